@@ -1,0 +1,1 @@
+"""Command-line interface: thin subcommands, one library call each (see :mod:`.main`)."""

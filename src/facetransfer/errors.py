@@ -1,0 +1,36 @@
+"""Project exceptions. All subclass :class:`ValueError` so callers can catch bad input uniformly.
+
+The CLI turns any of these into one line on stderr and exit status 2.
+"""
+
+
+class FaceTransferError(ValueError):
+    """Base class of every error facetransfer raises for bad input or bad data."""
+
+
+class ShapeError(FaceTransferError):
+    """An array has the wrong shape; the message names the shape found and the shape expected."""
+
+
+class MeshError(FaceTransferError):
+    """A mesh file is unreadable, empty, non-finite or has an unexpected topology."""
+
+
+class DatasetError(FaceTransferError):
+    """A manifest or data-set folder is inconsistent (duplicate or missing cells, mixed topology)."""
+
+
+class ModelFileError(FaceTransferError):
+    """A model file is truncated, altered, or written by a newer version."""
+
+
+class AssetError(FaceTransferError):
+    """An external asset is missing, cannot be downloaded, or fails its checksum."""
+
+
+class VideoError(FaceTransferError):
+    """A video is unreadable, empty, or has no face where one is needed."""
+
+
+class TrackError(FaceTransferError):
+    """Tracking could not proceed (bad initialisation, lost face, mismatched track file)."""

@@ -1,0 +1,1 @@
+"""File input and output: the only code that touches files (meshes, landmarks, video, atomic writes)."""

@@ -1,0 +1,68 @@
+"""Atomic output: write to a temporary file beside the target, then rename over it.
+
+An existing output is never overwritten half-way; an interrupted job leaves no partial file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import tempfile
+from pathlib import Path
+from typing import Iterator
+
+from ..errors import FaceTransferError
+
+
+def check_output_path(path: str | os.PathLike, *, overwrite: bool = True) -> Path:
+    """Validate an output path: its folder must exist; with ``overwrite=False`` it must not exist.
+
+    Raises
+    ------
+    FaceTransferError
+        If the parent folder does not exist, or the file exists and ``overwrite`` is False.
+    """
+    p = Path(path)
+    parent = p.parent if str(p.parent) else Path(".")
+    if not parent.is_dir():
+        raise FaceTransferError(f"output folder {parent} does not exist (for {p})")
+    if not overwrite and p.exists():
+        raise FaceTransferError(f"output {p} exists; pass --overwrite to replace it")
+    return p
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, *, overwrite: bool = True) -> Iterator[Path]:
+    """Yield a temporary path in the target's folder; rename it to ``path`` on success.
+
+    The temporary file keeps the target's suffix so that writers choosing a format by extension
+    (OpenCV, matplotlib, trimesh, numpy) behave as for the final name. On error it is removed.
+
+    Examples
+    --------
+    >>> with atomic_path("out/model.npz") as tmp:    # doctest: +SKIP
+    ...     np.savez(tmp, a=1)
+    """
+    p = check_output_path(path, overwrite=overwrite)
+    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{p.suffix}", dir=p.parent or ".")
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, p)
+    except BaseException:
+        with contextlib.suppress(FileNotFoundError):
+            tmp_path.unlink()
+        raise
+
+
+def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, overwrite: bool = True) -> Path:
+    """Write ``data`` to ``path`` atomically and return the path."""
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        tmp.write_bytes(data)
+    return Path(path)
+
+
+def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = True) -> Path:
+    """Write ``text`` (UTF-8) to ``path`` atomically and return the path."""
+    return write_bytes_atomic(path, text.encode("utf-8"), overwrite=overwrite)

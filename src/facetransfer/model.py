@@ -1,0 +1,438 @@
+"""The multilinear face model (Vlasic et al. 2005, §4.3): Eq. (4), (5) and (9), and its file format.
+
+A data tensor of corresponded meshes ``T`` (vertex mode first, Fig. 3) is decomposed without
+factoring the vertex mode (Eq. (4))::
+
+    T ≈ M ×_2 U_2 ×_3 U_3 ... ×_N U_N
+
+``M`` is the *model*: ``(3 n_vertices, r_2, ..., r_N)``. Row ``i`` of ``U_k`` is the attribute vector
+of training item ``i`` in mode ``k``, so contracting ``M`` with one row per mode reproduces one
+training face, and any weights give a new face (Eq. (5)). Fixing all modes but one turns the model
+into a linear basis for that mode (Eq. (9)), which the tracker solves for.
+
+Mode names are the attribute modes only (``("identity", "expression"[, "viseme"])``); the vertex
+mode is implicit. Vertex coordinates are vertex-major: row ``3 v + c`` of ``M`` is coordinate ``c`` of
+vertex ``v``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import json
+import logging
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from . import tensor as tl
+from .datasets.base import FaceDataset
+from .errors import DatasetError, ModelFileError, ShapeError
+from .io.atomic import atomic_path
+
+log = logging.getLogger(__name__)
+
+#: Version of the model file format written by :meth:`MultilinearModel.save`.
+FORMAT_VERSION = 1
+_MAGIC = "facetransfer-model"
+
+Weights = Mapping[str, np.ndarray] | Sequence[np.ndarray]
+
+
+@dataclass(frozen=True, eq=False)
+class MultilinearModel:
+    """A multilinear face model (Eq. (4)) with everything needed to use it.
+
+    Attributes
+    ----------
+    core : (3 n_vertices, r_1, ..., r_K) float64
+        The model tensor ``M`` (vertex mode unfactored).
+    factors : tuple of (d_k, r_k) float64
+        Per-mode factor matrices ``Ǔ_k``; row ``i`` is the attribute vector of training item ``i``.
+    mode_names : tuple of str
+    labels : tuple of tuple of str
+        Training labels per mode (``len(labels[k]) == d_k``).
+    faces : (n_faces, 3) int64
+    uvs : (n_vertices, 2) float64 or None
+    landmarks : (68,) int64 or None
+        iBUG-68 landmark vertices (indices into this model's vertices).
+    vertex_subset : (n_vertices,) int64 or None
+        Indices of the model's vertices in the source template.
+    eigenvalues : tuple of (d_k,) float64
+        Mode-k eigenvalues of the data (squared mode singular values) for explained variance.
+    imputed : (d_1, ..., d_K) bool or None
+        Cells of the training tensor that were imputed (§4.4) rather than measured.
+    provenance : dict
+        Data set, recipe, seed, ranks, refinement and errors: what it was built from.
+    """
+
+    core: np.ndarray
+    factors: tuple[np.ndarray, ...]
+    mode_names: tuple[str, ...]
+    labels: tuple[tuple[str, ...], ...]
+    faces: np.ndarray
+    uvs: np.ndarray | None = None
+    landmarks: np.ndarray | None = None
+    vertex_subset: np.ndarray | None = None
+    eigenvalues: tuple[np.ndarray, ...] = ()
+    imputed: np.ndarray | None = None
+    provenance: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        K = len(self.mode_names)
+        if self.core.ndim != K + 1 or self.core.shape[0] % 3:
+            raise ShapeError(f"model core must be (3 n_vertices, r_1..r_{K}), got {self.core.shape}")
+        if len(self.factors) != K or len(self.labels) != K:
+            raise ShapeError(f"{K} modes need {K} factors and label lists, got "
+                             f"{len(self.factors)} and {len(self.labels)}")
+        for k, (U, lab) in enumerate(zip(self.factors, self.labels)):
+            if U.ndim != 2 or U.shape[1] != self.core.shape[k + 1] or U.shape[0] != len(lab):
+                raise ShapeError(f"factor of mode {self.mode_names[k]!r} has shape {U.shape}, "
+                                 f"expected ({len(lab)}, {self.core.shape[k + 1]})")
+        if self.faces.ndim != 2 or self.faces.shape[1] != 3:
+            raise ShapeError(f"faces must be (n_faces, 3), got {self.faces.shape}")
+        if self.faces.size and (self.faces.min() < 0 or self.faces.max() >= self.n_vertices):
+            raise ShapeError(f"faces index outside 0..{self.n_vertices - 1}")
+        if self.landmarks is not None and (self.landmarks.min() < 0
+                                           or self.landmarks.max() >= self.n_vertices):
+            raise ShapeError(f"landmarks index outside 0..{self.n_vertices - 1}")
+
+    # ----------------------------------------------------------------- basic properties
+    @property
+    def n_vertices(self) -> int:
+        return self.core.shape[0] // 3
+
+    @property
+    def n_modes(self) -> int:
+        return len(self.mode_names)
+
+    @property
+    def ranks(self) -> tuple[int, ...]:
+        return tuple(self.core.shape[1:])
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        """Training cells per mode ``(d_1, ..., d_K)``."""
+        return tuple(U.shape[0] for U in self.factors)
+
+    def mode_index(self, mode: str | int) -> int:
+        """Index of a mode given by name or index."""
+        if isinstance(mode, (int, np.integer)):
+            if not 0 <= mode < self.n_modes:
+                raise ValueError(f"mode {mode} out of range; the model has modes {self.mode_names}")
+            return int(mode)
+        try:
+            return self.mode_names.index(mode)
+        except ValueError:
+            raise ValueError(f"unknown mode {mode!r}; the model has modes "
+                             f"{', '.join(self.mode_names)}") from None
+
+    def label_index(self, mode: str | int, label: str) -> int:
+        k = self.mode_index(mode)
+        try:
+            return self.labels[k].index(str(label))
+        except ValueError:
+            raise ValueError(f"unknown {self.mode_names[k]} {label!r}; known: "
+                             f"{', '.join(self.labels[k])}") from None
+
+    def training_weights(self, mode: str | int, label: str) -> np.ndarray:
+        """Row of mode ``mode``'s factor for a training label, shape (r,) (Eq. (5) weights)."""
+        k = self.mode_index(mode)
+        return self.factors[k][self.label_index(k, label)].copy()
+
+    def weight_mean(self, mode: str | int) -> np.ndarray:
+        """Mean of the training attribute vectors of a mode, shape (r,)."""
+        return self.factors[self.mode_index(mode)].mean(axis=0)
+
+    def weight_cov(self, mode: str | int) -> np.ndarray:
+        """Covariance of the training attribute vectors of a mode, shape (r, r).
+
+        With fewer training items than the rank the covariance is singular; a small ridge
+        (1e-6 of its trace / r) keeps it invertible for use as a prior.
+        """
+        U = self.factors[self.mode_index(mode)]
+        C = np.cov(U, rowvar=False, bias=True) if U.shape[0] > 1 else np.zeros((U.shape[1],) * 2)
+        C = np.atleast_2d(C)
+        ridge = 1e-6 * max(np.trace(C) / C.shape[0], 1e-12)
+        return C + ridge * np.eye(C.shape[0])
+
+    def default_weights(self) -> dict[str, np.ndarray]:
+        """Mean training weights of every mode (the "average face")."""
+        return {name: self.weight_mean(name) for name in self.mode_names}
+
+    def like(self, **labels: str) -> dict[str, np.ndarray]:
+        """Weights taking each named mode's training row by label, the others at their mean.
+
+        ``model.synthesize(model.like(identity="id03", expression="smile"))`` reproduces that
+        training mesh exactly when the model is not truncated.
+        """
+        w = self.default_weights()
+        for mode, lab in labels.items():
+            w[self.mode_names[self.mode_index(mode)]] = self.training_weights(mode, lab)
+        return w
+
+    # ----------------------------------------------------------------- Eq. (5) and (9)
+    def _weights_list(self, weights: Weights) -> list[np.ndarray]:
+        if isinstance(weights, Mapping):
+            unknown = set(weights) - set(self.mode_names)
+            if unknown:
+                raise ValueError(f"unknown mode(s) {sorted(unknown)}; the model has modes "
+                                 f"{', '.join(self.mode_names)}")
+            missing = [n for n in self.mode_names if n not in weights]
+            if missing:
+                raise ValueError(f"weights missing for mode(s) {missing}")
+            ws = [np.asarray(weights[n], dtype=np.float64) for n in self.mode_names]
+        else:
+            ws = [np.asarray(w, dtype=np.float64) for w in weights]
+            if len(ws) != self.n_modes:
+                raise ValueError(f"{len(ws)} weight vectors for {self.n_modes} modes")
+        for name, w, r in zip(self.mode_names, ws, self.ranks):
+            if w.ndim == 0 or w.shape[-1] != r:
+                raise ShapeError(f"weights of mode {name!r} must end in {r}, got shape {w.shape}")
+        return ws
+
+    def synthesize(self, weights: Weights, *, vertices: np.ndarray | None = None) -> np.ndarray:
+        """Faces from attribute weights, Eq. (5): ``f = M ×_2 w_2ᵀ ×_3 w_3ᵀ ... ×_N w_Nᵀ``.
+
+        Parameters
+        ----------
+        weights : mapping mode name -> (..., r_k) array, or a sequence in mode order
+            Leading (batch) dimensions broadcast against each other.
+        vertices : (m,) int array, optional
+            Only synthesize these vertices.
+
+        Returns
+        -------
+        (..., n_vertices or m, 3) float64
+        """
+        ws = self._weights_list(weights)
+        batch = np.broadcast_shapes(*[w.shape[:-1] for w in ws])
+        core = self._core_rows(vertices)
+        # Eq. (5) as one matrix product: the outer product of the mode weights (a Kronecker
+        # vector of length r_1 ... r_K, C order to match the core's layout) times the unfolded core.
+        kron = np.ones(batch + (1,))
+        for w in ws:
+            w = np.broadcast_to(w, batch + w.shape[-1:])
+            kron = (kron[..., :, None] * w[..., None, :]).reshape(batch + (-1,))
+        out = kron @ core.reshape(core.shape[0], -1).T
+        return out.reshape(batch + (-1, 3))
+
+    def _core_rows(self, vertices: np.ndarray | None) -> np.ndarray:
+        if vertices is None:
+            return self.core
+        v = np.asarray(vertices, dtype=np.int64).ravel()
+        if v.size and (v.min() < 0 or v.max() >= self.n_vertices):
+            raise ShapeError(f"vertex indices outside 0..{self.n_vertices - 1}")
+        rows = (3 * v[:, None] + np.arange(3)).ravel()
+        return self.core[rows]
+
+    def mode_basis(self, mode: str | int, weights: Weights, *,
+                   vertices: np.ndarray | None = None) -> np.ndarray:
+        """Linear basis of one mode with the others fixed, Eq. (9).
+
+        ``M_m = M ×_2 w_2ᵀ ... ×_{m-1} w_{m-1}ᵀ ×_{m+1} w_{m+1}ᵀ ... ×_N w_Nᵀ``, so that
+        ``synthesize(w)[vertices] == mode_basis(m, w, vertices=vertices) @ w_m``.
+
+        Parameters
+        ----------
+        mode : str or int
+        weights : mapping or sequence of (r_k,) vectors
+            The entry of ``mode`` itself is ignored (may be anything of the right length).
+        vertices : (m,) int array, optional
+
+        Returns
+        -------
+        (n_vertices or m, 3, r_m) float64
+        """
+        k = self.mode_index(mode)
+        ws = self._weights_list(weights)
+        core = self._core_rows(vertices)
+        out = core
+        for j in reversed(range(self.n_modes)):
+            if j == k:
+                continue
+            out = np.tensordot(out, ws[j], axes=([j + 1], [0]))
+        return out.reshape(-1, 3, self.ranks[k])
+
+    # ----------------------------------------------------------------- identity & i/o
+    @property
+    def content_hash(self) -> str:
+        """sha256 (hex) over every array and the metadata: identifies the model in track files."""
+        return _content_hash(self._arrays(), self._metadata(include_hash=False))
+
+    def _arrays(self) -> dict[str, np.ndarray]:
+        arrays = {"core": self.core, "faces": self.faces}
+        for k, U in enumerate(self.factors):
+            arrays[f"factor_{k}"] = U
+        for k, ev in enumerate(self.eigenvalues):
+            arrays[f"eigenvalues_{k}"] = ev
+        for name in ("uvs", "landmarks", "vertex_subset", "imputed"):
+            val = getattr(self, name)
+            if val is not None:
+                arrays[name] = val
+        return arrays
+
+    def _metadata(self, *, include_hash: bool = True) -> dict:
+        meta = {"magic": _MAGIC, "format_version": FORMAT_VERSION,
+                "mode_names": list(self.mode_names), "labels": [list(l) for l in self.labels],
+                "provenance": self.provenance}
+        return meta
+
+    def save(self, path: str | Path, *, overwrite: bool = True) -> Path:
+        """Write the model to one ``.npz`` file atomically (versioned, with a content checksum)."""
+        arrays = self._arrays()
+        meta = self._metadata()
+        meta["sha256"] = _content_hash(arrays, self._metadata(include_hash=False))
+        with atomic_path(path, overwrite=overwrite) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, metadata=np.array(json.dumps(meta, default=_json_default)), **arrays)
+        return Path(path)
+
+
+def _json_default(o):
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, (np.integer,)):
+        return int(o)
+    if isinstance(o, (np.floating,)):
+        return float(o)
+    if isinstance(o, Path):
+        return str(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def _content_hash(arrays: Mapping[str, np.ndarray], meta: dict) -> str:
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        h.update(name.encode())
+        h.update(str(a.dtype).encode())
+        h.update(str(a.shape).encode())
+        h.update(a.tobytes())
+    h.update(json.dumps(meta, sort_keys=True, default=_json_default).encode())
+    return h.hexdigest()
+
+
+def load_model(path: str | Path) -> MultilinearModel:
+    """Read and validate a model file written by :meth:`MultilinearModel.save`.
+
+    Raises
+    ------
+    ModelFileError
+        Missing, truncated or altered file (checksum mismatch), not a model file, or a newer
+        format version.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ModelFileError(f"model file {p} does not exist")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            data = {k: z[k] for k in z.files}
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
+        raise ModelFileError(f"model file {p} is truncated or not a model file ({exc})") from None
+    if "metadata" not in data:
+        raise ModelFileError(f"{p} is not a facetransfer model file (no metadata)")
+    try:
+        meta = json.loads(str(data.pop("metadata")))
+    except json.JSONDecodeError:
+        raise ModelFileError(f"model file {p} has corrupt metadata") from None
+    if meta.get("magic") != _MAGIC:
+        raise ModelFileError(f"{p} is not a facetransfer model file")
+    version = int(meta.get("format_version", -1))
+    if version > FORMAT_VERSION:
+        raise ModelFileError(f"model file {p} has format version {version}, newer than this "
+                             f"facetransfer reads ({FORMAT_VERSION}); upgrade facetransfer")
+    expected = meta.pop("sha256", None)
+    if expected != _content_hash(data, meta):
+        raise ModelFileError(f"model file {p} fails its checksum: it was altered or damaged")
+    K = len(meta["mode_names"])
+    try:
+        return MultilinearModel(
+            core=data["core"], factors=tuple(data[f"factor_{k}"] for k in range(K)),
+            mode_names=tuple(meta["mode_names"]), labels=tuple(tuple(l) for l in meta["labels"]),
+            faces=data["faces"], uvs=data.get("uvs"), landmarks=data.get("landmarks"),
+            vertex_subset=data.get("vertex_subset"),
+            eigenvalues=tuple(data[f"eigenvalues_{k}"] for k in range(K) if f"eigenvalues_{k}" in data),
+            imputed=data.get("imputed"), provenance=meta.get("provenance", {}))
+    except (KeyError, ShapeError) as exc:
+        raise ModelFileError(f"model file {p} is incomplete: {exc}") from None
+
+
+def file_hash(path: str | Path) -> str:
+    """sha256 (hex) of a file's bytes."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for chunk in iter(lambda: fh.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def build_model(dataset: FaceDataset, ranks: Mapping[str, int] | None = None, *,
+                refine: bool = True, variance: float | None = None, max_iter: int = 50,
+                imputed: np.ndarray | None = None) -> MultilinearModel:
+    """Build the multilinear model of a complete data set, Eq. (4).
+
+    Parameters
+    ----------
+    dataset : FaceDataset
+        Must be complete (fill missing cells with :mod:`facetransfer.impute` first).
+    ranks : mapping mode name -> rank, optional
+        Modes not named keep all components (or as many as ``variance`` needs).
+    refine : bool
+        Refine the N-mode SVD by alternating least squares (HOOI, §3).
+    variance : float, optional
+        Retained-variance truncation for modes without an explicit rank.
+    imputed : (d_1, ..., d_K) bool, optional
+        Cells that were imputed, recorded in the model.
+
+    Returns
+    -------
+    MultilinearModel
+
+    References
+    ----------
+    Vlasic et al. 2005, §3 (N-mode SVD, ALS) and §4.3, Eq. (4).
+    """
+    if not dataset.mask.all():
+        missing = dataset.missing_cells()
+        shown = "; ".join("/".join(c) for c in missing[:10])
+        more = f" and {len(missing) - 10} more" if len(missing) > 10 else ""
+        raise DatasetError(f"{len(missing)} missing cells ({shown}{more}): impute them first "
+                           f"(--impute ppca)")
+    ranks = dict(ranks or {})
+    unknown = set(ranks) - set(dataset.mode_names)
+    if unknown:
+        raise ValueError(f"ranks given for unknown mode(s) {sorted(unknown)}; modes are "
+                         f"{', '.join(dataset.mode_names)}")
+    T = dataset.data_tensor()  # (3n, d_1..d_K), Fig. 3
+    rank_list: list[int | None] = [None] + [ranks.get(n) for n in dataset.mode_names]
+    for name, r, d in zip(dataset.mode_names, rank_list[1:], dataset.shape):
+        if r is not None and not 1 <= r <= d:
+            raise ValueError(f"rank {r} for mode {name!r} must be between 1 and {d}")
+    if refine:
+        dec = tl.hooi(T, rank_list, skip=(0,), variance=variance, max_iter=max_iter)
+    else:
+        dec = tl.nmode_svd(T, rank_list, skip=(0,), variance=variance)
+    prov = dict(dataset.provenance)
+    prov.update({"ranks": {n: int(r) for n, r in zip(dataset.mode_names, dec.ranks[1:])},
+                 "refine": bool(refine), "relative_errors": [float(e) for e in dec.errors],
+                 "facetransfer_version": _version()})
+    return MultilinearModel(
+        core=np.ascontiguousarray(dec.core), factors=tuple(dec.factors[1:]),
+        mode_names=tuple(dataset.mode_names), labels=tuple(tuple(l) for l in dataset.labels),
+        faces=np.asarray(dataset.faces, dtype=np.int64),
+        uvs=None if dataset.uvs is None else np.asarray(dataset.uvs, dtype=np.float64),
+        landmarks=None if dataset.landmarks is None else np.asarray(dataset.landmarks, np.int64),
+        vertex_subset=None if dataset.vertex_subset is None else np.asarray(dataset.vertex_subset,
+                                                                             np.int64),
+        eigenvalues=tuple(dec.eigenvalues[1:]),
+        imputed=None if imputed is None else np.asarray(imputed, dtype=bool), provenance=prov)
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__

@@ -1,0 +1,245 @@
+"""The result of tracking a face through a video, and its file format (``TRACK.npz``).
+
+A :class:`Track` holds, per frame, the weak-perspective pose of Eq. (7) (Vlasic et al. 2005,
+§5.1) — rotation ``R``, scale ``s`` (pixels per model unit) and translation ``t`` (pixels) — and
+the multilinear model's attribute weights of Eq. (5), one array per mode; the identity (the
+attribute constant over the clip) is the same on every frame.
+
+File format (``numpy.savez``, written atomically), one key per field:
+
+==================  ===================  ===========================================================
+key                 shape / dtype        meaning
+==================  ===================  ===========================================================
+``fps``             () float64           frame rate of the source video
+``frame_size``      (2,) int64           ``(W, H)`` of the source video in pixels
+``rotation``        (F, 3, 3) float64    model-to-camera rotation per frame
+``scale``           (F,) float64         pixels per model unit per frame
+``translation``     (F, 2) float64       pixel position of the model origin per frame
+``weights_<mode>``  (F, r_mode) float64  attribute weights of each mode per frame
+``landmarks2d``     (F, 68, 2) float64   pixel positions of the model's 68 landmark vertices
+``confidence``      (F,) float64         tracking confidence in [0, 1]
+``lost``            (F,) bool            frames where the face was lost (pose held/re-initialised)
+``model_hash``      () str               :attr:`MultilinearModel.content_hash` of the model used
+``mode_names``      (K,) str             the model's modes, in order
+``source``          () str               the tracked video's path
+``format_version``  () int64             version of this layout
+==================  ===================  ===========================================================
+"""
+
+from __future__ import annotations
+
+import os
+import zipfile
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import TrackError
+from ..io.atomic import atomic_path
+
+__all__ = ["Track", "TRACK_FORMAT_VERSION"]
+
+#: Version of the track file layout written by :meth:`Track.save`.
+TRACK_FORMAT_VERSION = 1
+
+
+@dataclass(frozen=True, eq=False)
+class Track:
+    """Per-frame pose and model weights of a tracked face (Vlasic et al. 2005, §5.1, Eq. (7)).
+
+    Attributes
+    ----------
+    fps : float
+    frame_size : (int, int)
+        ``(W, H)`` of the video in pixels.
+    rotation : (F, 3, 3) float64
+    scale : (F,) float64
+    translation : (F, 2) float64
+    weights : dict mode name -> (F, r) float64
+        The identity (constant mode) has the same row on every frame.
+    landmarks2d : (F, 68, 2) float64
+        Pixel positions of the model's iBUG-68 landmark vertices.
+    confidence : (F,) float64 in [0, 1]
+    lost : (F,) bool
+    model_hash : str
+    mode_names : tuple of str
+    source : str
+        Path of the tracked video.
+    info : dict
+        Free-form run details (not saved; e.g. per-pass residuals).
+    """
+
+    fps: float
+    frame_size: tuple[int, int]
+    rotation: np.ndarray
+    scale: np.ndarray
+    translation: np.ndarray
+    weights: dict
+    landmarks2d: np.ndarray
+    confidence: np.ndarray
+    lost: np.ndarray
+    model_hash: str
+    mode_names: tuple[str, ...]
+    source: str = ""
+    info: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        R = np.asarray(self.rotation, dtype=np.float64)
+        if R.ndim != 3 or R.shape[1:] != (3, 3):
+            raise TrackError(f"track rotation must be (F, 3, 3), got {R.shape}")
+        F = R.shape[0]
+        if F < 1:
+            raise TrackError("a track needs at least one frame")
+
+        def arr(name, val, shape, dtype=np.float64):
+            a = np.asarray(val, dtype=dtype)
+            if a.shape != shape:
+                raise TrackError(f"track {name} must have shape {shape}, got {a.shape}")
+            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+                raise TrackError(f"track {name} has non-finite values")
+            return a
+
+        set_ = object.__setattr__
+        set_(self, "rotation", arr("rotation", R, (F, 3, 3)))
+        set_(self, "scale", arr("scale", self.scale, (F,)))
+        if np.any(self.scale <= 0):
+            raise TrackError("track scale must be > 0 on every frame")
+        set_(self, "translation", arr("translation", self.translation, (F, 2)))
+        set_(self, "landmarks2d", arr("landmarks2d", self.landmarks2d, (F, 68, 2)))
+        conf = arr("confidence", self.confidence, (F,))
+        if np.any((conf < 0) | (conf > 1)):
+            raise TrackError("track confidence must lie in [0, 1]")
+        set_(self, "confidence", conf)
+        set_(self, "lost", arr("lost", self.lost, (F,), bool))
+        names = tuple(str(n) for n in self.mode_names)
+        if not names:
+            raise TrackError("a track needs at least one mode name")
+        set_(self, "mode_names", names)
+        if set(self.weights) != set(names):
+            raise TrackError(f"track weights are given for modes {sorted(self.weights)}, "
+                             f"expected {list(names)}")
+        w = {}
+        for n in names:
+            a = np.asarray(self.weights[n], dtype=np.float64)
+            if a.ndim != 2 or a.shape[0] != F:
+                raise TrackError(f"track weights of mode {n!r} must be ({F}, r), got {a.shape}")
+            if not np.all(np.isfinite(a)):
+                raise TrackError(f"track weights of mode {n!r} have non-finite values")
+            w[n] = a
+        set_(self, "weights", w)
+        size = tuple(int(v) for v in np.asarray(self.frame_size).ravel())
+        if len(size) != 2 or min(size) <= 0:
+            raise TrackError(f"track frame_size must be (W, H) > 0, got {self.frame_size}")
+        set_(self, "frame_size", size)
+        fps = float(self.fps)
+        if not np.isfinite(fps) or fps <= 0:
+            raise TrackError(f"track fps must be > 0, got {self.fps}")
+        set_(self, "fps", fps)
+        set_(self, "model_hash", str(self.model_hash))
+        set_(self, "source", str(self.source))
+
+    # ------------------------------------------------------------------ access
+    @property
+    def n_frames(self) -> int:
+        return int(self.rotation.shape[0])
+
+    def _check_frame(self, i: int) -> int:
+        i = int(i)
+        if not -self.n_frames <= i < self.n_frames:
+            raise TrackError(f"frame {i} outside the track's {self.n_frames} frames")
+        return i
+
+    def camera(self, i: int):
+        """The weak-perspective camera of frame ``i`` (:class:`facetransfer.render.WeakPerspective`)."""
+        from ..render import WeakPerspective
+
+        i = self._check_frame(i)
+        return WeakPerspective(float(self.scale[i]), self.rotation[i], self.translation[i])
+
+    def weights_at(self, i: int) -> dict[str, np.ndarray]:
+        """Weights of every mode at frame ``i``: dict mode name -> (r,) (copies)."""
+        i = self._check_frame(i)
+        return {n: self.weights[n][i].copy() for n in self.mode_names}
+
+    def check_video(self, n_frames: int, size: tuple[int, int], *, what: str = "video") -> None:
+        """Raise :class:`TrackError` unless the track matches a video's frame count and size."""
+        size = (int(size[0]), int(size[1]))
+        if size != self.frame_size:
+            raise TrackError(f"track {self.source or ''} is for frames of "
+                             f"{self.frame_size[0]}x{self.frame_size[1]}, but {what} is "
+                             f"{size[0]}x{size[1]}")
+        if int(n_frames) != self.n_frames:
+            raise TrackError(f"track {self.source or ''} has {self.n_frames} frames, but {what} "
+                             f"has {n_frames}")
+
+    def check_model(self, model) -> None:
+        """Raise :class:`TrackError` unless ``model`` is the model this track was made with."""
+        if tuple(model.mode_names) != self.mode_names:
+            raise TrackError(f"track has modes {self.mode_names}, the model {model.mode_names}")
+        for n, r in zip(model.mode_names, model.ranks):
+            if self.weights[n].shape[1] != r:
+                raise TrackError(f"track weights of mode {n!r} have {self.weights[n].shape[1]} "
+                                 f"components, the model has {r}")
+        if self.model_hash and self.model_hash != model.content_hash:
+            raise TrackError("track was made with a different model (model hash differs)")
+
+    # ------------------------------------------------------------------ file i/o
+    def save(self, path: str | os.PathLike, *, overwrite: bool = True) -> Path:
+        """Write the track to ``path`` (``.npz``) atomically and return the path."""
+        arrays = {
+            "format_version": np.int64(TRACK_FORMAT_VERSION),
+            "fps": np.float64(self.fps),
+            "frame_size": np.asarray(self.frame_size, dtype=np.int64),
+            "rotation": self.rotation, "scale": self.scale, "translation": self.translation,
+            "landmarks2d": self.landmarks2d, "confidence": self.confidence, "lost": self.lost,
+            "model_hash": np.array(self.model_hash), "mode_names": np.array(self.mode_names),
+            "source": np.array(self.source),
+        }
+        for n in self.mode_names:
+            arrays[f"weights_{n}"] = self.weights[n]
+        with atomic_path(path, overwrite=overwrite) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+        return Path(path)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "Track":
+        """Read and validate a track file written by :meth:`save`.
+
+        Raises
+        ------
+        TrackError
+            Missing, truncated or malformed file, a newer format version, or inconsistent arrays.
+        """
+        p = Path(path)
+        if not p.is_file():
+            raise TrackError(f"track file {p} does not exist")
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                data = {k: z[k] for k in z.files}
+        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
+            raise TrackError(f"track file {p} is truncated or not a track file ({exc})") from None
+        required = ("fps", "frame_size", "rotation", "scale", "translation", "landmarks2d",
+                    "confidence", "lost", "model_hash", "mode_names")
+        missing = [k for k in required if k not in data]
+        if missing:
+            raise TrackError(f"{p} is not a track file (missing {', '.join(missing)})")
+        version = int(data.get("format_version", 1))
+        if version > TRACK_FORMAT_VERSION:
+            raise TrackError(f"track file {p} has format version {version}, newer than this "
+                             f"facetransfer reads ({TRACK_FORMAT_VERSION})")
+        names = tuple(str(n) for n in np.atleast_1d(data["mode_names"]))
+        absent = [n for n in names if f"weights_{n}" not in data]
+        if absent:
+            raise TrackError(f"track file {p} lacks weights of mode(s) {absent}")
+        try:
+            return cls(fps=float(data["fps"]), frame_size=tuple(data["frame_size"]),
+                       rotation=data["rotation"], scale=data["scale"],
+                       translation=data["translation"],
+                       weights={n: data[f"weights_{n}"] for n in names},
+                       landmarks2d=data["landmarks2d"], confidence=data["confidence"],
+                       lost=data["lost"], model_hash=str(data["model_hash"]), mode_names=names,
+                       source=str(data.get("source", "")))
+        except TrackError as exc:
+            raise TrackError(f"track file {p} is invalid: {exc}") from None

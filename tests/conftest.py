@@ -1,0 +1,86 @@
+"""Shared fixtures. ``FACETRANSFER_DATA_DIR`` must point at the offline asset mirror (CI sets it)."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("OMP_NUM_THREADS", "2")
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+@pytest.fixture(scope="session")
+def data_dir() -> Path:
+    """The offline asset mirror; tests needing real assets skip only when it is not configured."""
+    d = os.environ.get("FACETRANSFER_DATA_DIR")
+    if not d:
+        pytest.skip("FACETRANSFER_DATA_DIR is not set (CI sets it to the ../shared/data mirror)")
+    return Path(d)
+
+
+def _quick_ict_dataset(data_dir: Path, n_identities: int, expressions: dict[str, dict[str, float]],
+                       seed: int = 0):
+    """A small additive ICT-FaceKit data set (no deformation transfer) for tests of other stages."""
+    from facetransfer.datasets import FaceDataset
+    from facetransfer.io.mesh import read_obj, read_obj_vertices
+
+    root = data_dir / "ict-facekit" / "FaceXModel"
+    full = read_obj(root / "generic_neutral_mesh.obj")
+    n = 9409  # FaceKit "full face area", vertices 0..9408
+    keep = (full.faces < n).all(axis=1)
+    faces = full.faces[keep]
+    idx = json.loads((root / "vertex_indices.json").read_text())
+    landmarks = np.asarray(idx["idx_to_landmark_verts"], dtype=np.int64)
+    neutral = full.vertices[:n]
+    rng = np.random.default_rng(seed)
+    comps = [read_obj_vertices(root / f"identity{k:03d}.obj")[:n] - neutral for k in range(10)]
+    ids = [neutral] + [neutral + sum(w * c for w, c in zip(rng.normal(size=10), comps))
+                       for _ in range(n_identities - 1)]
+    shapes = {}
+    for recipe in expressions.values():
+        for s in recipe:
+            if s not in shapes:
+                shapes[s] = read_obj_vertices(root / f"{s}.obj")[:n] - neutral
+    offs = [sum((w * shapes[s] for s, w in r.items()), np.zeros_like(neutral))
+            for r in expressions.values()]
+    verts = np.stack([np.stack([i + o for o in offs]) for i in ids])
+    return FaceDataset(verts, np.ones(verts.shape[:2], bool), ("identity", "expression"),
+                       (tuple(f"id{k:02d}" for k in range(n_identities)), tuple(expressions)),
+                       faces, full.uvs[:n] if full.uvs is not None else None, landmarks,
+                       np.arange(n), {"dataset": "test-quick-ict", "seed": seed})
+
+
+QUICK_EXPRESSIONS = {
+    "neutral": {},
+    "smile": {"mouthSmile_L": 1.0, "mouthSmile_R": 1.0},
+    "open": {"jawOpen": 0.8},
+    "frown": {"browDown_L": 1.0, "browDown_R": 1.0, "mouthFrown_L": 0.7, "mouthFrown_R": 0.7},
+    "pucker": {"mouthPucker": 1.0, "mouthFunnel": 0.5},
+    "surprise": {"browInnerUp_L": 1.0, "browInnerUp_R": 1.0, "eyeWide_L": 1.0, "eyeWide_R": 1.0,
+                 "jawOpen": 0.4},
+}
+
+
+@pytest.fixture(scope="session")
+def quick_ict_dataset(data_dir):
+    """6 identities × 6 expressions of the ICT-FaceKit face area (9,409 vertices), additive."""
+    return _quick_ict_dataset(data_dir, 6, QUICK_EXPRESSIONS)
+
+
+@pytest.fixture(scope="session")
+def quick_model(quick_ict_dataset, tmp_path_factory):
+    """A bilinear model (identity rank 5, expression rank 5) of :func:`quick_ict_dataset`."""
+    from facetransfer.model import build_model
+
+    return build_model(quick_ict_dataset, {"identity": 5, "expression": 5})
+
+
+@pytest.fixture(scope="session")
+def quick_model_path(quick_model, tmp_path_factory) -> Path:
+    p = tmp_path_factory.mktemp("models") / "quick.npz"
+    quick_model.save(p)
+    return p

@@ -1,0 +1,101 @@
+"""File I/O: meshes, videos, atomic writes, and the CLI's one-line errors."""
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from facetransfer.errors import FaceTransferError, MeshError, VideoError
+from facetransfer.io.atomic import atomic_path, write_text_atomic
+from facetransfer.io.mesh import read_mesh, read_obj, read_obj_vertices, write_mesh
+from facetransfer.io.video import read_video, video_info, write_video
+
+QUAD_OBJ = """# a unit quad with UVs
+v 0 0 0
+v 1 0 0
+v 1 1 0
+v 0 1 0
+vt 0 0
+vt 1 0
+vt 1 1
+vt 0 1
+f 1/1 2/2 3/3 4/4
+"""
+
+
+def test_read_obj_splits_quads_and_keeps_uvs(tmp_path):
+    p = tmp_path / "q.obj"
+    p.write_text(QUAD_OBJ)
+    m = read_obj(p)
+    assert m.vertices.shape == (4, 3)
+    assert np.array_equal(m.faces, [[0, 1, 2], [0, 2, 3]])
+    assert np.allclose(m.uvs, [[0, 0], [1, 0], [1, 1], [0, 1]])
+    assert np.array_equal(read_obj_vertices(p), m.vertices)
+
+
+def test_mesh_round_trip_obj_and_ply(tmp_path):
+    rng = np.random.default_rng(0)
+    v = rng.normal(size=(10, 3))
+    f = np.array([[0, 1, 2], [2, 3, 4], [5, 6, 7]])
+    for ext in ("obj", "ply"):
+        p = write_mesh(tmp_path / f"m.{ext}", v, f)
+        m = read_mesh(p)
+        assert np.allclose(m.vertices, v, atol=1e-6)
+        assert np.array_equal(m.faces, f)
+
+
+@pytest.mark.parametrize("content,match", [
+    ("", "empty"),
+    ("v 0 0 nan\nv 1 1 1\n", "NaN"),
+    ("# nothing\n", "no vertices"),
+    ("v 0 0 x\n", "malformed"),
+])
+def test_bad_meshes(tmp_path, content, match):
+    p = tmp_path / "bad.obj"
+    p.write_text(content)
+    with pytest.raises(MeshError, match=match):
+        read_mesh(p)
+    with pytest.raises(MeshError):
+        read_mesh(tmp_path / "missing.obj")
+
+
+def test_atomic_path_leaves_nothing_on_error(tmp_path):
+    target = tmp_path / "out.txt"
+    target.write_text("old")
+    with pytest.raises(RuntimeError):
+        with atomic_path(target) as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("boom")
+    assert target.read_text() == "old"
+    assert [p.name for p in tmp_path.iterdir()] == ["out.txt"]
+    write_text_atomic(target, "new")
+    assert target.read_text() == "new"
+    with pytest.raises(FaceTransferError, match="does not exist"):
+        write_text_atomic(tmp_path / "no" / "x.txt", "a")
+    with pytest.raises(FaceTransferError, match="--overwrite"):
+        write_text_atomic(target, "x", overwrite=False)
+
+
+def test_video_round_trip(tmp_path):
+    rng = np.random.default_rng(1)
+    frames = np.repeat(rng.integers(0, 255, size=(6, 1, 32, 48, 1), dtype=np.uint8), 3, axis=1)
+    frames = np.ascontiguousarray(np.moveaxis(frames[:, 0], -1, -1).repeat(3, axis=-1))
+    p = write_video(tmp_path / "v.mp4", frames, 10)
+    info = video_info(p)
+    assert info.size == (48, 32) and info.n_frames == 6 and info.fps == pytest.approx(10)
+    back, fps = read_video(p)
+    assert back.shape == (6, 32, 48, 3)
+    with pytest.raises(VideoError, match="does not exist"):
+        video_info(tmp_path / "none.mp4")
+    (tmp_path / "junk.mp4").write_bytes(b"not a video at all" * 10)
+    with pytest.raises(VideoError):
+        read_video(tmp_path / "junk.mp4")
+
+
+def test_cli_bad_input_is_one_line_exit_2(tmp_path):
+    r = subprocess.run([sys.executable, "-m", "facetransfer.cli.main", "model", "info",
+                        str(tmp_path / "nope.npz")], capture_output=True, text=True)
+    assert r.returncode == 2, r.stderr
+    lines = [l for l in r.stderr.splitlines() if l.strip()]
+    assert len(lines) == 1 and "nope.npz" in lines[0] and "Traceback" not in r.stderr

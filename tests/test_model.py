@@ -1,0 +1,169 @@
+"""The multilinear model (§4.3): Eq. (4), (5), (9) and the model file."""
+
+import json
+import zipfile
+
+import numpy as np
+import pytest
+
+from facetransfer.datasets import FaceDataset
+from facetransfer.errors import DatasetError, ModelFileError, ShapeError
+from facetransfer.model import FORMAT_VERSION, build_model, load_model
+
+
+def random_dataset(d=(5, 4, 3), n=40, seed=0):
+    rng = np.random.default_rng(seed)
+    verts = rng.normal(size=d + (n, 3))
+    names = ("identity", "expression", "viseme")[: len(d)]
+    labels = tuple(tuple(f"{m[:2]}{i}" for i in range(k)) for m, k in zip(names, d))
+    faces = np.array([[0, 1, 2], [1, 2, 3], [2, 3, 4]])
+    return FaceDataset(verts, np.ones(d, bool), names, labels, faces, landmarks=np.arange(5),
+                       provenance={"dataset": "random", "seed": seed})
+
+
+def test_untruncated_model_reproduces_every_training_face():
+    ds = random_dataset()
+    m = build_model(ds, refine=False)
+    assert m.ranks == (5, 4, 3) and m.n_vertices == 40
+    for i, j, k in [(0, 0, 0), (4, 3, 2), (2, 1, 0)]:
+        f = m.synthesize(m.like(identity=f"id{i}", expression=f"ex{j}", viseme=f"vi{k}"))
+        assert np.allclose(f, ds.vertices[i, j, k], atol=1e-10)  # Eq. (5) with rows of Ǔ_k
+
+
+def test_synthesize_batched_equals_loop():
+    ds = random_dataset(seed=1)
+    m = build_model(ds, {"identity": 3, "expression": 2}, refine=True)
+    rng = np.random.default_rng(0)
+    W = {n: rng.normal(size=(7, r)) for n, r in zip(m.mode_names, m.ranks)}
+    batch = m.synthesize(W)
+    assert batch.shape == (7, 40, 3)
+    for b in range(7):
+        single = m.synthesize({n: w[b] for n, w in W.items()})
+        assert np.allclose(batch[b], single, atol=1e-12)
+    # broadcast one identity against many expressions
+    W2 = dict(W, identity=W["identity"][0])
+    assert np.allclose(m.synthesize(W2)[3], m.synthesize({n: w[3] for n, w in W2.items()
+                                                          if n != "identity"} | {"identity": W["identity"][0]}))
+
+
+def test_synthesize_matches_explicit_mode_products():
+    from facetransfer import tensor as tl
+
+    ds = random_dataset(seed=2)
+    m = build_model(ds, {"identity": 2, "expression": 3, "viseme": 2})
+    w = [np.array([0.3, -1.0]), np.array([1.0, 0.5, 0.2]), np.array([0.7, 0.1])]
+    ref = tl.multi_mode_dot(m.core, [None] + w)  # M ×_2 w_2ᵀ ×_3 w_3ᵀ ×_4 w_4ᵀ
+    assert np.allclose(m.synthesize(w).ravel(), ref, atol=1e-12)
+
+
+@pytest.mark.parametrize("mode", ["identity", "expression", "viseme"])
+def test_mode_basis_is_eq9(mode):
+    ds = random_dataset(seed=3)
+    m = build_model(ds, {"identity": 4, "expression": 3, "viseme": 2})
+    rng = np.random.default_rng(1)
+    w = {n: rng.normal(size=r) for n, r in zip(m.mode_names, m.ranks)}
+    vs = np.array([0, 7, 39])
+    B = m.mode_basis(mode, w, vertices=vs)
+    assert B.shape == (3, 3, m.ranks[m.mode_index(mode)])
+    assert np.allclose(B @ w[mode], m.synthesize(w)[vs], atol=1e-12)
+    # linear in w_m: a different w_m gives the face through the same basis
+    w2 = dict(w, **{mode: rng.normal(size=len(w[mode]))})
+    assert np.allclose(B @ w2[mode], m.synthesize(w2)[vs], atol=1e-12)
+    assert np.allclose(m.mode_basis(mode, w)[vs], B)
+
+
+def test_truncated_model_reports_explained_variance_and_error():
+    ds = random_dataset(seed=4)
+    m = build_model(ds, {"identity": 2}, refine=True)
+    errs = m.provenance["relative_errors"]
+    assert errs[-1] <= errs[0] and errs[-1] > 0
+    assert m.eigenvalues[0].shape == (5,)
+    assert m.provenance["ranks"] == {"identity": 2, "expression": 4, "viseme": 3}
+
+
+def test_weight_statistics():
+    m = build_model(random_dataset(seed=5), refine=False)
+    U = m.factors[1]
+    assert np.allclose(m.weight_mean("expression"), U.mean(0))
+    C = m.weight_cov("expression")
+    assert C.shape == (4, 4) and np.all(np.linalg.eigvalsh(C) > 0)
+
+
+def test_save_load_round_trip(tmp_path):
+    m = build_model(random_dataset(seed=6), {"identity": 3})
+    p = m.save(tmp_path / "m.npz")
+    m2 = load_model(p)
+    assert m2.content_hash == m.content_hash
+    assert m2.labels == m.labels and m2.mode_names == m.mode_names
+    assert np.array_equal(m2.core, m.core) and np.array_equal(m2.landmarks, m.landmarks)
+    assert m2.provenance["dataset"] == "random"
+
+
+def test_load_rejects_truncated_altered_newer_and_foreign_files(tmp_path):
+    m = build_model(random_dataset(seed=7))
+    p = m.save(tmp_path / "m.npz")
+    data = p.read_bytes()
+    (tmp_path / "trunc.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ModelFileError, match="truncated"):
+        load_model(tmp_path / "trunc.npz")
+    # altered: change one array, keep the stored checksum
+    with np.load(p) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["core"] = arrays["core"] + 1e-9
+    np.savez(tmp_path / "alt.npz", **arrays)
+    with pytest.raises(ModelFileError, match="checksum"):
+        load_model(tmp_path / "alt.npz")
+    meta = json.loads(str(arrays["metadata"]))
+    meta["format_version"] = FORMAT_VERSION + 1
+    arrays["metadata"] = np.array(json.dumps(meta))
+    np.savez(tmp_path / "new.npz", **arrays)
+    with pytest.raises(ModelFileError, match="newer"):
+        load_model(tmp_path / "new.npz")
+    np.savez(tmp_path / "foreign.npz", a=np.zeros(3))
+    with pytest.raises(ModelFileError, match="not a facetransfer model"):
+        load_model(tmp_path / "foreign.npz")
+    with pytest.raises(ModelFileError, match="does not exist"):
+        load_model(tmp_path / "nope.npz")
+
+
+def test_save_is_atomic_and_refuses_overwrite(tmp_path):
+    m = build_model(random_dataset(seed=8))
+    p = m.save(tmp_path / "m.npz")
+    before = p.read_bytes()
+    from facetransfer.errors import FaceTransferError
+
+    with pytest.raises(FaceTransferError, match="exists"):
+        m.save(p, overwrite=False)
+    assert p.read_bytes() == before
+    assert sorted(x.name for x in tmp_path.iterdir()) == ["m.npz"]
+
+
+def test_build_rejects_missing_cells_and_bad_ranks():
+    ds = random_dataset(seed=9)
+    mask = ds.mask.copy()
+    mask[1, 2, 0] = False
+    with pytest.raises(DatasetError, match="1 missing cells.*id1/ex2/vi0"):
+        build_model(ds.with_vertices(ds.vertices, mask))
+    with pytest.raises(ValueError, match="rank 9 for mode 'expression'"):
+        build_model(ds, {"expression": 9})
+    with pytest.raises(ValueError, match="unknown mode"):
+        build_model(ds, {"age": 2})
+
+
+def test_weight_validation():
+    m = build_model(random_dataset(seed=10))
+    with pytest.raises(ShapeError, match="mode 'expression' must end in 4"):
+        m.synthesize({"identity": np.zeros(5), "expression": np.zeros(3), "viseme": np.zeros(3)})
+    with pytest.raises(ValueError, match="unknown expression 'grin'"):
+        m.like(expression="grin")
+    with pytest.raises(ValueError, match="missing for mode"):
+        m.synthesize({"identity": np.zeros(5)})
+
+
+def test_quick_ict_model_separates_identity_and_expression(quick_model, quick_ict_dataset):
+    # Real face data: the truncated model still reproduces training faces to sub-millimetre
+    m, ds = quick_model, quick_ict_dataset
+    f = m.synthesize(m.like(identity="id03", expression="smile"))
+    err = np.abs(f - ds.vertices[3, 1]).max()
+    assert err < 0.5  # cm; ranks 5/5 of 6/6
+    assert m.landmarks.shape == (68,)
