@@ -102,6 +102,8 @@ class Asset:
         Attribution to show wherever the asset (or anything derived from it) is shown.
     single_file : bool
         True when the asset is one file and :func:`asset_path` returns that file.
+    source : str
+        Human-readable upstream location (repository folder at the pinned commit).
     """
 
     name: str
@@ -110,6 +112,7 @@ class Asset:
     licence: str
     credit: str = ""
     single_file: bool = False
+    source: str = ""
 
     def file(self, relpath: str) -> AssetFile:
         for f in self.files:
@@ -131,7 +134,8 @@ def _ict_asset() -> Asset:
             continue  # LICENSE sits beside FaceXModel/; recorded but not part of the folder asset
         files.append(AssetFile(rel, base + path, digest))
     return Asset("ict-facekit", tuple(files), "ict-facekit/FaceXModel", "MIT",
-                 "ICT-FaceKit, (c) 2020 USC Institute for Creative Technologies, MIT licence")
+                 "ICT-FaceKit, (c) 2020 USC Institute for Creative Technologies, MIT licence",
+                 source=f"https://github.com/ICT-VGL/ICT-FaceKit/tree/{ICT_COMMIT}/FaceXModel")
 
 
 def _registry() -> dict[str, Asset]:
@@ -153,7 +157,8 @@ def _registry() -> dict[str, Asset]:
             AssetFile("Map-COL.jpg", lps + "Map-COL.jpg",
                       "e976d73b31407f8d0967412bf468019ed26a5d5a32cf5811aabff7e816458a65"),
         ), "lee-perry-smith", "CC-BY-3.0",
-            "Infinite, 3D Head Scan by Lee Perry-Smith (Infinite Realities), CC-BY 3.0"),
+            "Infinite, 3D Head Scan by Lee Perry-Smith (Infinite Realities), CC-BY 3.0",
+            source=f"https://github.com/mrdoob/three.js/tree/{THREEJS_COMMIT}/examples/models/gltf/LeePerrySmith"),
         Asset("canonical_face_model", (AssetFile(
             "canonical_face_model.obj", mp + "canonical_face_model.obj",
             "8bac80443397e113f41a8b565ea72c59390bc031d9defab289dba7bc0c54e618"),),
@@ -400,7 +405,7 @@ def describe(name: str) -> Mapping[str, str]:
     """Licence, credit and first URL of an asset, for provenance records."""
     a = _get(name)
     return {"asset": a.name, "licence": a.licence, "credit": a.credit,
-            "url": a.files[0].url if a.files else ""}
+            "source": a.source or (a.files[0].url if a.files else "")}
 
 
 def _clear_verified() -> None:

@@ -84,9 +84,11 @@ def _check_mask(mask, name: str, shape: tuple[int, int]) -> np.ndarray:
     if not np.issubdtype(m.dtype, np.number):
         raise CompositeError(f"{name} must be bool or numeric in [0, 1], got dtype {m.dtype}")
     m = m.astype(np.float64)
-    if not np.all(np.isfinite(m)) or m.min() < 0 or m.max() > 1:
+    if not np.all(np.isfinite(m)):
+        raise CompositeError(f"{name} has NaN or infinite values")
+    if m.min() < 0 or m.max() > 1:
         raise CompositeError(f"{name} values must lie in [0, 1], got range "
-                             f"[{np.nanmin(m):.3g}, {np.nanmax(m):.3g}]")
+                             f"[{m.min():.3g}, {m.max():.3g}]")
     return m
 
 
@@ -98,12 +100,13 @@ def _to_uint8(img: np.ndarray) -> np.ndarray:
 # the sparse solver
 # ---------------------------------------------------------------------------------------------
 
-def _edge_guidance(sources, alphas, target, axis: int, mixed: bool) -> np.ndarray:
+def _edge_guidance(sources, alphas, valids, target, axis: int, mixed: bool) -> np.ndarray:
     """Guidance ``v_pq`` on the edges between pixel p and its successor q along ``axis``.
 
-    Every source k owns the edge with weight ``max(alpha_k(p), alpha_k(q))``; the weights are
-    normalised to sum at most 1 and the target gets the rest (feathered edges then blend the
-    source and target gradients smoothly). Returns ``f_p - f_q`` differences, ``(h', w', 3)``.
+    Every source k owns the edge with weight ``max(alpha_k(p), alpha_k(q))`` if both ends are
+    valid pixels of that source (0 otherwise); the weights are normalised to sum at most 1 and
+    the target gets the rest (feathered edges then blend the source and target gradients
+    smoothly). Returns ``f_p - f_q`` differences, ``(h', w', 3)``.
     """
     def diff(img):
         return img[:-1] - img[1:] if axis == 0 else img[:, :-1] - img[:, 1:]
@@ -111,7 +114,10 @@ def _edge_guidance(sources, alphas, target, axis: int, mixed: bool) -> np.ndarra
     def emax(a):
         return np.maximum(a[:-1], a[1:]) if axis == 0 else np.maximum(a[:, :-1], a[:, 1:])
 
-    w = [emax(a) for a in alphas]
+    def eboth(v):
+        return (v[:-1] & v[1:]) if axis == 0 else (v[:, :-1] & v[:, 1:])
+
+    w = [emax(a) * (1.0 if v is None else eboth(v)) for a, v in zip(alphas, valids)]
     total = np.sum(w, axis=0)
     scale = np.where(total > 1.0, 1.0 / np.maximum(total, 1e-300), 1.0)
     d_t = diff(target)
@@ -129,7 +135,7 @@ def _edge_guidance(sources, alphas, target, axis: int, mixed: bool) -> np.ndarra
 
 
 def _solve_poisson(target: np.ndarray, sources: Sequence[np.ndarray], alphas: Sequence[np.ndarray],
-                   region: np.ndarray, mixed: bool) -> np.ndarray:
+                   valids: Sequence[np.ndarray | None], region: np.ndarray, mixed: bool) -> np.ndarray:
     """Solve Pérez et al. Eq. (7) inside ``region`` (bool, (h, w)) of a crop; float64 (h, w, 3)."""
     h, w = region.shape
     n = int(region.sum())
@@ -141,7 +147,7 @@ def _solve_poisson(target: np.ndarray, sources: Sequence[np.ndarray], alphas: Se
     rows, cols = [], []
 
     for axis in (0, 1):
-        v = _edge_guidance(sources, alphas, target, axis, mixed)  # v_pq = f_p - f_q wanted
+        v = _edge_guidance(sources, alphas, valids, target, axis, mixed)  # v_pq = f_p - f_q
         if axis == 0:
             ip, iq = idx[:-1], idx[1:]
             tp, tq = target[:-1], target[1:]
@@ -206,9 +212,12 @@ def poisson_blend_multi(target, sources: Sequence[tuple[np.ndarray, np.ndarray]]
     ----------
     target : (H, W, 3) uint8 or float
         Image to paste into (its values on the region's outline are the Dirichlet boundary).
-    sources : sequence of (source (H, W, 3), mask (H, W) bool or float in [0, 1])
+    sources : sequence of (source (H, W, 3), mask (H, W) bool or float in [0, 1][, valid (H, W) bool])
         Source images aligned with the target (pixel (x, y) of a source lands on (x, y)).
         Where masks overlap, later sources share the edge with earlier ones in proportion.
+        The optional ``valid`` marks the pixels where the source has content (e.g. a rendered
+        face without its background): an edge with an invalid end takes the target's
+        difference instead (default: every pixel valid, as in Pérez et al.).
     mixed : bool, keyword-only
         Mixed gradients (Pérez et al. 2003, Eq. (13)): per edge, the larger of the source and
         target differences, so that target texture shows through flat source areas.
@@ -226,12 +235,20 @@ def poisson_blend_multi(target, sources: Sequence[tuple[np.ndarray, np.ndarray]]
     H, W = t.shape[:2]
     if len(sources) == 0:
         raise CompositeError("poisson_blend_multi needs at least one (source, mask) pair")
-    srcs, alphas = [], []
+    srcs, alphas, valids = [], [], []
     for k, pair in enumerate(sources):
-        if len(pair) != 2:
-            raise CompositeError(f"sources[{k}] must be a (source, mask) pair")
+        if len(pair) not in (2, 3):
+            raise CompositeError(f"sources[{k}] must be a (source, mask) pair or a "
+                                 "(source, mask, valid) triple")
         srcs.append(_check_image(pair[0], f"sources[{k}] image", (H, W)).astype(np.float64))
         alphas.append(_check_mask(pair[1], f"sources[{k}] mask", (H, W)))
+        valid = None
+        if len(pair) == 3 and pair[2] is not None:
+            valid = np.asarray(pair[2])
+            if valid.shape != (H, W) or valid.dtype != bool:
+                raise ShapeError(f"sources[{k}] valid must be (H, W) = {(H, W)} bool, got "
+                                 f"{valid.shape} {valid.dtype}")
+        valids.append(valid)
     region = np.any([a > 0 for a in alphas], axis=0)
     out = t.astype(np.float64)
     if not region.any():
@@ -239,7 +256,7 @@ def poisson_blend_multi(target, sources: Sequence[tuple[np.ndarray, np.ndarray]]
         return _to_uint8(out)
     ys, xs = _bbox(region)
     f = _solve_poisson(out[ys, xs], [s[ys, xs] for s in srcs], [a[ys, xs] for a in alphas],
-                       region[ys, xs], mixed)
+                       [None if v is None else v[ys, xs] for v in valids], region[ys, xs], mixed)
     out[ys, xs] = f
     res = _to_uint8(out)
     if t.dtype == np.uint8:
@@ -408,7 +425,8 @@ def composite_face(target_frame, rendered_face, face_mask, *, mouth_source=None,
     ----------
     target_frame : (H, W, 3) uint8
     rendered_face : (H, W, 3) uint8
-        The face rendered in the target frame's camera.
+        The face rendered in the target frame's camera; its pixels outside ``face_mask`` are
+        ignored (edges leaving the face take the target's gradient).
     face_mask : (H, W) bool
         Pixels covered by the rendered face.
     mouth_source : (H, W, 3) uint8, optional
@@ -442,6 +460,8 @@ def composite_face(target_frame, rendered_face, face_mask, *, mouth_source=None,
     face = _to_uint8(np.asarray(r, dtype=np.float64))
     if color_match:
         face = match_color(face, t, fm)
+    # The rendered image has no face beyond face_mask (background there): edges leaving the
+    # face take the target's gradient (valid = face_mask), so no seam of background leaks in.
     pairs = []
     if mouth_source is not None:
         ms_img = _check_image(mouth_source, "mouth_source", t.shape[:2])
@@ -450,7 +470,7 @@ def composite_face(target_frame, rendered_face, face_mask, *, mouth_source=None,
             raise ShapeError(f"mouth_mask must be (H, W) = {t.shape[:2]} bool, got {mm.shape} {mm.dtype}")
         a_mouth = feather_mask(mm, feather)
         a_face = feather_mask(fm & ~mm, feather) * (1.0 - a_mouth)
-        pairs = [(face, a_face), (ms_img, a_mouth)]
+        pairs = [(face, a_face, fm), (ms_img, a_mouth)]
     else:
-        pairs = [(face, feather_mask(fm, feather))]
+        pairs = [(face, feather_mask(fm, feather), fm)]
     return poisson_blend_multi(t, pairs, mixed=mixed)

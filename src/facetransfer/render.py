@@ -35,6 +35,7 @@ Pineda. A parallel algorithm for polygon rasterization. SIGGRAPH 1988 (edge func
 from __future__ import annotations
 
 import logging
+import threading
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -59,6 +60,7 @@ __all__ = [
     "RenderResult",
     "RenderError",
     "rasterize",
+    "Rasterizer",
     "rasterize_reference",
     "vertex_visibility",
     "vertex_normals",
@@ -66,6 +68,8 @@ __all__ = [
     "rotation_from_euler",
     "euler_from_rotation",
     "look_at_weak_perspective",
+    "render_model",
+    "sample_texture",
 ]
 
 
@@ -106,7 +110,7 @@ def _as_points(X) -> np.ndarray:
     return X
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class WeakPerspective:
     """The tracker's weak-perspective camera (Vlasic et al. 2005, §5.1, Eq. (7)).
 
@@ -155,7 +159,7 @@ class WeakPerspective:
         return _as_points(X) @ self.rotation[2]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Pinhole:
     """A pinhole camera for previews: camera coordinates ``Xc = R @ X + T``.
 
@@ -266,7 +270,7 @@ def look_at_weak_perspective(vertices: np.ndarray, size: tuple[int, int], *,
 # Results
 # --------------------------------------------------------------------------------------------
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class Raster:
     """Per-pixel result of rasterising a mesh.
 
@@ -294,7 +298,7 @@ class Raster:
         return int(self.tri_id.shape[1]), int(self.tri_id.shape[0])
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class RenderResult:
     """A rendered image with the raster behind it.
 
@@ -350,12 +354,21 @@ def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
 
 def _check_not_all_degenerate(V: np.ndarray, F: np.ndarray) -> None:
     """Reject a mesh whose triangles all have zero area in 3D."""
-    a = V[F[:, 1]] - V[F[:, 0]]
-    b = V[F[:, 2]] - V[F[:, 0]]
-    area2 = np.einsum("ij,ij->i", *(np.cross(a, b),) * 2)
-    scale = float(np.ptp(V, axis=0).max()) if V.shape[0] > 1 else 0.0
-    if scale == 0.0 or not np.any(area2 > (1e-12 * scale * scale) ** 2):
+    scale = float(_bbox_diagonal(V))
+    if scale == 0.0 or not _any_nondegenerate(V, F, (1e-12 * scale * scale) ** 2):
         raise RenderError(f"all {F.shape[0]} triangles are degenerate (zero area)")
+
+
+def _any_nondegenerate_py(V, F, eps2):  # pragma: no cover
+    """True as soon as one triangle has squared doubled area > eps2 (stops early)."""
+    for f in range(F.shape[0]):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        ax, ay, az = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
+        bx, by, bz = V[i2, 0] - V[i0, 0], V[i2, 1] - V[i0, 1], V[i2, 2] - V[i0, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        if nx * nx + ny * ny + nz * nz > eps2:
+            return True
+    return False
 
 
 # --------------------------------------------------------------------------------------------
@@ -368,6 +381,11 @@ def _screen(V: np.ndarray, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     For the weak-perspective camera q = 1. For the pinhole camera q = 1 / (-Xc_z); vertices
     nearer than ``camera.near`` get q = 0, which marks their triangles as not drawable.
     """
+    if not isinstance(camera, (WeakPerspective, Pinhole)) and not (
+            hasattr(camera, "project") and hasattr(camera, "depth")
+            and hasattr(camera, "rotation")):
+        raise ShapeError(f"camera must be a WeakPerspective or Pinhole, got "
+                         f"{type(camera).__name__}")
     if getattr(camera, "perspective", False):
         Xc = camera.to_camera(V)
         w = -Xc[:, 2]
@@ -461,6 +479,7 @@ def rasterize_reference(vertices: np.ndarray, faces: np.ndarray, camera, size: t
         getattr(camera, "perspective", False)))
     pos = a > 0
     inside = np.where(pos, (w0 >= 0) & (w1 >= 0) & (w2 >= 0), (w0 <= 0) & (w1 <= 0) & (w2 <= 0))
+    d = d.astype(np.float32)  # the z-buffer holds float32 depths
     inside &= d > -np.inf  # NaN and -inf never beat the empty z-buffer
     t, px, py, d = t[inside], px[inside].astype(np.int64), py[inside].astype(np.int64), d[inside]
     pix = py * W + px
@@ -469,7 +488,7 @@ def rasterize_reference(vertices: np.ndarray, faces: np.ndarray, camera, size: t
     first = np.ones(pix.size, bool)
     first[1:] = pix[1:] != pix[:-1]
     pix, t, d = pix[first], t[first], d[first]
-    out.depth.ravel()[pix] = d.astype(np.float32)
+    out.depth.ravel()[pix] = d
     out.tri_id.ravel()[pix] = t.astype(np.int32)
     out.mask.ravel()[pix] = True
     py, px = np.divmod(pix, W)
@@ -484,11 +503,14 @@ def rasterize_reference(vertices: np.ndarray, faces: np.ndarray, camera, size: t
 # numba kernel
 # --------------------------------------------------------------------------------------------
 
-def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid):  # pragma: no cover
-    """Z-buffer loop over triangles; fills ``zbuf`` (H, W) float64 and ``tid`` (H, W) int32.
+def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  # pragma: no cover
+    """Z-buffer loop over triangles; fills ``zbuf`` (H, W) float32, ``tid`` (H, W) int32 and
+    ``bary`` (H, W, 3) float32 at every pixel a triangle wins. Returns the bounding box
+    ``(x_lo, y_lo, x_hi, y_hi)`` (inclusive) of the pixels written (empty: lo > hi).
 
     Must stay operation-for-operation equal to :func:`rasterize_reference`.
     """
+    bx0, by0, bx1, by1 = W, H, -1, -1
     for f in range(F.shape[0]):
         i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
         q0, q1, q2 = q[i0], q[i1], q[i2]
@@ -508,6 +530,7 @@ def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid):  # pragm
             continue
         z0, z1, z2 = z[i0], z[i1], z[i2]
         pos = area > 0
+        wrote = False
         for iy in range(int(ymin), int(ymax) + 1):
             py = float(iy)
             for ix in range(int(xmin), int(xmax) + 1):
@@ -531,50 +554,28 @@ def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid):  # pragm
                     b0 = c0 / s
                     b1 = c1 / s
                     b2 = c2 / s
-                d = b0 * z0 + b1 * z1 + b2 * z2
+                d = np.float32(b0 * z0 + b1 * z1 + b2 * z2)
                 if d > zbuf[iy, ix]:
                     zbuf[iy, ix] = d
                     tid[iy, ix] = f
+                    bary[iy, ix, 0] = b0
+                    bary[iy, ix, 1] = b1
+                    bary[iy, ix, 2] = b2
+                    wrote = True
+        if wrote:
+            bx0 = min(bx0, int(xmin))
+            by0 = min(by0, int(ymin))
+            bx1 = max(bx1, int(xmax))
+            by1 = max(by1, int(ymax))
+    return bx0, by0, bx1, by1
 
 
-def _bary_kernel_py(xy, z, q, F, perspective, tid, bary):  # pragma: no cover
-    """Barycentrics of the winning triangle at every covered pixel (second pass)."""
-    H, W = tid.shape
-    for iy in range(H):
-        py = float(iy)
-        for ix in range(W):
-            f = tid[iy, ix]
-            if f < 0:
-                continue
-            i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-            x0, y0, x1, y1, x2, y2 = xy[i0, 0], xy[i0, 1], xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]
-            area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
-            px = float(ix)
-            w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
-            w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
-            w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
-            b0 = w0 / area
-            b1 = w1 / area
-            b2 = w2 / area
-            if perspective:
-                c0 = b0 * q[i0]
-                c1 = b1 * q[i1]
-                c2 = b2 * q[i2]
-                s = c0 + c1 + c2
-                b0 = c0 / s
-                b1 = c1 / s
-                b2 = c2 / s
-            bary[iy, ix, 0] = b0
-            bary[iy, ix, 1] = b1
-            bary[iy, ix, 2] = b2
+def _maybe_njit(fn):
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn) if _HAVE_NUMBA else fn
 
 
-if _HAVE_NUMBA:
-    _raster_kernel = numba.njit(cache=True, nogil=True, error_model="numpy")(_raster_kernel_py)
-    _bary_kernel = numba.njit(cache=True, nogil=True, error_model="numpy")(_bary_kernel_py)
-else:  # pragma: no cover
-    _raster_kernel = _raster_kernel_py
-    _bary_kernel = _bary_kernel_py
+_raster_kernel = _maybe_njit(_raster_kernel_py)
+_any_nondegenerate = _maybe_njit(_any_nondegenerate_py)
 
 
 def rasterize(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int], *,
@@ -612,25 +613,81 @@ def rasterize(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, 
 def _rasterize_checked(V, F, camera, W, H, cull) -> Raster:
     xy, z, q = _screen(V, camera)
     perspective = bool(getattr(camera, "perspective", False))
-    zbuf = np.full((H, W), -np.inf)
+    zbuf = np.full((H, W), -np.inf, np.float32)
     tid = np.full((H, W), -1, np.int32)
-    _raster_kernel(xy, z, q, F, W, H, bool(cull), perspective, zbuf, tid)
     bary = np.zeros((H, W, 3), np.float32)
-    _bary_kernel(xy, z, q, F, perspective, tid, bary)
-    return Raster(zbuf.astype(np.float32), tid, bary, tid >= 0)
+    _raster_kernel(xy, z, q, F, W, H, bool(cull), perspective, zbuf, tid, bary)
+    return Raster(zbuf, tid, bary, tid >= 0)
+
+
+class Rasterizer:
+    """Rasterise many frames of one size into reused buffers (no allocation per frame).
+
+    ``Rasterizer(size).rasterize(vertices, faces, camera)`` gives the same result as
+    :func:`rasterize`, but the returned :class:`Raster` views the rasterizer's buffers: it is
+    valid until the next call (copy it to keep it). Only the region written by the previous
+    call is cleared, so a face filling part of the frame costs only its own pixels.
+
+    Parameters
+    ----------
+    size : (W, H)
+    """
+
+    def __init__(self, size: tuple[int, int]) -> None:
+        self.size = _as_size(size)
+        W, H = self.size
+        self._depth = np.full((H, W), -np.inf, np.float32)
+        self._tid = np.full((H, W), -1, np.int32)
+        self._bary = np.zeros((H, W, 3), np.float32)
+        self._mask = np.zeros((H, W), bool)
+        self._dirty = (0, 0, -1, -1)
+
+    def rasterize(self, vertices: np.ndarray, faces: np.ndarray, camera, *,
+                  cull_backfaces: bool = False) -> Raster:
+        """See :func:`rasterize`; the result is overwritten by the next call."""
+        V, F = _check_mesh(vertices, faces)
+        return self._run(V, F, camera, cull_backfaces)
+
+    def _run(self, V: np.ndarray, F: np.ndarray, camera, cull: bool) -> Raster:
+        W, H = self.size
+        x0, y0, x1, y1 = self._dirty
+        if x1 >= x0 and y1 >= y0:
+            region = (slice(y0, y1 + 1), slice(x0, x1 + 1))
+            self._depth[region] = -np.inf
+            self._tid[region] = -1
+            self._bary[region] = 0.0
+            self._mask[region] = False
+        xy, z, q = _screen(V, camera)
+        box = _raster_kernel(xy, z, q, F, W, H, bool(cull),
+                             bool(getattr(camera, "perspective", False)),
+                             self._depth, self._tid, self._bary)
+        self._dirty = tuple(int(b) for b in box)
+        x0, y0, x1, y1 = self._dirty
+        if x1 >= x0 and y1 >= y0:
+            region = (slice(y0, y1 + 1), slice(x0, x1 + 1))
+            np.greater_equal(self._tid[region], 0, out=self._mask[region])
+        return Raster(self._depth, self._tid, self._bary, self._mask)
+
+
+_scratch = threading.local()
+
+
+def _scratch_rasterizer(W: int, H: int) -> Rasterizer:
+    """A per-thread :class:`Rasterizer` for internal use (visibility without a given raster)."""
+    cache = getattr(_scratch, "cache", None)
+    if cache is None:
+        cache = _scratch.cache = {}
+    r = cache.get((W, H))
+    if r is None:
+        if len(cache) > 4:
+            cache.clear()
+        r = cache[(W, H)] = Rasterizer((W, H))
+    return r
 
 
 # --------------------------------------------------------------------------------------------
 # Visibility
 # --------------------------------------------------------------------------------------------
-
-def _front_facing(xy: np.ndarray, q: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """(F,) bool: triangle drawable and counter-clockwise seen from the camera."""
-    x = xy[:, 0][F]
-    y = xy[:, 1][F]
-    area = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (y[:, 1] - y[:, 0]) * (x[:, 2] - x[:, 0])
-    return (area < 0) & np.all(q[F] > 0, axis=1)
-
 
 def vertex_visibility(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int], *,
                       raster: Raster | None = None, tol: float | None = None) -> np.ndarray:
@@ -639,9 +696,13 @@ def vertex_visibility(vertices: np.ndarray, faces: np.ndarray, camera, size: tup
     A vertex is visible if (1) it projects inside the image, (2) it belongs to at least one
     front-facing triangle and (3) the triangle that wins the z-buffer at its nearest pixel,
     with its plane evaluated at the vertex's exact image position, is not nearer than the
-    vertex by more than ``tol``. Evaluating the winner's plane at the vertex (rather than
-    reading the depth at the pixel centre) makes the test exact for the vertex's own
-    triangles, so ``tol`` only has to absorb curvature over half a pixel.
+    vertex by more than ``tol`` plus that triangle's depth change over one pixel (at most
+    ``3 tol``). Evaluating the winner's plane at the vertex, rather than reading the depth at
+    the pixel centre, makes the test exact for the vertex's own triangles; ``tol`` absorbs
+    curvature between neighbouring triangles, the one-pixel slope term triangles smaller than
+    a pixel on steep surfaces (small, distant faces). A silhouette vertex
+    whose nearest pixel centre falls just off the mesh is tested against the winners of the 8
+    pixels around it instead (visible if any passes).
 
     Parameters
     ----------
@@ -665,12 +726,103 @@ def vertex_visibility(vertices: np.ndarray, faces: np.ndarray, camera, size: tup
     V, F = _check_mesh(vertices, faces)
     W, H = _as_size(size)
     if raster is None:
-        raster = _rasterize_checked(V, F, camera, W, H, False)
+        raster = _scratch_rasterizer(W, H)._run(V, F, camera, False)
     elif raster.tri_id.shape != (H, W):
         raise ShapeError(f"raster is {raster.size}, expected size {(W, H)}")
     if tol is None:
-        tol = 0.01 * float(np.linalg.norm(np.ptp(V, axis=0)))
+        tol = _default_tol(V)
+    elif not (np.isfinite(tol) and tol >= 0):
+        raise ShapeError(f"visibility tolerance must be a finite number >= 0, got {tol}")
     return _visibility(V, F, camera, raster, float(tol))
+
+
+@_maybe_njit
+def _plane_depth(xy, z, q, F, f, vx, vy, perspective, tol):  # pragma: no cover
+    """Depth of triangle ``f``'s (perspective-correct) plane at image point (vx, vy), and the
+    allowance for a vertex tested against it: ``tol`` plus the triangle's depth change over one
+    pixel (its screen-space depth gradient), at most ``3 tol``."""
+    i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+    x0, y0, x1, y1, x2, y2 = xy[i0, 0], xy[i0, 1], xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]
+    area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+    b0 = ((x2 - x1) * (vy - y1) - (y2 - y1) * (vx - x1)) / area
+    b1 = ((x0 - x2) * (vy - y2) - (y0 - y2) * (vx - x2)) / area
+    b2 = ((x1 - x0) * (vy - y0) - (y1 - y0) * (vx - x0)) / area
+    if perspective:
+        c0 = b0 * q[i0]
+        c1 = b1 * q[i1]
+        c2 = b2 * q[i2]
+        s = c0 + c1 + c2
+        b0 = c0 / s
+        b1 = c1 / s
+        b2 = c2 / s
+    z0, z1, z2 = z[i0], z[i1], z[i2]
+    gx = ((z1 - z0) * (y2 - y0) - (z2 - z0) * (y1 - y0)) / area
+    gy = ((z2 - z0) * (x1 - x0) - (z1 - z0) * (x2 - x0)) / area
+    allow = tol + min(np.sqrt(gx * gx + gy * gy), 3.0 * tol)
+    return b0 * z0 + b1 * z1 + b2 * z2, allow
+
+
+def _visibility_kernel_py(xy, z, q, F, tid, cand, tol, perspective, vis):  # pragma: no cover
+    """Per candidate vertex: the winning triangle at its nearest pixel (or, if that pixel is
+    background, any winner of the 8 pixels around it), with its plane evaluated at the vertex,
+    must not be nearer than the vertex by more than its allowance (see _plane_depth)."""
+    H, W = tid.shape
+    for v in range(xy.shape[0]):
+        if not cand[v]:
+            continue
+        vx, vy = xy[v, 0], xy[v, 1]
+        cx, cy = int(np.rint(vx)), int(np.rint(vy))
+        f = tid[cy, cx]
+        if f >= 0:
+            d, allow = _plane_depth(xy, z, q, F, f, vx, vy, perspective, tol)
+            vis[v] = d <= z[v] + allow
+            continue
+        for iy in range(max(cy - 1, 0), min(cy + 1, H - 1) + 1):
+            for ix in range(max(cx - 1, 0), min(cx + 1, W - 1) + 1):
+                f = tid[iy, ix]
+                if f >= 0:
+                    d, allow = _plane_depth(xy, z, q, F, f, vx, vy, perspective, tol)
+                    if d <= z[v] + allow:
+                        vis[v] = True
+
+
+_visibility_kernel = _maybe_njit(_visibility_kernel_py)
+
+
+def _bbox_diagonal_py(V):  # pragma: no cover
+    """Length of the diagonal of the axis-aligned bounding box of V (n, 3)."""
+    lo0 = hi0 = V[0, 0]
+    lo1 = hi1 = V[0, 1]
+    lo2 = hi2 = V[0, 2]
+    for i in range(1, V.shape[0]):
+        lo0, hi0 = min(lo0, V[i, 0]), max(hi0, V[i, 0])
+        lo1, hi1 = min(lo1, V[i, 1]), max(hi1, V[i, 1])
+        lo2, hi2 = min(lo2, V[i, 2]), max(hi2, V[i, 2])
+    return np.sqrt((hi0 - lo0) ** 2 + (hi1 - lo1) ** 2 + (hi2 - lo2) ** 2)
+
+
+_bbox_diagonal = _maybe_njit(_bbox_diagonal_py)
+
+
+def _default_tol(V: np.ndarray) -> float:
+    """Default visibility tolerance: 1 % of the mesh's bounding-box diagonal."""
+    return 0.01 * float(_bbox_diagonal(V))
+
+
+def _front_vertices_py(xy, q, F, front):  # pragma: no cover
+    """Mark the vertices of drawable, counter-clockwise (front-facing) triangles."""
+    for f in range(F.shape[0]):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        if not (q[i0] > 0 and q[i1] > 0 and q[i2] > 0):
+            continue
+        x0, y0, x1, y1, x2, y2 = xy[i0, 0], xy[i0, 1], xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]
+        if (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0) < 0:
+            front[i0] = True
+            front[i1] = True
+            front[i2] = True
+
+
+_front_vertices = _maybe_njit(_front_vertices_py)
 
 
 def _visibility(V, F, camera, raster: Raster, tol: float) -> np.ndarray:
@@ -678,23 +830,14 @@ def _visibility(V, F, camera, raster: Raster, tol: float) -> np.ndarray:
     H, W = raster.tri_id.shape
     xy, z, q = _screen(V, camera)
     front = np.zeros(n, bool)
-    front[F[_front_facing(xy, q, F)].ravel()] = True
-    ix = np.rint(xy[:, 0])
-    iy = np.rint(xy[:, 1])
-    cand = front & (ix >= 0) & (ix <= W - 1) & (iy >= 0) & (iy <= H - 1) & (q > 0)
-    idx = np.flatnonzero(cand)
-    if idx.size == 0:
-        return np.zeros(n, bool)
-    t = raster.tri_id[iy[idx].astype(np.intp), ix[idx].astype(np.intp)].astype(np.int64)
-    hit = t >= 0
-    idx, t = idx[hit], t[hit]
-    Ft = F[t]
-    x, y = xy[:, 0][Ft], xy[:, 1][Ft]
-    area = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (y[:, 1] - y[:, 0]) * (x[:, 2] - x[:, 0])
-    *_, d = _bary_depth_np(x, y, z[Ft], q[Ft], area, xy[idx, 0], xy[idx, 1],
-                           perspective=bool(getattr(camera, "perspective", False)))
+    _front_vertices(xy, q, F, front)
+    with np.errstate(invalid="ignore"):
+        cand = front & (q > 0) & (xy[:, 0] >= -0.5) & (xy[:, 0] < W - 0.5) \
+            & (xy[:, 1] >= -0.5) & (xy[:, 1] < H - 0.5)
     vis = np.zeros(n, bool)
-    vis[idx] = d <= z[idx] + tol
+    if cand.any():
+        _visibility_kernel(xy, z, q, F, np.ascontiguousarray(raster.tri_id, dtype=np.int32),
+                           cand, float(tol), bool(getattr(camera, "perspective", False)), vis)
     return vis
 
 
@@ -716,13 +859,31 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
         Unit normals; vertices on no non-degenerate face get (0, 0, 0).
     """
     V, F = _check_mesh(vertices, faces)
-    fn = np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]])  # |fn| = 2 * area
     N = np.zeros_like(V)
-    idx = F.T.ravel()  # (3F,): corner k of every face, k = 0, 1, 2
-    for c in range(3):
-        N[:, c] = np.bincount(idx, weights=np.tile(fn[:, c], 3), minlength=V.shape[0])
-    norm = np.linalg.norm(N, axis=1, keepdims=True)
-    return np.divide(N, norm, out=np.zeros_like(N), where=norm > 0)
+    _normals_kernel(V, F, N)
+    return N
+
+
+def _normals_kernel_py(V, F, N):  # pragma: no cover
+    """Sum of face cross products (2 x area x unit normal) per vertex, then normalised."""
+    for f in range(F.shape[0]):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        ax, ay, az = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
+        bx, by, bz = V[i2, 0] - V[i0, 0], V[i2, 1] - V[i0, 1], V[i2, 2] - V[i0, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        for i in (i0, i1, i2):
+            N[i, 0] += nx
+            N[i, 1] += ny
+            N[i, 2] += nz
+    for i in range(N.shape[0]):
+        norm = np.sqrt(N[i, 0] ** 2 + N[i, 1] ** 2 + N[i, 2] ** 2)
+        if norm > 0:
+            N[i, 0] /= norm
+            N[i, 1] /= norm
+            N[i, 2] /= norm
+
+
+_normals_kernel = _maybe_njit(_normals_kernel_py)
 
 
 def _check_texture(texture) -> np.ndarray:
@@ -851,30 +1012,131 @@ def render(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int
         log.warning("the mesh is entirely behind the camera or outside the %dx%d image; "
                     "rendering the background only", W, H)
         return RenderResult(image, raster, np.zeros(n, bool))
-    tol = 0.01 * float(np.linalg.norm(np.ptp(V, axis=0))) if visibility_tol is None \
+    if visibility_tol is not None and not (np.isfinite(visibility_tol) and visibility_tol >= 0):
+        raise ShapeError(f"visibility tolerance must be a finite number >= 0, got "
+                         f"{visibility_tol}")
+    tol = _default_tol(V) if visibility_tol is None \
         else float(visibility_tol)
     visible = _visibility(V, F, camera, raster, tol)
 
-    pix = np.flatnonzero(raster.mask.ravel())
-    tri = raster.tri_id.ravel()[pix]
-    b = raster.bary.reshape(-1, 3)[pix].astype(np.float64)  # (m, 3)
-    Ft = F[tri]  # (m, 3)
     if T is not None:
-        uv = np.einsum("mk,mkc->mc", b, UV[Ft])
-        col = sample_texture(T, uv)
+        src, uv_arr, tex_arr, col_arr = 1, UV, np.ascontiguousarray(T), _DUMMY_COLORS
     elif C is not None:
-        col = np.einsum("mk,mkc->mc", b, C[Ft])
+        src, uv_arr, tex_arr, col_arr = 0, _DUMMY_UV, _DUMMY_TEX, C
     else:
-        col = np.full((pix.size, 3), 200.0)
+        src, uv_arr, tex_arr, col_arr = 0, _DUMMY_UV, _DUMMY_TEX, np.full((n, 3), 200.0)
     if shading == "lambert":
         L = np.asarray(light, dtype=np.float64)
         if L.shape != (3,) or not np.linalg.norm(L) > 0:
             raise ShapeError(f"light must be a non-zero (3,) direction, got {L}")
         L = L / np.linalg.norm(L)
-        Nc = vertex_normals(V, F) @ camera.rotation.T  # camera-space normals (n, 3)
-        nrm = np.einsum("mk,mkc->mc", b, Nc[Ft])
-        nl = np.linalg.norm(nrm, axis=1)
-        cos = np.divide(nrm @ L, nl, out=np.zeros_like(nl), where=nl > 0)
-        col = col * (ambient + (1.0 - ambient) * np.maximum(cos, 0.0))[:, None]
-    image.reshape(-1, 3)[pix] = np.clip(np.rint(col), 0, 255).astype(np.uint8)
+        Nc = np.ascontiguousarray(vertex_normals(V, F) @ camera.rotation.T)  # camera space
+    else:
+        L, Nc = np.zeros(3), _DUMMY_COLORS
+    _shade_kernel(raster.tri_id, raster.bary, F, src, col_arr, uv_arr, tex_arr,
+                  shading == "lambert", Nc, L, float(ambient), image)
     return RenderResult(image, raster, visible)
+
+
+_DUMMY_COLORS = np.zeros((1, 3))
+_DUMMY_UV = np.zeros((1, 2))
+_DUMMY_TEX = np.zeros((1, 1, 3), np.uint8)
+
+
+def _shade_kernel_py(tid, bary, F, src, colors, uvs, tex, lambert, normals, light, ambient,
+                     image):  # pragma: no cover
+    """Colour every covered pixel: interpolated vertex colour (src 0) or bilinear texture
+    sample at the interpolated uv (src 1), times ``ambient + (1 - ambient) max(0, n . l)``."""
+    H, W = tid.shape
+    Ht, Wt = tex.shape[0], tex.shape[1]
+    for iy in range(H):
+        for ix in range(W):
+            f = tid[iy, ix]
+            if f < 0:
+                continue
+            i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+            b0, b1, b2 = float(bary[iy, ix, 0]), float(bary[iy, ix, 1]), float(bary[iy, ix, 2])
+            if src == 1:
+                u = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
+                v = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
+                u = min(max(u, 0.0), 1.0) * (Wt - 1)
+                v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
+                c0 = min(int(np.floor(u)), Wt - 1)
+                r0 = min(int(np.floor(v)), Ht - 1)
+                c1 = min(c0 + 1, Wt - 1)
+                r1 = min(r0 + 1, Ht - 1)
+                fu = u - c0
+                fv = v - r0
+                cr = 0.0
+                cg = 0.0
+                cb = 0.0
+                for k in range(3):
+                    top = tex[r0, c0, k] * (1.0 - fu) + tex[r0, c1, k] * fu
+                    bot = tex[r1, c0, k] * (1.0 - fu) + tex[r1, c1, k] * fu
+                    val = top * (1.0 - fv) + bot * fv
+                    if k == 0:
+                        cr = val
+                    elif k == 1:
+                        cg = val
+                    else:
+                        cb = val
+            else:
+                cr = b0 * colors[i0, 0] + b1 * colors[i1, 0] + b2 * colors[i2, 0]
+                cg = b0 * colors[i0, 1] + b1 * colors[i1, 1] + b2 * colors[i2, 1]
+                cb = b0 * colors[i0, 2] + b1 * colors[i1, 2] + b2 * colors[i2, 2]
+            if lambert:
+                nx = b0 * normals[i0, 0] + b1 * normals[i1, 0] + b2 * normals[i2, 0]
+                ny = b0 * normals[i0, 1] + b1 * normals[i1, 1] + b2 * normals[i2, 1]
+                nz = b0 * normals[i0, 2] + b1 * normals[i1, 2] + b2 * normals[i2, 2]
+                nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+                cos = 0.0
+                if nn > 0:
+                    cos = max((nx * light[0] + ny * light[1] + nz * light[2]) / nn, 0.0)
+                g = ambient + (1.0 - ambient) * cos
+                cr *= g
+                cg *= g
+                cb *= g
+            image[iy, ix, 0] = min(max(np.rint(cr), 0.0), 255.0)
+            image[iy, ix, 1] = min(max(np.rint(cg), 0.0), 255.0)
+            image[iy, ix, 2] = min(max(np.rint(cb), 0.0), 255.0)
+
+
+_shade_kernel = _maybe_njit(_shade_kernel_py)
+
+
+def render_model(model, weights, *, size: tuple[int, int] = (640, 480), yaw_deg: float = 0.0,
+                 pitch_deg: float = 0.0, roll_deg: float = 0.0, scale: float = 1.0,
+                 fill: float = 0.8, colors: np.ndarray | None = None,
+                 texture: np.ndarray | None = None, background=(255, 255, 255),
+                 shading: str = "lambert") -> RenderResult:
+    """A framed preview of a multilinear model face (Eq. (5)) under a weak-perspective camera.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+        Anything with ``synthesize(weights)``, ``faces`` and ``uvs``.
+    weights : mapping mode -> (r_k,)
+    size : (W, H)
+    yaw_deg, pitch_deg, roll_deg : float
+        Head rotation (:func:`rotation_from_euler`), about the centre of the face's box.
+    scale : float
+        Zoom relative to the framing (1: the rotated face box fills ``fill`` of the image).
+    colors, texture : optional
+        Per-vertex colours, or a UV texture (needs ``model.uvs``); default plain grey.
+    background : colour (3,) or (H, W, 3) uint8
+    shading : {"lambert", "none"}
+
+    Returns
+    -------
+    RenderResult
+    """
+    if not (np.isfinite(scale) and scale > 0):
+        raise ShapeError(f"preview scale must be > 0, got {scale}")
+    V = np.asarray(model.synthesize(weights), dtype=np.float64)
+    R = rotation_from_euler(yaw_deg, pitch_deg, roll_deg)
+    cam = look_at_weak_perspective(V, size, rotation=R, fill=fill * scale)
+    uvs = model.uvs if texture is not None else None
+    if texture is not None and uvs is None:
+        raise RenderError("a texture needs a model with UVs; this model has none")
+    return render(V, model.faces, cam, size, colors=colors, uvs=uvs, texture=texture,
+                  shading=shading, background=background)

@@ -1,7 +1,392 @@
-"""``facetransfer`` subcommands of this area (filled in by its issue)."""
+"""``facetransfer model``: build, inspect, sample and picture multilinear face models (§4).
+
+    facetransfer model build --dataset ict-bilinear --out bilinear.npz
+    facetransfer model info bilinear.npz
+    facetransfer model synth bilinear.npz --like identity=id03,expression=smile --out face.obj
+    facetransfer model sheet bilinear.npz --out sheet.png        # also writes sheet_dials.png
+"""
 
 from __future__ import annotations
 
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+from typing import Callable
 
+import numpy as np
+
+from ..errors import DatasetError, FaceTransferError, ShapeError
+from ..io.atomic import atomic_path, check_output_path
+
+log = logging.getLogger(__name__)
+
+#: Sheet tile size (W, H) in pixels.
+TILE = (150, 180)
+
+
+# --------------------------------------------------------------------------------- parsing
+def parse_ranks(text: str | None) -> dict[str, int]:
+    """``"identity=9,expression=6"`` -> ``{"identity": 9, "expression": 6}``."""
+    if not text:
+        return {}
+    out: dict[str, int] = {}
+    for part in text.split(","):
+        name, sep, val = part.partition("=")
+        name = name.strip()
+        try:
+            r = int(val)
+        except ValueError:
+            r = 0
+        if not sep or not name or r < 1:
+            raise FaceTransferError(f"--ranks: expected MODE=POSITIVE_INT[,...], got {part!r}")
+        out[name] = r
+    return out
+
+
+def parse_weights(text: str) -> dict[str, np.ndarray]:
+    """``"identity=0.1,0.2;expression=1,0"`` -> per-mode float arrays."""
+    out: dict[str, np.ndarray] = {}
+    for part in text.split(";"):
+        if not part.strip():
+            continue
+        name, sep, vals = part.partition("=")
+        try:
+            w = np.array([float(x) for x in vals.split(",")], dtype=np.float64)
+        except ValueError:
+            w = np.array([np.nan])
+        if not sep or not name.strip() or w.size == 0 or not np.all(np.isfinite(w)):
+            raise FaceTransferError(f"--weights: expected MODE=NUM,NUM,...[;MODE=...], got {part!r}")
+        out[name.strip()] = w
+    if not out:
+        raise FaceTransferError("--weights is empty")
+    return out
+
+
+def parse_like(text: str) -> dict[str, str]:
+    """``"identity=id03,expression=smile"`` -> ``{"identity": "id03", "expression": "smile"}``."""
+    out: dict[str, str] = {}
+    for part in text.split(","):
+        name, sep, lab = part.partition("=")
+        if not sep or not name.strip() or not lab.strip():
+            raise FaceTransferError(f"--like: expected MODE=LABEL[,...], got {part!r}")
+        out[name.strip()] = lab.strip()
+    return out
+
+
+def _tqdm_progress(desc: str) -> tuple[Callable[[int, int], None], Callable[[], None]]:
+    from tqdm import tqdm
+
+    state: dict = {}
+
+    def cb(done: int, total: int) -> None:
+        if "bar" not in state:
+            state["bar"] = tqdm(total=total, desc=desc, unit="item", leave=False,
+                                disable=not sys.stderr.isatty())
+        state["bar"].update(done - state["bar"].n)
+
+    def close() -> None:
+        if "bar" in state:
+            state["bar"].close()
+
+    return cb, close
+
+
+# --------------------------------------------------------------------------------- build
+def default_ranks(dataset) -> dict[str, int]:
+    """Recipe ranks (ICT data sets: bilinear 9/6, trilinear 16/4/4) clipped to the mode sizes;
+    empty (full ranks) for other data sets."""
+    rec = dict(dataset.provenance.get("default_ranks") or {})
+    sizes = dict(zip(dataset.mode_names, dataset.shape))
+    return {m: min(int(r), sizes[m]) for m, r in rec.items() if m in sizes}
+
+
+def _fill_missing(dataset, method: str, seed: int):
+    """Impute missing cells (§4.4) or raise listing them. Returns (dataset, imputed mask or None)."""
+    if dataset.mask.all():
+        return dataset, None
+    missing = dataset.missing_cells()
+    shown = "; ".join("/".join(c) for c in missing[:12])
+    more = f" and {len(missing) - 12} more" if len(missing) > 12 else ""
+    if method == "none":
+        raise DatasetError(f"{len(missing)} missing cells ({shown}{more}); use --impute ppca or "
+                           "average to fill them")
+    try:
+        from ..impute import impute_dataset
+    except ImportError:
+        raise DatasetError(f"{len(missing)} missing cells ({shown}{more}) and imputation is not "
+                           "available in this version") from None
+    res = impute_dataset(dataset, method=method, rng=np.random.default_rng(seed))
+    imputed = np.asarray(res.imputed, dtype=bool)
+    cells = [list(c) for c in missing]
+    filled = res.dataset.with_vertices(res.dataset.vertices, np.ones_like(dataset.mask),
+                                       imputed_cells=cells, impute_method=method)
+    print(f"imputed {int(imputed.sum())} missing cells ({method})", file=sys.stderr)
+    return filled, imputed
+
+
+def cmd_build(args: argparse.Namespace) -> int:
+    from ..datasets import load_dataset
+    from ..model import build_model
+
+    check_output_path(args.out)
+    ranks = parse_ranks(args.ranks)
+    cb, close = _tqdm_progress(f"dataset {args.dataset}")
+    try:
+        ds = load_dataset(args.dataset, seed=args.seed, n_identities=args.identities, progress=cb)
+    finally:
+        close()
+    if args.identities is not None and str(args.dataset) not in ("ict-bilinear", "ict-trilinear"):
+        log.warning("--identities applies to the ICT data sets only; ignored")
+    ds, imputed = _fill_missing(ds, args.impute, args.seed)
+    use = default_ranks(ds)
+    use.update(ranks)
+    for m, r in ranks.items():
+        if m in ds.mode_names and r > ds.shape[ds.mode_names.index(m)]:
+            raise ShapeError(f"--ranks {m}={r} is larger than the {ds.shape[ds.mode_names.index(m)]} "
+                             f"{m} entries of {args.dataset}")
+    model = build_model(ds, use, refine=args.refine, imputed=imputed)
+    model.save(args.out)
+    err = model.provenance.get("relative_errors", [float("nan")])[-1]
+    print(f"wrote {args.out}: modes {', '.join(f'{n}={d}->{r}' for n, d, r in zip(model.mode_names, model.shape, model.ranks))}, "
+          f"{model.n_vertices} vertices, relative error {err:.4f}")
+    return 0
+
+
+# --------------------------------------------------------------------------------- info
+def explained_variance(model) -> dict[str, list[float]]:
+    """Fraction of each mode's data variance held by each kept component."""
+    out = {}
+    for name, ev, r in zip(model.mode_names, model.eigenvalues, model.ranks):
+        ev = np.asarray(ev, dtype=np.float64)
+        tot = ev.sum()
+        out[name] = [float(x) for x in (ev[:r] / tot if tot > 0 else np.zeros(r))]
+    return out
+
+
+def cmd_info(args: argparse.Namespace) -> int:
+    from ..model import load_model
+
+    m = load_model(args.model)
+    ev = explained_variance(m)
+    lines = [f"model {args.model}", f"  vertices: {m.n_vertices}, triangles: {len(m.faces)}, "
+             f"landmarks: {'yes' if m.landmarks is not None else 'no'}, "
+             f"uvs: {'yes' if m.uvs is not None else 'no'}"]
+    for name, d, r, labs in zip(m.mode_names, m.shape, m.ranks, m.labels):
+        cum = float(np.sum(ev[name]))
+        per = ", ".join(f"{x:.3f}" for x in ev[name])
+        lines.append(f"  mode {name}: {d} training entries, rank {r}, explained variance "
+                     f"{cum:.4f} ({per})")
+        lines.append(f"    labels: {', '.join(labs[:12])}{' ...' if len(labs) > 12 else ''}")
+    if m.imputed is not None and np.any(m.imputed):
+        lines.append(f"  imputed cells: {int(np.sum(m.imputed))}")
+    prov = {k: v for k, v in m.provenance.items() if k not in ("identity_weights",)}
+    lines.append("  provenance: " + json.dumps(prov, sort_keys=True, default=str)[:2000])
+    print("\n".join(lines))
+    return 0
+
+
+# --------------------------------------------------------------------------------- synth
+def synth_weights(model, weights: dict[str, np.ndarray] | None = None,
+                  like: dict[str, str] | None = None) -> dict[str, np.ndarray]:
+    """Weights for :meth:`MultilinearModel.synthesize`: given modes set, others at their mean."""
+    w = model.default_weights()
+    if like:
+        w = model.like(**like)
+    for name, vec in (weights or {}).items():
+        k = model.mode_index(name)
+        if vec.shape != (model.ranks[k],):
+            raise ShapeError(f"--weights {name} has {vec.size} values; the model's {name} rank is "
+                             f"{model.ranks[k]}")
+        w[model.mode_names[k]] = vec
+    return w
+
+
+def cmd_synth(args: argparse.Namespace) -> int:
+    from ..io.mesh import write_mesh
+    from ..model import load_model
+
+    out = Path(args.out)
+    if out.suffix.lower() not in (".obj", ".ply"):
+        raise FaceTransferError(f"--out must end in .obj or .ply, got {out}")
+    check_output_path(out)
+    if args.weights and args.like:
+        raise FaceTransferError("give --weights or --like, not both")
+    m = load_model(args.model)
+    w = synth_weights(m, parse_weights(args.weights) if args.weights else None,
+                      parse_like(args.like) if args.like else None)
+    v = m.synthesize(w)
+    write_mesh(out, v, m.faces, uvs=m.uvs if out.suffix.lower() == ".obj" else None)
+    print(f"wrote {out} ({m.n_vertices} vertices)")
+    return 0
+
+
+# --------------------------------------------------------------------------------- sheet
+def _fallback_render(vertices: np.ndarray, faces: np.ndarray, camera, size) -> np.ndarray:
+    """Lambert-shaded painter's algorithm (numpy + matplotlib) when facetransfer.render is absent."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    W, H = size
+    R, s, t = camera.rotation, camera.scale, camera.translation
+    X = vertices @ R.T
+    xy = s * X[:, :2] * np.array([1.0, -1.0]) + t
+    tri = xy[faces]
+    n = np.cross(X[faces[:, 1]] - X[faces[:, 0]], X[faces[:, 2]] - X[faces[:, 0]])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    keep = n[:, 2] > 0
+    shade = 0.25 + 0.75 * np.clip(n[:, 2], 0, 1)
+    order = np.argsort(X[faces, 2].mean(axis=1)[keep])
+    fig = plt.figure(figsize=(W / 100, H / 100), dpi=100)
+    ax = fig.add_axes([0, 0, 1, 1])
+    ax.set_xlim(0, W)
+    ax.set_ylim(H, 0)
+    ax.axis("off")
+    col = np.repeat(shade[keep][order, None], 3, axis=1) * np.array([0.85, 0.75, 0.7])
+    ax.add_collection(PolyCollection(tri[keep][order], facecolors=col, edgecolors="none"))
+    fig.canvas.draw()
+    img = np.asarray(fig.canvas.buffer_rgba())[:, :, :3].copy()
+    plt.close(fig)
+    return img
+
+
+def _render_tile(vertices: np.ndarray, faces: np.ndarray, camera, size) -> np.ndarray:
+    try:
+        from ..render import render
+    except ImportError:
+        return _fallback_render(vertices, faces, camera, size)
+    colors = np.tile(np.array([[0.85, 0.75, 0.70]]), (len(vertices), 1))
+    return render(vertices, faces, camera, size, colors=colors, background=(255, 255, 255)).image
+
+
+def _camera(vertices: np.ndarray, size):
+    from ..render import look_at_weak_perspective, rotation_from_euler
+
+    return look_at_weak_perspective(vertices, size, rotation=rotation_from_euler(15.0, 0.0),
+                                    fill=0.85)
+
+
+def _grid(tiles: list[list[np.ndarray]], row_labels: list[str], col_labels: list[str],
+          title: str) -> "object":
+    from PIL import Image, ImageDraw
+
+    th, tw = tiles[0][0].shape[:2]
+    lw, hh = 90, 36
+    img = Image.new("RGB", (lw + tw * len(col_labels), hh + th * len(row_labels)), "white")
+    draw = ImageDraw.Draw(img)
+    draw.text((4, 2), title, fill=(0, 0, 0))
+    for j, lab in enumerate(col_labels):
+        draw.text((lw + j * tw + 4, hh - 14), lab[:22], fill=(0, 0, 0))
+    for i, lab in enumerate(row_labels):
+        draw.text((4, hh + i * th + th // 2), lab[:14], fill=(0, 0, 0))
+        for j, t in enumerate(tiles[i]):
+            img.paste(Image.fromarray(t), (lw + j * tw, hh + i * th))
+    return img
+
+
+def model_sheets(model, *, max_identities: int = 8, dial_components: int = 3,
+                 dial_steps: tuple[float, ...] = (-2.0, -1.0, 0.0, 1.0, 2.0)):
+    """Two PIL images: identities × attribute labels (Fig. 5/6), and one dial at a time.
+
+    The first sheet has one row per training identity (up to ``max_identities``) and one column
+    per training label of every other mode (that mode's training row, the remaining modes at
+    their mean). The second varies one principal direction of one mode's training weights at a
+    time by ``dial_steps`` standard deviations, all other weights at their mean.
+    """
+    ident = model.mode_names[0]
+    ids = list(model.labels[0][:max_identities])
+    cols: list[tuple[str, str]] = [(m, lab) for m, labs in zip(model.mode_names[1:], model.labels[1:])
+                                   for lab in labs]
+    weights = [[model.like(**{ident: i, m: lab}) for m, lab in cols] for i in ids]
+    mean = model.default_weights()
+    cam = _camera(model.synthesize(mean), TILE)
+    flat = [w for row in weights for w in row]
+    batch = {n: np.stack([w[n] for w in flat]) for n in model.mode_names}
+    V = model.synthesize(batch)
+    tiles = [[_render_tile(V[i * len(cols) + j], model.faces, cam, TILE) for j in range(len(cols))]
+             for i in range(len(ids))]
+    col_labels = [lab if len(model.mode_names) == 2 else f"{m[:3]}:{lab}" for m, lab in cols]
+    sheet = _grid(tiles, ids, col_labels, f"{', '.join(model.mode_names)} "
+                  f"(ranks {', '.join(map(str, model.ranks))})")
+
+    rows, rlabels = [], []
+    for name in model.mode_names:
+        C = model.weight_cov(name)
+        ev, vec = np.linalg.eigh(C)
+        order = np.argsort(ev)[::-1][:dial_components]
+        for pc, c in enumerate(order, start=1):
+            step = np.sqrt(max(ev[c], 0.0)) * vec[:, c]
+            ws = []
+            for t in dial_steps:
+                w = dict(mean)
+                w[name] = mean[name] + t * step
+                ws.append(w)
+            b = {n: np.stack([w[n] for w in ws]) for n in model.mode_names}
+            Vd = model.synthesize(b)
+            rows.append([_render_tile(v, model.faces, cam, TILE) for v in Vd])
+            rlabels.append(f"{name} pc{pc}")
+    dials = _grid(rows, rlabels, [f"{t:+g} sd" for t in dial_steps], "one dial at a time")
+    return sheet, dials
+
+
+def cmd_sheet(args: argparse.Namespace) -> int:
+    from ..model import load_model
+
+    out = Path(args.out)
+    if out.suffix.lower() != ".png":
+        raise FaceTransferError(f"--out must end in .png, got {out}")
+    dials_out = out.with_name(f"{out.stem}_dials.png")
+    check_output_path(out)
+    m = load_model(args.model)
+    sheet, dials = model_sheets(m, max_identities=args.max_identities)
+    with atomic_path(out) as tmp, atomic_path(dials_out) as tmp2:
+        sheet.save(tmp, format="PNG")
+        dials.save(tmp2, format="PNG")
+    print(f"wrote {out} and {dials_out}")
+    return 0
+
+
+# --------------------------------------------------------------------------------- register
 def register(sub) -> None:
-    """Add this module's subcommands to the facetransfer parser."""
+    """Add ``facetransfer model {build,info,synth,sheet}``."""
+    p = sub.add_parser("model", help="build, inspect and sample multilinear face models (§4)",
+                       description="Multilinear face models (Vlasic et al. 2005, §4).")
+    msub = p.add_subparsers(dest="model_command", metavar="ACTION")
+    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+
+    b = msub.add_parser("build", help="build a model from a data set")
+    b.add_argument("--dataset", required=True,
+                   help="ict-bilinear, ict-trilinear, a manifest .csv, or a FaceWarehouse folder")
+    b.add_argument("--ranks", help="ranks per mode, e.g. identity=9,expression=6 "
+                   "(default: 9/6 bilinear, 16/4/4 trilinear, full otherwise)")
+    b.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
+                   help="refine the N-mode SVD by alternating least squares (default on)")
+    b.add_argument("--impute", choices=("ppca", "average", "none"), default="ppca",
+                   help="how to fill missing cells (default ppca; none: missing cells are an error)")
+    b.add_argument("--seed", type=int, default=0, help="seed of ICT identities and imputation")
+    b.add_argument("--identities", type=int, default=None,
+                   help="number of identities (ICT data sets only; default 15 / 16)")
+    b.add_argument("--out", required=True, help="model file to write (.npz)")
+    b.set_defaults(func=cmd_build)
+
+    i = msub.add_parser("info", help="show a model's modes, ranks, variance and provenance")
+    i.add_argument("model")
+    i.set_defaults(func=cmd_info)
+
+    s = msub.add_parser("synth", help="write one face of the model as a mesh")
+    s.add_argument("model")
+    s.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...' "
+                   "(modes not given: their mean)")
+    s.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=smile")
+    s.add_argument("--out", required=True, help="FACE.obj or FACE.ply")
+    s.set_defaults(func=cmd_synth)
+
+    h = msub.add_parser("sheet", help="picture sheets: identities x expressions, and dials")
+    h.add_argument("model")
+    h.add_argument("--out", required=True, help="SHEET.png (also writes SHEET_dials.png)")
+    h.add_argument("--max-identities", type=int, default=8, help="rows of the first sheet")
+    h.set_defaults(func=cmd_sheet)

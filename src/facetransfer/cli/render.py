@@ -1,7 +1,227 @@
-"""``facetransfer`` subcommands of this area (filled in by its issue)."""
+"""``facetransfer render`` and ``facetransfer synth-video``: previews and synthetic footage (§6).
+
+    facetransfer render MODEL.npz --like identity=id03,expression=smile --pose yaw=20 --out face.png
+    facetransfer render MODEL.npz --weights 'identity=0.1,0.2,...;expression=...' --out face.png
+    facetransfer synth-video --model MODEL.npz --random --frames 100 --seed 1 --out clip.mp4
+    facetransfer synth-video --model MODEL.npz --performance perf.json --identity id02 --out clip.mp4
+
+``synth-video`` writes ``clip.mp4`` and, beside it, ``clip.truth.npz`` (pose, weights per mode,
+68 landmarks and all vertices in pixels, per-vertex visibility, per frame).
+"""
 
 from __future__ import annotations
 
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FaceTransferError
+from ..io.atomic import atomic_path, check_output_path
+
+POSE_KEYS = ("yaw", "pitch", "roll", "scale")
+
+
+def parse_size(text: str) -> tuple[int, int]:
+    """``"640x480"`` -> ``(640, 480)``."""
+    w, sep, h = text.lower().partition("x")
+    try:
+        W, H = int(w), int(h)
+    except ValueError:
+        W = H = 0
+    if not sep or not (8 <= W <= 8192 and 8 <= H <= 8192):
+        raise FaceTransferError(f"--size: expected WIDTHxHEIGHT between 8 and 8192, got {text!r}")
+    return W, H
+
+
+def parse_pose(text: str | None) -> dict[str, float]:
+    """``"yaw=10,pitch=-5,roll=0,scale=1.2"`` -> ``{"yaw": 10.0, ...}`` (missing keys omitted)."""
+    out: dict[str, float] = {}
+    for part in (text or "").split(","):
+        if not part.strip():
+            continue
+        name, sep, val = part.partition("=")
+        name = name.strip()
+        try:
+            v = float(val)
+        except ValueError:
+            v = float("nan")
+        if not sep or name not in POSE_KEYS or not np.isfinite(v):
+            raise FaceTransferError(f"--pose: expected KEY=NUMBER with KEY in "
+                                    f"{', '.join(POSE_KEYS)}, got {part!r}")
+        out[name] = v
+    if out.get("scale", 1.0) <= 0:
+        raise FaceTransferError(f"--pose: scale must be > 0, got {out['scale']}")
+    return out
+
+
+def parse_colour(text: str) -> tuple[int, int, int]:
+    """``"255,255,255"`` -> ``(255, 255, 255)``."""
+    try:
+        c = tuple(int(v) for v in text.split(","))
+    except ValueError:
+        c = ()
+    if len(c) != 3 or not all(0 <= v <= 255 for v in c):
+        raise FaceTransferError(f"--background: expected R,G,B in 0..255, got {text!r}")
+    return c  # type: ignore[return-value]
+
+
+def parse_identity(text: str):
+    """A label (``id03``) or comma-separated weights (``0.1,0.2,...``)."""
+    parts = [p.strip() for p in text.split(",")]
+    try:
+        return [float(p) for p in parts]
+    except ValueError:
+        if len(parts) > 1:
+            raise FaceTransferError(f"--identity: expected a label or numbers, got {text!r}") \
+                from None
+        return parts[0]
+
+
+def _load_model(path: str):
+    from ..model import load_model
+
+    if not Path(path).is_file():
+        raise FaceTransferError(f"model file {path} does not exist")
+    return load_model(path)
+
+
+def _model_weights(model, args) -> dict[str, np.ndarray]:
+    from .model import parse_like, parse_weights
+
+    if args.weights and args.like:
+        raise FaceTransferError("give either --weights or --like, not both")
+    w = model.default_weights()
+    if args.like:
+        w.update(model.like(**parse_like(args.like)))
+    if args.weights:
+        for mode, vals in parse_weights(args.weights).items():
+            k = model.mode_index(mode)
+            if vals.shape != (model.ranks[k],):
+                raise FaceTransferError(f"--weights: mode {mode!r} needs {model.ranks[k]} "
+                                        f"numbers, got {vals.size}")
+            w[model.mode_names[k]] = vals
+    return w
+
+
+def cmd_render(args: argparse.Namespace) -> int:
+    import cv2
+
+    from ..render import render_model
+
+    out = check_output_path(args.out)
+    if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
+        raise FaceTransferError(f"--out {out}: expected a .png or .jpg image")
+    size = parse_size(args.size)
+    pose = parse_pose(args.pose)
+    model = _load_model(args.model)
+    weights = _model_weights(model, args)
+    res = render_model(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
+                       pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
+                       scale=pose.get("scale", 1.0), background=parse_colour(args.background))
+    with atomic_path(out) as tmp:
+        if not cv2.imwrite(str(tmp), cv2.cvtColor(res.image, cv2.COLOR_RGB2BGR)):
+            raise FaceTransferError(f"cannot write image {out}")
+    print(f"wrote {out} ({size[0]}x{size[1]}, {int(res.visible.sum())} of "
+          f"{res.visible.size} vertices visible)")
+    return 0
+
+
+def _texture(choice: str, model, seed: int):
+    """``procedural`` -> None (synth's default), ``default`` -> the project's default face
+    texture, anything else -> an image file."""
+    if choice == "procedural":
+        return None
+    if model.uvs is None:
+        raise FaceTransferError(f"--texture {choice}: the model has no UVs")
+    if choice == "default":
+        from ..texture import default_face_texture
+
+        return default_face_texture(model, seed=seed)
+    from ..synth import load_texture_image
+
+    return load_texture_image(choice)
+
+
+def cmd_synth_video(args: argparse.Namespace) -> int:
+    import json
+
+    from tqdm import tqdm
+
+    from ..synth import (DEFAULT_FPS, DEFAULT_SIZE, load_performance, performance_from_spec,
+                         random_performance, synthesize_video, truth_path)
+
+    out = check_output_path(args.out)
+    if out.suffix.lower() not in (".mp4", ".avi"):
+        raise FaceTransferError(f"--out {out}: expected a .mp4 or .avi video")
+    if bool(args.performance) == bool(args.random):
+        raise FaceTransferError("give either --performance SPEC.json or --random")
+    if args.fps is not None and not 0 < args.fps <= 1000:
+        raise FaceTransferError(f"--fps must be in (0, 1000], got {args.fps}")
+    if args.frames is not None and args.frames < 1:
+        raise FaceTransferError(f"--frames must be >= 1, got {args.frames}")
+    size = parse_size(args.size) if args.size else None
+    identity = parse_identity(args.identity) if args.identity else None
+    model = _load_model(args.model)
+    texture = _texture(args.texture, model, args.seed)
+    if args.random:
+        perf = random_performance(model, args.frames or 100, seed=args.seed,
+                                  size=size or DEFAULT_SIZE, fps=args.fps or DEFAULT_FPS,
+                                  identity=identity)
+    else:
+        perf = load_performance(model, args.performance)  # validates the file
+        if size or args.fps or identity is not None or args.frames:
+            spec = json.loads(Path(args.performance).read_text(encoding="utf-8"))
+            if size:
+                spec["size"] = list(size)
+            if args.fps:
+                spec["fps"] = args.fps
+            if identity is not None:
+                spec["identity"] = identity
+            if args.frames:
+                spec["n_frames"] = args.frames
+            perf = performance_from_spec(model, spec)
+    with tqdm(total=perf.n_frames, desc="synth-video", unit="frame",
+              disable=not sys.stderr.isatty()) as bar:
+        truth = synthesize_video(model, perf, out, seed=args.seed, texture=texture,
+                                 progress=bar.update)
+    print(f"wrote {out} ({perf.n_frames} frames, {perf.size[0]}x{perf.size[1]} at "
+          f"{perf.fps:g} fps) and {truth_path(out)}; mean vertex visibility "
+          f"{truth.visible.mean():.2f}")
+    return 0
+
 
 def register(sub) -> None:
-    """Add this module's subcommands to the facetransfer parser."""
+    """Add ``render`` and ``synth-video`` to the facetransfer parser."""
+    r = sub.add_parser("render", help="render a Lambert-shaded preview of a model face",
+                       description="Render a model face (Eq. (5)) with a weak-perspective camera.")
+    r.add_argument("model", help="model file (.npz)")
+    r.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...'"
+                   " (modes not given take their mean)")
+    r.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=smile")
+    r.add_argument("--pose", help="head pose, e.g. yaw=20,pitch=-5,roll=0,scale=1.2 (degrees)")
+    r.add_argument("--size", default="640x480", help="image WIDTHxHEIGHT (default 640x480)")
+    r.add_argument("--background", default="255,255,255", help="R,G,B (default white)")
+    r.add_argument("--out", required=True, help="IMG.png")
+    r.set_defaults(func=cmd_render)
+
+    s = sub.add_parser("synth-video", help="render synthetic footage with exact ground truth",
+                       description="Render a textured model face over a background with head "
+                       "motion and expression/viseme tracks; writes CLIP.mp4 and "
+                       "CLIP.truth.npz.")
+    s.add_argument("--model", required=True, help="model file (.npz)")
+    s.add_argument("--identity", help="identity label or comma-separated weights")
+    s.add_argument("--performance", help="performance spec (JSON, see facetransfer.synth)")
+    s.add_argument("--random", action="store_true", help="a seeded random performance")
+    s.add_argument("--frames", type=int, default=None,
+                   help="number of frames (default 100 for --random; overrides the spec)")
+    s.add_argument("--seed", type=int, default=0, help="seed of the random performance, "
+                   "texture and background")
+    s.add_argument("--size", default=None, help="WIDTHxHEIGHT (default 640x480 or the spec's)")
+    s.add_argument("--fps", type=float, default=None, help="frame rate (default 25 or the spec's)")
+    s.add_argument("--texture", default="procedural",
+                   help="'procedural' (default: band-limited skin, KLT-friendly), 'default' "
+                   "(facetransfer.texture.default_face_texture) or a UV texture image file")
+    s.add_argument("--out", required=True, help="CLIP.mp4")
+    s.set_defaults(func=cmd_synth_video)

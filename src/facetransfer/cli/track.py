@@ -1,7 +1,116 @@
-"""``facetransfer`` subcommands of this area (filled in by its issue)."""
+"""``facetransfer track``: track a face through a video with a multilinear model (§5).
+
+    facetransfer track VIDEO.mp4 --model MODEL.npz --out TRACK.npz [--init auto|POINTS.json]
+                       [--passes N] [--anchor] [--max-frames N] [--overlay OVERLAY.mp4]
+    facetransfer track VIDEO.mp4 --model MODEL.npz --from-track TRACK.npz --overlay OVERLAY.mp4
+
+``TRACK.npz`` holds per frame the weak-perspective pose, the weights of every mode, the 68
+landmarks in pixels, a confidence and a lost flag (see :mod:`facetransfer.track.result`).
+"""
 
 from __future__ import annotations
 
+import argparse
+from pathlib import Path
+
+from ..errors import FaceTransferError
+from ..io.atomic import check_output_path
+
 
 def register(sub) -> None:
-    """Add this module's subcommands to the facetransfer parser."""
+    """Add ``track`` to the facetransfer parser."""
+    from ..track.tracker import TrackOptions
+
+    d = TrackOptions()
+    p = sub.add_parser(
+        "track", help="track a face in a video: pose and model weights per frame (§5)",
+        description="Track a face through a video with a multilinear model (Vlasic et al. "
+        "2005, §5.1-5.2): per frame the head pose and the weights of every mode, the identity "
+        "once for the clip.", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("video", metavar="VIDEO", help="input video")
+    p.add_argument("--model", required=True, help="multilinear model (.npz, with landmarks)")
+    p.add_argument("--out", help="track file to write (.npz)")
+    p.add_argument("--init", default="auto",
+                   help='first-frame feature points: "auto" (MediaPipe) or a JSON file '
+                   '{"points": {"36": [x, y], ...}} keyed by iBUG-68 number')
+    p.add_argument("--passes", type=int, default=d.passes, help="passes through the video")
+    p.add_argument("--anchor", action="store_true",
+                   help="add detected landmarks of every frame as an extra term (less drift)")
+    p.add_argument("--smooth", type=float, default=d.smooth,
+                   help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
+    p.add_argument("--points", type=int, default=d.n_points, help="tracked vertices per frame")
+    p.add_argument("--max-frames", type=int, default=None, help="track only the first N frames")
+    p.add_argument("--overlay", help="also write a video with the fitted mesh drawn (.mp4)")
+    p.add_argument("--from-track", dest="from_track",
+                   help="draw --overlay from an existing track file instead of tracking")
+    p.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=True,
+                   help="replace existing outputs")
+    p.set_defaults(func=run)
+
+
+def _bar(desc: str, total: int):
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit="frame", leave=False, dynamic_ncols=True)
+
+
+def run(args) -> int:
+    from ..io.video import video_info
+    from ..model import load_model
+    from ..track.init import require_landmarks
+    from ..track.overlay import write_overlay
+    from ..track.result import Track
+    from ..track.tracker import TrackOptions, frame_source, track_video
+
+    if args.from_track is None and not args.out:
+        raise FaceTransferError("--out is required (the track file to write)")
+    if args.from_track is not None and not args.overlay:
+        raise FaceTransferError("--from-track needs --overlay (the video to draw)")
+    if args.max_frames is not None and args.max_frames < 1:
+        raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
+    for path in (args.out, args.overlay):
+        if path:
+            check_output_path(path, overwrite=args.overwrite)
+    model = load_model(args.model)
+    require_landmarks(model)
+    video_info(args.video)  # unreadable / empty video: one line, before any work
+
+    if args.from_track is not None:
+        track = Track.load(args.from_track)
+        frames = frame_source(args.video, args.max_frames)
+        track.check_video(frames.n, frames.size, what=f"video {args.video}")
+        track.check_model(model)
+    else:
+        opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
+                           n_points=args.points)
+        bars: dict[str, object] = {}
+
+        def progress(stage: str, done: int, total: int) -> None:
+            bar = bars.get(stage)
+            if bar is None:
+                for b in bars.values():
+                    b.close()
+                bar = bars[stage] = _bar(stage, total)
+            bar.update(done - bar.n)
+
+        try:
+            track = track_video(args.video, model, init=args.init, options=opt,
+                                max_frames=args.max_frames, progress=progress,
+                                source=str(args.video))
+        finally:
+            for b in bars.values():
+                b.close()
+        track.save(args.out, overwrite=args.overwrite)
+        n_lost = int(track.lost.sum())
+        print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"
+              f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
+              + (f", {n_lost} lost" if n_lost else ""))
+    if args.overlay:
+        bar = _bar("overlay", track.n_frames)
+        try:
+            write_overlay(args.video, track, model, args.overlay, progress=bar.update,
+                          overwrite=args.overwrite)
+        finally:
+            bar.close()
+        print(f"wrote {args.overlay}")
+    return 0

@@ -1,7 +1,274 @@
-"""``facetransfer`` subcommands of this area (filled in by its issue)."""
+"""``facetransfer transfer | edit | puppet | demo``: the applications of Vlasic et al. 2005, §6.
+
+    facetransfer transfer --target T.mp4 [--target-track T.npz]
+        (--expression-from S.mp4 [--source-track S.npz] [--viseme-from S2.mp4]
+         | --identity-from V.mp4 | --identity-weights W | --identity-label L)
+        [--pose-from P.mp4] --model M.npz [--align trim|loop|hold] [--max-frames N]
+        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4 [--overwrite]
+    facetransfer edit TRACK.npz [--model M.npz] --add frown@120-180 --scale smile=1.5 --out T2.npz
+    facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
+    facetransfer puppet VIDEO --model M.npz --identity LABEL --out OUT.mp4
+    facetransfer demo [--out out] [--frames N]
+"""
 
 from __future__ import annotations
 
+import argparse
+import sys
+
+from ..errors import FaceTransferError
+
+ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
+              "(repeat the source), hold (hold the source's last frame); default: trim when the "
+              "source is at least as long as the target, hold when it is shorter (the output "
+              "always has the target's frame rate)")
+
+
+def _bar_factory(enabled: bool = True):
+    """``factory(desc, total) -> tqdm`` for library progress (stderr), or None."""
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    def make(desc, total):
+        return tqdm(total=total, desc=desc, unit="frame", leave=False, dynamic_ncols=True,
+                    file=sys.stderr)
+
+    return make
+
 
 def register(sub) -> None:
-    """Add this module's subcommands to the facetransfer parser."""
+    """Add ``transfer``, ``edit``, ``puppet`` and ``demo`` to the facetransfer parser."""
+    fmt = argparse.ArgumentDefaultsHelpFormatter
+
+    p = sub.add_parser(
+        "transfer", formatter_class=fmt,
+        help="put expressions, visemes, identity or pose of other videos into target footage",
+        description="Video rewrite (Vlasic et al. 2005, §6, Fig. 1, Fig. 7): track the videos "
+        "(or reuse track files), take each attribute from its chosen video, render the new face "
+        "into the target footage with the target's texture and the source's mouth, blend, and "
+        "keep the target's audio.")
+    p.add_argument("--target", required=True, metavar="T.mp4", help="footage to rewrite")
+    p.add_argument("--target-track", metavar="T.npz", help="track file of the target (reused)")
+    p.add_argument("--expression-from", metavar="S.mp4", help="video whose expressions to use")
+    p.add_argument("--source-track", metavar="S.npz", help="track file of --expression-from")
+    p.add_argument("--viseme-from", metavar="S2.mp4",
+                   help="video whose visemes to use (trilinear models)")
+    p.add_argument("--viseme-track", metavar="S2.npz", help="track file of --viseme-from")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--identity-from", metavar="V.mp4", help="video whose identity to use")
+    g.add_argument("--identity-weights", metavar="W",
+                   help="identity weights: comma-separated numbers or a .npy file")
+    g.add_argument("--identity-label", metavar="L", help="a training identity of the model")
+    p.add_argument("--identity-track", metavar="V.npz", help="track file of --identity-from")
+    p.add_argument("--pose-from", metavar="P.mp4",
+                   help="video whose head pose to use (same frame size as the target)")
+    p.add_argument("--pose-track", metavar="P.npz", help="track file of --pose-from")
+    p.add_argument("--performance", metavar="NEW.npz",
+                   help="render a ready performance on the target's timeline (e.g. the output "
+                   "of `facetransfer edit`) instead of combining sources")
+    p.add_argument("--model", required=True, metavar="M.npz", help="multilinear model")
+    p.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
+    p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
+    p.add_argument("--texture", choices=("frame", "constant"), default="frame",
+                   help="target face texture: lifted from each frame, or one for the clip")
+    p.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast",
+                   help="fast membrane blend, exact Poisson solve, or hard paste")
+    p.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
+                   help="tracking when no track file is given (auto: optical flow, §5)")
+    p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
+    p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
+    p.add_argument("--out", required=True, metavar="OUT.mp4", help="video to write")
+    p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+    p.set_defaults(func=run_transfer)
+
+    e = sub.add_parser(
+        "edit", formatter_class=fmt, help="edit a tracked performance (Fig. 7E)",
+        description="Add a training expression over a frame range (with smooth ramps) or scale "
+        "an expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E).")
+    e.add_argument("track", metavar="TRACK.npz")
+    e.add_argument("--model", metavar="M.npz",
+                   help="the model the track was made with (default: the demo's default model)")
+    e.add_argument("--add", action="append", default=[], metavar="EXPR@START-END",
+                   help="add EXPR (training weights minus neutral) on frames START..END "
+                   "(inclusive, 0-based); EXPR*0.5@... for half; repeatable")
+    e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
+                   help="scale the component of the expression along EXPR - neutral; repeatable")
+    e.add_argument("--ramp", type=int, default=8, help="ramp length in frames at range ends")
+    e.add_argument("--out", required=True, metavar="TRACK2.npz")
+    e.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    e.set_defaults(func=run_edit)
+
+    q = sub.add_parser(
+        "puppet", formatter_class=fmt, help="drive a model identity from a video (puppetry)",
+        description="Track a video (or reuse its track) and render an identity of the model "
+        "performing it, alone on a plain background (Vlasic et al. 2005, §5).")
+    q.add_argument("video", metavar="VIDEO")
+    q.add_argument("--model", required=True, metavar="M.npz")
+    q.add_argument("--identity", required=True, metavar="LABEL", help="training identity label")
+    q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused)")
+    q.add_argument("--max-frames", type=int, default=None)
+    q.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto")
+    q.add_argument("--out", required=True, metavar="OUT.mp4")
+    q.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    q.set_defaults(func=run_puppet)
+
+    d = sub.add_parser(
+        "demo", formatter_class=fmt, help="the main job end to end on the default clips",
+        description="Build the default model if needed, track two clips of the data folder "
+        "($FACETRANSFER_DATA_DIR/video), transfer the expressions of driving_d9.mp4 onto "
+        "WDA_KatieHill_000.mp4 and write OUT/demo.mp4 (source | target | result), OUT/demo.png "
+        "(contact sheet) and OUT/demo_track.npz.")
+    d.add_argument("--out", default="out", metavar="DIR", help="output folder")
+    d.add_argument("--frames", type=int, default=120, help="target frames to use")
+    d.add_argument("--source", metavar="S.mp4", help="expression source (default driving_d9)")
+    d.add_argument("--target", metavar="T.mp4", help="target footage (default WDA_KatieHill_000)")
+    d.add_argument("--model", metavar="M.npz", help="model (default: built and cached)")
+    d.add_argument("--texture", choices=("frame", "constant"), default="frame")
+    d.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast")
+    d.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto")
+    d.set_defaults(func=run_demo)
+
+
+def _positive(value, name):
+    if value is not None and int(value) < 1:
+        raise FaceTransferError(f"{name} must be >= 1, got {value}")
+
+
+def run_transfer(args) -> int:
+    from ..io.atomic import check_output_path
+    from ..io.video import video_info
+    from ..model import load_model
+    from ..rewrite import transfer_video
+    from ..transfer import identity_from_label, parse_weights
+
+    _positive(args.max_frames, "--max-frames")
+    if not (args.expression_from or args.viseme_from or args.identity_from
+            or args.identity_weights or args.identity_label or args.pose_from
+            or args.performance):
+        raise FaceTransferError("nothing to transfer: give --expression-from, --viseme-from, "
+                                "--identity-from/--identity-weights/--identity-label, "
+                                "--pose-from or --performance")
+    for flag, dep, name in ((args.source_track, args.expression_from, "--source-track"),
+                            (args.viseme_track, args.viseme_from, "--viseme-track"),
+                            (args.identity_track, args.identity_from, "--identity-track"),
+                            (args.pose_track, args.pose_from, "--pose-track")):
+        if flag and not dep:
+            raise FaceTransferError(f"{name} needs the video it belongs to")
+    check_output_path(args.out, overwrite=args.overwrite)
+    if args.save_track:
+        check_output_path(args.save_track, overwrite=args.overwrite)
+    for v in (args.target, args.expression_from, args.viseme_from, args.identity_from,
+              args.pose_from):
+        if v:
+            video_info(v)  # unreadable input: one line, before any work
+    model = load_model(args.model)
+    identity = None
+    if args.identity_label:
+        identity = identity_from_label(model, args.identity_label)
+    elif args.identity_weights:
+        idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
+        identity = parse_weights(args.identity_weights, model.ranks[model.mode_index(idm)])
+    res = transfer_video(
+        args.target, args.out, model, overwrite=args.overwrite, texture=args.texture,
+        blend=args.blend, meshes_dir=args.meshes, save_track=args.save_track,
+        progress_factory=_bar_factory(not args.no_progress),
+        target_track=args.target_track, expression_from=args.expression_from,
+        expression_track=args.source_track, viseme_from=args.viseme_from,
+        viseme_track=args.viseme_track, identity=identity, identity_from=args.identity_from,
+        identity_track=args.identity_track, pose_from=args.pose_from,
+        pose_track=args.pose_track, performance=args.performance, align=args.align,
+        max_frames=args.max_frames, track_method=args.tracker)
+    kept = res.n_frames - res.n_rewritten
+    print(f"wrote {res.path}: {res.n_frames} frames"
+          + (f" ({kept} kept original: face lost)" if kept else "")
+          + (", with the target's audio" if res.audio else ", no audio"))
+    if args.save_track:
+        print(f"wrote {args.save_track}")
+    if args.meshes:
+        print(f"wrote {res.n_frames} meshes to {args.meshes}")
+    return 0
+
+
+def _model_for_track(track, model_path):
+    from ..demo import default_model_path
+    from ..errors import TrackError
+    from ..model import load_model
+
+    if model_path is None:
+        p = default_model_path()
+        if not p.is_file():
+            raise TrackError("no --model given and no default model cached yet (run "
+                             "`facetransfer demo` or pass --model)")
+        model_path = p
+    model = load_model(model_path)
+    track.check_model(model)
+    return model
+
+
+def run_edit(args) -> int:
+    from ..io.atomic import check_output_path
+    from ..track import Track
+    from ..transfer import edit_track, parse_add, parse_scale
+
+    if not args.add and not args.scale:
+        raise FaceTransferError("nothing to do: give --add EXPR@START-END and/or --scale "
+                                "EXPR=FACTOR")
+    adds = [parse_add(a) for a in args.add]
+    scales = [parse_scale(s) for s in args.scale]
+    check_output_path(args.out, overwrite=args.overwrite)
+    track = Track.load(args.track)
+    model = _model_for_track(track, args.model)
+    new = edit_track(track, model, add=adds, scale=scales, ramp=args.ramp)
+    new.save(args.out, overwrite=args.overwrite)
+    print(f"wrote {args.out}: {new.n_frames} frames, {len(adds)} addition(s), "
+          f"{len(scales)} scaling(s)")
+    return 0
+
+
+def run_puppet(args) -> int:
+    from ..io.atomic import check_output_path
+    from ..io.video import read_video, video_info
+    from ..model import load_model
+    from ..rewrite import obtain_track, write_video_with_audio
+    from ..transfer import identity_from_label, puppet_frames
+
+    _positive(args.max_frames, "--max-frames")
+    check_output_path(args.out, overwrite=args.overwrite)
+    video_info(args.video)
+    model = load_model(args.model)
+    wid = identity_from_label(model, args.identity)
+    frames, fps = read_video(args.video, max_frames=args.max_frames)
+    track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
+                         max_frames=len(frames), method=args.tracker,
+                         progress_factory=_bar_factory())
+    if track.lost.all():
+        raise FaceTransferError(f"no face found in {args.video}")
+    from tqdm import tqdm
+
+    frames = None
+    it = puppet_frames(track, model, wid)
+    audio = write_video_with_audio(
+        args.out, tqdm(it, total=track.n_frames, desc="render", unit="frame", leave=False),
+        track.fps, audio_from=args.video, overwrite=args.overwrite)
+    print(f"wrote {args.out}: {track.n_frames} frames of {args.identity}"
+          + (", with the video's audio" if audio else ""))
+    return 0
+
+
+def run_demo(args) -> int:
+    from ..demo import run_demo as demo
+    from ..model import load_model
+
+    _positive(args.frames, "--frames")
+    model = load_model(args.model) if args.model else None
+    res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
+               model=model, texture=args.texture, blend=args.blend, track_method=args.tracker,
+               progress_factory=_bar_factory())
+    t = res.timings
+    print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "
+          f"{res.track}")
+    print("seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items())
+          + ("" if res.method == "auto" else f" (tracking: {res.method})"))
+    return 0

@@ -1,0 +1,317 @@
+"""Benchmark of issue 6: face transfer and video rewrite (Vlasic et al. 2005, §6, Fig. 7).
+
+Measures, in one run:
+
+(a) synthetic footage with ground truth (``facetransfer.synth``, the default ICT bilinear model):
+    actor A performs random expressions, actor B (another identity, other pose, other
+    background) is the target footage; the truth is B performing A's expressions with B's pose.
+    We track both videos (§5), transfer A's expressions onto B's footage and compare with the
+    truth: PSNR and SSIM on the face region, and the landmark error (pixels) of the new
+    performance. For reference: the same rewrite with the truth tracks (rendering error alone)
+    and the untouched target (what "doing nothing" scores).
+(b) identity leakage: the result is tracked again; we report the distance of its identity
+    weights to the target's and to the source's (normalised by the A-B distance: 0 = the
+    target's identity, 1 = the source's).
+(c) outside the face mask the result must equal the target frame: PSNR there (inf = exact).
+(d) speed: end-to-end seconds (read, track both clips, render, blend, write with audio) for a
+    10-second 512x512 clip pair at 25 fps, and the share of each stage; goal: no slower than the
+    clip's duration. Wall clock and process CPU time (the machine may be shared).
+
+Usage::
+
+    FACETRANSFER_DATA_DIR=... python benchmarks/bench_transfer.py [--out out/benchmarks]
+        [--frames 60] [--size 320] [--speed-seconds 10] [--quick]
+
+Writes ``OUT/transfer.json`` and ``OUT/transfer.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("OMP_NUM_THREADS", "2")
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+# ------------------------------------------------------------------------------------ metrics
+def sq_err(a, b, mask=None) -> tuple[float, int]:
+    """Sum of squared differences and number of values (over ``mask``)."""
+    d = (np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2
+    if mask is not None:
+        d = d[mask]
+    return float(d.sum()), int(d.size)
+
+
+def psnr_of(sums) -> float:
+    """PSNR (dB) of pooled squared errors ``[(sum, count), ...]`` (inf when all exact)."""
+    tot = sum(s for s, _ in sums)
+    cnt = sum(c for _, c in sums)
+    m = tot / cnt if cnt else 0.0
+    return float("inf") if m == 0 else float(10 * np.log10(255.0 ** 2 / m))
+
+
+def psnr(a, b, mask=None) -> float:
+    return psnr_of([sq_err(a, b, mask)])
+
+
+def ssim(a, b, mask=None, sigma: float = 1.5) -> float:
+    """Mean SSIM (Wang et al. 2004) on luma with Gaussian windows, averaged over ``mask``."""
+    from scipy.ndimage import gaussian_filter
+
+    def luma(x):
+        x = np.asarray(x, np.float64)
+        return 0.299 * x[..., 0] + 0.587 * x[..., 1] + 0.114 * x[..., 2]
+
+    x, y = luma(a), luma(b)
+    C1, C2 = (0.01 * 255) ** 2, (0.03 * 255) ** 2
+    mx, my = gaussian_filter(x, sigma), gaussian_filter(y, sigma)
+    sxx = gaussian_filter(x * x, sigma) - mx * mx
+    syy = gaussian_filter(y * y, sigma) - my * my
+    sxy = gaussian_filter(x * y, sigma) - mx * my
+    s = ((2 * mx * my + C1) * (2 * sxy + C2)) / ((mx * mx + my * my + C1) * (sxx + syy + C2))
+    return float(s[mask].mean() if mask is not None else s.mean())
+
+
+def face_mask(model, weights, camera, size):
+    from facetransfer.render import rasterize
+
+    return rasterize(model.synthesize(weights), model.faces, camera, size).mask
+
+
+def track_of(clip_truth, model, source=""):
+    """A Track holding a synthetic clip's truth."""
+    from facetransfer.track import Track
+
+    t = clip_truth
+    n = t.n_frames
+    return Track(fps=t.fps, frame_size=t.frame_size, rotation=t.rotation, scale=t.scale,
+                 translation=t.translation, weights=t.weights, landmarks2d=t.landmarks2d,
+                 confidence=np.ones(n), lost=np.zeros(n, bool), model_hash=model.content_hash,
+                 mode_names=model.mode_names, source=source)
+
+
+def track_frames(frames, model, fps):
+    from facetransfer.track.tracker import track_video
+
+    tr = track_video(frames, model, progress=None)
+    return dataclasses.replace(tr, fps=float(fps))
+
+
+# ------------------------------------------------------------------------------------ (a)-(c)
+def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=print) -> dict:
+    from facetransfer import rewrite as rw
+    from facetransfer.synth import make_clip, random_performance
+    from facetransfer.transfer import constant_weights, project_landmarks, recombine
+
+    idm = model.mode_names[0]
+    labels = model.labels[0]
+    perf_a = random_performance(model, n_frames, seed=seed + 11, size=(size, size),
+                                identity=labels[1], key_every=0.6)
+    perf_b = random_performance(model, n_frames, seed=seed + 23, size=(size, size),
+                                identity=labels[4], key_every=1.5)
+    # the truth: B's identity and pose, A's expressions
+    w_t = dict(perf_b.weights)
+    for m in model.mode_names[1:]:
+        w_t[m] = perf_a.weights[m]
+    perf_t = dataclasses.replace(perf_b, weights=w_t)
+    t0 = time.perf_counter()
+    clip_a = make_clip(model, perf_a, seed=seed + 1)
+    clip_b = make_clip(model, perf_b, seed=seed + 2)
+    clip_t = make_clip(model, perf_t, seed=seed + 2)  # same texture and background as B
+    log(f"(a) rendered 3 synthetic clips of {n_frames} frames at {size}px in "
+        f"{time.perf_counter() - t0:.1f} s")
+    truth_a, truth_b = track_of(clip_a.truth, model), track_of(clip_b.truth, model)
+
+    t0 = time.perf_counter()
+    tr_a = track_frames(clip_a.frames, model, perf_a.fps)
+    tr_b = track_frames(clip_b.frames, model, perf_b.fps)
+    log(f"(a) tracked both clips in {time.perf_counter() - t0:.1f} s")
+    topo = rw.mesh_topology(model)
+
+    def run(ta, tb, texture="frame", blend="fast"):
+        new = project_landmarks(recombine(tb, expression=ta), model)
+        outs = list(rw.rewrite_frames(clip_b.frames, tb, new, model, source_frames=clip_a.frames,
+                                      source_track=ta, texture=texture, blend=blend, topo=topo))
+        return new, outs
+
+    import scipy.ndimage as ndi
+
+    results = {}
+    masks = [face_mask(model, perf_t.frame_weights(i), perf_t.camera(i), (size, size))
+             for i in range(n_frames)]
+    for name, (ta, tb, tex, bl) in {
+            "tracked_frame_fast": (tr_a, tr_b, "frame", "fast"),
+            "tracked_constant_fast": (tr_a, tr_b, "constant", "fast"),
+            "tracked_frame_poisson": (tr_a, tr_b, "frame", "poisson"),
+            "truth_tracks_frame_fast": (truth_a, truth_b, "frame", "fast"),
+    }.items():
+        t0 = time.perf_counter()
+        new, outs = run(ta, tb, tex, bl)
+        dt = time.perf_counter() - t0
+        errs = [sq_err(o.image, clip_t.frames[i], masks[i]) for i, o in enumerate(outs)]
+        p = [psnr_of([e]) for e in errs]
+        s = [ssim(o.image, clip_t.frames[i], masks[i]) for i, o in enumerate(outs)]
+        lm = np.linalg.norm(new.landmarks2d - clip_t.truth.landmarks2d, axis=-1).mean(axis=-1)
+        outside = []
+        for i, o in enumerate(outs):
+            grown = ndi.binary_dilation(o.face_mask, iterations=4) if o.face_mask.any() \
+                else o.face_mask
+            outside.append(sq_err(o.image, clip_b.frames[i], ~grown))
+        results[name] = {"psnr_face_db": psnr_of(errs), "psnr_face_db_min": float(np.min(p)),
+                         "ssim_face": float(np.mean(s)),
+                         "landmark_error_px": float(lm.mean()),
+                         "psnr_outside_mask_db": psnr_of(outside),
+                         "seconds_per_frame": dt / n_frames}
+        if name == "tracked_frame_fast":
+            result_frames = np.stack([o.image for o in outs])
+        log(f"(a) {name}: PSNR {psnr_of(errs):.2f} dB, SSIM {np.mean(s):.3f}, landmarks "
+            f"{lm.mean():.2f} px, outside-mask PSNR {psnr_of(outside)}")
+    base_p = [sq_err(clip_b.frames[i], clip_t.frames[i], masks[i]) for i in range(n_frames)]
+    base_s = [ssim(clip_b.frames[i], clip_t.frames[i], masks[i]) for i in range(n_frames)]
+    results["untouched_target"] = {"psnr_face_db": psnr_of(base_p),
+                                   "ssim_face": float(np.mean(base_s))}
+
+    # (b) identity leakage: track the result again
+    t0 = time.perf_counter()
+    tr_r = track_frames(result_frames, model, perf_b.fps)
+    w_r = constant_weights(tr_r, idm)
+    w_a_tr, w_b_tr = constant_weights(tr_a, idm), constant_weights(tr_b, idm)
+    w_a, w_b = perf_a.weights[idm][0], perf_b.weights[idm][0]
+    ab = float(np.linalg.norm(w_a - w_b))
+    leak = {"to_target_truth": float(np.linalg.norm(w_r - w_b)) / ab,
+            "to_source_truth": float(np.linalg.norm(w_r - w_a)) / ab,
+            "to_target_tracked": float(np.linalg.norm(w_r - w_b_tr)) / ab,
+            "to_source_tracked": float(np.linalg.norm(w_r - w_a_tr)) / ab,
+            "target_tracked_to_target_truth": float(np.linalg.norm(w_b_tr - w_b)) / ab,
+            "note": "identity-weight distances divided by |w_source - w_target| (truth); "
+                    "0 = the target's identity, 1 = the source's"}
+    log(f"(b) identity of the re-tracked result: {leak['to_target_truth']:.3f} from the target, "
+        f"{leak['to_source_truth']:.3f} from the source ({time.perf_counter() - t0:.1f} s)")
+    return {"n_frames": n_frames, "size": [size, size], "identities": [labels[1], labels[4]],
+            "quality": results, "identity_leakage": leak}
+
+
+# ------------------------------------------------------------------------------------ (d)
+def speed(model, *, seconds: float, size: int, log=print, tmpdir: Path) -> dict:
+    from facetransfer.rewrite import transfer_video
+    from facetransfer.synth import make_clip, random_performance
+    from facetransfer.io.video import write_video
+
+    fps = 25.0
+    n = int(round(seconds * fps))
+    labels = model.labels[0]
+    paths = {}
+    for name, ident, seed in (("source", labels[2], 5), ("target", labels[6], 7)):
+        perf = random_performance(model, n, seed=seed, size=(size, size), identity=ident)
+        clip = make_clip(model, perf, seed=seed)
+        paths[name] = tmpdir / f"{name}.mp4"
+        write_video(paths[name], clip.frames, fps)
+    log(f"(d) wrote a {seconds:g} s {size}x{size} clip pair ({n} frames each)")
+    c0, t0 = time.process_time(), time.perf_counter()
+    res = transfer_video(paths["target"], tmpdir / "result.mp4", model, overwrite=True,
+                         expression_from=paths["source"])
+    wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+    stages = dict(res.timings)
+    total = sum(stages.values())
+    out = {"clip_seconds": seconds, "frames": n, "size": [size, size], "wall_seconds": wall,
+           "cpu_seconds": cpu, "realtime_factor": wall / seconds,
+           "stage_seconds": stages,
+           "stage_share": {k: v / total for k, v in stages.items()},
+           "goal_met": wall <= seconds}
+    log(f"(d) end to end {wall:.1f} s wall ({cpu:.1f} s CPU) for a {seconds:g} s clip: "
+        + ", ".join(f"{k} {v:.1f} s" for k, v in stages.items()))
+    return out
+
+
+# ------------------------------------------------------------------------------------ plot
+def plot(report: dict, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+    q = report.get("synthetic", {}).get("quality", {})
+    if q:
+        names = list(q)
+        axes[0].bar(range(len(names)), [q[k]["psnr_face_db"] for k in names], color="C0")
+        axes[0].set_xticks(range(len(names)), [k.replace("_", "\n") for k in names], fontsize=7)
+        axes[0].set_ylabel("PSNR on the face (dB)")
+        ax2 = axes[0].twinx()
+        ax2.plot(range(len(names)), [q[k]["ssim_face"] for k in names], "o-", color="C3")
+        ax2.set_ylabel("SSIM on the face", color="C3")
+        axes[0].set_title("(a) transfer vs ground truth")
+    lk = report.get("synthetic", {}).get("identity_leakage")
+    if lk:
+        keys = ["to_target_truth", "to_source_truth"]
+        axes[1].bar([0, 1], [lk[k] for k in keys], color=["C2", "C1"])
+        axes[1].set_xticks([0, 1], ["result - target", "result - source"])
+        axes[1].set_ylabel("identity distance / |source - target|")
+        axes[1].set_title("(b) identity leakage (re-tracked result)")
+    sp = report.get("speed")
+    if sp:
+        st = sp["stage_seconds"]
+        axes[2].bar(range(len(st)), list(st.values()), color="C4")
+        axes[2].set_xticks(range(len(st)), list(st))
+        axes[2].axhline(sp["clip_seconds"], color="k", ls="--", label="clip duration")
+        axes[2].set_ylabel("seconds")
+        axes[2].set_title(f"(d) {sp['clip_seconds']:g} s {sp['size'][0]}px pair: "
+                          f"{sp['wall_seconds']:.0f} s total")
+        axes[2].legend()
+    fig.tight_layout()
+    from facetransfer.io.atomic import atomic_path
+
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=110, format="png")
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="out/benchmarks")
+    ap.add_argument("--model", help="model .npz (default: the demo's default model)")
+    ap.add_argument("--frames", type=int, default=60, help="synthetic clip length")
+    ap.add_argument("--size", type=int, default=320, help="synthetic frame size (square)")
+    ap.add_argument("--speed-seconds", type=float, default=10.0)
+    ap.add_argument("--speed-size", type=int, default=512)
+    ap.add_argument("--skip-speed", action="store_true")
+    ap.add_argument("--quick", action="store_true", help="30 frames, 2-second speed clip")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.frames, args.speed_seconds = 30, 2.0
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+
+    from facetransfer.demo import ensure_default_model
+    from facetransfer.io.atomic import write_text_atomic
+    from facetransfer.model import load_model
+
+    model = load_model(args.model) if args.model else ensure_default_model()
+    report = {"benchmark": "transfer", "issue": 6, "model": {
+        "modes": list(model.mode_names), "ranks": list(model.ranks),
+        "n_vertices": model.n_vertices, "hash": model.content_hash[:16]},
+        "machine": {"cpus": os.cpu_count(), "python": platform.python_version(),
+                    "omp_threads": os.environ.get("OMP_NUM_THREADS")},
+        "settings": vars(args)}
+    t0 = time.perf_counter()
+    report["synthetic"] = synthetic_quality(model, n_frames=args.frames, size=args.size)
+    if not args.skip_speed:
+        with tempfile.TemporaryDirectory() as d:
+            report["speed"] = speed(model, seconds=args.speed_seconds, size=args.speed_size,
+                                    tmpdir=Path(d))
+    report["benchmark_seconds"] = time.perf_counter() - t0
+    write_text_atomic(out / "transfer.json", json.dumps(report, indent=2, default=float))
+    plot(report, out / "transfer.png")
+    print(f"wrote {out / 'transfer.json'} and {out / 'transfer.png'}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

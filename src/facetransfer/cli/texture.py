@@ -1,0 +1,204 @@
+"""``facetransfer texture ...``: default face texture, texture lifting from video, Poisson blending (§6).
+
+    facetransfer texture default --model MODEL.npz --out tex.png [--size 512] [--seed 0]
+    facetransfer texture lift CLIP.mp4 --track CLIP.truth.npz --model MODEL.npz --out tex.png \\
+        [--size 512] [--step 2] [--function tf.npz]
+    facetransfer texture blend --source face.png --target frame.png --mask mask.png --out out.png \\
+        [--method auto|opencv|solver] [--mixed] [--feather 3]
+
+``--track`` takes a tracker output (``TRACK.npz``) or the ground truth of ``synth-video``
+(``CLIP.truth.npz``): both carry the per-frame pose and model weights.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import FaceTransferError
+from ..io.atomic import atomic_path, check_output_path
+
+_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+
+def _image_out(path: str) -> Path:
+    out = check_output_path(path)
+    if out.suffix.lower() not in _IMAGE_SUFFIXES:
+        raise FaceTransferError(f"--out {out}: expected a .png or .jpg image")
+    return out
+
+
+def _read_image(path: str, what: str) -> np.ndarray:
+    import cv2
+
+    p = Path(path)
+    if not p.is_file():
+        raise FaceTransferError(f"{what} {p} does not exist")
+    img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+    if img is None:
+        raise FaceTransferError(f"{what} {p} is not an image OpenCV can read")
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+
+
+def _read_mask(path: str, shape: tuple[int, int]) -> np.ndarray:
+    import cv2
+
+    p = Path(path)
+    if not p.is_file():
+        raise FaceTransferError(f"mask {p} does not exist")
+    m = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
+    if m is None:
+        raise FaceTransferError(f"mask {p} is not an image OpenCV can read")
+    if m.shape != shape:
+        raise FaceTransferError(f"mask {p} is {m.shape[1]}x{m.shape[0]}, the target is "
+                                f"{shape[1]}x{shape[0]}")
+    return m > 127
+
+
+def _write_image(out: Path, rgb: np.ndarray) -> None:
+    import cv2
+
+    with atomic_path(out) as tmp:
+        if not cv2.imwrite(str(tmp), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
+            raise FaceTransferError(f"cannot write image {out}")
+
+
+def _load_model(path: str):
+    from ..model import load_model
+
+    if not Path(path).is_file():
+        raise FaceTransferError(f"model file {path} does not exist")
+    return load_model(path)
+
+
+def _load_track(path: str):
+    """A tracker ``TRACK.npz`` or a ``synth-video`` ``CLIP.truth.npz``."""
+    p = Path(path)
+    if not p.is_file():
+        raise FaceTransferError(f"track file {p} does not exist")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            is_truth = "meta" in z.files
+    except (OSError, ValueError) as exc:
+        raise FaceTransferError(f"track file {p} is not an .npz file: {exc}") from None
+    if is_truth:
+        from ..synth import load_truth
+
+        return load_truth(p)
+    from ..track.result import Track
+
+    return Track.load(p)
+
+
+def cmd_default(args: argparse.Namespace) -> int:
+    from ..texture import default_face_texture
+
+    out = _image_out(args.out)
+    model = _load_model(args.model)
+    tex = default_face_texture(model, size=args.size, seed=args.seed)
+    _write_image(out, tex)
+    print(f"wrote {out} ({args.size}x{args.size} procedural skin texture)")
+    return 0
+
+
+def cmd_lift(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from ..io.video import iter_frames, video_info
+    from ..texture import TextureFunction, lift_track, merge_textures, texture_to_uint8
+
+    out = _image_out(args.out)
+    fn_out = check_output_path(args.function) if args.function else None
+    if fn_out is not None and fn_out.suffix.lower() != ".npz":
+        raise FaceTransferError(f"--function {fn_out}: expected an .npz file")
+    if args.step < 1:
+        raise FaceTransferError(f"--step must be >= 1, got {args.step}")
+    if not 8 <= args.size <= 4096:
+        raise FaceTransferError(f"--size must be in 8..4096, got {args.size}")
+    if not Path(args.video).is_file():
+        raise FaceTransferError(f"video {args.video} does not exist")
+    info = video_info(args.video)
+    track = _load_track(args.track)
+    model = _load_model(args.model)
+    if tuple(track.frame_size) != tuple(info.size):
+        raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
+                                f"{track.frame_size[1]} frames, the video is "
+                                f"{info.size[0]}x{info.size[1]}")
+    n = int(track.scale.shape[0])
+    with tqdm(total=(n + args.step - 1) // args.step, desc="texture lift", unit="frame",
+              disable=not sys.stderr.isatty()) as bar:
+        lt = lift_track(model, iter_frames(args.video), track, tex_size=args.size,
+                        step=args.step, progress=bar.update)
+    merged = merge_textures(lt.lifted)
+    _write_image(out, texture_to_uint8(merged.texture))
+    seen = float((merged.weight > 1e-6).mean())
+    msg = f"wrote {out} (merged from {len(lt.lifted)} frames, {100 * seen:.0f}% of texels seen)"
+    if fn_out is not None:
+        TextureFunction.from_lifted(lt.lifted, lt.attributes, k=args.k).save(fn_out)
+        msg += f" and {fn_out} (texture function, k={args.k})"
+    print(msg)
+    return 0
+
+
+def cmd_blend(args: argparse.Namespace) -> int:
+    from ..composite import feather_mask, poisson_blend
+
+    out = _image_out(args.out)
+    src = _read_image(args.source, "source image")
+    dst = _read_image(args.target, "target image")
+    if src.shape != dst.shape:
+        raise FaceTransferError(f"source {args.source} is {src.shape[1]}x{src.shape[0]}, target "
+                                f"{args.target} is {dst.shape[1]}x{dst.shape[0]}: sizes must match")
+    mask = _read_mask(args.mask, dst.shape[:2])
+    if args.feather < 0:
+        raise FaceTransferError(f"--feather must be >= 0, got {args.feather}")
+    m = feather_mask(mask, args.feather) if args.feather > 0 else mask
+    method = args.method if args.feather == 0 else ("solver" if args.method == "auto" else args.method)
+    res = poisson_blend(src, dst, m, method=method, mixed=args.mixed)
+    _write_image(out, res)
+    print(f"wrote {out} ({int(mask.sum())} masked pixels)")
+    return 0
+
+
+def register(sub) -> None:
+    """Add ``texture default|lift|blend`` to the facetransfer parser."""
+    t = sub.add_parser("texture", help="face textures: default texture, lift from video, "
+                       "Poisson blending (§6)",
+                       description="Texture tools of Vlasic et al. 2005, §6.")
+    tsub = t.add_subparsers(dest="texture_command", metavar="ACTION")
+    t.set_defaults(func=lambda a: (t.print_help(), 2)[1])
+
+    d = tsub.add_parser("default", help="write the default procedural skin texture for a model's UVs")
+    d.add_argument("--model", required=True, help="model file (.npz) with UVs")
+    d.add_argument("--size", type=int, default=512, help="texture width and height (default 512)")
+    d.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    d.add_argument("--out", required=True, help="TEX.png")
+    d.set_defaults(func=cmd_default)
+
+    lf = tsub.add_parser("lift", help="lift and merge a UV texture from a tracked video",
+                         description="Sample every tracked frame onto the model's UVs, weight by "
+                         "visibility and obliqueness, merge, fill holes.")
+    lf.add_argument("video", help="the video the track belongs to")
+    lf.add_argument("--track", required=True, help="TRACK.npz or CLIP.truth.npz")
+    lf.add_argument("--model", required=True, help="model file (.npz) used for the track")
+    lf.add_argument("--size", type=int, default=512, help="texture size (default 512)")
+    lf.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
+    lf.add_argument("--function", help="also write the performance-driven texture function (.npz)")
+    lf.add_argument("--k", type=int, default=4, help="neighbours of the texture function (default 4)")
+    lf.add_argument("--out", required=True, help="TEX.png (merged texture)")
+    lf.set_defaults(func=cmd_lift)
+
+    b = tsub.add_parser("blend", help="Poisson-blend a source image into a target over a mask",
+                        description="Poisson image editing (Pérez et al. 2003).")
+    b.add_argument("--source", required=True, help="source image (same size as the target)")
+    b.add_argument("--target", required=True, help="target image")
+    b.add_argument("--mask", required=True, help="mask image (white = paste)")
+    b.add_argument("--method", choices=("auto", "opencv", "solver"), default="auto",
+                   help="auto (default): OpenCV seamlessClone where it serves, else our solver")
+    b.add_argument("--mixed", action="store_true", help="mixed gradients")
+    b.add_argument("--feather", type=float, default=0.0, help="soft edge radius in pixels (default 0)")
+    b.add_argument("--out", required=True, help="OUT.png")
+    b.set_defaults(func=cmd_blend)

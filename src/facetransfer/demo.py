@@ -1,0 +1,303 @@
+"""``facetransfer demo``: the main job end to end on the default inputs (what ``make demo`` runs).
+
+1. the default model: the bilinear ICT-FaceKit model (``ict-bilinear``, the recipe ranks), built
+   once and cached in the user cache (``~/.cache/facetransfer/models``);
+2. two clips of the data folder (``$FACETRANSFER_DATA_DIR/video``): ``driving_d9.mp4`` gives the
+   expressions, ``WDA_KatieHill_000.mp4`` is the target footage (without a data folder, two
+   synthetic clips of :mod:`facetransfer.synth` stand in);
+3. both are tracked (§5; a landmark-only fit if the optical-flow tracker fails), the source's
+   expressions are put on the target's identity and pose (§6, Fig. 7C) and rendered back into
+   the target footage (:mod:`facetransfer.rewrite`);
+4. ``OUT/demo.mp4`` (source | target | result side by side, with the target's audio),
+   ``OUT/demo.png`` (a contact sheet of six frames) and ``OUT/demo_track.npz`` (the new
+   performance) are written, each atomically.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import AssetError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["DEFAULT_SOURCE", "DEFAULT_TARGET", "DemoResult", "default_model_path",
+           "ensure_default_model", "default_inputs", "synthetic_inputs", "side_by_side",
+           "contact_sheet", "run_demo"]
+
+DEFAULT_SOURCE = "driving_d9.mp4"
+DEFAULT_TARGET = "WDA_KatieHill_000.mp4"
+DEFAULT_DATASET = "ict-bilinear"
+
+
+def default_model_path() -> Path:
+    """Where the demo caches its default model."""
+    from .assets import cache_dir
+
+    return cache_dir() / "models" / f"{DEFAULT_DATASET}-default.npz"
+
+
+def ensure_default_model(*, progress_factory=None):
+    """Load the default model, building and caching it first if needed.
+
+    Returns
+    -------
+    MultilinearModel
+    """
+    from .errors import ModelFileError
+    from .model import build_model, load_model
+
+    path = default_model_path()
+    if path.is_file():
+        try:
+            return load_model(path)
+        except ModelFileError as exc:
+            log.warning("cached default model is unusable (%s); rebuilding", exc)
+    from .cli.model import default_ranks
+    from .datasets import load_dataset
+
+    bar = progress_factory(f"dataset {DEFAULT_DATASET}", None) if progress_factory else None
+
+    def cb(done, total):
+        if bar is not None:
+            bar.total = total
+            bar.update(done - bar.n)
+
+    try:
+        ds = load_dataset(DEFAULT_DATASET, progress=cb)
+    finally:
+        if bar is not None:
+            bar.close()
+    model = build_model(ds, default_ranks(ds))
+    path.parent.mkdir(parents=True, exist_ok=True)
+    model.save(path)
+    log.info("built the default model %s", path)
+    return model
+
+
+def default_inputs() -> tuple[Path, Path]:
+    """``(source, target)`` videos of the data folder."""
+    from .assets import data_dir
+
+    root = data_dir()
+    if root is None:
+        raise AssetError("the demo clips live in the data folder: set FACETRANSFER_DATA_DIR to "
+                         "the offline mirror (it has video/driving_d9.mp4 and "
+                         "video/WDA_KatieHill_000.mp4)")
+    src, tgt = Path(root) / "video" / DEFAULT_SOURCE, Path(root) / "video" / DEFAULT_TARGET
+    for p in (src, tgt):
+        if not p.is_file():
+            raise AssetError(f"demo clip {p} is missing from the data folder {root}")
+    return src, tgt
+
+
+def synthetic_inputs(folder, model, *, n_frames: int = 120, size: int = 512
+                     ) -> tuple[Path, Path, Path, Path]:
+    """Two synthetic clips (:mod:`facetransfer.synth`) for when the data folder is missing:
+    ``source.mp4`` (lively expressions) and ``target.mp4`` (another identity, calmer), and
+    their true tracks ``source.npz``, ``target.npz`` (no face detector needed).
+
+    Returns
+    -------
+    (source video, target video, source track, target track)
+    """
+    import numpy as np
+
+    from .io.video import write_video
+    from .synth import make_clip, random_performance
+    from .track import Track
+
+    d = Path(folder)
+    d.mkdir(parents=True, exist_ok=True)
+    labels = model.labels[0]
+    paths = []
+    for name, ident, seed, every in (("source", labels[1 % len(labels)], 3, 0.6),
+                                     ("target", labels[-1], 8, 2.0)):
+        perf = random_performance(model, n_frames, seed=seed, size=(size, size), identity=ident,
+                                  key_every=every)
+        clip = make_clip(model, perf, seed=seed)
+        p = d / f"{name}.mp4"
+        write_video(p, clip.frames, perf.fps)
+        t = clip.truth
+        Track(fps=t.fps, frame_size=t.frame_size, rotation=t.rotation, scale=t.scale,
+              translation=t.translation, weights=t.weights, landmarks2d=t.landmarks2d,
+              confidence=np.ones(t.n_frames), lost=np.zeros(t.n_frames, bool),
+              model_hash=model.content_hash, mode_names=model.mode_names,
+              source=str(p)).save(d / f"{name}.npz")
+        paths.append(p)
+    return paths[0], paths[1], d / "source.npz", d / "target.npz"
+
+
+def _fit_height(img: np.ndarray, H: int, W: int) -> np.ndarray:
+    """``img`` scaled to height ``H`` and padded or cropped (centred) to width ``W``."""
+    import cv2
+
+    h, w = img.shape[:2]
+    nw = max(1, int(round(w * H / h)))
+    r = cv2.resize(img, (nw, H), interpolation=cv2.INTER_AREA if H < h else cv2.INTER_LINEAR)
+    if nw >= W:
+        x0 = (nw - W) // 2
+        return r[:, x0:x0 + W]
+    out = np.zeros((H, W, 3), np.uint8)
+    x0 = (W - nw) // 2
+    out[:, x0:x0 + nw] = r
+    return out
+
+
+def side_by_side(source: np.ndarray, target: np.ndarray, result: np.ndarray, *,
+                 labels: bool = True) -> np.ndarray:
+    """One demo frame: source | target | result at the target's size, (H, 3 W, 3) uint8."""
+    import cv2
+
+    H, W = target.shape[:2]
+    tiles = [_fit_height(source, H, W), target.copy(), result.copy()]
+    if labels:
+        for t, text in zip(tiles, ("source (expressions)", "target", "result")):
+            cv2.putText(t, text, (10, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 0), 4,
+                        cv2.LINE_AA)
+            cv2.putText(t, text, (10, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 255, 255), 2,
+                        cv2.LINE_AA)
+    W2 = W - (W % 2)
+    H2 = H - (H % 2)
+    return np.ascontiguousarray(np.hstack([t[:H2, :W2] for t in tiles]))
+
+
+def contact_sheet(frames: list[np.ndarray], path, *, columns: int = 2, scale: float = 0.5,
+                  overwrite: bool = True) -> Path:
+    """Write a grid of side-by-side frames to ``path`` (PNG), atomically."""
+    import cv2
+    from PIL import Image
+
+    from .io.atomic import atomic_path
+
+    small = [cv2.resize(f, (int(f.shape[1] * scale), int(f.shape[0] * scale)),
+                        interpolation=cv2.INTER_AREA) for f in frames]
+    rows = []
+    for k in range(0, len(small), columns):
+        row = small[k:k + columns]
+        while len(row) < columns:
+            row.append(np.zeros_like(small[0]))
+        rows.append(np.hstack(row))
+    sheet = np.vstack(rows)
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        Image.fromarray(sheet).save(tmp, format="PNG")
+    return Path(path)
+
+
+@dataclass(frozen=True)
+class DemoResult:
+    """Outputs of :func:`run_demo` and seconds per stage."""
+
+    video: Path
+    sheet: Path
+    track: Path
+    n_frames: int
+    method: str
+    timings: dict = field(default_factory=dict)
+
+
+def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None,
+             texture: str = "frame", blend: str = "fast", track_method: str = "auto",
+             progress_factory=None, overwrite: bool = True) -> DemoResult:
+    """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
+
+    Parameters
+    ----------
+    out_dir : path-like
+        Created if missing; receives ``demo.mp4``, ``demo.png`` and ``demo_track.npz``.
+    frames : int
+        Target frames to use (the source is read for the same duration).
+    source, target : path-like, optional
+        Default: :func:`default_inputs`.
+    model : MultilinearModel, optional
+        Default: :func:`ensure_default_model`.
+    texture, blend : str
+        See :func:`facetransfer.rewrite.rewrite_frames`.
+    track_method : {"auto", "flow", "landmarks"}
+        ``"auto"``: the optical-flow tracker, falling back to a landmark-only fit if it fails.
+
+    Returns
+    -------
+    DemoResult
+    """
+    from . import rewrite as rw
+    from .io.atomic import check_output_path
+
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    video_path, sheet_path, track_path = out / "demo.mp4", out / "demo.png", out / "demo_track.npz"
+    for p in (video_path, sheet_path, track_path):
+        check_output_path(p, overwrite=overwrite)
+    if model is None:
+        model = ensure_default_model(progress_factory=progress_factory)
+    timings["model"] = time.perf_counter() - t0
+    tracks: dict = {}
+    if source is None or target is None:
+        try:
+            s, t = default_inputs()
+        except AssetError as exc:  # no data folder: degrade to synthetic footage
+            log.warning("%s; using synthetic clips (with their true tracks) instead", exc)
+            s, t, ts, tt = synthetic_inputs(out / "inputs", model, n_frames=frames)
+            tracks = {"expression_track": ts, "target_track": tt}
+        source = s if source is None else source
+        target = t if target is None else target
+
+    method = track_method
+    try:
+        plan = rw.plan_transfer(target, model, expression_from=source, max_frames=frames,
+                                track_method=method, progress_factory=progress_factory,
+                                **tracks)
+    except (KeyboardInterrupt, MemoryError):
+        raise
+    except Exception as exc:  # noqa: BLE001 - the demo degrades instead of failing
+        if track_method != "auto":
+            raise
+        log.warning("tracking failed (%s: %s); falling back to a landmark-only fit",
+                    type(exc).__name__, exc)
+        method = "landmarks"
+        plan = rw.plan_transfer(target, model, expression_from=source, max_frames=frames,
+                                track_method=method, progress_factory=progress_factory,
+                                **tracks)
+    timings.update({f"{k}": v for k, v in plan.timings.items()})
+
+    n = plan.n_frames
+    pick = set(np.linspace(0, n - 1, 6).round().astype(int).tolist())
+    sheet_frames: list[np.ndarray] = []
+    bar = progress_factory("render", n) if progress_factory else None
+    t_render = [0.0]
+
+    def composed():
+        it = rw.rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
+                               source_frames=plan.mouth_frames, source_track=plan.mouth_track,
+                               source_index=plan.mouth_index, texture=texture, blend=blend,
+                               progress=bar.update if bar is not None else None)
+        for i in range(n):
+            t = time.perf_counter()
+            r = next(it)
+            frame = side_by_side(plan.mouth_frames[plan.mouth_index[i]], plan.target_frames[i],
+                                 r.image)
+            t_render[0] += time.perf_counter() - t
+            if i in pick:
+                sheet_frames.append(frame)
+            yield frame
+
+    t1 = time.perf_counter()
+    try:
+        rw.write_video_with_audio(video_path, composed(), plan.fps, audio_from=target,
+                                  overwrite=overwrite)
+    finally:
+        if bar is not None:
+            bar.close()
+    timings["render"] = t_render[0]
+    timings["write"] = time.perf_counter() - t1 - t_render[0]
+    contact_sheet(sheet_frames, sheet_path, overwrite=overwrite)
+    plan.new_track.save(track_path, overwrite=overwrite)
+    timings["total"] = time.perf_counter() - t0
+    return DemoResult(video_path, sheet_path, track_path, n, method, timings)

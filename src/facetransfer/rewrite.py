@@ -1,0 +1,1241 @@
+"""Video rewrite: render a new performance back into the target footage (Vlasic et al. 2005, §6).
+
+For every frame of the target video (§6, Fig. 7C–7E):
+
+1. the new face geometry (Eq. (5) with the recombined weights) is posed with the target's camera
+   (Eq. (7)) and rasterised;
+2. the mouth gap of the mesh is closed for texturing, as the paper does ("the mouth shapes closed-
+   off for texturing", Fig. 7A–C): the inner-lip boundary loop is triangulated as a fan around an
+   added centre vertex (:func:`mouth_topology`, :func:`close_mouth`);
+3. the face is textured with the target's face texture (``texture="constant"``: lifted from the
+   target video, one texture for the whole clip, as in the paper; ``"frame"``, the default:
+   lifted from the current target frame, which keeps that frame's lighting), the mouth (lips and
+   the closed gap) with the *source* performance's mouth (the source frame warped through the
+   source's own tracked geometry: the performance-driven texture of §6 with the nearest
+   neighbour being the source's own frame);
+4. the rendered face is blended into the target frame in the gradient domain (Pérez et al.
+   2003): ``blend="poisson"`` solves the Poisson equation exactly
+   (:func:`facetransfer.composite.composite_face`); ``"fast"`` (default, ~5x faster) adds a
+   membrane correction interpolated from the region's outline (:func:`membrane_blend`). The
+   blend region stays a few pixels inside the rendered silhouette, so its boundary lies on the
+   target's own face. The mesh's eye holes are not part of the rendered mask, so the target's
+   own eyes show through them (§6); outside the (feathered) face mask the output equals the
+   target frame exactly. Frames where the face is lost keep the original frame.
+
+Texture lookups are done in image space: a vertex's texture coordinate is its projection into the
+frame the texture comes from, so a triangle of the new mesh shows the same triangle of the frame
+(an affine warp per triangle).
+
+References
+----------
+Vlasic, Brand, Pfister, Popović. Face Transfer with Multilinear Models. SIGGRAPH 2005, §6, Fig. 7.
+Pérez, Gangnet, Blake. Poisson image editing. SIGGRAPH 2003.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import shutil
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Iterator
+
+import numpy as np
+
+from .errors import FaceTransferError, ShapeError, VideoError
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "RewriteError",
+    "MeshTopology",
+    "mesh_topology",
+    "boundary_loops",
+    "close_mouth",
+    "frame_uvs",
+    "FaceTexture",
+    "constant_face_texture",
+    "rewrite_frame",
+    "RewriteFrame",
+    "rewrite_frames",
+    "mux_audio",
+]
+
+TEXTURE_MODES = ("constant", "frame")
+#: Ways to put the rendered face into the frame: Pérez et al.'s Poisson solve (exact), a
+#: membrane (harmonic-like) correction interpolated by push-pull (fast), or a hard paste.
+BLEND_MODES = ("fast", "poisson", "none")
+
+
+class RewriteError(FaceTransferError):
+    """Frames, tracks or a model that cannot be rendered back into footage."""
+
+
+# ---------------------------------------------------------------------------------------------
+# mesh topology: boundary loops, the mouth gap, the eye holes
+# ---------------------------------------------------------------------------------------------
+
+def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
+    """Closed loops of boundary edges (edges of exactly one triangle) of a triangle mesh.
+
+    Parameters
+    ----------
+    faces : (F, 3) int64
+
+    Returns
+    -------
+    list of (k,) int64
+        Vertex indices in loop order; longest first.
+    """
+    F = np.asarray(faces, dtype=np.int64)
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])  # directed half-edges
+    key = np.sort(E, axis=1)
+    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    bnd = E[cnt[inv.ravel()] == 1]  # directed boundary half-edges (a -> b)
+    nxt: dict[int, int] = {}
+    for a, b in bnd:
+        nxt.setdefault(int(a), int(b))
+    loops, seen = [], set()
+    for s in list(nxt):
+        if s in seen:
+            continue
+        loop, cur = [], s
+        while cur not in seen and cur in nxt:
+            seen.add(cur)
+            loop.append(cur)
+            cur = nxt[cur]
+        if len(loop) >= 3:
+            loops.append(np.asarray(loop, dtype=np.int64))
+    loops.sort(key=len, reverse=True)
+    return loops
+
+
+@dataclass(frozen=True)
+class MeshTopology:
+    """The model mesh prepared for texturing.
+
+    Attributes
+    ----------
+    n_vertices : int
+        Vertices of the model; the closed mesh appends one centre vertex of the mouth (index
+        ``n_vertices``) when there is a mouth gap.
+    faces : (F', 3) int64
+        Model faces followed by the mouth-closing fan.
+    mouth_loop : (k,) int64
+        The inner-lip boundary loop (empty when the mesh has no mouth gap).
+    mouth_faces : (m,) int64
+        Indices into ``faces`` of the triangles textured from the source's mouth.
+    eye_loops : tuple of (k,) int64
+        The eye holes, left open so that the target's eyes show through (§6).
+    """
+
+    n_vertices: int
+    faces: np.ndarray
+    mouth_loop: np.ndarray
+    mouth_faces: np.ndarray
+    eye_loops: tuple
+
+    @property
+    def n_closed(self) -> int:
+        """Vertices of the closed mesh."""
+        return self.n_vertices + (1 if self.mouth_loop.size else 0)
+
+
+def mesh_topology(model, *, mouth_rings: int = 1, lips: bool = True) -> MeshTopology:
+    """Find the mouth gap and eye holes of the model's mesh and close the mouth (§6, Fig. 7A).
+
+    Boundary loops are classified by the nearest iBUG-68 landmark group of the model's mean
+    face: inner lips (60–67) for the mouth, eyes (36–41, 42–47). The mouth loop is closed by a
+    fan around its centroid; the triangles of the fan, the ``mouth_rings`` rings of model
+    triangles around the loop and (``lips``) the lips form the mouth region textured from the
+    source.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+    mouth_rings : int
+        Rings of lip triangles around the gap that also take the source's mouth texture.
+    lips : bool
+        Also the triangles inside the outer lip contour (iBUG 48–59): the whole mouth, lips
+        included, comes from the source (§6: "the mouth texture from the source video").
+
+    Returns
+    -------
+    MeshTopology
+    """
+    F = np.asarray(model.faces, dtype=np.int64)
+    n = int(model.n_vertices)
+    loops = boundary_loops(F)
+    empty = np.zeros(0, np.int64)
+    if model.landmarks is None or len(loops) < 2:
+        return MeshTopology(n, F, empty, empty, ())
+    V = model.synthesize(model.default_weights())
+    lm = V[np.asarray(model.landmarks)]
+    centres = {"mouth": lm[60:68].mean(0), "eye_r": lm[36:42].mean(0), "eye_l": lm[42:48].mean(0)}
+    size = float(np.linalg.norm(lm[36] - lm[45])) or 1.0  # outer eye corners: face scale
+    best: dict[str, tuple[float, int]] = {}
+    for li, loop in enumerate(loops[1:], start=1):  # loops[0] is the outer boundary
+        c = V[loop].mean(0)
+        for name, ctr in centres.items():
+            d = float(np.linalg.norm(c - ctr))
+            if d < 0.35 * size and (name not in best or d < best[name][0]):
+                best[name] = (d, li)
+    eyes = tuple(loops[best[k][1]] for k in ("eye_r", "eye_l") if k in best)
+    if "mouth" not in best:
+        log.info("the model mesh has no mouth gap; nothing to close")
+        return MeshTopology(n, F, empty, empty, eyes)
+    loop = loops[best["mouth"][1]]
+    # fan around a new centre vertex n; orient like the adjacent triangles (loop is a boundary
+    # traversed along its half-edges, so the fan (b, a, centre) continues the surface's winding)
+    fan = np.stack([np.roll(loop, -1), loop, np.full_like(loop, n)], axis=1)
+    faces = np.concatenate([F, fan])
+    mouth = set(range(F.shape[0], faces.shape[0]))
+    ring = set(int(v) for v in loop)
+    for _ in range(int(mouth_rings)):
+        touch = np.flatnonzero(np.isin(F, list(ring)).any(axis=1))
+        mouth.update(int(t) for t in touch)
+        ring.update(int(v) for v in F[touch].ravel())
+    if lips:
+        # the lips: triangles inside the outer lip contour (iBUG 48-59) seen from the front,
+        # grown by 10% about its centre
+        from matplotlib.path import Path as _Path
+
+        poly = lm[48:60, :2]
+        ctr = poly.mean(0)
+        inside = _Path(ctr + 1.1 * (poly - ctr)).contains_points(V[:, :2])
+        inside &= V[:, 2] > V[loop, 2].min() - 0.5 * size  # the front of the face only
+        mouth.update(int(t) for t in np.flatnonzero(inside[F].all(axis=1)))
+    return MeshTopology(n, faces, loop, np.asarray(sorted(mouth), dtype=np.int64), eyes)
+
+
+def close_mouth(vertices: np.ndarray, topo: MeshTopology) -> np.ndarray:
+    """Append the mouth's centre vertex (mean of the inner-lip loop) to each mesh.
+
+    Parameters
+    ----------
+    vertices : (..., n_vertices, 3)
+    topo : MeshTopology
+
+    Returns
+    -------
+    (..., topo.n_closed, 3)
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    if V.shape[-2:] != (topo.n_vertices, 3):
+        raise ShapeError(f"vertices must be (..., {topo.n_vertices}, 3), got {V.shape}")
+    if not topo.mouth_loop.size:
+        return V
+    c = V[..., topo.mouth_loop, :].mean(axis=-2, keepdims=True)
+    return np.concatenate([V, c], axis=-2)
+
+
+def frame_uvs(vertices: np.ndarray, camera, size: tuple[int, int]) -> np.ndarray:
+    """Texture coordinates that look a mesh up in the frame it was tracked in.
+
+    ``uv = (x / (W - 1), 1 - y / (H - 1))`` of each vertex's projection (Eq. (7)), so that
+    :func:`facetransfer.render.sample_texture` with the frame as texture returns the frame's
+    pixel under the vertex.
+
+    Parameters
+    ----------
+    vertices : (n, 3)
+    camera : WeakPerspective
+    size : (W, H)
+
+    Returns
+    -------
+    (n, 2) float64
+    """
+    W, H = size
+    p = camera.project(vertices)
+    return np.stack([p[:, 0] / max(W - 1, 1), 1.0 - p[:, 1] / max(H - 1, 1)], axis=1)
+
+
+# ---------------------------------------------------------------------------------------------
+# texture
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class FaceTexture:
+    """A texture image and the texture coordinates of the closed mesh's vertices.
+
+    Attributes
+    ----------
+    image : (Ht, Wt, 3) uint8
+    uvs : (n_closed, 2) float64
+        ``(u, v)`` with v up (see :func:`frame_uvs`).
+    frame : int
+        The target frame it was lifted from (-1 if merged from several).
+    """
+
+    image: np.ndarray
+    uvs: np.ndarray
+    frame: int = -1
+
+
+def _reference_frame(track, model, n_frames: int | None = None) -> int:
+    """The target frame to lift the constant face texture from: not lost, facing the camera,
+    mouth closest to neutral, most confident (among the first ``n_frames``)."""
+    good = np.flatnonzero(~track.lost[:n_frames])
+    if good.size == 0:
+        raise RewriteError(f"the face is lost in every frame of {track.source or 'the target'}")
+    facing = track.rotation[good, 2, 2]  # cos of the angle between the face's z and the view
+    score = facing + 0.5 * track.confidence[good]
+    if "expression" in track.weights:
+        k = model.mode_index("expression")
+        ref = model.training_weights(k, "neutral") if "neutral" in model.labels[k] \
+            else model.weight_mean(k)
+        dist = np.linalg.norm(track.weights["expression"][good] - ref, axis=1)
+        score = score - 0.5 * dist / (dist.max() + 1e-12)
+    return int(good[np.argmax(score)])
+
+
+def constant_face_texture(frames, track, model, topo: MeshTopology, *,
+                          frame: int | None = None) -> FaceTexture:
+    """The target's face texture, constant over the clip (§6: "the face texture from the target
+    video (constant throughout the sequence)").
+
+    The texture is one reference frame of the target (facing the camera, near-neutral mouth,
+    chosen by :func:`_reference_frame` unless ``frame`` is given) looked up through the target's
+    tracked geometry in that frame.
+
+    Parameters
+    ----------
+    frames : (F, H, W, 3) uint8 or sequence of frames
+    track : Track
+        The target's track (its own weights and pose).
+    model : MultilinearModel
+    topo : MeshTopology
+    frame : int, optional
+
+    Returns
+    -------
+    FaceTexture
+    """
+    i = _reference_frame(track, model, len(frames)) if frame is None else int(frame)
+    V = close_mouth(model.synthesize(track.weights_at(i)), topo)
+    img = np.asarray(frames[i])
+    return FaceTexture(img, frame_uvs(V, track.camera(i), (img.shape[1], img.shape[0])), i)
+
+
+def _shade(raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,
+           select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Texture the pixels of a raster: ``(image (H, W, 3) uint8, mask (H, W) bool)``.
+
+    ``select`` (F',) bool restricts to some triangles (the rest stay black, outside the mask).
+    """
+    from .render import sample_texture
+
+    H, W = raster.tri_id.shape
+    tid = raster.tri_id.ravel()
+    covered = tid >= 0
+    if select is not None:
+        covered &= select[np.maximum(tid, 0)]
+    pix = np.flatnonzero(covered)
+    img = np.zeros((H * W, 3), np.uint8)
+    if pix.size:
+        b = raster.bary.reshape(-1, 3)[pix].astype(np.float64)
+        uv = np.einsum("mk,mkc->mc", b, uvs[faces[tid[pix]]])
+        img[pix] = np.clip(np.rint(sample_texture(texture, uv)), 0, 255).astype(np.uint8)
+    return img.reshape(H, W, 3), covered.reshape(H, W)
+
+
+# ---------------------------------------------------------------------------------------------
+# blending
+# ---------------------------------------------------------------------------------------------
+
+def _extend(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``img`` inside ``mask``, its nearest inside pixel outside (no step across the outline)."""
+    import scipy.ndimage as ndi
+
+    if mask.all() or not mask.any():
+        return img.copy()
+    _, (iy, ix) = ndi.distance_transform_edt(~mask, return_indices=True)
+    return img[iy, ix]
+
+
+def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
+                   feather: float = 2.0, margin: int = 8,
+                   smooth_iterations: int = 10, outlier: float | None = 40.0) -> np.ndarray:
+    """Seamless paste by a membrane correction (an approximation of Poisson blending).
+
+    Poisson image editing with the source's own gradients as guidance (Pérez et al. 2003,
+    Eq. (7)–(10)) gives ``f = source + h`` inside the mask, with ``h`` harmonic and equal to
+    ``target − source`` on the outline. Here ``h`` is interpolated into the mask from the
+    outline by pyramid push-pull (smooth, linear time) instead of solving the sparse system;
+    the seam is then feathered over ``feather`` pixels inside the mask. Outside the mask the
+    result is ``target`` exactly.
+
+    Parameters
+    ----------
+    target, source : (H, W, 3) uint8
+    mask : (H, W) bool
+    feather : float
+        Width in pixels of the inside band where the result fades to the target.
+    smooth_iterations : int
+        Jacobi sweeps of Laplace's equation applied to the push-pull membrane.
+    outlier : float or None
+        Outline pixels whose target-source difference exceeds this (0..255 scale, any channel)
+        do not constrain the membrane (None: all do).
+
+    Returns
+    -------
+    (H, W, 3) uint8
+    """
+    import scipy.ndimage as ndi
+
+    from .texture import fill_holes
+
+    T = np.asarray(target)
+    out = T.copy()
+    if not mask.any():
+        return out
+    ys, xs = np.nonzero(mask)
+    H, W = mask.shape
+    y0, y1 = max(ys.min() - margin, 0), min(ys.max() + margin + 1, H)
+    x0, x1 = max(xs.min() - margin, 0), min(xs.max() + margin + 1, W)
+    m = mask[y0:y1, x0:x1]
+    t = T[y0:y1, x0:x1].astype(np.float32)
+    s = _extend(np.asarray(source)[y0:y1, x0:x1].astype(np.float32), m)
+    ring = ndi.binary_dilation(m, iterations=2) & ~m  # the outline just outside the region
+    d = t - s
+    if outlier is not None:
+        # outline pixels where target and source disagree wildly (the silhouette moved with
+        # the new expression, or hair crosses it) would bleed into the face: leave them out
+        ok = ring & (np.abs(d).max(axis=-1) < float(outlier))
+        if ok.sum() >= 0.25 * ring.sum():
+            ring = ok
+    h = fill_holes(d, ring)  # (h, w, 3): the membrane, = target - source on the outline
+    # a few Jacobi sweeps of Laplace's equation smooth the push-pull result towards harmonic
+    h = np.ascontiguousarray(h, dtype=np.float32)
+    inner = m[1:-1, 1:-1]
+    avg = np.empty_like(h[1:-1, 1:-1])
+    for _ in range(int(smooth_iterations)):
+        np.add(h[:-2, 1:-1], h[2:, 1:-1], out=avg)
+        avg += h[1:-1, :-2]
+        avg += h[1:-1, 2:]
+        avg *= 0.25
+        np.copyto(h[1:-1, 1:-1], avg, where=inner[..., None])
+    f = s + h
+    if feather > 0:
+        d = ndi.distance_transform_edt(m)
+        a = np.clip(d / float(feather), 0.0, 1.0)[..., None]
+        f = a * f + (1.0 - a) * t
+    crop = np.clip(np.rint(f), 0, 255).astype(np.uint8)
+    out[y0:y1, x0:x1] = np.where(m[..., None], crop, T[y0:y1, x0:x1])
+    return out
+
+
+# ---------------------------------------------------------------------------------------------
+# one frame
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class RewriteFrame:
+    """One rewritten frame.
+
+    Attributes
+    ----------
+    image : (H, W, 3) uint8
+        The composite.
+    rendered : (H, W, 3) uint8
+        The textured new face before blending (black outside ``face_mask``).
+    face_mask : (H, W) bool
+        Pixels covered by the closed new mesh (eye holes excluded).
+    mouth_mask : (H, W) bool
+        Pixels textured from the source's mouth.
+    """
+
+    image: np.ndarray
+    rendered: np.ndarray
+    face_mask: np.ndarray
+    mouth_mask: np.ndarray
+
+
+def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: MeshTopology,
+                  face_texture: FaceTexture, *, mouth_texture: FaceTexture | None = None,
+                  blend: str = "fast", feather: float = 2.0, erode: int = 2,
+                  color_match: bool = False) -> RewriteFrame:
+    """Render the new face into one target frame (§6).
+
+    Parameters
+    ----------
+    target_frame : (H, W, 3) uint8
+    vertices : (n_vertices, 3) or (n_closed, 3)
+        The new face (Eq. (5)) in model coordinates; the mouth is closed here if needed.
+    camera : WeakPerspective
+        The target's pose at this frame (Eq. (7)).
+    topo : MeshTopology
+    face_texture : FaceTexture
+        The target's face texture (uvs for the closed mesh).
+    mouth_texture : FaceTexture, optional
+        The source's mouth for this frame; without it the face texture covers the mouth.
+    blend : {"fast", "poisson", "none"}
+        :func:`membrane_blend` (fast), Poisson blending
+        (:func:`facetransfer.composite.composite_face`, exact sparse solve) or a hard paste.
+    feather : float
+        Soft-edge radius of the blend in pixels.
+    erode : int
+        The blend region is the rendered face mask eroded by this many pixels.
+    color_match : bool
+        Match the rendered face's colour statistics to the target's before the Poisson blend.
+
+    Returns
+    -------
+    RewriteFrame
+    """
+    from .render import rasterize
+
+    T = np.asarray(target_frame)
+    if T.ndim != 3 or T.shape[2] != 3 or T.dtype != np.uint8:
+        raise ShapeError(f"target frame must be (H, W, 3) uint8, got {T.shape} {T.dtype}")
+    if blend not in BLEND_MODES:
+        raise RewriteError(f"blend must be one of {', '.join(BLEND_MODES)}, got {blend!r}")
+    H, W = T.shape[:2]
+    V = np.asarray(vertices, dtype=np.float64)
+    if V.shape[0] == topo.n_vertices:
+        V = close_mouth(V, topo)
+    if V.shape != (topo.n_closed, 3):
+        raise ShapeError(f"vertices must be ({topo.n_vertices} or {topo.n_closed}, 3), got {V.shape}")
+    raster = rasterize(V, topo.faces, camera, (W, H))
+    face_img, face_mask = _shade(raster, topo.faces, face_texture.uvs, face_texture.image)
+    mouth_mask = np.zeros((H, W), bool)
+    rendered = face_img
+    mouth_img = None
+    if mouth_texture is not None and topo.mouth_faces.size:
+        sel = np.zeros(topo.faces.shape[0], bool)
+        sel[topo.mouth_faces] = True
+        mouth_img, mouth_mask = _shade(raster, topo.faces, mouth_texture.uvs, mouth_texture.image,
+                                       sel)
+        rendered = np.where(mouth_mask[..., None], mouth_img, face_img)
+    if not face_mask.any():
+        return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask)
+    # The blend region stays ``erode`` pixels inside the rendered silhouette, so its outline
+    # (the Dirichlet boundary of the Poisson problem) lies on the target's own face, which
+    # covers the same silhouette up to the change of expression, not on the background.
+    import scipy.ndimage as ndi
+
+    region = ndi.binary_erosion(face_mask, iterations=int(erode)) if erode > 0 else face_mask
+    if not region.any():
+        region = face_mask
+    if blend == "none":
+        out = np.where(region[..., None], rendered, T)
+    elif blend == "fast":
+        face = rendered
+        if mouth_img is not None and mouth_mask.any():
+            # the source's mouth first takes the colours of the face around it (same membrane)
+            face = membrane_blend(np.where(face_mask[..., None], face_img, T), mouth_img,
+                                  mouth_mask & region, feather=0.0)
+        out = membrane_blend(T, face, region, feather=feather)
+    else:
+        from .composite import composite_face
+
+        # The guidance field on the region's outline is the source's difference across it, so
+        # each source is extended beyond its mask by its nearest inside pixel (no step there).
+        face_src = _extend(face_img, face_mask)
+        if mouth_img is not None and (mouth_mask & region).any():
+            mouth_src = _extend(mouth_img, mouth_mask)
+            out = composite_face(T, face_src, region, mouth_source=mouth_src,
+                                 mouth_mask=mouth_mask & region, color_match=color_match,
+                                 feather=feather)
+        else:
+            out = composite_face(T, face_src, region, color_match=color_match,
+                                 feather=feather)
+    return RewriteFrame(np.ascontiguousarray(out, dtype=np.uint8), rendered, face_mask,
+                        mouth_mask)
+
+
+# ---------------------------------------------------------------------------------------------
+# a clip
+# ---------------------------------------------------------------------------------------------
+
+def rewrite_frames(target_frames, target_track, new_track, model, *, source_frames=None,
+                   source_track=None, source_index: np.ndarray | None = None,
+                   texture: str = "frame", blend: str = "fast", feather: float = 2.0,
+                   topo: MeshTopology | None = None,
+                   progress: Callable[[int], None] | None = None) -> Iterator[RewriteFrame]:
+    """Rewrite every target frame with the new performance (§6, Fig. 7).
+
+    Parameters
+    ----------
+    target_frames : (F, H, W, 3) uint8 or sequence of frames
+    target_track : Track
+        The target's own track (texture lifting).
+    new_track : Track
+        The new performance on the target's timeline (:func:`facetransfer.transfer.recombine`),
+        at most ``F`` frames; its lost frames keep the original frame.
+    model : MultilinearModel
+    source_frames : sequence of (Hs, Ws, 3) uint8, optional
+        The expression source video (mouth texture).
+    source_track : Track, optional
+        The source's track resampled to the new timeline (same frame count as ``new_track``).
+    source_index : (F,) int, optional
+        The source frame shown at each output frame (default ``arange``).
+    texture : {"frame", "constant"}
+        The target's face texture: the current frame's (default: it keeps the frame's own
+        lighting and measured better on synthetic footage with ground truth, see
+        ``benchmarks/bench_transfer.py``) or one for the whole clip (the paper's choice).
+    blend, feather
+        See :func:`rewrite_frame`.
+    progress : callable(int), optional
+        Called with 1 after each frame.
+
+    Yields
+    ------
+    RewriteFrame
+    """
+    if texture not in TEXTURE_MODES:
+        raise RewriteError(f"texture must be one of {TEXTURE_MODES}, got {texture!r}")
+    n = new_track.n_frames
+    if len(target_frames) < n:
+        raise RewriteError(f"the new performance has {n} frames but the target only "
+                           f"{len(target_frames)}")
+    if target_track.n_frames < n:
+        raise RewriteError(f"the target track has {target_track.n_frames} frames, fewer than the "
+                           f"new performance's {n}")
+    first = np.asarray(target_frames[0])
+    size = (first.shape[1], first.shape[0])
+    for what, tr in (("target", target_track), ("new", new_track)):
+        if tuple(tr.frame_size) != size:
+            raise RewriteError(f"{what} track is for {tr.frame_size[0]}x{tr.frame_size[1]} "
+                               f"frames but the target video is {size[0]}x{size[1]}")
+    with_mouth = source_frames is not None and source_track is not None
+    if with_mouth and source_track.n_frames < n:
+        raise RewriteError(f"the source track has {source_track.n_frames} frames, fewer than {n}")
+    sidx = np.arange(n) if source_index is None else np.asarray(source_index, np.int64)
+    topo = mesh_topology(model) if topo is None else topo
+    const_tex = constant_face_texture(target_frames, target_track, model, topo) \
+        if texture == "constant" and not target_track.lost.all() else None
+    names = model.mode_names
+    for i in range(n):
+        frame = np.asarray(target_frames[i])
+        if frame.shape != first.shape:
+            raise RewriteError(f"target frame {i} is {frame.shape}, frame 0 {first.shape}")
+        if new_track.lost[i] or target_track.lost[i]:
+            empty = np.zeros(frame.shape[:2], bool)
+            yield RewriteFrame(frame.copy(), np.zeros_like(frame), empty, empty)
+            if progress:
+                progress(1)
+            continue
+        if const_tex is not None:
+            tex = const_tex
+        else:
+            Vt = close_mouth(model.synthesize(target_track.weights_at(i)), topo)
+            tex = FaceTexture(frame, frame_uvs(Vt, target_track.camera(i), size), i)
+        mouth = None
+        if with_mouth:
+            j = int(sidx[i])
+            sf = np.asarray(source_frames[j])
+            Vs = close_mouth(model.synthesize(source_track.weights_at(i)), topo)
+            mouth = FaceTexture(sf, frame_uvs(Vs, source_track.camera(i),
+                                              (sf.shape[1], sf.shape[0])), j)
+        V = model.synthesize({m: new_track.weights[m][i] for m in names})
+        yield rewrite_frame(frame, V, new_track.camera(i), topo, tex, mouth_texture=mouth,
+                            blend=blend, feather=feather)
+        if progress:
+            progress(1)
+
+
+# ---------------------------------------------------------------------------------------------
+# audio
+# ---------------------------------------------------------------------------------------------
+
+def ffmpeg_exe() -> str | None:
+    """Path of an ffmpeg binary (imageio-ffmpeg's, else one on PATH), or None."""
+    try:
+        import imageio_ffmpeg
+
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except Exception:  # noqa: BLE001 - missing package or binary: fall back to PATH
+        return shutil.which("ffmpeg")
+
+
+def has_audio(path: str | os.PathLike) -> bool:
+    """Whether a media file has an audio stream (False when ffmpeg is unavailable)."""
+    exe = ffmpeg_exe()
+    if exe is None:
+        return False
+    res = subprocess.run([exe, "-hide_banner", "-i", str(path)], capture_output=True, text=True)
+    return "Audio:" in res.stderr
+
+
+def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str | os.PathLike, *,
+              start: float = 0.0, duration: float | None = None) -> bool:
+    """Copy ``video``'s frames and ``audio_from``'s audio into ``out`` (an mp4).
+
+    The video stream is copied as is; the audio is re-encoded to AAC, starting at ``start``
+    seconds and cut to the video's length. Returns False (and logs why) when there is no ffmpeg
+    or no audio, in which case ``out`` is not written.
+    """
+    exe = ffmpeg_exe()
+    if exe is None:
+        log.info("no ffmpeg available (pip install imageio-ffmpeg): output has no audio")
+        return False
+    if not has_audio(audio_from):
+        log.info("%s has no audio track; the output has none either", audio_from)
+        return False
+    cmd = [exe, "-hide_banner", "-loglevel", "error", "-y", "-i", str(video)]
+    if start:
+        cmd += ["-ss", f"{start:.3f}"]
+    cmd += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy",
+            "-c:a", "aac", "-shortest"]
+    if duration is not None:
+        cmd += ["-t", f"{duration:.3f}"]
+    cmd += [str(out)]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode != 0:
+        log.warning("could not mux audio from %s: %s", audio_from, res.stderr.strip()[-300:])
+        return False
+    return True
+
+
+def write_video_with_audio(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float, *,
+                           audio_from: str | os.PathLike | None = None, overwrite: bool = False,
+                           audio_start: float = 0.0) -> bool:
+    """Write frames to ``path`` atomically, with the audio of ``audio_from`` when it has some.
+
+    Frames go to a temporary video next to ``path``; ffmpeg then muxes the audio into a second
+    temporary file which is renamed to ``path``. Nothing appears under ``path`` unless the whole
+    job succeeded. Returns whether audio was muxed in.
+    """
+    from .io.atomic import atomic_path, check_output_path
+    from .io.video import write_video
+
+    p = check_output_path(path, overwrite=overwrite)
+    tmp_video = p.with_name(f".{p.stem}.{os.getpid()}.video{p.suffix}")
+    try:
+        write_video(tmp_video, frames, fps, overwrite=True)
+        n = _count_frames(tmp_video)
+        with atomic_path(p, overwrite=overwrite) as tmp_out:
+            ok = audio_from is not None and mux_audio(
+                tmp_video, audio_from, tmp_out, start=audio_start,
+                duration=n / float(fps) if n else None)
+            if not ok:
+                os.replace(tmp_video, tmp_out)
+    finally:
+        if tmp_video.exists():
+            tmp_video.unlink()
+    return bool(ok)
+
+
+def _count_frames(path) -> int:
+    from .io.video import video_info
+
+    try:
+        return int(video_info(path).n_frames)
+    except VideoError:
+        return 0
+
+
+# ---------------------------------------------------------------------------------------------
+# tracking adapter: the tracker of §5 when available, else a landmark-only fit (§5.2)
+# ---------------------------------------------------------------------------------------------
+
+def landmarks_file(video: str | os.PathLike) -> Path | None:
+    """``NAME.mediapipe478.npz`` next to ``NAME.mp4`` if it exists (precomputed landmarks)."""
+    p = Path(video)
+    cand = p.with_name(p.stem + ".mediapipe478.npz")
+    return cand if cand.is_file() else None
+
+
+def _detect_landmarks(frames, *, progress=None) -> np.ndarray:
+    """iBUG-68 points per frame with MediaPipe, (F, 68, 2), NaN where no face."""
+    from .track.init import MediaPipeDetector
+
+    out = np.full((len(frames), 68, 2), np.nan)
+    with MediaPipeDetector() as det:
+        for i, f in enumerate(frames):
+            pts = det.detect(np.asarray(f))
+            if pts is not None:
+                out[i] = pts[:, :2]
+            if progress:
+                progress(1)
+    return out
+
+
+def landmark_track(model, landmarks68: np.ndarray, *, fps: float, size: tuple[int, int],
+                   source: str = "", identity_frames: int = 8, progress=None):
+    """A track fitted to per-frame 2-D landmarks only (no optical flow): §5.2 on every frame.
+
+    The identity is fitted jointly-by-averaging over up to ``identity_frames`` frames spread over
+    the clip (all modes free), then every frame's pose and the varying modes are fitted with the
+    identity fixed, starting from the previous frame. Frames without landmarks are lost.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+    landmarks68 : (F, 68, 2) float
+        iBUG-68 pixel positions, NaN where no face.
+    fps : float
+    size : (W, H)
+
+    Returns
+    -------
+    Track
+    """
+    from .track import Track
+    from .track.init import fit_landmarks
+    from .transfer import project_landmarks
+
+    L = np.asarray(landmarks68, dtype=np.float64)
+    if L.ndim != 3 or L.shape[1:] != (68, 2):
+        raise ShapeError(f"landmarks must be (F, 68, 2), got {L.shape}")
+    n = L.shape[0]
+    found = np.isfinite(L).all(axis=(1, 2))
+    if not found.any():
+        raise VideoError(f"no face found in any frame of {source or 'the video'}")
+    idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
+    good = np.flatnonzero(found)
+    pick = good[np.linspace(0, good.size - 1, min(identity_frames, good.size)).round().astype(int)]
+    ids = [fit_landmarks(model, L[i], iterations=12).weights[idm] for i in pick]
+    wid = np.mean(ids, axis=0)
+    varying = tuple(m for m in model.mode_names if m != idm)
+    R = np.tile(np.eye(3), (n, 1, 1))
+    s = np.ones(n)
+    t = np.zeros((n, 2))
+    W = {m: np.tile(model.weight_mean(m), (n, 1)) for m in model.mode_names}
+    W[idm][:] = wid
+    state = None
+    for i in range(n):
+        if found[i]:
+            if state is None:
+                w0 = model.default_weights()
+                w0[idm] = wid
+                st = fit_landmarks(model, L[i], modes=varying, iterations=10)
+                st = st.with_weights(idm, wid)
+                state = fit_landmarks(model, L[i], state=st, modes=varying, iterations=8)
+            else:
+                state = fit_landmarks(model, L[i], state=state, modes=varying, iterations=4)
+            R[i], s[i], t[i] = state.pose.rotation, state.pose.scale, state.pose.translation
+            for m in varying:
+                W[m][i] = state.weights[m]
+        elif state is not None:
+            R[i], s[i], t[i] = state.pose.rotation, state.pose.scale, state.pose.translation
+            for m in varying:
+                W[m][i] = state.weights[m]
+        if progress:
+            progress(1)
+    first = int(good[0])  # frames before the first detection take its pose (they are lost)
+    R[:first], s[:first], t[:first] = R[first], s[first], t[first]
+    for m in varying:
+        W[m][:first] = W[m][first]
+    tr = Track(fps=float(fps), frame_size=tuple(size), rotation=R, scale=s, translation=t,
+               weights=W, landmarks2d=np.zeros((n, 68, 2)),
+               confidence=found.astype(np.float64), lost=~found,
+               model_hash=model.content_hash, mode_names=model.mode_names, source=str(source),
+               info={"method": "landmarks"})
+    return project_landmarks(tr, model)
+
+
+def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
+                 track_file: str | os.PathLike | None = None, max_frames: int | None = None,
+                 method: str = "auto", progress_factory=None):
+    """The track of a video: read from ``track_file``, or tracked now.
+
+    ``method``: ``"auto"`` uses the optical-flow tracker of §5.1
+    (:func:`facetransfer.track.track_video`) when it is installed and otherwise fits landmarks
+    (precomputed ``NAME.mediapipe478.npz`` next to the video, else MediaPipe on the frames);
+    ``"flow"`` or ``"landmarks"`` force one.
+
+    Returns
+    -------
+    Track
+        Of at most ``max_frames`` frames (a longer track file is cut).
+    """
+    from .track import Track
+    from .transfer import _take
+
+    if method not in ("auto", "flow", "landmarks"):
+        raise RewriteError(f"tracking method must be auto, flow or landmarks, got {method!r}")
+    if track_file is not None:
+        tr = Track.load(track_file)
+        tr.check_model(model)
+        if max_frames is not None and tr.n_frames > max_frames:
+            tr = _take(tr, np.arange(max_frames))
+        return tr
+    from .io.video import read_video, video_info
+
+    info = video_info(video)
+    if frames is None:
+        frames, fps = read_video(video, max_frames=max_frames)
+    fps = info.fps if fps is None else fps
+    size = (frames.shape[2], frames.shape[1]) if hasattr(frames, "shape") else info.size
+    n = len(frames)
+
+    def bar(desc, total):
+        return progress_factory(desc, total) if progress_factory else None
+
+    if method in ("auto", "flow"):
+        try:
+            from .track.tracker import track_video
+        except ImportError:  # pragma: no cover - tracker not installed
+            track_video = None
+        if track_video is None and method == "flow":
+            raise RewriteError("the optical-flow tracker (facetransfer.track.track_video) is "
+                               "not available")
+        if track_video is not None:
+            bars: dict = {}
+
+            def stage_progress(stage: str, done: int, total: int) -> None:
+                if progress_factory is None:
+                    return
+                bar = bars.get(stage)
+                if bar is None:
+                    for b_ in bars.values():
+                        b_.close()
+                    bar = bars[stage] = progress_factory(f"{Path(video).name}: {stage}", total)
+                bar.update(done - bar.n)
+
+            try:
+                tr = track_video(frames, model, max_frames=max_frames, progress=stage_progress,
+                                 source=str(video))
+            finally:
+                for b_ in bars.values():
+                    b_.close()
+            if abs(tr.fps - fps) > 1e-9:  # an array of frames carries no frame rate
+                import dataclasses
+
+                tr = dataclasses.replace(tr, fps=float(fps))
+            return tr
+    lmf = landmarks_file(video)
+    if lmf is not None:
+        from .track.landmarks import mediapipe_to_ibug
+
+        with np.load(lmf) as z:
+            P = z["landmarks"][:n]
+        L = mediapipe_to_ibug(P[..., :2])
+        if L.shape[0] < n:
+            L = np.concatenate([L, np.full((n - L.shape[0], 68, 2), np.nan)])
+    else:
+        cb = bar(f"landmarks {Path(video).name}", n)
+        L = _detect_landmarks(frames, progress=cb.update if cb is not None else None)
+        if cb is not None and hasattr(cb, "close"):
+            cb.close()
+    cb = bar(f"fit {Path(video).name}", n)
+    try:
+        return landmark_track(model, L, fps=fps, size=size, source=str(video),
+                              progress=cb.update if cb is not None else None)
+    finally:
+        if cb is not None and hasattr(cb, "close"):
+            cb.close()
+
+
+# ---------------------------------------------------------------------------------------------
+# the job: tracks in or tracked now, recombined, rendered back, written with the target's audio
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class TransferPlan:
+    """Everything needed to render a transfer (built by :func:`plan_transfer`).
+
+    Attributes
+    ----------
+    target_frames : (F, H, W, 3) uint8
+    fps : float
+        The target's frame rate (the output's).
+    target_track : Track
+    new_track : Track
+        The recombined performance on the target's timeline (``n_frames`` <= F).
+    mouth_frames : (Fs, Hs, Ws, 3) uint8
+        Frames the mouth texture comes from (the expression/viseme source, else the target).
+    mouth_track : Track
+        Their track resampled to the new timeline.
+    mouth_index : (n_frames,) int64
+        The mouth frame shown at each output frame.
+    source_tracks : dict
+        The tracks of the inputs as tracked (``"target"``, ``"expression"``, ...).
+    timings : dict
+        Seconds spent reading and tracking.
+    """
+
+    target_frames: np.ndarray
+    fps: float
+    target_track: object
+    new_track: object
+    mouth_frames: np.ndarray
+    mouth_track: object
+    mouth_index: np.ndarray
+    source_tracks: dict
+    timings: dict
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.new_track.n_frames)
+
+
+def _frames_needed(n_target: int, fps_target: float, fps_source: float) -> int:
+    """Source frames that cover ``n_target`` target frames (resampled by frame rate)."""
+    return int(np.ceil((n_target - 1) * fps_source / fps_target + 1e-9)) + 1
+
+
+def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None
+                   ) -> np.ndarray:
+    """For each query row the index of the nearest bank row (Euclidean), among ``valid`` ones.
+
+    The performance-driven texture of §6 ("the weighted sum of nearest neighbors") with one
+    neighbour: the frame of the texture video whose attributes are closest.
+
+    Parameters
+    ----------
+    query : (n, r)
+    bank : (m, r)
+    valid : (m,) bool, optional
+
+    Returns
+    -------
+    (n,) int64
+    """
+    Q = np.asarray(query, np.float64)
+    B = np.asarray(bank, np.float64)
+    ok = np.ones(B.shape[0], bool) if valid is None else np.asarray(valid, bool)
+    if not ok.any():
+        raise RewriteError("no frame to take a texture from (all lost)")
+    idx = np.flatnonzero(ok)
+    d = ((Q[:, None, :] - B[None, idx, :]) ** 2).sum(axis=-1)
+    return idx[np.argmin(d, axis=1)]
+
+
+def plan_transfer(target, model, *, target_track=None, expression_from=None,
+                  expression_track=None, viseme_from=None, viseme_track=None, identity=None,
+                  identity_from=None, identity_track=None, pose_from=None, pose_track=None,
+                  performance=None, align: str | None = None, max_frames: int | None = None,
+                  track_method: str = "auto", progress_factory=None) -> TransferPlan:
+    """Read and track the inputs and recombine the performance (§5, §6, Fig. 1, Fig. 7).
+
+    Parameters
+    ----------
+    target : path-like
+        The footage rendered into (pose and identity by default).
+    model : MultilinearModel
+    target_track, expression_track, viseme_track, identity_track, pose_track : path-like, optional
+        Track files to reuse instead of tracking the corresponding video.
+    expression_from, viseme_from, identity_from, pose_from : path-like, optional
+        Videos whose expression / viseme / identity / pose replace the target's.
+    identity : (r,) array, optional
+        Identity weights (instead of ``identity_from``).
+    performance : Track or path-like, optional
+        A ready new performance on the target's timeline (e.g. from ``facetransfer edit``,
+        Fig. 7E) instead of recombining; the mouth texture then comes from the target frame
+        whose expression is nearest (:func:`nearest_frames`).
+    align : {"trim", "loop", "hold"} or None
+        Time alignment of the sources (:func:`facetransfer.transfer.time_map`).
+    max_frames : int, optional
+        Use only the first N target frames.
+
+    Raises
+    ------
+    VideoError
+        No face in the target (or in a whole source); unreadable videos.
+    TrackError, TransferError
+        Mismatched frame sizes, track files of another model or video.
+    """
+    import time
+
+    from .io.video import read_video, video_info
+    from .transfer import (_take, project_landmarks, recombine, resample_track, time_map,
+                           constant_weights)
+
+    if max_frames is not None and int(max_frames) < 1:
+        raise RewriteError(f"max_frames must be >= 1, got {max_frames}")
+    if identity is not None and identity_from is not None:
+        raise RewriteError("give the identity either as weights or as a video, not both")
+    timings = {"read": 0.0, "track": 0.0}
+    t0 = time.perf_counter()
+    frames, fps = read_video(target, max_frames=max_frames)
+    timings["read"] += time.perf_counter() - t0
+    n, H, W = frames.shape[:3]
+
+    def get_track(video, track_file, *, frames_=None, fps_=None, limit=None):
+        t = time.perf_counter()
+        tr = obtain_track(video, model, frames=frames_, fps=fps_, track_file=track_file,
+                          max_frames=limit, method=track_method,
+                          progress_factory=progress_factory)
+        timings["track"] += time.perf_counter() - t
+        return tr
+
+    tt = get_track(target, target_track, frames_=frames, fps_=fps, limit=n)
+    if target_track is not None:
+        tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H), what=f"target {target}")
+        if tt.n_frames < n:
+            raise RewriteError(f"target track {target_track} has {tt.n_frames} frames, the "
+                               f"target video {n}")
+    if tt.lost.all():
+        raise VideoError(f"no face found in the target {target}")
+    tracks = {"target": tt}
+    src_frames = {}
+
+    def read_source(kind, video, track_file):
+        info = video_info(video)
+        need = _frames_needed(n, fps, info.fps)
+        t = time.perf_counter()
+        fr, sfps = read_video(video, max_frames=need)
+        timings["read"] += time.perf_counter() - t
+        tr = get_track(video, track_file, frames_=fr, fps_=sfps, limit=len(fr))
+        if track_file is not None and tuple(tr.frame_size) != (fr.shape[2], fr.shape[1]):
+            raise RewriteError(f"{kind} track {track_file} is for {tr.frame_size[0]}x"
+                               f"{tr.frame_size[1]} frames but {video} is "
+                               f"{fr.shape[2]}x{fr.shape[1]}")
+        if tr.n_frames < len(fr):
+            fr = fr[:tr.n_frames]
+        if tr.lost.all():
+            raise VideoError(f"no face found in the {kind} source {video}")
+        if tr.lost.any():
+            log.info("%s source %s: face lost in %d frames (those keep the original frame)",
+                     kind, video, int(tr.lost.sum()))
+        tracks[kind] = tr
+        src_frames[kind] = fr
+        return tr
+
+    ex = read_source("expression", expression_from, expression_track) \
+        if expression_from is not None else None
+    vi = read_source("viseme", viseme_from, viseme_track) if viseme_from is not None else None
+    po = None
+    if pose_from is not None:
+        po = read_source("pose", pose_from, pose_track)
+        if tuple(po.frame_size) != (W, H):
+            raise RewriteError(f"pose source {pose_from} is {po.frame_size[0]}x{po.frame_size[1]}"
+                               f", the target {W}x{H}: frame sizes must match")
+    idw = identity
+    if identity_from is not None:
+        idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
+        it = read_source("identity", identity_from, identity_track)
+        idw = constant_weights(it, idm)
+    if performance is not None:
+        from .track import Track
+
+        if ex is not None or vi is not None or po is not None or idw is not None:
+            raise RewriteError("a ready performance (--performance) excludes the other sources")
+        new = performance if isinstance(performance, Track) else Track.load(performance)
+        new.check_model(model)
+        if tuple(new.frame_size) != (W, H):
+            raise RewriteError(f"performance is for {new.frame_size[0]}x{new.frame_size[1]} "
+                               f"frames, the target {target} is {W}x{H}")
+        if new.n_frames > n:
+            new = _take(new, np.arange(n))
+        varying = [m for m in model.mode_names if m != "identity"] or list(model.mode_names)
+        q = np.concatenate([new.weights[m] for m in varying], axis=1)
+        b = np.concatenate([tt.weights[m] for m in varying], axis=1)
+        j = nearest_frames(q, b, ~tt.lost)
+        mt = _take(tt, j)
+        # the chosen frames' geometry, seen by their own cameras (texture lookup)
+        return TransferPlan(frames, float(fps), tt, new, frames, mt, j, tracks, timings)
+    new = recombine(tt, expression=ex, viseme=vi, identity=idw, pose=po, align=align)
+    new = project_landmarks(new, model)
+    # the mouth texture: from the source of the mouth's motion (visemes, else expressions),
+    # else the target's own mouth
+    mouth_kind = "viseme" if vi is not None else ("expression" if ex is not None else None)
+    if mouth_kind is None:
+        mouth_frames, mouth_track = frames, _take(tt, np.arange(new.n_frames))
+        mouth_index = np.arange(new.n_frames)
+    else:
+        ms = tracks[mouth_kind]
+        tm = time_map(ms.n_frames, ms.fps, n, fps, align=align)
+        mouth_track = _take(resample_track(ms, tm), np.arange(new.n_frames))
+        mouth_frames = src_frames[mouth_kind]
+        mouth_index = tm.nearest[:new.n_frames]
+    return TransferPlan(frames, float(fps), tt, new, mouth_frames, mouth_track,
+                        np.asarray(mouth_index, np.int64), tracks, timings)
+
+
+@dataclass(frozen=True)
+class TransferResult:
+    """What :func:`transfer_video` wrote.
+
+    Attributes
+    ----------
+    path : Path
+    n_frames : int
+    n_rewritten : int
+        Frames where the face was rendered (the others keep the original).
+    audio : bool
+        Whether the target's audio was muxed in.
+    plan : TransferPlan
+    timings : dict
+        Seconds per stage (read, track, render, write).
+    """
+
+    path: Path
+    n_frames: int
+    n_rewritten: int
+    audio: bool
+    plan: TransferPlan
+    timings: dict
+
+
+def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: bool = True) -> int:
+    """Write the performance's meshes as ``frame_00000.obj`` ... (model faces), atomically each."""
+    from .io.mesh import write_mesh
+
+    d = Path(folder)
+    d.mkdir(parents=True, exist_ok=True)
+    for i in range(track.n_frames):
+        V = model.synthesize(track.weights_at(i))
+        write_mesh(d / f"frame_{i:05d}.obj", V, np.asarray(model.faces), uvs=model.uvs,
+                   overwrite=overwrite)
+    return track.n_frames
+
+
+def transfer_video(target, out, model, *, overwrite: bool = False, texture: str = "frame",
+                   blend: str = "fast", meshes_dir=None, save_track=None, progress_factory=None,
+                   **plan_kwargs) -> TransferResult:
+    """The whole video rewrite (§6): plan (read, track, recombine), render, write with audio.
+
+    ``plan_kwargs`` go to :func:`plan_transfer` (sources, track files, ``align``,
+    ``max_frames``). The output video (and the optional track and meshes) appear only when
+    everything succeeded; an existing ``out`` is replaced only with ``overwrite=True``.
+
+    Returns
+    -------
+    TransferResult
+    """
+    import time
+
+    from .io.atomic import check_output_path
+
+    check_output_path(out, overwrite=overwrite)
+    if save_track is not None:
+        check_output_path(save_track, overwrite=overwrite)
+    if meshes_dir is not None and not Path(meshes_dir).parent.is_dir():
+        raise RewriteError(f"folder {Path(meshes_dir).parent} for --meshes does not exist")
+    if texture not in TEXTURE_MODES:
+        raise RewriteError(f"texture must be one of {TEXTURE_MODES}, got {texture!r}")
+    if blend not in BLEND_MODES:
+        raise RewriteError(f"blend must be one of {BLEND_MODES}, got {blend!r}")
+    plan = plan_transfer(target, model, progress_factory=progress_factory, **plan_kwargs)
+    timings = dict(plan.timings)
+    n = plan.n_frames
+    bar = progress_factory("render", n) if progress_factory else None
+    count = {"rewritten": 0}
+    t_render = [0.0]
+
+    def frames():
+        it = rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
+                            source_frames=plan.mouth_frames, source_track=plan.mouth_track,
+                            source_index=plan.mouth_index, texture=texture, blend=blend,
+                            progress=bar.update if bar is not None else None)
+        while True:
+            t = time.perf_counter()
+            try:
+                r = next(it)
+            except StopIteration:
+                return
+            t_render[0] += time.perf_counter() - t
+            count["rewritten"] += bool(r.face_mask.any())
+            yield r.image
+
+    t0 = time.perf_counter()
+    try:
+        audio = write_video_with_audio(out, frames(), plan.fps, audio_from=target,
+                                       overwrite=overwrite)
+    finally:
+        if bar is not None:
+            bar.close()
+    timings["render"] = t_render[0]
+    timings["write"] = time.perf_counter() - t0 - t_render[0]
+    if save_track is not None:
+        plan.new_track.save(save_track, overwrite=overwrite)
+    if meshes_dir is not None:
+        write_mesh_sequence(meshes_dir, plan.new_track, model)
+    return TransferResult(Path(out), n, count["rewritten"], audio, plan, timings)

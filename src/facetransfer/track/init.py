@@ -1,0 +1,207 @@
+"""First-frame alignment (Vlasic et al. 2005, §5.2): feature points, then pose and weights.
+
+Feature points come from the user (``--init POINTS.json``: ``{"points": {"36": [x, y], ...}}``,
+pixel positions keyed by iBUG-68 number, 0-based; at least the eye corners 36, 39, 42, 45, the
+nose tip 30 and the mouth corners 48, 54) or from an automatic detector — here MediaPipe Face
+Landmarker (the paper used Viola-Jones features), mapped to iBUG-68 by
+:mod:`facetransfer.track.landmarks`. The pose and all weights are fitted to the points
+(:func:`facetransfer.track.solver.fit_points`); the tracker then "snaps" the alignment by
+tracking the first frames back and forth.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import AssetError, TrackError
+from .landmarks import IBUG_WEIGHTS, REQUIRED_IBUG, ibug_names, mediapipe_to_ibug
+from .solver import FrameState, fit_points
+
+log = logging.getLogger(__name__)
+
+__all__ = ["load_init_points", "check_init_points", "MediaPipeDetector", "fit_landmarks",
+           "points_to_array", "require_landmarks"]
+
+
+def require_landmarks(model) -> np.ndarray:
+    """The model's 68 landmark vertices, or :class:`TrackError` if it has none."""
+    lm = getattr(model, "landmarks", None)
+    if lm is None or np.asarray(lm).shape != (68,):
+        raise TrackError("the model has no landmark vertices (68 iBUG-68 points are needed to "
+                         "initialise tracking); build it from a data set with landmarks")
+    return np.asarray(lm, dtype=np.int64)
+
+
+def check_init_points(points: dict, frame_size: tuple[int, int], *, where: str = "init points"
+                      ) -> dict[int, np.ndarray]:
+    """Validate ``{ibug number: (x, y)}``: numbers 0..67, the required ones present, in the image.
+
+    Raises
+    ------
+    TrackError
+    """
+    W, H = int(frame_size[0]), int(frame_size[1])
+    out: dict[int, np.ndarray] = {}
+    for k, xy in points.items():
+        try:
+            i = int(k)
+        except (TypeError, ValueError):
+            raise TrackError(f"{where}: key {k!r} is not an iBUG-68 number (0..67)") from None
+        if not 0 <= i < 68:
+            raise TrackError(f"{where}: point number {i} is outside iBUG-68 (0..67)")
+        a = np.asarray(xy, dtype=np.float64).ravel()
+        if a.shape != (2,) or not np.all(np.isfinite(a)):
+            raise TrackError(f"{where}: point {i} must be [x, y], got {xy!r}")
+        if not (-0.5 <= a[0] <= W - 0.5 and -0.5 <= a[1] <= H - 0.5):
+            raise TrackError(f"{where}: point {i} at ({a[0]:g}, {a[1]:g}) is outside the "
+                             f"{W}x{H} image")
+        out[i] = a
+    missing = [i for i in REQUIRED_IBUG if i not in out]
+    if missing:
+        names = ibug_names()
+        raise TrackError(f"{where}: too few points; missing "
+                         + ", ".join(f"{i} ({names[i]})" for i in missing)
+                         + f" (need at least {', '.join(map(str, REQUIRED_IBUG))})")
+    return out
+
+
+def load_init_points(path: str | os.PathLike, frame_size: tuple[int, int]) -> dict[int, np.ndarray]:
+    """Read ``{"points": {"36": [x, y], ...}}`` and validate it against the frame size."""
+    p = Path(path)
+    if not p.is_file():
+        raise TrackError(f"init points file {p} does not exist")
+    try:
+        data = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise TrackError(f"init points file {p} is not valid JSON ({exc.msg if hasattr(exc, 'msg') else exc})") from None
+    if not isinstance(data, dict) or not isinstance(data.get("points"), dict):
+        raise TrackError(f'init points file {p} must hold {{"points": {{"36": [x, y], ...}}}}')
+    return check_init_points(data["points"], frame_size, where=f"init points {p}")
+
+
+def points_to_array(points: dict[int, np.ndarray]) -> np.ndarray:
+    """``{ibug: (x, y)}`` -> (68, 2) with NaN for absent points."""
+    out = np.full((68, 2), np.nan)
+    for i, xy in points.items():
+        out[int(i)] = xy
+    return out
+
+
+def fit_landmarks(model, landmarks: np.ndarray, *, state: FrameState | None = None,
+                  modes: tuple[str, ...] | None = None, prior: float = 4.0,
+                  iterations: int = 30, weights: np.ndarray | None = None) -> FrameState:
+    """Fit pose and weights to iBUG-68 image points (§5.2).
+
+    Parameters
+    ----------
+    model : MultilinearModel
+        With 68 landmark vertices.
+    landmarks : (68, 2) float
+        Pixel positions, NaN where unknown (at least 4 must be known).
+    state : FrameState, optional
+        Start; default the mean face with an affine pose.
+    modes : tuple of str, optional
+        Modes to fit (default all).
+    prior : float
+        Tikhonov weight, in squared pixels per unit of Mahalanobis distance (see
+        :func:`~facetransfer.track.solver.fit_points`) scaled by the face size (outer
+        eye-corner distance / 50 pixels, squared).
+    weights : (68,) float, optional
+        Per-point reliability (default :data:`~facetransfer.track.landmarks.IBUG_WEIGHTS`).
+
+    Returns
+    -------
+    FrameState
+    """
+    vid = require_landmarks(model)
+    L = np.asarray(landmarks, dtype=np.float64)
+    ok = np.all(np.isfinite(L), axis=1)
+    if ok.sum() < 4:
+        raise TrackError(f"need at least 4 landmarks to fit the pose, got {int(ok.sum())}")
+    w = (IBUG_WEIGHTS if weights is None else np.asarray(weights, float))[ok]
+    iod = np.linalg.norm(L[36] - L[45]) if ok[36] and ok[45] else np.ptp(L[ok], axis=0).max() / 2
+    lam = prior * (max(iod, 1.0) / 50.0) ** 2
+    return fit_points(model, vid[ok], L[ok], state=state, point_weights=w, modes=modes,
+                      prior=lam, iterations=iterations)
+
+
+class MediaPipeDetector:
+    """MediaPipe Face Landmarker (Tasks API) returning iBUG-68 points.
+
+    Parameters
+    ----------
+    model_path : path-like, optional
+        ``face_landmarker.task``; default from the asset registry
+        (``facetransfer.assets.asset_path("face_landmarker")``).
+
+    Use as a context manager or call :meth:`close`.
+    """
+
+    def __init__(self, model_path: str | os.PathLike | None = None) -> None:
+        os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ logging: errors only
+        os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+        try:
+            from mediapipe.tasks.python import BaseOptions, vision
+        except ImportError as exc:  # pragma: no cover
+            raise AssetError(f"mediapipe is not installed ({exc})") from None
+        if model_path is None:
+            model_path = _landmarker_path()
+        p = Path(model_path)
+        if not p.is_file():
+            raise AssetError(f"face landmarker model {p} does not exist")
+        opts = vision.FaceLandmarkerOptions(
+            base_options=BaseOptions(model_asset_path=str(p)),
+            running_mode=vision.RunningMode.IMAGE, num_faces=1)
+        self._lm = vision.FaceLandmarker.create_from_options(opts)
+
+    def detect478(self, frame: np.ndarray) -> np.ndarray | None:
+        """MediaPipe's 478 landmarks in pixels (x, y), (478, 2), or None if no face."""
+        import mediapipe as mp
+
+        f = np.ascontiguousarray(frame, dtype=np.uint8)
+        res = self._lm.detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=f))
+        if not res.face_landmarks:
+            return None
+        H, W = f.shape[:2]
+        # normalised [0, 1] image coordinates -> pixel centres at integers
+        return np.array([[q.x * W - 0.5, q.y * H - 0.5] for q in res.face_landmarks[0]])
+
+    def detect(self, frame: np.ndarray) -> np.ndarray | None:
+        """iBUG-68 points (68, 2) in pixels, or None if no face was found."""
+        P = self.detect478(frame)
+        return None if P is None else mediapipe_to_ibug(P)
+
+    def close(self) -> None:
+        lm, self._lm = getattr(self, "_lm", None), None
+        if lm is not None:
+            lm.close()
+
+    def __enter__(self) -> "MediaPipeDetector":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # pragma: no cover
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+def _landmarker_path() -> Path:
+    try:
+        from ..assets import asset_path
+
+        return Path(asset_path("face_landmarker"))
+    except ImportError:  # pragma: no cover - until the asset registry exists
+        root = os.environ.get("FACETRANSFER_DATA_DIR")
+        if not root:
+            raise AssetError("the MediaPipe face landmarker is not available: set "
+                             "FACETRANSFER_DATA_DIR") from None
+        return Path(root) / "mediapipe" / "face_landmarker.task"

@@ -1,0 +1,82 @@
+"""MediaPipe Face Landmarker (478 points) to iBUG-68 correspondence, as a data table.
+
+Each iBUG-68 point (0-based: jaw 0-16, brows 17-26, nose 27-35, eyes 36-47, mouth 48-67) is
+the mean of one or two MediaPipe points. The eye corners, nose tip and mouth corners follow the
+correspondences documented with the test data (33->36, 133->39, 362->42, 263->45, 4->30, 61->48,
+291->54). The other entries were chosen from MediaPipe's mesh topology (contours of the face oval,
+brows, eyes and lips) and checked on two stills with human iBUG-68 annotation
+(``stills/breakingbad``, ``stills/takeo``): eyes, nose and lips agree to ~0.02-0.07 of the outer
+eye-corner distance; brows are the mean of MediaPipe's upper and lower brow contours (~0.08); the
+jaw line is intrinsically ambiguous (a contour, not a point) and gets a low :data:`IBUG_WEIGHTS`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ShapeError
+
+__all__ = ["MP_TO_IBUG", "IBUG_WEIGHTS", "REQUIRED_IBUG", "mediapipe_to_ibug", "ibug_names"]
+
+#: MediaPipe indices averaged for each iBUG-68 point (index = iBUG number, 0-based).
+MP_TO_IBUG: tuple[tuple[int, ...], ...] = (
+    # jaw 0-16 (subject's right ear -> chin -> left ear), symmetric pairs of the face oval
+    (127,), (234,), (93,), (132,), (58,), (172,), (150,), (148, 176), (152,),
+    (377, 400), (379,), (397,), (288,), (361,), (323,), (454,), (356,),
+    # right brow 17-21 (mean of upper and lower brow contour)
+    (70, 46), (63, 53), (105, 52), (66, 65), (107, 55),
+    # left brow 22-26
+    (336, 285), (296, 295), (334, 282), (293, 283), (300, 276),
+    # nose bridge 27-30, tip 30 = 4
+    (168,), (197,), (5,), (4,),
+    # nostrils 31-35
+    (98,), (97,), (2,), (326,), (327,),
+    # right eye 36-41 (36 outer corner, 39 inner corner)
+    (33,), (160,), (158,), (133,), (153,), (144,),
+    # left eye 42-47 (42 inner corner, 45 outer corner)
+    (362,), (385,), (387,), (263,), (373,), (380,),
+    # outer lips 48-59 (48, 54 corners)
+    (61,), (39,), (37,), (0,), (267,), (269,), (291,), (321,), (314,), (17,), (84,), (91,),
+    # inner lips 60-67
+    (78,), (82,), (13,), (312,), (308,), (317,), (14,), (87,),
+)
+
+#: Reliability of each iBUG point from the detector, used as a weight in fitting (jaw low).
+IBUG_WEIGHTS = np.array([0.2] * 17 + [0.6] * 10 + [1.0] * 9 + [1.0] * 12 + [1.0] * 20)
+
+#: iBUG points a user must give for initialisation: eye corners, nose tip, mouth corners (§5.2).
+REQUIRED_IBUG = (36, 39, 42, 45, 30, 48, 54)
+
+
+
+def mediapipe_to_ibug(points: np.ndarray) -> np.ndarray:
+    """iBUG-68 points from MediaPipe's 478 (or 468) face landmarks.
+
+    Parameters
+    ----------
+    points : (..., 478, d) or (..., 468, d) float
+        MediaPipe landmarks (any trailing coordinates, e.g. pixel x, y[, z]).
+
+    Returns
+    -------
+    (..., 68, d) float64
+        NaN where the input is NaN (no face).
+    """
+    P = np.asarray(points, dtype=np.float64)
+    if P.ndim < 2 or P.shape[-2] < 468:
+        raise ShapeError(f"MediaPipe landmarks must be (..., 478, d), got {P.shape}")
+    out = np.empty(P.shape[:-2] + (68, P.shape[-1]))
+    for i, idx in enumerate(MP_TO_IBUG):
+        out[..., i, :] = P[..., list(idx), :].mean(axis=-2)
+    return out
+
+
+def ibug_names() -> tuple[str, ...]:
+    """Short names of the iBUG-68 points (for messages)."""
+    names = ([f"jaw{i}" for i in range(17)] + [f"brow{i}" for i in range(10)]
+             + [f"nose{i}" for i in range(9)] + [f"eye{i}" for i in range(12)]
+             + [f"mouth{i}" for i in range(20)])
+    names[36], names[39], names[42], names[45] = ("right outer eye corner", "right inner eye corner",
+                                                  "left inner eye corner", "left outer eye corner")
+    names[30], names[48], names[54] = "nose tip", "right mouth corner", "left mouth corner"
+    return tuple(names)

@@ -1,0 +1,587 @@
+"""Face transfer applications on tracked performances (Vlasic et al. 2005, §5, §6, Fig. 1, Fig. 7).
+
+A tracked video is a :class:`~facetransfer.track.Track`: per frame a weak-perspective pose
+(Eq. (7)) and one weight vector per model mode (Eq. (5)). Because the multilinear model separates
+the attributes, a new performance is made by picking each attribute's weights from a different
+track and synthesising the face from Eq. (5) (§6: "the pose from the original video with the
+expression from the new video"):
+
+* :func:`time_map` / :func:`resample_track`: put a source track on the target's timeline (another
+  frame rate or length; ``align`` = ``trim`` | ``loop`` | ``hold``);
+* :func:`recombine`: identity, expression, viseme and pose from up to three tracks (Fig. 1,
+  Fig. 7B–7D);
+* :func:`edit_track`: add a training expression over a frame range or scale an expression's
+  component (Fig. 7E);
+* :func:`puppet_frames`: drive an identity of the model from a video, rendered alone.
+
+Rendering the new performance back into footage is :mod:`facetransfer.rewrite`. Every function
+here is pure: tracks in, a new track out.
+
+References
+----------
+Vlasic, Brand, Pfister, Popović. Face Transfer with Multilinear Models. SIGGRAPH 2005,
+§5 (Eq. (5), (7)), §6 and Figures 1 and 7.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import re
+from dataclasses import dataclass
+from typing import Iterator, Sequence
+
+import numpy as np
+
+from .errors import FaceTransferError
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "ALIGN_MODES",
+    "TransferError",
+    "TimeMap",
+    "time_map",
+    "resample_track",
+    "constant_weights",
+    "recombine",
+    "project_landmarks",
+    "EditAdd",
+    "EditScale",
+    "parse_add",
+    "parse_scale",
+    "edit_track",
+    "puppet_frames",
+]
+
+#: Ways to align a source performance with the target's length (see :func:`time_map`).
+ALIGN_MODES = ("trim", "loop", "hold")
+
+
+class TransferError(FaceTransferError):
+    """A transfer, edit or alignment that cannot be done with the given tracks and options."""
+
+
+# ---------------------------------------------------------------------------------------------
+# time alignment
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class TimeMap:
+    """Where each output frame takes a source from.
+
+    Attributes
+    ----------
+    source_time : (n_out,) float64
+        Position in source frames (fractional: linear interpolation between neighbours).
+    align : str
+        The alignment used (``"trim"``, ``"loop"`` or ``"hold"``).
+    """
+
+    source_time: np.ndarray
+    align: str
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.source_time.shape[0])
+
+    @property
+    def nearest(self) -> np.ndarray:
+        """(n_out,) int64: the nearest source frame of every output frame."""
+        return np.floor(self.source_time + 0.5).astype(np.int64)
+
+
+def time_map(n_source: int, fps_source: float, n_target: int, fps_target: float, *,
+             align: str | None = None) -> TimeMap:
+    """Map the target's frames onto source time at the target's frame rate.
+
+    Output frame ``j`` (time ``j / fps_target``) reads the source at frame
+    ``j * fps_source / fps_target``. When that runs past the source's last frame:
+
+    * ``"trim"``: the output stops there (``n_out`` = frames of the target that the source covers);
+    * ``"loop"``: the source restarts from its first frame;
+    * ``"hold"``: the source's last frame is held.
+
+    The default (``align=None``) is ``"trim"`` when the source is at least as long as the target
+    (its extra frames are dropped; the output has the target's length) and ``"hold"`` when it is
+    shorter (the target keeps its length; the source's last frame is held).
+
+    Parameters
+    ----------
+    n_source, n_target : int
+        Frame counts (>= 1).
+    fps_source, fps_target : float
+        Frame rates (> 0).
+    align : {"trim", "loop", "hold"} or None, keyword-only
+
+    Returns
+    -------
+    TimeMap
+        ``source_time`` of length ``n_target`` (``loop``, ``hold``) or at most ``n_target``
+        (``trim``).
+    """
+    if int(n_source) < 1 or int(n_target) < 1:
+        raise TransferError(f"frame counts must be >= 1, got source {n_source}, target {n_target}")
+    if not (fps_source > 0 and fps_target > 0 and np.isfinite(fps_source * fps_target)):
+        raise TransferError(f"frame rates must be > 0, got source {fps_source}, "
+                            f"target {fps_target}")
+    n_source, n_target = int(n_source), int(n_target)
+    ratio = float(fps_source) / float(fps_target)
+    t = np.arange(n_target, dtype=np.float64) * ratio  # source frame at each target frame
+    last = n_source - 1
+    if align is None:
+        align = "trim" if t[-1] <= last + 1e-9 else "hold"
+    if align not in ALIGN_MODES:
+        raise TransferError(f"align must be one of {', '.join(ALIGN_MODES)}, got {align!r}")
+    if align == "trim":
+        t = t[t <= last + 1e-9]
+        t = np.minimum(t, last)
+    elif align == "loop":
+        t = np.mod(t, n_source)
+        # between the last frame and the wrap, interpolate towards the last frame (no blend with 0)
+        t = np.minimum(t, last)
+    else:
+        t = np.minimum(t, last)
+    return TimeMap(t, align)
+
+
+def _interp_rows(a: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Linear interpolation of ``a`` (n, ...) at fractional rows ``t`` (m,)."""
+    i0 = np.clip(np.floor(t).astype(np.int64), 0, a.shape[0] - 1)
+    i1 = np.minimum(i0 + 1, a.shape[0] - 1)
+    f = (t - i0).reshape((-1,) + (1,) * (a.ndim - 1))
+    return a[i0] * (1.0 - f) + a[i1] * f
+
+
+def _orthonormalize(R: np.ndarray) -> np.ndarray:
+    """Nearest rotations (F, 3, 3) of (F, 3, 3) matrices (SVD projection)."""
+    U, _, Vt = np.linalg.svd(R)
+    d = np.sign(np.linalg.det(U @ Vt))
+    U[:, :, 2] *= d[:, None]
+    return U @ Vt
+
+
+def resample_track(track, tmap: TimeMap):
+    """The track sampled at ``tmap.source_time`` (linear in pose and weights).
+
+    Rotations are interpolated linearly and projected back onto rotations; a resampled frame is
+    lost if either source frame it reads is lost. Frame rate and size are kept (the caller sets
+    the target's with :func:`dataclasses.replace`).
+
+    Parameters
+    ----------
+    track : Track
+    tmap : TimeMap
+
+    Returns
+    -------
+    Track
+        With ``tmap.n_frames`` frames.
+    """
+    t = np.asarray(tmap.source_time, dtype=np.float64)
+    if t.size == 0:
+        raise TransferError("time map is empty: the source covers none of the target")
+    if t.min() < 0 or t.max() > track.n_frames - 1 + 1e-9:
+        raise TransferError(f"time map reads source frames {t.min():.1f}..{t.max():.1f}, "
+                            f"outside the track's {track.n_frames} frames")
+    i0 = np.floor(t).astype(np.int64)
+    i1 = np.minimum(i0 + 1, track.n_frames - 1)
+    frac = t - i0
+    lost = track.lost[i0] | ((frac > 1e-9) & track.lost[i1])
+    return dataclasses.replace(
+        track,
+        rotation=_orthonormalize(_interp_rows(track.rotation, t)),
+        scale=_interp_rows(track.scale, t),
+        translation=_interp_rows(track.translation, t),
+        weights={n: _interp_rows(w, t) for n, w in track.weights.items()},
+        landmarks2d=_interp_rows(track.landmarks2d, t),
+        confidence=np.minimum(track.confidence[i0], track.confidence[i1]),
+        lost=lost,
+        info={},
+    )
+
+
+# ---------------------------------------------------------------------------------------------
+# recombination (Fig. 1, Fig. 7B-D)
+# ---------------------------------------------------------------------------------------------
+
+def constant_weights(track, mode: str) -> np.ndarray:
+    """A constant attribute of a track (e.g. its identity): mean over frames not lost, (r,)."""
+    if mode not in track.weights:
+        raise TransferError(f"track has no mode {mode!r} (modes: {', '.join(track.mode_names)})")
+    good = ~track.lost
+    w = track.weights[mode]
+    if not good.any():
+        raise TransferError(f"the face is lost in every frame of {track.source or 'the track'}; "
+                            f"no {mode} to take from it")
+    return w[good].mean(axis=0)
+
+
+def _check_compatible(target, other, what: str) -> None:
+    if tuple(other.mode_names) != tuple(target.mode_names):
+        raise TransferError(f"{what} track has modes {other.mode_names}, the target "
+                            f"{target.mode_names}: track both with the same model")
+    for n in target.mode_names:
+        if other.weights[n].shape[1] != target.weights[n].shape[1]:
+            raise TransferError(f"{what} track has {other.weights[n].shape[1]} {n} weights, the "
+                                f"target {target.weights[n].shape[1]}: use the same model")
+    if target.model_hash and other.model_hash and target.model_hash != other.model_hash:
+        raise TransferError(f"{what} track was made with a different model than the target "
+                            f"(model hashes differ)")
+
+
+def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
+              align: str | None = None, identity_mode: str = "identity",
+              expression_mode: str = "expression", viseme_mode: str = "viseme"):
+    """A new performance on the target's timeline, each attribute from its chosen source.
+
+    Implements the attribute mixing of Vlasic et al. (2005) §6 / Fig. 1 and Fig. 7B–D: the new
+    face of frame ``j`` is Eq. (5) with the identity, expression and viseme weights taken from
+    the chosen tracks, seen by the pose (weak-perspective camera, Eq. (7)) of the pose track.
+
+    Parameters
+    ----------
+    target : Track
+        The footage rendered into: fixes the timeline (frame rate, frame count), frame size and
+        by default pose and every attribute not given.
+    expression, viseme : Track, optional, keyword-only
+        Sources of the per-frame expression / viseme weights, resampled to the target's frame
+        rate with ``align``.
+    identity : Track or (r,) array, optional
+        A track (its identity: the mean over frames not lost) or identity weights.
+    pose : Track, optional
+        Source of the per-frame rotation, scale and translation (default: the target). Must
+        have the target's frame size.
+    align : {"trim", "loop", "hold"} or None
+        See :func:`time_map`. With ``trim`` the result is shortened to the shortest source.
+
+    Returns
+    -------
+    Track
+        Target's fps, frame size and source path; ``lost`` where the target or any source used
+        for the frame is lost (those frames keep the original footage when rendered);
+        ``landmarks2d`` copied from the pose track (recompute with :func:`project_landmarks`).
+    """
+    n = target.n_frames
+    sources = {}
+    for what, tr in (("expression", expression), ("viseme", viseme), ("pose", pose)):
+        if tr is not None:
+            _check_compatible(target, tr, what)
+            sources[what] = tr
+    if viseme is not None and viseme_mode not in target.mode_names:
+        raise TransferError(f"--viseme-from needs a model with a {viseme_mode!r} mode; this one "
+                            f"has {', '.join(target.mode_names)}")
+    if pose is not None and tuple(pose.frame_size) != tuple(target.frame_size):
+        raise TransferError(f"pose source frames are {pose.frame_size[0]}x{pose.frame_size[1]}, "
+                            f"the target's {target.frame_size[0]}x{target.frame_size[1]}: the "
+                            f"pose source must have the target's frame size")
+    # every source on the target's timeline
+    resampled = {}
+    n_out = n
+    for what, tr in sources.items():
+        tm = time_map(tr.n_frames, tr.fps, n, target.fps, align=align)
+        resampled[what] = resample_track(tr, tm)
+        n_out = min(n_out, tm.n_frames)
+    for what in resampled:
+        if resampled[what].n_frames > n_out:
+            resampled[what] = _take(resampled[what], np.arange(n_out))
+    base = _take(target, np.arange(n_out)) if n_out < n else target
+    posed = resampled.get("pose", base)
+    weights = {m: base.weights[m].copy() for m in base.mode_names}
+    lost = base.lost.copy()
+    if "expression" in resampled:
+        if expression_mode not in weights:
+            raise TransferError(f"the model has no {expression_mode!r} mode")
+        weights[expression_mode] = resampled["expression"].weights[expression_mode].copy()
+        lost |= resampled["expression"].lost
+    if "viseme" in resampled:
+        weights[viseme_mode] = resampled["viseme"].weights[viseme_mode].copy()
+        lost |= resampled["viseme"].lost
+    if "pose" in resampled:
+        lost |= resampled["pose"].lost
+    if identity is not None:
+        if identity_mode not in weights:
+            raise TransferError(f"the model has no {identity_mode!r} mode")
+        if hasattr(identity, "weights"):
+            _check_compatible(target, identity, "identity")
+            wid = constant_weights(identity, identity_mode)
+        else:
+            wid = np.asarray(identity, dtype=np.float64).ravel()
+        r = weights[identity_mode].shape[1]
+        if wid.shape != (r,) or not np.all(np.isfinite(wid)):
+            raise TransferError(f"identity weights must be {r} finite numbers, got shape "
+                                f"{wid.shape}")
+        weights[identity_mode] = np.broadcast_to(wid, (n_out, r)).copy()
+    conf = base.confidence.copy()
+    for tr in resampled.values():
+        conf = np.minimum(conf, tr.confidence)
+    return dataclasses.replace(
+        base, rotation=posed.rotation.copy(), scale=posed.scale.copy(),
+        translation=posed.translation.copy(), landmarks2d=posed.landmarks2d.copy(),
+        weights=weights, lost=lost, confidence=conf, info={})
+
+
+def _take(track, idx: np.ndarray):
+    """Frames ``idx`` of a track."""
+    return dataclasses.replace(
+        track, rotation=track.rotation[idx], scale=track.scale[idx],
+        translation=track.translation[idx],
+        weights={n: w[idx] for n, w in track.weights.items()},
+        landmarks2d=track.landmarks2d[idx], confidence=track.confidence[idx],
+        lost=track.lost[idx], info={})
+
+
+def project_landmarks(track, model):
+    """The track with ``landmarks2d`` recomputed from its weights and pose (Eq. (5), (7)).
+
+    Parameters
+    ----------
+    track : Track
+    model : MultilinearModel
+        Must have ``landmarks`` (68,).
+
+    Returns
+    -------
+    Track
+    """
+    if model.landmarks is None:
+        raise TransferError("the model has no landmark vertices")
+    lm = model.synthesize({n: track.weights[n] for n in model.mode_names},
+                          vertices=model.landmarks)  # (F, 68, 3)
+    Y = np.einsum("fij,fvj->fvi", track.rotation[:, :2], lm)  # (F, 68, 2)
+    px = np.empty_like(Y)
+    px[..., 0] = track.scale[:, None] * Y[..., 0] + track.translation[:, None, 0]  # Eq. (7)
+    px[..., 1] = -track.scale[:, None] * Y[..., 1] + track.translation[:, None, 1]
+    return dataclasses.replace(track, landmarks2d=px, info={})
+
+
+# ---------------------------------------------------------------------------------------------
+# editing (Fig. 7E)
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class EditAdd:
+    """Add the training expression ``label`` over frames ``start..stop`` (inclusive)."""
+
+    label: str
+    start: int
+    stop: int
+    amount: float = 1.0
+
+
+@dataclass(frozen=True)
+class EditScale:
+    """Scale the component of the expression weights along ``label`` − neutral by ``factor``."""
+
+    label: str
+    factor: float
+
+
+_ADD_RE = re.compile(r"^\s*([A-Za-z0-9_.\-]+?)(?:\*([-+0-9.eE]+))?@(\d+)-(\d+)\s*$")
+_SCALE_RE = re.compile(r"^\s*([A-Za-z0-9_.\-]+)=([-+0-9.eE]+)\s*$")
+
+
+def parse_add(text: str) -> EditAdd:
+    """Parse ``LABEL@START-STOP`` or ``LABEL*AMOUNT@START-STOP`` (frames, inclusive, 0-based)."""
+    m = _ADD_RE.match(str(text))
+    if not m:
+        raise TransferError(f"--add {text!r}: expected EXPRESSION@START-STOP, e.g. frown@120-180")
+    label, amount, a, b = m.group(1), m.group(2), int(m.group(3)), int(m.group(4))
+    if b < a:
+        raise TransferError(f"--add {text!r}: the range ends ({b}) before it starts ({a})")
+    try:
+        amt = 1.0 if amount is None else float(amount)
+    except ValueError:
+        raise TransferError(f"--add {text!r}: amount {amount!r} is not a number") from None
+    return EditAdd(label, a, b, amt)
+
+
+def parse_scale(text: str) -> EditScale:
+    """Parse ``LABEL=FACTOR``."""
+    m = _SCALE_RE.match(str(text))
+    if not m:
+        raise TransferError(f"--scale {text!r}: expected EXPRESSION=FACTOR, e.g. smile=1.5")
+    try:
+        f = float(m.group(2))
+    except ValueError:
+        raise TransferError(f"--scale {text!r}: {m.group(2)!r} is not a number") from None
+    if not np.isfinite(f):
+        raise TransferError(f"--scale {text!r}: the factor must be finite")
+    return EditScale(m.group(1), f)
+
+
+def _expression_direction(model, label: str, mode: str, neutral: str) -> np.ndarray:
+    """``training_weights(label) − training_weights(neutral)`` in ``mode`` (r,)."""
+    k = model.mode_index(mode)
+    labels = model.labels[k]
+    if label not in labels:
+        raise TransferError(f"unknown {mode} {label!r}; the model knows: {', '.join(labels)}")
+    if neutral not in labels:
+        raise TransferError(f"the model's {mode} mode has no {neutral!r} training item to "
+                            f"measure {label!r} from")
+    return model.training_weights(k, label) - model.training_weights(k, neutral)
+
+
+def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int) -> np.ndarray:
+    """(n_frames,) weights: 0 outside ``start..stop``, 1 inside, smoothstep ramps at both ends.
+
+    The ramps take ``ramp`` frames each (shortened to half the range when it is shorter), so
+    the envelope rises from 0 at ``start`` and falls back to 0 at ``stop``; with ``ramp=0`` it
+    is a box 1 on ``start..stop``.
+    """
+    t = np.arange(n_frames, dtype=np.float64)
+    inside = (t >= start) & (t <= stop)
+    r = min(float(ramp), (stop - start) / 2.0)
+    if r <= 0:
+        return inside.astype(np.float64)
+
+    def smooth(x):
+        x = np.clip(x, 0.0, 1.0)
+        return x * x * (3.0 - 2.0 * x)
+
+    return np.where(inside, smooth((t - start) / r) * smooth((stop - t) / r), 0.0)
+
+
+def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[EditScale] = (),
+               ramp: int = 8, mode: str = "expression", neutral: str = "neutral"):
+    """Edit a tracked performance (Vlasic et al. 2005, §6, Fig. 7E: "we manually add a frown").
+
+    Scaling is applied first, then additions:
+
+    * ``EditScale(label, f)``: with ``d = w(label) − w(neutral)`` (training weights), each
+      frame's ``w`` becomes ``w + (f − 1) ((w − w(neutral)) · d / d · d) d``: the component of
+      the expression (relative to neutral) along ``d`` is multiplied by ``f``, the rest is kept.
+    * ``EditAdd(label, a, b, amount)``: ``w += amount · e(t) · d`` with ``e`` the envelope of
+      :func:`ramp_envelope` (1 on ``a..b`` with smooth ramps of ``ramp`` frames at the ends).
+
+    Parameters
+    ----------
+    track : Track
+    model : MultilinearModel
+        The model the track was made with (its training weights define the expressions).
+    add, scale : sequences of EditAdd / EditScale, keyword-only
+    ramp : int
+        Ramp length in frames at each end of an added range.
+    mode, neutral : str
+        The edited mode and its neutral training label.
+
+    Returns
+    -------
+    Track
+
+    Raises
+    ------
+    TransferError
+        Unknown expression, a frame range outside the clip, a track of another model.
+    """
+    if mode not in track.weights:
+        raise TransferError(f"the track has no {mode!r} mode (modes: {', '.join(track.mode_names)})")
+    if tuple(model.mode_names) != tuple(track.mode_names) or \
+            model.ranks[model.mode_index(mode)] != track.weights[mode].shape[1]:
+        raise TransferError("the track was made with another model (modes or ranks differ)")
+    if int(ramp) < 0:
+        raise TransferError(f"ramp must be >= 0 frames, got {ramp}")
+    n = track.n_frames
+    w = track.weights[mode].copy()  # (F, r)
+    k = model.mode_index(mode)
+    w0 = model.training_weights(k, neutral) if neutral in model.labels[k] else None
+    for s in scale:
+        d = _expression_direction(model, s.label, mode, neutral)
+        dd = float(d @ d)
+        if dd == 0:
+            raise TransferError(f"{s.label!r} has the same weights as {neutral!r}; nothing to scale")
+        c = (w - w0) @ d / dd  # (F,) component along d
+        w = w + (s.factor - 1.0) * c[:, None] * d[None, :]
+    for a in add:
+        if a.start < 0 or a.stop > n - 1:
+            raise TransferError(f"--add {a.label}@{a.start}-{a.stop}: frames outside the clip "
+                                f"(0-{n - 1})")
+        d = _expression_direction(model, a.label, mode, neutral)
+        e = ramp_envelope(n, a.start, a.stop, int(ramp))
+        w = w + a.amount * e[:, None] * d[None, :]
+    weights = dict(track.weights)
+    weights[mode] = w
+    return dataclasses.replace(track, weights=weights, info={})
+
+
+# ---------------------------------------------------------------------------------------------
+# puppetry
+# ---------------------------------------------------------------------------------------------
+
+def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] | None = None,
+                  background=(40, 40, 48), identity_mode: str = "identity",
+                  color=(205, 170, 150)) -> Iterator[np.ndarray]:
+    """Drive a synthetic actor (an identity of the model) with a tracked performance.
+
+    Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
+    track's camera, Lambert-shaded on a plain background; lost frames repeat the last good one
+    (or the background before the first).
+
+    Parameters
+    ----------
+    track : Track
+    model : MultilinearModel
+    identity : (r,) float64
+    size : (W, H), optional
+        Default: the track's frame size.
+    background : (3,) colour
+
+    Yields
+    ------
+    (H, W, 3) uint8
+    """
+    from .render import render
+
+    size = tuple(track.frame_size) if size is None else (int(size[0]), int(size[1]))
+    r = model.ranks[model.mode_index(identity_mode)]
+    wid = np.asarray(identity, dtype=np.float64).ravel()
+    if wid.shape != (r,):
+        raise TransferError(f"identity weights must have {r} values, got {wid.shape}")
+    bg = np.broadcast_to(np.asarray(background, np.uint8), (size[1], size[0], 3)).copy()
+    sx = size[0] / track.frame_size[0]
+    sy = size[1] / track.frame_size[1]
+    colors = np.broadcast_to(np.asarray(color, np.float64), (model.n_vertices, 3))
+    last = bg
+    for i in range(track.n_frames):
+        if track.lost[i]:
+            yield last
+            continue
+        w = track.weights_at(i)
+        w[identity_mode] = wid
+        V = model.synthesize(w)
+        cam = track.camera(i)
+        if (sx, sy) != (1.0, 1.0):
+            cam = type(cam)(cam.scale * np.sqrt(sx * sy), cam.rotation,
+                            cam.translation * np.array([sx, sy]))
+        img = render(V, model.faces, cam, size, colors=colors, background=bg).image
+        last = img
+        yield img
+
+
+def identity_from_label(model, label: str, mode: str = "identity") -> np.ndarray:
+    """Training weights of an identity given by label (TransferError listing known labels)."""
+    k = model.mode_index(mode)
+    if label not in model.labels[k]:
+        raise TransferError(f"unknown identity {label!r}; the model knows: "
+                            f"{', '.join(model.labels[k][:20])}"
+                            + (" ..." if len(model.labels[k]) > 20 else ""))
+    return model.training_weights(k, label)
+
+
+def parse_weights(text: str, r: int, *, what: str = "--identity-weights") -> np.ndarray:
+    """``"0.1,0.2,..."`` (r numbers) or a ``.npy`` / ``.txt`` file of r numbers -> (r,)."""
+    from pathlib import Path
+
+    p = Path(text)
+    try:
+        if p.suffix in (".npy", ".txt", ".csv") and p.is_file():
+            vals = np.load(p) if p.suffix == ".npy" else np.loadtxt(p, delimiter=",")
+        else:
+            vals = np.array([float(v) for v in str(text).replace(" ", ",").split(",") if v])
+    except (ValueError, OSError) as exc:
+        raise TransferError(f"{what} {text!r}: not a list of numbers or a .npy file ({exc})") \
+            from None
+    vals = np.asarray(vals, dtype=np.float64).ravel()
+    if vals.shape != (r,) or not np.all(np.isfinite(vals)):
+        raise TransferError(f"{what}: expected {r} finite numbers, got {vals.size}")
+    return vals

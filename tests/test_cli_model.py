@@ -1,0 +1,186 @@
+"""``facetransfer model build|info|synth|sheet`` end to end on small generated data sets."""
+
+from __future__ import annotations
+
+import sys
+import types
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from facetransfer.cli.main import main
+from facetransfer.cli.model import parse_like, parse_ranks, parse_weights
+from facetransfer.errors import FaceTransferError
+from facetransfer.io.mesh import read_obj_vertices
+from facetransfer.model import load_model
+
+from test_datasets_manifest import cell_vertices, make_manifest
+
+
+def run(capsys, *argv):
+    code = main(list(map(str, argv)))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+@pytest.fixture
+def manifest(tmp_path):
+    return make_manifest(tmp_path / "data", [(i, e) for i in range(3) for e in range(3)])
+
+
+@pytest.fixture
+def model_path(manifest, tmp_path, capsys):
+    out = tmp_path / "m.npz"
+    code, o, err = run(capsys, "model", "build", "--dataset", manifest, "--out", out)
+    assert code == 0, err
+    return out
+
+
+def test_parsers():
+    assert parse_ranks("identity=9, expression=6") == {"identity": 9, "expression": 6}
+    assert parse_ranks(None) == {}
+    w = parse_weights("identity=0.5,-1;expression=2")
+    np.testing.assert_array_equal(w["identity"], [0.5, -1.0])
+    assert parse_like("identity=id03,expression=smile") == {"identity": "id03", "expression": "smile"}
+    for bad in ("identity", "identity=0", "identity=x", "=3"):
+        with pytest.raises(FaceTransferError, match="--ranks"):
+            parse_ranks(bad)
+    with pytest.raises(FaceTransferError, match="--weights"):
+        parse_weights("identity=1,nan")
+    with pytest.raises(FaceTransferError, match="--like"):
+        parse_like("identity")
+
+
+def test_build_info_synth_like_reproduces_training_mesh(model_path, tmp_path, capsys):
+    m = load_model(model_path)
+    assert m.mode_names == ("identity", "expression") and m.ranks == (3, 3)
+    code, out, _ = run(capsys, "model", "info", model_path)
+    assert code == 0
+    assert "mode identity: 3 training entries, rank 3" in out and "explained variance" in out
+    assert "manifest.csv" in out  # provenance names the source
+    face = tmp_path / "f.obj"
+    code, _, err = run(capsys, "model", "synth", model_path, "--like", "identity=id2,expression=ex1",
+                       "--out", face)
+    assert code == 0, err
+    np.testing.assert_allclose(read_obj_vertices(face), cell_vertices(2, 1), atol=2e-6)
+    # explicit weights = the training rows give the same face
+    wi = ",".join(repr(float(x)) for x in m.training_weights("identity", "id1"))
+    we = ",".join(repr(float(x)) for x in m.training_weights("expression", "ex2"))
+    face2 = tmp_path / "g.ply"
+    code, _, err = run(capsys, "model", "synth", model_path, "--weights",
+                       f"identity={wi};expression={we}", "--out", face2)
+    assert code == 0, err
+    import trimesh
+
+    v = np.asarray(trimesh.load(face2, process=False).vertices)
+    np.testing.assert_allclose(v, cell_vertices(1, 2), atol=1e-6)
+
+
+def test_synth_bad_input(model_path, tmp_path, capsys):
+    out = tmp_path / "x.obj"
+    cases = [
+        (["--weights", "identity=1,2"], "identity has 2 values; the model's identity rank is 3"),
+        (["--like", "identity=nobody"], "unknown identity 'nobody'"),
+        (["--like", "mood=happy"], "unknown mode 'mood'"),
+        (["--like", "identity=id1", "--weights", "identity=1,2,3"], "not both"),
+    ]
+    for extra, msg in cases:
+        code, _, err = run(capsys, "model", "synth", model_path, *extra, "--out", out)
+        assert code == 2 and msg in err and err.count("\n") == 1, err
+        assert not out.exists()
+    code, _, err = run(capsys, "model", "synth", model_path, "--out", tmp_path / "x.stl")
+    assert code == 2 and ".obj or .ply" in err
+
+
+def test_build_bad_input_leaves_no_file(manifest, tmp_path, capsys):
+    out = tmp_path / "bad.npz"
+    code, _, err = run(capsys, "model", "build", "--dataset", manifest, "--ranks", "identity=5",
+                       "--out", out)
+    assert code == 2 and "identity=5 is larger than the 3" in err and not out.exists()
+    code, _, err = run(capsys, "model", "build", "--dataset", tmp_path / "nope.csv", "--out", out)
+    assert code == 2 and "does not exist" in err and not out.exists()
+    code, _, err = run(capsys, "model", "build", "--dataset", manifest, "--out",
+                       tmp_path / "nofolder" / "m.npz")
+    assert code == 2 and "output folder" in err
+    trunc = tmp_path / "trunc.npz"
+    trunc.write_bytes(b"PK\x03\x04 truncated")
+    code, _, err = run(capsys, "model", "info", trunc)
+    assert code == 2 and err.startswith("facetransfer model: error:") and err.count("\n") == 1
+
+
+def test_missing_cells_error_lists_them(tmp_path, capsys):
+    cells = [(i, e) for i in range(3) for e in range(3) if (i, e) not in {(1, 2), (2, 0)}]
+    man = make_manifest(tmp_path / "d", cells)
+    out = tmp_path / "m.npz"
+    code, _, err = run(capsys, "model", "build", "--dataset", man, "--impute", "none", "--out", out)
+    assert code == 2 and "2 missing cells" in err and "id1/ex2" in err and "id2/ex0" in err
+    assert not out.exists()
+
+
+@dataclass(frozen=True)
+class _FakeImputation:
+    dataset: object
+    imputed: np.ndarray
+
+
+def test_missing_cells_are_imputed_and_recorded(tmp_path, capsys, monkeypatch):
+    """The CLI hands missing cells to facetransfer.impute and records what was filled."""
+    calls = []
+
+    def impute_dataset(ds, *, method, rng):
+        calls.append(method)
+        v = ds.vertices.copy()
+        mean = np.nanmean(v, axis=0)  # per-expression average over identities
+        miss = ~ds.mask
+        v[miss] = np.broadcast_to(mean, v.shape)[miss]
+        return _FakeImputation(ds.with_vertices(v, np.ones_like(ds.mask)), miss)
+
+    fake = types.ModuleType("facetransfer.impute")
+    fake.impute_dataset = impute_dataset
+    monkeypatch.setitem(sys.modules, "facetransfer.impute", fake)
+    cells = [(i, e) for i in range(3) for e in range(3) if (i, e) != (1, 2)]
+    man = make_manifest(tmp_path / "d", cells)
+    out = tmp_path / "m.npz"
+    code, _, err = run(capsys, "model", "build", "--dataset", man, "--impute", "average", "--out", out)
+    assert code == 0, err
+    assert calls == ["average"] and "imputed 1 missing cells (average)" in err
+    m = load_model(out)
+    assert m.imputed is not None and m.imputed.tolist() == [[False] * 3, [False, False, True], [False] * 3]
+    assert m.provenance["imputed_cells"] == [["id1", "ex2"]]
+    filled = m.synthesize(m.like(identity="id1", expression="ex2"))
+    expect = (cell_vertices(0, 2) + cell_vertices(2, 2)) / 2
+    np.testing.assert_allclose(filled, expect, atol=1e-6)
+
+
+def test_sheet_writes_two_pictures(model_path, tmp_path, capsys):
+    out = tmp_path / "sheet.png"
+    code, _, err = run(capsys, "model", "sheet", model_path, "--out", out)
+    assert code == 0, err
+    a = np.asarray(Image.open(out))
+    b = np.asarray(Image.open(tmp_path / "sheet_dials.png"))
+    # 3 identity rows x 3 expression columns of 150x180 tiles plus headers
+    assert a.shape == (36 + 3 * 180, 90 + 3 * 150, 3)
+    # every tile shows a face (non-white pixels)
+    for i in range(3):
+        for j in range(3):
+            tile = a[36 + i * 180: 36 + (i + 1) * 180, 90 + j * 150: 90 + (j + 1) * 150]
+            assert (tile.min(axis=2) < 200).mean() > 0.05
+    assert b.shape[1] == 90 + 5 * 150 and b.shape[0] > 36
+    code, _, err = run(capsys, "model", "sheet", model_path, "--out", tmp_path / "s.jpg")
+    assert code == 2 and ".png" in err
+
+
+def test_build_ict_with_default_ranks(data_dir, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    out = tmp_path / "ict.npz"
+    code, o, err = run(capsys, "model", "build", "--dataset", "ict-bilinear", "--identities", "3",
+                       "--no-refine", "--out", out)
+    assert code == 0, err
+    m = load_model(out)
+    assert m.ranks == (3, 6) and m.shape == (3, 10)  # identity rank 9 clipped to 3 identities
+    assert m.provenance["dataset"] == "ict-bilinear" and m.provenance["refine"] is False
+    assert m.landmarks is not None and m.landmarks.shape == (68,)
+    code, o, _ = run(capsys, "model", "info", out)
+    assert "mode expression: 10 training entries, rank 6" in o

@@ -1,0 +1,98 @@
+"""CLI ``facetransfer texture default|lift|blend``: outputs, and one-line errors with exit 2."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from facetransfer.cli import main as cli_main
+from facetransfer.model import build_model
+from facetransfer.synth import make_clip, random_performance, write_clip
+
+from test_texture_track import _cap_dataset
+
+
+@pytest.fixture()
+def run(monkeypatch):
+    if "texture" not in cli_main.SUBCOMMAND_MODULES:  # until the lead registers it
+        monkeypatch.setattr(cli_main, "SUBCOMMAND_MODULES", cli_main.SUBCOMMAND_MODULES + ("texture",))
+    return lambda *argv: cli_main.main([str(a) for a in argv])
+
+
+@pytest.fixture(scope="module")
+def model_path(tmp_path_factory):
+    p = tmp_path_factory.mktemp("tm") / "cap.npz"
+    build_model(_cap_dataset(), {"identity": 3, "expression": 3}).save(p)
+    return p
+
+
+def _write(path, rgb):
+    assert cv2.imwrite(str(path), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR))
+
+
+def _read(path):
+    return cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+
+
+def test_blend_offset_source_gives_target(run, tmp_path):
+    yy, xx = np.mgrid[:80, :100]
+    t = np.stack([60 + xx, 50 + yy, 100 + 0 * xx], -1).astype(np.uint8)
+    s = t + 30
+    m = np.zeros((80, 100), np.uint8)
+    m[:40, :50] = 255  # touches the border: the solver path
+    _write(tmp_path / "s.png", s)
+    _write(tmp_path / "t.png", t)
+    _write(tmp_path / "m.png", np.dstack([m] * 3))
+    for extra in ([], ["--feather", "3"]):
+        assert run("texture", "blend", "--source", tmp_path / "s.png", "--target", tmp_path / "t.png",
+                   "--mask", tmp_path / "m.png", "--out", tmp_path / "o.png", *extra) == 0
+        assert np.abs(_read(tmp_path / "o.png").astype(int) - t).max() <= 1
+
+
+def test_default_and_lift(run, tmp_path, model_path):
+    assert run("texture", "default", "--model", model_path, "--size", 64, "--out", tmp_path / "d.png") == 0
+    assert _read(tmp_path / "d.png").shape == (64, 64, 3)
+
+    from facetransfer.model import load_model
+
+    model = load_model(model_path)
+    yy, xx = np.mgrid[:64, :64]
+    ramp = np.stack([40 + 3 * xx, 40 + 3 * yy, 120 + 0 * xx], -1).astype(np.uint8)
+    _write(tmp_path / "ramp.png", ramp)
+    clip = make_clip(model, random_performance(model, 6, seed=0, size=(160, 128)), texture=ramp)
+    write_clip(clip, tmp_path / "c.mp4")
+    rc = run("texture", "lift", tmp_path / "c.mp4", "--track", tmp_path / "c.truth.npz", "--model",
+             model_path, "--size", 64, "--step", 2, "--function", tmp_path / "tf.npz",
+             "--out", tmp_path / "lift.png")
+    assert rc == 0
+    lifted = _read(tmp_path / "lift.png").astype(float)
+    truth = ramp.astype(float)
+    # Lambert shading and video compression: the lifted texture is darker but follows the ramps
+    for ch in (0, 1):
+        c = np.corrcoef(lifted[8:56, 8:56, ch].ravel(), truth[8:56, 8:56, ch].ravel())[0, 1]
+        assert c > 0.9
+    assert (tmp_path / "tf.npz").is_file()
+
+
+def test_errors_are_one_line(run, tmp_path, model_path, capsys):
+    img = np.zeros((20, 20, 3), np.uint8)
+    _write(tmp_path / "a.png", img)
+    (tmp_path / "bad.png").write_bytes(b"not an image")
+    cases = [
+        ("texture", "blend", "--source", tmp_path / "a.png", "--target", tmp_path / "a.png",
+         "--mask", tmp_path / "missing.png", "--out", tmp_path / "o.png"),
+        ("texture", "blend", "--source", tmp_path / "bad.png", "--target", tmp_path / "a.png",
+         "--mask", tmp_path / "a.png", "--out", tmp_path / "o.png"),
+        ("texture", "blend", "--source", tmp_path / "a.png", "--target", tmp_path / "a.png",
+         "--mask", tmp_path / "a.png", "--out", tmp_path / "nodir" / "o.png"),
+        ("texture", "default", "--model", tmp_path / "nomodel.npz", "--out", tmp_path / "d.png"),
+        ("texture", "default", "--model", model_path, "--out", tmp_path / "d.txt"),
+        ("texture", "lift", tmp_path / "none.mp4", "--track", tmp_path / "t.npz", "--model",
+         model_path, "--out", tmp_path / "l.png"),
+    ]
+    for argv in cases:
+        capsys.readouterr()
+        assert run(*argv) == 2
+        err = capsys.readouterr().err.strip()
+        assert err.startswith("facetransfer texture: error:") and "\n" not in err

@@ -1,0 +1,72 @@
+"""Tracking synthetic footage with known truth (Vlasic et al. 2005, §5.1, §5.2).
+
+Clips come from :func:`facetransfer.synth.make_clip` (the quick bilinear ICT model, textured,
+Lambert-shaded, over a textured background, gentle head motion and expression changes).
+Tolerances were set from measured errors (given in the comments) with a margin.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facetransfer.errors import TrackError
+from facetransfer.synth import make_clip, random_performance
+from facetransfer.track import Track
+from facetransfer.track.tracker import TrackOptions, smooth_track, track_video
+
+
+@pytest.fixture(scope="module")
+def clip(quick_model):
+    perf = random_performance(quick_model, 20, seed=2, size=(320, 240), fps=25, fill=0.8)
+    return make_clip(quick_model, perf, seed=2)
+
+
+def test_tracking_follows_the_synthetic_face(quick_model, clip):
+    T = clip.truth
+    tr = track_video(clip.frames, quick_model, init=T.landmarks2d[0],
+                     options=TrackOptions(passes=2, recover=False))
+    assert isinstance(tr, Track) and tr.n_frames == 20 and tr.frame_size == (320, 240)
+    err = np.linalg.norm(tr.landmarks2d - T.landmarks2d, axis=2).mean(axis=1)   # (F,) px
+    iod = np.linalg.norm(T.landmarks2d[:, 36] - T.landmarks2d[:, 45], axis=1)   # ~60 px
+    # measured: 0.5-0.8 px on every frame (identity unknown, from 68 exact landmarks)
+    assert err.max() < 1.5 and (err / iod).max() < 0.025
+    # the face does not drift: the last frame is as good as the first (measured +0.0 px)
+    assert err[-1] < err[0] + 0.5
+    # the identity is one vector for the clip
+    assert np.all(tr.weights["identity"] == tr.weights["identity"][0])
+    assert np.all(tr.confidence > 0.8) and not tr.lost.any()
+    assert tr.model_hash == quick_model.content_hash
+
+
+def test_expression_weights_are_recovered_with_a_known_identity(quick_model, clip):
+    T = clip.truth
+    tr = track_video(clip.frames, quick_model, init=T.landmarks2d[0],
+                     fixed={"identity": T.weights["identity"][0]},
+                     options=TrackOptions(passes=1, recover=False, snap_frames=0))
+    err = np.linalg.norm(tr.landmarks2d - T.landmarks2d, axis=2).mean(axis=1)
+    assert err.max() < 1.0                                # measured 0.26 px
+    w_err = np.abs(tr.weights["expression"] - T.weights["expression"]).max(axis=1)
+    w_range = np.abs(T.weights["expression"] - T.weights["expression"][0]).max()  # 0.53
+    assert w_err.max() < 0.15                             # measured 0.10
+    assert w_err.max() < 0.3 * w_range
+    dR = np.einsum("fij,fkj->fik", tr.rotation, T.rotation)
+    ang = np.degrees(np.arccos(np.clip((np.trace(dR, axis1=1, axis2=2) - 1) / 2, -1, 1)))
+    assert ang.max() < 2.0                                # measured < 1 degree
+    with pytest.raises(TrackError, match="fixed weights"):
+        track_video(clip.frames[:3], quick_model, init=T.landmarks2d[0],
+                    fixed={"identity": np.zeros(2)})
+
+
+def test_zero_phase_smoothing_has_no_lag():
+    F = 60
+    t = np.arange(F, dtype=float)
+    trans = np.stack([5 * t, np.zeros(F)], axis=1)                 # constant velocity
+    R = np.tile(np.eye(3), (F, 1, 1))
+    w = {"expression": np.sin(t / 9)[:, None], "identity": np.ones((F, 2))}
+    R2, s2, t2, w2 = smooth_track(R, np.full(F, 3.0), trans, w, 2.0, constant=("identity",))
+    assert np.allclose(t2[10:-10], trans[10:-10], atol=1e-9)       # a ramp is unchanged
+    assert np.allclose(s2, 3.0) and np.allclose(R2, R)
+    lag = np.argmax(np.correlate(w2["expression"][:, 0], w["expression"][:, 0], "full")) - (F - 1)
+    assert lag == 0
+    assert np.array_equal(w2["identity"], w["identity"])

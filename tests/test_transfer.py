@@ -1,0 +1,228 @@
+"""Tests of facetransfer.transfer: time alignment, recombination and editing on tracks (exact)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from facetransfer.track import Track
+from facetransfer.transfer import (EditAdd, EditScale, TransferError, constant_weights,
+                                   edit_track, parse_add, parse_scale, parse_weights,
+                                   project_landmarks, ramp_envelope, recombine, resample_track,
+                                   time_map)
+
+
+def make_track(n=10, *, r=(3, 4), fps=25.0, size=(64, 48), seed=0, model_hash="h",
+               modes=("identity", "expression"), lost=None) -> Track:
+    """A track with distinct, known values in every field."""
+    rng = np.random.default_rng(seed)
+    weights = {m: rng.normal(size=(n, k)) for m, k in zip(modes, r)}
+    weights[modes[0]][:] = weights[modes[0]][0]  # identity constant over the clip
+    return Track(fps=fps, frame_size=size, rotation=np.tile(np.eye(3), (n, 1, 1)),
+                 scale=1.0 + rng.random(n), translation=rng.normal(size=(n, 2)) * 5,
+                 weights=weights, landmarks2d=rng.normal(size=(n, 68, 2)),
+                 confidence=np.full(n, 0.9),
+                 lost=np.zeros(n, bool) if lost is None else np.asarray(lost, bool),
+                 model_hash=model_hash, mode_names=modes, source=f"clip{seed}.mp4")
+
+
+# ------------------------------------------------------------------------------ time_map
+def test_time_map_same_rate_same_length_is_identity():
+    tm = time_map(10, 25, 10, 25)
+    np.testing.assert_array_equal(tm.source_time, np.arange(10))
+    assert tm.align == "trim"
+
+
+def test_time_map_default_trims_longer_source_and_holds_shorter():
+    longer = time_map(20, 25, 10, 25)
+    assert longer.align == "trim" and longer.n_frames == 10
+    np.testing.assert_array_equal(longer.source_time, np.arange(10))
+    shorter = time_map(4, 25, 10, 25)
+    assert shorter.align == "hold" and shorter.n_frames == 10
+    np.testing.assert_array_equal(shorter.source_time, [0, 1, 2, 3, 3, 3, 3, 3, 3, 3])
+
+
+def test_time_map_trim_loop_hold_exact():
+    np.testing.assert_array_equal(time_map(4, 25, 10, 25, align="trim").source_time,
+                                  [0, 1, 2, 3])
+    np.testing.assert_array_equal(time_map(4, 25, 10, 25, align="loop").source_time,
+                                  [0, 1, 2, 3, 0, 1, 2, 3, 0, 1])
+    np.testing.assert_array_equal(time_map(4, 25, 6, 25, align="hold").source_time,
+                                  [0, 1, 2, 3, 3, 3])
+
+
+def test_time_map_resamples_frame_rate():
+    # a 30 fps source on a 25 fps target: target frame j reads source frame 1.2 j
+    tm = time_map(100, 30, 6, 25)
+    np.testing.assert_allclose(tm.source_time, 1.2 * np.arange(6))
+    np.testing.assert_array_equal(tm.nearest, [0, 1, 2, 4, 5, 6])
+    # a 12.5 fps source is read at half steps
+    np.testing.assert_allclose(time_map(3, 12.5, 5, 25).source_time, [0, 0.5, 1, 1.5, 2])
+
+
+@pytest.mark.parametrize("args,kw", [((0, 25, 5, 25), {}), ((5, 0, 5, 25), {}),
+                                     ((5, 25, 5, -1), {}), ((5, 25, 5, 25), {"align": "stretch"})])
+def test_time_map_bad_input(args, kw):
+    with pytest.raises(TransferError):
+        time_map(*args, **kw)
+
+
+def test_resample_track_interpolates_and_propagates_lost():
+    tr = make_track(4, lost=[False, False, True, False])
+    tm = time_map(4, 12.5, 7, 25)  # times 0, .5, 1, 1.5, 2, 2.5, 3
+    rs = resample_track(tr, tm)
+    assert rs.n_frames == 7
+    w = tr.weights["expression"]
+    np.testing.assert_allclose(rs.weights["expression"][1], 0.5 * (w[0] + w[1]))
+    np.testing.assert_allclose(rs.weights["expression"][6], w[3])
+    np.testing.assert_allclose(rs.scale[3], 0.5 * (tr.scale[1] + tr.scale[2]))
+    np.testing.assert_array_equal(rs.lost, [False, False, False, True, True, True, False])
+
+
+# ------------------------------------------------------------------------------ recombine
+def test_recombine_expression_from_source_keeps_target_identity_and_pose():
+    tgt, src = make_track(8, seed=1), make_track(8, seed=2)
+    new = recombine(tgt, expression=src)
+    np.testing.assert_array_equal(new.weights["expression"], src.weights["expression"])
+    np.testing.assert_array_equal(new.weights["identity"], tgt.weights["identity"])
+    np.testing.assert_array_equal(new.translation, tgt.translation)
+    np.testing.assert_array_equal(new.scale, tgt.scale)
+    assert new.fps == tgt.fps and new.frame_size == tgt.frame_size
+
+
+def test_recombine_identity_pose_and_mixing_three_tracks():
+    tgt, a, b = make_track(6, seed=1), make_track(6, seed=2), make_track(6, seed=3)
+    b_lost = dataclasses.replace(b, lost=np.array([True] + [False] * 5))
+    new = recombine(tgt, expression=a, identity=b_lost, pose=a)
+    # identity: the mean over frames not lost (all rows equal here)
+    np.testing.assert_allclose(new.weights["identity"], np.tile(b.weights["identity"][0], (6, 1)))
+    np.testing.assert_array_equal(new.translation, a.translation)
+    w = np.arange(3.0)
+    np.testing.assert_array_equal(recombine(tgt, identity=w).weights["identity"],
+                                  np.tile(w, (6, 1)))
+    with pytest.raises(TransferError, match="3 finite numbers"):
+        recombine(tgt, identity=np.zeros(5))
+
+
+def test_recombine_lost_frames_and_alignment():
+    tgt = make_track(6, seed=1, lost=[0, 0, 0, 0, 0, 1])
+    src = make_track(3, seed=2, lost=[0, 1, 0])
+    new = recombine(tgt, expression=src)  # shorter source: hold its last frame
+    assert new.n_frames == 6
+    np.testing.assert_array_equal(new.lost, [False, True, False, False, False, True])
+    np.testing.assert_array_equal(new.weights["expression"][5], src.weights["expression"][2])
+    assert recombine(tgt, expression=src, align="trim").n_frames == 3
+
+
+def test_recombine_rejects_incompatible_tracks():
+    tgt = make_track(4, seed=1)
+    with pytest.raises(TransferError, match="different model"):
+        recombine(tgt, expression=make_track(4, seed=2, model_hash="other"))
+    with pytest.raises(TransferError, match="viseme"):
+        recombine(tgt, viseme=make_track(4, seed=2))
+    with pytest.raises(TransferError, match="frame size"):
+        recombine(tgt, pose=make_track(4, seed=2, size=(32, 32)))
+    with pytest.raises(TransferError, match="weights"):
+        recombine(tgt, expression=make_track(4, seed=2, r=(3, 5)))
+
+
+def test_recombine_viseme_from_trilinear_tracks():
+    modes = ("identity", "expression", "viseme")
+    tgt = make_track(5, r=(3, 2, 2), modes=modes, seed=1)
+    s1 = make_track(5, r=(3, 2, 2), modes=modes, seed=2)
+    s2 = make_track(5, r=(3, 2, 2), modes=modes, seed=3)
+    new = recombine(tgt, expression=s1, viseme=s2)
+    np.testing.assert_array_equal(new.weights["expression"], s1.weights["expression"])
+    np.testing.assert_array_equal(new.weights["viseme"], s2.weights["viseme"])
+    np.testing.assert_array_equal(new.weights["identity"], tgt.weights["identity"])
+
+
+def test_constant_weights_all_lost_raises():
+    with pytest.raises(TransferError, match="lost in every frame"):
+        constant_weights(make_track(3, lost=[1, 1, 1]), "identity")
+
+
+# ------------------------------------------------------------------------------ edits
+def test_ramp_envelope_shape():
+    e = ramp_envelope(20, 5, 15, 3)
+    assert e[:5].sum() == 0 and e[16:].sum() == 0
+    assert e[5] == 0 and e[15] == 0
+    np.testing.assert_array_equal(e[8:13], 1.0)
+    assert 0 < e[6] < e[7] < 1
+    np.testing.assert_array_equal(ramp_envelope(6, 1, 3, 0), [0, 1, 1, 1, 0, 0])
+
+
+@pytest.fixture(scope="module")
+def quick_track(quick_model):
+    n = 30
+    rng = np.random.default_rng(5)
+    w = {"identity": np.tile(quick_model.training_weights("identity", "id02"), (n, 1)),
+         "expression": quick_model.training_weights("expression", "neutral")
+         + 0.1 * rng.normal(size=(n, quick_model.ranks[1]))}
+    tr = Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
+               scale=np.full(n, 2.0), translation=np.tile([32.0, 32.0], (n, 1)), weights=w,
+               landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n), lost=np.zeros(n, bool),
+               model_hash=quick_model.content_hash, mode_names=quick_model.mode_names)
+    return tr
+
+
+def test_edit_add_is_exact_on_weights(quick_model, quick_track):
+    m = quick_model
+    d = m.training_weights("expression", "frown") - m.training_weights("expression", "neutral")
+    new = edit_track(quick_track, m, add=[EditAdd("frown", 10, 20)], ramp=3)
+    diff = new.weights["expression"] - quick_track.weights["expression"]
+    e = ramp_envelope(30, 10, 20, 3)
+    np.testing.assert_allclose(diff, e[:, None] * d[None, :], atol=1e-12)
+    np.testing.assert_allclose(diff[15], d, atol=1e-12)  # full frown mid-range
+    np.testing.assert_array_equal(diff[:10], 0.0)
+    np.testing.assert_array_equal(new.weights["identity"], quick_track.weights["identity"])
+
+
+def test_edit_scale_is_exact_on_weights(quick_model, quick_track):
+    m = quick_model
+    n0 = m.training_weights("expression", "neutral")
+    d = m.training_weights("expression", "smile") - n0
+    rng = np.random.default_rng(1)
+    perp = rng.normal(size=(30, d.size))
+    perp -= (perp @ d)[:, None] * d / (d @ d)  # orthogonal to d
+    a = rng.normal(size=30)
+    tr = dataclasses.replace(quick_track, weights={
+        "identity": quick_track.weights["identity"],
+        "expression": n0 + a[:, None] * d + perp})
+    new = edit_track(tr, m, scale=[EditScale("smile", 1.5)])
+    np.testing.assert_allclose(new.weights["expression"], n0 + 1.5 * a[:, None] * d + perp,
+                               atol=1e-10)
+
+
+def test_edit_bad_input(quick_model, quick_track):
+    with pytest.raises(TransferError, match="unknown expression 'grin'"):
+        edit_track(quick_track, quick_model, add=[EditAdd("grin", 0, 5)])
+    with pytest.raises(TransferError, match="outside the clip"):
+        edit_track(quick_track, quick_model, add=[EditAdd("frown", 20, 40)])
+    with pytest.raises(TransferError, match="another model"):
+        edit_track(make_track(5), quick_model, add=[EditAdd("frown", 0, 2)])
+
+
+def test_parse_edit_arguments():
+    assert parse_add("frown@120-180") == EditAdd("frown", 120, 180, 1.0)
+    assert parse_add("jaw_open*0.5@3-9") == EditAdd("jaw_open", 3, 9, 0.5)
+    assert parse_scale("smile=1.5") == EditScale("smile", 1.5)
+    for bad in ("frown", "frown@9-3", "frown@a-b"):
+        with pytest.raises(TransferError):
+            parse_add(bad)
+    for bad in ("smile", "smile=x", "smile=inf"):
+        with pytest.raises(TransferError):
+            parse_scale(bad)
+    np.testing.assert_array_equal(parse_weights("1,2,3", 3), [1, 2, 3])
+    with pytest.raises(TransferError, match="expected 3"):
+        parse_weights("1,2", 3)
+
+
+def test_project_landmarks_matches_camera(quick_model, quick_track):
+    tr = project_landmarks(quick_track, quick_model)
+    i = 7
+    V = quick_model.synthesize(tr.weights_at(i))
+    np.testing.assert_allclose(tr.landmarks2d[i], tr.camera(i).project(V[quick_model.landmarks]),
+                               atol=1e-9)

@@ -1,0 +1,196 @@
+"""CLI tests of ``facetransfer transfer | edit | puppet`` on small synthetic clips with truth tracks."""
+
+from __future__ import annotations
+
+import sys
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
+
+from facetransfer.cli.main import main  # noqa: E402
+from facetransfer.io.video import read_video, write_video  # noqa: E402
+from facetransfer.track import Track  # noqa: E402
+from test_transfer_rewrite import render_clip  # noqa: E402
+
+
+@pytest.fixture(scope="module")
+def clips(quick_model, tmp_path_factory):
+    """target.mp4 (id03, neutral) and source.mp4 (id01, expressions) with their truth tracks."""
+    from facetransfer.rewrite import mesh_topology
+    from facetransfer.texture import default_face_texture
+
+    m = quick_model
+    topo = mesh_topology(m)
+    tex = default_face_texture(m, 256)
+    d = tmp_path_factory.mktemp("clips")
+    labels = ["neutral", "open", "smile", "open", "frown", "neutral"]
+    e_a = [m.training_weights("expression", l) for l in labels]
+    e_b = [m.training_weights("expression", "neutral")] * 6
+    fa, ta = render_clip(m, topo, tex, "id01", e_a, [0, 4, 8, 4, 0, -4], seed=1)
+    fb, tb = render_clip(m, topo, tex, "id03", e_b, [-4, 0, 4, 8, 4, 0], seed=2)
+    paths = {"source": d / "source.mp4", "target": d / "target.mp4",
+             "source_track": d / "source.npz", "target_track": d / "target.npz"}
+    write_video(paths["source"], fa, 25.0)
+    write_video(paths["target"], fb, 25.0)
+    ta.save(paths["source_track"])
+    tb.save(paths["target_track"])
+    return paths
+
+
+def run(argv, capsys):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_transfer_with_track_files(clips, quick_model_path, tmp_path, capsys):
+    out = tmp_path / "out.mp4"
+    code, stdout, err = run(["transfer", "--target", clips["target"], "--target-track",
+                             clips["target_track"], "--expression-from", clips["source"],
+                             "--source-track", clips["source_track"], "--model",
+                             quick_model_path, "--out", out, "--save-track", tmp_path / "new.npz",
+                             "--meshes", tmp_path / "meshes", "--no-progress"], capsys)
+    assert code == 0, err
+    assert "no audio" in stdout  # synthetic clips have none: skipped quietly
+    frames, fps = read_video(out)
+    target, _ = read_video(clips["target"])
+    assert frames.shape == target.shape and fps == 25.0
+    new = Track.load(tmp_path / "new.npz")
+    src = Track.load(clips["source_track"])
+    np.testing.assert_allclose(new.weights["expression"], src.weights["expression"])
+    assert len(list((tmp_path / "meshes").glob("frame_*.obj"))) == 6
+    # the open mouth of frame 1 changed the face; the corners (background) did not
+    diff = np.abs(frames[1].astype(int) - target[1].astype(int)).max(axis=-1)
+    assert diff[40:100, 40:90].max() > 40
+    assert diff[:10, :10].max() <= 6  # mp4v re-encoding only
+
+
+def test_transfer_refuses_existing_output(clips, quick_model_path, tmp_path, capsys):
+    out = tmp_path / "exists.mp4"
+    out.write_bytes(b"keep me")
+    argv = ["transfer", "--target", clips["target"], "--target-track", clips["target_track"],
+            "--expression-from", clips["source"], "--source-track", clips["source_track"],
+            "--model", quick_model_path, "--out", out, "--no-progress"]
+    code, _, err = run(argv, capsys)
+    assert code == 2 and "exists" in err and "--overwrite" in err
+    assert len(err.strip().splitlines()) == 1
+    assert out.read_bytes() == b"keep me"
+    code, _, err = run(argv + ["--overwrite"], capsys)
+    assert code == 0, err
+    assert out.stat().st_size > 1000
+
+
+def test_transfer_mismatched_frame_size(clips, quick_model_path, tmp_path, capsys):
+    import dataclasses
+
+    bad = dataclasses.replace(Track.load(clips["target_track"]), frame_size=(64, 64))
+    bad.save(tmp_path / "bad.npz")
+    out = tmp_path / "o.mp4"
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        tmp_path / "bad.npz", "--expression-from", clips["source"],
+                        "--source-track", clips["source_track"], "--model", quick_model_path,
+                        "--out", out, "--no-progress"], capsys)
+    assert code == 2 and "64x64" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    assert not list(tmp_path.glob(".o*"))  # nothing half-written
+
+
+def test_transfer_target_without_face(quick_model_path, tmp_path, capsys):
+    rng = np.random.default_rng(0)
+    write_video(tmp_path / "noise.mp4", (rng.random((3, 96, 96, 3)) * 255).astype(np.uint8), 25)
+    out = tmp_path / "o.mp4"
+    code, _, err = run(["transfer", "--target", tmp_path / "noise.mp4", "--identity-label",
+                        "id01", "--model", quick_model_path, "--tracker", "landmarks",
+                        "--out", out, "--no-progress"], capsys)
+    assert code == 2 and "no face" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_transfer_needs_something_to_transfer(clips, quick_model_path, tmp_path, capsys):
+    code, _, err = run(["transfer", "--target", clips["target"], "--model", quick_model_path,
+                        "--out", tmp_path / "o.mp4"], capsys)
+    assert code == 2 and "nothing to transfer" in err
+    code, _, err = run(["transfer", "--target", clips["target"], "--identity-label", "nobody",
+                        "--target-track", clips["target_track"], "--model", quick_model_path,
+                        "--out", tmp_path / "o.mp4", "--no-progress"], capsys)
+    assert code == 2 and "unknown identity 'nobody'" in err
+
+
+def test_identity_change_with_track(clips, quick_model_path, tmp_path, capsys):
+    out = tmp_path / "id.mp4"
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        clips["target_track"], "--identity-label", "id05", "--model",
+                        quick_model_path, "--out", out, "--save-track", tmp_path / "t.npz",
+                        "--no-progress"], capsys)
+    assert code == 0, err
+    from facetransfer.model import load_model
+
+    m = load_model(quick_model_path)
+    new = Track.load(tmp_path / "t.npz")
+    np.testing.assert_allclose(new.weights["identity"][3], m.training_weights("identity", "id05"))
+
+
+def test_edit_cli(clips, quick_model_path, tmp_path, capsys):
+    out = tmp_path / "edited.npz"
+    code, stdout, err = run(["edit", clips["source_track"], "--model", quick_model_path,
+                             "--add", "frown@1-4", "--scale", "smile=1.5", "--ramp", "1",
+                             "--out", out], capsys)
+    assert code == 0, err
+    a, b = Track.load(clips["source_track"]), Track.load(out)
+    assert not np.allclose(a.weights["expression"][2], b.weights["expression"][2])
+    np.testing.assert_array_equal(a.weights["identity"], b.weights["identity"])
+    for bad, msg in ((["--add", "grin@1-2"], "unknown expression 'grin'"),
+                     (["--add", "frown@2-60"], "outside the clip"),
+                     (["--scale", "smile"], "EXPRESSION=FACTOR"),
+                     ([], "nothing to do")):
+        o2 = tmp_path / "bad.npz"
+        code, _, err = run(["edit", clips["source_track"], "--model", quick_model_path, *bad,
+                            "--out", o2], capsys)
+        assert code == 2 and msg in err and len(err.strip().splitlines()) == 1, (bad, err)
+        assert not o2.exists()
+    code, _, err = run(["edit", clips["source_track"], "--model", quick_model_path, "--add",
+                        "frown@1-2", "--out", out], capsys)
+    assert code == 2 and "exists" in err
+
+
+def test_puppet_cli(clips, quick_model_path, tmp_path, capsys):
+    out = tmp_path / "puppet.mp4"
+    code, stdout, err = run(["puppet", clips["source"], "--model", quick_model_path,
+                             "--identity", "id04", "--track", clips["source_track"],
+                             "--out", out], capsys)
+    assert code == 0, err
+    frames, _ = read_video(out)
+    assert frames.shape[0] == 6
+    # a plain background around the rendered face
+    assert np.abs(frames[0, :8, :8].astype(int) - np.array([40, 40, 48])).max() <= 6
+    assert frames[0, 50:80, 50:80].mean() > 90
+
+
+def test_edit_then_render_performance(clips, quick_model_path, tmp_path, capsys):
+    """Fig. 7E: add a frown to the target's own track, render it back into the target."""
+    edited = tmp_path / "edited.npz"
+    code, _, err = run(["edit", clips["target_track"], "--model", quick_model_path, "--add",
+                        "open@1-4", "--ramp", "0", "--out", edited], capsys)
+    assert code == 0, err
+    out = tmp_path / "edited.mp4"
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        clips["target_track"], "--performance", edited, "--model",
+                        quick_model_path, "--out", out, "--no-progress"], capsys)
+    assert code == 0, err
+    frames, _ = read_video(out)
+    target, _ = read_video(clips["target"])
+    d = np.abs(frames.astype(int) - target.astype(int)).max(axis=-1)
+    # the mouth opened on frames 1-4; frames 0 and 5 are only re-rendered (and re-encoded)
+    lm = Track.load(clips["target_track"]).landmarks2d[:, 48:68]  # the mouth's landmarks
+    x0, y0 = np.floor(lm.min(axis=(0, 1))).astype(int) - 3
+    x1, y1 = np.ceil(lm.max(axis=(0, 1))).astype(int) + 6
+    mouth = [float(d[i, y0:y1, x0:x1].mean()) for i in range(6)]
+    assert min(mouth[2], mouth[3]) > 1.5 * max(mouth[0], mouth[5]), mouth  # ~21 vs ~12
+    bad = tmp_path / "bad.mp4"
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        clips["target_track"], "--performance", edited, "--identity-label",
+                        "id01", "--model", quick_model_path, "--out", bad,
+                        "--no-progress"], capsys)
+    assert code == 2 and "excludes" in err and not bad.exists()
