@@ -27,6 +27,7 @@ import json
 import os
 import platform
 import resource
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -54,9 +55,13 @@ def _child_build(name: str) -> None:
 def bench_builds() -> list[dict]:
     out = []
     for name in ("ict-bilinear", "ict-trilinear"):
-        env = dict(os.environ, XDG_CACHE_HOME=tempfile.mkdtemp(prefix="ftbench"))
-        res = subprocess.run([sys.executable, __file__, "--child-build", name], env=env,
-                             capture_output=True, text=True, check=True)
+        tmp = tempfile.mkdtemp(prefix="ftbench")
+        env = dict(os.environ, XDG_CACHE_HOME=tmp)
+        try:
+            res = subprocess.run([sys.executable, __file__, "--child-build", name], env=env,
+                                 capture_output=True, text=True, check=True)
+        finally:
+            shutil.rmtree(tmp, ignore_errors=True)
         row = json.loads(res.stdout.strip().splitlines()[-1])
         print(f"build {name}: {row['seconds']:.1f} s, peak RSS {row['peak_rss_mb']:.0f} MB "
               f"(data set {row['dataset_mb']:.0f} MB)")
@@ -141,44 +146,65 @@ def bench_tensors(reps: int = 3) -> list[dict]:
 
 
 # ------------------------------------------------------------------------------ 3. separability
-def bench_separability(holdout: str = "id14", expression: str = "smile") -> dict:
-    from facetransfer.datasets import build_ict_dataset
+def _separability_one(ds, h: int, ranks: tuple[int, int], expression: str) -> dict:
     from facetransfer.model import build_model
 
-    ds = build_ict_dataset("ict-bilinear")
     ids = list(ds.labels[0])
-    h = ids.index(holdout)
     keep = [i for i in range(len(ids)) if i != h]
     train = type(ds)(ds.vertices[keep], ds.mask[keep], ds.mode_names,
                      (tuple(ids[i] for i in keep), ds.labels[1]), ds.faces, ds.uvs, ds.landmarks,
-                     ds.vertex_subset, dict(ds.provenance, holdout=holdout))
-    m = build_model(train, {"identity": 9, "expression": 6})
+                     ds.vertex_subset, dict(ds.provenance, holdout=ids[h]))
+    m = build_model(train, {"identity": ranks[0], "expression": ranks[1]})
     e_neu, e_exp = ds.labels[1].index("neutral"), ds.labels[1].index(expression)
     true_neutral, true_expr = ds.vertices[h, e_neu], ds.vertices[h, e_exp]
+    true_disp = true_expr - true_neutral
     w_neu = m.training_weights("expression", "neutral")
     w_exp = m.training_weights("expression", expression)
-    B = m.mode_basis("identity", {"identity": m.weight_mean("identity"), "expression": w_neu})  # Eq. (9)
+    # Eq. (9): with the expression fixed to "neutral" the model is linear in the identity weights
+    B = m.mode_basis("identity", {"identity": m.weight_mean("identity"), "expression": w_neu})
     w_id, *_ = np.linalg.lstsq(B.reshape(-1, B.shape[-1]), true_neutral.ravel(), rcond=None)
     fit_neutral = m.synthesize({"identity": w_id, "expression": w_neu})
     pred = m.synthesize({"identity": w_id, "expression": w_exp})
-    disp = np.linalg.norm(true_expr - true_neutral)
+    disp = np.linalg.norm(true_disp)
     generic = ds.vertices[ids.index("generic")]
-    additive = true_neutral + (generic[e_exp] - generic[e_neu])  # same offsets for every face
-    res = {
-        "holdout": holdout, "expression": expression, "train_identities": len(keep),
-        "ranks": {"identity": 9, "expression": 6},
+    avg_offset = np.mean(ds.vertices[keep, e_exp] - ds.vertices[keep, e_neu], axis=0)
+    return {
+        "holdout": ids[h],
         "displacement_norm_cm": float(disp),
         "rel_error_total": float(np.linalg.norm(pred - true_expr) / disp),
-        "rel_error_displacement": float(np.linalg.norm((pred - fit_neutral) - (true_expr - true_neutral)) / disp),
+        "rel_error_displacement": float(np.linalg.norm((pred - fit_neutral) - true_disp) / disp),
         "rel_error_neutral_fit": float(np.linalg.norm(fit_neutral - true_neutral) / disp),
-        "baseline_generic_offsets_rel_error": float(np.linalg.norm(additive - true_expr) / disp),
-        "max_vertex_error_cm": float(np.linalg.norm(pred - true_expr, axis=1).max()),
+        "baseline_generic_offsets": float(np.linalg.norm(generic[e_exp] - generic[e_neu] - true_disp) / disp),
+        "baseline_mean_training_offsets": float(np.linalg.norm(avg_offset - true_disp) / disp),
     }
-    print(f"separability ({expression}, held-out {holdout}): total {res['rel_error_total']:.3f}, "
-          f"displacement {res['rel_error_displacement']:.3f}, neutral fit {res['rel_error_neutral_fit']:.3f}, "
-          f"generic-offset baseline {res['baseline_generic_offsets_rel_error']:.3f} (of the "
-          f"{disp:.2f} cm displacement norm)")
-    return res
+
+
+def bench_separability(expression: str = "smile",
+                       rank_sets: tuple[tuple[int, int], ...] = ((9, 6), (9, 10))) -> dict:
+    """Leave-one-identity-out over every sampled identity of ict-bilinear (not the generic one).
+
+    Errors are relative to the held-out identity's true smile displacement norm
+    ``||smile - neutral||_F``: ``total`` compares the synthesized smile with the true one;
+    ``displacement`` compares synthesized smile minus synthesized neutral with the true
+    displacement (removing the error of fitting the neutral face); the baselines add one
+    displacement to every face (the generic face's, or the training identities' mean).
+    """
+    from facetransfer.datasets import build_ict_dataset
+
+    ds = build_ict_dataset("ict-bilinear")
+    out = {"expression": expression, "dataset": "ict-bilinear", "runs": {}}
+    for ranks in rank_sets:
+        rows = [_separability_one(ds, h, ranks, expression)
+                for h in range(len(ds.labels[0])) if ds.labels[0][h] != "generic"]
+        keys = [k for k in rows[0] if k not in ("holdout", "displacement_norm_cm")]
+        summary = {k: {"mean": float(np.mean([r[k] for r in rows])),
+                       "median": float(np.median([r[k] for r in rows])),
+                       "max": float(np.max([r[k] for r in rows]))} for k in keys}
+        label = f"identity={ranks[0]},expression={ranks[1]}"
+        out["runs"][label] = {"summary": summary, "per_holdout": rows}
+        print(f"separability ({expression}, leave-one-out over {len(rows)} identities, ranks {label}): "
+              + ", ".join(f"{k} {v['mean']:.3f}" for k, v in summary.items()) + " (mean, relative)")
+    return out
 
 
 # ------------------------------------------------------------------------------ plot
@@ -215,13 +241,18 @@ def plot(result: dict, path: Path) -> None:
     ax[1].set_title("90,000 x attribute modes, same ranks")
     ax[1].legend(fontsize=8)
     s = result["separability"]
-    names = ["model (total)", "model (displacement)", "neutral fit", "generic offsets"]
-    vals = [s["rel_error_total"], s["rel_error_displacement"], s["rel_error_neutral_fit"],
-            s["baseline_generic_offsets_rel_error"]]
-    ax[2].bar(names, vals, color=["#55a868", "#8fd19e", "#c0c0c0", "#c44e52"])
-    ax[2].set_ylabel("error / smile displacement norm")
-    ax[2].set_title(f"separability: held-out {s['holdout']} {s['expression']}")
-    ax[2].tick_params(axis="x", labelsize=8)
+    keys = ["rel_error_total", "rel_error_displacement", "rel_error_neutral_fit",
+            "baseline_generic_offsets", "baseline_mean_training_offsets"]
+    short = ["total", "displ.", "neutral fit", "generic offs.", "mean offs."]
+    runs = list(s["runs"].items())
+    x = np.arange(len(keys))
+    for j, (label, run) in enumerate(runs):
+        ax[2].bar(x + (j - (len(runs) - 1) / 2) * 0.38, [run["summary"][k]["mean"] for k in keys],
+                  0.38, label=label)
+    ax[2].set_xticks(x, short, fontsize=8)
+    ax[2].set_ylabel("error / smile displacement norm (mean)")
+    ax[2].set_title(f"separability: leave one identity out, {s['expression']}")
+    ax[2].legend(fontsize=7)
     fig.tight_layout()
     with atomic_path(path) as tmp:
         fig.savefig(tmp, dpi=110)
@@ -232,6 +263,8 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="out/benchmarks", help="output folder (default out/benchmarks)")
     p.add_argument("--reps", type=int, default=3, help="timing repetitions (best of)")
+    p.add_argument("--parts", default="builds,tensors,separability",
+                   help="comma-separated parts to run; others are kept from an existing model.json")
     p.add_argument("--child-build", help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     if a.child_build:
@@ -241,13 +274,24 @@ def main(argv=None) -> int:
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
-    result = {
-        "machine": {"python": platform.python_version(), "cpus": os.cpu_count(),
-                    "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS")},
-        "builds": bench_builds(),
-        "tensors": bench_tensors(a.reps),
-        "separability": bench_separability(),
-    }
+    parts = {x.strip() for x in a.parts.split(",") if x.strip()}
+    unknown = parts - {"builds", "tensors", "separability"}
+    if unknown:
+        p.error(f"unknown --parts {sorted(unknown)}")
+    old = out / "model.json"
+    result = json.loads(old.read_text()) if old.is_file() and parts != {"builds", "tensors", "separability"} else {}
+    result["machine"] = {"python": platform.python_version(), "cpus": os.cpu_count(),
+                         "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS"),
+                         "load_average_at_start": os.getloadavg()[0]}
+    if "builds" in parts:
+        result["builds"] = bench_builds()
+    if "tensors" in parts:
+        result["tensors"] = bench_tensors(a.reps)
+    if "separability" in parts:
+        result["separability"] = bench_separability()
+    missing = {"builds", "tensors", "separability"} - set(result)
+    if missing:
+        p.error(f"no earlier results for {sorted(missing)} in {old}; run them too")
     write_text_atomic(out / "model.json", json.dumps(result, indent=2))
     plot(result, out / "model.png")
     print(f"wrote {out / 'model.json'} and {out / 'model.png'}")

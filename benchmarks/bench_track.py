@@ -66,7 +66,8 @@ class CachedDetector:
 
     @staticmethod
     def key(frame):
-        return hashlib.blake2b(np.ascontiguousarray(frame[::7, ::7]).tobytes(), digest_size=16).digest()
+        data = np.ascontiguousarray(frame[::7, ::7]).tobytes()
+        return hashlib.blake2b(data, digest_size=16).digest()
 
     def detect(self, frame):
         k = self.key(frame)
@@ -241,22 +242,29 @@ def real_errors(L, ref):
 
 
 def jitter(L, ref, still):
-    """Mean |L[t+1] - 2 L[t] + L[t-1]| over the key points on still frames, / eye distance."""
+    """Mean |L[t+1] - 2 L[t] + L[t-1]| over the eye corners and nose on still frames, / eye
+    distance (the mouth moves while talking, so it is left out)."""
     iod = np.linalg.norm(ref[:, 36] - ref[:, 45], axis=1)
-    acc = np.linalg.norm(L[2:, KEY] - 2 * L[1:-1, KEY] + L[:-2, KEY], axis=2).mean(1) / iod[1:-1]
+    acc = L[2:, RIGID] - 2 * L[1:-1, RIGID] + L[:-2, RIGID]
+    acc = np.linalg.norm(acc, axis=2).mean(1) / iod[1:-1]
     m = still[1:-1] & np.isfinite(acc)
     return float(acc[m].mean()) if m.any() else float("nan")
 
 
+RIGID = [36, 39, 42, 45, 27, 30]            # eye corners and nose: move only with the head
+
+
 def still_frames(ref):
-    """Frames where the reference key points move less than 0.4 % of the eye distance a frame."""
+    """Frames where the head holds still: the reference eye corners and nose, averaged over 9
+    frames (MediaPipe's own jitter removed), move less than 0.3 % of the eye distance per
+    frame; the mouth may move."""
     from scipy.ndimage import uniform_filter1d
 
     iod = np.linalg.norm(ref[:, 36] - ref[:, 45], axis=1)
-    v = np.r_[np.nan, np.linalg.norm(np.diff(ref[:, KEY], axis=0), axis=2).mean(1) / iod[1:]]
-    v = np.nan_to_num(v, nan=1.0)
-    vs = uniform_filter1d(v, 5)
-    return vs < 0.004
+    P = uniform_filter1d(np.nan_to_num(ref[:, RIGID]), 9, axis=0, mode="nearest")
+    v = np.r_[np.nan, np.linalg.norm(np.diff(P, axis=0), axis=2).mean(1) / iod[1:]]
+    v[~np.isfinite(v)] = 1.0
+    return v < 0.003
 
 
 def bench_real(model, data, max_frames, log, det, passes):
@@ -294,7 +302,8 @@ def bench_real(model, data, max_frames, log, det, passes):
                 tr = track_video(frames, model, init="auto", detector=cd,
                                  options=TrackOptions(passes=passes, anchor=anchor))
             k, i, ok = real_errors(tr.landmarks2d, ref)
-            res[label] = {"key_frac_iod": float(np.nanmean(k)), "inner_frac_iod": float(np.nanmean(i)),
+            res[label] = {"key_frac_iod": float(np.nanmean(k)),
+                          "inner_frac_iod": float(np.nanmean(i)),
                           "key_frac_iod_first100": float(np.nanmean(k[:100])),
                           "key_frac_iod_last100": float(np.nanmean(k[-100:])),
                           "jitter_frac_iod": jitter(tr.landmarks2d, ref, still),
@@ -303,6 +312,12 @@ def bench_real(model, data, max_frames, log, det, passes):
                           "reinitialised": len(tr.info["reinitialised"]),
                           "seconds_wall": c.wall, "seconds_cpu": c.cpu, "passes": passes}
             curves[name][label] = k.tolist()
+            if anchor:   # zero-phase smoothing of the same run (no lag), sigma 1.5 frames
+                Ls = smoothed_landmarks(model, tr, 1.5)
+                ks, i_s, _ = real_errors(Ls, ref)
+                res["tracker_anchor_smooth"] = {
+                    "key_frac_iod": float(np.nanmean(ks)), "inner_frac_iod": float(np.nanmean(i_s)),
+                    "jitter_frac_iod": jitter(Ls, ref, still), "sigma_frames": 1.5}
             log(f"{name} {label}: key {res[label]['key_frac_iod']:.3f} IOD, jitter "
                 f"{res[label]['jitter_frac_iod']:.4f}, {c.wall:.0f} s")
             if name == "driving_d6" and anchor:
@@ -322,6 +337,18 @@ def bench_real(model, data, max_frames, log, det, passes):
         log(f"{name} LK: key {res['lk_baseline']['key_frac_iod']:.3f} IOD")
         out[name] = res
     return out, curves
+
+
+def smoothed_landmarks(model, tr, sigma):
+    """Landmarks of a track after :func:`facetransfer.track.tracker.smooth_track`."""
+    from facetransfer.track.tracker import smooth_track
+
+    R, s, t, w = smooth_track(tr.rotation, tr.scale, tr.translation, tr.weights, sigma,
+                              constant=("identity",))
+    X = model.synthesize(w, vertices=model.landmarks)
+    Y = np.einsum("fij,fnj->fni", R[:, :2], X) * s[:, None, None]
+    Y[..., 1] *= -1
+    return Y + t[:, None, :]
 
 
 # ------------------------------------------------------------------------------ 3. speed
@@ -354,7 +381,8 @@ def bench_speed(model, det, log, n_frames=60):
                "seconds_wall": c.wall, "seconds_cpu": c.cpu, "frame_pairs": n_pairs,
                "ms_per_pair_wall": 1000 * tm.get("pair", 0) / max(n_pairs, 1),
                "solve_ms_per_pair": 1000 * tm.get("solve", 0) / max(n_pairs, 1),
-               "solve_ms_per_system": 1000 * tm.get("solve", 0) / max(tr.info["counts"]["solve"], 1),
+               "solve_ms_per_system": 1000 * tm.get("solve", 0)
+               / max(tr.info["counts"]["solve"], 1),
                "systems_per_pair": tr.info["counts"]["solve"] / max(n_pairs, 1),
                "klt_terms_ms_per_pair": 1000 * tm.get("terms", 0) / max(n_pairs, 1),
                "select_ms_per_pair": 1000 * tm.get("select", 0) / max(n_pairs, 1),
@@ -367,8 +395,9 @@ def bench_speed(model, det, log, n_frames=60):
         log(f"speed {label}: {res['fps_wall']:.1f} fps wall ({res['fps_cpu']:.1f} fps CPU), "
             f"solve {res['solve_ms_per_system']:.2f} ms per system (wall)")
     out["micro_cpu"] = micro_cpu(model, frames, L0)
-    log(f"speed CPU per frame pair {out['micro_cpu']['pair_ms_cpu']:.1f} ms, per system "
-        f"{out['micro_cpu']['system_ms_cpu']:.3f} ms, KLT terms {out['micro_cpu']['klt_ms_cpu']:.2f} ms")
+    mc = out["micro_cpu"]
+    log(f"speed CPU per frame pair {mc['pair_ms_cpu']:.1f} ms, per system "
+        f"{mc['system_ms_cpu']:.3f} ms, KLT terms {mc['klt_ms_cpu']:.2f} ms")
     with Clock() as c:
         for fr in frames:
             det.detect(fr)
@@ -388,7 +417,7 @@ def micro_cpu(model, frames, L0, reps=30):
     evaluation, repeated on a fixed pair (so the machine's load does not enter)."""
     from facetransfer.track.camera import project
     from facetransfer.track.init import fit_landmarks
-    from facetransfer.track.klt import klt_terms_at, level_coords, sample_windows
+    from facetransfer.track.klt import klt_terms_at, sample_windows
     from facetransfer.track.solver import solve_step
     from facetransfer.track.tracker import FaceTracker, TrackOptions
 
@@ -422,7 +451,8 @@ def micro_cpu(model, frames, L0, reps=30):
     system = c.cpu / (reps * 10)
     return {"pair_ms_cpu": 1000 * pair, "select_ms_cpu": 1000 * select,
             "klt_ms_cpu": 1000 * klt, "system_ms_cpu": 1000 * system,
-            "n_points": int(sel.size), "systems_in_pair": tr.counts.get("solve", 0) / max(tr.counts.get("pair", 1), 1)}
+            "n_points": int(sel.size),
+            "systems_in_pair": tr.counts.get("solve", 0) / max(tr.counts.get("pair", 1), 1)}
 
 
 # ------------------------------------------------------------------------------ outputs
@@ -499,7 +529,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--synthetic-frames", type=int, default=60)
     ap.add_argument("--passes", type=int, default=2, help="passes on real clips")
-    ap.add_argument("--skip", default="", help="comma list of sections to skip: synthetic,real,speed")
+    ap.add_argument("--skip", default="",
+                    help="comma list of sections to skip: synthetic,real,speed")
     args = ap.parse_args(argv)
     from facetransfer.track.init import MediaPipeDetector
 
@@ -531,6 +562,14 @@ def main(argv=None) -> int:
             results["real"] = real
             if tr is not None:
                 overlay_picture(model, tr, data, out / "track_overlay.png", args.max_frames)
+    prev = out / "track.json"
+    if skip and prev.is_file():   # keep the sections of an earlier run that were skipped now
+        old = json.loads(prev.read_text())
+        for sec in ("speed", "synthetic", "real"):
+            if sec in skip and sec in old:
+                results[sec] = old[sec]
+        if "real" in skip and "drift_curves_driving_d6" in old:
+            curves = {"driving_d6": old["drift_curves_driving_d6"]}
     results["machine"]["load_avg_end"] = os.getloadavg()
     results["seconds_total"] = time.perf_counter() - t0
     results["drift_curves_driving_d6"] = curves.get("driving_d6", {})

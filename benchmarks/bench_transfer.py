@@ -154,6 +154,7 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
             "tracked_constant_fast": (tr_a, tr_b, "constant", "fast"),
             "tracked_frame_poisson": (tr_a, tr_b, "frame", "poisson"),
             "truth_tracks_frame_fast": (truth_a, truth_b, "frame", "fast"),
+            "truth_tracks_constant_fast": (truth_a, truth_b, "constant", "fast"),
     }.items():
         t0 = time.perf_counter()
         new, outs = run(ta, tb, tex, bl)

@@ -163,3 +163,25 @@ def test_real_mirror_assets(data_dir, monkeypatch):
     assert (lps / "LeePerrySmith.glb").is_file() and (lps / "Map-COL.jpg").is_file()
     vi = assets.asset_file("ict-facekit", "vertex_indices.json")
     assert len(json.loads(vi.read_text())["idx_to_landmark_verts"]) == 68
+
+
+def test_download_progress_callback(env):
+    seen = []
+    p = assets.asset_file("fake", "sub/b.bin", progress=lambda done, total: seen.append((done, total)))
+    assert p.stat().st_size == 2560
+    assert seen and seen[-1][0] == 2560 and all(t in (0, 2560) for _, t in seen)
+
+
+def test_incomplete_mirror_folder_is_completed_in_cache(env):
+    mirror = env["tmp"] / "mirror"
+    (mirror / "fake-mirror").mkdir(parents=True)
+    (mirror / "fake-mirror" / "a.txt").write_bytes(b"hello asset\n")  # sub/b.bin missing
+    env["monkeypatch"].setenv("FACETRANSFER_DATA_DIR", str(mirror))
+    p = assets.asset_path("fake")
+    assert p == env["tmp"] / "cache" / "facetransfer" / "assets" / "fake"
+    assert (p / "a.txt").read_bytes() == b"hello asset\n"  # copied from the mirror
+    assert (p / "sub" / "b.bin").read_bytes() == bytes(range(256)) * 10  # downloaded
+    (p / "sub" / "b.bin").unlink()
+    env["monkeypatch"].setenv("FACETRANSFER_OFFLINE", "1")
+    with pytest.raises(AssetError, match=r"put the file at .*fake-mirror/sub/b.bin"):
+        assets.asset_path("fake")

@@ -129,7 +129,7 @@ def test_missing_cells_are_imputed_and_recorded(tmp_path, capsys, monkeypatch):
     """The CLI hands missing cells to facetransfer.impute and records what was filled."""
     calls = []
 
-    def impute_dataset(ds, *, method, rng):
+    def impute_dataset(ds, *, method, rng, progress=None):
         calls.append(method)
         v = ds.vertices.copy()
         mean = np.nanmean(v, axis=0)  # per-expression average over identities
@@ -184,3 +184,34 @@ def test_build_ict_with_default_ranks(data_dir, tmp_path, capsys, monkeypatch):
     assert m.landmarks is not None and m.landmarks.shape == (68,)
     code, o, _ = run(capsys, "model", "info", out)
     assert "mode expression: 10 training entries, rank 6" in o
+
+
+def test_fallback_painter_matches_renderer_silhouette(model_path):
+    """The private matplotlib fallback draws the same face region as facetransfer.render."""
+    from facetransfer.cli.model import TILE, _camera, _fallback_render, _render_tile
+
+    m = load_model(model_path)
+    v = m.synthesize(m.default_weights())
+    cam = _camera(v, TILE)
+    a = _render_tile(v, m.faces, cam, TILE)
+    b = _fallback_render(v, m.faces, cam, TILE)
+    assert a.shape == b.shape == (TILE[1], TILE[0], 3)
+    ma, mb = a.min(axis=2) < 250, b.min(axis=2) < 250
+    iou = (ma & mb).sum() / (ma | mb).sum()
+    assert ma.sum() > 500 and iou > 0.85, iou
+
+
+def test_missing_cells_with_real_imputation(tmp_path, capsys):
+    pytest.importorskip("facetransfer.impute")
+    cells = [(i, e) for i in range(4) for e in range(3) if (i, e) != (1, 2)]
+    man = make_manifest(tmp_path / "d", cells)
+    out = tmp_path / "m.npz"
+    code, _, err = run(capsys, "model", "build", "--dataset", man, "--out", out)  # default ppca
+    assert code == 0, err
+    assert "imputed 1 missing cells (ppca)" in err
+    m = load_model(out)
+    assert m.imputed[1, 2] and m.imputed.sum() == 1
+    # the generated data are exactly of multilinear rank (2, 2): the fill is the true mesh
+    filled = m.synthesize(m.like(identity="id1", expression="ex2"))
+    truth = cell_vertices(1, 2)
+    assert np.linalg.norm(filled - truth) / np.linalg.norm(truth) < 1e-3

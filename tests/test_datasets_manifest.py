@@ -83,12 +83,16 @@ def test_vertex_count_mismatch_names_file_and_counts(tmp_path):
     ("", MeshError, "is empty"),
     ("hello\n", MeshError, "no vertices"),
 ])
-def test_bad_mesh_files(tmp_path, content, err, pattern):
+@pytest.mark.parametrize("first", [False, True])
+def test_bad_mesh_files(tmp_path, content, err, pattern, first):
     p = make_manifest(tmp_path, [(0, 0), (1, 0)])
     (tmp_path / "bad.obj").write_text(content)
-    p.write_text(p.read_text() + "bad.obj,id1,ex1\n")
-    with pytest.raises(err, match=pattern):
+    head, *rows = p.read_text().splitlines()
+    rows = ["bad.obj,id1,ex1"] + rows if first else rows + ["bad.obj,id1,ex1"]
+    p.write_text("\n".join([head] + rows) + "\n")
+    with pytest.raises(err, match=pattern) as ei:
         read_manifest(p)
+    assert "bad.obj" in str(ei.value)
 
 
 def test_missing_mesh_file(tmp_path):

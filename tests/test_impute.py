@@ -304,6 +304,13 @@ def test_nan_in_a_known_cell_is_rejected(small_ds):
         im.impute_dataset(bad)
 
 
+def test_too_many_cells_is_a_clear_error():
+    mask = np.ones((61, 50), bool)
+    mask[0, 0] = False
+    with pytest.raises(DatasetError, match="at most 3000 cells"):
+        im.impute_tensor(np.zeros((3, 61, 50)), mask)
+
+
 def test_bad_options():
     T = bilinear_faces(n_id=4, n_expr=3, P=30, ranks=(2, 2))
     mask = np.ones((4, 3), bool)

@@ -29,9 +29,9 @@ def test_tracking_follows_the_synthetic_face(quick_model, clip):
     assert isinstance(tr, Track) and tr.n_frames == 20 and tr.frame_size == (320, 240)
     err = np.linalg.norm(tr.landmarks2d - T.landmarks2d, axis=2).mean(axis=1)   # (F,) px
     iod = np.linalg.norm(T.landmarks2d[:, 36] - T.landmarks2d[:, 45], axis=1)   # ~60 px
-    # measured: 0.5-0.8 px on every frame (identity unknown, from 68 exact landmarks)
+    # measured: 0.3-0.45 px on every frame (identity unknown, from 68 exact landmarks)
     assert err.max() < 1.5 and (err / iod).max() < 0.025
-    # the face does not drift: the last frame is as good as the first (measured +0.0 px)
+    # little drift: the last frame is about as good as the first (measured +0.17 px)
     assert err[-1] < err[0] + 0.5
     # the identity is one vector for the clip
     assert np.all(tr.weights["identity"] == tr.weights["identity"][0])
@@ -40,15 +40,20 @@ def test_tracking_follows_the_synthetic_face(quick_model, clip):
 
 
 def test_expression_weights_are_recovered_with_a_known_identity(quick_model, clip):
+    """With the identity known and a weak prior the expression weights follow the truth.
+
+    (The default prior, 10x stronger, is tuned for real footage where it keeps the expression
+    plausible; on this clip it biases the weights toward neutral by up to 0.2.)
+    """
     T = clip.truth
     tr = track_video(clip.frames, quick_model, init=T.landmarks2d[0],
                      fixed={"identity": T.weights["identity"][0]},
-                     options=TrackOptions(passes=1, recover=False, snap_frames=0))
+                     options=TrackOptions(passes=1, recover=False, snap_frames=0, prior=0.002))
     err = np.linalg.norm(tr.landmarks2d - T.landmarks2d, axis=2).mean(axis=1)
-    assert err.max() < 1.0                                # measured 0.26 px
+    assert err.max() < 1.0                                # measured 0.25 px
     w_err = np.abs(tr.weights["expression"] - T.weights["expression"]).max(axis=1)
     w_range = np.abs(T.weights["expression"] - T.weights["expression"][0]).max()  # 0.53
-    assert w_err.max() < 0.15                             # measured 0.10
+    assert w_err.max() < 0.15                             # measured 0.07
     assert w_err.max() < 0.3 * w_range
     dR = np.einsum("fij,fkj->fik", tr.rotation, T.rotation)
     ang = np.degrees(np.arccos(np.clip((np.trace(dR, axis1=1, axis2=2) - 1) / 2, -1, 1)))
@@ -70,3 +75,56 @@ def test_zero_phase_smoothing_has_no_lag():
     lag = np.argmax(np.correlate(w2["expression"][:, 0], w["expression"][:, 0], "full")) - (F - 1)
     assert lag == 0
     assert np.array_equal(w2["identity"], w["identity"])
+
+
+class TruthDetector:
+    """Stands in for MediaPipe: the true landmarks of each frame, found by content."""
+
+    def __init__(self, frames, landmarks, offset=(0.0, 0.0)):
+        import hashlib
+
+        self._key = lambda f: hashlib.sha1(np.ascontiguousarray(f).tobytes()).hexdigest()
+        self.table = {self._key(f): L + np.asarray(offset) for f, L in zip(frames, landmarks)}
+        self.calls = 0
+
+    def detect(self, frame):
+        self.calls += 1
+        return self.table.get(self._key(frame))
+
+
+@pytest.fixture(scope="module")
+def jump_clip(quick_model):
+    """20 frames; at frame 10 the head jumps 70 px right and 25 px down (a cut)."""
+    perf = random_performance(quick_model, 20, seed=4, size=(320, 240), fps=25, fill=0.7)
+    perf.translation[10:] += np.array([70.0, 25.0])
+    return make_clip(quick_model, perf, seed=4)
+
+
+def test_lost_face_is_marked_and_recovered_from_the_detector(quick_model, jump_clip):
+    T = jump_clip.truth
+    opt = TrackOptions(passes=1)
+    tr = track_video(jump_clip.frames, quick_model, init=T.landmarks2d[0], options=opt)
+    err = np.linalg.norm(tr.landmarks2d - T.landmarks2d, axis=2).mean(axis=1)
+    assert not tr.lost[:10].any() and err[:10].max() < 1.5
+    assert tr.lost[10:].all()             # no detector: lost from the cut to the end
+    assert np.all(tr.confidence[10:] == 0)
+    det = TruthDetector(jump_clip.frames, T.landmarks2d)
+    tr = track_video(jump_clip.frames, quick_model, init=T.landmarks2d[0], options=opt,
+                     detector=det)
+    err = np.linalg.norm(tr.landmarks2d - T.landmarks2d, axis=2).mean(axis=1)
+    assert tr.info["reinitialised"] == [10] and not tr.lost.any()
+    assert err.max() < 1.5                # measured 0.4 px after the re-initialisation
+
+
+def test_anchoring_pulls_a_misaligned_start_back(quick_model, clip):
+    T = clip.truth
+    L0 = T.landmarks2d[0] + np.array([4.0, -3.0])   # a 5-pixel misplaced initialisation
+    det = TruthDetector(clip.frames, T.landmarks2d)
+    errs = {}
+    for anchor in (False, True):
+        tr = track_video(clip.frames, quick_model, init=L0, detector=det,
+                         options=TrackOptions(passes=1, snap_frames=0, anchor=anchor,
+                                              anchor_weight=0.2))
+        errs[anchor] = np.linalg.norm(tr.landmarks2d - T.landmarks2d, axis=2).mean(axis=1)
+    assert errs[False][-1] > 3.0                    # the flow keeps the offset (measured 5.3)
+    assert errs[True][-1] < 0.5 * errs[False][-1]   # the anchor removes most of it (0.8)

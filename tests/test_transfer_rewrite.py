@@ -213,3 +213,13 @@ def test_landmark_track_recovers_pose_and_marks_lost(quick_model):
     np.testing.assert_allclose(fit.scale[:3], 6.0, rtol=0.1)
     with pytest.raises(Exception, match="no face"):
         rw.landmark_track(m, np.full((2, 68, 2), np.nan), fps=25.0, size=(200, 200))
+
+
+def test_nearest_frames_picks_closest_valid_row():
+    bank = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 5.0]])
+    q = np.array([[0.9, 0.1], [0.1, 0.8], [4.0, 4.0]])
+    np.testing.assert_array_equal(rw.nearest_frames(q, bank), [1, 2, 3])
+    valid = np.array([True, True, True, False])
+    np.testing.assert_array_equal(rw.nearest_frames(q, bank, valid), [1, 2, 1])
+    with pytest.raises(rw.RewriteError, match="all lost"):
+        rw.nearest_frames(q, bank, np.zeros(4, bool))

@@ -26,6 +26,7 @@ import hashlib
 import json
 import logging
 import os
+import shutil
 import threading
 import urllib.error
 import urllib.request
@@ -35,6 +36,7 @@ from pathlib import Path
 from typing import Callable, Iterable, Mapping
 
 from .errors import AssetError
+from .io.atomic import atomic_path
 
 log = logging.getLogger(__name__)
 
@@ -49,6 +51,7 @@ __all__ = [
     "data_dir",
     "fetch",
     "sha256_file",
+    "set_download_progress",
     "verify_file",
 ]
 
@@ -174,6 +177,19 @@ REGISTRY: dict[str, Asset] = _registry()
 # (realpath, size, mtime_ns) -> sha256 hex, for files already hashed in this process
 _VERIFIED: dict[tuple[str, int, int], str] = {}
 _LOCK = threading.Lock()
+# progress shown for downloads when the caller passes none (the CLI turns it on)
+_DEFAULT_PROGRESS: bool = False
+_ANNOUNCED: set[str] = set()
+
+
+def set_download_progress(enabled: bool) -> None:
+    """Show (or hide) a tqdm progress bar for downloads made without an explicit ``progress``.
+
+    Library code never prints; the command-line interface calls this so that a first-use
+    download of a large asset is visible.
+    """
+    global _DEFAULT_PROGRESS
+    _DEFAULT_PROGRESS = bool(enabled)
 
 
 def data_dir() -> Path | None:
@@ -244,7 +260,8 @@ def _mirror_location(asset: Asset, f: AssetFile) -> Path | None:
 
 
 def fetch(url: str, dest: str | os.PathLike, sha256: str, *, name: str = "",
-          progress: bool | Callable[[int, int], None] = False, timeout: float = 60.0) -> Path:
+          progress: bool | Callable[[int, int], None] = False, timeout: float = 60.0,
+          hint: str = _MIRROR_HINT) -> Path:
     """Download ``url`` to ``dest`` (atomically) and check its sha256.
 
     Parameters
@@ -259,6 +276,8 @@ def fetch(url: str, dest: str | os.PathLike, sha256: str, *, name: str = "",
         Asset name for messages.
     progress : bool or callable
         True shows a tqdm bar; a callable gets ``(bytes_done, bytes_total)``.
+    hint : str
+        How to provide the file otherwise, appended to error messages.
 
     Raises
     ------
@@ -270,7 +289,7 @@ def fetch(url: str, dest: str | os.PathLike, sha256: str, *, name: str = "",
     label = name or dest.name
     if os.environ.get(OFFLINE_ENV, "").strip() not in ("", "0"):
         raise AssetError(f"asset {label!r} is not available offline ({OFFLINE_ENV} is set); "
-                         f"it is downloaded from {url}; {_MIRROR_HINT}")
+                         f"it is downloaded from {url}; {hint}")
     tmp = dest.with_name(f".{dest.name}.{os.getpid()}.part")
     h = hashlib.sha256()
     bar = None
@@ -297,7 +316,7 @@ def fetch(url: str, dest: str | os.PathLike, sha256: str, *, name: str = "",
     except (urllib.error.URLError, OSError, ValueError) as exc:
         tmp.unlink(missing_ok=True)
         reason = getattr(exc, "reason", None) or exc
-        raise AssetError(f"asset {label!r}: cannot download {url} ({reason}); {_MIRROR_HINT}") from None
+        raise AssetError(f"asset {label!r}: cannot download {url} ({reason}); {hint}") from None
     finally:
         if bar is not None:
             bar.close()
@@ -311,10 +330,22 @@ def fetch(url: str, dest: str | os.PathLike, sha256: str, *, name: str = "",
     return dest
 
 
+def _hint(mirror: Path | None) -> str:
+    if mirror is None:
+        return _MIRROR_HINT
+    return f"or put the file at {mirror} ({DATA_DIR_ENV}={data_dir()})"
+
+
 def _resolve_file(asset: Asset, f: AssetFile, *, download: bool,
-                  progress: bool | Callable[[int, int], None]) -> Path:
+                  progress: bool | Callable[[int, int], None] | None,
+                  into_cache: bool = False) -> Path:
+    """Verified path of one file: mirror, else cache, else download into the cache.
+
+    With ``into_cache`` the result is always in the cache (a mirror copy is copied there), so
+    that a folder asset can be assembled in one place.
+    """
     mirror = _mirror_location(asset, f)
-    if mirror is not None and mirror.is_file():
+    if not into_cache and mirror is not None and mirror.is_file():
         if not verify_file(mirror, f.sha256):
             raise AssetError(f"asset {asset.name!r}: mirror file {mirror} fails its sha256 check "
                              f"(expected {f.sha256}); replace it with the file from {f.url}")
@@ -327,16 +358,27 @@ def _resolve_file(asset: Asset, f: AssetFile, *, download: bool,
         os.replace(cached, bad)
         log.warning("asset %s: cached %s failed its sha256 check; moved to %s", asset.name,
                     cached, bad)
+    if into_cache and mirror is not None and mirror.is_file() and verify_file(mirror, f.sha256):
+        cached.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(cached) as tmp:
+            shutil.copyfile(mirror, tmp)
+        return cached
     if not download:
         where = f"{mirror}" if mirror is not None else f"{DATA_DIR_ENV} (unset)"
         raise AssetError(f"asset {asset.name!r} file {f.relpath!r} is missing (looked in {where} "
-                         f"and {cached}); download it from {f.url} or {_MIRROR_HINT}")
+                         f"and {cached}); download it from {f.url} {_hint(mirror)}")
+    if asset.name not in _ANNOUNCED:
+        _ANNOUNCED.add(asset.name)
+        log.warning("asset %s is not in %s or the cache; downloading it from %s into %s",
+                    asset.name, DATA_DIR_ENV, asset.source or f.url, cache_dir() / "assets")
     log.info("downloading %s from %s", asset.name, f.url)
-    return fetch(f.url, cached, f.sha256, name=asset.name, progress=progress)
+    if progress is None:
+        progress = _DEFAULT_PROGRESS
+    return fetch(f.url, cached, f.sha256, name=asset.name, progress=progress, hint=_hint(mirror))
 
 
 def asset_file(name: str, relpath: str | None = None, *, download: bool = True,
-               progress: bool | Callable[[int, int], None] = False) -> Path:
+               progress: bool | Callable[[int, int], None] | None = None) -> Path:
     """Path of one verified file of an asset (fetched if needed).
 
     Parameters
@@ -347,6 +389,9 @@ def asset_file(name: str, relpath: str | None = None, *, download: bool = True,
         File inside the asset (e.g. ``"jawOpen.obj"``); optional for single-file assets.
     download : bool
         Allow downloading into the cache when neither the mirror nor the cache has it.
+    progress : bool or callable, optional
+        Download progress: True for a tqdm bar, a callable for ``(done, total)`` bytes; default
+        as set by :func:`set_download_progress` (off).
 
     Raises
     ------
@@ -364,7 +409,7 @@ def asset_file(name: str, relpath: str | None = None, *, download: bool = True,
 
 
 def asset_files(name: str, relpaths: Iterable[str] | None = None, *, download: bool = True,
-                progress: bool | Callable[[int, int], None] = False) -> dict[str, Path]:
+                progress: bool | Callable[[int, int], None] | None = None) -> dict[str, Path]:
     """Verified paths of several files of an asset (all of them by default)."""
     asset = _get(name)
     rels = [f.relpath for f in asset.files] if relpaths is None else list(relpaths)
@@ -372,7 +417,7 @@ def asset_files(name: str, relpaths: Iterable[str] | None = None, *, download: b
 
 
 def asset_path(name: str, *, download: bool = True,
-               progress: bool | Callable[[int, int], None] = False) -> Path:
+               progress: bool | Callable[[int, int], None] | None = None) -> Path:
     """Location of an asset: the file (single-file assets) or the folder holding all its files.
 
     A folder asset is complete and verified when this returns: in the mirror when the mirror has
@@ -394,10 +439,8 @@ def asset_path(name: str, *, download: bool = True,
         for f in asset.files:
             _resolve_file(asset, f, download=False, progress=False)
         return mirror
-    for f in asset.files:
-        cached = _cache_location(asset, f)
-        if not (cached.is_file() and verify_file(cached, f.sha256)):
-            _resolve_file(asset, f, download=download, progress=progress)
+    for f in asset.files:  # assemble the complete folder in the cache
+        _resolve_file(asset, f, download=download, progress=progress, into_cache=True)
     return cache_dir() / "assets" / asset.name
 
 

@@ -2,7 +2,7 @@
 
 1. the default model: the bilinear ICT-FaceKit model (``ict-bilinear``, the recipe ranks), built
    once and cached in the user cache (``~/.cache/facetransfer/models``);
-2. two clips of the data folder (``$FACETRANSFER_DATA_DIR/video``): ``driving_d9.mp4`` gives the
+2. two clips of the data folder (``$FACETRANSFER_DATA_DIR/video``): ``driving_d6.mp4`` gives the
    expressions, ``WDA_KatieHill_000.mp4`` is the target footage (without a data folder, two
    synthetic clips of :mod:`facetransfer.synth` stand in);
 3. both are tracked (§5; a landmark-only fit if the optical-flow tracker fails), the source's
@@ -30,7 +30,7 @@ __all__ = ["DEFAULT_SOURCE", "DEFAULT_TARGET", "DemoResult", "default_model_path
            "ensure_default_model", "default_inputs", "synthetic_inputs", "side_by_side",
            "contact_sheet", "run_demo"]
 
-DEFAULT_SOURCE = "driving_d9.mp4"
+DEFAULT_SOURCE = "driving_d6.mp4"  # strong expressions: the mouth opens and closes
 DEFAULT_TARGET = "WDA_KatieHill_000.mp4"
 DEFAULT_DATASET = "ict-bilinear"
 
@@ -87,7 +87,7 @@ def default_inputs() -> tuple[Path, Path]:
     root = data_dir()
     if root is None:
         raise AssetError("the demo clips live in the data folder: set FACETRANSFER_DATA_DIR to "
-                         "the offline mirror (it has video/driving_d9.mp4 and "
+                         "the offline mirror (it has video/driving_d6.mp4 and "
                          "video/WDA_KatieHill_000.mp4)")
     src, tgt = Path(root) / "video" / DEFAULT_SOURCE, Path(root) / "video" / DEFAULT_TARGET
     for p in (src, tgt):

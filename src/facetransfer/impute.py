@@ -128,6 +128,9 @@ METHODS = ("ppca", "average", "naive", "tensorly")
 #: Variants :func:`evaluate_imputation` also accepts: the paper's scheme with face regions.
 EVAL_VARIANTS = {"ppca-mouth": {"regions": "mouth"}, "ppca-regions8": {"regions": 8}}
 
+#: Largest number of cells :func:`impute_tensor` accepts (it builds N × N matrices).
+MAX_CELLS = 3000
+
 #: Relative eigenvalue floor of the mode covariances (keeps them invertible; exact data).
 _FLOOR = 1e-10
 
@@ -593,6 +596,10 @@ def impute_tensor(tensor: np.ndarray, mask: np.ndarray, *, ranks=None,
         n_eff = float(w.sum())
     if not missing.any():
         return TensorImputation(T.copy(), (), 0, True, ())
+    if mask.size > MAX_CELLS:
+        raise DatasetError(f"{mask.size} cells {shape}: the §4.4 solver builds cells × cells "
+                           f"matrices and supports at most {MAX_CELLS} cells; use method "
+                           f"'average' for larger data sets")
     K = len(shape)
     N = mask.size
     nm = int(missing.sum())
@@ -902,7 +909,11 @@ def tensorly_impute(tensor: np.ndarray, mask: np.ndarray, *, ranks: Sequence[int
         Tucker ranks of the attribute modes (default ``ceil(d_k / 2)``, the best of a sweep on
         ict-trilinear: ``d_k - 1`` and ``ceil(d_k / 4)`` did worse).
     """
-    from tensorly.decomposition import partial_tucker  # benchmark/test dependency only
+    try:
+        from tensorly.decomposition import partial_tucker  # benchmark/test dependency only
+    except ImportError:
+        raise ValueError("method 'tensorly' needs the tensorly package (pip install tensorly; "
+                         "it is in the 'bench' and 'test' extras)") from None
 
     mask = validate_mask(mask, np.shape(tensor)[1:], mode_names=mode_names, labels=labels)
     T = _check_tensor(tensor, mask)

@@ -320,6 +320,43 @@ def constant_face_texture(frames, track, model, topo: MeshTopology, *,
     return FaceTexture(img, frame_uvs(V, track.camera(i), (img.shape[1], img.shape[0])), i)
 
 
+def merged_face_texture(frames, track, model, topo: MeshTopology, *, n_samples: int = 8,
+                        tex_size: int = 1024) -> FaceTexture:
+    """The target's face texture merged over several frames in the model's UV layout (§6).
+
+    ``n_samples`` frames spread over the clip (face not lost) are lifted into a UV texture
+    (:func:`facetransfer.texture.lift_uv_texture`, each texel weighted by visibility and
+    obliqueness) and merged (:func:`facetransfer.texture.merge_textures`): "the face texture
+    from the target video (constant throughout the sequence)". The closing vertex of the mouth
+    takes the mean UV of the inner-lip loop (the mouth itself is textured from the source).
+
+    Returns
+    -------
+    FaceTexture
+        ``frame = -1``.
+    """
+    from .texture import lift_uv_texture, merge_textures, texture_to_uint8, uv_atlas
+
+    if model.uvs is None:
+        raise RewriteError("the model has no UVs: use the reference-frame texture")
+    n = min(len(frames), track.n_frames)
+    good = np.flatnonzero(~track.lost[:n])
+    if good.size == 0:
+        raise RewriteError(f"the face is lost in every frame of {track.source or 'the target'}")
+    pick = np.unique(good[np.linspace(0, good.size - 1, min(n_samples, good.size))
+                          .round().astype(int)])
+    faces = np.asarray(model.faces)
+    atlas = uv_atlas(faces, model.uvs, tex_size)
+    lifted = [lift_uv_texture(np.asarray(frames[i]), model.synthesize(track.weights_at(i)),
+                              faces, model.uvs, track.camera(i), tex_size, atlas=atlas)
+              for i in pick]
+    img = texture_to_uint8(merge_textures(lifted).texture)
+    uvs = np.asarray(model.uvs, np.float64)
+    if topo.mouth_loop.size:
+        uvs = np.vstack([uvs, uvs[topo.mouth_loop].mean(axis=0)])
+    return FaceTexture(img, uvs, -1)
+
+
 def _shade(raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,
            select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Texture the pixels of a raster: ``(image (H, W, 3) uint8, mask (H, W) bool)``.
@@ -554,7 +591,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
 def rewrite_frames(target_frames, target_track, new_track, model, *, source_frames=None,
                    source_track=None, source_index: np.ndarray | None = None,
                    texture: str = "frame", blend: str = "fast", feather: float = 2.0,
-                   topo: MeshTopology | None = None,
+                   topo: MeshTopology | None = None, workers: int | None = None,
                    progress: Callable[[int], None] | None = None) -> Iterator[RewriteFrame]:
     """Rewrite every target frame with the new performance (§6, Fig. 7).
 
@@ -579,6 +616,9 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         ``benchmarks/bench_transfer.py``) or one for the whole clip (the paper's choice).
     blend, feather
         See :func:`rewrite_frame`.
+    workers : int, optional
+        Threads rendering frames in parallel (default: 2, or 1 on a single CPU); the output
+        order and values do not depend on it.
     progress : callable(int), optional
         Called with 1 after each frame.
 
@@ -606,19 +646,20 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         raise RewriteError(f"the source track has {source_track.n_frames} frames, fewer than {n}")
     sidx = np.arange(n) if source_index is None else np.asarray(source_index, np.int64)
     topo = mesh_topology(model) if topo is None else topo
-    const_tex = constant_face_texture(target_frames, target_track, model, topo) \
-        if texture == "constant" and not target_track.lost.all() else None
+    const_tex = None
+    if texture == "constant" and not target_track.lost.all():
+        const_tex = merged_face_texture(target_frames, target_track, model, topo) \
+            if model.uvs is not None else constant_face_texture(target_frames, target_track,
+                                                               model, topo)
     names = model.mode_names
-    for i in range(n):
+
+    def one(i: int) -> RewriteFrame:
         frame = np.asarray(target_frames[i])
         if frame.shape != first.shape:
             raise RewriteError(f"target frame {i} is {frame.shape}, frame 0 {first.shape}")
         if new_track.lost[i] or target_track.lost[i]:
             empty = np.zeros(frame.shape[:2], bool)
-            yield RewriteFrame(frame.copy(), np.zeros_like(frame), empty, empty)
-            if progress:
-                progress(1)
-            continue
+            return RewriteFrame(frame.copy(), np.zeros_like(frame), empty, empty)
         if const_tex is not None:
             tex = const_tex
         else:
@@ -632,10 +673,38 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
             mouth = FaceTexture(sf, frame_uvs(Vs, source_track.camera(i),
                                               (sf.shape[1], sf.shape[0])), j)
         V = model.synthesize({m: new_track.weights[m][i] for m in names})
-        yield rewrite_frame(frame, V, new_track.camera(i), topo, tex, mouth_texture=mouth,
-                            blend=blend, feather=feather)
-        if progress:
-            progress(1)
+        return rewrite_frame(frame, V, new_track.camera(i), topo, tex, mouth_texture=mouth,
+                             blend=blend, feather=feather)
+
+    workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
+    if workers == 1 or n < 2:
+        for i in range(n):
+            yield one(i)
+            if progress:
+                progress(1)
+        return
+    # frames are independent: render them on a few threads (the rasteriser and most numpy
+    # kernels release the GIL), yielding in order with a bounded look-ahead
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        pending: deque = deque()
+        nxt = 0
+        while nxt < n or pending:
+            while nxt < n and len(pending) < 2 * workers:
+                pending.append(pool.submit(one, nxt))
+                nxt += 1
+            fut = pending.popleft()
+            try:
+                res = fut.result()
+            except BaseException:
+                for f in pending:
+                    f.cancel()
+                raise
+            yield res
+            if progress:
+                progress(1)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -1197,8 +1266,12 @@ def transfer_video(target, out, model, *, overwrite: bool = False, texture: str 
     check_output_path(out, overwrite=overwrite)
     if save_track is not None:
         check_output_path(save_track, overwrite=overwrite)
-    if meshes_dir is not None and not Path(meshes_dir).parent.is_dir():
-        raise RewriteError(f"folder {Path(meshes_dir).parent} for --meshes does not exist")
+    if meshes_dir is not None:
+        md = Path(meshes_dir)
+        if not md.parent.is_dir():
+            raise RewriteError(f"folder {md.parent} for --meshes does not exist")
+        if not overwrite and md.is_dir() and any(md.glob("frame_*.obj")):
+            raise RewriteError(f"{md} already holds meshes; pass --overwrite to replace them")
     if texture not in TEXTURE_MODES:
         raise RewriteError(f"texture must be one of {TEXTURE_MODES}, got {texture!r}")
     if blend not in BLEND_MODES:

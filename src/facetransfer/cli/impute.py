@@ -79,7 +79,13 @@ def _eval(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a folder")
-    ds = load_dataset(args.dataset)
+    with tqdm(desc="loading data set", unit="mesh", leave=False) as lbar:
+        def loaded(done: int, total: int) -> None:
+            lbar.total = total
+            lbar.n = done
+            lbar.refresh()
+
+        ds = load_dataset(args.dataset, progress=loaded)
     total = len(fractions) * args.trials * len(methods)
     bar = tqdm(total=total, desc="impute eval", unit="run", leave=False)
 

@@ -117,7 +117,11 @@ def _fill_missing(dataset, method: str, seed: int):
     except ImportError:
         raise DatasetError(f"{len(missing)} missing cells ({shown}{more}) and imputation is not "
                            "available in this version") from None
-    res = impute_dataset(dataset, method=method, rng=np.random.default_rng(seed))
+    cb, close = _tqdm_progress(f"impute ({method})")
+    try:
+        res = impute_dataset(dataset, method=method, rng=np.random.default_rng(seed), progress=cb)
+    finally:
+        close()
     imputed = np.asarray(res.imputed, dtype=bool)
     cells = [list(c) for c in missing]
     filled = res.dataset.with_vertices(res.dataset.vertices, np.ones_like(dataset.mask),
@@ -127,11 +131,13 @@ def _fill_missing(dataset, method: str, seed: int):
 
 
 def cmd_build(args: argparse.Namespace) -> int:
+    from .. import assets
     from ..datasets import load_dataset
     from ..model import build_model
 
     check_output_path(args.out)
     ranks = parse_ranks(args.ranks)
+    assets.set_download_progress(sys.stderr.isatty())
     cb, close = _tqdm_progress(f"dataset {args.dataset}")
     try:
         ds = load_dataset(args.dataset, seed=args.seed, n_identities=args.identities, progress=cb)
@@ -175,9 +181,9 @@ def cmd_info(args: argparse.Namespace) -> int:
              f"uvs: {'yes' if m.uvs is not None else 'no'}"]
     for name, d, r, labs in zip(m.mode_names, m.shape, m.ranks, m.labels):
         cum = float(np.sum(ev[name]))
-        per = ", ".join(f"{x:.3f}" for x in ev[name])
+        per = ", ".join(f"{x:.3g}" for x in ev[name])
         lines.append(f"  mode {name}: {d} training entries, rank {r}, explained variance "
-                     f"{cum:.4f} ({per})")
+                     f"{cum:.6f} (per component: {per})")
         lines.append(f"    labels: {', '.join(labs[:12])}{' ...' if len(labs) > 12 else ''}")
     if m.imputed is not None and np.any(m.imputed):
         lines.append(f"  imputed cells: {int(np.sum(m.imputed))}")
@@ -263,10 +269,22 @@ def _render_tile(vertices: np.ndarray, faces: np.ndarray, camera, size) -> np.nd
     return render(vertices, faces, camera, size, colors=colors, background=(255, 255, 255)).image
 
 
-def _camera(vertices: np.ndarray, size):
-    from ..render import look_at_weak_perspective, rotation_from_euler
+def _camera(vertices: np.ndarray, size, yaw_deg: float = 15.0):
+    """A weak-perspective camera framing ``vertices`` (render's helper, or the same by hand)."""
+    try:
+        from ..render import look_at_weak_perspective, rotation_from_euler
+    except ImportError:
+        from types import SimpleNamespace
 
-    return look_at_weak_perspective(vertices, size, rotation=rotation_from_euler(15.0, 0.0),
+        a = np.deg2rad(yaw_deg)
+        R = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
+        Y = vertices @ R[:2].T
+        lo, hi = Y.min(axis=0), Y.max(axis=0)
+        s = 0.85 * min(size) / max(float((hi - lo).max()), 1e-12)
+        c = (lo + hi) / 2
+        t = np.array([(size[0] - 1) / 2 - s * c[0], (size[1] - 1) / 2 + s * c[1]])
+        return SimpleNamespace(scale=s, rotation=R, translation=t)
+    return look_at_weak_perspective(vertices, size, rotation=rotation_from_euler(yaw_deg, 0.0),
                                     fill=0.85)
 
 

@@ -11,7 +11,6 @@ landmarks in pixels, a confidence and a lost flag (see :mod:`facetransfer.track.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path
@@ -57,7 +56,7 @@ def _bar(desc: str, total: int):
 def run(args) -> int:
     from ..io.video import video_info
     from ..model import load_model
-    from ..track.init import require_landmarks
+    from ..track.init import LazyDetector, require_landmarks
     from ..track.overlay import write_overlay
     from ..track.result import Track
     from ..track.tracker import TrackOptions, frame_source, track_video
@@ -93,13 +92,18 @@ def run(args) -> int:
                 bar = bars[stage] = _bar(stage, total)
             bar.update(done - bar.n)
 
+        # auto init and anchoring create MediaPipe themselves; with user points it is only
+        # loaded if the face is lost (recovery)
+        detector = None if (args.init == "auto" or args.anchor) else LazyDetector()
         try:
             track = track_video(args.video, model, init=args.init, options=opt,
                                 max_frames=args.max_frames, progress=progress,
-                                source=str(args.video))
+                                source=str(args.video), detector=detector)
         finally:
             for b in bars.values():
                 b.close()
+            if detector is not None:
+                detector.close()
         track.save(args.out, overwrite=args.overwrite)
         n_lost = int(track.lost.sum())
         print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"

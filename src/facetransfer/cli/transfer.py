@@ -37,9 +37,18 @@ def _bar_factory(enabled: bool = True):
     return make
 
 
+class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Show ``(default: X)`` only for options that have a default."""
+
+    def _get_help_string(self, action):
+        if action.default is None or action.default is False:
+            return action.help
+        return super()._get_help_string(action)
+
+
 def register(sub) -> None:
     """Add ``transfer``, ``edit``, ``puppet`` and ``demo`` to the facetransfer parser."""
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = _DefaultsFormatter
 
     p = sub.add_parser(
         "transfer", formatter_class=fmt,
@@ -108,8 +117,9 @@ def register(sub) -> None:
     q.add_argument("--model", required=True, metavar="M.npz")
     q.add_argument("--identity", required=True, metavar="LABEL", help="training identity label")
     q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused)")
-    q.add_argument("--max-frames", type=int, default=None)
-    q.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto")
+    q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
+    q.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
+                   help="tracking when no track file is given")
     q.add_argument("--out", required=True, metavar="OUT.mp4")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output")
     q.set_defaults(func=run_puppet)
@@ -117,17 +127,20 @@ def register(sub) -> None:
     d = sub.add_parser(
         "demo", formatter_class=fmt, help="the main job end to end on the default clips",
         description="Build the default model if needed, track two clips of the data folder "
-        "($FACETRANSFER_DATA_DIR/video), transfer the expressions of driving_d9.mp4 onto "
+        "($FACETRANSFER_DATA_DIR/video), transfer the expressions of driving_d6.mp4 onto "
         "WDA_KatieHill_000.mp4 and write OUT/demo.mp4 (source | target | result), OUT/demo.png "
         "(contact sheet) and OUT/demo_track.npz.")
     d.add_argument("--out", default="out", metavar="DIR", help="output folder")
     d.add_argument("--frames", type=int, default=120, help="target frames to use")
-    d.add_argument("--source", metavar="S.mp4", help="expression source (default driving_d9)")
+    d.add_argument("--source", metavar="S.mp4", help="expression source (default driving_d6)")
     d.add_argument("--target", metavar="T.mp4", help="target footage (default WDA_KatieHill_000)")
     d.add_argument("--model", metavar="M.npz", help="model (default: built and cached)")
-    d.add_argument("--texture", choices=("frame", "constant"), default="frame")
-    d.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast")
-    d.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto")
+    d.add_argument("--texture", choices=("frame", "constant"), default="frame",
+                   help="target face texture (see `transfer --help`)")
+    d.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast",
+                   help="blending into the footage (see `transfer --help`)")
+    d.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
+                   help="auto: the optical-flow tracker, a landmark-only fit if it fails")
     d.set_defaults(func=run_demo)
 
 

@@ -284,7 +284,7 @@ def _load_cache(path: Path) -> FaceDataset | None:
                 z["vertices"], z["mask"], tuple(meta["mode_names"]),
                 tuple(tuple(l) for l in meta["labels"]), z["faces"],
                 uvs if len(uvs) else None, z["landmarks"], z["vertex_subset"],
-                dict(meta["provenance"], cache=str(path)))
+                dict(meta["provenance"]))
     except Exception as exc:  # a damaged cache file is rebuilt, never trusted
         log.warning("ignoring unreadable cached data set %s (%s)", path, exc)
         return None

@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import DatasetError, MeshError
-from ..io.mesh import read_mesh
+from ..io.mesh import read_mesh, read_obj_vertices
 from .base import FaceDataset
 
 log = logging.getLogger(__name__)
@@ -98,6 +98,17 @@ def read_manifest(path: str | os.PathLike, *,
                                progress=progress, lines=[e[2] for e in entries])
 
 
+def _read_vertices(path: Path) -> np.ndarray:
+    """Vertices only (fast for OBJ: no face parsing), with the same checks as ``read_mesh``."""
+    if path.suffix.lower() != ".obj":
+        return read_mesh(path).vertices
+    if not path.is_file():
+        raise MeshError(f"mesh file {path} does not exist")
+    if path.stat().st_size == 0:
+        raise MeshError(f"mesh file {path} is empty")
+    return read_obj_vertices(path)
+
+
 def dataset_from_meshes(items: list[tuple[Path, tuple[str, ...]]], modes: tuple[str, ...], *,
                         source: str = "", progress: Callable[[int, int], None] | None = None,
                         lines: list[int] | None = None) -> FaceDataset:
@@ -138,12 +149,14 @@ def dataset_from_meshes(items: list[tuple[Path, tuple[str, ...]]], modes: tuple[
     mask = np.zeros(shape, dtype=bool)
     total = len(index)
     for k, (vals, path) in enumerate(index.items()):
-        mesh = read_mesh(path)
-        v = mesh.vertices
-        if first is None:
+        if first is None:  # the first mesh gives the triangles and UVs of all
+            mesh = read_mesh(path)
+            v = mesh.vertices
             first = (path, mesh)
             verts = np.full(shape + v.shape, np.nan)
-        elif len(v) != len(first[1].vertices):
+        else:
+            v = _read_vertices(path)
+        if len(v) != len(first[1].vertices):
             raise DatasetError(f"mesh {path} has {len(v)} vertices but {first[0]} has "
                                f"{len(first[1].vertices)}; all meshes must share one topology")
         idx = tuple(labels[m].index(vals[m]) for m in range(len(modes)))

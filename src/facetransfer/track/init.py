@@ -24,7 +24,8 @@ from .solver import FrameState, fit_points
 
 log = logging.getLogger(__name__)
 
-__all__ = ["load_init_points", "check_init_points", "MediaPipeDetector", "fit_landmarks",
+__all__ = ["load_init_points", "check_init_points", "MediaPipeDetector", "LazyDetector",
+           "fit_landmarks",
            "points_to_array", "require_landmarks"]
 
 
@@ -78,7 +79,8 @@ def load_init_points(path: str | os.PathLike, frame_size: tuple[int, int]) -> di
     try:
         data = json.loads(p.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise TrackError(f"init points file {p} is not valid JSON ({exc.msg if hasattr(exc, 'msg') else exc})") from None
+        msg = getattr(exc, "msg", exc)
+        raise TrackError(f"init points file {p} is not valid JSON ({msg})") from None
     if not isinstance(data, dict) or not isinstance(data.get("points"), dict):
         raise TrackError(f'init points file {p} must hold {{"points": {{"36": [x, y], ...}}}}')
     return check_init_points(data["points"], frame_size, where=f"init points {p}")
@@ -205,3 +207,36 @@ def _landmarker_path() -> Path:
             raise AssetError("the MediaPipe face landmarker is not available: set "
                              "FACETRANSFER_DATA_DIR") from None
         return Path(root) / "mediapipe" / "face_landmarker.task"
+
+
+class LazyDetector:
+    """A :class:`MediaPipeDetector` created on first use (e.g. only if the face is lost).
+
+    If the detector cannot be created (asset missing), :meth:`detect` returns None and a
+    warning is logged once.
+    """
+
+    def __init__(self, model_path: str | os.PathLike | None = None) -> None:
+        self._path = model_path
+        self._det: MediaPipeDetector | None = None
+        self._failed = False
+
+    def detect(self, frame: np.ndarray) -> np.ndarray | None:
+        if self._det is None and not self._failed:
+            try:
+                self._det = MediaPipeDetector(self._path)
+            except AssetError as exc:
+                self._failed = True
+                log.warning("face detector unavailable, cannot recover lost frames: %s", exc)
+        return None if self._det is None else self._det.detect(frame)
+
+    def close(self) -> None:
+        if self._det is not None:
+            self._det.close()
+            self._det = None
+
+    def __enter__(self) -> "LazyDetector":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

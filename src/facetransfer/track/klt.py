@@ -30,7 +30,8 @@ import numpy as np
 
 from ..errors import ShapeError
 
-__all__ = ["Pyramid", "build_pyramid", "window_offsets", "sample_windows", "klt_terms", "klt_terms_at",
+__all__ = ["Pyramid", "build_pyramid", "window_offsets", "sample_windows", "klt_terms",
+           "klt_terms_at",
            "solve_flow"]
 
 

@@ -76,7 +76,7 @@ def ibug_names() -> tuple[str, ...]:
     names = ([f"jaw{i}" for i in range(17)] + [f"brow{i}" for i in range(10)]
              + [f"nose{i}" for i in range(9)] + [f"eye{i}" for i in range(12)]
              + [f"mouth{i}" for i in range(20)])
-    names[36], names[39], names[42], names[45] = ("right outer eye corner", "right inner eye corner",
-                                                  "left inner eye corner", "left outer eye corner")
+    names[36], names[39] = "right outer eye corner", "right inner eye corner"
+    names[42], names[45] = "left inner eye corner", "left outer eye corner"
     names[30], names[48], names[54] = "nose tip", "right mouth corner", "left mouth corner"
     return tuple(names)

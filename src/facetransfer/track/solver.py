@@ -32,7 +32,7 @@ the weights stay comparable with the training rows and ``s`` carries the image s
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -42,7 +42,8 @@ from .camera import N_POSE, Pose, compose, fit_affine_pose, pose_jacobian, proje
 log = logging.getLogger(__name__)
 
 __all__ = ["FrameState", "BasisCache", "normal_equations", "point_terms", "schur_reduce",
-           "prior_terms", "project_to_gauge", "full_jacobian", "solve_step", "weight_jacobian", "fit_points", "Prior"]
+           "prior_terms", "project_to_gauge", "full_jacobian", "solve_step", "weight_jacobian",
+           "fit_points", "Prior", "flow_normal_equations"]
 
 
 @dataclass(frozen=True)
@@ -385,8 +386,9 @@ def _flow_normal_py(X, BQ, R, s, Z, e, A, b, G):  # pragma: no cover (compiled b
         J[1, 5] = 1.0
         # weight columns: s F R[:2] M_{m,i} Q (Eq. (8))
         for c in range(k):
-            J[0, 6 + c] = s * (R[0, 0] * BQ[i, 0, c] + R[0, 1] * BQ[i, 1, c] + R[0, 2] * BQ[i, 2, c])
-            J[1, 6 + c] = -s * (R[1, 0] * BQ[i, 0, c] + R[1, 1] * BQ[i, 1, c] + R[1, 2] * BQ[i, 2, c])
+            bx, by, bz = BQ[i, 0, c], BQ[i, 1, c], BQ[i, 2, c]
+            J[0, 6 + c] = s * (R[0, 0] * bx + R[0, 1] * by + R[0, 2] * bz)
+            J[1, 6 + c] = -s * (R[1, 0] * bx + R[1, 1] * by + R[1, 2] * bz)
         z00 = Z[i, 0, 0]
         z01 = Z[i, 0, 1]
         z11 = Z[i, 1, 1]

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from typing import Callable, Iterator, Sequence
 
 import cv2
@@ -34,7 +34,7 @@ from .landmarks import IBUG_WEIGHTS
 from .result import Track
 from .solver import (BasisCache, FrameState, Prior, fit_points, flow_normal_equations,
                      normal_equations,
-                     point_terms, prior_terms, project_to_gauge, schur_reduce, solve_step,
+                     point_terms, prior_terms, schur_reduce, solve_step,
                      weight_jacobian)
 
 log = logging.getLogger(__name__)
@@ -215,7 +215,7 @@ class FaceTracker:
         self.priors = {m: Prior.from_model(model, m) for m in model.mode_names}
         self.offsets, self.wwin = window_offsets(self.opt.half_window)
         Xl = model.synthesize(model.default_weights(), vertices=self.lm_vertices[[36, 45]])
-        self.model_iod = float(np.linalg.norm(Xl[0] - Xl[1]))       # eye-corner distance, model units
+        self.model_iod = float(np.linalg.norm(Xl[0] - Xl[1]))  # outer eye corners, model units
         self._cache: BasisCache | None = None
         self._cache_key = None
         self.timings: dict[str, float] = {}
@@ -367,7 +367,7 @@ class FaceTracker:
 
     def _flow_system(self, Z, e, X, B, pose, w, mode, anc, weights, guess):
         Q = self.priors[mode].Q
-        A, b, G = flow_normal_equations(X, B @ Q, pose, Z, e)          # Σ JᵀZJ, Σ Jᵀe, Σ JᵀJ
+        A, b, G = flow_normal_equations(X, B @ Q, pose, Z, e)   # Σ JᵀZJ, Σ Jᵀe, Σ JᵀJ
         G /= X.shape[0]
         norm = max(float(Z[:, 0, 0].sum() + Z[:, 1, 1].sum()) / 2.0, 1e-12)   # Σ tr(Z) / 2
         A /= norm
@@ -508,7 +508,8 @@ def _confidence(a: np.ndarray, b: np.ndarray) -> float:
 def _relative_guess(cur: FrameState, prev_a: FrameState, prev_b: FrameState) -> FrameState:
     """``cur`` moved by the motion ``prev_a -> prev_b`` of an earlier pass."""
     Rd = prev_b.pose.rotation @ prev_a.pose.rotation.T
-    pose = Pose(orthonormalize(Rd @ cur.pose.rotation), cur.pose.scale * prev_b.pose.scale / prev_a.pose.scale,
+    pose = Pose(orthonormalize(Rd @ cur.pose.rotation),
+                cur.pose.scale * prev_b.pose.scale / prev_a.pose.scale,
                 cur.pose.translation + prev_b.pose.translation - prev_a.pose.translation)
     w = {k: cur.weights[k] + (prev_b.weights[k] - prev_a.weights[k]) for k in cur.weights}
     return FrameState(pose, w)
@@ -538,7 +539,9 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
         MediaPipe from the asset registry).
     options : TrackOptions
     detector : object with ``detect(frame) -> (68, 2) | None``, optional
-        Used for ``init="auto"``, anchoring and recovery; created on demand (MediaPipe).
+        Used for ``init="auto"``, anchoring and recovery. Created (MediaPipe) when
+        ``init="auto"`` or anchoring needs one; otherwise, without a detector, lost frames stay
+        lost (pass :class:`~facetransfer.track.init.LazyDetector` to recover on demand).
     max_frames : int, optional
     fixed : dict mode name -> (r,) weights, optional
         Modes whose weights are known (e.g. the identity from another track): held constant.
@@ -563,12 +566,10 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
     src = source if source is not None else (frames.path or "")
     F = frames.n
     own_detector = None
-    need_det = (isinstance(init, str) and init == "auto") or opt.anchor or opt.recover
-    if detector is None and need_det:
-        if (isinstance(init, str) and init == "auto") or opt.anchor:
-            from .init import MediaPipeDetector
+    if detector is None and ((isinstance(init, str) and init == "auto") or opt.anchor):
+        from .init import MediaPipeDetector
 
-            detector = own_detector = MediaPipeDetector()
+        detector = own_detector = MediaPipeDetector()
     try:
         return _run(frames, model, init, opt, detector, progress, src, fixed)
     finally:
@@ -647,7 +648,7 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
             return None
         return detect(i, frame)
 
-    def apply_identity(systems, ref_states, ref_idx):
+    def apply_identity(systems, ref_idx):
         """Solve identity; re-express the reference frame's 2-D vertex positions with it."""
         nonlocal state0
         if not systems or id_name is None:
@@ -690,13 +691,15 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
                 prog("snap", rnd * len(order) + j + 1, len(order) * int(opt.snap_rounds))
             # the state reached back at the first frame is the snapped alignment
             state0 = st
-            apply_identity(systems, None, start)
+            apply_identity(systems, start)
 
     # -------- §5.1 passes
     prev: list[FrameState | None] | None = None
     for ps in range(int(opt.passes)):
         last = ps == int(opt.passes) - 1
         systems = []
+        reinit = []
+        lost[start + 1:] = False
         if id_name is not None:
             systems.append(tr.landmark_identity_system(state0, L0, opt.init_weight)
                            if not lost[start] else None)
@@ -712,14 +715,18 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
             st_prev = states[i - 1]
             if prev is not None and prev[i] is not None and prev[i - 1] is not None:
                 guess = _relative_guess(st_prev, prev[i - 1], prev[i])
-            elif i - 2 >= start and not lost[i - 1]:
+            elif (i - 2 >= start and not lost[i - 1] and not lost[i - 2]
+                  and (i - 1) not in reinit):
                 guess = _velocity_guess(states[i - 2], st_prev)
             else:
                 guess = st_prev
             res = tr.track_pair(pyr0, pyr1, st_prev, guess, anchor=anchor_for(i, fr),
                                 accumulate=(id_name is not None and not last))
             st, c = res.state, res.confidence
-            is_lost = c < opt.lost_threshold or not _face_in_image(model, tr, st, (W, H))
+            # once lost, frames stay lost until a re-initialisation (the flow may lock onto
+            # the background with high confidence)
+            is_lost = (c < opt.lost_threshold or not _face_in_image(model, tr, st, (W, H))
+                       or bool(lost[i - 1]))
             if is_lost and opt.recover and detector is not None:
                 L = detect(i, fr)
                 if L is not None:
@@ -730,18 +737,18 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
                         is_lost = False
                         c = max(c, opt.lost_threshold)
                     except TrackError:
-                        pass
+                        log.debug("re-initialisation failed at frame %d", i)
             if is_lost and not _face_in_image(model, tr, st, (W, H)):
                 st = st_prev
             states[i] = st
-            conf[i] = c
+            conf[i] = 0.0 if is_lost else c
             lost[i] = is_lost
             if res.identity_system is not None and not is_lost:
                 systems.append(res.identity_system)
             pyr0 = pyr1
             prog(f"pass {ps + 1}/{opt.passes}", i - start, F - 1 - start)
         if not last and id_name is not None and len(systems) > 0:
-            apply_identity(systems, states, start)
+            apply_identity(systems, start)
         prev = list(states)
 
     # frames before the first face hold the first tracked state

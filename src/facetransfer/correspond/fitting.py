@@ -1,0 +1,409 @@
+"""Template fitting (§4.2): the smallest smooth deformation of a template that fits a scan.
+
+Following Allen, Curless & Popović 2003 and Sumner & Popović 2004, with the deformation written as
+per-vertex displacements ``d = x − x₀`` of the template ``x₀`` and, per stage, the energy
+
+    E(x) = w_s ‖L (x − x₀)‖² + w_f Σ_l ‖x_{v(l)} − f_l‖² + w_c Σ_{i ∈ V} ‖x_i − c_i‖²     (1)
+
+* ``L``: the row-normalised cotangent Laplacian of the template, so the smoothness term
+  penalises bending of the displacement field (affine changes are nearly free);
+* ``f_l``: the scan's feature point for iBUG landmark ``l`` and ``v(l)`` its template vertex;
+* ``c_i``: the closest point on the scan to vertex ``i``; pairs are rejected when the closest
+  point is on a boundary (a hole or the cropped rim), further than ``max_distance``, or when the
+  normals differ by more than ``max_angle`` degrees.
+
+Eq. (1) is quadratic with a diagonal data part, so each iteration solves one sparse symmetric
+positive definite system ``(w_s LᵀL + W) D = W (C − X₀)`` for all three coordinates (normal
+equations, sparse LU). The closest points are recomputed a few times per stage. The schedule
+first weighs the features heavily, then proximity, while the stiffness ``w_s`` is lowered
+(the paper's protocol, §4.2; cf. the stiffness annealing of Amberg et al. 2007).
+
+Before fitting, the template is aligned to the scan by a similarity from the feature points
+(Procrustes, §4.2). With a ``reference`` (the cascade: closed-mouth scan → its subject's neutral
+fit, viseme → its closed-mouth fit) the reference is rigidly aligned to the scan on the upper face
+(ICP on the vertices nearest to brow, eye and nose landmarks) and then deformed as above.
+
+All geometry is solved in a normalised frame where the template's landmark spread equals that of
+ICT-FaceKit (5.94 cm), so the distances of the schedule are in centimetre-like units whatever the
+scan's units.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+import scipy.sparse as sp
+import scipy.sparse.linalg as spla
+
+from ..errors import FaceTransferError, MeshError
+from .features import FeatureError, FeaturePoints, validate_features_on_surface
+from .meshops import ScanMesh, SurfaceQuery, face_normals, mesh_laplacian, vertex_normals
+from .procrustes import Similarity, similarity_procrustes
+
+log = logging.getLogger(__name__)
+
+#: RMS distance of the 68 ICT-FaceKit landmarks from their centroid (cm): the normalised frame.
+REFERENCE_SPREAD = 5.94
+#: iBUG landmarks of the upper face (brows, eyes, nose), used for rigid alignment on the upper face.
+UPPER_LANDMARKS = tuple(range(17, 48))
+
+
+class FitDivergedError(FaceTransferError):
+    """The fit did not converge to the scan (distance too large or triangles folded)."""
+
+
+@dataclass(frozen=True)
+class FitStage:
+    """One stage of the schedule of Eq. (1).
+
+    Attributes
+    ----------
+    name : str
+    w_smooth, w_features, w_closest : float
+        Weights of the three terms.
+    iterations : int
+        Closest-point recomputations (solves) in the stage.
+    max_distance : float
+        Closest-point pairs further than this (normalised cm) are rejected.
+    """
+
+    name: str
+    w_smooth: float
+    w_features: float
+    w_closest: float
+    iterations: int = 3
+    max_distance: float = 2.0
+
+
+#: Features first (heavily), then proximity with decreasing stiffness (§4.2).
+DEFAULT_SCHEDULE: tuple[FitStage, ...] = (
+    FitStage("features", 30.0, 10.0, 0.0, 1),
+    FitStage("features+proximity", 30.0, 10.0, 0.2, 3, 2.0),
+    FitStage("proximity, stiff", 10.0, 1.0, 1.0, 3, 1.0),
+    FitStage("proximity", 3.0, 0.3, 1.0, 3, 0.5),
+    FitStage("proximity, fine", 1.0, 0.1, 1.0, 3, 0.3),
+)
+
+
+@dataclass(frozen=True)
+class Template:
+    """A template mesh with iBUG-68 landmark vertices.
+
+    Attributes
+    ----------
+    vertices : (n, 3) float64
+    faces : (F, 3) int64
+    landmarks : (68,) int64
+        Vertex of each iBUG-68 landmark, ``-1`` where the template has none.
+    name : str
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    landmarks: np.ndarray
+    name: str = "template"
+
+
+@dataclass(frozen=True)
+class FitResult:
+    """Result of :func:`fit_template`.
+
+    Attributes
+    ----------
+    vertices : (n, 3) float64
+        The fitted template in the scan's coordinates (template topology).
+    faces : (F, 3) int64
+    distance : (n,) float64
+        Distance of each fitted vertex to the scan surface (scan units).
+    covered : (n,) bool
+        Vertices whose closest scan point is not on a boundary (the scan covers them).
+    similarity : Similarity
+        Template (or reference) frame → scan frame, from the features (and upper-face ICP).
+    feature_residual : (k,) float64
+        Distance from each used feature point to its fitted landmark vertex (scan units).
+    stats : dict
+        ``mean``, ``median``, ``p95``, ``max`` surface distance over covered vertices (scan units),
+        ``n_covered``, ``seconds``, ``feature_rms``, ``flipped_fraction``.
+    history : tuple of dict
+        Per solve: stage, iteration, accepted pairs, mean distance (normalised units).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    distance: np.ndarray
+    covered: np.ndarray
+    similarity: Similarity
+    feature_residual: np.ndarray
+    stats: dict
+    history: tuple = field(default_factory=tuple)
+
+
+def _spread(p: np.ndarray) -> float:
+    return float(np.sqrt(np.mean(np.sum((p - p.mean(axis=0)) ** 2, axis=1))))
+
+
+def template_from_mesh(vertices: np.ndarray, faces: np.ndarray, landmarks, *,
+                       name: str = "template") -> Template:
+    """Build a :class:`Template`, validating the landmark table.
+
+    Parameters
+    ----------
+    landmarks : (68,) int array (``-1`` = missing) or dict ``{ibug_number: vertex}``
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if isinstance(landmarks, dict):
+        lm = -np.ones(68, dtype=np.int64)
+        for k, vi in landmarks.items():
+            try:
+                k = int(k)
+                vi = int(vi)
+            except (TypeError, ValueError):
+                raise MeshError(f"{name}: landmark entry {k!r}: {vi!r} is not an integer pair") from None
+            if not 0 <= k <= 67:
+                raise MeshError(f"{name}: landmark {k} outside the iBUG-68 range 0..67")
+            lm[k] = vi
+    else:
+        lm = np.asarray(landmarks, dtype=np.int64).ravel()
+        if lm.shape != (68,):
+            raise MeshError(f"{name}: template landmarks must be 68 vertex indices, got {lm.shape}")
+    if np.any(lm >= len(v)) or np.any(lm < -1):
+        raise MeshError(f"{name}: template landmark vertices outside 0..{len(v) - 1}")
+    if np.count_nonzero(lm >= 0) < 8:
+        raise MeshError(f"{name}: template has {np.count_nonzero(lm >= 0)} landmarks, at least 8 needed")
+    return Template(v, f, lm, name)
+
+
+def load_template(spec: str | os.PathLike = "ict", *, landmarks: str | os.PathLike | None = None
+                  ) -> Template:
+    """Load a template.
+
+    Parameters
+    ----------
+    spec : "ict", a model file ``*.npz`` or a mesh file
+        ``"ict"``: ICT-FaceKit face area (vertices 0..9408, cm). A model file: its default face
+        (``m.synthesize(m.default_weights())``) with ``m.faces`` and ``m.landmarks``. A mesh:
+        needs ``landmarks``.
+    landmarks : path, optional
+        JSON with the template's landmark vertices: a list of 68 ints (``-1`` for none), or
+        ``{"landmarks": [...]}``, or ``{"36": vertex, ...}``.
+    """
+    s = str(spec)
+    if s == "ict":
+        from ..datasets.ict import ict_template
+
+        t = ict_template("face")
+        return template_from_mesh(t.mesh.vertices, t.mesh.faces, t.landmarks, name="ict")
+    p = Path(s)
+    if not p.is_file():
+        raise MeshError(f"template {p} does not exist (expected 'ict', a model .npz or a mesh)")
+    if p.suffix.lower() == ".npz":
+        from ..model import load_model
+
+        m = load_model(p)
+        if m.landmarks is None:
+            raise MeshError(f"model {p} has no landmarks; it cannot serve as a fitting template")
+        v = np.asarray(m.synthesize(m.default_weights()), dtype=np.float64)
+        return template_from_mesh(v, m.faces, m.landmarks, name=p.name)
+    if landmarks is None:
+        raise MeshError(f"template mesh {p} needs --template-landmarks (a JSON of 68 vertex indices)")
+    import json
+
+    from ..io.mesh import read_mesh
+
+    m = read_mesh(p)
+    try:
+        data = json.loads(Path(landmarks).read_text())
+    except (OSError, ValueError) as exc:
+        raise MeshError(f"cannot read template landmarks {landmarks}: {exc}") from None
+    if isinstance(data, dict) and "landmarks" in data:
+        data = data["landmarks"]
+    return template_from_mesh(m.vertices, m.faces, data, name=p.name)
+
+
+def upper_face_vertices(vertices: np.ndarray, landmarks: np.ndarray) -> np.ndarray:
+    """Vertices whose nearest landmark is a brow, eye or nose landmark (the upper face).
+
+    Returns ``(m,) int64`` vertex indices; the rest of the face moves with the mouth and jaw.
+    """
+    valid = np.flatnonzero(landmarks >= 0)
+    from scipy.spatial import cKDTree
+
+    _, nearest = cKDTree(vertices[landmarks[valid]]).query(vertices)
+    return np.flatnonzero(np.isin(valid[nearest], UPPER_LANDMARKS))
+
+
+def _pairs(query: SurfaceQuery, x: np.ndarray, faces: np.ndarray, *, max_distance: float,
+           max_angle: float, normal_sign: float):
+    cp = query.closest(x)
+    vn = vertex_normals(x, faces)
+    cos = normal_sign * np.einsum("ij,ij->i", vn, cp.normal)
+    ok = (~cp.on_boundary) & (cp.distance <= max_distance) & (cos >= np.cos(np.radians(max_angle)))
+    return cp, ok, cos
+
+
+def _rigid_icp(query, x, faces, idx, *, iterations, max_distance, max_angle, normal_sign):
+    """Rigid ICP of vertices ``idx`` of ``x`` to the surface; returns the composed rigid motion."""
+    total = Similarity.identity()
+    cur = x
+    for _ in range(iterations):
+        cp, ok, _ = _pairs(query, cur, faces, max_distance=max_distance, max_angle=max_angle,
+                           normal_sign=normal_sign)
+        sel = idx[ok[idx]]
+        if len(sel) < 10:
+            break
+        step = similarity_procrustes(cur[sel], cp.points[sel], with_scale=False)
+        total = step.compose(total)
+        cur = step.apply(cur)
+    return total
+
+
+def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
+                 reference: np.ndarray | None = None,
+                 schedule: Sequence[FitStage] = DEFAULT_SCHEDULE,
+                 max_angle: float = 60.0, feature_tolerance: float = 0.1,
+                 diverge_distance: float = 0.5, diverge_flipped: float = 0.05,
+                 progress: Callable[[int, int, str], None] | None = None) -> FitResult:
+    """Fit a template to a scan (§4.2).
+
+    Parameters
+    ----------
+    scan : ScanMesh
+        A cleaned scan (:func:`~facetransfer.correspond.meshops.clean_scan`), any units and pose.
+    features : FeaturePoints
+        At least 8 iBUG-68 points on the scan with template landmarks.
+    template : Template
+        Defines the output topology and the landmark vertices.
+    reference : (n, 3) float, optional
+        A previous fit of the same subject in ``template`` topology, in its own scan's
+        coordinates (the cascade): it is aligned rigidly on the upper face and deformed instead of
+        the template.
+    schedule : sequence of FitStage
+    max_angle : float
+        Closest-point pairs whose normals differ more (degrees) are rejected.
+    feature_tolerance : float
+        Feature points further than this fraction of their spread from the scan are an error.
+    diverge_distance : float
+        Mean distance (normalised cm) above which the fit counts as diverged.
+    diverge_flipped : float
+        Fraction of flipped triangles above which the fit counts as diverged.
+    progress : callable(stage_index, n_stages, stage_name), optional
+
+    Returns
+    -------
+    FitResult
+
+    Raises
+    ------
+    FeatureError
+        Too few usable features, or features off the scan.
+    FitDivergedError
+        The fit ended far from the scan or folded; nothing should be written.
+
+    References
+    ----------
+    Vlasic et al. 2005, §4.2; Allen et al. 2003; Sumner & Popović 2004; Umeyama 1991.
+    """
+    t0 = time.perf_counter()
+    faces = template.faces
+    base = template.vertices if reference is None else np.asarray(reference, dtype=np.float64)
+    if base.shape != template.vertices.shape or not np.all(np.isfinite(base)):
+        raise MeshError(f"reference fit must be finite {template.vertices.shape}, got {base.shape}")
+    query_scan = SurfaceQuery(scan.vertices, scan.faces)
+    validate_features_on_surface(features, query_scan.closest(features.points).distance,
+                                 rel_tol=feature_tolerance, source="feature points")
+    lmv = template.landmarks[features.indices]
+    use = lmv >= 0
+    if use.sum() < 8:
+        raise FeatureError(f"only {int(use.sum())} feature points have a template landmark; "
+                           "at least 8 needed")
+    fidx, fpts, lmv = features.indices[use], features.points[use], lmv[use]
+    # Procrustes (§4.2): template/reference frame → scan frame.
+    sim = similarity_procrustes(base[lmv], fpts, with_scale=reference is None)
+    # Normalised frame: template landmark spread → REFERENCE_SPREAD (cm-like units).
+    valid_lm = template.landmarks[template.landmarks >= 0]
+    k = REFERENCE_SPREAD / _spread(base[valid_lm])
+    norm = Similarity(k, np.eye(3), np.zeros(3))
+    to_work = norm.compose(sim.inverse())              # scan → work
+    scan_w = to_work.apply(scan.vertices)
+    fpts_w = to_work.apply(fpts)
+    x0 = norm.apply(base)
+    query = SurfaceQuery(scan_w, scan.faces)
+    # Scan normals may be wound either way: orient them by agreement with the template.
+    cp0 = query.closest(x0)
+    vn0 = vertex_normals(x0, faces)
+    near = (~cp0.on_boundary) & (cp0.distance < 1.0)
+    dots = np.einsum("ij,ij->i", vn0, cp0.normal)[near]
+    normal_sign = -1.0 if dots.size and np.median(dots) < 0 else 1.0
+    history = []
+    if reference is not None:
+        upper = upper_face_vertices(x0, template.landmarks)
+        rig = _rigid_icp(query, x0, faces, upper, iterations=10, max_distance=1.0,
+                         max_angle=max_angle, normal_sign=normal_sign)
+        # Move the scan instead of the reference, so x0 stays the regularisation target.
+        to_work = rig.inverse().compose(to_work)
+        scan_w = to_work.apply(scan.vertices)
+        fpts_w = to_work.apply(fpts)
+        query = SurfaceQuery(scan_w, scan.faces)
+    n = len(x0)
+    lap = mesh_laplacian(x0, faces)
+    ltl = (lap.T @ lap).tocsc()
+    eye = sp.identity(n, format="csc")
+    x = x0.copy()
+    for si, st in enumerate(schedule):
+        if progress is not None:
+            progress(si, len(schedule), st.name)
+        for it in range(max(1, st.iterations)):
+            wdiag = np.zeros(n)
+            target = np.zeros((n, 3))
+            if st.w_closest > 0:
+                cp, ok, _ = _pairs(query, x, faces, max_distance=st.max_distance,
+                                   max_angle=max_angle, normal_sign=normal_sign)
+                wdiag[ok] += st.w_closest
+                target[ok] += st.w_closest * cp.points[ok]
+                n_ok, mean_d = int(ok.sum()), float(cp.distance[ok].mean()) if ok.any() else np.nan
+            else:
+                n_ok, mean_d = 0, np.nan
+            np.add.at(wdiag, lmv, st.w_features)
+            np.add.at(target, lmv, st.w_features * fpts_w)
+            a = (st.w_smooth * ltl + sp.diags(wdiag) + 1e-9 * eye).tocsc()
+            rhs = target - wdiag[:, None] * x0                 # normal equations of Eq. (1) in d
+            d = spla.splu(a, permc_spec="MMD_ATA").solve(rhs)
+            x = x0 + d
+            history.append({"stage": st.name, "iteration": it, "pairs": n_ok, "mean_distance": mean_d})
+            log.info("stage %s it %d: %d pairs, mean distance %.4g", st.name, it, n_ok, mean_d)
+            if st.w_closest == 0:
+                break
+    if progress is not None:
+        progress(len(schedule), len(schedule), "done")
+    # Final statistics in scan units.
+    back = to_work.inverse()
+    out = back.apply(x)
+    cp = query_scan.closest(out)
+    covered = ~cp.on_boundary
+    dist = cp.distance
+    scale_back = 1.0 / to_work.scale
+    fn0, _ = face_normals(x0, faces)
+    fn1, _ = face_normals(x, faces)
+    flipped = float(np.mean(np.einsum("ij,ij->i", fn0, fn1) < 0))
+    resid = np.linalg.norm(out[lmv] - fpts, axis=1)
+    dc = dist[covered] if covered.any() else dist
+    stats = {"mean": float(dc.mean()), "median": float(np.median(dc)),
+             "p95": float(np.percentile(dc, 95)), "max": float(dc.max()),
+             "n_covered": int(covered.sum()), "n_vertices": int(n),
+             "feature_rms": float(np.sqrt(np.mean(resid ** 2))), "flipped_fraction": flipped,
+             "scan_units_per_template_unit": float(sim.scale),
+             "seconds": time.perf_counter() - t0, "features_used": [int(i) for i in fidx]}
+    if not np.all(np.isfinite(out)) or stats["mean"] / scale_back > diverge_distance \
+            or flipped > diverge_flipped:
+        raise FitDivergedError(
+            f"fit diverged: mean distance to the scan {stats['mean']:.4g} scan units "
+            f"(limit {diverge_distance * scale_back:.4g}), {100 * flipped:.1f}% of triangles flipped "
+            f"(limit {100 * diverge_flipped:.0f}%); check the feature points")
+    return FitResult(out, faces, dist, covered, back.compose(norm), resid, stats, tuple(history))

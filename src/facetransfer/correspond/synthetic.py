@@ -1,0 +1,153 @@
+"""Synthetic scans with exact ground truth, for tests and benchmarks of template fitting.
+
+A mesh in template topology (the "truth") is resampled into an unrelated triangulation: a jittered
+grid of points in the template's UV chart is lifted to the surface by barycentric interpolation
+and re-triangulated by Delaunay triangulation in UV space; then the rim is cropped, holes are cut,
+Gaussian noise is added along the normals and a random similarity is applied. Feature points are
+the true landmark vertices moved by a fixed distance in random directions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .features import FeaturePoints
+from .meshops import ScanMesh, clean_scan, vertex_normals
+from .procrustes import Similarity
+
+
+@dataclass(frozen=True)
+class SyntheticScan:
+    """A synthetic scan and its ground truth.
+
+    Attributes
+    ----------
+    scan : ScanMesh
+        In scan coordinates (after the similarity).
+    features : FeaturePoints
+        Perturbed landmark positions, scan coordinates.
+    similarity : Similarity
+        Truth frame → scan frame.
+    truth : (n, 3) float64
+        The true template-topology vertices, truth frame (template units).
+    """
+
+    scan: ScanMesh
+    features: FeaturePoints
+    similarity: Similarity
+    truth: np.ndarray
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly random proper rotation (3, 3)."""
+    q, r = np.linalg.qr(rng.normal(size=(3, 3)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] = -q[:, 0]
+    return q
+
+
+def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
+                        landmarks: np.ndarray, *, n_points: int = 30000, noise: float = 0.02,
+                        n_holes: int = 2, hole_radius: float = 0.8, crop: bool = True,
+                        feature_noise: float = 0.1, feature_ids=None, transform: bool = True,
+                        rng: np.random.Generator | None = None) -> SyntheticScan:
+    """Resample ``truth`` into a noisy, holed, cropped scan in a random pose.
+
+    Parameters
+    ----------
+    truth : (n, 3) float
+        Template-topology mesh (cm for ICT).
+    faces : (F, 3) int
+    uvs : (n, 2) float
+        A valid UV chart of the mesh (no overlapping triangles).
+    landmarks : (68,) int
+    n_points : int
+        Approximate number of scan vertices before cropping.
+    noise : float
+        Standard deviation of the noise along the normals (truth units).
+    n_holes, hole_radius : int, float
+        Holes cut around random surface points.
+    crop : bool
+        Crop the rim with an ellipse in the front view (x, y), removing forehead top, ears, neck.
+    feature_noise : float
+        Each feature point is moved by this distance in a random direction.
+    feature_ids : sequence of int, optional
+        iBUG numbers to give as features (default all 68).
+    transform : bool
+        Apply a random similarity (rotation, scale in [0.3, 3], translation).
+    rng : numpy Generator
+    """
+    import matplotlib.tri as mtri
+    from scipy.spatial import Delaunay
+
+    rng = np.random.default_rng(rng)
+    truth = np.asarray(truth, dtype=np.float64)
+    tri = mtri.Triangulation(uvs[:, 0], uvs[:, 1], faces)
+    finder = tri.get_trifinder()
+    lo, hi = uvs.min(0), uvs.max(0)
+    area_uv = float(np.sum(np.abs(np.cross(uvs[faces[:, 1]] - uvs[faces[:, 0]],
+                                           uvs[faces[:, 2]] - uvs[faces[:, 0]]))) / 2)
+    h = np.sqrt(area_uv / n_points)
+    gx, gy = np.meshgrid(np.arange(lo[0], hi[0], h), np.arange(lo[1], hi[1], h * np.sqrt(3) / 2))
+    gx = gx + (np.arange(gx.shape[0]) % 2)[:, None] * h / 2      # hexagonal-ish grid
+    uv = np.stack([gx.ravel(), gy.ravel()], 1) + rng.uniform(-0.3, 0.3, (gx.size, 2)) * h
+    fi = finder(uv[:, 0], uv[:, 1])
+    uv, fi = uv[fi >= 0], fi[fi >= 0]
+    tv = faces[fi]
+    a, b, c = uvs[tv[:, 0]], uvs[tv[:, 1]], uvs[tv[:, 2]]
+    m = np.stack([b - a, c - a], axis=2)                        # (k, 2, 2)
+    lam = np.linalg.solve(m, (uv - a)[:, :, None])[:, :, 0]
+    bary = np.column_stack([1 - lam.sum(1), lam])
+    pts = np.einsum("kj,kjd->kd", bary, truth[tv])
+    keep = np.ones(len(pts), dtype=bool)
+    if crop:
+        lmp = truth[landmarks]
+        cx, cy = lmp[:, 0].mean(), lmp[:, 1].mean()
+        ax = 0.95 * (lmp[16, 0] - lmp[0, 0]) / 2 + 0.5
+        ay = 1.25 * (lmp[:, 1].max() - lmp[:, 1].min()) / 2 + 1.0
+        keep &= ((pts[:, 0] - cx) / ax) ** 2 + ((pts[:, 1] - cy) / ay) ** 2 < 1.0
+    for _ in range(n_holes):
+        centre = pts[rng.choice(np.flatnonzero(keep))]
+        keep &= np.linalg.norm(pts - centre, axis=1) > hole_radius
+    uv, pts = uv[keep], pts[keep]
+    d = Delaunay(uv)
+    sf = d.simplices.astype(np.int64)
+    cen = uv[sf].mean(axis=1)
+    ok = finder(cen[:, 0], cen[:, 1]) >= 0
+    e = np.stack([np.linalg.norm(pts[sf[:, i]] - pts[sf[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
+    med = np.median(e)
+    ok &= e.max(axis=1) < 3.0 * med
+    sf = sf[ok]
+    # The truth's orientation: flip Delaunay triangles to agree with the truth normals.
+    cr = np.cross(pts[sf[:, 1]] - pts[sf[:, 0]], pts[sf[:, 2]] - pts[sf[:, 0]])
+    vn_truth = vertex_normals(truth, faces)
+    nrm_at = np.einsum("kj,kjd->kd", bary[keep], vn_truth[tv[keep]])
+    flip = np.einsum("ij,ij->i", cr, nrm_at[sf].mean(axis=1)) < 0
+    sf[flip] = sf[flip][:, ::-1]
+    nrm = nrm_at / np.linalg.norm(nrm_at, axis=1, keepdims=True)
+    pts = pts + rng.normal(0, noise, len(pts))[:, None] * nrm
+    if transform:
+        sim = Similarity(float(np.exp(rng.uniform(np.log(0.3), np.log(3)))), random_rotation(rng),
+                         rng.normal(0, 20, 3))
+    else:
+        sim = Similarity.identity()
+    scan = clean_scan(sim.apply(pts), sf, name="synthetic scan")
+    ids = np.arange(68) if feature_ids is None else np.asarray(sorted(feature_ids), dtype=np.int64)
+    dirs = rng.normal(size=(len(ids), 3))
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    # Only landmarks the scan still shows can be marked on it.
+    from scipy.spatial import cKDTree
+
+    gap, _ = cKDTree(pts).query(truth[landmarks[ids]])
+    seen = gap < 3.0 * med
+    ids, dirs = ids[seen], dirs[seen]
+    fp = truth[landmarks[ids]] + feature_noise * dirs
+    return SyntheticScan(scan, FeaturePoints(ids, sim.apply(fp)), sim, truth)
+
+
+def correspondence_error(fitted: np.ndarray, truth: np.ndarray, similarity: Similarity) -> np.ndarray:
+    """Per-vertex distance ``(n,)`` between a fit (scan frame) and the truth (truth frame units)."""
+    return np.linalg.norm(similarity.inverse().apply(fitted) - truth, axis=1)
