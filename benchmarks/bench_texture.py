@@ -1,7 +1,9 @@
 """Benchmark of texture lifting (§6) and Poisson compositing (issue 5, "Measured").
 
 1. Texture lifting PSNR. The ICT-FaceKit face area (9,409 vertices, its own UVs) is rendered
-   (no shading, 640x480) with a known texture (``default_face_texture``, 512²) at several head
+   (no shading, 640x480) with a known texture (``default_face_texture``, 512², procedural; and
+   again with the Lee Perry-Smith scan's colour map carried onto the template, credit
+   "Lee Perry-Smith (Infinite Realities), CC-BY 3.0") at several head
    poses. A UV texture is lifted from each frame (``lift_uv_texture``), merged over frames
    (``merge_textures``) and rendered again; reported: PSNR against the original frames on the
    face region, for the training poses and for held-out poses, and the same with per-vertex
@@ -39,8 +41,9 @@ import numpy as np  # noqa: E402
 from facetransfer.composite import poisson_blend  # noqa: E402
 from facetransfer.io.atomic import atomic_path, write_text_atomic  # noqa: E402
 from facetransfer.render import look_at_weak_perspective, render, rotation_from_euler  # noqa: E402
-from facetransfer.texture import (default_face_texture, lift_uv_texture, lift_vertex_colors,  # noqa: E402
-                                  merge_textures, texture_to_uint8, uv_atlas, fill_vertex_colors)
+from facetransfer.texture import (LEE_PERRY_SMITH_CREDIT, default_face_texture,  # noqa: E402
+                                  fill_vertex_colors, lift_uv_texture, lift_vertex_colors,
+                                  merge_textures, texture_to_uint8, uv_atlas)
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
@@ -69,7 +72,7 @@ def load_mesh():
         return "uv sphere", V, F, UV, None
 
 
-def bench_lifting(quick: bool) -> tuple[dict, dict]:
+def bench_lifting(quick: bool, source: str = "procedural") -> tuple[dict, dict]:
     name, V, F, UV, lm = load_mesh()
 
     class _M:
@@ -77,7 +80,7 @@ def bench_lifting(quick: bool) -> tuple[dict, dict]:
         landmarks = lm
 
     T = 512
-    texture = default_face_texture(_M(), size=T, seed=0)
+    texture = default_face_texture(_M(), size=T, seed=0, source=source)
     size = (640, 480)
     train = [(-40, 0), (-20, 10), (0, 0), (20, -10), (40, 0), (0, 20)]
     held = [(30, 15), (-30, -15), (10, 5)]
@@ -122,6 +125,7 @@ def bench_lifting(quick: bool) -> tuple[dict, dict]:
     m_seen = atlas.mask & (merged.weight > 0.05)
     tex_psnr = psnr(tex8[m_seen], texture[m_seen])
     res = {
+        "texture": source,
         "mesh": name, "n_vertices": int(V.shape[0]), "n_faces": int(F.shape[0]),
         "frame_size": list(size), "tex_size": T,
         "train_poses_yaw_pitch_deg": train, "heldout_poses_yaw_pitch_deg": held,
@@ -242,50 +246,61 @@ def bench_poisson(quick: bool) -> dict:
             "p99_abs_diff_ours_vs_opencv": float(np.percentile(d, 99))}
 
 
-def plot(res: dict, pics: dict, path: Path) -> None:
+def plot(res: dict, pics: dict, pics_lps: dict | None, path: Path) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(2, 4, figsize=(16, 7.5))
+    fig, ax = plt.subplots(3, 4, figsize=(16, 11.5))
     crop = lambda im: im[40:440, 120:520]  # noqa: E731
-    for a, key, title in [(ax[0, 0], "frame", "rendered frame (training pose)"),
-                          (ax[0, 1], "rerender_train", "re-rendered with lifted texture"),
-                          (ax[0, 2], "heldout_truth", "held-out pose, truth"),
-                          (ax[0, 3], "rerender_heldout", "held-out pose, lifted texture")]:
-        a.imshow(crop(pics[key]))
-        a.set_title(title, fontsize=9)
+    rows = [(0, pics, "procedural texture")]
+    if pics_lps is not None:
+        rows.append((1, pics_lps, "Lee Perry-Smith (Infinite Realities), CC-BY 3.0"))
+    for r, P_, name in rows:
+        for a, key, title in [(ax[r, 0], "frame", "frame (training pose)"),
+                              (ax[r, 1], "rerender_train", "re-rendered, lifted texture"),
+                              (ax[r, 2], "heldout_truth", "held-out pose, truth"),
+                              (ax[r, 3], "rerender_heldout", "held-out pose, lifted texture")]:
+            a.imshow(crop(P_[key]))
+            a.set_title(f"{title}\n[{name}]" if key == "frame" else title, fontsize=9)
+    for a in ax[:2].ravel():
         a.axis("off")
-    ax[1, 0].imshow(pics["texture_truth"])
-    ax[1, 0].set_title("known texture (procedural)", fontsize=9)
-    ax[1, 1].imshow(pics["texture_lifted"])
-    ax[1, 1].set_title("lifted + merged + push-pull filled", fontsize=9)
-    im = ax[1, 2].imshow(pics["weight"], cmap="viridis")
-    ax[1, 2].set_title("total weight (visibility x cos²)", fontsize=9)
-    fig.colorbar(im, ax=ax[1, 2], fraction=0.046)
-    for a in ax[1, :3]:
+    ax[2, 0].imshow(pics["texture_lifted"])
+    ax[2, 0].set_title("procedural: lifted + merged + push-pull filled", fontsize=9)
+    if pics_lps is not None:
+        ax[2, 1].imshow(pics_lps["texture_lifted"])
+        ax[2, 1].set_title("Lee Perry-Smith (CC-BY 3.0): lifted + merged", fontsize=9)
+    im = ax[2, 2].imshow(pics["weight"], cmap="viridis")
+    ax[2, 2].set_title("total weight (visibility x cos²)", fontsize=9)
+    fig.colorbar(im, ax=ax[2, 2], fraction=0.046)
+    for a in ax[2, :3]:
         a.axis("off")
     L, P = res["lifting"], res["poisson"]
     labels = ["UV train", "UV held-out", "vertex train", "vertex held-out"]
     vals = [L["psnr_db_uv_train_mean"], L["psnr_db_uv_heldout_mean"],
             L["psnr_db_vertex_train_mean"], L["psnr_db_vertex_heldout_mean"]]
     colors = ["C0", "C0", "C1", "C1"]
+    LL = res.get("lifting_lee_perry_smith", {})
+    if "psnr_db_uv_heldout_mean" in LL:
+        labels += ["LPS UV train", "LPS UV held-out"]
+        vals += [LL["psnr_db_uv_train_mean"], LL["psnr_db_uv_heldout_mean"]]
+        colors += ["C4", "C4"]
     Fn = res.get("texture_function", {})
     if "psnr_db_texture_function_heldout_mean" in Fn:
         labels += ["expr: function", "expr: static"]
         vals += [Fn["psnr_db_texture_function_heldout_mean"], Fn["psnr_db_static_merged_heldout_mean"]]
         colors += ["C2", "C3"]
-    ax[1, 3].bar(labels, vals, color=colors)
-    ax[1, 3].set_ylabel("PSNR on face region (dB)")
-    ax[1, 3].tick_params(axis="x", labelsize=8, rotation=20)
-    ax[1, 3].set_title(f"Poisson 512²: ours {P['seconds_ours_sparse_lu']:.2f} s, "
+    ax[2, 3].bar(labels, vals, color=colors)
+    ax[2, 3].set_ylabel("PSNR on face region (dB)")
+    ax[2, 3].tick_params(axis="x", labelsize=7, rotation=35)
+    ax[2, 3].set_title(f"Poisson 512²: ours {P['seconds_ours_sparse_lu']:.2f} s, "
                        f"seamlessClone {P['seconds_opencv_seamlessClone']:.2f} s", fontsize=9)
     fig.suptitle(f"Texture lifting on {L['mesh']} ({L['n_vertices']} vertices), "
                  f"{len(L['train_poses_yaw_pitch_deg'])} training poses", fontsize=11)
     fig.tight_layout()
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=80)
+        fig.savefig(tmp, dpi=72)
     plt.close(fig)
 
 
@@ -297,20 +312,28 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     lifting, pics = bench_lifting(args.quick)
+    try:  # the same with the Lee Perry-Smith scan's colour map on the template (CC-BY 3.0)
+        lifting_lps, pics_lps = bench_lifting(args.quick, source="lee-perry-smith")
+    except Exception as exc:  # noqa: BLE001  (needs the assets and MediaPipe; reported)
+        lifting_lps, pics_lps = {"skipped": f"{type(exc).__name__}: {exc}"}, None
     try:
         function = bench_function(args.quick)
     except Exception as exc:  # noqa: BLE001  (needs the ICT data; reported, not fatal)
         function = {"skipped": f"{type(exc).__name__}: {exc}"}
     poisson = bench_poisson(args.quick)
-    res = {"benchmark": "texture", "lifting": lifting, "texture_function": function,
+    res = {"benchmark": "texture", "lifting": lifting, "lifting_lee_perry_smith": lifting_lps,
+           "texture_function": function,
            "poisson": poisson,
            "machine": {"python": platform.python_version(), "cpu": platform.processor() or platform.machine(),
                        "opencv": cv2.__version__, "threads": os.environ.get("OMP_NUM_THREADS")},
-           "credit": "procedural texture (facetransfer.texture.default_face_texture); ICT-FaceKit "
+           "credit": "procedural texture (facetransfer.texture.default_face_texture); "
+                     f"{LEE_PERRY_SMITH_CREDIT} (lifting_lee_perry_smith); ICT-FaceKit "
                      "(MIT, USC ICT) geometry"}
     write_text_atomic(out / "texture.json", json.dumps(res, indent=2) + "\n")
-    plot(res, pics, out / "texture.png")
-    print(json.dumps({k: v for k, v in lifting.items() if "mean" in k or "seconds" in k}, indent=1))
+    plot(res, pics, pics_lps, out / "texture.png")
+    for L in (lifting, lifting_lps):
+        print(json.dumps({k: v for k, v in L.items() if "mean" in k or "seconds" in k
+                          or k in ("texture", "skipped")}, indent=1))
     print(json.dumps({k: v for k, v in function.items() if "mean" in k or k == "skipped"}, indent=1))
     print(json.dumps(poisson, indent=1))
     return 0

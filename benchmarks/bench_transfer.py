@@ -251,11 +251,15 @@ def plot(report: dict, path: Path) -> None:
         axes[0].set_title("(a) transfer vs ground truth")
     lk = report.get("synthetic", {}).get("identity_leakage")
     if lk:
-        keys = ["to_target_truth", "to_source_truth"]
-        axes[1].bar([0, 1], [lk[k] for k in keys], color=["C2", "C1"])
-        axes[1].set_xticks([0, 1], ["result - target", "result - source"])
+        keys = ["to_target_tracked", "to_source_tracked", "to_target_truth", "to_source_truth",
+                "target_tracked_to_target_truth"]
+        labels = ["result-target\n(tracked)", "result-source\n(tracked)",
+                  "result-target\n(truth)", "result-source\n(truth)",
+                  "target tracked-\ntarget truth"]
+        axes[1].bar(range(5), [lk[k] for k in keys], color=["C2", "C1", "C2", "C1", "C7"])
+        axes[1].set_xticks(range(5), labels, fontsize=7)
         axes[1].set_ylabel("identity distance / |source - target|")
-        axes[1].set_title("(b) identity leakage (re-tracked result)")
+        axes[1].set_title("(b) identity of the re-tracked result")
     sp = report.get("speed")
     if sp:
         st = sp["stage_seconds"]
@@ -284,7 +288,11 @@ def main(argv=None) -> int:
     ap.add_argument("--speed-size", type=int, default=512)
     ap.add_argument("--skip-speed", action="store_true")
     ap.add_argument("--quick", action="store_true", help="30 frames, 2-second speed clip")
+    ap.add_argument("--replot", metavar="JSON", help="only redraw the plot of a report")
     args = ap.parse_args(argv)
+    if args.replot:
+        plot(json.loads(Path(args.replot).read_text()), Path(args.out) / "transfer.png")
+        return 0
     if args.quick:
         args.frames, args.speed_seconds = 30, 2.0
     out = Path(args.out)

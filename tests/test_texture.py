@@ -427,3 +427,44 @@ def test_texture_function_per_vertex_fills_unseen_vertices():
     np.testing.assert_allclose(tf(np.array([0.3]))[12], [100, 50, 20], atol=1e-3)
     tf0 = TextureFunction(cols, w, A, k=2)
     np.testing.assert_allclose(tf0(np.array([0.3]))[12], 0, atol=1e-3)
+
+
+def test_lee_perry_smith_on_ict_template(data_dir, tmp_path, monkeypatch):
+    """Fit the ICT template to the scan, carry its colour map over; lips red, brows dark."""
+    from facetransfer.datasets.ict import ict_template
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    monkeypatch.setenv("FACETRANSFER_DATA_DIR", str(data_dir))
+    t = ict_template("face")
+
+    class _Model:
+        uvs = t.mesh.uvs
+        landmarks = t.landmarks
+        vertex_subset = np.arange(len(t.mesh.uvs))
+
+    T = 256
+    tex = default_face_texture(_Model(), size=T, source="lee-perry-smith").astype(float)
+    assert tex.shape == (T, T, 3)
+
+    def at(i):
+        c, r = np.rint(t.mesh.uvs[t.landmarks[i]] * [T - 1, -(T - 1)] + [0, T - 1]).astype(int)
+        return tex[r - 1:r + 2, c - 1:c + 2].reshape(-1, 3).mean(0)
+
+    redness = lambda c: (c[0] - c[1]) / c[0]  # noqa: E731
+    lips = np.mean([at(i) for i in (51, 62, 66)], axis=0)
+    brows = np.mean([at(i) for i in (19, 24)], axis=0)
+    skin = np.mean([at(i) for i in (3, 13, 27, 29)], axis=0)  # jaw sides, nose bridge
+    # measured: redness lips 0.44, skin 0.23; brightness brows 121, skin 172
+    assert redness(lips) > redness(skin) + 0.1
+    assert brows.mean() < skin.mean() - 25
+    cached = sorted(p.name for p in (tmp_path / "facetransfer" / "textures").iterdir())
+    assert any(n.endswith("-fit.npy") for n in cached) and any(n.endswith(f"-{T}.png") for n in cached)
+    np.testing.assert_array_equal(default_face_texture(_Model(), size=T, source="auto"), tex)
+    # not ICT UVs: auto falls back to procedural, an explicit request is an error
+    _, _, UV = grid(4)
+    np.testing.assert_array_equal(default_face_texture(UV, size=32, source="auto"),
+                                  default_face_texture(UV, size=32))
+    with pytest.raises(TextureError):
+        default_face_texture(UV, size=32, source="lee-perry-smith")
+    with pytest.raises(TextureError):
+        default_face_texture(UV, size=32, source="photo")

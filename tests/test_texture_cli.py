@@ -88,6 +88,8 @@ def test_errors_are_one_line(run, tmp_path, model_path, capsys):
          "--mask", tmp_path / "a.png", "--out", tmp_path / "nodir" / "o.png"),
         ("texture", "default", "--model", tmp_path / "nomodel.npz", "--out", tmp_path / "d.png"),
         ("texture", "default", "--model", model_path, "--out", tmp_path / "d.txt"),
+        ("texture", "default", "--model", model_path, "--source", "lee-perry-smith",
+         "--out", tmp_path / "d.png"),  # the cap model's UVs are not ICT-FaceKit's
         ("texture", "lift", tmp_path / "none.mp4", "--track", tmp_path / "t.npz", "--model",
          model_path, "--out", tmp_path / "l.png"),
     ]

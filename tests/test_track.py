@@ -300,3 +300,30 @@ def test_track_validation_and_bad_files(tmp_path):
     with pytest.raises(TrackError, match="has 4 frames"):
         t.check_video(5, (64, 48))
     t.check_video(4, (64, 48))
+
+
+def test_solver_cycles_through_three_modes(quick_model):
+    """A trilinear model (identity x expression x viseme): coordinate descent over all modes."""
+    from facetransfer.model import MultilinearModel
+
+    rng = np.random.default_rng(7)
+    n = 300
+    base = quick_model.synthesize(quick_model.default_weights())[:n]      # a face-like shape
+    core = np.zeros((3 * n, 3, 3, 3))
+    core[:, 0, 0, 0] = base.ravel()                                      # mean face
+    core += 0.3 * rng.normal(size=core.shape) * (np.arange(27).reshape(3, 3, 3) > 0)
+    factors = tuple(np.c_[np.ones(4), 0.3 * rng.normal(size=(4, 2))] for _ in range(3))
+    m = MultilinearModel(core=core, factors=factors,
+                         mode_names=("identity", "expression", "viseme"),
+                         labels=tuple(tuple(f"{k}{i}" for i in range(4)) for k in "iev"),
+                         faces=np.array([[0, 1, 2]]), landmarks=np.arange(68))
+    w_true = {k: np.r_[1.0, 0.2 * rng.normal(size=2)] for k in m.mode_names}  # on the gauge
+    for k in m.mode_names:
+        assert np.allclose(project_to_gauge(w_true[k], Prior.from_model(m, k)), w_true[k])
+    R, s, t = rotation_from_euler(10, 5, -4), 7.0, np.array([50.0, 60.0])
+    v = np.arange(n)
+    T = project(m.synthesize(w_true, vertices=v), R, s, t)
+    st = fit_points(m, v, T, prior=0.0, iterations=300)
+    for k in m.mode_names:
+        assert np.abs(st.weights[k] - w_true[k]).max() < 1e-6
+    assert np.abs(st.pose.rotation - R).max() < 1e-6 and abs(st.pose.scale - s) < 1e-5

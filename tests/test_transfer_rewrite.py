@@ -223,3 +223,13 @@ def test_nearest_frames_picks_closest_valid_row():
     np.testing.assert_array_equal(rw.nearest_frames(q, bank, valid), [1, 2, 1])
     with pytest.raises(rw.RewriteError, match="all lost"):
         rw.nearest_frames(q, bank, np.zeros(4, bool))
+
+
+def test_parallel_rendering_is_deterministic(quick_model, topo, synthetic):
+    fa, ta, fb, tb, truth = synthetic
+    new = recombine(tb, expression=ta)
+    runs = [[o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
+                                                source_track=ta, topo=topo, workers=w)]
+            for w in (1, 2)]
+    for a, b in zip(*runs):
+        np.testing.assert_array_equal(a, b)

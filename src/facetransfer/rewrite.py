@@ -50,6 +50,8 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "RewriteError",
+    "TEXTURE_MODES",
+    "BLEND_MODES",
     "MeshTopology",
     "mesh_topology",
     "boundary_loops",
@@ -57,10 +59,22 @@ __all__ = [
     "frame_uvs",
     "FaceTexture",
     "constant_face_texture",
-    "rewrite_frame",
+    "merged_face_texture",
+    "membrane_blend",
     "RewriteFrame",
+    "rewrite_frame",
     "rewrite_frames",
+    "has_audio",
     "mux_audio",
+    "write_video_with_audio",
+    "landmark_track",
+    "obtain_track",
+    "nearest_frames",
+    "TransferPlan",
+    "plan_transfer",
+    "TransferResult",
+    "transfer_video",
+    "write_mesh_sequence",
 ]
 
 TEXTURE_MODES = ("constant", "frame")
@@ -914,7 +928,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         Of at most ``max_frames`` frames (a longer track file is cut).
     """
     from .track import Track
-    from .transfer import _take
+    from .transfer import take_frames
 
     if method not in ("auto", "flow", "landmarks"):
         raise RewriteError(f"tracking method must be auto, flow or landmarks, got {method!r}")
@@ -922,7 +936,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         tr = Track.load(track_file)
         tr.check_model(model)
         if max_frames is not None and tr.n_frames > max_frames:
-            tr = _take(tr, np.arange(max_frames))
+            tr = take_frames(tr, np.arange(max_frames))
         return tr
     from .io.video import read_video, video_info
 
@@ -1103,7 +1117,7 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
     import time
 
     from .io.video import read_video, video_info
-    from .transfer import (_take, project_landmarks, recombine, resample_track, time_map,
+    from .transfer import (take_frames, project_landmarks, recombine, resample_track, time_map,
                            constant_weights)
 
     if max_frames is not None and int(max_frames) < 1:
@@ -1182,12 +1196,12 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
             raise RewriteError(f"performance is for {new.frame_size[0]}x{new.frame_size[1]} "
                                f"frames, the target {target} is {W}x{H}")
         if new.n_frames > n:
-            new = _take(new, np.arange(n))
+            new = take_frames(new, np.arange(n))
         varying = [m for m in model.mode_names if m != "identity"] or list(model.mode_names)
         q = np.concatenate([new.weights[m] for m in varying], axis=1)
         b = np.concatenate([tt.weights[m] for m in varying], axis=1)
         j = nearest_frames(q, b, ~tt.lost)
-        mt = _take(tt, j)
+        mt = take_frames(tt, j)
         # the chosen frames' geometry, seen by their own cameras (texture lookup)
         return TransferPlan(frames, float(fps), tt, new, frames, mt, j, tracks, timings)
     new = recombine(tt, expression=ex, viseme=vi, identity=idw, pose=po, align=align)
@@ -1196,12 +1210,12 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
     # else the target's own mouth
     mouth_kind = "viseme" if vi is not None else ("expression" if ex is not None else None)
     if mouth_kind is None:
-        mouth_frames, mouth_track = frames, _take(tt, np.arange(new.n_frames))
+        mouth_frames, mouth_track = frames, take_frames(tt, np.arange(new.n_frames))
         mouth_index = np.arange(new.n_frames)
     else:
         ms = tracks[mouth_kind]
         tm = time_map(ms.n_frames, ms.fps, n, fps, align=align)
-        mouth_track = _take(resample_track(ms, tm), np.arange(new.n_frames))
+        mouth_track = take_frames(resample_track(ms, tm), np.arange(new.n_frames))
         mouth_frames = src_frames[mouth_kind]
         mouth_index = tm.nearest[:new.n_frames]
     return TransferPlan(frames, float(fps), tt, new, mouth_frames, mouth_track,

@@ -78,6 +78,7 @@ __all__ = [
     "BakedTexture",
     "load_lee_perry_smith",
     "lee_perry_smith_texture",
+    "lee_perry_smith_template_texture",
     "LEE_PERRY_SMITH_CREDIT",
     "texture_to_uint8",
 ]
@@ -981,27 +982,50 @@ _BROWS = (list(range(17, 22)), list(range(22, 27)))
 _EYES = (list(range(36, 42)), list(range(42, 48)))
 
 
-def default_face_texture(model_or_uvs, size: int = 512, seed: int = 0) -> np.ndarray:
-    """A plain procedural skin texture for a face mesh's UV layout.
+def default_face_texture(model_or_uvs, size: int = 512, seed: int = 0, *,
+                         source: str = "procedural") -> np.ndarray:
+    """The default face texture for a face mesh's UV layout.
 
-    Skin tone with smooth low-frequency variation, fine noise (so that a KLT tracker finds
-    gradients everywhere) and, where the landmarks can be located in UV space, darker red lips,
-    darker brows and eyelid lines. It stands in until the Lee Perry-Smith scan
-    ("Lee Perry-Smith (Infinite Realities), CC-BY 3.0") is carried onto the template UVs.
+    ``source="procedural"``: a plain procedural skin texture: skin tone with smooth
+    low-frequency variation, fine noise (so that a KLT tracker finds gradients everywhere) and,
+    where the landmarks can be located in UV space, darker red lips, darker brows and eyelid
+    lines. Deterministic, fast, needs no asset.
+
+    ``source="lee-perry-smith"``: the Lee Perry-Smith scan carried onto the ICT-FaceKit template
+    UVs by template fitting (:func:`lee_perry_smith_template_texture`; first call about 15 s,
+    then cached). Needs a mesh whose UVs are ICT-FaceKit's (e.g. a model built from the ICT
+    data sets). Show it with the credit :data:`LEE_PERRY_SMITH_CREDIT`.
+    ``source="auto"``: Lee Perry-Smith where it applies and its assets are available, else
+    procedural.
 
     Parameters
     ----------
     model_or_uvs : MultilinearModel, FaceDataset, Mesh or (n, 2) array
-        Anything with ``uvs`` (and optionally ``landmarks``, iBUG-68 vertex indices), or the uvs.
+        Anything with ``uvs`` (and optionally ``landmarks``, iBUG-68 vertex indices, and
+        ``vertex_subset``, indices into the ICT-FaceKit mesh), or the uvs.
     size : int
         Texture width and height ``T``.
     seed : int
-        Seed of the noise.
+        Seed of the noise (procedural only).
+    source : {"procedural", "lee-perry-smith", "auto"}, keyword-only
 
     Returns
     -------
     (T, T, 3) uint8 RGB, in the convention of :func:`facetransfer.render.sample_texture`.
     """
+    if source not in ("procedural", "lee-perry-smith", "auto"):
+        raise TextureError(f"source must be 'procedural', 'lee-perry-smith' or 'auto', got {source!r}")
+    if source != "procedural":
+        try:
+            if not _uses_ict_uvs(model_or_uvs):
+                raise TextureError("the Lee Perry-Smith texture is carried onto ICT-FaceKit UVs; "
+                                   "this mesh's UVs are not ICT-FaceKit's")
+            return lee_perry_smith_template_texture(size)
+        except (FaceTransferError, RuntimeError, OSError, ImportError) as exc:
+            if source == "lee-perry-smith":
+                raise
+            log.info("default_face_texture: Lee Perry-Smith texture not available (%s); "
+                     "using the procedural texture", exc)
     if isinstance(model_or_uvs, np.ndarray):
         uvs, lm = model_or_uvs, None
     else:
@@ -1221,4 +1245,140 @@ def lee_perry_smith_texture(fitted_vertices, faces, uvs, size: int = 512, *,
         with atomic_path(path) as tmp:
             cv2.imwrite(str(tmp), cv2.cvtColor(tex, cv2.COLOR_RGB2BGR))
         log.info("cached the Lee Perry-Smith texture at %s", path)
+    return tex
+
+
+#: Bump when the Lee Perry-Smith template pipeline changes (invalidates cached results).
+_LPS_PIPELINE_VERSION = 1
+#: iBUG-68 points detected on the rendered scan and used as fitting features (no jaw contour).
+_LPS_FEATURES = tuple(range(17, 68))
+
+
+def _uses_ict_uvs(model_or_uvs) -> bool:
+    """True if the mesh's UVs are those of ICT-FaceKit vertices (``vertex_subset`` or 0..n-1)."""
+    from .datasets.ict import ict_template
+
+    U = model_or_uvs if isinstance(model_or_uvs, np.ndarray) else getattr(model_or_uvs, "uvs", None)
+    if U is None:
+        return False
+    U = np.asarray(U, dtype=np.float64)
+    sub = None if isinstance(model_or_uvs, np.ndarray) else getattr(model_or_uvs, "vertex_subset", None)
+    ict_uvs = ict_template("face").mesh.uvs
+    sub = np.arange(U.shape[0]) if sub is None else np.asarray(sub, dtype=np.int64)
+    if U.ndim != 2 or sub.shape != (U.shape[0],) or sub.size == 0 or sub.max() >= len(ict_uvs) \
+            or sub.min() < 0:
+        return False
+    return bool(np.allclose(U, ict_uvs[sub], atol=1e-6))
+
+
+def _lps_features(mesh, image, *, size: int = 640):
+    """iBUG feature points on the Lee Perry-Smith scan: detected on a frontal rendering.
+
+    The scan is rendered frontally with its colour map, MediaPipe's face landmarker finds the
+    478 points (mapped to iBUG-68), and each point is lifted back onto the scan surface through
+    the z-buffer (triangle and barycentric coordinates at its exact image position).
+    """
+    from .correspond.features import FeaturePoints
+    from .render import look_at_weak_perspective, render
+    from .track.init import MediaPipeDetector
+
+    V, F = mesh.vertices, mesh.faces
+    head = V[V[:, 1] > np.percentile(V[:, 1], 20)]  # the bust's head, not the shoulders
+    cam = look_at_weak_perspective(head, (size, size), fill=0.9)
+    r = render(V, F, cam, (size, size), uvs=mesh.uvs, texture=image, background=(90, 90, 90))
+    with MediaPipeDetector() as det:
+        p68 = det.detect(r.image)
+    if p68 is None:
+        raise TextureError("no face found on the rendered Lee Perry-Smith scan")
+    idx = np.asarray(_LPS_FEATURES, dtype=np.int64)
+    xy = p68[idx]
+    ix, iy = np.rint(xy[:, 0]).astype(int), np.rint(xy[:, 1]).astype(int)
+    inside = (ix >= 0) & (ix < size) & (iy >= 0) & (iy < size)
+    tri = np.full(len(idx), -1, np.int64)
+    tri[inside] = r.raster.tri_id[iy[inside], ix[inside]]
+    ok = tri >= 0
+    Ft = F[tri[ok]]
+    b = _bary2d(cam.project(V[Ft.ravel()]).reshape(-1, 3, 2), xy[ok])
+    pts = np.einsum("mk,mkc->mc", b, V[Ft])
+    return FeaturePoints(idx[ok], pts)
+
+
+def lee_perry_smith_template_texture(size: int = 512, *, use_cache: bool = True) -> np.ndarray:
+    """The Lee Perry-Smith scan's colour map on the ICT-FaceKit template's UVs (issue 5).
+
+    Pipeline (run once, then cached in the user cache, ``cache_dir()/textures``):
+
+    1. feature points on the scan: iBUG-68 brows, nose, eyes and lips detected by MediaPipe on a
+       frontal rendering and lifted onto the surface (:func:`_lps_features`);
+    2. template fitting (§4.2, :func:`facetransfer.correspond.fitting.fit_template`) of the
+       ICT-FaceKit face area to the scan;
+    3. closest-point transfer of the colour map to the template's UVs (:func:`bake_texture`).
+
+    The image applies to every mesh whose UVs are ICT-FaceKit's (the ICT data sets and the
+    models built from them). Credit :data:`LEE_PERRY_SMITH_CREDIT` wherever it is shown.
+
+    Parameters
+    ----------
+    size : int
+        Texture width and height.
+    use_cache : bool, keyword-only
+
+    Returns
+    -------
+    (size, size, 3) uint8 RGB
+
+    Raises
+    ------
+    AssetError
+        The ICT-FaceKit, Lee Perry-Smith or MediaPipe assets are missing.
+    TextureError, FitDivergedError
+        No face detected on the scan, or the fit failed.
+    """
+    from .assets import cache_dir
+    from .datasets.ict import ict_template
+
+    T = int(size)
+    if T != size or T < 8 or T > 8192:
+        raise TextureError(f"size must be an integer in 8..8192, got {size!r}")
+    tmpl = ict_template("face")
+    h = hashlib.sha256()
+    for a in (tmpl.mesh.vertices, tmpl.mesh.faces, tmpl.mesh.uvs, tmpl.landmarks):
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(f"lps-ict-v{_LPS_PIPELINE_VERSION}".encode())
+    key = h.hexdigest()[:16]
+    folder = cache_dir() / "textures"
+    tex_path = folder / f"lee-perry-smith-ict-face-{key}-{T}.png"
+    fit_path = folder / f"lee-perry-smith-ict-face-{key}-fit.npy"
+    if use_cache and tex_path.is_file():
+        img = cv2.imread(str(tex_path), cv2.IMREAD_COLOR)
+        if img is not None and img.shape == (T, T, 3):
+            return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    fitted = None
+    if use_cache and fit_path.is_file():
+        try:
+            fitted = np.load(fit_path, allow_pickle=False)
+        except (OSError, ValueError):
+            fitted = None
+        if fitted is not None and fitted.shape != tmpl.mesh.vertices.shape:
+            fitted = None
+    if fitted is None:
+        from .correspond.fitting import fit_template, template_from_mesh
+        from .correspond.meshops import clean_scan
+
+        mesh, image = load_lee_perry_smith()
+        features = _lps_features(mesh, image)
+        scan = clean_scan(mesh.vertices, mesh.faces, name="LeePerrySmith.glb")
+        template = template_from_mesh(tmpl.mesh.vertices, tmpl.mesh.faces, tmpl.landmarks, name="ict")
+        fit = fit_template(scan, features, template)
+        log.info("fitted the ICT template to the Lee Perry-Smith scan: %s", fit.stats)
+        fitted = fit.vertices
+        if use_cache:
+            folder.mkdir(parents=True, exist_ok=True)
+            with atomic_path(fit_path) as tmp:
+                np.save(tmp, fitted)
+    tex = lee_perry_smith_texture(fitted, tmpl.mesh.faces, tmpl.mesh.uvs, T, use_cache=False)
+    if use_cache:
+        folder.mkdir(parents=True, exist_ok=True)
+        with atomic_path(tex_path) as tmp:
+            cv2.imwrite(str(tmp), cv2.cvtColor(tex, cv2.COLOR_RGB2BGR))
     return tex

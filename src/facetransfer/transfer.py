@@ -50,8 +50,12 @@ __all__ = [
     "EditScale",
     "parse_add",
     "parse_scale",
+    "ramp_envelope",
     "edit_track",
     "puppet_frames",
+    "take_frames",
+    "identity_from_label",
+    "parse_weights",
 ]
 
 #: Ways to align a source performance with the target's length (see :func:`time_map`).
@@ -284,8 +288,8 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         n_out = min(n_out, tm.n_frames)
     for what in resampled:
         if resampled[what].n_frames > n_out:
-            resampled[what] = _take(resampled[what], np.arange(n_out))
-    base = _take(target, np.arange(n_out)) if n_out < n else target
+            resampled[what] = take_frames(resampled[what], np.arange(n_out))
+    base = take_frames(target, np.arange(n_out)) if n_out < n else target
     posed = resampled.get("pose", base)
     weights = {m: base.weights[m].copy() for m in base.mode_names}
     lost = base.lost.copy()
@@ -321,8 +325,8 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         weights=weights, lost=lost, confidence=conf, info={})
 
 
-def _take(track, idx: np.ndarray):
-    """Frames ``idx`` of a track."""
+def take_frames(track, idx: np.ndarray):
+    """Frames ``idx`` (int array) of a track, as a new track."""
     return dataclasses.replace(
         track, rotation=track.rotation[idx], scale=track.scale[idx],
         translation=track.translation[idx],

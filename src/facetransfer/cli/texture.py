@@ -1,6 +1,7 @@
 """``facetransfer texture ...``: default face texture, texture lifting from video, Poisson blending (§6).
 
-    facetransfer texture default --model MODEL.npz --out tex.png [--size 512] [--seed 0]
+    facetransfer texture default --model MODEL.npz --out tex.png [--size 512] [--seed 0] \\
+        [--source procedural|lee-perry-smith|auto]
     facetransfer texture lift CLIP.mp4 --track CLIP.truth.npz --model MODEL.npz --out tex.png \\
         [--size 512] [--step 2] [--function tf.npz]
     facetransfer texture blend --source face.png --target frame.png --mask mask.png --out out.png \\
@@ -94,13 +95,21 @@ def _load_track(path: str):
 
 
 def cmd_default(args: argparse.Namespace) -> int:
-    from ..texture import default_face_texture
+    from ..texture import LEE_PERRY_SMITH_CREDIT, default_face_texture
 
     out = _image_out(args.out)
+    if not 8 <= args.size <= 8192:
+        raise FaceTransferError(f"--size must be in 8..8192, got {args.size}")
     model = _load_model(args.model)
-    tex = default_face_texture(model, size=args.size, seed=args.seed)
+    procedural = default_face_texture(model, size=args.size, seed=args.seed)
+    tex = procedural if args.source == "procedural" else \
+        default_face_texture(model, size=args.size, seed=args.seed, source=args.source)
     _write_image(out, tex)
-    print(f"wrote {out} ({args.size}x{args.size} procedural skin texture)")
+    if args.source != "procedural" and not np.array_equal(tex, procedural):
+        print(f"wrote {out} ({args.size}x{args.size}, Lee Perry-Smith scan on the model's UVs; "
+              f"credit: {LEE_PERRY_SMITH_CREDIT})")
+    else:
+        print(f"wrote {out} ({args.size}x{args.size} procedural skin texture)")
     return 0
 
 
@@ -175,6 +184,10 @@ def register(sub) -> None:
     d.add_argument("--model", required=True, help="model file (.npz) with UVs")
     d.add_argument("--size", type=int, default=512, help="texture width and height (default 512)")
     d.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    d.add_argument("--source", choices=("procedural", "lee-perry-smith", "auto"),
+                   default="procedural",
+                   help="procedural skin (default), the Lee Perry-Smith scan fitted onto the "
+                   "ICT-FaceKit UVs (CC-BY 3.0; first run ~15 s, then cached), or auto")
     d.add_argument("--out", required=True, help="TEX.png")
     d.set_defaults(func=cmd_default)
 

@@ -83,11 +83,11 @@ class FitStage:
 
 #: Features first (heavily), then proximity with decreasing stiffness (§4.2).
 DEFAULT_SCHEDULE: tuple[FitStage, ...] = (
-    FitStage("features", 30.0, 10.0, 0.0, 1),
-    FitStage("features+proximity", 30.0, 10.0, 0.2, 3, 2.0),
-    FitStage("proximity, stiff", 10.0, 1.0, 1.0, 3, 1.0),
-    FitStage("proximity", 3.0, 0.3, 1.0, 3, 0.5),
-    FitStage("proximity, fine", 1.0, 0.1, 1.0, 3, 0.3),
+    FitStage("features", 1000.0, 10.0, 0.0, 1),
+    FitStage("features + proximity", 1000.0, 10.0, 0.2, 2, 2.0),
+    FitStage("proximity, stiff", 300.0, 3.0, 1.0, 2, 1.0),
+    FitStage("proximity", 100.0, 1.0, 1.0, 2, 0.5),
+    FitStage("proximity, fine", 30.0, 0.3, 1.0, 2, 0.3),
 )
 
 
@@ -248,16 +248,24 @@ def _pairs(query: SurfaceQuery, x: np.ndarray, faces: np.ndarray, *, max_distanc
     return cp, ok, cos
 
 
-def _rigid_icp(query, x, faces, idx, *, iterations, max_distance, max_angle, normal_sign):
-    """Rigid ICP of vertices ``idx`` of ``x`` to the surface; returns the composed rigid motion."""
+def _rigid_icp(query, x, faces, idx, *, iterations, max_angle, normal_sign,
+               start_distance=5.0, end_distance=0.5, keep=0.7):
+    """Trimmed rigid ICP of vertices ``idx`` of ``x`` to the surface.
+
+    The distance limit shrinks geometrically from ``start_distance`` to ``end_distance`` and only
+    the closest ``keep`` fraction of the accepted pairs is used (trimmed ICP). Returns the rigid
+    motion mapping ``x`` onto the surface.
+    """
     total = Similarity.identity()
     cur = x
-    for _ in range(iterations):
-        cp, ok, _ = _pairs(query, cur, faces, max_distance=max_distance, max_angle=max_angle,
+    for it in range(iterations):
+        lim = max(end_distance, start_distance * 0.75 ** it)
+        cp, ok, _ = _pairs(query, cur, faces, max_distance=lim, max_angle=max_angle,
                            normal_sign=normal_sign)
         sel = idx[ok[idx]]
         if len(sel) < 10:
-            break
+            continue
+        sel = sel[cp.distance[sel] <= np.quantile(cp.distance[sel], keep)]
         step = similarity_procrustes(cur[sel], cp.points[sel], with_scale=False)
         total = step.compose(total)
         cur = step.apply(cur)
@@ -267,7 +275,7 @@ def _rigid_icp(query, x, faces, idx, *, iterations, max_distance, max_angle, nor
 def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
                  reference: np.ndarray | None = None,
                  schedule: Sequence[FitStage] = DEFAULT_SCHEDULE,
-                 max_angle: float = 60.0, feature_tolerance: float = 0.1,
+                 max_angle: float = 60.0, feature_tolerance: float = 0.2,
                  diverge_distance: float = 0.5, diverge_flipped: float = 0.05,
                  progress: Callable[[int, int, str], None] | None = None) -> FitResult:
     """Fit a template to a scan (§4.2).
@@ -344,8 +352,8 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     history = []
     if reference is not None:
         upper = upper_face_vertices(x0, template.landmarks)
-        rig = _rigid_icp(query, x0, faces, upper, iterations=10, max_distance=1.0,
-                         max_angle=max_angle, normal_sign=normal_sign)
+        rig = _rigid_icp(query, x0, faces, upper, iterations=25, max_angle=max_angle,
+                         normal_sign=normal_sign)
         # Move the scan instead of the reference, so x0 stays the regularisation target.
         to_work = rig.inverse().compose(to_work)
         scan_w = to_work.apply(scan.vertices)

@@ -124,7 +124,7 @@ def clean_scan(vertices: np.ndarray, faces: np.ndarray, *, name: str = "scan",
     inv = inv.ravel()
     if len(first) < len(v):
         notes.append(f"merged {len(v) - len(first)} duplicate vertices")
-        log.warning("%s: merged %d duplicate vertices", name, len(v) - len(first))
+        log.info("%s: merged %d duplicate vertices", name, len(v) - len(first))
     v = v[first]
     f = inv[f]
     _, area = face_normals(v, f)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .features import FeaturePoints
-from .meshops import ScanMesh, clean_scan, vertex_normals
+from .meshops import ScanMesh, SurfaceQuery, clean_scan, vertex_normals
 from .procrustes import Similarity
 
 
@@ -32,12 +32,16 @@ class SyntheticScan:
         Truth frame → scan frame.
     truth : (n, 3) float64
         The true template-topology vertices, truth frame (template units).
+    observed : (n,) bool
+        Vertices the scan shows faithfully: within ``observe_tol`` of the noise-free resampled
+        surface, away from its boundary (excludes crops, holes, nostrils, ear folds, the mouth).
     """
 
     scan: ScanMesh
     features: FeaturePoints
     similarity: Similarity
     truth: np.ndarray
+    observed: np.ndarray
 
 
 def random_rotation(rng: np.random.Generator) -> np.ndarray:
@@ -52,8 +56,8 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
 def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
                         landmarks: np.ndarray, *, n_points: int = 30000, noise: float = 0.02,
                         n_holes: int = 2, hole_radius: float = 0.8, crop: bool = True,
-                        feature_noise: float = 0.1, feature_ids=None, transform: bool = True,
-                        rng: np.random.Generator | None = None) -> SyntheticScan:
+                        feature_noise: float = 0.1, feature_ids=None, transform: bool | Similarity = True,
+                        observe_tol: float = 0.05, rng: np.random.Generator | None = None) -> SyntheticScan:
     """Resample ``truth`` into a noisy, holed, cropped scan in a random pose.
 
     Parameters
@@ -76,8 +80,8 @@ def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
         Each feature point is moved by this distance in a random direction.
     feature_ids : sequence of int, optional
         iBUG numbers to give as features (default all 68).
-    transform : bool
-        Apply a random similarity (rotation, scale in [0.3, 3], translation).
+    transform : bool or Similarity
+        Apply a random similarity (rotation, scale in [0.3, 3], translation), or this one.
     rng : numpy Generator
     """
     import matplotlib.tri as mtri
@@ -128,8 +132,13 @@ def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
     flip = np.einsum("ij,ij->i", cr, nrm_at[sf].mean(axis=1)) < 0
     sf[flip] = sf[flip][:, ::-1]
     nrm = nrm_at / np.linalg.norm(nrm_at, axis=1, keepdims=True)
+    clean = clean_scan(pts, sf, name="synthetic scan")
+    cp = SurfaceQuery(clean.vertices, clean.faces).closest(truth)
+    observed = (cp.distance < observe_tol) & ~cp.on_boundary
     pts = pts + rng.normal(0, noise, len(pts))[:, None] * nrm
-    if transform:
+    if isinstance(transform, Similarity):
+        sim = transform
+    elif transform:
         sim = Similarity(float(np.exp(rng.uniform(np.log(0.3), np.log(3)))), random_rotation(rng),
                          rng.normal(0, 20, 3))
     else:
@@ -142,10 +151,10 @@ def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
     from scipy.spatial import cKDTree
 
     gap, _ = cKDTree(pts).query(truth[landmarks[ids]])
-    seen = gap < 3.0 * med
+    seen = gap < 1.5 * med
     ids, dirs = ids[seen], dirs[seen]
     fp = truth[landmarks[ids]] + feature_noise * dirs
-    return SyntheticScan(scan, FeaturePoints(ids, sim.apply(fp)), sim, truth)
+    return SyntheticScan(scan, FeaturePoints(ids, sim.apply(fp)), sim, truth, observed)
 
 
 def correspondence_error(fitted: np.ndarray, truth: np.ndarray, similarity: Similarity) -> np.ndarray:

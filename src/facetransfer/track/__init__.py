@@ -4,8 +4,18 @@ Modules: :mod:`.result` (the :class:`Track` result and its file), :mod:`.camera`
 pose, Eq. (7)), :mod:`.klt` (symmetric KLT terms, Eq. (6)), :mod:`.solver` (Eq. (8), (9)),
 :mod:`.landmarks` (MediaPipe-478 to iBUG-68), :mod:`.init` (§5.2), :mod:`.tracker` (passes),
 :mod:`.overlay` (drawing the fit on frames).
+
+Typical use::
+
+    from facetransfer.model import load_model
+    from facetransfer.track import TrackOptions, track_video
+
+    track = track_video("clip.mp4", load_model("bilinear.npz"), init="auto",
+                        options=TrackOptions(passes=2, anchor=True))
+    track.save("clip.track.npz")
 """
 
 from .result import Track
+from .tracker import FaceTracker, TrackOptions, track_video
 
-__all__ = ["Track"]
+__all__ = ["Track", "TrackOptions", "FaceTracker", "track_video"]

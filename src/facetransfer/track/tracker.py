@@ -340,15 +340,17 @@ class FaceTracker:
                                             self.offsets, self.wwin)      # Eq. (6), level units
                     self._tick("terms", t1)
                     t1 = _now()
-                    rw = f * _robust_weights(wi[..., 0], wj, opt.robust)  # occlusion, mismatch
-                    Z *= (f * rw)[:, None, None]                          # full-res pixels
-                    e *= rw[:, None]
-                    A, b, J = self._flow_system(Z, e, X, B, pose, weights[m], m, anc,
+                    rw = _robust_weights(wi[..., 0], wj, opt.robust)      # occlusion, mismatch
+                    # level units -> full-resolution pixels: d_l = f d, so Z f², e f
+                    Z *= (f * f * rw)[:, None, None]
+                    e *= (f * rw)[:, None]
+                    A, b, G = self._flow_system(Z, e, X, B, pose, weights[m], m, anc,
                                                 weights, guess)
                     d = _clip_step(solve_step(A, b), pose.scale)
                     pose = compose(pose, d[:N_POSE])
                     weights[m] = weights[m] + self.priors[m].Q @ d[N_POSE:]
-                    moved = max(moved, float(np.sqrt(max(d @ J @ d, 0.0))))  # rms pixels
+                    # G is the mean JᵀJ: dᵀ G d is the mean squared pixel motion of the step
+                    moved = max(moved, float(np.sqrt(max(d @ G @ d, 0.0))))
                     self._tick("solve", t1)
                 if moved < opt.tolerance / f:  # converged on this level (rms pixel motion)
                     break
@@ -358,6 +360,9 @@ class FaceTracker:
         p = project(X, pose.rotation, pose.scale, pose.translation)
         Z, e, wj = klt_terms_at(pyr1.levels[0], p, wi, self.offsets, self.wwin)
         conf = _confidence(wi[..., 0], wj)
+        rw = _robust_weights(wi[..., 0], wj, opt.robust)
+        Z *= rw[:, None, None]
+        e *= rw[:, None]
         ident = None
         if accumulate and self.accumulated:
             ident = self._identity_system(Z, e, X, sel, state, anc)
@@ -366,6 +371,12 @@ class FaceTracker:
         return _PairResult(state, conf, ident, int(sel.size))
 
     def _flow_system(self, Z, e, X, B, pose, w, mode, anc, weights, guess):
+        """Normal equations of one Gauss-Newton step for (pose, mode ``mode``), Eq. (8).
+
+        The flow term is normalised by ``Σ tr(Z) / 2`` (so it is a mean over well-textured
+        points in squared pixels), then the temporal damping toward ``guess``, the anchor
+        term and the prior are added. Returns ``(A, b, G)``, ``G`` the mean ``JᵀJ``.
+        """
         Q = self.priors[mode].Q
         A, b, G = flow_normal_equations(X, B @ Q, pose, Z, e)   # Σ JᵀZJ, Σ Jᵀe, Σ JᵀJ
         G /= X.shape[0]
