@@ -153,3 +153,20 @@ def test_hooi_matches_tensorly_partial_tucker_error():
     theirs = np.linalg.norm(rec - T) / np.linalg.norm(T)
     assert ours.errors[-1] <= theirs + 1e-9
     assert abs(ours.errors[-1] - theirs) < 1e-4
+
+
+def test_hooi_through_attribute_gram_equals_direct_sweeps(monkeypatch):
+    rng = np.random.default_rng(9)
+    T = rng.normal(size=(300, 5, 4, 6)) + 20 * low_rank_tensor((300, 5, 4, 6), (300, 2, 2, 3), seed=9)
+    fast = tl.hooi(T, [None, 3, 2, 3], skip=(0,), tol=-1.0, max_iter=15)
+    monkeypatch.setattr(tl, "GRAM_LIMIT", 0)  # force the sweeps over the full tensor
+    slow = tl.hooi(T, [None, 3, 2, 3], skip=(0,), tol=-1.0, max_iter=15)
+    assert np.allclose(fast.errors, slow.errors, atol=1e-10)
+    for a, b in zip(fast.factors[1:], slow.factors[1:]):
+        assert np.allclose(a @ a.T, b @ b.T, atol=1e-8)  # same subspaces
+    assert np.allclose(fast.to_tensor(), slow.to_tensor(), atol=1e-8)
+    assert np.all(np.diff(fast.errors) <= 1e-12)
+    # the Gram's partial traces are the mode Grams of the data
+    G, active = tl.attribute_gram(T, {0})
+    assert active == (1, 2, 3)
+    assert np.allclose(np.einsum("abcdbc->ad", G), tl.mode_gram(T, 1))

@@ -508,7 +508,7 @@ class RewriteFrame:
 def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: MeshTopology,
                   face_texture: FaceTexture, *, mouth_texture: FaceTexture | None = None,
                   blend: str = "fast", feather: float = 2.0, erode: int = 2,
-                  color_match: bool = False) -> RewriteFrame:
+                  mouth_feather: float = 3.0, color_match: bool = False) -> RewriteFrame:
     """Render the new face into one target frame (§6).
 
     Parameters
@@ -530,6 +530,8 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         Soft-edge radius of the blend in pixels.
     erode : int
         The blend region is the rendered face mask eroded by this many pixels.
+    mouth_feather : float
+        Soft-edge width in pixels of the source's mouth inside the face (``blend="fast"``).
     color_match : bool
         Match the rendered face's colour statistics to the target's before the Poisson blend.
 
@@ -576,9 +578,10 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     elif blend == "fast":
         face = rendered
         if mouth_img is not None and mouth_mask.any():
-            # the source's mouth first takes the colours of the face around it (same membrane)
+            # the source's mouth first takes the colours of the face around it (same membrane;
+            # every outline pixel counts: skin tones of two people are expected to differ)
             face = membrane_blend(np.where(face_mask[..., None], face_img, T), mouth_img,
-                                  mouth_mask & region, feather=0.0)
+                                  mouth_mask & region, feather=mouth_feather, outlier=None)
         out = membrane_blend(T, face, region, feather=feather)
     else:
         from .composite import composite_face

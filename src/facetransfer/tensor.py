@@ -39,6 +39,7 @@ __all__ = [
     "Tucker",
     "nmode_svd",
     "hooi",
+    "attribute_gram",
     "tucker_to_tensor",
 ]
 
@@ -323,6 +324,113 @@ def nmode_svd(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
     return Tucker(core, factors, tuple(eig), (err,))
 
 
+_LETTERS = "abcdefghijklmnopqrstuvwxyz"
+
+
+def attribute_gram(tensor: np.ndarray, skip: Sequence[int]) -> tuple[np.ndarray, tuple[int, ...]]:
+    """Gram matrix of the tensor over its factored ("attribute") modes jointly.
+
+    With the skipped modes moved to the front and the tensor viewed as a ``(P_s, D)`` matrix
+    ``A`` (``D`` = product of the attribute dims), returns ``A^T A`` reshaped to
+    ``(d_a1, ..., d_aK, d_a1, ..., d_aK)`` and the attribute modes' order. Every N-mode SVD and ALS
+    quantity of the attribute modes is a contraction of this small tensor.
+    """
+    N = tensor.ndim
+    active = tuple(n for n in range(N) if n not in skip)
+    lead = [n for n in range(N) if n in skip]
+    A = np.moveaxis(tensor, lead + list(active), range(N)).reshape(-1, _prod(tensor.shape[n] for n in active))
+    G = A.T @ A
+    dims = tuple(tensor.shape[n] for n in active)
+    return G.reshape(dims + dims), active
+
+
+def _prod(xs) -> int:
+    out = 1
+    for x in xs:
+        out *= int(x)
+    return out
+
+
+def _gram_contract(G: np.ndarray, projections: Sequence[np.ndarray | None], keep: int | None) -> np.ndarray:
+    """Contract the attribute Gram ``G`` with ``P_m = U_m U_m^T`` on every mode but ``keep``.
+
+    Returns the mode-``keep`` Gram matrix of ``T ×_{m≠keep} U_m^T`` (``(d_keep, d_keep)``), or, with
+    ``keep=None``, the scalar ``||T ×_m U_m^T||²``. ``None`` projections mean the identity.
+    """
+    K = G.ndim // 2
+    rows, cols = _LETTERS[:K], _LETTERS[K:2 * K]
+    ops, subs = [G], [rows + cols]
+    out = ""
+    col_sub = list(cols)
+    for m in range(K):
+        if m == keep:
+            continue
+        if projections[m] is None:
+            col_sub[m] = rows[m]  # identity: trace over the pair
+        else:
+            ops.append(projections[m])
+            subs.append(rows[m] + cols[m])
+    subs[0] = rows + "".join(col_sub)
+    if keep is not None:
+        out = rows[keep] + col_sub[keep]
+    return np.einsum(",".join(subs) + "->" + out, *ops, optimize=True)
+
+
+def _hooi_gram(T: np.ndarray, skip: set, ranks, variance, init: "Tucker | None", max_iter: int,
+               tol: float) -> "Tucker":
+    """HOOI over the attribute modes through their joint Gram matrix (see :func:`hooi`).
+
+    The initial N-mode SVD (unless ``init`` is given) comes from the same Gram: the mode-n Gram
+    of the data is its partial trace over the other attribute modes.
+    """
+    G, active = attribute_gram(T, skip)
+    norm2 = float(np.vdot(T, T))
+    if ranks is not None and len(ranks) != T.ndim:
+        raise TensorShapeError(f"{len(ranks)} ranks given for a tensor of shape {T.shape}")
+    if init is None:
+        eig: list[np.ndarray | None] = [None] * T.ndim
+        full: list[np.ndarray | None] = [None] * T.ndim
+        for j, n in enumerate(active):
+            full[n], eig[n] = leading_eigvecs(_gram_contract(G, [None] * len(active), j), T.shape[n])
+        rk = _resolve_ranks(T.shape, ranks, skip, variance, eig)
+        U = [full[n][:, :rk[n]] for n in active]
+        eigenvalues = tuple(eig)
+    else:
+        U = [init.factors[n] for n in active]
+        eigenvalues = init.eigenvalues
+    P = [u @ u.T for u in U]
+    errors = [_err_from_core_norm(norm2, float(_gram_contract(G, P, None)))]
+    for it in range(max_iter):
+        for j in range(len(active)):
+            U[j], _ = leading_eigvecs(_gram_contract(G, P, j), U[j].shape[1])
+            P[j] = U[j] @ U[j].T
+        errors.append(_err_from_core_norm(norm2, float(_gram_contract(G, P, None))))
+        log.debug("HOOI sweep %d: relative error %.3e", it + 1, errors[-1])
+        if errors[-2] - errors[-1] <= tol * max(errors[-2], 1e-300):
+            break
+    factors: list[np.ndarray | None] = [None] * T.ndim
+    for n, u in zip(active, U):
+        factors[n] = u
+    # Core (Eq. (1)/(4)) in one product: the attribute unfolding times the Kronecker product of
+    # the factors (C order, matching the unfolding's column order).
+    lead = [n for n in range(T.ndim) if n in skip]
+    A = np.moveaxis(T, lead + list(active), range(T.ndim)).reshape(-1, _prod(G.shape[:len(active)]))
+    W = U[0]
+    for u in U[1:]:
+        W = np.kron(W, u)
+    core = (A @ W).reshape(tuple(T.shape[n] for n in lead) + tuple(u.shape[1] for u in U))
+    core = np.moveaxis(core, range(T.ndim), lead + list(active))
+    return Tucker(core, tuple(factors), eigenvalues, tuple(errors))
+
+
+def _err_from_core_norm(norm2: float, core2: float) -> float:
+    return float(np.sqrt(max(norm2 - core2, 0.0) / norm2)) if norm2 > 0 else 0.0
+
+
+#: Largest product of attribute dims for which :func:`hooi` works through the attribute Gram.
+GRAM_LIMIT = 4096
+
+
 def hooi(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
          skip: Sequence[int] = (), variance: float | None = None, max_iter: int = 50,
          tol: float = 1e-10, init: Tucker | None = None) -> Tucker:
@@ -351,12 +459,17 @@ def hooi(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
     T = np.asarray(tensor, dtype=np.float64)
     N = T.ndim
     skip = {s % N for s in skip}
+    active = [n for n in range(N) if n not in skip]
+    if skip and _prod(T.shape[n] for n in active) <= GRAM_LIMIT:
+        # The skipped (vertex) mode is never factored, so the data enter every sweep only through
+        # the small joint Gram of the attribute modes: one pass over the big tensor, then sweeps
+        # of cost O(D² r) with D = d_1 ... d_K, and one final projection for the core.
+        return _hooi_gram(T, skip, ranks, variance, init, max_iter, tol)
     start = init if init is not None else nmode_svd(T, ranks, skip=sorted(skip), variance=variance)
     factors = list(start.factors)
     norm2 = float(np.vdot(T, T))
     errors = [start.errors[-1] if start.errors else _rel_error(norm2, start.core)]
     core = start.core
-    active = [n for n in range(N) if n not in skip]
     for it in range(max_iter):
         for n in active:
             others = [None if (m == n or m in skip) else factors[m] for m in range(N)]

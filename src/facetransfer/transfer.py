@@ -518,8 +518,8 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     """Drive a synthetic actor (an identity of the model) with a tracked performance.
 
     Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
-    track's camera, Lambert-shaded on a plain background; lost frames repeat the last good one
-    (or the background before the first).
+    track's camera, Lambert-shaded on a plain background, with the mouth gap and eye holes
+    closed; lost frames repeat the last good one (or the background before the first).
 
     Parameters
     ----------
@@ -541,10 +541,20 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     wid = np.asarray(identity, dtype=np.float64).ravel()
     if wid.shape != (r,):
         raise TransferError(f"identity weights must have {r} values, got {wid.shape}")
+    from .rewrite import close_mouth, mesh_topology
+
     bg = np.broadcast_to(np.asarray(background, np.uint8), (size[1], size[0], 3)).copy()
     sx = size[0] / track.frame_size[0]
     sy = size[1] / track.frame_size[1]
-    colors = np.broadcast_to(np.asarray(color, np.float64), (model.n_vertices, 3))
+    # a solid head: the mouth gap and the eye holes closed by fans around their centres
+    topo = mesh_topology(model, lips=False)
+    faces = [topo.faces]
+    for k, loop in enumerate(topo.eye_loops):
+        c = topo.n_closed + k
+        faces.append(np.stack([np.roll(loop, -1), loop, np.full_like(loop, c)], axis=1))
+    faces = np.concatenate(faces)
+    n_all = topo.n_closed + len(topo.eye_loops)
+    colors = np.broadcast_to(np.asarray(color, np.float64), (n_all, 3))
     last = bg
     for i in range(track.n_frames):
         if track.lost[i]:
@@ -552,12 +562,15 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
             continue
         w = track.weights_at(i)
         w[identity_mode] = wid
-        V = model.synthesize(w)
+        V = close_mouth(model.synthesize(w), topo)
+        if topo.eye_loops:
+            V = np.concatenate([V] + [V[loop].mean(axis=0, keepdims=True)
+                                      for loop in topo.eye_loops])
         cam = track.camera(i)
         if (sx, sy) != (1.0, 1.0):
             cam = type(cam)(cam.scale * np.sqrt(sx * sy), cam.rotation,
                             cam.translation * np.array([sx, sy]))
-        img = render(V, model.faces, cam, size, colors=colors, background=bg).image
+        img = render(V, faces, cam, size, colors=colors, background=bg).image
         last = img
         yield img
 

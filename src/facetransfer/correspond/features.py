@@ -42,10 +42,10 @@ IBUG_NAMES: tuple[str, ...] = tuple(
 
 _BROWS = IBUG_GROUPS["right_brow"] + IBUG_GROUPS["left_brow"]
 #: Neutral (m-viseme) scans: 42 points (§4.2). The paper does not list them; we take the brows
-#: (10), nose (9), eyes (12), outer lips (12) less the nose-bridge top 27, and jaw corners and chin
-#: 0, 8, 16 — 42 points covering the whole face.
+#: (10), nose bridge top, tip and base corners and middle (27, 30, 31, 33, 35), eyes (12), outer
+#: lips (12), and jaw ends and chin (0, 8, 16): 42 points covering the whole face.
 PROTOCOL_NEUTRAL_42: tuple[int, ...] = tuple(sorted(
-    set(_BROWS) | set(range(28, 36)) | set(range(36, 48)) | set(range(48, 60)) | {0, 8, 16}))
+    set(_BROWS) | {27, 30, 31, 33, 35} | set(range(36, 48)) | set(range(48, 60)) | {0, 8, 16}))
 #: Other closed-mouth scans: 21 points around the eyebrows and lips (§4.2): brows (10), outer
 #: lip corners, peaks and bottom (48, 50, 51, 52, 54, 56, 57, 58), inner lip middles (62, 66) and
 #: the nose tip 30.

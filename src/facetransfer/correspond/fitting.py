@@ -6,7 +6,8 @@ per-vertex displacements ``d = x − x₀`` of the template ``x₀`` and, per st
     E(x) = w_s ‖L (x − x₀)‖² + w_f Σ_l ‖x_{v(l)} − f_l‖² + w_c Σ_{i ∈ V} ‖x_i − c_i‖²     (1)
 
 * ``L``: the row-normalised cotangent Laplacian of the template, so the smoothness term
-  penalises bending of the displacement field (affine changes are nearly free);
+  penalises bending of the displacement field (affine changes are nearly free; the small
+  ``w_r`` term keeps them determined when the features cover only part of the face);
 * ``f_l``: the scan's feature point for iBUG landmark ``l`` and ``v(l)`` its template vertex;
 * ``c_i``: the closest point on the scan to vertex ``i``; pairs are rejected when the closest
   point is on a boundary (a hole or the cropped rim), further than ``max_distance``, or when the
@@ -71,6 +72,9 @@ class FitStage:
         Closest-point recomputations (solves) in the stage.
     max_distance : float
         Closest-point pairs further than this (normalised cm) are rejected.
+    w_rest : float
+        Weight of ``‖x − x₀‖²`` per vertex: pins the near-affine null space of ``L`` when the
+        features do not span the face (e.g. 18 lip points on a viseme).
     """
 
     name: str
@@ -79,6 +83,7 @@ class FitStage:
     w_closest: float
     iterations: int = 3
     max_distance: float = 2.0
+    w_rest: float = 0.01
 
 
 #: Features first (heavily), then proximity with decreasing stiffness (§4.2).
@@ -240,35 +245,57 @@ def upper_face_vertices(vertices: np.ndarray, landmarks: np.ndarray) -> np.ndarr
 
 
 def _pairs(query: SurfaceQuery, x: np.ndarray, faces: np.ndarray, *, max_distance: float,
-           max_angle: float, normal_sign: float):
-    cp = query.closest(x)
+           max_angle: float, normal_sign: float, idx: np.ndarray | None = None):
+    """Closest points of ``x`` (or of ``x[idx]``) and which pairs are accepted."""
     vn = vertex_normals(x, faces)
+    if idx is not None:
+        x, vn = x[idx], vn[idx]
+    cp = query.closest(x)
     cos = normal_sign * np.einsum("ij,ij->i", vn, cp.normal)
     ok = (~cp.on_boundary) & (cp.distance <= max_distance) & (cos >= np.cos(np.radians(max_angle)))
     return cp, ok, cos
 
 
-def _rigid_icp(query, x, faces, idx, *, iterations, max_angle, normal_sign,
-               start_distance=5.0, end_distance=0.5, keep=0.7):
-    """Trimmed rigid ICP of vertices ``idx`` of ``x`` to the surface.
+def _rotation_from_vector(w: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: rotation (3, 3) by angle ``|w|`` about ``w``."""
+    th = float(np.linalg.norm(w))
+    if th < 1e-15:
+        return np.eye(3)
+    k = w / th
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(th) * kx + (1 - np.cos(th)) * kx @ kx
 
-    The distance limit shrinks geometrically from ``start_distance`` to ``end_distance`` and only
-    the closest ``keep`` fraction of the accepted pairs is used (trimmed ICP). Returns the rigid
+
+def _rigid_icp(query, x, faces, idx, *, iterations, max_angle, normal_sign,
+               start_distance=5.0, end_distance=0.5, keep=0.8):
+    """Trimmed point-to-plane rigid ICP of vertices ``idx`` of ``x`` to the surface.
+
+    Each step linearises the rotation and minimises ``Σ (n·(R x + t − c))²`` over the closest
+    pairs (Chen & Medioni 1992); the distance limit shrinks from ``start_distance`` to
+    ``end_distance`` and only the closest ``keep`` fraction of pairs is used. Returns the rigid
     motion mapping ``x`` onto the surface.
     """
     total = Similarity.identity()
     cur = x
     for it in range(iterations):
-        lim = max(end_distance, start_distance * 0.75 ** it)
+        lim = max(end_distance, start_distance * 0.7 ** it)
         cp, ok, _ = _pairs(query, cur, faces, max_distance=lim, max_angle=max_angle,
-                           normal_sign=normal_sign)
-        sel = idx[ok[idx]]
+                           normal_sign=normal_sign, idx=idx)
+        sel = np.flatnonzero(ok)
         if len(sel) < 10:
             continue
         sel = sel[cp.distance[sel] <= np.quantile(cp.distance[sel], keep)]
-        step = similarity_procrustes(cur[sel], cp.points[sel], with_scale=False)
+        p, q, nrm = cur[idx[sel]], cp.points[sel], cp.normal[sel]
+        c = p.mean(axis=0)
+        a = np.hstack([np.cross(p - c, nrm), nrm])            # (m, 6)
+        b = np.einsum("ij,ij->i", nrm, q - p)
+        sol = np.linalg.lstsq(a, b, rcond=None)[0]
+        r = _rotation_from_vector(sol[:3])
+        step = Similarity(1.0, r, c - r @ c + sol[3:])
         total = step.compose(total)
         cur = step.apply(cur)
+        if np.linalg.norm(sol) < 1e-7:
+            break
     return total
 
 
@@ -380,7 +407,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
                 n_ok, mean_d = 0, np.nan
             np.add.at(wdiag, lmv, st.w_features)
             np.add.at(target, lmv, st.w_features * fpts_w)
-            a = (st.w_smooth * ltl + sp.diags(wdiag) + 1e-9 * eye).tocsc()
+            a = (st.w_smooth * ltl + sp.diags(wdiag) + (st.w_rest + 1e-9) * eye).tocsc()
             rhs = target - wdiag[:, None] * x0                 # normal equations of Eq. (1) in d
             d = spla.splu(a, permc_spec="MMD_ATA").solve(rhs)
             x = x0 + d
