@@ -297,10 +297,12 @@ def bench_real(model, data, max_frames, log, det, passes):
                                  "jitter_frac_iod": jitter(mp_L, ref, still)}
         res["reference_jitter_frac_iod"] = jitter(ref, ref, still)
         curves[name] = {}
-        for label, anchor in (("tracker", False), ("tracker_anchor", True)):
+        for label, anchor, kf in (("tracker_paper", False, 0.0), ("tracker", False, None),
+                                  ("tracker_anchor", True, None)):
+            kw = {} if kf is None else {"keyframe": kf}
             with Clock() as c:
                 tr = track_video(frames, model, init="auto", detector=cd,
-                                 options=TrackOptions(passes=passes, anchor=anchor))
+                                 options=TrackOptions(passes=passes, anchor=anchor, **kw))
             k, i, ok = real_errors(tr.landmarks2d, ref)
             res[label] = {"key_frac_iod": float(np.nanmean(k)),
                           "inner_frac_iod": float(np.nanmean(i)),
@@ -364,6 +366,8 @@ def bench_speed(model, det, log, n_frames=60):
     # warm-up (numba compile, caches)
     track_video(frames[:3], model, init=L0, options=TrackOptions(passes=1, snap_frames=0))
     for label, opt in (("single_pass", TrackOptions(passes=1, snap_frames=0, recover=False)),
+                       ("single_pass_paper", TrackOptions(passes=1, snap_frames=0, recover=False,
+                                                          keyframe=0.0)),
                        ("full_3_passes", TrackOptions(passes=3, recover=False))):
         marks = {}
 
@@ -388,6 +392,7 @@ def bench_speed(model, det, log, n_frames=60):
                "select_ms_per_pair": 1000 * tm.get("select", 0) / max(n_pairs, 1),
                "tracked_vertices": tr.info.get("mean_points")}
         p1 = marks.get("pass 1/1")
+        res["keyframe_weight"] = opt.keyframe
         if p1 is not None and p1[2] > 1:
             res["pass_fps_wall"] = p1[2] / (p1[1][0] - p1[0][0])
             res["pass_fps_cpu"] = p1[2] / max(p1[1][1] - p1[0][1], 1e-9)
@@ -474,13 +479,13 @@ def plot(results, curves, path):
     a.legend()
     a = ax[0, 1]
     names = [n for n in CLIPS if n in results["real"]]
-    meths = ["tracker", "tracker_anchor", "tracker_anchor_smooth", "lk_baseline",
-             "mediapipe_live"]
+    meths = ["tracker_paper", "tracker", "tracker_anchor", "tracker_anchor_smooth",
+             "lk_baseline", "mediapipe_live"]
     x = np.arange(len(names))
     for j, m in enumerate(meths):
-        a.bar(x + j * 0.16, [results["real"][n].get(m, {}).get("key_frac_iod", np.nan)
-                             for n in names], 0.16, label=m)
-    a.set_xticks(x + 0.32)
+        a.bar(x + j * 0.14, [results["real"][n].get(m, {}).get("key_frac_iod", np.nan)
+                             for n in names], 0.14, label=m)
+    a.set_xticks(x + 0.35)
     a.set_xticklabels(names, fontsize=8)
     a.set_title("real clips: mean key-point error / eye distance")
     a.legend(fontsize=8)
@@ -497,18 +502,20 @@ def plot(results, curves, path):
     a.legend(fontsize=8)
     a = ax[1, 1]
     sp = results["speed"]
-    labels = ["single pass", "3 passes + snap", "LK baseline", "MediaPipe"]
-    wall = [sp["single_pass"].get("pass_fps_wall", sp["single_pass"]["fps_wall"]),
+    labels = ["single pass\n(paper)", "single pass\n(+key frame)", "3 passes + snap",
+              "LK baseline", "MediaPipe"]
+    sp1, sp0 = sp["single_pass"], sp.get("single_pass_paper", sp["single_pass"])
+    wall = [sp0.get("pass_fps_wall", sp0["fps_wall"]), sp1.get("pass_fps_wall", sp1["fps_wall"]),
             sp["full_3_passes"]["fps_wall"], sp["lk_baseline"]["fps_wall"],
             sp["mediapipe"]["fps_wall"]]
-    cpu = [sp["single_pass"].get("pass_fps_cpu", sp["single_pass"]["fps_cpu"]),
+    cpu = [sp0.get("pass_fps_cpu", sp0["fps_cpu"]), sp1.get("pass_fps_cpu", sp1["fps_cpu"]),
            sp["full_3_passes"]["fps_cpu"], sp["lk_baseline"]["fps_cpu"],
            1000.0 / sp["mediapipe"]["ms_per_frame_cpu"]]
     x = np.arange(len(labels))
     a.bar(x - 0.2, wall, 0.4, label="wall clock (machine shared, loaded)")
     a.bar(x + 0.2, cpu, 0.4, label="process CPU time")
     a.set_xticks(x)
-    a.set_xticklabels(labels)
+    a.set_xticklabels(labels, fontsize=8)
     a.axhline(30, color="k", ls="--", lw=0.8)
     a.set_title("speed at 640x480, ~1000 tracked vertices (frames per second)")
     a.legend(fontsize=8)

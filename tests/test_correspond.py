@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from facetransfer.correspond import (PROTOCOL_CLOSED_MOUTH_21, PROTOCOL_NEUTRAL_42, PROTOCOL_VISEME_18,
-                                     FeaturePoints, Similarity, bilateral_smooth, clean_scan,
-                                     laplacian_smooth, read_features, similarity_procrustes,
+                                     Similarity, bilateral_smooth, clean_scan, laplacian_smooth,
+                                     read_features, similarity_procrustes,
                                      validate_features_on_surface, write_features)
 from facetransfer.correspond.features import FeatureError, features_from_dict
 from facetransfer.correspond.meshops import SurfaceQuery, closest_point_on_triangles, vertex_normals

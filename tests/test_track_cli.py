@@ -127,3 +127,16 @@ def test_mediapipe_auto_init_on_a_real_frame(data_dir, quick_model):
                 st.pose.rotation, st.pose.scale, st.pose.translation)
     # the fitted model's landmark vertices land near the detections (measured ~4 %)
     assert np.linalg.norm(P[KEY] - ref[KEY], axis=1).mean() < 0.08 * iod
+
+
+def test_cli_rejects_bad_options(quick_model_path, small_clip, tmp_path, capsys):
+    video, pts, _ = small_clip
+    base = (video, "--model", quick_model_path, "--init", pts)
+    code, lines = _run(capsys, *base, "--out", tmp_path / "t.npz", "--passes", "0")
+    assert code == 2 and "passes must be >= 1" in lines[0]
+    code, lines = _run(capsys, *base, "--out", tmp_path / "t.npz", "--keyframe", "-1")
+    assert code == 2 and "keyframe must be >= 0" in lines[0]
+    code, lines = _run(capsys, *base)
+    assert code == 2 and "--out is required" in lines[0]
+    code, lines = _run(capsys, *base, "--out", tmp_path / "missing" / "t.npz")
+    assert code == 2 and "does not exist" in lines[0]

@@ -194,3 +194,37 @@ def test_edit_then_render_performance(clips, quick_model_path, tmp_path, capsys)
                         "id01", "--model", quick_model_path, "--out", bad,
                         "--no-progress"], capsys)
     assert code == 2 and "excludes" in err and not bad.exists()
+
+
+def test_identity_and_pose_from_videos_and_align(clips, quick_model_path, tmp_path, capsys):
+    """Fig. 1: attributes from several videos; --align trim shortens to a shorter source."""
+    import dataclasses
+
+    src = Track.load(clips["source_track"])
+    tgt = Track.load(clips["target_track"])
+    out, new = tmp_path / "mix.mp4", tmp_path / "mix.npz"
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        clips["target_track"], "--identity-from", clips["source"],
+                        "--identity-track", clips["source_track"], "--pose-from",
+                        clips["source"], "--pose-track", clips["source_track"], "--model",
+                        quick_model_path, "--out", out, "--save-track", new, "--no-progress"],
+                       capsys)
+    assert code == 0, err
+    mix = Track.load(new)
+    np.testing.assert_allclose(mix.weights["identity"], src.weights["identity"])
+    np.testing.assert_allclose(mix.weights["expression"], tgt.weights["expression"])
+    np.testing.assert_allclose(mix.rotation, src.rotation, atol=1e-12)
+    # a 3-frame source with --align trim: the output has 3 frames
+    short = dataclasses.replace(src, rotation=src.rotation[:3], scale=src.scale[:3],
+                                translation=src.translation[:3],
+                                weights={k: v[:3] for k, v in src.weights.items()},
+                                landmarks2d=src.landmarks2d[:3], confidence=src.confidence[:3],
+                                lost=src.lost[:3])
+    short.save(tmp_path / "short.npz")
+    out2 = tmp_path / "trim.mp4"
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        clips["target_track"], "--expression-from", clips["source"],
+                        "--source-track", tmp_path / "short.npz", "--align", "trim",
+                        "--model", quick_model_path, "--out", out2, "--no-progress"], capsys)
+    assert code == 0, err
+    assert read_video(out2)[0].shape[0] == 3

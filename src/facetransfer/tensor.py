@@ -254,6 +254,15 @@ def tucker_to_tensor(core: np.ndarray, factors: Sequence[np.ndarray | None]) -> 
     return multi_mode_dot(core, list(factors), list(range(len(factors))))
 
 
+def _factors_from_grams(shape, grams: dict[int, np.ndarray]):
+    """All eigenvectors and eigenvalues of each mode's Gram (``None`` for modes not given)."""
+    vecs: list[np.ndarray | None] = [None] * len(shape)
+    eig: list[np.ndarray | None] = [None] * len(shape)
+    for n, g in grams.items():
+        vecs[n], eig[n] = leading_eigvecs(g, shape[n])
+    return vecs, eig
+
+
 def _resolve_ranks(shape, ranks, skip, variance, grams_eig) -> list[int]:
     out = []
     for n, d in enumerate(shape):
@@ -310,16 +319,20 @@ def nmode_svd(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
     skip = {s % N for s in skip}
     if ranks is not None and len(ranks) != N:
         raise TensorShapeError(f"{len(ranks)} ranks given for a tensor of shape {T.shape}")
-    eig: list[np.ndarray | None] = [None] * N
-    vecs: list[np.ndarray | None] = [None] * N
-    for n in range(N):
-        if n in skip:
-            continue
-        V, w = leading_eigvecs(mode_gram(T, n), T.shape[n])
-        eig[n], vecs[n] = w, V
+    active = [n for n in range(N) if n not in skip]
+    if skip and _prod(T.shape[n] for n in active) <= GRAM_LIMIT:
+        # one pass over the big (skipped) mode; each mode's Gram is a partial trace of the joint one
+        G, _ = attribute_gram(T, skip)
+        grams = {n: _gram_contract(G, [None] * len(active), j) for j, n in enumerate(active)}
+    else:
+        grams = {n: mode_gram(T, n) for n in active}
+    vecs, eig = _factors_from_grams(T.shape, grams)
     rk = _resolve_ranks(T.shape, ranks, skip, variance, eig)
     factors = tuple(None if vecs[n] is None else vecs[n][:, :rk[n]] for n in range(N))
-    core = multi_mode_dot(T, list(factors), transpose=True)  # Eq. (1)
+    if skip and active:
+        core = _kron_core(T, skip, active, [factors[n] for n in active])  # Eq. (1) / (4)
+    else:
+        core = multi_mode_dot(T, list(factors), transpose=True)  # Eq. (1)
     err = _rel_error(float(np.vdot(T, T)), core)
     return Tucker(core, factors, tuple(eig), (err,))
 
@@ -388,10 +401,8 @@ def _hooi_gram(T: np.ndarray, skip: set, ranks, variance, init: "Tucker | None",
     if ranks is not None and len(ranks) != T.ndim:
         raise TensorShapeError(f"{len(ranks)} ranks given for a tensor of shape {T.shape}")
     if init is None:
-        eig: list[np.ndarray | None] = [None] * T.ndim
-        full: list[np.ndarray | None] = [None] * T.ndim
-        for j, n in enumerate(active):
-            full[n], eig[n] = leading_eigvecs(_gram_contract(G, [None] * len(active), j), T.shape[n])
+        full, eig = _factors_from_grams(T.shape, {n: _gram_contract(G, [None] * len(active), j)
+                                                  for j, n in enumerate(active)})
         rk = _resolve_ranks(T.shape, ranks, skip, variance, eig)
         U = [full[n][:, :rk[n]] for n in active]
         eigenvalues = tuple(eig)
@@ -411,16 +422,19 @@ def _hooi_gram(T: np.ndarray, skip: set, ranks, variance, init: "Tucker | None",
     factors: list[np.ndarray | None] = [None] * T.ndim
     for n, u in zip(active, U):
         factors[n] = u
-    # Core (Eq. (1)/(4)) in one product: the attribute unfolding times the Kronecker product of
-    # the factors (C order, matching the unfolding's column order).
+    return Tucker(_kron_core(T, skip, active, U), tuple(factors), eigenvalues, tuple(errors))
+
+
+def _kron_core(T: np.ndarray, skip, active, U) -> np.ndarray:
+    """Core ``T ×_n U_nᵀ`` over the attribute modes (Eq. (1)/(4)) in one matrix product: the
+    attribute unfolding times the Kronecker product of the factors (C order, as the unfolding)."""
     lead = [n for n in range(T.ndim) if n in skip]
-    A = np.moveaxis(T, lead + list(active), range(T.ndim)).reshape(-1, _prod(G.shape[:len(active)]))
+    A = np.moveaxis(T, lead + list(active), range(T.ndim)).reshape(-1, _prod(T.shape[n] for n in active))
     W = U[0]
     for u in U[1:]:
         W = np.kron(W, u)
     core = (A @ W).reshape(tuple(T.shape[n] for n in lead) + tuple(u.shape[1] for u in U))
-    core = np.moveaxis(core, range(T.ndim), lead + list(active))
-    return Tucker(core, tuple(factors), eigenvalues, tuple(errors))
+    return np.moveaxis(core, range(T.ndim), lead + list(active))
 
 
 def _err_from_core_norm(norm2: float, core2: float) -> float:

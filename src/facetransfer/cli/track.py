@@ -35,6 +35,9 @@ def register(sub) -> None:
     p.add_argument("--passes", type=int, default=d.passes, help="passes through the video")
     p.add_argument("--anchor", action="store_true",
                    help="add detected landmarks of every frame as an extra term (less drift)")
+    p.add_argument("--keyframe", type=float, default=d.keyframe,
+                   help="weight of the KLT term against the first frame (less drift; 0 = the "
+                   "paper's frame-to-frame tracking only)")
     p.add_argument("--smooth", type=float, default=d.smooth,
                    help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
     p.add_argument("--points", type=int, default=d.n_points, help="tracked vertices per frame")
@@ -70,6 +73,8 @@ def run(args) -> int:
     for path in (args.out, args.overlay):
         if path:
             check_output_path(path, overwrite=args.overwrite)
+    opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
+                       n_points=args.points, keyframe=args.keyframe)   # validates the options
     model = load_model(args.model)
     require_landmarks(model)
     video_info(args.video)  # unreadable / empty video: one line, before any work
@@ -80,8 +85,6 @@ def run(args) -> int:
         track.check_video(frames.n, frames.size, what=f"video {args.video}")
         track.check_model(model)
     else:
-        opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
-                           n_points=args.points)
         bars: dict[str, object] = {}
 
         def progress(stage: str, done: int, total: int) -> None:

@@ -8,6 +8,7 @@ Pipeline stages, one module each:
 * :mod:`.procrustes` — similarity alignment (Umeyama 1991).
 * :mod:`.fitting` — template fitting (Allen et al. 2003; Sumner & Popović 2004) and the cascade.
 * :mod:`.report` — surface-distance statistics and a picture of a fit.
+* :mod:`.synthetic` — synthetic scans with exact ground truth (tests, benchmarks).
 """
 
 from .features import (IBUG_NAMES, PROTOCOL_CLOSED_MOUTH_21, PROTOCOL_NEUTRAL_42, PROTOCOL_VISEME_18,

@@ -92,8 +92,8 @@ def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
     tri = mtri.Triangulation(uvs[:, 0], uvs[:, 1], faces)
     finder = tri.get_trifinder()
     lo, hi = uvs.min(0), uvs.max(0)
-    area_uv = float(np.sum(np.abs(np.cross(uvs[faces[:, 1]] - uvs[faces[:, 0]],
-                                           uvs[faces[:, 2]] - uvs[faces[:, 0]]))) / 2)
+    e1, e2 = uvs[faces[:, 1]] - uvs[faces[:, 0]], uvs[faces[:, 2]] - uvs[faces[:, 0]]
+    area_uv = float(np.sum(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))) / 2
     h = np.sqrt(area_uv / n_points)
     gx, gy = np.meshgrid(np.arange(lo[0], hi[0], h), np.arange(lo[1], hi[1], h * np.sqrt(3) / 2))
     gx = gx + (np.arange(gx.shape[0]) % 2)[:, None] * h / 2      # hexagonal-ish grid

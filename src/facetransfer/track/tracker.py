@@ -8,10 +8,14 @@ Gauss-Newton, coarse to fine over an image pyramid, cycling through the per-fram
 pass and solved once per pass. Several passes run through the video; the first frames are
 tracked back and forth first to let the initial alignment "snap" (§5.2).
 
-Beyond the paper: optional landmark anchoring (detector points as an extra weighted term beside
-the flow term), zero-phase temporal smoothing (no lag), a per-frame confidence (normalised
-cross-correlation of the tracked windows) and recovery when the face is lost (re-initialisation
-from the detector; the frames are marked).
+Beyond the paper (each can be switched off in :class:`TrackOptions`): a second KLT term of the
+same vertices against the first tracked frame (``keyframe``: less drift on long clips), optional
+landmark anchoring (detector points as an extra weighted term beside the flow term, never
+instead of it), per-point robust weights from the windows' correlation, damping toward the
+predicted state, zero-phase temporal smoothing (no lag), a per-frame confidence (normalised
+cross-correlation of the tracked windows) and recovery when the face is lost
+(re-initialisation from the detector; the frames are marked). ``TrackOptions(keyframe=0,
+robust=0)`` is the paper's frame-to-frame tracker.
 """
 
 from __future__ import annotations
@@ -84,6 +88,9 @@ class TrackOptions:
     tolerance : float
         A level's iterations stop when a cycle moves the vertices by less than this (rms, in
         pixels of that level).
+    keyframe : float
+        Weight of a second KLT term against the first tracked frame (on the two finest
+        levels; beyond the paper, reduces drift; 0 = off).
     temporal : float
         Damping toward the predicted state (per pixel of rms vertex motion per parameter),
         stabilising directions the flow does not determine.
@@ -112,6 +119,7 @@ class TrackOptions:
     anchor: bool = False
     anchor_weight: float = 0.05
     temporal: float = 0.02
+    keyframe: float = 0.5
     tolerance: float = 0.02
     robust: float = 0.4
     smooth: float = 0.0
@@ -124,7 +132,7 @@ class TrackOptions:
             if int(getattr(self, name)) < 1:
                 raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("prior", "identity_prior", "init_prior", "init_weight", "anchor_weight",
-                     "smooth", "snap_frames"):
+                     "smooth", "snap_frames", "keyframe", "temporal", "robust"):
             if not getattr(self, name) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
 
@@ -293,7 +301,8 @@ class FaceTracker:
 
     # ------------------------------------------------------------------ one frame pair
     def track_pair(self, pyr0: Pyramid, pyr1: Pyramid, state0: FrameState, guess: FrameState, *,
-                   anchor: np.ndarray | None = None, accumulate: bool = False) -> _PairResult:
+                   anchor: np.ndarray | None = None, accumulate: bool = False,
+                   key: tuple | None = None) -> _PairResult:
         """Solve the pose and per-frame weights of the second frame of a pair (Eq. (6)-(9)).
 
         Parameters
@@ -308,6 +317,9 @@ class FaceTracker:
             Detector landmarks at ``t + 1`` (NaN where missing), an extra term.
         accumulate : bool
             Also return the identity's reduced system of this pair (§5.1).
+        key : (Pyramid, FrameState), optional
+            A key frame (the first tracked frame) and its solution: its windows give a second
+            KLT term for the same vertices (weight ``keyframe``), against drift.
         """
         opt = self.opt
         t0 = _now()
@@ -324,10 +336,17 @@ class FaceTracker:
             if ok.sum() >= 4:
                 anc = (self.lm_vertices[ok], np.asarray(anchor, float)[ok], IBUG_WEIGHTS[ok])
         wi = wj = None
+        q_key = None
+        if key is not None and opt.keyframe > 0:
+            kst = key[1]
+            Xk = self.cache(kst.weights).restrict(sel).shape(kst.weights)
+            q_key = project(Xk, kst.pose.rotation, kst.pose.scale, kst.pose.translation)
         for lv in reversed(range(min(opt.levels, pyr0.n_levels))):
             f = 0.5 ** lv
             t1 = _now()
             wi = sample_windows(pyr0.levels[lv], level_coords(q, lv), self.offsets)
+            wk = (sample_windows(key[0].levels[lv], level_coords(q_key, lv), self.offsets)
+                  if q_key is not None and lv <= 1 else None)
             self._tick("sample", t1)
             for _ in range(opt.iterations):
                 moved = 0.0
@@ -341,6 +360,13 @@ class FaceTracker:
                     self._tick("terms", t1)
                     t1 = _now()
                     rw = _robust_weights(wi[..., 0], wj, opt.robust)      # occlusion, mismatch
+                    if wk is not None:  # the key frame's view of the same vertices
+                        Zk, ek, wjk = klt_terms_at(pyr1.levels[lv], level_coords(p, lv), wk,
+                                                   self.offsets, self.wwin)
+                        rk = opt.keyframe * _robust_weights(wk[..., 0], wjk, 0.6)
+                        Z = rw[:, None, None] * Z + rk[:, None, None] * Zk
+                        e = rw[:, None] * e + rk[:, None] * ek
+                        rw = np.ones_like(rw)
                     # level units -> full-resolution pixels: d_l = f d, so Z f², e f
                     Z *= (f * f * rw)[:, None, None]
                     e *= (f * rw)[:, None]
@@ -720,6 +746,7 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
         it = frames.iterate(start)
         first = next(it)
         pyr0 = tr.pyramid(first)
+        key = (pyr0, state0)
         conf[start] = 1.0
         for i, fr in enumerate(it, start=start + 1):
             pyr1 = tr.pyramid(fr)
@@ -732,7 +759,7 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
             else:
                 guess = st_prev
             res = tr.track_pair(pyr0, pyr1, st_prev, guess, anchor=anchor_for(i, fr),
-                                accumulate=(id_name is not None and not last))
+                                accumulate=(id_name is not None and not last), key=key)
             st, c = res.state, res.confidence
             # once lost, frames stay lost until a re-initialisation (the flow may lock onto
             # the background with high confidence)
