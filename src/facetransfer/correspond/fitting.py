@@ -88,11 +88,12 @@ class FitStage:
 
 #: Features first (heavily), then proximity with decreasing stiffness (§4.2).
 DEFAULT_SCHEDULE: tuple[FitStage, ...] = (
-    FitStage("features", 1000.0, 10.0, 0.0, 1),
-    FitStage("features + proximity", 1000.0, 10.0, 0.2, 2, 2.0),
-    FitStage("proximity, stiff", 300.0, 3.0, 1.0, 2, 1.0),
-    FitStage("proximity", 100.0, 1.0, 1.0, 2, 0.5),
-    FitStage("proximity, fine", 30.0, 0.3, 1.0, 2, 0.3),
+    FitStage("features", 10000.0, 10.0, 0.0, 1),
+    FitStage("features + proximity", 3000.0, 10.0, 0.2, 2, 2.0),
+    FitStage("proximity, stiff", 1000.0, 3.0, 1.0, 2, 1.0),
+    FitStage("proximity", 300.0, 1.0, 1.0, 2, 0.5),
+    FitStage("proximity, fine", 100.0, 0.3, 1.0, 2, 0.3),
+    FitStage("proximity, detail", 30.0, 0.3, 1.0, 2, 0.3),
 )
 
 
@@ -136,7 +137,8 @@ class FitResult:
         ``mean``, ``median``, ``p95``, ``max`` surface distance over covered vertices (scan units),
         ``n_covered``, ``seconds``, ``feature_rms``, ``flipped_fraction``.
     history : tuple of dict
-        Per solve: stage, iteration, accepted pairs, mean distance (normalised units).
+        Per solve: stage, iteration, accepted closest-point pairs, their mean distance
+        (normalised cm; ``None`` in the features-only stage).
     """
 
     vertices: np.ndarray
@@ -299,6 +301,28 @@ def _rigid_icp(query, x, faces, idx, *, iterations, max_angle, normal_sign,
     return total
 
 
+def _solve(a: sp.csc_matrix, rhs: np.ndarray, lu, guess: np.ndarray):
+    """Solve the SPD system ``a d = rhs`` (n × 3 right-hand sides); returns ``(d, lu)``.
+
+    Without ``lu``: sparse LU, returned for reuse. With the factorisation of an earlier
+    iteration of the same stage (whose matrix differs only in the accepted closest-point
+    weights on the diagonal): preconditioned conjugate gradients from ``guess``, which converge
+    in a few steps; falls back to a fresh LU if they do not.
+    """
+    if lu is not None:
+        m = spla.LinearOperator(a.shape, matvec=lu.solve, dtype=np.float64)
+        out = np.empty_like(rhs)
+        for c in range(rhs.shape[1]):
+            sol, info = spla.cg(a, rhs[:, c], x0=guess[:, c], M=m, rtol=1e-10, maxiter=50)
+            if info != 0:
+                break
+            out[:, c] = sol
+        else:
+            return out, lu
+    lu = spla.splu(a, permc_spec="MMD_ATA")
+    return lu.solve(rhs), lu
+
+
 def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
                  reference: np.ndarray | None = None,
                  schedule: Sequence[FitStage] = DEFAULT_SCHEDULE,
@@ -402,17 +426,18 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
                                    max_angle=max_angle, normal_sign=normal_sign)
                 wdiag[ok] += st.w_closest
                 target[ok] += st.w_closest * cp.points[ok]
-                n_ok, mean_d = int(ok.sum()), float(cp.distance[ok].mean()) if ok.any() else np.nan
+                n_ok = int(ok.sum())
+                mean_d = float(cp.distance[ok].mean()) if ok.any() else None
             else:
-                n_ok, mean_d = 0, np.nan
+                n_ok, mean_d = 0, None
             np.add.at(wdiag, lmv, st.w_features)
             np.add.at(target, lmv, st.w_features * fpts_w)
             a = (st.w_smooth * ltl + sp.diags(wdiag) + (st.w_rest + 1e-9) * eye).tocsc()
             rhs = target - wdiag[:, None] * x0                 # normal equations of Eq. (1) in d
-            d = spla.splu(a, permc_spec="MMD_ATA").solve(rhs)
+            d, lu = _solve(a, rhs, lu if it > 0 else None, x - x0)
             x = x0 + d
             history.append({"stage": st.name, "iteration": it, "pairs": n_ok, "mean_distance": mean_d})
-            log.info("stage %s it %d: %d pairs, mean distance %.4g", st.name, it, n_ok, mean_d)
+            log.info("stage %s it %d: %d pairs, mean distance %s", st.name, it, n_ok, mean_d)
             if st.w_closest == 0:
                 break
     if progress is not None:

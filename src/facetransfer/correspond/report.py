@@ -73,8 +73,7 @@ def plot_fit(path: str | os.PathLike, result: FitResult, *, title: str = "",
     order = np.argsort(v[front].mean(axis=1)[:, 2])  # far triangles first
     tri = Triangulation(v[:, 0], v[:, 1], front[order])
     covered_face = result.covered[front[order]].all(axis=1)
-    ax.tripcolor(tri, facecolors=np.where(covered_face, 1.0, np.nan) * 0 + 0.7, cmap="gray",
-                 vmin=0, vmax=1)
+    ax.tripcolor(tri, facecolors=np.full(len(front), 0.7), cmap="gray", vmin=0, vmax=1)
     tri_c = Triangulation(v[:, 0], v[:, 1], front[order][covered_face])
     tp = ax.tripcolor(tri_c, d, cmap="viridis", vmin=0, vmax=vmax, shading="gouraud")
     cb = fig.colorbar(tp, ax=ax, shrink=0.8)

@@ -103,7 +103,7 @@ def overlay_frames(frames, track, model, *, edge_stride: int = 2, visibility: bo
 
 
 def write_overlay(video, track, model, path, *, progress=None, overwrite: bool = True):
-    """Write the overlay video of a track (atomically, through :class:`~facetransfer.io.video.VideoWriter`).
+    """Write the overlay video of a track, atomically (:class:`~facetransfer.io.video.VideoWriter`).
 
     Parameters
     ----------

@@ -151,7 +151,7 @@ class Track:
         return i
 
     def camera(self, i: int):
-        """The weak-perspective camera of frame ``i`` (:class:`facetransfer.render.WeakPerspective`)."""
+        """Camera of frame ``i``: a :class:`~facetransfer.render.WeakPerspective`."""
         from ..render import WeakPerspective
 
         i = self._check_frame(i)
