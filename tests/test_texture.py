@@ -452,11 +452,12 @@ def test_lee_perry_smith_on_ict_template(data_dir, tmp_path, monkeypatch):
 
     redness = lambda c: (c[0] - c[1]) / c[0]  # noqa: E731
     lips = np.mean([at(i) for i in (51, 62, 66)], axis=0)
-    brows = np.mean([at(i) for i in (19, 24)], axis=0)
-    skin = np.mean([at(i) for i in (3, 13, 27, 29)], axis=0)  # jaw sides, nose bridge
-    # measured: redness lips 0.44, skin 0.23; brightness brows 121, skin 172
+    brows = np.mean([at(i) for i in range(17, 27)], axis=0)
+    # nose bridge: the jaw sides fall on stubble, as dark as brows, so they make no reference
+    skin = np.mean([at(i) for i in (27, 28, 29)], axis=0)
+    # measured: redness lips 0.44, skin 0.25; brightness brows 151, skin 182
     assert redness(lips) > redness(skin) + 0.1
-    assert brows.mean() < skin.mean() - 25
+    assert brows.mean() < skin.mean() - 20
     cached = sorted(p.name for p in (tmp_path / "facetransfer" / "textures").iterdir())
     assert any(n.endswith("-fit.npy") for n in cached) and any(n.endswith(f"-{T}.png") for n in cached)
     np.testing.assert_array_equal(default_face_texture(_Model(), size=T, source="auto"), tex)
