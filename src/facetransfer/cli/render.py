@@ -88,21 +88,12 @@ def _load_model(path: str):
 
 
 def _model_weights(model, args) -> dict[str, np.ndarray]:
-    from .model import parse_like, parse_weights
+    from .model import parse_like, parse_weights, synth_weights
 
     if args.weights and args.like:
         raise FaceTransferError("give either --weights or --like, not both")
-    w = model.default_weights()
-    if args.like:
-        w.update(model.like(**parse_like(args.like)))
-    if args.weights:
-        for mode, vals in parse_weights(args.weights).items():
-            k = model.mode_index(mode)
-            if vals.shape != (model.ranks[k],):
-                raise FaceTransferError(f"--weights: mode {mode!r} needs {model.ranks[k]} "
-                                        f"numbers, got {vals.size}")
-            w[model.mode_names[k]] = vals
-    return w
+    return synth_weights(model, parse_weights(args.weights) if args.weights else None,
+                         parse_like(args.like) if args.like else None)
 
 
 def cmd_render(args: argparse.Namespace) -> int:
