@@ -14,9 +14,7 @@ from test_texture_track import _cap_dataset
 
 
 @pytest.fixture()
-def run(monkeypatch):
-    if "texture" not in cli_main.SUBCOMMAND_MODULES:  # until the lead registers it
-        monkeypatch.setattr(cli_main, "SUBCOMMAND_MODULES", cli_main.SUBCOMMAND_MODULES + ("texture",))
+def run():
     return lambda *argv: cli_main.main([str(a) for a in argv])
 
 

@@ -129,7 +129,8 @@ def _texture(choice: str, model, seed: int):
     if choice == "default":
         from ..texture import default_face_texture
 
-        return default_face_texture(model, seed=seed)
+        # the project's default face: Lee Perry-Smith on ICT UVs (§6 texture), else procedural
+        return default_face_texture(model, seed=seed, source="auto")
     from ..synth import load_texture_image
 
     return load_texture_image(choice)

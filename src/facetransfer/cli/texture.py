@@ -185,9 +185,10 @@ def register(sub) -> None:
     d.add_argument("--size", type=int, default=512, help="texture width and height (default 512)")
     d.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     d.add_argument("--source", choices=("procedural", "lee-perry-smith", "auto"),
-                   default="procedural",
-                   help="procedural skin (default), the Lee Perry-Smith scan fitted onto the "
-                   "ICT-FaceKit UVs (CC-BY 3.0; first run ~15 s, then cached), or auto")
+                   default="auto",
+                   help="auto (default): the Lee Perry-Smith scan fitted onto the ICT-FaceKit UVs "
+                   "(CC-BY 3.0; first run ~15 s, then cached) where the model has ICT UVs, else "
+                   "procedural skin; or force one of the two")
     d.add_argument("--out", required=True, help="TEX.png")
     d.set_defaults(func=cmd_default)
 
