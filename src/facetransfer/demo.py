@@ -203,7 +203,8 @@ class DemoResult:
 
 def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None,
              texture: str = "frame", blend: str = "fast", track_method: str = "auto",
-             progress_factory=None, overwrite: bool = True) -> DemoResult:
+             speed: str = "balanced", progress_factory=None,
+             overwrite: bool = True) -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
     Parameters
@@ -220,6 +221,8 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
         See :func:`facetransfer.rewrite.rewrite_frames`.
     track_method : {"auto", "flow", "landmarks"}
         ``"auto"``: the optical-flow tracker, falling back to a landmark-only fit if it fails.
+    speed : {"fast", "balanced", "quality"}
+        Tracking preset (:func:`facetransfer.rewrite.track_options`).
 
     Returns
     -------
@@ -228,6 +231,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     from . import rewrite as rw
     from .io.atomic import check_output_path
 
+    rw.track_options(speed)  # an unknown preset fails before any work
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     out = Path(out_dir)
@@ -252,7 +256,8 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     method = track_method
     try:
         plan = rw.plan_transfer(target, model, expression_from=source, max_frames=frames,
-                                track_method=method, progress_factory=progress_factory,
+                                track_method=method, speed=speed,
+                                progress_factory=progress_factory,
                                 **tracks)
     except (KeyboardInterrupt, MemoryError):
         raise
@@ -263,7 +268,8 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
                     type(exc).__name__, exc)
         method = "landmarks"
         plan = rw.plan_transfer(target, model, expression_from=source, max_frames=frames,
-                                track_method=method, progress_factory=progress_factory,
+                                track_method=method, speed=speed,
+                                progress_factory=progress_factory,
                                 **tracks)
     timings.update({f"{k}": v for k, v in plan.timings.items()})
 

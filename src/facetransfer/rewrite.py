@@ -70,6 +70,8 @@ __all__ = [
     "landmark_track",
     "obtain_track",
     "nearest_frames",
+    "SPEED_PRESETS",
+    "track_options",
     "TransferPlan",
     "plan_transfer",
     "TransferResult",
@@ -81,6 +83,8 @@ TEXTURE_MODES = ("constant", "frame")
 #: Ways to put the rendered face into the frame: Pérez et al.'s Poisson solve (exact), a
 #: membrane (harmonic-like) correction interpolated by push-pull (fast), or a hard paste.
 BLEND_MODES = ("fast", "poisson", "none")
+#: Tracking presets of a transfer (:func:`track_options`), fastest first.
+SPEED_PRESETS = ("fast", "balanced", "quality")
 
 
 class RewriteError(FaceTransferError):
@@ -407,6 +411,13 @@ def _extend(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return img[iy, ix]
 
 
+#: :func:`rewrite_frames` synthesises all of a clip's meshes up front below this many bytes
+_MESH_CACHE_BYTES = 1 << 30
+
+#: the mean of the 4 neighbours (a Jacobi sweep of Laplace's equation)
+_FOUR_NEIGHBOURS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.float32)
+
+
 def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
                    feather: float = 2.0, margin: int = 8,
                    smooth_iterations: int = 10, outlier: float | None = 40.0) -> np.ndarray:
@@ -460,15 +471,17 @@ def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
             ring = ok
     h = fill_holes(d, ring)  # (h, w, 3): the membrane, = target - source on the outline
     # a few Jacobi sweeps of Laplace's equation smooth the push-pull result towards harmonic
+    # (the mean of the 4 neighbours, by one 3x3 filter per sweep; the crop's outer pixels and
+    # the pixels outside the region keep their values)
+    import cv2
+
     h = np.ascontiguousarray(h, dtype=np.float32)
-    inner = m[1:-1, 1:-1]
-    avg = np.empty_like(h[1:-1, 1:-1])
+    inner = np.zeros_like(m)
+    inner[1:-1, 1:-1] = m[1:-1, 1:-1]
+    inner3 = np.repeat(inner[..., None], h.shape[2], axis=2)
     for _ in range(int(smooth_iterations)):
-        np.add(h[:-2, 1:-1], h[2:, 1:-1], out=avg)
-        avg += h[1:-1, :-2]
-        avg += h[1:-1, 2:]
-        avg *= 0.25
-        np.copyto(h[1:-1, 1:-1], avg, where=inner[..., None])
+        np.copyto(h, cv2.filter2D(h, -1, _FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE),
+                  where=inner3)
     f = s + h
     if feather > 0:
         d = ndi.distance_transform_edt(m)
@@ -539,8 +552,6 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     -------
     RewriteFrame
     """
-    from .render import rasterize
-
     T = np.asarray(target_frame)
     if T.ndim != 3 or T.shape[2] != 3 or T.dtype != np.uint8:
         raise ShapeError(f"target frame must be (H, W, 3) uint8, got {T.shape} {T.dtype}")
@@ -551,7 +562,93 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     if V.shape[0] == topo.n_vertices:
         V = close_mouth(V, topo)
     if V.shape != (topo.n_closed, 3):
-        raise ShapeError(f"vertices must be ({topo.n_vertices} or {topo.n_closed}, 3), got {V.shape}")
+        raise ShapeError(f"vertices must be ({topo.n_vertices} or {topo.n_closed}, 3), "
+                         f"got {V.shape}")
+    # all per-frame work happens in the face's bounding box (plus a margin wider than any
+    # filter below: erosion, outline ring, membrane margin, feathering); the rest is T
+    box = _face_box(V, camera, (W, H), margin=int(erode) + int(np.ceil(feather)) + 16)
+    if box is None:  # nothing of the face in the frame
+        return _paste(T, None)
+    x0, y0, x1, y1 = box
+    cam = camera if box == (0, 0, W, H) else _shift_camera(camera, x0, y0)
+    res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
+                        feather, erode, mouth_feather, color_match)
+    return _paste(T, (box, res))
+
+
+def _paste(T: np.ndarray, part) -> RewriteFrame:
+    """The full frame from ``(box, crop result)``; ``None``: the frame unchanged, no face."""
+    H, W = T.shape[:2]
+    if part is None:
+        empty = np.zeros((H, W), bool)
+        return RewriteFrame(T.copy(), np.zeros_like(T), empty, empty.copy())
+    (x0, y0, x1, y1), res = part
+    if (x0, y0, x1, y1) == (0, 0, W, H):
+        return res
+
+    def paste(crop, base):
+        base[y0:y1, x0:x1] = crop
+        return base
+
+    return RewriteFrame(paste(res.image, T.copy()), paste(res.rendered, np.zeros_like(T)),
+                        paste(res.face_mask, np.zeros((H, W), bool)),
+                        paste(res.mouth_mask, np.zeros((H, W), bool)))
+
+
+def _crop_of(T: np.ndarray, frame: RewriteFrame):
+    """``(box, crop result)`` of a rewritten frame: the inverse of :func:`_paste`, cropped to
+    the pixels that differ from ``T`` or belong to the face (small to send between
+    processes); None when nothing changed."""
+    changed = frame.face_mask | frame.mouth_mask | (frame.image != T).any(axis=-1)
+    changed |= frame.rendered.any(axis=-1)
+    if not changed.any():
+        return None
+    ys = np.flatnonzero(changed.any(axis=1))
+    xs = np.flatnonzero(changed.any(axis=0))
+    y0, y1, x0, x1 = int(ys[0]), int(ys[-1]) + 1, int(xs[0]), int(xs[-1]) + 1
+    sl = (slice(y0, y1), slice(x0, x1))
+    return (x0, y0, x1, y1), RewriteFrame(frame.image[sl].copy(), frame.rendered[sl].copy(),
+                                          frame.face_mask[sl].copy(),
+                                          frame.mouth_mask[sl].copy())
+
+
+def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int
+              ) -> tuple[int, int, int, int] | None:
+    """``(x0, y0, x1, y1)`` (end exclusive) of the mesh's projection grown by ``margin``
+    pixels and clipped to the frame; the whole frame for cameras other than weak perspective;
+    None when the projection misses the frame."""
+    from .render import WeakPerspective
+
+    W, H = size
+    if not isinstance(camera, WeakPerspective):
+        return 0, 0, W, H
+    p = camera.project(V)
+    p = p[np.isfinite(p).all(axis=1)]
+    if p.size == 0:
+        return None
+    lo = np.floor(p.min(axis=0)).astype(np.int64) - margin
+    hi = np.ceil(p.max(axis=0)).astype(np.int64) + margin + 1
+    x0, y0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
+    x1, y1 = min(int(hi[0]), W), min(int(hi[1]), H)
+    if x1 <= x0 or y1 <= y0:
+        return None
+    return x0, y0, x1, y1
+
+
+def _shift_camera(camera, x0: int, y0: int):
+    """The camera of the crop whose top-left pixel is ``(x0, y0)`` of the frame."""
+    import dataclasses
+
+    t = np.asarray(camera.translation, np.float64) - np.array([x0, y0], np.float64)
+    return dataclasses.replace(camera, translation=t)
+
+
+def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
+                  mouth_feather, color_match) -> RewriteFrame:
+    """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
+    from .render import rasterize
+
+    H, W = T.shape[:2]
     raster = rasterize(V, topo.faces, camera, (W, H))
     face_img, face_mask = _shade(raster, topo.faces, face_texture.uvs, face_texture.image)
     mouth_mask = np.zeros((H, W), bool)
@@ -609,6 +706,7 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
                    source_track=None, source_index: np.ndarray | None = None,
                    texture: str = "frame", blend: str = "fast", feather: float = 2.0,
                    topo: MeshTopology | None = None, workers: int | None = None,
+                   processes: bool | None = None,
                    progress: Callable[[int], None] | None = None) -> Iterator[RewriteFrame]:
     """Rewrite every target frame with the new performance (§6, Fig. 7).
 
@@ -634,8 +732,12 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
     blend, feather
         See :func:`rewrite_frame`.
     workers : int, optional
-        Threads rendering frames in parallel (default: 2, or 1 on a single CPU); the output
-        order and values do not depend on it.
+        Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU);
+        the output order and values do not depend on it.
+    processes : bool, optional
+        With ``workers > 1``: render in forked worker processes instead of threads (where the
+        platform can fork). Default: threads (measured a little faster on 2 cores once the
+        meshes are synthesised up front: the per-frame kernels mostly release the GIL).
     progress : callable(int), optional
         Called with 1 after each frame.
 
@@ -669,6 +771,24 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
             if model.uvs is not None else constant_face_texture(target_frames, target_track,
                                                                model, topo)
     names = model.mode_names
+    # the meshes of every frame at once (Eq. (5) batched: one matrix product per track, no
+    # linear algebra left in the per-frame work that runs in parallel), unless the clip is long
+    meshes: dict = {}
+    n_sets = 1 + (const_tex is None) + with_mouth
+    if n * int(model.n_vertices) * 3 * 8 * n_sets <= _MESH_CACHE_BYTES:
+        rows = np.arange(n)
+        meshes["new"] = model.synthesize({m: new_track.weights[m][rows] for m in names})
+        if const_tex is None:
+            meshes["target"] = model.synthesize({m: target_track.weights[m][rows]
+                                                 for m in target_track.mode_names})
+        if with_mouth:
+            meshes["source"] = model.synthesize({m: source_track.weights[m][rows]
+                                                 for m in source_track.mode_names})
+
+    def mesh(kind: str, track, i: int) -> np.ndarray:
+        if kind in meshes:
+            return meshes[kind][i]
+        return model.synthesize(track.weights_at(i))
 
     def one(i: int) -> RewriteFrame:
         frame = np.asarray(target_frames[i])
@@ -680,16 +800,16 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         if const_tex is not None:
             tex = const_tex
         else:
-            Vt = close_mouth(model.synthesize(target_track.weights_at(i)), topo)
+            Vt = close_mouth(mesh("target", target_track, i), topo)
             tex = FaceTexture(frame, frame_uvs(Vt, target_track.camera(i), size), i)
         mouth = None
         if with_mouth:
             j = int(sidx[i])
             sf = np.asarray(source_frames[j])
-            Vs = close_mouth(model.synthesize(source_track.weights_at(i)), topo)
+            Vs = close_mouth(mesh("source", source_track, i), topo)
             mouth = FaceTexture(sf, frame_uvs(Vs, source_track.camera(i),
                                               (sf.shape[1], sf.shape[0])), j)
-        V = model.synthesize({m: new_track.weights[m][i] for m in names})
+        V = mesh("new", new_track, i)
         return rewrite_frame(frame, V, new_track.camera(i), topo, tex, mouth_texture=mouth,
                              blend=blend, feather=feather)
 
@@ -699,6 +819,13 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
             yield one(i)
             if progress:
                 progress(1)
+        return
+    import multiprocessing as mp
+
+    if processes is None:
+        processes = _RENDER_IN_PROCESSES and n >= 16  # worth a fork for longer clips only
+    if processes and "fork" in mp.get_all_start_methods():
+        yield from _render_in_processes(one, target_frames, n, workers, progress)
         return
     # frames are independent: render them on a few threads (the rasteriser and most numpy
     # kernels release the GIL), yielding in order with a bounded look-ahead
@@ -722,6 +849,75 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
             yield res
             if progress:
                 progress(1)
+
+
+#: default of ``rewrite_frames(processes=None)`` for clips of 16 frames or more
+_RENDER_IN_PROCESSES = False
+
+#: the per-frame function of :func:`rewrite_frames` handed to forked workers (not pickled)
+_RENDER_JOB: Callable | None = None
+
+
+def _render_job(i: int):
+    frame = _RENDER_JOB(i)
+    return _crop_of(np.asarray(_RENDER_FRAMES[i]), frame)
+
+
+_RENDER_FRAMES = None
+
+
+def _render_in_processes(one, target_frames, n: int, workers: int, progress):
+    """Yield ``one(i)`` for i < n, computed in ``workers`` forked processes, in order.
+
+    Workers send back only the changed crop of each frame (:func:`_crop_of`); if the pool
+    breaks, the remaining frames are rendered here."""
+    global _RENDER_JOB, _RENDER_FRAMES
+    import multiprocessing as mp
+    from collections import deque
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    _RENDER_JOB, _RENDER_FRAMES = one, target_frames
+    try:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"))
+        pending: deque = deque()
+        nxt = 0
+        try:
+            pending.append(pool.submit(_render_job, nxt))  # forks the workers now
+            nxt += 1
+        finally:
+            _RENDER_JOB, _RENDER_FRAMES = None, None
+    except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. in a daemon process)
+        log.info("no worker processes (%s): rendering here", exc)
+        for i in range(n):
+            yield one(i)
+            if progress:
+                progress(1)
+        return
+    done = 0
+    broken = False
+    try:
+        while done < n:
+            if not broken:
+                try:
+                    while nxt < n and len(pending) < 4 * workers:
+                        pending.append(pool.submit(_render_job, nxt))
+                        nxt += 1
+                    part = pending.popleft().result()
+                    res = _paste(np.asarray(target_frames[done]), part)
+                except BrokenProcessPool as exc:
+                    log.warning("render workers failed (%s); rendering here", exc)
+                    broken = True
+            if broken:
+                res = one(done)
+            yield res
+            done += 1
+            if progress:
+                progress(1)
+    finally:
+        for f in pending:
+            f.cancel()
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -915,15 +1111,46 @@ def landmark_track(model, landmarks68: np.ndarray, *, fps: float, size: tuple[in
     return project_landmarks(tr, model)
 
 
+def track_options(speed: str = "balanced"):
+    """Settings of the optical-flow tracker (§5.1) for a speed preset.
+
+    ``"balanced"`` is the tracker's own default (:class:`facetransfer.track.TrackOptions`:
+    two passes, three pyramid levels, a thousand vertices, the initial snap and the key-frame
+    term); ``"fast"`` makes a single pass (the identity comes from the snap of §5.2) on two
+    pyramid levels with 500 tracked vertices and a shorter snap, about three times faster
+    with nearly the same landmark error on synthetic footage (``benchmarks/bench_transfer.py``);
+    ``"quality"`` makes three passes and two snap rounds.
+
+    Parameters
+    ----------
+    speed : {"fast", "balanced", "quality"}
+
+    Returns
+    -------
+    TrackOptions
+    """
+    from .track.tracker import TrackOptions
+
+    if speed == "balanced":
+        return TrackOptions()
+    if speed == "fast":
+        return TrackOptions(passes=1, levels=2, n_points=500, snap_frames=4)
+    if speed == "quality":
+        return TrackOptions(passes=3, snap_rounds=2)
+    raise RewriteError(f"speed must be one of {', '.join(SPEED_PRESETS)}, got {speed!r}")
+
+
 def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
                  track_file: str | os.PathLike | None = None, max_frames: int | None = None,
-                 method: str = "auto", progress_factory=None):
+                 method: str = "auto", progress_factory=None, options=None):
     """The track of a video: read from ``track_file``, or tracked now.
 
     ``method``: ``"auto"`` uses the optical-flow tracker of §5.1
     (:func:`facetransfer.track.track_video`) when it is installed and otherwise fits landmarks
     (precomputed ``NAME.mediapipe478.npz`` next to the video, else MediaPipe on the frames);
-    ``"flow"`` or ``"landmarks"`` force one.
+    ``"flow"`` or ``"landmarks"`` force one. ``options`` (a
+    :class:`~facetransfer.track.TrackOptions`, e.g. from :func:`track_options`) configure the
+    optical-flow tracker (default: its own defaults).
 
     Returns
     -------
@@ -976,7 +1203,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
 
             try:
                 tr = track_video(frames, model, max_frames=max_frames, progress=stage_progress,
-                                 source=str(video))
+                                 source=str(video), options=options)
             finally:
                 for b_ in bars.values():
                     b_.close()
@@ -1011,6 +1238,79 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
 # ---------------------------------------------------------------------------------------------
 # the job: tracks in or tracked now, recombined, rendered back, written with the target's audio
 # ---------------------------------------------------------------------------------------------
+
+class _BackgroundTrack:
+    """A track computed in a forked child process (:func:`_start_background_track`)."""
+
+    def __init__(self, pool, future) -> None:
+        self._pool, self._future = pool, future
+
+    def result(self):
+        """The Track, or None when the child could not run (then the caller tracks itself).
+
+        Errors of the tracking itself (e.g. no face in the video) are raised here."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        try:
+            return self._future.result()
+        except BrokenProcessPool as exc:
+            log.warning("background tracking failed (%s); tracking in this process", exc)
+            return None
+        except BaseException:  # e.g. Ctrl-C: do not wait for the child
+            self.cancel()
+            raise
+        finally:
+            self._pool.shutdown(wait=True)
+
+    def cancel(self) -> None:
+        """Stop the child (it may be half-way through the video) without waiting for it."""
+        self._future.cancel()
+        procs = getattr(self._pool, "_processes", None) or {}
+        for proc in list(procs.values()):
+            try:
+                proc.terminate()
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+#: (model, video, max_frames, method, options) handed to the forked child (not pickled)
+_BACKGROUND_JOB: tuple | None = None
+
+
+def _background_track_job():
+    from .io.video import read_video
+
+    model, video, max_frames, method, options = _BACKGROUND_JOB
+    frames, fps = read_video(video, max_frames=max_frames)
+    return obtain_track(video, model, frames=frames, fps=fps, max_frames=len(frames),
+                        method=method, options=options)
+
+
+def _start_background_track(video, model, max_frames: int, *, method: str, options,
+                            parallel: bool | None) -> _BackgroundTrack | None:
+    """Track ``video`` in a forked child process; None when not worth it or not possible."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    global _BACKGROUND_JOB
+    if method == "landmarks":
+        return None
+    if parallel is None:
+        parallel = (os.cpu_count() or 1) >= 2
+    if not parallel or "fork" not in mp.get_all_start_methods():
+        return None
+    _BACKGROUND_JOB = (model, video, int(max_frames), method, options)
+    try:
+        pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))
+        fut = pool.submit(_background_track_job)  # forks now: the child sees _BACKGROUND_JOB
+    except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. in a daemon process)
+        log.info("no background tracking (%s)", exc)
+        return None
+    finally:
+        _BACKGROUND_JOB = None
+    return _BackgroundTrack(pool, fut)
+
 
 @dataclass(frozen=True)
 class TransferPlan:
@@ -1087,7 +1387,8 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
                   expression_track=None, viseme_from=None, viseme_track=None, identity=None,
                   identity_from=None, identity_track=None, pose_from=None, pose_track=None,
                   performance=None, align: str | None = None, max_frames: int | None = None,
-                  track_method: str = "auto", progress_factory=None) -> TransferPlan:
+                  track_method: str = "auto", speed: str = "balanced",
+                  parallel: bool | None = None, progress_factory=None) -> TransferPlan:
     """Read and track the inputs and recombine the performance (§5, §6, Fig. 1, Fig. 7).
 
     Parameters
@@ -1109,6 +1410,14 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         Time alignment of the sources (:func:`facetransfer.transfer.time_map`).
     max_frames : int, optional
         Use only the first N target frames.
+    track_method : {"auto", "flow", "landmarks"}
+        See :func:`obtain_track`.
+    speed : {"fast", "balanced", "quality"}
+        Tracking preset (:func:`track_options`) for the videos tracked now.
+    parallel : bool, optional
+        Track the expression source in a second (forked) process while the target is tracked
+        here. Default: when the machine has two or more CPUs and the platform can fork. The
+        tracks do not depend on it.
 
     Raises
     ------
@@ -1127,6 +1436,7 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         raise RewriteError(f"max_frames must be >= 1, got {max_frames}")
     if identity is not None and identity_from is not None:
         raise RewriteError("give the identity either as weights or as a video, not both")
+    options = track_options(speed)  # validates the preset before any work
     timings = {"read": 0.0, "track": 0.0}
     t0 = time.perf_counter()
     frames, fps = read_video(target, max_frames=max_frames)
@@ -1137,11 +1447,22 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         t = time.perf_counter()
         tr = obtain_track(video, model, frames=frames_, fps=fps_, track_file=track_file,
                           max_frames=limit, method=track_method,
-                          progress_factory=progress_factory)
+                          progress_factory=progress_factory, options=options)
         timings["track"] += time.perf_counter() - t
         return tr
 
-    tt = get_track(target, target_track, frames_=frames, fps_=fps, limit=n)
+    # the expression source is tracked in a second process while this one tracks the target
+    early = None
+    if expression_from is not None and expression_track is None:
+        early = _start_background_track(
+            expression_from, model, _frames_needed(n, fps, video_info(expression_from).fps),
+            method=track_method, options=options, parallel=parallel)
+    try:
+        tt = get_track(target, target_track, frames_=frames, fps_=fps, limit=n)
+    except BaseException:
+        if early is not None:
+            early.cancel()
+        raise
     if target_track is not None:
         tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H), what=f"target {target}")
         if tt.n_frames < n:
@@ -1158,7 +1479,17 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         t = time.perf_counter()
         fr, sfps = read_video(video, max_frames=need)
         timings["read"] += time.perf_counter() - t
-        tr = get_track(video, track_file, frames_=fr, fps_=sfps, limit=len(fr))
+        tr = None
+        if kind == "expression" and early is not None:
+            t = time.perf_counter()
+            tr = early.result()  # None: the background job failed to run; track here
+            timings["track"] += time.perf_counter() - t
+            if tr is not None and len(fr) < tr.n_frames:
+                from .transfer import take_frames
+
+                tr = take_frames(tr, np.arange(len(fr)))
+        if tr is None:
+            tr = get_track(video, track_file, frames_=fr, fps_=sfps, limit=len(fr))
         if track_file is not None and tuple(tr.frame_size) != (fr.shape[2], fr.shape[1]):
             raise RewriteError(f"{kind} track {track_file} is for {tr.frame_size[0]}x"
                                f"{tr.frame_size[1]} frames but {video} is "
@@ -1269,8 +1600,9 @@ def transfer_video(target, out, model, *, overwrite: bool = False, texture: str 
     """The whole video rewrite (§6): plan (read, track, recombine), render, write with audio.
 
     ``plan_kwargs`` go to :func:`plan_transfer` (sources, track files, ``align``,
-    ``max_frames``). The output video (and the optional track and meshes) appear only when
-    everything succeeded; an existing ``out`` is replaced only with ``overwrite=True``.
+    ``max_frames``, ``track_method``, ``speed``). The output video (and the optional track and
+    meshes) appear only when everything succeeded; an existing ``out`` is replaced only with
+    ``overwrite=True``.
 
     Returns
     -------

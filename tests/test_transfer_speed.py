@@ -1,0 +1,172 @@
+"""Tests of the speed options of the transfer: tracking presets, the face-box crop of the
+rewrite and the background (forked) tracking of the expression source."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer import rewrite as rw  # noqa: E402
+from facetransfer.errors import VideoError  # noqa: E402
+from facetransfer.track import Track  # noqa: E402
+from facetransfer.track.tracker import TrackOptions  # noqa: E402
+from facetransfer.transfer import recombine  # noqa: E402
+from test_transfer_cli import clips, run  # noqa: E402,F401 (fixture)
+from test_transfer_rewrite import face_texture, synthetic, topo  # noqa: E402,F401 (fixtures)
+
+
+def test_track_options_presets():
+    assert rw.track_options("balanced") == TrackOptions()
+    fast = rw.track_options("fast")
+    assert (fast.passes, fast.levels, fast.n_points, fast.snap_frames) == (1, 2, 500, 4)
+    assert rw.track_options("quality").passes == 3
+    assert rw.track_options() == TrackOptions()
+    with pytest.raises(rw.RewriteError, match="speed must be one of fast, balanced, quality"):
+        rw.track_options("turbo")
+
+
+def test_plan_rejects_unknown_speed_before_any_work(quick_model, tmp_path):
+    # the target does not exist: the preset is checked first
+    with pytest.raises(rw.RewriteError, match="speed"):
+        rw.plan_transfer(tmp_path / "missing.mp4", quick_model, speed="ludicrous")
+
+
+@pytest.mark.parametrize("blend", ["fast", "poisson", "none"])
+def test_face_box_crop_matches_the_full_frame(quick_model, topo, synthetic, blend):
+    """The rewrite of the face's bounding box, pasted back, equals the full-frame rewrite."""
+    fa, ta, fb, tb, truth = synthetic
+    new = recombine(tb, expression=ta)
+    for i in (1, 3):
+        V = rw.close_mouth(quick_model.synthesize(new.weights_at(i)), topo)
+        Vt = rw.close_mouth(quick_model.synthesize(tb.weights_at(i)), topo)
+        Vs = rw.close_mouth(quick_model.synthesize(ta.weights_at(i)), topo)
+        tex = rw.FaceTexture(fb[i], rw.frame_uvs(Vt, tb.camera(i), (128, 128)), i)
+        mouth = rw.FaceTexture(fa[i], rw.frame_uvs(Vs, ta.camera(i), (128, 128)), i)
+        cropped = rw.rewrite_frame(fb[i], V, new.camera(i), topo, tex, mouth_texture=mouth,
+                                   blend=blend)
+        full = rw._rewrite_crop(fb[i], V, new.camera(i), topo, tex, mouth, blend, 2.0, 2, 3.0,
+                                False)
+        box = rw._face_box(V, new.camera(i), (128, 128), margin=20)
+        assert box is not None and box != (0, 0, 128, 128)  # the crop really is smaller
+        for a, b in zip(dataclasses.astuple(cropped), dataclasses.astuple(full)):
+            np.testing.assert_array_equal(a, b)
+        assert cropped.face_mask.sum() > 2000
+
+
+def test_face_box_off_screen_keeps_the_frame(quick_model, topo, synthetic):
+    fa, ta, fb, tb, truth = synthetic
+    cam = dataclasses.replace(tb.camera(0), translation=np.array([1000.0, 1000.0]))
+    V = quick_model.synthesize(tb.weights_at(0))
+    assert rw._face_box(rw.close_mouth(V, topo), cam, (128, 128), margin=4) is None
+    Vt = rw.close_mouth(V, topo)
+    tex = rw.FaceTexture(fb[0], rw.frame_uvs(Vt, tb.camera(0), (128, 128)), 0)
+    out = rw.rewrite_frame(fb[0], V, cam, topo, tex)
+    np.testing.assert_array_equal(out.image, fb[0])
+    assert not out.face_mask.any()
+
+
+def _fake_obtain_track(tracks):
+    """obtain_track stand-in: the truth track of the video, its ``source`` = the process id."""
+
+    def fake(video, model, **kw):
+        name = Path(video).stem
+        if name == "broken":
+            raise VideoError(f"no face found in {video}")
+        tr = Track.load(tracks[name])
+        n = kw.get("max_frames")
+        if n is not None and tr.n_frames > n:
+            from facetransfer.transfer import take_frames
+
+            tr = take_frames(tr, np.arange(n))
+        return dataclasses.replace(tr, source=str(os.getpid()))
+
+    return fake
+
+
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
+                    reason="needs fork")
+def test_background_tracking_equals_sequential(clips, quick_model, monkeypatch, tmp_path):
+    fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
+    monkeypatch.setattr(rw, "obtain_track", fake)
+    plans = {par: rw.plan_transfer(clips["target"], quick_model,
+                                   expression_from=clips["source"], parallel=par)
+             for par in (False, True)}
+    me = str(os.getpid())
+    assert plans[False].source_tracks["expression"].source == me
+    assert plans[True].source_tracks["expression"].source != me  # tracked in the child
+    assert plans[True].source_tracks["target"].source == me
+    for m in quick_model.mode_names:
+        np.testing.assert_array_equal(plans[True].new_track.weights[m],
+                                      plans[False].new_track.weights[m])
+    np.testing.assert_array_equal(plans[True].mouth_index, plans[False].mouth_index)
+    # an error of the tracking in the child reaches the caller
+    import shutil
+
+    broken = tmp_path / "broken.mp4"
+    shutil.copy(clips["source"], broken)
+    with pytest.raises(VideoError, match="no face found"):
+        rw.plan_transfer(clips["target"], quick_model, expression_from=broken, parallel=True)
+
+
+def test_cli_speed_option(clips, quick_model_path, tmp_path, capsys):
+    out = tmp_path / "fast.mp4"
+    code, stdout, err = run(["transfer", "--target", clips["target"], "--target-track",
+                             clips["target_track"], "--expression-from", clips["source"],
+                             "--source-track", clips["source_track"], "--model",
+                             quick_model_path, "--out", out, "--speed", "fast",
+                             "--no-progress"], capsys)
+    assert code == 0, err
+    assert out.is_file()
+    with pytest.raises(SystemExit) as exc:
+        run(["transfer", "--target", clips["target"], "--expression-from", clips["source"],
+             "--model", quick_model_path, "--out", tmp_path / "x.mp4", "--speed", "turbo"],
+            capsys)
+    assert exc.value.code == 2
+    assert "--speed" in capsys.readouterr().err
+    assert not (tmp_path / "x.mp4").exists()
+
+
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
+                    reason="needs fork")
+def test_rendering_in_processes_equals_one_thread(quick_model, topo, synthetic):
+    fa, ta, fb, tb, truth = synthetic
+    new = recombine(tb, expression=ta)
+    lost = new.lost.copy()
+    lost[2] = True  # a lost frame keeps the original in both
+    new = dataclasses.replace(new, lost=lost)
+    runs = [list(rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
+                                   topo=topo, workers=w, processes=p))
+            for w, p in ((1, False), (2, True))]
+    for a, b in zip(*runs):
+        for x, y in zip(dataclasses.astuple(a), dataclasses.astuple(b)):
+            np.testing.assert_array_equal(x, y)
+    np.testing.assert_array_equal(runs[1][2].image, fb[2])
+    assert runs[1][1].mouth_mask.any() and runs[1][1].face_mask.sum() > 2000
+
+
+def test_crop_of_and_paste_round_trip(synthetic):
+    fa, ta, fb, tb, truth = synthetic
+    T = fb[0]
+    img = T.copy()
+    img[30:40, 50:70] = 0
+    face = np.zeros(T.shape[:2], bool)
+    face[32:38, 52:60] = True
+    rend = np.zeros_like(T)
+    rend[face] = 200
+    frame = rw.RewriteFrame(img, rend, face, np.zeros_like(face))
+    part = rw._crop_of(T, frame)
+    assert part[0] == (50, 30, 70, 40)
+    back = rw._paste(T, part)
+    for x, y in zip(dataclasses.astuple(frame), dataclasses.astuple(back)):
+        np.testing.assert_array_equal(x, y)
+    unchanged = rw.RewriteFrame(T.copy(), np.zeros_like(T), np.zeros_like(face),
+                                np.zeros_like(face))
+    assert rw._crop_of(T, unchanged) is None
+    np.testing.assert_array_equal(rw._paste(T, None).image, T)
