@@ -261,7 +261,7 @@ class MultilinearModel:
     @property
     def content_hash(self) -> str:
         """sha256 (hex) over every array and the metadata: identifies the model in track files."""
-        return _content_hash(self._arrays(), self._metadata(include_hash=False))
+        return _content_hash(self._arrays(), self._metadata())
 
     def _arrays(self) -> dict[str, np.ndarray]:
         arrays = {"core": self.core, "faces": self.faces}
@@ -275,7 +275,7 @@ class MultilinearModel:
                 arrays[name] = val
         return arrays
 
-    def _metadata(self, *, include_hash: bool = True) -> dict:
+    def _metadata(self) -> dict:
         meta = {"magic": _MAGIC, "format_version": FORMAT_VERSION,
                 "mode_names": list(self.mode_names), "labels": [list(l) for l in self.labels],
                 "provenance": self.provenance}
@@ -285,7 +285,7 @@ class MultilinearModel:
         """Write the model to one ``.npz`` file atomically (versioned, with a content checksum)."""
         arrays = self._arrays()
         meta = self._metadata()
-        meta["sha256"] = _content_hash(arrays, self._metadata(include_hash=False))
+        meta["sha256"] = _content_hash(arrays, self._metadata())
         with atomic_path(path, overwrite=overwrite) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, metadata=np.array(json.dumps(meta, default=_json_default)), **arrays)

@@ -32,27 +32,22 @@ def _image_out(path: str) -> Path:
     return out
 
 
-def _read_image(path: str, what: str) -> np.ndarray:
+def _read_image(path: str, what: str, *, gray: bool = False) -> np.ndarray:
+    """An RGB image ``(H, W, 3) uint8`` (or grey ``(H, W)``); one clear error if unreadable."""
     import cv2
 
     p = Path(path)
     if not p.is_file():
         raise FaceTransferError(f"{what} {p} does not exist")
-    img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+    img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
     if img is None:
         raise FaceTransferError(f"{what} {p} is not an image OpenCV can read")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return img if gray else cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
 
 
 def _read_mask(path: str, shape: tuple[int, int]) -> np.ndarray:
-    import cv2
-
     p = Path(path)
-    if not p.is_file():
-        raise FaceTransferError(f"mask {p} does not exist")
-    m = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE)
-    if m is None:
-        raise FaceTransferError(f"mask {p} is not an image OpenCV can read")
+    m = _read_image(path, "mask", gray=True)
     if m.shape != shape:
         raise FaceTransferError(f"mask {p} is {m.shape[1]}x{m.shape[0]}, the target is "
                                 f"{shape[1]}x{shape[0]}")

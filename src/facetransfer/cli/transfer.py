@@ -46,6 +46,20 @@ class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action)
 
 
+def add_rewrite_options(p: argparse.ArgumentParser) -> None:
+    """Options shared by ``transfer`` and ``demo``: texture, blending and tracking (one definition)."""
+    p.add_argument("--texture", choices=("frame", "constant"), default="frame",
+                   help="target face texture: lifted from each frame, or one for the clip")
+    p.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast",
+                   help="fast membrane blend, exact Poisson solve, or hard paste")
+    p.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
+                   help="tracking when no track file is given: auto (the optical-flow tracker of "
+                   "§5, a landmark-only fit if it fails), flow or landmarks")
+    p.add_argument("--speed", choices=("fast", "balanced", "quality"), default="balanced",
+                   help="tracking preset when no track file is given: fast (one pass, about 3x "
+                   "faster), balanced (the tracker's defaults) or quality (three passes)")
+
+
 def register(sub) -> None:
     """Add ``transfer``, ``edit``, ``puppet`` and ``demo`` to the facetransfer parser."""
     fmt = _DefaultsFormatter
@@ -79,15 +93,7 @@ def register(sub) -> None:
     p.add_argument("--model", required=True, metavar="M.npz", help="multilinear model")
     p.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
     p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
-    p.add_argument("--texture", choices=("frame", "constant"), default="frame",
-                   help="target face texture: lifted from each frame, or one for the clip")
-    p.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast",
-                   help="fast membrane blend, exact Poisson solve, or hard paste")
-    p.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
-                   help="tracking when no track file is given (auto: optical flow, §5)")
-    p.add_argument("--speed", choices=("fast", "balanced", "quality"), default="balanced",
-                   help="tracking preset when no track file is given: fast (one pass, about 3x "
-                   "faster), balanced (the tracker's defaults) or quality (three passes)")
+    add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
     p.add_argument("--out", required=True, metavar="OUT.mp4", help="video to write")
@@ -138,15 +144,7 @@ def register(sub) -> None:
     d.add_argument("--source", metavar="S.mp4", help="expression source (default driving_d6)")
     d.add_argument("--target", metavar="T.mp4", help="target footage (default WDA_KatieHill_000)")
     d.add_argument("--model", metavar="M.npz", help="model (default: built and cached)")
-    d.add_argument("--texture", choices=("frame", "constant"), default="frame",
-                   help="target face texture (see `transfer --help`)")
-    d.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast",
-                   help="blending into the footage (see `transfer --help`)")
-    d.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
-                   help="auto: the optical-flow tracker, a landmark-only fit if it fails")
-    d.add_argument("--speed", choices=("fast", "balanced", "quality"), default="balanced",
-                   help="tracking preset when no track file is given: fast (one pass, about 3x "
-                   "faster), balanced (the tracker's defaults) or quality (three passes)")
+    add_rewrite_options(d)
     d.set_defaults(func=run_demo)
 
 
