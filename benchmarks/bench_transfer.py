@@ -8,7 +8,10 @@ Measures, in one run:
     We track both videos (§5), transfer A's expressions onto B's footage and compare with the
     truth: PSNR and SSIM on the face region, and the landmark error (pixels) of the new
     performance. For reference: the same rewrite with the truth tracks (rendering error alone)
-    and the untouched target (what "doing nothing" scores).
+    and the untouched target (what "doing nothing" scores). Rows ``..._mouth=function`` take
+    the mouth from the texture function of §6 (``--mouth function``) instead of the source's
+    frame; ``tracked_performance_mouth=...`` rewrite with a ready performance (``--performance``)
+    whose mouth comes from the target's own footage (nearest frame or texture function).
 (b) identity leakage: the result is tracked again; we report the distance of its identity
     weights to the target's and to the source's (normalised by the A-B distance: 0 = the
     target's identity, 1 = the source's).
@@ -159,10 +162,26 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
         log(f"(a) tracked both clips with --speed {sp} in {track_seconds[sp]:.1f} s")
     topo = rw.mesh_topology(model)
 
-    def run(ta, tb, texture="frame", blend="fast"):
+    def run(ta, tb, texture="frame", blend="fast", mouth="frame", mouth_from="source"):
+        """``mouth_from="target"``: the mouth from B's own footage, as for a ready performance
+        (``--performance``): its nearest frame (``mouth="frame"``) or the texture function
+        lifted from its frames."""
+        from facetransfer.transfer import take_frames
+
         new = project_landmarks(recombine(tb, expression=ta), model)
-        outs = list(rw.rewrite_frames(clip_b.frames, tb, new, model, source_frames=clip_a.frames,
-                                      source_track=ta, texture=texture, blend=blend, topo=topo))
+        src = dict(source_frames=clip_a.frames, source_track=ta)
+        if mouth_from == "target":
+            names = model.mode_names[1:]
+            j = rw.nearest_frames(np.concatenate([new.weights[m] for m in names], axis=1),
+                                  np.concatenate([tb.weights[m] for m in names], axis=1),
+                                  ~tb.lost)
+            src = dict(source_frames=clip_b.frames, source_track=take_frames(tb, j),
+                       source_index=j)
+            if mouth == "function":
+                src["mouth_function"] = rw.mouth_texture_function(model, clip_b.frames, tb,
+                                                                  topo)
+        outs = list(rw.rewrite_frames(clip_b.frames, tb, new, model, texture=texture,
+                                      blend=blend, topo=topo, mouth=mouth, **src))
         return new, outs
 
     import scipy.ndimage as ndi
@@ -174,14 +193,24 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
         "tracked_frame_poisson": (tr_a, tr_b, "frame", "poisson"),
         "truth_tracks_frame_fast": (truth_a, truth_b, "frame", "fast"),
         "truth_tracks_constant_fast": (truth_a, truth_b, "constant", "fast"),
+        # the mouth texture (--mouth): the texture function of §6 lifted from the source
+        # instead of the source's frame at that time
+        "tracked_frame_fast_mouth=function": (tr_a, tr_b, "frame", "fast", "function"),
+        "truth_tracks_frame_fast_mouth=function": (truth_a, truth_b, "frame", "fast",
+                                                   "function"),
+        # a ready performance (--performance): the mouth from the target's own footage, its
+        # nearest frame in attribute space or the texture function of its frames
+        "tracked_performance_mouth=frame": (tr_a, tr_b, "frame", "fast", "frame", "target"),
+        "tracked_performance_mouth=function": (tr_a, tr_b, "frame", "fast", "function",
+                                               "target"),
     }
     for sp, (ta_, tb_) in other.items():
         runs[f"tracked_{sp}_preset_frame_fast"] = (ta_, tb_, "frame", "fast")
     masks = [face_mask(model, perf_t.frame_weights(i), perf_t.camera(i), (size, size))
              for i in range(n_frames)]
-    for name, (ta, tb, tex, bl) in runs.items():
+    for name, (ta, tb, tex, bl, *mouth) in runs.items():
         t0 = time.perf_counter()
-        new, outs = run(ta, tb, tex, bl)
+        new, outs = run(ta, tb, tex, bl, *mouth)
         dt = time.perf_counter() - t0
         errs = [sq_err(o.image, clip_t.frames[i], masks[i]) for i, o in enumerate(outs)]
         p = [psnr_of([e]) for e in errs]
@@ -192,14 +221,17 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
             grown = ndi.binary_dilation(o.face_mask, iterations=4) if o.face_mask.any() \
                 else o.face_mask
             outside.append(sq_err(o.image, clip_b.frames[i], ~grown))
+        mouth_errs = [sq_err(o.image, clip_t.frames[i], o.mouth_mask) for i, o in enumerate(outs)]
         results[name] = {"psnr_face_db": psnr_of(errs), "psnr_face_db_min": float(np.min(p)),
+                         "psnr_mouth_db": psnr_of(mouth_errs),
                          "ssim_face": float(np.mean(s)),
                          "landmark_error_px": float(lm.mean()),
                          "psnr_outside_mask_db": psnr_of(outside),
                          "seconds_per_frame": dt / n_frames}
         if name == "tracked_frame_fast":
             result_frames = np.stack([o.image for o in outs])
-        log(f"(a) {name}: PSNR {psnr_of(errs):.2f} dB, SSIM {np.mean(s):.3f}, landmarks "
+        log(f"(a) {name}: PSNR {psnr_of(errs):.2f} dB (mouth {psnr_of(mouth_errs):.2f}), "
+            f"SSIM {np.mean(s):.3f}, landmarks "
             f"{lm.mean():.2f} px, outside-mask PSNR {psnr_of(outside)}")
     base_p = [sq_err(clip_b.frames[i], clip_t.frames[i], masks[i]) for i in range(n_frames)]
     base_s = [ssim(clip_b.frames[i], clip_t.frames[i], masks[i]) for i in range(n_frames)]

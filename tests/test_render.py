@@ -432,3 +432,35 @@ def test_occluded_vertex_is_not_visible_pinhole():
                                   [False, False, False, True, True, True])
     np.testing.assert_array_equal(vertex_visibility(V, F[:1], cam, (100, 100)), [True] * 3 +
                                   [False] * 3)  # vertices on no triangle are never visible
+
+
+def test_shade_texture_equals_numpy_lookup_on_selected_triangles():
+    from facetransfer.render import shade_texture
+
+    P, F = cap_mesh(16, 16)
+    uvs = (P[:, :2] - P[:, :2].min(0)) / np.ptp(P[:, :2], axis=0)
+    rng = np.random.default_rng(3)
+    tex = rng.integers(0, 256, (37, 53, 3), dtype=np.uint8)
+    cam = look_at_weak_perspective(P, (90, 70))
+    r = rasterize(P, F, cam, (90, 70))
+    select = rng.random(len(F)) < 0.5
+    img, mask = shade_texture(r, F, uvs, tex, select)
+    tid = r.tri_id
+    want = (tid >= 0) & select[np.maximum(tid, 0)]
+    np.testing.assert_array_equal(mask, want)
+    assert want.sum() > 500 and (~want & (tid >= 0)).sum() > 500
+    b = r.bary[want].astype(np.float64)
+    uv = np.einsum("mk,mkc->mc", b, uvs[F[tid[want]]])
+    ref = np.clip(np.rint(sample_texture(tex, uv)), 0, 255)
+    diff = np.abs(img[want].astype(int) - ref.astype(int))
+    assert diff.max() <= 1 and diff.mean() < 0.01     # float32 vs float64 rounding only
+    assert not img[~want].any()
+    full, fmask = shade_texture(r, F, uvs, tex)
+    np.testing.assert_array_equal(fmask, tid >= 0)
+    np.testing.assert_array_equal(full[want], img[want])
+    with pytest.raises(ShapeError):
+        shade_texture(r, F, uvs[:5], tex)
+    with pytest.raises(ShapeError):
+        shade_texture(r, F, uvs, tex, select[:-1])
+    with pytest.raises(AssetError):
+        shade_texture(r, F, uvs, tex.astype(np.float32))

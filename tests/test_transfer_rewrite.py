@@ -234,3 +234,14 @@ def test_parallel_rendering_is_deterministic(quick_model, topo, synthetic):
             for w in (1, 2)]
     for a, b in zip(*runs):
         np.testing.assert_array_equal(a, b)
+
+
+def test_erode_equals_scipy_binary_erosion():
+    import scipy.ndimage as ndi
+
+    rng = np.random.default_rng(0)
+    for k in (1, 2, 3):
+        m = ndi.binary_opening(rng.random((60, 80)) < 0.7)
+        m[0, :] = True  # the image border counts as outside
+        m[:, -1] = True
+        np.testing.assert_array_equal(rw._erode(m, k), ndi.binary_erosion(m, iterations=k))

@@ -23,11 +23,13 @@ from test_transfer_rewrite import face_texture, synthetic, topo  # noqa: E402,F4
 
 
 def test_track_options_presets():
-    assert rw.track_options("balanced") == TrackOptions()
+    assert rw.track_options("balanced") == TrackOptions(reselect=4)
     fast = rw.track_options("fast")
-    assert (fast.passes, fast.levels, fast.n_points, fast.snap_frames) == (1, 2, 500, 4)
+    assert (fast.passes, fast.levels, fast.n_points, fast.snap_frames, fast.reselect,
+            fast.half_window) == (1, 2, 500, 4, 8, 3)
     assert rw.track_options("quality").passes == 3
-    assert rw.track_options() == TrackOptions()
+    assert rw.track_options("quality").reselect == 1
+    assert rw.track_options() == TrackOptions(reselect=4)
     with pytest.raises(rw.RewriteError, match="speed must be one of fast, balanced, quality"):
         rw.track_options("turbo")
 

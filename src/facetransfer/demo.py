@@ -203,7 +203,7 @@ class DemoResult:
 
 def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None,
              texture: str = "frame", blend: str = "fast", track_method: str = "auto",
-             speed: str = "balanced", progress_factory=None,
+             speed: str = "balanced", progress_factory=None, mouth: str | None = None,
              overwrite: bool = True) -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
@@ -219,6 +219,9 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
         Default: :func:`ensure_default_model`.
     texture, blend : str
         See :func:`facetransfer.rewrite.rewrite_frames`.
+    mouth : {"frame", "function"}, optional
+        The mouth texture (:func:`facetransfer.rewrite.rewrite_frames`); default
+        :func:`facetransfer.rewrite.default_mouth_mode`.
     track_method : {"auto", "flow", "landmarks"}
         ``"auto"``: the optical-flow tracker, falling back to a landmark-only fit if it fails.
     speed : {"fast", "balanced", "quality"}
@@ -232,6 +235,10 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     from .io.atomic import check_output_path
 
     rw.track_options(speed)  # an unknown preset fails before any work
+    if mouth is not None and mouth not in rw.MOUTH_MODES:  # also before any work
+        raise rw.RewriteError(f"mouth must be one of {', '.join(rw.MOUTH_MODES)}, got {mouth!r}")
+    if model is not None:
+        mouth = rw.resolve_mouth_mode(mouth, model)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     out = Path(out_dir)
@@ -276,6 +283,12 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     n = plan.n_frames
     pick = set(np.linspace(0, n - 1, 6).round().astype(int).tolist())
     sheet_frames: list[np.ndarray] = []
+    mouth = rw.resolve_mouth_mode(mouth, model)
+    mouth_fn = None
+    if mouth == "function":  # the texture function of §6, lifted from the source's frames
+        t_mouth = time.perf_counter()
+        mouth_fn = plan.mouth_function(model)
+        timings["mouth"] = time.perf_counter() - t_mouth
     bar = progress_factory("render", n) if progress_factory else None
     t_render = [0.0]
 
@@ -283,6 +296,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
         it = rw.rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
                                source_frames=plan.mouth_frames, source_track=plan.mouth_track,
                                source_index=plan.mouth_index, texture=texture, blend=blend,
+                               mouth=mouth, mouth_function=mouth_fn,
                                progress=bar.update if bar is not None else None)
         for i in range(n):
             t = time.perf_counter()

@@ -70,6 +70,7 @@ __all__ = [
     "look_at_weak_perspective",
     "render_model",
     "sample_texture",
+    "shade_texture",
 ]
 
 
@@ -941,6 +942,82 @@ def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     top = Tf[r0, c0] * (1 - fu) + Tf[r0, c1] * fu
     bot = Tf[r1, c0] * (1 - fu) + Tf[r1, c1] * fu
     return top * (1 - fv) + bot * fv
+
+
+def _shade_uv_kernel_py(tid, bary, F, uvs, tex, select, image, mask):  # pragma: no cover
+    """Unlit texture shading of the covered pixels whose triangle is selected (bilinear,
+    the texel convention of :func:`sample_texture`)."""
+    H, W = tid.shape
+    Ht, Wt = tex.shape[0], tex.shape[1]
+    for iy in range(H):
+        for ix in range(W):
+            f = tid[iy, ix]
+            if f < 0 or not select[f]:
+                continue
+            mask[iy, ix] = True
+            i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+            b0, b1, b2 = float(bary[iy, ix, 0]), float(bary[iy, ix, 1]), float(bary[iy, ix, 2])
+            u = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
+            v = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
+            u = min(max(u, 0.0), 1.0) * (Wt - 1)
+            v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
+            c0 = min(int(np.floor(u)), Wt - 1)
+            r0 = min(int(np.floor(v)), Ht - 1)
+            c1 = min(c0 + 1, Wt - 1)
+            r1 = min(r0 + 1, Ht - 1)
+            fu = u - c0
+            fv = v - r0
+            for k in range(3):
+                top = tex[r0, c0, k] * (1.0 - fu) + tex[r0, c1, k] * fu
+                bot = tex[r1, c0, k] * (1.0 - fu) + tex[r1, c1, k] * fu
+                val = top * (1.0 - fv) + bot * fv
+                image[iy, ix, k] = min(max(np.rint(val), 0.0), 255.0)
+
+
+_shade_uv_kernel = _maybe_njit(_shade_uv_kernel_py)
+
+
+def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,
+                  select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Texture the pixels of a raster without lighting, in one pass (numba).
+
+    Every pixel covered by a (selected) triangle takes the bilinear texture sample
+    (:func:`sample_texture`) at the barycentric interpolation of its triangle's ``uvs``.
+
+    Parameters
+    ----------
+    raster : Raster
+        Of a mesh with faces ``faces``.
+    faces : (F, 3) int
+    uvs : (n, 2) float
+        Texture coordinates (v up) of the mesh's vertices.
+    texture : (Ht, Wt, 3) uint8
+    select : (F,) bool, optional
+        Shade only these triangles (the others stay black and outside the mask).
+
+    Returns
+    -------
+    image : (H, W, 3) uint8
+        Black where nothing is shaded.
+    mask : (H, W) bool
+        The shaded pixels.
+    """
+    T = _check_texture(texture)
+    Fa = np.ascontiguousarray(faces, dtype=np.int64)
+    U = np.ascontiguousarray(uvs, dtype=np.float64)
+    if U.ndim != 2 or U.shape[1] != 2 or (Fa.size and Fa.max() >= U.shape[0]):
+        raise ShapeError(f"uvs must be (n, 2) covering the faces' vertices, got {U.shape}")
+    sel = np.ones(len(Fa), bool) if select is None else np.ascontiguousarray(select, dtype=bool)
+    if sel.shape != (len(Fa),):
+        raise ShapeError(f"select must be ({len(Fa)},) bool, got {sel.shape}")
+    H, W = raster.tri_id.shape
+    if raster.tri_id.size and raster.tri_id.max() >= len(Fa):
+        raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
+    image = np.zeros((H, W, 3), np.uint8)
+    mask = np.zeros((H, W), bool)
+    _shade_uv_kernel(np.ascontiguousarray(raster.tri_id), np.ascontiguousarray(raster.bary), Fa,
+                     U, np.ascontiguousarray(T), sel, image, mask)
+    return image, mask
 
 
 def render(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int], *,

@@ -661,8 +661,11 @@ def _push_pull(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
     wp = np.zeros((Hp, Wp), np.float32)
     cp[:H, :W] = tex * w[..., None]
     wp[:H, :W] = w
-    c2 = cp.reshape(Hp // 2, 2, Wp // 2, 2, 3).sum(axis=(1, 3))
-    w2 = wp.reshape(Hp // 2, 2, Wp // 2, 2).sum(axis=(1, 3))
+    # 2x2 block sums (an exact halving: INTER_AREA averages the blocks)
+    c2 = cv2.resize(cp, (Wp // 2, Hp // 2), interpolation=cv2.INTER_AREA) * np.float32(4)
+    w2 = cv2.resize(wp, (Wp // 2, Hp // 2), interpolation=cv2.INTER_AREA) * np.float32(4)
+    if c2.ndim == 2:  # a 1-pixel-wide level: cv2 drops the channel axis of (1, 1, 3)
+        c2 = c2.reshape(Hp // 2, Wp // 2, 3)
     coarse = np.divide(c2, w2[..., None], out=np.zeros_like(c2), where=w2[..., None] > 0)
     coarse = _push_pull(coarse, np.minimum(w2, 1.0))
     # push (up): bilinear upsampling of the coarse level, blended in by missing weight

@@ -4,6 +4,7 @@
         (--expression-from S.mp4 [--source-track S.npz] [--viseme-from S2.mp4]
          | --identity-from V.mp4 | --identity-weights W | --identity-label L)
         [--pose-from P.mp4] --model M.npz [--align trim|loop|hold] [--max-frames N]
+        [--mouth frame|function]
         [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4 [--overwrite]
     facetransfer edit TRACK.npz [--model M.npz] --add frown@120-180 --scale smile=1.5 --out T2.npz
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
@@ -50,6 +51,12 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
     """Options shared by ``transfer`` and ``demo``: texture, blending and tracking (one definition)."""
     p.add_argument("--texture", choices=("frame", "constant"), default="frame",
                    help="target face texture: lifted from each frame, or one for the clip")
+    p.add_argument("--mouth", choices=("frame", "function"), default=None,
+                   help="mouth texture (lips and mouth inside): frame (the mouth source's frame "
+                   "at that time, warped through its tracked geometry) or function (the "
+                   "texture function of §6: textures lifted from the mouth source's frames, "
+                   "blended by nearest neighbours of the new expression/viseme weights; needs "
+                   "a model with UVs); default: function with --performance, frame otherwise")
     p.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast",
                    help="fast membrane blend, exact Poisson solve, or hard paste")
     p.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
@@ -189,7 +196,7 @@ def run_transfer(args) -> int:
         identity = parse_weights(args.identity_weights, model.ranks[model.mode_index(idm)])
     res = transfer_video(
         args.target, args.out, model, overwrite=args.overwrite, texture=args.texture,
-        blend=args.blend, meshes_dir=args.meshes, save_track=args.save_track,
+        blend=args.blend, mouth=args.mouth, meshes_dir=args.meshes, save_track=args.save_track,
         progress_factory=_bar_factory(not args.no_progress),
         target_track=args.target_track, expression_from=args.expression_from,
         expression_track=args.source_track, viseme_from=args.viseme_from,
@@ -281,7 +288,8 @@ def run_demo(args) -> int:
     _positive(args.frames, "--frames")
     model = load_model(args.model) if args.model else None
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
-               model=model, texture=args.texture, blend=args.blend, track_method=args.tracker,
+               model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
+               track_method=args.tracker,
                speed=args.speed, progress_factory=_bar_factory())
     t = res.timings
     print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "

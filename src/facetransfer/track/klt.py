@@ -92,7 +92,7 @@ def build_pyramid(frame: np.ndarray, n_levels: int = 3, *, blur: float = 0.8) ->
         s = cv2.GaussianBlur(g, (0, 0), blur) if blur > 0 else g
         gx = cv2.Scharr(s, cv2.CV_32F, 1, 0, scale=1.0 / 32.0, borderType=cv2.BORDER_REPLICATE)
         gy = cv2.Scharr(s, cv2.CV_32F, 0, 1, scale=1.0 / 32.0, borderType=cv2.BORDER_REPLICATE)
-        levels.append(np.ascontiguousarray(np.dstack([s, gx, gy])))
+        levels.append(cv2.merge([s, gx, gy]))  # (h, w, 3) float32, contiguous
     return Pyramid(tuple(levels))
 
 

@@ -103,6 +103,13 @@ class TrackOptions:
         Re-initialise from the detector when the face is lost.
     visibility_scale : float
         Resolution factor of the visibility raster.
+    reselect : int
+        Choose the tracked vertices (visibility raster, texture strength, spread) anew every
+        ``reselect`` frame pairs; in between the last choice is reused with its points
+        re-projected, unless the head turned by more than ``reselect_degrees`` or the scale
+        changed by more than 5 % since (1 = every pair, as in the paper).
+    reselect_degrees : float
+        Head rotation (degrees) since the last choice that forces a new one.
     """
 
     passes: int = 2
@@ -126,13 +133,16 @@ class TrackOptions:
     lost_threshold: float = 0.3
     recover: bool = True
     visibility_scale: float = 0.25
+    reselect: int = 1
+    reselect_degrees: float = 3.0
 
     def __post_init__(self) -> None:
-        for name in ("passes", "levels", "iterations", "n_points", "half_window"):
+        for name in ("passes", "levels", "iterations", "n_points", "half_window", "reselect"):
             if int(getattr(self, name)) < 1:
                 raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("prior", "identity_prior", "init_prior", "init_weight", "anchor_weight",
-                     "smooth", "snap_frames", "keyframe", "temporal", "robust"):
+                     "smooth", "snap_frames", "keyframe", "temporal", "robust",
+                     "reselect_degrees"):
             if not getattr(self, name) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
 
@@ -226,6 +236,7 @@ class FaceTracker:
         self.model_iod = float(np.linalg.norm(Xl[0] - Xl[1]))  # outer eye corners, model units
         self._cache: BasisCache | None = None
         self._cache_key = None
+        self._selection: tuple | None = None  # (vertices, pose, pairs since) for `reselect`
         self.timings: dict[str, float] = {}
         self.counts: dict[str, int] = {}
 
@@ -299,6 +310,29 @@ class FaceTracker:
         chosen = cand[order2[:k]]
         return chosen, p[chosen]
 
+    def _reuse_selection(self, state: FrameState):
+        """The last vertex choice re-projected at ``state`` (``TrackOptions.reselect``), or
+        ``(None, None)`` when a new choice is due."""
+        opt = self.opt
+        last = self._selection
+        if opt.reselect <= 1 or last is None:
+            return None, None
+        sel, pose, age = last
+        if age + 1 >= opt.reselect or sel.size == 0:
+            return None, None
+        turn = np.degrees(np.linalg.norm(so3_log(state.pose.rotation @ pose.rotation.T)))
+        if turn > opt.reselect_degrees or abs(np.log(state.pose.scale / pose.scale)) > 0.05:
+            return None, None
+        X = self.cache(state.weights).restrict(sel).shape(state.weights)
+        p = project(X, state.pose.rotation, state.pose.scale, state.pose.translation)
+        W, H = self.size
+        m = opt.half_window * 2 + 2
+        inside = (p[:, 0] > m) & (p[:, 0] < W - 1 - m) & (p[:, 1] > m) & (p[:, 1] < H - 1 - m)
+        if inside.mean() < 0.9:  # the face is leaving the frame: choose again
+            return None, None
+        self._selection = (sel, pose, age + 1)
+        return sel[inside], p[inside]
+
     # ------------------------------------------------------------------ one frame pair
     def track_pair(self, pyr0: Pyramid, pyr1: Pyramid, state0: FrameState, guess: FrameState, *,
                    anchor: np.ndarray | None = None, accumulate: bool = False,
@@ -323,7 +357,11 @@ class FaceTracker:
         """
         opt = self.opt
         t0 = _now()
-        sel, q = self.select_vertices(state0, pyr0)
+        sel, q = self._reuse_selection(state0)
+        if sel is None:
+            sel, q = self.select_vertices(state0, pyr0)
+            self._selection = (sel, state0.pose, 0)
+            self.counts["selections"] = self.counts.get("selections", 0) + 1
         self._tick("select", t0)
         if sel.size < 10:
             return _PairResult(guess, 0.0, None, int(sel.size))
