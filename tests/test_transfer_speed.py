@@ -29,7 +29,7 @@ def test_track_options_presets():
             fast.half_window) == (1, 2, 500, 4, 8, 3)
     assert rw.track_options("quality").passes == 3
     assert rw.track_options("quality").reselect == 1
-    assert rw.track_options() == TrackOptions(reselect=4)
+    assert rw.track_options() == fast and rw.DEFAULT_SPEED == "fast"
     with pytest.raises(rw.RewriteError, match="speed must be one of fast, balanced, quality"):
         rw.track_options("turbo")
 
@@ -172,3 +172,12 @@ def test_crop_of_and_paste_round_trip(synthetic):
                                 np.zeros_like(face))
     assert rw._crop_of(T, unchanged) is None
     np.testing.assert_array_equal(rw._paste(T, None).image, T)
+
+
+def test_defaults_agree():
+    import inspect
+
+    from facetransfer import demo
+
+    assert inspect.signature(demo.run_demo).parameters["speed"].default == rw.DEFAULT_SPEED
+    assert inspect.signature(rw.plan_transfer).parameters["speed"].default == rw.DEFAULT_SPEED

@@ -203,7 +203,7 @@ class DemoResult:
 
 def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None,
              texture: str = "frame", blend: str = "fast", track_method: str = "auto",
-             speed: str = "balanced", progress_factory=None, mouth: str | None = None,
+             speed: str = "fast", progress_factory=None, mouth: str | None = None,
              overwrite: bool = True) -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
@@ -225,7 +225,8 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     track_method : {"auto", "flow", "landmarks"}
         ``"auto"``: the optical-flow tracker, falling back to a landmark-only fit if it fails.
     speed : {"fast", "balanced", "quality"}
-        Tracking preset (:func:`facetransfer.rewrite.track_options`).
+        Tracking preset (:func:`facetransfer.rewrite.track_options`; the default is
+        :data:`facetransfer.rewrite.DEFAULT_SPEED`).
 
     Returns
     -------

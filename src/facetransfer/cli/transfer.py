@@ -18,6 +18,7 @@ import argparse
 import sys
 
 from ..errors import FaceTransferError
+from ..rewrite import DEFAULT_SPEED, SPEED_PRESETS
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
               "(repeat the source), hold (hold the source's last frame); default: trim when the "
@@ -62,9 +63,11 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
                    help="tracking when no track file is given: auto (the optical-flow tracker of "
                    "§5, a landmark-only fit if it fails), flow or landmarks")
-    p.add_argument("--speed", choices=("fast", "balanced", "quality"), default="balanced",
-                   help="tracking preset when no track file is given: fast (one pass, about 3x "
-                   "faster), balanced (the tracker's defaults) or quality (three passes)")
+    p.add_argument("--speed", choices=SPEED_PRESETS, default=DEFAULT_SPEED,
+                   help="tracking preset when no track file is given: fast (one pass, two "
+                   "pyramid levels; as accurate as balanced on the footage measured, about 4x "
+                   "faster), balanced (the tracker's defaults: two passes, three levels) or "
+                   "quality (three passes) for hard footage")
 
 
 def register(sub) -> None:
