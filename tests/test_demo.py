@@ -37,3 +37,28 @@ def test_demo_end_to_end(data_dir, quick_model, tmp_path):
     assert np.abs(tgt[250:350, 180:330] - res_[250:350, 180:330]).mean() > 1
     with pytest.raises(ValueError, match="exists"):
         run_demo(tmp_path / "out", frames=6, model=quick_model, overwrite=False)
+
+
+@pytest.mark.slow
+def test_demo_with_the_mouth_texture_function(data_dir, quick_model, tmp_path):
+    """``mouth="function"``: the mouth comes from the texture function lifted from the source;
+    it differs from the default (the source frame's own mouth) only around the mouth."""
+    from facetransfer.io.video import read_video
+    from facetransfer.track import Track
+
+    a = run_demo(tmp_path / "a", frames=4, model=quick_model)
+    b = run_demo(tmp_path / "b", frames=4, model=quick_model, mouth="function")
+    fa, _ = read_video(a.video)
+    fb, _ = read_video(b.video)
+    ra, rb = fa[:, :, 1024:].astype(int), fb[:, :, 1024:].astype(int)
+    np.testing.assert_array_equal(fa[:, :, :1024], fb[:, :, :1024])  # source | target panels
+    diff = np.abs(ra - rb).max(axis=-1)        # (4, 512, 512)
+    changed = np.argwhere(diff > 4)             # measured: 2303 pixels, at most 20 levels apart
+    assert len(changed) > 500
+    # ... around the target's mouth (landmarks 48-67 of its track), nowhere else
+    tr = Track.load(a.track)
+    mouth = tr.landmarks2d[:4, 48:68].reshape(-1, 2).mean(axis=0)      # (x, y)
+    assert np.linalg.norm(changed[:, [2, 1]].mean(axis=0) - mouth) < 30
+    assert np.percentile(np.linalg.norm(changed[:, [2, 1]] - mouth, axis=1), 95) < 80
+    with pytest.raises(ValueError, match="mouth"):
+        run_demo(tmp_path / "c", frames=4, model=quick_model, mouth="lips")
