@@ -140,3 +140,38 @@ def test_cli_rejects_bad_options(quick_model_path, small_clip, tmp_path, capsys)
     assert code == 2 and "--out is required" in lines[0]
     code, lines = _run(capsys, *base, "--out", tmp_path / "missing" / "t.npz")
     assert code == 2 and "does not exist" in lines[0]
+
+
+def test_cli_continues_an_interrupted_run(small_clip, quick_model_path, tmp_path, capsys,
+                                          monkeypatch):
+    from facetransfer.track import tracker
+
+    video, pts, clip = small_clip
+    out = tmp_path / "t.npz"
+    partial = tmp_path / "t.partial.npz"
+    args = (video, "--model", quick_model_path, "--out", out, "--init", pts, "--passes", "2")
+    ref = tmp_path / "ref.npz"
+    assert _run(capsys, *args[:3], "--out", ref, *args[5:])[0] == 0
+    real = tracker.FaceTracker.track_pair
+    calls = {"n": 0}
+
+    def interrupted(self, *a, **k):
+        calls["n"] += 1
+        if calls["n"] == 20:       # the snap (7 frames back and forth: 14 pairs), then 5 frames
+            raise KeyboardInterrupt
+        return real(self, *a, **k)
+
+    monkeypatch.setattr(tracker.FaceTracker, "track_pair", interrupted)
+    assert main(["track", *map(str, args)]) == 130
+    err = capsys.readouterr().err
+    assert "run the same command again" in err and partial.is_file() and not out.exists()
+    monkeypatch.setattr(tracker.FaceTracker, "track_pair", real)
+    assert main(["track", *map(str, args)]) == 0
+    assert "continued an interrupted run from pass 1" in capsys.readouterr().out
+    assert not partial.exists()
+    np.testing.assert_allclose(Track.load(out).landmarks2d, Track.load(ref).landmarks2d,
+                               atol=1e-9)
+    # --restart drops the progress file of an interrupted run
+    partial.write_bytes(b"junk")
+    assert main(["track", *map(str, args), "--restart"]) == 0
+    assert "continued" not in capsys.readouterr().out and not partial.exists()

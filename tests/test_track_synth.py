@@ -149,3 +149,59 @@ def test_anchoring_pulls_a_misaligned_start_back(quick_model, clip):
         errs[anchor] = np.linalg.norm(tr.landmarks2d - T.landmarks2d, axis=2).mean(axis=1)
     assert errs[False][-1] > 3.0                    # the flow keeps the offset (measured 5.3)
     assert errs[True][-1] < 0.5 * errs[False][-1]   # the anchor removes most of it (0.8)
+
+
+def test_an_interrupted_track_continues_where_it_stopped(quick_model, clip, tmp_path):
+    """``checkpoint``: stopped in the middle of the second pass, a second call does only the
+    rest and gives the same track as an uninterrupted run."""
+    T = clip.truth
+    opt = TrackOptions(passes=2, recover=False, snap_frames=2)
+    full = track_video(clip.frames, quick_model, init=T.landmarks2d[0], options=opt)
+    ck = tmp_path / "run.partial.npz"
+
+    def stop(stage, done, total):
+        if stage == "pass 2/2" and done == 7:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        track_video(clip.frames, quick_model, init=T.landmarks2d[0], options=opt,
+                    checkpoint=ck, checkpoint_every=1e9, progress=stop)
+    assert ck.is_file()
+    seen = []
+    res = track_video(clip.frames, quick_model, init=T.landmarks2d[0], options=opt,
+                      checkpoint=ck, progress=lambda st, d, t: seen.append((st, d)))
+    assert not ck.exists()                                  # removed once complete
+    assert res.info["resumed"] == {"pass": 2, "frame": 8}   # frames 0-7 of pass 2 were kept
+    assert {st for st, _ in seen} == {"pass 2/2"} and seen[0][1] == 8
+    np.testing.assert_allclose(res.landmarks2d, full.landmarks2d, atol=1e-9)
+    for m in full.weights:
+        np.testing.assert_allclose(res.weights[m], full.weights[m], atol=1e-12)
+    np.testing.assert_array_equal(res.lost, full.lost)
+
+
+def test_a_checkpoint_of_another_run_is_ignored(quick_model, clip, tmp_path, caplog):
+    T = clip.truth
+    ck = tmp_path / "run.partial.npz"
+    opt = TrackOptions(passes=1, recover=False, snap_frames=0)
+
+    def stop(stage, done, total):
+        if done == 5:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        track_video(clip.frames[:10], quick_model, init=T.landmarks2d[0], options=opt,
+                    checkpoint=ck, checkpoint_every=0, progress=stop)
+    assert ck.is_file()
+    other = TrackOptions(passes=1, recover=False, snap_frames=0, n_points=300)
+    with caplog.at_level("WARNING"):
+        res = track_video(clip.frames[:10], quick_model, init=T.landmarks2d[0], options=other,
+                          checkpoint=ck)
+    assert "another run" in caplog.text and res.info["resumed"] is None
+    fresh = track_video(clip.frames[:10], quick_model, init=T.landmarks2d[0], options=other)
+    np.testing.assert_allclose(res.landmarks2d, fresh.landmarks2d, atol=1e-9)
+    assert not ck.exists()
+    ck.write_bytes(b"not an npz")                           # unreadable: ignored, replaced
+    with caplog.at_level("WARNING"):
+        res = track_video(clip.frames[:10], quick_model, init=T.landmarks2d[0], options=other,
+                          checkpoint=ck)
+    assert "unreadable checkpoint" in caplog.text and not ck.exists()

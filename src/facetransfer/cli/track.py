@@ -11,9 +11,17 @@ landmarks in pixels, a confidence and a lost flag (see :mod:`facetransfer.track.
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path
+
+
+def partial_path(out) -> Path:
+    """Where ``track --out OUT`` keeps the progress of an unfinished run."""
+    p = Path(out)
+    return p.with_name(p.stem + ".partial.npz")
 
 
 def register(sub) -> None:
@@ -43,6 +51,9 @@ def register(sub) -> None:
     p.add_argument("--points", type=int, default=d.n_points, help="tracked vertices per frame")
     p.add_argument("--max-frames", type=int, default=None, help="track only the first N frames")
     p.add_argument("--overlay", help="also write a video with the fitted mesh drawn (.mp4)")
+    p.add_argument("--restart", action="store_true",
+                   help="ignore the progress of an interrupted run (OUT with suffix "
+                   ".partial.npz; by default tracking continues from it)")
     p.add_argument("--from-track", dest="from_track",
                    help="draw --overlay from an existing track file instead of tracking")
     p.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=True,
@@ -98,15 +109,26 @@ def run(args) -> int:
         # auto init and anchoring create MediaPipe themselves; with user points it is only
         # loaded if the face is lost (recovery)
         detector = None if (args.init == "auto" or args.anchor) else LazyDetector()
+        partial = partial_path(args.out)
+        if args.restart and partial.exists():
+            partial.unlink()
         try:
             track = track_video(args.video, model, init=args.init, options=opt,
                                 max_frames=args.max_frames, progress=progress,
-                                source=str(args.video), detector=detector)
+                                source=str(args.video), detector=detector,
+                                checkpoint=partial)
+        except KeyboardInterrupt:
+            print(f"interrupted; the progress is in {partial}: run the same command again to "
+                  "continue", file=sys.stderr)
+            raise
         finally:
             for b in bars.values():
                 b.close()
             if detector is not None:
                 detector.close()
+        if track.info and track.info.get("resumed"):
+            r = track.info["resumed"]
+            print(f"continued an interrupted run from pass {r['pass']}, frame {r['frame']}")
         track.save(args.out, overwrite=args.overwrite)
         n_lost = int(track.lost.sum())
         print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"

@@ -21,6 +21,7 @@ robust=0)`` is the paper's frame-to-frame tracker.
 from __future__ import annotations
 
 import logging
+import os
 import time
 from dataclasses import dataclass, replace
 from typing import Callable, Iterator, Sequence
@@ -601,7 +602,9 @@ def _velocity_guess(a: FrameState, b: FrameState) -> FrameState:
 # ------------------------------------------------------------------------------------ driver
 def track_video(video, model, *, init="auto", options: TrackOptions | None = None,
                 detector=None, max_frames: int | None = None, fixed: dict | None = None,
-                progress: Progress | None = None, source: str | None = None) -> Track:
+                progress: Progress | None = None, source: str | None = None,
+                checkpoint: str | os.PathLike | None = None,
+                checkpoint_every: float = 20.0) -> Track:
     """Track a face through a video with a multilinear model (Vlasic et al. 2005, §5).
 
     Parameters
@@ -623,6 +626,13 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
     progress : callable(stage, done, total), optional
     source : str, optional
         Recorded in the track (default: the video path).
+    checkpoint : path-like, optional
+        Progress file: the run saves what it has finished there every ``checkpoint_every``
+        seconds and when interrupted, and a later call with the same video, model, options and
+        initial points continues from it (:mod:`facetransfer.track.checkpoint`). Removed when
+        the track is complete. A file of another run is ignored (and replaced).
+    checkpoint_every : float
+        Seconds between periodic saves (0 = after every frame).
 
     Returns
     -------
@@ -645,15 +655,44 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
         from .init import MediaPipeDetector
 
         detector = own_detector = MediaPipeDetector()
+    ck = None
+    if checkpoint is not None:
+        from .checkpoint import Checkpoint, checkpoint_key, video_identity
+
+        vid = video_identity(frames.path) if frames.path else video_identity(
+            None, frames.array[0], frames.array[-1])
+        ini = "auto" if isinstance(init, str) and init == "auto" else _init_array(init,
+                                                                                   frames.size)
+        ck = Checkpoint(checkpoint, checkpoint_key(vid, frames.n, model.content_hash, opt, ini,
+                                                   fixed), model.mode_names,
+                        every=checkpoint_every)
     try:
-        return _run(frames, model, init, opt, detector, progress, src, fixed)
+        track = _run(frames, model, init, opt, detector, progress, src, fixed, ck)
+        if ck is not None:
+            ck.remove()
+        return track
     finally:
         if own_detector is not None:
             own_detector.close()
 
 
+def _init_array(init, size) -> np.ndarray:
+    """User initial points (dict, (68, 2) array or POINTS.json) as a (68, 2) array, NaN where
+    not given (validated as :func:`_run` does)."""
+    from .init import load_init_points
+
+    if isinstance(init, str) or hasattr(init, "__fspath__"):
+        return points_to_array(load_init_points(init, size))
+    if isinstance(init, dict):
+        return points_to_array(check_init_points(init, size))
+    arr = np.asarray(init, dtype=np.float64)
+    if arr.shape != (68, 2):
+        raise TrackError(f"init landmarks must be (68, 2), got {arr.shape}")
+    return arr
+
+
 def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, src,
-         fixed: dict | None = None) -> Track:
+         fixed: dict | None = None, checkpoint=None) -> Track:
     from .init import load_init_points
 
     F = frames.n
@@ -674,41 +713,47 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
                 detections[i] = detector.detect(frames.get(i) if frame is None else frame)
         return detections[i]
 
-    start = 0
-    if isinstance(init, str) and init == "auto":
-        if detector is None:
-            raise TrackError("automatic initialisation needs a face detector")
-        L0 = None
-        for i, fr in enumerate(frames.iterate()):
-            L0 = detect(i, fr)
-            if L0 is not None:
-                start = i
-                break
-        if L0 is None:
-            raise VideoError(f"no face found in {src or 'the video'} (searched frames 0-{F - 1})")
-    else:
-        if isinstance(init, (str,)) or hasattr(init, "__fspath__"):
-            pts = load_init_points(init, (W, H))
-        elif isinstance(init, dict):
-            pts = check_init_points(init, (W, H))
+    resume = checkpoint.load() if checkpoint is not None else None
+    if resume is None:
+        start = 0
+        if isinstance(init, str) and init == "auto":
+            if detector is None:
+                raise TrackError("automatic initialisation needs a face detector")
+            L0 = None
+            for i, fr in enumerate(frames.iterate()):
+                L0 = detect(i, fr)
+                if L0 is not None:
+                    start = i
+                    break
+            if L0 is None:
+                raise VideoError(f"no face found in {src or 'the video'} (searched frames 0-{F - 1})")
         else:
-            arr = np.asarray(init, dtype=np.float64)
-            if arr.shape != (68, 2):
-                raise TrackError(f"init landmarks must be (68, 2), got {arr.shape}")
-            pts = check_init_points({i: arr[i] for i in range(68)
-                                     if np.all(np.isfinite(arr[i]))}, (W, H))
-        L0 = points_to_array(pts)
-    if start > 0:
-        log.info("first face found at frame %d", start)
-    start_state = None
-    if fixed:
-        w = {m: tr.priors[m].mean.copy() for m in model.mode_names}
-        w.update(fixed)
-        ok = np.all(np.isfinite(L0), axis=1)
-        X = model.synthesize(w, vertices=tr.lm_vertices[ok])
-        start_state = FrameState(fit_affine_pose(X, L0[ok]), w)
-    state0 = fit_landmarks(model, L0, prior=opt.init_prior, state=start_state,
-                           modes=tuple(m for m in model.mode_names if m not in fixed))
+            if isinstance(init, (str,)) or hasattr(init, "__fspath__"):
+                pts = load_init_points(init, (W, H))
+            elif isinstance(init, dict):
+                pts = check_init_points(init, (W, H))
+            else:
+                arr = np.asarray(init, dtype=np.float64)
+                if arr.shape != (68, 2):
+                    raise TrackError(f"init landmarks must be (68, 2), got {arr.shape}")
+                pts = check_init_points({i: arr[i] for i in range(68)
+                                         if np.all(np.isfinite(arr[i]))}, (W, H))
+            L0 = points_to_array(pts)
+        if start > 0:
+            log.info("first face found at frame %d", start)
+        start_state = None
+        if fixed:
+            w = {m: tr.priors[m].mean.copy() for m in model.mode_names}
+            w.update(fixed)
+            ok = np.all(np.isfinite(L0), axis=1)
+            X = model.synthesize(w, vertices=tr.lm_vertices[ok])
+            start_state = FrameState(fit_affine_pose(X, L0[ok]), w)
+        state0 = fit_landmarks(model, L0, prior=opt.init_prior, state=start_state,
+                               modes=tuple(m for m in model.mode_names if m not in fixed))
+    else:  # an interrupted run of the same video, model and options
+        start, L0, state0 = resume.start, np.asarray(resume.L0), resume.state0
+        log.info("resuming from %s: pass %d, frame %d", checkpoint.path,
+                 resume.pass_index + 1, resume.next_frame)
     t_init = time.perf_counter() - t_start
 
     states: list[FrameState | None] = [None] * F
@@ -745,7 +790,7 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
 
     # -------- §5.2 snap: track the first frames back and forth
     n_snap = min(int(opt.snap_frames), F - start - 1)
-    if n_snap > 0:
+    if n_snap > 0 and resume is None:
         snap_frames = list(frames.iterate(start, start + n_snap + 1))
         pyrs = [tr.pyramid(f) for f in snap_frames]
         for rnd in range(int(opt.snap_rounds)):
@@ -768,64 +813,98 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
             state0 = st
             apply_identity(systems, start)
 
+    def save(pass_index, next_frame, systems_, reinit_, prev_):
+        checkpoint.save(start=start, L0=L0, state0=state0, pass_index=pass_index,
+                        next_frame=next_frame, states=states, prev=prev_, conf=conf, lost=lost,
+                        reinit=reinit_, systems=systems_)
+
     # -------- §5.1 passes
     prev: list[FrameState | None] | None = None
-    for ps in range(int(opt.passes)):
+    first_pass = 0
+    if resume is not None:
+        first_pass, prev = resume.pass_index, resume.prev
+        conf[:], lost[:] = resume.conf, resume.lost
+        if first_pass >= int(opt.passes):  # every pass was done: only the assembly is left
+            states[:] = prev
+    elif checkpoint is not None:
+        save(0, start + 1, [], [], None)
+    for ps in range(first_pass, int(opt.passes)):
         last = ps == int(opt.passes) - 1
-        systems = []
-        reinit = []
-        lost[start + 1:] = False
-        if id_name is not None:
-            systems.append(tr.landmark_identity_system(state0, L0, opt.init_weight)
-                           if not lost[start] else None)
-            systems = [s for s in systems if s is not None]
-        states[start] = state0
-        pyr0 = None
-        it = frames.iterate(start)
-        first = next(it)
-        pyr0 = tr.pyramid(first)
-        key = (pyr0, state0)
-        conf[start] = 1.0
-        for i, fr in enumerate(it, start=start + 1):
-            pyr1 = tr.pyramid(fr)
-            st_prev = states[i - 1]
-            if prev is not None and prev[i] is not None and prev[i - 1] is not None:
-                guess = _relative_guess(st_prev, prev[i - 1], prev[i])
-            elif (i - 2 >= start and not lost[i - 1] and not lost[i - 2]
-                  and (i - 1) not in reinit):
-                guess = _velocity_guess(states[i - 2], st_prev)
-            else:
-                guess = st_prev
-            res = tr.track_pair(pyr0, pyr1, st_prev, guess, anchor=anchor_for(i, fr),
-                                accumulate=(id_name is not None and not last), key=key)
-            st, c = res.state, res.confidence
-            # once lost, frames stay lost until a re-initialisation (the flow may lock onto
-            # the background with high confidence)
-            is_lost = (c < opt.lost_threshold or not _face_in_image(model, tr, st, (W, H))
-                       or bool(lost[i - 1]))
-            if is_lost and opt.recover and detector is not None:
-                L = detect(i, fr)
-                if L is not None:
-                    try:
-                        st = fit_landmarks(model, L, state=st_prev, modes=tr.per_frame,
-                                           prior=opt.init_prior)
-                        reinit.append(i)
-                        is_lost = False
-                        c = max(c, opt.lost_threshold)
-                    except TrackError:
-                        log.debug("re-initialisation failed at frame %d", i)
-            if is_lost and not _face_in_image(model, tr, st, (W, H)):
-                st = st_prev
-            states[i] = st
-            conf[i] = 0.0 if is_lost else c
-            lost[i] = is_lost
-            if res.identity_system is not None and not is_lost:
-                systems.append(res.identity_system)
-            pyr0 = pyr1
-            prog(f"pass {ps + 1}/{opt.passes}", i - start, F - 1 - start)
+        if resume is not None and ps == resume.pass_index and resume.next_frame > start + 1:
+            # continue the interrupted pass where it stopped
+            systems, reinit = list(resume.systems), list(resume.reinit)
+            base = prev if prev is not None else [None] * F
+            states[:] = [r if r is not None else b for r, b in zip(resume.states, base)]
+            i_next = resume.next_frame
+            key = (tr.pyramid(frames.get(start)), state0)
+            pyr0 = tr.pyramid(frames.get(i_next - 1))
+            it = frames.iterate(i_next)
+        else:
+            systems = []
+            reinit = []
+            lost[start + 1:] = False
+            if id_name is not None:
+                systems.append(tr.landmark_identity_system(state0, L0, opt.init_weight)
+                               if not lost[start] else None)
+                systems = [s for s in systems if s is not None]
+            states[start] = state0
+            it = frames.iterate(start)
+            first = next(it)
+            pyr0 = tr.pyramid(first)
+            key = (pyr0, state0)
+            conf[start] = 1.0
+            i_next = start + 1
+        done = i_next  # the next frame to solve
+        try:
+            for i, fr in enumerate(it, start=i_next):
+                pyr1 = tr.pyramid(fr)
+                st_prev = states[i - 1]
+                if prev is not None and prev[i] is not None and prev[i - 1] is not None:
+                    guess = _relative_guess(st_prev, prev[i - 1], prev[i])
+                elif (i - 2 >= start and not lost[i - 1] and not lost[i - 2]
+                      and (i - 1) not in reinit):
+                    guess = _velocity_guess(states[i - 2], st_prev)
+                else:
+                    guess = st_prev
+                res = tr.track_pair(pyr0, pyr1, st_prev, guess, anchor=anchor_for(i, fr),
+                                    accumulate=(id_name is not None and not last), key=key)
+                st, c = res.state, res.confidence
+                # once lost, frames stay lost until a re-initialisation (the flow may lock onto
+                # the background with high confidence)
+                is_lost = (c < opt.lost_threshold or not _face_in_image(model, tr, st, (W, H))
+                           or bool(lost[i - 1]))
+                if is_lost and opt.recover and detector is not None:
+                    L = detect(i, fr)
+                    if L is not None:
+                        try:
+                            st = fit_landmarks(model, L, state=st_prev, modes=tr.per_frame,
+                                               prior=opt.init_prior)
+                            reinit.append(i)
+                            is_lost = False
+                            c = max(c, opt.lost_threshold)
+                        except TrackError:
+                            log.debug("re-initialisation failed at frame %d", i)
+                if is_lost and not _face_in_image(model, tr, st, (W, H)):
+                    st = st_prev
+                states[i] = st
+                conf[i] = 0.0 if is_lost else c
+                lost[i] = is_lost
+                if res.identity_system is not None and not is_lost:
+                    systems.append(res.identity_system)
+                pyr0 = pyr1
+                done = i + 1
+                if checkpoint is not None and checkpoint.due():
+                    save(ps, done, systems, reinit, prev)
+                prog(f"pass {ps + 1}/{opt.passes}", i - start, F - 1 - start)
+        except BaseException:
+            if checkpoint is not None and done > i_next:  # keep what this pass finished
+                save(ps, done, systems, reinit, prev)
+            raise
         if not last and id_name is not None and len(systems) > 0:
             apply_identity(systems, start)
         prev = list(states)
+        if checkpoint is not None:
+            save(ps + 1, start + 1, [], reinit, prev)
 
     # frames before the first face hold the first tracked state
     for i in range(start):
@@ -833,6 +912,8 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
     t_track = time.perf_counter() - t_start
     track = _assemble(model, states, conf, lost, frames.fps, (W, H), src, opt)
     info = {"start_frame": start, "reinitialised": reinit, "timings": dict(tr.timings),
+            "resumed": None if resume is None else {"pass": resume.pass_index + 1,
+                                                    "frame": resume.next_frame},
             "counts": dict(tr.counts),
             "mean_points": tr.counts.get("points", 0) / max(tr.counts.get("pair", 0), 1),
             "seconds_init": t_init, "seconds_total": t_track, "n_frames": F}
