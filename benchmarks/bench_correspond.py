@@ -131,6 +131,30 @@ def main(argv=None) -> int:
     plot_fit(out / "lee_perry_smith_fit.png", r, title="ICT-FaceKit template fitted to Lee Perry-Smith",
              credit=credit)
     print(json.dumps({"lee_perry_smith": lps}), flush=True)
+    # the same with feature points found automatically (MediaPipe on a rendering): an
+    # independent placement, compared with the file's
+    from facetransfer.correspond.detect import detect_scan_features
+    from facetransfer.texture import load_lee_perry_smith
+
+    mesh, image = load_lee_perry_smith()
+    t0 = time.perf_counter()
+    det = detect_scan_features(mesh.vertices, mesh.faces, uvs=mesh.uvs, texture=image)
+    det_sec = time.perf_counter() - t0
+    r2 = fit_template(scan, det.features, t)
+    u2 = r2.stats["scan_units_per_template_unit"]
+    filef = read_features(feats)
+    ids = np.intersect1d(filef.indices, det.features.indices)
+    gap = np.linalg.norm(filef.points[np.searchsorted(filef.indices, ids)]
+                         - det.features.points[np.searchsorted(det.features.indices, ids)], axis=1)
+    lps["detected_features"] = {
+        "n_features": int(len(det.features.indices)), "detect_seconds": det_sec,
+        "mean": r2.stats["mean"], "p95": r2.stats["p95"],
+        "mean_mm_equiv": r2.stats["mean"] / u2 * 10, "p95_mm_equiv": r2.stats["p95"] / u2 * 10,
+        "feature_rms_mm_equiv": r2.stats["feature_rms"] / u2 * 10,
+        "file_feature_rms_mm_equiv": r.stats["feature_rms"] / unit * 10,
+        "detected_vs_file_mean_mm_equiv": float(gap.mean() / unit * 10),
+        "detected_vs_file_max_mm_equiv": float(gap.max() / unit * 10)}
+    print(json.dumps({"lee_perry_smith_detected": lps["detected_features"]}), flush=True)
 
     summary = {}
     for m in methods:

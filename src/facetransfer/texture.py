@@ -1279,31 +1279,18 @@ def _lps_features(mesh, image, *, size: int = 640):
 
     The scan is rendered frontally with its colour map, MediaPipe's face landmarker finds the
     478 points (mapped to iBUG-68), and each point is lifted back onto the scan surface through
-    the z-buffer (triangle and barycentric coordinates at its exact image position).
+    the z-buffer (:func:`facetransfer.correspond.detect.detect_scan_features`).
     """
-    from .correspond.features import FeaturePoints
-    from .render import look_at_weak_perspective, render
-    from .track.init import MediaPipeDetector
+    from .correspond.detect import FeatureDetectionError, detect_scan_features
 
-    V, F = mesh.vertices, mesh.faces
+    V = mesh.vertices
     head = V[V[:, 1] > np.percentile(V[:, 1], 20)]  # the bust's head, not the shoulders
-    cam = look_at_weak_perspective(head, (size, size), fill=0.9)
-    r = render(V, F, cam, (size, size), uvs=mesh.uvs, texture=image, background=(90, 90, 90))
-    with MediaPipeDetector() as det:
-        p68 = det.detect(r.image)
-    if p68 is None:
-        raise TextureError("no face found on the rendered Lee Perry-Smith scan")
-    idx = np.asarray(_LPS_FEATURES, dtype=np.int64)
-    xy = p68[idx]
-    ix, iy = np.rint(xy[:, 0]).astype(int), np.rint(xy[:, 1]).astype(int)
-    inside = (ix >= 0) & (ix < size) & (iy >= 0) & (iy < size)
-    tri = np.full(len(idx), -1, np.int64)
-    tri[inside] = r.raster.tri_id[iy[inside], ix[inside]]
-    ok = tri >= 0
-    Ft = F[tri[ok]]
-    b = _bary2d(cam.project(V[Ft.ravel()]).reshape(-1, 3, 2), xy[ok])
-    pts = np.einsum("mk,mkc->mc", b, V[Ft])
-    return FeaturePoints(idx[ok], pts)
+    try:
+        return detect_scan_features(V, mesh.faces, uvs=mesh.uvs, texture=image, view="front",
+                                    ids=_LPS_FEATURES, size=size, fill=0.9,
+                                    frame_vertices=head).features
+    except FeatureDetectionError:
+        raise TextureError("no face found on the rendered Lee Perry-Smith scan") from None
 
 
 def lee_perry_smith_template_texture(size: int = 512, *, use_cache: bool = True) -> np.ndarray:

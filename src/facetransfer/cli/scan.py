@@ -26,6 +26,24 @@ def register(sub) -> None:
                     help="influence sigma, scan units (default: sigma-c / 2)")
     sm.set_defaults(func=_smooth)
 
+    fe = ssub.add_parser("features", help="find iBUG-68 feature points on a scan automatically "
+                         "(MediaPipe on renderings); writes OUT (JSON) and a picture")
+    fe.add_argument("scan", help="scan mesh (any units and pose)")
+    fe.add_argument("--out", required=True, help='feature file to write (JSON {"points": ...})')
+    fe.add_argument("--texture", default=None,
+                    help="the scan's colour map (default: one embedded in the mesh file; "
+                    "without one the scan is shaded in a skin tone)")
+    fe.add_argument("--flip-v", action="store_true",
+                    help="the texture coordinates count v downwards (e.g. some glTF exports)")
+    fe.add_argument("--view", choices=("auto", "front"), default="auto",
+                    help="auto: search the scan's orientation; front: it faces +z with y up")
+    fe.add_argument("--with-jaw", action="store_true",
+                    help="also the jaw contour (iBUG 0-16; a silhouette, less reliable on a 3D "
+                    "surface)")
+    fe.add_argument("--picture", default=None,
+                    help="rendering with the points drawn (default OUT with suffix .png)")
+    fe.set_defaults(func=_features)
+
     ft = ssub.add_parser("fit", help="fit the template to a scan; writes OUT, OUT.report.json, OUT.png")
     ft.add_argument("scan", help="scan mesh (any units and pose)")
     ft.add_argument("--features", required=True,
@@ -59,6 +77,76 @@ def _smooth(args) -> int:
     v = bilateral_smooth(scan.vertices, scan.faces, sigma_c=args.sigma_c, sigma_s=args.sigma_s)
     write_mesh(args.out, v, scan.faces)
     print(f"wrote {args.out} ({len(v)} vertices)")
+    return 0
+
+
+def _embedded_texture(path):
+    """The colour map embedded in a mesh file (trimesh), as (H, W, 3) uint8, or None."""
+    import numpy as np
+    import trimesh
+
+    try:
+        m = trimesh.load(path, process=False, force="mesh")
+        mat = m.visual.material
+        img = getattr(mat, "baseColorTexture", None) or getattr(mat, "image", None)
+    except Exception:  # no visual, no material, unreadable: no texture
+        return None
+    return None if img is None else np.asarray(img.convert("RGB"), np.uint8)
+
+
+def _features(args) -> int:
+    import cv2
+    import numpy as np
+
+    from ..correspond.detect import INNER_FEATURES, detect_scan_features
+    from ..correspond.features import IBUG_NAMES, write_features
+    from ..errors import MeshError
+    from ..io.atomic import atomic_path, check_output_path
+    from ..io.mesh import read_mesh
+
+    out = Path(args.out)
+    picture = Path(args.picture) if args.picture else out.with_suffix(".png")
+    check_output_path(out)
+    check_output_path(picture)
+    mesh = read_mesh(args.scan)
+    if len(mesh.faces) == 0:
+        raise MeshError(f"{args.scan} has no triangles (a point cloud cannot be rendered)")
+    texture = None
+    if args.texture:
+        texture = cv2.imread(str(args.texture), cv2.IMREAD_COLOR)
+        if texture is None:
+            raise MeshError(f"--texture {args.texture} is not an image OpenCV can read")
+        texture = cv2.cvtColor(texture, cv2.COLOR_BGR2RGB)
+    else:
+        texture = _embedded_texture(args.scan)
+    uvs = None
+    if texture is not None:
+        if mesh.uvs is None:
+            raise MeshError(f"{args.scan} has no texture coordinates for its colour map")
+        uvs = mesh.uvs.copy()
+        if args.flip_v:
+            uvs[:, 1] = 1.0 - uvs[:, 1]
+    ids = tuple(range(68)) if args.with_jaw else INNER_FEATURES
+    d = detect_scan_features(mesh.vertices, mesh.faces, uvs=uvs, texture=texture,
+                             view=args.view, ids=ids)
+    credit = LPS_CREDIT if "leeperrysmith" in Path(args.scan).name.lower() else None
+    extra = {"scan": Path(args.scan).name,
+             "note": "found by facetransfer scan features: MediaPipe face landmarker on a "
+                     "rendering of the scan, lifted onto its surface",
+             "names": {str(int(i)): IBUG_NAMES[int(i)] for i in d.features.indices}}
+    if credit:
+        extra["credit"] = credit
+    img = cv2.cvtColor(d.image, cv2.COLOR_RGB2BGR)
+    for (x, y), i in zip(d.points2d, d.features.indices):
+        cv2.circle(img, (int(round(x)), int(round(y))), 3, (0, 255, 255), -1, cv2.LINE_AA)
+    if credit:
+        cv2.putText(img, credit, (8, img.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
+                    (255, 255, 255), 1, cv2.LINE_AA)
+    with atomic_path(picture) as tmp:
+        if not cv2.imwrite(str(tmp), img):
+            raise MeshError(f"cannot write the picture {picture}")
+    write_features(out, d.features, extra=extra)
+    print(f"wrote {out} ({len(d.features.indices)} points) and {picture}")
     return 0
 
 

@@ -5,6 +5,7 @@ Pipeline stages, one module each:
 * :mod:`.meshops` — scan validation and repair, normals, Laplacian, closest points on a surface.
 * :mod:`.smoothing` — non-iterative feature-preserving bilateral smoothing (Jones et al. 2003).
 * :mod:`.features` — iBUG-68 feature-point files and the paper's marking protocols.
+* :mod:`.detect` — feature points found automatically (MediaPipe on renderings of the scan).
 * :mod:`.procrustes` — similarity alignment (Umeyama 1991).
 * :mod:`.fitting` — template fitting (Allen et al. 2003; Sumner & Popović 2004) and the cascade.
 * :mod:`.report` — surface-distance statistics and a picture of a fit.
