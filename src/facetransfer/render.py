@@ -944,11 +944,34 @@ def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return top * (1 - fv) + bot * fv
 
 
+def _texel_py(tex, u, v):  # pragma: no cover (numba)
+    """Bilinear sample (r, g, b) of ``tex`` at texture coordinates ``(u, v)`` (v up, clamped to
+    [0, 1]): texel ``(col, row) = (u (Wt - 1), (1 - v) (Ht - 1))``, as :func:`sample_texture`."""
+    Ht, Wt = tex.shape[0], tex.shape[1]
+    u = min(max(u, 0.0), 1.0) * (Wt - 1)
+    v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
+    c0 = min(int(np.floor(u)), Wt - 1)
+    r0 = min(int(np.floor(v)), Ht - 1)
+    c1 = min(c0 + 1, Wt - 1)
+    r1 = min(r0 + 1, Ht - 1)
+    fu = u - c0
+    fv = v - r0
+    out0 = (tex[r0, c0, 0] * (1.0 - fu) + tex[r0, c1, 0] * fu) * (1.0 - fv) \
+        + (tex[r1, c0, 0] * (1.0 - fu) + tex[r1, c1, 0] * fu) * fv
+    out1 = (tex[r0, c0, 1] * (1.0 - fu) + tex[r0, c1, 1] * fu) * (1.0 - fv) \
+        + (tex[r1, c0, 1] * (1.0 - fu) + tex[r1, c1, 1] * fu) * fv
+    out2 = (tex[r0, c0, 2] * (1.0 - fu) + tex[r0, c1, 2] * fu) * (1.0 - fv) \
+        + (tex[r1, c0, 2] * (1.0 - fu) + tex[r1, c1, 2] * fu) * fv
+    return out0, out1, out2
+
+
+_texel = _maybe_njit(_texel_py)
+
+
 def _shade_uv_kernel_py(tid, bary, F, uvs, tex, select, image, mask):  # pragma: no cover
     """Unlit texture shading of the covered pixels whose triangle is selected (bilinear,
     the texel convention of :func:`sample_texture`)."""
     H, W = tid.shape
-    Ht, Wt = tex.shape[0], tex.shape[1]
     for iy in range(H):
         for ix in range(W):
             f = tid[iy, ix]
@@ -957,21 +980,10 @@ def _shade_uv_kernel_py(tid, bary, F, uvs, tex, select, image, mask):  # pragma:
             mask[iy, ix] = True
             i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
             b0, b1, b2 = float(bary[iy, ix, 0]), float(bary[iy, ix, 1]), float(bary[iy, ix, 2])
-            u = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
-            v = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
-            u = min(max(u, 0.0), 1.0) * (Wt - 1)
-            v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
-            c0 = min(int(np.floor(u)), Wt - 1)
-            r0 = min(int(np.floor(v)), Ht - 1)
-            c1 = min(c0 + 1, Wt - 1)
-            r1 = min(r0 + 1, Ht - 1)
-            fu = u - c0
-            fv = v - r0
+            c = _texel(tex, b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0],
+                       b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1])
             for k in range(3):
-                top = tex[r0, c0, k] * (1.0 - fu) + tex[r0, c1, k] * fu
-                bot = tex[r1, c0, k] * (1.0 - fu) + tex[r1, c1, k] * fu
-                val = top * (1.0 - fv) + bot * fv
-                image[iy, ix, k] = min(max(np.rint(val), 0.0), 255.0)
+                image[iy, ix, k] = min(max(np.rint(c[k]), 0.0), 255.0)
 
 
 _shade_uv_kernel = _maybe_njit(_shade_uv_kernel_py)
@@ -1125,7 +1137,6 @@ def _shade_kernel_py(tid, bary, F, src, colors, uvs, tex, lambert, normals, ligh
     """Colour every covered pixel: interpolated vertex colour (src 0) or bilinear texture
     sample at the interpolated uv (src 1), times ``ambient + (1 - ambient) max(0, n . l)``."""
     H, W = tid.shape
-    Ht, Wt = tex.shape[0], tex.shape[1]
     for iy in range(H):
         for ix in range(W):
             f = tid[iy, ix]
@@ -1134,29 +1145,8 @@ def _shade_kernel_py(tid, bary, F, src, colors, uvs, tex, lambert, normals, ligh
             i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
             b0, b1, b2 = float(bary[iy, ix, 0]), float(bary[iy, ix, 1]), float(bary[iy, ix, 2])
             if src == 1:
-                u = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
-                v = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
-                u = min(max(u, 0.0), 1.0) * (Wt - 1)
-                v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
-                c0 = min(int(np.floor(u)), Wt - 1)
-                r0 = min(int(np.floor(v)), Ht - 1)
-                c1 = min(c0 + 1, Wt - 1)
-                r1 = min(r0 + 1, Ht - 1)
-                fu = u - c0
-                fv = v - r0
-                cr = 0.0
-                cg = 0.0
-                cb = 0.0
-                for k in range(3):
-                    top = tex[r0, c0, k] * (1.0 - fu) + tex[r0, c1, k] * fu
-                    bot = tex[r1, c0, k] * (1.0 - fu) + tex[r1, c1, k] * fu
-                    val = top * (1.0 - fv) + bot * fv
-                    if k == 0:
-                        cr = val
-                    elif k == 1:
-                        cg = val
-                    else:
-                        cb = val
+                cr, cg, cb = _texel(tex, b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0],
+                                    b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1])
             else:
                 cr = b0 * colors[i0, 0] + b1 * colors[i1, 0] + b2 * colors[i2, 0]
                 cg = b0 * colors[i0, 1] + b1 * colors[i1, 1] + b2 * colors[i2, 1]

@@ -1594,15 +1594,17 @@ _BACKGROUND_JOB: tuple | None = None
 def _background_track_job():
     from .io.video import read_video
 
-    model, video, max_frames, method, options = _BACKGROUND_JOB
-    frames, fps = read_video(video, max_frames=max_frames)
+    model, video, max_frames, method, options, decoded = _BACKGROUND_JOB
+    frames, fps = decoded if decoded is not None else read_video(video, max_frames=max_frames)
     return obtain_track(video, model, frames=frames, fps=fps, max_frames=len(frames),
                         method=method, options=options)
 
 
 def _start_background_track(video, model, max_frames: int, *, method: str, options,
-                            parallel: bool | None) -> _BackgroundTrack | None:
-    """Track ``video`` in a forked child process; None when not worth it or not possible."""
+                            parallel: bool | None, frames=None) -> _BackgroundTrack | None:
+    """Track ``video`` in a forked child process; None when not worth it or not possible.
+
+    ``frames``: its decoded ``(frames, fps)``, inherited by the child (else it decodes them)."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -1613,7 +1615,7 @@ def _start_background_track(video, model, max_frames: int, *, method: str, optio
         parallel = (os.cpu_count() or 1) >= 2
     if not parallel or "fork" not in mp.get_all_start_methods():
         return None
-    _BACKGROUND_JOB = (model, video, int(max_frames), method, options)
+    _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames)
     try:
         pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))
         fut = pool.submit(_background_track_job)  # forks now: the child sees _BACKGROUND_JOB
@@ -1785,7 +1787,26 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
     options = track_options(speed)  # validates the preset before any work
     timings = {"read": 0.0, "track": 0.0}
     t0 = time.perf_counter()
-    frames, fps = read_video(target, max_frames=max_frames)
+    pre_read = None  # the expression source's frames, decoded with the target's
+    if expression_from is None:
+        frames, fps = read_video(target, max_frames=max_frames)
+    else:
+        # the two videos are decoded on two threads at once; the source is then cut to the
+        # frames the target's timeline needs
+        from concurrent.futures import ThreadPoolExecutor
+
+        ti, si = video_info(target), video_info(expression_from)
+        n_est = ti.n_frames if max_frames is None else min(int(max_frames), ti.n_frames)
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            ft = pool.submit(read_video, target, max_frames=max_frames)
+            fs = pool.submit(read_video, expression_from,
+                             max_frames=_frames_needed(max(n_est, 1), ti.fps, si.fps) + 8)
+            frames, fps = ft.result()
+            sfr, sfps = fs.result()
+        need = _frames_needed(len(frames), fps, sfps)
+        if len(sfr) < need and len(sfr) < si.n_frames:  # the containers' counts were short
+            sfr, sfps = read_video(expression_from, max_frames=need)
+        pre_read = (sfr[:need], sfps)
     timings["read"] += time.perf_counter() - t0
     n, H, W = frames.shape[:3]
 
@@ -1797,28 +1818,18 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         timings["track"] += time.perf_counter() - t
         return tr
 
-    # the expression source is tracked in a second process while this one tracks the target
+    # the expression source is tracked in a second (forked) process while this one tracks the
+    # target; the child inherits the decoded frames (no second decoding, nothing pickled)
     early = None
-    if expression_from is not None and expression_track is None:
-        early = _start_background_track(
-            expression_from, model, _frames_needed(n, fps, video_info(expression_from).fps),
-            method=track_method, options=options, parallel=parallel)
-    # ... and its frames (for the mouth texture) are decoded on a thread meanwhile
-    pre_read = None
-    if expression_from is not None:
-        from concurrent.futures import ThreadPoolExecutor
-
-        reader = ThreadPoolExecutor(max_workers=1)
-        pre_read = reader.submit(read_video, expression_from,
-                                 max_frames=_frames_needed(n, fps, video_info(expression_from).fps))
-        reader.shutdown(wait=False)
+    if pre_read is not None and expression_track is None:
+        early = _start_background_track(expression_from, model, len(pre_read[0]),
+                                        frames=pre_read, method=track_method, options=options,
+                                        parallel=parallel)
     try:
         tt = get_track(target, target_track, frames_=frames, fps_=fps, limit=n)
     except BaseException:
         if early is not None:
             early.cancel()
-        if pre_read is not None:
-            pre_read.cancel()
         raise
     if target_track is not None:
         tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H), what=f"target {target}")
@@ -1835,7 +1846,7 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         need = _frames_needed(n, fps, info.fps)
         t = time.perf_counter()
         if kind == "expression" and pre_read is not None:
-            fr, sfps = pre_read.result()  # re-raises the reader's error (unreadable video)
+            fr, sfps = pre_read
         else:
             fr, sfps = read_video(video, max_frames=need)
         timings["read"] += time.perf_counter() - t
