@@ -47,7 +47,13 @@ def register(sub) -> None:
     ft = ssub.add_parser("fit", help="fit the template to a scan; writes OUT, OUT.report.json, OUT.png")
     ft.add_argument("scan", help="scan mesh (any units and pose)")
     ft.add_argument("--features", required=True,
-                    help='JSON {"points": {"36": [x, y, z], ...}} of iBUG-68 points on the scan (>= 8)')
+                    help='JSON {"points": {"36": [x, y, z], ...}} of iBUG-68 points on the scan '
+                    '(>= 8), or "auto": found as by "scan features" (written to OUT with suffix '
+                    '.features.json)')
+    ft.add_argument("--texture", default=None,
+                    help="with --features auto: the scan's colour map (see scan features)")
+    ft.add_argument("--flip-v", action="store_true",
+                    help="with --features auto: texture coordinates count v downwards")
     ft.add_argument("--template", default="ict",
                     help="'ict' (ICT-FaceKit face area, default), a model .npz, or a mesh "
                          "(with --template-landmarks)")
@@ -95,42 +101,60 @@ def _embedded_texture(path):
 
 
 def _features(args) -> int:
-    import cv2
-    import numpy as np
-
-    from ..correspond.detect import INNER_FEATURES, detect_scan_features
-    from ..correspond.features import IBUG_NAMES, write_features
-    from ..errors import MeshError
-    from ..io.atomic import atomic_path, check_output_path
-    from ..io.mesh import read_mesh
+    from ..correspond.detect import INNER_FEATURES
+    from ..io.atomic import check_output_path
 
     out = Path(args.out)
     picture = Path(args.picture) if args.picture else out.with_suffix(".png")
     check_output_path(out)
     check_output_path(picture)
-    mesh = read_mesh(args.scan)
+    ids = tuple(range(68)) if args.with_jaw else INNER_FEATURES
+    d = _detect(args.scan, args.texture, args.flip_v, args.view, ids)
+    _write_detected(out, picture, args.scan, d)
+    print(f"wrote {out} ({len(d.features.indices)} points) and {picture}")
+    return 0
+
+
+def _detect(scan, texture_path, flip_v: bool, view: str, ids):
+    """Feature points found on renderings of a scan file (``scan features``)."""
+    import cv2
+
+    from ..correspond.detect import detect_scan_features
+    from ..errors import MeshError
+    from ..io.mesh import read_mesh
+
+    mesh = read_mesh(scan)
     if len(mesh.faces) == 0:
-        raise MeshError(f"{args.scan} has no triangles (a point cloud cannot be rendered)")
+        raise MeshError(f"{scan} has no triangles (a point cloud cannot be rendered)")
     texture = None
-    if args.texture:
-        texture = cv2.imread(str(args.texture), cv2.IMREAD_COLOR)
+    if texture_path:
+        texture = cv2.imread(str(texture_path), cv2.IMREAD_COLOR)
         if texture is None:
-            raise MeshError(f"--texture {args.texture} is not an image OpenCV can read")
+            raise MeshError(f"--texture {texture_path} is not an image OpenCV can read")
         texture = cv2.cvtColor(texture, cv2.COLOR_BGR2RGB)
     else:
-        texture = _embedded_texture(args.scan)
+        texture = _embedded_texture(scan)
     uvs = None
     if texture is not None:
         if mesh.uvs is None:
-            raise MeshError(f"{args.scan} has no texture coordinates for its colour map")
+            raise MeshError(f"{scan} has no texture coordinates for its colour map")
         uvs = mesh.uvs.copy()
-        if args.flip_v:
+        if flip_v:
             uvs[:, 1] = 1.0 - uvs[:, 1]
-    ids = tuple(range(68)) if args.with_jaw else INNER_FEATURES
-    d = detect_scan_features(mesh.vertices, mesh.faces, uvs=uvs, texture=texture,
-                             view=args.view, ids=ids)
-    credit = LPS_CREDIT if "leeperrysmith" in Path(args.scan).name.lower() else None
-    extra = {"scan": Path(args.scan).name,
+    return detect_scan_features(mesh.vertices, mesh.faces, uvs=uvs, texture=texture,
+                                view=view, ids=ids)
+
+
+def _write_detected(out, picture, scan, d) -> None:
+    """The feature file and its picture (the rendering with the points drawn)."""
+    import cv2
+
+    from ..correspond.features import IBUG_NAMES, write_features
+    from ..errors import MeshError
+    from ..io.atomic import atomic_path
+
+    credit = LPS_CREDIT if "leeperrysmith" in Path(scan).name.lower() else None
+    extra = {"scan": Path(scan).name,
              "note": "found by facetransfer scan features: MediaPipe face landmarker on a "
                      "rendering of the scan, lifted onto its surface",
              "names": {str(int(i)): IBUG_NAMES[int(i)] for i in d.features.indices}}
@@ -146,8 +170,6 @@ def _features(args) -> int:
         if not cv2.imwrite(str(tmp), img):
             raise MeshError(f"cannot write the picture {picture}")
     write_features(out, d.features, extra=extra)
-    print(f"wrote {out} ({len(d.features.indices)} points) and {picture}")
-    return 0
 
 
 def _fit(args) -> int:
@@ -163,7 +185,20 @@ def _fit(args) -> int:
     check_output_path(out)
     stem = out.with_suffix("")
     report_path, png_path = Path(f"{stem}.report.json"), Path(f"{stem}.png")
-    features = read_features(args.features, protocol=args.protocol)
+    if args.features == "auto":
+        from ..correspond.detect import INNER_FEATURES
+        from ..correspond.features import PROTOCOLS
+
+        fpath = Path(f"{stem}.features.json")
+        check_output_path(fpath)
+        ids = PROTOCOLS[args.protocol] if args.protocol else INNER_FEATURES
+        d = _detect(args.scan, args.texture, args.flip_v, "auto", ids)
+        _write_detected(fpath, Path(f"{stem}.features.png"), args.scan, d)
+        features = d.features
+        print(f"wrote {fpath} ({len(features.indices)} feature points found automatically)")
+        args.features = str(fpath)
+    else:
+        features = read_features(args.features, protocol=args.protocol)
     scan = load_scan(args.scan)
     template = load_template(args.template, landmarks=args.template_landmarks)
     reference = None
