@@ -10,6 +10,16 @@ log = logging.getLogger(__name__)
 LPS_CREDIT = "Lee Perry-Smith (Infinite Realities), CC-BY 3.0"
 
 
+def _add_texture_options(p, prefix: str = "") -> None:
+    """``--texture`` and ``--flip-v``: the colour map used to find feature points."""
+    p.add_argument("--texture", default=None,
+                   help=prefix + "the scan's colour map (default: one embedded in the mesh file; "
+                   "without one the scan is shaded in a skin tone)")
+    p.add_argument("--flip-v", action="store_true",
+                   help=prefix + "the texture coordinates count v downwards (e.g. some glTF "
+                   "exports)")
+
+
 def register(sub) -> None:
     """Add ``scan smooth`` and ``scan fit`` to the facetransfer parser."""
     p = sub.add_parser("scan", help="smooth scans and fit the template to them (§4.1-4.2)",
@@ -30,11 +40,7 @@ def register(sub) -> None:
                          "(MediaPipe on renderings); writes OUT (JSON) and a picture")
     fe.add_argument("scan", help="scan mesh (any units and pose)")
     fe.add_argument("--out", required=True, help='feature file to write (JSON {"points": ...})')
-    fe.add_argument("--texture", default=None,
-                    help="the scan's colour map (default: one embedded in the mesh file; "
-                    "without one the scan is shaded in a skin tone)")
-    fe.add_argument("--flip-v", action="store_true",
-                    help="the texture coordinates count v downwards (e.g. some glTF exports)")
+    _add_texture_options(fe)
     fe.add_argument("--view", choices=("auto", "front"), default="auto",
                     help="auto: search the scan's orientation; front: it faces +z with y up")
     fe.add_argument("--with-jaw", action="store_true",
@@ -50,10 +56,7 @@ def register(sub) -> None:
                     help='JSON {"points": {"36": [x, y, z], ...}} of iBUG-68 points on the scan '
                     '(>= 8), or "auto": found as by "scan features" (written to OUT with suffix '
                     '.features.json)')
-    ft.add_argument("--texture", default=None,
-                    help="with --features auto: the scan's colour map (see scan features)")
-    ft.add_argument("--flip-v", action="store_true",
-                    help="with --features auto: texture coordinates count v downwards")
+    _add_texture_options(ft, prefix="with --features auto: ")
     ft.add_argument("--template", default="ict",
                     help="'ict' (ICT-FaceKit face area, default), a model .npz, or a mesh "
                          "(with --template-landmarks)")
