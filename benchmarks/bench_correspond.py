@@ -182,7 +182,7 @@ def _plot(path, rows, methods):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from facetransfer.io.atomic import atomic_path
+    from facetransfer.io.atomic import save_figure
 
     labels = []
     for x in rows:
@@ -209,9 +209,7 @@ def _plot(path, rows, methods):
         ax.legend(fontsize=8)
     fig.suptitle("Template fitting on synthetic ICT-FaceKit scans (~30k vertices)")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 if __name__ == "__main__":

@@ -117,7 +117,7 @@ def _plot(all_results: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from facetransfer.io.atomic import atomic_path
+    from facetransfer.io.atomic import save_figure
 
     names = list(all_results)
     fig, axes = plt.subplots(len(names), 2, figsize=(10, 3.8 * len(names)), squeeze=False)
@@ -140,9 +140,7 @@ def _plot(all_results: dict, path: Path) -> None:
             ax.legend(fontsize=8)
     fig.suptitle("§4.4 imputation of held-out faces: ours (ppca) vs baselines")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def main(argv=None) -> int:

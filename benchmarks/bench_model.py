@@ -214,7 +214,7 @@ def plot(result: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from facetransfer.io.atomic import atomic_path
+    from facetransfer.io.atomic import save_figure
 
     fig, ax = plt.subplots(1, 3, figsize=(14, 4.2))
     b = result["builds"]
@@ -254,9 +254,7 @@ def plot(result: dict, path: Path) -> None:
     ax[2].set_title(f"separability: leave one identity out, {s['expression']}")
     ax[2].legend(fontsize=7)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
 
 
 def main(argv=None) -> int:

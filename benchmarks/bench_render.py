@@ -102,7 +102,7 @@ def main(argv=None) -> int:
     ap.add_argument("--quick", action="store_true", help="shorter timings, 10k mesh only")
     args = ap.parse_args(argv)
 
-    from facetransfer.io.atomic import atomic_path, write_text_atomic
+    from facetransfer.io.atomic import save_figure, write_text_atomic
     from facetransfer.render import (Rasterizer, look_at_weak_perspective, rasterize, render,
                                      rotation_from_euler, vertex_visibility)
 
@@ -188,9 +188,7 @@ def main(argv=None) -> int:
     ax.set_title("facetransfer.render vs trimesh ray casting")
     ax.legend(fontsize=8, ncol=3)
     fig.tight_layout()
-    with atomic_path(out / "render.png") as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "render.png", dpi=110)
     print(f"wrote {out / 'render.json'} and {out / 'render.png'}")
     return 0
 

@@ -39,7 +39,7 @@ import cv2  # noqa: E402
 import numpy as np  # noqa: E402
 
 from facetransfer.composite import poisson_blend  # noqa: E402
-from facetransfer.io.atomic import atomic_path, write_text_atomic  # noqa: E402
+from facetransfer.io.atomic import save_figure, write_text_atomic  # noqa: E402
 from facetransfer.render import look_at_weak_perspective, render, rotation_from_euler  # noqa: E402
 from facetransfer.texture import (LEE_PERRY_SMITH_CREDIT, default_face_texture,  # noqa: E402
                                   fill_vertex_colors, lift_uv_texture, lift_vertex_colors,
@@ -299,9 +299,7 @@ def plot(res: dict, pics: dict, pics_lps: dict | None, path: Path) -> None:
     fig.suptitle(f"Texture lifting on {L['mesh']} ({L['n_vertices']} vertices), "
                  f"{len(L['train_poses_yaw_pitch_deg'])} training poses", fontsize=11)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=72)
-    plt.close(fig)
+    save_figure(fig, path, dpi=72)
 
 
 def main(argv=None) -> int:

@@ -467,6 +467,8 @@ def plot(results, curves, path):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from facetransfer.io.atomic import save_figure
+
     fig, ax = plt.subplots(2, 2, figsize=(13, 9))
     a = ax[0, 0]
     if "driving_d6" in curves:
@@ -520,13 +522,13 @@ def plot(results, curves, path):
     a.set_title("speed at 640x480, ~1000 tracked vertices (frames per second)")
     a.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 def overlay_picture(model, track, data, path, max_frames):
     import cv2
 
+    from facetransfer.io.atomic import write_image
     from facetransfer.io.video import read_video
     from facetransfer.track.overlay import overlay_frames
 
@@ -535,7 +537,7 @@ def overlay_picture(model, track, data, path, max_frames):
     imgs = [img for i, img in enumerate(overlay_frames(frames, track, model)) if i in idx]
     pic = np.concatenate(imgs, axis=1)
     pic = cv2.resize(pic, None, fx=0.6, fy=0.6, interpolation=cv2.INTER_AREA)
-    cv2.imwrite(str(path), cv2.cvtColor(pic, cv2.COLOR_RGB2BGR))
+    write_image(path, pic)
 
 
 def main(argv=None) -> int:

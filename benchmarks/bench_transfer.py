@@ -335,11 +335,9 @@ def plot(report: dict, path: Path) -> None:
                           f"{sp['wall_seconds']:.0f} s total")
         axes[2].legend()
     fig.tight_layout()
-    from facetransfer.io.atomic import atomic_path
+    from facetransfer.io.atomic import save_figure
 
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110, format="png")
-    plt.close(fig)
+    save_figure(fig, path, dpi=110, format="png")
 
 
 def main(argv=None) -> int:

@@ -99,3 +99,24 @@ def test_cli_bad_input_is_one_line_exit_2(tmp_path):
     assert r.returncode == 2, r.stderr
     lines = [l for l in r.stderr.splitlines() if l.strip()]
     assert len(lines) == 1 and "nope.npz" in lines[0] and "Traceback" not in r.stderr
+
+
+def test_write_image_and_save_figure_are_atomic(tmp_path):
+    import cv2
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from facetransfer.io.atomic import save_figure, write_image
+
+    rgb = np.zeros((4, 5, 3), np.uint8)
+    rgb[..., 0] = 200                                   # red
+    p = write_image(tmp_path / "a.png", rgb)
+    np.testing.assert_array_equal(cv2.imread(str(p))[..., ::-1], rgb)
+    with pytest.raises(FaceTransferError, match="cannot write image"):
+        write_image(tmp_path / "b.unknown-format", rgb)
+    assert sorted(f.name for f in tmp_path.iterdir()) == ["a.png"]   # no temporary left
+    fig = plt.figure()
+    q = save_figure(fig, tmp_path / "f.png", dpi=20)
+    assert q.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not plt.fignum_exists(fig.number)

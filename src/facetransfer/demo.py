@@ -279,45 +279,24 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
                                 track_method=method, speed=speed,
                                 progress_factory=progress_factory,
                                 **tracks)
-    timings.update({f"{k}": v for k, v in plan.timings.items()})
 
     n = plan.n_frames
     pick = set(np.linspace(0, n - 1, 6).round().astype(int).tolist())
     sheet_frames: list[np.ndarray] = []
-    mouth = rw.resolve_mouth_mode(mouth, model)
-    mouth_fn = None
-    if mouth == "function":  # the texture function of §6, lifted from the source's frames
-        t_mouth = time.perf_counter()
-        mouth_fn = plan.mouth_function(model)
-        timings["mouth"] = time.perf_counter() - t_mouth
-    bar = progress_factory("render", n) if progress_factory else None
-    t_render = [0.0]
 
-    def composed():
-        it = rw.rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
-                               source_frames=plan.mouth_frames, source_track=plan.mouth_track,
-                               source_index=plan.mouth_index, texture=texture, blend=blend,
-                               mouth=mouth, mouth_function=mouth_fn,
-                               progress=bar.update if bar is not None else None)
-        for i in range(n):
-            t = time.perf_counter()
-            r = next(it)
-            frame = side_by_side(plan.mouth_frames[plan.mouth_index[i]], plan.target_frames[i],
-                                 r.image)
-            t_render[0] += time.perf_counter() - t
-            if i in pick:
-                sheet_frames.append(frame)
-            yield frame
+    def compose(i, r):  # source | target | result
+        frame = side_by_side(plan.mouth_frames[plan.mouth_index[i]], plan.target_frames[i],
+                             r.image)
+        if i in pick:
+            sheet_frames.append(frame)
+        return frame
 
-    t1 = time.perf_counter()
-    try:
-        rw.write_video_with_audio(video_path, composed(), plan.fps, audio_from=target,
-                                  overwrite=overwrite)
-    finally:
-        if bar is not None:
-            bar.close()
-    timings["render"] = t_render[0]
-    timings["write"] = time.perf_counter() - t1 - t_render[0]
+    render_timings, _, _ = rw.render_plan(plan, model, video_path, audio_from=target,
+                                          texture=texture, blend=blend,
+                                          mouth=rw.resolve_mouth_mode(mouth, model),
+                                          overwrite=overwrite,
+                                          progress_factory=progress_factory, compose=compose)
+    timings.update(render_timings)
     contact_sheet(sheet_frames, sheet_path, overwrite=overwrite)
     plan.new_track.save(track_path, overwrite=overwrite)
     timings["total"] = time.perf_counter() - t0

@@ -18,7 +18,6 @@ vertex ``v``.
 from __future__ import annotations
 
 import hashlib
-import io
 import json
 import logging
 import zipfile

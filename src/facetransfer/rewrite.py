@@ -81,6 +81,7 @@ __all__ = [
     "TransferPlan",
     "plan_transfer",
     "TransferResult",
+    "render_plan",
     "transfer_video",
     "write_mesh_sequence",
 ]
@@ -1969,6 +1970,83 @@ def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: b
     return track.n_frames
 
 
+def render_plan(plan: TransferPlan, model, out, *, audio_from=None, texture: str = "frame",
+                blend: str = "fast", mouth: str = "frame", overwrite: bool = False,
+                progress_factory=None, compose: Callable | None = None):
+    """Render a planned transfer into the video ``out`` (§6), timing each stage.
+
+    Lifts the mouth texture function first when ``mouth == "function"`` (from
+    :attr:`TransferPlan.texture_frames`), then rewrites every frame (:func:`rewrite_frames`)
+    and writes the video with the audio of ``audio_from`` as the frames come.
+
+    Parameters
+    ----------
+    plan : TransferPlan
+    model : MultilinearModel
+    out : path-like
+        The video to write (atomically).
+    audio_from : path-like, optional
+    texture, blend, mouth
+        See :func:`rewrite_frames` (``mouth`` already resolved: "frame" or "function").
+    compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
+        The frame to write for output frame ``i`` (default: the rewritten image).
+
+    Returns
+    -------
+    timings : dict
+        The plan's timings plus ``mouth`` (if lifted), ``render`` and ``write`` seconds.
+    n_rewritten : int
+        Frames where the face was rendered.
+    audio : bool
+        Whether audio was muxed in.
+    """
+    import time
+
+    timings = dict(plan.timings)
+    n = plan.n_frames
+    mouth_fn = None
+    if mouth == "function":
+        t = time.perf_counter()
+        lift_bar = progress_factory("mouth texture", min(
+            MOUTH_MAX_FRAMES, len(plan.texture_frames) if plan.texture_frames is not None
+            else n)) if progress_factory else None
+        try:
+            mouth_fn = plan.mouth_function(
+                model, progress=lift_bar.update if lift_bar is not None else None)
+        finally:
+            if lift_bar is not None:
+                lift_bar.close()
+        timings["mouth"] = time.perf_counter() - t
+    bar = progress_factory("render", n) if progress_factory else None
+    rewritten = [0]
+    t_render = [0.0]
+
+    def frames():
+        it = rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
+                            source_frames=plan.mouth_frames, source_track=plan.mouth_track,
+                            source_index=plan.mouth_index, texture=texture, blend=blend,
+                            mouth=mouth, mouth_function=mouth_fn,
+                            progress=bar.update if bar is not None else None)
+        for i in range(n):
+            t = time.perf_counter()
+            r = next(it)
+            frame = r.image if compose is None else compose(i, r)
+            t_render[0] += time.perf_counter() - t
+            rewritten[0] += bool(r.face_mask.any())
+            yield frame
+
+    t0 = time.perf_counter()
+    try:
+        audio = write_video_with_audio(out, frames(), plan.fps, audio_from=audio_from,
+                                       overwrite=overwrite)
+    finally:
+        if bar is not None:
+            bar.close()
+    timings["render"] = t_render[0]
+    timings["write"] = time.perf_counter() - t0 - t_render[0]
+    return timings, rewritten[0], audio
+
+
 def transfer_video(target, out, model, *, overwrite: bool = False, texture: str = "frame",
                    blend: str = "fast", mouth: str | None = None, meshes_dir=None,
                    save_track=None, progress_factory=None, **plan_kwargs) -> TransferResult:
@@ -1986,8 +2064,6 @@ def transfer_video(target, out, model, *, overwrite: bool = False, texture: str 
     -------
     TransferResult
     """
-    import time
-
     from .io.atomic import check_output_path
 
     check_output_path(out, overwrite=overwrite)
@@ -2006,52 +2082,12 @@ def transfer_video(target, out, model, *, overwrite: bool = False, texture: str 
     mouth = resolve_mouth_mode(mouth, model,
                                performance=plan_kwargs.get("performance") is not None)
     plan = plan_transfer(target, model, progress_factory=progress_factory, **plan_kwargs)
-    timings = dict(plan.timings)
-    n = plan.n_frames
-    mouth_fn = None
-    if mouth == "function":
-        t = time.perf_counter()
-        lift_bar = progress_factory("mouth texture", min(
-            MOUTH_MAX_FRAMES, len(plan.texture_frames) if plan.texture_frames is not None
-            else n)) if progress_factory else None
-        try:
-            mouth_fn = plan.mouth_function(
-                model, progress=lift_bar.update if lift_bar is not None else None)
-        finally:
-            if lift_bar is not None:
-                lift_bar.close()
-        timings["mouth"] = time.perf_counter() - t
-    bar = progress_factory("render", n) if progress_factory else None
-    count = {"rewritten": 0}
-    t_render = [0.0]
-
-    def frames():
-        it = rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
-                            source_frames=plan.mouth_frames, source_track=plan.mouth_track,
-                            source_index=plan.mouth_index, texture=texture, blend=blend,
-                            mouth=mouth, mouth_function=mouth_fn,
-                            progress=bar.update if bar is not None else None)
-        while True:
-            t = time.perf_counter()
-            try:
-                r = next(it)
-            except StopIteration:
-                return
-            t_render[0] += time.perf_counter() - t
-            count["rewritten"] += bool(r.face_mask.any())
-            yield r.image
-
-    t0 = time.perf_counter()
-    try:
-        audio = write_video_with_audio(out, frames(), plan.fps, audio_from=target,
-                                       overwrite=overwrite)
-    finally:
-        if bar is not None:
-            bar.close()
-    timings["render"] = t_render[0]
-    timings["write"] = time.perf_counter() - t0 - t_render[0]
+    timings, n_rewritten, audio = render_plan(plan, model, out, audio_from=target,
+                                              texture=texture, blend=blend, mouth=mouth,
+                                              overwrite=overwrite,
+                                              progress_factory=progress_factory)
     if save_track is not None:
         plan.new_track.save(save_track, overwrite=overwrite)
     if meshes_dir is not None:
         write_mesh_sequence(meshes_dir, plan.new_track, model)
-    return TransferResult(Path(out), n, count["rewritten"], audio, plan, timings)
+    return TransferResult(Path(out), plan.n_frames, n_rewritten, audio, plan, timings)

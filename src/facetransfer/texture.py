@@ -51,7 +51,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from .errors import FaceTransferError, ShapeError
-from .io.atomic import atomic_path
+from .io.atomic import atomic_path, write_image
 from .render import rasterize, vertex_normals, vertex_visibility
 
 log = logging.getLogger(__name__)
@@ -1245,8 +1245,7 @@ def lee_perry_smith_texture(fitted_vertices, faces, uvs, size: int = 512, *,
                        source_samples=source_samples).texture
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(path) as tmp:
-            cv2.imwrite(str(tmp), cv2.cvtColor(tex, cv2.COLOR_RGB2BGR))
+        write_image(path, tex)
         log.info("cached the Lee Perry-Smith texture at %s", path)
     return tex
 
@@ -1369,6 +1368,5 @@ def lee_perry_smith_template_texture(size: int = 512, *, use_cache: bool = True)
     tex = lee_perry_smith_texture(fitted, tmpl.mesh.faces, tmpl.mesh.uvs, T, use_cache=False)
     if use_cache:
         folder.mkdir(parents=True, exist_ok=True)
-        with atomic_path(tex_path) as tmp:
-            cv2.imwrite(str(tmp), cv2.cvtColor(tex, cv2.COLOR_RGB2BGR))
+        write_image(tex_path, tex)
     return tex

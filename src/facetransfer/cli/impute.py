@@ -162,7 +162,7 @@ def plot_error_vs_missing(ev, path: Path, *, title: str = "") -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io.atomic import atomic_path
+    from ..io.atomic import save_figure
 
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     methods = list(dict.fromkeys(r.method for r in ev.results))
@@ -181,9 +181,7 @@ def plot_error_vs_missing(ev, path: Path, *, title: str = "") -> Path:
         ax.legend()
     fig.suptitle(f"Imputation of held-out faces (§4.4) {title}")
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, dpi=110)
     return path
 
 
@@ -220,7 +218,7 @@ def plot_fig4(examples: dict, faces: np.ndarray, path: Path, *, size: int = 220)
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from ..io.atomic import atomic_path
+    from ..io.atomic import save_figure
 
     rows = [(m, lab) for m, lab in (("ppca", "ours (PPCA, §4.4)"), ("truth", "actual face"),
                                     ("average", "averaging")) if m in examples]
@@ -248,7 +246,5 @@ def plot_fig4(examples: dict, faces: np.ndarray, path: Path, *, size: int = 220)
     fig.suptitle(f"Held-out faces ({100 * examples['missing']:.0f} % missing): ours, truth, "
                  f"averaging (cf. Fig. 4)", fontsize=10)
     fig.tight_layout()
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100)
-    plt.close(fig)
+    save_figure(fig, path, dpi=100)
     return path

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FaceTransferError
-from ..io.atomic import atomic_path, check_output_path
+from ..io.atomic import check_output_path, write_image
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
 
@@ -97,8 +97,6 @@ def _model_weights(model, args) -> dict[str, np.ndarray]:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    import cv2
-
     from ..render import render_model
 
     out = check_output_path(args.out)
@@ -111,9 +109,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     res = render_model(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
                        pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
                        scale=pose.get("scale", 1.0), background=parse_colour(args.background))
-    with atomic_path(out) as tmp:
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(res.image, cv2.COLOR_RGB2BGR)):
-            raise FaceTransferError(f"cannot write image {out}")
+    write_image(out, res.image)
     print(f"wrote {out} ({size[0]}x{size[1]}, {int(res.visible.sum())} of "
           f"{res.visible.size} vertices visible)")
     return 0

@@ -153,8 +153,7 @@ def _write_detected(out, picture, scan, d) -> None:
     import cv2
 
     from ..correspond.features import IBUG_NAMES, write_features
-    from ..errors import MeshError
-    from ..io.atomic import atomic_path
+    from ..io.atomic import write_image
 
     credit = LPS_CREDIT if "leeperrysmith" in Path(scan).name.lower() else None
     extra = {"scan": Path(scan).name,
@@ -169,9 +168,7 @@ def _write_detected(out, picture, scan, d) -> None:
     if credit:
         cv2.putText(img, credit, (8, img.shape[0] - 10), cv2.FONT_HERSHEY_SIMPLEX, 0.45,
                     (255, 255, 255), 1, cv2.LINE_AA)
-    with atomic_path(picture) as tmp:
-        if not cv2.imwrite(str(tmp), img):
-            raise MeshError(f"cannot write the picture {picture}")
+    write_image(picture, cv2.cvtColor(img, cv2.COLOR_BGR2RGB))
     write_features(out, d.features, extra=extra)
 
 

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import FaceTransferError
-from ..io.atomic import atomic_path, check_output_path
+from ..io.atomic import check_output_path, write_image
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -52,14 +52,6 @@ def _read_mask(path: str, shape: tuple[int, int]) -> np.ndarray:
         raise FaceTransferError(f"mask {p} is {m.shape[1]}x{m.shape[0]}, the target is "
                                 f"{shape[1]}x{shape[0]}")
     return m > 127
-
-
-def _write_image(out: Path, rgb: np.ndarray) -> None:
-    import cv2
-
-    with atomic_path(out) as tmp:
-        if not cv2.imwrite(str(tmp), cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR)):
-            raise FaceTransferError(f"cannot write image {out}")
 
 
 def _load_model(path: str):
@@ -99,7 +91,7 @@ def cmd_default(args: argparse.Namespace) -> int:
     procedural = default_face_texture(model, size=args.size, seed=args.seed)
     tex = procedural if args.source == "procedural" else \
         default_face_texture(model, size=args.size, seed=args.seed, source=args.source)
-    _write_image(out, tex)
+    write_image(out, tex)
     if args.source != "procedural" and not np.array_equal(tex, procedural):
         print(f"wrote {out} ({args.size}x{args.size}, Lee Perry-Smith scan on the model's UVs; "
               f"credit: {LEE_PERRY_SMITH_CREDIT})")
@@ -137,7 +129,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
         lt = lift_track(model, iter_frames(args.video), track, tex_size=args.size,
                         step=args.step, progress=bar.update)
     merged = merge_textures(lt.lifted)
-    _write_image(out, texture_to_uint8(merged.texture))
+    write_image(out, texture_to_uint8(merged.texture))
     seen = float((merged.weight > 1e-6).mean())
     msg = f"wrote {out} (merged from {len(lt.lifted)} frames, {100 * seen:.0f}% of texels seen)"
     if fn_out is not None:
@@ -162,7 +154,7 @@ def cmd_blend(args: argparse.Namespace) -> int:
     m = feather_mask(mask, args.feather) if args.feather > 0 else mask
     method = args.method if args.feather == 0 else ("solver" if args.method == "auto" else args.method)
     res = poisson_blend(src, dst, m, method=method, mixed=args.mixed)
-    _write_image(out, res)
+    write_image(out, res)
     print(f"wrote {out} ({int(mask.sum())} masked pixels)")
     return 0
 

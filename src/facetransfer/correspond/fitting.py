@@ -416,6 +416,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     eye = sp.identity(n, format="csc")
     x = x0.copy()
     for si, st in enumerate(schedule):
+        lu = None  # factorised at the stage's first solve
         if progress is not None:
             progress(si, len(schedule), st.name)
         for it in range(max(1, st.iterations)):
@@ -434,7 +435,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
             np.add.at(target, lmv, st.w_features * fpts_w)
             a = (st.w_smooth * ltl + sp.diags(wdiag) + (st.w_rest + 1e-9) * eye).tocsc()
             rhs = target - wdiag[:, None] * x0                 # normal equations of Eq. (1) in d
-            d, lu = _solve(a, rhs, lu if it > 0 else None, x - x0)
+            d, lu = _solve(a, rhs, lu, x - x0)  # the stage's factorisation, once made
             x = x0 + d
             history.append({"stage": st.name, "iteration": it, "pairs": n_ok, "mean_distance": mean_d})
             log.info("stage %s it %d: %d pairs, mean distance %s", st.name, it, n_ok, mean_d)

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path, write_text_atomic
+from ..io.atomic import save_figure, write_text_atomic
 from .fitting import FitResult
 from .procrustes import Similarity
 
@@ -86,7 +86,5 @@ def plot_fit(path: str | os.PathLike, result: FitResult, *, title: str = "",
         fig.text(0.01, 0.005, credit, fontsize=7)
     ax.set_aspect("equal")
     ax.axis("off")
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, dpi=100, bbox_inches="tight")
-    plt.close(fig)
+    save_figure(fig, path, dpi=100, bbox_inches="tight")
     return Path(path)

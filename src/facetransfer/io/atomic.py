@@ -71,3 +71,38 @@ def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, overwrite: bool 
 def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = True) -> Path:
     """Write ``text`` (UTF-8) to ``path`` atomically and return the path."""
     return write_bytes_atomic(path, text.encode("utf-8"), overwrite=overwrite)
+
+
+def write_image(path: str | os.PathLike, rgb, *, overwrite: bool = True) -> Path:
+    """Write an ``(H, W, 3)`` uint8 RGB image atomically (format by extension, OpenCV).
+
+    Raises
+    ------
+    FaceTransferError
+        If OpenCV cannot write that format or file.
+    """
+    import cv2
+    import numpy as np
+
+    img = np.ascontiguousarray(rgb, dtype=np.uint8)
+    with atomic_path(path, overwrite=overwrite) as tmp:
+        try:
+            ok = cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+        except cv2.error as exc:  # e.g. an extension OpenCV has no writer for
+            raise FaceTransferError(f"cannot write image {path}: "
+                                    f"{str(exc).strip().splitlines()[-1]}") from None
+        if not ok:
+            raise FaceTransferError(f"cannot write image {path}")
+    return Path(path)
+
+
+def save_figure(fig, path: str | os.PathLike, *, overwrite: bool = True, **savefig_kwargs) -> Path:
+    """Save a matplotlib figure atomically and close it (``savefig_kwargs``: dpi, bbox_inches…)."""
+    import matplotlib.pyplot as plt
+
+    try:
+        with atomic_path(path, overwrite=overwrite) as tmp:
+            fig.savefig(tmp, **savefig_kwargs)
+    finally:
+        plt.close(fig)
+    return Path(path)

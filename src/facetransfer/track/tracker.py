@@ -649,7 +649,6 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
     require_landmarks(model)
     frames = frame_source(video, max_frames)
     src = source if source is not None else (frames.path or "")
-    F = frames.n
     own_detector = None
     if detector is None and ((isinstance(init, str) and init == "auto") or opt.anchor):
         from .init import MediaPipeDetector
