@@ -1251,7 +1251,7 @@ def lee_perry_smith_texture(fitted_vertices, faces, uvs, size: int = 512, *,
 
 
 #: Bump when the Lee Perry-Smith template pipeline changes (invalidates cached results).
-_LPS_PIPELINE_VERSION = 1
+_LPS_PIPELINE_VERSION = 2
 #: iBUG-68 points detected on the rendered scan and used as fitting features (no jaw contour).
 _LPS_FEATURES = tuple(range(17, 68))
 
@@ -1351,14 +1351,13 @@ def lee_perry_smith_template_texture(size: int = 512, *, use_cache: bool = True)
         if fitted is not None and fitted.shape != tmpl.mesh.vertices.shape:
             fitted = None
     if fitted is None:
-        from .correspond.fitting import fit_template, template_from_mesh
+        from .correspond.fitting import fit_template, load_template
         from .correspond.meshops import clean_scan
 
         mesh, image = load_lee_perry_smith()
         features = _lps_features(mesh, image)
         scan = clean_scan(mesh.vertices, mesh.faces, name="LeePerrySmith.glb")
-        template = template_from_mesh(tmpl.mesh.vertices, tmpl.mesh.faces, tmpl.landmarks, name="ict")
-        fit = fit_template(scan, features, template)
+        fit = fit_template(scan, features, load_template("ict"))   # with the identity prior
         log.info("fitted the ICT template to the Lee Perry-Smith scan: %s", fit.stats)
         fitted = fit.vertices
         if use_cache:

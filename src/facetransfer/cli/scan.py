@@ -65,6 +65,13 @@ def register(sub) -> None:
     ft.add_argument("--reference", default=None,
                     help="previous fit of the same subject (template topology) to deform instead: "
                          "closed-mouth scan -> neutral fit, viseme -> closed-mouth fit")
+    ft.add_argument("--prior", choices=("auto", "identity+expression", "none"), default="auto",
+                    help="face space fitted before the smooth deformation: 'auto' = the template's "
+                         "identity space (ICT-FaceKit's 100 identity components, or a model "
+                         "file's identity mode); 'identity+expression' (ICT template) adds the "
+                         "FaceKit's expression shapes, for a scan in an expression without a "
+                         "neutral fit to give as --reference; 'none' = the paper's generic "
+                         "template alone. Not used with --reference")
     ft.add_argument("--protocol", choices=("neutral", "closed-mouth", "viseme"), default=None,
                     help="use only that marking protocol's feature points (42, 21 or 18)")
     ft.add_argument("--out", required=True, help="fitted mesh (template topology, scan coordinates)")
@@ -207,6 +214,15 @@ def _fit(args) -> int:
         if reference.shape != template.vertices.shape:
             raise MeshError(f"reference {args.reference} has {len(reference)} vertices; the template "
                             f"has {len(template.vertices)} (it must be a fit in template topology)")
+    prior = "template"
+    if args.prior == "none":
+        prior = None
+    elif args.prior == "identity+expression":
+        if template.name != "ict":
+            raise MeshError(f"--prior identity+expression needs the ICT template, not {args.template}")
+        from ..correspond.prior import ict_prior
+
+        prior = ict_prior("identity+expression", neutral=template.vertices)
     bar = None
     if not args.no_progress:
         from tqdm import tqdm
@@ -221,7 +237,8 @@ def _fit(args) -> int:
             bar.refresh()
 
     try:
-        result = fit_template(scan, features, template, reference=reference, progress=progress)
+        result = fit_template(scan, features, template, reference=reference, prior=prior,
+                              progress=progress)
     finally:
         if bar is not None:
             bar.close()

@@ -20,7 +20,11 @@ first weighs the features heavily, then proximity, while the stiffness ``w_s`` i
 (the paper's protocol, §4.2; cf. the stiffness annealing of Amberg et al. 2007).
 
 Before fitting, the template is aligned to the scan by a similarity from the feature points
-(Procrustes, §4.2). With a ``reference`` (the cascade: closed-mouth scan → its subject's neutral
+(Procrustes, §4.2). With a shape prior (:mod:`.prior`; by default ICT-FaceKit's identity space for
+the ICT template) the face space's coefficients and the pose are fitted next, and Eq. (1) then
+deforms that face (``x₀`` := the prior's best face) with :data:`PRIOR_SCHEDULE`: beyond the paper,
+which deforms the generic template, because the smoothness energy alone lets the correspondence
+slide along smooth regions (the jaw) by about a millimetre (BENCHMARKS.md). With a ``reference`` (the cascade: closed-mouth scan → its subject's neutral
 fit, viseme → its closed-mouth fit) the reference is rigidly aligned to the scan on the upper face
 (ICP on the vertices nearest to brow, eye and nose landmarks) and then deformed as above.
 
@@ -34,7 +38,7 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Callable, Sequence
 
@@ -45,7 +49,8 @@ import scipy.sparse.linalg as spla
 from ..errors import FaceTransferError, MeshError
 from .features import FeatureError, FeaturePoints, validate_features_on_surface
 from .meshops import ScanMesh, SurfaceQuery, face_normals, mesh_laplacian, vertex_normals
-from .procrustes import Similarity, similarity_procrustes
+from .prior import ShapePrior, fit_shape_prior, ict_prior, model_identity_prior
+from .procrustes import Similarity, rotation_from_vector, similarity_procrustes
 
 log = logging.getLogger(__name__)
 
@@ -96,6 +101,16 @@ DEFAULT_SCHEDULE: tuple[FitStage, ...] = (
     FitStage("proximity, detail", 30.0, 0.3, 1.0, 2, 0.3),
 )
 
+#: After a shape prior has placed the face (:mod:`.prior`): proximity only, features lightly, from
+#: stiff to the same final stiffness. The heavy feature stages are not needed and would pull the
+#: landmark vertices toward the (noisy) feature points again.
+PRIOR_SCHEDULE: tuple[FitStage, ...] = (
+    FitStage("proximity, stiff", 1000.0, 1.0, 1.0, 2, 1.0),
+    FitStage("proximity", 300.0, 0.3, 1.0, 2, 0.5),
+    FitStage("proximity, fine", 100.0, 0.1, 1.0, 2, 0.3),
+    FitStage("proximity, detail", 30.0, 0.1, 1.0, 2, 0.3),
+)
+
 
 @dataclass(frozen=True)
 class Template:
@@ -108,12 +123,17 @@ class Template:
     landmarks : (68,) int64
         Vertex of each iBUG-68 landmark, ``-1`` where the template has none.
     name : str
+    prior : ShapePrior, optional
+        The face space around the template (:mod:`.prior`) that :func:`fit_template` fits first:
+        ICT-FaceKit's identity components for ``"ict"``, a model file's identity mode for a
+        model.
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     landmarks: np.ndarray
     name: str = "template"
+    prior: ShapePrior | None = None
 
 
 @dataclass(frozen=True)
@@ -206,7 +226,8 @@ def load_template(spec: str | os.PathLike = "ict", *, landmarks: str | os.PathLi
         from ..datasets.ict import ict_template
 
         t = ict_template("face")
-        return template_from_mesh(t.mesh.vertices, t.mesh.faces, t.landmarks, name="ict")
+        tm = template_from_mesh(t.mesh.vertices, t.mesh.faces, t.landmarks, name="ict")
+        return replace(tm, prior=ict_prior("identity", neutral=t.mesh.vertices))
     p = Path(s)
     if not p.is_file():
         raise MeshError(f"template {p} does not exist (expected 'ict', a model .npz or a mesh)")
@@ -217,7 +238,8 @@ def load_template(spec: str | os.PathLike = "ict", *, landmarks: str | os.PathLi
         if m.landmarks is None:
             raise MeshError(f"model {p} has no landmarks; it cannot serve as a fitting template")
         v = np.asarray(m.synthesize(m.default_weights()), dtype=np.float64)
-        return template_from_mesh(v, m.faces, m.landmarks, name=p.name)
+        return replace(template_from_mesh(v, m.faces, m.landmarks, name=p.name),
+                       prior=model_identity_prior(m))
     if landmarks is None:
         raise MeshError(f"template mesh {p} needs --template-landmarks (a JSON of 68 vertex indices)")
     import json
@@ -258,16 +280,6 @@ def _pairs(query: SurfaceQuery, x: np.ndarray, faces: np.ndarray, *, max_distanc
     return cp, ok, cos
 
 
-def _rotation_from_vector(w: np.ndarray) -> np.ndarray:
-    """Rodrigues' formula: rotation (3, 3) by angle ``|w|`` about ``w``."""
-    th = float(np.linalg.norm(w))
-    if th < 1e-15:
-        return np.eye(3)
-    k = w / th
-    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + np.sin(th) * kx + (1 - np.cos(th)) * kx @ kx
-
-
 def _rigid_icp(query, x, faces, idx, *, iterations, max_angle, normal_sign,
                start_distance=5.0, end_distance=0.5, keep=0.8):
     """Trimmed point-to-plane rigid ICP of vertices ``idx`` of ``x`` to the surface.
@@ -292,7 +304,7 @@ def _rigid_icp(query, x, faces, idx, *, iterations, max_angle, normal_sign,
         a = np.hstack([np.cross(p - c, nrm), nrm])            # (m, 6)
         b = np.einsum("ij,ij->i", nrm, q - p)
         sol = np.linalg.lstsq(a, b, rcond=None)[0]
-        r = _rotation_from_vector(sol[:3])
+        r = rotation_from_vector(sol[:3])
         step = Similarity(1.0, r, c - r @ c + sol[3:])
         total = step.compose(total)
         cur = step.apply(cur)
@@ -325,7 +337,9 @@ def _solve(a: sp.csc_matrix, rhs: np.ndarray, lu, guess: np.ndarray):
 
 def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
                  reference: np.ndarray | None = None,
-                 schedule: Sequence[FitStage] = DEFAULT_SCHEDULE,
+                 prior: ShapePrior | str | None = "template", prior_iterations: int = 12,
+                 prior_lambda: float = 0.1,
+                 schedule: Sequence[FitStage] | None = None,
                  max_angle: float = 60.0, feature_tolerance: float = 0.2,
                  diverge_distance: float = 0.5, diverge_flipped: float = 0.05,
                  progress: Callable[[int, int, str], None] | None = None) -> FitResult:
@@ -343,7 +357,16 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
         A previous fit of the same subject in ``template`` topology, in its own scan's
         coordinates (the cascade): it is aligned rigidly on the upper face and deformed instead of
         the template.
-    schedule : sequence of FitStage
+    prior : ShapePrior, "template" or None
+        Fit this face space first (:func:`.prior.fit_shape_prior`) and deform its best face
+        instead of the template; ``"template"`` (default): the template's own prior, if any.
+        Not used with a ``reference`` (the reference already is the subject).
+    prior_iterations : int
+        Closest-point iterations of the prior fit.
+    prior_lambda : float
+        Weight of the prior ``‖w‖²`` against the proximity of all template vertices at unit weight.
+    schedule : sequence of FitStage, optional
+        Default :data:`PRIOR_SCHEDULE` after a prior, :data:`DEFAULT_SCHEDULE` without.
     max_angle : float
         Closest-point pairs whose normals differ more (degrees) are rejected.
     feature_tolerance : float
@@ -371,6 +394,17 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     """
     t0 = time.perf_counter()
     faces = template.faces
+    if isinstance(prior, str):
+        if prior != "template":
+            raise ValueError(f"prior must be a ShapePrior, 'template' or None, got {prior!r}")
+        prior = template.prior
+    if reference is not None:
+        prior = None
+    if prior is not None and prior.basis.shape[1:] != template.vertices.shape:
+        raise MeshError(f"shape prior {prior.name} has basis {prior.basis.shape}; the template "
+                        f"{template.name} needs (K, {len(template.vertices)}, 3)")
+    if schedule is None:
+        schedule = DEFAULT_SCHEDULE if prior is None else PRIOR_SCHEDULE
     base = template.vertices if reference is None else np.asarray(reference, dtype=np.float64)
     if base.shape != template.vertices.shape or not np.all(np.isfinite(base)):
         raise MeshError(f"reference fit must be finite {template.vertices.shape}, got {base.shape}")
@@ -393,7 +427,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     scan_w = to_work.apply(scan.vertices)
     fpts_w = to_work.apply(fpts)
     x0 = norm.apply(base)
-    query = SurfaceQuery(scan_w, scan.faces)
+    query = query_scan.moved(scan_w)
     # Scan normals may be wound either way: orient them by agreement with the template.
     cp0 = query.closest(x0)
     vn0 = vertex_normals(x0, faces)
@@ -401,6 +435,27 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     dots = np.einsum("ij,ij->i", vn0, cp0.normal)[near]
     normal_sign = -1.0 if dots.size and np.median(dots) < 0 else 1.0
     history = []
+    prior_info = None
+    if prior is not None:
+        sub = np.arange(0, len(x0), max(1, len(x0) // 3000))  # 107 unknowns: 3000 pairs suffice
+
+        def pairs_fn(x, it):
+            cp, ok, _ = _pairs(query, x, faces, max_distance=max(0.3, 2.0 * 0.6 ** it),
+                               max_angle=max_angle, normal_sign=normal_sign, idx=sub)
+            return sub[ok], cp.points[ok], cp.normal[ok]
+
+        pf = fit_shape_prior(pairs_fn, x0, k * prior.basis, lmv, fpts_w,
+                             iterations=prior_iterations,
+                             lam=prior_lambda * len(sub) / len(x0))
+        x0 = x0 + np.tensordot(pf.coefficients, k * prior.basis, axes=1)
+        to_work = pf.pose.inverse().compose(to_work)   # move the scan, not the prior face
+        scan_w = to_work.apply(scan.vertices)
+        fpts_w = to_work.apply(fpts)
+        query = query.moved(scan_w)
+        history.extend({"stage": "shape prior", "iteration": i, **h} for i, h in enumerate(pf.history))
+        prior_info = {"name": prior.name, "n_components": prior.n_components,
+                      "coefficient_norm": float(np.linalg.norm(pf.coefficients)),
+                      "coefficients": [round(float(c), 6) for c in pf.coefficients]}
     if reference is not None:
         upper = upper_face_vertices(x0, template.landmarks)
         rig = _rigid_icp(query, x0, faces, upper, iterations=25, max_angle=max_angle,
@@ -409,7 +464,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
         to_work = rig.inverse().compose(to_work)
         scan_w = to_work.apply(scan.vertices)
         fpts_w = to_work.apply(fpts)
-        query = SurfaceQuery(scan_w, scan.faces)
+        query = query.moved(scan_w)
     n = len(x0)
     lap = mesh_laplacian(x0, faces)
     ltl = (lap.T @ lap).tocsc()
@@ -460,7 +515,8 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
              "n_covered": int(covered.sum()), "n_vertices": int(n),
              "feature_rms": float(np.sqrt(np.mean(resid ** 2))), "flipped_fraction": flipped,
              "scan_units_per_template_unit": float(sim.scale),
-             "seconds": time.perf_counter() - t0, "features_used": [int(i) for i in fidx]}
+             "seconds": time.perf_counter() - t0, "features_used": [int(i) for i in fidx],
+             "prior": prior_info}
     if not np.all(np.isfinite(out)) or stats["mean"] / scale_back > diverge_distance \
             or flipped > diverge_flipped:
         raise FitDivergedError(

@@ -293,6 +293,20 @@ class SurfaceQuery:
         bv[edges[counts == 1].ravel()] = True
         self.vertex_boundary = bv
 
+    def moved(self, vertices: np.ndarray) -> "SurfaceQuery":
+        """The same surface with its vertices moved (e.g. by a similarity): the topology tables
+        are shared, only the k-d tree and the normals are rebuilt."""
+        q = object.__new__(SurfaceQuery)
+        q.vertices = np.asarray(vertices, dtype=np.float64)
+        if q.vertices.shape != self.vertices.shape:
+            raise ShapeError(f"moved surface needs vertices {self.vertices.shape}, got {q.vertices.shape}")
+        q.faces, q.k = self.faces, self.k
+        q.tree = cKDTree(q.vertices)
+        q.normals, _ = face_normals(q.vertices, q.faces)
+        q.vertex_faces, q.edge_boundary = self.vertex_faces, self.edge_boundary
+        q.vertex_boundary = self.vertex_boundary
+        return q
+
     def closest(self, points: np.ndarray) -> ClosestPoints:
         """Closest surface points to ``points`` ``(m, 3)``."""
         p = np.asarray(points, dtype=np.float64)

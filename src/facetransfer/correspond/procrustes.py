@@ -90,3 +90,13 @@ def similarity_procrustes(src: np.ndarray, dst: np.ndarray, *, weights: np.ndarr
     s = float(d @ sgn) / var_a if with_scale else 1.0    # Eq. (42)
     t = mb - s * r @ ma                                  # Eq. (41)
     return Similarity(s, r, t)
+
+
+def rotation_from_vector(w: np.ndarray) -> np.ndarray:
+    """Rodrigues' formula: rotation (3, 3) by angle ``|w|`` about ``w``."""
+    th = float(np.linalg.norm(w))
+    if th < 1e-15:
+        return np.eye(3)
+    k = w / th
+    kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(th) * kx + (1 - np.cos(th)) * kx @ kx

@@ -26,6 +26,7 @@ def fit_report(result: FitResult, *, scan: str = "", features: str = "", templat
         "features_used": result.stats["features_used"],
         "scan_units_per_template_unit": result.stats["scan_units_per_template_unit"],
         "seconds": result.stats["seconds"],
+        "prior": result.stats.get("prior"),
         "similarity": {"scale": result.similarity.scale,
                        "rotation": result.similarity.rotation.tolist(),
                        "translation": result.similarity.translation.tolist()},
@@ -80,8 +81,9 @@ def plot_fit(path: str | os.PathLike, result: FitResult, *, title: str = "",
     cb.set_label("distance to scan (scan units)")
     s = result.stats
     ax.set_title(title or "template fit", fontsize=10)
-    ax.text(0.02, 0.02, f"mean {s['mean']:.3g}, median {s['median']:.3g}, p95 {s['p95']:.3g}",
-            transform=ax.transAxes, fontsize=8)
+    prior = (s.get("prior") or {}).get("name", "none (generic template)")
+    ax.text(0.02, 0.02, f"mean {s['mean']:.3g}, median {s['median']:.3g}, p95 {s['p95']:.3g}\n"
+            f"shape prior: {prior}", transform=ax.transAxes, fontsize=8)
     if credit:
         fig.text(0.01, 0.005, credit, fontsize=7)
     ax.set_aspect("equal")

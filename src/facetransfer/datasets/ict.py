@@ -246,6 +246,56 @@ def _identity_components(neutral: np.ndarray, region: str, use_cache: bool) -> n
     return comps
 
 
+def ict_expression_names() -> tuple[str, ...]:
+    """The FaceKit's ARKit-named expression shapes (sorted), from the asset registry.
+
+    Every ``*.obj`` of the asset except the identities, the generic neutral and the pupil
+    dilation shapes (which move only the eyeballs, outside the face area).
+    """
+    rels = [f.relpath for f in assets._get(_ASSET).files]
+    return tuple(sorted(r[:-4] for r in rels if r.endswith(".obj")
+                        and not r.startswith(("identity", "generic_neutral", "PupilDilate"))))
+
+
+def ict_expression_components(region: str = "face", use_cache: bool = True, *,
+                              neutral: np.ndarray | None = None
+                              ) -> tuple[tuple[str, ...], np.ndarray]:
+    """Names and offsets ``shape - neutral`` ``(E, n, 3)`` of the expression shapes over a region.
+
+    Cached as ``.npy`` like the identity components. ``neutral``: the region's generic neutral,
+    if already read.
+    """
+    names = ict_expression_names()
+    if neutral is None:
+        neutral = ict_template(region).mesh.vertices
+    n = len(neutral)
+    tag = hashlib.sha256("\n".join(names).encode()).hexdigest()[:8]
+    cache = (assets.cache_dir() / "datasets" /
+             f"ict-expression-components-{region}-{assets.ICT_COMMIT[:12]}-{tag}-v{BUILDER_VERSION}.npy")
+    if use_cache and cache.is_file():
+        try:
+            comps = np.load(cache, allow_pickle=False)
+            if comps.shape == (len(names), n, 3) and np.all(np.isfinite(comps)):
+                return names, comps
+        except (OSError, ValueError) as exc:
+            log.warning("ignoring unreadable %s (%s)", cache, exc)
+    off = _offsets(set(names), neutral)
+    comps = np.stack([off[k] for k in names])
+    if use_cache:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(cache) as tmp:
+            np.save(tmp, comps)
+    return names, comps
+
+
+def ict_identity_components(region: str = "face", use_cache: bool = True, *,
+                            neutral: np.ndarray | None = None) -> np.ndarray:
+    """ICT-FaceKit's 100 identity offsets ``(100, n, 3)`` over a region (scaled by their std)."""
+    if neutral is None:
+        neutral = ict_template(region).mesh.vertices
+    return _identity_components(neutral, region, use_cache)
+
+
 def _offsets(names: set[str], neutral: np.ndarray) -> dict[str, np.ndarray]:
     out = {}
     for s in sorted(names):
