@@ -97,6 +97,33 @@ def test_prior_beats_the_generic_template_even_held_out(ict, synthetic_fit):
     assert err(held_out) < err(none)
 
 
+def test_cli_prior_choices_match_the_library(ict, synthetic_fit, tmp_path, capsys):
+    """`scan fit --prior none` is the paper's fit (library ``prior=None``) and says so in its
+    report; `--prior identity+expression` uses the FaceKit's expression shapes as well."""
+    from facetransfer.correspond import write_features
+
+    t, _ = ict
+    s, _ = synthetic_fit
+    scan, feats = tmp_path / "scan.obj", tmp_path / "f.json"
+    write_mesh(scan, s.scan.vertices, s.scan.faces)
+    write_features(feats, s.features)
+    out = tmp_path / "none.obj"
+    assert main(["scan", "fit", str(scan), "--features", str(feats), "--prior", "none",
+                 "--out", str(out), "--no-progress"]) == 0
+    rep = json.loads((tmp_path / "none.report.json").read_text())
+    assert rep["prior"] is None
+    from facetransfer.correspond import load_scan, read_features
+
+    lib = fit_template(load_scan(scan), read_features(feats), t, prior=None)
+    np.testing.assert_allclose(read_obj(out).vertices, lib.vertices, atol=1e-5)
+    out2 = tmp_path / "both.obj"
+    assert main(["scan", "fit", str(scan), "--features", str(feats), "--prior",
+                 "identity+expression", "--out", str(out2), "--no-progress"]) == 0
+    rep2 = json.loads((tmp_path / "both.report.json").read_text())
+    assert rep2["prior"]["n_components"] == 155 and "expression" in rep2["prior"]["name"]
+    capsys.readouterr()
+
+
 def test_cascade_viseme_to_reference(ict, identity_truth, synthetic_fit, data_dir):
     """A smiling scan of the same subject, 18 lip features, fitted from the previous fit."""
     t, uvs = ict

@@ -22,10 +22,12 @@ first weighs the features heavily, then proximity, while the stiffness ``w_s`` i
 Before fitting, the template is aligned to the scan by a similarity from the feature points
 (Procrustes, §4.2). With a shape prior (:mod:`.prior`; by default ICT-FaceKit's identity space for
 the ICT template) the face space's coefficients and the pose are fitted next, and Eq. (1) then
-deforms that face (``x₀`` := the prior's best face) with :data:`PRIOR_SCHEDULE`: beyond the paper,
-which deforms the generic template, because the smoothness energy alone lets the correspondence
-slide along smooth regions (the jaw) by about a millimetre (BENCHMARKS.md). With a ``reference`` (the cascade: closed-mouth scan → its subject's neutral
-fit, viseme → its closed-mouth fit) the reference is rigidly aligned to the scan on the upper face
+deforms that face (``x₀`` := the prior's best face) with :data:`PRIOR_SCHEDULE`. This goes beyond
+the paper, which deforms the generic template: the smoothness energy alone lets the
+correspondence slide along smooth regions (the jaw) by about a millimetre (BENCHMARKS.md).
+
+With a ``reference`` (the cascade: closed-mouth scan → its subject's neutral fit, viseme → its
+closed-mouth fit) the reference is rigidly aligned to the scan on the upper face
 (ICP on the vertices nearest to brow, eye and nose landmarks) and then deformed as above.
 
 All geometry is solved in a normalised frame where the template's landmark spread equals that of
@@ -376,6 +378,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     diverge_flipped : float
         Fraction of flipped triangles above which the fit counts as diverged.
     progress : callable(stage_index, n_stages, stage_name), optional
+        Called before each stage (the prior fit counts as one) and once with ``"done"``.
 
     Returns
     -------
@@ -436,7 +439,10 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     normal_sign = -1.0 if dots.size and np.median(dots) < 0 else 1.0
     history = []
     prior_info = None
+    n_stages = len(schedule) + (prior is not None)
     if prior is not None:
+        if progress is not None:
+            progress(0, n_stages, "shape prior")
         sub = np.arange(0, len(x0), max(1, len(x0) // 3000))  # 107 unknowns: 3000 pairs suffice
 
         def pairs_fn(x, it):
@@ -473,7 +479,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     for si, st in enumerate(schedule):
         lu = None  # factorised at the stage's first solve
         if progress is not None:
-            progress(si, len(schedule), st.name)
+            progress(si + (prior is not None), n_stages, st.name)
         for it in range(max(1, st.iterations)):
             wdiag = np.zeros(n)
             target = np.zeros((n, 3))
@@ -497,7 +503,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
             if st.w_closest == 0:
                 break
     if progress is not None:
-        progress(len(schedule), len(schedule), "done")
+        progress(n_stages, n_stages, "done")
     # Final statistics in scan units.
     back = to_work.inverse()
     out = back.apply(x)

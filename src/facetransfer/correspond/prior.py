@@ -210,7 +210,7 @@ def model_identity_prior(model, mode: str | int = "identity", *, min_variance: f
     With the other modes at their mean weights the model is linear in the identity weights,
     ``x = x̄ + M_id (w − w̄)``; the training identities' covariance ``C = V Λ Vᵀ`` gives the basis
     ``M_id V Λ^{1/2}`` (components with variance above ``min_variance`` of the largest).
-    Returns ``None`` when the model has no such mode.
+    Returns ``None`` when the model has no such mode or its training items do not vary.
     """
     try:
         k = model.mode_index(mode)
@@ -220,6 +220,8 @@ def model_identity_prior(model, mode: str | int = "identity", *, min_variance: f
     basis = model.mode_basis(k, w)                                  # (n, 3, r)
     lam, vec = np.linalg.eigh(model.weight_cov(k))
     keep = lam > min_variance * max(float(lam.max()), 1e-300)
+    if float(lam.max()) <= 1e-12 or not keep.any():          # one training identity: no space
+        return None
     order = np.argsort(lam[keep])[::-1]
     cols = vec[:, keep][:, order] * np.sqrt(lam[keep][order])
     b = np.einsum("ndr,rk->knd", basis, cols)
