@@ -4,19 +4,23 @@ in a face space instead of from the generic template.
 §4.2 fits a generic template with a smoothness energy alone. On a smooth, featureless region
 (cheeks, jaw) that energy cannot tell where along the surface a template vertex belongs, so the
 correspondence slides tangentially. A face space learned from corresponded faces (here
-ICT-FaceKit's identity principal components, built from Light Stage scans) knows how faces vary;
-fitting its coefficients first puts every vertex close to its place, and the smooth deformation of
-Eq. (1) then only has to explain what the face space misses (Blanz & Vetter 1999; the FLAME
-registration of Li et al. 2017 regularises with its model the same way).
+ICT-FaceKit's identity principal components) knows how faces vary: fitting its coefficients first
+puts every vertex close to its place, and the smooth deformation of Eq. (1) then only has to
+explain what the face space misses (the morphable model of Blanz & Vetter 1999; model-based
+registration such as FLAME's, Li et al. 2017, regularises with the model in the same spirit).
 
 The stage solves, per closest-point iteration, the linear least-squares problem
 
-    min_{Δw, ω, t, s}  Σ_i (n_iᵀ(x_i + B_i Δw + ω×(x_i−c) + t + s (x_i−c) − c_i))²
-                     + w_f Σ_l ‖x_{v(l)} + … − f_l‖² + λ ‖w + Δw‖²                      (P)
+    min_{Δw, ω, t, s}  Σ_i (n_iᵀ(y_i − q_i))² + w_p Σ_i ‖y_i − q_i‖²
+                     + w_f Σ_l ‖y_{v(l)} − f_l‖² + λ ‖w + Δw‖²                           (P)
 
-(point-to-plane proximity, features, Gaussian prior on the coefficients ``w ~ N(0, I)``: the
-basis is scaled by its standard deviations) together with a small similarity update of the face's
-pose (``ω, t, s`` linearised about the centroid ``c``).
+    with  y_i = x_i + B_i Δw + ω×(x_i − c) + t + s (x_i − c)
+
+(``x``: the current face, ``q_i`` the closest scan point of vertex ``i`` with normal ``n_i``,
+``f_l`` the feature points; point-to-plane proximity with a little point-to-point, features, and
+a Gaussian prior on the coefficients ``w ~ N(0, I)``, the basis being scaled by its standard
+deviations), together with a small similarity update of the face's pose (``ω, t, s`` linearised
+about the centroid ``c``).
 """
 
 from __future__ import annotations
