@@ -1,7 +1,6 @@
 """The multilinear model (§4.3): Eq. (4), (5), (9) and the model file."""
 
 import json
-import zipfile
 
 import numpy as np
 import pytest

@@ -137,7 +137,6 @@ def test_lift_vertex_colors_occlusion_and_outside():
     Vf, Ff, _ = grid(2, z=1.0, x0=-0.4, x1=0.4)
     V = np.vstack([Vb, Vf])
     F = np.vstack([Fb, Ff + len(Vb)])
-    size = (200, 200)
     cam = WeakPerspective(80.0, np.eye(3), np.array([99.5, 99.5]))
     frame = np.full((200, 200, 3), 77, np.uint8)
     lifted = lift_vertex_colors(frame, V, F, cam)
@@ -183,7 +182,7 @@ def test_merge_over_poses_and_rerender_psnr():
     T = 128
     tex = smooth_texture(T, seed=2)
     size = (256, 256)
-    lifted, frames = [], []
+    lifted = []
     for yaw in (-60, 0, 60, 120, 180, 240):
         cam = look_at_weak_perspective(V, size, rotation=rotation_from_euler(yaw, 15, 0))
         r = render(V, F, cam, size, uvs=UV, texture=tex, shading="none")
