@@ -66,9 +66,9 @@ def register(sub) -> None:
                     help="previous fit of the same subject (template topology) to deform instead: "
                          "closed-mouth scan -> neutral fit, viseme -> closed-mouth fit")
     ft.add_argument("--prior", choices=("auto", "identity+expression", "none"), default="auto",
-                    help="face space fitted before the smooth deformation: 'auto' = the template's "
-                         "identity space (ICT-FaceKit's 100 identity components, or a model "
-                         "file's identity mode); 'identity+expression' (ICT template) adds the "
+                    help="face space fitted before the smooth deformation: 'auto' = ICT-FaceKit's "
+                         "100 identity components for the ICT template, none for other "
+                         "templates; 'identity+expression' (ICT template) adds the "
                          "FaceKit's expression shapes, for a scan in an expression without a "
                          "neutral fit to give as --reference; 'none' = the paper's generic "
                          "template alone. Not used with --reference")

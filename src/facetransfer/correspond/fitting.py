@@ -51,7 +51,7 @@ import scipy.sparse.linalg as spla
 from ..errors import FaceTransferError, MeshError
 from .features import FeatureError, FeaturePoints, validate_features_on_surface
 from .meshops import ScanMesh, SurfaceQuery, face_normals, mesh_laplacian, vertex_normals
-from .prior import ShapePrior, fit_shape_prior, ict_prior, model_identity_prior
+from .prior import ShapePrior, fit_shape_prior, ict_prior
 from .procrustes import Similarity, rotation_from_vector, similarity_procrustes
 
 log = logging.getLogger(__name__)
@@ -126,9 +126,8 @@ class Template:
         Vertex of each iBUG-68 landmark, ``-1`` where the template has none.
     name : str
     prior : ShapePrior, optional
-        The face space around the template (:mod:`.prior`) that :func:`fit_template` fits first:
-        ICT-FaceKit's identity components for ``"ict"``, a model file's identity mode for a
-        model.
+        The face space around the template (:mod:`.prior`) that :func:`fit_template` fits first
+        by default: ICT-FaceKit's identity components for ``"ict"``, none for other templates.
     """
 
     vertices: np.ndarray
@@ -240,8 +239,10 @@ def load_template(spec: str | os.PathLike = "ict", *, landmarks: str | os.PathLi
         if m.landmarks is None:
             raise MeshError(f"model {p} has no landmarks; it cannot serve as a fitting template")
         v = np.asarray(m.synthesize(m.default_weights()), dtype=np.float64)
-        return replace(template_from_mesh(v, m.faces, m.landmarks, name=p.name),
-                       prior=model_identity_prior(m))
+        # No prior by default: a model's identity mode is a weak face space (8 components from
+        # the default model's 15 identities) and made fits worse (BENCHMARKS.md); pass
+        # ``prior=model_identity_prior(m)`` to fit_template to use it anyway.
+        return template_from_mesh(v, m.faces, m.landmarks, name=p.name)
     if landmarks is None:
         raise MeshError(f"template mesh {p} needs --template-landmarks (a JSON of 68 vertex indices)")
     import json
