@@ -1026,10 +1026,7 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
     """
     if texture not in TEXTURE_MODES:
         raise RewriteError(f"texture must be one of {TEXTURE_MODES}, got {texture!r}")
-    if mouth not in MOUTH_MODES:
-        raise RewriteError(f"mouth must be one of {', '.join(MOUTH_MODES)}, got {mouth!r}")
-    if mouth == "function" and model.uvs is None:
-        raise RewriteError(_NO_UVS)
+    mouth = resolve_mouth_mode(mouth, model)
     n = new_track.n_frames
     if len(target_frames) < n:
         raise RewriteError(f"the new performance has {n} frames but the target only "

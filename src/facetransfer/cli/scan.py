@@ -127,23 +127,15 @@ def _features(args) -> int:
 
 def _detect(scan, texture_path, flip_v: bool, view: str, ids):
     """Feature points found on renderings of a scan file (``scan features``)."""
-    import cv2
-
     from ..correspond.detect import detect_scan_features
     from ..errors import MeshError
     from ..io.mesh import read_mesh
+    from ..synth import load_texture_image
 
     mesh = read_mesh(scan)
     if len(mesh.faces) == 0:
         raise MeshError(f"{scan} has no triangles (a point cloud cannot be rendered)")
-    texture = None
-    if texture_path:
-        texture = cv2.imread(str(texture_path), cv2.IMREAD_COLOR)
-        if texture is None:
-            raise MeshError(f"--texture {texture_path} is not an image OpenCV can read")
-        texture = cv2.cvtColor(texture, cv2.COLOR_BGR2RGB)
-    else:
-        texture = _embedded_texture(scan)
+    texture = load_texture_image(texture_path) if texture_path else _embedded_texture(scan)
     uvs = None
     if texture is not None:
         if mesh.uvs is None:

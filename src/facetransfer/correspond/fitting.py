@@ -454,7 +454,7 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
         pf = fit_shape_prior(pairs_fn, x0, k * prior.basis, lmv, fpts_w,
                              iterations=prior_iterations,
                              lam=prior_lambda * len(sub) / len(x0))
-        x0 = x0 + np.tensordot(pf.coefficients, k * prior.basis, axes=1)
+        x0 = pf.face                                    # x₀ + B w
         to_work = pf.pose.inverse().compose(to_work)   # move the scan, not the prior face
         scan_w = to_work.apply(scan.vertices)
         fpts_w = to_work.apply(fpts)

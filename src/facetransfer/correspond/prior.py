@@ -72,17 +72,22 @@ class PriorFit:
     coefficients : (K,) float64
         ``w`` of the face space (standard deviations).
     pose : Similarity
-        Work frame → work frame: moves the prior face ``x₀ + B w`` onto the scan.
-    vertices : (n, 3) float64
-        ``pose(x₀ + B w)``: the prior face on the scan, work frame.
+        Work frame → work frame: moves the prior face onto the scan.
+    face : (n, 3) float64
+        The prior face ``x₀ + B w`` (the template's frame).
     history : tuple of dict
         Per iteration: accepted pairs and their mean distance.
     """
 
     coefficients: np.ndarray
     pose: Similarity
-    vertices: np.ndarray
+    face: np.ndarray
     history: tuple
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """``pose(x₀ + B w)``: the prior face on the scan, work frame ``(n, 3)``."""
+        return self.pose.apply(self.face)
 
 
 def _skew_rows(p: np.ndarray) -> np.ndarray:
@@ -169,7 +174,7 @@ def fit_shape_prior(pairs_fn, x0: np.ndarray, basis: np.ndarray, lmv: np.ndarray
         om, t, s = sol[kk:kk + 3], sol[kk + 3:kk + 6], sol[kk + 6]
         r = rotation_from_vector(om)
         pose = Similarity(1.0 + s, r, c - (1.0 + s) * r @ c + t).compose(pose)
-    return PriorFit(w, pose, pose.apply(x0 + bt @ w), tuple(hist))
+    return PriorFit(w, pose, x0 + bt @ w, tuple(hist))
 
 
 #: Kinds of :func:`ict_prior`.

@@ -221,6 +221,26 @@ def _read_prefix_vertices(path: Path, n: int) -> np.ndarray:
     return v[:n]
 
 
+def _cached_offsets(name: str, shape: tuple[int, ...], build: Callable[[], np.ndarray],
+                    use_cache: bool) -> np.ndarray:
+    """Shape offsets ``shape`` read from the ``.npy`` cache file ``name`` if it is there and
+    sound, else ``build()`` (then saved atomically when ``use_cache``)."""
+    cache = assets.cache_dir() / "datasets" / name
+    if use_cache and cache.is_file():
+        try:
+            comps = np.load(cache, allow_pickle=False)
+            if comps.shape == shape and np.all(np.isfinite(comps)):
+                return comps
+        except (OSError, ValueError) as exc:
+            log.warning("ignoring unreadable %s (%s)", cache, exc)
+    comps = build()
+    if use_cache:
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(cache) as tmp:
+            np.save(tmp, comps)
+    return comps
+
+
 def _identity_components(neutral: np.ndarray, region: str, use_cache: bool) -> np.ndarray:
     """The 100 identity offsets ``identity_c - neutral`` over the region, ``(100, n, 3)``.
 
@@ -228,22 +248,14 @@ def _identity_components(neutral: np.ndarray, region: str, use_cache: bool) -> n
     small builds.
     """
     n = len(neutral)
-    cache = (assets.cache_dir() / "datasets" /
-             f"ict-identity-components-{region}-{assets.ICT_COMMIT[:12]}-v{BUILDER_VERSION}.npy")
-    if use_cache and cache.is_file():
-        try:
-            comps = np.load(cache, allow_pickle=False)
-            if comps.shape == (_N_IDENTITY_COMPONENTS, n, 3) and np.all(np.isfinite(comps)):
-                return comps
-        except (OSError, ValueError) as exc:
-            log.warning("ignoring unreadable %s (%s)", cache, exc)
-    comps = np.stack([_read_prefix_vertices(assets.asset_file(_ASSET, f"identity{c:03d}.obj"), n)
-                      for c in range(_N_IDENTITY_COMPONENTS)]) - neutral
-    if use_cache:
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(cache) as tmp:
-            np.save(tmp, comps)
-    return comps
+
+    def build():
+        return np.stack([_read_prefix_vertices(assets.asset_file(_ASSET, f"identity{c:03d}.obj"), n)
+                         for c in range(_N_IDENTITY_COMPONENTS)]) - neutral
+
+    return _cached_offsets(
+        f"ict-identity-components-{region}-{assets.ICT_COMMIT[:12]}-v{BUILDER_VERSION}.npy",
+        (_N_IDENTITY_COMPONENTS, n, 3), build, use_cache)
 
 
 def ict_expression_names() -> tuple[str, ...]:
@@ -268,23 +280,15 @@ def ict_expression_components(region: str = "face", use_cache: bool = True, *,
     names = ict_expression_names()
     if neutral is None:
         neutral = ict_template(region).mesh.vertices
-    n = len(neutral)
     tag = hashlib.sha256("\n".join(names).encode()).hexdigest()[:8]
-    cache = (assets.cache_dir() / "datasets" /
-             f"ict-expression-components-{region}-{assets.ICT_COMMIT[:12]}-{tag}-v{BUILDER_VERSION}.npy")
-    if use_cache and cache.is_file():
-        try:
-            comps = np.load(cache, allow_pickle=False)
-            if comps.shape == (len(names), n, 3) and np.all(np.isfinite(comps)):
-                return names, comps
-        except (OSError, ValueError) as exc:
-            log.warning("ignoring unreadable %s (%s)", cache, exc)
-    off = _offsets(set(names), neutral)
-    comps = np.stack([off[k] for k in names])
-    if use_cache:
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(cache) as tmp:
-            np.save(tmp, comps)
+
+    def build():
+        off = _offsets(set(names), neutral)
+        return np.stack([off[k] for k in names])
+
+    comps = _cached_offsets(
+        f"ict-expression-components-{region}-{assets.ICT_COMMIT[:12]}-{tag}-v{BUILDER_VERSION}.npy",
+        (len(names), len(neutral), 3), build, use_cache)
     return names, comps
 
 

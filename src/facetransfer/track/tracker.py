@@ -649,8 +649,11 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
     require_landmarks(model)
     frames = frame_source(video, max_frames)
     src = source if source is not None else (frames.path or "")
+    auto = isinstance(init, str) and init == "auto"
+    if not auto:  # read and validated once (a file, a dict or an array of points)
+        init = _init_array(init, frames.size)
     own_detector = None
-    if detector is None and ((isinstance(init, str) and init == "auto") or opt.anchor):
+    if detector is None and (auto or opt.anchor):
         from .init import MediaPipeDetector
 
         detector = own_detector = MediaPipeDetector()
@@ -660,9 +663,7 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
 
         vid = video_identity(frames.path) if frames.path else video_identity(
             None, frames.array[0], frames.array[-1])
-        ini = "auto" if isinstance(init, str) and init == "auto" else _init_array(init,
-                                                                                   frames.size)
-        ck = Checkpoint(checkpoint, checkpoint_key(vid, frames.n, model.content_hash, opt, ini,
+        ck = Checkpoint(checkpoint, checkpoint_key(vid, frames.n, model.content_hash, opt, init,
                                                    fixed), model.mode_names,
                         every=checkpoint_every)
     try:
@@ -676,8 +677,8 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
 
 
 def _init_array(init, size) -> np.ndarray:
-    """User initial points (dict, (68, 2) array or POINTS.json) as a (68, 2) array, NaN where
-    not given (validated as :func:`_run` does)."""
+    """User initial points (POINTS.json path, dict or (68, 2) array) as a validated (68, 2)
+    array in pixels, NaN where not given."""
     from .init import load_init_points
 
     if isinstance(init, str) or hasattr(init, "__fspath__"):
@@ -687,13 +688,12 @@ def _init_array(init, size) -> np.ndarray:
     arr = np.asarray(init, dtype=np.float64)
     if arr.shape != (68, 2):
         raise TrackError(f"init landmarks must be (68, 2), got {arr.shape}")
-    return arr
+    return points_to_array(check_init_points({i: arr[i] for i in range(68)
+                                              if np.all(np.isfinite(arr[i]))}, size))
 
 
 def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, src,
          fixed: dict | None = None, checkpoint=None) -> Track:
-    from .init import load_init_points
-
     F = frames.n
     W, H = frames.size
     fixed = _check_fixed(model, fixed)
@@ -727,17 +727,7 @@ def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, sr
             if L0 is None:
                 raise VideoError(f"no face found in {src or 'the video'} (searched frames 0-{F - 1})")
         else:
-            if isinstance(init, (str,)) or hasattr(init, "__fspath__"):
-                pts = load_init_points(init, (W, H))
-            elif isinstance(init, dict):
-                pts = check_init_points(init, (W, H))
-            else:
-                arr = np.asarray(init, dtype=np.float64)
-                if arr.shape != (68, 2):
-                    raise TrackError(f"init landmarks must be (68, 2), got {arr.shape}")
-                pts = check_init_points({i: arr[i] for i in range(68)
-                                         if np.all(np.isfinite(arr[i]))}, (W, H))
-            L0 = points_to_array(pts)
+            L0 = _init_array(init, (W, H))
         if start > 0:
             log.info("first face found at frame %d", start)
         start_state = None
