@@ -62,7 +62,7 @@ BUILDER_VERSION = 1
 #: Named vertex ranges of the FaceKit head (upstream README): the region is vertices ``0..n-1``.
 REGIONS: dict[str, int] = {"face": 9409, "narrow": 6706}
 #: Names accepted by :func:`build_ict_dataset`.
-ICT_DATASETS = ("ict-bilinear", "ict-trilinear")
+ICT_DATASETS = ("ict-arkit", "ict-bilinear", "ict-trilinear")
 _ASSET = "ict-facekit"
 _N_IDENTITY_COMPONENTS = 100
 
@@ -115,6 +115,7 @@ def load_recipes(path: str | Path | None = None) -> dict:
     for key in ("expressions", "visemes", "datasets"):
         if not isinstance(rec.get(key), dict):
             raise DatasetError(f"ICT recipe file lacks a {key!r} table")
+    _expand_arkit(rec)
     for table in ("expressions", "visemes"):
         for name, shapes in rec[table].items():
             if not isinstance(shapes, dict) or not all(
@@ -126,6 +127,23 @@ def load_recipes(path: str | Path | None = None) -> dict:
                 if lab not in rec[table]:
                     raise DatasetError(f"data set {dname} uses {mode[:-1]} {lab!r} with no recipe")
     return rec
+
+
+def _expand_arkit(rec: dict) -> None:
+    """A data set whose ``expressions`` is ``"arkit"`` gets the neutral and every ARKit shape of
+    ``arkit_facekit.json`` (:mod:`facetransfer.arkit`), in :data:`~facetransfer.arkit.ARKIT_NAMES`
+    order, as expression recipes."""
+    from ..arkit import ARKIT_NAMES, load_facekit_mapping
+
+    for spec in rec["datasets"].values():
+        if spec.get("expressions") != "arkit":
+            continue
+        shapes = load_facekit_mapping()["shapes"]
+        names = [n for n in ARKIT_NAMES if n in shapes]
+        rec["expressions"].setdefault("neutral", {})
+        for n in names:
+            rec["expressions"][n] = dict(shapes[n])
+        spec["expressions"] = ["neutral"] + names
 
 
 def _load_landmarks_and_rigid(n: int) -> tuple[np.ndarray, np.ndarray]:

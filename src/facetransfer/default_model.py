@@ -1,0 +1,93 @@
+"""The default model: built once from the ``ict-arkit`` data set into the user cache, on first use.
+
+Every command that needs a model and gets no ``--model`` uses it (``track``, ``transfer``,
+``puppet``, ``demo``, ``export``, ``batch``). Its expressions are the ARKit blendshapes
+(:mod:`facetransfer.arkit`), its identities are drawn from the ICT-FaceKit's 100-component
+identity space (§4.1). The file lives at :func:`default_model_path`; a damaged file is rebuilt.
+
+Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datasets` and
+:func:`facetransfer.model.build_model`), below every consumer.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Callable
+
+from .errors import ModelFileError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["DEFAULT_DATASET", "default_model_path", "dataset_ranks", "load_default_model",
+           "is_default_model"]
+
+#: The data set of the default model.
+DEFAULT_DATASET = "ict-arkit"
+#: Bump when the default model's recipe changes (a new file name; the old one is left alone).
+DEFAULT_MODEL_VERSION = 1
+
+Progress = Callable[[int, int], None]
+
+
+def default_model_path() -> Path:
+    """Where the default model is cached (the file may not exist yet)."""
+    from .assets import cache_dir
+
+    return cache_dir() / "models" / f"{DEFAULT_DATASET}-default-v{DEFAULT_MODEL_VERSION}.npz"
+
+
+def dataset_ranks(dataset) -> dict[str, int]:
+    """Recipe ranks of an ICT data set (``default_ranks`` in its provenance) clipped to the mode
+    sizes; empty (full ranks) for other data sets."""
+    rec = dict(dataset.provenance.get("default_ranks") or {})
+    sizes = dict(zip(dataset.mode_names, dataset.shape))
+    return {m: min(int(r), sizes[m]) for m, r in rec.items() if m in sizes}
+
+
+def load_default_model(*, progress: Progress | None = None, announce: Callable[[str], None]
+                       | None = None):
+    """Load the default model, building and caching it first if needed.
+
+    Parameters
+    ----------
+    progress : callable(done, total), optional
+        Called per identity while the data set is built (first use only).
+    announce : callable(str), optional
+        Called once with a one-line message before a build starts (the CLI prints it).
+
+    Returns
+    -------
+    MultilinearModel
+    """
+    from .model import load_model
+
+    path = default_model_path()
+    if path.is_file():
+        try:
+            return load_model(path)
+        except ModelFileError as exc:
+            log.warning("cached default model is unusable (%s); rebuilding", exc)
+    return _build(path, progress, announce)
+
+
+def _build(path: Path, progress, announce):
+    from .datasets import load_dataset
+    from .model import build_model
+
+    if announce is not None:
+        announce(f"building the default model ({DEFAULT_DATASET}) once into {path}")
+    ds = load_dataset(DEFAULT_DATASET, progress=progress)
+    model = build_model(ds, dataset_ranks(ds), refine=False)
+    del ds
+    model.provenance["default_model"] = True  # read by is_default_model
+    path.parent.mkdir(parents=True, exist_ok=True)
+    model.save(path)
+    log.info("built the default model %s", path)
+    return model
+
+
+def is_default_model(model) -> bool:
+    """Whether ``model`` was built by :func:`load_default_model` (its provenance says so)."""
+    prov = getattr(model, "provenance", {}) or {}
+    return prov.get("dataset") == DEFAULT_DATASET and prov.get("default_model") is True
