@@ -34,7 +34,7 @@ from .errors import ShapeError
 
 __all__ = ["ARKIT_NAMES", "MEDIAPIPE_NAMES", "load_facekit_mapping", "is_arkit_model",
            "arkit_rows", "activation_basis", "activations_to_weights", "weights_to_activations",
-           "ExpressionRig", "expression_rig"]
+           "ExpressionRig", "expression_rig", "attach_activations"]
 
 #: MediaPipe Face Landmarker's 51 ARKit blendshapes, in its output order (after ``_neutral``).
 MEDIAPIPE_NAMES: tuple[str, ...] = (
@@ -214,3 +214,22 @@ def expression_rig(model, weights: dict, *, vertices: np.ndarray | None = None) 
     neutral = B @ u0
     deltas = np.einsum("ncr,jr->jnc", B, D)
     return ExpressionRig(neutral, deltas)
+
+
+def attach_activations(track, model):
+    """The track with ``blendshapes`` recomputed from its expression weights (Eq. A inverse).
+
+    A track of a model whose expressions are not ARKit blendshapes is returned without them.
+
+    Parameters
+    ----------
+    track : facetransfer.track.Track
+    model : MultilinearModel
+        The model the track's weights belong to.
+    """
+    import dataclasses
+
+    if not is_arkit_model(model) or "expression" not in track.weights:
+        return dataclasses.replace(track, blendshapes=None, blendshape_names=None)
+    a = weights_to_activations(model, track.weights["expression"]).astype(np.float32)
+    return dataclasses.replace(track, blendshapes=a, blendshape_names=ARKIT_NAMES)

@@ -33,6 +33,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
+from .arkit import attach_activations
 from .errors import FaceTransferError
 
 log = logging.getLogger(__name__)
@@ -356,7 +357,7 @@ def project_landmarks(track, model):
     px = np.empty_like(Y)
     px[..., 0] = track.scale[:, None] * Y[..., 0] + track.translation[:, None, 0]  # Eq. (7)
     px[..., 1] = -track.scale[:, None] * Y[..., 1] + track.translation[:, None, 1]
-    return dataclasses.replace(track, landmarks2d=px, info={})
+    return attach_activations(dataclasses.replace(track, landmarks2d=px, info={}), model)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -505,7 +506,7 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
         w = w + a.amount * e[:, None] * d[None, :]
     weights = dict(track.weights)
     weights[mode] = w
-    return dataclasses.replace(track, weights=weights, info={})
+    return attach_activations(dataclasses.replace(track, weights=weights, info={}), model)
 
 
 # ---------------------------------------------------------------------------------------------

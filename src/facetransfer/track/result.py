@@ -22,6 +22,8 @@ key                 shape / dtype        meaning
 ``model_hash``      () str               :attr:`MultilinearModel.content_hash` of the model used
 ``mode_names``      (K,) str             the model's modes, in order
 ``source``          () str               the tracked video's path
+``blendshapes``     (F, 52) float32      ARKit activations in [0, 1] (only for an ARKit model)
+``blendshape_names``(52,) str            their names, :data:`facetransfer.arkit.ARKIT_NAMES`
 ``format_version``  () int64             version of this layout
 ==================  ===================  ===========================================================
 """
@@ -66,6 +68,11 @@ class Track:
     mode_names : tuple of str
     source : str
         Path of the tracked video.
+    blendshapes : (F, 52) float32 in [0, 1] or None
+        ARKit activations per frame (models with ARKit-named expressions,
+        :mod:`facetransfer.arkit`); ``None`` otherwise.
+    blendshape_names : tuple of str or None
+        Names of the ``blendshapes`` columns (:data:`facetransfer.arkit.ARKIT_NAMES`).
     info : dict
         Free-form run details (not saved; e.g. per-pass residuals).
     """
@@ -82,6 +89,8 @@ class Track:
     model_hash: str
     mode_names: tuple[str, ...]
     source: str = ""
+    blendshapes: np.ndarray | None = None
+    blendshape_names: tuple[str, ...] | None = None
     info: dict = field(default_factory=dict)
 
     def __post_init__(self) -> None:
@@ -138,6 +147,22 @@ class Track:
         set_(self, "fps", fps)
         set_(self, "model_hash", str(self.model_hash))
         set_(self, "source", str(self.source))
+        self._check_blendshapes(F)
+
+    def _check_blendshapes(self, F: int) -> None:
+        if self.blendshapes is None:
+            if self.blendshape_names is not None:
+                raise TrackError("track has blendshape names but no blendshapes")
+            return
+        a = np.asarray(self.blendshapes, dtype=np.float32)
+        names = tuple(str(n) for n in (self.blendshape_names or ()))
+        if a.ndim != 2 or a.shape[0] != F or a.shape[1] != len(names):
+            raise TrackError(f"track blendshapes must be ({F}, {len(names)}) for its "
+                             f"{len(names)} names, got {a.shape}")
+        if not np.all(np.isfinite(a)) or a.size and (a.min() < 0 or a.max() > 1):
+            raise TrackError("track blendshapes must be finite and lie in [0, 1]")
+        object.__setattr__(self, "blendshapes", a)
+        object.__setattr__(self, "blendshape_names", names)
 
     # ------------------------------------------------------------------ access
     @property
@@ -198,6 +223,9 @@ class Track:
         }
         for n in self.mode_names:
             arrays[f"weights_{n}"] = self.weights[n]
+        if self.blendshapes is not None:
+            arrays["blendshapes"] = self.blendshapes
+            arrays["blendshape_names"] = np.array(self.blendshape_names)
         with atomic_path(path, overwrite=overwrite) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
@@ -240,6 +268,10 @@ class Track:
                        weights={n: data[f"weights_{n}"] for n in names},
                        landmarks2d=data["landmarks2d"], confidence=data["confidence"],
                        lost=data["lost"], model_hash=str(data["model_hash"]), mode_names=names,
-                       source=str(data.get("source", "")))
+                       source=str(data.get("source", "")),
+                       blendshapes=data.get("blendshapes"),
+                       blendshape_names=(None if "blendshape_names" not in data else
+                                         tuple(str(n) for n in
+                                               np.atleast_1d(data["blendshape_names"]))))
         except TrackError as exc:
             raise TrackError(f"track file {p} is invalid: {exc}") from None
