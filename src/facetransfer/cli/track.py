@@ -37,18 +37,23 @@ def register(sub) -> None:
     p.add_argument("video", metavar="VIDEO", help="input video")
     p.add_argument("--model", required=True, help="multilinear model (.npz, with landmarks)")
     p.add_argument("--out", help="track file to write (.npz)")
+    p.add_argument("--tracker", choices=("capture", "klt"), default=None,
+                   help="default capture (klt when --init gives points): capture: the model fitted to MediaPipe's landmarks and their optical "
+                   "flow on every frame, identity from the whole clip, ARKit activations "
+                   "(facetransfer.track.capture); klt: the paper's model-based optical-flow "
+                   "tracker from the first frame (the options below marked [klt])")
     p.add_argument("--init", default="auto",
-                   help='first-frame feature points: "auto" (MediaPipe) or a JSON file '
+                   help='[klt] first-frame feature points: "auto" (MediaPipe) or a JSON file '
                    '{"points": {"36": [x, y], ...}} keyed by iBUG-68 number')
-    p.add_argument("--passes", type=int, default=d.passes, help="passes through the video")
+    p.add_argument("--passes", type=int, default=d.passes, help="[klt] passes through the video")
     p.add_argument("--anchor", action="store_true",
-                   help="add detected landmarks of every frame as an extra term (less drift)")
+                   help="[klt] add detected landmarks of every frame as an extra term (less drift)")
     p.add_argument("--keyframe", type=float, default=d.keyframe,
-                   help="weight of the KLT term against the first frame (less drift; 0 = the "
+                   help="[klt] weight of the KLT term against the first frame (less drift; 0 = the "
                    "paper's frame-to-frame tracking only)")
     p.add_argument("--smooth", type=float, default=d.smooth,
                    help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
-    p.add_argument("--points", type=int, default=d.n_points, help="tracked vertices per frame")
+    p.add_argument("--points", type=int, default=d.n_points, help="[klt] tracked vertices per frame")
     p.add_argument("--max-frames", type=int, default=None, help="track only the first N frames")
     p.add_argument("--overlay", help="also write a video with the fitted mesh drawn (.mp4)")
     p.add_argument("--restart", action="store_true",
@@ -106,34 +111,22 @@ def run(args) -> int:
                 bar = bars[stage] = _bar(stage, total)
             bar.update(done - bar.n)
 
-        # auto init and anchoring create MediaPipe themselves; with user points it is only
-        # loaded if the face is lost (recovery)
-        detector = None if (args.init == "auto" or args.anchor) else LazyDetector()
-        partial = partial_path(args.out)
-        if args.restart and partial.exists():
-            partial.unlink()
-        try:
-            track = track_video(args.video, model, init=args.init, options=opt,
-                                max_frames=args.max_frames, progress=progress,
-                                source=str(args.video), detector=detector,
-                                checkpoint=partial)
-        except KeyboardInterrupt:
-            print(f"interrupted; the progress is in {partial}: run the same command again to "
-                  "continue", file=sys.stderr)
-            raise
-        finally:
-            for b in bars.values():
-                b.close()
-            if detector is not None:
-                detector.close()
-        if track.info and track.info.get("resumed"):
-            r = track.info["resumed"]
-            print(f"continued an interrupted run from pass {r['pass']}, frame {r['frame']}")
+        tracker = args.tracker or ("capture" if args.init == "auto" else "klt")
+        if tracker == "capture":
+            if args.init != "auto":
+                raise FaceTransferError("--init POINTS is an option of --tracker klt (capture "
+                                        "detects the face on every frame)")
+            track = _capture(args, model, progress, bars)
+        else:
+            track = _track_klt(args, model, opt, progress, bars)
         track.save(args.out, overwrite=args.overwrite)
         n_lost = int(track.lost.sum())
         print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"
               f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
               + (f", {n_lost} lost" if n_lost else ""))
+        if track.blendshapes is None:
+            print("note: the model's expressions are not ARKit blendshapes, so the track has no "
+                  "blendshape activations (the default model, ict-arkit, gives them)")
     if args.overlay:
         bar = _bar("overlay", track.n_frames)
         try:
@@ -143,3 +136,43 @@ def run(args) -> int:
             bar.close()
         print(f"wrote {args.overlay}")
     return 0
+
+
+def _capture(args, model, progress, bars):
+    from ..track.capture import capture_video
+
+    try:
+        return capture_video(args.video, model, max_frames=args.max_frames, progress=progress,
+                             source=str(args.video))
+    finally:
+        for b in bars.values():
+            b.close()
+
+
+def _track_klt(args, model, opt, progress, bars):
+    from ..track.init import LazyDetector
+    from ..track.tracker import track_video
+
+    # auto init and anchoring create MediaPipe themselves; with user points it is only
+    # loaded if the face is lost (recovery)
+    detector = None if (args.init == "auto" or args.anchor) else LazyDetector()
+    partial = partial_path(args.out)
+    if args.restart and partial.exists():
+        partial.unlink()
+    try:
+        track = track_video(args.video, model, init=args.init, options=opt,
+                            max_frames=args.max_frames, progress=progress,
+                            source=str(args.video), detector=detector, checkpoint=partial)
+    except KeyboardInterrupt:
+        print(f"interrupted; the progress is in {partial}: run the same command again to "
+              "continue", file=sys.stderr)
+        raise
+    finally:
+        for b in bars.values():
+            b.close()
+        if detector is not None:
+            detector.close()
+    if track.info and track.info.get("resumed"):
+        r = track.info["resumed"]
+        print(f"continued an interrupted run from pass {r['pass']}, frame {r['frame']}")
+    return track

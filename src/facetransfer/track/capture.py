@@ -1,0 +1,478 @@
+"""Performance capture: the model fitted to a whole clip's detections and point flow (§5, beyond).
+
+The paper tracks with model-based optical flow from a first frame initialised by hand (§5.1,
+§5.2); :mod:`facetransfer.track.tracker` implements that. This tracker keeps the paper's model and
+its clip-constant identity accumulated over the clip (§5.1), and replaces the hand-made first
+frame and the drifting flow by measurements taken on every frame:
+
+1. **Detections** (:mod:`facetransfer.track.detect`): MediaPipe's landmarks as iBUG-68 points on
+   every frame, and the Lucas-Kanade flow of those points between neighbouring frames.
+2. **Identity from the whole clip**: ``identity_frames`` frames spread through the clip are fitted
+   jointly: per frame, pose and expression; over all of them, one identity (Eq. (9) with the
+   identity mode free, a Gaussian prior of the training identities); a few rounds.
+3. **Tracking both ways** from the frame the model explains best: per frame, the weak-perspective
+   pose (Eq. (7)) and the expression, fitted to the frame's detections (a robust term, per-point
+   reliability) and to the previous frame's fit moved by the point flow (the flow term), with a
+   temporal term toward the previous frame. For a model whose expressions are ARKit blendshapes
+   (:mod:`facetransfer.arkit`) the expression is solved as activations in [0, 1] (a bounded
+   least-squares step); for other models as the mode weights with their training prior.
+4. Frames without a detection are lost (the nearest tracked state is held); the face may appear
+   late: tracking starts where it is.
+
+References
+----------
+Vlasic et al. 2005, §5.1 (Eq. (7)-(9), identity over the clip); MediaPipe Face Landmarker;
+Lucas & Kanade 1981 (OpenCV's pyramidal implementation).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, replace
+from typing import Callable
+
+import numpy as np
+
+from ..arkit import ARKIT_NAMES, activation_basis, expression_rig, is_arkit_model
+from ..errors import TrackError, VideoError
+from .camera import Pose, fit_affine_pose
+from .detect import ClipDetections, VideoLandmarker, detect_clip
+from .fit2d import box_qp, pose_gauss_newton, project_basis, targets_normal
+from .init import require_landmarks
+from .landmarks import IBUG_WEIGHTS
+from .result import Track
+from .solver import Prior
+
+log = logging.getLogger(__name__)
+
+__all__ = ["CaptureOptions", "capture_video", "capture_detections"]
+
+Progress = Callable[[str, int, int], None]
+
+
+@dataclass(frozen=True)
+class CaptureOptions:
+    """Settings of :func:`capture_video` (the defaults were chosen by ``benchmarks/bench_capture.py``).
+
+    Attributes
+    ----------
+    identity_frames : int
+        Frames spread through the clip for the joint identity fit.
+    identity_rounds : int
+        Alternations of per-frame fits and the identity solve.
+    identity_prior : float
+        Weight of the identity's training prior (per frame, per unit Mahalanobis distance).
+    expression_prior : float
+        Ridge on the activations (ARKit models) or weight of the expression prior (others).
+    temporal : float
+        Weight pulling a frame's expression toward the previous frame's.
+    flow : float
+        Weight of the flow term relative to the detection term (0 = detections only).
+    iterations : int
+        Pose/expression alternations per frame.
+    smooth : float
+        Sigma (frames) of a zero-phase smoothing of pose and expression afterwards (0 = off).
+    point_weights : tuple of 68 float or None
+        Reliability of each iBUG point (default :data:`~facetransfer.track.landmarks.IBUG_WEIGHTS`).
+    """
+
+    identity_frames: int = 40
+    identity_rounds: int = 3
+    identity_prior: float = 2e-3
+    expression_prior: float = 1e-3
+    temporal: float = 2e-3
+    flow: float = 0.5
+    iterations: int = 3
+    smooth: float = 0.0
+    point_weights: tuple | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("identity_frames", "identity_rounds", "iterations"):
+            if int(getattr(self, name)) < 1:
+                raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
+        for name in ("identity_prior", "expression_prior", "temporal", "flow", "smooth"):
+            if not float(getattr(self, name)) >= 0:
+                raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if self.point_weights is not None and len(self.point_weights) != 68:
+            raise TrackError(f"point_weights must have 68 entries, got {len(self.point_weights)}")
+
+
+@dataclass(frozen=True)
+class _State:
+    """One frame's fit: pose and the per-frame parameters (activations or mode weights)."""
+
+    pose: Pose
+    x: np.ndarray          # ARKit: (K,) activations; generic: concatenated per-frame weights
+    residual: float        # weighted rms of the detection term, in eye distances
+
+
+class _Shape:
+    """The face at the 68 landmark vertices as a linear function of per-frame parameters.
+
+    For an ARKit model: ``X(a) = N + Σ_j a_j Δ_j`` (the person's rig, bounded ``a``); otherwise
+    one block per per-frame mode with its training prior (Eq. (9), coordinate descent).
+    """
+
+    def __init__(self, model, identity: np.ndarray | None, lm: np.ndarray, opt: CaptureOptions):
+        self.model, self.lm, self.opt = model, lm, opt
+        self.arkit = is_arkit_model(model)
+        self.id_name = "identity" if "identity" in model.mode_names else None
+        self.per_frame = tuple(m for m in model.mode_names if m != self.id_name)
+        self.identity = identity
+        if self.arkit:
+            w = {self.id_name: identity} if self.id_name else {}
+            rig = expression_rig(model, w | {"expression": np.zeros(model.ranks[
+                model.mode_index("expression")])}, vertices=lm)
+            self.used = np.flatnonzero(np.any(rig.deltas != 0, axis=(1, 2)))
+            self.N, self.D = rig.neutral, rig.deltas[self.used]          # (68,3), (K,68,3)
+            self.size = len(self.used)
+            self.x0 = np.zeros(self.size)
+        else:
+            self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
+            self.sizes = [model.ranks[model.mode_index(m)] for m in self.per_frame]
+            self.size = int(sum(self.sizes))
+            self.x0 = np.concatenate([self.priors[m].mean for m in self.per_frame])
+
+    def weights(self, x: np.ndarray) -> dict:
+        """Model weights of every per-frame mode for parameters ``x``."""
+        if self.arkit:
+            u0, D = activation_basis(self.model)
+            a = np.zeros(len(ARKIT_NAMES))
+            a[self.used] = x
+            return {"expression": u0 + a @ D}
+        out, i = {}, 0
+        for m, r in zip(self.per_frame, self.sizes):
+            out[m] = x[i:i + r]
+            i += r
+        return out
+
+    def points(self, x: np.ndarray) -> np.ndarray:
+        if self.arkit:
+            return self.N + np.tensordot(x, self.D, axes=1)
+        w = self.weights(x)
+        if self.id_name:
+            w[self.id_name] = self.identity
+        return self.model.synthesize(w, vertices=self.lm)
+
+    def solve(self, pose: Pose, targets: list, iod: float, x: np.ndarray,
+              prev: np.ndarray | None) -> np.ndarray:
+        """The per-frame parameters best explaining ``targets`` at ``pose``."""
+        lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
+        if self.arkit:
+            Y = project_basis(self.D, pose)
+            base = pose.project(self.N)
+            G, h = targets_normal(Y, base, targets, iod)
+            G = G + (lam_p + lam_t + 1e-9) * np.eye(self.size)
+            if lam_t:
+                h = h + lam_t * prev
+            return box_qp(G, h, x)
+        return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
+
+    def _solve_modes(self, pose, targets, iod, x, prev, lam_p, lam_t):
+        x = x.copy()
+        offs = np.cumsum([0] + self.sizes)
+        for k, m in enumerate(self.per_frame):
+            w = self.weights(x)
+            if self.id_name:
+                w[self.id_name] = self.identity
+            B = self.model.mode_basis(m, w, vertices=self.lm)               # (68, 3, r) Eq. (9)
+            Y = project_basis(np.moveaxis(B, 2, 0), pose)
+            G, h = targets_normal(Y, pose.project(np.zeros((len(self.lm), 3))), targets, iod)
+            pr = self.priors[m]
+            P = pr.Q @ pr.inv_cov @ pr.Q.T
+            G = G + lam_p * P + (lam_t + 1e-9) * np.eye(len(pr.mean))
+            h = h + lam_p * P @ pr.mean
+            if lam_t:
+                h = h + lam_t * prev[offs[k]:offs[k + 1]]
+            x[offs[k]:offs[k + 1]] = np.linalg.solve(G, h)
+        return x
+
+
+def _iod(points: np.ndarray) -> float:
+    d = float(np.linalg.norm(points[36] - points[45]))
+    return d if np.isfinite(d) and d > 1.0 else float(np.nanmax(np.ptp(points, axis=0)) / 2)
+
+
+def _residual(shape: _Shape, st_pose: Pose, x: np.ndarray, p: np.ndarray, w: np.ndarray,
+              iod: float) -> float:
+    q = st_pose.project(shape.points(x))
+    r2 = np.nansum((q - p) ** 2, axis=1)
+    return float(np.sqrt(np.sum(w * r2) / max(np.sum(w), 1e-12)) / iod)
+
+
+def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: np.ndarray,
+               prev: np.ndarray | None, iterations: int) -> _State:
+    """Alternate pose (Gauss-Newton) and expression (bounded or prior-weighted LS) for one frame."""
+    p, w = targets[0]
+    if pose is None:
+        ok = w > 0
+        pose = fit_affine_pose(shape.points(x)[ok], p[ok])
+    for _ in range(iterations):
+        pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=2)
+        x = shape.solve(pose, targets, iod, x, prev)
+    pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
+    return _State(pose, x, _residual(shape, pose, x, p, w, iod))
+
+
+def _solve_identity(model, shape: _Shape, frames: list, states: list, det: ClipDetections,
+                    weights: np.ndarray, opt: CaptureOptions) -> np.ndarray:
+    """One identity for the sampled frames (Eq. (9), identity mode free, training prior)."""
+    prior = Prior.from_model(model, "identity")
+    r = prior.mean.size
+    G = np.zeros((r, r))
+    h = np.zeros(r)
+    for i, st in zip(frames, states):
+        p = det.points[i]
+        w = np.where(np.isfinite(p).all(1), weights, 0.0)
+        wts = shape.weights(st.x)
+        wts["identity"] = prior.mean
+        B = model.mode_basis("identity", wts, vertices=shape.lm)             # (68, 3, r)
+        Y = project_basis(np.moveaxis(B, 2, 0), st.pose)
+        g_, h_ = targets_normal(Y, st.pose.project(np.zeros((len(shape.lm), 3))), [(p, w)],
+                                _iod(p))
+        G += g_
+        h += h_
+    P = prior.Q @ prior.inv_cov @ prior.Q.T
+    lam = opt.identity_prior * len(frames)
+    return np.linalg.solve(G + lam * P + 1e-9 * np.eye(r), h + lam * P @ prior.mean)
+
+
+def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
+    idx = np.flatnonzero(found)
+    if len(idx) <= n:
+        return idx
+    return idx[np.unique(np.linspace(0, len(idx) - 1, n).round().astype(int))]
+
+
+def _clip_identity(model, det: ClipDetections, lm, weights, opt: CaptureOptions, fixed,
+                   prog) -> tuple[_Shape, list, np.ndarray]:
+    """Identity from frames spread through the clip; returns the shape, sample states, frames."""
+    frames = _sample_frames(det.found, int(opt.identity_frames))
+    has_id = "identity" in model.mode_names
+    ident = None
+    if has_id:
+        ident = (np.asarray(fixed["identity"], float) if "identity" in fixed
+                 else Prior.from_model(model, "identity").mean)
+    shape = _Shape(model, ident, lm, opt)
+    solve_id = has_id and "identity" not in fixed
+    rounds = int(opt.identity_rounds) if solve_id else 0
+    states = _fit_sample(shape, det, frames, weights, opt, None)
+    for rnd in range(rounds):
+        ident = _solve_identity(model, shape, list(frames), states, det, weights, opt)
+        shape = _Shape(model, ident, lm, opt)
+        states = _fit_sample(shape, det, frames, weights, opt, states)
+        prog("identity", rnd + 1, rounds)
+    return shape, states, frames
+
+
+def _fit_sample(shape: _Shape, det: ClipDetections, frames, weights, opt, states) -> list:
+    """Fit every sampled frame on its own (pose and expression), warm-started from ``states``."""
+    out = []
+    for j, i in enumerate(frames):
+        p = det.points[i]
+        w = np.where(np.isfinite(p).all(1), weights, 0.0)
+        st = None if states is None else states[j]
+        out.append(_fit_frame(shape, [(p, w)], _iod(p), None if st is None else st.pose,
+                              shape.x0 if st is None else st.x, None, int(opt.iterations) + 1))
+    return out
+
+
+def _targets(det: ClipDetections, i: int, j: int, prev_q: np.ndarray | None, weights, opt,
+             forward: bool) -> list:
+    """Detection term of frame ``i`` and, from its tracked neighbour ``j``, the flow term."""
+    p = det.points[i]
+    w = np.where(np.isfinite(p).all(1), weights, 0.0)
+    out = [(p, w)]
+    if opt.flow > 0 and prev_q is not None:
+        d = det.flow[i] if forward else -det.flow[j]   # flow[t] moves points of t-1 into t
+        q = prev_q + d
+        wf = np.where(np.isfinite(q).all(1), opt.flow * weights, 0.0)
+        if wf.any():
+            out.append((q, wf))
+    return out
+
+
+def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State, weights,
+               opt: CaptureOptions, states: list, prog, done0: int) -> int:
+    """Track frames in ``order`` (consecutive, one direction) from the ``seed`` state."""
+    prev: _State | None = seed
+    prev_i = None
+    done = done0
+    for i in order:
+        if not det.found[i]:
+            prev, prev_i = None, None
+            done += 1
+            continue
+        q = None
+        if prev is not None and prev_i is not None and abs(prev_i - i) == 1:
+            q = prev.pose.project(shape.points(prev.x))
+        forward = prev_i is not None and i > prev_i
+        tg = _targets(det, i, prev_i if prev_i is not None else i, q, weights, opt, forward)
+        p = det.points[i]
+        st = _fit_frame(shape, tg, _iod(p), None if prev is None else prev.pose,
+                        shape.x0 if prev is None else prev.x,
+                        None if prev is None or prev_i is None else prev.x, int(opt.iterations))
+        states[i] = st
+        prev, prev_i = st, i
+        done += 1
+        prog("track", done, det.n_frames)
+    return done
+
+
+def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | None = None,
+                       fps: float = 30.0, frame_size: tuple[int, int] = (0, 0),
+                       fixed: dict | None = None, progress: Progress | None = None,
+                       source: str = "") -> Track:
+    """Fit the model to a clip's detections and flow (steps 2-4 of the module notes).
+
+    Parameters
+    ----------
+    det : ClipDetections
+    model : MultilinearModel
+        With 68 landmark vertices.
+    options : CaptureOptions
+    fps : float
+    frame_size : (W, H)
+    fixed : dict, optional
+        ``{"identity": (r,)}`` to keep a known identity.
+    progress : callable(stage, done, total), optional
+    source : str
+
+    Returns
+    -------
+    Track
+        With ``blendshapes`` for an ARKit model.
+    """
+    opt = options or CaptureOptions()
+    lm = require_landmarks(model)
+    fixed = dict(fixed or {})
+    unknown = set(fixed) - {"identity"}
+    if unknown:
+        raise TrackError(f"capture can keep only the identity fixed, got {sorted(unknown)}")
+    found = det.found
+    if not found.any():
+        raise VideoError(f"no face found in {source or 'the video'} "
+                         f"(searched frames 0-{det.n_frames - 1})")
+    prog = progress or (lambda stage, done, total: None)
+    weights = np.asarray(opt.point_weights if opt.point_weights is not None else IBUG_WEIGHTS,
+                         float)
+    t0 = time.perf_counter()
+    shape, sample_states, frames = _clip_identity(model, det, lm, weights, opt, fixed, prog)
+    t_id = time.perf_counter() - t0
+    best = int(np.argmin([s.residual for s in sample_states]))
+    start = int(frames[best])
+    seed = sample_states[best]
+    states: list[_State | None] = [None] * det.n_frames
+    F = det.n_frames
+    done = _track_run(shape, det, list(range(start, F)), seed, weights, opt, states, prog, 0)
+    _track_run(shape, det, list(range(start - 1, -1, -1)), states[start], weights, opt, states,
+               prog, done)
+    track = _assemble(model, shape, states, fps, frame_size, source, opt)
+    info = {"start_frame": start, "identity_frames": [int(i) for i in frames],
+            "seconds_identity": t_id, "seconds_total": time.perf_counter() - t0,
+            "tracker": "capture"}
+    return replace(track, info=info)
+
+
+def _fill_lost(states: list) -> tuple[list, np.ndarray]:
+    """Lost frames take the nearest tracked state (earlier one on ties)."""
+    F = len(states)
+    ok = np.array([s is not None for s in states])
+    idx = np.flatnonzero(ok)
+    out = list(states)
+    for i in np.flatnonzero(~ok):
+        j = idx[np.argmin(np.abs(idx - i))]
+        out[i] = states[j]
+    return out, ~ok
+
+
+def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
+    from .tracker import smooth_track
+
+    full, lost = _fill_lost(states)
+    F = len(full)
+    R = np.stack([s.pose.rotation for s in full])
+    s = np.array([s_.pose.scale for s_ in full])
+    t = np.stack([s_.pose.translation for s_ in full])
+    X = np.stack([s_.x for s_ in full])
+    if opt.smooth > 0:
+        R, s, t, wx = smooth_track(R, s, t, {"x": X}, opt.smooth)
+        X = wx["x"]
+        if shape.arkit:
+            X = np.clip(X, 0.0, 1.0)
+    w = {m: np.stack([shape.weights(x)[m] for x in X]) for m in shape.per_frame}
+    if shape.id_name:
+        w[shape.id_name] = np.tile(shape.identity, (F, 1))
+    res = np.array([s_.residual for s_ in full])
+    conf = np.where(lost, 0.0, np.clip(1.0 - res / 0.15, 0.0, 1.0))
+    Xl = model.synthesize(w, vertices=model.landmarks)                  # (F, 68, 3)
+    Y = np.einsum("fij,fnj->fni", R[:, :2], Xl) * s[:, None, None]
+    Y[..., 1] *= -1
+    L = Y + t[:, None, :]
+    blend = names = None
+    if shape.arkit:
+        blend = np.zeros((F, len(ARKIT_NAMES)), np.float32)
+        blend[:, shape.used] = X
+        names = ARKIT_NAMES
+    W, H = size
+    return Track(fps=fps, frame_size=(max(int(W), 1), max(int(H), 1)), rotation=R, scale=s,
+                 translation=t, weights=w, landmarks2d=L, confidence=conf, lost=lost,
+                 model_hash=model.content_hash, mode_names=tuple(model.mode_names), source=src,
+                 blendshapes=blend, blendshape_names=names)
+
+
+def capture_video(video, model, *, options: CaptureOptions | None = None, detector=None,
+                  detections: ClipDetections | None = None, max_frames: int | None = None,
+                  fixed: dict | None = None, progress: Progress | None = None,
+                  source: str | None = None) -> Track:
+    """Capture a face's performance from a video (module notes): the default tracker.
+
+    Parameters
+    ----------
+    video : path-like or (F, H, W, 3) uint8 array
+    model : MultilinearModel
+    options : CaptureOptions
+    detector : object, optional
+        ``detect478(frame)`` or ``detect(frame)`` in frame order; default MediaPipe in video mode.
+    detections : ClipDetections, optional
+        Reuse detections made before (the video is then read only for its size and rate).
+    max_frames, fixed, progress, source
+        As in :func:`facetransfer.track.track_video`.
+
+    Returns
+    -------
+    Track
+    """
+    require_landmarks(model)
+    prog = progress or (lambda stage, done, total: None)
+    fps, size, src, frames, n = _open(video, max_frames, source)
+    if detections is None:
+        own = None
+        if detector is None:
+            detector = own = VideoLandmarker(fps=fps)
+        try:
+            detections = detect_clip(frames, detector, n_frames=n,
+                                     progress=lambda d, t: prog("detect", d, t))
+        finally:
+            if own is not None:
+                own.close()
+    elif n is not None and detections.n_frames != n:
+        raise TrackError(f"detections have {detections.n_frames} frames, the video {n}")
+    return capture_detections(detections, model, options=options, fps=fps, frame_size=size,
+                              fixed=fixed, progress=progress, source=src)
+
+
+def _open(video, max_frames, source):
+    """(fps, (W, H), source, frame iterator, frame count or None) of a path or an array."""
+    if isinstance(video, np.ndarray) or (isinstance(video, (list, tuple))):
+        arr = np.asarray(video)
+        if arr.ndim != 4 or arr.shape[-1] != 3 or arr.shape[0] == 0:
+            raise VideoError(f"frames must be (F, H, W, 3) RGB with F >= 1, got {arr.shape}")
+        arr = arr[:max_frames] if max_frames is not None else arr
+        return 25.0, (arr.shape[2], arr.shape[1]), source or "", iter(arr), arr.shape[0]
+    from ..io.video import iter_frames, video_info
+
+    info = video_info(video)
+    return (info.fps, info.size, source if source is not None else str(video),
+            iter_frames(video, stop=max_frames), max_frames)

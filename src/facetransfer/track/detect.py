@@ -1,0 +1,206 @@
+"""Per-frame detections of a whole clip: MediaPipe landmarks in video mode and point flow.
+
+One decoding pass over the clip gives, for every frame ``t``, the detector's iBUG-68 points
+(through :func:`facetransfer.track.landmarks.mediapipe_to_ibug`) and the pyramidal Lucas-Kanade
+flow of frame ``t-1``'s points into frame ``t`` (OpenCV, with a forward-backward check). The
+capture tracker (:mod:`facetransfer.track.capture`) then needs no frames at all: it fits the
+model to these measurements, so detections can be computed once and reused.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable
+
+import cv2
+import numpy as np
+
+from ..errors import AssetError, ShapeError
+from .landmarks import mediapipe_to_ibug
+
+__all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow"]
+
+
+@dataclass(frozen=True)
+class ClipDetections:
+    """What the detector and the flow saw in each frame of a clip.
+
+    Attributes
+    ----------
+    points : (F, 68, 2) float64
+        iBUG-68 detections in pixels, NaN where no face was found.
+    flow : (F, 68, 2) float64
+        ``flow[t]``: displacement of ``points[t-1]`` into frame ``t`` (Lucas-Kanade), NaN where
+        the flow failed its forward-backward check or there was no previous detection;
+        ``flow[0]`` is NaN.
+    points478 : (F, 478, 2) float32 or None
+        MediaPipe's raw points (kept for diagnostics and exports).
+    """
+
+    points: np.ndarray
+    flow: np.ndarray
+    points478: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        P = np.asarray(self.points, dtype=np.float64)
+        if P.ndim != 3 or P.shape[1:] != (68, 2):
+            raise ShapeError(f"detections must be (F, 68, 2), got {P.shape}")
+        Fl = np.asarray(self.flow, dtype=np.float64)
+        if Fl.shape != P.shape:
+            raise ShapeError(f"flow must be {P.shape}, got {Fl.shape}")
+        object.__setattr__(self, "points", P)
+        object.__setattr__(self, "flow", Fl)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.points.shape[0])
+
+    @property
+    def found(self) -> np.ndarray:
+        """(F,) bool: frames with a detection."""
+        return np.all(np.isfinite(self.points), axis=(1, 2))
+
+    @classmethod
+    def from_points(cls, points: np.ndarray) -> "ClipDetections":
+        """Detections without flow (e.g. a MediaPipe-478 reference file mapped to iBUG)."""
+        P = np.asarray(points, dtype=np.float64)
+        return cls(P, np.full_like(P, np.nan))
+
+
+class VideoLandmarker:
+    """MediaPipe Face Landmarker (Tasks API) in VIDEO running mode: 478 points per frame.
+
+    Video mode tracks the face between frames inside MediaPipe, which is faster than detecting
+    it anew in every frame. Timestamps must increase: call :meth:`detect478` in frame order.
+    """
+
+    def __init__(self, model_path: str | os.PathLike | None = None, *, fps: float = 30.0) -> None:
+        os.environ.setdefault("GLOG_minloglevel", "2")
+        os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
+        try:
+            from mediapipe.tasks.python import BaseOptions, vision
+        except ImportError as exc:  # pragma: no cover
+            raise AssetError(f"mediapipe is not installed ({exc})") from None
+        if model_path is None:
+            from .init import _landmarker_path
+
+            model_path = _landmarker_path()
+        p = Path(model_path)
+        if not p.is_file():
+            raise AssetError(f"face landmarker model {p} does not exist")
+        opts = vision.FaceLandmarkerOptions(
+            base_options=BaseOptions(model_asset_path=str(p)),
+            running_mode=vision.RunningMode.VIDEO, num_faces=1)
+        self._lm = vision.FaceLandmarker.create_from_options(opts)
+        self._dt = 1000.0 / max(float(fps), 1e-3)
+        self._i = 0
+
+    def detect478(self, frame: np.ndarray) -> np.ndarray | None:
+        """The next frame's 478 landmarks in pixels (x, y), (478, 2), or None if no face."""
+        import mediapipe as mp
+
+        f = np.ascontiguousarray(frame, dtype=np.uint8)
+        ts = int(round(self._i * self._dt))
+        self._i += 1
+        res = self._lm.detect_for_video(mp.Image(image_format=mp.ImageFormat.SRGB, data=f), ts)
+        if not res.face_landmarks:
+            return None
+        H, W = f.shape[:2]
+        pts = np.array([(q.x, q.y) for q in res.face_landmarks[0]], dtype=np.float64)
+        return pts * (W, H) - 0.5
+
+    def close(self) -> None:
+        lm, self._lm = getattr(self, "_lm", None), None
+        if lm is not None:
+            lm.close()
+
+    def __enter__(self) -> "VideoLandmarker":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
+               window: int = 21, levels: int = 2, max_fb: float = 1.0) -> np.ndarray:
+    """Lucas-Kanade displacement of points from one frame into the next, (n, 2), NaN on failure.
+
+    A point fails when OpenCV loses it or when tracking it back lands more than ``max_fb``
+    pixels from where it started (forward-backward check).
+    """
+    ok = np.all(np.isfinite(pts), axis=1)
+    out = np.full(pts.shape, np.nan)
+    if not ok.any():
+        return out
+    p0 = pts[ok].astype(np.float32).reshape(-1, 1, 2)
+    crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03)
+    p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, p0, None, winSize=(window, window),
+                                          maxLevel=levels, criteria=crit)
+    pb, st2, _ = cv2.calcOpticalFlowPyrLK(gray, prev_gray, p1, None, winSize=(window, window),
+                                          maxLevel=levels, criteria=crit)
+    fb = np.linalg.norm((pb - p0).reshape(-1, 2), axis=1)
+    good = (st1.ravel() == 1) & (st2.ravel() == 1) & (fb < max_fb)
+    d = (p1 - p0).reshape(-1, 2).astype(np.float64)
+    d[~good] = np.nan
+    out[ok] = d
+    return out
+
+
+def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None = None,
+                flow: bool = True, progress: Callable[[int, int], None] | None = None,
+                keep478: bool = False) -> ClipDetections:
+    """Detect the face in every frame and the point flow between neighbouring frames.
+
+    Parameters
+    ----------
+    frames : iterable of (H, W, 3) uint8
+        The clip in order (read once).
+    detector : object with ``detect478(frame) -> (478, 2) | None`` (e.g. :class:`VideoLandmarker`)
+        or ``detect(frame) -> (68, 2) | None``.
+    n_frames : int, optional
+        Stop after this many frames (also the progress total, if known).
+    flow : bool
+        Also compute :func:`point_flow` of the detections.
+    progress : callable(done, total), optional
+        ``total`` is ``n_frames`` or 0 when unknown.
+    keep478 : bool
+        Keep MediaPipe's raw points.
+
+    Returns
+    -------
+    ClipDetections
+    """
+    P, Fl, raw = [], [], []
+    prev_gray = None
+    has478 = hasattr(detector, "detect478")
+    nan68 = np.full((68, 2), np.nan)
+    for i, fr in enumerate(frames):
+        if n_frames is not None and i >= n_frames:
+            break
+        pts, q = nan68, None
+        if has478:
+            q = detector.detect478(fr)
+            if q is not None:
+                pts = mediapipe_to_ibug(q)
+        else:
+            d = detector.detect(fr)
+            if d is not None:
+                pts = np.asarray(d, dtype=np.float64)
+        if keep478:
+            raw.append(np.full((478, 2), np.nan, np.float32) if q is None else
+                       np.asarray(q[:478], np.float32))
+        f = nan68
+        if flow:
+            gray = cv2.cvtColor(np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY)
+            if prev_gray is not None:
+                f = point_flow(prev_gray, gray, P[-1])
+            prev_gray = gray
+        P.append(pts)
+        Fl.append(f)
+        if progress is not None:
+            progress(i + 1, n_frames or 0)
+    if not P:
+        raise ShapeError("the clip has no frames")
+    return ClipDetections(np.stack(P), np.stack(Fl), np.stack(raw) if keep478 else None)
