@@ -84,3 +84,13 @@ def quick_model_path(quick_model, tmp_path_factory) -> Path:
     p = tmp_path_factory.mktemp("models") / "quick.npz"
     quick_model.save(p)
     return p
+
+
+@pytest.fixture(scope="session")
+def arkit_model(data_dir):
+    """A small untruncated ``ict-arkit`` model: 4 identities × (neutral + 51 ARKit shapes)."""
+    from facetransfer.datasets import build_ict_dataset
+    from facetransfer.model import build_model
+
+    ds = build_ict_dataset("ict-arkit", n_identities=4, seed=0)
+    return build_model(ds, refine=False)

@@ -34,7 +34,7 @@ from .errors import ShapeError
 
 __all__ = ["ARKIT_NAMES", "MEDIAPIPE_NAMES", "load_facekit_mapping", "is_arkit_model",
            "arkit_rows", "activation_basis", "activations_to_weights", "weights_to_activations",
-           "ExpressionRig", "expression_rig", "attach_activations"]
+           "ExpressionRig", "expression_rig", "attach_activations", "activation_prior_scale"]
 
 #: MediaPipe Face Landmarker's 51 ARKit blendshapes, in its output order (after ``_neutral``).
 MEDIAPIPE_NAMES: tuple[str, ...] = (
@@ -72,6 +72,18 @@ def load_facekit_mapping() -> dict:
     if unknown:  # a packaging error, not user input
         raise ShapeError(f"arkit_facekit.json names non-ARKit shapes {sorted(unknown)}")
     return table
+
+
+@lru_cache(maxsize=1)
+def activation_prior_scale() -> np.ndarray:
+    """Relative ridge per ARKit shape when activations are fitted to 2-D points, (52,).
+
+    From ``arkit_facekit.json`` (``prior_scale``; 1 where not listed): shapes that real
+    performances use often and that 2-D points show well (jaw, blinks, smiles, brows) get a
+    weaker prior than shapes that mostly mimic them in 2-D (lip-only opening, funnel, puff).
+    """
+    table = load_facekit_mapping().get("prior_scale", {})
+    return np.array([float(table.get(n, 1.0)) for n in ARKIT_NAMES])
 
 
 def _expression_mode(model) -> int | None:

@@ -259,8 +259,15 @@ class MultilinearModel:
     # ----------------------------------------------------------------- identity & i/o
     @property
     def content_hash(self) -> str:
-        """sha256 (hex) over every array and the metadata: identifies the model in track files."""
-        return _content_hash(self._arrays(), self._metadata())
+        """sha256 (hex) over every array and the metadata: identifies the model in track files.
+
+        Computed once per model object (the arrays of a model are never changed in place).
+        """
+        h = self.__dict__.get("_hash")
+        if h is None:
+            h = _content_hash(self._arrays(), self._metadata())
+            self.__dict__["_hash"] = h
+        return h
 
     def _arrays(self) -> dict[str, np.ndarray]:
         arrays = {"core": self.core, "faces": self.faces}
@@ -349,7 +356,7 @@ def load_model(path: str | Path) -> MultilinearModel:
         raise ModelFileError(f"model file {p} fails its checksum: it was altered or damaged")
     K = len(meta["mode_names"])
     try:
-        return MultilinearModel(
+        model = MultilinearModel(
             core=data["core"], factors=tuple(data[f"factor_{k}"] for k in range(K)),
             mode_names=tuple(meta["mode_names"]), labels=tuple(tuple(l) for l in meta["labels"]),
             faces=data["faces"], uvs=data.get("uvs"), landmarks=data.get("landmarks"),
@@ -358,6 +365,8 @@ def load_model(path: str | Path) -> MultilinearModel:
             imputed=data.get("imputed"), provenance=meta.get("provenance", {}))
     except (KeyError, ShapeError) as exc:
         raise ModelFileError(f"model file {p} is incomplete: {exc}") from None
+    model.__dict__["_hash"] = expected  # verified above: the same sha256 content_hash gives
+    return model
 
 
 def file_hash(path: str | Path) -> str:

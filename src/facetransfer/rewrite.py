@@ -1451,15 +1451,43 @@ def track_options(speed: str = DEFAULT_SPEED):
     raise RewriteError(f"speed must be one of {', '.join(SPEED_PRESETS)}, got {speed!r}")
 
 
+def _capture(video, model, frames, fps, max_frames, progress_factory):
+    """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames."""
+    import dataclasses
+
+    from .track.capture import capture_video
+
+    bars: dict = {}
+
+    def stage_progress(stage: str, done: int, total: int) -> None:
+        if progress_factory is None:
+            return
+        bar = bars.get(stage)
+        if bar is None:
+            for b_ in bars.values():
+                b_.close()
+            bar = bars[stage] = progress_factory(f"{Path(video).name}: {stage}", total)
+        bar.update(done - bar.n)
+
+    try:
+        tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
+                           source=str(video))
+    finally:
+        for b_ in bars.values():
+            b_.close()
+    return dataclasses.replace(tr, fps=float(fps))
+
+
 def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
                  track_file: str | os.PathLike | None = None, max_frames: int | None = None,
                  method: str = "auto", progress_factory=None, options=None):
     """The track of a video: read from ``track_file``, or tracked now.
 
-    ``method``: ``"auto"`` uses the optical-flow tracker of §5.1
-    (:func:`facetransfer.track.track_video`) when it is installed and otherwise fits landmarks
-    (precomputed ``NAME.mediapipe478.npz`` next to the video, else MediaPipe on the frames);
-    ``"flow"`` or ``"landmarks"`` force one. ``options`` (a
+    ``method``: ``"auto"`` or ``"capture"`` use the capture tracker
+    (:func:`facetransfer.track.capture.capture_video`: the model fitted to MediaPipe's points
+    and their flow on every frame); ``"flow"`` the optical-flow tracker of §5.1
+    (:func:`facetransfer.track.track_video`, configured by ``options``); ``"landmarks"`` fits
+    landmarks (precomputed ``NAME.mediapipe478.npz`` next to the video, else MediaPipe). ``options`` (a
     :class:`~facetransfer.track.TrackOptions`, e.g. from :func:`track_options`) configure the
     optical-flow tracker (default: its own defaults).
 
@@ -1471,8 +1499,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     from .track import Track
     from .transfer import take_frames
 
-    if method not in ("auto", "flow", "landmarks"):
-        raise RewriteError(f"tracking method must be auto, flow or landmarks, got {method!r}")
+    if method not in ("auto", "capture", "flow", "landmarks"):
+        raise RewriteError(f"tracking method must be auto, capture, flow or landmarks, got "
+                           f"{method!r}")
     if track_file is not None:
         tr = Track.load(track_file)
         tr.check_model(model)
@@ -1491,7 +1520,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     def bar(desc, total):
         return progress_factory(desc, total) if progress_factory else None
 
-    if method in ("auto", "flow"):
+    if method in ("auto", "capture"):
+        return _capture(video, model, frames, fps, max_frames, progress_factory)
+    if method == "flow":
         try:
             from .track.tracker import track_video
         except ImportError:  # pragma: no cover - tracker not installed

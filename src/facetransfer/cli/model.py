@@ -132,7 +132,7 @@ def _fill_missing(dataset, method: str, seed: int):
 
 def cmd_build(args: argparse.Namespace) -> int:
     from .. import assets
-    from ..datasets import load_dataset
+    from ..datasets import ICT_DATASETS, load_dataset
     from ..model import build_model
 
     check_output_path(args.out)
@@ -143,7 +143,7 @@ def cmd_build(args: argparse.Namespace) -> int:
         ds = load_dataset(args.dataset, seed=args.seed, n_identities=args.identities, progress=cb)
     finally:
         close()
-    if args.identities is not None and str(args.dataset) not in ("ict-bilinear", "ict-trilinear"):
+    if args.identities is not None and str(args.dataset) not in ICT_DATASETS:
         log.warning("--identities applies to the ICT data sets only; ignored")
     ds, imputed = _fill_missing(ds, args.impute, args.seed)
     use = default_ranks(ds)

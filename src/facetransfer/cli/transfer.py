@@ -60,9 +60,10 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "a model with UVs); default: function with --performance, frame otherwise")
     p.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast",
                    help="fast membrane blend, exact Poisson solve, or hard paste")
-    p.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
-                   help="tracking when no track file is given: auto (the optical-flow tracker of "
-                   "§5, a landmark-only fit if it fails), flow or landmarks")
+    p.add_argument("--tracker", choices=("auto", "capture", "flow", "landmarks"), default="auto",
+                   help="tracking when no track file is given: auto or capture (the model "
+                   "fitted to MediaPipe's points and their flow on every frame), flow (the "
+                   "optical-flow tracker of §5, with --speed) or landmarks")
     p.add_argument("--speed", choices=SPEED_PRESETS, default=DEFAULT_SPEED,
                    help="tracking preset when no track file is given: fast (one pass, two "
                    "pyramid levels; as accurate as balanced on the footage measured, about 4x "
@@ -137,7 +138,7 @@ def register(sub) -> None:
     q.add_argument("--identity", required=True, metavar="LABEL", help="training identity label")
     q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused)")
     q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
-    q.add_argument("--tracker", choices=("auto", "flow", "landmarks"), default="auto",
+    q.add_argument("--tracker", choices=("auto", "capture", "flow", "landmarks"), default="auto",
                    help="tracking when no track file is given")
     q.add_argument("--out", required=True, metavar="OUT.mp4")
     q.add_argument("--overwrite", action="store_true", help="replace an existing output")

@@ -362,6 +362,39 @@ def _load_cache(path: Path) -> FaceDataset | None:
         return None
 
 
+def build_memory_bytes(n_identities: int, n_cells: int, n_vertices: int) -> int:
+    """Peak memory of building a data set and its model, estimated (bytes).
+
+    The data tensor ``(n_identities, n_cells, n, 3)`` float64 is held about four times at the
+    peak (the cells, the tensor handed to the N-mode SVD, its unfolding and the core), plus the
+    100 identity components.
+    """
+    tensor = 8 * 3 * n_vertices * n_identities * n_cells
+    return int(4 * tensor + 8 * 3 * n_vertices * (_N_IDENTITY_COMPONENTS + n_cells))
+
+
+def _available_bytes() -> int | None:
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return None
+
+
+def check_build_memory(name: str, n_identities: int, spec: Mapping, region: str) -> None:
+    """Refuse, before allocating, a build that would not fit in the available memory."""
+    cells = len(spec["expressions"]) * max(1, len(spec.get("visemes", [])))
+    need = build_memory_bytes(n_identities, cells, REGIONS[region])
+    avail = _available_bytes()
+    if avail is not None and need > avail:
+        raise DatasetError(f"{name} with {n_identities} identities needs about "
+                           f"{need / 2**30:.1f} GiB of memory; {avail / 2**30:.1f} GiB is "
+                           f"available (use fewer --identities)")
+
+
 def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = None,
                       region: str = "face", progress: Progress | None = None,
                       use_cache: bool = True, recipes: Mapping | None = None) -> FaceDataset:
@@ -369,9 +402,11 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
 
     Parameters
     ----------
-    name : {"ict-bilinear", "ict-trilinear"}
+    name : {"ict-arkit", "ict-bilinear", "ict-trilinear"}
         ``ict-bilinear``: identity × expression (15 × 10 by default); ``ict-trilinear``:
-        identity × expression × viseme (16 × 5 × 5), as the paper's two models (§4.3).
+        identity × expression × viseme (16 × 5 × 5), as the paper's two models (§4.3);
+        ``ict-arkit``: identity × (neutral + 51 ARKit blendshapes), 50 identities by default,
+        the default model (:mod:`facetransfer.arkit`, ``data/arkit_facekit.json``).
     seed : int
         Seed of the identity weights.
     n_identities : int, optional
@@ -403,6 +438,7 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
         raise DatasetError(f"n_identities must be at least 2, got {n_id}")
     if region not in REGIONS:
         raise DatasetError(f"unknown ICT region {region!r}; expected one of {sorted(REGIONS)}")
+    check_build_memory(name, n_id, spec, region)
     cache = ict_cache_path(name, seed=seed, n_identities=n_id, region=region, recipes=rec)
     if use_cache and cache.is_file():
         ds = _load_cache(cache)

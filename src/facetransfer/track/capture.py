@@ -27,6 +27,7 @@ Lucas & Kanade 1981 (OpenCV's pyramidal implementation).
 
 from __future__ import annotations
 
+import copy
 import logging
 import time
 from dataclasses import dataclass, replace
@@ -34,7 +35,8 @@ from typing import Callable
 
 import numpy as np
 
-from ..arkit import ARKIT_NAMES, activation_basis, expression_rig, is_arkit_model
+from ..arkit import (ARKIT_NAMES, activation_basis, activation_prior_scale, expression_rig,
+                     is_arkit_model)
 from ..errors import TrackError, VideoError
 from .camera import Pose, fit_affine_pose
 from .detect import ClipDetections, VideoLandmarker, detect_clip
@@ -65,6 +67,9 @@ class CaptureOptions:
         Weight of the identity's training prior (per frame, per unit Mahalanobis distance).
     expression_prior : float
         Ridge on the activations (ARKit models) or weight of the expression prior (others).
+    sparsity : float
+        L1 weight on the activations (ARKit models: they are >= 0, so a linear term), which
+        keeps shapes the 2-D points cannot tell apart switched off.
     temporal : float
         Weight pulling a frame's expression toward the previous frame's.
     flow : float
@@ -75,23 +80,41 @@ class CaptureOptions:
         Sigma (frames) of a zero-phase smoothing of pose and expression afterwards (0 = off).
     point_weights : tuple of 68 float or None
         Reliability of each iBUG point (default :data:`~facetransfer.track.landmarks.IBUG_WEIGHTS`).
+    offset_prior : float
+        Ridge of the clip's static offset: a 3-D displacement of every tracked point, constant
+        over the clip, fitted with the identity. It takes up how this face (and where the
+        detector puts its points on it) differs from everything the model's identity space
+        can show, which would otherwise be explained by expressions held on all clip long.
+        ``inf`` = off.
+    identity_expression_prior : float
+        Ridge on the activations while the identity and offset are fitted (stronger than
+        ``expression_prior``: the clip's average face goes to identity and offset, not to
+        expressions).
+    dense : float
+        Weight of MediaPipe's other mesh points (:mod:`facetransfer.track.dense`) relative to an
+        iBUG point of weight 1 (0 = the 68 iBUG points only).
     """
 
     identity_frames: int = 40
-    identity_rounds: int = 3
+    identity_rounds: int = 6
     identity_prior: float = 2e-3
-    expression_prior: float = 1e-3
+    expression_prior: float = 3e-3
+    sparsity: float = 0.0
     temporal: float = 2e-3
     flow: float = 0.5
     iterations: int = 3
     smooth: float = 0.0
     point_weights: tuple | None = None
+    offset_prior: float = 1e-4
+    identity_expression_prior: float = 3e-2
+    dense: float = 0.3
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
             if int(getattr(self, name)) < 1:
                 raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("identity_prior", "expression_prior", "temporal", "flow", "smooth"):
+        for name in ("identity_prior", "expression_prior", "sparsity", "temporal", "flow",
+                     "smooth", "dense", "offset_prior", "identity_expression_prior"):
             if not float(getattr(self, name)) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.point_weights is not None and len(self.point_weights) != 68:
@@ -107,6 +130,37 @@ class _State:
     residual: float        # weighted rms of the detection term, in eye distances
 
 
+class _Sampler:
+    """The tracked points as a multilinear model of their own.
+
+    Points are linear in the vertices (``points = S @ vertices[verts]``, ``S`` ``(P, V)``; rows
+    0-67 are the iBUG landmark vertices, then the dense surface points), so applying ``S`` to
+    the core once gives a model whose "vertices" are the tracked points: every Eq. (9) basis
+    of the run is then a contraction of a small core.
+    """
+
+    def __init__(self, model, dense=None) -> None:
+        from ..model import MultilinearModel
+
+        lm = np.asarray(model.landmarks, np.int64)
+        tris = np.zeros((0, 3), np.int64) if dense is None else dense.triangles
+        verts, inv = np.unique(np.concatenate([lm, tris.ravel()]), return_inverse=True)
+        P = 68 + len(tris)
+        S = np.zeros((P, len(verts)))
+        S[np.arange(68), inv[:68]] = 1.0
+        if len(tris):
+            cols = inv[68:].reshape(-1, 3)
+            for k in range(3):
+                np.add.at(S, (np.arange(68, P), cols[:, k]), dense.bary[:, k])
+        rows = (3 * verts[:, None] + np.arange(3)).ravel()
+        core = model.core[rows].reshape(len(verts), -1)                    # (V, 3 r_1 ... r_K)
+        core = (S @ core).reshape((3 * P,) + model.core.shape[1:])
+        self.model = MultilinearModel(core=core, factors=model.factors,
+                                      mode_names=model.mode_names, labels=model.labels,
+                                      faces=np.zeros((0, 3), np.int64))
+        self.mp_index = None if dense is None else dense.mp_index
+
+
 class _Shape:
     """The face at the 68 landmark vertices as a linear function of per-frame parameters.
 
@@ -114,25 +168,40 @@ class _Shape:
     one block per per-frame mode with its training prior (Eq. (9), coordinate descent).
     """
 
-    def __init__(self, model, identity: np.ndarray | None, lm: np.ndarray, opt: CaptureOptions):
-        self.model, self.lm, self.opt = model, lm, opt
+    def __init__(self, model, identity: np.ndarray | None, sampler: _Sampler,
+                 opt: CaptureOptions, offset: np.ndarray | None = None):
+        self.model, self.opt = sampler.model, opt                           # points model
+        P = sampler.model.n_vertices
+        self.offset = np.zeros((P, 3)) if offset is None else offset        # (P, 3) static
         self.arkit = is_arkit_model(model)
         self.id_name = "identity" if "identity" in model.mode_names else None
         self.per_frame = tuple(m for m in model.mode_names if m != self.id_name)
         self.identity = identity
         if self.arkit:
             w = {self.id_name: identity} if self.id_name else {}
-            rig = expression_rig(model, w | {"expression": np.zeros(model.ranks[
-                model.mode_index("expression")])}, vertices=lm)
+            rig = expression_rig(self.model, w | {"expression": np.zeros(model.ranks[
+                model.mode_index("expression")])})
             self.used = np.flatnonzero(np.any(rig.deltas != 0, axis=(1, 2)))
-            self.N, self.D = rig.neutral, rig.deltas[self.used]          # (68,3), (K,68,3)
+            self.N = rig.neutral + self.offset                                 # (P, 3)
+            self.D = rig.deltas[self.used]                                     # (K, P, 3)
             self.size = len(self.used)
             self.x0 = np.zeros(self.size)
+            self.ridge = activation_prior_scale()[self.used]                   # (K,)
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
             self.sizes = [model.ranks[model.mode_index(m)] for m in self.per_frame]
             self.size = int(sum(self.sizes))
             self.x0 = np.concatenate([self.priors[m].mean for m in self.per_frame])
+
+    def with_options(self, opt: CaptureOptions) -> "_Shape":
+        """The same shape solved with other settings (e.g. the identity phase's priors)."""
+        other = copy.copy(self)
+        other.opt = opt
+        return other
+
+    def basis(self, mode: str, weights: dict) -> np.ndarray:
+        """Eq. (9) at the tracked points: ``(r, P, 3)``."""
+        return np.moveaxis(self.model.mode_basis(mode, weights), 2, 0)
 
     def weights(self, x: np.ndarray) -> dict:
         """Model weights of every per-frame mode for parameters ``x``."""
@@ -153,7 +222,7 @@ class _Shape:
         w = self.weights(x)
         if self.id_name:
             w[self.id_name] = self.identity
-        return self.model.synthesize(w, vertices=self.lm)
+        return self.model.synthesize(w) + self.offset
 
     def solve(self, pose: Pose, targets: list, iod: float, x: np.ndarray,
               prev: np.ndarray | None) -> np.ndarray:
@@ -163,10 +232,10 @@ class _Shape:
             Y = project_basis(self.D, pose)
             base = pose.project(self.N)
             G, h = targets_normal(Y, base, targets, iod)
-            G = G + (lam_p + lam_t + 1e-9) * np.eye(self.size)
+            G = G + np.diag(lam_p * self.ridge + lam_t + 1e-9)
             if lam_t:
                 h = h + lam_t * prev
-            return box_qp(G, h, x)
+            return box_qp(G, h - self.opt.sparsity, x, tol=1e-5)
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
 
     def _solve_modes(self, pose, targets, iod, x, prev, lam_p, lam_t):
@@ -176,9 +245,8 @@ class _Shape:
             w = self.weights(x)
             if self.id_name:
                 w[self.id_name] = self.identity
-            B = self.model.mode_basis(m, w, vertices=self.lm)               # (68, 3, r) Eq. (9)
-            Y = project_basis(np.moveaxis(B, 2, 0), pose)
-            G, h = targets_normal(Y, pose.project(np.zeros((len(self.lm), 3))), targets, iod)
+            Y = project_basis(self.basis(m, w), pose)                     # Eq. (9)
+            G, h = targets_normal(Y, pose.project(self.offset), targets, iod)
             pr = self.priors[m]
             P = pr.Q @ pr.inv_cov @ pr.Q.T
             G = G + lam_p * P + (lam_t + 1e-9) * np.eye(len(pr.mean))
@@ -209,7 +277,7 @@ def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: n
         ok = w > 0
         pose = fit_affine_pose(shape.points(x)[ok], p[ok])
     for _ in range(iterations):
-        pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=2)
+        pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
         x = shape.solve(pose, targets, iod, x, prev)
     pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
     return _State(pose, x, _residual(shape, pose, x, p, w, iod))
@@ -223,19 +291,53 @@ def _solve_identity(model, shape: _Shape, frames: list, states: list, det: ClipD
     G = np.zeros((r, r))
     h = np.zeros(r)
     for i, st in zip(frames, states):
-        p = det.points[i]
-        w = np.where(np.isfinite(p).all(1), weights, 0.0)
+        p, w = _detection(det, i, weights)
         wts = shape.weights(st.x)
         wts["identity"] = prior.mean
-        B = model.mode_basis("identity", wts, vertices=shape.lm)             # (68, 3, r)
-        Y = project_basis(np.moveaxis(B, 2, 0), st.pose)
-        g_, h_ = targets_normal(Y, st.pose.project(np.zeros((len(shape.lm), 3))), [(p, w)],
-                                _iod(p))
+        Y = project_basis(shape.basis("identity", wts), st.pose)             # (r, P, 2)
+        g_, h_ = targets_normal(Y, st.pose.project(shape.offset), [(p, w)], _iod(p))
         G += g_
         h += h_
     P = prior.Q @ prior.inv_cov @ prior.Q.T
     lam = opt.identity_prior * len(frames)
     return np.linalg.solve(G + lam * P + 1e-9 * np.eye(r), h + lam * P @ prior.mean)
+
+
+@dataclass(frozen=True)
+class _PointWeights:
+    """Reliability of every tracked point: iBUG-68, then the dense points (MediaPipe indices)."""
+
+    w: np.ndarray
+    mp_index: np.ndarray | None = None
+
+
+def _detection(det: ClipDetections, i: int, pw: _PointWeights) -> tuple[np.ndarray, np.ndarray]:
+    """Frame ``i``'s targets for the tracked points and their weights (0 where unknown)."""
+    p = det.points[i]
+    if pw.mp_index is not None and len(pw.mp_index):
+        p = np.concatenate([p, np.asarray(det.points478[i, pw.mp_index], np.float64)])
+    return p, np.where(np.isfinite(p).all(1), pw.w, 0.0)
+
+
+def _solve_offset(shape: "_Shape", frames, states: list, det: ClipDetections, weights,
+                  opt: CaptureOptions) -> np.ndarray:
+    """The clip's static offset ``o`` (P, 3): per point, ``min Σ_f w |r_f - s_f F R_f[:2] o|²
+    + λ |o|²`` over the sampled frames, residuals ``r_f`` of the fit without the offset (in eye
+    distances)."""
+    P = shape.offset.shape[0]
+    A = np.zeros((P, 3, 3))
+    b = np.zeros((P, 3))
+    for i, st in zip(frames, states):
+        p, w = _detection(det, i, weights)
+        iod = _iod(det.points[i])
+        q = st.pose.project(shape.points(st.x) - shape.offset)
+        r = np.nan_to_num(p - q) / iod
+        M = st.pose.scale / iod * st.pose.rotation[:2].copy()               # (2, 3)
+        M[1] *= -1.0
+        A += w[:, None, None] * (M.T @ M)[None]
+        b += w[:, None] * (r @ M)
+    lam = opt.offset_prior * len(frames)
+    return np.linalg.solve(A + lam * np.eye(3)[None], b[..., None])[..., 0]
 
 
 def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
@@ -245,8 +347,8 @@ def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
     return idx[np.unique(np.linspace(0, len(idx) - 1, n).round().astype(int))]
 
 
-def _clip_identity(model, det: ClipDetections, lm, weights, opt: CaptureOptions, fixed,
-                   prog) -> tuple[_Shape, list, np.ndarray]:
+def _clip_identity(model, det: ClipDetections, lm: _Sampler, weights, opt: CaptureOptions,
+                   fixed, prog) -> tuple[_Shape, list, np.ndarray]:
     """Identity from frames spread through the clip; returns the shape, sample states, frames."""
     frames = _sample_frames(det.found, int(opt.identity_frames))
     has_id = "identity" in model.mode_names
@@ -256,22 +358,29 @@ def _clip_identity(model, det: ClipDetections, lm, weights, opt: CaptureOptions,
                  else Prior.from_model(model, "identity").mean)
     shape = _Shape(model, ident, lm, opt)
     solve_id = has_id and "identity" not in fixed
-    rounds = int(opt.identity_rounds) if solve_id else 0
-    states = _fit_sample(shape, det, frames, weights, opt, None)
+    use_offset = np.isfinite(opt.offset_prior)
+    rounds = int(opt.identity_rounds) if (solve_id or use_offset) else 0
+    opt_id = replace(opt, expression_prior=opt.identity_expression_prior)
+    states = _fit_sample(shape, det, frames, weights, opt_id, None)
     for rnd in range(rounds):
-        ident = _solve_identity(model, shape, list(frames), states, det, weights, opt)
-        shape = _Shape(model, ident, lm, opt)
-        states = _fit_sample(shape, det, frames, weights, opt, states)
+        if solve_id:
+            ident = _solve_identity(model, shape, list(frames), states, det, weights, opt)
+            shape = _Shape(model, ident, lm, opt, shape.offset)
+        if use_offset:
+            shape = _Shape(model, ident, lm, opt,
+                           _solve_offset(shape, frames, states, det, weights, opt))
+        states = _fit_sample(shape, det, frames, weights,
+                             opt if rnd == rounds - 1 else opt_id, states)
         prog("identity", rnd + 1, rounds)
     return shape, states, frames
 
 
 def _fit_sample(shape: _Shape, det: ClipDetections, frames, weights, opt, states) -> list:
     """Fit every sampled frame on its own (pose and expression), warm-started from ``states``."""
+    shape = shape.with_options(opt)
     out = []
     for j, i in enumerate(frames):
-        p = det.points[i]
-        w = np.where(np.isfinite(p).all(1), weights, 0.0)
+        p, w = _detection(det, i, weights)
         st = None if states is None else states[j]
         out.append(_fit_frame(shape, [(p, w)], _iod(p), None if st is None else st.pose,
                               shape.x0 if st is None else st.x, None, int(opt.iterations) + 1))
@@ -281,13 +390,13 @@ def _fit_sample(shape: _Shape, det: ClipDetections, frames, weights, opt, states
 def _targets(det: ClipDetections, i: int, j: int, prev_q: np.ndarray | None, weights, opt,
              forward: bool) -> list:
     """Detection term of frame ``i`` and, from its tracked neighbour ``j``, the flow term."""
-    p = det.points[i]
-    w = np.where(np.isfinite(p).all(1), weights, 0.0)
+    p, w = _detection(det, i, weights)
     out = [(p, w)]
     if opt.flow > 0 and prev_q is not None:
-        d = det.flow[i] if forward else -det.flow[j]   # flow[t] moves points of t-1 into t
+        d = np.full(p.shape, np.nan)
+        d[:68] = det.flow[i] if forward else -det.flow[j]   # flow[t] moves points of t-1 into t
         q = prev_q + d
-        wf = np.where(np.isfinite(q).all(1), opt.flow * weights, 0.0)
+        wf = np.where(np.isfinite(q).all(1), opt.flow * weights.w, 0.0)
         if wf.any():
             out.append((q, wf))
     return out
@@ -309,8 +418,7 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State, we
             q = prev.pose.project(shape.points(prev.x))
         forward = prev_i is not None and i > prev_i
         tg = _targets(det, i, prev_i if prev_i is not None else i, q, weights, opt, forward)
-        p = det.points[i]
-        st = _fit_frame(shape, tg, _iod(p), None if prev is None else prev.pose,
+        st = _fit_frame(shape, tg, _iod(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
                         None if prev is None or prev_i is None else prev.x, int(opt.iterations))
         states[i] = st
@@ -344,8 +452,16 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
     Track
         With ``blendshapes`` for an ARKit model.
     """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1, user_api="blas"):  # small products: threads only cost
+        return _capture_detections(det, model, options, fps, frame_size, fixed, progress,
+                                   source)
+
+
+def _capture_detections(det, model, options, fps, frame_size, fixed, progress, source) -> Track:
     opt = options or CaptureOptions()
-    lm = require_landmarks(model)
+    require_landmarks(model)
     fixed = dict(fixed or {})
     unknown = set(fixed) - {"identity"}
     if unknown:
@@ -357,8 +473,16 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
     prog = progress or (lambda stage, done, total: None)
     weights = np.asarray(opt.point_weights if opt.point_weights is not None else IBUG_WEIGHTS,
                          float)
+    dense = None
+    if opt.dense > 0 and det.points478 is not None:
+        from .dense import mediapipe_correspondence
+
+        dense = mediapipe_correspondence(model)
+        weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
+    sampler = _Sampler(model, dense)
+    weights = _PointWeights(weights, sampler.mp_index)
     t0 = time.perf_counter()
-    shape, sample_states, frames = _clip_identity(model, det, lm, weights, opt, fixed, prog)
+    shape, sample_states, frames = _clip_identity(model, det, sampler, weights, opt, fixed, prog)
     t_id = time.perf_counter() - t0
     best = int(np.argmin([s.residual for s in sample_states]))
     start = int(frames[best])
@@ -452,7 +576,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         if detector is None:
             detector = own = VideoLandmarker(fps=fps)
         try:
-            detections = detect_clip(frames, detector, n_frames=n,
+            detections = detect_clip(frames, detector, n_frames=n, keep478=True,
                                      progress=lambda d, t: prog("detect", d, t))
         finally:
             if own is not None:

@@ -1,0 +1,135 @@
+"""The capture tracker (facetransfer.track.capture) and its solvers (facetransfer.track.fit2d)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import lsq_linear
+
+from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+from facetransfer.errors import TrackError, VideoError
+from facetransfer.render import rotation_from_euler
+from facetransfer.track.camera import Pose, project
+from facetransfer.track.capture import CaptureOptions, capture_detections
+from facetransfer.track.dense import mediapipe_correspondence
+from facetransfer.track.detect import ClipDetections
+from facetransfer.track.fit2d import box_qp, pose_gauss_newton
+
+
+def test_box_qp_matches_scipy_bounded_least_squares():
+    rng = np.random.default_rng(0)
+    for k in (3, 12, 51):
+        A = rng.normal(size=(3 * k, k))
+        b = rng.normal(size=3 * k) * 2
+        ref = lsq_linear(A, b, bounds=(0.0, 1.0), method="bvls", tol=1e-12).x
+        x = box_qp(A.T @ A, A.T @ b, np.zeros(k), sweeps=5000, tol=1e-12)
+        np.testing.assert_allclose(x, ref, atol=1e-6)
+        assert x.min() >= 0 and x.max() <= 1
+
+
+def test_pose_gauss_newton_recovers_a_pose():
+    rng = np.random.default_rng(1)
+    X = rng.normal(size=(68, 3)) * 5
+    true = Pose(rotation_from_euler(20, -10, 5), 12.0, np.array([200.0, 180.0]))
+    p = project(X, true.rotation, true.scale, true.translation)
+    start = Pose(rotation_from_euler(10, 0, 0), 10.0, np.array([190.0, 170.0]))
+    est = pose_gauss_newton(X, [(p, np.ones(68))], start, 100.0, iterations=15)
+    np.testing.assert_allclose(est.rotation, true.rotation, atol=1e-8)
+    assert est.scale == pytest.approx(12.0, rel=1e-9)
+
+
+def _synthetic(model, F=60, yaw0=25.0, late=0):
+    """Exact 2-D landmarks of a training identity performing blinks, jaw and smiles."""
+    t = np.arange(F)
+    a = np.zeros((F, 52))
+    j = {n: ARKIT_NAMES.index(n) for n in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight",
+                                             "mouthSmileLeft", "browInnerUp")}
+    a[:, j["jawOpen"]] = 0.5 + 0.45 * np.sin(t / 6.0)
+    blink = np.exp(-0.5 * ((t - 30) / 2.0) ** 2)
+    a[:, j["eyeBlinkLeft"]] = a[:, j["eyeBlinkRight"]] = blink
+    a[:, j["mouthSmileLeft"]] = np.clip(np.sin(t / 9.0), 0, 1) * 0.8
+    a[:, j["browInnerUp"]] = np.clip(np.cos(t / 7.0), 0, 1) * 0.7
+    w_id = model.training_weights("identity", "id02")
+    w_ex = activations_to_weights(model, a)
+    V = model.synthesize({"identity": np.tile(w_id, (F, 1)), "expression": w_ex})
+    dc = mediapipe_correspondence(model)
+    yaw = yaw0 * np.cos(t / 15.0)
+    poses = [(rotation_from_euler(yaw[i], 8 * np.sin(t[i] / 11), 0), 9.0,
+              np.array([256.0 + t[i], 240.0])) for i in range(F)]
+    pts = np.stack([project(V[i, model.landmarks], *poses[i]) for i in range(F)])
+    mp = np.full((F, 478, 2), np.nan)
+    mp[:, dc.mp_index] = np.stack([project(dc.sample(V[i]), *poses[i]) for i in range(F)])
+    flow = np.full_like(pts, np.nan)
+    flow[1:] = pts[1:] - pts[:-1]
+    pts[:late] = np.nan
+    mp[:late] = np.nan
+    flow[:late + 1] = np.nan
+    return ClipDetections(pts, flow, mp), a, pts
+
+
+def test_capture_recovers_activations_and_points(arkit_model):
+    det, a, pts = _synthetic(arkit_model)
+    tr = capture_detections(det, arkit_model, fps=30, frame_size=(512, 512))
+    assert tr.blendshapes.shape == (60, 52) and tr.blendshape_names == ARKIT_NAMES
+    iod = np.linalg.norm(pts[:, 36] - pts[:, 45], axis=1)
+    err = np.linalg.norm(tr.landmarks2d - pts, axis=2).mean(axis=1) / iod
+    assert np.median(err) < 0.02  # the priors cost about 1 % of the eye distance on exact data
+    for n in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight"):
+        k = ARKIT_NAMES.index(n)
+        assert np.corrcoef(tr.blendshapes[:, k], a[:, k])[0, 1] > 0.97, n
+        assert np.abs(tr.blendshapes[:, k] - a[:, k]).mean() < 0.06, n
+    k = ARKIT_NAMES.index("eyeBlinkLeft")
+    assert tr.blendshapes[30, k] > 0.8 and tr.blendshapes[5, k] < 0.15  # a full blink
+
+
+def test_face_appearing_late_marks_earlier_frames_lost(arkit_model):
+    det, a, pts = _synthetic(arkit_model, F=40, late=12)
+    tr = capture_detections(det, arkit_model, fps=30, frame_size=(512, 512))
+    assert tr.lost[:12].all() and not tr.lost[12:].any()
+    assert tr.info["start_frame"] >= 12
+    assert np.all(tr.confidence[:12] == 0)
+
+
+def test_no_face_anywhere_is_a_clear_error(arkit_model):
+    det = ClipDetections.from_points(np.full((5, 68, 2), np.nan))
+    with pytest.raises(VideoError, match="no face found"):
+        capture_detections(det, arkit_model, source="clip.mp4")
+
+
+def test_models_without_arkit_names_track_without_blendshapes(quick_model):
+    """The paper's kind of model (expression weights with a prior) still tracks."""
+    F = 20
+    w = quick_model.like(identity="id02", expression="smile")
+    X = quick_model.synthesize(w, vertices=quick_model.landmarks)
+    pts = np.stack([project(X, rotation_from_euler(10 * np.sin(i / 4), 0, 0), 9.0,
+                            np.array([256.0, 240.0])) for i in range(F)])
+    tr = capture_detections(ClipDetections.from_points(pts), quick_model)
+    assert tr.blendshapes is None
+    iod = np.linalg.norm(pts[:, 36] - pts[:, 45], axis=1)
+    err = np.linalg.norm(tr.landmarks2d - pts, axis=2).mean(axis=1) / iod
+    assert np.median(err) < 0.02
+
+
+def test_options_are_validated():
+    with pytest.raises(TrackError):
+        CaptureOptions(flow=-1)
+    with pytest.raises(TrackError):
+        CaptureOptions(identity_frames=0)
+
+
+def test_capture_on_a_real_clip_follows_mediapipe(arkit_model, data_dir):
+    """The whole path on real footage: MediaPipe in video mode, flow, fit; against the
+    MediaPipe-478 reference of the data folder."""
+    from facetransfer.track.capture import capture_video
+    from facetransfer.track.landmarks import mediapipe_to_ibug
+
+    clip = data_dir / "video" / "WDA_KatieHill_000.mp4"
+    tr = capture_video(clip, arkit_model, max_frames=40)
+    ref = mediapipe_to_ibug(np.load(data_dir / "video" / "WDA_KatieHill_000.mediapipe478.npz")
+                            ["landmarks"][:40, :, :2])
+    iod = np.linalg.norm(ref[:, 36] - ref[:, 45], axis=1)
+    keep = [36, 39, 42, 45, 30, 48, 54]
+    err = np.linalg.norm(tr.landmarks2d[:, keep] - ref[:, keep], axis=2).mean(axis=1) / iod
+    assert tr.n_frames == 40 and not tr.lost.any()
+    assert np.median(err) < 0.06
+    assert tr.blendshapes.min() >= 0 and tr.blendshapes.max() <= 1
