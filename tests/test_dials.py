@@ -44,8 +44,11 @@ def test_one_unit_changes_the_measurement_by_the_stated_amount(arkit_model, dial
         base = W[3]  # a training identity, not the mean face the effect was stated on
         m0, m1, m2 = identity_measurements(arkit_model, np.stack(
             [base, base + d.direction, base + 2 * d.direction]))[:, j]
-        assert m1 - m0 == pytest.approx(d.effect, rel=0.1), d.name
-        assert m2 - m0 == pytest.approx(2 * d.effect, rel=0.1), d.name
+        # distances are nearly, not exactly, linear in the weights (lips and chin least)
+        assert m1 - m0 == pytest.approx(d.effect, rel=0.2), d.name
+        assert m2 - m0 == pytest.approx(2 * (m1 - m0), rel=0.05), d.name
+    for d in dials.dials:  # the unit is one standard deviation, on the mean face
+        assert d.effect == pytest.approx(d.sigma, rel=0.02), d.name
 
 
 def test_dial_track_and_values(arkit_model, dials, make_arkit_track):

@@ -10,15 +10,16 @@ so the reported R² does not flatter a model with as many components as identiti
 
     m_k(w) ≈ c_k + b_kᵀ (w - w̄)                                           (Eq. D1)
 
-The dial of measurement ``k`` moves the identity weights along ``b_k``, scaled so that one unit
-changes the *predicted* measurement by one standard deviation ``σ_k`` of that measurement over
-the training identities::
+The dial of measurement ``k`` moves the identity weights along the regression direction ``b_k``,
+scaled so that one unit changes the measurement, measured on the mean identity ``w̄``, by one
+standard deviation ``σ_k`` of that measurement over the training identities::
 
-    w ← w + t d_k,   d_k = σ_k b_k / (b_kᵀ b_k)                                (Eq. D2)
+    w ← w + t d_k,   d_k = σ_k b_k / (m_k(w̄ + b_k) - m_k(w̄))                  (Eq. D2)
 
-:attr:`Dial.effect` is the change a unit actually makes, measured on the mean identity (the
-"stated amount" that ``facetransfer model dials`` lists); measurements are distances, nearly
-linear in ``w``, so it holds elsewhere too (tested).
+(Scaling by the measured change rather than by ``b_kᵀ b_k`` keeps the unit honest where the
+ridge shrinks ``b_k``.) :attr:`Dial.effect` is the change one unit makes on the mean identity
+(the "stated amount" that ``facetransfer model dials`` lists); measurements are distances,
+nearly linear in ``w``, so it holds for other identities too (tested and measured).
 
 References
 ----------
@@ -89,8 +90,8 @@ class Dial:
     direction : (r,) float64
         ``d_k``: identity-weight change per unit.
     sigma : float
-        ``σ_k``: standard deviation of the measurement over the training identities; the
-        regression's predicted change per unit.
+        ``σ_k``: standard deviation of the measurement over the training identities: the
+        intended change per unit.
     effect : float
         Measured change per unit on the mean identity (model units).
     r2 : float
@@ -222,8 +223,8 @@ def learn_dials(model, *, mode: str = "identity") -> DialSet:
     for k, (name, (desc, _)) in enumerate(MEASUREMENTS.items()):
         b, r2, r2_loo = _ridge_loo(X, M[:, k], lambdas)
         sigma = float(M[:, k].std())
-        bb = float(b @ b)
-        d = b * (sigma / bb) if bb > 0 else np.zeros_like(b)
+        gain = float(identity_measurements(model, mean_w + b, mode=mode)[0, k] - m0[k])
+        d = b * (sigma / gain) if abs(gain) > 1e-12 * max(sigma, 1e-12) else np.zeros_like(b)
         effect = float(identity_measurements(model, mean_w + d, mode=mode)[0, k] - m0[k])
         dials.append(Dial(name, desc, d, sigma, effect, float(r2), float(r2_loo)))
     ds = str(model.provenance.get("dataset", ""))
