@@ -8,7 +8,8 @@ Measures, in one run:
     ``output_face_blendshapes=True`` in VIDEO mode, the same pass that feeds the tracker its
     landmarks) gives its own blendshapes. Reported per clip and blendshape: Pearson correlation
     over frames with a face in both, and the mean absolute difference. Goal: r >= 0.8 for
-    jawOpen, eyeBlinkLeft, eyeBlinkRight.
+    jawOpen, eyeBlinkLeft, eyeBlinkRight. As a referee for both, each of the three is also
+    correlated with the lip gap / eyelid closure measured on the clip's reference landmarks.
 (b) round trips on a synthetic 1,000-frame track of the default model: CSV read back (ours and
     Python's csv), the glb's morph weights at key k vs the track's frame k (pygltflib), the glb's
     mesh as trimesh loads it, UsdSkel weights at time k (pxr), the JSON read back.
@@ -102,6 +103,18 @@ def _pearson(x: np.ndarray, y: np.ndarray) -> float:
     return float(np.corrcoef(x, y)[0, 1])
 
 
+def _geometry(ref: Path, n: int) -> dict:
+    """Lip gap and eyelid closure from the clip's reference landmarks (MediaPipe 478 points,
+    ``NAME.mediapipe478.npz``), over the inter-ocular distance: a geometric check of jawOpen
+    and the blinks independent of either blendshape estimator."""
+    L = np.load(ref)["landmarks"][:n, :, :2]  # (F, 478, 2) pixels
+    iod = np.linalg.norm(L[:, 33] - L[:, 263], axis=1)
+    gap = lambda a, b: np.linalg.norm(L[:, a] - L[:, b], axis=1) / iod  # noqa: E731
+    # subject's left eye = MediaPipe's 386/374 (image right); right eye 159/145
+    return {"jawOpen": gap(13, 14), "eyeBlinkLeft": -gap(386, 374),
+            "eyeBlinkRight": -gap(159, 145)}
+
+
 def agreement(model, data_dir: Path, clips, max_frames, tmp: Path) -> dict:
     from facetransfer.arkit import ARKIT_NAMES, MEDIAPIPE_NAMES
     from facetransfer.export import export_track
@@ -132,11 +145,22 @@ def agreement(model, data_dir: Path, clips, max_frames, tmp: Path) -> dict:
             per[n] = {"r": _pearson(x, y), "mad": float(np.mean(np.abs(x - y))),
                       "mean_ours": float(x.mean()), "mean_mediapipe": float(y.mean())}
         rs = np.array([v["r"] for v in per.values()])
+        geo = _geometry(data_dir / "video" / f"{name}.mediapipe478.npz", track.n_frames)
+        ref = {}
+        for n, g in geo.items():
+            j = MEDIAPIPE_NAMES.index(n)
+            good = ok & np.isfinite(g)
+            ref[n] = {"r_ours": _pearson(ours[good, j], g[good]),
+                      "r_mediapipe": _pearson(theirs[good, j], g[good])}
         out[name] = {"frames": track.n_frames, "frames_compared": int(ok.sum()),
                      "tracker": tracker, "track_seconds": secs,
                      "key": {n: per[n] for n in KEY_SHAPES},
+                     "vs_landmark_geometry": ref,
                      "median_r_all51": float(np.nanmedian(rs)),
                      "shapes_r_ge_0.8": int(np.sum(rs >= 0.8)), "per_shape": per}
+        print("    vs landmark geometry: " + ", ".join(
+            f"{n} ours {v['r_ours']:.3f} / MediaPipe {v['r_mediapipe']:.3f}"
+            for n, v in ref.items()), flush=True)
         print(f"  {name}: " + ", ".join(f"{n} r={per[n]['r']:.3f}" for n in KEY_SHAPES)
               + f"; median r over 51 = {np.nanmedian(rs):.3f} ({secs:.1f} s, {tracker})",
               flush=True)

@@ -235,7 +235,7 @@ def test_export_errors(case, tmp_path, monkeypatch):
 def test_export_cli(case, tmp_path, capsys):
     import dataclasses
 
-    model, track, a, _ = case
+    model, track, _, _ = case
     tp, mp = tmp_path / "t.npz", tmp_path / "m.npz"
     track.save(tp)
     model.save(mp)

@@ -96,3 +96,26 @@ def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
     assert "--overwrite" in capsys.readouterr().err
     page = viewer_page(arkit_model)
     assert '"n_frames": 0' in page
+
+
+def test_page_of_a_model_without_arkit_shapes(quick_model):
+    import json
+
+    page = viewer_page(quick_model, title="quick")
+    data = json.loads(re.search(r'<script id="ft-data" type="application/json">(.*?)</script>',
+                                page, re.S).group(1))
+    shapes = data["target_names"][:data["n_shapes"]]
+    assert shapes == [lab for lab in quick_model.labels[1] if lab != "neutral"]
+    assert data["shape_title"].startswith("expression") and data["n_frames"] == 0
+    # int16 offsets with one scale per target reproduce the model's shape offsets
+    q = np.frombuffer(__import__("base64").b64decode(data["targets"]), np.int16)
+    n = quick_model.n_vertices
+    first = q[: n * 3].reshape(n, 3) * data["target_scales"][0]
+    from facetransfer.dials import neutral_weights
+
+    rest = neutral_weights(quick_model)
+    w = quick_model.weight_mean(0)
+    want = quick_model.synthesize({**rest, "identity": w, "expression": quick_model
+                                   .training_weights(1, shapes[0])}) \
+        - quick_model.synthesize({**rest, "identity": w})
+    np.testing.assert_allclose(first, want, atol=2 * data["target_scales"][0])
