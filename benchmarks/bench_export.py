@@ -295,7 +295,7 @@ def plot(res: dict, path: Path) -> None:
     ax[1].set_xticks(x, list(dl), rotation=45, ha="right")
     ax[1].set_ylim(min(0, min(v["r2_loo"] for v in dl.values())), 1.05)
     ax[1].set_title(f"(c) identity dials of the default model ({res['dials']['identities']} ids)")
-    ax[1].legend(fontsize=8)
+    ax[1].legend(fontsize=8, loc="lower left")
     cost = res["cost"]
     keys = list(cost)
     ax[2].bar(keys, [cost[k]["bytes"] / 1e6 for k in keys], color="tab:blue")

@@ -222,6 +222,11 @@ def test_export_errors(case, tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="--overwrite"):
         export_track(track, "livelink", tmp_path / "x.csv")
     assert (tmp_path / "x.csv").read_text() == "keep"
+    with pytest.raises(ExportError, match="only into glb"):
+        export_track(track, "usd", tmp_path / "t.usd", model=model, texture=tmp_path / "t.png")
+    with pytest.raises(ExportError, match="cannot read texture image"):
+        export_track(track, "glb", tmp_path / "t.glb", model=model, texture=tmp_path / "no.png")
+    assert not (tmp_path / "t.glb").exists()
     # model=None: the default model if the track was made with it, else ask for --model
     monkeypatch.setattr(dm, "load_default_model", lambda **kw: model)
     assert export_track(track, "glb", tmp_path / "d.glb").is_file()
