@@ -88,7 +88,7 @@ def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     for src, msg in ((tmp_path / "none.npz", "does not exist"),
-                     (tmp_path / "junk.npz", "")):
+                     (tmp_path / "junk.npz", "neither a model nor a track")):
         assert main(["view", str(src), "--out", str(tmp_path / "q.html")]) == 2
         err = capsys.readouterr().err
         assert msg in err and "Traceback" not in err and len(err.strip().splitlines()) == 1

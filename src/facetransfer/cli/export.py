@@ -35,6 +35,30 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def default_model_for(track):
+    """The default model for a track given without ``--model`` (built once with a progress bar;
+    an error asking for ``--model`` if the track was made with another model)."""
+    from tqdm import tqdm
+
+    from ..export.common import resolve_model
+
+    bar = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = tqdm(total=total, desc="default model", unit="identity", leave=False,
+                       disable=not sys.stderr.isatty())
+        bar.update(done - bar.n)
+
+    try:
+        return resolve_model(track, progress=progress,
+                             announce=lambda m: print(m, file=sys.stderr))
+    finally:
+        if bar is not None:
+            bar.close()
+
+
 def run(args: argparse.Namespace) -> int:
     from ..errors import FaceTransferError
     from ..export import export_track
@@ -52,9 +76,7 @@ def run(args: argparse.Namespace) -> int:
 
         model = load_model(args.model)
     elif args.format in ("glb", "usd"):
-        from ..default_model import default_model_path
-
-        print(f"using the default model {default_model_path()}", file=sys.stderr)
+        model = default_model_for(track)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
                         texture=args.texture)
     print(f"wrote {path}: {track.n_frames} frames ({args.format})")

@@ -24,6 +24,18 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
+def _is_track(path) -> bool:
+    import zipfile
+
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return "rotation" in z.files and "mode_names" in z.files
+    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+        return False  # write_viewer reports it
+
+
 def run(args: argparse.Namespace) -> int:
     from ..export.viewer import write_viewer
     from ..io.atomic import check_output_path
@@ -34,6 +46,11 @@ def run(args: argparse.Namespace) -> int:
         from ..model import load_model
 
         model = load_model(args.model)
+    elif _is_track(args.source):
+        from ..track import Track
+        from .export import default_model_for
+
+        model = default_model_for(Track.load(args.source))
     path = write_viewer(args.source, args.out, model=model, overwrite=args.overwrite)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
     return 0

@@ -63,9 +63,10 @@ def require_activations(track, *, what: str = "track") -> np.ndarray:
     return out
 
 
-def resolve_model(track, model=None):
+def resolve_model(track, model=None, *, progress=None, announce=None):
     """The model of ``track``: ``model`` if given (checked), else the default model if the
-    track was made with it.
+    track was made with it (``progress`` and ``announce`` go to
+    :func:`facetransfer.default_model.load_default_model`, which builds it on first use).
 
     Raises
     ------
@@ -76,7 +77,7 @@ def resolve_model(track, model=None):
     if model is None:
         from ..default_model import load_default_model
 
-        model = load_default_model()
+        model = load_default_model(progress=progress, announce=announce)
         if track.model_hash and track.model_hash != model.content_hash:
             raise ExportError("the track was not made with the default model (ict-arkit); pass "
                               "the model it was tracked with (--model M.npz)")

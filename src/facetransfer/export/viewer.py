@@ -24,6 +24,7 @@ import html
 import json
 import logging
 import os
+import zipfile
 from importlib import resources
 from pathlib import Path
 
@@ -141,8 +142,11 @@ def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=Non
     src = Path(source)
     if not src.is_file():
         raise ExportError(f"{src} does not exist")
-    with np.load(src, allow_pickle=False) as z:
-        is_track = "rotation" in z.files and "mode_names" in z.files
+    try:
+        with np.load(src, allow_pickle=False) as z:
+            is_track = "rotation" in z.files and "mode_names" in z.files
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        raise ExportError(f"{src} is neither a model nor a track file (not an .npz)") from None
     if is_track:
         track = Track.load(src)
         page = viewer_page(resolve_model(track, model), track=track, title=src.name)
