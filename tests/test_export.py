@@ -267,3 +267,36 @@ def test_export_cli(case, tmp_path, capsys):
     assert main(["export", str(tp), "--format", "usd", "--model", str(om),
                  "--out", str(tmp_path / "t.usd")]) == 2
     assert "different model" in capsys.readouterr().err
+
+
+def test_glb_texture_lifted_from_the_video(case, tmp_path, capsys):
+    import io
+
+    import pygltflib
+    from PIL import Image
+
+    from facetransfer.io.video import write_video
+
+    model, track, _, _ = case
+    colour = np.array([200, 100, 50], np.uint8)
+    W, H = track.frame_size
+    video = write_video(tmp_path / "clip.mp4", [np.tile(colour, (H, W, 1))] * track.n_frames,
+                        track.fps)
+    tp, mp = tmp_path / "t.npz", tmp_path / "m.npz"
+    track.save(tp)
+    model.save(mp)
+    out = tmp_path / "lifted.glb"
+    assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
+                 str(video), "--texture-step", "4", "--out", str(out)]) == 0
+    g = pygltflib.GLTF2().load(str(out))
+    view = g.bufferViews[g.images[0].bufferView]
+    png = g.binary_blob()[view.byteOffset:view.byteOffset + view.byteLength]
+    tex = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).reshape(-1, 3)
+    np.testing.assert_allclose(np.median(tex, axis=0), colour, atol=8)  # the video's colour
+    assert main(["export", str(tp), "--format", "usd", "--model", str(mp), "--texture-from",
+                 str(video), "--out", str(tmp_path / "x.usd")]) == 2
+    assert "only glb" in capsys.readouterr().err
+    short = write_video(tmp_path / "short.mp4", [np.tile(colour, (H, W, 1))] * 3, track.fps)
+    assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
+                 str(short), "--out", str(tmp_path / "y.glb")]) == 2
+    assert "frames" in capsys.readouterr().err

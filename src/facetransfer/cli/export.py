@@ -1,7 +1,7 @@
 """``facetransfer export``: a track's ARKit curves and head pose for animation tools.
 
     facetransfer export TRACK.npz --format livelink --out take.csv        # Live Link Face CSV
-    facetransfer export TRACK.npz --format glb --out face.glb [--texture TEX.png]
+    facetransfer export TRACK.npz --format glb --out face.glb [--texture TEX.png | --texture-from V.mp4]
     facetransfer export TRACK.npz --format usd --out face.usd [--model M.npz]
     facetransfer export TRACK.npz --format json --out blendshapes.json    # MediaPipe layout
 """
@@ -31,6 +31,10 @@ def register(sub) -> None:
                    "track was made with it)")
     p.add_argument("--texture", metavar="TEX.png",
                    help="base-colour texture in the template's UV layout (glb only)")
+    p.add_argument("--texture-from", metavar="VIDEO.mp4",
+                   help="lift the texture from the tracked video instead (glb only)")
+    p.add_argument("--texture-step", type=int, default=10, metavar="N",
+                   help="with --texture-from: use every N-th frame (default 10)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
 
@@ -59,6 +63,17 @@ def default_model_for(track):
             bar.close()
 
 
+def _lift(track, model, args):
+    from tqdm import tqdm
+
+    from ..export.gltf import lift_clip_texture
+
+    with tqdm(total=(track.n_frames + args.texture_step - 1) // args.texture_step,
+              desc="texture lift", unit="frame", disable=not sys.stderr.isatty()) as bar:
+        return lift_clip_texture(track, model, args.texture_from, step=args.texture_step,
+                                 progress=bar.update)
+
+
 def run(args: argparse.Namespace) -> int:
     from ..errors import FaceTransferError
     from ..export import export_track
@@ -69,6 +84,13 @@ def run(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--format: unknown format {args.format!r}; choose one of "
                                 f"{', '.join(FORMATS)}")
     check_output_path(args.out, overwrite=args.overwrite)
+    if args.texture and args.texture_from:
+        raise FaceTransferError("give --texture or --texture-from, not both")
+    if (args.texture or args.texture_from) and args.format != "glb":
+        raise FaceTransferError(f"--texture/--texture-from: only glb files carry a texture, "
+                                f"not {args.format}")
+    if args.texture_step < 1:
+        raise FaceTransferError(f"--texture-step must be >= 1, got {args.texture_step}")
     track = Track.load(args.track)
     model = None
     if args.model:
@@ -77,7 +99,10 @@ def run(args: argparse.Namespace) -> int:
         model = load_model(args.model)
     elif args.format in ("glb", "usd"):
         model = default_model_for(track)
+    texture = args.texture
+    if args.texture_from:
+        texture = _lift(track, model, args)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
-                        texture=args.texture)
+                        texture=texture)
     print(f"wrote {path}: {track.n_frames} frames ({args.format})")
     return 0

@@ -31,7 +31,7 @@ from ..io.atomic import atomic_path
 from .common import (ExportError, head_quaternions, head_translation, identity_rig,
                      require_activations)
 
-__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png"]
+__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture"]
 
 #: Model units to metres (the ICT-FaceKit is in centimetres).
 METRES_PER_UNIT = 0.01
@@ -93,6 +93,26 @@ def texture_png(texture) -> bytes:
     out = io.BytesIO()
     img.save(out, format="PNG")
     return out.getvalue()
+
+
+def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 10,
+                      progress=None) -> np.ndarray:
+    """The face's texture lifted from its video (§6, Eq. (1) weights), merged over every
+    ``step``-th frame and hole-filled, in the template's UV layout.
+
+    Returns
+    -------
+    (tex_size, tex_size, 3) uint8
+        Row 0 is ``v = 1`` (glTF's top-left origin after the exporter's ``1 - v``).
+    """
+    from ..io.video import iter_frames, video_info
+    from ..texture import lift_track, merge_textures, texture_to_uint8
+
+    info = video_info(video)
+    track.check_video(info.n_frames, info.size, what=f"video {video}")
+    lt = lift_track(model, iter_frames(video), track, tex_size=tex_size, step=step,
+                    progress=progress)
+    return texture_to_uint8(merge_textures(lt.lifted).texture)
 
 
 def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
