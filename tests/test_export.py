@@ -201,6 +201,14 @@ def test_usd_blend_shapes_and_animation(case, tmp_path):
     k = 7
     got = pts + np.tensordot(a[k, :51].astype(np.float64), offs, 1)
     np.testing.assert_allclose(got, model.synthesize(track.weights_at(k)), atol=2e-4)
+    try:  # USD's own validators (usd-core >= 24.11): skel binding, stage metadata, ...
+        from pxr import UsdValidation
+    except ImportError:
+        return
+    ctx = UsdValidation.ValidationContext(
+        UsdValidation.ValidationRegistry().GetOrLoadAllValidators())
+    errors = ctx.Validate(stage)
+    assert not errors, [e.GetMessage() for e in errors]
     assert pxr is not None
 
 
