@@ -239,7 +239,8 @@ def _dialled_identity(model, identity, args):
     if identity is None:
         if not args.target_track or args.identity_from:
             raise FaceTransferError("--identity-dials needs the identity to move: "
-                                    "--identity-label, --identity-weights or --target-track")
+                                    "--identity-label, --identity-weights or the target's "
+                                    "(--target-track); not --identity-from")
         tt = Track.load(args.target_track)
         tt.check_model(model)
         identity = constant_weights(tt, dials.mode)
