@@ -54,6 +54,18 @@ def pages(arkit_model, make_arkit_track, tmp_path_factory):
                                                              model=arkit_model), track, a)
 
 
+def test_vendored_three_is_the_pinned_build():
+    import hashlib
+    from importlib import resources
+
+    from facetransfer.export.viewer import THREE_SHA256
+
+    root = resources.files("facetransfer.data").joinpath("vendor/three")
+    assert hashlib.sha256(root.joinpath("three.min.js").read_bytes()).hexdigest() == THREE_SHA256
+    assert "MIT License" in root.joinpath("LICENSE").read_text()
+    assert THREE_VERSION in root.joinpath("README.md").read_text()
+
+
 def test_page_is_self_contained(pages):
     page = pages[0].read_text()
     assert f"three.js {THREE_VERSION}" in page and "THREE.WebGLRenderer" in page

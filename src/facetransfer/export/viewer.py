@@ -35,10 +35,11 @@ from .common import ExportError, head_quaternions, require_activations
 
 log = logging.getLogger(__name__)
 
-__all__ = ["THREE_VERSION", "viewer_page", "write_viewer", "view_rig"]
+__all__ = ["THREE_VERSION", "THREE_SHA256", "viewer_page", "write_viewer", "view_rig"]
 
-#: The vendored three.js release.
+#: The vendored three.js release and the sha256 of its ``build/three.min.js``.
 THREE_VERSION = "0.159.0"
+THREE_SHA256 = "7b1c5d75b28d9de15042e2b374f83566d8c7146697af8fdeb4558b0fb528a585"
 
 
 def _b64(a: np.ndarray) -> str:
