@@ -88,9 +88,43 @@ def quick_model_path(quick_model, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def arkit_model(data_dir):
-    """A small untruncated ``ict-arkit`` model: 4 identities × (neutral + 51 ARKit shapes)."""
-    from facetransfer.datasets import build_ict_dataset
+    """A small untruncated ARKit model: ``ict-arkit`` with 6 identities x 52 expressions (so
+    activations and expression weights convert exactly, and the training meshes reproduce).
+    Cached data set: ~25 s once."""
+    from facetransfer.datasets.ict import build_ict_dataset
     from facetransfer.model import build_model
 
-    ds = build_ict_dataset("ict-arkit", n_identities=4, seed=0)
-    return build_model(ds, refine=False)
+    ds = build_ict_dataset("ict-arkit", n_identities=6, use_cache=True)
+    return build_model(ds, {"identity": ds.shape[0], "expression": ds.shape[1]}, refine=False)
+
+
+def synthetic_arkit_track(model, n_frames: int = 12, *, seed: int = 0, identity: int = 1,
+                          fps: float = 25.0):
+    """A track of ``model`` with known activations, head angles (yaw, pitch, roll; radians) and
+    translation. Returns (track, activations (F, 52) float32, angles (F, 3))."""
+    from scipy.spatial.transform import Rotation
+
+    from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+    from facetransfer.track.result import Track
+
+    rng = np.random.default_rng(seed)
+    a = rng.uniform(0, 1, (n_frames, 52)).astype(np.float32)
+    a[:, ARKIT_NAMES.index("tongueOut")] = 0.0  # the FaceKit has no tongue shape
+    ang = rng.uniform(-0.4, 0.4, (n_frames, 3))
+    R = Rotation.from_euler("YXZ", ang).as_matrix()
+    k = model.mode_index("identity")
+    track = Track(fps=fps, frame_size=(640, 480), rotation=R,
+                  scale=rng.uniform(8, 12, n_frames), translation=rng.uniform(200, 400, (n_frames, 2)),
+                  weights={"identity": np.tile(model.factors[k][identity], (n_frames, 1)),
+                           "expression": activations_to_weights(model, a)},
+                  landmarks2d=np.zeros((n_frames, 68, 2)), confidence=np.ones(n_frames),
+                  lost=np.zeros(n_frames, bool), model_hash=model.content_hash,
+                  mode_names=model.mode_names, source="synthetic.mp4", blendshapes=a,
+                  blendshape_names=ARKIT_NAMES)
+    return track, a, ang
+
+
+@pytest.fixture(scope="session")
+def make_arkit_track():
+    """:func:`synthetic_arkit_track` as a fixture."""
+    return synthetic_arkit_track

@@ -4,6 +4,7 @@
     facetransfer model info bilinear.npz
     facetransfer model synth bilinear.npz --like identity=id03,expression=smile --out face.obj
     facetransfer model sheet bilinear.npz --out sheet.png        # also writes sheet_dials.png
+    facetransfer model dials bilinear.npz [--out dials.png]      # semantic identity dials
 """
 
 from __future__ import annotations
@@ -368,9 +369,35 @@ def cmd_sheet(args: argparse.Namespace) -> int:
     return 0
 
 
+# --------------------------------------------------------------------------------- dials
+def cmd_dials(args: argparse.Namespace) -> int:
+    from ..dials import dial_sheet, learn_dials
+    from ..model import load_model
+
+    if args.out:
+        if Path(args.out).suffix.lower() != ".png":
+            raise FaceTransferError(f"--out must end in .png, got {args.out}")
+        check_output_path(args.out, overwrite=args.overwrite)
+    m = load_model(args.model)
+    dials = learn_dials(m)
+    lines = [f"identity dials of {args.model} (learnt from {m.shape[0]} identities; one unit = "
+             f"one standard deviation of the measurement; {dials.unit})",
+             f"  {'dial':14s} {'R2':>6s} {'LOO R2':>7s} {'sd':>8s} {'+1 unit':>9s}  measures"]
+    for d in dials.dials:
+        lines.append(f"  {d.name:14s} {d.r2:6.3f} {d.r2_loo:7.3f} {d.sigma:8.3f} "
+                     f"{d.effect:+9.3f}  {d.description}")
+    print("\n".join(lines))
+    if args.out:
+        img = dial_sheet(m, dials)
+        with atomic_path(args.out, overwrite=args.overwrite) as tmp:
+            img.save(tmp, format="PNG")
+        print(f"wrote {args.out}")
+    return 0
+
+
 # --------------------------------------------------------------------------------- register
 def register(sub) -> None:
-    """Add ``facetransfer model {build,info,synth,sheet}``."""
+    """Add ``facetransfer model {build,info,synth,sheet,dials}``."""
     p = sub.add_parser("model", help="build, inspect and sample multilinear face models (§4)",
                        description="Multilinear face models (Vlasic et al. 2005, §4).")
     msub = p.add_subparsers(dest="model_command", metavar="ACTION")
@@ -408,3 +435,11 @@ def register(sub) -> None:
     h.add_argument("--out", required=True, help="SHEET.png (also writes SHEET_dials.png)")
     h.add_argument("--max-identities", type=int, default=8, help="rows of the first sheet")
     h.set_defaults(func=cmd_sheet)
+
+    dl = msub.add_parser("dials", help="semantic identity dials (face width, nose length, ...) "
+                         "with R², and a picture sheet")
+    dl.add_argument("model")
+    dl.add_argument("--out", metavar="DIALS.png", help="also draw the dials (mean face at -2, 0, "
+                    "+2 units)")
+    dl.add_argument("--overwrite", action="store_true", help="replace an existing picture")
+    dl.set_defaults(func=cmd_dials)

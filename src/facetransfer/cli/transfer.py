@@ -95,6 +95,10 @@ def register(sub) -> None:
                    help="identity weights: comma-separated numbers or a .npy file")
     g.add_argument("--identity-label", metavar="L", help="a training identity of the model")
     p.add_argument("--identity-track", metavar="V.npz", help="track file of --identity-from")
+    p.add_argument("--identity-dials", metavar="NAME=UNITS,...",
+                   help="move the identity along semantic dials (`facetransfer model dials`), "
+                   "e.g. width=+1.5,nose_length=-1; needs --identity-label, --identity-weights or "
+                   "--target-track")
     p.add_argument("--pose-from", metavar="P.mp4",
                    help="video whose head pose to use (same frame size as the target)")
     p.add_argument("--pose-track", metavar="P.npz", help="track file of --pose-from")
@@ -125,6 +129,8 @@ def register(sub) -> None:
     e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
                    help="scale the component of the expression along EXPR - neutral; repeatable")
     e.add_argument("--ramp", type=int, default=8, help="ramp length in frames at range ends")
+    e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
+                   help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1")
     e.add_argument("--out", required=True, metavar="TRACK2.npz")
     e.add_argument("--overwrite", action="store_true", help="replace an existing output")
     e.set_defaults(func=run_edit)
@@ -174,7 +180,7 @@ def run_transfer(args) -> int:
     _positive(args.max_frames, "--max-frames")
     if not (args.expression_from or args.viseme_from or args.identity_from
             or args.identity_weights or args.identity_label or args.pose_from
-            or args.performance):
+            or args.performance or args.identity_dials):
         raise FaceTransferError("nothing to transfer: give --expression-from, --viseme-from, "
                                 "--identity-from/--identity-weights/--identity-label, "
                                 "--pose-from or --performance")
@@ -198,6 +204,8 @@ def run_transfer(args) -> int:
     elif args.identity_weights:
         idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
         identity = parse_weights(args.identity_weights, model.ranks[model.mode_index(idm)])
+    if args.identity_dials:
+        identity = _dialled_identity(model, identity, args)
     res = transfer_video(
         args.target, args.out, model, overwrite=args.overwrite, texture=args.texture,
         blend=args.blend, mouth=args.mouth, meshes_dir=args.meshes, save_track=args.save_track,
@@ -217,6 +225,27 @@ def run_transfer(args) -> int:
     if args.meshes:
         print(f"wrote {res.n_frames} meshes to {args.meshes}")
     return 0
+
+
+def _dialled_identity(model, identity, args):
+    """``--identity-dials`` applied to the chosen identity (or the target track's)."""
+    from ..dials import learn_dials, parse_dial_values
+    from ..track import Track
+    from ..transfer import constant_weights
+
+    values = parse_dial_values(args.identity_dials)
+    dials = learn_dials(model)
+    for name in values:
+        dials.get(name)
+    if identity is None:
+        if not args.target_track or args.identity_from:
+            raise FaceTransferError("--identity-dials needs the identity to move: "
+                                    "--identity-label, --identity-weights or the target's "
+                                    "(--target-track); not --identity-from")
+        tt = Track.load(args.target_track)
+        tt.check_model(model)
+        identity = constant_weights(tt, dials.mode)
+    return dials.apply(identity, values)
 
 
 def _model_for_track(track, model_path):
@@ -240,18 +269,27 @@ def run_edit(args) -> int:
     from ..track import Track
     from ..transfer import edit_track, parse_add, parse_scale
 
-    if not args.add and not args.scale:
-        raise FaceTransferError("nothing to do: give --add EXPR@START-END and/or --scale "
-                                "EXPR=FACTOR")
+    if not args.add and not args.scale and not args.identity_dials:
+        raise FaceTransferError("nothing to do: give --add EXPR@START-END, --scale "
+                                "EXPR=FACTOR and/or --identity-dials NAME=UNITS")
+    dial_values = None
+    if args.identity_dials:
+        from ..dials import parse_dial_values
+
+        dial_values = parse_dial_values(args.identity_dials)
     adds = [parse_add(a) for a in args.add]
     scales = [parse_scale(s) for s in args.scale]
     check_output_path(args.out, overwrite=args.overwrite)
     track = Track.load(args.track)
     model = _model_for_track(track, args.model)
     new = edit_track(track, model, add=adds, scale=scales, ramp=args.ramp)
+    if dial_values:
+        from ..dials import dial_track
+
+        new = dial_track(new, model, dial_values)
     new.save(args.out, overwrite=args.overwrite)
     print(f"wrote {args.out}: {new.n_frames} frames, {len(adds)} addition(s), "
-          f"{len(scales)} scaling(s)")
+          f"{len(scales)} scaling(s)" + (f", dials {args.identity_dials}" if dial_values else ""))
     return 0
 
 

@@ -1,0 +1,108 @@
+"""``facetransfer export``: a track's ARKit curves and head pose for animation tools.
+
+    facetransfer export TRACK.npz --format livelink --out take.csv        # Live Link Face CSV
+    facetransfer export TRACK.npz --format glb --out face.glb [--texture TEX.png | --texture-from V.mp4]
+    facetransfer export TRACK.npz --format usd --out face.usd [--model M.npz]
+    facetransfer export TRACK.npz --format json --out blendshapes.json    # MediaPipe layout
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..export import FORMATS
+
+
+def register(sub) -> None:
+    """Add ``facetransfer export``."""
+    p = sub.add_parser(
+        "export", help="write a track's ARKit blendshapes and head pose (Live Link CSV, glb, "
+        "USD, MediaPipe JSON)",
+        description="Export a track's ARKit activations and head pose: livelink (Live Link Face "
+        "CSV), glb (glTF 2.0 with 52 morph targets and the animation), usd (UsdSkel), json "
+        "(MediaPipe's blendshape layout).")
+    p.add_argument("track", metavar="TRACK.npz")
+    p.add_argument("--format", required=True, metavar="FMT",
+                   help=f"one of {', '.join(FORMATS)}")
+    p.add_argument("--out", required=True, metavar="FILE", help="file to write")
+    p.add_argument("--model", metavar="M.npz",
+                   help="the model the track was made with (default: the default model, if the "
+                   "track was made with it)")
+    p.add_argument("--texture", metavar="TEX.png",
+                   help="base-colour texture in the template's UV layout (glb only)")
+    p.add_argument("--texture-from", metavar="VIDEO.mp4",
+                   help="lift the texture from the tracked video instead (glb only)")
+    p.add_argument("--texture-step", type=int, default=10, metavar="N",
+                   help="with --texture-from: use every N-th frame (default 10)")
+    p.add_argument("--overwrite", action="store_true", help="replace an existing output")
+    p.set_defaults(func=run)
+
+
+def default_model_for(track):
+    """The default model for a track given without ``--model`` (built once with a progress bar;
+    an error asking for ``--model`` if the track was made with another model)."""
+    from tqdm import tqdm
+
+    from ..export.common import resolve_model
+
+    bar = None
+
+    def progress(done: int, total: int) -> None:
+        nonlocal bar
+        if bar is None:
+            bar = tqdm(total=total, desc="default model", unit="identity", leave=False,
+                       disable=not sys.stderr.isatty())
+        bar.update(done - bar.n)
+
+    try:
+        return resolve_model(track, progress=progress,
+                             announce=lambda m: print(m, file=sys.stderr))
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _lift(track, model, args):
+    from tqdm import tqdm
+
+    from ..export.gltf import lift_clip_texture
+
+    with tqdm(total=(track.n_frames + args.texture_step - 1) // args.texture_step,
+              desc="texture lift", unit="frame", disable=not sys.stderr.isatty()) as bar:
+        return lift_clip_texture(track, model, args.texture_from, step=args.texture_step,
+                                 progress=bar.update)
+
+
+def run(args: argparse.Namespace) -> int:
+    from ..errors import FaceTransferError
+    from ..export import export_track
+    from ..io.atomic import check_output_path
+    from ..track import Track
+
+    if args.format not in FORMATS:
+        raise FaceTransferError(f"--format: unknown format {args.format!r}; choose one of "
+                                f"{', '.join(FORMATS)}")
+    check_output_path(args.out, overwrite=args.overwrite)
+    if args.texture and args.texture_from:
+        raise FaceTransferError("give --texture or --texture-from, not both")
+    if (args.texture or args.texture_from) and args.format != "glb":
+        raise FaceTransferError(f"--texture/--texture-from: only glb files carry a texture, "
+                                f"not {args.format}")
+    if args.texture_step < 1:
+        raise FaceTransferError(f"--texture-step must be >= 1, got {args.texture_step}")
+    track = Track.load(args.track)
+    model = None
+    if args.model:
+        from ..model import load_model
+
+        model = load_model(args.model)
+    elif args.format in ("glb", "usd"):
+        model = default_model_for(track)
+    texture = args.texture
+    if args.texture_from:
+        texture = _lift(track, model, args)
+    path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
+                        texture=texture)
+    print(f"wrote {path}: {track.n_frames} frames ({args.format})")
+    return 0

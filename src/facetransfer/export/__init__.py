@@ -1,0 +1,80 @@
+"""Exports animators can use (beyond the paper): Live Link Face CSV, glTF, USD, MediaPipe JSON.
+
+A track's ARKit activations (``TRACK.npz`` key ``blendshapes``) and head pose go out in the
+formats that Blender, Unreal, Maya, Unity and tools written against MediaPipe read:
+
+==========  ============  ===========================================================
+format      module        what
+==========  ============  ===========================================================
+livelink    livelink      Live Link Face CSV take (the app's columns, by position)
+glb         gltf          glTF 2.0 binary: the person, 52 morph targets, one animation
+usd         usd           UsdSkel blend shapes + SkelAnimation (needs ``usd-core``)
+json        mpjson        per-frame scores in MediaPipe Face Landmarker's layout
+==========  ============  ===========================================================
+
+The browser dial editor is :mod:`facetransfer.export.viewer`.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..io.atomic import check_output_path
+from .common import ExportError, require_activations, resolve_model
+
+__all__ = ["FORMATS", "ExportError", "export_track"]
+
+#: Format name -> usual file suffix.
+FORMATS: dict[str, str] = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "json": ".json"}
+
+
+def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwrite: bool = False,
+                 texture=None) -> Path:
+    """Write ``track`` in format ``fmt`` to ``out`` and return the path.
+
+    Parameters
+    ----------
+    track : facetransfer.track.Track
+        With ARKit activations (``blendshapes``).
+    fmt : {"livelink", "glb", "usd", "json"}
+    out : path-like
+        Its folder must exist; an existing file is replaced only with ``overwrite``.
+    model : MultilinearModel, optional
+        The track's model; None: the default model, if the track was made with it.
+    overwrite : bool
+    texture : path or (H, W, 3) uint8, optional
+        Base-colour texture in the template's UV layout (``glb`` only).
+
+    Raises
+    ------
+    ExportError
+        Unknown format, no activations, a model that does not match, a texture for a format
+        without one.
+    """
+    if fmt not in FORMATS:
+        raise ExportError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    check_output_path(out, overwrite=overwrite)
+    if texture is not None and fmt != "glb":
+        raise ExportError(f"a texture is written only into glb files, not {fmt}")
+    require_activations(track)
+    if fmt == "livelink":
+        from .livelink import write_livelink
+
+        if model is not None:
+            track.check_model(model)
+        return write_livelink(track, out, overwrite=overwrite)
+    if fmt == "json":
+        from .mpjson import write_mediapipe_json
+
+        if model is not None:
+            track.check_model(model)
+        return write_mediapipe_json(track, out, overwrite=overwrite)
+    model = resolve_model(track, model)
+    if fmt == "glb":
+        from .gltf import write_glb
+
+        return write_glb(track, model, out, overwrite=overwrite, texture=texture)
+    from .usd import write_usd
+
+    return write_usd(track, model, out, overwrite=overwrite)

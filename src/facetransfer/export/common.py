@@ -1,0 +1,133 @@
+"""What every export format shares: the model check, the activations, the head pose.
+
+Beyond the paper: a track (``TRACK.npz``) holds the weak-perspective pose of Eq. (7) and, for a
+model whose expressions are ARKit blendshapes (:mod:`facetransfer.arkit`), the 52 activations
+per frame. Exporters read only those; this module turns the pose into the quantities animation
+tools key (head Euler angles in radians, a quaternion, a translation in model units).
+
+Conventions (camera coordinates of :class:`facetransfer.render.WeakPerspective`: x right,
+y up, z towards the viewer):
+
+* ``R = Ry(yaw) @ Rx(pitch) @ Rz(roll)`` (intrinsic Y-X'-Z''), angles in **radians**;
+  positive yaw turns the face towards the image's right (the subject's left), positive pitch
+  tips the top of the head towards the camera (looking down), positive roll turns the face
+  counter-clockwise in the image.
+* Head translation in model units: ``((t_x - W/2) / s, -(t_y - H/2) / s, 0)``, the model origin's
+  offset from the image centre at the face's depth (weak perspective has no depth).
+"""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from ..arkit import ARKIT_NAMES
+from ..errors import FaceTransferError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["ExportError", "require_activations", "resolve_model", "head_euler",
+           "head_quaternions", "head_translation"]
+
+
+class ExportError(FaceTransferError):
+    """A track cannot be exported (no activations, wrong model, unknown format)."""
+
+
+_NO_ACTIVATIONS = ("has no ARKit blendshape activations; track the video with the default "
+                   "model (ict-arkit: `facetransfer track` without --model) or with a model built "
+                   "from the ict-arkit data set, whose expressions are the 52 ARKit blendshapes")
+
+
+def require_activations(track, *, what: str = "track") -> np.ndarray:
+    """The track's activations in :data:`ARKIT_NAMES` order, ``(F, 52) float32``.
+
+    Raises
+    ------
+    ExportError
+        If the track has none, naming the model that gives them.
+    """
+    if track.blendshapes is None:
+        src = f" {track.source}" if track.source else ""
+        raise ExportError(f"{what}{src} {_NO_ACTIVATIONS}")
+    names = tuple(track.blendshape_names)
+    if names == ARKIT_NAMES:
+        return np.asarray(track.blendshapes, dtype=np.float32)
+    unknown = sorted(set(names) - set(ARKIT_NAMES))
+    if unknown:
+        raise ExportError(f"{what} has blendshapes {unknown[:5]} that are not ARKit names")
+    out = np.zeros((track.n_frames, len(ARKIT_NAMES)), np.float32)
+    for j, n in enumerate(names):
+        out[:, ARKIT_NAMES.index(n)] = track.blendshapes[:, j]
+    return out
+
+
+def resolve_model(track, model=None, *, progress=None, announce=None):
+    """The model of ``track``: ``model`` if given (checked), else the default model if the
+    track was made with it (``progress`` and ``announce`` go to
+    :func:`facetransfer.default_model.load_default_model`, which builds it on first use).
+
+    Raises
+    ------
+    ExportError, TrackError
+        No model given and the track is not of the default model; or a model that does not
+        match the track (modes, ranks or content hash).
+    """
+    if model is None:
+        from ..default_model import load_default_model
+
+        model = load_default_model(progress=progress, announce=announce)
+        if track.model_hash and track.model_hash != model.content_hash:
+            raise ExportError("the track was not made with the default model (ict-arkit); pass "
+                              "the model it was tracked with (--model M.npz)")
+    track.check_model(model)
+    return model
+
+
+def head_euler(rotation: np.ndarray) -> np.ndarray:
+    """Yaw, pitch, roll in radians per frame (see the module's conventions).
+
+    Parameters
+    ----------
+    rotation : (F, 3, 3) float
+        Model-to-camera rotations.
+
+    Returns
+    -------
+    (F, 3) float64
+        ``[yaw, pitch, roll]`` with ``R = Ry(yaw) Rx(pitch) Rz(roll)``.
+    """
+    from scipy.spatial.transform import Rotation
+
+    return Rotation.from_matrix(np.asarray(rotation, np.float64)).as_euler("YXZ")
+
+
+def head_quaternions(rotation: np.ndarray) -> np.ndarray:
+    """Unit quaternions ``(F, 4)`` in ``(x, y, z, w)`` order (glTF's), ``w >= 0``."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(np.asarray(rotation, np.float64)).as_quat()
+    q *= np.where(q[:, 3:] < 0, -1.0, 1.0)
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+def head_translation(track) -> np.ndarray:
+    """Per-frame translation of the model origin in model units, ``(F, 3) float64``."""
+    W, H = track.frame_size
+    s = np.asarray(track.scale, np.float64)
+    t = np.asarray(track.translation, np.float64)
+    out = np.zeros((track.n_frames, 3))
+    out[:, 0] = (t[:, 0] - W / 2.0) / s
+    out[:, 1] = -(t[:, 1] - H / 2.0) / s
+    return out
+
+
+def identity_rig(track, model):
+    """The clip's person as an ARKit blendshape rig (identity of frame 0; it is constant)."""
+    from ..arkit import expression_rig, is_arkit_model
+
+    if not is_arkit_model(model):
+        raise ExportError("the model's expressions are not ARKit blendshapes; morph targets need "
+                          "a model built from the ict-arkit data set (the default model)")
+    return expression_rig(model, track.weights_at(0))

@@ -1,0 +1,218 @@
+"""glTF 2.0 binary (``.glb``): the clip's person with 52 ARKit morph targets and the performance.
+
+The file holds one node ``face`` with one mesh: the person's neutral face (the track's identity,
+Eq. (9)) with the template's UVs (v flipped: glTF's origin is the image's top left), vertex
+normals, optionally the texture lifted from the video as its base colour, and 52 morph targets
+(``POSITION`` deltas ``f_j - f_0``, :func:`facetransfer.arkit.expression_rig`) named in
+``mesh.extras.targetNames`` in :data:`facetransfer.arkit.ARKIT_NAMES` order (the convention
+three.js, Blender and Babylon read). One animation ``performance`` has a ``weights`` channel with
+one key per frame (time ``k / fps``, LINEAR) whose values are the track's activations, and the
+head pose as the node's ``rotation`` and ``translation`` channels (same keys). Positions are in
+metres (glTF's unit): model units times ``metres_per_unit`` (0.01 for the ICT-FaceKit's
+centimetres).
+
+Written with pygltflib; every file the tests write passes the Khronos glTF validator.
+
+References
+----------
+Khronos glTF 2.0 specification, §3.7.2.2 Morph Targets, §3.11 Animations.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..arkit import ARKIT_NAMES
+from ..io.atomic import atomic_path
+from .common import (ExportError, head_quaternions, head_translation, identity_rig,
+                     require_activations)
+
+__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture"]
+
+#: Model units to metres (the ICT-FaceKit is in centimetres).
+METRES_PER_UNIT = 0.01
+
+_ARRAY, _ELEMENTS = 34962, 34963
+_FLOAT, _UINT = 5126, 5125
+
+
+class _Blob:
+    """The binary chunk: aligned views and accessors appended one by one."""
+
+    def __init__(self, gltf):
+        self.gltf = gltf
+        self.buf = io.BytesIO()
+
+    def view(self, data: bytes, target: int | None = None) -> int:
+        from pygltflib import BufferView
+
+        pad = (-self.buf.tell()) % 4
+        self.buf.write(b"\0" * pad)
+        off = self.buf.tell()
+        self.buf.write(data)
+        self.gltf.bufferViews.append(BufferView(buffer=0, byteOffset=off, byteLength=len(data),
+                                                target=target))
+        return len(self.gltf.bufferViews) - 1
+
+    def accessor(self, a: np.ndarray, kind: str, *, target: int | None = _ARRAY,
+                 bounds: bool = False) -> int:
+        from pygltflib import Accessor
+
+        comp = _UINT if a.dtype == np.uint32 else _FLOAT
+        view = self.view(np.ascontiguousarray(a).tobytes(), target)
+        flat = a.reshape(len(a), -1)
+        acc = Accessor(bufferView=view, componentType=comp, count=int(len(a)), type=kind)
+        if bounds:
+            acc.min = [float(x) for x in flat.min(axis=0)]
+            acc.max = [float(x) for x in flat.max(axis=0)]
+            if comp == _UINT:
+                acc.min, acc.max = [int(x) for x in acc.min], [int(x) for x in acc.max]
+        self.gltf.accessors.append(acc)
+        return len(self.gltf.accessors) - 1
+
+
+def texture_png(texture) -> bytes:
+    """PNG bytes of a texture given as an image path or an ``(H, W, 3)`` uint8 RGB array."""
+    from PIL import Image
+
+    if isinstance(texture, (str, os.PathLike)):
+        p = Path(texture)
+        try:
+            img = Image.open(p).convert("RGB")
+        except (OSError, ValueError) as exc:
+            raise ExportError(f"cannot read texture image {p} ({exc})") from None
+    else:
+        a = np.asarray(texture)
+        if a.ndim != 3 or a.shape[2] != 3:
+            raise ExportError(f"texture must be (H, W, 3), got {a.shape}")
+        img = Image.fromarray(np.clip(a, 0, 255).astype(np.uint8), "RGB")
+    out = io.BytesIO()
+    img.save(out, format="PNG")
+    return out.getvalue()
+
+
+def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 10,
+                      progress=None) -> np.ndarray:
+    """The face's texture lifted from its video (§6, Eq. (1) weights), merged over every
+    ``step``-th frame and hole-filled, in the template's UV layout.
+
+    Returns
+    -------
+    (tex_size, tex_size, 3) uint8
+        Row 0 is ``v = 1`` (glTF's top-left origin after the exporter's ``1 - v``).
+    """
+    from ..io.video import iter_frames, video_info
+    from ..texture import lift_track, merge_textures, texture_to_uint8
+
+    info = video_info(video)
+    track.check_video(info.n_frames, info.size, what=f"video {video}")
+    lt = lift_track(model, iter_frames(video), track, tex_size=tex_size, step=step,
+                    progress=progress)
+    return texture_to_uint8(merge_textures(lt.lifted).texture)
+
+
+def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    import trimesh
+
+    n = trimesh.Trimesh(vertices, faces, process=False).vertex_normals.astype(np.float32)
+    bad = ~np.isfinite(n).all(axis=1) | (np.linalg.norm(n, axis=1) < 0.5)
+    n[bad] = (0.0, 0.0, 1.0)
+    return (n / np.linalg.norm(n, axis=1, keepdims=True)).astype(np.float32)
+
+
+def _material(gltf, blob: _Blob, texture) -> int:
+    from pygltflib import (Image, Material, PbrMetallicRoughness, Sampler, Texture,
+                           TextureInfo)
+
+    pbr = PbrMetallicRoughness(baseColorFactor=[0.86, 0.72, 0.64, 1.0], metallicFactor=0.0,
+                               roughnessFactor=0.7)
+    if texture is not None:
+        view = blob.view(texture_png(texture))
+        gltf.images.append(Image(bufferView=view, mimeType="image/png"))
+        gltf.samplers.append(Sampler(magFilter=9729, minFilter=9729, wrapS=33071, wrapT=33071))
+        gltf.textures.append(Texture(source=0, sampler=0))
+        pbr.baseColorFactor = [1.0, 1.0, 1.0, 1.0]
+        pbr.baseColorTexture = TextureInfo(index=0)
+    gltf.materials.append(Material(name="skin", pbrMetallicRoughness=pbr, doubleSided=False))
+    return 0
+
+
+def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
+    from pygltflib import Attributes, Mesh, Primitive
+
+    V = (rig.neutral * unit).astype(np.float32)
+    faces = np.asarray(model.faces, np.int64)
+    attrs = Attributes(POSITION=blob.accessor(V, "VEC3", bounds=True),
+                       NORMAL=blob.accessor(_normals(V, faces), "VEC3"))
+    if model.uvs is not None:
+        uv = np.asarray(model.uvs, np.float64).copy()
+        uv[:, 1] = 1.0 - uv[:, 1]  # glTF's texture origin is top left
+        attrs.TEXCOORD_0 = blob.accessor(uv.astype(np.float32), "VEC2")
+    targets = [Attributes(POSITION=blob.accessor((d * unit).astype(np.float32), "VEC3",
+                                                 bounds=True)) for d in rig.deltas]
+    idx = faces.astype(np.uint32).reshape(-1, 1)
+    prim = Primitive(attributes=attrs, indices=blob.accessor(idx, "SCALAR", target=_ELEMENTS),
+                     material=material, targets=targets)
+    gltf.meshes.append(Mesh(name="face", primitives=[prim], weights=[0.0] * len(rig.deltas),
+                            extras={"targetNames": list(ARKIT_NAMES)}))
+
+
+def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float) -> None:
+    from pygltflib import Animation, AnimationChannel, AnimationChannelTarget, AnimationSampler
+
+    t = (np.arange(track.n_frames) / track.fps).astype(np.float32).reshape(-1, 1)
+    inp = blob.accessor(t, "SCALAR", target=None, bounds=True)
+    outs = {"weights": (activations.reshape(-1, 1).astype(np.float32), "SCALAR"),
+            "rotation": (head_quaternions(track.rotation).astype(np.float32), "VEC4"),
+            "translation": ((head_translation(track) * unit).astype(np.float32), "VEC3")}
+    anim = Animation(name="performance")
+    for i, (path, (a, kind)) in enumerate(outs.items()):
+        anim.samplers.append(AnimationSampler(input=inp, output=blob.accessor(a, kind, target=None),
+                                              interpolation="LINEAR"))
+        anim.channels.append(AnimationChannel(sampler=i,
+                                              target=AnimationChannelTarget(node=0, path=path)))
+    gltf.animations.append(anim)
+
+
+def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, texture=None,
+              metres_per_unit: float = METRES_PER_UNIT) -> Path:
+    """Write the track as a glTF 2.0 binary with ARKit morph targets and return the path.
+
+    Parameters
+    ----------
+    track : Track
+        With ``blendshapes``.
+    model : MultilinearModel
+        The track's model (ARKit-named expressions).
+    texture : path or (H, W, 3) uint8, optional
+        Base colour in the template's UV layout (e.g. lifted from the video).
+    metres_per_unit : float
+        Model units to metres.
+    """
+    from pygltflib import GLTF2, Asset, Buffer, Node, Scene
+
+    a = require_activations(track)
+    rig = identity_rig(track, model)
+    gltf = GLTF2(asset=Asset(version="2.0", generator="facetransfer"))
+    blob = _Blob(gltf)
+    _mesh(gltf, blob, rig, model, float(metres_per_unit), _material(gltf, blob, texture))
+    q0 = head_quaternions(track.rotation[:1])[0]
+    gltf.nodes.append(Node(name="face", mesh=0, rotation=[float(x) for x in q0],
+                           translation=[float(x) for x in head_translation(track)[0]
+                                        * metres_per_unit]))
+    gltf.scenes.append(Scene(name="facetransfer", nodes=[0]))
+    gltf.scene = 0
+    _animation(gltf, blob, track, a, float(metres_per_unit))
+    pad = (-blob.buf.tell()) % 4
+    blob.buf.write(b"\0" * pad)
+    data = blob.buf.getvalue()
+    gltf.buffers.append(Buffer(byteLength=len(data)))
+    gltf.set_binary_blob(data)
+    gltf.extras = {"source": track.source, "fps": track.fps}
+    with atomic_path(out, overwrite=overwrite) as tmp:
+        gltf.save_binary(str(tmp))
+    return Path(out)

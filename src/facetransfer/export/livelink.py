@@ -1,0 +1,165 @@
+"""Live Link Face CSV: the take file of Epic Games' Live Link Face iOS app, column for column.
+
+Importers (the Blender, Maya and MotionBuilder add-ons, Unreal's Live Link Face importer) read
+its columns by position, so the layout is the app's exactly:
+
+* header ``Timecode,BlendShapeCount,`` then the 52 ARKit names in PascalCase in the app's order
+  (:data:`LIVELINK_NAMES`: eyes left, eyes right, jaw, mouth, brows, cheeks, nose, tongue; note
+  ``JawRight`` before ``JawLeft`` and ``MouthRight`` before ``MouthLeft``), then the 9 rotation
+  columns :data:`POSE_COLUMNS`;
+* one row per frame: timecode ``HH:MM:SS:FF.mmm`` (frame ``FF`` at the clip's nominal integer
+  rate, ``.mmm`` the sub-frame in thousandths, as the app writes for 59.94 fps takes), the count
+  ``61`` (52 + 9 values), the activations in [0, 1], then head yaw, pitch and roll in **radians**
+  (:func:`facetransfer.export.common.head_euler`) and the six eye angles (0: facetransfer does not
+  track gaze).
+
+References
+----------
+Header row of the app's CSV takes as reproduced byte for byte by open importers:
+nmfisher/blender_livelinkface (``bpylivelinkface.py``, ``LIVE_LINK_FACE_HEADER``),
+alexdjulin/LiveLinkFace-CSV-Retarget-For-Motionbuilder; radians for the head angles as in
+JimWest/MeFaMo (Euler angles of the pose matrix sent as ``HeadYaw``/``HeadPitch``/``HeadRoll``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..arkit import ARKIT_NAMES
+from ..io.atomic import write_text_atomic
+from .common import ExportError, head_euler, require_activations
+
+__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "format_timecode", "parse_timecode",
+           "livelink_rows", "write_livelink", "read_livelink", "LiveLinkTake"]
+
+#: The app's 52 blendshape columns, in its order.
+LIVELINK_NAMES: tuple[str, ...] = (
+    "EyeBlinkLeft", "EyeLookDownLeft", "EyeLookInLeft", "EyeLookOutLeft", "EyeLookUpLeft",
+    "EyeSquintLeft", "EyeWideLeft", "EyeBlinkRight", "EyeLookDownRight", "EyeLookInRight",
+    "EyeLookOutRight", "EyeLookUpRight", "EyeSquintRight", "EyeWideRight", "JawForward",
+    "JawRight", "JawLeft", "JawOpen", "MouthClose", "MouthFunnel", "MouthPucker", "MouthRight",
+    "MouthLeft", "MouthSmileLeft", "MouthSmileRight", "MouthFrownLeft", "MouthFrownRight",
+    "MouthDimpleLeft", "MouthDimpleRight", "MouthStretchLeft", "MouthStretchRight",
+    "MouthRollLower", "MouthRollUpper", "MouthShrugLower", "MouthShrugUpper", "MouthPressLeft",
+    "MouthPressRight", "MouthLowerDownLeft", "MouthLowerDownRight", "MouthUpperUpLeft",
+    "MouthUpperUpRight", "BrowDownLeft", "BrowDownRight", "BrowInnerUp", "BrowOuterUpLeft",
+    "BrowOuterUpRight", "CheekPuff", "CheekSquintLeft", "CheekSquintRight", "NoseSneerLeft",
+    "NoseSneerRight", "TongueOut",
+)
+#: The 9 rotation columns after the blendshapes (radians).
+POSE_COLUMNS: tuple[str, ...] = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw",
+                                 "LeftEyePitch", "LeftEyeRoll", "RightEyeYaw", "RightEyePitch",
+                                 "RightEyeRoll")
+HEADER: tuple[str, ...] = ("Timecode", "BlendShapeCount") + LIVELINK_NAMES + POSE_COLUMNS
+#: Position in :data:`ARKIT_NAMES` of each app column (PascalCase = capitalised camelCase).
+_TO_ARKIT = np.array([ARKIT_NAMES.index(n[0].lower() + n[1:]) for n in LIVELINK_NAMES])
+if sorted(_TO_ARKIT.tolist()) != list(range(len(ARKIT_NAMES))):  # a packaging error
+    raise ImportError("LIVELINK_NAMES is not a permutation of ARKIT_NAMES")
+
+_TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2}):(\d{2,3})\.(\d{3})$")
+
+
+def _nominal_rate(fps: float) -> int:
+    return max(1, int(round(float(fps))))
+
+
+def format_timecode(frame: int, fps: float) -> str:
+    """``HH:MM:SS:FF.mmm`` of a frame index at ``fps`` (frame 0 is ``00:00:00:00.000``).
+
+    Time ``k / fps`` is counted in frames of the nominal rate ``round(fps)``: ``FF`` is the frame
+    within the second, ``mmm`` the thousandths of a frame (0 for integer rates).
+    """
+    rate = _nominal_rate(fps)
+    units = round(int(frame) * rate / float(fps) * 1000)  # thousandths of a nominal frame
+    whole, milli = divmod(units, 1000)
+    secs, ff = divmod(whole, rate)
+    mins, ss = divmod(secs, 60)
+    hh, mm = divmod(mins, 60)
+    return f"{hh:02d}:{mm:02d}:{ss:02d}:{ff:02d}.{milli:03d}"
+
+
+def parse_timecode(text: str, fps: float) -> float:
+    """Frame index (float) of a ``HH:MM:SS:FF.mmm`` timecode at ``fps``; inverse of
+    :func:`format_timecode`."""
+    m = _TC.match(text.strip())
+    if not m:
+        raise ExportError(f"timecode {text!r} is not HH:MM:SS:FF.mmm")
+    hh, mm, ss, ff, milli = (int(g) for g in m.groups())
+    rate = _nominal_rate(fps)
+    nominal = ((hh * 60 + mm) * 60 + ss) * rate + ff + milli / 1000.0
+    return nominal * float(fps) / rate
+
+
+def livelink_rows(track) -> list[list[str]]:
+    """The CSV as rows of strings (header first)."""
+    a = require_activations(track)[:, _TO_ARKIT]  # (F, 52) in the app's order
+    ypr = head_euler(track.rotation)  # (F, 3) radians
+    pose = np.zeros((track.n_frames, len(POSE_COLUMNS)))
+    pose[:, :3] = ypr
+    count = str(len(LIVELINK_NAMES) + len(POSE_COLUMNS))
+    rows = [list(HEADER)]
+    for k in range(track.n_frames):
+        rows.append([format_timecode(k, track.fps), count]
+                    + [f"{v:.8f}" for v in a[k]] + [f"{v:.8f}" for v in pose[k]])
+    return rows
+
+
+def write_livelink(track, out: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write the track as a Live Link Face CSV take (atomically) and return the path."""
+    buf = io.StringIO()
+    csv.writer(buf, lineterminator="\n").writerows(livelink_rows(track))
+    return write_text_atomic(out, buf.getvalue(), overwrite=overwrite)
+
+
+@dataclass(frozen=True)
+class LiveLinkTake:
+    """A Live Link Face CSV read back.
+
+    Attributes
+    ----------
+    timecodes : tuple of str
+    activations : (F, 52) float64
+        In :data:`facetransfer.arkit.ARKIT_NAMES` order.
+    pose : (F, 9) float64
+        :data:`POSE_COLUMNS`, radians.
+    """
+
+    timecodes: tuple[str, ...]
+    activations: np.ndarray
+    pose: np.ndarray
+
+    def frames(self, fps: float) -> np.ndarray:
+        """Frame index of every row at ``fps``, ``(F,) float64``."""
+        return np.array([parse_timecode(t, fps) for t in self.timecodes])
+
+
+def read_livelink(path: str | os.PathLike) -> LiveLinkTake:
+    """Read a Live Link Face CSV (columns by name; the app's header is required)."""
+    p = Path(path)
+    with open(p, newline="") as fh:
+        rows = list(csv.reader(fh))
+    if not rows or tuple(rows[0][:2]) != HEADER[:2]:
+        raise ExportError(f"{p} is not a Live Link Face CSV (header must start "
+                          f"'Timecode,BlendShapeCount')")
+    col = {n: i for i, n in enumerate(rows[0])}
+    missing = [n for n in LIVELINK_NAMES + POSE_COLUMNS if n not in col]
+    if missing:
+        raise ExportError(f"{p} lacks the columns {missing[:5]}")
+    body = [r for r in rows[1:] if r]
+    try:
+        a = np.array([[float(r[col[n]]) for n in LIVELINK_NAMES] for r in body]).reshape(-1, 52)
+        pose = np.array([[float(r[col[n]]) for n in POSE_COLUMNS] for r in body]).reshape(-1, 9)
+    except (ValueError, IndexError) as exc:
+        raise ExportError(f"{p} has a malformed row ({exc})") from None
+    act = np.zeros_like(a)
+    act[:, _TO_ARKIT] = a
+    if not np.all(np.isfinite(act)) or not np.all(np.isfinite(pose)):
+        raise ExportError(f"{p} has non-finite values")
+    return LiveLinkTake(tuple(r[0] for r in body), act, pose)

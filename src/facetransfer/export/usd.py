@@ -1,0 +1,135 @@
+"""USD with UsdSkel blend shapes: the clip's person, 52 ARKit ``BlendShape`` prims, a SkelAnimation.
+
+Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
+
+    /Face                 SkelRoot (default prim); stage Y up, metersPerUnit 0.01 (model units)
+      /Face/Skel          Skeleton, one joint "head"; skel:animationSource -> Anim
+        /Face/Skel/Anim   SkelAnimation: blendShapes (52 ARKit names), blendShapeWeights,
+                          translations / rotations / scales of "head": one time sample per frame
+      /Face/Mesh          Mesh (neutral face, primvars:st), SkelBindingAPI: skel:skeleton,
+                          skel:blendShapes + skel:blendShapeTargets, every vertex on "head"
+        /Face/Mesh/<name> BlendShape: offsets f_j - f_0 (pointIndices when sparse)
+
+Time codes are frame indices (``timeCodesPerSecond`` = the clip's fps).
+
+References
+----------
+Pixar USD, UsdSkel schemas: ``UsdSkelBlendShape``, ``UsdSkelAnimation``,
+``UsdSkelBindingAPI`` ("Blend Shapes" and "Binding" in the UsdSkel documentation).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..arkit import ARKIT_NAMES
+from ..io.atomic import atomic_path
+from .common import ExportError, head_quaternions, head_translation, identity_rig, \
+    require_activations
+
+__all__ = ["write_usd", "USD_SUFFIXES"]
+
+USD_SUFFIXES = (".usd", ".usda", ".usdc")
+
+
+def _pxr():
+    try:
+        from pxr import Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+    except ImportError:
+        raise ExportError("USD export needs usd-core: pip install 'facetransfer[usd]'") from None
+    return Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+
+def _mesh(stage, rig, model, pxr):
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    mesh = UsdGeom.Mesh.Define(stage, "/Face/Mesh")
+    faces = np.asarray(model.faces, np.int32)
+    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rig.neutral.astype(np.float32)))
+    mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)))
+    mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.ravel()))
+    mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
+    mesh.CreateSubdivisionSchemeAttr(UsdGeom.Tokens.none)
+    if model.uvs is not None:
+        st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                     UsdGeom.Tokens.vertex)
+        st.Set(Vt.Vec2fArray.FromNumpy(np.asarray(model.uvs, np.float32)))
+    return mesh
+
+
+def _blend_shapes(stage, mesh, rig, pxr):
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    paths = []
+    for name, d in zip(ARKIT_NAMES, rig.deltas):
+        bs = UsdSkel.BlendShape.Define(stage, mesh.GetPath().AppendChild(name))
+        idx = np.flatnonzero(np.any(d != 0, axis=1)).astype(np.int32)
+        if idx.size == 0:  # a shape the model lacks (tongueOut): one zero offset
+            idx = np.zeros(1, np.int32)
+        if idx.size == len(d):  # dense: offsets for every point, no indices
+            bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(d.astype(np.float32)))
+        else:
+            bs.CreateOffsetsAttr(Vt.Vec3fArray.FromNumpy(d[idx].astype(np.float32)))
+            bs.CreatePointIndicesAttr(Vt.IntArray.FromNumpy(idx))
+        paths.append(bs.GetPath())
+    return paths
+
+
+def _animation(stage, track, activations, pxr):
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    anim = UsdSkel.Animation.Define(stage, "/Face/Skel/Anim")
+    anim.CreateJointsAttr(["head"])
+    anim.CreateBlendShapesAttr(list(ARKIT_NAMES))
+    w, tr, ro, sc = (anim.CreateBlendShapeWeightsAttr(), anim.CreateTranslationsAttr(),
+                     anim.CreateRotationsAttr(), anim.CreateScalesAttr())
+    T = head_translation(track).astype(np.float32)
+    Q = head_quaternions(track.rotation)
+    one = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)])
+    for k in range(track.n_frames):
+        t = Usd.TimeCode(k)
+        w.Set(Vt.FloatArray.FromNumpy(activations[k].astype(np.float32)), t)
+        tr.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, T[k]))]), t)
+        x, y, z, r = (float(v) for v in Q[k])
+        ro.Set(Vt.QuatfArray([Gf.Quatf(r, x, y, z)]), t)
+        sc.Set(one, t)
+    return anim
+
+
+def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False) -> Path:
+    """Write the track as USD (``.usd``/``.usdc`` binary, ``.usda`` text) and return the path."""
+    pxr = _pxr()
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    if Path(out).suffix.lower() not in USD_SUFFIXES:
+        raise ExportError(f"USD output {out} must end in {', '.join(USD_SUFFIXES)}")
+    a = require_activations(track)
+    rig = identity_rig(track, model)
+    stage = Usd.Stage.CreateInMemory()
+    UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.y)
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    stage.SetTimeCodesPerSecond(track.fps)
+    stage.SetFramesPerSecond(track.fps)
+    stage.SetStartTimeCode(0)
+    stage.SetEndTimeCode(track.n_frames - 1)
+    root = UsdSkel.Root.Define(stage, "/Face")
+    stage.SetDefaultPrim(root.GetPrim())
+    skel = UsdSkel.Skeleton.Define(stage, "/Face/Skel")
+    skel.CreateJointsAttr(["head"])
+    skel.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
+    skel.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
+    anim = _animation(stage, track, a, pxr)
+    UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
+        [anim.GetPath()])
+    mesh = _mesh(stage, rig, model, pxr)
+    binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
+    binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
+    binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
+    binding.CreateJointWeightsPrimvar(True, 1).Set(Vt.FloatArray([1.0]))
+    binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
+    binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
+    binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig, pxr))
+    stage.GetRootLayer().customLayerData = {"source": track.source, "generator": "facetransfer"}
+    with atomic_path(out, overwrite=overwrite) as tmp:
+        if not stage.GetRootLayer().Export(str(tmp)):
+            raise ExportError(f"USD could not write {out}")
+    return Path(out)

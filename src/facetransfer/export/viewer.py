@@ -1,0 +1,160 @@
+"""The browser dial editor: one self-contained HTML page (no network) to look at a model or a track.
+
+``facetransfer view MODEL.npz|TRACK.npz --out page.html`` writes a page with the pinned three.js
+build inlined (package data ``data/vendor/three/``, see its README for the version and how to
+update it), the face's mesh and morph targets embedded (int16, one scale per target), and
+
+* a slider per expression shape (the 52 ARKit blendshapes for an ARKit model, else one per
+  training expression of the model),
+* a slider per semantic identity dial (:mod:`facetransfer.dials`),
+* head yaw, pitch and roll,
+* for a track: a timeline with play and pause that drives the shapes and head pose per frame.
+
+Identity dials act on the neutral face (their offsets are exact there); the expression offsets
+stay those of the shown identity (the bilinear cross term is left out in the page).
+
+The page reads ``#name=value&...`` from its URL (slider ids, ``frame=K``, ``play``) so that a
+view can be linked, and so the tests can drive it from headless Chromium.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import json
+import logging
+import os
+import zipfile
+from importlib import resources
+from pathlib import Path
+
+import numpy as np
+
+from ..io.atomic import write_text_atomic
+from .common import ExportError, head_quaternions, require_activations
+
+log = logging.getLogger(__name__)
+
+__all__ = ["THREE_VERSION", "THREE_SHA256", "viewer_page", "write_viewer", "view_rig"]
+
+#: The vendored three.js release and the sha256 of its ``build/three.min.js``.
+THREE_VERSION = "0.159.0"
+THREE_SHA256 = "7b1c5d75b28d9de15042e2b374f83566d8c7146697af8fdeb4558b0fb528a585"
+
+
+def _b64(a: np.ndarray) -> str:
+    return base64.b64encode(np.ascontiguousarray(a).tobytes()).decode("ascii")
+
+
+def _quantize(targets: np.ndarray) -> tuple[np.ndarray, list[float]]:
+    """``(T, n, 3)`` float -> int16 and one scale per target (max |offset| / 32767)."""
+    m = np.abs(targets).reshape(len(targets), -1).max(axis=1)
+    scale = np.where(m > 0, m / 32767.0, 1.0)
+    q = np.round(targets / scale[:, None, None]).astype(np.int16)
+    return q, [float(s) for s in scale]
+
+
+def view_rig(model, identity: np.ndarray, dials=None):
+    """Neutral ``(n, 3)``, shape offsets ``(S, n, 3)`` with their names and title, and identity
+    dial offsets of the neutral ``(K, n, 3)`` for the page."""
+    from ..arkit import ARKIT_NAMES, expression_rig, is_arkit_model
+    from ..dials import neutral_weights
+
+    mode = dials.mode if dials is not None else "identity"
+    if is_arkit_model(model):
+        rig = expression_rig(model, {mode: identity})
+        neutral, shapes, names, title = rig.neutral, rig.deltas, list(ARKIT_NAMES), \
+            "ARKit blendshapes"
+    else:
+        k = model.mode_index("expression") if "expression" in model.mode_names else 1
+        rest = neutral_weights(model, mode)
+        neutral = model.synthesize({**rest, mode: identity})
+        labs = [lab for lab in model.labels[k] if lab != "neutral"]
+        shapes = np.stack([model.synthesize({**rest, mode: identity,
+                                             model.mode_names[k]: model.training_weights(k, lab)})
+                           - neutral for lab in labs]) if labs else np.zeros((0,) + neutral.shape)
+        names, title = labs, f"{model.mode_names[k]} (training shapes)"
+    dial_off = np.zeros((0,) + neutral.shape)
+    if dials is not None and dials.dials:
+        rest = neutral_weights(model, mode)
+        base = model.synthesize({**rest, mode: identity})
+        moved = model.synthesize({**{n: np.tile(v, (len(dials.dials), 1)) for n, v in rest.items()},
+                                  mode: identity + np.stack([d.direction for d in dials.dials])})
+        dial_off = moved - base
+    return neutral, shapes, names, title, dial_off
+
+
+def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
+    """The HTML page (a str) for ``model``, or for ``track`` of that model."""
+    from ..dials import DialError, learn_dials
+
+    try:
+        dials = learn_dials(model)
+    except DialError as exc:  # e.g. fewer than 3 identities: the page shows no dials
+        log.info("no identity dials: %s", exc)
+        dials = None
+    mode = dials.mode if dials is not None else "identity"
+    k = model.mode_index(mode) if mode in model.mode_names else 0
+    identity = (track.weights_at(0)[model.mode_names[k]] if track is not None
+                else model.weight_mean(k))
+    neutral, shapes, names, shape_title, dial_off = view_rig(model, identity, dials)
+    dial_names = list(dials.names) if dials is not None else []
+    q, scales = _quantize(np.concatenate([shapes, dial_off]) if len(shapes) + len(dial_off)
+                          else np.zeros((0,) + neutral.shape))
+    data = {"positions": _b64(neutral.astype(np.float32)),
+            "faces": _b64(np.asarray(model.faces, np.uint32)),
+            "targets": _b64(q), "target_scales": scales, "target_names": names + dial_names,
+            "n_shapes": len(names), "shape_title": shape_title,
+            "dial_info": [f"{d.effect:+.2f} {dials.unit}/unit, R2 {d.r2_loo:.2f}"
+                          for d in dials.dials] if dials is not None else [],
+            "n_frames": 0, "fps": 25.0,
+            "about": (f"{model.n_vertices} vertices; three.js {THREE_VERSION}; "
+                      + (f"track of {track.source or 'a clip'}, {track.n_frames} frames at "
+                         f"{track.fps:g} fps" if track is not None else "the model's mean identity"))}
+    if track is not None:
+        if len(names) != 52:
+            raise ExportError("a track's timeline needs a model with ARKit blendshapes")
+        data.update(n_frames=track.n_frames, fps=track.fps,
+                    activations=_b64(require_activations(track).astype(np.float32)),
+                    quaternions=_b64(head_quaternions(track.rotation).astype(np.float32)))
+    three = resources.files("facetransfer.data").joinpath("vendor/three/three.min.js").read_text()
+    template = resources.files("facetransfer.data").joinpath("viewer.html").read_text()
+    page = template.replace("__TITLE__", html.escape(title))
+    page = page.replace("__DATA__", json.dumps(data).replace("<", "\\u003c"))
+    return page.replace("<script>__THREE__</script>", f"<script>{three}</script>", 1)
+
+
+def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=None,
+                 overwrite: bool = False) -> Path:
+    """Write the page for ``source`` (a model ``.npz`` or a ``TRACK.npz``) and return its path.
+
+    Parameters
+    ----------
+    source : path-like
+        A model file or a track file (told apart by their contents).
+    model : MultilinearModel, optional
+        For a track: its model (default: the default model, if the track was made with it).
+    """
+    from ..errors import ModelFileError
+    from ..model import load_model
+    from ..track import Track
+    from .common import resolve_model
+
+    src = Path(source)
+    if not src.is_file():
+        raise ExportError(f"{src} does not exist")
+    try:
+        with np.load(src, allow_pickle=False) as z:
+            is_track = "rotation" in z.files and "mode_names" in z.files
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+        raise ExportError(f"{src} is neither a model nor a track file (not an .npz)") from None
+    if is_track:
+        track = Track.load(src)
+        page = viewer_page(resolve_model(track, model), track=track, title=src.name)
+    else:
+        try:
+            m = load_model(src)
+        except ModelFileError as exc:
+            raise ExportError(f"{src} is neither a model nor a track file ({exc})") from None
+        page = viewer_page(m, title=src.name)
+    return write_text_atomic(out, page, overwrite=overwrite)

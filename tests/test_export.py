@@ -1,0 +1,310 @@
+"""Exports: Live Link Face CSV, MediaPipe JSON, glTF binary, UsdSkel (beyond the paper).
+
+Reference values: the Live Link Face header is the app's header row as reproduced byte for byte
+by open importers (nmfisher/blender_livelinkface, ``LIVE_LINK_FACE_HEADER``); the 59.94 fps
+timecodes ``…:01.001``, ``…:02.002`` are the app's (rows of takes quoted by importers).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from facetransfer.arkit import ARKIT_NAMES, MEDIAPIPE_NAMES
+from facetransfer.cli.main import main
+from facetransfer.export import ExportError, export_track
+
+APP_HEADER = (
+    "Timecode,BlendShapeCount,EyeBlinkLeft,EyeLookDownLeft,EyeLookInLeft,EyeLookOutLeft,"
+    "EyeLookUpLeft,EyeSquintLeft,EyeWideLeft,EyeBlinkRight,EyeLookDownRight,EyeLookInRight,"
+    "EyeLookOutRight,EyeLookUpRight,EyeSquintRight,EyeWideRight,JawForward,JawRight,JawLeft,"
+    "JawOpen,MouthClose,MouthFunnel,MouthPucker,MouthRight,MouthLeft,MouthSmileLeft,"
+    "MouthSmileRight,MouthFrownLeft,MouthFrownRight,MouthDimpleLeft,MouthDimpleRight,"
+    "MouthStretchLeft,MouthStretchRight,MouthRollLower,MouthRollUpper,MouthShrugLower,"
+    "MouthShrugUpper,MouthPressLeft,MouthPressRight,MouthLowerDownLeft,MouthLowerDownRight,"
+    "MouthUpperUpLeft,MouthUpperUpRight,BrowDownLeft,BrowDownRight,BrowInnerUp,BrowOuterUpLeft,"
+    "BrowOuterUpRight,CheekPuff,CheekSquintLeft,CheekSquintRight,NoseSneerLeft,NoseSneerRight,"
+    "TongueOut,HeadYaw,HeadPitch,HeadRoll,LeftEyeYaw,LeftEyePitch,LeftEyeRoll,RightEyeYaw,"
+    "RightEyePitch,RightEyeRoll")
+
+TOOLS = Path(os.environ.get("FACETRANSFER_TEST_TOOLS",
+                            Path.home() / ".cache" / "facetransfer-test-tools"))
+
+
+@pytest.fixture(scope="module")
+def case(arkit_model, make_arkit_track):
+    return (arkit_model,) + make_arkit_track(arkit_model)
+
+
+# ------------------------------------------------------------------------------ Live Link
+def test_livelink_header_and_rows(case, tmp_path):
+    from facetransfer.export.livelink import read_livelink
+
+    model, track, a, ang = case
+    out = export_track(track, "livelink", tmp_path / "take.csv")
+    lines = out.read_text().splitlines()
+    assert lines[0] == APP_HEADER
+    assert len(lines) == track.n_frames + 1
+    row = lines[4].split(",")  # frame 3
+    assert len(row) == 63 and row[0] == "00:00:00:03.000" and row[1] == "61"
+    assert float(row[2 + 17]) == pytest.approx(a[3, ARKIT_NAMES.index("jawOpen")], abs=1e-8)
+    take = read_livelink(out)
+    np.testing.assert_allclose(take.activations, a, atol=1e-6)  # round trip to 1e-6
+    np.testing.assert_allclose(take.pose[:, :3], ang, atol=1e-7)  # yaw, pitch, roll (radians)
+    assert np.all(take.pose[:, 3:] == 0)
+    np.testing.assert_allclose(take.frames(track.fps), np.arange(track.n_frames), atol=1e-9)
+
+
+def test_timecodes():
+    from facetransfer.export.livelink import format_timecode, parse_timecode
+
+    assert format_timecode(0, 25) == "00:00:00:00.000"
+    assert format_timecode(26, 25) == "00:00:01:01.000"
+    assert format_timecode(25 * 3600 + 25 * 61 + 7, 25) == "01:01:01:07.000"
+    assert format_timecode(1, 59.94) == "00:00:00:01.001"  # the app's 59.94 fps sub-frames
+    assert format_timecode(2, 59.94) == "00:00:00:02.002"
+    for fps in (24, 25, 29.97, 30, 59.94, 60):
+        for k in (0, 1, 17, 1000, 123457):
+            assert parse_timecode(format_timecode(k, fps), fps) == pytest.approx(k, abs=6e-4)
+    with pytest.raises(ExportError, match="HH:MM:SS:FF.mmm"):
+        parse_timecode("00:00:01", 25)
+
+
+# ------------------------------------------------------------------------------ MediaPipe JSON
+def test_mediapipe_json(case, tmp_path):
+    import dataclasses
+
+    from facetransfer.export.mpjson import read_mediapipe_json
+
+    model, track, a, _ = case
+    lost = track.lost.copy()
+    lost[2] = True
+    tr = dataclasses.replace(track, lost=lost)
+    out = export_track(tr, "json", tmp_path / "bs.json")
+    doc = json.loads(out.read_text())
+    fr = doc["frames"][0]
+    assert fr["timestampMs"] == 0.0 and doc["frames"][1]["timestampMs"] == 40.0
+    cats = fr["faceBlendshapes"][0]["categories"]
+    assert [c["categoryName"] for c in cats[:52]] == ["_neutral"] + list(MEDIAPIPE_NAMES)
+    assert [c["index"] for c in cats] == list(range(53))
+    assert set(cats[0]) == {"index", "score", "categoryName", "displayName"}
+    assert doc["frames"][2]["faceBlendshapes"] == []  # a lost face: none, as MediaPipe
+    back = read_mediapipe_json(out)
+    assert np.all(np.isnan(back[2]))
+    keep = np.arange(track.n_frames) != 2
+    np.testing.assert_allclose(back[keep], a[keep], atol=1e-6)
+
+
+# ------------------------------------------------------------------------------ glTF
+def _validate(path: Path) -> dict:
+    node = shutil.which("node")
+    mod = TOOLS / "node_modules" / "gltf-validator"
+    if node is None or not mod.is_dir():
+        pytest.skip(f"node or the npm package gltf-validator (in {TOOLS}) is not installed")
+    js = ("const v=require(process.argv[1]);const fs=require('fs');"
+          "v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])),{maxIssues:100})"
+          ".then(r=>console.log(JSON.stringify(r.issues)))"
+          ".catch(e=>{console.error(String(e));process.exit(3)});")
+    res = subprocess.run([node, "-e", js, str(mod), str(path)], capture_output=True, text=True,
+                         timeout=120)
+    assert res.returncode == 0, res.stderr
+    return json.loads(res.stdout)
+
+
+def _read_accessor(g, i: int) -> np.ndarray:
+    acc = g.accessors[i]
+    view = g.bufferViews[acc.bufferView]
+    blob = g.binary_blob()
+    n = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc.type]
+    dt = np.uint32 if acc.componentType == 5125 else np.float32
+    start = view.byteOffset + (acc.byteOffset or 0)
+    return np.frombuffer(blob, dt, acc.count * n, start).reshape(acc.count, n)
+
+
+def test_glb_morph_targets_and_animation(case, tmp_path):
+    import pygltflib
+    import trimesh
+
+    from facetransfer.export.common import head_quaternions
+
+    model, track, a, _ = case
+    tex = np.zeros((64, 64, 3), np.uint8)
+    tex[:, :32] = (200, 150, 120)
+    out = export_track(track, "glb", tmp_path / "face.glb", model=model, texture=tex)
+    g = pygltflib.GLTF2().load(str(out))
+    mesh = g.meshes[0]
+    assert mesh.extras["targetNames"] == list(ARKIT_NAMES)
+    prim = mesh.primitives[0]
+    assert len(prim.targets) == 52 and g.images and g.materials[0].pbrMetallicRoughness \
+        .baseColorTexture.index == 0
+    anim = g.animations[0]
+    paths = {c.target.path: c.sampler for c in anim.channels}
+    assert set(paths) == {"weights", "rotation", "translation"}
+    times = _read_accessor(g, anim.samplers[paths["weights"]].input)[:, 0]
+    np.testing.assert_allclose(times, np.arange(track.n_frames) / track.fps, atol=1e-6)
+    W = _read_accessor(g, anim.samplers[paths["weights"]].output).reshape(track.n_frames, 52)
+    np.testing.assert_array_equal(W, a)  # key k = the track's frame k
+    Q = _read_accessor(g, anim.samplers[paths["rotation"]].output)
+    np.testing.assert_allclose(Q, head_quaternions(track.rotation), atol=1e-6)
+    # Eq. (A) with Eq. (9): neutral + sum_j a_j target_j is the model's face of frame k
+    V0 = _read_accessor(g, prim.attributes.POSITION).astype(np.float64)
+    T = np.stack([_read_accessor(g, t["POSITION"]) for t in prim.targets]).astype(np.float64)
+    k = 5
+    want = model.synthesize(track.weights_at(k)) * 0.01  # metres
+    np.testing.assert_allclose(V0 + np.tensordot(a[k].astype(np.float64), T, 1), want,
+                               atol=2e-6)
+    tm = trimesh.load(out, force="mesh", process=False)
+    assert len(tm.vertices) == model.n_vertices and len(tm.faces) == len(model.faces)
+    issues = _validate(out)  # last: skips when node or the validator is absent
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
+def test_glb_without_texture_validates(case, tmp_path):
+    model, track, _, _ = case
+    out = export_track(track, "glb", tmp_path / "plain.glb", model=model)
+    issues = _validate(out)
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
+
+
+# ------------------------------------------------------------------------------ USD
+def test_usd_blend_shapes_and_animation(case, tmp_path):
+    pxr = pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    from pxr import Usd, UsdSkel
+
+    model, track, a, ang = case
+    out = export_track(track, "usd", tmp_path / "face.usda", model=model)
+    stage = Usd.Stage.Open(str(out))
+    assert stage.GetTimeCodesPerSecond() == track.fps
+    mesh = stage.GetPrimAtPath("/Face/Mesh")
+    binding = UsdSkel.BindingAPI(mesh)
+    assert [str(t) for t in binding.GetSkeletonRel().GetTargets()] == ["/Face/Skel"]
+    assert list(binding.GetBlendShapesAttr().Get()) == list(ARKIT_NAMES)
+    cache = UsdSkel.Cache()
+    root = UsdSkel.Root(stage.GetPrimAtPath("/Face"))
+    cache.Populate(root, Usd.PrimDefaultPredicate)
+    skq = cache.GetSkelQuery(UsdSkel.Skeleton(stage.GetPrimAtPath("/Face/Skel")))
+    anim = skq.GetAnimQuery()
+    assert list(anim.GetBlendShapeOrder()) == list(ARKIT_NAMES)
+    for k in (0, 7):
+        np.testing.assert_allclose(np.array(anim.ComputeBlendShapeWeights(Usd.TimeCode(k))),
+                                   a[k], atol=1e-7)
+    # offsets reproduce the model's face (Eq. (A), (9)), in model units
+    pts = np.array(mesh.GetAttribute("points").Get(), np.float64)
+    offs = np.stack([np.array(UsdSkel.BlendShape(stage.GetPrimAtPath(f"/Face/Mesh/{n}"))
+                              .GetOffsetsAttr().Get(), np.float64) for n in ARKIT_NAMES[:51]])
+    k = 7
+    got = pts + np.tensordot(a[k, :51].astype(np.float64), offs, 1)
+    np.testing.assert_allclose(got, model.synthesize(track.weights_at(k)), atol=2e-4)
+    try:  # USD's own validators (usd-core >= 24.11): skel binding, stage metadata, ...
+        from pxr import UsdValidation
+    except ImportError:
+        return
+    ctx = UsdValidation.ValidationContext(
+        UsdValidation.ValidationRegistry().GetOrLoadAllValidators())
+    errors = ctx.Validate(stage)
+    assert not errors, [e.GetMessage() for e in errors]
+    assert pxr is not None
+
+
+# ------------------------------------------------------------------------------ bad input
+def test_export_errors(case, tmp_path, monkeypatch):
+    import dataclasses
+
+    import facetransfer.default_model as dm
+
+    model, track, _, _ = case
+    bare = dataclasses.replace(track, blendshapes=None, blendshape_names=None)
+    with pytest.raises(ExportError, match="ict-arkit"):
+        export_track(bare, "livelink", tmp_path / "a.csv")
+    with pytest.raises(ExportError, match="unknown export format"):
+        export_track(track, "fbx", tmp_path / "a.fbx")
+    with pytest.raises(ValueError, match="does not exist"):
+        export_track(track, "json", tmp_path / "nope" / "a.json")
+    (tmp_path / "x.csv").write_text("keep")
+    with pytest.raises(ValueError, match="--overwrite"):
+        export_track(track, "livelink", tmp_path / "x.csv")
+    assert (tmp_path / "x.csv").read_text() == "keep"
+    with pytest.raises(ExportError, match="only into glb"):
+        export_track(track, "usd", tmp_path / "t.usd", model=model, texture=tmp_path / "t.png")
+    with pytest.raises(ExportError, match="cannot read texture image"):
+        export_track(track, "glb", tmp_path / "t.glb", model=model, texture=tmp_path / "no.png")
+    assert not (tmp_path / "t.glb").exists()
+    # model=None: the default model if the track was made with it, else ask for --model
+    monkeypatch.setattr(dm, "load_default_model", lambda **kw: model)
+    assert export_track(track, "glb", tmp_path / "d.glb").is_file()
+    other = dataclasses.replace(track, model_hash="0" * 16)
+    with pytest.raises(ExportError, match="--model"):
+        export_track(other, "glb", tmp_path / "e.glb")
+    with pytest.raises(ValueError, match="different model"):
+        export_track(other, "usd", tmp_path / "e.usd", model=model)
+
+
+def test_export_cli(case, tmp_path, capsys):
+    import dataclasses
+
+    model, track, _, _ = case
+    tp, mp = tmp_path / "t.npz", tmp_path / "m.npz"
+    track.save(tp)
+    model.save(mp)
+    assert main(["export", str(tp), "--format", "livelink", "--out", str(tmp_path / "t.csv")]) == 0
+    assert "wrote" in capsys.readouterr().out
+    assert main(["export", str(tp), "--format", "glb", "--model", str(mp),
+                 "--out", str(tmp_path / "t.glb")]) == 0
+    cases = [
+        (["--format", "fbx", "--out", str(tmp_path / "t.fbx")], "unknown format"),
+        (["--format", "json", "--out", str(tmp_path / "no" / "t.json")], "does not exist"),
+        (["--format", "livelink", "--out", str(tmp_path / "t.csv")], "--overwrite"),
+    ]
+    for extra, msg in cases:
+        assert main(["export", str(tp)] + extra) == 2
+        err = capsys.readouterr().err
+        assert msg in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    bare = tmp_path / "bare.npz"
+    dataclasses.replace(track, blendshapes=None, blendshape_names=None).save(bare)
+    assert main(["export", str(bare), "--format", "json", "--out", str(tmp_path / "b.json")]) == 2
+    assert "ict-arkit" in capsys.readouterr().err
+    other = model.__class__(**{**model.__dict__, "provenance": {"x": 1}})
+    om = tmp_path / "other.npz"
+    other.save(om)
+    assert main(["export", str(tp), "--format", "usd", "--model", str(om),
+                 "--out", str(tmp_path / "t.usd")]) == 2
+    assert "different model" in capsys.readouterr().err
+
+
+def test_glb_texture_lifted_from_the_video(case, tmp_path, capsys):
+    import io
+
+    import pygltflib
+    from PIL import Image
+
+    from facetransfer.io.video import write_video
+
+    model, track, _, _ = case
+    colour = np.array([200, 100, 50], np.uint8)
+    W, H = track.frame_size
+    video = write_video(tmp_path / "clip.mp4", [np.tile(colour, (H, W, 1))] * track.n_frames,
+                        track.fps)
+    tp, mp = tmp_path / "t.npz", tmp_path / "m.npz"
+    track.save(tp)
+    model.save(mp)
+    out = tmp_path / "lifted.glb"
+    assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
+                 str(video), "--texture-step", "4", "--out", str(out)]) == 0
+    g = pygltflib.GLTF2().load(str(out))
+    view = g.bufferViews[g.images[0].bufferView]
+    png = g.binary_blob()[view.byteOffset:view.byteOffset + view.byteLength]
+    tex = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).reshape(-1, 3)
+    np.testing.assert_allclose(np.median(tex, axis=0), colour, atol=8)  # the video's colour
+    assert main(["export", str(tp), "--format", "usd", "--model", str(mp), "--texture-from",
+                 str(video), "--out", str(tmp_path / "x.usd")]) == 2
+    assert "only glb" in capsys.readouterr().err
+    short = write_video(tmp_path / "short.mp4", [np.tile(colour, (H, W, 1))] * 3, track.fps)
+    assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
+                 str(short), "--out", str(tmp_path / "y.glb")]) == 2
+    assert "frames" in capsys.readouterr().err

@@ -1,0 +1,133 @@
+"""The browser dial editor: a self-contained page, drawn in headless Chromium."""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from facetransfer.cli.main import main
+from facetransfer.export.viewer import THREE_VERSION, viewer_page, write_viewer
+
+CANVAS = (slice(20, 680), slice(20, 540))  # rows, columns of the 3D view in a 900x700 window
+BACKGROUND = np.array([244, 242, 239])
+
+
+def _chromium() -> str:
+    exe = os.environ.get("FACETRANSFER_CHROMIUM") or shutil.which("chromium") \
+        or shutil.which("chromium-browser")
+    if not exe:
+        pytest.skip("chromium is not installed (apt-get install -y chromium)")
+    return exe
+
+
+def _shot(page: Path, fragment: str, tmp_path: Path) -> np.ndarray:
+    from PIL import Image
+
+    exe = _chromium()
+    out = tmp_path / f"shot_{abs(hash(fragment))}.png"
+    with tempfile.TemporaryDirectory() as profile:
+        res = subprocess.run(
+            [exe, "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+             "--no-first-run", "--disable-background-networking", "--disable-component-update",
+             "--disable-sync", f"--user-data-dir={profile}", "--window-size=900,700",
+             f"--screenshot={out}", f"{page.resolve().as_uri()}#{fragment}"],
+            capture_output=True, text=True, timeout=180)
+    assert out.is_file(), res.stderr[-2000:]
+    return np.asarray(Image.open(out).convert("RGB"))[CANVAS].astype(np.int16)
+
+
+@pytest.fixture(scope="module")
+def pages(arkit_model, make_arkit_track, tmp_path_factory):
+    d = tmp_path_factory.mktemp("view")
+    mp, tp = d / "m.npz", d / "t.npz"
+    arkit_model.save(mp)
+    track, a, _ = make_arkit_track(arkit_model, 8)
+    track.save(tp)
+    return (write_viewer(mp, d / "model.html"), write_viewer(tp, d / "track.html",
+                                                             model=arkit_model), track, a)
+
+
+def test_vendored_three_is_the_pinned_build():
+    import hashlib
+    from importlib import resources
+
+    from facetransfer.export.viewer import THREE_SHA256
+
+    root = resources.files("facetransfer.data").joinpath("vendor/three")
+    assert hashlib.sha256(root.joinpath("three.min.js").read_bytes()).hexdigest() == THREE_SHA256
+    assert "MIT License" in root.joinpath("LICENSE").read_text()
+    assert THREE_VERSION in root.joinpath("README.md").read_text()
+
+
+def test_page_is_self_contained(pages):
+    page = pages[0].read_text()
+    assert f"three.js {THREE_VERSION}" in page and "THREE.WebGLRenderer" in page
+    assert not re.search(r"<(script|link|img|iframe)[^>]+(src|href)=", page)
+    assert '"target_names"' in page and "eye_spacing" in page and "jawOpen" in page
+    t = pages[1].read_text()
+    assert '"n_frames": 8' in t and 'id="play"' in t
+
+
+@pytest.mark.slow
+def test_face_is_drawn_and_dials_move_it(pages, tmp_path):
+    model_page, track_page, _, _ = pages
+    base = _shot(model_page, "", tmp_path)
+    face = np.abs(base - BACKGROUND).sum(axis=2) > 30
+    assert face.mean() > 0.15, "no face drawn"  # the face fills a good part of the view
+    for frag in ("jawOpen=1", "width=3&yaw=20"):
+        moved = _shot(model_page, frag, tmp_path)
+        changed = (np.abs(moved - base).sum(axis=2) > 30).mean()
+        assert changed > 0.005, frag  # moving a slider changes the pixels
+    f0 = _shot(track_page, "frame=0", tmp_path)
+    f5 = _shot(track_page, "frame=5", tmp_path)
+    assert (np.abs(f5 - f0).sum(axis=2) > 30).mean() > 0.005  # the timeline drives the face
+
+
+def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
+    _, _, track, _ = pages
+    mp = tmp_path / "m.npz"
+    arkit_model.save(mp)
+    tp = tmp_path / "t.npz"
+    track.save(tp)
+    assert main(["view", str(tp), "--model", str(mp), "--out", str(tmp_path / "p.html")]) == 0
+    assert "wrote" in capsys.readouterr().out
+    (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    for src, msg in ((tmp_path / "none.npz", "does not exist"),
+                     (tmp_path / "junk.npz", "neither a model nor a track")):
+        assert main(["view", str(src), "--out", str(tmp_path / "q.html")]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert main(["view", str(mp), "--out", str(tmp_path / "p.html")]) == 2  # exists
+    assert "--overwrite" in capsys.readouterr().err
+    page = viewer_page(arkit_model)
+    assert '"n_frames": 0' in page
+
+
+def test_page_of_a_model_without_arkit_shapes(quick_model):
+    import json
+
+    page = viewer_page(quick_model, title="quick")
+    data = json.loads(re.search(r'<script id="ft-data" type="application/json">(.*?)</script>',
+                                page, re.S).group(1))
+    shapes = data["target_names"][:data["n_shapes"]]
+    assert shapes == [lab for lab in quick_model.labels[1] if lab != "neutral"]
+    assert data["shape_title"].startswith("expression") and data["n_frames"] == 0
+    # int16 offsets with one scale per target reproduce the model's shape offsets
+    q = np.frombuffer(__import__("base64").b64decode(data["targets"]), np.int16)
+    n = quick_model.n_vertices
+    first = q[: n * 3].reshape(n, 3) * data["target_scales"][0]
+    from facetransfer.dials import neutral_weights
+
+    rest = neutral_weights(quick_model)
+    w = quick_model.weight_mean(0)
+    want = quick_model.synthesize({**rest, "identity": w, "expression": quick_model
+                                   .training_weights(1, shapes[0])}) \
+        - quick_model.synthesize({**rest, "identity": w})
+    np.testing.assert_allclose(first, want, atol=2 * data["target_scales"][0])
