@@ -99,10 +99,17 @@ def test_no_face_anywhere_is_a_clear_error(arkit_model):
 def test_models_without_arkit_names_track_without_blendshapes(quick_model):
     """The paper's kind of model (expression weights with a prior) still tracks."""
     F = 20
-    w = quick_model.like(identity="id02", expression="smile")
-    X = quick_model.synthesize(w, vertices=quick_model.landmarks)
-    pts = np.stack([project(X, rotation_from_euler(10 * np.sin(i / 4), 0, 0), 9.0,
-                            np.array([256.0, 240.0])) for i in range(F)])
+    m = quick_model
+    pts = []
+    for i in range(F):  # from neutral to a smile and back
+        c = np.sin(np.pi * i / (F - 1))
+        w = m.like(identity="id02", expression="neutral")
+        w["expression"] = ((1 - c) * m.training_weights("expression", "neutral")
+                           + c * m.training_weights("expression", "smile"))
+        X = m.synthesize(w, vertices=m.landmarks)
+        pts.append(project(X, rotation_from_euler(10 * np.sin(i / 4), 0, 0), 9.0,
+                           np.array([256.0, 240.0])))
+    pts = np.stack(pts)
     tr = capture_detections(ClipDetections.from_points(pts), quick_model)
     assert tr.blendshapes is None
     iod = np.linalg.norm(pts[:, 36] - pts[:, 45], axis=1)
@@ -133,3 +140,31 @@ def test_capture_on_a_real_clip_follows_mediapipe(arkit_model, data_dir):
     assert tr.n_frames == 40 and not tr.lost.any()
     assert np.median(err) < 0.06
     assert tr.blendshapes.min() >= 0 and tr.blendshapes.max() <= 1
+
+
+def test_umeyama_recovers_a_similarity():
+    from facetransfer.render import rotation_from_euler as rot
+    from facetransfer.track.dense import umeyama
+
+    rng = np.random.default_rng(4)
+    X = rng.normal(size=(30, 3))
+    R = rot(30, -20, 10)
+    Y = 2.5 * X @ R.T + np.array([1.0, -2.0, 3.0])
+    s, R2, t = umeyama(X, Y)
+    assert s == pytest.approx(2.5) and np.allclose(R2, R) and np.allclose(t, [1, -2, 3])
+
+
+def test_dense_correspondence_puts_mediapipe_points_on_the_face(arkit_model):
+    """MediaPipe's eye corners, nose tip and mouth corners land next to the model's own iBUG
+    landmark vertices (a few millimetres), and most of the 468 points find the surface."""
+    from facetransfer.track.dense import mediapipe_correspondence
+
+    m = arkit_model
+    dc = mediapipe_correspondence(m, use_cache=False)
+    assert len(dc.mp_index) > 400
+    V = m.synthesize(m.default_weights())
+    pts = dc.sample(V)
+    where = {int(k): j for j, k in enumerate(dc.mp_index)}
+    for mp_i, ibug in ((33, 36), (133, 39), (362, 42), (263, 45), (4, 30), (61, 48), (291, 54)):
+        d = np.linalg.norm(pts[where[mp_i]] - V[m.landmarks[ibug]])
+        assert d < 0.5, (mp_i, ibug, d)  # cm

@@ -359,19 +359,20 @@ def _clip_identity(model, det: ClipDetections, lm: _Sampler, weights, opt: Captu
     shape = _Shape(model, ident, lm, opt)
     solve_id = has_id and "identity" not in fixed
     use_offset = np.isfinite(opt.offset_prior)
-    rounds = int(opt.identity_rounds) if (solve_id or use_offset) else 0
+    rounds = int(opt.identity_rounds) if solve_id else 0
     opt_id = replace(opt, expression_prior=opt.identity_expression_prior)
     states = _fit_sample(shape, det, frames, weights, opt_id, None)
-    for rnd in range(rounds):
-        if solve_id:
-            ident = _solve_identity(model, shape, list(frames), states, det, weights, opt)
-            shape = _Shape(model, ident, lm, opt, shape.offset)
-        if use_offset:
-            shape = _Shape(model, ident, lm, opt,
-                           _solve_offset(shape, frames, states, det, weights, opt))
-        states = _fit_sample(shape, det, frames, weights,
-                             opt if rnd == rounds - 1 else opt_id, states)
-        prog("identity", rnd + 1, rounds)
+    for rnd in range(rounds):  # identity first: it takes all it can explain
+        ident = _solve_identity(model, shape, list(frames), states, det, weights, opt)
+        shape = _Shape(model, ident, lm, opt)
+        states = _fit_sample(shape, det, frames, weights, opt_id, states)
+        prog("identity", rnd + 1, rounds + 2 * use_offset)
+    for rnd in range(2 if use_offset else 0):  # then the offset: what no identity shows
+        shape = _Shape(model, ident, lm, opt,
+                       _solve_offset(shape, frames, states, det, weights, opt))
+        states = _fit_sample(shape, det, frames, weights, opt_id, states)
+        prog("identity", rounds + rnd + 1, rounds + 2)
+    states = _fit_sample(shape, det, frames, weights, opt, states)
     return shape, states, frames
 
 
