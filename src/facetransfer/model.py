@@ -20,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -324,23 +323,22 @@ def load_model(path: str | Path) -> MultilinearModel:
         Missing, truncated or altered file (checksum mismatch), not a model file, or a newer
         format version.
     """
+    from .io.npz import read_npz
+
     p = Path(path)
-    if not p.is_file():
-        raise ModelFileError(f"model file {p} does not exist")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
-        raise ModelFileError(f"model file {p} is truncated or not a model file ({exc})") from None
+    data = read_npz(p, "model file", ModelFileError)
     if "metadata" not in data:
         raise ModelFileError(f"{p} is not a facetransfer model file (no metadata)")
     try:
         meta = json.loads(str(data.pop("metadata")))
-    except json.JSONDecodeError:
+    except (json.JSONDecodeError, ValueError):
         raise ModelFileError(f"model file {p} has corrupt metadata") from None
-    if meta.get("magic") != _MAGIC:
+    if not isinstance(meta, dict) or meta.get("magic") != _MAGIC:
         raise ModelFileError(f"{p} is not a facetransfer model file")
-    version = int(meta.get("format_version", -1))
+    try:
+        version = int(meta.get("format_version", -1))
+    except (TypeError, ValueError):
+        raise ModelFileError(f"model file {p} has corrupt metadata (format_version)") from None
     if version > FORMAT_VERSION:
         raise ModelFileError(f"model file {p} has format version {version}, newer than this "
                              f"facetransfer reads ({FORMAT_VERSION}); upgrade facetransfer")
@@ -356,8 +354,8 @@ def load_model(path: str | Path) -> MultilinearModel:
             vertex_subset=data.get("vertex_subset"),
             eigenvalues=tuple(data[f"eigenvalues_{k}"] for k in range(K) if f"eigenvalues_{k}" in data),
             imputed=data.get("imputed"), provenance=meta.get("provenance", {}))
-    except (KeyError, ShapeError) as exc:
-        raise ModelFileError(f"model file {p} is incomplete: {exc}") from None
+    except (KeyError, ValueError, TypeError, IndexError) as exc:  # ShapeError is a ValueError
+        raise ModelFileError(f"model file {p} is incomplete or inconsistent: {exc}") from None
 
 
 def file_hash(path: str | Path) -> str:

@@ -66,8 +66,10 @@ def register(sub) -> None:
                     help="previous fit of the same subject (template topology) to deform instead: "
                          "closed-mouth scan -> neutral fit, viseme -> closed-mouth fit")
     ft.add_argument("--prior", choices=("auto", "identity+expression", "none"), default="auto",
-                    help="face space fitted before the smooth deformation: 'auto' = ICT-FaceKit's "
-                         "100 identity components for the ICT template, none for other "
+                    help="face space fitted before the smooth deformation: 'auto' = for the "
+                         "ICT template, both ICT-FaceKit's 100 identity components and "
+                         "identity+expression are fitted and the one closer to the scan is kept "
+                         "(the report names it), none for other "
                          "templates; 'identity+expression' (ICT template) adds the "
                          "FaceKit's expression shapes, for a scan in an expression without a "
                          "neutral fit to give as --reference; 'none' = the paper's generic "
@@ -215,6 +217,10 @@ def _fit(args) -> int:
         from ..correspond.prior import ict_prior
 
         prior = ict_prior("identity+expression", neutral=template.vertices)
+    elif template.name == "ict" and reference is None:   # auto: the better of the two face spaces
+        from ..correspond.prior import ict_prior
+
+        prior = [template.prior, ict_prior("identity+expression", neutral=template.vertices)]
     bar = None
     if not args.no_progress:
         from tqdm import tqdm
@@ -236,13 +242,18 @@ def _fit(args) -> int:
             bar.close()
     credit = LPS_CREDIT if "leeperrysmith" in Path(args.scan).name.lower() else None
     write_fit_report(report_path, result, scan=str(args.scan), features=str(args.features),
-                     template=str(args.template), credit=credit)
+                     template=str(args.template), credit=credit, repairs=scan.notes)
     plot_fit(png_path, result, title=f"fit of {Path(args.scan).name}", credit=credit)
     write_mesh(out, result.vertices, result.faces)
     s = result.stats
     print(f"wrote {out}, {report_path}, {png_path}: surface distance mean {s['mean']:.4g}, "
           f"median {s['median']:.4g}, p95 {s['p95']:.4g}, max {s['max']:.4g} (scan units), "
           f"{s['seconds']:.1f} s")
+    if s.get("prior"):
+        print(f"shape prior: {s['prior']['name']}"
+              + (" (chosen automatically: lower residual)" if "candidates" in s["prior"] else ""))
+    if scan.notes:
+        print("scan repaired: " + "; ".join(scan.notes))
     if not np.isfinite(s["mean"]):
         return 1
     return 0
