@@ -20,6 +20,7 @@ import contextlib
 import hashlib
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -229,7 +230,8 @@ def cases(fx: Path) -> list[Case]:
         Case("track, full disk", ["track", C, "--model", M, "--out", "mnt/t.npz", "--passes",
                                   "1"], setup=_copy(M, C), mount="full"),
         Case("model synth --overwrite, full disk: old file kept",
-             ["model", "synth", M, "--out", "mnt/f.obj"], setup=_copy(M), mount="full",
+             ["model", "synth", M, "--out", "mnt/f.obj", "--overwrite"], setup=_copy(M),
+             mount="full",
              protect=["mnt/f.obj"]),
         Case("track with empty T.partial.npz", ["track", C, "--model", M, "--out", "t.npz",
                                                 "--passes", "1"], expect=0,
@@ -338,9 +340,9 @@ def run_case(case: Case, fx: Path, work: Path) -> dict:
             rc, err = "timeout", (exc.stderr or b"").decode(errors="replace")
         after = {p: _digest(cd / p) for p in case.protect}
         temps = _temps(cd)
+    progress = re.compile(r"\[\d+:\d+(?:<|,)")   # a tqdm bar ("| 3/16 [00:00<00:01, ...]")
     lines = [ln for ln in err.replace("\r", "\n").splitlines()
-             if ln.strip() and "it/s]" not in ln and "frame/s]" not in ln
-             and not ln.strip().endswith("?it/s]")]
+             if ln.strip() and not progress.search(ln)]
     tb = "Traceback (most recent call last)" in err
     own = [i for i, ln in enumerate(lines) if ln.startswith("facetransfer ")]
     first_own = own[0] if own else None

@@ -13,6 +13,7 @@ import importlib
 import logging
 import os
 import sys
+import zipfile
 
 from .. import __version__
 
@@ -69,8 +70,8 @@ def error_line(command: str, exc: BaseException) -> str:
             what = "no space left on the device"
         where = f": {os.fsdecode(exc.filename)}" if exc.filename is not None else ""
         msg = f"{what}{where}"
-    else:
-        msg = f"{exc.__class__.__name__}: {exc}"
+    else:  # EOFError, BadZipFile: an input file read without the project's loaders
+        msg = f"an input file is truncated or damaged ({exc.__class__.__name__}: {exc})"
     return f"facetransfer {command}: error: {msg}"
 
 
@@ -97,7 +98,7 @@ def main(argv: list[str] | None = None) -> int:
 def _run(args) -> int:
     try:
         return int(args.func(args) or 0)
-    except (ValueError, OSError, MemoryError) as exc:
+    except (ValueError, OSError, MemoryError, EOFError, zipfile.BadZipFile) as exc:
         # bad input, a failed write or read (permissions, full disk), a job too large
         if args.verbose:
             logging.getLogger("facetransfer").exception("details")

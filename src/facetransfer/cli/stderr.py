@@ -22,6 +22,17 @@ NATIVE_LOG = re.compile(
     rb".*|WARNING: Logging before InitGoogle\(\).*)\r?\n?$")
 
 
+_KEYWORDS = (b"INFO: ", b"WARNING: ", b"ERROR: ")
+
+
+def _maybe_native(partial: bytes) -> bool:
+    """Whether an unfinished line may become a native log line (C libraries often write the
+    severity, the message and the newline in separate writes)."""
+    if re.match(rb"^[IWE]\d{0,4}(?: |$)", partial):
+        return True
+    return any(partial.startswith(k) or k.startswith(partial) for k in _KEYWORDS)
+
+
 def filter_native(data: bytes) -> tuple[bytes, bytes]:
     """Split ``data`` into what to forward now and an unfinished native log line to keep.
 
@@ -34,7 +45,7 @@ def filter_native(data: bytes) -> tuple[bytes, bytes]:
     out = []
     lines = data.splitlines(keepends=True)
     rest = b""
-    if lines and not lines[-1].endswith(b"\n") and re.match(rb"^[IWE]\d{4} ", lines[-1]):
+    if lines and not lines[-1].endswith(b"\n") and _maybe_native(lines[-1]):
         rest = lines.pop()
     for ln in lines:
         if not NATIVE_LOG.match(ln):
