@@ -345,8 +345,9 @@ def load_model(path: str | Path) -> MultilinearModel:
     expected = meta.pop("sha256", None)
     if expected != _content_hash(data, meta):
         raise ModelFileError(f"model file {p} fails its checksum: it was altered or damaged")
-    K = len(meta["mode_names"])
     try:
+        K = len(meta["mode_names"])
+        _check_model_arrays(p, data, K)
         return MultilinearModel(
             core=data["core"], factors=tuple(data[f"factor_{k}"] for k in range(K)),
             mode_names=tuple(meta["mode_names"]), labels=tuple(tuple(l) for l in meta["labels"]),
@@ -356,6 +357,36 @@ def load_model(path: str | Path) -> MultilinearModel:
             imputed=data.get("imputed"), provenance=meta.get("provenance", {}))
     except (KeyError, ValueError, TypeError, IndexError) as exc:  # ShapeError is a ValueError
         raise ModelFileError(f"model file {p} is incomplete or inconsistent: {exc}") from None
+
+
+#: dtype kinds of the arrays of a model file (float: also integers; int: integers only)
+_ARRAY_KINDS = {"core": "fiu", "faces": "iu", "uvs": "fiu", "landmarks": "iu",
+                "vertex_subset": "iu", "imputed": "b"}
+
+
+def _check_model_arrays(p: Path, data: dict, n_modes: int) -> None:
+    """Dtypes, finiteness and shapes the model class does not check; ModelFileError names ``p``."""
+    for name, a in data.items():
+        base = name.rsplit("_", 1)[0] if name[-1].isdigit() else name
+        kinds = _ARRAY_KINDS.get(base, "fiu")
+        if a.dtype.kind not in kinds:
+            raise ModelFileError(f"model file {p}: {name} has dtype {a.dtype}, expected "
+                                 + {"fiu": "numbers", "iu": "integers", "b": "booleans"}[kinds])
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            raise ModelFileError(f"model file {p}: {name} has NaN or infinite values")
+    core = data["core"]
+    n = core.shape[0] // 3 if core.ndim else 0
+    for name, shape in (("uvs", (n, 2)), ("landmarks", None), ("vertex_subset", (n,))):
+        a = data.get(name)
+        if a is None:
+            continue
+        if (shape is not None and a.shape != shape) or a.ndim != 1 and name != "uvs":
+            raise ModelFileError(f"model file {p}: {name} has shape {a.shape}, expected "
+                                 f"{shape or '(68,)'}")
+    for k in range(n_modes):
+        ev = data.get(f"eigenvalues_{k}")
+        if ev is not None and ev.ndim != 1:
+            raise ModelFileError(f"model file {p}: eigenvalues_{k} must be 1-D, got {ev.shape}")
 
 
 def file_hash(path: str | Path) -> str:
