@@ -248,7 +248,7 @@ def cases(fx: Path) -> list[Case]:
         Case("transfer --tracker landmarks, truncated NAME.mediapipe478.npz",
              ["transfer", "--target", C, "--expression-from", C, "--model", M, "--tracker",
               "landmarks", "--out", "o.mp4", "--max-frames", "3", "--no-progress"],
-             setup=_mediapipe_truncated),
+             setup=_mediapipe_truncated, names="clip.mediapipe478.npz"),
         Case("scan smooth, OBJ vt index out of range", ["scan", "smooth", "bad.obj", "--out",
                                                         "s.obj"], setup=_bad_obj),
         Case("demo --out EXISTING_FILE", ["demo", "--out", "file.txt", "--model", M],
@@ -399,7 +399,42 @@ def main() -> int:
     (out / f"audit_{args.label}.md").write_text("\n".join(md) + "\n")
     n_ok = sum(r["ok"] for r in rows)
     print(f"{n_ok} of {len(rows)} cases ok; wrote {out / f'audit_{args.label}.md'}")
+    runs = {lab: json.loads((out / f"audit_{lab}.json").read_text())
+            for lab in ("before", "after") if (out / f"audit_{lab}.json").is_file()}
+    if len(runs) == 2:
+        plot(runs, out / "audit.png")
+        print(f"wrote {out / 'audit.png'}")
     return 0
+
+
+def plot(runs: dict, path: Path) -> None:
+    """One row per case, a cell per run: green ok, red not (the problem written in it)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    names = [r["case"] for r in runs["after"]]
+    fig, ax = plt.subplots(figsize=(13, 0.32 * len(names) + 1.2))
+    for j, (lab, rows) in enumerate(runs.items()):
+        by = {r["case"]: r for r in rows}
+        for i, n in enumerate(names):
+            r = by.get(n)
+            ok = bool(r and r["ok"])
+            ax.add_patch(plt.Rectangle((j, i), 0.98, 0.9, color="#4caf50" if ok else "#e53935"))
+            text = "ok" if ok else ("; ".join(r["problems"]) if r else "not run")
+            ax.text(j + 0.02, i + 0.45, text[:70], va="center", fontsize=6, color="white")
+    ax.set_xlim(0, len(runs))
+    ax.set_ylim(len(names), 0)
+    ax.set_yticks([i + 0.45 for i in range(len(names))], names, fontsize=7)
+    ax.set_xticks([j + 0.5 for j in range(len(runs))],
+                  [f"{lab}: {sum(r['ok'] for r in rows)}/{len(rows)} ok"
+                   for lab, rows in runs.items()])
+    ax.xaxis.tick_top()
+    ax.set_title("facetransfer CLI audit (issue 16): bad inputs and faults", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

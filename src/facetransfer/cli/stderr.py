@@ -4,7 +4,8 @@ MediaPipe, TensorFlow Lite and absl write their own log lines (``W0000 00:00:...
 ...``, ``INFO: Created TensorFlow Lite XNNPACK delegate``) straight to file descriptor 2, from C++,
 past Python's logging. :func:`filtered_stderr` points descriptor 2 at a pipe read by a thread
 that forwards everything except those lines (fatal ``F`` lines still pass), so the tool's own
-line is the first a person sees.
+line is the first a person sees. Python's ``sys.stderr`` is moved to a copy of the original
+descriptor, so progress bars still see the terminal (``isatty``).
 """
 
 from __future__ import annotations
@@ -81,17 +82,26 @@ def filtered_stderr() -> Iterator[None]:
                 os.write(saved, rest)
         os.close(r)
 
+    import io
+    import sys
+
     t = threading.Thread(target=pump, name="stderr-filter", daemon=True)
     t.start()
+    old = sys.stderr
+    with contextlib.suppress(Exception):
+        old.flush()
     os.dup2(w, 2)
     os.close(w)
+    py_fd = os.dup(saved)
+    sys.stderr = io.TextIOWrapper(io.FileIO(py_fd, "w"), encoding=getattr(old, "encoding", None)
+                                  or "utf-8", errors="backslashreplace", line_buffering=True)
     try:
         yield
     finally:
-        import sys
-
         with contextlib.suppress(Exception):
             sys.stderr.flush()
+            sys.stderr.close()
+        sys.stderr = old
         os.dup2(saved, 2)   # closes the pipe's last write end: the pump drains and stops
         t.join(timeout=2)
         os.close(saved)

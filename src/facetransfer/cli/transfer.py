@@ -170,6 +170,16 @@ def _positive(value, name):
         raise FaceTransferError(f"{name} must be >= 1, got {value}")
 
 
+def _check_landmarks_file(video) -> None:
+    """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work."""
+    from ..io.landmarks import read_mediapipe_landmarks
+    from ..rewrite import landmarks_file
+
+    lmf = landmarks_file(video)
+    if lmf is not None:
+        read_mediapipe_landmarks(lmf)
+
+
 def run_transfer(args) -> int:
     from ..io.atomic import check_output_path
     from ..io.video import video_info
@@ -198,10 +208,13 @@ def run_transfer(args) -> int:
     check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
-    for v in (args.target, args.expression_from, args.viseme_from, args.identity_from,
-              args.pose_from):
+    for v, tr in ((args.target, args.target_track), (args.expression_from, args.source_track),
+                  (args.viseme_from, args.viseme_track), (args.identity_from, args.identity_track),
+                  (args.pose_from, args.pose_track)):
         if v:
             video_info(v)  # unreadable input: one line, before any work
+            if not tr and not (v == args.target and args.performance):
+                _check_landmarks_file(v)
     model = load_model(args.model)
     identity = None
     if args.identity_label:
@@ -285,6 +298,8 @@ def run_puppet(args) -> int:
     check_output_path(args.out, overwrite=args.overwrite,
                       inputs=[args.video, args.model, args.track])
     video_info(args.video)
+    if not args.track:
+        _check_landmarks_file(args.video)
     model = load_model(args.model)
     wid = identity_from_label(model, args.identity)
     frames, fps = read_video(args.video, max_frames=args.max_frames)
