@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 
 from facetransfer.errors import FaceTransferError
 
-FUZZ = settings(max_examples=30, deadline=None, derandomize=True,
+FUZZ = settings(max_examples=25, deadline=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
 
