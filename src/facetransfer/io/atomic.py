@@ -261,8 +261,7 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True,
         _commit(tmp, p, overwrite=overwrite)
     except OSError as exc:
         _discard(tmp)
-        if _is_write_failure(exc, tmp) or isinstance(exc, FileNotFoundError) and \
-                exc.filename is None:
+        if _is_write_failure(exc, tmp):   # not an input the block was reading
             raise write_error(exc, p) from None
         raise
     except BaseException:
