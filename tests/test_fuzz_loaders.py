@@ -359,10 +359,23 @@ def test_feature_points_loader(work, data):
                  ok=lambda fp: np.all(np.isfinite(fp.points)) and fp.points.shape[1] == 3)
 
 
-@pytest.mark.xfail(strict=True, reason="track/init.py (owned by the tracker rewrite, not edited "
-                   "here): check_init_points calls np.asarray(xy, float) unguarded, so an entry "
-                   "like \"\" or {} raises numpy's ValueError/TypeError without the path; fix: "
+@pytest.mark.xfail(strict=True, raises=(TypeError, ValueError),
+                   reason="track/init.py (owned by the tracker rewrite, not edited here): "
+                   "check_init_points calls np.asarray(xy, float) unguarded, so an entry like "
+                   "\"\" or {} raises numpy's ValueError/TypeError without the path; fix: "
                    "catch (TypeError, ValueError) there and raise TrackError(where ...)")
+@pytest.mark.parametrize("entry", ["", {}])
+def test_init_points_entry_of_the_wrong_type(work, entry):
+    from facetransfer.errors import TrackError
+    from facetransfer.track.init import load_init_points
+
+    pts = {str(i): [i, i / 2] for i in range(17, 68)}
+    pts["30"] = entry
+    p = _put(work, "init_bad.json", json.dumps({"points": pts}).encode())
+    with pytest.raises(TrackError, match="init_bad.json"):
+        load_init_points(p, (200, 200))
+
+
 @FUZZ
 @given(data=st.data())
 def test_init_points_loader(work, data):
