@@ -185,7 +185,7 @@ def test_model_loader_rejects_other_files(work, tiny_model_arrays):
     cv2.imwrite(str(png), np.zeros((4, 4, 3), np.uint8))
     npy = work / "array.npy"
     np.save(npy, np.zeros(3))
-    for p, words in ((png, "not a valid .npz"), (work, "is a folder"), (npy, ".npz")):
+    for p, words in ((png, "not a model file"), (work, "is a folder"), (npy, ".npz")):
         with pytest.raises(ModelFileError) as e:
             load_model(p)
         assert str(p) in str(e.value) and words in str(e.value) and "pickle" not in str(e.value)

@@ -58,21 +58,27 @@ def read_npz(path: str | os.PathLike, what: str,
     """
     p = check_input_file(path, what, error)
     try:
-        with np.load(p, allow_pickle=False) as z:
-            if not hasattr(z, "files"):   # a plain .npy file
-                raise ValueError("an .npy array, not an .npz archive")
+        z = np.load(p, allow_pickle=False)
+    except MemoryError:
+        raise
+    except Exception as exc:  # zipfile.BadZipFile, EOFError, OSError, ValueError (pickle)…
+        raise error(f"{what} {p} is truncated or not a {what} ({_reason(exc)})") from None
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        raise error(f"{what} {p} is not a {what} (a single .npy array, not an .npz archive)")
+    try:
+        with z:
             return {k: z[k] for k in z.files}
     except MemoryError:
         raise
-    except ValueError as exc:
-        if "pickle" in str(exc):
-            reason = "not an .npz archive of arrays"
-        else:
-            reason = str(exc).splitlines()[0] if str(exc) else "unreadable"
-        raise error(f"{what} {p} is not a valid .npz file ({reason})") from None
-    except Exception as exc:  # zipfile.BadZipFile, EOFError, OSError, KeyError, zlib.error…
-        raise error(f"{what} {p} is truncated or not an .npz file "
-                    f"({exc.__class__.__name__})") from None
+    except Exception as exc:  # a damaged member: bad CRC, zlib.error, EOFError, pickle…
+        raise error(f"{what} {p} is truncated or not a {what} ({_reason(exc)})") from None
+
+
+def _reason(exc: Exception) -> str:
+    """A short cause without numpy's advice (its ``allow_pickle`` hint misleads here)."""
+    if isinstance(exc, ValueError) and "pickle" in str(exc):
+        return "not an .npz archive of arrays"
+    return exc.__class__.__name__
 
 
 def scalar(data: dict, key: str, kind: type, path, what: str,
