@@ -324,10 +324,10 @@ def run_puppet(args) -> int:
 
 
 def run_demo(args) -> int:
+    from pathlib import Path
+
     from ..demo import run_demo as demo
     from ..model import load_model
-
-    from pathlib import Path
 
     _positive(args.frames, "--frames")
     out = Path(args.out)
