@@ -179,7 +179,8 @@ def write_error(exc: OSError, path: str | os.PathLike) -> OutputError:
 def _is_write_failure(exc: OSError, tmp: Path) -> bool:
     """An OSError from writing ``tmp`` (not from reading some input inside the block)."""
     name = getattr(exc, "filename", None)
-    if name is not None and os.path.abspath(os.fsdecode(name)) != os.path.abspath(tmp):
+    if isinstance(name, (str, bytes, os.PathLike)) and \
+            os.path.abspath(os.fsdecode(name)) != os.path.abspath(tmp):
         return False
     return exc.errno in _WRITE_ERRNOS or name is not None
 
@@ -191,7 +192,8 @@ def _make_temp(p: Path) -> tuple[int, Path]:
                                    dir=parent)
     except OSError as exc:
         raise write_error(exc, p) from None
-    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # marks the temp as live (remove_stale_temps)
+    with contextlib.suppress(OSError):   # best effort: some network file systems cannot lock
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # marks the temp as live
     return fd, Path(tmp)
 
 
