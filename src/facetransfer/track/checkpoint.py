@@ -148,7 +148,7 @@ class Checkpoint:
             with np.load(self.path, allow_pickle=False) as z:
                 d = {k: z[k] for k in z.files}
         except Exception as exc:  # empty, truncated, not an npz (zipfile, EOFError, ValueError…)
-            log.warning("ignoring unreadable progress file %s (%s); starting afresh",
+            log.warning("ignoring unreadable checkpoint %s (%s); starting afresh",
                         self.path, exc.__class__.__name__)
             return None
         if str(d.get("key", "")) != self.key:
@@ -158,7 +158,7 @@ class Checkpoint:
         try:
             return self._resume(d)
         except Exception as exc:  # keys missing, wrong shapes or dtypes: a damaged file
-            log.warning("ignoring damaged progress file %s (%s); starting afresh", self.path,
+            log.warning("ignoring damaged checkpoint %s (%s); starting afresh", self.path,
                         exc.__class__.__name__)
             return None
 
