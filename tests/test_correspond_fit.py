@@ -235,7 +235,6 @@ def _bad_cases(tmp_path, data_dir, model):
     fin.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\nf 1 2 3\nf 2 1 4\nf 1 2 5\n")
     good = str(LPS_FEATURES)
     return [
-        ([str(fin), "--features", good], "non-manifold"),
         ([str(tmp_path / "missing.obj"), "--features", good], "does not exist"),
         ([str(empty), "--features", good], "empty"),
         ([str(nan), "--features", good], "NaN"),

@@ -44,7 +44,8 @@ def test_blend_offset_source_gives_target(run, tmp_path):
     _write(tmp_path / "m.png", np.dstack([m] * 3))
     for extra in ([], ["--feather", "3"]):
         assert run("texture", "blend", "--source", tmp_path / "s.png", "--target", tmp_path / "t.png",
-                   "--mask", tmp_path / "m.png", "--out", tmp_path / "o.png", *extra) == 0
+                   "--mask", tmp_path / "m.png", "--out", tmp_path / "o.png", "--overwrite",
+                   *extra) == 0
         assert np.abs(_read(tmp_path / "o.png").astype(int) - t).max() <= 1
 
 

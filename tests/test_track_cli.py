@@ -173,5 +173,7 @@ def test_cli_continues_an_interrupted_run(small_clip, quick_model_path, tmp_path
                                atol=1e-9)
     # --restart drops the progress file of an interrupted run
     partial.write_bytes(b"junk")
-    assert main(["track", *map(str, args), "--restart"]) == 0
+    assert main(["track", *map(str, args), "--restart"]) == 2   # the track exists now
+    assert "pass --overwrite" in capsys.readouterr().err and partial.is_file()
+    assert main(["track", *map(str, args), "--restart", "--overwrite"]) == 0
     assert "continued" not in capsys.readouterr().out and not partial.exists()

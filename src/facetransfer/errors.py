@@ -34,3 +34,8 @@ class VideoError(FaceTransferError):
 
 class TrackError(FaceTransferError):
     """Tracking could not proceed (bad initialisation, lost face, mismatched track file)."""
+
+
+class OutputError(FaceTransferError):
+    """An output cannot be written: bad path, exists without --overwrite, is also an input, or the
+    write failed (no space left, read-only folder); the message names the output."""

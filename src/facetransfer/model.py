@@ -20,7 +20,6 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -331,31 +330,31 @@ def load_model(path: str | Path) -> MultilinearModel:
         Missing, truncated or altered file (checksum mismatch), not a model file, or a newer
         format version.
     """
+    from .io.npz import read_npz
+
     p = Path(path)
-    if not p.is_file():
-        raise ModelFileError(f"model file {p} does not exist")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError, KeyError) as exc:
-        raise ModelFileError(f"model file {p} is truncated or not a model file ({exc})") from None
+    data = read_npz(p, "model file", ModelFileError)
     if "metadata" not in data:
         raise ModelFileError(f"{p} is not a facetransfer model file (no metadata)")
     try:
         meta = json.loads(str(data.pop("metadata")))
-    except json.JSONDecodeError:
+    except (json.JSONDecodeError, ValueError):
         raise ModelFileError(f"model file {p} has corrupt metadata") from None
-    if meta.get("magic") != _MAGIC:
+    if not isinstance(meta, dict) or meta.get("magic") != _MAGIC:
         raise ModelFileError(f"{p} is not a facetransfer model file")
-    version = int(meta.get("format_version", -1))
+    try:
+        version = int(meta.get("format_version", -1))
+    except (TypeError, ValueError):
+        raise ModelFileError(f"model file {p} has corrupt metadata (format_version)") from None
     if version > FORMAT_VERSION:
         raise ModelFileError(f"model file {p} has format version {version}, newer than this "
                              f"facetransfer reads ({FORMAT_VERSION}); upgrade facetransfer")
     expected = meta.pop("sha256", None)
     if expected != _content_hash(data, meta):
         raise ModelFileError(f"model file {p} fails its checksum: it was altered or damaged")
-    K = len(meta["mode_names"])
     try:
+        K = len(meta["mode_names"])
+        _check_model_arrays(p, data, K)
         model = MultilinearModel(
             core=data["core"], factors=tuple(data[f"factor_{k}"] for k in range(K)),
             mode_names=tuple(meta["mode_names"]), labels=tuple(tuple(l) for l in meta["labels"]),
@@ -363,10 +362,40 @@ def load_model(path: str | Path) -> MultilinearModel:
             vertex_subset=data.get("vertex_subset"),
             eigenvalues=tuple(data[f"eigenvalues_{k}"] for k in range(K) if f"eigenvalues_{k}" in data),
             imputed=data.get("imputed"), provenance=meta.get("provenance", {}))
-    except (KeyError, ShapeError) as exc:
-        raise ModelFileError(f"model file {p} is incomplete: {exc}") from None
+    except (KeyError, ValueError, TypeError, IndexError) as exc:  # ShapeError is a ValueError
+        raise ModelFileError(f"model file {p} is incomplete or inconsistent: {exc}") from None
     model.__dict__["_hash"] = expected  # verified above: the same sha256 content_hash gives
     return model
+
+
+#: dtype kinds of the arrays of a model file (float: also integers; int: integers only)
+_ARRAY_KINDS = {"core": "fiu", "faces": "iu", "uvs": "fiu", "landmarks": "iu",
+                "vertex_subset": "iu", "imputed": "b"}
+
+
+def _check_model_arrays(p: Path, data: dict, n_modes: int) -> None:
+    """Dtypes, finiteness and shapes the model class does not check; ModelFileError names ``p``."""
+    for name, a in data.items():
+        base = name.rsplit("_", 1)[0] if name[-1].isdigit() else name
+        kinds = _ARRAY_KINDS.get(base, "fiu")
+        if a.dtype.kind not in kinds:
+            raise ModelFileError(f"model file {p}: {name} has dtype {a.dtype}, expected "
+                                 + {"fiu": "numbers", "iu": "integers", "b": "booleans"}[kinds])
+        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+            raise ModelFileError(f"model file {p}: {name} has NaN or infinite values")
+    core = data["core"]
+    n = core.shape[0] // 3 if core.ndim else 0
+    for name, shape in (("uvs", (n, 2)), ("landmarks", None), ("vertex_subset", (n,))):
+        a = data.get(name)
+        if a is None:
+            continue
+        if (shape is not None and a.shape != shape) or a.ndim != 1 and name != "uvs":
+            raise ModelFileError(f"model file {p}: {name} has shape {a.shape}, expected "
+                                 f"{shape or '(68,)'}")
+    for k in range(n_modes):
+        ev = data.get(f"eigenvalues_{k}")
+        if ev is not None and ev.ndim != 1:
+            raise ModelFileError(f"model file {p}: eigenvalues_{k} must be 1-D, got {ev.shape}")
 
 
 def file_hash(path: str | Path) -> str:

@@ -8,9 +8,12 @@ parser(s) and sets ``func`` to a handler ``handler(args) -> int``. Bad input rai
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import logging
+import os
 import sys
+import zipfile
 
 from .. import __version__
 
@@ -34,23 +37,73 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+#: environment that silences the C++ logs of MediaPipe / TensorFlow Lite / absl unless -v
+QUIET_NATIVE_LOGS = {"GLOG_minloglevel": "2", "TF_CPP_MIN_LOG_LEVEL": "3",
+                     "ABSL_MIN_LOG_LEVEL": "2"}
+
+
+def configure_logging(verbose: bool) -> None:
+    """facetransfer's own warnings always; third-party log lines and warnings only with -v."""
+    logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    logging.getLogger("facetransfer").setLevel(logging.INFO if verbose else logging.WARNING)
+    if verbose:
+        return
+    for k, v in QUIET_NATIVE_LOGS.items():
+        os.environ.setdefault(k, v)
+    logging.captureWarnings(True)       # third-party warnings become log records ...
+    logging.getLogger("py.warnings").setLevel(logging.ERROR)   # ... shown only with -v
+    root = logging.getLogger()
+    root.setLevel(logging.ERROR)        # other libraries' loggers: errors only
+    for name in ("trimesh", "matplotlib", "PIL", "numba", "distributed", "absl"):
+        logging.getLogger(name).setLevel(logging.ERROR)
+
+
+def error_line(command: str, exc: BaseException) -> str:
+    """The one line a failed command prints (no traceback)."""
+    if isinstance(exc, ValueError):  # every project error subclasses ValueError
+        msg = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
+    elif isinstance(exc, MemoryError):
+        msg = "out of memory (the job is too large for this machine; make it smaller)"
+    elif isinstance(exc, OSError):
+        what = os.strerror(exc.errno) if exc.errno else str(exc)
+        if exc.errno == errno.ENOSPC:
+            what = "no space left on the device"
+        where = f": {os.fsdecode(exc.filename)}" if exc.filename is not None else ""
+        msg = f"{what}{where}"
+    else:  # EOFError, BadZipFile: an input file read without the project's loaders
+        msg = f"an input file is truncated or damaged ({exc.__class__.__name__}: {exc})"
+    return f"facetransfer {command}: error: {msg}"
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Run the CLI; returns the exit status (0 ok, 2 bad input or usage, 130 interrupted)."""
+    """Run the CLI; returns the exit status (0 ok, 2 bad input or usage, 130 interrupted).
+
+    Called with no ``argv`` (the console script), native libraries' log lines are filtered out
+    of stderr unless ``-v`` is given (:mod:`.stderr`).
+    """
     parser = build_parser()
     args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+    configure_logging(args.verbose)
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    if argv is None and not args.verbose:
+        from .stderr import filtered_stderr
+
+        with filtered_stderr():
+            return _run(args)
+    return _run(args)
+
+
+def _run(args) -> int:
     try:
         return int(args.func(args) or 0)
-    except ValueError as exc:  # every project error subclasses ValueError
-        msg = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
-        print(f"facetransfer {args.command}: error: {msg}", file=sys.stderr)
-        return 2
-    except FileNotFoundError as exc:
-        print(f"facetransfer {args.command}: error: file not found: {exc.filename}", file=sys.stderr)
+    except (ValueError, OSError, MemoryError, EOFError, zipfile.BadZipFile) as exc:
+        # bad input, a failed write or read (permissions, full disk), a job too large
+        if args.verbose:
+            logging.getLogger("facetransfer").exception("details")
+        print(error_line(args.command, exc), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print(f"facetransfer {args.command}: interrupted", file=sys.stderr)

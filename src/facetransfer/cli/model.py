@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import sys
 from pathlib import Path
 from typing import Callable
@@ -131,13 +132,70 @@ def _fill_missing(dataset, method: str, seed: int):
     return filled, imputed
 
 
+def available_memory() -> int:
+    """Bytes of memory available to a new job (``MemAvailable`` of /proc/meminfo, else the
+    physical memory)."""
+    try:
+        with open("/proc/meminfo") as fh:
+            for line in fh:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    try:
+        return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
+    except (ValueError, OSError, AttributeError):
+        return 1 << 62
+
+
+#: peak memory of a build as a multiple of the data tensor (data set, tensor, unfoldings, SVD)
+BUILD_MEMORY_FACTOR = 4.0
+
+
+def build_memory_estimate(dataset: str, n_identities: int | None) -> int | None:
+    """Peak bytes :func:`cmd_build` needs for an ICT data set (None for other data sets).
+
+    The data tensor holds ``identities x cells x vertices x 3`` float64 values (Fig. 3); the build
+    keeps about :data:`BUILD_MEMORY_FACTOR` copies of it at its peak.
+    """
+    from ..datasets import ICT_DATASETS
+    from ..datasets.ict import load_recipes
+
+    if dataset not in ICT_DATASETS:
+        return None
+    spec = load_recipes()["datasets"][dataset]
+    n_id = int(spec["n_identities"] if n_identities is None else n_identities)
+    cells = 1
+    for mode in ("expressions", "visemes"):
+        if mode in spec:
+            cells *= len(spec[mode])
+    return int(BUILD_MEMORY_FACTOR * n_id * cells * ICT_FACE_VERTICES * 3 * 8)
+
+
+#: vertices of the ICT-FaceKit face area the data sets use (0..9408)
+ICT_FACE_VERTICES = 9409
+
+
+def check_build_memory(dataset: str, n_identities: int | None) -> None:
+    """Refuse a build that cannot fit in memory, naming the estimate and what is available."""
+    need = build_memory_estimate(dataset, n_identities)
+    have = available_memory()
+    if need is not None and need > have:
+        raise FaceTransferError(
+            f"--identities {n_identities}: building {dataset} needs about {need / 2**30:.1f} GiB "
+            f"of memory, this machine has {have / 2**30:.1f} GiB available; use fewer identities")
+
+
 def cmd_build(args: argparse.Namespace) -> int:
     from .. import assets
     from ..datasets import ICT_DATASETS, load_dataset
     from ..model import build_model
 
-    check_output_path(args.out)
+    check_output_path(args.out, overwrite=args.overwrite, inputs=[args.dataset])
     ranks = parse_ranks(args.ranks)
+    if args.identities is not None and args.identities < 2:
+        raise FaceTransferError(f"--identities must be at least 2, got {args.identities}")
+    check_build_memory(str(args.dataset), args.identities)
     assets.set_download_progress(sys.stderr.isatty())
     cb, close = _tqdm_progress(f"dataset {args.dataset}")
     try:
@@ -154,7 +212,7 @@ def cmd_build(args: argparse.Namespace) -> int:
             raise ShapeError(f"--ranks {m}={r} is larger than the {ds.shape[ds.mode_names.index(m)]} "
                              f"{m} entries of {args.dataset}")
     model = build_model(ds, use, refine=args.refine, imputed=imputed)
-    model.save(args.out)
+    model.save(args.out, overwrite=args.overwrite)
     err = model.provenance.get("relative_errors", [float("nan")])[-1]
     print(f"wrote {args.out}: modes {', '.join(f'{n}={d}->{r}' for n, d, r in zip(model.mode_names, model.shape, model.ranks))}, "
           f"{model.n_vertices} vertices, relative error {err:.4f}")
@@ -217,14 +275,15 @@ def cmd_synth(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.suffix.lower() not in (".obj", ".ply"):
         raise FaceTransferError(f"--out must end in .obj or .ply, got {out}")
-    check_output_path(out)
+    check_output_path(out, overwrite=args.overwrite, inputs=[args.model])
     if args.weights and args.like:
         raise FaceTransferError("give --weights or --like, not both")
     m = load_model(args.model)
     w = synth_weights(m, parse_weights(args.weights) if args.weights else None,
                       parse_like(args.like) if args.like else None)
     v = m.synthesize(w)
-    write_mesh(out, v, m.faces, uvs=m.uvs if out.suffix.lower() == ".obj" else None)
+    write_mesh(out, v, m.faces, uvs=m.uvs if out.suffix.lower() == ".obj" else None,
+               overwrite=args.overwrite)
     print(f"wrote {out} ({m.n_vertices} vertices)")
     return 0
 
@@ -359,10 +418,14 @@ def cmd_sheet(args: argparse.Namespace) -> int:
     if out.suffix.lower() != ".png":
         raise FaceTransferError(f"--out must end in .png, got {out}")
     dials_out = out.with_name(f"{out.stem}_dials.png")
-    check_output_path(out)
+    if args.max_identities < 1:
+        raise FaceTransferError(f"--max-identities must be >= 1, got {args.max_identities}")
+    for o in (out, dials_out):
+        check_output_path(o, overwrite=args.overwrite, inputs=[args.model])
     m = load_model(args.model)
     sheet, dials = model_sheets(m, max_identities=args.max_identities)
-    with atomic_path(out) as tmp, atomic_path(dials_out) as tmp2:
+    with atomic_path(out, overwrite=args.overwrite) as tmp, \
+            atomic_path(dials_out, overwrite=args.overwrite) as tmp2:
         sheet.save(tmp, format="PNG")
         dials.save(tmp2, format="PNG")
     print(f"wrote {out} and {dials_out}")
@@ -396,6 +459,11 @@ def cmd_dials(args: argparse.Namespace) -> int:
 
 
 # --------------------------------------------------------------------------------- register
+def _overwrite_option(p) -> None:
+    p.add_argument("--overwrite", action="store_true",
+                   help="replace an existing output (an output is never one of the inputs)")
+
+
 def register(sub) -> None:
     """Add ``facetransfer model {build,info,synth,sheet,dials}``."""
     p = sub.add_parser("model", help="build, inspect and sample multilinear face models (§4)",
@@ -416,6 +484,7 @@ def register(sub) -> None:
     b.add_argument("--identities", type=int, default=None,
                    help="number of identities (ICT data sets only; default 15 / 16)")
     b.add_argument("--out", required=True, help="model file to write (.npz)")
+    _overwrite_option(b)
     b.set_defaults(func=cmd_build)
 
     i = msub.add_parser("info", help="show a model's modes, ranks, variance and provenance")
@@ -428,12 +497,14 @@ def register(sub) -> None:
                    "(modes not given: their mean)")
     s.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=smile")
     s.add_argument("--out", required=True, help="FACE.obj or FACE.ply")
+    _overwrite_option(s)
     s.set_defaults(func=cmd_synth)
 
     h = msub.add_parser("sheet", help="picture sheets: identities x expressions, and dials")
     h.add_argument("model")
     h.add_argument("--out", required=True, help="SHEET.png (also writes SHEET_dials.png)")
     h.add_argument("--max-identities", type=int, default=8, help="rows of the first sheet")
+    _overwrite_option(h)
     h.set_defaults(func=cmd_sheet)
 
     dl = msub.add_parser("dials", help="semantic identity dials (face width, nose length, ...) "

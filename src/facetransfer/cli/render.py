@@ -82,9 +82,7 @@ def parse_identity(text: str):
 def _load_model(path: str):
     from ..model import load_model
 
-    if not Path(path).is_file():
-        raise FaceTransferError(f"model file {path} does not exist")
-    return load_model(path)
+    return load_model(path)   # names a missing file, a folder or a damaged file
 
 
 def _model_weights(model, args) -> dict[str, np.ndarray]:
@@ -99,7 +97,7 @@ def _model_weights(model, args) -> dict[str, np.ndarray]:
 def cmd_render(args: argparse.Namespace) -> int:
     from ..render import render_model
 
-    out = check_output_path(args.out)
+    out = check_output_path(args.out, overwrite=args.overwrite, inputs=[args.model])
     if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise FaceTransferError(f"--out {out}: expected a .png or .jpg image")
     size = parse_size(args.size)
@@ -109,7 +107,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     res = render_model(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
                        pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
                        scale=pose.get("scale", 1.0), background=parse_colour(args.background))
-    write_image(out, res.image)
+    write_image(out, res.image, overwrite=args.overwrite)
     print(f"wrote {out} ({size[0]}x{size[1]}, {int(res.visible.sum())} of "
           f"{res.visible.size} vertices visible)")
     return 0
@@ -140,7 +138,12 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
     from ..synth import (DEFAULT_FPS, DEFAULT_SIZE, load_performance, performance_from_spec,
                          random_performance, synthesize_video, truth_path)
 
-    out = check_output_path(args.out)
+    from ..synth import truth_path as _truth_path
+
+    inputs = [args.model, args.performance,
+              args.texture if args.texture not in ("procedural", "default") else None]
+    out = check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
+    check_output_path(_truth_path(out), overwrite=args.overwrite, inputs=inputs)
     if out.suffix.lower() not in (".mp4", ".avi"):
         raise FaceTransferError(f"--out {out}: expected a .mp4 or .avi video")
     if bool(args.performance) == bool(args.random):
@@ -173,7 +176,7 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
     with tqdm(total=perf.n_frames, desc="synth-video", unit="frame",
               disable=not sys.stderr.isatty()) as bar:
         truth = synthesize_video(model, perf, out, seed=args.seed, texture=texture,
-                                 progress=bar.update)
+                                 progress=bar.update, overwrite=args.overwrite)
     print(f"wrote {out} ({perf.n_frames} frames, {perf.size[0]}x{perf.size[1]} at "
           f"{perf.fps:g} fps) and {truth_path(out)}; mean vertex visibility "
           f"{truth.visible.mean():.2f}")
@@ -192,6 +195,7 @@ def register(sub) -> None:
     r.add_argument("--size", default="640x480", help="image WIDTHxHEIGHT (default 640x480)")
     r.add_argument("--background", default="255,255,255", help="R,G,B (default white)")
     r.add_argument("--out", required=True, help="IMG.png")
+    r.add_argument("--overwrite", action="store_true", help="replace an existing output")
     r.set_defaults(func=cmd_render)
 
     s = sub.add_parser("synth-video", help="render synthetic footage with exact ground truth",
@@ -212,4 +216,6 @@ def register(sub) -> None:
                    help="'procedural' (default: band-limited skin, KLT-friendly), 'default' "
                    "(facetransfer.texture.default_face_texture) or a UV texture image file")
     s.add_argument("--out", required=True, help="CLIP.mp4")
+    s.add_argument("--overwrite", action="store_true",
+                   help="replace existing outputs (CLIP.mp4 and CLIP.truth.npz)")
     s.set_defaults(func=cmd_synth_video)

@@ -34,6 +34,7 @@ def register(sub) -> None:
                     help="spatial sigma, scan units (default: 2 x mean edge length)")
     sm.add_argument("--sigma-s", type=float, default=None,
                     help="influence sigma, scan units (default: sigma-c / 2)")
+    sm.add_argument("--overwrite", action="store_true", help="replace an existing output")
     sm.set_defaults(func=_smooth)
 
     fe = ssub.add_parser("features", help="find iBUG-68 feature points on a scan automatically "
@@ -48,6 +49,7 @@ def register(sub) -> None:
                     "surface)")
     fe.add_argument("--picture", default=None,
                     help="rendering with the points drawn (default OUT with suffix .png)")
+    fe.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     fe.set_defaults(func=_features)
 
     ft = ssub.add_parser("fit", help="fit the template to a scan; writes OUT, OUT.report.json, OUT.png")
@@ -66,8 +68,10 @@ def register(sub) -> None:
                     help="previous fit of the same subject (template topology) to deform instead: "
                          "closed-mouth scan -> neutral fit, viseme -> closed-mouth fit")
     ft.add_argument("--prior", choices=("auto", "identity+expression", "none"), default="auto",
-                    help="face space fitted before the smooth deformation: 'auto' = ICT-FaceKit's "
-                         "100 identity components for the ICT template, none for other "
+                    help="face space fitted before the smooth deformation: 'auto' = for the "
+                         "ICT template, both ICT-FaceKit's 100 identity components and "
+                         "identity+expression are fitted and the one closer to the scan is kept "
+                         "(the report names it), none for other "
                          "templates; 'identity+expression' (ICT template) adds the "
                          "FaceKit's expression shapes, for a scan in an expression without a "
                          "neutral fit to give as --reference; 'none' = the paper's generic "
@@ -76,6 +80,7 @@ def register(sub) -> None:
                     help="use only that marking protocol's feature points (42, 21 or 18)")
     ft.add_argument("--out", required=True, help="fitted mesh (template topology, scan coordinates)")
     ft.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ft.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     ft.set_defaults(func=_fit)
 
 
@@ -84,14 +89,14 @@ def _smooth(args) -> int:
     from ..io.atomic import check_output_path
     from ..io.mesh import write_mesh
 
-    check_output_path(args.out)
+    check_output_path(args.out, overwrite=args.overwrite, inputs=[args.scan])
     for name in ("sigma_c", "sigma_s"):
         val = getattr(args, name)
         if val is not None and not val > 0:
             raise ValueError(f"--{name.replace('_', '-')} must be positive, got {val}")
     scan = load_scan(args.scan)
     v = bilateral_smooth(scan.vertices, scan.faces, sigma_c=args.sigma_c, sigma_s=args.sigma_s)
-    write_mesh(args.out, v, scan.faces)
+    write_mesh(args.out, v, scan.faces, overwrite=args.overwrite)
     print(f"wrote {args.out} ({len(v)} vertices)")
     return 0
 
@@ -116,8 +121,9 @@ def _features(args) -> int:
 
     out = Path(args.out)
     picture = Path(args.picture) if args.picture else out.with_suffix(".png")
-    check_output_path(out)
-    check_output_path(picture)
+    inputs = [args.scan, args.texture]
+    check_output_path(out, overwrite=args.overwrite, inputs=inputs)
+    check_output_path(picture, overwrite=args.overwrite, inputs=inputs + [out])
     ids = tuple(range(68)) if args.with_jaw else INNER_FEATURES
     d = _detect(args.scan, args.texture, args.flip_v, args.view, ids)
     _write_detected(out, picture, args.scan, d)
@@ -181,15 +187,19 @@ def _fit(args) -> int:
     from ..io.mesh import read_mesh, write_mesh
 
     out = Path(args.out)
-    check_output_path(out)
+    inputs = [args.scan, args.features if args.features != "auto" else None, args.texture,
+              args.reference, args.template_landmarks,
+              args.template if args.template != "ict" else None]
     stem = out.with_suffix("")
     report_path, png_path = Path(f"{stem}.report.json"), Path(f"{stem}.png")
+    for o in (out, report_path, png_path):
+        check_output_path(o, overwrite=args.overwrite, inputs=inputs)
     if args.features == "auto":
         from ..correspond.detect import INNER_FEATURES
         from ..correspond.features import PROTOCOLS
 
         fpath = Path(f"{stem}.features.json")
-        check_output_path(fpath)
+        check_output_path(fpath, overwrite=args.overwrite, inputs=inputs)
         ids = PROTOCOLS[args.protocol] if args.protocol else INNER_FEATURES
         d = _detect(args.scan, args.texture, args.flip_v, "auto", ids)
         _write_detected(fpath, Path(f"{stem}.features.png"), args.scan, d)
@@ -215,6 +225,10 @@ def _fit(args) -> int:
         from ..correspond.prior import ict_prior
 
         prior = ict_prior("identity+expression", neutral=template.vertices)
+    elif template.name == "ict" and reference is None:   # auto: the better of the two face spaces
+        from ..correspond.prior import ict_prior
+
+        prior = [template.prior, ict_prior("identity+expression", neutral=template.vertices)]
     bar = None
     if not args.no_progress:
         from tqdm import tqdm
@@ -236,13 +250,18 @@ def _fit(args) -> int:
             bar.close()
     credit = LPS_CREDIT if "leeperrysmith" in Path(args.scan).name.lower() else None
     write_fit_report(report_path, result, scan=str(args.scan), features=str(args.features),
-                     template=str(args.template), credit=credit)
+                     template=str(args.template), credit=credit, repairs=scan.notes)
     plot_fit(png_path, result, title=f"fit of {Path(args.scan).name}", credit=credit)
     write_mesh(out, result.vertices, result.faces)
     s = result.stats
     print(f"wrote {out}, {report_path}, {png_path}: surface distance mean {s['mean']:.4g}, "
           f"median {s['median']:.4g}, p95 {s['p95']:.4g}, max {s['max']:.4g} (scan units), "
           f"{s['seconds']:.1f} s")
+    if s.get("prior"):
+        print(f"shape prior: {s['prior']['name']}"
+              + (" (chosen automatically: lower residual)" if "candidates" in s["prior"] else ""))
+    if scan.notes:
+        print("scan repaired: " + "; ".join(scan.notes))
     if not np.isfinite(s["mean"]):
         return 1
     return 0

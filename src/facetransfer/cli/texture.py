@@ -25,8 +25,8 @@ from ..io.atomic import check_output_path, write_image
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 
-def _image_out(path: str) -> Path:
-    out = check_output_path(path)
+def _image_out(path: str, args=None, inputs=()) -> Path:
+    out = check_output_path(path, overwrite=getattr(args, "overwrite", False), inputs=inputs)
     if out.suffix.lower() not in _IMAGE_SUFFIXES:
         raise FaceTransferError(f"--out {out}: expected a .png or .jpg image")
     return out
@@ -36,9 +36,9 @@ def _read_image(path: str, what: str, *, gray: bool = False) -> np.ndarray:
     """An RGB image ``(H, W, 3) uint8`` (or grey ``(H, W)``); one clear error if unreadable."""
     import cv2
 
-    p = Path(path)
-    if not p.is_file():
-        raise FaceTransferError(f"{what} {p} does not exist")
+    from ..io.npz import check_input_file
+
+    p = check_input_file(path, what)
     img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
     if img is None:
         raise FaceTransferError(f"{what} {p} is not an image OpenCV can read")
@@ -57,22 +57,16 @@ def _read_mask(path: str, shape: tuple[int, int]) -> np.ndarray:
 def _load_model(path: str):
     from ..model import load_model
 
-    if not Path(path).is_file():
-        raise FaceTransferError(f"model file {path} does not exist")
-    return load_model(path)
+    return load_model(path)   # names a missing file, a folder or a damaged file
 
 
 def _load_track(path: str):
     """A tracker ``TRACK.npz`` or a ``synth-video`` ``CLIP.truth.npz``."""
+    from ..errors import TrackError
+    from ..io.npz import read_npz
+
     p = Path(path)
-    if not p.is_file():
-        raise FaceTransferError(f"track file {p} does not exist")
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            is_truth = "meta" in z.files
-    except (OSError, ValueError) as exc:
-        raise FaceTransferError(f"track file {p} is not an .npz file: {exc}") from None
-    if is_truth:
+    if "meta" in read_npz(p, "track file", TrackError):
         from ..synth import load_truth
 
         return load_truth(p)
@@ -84,14 +78,14 @@ def _load_track(path: str):
 def cmd_default(args: argparse.Namespace) -> int:
     from ..texture import LEE_PERRY_SMITH_CREDIT, default_face_texture
 
-    out = _image_out(args.out)
+    out = _image_out(args.out, args, [args.model])
     if not 8 <= args.size <= 8192:
         raise FaceTransferError(f"--size must be in 8..8192, got {args.size}")
     model = _load_model(args.model)
     procedural = default_face_texture(model, size=args.size, seed=args.seed)
     tex = procedural if args.source == "procedural" else \
         default_face_texture(model, size=args.size, seed=args.seed, source=args.source)
-    write_image(out, tex)
+    write_image(out, tex, overwrite=args.overwrite)
     if args.source != "procedural" and not np.array_equal(tex, procedural):
         print(f"wrote {out} ({args.size}x{args.size}, Lee Perry-Smith scan on the model's UVs; "
               f"credit: {LEE_PERRY_SMITH_CREDIT})")
@@ -106,16 +100,19 @@ def cmd_lift(args: argparse.Namespace) -> int:
     from ..io.video import iter_frames, video_info
     from ..texture import TextureFunction, lift_track, merge_textures, texture_to_uint8
 
-    out = _image_out(args.out)
-    fn_out = check_output_path(args.function) if args.function else None
+    inputs = [args.video, args.track, args.model]
+    out = _image_out(args.out, args, inputs)
+    fn_out = check_output_path(args.function, overwrite=args.overwrite, inputs=inputs + [out]) \
+        if args.function else None
     if fn_out is not None and fn_out.suffix.lower() != ".npz":
         raise FaceTransferError(f"--function {fn_out}: expected an .npz file")
     if args.step < 1:
         raise FaceTransferError(f"--step must be >= 1, got {args.step}")
     if not 8 <= args.size <= 4096:
         raise FaceTransferError(f"--size must be in 8..4096, got {args.size}")
-    if not Path(args.video).is_file():
-        raise FaceTransferError(f"video {args.video} does not exist")
+    from ..io.npz import check_input_file
+
+    check_input_file(args.video, "video")
     info = video_info(args.video)
     track = _load_track(args.track)
     model = _load_model(args.model)
@@ -129,7 +126,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
         lt = lift_track(model, iter_frames(args.video), track, tex_size=args.size,
                         step=args.step, progress=bar.update)
     merged = merge_textures(lt.lifted)
-    write_image(out, texture_to_uint8(merged.texture))
+    write_image(out, texture_to_uint8(merged.texture), overwrite=args.overwrite)
     seen = float((merged.weight > 1e-6).mean())
     msg = f"wrote {out} (merged from {len(lt.lifted)} frames, {100 * seen:.0f}% of texels seen)"
     if fn_out is not None:
@@ -142,7 +139,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
 def cmd_blend(args: argparse.Namespace) -> int:
     from ..composite import feather_mask, poisson_blend
 
-    out = _image_out(args.out)
+    out = _image_out(args.out, args, [args.source, args.target, args.mask])
     src = _read_image(args.source, "source image")
     dst = _read_image(args.target, "target image")
     if src.shape != dst.shape:
@@ -154,7 +151,7 @@ def cmd_blend(args: argparse.Namespace) -> int:
     m = feather_mask(mask, args.feather) if args.feather > 0 else mask
     method = args.method if args.feather == 0 else ("solver" if args.method == "auto" else args.method)
     res = poisson_blend(src, dst, m, method=method, mixed=args.mixed)
-    write_image(out, res)
+    write_image(out, res, overwrite=args.overwrite)
     print(f"wrote {out} ({int(mask.sum())} masked pixels)")
     return 0
 
@@ -177,6 +174,7 @@ def register(sub) -> None:
                    "(CC-BY 3.0; first run ~15 s, then cached) where the model has ICT UVs, else "
                    "procedural skin; or force one of the two")
     d.add_argument("--out", required=True, help="TEX.png")
+    d.add_argument("--overwrite", action="store_true", help="replace an existing output")
     d.set_defaults(func=cmd_default)
 
     lf = tsub.add_parser("lift", help="lift and merge a UV texture from a tracked video",
@@ -190,6 +188,7 @@ def register(sub) -> None:
     lf.add_argument("--function", help="also write the performance-driven texture function (.npz)")
     lf.add_argument("--k", type=int, default=4, help="neighbours of the texture function (default 4)")
     lf.add_argument("--out", required=True, help="TEX.png (merged texture)")
+    lf.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     lf.set_defaults(func=cmd_lift)
 
     b = tsub.add_parser("blend", help="Poisson-blend a source image into a target over a mask",
@@ -202,4 +201,5 @@ def register(sub) -> None:
     b.add_argument("--mixed", action="store_true", help="mixed gradients")
     b.add_argument("--feather", type=float, default=0.0, help="soft edge radius in pixels (default 0)")
     b.add_argument("--out", required=True, help="OUT.png")
+    b.add_argument("--overwrite", action="store_true", help="replace an existing output")
     b.set_defaults(func=cmd_blend)

@@ -15,7 +15,7 @@ import sys
 from pathlib import Path
 
 from ..errors import FaceTransferError
-from ..io.atomic import check_output_path
+from ..io.atomic import check_not_input, check_output_path
 
 
 def partial_path(out) -> Path:
@@ -61,8 +61,8 @@ def register(sub) -> None:
                    ".partial.npz; by default tracking continues from it)")
     p.add_argument("--from-track", dest="from_track",
                    help="draw --overlay from an existing track file instead of tracking")
-    p.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=True,
-                   help="replace existing outputs")
+    p.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=False,
+                   help="replace existing outputs (an output is never one of the inputs)")
     p.set_defaults(func=run)
 
 
@@ -86,9 +86,15 @@ def run(args) -> int:
         raise FaceTransferError("--from-track needs --overlay (the video to draw)")
     if args.max_frames is not None and args.max_frames < 1:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
+    inputs = (args.video, args.model, args.from_track,
+              None if args.init == "auto" else args.init)
     for path in (args.out, args.overlay):
         if path:
-            check_output_path(path, overwrite=args.overwrite)
+            check_output_path(path, overwrite=args.overwrite, inputs=inputs)
+    if args.out and args.overlay:
+        check_not_input(args.overlay, [args.out, partial_path(args.out)])
+    if args.out:
+        check_not_input(partial_path(args.out), inputs)
     opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
                        n_points=args.points, keyframe=args.keyframe)   # validates the options
     model = load_model(args.model)

@@ -161,13 +161,30 @@ def register(sub) -> None:
     d.add_argument("--source", metavar="S.mp4", help="expression source (default driving_d6)")
     d.add_argument("--target", metavar="T.mp4", help="target footage (default WDA_KatieHill_000)")
     d.add_argument("--model", metavar="M.npz", help="model (default: built and cached)")
+    d.add_argument("--overwrite", action="store_true",
+                   help="replace the outputs of an earlier run in the folder")
     add_rewrite_options(d)
     d.set_defaults(func=run_demo)
+
+
+#: largest |factor| of ``edit --scale`` and |amount| of ``edit --add``: beyond it a face leaves
+#: the space the model was trained on (weights of 1e307 were written before issue 16)
+MAX_EDIT_FACTOR = 10.0
 
 
 def _positive(value, name):
     if value is not None and int(value) < 1:
         raise FaceTransferError(f"{name} must be >= 1, got {value}")
+
+
+def _check_landmarks_file(video) -> None:
+    """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work."""
+    from ..io.landmarks import read_mediapipe_landmarks
+    from ..rewrite import landmarks_file
+
+    lmf = landmarks_file(video)
+    if lmf is not None:
+        read_mediapipe_landmarks(lmf)
 
 
 def run_transfer(args) -> int:
@@ -190,13 +207,21 @@ def run_transfer(args) -> int:
                             (args.pose_track, args.pose_from, "--pose-track")):
         if flag and not dep:
             raise FaceTransferError(f"{name} needs the video it belongs to")
-    check_output_path(args.out, overwrite=args.overwrite)
+    inputs = [args.target, args.target_track, args.expression_from, args.source_track,
+              args.viseme_from, args.viseme_track, args.identity_from, args.identity_track,
+              args.pose_from, args.pose_track, args.performance, args.model,
+              args.identity_weights if args.identity_weights and
+              args.identity_weights.endswith(".npy") else None]
+    check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
-        check_output_path(args.save_track, overwrite=args.overwrite)
-    for v in (args.target, args.expression_from, args.viseme_from, args.identity_from,
-              args.pose_from):
+        check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
+    for v, tr in ((args.target, args.target_track), (args.expression_from, args.source_track),
+                  (args.viseme_from, args.viseme_track), (args.identity_from, args.identity_track),
+                  (args.pose_from, args.pose_track)):
         if v:
             video_info(v)  # unreadable input: one line, before any work
+            if not tr and not (v == args.target and args.performance):
+                _check_landmarks_file(v)
     model = load_model(args.model)
     identity = None
     if args.identity_label:
@@ -279,7 +304,15 @@ def run_edit(args) -> int:
         dial_values = parse_dial_values(args.identity_dials)
     adds = [parse_add(a) for a in args.add]
     scales = [parse_scale(s) for s in args.scale]
-    check_output_path(args.out, overwrite=args.overwrite)
+    for s, text in zip(scales, args.scale):
+        if not abs(s.factor) <= MAX_EDIT_FACTOR:
+            raise FaceTransferError(f"--scale {text}: the factor must lie in "
+                                    f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}]")
+    for a, text in zip(adds, args.add):
+        if not abs(a.amount) <= MAX_EDIT_FACTOR:
+            raise FaceTransferError(f"--add {text}: the amount must lie in "
+                                    f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}]")
+    check_output_path(args.out, overwrite=args.overwrite, inputs=[args.track, args.model])
     track = Track.load(args.track)
     model = _model_for_track(track, args.model)
     new = edit_track(track, model, add=adds, scale=scales, ramp=args.ramp)
@@ -301,14 +334,20 @@ def run_puppet(args) -> int:
     from ..transfer import identity_from_label, puppet_frames
 
     _positive(args.max_frames, "--max-frames")
-    check_output_path(args.out, overwrite=args.overwrite)
+    check_output_path(args.out, overwrite=args.overwrite,
+                      inputs=[args.video, args.model, args.track])
     video_info(args.video)
+    if not args.track:
+        _check_landmarks_file(args.video)
     model = load_model(args.model)
     wid = identity_from_label(model, args.identity)
     frames, fps = read_video(args.video, max_frames=args.max_frames)
     track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
                          max_frames=len(frames), method=args.tracker,
                          progress_factory=_bar_factory())
+    if args.track:   # a track of another video would drive the face with the wrong motion
+        track.check_video(len(frames), (frames.shape[2], frames.shape[1]),
+                          what=f"video {args.video}")
     if track.lost.all():
         raise FaceTransferError(f"no face found in {args.video}")
     from tqdm import tqdm
@@ -324,14 +363,20 @@ def run_puppet(args) -> int:
 
 
 def run_demo(args) -> int:
+    from pathlib import Path
+
     from ..demo import run_demo as demo
     from ..model import load_model
 
     _positive(args.frames, "--frames")
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise FaceTransferError(f"--out {out} is a file; demo writes into a folder (give a "
+                                "folder name)")
     model = load_model(args.model) if args.model else None
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
-               track_method=args.tracker,
+               track_method=args.tracker, overwrite=args.overwrite,
                speed=args.speed, progress_factory=_bar_factory())
     t = res.timings
     print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "

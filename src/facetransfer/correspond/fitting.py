@@ -338,10 +338,35 @@ def _solve(a: sp.csc_matrix, rhs: np.ndarray, lu, guess: np.ndarray):
     return lu.solve(rhs), lu
 
 
+def choose_prior(residuals: Sequence[float], *, margin: float = 0.1) -> int:
+    """Index of the prior to keep: candidates are ordered simplest first, and a later one wins
+    only if its residual is lower than the current choice's by more than ``margin`` (a fraction).
+
+    >>> choose_prior([1.0, 0.95]), choose_prior([1.0, 0.5]), choose_prior([0.4, 0.5, 0.2])
+    (0, 1, 2)
+    """
+    best = 0
+    for i, r in enumerate(residuals):
+        if np.isfinite(r) and (not np.isfinite(residuals[best])
+                               or r < (1.0 - margin) * residuals[best]):
+            best = i
+    return best
+
+
+def _prior_residual(query, pf, faces, sub, *, max_angle: float, normal_sign: float) -> float:
+    """Median distance (work units) from a prior fit's posed face to the scan, over the sampled
+    vertices that find a compatible closest point within 2 units."""
+    x = pf.pose.apply(pf.face)
+    cp, ok, _ = _pairs(query, x, faces, max_distance=2.0, max_angle=max_angle,
+                       normal_sign=normal_sign, idx=sub)
+    return float(np.median(cp.distance[ok])) if ok.any() else float("inf")
+
+
 def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
                  reference: np.ndarray | None = None,
-                 prior: ShapePrior | str | None = "template", prior_iterations: int = 12,
-                 prior_lambda: float = 0.1,
+                 prior: ShapePrior | Sequence[ShapePrior] | str | None = "template",
+                 prior_iterations: int = 12, prior_lambda: float = 0.1,
+                 prior_margin: float = 0.1,
                  schedule: Sequence[FitStage] | None = None,
                  max_angle: float = 60.0, feature_tolerance: float = 0.2,
                  diverge_distance: float = 0.5, diverge_flipped: float = 0.05,
@@ -363,11 +388,16 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     prior : ShapePrior, "template" or None
         Fit this face space first (:func:`.prior.fit_shape_prior`) and deform its best face
         instead of the template; ``"template"`` (default): the template's own prior, if any.
-        Not used with a ``reference`` (the reference already is the subject).
+        Not used with a ``reference`` (the reference already is the subject). A sequence of
+        priors: each is fitted, and the one whose face lies closest to the scan is kept
+        (:func:`choose_prior`); ``stats["prior"]`` names it and lists every candidate's residual.
     prior_iterations : int
         Closest-point iterations of the prior fit.
     prior_lambda : float
         Weight of the prior ``‖w‖²`` against the proximity of all template vertices at unit weight.
+    prior_margin : float
+        With several priors, a later (larger) one is chosen only if its residual is lower than
+        the best earlier one's by more than this fraction.
     schedule : sequence of FitStage, optional
         Default :data:`PRIOR_SCHEDULE` after a prior, :data:`DEFAULT_SCHEDULE` without.
     max_angle : float
@@ -404,9 +434,13 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
         prior = template.prior
     if reference is not None:
         prior = None
-    if prior is not None and prior.basis.shape[1:] != template.vertices.shape:
-        raise MeshError(f"shape prior {prior.name} has basis {prior.basis.shape}; the template "
-                        f"{template.name} needs (K, {len(template.vertices)}, 3)")
+    candidates = list(prior) if isinstance(prior, (list, tuple)) else [prior]
+    candidates = [c for c in candidates if c is not None]
+    prior = candidates[0] if candidates else None
+    for c in candidates:
+        if c.basis.shape[1:] != template.vertices.shape:
+            raise MeshError(f"shape prior {c.name} has basis {c.basis.shape}; the template "
+                            f"{template.name} needs (K, {len(template.vertices)}, 3)")
     if schedule is None:
         schedule = DEFAULT_SCHEDULE if prior is None else PRIOR_SCHEDULE
     base = template.vertices if reference is None else np.asarray(reference, dtype=np.float64)
@@ -451,9 +485,13 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
                                max_angle=max_angle, normal_sign=normal_sign, idx=sub)
             return sub[ok], cp.points[ok], cp.normal[ok]
 
-        pf = fit_shape_prior(pairs_fn, x0, k * prior.basis, lmv, fpts_w,
-                             iterations=prior_iterations,
-                             lam=prior_lambda * len(sub) / len(x0))
+        fits = [fit_shape_prior(pairs_fn, x0, k * c.basis, lmv, fpts_w,
+                                iterations=prior_iterations,
+                                lam=prior_lambda * len(sub) / len(x0)) for c in candidates]
+        residuals = [_prior_residual(query, pf, faces, sub, max_angle=max_angle,
+                                     normal_sign=normal_sign) for pf in fits]
+        pick = choose_prior(residuals, margin=prior_margin)
+        prior, pf = candidates[pick], fits[pick]
         x0 = pf.face                                    # x₀ + B w
         to_work = pf.pose.inverse().compose(to_work)   # move the scan, not the prior face
         scan_w = to_work.apply(scan.vertices)
@@ -462,7 +500,16 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
         history.extend({"stage": "shape prior", "iteration": i, **h} for i, h in enumerate(pf.history))
         prior_info = {"name": prior.name, "n_components": prior.n_components,
                       "coefficient_norm": float(np.linalg.norm(pf.coefficients)),
-                      "coefficients": [round(float(c), 6) for c in pf.coefficients]}
+                      "coefficients": [round(float(c), 6) for c in pf.coefficients],
+                      "residual": residuals[pick]}
+        if len(candidates) > 1:
+            prior_info["candidates"] = [{"name": c.name, "residual": r}
+                                        for c, r in zip(candidates, residuals)]
+            prior_info["chosen_by"] = (f"lowest median distance of the prior fit to the scan "
+                                       f"(a later candidate must be {100 * prior_margin:g}% "
+                                       "lower)")
+            log.info("shape prior: %s (median distances %s)", prior.name,
+                     ", ".join(f"{r:.4g}" for r in residuals))
     if reference is not None:
         upper = upper_face_vertices(x0, template.landmarks)
         rig = _rigid_icp(query, x0, faces, upper, iterations=25, max_angle=max_angle,

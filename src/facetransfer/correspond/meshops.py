@@ -75,6 +75,46 @@ def edge_use_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarr
     return edges, counts, inv.reshape(-1, 3)
 
 
+def drop_nonmanifold_faces(vertices: np.ndarray, faces: np.ndarray
+                           ) -> tuple[np.ndarray, int, int]:
+    """Make every edge manifold: on an edge shared by more than two triangles keep the two
+    largest and drop the others.
+
+    One pass suffices: dropping faces only lowers the use count of other edges.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (F, 3) int
+
+    Returns
+    -------
+    faces : (F', 3) int64
+        Kept faces, in their original order.
+    n_edges : int
+        Non-manifold edges found.
+    n_dropped : int
+        Faces dropped.
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    _, counts, face_edge = edge_use_counts(f)
+    bad = counts > 2
+    if not bad.any():
+        return f, 0, 0
+    _, area = face_normals(np.asarray(vertices, np.float64), f)
+    fe = face_edge.ravel()                       # (3F,) edge of each face corner
+    fid = np.repeat(np.arange(len(f)), 3)
+    sel = bad[fe]
+    e, fi = fe[sel], fid[sel]
+    order = np.lexsort((-area[fi], e))           # per edge, largest faces first
+    e, fi = e[order], fi[order]
+    start = np.r_[0, np.flatnonzero(np.diff(e)) + 1]
+    rank = np.arange(len(e)) - np.repeat(start, np.diff(np.r_[start, len(e)]))
+    drop = np.zeros(len(f), dtype=bool)
+    drop[fi[rank >= 2]] = True
+    return f[~drop], int(bad.sum()), int(drop.sum())
+
+
 def clean_scan(vertices: np.ndarray, faces: np.ndarray, *, name: str = "scan",
                merge_tol: float | None = None) -> ScanMesh:
     """Validate and repair a scan: merge duplicate vertices, drop degenerate/repeated faces.
@@ -96,8 +136,13 @@ def clean_scan(vertices: np.ndarray, faces: np.ndarray, *, name: str = "scan",
     Raises
     ------
     MeshError
-        Empty, non-finite, bad face indices, no valid triangle left, or non-manifold edges (an edge
-        shared by more than two triangles: which side is the surface is then ambiguous).
+        Empty, non-finite, bad face indices, or no valid triangle left.
+
+    Notes
+    -----
+    Raw scans that were remeshed or decimated (vertex clustering) have non-manifold edges, shared
+    by more than two triangles; on such an edge the two largest triangles are kept and the others
+    dropped (:func:`drop_nonmanifold_faces`). Every repair is logged and listed in ``notes``.
     """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces)
@@ -141,10 +186,12 @@ def clean_scan(vertices: np.ndarray, faces: np.ndarray, *, name: str = "scan",
         notes.append(f"dropped {len(f) - len(uniq)} repeated faces")
         log.warning("%s: dropped %d repeated faces", name, len(f) - len(uniq))
         f = f[np.sort(uniq)]
+    f, n_edges, n_dropped = drop_nonmanifold_faces(v, f)
+    if n_dropped:
+        notes.append(f"dropped {n_dropped} faces on {n_edges} non-manifold edges")
+        log.warning("%s: %d non-manifold edges (shared by more than two triangles); dropped %d "
+                    "faces on them", name, n_edges, n_dropped)
     edges, counts, _ = edge_use_counts(f)
-    if (counts > 2).any():
-        raise MeshError(f"{name}: {int((counts > 2).sum())} non-manifold edges (shared by more than "
-                        "two triangles); repair the scan first")
     used = np.zeros(len(v), dtype=bool)
     used[f.ravel()] = True
     if not used.all():

@@ -14,8 +14,9 @@ from .procrustes import Similarity
 
 
 def fit_report(result: FitResult, *, scan: str = "", features: str = "", template: str = "",
-               credit: str | None = None) -> dict:
-    """A JSON-ready summary of a fit: distance statistics (scan units), timing and history."""
+               credit: str | None = None, repairs=()) -> dict:
+    """A JSON-ready summary of a fit: distance statistics (scan units), timing and history;
+    ``repairs``: what cleaning the scan changed (:attr:`ScanMesh.notes`)."""
     rep = {
         "scan": scan, "features": features, "template": template,
         "surface_distance": {k: result.stats[k] for k in ("mean", "median", "p95", "max")},
@@ -30,6 +31,7 @@ def fit_report(result: FitResult, *, scan: str = "", features: str = "", templat
         "similarity": {"scale": result.similarity.scale,
                        "rotation": result.similarity.rotation.tolist(),
                        "translation": result.similarity.translation.tolist()},
+        "scan_repairs": list(repairs),
         "history": list(result.history),
     }
     if credit:

@@ -160,3 +160,46 @@ def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
 def correspondence_error(fitted: np.ndarray, truth: np.ndarray, similarity: Similarity) -> np.ndarray:
     """Per-vertex distance ``(n,)`` between a fit (scan frame) and the truth (truth frame units)."""
     return np.linalg.norm(similarity.inverse().apply(fitted) - truth, axis=1)
+
+
+def cluster_vertices(vertices: np.ndarray, faces: np.ndarray, cell: float
+                     ) -> tuple[np.ndarray, np.ndarray]:
+    """Decimate a mesh by vertex clustering, as scan software does (Rossignac & Borrel 1993).
+
+    Vertices in one cubic grid cell of side ``cell`` are replaced by their mean; triangles that
+    collapse are dropped. The result is typically *non-manifold*: an edge can end up shared by
+    three or more triangles, which is what raw, decimated scans look like.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (F, 3) int
+    cell : float
+        Grid cell size, mesh units (> 0).
+
+    Returns
+    -------
+    vertices : (m, 3) float64
+    faces : (F', 3) int64
+        Repeated triangles (same three vertices) are kept once.
+
+    References
+    ----------
+    J. Rossignac, P. Borrel, "Multi-resolution 3D approximations for rendering complex scenes",
+    Modeling in Computer Graphics, 1993.
+    """
+    if not cell > 0:
+        raise ValueError(f"cell must be > 0, got {cell}")
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    key = np.floor(v / cell).astype(np.int64)
+    _, inv, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    inv = inv.ravel()
+    sums = np.zeros((len(count), 3))
+    np.add.at(sums, inv, v)
+    vc = sums / count[:, None]
+    fc = inv[f]
+    keep = (fc[:, 0] != fc[:, 1]) & (fc[:, 1] != fc[:, 2]) & (fc[:, 0] != fc[:, 2])
+    fc = fc[keep]
+    _, first = np.unique(np.sort(fc, axis=1), axis=0, return_index=True)
+    return vc, fc[np.sort(first)]

@@ -1,64 +1,282 @@
-"""Atomic output: write to a temporary file beside the target, then rename over it.
+"""Atomic output: write to an exclusive temporary file beside the target, then rename over it.
 
-An existing output is never overwritten half-way; an interrupted job leaves no partial file.
+Guarantees, for every output written through :func:`atomic_path`:
+
+* an existing output is never overwritten half-way: a failed or interrupted write (full disk,
+  read-only folder, exception, SIGKILL) leaves the old file as it was;
+* the temporary file is created with ``O_CREAT | O_EXCL`` (:func:`tempfile.mkstemp`) under a
+  unique name, so a symlink planted in the folder is never followed and two writers of the same
+  output never share a temporary file (the last rename wins; with ``overwrite=False`` the second
+  one is refused);
+* a temporary file left behind by a killed process (``.STEM.PID-RANDOM.partSUFFIX``) is removed
+  by the next write of the same output, once its process is gone and its lock is free;
+* a failed write raises :class:`~facetransfer.errors.OutputError` (a ``ValueError``) naming the
+  output and the reason (no space left, read-only folder, permission denied).
 """
 
 from __future__ import annotations
 
 import contextlib
+import errno
+import fcntl
+import logging
 import os
+import re
 import tempfile
 from pathlib import Path
-from typing import Iterator
+from typing import Iterable, Iterator
 
-from ..errors import FaceTransferError
+from ..errors import FaceTransferError, OutputError
+
+log = logging.getLogger(__name__)
+
+#: errno values of a write that failed because of where it writes, not what it writes
+_WRITE_ERRNOS = {errno.ENOSPC: "no space left on the device",
+                 errno.EDQUOT: "disk quota exceeded",
+                 errno.EROFS: "the folder is on a read-only file system",
+                 errno.EACCES: "permission denied (is the folder read-only?)",
+                 errno.EPERM: "operation not permitted (is the folder read-only?)",
+                 errno.EFBIG: "the file is too large for the file system",
+                 errno.EIO: "input/output error"}
 
 
-def check_output_path(path: str | os.PathLike, *, overwrite: bool = True) -> Path:
-    """Validate an output path: its folder must exist; with ``overwrite=False`` it must not exist.
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def check_output_path(path: str | os.PathLike, *, overwrite: bool = True,
+                      inputs: Iterable[str | os.PathLike | None] = ()) -> Path:
+    """Validate an output path before any work is done.
+
+    Parameters
+    ----------
+    path : path-like
+        The output file.
+    overwrite : bool
+        With False, an existing ``path`` is refused.
+    inputs : iterable of path-like or None
+        Files the command reads; ``path`` naming one of them (also through a link) is refused.
+
+    Returns
+    -------
+    Path
 
     Raises
     ------
-    FaceTransferError
-        If the parent folder does not exist, or the file exists and ``overwrite`` is False.
+    OutputError
+        The parent folder does not exist or is not a folder, ``path`` is a folder, ``path`` exists
+        and ``overwrite`` is False, or ``path`` is also an input.
     """
     p = Path(path)
     parent = p.parent if str(p.parent) else Path(".")
+    if not parent.exists():
+        raise OutputError(f"output folder {parent} does not exist (for {p})")
     if not parent.is_dir():
-        raise FaceTransferError(f"output folder {parent} does not exist (for {p})")
-    if not overwrite and p.exists():
-        raise FaceTransferError(f"output {p} exists; pass --overwrite to replace it")
+        raise OutputError(f"output folder {parent} is a file, not a folder (for {p})")
+    if p.is_dir():
+        raise OutputError(f"output {p} is a folder; give a file name")
+    check_not_input(p, inputs)
+    if not overwrite and (p.exists() or p.is_symlink()):
+        raise OutputError(f"output {p} exists; pass --overwrite to replace it")
     return p
 
 
-@contextlib.contextmanager
-def atomic_path(path: str | os.PathLike, *, overwrite: bool = True) -> Iterator[Path]:
-    """Yield a temporary path in the target's folder; rename it to ``path`` on success.
+def check_not_input(output: str | os.PathLike,
+                    inputs: Iterable[str | os.PathLike | None]) -> None:
+    """Refuse an output path that is also one of ``inputs`` (same file, or same path).
 
-    The temporary file keeps the target's suffix so that writers choosing a format by extension
-    (OpenCV, matplotlib, trimesh, numpy) behave as for the final name. On error it is removed.
+    Raises
+    ------
+    OutputError
+        Naming the output and the input it would destroy.
+    """
+    p = Path(output)
+    for inp in inputs:
+        if inp is None or str(inp) == "":
+            continue
+        q = Path(inp)
+        if (p.exists() and q.exists() and _same_file(p, q)) or \
+                os.path.abspath(p) == os.path.abspath(q):
+            raise OutputError(f"output {p} is also an input ({q}); choose another output name")
+
+
+def _temp_pattern(p: Path) -> re.Pattern:
+    return re.compile(rf"^\.{re.escape(p.stem)}\.(\d+)-[A-Za-z0-9_]+\.part{re.escape(p.suffix)}$")
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:   # exists, another user's
+        return True
+    return True
+
+
+def _locked(path: Path) -> bool:
+    """Whether another process holds the writer's lock on ``path``."""
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)   # closing releases a lock taken here
+    return False
+
+
+def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
+    """Remove temporary files of ``path`` left by writers that were killed.
+
+    A temporary file is stale when the process named in it is gone and no process holds its
+    lock; files of live writers are never touched, nor anything that is not a regular file.
+
+    Returns
+    -------
+    list of Path
+        The files removed.
+    """
+    p = Path(path)
+    parent = p.parent if str(p.parent) else Path(".")
+    pat = _temp_pattern(p)
+    removed = []
+    try:
+        names = os.listdir(parent)
+    except OSError:
+        return removed
+    for name in names:
+        m = pat.match(name)
+        if not m:
+            continue
+        q = parent / name
+        try:
+            if not q.is_file() or q.is_symlink():
+                continue
+            pid = int(m.group(1))
+            if (pid != os.getpid() and _pid_alive(pid)) or _locked(q):
+                continue
+            q.unlink()
+        except OSError:
+            continue
+        removed.append(q)
+        log.warning("removed %s, left by an interrupted write of %s", q, p)
+    return removed
+
+
+def write_error(exc: OSError, path: str | os.PathLike) -> OutputError:
+    """An :class:`OutputError` naming ``path`` for an ``OSError`` raised while writing it."""
+    reason = _WRITE_ERRNOS.get(exc.errno) or (exc.strerror or str(exc))
+    return OutputError(f"cannot write {path}: {reason}")
+
+
+def _is_write_failure(exc: OSError, tmp: Path) -> bool:
+    """An OSError from writing ``tmp`` (not from reading some input inside the block)."""
+    name = getattr(exc, "filename", None)
+    if isinstance(name, (str, bytes, os.PathLike)) and \
+            os.path.abspath(os.fsdecode(name)) != os.path.abspath(tmp):
+        return False
+    return exc.errno in _WRITE_ERRNOS or name is not None
+
+
+def _make_temp(p: Path) -> tuple[int, Path]:
+    parent = p.parent if str(p.parent) else Path(".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.{os.getpid()}-", suffix=f".part{p.suffix}",
+                                   dir=parent)
+    except OSError as exc:
+        raise write_error(exc, p) from None
+    with contextlib.suppress(OSError):   # best effort: some network file systems cannot lock
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)   # marks the temp as live
+    return fd, Path(tmp)
+
+
+def _commit(tmp: Path, p: Path, *, overwrite: bool) -> None:
+    """Make ``tmp`` the output: durable on disk, usual permissions, then renamed in one step."""
+    st = os.lstat(tmp)   # FileNotFoundError / a link put in its place: the write is not ours
+    if not os.path.isfile(tmp) or os.path.islink(tmp):
+        raise OutputError(f"cannot write {p}: its temporary file {tmp} was replaced")
+    fd = os.open(tmp, os.O_RDONLY | os.O_NOFOLLOW)
+    try:
+        os.fsync(fd)   # a full disk can surface only here (delayed allocation)
+    finally:
+        os.close(fd)
+    umask = os.umask(0)
+    os.umask(umask)
+    if st.st_mode & 0o777 == 0o600:   # mkstemp's private mode: give the usual umask-based mode
+        os.chmod(tmp, 0o666 & ~umask)
+    if overwrite:
+        os.replace(tmp, p)
+        return
+    try:
+        os.link(tmp, p)   # no-clobber: fails if another writer created p meanwhile
+    except FileExistsError:
+        raise OutputError(f"output {p} exists; pass --overwrite to replace it") from None
+    except OSError:       # file systems without hard links
+        if p.exists():
+            raise OutputError(f"output {p} exists; pass --overwrite to replace it") from None
+        os.replace(tmp, p)
+        return
+    tmp.unlink()
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike, *, overwrite: bool = True,
+                inputs: Iterable[str | os.PathLike | None] = ()) -> Iterator[Path]:
+    """Yield an exclusive temporary path in the target's folder; rename it to ``path`` on success.
+
+    The temporary file exists (empty) when yielded and keeps the target's suffix, so that writers
+    choosing a format by extension (OpenCV, matplotlib, trimesh, numpy) behave as for the final
+    name. On any error it is removed and ``path`` is left as it was.
+
+    Parameters
+    ----------
+    path : path-like
+    overwrite : bool
+        With False, an existing ``path`` is refused (also one created by another writer while this
+        one was writing).
+    inputs : iterable of path-like
+        Files the job reads; ``path`` must not be one of them.
+
+    Raises
+    ------
+    OutputError
+        Bad output path (see :func:`check_output_path`), or the write failed: no space left,
+        read-only folder, permission denied (the message names ``path``).
 
     Examples
     --------
     >>> with atomic_path("out/model.npz") as tmp:    # doctest: +SKIP
     ...     np.savez(tmp, a=1)
     """
-    p = check_output_path(path, overwrite=overwrite)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.stem}.", suffix=f".part{p.suffix}", dir=p.parent or ".")
-    os.close(fd)
-    tmp_path = Path(tmp)
+    p = check_output_path(path, overwrite=overwrite, inputs=inputs)
+    remove_stale_temps(p)
+    fd, tmp = _make_temp(p)
     try:
-        yield tmp_path
-        # mkstemp makes the file private (0600); give the output the usual umask-based mode
-        umask = os.umask(0)
-        os.umask(umask)
-        if tmp_path.exists():
-            os.chmod(tmp_path, 0o666 & ~umask)
-        os.replace(tmp_path, p)
-    except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp_path.unlink()
+        yield tmp
+        _commit(tmp, p, overwrite=overwrite)
+    except OSError as exc:
+        _discard(tmp)
+        if _is_write_failure(exc, tmp):   # not an input the block was reading
+            raise write_error(exc, p) from None
         raise
+    except BaseException:
+        _discard(tmp)
+        raise
+    finally:
+        os.close(fd)
+
+
+def _discard(tmp: Path) -> None:
+    with contextlib.suppress(OSError):
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
 
 
 def write_bytes_atomic(path: str | os.PathLike, data: bytes, *, overwrite: bool = True) -> Path:

@@ -74,12 +74,47 @@ def read_obj_vertices(path: str | os.PathLike) -> np.ndarray:
     return _check_vertices(v.reshape(-1, 3), path)
 
 
+def _floats(rows: list[str], k: int, path, what: str) -> np.ndarray:
+    """``k`` numbers from each of ``rows`` (extra columns ignored), as an (n, k) float64 array."""
+    try:
+        cols = [s.split()[:k] for s in rows]
+        if any(len(c) < k for c in cols):
+            raise ValueError
+        return np.array(cols, dtype=np.float64).reshape(-1, k)
+    except ValueError:
+        bad = next((n for n, s in enumerate(rows) if len(s.split()) < k), None)
+        raise MeshError(f"mesh {path} has malformed {what} lines (each needs {k} numbers"
+                        + (f"; {what} {bad + 1} has {len(rows[bad].split())}" if bad is not None
+                           else "") + ")") from None
+
+
+def _face_index(token: str, path) -> int:
+    try:
+        return int(token)
+    except ValueError:
+        raise MeshError(f"mesh {path} has a malformed face index {token!r} (expected an "
+                        "integer)") from None
+
+
+def _obj_index(f: np.ndarray, n: int) -> np.ndarray:
+    """OBJ indices (1-based; negative counts from the end) -> 0-based; -1 where out of range."""
+    g = np.where(f < 0, f + n, f - 1)
+    return np.where((f == 0) | (g < 0) | (g >= n), -1, g)
+
+
 def read_obj(path: str | os.PathLike) -> Mesh:
-    """Read an OBJ file keeping vertex order; quads are split, UVs taken per vertex.
+    """Read an OBJ file keeping vertex order; polygons are fanned into triangles, UVs taken per
+    vertex.
 
     Returns
     -------
     Mesh
+
+    Raises
+    ------
+    MeshError
+        Unreadable file, malformed ``v`` / ``vt`` / ``f`` lines, face or texture indices out of
+        range, non-finite coordinates (the message names the file).
     """
     try:
         with open(path, "rb") as fh:
@@ -96,35 +131,36 @@ def read_obj(path: str | os.PathLike) -> Mesh:
         elif line.startswith("vt "):
             uvs.append(line[3:])
         elif line.startswith("f "):
-            parts = line[2:].split()
-            vi = [int(p.split("/")[0]) for p in parts]
-            ti = [int(p.split("/")[1]) if p.count("/") >= 1 and p.split("/")[1] else 0 for p in parts]
+            parts = [q.split("/") for q in line[2:].split()]
+            if len(parts) < 3:
+                raise MeshError(f"mesh {path} has a face with {len(parts)} vertices (at least 3)")
+            vi = [_face_index(q[0], path) for q in parts]
+            ti = [_face_index(q[1], path) if len(q) > 1 and q[1] else 0 for q in parts]
             for k in range(1, len(parts) - 1):
                 tris.append((vi[0], vi[k], vi[k + 1]))
                 tri_uv.append((ti[0], ti[k], ti[k + 1]))
     if not verts:
         raise MeshError(f"mesh {path} has no vertices")
-    try:
-        v = np.array([[float(x) for x in s.split()[:3]] for s in verts], dtype=np.float64)
-    except ValueError:
-        raise MeshError(f"mesh {path} has malformed vertex lines") from None
+    v = _floats(verts, 3, path, "vertex")
     _check_vertices(v, path)
     n = len(v)
-    f = np.array(tris, dtype=np.int64).reshape(-1, 3)
-    f = np.where(f < 0, f + n, f - 1)  # OBJ is 1-based; negative indices count from the end
-    if f.size and (f.min() < 0 or f.max() >= n):
-        raise MeshError(f"mesh {path} has face indices outside 0..{n - 1}")
+    f = _obj_index(np.array(tris, dtype=np.int64).reshape(-1, 3), n)
+    if f.size and f.min() < 0:
+        raise MeshError(f"mesh {path} has face indices outside 1..{n}")
     uv = None
     if uvs:
-        t = np.array([[float(x) for x in s.split()[:2]] for s in uvs], dtype=np.float64)
-        ti = np.array(tri_uv, dtype=np.int64).reshape(-1, 3)
-        if ti.size and ti.min() > 0:
+        t = _floats(uvs, 2, path, "texture coordinate")
+        if not np.all(np.isfinite(t)):
+            raise MeshError(f"mesh {path} has NaN or infinite texture coordinates")
+        raw = np.array(tri_uv, dtype=np.int64).reshape(-1, 3)
+        if raw.size and (raw != 0).all():
+            ti = _obj_index(raw, len(t))
+            if ti.min() < 0:
+                raise MeshError(f"mesh {path} has texture (vt) indices outside 1..{len(t)}")
             uv = np.zeros((n, 2))
-            seen = np.zeros(n, dtype=bool)
-            fv, tv = f.ravel(), ti.ravel() - 1
+            fv, tv = f.ravel(), ti.ravel()
             first = np.unique(fv, return_index=True)
             uv[first[0]] = t[tv[first[1]]]
-            seen[first[0]] = True
     return Mesh(v, f, uv)
 
 
@@ -136,22 +172,30 @@ def read_mesh(path: str | os.PathLike) -> Mesh:
     MeshError
         Unreadable, empty, non-finite, or not a mesh.
     """
-    p = Path(path)
-    if not p.is_file():
-        raise MeshError(f"mesh file {p} does not exist")
-    if p.stat().st_size == 0:
-        raise MeshError(f"mesh file {p} is empty")
+    from .npz import check_input_file
+
+    p = check_input_file(path, "mesh file", MeshError)
     if p.suffix.lower() == ".obj":
         return read_obj(p)
     import trimesh
 
     try:
-        loaded = trimesh.load(p, process=False, force="mesh")
+        loaded = trimesh.load(p, process=False)
+        if isinstance(loaded, trimesh.PointCloud):
+            v = np.asarray(loaded.vertices, dtype=np.float64)
+            f = np.zeros((0, 3), np.int64)
+        else:
+            if isinstance(loaded, trimesh.Scene):
+                loaded = trimesh.load(p, process=False, force="mesh")
+            v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
+            f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
     except Exception as exc:  # trimesh raises many kinds
-        raise MeshError(f"cannot read mesh {p}: {exc}") from None
-    v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
-    f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
+        msg = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
+        raise MeshError(f"cannot read mesh {p}: {msg}") from None
     _check_vertices(v, p)
+    f = f.reshape(-1, 3) if f.size else np.zeros((0, 3), np.int64)
+    if f.size and (f.min() < 0 or f.max() >= len(v)):
+        raise MeshError(f"mesh {p} has face indices outside 0..{len(v) - 1}")
     uv = None
     visual = getattr(loaded, "visual", None)
     if visual is not None and getattr(visual, "uv", None) is not None and len(visual.uv) == len(v):

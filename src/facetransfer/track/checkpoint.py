@@ -147,21 +147,36 @@ class Checkpoint:
         try:
             with np.load(self.path, allow_pickle=False) as z:
                 d = {k: z[k] for k in z.files}
-        except (OSError, ValueError) as exc:
-            log.warning("ignoring unreadable checkpoint %s: %s", self.path, exc)
+        except Exception as exc:  # empty, truncated, not an npz (zipfile, EOFError, ValueError…)
+            log.warning("ignoring unreadable checkpoint %s (%s); starting afresh",
+                        self.path, exc.__class__.__name__)
             return None
         if str(d.get("key", "")) != self.key:
             log.warning("checkpoint %s belongs to another run (video, model or options "
                         "differ); starting afresh", self.path)
             return None
+        try:
+            return self._resume(d)
+        except Exception as exc:  # keys missing, wrong shapes or dtypes: a damaged file
+            log.warning("ignoring damaged checkpoint %s (%s); starting afresh", self.path,
+                        exc.__class__.__name__)
+            return None
+
+    def _resume(self, d: dict) -> Resume:
         st0 = _unpack_states(d, "s0_", self.modes)[0]
         prev = _unpack_states(d, "prev_", self.modes) if bool(d["has_prev"]) else None
         n_sys = int(d["n_systems"])
         systems = [(d["sys_S"][k], d["sys_c"][k]) for k in range(n_sys)]
-        return Resume(int(d["start"]), d["L0"], st0, int(d["pass_index"]),
-                      int(d["next_frame"]), _unpack_states(d, "cur_", self.modes), prev,
-                      d["conf"].copy(), d["lost"].copy(), [int(i) for i in d["reinit"]],
-                      systems)
+        r = Resume(int(d["start"]), np.asarray(d["L0"], np.float64), st0, int(d["pass_index"]),
+                   int(d["next_frame"]), _unpack_states(d, "cur_", self.modes), prev,
+                   d["conf"].astype(np.float64), d["lost"].astype(bool),
+                   [int(i) for i in d["reinit"]], systems)
+        n = len(r.states)
+        if (r.L0.shape != (68, 2) or r.conf.shape != (n,) or r.lost.shape != (n,)
+                or not 0 <= r.start <= r.next_frame <= n or r.pass_index < 0
+                or (prev is not None and len(prev) != n)):
+            raise ValueError("inconsistent arrays")
+        return r
 
     def due(self) -> bool:
         return time.monotonic() - self._last >= self.every

@@ -31,7 +31,6 @@ key                 shape / dtype        meaning
 from __future__ import annotations
 
 import os
-import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -240,38 +239,45 @@ class Track:
         TrackError
             Missing, truncated or malformed file, a newer format version, or inconsistent arrays.
         """
+        from ..io.npz import read_npz, scalar
+
         p = Path(path)
-        if not p.is_file():
-            raise TrackError(f"track file {p} does not exist")
-        try:
-            with np.load(p, allow_pickle=False) as z:
-                data = {k: z[k] for k in z.files}
-        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as exc:
-            raise TrackError(f"track file {p} is truncated or not a track file ({exc})") from None
+        data = read_npz(p, "track file", TrackError)
         required = ("fps", "frame_size", "rotation", "scale", "translation", "landmarks2d",
                     "confidence", "lost", "model_hash", "mode_names")
         missing = [k for k in required if k not in data]
         if missing:
             raise TrackError(f"{p} is not a track file (missing {', '.join(missing)})")
-        version = int(data.get("format_version", 1))
+        version = scalar(data, "format_version", int, p, "track file", TrackError) \
+            if "format_version" in data else 1
         if version > TRACK_FORMAT_VERSION:
             raise TrackError(f"track file {p} has format version {version}, newer than this "
                              f"facetransfer reads ({TRACK_FORMAT_VERSION})")
+        for k in ("mode_names", "blendshape_names"):
+            if k in data and data[k].dtype.kind not in "US":
+                raise TrackError(f"track file {p}: {k!r} must hold text, got {data[k].dtype}")
         names = tuple(str(n) for n in np.atleast_1d(data["mode_names"]))
         absent = [n for n in names if f"weights_{n}" not in data]
         if absent:
             raise TrackError(f"track file {p} lacks weights of mode(s) {absent}")
+        for k, a in data.items():
+            if k not in ("mode_names", "blendshape_names", "model_hash", "source") and \
+                    a.dtype.kind not in "biuf":
+                raise TrackError(f"track file {p}: {k!r} must hold numbers, got {a.dtype}")
         try:
-            return cls(fps=float(data["fps"]), frame_size=tuple(data["frame_size"]),
+            return cls(fps=scalar(data, "fps", float, p, "track file", TrackError),
+                       frame_size=tuple(np.asarray(data["frame_size"]).ravel()),
                        rotation=data["rotation"], scale=data["scale"],
                        translation=data["translation"],
                        weights={n: data[f"weights_{n}"] for n in names},
                        landmarks2d=data["landmarks2d"], confidence=data["confidence"],
-                       lost=data["lost"], model_hash=str(data["model_hash"]), mode_names=names,
+                       lost=data["lost"],
+                       model_hash=scalar(data, "model_hash", str, p, "track file", TrackError),
+                       mode_names=names,
                        source=str(data.get("source", "")),
                        blendshapes=data.get("blendshapes"),
                        blendshape_names=(None if "blendshape_names" not in data else
                                          tuple(str(n) for n in
                                                np.atleast_1d(data["blendshape_names"]))))
-        except TrackError as exc:
+        except (TrackError, ValueError, TypeError, OverflowError) as exc:
             raise TrackError(f"track file {p} is invalid: {exc}") from None

@@ -1,0 +1,107 @@
+"""Keep native libraries' log lines off the terminal unless ``-v`` is given.
+
+MediaPipe, TensorFlow Lite and absl write their own log lines (``W0000 00:00:... file.cc:121]
+...``, ``INFO: Created TensorFlow Lite XNNPACK delegate``) straight to file descriptor 2, from C++,
+past Python's logging. :func:`filtered_stderr` points descriptor 2 at a pipe read by a thread
+that forwards everything except those lines (fatal ``F`` lines still pass), so the tool's own
+line is the first a person sees. Python's ``sys.stderr`` is moved to a copy of the original
+descriptor, so progress bars still see the terminal (``isatty``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import threading
+from typing import Iterator
+
+#: native log lines to drop: glog/absl info, warning and error lines, TFLite's INFO lines
+NATIVE_LOG = re.compile(
+    rb"^(?:[IWE]\d{4} [\d:.]+ +\d+ [^\]]*\] .*|INFO: Created TensorFlow Lite.*"
+    rb"|INFO: Initialized TensorFlow Lite.*|WARNING: All log messages before absl::InitializeLog"
+    rb".*|WARNING: Logging before InitGoogle\(\).*)\r?\n?$")
+
+
+_KEYWORDS = (b"INFO: ", b"WARNING: ", b"ERROR: ")
+
+
+def _maybe_native(partial: bytes) -> bool:
+    """Whether an unfinished line may become a native log line (C libraries often write the
+    severity, the message and the newline in separate writes)."""
+    if re.match(rb"^[IWE]\d{0,4}(?: |$)", partial):
+        return True
+    return any(partial.startswith(k) or k.startswith(partial) for k in _KEYWORDS)
+
+
+def filter_native(data: bytes) -> tuple[bytes, bytes]:
+    """Split ``data`` into what to forward now and an unfinished native log line to keep.
+
+    Returns
+    -------
+    forward : bytes
+    rest : bytes
+        A trailing partial line that starts like a native log line (kept for the next chunk).
+    """
+    out = []
+    lines = data.splitlines(keepends=True)
+    rest = b""
+    if lines and not lines[-1].endswith(b"\n") and _maybe_native(lines[-1]):
+        rest = lines.pop()
+    for ln in lines:
+        if not NATIVE_LOG.match(ln):
+            out.append(ln)
+    return b"".join(out), rest
+
+
+@contextlib.contextmanager
+def filtered_stderr() -> Iterator[None]:
+    """Filter native log lines out of descriptor 2 for the duration of the block."""
+    try:
+        saved = os.dup(2)
+        r, w = os.pipe()
+    except OSError:
+        yield
+        return
+
+    def pump() -> None:
+        rest = b""
+        while True:
+            try:
+                chunk = os.read(r, 65536)
+            except OSError:
+                break
+            if not chunk:
+                break
+            fwd, rest = filter_native(rest + chunk)
+            if fwd:
+                with contextlib.suppress(OSError):
+                    os.write(saved, fwd)
+        if rest and not NATIVE_LOG.match(rest):
+            with contextlib.suppress(OSError):
+                os.write(saved, rest)
+        os.close(r)
+
+    import io
+    import sys
+
+    t = threading.Thread(target=pump, name="stderr-filter", daemon=True)
+    t.start()
+    old = sys.stderr
+    with contextlib.suppress(Exception):
+        old.flush()
+    os.dup2(w, 2)
+    os.close(w)
+    py_fd = os.dup(saved)
+    sys.stderr = io.TextIOWrapper(io.FileIO(py_fd, "w"), encoding=getattr(old, "encoding", None)
+                                  or "utf-8", errors="backslashreplace", line_buffering=True)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(Exception):
+            sys.stderr.flush()
+            sys.stderr.close()
+        sys.stderr = old
+        os.dup2(saved, 2)   # closes the pipe's last write end: the pump drains and stops
+        t.join(timeout=2)
+        os.close(saved)

@@ -1,0 +1,117 @@
+"""The CLI's side of issue 16: one output rule for every command, bounds checked before any work,
+one line for OS errors, and native libraries' log lines kept off stderr."""
+
+from __future__ import annotations
+
+import errno
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from facetransfer.cli.main import error_line, main
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def _err(capsys) -> list[str]:
+    return capsys.readouterr().err.strip().splitlines()
+
+
+# ------------------------------------------------------------------------------ one output rule
+@pytest.fixture
+def tiny_model(tmp_path):
+    from facetransfer.datasets import FaceDataset
+    from facetransfer.model import build_model
+
+    rng = np.random.default_rng(0)
+    ds = FaceDataset(rng.normal(size=(2, 2, 6, 3)), np.ones((2, 2), bool),
+                     ("identity", "expression"), (("a", "b"), ("n", "s")),
+                     np.array([[0, 1, 2], [2, 3, 4], [3, 4, 5]]), None, None, None, {})
+    p = tmp_path / "m.npz"
+    build_model(ds, {"identity": 2, "expression": 2}).save(p)
+    return p
+
+
+def test_existing_output_needs_overwrite(tiny_model, tmp_path, capsys):
+    out = tmp_path / "face.obj"
+    out.write_text("old\n")
+    assert main(["model", "synth", str(tiny_model), "--out", str(out)]) == 2
+    assert _err(capsys) == [f"facetransfer model: error: output {out} exists; pass --overwrite "
+                            "to replace it"]
+    assert out.read_text() == "old\n"
+    assert main(["model", "synth", str(tiny_model), "--out", str(out), "--overwrite"]) == 0
+    assert out.read_text().startswith("# written by facetransfer")
+
+
+def test_output_that_is_an_input_is_refused(tmp_path, capsys):
+    mesh = tmp_path / "scan.obj"
+    mesh.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 2 4\nf 1 3 4\nf 2 3 4\n")
+    before = mesh.read_bytes()
+    link = tmp_path / "alias.obj"
+    link.symlink_to(mesh)
+    for out in (mesh, link):   # the same path, or the same file through a link
+        assert main(["scan", "smooth", str(mesh), "--out", str(out), "--overwrite"]) == 2
+        assert _err(capsys) == [f"facetransfer scan: error: output {out} is also an input "
+                                f"({mesh}); choose another output name"]
+    assert mesh.read_bytes() == before and link.is_symlink()
+
+
+def test_track_out_is_the_video_is_refused(tiny_model, tmp_path, capsys):
+    video = tmp_path / "v.mp4"
+    video.write_bytes(b"not really a video")
+    assert main(["track", str(video), "--model", str(tiny_model), "--out", str(video),
+                 "--overwrite"]) == 2
+    assert "is also an input" in _err(capsys)[0] and video.read_bytes() == b"not really a video"
+
+
+def test_bounds_are_checked_before_any_work(tiny_model, tmp_path, capsys, monkeypatch):
+    from facetransfer.cli import model as cli_model
+
+    assert main(["model", "sheet", str(tiny_model), "--out", str(tmp_path / "s.png"),
+                 "--max-identities", "-1"]) == 2
+    assert "--max-identities must be >= 1" in _err(capsys)[0]
+    monkeypatch.setattr(cli_model, "available_memory", lambda: 1 << 30)   # 1 GiB
+    assert main(["model", "build", "--dataset", "ict-bilinear", "--identities", "2000",
+                 "--out", str(tmp_path / "big.npz")]) == 2
+    line = _err(capsys)[0]
+    # 2000 x 10 cells x 9409 vertices x 3 x 8 bytes x 4 copies = 16.8 GiB
+    assert "needs about 16.8 GiB" in line and "1.0 GiB available" in line
+    assert cli_model.build_memory_estimate("ict-bilinear", None) == 4 * 15 * 10 * 9409 * 3 * 8
+
+
+# ------------------------------------------------------------------------------ one line
+def test_error_line_for_os_errors():
+    e = OSError(errno.ENOSPC, "No space left on device")
+    assert error_line("x", e) == "facetransfer x: error: no space left on the device"
+    e = PermissionError(errno.EACCES, "Permission denied", "/data/out")
+    assert error_line("x", e) == "facetransfer x: error: Permission denied: /data/out"
+    assert "out of memory" in error_line("x", MemoryError())
+
+
+# ------------------------------------------------------------------------------ native logs
+def test_native_log_lines_are_filtered_from_stderr():
+    """C libraries write straight to descriptor 2, often in pieces; only they are dropped."""
+    code = textwrap.dedent(f"""
+        import os, sys
+        sys.path.insert(0, {SRC!r})
+        from facetransfer.cli.stderr import filtered_stderr
+        with filtered_stderr():
+            os.write(2, b"W0000 00:00:1796140392.727433    7411 feedback.cc:121] Feedback\\n")
+            os.write(2, b"INFO: ")
+            os.write(2, b"Created TensorFlow Lite XNNPACK delegate for CPU.")
+            os.write(2, b"\\n")
+            print("\\rbar 50%", end="", file=sys.stderr, flush=True)
+            print("facetransfer x: error: the tool's own line", file=sys.stderr)
+            os.write(2, b"F0000 00:00:1.0  1 fatal.cc:1] a fatal native error\\n")
+        print("after", file=sys.stderr)
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=60)
+    err = r.stderr.decode()
+    assert r.returncode == 0
+    assert "Feedback" not in err and "TensorFlow" not in err and "INFO" not in err
+    assert "\rbar 50%facetransfer x: error: the tool's own line\n" in err
+    assert "a fatal native error" in err and err.endswith("after\n")
