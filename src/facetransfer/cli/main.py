@@ -25,7 +25,9 @@ def build_parser() -> argparse.ArgumentParser:
         "face models, track faces in video, and transfer performances between videos.",
     )
     parser.add_argument("--version", action="version", version=f"facetransfer {__version__}")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="log progress details, and let third-party libraries (MediaPipe, "
+                        "TensorFlow Lite) log too")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMAND_MODULES:
         module = importlib.import_module(f"{__package__}.{name}")
@@ -42,8 +44,11 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    from .quiet import quiet_stderr
+
     try:
-        return int(args.func(args) or 0)
+        with quiet_stderr(verbose=args.verbose):
+            return int(args.func(args) or 0)
     except ValueError as exc:  # every project error subclasses ValueError
         msg = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
         print(f"facetransfer {args.command}: error: {msg}", file=sys.stderr)

@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
+from .common import add_video_options, video_options
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
 
@@ -140,9 +141,13 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
     from ..synth import (DEFAULT_FPS, DEFAULT_SIZE, load_performance, performance_from_spec,
                          random_performance, synthesize_video, truth_path)
 
-    out = check_output_path(args.out)
-    if out.suffix.lower() not in (".mp4", ".avi"):
-        raise FaceTransferError(f"--out {out}: expected a .mp4 or .avi video")
+    from ..io.video import VIDEO_SUFFIXES, check_video_output
+
+    vopt = video_options(args)
+    out = Path(args.out)
+    if out.suffix.lower() not in VIDEO_SUFFIXES:  # the truth file goes beside one video file
+        raise FaceTransferError(f"--out {out}: expected a video ({', '.join(VIDEO_SUFFIXES)})")
+    check_video_output(out, vopt)
     if bool(args.performance) == bool(args.random):
         raise FaceTransferError("give either --performance SPEC.json or --random")
     if args.fps is not None and not 0 < args.fps <= 1000:
@@ -173,7 +178,7 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
     with tqdm(total=perf.n_frames, desc="synth-video", unit="frame",
               disable=not sys.stderr.isatty()) as bar:
         truth = synthesize_video(model, perf, out, seed=args.seed, texture=texture,
-                                 progress=bar.update)
+                                 progress=bar.update, options=vopt)
     print(f"wrote {out} ({perf.n_frames} frames, {perf.size[0]}x{perf.size[1]} at "
           f"{perf.fps:g} fps) and {truth_path(out)}; mean vertex visibility "
           f"{truth.visible.mean():.2f}")
@@ -212,4 +217,5 @@ def register(sub) -> None:
                    help="'procedural' (default: band-limited skin, KLT-friendly), 'default' "
                    "(facetransfer.texture.default_face_texture) or a UV texture image file")
     s.add_argument("--out", required=True, help="CLIP.mp4")
+    add_video_options(s)
     s.set_defaults(func=cmd_synth_video)
