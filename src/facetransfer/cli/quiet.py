@@ -25,15 +25,23 @@ from typing import Iterator
 #: Lines dropped: glog/absl (``W0000 00:00:1796.. 7910 file.cc:181] …``), their preamble, and
 #: TensorFlow Lite's own ``INFO:`` lines.
 NATIVE_LOG_LINE = re.compile(
-    rb"^(?:[IWEF]\d{4} \d\d:\d\d:\d\d\.\d+ +\d+ [^ \]]+:\d+\]"
+    rb"(?:[IWEF]\d{4} \d+:\d+:\d+\.\d+ +\d+ [^ \]]+:\d+\]"
     rb"|WARNING: Logging before InitGoogle\(\) is written to STDERR"
     rb"|WARNING: All log messages before absl::InitializeLog\(\) is called are written to STDERR"
     rb"|INFO: Created TensorFlow Lite)")
 
 
 def is_native_log_line(line: bytes) -> bool:
-    """Whether one line (without its newline) is a third-party native log line."""
-    return NATIVE_LOG_LINE.match(line.lstrip(b"\r")) is not None
+    """Whether one line (without its newline) has a third-party native log message."""
+    return NATIVE_LOG_LINE.search(line) is not None
+
+
+def _filter_line(line: bytes) -> bytes:
+    """What to pass on of one complete line (without its newline): all of it with the newline,
+    or, if it ends in a native log message (another thread's, perhaps glued after a progress
+    bar's update), only what comes before that message."""
+    m = NATIVE_LOG_LINE.search(line)
+    return line + b"\n" if m is None else line[:m.start()]
 
 
 def _pump(read_fd: int, write_fd: int) -> None:
@@ -55,7 +63,7 @@ def _pump(read_fd: int, write_fd: int) -> None:
                 out, pending = pending, b""
             else:
                 *lines, pending = (pending + chunk).split(b"\n")
-                out = b"".join(ln + b"\n" for ln in lines if not is_native_log_line(ln))
+                out = b"".join(_filter_line(ln) for ln in lines)
                 head, sep, tail = pending.rpartition(b"\r")
                 if tail[:1] in (b"I", b"W", b"E", b"F"):
                     out, pending = out + head + sep, tail
@@ -63,8 +71,8 @@ def _pump(read_fd: int, write_fd: int) -> None:
                     out, pending = out + pending, b""
             if out:
                 os.write(write_fd, out)
-        if pending and not is_native_log_line(pending):
-            os.write(write_fd, pending)
+        if pending:
+            os.write(write_fd, _filter_line(pending)[:len(pending)])
 
 
 @contextlib.contextmanager
