@@ -248,3 +248,11 @@ def test_video_info_of_written_video(tmp_path):
     p = encode_video(tmp_path / "v.mov", smooth_frames(n=6), 29.97).path
     info = video_info(p)
     assert info.n_frames == 6 and info.fps == pytest.approx(29.97, abs=1e-3)
+
+
+def test_output_that_is_the_audio_input_is_refused(tmp_path):
+    p = encode_video(tmp_path / "v.mp4", smooth_frames(n=2), 25).path
+    before = p.read_bytes()
+    with pytest.raises(VideoError, match="also the audio input"):
+        encode_video(p, smooth_frames(n=3), 25, audio_from=p, overwrite=True)
+    assert p.read_bytes() == before

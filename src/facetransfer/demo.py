@@ -36,7 +36,7 @@ DEFAULT_TARGET = "WDA_KatieHill_000.mp4"
 
 
 def default_model_path() -> Path:
-    """Where the default model is cached (:func:`facetransfer.default_model.default_model_path`)."""
+    """Where the default model is cached (see :mod:`facetransfer.default_model`)."""
     from .default_model import default_model_path as path
 
     return path()
