@@ -1,9 +1,9 @@
 """Keep third-party log lines off the terminal unless ``-v``.
 
 MediaPipe and TensorFlow Lite log from C++ straight to file descriptor 2
-(``W0000 00:00:… file.cc:181] …``, ``INFO: Created TensorFlow Lite XNNPACK delegate for CPU.``), and before absl's logging is
-initialised no environment variable silences them (GLOG_minloglevel and TF_CPP_MIN_LOG_LEVEL are
-set as well, for the builds that honour them). So while a command runs, fd 2 goes through a pipe
+(``W0000 00:00:… file.cc:181] …``, ``INFO: Created TensorFlow Lite XNNPACK delegate for CPU.``),
+and before absl's logging is initialised no environment variable silences them
+(GLOG_minloglevel and TF_CPP_MIN_LOG_LEVEL are set as well, for the builds that honour them). So while a command runs, fd 2 goes through a pipe
 that drops those lines and passes everything else on unchanged and at once (our own messages,
 tqdm bars, Python warnings). ffmpeg is run with ``-loglevel error`` and its output captured
 (:mod:`facetransfer.io.video`).
