@@ -589,7 +589,6 @@ class VideoWriter:
         if proc.wait() != 0:
             raise self._ffmpeg_failed()
         self._proc = None
-        self._stderr.close()
         n = decoded_frame_count(self.tmp)
         if n != self.n_frames:
             raise VideoError(f"cannot write video {self.path}: {self.n_frames} frames were "
@@ -597,6 +596,7 @@ class VideoWriter:
         audio = self.audio_from is not None and self._mux()
         atomic, self._atomic = self._atomic, None
         atomic.__exit__(None, None, None)  # rename into place
+        self._close_stderr()
         return WrittenVideo(self.path, self.n_frames, self.stored_size, bool(audio))
 
     def _mux(self) -> bool:
@@ -638,6 +638,7 @@ class VideoWriter:
             with contextlib.suppress(OSError):
                 proc.kill()
             proc.wait()
+        self._close_stderr()
         atomic, self._atomic = self._atomic, None
         if atomic is not None:
             err = VideoError(f"writing {self.path} was abandoned")
@@ -646,6 +647,12 @@ class VideoWriter:
         if self._tmpdir is not None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             self._tmpdir = None
+
+    def _close_stderr(self) -> None:
+        f = getattr(self, "_stderr", None)
+        if f is not None:
+            f.close()
+            self._stderr = None
 
     def __enter__(self) -> "VideoWriter":
         return self
