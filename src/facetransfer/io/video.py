@@ -638,6 +638,8 @@ class VideoWriter:
             with contextlib.suppress(OSError):
                 proc.kill()
             proc.wait()
+            with contextlib.suppress(OSError):
+                proc.stdin.close()
         self._close_stderr()
         atomic, self._atomic = self._atomic, None
         if atomic is not None:
