@@ -9,7 +9,12 @@ offered for H.264 and H.265, and as ProRes, decoded again with the project's rea
 compared with the decoded target frames outside the face mask (the rewritten face's mask,
 dilated by 8 pixels): PSNR over RGB and over luma (BT.601 Y). Side by side: the peer, OpenCV's
 ``mp4v`` writer (MPEG-4 Part 2, what facetransfer wrote before), and the rewritten frames before
-encoding (exactly the target there: inf dB). Also the bitrate and the encoding speed.
+encoding (exactly the target there: inf dB). OpenCV's YUV -> RGB conversion rounds down half of
+the levels and repeats chroma, which caps any 8-bit 4:2:0 round trip at about 45 dB; the column
+``psnr_rgb_exact_decode`` shows what the same encodings give when the clips are read with ffmpeg's
+exact conversion instead (``-sws_flags accurate_rnd+full_chroma_int``). Also the bitrate and the encoding cost (CPU
+milliseconds per frame of encoding and of the writer's decoding check: wall time means little on
+a shared machine), and, at CRF 18, two faster x264 presets than the default (medium).
 
 Usage::
 
@@ -37,6 +42,7 @@ PAIRS = (("driving_d6", "WDA_KatieHill_000"),   # the demo's pair (target: MPEG-
          ("driving_d9", "face_2"))               # target H.264, 844x844
 H264_CRFS = (0, 10, 14, 18, 23, 28)
 H265_CRFS = (18, 28)
+PRESETS = ("veryfast", "ultrafast")  # besides the default, medium (at CRF 18)
 GOAL_DB = 45.0
 DILATE = 8
 
@@ -102,6 +108,19 @@ def rewrite_pair(source: Path, target: Path, model, n_frames: int, tmp: Path):
         plan.fps
 
 
+def read_accurate(path: Path, n: int, size: tuple[int, int]) -> np.ndarray:
+    """The first ``n`` frames decoded by ffmpeg with exact rounding and interpolated chroma
+    (``-sws_flags bicubic+accurate_rnd+full_chroma_int``), cropped to ``size`` (W, H)."""
+    import imageio_ffmpeg
+
+    gen = imageio_ffmpeg.read_frames(str(path), output_params=[
+        "-sws_flags", "bicubic+accurate_rnd+full_chroma_int"])
+    W, H = next(gen)["size"]
+    out = [np.frombuffer(b, np.uint8).reshape(H, W, 3) for _, b in zip(range(n), gen)]
+    gen.close()
+    return np.stack(out)[:, :size[1], :size[0]]
+
+
 def encode_mp4v(path: Path, frames: np.ndarray, fps: float) -> None:
     """The peer: OpenCV's MPEG-4 Part 2 writer, as facetransfer used it before."""
     import cv2
@@ -114,12 +133,24 @@ def encode_mp4v(path: Path, frames: np.ndarray, fps: float) -> None:
 
 
 def settings():
-    """(label, codec, crf, suffix) of every encoding measured."""
-    out = [(f"h264 crf {c}", "h264", c, ".mp4") for c in H264_CRFS]
-    out += [(f"h265 crf {c}", "h265", c, ".mp4") for c in H265_CRFS]
-    out += [("prores 422 HQ", "prores", None, ".mov"), ("mp4v (OpenCV, before)", "mp4v", None,
-                                                       ".mp4")]
+    """(label, codec, crf, preset, suffix) of every encoding measured."""
+    out = [(f"h264 crf {c}", "h264", c, "medium", ".mp4") for c in H264_CRFS]
+    out += [(f"h264 crf 18 {p}", "h264", 18, p, ".mp4") for p in PRESETS]
+    out += [(f"h265 crf {c}", "h265", c, "medium", ".mp4") for c in H265_CRFS]
+    out += [("prores 422 HQ", "prores", None, "medium", ".mov"),
+            ("mp4v (OpenCV, before)", "mp4v", None, None, ".mp4")]
     return out
+
+
+def cpu_seconds() -> float:
+    """CPU time of this process and its finished children (ffmpeg), user + system."""
+    import resource
+
+    total = 0.0
+    for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN):
+        r = resource.getrusage(who)
+        total += r.ru_utime + r.ru_stime
+    return total
 
 
 def measure_pair(source: Path, target: Path, model, n_frames: int, tmp: Path, log=print):
@@ -130,28 +161,39 @@ def measure_pair(source: Path, target: Path, model, n_frames: int, tmp: Path, lo
     outside = ~masks
     n, h, w = res.shape[:3]
     raw_rgb, raw_y = psnr_outside(res, tgt, outside)
+    tgt_acc = read_accurate(target, n, (w, h))
     row = {"source": source.name, "target": target.name, "frames": int(n), "size": [w, h],
            "fps": fps, "outside_fraction": float(outside.mean()),
            "rewrite_seconds": time.perf_counter() - t0,
            "before_encoding": {"psnr_rgb": raw_rgb, "psnr_y": raw_y}, "encodings": []}
     log(f"{target.name} <- {source.name}: {n} frames {w}x{h}, {outside.mean():.0%} outside "
         f"the face; before encoding {raw_rgb:.1f} dB")
-    for label, codec, crf, suffix in settings():
-        p = tmp / f"{target.stem}.{codec}.{crf}{suffix}"
-        t = time.perf_counter()
+    for label, codec, crf, preset, suffix in settings():
+        p = tmp / f"{target.stem}.{codec}.{crf}.{preset}{suffix}"
+        t, c = time.perf_counter(), cpu_seconds()
         if codec == "mp4v":
             encode_mp4v(p, res, fps)
         else:
-            encode_video(p, res, fps, options=VideoOptions(codec, crf), overwrite=True)
-        sec = time.perf_counter() - t
+            encode_video(p, res, fps, options=VideoOptions(codec, crf, preset), overwrite=True)
+        sec, cpu = time.perf_counter() - t, cpu_seconds() - c
         back, _ = read_video(p)
         back = back[:, :h, :w]
         rgb, y = psnr_outside(back, tgt, outside)
+        acc = None
+        if codec in ("h264", "prores") and preset == "medium":
+            # with an exact reader: outside the face the result is the target as read, so
+            # encode the exactly decoded target the same way and decode it exactly again
+            q = tmp / f"exact{suffix}"
+            encode_video(q, tgt_acc, fps, options=VideoOptions(codec, crf), overwrite=True)
+            acc = psnr_outside(read_accurate(q, n, (w, h)), tgt_acc, outside)[0]
+            q.unlink()
         mbps = p.stat().st_size * 8 / 1e6 / (n / fps)
-        row["encodings"].append({"label": label, "codec": codec, "crf": crf, "psnr_rgb": rgb,
-                                 "psnr_y": y, "mbit_per_s": mbps, "encode_fps": n / sec})
+        row["encodings"].append({"label": label, "codec": codec, "crf": crf, "preset": preset,
+                                 "psnr_rgb": rgb, "psnr_y": y, "psnr_rgb_exact_decode": acc,
+                                 "mbit_per_s": mbps,
+                                 "encode_fps_wall": n / sec, "cpu_ms_per_frame": 1e3 * cpu / n})
         log(f"  {label:22s} outside the face {rgb:5.1f} dB RGB, {y:5.1f} dB Y, "
-            f"{mbps:6.2f} Mbit/s, {n / sec:6.1f} frames/s (encode + check)")
+            f"{mbps:6.2f} Mbit/s, {1e3 * cpu / n:5.1f} CPU-ms/frame (encode + check)")
         p.unlink()
     return row
 
@@ -170,7 +212,7 @@ def plot(report: dict, path: Path) -> None:
     for k, row in enumerate(report["pairs"]):
         c = colours[k % len(colours)]
         enc = row["encodings"]
-        h264 = [e for e in enc if e["codec"] == "h264"]
+        h264 = [e for e in enc if e["codec"] == "h264" and e["preset"] == "medium"]
         name = row["target"].rsplit(".", 1)[0]
         ax.plot([e["crf"] for e in h264], [e["psnr_rgb"] for e in h264], "o-", color=c,
                 label=f"{name}: H.264")
