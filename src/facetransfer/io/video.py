@@ -354,12 +354,18 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     return args
 
 
+_CAUSES = ("No space left", "Disk quota", "File too large", "Permission denied",
+           "Read-only file system", "Input/output error")
+
+
 def _ffmpeg_error(stderr: bytes | str, what: str) -> VideoError:
     text = stderr.decode("utf-8", "replace") if isinstance(stderr, bytes) else stderr
     # "[out#0/mp4 @ 0x55d0...] Error closing file: ..." -> "Error closing file: ..."
     lines = [re.sub(r"^\[[^\]]* @ 0x[0-9a-f]+\]\s*", "", ln.strip())
              for ln in text.splitlines() if ln.strip()]
-    return VideoError(f"{what}: {lines[-1] if lines else 'ffmpeg failed'}")
+    # the cause (a full disk...) may come before ffmpeg's closing remarks: prefer it
+    cause = [ln for ln in lines if any(k in ln for k in _CAUSES)]
+    return VideoError(f"{what}: {(cause or lines or ['ffmpeg failed'])[-1]}")
 
 
 def decoded_frame_count(path: str | os.PathLike) -> int:
