@@ -35,7 +35,7 @@ from .atomic import atomic_path, check_output_path
 log = logging.getLogger(__name__)
 
 __all__ = ["VideoInfo", "video_info", "iter_frames", "read_video", "CODECS", "DEFAULT_CODEC",
-           "DEFAULT_CRF", "CRF_RANGE", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
+           "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
            "VideoOutput", "WrittenVideo", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
            "is_image_pattern", "frame_path", "check_video_output", "decoded_frame_count",
            "has_audio", "mux_audio", "VideoWriter", "encode_video", "write_video"]
@@ -144,6 +144,10 @@ DEFAULT_CODEC = "h264"
 #: Constant rate factor of H.264 / H.265 when none is given (x264: 18 is "visually lossless").
 DEFAULT_CRF = 18
 CRF_RANGE = (0, 51)  # x264 and x265, 8-bit
+#: x264 / x265 speed presets, fastest first; the default is the encoders' own.
+PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
+           "veryslow")
+DEFAULT_PRESET = "medium"
 #: Video containers by extension (the ffmpeg muxer of each).
 VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska",
                   ".avi": "avi"}
@@ -166,16 +170,19 @@ class VideoOptions:
         Constant rate factor of H.264 / H.265, 0 (lossless in YUV) to 51; lower is better and
         bigger. Default :data:`DEFAULT_CRF`. ProRes has none.
     preset : str
-        x264 / x265 speed preset.
+        x264 / x265 speed preset (:data:`PRESETS`): faster ones cost less CPU for a little less
+        quality or bigger files at the same CRF (figures in BENCHMARKS.md).
     """
 
     codec: str = DEFAULT_CODEC
     crf: int | None = None
-    preset: str = "medium"
+    preset: str = DEFAULT_PRESET
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
             raise VideoError(f"codec must be one of {', '.join(CODECS)}, got {self.codec!r}")
+        if self.preset not in PRESETS:
+            raise VideoError(f"preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
         if self.crf is not None:
             if self.codec == "prores":
                 raise VideoError("--crf applies to h264 and h265; prores has a fixed quality "
