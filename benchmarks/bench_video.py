@@ -219,11 +219,14 @@ def plot(report: dict, path: Path) -> None:
         h265 = [e for e in enc if e["codec"] == "h265"]
         ax.plot([e["crf"] for e in h265], [e["psnr_rgb"] for e in h265], "s--", color=c,
                 label=f"{name}: H.265")
+        exact = [e for e in h264 if e.get("psnr_rgb_exact_decode") is not None]
+        if exact:
+            ax.plot([e["crf"] for e in exact], [e["psnr_rgb_exact_decode"] for e in exact],
+                    "-.", color=c, lw=1, alpha=0.7, label=f"{name}: H.264, exact reader")
         for e in enc:
             if e["codec"] == "mp4v":
-                ax.axhline(e["psnr_rgb"], color=c, ls=":", lw=1.2)
-                ax.annotate("mp4v (before)", (27.5, e["psnr_rgb"]), color=c, fontsize=7,
-                            va="bottom", ha="right")
+                ax.axhline(e["psnr_rgb"], color=c, ls=":", lw=1.2,
+                           label=f"{name}: mp4v (before)")
             if e["codec"] == "prores":
                 ax.plot([-1.5], [e["psnr_rgb"]], "D", color=c)
         bx.plot([e["mbit_per_s"] for e in h264], [e["psnr_rgb"] for e in h264], "o-", color=c,
@@ -238,7 +241,7 @@ def plot(report: dict, path: Path) -> None:
     ax.axvline(18, color="grey", lw=0.8)
     ax.set_xlabel("CRF (diamonds at -1.5: ProRes 422 HQ; dotted: mp4v)")
     ax.set_title("Outside the face after encoding (goal 45 dB, dashed; default CRF 18)")
-    ax.legend(fontsize=7, loc="lower left")
+    ax.legend(fontsize=6, loc="upper right", ncol=2)
     bx.set_xscale("log")
     bx.set_xlabel("bitrate (Mbit/s)")
     bx.set_title("Quality against size")
