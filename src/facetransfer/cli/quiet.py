@@ -3,10 +3,11 @@
 MediaPipe and TensorFlow Lite log from C++ straight to file descriptor 2
 (``W0000 00:00:… file.cc:181] …``, ``INFO: Created TensorFlow Lite XNNPACK delegate for CPU.``),
 and before absl's logging is initialised no environment variable silences them
-(GLOG_minloglevel and TF_CPP_MIN_LOG_LEVEL are set as well, for the builds that honour them). So while a command runs, fd 2 goes through a pipe
-that drops those lines and passes everything else on unchanged and at once (our own messages,
-tqdm bars, Python warnings). ffmpeg is run with ``-loglevel error`` and its output captured
-(:mod:`facetransfer.io.video`).
+(GLOG_minloglevel and TF_CPP_MIN_LOG_LEVEL are set as well, for the builds that honour them).
+So while a command runs, fd 2 goes through a pipe that drops those lines and passes everything
+else on unchanged and at once, while Python's ``sys.stderr`` (our own messages, tqdm bars,
+warnings) writes to the terminal directly. ffmpeg is run with ``-loglevel error`` and its output
+captured (:mod:`facetransfer.io.video`).
 
 Not a subcommand; :func:`facetransfer.cli.main.main` wraps every command in :func:`quiet_stderr`.
 """
@@ -99,11 +100,23 @@ def quiet_stderr(*, verbose: bool = False) -> Iterator[None]:
     os.close(w)
     thread = threading.Thread(target=_pump, args=(r, saved), name="quiet-stderr", daemon=True)
     thread.start()
+    # Python's own writes (our messages, tqdm) go straight to the terminal: bars still see a tty
+    py_stderr = sys.stderr
+    try:
+        swap = py_stderr.fileno() == 2  # not when a caller replaced it (pytest's capsys)
+    except (AttributeError, OSError, ValueError):
+        swap = False
+    if swap:
+        sys.stderr = open(os.dup(saved), "w", encoding=py_stderr.encoding or "utf-8",
+                          errors="backslashreplace", buffering=1)
     try:
         yield
     finally:
-        with contextlib.suppress(Exception):
-            sys.stderr.flush()
+        if swap:
+            with contextlib.suppress(Exception):
+                sys.stderr.flush()
+                sys.stderr.close()
+            sys.stderr = py_stderr
         os.dup2(saved, 2)  # closes the pipe's last write end: the thread sees EOF
         thread.join(timeout=5)
         if not thread.is_alive():  # else a child still holds the pipe: leave it to exit
