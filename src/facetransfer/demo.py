@@ -1,14 +1,15 @@
 """``facetransfer demo``: the main job end to end on the default inputs (what ``make demo`` runs).
 
-1. the default model: the bilinear ICT-FaceKit model (``ict-bilinear``, the recipe ranks), built
-   once and cached in the user cache (``~/.cache/facetransfer/models``);
+1. the default model (:mod:`facetransfer.default_model`: ``ict-arkit``, the ARKit blendshapes on
+   ICT-FaceKit identities), built once and cached in the user cache;
 2. two clips of the data folder (``$FACETRANSFER_DATA_DIR/video``): ``driving_d6.mp4`` gives the
    expressions, ``WDA_KatieHill_000.mp4`` is the target footage (without a data folder, two
    synthetic clips of :mod:`facetransfer.synth` stand in);
 3. both are tracked (§5; a landmark-only fit if the optical-flow tracker fails), the source's
    expressions are put on the target's identity and pose (§6, Fig. 7C) and rendered back into
    the target footage (:mod:`facetransfer.rewrite`);
-4. ``OUT/demo.mp4`` (source | target | result side by side, with the target's audio),
+4. ``OUT/demo.mp4`` (source | target | result side by side, with the target's audio; H.264 by
+   default, :mod:`facetransfer.io.video`),
    ``OUT/demo.png`` (a contact sheet of six frames) and ``OUT/demo_track.npz`` (the new
    performance) are written, each atomically.
 """
@@ -32,52 +33,41 @@ __all__ = ["DEFAULT_SOURCE", "DEFAULT_TARGET", "DemoResult", "default_model_path
 
 DEFAULT_SOURCE = "driving_d6.mp4"  # strong expressions: the mouth opens and closes
 DEFAULT_TARGET = "WDA_KatieHill_000.mp4"
-DEFAULT_DATASET = "ict-bilinear"
 
 
 def default_model_path() -> Path:
-    """Where the demo caches its default model."""
-    from .assets import cache_dir
+    """Where the default model is cached (see :mod:`facetransfer.default_model`)."""
+    from .default_model import default_model_path as path
 
-    return cache_dir() / "models" / f"{DEFAULT_DATASET}-default.npz"
+    return path()
 
 
 def ensure_default_model(*, progress_factory=None):
-    """Load the default model, building and caching it first if needed.
+    """The default model (:func:`facetransfer.default_model.load_default_model`), built and
+    cached on first use with a progress bar from ``progress_factory(desc, total)``.
 
     Returns
     -------
     MultilinearModel
     """
-    from .errors import ModelFileError
-    from .model import build_model, load_model
+    from .default_model import DEFAULT_DATASET, load_default_model
 
-    path = default_model_path()
-    if path.is_file():
-        try:
-            return load_model(path)
-        except ModelFileError as exc:
-            log.warning("cached default model is unusable (%s); rebuilding", exc)
-    from .cli.model import default_ranks
-    from .datasets import load_dataset
-
-    bar = progress_factory(f"dataset {DEFAULT_DATASET}", None) if progress_factory else None
+    bar = None
 
     def cb(done, total):
-        if bar is not None:
-            bar.total = total
-            bar.update(done - bar.n)
+        nonlocal bar
+        if progress_factory is None:
+            return
+        if bar is None:
+            bar = progress_factory(f"dataset {DEFAULT_DATASET}", total)
+        bar.total = total
+        bar.update(done - bar.n)
 
     try:
-        ds = load_dataset(DEFAULT_DATASET, progress=cb)
+        return load_default_model(progress=cb, announce=log.info)
     finally:
         if bar is not None:
             bar.close()
-    model = build_model(ds, default_ranks(ds))
-    path.parent.mkdir(parents=True, exist_ok=True)
-    model.save(path)
-    log.info("built the default model %s", path)
-    return model
 
 
 def default_inputs() -> tuple[Path, Path]:
@@ -204,13 +194,14 @@ class DemoResult:
 def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None,
              texture: str = "frame", blend: str = "fast", track_method: str = "auto",
              speed: str = "fast", progress_factory=None, mouth: str | None = None,
-             overwrite: bool = True) -> DemoResult:
+             overwrite: bool = True, video_options=None) -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
     Parameters
     ----------
     out_dir : path-like
-        Created if missing; receives ``demo.mp4``, ``demo.png`` and ``demo_track.npz``.
+        Created if missing; receives ``demo.mp4`` (``demo.mov`` for ProRes), ``demo.png`` and
+        ``demo_track.npz``.
     frames : int
         Target frames to use (the source is read for the same duration).
     source, target : path-like, optional
@@ -227,6 +218,8 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     speed : {"fast", "balanced", "quality"}
         Tracking preset (:func:`facetransfer.rewrite.track_options`; the default is
         :data:`facetransfer.rewrite.DEFAULT_SPEED`).
+    video_options : VideoOptions, optional
+        Codec and CRF of the video (:class:`facetransfer.io.video.VideoOptions`).
 
     Returns
     -------
@@ -234,6 +227,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     """
     from . import rewrite as rw
     from .io.atomic import check_output_path
+    from .io.video import VideoOptions, check_video_output
 
     rw.track_options(speed)  # an unknown preset fails before any work
     if mouth is not None and mouth not in rw.MOUTH_MODES:  # also before any work
@@ -244,8 +238,11 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     t0 = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    video_path, sheet_path, track_path = out / "demo.mp4", out / "demo.png", out / "demo_track.npz"
-    for p in (video_path, sheet_path, track_path):
+    ext = ".mov" if (video_options or VideoOptions()).codec == "prores" else ".mp4"
+    video_path, sheet_path, track_path = (out / f"demo{ext}", out / "demo.png",
+                                          out / "demo_track.npz")
+    check_video_output(video_path, video_options, overwrite=overwrite)
+    for p in (sheet_path, track_path):
         check_output_path(p, overwrite=overwrite)
     if model is None:
         model = ensure_default_model(progress_factory=progress_factory)
@@ -295,7 +292,8 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
                                           texture=texture, blend=blend,
                                           mouth=rw.resolve_mouth_mode(mouth, model),
                                           overwrite=overwrite,
-                                          progress_factory=progress_factory, compose=compose)
+                                          progress_factory=progress_factory, compose=compose,
+                                          video_options=video_options)
     timings.update(render_timings)
     contact_sheet(sheet_frames, sheet_path, overwrite=overwrite)
     plan.new_track.save(track_path, overwrite=overwrite)

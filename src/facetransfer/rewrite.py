@@ -36,8 +36,6 @@ from __future__ import annotations
 
 import logging
 import os
-import shutil
-import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable, Iterable, Iterator
@@ -45,6 +43,7 @@ from typing import Callable, Iterable, Iterator
 import numpy as np
 
 from .errors import FaceTransferError, ShapeError, VideoError
+from .io.video import has_audio, mux_audio  # noqa: F401 - moved there, kept importable
 
 log = logging.getLogger(__name__)
 
@@ -1223,94 +1222,19 @@ def _render_in_processes(one, target_frames, n: int, workers: int, progress):
 
 
 # ---------------------------------------------------------------------------------------------
-# audio
+# writing: the one video writer of facetransfer.io.video (audio muxed there)
 # ---------------------------------------------------------------------------------------------
-
-def ffmpeg_exe() -> str | None:
-    """Path of an ffmpeg binary (imageio-ffmpeg's, else one on PATH), or None."""
-    try:
-        import imageio_ffmpeg
-
-        return imageio_ffmpeg.get_ffmpeg_exe()
-    except Exception:  # noqa: BLE001 - missing package or binary: fall back to PATH
-        return shutil.which("ffmpeg")
-
-
-def has_audio(path: str | os.PathLike) -> bool:
-    """Whether a media file has an audio stream (False when ffmpeg is unavailable)."""
-    exe = ffmpeg_exe()
-    if exe is None:
-        return False
-    res = subprocess.run([exe, "-hide_banner", "-i", str(path)], capture_output=True, text=True)
-    return "Audio:" in res.stderr
-
-
-def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str | os.PathLike, *,
-              start: float = 0.0, duration: float | None = None) -> bool:
-    """Copy ``video``'s frames and ``audio_from``'s audio into ``out`` (an mp4).
-
-    The video stream is copied as is; the audio is re-encoded to AAC, starting at ``start``
-    seconds and cut to the video's length. Returns False (and logs why) when there is no ffmpeg
-    or no audio, in which case ``out`` is not written.
-    """
-    exe = ffmpeg_exe()
-    if exe is None:
-        log.info("no ffmpeg available (pip install imageio-ffmpeg): output has no audio")
-        return False
-    if not has_audio(audio_from):
-        log.info("%s has no audio track; the output has none either", audio_from)
-        return False
-    cmd = [exe, "-hide_banner", "-loglevel", "error", "-y", "-i", str(video)]
-    if start:
-        cmd += ["-ss", f"{start:.3f}"]
-    cmd += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy",
-            "-c:a", "aac", "-shortest"]
-    if duration is not None:
-        cmd += ["-t", f"{duration:.3f}"]
-    cmd += [str(out)]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    if res.returncode != 0:
-        log.warning("could not mux audio from %s: %s", audio_from, res.stderr.strip()[-300:])
-        return False
-    return True
-
 
 def write_video_with_audio(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float, *,
                            audio_from: str | os.PathLike | None = None, overwrite: bool = False,
-                           audio_start: float = 0.0) -> bool:
-    """Write frames to ``path`` atomically, with the audio of ``audio_from`` when it has some.
+                           audio_start: float = 0.0, options=None) -> bool:
+    """Write frames to ``path`` with the audio of ``audio_from`` when it has some
+    (:func:`facetransfer.io.video.encode_video`, ``options`` a
+    :class:`~facetransfer.io.video.VideoOptions`). Returns whether audio was muxed in."""
+    from .io.video import encode_video
 
-    Frames go to a temporary video next to ``path``; ffmpeg then muxes the audio into a second
-    temporary file which is renamed to ``path``. Nothing appears under ``path`` unless the whole
-    job succeeded. Returns whether audio was muxed in.
-    """
-    from .io.atomic import atomic_path, check_output_path
-    from .io.video import write_video
-
-    p = check_output_path(path, overwrite=overwrite)
-    tmp_video = p.with_name(f".{p.stem}.{os.getpid()}.video{p.suffix}")
-    try:
-        write_video(tmp_video, frames, fps, overwrite=True)
-        n = _count_frames(tmp_video)
-        with atomic_path(p, overwrite=overwrite) as tmp_out:
-            ok = audio_from is not None and mux_audio(
-                tmp_video, audio_from, tmp_out, start=audio_start,
-                duration=n / float(fps) if n else None)
-            if not ok:
-                os.replace(tmp_video, tmp_out)
-    finally:
-        if tmp_video.exists():
-            tmp_video.unlink()
-    return bool(ok)
-
-
-def _count_frames(path) -> int:
-    from .io.video import video_info
-
-    try:
-        return int(video_info(path).n_frames)
-    except VideoError:
-        return 0
+    return encode_video(path, frames, fps, options=options, audio_from=audio_from,
+                        audio_start=audio_start, overwrite=overwrite).audio
 
 
 # ---------------------------------------------------------------------------------------------
@@ -2000,7 +1924,7 @@ def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: b
 
 def render_plan(plan: TransferPlan, model, out, *, audio_from=None, texture: str = "frame",
                 blend: str = "fast", mouth: str = "frame", overwrite: bool = False,
-                progress_factory=None, compose: Callable | None = None):
+                progress_factory=None, compose: Callable | None = None, video_options=None):
     """Render a planned transfer into the video ``out`` (§6), timing each stage.
 
     Lifts the mouth texture function first when ``mouth == "function"`` (from
@@ -2018,6 +1942,8 @@ def render_plan(plan: TransferPlan, model, out, *, audio_from=None, texture: str
         See :func:`rewrite_frames` (``mouth`` already resolved: "frame" or "function").
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
         The frame to write for output frame ``i`` (default: the rewritten image).
+    video_options : VideoOptions, optional
+        Codec and CRF (:class:`facetransfer.io.video.VideoOptions`; default H.264, CRF 18).
 
     Returns
     -------
@@ -2066,7 +1992,7 @@ def render_plan(plan: TransferPlan, model, out, *, audio_from=None, texture: str
     t0 = time.perf_counter()
     try:
         audio = write_video_with_audio(out, frames(), plan.fps, audio_from=audio_from,
-                                       overwrite=overwrite)
+                                       overwrite=overwrite, options=video_options)
     finally:
         if bar is not None:
             bar.close()
@@ -2077,7 +2003,8 @@ def render_plan(plan: TransferPlan, model, out, *, audio_from=None, texture: str
 
 def transfer_video(target, out, model, *, overwrite: bool = False, texture: str = "frame",
                    blend: str = "fast", mouth: str | None = None, meshes_dir=None,
-                   save_track=None, progress_factory=None, **plan_kwargs) -> TransferResult:
+                   save_track=None, progress_factory=None, video_options=None,
+                   **plan_kwargs) -> TransferResult:
     """The whole video rewrite (§6): plan (read, track, recombine), render, write with audio.
 
     ``plan_kwargs`` go to :func:`plan_transfer` (sources, track files, ``align``,
@@ -2086,15 +2013,18 @@ def transfer_video(target, out, model, *, overwrite: bool = False, texture: str 
     ``overwrite=True``. ``mouth`` (see :func:`rewrite_frames`): None picks
     :func:`default_mouth_mode` (the texture function for a ready ``performance``, the source
     frame for a transfer); with ``"function"`` the function is lifted from
-    :attr:`TransferPlan.texture_frames`.
+    :attr:`TransferPlan.texture_frames`. ``video_options``: codec and CRF of ``out``
+    (:class:`facetransfer.io.video.VideoOptions`); ``out`` may be an image sequence
+    (``frames/%05d.png``).
 
     Returns
     -------
     TransferResult
     """
     from .io.atomic import check_output_path
+    from .io.video import check_video_output
 
-    check_output_path(out, overwrite=overwrite)
+    check_video_output(out, video_options, overwrite=overwrite)  # before any work
     if save_track is not None:
         check_output_path(save_track, overwrite=overwrite)
     if meshes_dir is not None:
@@ -2113,7 +2043,8 @@ def transfer_video(target, out, model, *, overwrite: bool = False, texture: str 
     timings, n_rewritten, audio = render_plan(plan, model, out, audio_from=target,
                                               texture=texture, blend=blend, mouth=mouth,
                                               overwrite=overwrite,
-                                              progress_factory=progress_factory)
+                                              progress_factory=progress_factory,
+                                              video_options=video_options)
     if save_track is not None:
         plan.new_track.save(save_track, overwrite=overwrite)
     if meshes_dir is not None:

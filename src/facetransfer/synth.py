@@ -788,8 +788,9 @@ def load_truth(path: str | os.PathLike) -> SyntheticTruth:
 
 
 def write_clip(clip: SyntheticClip, path: str | os.PathLike, *,
-               overwrite: bool = True) -> tuple[Path, Path]:
-    """Write ``clip`` as an mp4 (mp4v) and its truth beside it, both atomically.
+               overwrite: bool = True, options=None) -> tuple[Path, Path]:
+    """Write ``clip`` as a video (:class:`facetransfer.io.video.VideoWriter`: H.264 unless
+    ``options`` say otherwise) and its truth beside it, both atomically.
 
     Returns
     -------
@@ -801,7 +802,8 @@ def write_clip(clip: SyntheticClip, path: str | os.PathLike, *,
     tpath = truth_path(video)
     with atomic_path(tpath, overwrite=overwrite) as tmp:
         _save_truth(clip.truth, tmp)
-        with VideoWriter(video, clip.truth.fps, clip.truth.frame_size, overwrite=overwrite) as w:
+        with VideoWriter(video, clip.truth.fps, clip.truth.frame_size, overwrite=overwrite,
+                         options=options) as w:
             for frame in clip.frames:
                 w.write(frame)
     return video, tpath
@@ -810,18 +812,21 @@ def write_clip(clip: SyntheticClip, path: str | os.PathLike, *,
 def synthesize_video(model, performance: Performance, path: str | os.PathLike, *,
                      texture: np.ndarray | None = None, colors: np.ndarray | None = None,
                      background=None, seed: int = 0, overwrite: bool = True,
-                     progress: Callable[[int], None] | None = None) -> SyntheticTruth:
+                     progress: Callable[[int], None] | None = None,
+                     options=None) -> SyntheticTruth:
     """Render a performance straight to ``path`` (frames streamed, not held in memory) and
-    write the truth beside it; both atomic. Arguments as :func:`make_clip`."""
-    from .io.video import VideoWriter
+    write the truth beside it; both atomic. Arguments as :func:`make_clip`; ``options``: the
+    codec (:class:`facetransfer.io.video.VideoOptions`)."""
+    from .io.video import VIDEO_SUFFIXES, VideoWriter
 
     video = check_output_path(path, overwrite=overwrite)
-    if video.suffix.lower() not in (".mp4", ".avi"):
-        raise VideoError(f"video output {video} must end in .mp4 or .avi")
+    if video.suffix.lower() not in VIDEO_SUFFIXES:
+        raise VideoError(f"video output {video} must end in {', '.join(VIDEO_SUFFIXES)}")
     tpath = truth_path(video)
     v2d, vis = [], []
     with atomic_path(tpath, overwrite=overwrite) as tmp:
-        with VideoWriter(video, performance.fps, performance.size, overwrite=overwrite) as w:
+        with VideoWriter(video, performance.fps, performance.size, overwrite=overwrite,
+                         options=options) as w:
             for img, xy, v in _iter_render(model, performance, texture=texture, colors=colors,
                                            background=background, seed=seed, progress=progress):
                 w.write(img)

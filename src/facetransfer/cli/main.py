@@ -29,7 +29,9 @@ def build_parser() -> argparse.ArgumentParser:
         "face models, track faces in video, and transfer performances between videos.",
     )
     parser.add_argument("--version", action="version", version=f"facetransfer {__version__}")
-    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("-v", "--verbose", action="store_true",
+                        help="log progress details, and let third-party libraries (MediaPipe, "
+                        "TensorFlow Lite) log too")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMAND_MODULES:
         module = importlib.import_module(f"{__package__}.{name}")

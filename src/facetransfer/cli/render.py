@@ -19,6 +19,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
+from .common import add_video_options, video_options
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
 
@@ -138,14 +139,17 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
     from ..synth import (DEFAULT_FPS, DEFAULT_SIZE, load_performance, performance_from_spec,
                          random_performance, synthesize_video, truth_path)
 
+    from ..io.video import VIDEO_SUFFIXES, check_video_output
     from ..synth import truth_path as _truth_path
 
+    vopt = video_options(args)
     inputs = [args.model, args.performance,
               args.texture if args.texture not in ("procedural", "default") else None]
     out = check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     check_output_path(_truth_path(out), overwrite=args.overwrite, inputs=inputs)
-    if out.suffix.lower() not in (".mp4", ".avi"):
-        raise FaceTransferError(f"--out {out}: expected a .mp4 or .avi video")
+    if out.suffix.lower() not in VIDEO_SUFFIXES:  # the truth file goes beside one video file
+        raise FaceTransferError(f"--out {out}: expected a video ({', '.join(VIDEO_SUFFIXES)})")
+    check_video_output(out, vopt, overwrite=args.overwrite)
     if bool(args.performance) == bool(args.random):
         raise FaceTransferError("give either --performance SPEC.json or --random")
     if args.fps is not None and not 0 < args.fps <= 1000:
@@ -176,7 +180,7 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
     with tqdm(total=perf.n_frames, desc="synth-video", unit="frame",
               disable=not sys.stderr.isatty()) as bar:
         truth = synthesize_video(model, perf, out, seed=args.seed, texture=texture,
-                                 progress=bar.update, overwrite=args.overwrite)
+                                 progress=bar.update, overwrite=args.overwrite, options=vopt)
     print(f"wrote {out} ({perf.n_frames} frames, {perf.size[0]}x{perf.size[1]} at "
           f"{perf.fps:g} fps) and {truth_path(out)}; mean vertex visibility "
           f"{truth.visible.mean():.2f}")
@@ -218,4 +222,5 @@ def register(sub) -> None:
     s.add_argument("--out", required=True, help="CLIP.mp4")
     s.add_argument("--overwrite", action="store_true",
                    help="replace existing outputs (CLIP.mp4 and CLIP.truth.npz)")
+    add_video_options(s)
     s.set_defaults(func=cmd_synth_video)

@@ -1,8 +1,11 @@
 """``facetransfer track``: track a face through a video with a multilinear model (§5).
 
-    facetransfer track VIDEO.mp4 --model MODEL.npz --out TRACK.npz [--init auto|POINTS.json]
+    facetransfer track VIDEO.mp4 [--model MODEL.npz] --out TRACK.npz [--init auto|POINTS.json]
                        [--passes N] [--anchor] [--max-frames N] [--overlay OVERLAY.mp4]
-    facetransfer track VIDEO.mp4 --model MODEL.npz --from-track TRACK.npz --overlay OVERLAY.mp4
+                       [--codec h264|h265|prores] [--crf 18]
+    facetransfer track VIDEO.mp4 [--model MODEL.npz] --from-track TRACK.npz --overlay OVERLAY.mp4
+
+Without ``--model`` the default model is used (:mod:`facetransfer.default_model`).
 
 ``TRACK.npz`` holds per frame the weak-perspective pose, the weights of every mode, the 68
 landmarks in pixels, a confidence and a lost flag (see :mod:`facetransfer.track.result`).
@@ -16,6 +19,7 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
+from .common import MODEL_HELP, add_video_options, resolve_model, video_options
 
 
 def partial_path(out) -> Path:
@@ -35,7 +39,7 @@ def register(sub) -> None:
         "2005, §5.1-5.2): per frame the head pose and the weights of every mode, the identity "
         "once for the clip.", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     p.add_argument("video", metavar="VIDEO", help="input video")
-    p.add_argument("--model", required=True, help="multilinear model (.npz, with landmarks)")
+    p.add_argument("--model", help=MODEL_HELP + " (with landmarks)")
     p.add_argument("--out", help="track file to write (.npz)")
     p.add_argument("--tracker", choices=("capture", "klt"), default=None,
                    help="default capture (klt when --init gives points): capture: the model fitted to MediaPipe's landmarks and their optical "
@@ -55,7 +59,9 @@ def register(sub) -> None:
                    help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
     p.add_argument("--points", type=int, default=d.n_points, help="[klt] tracked vertices per frame")
     p.add_argument("--max-frames", type=int, default=None, help="track only the first N frames")
-    p.add_argument("--overlay", help="also write a video with the fitted mesh drawn (.mp4)")
+    p.add_argument("--overlay", help="also write a video with the fitted mesh drawn (.mp4, "
+                   "or an image sequence frames/%%05d.png)")
+    add_video_options(p, what="--overlay")
     p.add_argument("--restart", action="store_true",
                    help="ignore the progress of an interrupted run (OUT with suffix "
                    ".partial.npz; by default tracking continues from it)")
@@ -73,8 +79,7 @@ def _bar(desc: str, total: int):
 
 
 def run(args) -> int:
-    from ..io.video import video_info
-    from ..model import load_model
+    from ..io.video import check_video_output, video_info
     from ..track.init import LazyDetector, require_landmarks
     from ..track.overlay import write_overlay
     from ..track.result import Track
@@ -88,16 +93,19 @@ def run(args) -> int:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
     inputs = (args.video, args.model, args.from_track,
               None if args.init == "auto" else args.init)
+    vopt = video_options(args)
     for path in (args.out, args.overlay):
         if path:
             check_output_path(path, overwrite=args.overwrite, inputs=inputs)
+    if args.overlay:
+        check_video_output(args.overlay, vopt, overwrite=args.overwrite)
     if args.out and args.overlay:
         check_not_input(args.overlay, [args.out, partial_path(args.out)])
     if args.out:
         check_not_input(partial_path(args.out), inputs)
     opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
                        n_points=args.points, keyframe=args.keyframe)   # validates the options
-    model = load_model(args.model)
+    model = resolve_model(args.model)
     require_landmarks(model)
     video_info(args.video)  # unreadable / empty video: one line, before any work
 
@@ -137,7 +145,7 @@ def run(args) -> int:
         bar = _bar("overlay", track.n_frames)
         try:
             write_overlay(args.video, track, model, args.overlay, progress=bar.update,
-                          overwrite=args.overwrite)
+                          overwrite=args.overwrite, options=vopt)
         finally:
             bar.close()
         print(f"wrote {args.overlay}")

@@ -3,12 +3,12 @@
     facetransfer transfer --target T.mp4 [--target-track T.npz]
         (--expression-from S.mp4 [--source-track S.npz] [--viseme-from S2.mp4]
          | --identity-from V.mp4 | --identity-weights W | --identity-label L)
-        [--pose-from P.mp4] --model M.npz [--align trim|loop|hold] [--max-frames N]
-        [--mouth frame|function]
-        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4 [--overwrite]
+        [--pose-from P.mp4] [--model M.npz] [--align trim|loop|hold] [--max-frames N]
+        [--mouth frame|function] [--codec h264|h265|prores] [--crf 18]
+        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png [--overwrite]
     facetransfer edit TRACK.npz [--model M.npz] --add frown@120-180 --scale smile=1.5 --out T2.npz
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
-    facetransfer puppet VIDEO --model M.npz --identity LABEL --out OUT.mp4
+    facetransfer puppet VIDEO [--model M.npz] --identity LABEL --out OUT.mp4
     facetransfer demo [--out out] [--frames N]
 """
 
@@ -19,6 +19,7 @@ import sys
 
 from ..errors import FaceTransferError
 from ..rewrite import DEFAULT_SPEED, SPEED_PRESETS
+from .common import MODEL_HELP, add_video_options, resolve_model, video_options
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
               "(repeat the source), hold (hold the source's last frame); default: trim when the "
@@ -105,13 +106,16 @@ def register(sub) -> None:
     p.add_argument("--performance", metavar="NEW.npz",
                    help="render a ready performance on the target's timeline (e.g. the output "
                    "of `facetransfer edit`) instead of combining sources")
-    p.add_argument("--model", required=True, metavar="M.npz", help="multilinear model")
+    p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     p.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
     p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
-    p.add_argument("--out", required=True, metavar="OUT.mp4", help="video to write")
+    p.add_argument("--out", required=True, metavar="OUT.mp4",
+                   help="video to write (.mp4, .mov, .mkv...) or image sequence "
+                   "(frames/%%05d.png)")
+    add_video_options(p)
     p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=run_transfer)
@@ -140,13 +144,15 @@ def register(sub) -> None:
         description="Track a video (or reuse its track) and render an identity of the model "
         "performing it, alone on a plain background (Vlasic et al. 2005, §5).")
     q.add_argument("video", metavar="VIDEO")
-    q.add_argument("--model", required=True, metavar="M.npz")
+    q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     q.add_argument("--identity", required=True, metavar="LABEL", help="training identity label")
     q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused)")
     q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
     q.add_argument("--tracker", choices=("auto", "capture", "flow", "landmarks"), default="auto",
                    help="tracking when no track file is given")
-    q.add_argument("--out", required=True, metavar="OUT.mp4")
+    q.add_argument("--out", required=True, metavar="OUT.mp4",
+                   help="video (.mp4...) or image sequence (frames/%%05d.png)")
+    add_video_options(q)
     q.add_argument("--overwrite", action="store_true", help="replace an existing output")
     q.set_defaults(func=run_puppet)
 
@@ -160,10 +166,11 @@ def register(sub) -> None:
     d.add_argument("--frames", type=int, default=120, help="target frames to use")
     d.add_argument("--source", metavar="S.mp4", help="expression source (default driving_d6)")
     d.add_argument("--target", metavar="T.mp4", help="target footage (default WDA_KatieHill_000)")
-    d.add_argument("--model", metavar="M.npz", help="model (default: built and cached)")
+    d.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     d.add_argument("--overwrite", action="store_true",
                    help="replace the outputs of an earlier run in the folder")
     add_rewrite_options(d)
+    add_video_options(d, what="OUT/demo.mp4 (demo.mov for prores)")
     d.set_defaults(func=run_demo)
 
 
@@ -189,8 +196,7 @@ def _check_landmarks_file(video) -> None:
 
 def run_transfer(args) -> int:
     from ..io.atomic import check_output_path
-    from ..io.video import video_info
-    from ..model import load_model
+    from ..io.video import check_video_output, video_info
     from ..rewrite import transfer_video
     from ..transfer import identity_from_label, parse_weights
 
@@ -212,7 +218,9 @@ def run_transfer(args) -> int:
               args.pose_from, args.pose_track, args.performance, args.model,
               args.identity_weights if args.identity_weights and
               args.identity_weights.endswith(".npy") else None]
+    vopt = video_options(args)
     check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
+    check_video_output(args.out, vopt, overwrite=args.overwrite)
     if args.save_track:
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
     for v, tr in ((args.target, args.target_track), (args.expression_from, args.source_track),
@@ -222,7 +230,7 @@ def run_transfer(args) -> int:
             video_info(v)  # unreadable input: one line, before any work
             if not tr and not (v == args.target and args.performance):
                 _check_landmarks_file(v)
-    model = load_model(args.model)
+    model = resolve_model(args.model, progress=not args.no_progress)
     identity = None
     if args.identity_label:
         identity = identity_from_label(model, args.identity_label)
@@ -234,7 +242,7 @@ def run_transfer(args) -> int:
     res = transfer_video(
         args.target, args.out, model, overwrite=args.overwrite, texture=args.texture,
         blend=args.blend, mouth=args.mouth, meshes_dir=args.meshes, save_track=args.save_track,
-        progress_factory=_bar_factory(not args.no_progress),
+        progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
         target_track=args.target_track, expression_from=args.expression_from,
         expression_track=args.source_track, viseme_from=args.viseme_from,
         viseme_track=args.viseme_track, identity=identity, identity_from=args.identity_from,
@@ -274,7 +282,7 @@ def _dialled_identity(model, identity, args):
 
 
 def _model_for_track(track, model_path):
-    from ..demo import default_model_path
+    from ..default_model import default_model_path
     from ..errors import TrackError
     from ..model import load_model
 
@@ -327,19 +335,19 @@ def run_edit(args) -> int:
 
 
 def run_puppet(args) -> int:
-    from ..io.atomic import check_output_path
-    from ..io.video import read_video, video_info
-    from ..model import load_model
+    from ..io.video import check_video_output, read_video, video_info
     from ..rewrite import obtain_track, write_video_with_audio
     from ..transfer import identity_from_label, puppet_frames
 
     _positive(args.max_frames, "--max-frames")
+    vopt = video_options(args)
     check_output_path(args.out, overwrite=args.overwrite,
                       inputs=[args.video, args.model, args.track])
+    check_video_output(args.out, vopt, overwrite=args.overwrite)
     video_info(args.video)
     if not args.track:
         _check_landmarks_file(args.video)
-    model = load_model(args.model)
+    model = resolve_model(args.model)
     wid = identity_from_label(model, args.identity)
     frames, fps = read_video(args.video, max_frames=args.max_frames)
     track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
@@ -356,7 +364,7 @@ def run_puppet(args) -> int:
     it = puppet_frames(track, model, wid)
     audio = write_video_with_audio(
         args.out, tqdm(it, total=track.n_frames, desc="render", unit="frame", leave=False),
-        track.fps, audio_from=args.video, overwrite=args.overwrite)
+        track.fps, audio_from=args.video, overwrite=args.overwrite, options=vopt)
     print(f"wrote {args.out}: {track.n_frames} frames of {args.identity}"
           + (", with the video's audio" if audio else ""))
     return 0
@@ -366,18 +374,18 @@ def run_demo(args) -> int:
     from pathlib import Path
 
     from ..demo import run_demo as demo
-    from ..model import load_model
 
     _positive(args.frames, "--frames")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise FaceTransferError(f"--out {out} is a file; demo writes into a folder (give a "
                                 "folder name)")
-    model = load_model(args.model) if args.model else None
+    vopt = video_options(args)
+    model = resolve_model(args.model)
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
                track_method=args.tracker, overwrite=args.overwrite,
-               speed=args.speed, progress_factory=_bar_factory())
+               speed=args.speed, progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings
     print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "
           f"{res.track}")

@@ -1,21 +1,44 @@
-"""Video input and output through OpenCV. Frames are ``(H, W, 3) uint8`` RGB.
+"""Video input and output. Frames are ``(H, W, 3) uint8`` RGB.
 
-Reading decodes lazily (:func:`iter_frames`) or all at once (:func:`read_video`); writing goes to a
-temporary file renamed on success (:class:`VideoWriter`), so an interrupted job never leaves a
-half-written video under the final name.
+Reading decodes with OpenCV, lazily (:func:`iter_frames`) or all at once (:func:`read_video`).
+Writing is one writer for every command that writes video (:class:`VideoWriter`,
+:func:`encode_video`): H.264 by default (libx264 through the ffmpeg binary of imageio-ffmpeg,
+``yuv420p``, CRF 18), H.265 or ProRes (:class:`VideoOptions`), or an image sequence
+(``frames/%05d.png``), with the audio of another file muxed in. It writes to a temporary file
+renamed on success, checks ffmpeg's exit status and that the file decodes to the frames written,
+and raises :class:`~facetransfer.errors.VideoError` otherwise, so a failed write (a full disk)
+never leaves a broken video under the final name nor replaces a good one.
 """
 
 from __future__ import annotations
 
+import contextlib
+import functools
+import itertools
+import logging
 import os
+import re
+import shutil
+import signal
+import subprocess
+import tempfile
 from dataclasses import dataclass
+from fractions import Fraction
 from pathlib import Path
-from typing import Iterator
+from typing import Callable, Iterable, Iterator
 
 import numpy as np
 
 from ..errors import VideoError
-from .atomic import check_output_path
+from .atomic import atomic_path, check_output_path
+
+log = logging.getLogger(__name__)
+
+__all__ = ["VideoInfo", "video_info", "iter_frames", "read_video", "CODECS", "DEFAULT_CODEC",
+           "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
+           "VideoOutput", "WrittenVideo", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
+           "is_image_pattern", "frame_path", "check_video_output", "decoded_frame_count",
+           "has_audio", "mux_audio", "VideoWriter", "encode_video", "write_video"]
 
 
 @dataclass(frozen=True)
@@ -111,53 +134,540 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     return np.stack(frames), info.fps
 
 
-class VideoWriter:
-    """Write RGB frames to a video atomically (``.mp4`` with the ``mp4v`` codec, or ``.avi`` MJPG).
+# ---------------------------------------------------------------------------------------------
+# writing: one writer for every command (H.264 by default, H.265, ProRes, image sequences)
+# ---------------------------------------------------------------------------------------------
 
-    Use as a context manager; the file appears under its final name only when the block ends
-    without error.
+#: Codec names of ``--codec`` and the ffmpeg encoder each needs.
+CODECS = {"h264": "libx264", "h265": "libx265", "prores": "prores_ks"}
+DEFAULT_CODEC = "h264"
+#: Constant rate factor of H.264 / H.265 when none is given (x264: 18 is "visually lossless").
+DEFAULT_CRF = 18
+CRF_RANGE = (0, 51)  # x264 and x265, 8-bit
+#: x264 / x265 speed presets, fastest first; the default is the encoders' own.
+PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
+           "veryslow")
+DEFAULT_PRESET = "medium"
+#: Video containers by extension (the ffmpeg muxer of each).
+VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska",
+                  ".avi": "avi"}
+#: Image formats of a frame sequence (``frames/%05d.png``).
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
+_PATTERN = re.compile(r"%0?\d*d")
+
+
+@dataclass(frozen=True)
+class VideoOptions:
+    """How to encode a video.
+
+    Attributes
+    ----------
+    codec : {"h264", "h265", "prores"}
+        H.264 (libx264) and H.265 (libx265) are written as 8-bit 4:2:0 (``yuv420p``), what
+        browsers and phones play; ProRes 422 HQ (prores_ks, 10-bit 4:2:2) for editing, in
+        ``.mov`` or ``.mkv``.
+    crf : int, optional
+        Constant rate factor of H.264 / H.265, 0 (lossless in YUV) to 51; lower is better and
+        bigger. Default :data:`DEFAULT_CRF`. ProRes has none.
+    preset : str
+        x264 / x265 speed preset (:data:`PRESETS`): faster ones cost less CPU for a little less
+        quality or bigger files at the same CRF (figures in BENCHMARKS.md).
+    """
+
+    codec: str = DEFAULT_CODEC
+    crf: int | None = None
+    preset: str = DEFAULT_PRESET
+
+    def __post_init__(self) -> None:
+        if self.codec not in CODECS:
+            raise VideoError(f"codec must be one of {', '.join(CODECS)}, got {self.codec!r}")
+        if self.preset not in PRESETS:
+            raise VideoError(f"preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
+        if self.crf is not None:
+            if self.codec == "prores":
+                raise VideoError("--crf applies to h264 and h265; prores has a fixed quality "
+                                 "(profile HQ)")
+            lo, hi = CRF_RANGE
+            if isinstance(self.crf, bool) or int(self.crf) != self.crf or not lo <= self.crf <= hi:
+                raise VideoError(f"CRF must be an integer from {lo} to {hi} (lower is better; "
+                                 f"default {DEFAULT_CRF}), got {self.crf}")
+
+    @property
+    def effective_crf(self) -> int | None:
+        """The CRF used (None for ProRes)."""
+        return None if self.codec == "prores" else int(DEFAULT_CRF if self.crf is None
+                                                       else self.crf)
+
+
+@dataclass(frozen=True)
+class VideoOutput:
+    """A checked output: a video file or an image sequence (``kind`` "video" or "images")."""
+
+    path: Path
+    kind: str
+    options: VideoOptions
+
+
+@dataclass(frozen=True)
+class WrittenVideo:
+    """What :func:`encode_video` / :meth:`VideoWriter.close` wrote.
+
+    Attributes
+    ----------
+    path : Path
+        The video, or the pattern of an image sequence.
+    n_frames : int
+        Frames written (for a video: also the number it decodes to).
+    size : (int, int)
+        ``(width, height)`` as stored (odd sizes grow by one pixel for 4:2:0).
+    audio : bool
+        Whether audio was muxed in.
+    kind : str
+        "video" or "images".
+    """
+
+    path: Path
+    n_frames: int
+    size: tuple[int, int]
+    audio: bool
+    kind: str = "video"
+
+
+def ffmpeg_exe() -> str | None:
+    """Path of an ffmpeg binary (imageio-ffmpeg's, else one on PATH), or None."""
+    try:
+        import imageio_ffmpeg
+
+        return imageio_ffmpeg.get_ffmpeg_exe()
+    except Exception:  # noqa: BLE001 - missing package or binary: fall back to PATH
+        return shutil.which("ffmpeg")
+
+
+def _require_ffmpeg() -> str:
+    exe = ffmpeg_exe()
+    if exe is None:
+        raise VideoError("no ffmpeg binary found to write video (pip install imageio-ffmpeg)")
+    return exe
+
+
+@functools.lru_cache(maxsize=4)
+def ffmpeg_encoders(exe: str) -> frozenset[str]:
+    """Names of the video encoders the ffmpeg binary ``exe`` has."""
+    res = subprocess.run([exe, "-hide_banner", "-encoders"], capture_output=True, text=True)
+    names = set()
+    for line in res.stdout.splitlines():
+        parts = line.split()
+        if len(parts) >= 2 and len(parts[0]) == 6 and parts[0][0] == "V":
+            names.add(parts[1])
+    return frozenset(names)
+
+
+def require_encoder(codec: str) -> str:
+    """The ffmpeg binary, after checking that it has the encoder of ``codec``.
+
+    Raises
+    ------
+    VideoError
+        No ffmpeg, or one without that encoder (named).
+    """
+    exe = _require_ffmpeg()
+    enc = CODECS[codec]
+    if enc not in ffmpeg_encoders(exe):
+        raise VideoError(f"the ffmpeg binary {exe} lacks the {enc} encoder needed for "
+                         f"--codec {codec}; choose another --codec or install an ffmpeg with it")
+    return exe
+
+
+def is_image_pattern(path: str | os.PathLike) -> bool:
+    """Whether ``path`` names an image sequence (``frames/%05d.png``)."""
+    return "%" in Path(path).name
+
+
+def frame_path(pattern: str | os.PathLike, i: int) -> Path:
+    """File of frame ``i`` (0-based) of an image-sequence pattern."""
+    p = Path(pattern)
+    return p.with_name(p.name % i)
+
+
+def _pattern_files(pattern: Path) -> list[Path]:
+    """Existing files of an image sequence (names matching the pattern exactly)."""
+    if not pattern.parent.is_dir():
+        return []
+    m = _PATTERN.search(pattern.name)
+    rx = re.compile(re.escape(pattern.name[:m.start()]) + r"\d+"
+                    + re.escape(pattern.name[m.end():]) + r"\Z")
+    return sorted(q for q in pattern.parent.iterdir() if rx.match(q.name))
+
+
+def check_video_output(path: str | os.PathLike, options: VideoOptions | None = None, *,
+                       overwrite: bool = True) -> VideoOutput:
+    """Validate where a video goes before any work: the kind of output, codec and container.
+
+    ``path`` is a video (``.mp4``, ``.m4v``, ``.mov``, ``.mkv``, ``.avi``) or an image sequence
+    whose name has one frame-number field (``frames/%05d.png``; ``.png``, ``.jpg``, ``.tif``,
+    ``.bmp``; frame 0 is the first).
+
+    Raises
+    ------
+    VideoError
+        Any other extension, an image name without ``%d``, ProRes outside ``.mov``/``.mkv``, an
+        encoder the ffmpeg binary lacks, or an existing output without ``overwrite``.
+    """
+    opt = options or VideoOptions()
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if is_image_pattern(p):
+        fields = _PATTERN.findall(p.name)
+        if suffix not in IMAGE_SUFFIXES:
+            raise VideoError(f"output {p}: a frame pattern needs an image extension "
+                             f"({', '.join(IMAGE_SUFFIXES)}), got {suffix or 'none'}")
+        if len(fields) != 1 or p.name.count("%") != 1:
+            raise VideoError(f"output {p}: an image-sequence pattern needs exactly one frame "
+                             "number field like %05d (e.g. frames/%05d.png)")
+        if not p.parent.parent.is_dir() and not p.parent.is_dir():
+            raise VideoError(f"output folder {p.parent} does not exist (for {p})")
+        if not overwrite and _pattern_files(p):
+            raise VideoError(f"output frames {p} exist ({len(_pattern_files(p))} files); pass "
+                             "--overwrite to replace them")
+        return VideoOutput(p, "images", opt)
+    if suffix in IMAGE_SUFFIXES:
+        raise VideoError(f"output {p} is an image: for an image sequence put a frame number "
+                         f"in the name (e.g. {p.with_name(p.stem + '_%05d' + p.suffix)}); for "
+                         "a video use .mp4")
+    if suffix not in VIDEO_SUFFIXES:
+        raise VideoError(f"output {p}: extension {suffix or '(none)'} is neither a video "
+                         f"({', '.join(VIDEO_SUFFIXES)}) nor an image sequence "
+                         "(e.g. frames/%05d.png)")
+    if opt.codec == "prores" and suffix not in (".mov", ".mkv"):
+        raise VideoError(f"output {p}: ProRes goes in a .mov or .mkv file, not {suffix}")
+    require_encoder(opt.codec)
+    check_output_path(p, overwrite=overwrite)
+    return VideoOutput(p, "video", opt)
+
+
+def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
+    """ffmpeg output arguments of a codec (libx264/libx265 4:2:0 or ProRes 422 HQ)."""
+    enc = CODECS[opt.codec]
+    if opt.codec == "prores":
+        return ["-c:v", enc, "-profile:v", "3", "-pix_fmt", "yuv422p10le", "-vendor", "apl0"]
+    args = ["-c:v", enc, "-preset", opt.preset, "-crf", str(opt.effective_crf),
+            "-pix_fmt", "yuv420p"]
+    if opt.codec == "h265":
+        args += ["-x265-params", "log-level=error"]
+        if suffix in (".mp4", ".m4v", ".mov"):
+            args += ["-tag:v", "hvc1"]  # what Apple players expect of HEVC in MP4
+    if suffix in (".mp4", ".m4v", ".mov"):
+        args += ["-movflags", "+faststart"]
+    return args
+
+
+_CAUSES = ("No space left", "Disk quota", "File too large", "Permission denied",
+           "Read-only file system", "Input/output error")
+
+
+def _ffmpeg_error(stderr: bytes | str, what: str) -> VideoError:
+    text = stderr.decode("utf-8", "replace") if isinstance(stderr, bytes) else stderr
+    # "[out#0/mp4 @ 0x55d0...] Error closing file: ..." -> "Error closing file: ..."
+    lines = [re.sub(r"^\[[^\]]* @ 0x[0-9a-f]+\]\s*", "", ln.strip())
+             for ln in text.splitlines() if ln.strip()]
+    # the cause (a full disk...) may come before ffmpeg's closing remarks: prefer it
+    cause = [ln for ln in lines if any(k in ln for k in _CAUSES)]
+    return VideoError(f"{what}: {(cause or lines or ['ffmpeg failed'])[-1]}")
+
+
+def decoded_frame_count(path: str | os.PathLike) -> int:
+    """Decode every frame of a video with ffmpeg and return how many there are.
+
+    Raises
+    ------
+    VideoError
+        If ffmpeg cannot decode the file.
+    """
+    exe = _require_ffmpeg()
+    res = subprocess.run([exe, "-hide_banner", "-nostdin", "-v", "error", "-stats", "-i",
+                          str(path), "-map", "0:v:0", "-f", "null", "-"],
+                         capture_output=True, text=True)
+    found = re.findall(r"frame=\s*(\d+)", res.stderr)
+    if res.returncode != 0 or not found:
+        raise _ffmpeg_error(res.stderr, f"video {path} does not decode")
+    return int(found[-1])
+
+
+def has_audio(path: str | os.PathLike) -> bool:
+    """Whether a media file has an audio stream (False when ffmpeg is unavailable)."""
+    exe = ffmpeg_exe()
+    if exe is None:
+        return False
+    res = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)], capture_output=True,
+                         text=True)
+    return "Audio:" in res.stderr
+
+
+def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str | os.PathLike, *,
+              start: float = 0.0, duration: float | None = None) -> bool:
+    """Copy ``video``'s frames and ``audio_from``'s audio into ``out``.
+
+    The video stream is copied as is; the audio is re-encoded to AAC, starting at ``start``
+    seconds and cut to ``duration`` (default: the shorter stream). Returns False (and logs
+    why) when there is no ffmpeg or no audio, in which case ``out`` is not written.
+
+    Raises
+    ------
+    VideoError
+        If ffmpeg fails (e.g. the disk is full).
+    """
+    exe = ffmpeg_exe()
+    if exe is None:
+        log.info("no ffmpeg available (pip install imageio-ffmpeg): output has no audio")
+        return False
+    if not has_audio(audio_from):
+        log.info("%s has no audio track; the output has none either", audio_from)
+        return False
+    fmt = VIDEO_SUFFIXES.get(Path(out).suffix.lower(), "mp4")
+    cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-i", str(video)]
+    if start:
+        cmd += ["-ss", f"{start:.3f}"]
+    cmd += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy",
+            "-c:a", "aac"]
+    # cut to the video's length; a shorter audio track just ends early
+    cmd += ["-shortest"] if duration is None else ["-t", f"{duration:.3f}"]
+    if fmt in ("mp4", "mov"):
+        cmd += ["-movflags", "+faststart"]
+    cmd += ["-f", fmt, str(out)]
+    res = subprocess.run(cmd, capture_output=True, text=True)
+    if res.returncode != 0:
+        raise _ffmpeg_error(res.stderr, f"cannot mux the audio of {audio_from} into {out}")
+    return True
+
+
+def _fps_arg(fps: float) -> str:
+    """A frame rate as ffmpeg's exact rational (29.97 -> 30000/1001)."""
+    return str(Fraction(float(fps)).limit_denominator(100000))
+
+
+class VideoWriter:
+    """Write RGB frames to a video (H.264 by default) or an image sequence, atomically.
+
+    Frames are piped to the ffmpeg binary of imageio-ffmpeg (the library's own writer neither
+    reports ffmpeg's exit status nor captures its messages, both of which this one needs),
+    into a temporary file beside the output (:func:`facetransfer.io.atomic.atomic_path`).
+    :meth:`close` checks ffmpeg's exit status and that the file decodes to as many frames as
+    were written, muxes the audio of ``audio_from`` (AAC) and only then renames the file into
+    place; on any failure it raises :class:`~facetransfer.errors.VideoError` and an existing
+    output is left untouched. An image sequence is written into a temporary folder beside the
+    frames and each file is renamed into place at the end (surplus frames of an older, longer
+    sequence are removed).
 
     Parameters
     ----------
     path : path-like
+        ``OUT.mp4`` (``.m4v``, ``.mov``, ``.mkv``, ``.avi``) or ``frames/%05d.png``
+        (see :func:`check_video_output`).
     fps : float
     size : (width, height)
+    options : VideoOptions, optional
+    audio_from : path-like, optional
+        A media file whose audio goes into the video (none if it has no audio).
+    audio_start : float
+        Seconds into ``audio_from`` where the audio starts.
     overwrite : bool
-        Refuse to replace an existing file when False.
+        Refuse to replace an existing output when False.
+
+    Use as a context manager; the output appears only when the block ends without error.
     """
 
     def __init__(self, path: str | os.PathLike, fps: float, size: tuple[int, int], *,
-                 overwrite: bool = True) -> None:
-        import cv2
-
-        self.path = check_output_path(path, overwrite=overwrite)
-        if fps <= 0:
+                 options: VideoOptions | None = None, audio_from: str | os.PathLike | None = None,
+                 audio_start: float = 0.0, overwrite: bool = True) -> None:
+        if not (np.isfinite(fps) and fps > 0):
             raise VideoError(f"frame rate must be positive, got {fps}")
-        self.size = (int(size[0]), int(size[1]))
-        suffix = self.path.suffix.lower() or ".mp4"
-        self.tmp = self.path.with_name(f".{self.path.stem}.part{suffix}")
-        fourcc = cv2.VideoWriter_fourcc(*("MJPG" if suffix == ".avi" else "mp4v"))
-        self._w = cv2.VideoWriter(str(self.tmp), fourcc, float(fps), self.size)
-        if not self._w.isOpened():
-            raise VideoError(f"cannot write video {self.path} (codec for {suffix} unavailable)")
+        if len(size) != 2 or min(int(size[0]), int(size[1])) < 1:
+            raise VideoError(f"video size must be (width, height) >= 1, got {size}")
+        self.output = check_video_output(path, options, overwrite=overwrite)
+        self.path, self.options = self.output.path, self.output.options
+        if audio_from is not None and Path(audio_from).exists() and self.path.exists() \
+                and os.path.samefile(audio_from, self.path):
+            raise VideoError(f"output {self.path} is also the audio input; choose another --out")
+        self.fps, self.size = float(fps), (int(size[0]), int(size[1]))
+        self.audio_from, self.audio_start = audio_from, float(audio_start)
         self.n_frames = 0
+        self.result: WrittenVideo | None = None
+        self._proc = None
+        self._tmpdir: Path | None = None
+        self._atomic = None
+        if self.output.kind == "images":
+            if audio_from is not None:
+                log.info("an image sequence has no audio (%s not used)", audio_from)
+            self.path.parent.mkdir(exist_ok=True)
+            self._tmpdir = Path(tempfile.mkdtemp(prefix=".frames.", suffix=".part",
+                                                 dir=self.path.parent))
+            self.stored_size = self.size
+        else:
+            self._open_ffmpeg()
+
+    def _open_ffmpeg(self) -> None:
+        exe = require_encoder(self.options.codec)
+        w, h = self.size
+        even_h = self.options.codec != "prores"  # 4:2:0 halves both, ProRes 4:2:2 the width
+        self.stored_size = (w + w % 2, h + (h % 2 if even_h else 0))
+        if self.stored_size != self.size:
+            log.info("%s: odd frame size %dx%d stored as %dx%d (edge pixels repeated)",
+                     self.path, w, h, *self.stored_size)
+        self._atomic = atomic_path(self.path, overwrite=True)  # checked in __init__
+        self.tmp = self._atomic.__enter__()
+        cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",
+               "-pix_fmt", "rgb24", "-s", "{}x{}".format(*self.stored_size),
+               "-framerate", _fps_arg(self.fps), "-i", "-",
+               *_encode_args(self.options, self.path.suffix.lower()),
+               "-f", VIDEO_SUFFIXES[self.path.suffix.lower()], str(self.tmp)]
+        log.debug("ffmpeg: %s", " ".join(cmd))
+        self._stderr = tempfile.TemporaryFile()
+        try:
+            self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE,
+                                          stdout=subprocess.DEVNULL, stderr=self._stderr)
+        except OSError as exc:
+            self._abort()
+            raise VideoError(f"cannot start ffmpeg ({exe}) to write {self.path}: {exc}") from None
 
     def write(self, frame: np.ndarray) -> None:
         """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size."""
-        import cv2
-
+        if self.result is not None or (self._proc is None and self._tmpdir is None):
+            raise VideoError(f"video {self.path} is already closed")
         if frame.shape != (self.size[1], self.size[0], 3):
             raise VideoError(f"frame of shape {frame.shape} does not match video size "
-                             f"{self.size[0]}x{self.size[1]}")
-        self._w.write(cv2.cvtColor(np.ascontiguousarray(frame, dtype=np.uint8), cv2.COLOR_RGB2BGR))
+                             f"{self.size[0]}x{self.size[1]} of {self.path}")
+        img = np.ascontiguousarray(frame, dtype=np.uint8)
+        if self._tmpdir is not None:
+            self._write_image(img)
+        else:
+            pad = (self.stored_size[1] - self.size[1], self.stored_size[0] - self.size[0])
+            if any(pad):
+                img = np.pad(img, ((0, pad[0]), (0, pad[1]), (0, 0)), mode="edge")
+            try:
+                self._proc.stdin.write(memoryview(img).cast("B"))
+            except OSError:  # ffmpeg stopped (full disk, killed...): report why
+                raise self._ffmpeg_failed() from None
         self.n_frames += 1
 
-    def close(self, *, commit: bool = True) -> None:
-        self._w.release()
-        if commit and self.n_frames:
-            os.replace(self.tmp, self.path)
-        elif self.tmp.exists():
-            self.tmp.unlink()
+    def _write_image(self, img: np.ndarray) -> None:
+        from PIL import Image
+
+        f = self._tmpdir / (self.path.name % self.n_frames)
+        try:
+            Image.fromarray(img).save(f)
+        except (OSError, ValueError) as exc:  # full disk, unwritable folder, unknown format
+            raise VideoError(f"cannot write frame {f.name} of {self.path}: {exc}") from None
+
+    def _ffmpeg_failed(self) -> VideoError:
+        proc, self._proc = self._proc, None
+        with contextlib.suppress(OSError):
+            proc.stdin.close()
+        rc = proc.wait()
+        self._stderr.seek(0)
+        err = self._stderr.read().decode("utf-8", "replace")
+        why = f"exit status {rc}" if rc >= 0 else f"killed by signal {-rc}"
+        if -rc == getattr(signal, "SIGXFSZ", -1):
+            why += ": file size limit exceeded"
+        what = f"cannot write video {self.path} (ffmpeg {why})"
+        return _ffmpeg_error(err, what) if err.strip() else VideoError(what)
+
+    def close(self, *, commit: bool = True) -> WrittenVideo | None:
+        """Finish the output (``commit``) or discard it; returns what was written.
+
+        Raises
+        ------
+        VideoError
+            No frames, ffmpeg failed, the file does not decode to the frames written, or the
+            audio could not be muxed. The output is then not written (an old one is kept).
+        """
+        if self.result is not None:
+            return self.result
+        try:
+            if not commit:
+                self._abort()
+                return None
+            if self.n_frames == 0:
+                raise VideoError(f"no frames to write to {self.path}")
+            self.result = self._commit_images() if self._tmpdir is not None else \
+                self._commit_video()
+            return self.result
+        except BaseException:
+            self._abort()
+            raise
+
+    def _commit_video(self) -> WrittenVideo:
+        proc = self._proc
+        with contextlib.suppress(OSError):
+            proc.stdin.close()
+        if proc.wait() != 0:
+            raise self._ffmpeg_failed()
+        self._proc = None
+        n = decoded_frame_count(self.tmp)
+        if n != self.n_frames:
+            raise VideoError(f"cannot write video {self.path}: {self.n_frames} frames were "
+                             f"written but the file decodes to {n}")
+        audio = self.audio_from is not None and self._mux()
+        atomic, self._atomic = self._atomic, None
+        atomic.__exit__(None, None, None)  # rename into place
+        self._close_stderr()
+        return WrittenVideo(self.path, self.n_frames, self.stored_size, bool(audio))
+
+    def _mux(self) -> bool:
+        fd, name = tempfile.mkstemp(prefix=f".{self.path.stem}.", suffix=".audio.part"
+                                    + self.path.suffix, dir=self.path.parent)
+        os.close(fd)
+        tmp2 = Path(name)
+        try:
+            if not mux_audio(self.tmp, self.audio_from, tmp2, start=self.audio_start,
+                             duration=self.n_frames / self.fps):
+                return False
+            n = decoded_frame_count(tmp2)
+            if n != self.n_frames:
+                raise VideoError(f"cannot write video {self.path}: with the audio of "
+                                 f"{self.audio_from} it decodes to {n} frames, not "
+                                 f"{self.n_frames}")
+            os.replace(tmp2, self.tmp)
+            return True
+        finally:
+            with contextlib.suppress(FileNotFoundError):
+                tmp2.unlink()
+
+    def _commit_images(self) -> WrittenVideo:
+        old = _pattern_files(self.path)
+        names = [self.path.name % i for i in range(self.n_frames)]
+        for name in names:
+            os.replace(self._tmpdir / name, self.path.parent / name)
+        keep = set(names)
+        for q in old:  # frames of an older, longer sequence would be mistaken for ours
+            if q.name not in keep:
+                q.unlink()
+        self._tmpdir.rmdir()
+        self._tmpdir = None
+        return WrittenVideo(self.path, self.n_frames, self.size, False, "images")
+
+    def _abort(self) -> None:
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            with contextlib.suppress(OSError):
+                proc.kill()
+            proc.wait()
+            with contextlib.suppress(OSError):
+                proc.stdin.close()
+        self._close_stderr()
+        atomic, self._atomic = self._atomic, None
+        if atomic is not None:
+            err = VideoError(f"writing {self.path} was abandoned")
+            with contextlib.suppress(VideoError):
+                atomic.__exit__(VideoError, err, None)
+        if self._tmpdir is not None:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            self._tmpdir = None
+
+    def _close_stderr(self) -> None:
+        f = getattr(self, "_stderr", None)
+        if f is not None:
+            f.close()
+            self._stderr = None
 
     def __enter__(self) -> "VideoWriter":
         return self
@@ -166,15 +676,41 @@ class VideoWriter:
         self.close(commit=exc_type is None)
 
 
-def write_video(path: str | os.PathLike, frames, fps: float, *, overwrite: bool = True) -> Path:
-    """Write an iterable of RGB frames atomically; the size is taken from the first frame."""
+def encode_video(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float, *,
+                 options: VideoOptions | None = None,
+                 audio_from: str | os.PathLike | None = None, audio_start: float = 0.0,
+                 overwrite: bool = True, progress: Callable[[int], None] | None = None
+                 ) -> WrittenVideo:
+    """Write an iterable of ``(H, W, 3) uint8`` RGB frames with :class:`VideoWriter`; the size
+    is taken from the first frame, and the output is checked before the first frame is made.
+
+    Parameters
+    ----------
+    progress : callable(int), optional
+        Called with 1 per frame written.
+
+    Returns
+    -------
+    WrittenVideo
+    """
+    check_video_output(path, options, overwrite=overwrite)
     it = iter(frames)
     try:
         first = next(it)
     except StopIteration:
         raise VideoError(f"no frames to write to {path}") from None
-    with VideoWriter(path, fps, (first.shape[1], first.shape[0]), overwrite=overwrite) as w:
-        w.write(first)
-        for f in it:
+    with VideoWriter(path, fps, (first.shape[1], first.shape[0]), options=options,
+                     audio_from=audio_from, audio_start=audio_start, overwrite=overwrite) as w:
+        for f in itertools.chain([first], it):
             w.write(f)
-    return Path(path)
+            if progress is not None:
+                progress(1)
+    return w.result
+
+
+def write_video(path: str | os.PathLike, frames, fps: float, *, overwrite: bool = True,
+                options: VideoOptions | None = None,
+                audio_from: str | os.PathLike | None = None) -> Path:
+    """:func:`encode_video` returning only the path."""
+    return encode_video(path, frames, fps, options=options, audio_from=audio_from,
+                        overwrite=overwrite).path

@@ -102,7 +102,8 @@ def overlay_frames(frames, track, model, *, edge_stride: int = 2, visibility: bo
                            text=f"{i}  conf {track.confidence[i]:.2f}")
 
 
-def write_overlay(video, track, model, path, *, progress=None, overwrite: bool = True):
+def write_overlay(video, track, model, path, *, progress=None, overwrite: bool = True,
+                  options=None):
     """Write the overlay video of a track, atomically (:class:`~facetransfer.io.video.VideoWriter`).
 
     Parameters
@@ -112,13 +113,16 @@ def write_overlay(video, track, model, path, *, progress=None, overwrite: bool =
     track : Track
     model : MultilinearModel
     path : path-like
-        Output ``.mp4`` (or ``.avi``).
+        Output video (``.mp4``...) or image sequence (``frames/%05d.png``).
     progress : callable(int), optional
         Called with 1 per frame written.
+    options : VideoOptions, optional
+        Codec and CRF (default H.264, CRF 18).
     """
     from ..io.video import VideoWriter, iter_frames
 
-    with VideoWriter(path, track.fps, track.frame_size, overwrite=overwrite) as w:
+    with VideoWriter(path, track.fps, track.frame_size, overwrite=overwrite,
+                     options=options) as w:
         for img in overlay_frames(iter_frames(video, stop=track.n_frames), track, model):
             w.write(img)
             if progress is not None:

@@ -1,0 +1,77 @@
+"""What the commands that write video share: ``--codec``/``--crf``/``--preset`` and the model.
+
+Not a subcommand. ``transfer``, ``puppet``, ``track``, ``demo`` and ``synth-video`` take the
+video options (:class:`facetransfer.io.video.VideoOptions`); ``transfer``, ``puppet``, ``track``
+and ``demo`` use the default model (:mod:`facetransfer.default_model`) when ``--model`` is
+absent, building it once with a progress bar and a one-line message.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from ..io.video import CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_PRESET, PRESETS
+
+MODEL_HELP = ("multilinear model (.npz); default: the default model (ict-arkit, ARKit "
+              "blendshapes), built once into the user cache on first use")
+
+
+def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video") -> None:
+    """Add ``--codec``, ``--crf`` and ``--preset`` (one definition for every command that
+    writes video)."""
+    p.add_argument("--codec", choices=tuple(CODECS), default=DEFAULT_CODEC,
+                   help=f"codec of {what}: h264 (libx264, yuv420p: plays in browsers), h265 "
+                   "(libx265) or prores (ProRes 422 HQ, .mov/.mkv); ignored for an image "
+                   "sequence (--out frames/%%05d.png)")
+    p.add_argument("--crf", type=int, default=None,
+                   help=f"constant rate factor of h264/h265, {CRF_RANGE[0]} (best) to "
+                   f"{CRF_RANGE[1]}; default {DEFAULT_CRF}")
+    p.add_argument("--preset", choices=PRESETS, default=DEFAULT_PRESET, metavar="PRESET",
+                   help="x264/x265 speed preset, ultrafast ... veryslow: veryfast costs less "
+                   "than half the CPU of medium for slightly less quality at the same CRF")
+
+
+def video_options(args):
+    """The :class:`~facetransfer.io.video.VideoOptions` of parsed arguments (validated)."""
+    from ..io.video import VideoOptions
+
+    return VideoOptions(codec=args.codec, crf=args.crf, preset=args.preset)
+
+
+def resolve_model(path, *, progress: bool = True):
+    """``load_model(path)``, or the default model when ``path`` is None (built on first use
+    with a tqdm bar on stderr, announced in one line).
+
+    Returns
+    -------
+    MultilinearModel
+    """
+    if path is not None:
+        from ..model import load_model
+
+        return load_model(path)
+    from ..default_model import load_default_model
+
+    bar = None
+
+    def announce(message: str) -> None:
+        print(message, file=sys.stderr, flush=True)
+
+    def on_progress(done: int, total: int) -> None:
+        nonlocal bar
+        if not progress:
+            return
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=total, desc="default model", unit="identity", leave=False,
+                       dynamic_ncols=True, file=sys.stderr)
+        bar.total = total
+        bar.update(done - bar.n)
+
+    try:
+        return load_default_model(progress=on_progress, announce=announce)
+    finally:
+        if bar is not None:
+            bar.close()

@@ -1,0 +1,268 @@
+"""The one video writer (facetransfer.io.video): codecs, CRF, image sequences, audio, failures."""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from facetransfer.errors import VideoError
+from facetransfer.io import video as iov
+from facetransfer.io.video import (VideoOptions, VideoWriter, check_video_output,
+                                   decoded_frame_count, encode_video, has_audio, read_video,
+                                   video_info)
+
+SRC = Path(__file__).resolve().parents[1] / "src"
+
+
+def stream_info(path) -> str:
+    """ffmpeg's description of the first video stream ("Video: h264 (High) ..., yuv420p...")."""
+    res = subprocess.run([iov.ffmpeg_exe(), "-hide_banner", "-i", str(path)],
+                         capture_output=True, text=True)
+    return next(ln for ln in res.stderr.splitlines() if "Video:" in ln)
+
+
+def psnr(a, b) -> float:
+    mse = np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2)
+    return float(10 * np.log10(255.0 ** 2 / mse))
+
+
+def smooth_frames(n=8, h=64, w=96, seed=0) -> np.ndarray:
+    """Moving colour gradients with a little grey texture: (n, h, w, 3) uint8."""
+    rng = np.random.default_rng(seed)
+    y, x = np.mgrid[0:h, 0:w].astype(np.float64)
+    tex = rng.normal(0, 4, (h, w))
+    out = []
+    for i in range(n):
+        r = 128 + 60 * np.sin((x + 3 * i) / 17.0)
+        g = 128 + 50 * np.cos((y - 2 * i) / 13.0)
+        b = 100 + 0.8 * x
+        out.append(np.stack([r, g, b], -1) + tex[..., None])
+    return np.clip(np.rint(out), 0, 255).astype(np.uint8)
+
+
+def noisy_frames(n=6, h=64, w=64, seed=1) -> np.ndarray:
+    return np.random.default_rng(seed).integers(0, 256, (n, h, w, 3), dtype=np.uint8)
+
+
+def test_h264_by_default_yuv420p_crf18_and_decodes(tmp_path):
+    frames = smooth_frames()
+    res = encode_video(tmp_path / "v.mp4", frames, 25)
+    assert res.n_frames == 8 and res.size == (96, 64) and not res.audio
+    info = stream_info(res.path)
+    assert "h264" in info and "yuv420p" in info
+    back, fps = read_video(res.path)
+    assert back.shape == frames.shape and fps == pytest.approx(25)
+    # measured on this content: 37.5 dB (CRF 0: 43.5 dB, the ceiling of 8-bit 4:2:0 as OpenCV
+    # decodes it); the old writer, OpenCV's mp4v: 34.8 dB
+    assert psnr(back, frames) > 36.5
+    import cv2
+
+    peer = cv2.VideoWriter(str(tmp_path / "mp4v.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 25,
+                           (96, 64))
+    for f in frames:
+        peer.write(cv2.cvtColor(f, cv2.COLOR_RGB2BGR))
+    peer.release()
+    assert psnr(back, frames) > psnr(read_video(tmp_path / "mp4v.mp4")[0], frames) + 2
+    # the encoder's settings are recorded in the stream by x264
+    assert b"crf=18.0" in res.path.read_bytes()
+
+
+def test_odd_size_is_padded_to_even_by_repeating_edges(tmp_path):
+    frames = smooth_frames(n=4, h=33, w=47)
+    res = encode_video(tmp_path / "odd.mp4", frames, 10)
+    assert res.size == (48, 34)
+    back, _ = read_video(res.path)
+    assert back.shape == (4, 34, 48, 3)
+    assert psnr(back[:, :33, :47], frames) > 35.5   # measured 36.9 dB
+    # the added row and column repeat the last ones (up to coding)
+    assert np.abs(back[:, 33].astype(int) - back[:, 32].astype(int)).mean() < 3
+
+
+@pytest.mark.parametrize("codec,suffix,name,db", [("h265", ".mkv", "hevc", 37.0),
+                                                  ("prores", ".mov", "prores", 43.0)])
+def test_other_codecs(tmp_path, codec, suffix, name, db):
+    frames = smooth_frames(n=5)
+    res = encode_video(tmp_path / f"v{suffix}", frames, 30, options=VideoOptions(codec))
+    assert name in stream_info(res.path)
+    assert decoded_frame_count(res.path) == 5
+    back, _ = read_video(res.path)
+    # measured: H.265 CRF 18 38.4 dB, ProRes 422 HQ 44.4 dB
+    assert back.shape == frames.shape and psnr(back, frames) > db
+
+
+def test_lower_crf_is_bigger_and_closer(tmp_path):
+    frames = noisy_frames()
+    out = {}
+    for crf in (8, 18, 30):
+        p = encode_video(tmp_path / f"c{crf}.mp4", frames, 25, options=VideoOptions(crf=crf)).path
+        out[crf] = (p.stat().st_size, psnr(read_video(p)[0], frames))
+    assert out[8][0] > out[18][0] > out[30][0]
+    assert out[8][1] > out[18][1] > out[30][1]
+
+
+def test_image_sequence_lossless_and_replaced_only_with_overwrite(tmp_path):
+    frames = noisy_frames(n=5)
+    pattern = tmp_path / "frames" / "%05d.png"
+    res = encode_video(pattern, frames, 25)
+    assert res.kind == "images" and res.n_frames == 5
+    names = sorted(p.name for p in pattern.parent.iterdir())
+    assert names == [f"{i:05d}.png" for i in range(5)]           # frame 0 is 00000.png
+    from PIL import Image
+
+    np.testing.assert_array_equal(np.asarray(Image.open(pattern.parent / "00003.png")),
+                                  frames[3])
+    with pytest.raises(VideoError, match="--overwrite"):
+        encode_video(pattern, frames[:2], 25, overwrite=False)
+    (pattern.parent / "notes.txt").write_text("mine")
+    encode_video(pattern, frames[:2], 25, overwrite=True)          # a shorter sequence
+    left = sorted(p.name for p in pattern.parent.iterdir())
+    assert left == ["00000.png", "00001.png", "notes.txt"]         # old 2..4 gone, others kept
+
+
+def test_audio_of_another_file_is_muxed_and_cut(tmp_path):
+    # a 2-second tone as the audio source
+    tone = tmp_path / "tone.m4a"
+    subprocess.run([iov.ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "sine=frequency=440:duration=2", "-c:a", "aac", str(tone)], check=True)
+    res = encode_video(tmp_path / "a.mp4", smooth_frames(n=10), 10, audio_from=tone)
+    assert res.audio and has_audio(res.path)
+    assert decoded_frame_count(res.path) == 10
+    out = subprocess.run([iov.ffmpeg_exe(), "-hide_banner", "-i", str(res.path)],
+                         capture_output=True, text=True).stderr
+    h, m, s = re.search(r"Duration: (\d+):(\d+):([\d.]+)", out).groups()
+    assert float(s) == pytest.approx(1.0, abs=0.1)    # 10 frames at 10 fps, not the tone's 2 s
+    mute = encode_video(tmp_path / "mute.mp4", smooth_frames(n=2), 10).path
+    res2 = encode_video(tmp_path / "c.mp4", smooth_frames(n=3), 10, audio_from=mute)
+    assert not res2.audio and not has_audio(res2.path)  # no audio to keep: none, no error
+
+
+@pytest.mark.parametrize("out,match", [
+    ("x.png", "frame number"),                     # issue 16: MPEG-4 written into a .png
+    ("x.txt", "neither a video"),
+    ("x", "neither a video"),
+    ("frames/%s.png", "%05d"),
+    ("frames/%05d_%d.png", "%05d"),
+    ("frames/%05d.txt", "image extension"),
+])
+def test_bad_outputs(tmp_path, out, match):
+    with pytest.raises(VideoError, match=match):
+        check_video_output(tmp_path / out)
+
+
+def test_preset_reaches_x264(tmp_path):
+    # x264 writes its settings into the stream: subme 7 is medium's, subme 2 veryfast's
+    fast = encode_video(tmp_path / "f.mp4", smooth_frames(n=3), 25,
+                        options=VideoOptions(preset="veryfast")).path
+    assert b"subme=2 " in fast.read_bytes()
+    slow = encode_video(tmp_path / "m.mp4", smooth_frames(n=3), 25).path
+    assert b"subme=7 " in slow.read_bytes()
+
+
+@pytest.mark.parametrize("kw,match", [({"crf": 52}, "0 to 51"), ({"crf": -1}, "0 to 51"),
+                                      ({"preset": "warp"}, "preset must be one of"),
+                                      ({"crf": 2.5}, "integer"), ({"codec": "vp9"}, "h264"),
+                                      ({"codec": "prores", "crf": 10}, "prores")])
+def test_bad_options(kw, match):
+    with pytest.raises(VideoError, match=match):
+        VideoOptions(**kw)
+
+
+def test_prores_needs_mov_and_missing_encoder_is_named(tmp_path, monkeypatch):
+    with pytest.raises(VideoError, match=r"\.mov"):
+        check_video_output(tmp_path / "p.mp4", VideoOptions("prores"))
+    monkeypatch.setattr(iov, "ffmpeg_encoders", lambda exe: frozenset({"libx264"}))
+    with pytest.raises(VideoError, match="lacks the libx265 encoder"):
+        check_video_output(tmp_path / "v.mp4", VideoOptions("h265"))
+    check_video_output(tmp_path / "v.mp4")  # h264 is there
+
+
+def test_writer_refuses_wrong_frames_and_leaves_nothing(tmp_path):
+    with pytest.raises(VideoError, match="does not match"):
+        with VideoWriter(tmp_path / "v.mp4", 25, (64, 48)) as w:
+            w.write(np.zeros((48, 64, 3), np.uint8))
+            w.write(np.zeros((40, 64, 3), np.uint8))
+    assert list(tmp_path.iterdir()) == []
+    with pytest.raises(VideoError, match="no frames"):
+        encode_video(tmp_path / "v.mp4", [], 25)
+    assert list(tmp_path.iterdir()) == []
+
+
+_FULL_DISK = r"""
+import resource, sys
+import numpy as np
+from facetransfer.io.video import encode_video
+frames = np.random.default_rng(0).integers(0, 256, (30, 96, 128, 3), dtype=np.uint8)
+resource.setrlimit(resource.RLIMIT_FSIZE, (20000, 20000))   # the disk "fills" at 20 kB
+try:
+    encode_video(sys.argv[1], frames, 25, overwrite=True)
+except ValueError as exc:
+    print(type(exc).__name__, exc)
+    sys.exit(2)
+"""
+
+
+def test_full_disk_fails_and_keeps_the_old_video(tmp_path):
+    """Issue 16, defect 1: a write that runs out of space raises, and with overwrite the old
+    file survives unchanged; no temporary file is left."""
+    out = tmp_path / "v.mp4"
+    encode_video(out, smooth_frames(n=3), 25)
+    before = out.read_bytes()
+    r = subprocess.run([sys.executable, "-c", _FULL_DISK, str(out)], capture_output=True,
+                       text=True, env={**os.environ, "PYTHONPATH": str(SRC)})
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert r.stdout.startswith("VideoError cannot write video") and str(out) in r.stdout
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["v.mp4"]
+
+
+def test_full_disk_on_a_real_small_filesystem(tmp_path):
+    """The same on a 64 kB tmpfs (ENOSPC), where the system allows mounting one."""
+    mnt = tmp_path / "mnt"
+    mnt.mkdir()
+    if subprocess.run(["mount", "-t", "tmpfs", "-o", "size=64k", "tmpfs", str(mnt)],
+                      capture_output=True).returncode != 0:
+        pytest.skip("cannot mount a tmpfs here (needs root)")
+    try:
+        out = mnt / "v.mp4"
+        encode_video(out, smooth_frames(n=2, h=32, w=32), 25)
+        before = out.read_bytes()
+        with pytest.raises(VideoError, match="No space left"):
+            encode_video(out, noisy_frames(n=20, h=128, w=128), 25, overwrite=True)
+        assert out.read_bytes() == before
+        with pytest.raises(VideoError, match="No space left"):
+            encode_video(mnt / "f" / "%03d.png", noisy_frames(n=20, h=128, w=128), 25)
+        assert sorted(p.name for p in mnt.iterdir()) == ["f", "v.mp4"]
+        assert list((mnt / "f").iterdir()) == []
+    finally:
+        subprocess.run(["umount", str(mnt)], check=False)
+
+
+def test_undecodable_output_is_refused(tmp_path, monkeypatch):
+    """If the file ffmpeg wrote decodes to fewer frames than were sent, nothing is written."""
+    out = tmp_path / "v.mp4"
+    encode_video(out, smooth_frames(n=2), 25)
+    before = out.read_bytes()
+    monkeypatch.setattr(iov, "decoded_frame_count", lambda path: 1)
+    with pytest.raises(VideoError, match="decodes to 1"):
+        encode_video(out, smooth_frames(n=4), 25, overwrite=True)
+    assert out.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["v.mp4"]
+
+
+def test_video_info_of_written_video(tmp_path):
+    p = encode_video(tmp_path / "v.mov", smooth_frames(n=6), 29.97).path
+    info = video_info(p)
+    assert info.n_frames == 6 and info.fps == pytest.approx(29.97, abs=1e-3)
+
+
+def test_output_that_is_the_audio_input_is_refused(tmp_path):
+    p = encode_video(tmp_path / "v.mp4", smooth_frames(n=2), 25).path
+    before = p.read_bytes()
+    with pytest.raises(VideoError, match="also the audio input"):
+        encode_video(p, smooth_frames(n=3), 25, audio_from=p, overwrite=True)
+    assert p.read_bytes() == before
