@@ -359,11 +359,6 @@ def test_feature_points_loader(work, data):
                  ok=lambda fp: np.all(np.isfinite(fp.points)) and fp.points.shape[1] == 3)
 
 
-@pytest.mark.xfail(strict=True, raises=(TypeError, ValueError),
-                   reason="track/init.py (owned by the tracker rewrite, not edited here): "
-                   "check_init_points calls np.asarray(xy, float) unguarded, so an entry like "
-                   "\"\" or {} raises numpy's ValueError/TypeError without the path; fix: "
-                   "catch (TypeError, ValueError) there and raise TrackError(where ...)")
 @pytest.mark.parametrize("entry", ["", {}])
 def test_init_points_entry_of_the_wrong_type(work, entry):
     from facetransfer.errors import TrackError

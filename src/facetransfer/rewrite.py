@@ -1482,8 +1482,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     if lmf is not None:
         from .track.landmarks import mediapipe_to_ibug
 
-        with np.load(lmf) as z:
-            P = z["landmarks"][:n]
+        from .io.landmarks import read_mediapipe_landmarks
+
+        P = read_mediapipe_landmarks(lmf, n)
         L = mediapipe_to_ibug(P[..., :2])
         if L.shape[0] < n:
             L = np.concatenate([L, np.full((n - L.shape[0], 68, 2), np.nan)])

@@ -202,6 +202,8 @@ def resample_track(track, tmap: TimeMap):
         landmarks2d=_interp_rows(track.landmarks2d, t),
         confidence=np.minimum(track.confidence[i0], track.confidence[i1]),
         lost=lost,
+        blendshapes=(None if track.blendshapes is None else  # affine in the weights (Eq. A)
+                     np.clip(_interp_rows(track.blendshapes, t), 0.0, 1.0)),
         info={},
     )
 
@@ -323,7 +325,8 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
     return dataclasses.replace(
         base, rotation=posed.rotation.copy(), scale=posed.scale.copy(),
         translation=posed.translation.copy(), landmarks2d=posed.landmarks2d.copy(),
-        weights=weights, lost=lost, confidence=conf, info={})
+        weights=weights, lost=lost, confidence=conf, info={},
+        blendshapes=None, blendshape_names=None)  # new weights: project_landmarks attaches them
 
 
 def take_frames(track, idx: np.ndarray):
@@ -333,7 +336,8 @@ def take_frames(track, idx: np.ndarray):
         translation=track.translation[idx],
         weights={n: w[idx] for n, w in track.weights.items()},
         landmarks2d=track.landmarks2d[idx], confidence=track.confidence[idx],
-        lost=track.lost[idx], info={})
+        lost=track.lost[idx], info={},
+        blendshapes=None if track.blendshapes is None else track.blendshapes[idx])
 
 
 def project_landmarks(track, model):

@@ -55,7 +55,10 @@ def check_init_points(points: dict, frame_size: tuple[int, int], *, where: str =
             raise TrackError(f"{where}: key {k!r} is not an iBUG-68 number (0..67)") from None
         if not 0 <= i < 68:
             raise TrackError(f"{where}: point number {i} is outside iBUG-68 (0..67)")
-        a = np.asarray(xy, dtype=np.float64).ravel()
+        try:
+            a = np.asarray(xy, dtype=np.float64).ravel()
+        except (TypeError, ValueError):
+            raise TrackError(f"{where}: point {i} must be [x, y], got {xy!r}") from None
         if a.shape != (2,) or not np.all(np.isfinite(a)):
             raise TrackError(f"{where}: point {i} must be [x, y], got {xy!r}")
         if not (-0.5 <= a[0] <= W - 0.5 and -0.5 <= a[1] <= H - 0.5):
