@@ -20,6 +20,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import weakref
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Mapping, Sequence
@@ -32,6 +33,9 @@ from .errors import DatasetError, ModelFileError, ShapeError
 from .io.atomic import atomic_path
 
 log = logging.getLogger(__name__)
+
+#: content_hash of each model object, computed once (a model's arrays are never changed in place).
+_HASHES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 
 #: Version of the model file format written by :meth:`MultilinearModel.save`.
 FORMAT_VERSION = 1
@@ -262,10 +266,9 @@ class MultilinearModel:
 
         Computed once per model object (the arrays of a model are never changed in place).
         """
-        h = self.__dict__.get("_hash")
+        h = _HASHES.get(self)
         if h is None:
-            h = _content_hash(self._arrays(), self._metadata())
-            self.__dict__["_hash"] = h
+            h = _HASHES[self] = _content_hash(self._arrays(), self._metadata())
         return h
 
     def _arrays(self) -> dict[str, np.ndarray]:
@@ -364,7 +367,7 @@ def load_model(path: str | Path) -> MultilinearModel:
             imputed=data.get("imputed"), provenance=meta.get("provenance", {}))
     except (KeyError, ValueError, TypeError, IndexError) as exc:  # ShapeError is a ValueError
         raise ModelFileError(f"model file {p} is incomplete or inconsistent: {exc}") from None
-    model.__dict__["_hash"] = expected  # verified above: the same sha256 content_hash gives
+    _HASHES[model] = expected  # verified above: the same sha256 that content_hash gives
     return model
 
 

@@ -80,10 +80,10 @@ def _bar(desc: str, total: int):
 
 def run(args) -> int:
     from ..io.video import check_video_output, video_info
-    from ..track.init import LazyDetector, require_landmarks
+    from ..track.init import require_landmarks
     from ..track.overlay import write_overlay
     from ..track.result import Track
-    from ..track.tracker import TrackOptions, frame_source, track_video
+    from ..track.tracker import TrackOptions, frame_source
 
     if args.from_track is None and not args.out:
         raise FaceTransferError("--out is required (the track file to write)")
@@ -94,11 +94,11 @@ def run(args) -> int:
     inputs = (args.video, args.model, args.from_track,
               None if args.init == "auto" else args.init)
     vopt = video_options(args)
-    for path in (args.out, args.overlay):
-        if path:
-            check_output_path(path, overwrite=args.overwrite, inputs=inputs)
     if args.overlay:
         check_video_output(args.overlay, vopt, overwrite=args.overwrite)
+    for path in (args.out, args.overlay):
+        if path and "%" not in Path(path).name:  # an image sequence is checked above
+            check_output_path(path, overwrite=args.overwrite, inputs=inputs)
     if args.out and args.overlay:
         check_not_input(args.overlay, [args.out, partial_path(args.out)])
     if args.out:

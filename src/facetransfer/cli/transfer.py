@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..rewrite import DEFAULT_SPEED, SPEED_PRESETS
@@ -219,8 +220,9 @@ def run_transfer(args) -> int:
               args.identity_weights if args.identity_weights and
               args.identity_weights.endswith(".npy") else None]
     vopt = video_options(args)
-    check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     check_video_output(args.out, vopt, overwrite=args.overwrite)
+    if "%" not in Path(args.out).name:  # an image sequence is checked above
+        check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
     for v, tr in ((args.target, args.target_track), (args.expression_from, args.source_track),
@@ -335,15 +337,17 @@ def run_edit(args) -> int:
 
 
 def run_puppet(args) -> int:
+    from ..io.atomic import check_output_path
     from ..io.video import check_video_output, read_video, video_info
     from ..rewrite import obtain_track, write_video_with_audio
     from ..transfer import identity_from_label, puppet_frames
 
     _positive(args.max_frames, "--max-frames")
     vopt = video_options(args)
-    check_output_path(args.out, overwrite=args.overwrite,
-                      inputs=[args.video, args.model, args.track])
     check_video_output(args.out, vopt, overwrite=args.overwrite)
+    if "%" not in Path(args.out).name:  # an image sequence is checked above
+        check_output_path(args.out, overwrite=args.overwrite,
+                          inputs=[args.video, args.model, args.track])
     video_info(args.video)
     if not args.track:
         _check_landmarks_file(args.video)
@@ -371,7 +375,6 @@ def run_puppet(args) -> int:
 
 
 def run_demo(args) -> int:
-    from pathlib import Path
 
     from ..demo import run_demo as demo
 
