@@ -15,7 +15,8 @@ import sys
 from .. import __version__
 
 #: Subcommand modules, in help order. Each defines ``register(subparsers)``.
-SUBCOMMAND_MODULES = ("model", "impute", "scan", "render", "texture", "track", "transfer")
+SUBCOMMAND_MODULES = ("model", "impute", "scan", "render", "texture", "track", "transfer",
+                      "batch")
 
 
 def build_parser() -> argparse.ArgumentParser:
