@@ -11,6 +11,7 @@ A task raises on bad input; the client turns the exception into the clip's faile
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import time
 from dataclasses import dataclass
@@ -201,13 +202,32 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
                output=str(out))
 
 
+@functools.lru_cache(maxsize=1)
+def _default_model():
+    """The default model and its hash, loaded once per worker process (not once per task)."""
+    from ..default_model import load_default_model
+
+    model = load_default_model()
+    return model, model.content_hash
+
+
 def export_one(job, fmt: str, out: str, model=None, texture=None) -> Row:
-    """Export one track file with :func:`facetransfer.export.export_track` to ``out``."""
+    """Export one track file with :func:`facetransfer.export.export_track` to ``out``.
+
+    Without ``model``, a track made with the default model gets the worker's cached copy of
+    it; any other track is left to ``export_track``'s own check (``model=None``).
+    """
     from ..export import export_track
     from ..track.result import Track
 
     t0 = time.perf_counter()
     track = Track.load(job.track)
+    if model is None:
+        from ..default_model import default_model_path
+
+        if default_model_path().is_file():
+            default, h = _default_model()
+            model = default if track.model_hash == h else None
     path = export_track(track, fmt, out, model=model, overwrite=True, texture=texture)
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
                seconds=time.perf_counter() - t0,

@@ -13,7 +13,6 @@ is done; Ctrl-C cancels what is pending and keeps what finished. Exit status 1 i
 
 from __future__ import annotations
 
-import argparse
 import sys
 
 from ..errors import FaceTransferError
