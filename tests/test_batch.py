@@ -259,10 +259,8 @@ def test_batch_export_on_the_same_machinery(clips, quick_model_path, inproc, tmp
 
 
 def test_batch_export_with_the_real_module(clips, quick_model_path, inproc, tmp_path, capsys):
-    try:
-        import facetransfer.export as _  # noqa: F401
-    except ImportError:
-        pytest.skip("facetransfer.export is not on this branch yet (issue 14)")
+    pytest.importorskip("facetransfer.export",
+                        reason="facetransfer.export is not on this branch yet (issue 14)")
     t1 = tmp_path / "one.npz"
     (va, pa, _) = clips["a"]
     assert _cli(capsys, "track", va, "--model", quick_model_path, "--out", t1, "--init", pa,
