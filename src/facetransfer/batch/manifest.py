@@ -208,12 +208,12 @@ def pair_jobs(manifest: str | os.PathLike) -> list[PairJob]:
     jobs = []
     for i, row in enumerate(rows):
         where = f"manifest {manifest} row {i + 1}"
-        if not any(row.get(c) for c in PAIR_SOURCES):
-            raise BatchError(f"{where}: nothing to transfer (give one of {list(PAIR_SOURCES)})")
         for track, video in (("source_track", "expression_from"), ("viseme_track", "viseme_from"),
                              ("identity_track", "identity_from"), ("pose_track", "pose_from")):
             if row.get(track) and not row.get(video):
                 raise BatchError(f"{where}: {track} needs {video} (the video it belongs to)")
+        if not any(row.get(c) for c in PAIR_SOURCES):
+            raise BatchError(f"{where}: nothing to transfer (give one of {list(PAIR_SOURCES)})")
         if row.get("identity_from") and (row.get("identity_label") or row.get("identity_weights")):
             raise BatchError(f"{where}: give one of identity_from, identity_label, "
                              "identity_weights")
