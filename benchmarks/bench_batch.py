@@ -82,6 +82,8 @@ class MemoryPoll(threading.Thread):
 def serial_peer(clips, model_path, out: Path, args) -> dict:
     """``for c in clips; do facetransfer track c ...; done``: wall time and peak memory."""
     out.mkdir(parents=True, exist_ok=True)
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu0 = ru.ru_utime + ru.ru_stime
     t0 = time.perf_counter()
     for c in clips:
         subprocess.run([sys.executable, "-m", "facetransfer.cli.main", "track", str(c),
@@ -89,8 +91,9 @@ def serial_peer(clips, model_path, out: Path, args) -> dict:
                         "--passes", str(args.passes), "--points", str(args.points)],
                        check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     wall = time.perf_counter() - t0
-    peak = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss * 1024
-    return {"wall_s": wall, "peak_rss_mb": peak / 1e6}
+    ru = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return {"wall_s": wall, "peak_rss_mb": ru.ru_maxrss * 1024 / 1e6,
+            "cpu_s": ru.ru_utime + ru.ru_stime - cpu0}
 
 
 def batch_run(clips, model_path, out: Path, workers: int, args, *, chunk: int = 0,
@@ -101,6 +104,7 @@ def batch_run(clips, model_path, out: Path, workers: int, args, *, chunk: int = 
     from facetransfer.track import TrackOptions
 
     t0 = time.perf_counter()
+    cpu_client0 = time.process_time()
     model = load_model(model_path)
     t_load = time.perf_counter() - t0
     opt = TrackOptions(passes=args.passes, n_points=args.points)
@@ -114,13 +118,21 @@ def batch_run(clips, model_path, out: Path, workers: int, args, *, chunk: int = 
         t_run = time.perf_counter() - t1
         poll.stop.set()
         poll.join()
+        cpu = client.run(_process_cpu)  # worker processes: CPU seconds since they started
     wall = time.perf_counter() - t0
     task_s = sum(r.seconds for r in res.rows)
     return {"workers": workers, "wall_s": wall, "load_model_s": t_load, "cluster_s": t_cluster,
             "run_s": t_run, "task_seconds": task_s, "failed": res.n_failed,
+            "client_cpu_s": time.process_time() - cpu_client0,
+            "workers_cpu_s": sum(cpu.values()),
             "overhead_per_task_s": (t_run * workers - task_s) / len(clips),
             "worker_peak_rss_mb": sorted(v / 1e6 for v in poll.peak.values()),
             "per_clip_s": {r.clip: r.seconds for r in res.rows}}
+
+
+def _process_cpu() -> float:
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    return ru.ru_utime + ru.ru_stime
 
 
 def key_error(track, ref_path: Path) -> float:
@@ -157,7 +169,8 @@ def chunk_experiment(video: Path, model_path, out: Path, args) -> dict:
             "whole_wall_s": peer["wall_s"], "chunked_wall_s": res["wall_s"],
             "chunked_task_seconds": res["task_seconds"],
             "seams": list(rep.seams), "seam_px": list(rep.seam_px),
-            "elsewhere_px": rep.elsewhere_px, "jump_px": list(rep.jump_px),
+            "elsewhere_px": rep.elsewhere_px, "motion_px": list(rep.motion_px),
+            "whole_motion_px": list(rep.whole_motion_px),
             "iod_px": rep.iod_px,
             "key_error_whole_iod": key_error(whole, ref) if ref.is_file() else None,
             "key_error_chunked_iod": key_error(joined, ref) if ref.is_file() else None,

@@ -195,7 +195,9 @@ def test_chunked_clip_is_one_identity_and_smooth_at_the_seams(quick_model, quick
     err = np.linalg.norm(joined.landmarks2d - clip.truth.landmarks2d, axis=2).mean(axis=1)
     assert err.max() < 2.5  # as the whole-clip tracker on this footage (test_track_cli)
     rep = seam_difference(whole, joined, chunks, radius=3)
-    assert max(rep.seam_px) < 2.0 and max(rep.jump_px) < 2.0
+    assert max(rep.seam_px) < 2.0
+    # no step at a seam: the motion there is the footage's, as in the whole-clip track
+    assert all(m < w + 1.0 for m, w in zip(rep.motion_px, rep.whole_motion_px))
 
 
 def test_batch_transfer_calls_what_transfer_calls(clips, quick_model_path, inproc, tmp_path,

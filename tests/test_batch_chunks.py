@@ -152,4 +152,10 @@ def test_seam_difference_sees_a_step(quick_model):
     assert rep.seams == (30,)
     # frames 25..35 near the seam: 6 of 11 moved by 3 px in x and y (|d| = 3 sqrt 2)
     np.testing.assert_allclose(rep.seam_px[0], 6 / 11 * 3 * np.sqrt(2))
-    np.testing.assert_allclose(rep.jump_px[0], 3 * np.sqrt(2))
+    np.testing.assert_allclose(rep.elsewhere_px, 24 / 49 * 3 * np.sqrt(2))  # frames 36..59
+    # the step between frames 29 and 30 is the largest motion near the seam
+    motion = np.linalg.norm(np.diff(whole.landmarks2d, axis=0), axis=2).mean(1)
+    np.testing.assert_allclose(rep.whole_motion_px[0], motion[25:35].max())
+    d = np.linalg.norm(np.diff(stepped.landmarks2d, axis=0), axis=2).mean(1)
+    np.testing.assert_allclose(rep.motion_px[0], d[25:35].max())
+    assert rep.motion_px[0] >= 3 * np.sqrt(2) - motion[29] > rep.whole_motion_px[0]

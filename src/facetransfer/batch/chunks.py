@@ -219,10 +219,12 @@ class SeamReport:
         ``radius`` of each seam.
     elsewhere_px : float
         The same mean over the frames farther than ``radius`` from every seam.
-    jump_px : tuple of float
-        Largest difference of the frame-to-frame landmark motion (chunked minus whole, mean
-        over the 68 landmarks, pixels) within ``radius`` of each seam: a step at a seam shows
-        here.
+    motion_px : tuple of float
+        Largest frame-to-frame landmark motion (mean over the 68 landmarks, pixels) of the
+        chunked track within ``radius`` of each seam: a step at a seam shows here, above
+        ``whole_motion_px``.
+    whole_motion_px : tuple of float
+        The same for the whole-clip track over the same frames (the footage's own motion).
     iod_px : float
         Mean inter-ocular distance (outer eye corners) of the whole track, for scale.
     """
@@ -230,7 +232,8 @@ class SeamReport:
     seams: tuple[int, ...]
     seam_px: tuple[float, ...]
     elsewhere_px: float
-    jump_px: tuple[float, ...]
+    motion_px: tuple[float, ...]
+    whole_motion_px: tuple[float, ...]
     iod_px: float
 
 
@@ -252,17 +255,19 @@ def seam_difference(whole, joined, chunks, *, radius: int = 10) -> SeamReport:
     if whole.n_frames != joined.n_frames:
         raise BatchError(f"tracks of {whole.n_frames} and {joined.n_frames} frames")
     d = np.linalg.norm(whole.landmarks2d - joined.landmarks2d, axis=2).mean(axis=1)  # (F,)
-    motion = lambda t: np.diff(t.landmarks2d, axis=0)  # noqa: E731  (F-1, 68, 2)
-    dm = np.linalg.norm(motion(joined) - motion(whole), axis=2).mean(axis=1)  # (F-1,)
+    motion = lambda t: np.r_[np.linalg.norm(np.diff(t.landmarks2d, axis=0), axis=2).mean(
+        axis=1), 0.0]  # noqa: E731  (F,): frame i to i + 1
+    mj, mw = motion(joined), motion(whole)
     seams = [int((c.start + p.stop) // 2) for p, c in zip(chunks[:-1], chunks[1:])]
     near = np.zeros(whole.n_frames, bool)
-    seam_px, jump_px = [], []
+    seam_px, mot, wmot = [], [], []
     for s in seams:
         lo, hi = max(0, s - radius), min(whole.n_frames, s + radius + 1)
         near[lo:hi] = True
         seam_px.append(float(d[lo:hi].mean()))
-        jump_px.append(float(dm[lo:max(lo + 1, hi - 1)].max()) if dm.size else 0.0)
+        mot.append(float(mj[lo:hi - 1].max()) if hi - 1 > lo else 0.0)
+        wmot.append(float(mw[lo:hi - 1].max()) if hi - 1 > lo else 0.0)
     iod = float(np.linalg.norm(whole.landmarks2d[:, 36] - whole.landmarks2d[:, 45], axis=1).mean())
     rest = d[~near]
     return SeamReport(tuple(seams), tuple(seam_px), float(rest.mean()) if rest.size else 0.0,
-                      tuple(jump_px), iod)
+                      tuple(mot), tuple(wmot), iod)
