@@ -240,9 +240,12 @@ def _stub_export(monkeypatch, calls):
     monkeypatch.setitem(sys.modules, "facetransfer.export", mod)
 
 
-def test_batch_export_on_the_same_machinery(clips, quick_model_path, inproc, tmp_path, capsys,
-                                            monkeypatch):
-    """With a stand-in for facetransfer.export (its own tests cover the formats)."""
+def test_batch_export_on_a_running_scheduler(clips, quick_model_path, tmp_path, capsys,
+                                             monkeypatch):
+    """``--scheduler`` of a cluster started apart (its workers are threads of this process),
+    with a stand-in for facetransfer.export (its own tests cover the formats)."""
+    from dask.distributed import LocalCluster
+
     calls = []
     _stub_export(monkeypatch, calls)
     t1, t2 = tmp_path / "one.npz", tmp_path / "two.npz"
@@ -251,8 +254,11 @@ def test_batch_export_on_the_same_machinery(clips, quick_model_path, inproc, tmp
                 "--passes", "1")[0] == 0
     t2.write_bytes(b"not a track")
     out = tmp_path / "exp"
-    code, _, _ = _cli(capsys, "batch", "export", t1, t2, "--format", "livelink", "--out", out,
-                      "--model", quick_model_path)
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as running:
+        code, _, _ = _cli(capsys, "batch", "export", t1, t2, "--format", "livelink", "--out",
+                          out, "--model", quick_model_path, "--scheduler",
+                          running.scheduler_address)
     assert code == 1 and calls == [(8, "livelink", True)]
     assert json.loads((out / "one.csv").read_text()) == {"frames": 8, "format": "livelink"}
     rows = _summary(out / "summary.csv")
