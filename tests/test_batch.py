@@ -316,6 +316,12 @@ def test_bad_cluster_and_output_arguments(clips, quick_model_path, tmp_path, cap
     assert code == 2 and "--overlap must be between 1 and --chunk/2 = 50" in lines[0]
     code, _, lines = _cli(capsys, "batch", "track", *m, "--out", tmp_path / "o")
     assert code == 2 and "VIDEO files or --manifest" in lines[0]
+    (tmp_path / "o").mkdir(exist_ok=True)
+    clash = tmp_path / "o" / "t.npz"  # an input where its output would go
+    clash.write_bytes(b"keep")
+    code, _, lines = _cli(capsys, "batch", "track", clash, *m, "--out", tmp_path / "o")
+    assert code == 2 and f"output {clash} of 't' is also one of its inputs" in lines[0]
+    assert clash.read_bytes() == b"keep"
     bad = tmp_path / "bad.csv"
     bad.write_text("clip,init\nx.mp4,\n")
     code, _, lines = _cli(capsys, "batch", "track", "--manifest", bad, *m, "--out",
