@@ -19,7 +19,7 @@ from .. import __version__
 
 #: Subcommand modules, in help order. Each defines ``register(subparsers)``.
 SUBCOMMAND_MODULES = ("model", "impute", "scan", "render", "texture", "track", "transfer",
-                      "export", "view")
+                      "export", "view", "batch")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,254 @@
+"""The tasks a batch run sends to the Dask workers, one concept each: track a clip, track a chunk,
+join a clip's chunks, transfer a pair, export a track.
+
+Each task is a module-level function (workers import it from the installed package) that reads
+its inputs from paths the workers can see, writes its output atomically, and returns a small
+:class:`~facetransfer.batch.summary.Row` (or, for a chunk, its track) to the client. The model
+arrives as the value of a future scattered once to every worker, never pickled with the task.
+A task raises on bad input; the client turns the exception into the clip's failed row.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import logging
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .summary import Row
+
+log = logging.getLogger(__name__)
+
+__all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
+           "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS"]
+
+#: File extension of each ``batch export`` format.
+EXPORT_EXTENSIONS = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "json": ".json"}
+
+
+def partial_path(out, suffix: str = "") -> Path:
+    """Where the tracking of ``out`` keeps its progress (the name ``facetransfer track`` uses)."""
+    p = Path(out)
+    return p.with_name(p.stem + suffix + ".partial.npz")
+
+
+def track_row(name: str, track, out, seconds: float, status: str = "done") -> Row:
+    """The summary row of a finished track."""
+    return Row(clip=name, status=status, frames=track.n_frames, fps=track.fps, seconds=seconds,
+               mean_confidence=float(np.mean(track.confidence)), output=str(out))
+
+
+def _detector_for(init: str, options):
+    """As ``facetransfer track``: automatic init and anchoring create MediaPipe themselves; with
+    user points it is loaded only if the face is lost (recovery)."""
+    from ..track.init import LazyDetector
+
+    return None if (init == "auto" or options.anchor) else LazyDetector()
+
+
+def _track(video, model, init: str, options, *, source: str, checkpoint, fixed=None):
+    from ..track.tracker import track_video
+
+    detector = _detector_for(init, options)
+    try:
+        return track_video(video, model, init=init, options=options, source=source,
+                           detector=detector, fixed=fixed, checkpoint=checkpoint)
+    finally:
+        if detector is not None:
+            detector.close()
+
+
+def track_clip(job, out: str, model, options) -> Row:
+    """Track a whole clip exactly as ``facetransfer track VIDEO --out OUT`` does and write it.
+
+    Parameters
+    ----------
+    job : ClipJob
+    out : str
+        ``DIR/NAME.npz``.
+    model : MultilinearModel
+    options : TrackOptions
+
+    Returns
+    -------
+    Row
+    """
+    from ..io.video import video_info
+
+    t0 = time.perf_counter()
+    video_info(job.video)  # missing / not a video: one line naming the path
+    track = _track(str(job.video), model, job.init, options, source=str(job.video),
+                   checkpoint=partial_path(out))
+    track.save(out, overwrite=True)
+    return track_row(job.name, track, out, time.perf_counter() - t0)
+
+
+@dataclass(frozen=True, eq=False)
+class ChunkResult:
+    """The track of one chunk and the seconds it took."""
+
+    track: object
+    seconds: float
+
+
+def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult:
+    """Track frames ``chunk.start..chunk.stop`` of a clip.
+
+    The first chunk starts from the clip's initial points (``job.init``) and solves the
+    identity; every later chunk starts from detected landmarks with the identity of ``first``
+    (the first chunk's result) held fixed.
+
+    Parameters
+    ----------
+    job : ClipJob
+    chunk : Chunk
+    out : str
+        The clip's output (its progress files are named after it).
+    model : MultilinearModel
+    options : TrackOptions
+    first : ChunkResult, optional
+        The first chunk's result (for every chunk but the first).
+
+    Returns
+    -------
+    ChunkResult
+        The chunk's track (frames of the chunk, the video's frame rate).
+    """
+    from ..io.video import read_video
+
+    t0 = time.perf_counter()
+    frames, fps = read_video(job.video, start=chunk.start, stop=chunk.stop)
+    fixed = None
+    init = job.init
+    if first is not None:
+        if "identity" in first.track.weights:
+            fixed = {"identity": first.track.weights["identity"][0]}
+        init = "auto"  # the user's points are for the clip's first frame only
+    track = _track(frames, model, init, options, source=str(job.video), fixed=fixed,
+                   checkpoint=partial_path(out, f".chunk{chunk.index:03d}"))
+    return ChunkResult(dataclasses.replace(track, fps=fps), time.perf_counter() - t0)
+
+
+def join_clip(job, out: str, model, chunks, results) -> Row:
+    """Join a clip's chunk tracks (:func:`~facetransfer.batch.chunks.join_tracks`) and write
+    ``out``."""
+    from .chunks import join_tracks
+
+    t0 = time.perf_counter()
+    track = join_tracks([r.track for r in results], chunks, model)
+    track.save(out, overwrite=True)
+    return track_row(job.name, track, out,
+                     sum(r.seconds for r in results) + time.perf_counter() - t0)
+
+
+def _identity(job, model):
+    """Identity weights of a pair from ``identity_label`` / ``identity_weights``, or None."""
+    from ..transfer import identity_from_label, parse_weights
+
+    s = job.sources
+    if s.get("identity_label"):
+        return identity_from_label(model, s["identity_label"])
+    if s.get("identity_weights"):
+        idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
+        return parse_weights(s["identity_weights"], model.ranks[model.mode_index(idm)])
+    return None
+
+
+def transfer_pair(job, out: str, model, settings: dict) -> Row:
+    """Rewrite one target as ``facetransfer transfer`` does
+    (:func:`facetransfer.rewrite.transfer_video`) and write ``out``.
+
+    Parameters
+    ----------
+    job : PairJob
+    out : str
+        ``DIR/NAME.mp4``.
+    model : MultilinearModel
+    settings : dict
+        ``texture``, ``blend``, ``mouth``, ``align``, ``max_frames``, ``track_method``,
+        ``speed`` as the ``transfer`` options.
+
+    Returns
+    -------
+    Row
+    """
+    from ..io.video import video_info
+    from ..rewrite import transfer_video
+
+    t0 = time.perf_counter()
+    s = job.sources
+    for v in (job.target, s.get("expression_from"), s.get("viseme_from"),
+              s.get("identity_from"), s.get("pose_from")):
+        if v:
+            video_info(v)  # a missing or unreadable input fails the row, naming the path
+    res = transfer_video(
+        str(job.target), out, model, overwrite=True, texture=settings["texture"],
+        blend=settings["blend"], mouth=settings["mouth"], progress_factory=None,
+        target_track=s.get("target_track"), expression_from=s.get("expression_from"),
+        expression_track=s.get("source_track"), viseme_from=s.get("viseme_from"),
+        viseme_track=s.get("viseme_track"), identity=_identity(job, model),
+        identity_from=s.get("identity_from"), identity_track=s.get("identity_track"),
+        pose_from=s.get("pose_from"), pose_track=s.get("pose_track"),
+        performance=s.get("performance"), align=settings["align"],
+        max_frames=settings["max_frames"], track_method=settings["track_method"],
+        speed=settings["speed"], parallel=False)
+    conf = res.plan.target_track.confidence[:res.n_frames]
+    return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
+               seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
+               output=str(out))
+
+
+@functools.lru_cache(maxsize=1)
+def _default_model():
+    """The default model and its hash, loaded once per worker process (not once per task)."""
+    from ..default_model import load_default_model
+
+    model = load_default_model()
+    return model, model.content_hash
+
+
+def export_one(job, fmt: str, out: str, model=None, texture=None) -> Row:
+    """Export one track file with :func:`facetransfer.export.export_track` to ``out``.
+
+    Without ``model``, a track made with the default model gets the worker's cached copy of
+    it; any other track is left to ``export_track``'s own check (``model=None``).
+    """
+    from ..export import export_track
+    from ..track.result import Track
+
+    t0 = time.perf_counter()
+    track = Track.load(job.track)
+    if model is None:
+        from ..default_model import default_model_path
+
+        if default_model_path().is_file():
+            default, h = _default_model()
+            model = default if track.model_hash == h else None
+    path = export_track(track, fmt, out, model=model, overwrite=True, texture=texture)
+    return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
+               seconds=time.perf_counter() - t0,
+               mean_confidence=float(np.mean(track.confidence)), output=str(path))
+
+
+
+def count_frames(video) -> int:
+    """Frames of a video, counted by decoding as the tracker does (containers' counts can be
+    approximate).
+
+    Raises
+    ------
+    VideoError
+        Missing, unreadable or empty video (naming the path).
+    """
+    from ..errors import VideoError
+    from ..io.video import iter_frames, video_info
+
+    video_info(video)
+    n = sum(1 for _ in iter_frames(video))
+    if n == 0:
+        raise VideoError(f"video {video} has no frames")
+    return n

@@ -1,0 +1,252 @@
+"""The jobs of a batch run: clips, transfer pairs and tracks to export, read from the command
+line or a CSV manifest.
+
+A manifest is a CSV file with a header row. Paths in it are relative to the manifest's folder
+(absolute paths are kept); an empty cell is an absent value. Every job has a *name*: the ``name``
+column if present, else the stem of its main file. The name is the output's file name
+(``DIR/NAME.npz``, ``DIR/NAME.mp4``...), so two jobs with the same name are refused before
+anything runs.
+
+==================  =========================================================================
+manifest            columns
+==================  =========================================================================
+clips (``track``)   ``video`` (required), ``name``, ``init`` (POINTS.json; default ``auto``)
+pairs (``transfer``) ``target`` (required), ``name``, the sources of ``facetransfer transfer``:
+                    ``expression_from``, ``viseme_from``, ``identity_from``, ``pose_from``,
+                    ``performance``, their track files ``target_track``, ``source_track``,
+                    ``viseme_track``, ``identity_track``, ``pose_track``, and
+                    ``identity_label`` / ``identity_weights``
+==================  =========================================================================
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ..errors import FaceTransferError
+
+__all__ = ["BatchError", "ClipJob", "PairJob", "ExportJob", "read_manifest", "clip_jobs",
+           "pair_jobs", "export_jobs", "check_unique_names", "CLIP_COLUMNS", "PAIR_PATH_COLUMNS",
+           "PAIR_VALUE_COLUMNS"]
+
+
+class BatchError(FaceTransferError):
+    """A batch run cannot start: a bad manifest, duplicate names, a bad cluster or output."""
+
+
+#: Columns of a clips manifest (``video`` required).
+CLIP_COLUMNS = ("video", "name", "init")
+#: Columns of a pairs manifest holding paths (``target`` required).
+PAIR_PATH_COLUMNS = ("target", "expression_from", "viseme_from", "identity_from", "pose_from",
+                     "performance", "target_track", "source_track", "viseme_track",
+                     "identity_track", "pose_track")
+#: Columns of a pairs manifest holding values (not paths).
+PAIR_VALUE_COLUMNS = ("name", "identity_label", "identity_weights")
+#: The source columns of which a pair needs at least one (as ``transfer`` does).
+PAIR_SOURCES = ("expression_from", "viseme_from", "identity_from", "pose_from", "performance",
+                "identity_label", "identity_weights")
+
+
+@dataclass(frozen=True)
+class ClipJob:
+    """One clip to track: ``DIR/NAME.npz`` from ``video``.
+
+    Attributes
+    ----------
+    name : str
+    video : str
+        As given (recorded as the track's ``source``, as ``facetransfer track`` does).
+    init : str
+        ``"auto"`` or the path of a POINTS.json for the clip's first frame.
+    """
+
+    name: str
+    video: str
+    init: str = "auto"
+
+    @property
+    def inputs(self) -> tuple[Path, ...]:
+        return (Path(self.video),) + (() if self.init == "auto" else (Path(self.init),))
+
+
+@dataclass(frozen=True)
+class PairJob:
+    """One transfer: ``DIR/NAME.mp4`` rewritten from ``target`` and its sources.
+
+    Attributes
+    ----------
+    name : str
+    target : Path
+    sources : dict column -> str
+        The manifest's other non-empty cells (paths resolved), keyed by column name.
+    """
+
+    name: str
+    target: Path
+    sources: dict = field(default_factory=dict)
+
+    @property
+    def inputs(self) -> tuple[Path, ...]:
+        return (self.target,) + tuple(Path(v) for k, v in self.sources.items()
+                                      if k in PAIR_PATH_COLUMNS)
+
+
+@dataclass(frozen=True)
+class ExportJob:
+    """One track file to export as ``DIR/NAME.<ext>``."""
+
+    name: str
+    track: Path
+
+    @property
+    def inputs(self) -> tuple[Path, ...]:
+        return (self.track,)
+
+
+def _resolve(value: str, base: Path) -> str:
+    p = Path(os.path.expanduser(value))
+    return str(p if p.is_absolute() else base / p)
+
+
+def read_manifest(path: str | os.PathLike, *, required: tuple[str, ...],
+                  allowed: tuple[str, ...], paths: tuple[str, ...]) -> list[dict[str, str]]:
+    """Read a CSV manifest into one dict per row (empty cells dropped, paths resolved).
+
+    Parameters
+    ----------
+    path : path-like
+    required : tuple of str
+        Columns that must be present and non-empty on every row.
+    allowed : tuple of str
+        Every column the manifest may have (others are refused: a typo would be ignored).
+    paths : tuple of str
+        Columns holding paths, resolved against the manifest's folder.
+
+    Raises
+    ------
+    BatchError
+        Missing file, no header, unknown or missing columns, an empty required cell, no rows.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise BatchError(f"manifest {p} does not exist")
+    try:
+        with open(p, newline="", encoding="utf-8-sig") as fh:
+            reader = csv.DictReader(fh)
+            header = [h.strip() for h in (reader.fieldnames or [])]
+            raw = list(reader)
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise BatchError(f"manifest {p} is not a CSV file ({exc})") from None
+    if not header:
+        raise BatchError(f"manifest {p} is empty (expected a header row with {required[0]!r})")
+    unknown = [h for h in header if h not in allowed]
+    if unknown:
+        raise BatchError(f"manifest {p} has unknown column(s) {unknown}; expected some of "
+                         f"{list(allowed)}")
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise BatchError(f"manifest {p} lacks the column(s) {missing} (header: {header})")
+    rows = []
+    for line, row in enumerate(raw, start=2):
+        cells = {(k or "").strip(): (v or "").strip() for k, v in row.items() if k is not None}
+        if not any(cells.values()):
+            continue  # blank line
+        for c in required:
+            if not cells.get(c):
+                raise BatchError(f"manifest {p} line {line}: column {c!r} is empty")
+        rows.append({k: (_resolve(v, p.parent) if k in paths else v)
+                     for k, v in cells.items() if v})
+    if not rows:
+        raise BatchError(f"manifest {p} has no rows")
+    return rows
+
+
+def _name(explicit: str | None, path: str | os.PathLike, where: str) -> str:
+    name = explicit or Path(path).stem
+    if not name or name in (".", "..") or "/" in name or "\\" in name or name.startswith("."):
+        raise BatchError(f"{where}: {name!r} cannot be an output file name")
+    return name
+
+
+def clip_jobs(videos=(), manifest: str | os.PathLike | None = None, *,
+              init: str = "auto") -> list[ClipJob]:
+    """The clips of ``batch track``: videos given directly (with the initial points ``init``)
+    and/or the rows of a manifest (with their ``init`` column).
+
+    Raises
+    ------
+    BatchError
+        No clip at all, a bad manifest, or two clips with the same name.
+    """
+    jobs = [ClipJob(_name(None, v, f"video {v}"), str(v), str(init)) for v in videos]
+    if manifest is not None:
+        for i, row in enumerate(read_manifest(manifest, required=("video",),
+                                              allowed=CLIP_COLUMNS, paths=("video", "init"))):
+            where = f"manifest {manifest} row {i + 1}"
+            jobs.append(ClipJob(_name(row.get("name"), row["video"], where), row["video"],
+                                row.get("init", "auto")))
+    if not jobs:
+        raise BatchError("no clips: give VIDEO files or --manifest clips.csv")
+    check_unique_names(jobs)
+    return jobs
+
+
+def pair_jobs(manifest: str | os.PathLike) -> list[PairJob]:
+    """The transfers of ``batch transfer``: one per row of a pairs manifest.
+
+    Raises
+    ------
+    BatchError
+        A bad manifest, a row with nothing to transfer, a track column without its video, or
+        two rows with the same name.
+    """
+    rows = read_manifest(manifest, required=("target",),
+                         allowed=PAIR_PATH_COLUMNS + PAIR_VALUE_COLUMNS, paths=PAIR_PATH_COLUMNS)
+    jobs = []
+    for i, row in enumerate(rows):
+        where = f"manifest {manifest} row {i + 1}"
+        for track, video in (("source_track", "expression_from"), ("viseme_track", "viseme_from"),
+                             ("identity_track", "identity_from"), ("pose_track", "pose_from")):
+            if row.get(track) and not row.get(video):
+                raise BatchError(f"{where}: {track} needs {video} (the video it belongs to)")
+        if not any(row.get(c) for c in PAIR_SOURCES):
+            raise BatchError(f"{where}: nothing to transfer (give one of {list(PAIR_SOURCES)})")
+        if row.get("identity_from") and (row.get("identity_label") or row.get("identity_weights")):
+            raise BatchError(f"{where}: give one of identity_from, identity_label, "
+                             "identity_weights")
+        sources = {k: v for k, v in row.items() if k not in ("target", "name")}
+        jobs.append(PairJob(_name(row.get("name"), row["target"], where), Path(row["target"]),
+                            sources))
+    check_unique_names(jobs)
+    return jobs
+
+
+def export_jobs(tracks) -> list[ExportJob]:
+    """The track files of ``batch export``, named by their stems."""
+    jobs = [ExportJob(_name(None, t, f"track {t}"), Path(t)) for t in tracks]
+    if not jobs:
+        raise BatchError("no track files given")
+    check_unique_names(jobs)
+    return jobs
+
+
+def check_unique_names(jobs) -> None:
+    """Refuse two jobs whose outputs would have the same name (also differing only in case,
+    which is one file on macOS and Windows).
+
+    Raises
+    ------
+    BatchError
+        Naming both inputs of the first clash.
+    """
+    seen: dict[str, object] = {}
+    for job in jobs:
+        key = job.name.casefold()
+        if key in seen:
+            a, b = seen[key].inputs[0], job.inputs[0]
+            raise BatchError(f"two clips have the name {job.name!r} ({a} and {b}); give them "
+                             "distinct names (a 'name' column in the manifest)")
+        seen[key] = job

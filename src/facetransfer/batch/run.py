@@ -1,0 +1,341 @@
+"""Batch runs on a Dask client: many clips tracked, transferred or exported, one task per clip.
+
+Every run follows the same steps: check the output folder, refuse an output that is also an
+input, skip the jobs an earlier run finished (their output is complete and valid), scatter the
+model to the workers once, submit, collect the rows as the clips finish (reporting each to
+``progress``), and write ``DIR/summary.csv`` atomically (also every few seconds, and when the run
+is interrupted: pending tasks are cancelled, finished outputs stay). A failed clip is a
+``failed`` row while the others go on.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from . import jobs as J
+from .chunks import plan_chunks
+from .manifest import BatchError
+from .summary import Row, write_summary
+
+log = logging.getLogger(__name__)
+
+__all__ = ["BatchResult", "prepare_out_dir", "batch_track", "batch_transfer", "batch_export",
+           "SUMMARY_NAME", "DEFAULT_OVERLAP"]
+
+SUMMARY_NAME = "summary.csv"
+#: Frames shared by neighbouring chunks (1.2 s at 25 fps).
+DEFAULT_OVERLAP = 30
+#: Seconds between rewrites of the summary while a run goes on.
+SUMMARY_EVERY = 5.0
+
+Progress = Callable[[Row], None]
+
+
+@dataclass(frozen=True)
+class BatchResult:
+    """The rows of a run (in job order) and the summary file written."""
+
+    rows: tuple[Row, ...]
+    summary: Path
+
+    @property
+    def n_failed(self) -> int:
+        return sum(r.status == "failed" for r in self.rows)
+
+    def count(self, status: str) -> int:
+        return sum(r.status == status for r in self.rows)
+
+
+def prepare_out_dir(out_dir) -> Path:
+    """The output folder, created if needed (its parent must exist).
+
+    Raises
+    ------
+    BatchError
+        The path is a file, or its parent folder does not exist.
+    """
+    p = Path(out_dir)
+    if p.exists() and not p.is_dir():
+        raise BatchError(f"output folder {p} is a file")
+    if not p.is_dir():
+        if not (p.parent if str(p.parent) else Path(".")).is_dir():
+            raise BatchError(f"the folder {p.parent} of output folder {p} does not exist")
+        p.mkdir()
+    return p
+
+
+def _same(a: Path, b: Path) -> bool:
+    try:
+        return os.path.samefile(a, b)
+    except OSError:
+        return os.path.abspath(a) == os.path.abspath(b)
+
+
+def _outputs(jobs, out_dir: Path, ext: str) -> dict[str, Path]:
+    outs = {}
+    for job in jobs:
+        out = out_dir / f"{job.name}{ext}"
+        for p in job.inputs:
+            if _same(Path(p), out):
+                raise BatchError(f"output {out} of {job.name!r} is also one of its inputs")
+        outs[job.name] = out
+    return outs
+
+
+def _error_line(exc: BaseException) -> str:
+    msg = str(exc).strip()
+    if isinstance(exc, ValueError) and msg:
+        return msg.splitlines()[0]
+    return f"{type(exc).__name__}: {msg.splitlines()[0]}" if msg else type(exc).__name__
+
+
+class _Collector:
+    """Collects the rows as futures finish; writes the summary; cancels on Ctrl-C."""
+
+    def __init__(self, client, names, out_dir: Path, rows: dict, progress: Progress | None):
+        from dask.distributed import as_completed
+
+        self.client, self.names, self.rows = client, list(names), dict(rows)
+        self.summary = out_dir / SUMMARY_NAME
+        self.progress = progress
+        self.ac = as_completed(loop=client.loop)
+        self.what: dict = {}       # future -> (kind, job)
+        self.alive: list = []      # every future submitted (cancelled on interrupt)
+        self.last_write = time.monotonic()
+
+    def add(self, future, kind: str, job) -> None:
+        self.what[future] = (kind, job)
+        self.alive.append(future)
+        self.ac.add(future)
+
+    def finish(self, job, row: Row) -> None:
+        self.rows[job.name] = row
+        if self.progress is not None:
+            self.progress(row)
+        if time.monotonic() - self.last_write > SUMMARY_EVERY:
+            self.write()
+
+    def fail(self, job, exc: BaseException, out) -> None:
+        log.info("%s failed: %s", job.name, exc)
+        self.finish(job, Row(job.name, "failed", error=_error_line(exc), output=str(out)))
+
+    def write(self) -> Path:
+        rows = [self.rows.get(n) or Row(n, "cancelled") for n in self.names]
+        self.last_write = time.monotonic()
+        return write_summary(self.summary, rows)
+
+    def run(self, on_done: Callable) -> BatchResult:
+        """Iterate the futures as they finish, calling ``on_done(kind, job, future)``."""
+        try:
+            for fut in self.ac:
+                kind, job = self.what.pop(fut)
+                on_done(kind, job, fut)
+        except KeyboardInterrupt:
+            self.client.cancel([f for f in self.alive if not f.done()], force=True)
+            self.write()
+            raise
+        path = self.write()
+        return BatchResult(tuple(self.rows[n] for n in self.names), path)
+
+
+def _model_future(client, model):
+    from .cluster import scatter_model
+
+    return scatter_model(client, model)
+
+
+def _done_track(out: Path, name: str, model_hash: str) -> Row | None:
+    """The row of an output an earlier run finished (complete, valid, same model), else None."""
+    from ..errors import TrackError
+    from ..track.result import Track
+
+    if not out.is_file():
+        return None
+    try:
+        t = Track.load(out)
+    except TrackError as exc:
+        log.warning("%s is not a complete track (%s); tracking %s again", out, exc, name)
+        return None
+    if t.model_hash != model_hash:
+        log.warning("%s was made with another model; tracking %s again", out, name)
+        return None
+    return J.track_row(name, t, out, 0.0, status="skipped")
+
+
+def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
+                overlap: int = DEFAULT_OVERLAP, overwrite: bool = False,
+                progress: Progress | None = None) -> BatchResult:
+    """Track many clips: ``DIR/NAME.npz`` per clip, as ``facetransfer track`` writes it.
+
+    Parameters
+    ----------
+    jobs : list of ClipJob
+    out_dir : path-like
+    model : MultilinearModel
+    client : distributed.Client
+    options : TrackOptions, optional
+    chunk : int
+        Clips longer than this many frames are tracked in overlapping chunks in parallel and
+        joined (:mod:`facetransfer.batch.chunks`); 0 = every clip in one task.
+    overlap : int
+        Frames shared by neighbouring chunks.
+    overwrite : bool
+        Track every clip again (default: skip clips whose output is complete and valid).
+    progress : callable(Row), optional
+        Called as each clip finishes (or is skipped).
+
+    Returns
+    -------
+    BatchResult
+    """
+    from ..track.tracker import TrackOptions
+
+    options = options or TrackOptions()
+    if chunk < 0:
+        raise BatchError(f"--chunk must be >= 0 (0 = never split), got {chunk}")
+    if chunk:
+        plan_chunks(chunk + 1, chunk, overlap)  # a bad overlap fails before anything runs
+    out_dir = prepare_out_dir(out_dir)
+    outs = _outputs(jobs, out_dir, ".npz")
+    mhash = model.content_hash
+    done = {} if overwrite else {j.name: r for j in jobs
+                                 if (r := _done_track(outs[j.name], j.name, mhash)) is not None}
+    col = _Collector(client, [j.name for j in jobs], out_dir, done, progress)
+    if progress is not None:
+        for r in done.values():
+            progress(r)
+    todo = [j for j in jobs if j.name not in done]
+    mf = _model_future(client, model) if todo else None
+    for job in todo:
+        out = str(outs[job.name])
+        if chunk:
+            col.add(client.submit(J.count_frames, str(job.video), pure=False), "count", job)
+        else:
+            col.add(client.submit(J.track_clip, job, out, mf, options, pure=False), "clip", job)
+
+    def submit_chunks(job, n_frames: int) -> None:
+        out = str(outs[job.name])
+        chunks = plan_chunks(n_frames, chunk, overlap)
+        if len(chunks) == 1:
+            col.add(client.submit(J.track_clip, job, out, mf, options, pure=False), "clip", job)
+            return
+        first = client.submit(J.track_chunk, job, chunks[0], out, mf, options, pure=False,
+                              priority=1)
+        rest = [client.submit(J.track_chunk, job, c, out, mf, options, first, pure=False)
+                for c in chunks[1:]]
+        col.alive += [first] + rest
+        col.add(client.submit(J.join_clip, job, out, mf, chunks, [first] + rest, pure=False),
+                "clip", job)
+
+    def on_done(kind, job, fut) -> None:
+        try:
+            res = fut.result()
+        except Exception as exc:  # noqa: BLE001 (any failure is this clip's row)
+            col.fail(job, exc, outs[job.name])
+            return
+        if kind == "count":
+            submit_chunks(job, int(res))
+        else:
+            col.finish(job, res)
+
+    return col.run(on_done)
+
+
+def _done_video(out: Path, name: str) -> Row | None:
+    from ..errors import VideoError
+    from ..io.video import video_info
+
+    if not out.is_file():
+        return None
+    try:
+        info = video_info(out)
+    except VideoError:
+        return None
+    return Row(name, "skipped", frames=info.n_frames, fps=info.fps, output=str(out))
+
+
+def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: bool = False,
+                   progress: Progress | None = None) -> BatchResult:
+    """Rewrite many targets as ``facetransfer transfer`` does: ``DIR/NAME.mp4`` per pair.
+
+    Parameters
+    ----------
+    jobs : list of PairJob
+    out_dir : path-like
+    model : MultilinearModel
+    client : distributed.Client
+    settings : dict
+        See :func:`facetransfer.batch.jobs.transfer_pair`.
+    overwrite : bool
+        Redo every pair (default: skip pairs whose video exists and decodes).
+    progress : callable(Row), optional
+
+    Returns
+    -------
+    BatchResult
+    """
+    out_dir = prepare_out_dir(out_dir)
+    outs = _outputs(jobs, out_dir, ".mp4")
+    done = {} if overwrite else {j.name: r for j in jobs
+                                 if (r := _done_video(outs[j.name], j.name)) is not None}
+    return _simple(client, jobs, out_dir, outs, done, progress,
+                   lambda job, mf: client.submit(J.transfer_pair, job, str(outs[job.name]), mf,
+                                                 dict(settings), pure=False), model)
+
+
+def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
+                 overwrite: bool = False, progress: Progress | None = None) -> BatchResult:
+    """Export many track files with :func:`facetransfer.export.export_track`:
+    ``DIR/NAME.<ext>`` per track (:data:`~facetransfer.batch.jobs.EXPORT_EXTENSIONS`).
+
+    Parameters
+    ----------
+    jobs : list of ExportJob
+    out_dir : path-like
+    fmt : {"livelink", "glb", "usd", "json"}
+    client : distributed.Client
+    model : MultilinearModel, optional
+        None: the default model (``export_track`` checks the tracks were made with it).
+    texture : optional
+        Passed to ``export_track``.
+    overwrite : bool
+        Redo every export (default: skip existing outputs).
+
+    Returns
+    -------
+    BatchResult
+    """
+    if fmt not in J.EXPORT_EXTENSIONS:
+        raise BatchError(f"--format must be one of {sorted(J.EXPORT_EXTENSIONS)}, got {fmt!r}")
+    out_dir = prepare_out_dir(out_dir)
+    outs = _outputs(jobs, out_dir, J.EXPORT_EXTENSIONS[fmt])
+    done = {} if overwrite else {j.name: Row(j.name, "skipped", output=str(outs[j.name]))
+                                 for j in jobs if outs[j.name].is_file()}
+    return _simple(client, jobs, out_dir, outs, done, progress,
+                   lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
+                                                 texture, pure=False), model)
+
+
+def _simple(client, jobs, out_dir, outs, done, progress, submit, model) -> BatchResult:
+    """A run of one independent task per job."""
+    col = _Collector(client, [j.name for j in jobs], out_dir, done, progress)
+    if progress is not None:
+        for r in done.values():
+            progress(r)
+    todo = [j for j in jobs if j.name not in done]
+    mf = _model_future(client, model) if todo else None
+    for job in todo:
+        col.add(submit(job, mf), "clip", job)
+
+    def on_done(kind, job, fut) -> None:
+        try:
+            col.finish(job, fut.result())
+        except Exception as exc:  # noqa: BLE001
+            col.fail(job, exc, outs[job.name])
+
+    return col.run(on_done)

@@ -1,0 +1,89 @@
+"""The summary table of a batch run: ``DIR/summary.csv``, one row per clip.
+
+==================  ======================================================================
+column              meaning
+==================  ======================================================================
+``clip``            the job's name (its output is ``DIR/NAME.<ext>``)
+``frames``          frames of the output (empty when it failed)
+``fps``             frame rate
+``seconds``         compute seconds spent on the clip in this run (all its tasks; 0 if skipped)
+``mean_confidence`` mean tracking confidence over the frames (empty if not known)
+``status``          ``done``, ``skipped`` (already done by an earlier run), ``failed`` or
+                    ``cancelled`` (the run was stopped before it finished)
+``error``           one line: why it failed
+``output``          the output's path
+==================  ======================================================================
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from ..io.atomic import write_text_atomic
+
+__all__ = ["Row", "SUMMARY_COLUMNS", "STATUSES", "write_summary", "read_summary"]
+
+SUMMARY_COLUMNS = ("clip", "frames", "fps", "seconds", "mean_confidence", "status", "error",
+                   "output")
+STATUSES = ("done", "skipped", "failed", "cancelled")
+
+
+@dataclass(frozen=True)
+class Row:
+    """One clip's line of ``summary.csv`` (see the module docstring)."""
+
+    clip: str
+    status: str
+    frames: int | None = None
+    fps: float | None = None
+    seconds: float = 0.0
+    mean_confidence: float | None = None
+    error: str = ""
+    output: str = ""
+
+    def __post_init__(self) -> None:
+        if self.status not in STATUSES:
+            raise ValueError(f"summary status must be one of {STATUSES}, got {self.status!r}")
+        # one line, whatever the exception said
+        object.__setattr__(self, "error", " ".join(str(self.error).split()))
+
+    @property
+    def ok(self) -> bool:
+        return self.status in ("done", "skipped")
+
+    def with_seconds(self, seconds: float) -> "Row":
+        return replace(self, seconds=float(seconds))
+
+
+def _cell(v) -> str:
+    if v is None:
+        return ""
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    return str(v)
+
+
+def write_summary(path: str | os.PathLike, rows) -> Path:
+    """Write the rows to ``path`` (CSV with :data:`SUMMARY_COLUMNS`) atomically."""
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(SUMMARY_COLUMNS)
+    for r in rows:
+        w.writerow([_cell(getattr(r, c)) for c in SUMMARY_COLUMNS])
+    return write_text_atomic(path, buf.getvalue(), overwrite=True)
+
+
+def read_summary(path: str | os.PathLike) -> list[Row]:
+    """Read a ``summary.csv`` written by :func:`write_summary`."""
+    def num(s, kind):
+        return kind(s) if s != "" else None
+
+    with open(path, newline="", encoding="utf-8") as fh:
+        return [Row(clip=r["clip"], status=r["status"], frames=num(r["frames"], int),
+                    fps=num(r["fps"], float), seconds=float(r["seconds"] or 0),
+                    mean_confidence=num(r["mean_confidence"], float), error=r["error"],
+                    output=r.get("output", "")) for r in csv.DictReader(fh)]

@@ -1,0 +1,239 @@
+"""``facetransfer batch track | transfer | export``: many clips on Dask distributed.
+
+    facetransfer batch track VIDEO... | --manifest clips.csv --out DIR [--workers N]
+                             [--scheduler tcp://HOST:8786] [--chunk N [--overlap N]]
+                             [--model M.npz] [track options] [--overwrite]
+    facetransfer batch transfer --manifest pairs.csv --out DIR [--model M.npz] [transfer options]
+    facetransfer batch export TRACK... --format livelink|glb|usd|json --out DIR [--model M.npz]
+
+One task per clip on an embedded ``LocalCluster`` (one single-threaded worker process per core)
+or a running scheduler; ``DIR/NAME.<ext>`` per clip and ``DIR/summary.csv``. A rerun skips what
+is done; Ctrl-C cancels what is pending and keeps what finished. Exit status 1 if a clip failed.
+"""
+
+from __future__ import annotations
+
+import sys
+
+from ..errors import FaceTransferError
+
+
+def _cluster_options(p) -> None:
+    g = p.add_argument_group("cluster")
+    g.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    g.add_argument("--workers", type=int, default=None,
+                   help="worker processes of the embedded cluster (default: one per core)")
+    g.add_argument("--scheduler", metavar="tcp://HOST:8786",
+                   help="run on this Dask scheduler's workers instead (started with `dask "
+                   "scheduler` and `dask worker`; they must see the inputs and DIR at the same "
+                   "paths)")
+    g.add_argument("--timeout", type=float, default=10.0,
+                   help="seconds the scheduler has to answer")
+    g.add_argument("--overwrite", action="store_true",
+                   help="redo every clip (default: skip clips whose output is complete)")
+    g.add_argument("--no-progress", action="store_true", help="no progress bar")
+
+
+def _track_options(p) -> None:
+    """The options of ``facetransfer track`` that shape the track (same defaults)."""
+    from ..track.tracker import TrackOptions
+
+    d = TrackOptions()
+    g = p.add_argument_group("tracking (as `facetransfer track`)")
+    g.add_argument("--init", default="auto",
+                   help='first-frame feature points of the VIDEO arguments: "auto" (MediaPipe) '
+                   "or a POINTS.json (manifest rows: an init column)")
+    g.add_argument("--passes", type=int, default=d.passes, help="passes through the video")
+    g.add_argument("--anchor", action="store_true",
+                   help="add detected landmarks of every frame as an extra term (less drift)")
+    g.add_argument("--keyframe", type=float, default=d.keyframe,
+                   help="weight of the KLT term against the first frame")
+    g.add_argument("--smooth", type=float, default=d.smooth,
+                   help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
+    g.add_argument("--points", type=int, default=d.n_points, help="tracked vertices per frame")
+
+
+def register(sub) -> None:
+    """Add ``batch track``, ``batch transfer`` and ``batch export`` to the parser."""
+    from ..batch.run import DEFAULT_OVERLAP
+    from .transfer import ALIGN_HELP, _DefaultsFormatter, add_rewrite_options
+
+    fmt = _DefaultsFormatter
+    b = sub.add_parser("batch", help="many clips at once on Dask distributed (track, transfer, "
+                       "export)", description="Run track, transfer or export over many clips on "
+                       "an embedded Dask cluster or a real one; one output per clip and "
+                       "DIR/summary.csv.")
+    bs = b.add_subparsers(dest="batch_command", metavar="COMMAND")
+    b.set_defaults(func=lambda args: _usage(b))
+
+    t = bs.add_parser("track", formatter_class=fmt, help="track many clips: DIR/NAME.npz each",
+                      description="Track every clip as `facetransfer track` does, one task per "
+                      "clip; clips longer than --chunk frames in overlapping chunks joined at "
+                      "the seams (one identity per clip).")
+    t.add_argument("videos", nargs="*", metavar="VIDEO", help="videos to track")
+    t.add_argument("--manifest", metavar="clips.csv",
+                   help="CSV with a video column (and name, init); paths relative to it")
+    t.add_argument("--model", metavar="M.npz", help="model (default: the default model)")
+    t.add_argument("--chunk", type=int, default=0,
+                   help="split clips longer than this many frames into overlapping chunks "
+                   "tracked in parallel (0 = never)")
+    t.add_argument("--overlap", type=int, default=DEFAULT_OVERLAP,
+                   help="frames shared by neighbouring chunks (cross-faded)")
+    _track_options(t)
+    _cluster_options(t)
+    t.set_defaults(func=run_track)
+
+    r = bs.add_parser("transfer", formatter_class=fmt, help="many transfers: DIR/NAME.mp4 each",
+                      description="Run `facetransfer transfer` for every row of a pairs "
+                      "manifest (columns target, expression_from, and the other sources: "
+                      "viseme_from, identity_from, identity_label, identity_weights, pose_from, "
+                      "performance, and track files target_track, source_track, viseme_track, "
+                      "identity_track, pose_track; name).")
+    r.add_argument("--manifest", required=True, metavar="pairs.csv")
+    r.add_argument("--model", metavar="M.npz", help="model (default: the default model)")
+    r.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
+    r.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
+    add_rewrite_options(r)
+    _cluster_options(r)
+    r.set_defaults(func=run_transfer)
+
+    e = bs.add_parser("export", formatter_class=fmt, help="export many tracks: DIR/NAME.<ext>",
+                      description="Run `facetransfer export` for every track file.")
+    e.add_argument("tracks", nargs="+", metavar="TRACK.npz")
+    e.add_argument("--format", required=True, choices=("livelink", "glb", "usd", "json"))
+    e.add_argument("--model", metavar="M.npz",
+                   help="the model of the tracks (default: the default model)")
+    _cluster_options(e)
+    e.set_defaults(func=run_export)
+
+
+def _usage(parser) -> int:
+    parser.print_help()
+    return 2
+
+
+def _load_model(path):
+    from ..default_model import load_default_model
+    from ..model import load_model
+
+    if path:
+        return load_model(path)
+    from tqdm import tqdm
+
+    bar = None
+
+    def progress(done, total):
+        nonlocal bar
+        if bar is None:
+            bar = tqdm(total=total, desc="default model", unit="identity", leave=False)
+        bar.update(done - bar.n)
+
+    try:
+        return load_default_model(progress=progress,
+                                  announce=lambda m: print(m, file=sys.stderr))
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _run(args, what: str, n_jobs: int, call) -> int:
+    """Open the cluster, run ``call(client, progress)``, report; exit 1 if a clip failed."""
+    from tqdm import tqdm
+
+    from ..batch import cluster
+
+    if args.workers is not None and args.workers < 1:
+        raise FaceTransferError(f"--workers must be >= 1, got {args.workers}")
+    bar = None if args.no_progress else tqdm(total=n_jobs, desc=what, unit="clip",
+                                             dynamic_ncols=True, file=sys.stderr)
+    failed = 0
+
+    def progress(row) -> None:
+        nonlocal failed
+        failed += row.status == "failed"
+        if bar is not None:
+            bar.update(1)
+            if failed:
+                bar.set_postfix(failed=failed)
+
+    try:
+        with cluster.open_client(workers=args.workers, scheduler=args.scheduler,
+                                 timeout=args.timeout, verbose=args.verbose) as client:
+            res = call(client, progress)
+    except KeyboardInterrupt:
+        if bar is not None:
+            bar.close()
+        print(f"stopped: finished outputs are kept in {args.out} (see {args.out}/summary.csv); "
+              "run the same command again to continue", file=sys.stderr)
+        raise
+    finally:
+        if bar is not None:
+            bar.close()
+    for row in res.rows:
+        if row.status == "failed":
+            print(f"{row.clip}: failed: {row.error}", file=sys.stderr)
+    counts = ", ".join(f"{res.count(s)} {s}" for s in ("done", "skipped", "failed")
+                       if res.count(s))
+    print(f"{what}: {len(res.rows)} clips ({counts}); wrote {res.summary}")
+    return 1 if res.n_failed else 0
+
+
+def run_track(args) -> int:
+    from ..batch import batch_track, clip_jobs
+    from ..track.init import require_landmarks
+    from ..track.tracker import TrackOptions
+
+    if not args.videos and not args.manifest:
+        raise FaceTransferError("give VIDEO files or --manifest clips.csv")
+    # duplicate names are refused before anything runs
+    jobs = clip_jobs(args.videos, args.manifest, init=args.init)
+    opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
+                       n_points=args.points, keyframe=args.keyframe)  # validates the options
+    _check_cluster_args(args)
+    model = _load_model(args.model)
+    require_landmarks(model)
+    return _run(args, "track", len(jobs), lambda client, progress: batch_track(
+        jobs, args.out, model, client=client, options=opt, chunk=args.chunk,
+        overlap=args.overlap, overwrite=args.overwrite, progress=progress))
+
+
+def run_transfer(args) -> int:
+    from ..batch import batch_transfer, pair_jobs
+
+    if args.max_frames is not None and args.max_frames < 1:
+        raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
+    jobs = pair_jobs(args.manifest)
+    _check_cluster_args(args)
+    model = _load_model(args.model)
+    settings = {"texture": args.texture, "blend": args.blend, "mouth": args.mouth,
+                "align": args.align, "max_frames": args.max_frames,
+                "track_method": args.tracker, "speed": args.speed}
+    return _run(args, "transfer", len(jobs), lambda client, progress: batch_transfer(
+        jobs, args.out, model, client=client, settings=settings, overwrite=args.overwrite,
+        progress=progress))
+
+
+def run_export(args) -> int:
+    from ..batch import batch_export, export_jobs
+    from ..model import load_model
+
+    jobs = export_jobs(args.tracks)
+    _check_cluster_args(args)
+    model = load_model(args.model) if args.model else None  # None: export_track's default
+    return _run(args, "export", len(jobs), lambda client, progress: batch_export(
+        jobs, args.out, args.format, client=client, model=model, overwrite=args.overwrite,
+        progress=progress))
+
+
+def _check_cluster_args(args) -> None:
+    """Bad cluster or output arguments fail before a model is loaded."""
+    from ..batch.run import prepare_out_dir
+
+    if args.workers is not None and args.workers < 1:
+        raise FaceTransferError(f"--workers must be >= 1, got {args.workers}")
+    if args.workers is not None and args.scheduler:
+        raise FaceTransferError("--workers sizes the embedded cluster; the workers of "
+                                "--scheduler are the ones started with `dask worker`")
+    if not args.timeout > 0:
+        raise FaceTransferError(f"--timeout must be > 0, got {args.timeout}")
+    prepare_out_dir(args.out)
