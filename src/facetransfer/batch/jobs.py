@@ -51,8 +51,14 @@ def _detector_for(init: str, options):
 
 
 def _track(video, model, init: str, options, *, source: str, checkpoint, fixed=None):
+    """As ``facetransfer track``: the capture tracker, or the paper's KLT tracker when first-frame
+    points are given."""
     from ..track.tracker import track_video
 
+    if init == "auto":
+        from ..track.capture import capture_video
+
+        return capture_video(video, model, source=source, fixed=fixed)
     detector = _detector_for(init, options)
     try:
         return track_video(video, model, init=init, options=options, source=source,
