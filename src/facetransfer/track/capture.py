@@ -98,7 +98,7 @@ class CaptureOptions:
     identity_frames: int = 40
     identity_rounds: int = 6
     identity_prior: float = 2e-3
-    expression_prior: float = 3e-3
+    expression_prior: float = 1e-2
     sparsity: float = 0.0
     temporal: float = 2e-3
     flow: float = 0.5
@@ -502,7 +502,6 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
 
 def _fill_lost(states: list) -> tuple[list, np.ndarray]:
     """Lost frames take the nearest tracked state (earlier one on ties)."""
-    F = len(states)
     ok = np.array([s is not None for s in states])
     idx = np.flatnonzero(ok)
     out = list(states)
