@@ -68,6 +68,7 @@ TARGETS = {"mouth_open": 0.85, "mouth_width": 0.85, "eye_open": 0.85, "brow": 0.
            "jawOpen": 0.85, "eyeBlinkLeft": 0.85, "eyeBlinkRight": 0.85, "browInnerUp": 0.7,
            "std_ratio": (0.75, 1.33), "nme7": 0.025}
 TRACKERS = ("mediapipe", "ours", "floor")
+FLOOR_PRIOR: list = [None]                    # --floor-prior
 QUIET = [True]                                # drop MediaPipe's native log lines (not with -v)
 
 
@@ -206,15 +207,17 @@ def run_ours(video: Path, model, max_frames: int | None = None) -> dict:
             "lost": int(np.sum(tr.lost)), "has_blendshapes": tr.blendshapes is not None}
 
 
-def run_floor(truth68: np.ndarray, model) -> dict:
-    """The model fitted to the true 68 points on every frame (warm-started from the previous)."""
+def run_floor(truth68: np.ndarray, model, prior: float | None = None) -> dict:
+    """The model fitted to the true 68 points on every frame (warm-started from the previous);
+    ``prior``: :func:`~facetransfer.track.init.fit_landmarks`'s prior (default its own)."""
     from facetransfer.track.init import fit_landmarks
 
     lm = np.asarray(model.landmarks, np.int64)
     P, A, V = [], [], []
     state = None
+    kw = {} if prior is None else {"prior": float(prior)}
     for L in truth68:
-        state = fit_landmarks(model, L, state=state)
+        state = fit_landmarks(model, L, state=state, **kw)
         X = model.synthesize(state.weights)
         P.append(state.pose.project(X[lm]))
         V.append(X)
@@ -246,20 +249,25 @@ def synthetic_clips(cache: Path, quick: bool) -> list[cd.SyntheticClip]:
     return clips
 
 
+def _training_identities(model) -> np.ndarray | None:
+    """The model's training identity weights over the FaceKit's 100 components (row 0, the
+    generic neutral, dropped), from its provenance."""
+    w = (getattr(model, "provenance", {}) or {}).get("identity_weights")
+    return None if w is None else np.asarray(w, float)[1:]
+
+
 def run_synthetic(models: dict, trackers, cache: Path, quick: bool) -> dict:
     """Every tracker (and every model for ours/floor) on every synthetic clip."""
     clips = synthetic_clips(cache, quick)
     out = {"clips": {}, "identity_check": {}}
-    main_model = models["main"]
-    training = main_model.provenance.get("identity_weights")
-    training = None if training is None else np.asarray(training, float)[1:]  # row 0 = generic
+    training = {k: _training_identities(m) for k, m in models.items()}
     sheets = []
     for clip in clips:
         res, kept = {}, {}
-        dist = cd.identity_distance(clip.identity_weights, training)
         out["identity_check"][clip.name] = {
-            "min_distance_to_training": _r(dist, 3),
-            "norm": _r(np.linalg.norm(clip.identity_weights), 3)}
+            "norm": _r(np.linalg.norm(clip.identity_weights), 3),
+            "min_distance_to_training": {k: _r(cd.identity_distance(clip.identity_weights, t), 3)
+                                         for k, t in training.items()}}
         for tk in trackers:
             for mname, model in (models.items() if tk != "mediapipe" else [("main", None)]):
                 label = tk if mname == "main" else f"{tk}[{mname}]"
@@ -270,7 +278,7 @@ def run_synthetic(models: dict, trackers, cache: Path, quick: bool) -> dict:
                     elif tk == "ours":
                         pred = run_ours(clip.video, model)
                     else:
-                        pred = run_floor(clip.landmarks, model)
+                        pred = run_floor(clip.landmarks, model, FLOOR_PRIOR[0])
                 except Exception as exc:  # a tracker that fails is a result, not a crash
                     log.exception("%s failed on %s", label, clip.name)
                     res[label] = {"error": f"{type(exc).__name__}: {exc}"}
@@ -316,13 +324,35 @@ def contact_sheet(sheets, path: Path) -> None:
                 for x, y in P[i]:
                     if np.isfinite(x) and np.isfinite(y):
                         cv2.circle(img, (int(round(x)), int(round(y))), 2, _COLOURS[name], -1)
+            img = _crop_face(img, clip.landmarks[i], 360)
             cv2.putText(img, f"{clip.name} frame {i}" + (" (worst ours)" if i == worst else ""),
-                        (8, 20), cv2.FONT_HERSHEY_SIMPLEX, 0.55, (255, 255, 255), 1, cv2.LINE_AA)
+                        (6, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1, cv2.LINE_AA)
             cells.append(img)
         rows.append(np.concatenate(cells, axis=1))
     sheet = np.concatenate(rows, axis=0)
-    scale = min(1.0, 1800 / sheet.shape[1])
-    write_image(path, cv2.resize(sheet, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA))
+    legend = np.zeros((24, sheet.shape[1], 3), np.uint8)
+    x = 6
+    for name, col in _COLOURS.items():
+        cv2.circle(legend, (x + 4, 12), 4, col, -1)
+        cv2.putText(legend, name, (x + 12, 16), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1,
+                    cv2.LINE_AA)
+        x += 110
+    write_image(path, np.concatenate([legend, sheet], axis=0))
+
+
+def _crop_face(img: np.ndarray, P: np.ndarray, size: int) -> np.ndarray:
+    """A square crop around the points (1.5 times their extent), resized to ``size``."""
+    import cv2
+
+    c, half = P.mean(axis=0), 0.75 * np.ptp(P, axis=0).max()
+    x0, y0 = np.floor(c - half).astype(int)
+    x1, y1 = np.ceil(c + half).astype(int)
+    H, W = img.shape[:2]
+    pad = max(0, -x0, -y0, x1 - W, y1 - H)
+    if pad:
+        img = cv2.copyMakeBorder(img, pad, pad, pad, pad, cv2.BORDER_CONSTANT)
+    crop = img[y0 + pad:y1 + pad, x0 + pad:x1 + pad]
+    return cv2.resize(crop, (size, size), interpolation=cv2.INTER_AREA)
 
 
 # ------------------------------------------------------------------------------ real clips
@@ -356,6 +386,13 @@ def real_clip_scores(ours: dict, ref478: np.ndarray, mp_shapes: np.ndarray) -> d
         out["activations"][n] = {"corr": _r(corr(A[:, j], mp_shapes[:F, j])),
                                  "std_ratio": _r(std_ratio(A[:, j], mp_shapes[:F, j]))}
     return out
+
+
+def peer_agreement(mp478: np.ndarray, ref478: np.ndarray) -> dict:
+    """Today's Face Landmarker (Tasks API, VIDEO mode) against the stored reference (FaceMesh
+    0.10.21) on the same frames: how far two MediaPipe versions agree, a ceiling for ours."""
+    a, b = openings_mp(mp478), openings_mp(ref478[:len(mp478)])
+    return {k: {"corr": _r(corr(a[k], b[k])), "std_ratio": _r(std_ratio(a[k], b[k]))} for k in a}
 
 
 def trimmed_clip(video: Path, start: int, n: int, cache: Path) -> Path:
@@ -406,7 +443,7 @@ def run_real(model, cache: Path, quick: bool) -> dict:
         if start:
             video, ref = trimmed_clip(video, start, n, cache), ref[start:start + n]
         with filtered_stderr(QUIET[0]):
-            _, shapes = cached_landmarker(video, cache)
+            mp478, shapes = cached_landmarker(video, cache)
         try:
             ours = run_ours(video, model, max_frames=n)
         except Exception as exc:
@@ -414,6 +451,7 @@ def run_real(model, cache: Path, quick: bool) -> dict:
             out["clips"][name] = {"error": f"{type(exc).__name__}: {exc}"}
             continue
         r = real_clip_scores(ours, ref, shapes)
+        r["mediapipe_vs_reference"] = peer_agreement(mp478, ref)
         if name == "driving_d6":
             F = len(ours["landmarks"])
             r["drift_jitter"] = drift_jitter(ours["landmarks"], mediapipe_to_ibug(ref[:F]))
@@ -466,6 +504,12 @@ def print_real(real: dict) -> None:
         tgt = f">={row['target_corr']:.2f}" if row["target_corr"] else "-"
         print(f"{k:16s} " + " ".join(cells) + f" {med:>13s} {tgt:>10s} {row['verdict']}")
     print(f"(std ratio target {lo}-{hi})")
+    peer = [c["mediapipe_vs_reference"] for c in real["clips"].values()
+            if "mediapipe_vs_reference" in c]
+    if peer:
+        print("peer check, Face Landmarker now vs the stored reference (median corr/std ratio): "
+              + ", ".join(f"{k} {np.median([p[k]['corr'] for p in peer]):.2f}/"
+                          f"{np.median([p[k]['std_ratio'] for p in peer]):.2f}" for k in peer[0]))
     for n, c in real["clips"].items():
         if "drift_jitter" in c:
             d = c["drift_jitter"]
@@ -636,7 +680,12 @@ def load_models(args) -> tuple[dict, dict]:
         main, desc = load_default_model(announce=log.info), {"main": str(default_model_path())}
     models = {"main": main}
     for name in [m for m in (args.models or "").split(",") if m]:
-        models[name] = _paper_model(name)
+        try:
+            models[name] = _paper_model(name)
+        except Exception as exc:  # a paper model that cannot be built is reported, not fatal
+            log.error("cannot build %s: %s", name, exc)
+            desc[name] = f"failed: {exc}"
+            continue
         desc[name] = name
     for k, m in models.items():
         desc[k + "_shape"] = {"modes": list(m.mode_names), "sizes": list(m.shape),
@@ -745,12 +794,15 @@ def main(argv=None) -> int:
     ap.add_argument("--only", choices=("synthetic", "real", "speed"), help="run one part")
     ap.add_argument("--trackers", default=",".join(TRACKERS),
                     help=f"comma-separated subset of {','.join(TRACKERS)}")
+    ap.add_argument("--floor-prior", type=float, default=None,
+                    help="prior weight of the floor's landmark fit (default: fit_landmarks')")
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(asctime)s %(name)s %(message)s", datefmt="%H:%M:%S")
     log.setLevel(logging.INFO)
     QUIET[0] = not args.verbose
+    FLOOR_PRIOR[0] = args.floor_prior
     trackers = [t for t in args.trackers.split(",") if t]
     bad = sorted(set(trackers) - set(TRACKERS))
     if bad:
@@ -770,8 +822,10 @@ def main(argv=None) -> int:
            "trackers": trackers, "machine": {"python": platform.python_version(),
                                              "cpus": os.cpu_count()},
            "data_version": cd.DATA_VERSION, "date": time.strftime("%Y-%m-%d %H:%M:%S"),
-           "notes": {"floor": "facetransfer.track.init.fit_landmarks with its defaults on the true "
-                              "68 points of every frame, warm-started from the previous frame",
+           "notes": {"floor": "facetransfer.track.init.fit_landmarks on the true 68 points of every "
+                              "frame, warm-started from the previous frame, prior "
+                              + ("fit_landmarks' default" if args.floor_prior is None
+                                 else str(args.floor_prior)),
                      "v3d": "mean vertex distance over FaceKit vertices 0-6705 after a per-frame "
                             "similarity alignment (Umeyama) of the tracked to the true face, mm",
                      "nme": "mean point distance / true outer eye-corner distance (36-45) per "
