@@ -72,6 +72,10 @@ FLOOR_PRIOR: list = [None]                    # --floor-prior
 QUIET = [True]                                # drop MediaPipe's native log lines (not with -v)
 
 
+class BenchInputError(ValueError):
+    """Bad input to the benchmark: reported as one line, exit status 2."""
+
+
 # ------------------------------------------------------------------------------ metrics
 def iod(P: np.ndarray) -> np.ndarray:
     """Outer eye-corner distance (iBUG 36-45) per frame, (F, 68, 2) -> (F,)."""
@@ -360,9 +364,9 @@ def _data_dir() -> Path:
     from facetransfer import assets
 
     d = assets.data_dir()
-    if d is None:
-        raise SystemExit("bench_capture: set FACETRANSFER_DATA_DIR to the asset mirror "
-                         "(real clips are in its video/ folder)")
+    if d is None or not (Path(d) / "video").is_dir():
+        raise BenchInputError(f"FACETRANSFER_DATA_DIR ({d or 'unset'}) must be the asset mirror "
+                              "with the real clips in its video/ folder")
     return Path(d)
 
 
@@ -816,6 +820,14 @@ def main(argv=None) -> int:
     cache = out / "capture_cache"
     parts = [args.only] if args.only else (["synthetic", "real"] if args.quick
                                            else ["synthetic", "real", "speed"])
+    try:
+        return _run(args, trackers, out, cache, parts)
+    except BenchInputError as exc:
+        print(f"bench_capture: {exc}", file=sys.stderr)
+        return 2
+
+
+def _run(args, trackers, out: Path, cache: Path, parts) -> int:
     t0 = time.perf_counter()
     models, desc = load_models(args)
     res = {"benchmark": "capture (issue 12)", "quick": bool(args.quick), "models": desc,
