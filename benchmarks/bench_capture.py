@@ -293,6 +293,9 @@ def run_synthetic(models: dict, trackers, cache: Path, quick: bool) -> dict:
                     if tk == "ours":
                         kept["ours_nme7"] = nme(pred["landmarks"], clip.landmarks, KEY7)
                 res[label]["seconds"] = round(time.perf_counter() - t0, 2)
+                for k in ("lost", "has_blendshapes"):
+                    if k in pred:
+                        res[label][k] = pred[k]
                 log.info("%s %s: 7-pt NME median %s", clip.name, label, res[label]["nme7_median"])
         out["clips"][clip.name] = res
         sheets.append((clip, kept))
