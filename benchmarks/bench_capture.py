@@ -613,7 +613,7 @@ def plot(res: dict, path: Path) -> None:
               "7-point NME, median (% of eye-corner distance)", target=100 * TARGETS["nme7"])
         _act_bars(axes[0, 1], syn["clips"])
     if real:
-        _real_bars(axes[1, 0], real["summary"])
+        _real_bars(axes[1, 0], real)
     if sp and "error" not in sp:
         ax = axes[1, 1]
         ax.bar(["ours (facetransfer track)", "MediaPipe VIDEO"],
@@ -660,18 +660,25 @@ def _act_bars(ax, clips: dict) -> None:
     ax.legend(fontsize=8)
 
 
-def _real_bars(ax, summary: dict) -> None:
+def _real_bars(ax, real: dict) -> None:
+    summary = real["summary"]
     names = list(summary)
     c = [summary[n]["corr_median"] for n in names]
-    ax.bar(np.arange(len(names)), [np.nan if v is None else v for v in c], color="tab:blue",
-           label="ours vs MediaPipe, median correlation")
+    ax.bar(np.arange(len(names)) - 0.2, [np.nan if v is None else v for v in c], 0.4,
+           color="tab:blue", label="ours vs MediaPipe reference, median correlation")
+    peer = [c["mediapipe_vs_reference"] for c in real["clips"].values()
+            if "mediapipe_vs_reference" in c]
+    pc = [np.median([p[n]["corr"] for p in peer]) if peer and n in peer[0] else np.nan
+          for n in names]
+    ax.bar(np.arange(len(names)) + 0.2, pc, 0.4, color="tab:orange",
+           label="Face Landmarker now vs the reference (peer check)")
     t = [summary[n]["target_corr"] for n in names]
     ax.scatter(np.arange(len(names)), [np.nan if v is None else v for v in t], marker="_",
                s=400, color="k", label="target", zorder=3)
     ax.set_xticks(np.arange(len(names)), names, rotation=30, fontsize=8)
-    ax.set_ylim(-0.2, 1.0)
+    ax.set_ylim(-0.2, 1.3)
     ax.set_title("real clips: correlation over frames (median over clips)")
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7, ncol=2, loc="upper right")
 
 
 # ------------------------------------------------------------------------------ models
