@@ -11,8 +11,9 @@ Measures, in one run, every tracker on the same frames:
    (FaceKit vertices 0-6705) after a per-frame similarity alignment (Umeyama: rotation,
    translation, scale) of the tracked face to the true one; activation mean absolute error over
    MediaPipe's 51 shapes and per key shape; correlation over frames of eye and mouth opening.
-   Trackers: ``mediapipe`` (Face Landmarker, VIDEO mode, blendshapes), ``ours`` (``track_video``
-   with default options), ``floor`` (the model fitted to the true 68 points on every frame).
+   Trackers: ``mediapipe`` (Face Landmarker, VIDEO mode, blendshapes), ``ours`` (the default
+   tracker, ``capture_video``), ``klt`` (the paper's tracker, ``track_video`` with default
+   options), ``floor`` (the model fitted to the true 68 points on every frame).
 2. ``real``: clips of ``FACETRANSFER_DATA_DIR/video`` against their stored MediaPipe references:
    correlation and std ratio (ours / reference) of mouth opening, mouth width, eye opening and brow
    height (each / outer eye-corner distance) and of our activations against MediaPipe's
@@ -67,7 +68,7 @@ QUICK_REAL = (("WDA_KatieHill_000", 0, 100), ("driving_d6", 300, 120))
 TARGETS = {"mouth_open": 0.85, "mouth_width": 0.85, "eye_open": 0.85, "brow": 0.7,
            "jawOpen": 0.85, "eyeBlinkLeft": 0.85, "eyeBlinkRight": 0.85, "browInnerUp": 0.7,
            "std_ratio": (0.75, 1.33), "nme7": 0.025}
-TRACKERS = ("mediapipe", "ours", "floor")
+TRACKERS = ("mediapipe", "ours", "klt", "floor")
 FLOOR_PRIOR: list = [None]                    # --floor-prior
 QUIET = [True]                                # drop MediaPipe's native log lines (not with -v)
 
@@ -191,14 +192,20 @@ def run_mediapipe(video: Path, cache: Path) -> dict:
     return {"landmarks": mediapipe_to_ibug(pts), "activations": shp, "points478": pts}
 
 
-def run_ours(video: Path, model, max_frames: int | None = None) -> dict:
-    """``facetransfer.track.track_video`` with default options; its landmarks, activations and
-    unposed face vertices per frame."""
+def run_ours(video: Path, model, max_frames: int | None = None, *, tracker: str = "capture"
+             ) -> dict:
+    """Our default tracker as ``facetransfer track`` runs it (``capture``: the model fitted to
+    detections and flow on every frame), or the paper's ``klt`` tracker (``track_video`` with
+    default options); its landmarks, activations and unposed face vertices per frame."""
     from facetransfer.track import track_video
+    from facetransfer.track.capture import capture_video
 
     t0 = time.perf_counter()
     with filtered_stderr(QUIET[0]):
-        tr = track_video(str(video), model, max_frames=max_frames)
+        if tracker == "capture":
+            tr = capture_video(str(video), model, max_frames=max_frames)
+        else:
+            tr = track_video(str(video), model, max_frames=max_frames)
     sec = time.perf_counter() - t0
     A = None
     if tr.blendshapes is not None:
@@ -279,8 +286,9 @@ def run_synthetic(models: dict, trackers, cache: Path, quick: bool) -> dict:
                 try:
                     if tk == "mediapipe":
                         pred = run_mediapipe(clip.video, cache)
-                    elif tk == "ours":
-                        pred = run_ours(clip.video, model)
+                    elif tk in ("ours", "klt"):
+                        pred = run_ours(clip.video, model,
+                                        tracker="capture" if tk == "ours" else "klt")
                     else:
                         pred = run_floor(clip.landmarks, model, FLOOR_PRIOR[0])
                 except Exception as exc:  # a tracker that fails is a result, not a crash

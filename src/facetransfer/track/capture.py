@@ -95,14 +95,14 @@ class CaptureOptions:
         iBUG point of weight 1 (0 = the 68 iBUG points only).
     """
 
-    identity_frames: int = 40
-    identity_rounds: int = 6
+    identity_frames: int = 24
+    identity_rounds: int = 4
     identity_prior: float = 2e-3
     expression_prior: float = 1e-2
     sparsity: float = 0.0
     temporal: float = 2e-3
     flow: float = 0.5
-    iterations: int = 3
+    iterations: int = 2
     smooth: float = 0.0
     point_weights: tuple | None = None
     offset_prior: float = 1e-4
