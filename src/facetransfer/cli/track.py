@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 from ..errors import FaceTransferError
@@ -80,7 +81,6 @@ def _bar(desc: str, total: int):
 
 def run(args) -> int:
     from ..io.video import check_video_output, video_info
-    from ..track.init import require_landmarks
     from ..track.overlay import write_overlay
     from ..track.result import Track
     from ..track.tracker import TrackOptions, frame_source
@@ -105,9 +105,18 @@ def run(args) -> int:
         check_not_input(partial_path(args.out), inputs)
     opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
                        n_points=args.points, keyframe=args.keyframe)   # validates the options
-    model = resolve_model(args.model)
-    require_landmarks(model)
+    tracker = args.tracker or ("capture" if args.init == "auto" else "klt")
+    if tracker == "capture" and args.init != "auto":
+        raise FaceTransferError("--init POINTS is an option of --tracker klt (capture "
+                                "detects the face on every frame)")
     video_info(args.video)  # unreadable / empty video: one line, before any work
+    if args.from_track is None and tracker == "capture" and _model_on_disk(args.model):
+        # the capture tracker needs the model only after the detections: load it meanwhile
+        pool = ThreadPoolExecutor(max_workers=1)
+        model = pool.submit(_checked_model, args.model)
+        pool.shutdown(wait=False)
+    else:
+        model = _checked_model(args.model)
 
     if args.from_track is not None:
         track = Track.load(args.from_track)
@@ -125,12 +134,8 @@ def run(args) -> int:
                 bar = bars[stage] = _bar(stage, total)
             bar.update(done - bar.n)
 
-        tracker = args.tracker or ("capture" if args.init == "auto" else "klt")
         if tracker == "capture":
-            if args.init != "auto":
-                raise FaceTransferError("--init POINTS is an option of --tracker klt (capture "
-                                        "detects the face on every frame)")
-            track = _capture(args, model, progress, bars)
+            track, model = _capture(args, model, progress, bars)
         else:
             track = _track_klt(args, model, opt, progress, bars)
         track.save(args.out, overwrite=args.overwrite)
@@ -152,12 +157,34 @@ def run(args) -> int:
     return 0
 
 
+def _model_on_disk(path) -> bool:
+    """Whether the model is a file to read (not one to build first, with its own progress)."""
+    if path is not None:
+        return Path(path).is_file()
+    from ..default_model import default_model_path
+
+    return default_model_path().is_file()
+
+
+def _checked_model(path):
+    from ..track.init import require_landmarks
+
+    model = resolve_model(path)
+    require_landmarks(model)
+    return model
+
+
 def _capture(args, model, progress, bars):
-    from ..track.capture import capture_video
+    """The capture tracker; ``model`` may be a Future still loading. Returns (track, model)."""
+    from ..track.capture import capture_detections, detect_video
 
     try:
-        return capture_video(args.video, model, max_frames=args.max_frames, progress=progress,
-                             source=str(args.video))
+        det, fps, size, src = detect_video(args.video, max_frames=args.max_frames,
+                                           progress=progress, source=str(args.video))
+        if isinstance(model, Future):
+            model = model.result()
+        return capture_detections(det, model, fps=fps, frame_size=size, progress=progress,
+                                  source=src), model
     finally:
         for b in bars.values():
             b.close()

@@ -48,7 +48,7 @@ from .solver import Prior
 
 log = logging.getLogger(__name__)
 
-__all__ = ["CaptureOptions", "capture_video", "capture_detections"]
+__all__ = ["CaptureOptions", "capture_video", "capture_detections", "detect_video"]
 
 Progress = Callable[[str, int, int], None]
 
@@ -145,16 +145,16 @@ class _Sampler:
         lm = np.asarray(model.landmarks, np.int64)
         tris = np.zeros((0, 3), np.int64) if dense is None else dense.triangles
         verts, inv = np.unique(np.concatenate([lm, tris.ravel()]), return_inverse=True)
+        from scipy.sparse import csr_matrix
+
         P = 68 + len(tris)
-        S = np.zeros((P, len(verts)))
-        S[np.arange(68), inv[:68]] = 1.0
-        if len(tris):
-            cols = inv[68:].reshape(-1, 3)
-            for k in range(3):
-                np.add.at(S, (np.arange(68, P), cols[:, k]), dense.bary[:, k])
-        rows = (3 * verts[:, None] + np.arange(3)).ravel()
-        core = model.core[rows].reshape(len(verts), -1)                    # (V, 3 r_1 ... r_K)
-        core = (S @ core).reshape((3 * P,) + model.core.shape[1:])
+        rows = np.concatenate([np.arange(68), np.repeat(np.arange(68, P), 3)])
+        cols = np.concatenate([inv[:68], inv[68:]])
+        vals = np.concatenate([np.ones(68), np.zeros(0) if dense is None else dense.bary.ravel()])
+        S = csr_matrix((vals, (rows, cols)), shape=(P, len(verts)))        # sums duplicates
+        vrows = (3 * verts[:, None] + np.arange(3)).ravel()
+        core = model.core[vrows].reshape(len(verts), -1)                   # (V, 3 r_1 ... r_K)
+        core = np.asarray(S @ core).reshape((3 * P,) + model.core.shape[1:])
         self.model = MultilinearModel(core=core, factors=model.factors,
                                       mode_names=model.mode_names, labels=model.labels,
                                       faces=np.zeros((0, 3), np.int64))
@@ -569,22 +569,37 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
     Track
     """
     require_landmarks(model)
-    prog = progress or (lambda stage, done, total: None)
-    fps, size, src, frames, n = _open(video, max_frames, source)
     if detections is None:
-        own = None
-        if detector is None:
-            detector = own = VideoLandmarker(fps=fps)
-        try:
-            detections = detect_clip(frames, detector, n_frames=n, keep478=True,
-                                     progress=lambda d, t: prog("detect", d, t))
-        finally:
-            if own is not None:
-                own.close()
-    elif n is not None and detections.n_frames != n:
-        raise TrackError(f"detections have {detections.n_frames} frames, the video {n}")
+        detections, fps, size, src = detect_video(video, detector=detector,
+                                                  max_frames=max_frames, progress=progress,
+                                                  source=source)
+    else:
+        fps, size, src, _, n = _open(video, max_frames, source)
+        if n is not None and detections.n_frames != n:
+            raise TrackError(f"detections have {detections.n_frames} frames, the video {n}")
     return capture_detections(detections, model, options=options, fps=fps, frame_size=size,
                               fixed=fixed, progress=progress, source=src)
+
+
+def detect_video(video, *, detector=None, max_frames: int | None = None,
+                 progress: Progress | None = None, source: str | None = None
+                 ) -> tuple[ClipDetections, float, tuple[int, int], str]:
+    """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
+
+    Needs no model, so a caller may load the model meanwhile.
+    """
+    prog = progress or (lambda stage, done, total: None)
+    fps, size, src, frames, n = _open(video, max_frames, source)
+    own = None
+    if detector is None:
+        detector = own = VideoLandmarker(fps=fps)
+    try:
+        det = detect_clip(frames, detector, n_frames=n, keep478=True,
+                          progress=lambda d, t: prog("detect", d, t))
+    finally:
+        if own is not None:
+            own.close()
+    return det, fps, size, src
 
 
 def _open(video, max_frames, source):

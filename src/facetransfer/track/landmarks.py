@@ -12,6 +12,8 @@ jaw line is intrinsically ambiguous (a contour, not a point) and gets a low :dat
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 from ..errors import ShapeError
@@ -65,10 +67,22 @@ def mediapipe_to_ibug(points: np.ndarray) -> np.ndarray:
     P = np.asarray(points, dtype=np.float64)
     if P.ndim < 2 or P.shape[-2] < 468:
         raise ShapeError(f"MediaPipe landmarks must be (..., 478, d), got {P.shape}")
-    out = np.empty(P.shape[:-2] + (68, P.shape[-1]))
+    nan = np.isnan(P)
+    if (nan.any(axis=(-2, -1)) & ~nan.all(axis=(-2, -1))).any():  # frames partly unknown
+        out = np.empty(P.shape[:-2] + (68, P.shape[-1]))
+        for i, idx in enumerate(MP_TO_IBUG):
+            out[..., i, :] = P[..., list(idx), :].mean(axis=-2)
+        return out
+    return np.einsum("im,...md->...id", _averaging(P.shape[-2]), P)  # NaN frames stay NaN
+
+
+@lru_cache(maxsize=2)
+def _averaging(n: int) -> np.ndarray:
+    """(68, n) matrix averaging the MediaPipe points of each iBUG point."""
+    A = np.zeros((68, n))
     for i, idx in enumerate(MP_TO_IBUG):
-        out[..., i, :] = P[..., list(idx), :].mean(axis=-2)
-    return out
+        A[i, list(idx)] = 1.0 / len(idx)
+    return A
 
 
 def ibug_names() -> tuple[str, ...]:
