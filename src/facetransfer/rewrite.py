@@ -1375,30 +1375,43 @@ def track_options(speed: str = DEFAULT_SPEED):
     raise RewriteError(f"speed must be one of {', '.join(SPEED_PRESETS)}, got {speed!r}")
 
 
+class _StageBars:
+    """A tracker's ``progress(stage, done, total)`` as one bar per stage (from
+    ``progress_factory(desc, total)``, none without it); the bars close with the block."""
+
+    def __init__(self, video, progress_factory) -> None:
+        self.name, self.factory, self.bars = Path(video).name, progress_factory, {}
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if self.factory is None:
+            return
+        bar = self.bars.get(stage)
+        if bar is None:
+            self.close()
+            bar = self.bars[stage] = self.factory(f"{self.name}: {stage}", total)
+        bar.update(done - bar.n)
+
+    def close(self) -> None:
+        for b in self.bars.values():
+            b.close()
+        self.bars = {}
+
+    def __enter__(self) -> "_StageBars":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 def _capture(video, model, frames, fps, max_frames, progress_factory):
     """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames."""
     import dataclasses
 
     from .track.capture import capture_video
 
-    bars: dict = {}
-
-    def stage_progress(stage: str, done: int, total: int) -> None:
-        if progress_factory is None:
-            return
-        bar = bars.get(stage)
-        if bar is None:
-            for b_ in bars.values():
-                b_.close()
-            bar = bars[stage] = progress_factory(f"{Path(video).name}: {stage}", total)
-        bar.update(done - bar.n)
-
-    try:
+    with _StageBars(video, progress_factory) as stage_progress:
         tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
                            source=str(video))
-    finally:
-        for b_ in bars.values():
-            b_.close()
     return dataclasses.replace(tr, fps=float(fps))
 
 
@@ -1455,24 +1468,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
             raise RewriteError("the optical-flow tracker (facetransfer.track.track_video) is "
                                "not available")
         if track_video is not None:
-            bars: dict = {}
-
-            def stage_progress(stage: str, done: int, total: int) -> None:
-                if progress_factory is None:
-                    return
-                bar = bars.get(stage)
-                if bar is None:
-                    for b_ in bars.values():
-                        b_.close()
-                    bar = bars[stage] = progress_factory(f"{Path(video).name}: {stage}", total)
-                bar.update(done - bar.n)
-
-            try:
+            with _StageBars(video, progress_factory) as stage_progress:
                 tr = track_video(frames, model, max_frames=max_frames, progress=stage_progress,
                                  source=str(video), options=options)
-            finally:
-                for b_ in bars.values():
-                    b_.close()
             if abs(tr.fps - fps) > 1e-9:  # an array of frames carries no frame rate
                 import dataclasses
 

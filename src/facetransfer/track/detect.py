@@ -11,13 +11,12 @@ from __future__ import annotations
 
 import os
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable, Iterable
 
 import cv2
 import numpy as np
 
-from ..errors import AssetError, ShapeError
+from ..errors import ShapeError
 from .landmarks import mediapipe_to_ibug
 
 __all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow"]
@@ -77,23 +76,9 @@ class VideoLandmarker:
     """
 
     def __init__(self, model_path: str | os.PathLike | None = None, *, fps: float = 30.0) -> None:
-        os.environ.setdefault("GLOG_minloglevel", "2")
-        os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "3")
-        try:
-            from mediapipe.tasks.python import BaseOptions, vision
-        except ImportError as exc:  # pragma: no cover
-            raise AssetError(f"mediapipe is not installed ({exc})") from None
-        if model_path is None:
-            from .init import _landmarker_path
+        from .init import create_landmarker
 
-            model_path = _landmarker_path()
-        p = Path(model_path)
-        if not p.is_file():
-            raise AssetError(f"face landmarker model {p} does not exist")
-        opts = vision.FaceLandmarkerOptions(
-            base_options=BaseOptions(model_asset_path=str(p)),
-            running_mode=vision.RunningMode.VIDEO, num_faces=1)
-        self._lm = vision.FaceLandmarker.create_from_options(opts)
+        self._lm = create_landmarker(model_path, video=True)
         self._dt = 1000.0 / max(float(fps), 1e-3)
         self._i = 0
 

@@ -148,21 +148,7 @@ class MediaPipeDetector:
     """
 
     def __init__(self, model_path: str | os.PathLike | None = None) -> None:
-        os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ logging: errors only
-        os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
-        try:
-            from mediapipe.tasks.python import BaseOptions, vision
-        except ImportError as exc:  # pragma: no cover
-            raise AssetError(f"mediapipe is not installed ({exc})") from None
-        if model_path is None:
-            model_path = _landmarker_path()
-        p = Path(model_path)
-        if not p.is_file():
-            raise AssetError(f"face landmarker model {p} does not exist")
-        opts = vision.FaceLandmarkerOptions(
-            base_options=BaseOptions(model_asset_path=str(p)),
-            running_mode=vision.RunningMode.IMAGE, num_faces=1)
-        self._lm = vision.FaceLandmarker.create_from_options(opts)
+        self._lm = create_landmarker(model_path, video=False)
 
     def detect478(self, frame: np.ndarray) -> np.ndarray | None:
         """MediaPipe's 478 landmarks in pixels (x, y), (478, 2), or None if no face."""
@@ -197,6 +183,26 @@ class MediaPipeDetector:
             self.close()
         except Exception:
             pass
+
+
+def create_landmarker(model_path: str | os.PathLike | None = None, *, video: bool = False):
+    """A MediaPipe ``FaceLandmarker`` (Tasks API, one face) in IMAGE or VIDEO running mode.
+
+    ``model_path``: ``face_landmarker.task`` (default from the asset registry).
+    """
+    os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ logging: errors only
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    try:
+        from mediapipe.tasks.python import BaseOptions, vision
+    except ImportError as exc:  # pragma: no cover
+        raise AssetError(f"mediapipe is not installed ({exc})") from None
+    p = Path(_landmarker_path() if model_path is None else model_path)
+    if not p.is_file():
+        raise AssetError(f"face landmarker model {p} does not exist")
+    mode = vision.RunningMode.VIDEO if video else vision.RunningMode.IMAGE
+    opts = vision.FaceLandmarkerOptions(base_options=BaseOptions(model_asset_path=str(p)),
+                                        running_mode=mode, num_faces=1)
+    return vision.FaceLandmarker.create_from_options(opts)
 
 
 def _landmarker_path() -> Path:
