@@ -88,9 +88,18 @@ def quick_model_path(quick_model, tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="session")
 def arkit_model(data_dir):
-    """A small untruncated ARKit model: ``ict-arkit`` with 6 identities x 52 expressions (so
-    activations and expression weights convert exactly, and the training meshes reproduce).
-    Cached data set: ~25 s once."""
+    """A small ARKit model: ``ict-arkit`` with 6 identities (rank 5) x 52 expressions (untruncated,
+    so activations and expression weights convert exactly). Cached data set: ~25 s once."""
+    from facetransfer.datasets.ict import build_ict_dataset
+    from facetransfer.model import build_model
+
+    ds = build_ict_dataset("ict-arkit", n_identities=6, use_cache=True)
+    return build_model(ds, {"identity": 5, "expression": ds.shape[1]}, refine=False)
+
+
+@pytest.fixture(scope="session")
+def arkit_model_full(data_dir):
+    """:func:`arkit_model`'s data set with every identity kept (training meshes reproduce)."""
     from facetransfer.datasets.ict import build_ict_dataset
     from facetransfer.model import build_model
 

@@ -69,9 +69,9 @@ def test_arkit_model_labels_and_exact_conversion(arkit_model):
         activations_to_weights(m, a[:, :51])
 
 
-def test_rig_reproduces_the_training_meshes(arkit_model):
+def test_rig_reproduces_the_training_meshes(arkit_model_full):
     """The untruncated model's rig of a training identity gives its training shapes exactly."""
-    m = arkit_model
+    m = arkit_model_full
     w = m.like(identity="id01")
     rig = expression_rig(m, w)
     for j in (ARKIT_NAMES.index("jawOpen"), ARKIT_NAMES.index("eyeBlinkLeft")):
