@@ -158,8 +158,9 @@ def side_by_side(source: np.ndarray, target: np.ndarray, result: np.ndarray, *,
 
 
 def contact_sheet(frames: list[np.ndarray], path, *, columns: int = 2, scale: float = 0.5,
-                  overwrite: bool = True) -> Path:
-    """Write a grid of side-by-side frames to ``path`` (PNG), atomically."""
+                  overwrite: bool = True, caption: str | None = None) -> Path:
+    """Write a grid of side-by-side frames to ``path`` (PNG), atomically, with an optional
+    one-line caption under it."""
     import cv2
     from PIL import Image
 
@@ -174,6 +175,11 @@ def contact_sheet(frames: list[np.ndarray], path, *, columns: int = 2, scale: fl
             row.append(np.zeros_like(small[0]))
         rows.append(np.hstack(row))
     sheet = np.vstack(rows)
+    if caption:
+        band = np.full((28, sheet.shape[1], 3), 255, np.uint8)
+        cv2.putText(band, caption, (8, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (20, 20, 20), 1,
+                    cv2.LINE_AA)
+        sheet = np.vstack([sheet, band])
     with atomic_path(path, overwrite=overwrite) as tmp:
         Image.fromarray(sheet).save(tmp, format="PNG")
     return Path(path)
@@ -189,12 +195,13 @@ class DemoResult:
     n_frames: int
     method: str
     timings: dict = field(default_factory=dict)
+    fidelity: object = None  #: :class:`facetransfer.fidelity.Fidelity`, or None if not judged
 
 
 def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None,
              texture: str = "frame", blend: str = "fast", track_method: str = "auto",
              speed: str = "fast", progress_factory=None, mouth: str | None = None,
-             overwrite: bool = True, video_options=None) -> DemoResult:
+             overwrite: bool = True, video_options=None, judge: bool = True) -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
     Parameters
@@ -280,12 +287,16 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     n = plan.n_frames
     pick = set(np.linspace(0, n - 1, 6).round().astype(int).tolist())
     sheet_frames: list[np.ndarray] = []
+    panels: list[list[np.ndarray]] = [[], [], []]  # half size, for the judge
 
     def compose(i, r):  # source | target | result
-        frame = side_by_side(plan.mouth_frames[plan.mouth_index[i]], plan.target_frames[i],
-                             r.image)
+        trio = (plan.mouth_frames[plan.mouth_index[i]], plan.target_frames[i], r.image)
+        frame = side_by_side(*trio)
         if i in pick:
             sheet_frames.append(frame)
+        if judge:
+            for k, f in enumerate(trio):
+                panels[k].append(f[::2, ::2].copy())
         return frame
 
     render_timings, _, _ = rw.render_plan(plan, model, video_path, audio_from=target,
@@ -295,7 +306,23 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
                                           progress_factory=progress_factory, compose=compose,
                                           video_options=video_options)
     timings.update(render_timings)
-    contact_sheet(sheet_frames, sheet_path, overwrite=overwrite)
+    fid = _judge(panels, plan.fps) if judge else None
+    timings["judge"] = time.perf_counter() - t0 - sum(timings.values())
+    contact_sheet(sheet_frames, sheet_path, overwrite=overwrite,
+                  caption=None if fid is None else fid.line())
     plan.new_track.save(track_path, overwrite=overwrite)
     timings["total"] = time.perf_counter() - t0
-    return DemoResult(video_path, sheet_path, track_path, n, method, timings)
+    return DemoResult(video_path, sheet_path, track_path, n, method, timings, fid)
+
+
+def _judge(panels, fps):
+    """The independent judge on the three panels (:mod:`facetransfer.fidelity`), or None if
+    MediaPipe is unavailable."""
+    from .errors import FaceTransferError
+    from .fidelity import judge_frames
+
+    try:
+        return judge_frames(*panels, fps=fps)
+    except (FaceTransferError, ImportError) as exc:
+        log.warning("no fidelity figures: %s", exc)
+        return None

@@ -394,4 +394,6 @@ def run_demo(args) -> int:
           f"{res.track}")
     print("seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items())
           + ("" if res.method == "auto" else f" (tracking: {res.method})"))
+    if res.fidelity is not None:
+        print(res.fidelity.line())
     return 0

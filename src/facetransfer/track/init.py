@@ -185,10 +185,12 @@ class MediaPipeDetector:
             pass
 
 
-def create_landmarker(model_path: str | os.PathLike | None = None, *, video: bool = False):
+def create_landmarker(model_path: str | os.PathLike | None = None, *, video: bool = False,
+                      blendshapes: bool = False):
     """A MediaPipe ``FaceLandmarker`` (Tasks API, one face) in IMAGE or VIDEO running mode.
 
-    ``model_path``: ``face_landmarker.task`` (default from the asset registry).
+    ``model_path``: ``face_landmarker.task`` (default from the asset registry);
+    ``blendshapes``: also output its 52 blendshape scores.
     """
     os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ logging: errors only
     os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
@@ -201,7 +203,8 @@ def create_landmarker(model_path: str | os.PathLike | None = None, *, video: boo
         raise AssetError(f"face landmarker model {p} does not exist")
     mode = vision.RunningMode.VIDEO if video else vision.RunningMode.IMAGE
     opts = vision.FaceLandmarkerOptions(base_options=BaseOptions(model_asset_path=str(p)),
-                                        running_mode=mode, num_faces=1)
+                                        running_mode=mode, num_faces=1,
+                                        output_face_blendshapes=bool(blendshapes))
     return vision.FaceLandmarker.create_from_options(opts)
 
 

@@ -1,0 +1,98 @@
+"""Transfer fidelity judged independently: MediaPipe's blendshapes on source, target and result.
+
+A rewritten video carries the source's performance when, frame by frame, MediaPipe Face
+Landmarker (a detector the tracker does not share its fit with) sees the result's jaw, mouth and
+eyes move with the source's and not with the target's own (the measure of issue 13). Used by the
+demo to print and draw its figures; ``benchmarks/bench_transfer_judge.py`` runs the same measure
+on any ``source | target | result`` video.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Fidelity", "judge_frames", "panel_scores"]
+
+#: MediaPipe blendshape names reported (its order: :data:`facetransfer.arkit.MEDIAPIPE_NAMES`).
+JUDGED = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "browInnerUp", "mouthPucker")
+
+
+@dataclass(frozen=True)
+class Fidelity:
+    """Correlations over frames of the result with the source and with the target.
+
+    Attributes
+    ----------
+    with_source, with_target : dict name -> float
+        For :data:`JUDGED` and ``"mouthOpening"`` (inner lip gap / outer eye-corner distance);
+        NaN where MediaPipe found too few faces.
+    """
+
+    with_source: dict
+    with_target: dict
+
+    def line(self) -> str:
+        """One line for people: the jaw, the mouth opening and the blinks."""
+        s, t = self.with_source, self.with_target
+        blink_s = _mean(s["eyeBlinkLeft"], s["eyeBlinkRight"])
+        blink_t = _mean(t["eyeBlinkLeft"], t["eyeBlinkRight"])
+        return (f"fidelity (MediaPipe on the result): jawOpen r={s['jawOpen']:+.2f} with the "
+                f"source, {t['jawOpen']:+.2f} with the target; mouth opening "
+                f"{s['mouthOpening']:+.2f} / {t['mouthOpening']:+.2f}; blinks {blink_s:+.2f} / "
+                f"{blink_t:+.2f}")
+
+
+def _mean(*values: float) -> float:
+    ok = [v for v in values if np.isfinite(v)]
+    return float(np.mean(ok)) if ok else float("nan")
+
+
+def panel_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
+    """MediaPipe's blendshapes ``(F, 51)`` and mouth opening ``(F,)`` of frames (NaN: no face)."""
+    import mediapipe as mp
+
+    from .track.init import create_landmarker
+
+    shapes, mouth = [], []
+    lm = create_landmarker(video=True, blendshapes=True)
+    try:
+        for i, f in enumerate(frames):
+            img = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(f))
+            r = lm.detect_for_video(img, int(round(i * 1000.0 / fps)))
+            if not r.face_blendshapes:
+                shapes.append(np.full(51, np.nan))
+                mouth.append(np.nan)
+                continue
+            shapes.append([b.score for b in r.face_blendshapes[0]][1:52])
+            L = np.array([(q.x, q.y) for q in r.face_landmarks[0]])
+            mouth.append(np.linalg.norm(L[13] - L[14]) / np.linalg.norm(L[33] - L[263]))
+    finally:
+        lm.close()
+    return np.asarray(shapes, float), np.asarray(mouth, float)
+
+
+#: Below this standard deviation over frames a score "does not move" (MediaPipe's video mode
+#: settles by about 0.002 over the first frames of a still video), and has no correlation.
+STILL = 5e-3
+
+
+def _corr(a: np.ndarray, b: np.ndarray) -> float:
+    ok = np.isfinite(a) & np.isfinite(b)
+    if ok.sum() < 3 or np.std(a[ok]) < STILL or np.std(b[ok]) < STILL:
+        return float("nan")
+    return float(np.corrcoef(a[ok], b[ok])[0, 1])
+
+
+def judge_frames(source, target, result, fps: float = 25.0) -> Fidelity:
+    """:class:`Fidelity` of time-aligned frame sequences (each an iterable of (H, W, 3) uint8)."""
+    from .arkit import MEDIAPIPE_NAMES
+
+    (S, Sm), (T, Tm), (R, Rm) = (panel_scores(x, fps) for x in (source, target, result))
+    ws, wt = {}, {}
+    for n in JUDGED:
+        k = MEDIAPIPE_NAMES.index(n)
+        ws[n], wt[n] = _corr(R[:, k], S[:, k]), _corr(R[:, k], T[:, k])
+    ws["mouthOpening"], wt["mouthOpening"] = _corr(Rm, Sm), _corr(Rm, Tm)
+    return Fidelity(ws, wt)

@@ -1,0 +1,31 @@
+"""The independent judge of transfer fidelity (facetransfer.fidelity) on real footage."""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def test_a_result_equal_to_the_source_follows_it_exactly(data_dir):
+    from facetransfer.fidelity import judge_frames
+    from facetransfer.io.video import read_video
+
+    src, fps = read_video(data_dir / "video" / "driving_d6.mp4", max_frames=60)
+    tgt, _ = read_video(data_dir / "video" / "WDA_KatieHill_000.mp4", max_frames=60)
+    src, tgt = src[:, ::2, ::2], tgt[:, ::2, ::2]
+    fid = judge_frames(src, tgt, src, fps=fps)
+    # the same frames through the same detector: correlation 1 with the source
+    assert abs(fid.with_source["jawOpen"] - 1.0) < 1e-6
+    assert abs(fid.with_source["mouthOpening"] - 1.0) < 1e-6
+    assert fid.with_target["jawOpen"] < 0.9
+    line = fid.line()
+    assert "jawOpen r=+1.00 with the source" in line and "\n" not in line
+
+
+def test_a_frozen_result_has_no_correlation(data_dir):
+    from facetransfer.fidelity import judge_frames
+    from facetransfer.io.video import read_video
+
+    src, fps = read_video(data_dir / "video" / "driving_d6.mp4", max_frames=20)
+    frozen = np.repeat(src[:1], len(src), axis=0)
+    fid = judge_frames(src, src, frozen, fps=fps)
+    assert np.isnan(fid.with_source["jawOpen"])  # the result never moves: nothing to follow
