@@ -590,16 +590,24 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     """
     prog = progress or (lambda stage, done, total: None)
     fps, size, src, frames, n = _open(video, max_frames, source)
+    total = n if n is not None else _container_count(video)  # for the progress bar only
     own = None
     if detector is None:
         detector = own = VideoLandmarker(fps=fps)
     try:
         det = detect_clip(frames, detector, n_frames=n, keep478=True,
-                          progress=lambda d, t: prog("detect", d, t))
+                          progress=lambda d, t: prog("detect", d, max(total, d)))
     finally:
         if own is not None:
             own.close()
     return det, fps, size, src
+
+
+def _container_count(video) -> int:
+    """The frame count the container states (may be approximate; 0 if unknown)."""
+    from ..io.video import video_info
+
+    return max(int(video_info(video).n_frames), 0)
 
 
 def _open(video, max_frames, source):
