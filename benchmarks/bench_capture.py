@@ -723,12 +723,7 @@ def _paper_model(name: str):
     from facetransfer.model import build_model
 
     ds = load_dataset(name)
-    try:
-        from facetransfer.cli.model import default_ranks  # the CLI's defaults, as a user gets
-        ranks = default_ranks(ds)
-    except (ImportError, TypeError):
-        ranks = dataset_ranks(ds)
-    return build_model(ds, ranks)
+    return build_model(ds, dataset_ranks(ds))
 
 
 # ------------------------------------------------------------------------------ report

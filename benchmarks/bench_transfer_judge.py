@@ -28,41 +28,18 @@ SHAPES = ("jawOpen", "mouthPucker", "mouthSmileLeft", "mouthSmileRight", "browIn
 
 
 def panel_scores(video: Path, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Blendshapes (F, 51) and mouth opening (F,) of panel ``k`` (0, 1, 2), NaN without a face."""
-    import mediapipe as mp
-    from mediapipe.tasks.python import BaseOptions, vision
-
-    from facetransfer.assets import asset_path
+    """:func:`facetransfer.fidelity.panel_scores` of panel ``k`` (0, 1, 2) of the video."""
+    from facetransfer.fidelity import panel_scores as scores
     from facetransfer.io.video import iter_frames, video_info
 
     info = video_info(video)
     w = info.size[0] // 3
-    opts = vision.FaceLandmarkerOptions(
-        base_options=BaseOptions(model_asset_path=str(asset_path("face_landmarker"))),
-        output_face_blendshapes=True, num_faces=1, running_mode=vision.RunningMode.VIDEO)
-    shapes, mouth = [], []
-    with vision.FaceLandmarker.create_from_options(opts) as lm:
-        for i, f in enumerate(iter_frames(video)):
-            img = np.ascontiguousarray(f[:, k * w:(k + 1) * w])
-            r = lm.detect_for_video(mp.Image(image_format=mp.ImageFormat.SRGB, data=img),
-                                    int(i * 1000 / info.fps))
-            if not r.face_blendshapes:
-                shapes.append([np.nan] * 51)
-                mouth.append(np.nan)
-                continue
-            shapes.append([b.score for b in r.face_blendshapes[0]][1:])
-            L = np.array([(q.x, q.y) for q in r.face_landmarks[0]])
-            mouth.append(np.linalg.norm(L[13] - L[14]) / np.linalg.norm(L[33] - L[263]))
-    return np.array(shapes), np.array(mouth)
-
-
-def _corr(a: np.ndarray, b: np.ndarray) -> float:
-    ok = np.isfinite(a) & np.isfinite(b)
-    return float(np.corrcoef(a[ok], b[ok])[0, 1]) if ok.sum() > 2 else float("nan")
+    return scores((f[:, k * w:(k + 1) * w] for f in iter_frames(video)), info.fps)
 
 
 def judge(video: Path) -> dict:
     from facetransfer.arkit import MEDIAPIPE_NAMES
+    from facetransfer.fidelity import correlation as _corr
 
     (S, Sm), (T, Tm), (R, Rm) = (panel_scores(video, k) for k in range(3))
     out = {}

@@ -27,19 +27,11 @@ from .errors import AssetError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_SOURCE", "DEFAULT_TARGET", "DemoResult", "default_model_path",
-           "ensure_default_model", "default_inputs", "synthetic_inputs", "side_by_side",
+__all__ = ["DEFAULT_SOURCE", "DEFAULT_TARGET", "DemoResult", "ensure_default_model", "default_inputs", "synthetic_inputs", "side_by_side",
            "contact_sheet", "run_demo"]
 
 DEFAULT_SOURCE = "driving_d6.mp4"  # strong expressions: the mouth opens and closes
 DEFAULT_TARGET = "WDA_KatieHill_000.mp4"
-
-
-def default_model_path() -> Path:
-    """Where the default model is cached (see :mod:`facetransfer.default_model`)."""
-    from .default_model import default_model_path as path
-
-    return path()
 
 
 def ensure_default_model(*, progress_factory=None):

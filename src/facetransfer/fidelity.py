@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Fidelity", "judge_frames", "panel_scores"]
+__all__ = ["Fidelity", "judge_frames", "panel_scores", "correlation"]
 
 #: MediaPipe blendshape names reported (its order: :data:`facetransfer.arkit.MEDIAPIPE_NAMES`).
 JUDGED = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "browInnerUp", "mouthPucker")
@@ -78,7 +78,8 @@ def panel_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
 STILL = 5e-3
 
 
-def _corr(a: np.ndarray, b: np.ndarray) -> float:
+def correlation(a: np.ndarray, b: np.ndarray) -> float:
+    """Correlation over frames where both are known; NaN if either does not move (:data:`STILL`)."""
     ok = np.isfinite(a) & np.isfinite(b)
     if ok.sum() < 3 or np.std(a[ok]) < STILL or np.std(b[ok]) < STILL:
         return float("nan")
@@ -93,6 +94,6 @@ def judge_frames(source, target, result, fps: float = 25.0) -> Fidelity:
     ws, wt = {}, {}
     for n in JUDGED:
         k = MEDIAPIPE_NAMES.index(n)
-        ws[n], wt[n] = _corr(R[:, k], S[:, k]), _corr(R[:, k], T[:, k])
-    ws["mouthOpening"], wt["mouthOpening"] = _corr(Rm, Sm), _corr(Rm, Tm)
+        ws[n], wt[n] = correlation(R[:, k], S[:, k]), correlation(R[:, k], T[:, k])
+    ws["mouthOpening"], wt["mouthOpening"] = correlation(Rm, Sm), correlation(Rm, Tm)
     return Fidelity(ws, wt)

@@ -50,18 +50,19 @@ def _detector_for(init: str, options):
     return None if (init == "auto" or options.anchor) else LazyDetector()
 
 
-def _track(video, model, init: str, options, *, source: str, checkpoint, fixed=None):
-    """As ``facetransfer track``: the capture tracker, or the paper's KLT tracker when first-frame
-    points are given."""
+def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=None,
+           tracker: str | None = None):
+    """As ``facetransfer track``: the tracker ``settings`` choose for ``init`` (or ``tracker``)."""
     from ..track.tracker import track_video
 
-    if init == "auto":
+    if (tracker or settings.choose(init)) == "capture":
         from ..track.capture import capture_video
 
-        return capture_video(video, model, source=source, fixed=fixed)
-    detector = _detector_for(init, options)
+        return capture_video(video, model, options=settings.capture, source=source,
+                             fixed=fixed)
+    detector = _detector_for(init, settings.klt)
     try:
-        return track_video(video, model, init=init, options=options, source=source,
+        return track_video(video, model, init=init, options=settings.klt, source=source,
                            detector=detector, fixed=fixed, checkpoint=checkpoint)
     finally:
         if detector is not None:
@@ -77,7 +78,7 @@ def track_clip(job, out: str, model, options) -> Row:
     out : str
         ``DIR/NAME.npz``.
     model : MultilinearModel
-    options : TrackOptions
+    options : TrackerSettings
 
     Returns
     -------
@@ -115,7 +116,7 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
     out : str
         The clip's output (its progress files are named after it).
     model : MultilinearModel
-    options : TrackOptions
+    options : TrackerSettings
     first : ChunkResult, optional
         The first chunk's result (for every chunk but the first).
 
@@ -130,12 +131,13 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
     frames, fps = read_video(job.video, start=chunk.start, stop=chunk.stop)
     fixed = None
     init = job.init
+    tracker = options.choose(job.init)  # one tracker for every chunk of the clip
     if first is not None:
         if "identity" in first.track.weights:
             fixed = {"identity": first.track.weights["identity"][0]}
         init = "auto"  # the user's points are for the clip's first frame only
     track = _track(frames, model, init, options, source=str(job.video), fixed=fixed,
-                   checkpoint=partial_path(out, f".chunk{chunk.index:03d}"))
+                   checkpoint=partial_path(out, f".chunk{chunk.index:03d}"), tracker=tracker)
     return ChunkResult(dataclasses.replace(track, fps=fps), time.perf_counter() - t0)
 
 

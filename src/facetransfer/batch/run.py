@@ -178,7 +178,9 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     out_dir : path-like
     model : MultilinearModel
     client : distributed.Client
-    options : TrackOptions, optional
+    options : TrackerSettings or TrackOptions, optional
+        The tracker and its options (default: as ``facetransfer track``); bare
+        ``TrackOptions`` are the klt tracker's, with the tracker chosen per clip.
     chunk : int
         Clips longer than this many frames are tracked in overlapping chunks in parallel and
         joined (:mod:`facetransfer.batch.chunks`); 0 = every clip in one task.
@@ -193,9 +195,11 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     -------
     BatchResult
     """
+    from ..track.settings import TrackerSettings
     from ..track.tracker import TrackOptions
 
-    options = options or TrackOptions()
+    if not isinstance(options, TrackerSettings):
+        options = TrackerSettings(klt=options or TrackOptions())
     if chunk < 0:
         raise BatchError(f"--chunk must be >= 0 (0 = never split), got {chunk}")
     if chunk:

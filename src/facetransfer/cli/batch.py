@@ -16,6 +16,7 @@ from __future__ import annotations
 import sys
 
 from ..errors import FaceTransferError
+from .common import resolve_model
 
 
 def _cluster_options(p) -> None:
@@ -35,22 +36,11 @@ def _cluster_options(p) -> None:
 
 
 def _track_options(p) -> None:
-    """The options of ``facetransfer track`` that shape the track (same defaults)."""
-    from ..track.tracker import TrackOptions
+    """The options of ``facetransfer track`` that shape the track (the same definitions)."""
+    from .track import add_track_options
 
-    d = TrackOptions()
-    g = p.add_argument_group("tracking (as `facetransfer track`)")
-    g.add_argument("--init", default="auto",
-                   help='first-frame feature points of the VIDEO arguments: "auto" (MediaPipe) '
-                   "or a POINTS.json (manifest rows: an init column)")
-    g.add_argument("--passes", type=int, default=d.passes, help="passes through the video")
-    g.add_argument("--anchor", action="store_true",
-                   help="add detected landmarks of every frame as an extra term (less drift)")
-    g.add_argument("--keyframe", type=float, default=d.keyframe,
-                   help="weight of the KLT term against the first frame")
-    g.add_argument("--smooth", type=float, default=d.smooth,
-                   help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
-    g.add_argument("--points", type=int, default=d.n_points, help="tracked vertices per frame")
+    add_track_options(p.add_argument_group("tracking (as `facetransfer track`; a manifest's "
+                                           "init column gives per-clip --init points)"))
 
 
 def register(sub) -> None:
@@ -112,30 +102,6 @@ def _usage(parser) -> int:
     return 2
 
 
-def _load_model(path):
-    from ..default_model import load_default_model
-    from ..model import load_model
-
-    if path:
-        return load_model(path)
-    from tqdm import tqdm
-
-    bar = None
-
-    def progress(done, total):
-        nonlocal bar
-        if bar is None:
-            bar = tqdm(total=total, desc="default model", unit="identity", leave=False)
-        bar.update(done - bar.n)
-
-    try:
-        return load_default_model(progress=progress,
-                                  announce=lambda m: print(m, file=sys.stderr))
-    finally:
-        if bar is not None:
-            bar.close()
-
-
 def _run(args, what: str, n_jobs: int, call) -> int:
     """Open the cluster, run ``call(client, progress)``, report; exit 1 if a clip failed."""
     from tqdm import tqdm
@@ -181,16 +147,15 @@ def _run(args, what: str, n_jobs: int, call) -> int:
 def run_track(args) -> int:
     from ..batch import batch_track, clip_jobs
     from ..track.init import require_landmarks
-    from ..track.tracker import TrackOptions
+    from .track import track_settings
 
     if not args.videos and not args.manifest:
         raise FaceTransferError("give VIDEO files or --manifest clips.csv")
     # duplicate names are refused before anything runs
     jobs = clip_jobs(args.videos, args.manifest, init=args.init)
-    opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
-                       n_points=args.points, keyframe=args.keyframe)  # validates the options
+    opt = track_settings(args)  # validates the options
     _check_cluster_args(args)
-    model = _load_model(args.model)
+    model = resolve_model(args.model)
     require_landmarks(model)
     return _run(args, "track", len(jobs), lambda client, progress: batch_track(
         jobs, args.out, model, client=client, options=opt, chunk=args.chunk,
@@ -204,7 +169,7 @@ def run_transfer(args) -> int:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
     jobs = pair_jobs(args.manifest)
     _check_cluster_args(args)
-    model = _load_model(args.model)
+    model = resolve_model(args.model)
     settings = {"texture": args.texture, "blend": args.blend, "mouth": args.mouth,
                 "align": args.align, "max_frames": args.max_frames,
                 "track_method": args.tracker, "speed": args.speed}

@@ -19,6 +19,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..default_model import dataset_ranks as default_ranks  # the recipe ranks
 from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
 
@@ -96,12 +97,6 @@ def _tqdm_progress(desc: str) -> tuple[Callable[[int, int], None], Callable[[], 
 
 
 # --------------------------------------------------------------------------------- build
-def default_ranks(dataset) -> dict[str, int]:
-    """Recipe ranks (ICT data sets: bilinear 9/6, trilinear 16/4/4) clipped to the mode sizes;
-    empty (full ranks) for other data sets."""
-    rec = dict(dataset.provenance.get("default_ranks") or {})
-    sizes = dict(zip(dataset.mode_names, dataset.shape))
-    return {m: min(int(r), sizes[m]) for m, r in rec.items() if m in sizes}
 
 
 def _fill_missing(dataset, method: str, seed: int):

@@ -29,11 +29,48 @@ def partial_path(out) -> Path:
     return p.with_name(p.stem + ".partial.npz")
 
 
-def register(sub) -> None:
-    """Add ``track`` to the facetransfer parser."""
+def add_track_options(p) -> None:
+    """The options that shape a track (``track`` and ``batch track``; defaults from the
+    option classes)."""
     from ..track.tracker import TrackOptions
 
     d = TrackOptions()
+    p.add_argument("--tracker", choices=("capture", "klt"), default=None,
+                   help="default capture (klt when --init gives points): capture: the model "
+                   "fitted to MediaPipe's landmarks and their optical flow on every frame, "
+                   "identity from the whole clip, ARKit activations "
+                   "(facetransfer.track.capture); klt: the paper's model-based optical-flow "
+                   "tracker from the first frame (the options marked [klt])")
+    p.add_argument("--init", default="auto",
+                   help='[klt] first-frame feature points: "auto" (MediaPipe) or a JSON file '
+                   '{"points": {"36": [x, y], ...}} keyed by iBUG-68 number')
+    p.add_argument("--passes", type=int, default=d.passes, help="[klt] passes through the video")
+    p.add_argument("--anchor", action="store_true",
+                   help="[klt] add detected landmarks of every frame as an extra term (less "
+                   "drift)")
+    p.add_argument("--keyframe", type=float, default=d.keyframe,
+                   help="[klt] weight of the KLT term against the first frame (less drift; 0 = "
+                   "the paper's frame-to-frame tracking only)")
+    p.add_argument("--smooth", type=float, default=d.smooth,
+                   help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
+    p.add_argument("--points", type=int, default=d.n_points,
+                   help="[klt] tracked vertices per frame")
+
+
+def track_settings(args):
+    """:class:`~facetransfer.track.settings.TrackerSettings` from :func:`add_track_options`'s
+    arguments (validated)."""
+    from ..track.capture import CaptureOptions
+    from ..track.settings import TrackerSettings
+    from ..track.tracker import TrackOptions
+
+    klt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
+                       n_points=args.points, keyframe=args.keyframe)
+    return TrackerSettings(args.tracker, klt, CaptureOptions(smooth=args.smooth))
+
+
+def register(sub) -> None:
+    """Add ``track`` to the facetransfer parser."""
     p = sub.add_parser(
         "track", help="track a face in a video: pose and model weights per frame (§5)",
         description="Track a face through a video with a multilinear model (Vlasic et al. "
@@ -42,23 +79,7 @@ def register(sub) -> None:
     p.add_argument("video", metavar="VIDEO", help="input video")
     p.add_argument("--model", help=MODEL_HELP + " (with landmarks)")
     p.add_argument("--out", help="track file to write (.npz)")
-    p.add_argument("--tracker", choices=("capture", "klt"), default=None,
-                   help="default capture (klt when --init gives points): capture: the model fitted to MediaPipe's landmarks and their optical "
-                   "flow on every frame, identity from the whole clip, ARKit activations "
-                   "(facetransfer.track.capture); klt: the paper's model-based optical-flow "
-                   "tracker from the first frame (the options below marked [klt])")
-    p.add_argument("--init", default="auto",
-                   help='[klt] first-frame feature points: "auto" (MediaPipe) or a JSON file '
-                   '{"points": {"36": [x, y], ...}} keyed by iBUG-68 number')
-    p.add_argument("--passes", type=int, default=d.passes, help="[klt] passes through the video")
-    p.add_argument("--anchor", action="store_true",
-                   help="[klt] add detected landmarks of every frame as an extra term (less drift)")
-    p.add_argument("--keyframe", type=float, default=d.keyframe,
-                   help="[klt] weight of the KLT term against the first frame (less drift; 0 = the "
-                   "paper's frame-to-frame tracking only)")
-    p.add_argument("--smooth", type=float, default=d.smooth,
-                   help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
-    p.add_argument("--points", type=int, default=d.n_points, help="[klt] tracked vertices per frame")
+    add_track_options(p)
     p.add_argument("--max-frames", type=int, default=None, help="track only the first N frames")
     p.add_argument("--overlay", help="also write a video with the fitted mesh drawn (.mp4, "
                    "or an image sequence frames/%%05d.png)")
@@ -83,7 +104,7 @@ def run(args) -> int:
     from ..io.video import check_video_output, video_info
     from ..track.overlay import write_overlay
     from ..track.result import Track
-    from ..track.tracker import TrackOptions, frame_source
+    from ..track.tracker import frame_source
 
     if args.from_track is None and not args.out:
         raise FaceTransferError("--out is required (the track file to write)")
@@ -103,12 +124,8 @@ def run(args) -> int:
         check_not_input(args.overlay, [args.out, partial_path(args.out)])
     if args.out:
         check_not_input(partial_path(args.out), inputs)
-    opt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
-                       n_points=args.points, keyframe=args.keyframe)   # validates the options
-    tracker = args.tracker or ("capture" if args.init == "auto" else "klt")
-    if tracker == "capture" and args.init != "auto":
-        raise FaceTransferError("--init POINTS is an option of --tracker klt (capture "
-                                "detects the face on every frame)")
+    settings = track_settings(args)                                   # validates the options
+    tracker = settings.choose(args.init)
     video_info(args.video)  # unreadable / empty video: one line, before any work
     if args.from_track is None and tracker == "capture" and _model_on_disk(args.model):
         # the capture tracker needs the model only after the detections: load it meanwhile
@@ -135,9 +152,9 @@ def run(args) -> int:
             bar.update(done - bar.n)
 
         if tracker == "capture":
-            track, model = _capture(args, model, progress, bars)
+            track, model = _capture(args, model, settings.capture, progress, bars)
         else:
-            track = _track_klt(args, model, opt, progress, bars)
+            track = _track_klt(args, model, settings.klt, progress, bars)
         track.save(args.out, overwrite=args.overwrite)
         n_lost = int(track.lost.sum())
         print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"
@@ -174,7 +191,7 @@ def _checked_model(path):
     return model
 
 
-def _capture(args, model, progress, bars):
+def _capture(args, model, options, progress, bars):
     """The capture tracker; ``model`` may be a Future still loading. Returns (track, model)."""
     from ..track.capture import capture_detections, detect_video
 
@@ -183,8 +200,8 @@ def _capture(args, model, progress, bars):
                                            progress=progress, source=str(args.video))
         if isinstance(model, Future):
             model = model.result()
-        return capture_detections(det, model, fps=fps, frame_size=size, progress=progress,
-                                  source=src), model
+        return capture_detections(det, model, options=options, fps=fps, frame_size=size,
+                                  progress=progress, source=src), model
     finally:
         for b in bars.values():
             b.close()

@@ -187,6 +187,8 @@ class _Shape:
             self.size = len(self.used)
             self.x0 = np.zeros(self.size)
             self.ridge = activation_prior_scale()[self.used]                   # (K,)
+            self.u0, D = activation_basis(self.model)
+            self.Du = D[self.used]                                             # (K, r)
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
             self.sizes = [model.ranks[model.mode_index(m)] for m in self.per_frame]
@@ -204,15 +206,12 @@ class _Shape:
         return np.moveaxis(self.model.mode_basis(mode, weights), 2, 0)
 
     def weights(self, x: np.ndarray) -> dict:
-        """Model weights of every per-frame mode for parameters ``x``."""
+        """Model weights of every per-frame mode for parameters ``x`` ``(..., size)``."""
         if self.arkit:
-            u0, D = activation_basis(self.model)
-            a = np.zeros(len(ARKIT_NAMES))
-            a[self.used] = x
-            return {"expression": u0 + a @ D}
+            return {"expression": self.u0 + x @ self.Du}                   # Eq. (A)
         out, i = {}, 0
         for m, r in zip(self.per_frame, self.sizes):
-            out[m] = x[i:i + r]
+            out[m] = x[..., i:i + r]
             i += r
         return out
 
@@ -525,7 +524,7 @@ def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
         X = wx["x"]
         if shape.arkit:
             X = np.clip(X, 0.0, 1.0)
-    w = {m: np.stack([shape.weights(x)[m] for x in X]) for m in shape.per_frame}
+    w = shape.weights(X)                                                  # (F, r) per mode
     if shape.id_name:
         w[shape.id_name] = np.tile(shape.identity, (F, 1))
     res = np.array([s_.residual for s_ in full])
@@ -574,7 +573,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
                                                   max_frames=max_frames, progress=progress,
                                                   source=source)
     else:
-        fps, size, src, _, n = _open(video, max_frames, source)
+        fps, size, src, _, n, _ = _open(video, max_frames, source)
         if n is not None and detections.n_frames != n:
             raise TrackError(f"detections have {detections.n_frames} frames, the video {n}")
     return capture_detections(detections, model, options=options, fps=fps, frame_size=size,
@@ -589,8 +588,7 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     Needs no model, so a caller may load the model meanwhile.
     """
     prog = progress or (lambda stage, done, total: None)
-    fps, size, src, frames, n = _open(video, max_frames, source)
-    total = n if n is not None else _container_count(video)  # for the progress bar only
+    fps, size, src, frames, n, total = _open(video, max_frames, source)
     own = None
     if detector is None:
         detector = own = VideoLandmarker(fps=fps)
@@ -603,23 +601,19 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     return det, fps, size, src
 
 
-def _container_count(video) -> int:
-    """The frame count the container states (may be approximate; 0 if unknown)."""
-    from ..io.video import video_info
-
-    return max(int(video_info(video).n_frames), 0)
-
-
 def _open(video, max_frames, source):
-    """(fps, (W, H), source, frame iterator, frame count or None) of a path or an array."""
+    """``(fps, (W, H), source, frame iterator, frame count or None, count for a progress bar)``
+    of a path (the container's count, maybe approximate) or an array."""
     if isinstance(video, np.ndarray) or (isinstance(video, (list, tuple))):
         arr = np.asarray(video)
         if arr.ndim != 4 or arr.shape[-1] != 3 or arr.shape[0] == 0:
             raise VideoError(f"frames must be (F, H, W, 3) RGB with F >= 1, got {arr.shape}")
         arr = arr[:max_frames] if max_frames is not None else arr
-        return 25.0, (arr.shape[2], arr.shape[1]), source or "", iter(arr), arr.shape[0]
+        n = arr.shape[0]
+        return 25.0, (arr.shape[2], arr.shape[1]), source or "", iter(arr), n, n
     from ..io.video import iter_frames, video_info
 
     info = video_info(video)
+    total = max_frames if max_frames is not None else max(int(info.n_frames), 0)
     return (info.fps, info.size, source if source is not None else str(video),
-            iter_frames(video, stop=max_frames), max_frames)
+            iter_frames(video, stop=max_frames), max_frames, total)

@@ -17,6 +17,7 @@ import cv2
 import numpy as np
 
 from ..errors import ShapeError
+from .init import MediaPipeDetector, create_landmarker
 from .landmarks import mediapipe_to_ibug
 
 __all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow"]
@@ -68,7 +69,7 @@ class ClipDetections:
         return cls(P, np.full_like(P, np.nan))
 
 
-class VideoLandmarker:
+class VideoLandmarker(MediaPipeDetector):
     """MediaPipe Face Landmarker (Tasks API) in VIDEO running mode: 478 points per frame.
 
     Video mode tracks the face between frames inside MediaPipe, which is faster than detecting
@@ -76,36 +77,14 @@ class VideoLandmarker:
     """
 
     def __init__(self, model_path: str | os.PathLike | None = None, *, fps: float = 30.0) -> None:
-        from .init import create_landmarker
-
         self._lm = create_landmarker(model_path, video=True)
         self._dt = 1000.0 / max(float(fps), 1e-3)
         self._i = 0
 
-    def detect478(self, frame: np.ndarray) -> np.ndarray | None:
-        """The next frame's 478 landmarks in pixels (x, y), (478, 2), or None if no face."""
-        import mediapipe as mp
-
-        f = np.ascontiguousarray(frame, dtype=np.uint8)
+    def _detect(self, image):
         ts = int(round(self._i * self._dt))
         self._i += 1
-        res = self._lm.detect_for_video(mp.Image(image_format=mp.ImageFormat.SRGB, data=f), ts)
-        if not res.face_landmarks:
-            return None
-        H, W = f.shape[:2]
-        pts = np.array([(q.x, q.y) for q in res.face_landmarks[0]], dtype=np.float64)
-        return pts * (W, H) - 0.5
-
-    def close(self) -> None:
-        lm, self._lm = getattr(self, "_lm", None), None
-        if lm is not None:
-            lm.close()
-
-    def __enter__(self) -> "VideoLandmarker":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+        return self._lm.detect_for_video(image, ts)
 
 
 def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,

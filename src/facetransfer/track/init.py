@@ -155,12 +155,15 @@ class MediaPipeDetector:
         import mediapipe as mp
 
         f = np.ascontiguousarray(frame, dtype=np.uint8)
-        res = self._lm.detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=f))
+        res = self._detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=f))
         if not res.face_landmarks:
             return None
         H, W = f.shape[:2]
-        # normalised [0, 1] image coordinates -> pixel centres at integers
-        return np.array([[q.x * W - 0.5, q.y * H - 0.5] for q in res.face_landmarks[0]])
+        pts = np.array([(q.x, q.y) for q in res.face_landmarks[0]], dtype=np.float64)
+        return pts * (W, H) - 0.5  # normalised [0, 1] coordinates -> pixel centres at integers
+
+    def _detect(self, image):
+        return self._lm.detect(image)
 
     def detect(self, frame: np.ndarray) -> np.ndarray | None:
         """iBUG-68 points (68, 2) in pixels, or None if no face was found."""

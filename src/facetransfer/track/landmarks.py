@@ -67,13 +67,11 @@ def mediapipe_to_ibug(points: np.ndarray) -> np.ndarray:
     P = np.asarray(points, dtype=np.float64)
     if P.ndim < 2 or P.shape[-2] < 468:
         raise ShapeError(f"MediaPipe landmarks must be (..., 478, d), got {P.shape}")
-    nan = np.isnan(P)
-    if (nan.any(axis=(-2, -1)) & ~nan.all(axis=(-2, -1))).any():  # frames partly unknown
-        out = np.empty(P.shape[:-2] + (68, P.shape[-1]))
-        for i, idx in enumerate(MP_TO_IBUG):
-            out[..., i, :] = P[..., list(idx), :].mean(axis=-2)
-        return out
-    return np.einsum("im,...md->...id", _averaging(P.shape[-2]), P)  # NaN frames stay NaN
+    A = _averaging(P.shape[-2])                                            # (68, n)
+    out = np.einsum("im,...md->...id", A, np.nan_to_num(P))
+    unknown = np.einsum("im,...m->...i", A > 0, np.isnan(P).any(axis=-1)) > 0
+    out[unknown] = np.nan  # an iBUG point is unknown when any of its MediaPipe points is
+    return out
 
 
 @lru_cache(maxsize=2)
