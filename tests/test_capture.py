@@ -168,3 +168,21 @@ def test_dense_correspondence_puts_mediapipe_points_on_the_face(arkit_model):
     for mp_i, ibug in ((33, 36), (133, 39), (362, 42), (263, 45), (4, 30), (61, 48), (291, 54)):
         d = np.linalg.norm(pts[where[mp_i]] - V[m.landmarks[ibug]])
         assert d < 0.5, (mp_i, ibug, d)  # cm
+
+
+def test_cli_capture_removes_a_damaged_progress_file(data_dir, quick_model_path, tmp_path):
+    """The capture tracker does not resume, but an unreadable T.partial.npz (of an interrupted
+    klt run) is not left behind; a readable one is kept."""
+    from facetransfer.cli.main import main
+
+    out = tmp_path / "t.npz"
+    partial = tmp_path / "t.partial.npz"
+    partial.write_bytes(b"")
+    clip = str(data_dir / "video" / "face_2.mp4")
+    assert main(["track", clip, "--model", str(quick_model_path), "--out", str(out),
+                 "--max-frames", "5"]) == 0
+    assert out.is_file() and not partial.exists()
+    np.savez(partial, key=np.array("another run"))
+    assert main(["track", clip, "--model", str(quick_model_path), "--out", str(out),
+                 "--max-frames", "5", "--overwrite"]) == 0
+    assert partial.is_file()

@@ -194,7 +194,9 @@ def _checked_model(path):
 def _capture(args, model, options, progress, bars):
     """The capture tracker; ``model`` may be a Future still loading. Returns (track, model)."""
     from ..track.capture import capture_detections, detect_video
+    from ..track.checkpoint import discard_if_damaged
 
+    discard_if_damaged(partial_path(args.out))  # capture does not resume: only a damaged one goes
     try:
         det, fps, size, src = detect_video(args.video, max_frames=args.max_frames,
                                            progress=progress, source=str(args.video))
