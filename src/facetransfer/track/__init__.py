@@ -2,8 +2,10 @@
 
 Modules: :mod:`.result` (the :class:`Track` result and its file), :mod:`.camera` (weak-perspective
 pose, Eq. (7)), :mod:`.klt` (symmetric KLT terms, Eq. (6)), :mod:`.solver` (Eq. (8), (9)),
-:mod:`.landmarks` (MediaPipe-478 to iBUG-68), :mod:`.init` (§5.2), :mod:`.tracker` (passes),
-:mod:`.overlay` (drawing the fit on frames).
+:mod:`.landmarks` (MediaPipe-478 to iBUG-68), :mod:`.init` (§5.2), :mod:`.pair` (one frame pair,
+Eq. (6)-(9)), :mod:`.tracker` (initialisation, snap and passes), :mod:`.options` (its options),
+:mod:`.frames` (video frames), :mod:`.smooth` (temporal smoothing), :mod:`.overlay` (drawing the
+fit on frames).
 
 Typical use::
 

@@ -31,8 +31,7 @@ import numpy as np
 from ..errors import ShapeError
 
 __all__ = ["Pyramid", "build_pyramid", "window_offsets", "sample_windows", "klt_terms",
-           "klt_terms_at",
-           "solve_flow"]
+           "klt_terms_at", "solve_flow", "window_ncc", "robust_weights", "window_confidence"]
 
 
 @dataclass(frozen=True)
@@ -315,3 +314,52 @@ def klt_terms_at(image: np.ndarray, points: np.ndarray, win_i: np.ndarray, offse
        np.ascontiguousarray(offsets, np.float32), np.ascontiguousarray(weights, np.float32),
        np.ascontiguousarray(win_i, np.float32), Z, e, Jint)
     return Z, e, Jint
+
+
+# ------------------------------------------------------------------------------------ windows
+def _correlation_terms(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Numerator and denominator (n,) of the zero-mean normalised cross-correlation of window
+    pairs (n, m), in the windows' dtype."""
+    a = a - a.mean(1, keepdims=True)
+    b = b - b.mean(1, keepdims=True)
+    return (a * b).sum(1), np.sqrt((a * a).sum(1) * (b * b).sum(1))
+
+
+def window_ncc(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Zero-mean normalised cross-correlation of window pairs, (n, m) x (n, m) -> (n,).
+
+    0 where either window is flat (no texture to correlate).
+    """
+    num, den = _correlation_terms(a, b)
+    return np.divide(num, den, out=np.zeros(a.shape[0], np.float64), where=den > 1e-10)
+
+
+def robust_weights(a: np.ndarray, b: np.ndarray, level: float) -> np.ndarray:
+    """Per-point weights in [0, 1] from the windows' correlation (1 above ``level + 0.3``).
+
+    Parameters
+    ----------
+    a, b : (n, m)
+        Intensities of each point's window in the two frames.
+    level : float
+        Correlation at and below which a point gets no weight (0 = every weight 1).
+
+    Returns
+    -------
+    (n,) float64
+    """
+    if level <= 0:
+        return np.ones(a.shape[0])
+    return np.clip((window_ncc(a, b) - level) / 0.3, 0.0, 1.0)
+
+
+def window_confidence(a: np.ndarray, b: np.ndarray) -> float:
+    """Median zero-mean normalised cross-correlation of window pairs (n, m), clipped to [0, 1].
+
+    Flat windows are left out; 0 when every window is flat.
+    """
+    num, den = _correlation_terms(a, b)
+    ok = den > 1e-10
+    if not ok.any():
+        return 0.0
+    return float(np.clip(np.median(num[ok] / den[ok]), 0.0, 1.0))

@@ -16,6 +16,11 @@ predicted state, zero-phase temporal smoothing (no lag), a per-frame confidence 
 cross-correlation of the tracked windows) and recovery when the face is lost
 (re-initialisation from the detector; the frames are marked). ``TrackOptions(keyframe=0,
 robust=0)`` is the paper's frame-to-frame tracker.
+
+This module runs the passes (:func:`track_video`); one frame pair is solved by
+:class:`~facetransfer.track.pair.FaceTracker` (:mod:`.pair`), the options are
+:class:`~facetransfer.track.options.TrackOptions`, the frames come from :mod:`.frames` and the
+smoothing from :mod:`.smooth`.
 """
 
 from __future__ import annotations
@@ -23,580 +28,25 @@ from __future__ import annotations
 import logging
 import os
 import time
-from dataclasses import dataclass, replace
-from typing import Callable, Iterator, Sequence
+from dataclasses import dataclass, field, replace
 
-import cv2
 import numpy as np
 
 from ..errors import TrackError, VideoError
-from .camera import (N_POSE, Pose, compose, fit_affine_pose, orthonormalize, pose_jacobian,
-                     project, so3_log)
+from .camera import Pose, fit_affine_pose, orthonormalize, project
+from .frames import FrameSource, frame_source
 from .init import check_init_points, fit_landmarks, points_to_array, require_landmarks
-from .klt import (Pyramid, build_pyramid, klt_terms_at, level_coords, sample_windows,
-                  window_offsets)
-from .landmarks import IBUG_WEIGHTS
+from .options import Progress, TrackOptions
+from .pair import FaceTracker
 from .result import Track
-from .solver import (BasisCache, FrameState, Prior, fit_points, flow_normal_equations,
-                     normal_equations,
-                     point_terms, prior_terms, schur_reduce, solve_step,
-                     weight_jacobian)
+from .smooth import smooth_track
+from .solver import FrameState, fit_points
 
 log = logging.getLogger(__name__)
 
+# FaceTracker, TrackOptions, smooth_track and frame_source live in .pair, .options, .smooth and
+# .frames; they stay importable from here.
 __all__ = ["TrackOptions", "FaceTracker", "track_video", "smooth_track", "frame_source"]
-
-Progress = Callable[[str, int, int], None]
-
-
-@dataclass(frozen=True)
-class TrackOptions:
-    """Settings of :func:`track_video` (defaults defined once here; the CLI uses them).
-
-    Attributes
-    ----------
-    passes : int
-        Passes through the video (§5.1: "several passes").
-    levels : int
-        Pyramid levels (multi-scale).
-    iterations : int
-        Gauss-Newton iterations per level (each cycles through the per-frame modes).
-    n_points : int
-        Tracked vertices per frame pair (about a thousand in the paper).
-    half_window : int
-        KLT window half-size in pixels of each level (window ``2 h + 1`` square).
-    prior : float
-        Weight of the training-distribution prior in the per-frame solves (mean squared pixel
-        error per unit of Mahalanobis distance, for a face 100 pixels between the outer eye
-        corners; scaled with the face size).
-    identity_prior : float
-        Weight of the prior in the per-pass identity solve.
-    init_prior : float
-        Prior weight of the landmark fit at initialisation (see :func:`fit_landmarks`).
-    init_weight : float
-        Weight of the initial landmarks in the identity solve, in frame pairs.
-    snap_frames : int
-        Frames tracked back and forth to snap the initial alignment (0 = off).
-    snap_rounds : int
-    anchor : bool
-        Add detector landmarks of every frame as an extra term (needs a detector).
-    anchor_weight : float
-        Weight of the anchor term relative to the flow term.
-    robust : float
-        Points whose window correlation between the frames is below this get no weight
-        (occlusions, the mouth interior, the silhouette); full weight above ``robust + 0.3``.
-        0 = off.
-    tolerance : float
-        A level's iterations stop when a cycle moves the vertices by less than this (rms, in
-        pixels of that level).
-    keyframe : float
-        Weight of a second KLT term against the first tracked frame (on the two finest
-        levels; beyond the paper, reduces drift; 0 = off).
-    temporal : float
-        Damping toward the predicted state (per pixel of rms vertex motion per parameter),
-        stabilising directions the flow does not determine.
-    smooth : float
-        Sigma (frames) of the zero-phase Gaussian smoothing of pose and per-frame weights
-        (0 = off).
-    lost_threshold : float
-        Frames with confidence below this are lost.
-    recover : bool
-        Re-initialise from the detector when the face is lost.
-    visibility_scale : float
-        Resolution factor of the visibility raster.
-    reselect : int
-        Choose the tracked vertices (visibility raster, texture strength, spread) anew every
-        ``reselect`` frame pairs; in between the last choice is reused with its points
-        re-projected, unless the head turned by more than ``reselect_degrees`` or the scale
-        changed by more than 5 % since (1 = every pair, as in the paper).
-    reselect_degrees : float
-        Head rotation (degrees) since the last choice that forces a new one.
-    """
-
-    passes: int = 2
-    levels: int = 3
-    iterations: int = 3
-    n_points: int = 1000
-    half_window: int = 4
-    prior: float = 0.02
-    identity_prior: float = 0.5
-    init_prior: float = 1.0
-    init_weight: float = 10.0
-    snap_frames: int = 8
-    snap_rounds: int = 1
-    anchor: bool = False
-    anchor_weight: float = 0.05
-    temporal: float = 0.02
-    keyframe: float = 0.5
-    tolerance: float = 0.02
-    robust: float = 0.4
-    smooth: float = 0.0
-    lost_threshold: float = 0.3
-    recover: bool = True
-    visibility_scale: float = 0.25
-    reselect: int = 1
-    reselect_degrees: float = 3.0
-
-    def __post_init__(self) -> None:
-        for name in ("passes", "levels", "iterations", "n_points", "half_window", "reselect"):
-            if int(getattr(self, name)) < 1:
-                raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("prior", "identity_prior", "init_prior", "init_weight", "anchor_weight",
-                     "smooth", "snap_frames", "keyframe", "temporal", "robust",
-                     "reselect_degrees"):
-            if not getattr(self, name) >= 0:
-                raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
-
-
-# ------------------------------------------------------------------------------------ frames
-class _Frames:
-    """Random and sequential access to video frames (a path streams, an array is indexed)."""
-
-    def __init__(self, src, max_frames: int | None = None) -> None:
-        self.path = None
-        if isinstance(src, np.ndarray) or (isinstance(src, Sequence) and not isinstance(src, str)):
-            arr = np.asarray(src)
-            if arr.ndim != 4 or arr.shape[-1] != 3 or arr.shape[0] == 0:
-                raise VideoError(f"frames must be (F, H, W, 3) RGB with F >= 1, got {arr.shape}")
-            if max_frames is not None:
-                arr = arr[:max_frames]
-            self.array = arr
-            self.n = arr.shape[0]
-            self.size = (arr.shape[2], arr.shape[1])
-            self.fps = 25.0
-        else:
-            from ..io.video import iter_frames, video_info
-
-            info = video_info(src)
-            self.path = str(src)
-            self.array = None
-            self.fps = info.fps
-            self.size = info.size
-            # the container's count can be approximate: count by decoding
-            n = 0
-            for _ in iter_frames(src, stop=max_frames):
-                n += 1
-            if n == 0:
-                raise VideoError(f"video {src} has no frames")
-            self.n = n
-
-    def iterate(self, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
-        stop = self.n if stop is None else min(stop, self.n)
-        if self.array is not None:
-            yield from self.array[start:stop]
-            return
-        from ..io.video import iter_frames
-
-        yield from iter_frames(self.path, start=start, stop=stop)
-
-    def get(self, i: int) -> np.ndarray:
-        return next(self.iterate(i, i + 1))
-
-
-def frame_source(src, max_frames: int | None = None) -> _Frames:
-    """Wrap a video path or an ``(F, H, W, 3)`` array for the tracker."""
-    return _Frames(src, max_frames)
-
-
-# ------------------------------------------------------------------------------------ tracker
-@dataclass
-class _PairResult:
-    state: FrameState
-    confidence: float
-    identity_system: tuple | None
-    n_points: int
-
-
-class FaceTracker:
-    """The tracker's state between frames: the model, options, caches and the identity.
-
-    Parameters
-    ----------
-    model : MultilinearModel
-    frame_size : (W, H)
-    options : TrackOptions
-    detector : object with ``detect(frame) -> (68, 2) or None``, optional
-    """
-
-    def __init__(self, model, frame_size, options: TrackOptions | None = None, *,
-                 detector=None, fixed: tuple[str, ...] = ()) -> None:
-        self.model = model
-        self.opt = options or TrackOptions()
-        self.size = (int(frame_size[0]), int(frame_size[1]))
-        self.detector = detector
-        self.lm_vertices = require_landmarks(model)
-        self.fixed = tuple(fixed)
-        # clip-constant modes: the identity and any mode given by the caller
-        self.constant = tuple(m for m in model.mode_names if m == "identity" or m in self.fixed)
-        self.per_frame = tuple(m for m in model.mode_names if m not in self.constant)
-        # constant modes solved once per pass (§5.1)
-        self.accumulated = tuple(m for m in self.constant if m not in self.fixed)
-        self.priors = {m: Prior.from_model(model, m) for m in model.mode_names}
-        self.offsets, self.wwin = window_offsets(self.opt.half_window)
-        Xl = model.synthesize(model.default_weights(), vertices=self.lm_vertices[[36, 45]])
-        self.model_iod = float(np.linalg.norm(Xl[0] - Xl[1]))  # outer eye corners, model units
-        self._cache: BasisCache | None = None
-        self._cache_key = None
-        self._selection: tuple | None = None  # (vertices, pose, pairs since) for `reselect`
-        self.timings: dict[str, float] = {}
-        self.counts: dict[str, int] = {}
-
-    # ------------------------------------------------------------------ model evaluation
-    def cache(self, weights: dict) -> BasisCache:
-        key = tuple(np.asarray(weights[m]).tobytes() for m in self.constant)
-        if self._cache is None or self._cache_key != key:
-            self._cache = BasisCache(self.model, {m: weights[m] for m in self.constant})
-            self._cache_key = key
-        return self._cache
-
-    def pyramid(self, frame: np.ndarray) -> Pyramid:
-        return build_pyramid(frame, self.opt.levels)
-
-    # ------------------------------------------------------------------ vertex selection
-    def select_vertices(self, state: FrameState, pyr: Pyramid) -> tuple[np.ndarray, np.ndarray]:
-        """Visible, well-textured vertices spread over the face at this state.
-
-        Returns
-        -------
-        vertices : (k,) int64
-        points : (k, 2) float64
-            Their pixels in this frame.
-        """
-        from ..render import WeakPerspective, vertex_normals, vertex_visibility
-
-        V = self.cache(state.weights).shape(state.weights)            # (n, 3)
-        pose = state.pose
-        W, H = self.size
-        f = self.opt.visibility_scale
-        sw, sh = max(int(round(W * f)), 8), max(int(round(H * f)), 8)
-        fx, fy = sw / W, sh / H
-        ff = min(fx, fy)
-        cam = WeakPerspective(pose.scale * ff, pose.rotation,
-                              (pose.translation + 0.5) * ff - 0.5)
-        try:
-            vis = vertex_visibility(V, self.model.faces, cam, (sw, sh))
-        except ValueError:
-            vis = np.zeros(V.shape[0], bool)
-        N = vertex_normals(V, self.model.faces) @ pose.rotation[2]      # camera-facing part
-        p = project(V, pose.rotation, pose.scale, pose.translation)
-        m = self.opt.half_window * 2 + 2
-        inside = (p[:, 0] > m) & (p[:, 0] < W - 1 - m) & (p[:, 1] > m) & (p[:, 1] < H - 1 - m)
-        cand = np.flatnonzero(vis & (N > 0.3) & inside)
-        if cand.size == 0:
-            return cand, np.zeros((0, 2))
-        # texture strength: min eigenvalue of the structure tensor on level 1 (or 0)
-        lv = min(1, pyr.n_levels - 1)
-        img = pyr.levels[lv][..., 0]
-        eig = cv2.cornerMinEigenVal(img, 5, 3)
-        pl = level_coords(p[cand], lv)
-        xi = np.clip(np.rint(pl[:, 0]).astype(int), 0, img.shape[1] - 1)
-        yi = np.clip(np.rint(pl[:, 1]).astype(int), 0, img.shape[0] - 1)
-        score = eig[yi, xi]
-        k = self.opt.n_points
-        if cand.size <= k:
-            return cand, p[cand]
-        # spread: a grid over the face, the best-textured vertices of each cell first
-        lo, hi = p[cand].min(0), p[cand].max(0)
-        area = max(float(np.prod(hi - lo)), 1.0)
-        cell = max(np.sqrt(area / k) * 1.0, 1.0)
-        gx = ((p[cand, 0] - lo[0]) / cell).astype(np.int64)
-        gy = ((p[cand, 1] - lo[1]) / cell).astype(np.int64)
-        cid = gy * (gx.max() + 1) + gx
-        order = np.lexsort((-score, cid))
-        cs = cid[order]
-        first = np.r_[0, np.flatnonzero(np.diff(cs)) + 1]
-        rank = np.arange(cs.size) - np.repeat(first, np.diff(np.r_[first, cs.size]))
-        # rank within the cell first, then score
-        order2 = order[np.lexsort((-score[order], rank))]
-        chosen = cand[order2[:k]]
-        return chosen, p[chosen]
-
-    def _reuse_selection(self, state: FrameState):
-        """The last vertex choice re-projected at ``state`` (``TrackOptions.reselect``), or
-        ``(None, None)`` when a new choice is due."""
-        opt = self.opt
-        last = self._selection
-        if opt.reselect <= 1 or last is None:
-            return None, None
-        sel, pose, age = last
-        if age + 1 >= opt.reselect or sel.size == 0:
-            return None, None
-        turn = np.degrees(np.linalg.norm(so3_log(state.pose.rotation @ pose.rotation.T)))
-        if turn > opt.reselect_degrees or abs(np.log(state.pose.scale / pose.scale)) > 0.05:
-            return None, None
-        X = self.cache(state.weights).restrict(sel).shape(state.weights)
-        p = project(X, state.pose.rotation, state.pose.scale, state.pose.translation)
-        W, H = self.size
-        m = opt.half_window * 2 + 2
-        inside = (p[:, 0] > m) & (p[:, 0] < W - 1 - m) & (p[:, 1] > m) & (p[:, 1] < H - 1 - m)
-        if inside.mean() < 0.9:  # the face is leaving the frame: choose again
-            return None, None
-        self._selection = (sel, pose, age + 1)
-        return sel[inside], p[inside]
-
-    # ------------------------------------------------------------------ one frame pair
-    def track_pair(self, pyr0: Pyramid, pyr1: Pyramid, state0: FrameState, guess: FrameState, *,
-                   anchor: np.ndarray | None = None, accumulate: bool = False,
-                   key: tuple | None = None) -> _PairResult:
-        """Solve the pose and per-frame weights of the second frame of a pair (Eq. (6)-(9)).
-
-        Parameters
-        ----------
-        pyr0, pyr1 : Pyramid
-            Frames ``t`` (solved) and ``t + 1``.
-        state0 : FrameState
-            The solution at ``t``.
-        guess : FrameState
-            Starting point at ``t + 1``.
-        anchor : (68, 2), optional
-            Detector landmarks at ``t + 1`` (NaN where missing), an extra term.
-        accumulate : bool
-            Also return the identity's reduced system of this pair (§5.1).
-        key : (Pyramid, FrameState), optional
-            A key frame (the first tracked frame) and its solution: its windows give a second
-            KLT term for the same vertices (weight ``keyframe``), against drift.
-        """
-        opt = self.opt
-        t0 = _now()
-        sel, q = self._reuse_selection(state0)
-        if sel is None:
-            sel, q = self.select_vertices(state0, pyr0)
-            self._selection = (sel, state0.pose, 0)
-            self.counts["selections"] = self.counts.get("selections", 0) + 1
-        self._tick("select", t0)
-        if sel.size < 10:
-            return _PairResult(guess, 0.0, None, int(sel.size))
-        cache = self.cache(guess.weights).restrict(sel)    # model rows of the tracked vertices
-        pose = guess.pose
-        weights = {k: np.asarray(v, float).copy() for k, v in guess.weights.items()}
-        anc = None
-        if anchor is not None and opt.anchor_weight > 0:
-            ok = np.all(np.isfinite(anchor), axis=1)
-            if ok.sum() >= 4:
-                anc = (self.lm_vertices[ok], np.asarray(anchor, float)[ok], IBUG_WEIGHTS[ok])
-        wi = wj = None
-        q_key = None
-        if key is not None and opt.keyframe > 0:
-            kst = key[1]
-            Xk = self.cache(kst.weights).restrict(sel).shape(kst.weights)
-            q_key = project(Xk, kst.pose.rotation, kst.pose.scale, kst.pose.translation)
-        for lv in reversed(range(min(opt.levels, pyr0.n_levels))):
-            f = 0.5 ** lv
-            t1 = _now()
-            wi = sample_windows(pyr0.levels[lv], level_coords(q, lv), self.offsets)
-            wk = (sample_windows(key[0].levels[lv], level_coords(q_key, lv), self.offsets)
-                  if q_key is not None and lv <= 1 else None)
-            self._tick("sample", t1)
-            for _ in range(opt.iterations):
-                moved = 0.0
-                for m in self.per_frame:
-                    t1 = _now()
-                    B = cache.basis(m, weights)                           # Eq. (9), (k, 3, r)
-                    X = B @ weights[m]
-                    p = project(X, pose.rotation, pose.scale, pose.translation)
-                    Z, e, wj = klt_terms_at(pyr1.levels[lv], level_coords(p, lv), wi,
-                                            self.offsets, self.wwin)      # Eq. (6), level units
-                    self._tick("terms", t1)
-                    t1 = _now()
-                    rw = _robust_weights(wi[..., 0], wj, opt.robust)      # occlusion, mismatch
-                    if wk is not None:  # the key frame's view of the same vertices
-                        Zk, ek, wjk = klt_terms_at(pyr1.levels[lv], level_coords(p, lv), wk,
-                                                   self.offsets, self.wwin)
-                        rk = opt.keyframe * _robust_weights(wk[..., 0], wjk, 0.6)
-                        Z = rw[:, None, None] * Z + rk[:, None, None] * Zk
-                        e = rw[:, None] * e + rk[:, None] * ek
-                        rw = np.ones_like(rw)
-                    # level units -> full-resolution pixels: d_l = f d, so Z f², e f
-                    Z *= (f * f * rw)[:, None, None]
-                    e *= (f * rw)[:, None]
-                    A, b, G = self._flow_system(Z, e, X, B, pose, weights[m], m, anc,
-                                                weights, guess)
-                    d = _clip_step(solve_step(A, b), pose.scale)
-                    pose = compose(pose, d[:N_POSE])
-                    weights[m] = weights[m] + self.priors[m].Q @ d[N_POSE:]
-                    # G is the mean JᵀJ: dᵀ G d is the mean squared pixel motion of the step
-                    moved = max(moved, float(np.sqrt(max(d @ G @ d, 0.0))))
-                    self._tick("solve", t1)
-                if moved < opt.tolerance / f:  # converged on this level (rms pixel motion)
-                    break
-        state = FrameState(pose, weights)
-        # confidence: zero-mean normalised cross-correlation of the final windows (finest level)
-        X = cache.shape(weights)
-        p = project(X, pose.rotation, pose.scale, pose.translation)
-        Z, e, wj = klt_terms_at(pyr1.levels[0], p, wi, self.offsets, self.wwin)
-        conf = _confidence(wi[..., 0], wj)
-        rw = _robust_weights(wi[..., 0], wj, opt.robust)
-        Z *= rw[:, None, None]
-        e *= rw[:, None]
-        ident = None
-        if accumulate and self.accumulated:
-            ident = self._identity_system(Z, e, X, sel, state, anc)
-        self._tick("pair", t0)
-        self.counts["points"] = self.counts.get("points", 0) + int(sel.size)
-        return _PairResult(state, conf, ident, int(sel.size))
-
-    def _flow_system(self, Z, e, X, B, pose, w, mode, anc, weights, guess):
-        """Normal equations of one Gauss-Newton step for (pose, mode ``mode``), Eq. (8).
-
-        The flow term is normalised by ``Σ tr(Z) / 2`` (so it is a mean over well-textured
-        points in squared pixels), then the temporal damping toward ``guess``, the anchor
-        term and the prior are added. Returns ``(A, b, G)``, ``G`` the mean ``JᵀJ``.
-        """
-        Q = self.priors[mode].Q
-        A, b, G = flow_normal_equations(X, B @ Q, pose, Z, e)   # Σ JᵀZJ, Σ Jᵀe, Σ JᵀJ
-        G /= X.shape[0]
-        norm = max(float(Z[:, 0, 0].sum() + Z[:, 1, 1].sum()) / 2.0, 1e-12)   # Σ tr(Z) / 2
-        A /= norm
-        b /= norm
-        if self.opt.temporal > 0:
-            # stay near the prediction in directions the flow leaves undetermined: each
-            # parameter costs `temporal` per pixel (rms over the points) it moves the vertices
-            D = self.opt.temporal * np.diag(G)
-            r = np.concatenate([so3_log(pose.rotation @ guess.pose.rotation.T),
-                                [np.log(pose.scale / guess.pose.scale)],
-                                pose.translation - guess.pose.translation,
-                                Q.T @ (w - guess.weights[mode])])
-            A[np.diag_indices_from(A)] += D
-            b -= D * r
-        if anc is not None:
-            Aa, ba = self._anchor_system(anc, pose, mode, weights, Q)
-            A += self.opt.anchor_weight * Aa
-            b += self.opt.anchor_weight * ba
-        if self.opt.prior > 0:
-            # squared pixels per unit of Mahalanobis distance, for a face 100 pixels between the
-            # outer eye corners (so the balance does not change with the image resolution)
-            lam = self.opt.prior * (pose.scale * self.model_iod / 100.0) ** 2
-            Ap, bp = prior_terms(w, self.priors[mode], lam)
-            A += Ap
-            b += bp
-        return A, b, G
-
-    def _anchor_system(self, anc, pose, mode, weights, Q):
-        v, T, pw = anc
-        B = self.model.mode_basis(mode, weights, vertices=v)
-        X = B @ weights[mode]
-        p = project(X, pose.rotation, pose.scale, pose.translation)
-        J = np.concatenate([pose_jacobian(X @ pose.rotation.T, pose.scale),
-                            weight_jacobian(B @ Q, pose.rotation, pose.scale)], axis=2)
-        Z, e = point_terms(p, T, pw / pw.sum())
-        return normal_equations(J, Z, e)
-
-    def _identity_system(self, Z, e, X, sel, state, anc):
-        """Identity block of this pair's system, pose eliminated (Schur complement)."""
-        m = self.accumulated[0]
-        pose, weights = state.pose, state.weights
-        Q = self.priors[m].Q
-        B = self.model.mode_basis(m, weights, vertices=sel)
-        J = np.concatenate([pose_jacobian(X @ pose.rotation.T, pose.scale),
-                            weight_jacobian(B @ Q, pose.rotation, pose.scale)], axis=2)
-        A, b = normal_equations(J, Z, e)
-        norm = max(float(np.trace(Z.sum(0))) / 2.0, 1e-12)
-        A /= norm
-        b /= norm
-        if anc is not None:
-            Aa, ba = self._anchor_system(anc, pose, m, weights, Q)
-            A += self.opt.anchor_weight * Aa
-            b += self.opt.anchor_weight * ba
-        return schur_reduce(A, b)
-
-    def landmark_identity_system(self, state: FrameState, landmarks: np.ndarray, weight: float):
-        """Identity block of the landmark fit at one frame (initialisation term)."""
-        m = self.accumulated[0]
-        ok = np.all(np.isfinite(landmarks), axis=1)
-        anc = (self.lm_vertices[ok], np.asarray(landmarks, float)[ok], IBUG_WEIGHTS[ok])
-        iod = _iod(landmarks)
-        Q = self.priors[m].Q
-        A, b = self._anchor_system(anc, state.pose, m, state.weights, Q)
-        # landmark errors in units of the face size: comparable to the normalised flow term
-        sc = (50.0 / max(iod, 1.0)) ** 2
-        S, c = schur_reduce(A * sc, b * sc)
-        return S * weight, c * weight
-
-    def solve_identity(self, systems: list, weights: dict) -> tuple[np.ndarray, float]:
-        """Solve the accumulated identity systems once (§5.1); returns (new w, scale factor)."""
-        m = self.accumulated[0]
-        w = np.asarray(weights[m], float)
-        S = sum(s for s, _ in systems)
-        c = sum(c for _, c in systems)
-        Ap, bp = prior_terms(w, self.priors[m], self.opt.identity_prior * len(systems), 0)
-        y = solve_step(S + Ap, c + bp)
-        return w + self.priors[m].Q @ y, 1.0
-
-    def _tick(self, name: str, t0: float) -> None:
-        """Accumulate wall seconds since ``t0`` (from :func:`_now`) under ``name``."""
-        self.timings[name] = self.timings.get(name, 0.0) + time.perf_counter() - t0
-        self.counts[name] = self.counts.get(name, 0) + 1
-
-
-def _now() -> float:
-    return time.perf_counter()
-
-
-def _iod(L: np.ndarray) -> float:
-    L = np.asarray(L, float)
-    if np.all(np.isfinite(L[[36, 45]])):
-        return float(np.linalg.norm(L[36] - L[45]))
-    ok = np.all(np.isfinite(L), axis=1)
-    return float(np.ptp(L[ok], axis=0).max() / 2) if ok.any() else 1.0
-
-
-def _clip_step(d: np.ndarray, scale: float, *, max_rot: float = 0.15, max_log_scale: float = 0.1,
-               max_shift: float = 40.0) -> np.ndarray:
-    """Trust region of one Gauss-Newton step: rotation (rad), log-scale, translation (pixels)."""
-    d = d.copy()
-    n = float(np.linalg.norm(d[:3]))
-    if n > max_rot:
-        d[:3] *= max_rot / n
-    d[3] = np.clip(d[3], -max_log_scale, max_log_scale)
-    n = float(np.linalg.norm(d[4:6]))
-    if n > max_shift:
-        d[4:6] *= max_shift / n
-    return d
-
-
-def _ncc(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Zero-mean normalised cross-correlation of window pairs, (n, m) x (n, m) -> (n,)."""
-    a = a - a.mean(1, keepdims=True)
-    b = b - b.mean(1, keepdims=True)
-    den = np.sqrt((a * a).sum(1) * (b * b).sum(1))
-    return np.divide((a * b).sum(1), den, out=np.zeros(a.shape[0], np.float64), where=den > 1e-10)
-
-
-def _robust_weights(a: np.ndarray, b: np.ndarray, level: float) -> np.ndarray:
-    """Per-point weights in [0, 1] from the windows' correlation (1 above ``level + 0.3``)."""
-    if level <= 0:
-        return np.ones(a.shape[0])
-    return np.clip((_ncc(a, b) - level) / 0.3, 0.0, 1.0)
-
-
-def _confidence(a: np.ndarray, b: np.ndarray) -> float:
-    """Median zero-mean normalised cross-correlation of window pairs, clipped to [0, 1]."""
-    a = a - a.mean(1, keepdims=True)
-    b = b - b.mean(1, keepdims=True)
-    den = np.sqrt((a * a).sum(1) * (b * b).sum(1))
-    ok = den > 1e-10
-    if not ok.any():
-        return 0.0
-    ncc = (a * b).sum(1)[ok] / den[ok]
-    return float(np.clip(np.median(ncc), 0.0, 1.0))
-
-
-def _relative_guess(cur: FrameState, prev_a: FrameState, prev_b: FrameState) -> FrameState:
-    """``cur`` moved by the motion ``prev_a -> prev_b`` of an earlier pass."""
-    Rd = prev_b.pose.rotation @ prev_a.pose.rotation.T
-    pose = Pose(orthonormalize(Rd @ cur.pose.rotation),
-                cur.pose.scale * prev_b.pose.scale / prev_a.pose.scale,
-                cur.pose.translation + prev_b.pose.translation - prev_a.pose.translation)
-    w = {k: cur.weights[k] + (prev_b.weights[k] - prev_a.weights[k]) for k in cur.weights}
-    return FrameState(pose, w)
-
-
-def _velocity_guess(a: FrameState, b: FrameState) -> FrameState:
-    """Constant-velocity prediction of the pose after ``b`` (weights held)."""
-    Rd = b.pose.rotation @ a.pose.rotation.T
-    pose = Pose(orthonormalize(Rd @ b.pose.rotation), b.pose.scale * b.pose.scale / a.pose.scale,
-                2 * b.pose.translation - a.pose.translation)
-    return FrameState(pose, b.weights)
 
 
 # ------------------------------------------------------------------------------------ driver
@@ -692,221 +142,355 @@ def _init_array(init, size) -> np.ndarray:
                                               if np.all(np.isfinite(arr[i]))}, size))
 
 
-def _run(frames: _Frames, model, init, opt: TrackOptions, detector, progress, src,
-         fixed: dict | None = None, checkpoint=None) -> Track:
-    F = frames.n
-    W, H = frames.size
-    fixed = _check_fixed(model, fixed)
-    tr = FaceTracker(model, (W, H), opt, detector=detector, fixed=tuple(fixed))
-    prog = progress or (lambda stage, done, total: None)
-    t_start = time.perf_counter()
+# ------------------------------------------------------------------------------------ run state
+class _Detections:
+    """Detector landmarks (68, 2) per frame index, each frame detected at most once."""
 
-    # -------- §5.2 initialisation: feature points of the first frame with a face
-    detections: dict[int, np.ndarray | None] = {}
+    def __init__(self, frames: FrameSource, detector) -> None:
+        self.frames = frames
+        self.detector = detector
+        self.found: dict[int, np.ndarray | None] = {}
 
-    def detect(i, frame=None):
-        if i not in detections:
-            if detector is None:
-                detections[i] = None
+    def __call__(self, i: int, frame: np.ndarray | None = None) -> np.ndarray | None:
+        if i not in self.found:
+            if self.detector is None:
+                self.found[i] = None
             else:
-                detections[i] = detector.detect(frames.get(i) if frame is None else frame)
-        return detections[i]
+                self.found[i] = self.detector.detect(self.frames.get(i) if frame is None
+                                                     else frame)
+        return self.found[i]
 
+
+@dataclass
+class _Run:
+    """What one run of the tracker carries between its steps (§5.2 initialisation and snap,
+    §5.1 passes): the solution ``state0`` at the first frame with a face ``start``, its feature
+    points ``L0`` (68, 2), and per frame the state, the confidence and the lost flag."""
+
+    frames: FrameSource
+    model: object
+    tr: FaceTracker
+    detect: _Detections
+    checkpoint: object | None
+    progress: Progress
+    start: int
+    L0: np.ndarray
+    state0: FrameState
+    states: list = field(init=False)
+    conf: np.ndarray = field(init=False)
+    lost: np.ndarray = field(init=False)
+    reinit: list = field(default_factory=list)   # frames re-initialised in the current pass
+
+    def __post_init__(self) -> None:
+        F = self.frames.n
+        self.states = [None] * F
+        self.conf = np.zeros(F)
+        self.lost = np.zeros(F, bool)
+        self.lost[:self.start] = True
+
+    @property
+    def opt(self) -> TrackOptions:
+        return self.tr.opt
+
+    @property
+    def id_name(self) -> str | None:
+        """The clip-constant mode solved once per pass (§5.1), if any."""
+        return self.tr.accumulated[0] if self.tr.accumulated else None
+
+    def anchor_for(self, i: int, frame: np.ndarray) -> np.ndarray | None:
+        """Detector landmarks of frame ``i`` when anchoring is on."""
+        return self.detect(i, frame) if self.opt.anchor else None
+
+    def save(self, pass_index: int, next_frame: int, systems: list, reinit: list,
+             prev: list | None) -> None:
+        """Write the checkpoint: what is finished up to ``next_frame`` of pass ``pass_index``."""
+        self.checkpoint.save(start=self.start, L0=self.L0, state0=self.state0,
+                             pass_index=pass_index, next_frame=next_frame, states=self.states,
+                             prev=prev, conf=self.conf, lost=self.lost, reinit=reinit,
+                             systems=systems)
+
+
+@dataclass
+class _Pass:
+    """One pass in progress (§5.1): the identity systems accumulated so far, the key frame and
+    the pyramid of the last solved frame, the frames left and the next frame to solve."""
+
+    index: int
+    last: bool
+    systems: list
+    key: tuple
+    pyr0: object
+    todo: object          # iterator over the frames from `next_frame` on
+    next_frame: int
+
+
+def _no_progress(stage: str, done: int, total: int) -> None:
+    return None
+
+
+def _run(frames: FrameSource, model, init, opt: TrackOptions, detector, progress, src,
+         fixed: dict | None = None, checkpoint=None) -> Track:
+    """Initialise, snap and run the passes (§5.2, §5.1); resume from ``checkpoint`` if it holds
+    an interrupted run."""
+    fixed = _check_fixed(model, fixed)
+    tr = FaceTracker(model, frames.size, opt, detector=detector, fixed=tuple(fixed))
+    t_start = time.perf_counter()
+    detect = _Detections(frames, detector)
     resume = checkpoint.load() if checkpoint is not None else None
     if resume is None:
-        start = 0
-        if isinstance(init, str) and init == "auto":
-            if detector is None:
-                raise TrackError("automatic initialisation needs a face detector")
-            L0 = None
-            for i, fr in enumerate(frames.iterate()):
-                L0 = detect(i, fr)
-                if L0 is not None:
-                    start = i
-                    break
-            if L0 is None:
-                raise VideoError(f"no face found in {src or 'the video'} (searched frames 0-{F - 1})")
-        else:
-            L0 = _init_array(init, (W, H))
-        if start > 0:
-            log.info("first face found at frame %d", start)
-        start_state = None
-        if fixed:
-            w = {m: tr.priors[m].mean.copy() for m in model.mode_names}
-            w.update(fixed)
-            ok = np.all(np.isfinite(L0), axis=1)
-            X = model.synthesize(w, vertices=tr.lm_vertices[ok])
-            start_state = FrameState(fit_affine_pose(X, L0[ok]), w)
-        state0 = fit_landmarks(model, L0, prior=opt.init_prior, state=start_state,
-                               modes=tuple(m for m in model.mode_names if m not in fixed))
+        start, L0, state0 = _initialise(frames, model, tr, init, detect, src, fixed)
     else:  # an interrupted run of the same video, model and options
         start, L0, state0 = resume.start, np.asarray(resume.L0), resume.state0
         log.info("resuming from %s: pass %d, frame %d", checkpoint.path,
                  resume.pass_index + 1, resume.next_frame)
     t_init = time.perf_counter() - t_start
-
-    states: list[FrameState | None] = [None] * F
-    conf = np.zeros(F)
-    lost = np.zeros(F, bool)
-    lost[:start] = True
-    reinit: list[int] = []
-    id_name = tr.accumulated[0] if tr.accumulated else None
-
-    def anchor_for(i, frame):
-        if not opt.anchor:
-            return None
-        return detect(i, frame)
-
-    def apply_identity(systems, ref_idx):
-        """Solve identity; re-express the reference frame's 2-D vertex positions with it."""
-        nonlocal state0
-        if not systems or id_name is None:
-            return
-        w_new, fac = tr.solve_identity(systems, state0.weights)
-        st = state0
-        # targets: the current 2-D positions of many vertices at the start frame
-        pyr = tr.pyramid(frames.get(ref_idx))
-        sel, p = tr.select_vertices(st, pyr)
-        if sel.size < 10:
-            sel = tr.lm_vertices
-            p = project(model.synthesize(st.weights, vertices=sel), st.pose.rotation,
-                        st.pose.scale, st.pose.translation)
-        w = dict(st.weights)
-        w[id_name] = w_new
-        start_st = FrameState(Pose(st.pose.rotation, st.pose.scale * fac, st.pose.translation), w)
-        state0 = fit_points(model, sel, p, state=start_st, modes=tr.per_frame, prior=0.0,
-                            iterations=5)
-
-    # -------- §5.2 snap: track the first frames back and forth
-    n_snap = min(int(opt.snap_frames), F - start - 1)
-    if n_snap > 0 and resume is None:
-        snap_frames = list(frames.iterate(start, start + n_snap + 1))
-        pyrs = [tr.pyramid(f) for f in snap_frames]
-        for rnd in range(int(opt.snap_rounds)):
-            systems = []
-            if id_name is not None:
-                systems.append(tr.landmark_identity_system(state0, L0, opt.init_weight))
-            st = state0
-            order = list(range(1, n_snap + 1)) + list(range(n_snap - 1, -1, -1))
-            cur = 0
-            for j, nxt in enumerate(order):
-                res = tr.track_pair(pyrs[cur], pyrs[nxt], st, st,
-                                    anchor=anchor_for(start + nxt, snap_frames[nxt]),
-                                    accumulate=id_name is not None)
-                st = res.state
-                if res.identity_system is not None:
-                    systems.append(res.identity_system)
-                cur = nxt
-                prog("snap", rnd * len(order) + j + 1, len(order) * int(opt.snap_rounds))
-            # the state reached back at the first frame is the snapped alignment
-            state0 = st
-            apply_identity(systems, start)
-
-    def save(pass_index, next_frame, systems_, reinit_, prev_):
-        checkpoint.save(start=start, L0=L0, state0=state0, pass_index=pass_index,
-                        next_frame=next_frame, states=states, prev=prev_, conf=conf, lost=lost,
-                        reinit=reinit_, systems=systems_)
-
-    # -------- §5.1 passes
-    prev: list[FrameState | None] | None = None
-    first_pass = 0
-    if resume is not None:
-        first_pass, prev = resume.pass_index, resume.prev
-        conf[:], lost[:] = resume.conf, resume.lost
-        if first_pass >= int(opt.passes):  # every pass was done: only the assembly is left
-            states[:] = prev
-    elif checkpoint is not None:
-        save(0, start + 1, [], [], None)
-    for ps in range(first_pass, int(opt.passes)):
-        last = ps == int(opt.passes) - 1
-        if resume is not None and ps == resume.pass_index and resume.next_frame > start + 1:
-            # continue the interrupted pass where it stopped
-            systems, reinit = list(resume.systems), list(resume.reinit)
-            base = prev if prev is not None else [None] * F
-            states[:] = [r if r is not None else b for r, b in zip(resume.states, base)]
-            i_next = resume.next_frame
-            key = (tr.pyramid(frames.get(start)), state0)
-            pyr0 = tr.pyramid(frames.get(i_next - 1))
-            it = frames.iterate(i_next)
-        else:
-            systems = []
-            reinit = []
-            lost[start + 1:] = False
-            if id_name is not None:
-                systems.append(tr.landmark_identity_system(state0, L0, opt.init_weight)
-                               if not lost[start] else None)
-                systems = [s for s in systems if s is not None]
-            states[start] = state0
-            it = frames.iterate(start)
-            first = next(it)
-            pyr0 = tr.pyramid(first)
-            key = (pyr0, state0)
-            conf[start] = 1.0
-            i_next = start + 1
-        done = i_next  # the next frame to solve
-        try:
-            for i, fr in enumerate(it, start=i_next):
-                pyr1 = tr.pyramid(fr)
-                st_prev = states[i - 1]
-                if prev is not None and prev[i] is not None and prev[i - 1] is not None:
-                    guess = _relative_guess(st_prev, prev[i - 1], prev[i])
-                elif (i - 2 >= start and not lost[i - 1] and not lost[i - 2]
-                      and (i - 1) not in reinit):
-                    guess = _velocity_guess(states[i - 2], st_prev)
-                else:
-                    guess = st_prev
-                res = tr.track_pair(pyr0, pyr1, st_prev, guess, anchor=anchor_for(i, fr),
-                                    accumulate=(id_name is not None and not last), key=key)
-                st, c = res.state, res.confidence
-                # once lost, frames stay lost until a re-initialisation (the flow may lock onto
-                # the background with high confidence)
-                is_lost = (c < opt.lost_threshold or not _face_in_image(model, tr, st, (W, H))
-                           or bool(lost[i - 1]))
-                if is_lost and opt.recover and detector is not None:
-                    L = detect(i, fr)
-                    if L is not None:
-                        try:
-                            st = fit_landmarks(model, L, state=st_prev, modes=tr.per_frame,
-                                               prior=opt.init_prior)
-                            reinit.append(i)
-                            is_lost = False
-                            c = max(c, opt.lost_threshold)
-                        except TrackError:
-                            log.debug("re-initialisation failed at frame %d", i)
-                if is_lost and not _face_in_image(model, tr, st, (W, H)):
-                    st = st_prev
-                states[i] = st
-                conf[i] = 0.0 if is_lost else c
-                lost[i] = is_lost
-                if res.identity_system is not None and not is_lost:
-                    systems.append(res.identity_system)
-                pyr0 = pyr1
-                done = i + 1
-                if checkpoint is not None and checkpoint.due():
-                    save(ps, done, systems, reinit, prev)
-                prog(f"pass {ps + 1}/{opt.passes}", i - start, F - 1 - start)
-        except BaseException:
-            if checkpoint is not None and done > i_next:  # keep what this pass finished
-                save(ps, done, systems, reinit, prev)
-            raise
-        if not last and id_name is not None and len(systems) > 0:
-            apply_identity(systems, start)
-        prev = list(states)
-        if checkpoint is not None:
-            save(ps + 1, start + 1, [], reinit, prev)
-
-    # frames before the first face hold the first tracked state
-    for i in range(start):
-        states[i] = states[start]
+    run = _Run(frames, model, tr, detect, checkpoint, progress or _no_progress, start, L0,
+               state0)
+    if resume is None:
+        _snap(run)
+    _passes(run, resume)
+    for i in range(start):  # frames before the first face hold the first tracked state
+        run.states[i] = run.states[start]
     t_track = time.perf_counter() - t_start
-    track = _assemble(model, states, conf, lost, frames.fps, (W, H), src, opt)
-    info = {"start_frame": start, "reinitialised": reinit, "timings": dict(tr.timings),
+    track = _assemble(model, run.states, run.conf, run.lost, frames.fps, frames.size, src, opt)
+    info = {"start_frame": start, "reinitialised": run.reinit, "timings": dict(tr.timings),
             "resumed": None if resume is None else {"pass": resume.pass_index + 1,
                                                     "frame": resume.next_frame},
             "counts": dict(tr.counts),
             "mean_points": tr.counts.get("points", 0) / max(tr.counts.get("pair", 0), 1),
-            "seconds_init": t_init, "seconds_total": t_track, "n_frames": F}
+            "seconds_init": t_init, "seconds_total": t_track, "n_frames": frames.n}
     return replace(track, info=info)
+
+
+# ------------------------------------------------------------------------------------ §5.2
+def _initialise(frames: FrameSource, model, tr: FaceTracker, init, detect: _Detections, src,
+                fixed: dict) -> tuple[int, np.ndarray, FrameState]:
+    """§5.2 initialisation: the first frame with a face, its feature points (68, 2) and the
+    model fitted to them (pose, identity and expression; ``fixed`` modes held)."""
+    start = 0
+    if isinstance(init, str) and init == "auto":
+        start, L0 = _first_face(frames, detect, src)
+    else:
+        L0 = _init_array(init, frames.size)
+    if start > 0:
+        log.info("first face found at frame %d", start)
+    start_state = None
+    if fixed:
+        w = {m: tr.priors[m].mean.copy() for m in model.mode_names}
+        w.update(fixed)
+        ok = np.all(np.isfinite(L0), axis=1)
+        X = model.synthesize(w, vertices=tr.lm_vertices[ok])
+        start_state = FrameState(fit_affine_pose(X, L0[ok]), w)
+    state0 = fit_landmarks(model, L0, prior=tr.opt.init_prior, state=start_state,
+                           modes=tuple(m for m in model.mode_names if m not in fixed))
+    return start, L0, state0
+
+
+def _first_face(frames: FrameSource, detect: _Detections, src) -> tuple[int, np.ndarray]:
+    """The first frame the detector finds a face in, and its landmarks (68, 2)."""
+    if detect.detector is None:
+        raise TrackError("automatic initialisation needs a face detector")
+    for i, fr in enumerate(frames.iterate()):
+        L0 = detect(i, fr)
+        if L0 is not None:
+            return i, L0
+    raise VideoError(f"no face found in {src or 'the video'} (searched frames 0-{frames.n - 1})")
+
+
+def _snap(run: _Run) -> None:
+    """§5.2 snap: track the first ``snap_frames`` frames forth and back (``snap_rounds``
+    times); the state reached back at the first frame is the snapped alignment."""
+    n_snap = min(int(run.opt.snap_frames), run.frames.n - run.start - 1)
+    if n_snap <= 0:
+        return
+    snap_frames = list(run.frames.iterate(run.start, run.start + n_snap + 1))
+    pyrs = [run.tr.pyramid(f) for f in snap_frames]
+    order = list(range(1, n_snap + 1)) + list(range(n_snap - 1, -1, -1))
+    for rnd in range(int(run.opt.snap_rounds)):
+        systems = []
+        if run.id_name is not None:
+            systems.append(run.tr.landmark_identity_system(run.state0, run.L0,
+                                                           run.opt.init_weight))
+        st = run.state0
+        cur = 0
+        for j, nxt in enumerate(order):
+            res = run.tr.track_pair(pyrs[cur], pyrs[nxt], st, st,
+                                    anchor=run.anchor_for(run.start + nxt, snap_frames[nxt]),
+                                    accumulate=run.id_name is not None)
+            st = res.state
+            if res.identity_system is not None:
+                systems.append(res.identity_system)
+            cur = nxt
+            run.progress("snap", rnd * len(order) + j + 1, len(order) * int(run.opt.snap_rounds))
+        run.state0 = st
+        _apply_identity(run, systems)
+
+
+def _apply_identity(run: _Run, systems: list) -> None:
+    """Solve the identity from the accumulated systems (§5.1, once per pass) and re-express the
+    first frame's 2-D vertex positions with it (a new ``run.state0``)."""
+    if not systems or run.id_name is None:
+        return
+    tr, model, st = run.tr, run.model, run.state0
+    w_new, fac = tr.solve_identity(systems, st.weights)
+    # targets: the current 2-D positions of many vertices at the start frame
+    pyr = tr.pyramid(run.frames.get(run.start))
+    sel, p = tr.select_vertices(st, pyr)
+    if sel.size < 10:
+        sel = tr.lm_vertices
+        p = project(model.synthesize(st.weights, vertices=sel), st.pose.rotation,
+                    st.pose.scale, st.pose.translation)
+    w = dict(st.weights)
+    w[run.id_name] = w_new
+    start_st = FrameState(Pose(st.pose.rotation, st.pose.scale * fac, st.pose.translation), w)
+    run.state0 = fit_points(model, sel, p, state=start_st, modes=tr.per_frame, prior=0.0,
+                            iterations=5)
+
+
+# ------------------------------------------------------------------------------------ §5.1
+def _passes(run: _Run, resume) -> None:
+    """§5.1: ``passes`` passes through the video, each from the first frame (continuing an
+    interrupted pass of ``resume``); the identity is solved after every pass but the last."""
+    n_passes = int(run.opt.passes)
+    prev: list | None = None
+    first_pass = 0
+    if resume is not None:
+        first_pass, prev = resume.pass_index, resume.prev
+        run.conf[:], run.lost[:] = resume.conf, resume.lost
+        if first_pass >= n_passes:  # every pass was done: only the assembly is left
+            run.states[:] = prev
+    elif run.checkpoint is not None:
+        run.save(0, run.start + 1, [], [], None)
+    for ps in range(first_pass, n_passes):
+        if resume is not None and ps == resume.pass_index and resume.next_frame > run.start + 1:
+            pas = _resume_pass(run, ps, resume, prev)   # continue where it stopped
+        else:
+            pas = _begin_pass(run, ps)
+        _track_frames(run, pas, prev)
+        if not pas.last and run.id_name is not None and len(pas.systems) > 0:
+            _apply_identity(run, pas.systems)
+        prev = list(run.states)
+        if run.checkpoint is not None:
+            run.save(ps + 1, run.start + 1, [], run.reinit, prev)
+
+
+def _begin_pass(run: _Run, ps: int) -> _Pass:
+    """A fresh pass from the first frame: its state is ``run.state0``, its landmarks the first
+    identity system."""
+    run.reinit = []
+    run.lost[run.start + 1:] = False
+    systems = []
+    if run.id_name is not None and not run.lost[run.start]:
+        systems.append(run.tr.landmark_identity_system(run.state0, run.L0, run.opt.init_weight))
+    run.states[run.start] = run.state0
+    todo = run.frames.iterate(run.start)
+    pyr0 = run.tr.pyramid(next(todo))
+    run.conf[run.start] = 1.0
+    return _Pass(ps, ps == int(run.opt.passes) - 1, systems, (pyr0, run.state0), pyr0, todo,
+                 run.start + 1)
+
+
+def _resume_pass(run: _Run, ps: int, resume, prev: list | None) -> _Pass:
+    """The interrupted pass of ``resume``, from the first frame it had not solved."""
+    run.reinit = list(resume.reinit)
+    base = prev if prev is not None else [None] * run.frames.n
+    run.states[:] = [r if r is not None else b for r, b in zip(resume.states, base)]
+    i_next = resume.next_frame
+    key = (run.tr.pyramid(run.frames.get(run.start)), run.state0)
+    pyr0 = run.tr.pyramid(run.frames.get(i_next - 1))
+    return _Pass(ps, ps == int(run.opt.passes) - 1, list(resume.systems), key, pyr0,
+                 run.frames.iterate(i_next), i_next)
+
+
+def _track_frames(run: _Run, pas: _Pass, prev: list | None) -> None:
+    """Track the frames left in the pass, one pair at a time; checkpoint as due and, when
+    interrupted, what the pass has finished."""
+    done = pas.next_frame  # the next frame to solve
+    F = run.frames.n
+    try:
+        for i, fr in enumerate(pas.todo, start=pas.next_frame):
+            pyr1 = run.tr.pyramid(fr)
+            _track_frame(run, pas, i, fr, pyr1, prev)
+            pas.pyr0 = pyr1
+            done = i + 1
+            if run.checkpoint is not None and run.checkpoint.due():
+                run.save(pas.index, done, pas.systems, run.reinit, prev)
+            run.progress(f"pass {pas.index + 1}/{run.opt.passes}", i - run.start,
+                         F - 1 - run.start)
+    except BaseException:
+        if run.checkpoint is not None and done > pas.next_frame:  # keep what this pass finished
+            run.save(pas.index, done, pas.systems, run.reinit, prev)
+        raise
+
+
+def _track_frame(run: _Run, pas: _Pass, i: int, fr: np.ndarray, pyr1, prev: list | None) -> None:
+    """Solve frame ``i`` from frame ``i - 1`` (the pair's solve), mark it lost or recover it, and
+    keep its identity system."""
+    tr, opt = run.tr, run.opt
+    st_prev = run.states[i - 1]
+    res = tr.track_pair(pas.pyr0, pyr1, st_prev, _guess(run, i, prev),
+                        anchor=run.anchor_for(i, fr),
+                        accumulate=(run.id_name is not None and not pas.last), key=pas.key)
+    st, c = res.state, res.confidence
+    # once lost, frames stay lost until a re-initialisation (the flow may lock onto the
+    # background with high confidence)
+    is_lost = (c < opt.lost_threshold or not _face_in_image(run.model, tr, st, run.frames.size)
+               or bool(run.lost[i - 1]))
+    if is_lost and opt.recover and tr.detector is not None:
+        st, c, is_lost = _recover(run, i, fr, st_prev, st, c)
+    if is_lost and not _face_in_image(run.model, tr, st, run.frames.size):
+        st = st_prev
+    run.states[i] = st
+    run.conf[i] = 0.0 if is_lost else c
+    run.lost[i] = is_lost
+    if res.identity_system is not None and not is_lost:
+        pas.systems.append(res.identity_system)
+
+
+def _guess(run: _Run, i: int, prev: list | None) -> FrameState:
+    """Starting point at frame ``i``: frame ``i - 1`` moved as in the previous pass, or at
+    constant velocity, or frame ``i - 1`` itself."""
+    st_prev = run.states[i - 1]
+    if prev is not None and prev[i] is not None and prev[i - 1] is not None:
+        return _relative_guess(st_prev, prev[i - 1], prev[i])
+    if (i - 2 >= run.start and not run.lost[i - 1] and not run.lost[i - 2]
+            and (i - 1) not in run.reinit):
+        return _velocity_guess(run.states[i - 2], st_prev)
+    return st_prev
+
+
+def _recover(run: _Run, i: int, fr: np.ndarray, st_prev: FrameState, st: FrameState,
+             c: float) -> tuple[FrameState, float, bool]:
+    """Re-initialise a lost frame from the detector: ``(state, confidence, still lost)``."""
+    L = run.detect(i, fr)
+    if L is None:
+        return st, c, True
+    try:
+        st = fit_landmarks(run.model, L, state=st_prev, modes=run.tr.per_frame,
+                           prior=run.opt.init_prior)
+    except TrackError:
+        log.debug("re-initialisation failed at frame %d", i)
+        return st, c, True
+    run.reinit.append(i)
+    return st, max(c, run.opt.lost_threshold), False
+
+
+def _relative_guess(cur: FrameState, prev_a: FrameState, prev_b: FrameState) -> FrameState:
+    """``cur`` moved by the motion ``prev_a -> prev_b`` of an earlier pass."""
+    Rd = prev_b.pose.rotation @ prev_a.pose.rotation.T
+    pose = Pose(orthonormalize(Rd @ cur.pose.rotation),
+                cur.pose.scale * prev_b.pose.scale / prev_a.pose.scale,
+                cur.pose.translation + prev_b.pose.translation - prev_a.pose.translation)
+    w = {k: cur.weights[k] + (prev_b.weights[k] - prev_a.weights[k]) for k in cur.weights}
+    return FrameState(pose, w)
+
+
+def _velocity_guess(a: FrameState, b: FrameState) -> FrameState:
+    """Constant-velocity prediction of the pose after ``b`` (weights held)."""
+    Rd = b.pose.rotation @ a.pose.rotation.T
+    pose = Pose(orthonormalize(Rd @ b.pose.rotation), b.pose.scale * b.pose.scale / a.pose.scale,
+                2 * b.pose.translation - a.pose.translation)
+    return FrameState(pose, b.weights)
 
 
 def _check_fixed(model, fixed) -> dict:
@@ -930,36 +514,6 @@ def _face_in_image(model, tr: FaceTracker, st: FrameState, size) -> bool:
     W, H = size
     span = np.ptp(p, axis=0).max()
     return bool(0 <= c[0] < W and 0 <= c[1] < H and 2.0 < span < 4 * max(W, H))
-
-
-def smooth_track(rotation: np.ndarray, scale: np.ndarray, translation: np.ndarray,
-                 weights: dict, sigma: float, *, constant: Sequence[str] = ()
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, dict]:
-    """Zero-phase Gaussian smoothing of pose and per-frame weights (no lag).
-
-    Rotations are smoothed as sign-aligned quaternions and renormalised; the scale in log space.
-
-    Returns
-    -------
-    rotation (F, 3, 3), scale (F,), translation (F, 2), weights dict
-    """
-    from scipy.ndimage import gaussian_filter1d
-    from scipy.spatial.transform import Rotation
-
-    if sigma <= 0 or rotation.shape[0] < 3:
-        return rotation, scale, translation, weights
-    g = lambda a: gaussian_filter1d(a, sigma, axis=0, mode="nearest")  # noqa: E731
-    q = Rotation.from_matrix(rotation).as_quat()
-    for i in range(1, q.shape[0]):
-        if q[i] @ q[i - 1] < 0:
-            q[i] = -q[i]
-    q = g(q)
-    q /= np.linalg.norm(q, axis=1, keepdims=True)
-    R = Rotation.from_quat(q).as_matrix()
-    s = np.exp(g(np.log(scale)))
-    t = g(translation)
-    w = {k: (v if k in constant else g(v)) for k, v in weights.items()}
-    return R, s, t, w
 
 
 def _assemble(model, states, conf, lost, fps, size, src, opt: TrackOptions) -> Track:
