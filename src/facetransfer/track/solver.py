@@ -330,23 +330,8 @@ def fit_points(model, vertices: np.ndarray, targets: np.ndarray, *,
     prev = np.inf
     for _ in range(max(int(iterations), 1)):
         for m in modes:
-            B = model.mode_basis(m, weights, vertices=v)
-            X = B @ weights[m]
-            p = project(X, pose.rotation, pose.scale, pose.translation)
-            Q = priors[m].Q                                # gauge: (r, k)
-            J = full_jacobian(X, B @ Q, pose)
-            Z, e = point_terms(p, T, pw)
-            A, b = normal_equations(J, Z, e)
-            if prior > 0:
-                Ap, bp = prior_terms(weights[m], priors[m], prior)
-                A, b = A + Ap, b + bp
-            if fix_pose:
-                d = np.zeros(A.shape[0])
-                d[N_POSE:] = solve_step(A[N_POSE:, N_POSE:], b[N_POSE:])
-            else:
-                d = solve_step(A, b)
-            pose = compose(pose, d[:N_POSE])
-            weights[m] = weights[m] + Q @ d[N_POSE:]
+            pose, weights[m] = _point_step(model, m, weights, pose, v, T, pw, priors[m], prior,
+                                           fix_pose)
         X = model.synthesize(weights, vertices=v)
         p = project(X, pose.rotation, pose.scale, pose.translation)
         err = float(np.sum(pw * np.sum((p - T) ** 2, axis=1)))
@@ -354,6 +339,30 @@ def fit_points(model, vertices: np.ndarray, targets: np.ndarray, *,
             break
         prev = err
     return FrameState(pose, weights)
+
+
+def _point_step(model, m: str, weights: dict, pose: Pose, v: np.ndarray, T: np.ndarray,
+                pw: np.ndarray, prior_m: Prior, prior: float, fix_pose: bool
+                ) -> tuple[Pose, np.ndarray]:
+    """One Gauss-Newton step of :func:`fit_points` for the pose and mode ``m`` (Eq. (8), (9)):
+    vertices ``v`` (k,) toward targets ``T`` (k, 2) with point weights ``pw`` (k,) summing to
+    1. Returns the new pose and the mode's new weights (r,)."""
+    B = model.mode_basis(m, weights, vertices=v)
+    X = B @ weights[m]
+    p = project(X, pose.rotation, pose.scale, pose.translation)
+    Q = prior_m.Q                                  # gauge: (r, k)
+    J = full_jacobian(X, B @ Q, pose)
+    Z, e = point_terms(p, T, pw)
+    A, b = normal_equations(J, Z, e)
+    if prior > 0:
+        Ap, bp = prior_terms(weights[m], prior_m, prior)
+        A, b = A + Ap, b + bp
+    if fix_pose:
+        d = np.zeros(A.shape[0])
+        d[N_POSE:] = solve_step(A[N_POSE:, N_POSE:], b[N_POSE:])
+    else:
+        d = solve_step(A, b)
+    return compose(pose, d[:N_POSE]), weights[m] + Q @ d[N_POSE:]
 
 
 # -------------------------------------------------------------------------------- fast path

@@ -107,15 +107,8 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
         from .init import MediaPipeDetector
 
         detector = own_detector = MediaPipeDetector()
-    ck = None
-    if checkpoint is not None:
-        from .checkpoint import Checkpoint, checkpoint_key, video_identity
-
-        vid = video_identity(frames.path) if frames.path else video_identity(
-            None, frames.array[0], frames.array[-1])
-        ck = Checkpoint(checkpoint, checkpoint_key(vid, frames.n, model.content_hash, opt, init,
-                                                   fixed), model.mode_names,
-                        every=checkpoint_every)
+    ck = (None if checkpoint is None else
+          _open_checkpoint(checkpoint, frames, model, opt, init, fixed, checkpoint_every))
     try:
         track = _run(frames, model, init, opt, detector, progress, src, fixed, ck)
         if ck is not None:
@@ -124,6 +117,18 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
     finally:
         if own_detector is not None:
             own_detector.close()
+
+
+def _open_checkpoint(path, frames: FrameSource, model, opt: TrackOptions, init, fixed,
+                     every: float):
+    """The run's :class:`~facetransfer.track.checkpoint.Checkpoint`, keyed by everything the run
+    depends on (the video, the model, the options, the initial points, the fixed modes)."""
+    from .checkpoint import Checkpoint, checkpoint_key, video_identity
+
+    vid = video_identity(frames.path) if frames.path else video_identity(
+        None, frames.array[0], frames.array[-1])
+    return Checkpoint(path, checkpoint_key(vid, frames.n, model.content_hash, opt, init, fixed),
+                      model.mode_names, every=every)
 
 
 def _init_array(init, size) -> np.ndarray:
