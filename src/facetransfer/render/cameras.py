@@ -1,0 +1,215 @@
+"""The cameras the renderer images meshes with (Vlasic et al. 2005, §5.1, Eq. (7)).
+
+:class:`WeakPerspective` is the tracker's camera (``p = s diag(1, -1) R[:2] X + t``, depth
+``(R X)[2]``, larger = nearer); :class:`Pinhole` is for previews. Also head rotations from
+Euler angles and a camera that frames a mesh.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+import numpy as np
+
+from ..errors import ShapeError
+
+__all__ = ["Camera", "WeakPerspective", "Pinhole", "rotation_from_euler", "euler_from_rotation",
+           "look_at_weak_perspective"]
+
+
+class Camera(Protocol):
+    """What :func:`rasterize` needs from a camera."""
+
+    rotation: np.ndarray
+    perspective: bool
+
+    def project(self, X: np.ndarray) -> np.ndarray: ...
+
+    def depth(self, X: np.ndarray) -> np.ndarray: ...
+
+    def to_camera(self, X: np.ndarray) -> np.ndarray: ...
+
+
+def _as_rotation(R) -> np.ndarray:
+    R = np.asarray(R, dtype=np.float64)
+    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+        raise ShapeError(f"rotation must be a finite (3, 3) array, got shape {R.shape}")
+    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        raise ShapeError("rotation must be a proper rotation matrix (R R^T = I, det R = +1)")
+    return R
+
+
+def _as_vector(x, n: int, what: str) -> np.ndarray:
+    """``x`` as a finite (n,) float64 array; ShapeError naming ``what`` otherwise."""
+    a = np.asarray(x, dtype=np.float64)
+    if a.shape != (n,) or not np.all(np.isfinite(a)):
+        raise ShapeError(f"{what} must be finite ({n},), got {a.shape}")
+    return a
+
+
+def _as_points(X) -> np.ndarray:
+    X = np.asarray(X, dtype=np.float64)
+    if X.ndim != 2 or X.shape[1] != 3:
+        raise ShapeError(f"points must be (n, 3), got {X.shape}")
+    return X
+
+
+@dataclass(frozen=True, eq=False)
+class WeakPerspective:
+    """The tracker's weak-perspective camera (Vlasic et al. 2005, §5.1, Eq. (7)).
+
+    Attributes
+    ----------
+    scale : float
+        ``s`` > 0, pixels per model unit.
+    rotation : (3, 3) float64
+        ``R``, model to camera rotation (camera looks along -z, y up).
+    translation : (2,) float64
+        ``t``, pixel position of the model origin (x right, y down).
+    """
+
+    scale: float
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    #: The projection does not divide by depth.
+    perspective = False
+
+    def __post_init__(self) -> None:
+        s = float(self.scale)
+        if not np.isfinite(s) or s <= 0:
+            raise ShapeError(f"camera scale must be a finite number > 0, got {self.scale}")
+        t = _as_vector(self.translation, 2, "weak-perspective translation")
+        object.__setattr__(self, "scale", s)
+        object.__setattr__(self, "rotation", _as_rotation(self.rotation))
+        object.__setattr__(self, "translation", t)
+
+    def to_camera(self, X: np.ndarray) -> np.ndarray:
+        """Rotated coordinates ``R @ X`` per point, (n, 3) -> (n, 3)."""
+        return _as_points(X) @ self.rotation.T
+
+    def project(self, X: np.ndarray) -> np.ndarray:
+        """Pixels ``s * diag(1, -1) @ R[:2] @ X + t`` (Eq. (7)), (n, 3) -> (n, 2)."""
+        Y = _as_points(X) @ self.rotation[:2].T  # (n, 2)
+        out = np.empty_like(Y)
+        out[:, 0] = self.scale * Y[:, 0] + self.translation[0]
+        out[:, 1] = -self.scale * Y[:, 1] + self.translation[1]
+        return out
+
+    def depth(self, X: np.ndarray) -> np.ndarray:
+        """Depth ``(R @ X)[2]`` per point, larger = nearer, (n, 3) -> (n,)."""
+        return _as_points(X) @ self.rotation[2]
+
+
+@dataclass(frozen=True, eq=False)
+class Pinhole:
+    """A pinhole camera for previews: camera coordinates ``Xc = R @ X + T``.
+
+    The camera looks along -z of its coordinates with y up; a point in front has ``Xc_z < 0``
+    and lands at pixel ``(cx + f Xc_x / -Xc_z, cy - f Xc_y / -Xc_z)``. Its depth is ``Xc_z``
+    (larger = nearer, as for :class:`WeakPerspective`).
+
+    Attributes
+    ----------
+    focal : float
+        Focal length in pixels, > 0.
+    center : (2,) float64
+        Principal point ``(cx, cy)`` in pixels.
+    rotation : (3, 3) float64
+    translation : (3,) float64
+    near : float
+        Triangles with a vertex closer than ``near`` (camera units, > 0) are not drawn.
+    """
+
+    focal: float
+    center: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    near: float = 1e-3
+
+    perspective = True
+
+    def __post_init__(self) -> None:
+        f = float(self.focal)
+        if not np.isfinite(f) or f <= 0:
+            raise ShapeError(f"pinhole focal length must be finite and > 0, got {self.focal}")
+        c = _as_vector(self.center, 2, "pinhole center")
+        T = _as_vector(self.translation, 3, "pinhole translation")
+        if not float(self.near) > 0:
+            raise ShapeError(f"pinhole near distance must be > 0, got {self.near}")
+        object.__setattr__(self, "focal", f)
+        object.__setattr__(self, "center", c)
+        object.__setattr__(self, "translation", T)
+        object.__setattr__(self, "rotation", _as_rotation(self.rotation))
+        object.__setattr__(self, "near", float(self.near))
+
+    def to_camera(self, X: np.ndarray) -> np.ndarray:
+        """Camera coordinates ``R @ X + T`` per point, (n, 3) -> (n, 3)."""
+        return _as_points(X) @ self.rotation.T + self.translation
+
+    def project(self, X: np.ndarray) -> np.ndarray:
+        """Pixels (n, 2); points at or behind the camera plane give non-finite values."""
+        Xc = self.to_camera(X)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = -Xc[:, 2]
+            return np.stack([self.center[0] + self.focal * Xc[:, 0] / w,
+                             self.center[1] - self.focal * Xc[:, 1] / w], axis=1)
+
+    def depth(self, X: np.ndarray) -> np.ndarray:
+        """Depth ``(R @ X + T)[2]`` per point, larger = nearer, (n, 3) -> (n,)."""
+        return self.to_camera(X)[:, 2]
+
+
+def rotation_from_euler(yaw_deg: float = 0.0, pitch_deg: float = 0.0,
+                        roll_deg: float = 0.0) -> np.ndarray:
+    """Head rotation from angles in degrees: ``R = Rz(roll) @ Ry(yaw) @ Rx(pitch)``.
+
+    Yaw turns about the model's vertical (y) axis, pitch about x (nodding), roll about the view
+    (z) axis; angles follow the right-hand rule. Returns a (3, 3) float64 rotation.
+    """
+    y, p, r = np.deg2rad([yaw_deg, pitch_deg, roll_deg])
+    cy, sy, cp, sp, cr, sr = np.cos(y), np.sin(y), np.cos(p), np.sin(p), np.cos(r), np.sin(r)
+    Rx = np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]])
+    Ry = np.array([[cy, 0, sy], [0, 1, 0], [-sy, 0, cy]])
+    Rz = np.array([[cr, -sr, 0], [sr, cr, 0], [0, 0, 1]])
+    return Rz @ Ry @ Rx
+
+
+def euler_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
+    """Inverse of :func:`rotation_from_euler`: ``(yaw_deg, pitch_deg, roll_deg)``."""
+    R = _as_rotation(R)
+    yaw = np.arcsin(np.clip(-R[2, 0], -1.0, 1.0))
+    pitch = np.arctan2(R[2, 1], R[2, 2])
+    roll = np.arctan2(R[1, 0], R[0, 0])
+    return tuple(float(v) for v in np.rad2deg([yaw, pitch, roll]))
+
+
+def look_at_weak_perspective(vertices: np.ndarray, size: tuple[int, int], *,
+                             rotation: np.ndarray | None = None, fill: float = 0.8,
+                             offset: tuple[float, float] = (0.0, 0.0)) -> WeakPerspective:
+    """A weak-perspective camera that frames ``vertices`` in an image of ``size = (W, H)``.
+
+    The rotated bounding box is centred (plus ``offset`` pixels) and scaled so that it fills
+    ``fill`` of the smaller image side.
+    """
+    V = _as_points(vertices)
+    R = np.eye(3) if rotation is None else _as_rotation(rotation)
+    W, H = _as_size(size)
+    Y = V @ R[:2].T
+    lo, hi = Y.min(axis=0), Y.max(axis=0)
+    extent = float(max(hi[0] - lo[0], hi[1] - lo[1], 1e-12))
+    s = fill * min(W, H) / extent
+    c = 0.5 * (lo + hi)
+    t = np.array([(W - 1) / 2 - s * c[0] + offset[0], (H - 1) / 2 + s * c[1] + offset[1]])
+    return WeakPerspective(s, R, t)
+
+
+def _as_size(size) -> tuple[int, int]:
+    try:
+        W, H = (int(v) for v in size)
+    except (TypeError, ValueError):
+        raise ShapeError(f"image size must be (width, height), got {size!r}") from None
+    if W <= 0 or H <= 0 or W > 32768 or H > 32768:
+        raise ShapeError(f"image size must be positive (width, height) <= 32768, got {size!r}")
+    return W, H

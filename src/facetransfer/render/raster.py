@@ -1,0 +1,440 @@
+"""Z-buffer rasterisation of triangle meshes (paper §5.1, §6): a :class:`Raster` per image.
+
+Rasterisation rule: a pixel centre ``(px, py)`` belongs to a triangle if it lies inside or on
+the triangle's boundary (edge functions of one sign or zero). Among the triangles covering a
+pixel the nearest wins; equal depths go to the lower triangle index. Triangles with zero
+projected area are skipped silently. Two implementations obey this rule exactly: a vectorised
+numpy reference (:func:`rasterize_reference`) and a numba kernel (:func:`rasterize`,
+:class:`Rasterizer`), which are tested to give identical pixels.
+
+References
+----------
+Pineda. A parallel algorithm for polygon rasterization. SIGGRAPH 1988 (edge functions).
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import MeshError, ShapeError
+from .cameras import Pinhole, WeakPerspective, _as_size
+
+try:  # numba is a hard dependency; the fallback keeps the module importable without it
+    import numba
+
+    _HAVE_NUMBA = True
+except ImportError:  # pragma: no cover
+    numba = None
+    _HAVE_NUMBA = False
+
+__all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference"]
+
+
+def _maybe_njit(fn):
+    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn) if _HAVE_NUMBA else fn
+
+
+class RenderError(MeshError):
+    """A mesh, camera or texture that cannot be rendered."""
+
+
+@dataclass(frozen=True, eq=False)
+class Raster:
+    """Per-pixel result of rasterising a mesh.
+
+    Attributes
+    ----------
+    depth : (H, W) float32
+        Depth of the nearest surface (camera depth, larger = nearer); ``-inf`` on background.
+    tri_id : (H, W) int32
+        Index of the nearest triangle; -1 on background.
+    bary : (H, W, 3) float32
+        Barycentric coordinates in that triangle of the 3D surface point seen at the pixel
+        centre (perspective-correct for :class:`Pinhole`); 0 on background.
+    mask : (H, W) bool
+        ``tri_id >= 0``.
+    """
+
+    depth: np.ndarray
+    tri_id: np.ndarray
+    bary: np.ndarray
+    mask: np.ndarray
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """``(W, H)``."""
+        return int(self.tri_id.shape[1]), int(self.tri_id.shape[0])
+
+
+# --------------------------------------------------------------------------------------------
+# Validation
+# --------------------------------------------------------------------------------------------
+
+def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices (n, 3) float64 finite and faces (F, 3) int64 in range; rejects empty meshes."""
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise ShapeError(f"vertices must be (n, 3), got {V.shape}")
+    if V.shape[0] == 0:
+        raise RenderError("cannot render an empty mesh (0 vertices)")
+    if not np.all(np.isfinite(V)):
+        raise RenderError("vertices contain NaN or infinite coordinates")
+    F = np.asarray(faces)
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise ShapeError(f"faces must be (F, 3), got {F.shape}")
+    if F.shape[0] == 0:
+        raise RenderError("cannot render a mesh with no faces (0 triangles)")
+    if not np.issubdtype(F.dtype, np.integer):
+        raise ShapeError(f"faces must be integer indices, got dtype {F.dtype}")
+    F = np.ascontiguousarray(F, dtype=np.int64)
+    lo, hi = int(F.min()), int(F.max())
+    if lo < 0 or hi >= V.shape[0]:
+        raise RenderError(f"faces index vertices {lo}..{hi} but the mesh has {V.shape[0]} vertices")
+    return V, F
+
+
+def _check_not_all_degenerate(V: np.ndarray, F: np.ndarray) -> None:
+    """Reject a mesh whose triangles all have zero area in 3D."""
+    scale = float(_bbox_diagonal(V))
+    if scale == 0.0 or not _any_nondegenerate(V, F, (1e-12 * scale * scale) ** 2):
+        raise RenderError(f"all {F.shape[0]} triangles are degenerate (zero area)")
+
+
+def _any_nondegenerate_py(V, F, eps2):  # pragma: no cover
+    """True as soon as one triangle has squared doubled area > eps2 (stops early)."""
+    for f in range(F.shape[0]):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        ax, ay, az = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
+        bx, by, bz = V[i2, 0] - V[i0, 0], V[i2, 1] - V[i0, 1], V[i2, 2] - V[i0, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        if nx * nx + ny * ny + nz * nz > eps2:
+            return True
+    return False
+
+
+def _bbox_diagonal_py(V):  # pragma: no cover
+    """Length of the diagonal of the axis-aligned bounding box of V (n, 3)."""
+    lo0 = hi0 = V[0, 0]
+    lo1 = hi1 = V[0, 1]
+    lo2 = hi2 = V[0, 2]
+    for i in range(1, V.shape[0]):
+        lo0, hi0 = min(lo0, V[i, 0]), max(hi0, V[i, 0])
+        lo1, hi1 = min(lo1, V[i, 1]), max(hi1, V[i, 1])
+        lo2, hi2 = min(lo2, V[i, 2]), max(hi2, V[i, 2])
+    return np.sqrt((hi0 - lo0) ** 2 + (hi1 - lo1) ** 2 + (hi2 - lo2) ** 2)
+
+
+_bbox_diagonal = _maybe_njit(_bbox_diagonal_py)
+
+
+# --------------------------------------------------------------------------------------------
+# Rasterisation: shared setup
+# --------------------------------------------------------------------------------------------
+
+def _screen(V: np.ndarray, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pixel positions (n, 2), depths (n,) and perspective weights q = 1/w (n,) of vertices.
+
+    For the weak-perspective camera q = 1. For the pinhole camera q = 1 / (-Xc_z); vertices
+    nearer than ``camera.near`` get q = 0, which marks their triangles as not drawable.
+    """
+    if not isinstance(camera, (WeakPerspective, Pinhole)) and not (
+            hasattr(camera, "project") and hasattr(camera, "depth")
+            and hasattr(camera, "rotation")):
+        raise ShapeError(f"camera must be a WeakPerspective or Pinhole, got "
+                         f"{type(camera).__name__}")
+    if getattr(camera, "perspective", False):
+        Xc = camera.to_camera(V)
+        w = -Xc[:, 2]
+        ok = w > camera.near
+        with np.errstate(divide="ignore", invalid="ignore"):
+            q = np.where(ok, 1.0 / np.where(ok, w, 1.0), 0.0)
+            xy = np.stack([camera.center[0] + camera.focal * Xc[:, 0] * q,
+                           camera.center[1] - camera.focal * Xc[:, 1] * q], axis=1)
+        xy[~ok] = 0.0
+        z = np.where(ok, Xc[:, 2], 0.0)
+    else:
+        xy = camera.project(V)
+        z = camera.depth(V)
+        q = np.ones(V.shape[0])
+    return np.ascontiguousarray(xy), np.ascontiguousarray(z), np.ascontiguousarray(q)
+
+
+def _empty_raster(W: int, H: int) -> Raster:
+    return Raster(np.full((H, W), -np.inf, np.float32), np.full((H, W), -1, np.int32),
+                  np.zeros((H, W, 3), np.float32), np.zeros((H, W), bool))
+
+
+# --------------------------------------------------------------------------------------------
+# numpy reference implementation
+# --------------------------------------------------------------------------------------------
+
+def _edges_np(x0, y0, x1, y1, x2, y2, px, py):
+    """Edge functions of pixel centres; their sum is the signed double area (same op order as
+    the numba kernel so both give bit-identical results)."""
+    w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
+    w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
+    w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
+    return w0, w1, w2
+
+
+def _tri_setup_np(xy, q, F, W, H, cull):
+    """Per-triangle signed area, drawability and clipped pixel bounding box."""
+    x = xy[:, 0][F]  # (F, 3)
+    y = xy[:, 1][F]
+    area = (x[:, 1] - x[:, 0]) * (y[:, 2] - y[:, 0]) - (y[:, 1] - y[:, 0]) * (x[:, 2] - x[:, 0])
+    ok = (area != 0) & np.isfinite(area) & np.all(q[F] > 0, axis=1)
+    if cull:
+        ok &= area < 0  # front-facing: counter-clockwise seen from the camera (y up) -> area < 0
+    xmin = np.maximum(np.ceil(x.min(axis=1)), 0.0)
+    xmax = np.minimum(np.floor(x.max(axis=1)), W - 1.0)
+    ymin = np.maximum(np.ceil(y.min(axis=1)), 0.0)
+    ymax = np.minimum(np.floor(y.max(axis=1)), H - 1.0)
+    ok &= (xmin <= xmax) & (ymin <= ymax)
+    return x, y, area, ok, xmin, xmax, ymin, ymax
+
+
+def _bary_depth_np(x, y, zt, qt, area, px, py, perspective):
+    """Barycentrics (m, 3) and depth (m,) at pixels for triangles given per row."""
+    w0, w1, w2 = _edges_np(x[:, 0], y[:, 0], x[:, 1], y[:, 1], x[:, 2], y[:, 2], px, py)
+    b0, b1, b2 = w0 / area, w1 / area, w2 / area
+    if perspective:
+        c0, c1, c2 = b0 * qt[:, 0], b1 * qt[:, 1], b2 * qt[:, 2]
+        s = c0 + c1 + c2
+        b0, b1, b2 = c0 / s, c1 / s, c2 / s
+    depth = b0 * zt[:, 0] + b1 * zt[:, 1] + b2 * zt[:, 2]
+    return w0, w1, w2, b0, b1, b2, depth
+
+
+def rasterize_reference(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int],
+                        *, cull_backfaces: bool = False) -> Raster:
+    """Vectorised numpy rasteriser: the reference that the numba kernel must match exactly.
+
+    Same arguments and result as :func:`rasterize`. Memory grows with the summed bounding-box
+    areas of the triangles; use it for tests and small images.
+    """
+    V, F = _check_mesh(vertices, faces)
+    W, H = _as_size(size)
+    xy, z, q = _screen(V, camera)
+    x, y, area, ok, xmin, xmax, ymin, ymax = _tri_setup_np(xy, q, F, W, H, cull_backfaces)
+    tri = np.flatnonzero(ok)
+    out = _empty_raster(W, H)
+    if tri.size == 0:
+        return out
+    bw = (xmax[tri] - xmin[tri] + 1).astype(np.int64)
+    bh = (ymax[tri] - ymin[tri] + 1).astype(np.int64)
+    count = bw * bh
+    start = np.cumsum(count) - count
+    t = np.repeat(tri, count)  # candidate (triangle, pixel) pairs
+    k = np.arange(int(count.sum())) - np.repeat(start, count)
+    bwr = np.repeat(bw, count)
+    px = np.repeat(xmin[tri], count) + (k % bwr)
+    py = np.repeat(ymin[tri], count) + (k // bwr)
+    zt, qt = z[F[t]], q[F[t]]
+    a = area[t]
+    w0, w1, w2, b0, b1, b2, d = _bary_depth_np(x[t], y[t], zt, qt, a, px, py, perspective=bool(
+        getattr(camera, "perspective", False)))
+    pos = a > 0
+    inside = np.where(pos, (w0 >= 0) & (w1 >= 0) & (w2 >= 0), (w0 <= 0) & (w1 <= 0) & (w2 <= 0))
+    d = d.astype(np.float32)  # the z-buffer holds float32 depths
+    inside &= d > -np.inf  # NaN and -inf never beat the empty z-buffer
+    t, px, py, d = t[inside], px[inside].astype(np.int64), py[inside].astype(np.int64), d[inside]
+    pix = py * W + px
+    order = np.lexsort((t, -d, pix))  # per pixel: nearest first, then lowest triangle id
+    pix, t, d = pix[order], t[order], d[order]
+    first = np.ones(pix.size, bool)
+    first[1:] = pix[1:] != pix[:-1]
+    pix, t, d = pix[first], t[first], d[first]
+    out.depth.ravel()[pix] = d
+    out.tri_id.ravel()[pix] = t.astype(np.int32)
+    out.mask.ravel()[pix] = True
+    py, px = np.divmod(pix, W)
+    _, _, _, b0, b1, b2, _ = _bary_depth_np(x[t], y[t], z[F[t]], q[F[t]], area[t],
+                                            px.astype(np.float64), py.astype(np.float64),
+                                            perspective=bool(getattr(camera, "perspective", False)))
+    out.bary.reshape(-1, 3)[pix] = np.stack([b0, b1, b2], axis=1).astype(np.float32)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# numba kernel
+# --------------------------------------------------------------------------------------------
+
+def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  # pragma: no cover
+    """Z-buffer loop over triangles; fills ``zbuf`` (H, W) float32, ``tid`` (H, W) int32 and
+    ``bary`` (H, W, 3) float32 at every pixel a triangle wins. Returns the bounding box
+    ``(x_lo, y_lo, x_hi, y_hi)`` (inclusive) of the pixels written (empty: lo > hi).
+
+    Must stay operation-for-operation equal to :func:`rasterize_reference`.
+    """
+    bx0, by0, bx1, by1 = W, H, -1, -1
+    for f in range(F.shape[0]):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        q0, q1, q2 = q[i0], q[i1], q[i2]
+        if not (q0 > 0 and q1 > 0 and q2 > 0):
+            continue
+        x0, y0, x1, y1, x2, y2 = xy[i0, 0], xy[i0, 1], xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]
+        area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+        if area == 0 or not np.isfinite(area):
+            continue
+        if cull and area > 0:
+            continue
+        xmin = max(np.ceil(min(x0, x1, x2)), 0.0)
+        xmax = min(np.floor(max(x0, x1, x2)), W - 1.0)
+        ymin = max(np.ceil(min(y0, y1, y2)), 0.0)
+        ymax = min(np.floor(max(y0, y1, y2)), H - 1.0)
+        if xmin > xmax or ymin > ymax:
+            continue
+        z0, z1, z2 = z[i0], z[i1], z[i2]
+        pos = area > 0
+        wrote = False
+        for iy in range(int(ymin), int(ymax) + 1):
+            py = float(iy)
+            for ix in range(int(xmin), int(xmax) + 1):
+                px = float(ix)
+                w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
+                w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
+                w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
+                if pos:
+                    if w0 < 0 or w1 < 0 or w2 < 0:
+                        continue
+                elif w0 > 0 or w1 > 0 or w2 > 0:
+                    continue
+                b0 = w0 / area
+                b1 = w1 / area
+                b2 = w2 / area
+                if perspective:
+                    c0 = b0 * q0
+                    c1 = b1 * q1
+                    c2 = b2 * q2
+                    s = c0 + c1 + c2
+                    b0 = c0 / s
+                    b1 = c1 / s
+                    b2 = c2 / s
+                d = np.float32(b0 * z0 + b1 * z1 + b2 * z2)
+                if d > zbuf[iy, ix]:
+                    zbuf[iy, ix] = d
+                    tid[iy, ix] = f
+                    bary[iy, ix, 0] = b0
+                    bary[iy, ix, 1] = b1
+                    bary[iy, ix, 2] = b2
+                    wrote = True
+        if wrote:
+            bx0 = min(bx0, int(xmin))
+            by0 = min(by0, int(ymin))
+            bx1 = max(bx1, int(xmax))
+            by1 = max(by1, int(ymax))
+    return bx0, by0, bx1, by1
+
+
+_raster_kernel = _maybe_njit(_raster_kernel_py)
+_any_nondegenerate = _maybe_njit(_any_nondegenerate_py)
+
+
+def rasterize(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int], *,
+              cull_backfaces: bool = False) -> Raster:
+    """Z-buffer rasterisation of a triangle mesh (numba kernel).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+        Model coordinates.
+    faces : (F, 3) int64
+        Triangles; zero-area ones are skipped.
+    camera : WeakPerspective or Pinhole
+    size : (W, H)
+        Image width and height in pixels.
+    cull_backfaces : bool, keyword-only
+        Skip triangles whose vertex order is clockwise as seen from the camera (normals, by the
+        right-hand rule, pointing away from it).
+
+    Returns
+    -------
+    Raster
+        Depth, triangle id, barycentrics and mask; background if nothing projects into the image.
+
+    Raises
+    ------
+    RenderError, ShapeError
+        Empty mesh, faces out of range, non-finite vertices, bad size.
+    """
+    V, F = _check_mesh(vertices, faces)
+    W, H = _as_size(size)
+    return _rasterize_checked(V, F, camera, W, H, cull_backfaces)
+
+
+def _rasterize_checked(V, F, camera, W, H, cull) -> Raster:
+    xy, z, q = _screen(V, camera)
+    perspective = bool(getattr(camera, "perspective", False))
+    zbuf = np.full((H, W), -np.inf, np.float32)
+    tid = np.full((H, W), -1, np.int32)
+    bary = np.zeros((H, W, 3), np.float32)
+    _raster_kernel(xy, z, q, F, W, H, bool(cull), perspective, zbuf, tid, bary)
+    return Raster(zbuf, tid, bary, tid >= 0)
+
+
+class Rasterizer:
+    """Rasterise many frames of one size into reused buffers (no allocation per frame).
+
+    ``Rasterizer(size).rasterize(vertices, faces, camera)`` gives the same result as
+    :func:`rasterize`, but the returned :class:`Raster` views the rasterizer's buffers: it is
+    valid until the next call (copy it to keep it). Only the region written by the previous
+    call is cleared, so a face filling part of the frame costs only its own pixels.
+
+    Parameters
+    ----------
+    size : (W, H)
+    """
+
+    def __init__(self, size: tuple[int, int]) -> None:
+        self.size = _as_size(size)
+        W, H = self.size
+        self._depth = np.full((H, W), -np.inf, np.float32)
+        self._tid = np.full((H, W), -1, np.int32)
+        self._bary = np.zeros((H, W, 3), np.float32)
+        self._mask = np.zeros((H, W), bool)
+        self._dirty = (0, 0, -1, -1)
+
+    def rasterize(self, vertices: np.ndarray, faces: np.ndarray, camera, *,
+                  cull_backfaces: bool = False) -> Raster:
+        """See :func:`rasterize`; the result is overwritten by the next call."""
+        V, F = _check_mesh(vertices, faces)
+        return self._run(V, F, camera, cull_backfaces)
+
+    def _run(self, V: np.ndarray, F: np.ndarray, camera, cull: bool) -> Raster:
+        W, H = self.size
+        x0, y0, x1, y1 = self._dirty
+        if x1 >= x0 and y1 >= y0:
+            region = (slice(y0, y1 + 1), slice(x0, x1 + 1))
+            self._depth[region] = -np.inf
+            self._tid[region] = -1
+            self._bary[region] = 0.0
+            self._mask[region] = False
+        xy, z, q = _screen(V, camera)
+        box = _raster_kernel(xy, z, q, F, W, H, bool(cull),
+                             bool(getattr(camera, "perspective", False)),
+                             self._depth, self._tid, self._bary)
+        self._dirty = tuple(int(b) for b in box)
+        x0, y0, x1, y1 = self._dirty
+        if x1 >= x0 and y1 >= y0:
+            region = (slice(y0, y1 + 1), slice(x0, x1 + 1))
+            np.greater_equal(self._tid[region], 0, out=self._mask[region])
+        return Raster(self._depth, self._tid, self._bary, self._mask)
+
+
+_scratch = threading.local()
+
+
+def _scratch_rasterizer(W: int, H: int) -> Rasterizer:
+    """A per-thread :class:`Rasterizer` for internal use (visibility without a given raster)."""
+    cache = getattr(_scratch, "cache", None)
+    if cache is None:
+        cache = _scratch.cache = {}
+    r = cache.get((W, H))
+    if r is None:
+        if len(cache) > 4:
+            cache.clear()
+        r = cache[(W, H)] = Rasterizer((W, H))
+    return r

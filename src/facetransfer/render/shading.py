@@ -1,0 +1,298 @@
+"""Colour for rasterised pixels (paper §6): vertex normals, texture sampling, and the numba
+kernels that shade a :class:`~facetransfer.render.raster.Raster` from per-vertex colours or a UV
+texture, optionally Lambert-lit."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import AssetError, ShapeError
+from .raster import Raster, RenderError, _check_mesh, _maybe_njit
+
+__all__ = ["vertex_normals", "sample_texture", "shade_texture"]
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Area-weighted unit vertex normals (right-hand rule on the face vertex order).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    faces : (F, 3) int64
+
+    Returns
+    -------
+    (n, 3) float64
+        Unit normals; vertices on no non-degenerate face get (0, 0, 0).
+    """
+    V, F = _check_mesh(vertices, faces)
+    N = np.zeros_like(V)
+    _normals_kernel(V, F, N)
+    return N
+
+
+def _normals_kernel_py(V, F, N):  # pragma: no cover
+    """Sum of face cross products (2 x area x unit normal) per vertex, then normalised."""
+    for f in range(F.shape[0]):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        ax, ay, az = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
+        bx, by, bz = V[i2, 0] - V[i0, 0], V[i2, 1] - V[i0, 1], V[i2, 2] - V[i0, 2]
+        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        for i in (i0, i1, i2):
+            N[i, 0] += nx
+            N[i, 1] += ny
+            N[i, 2] += nz
+    for i in range(N.shape[0]):
+        norm = np.sqrt(N[i, 0] ** 2 + N[i, 1] ** 2 + N[i, 2] ** 2)
+        if norm > 0:
+            N[i, 0] /= norm
+            N[i, 1] /= norm
+            N[i, 2] /= norm
+
+
+_normals_kernel = _maybe_njit(_normals_kernel_py)
+
+
+def _check_texture(texture) -> np.ndarray:
+    if texture is None:
+        raise AssetError("texture is missing (None)")
+    T = np.asarray(texture)
+    if T.ndim != 3 or T.shape[2] != 3 or T.dtype != np.uint8 or T.shape[0] < 1 or T.shape[1] < 1:
+        raise AssetError(f"texture must be an (H, W, 3) uint8 RGB image, got {T.shape} {T.dtype}")
+    return T
+
+
+def _check_colors(colors, n: int) -> np.ndarray:
+    C = np.asarray(colors)
+    if C.shape != (n, 3):
+        raise ShapeError(f"colors must be (n_vertices, 3) = ({n}, 3), got {C.shape}")
+    if C.dtype == np.uint8:
+        return C.astype(np.float64)
+    C = C.astype(np.float64)
+    if not np.all(np.isfinite(C)):
+        raise ShapeError("colors contain NaN or infinite values")
+    # float colours: 0..1 if they all fit, otherwise 0..255
+    return C * 255.0 if C.max(initial=0.0) <= 1.0 else C
+
+
+def _background(background, W: int, H: int) -> np.ndarray:
+    if background is None:
+        return np.zeros((H, W, 3), np.uint8)
+    B = np.asarray(background)
+    if B.ndim == 1 and B.shape == (3,):
+        if not np.all((B >= 0) & (B <= 255)):
+            raise ShapeError(f"background colour must be 3 values in 0..255, got {B}")
+        return np.broadcast_to(B.astype(np.uint8), (H, W, 3)).copy()
+    if B.shape != (H, W, 3) or B.dtype != np.uint8:
+        raise ShapeError(f"background must be a colour (3,) or an ({H}, {W}, 3) uint8 image, "
+                         f"got {B.shape} {B.dtype}")
+    return B.copy()
+
+
+def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
+    """Bilinear texture lookup, ``uv`` (m, 2) with v up -> (m, 3) float64 in 0..255.
+
+    Texel ``(col, row) = (u (Wt - 1), (1 - v) (Ht - 1))``; coordinates are clamped to the image.
+    """
+    T = _check_texture(texture)
+    Ht, Wt = T.shape[:2]
+    u = np.clip(uv[:, 0], 0.0, 1.0) * (Wt - 1)
+    v = (1.0 - np.clip(uv[:, 1], 0.0, 1.0)) * (Ht - 1)
+    c0 = np.minimum(np.floor(u).astype(np.intp), Wt - 1)
+    r0 = np.minimum(np.floor(v).astype(np.intp), Ht - 1)
+    c1 = np.minimum(c0 + 1, Wt - 1)
+    r1 = np.minimum(r0 + 1, Ht - 1)
+    fu = (u - c0)[:, None]
+    fv = (v - r0)[:, None]
+    Tf = T.astype(np.float32) if T.size <= 4096 * 4096 * 3 else T
+    top = Tf[r0, c0] * (1 - fu) + Tf[r0, c1] * fu
+    bot = Tf[r1, c0] * (1 - fu) + Tf[r1, c1] * fu
+    return top * (1 - fv) + bot * fv
+
+
+def _texel_py(tex, u, v):  # pragma: no cover (numba)
+    """Bilinear sample (r, g, b) of ``tex`` at texture coordinates ``(u, v)`` (v up, clamped to
+    [0, 1]): texel ``(col, row) = (u (Wt - 1), (1 - v) (Ht - 1))``, as :func:`sample_texture`."""
+    Ht, Wt = tex.shape[0], tex.shape[1]
+    u = min(max(u, 0.0), 1.0) * (Wt - 1)
+    v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
+    c0 = min(int(np.floor(u)), Wt - 1)
+    r0 = min(int(np.floor(v)), Ht - 1)
+    c1 = min(c0 + 1, Wt - 1)
+    r1 = min(r0 + 1, Ht - 1)
+    fu = u - c0
+    fv = v - r0
+    out0 = (tex[r0, c0, 0] * (1.0 - fu) + tex[r0, c1, 0] * fu) * (1.0 - fv) \
+        + (tex[r1, c0, 0] * (1.0 - fu) + tex[r1, c1, 0] * fu) * fv
+    out1 = (tex[r0, c0, 1] * (1.0 - fu) + tex[r0, c1, 1] * fu) * (1.0 - fv) \
+        + (tex[r1, c0, 1] * (1.0 - fu) + tex[r1, c1, 1] * fu) * fv
+    out2 = (tex[r0, c0, 2] * (1.0 - fu) + tex[r0, c1, 2] * fu) * (1.0 - fv) \
+        + (tex[r1, c0, 2] * (1.0 - fu) + tex[r1, c1, 2] * fu) * fv
+    return out0, out1, out2
+
+
+_texel = _maybe_njit(_texel_py)
+
+
+def _shade_uv_kernel_py(tid, bary, F, uvs, tex, select, image, mask):  # pragma: no cover
+    """Unlit texture shading of the covered pixels whose triangle is selected (bilinear,
+    the texel convention of :func:`sample_texture`)."""
+    H, W = tid.shape
+    for iy in range(H):
+        for ix in range(W):
+            f = tid[iy, ix]
+            if f < 0 or not select[f]:
+                continue
+            mask[iy, ix] = True
+            i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+            b0, b1, b2 = float(bary[iy, ix, 0]), float(bary[iy, ix, 1]), float(bary[iy, ix, 2])
+            c = _texel(tex, b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0],
+                       b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1])
+            for k in range(3):
+                image[iy, ix, k] = min(max(np.rint(c[k]), 0.0), 255.0)
+
+
+_shade_uv_kernel = _maybe_njit(_shade_uv_kernel_py)
+
+
+def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,
+                  select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Texture the pixels of a raster without lighting, in one pass (numba).
+
+    Every pixel covered by a (selected) triangle takes the bilinear texture sample
+    (:func:`sample_texture`) at the barycentric interpolation of its triangle's ``uvs``.
+
+    Parameters
+    ----------
+    raster : Raster
+        Of a mesh with faces ``faces``.
+    faces : (F, 3) int
+    uvs : (n, 2) float
+        Texture coordinates (v up) of the mesh's vertices.
+    texture : (Ht, Wt, 3) uint8
+    select : (F,) bool, optional
+        Shade only these triangles (the others stay black and outside the mask).
+
+    Returns
+    -------
+    image : (H, W, 3) uint8
+        Black where nothing is shaded.
+    mask : (H, W) bool
+        The shaded pixels.
+    """
+    T = _check_texture(texture)
+    Fa = np.ascontiguousarray(faces, dtype=np.int64)
+    U = np.ascontiguousarray(uvs, dtype=np.float64)
+    if U.ndim != 2 or U.shape[1] != 2 or (Fa.size and Fa.max() >= U.shape[0]):
+        raise ShapeError(f"uvs must be (n, 2) covering the faces' vertices, got {U.shape}")
+    sel = np.ones(len(Fa), bool) if select is None else np.ascontiguousarray(select, dtype=bool)
+    if sel.shape != (len(Fa),):
+        raise ShapeError(f"select must be ({len(Fa)},) bool, got {sel.shape}")
+    H, W = raster.tri_id.shape
+    if raster.tri_id.size and raster.tri_id.max() >= len(Fa):
+        raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
+    image = np.zeros((H, W, 3), np.uint8)
+    mask = np.zeros((H, W), bool)
+    _shade_uv_kernel(np.ascontiguousarray(raster.tri_id), np.ascontiguousarray(raster.bary), Fa,
+                     U, np.ascontiguousarray(T), sel, image, mask)
+    return image, mask
+
+
+def check_shading(shading: str, ambient: float) -> None:
+    """RenderError unless ``shading`` is "lambert" or "none" and ``ambient`` is in [0, 1]."""
+    if shading not in ("lambert", "none"):
+        raise RenderError(f"shading must be 'lambert' or 'none', got {shading!r}")
+    if not 0.0 <= float(ambient) <= 1.0:
+        raise RenderError(f"ambient must be in [0, 1], got {ambient}")
+
+
+def check_textured(texture, uvs, n: int) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """The texture (Ht, Wt, 3) uint8 and the uvs (n, 2) float64 checked, or ``(None, None)``
+    when neither is given (one without the other is an error)."""
+    if texture is None and uvs is None:
+        return None, None
+    T = _check_texture(texture)
+    UV = np.asarray(uvs, dtype=np.float64) if uvs is not None else None
+    if UV is None or UV.shape != (n, 2):
+        raise ShapeError(f"uvs must be (n_vertices, 2) = ({n}, 2) with a texture, got "
+                         f"{None if UV is None else UV.shape}")
+    return T, UV
+
+
+def _light_direction(light) -> np.ndarray:
+    """Unit (3,) direction towards the light."""
+    L = np.asarray(light, dtype=np.float64)
+    if L.shape != (3,) or not np.linalg.norm(L) > 0:
+        raise ShapeError(f"light must be a non-zero (3,) direction, got {L}")
+    return L / np.linalg.norm(L)
+
+
+def shade_image(image: np.ndarray, raster: Raster, V: np.ndarray, F: np.ndarray,
+                rotation: np.ndarray, *, texture: np.ndarray | None, uvs: np.ndarray | None,
+                colors: np.ndarray | None, lambert: bool, light, ambient: float) -> None:
+    """Colour the covered pixels of ``image`` (H, W, 3) uint8 in place (numba).
+
+    The colour is the bilinear ``texture`` sample at the interpolated ``uvs`` (n, 2) if a
+    texture is given, else the interpolated per-vertex ``colors`` (n, 3) in 0..255, else grey
+    200; with ``lambert`` it is multiplied by ``ambient + (1 - ambient) max(0, n . light)``,
+    ``n`` the interpolated vertex normal of the mesh ``V`` (n, 3), ``F`` (F, 3) turned into
+    camera space by ``rotation`` (3, 3).
+    """
+    n = V.shape[0]
+    if texture is not None:
+        src, uv_arr, tex_arr, col_arr = 1, uvs, np.ascontiguousarray(texture), _DUMMY_COLORS
+    elif colors is not None:
+        src, uv_arr, tex_arr, col_arr = 0, _DUMMY_UV, _DUMMY_TEX, colors
+    else:
+        src, uv_arr, tex_arr, col_arr = 0, _DUMMY_UV, _DUMMY_TEX, np.full((n, 3), 200.0)
+    if lambert:
+        L = _light_direction(light)
+        Nc = np.ascontiguousarray(vertex_normals(V, F) @ rotation.T)  # camera space
+    else:
+        L, Nc = np.zeros(3), _DUMMY_COLORS
+    _shade_kernel(raster.tri_id, raster.bary, F, src, col_arr, uv_arr, tex_arr, lambert, Nc, L,
+                  ambient, image)
+
+
+_DUMMY_COLORS = np.zeros((1, 3))
+_DUMMY_UV = np.zeros((1, 2))
+_DUMMY_TEX = np.zeros((1, 1, 3), np.uint8)
+
+
+def _shade_kernel_py(tid, bary, F, src, colors, uvs, tex, lambert, normals, light, ambient,
+                     image):  # pragma: no cover
+    """Colour every covered pixel: interpolated vertex colour (src 0) or bilinear texture
+    sample at the interpolated uv (src 1), times ``ambient + (1 - ambient) max(0, n . l)``."""
+    H, W = tid.shape
+    for iy in range(H):
+        for ix in range(W):
+            f = tid[iy, ix]
+            if f < 0:
+                continue
+            i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+            b0, b1, b2 = float(bary[iy, ix, 0]), float(bary[iy, ix, 1]), float(bary[iy, ix, 2])
+            if src == 1:
+                cr, cg, cb = _texel(tex, b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0],
+                                    b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1])
+            else:
+                cr = b0 * colors[i0, 0] + b1 * colors[i1, 0] + b2 * colors[i2, 0]
+                cg = b0 * colors[i0, 1] + b1 * colors[i1, 1] + b2 * colors[i2, 1]
+                cb = b0 * colors[i0, 2] + b1 * colors[i1, 2] + b2 * colors[i2, 2]
+            if lambert:
+                nx = b0 * normals[i0, 0] + b1 * normals[i1, 0] + b2 * normals[i2, 0]
+                ny = b0 * normals[i0, 1] + b1 * normals[i1, 1] + b2 * normals[i2, 1]
+                nz = b0 * normals[i0, 2] + b1 * normals[i1, 2] + b2 * normals[i2, 2]
+                nn = np.sqrt(nx * nx + ny * ny + nz * nz)
+                cos = 0.0
+                if nn > 0:
+                    cos = max((nx * light[0] + ny * light[1] + nz * light[2]) / nn, 0.0)
+                g = ambient + (1.0 - ambient) * cos
+                cr *= g
+                cg *= g
+                cb *= g
+            image[iy, ix, 0] = min(max(np.rint(cr), 0.0), 255.0)
+            image[iy, ix, 1] = min(max(np.rint(cg), 0.0), 255.0)
+            image[iy, ix, 2] = min(max(np.rint(cb), 0.0), 255.0)
+
+
+_shade_kernel = _maybe_njit(_shade_kernel_py)
