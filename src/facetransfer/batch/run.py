@@ -149,6 +149,17 @@ def _model_future(client, model):
     return scatter_model(client, model)
 
 
+def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, model):
+    """The run's collector (the rows of ``done`` reported), the jobs left to do and the model
+    scattered to the workers (None when nothing is left)."""
+    col = _Collector(client, [j.name for j in jobs], out_dir, done, progress)
+    if progress is not None:
+        for r in done.values():
+            progress(r)
+    todo = [j for j in jobs if j.name not in done]
+    return col, todo, (_model_future(client, model) if todo else None)
+
+
 def _done_track(out: Path, name: str, model_hash: str) -> Row | None:
     """The row of an output an earlier run finished (complete, valid, same model), else None."""
     from ..errors import TrackError
@@ -195,8 +206,8 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     -------
     BatchResult
     """
+    from ..track.options import TrackOptions
     from ..track.settings import TrackerSettings
-    from ..track.tracker import TrackOptions
 
     if not isinstance(options, TrackerSettings):
         options = TrackerSettings(klt=options or TrackOptions())
@@ -209,45 +220,57 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     mhash = model.content_hash
     done = {} if overwrite else {j.name: r for j in jobs
                                  if (r := _done_track(outs[j.name], j.name, mhash)) is not None}
-    col = _Collector(client, [j.name for j in jobs], out_dir, done, progress)
-    if progress is not None:
-        for r in done.values():
-            progress(r)
-    todo = [j for j in jobs if j.name not in done]
-    mf = _model_future(client, model) if todo else None
+    col, todo, mf = _start(client, jobs, out_dir, done, progress, model)
+    run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap)
     for job in todo:
-        out = str(outs[job.name])
-        if chunk:
-            col.add(client.submit(J.count_frames, str(job.video), pure=False), "count", job)
+        run.submit(job)
+    return col.run(run.on_done)
+
+
+class _TrackSubmit:
+    """The tasks of :func:`batch_track`: a clip in one task, or (``chunk``) its frames counted
+    first, then its chunks tracked in parallel (the first one first) and joined."""
+
+    def __init__(self, client, col: _Collector, outs: dict, mf, options, chunk: int,
+                 overlap: int) -> None:
+        self.client, self.col, self.outs, self.mf = client, col, outs, mf
+        self.options, self.chunk, self.overlap = options, chunk, overlap
+
+    def submit(self, job) -> None:
+        if self.chunk:
+            self.col.add(self.client.submit(J.count_frames, str(job.video), pure=False), "count",
+                         job)
         else:
-            col.add(client.submit(J.track_clip, job, out, mf, options, pure=False), "clip", job)
+            self._whole(job)
 
-    def submit_chunks(job, n_frames: int) -> None:
-        out = str(outs[job.name])
-        chunks = plan_chunks(n_frames, chunk, overlap)
+    def _whole(self, job) -> None:
+        self.col.add(self.client.submit(J.track_clip, job, str(self.outs[job.name]), self.mf,
+                                        self.options, pure=False), "clip", job)
+
+    def _chunks(self, job, n_frames: int) -> None:
+        out, mf, opt = str(self.outs[job.name]), self.mf, self.options
+        chunks = plan_chunks(n_frames, self.chunk, self.overlap)
         if len(chunks) == 1:
-            col.add(client.submit(J.track_clip, job, out, mf, options, pure=False), "clip", job)
+            self._whole(job)
             return
-        first = client.submit(J.track_chunk, job, chunks[0], out, mf, options, pure=False,
-                              priority=1)
-        rest = [client.submit(J.track_chunk, job, c, out, mf, options, first, pure=False)
+        submit = self.client.submit
+        first = submit(J.track_chunk, job, chunks[0], out, mf, opt, pure=False, priority=1)
+        rest = [submit(J.track_chunk, job, c, out, mf, opt, first, pure=False)
                 for c in chunks[1:]]
-        col.alive += [first] + rest
-        col.add(client.submit(J.join_clip, job, out, mf, chunks, [first] + rest, pure=False),
-                "clip", job)
+        self.col.alive += [first] + rest
+        self.col.add(submit(J.join_clip, job, out, mf, chunks, [first] + rest, pure=False),
+                     "clip", job)
 
-    def on_done(kind, job, fut) -> None:
+    def on_done(self, kind: str, job, fut) -> None:
         try:
             res = fut.result()
         except Exception as exc:  # noqa: BLE001 (any failure is this clip's row)
-            col.fail(job, exc, outs[job.name])
+            self.col.fail(job, exc, self.outs[job.name])
             return
         if kind == "count":
-            submit_chunks(job, int(res))
+            self._chunks(job, int(res))
         else:
-            col.finish(job, res)
-
-    return col.run(on_done)
+            self.col.finish(job, res)
 
 
 def _done_video(out: Path, name: str) -> Row | None:
@@ -327,12 +350,7 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
 
 def _simple(client, jobs, out_dir, outs, done, progress, submit, model) -> BatchResult:
     """A run of one independent task per job."""
-    col = _Collector(client, [j.name for j in jobs], out_dir, done, progress)
-    if progress is not None:
-        for r in done.values():
-            progress(r)
-    todo = [j for j in jobs if j.name not in done]
-    mf = _model_future(client, model) if todo else None
+    col, todo, mf = _start(client, jobs, out_dir, done, progress, model)
     for job in todo:
         col.add(submit(job, mf), "clip", job)
 
