@@ -167,16 +167,8 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
     from ..transfer import project_landmarks
 
     tracks, chunks = list(tracks), list(chunks)
-    if len(tracks) != len(chunks) or not tracks:
-        raise BatchError(f"{len(tracks)} chunk tracks for {len(chunks)} chunks")
+    _check_chunk_tracks(tracks, chunks)
     t0 = tracks[0]
-    for t, c in zip(tracks, chunks):
-        if t.n_frames != c.n_frames:
-            raise BatchError(f"chunk {c.index} (frames {c.start}-{c.stop - 1}) was tracked to "
-                             f"{t.n_frames} frames, expected {c.n_frames}")
-        if t.frame_size != t0.frame_size or t.model_hash != t0.model_hash \
-                or t.mode_names != t0.mode_names:
-            raise BatchError(f"chunk {c.index} has another frame size or model than chunk 0")
     F = chunks[-1].stop
     full = _fields(t0)
     full = {k: (np.zeros((F,) + v.shape[1:], v.dtype) if k != "weights" else
@@ -199,6 +191,21 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
                    confidence=np.clip(full["confidence"], 0, 1), lost=full["lost"],
                    model_hash=t0.model_hash, mode_names=t0.mode_names, source=t0.source)
     return dataclasses.replace(project_landmarks(joined, model), source=t0.source)
+
+
+def _check_chunk_tracks(tracks: list, chunks: list) -> None:
+    """BatchError unless there is one track per chunk, of its length, all of one frame size and
+    model."""
+    if len(tracks) != len(chunks) or not tracks:
+        raise BatchError(f"{len(tracks)} chunk tracks for {len(chunks)} chunks")
+    t0 = tracks[0]
+    for t, c in zip(tracks, chunks):
+        if t.n_frames != c.n_frames:
+            raise BatchError(f"chunk {c.index} (frames {c.start}-{c.stop - 1}) was tracked to "
+                             f"{t.n_frames} frames, expected {c.n_frames}")
+        if t.frame_size != t0.frame_size or t.model_hash != t0.model_hash \
+                or t.mode_names != t0.mode_names:
+            raise BatchError(f"chunk {c.index} has another frame size or model than chunk 0")
 
 
 def _fields_of(full: dict, sl: slice) -> dict:

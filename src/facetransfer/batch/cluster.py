@@ -85,21 +85,14 @@ def open_client(*, workers: int | None = None, scheduler: str | None = None,
     BatchError
         ``workers < 1``, ``workers`` with ``scheduler``, a scheduler that does not answer.
     """
-    from dask import config
-    from dask.distributed import Client, LocalCluster
+    from dask.distributed import Client
 
     quiet_dask(verbose)
-    level = logging.INFO if verbose else logging.CRITICAL  # a failed task is its clip's row
     if scheduler is not None:
         if workers is not None:
             raise BatchError("--workers sizes the embedded cluster; the workers of --scheduler "
                              "are the ones started with `dask worker`")
-        _probe(scheduler, timeout)
-        try:
-            client = Client(scheduler, timeout=timeout, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
-            raise BatchError(f"scheduler {scheduler} did not answer within {timeout:g} s "
-                             f"({exc})") from None
+        client = _remote_client(scheduler, timeout)
         try:
             yield client
         finally:
@@ -108,14 +101,7 @@ def open_client(*, workers: int | None = None, scheduler: str | None = None,
     n = default_workers() if workers is None else int(workers)
     if n < 1:
         raise BatchError(f"--workers must be >= 1, got {workers}")
-    kw = {}
-    if processes and not verbose:  # native log lines of MediaPipe and FFmpeg in the workers
-        kw["env"] = {"GLOG_minloglevel": os.environ.get("GLOG_minloglevel", "2"),
-                     "OPENCV_FFMPEG_LOGLEVEL": os.environ.get("OPENCV_FFMPEG_LOGLEVEL", "-8")}
-    # workers that may start processes of their own (the renderer forks for long clips)
-    with config.set({"distributed.worker.daemon": False}):
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
-                               dashboard_address=None, silence_logs=level, **kw)
+    cluster = _local_cluster(n, processes, verbose)
     try:
         client = Client(cluster, set_as_default=False)
         try:
@@ -124,6 +110,34 @@ def open_client(*, workers: int | None = None, scheduler: str | None = None,
             client.close()
     finally:
         cluster.close()
+
+
+def _remote_client(scheduler: str, timeout: float):
+    """A client of the running scheduler at ``scheduler`` (BatchError if it does not answer)."""
+    from dask.distributed import Client
+
+    _probe(scheduler, timeout)
+    try:
+        return Client(scheduler, timeout=timeout, set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        raise BatchError(f"scheduler {scheduler} did not answer within {timeout:g} s "
+                         f"({exc})") from None
+
+
+def _local_cluster(n: int, processes: bool, verbose: bool):
+    """An embedded cluster of ``n`` single-threaded workers (processes or threads)."""
+    from dask import config
+    from dask.distributed import LocalCluster
+
+    level = logging.INFO if verbose else logging.CRITICAL  # a failed task is its clip's row
+    kw = {}
+    if processes and not verbose:  # native log lines of MediaPipe and FFmpeg in the workers
+        kw["env"] = {"GLOG_minloglevel": os.environ.get("GLOG_minloglevel", "2"),
+                     "OPENCV_FFMPEG_LOGLEVEL": os.environ.get("OPENCV_FFMPEG_LOGLEVEL", "-8")}
+    # workers that may start processes of their own (the renderer forks for long clips)
+    with config.set({"distributed.worker.daemon": False}):
+        return LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
+                            dashboard_address=None, silence_logs=level, **kw)
 
 
 def scatter_model(client, model):
