@@ -103,13 +103,21 @@ def _check_not_all_degenerate(V: np.ndarray, F: np.ndarray) -> None:
         raise RenderError(f"all {F.shape[0]} triangles are degenerate (zero area)")
 
 
+def _face_cross_py(V, i0, i1, i2):  # pragma: no cover (numba)
+    """Cross product ``(V[i1] - V[i0]) x (V[i2] - V[i0])`` of a triangle (2 x area x unit
+    normal) as three floats."""
+    ax, ay, az = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
+    bx, by, bz = V[i2, 0] - V[i0, 0], V[i2, 1] - V[i0, 1], V[i2, 2] - V[i0, 2]
+    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+
+
+_face_cross = _maybe_njit(_face_cross_py)
+
+
 def _any_nondegenerate_py(V, F, eps2):  # pragma: no cover
     """True as soon as one triangle has squared doubled area > eps2 (stops early)."""
     for f in range(F.shape[0]):
-        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-        ax, ay, az = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
-        bx, by, bz = V[i2, 0] - V[i0, 0], V[i2, 1] - V[i0, 1], V[i2, 2] - V[i0, 2]
-        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        nx, ny, nz = _face_cross(V, F[f, 0], F[f, 1], F[f, 2])
         if nx * nx + ny * ny + nz * nz > eps2:
             return True
     return False

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import AssetError, ShapeError
-from .raster import Raster, RenderError, _check_mesh, _maybe_njit
+from .raster import Raster, RenderError, _check_mesh, _face_cross, _maybe_njit
 
 __all__ = ["vertex_normals", "sample_texture", "shade_texture"]
 
@@ -35,9 +35,7 @@ def _normals_kernel_py(V, F, N):  # pragma: no cover
     """Sum of face cross products (2 x area x unit normal) per vertex, then normalised."""
     for f in range(F.shape[0]):
         i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-        ax, ay, az = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
-        bx, by, bz = V[i2, 0] - V[i0, 0], V[i2, 1] - V[i0, 1], V[i2, 2] - V[i0, 2]
-        nx, ny, nz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
+        nx, ny, nz = _face_cross(V, i0, i1, i2)
         for i in (i0, i1, i2):
             N[i, 0] += nx
             N[i, 1] += ny
