@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 
 from ..errors import TrackError
 from .capture import CaptureOptions
-from .tracker import TrackOptions
+from .options import TrackOptions
 
 __all__ = ["TRACKERS", "TrackerSettings"]
 
