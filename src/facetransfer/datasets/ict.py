@@ -446,6 +446,16 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
             log.info("read cached %s from %s", name, cache)
             return ds
 
+    ds = _build(name, spec, rec, seed=seed, n_id=n_id, region=region, progress=progress,
+                use_cache=use_cache)
+    if use_cache:
+        _save_cache(cache, ds)
+    return ds
+
+
+def _build(name: str, spec: dict, rec: Mapping, *, seed: int, n_id: int, region: str,
+           progress: Progress | None, use_cache: bool) -> FaceDataset:
+    """Steps 1-3 of the module docstring for one data set spec; the provenance records them."""
     t0 = time.perf_counter()
     used = _used_recipes(spec, rec)
     id_cfg = rec.get("identity", {})
@@ -474,8 +484,6 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
     ds = FaceDataset(out, np.ones(out.shape[:-2], dtype=bool), modes, labels, faces,
                      tmpl.mesh.uvs, tmpl.landmarks, tmpl.vertex_subset, prov)
     log.info("built %s (%s cells, %d vertices) in %.1f s", name, out.shape[:-2], n, seconds)
-    if use_cache:
-        _save_cache(cache, ds)
     return ds
 
 
