@@ -63,8 +63,10 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from .background import background_image
 from .errors import AssetError, FaceTransferError, VideoError
 from .io.atomic import atomic_path, check_output_path
+from .io.npz import read_npz
 from .render import WeakPerspective, render, rotation_from_euler
 
 log = logging.getLogger(__name__)
@@ -105,8 +107,26 @@ class SpecError(FaceTransferError):
 # Performance: per-frame weights and pose
 # --------------------------------------------------------------------------------------------
 
+class _Posed:
+    """Per-frame weak-perspective poses (Eq. (7)) held as ``scale`` (F,), ``rotation`` (F, 3, 3)
+    and ``translation`` (F, 2): what :class:`Performance` and :class:`SyntheticTruth` share."""
+
+    scale: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.scale.shape[0])
+
+    def camera(self, frame: int) -> WeakPerspective:
+        """The weak-perspective camera of one frame."""
+        return WeakPerspective(float(self.scale[frame]), self.rotation[frame],
+                               self.translation[frame])
+
+
 @dataclass(frozen=True, eq=False)
-class Performance:
+class Performance(_Posed):
     """What the model does in every frame.
 
     Attributes
@@ -131,15 +151,6 @@ class Performance:
     scale: np.ndarray
     translation: np.ndarray
     spec: dict = field(default_factory=dict)
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.scale.shape[0])
-
-    def camera(self, frame: int) -> WeakPerspective:
-        """The weak-perspective camera of one frame."""
-        return WeakPerspective(float(self.scale[frame]), self.rotation[frame],
-                               self.translation[frame])
 
     def frame_weights(self, frame: int) -> dict[str, np.ndarray]:
         return {m: w[frame] for m, w in self.weights.items()}
@@ -276,13 +287,7 @@ def performance_from_spec(model, spec: Mapping) -> Performance:
     SpecError
         Unknown keys, modes or labels, weights of the wrong length, bad frame numbers.
     """
-    if not isinstance(spec, Mapping):
-        raise SpecError(f"a performance spec must be a JSON object, got {type(spec).__name__}")
-    known = {"fps", "n_frames", "size", "identity", "tracks", "pose"}
-    unknown = set(spec) - known
-    if unknown:
-        raise SpecError(f"unknown performance spec key(s) {sorted(unknown)}; known: "
-                        f"{sorted(known)}")
+    _check_spec_keys(spec)
     fps = _num(spec, "fps", DEFAULT_FPS, "fps")
     if not 0 < fps <= 1000:
         raise SpecError(f"fps must be in (0, 1000], got {fps}")
@@ -290,6 +295,44 @@ def performance_from_spec(model, spec: Mapping) -> Performance:
     id_mode = model.mode_names[0]
     identity = _value_weights(model, id_mode, spec["identity"], "identity") \
         if "identity" in spec else _base(model, id_mode)
+    parsed, last = _spec_tracks(model, spec)
+    pose = spec.get("pose", {}) or {}
+    if not isinstance(pose, Mapping):
+        raise SpecError(f"pose must be an object, got {pose!r}")
+    pose = dict(pose)
+    if "keys" in pose:
+        last = max(last, _parse_keys(pose["keys"], "pose.keys")[-1][0])
+    n_frames = _spec_n_frames(spec, last)
+    weights = _mode_weights(model, identity, parsed, n_frames)
+    fill = _num(pose, "fill", DEFAULT_FILL, "pose.fill")
+    pose.pop("fill", None)
+    if not 0 < fill <= 2:
+        raise SpecError(f"pose.fill must be in (0, 2], got {fill}")
+    s0, centre = _frame_camera_params(model, identity, size, fill)
+    if "keys" in pose:
+        yaw, pitch, roll, tx, ty, rs = _keyed_pose(pose, n_frames)
+    else:
+        yaw, pitch, roll, tx, ty, rs = _oscillating_pose(pose, np.arange(n_frames) / fps)
+    if np.any(rs <= 0):
+        raise SpecError("pose scale must stay > 0")
+    R, s, tr = _pose_arrays(yaw, pitch, roll, tx, ty, rs, s0, centre, size)
+    return Performance(fps, size, weights, R, s, tr, dict(spec))
+
+
+def _check_spec_keys(spec) -> None:
+    """SpecError unless ``spec`` is a mapping of the known top-level keys."""
+    if not isinstance(spec, Mapping):
+        raise SpecError(f"a performance spec must be a JSON object, got {type(spec).__name__}")
+    known = {"fps", "n_frames", "size", "identity", "tracks", "pose"}
+    unknown = set(spec) - known
+    if unknown:
+        raise SpecError(f"unknown performance spec key(s) {sorted(unknown)}; known: "
+                        f"{sorted(known)}")
+
+
+def _spec_tracks(model, spec: Mapping) -> tuple[dict[str, list[tuple[int, np.ndarray]]], int]:
+    """Keyframes ``(frame, weights (r,))`` per non-identity mode, and the last keyed frame (-1)."""
+    id_mode = model.mode_names[0]
     tracks = spec.get("tracks", {}) or {}
     if not isinstance(tracks, Mapping):
         raise SpecError("tracks must be an object {mode: [[frame, value], ...]}")
@@ -305,66 +348,70 @@ def performance_from_spec(model, spec: Mapping) -> Performance:
         parsed[mode] = [(f, _value_weights(model, mode, v, f"tracks.{mode} frame {f}"))
                         for f, v in keys]
         last = max(last, keys[-1][0])
-    pose = spec.get("pose", {}) or {}
-    if not isinstance(pose, Mapping):
-        raise SpecError(f"pose must be an object, got {pose!r}")
-    pose = dict(pose)
-    if "keys" in pose:
-        last = max(last, _parse_keys(pose["keys"], "pose.keys")[-1][0])
+    return parsed, last
+
+
+def _spec_n_frames(spec: Mapping, last: int) -> int:
+    """The clip length: ``n_frames``, else the last keyframe + 1, else 100."""
     n_frames = _num(spec, "n_frames", last + 1 if last >= 0 else 100, "n_frames")
     if n_frames != int(n_frames):
         raise SpecError(f"n_frames must be an integer, got {n_frames}")
     n_frames = int(n_frames)
     if not 1 <= n_frames <= 100_000:
         raise SpecError(f"n_frames must be between 1 and 100000, got {n_frames}")
+    return n_frames
 
+
+def _mode_weights(model, identity: np.ndarray, parsed: dict, n_frames: int
+                  ) -> dict[str, np.ndarray]:
+    """Weights (n_frames, r_k) of every mode: the identity constant, tracks eased, others at base."""
     weights = {}
     for mode in model.mode_names:
-        if mode == id_mode:
+        if mode == model.mode_names[0]:
             weights[mode] = np.tile(identity, (n_frames, 1))
         elif mode in parsed:
             weights[mode] = _keyframe_track(parsed[mode], n_frames)
         else:
             weights[mode] = np.tile(_base(model, mode), (n_frames, 1))
+    return weights
 
-    fill = _num(pose, "fill", DEFAULT_FILL, "pose.fill")
-    pose.pop("fill", None)
-    if not 0 < fill <= 2:
-        raise SpecError(f"pose.fill must be in (0, 2], got {fill}")
-    s0, centre = _frame_camera_params(model, identity, size, fill)
-    t = np.arange(n_frames) / fps
-    if "keys" in pose:
-        names = ("yaw_deg", "pitch_deg", "roll_deg", "tx", "ty", "scale")
-        keys = []
-        for f, v in _parse_keys(pose.pop("keys"), "pose.keys"):
-            if not isinstance(v, Mapping) or set(v) - set(names):
-                raise SpecError(f"pose.keys frame {f}: expected an object with keys from "
-                                f"{names}, got {v!r}")
-            keys.append((f, np.array([_num(v, k, 1.0 if k == "scale" else 0.0,
-                                           f"pose.keys frame {f}: {k}") for k in names])))
-        if pose:
-            raise SpecError(f"unknown pose key(s) {sorted(pose)} beside 'keys'")
-        P = _keyframe_track(keys, n_frames)
-        yaw, pitch, roll, tx, ty, rs = P.T
-    else:
-        names = {"yaw_deg", "pitch_deg", "roll_deg", "translate_px", "scale", "period_s"}
-        if set(pose) - names:
-            raise SpecError(f"unknown pose key(s) {sorted(set(pose) - names)}; known: "
-                            f"{sorted(names | {'fill', 'keys'})}")
-        period = _num(pose, "period_s", 4.0, "pose.period_s")
-        if not period > 0:
-            raise SpecError(f"pose.period_s must be > 0, got {period}")
-        ph = 2 * np.pi * t / period
-        yaw = _num(pose, "yaw_deg", 0.0, "pose.yaw_deg") * np.sin(ph)
-        pitch = _num(pose, "pitch_deg", 0.0, "pose.pitch_deg") * np.sin(1.37 * ph + 0.5)
-        roll = _num(pose, "roll_deg", 0.0, "pose.roll_deg") * np.sin(0.71 * ph + 1.0)
-        amp = _num(pose, "translate_px", 0.0, "pose.translate_px")
-        tx, ty = amp * np.sin(0.53 * ph + 2.0), amp * np.sin(0.89 * ph + 0.3)
-        rs = 1.0 + _num(pose, "scale", 0.0, "pose.scale") * np.sin(0.61 * ph + 1.2)
-    if np.any(rs <= 0):
-        raise SpecError("pose scale must stay > 0")
-    R, s, tr = _pose_arrays(yaw, pitch, roll, tx, ty, rs, s0, centre, size)
-    return Performance(fps, size, weights, R, s, tr, dict(spec))
+
+def _keyed_pose(pose: dict, n_frames: int) -> np.ndarray:
+    """Keyframed pose: (6, n_frames) yaw, pitch, roll (degrees), tx, ty (pixels), relative scale.
+
+    ``pose`` holds ``keys`` and nothing else (``fill`` already taken out).
+    """
+    names = ("yaw_deg", "pitch_deg", "roll_deg", "tx", "ty", "scale")
+    keys = []
+    for f, v in _parse_keys(pose.pop("keys"), "pose.keys"):
+        if not isinstance(v, Mapping) or set(v) - set(names):
+            raise SpecError(f"pose.keys frame {f}: expected an object with keys from "
+                            f"{names}, got {v!r}")
+        keys.append((f, np.array([_num(v, k, 1.0 if k == "scale" else 0.0,
+                                       f"pose.keys frame {f}: {k}") for k in names])))
+    if pose:
+        raise SpecError(f"unknown pose key(s) {sorted(pose)} beside 'keys'")
+    return _keyframe_track(keys, n_frames).T
+
+
+def _oscillating_pose(pose: Mapping, t: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Smooth head oscillation at times ``t`` (n,) seconds: yaw, pitch, roll (degrees), tx, ty
+    (pixels) and relative scale, each (n,); the periods are detuned from ``period_s``."""
+    names = {"yaw_deg", "pitch_deg", "roll_deg", "translate_px", "scale", "period_s"}
+    if set(pose) - names:
+        raise SpecError(f"unknown pose key(s) {sorted(set(pose) - names)}; known: "
+                        f"{sorted(names | {'fill', 'keys'})}")
+    period = _num(pose, "period_s", 4.0, "pose.period_s")
+    if not period > 0:
+        raise SpecError(f"pose.period_s must be > 0, got {period}")
+    ph = 2 * np.pi * t / period
+    yaw = _num(pose, "yaw_deg", 0.0, "pose.yaw_deg") * np.sin(ph)
+    pitch = _num(pose, "pitch_deg", 0.0, "pose.pitch_deg") * np.sin(1.37 * ph + 0.5)
+    roll = _num(pose, "roll_deg", 0.0, "pose.roll_deg") * np.sin(0.71 * ph + 1.0)
+    amp = _num(pose, "translate_px", 0.0, "pose.translate_px")
+    tx, ty = amp * np.sin(0.53 * ph + 2.0), amp * np.sin(0.89 * ph + 0.3)
+    rs = 1.0 + _num(pose, "scale", 0.0, "pose.scale") * np.sin(0.61 * ph + 1.2)
+    return yaw, pitch, roll, tx, ty, rs
 
 
 def load_performance(model, path: str | os.PathLike) -> Performance:
@@ -606,7 +653,7 @@ def load_texture_image(path: str | os.PathLike) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 @dataclass(frozen=True, eq=False)
-class SyntheticTruth:
+class SyntheticTruth(_Posed):
     """Ground truth of a synthetic clip, per frame.
 
     Attributes
@@ -641,14 +688,6 @@ class SyntheticTruth:
     landmark_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     meta: dict = field(default_factory=dict)
 
-    @property
-    def n_frames(self) -> int:
-        return int(self.scale.shape[0])
-
-    def camera(self, frame: int) -> WeakPerspective:
-        return WeakPerspective(float(self.scale[frame]), self.rotation[frame],
-                               self.translation[frame])
-
 
 @dataclass(frozen=True, eq=False)
 class SyntheticClip:
@@ -674,18 +713,10 @@ def _appearance(model, texture, colors, seed: int):
 
 
 def _background_image(background, size, seed: int) -> np.ndarray:
-    W, H = size
+    """The clip's background (H, W, 3) uint8: procedural unless a colour or image is given."""
     if background is None:
         return procedural_background(size, seed=seed + 1)
-    B = np.asarray(background)
-    if B.shape == (3,):
-        if not np.all((B >= 0) & (B <= 255)):
-            raise SpecError(f"background colour must be 3 values in 0..255, got {B}")
-        return np.broadcast_to(B.astype(np.uint8), (H, W, 3)).copy()
-    if B.shape != (H, W, 3) or B.dtype != np.uint8:
-        raise SpecError(f"background must be a colour or an ({H}, {W}, 3) uint8 image, "
-                        f"got {B.shape} {B.dtype}")
-    return B
+    return background_image(background, *size, error=SpecError)
 
 
 def _iter_render(model, perf: Performance, *, texture=None, colors=None, background=None,
@@ -771,18 +802,16 @@ def load_truth(path: str | os.PathLike) -> SyntheticTruth:
     p = Path(path)
     if p.suffix.lower() != ".npz":
         p = truth_path(p)
-    if not p.is_file():
-        raise VideoError(f"ground-truth file {p} does not exist")
+    z = read_npz(p, "ground-truth file", VideoError)
     try:
-        with np.load(p, allow_pickle=False) as z:
-            meta = json.loads(str(z["meta"]))
-            weights = {k[len("weights__"):]: z[k] for k in z.files if k.startswith("weights__")}
-            order = meta.get("mode_names", list(weights))
-            weights = {m: weights[m] for m in order if m in weights}
-            return SyntheticTruth(float(z["fps"]), tuple(int(v) for v in z["frame_size"]),
-                                  z["rotation"], z["scale"], z["translation"], weights,
-                                  z["landmarks2d"], z["vertices2d"], z["visible"],
-                                  z["landmark_indices"], meta)
+        meta = json.loads(str(z["meta"]))
+        weights = {k[len("weights__"):]: z[k] for k in z if k.startswith("weights__")}
+        order = meta.get("mode_names", list(weights))
+        weights = {m: weights[m] for m in order if m in weights}
+        return SyntheticTruth(float(z["fps"]), tuple(int(v) for v in z["frame_size"]),
+                              z["rotation"], z["scale"], z["translation"], weights,
+                              z["landmarks2d"], z["vertices2d"], z["visible"],
+                              z["landmark_indices"], meta)
     except (KeyError, ValueError, OSError) as exc:
         raise VideoError(f"ground-truth file {p} is not a facetransfer truth file: {exc}") from None
 

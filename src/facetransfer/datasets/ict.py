@@ -446,6 +446,16 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
             log.info("read cached %s from %s", name, cache)
             return ds
 
+    ds = _build(name, spec, rec, seed=seed, n_id=n_id, region=region, progress=progress,
+                use_cache=use_cache)
+    if use_cache:
+        _save_cache(cache, ds)
+    return ds
+
+
+def _build(name: str, spec: dict, rec: Mapping, *, seed: int, n_id: int, region: str,
+           progress: Progress | None, use_cache: bool) -> FaceDataset:
+    """Steps 1-3 of the module docstring for one data set spec; the provenance records them."""
     t0 = time.perf_counter()
     used = _used_recipes(spec, rec)
     id_cfg = rec.get("identity", {})
@@ -454,52 +464,14 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
     tmpl = ict_template(region)
     faces, n = tmpl.mesh.faces, len(tmpl.mesh.vertices)
     neutral = tmpl.mesh.vertices
-
-    # Identities (step 1).
-    comps = _identity_components(neutral, region, use_cache)  # (100, n, 3)
-    rng = np.random.default_rng(seed)
-    w = scale * rng.standard_normal((n_id, _N_IDENTITY_COMPONENTS))
-    if include_generic:
-        w[0] = 0.0
-    id_neutral = neutral + np.tensordot(w, comps, axes=1)  # (n_id, n, 3)
-    del comps
-
-    # Generic cells (step 2): neutral + expression offset [+ viseme offset].
-    shapes = {s for r in used["expressions"].values() for s in r}
-    shapes |= {s for r in used["visemes"].values() for s in r}
-    off = _offsets(shapes, neutral)
-    expr = [_combine(used["expressions"][e], off, n) for e in spec["expressions"]]
-    vis = [_combine(used["visemes"][v], off, n) for v in spec.get("visemes", [])]
-    if vis:
-        cell_off = np.stack([[e + v for v in vis] for e in expr])  # (E, V, n, 3)
-    else:
-        cell_off = np.stack(expr)  # (E, n, 3)
-    cell_shape = cell_off.shape[:-2]
-
-    # Anchor: the rigid vertex that moves least over all used shapes.
-    motion = sum(np.linalg.norm(o, axis=1) for o in off.values()) if off else np.zeros(n)
-    preferred = tmpl.rigid[np.argsort(motion[tmpl.rigid], kind="stable")]
-    anchors = component_anchors(n, faces, preferred)
-
-    # Identity-specific cells (step 3): deformation transfer of every generic cell.
-    Q = deformation_gradients(neutral, neutral + cell_off, faces)  # (*cells, F, 3, 3)
-    out = np.empty((n_id,) + cell_shape + (n, 3))
-    for i in range(n_id):
-        dt = DeformationTransfer(id_neutral[i], faces, anchors)
-        P = id_neutral[i][dt.fixed] + cell_off[..., dt.fixed, :]
-        out[i] = dt.solve(Q, P)
-        if progress is not None:
-            progress(i + 1, n_id)
+    w = _identity_weights(seed, n_id, scale, include_generic)
+    id_neutral = _identity_neutrals(neutral, region, w, use_cache)  # step 1
+    off = _offsets(_used_shapes(used), neutral)
+    cell_off = _generic_cell_offsets(used, spec, off, n)  # step 2
+    anchors = _anchor_vertices(tmpl, off, n)
+    out = _transfer_cells(neutral, cell_off, faces, anchors, id_neutral, progress)  # step 3
     seconds = time.perf_counter() - t0
-
-    width = max(2, len(str(n_id - 1)))
-    id_labels = tuple(("generic" if (i == 0 and include_generic) else f"id{i:0{width}d}")
-                      for i in range(n_id))
-    labels = (id_labels, tuple(spec["expressions"]))
-    modes: tuple[str, ...] = ("identity", "expression")
-    if vis:
-        labels = labels + (tuple(spec["visemes"]),)
-        modes = modes + ("viseme",)
+    modes, labels = _modes_and_labels(spec, n_id, include_generic)
     prov = {
         "dataset": name, "builder": "facetransfer.datasets.ict", "builder_version": BUILDER_VERSION,
         "seed": int(seed), "n_identities": n_id, "region": region,
@@ -512,6 +484,79 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
     ds = FaceDataset(out, np.ones(out.shape[:-2], dtype=bool), modes, labels, faces,
                      tmpl.mesh.uvs, tmpl.landmarks, tmpl.vertex_subset, prov)
     log.info("built %s (%s cells, %d vertices) in %.1f s", name, out.shape[:-2], n, seconds)
-    if use_cache:
-        _save_cache(cache, ds)
     return ds
+
+
+def _identity_weights(seed: int, n_id: int, scale: float, include_generic: bool) -> np.ndarray:
+    """Seeded identity weights ``(n_id, 100)``; row 0 zero (the generic face) if included."""
+    rng = np.random.default_rng(seed)
+    w = scale * rng.standard_normal((n_id, _N_IDENTITY_COMPONENTS))
+    if include_generic:
+        w[0] = 0.0
+    return w
+
+
+def _identity_neutrals(neutral: np.ndarray, region: str, w: np.ndarray, use_cache: bool
+                       ) -> np.ndarray:
+    """Step 1: every identity's neutral face, ``neutral + Σ w_k c_k``, shape (n_id, n, 3)."""
+    comps = _identity_components(neutral, region, use_cache)  # (100, n, 3)
+    return neutral + np.tensordot(w, comps, axes=1)  # (n_id, n, 3)
+
+
+def _used_shapes(used: dict) -> set:
+    """Names of every ICT blendshape the used expression and viseme recipes combine."""
+    shapes = {s for r in used["expressions"].values() for s in r}
+    return shapes | {s for r in used["visemes"].values() for s in r}
+
+
+def _generic_cell_offsets(used: dict, spec: dict, off: dict, n: int) -> np.ndarray:
+    """Step 2: the generic face's offset of every cell, expression offset [+ viseme offset].
+
+    Returns
+    -------
+    (E, n, 3) or (E, V, n, 3) float64
+    """
+    expr = [_combine(used["expressions"][e], off, n) for e in spec["expressions"]]
+    vis = [_combine(used["visemes"][v], off, n) for v in spec.get("visemes", [])]
+    if vis:
+        return np.stack([[e + v for v in vis] for e in expr])  # (E, V, n, 3)
+    return np.stack(expr)  # (E, n, 3)
+
+
+def _anchor_vertices(tmpl, off: dict, n: int) -> np.ndarray:
+    """Anchors of the deformation transfer: per component, the rigid vertex that moves least
+    over all used shapes."""
+    motion = sum(np.linalg.norm(o, axis=1) for o in off.values()) if off else np.zeros(n)
+    preferred = tmpl.rigid[np.argsort(motion[tmpl.rigid], kind="stable")]
+    return component_anchors(n, tmpl.mesh.faces, preferred)
+
+
+def _transfer_cells(neutral: np.ndarray, cell_off: np.ndarray, faces: np.ndarray,
+                    anchors: np.ndarray, id_neutral: np.ndarray,
+                    progress: Progress | None) -> np.ndarray:
+    """Step 3: deformation transfer of every generic cell onto every identity (Sumner & Popović
+    2004), shape (n_id, *cells, n, 3)."""
+    n_id, n = id_neutral.shape[0], neutral.shape[0]
+    Q = deformation_gradients(neutral, neutral + cell_off, faces)  # (*cells, F, 3, 3)
+    out = np.empty((n_id,) + cell_off.shape[:-2] + (n, 3))
+    for i in range(n_id):
+        dt = DeformationTransfer(id_neutral[i], faces, anchors)
+        P = id_neutral[i][dt.fixed] + cell_off[..., dt.fixed, :]
+        out[i] = dt.solve(Q, P)
+        if progress is not None:
+            progress(i + 1, n_id)
+    return out
+
+
+def _modes_and_labels(spec: dict, n_id: int, include_generic: bool
+                      ) -> tuple[tuple[str, ...], tuple[tuple[str, ...], ...]]:
+    """Mode names and labels: ``generic``/``idNN`` identities, the expressions[, the visemes]."""
+    width = max(2, len(str(n_id - 1)))
+    id_labels = tuple(("generic" if (i == 0 and include_generic) else f"id{i:0{width}d}")
+                      for i in range(n_id))
+    labels = (id_labels, tuple(spec["expressions"]))
+    modes: tuple[str, ...] = ("identity", "expression")
+    if spec.get("visemes", []):
+        labels = labels + (tuple(spec["visemes"]),)
+        modes = modes + ("viseme",)
+    return modes, labels
