@@ -42,13 +42,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..background import background_image
 from ..errors import ShapeError
 from .cameras import Camera  # noqa: F401 (the camera protocol, importable here as before)
 from .cameras import (Pinhole, WeakPerspective, _as_size, euler_from_rotation,
                       look_at_weak_perspective, rotation_from_euler)
 from .raster import (Raster, Rasterizer, RenderError, _check_mesh, _check_not_all_degenerate,
                      _rasterize_checked, rasterize, rasterize_reference)
-from .shading import (_background, _check_colors, check_shading, check_textured, sample_texture,
+from .shading import (_check_colors, check_shading, check_textured, sample_texture,
                       shade_image, shade_texture, vertex_normals)
 from .visibility import _tolerance, _visibility, vertex_visibility
 
@@ -144,7 +145,8 @@ def render(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int
     n = V.shape[0]
     T, UV = check_textured(texture, uvs, n)
     C = _check_colors(colors, n) if colors is not None else None
-    image = _background(background, W, H)
+    image = (np.zeros((H, W, 3), np.uint8) if background is None
+             else background_image(background, W, H))
 
     raster = _rasterize_checked(V, F, camera, W, H, cull_backfaces)
     if not raster.mask.any():

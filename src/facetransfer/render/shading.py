@@ -73,20 +73,6 @@ def _check_colors(colors, n: int) -> np.ndarray:
     return C * 255.0 if C.max(initial=0.0) <= 1.0 else C
 
 
-def _background(background, W: int, H: int) -> np.ndarray:
-    if background is None:
-        return np.zeros((H, W, 3), np.uint8)
-    B = np.asarray(background)
-    if B.ndim == 1 and B.shape == (3,):
-        if not np.all((B >= 0) & (B <= 255)):
-            raise ShapeError(f"background colour must be 3 values in 0..255, got {B}")
-        return np.broadcast_to(B.astype(np.uint8), (H, W, 3)).copy()
-    if B.shape != (H, W, 3) or B.dtype != np.uint8:
-        raise ShapeError(f"background must be a colour (3,) or an ({H}, {W}, 3) uint8 image, "
-                         f"got {B.shape} {B.dtype}")
-    return B.copy()
-
-
 def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     """Bilinear texture lookup, ``uv`` (m, 2) with v up -> (m, 3) float64 in 0..255.
 
