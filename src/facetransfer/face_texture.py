@@ -190,7 +190,7 @@ class MouthFunction:
     of the mouth source and indexed by their attribute vectors
     (:func:`facetransfer.texture.attribute_vector`: expression [+ viseme] weights). Build it
     with :func:`mouth_texture_function`; :meth:`face_texture` gives the mouth texture for a new
-    attribute vector, ready for :func:`rewrite_frame`'s ``mouth_texture``.
+    attribute vector, ready for :func:`facetransfer.rewrite.rewrite_frame`'s ``mouth_texture``.
 
     Attributes
     ----------

@@ -53,8 +53,6 @@ from .topology import MeshTopology, close_mouth, mesh_topology
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "RewriteError",
-    "RewriteOptions",
     "RewriteFrame",
     "rewrite_frame",
     "rewrite_frames",
@@ -106,7 +104,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     mouth_texture : FaceTexture, optional
         The source's mouth for this frame; without it the face texture covers the mouth.
     blend : {"fast", "poisson", "none"}
-        :func:`membrane_blend` (fast), Poisson blending
+        :func:`~facetransfer.composite.membrane_blend` (fast), Poisson blending
         (:func:`facetransfer.composite.composite_face`, exact sparse solve) or a hard paste.
     feather : float
         Soft-edge radius of the blend in pixels.

@@ -2,10 +2,11 @@
 inputs (or reuse their track files), recombine the performance, render it back into the target
 footage and write it with the target's audio.
 
-* :func:`plan_transfer` -> :class:`TransferPlan`: reading (:func:`facetransfer.io.video.read_video`),
-  tracking (:func:`facetransfer.track.obtain.obtain_track`, the expression source in a forked
-  process while the target is tracked here), recombining (:func:`facetransfer.transfer.recombine`)
-  or a ready performance;
+* :func:`plan_transfer` -> :class:`TransferPlan`: reading
+  (:func:`facetransfer.io.video.read_video`), tracking
+  (:func:`facetransfer.track.obtain.obtain_track`, the expression source in a forked process
+  while the target is tracked here), recombining (:func:`facetransfer.transfer.recombine`) or
+  a ready performance;
 * :func:`render_plan`: the frames rewritten (:func:`facetransfer.rewrite.rewrite_frames`) and
   written (:func:`facetransfer.io.video.write_video_with_audio`);
 * :func:`transfer_video`: both, with the outputs checked before any work.
@@ -152,8 +153,8 @@ class TransferPlan:
     def mouth_function(self, model, topo: MeshTopology | None = None, *,
                        progress: Callable[[int], None] | None = None, **kwargs) -> MouthFunction:
         """The mouth texture function lifted from :attr:`texture_frames`
-        (:func:`mouth_texture_function`; ``kwargs``: ``tex_size``, ``step``, ``max_frames``,
-        ``k``)."""
+        (:func:`facetransfer.face_texture.mouth_texture_function`; ``kwargs``: ``tex_size``,
+        ``step``, ``max_frames``, ``k``)."""
         if self.texture_frames is None or self.texture_track is None:
             tr = take_frames(self.mouth_track, np.arange(self.n_frames))
             return mouth_texture_function(model, self.mouth_frames, tr, topo,

@@ -89,6 +89,17 @@ def _parser(sub, name: str, help: str, description: str):
                           description=description)
 
 
+def _add_output(p, func, *, metavar: str, help: str | None = None, video: bool = False,
+                overwrite_help: str = "replace an existing output") -> None:
+    """``--out`` (with the video options when ``video``), ``--overwrite`` and the function
+    that runs the subcommand."""
+    p.add_argument("--out", required=True, metavar=metavar, help=help)
+    if video:
+        add_video_options(p)
+    p.add_argument("--overwrite", action="store_true", help=overwrite_help)
+    p.set_defaults(func=func)
+
+
 def register(sub) -> None:
     """Add ``transfer``, ``edit``, ``puppet`` and ``demo`` to the facetransfer parser."""
     _register_transfer(sub)
@@ -112,13 +123,10 @@ def _register_transfer(sub) -> None:
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
-    p.add_argument("--out", required=True, metavar="OUT.mp4",
-                   help="video to write (.mp4, .mov, .mkv...) or image sequence "
-                   "(frames/%%05d.png)")
-    add_video_options(p)
-    p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
+    _add_output(p, run_transfer, metavar="OUT.mp4", video=True,
+                help="video to write (.mp4, .mov, .mkv...) or image sequence (frames/%%05d.png)",
+                overwrite_help="replace existing outputs")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.set_defaults(func=run_transfer)
 
 
 def _add_sources(p) -> None:
@@ -164,9 +172,7 @@ def _register_edit(sub) -> None:
     e.add_argument("--ramp", type=int, default=8, help="ramp length in frames at range ends")
     e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
                    help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1")
-    e.add_argument("--out", required=True, metavar="TRACK2.npz")
-    e.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    e.set_defaults(func=run_edit)
+    _add_output(e, run_edit, metavar="TRACK2.npz")
 
 
 def _register_puppet(sub) -> None:
@@ -181,11 +187,8 @@ def _register_puppet(sub) -> None:
     q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
     q.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given")
-    q.add_argument("--out", required=True, metavar="OUT.mp4",
-                   help="video (.mp4...) or image sequence (frames/%%05d.png)")
-    add_video_options(q)
-    q.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    q.set_defaults(func=run_puppet)
+    _add_output(q, run_puppet, metavar="OUT.mp4", video=True,
+                help="video (.mp4...) or image sequence (frames/%%05d.png)")
 
 
 def _register_demo(sub) -> None:

@@ -10,8 +10,9 @@ __all__ = ["SPEED_PRESETS", "DEFAULT_SPEED", "track_options"]
 def track_options(speed: str = DEFAULT_SPEED):
     """Settings of the optical-flow tracker (§5.1) for a speed preset.
 
-    ``"fast"`` (the default of the transfer, :data:`DEFAULT_SPEED`) makes a single pass (the
-    identity comes from the snap of §5.2) on two pyramid levels with 500 tracked vertices, 7x7
+    ``"fast"`` (the default of the transfer,
+    :data:`facetransfer.rewrite_options.DEFAULT_SPEED`) makes a single pass (the identity
+    comes from the snap of §5.2) on two pyramid levels with 500 tracked vertices, 7x7
     KLT windows, a shorter snap, and chooses the tracked vertices anew every 8 frame pairs
     (``TrackOptions.reselect``). ``"balanced"`` is the tracker's own default
     (:class:`facetransfer.track.TrackOptions`: two passes, three pyramid levels, a thousand
