@@ -33,6 +33,7 @@ __all__ = [
     "MOUTH_MAX_FRAMES",
     "MouthFunction",
     "mouth_texture_function",
+    "timeline_mouth_function",
     "default_mouth_mode",
     "resolve_mouth_mode",
 ]
@@ -306,6 +307,18 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
     log.info("mouth texture function: %d frames lifted at %dx%d", rows.size, tex_size, tex_size)
     fn = TextureFunction(textures, weights, attrs, k=k, kernel=kernel, bandwidth=bandwidth)
     return MouthFunction(fn, uvs, idx[rows])
+
+
+def timeline_mouth_function(model, frames, track, index: np.ndarray, n: int,
+                            topo: MeshTopology | None = None, **kwargs) -> MouthFunction:
+    """:func:`mouth_texture_function` of a mouth source resampled to a new timeline: row ``i``
+    (< ``n``) of ``track`` is the pose and weights shown at output frame ``i``, whose frame is
+    ``frames[index[i]]`` (``kwargs``: ``tex_size``, ``step``, ``max_frames``, ``k``,
+    ``progress``)."""
+    from .transfer import take_frames
+
+    return mouth_texture_function(model, frames, take_frames(track, np.arange(n)), topo,
+                                  frame_index=np.asarray(index)[:n], **kwargs)
 
 
 def _mouth_rows(track, n_frames: int, frame_index, step: int, max_frames: int

@@ -46,7 +46,8 @@ import numpy as np
 from .composite import _erode, _extend, composite_face, membrane_blend
 from .errors import ShapeError
 from .face_texture import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
-                           merged_face_texture, mouth_texture_function, resolve_mouth_mode)
+                           merged_face_texture, mouth_texture_function, resolve_mouth_mode,
+                           timeline_mouth_function)
 from .rewrite_options import BLEND_MODES, RewriteError, RewriteOptions, check_mode
 from .topology import MeshTopology, close_mouth, mesh_topology
 
@@ -398,11 +399,8 @@ def _clip_mouth_function(model, topo: MeshTopology, new_track, target_frames, ta
     n = new_track.n_frames
     if mouth_function is None and topo.mouth_faces.size:
         if with_mouth:
-            from .transfer import take_frames
-
-            mouth_function = mouth_texture_function(
-                model, source_frames, take_frames(source_track, np.arange(n)), topo,
-                frame_index=sidx[:n])
+            mouth_function = timeline_mouth_function(model, source_frames, source_track, sidx,
+                                                     n, topo)
         else:
             mouth_function = mouth_texture_function(model, target_frames, target_track, topo)
     if mouth_function is not None:

@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import VideoError
 from .face_texture import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
-                           resolve_mouth_mode)
+                           resolve_mouth_mode, timeline_mouth_function)
 from .rewrite import rewrite_frames
 from .rewrite_options import DEFAULT_SPEED, RewriteError, RewriteOptions
 from .topology import MeshTopology
@@ -156,10 +156,9 @@ class TransferPlan:
         (:func:`facetransfer.face_texture.mouth_texture_function`; ``kwargs``: ``tex_size``,
         ``step``, ``max_frames``, ``k``)."""
         if self.texture_frames is None or self.texture_track is None:
-            tr = take_frames(self.mouth_track, np.arange(self.n_frames))
-            return mouth_texture_function(model, self.mouth_frames, tr, topo,
-                                          frame_index=self.mouth_index[:self.n_frames],
-                                          progress=progress, **kwargs)
+            return timeline_mouth_function(model, self.mouth_frames, self.mouth_track,
+                                           self.mouth_index, self.n_frames, topo,
+                                           progress=progress, **kwargs)
         m = min(len(self.texture_frames), self.texture_track.n_frames)
         tr = self.texture_track
         if tr.n_frames > m:

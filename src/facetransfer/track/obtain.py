@@ -78,6 +78,23 @@ def landmark_track(model, landmarks68: np.ndarray, *, fps: float, size: tuple[in
     pick = good[np.linspace(0, good.size - 1, min(identity_frames, good.size)).round().astype(int)]
     ids = [fit_landmarks(model, L[i], iterations=12).weights[idm] for i in pick]
     wid = np.mean(ids, axis=0)
+    R, s, t, W = _fit_frames(model, L, found, idm, wid, progress)
+    tr = Track(fps=float(fps), frame_size=tuple(size), rotation=R, scale=s, translation=t,
+               weights=W, landmarks2d=np.zeros((n, 68, 2)),
+               confidence=found.astype(np.float64), lost=~found,
+               model_hash=model.content_hash, mode_names=model.mode_names, source=str(source),
+               info={"method": "landmarks"})
+    return project_landmarks(tr, model)
+
+
+def _fit_frames(model, L: np.ndarray, found: np.ndarray, idm: str, wid: np.ndarray, progress):
+    """Pose (R (F, 3, 3), s (F,), t (F, 2)) and weights (mode -> (F, r)) of every frame fitted
+    to its landmarks ``L`` (F, 68, 2) (§5.2) with the identity ``wid`` fixed, each frame
+    starting from the previous one; frames without landmarks (``~found``) keep the previous
+    frame's fit, frames before the first detection take its fit."""
+    from .init import fit_landmarks
+
+    n = L.shape[0]
     varying = tuple(m for m in model.mode_names if m != idm)
     R = np.tile(np.eye(3), (n, 1, 1))
     s = np.ones(n)
@@ -88,32 +105,22 @@ def landmark_track(model, landmarks68: np.ndarray, *, fps: float, size: tuple[in
     for i in range(n):
         if found[i]:
             if state is None:
-                w0 = model.default_weights()
-                w0[idm] = wid
                 st = fit_landmarks(model, L[i], modes=varying, iterations=10)
                 st = st.with_weights(idm, wid)
                 state = fit_landmarks(model, L[i], state=st, modes=varying, iterations=8)
             else:
                 state = fit_landmarks(model, L[i], state=state, modes=varying, iterations=4)
-            R[i], s[i], t[i] = state.pose.rotation, state.pose.scale, state.pose.translation
-            for m in varying:
-                W[m][i] = state.weights[m]
-        elif state is not None:
+        if state is not None:
             R[i], s[i], t[i] = state.pose.rotation, state.pose.scale, state.pose.translation
             for m in varying:
                 W[m][i] = state.weights[m]
         if progress:
             progress(1)
-    first = int(good[0])  # frames before the first detection take its pose (they are lost)
+    first = int(np.flatnonzero(found)[0])  # frames before the first detection take its pose
     R[:first], s[:first], t[:first] = R[first], s[first], t[first]
     for m in varying:
         W[m][:first] = W[m][first]
-    tr = Track(fps=float(fps), frame_size=tuple(size), rotation=R, scale=s, translation=t,
-               weights=W, landmarks2d=np.zeros((n, 68, 2)),
-               confidence=found.astype(np.float64), lost=~found,
-               model_hash=model.content_hash, mode_names=model.mode_names, source=str(source),
-               info={"method": "landmarks"})
-    return project_landmarks(tr, model)
+    return R, s, t, W
 
 
 class _StageBars:
