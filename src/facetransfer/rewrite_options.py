@@ -24,6 +24,7 @@ __all__ = [
     "TRACK_METHODS",
     "RewriteOptions",
     "check_mode",
+    "check_track_method",
 ]
 
 
@@ -56,6 +57,13 @@ def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> 
     if value not in modes:
         allowed = repr(modes) if sep is None else sep.join(modes)
         raise RewriteError(f"{name} must be one of {allowed}, got {value!r}")
+
+
+def check_track_method(method) -> None:
+    """Raise :class:`RewriteError` unless ``method`` is one of :data:`TRACK_METHODS`."""
+    if method not in TRACK_METHODS:
+        raise RewriteError(f"tracking method must be auto, capture, flow or landmarks, got "
+                           f"{method!r}")
 
 
 @dataclass(frozen=True)
@@ -101,9 +109,7 @@ class RewriteOptions:
             check_mode("mouth", self.mouth, MOUTH_MODES)
         check_mode("blend", self.blend, BLEND_MODES)
         check_mode("speed", self.speed, SPEED_PRESETS)
-        if self.track_method not in TRACK_METHODS:
-            raise RewriteError(f"tracking method must be auto, capture, flow or landmarks, got "
-                               f"{self.track_method!r}")
+        check_track_method(self.track_method)
         if not self.feather >= 0:
             raise RewriteError(f"feather must be >= 0 pixels, got {self.feather!r}")
         if int(self.erode) != self.erode or self.erode < 0:

@@ -37,7 +37,6 @@ import numpy as np
 from .arkit import attach_activations
 from .errors import FaceTransferError
 from .topology import close_mouth, mesh_topology
-from .track.camera import nearest_rotation
 
 log = logging.getLogger(__name__)
 
@@ -164,6 +163,8 @@ def _interp_rows(a: np.ndarray, t: np.ndarray) -> np.ndarray:
 def _orthonormalize(R: np.ndarray) -> np.ndarray:
     """Nearest rotations (F, 3, 3) of (F, 3, 3) matrices
     (:func:`facetransfer.track.camera.nearest_rotation`, the SVD projection)."""
+    from .track.camera import nearest_rotation  # here: the track package is slow to import
+
     return np.stack([nearest_rotation(r) for r in R]) if len(R) else np.asarray(R, np.float64)
 
 

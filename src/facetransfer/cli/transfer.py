@@ -19,6 +19,7 @@ import sys
 from pathlib import Path
 
 from ..errors import FaceTransferError
+from ..transfer import ALIGN_MODES
 from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import MODEL_HELP, add_video_options, resolve_model, video_options
@@ -118,7 +119,7 @@ def _register_transfer(sub) -> None:
         "the target's audio.")
     _add_sources(p)
     p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
-    p.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
+    p.add_argument("--align", choices=ALIGN_MODES, default=None, help=ALIGN_HELP)
     p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")

@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ShapeError, VideoError
-from ..rewrite_options import TRACK_METHODS, RewriteError
+from ..rewrite_options import RewriteError, check_track_method
 from ..transfer import project_landmarks, take_frames
 from .result import Track
 
@@ -180,9 +180,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     Track
         Of at most ``max_frames`` frames (a longer track file is cut).
     """
-    if method not in TRACK_METHODS:
-        raise RewriteError(f"tracking method must be auto, capture, flow or landmarks, got "
-                           f"{method!r}")
+    check_track_method(method)
     if track_file is not None:
         tr = Track.load(track_file)
         tr.check_model(model)
