@@ -112,7 +112,7 @@ def track_of(clip_truth, model, source=""):
 
 
 def track_frames(frames, model, fps, speed="balanced"):
-    from facetransfer.rewrite import track_options
+    from facetransfer.track.presets import track_options
     from facetransfer.track.tracker import track_video
 
     tr = track_video(frames, model, progress=None, options=track_options(speed))
@@ -123,6 +123,9 @@ def track_frames(frames, model, fps, speed="balanced"):
 def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=print,
                       speeds=("balanced",)) -> dict:
     from facetransfer import rewrite as rw
+    from facetransfer import face_texture as ftex
+    from facetransfer import topology
+    from facetransfer import video_transfer as vt
     from facetransfer.synth import make_clip, random_performance
     from facetransfer.transfer import constant_weights, project_landmarks, recombine
 
@@ -160,7 +163,7 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
                      track_frames(clip_b.frames, model, perf_b.fps, sp))
         track_seconds[sp] = time.perf_counter() - t0
         log(f"(a) tracked both clips with --speed {sp} in {track_seconds[sp]:.1f} s")
-    topo = rw.mesh_topology(model)
+    topo = topology.mesh_topology(model)
 
     def run(ta, tb, texture="frame", blend="fast", mouth="frame", mouth_from="source"):
         """``mouth_from="target"``: the mouth from B's own footage, as for a ready performance
@@ -172,13 +175,13 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
         src = dict(source_frames=clip_a.frames, source_track=ta)
         if mouth_from == "target":
             names = model.mode_names[1:]
-            j = rw.nearest_frames(np.concatenate([new.weights[m] for m in names], axis=1),
+            j = vt.nearest_frames(np.concatenate([new.weights[m] for m in names], axis=1),
                                   np.concatenate([tb.weights[m] for m in names], axis=1),
                                   ~tb.lost)
             src = dict(source_frames=clip_b.frames, source_track=take_frames(tb, j),
                        source_index=j)
             if mouth == "function":
-                src["mouth_function"] = rw.mouth_texture_function(model, clip_b.frames, tb,
+                src["mouth_function"] = ftex.mouth_texture_function(model, clip_b.frames, tb,
                                                                   topo)
         outs = list(rw.rewrite_frames(clip_b.frames, tb, new, model, texture=texture,
                                       blend=blend, topo=topo, mouth=mouth, **src))
@@ -262,7 +265,7 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
 # ------------------------------------------------------------------------------------ (d)
 def speed(model, *, seconds: float, size: int, log=print, tmpdir: Path,
           presets=("fast",)) -> dict:
-    from facetransfer.rewrite import transfer_video
+    from facetransfer.video_transfer import transfer_video
     from facetransfer.synth import make_clip, random_performance
     from facetransfer.io.video import write_video
 

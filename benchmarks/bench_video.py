@@ -71,15 +71,15 @@ def landmark_tracks(source: Path, target: Path, model, n_frames: int, tmp: Path)
     """
     import dataclasses
 
-    from facetransfer import rewrite as rw
     from facetransfer.io.video import video_info
+    from facetransfer.track import obtain
 
     paths = []
     for video, n in ((target, n_frames), (source, None)):
         if n is None:  # the source: as many seconds as the target's frames
             ti, si = video_info(target), video_info(video)
             n = int(np.ceil(n_frames / ti.fps * si.fps)) + 2
-        tr = rw.obtain_track(video, model, max_frames=n, method="landmarks")
+        tr = obtain.obtain_track(video, model, max_frames=n, method="landmarks")
         tr = dataclasses.replace(tr, blendshapes=None, blendshape_names=None)
         p = tmp / f"{video.stem}.track.npz"
         tr.save(p, overwrite=True)
@@ -92,9 +92,10 @@ def rewrite_pair(source: Path, target: Path, model, n_frames: int, tmp: Path):
     import cv2
 
     from facetransfer import rewrite as rw
+    from facetransfer import video_transfer as vt
 
     tt, st = landmark_tracks(source, target, model, n_frames, tmp)
-    plan = rw.plan_transfer(target, model, target_track=tt, expression_from=source,
+    plan = vt.plan_transfer(target, model, target_track=tt, expression_from=source,
                             expression_track=st, max_frames=n_frames, parallel=False)
     frames, masks = [], []
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * DILATE + 1, 2 * DILATE + 1))

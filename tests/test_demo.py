@@ -21,7 +21,7 @@ def test_side_by_side_layout():
 @pytest.mark.slow
 def test_demo_end_to_end(data_dir, quick_model, tmp_path):
     from facetransfer.io.video import read_video
-    from facetransfer.rewrite import has_audio
+    from facetransfer.io.video import has_audio
     from facetransfer.track import Track
 
     res = run_demo(tmp_path / "out", frames=6, model=quick_model)

@@ -18,7 +18,7 @@ from test_transfer_rewrite import render_clip  # noqa: E402
 @pytest.fixture(scope="module")
 def clips(quick_model, tmp_path_factory):
     """target.mp4 (id03, neutral) and source.mp4 (id01, expressions) with their truth tracks."""
-    from facetransfer.rewrite import mesh_topology
+    from facetransfer.topology import mesh_topology
     from facetransfer.texture import default_face_texture
 
     m = quick_model

@@ -18,6 +18,10 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import rewrite as rw  # noqa: E402
+from facetransfer import face_texture as ftex  # noqa: E402
+from facetransfer import rewrite_options as rwo  # noqa: E402
+from facetransfer import topology  # noqa: E402
+from facetransfer import video_transfer as vt  # noqa: E402
 from facetransfer.render import (WeakPerspective, look_at_weak_perspective, render,  # noqa: E402
                                  rotation_from_euler)
 from facetransfer.track import Track  # noqa: E402
@@ -42,7 +46,7 @@ class Scene:
         from facetransfer.texture import default_face_texture, uv_atlas
 
         m = self.model = model
-        self.topo = rw.mesh_topology(m)
+        self.topo = topology.mesh_topology(m)
         self.uvs = np.vstack([m.uvs, m.uvs[self.topo.mouth_loop].mean(0)])
         base = default_face_texture(m, 256).astype(np.float64)
         T = base.shape[0]
@@ -73,7 +77,7 @@ class Scene:
         frames, R = [], []
         for e, yaw in zip(expressions, yaws):
             Rf = rotation_from_euler(yaw, 0, 0)
-            V = rw.close_mouth(m.synthesize({"identity": wid, "expression": e}), self.topo)
+            V = topology.close_mouth(m.synthesize({"identity": wid, "expression": e}), self.topo)
             cam = WeakPerspective(self.cam0.scale, Rf, self.cam0.translation)
             frames.append(render(V, self.topo.faces, cam, SIZE, uvs=self.uvs,
                                  texture=self.texture(e), shading="none",
@@ -100,13 +104,13 @@ def bank(scene):
     """B's footage with varied expressions (the texture function's frames) and its function."""
     m = scene.model
     frames, track = scene.clip([m.training_weights("expression", l) for l in LABELS], YAWS)
-    return frames, track, rw.mouth_texture_function(m, frames, track, scene.topo)
+    return frames, track, ftex.mouth_texture_function(m, frames, track, scene.topo)
 
 
 def _render(scene, target, target_track, new, bank_frames, bank_track, mouth, fn=None,
             **kwargs):
     """Rewrite with the mouth from the bank: its nearest frame ("frame") or the function."""
-    j = rw.nearest_frames(new.weights["expression"], bank_track.weights["expression"])
+    j = vt.nearest_frames(new.weights["expression"], bank_track.weights["expression"])
     return list(rw.rewrite_frames(target, target_track, new, scene.model,
                                   source_frames=bank_frames,
                                   source_track=take_frames(bank_track, j), source_index=j, mouth=mouth, mouth_function=fn,
@@ -122,7 +126,7 @@ def test_query_at_a_lifted_frame_returns_its_texture(scene, bank):
     np.testing.assert_array_equal(fn.frames, np.arange(len(LABELS)))
     assert fn.uvs.shape == (scene.topo.n_closed, 2)
     i = 2  # smile: its attributes occur once in the clip
-    V = rw.close_mouth(scene.model.synthesize(track.weights_at(i)), scene.topo)
+    V = topology.close_mouth(scene.model.synthesize(track.weights_at(i)), scene.topo)
     lifted = lift_uv_texture(frames[i], V, scene.topo.faces, fn.uvs, track.camera(i), 256,
                              atlas=uv_atlas(scene.topo.faces, fn.uvs, 256))
     img = fn.texture(track.weights["expression"][i])
@@ -210,7 +214,7 @@ def test_function_built_inside_rewrite_frames_and_workers(scene, bank):
     # the same frames given explicitly: the same output
     ref = [o.image for o in rw.rewrite_frames(target, target_track, new, scene.model,
                                               mouth="function", topo=scene.topo, workers=1,
-                                              mouth_function=rw.mouth_texture_function(
+                                              mouth_function=ftex.mouth_texture_function(
                                                   scene.model, frames,
                                                   take_frames(track, np.arange(3)), scene.topo))]
     for a, b in zip(runs[0], ref):
@@ -219,22 +223,22 @@ def test_function_built_inside_rewrite_frames_and_workers(scene, bank):
 
 def test_max_frames_caps_the_lifted_frames(scene, bank):
     frames, track, _ = bank
-    fn = rw.mouth_texture_function(scene.model, frames, track, scene.topo, max_frames=3)
+    fn = ftex.mouth_texture_function(scene.model, frames, track, scene.topo, max_frames=3)
     np.testing.assert_array_equal(fn.frames, [0, 2, 5])  # evenly spaced, ends kept
     assert fn.function.textures.shape == (3, 256, 256, 3)
     lost = dataclasses.replace(track, lost=np.array([True, False, True, False, False, False]))
-    fn = rw.mouth_texture_function(scene.model, frames, lost, scene.topo, step=2)
+    fn = ftex.mouth_texture_function(scene.model, frames, lost, scene.topo, step=2)
     np.testing.assert_array_equal(fn.frames, [4])  # rows 0, 2, 4; 0 and 2 lost
     # repeated frames (a resampled track) are lifted once
     idx = np.array([0, 0, 1, 1, 2])
-    fn = rw.mouth_texture_function(scene.model, frames, take_frames(track, idx), scene.topo,
+    fn = ftex.mouth_texture_function(scene.model, frames, take_frames(track, idx), scene.topo,
                                    frame_index=idx)
     np.testing.assert_array_equal(fn.frames, [0, 1, 2])
 
 
 def test_default_mouth_mode():
-    assert rw.default_mouth_mode(True) == "function"
-    assert rw.default_mouth_mode(False) == "frame"
+    assert ftex.default_mouth_mode(True) == "function"
+    assert ftex.default_mouth_mode(False) == "frame"
 
 
 # ------------------------------------------------------------------------------- bad input
@@ -242,36 +246,36 @@ def test_mouth_bad_input(scene, bank, quick_model):
     frames, track, fn = bank
     m = quick_model
     no_uvs = dataclasses.replace(m, uvs=None)
-    with pytest.raises(rw.RewriteError, match="needs a model with texture coordinates"):
-        rw.mouth_texture_function(no_uvs, frames, track, scene.topo)
-    with pytest.raises(rw.RewriteError, match="texture coordinates"):
+    with pytest.raises(rwo.RewriteError, match="needs a model with texture coordinates"):
+        ftex.mouth_texture_function(no_uvs, frames, track, scene.topo)
+    with pytest.raises(rwo.RewriteError, match="texture coordinates"):
         list(rw.rewrite_frames(frames, track, track, no_uvs, mouth="function", topo=scene.topo))
-    with pytest.raises(rw.RewriteError, match="texture coordinates"):
-        rw.resolve_mouth_mode("function", no_uvs)
-    assert rw.resolve_mouth_mode(None, no_uvs, performance=True) == "frame"
-    assert rw.resolve_mouth_mode(None, m, performance=True) == "function"
-    with pytest.raises(rw.RewriteError, match="mouth must be one of frame, function"):
+    with pytest.raises(rwo.RewriteError, match="texture coordinates"):
+        ftex.resolve_mouth_mode("function", no_uvs)
+    assert ftex.resolve_mouth_mode(None, no_uvs, performance=True) == "frame"
+    assert ftex.resolve_mouth_mode(None, m, performance=True) == "function"
+    with pytest.raises(rwo.RewriteError, match="mouth must be one of frame, function"):
         list(rw.rewrite_frames(frames, track, track, m, mouth="teeth", topo=scene.topo))
-    with pytest.raises(rw.RewriteError, match="mouth must be one of"):
-        rw.resolve_mouth_mode("nearest", m)
-    with pytest.raises(rw.RewriteError, match="max_frames must be an integer >= 1"):
-        rw.mouth_texture_function(m, frames, track, scene.topo, max_frames=0)
-    with pytest.raises(rw.RewriteError, match="step must be"):
-        rw.mouth_texture_function(m, frames, track, scene.topo, step=1.5)
-    with pytest.raises(rw.RewriteError, match="frame_index must have one entry"):
-        rw.mouth_texture_function(m, frames, track, scene.topo, frame_index=[0, 1])
-    with pytest.raises(rw.RewriteError, match="outside 0..5"):
-        rw.mouth_texture_function(m, frames, track, scene.topo, frame_index=np.arange(6) + 1)
+    with pytest.raises(rwo.RewriteError, match="mouth must be one of"):
+        ftex.resolve_mouth_mode("nearest", m)
+    with pytest.raises(rwo.RewriteError, match="max_frames must be an integer >= 1"):
+        ftex.mouth_texture_function(m, frames, track, scene.topo, max_frames=0)
+    with pytest.raises(rwo.RewriteError, match="step must be"):
+        ftex.mouth_texture_function(m, frames, track, scene.topo, step=1.5)
+    with pytest.raises(rwo.RewriteError, match="frame_index must have one entry"):
+        ftex.mouth_texture_function(m, frames, track, scene.topo, frame_index=[0, 1])
+    with pytest.raises(rwo.RewriteError, match="outside 0..5"):
+        ftex.mouth_texture_function(m, frames, track, scene.topo, frame_index=np.arange(6) + 1)
     all_lost = dataclasses.replace(track, lost=np.ones(track.n_frames, bool))
-    with pytest.raises(rw.RewriteError, match="lost in every frame"):
-        rw.mouth_texture_function(m, frames, all_lost, scene.topo)
+    with pytest.raises(rwo.RewriteError, match="lost in every frame"):
+        ftex.mouth_texture_function(m, frames, all_lost, scene.topo)
     from facetransfer.demo import run_demo
 
-    with pytest.raises(rw.RewriteError, match="mouth must be one of"):  # before any work
+    with pytest.raises(rwo.RewriteError, match="mouth must be one of"):  # before any work
         run_demo(Path("/nonexistent/demo-out"), model=m, mouth="teeth")
     # a function of another model layout
-    small = rw.MouthFunction(fn.function, fn.uvs[:10], fn.frames)
-    with pytest.raises(rw.RewriteError, match="texture function is for"):
+    small = ftex.MouthFunction(fn.function, fn.uvs[:10], fn.frames)
+    with pytest.raises(rwo.RewriteError, match="texture function is for"):
         list(rw.rewrite_frames(frames, track, track, m, mouth="function", mouth_function=small,
                                topo=scene.topo))
 

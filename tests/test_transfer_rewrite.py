@@ -8,6 +8,12 @@ import numpy as np
 import pytest
 
 from facetransfer import rewrite as rw
+from facetransfer import composite
+from facetransfer import face_texture as ftex
+from facetransfer.track import obtain
+from facetransfer import rewrite_options as rwo
+from facetransfer import topology
+from facetransfer import video_transfer as vt
 from facetransfer.render import WeakPerspective, look_at_weak_perspective, render, rotation_from_euler
 from facetransfer.track import Track
 from facetransfer.transfer import project_landmarks, recombine
@@ -24,7 +30,7 @@ def psnr(a, b, mask=None) -> float:
 
 @pytest.fixture(scope="module")
 def topo(quick_model):
-    return rw.mesh_topology(quick_model)
+    return topology.mesh_topology(quick_model)
 
 
 @pytest.fixture(scope="module")
@@ -47,7 +53,7 @@ def render_clip(model, topo, texture, identity, expressions, yaws, *, seed, size
     frames, R, w_e = [], [], []
     for e, yaw in zip(expressions, yaws):
         Rf = rotation_from_euler(yaw, 0, 0)
-        V = rw.close_mouth(model.synthesize({"identity": wid, "expression": e}), topo)
+        V = topology.close_mouth(model.synthesize({"identity": wid, "expression": e}), topo)
         cam = WeakPerspective(cam0.scale, Rf, cam0.translation)
         frames.append(render(V, topo.faces, cam, size, uvs=uvs, texture=texture,
                              shading="none", background=bg).image)
@@ -85,11 +91,11 @@ def test_boundary_loops_of_a_square_and_a_hole():
         for x in range(2):
             a, b, c, d = 3 * y + x, 3 * y + x + 1, 3 * y + x + 3, 3 * y + x + 4
             faces += [[a, b, d], [a, d, c]]
-    loops = rw.boundary_loops(np.array(faces))
+    loops = topology.boundary_loops(np.array(faces))
     assert len(loops) == 1 and sorted(loops[0].tolist()) == [0, 1, 2, 3, 5, 6, 7, 8]
     # removing the centre vertex's triangles leaves no inner loop (the centre is gone), the
     # grid without its two centre triangles gets a hole
-    loops = rw.boundary_loops(np.array(faces[:3] + faces[4:]))
+    loops = topology.boundary_loops(np.array(faces[:3] + faces[4:]))
     assert len(loops) == 1  # still one boundary (the notch merges with the outer loop)
 
 
@@ -98,16 +104,16 @@ def test_mesh_topology_finds_mouth_and_eyes(quick_model, topo):
     assert len(topo.eye_loops) == 2
     assert topo.faces.shape[0] == quick_model.faces.shape[0] + topo.mouth_loop.size
     # the fan closes the gap: in the closed mesh no mouth loop vertex is on the boundary
-    loops = rw.boundary_loops(topo.faces)
+    loops = topology.boundary_loops(topo.faces)
     on_boundary = set(np.concatenate(loops).tolist())
     assert not on_boundary & set(topo.mouth_loop.tolist())
     assert len(loops) == 3  # outer boundary and two eye holes
     V = quick_model.synthesize(quick_model.default_weights())
-    Vc = rw.close_mouth(V, topo)
+    Vc = topology.close_mouth(V, topo)
     np.testing.assert_allclose(Vc[-1], V[topo.mouth_loop].mean(0))
     np.testing.assert_array_equal(Vc[:-1], V)
     with pytest.raises(Exception, match="vertices must be"):
-        rw.close_mouth(V[:10], topo)
+        topology.close_mouth(V[:10], topo)
 
 
 # --------------------------------------------------------------------------------- blending
@@ -118,10 +124,10 @@ def test_membrane_blend_outside_exact_and_recovers_offset():
     mask[15:45, 20:50] = True
     # a source that is the target plus a constant: blending removes the constant
     S = np.clip(T.astype(int) + 40, 0, 255).astype(np.uint8)
-    out = rw.membrane_blend(T, S, mask, feather=0)
+    out = composite.membrane_blend(T, S, mask, feather=0)
     np.testing.assert_array_equal(out[~mask], T[~mask])
     assert np.abs(out[mask].astype(int) - T[mask].astype(int)).mean() < 1.0
-    np.testing.assert_array_equal(rw.membrane_blend(T, S, np.zeros_like(mask)), T)
+    np.testing.assert_array_equal(composite.membrane_blend(T, S, np.zeros_like(mask)), T)
 
 
 # --------------------------------------------------------------------------------- rewrite
@@ -182,15 +188,15 @@ def test_lost_frames_keep_the_original(quick_model, topo, synthetic):
 def test_rewrite_bad_input(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
-    with pytest.raises(rw.RewriteError, match="texture"):
+    with pytest.raises(rwo.RewriteError, match="texture"):
         list(rw.rewrite_frames(fb, tb, new, quick_model, texture="bogus"))
-    with pytest.raises(rw.RewriteError, match="only 2"):
+    with pytest.raises(rwo.RewriteError, match="only 2"):
         list(rw.rewrite_frames(fb[:2], tb, new, quick_model))
-    with pytest.raises(rw.RewriteError, match="64x64"):
+    with pytest.raises(rwo.RewriteError, match="64x64"):
         list(rw.rewrite_frames(fb[:, :64, :64], tb, new, quick_model))
-    with pytest.raises(rw.RewriteError, match="blend"):
+    with pytest.raises(rwo.RewriteError, match="blend"):
         rw.rewrite_frame(fb[0], quick_model.synthesize(tb.weights_at(0)), tb.camera(0), topo,
-                         rw.FaceTexture(fb[0], np.zeros((topo.n_closed, 2))), blend="magic")
+                         ftex.FaceTexture(fb[0], np.zeros((topo.n_closed, 2))), blend="magic")
 
 
 def test_landmark_track_recovers_pose_and_marks_lost(quick_model):
@@ -207,23 +213,23 @@ def test_landmark_track_recovers_pose_and_marks_lost(quick_model):
                model_hash=m.content_hash, mode_names=m.mode_names)
     L = project_landmarks(tr, m).landmarks2d.copy()
     L[3] = np.nan
-    fit = rw.landmark_track(m, L, fps=25.0, size=(200, 200))
+    fit = obtain.landmark_track(m, L, fps=25.0, size=(200, 200))
     np.testing.assert_array_equal(fit.lost, [False, False, False, True])
     err = np.linalg.norm(fit.landmarks2d[:3] - L[:3], axis=-1).mean()
     assert err < 2.5  # pixels, on a face ~110 px wide (measured 1.5)
     np.testing.assert_allclose(fit.scale[:3], 6.0, rtol=0.1)
     with pytest.raises(Exception, match="no face"):
-        rw.landmark_track(m, np.full((2, 68, 2), np.nan), fps=25.0, size=(200, 200))
+        obtain.landmark_track(m, np.full((2, 68, 2), np.nan), fps=25.0, size=(200, 200))
 
 
 def test_nearest_frames_picks_closest_valid_row():
     bank = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 5.0]])
     q = np.array([[0.9, 0.1], [0.1, 0.8], [4.0, 4.0]])
-    np.testing.assert_array_equal(rw.nearest_frames(q, bank), [1, 2, 3])
+    np.testing.assert_array_equal(vt.nearest_frames(q, bank), [1, 2, 3])
     valid = np.array([True, True, True, False])
-    np.testing.assert_array_equal(rw.nearest_frames(q, bank, valid), [1, 2, 1])
-    with pytest.raises(rw.RewriteError, match="all lost"):
-        rw.nearest_frames(q, bank, np.zeros(4, bool))
+    np.testing.assert_array_equal(vt.nearest_frames(q, bank, valid), [1, 2, 1])
+    with pytest.raises(rwo.RewriteError, match="all lost"):
+        vt.nearest_frames(q, bank, np.zeros(4, bool))
 
 
 def test_parallel_rendering_is_deterministic(quick_model, topo, synthetic):
@@ -244,4 +250,4 @@ def test_erode_equals_scipy_binary_erosion():
         m = ndi.binary_opening(rng.random((60, 80)) < 0.7)
         m[0, :] = True  # the image border counts as outside
         m[:, -1] = True
-        np.testing.assert_array_equal(rw._erode(m, k), ndi.binary_erosion(m, iterations=k))
+        np.testing.assert_array_equal(composite._erode(m, k), ndi.binary_erosion(m, iterations=k))

@@ -14,6 +14,12 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import rewrite as rw  # noqa: E402
+from facetransfer import face_texture as ftex  # noqa: E402
+from facetransfer.track import obtain  # noqa: E402
+from facetransfer.track import presets  # noqa: E402
+from facetransfer import rewrite_options as rwo  # noqa: E402
+from facetransfer import topology  # noqa: E402
+from facetransfer import video_transfer as vt  # noqa: E402
 from facetransfer.errors import VideoError  # noqa: E402
 from facetransfer.track import Track  # noqa: E402
 from facetransfer.track.tracker import TrackOptions  # noqa: E402
@@ -23,21 +29,21 @@ from test_transfer_rewrite import face_texture, synthetic, topo  # noqa: E402,F4
 
 
 def test_track_options_presets():
-    assert rw.track_options("balanced") == TrackOptions(reselect=4)
-    fast = rw.track_options("fast")
+    assert presets.track_options("balanced") == TrackOptions(reselect=4)
+    fast = presets.track_options("fast")
     assert (fast.passes, fast.levels, fast.n_points, fast.snap_frames, fast.reselect,
             fast.half_window) == (1, 2, 500, 4, 8, 3)
-    assert rw.track_options("quality").passes == 3
-    assert rw.track_options("quality").reselect == 1
-    assert rw.track_options() == fast and rw.DEFAULT_SPEED == "fast"
-    with pytest.raises(rw.RewriteError, match="speed must be one of fast, balanced, quality"):
-        rw.track_options("turbo")
+    assert presets.track_options("quality").passes == 3
+    assert presets.track_options("quality").reselect == 1
+    assert presets.track_options() == fast and presets.DEFAULT_SPEED == "fast"
+    with pytest.raises(rwo.RewriteError, match="speed must be one of fast, balanced, quality"):
+        presets.track_options("turbo")
 
 
 def test_plan_rejects_unknown_speed_before_any_work(quick_model, tmp_path):
     # the target does not exist: the preset is checked first
-    with pytest.raises(rw.RewriteError, match="speed"):
-        rw.plan_transfer(tmp_path / "missing.mp4", quick_model, speed="ludicrous")
+    with pytest.raises(rwo.RewriteError, match="speed"):
+        vt.plan_transfer(tmp_path / "missing.mp4", quick_model, speed="ludicrous")
 
 
 @pytest.mark.parametrize("blend", ["fast", "poisson", "none"])
@@ -46,11 +52,11 @@ def test_face_box_crop_matches_the_full_frame(quick_model, topo, synthetic, blen
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
     for i in (1, 3):
-        V = rw.close_mouth(quick_model.synthesize(new.weights_at(i)), topo)
-        Vt = rw.close_mouth(quick_model.synthesize(tb.weights_at(i)), topo)
-        Vs = rw.close_mouth(quick_model.synthesize(ta.weights_at(i)), topo)
-        tex = rw.FaceTexture(fb[i], rw.frame_uvs(Vt, tb.camera(i), (128, 128)), i)
-        mouth = rw.FaceTexture(fa[i], rw.frame_uvs(Vs, ta.camera(i), (128, 128)), i)
+        V = topology.close_mouth(quick_model.synthesize(new.weights_at(i)), topo)
+        Vt = topology.close_mouth(quick_model.synthesize(tb.weights_at(i)), topo)
+        Vs = topology.close_mouth(quick_model.synthesize(ta.weights_at(i)), topo)
+        tex = ftex.FaceTexture(fb[i], ftex.frame_uvs(Vt, tb.camera(i), (128, 128)), i)
+        mouth = ftex.FaceTexture(fa[i], ftex.frame_uvs(Vs, ta.camera(i), (128, 128)), i)
         cropped = rw.rewrite_frame(fb[i], V, new.camera(i), topo, tex, mouth_texture=mouth,
                                    blend=blend)
         full = rw._rewrite_crop(fb[i], V, new.camera(i), topo, tex, mouth, blend, 2.0, 2, 3.0,
@@ -66,9 +72,9 @@ def test_face_box_off_screen_keeps_the_frame(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     cam = dataclasses.replace(tb.camera(0), translation=np.array([1000.0, 1000.0]))
     V = quick_model.synthesize(tb.weights_at(0))
-    assert rw._face_box(rw.close_mouth(V, topo), cam, (128, 128), margin=4) is None
-    Vt = rw.close_mouth(V, topo)
-    tex = rw.FaceTexture(fb[0], rw.frame_uvs(Vt, tb.camera(0), (128, 128)), 0)
+    assert rw._face_box(topology.close_mouth(V, topo), cam, (128, 128), margin=4) is None
+    Vt = topology.close_mouth(V, topo)
+    tex = ftex.FaceTexture(fb[0], ftex.frame_uvs(Vt, tb.camera(0), (128, 128)), 0)
     out = rw.rewrite_frame(fb[0], V, cam, topo, tex)
     np.testing.assert_array_equal(out.image, fb[0])
     assert not out.face_mask.any()
@@ -96,8 +102,8 @@ def _fake_obtain_track(tracks):
                     reason="needs fork")
 def test_background_tracking_equals_sequential(clips, quick_model, monkeypatch, tmp_path):
     fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
-    monkeypatch.setattr(rw, "obtain_track", fake)
-    plans = {par: rw.plan_transfer(clips["target"], quick_model,
+    monkeypatch.setattr(obtain, "obtain_track", fake)
+    plans = {par: vt.plan_transfer(clips["target"], quick_model,
                                    expression_from=clips["source"], parallel=par)
              for par in (False, True)}
     me = str(os.getpid())
@@ -114,7 +120,7 @@ def test_background_tracking_equals_sequential(clips, quick_model, monkeypatch, 
     broken = tmp_path / "broken.mp4"
     shutil.copy(clips["source"], broken)
     with pytest.raises(VideoError, match="no face found"):
-        rw.plan_transfer(clips["target"], quick_model, expression_from=broken, parallel=True)
+        vt.plan_transfer(clips["target"], quick_model, expression_from=broken, parallel=True)
 
 
 def test_cli_speed_option(clips, quick_model_path, tmp_path, capsys):
@@ -179,5 +185,5 @@ def test_defaults_agree():
 
     from facetransfer import demo
 
-    assert inspect.signature(demo.run_demo).parameters["speed"].default == rw.DEFAULT_SPEED
-    assert inspect.signature(rw.plan_transfer).parameters["speed"].default == rw.DEFAULT_SPEED
+    assert inspect.signature(demo.run_demo).parameters["speed"].default == presets.DEFAULT_SPEED
+    assert inspect.signature(vt.plan_transfer).parameters["speed"].default == presets.DEFAULT_SPEED

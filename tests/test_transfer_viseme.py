@@ -15,6 +15,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import rewrite as rw  # noqa: E402
+from facetransfer import topology  # noqa: E402
 from facetransfer.render import (WeakPerspective, look_at_weak_perspective, render,  # noqa: E402
                                  rotation_from_euler)
 from facetransfer.track import Track  # noqa: E402
@@ -92,7 +93,7 @@ def tri_model(tri_dataset):
 
 @pytest.fixture(scope="module")
 def tri_topo(tri_model):
-    return rw.mesh_topology(tri_model)
+    return topology.mesh_topology(tri_model)
 
 
 def render_clip(model, topo, texture, identity, expressions, visemes, yaws, *, seed):
@@ -110,7 +111,7 @@ def render_clip(model, topo, texture, identity, expressions, visemes, yaws, *, s
     frames, R = [], []
     for e, v, yaw in zip(we, wv, yaws):
         Rf = rotation_from_euler(yaw, 0, 0)
-        V = rw.close_mouth(m.synthesize({"identity": wid, "expression": e, "viseme": v}), topo)
+        V = topology.close_mouth(m.synthesize({"identity": wid, "expression": e, "viseme": v}), topo)
         frames.append(render(V, topo.faces, WeakPerspective(cam0.scale, Rf, cam0.translation),
                              SIZE, uvs=uvs, texture=texture, shading="none",
                              background=bg).image)

@@ -46,6 +46,7 @@ __all__ = [
     "feather_mask",
     "match_color",
     "composite_face",
+    "membrane_blend",
 ]
 
 _METHODS = ("auto", "opencv", "solver")
@@ -474,3 +475,139 @@ def composite_face(target_frame, rendered_face, face_mask, *, mouth_source=None,
     else:
         pairs = [(face, feather_mask(fm, feather), fm)]
     return poisson_blend_multi(t, pairs, mixed=mixed)
+
+
+# ---------------------------------------------------------------------------------------------
+# the fast blend: a membrane correction (an approximation of Poisson blending)
+# ---------------------------------------------------------------------------------------------
+
+def _extend(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``img`` inside ``mask``, its nearest inside pixel outside (no step across the outline)."""
+    if mask.all() or not mask.any():
+        return img.copy()
+    _, (iy, ix) = ndi.distance_transform_edt(~mask, return_indices=True)
+    return img[iy, ix]
+
+
+#: 4-connected structuring element (``scipy.ndimage``'s default for binary morphology)
+_CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8)
+
+
+def _erode(mask: np.ndarray, iterations: int) -> np.ndarray:
+    """Binary erosion by the 4-connected cross, pixels beyond the image counting as outside
+    (equal to ``scipy.ndimage.binary_erosion(mask, iterations=iterations)``)."""
+    return cv2.erode(mask.astype(np.uint8), _CROSS, iterations=int(iterations),
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+
+
+#: the mean of the 4 neighbours (a Jacobi sweep of Laplace's equation)
+_FOUR_NEIGHBOURS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.float32)
+
+
+def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
+                   feather: float = 2.0, margin: int = 8,
+                   smooth_iterations: int = 10, outlier: float | None = 40.0) -> np.ndarray:
+    """Seamless paste by a membrane correction (an approximation of Poisson blending).
+
+    Poisson image editing with the source's own gradients as guidance (Pérez et al. 2003,
+    Eq. (7)–(10)) gives ``f = source + h`` inside the mask, with ``h`` harmonic and equal to
+    ``target − source`` on the outline. Here the outline is the region's own border (its pixels
+    with a neighbour outside), so the source is only read inside the mask; ``h`` is interpolated
+    into the region from the outline by pyramid push-pull (smooth, linear time) and a few
+    Jacobi sweeps of Laplace's equation, instead of solving the sparse system; the seam is then
+    feathered over ``feather`` pixels inside the mask. Outside the mask the result is ``target``
+    exactly.
+
+    Parameters
+    ----------
+    target, source : (H, W, 3) uint8
+        ``source`` is read inside ``mask`` only.
+    mask : (H, W) bool
+    feather : float
+        Width in pixels of the inside band where the result fades to the target.
+    margin : int
+        Pixels around the mask's bounding box in the working crop.
+    smooth_iterations : int
+        Jacobi sweeps of Laplace's equation applied to the push-pull membrane.
+    outlier : float or None
+        Outline pixels whose target-source difference exceeds this (0..255 scale, any channel)
+        do not constrain the membrane (None: all do).
+
+    Returns
+    -------
+    (H, W, 3) uint8
+    """
+    T = np.asarray(target)
+    out = T.copy()
+    mask = np.asarray(mask, bool)
+    bx, by, bw, bh = cv2.boundingRect(mask.view(np.uint8))
+    if bw == 0 or bh == 0:
+        return out
+    H, W = mask.shape
+    y0, y1 = max(by - margin, 0), min(by + bh + margin, H)
+    x0, x1 = max(bx - margin, 0), min(bx + bw + margin, W)
+    m = mask[y0:y1, x0:x1]
+    t = T[y0:y1, x0:x1].astype(np.float32)
+    s = np.asarray(source)[y0:y1, x0:x1].astype(np.float32)
+    f = s + _membrane(m, t, s, outlier, int(smooth_iterations))
+    if feather > 0:
+        # distance to the nearest pixel outside the region (the crop's margin is outside)
+        dist = cv2.distanceTransform(m.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+        a = np.clip(dist / float(feather), 0.0, 1.0)[..., None]
+        f = a * f + (1.0 - a) * t
+    crop = np.clip(np.rint(f), 0, 255).astype(np.uint8)
+    out[y0:y1, x0:x1] = np.where(m[..., None], crop, T[y0:y1, x0:x1])
+    return out
+
+
+def _outline(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None):
+    """The outline of region ``m`` (h, w) bool and ``target - source`` on it.
+
+    The outline is the region's pixels with one of their 8 neighbours outside (the crop's edge
+    counts as outside); outline pixels where ``t`` and ``s`` (h, w, 3) differ by ``outlier`` or
+    more in a channel are left out (unless that leaves fewer than a quarter).
+
+    Returns
+    -------
+    ring, interior : (h, w) bool
+    ry, rx : (k,) int
+        The outline pixels kept.
+    dr : (k, 3) float32
+        ``t - s`` there.
+    """
+    interior = cv2.erode(m.view(np.uint8), np.ones((3, 3), np.uint8),
+                         borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
+    ring = m & ~interior
+    ry, rx = np.nonzero(ring)
+    dr = t[ry, rx] - s[ry, rx]                       # target - source on the outline
+    if outlier is not None:
+        # outline pixels where target and source disagree wildly (the silhouette moved with
+        # the new expression, or hair crosses it) would bleed into the face: leave them out
+        ok = np.abs(dr).max(axis=-1) < float(outlier)
+        if ok.sum() >= 0.25 * ok.size and not ok.all():
+            ring[ry[~ok], rx[~ok]] = False
+            interior = m & ~ring
+            ry, rx, dr = ry[ok], rx[ok], dr[ok]
+    return ring, interior, ry, rx, dr
+
+
+def _membrane(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None,
+              smooth_iterations: int) -> np.ndarray:
+    """The membrane ``h`` (h, w, 3) float32 of :func:`membrane_blend`: ``t - s`` on the outline
+    of ``m`` (:func:`_outline`), interpolated inside by push-pull
+    (:func:`facetransfer.texture.fill_holes`) and ``smooth_iterations`` Jacobi sweeps of
+    Laplace's equation."""
+    from .texture import fill_holes
+
+    ring, interior, ry, rx, dr = _outline(m, t, s, outlier)
+    d = np.zeros_like(t)
+    d[ry, rx] = dr
+    h = fill_holes(d, ring)  # (h, w, 3): the membrane, = target - source on the outline
+    # Jacobi sweeps of Laplace's equation (the mean of the 4 neighbours, one 3x3 filter per
+    # sweep) smooth the push-pull result towards harmonic; the outline keeps its values
+    h = np.ascontiguousarray(h, dtype=np.float32)
+    inner3 = np.repeat(interior[..., None], h.shape[2], axis=2)
+    for _ in range(int(smooth_iterations)):
+        np.copyto(h, cv2.filter2D(h, -1, _FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE),
+                  where=inner3)
+    return h

@@ -7,7 +7,7 @@
    synthetic clips of :mod:`facetransfer.synth` stand in);
 3. both are tracked (§5; a landmark-only fit if the optical-flow tracker fails), the source's
    expressions are put on the target's identity and pose (§6, Fig. 7C) and rendered back into
-   the target footage (:mod:`facetransfer.rewrite`);
+   the target footage (:mod:`facetransfer.video_transfer`, :mod:`facetransfer.rewrite`);
 4. ``OUT/demo.mp4`` (source | target | result side by side, with the target's audio; H.264 by
    default, :mod:`facetransfer.io.video`),
    ``OUT/demo.png`` (a contact sheet of six frames) and ``OUT/demo_track.npz`` (the new
@@ -24,6 +24,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import AssetError
+from .face_texture import resolve_mouth_mode
+from .rewrite_options import DEFAULT_SPEED, RewriteOptions
+from .video_transfer import plan_transfer, render_plan
 
 log = logging.getLogger(__name__)
 
@@ -192,7 +195,7 @@ class DemoResult:
 
 def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None,
              texture: str = "frame", blend: str = "fast", track_method: str = "auto",
-             speed: str = "fast", progress_factory=None, mouth: str | None = None,
+             speed: str = DEFAULT_SPEED, progress_factory=None, mouth: str | None = None,
              overwrite: bool = True, video_options=None, judge: bool = True) -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
@@ -207,16 +210,10 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
         Default: :func:`default_inputs`.
     model : MultilinearModel, optional
         Default: :func:`ensure_default_model`.
-    texture, blend : str
-        See :func:`facetransfer.rewrite.rewrite_frames`.
-    mouth : {"frame", "function"}, optional
-        The mouth texture (:func:`facetransfer.rewrite.rewrite_frames`); default
-        :func:`facetransfer.rewrite.default_mouth_mode`.
-    track_method : {"auto", "flow", "landmarks"}
-        ``"auto"``: the optical-flow tracker, falling back to a landmark-only fit if it fails.
-    speed : {"fast", "balanced", "quality"}
-        Tracking preset (:func:`facetransfer.rewrite.track_options`; the default is
-        :data:`facetransfer.rewrite.DEFAULT_SPEED`).
+    texture, blend, mouth, track_method, speed : str
+        The :class:`facetransfer.rewrite_options.RewriteOptions` of the transfer (checked
+        before any work). ``track_method="auto"`` falls back to a landmark-only fit if tracking
+        fails; a mouth of None is :func:`facetransfer.face_texture.default_mouth_mode`.
     video_options : VideoOptions, optional
         Codec and CRF of the video (:class:`facetransfer.io.video.VideoOptions`).
 
@@ -224,17 +221,39 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     -------
     DemoResult
     """
-    from . import rewrite as rw
+    opts = RewriteOptions(texture=texture, mouth=mouth, blend=blend, speed=speed,
+                          track_method=track_method)
+    if model is not None:  # an unusable mouth mode fails before any work
+        resolve_mouth_mode(opts.mouth, model)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    video_path, sheet_path, track_path = _demo_paths(out_dir, video_options, overwrite)
+    if model is None:
+        model = ensure_default_model(progress_factory=progress_factory)
+    timings["model"] = time.perf_counter() - t0
+    source, target, tracks = _demo_inputs(source, target, model, Path(out_dir), frames)
+    plan, opts = _plan_with_fallback(target, source, model, opts, frames, tracks,
+                                     progress_factory)
+    sheet = _DemoFrames(plan, judge)
+    rendered = render_plan(plan, model, video_path, options=opts, audio_from=target,
+                           overwrite=overwrite, progress_factory=progress_factory,
+                           compose=sheet.compose, video_options=video_options)
+    timings.update(rendered.timings)
+    fid = _judge(sheet.panels, plan.fps) if judge else None
+    timings["judge"] = time.perf_counter() - t0 - sum(timings.values())
+    contact_sheet(sheet.sheet_frames, sheet_path, overwrite=overwrite,
+                  caption=None if fid is None else fid.line())
+    plan.new_track.save(track_path, overwrite=overwrite)
+    timings["total"] = time.perf_counter() - t0
+    return DemoResult(video_path, sheet_path, track_path, plan.n_frames, opts.track_method,
+                      timings, fid)
+
+
+def _demo_paths(out_dir, video_options, overwrite: bool) -> tuple[Path, Path, Path]:
+    """``(video, sheet, track)`` in ``out_dir`` (created), each checked for writing."""
     from .io.atomic import check_output_path
     from .io.video import VideoOptions, check_video_output
 
-    rw.track_options(speed)  # an unknown preset fails before any work
-    if mouth is not None and mouth not in rw.MOUTH_MODES:  # also before any work
-        raise rw.RewriteError(f"mouth must be one of {', '.join(rw.MOUTH_MODES)}, got {mouth!r}")
-    if model is not None:
-        mouth = rw.resolve_mouth_mode(mouth, model)
-    timings: dict[str, float] = {}
-    t0 = time.perf_counter()
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     ext = ".mov" if (video_options or VideoOptions()).codec == "prores" else ".mp4"
@@ -243,9 +262,12 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     check_video_output(video_path, video_options, overwrite=overwrite)
     for p in (sheet_path, track_path):
         check_output_path(p, overwrite=overwrite)
-    if model is None:
-        model = ensure_default_model(progress_factory=progress_factory)
-    timings["model"] = time.perf_counter() - t0
+    return video_path, sheet_path, track_path
+
+
+def _demo_inputs(source, target, model, out: Path, frames: int):
+    """``(source, target, track files)``: the given clips, else the data folder's, else two
+    synthetic clips with their true tracks (``{"expression_track": ..., "target_track": ...}``)."""
     tracks: dict = {}
     if source is None or target is None:
         try:
@@ -256,55 +278,53 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
             tracks = {"expression_track": ts, "target_track": tt}
         source = s if source is None else source
         target = t if target is None else target
+    return source, target, tracks
 
-    method = track_method
+
+def _plan_with_fallback(target, source, model, opts: RewriteOptions, frames: int, tracks: dict,
+                        progress_factory):
+    """``(plan, options)``: :func:`facetransfer.video_transfer.plan_transfer` with the chosen
+    tracker; with ``"auto"``, a landmark-only fit when tracking fails (the demo degrades
+    instead of failing)."""
+    def plan(method):
+        return plan_transfer(target, model, expression_from=source, max_frames=frames,
+                             track_method=method, speed=opts.speed,
+                             progress_factory=progress_factory, **tracks)
+
     try:
-        plan = rw.plan_transfer(target, model, expression_from=source, max_frames=frames,
-                                track_method=method, speed=speed,
-                                progress_factory=progress_factory,
-                                **tracks)
+        return plan(opts.track_method), opts
     except (KeyboardInterrupt, MemoryError):
         raise
     except Exception as exc:  # noqa: BLE001 - the demo degrades instead of failing
-        if track_method != "auto":
+        if opts.track_method != "auto":
             raise
         log.warning("tracking failed (%s: %s); falling back to a landmark-only fit",
                     type(exc).__name__, exc)
-        method = "landmarks"
-        plan = rw.plan_transfer(target, model, expression_from=source, max_frames=frames,
-                                track_method=method, speed=speed,
-                                progress_factory=progress_factory,
-                                **tracks)
+        opts = opts.with_(track_method="landmarks")
+        return plan(opts.track_method), opts
 
-    n = plan.n_frames
-    pick = set(np.linspace(0, n - 1, 6).round().astype(int).tolist())
-    sheet_frames: list[np.ndarray] = []
-    panels: list[list[np.ndarray]] = [[], [], []]  # half size, for the judge
 
-    def compose(i, r):  # source | target | result
+class _DemoFrames:
+    """The demo's frame composer (source | target | result): keeps six frames for the contact
+    sheet and, for the judge, the three panels at half size."""
+
+    def __init__(self, plan, judge: bool) -> None:
+        n = plan.n_frames
+        self.plan, self.judge = plan, judge
+        self.pick = set(np.linspace(0, n - 1, 6).round().astype(int).tolist())
+        self.sheet_frames: list[np.ndarray] = []
+        self.panels: list[list[np.ndarray]] = [[], [], []]
+
+    def compose(self, i: int, r) -> np.ndarray:
+        plan = self.plan
         trio = (plan.mouth_frames[plan.mouth_index[i]], plan.target_frames[i], r.image)
         frame = side_by_side(*trio)
-        if i in pick:
-            sheet_frames.append(frame)
-        if judge:
+        if i in self.pick:
+            self.sheet_frames.append(frame)
+        if self.judge:
             for k, f in enumerate(trio):
-                panels[k].append(f[::2, ::2].copy())
+                self.panels[k].append(f[::2, ::2].copy())
         return frame
-
-    render_timings, _, _ = rw.render_plan(plan, model, video_path, audio_from=target,
-                                          texture=texture, blend=blend,
-                                          mouth=rw.resolve_mouth_mode(mouth, model),
-                                          overwrite=overwrite,
-                                          progress_factory=progress_factory, compose=compose,
-                                          video_options=video_options)
-    timings.update(render_timings)
-    fid = _judge(panels, plan.fps) if judge else None
-    timings["judge"] = time.perf_counter() - t0 - sum(timings.values())
-    contact_sheet(sheet_frames, sheet_path, overwrite=overwrite,
-                  caption=None if fid is None else fid.line())
-    plan.new_track.save(track_path, overwrite=overwrite)
-    timings["total"] = time.perf_counter() - t0
-    return DemoResult(video_path, sheet_path, track_path, n, method, timings, fid)
 
 
 def _judge(panels, fps):

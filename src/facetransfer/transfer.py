@@ -14,8 +14,9 @@ expression from the new video"):
   component (Fig. 7E);
 * :func:`puppet_frames`: drive an identity of the model from a video, rendered alone.
 
-Rendering the new performance back into footage is :mod:`facetransfer.rewrite`. Every function
-here is pure: tracks in, a new track out.
+Rendering the new performance back into footage is :mod:`facetransfer.rewrite` (one frame) and
+:mod:`facetransfer.video_transfer` (the job). Every function here is pure: tracks in, a new
+track out.
 
 References
 ----------
@@ -35,6 +36,7 @@ import numpy as np
 
 from .arkit import attach_activations
 from .errors import FaceTransferError
+from .topology import close_mouth, mesh_topology
 
 log = logging.getLogger(__name__)
 
@@ -159,11 +161,11 @@ def _interp_rows(a: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 def _orthonormalize(R: np.ndarray) -> np.ndarray:
-    """Nearest rotations (F, 3, 3) of (F, 3, 3) matrices (SVD projection)."""
-    U, _, Vt = np.linalg.svd(R)
-    d = np.sign(np.linalg.det(U @ Vt))
-    U[:, :, 2] *= d[:, None]
-    return U @ Vt
+    """Nearest rotations (F, 3, 3) of (F, 3, 3) matrices
+    (:func:`facetransfer.track.camera.nearest_rotation`, the SVD projection)."""
+    from .track.camera import nearest_rotation  # here: the track package is slow to import
+
+    return np.stack([nearest_rotation(r) for r in R]) if len(R) else np.asarray(R, np.float64)
 
 
 def resample_track(track, tmap: TimeMap):
@@ -269,7 +271,6 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         for the frame is lost (those frames keep the original footage when rendered);
         ``landmarks2d`` copied from the pose track (recompute with :func:`project_landmarks`).
     """
-    n = target.n_frames
     sources = {}
     for what, tr in (("expression", expression), ("viseme", viseme), ("pose", pose)):
         if tr is not None:
@@ -282,7 +283,37 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         raise TransferError(f"pose source frames are {pose.frame_size[0]}x{pose.frame_size[1]}, "
                             f"the target's {target.frame_size[0]}x{target.frame_size[1]}: the "
                             f"pose source must have the target's frame size")
-    # every source on the target's timeline
+    base, resampled = _on_timeline(target, sources, align)
+    n_out = base.n_frames
+    posed = resampled.get("pose", base)
+    weights = {m: base.weights[m].copy() for m in base.mode_names}
+    lost = base.lost.copy()
+    for what, mode in (("expression", expression_mode), ("viseme", viseme_mode)):
+        if what in resampled:
+            if what == "expression" and mode not in weights:
+                raise TransferError(f"the model has no {mode!r} mode")
+            weights[mode] = resampled[what].weights[mode].copy()
+    for tr in resampled.values():
+        lost |= tr.lost
+    if identity is not None:
+        if identity_mode not in weights:
+            raise TransferError(f"the model has no {identity_mode!r} mode")
+        wid = _identity_weights(target, identity, identity_mode, weights[identity_mode].shape[1])
+        weights[identity_mode] = np.broadcast_to(wid, (n_out, wid.shape[0])).copy()
+    conf = base.confidence.copy()
+    for tr in resampled.values():
+        conf = np.minimum(conf, tr.confidence)
+    return dataclasses.replace(
+        base, rotation=posed.rotation.copy(), scale=posed.scale.copy(),
+        translation=posed.translation.copy(), landmarks2d=posed.landmarks2d.copy(),
+        weights=weights, lost=lost, confidence=conf, info={},
+        blendshapes=None, blendshape_names=None)  # new weights: project_landmarks attaches them
+
+
+def _on_timeline(target, sources: dict, align: str | None):
+    """``(base, resampled)``: every source track resampled to the target's frame rate
+    (:func:`time_map` with ``align``), all cut to the shortest, and the target cut alike."""
+    n = target.n_frames
     resampled = {}
     n_out = n
     for what, tr in sources.items():
@@ -293,40 +324,20 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         if resampled[what].n_frames > n_out:
             resampled[what] = take_frames(resampled[what], np.arange(n_out))
     base = take_frames(target, np.arange(n_out)) if n_out < n else target
-    posed = resampled.get("pose", base)
-    weights = {m: base.weights[m].copy() for m in base.mode_names}
-    lost = base.lost.copy()
-    if "expression" in resampled:
-        if expression_mode not in weights:
-            raise TransferError(f"the model has no {expression_mode!r} mode")
-        weights[expression_mode] = resampled["expression"].weights[expression_mode].copy()
-        lost |= resampled["expression"].lost
-    if "viseme" in resampled:
-        weights[viseme_mode] = resampled["viseme"].weights[viseme_mode].copy()
-        lost |= resampled["viseme"].lost
-    if "pose" in resampled:
-        lost |= resampled["pose"].lost
-    if identity is not None:
-        if identity_mode not in weights:
-            raise TransferError(f"the model has no {identity_mode!r} mode")
-        if hasattr(identity, "weights"):
-            _check_compatible(target, identity, "identity")
-            wid = constant_weights(identity, identity_mode)
-        else:
-            wid = np.asarray(identity, dtype=np.float64).ravel()
-        r = weights[identity_mode].shape[1]
-        if wid.shape != (r,) or not np.all(np.isfinite(wid)):
-            raise TransferError(f"identity weights must be {r} finite numbers, got shape "
-                                f"{wid.shape}")
-        weights[identity_mode] = np.broadcast_to(wid, (n_out, r)).copy()
-    conf = base.confidence.copy()
-    for tr in resampled.values():
-        conf = np.minimum(conf, tr.confidence)
-    return dataclasses.replace(
-        base, rotation=posed.rotation.copy(), scale=posed.scale.copy(),
-        translation=posed.translation.copy(), landmarks2d=posed.landmarks2d.copy(),
-        weights=weights, lost=lost, confidence=conf, info={},
-        blendshapes=None, blendshape_names=None)  # new weights: project_landmarks attaches them
+    return base, resampled
+
+
+def _identity_weights(target, identity, identity_mode: str, r: int) -> np.ndarray:
+    """The identity (r,) of :func:`recombine`: a track's constant identity or given weights."""
+    if hasattr(identity, "weights"):
+        _check_compatible(target, identity, "identity")
+        wid = constant_weights(identity, identity_mode)
+    else:
+        wid = np.asarray(identity, dtype=np.float64).ravel()
+    if wid.shape != (r,) or not np.all(np.isfinite(wid)):
+        raise TransferError(f"identity weights must be {r} finite numbers, got shape "
+                            f"{wid.shape}")
+    return wid
 
 
 def take_frames(track, idx: np.ndarray):
@@ -546,8 +557,6 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     wid = np.asarray(identity, dtype=np.float64).ravel()
     if wid.shape != (r,):
         raise TransferError(f"identity weights must have {r} values, got {wid.shape}")
-    from .rewrite import close_mouth, mesh_topology
-
     bg = np.broadcast_to(np.asarray(background, np.uint8), (size[1], size[0], 3)).copy()
     sx = size[0] / track.frame_size[0]
     sy = size[1] / track.frame_size[1]

@@ -185,7 +185,7 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     Row
     """
     from ..io.video import video_info
-    from ..rewrite import transfer_video
+    from ..video_transfer import transfer_video
 
     t0 = time.perf_counter()
     s = job.sources

@@ -23,6 +23,10 @@ from ..io.atomic import check_not_input, check_output_path
 from .common import MODEL_HELP, add_video_options, resolve_model, video_options
 
 
+#: What the capture tracker does, for the help of every ``--tracker`` option.
+CAPTURE_HELP = "the model fitted to MediaPipe's landmarks and their optical flow on every frame"
+
+
 def partial_path(out) -> Path:
     """Where ``track --out OUT`` keeps the progress of an unfinished run."""
     p = Path(out)
@@ -36,9 +40,8 @@ def add_track_options(p) -> None:
 
     d = TrackOptions()
     p.add_argument("--tracker", choices=("capture", "klt"), default=None,
-                   help="default capture (klt when --init gives points): capture: the model "
-                   "fitted to MediaPipe's landmarks and their optical flow on every frame, "
-                   "identity from the whole clip, ARKit activations "
+                   help="default capture (klt when --init gives points): capture: "
+                   + CAPTURE_HELP + ", identity from the whole clip, ARKit activations "
                    "(facetransfer.track.capture); klt: the paper's model-based optical-flow "
                    "tracker from the first frame (the options marked [klt])")
     p.add_argument("--init", default="auto",

@@ -19,8 +19,11 @@ import sys
 from pathlib import Path
 
 from ..errors import FaceTransferError
-from ..rewrite import DEFAULT_SPEED, SPEED_PRESETS
+from ..transfer import ALIGN_MODES
+from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, MOUTH_MODES, SPEED_PRESETS,
+                               TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import MODEL_HELP, add_video_options, resolve_model, video_options
+from .track import CAPTURE_HELP
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
               "(repeat the source), hold (hold the source's last frame); default: trim when the "
@@ -51,21 +54,22 @@ class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
 
 
 def add_rewrite_options(p: argparse.ArgumentParser) -> None:
-    """Options shared by ``transfer`` and ``demo``: texture, blending and tracking (one definition)."""
-    p.add_argument("--texture", choices=("frame", "constant"), default="frame",
+    """Options shared by ``transfer`` and ``demo``: texture, blending and tracking (one
+    definition; read back by :func:`rewrite_options`)."""
+    p.add_argument("--texture", choices=TEXTURE_MODES, default="frame",
                    help="target face texture: lifted from each frame, or one for the clip")
-    p.add_argument("--mouth", choices=("frame", "function"), default=None,
+    p.add_argument("--mouth", choices=MOUTH_MODES, default=None,
                    help="mouth texture (lips and mouth inside): frame (the mouth source's frame "
                    "at that time, warped through its tracked geometry) or function (the "
                    "texture function of §6: textures lifted from the mouth source's frames, "
                    "blended by nearest neighbours of the new expression/viseme weights; needs "
                    "a model with UVs); default: function with --performance, frame otherwise")
-    p.add_argument("--blend", choices=("fast", "poisson", "none"), default="fast",
+    p.add_argument("--blend", choices=BLEND_MODES, default="fast",
                    help="fast membrane blend, exact Poisson solve, or hard paste")
-    p.add_argument("--tracker", choices=("auto", "capture", "flow", "landmarks"), default="auto",
-                   help="tracking when no track file is given: auto or capture (the model "
-                   "fitted to MediaPipe's points and their flow on every frame), flow (the "
-                   "optical-flow tracker of §5, with --speed) or landmarks")
+    p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
+                   help="tracking when no track file is given: auto or capture ("
+                   + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
+                   "landmarks")
     p.add_argument("--speed", choices=SPEED_PRESETS, default=DEFAULT_SPEED,
                    help="tracking preset when no track file is given: fast (one pass, two "
                    "pyramid levels; as accurate as balanced on the footage measured, about 4x "
@@ -73,17 +77,61 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "quality (three passes) for hard footage")
 
 
+def rewrite_options(args) -> RewriteOptions:
+    """The :class:`~facetransfer.rewrite_options.RewriteOptions` of
+    :func:`add_rewrite_options`' arguments."""
+    return RewriteOptions(texture=args.texture, mouth=args.mouth, blend=args.blend,
+                          speed=args.speed, track_method=args.tracker)
+
+
+def _parser(sub, name: str, help: str, description: str):
+    """A subcommand's parser with the defaults shown in its help."""
+    return sub.add_parser(name, formatter_class=_DefaultsFormatter, help=help,
+                          description=description)
+
+
+def _add_output(p, func, *, metavar: str, help: str | None = None, video: bool = False,
+                overwrite_help: str = "replace an existing output") -> None:
+    """``--out`` (with the video options when ``video``), ``--overwrite`` and the function
+    that runs the subcommand."""
+    p.add_argument("--out", required=True, metavar=metavar, help=help)
+    if video:
+        add_video_options(p)
+    p.add_argument("--overwrite", action="store_true", help=overwrite_help)
+    p.set_defaults(func=func)
+
+
 def register(sub) -> None:
     """Add ``transfer``, ``edit``, ``puppet`` and ``demo`` to the facetransfer parser."""
-    fmt = _DefaultsFormatter
+    _register_transfer(sub)
+    _register_edit(sub)
+    _register_puppet(sub)
+    _register_demo(sub)
 
-    p = sub.add_parser(
-        "transfer", formatter_class=fmt,
-        help="put expressions, visemes, identity or pose of other videos into target footage",
-        description="Video rewrite (Vlasic et al. 2005, §6, Fig. 1, Fig. 7): track the videos "
-        "(or reuse track files), take each attribute from its chosen video, render the new face "
-        "into the target footage with the target's texture and the source's mouth, blend, and "
-        "keep the target's audio.")
+
+def _register_transfer(sub) -> None:
+    p = _parser(
+        sub, "transfer",
+        "put expressions, visemes, identity or pose of other videos into target footage",
+        "Video rewrite (Vlasic et al. 2005, §6, Fig. 1, Fig. 7): track the videos (or reuse "
+        "track files), take each attribute from its chosen video, render the new face into "
+        "the target footage with the target's texture and the source's mouth, blend, and keep "
+        "the target's audio.")
+    _add_sources(p)
+    p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
+    p.add_argument("--align", choices=ALIGN_MODES, default=None, help=ALIGN_HELP)
+    p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
+    add_rewrite_options(p)
+    p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
+    p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
+    _add_output(p, run_transfer, metavar="OUT.mp4", video=True,
+                help="video to write (.mp4, .mov, .mkv...) or image sequence (frames/%%05d.png)",
+                overwrite_help="replace existing outputs")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def _add_sources(p) -> None:
+    """``transfer``'s inputs: the target and, per attribute, a video and its track file."""
     p.add_argument("--target", required=True, metavar="T.mp4", help="footage to rewrite")
     p.add_argument("--target-track", metavar="T.npz", help="track file of the target (reused)")
     p.add_argument("--expression-from", metavar="S.mp4", help="video whose expressions to use")
@@ -107,24 +155,13 @@ def register(sub) -> None:
     p.add_argument("--performance", metavar="NEW.npz",
                    help="render a ready performance on the target's timeline (e.g. the output "
                    "of `facetransfer edit`) instead of combining sources")
-    p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
-    p.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
-    p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
-    add_rewrite_options(p)
-    p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
-    p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
-    p.add_argument("--out", required=True, metavar="OUT.mp4",
-                   help="video to write (.mp4, .mov, .mkv...) or image sequence "
-                   "(frames/%%05d.png)")
-    add_video_options(p)
-    p.add_argument("--overwrite", action="store_true", help="replace existing outputs")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
-    p.set_defaults(func=run_transfer)
 
-    e = sub.add_parser(
-        "edit", formatter_class=fmt, help="edit a tracked performance (Fig. 7E)",
-        description="Add a training expression over a frame range (with smooth ramps) or scale "
-        "an expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E).")
+
+def _register_edit(sub) -> None:
+    e = _parser(
+        sub, "edit", "edit a tracked performance (Fig. 7E)",
+        "Add a training expression over a frame range (with smooth ramps) or scale an "
+        "expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E).")
     e.add_argument("track", metavar="TRACK.npz")
     e.add_argument("--model", metavar="M.npz",
                    help="the model the track was made with (default: the demo's default model)")
@@ -136,30 +173,29 @@ def register(sub) -> None:
     e.add_argument("--ramp", type=int, default=8, help="ramp length in frames at range ends")
     e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
                    help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1")
-    e.add_argument("--out", required=True, metavar="TRACK2.npz")
-    e.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    e.set_defaults(func=run_edit)
+    _add_output(e, run_edit, metavar="TRACK2.npz")
 
-    q = sub.add_parser(
-        "puppet", formatter_class=fmt, help="drive a model identity from a video (puppetry)",
-        description="Track a video (or reuse its track) and render an identity of the model "
-        "performing it, alone on a plain background (Vlasic et al. 2005, §5).")
+
+def _register_puppet(sub) -> None:
+    q = _parser(
+        sub, "puppet", "drive a model identity from a video (puppetry)",
+        "Track a video (or reuse its track) and render an identity of the model performing "
+        "it, alone on a plain background (Vlasic et al. 2005, §5).")
     q.add_argument("video", metavar="VIDEO")
     q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     q.add_argument("--identity", required=True, metavar="LABEL", help="training identity label")
     q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused)")
     q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
-    q.add_argument("--tracker", choices=("auto", "capture", "flow", "landmarks"), default="auto",
+    q.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given")
-    q.add_argument("--out", required=True, metavar="OUT.mp4",
-                   help="video (.mp4...) or image sequence (frames/%%05d.png)")
-    add_video_options(q)
-    q.add_argument("--overwrite", action="store_true", help="replace an existing output")
-    q.set_defaults(func=run_puppet)
+    _add_output(q, run_puppet, metavar="OUT.mp4", video=True,
+                help="video (.mp4...) or image sequence (frames/%%05d.png)")
 
-    d = sub.add_parser(
-        "demo", formatter_class=fmt, help="the main job end to end on the default clips",
-        description="Build the default model if needed, track two clips of the data folder "
+
+def _register_demo(sub) -> None:
+    d = _parser(
+        sub, "demo", "the main job end to end on the default clips",
+        "Build the default model if needed, track two clips of the data folder "
         "($FACETRANSFER_DATA_DIR/video), transfer the expressions of driving_d6.mp4 onto "
         "WDA_KatieHill_000.mp4 and write OUT/demo.mp4 (source | target | result), OUT/demo.png "
         "(contact sheet) and OUT/demo_track.npz.")
@@ -188,7 +224,7 @@ def _positive(value, name):
 def _check_landmarks_file(video) -> None:
     """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work."""
     from ..io.landmarks import read_mediapipe_landmarks
-    from ..rewrite import landmarks_file
+    from ..track.obtain import landmarks_file
 
     lmf = landmarks_file(video)
     if lmf is not None:
@@ -198,8 +234,8 @@ def _check_landmarks_file(video) -> None:
 def run_transfer(args) -> int:
     from ..io.atomic import check_output_path
     from ..io.video import check_video_output, video_info
-    from ..rewrite import transfer_video
     from ..transfer import identity_from_label, parse_weights
+    from ..video_transfer import TransferSources, transfer_video
 
     _positive(args.max_frames, "--max-frames")
     if not (args.expression_from or args.viseme_from or args.identity_from
@@ -241,16 +277,17 @@ def run_transfer(args) -> int:
         identity = parse_weights(args.identity_weights, model.ranks[model.mode_index(idm)])
     if args.identity_dials:
         identity = _dialled_identity(model, identity, args)
-    res = transfer_video(
-        args.target, args.out, model, overwrite=args.overwrite, texture=args.texture,
-        blend=args.blend, mouth=args.mouth, meshes_dir=args.meshes, save_track=args.save_track,
-        progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
-        target_track=args.target_track, expression_from=args.expression_from,
+    sources = TransferSources.of(
+        args.target, target_track=args.target_track, expression_from=args.expression_from,
         expression_track=args.source_track, viseme_from=args.viseme_from,
         viseme_track=args.viseme_track, identity=identity, identity_from=args.identity_from,
         identity_track=args.identity_track, pose_from=args.pose_from,
-        pose_track=args.pose_track, performance=args.performance, align=args.align,
-        max_frames=args.max_frames, track_method=args.tracker, speed=args.speed)
+        pose_track=args.pose_track, performance=args.performance)
+    res = transfer_video(
+        args.target, args.out, model, sources=sources, options=rewrite_options(args),
+        overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
+        progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
+        align=args.align, max_frames=args.max_frames)
     kept = res.n_frames - res.n_rewritten
     print(f"wrote {res.path}: {res.n_frames} frames"
           + (f" ({kept} kept original: face lost)" if kept else "")
@@ -338,8 +375,8 @@ def run_edit(args) -> int:
 
 def run_puppet(args) -> int:
     from ..io.atomic import check_output_path
-    from ..io.video import check_video_output, read_video, video_info
-    from ..rewrite import obtain_track, write_video_with_audio
+    from ..io.video import check_video_output, read_video, video_info, write_video_with_audio
+    from ..track.obtain import obtain_track
     from ..transfer import identity_from_label, puppet_frames
 
     _positive(args.max_frames, "--max-frames")
@@ -387,8 +424,8 @@ def run_demo(args) -> int:
     model = resolve_model(args.model)
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
-               track_method=args.tracker, overwrite=args.overwrite,
-               speed=args.speed, progress_factory=_bar_factory(), video_options=vopt)
+               track_method=args.tracker, speed=args.speed, overwrite=args.overwrite,
+               progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings
     print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "
           f"{res.track}")

@@ -38,7 +38,8 @@ __all__ = ["VideoInfo", "video_info", "iter_frames", "read_video", "CODECS", "DE
            "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
            "VideoOutput", "WrittenVideo", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
            "is_image_pattern", "frame_path", "check_video_output", "decoded_frame_count",
-           "has_audio", "mux_audio", "VideoWriter", "encode_video", "write_video"]
+           "has_audio", "mux_audio", "VideoWriter", "encode_video", "write_video",
+           "write_video_with_audio"]
 
 
 @dataclass(frozen=True)
@@ -714,3 +715,13 @@ def write_video(path: str | os.PathLike, frames, fps: float, *, overwrite: bool 
     """:func:`encode_video` returning only the path."""
     return encode_video(path, frames, fps, options=options, audio_from=audio_from,
                         overwrite=overwrite).path
+
+
+def write_video_with_audio(path: str | os.PathLike, frames: Iterable[np.ndarray], fps: float, *,
+                           audio_from: str | os.PathLike | None = None, overwrite: bool = False,
+                           audio_start: float = 0.0, options: VideoOptions | None = None) -> bool:
+    """Write frames to ``path`` with the audio of ``audio_from`` when it has some
+    (:func:`encode_video`, ``options`` a :class:`VideoOptions`). Returns whether audio was
+    muxed in."""
+    return encode_video(path, frames, fps, options=options, audio_from=audio_from,
+                        audio_start=audio_start, overwrite=overwrite).audio

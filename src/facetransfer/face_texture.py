@@ -1,0 +1,433 @@
+"""Face textures of the video rewrite (Vlasic et al. 2005, §6): the target's face texture and
+the performance-driven mouth texture.
+
+* :class:`FaceTexture`: a texture image and the texture coordinates of the closed mesh;
+  :func:`frame_uvs` looks a mesh up in the frame it was tracked in (image-space lookups: a
+  triangle of the new mesh shows the same triangle of the frame, an affine warp per triangle);
+* :func:`constant_face_texture` / :func:`merged_face_texture`: "the face texture from the
+  target video (constant throughout the sequence)";
+* :class:`MouthFunction` / :func:`mouth_texture_function`: the performance-driven texture
+  function of §6 ("the weighted sum of nearest neighbors" in attribute space) for the mouth;
+  :func:`resolve_mouth_mode` / :func:`default_mouth_mode` choose between it and the source's
+  frame.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .rewrite_options import MOUTH_MODES, RewriteError, check_mode
+from .topology import MeshTopology, close_mouth, mesh_topology
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "frame_uvs",
+    "FaceTexture",
+    "constant_face_texture",
+    "merged_face_texture",
+    "MOUTH_MAX_FRAMES",
+    "MouthFunction",
+    "mouth_texture_function",
+    "timeline_mouth_function",
+    "default_mouth_mode",
+    "resolve_mouth_mode",
+]
+
+#: The mouth texture function lifts at most this many (evenly spaced) frames: float32 textures
+#: of ``T x T`` texels take ``16 T²`` bytes each (120 frames at T = 256: 126 MB).
+MOUTH_MAX_FRAMES = 120
+
+
+def frame_uvs(vertices: np.ndarray, camera, size: tuple[int, int]) -> np.ndarray:
+    """Texture coordinates that look a mesh up in the frame it was tracked in.
+
+    ``uv = (x / (W - 1), 1 - y / (H - 1))`` of each vertex's projection (Eq. (7)), so that
+    :func:`facetransfer.render.sample_texture` with the frame as texture returns the frame's
+    pixel under the vertex.
+
+    Parameters
+    ----------
+    vertices : (n, 3)
+    camera : WeakPerspective
+    size : (W, H)
+
+    Returns
+    -------
+    (n, 2) float64
+    """
+    W, H = size
+    p = camera.project(vertices)
+    return np.stack([p[:, 0] / max(W - 1, 1), 1.0 - p[:, 1] / max(H - 1, 1)], axis=1)
+
+
+
+
+
+@dataclass(frozen=True)
+class FaceTexture:
+    """A texture image and the texture coordinates of the closed mesh's vertices.
+
+    Attributes
+    ----------
+    image : (Ht, Wt, 3) uint8
+    uvs : (n_closed, 2) float64
+        ``(u, v)`` with v up (see :func:`frame_uvs`).
+    frame : int
+        The target frame it was lifted from (-1 if merged from several).
+    """
+
+    image: np.ndarray
+    uvs: np.ndarray
+    frame: int = -1
+
+
+def _reference_frame(track, model, n_frames: int | None = None) -> int:
+    """The target frame to lift the constant face texture from: not lost, facing the camera,
+    mouth closest to neutral, most confident (among the first ``n_frames``)."""
+    good = np.flatnonzero(~track.lost[:n_frames])
+    if good.size == 0:
+        raise RewriteError(f"the face is lost in every frame of {track.source or 'the target'}")
+    facing = track.rotation[good, 2, 2]  # cos of the angle between the face's z and the view
+    score = facing + 0.5 * track.confidence[good]
+    if "expression" in track.weights:
+        k = model.mode_index("expression")
+        ref = model.training_weights(k, "neutral") if "neutral" in model.labels[k] \
+            else model.weight_mean(k)
+        dist = np.linalg.norm(track.weights["expression"][good] - ref, axis=1)
+        score = score - 0.5 * dist / (dist.max() + 1e-12)
+    return int(good[np.argmax(score)])
+
+
+def constant_face_texture(frames, track, model, topo: MeshTopology, *,
+                          frame: int | None = None) -> FaceTexture:
+    """The target's face texture, constant over the clip (§6: "the face texture from the target
+    video (constant throughout the sequence)").
+
+    The texture is one reference frame of the target (facing the camera, near-neutral mouth,
+    chosen by :func:`_reference_frame` unless ``frame`` is given) looked up through the target's
+    tracked geometry in that frame.
+
+    Parameters
+    ----------
+    frames : (F, H, W, 3) uint8 or sequence of frames
+    track : Track
+        The target's track (its own weights and pose).
+    model : MultilinearModel
+    topo : MeshTopology
+    frame : int, optional
+
+    Returns
+    -------
+    FaceTexture
+    """
+    i = _reference_frame(track, model, len(frames)) if frame is None else int(frame)
+    V = close_mouth(model.synthesize(track.weights_at(i)), topo)
+    img = np.asarray(frames[i])
+    return FaceTexture(img, frame_uvs(V, track.camera(i), (img.shape[1], img.shape[0])), i)
+
+
+def merged_face_texture(frames, track, model, topo: MeshTopology, *, n_samples: int = 8,
+                        tex_size: int = 1024) -> FaceTexture:
+    """The target's face texture merged over several frames in the model's UV layout (§6).
+
+    ``n_samples`` frames spread over the clip (face not lost) are lifted into a UV texture
+    (:func:`facetransfer.texture.lift_uv_texture`, each texel weighted by visibility and
+    obliqueness) and merged (:func:`facetransfer.texture.merge_textures`): "the face texture
+    from the target video (constant throughout the sequence)". The closing vertex of the mouth
+    takes the mean UV of the inner-lip loop (the mouth itself is textured from the source).
+
+    Returns
+    -------
+    FaceTexture
+        ``frame = -1``.
+    """
+    from .texture import lift_uv_texture, merge_textures, texture_to_uint8, uv_atlas
+
+    _closed_uvs(model, topo, "the model has no UVs: use the reference-frame texture")
+    n = min(len(frames), track.n_frames)
+    good = np.flatnonzero(~track.lost[:n])
+    if good.size == 0:
+        raise RewriteError(f"the face is lost in every frame of {track.source or 'the target'}")
+    pick = np.unique(good[np.linspace(0, good.size - 1, min(n_samples, good.size))
+                          .round().astype(int)])
+    faces = np.asarray(model.faces)
+    atlas = uv_atlas(faces, model.uvs, tex_size)
+    lifted = [lift_uv_texture(np.asarray(frames[i]), model.synthesize(track.weights_at(i)),
+                              faces, model.uvs, track.camera(i), tex_size, atlas=atlas)
+              for i in pick]
+    img = texture_to_uint8(merge_textures(lifted).texture)
+    return FaceTexture(img, _closed_uvs(model, topo), -1)
+
+
+# ---------------------------------------------------------------------------------------------
+# the performance-driven mouth texture (§6)
+# ---------------------------------------------------------------------------------------------
+
+_NO_UVS = ("mouth='function' (the texture function of §6) needs a model with texture "
+           "coordinates (UVs); this model has none: use mouth='frame'")
+
+
+def _closed_uvs(model, topo: MeshTopology, no_uvs: str | None = None) -> np.ndarray:
+    """The model's UVs for the closed mesh: the mouth's centre vertex takes the mean UV of the
+    inner-lip loop, ``(topo.n_closed, 2)``; ``no_uvs``: the message when the model has none."""
+    if model.uvs is None:
+        raise RewriteError(_NO_UVS if no_uvs is None else no_uvs)
+    uvs = np.asarray(model.uvs, np.float64)
+    if topo.mouth_loop.size:
+        uvs = np.vstack([uvs, uvs[topo.mouth_loop].mean(axis=0)])
+    return uvs
+
+
+class MouthFunction:
+    """The performance-driven mouth texture of §6 in the model's UV layout.
+
+    A :class:`facetransfer.texture.TextureFunction` over UV textures of the *closed* mesh (the
+    mouth-closing fan included, so the mouth's inside is lifted too) lifted from tracked frames
+    of the mouth source and indexed by their attribute vectors
+    (:func:`facetransfer.texture.attribute_vector`: expression [+ viseme] weights). Build it
+    with :func:`mouth_texture_function`; :meth:`face_texture` gives the mouth texture for a new
+    attribute vector, ready for :func:`facetransfer.rewrite.rewrite_frame`'s ``mouth_texture``.
+
+    Attributes
+    ----------
+    function : TextureFunction
+    uvs : (n_closed, 2) float64
+        Texture coordinates of the closed mesh (v up).
+    frames : (m,) int64
+        The lifted frames (indices into the clip's frames).
+    """
+
+    def __init__(self, function, uvs: np.ndarray, frames: np.ndarray) -> None:
+        self.function = function
+        self.uvs = np.asarray(uvs, np.float64)
+        self.frames = np.asarray(frames, np.int64)
+        self._last: tuple[bytes, np.ndarray] | None = None
+
+    @property
+    def n_attributes(self) -> int:
+        return int(self.function.attributes.shape[1])
+
+    def texture(self, attributes: np.ndarray) -> np.ndarray:
+        """The mouth texture for one attribute vector (r,): Eq. (2) of
+        :class:`~facetransfer.texture.TextureFunction`, ``(T, T, 3) uint8``."""
+        from .texture import texture_to_uint8
+
+        a = np.asarray(attributes, np.float64)
+        key = a.tobytes()
+        last = self._last
+        if last is not None and last[0] == key:  # consecutive frames often repeat a query
+            return last[1]
+        img = texture_to_uint8(self.function(a))
+        self._last = (key, img)
+        return img
+
+    def face_texture(self, attributes: np.ndarray) -> FaceTexture:
+        """:meth:`texture` with the closed mesh's UVs, as a :class:`FaceTexture` (frame -1)."""
+        return FaceTexture(self.texture(attributes), self.uvs, -1)
+
+
+def _even_pick(rows: np.ndarray, limit: int) -> np.ndarray:
+    """At most ``limit`` entries of ``rows``, evenly spaced, first and last kept."""
+    if rows.size <= limit:
+        return rows
+    return rows[np.unique(np.linspace(0, rows.size - 1, limit).round().astype(np.int64))]
+
+
+def mouth_texture_function(model, frames, track, topo: MeshTopology | None = None, *,
+                           frame_index: np.ndarray | None = None, tex_size: int = 256,
+                           step: int = 1, max_frames: int = MOUTH_MAX_FRAMES, k: int = 4,
+                           kernel: str = "inverse", bandwidth: float | None = None,
+                           progress: Callable[[int], None] | None = None) -> MouthFunction:
+    """Lift the mouth source's frames into a performance-driven texture function (§6).
+
+    §6: "A simple performance-driven texture function can be obtained with the weighted sum of
+    nearest neighbors" (in attribute space). Every used frame's closed mesh (Eq. (5), mouth
+    closed as in :func:`close_mouth`) is posed with its camera (Eq. (7)) and a UV texture is
+    lifted from the frame (:func:`facetransfer.texture.lift_uv_texture`, texels weighted by
+    visibility and obliqueness); the textures and the frames' attribute vectors make a
+    :class:`~facetransfer.texture.TextureFunction` with ``k`` neighbours and a Gaussian kernel.
+
+    Memory: the lifted textures are float32, ``16 T²`` bytes per frame, so at most
+    ``max_frames`` frames (default :data:`MOUTH_MAX_FRAMES` = 120, about 126 MB at T = 256) are
+    lifted, evenly spaced over the usable ones (every ``step``-th, face not lost).
+
+    Parameters
+    ----------
+    model : MultilinearModel
+        Needs UVs and a mode besides identity (the attributes).
+    frames : sequence of (H, W, 3) uint8
+        The mouth source's frames.
+    track : Track
+        Row ``i`` is the pose and weights of ``frames[frame_index[i]]``.
+    topo : MeshTopology, optional
+        Default :func:`mesh_topology` of the model.
+    frame_index : (track.n_frames,) int, optional
+        Default ``arange``: row i of the track is frame i. Repeated frames are lifted once.
+    tex_size : int
+        ``T``, the texture's width and height in texels.
+    step : int
+        Use every ``step``-th track row.
+    max_frames : int
+        Cap on the lifted frames (memory, above).
+    k : int
+        Neighbours of the texture function.
+    progress : callable(int), optional
+        Called with 1 after each lifted frame.
+
+    Returns
+    -------
+    MouthFunction
+
+    Raises
+    ------
+    RewriteError
+        No UVs, no attribute mode, bad ``step``/``max_frames``, or no usable frame.
+
+    References
+    ----------
+    Vlasic et al. 2005, §6 (texture from video, the performance-driven texture function).
+    """
+    from .texture import TextureFunction
+
+    if len(model.mode_names) < 2:
+        raise RewriteError("mouth='function' needs a model with an expression or viseme mode")
+    topo = mesh_topology(model) if topo is None else topo
+    uvs = _closed_uvs(model, topo)
+    for name, val in (("step", step), ("max_frames", max_frames), ("tex_size", tex_size)):
+        if int(val) != val or val < 1:
+            raise RewriteError(f"{name} must be an integer >= 1, got {val!r}")
+    idx, rows = _mouth_rows(track, len(frames), frame_index, int(step), int(max_frames))
+    textures, weights, attrs = _lift_mouth_textures(model, frames, track, topo, uvs, idx, rows,
+                                                    int(tex_size), progress)
+    log.info("mouth texture function: %d frames lifted at %dx%d", rows.size, tex_size, tex_size)
+    fn = TextureFunction(textures, weights, attrs, k=k, kernel=kernel, bandwidth=bandwidth)
+    return MouthFunction(fn, uvs, idx[rows])
+
+
+def timeline_mouth_function(model, frames, track, index: np.ndarray, n: int,
+                            topo: MeshTopology | None = None, **kwargs) -> MouthFunction:
+    """:func:`mouth_texture_function` of a mouth source resampled to a new timeline: row ``i``
+    (< ``n``) of ``track`` is the pose and weights shown at output frame ``i``, whose frame is
+    ``frames[index[i]]`` (``kwargs``: ``tex_size``, ``step``, ``max_frames``, ``k``,
+    ``progress``)."""
+    from .transfer import take_frames
+
+    return mouth_texture_function(model, frames, take_frames(track, np.arange(n)), topo,
+                                  frame_index=np.asarray(index)[:n], **kwargs)
+
+
+def _mouth_rows(track, n_frames: int, frame_index, step: int, max_frames: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """``(idx, rows)``: the frame of every track row (``frame_index``, default ``arange``) and
+    the rows to lift (every ``step``-th, face not lost, each frame once, at most
+    ``max_frames`` evenly spaced) for :func:`mouth_texture_function`."""
+    n = int(track.n_frames)
+    idx = np.arange(n) if frame_index is None else np.asarray(frame_index, np.int64)
+    if idx.shape != (n,):
+        raise RewriteError(f"frame_index must have one entry per track row ({n}), "
+                           f"got shape {idx.shape}")
+    if n and (idx.min() < 0 or idx.max() >= n_frames):
+        raise RewriteError(f"frame_index refers to frames outside 0..{n_frames - 1}")
+    rows = np.arange(0, n, step)
+    rows = rows[~np.asarray(track.lost, bool)[rows]]
+    _, first = np.unique(idx[rows], return_index=True)  # each frame once (its first row)
+    rows = _even_pick(np.sort(rows[first]), max_frames)
+    if rows.size == 0:
+        raise RewriteError(f"no frame to lift a mouth texture from: the face is lost in every "
+                           f"frame of {getattr(track, 'source', '') or 'the mouth source'}")
+    return idx, rows
+
+
+def _lift_mouth_textures(model, frames, track, topo: MeshTopology, uvs: np.ndarray,
+                         idx: np.ndarray, rows: np.ndarray, tex_size: int, progress):
+    """The UV textures (m, T, T, 3) float32, their texel weights (m, T, T) float32 and the
+    attribute vectors (m, r) of the closed meshes of track ``rows`` (frames ``idx[rows]``)."""
+    from .texture import attribute_vector, lift_uv_texture, uv_atlas
+
+    faces = topo.faces
+    atlas = uv_atlas(faces, uvs, tex_size)
+    # texels of the mouth-closing fan (its triangles come after the model's)
+    gap = atlas.texel_tri >= int(np.asarray(model.faces).shape[0])
+    textures = np.empty((rows.size, tex_size, tex_size, 3), np.float32)
+    weights = np.empty((rows.size, tex_size, tex_size), np.float32)
+    attrs = np.empty((rows.size, len(attribute_vector(model, track.weights_at(int(rows[0]))))))
+    for j, r in enumerate(rows):
+        w = track.weights_at(int(r))
+        V = close_mouth(model.synthesize(w), topo)  # Eq. (5), mouth closed
+        frame = np.asarray(frames[int(idx[r])])
+        cam = track.camera(int(r))
+        lifted = lift_uv_texture(frame, V, faces, uvs, cam, tex_size, atlas=atlas)
+        textures[j], weights[j] = lifted.texture, lifted.weight
+        if gap.any():
+            _fill_closed_gap(textures[j], weights[j], frame, V, cam, atlas, gap)
+        attrs[j] = attribute_vector(model, w)
+        if progress:
+            progress(1)
+    return textures, weights, attrs
+
+
+def resolve_mouth_mode(mouth: str | None, model, *, performance: bool = False) -> str:
+    """Validate ``mouth`` (None: :func:`default_mouth_mode`) against :data:`MOUTH_MODES` and the
+    model (``"function"`` needs UVs; a default of ``"function"`` falls back to ``"frame"`` for
+    a model without UVs)."""
+    if mouth is None:
+        mouth = default_mouth_mode(performance)
+        if mouth == "function" and model.uvs is None:
+            log.info("the model has no UVs: the mouth comes from the nearest frame")
+            return "frame"
+    check_mode("mouth", mouth, MOUTH_MODES)
+    if mouth == "function" and model.uvs is None:
+        raise RewriteError(_NO_UVS)
+    return mouth
+
+
+#: weight of the closed gap's texels where a frame did not see them (:func:`_fill_closed_gap`)
+_GAP_FLOOR = 1e-3
+
+
+def _fill_closed_gap(texture: np.ndarray, weight: np.ndarray, frame: np.ndarray,
+                     vertices: np.ndarray, camera, atlas, gap: np.ndarray) -> None:
+    """Give the unseen texels of the mouth-closing fan the colour under their projection.
+
+    With the mouth (nearly) closed the fan has (nearly) no area in the frame, so
+    :func:`~facetransfer.texture.lift_uv_texture` sees none of it; left at weight 0, those
+    texels of a closed-mouth neighbour would take the texture function's all-frame mean, i.e.
+    the inside of the open mouths. Here they take the frame's colour where they project (the
+    seam between the lips, as the ``"frame"`` mouth shows it) with the small weight
+    :data:`_GAP_FLOOR`, so any neighbour that did see them still wins. In place.
+    """
+    from .render import sample_texture
+
+    T = atlas.tex_size
+    unseen = (gap & (weight < _GAP_FLOOR)).ravel()
+    covered = atlas.mask.ravel()
+    sel = unseen[covered]  # among the covered texels, row-major: atlas.interpolate's order
+    if not sel.any():
+        return
+    P = atlas.interpolate(vertices)[sel]  # (m, 3) surface points of those texels
+    uv = frame_uvs(P, camera, (frame.shape[1], frame.shape[0]))
+    flat = np.flatnonzero(unseen)
+    texture.reshape(T * T, 3)[flat] = sample_texture(frame, uv).astype(np.float32)
+    weight.reshape(T * T)[flat] = _GAP_FLOOR
+
+
+def default_mouth_mode(performance: bool) -> str:
+    """The default mouth mode: ``"function"`` for a ready (edited) performance, ``"frame"`` for
+    a transfer.
+
+    An edit asks for attributes no frame of the footage shows: on synthetic footage whose mouth
+    texture changes with the expression, the function's in-between mouth is 6-12 dB closer to
+    the truth than the nearest frame's (``tests/test_transfer_mouth.py``). In a transfer every
+    output frame has the attributes of a source frame, so the function (then about that
+    frame's own texture) measured only +0.2 dB on the face, +0.5 dB on the mouth
+    (``benchmarks/bench_transfer.py`` part (a)) for ~50 ms of lifting per source frame (up to
+    :data:`MOUTH_MAX_FRAMES`) and ~5 ms per output frame.
+    """
+    return "function" if performance else "frame"
+
+

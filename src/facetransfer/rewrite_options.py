@@ -1,0 +1,122 @@
+"""The options of a video rewrite (Vlasic et al. 2005, §6), validated once.
+
+The mode strings of the rewrite (face texture, mouth texture, blend, tracking preset and
+tracker) are defined here, and :class:`RewriteOptions` checks them when it is made, so that
+:func:`facetransfer.rewrite.rewrite_frames`, :func:`facetransfer.video_transfer.render_plan`,
+:func:`facetransfer.video_transfer.transfer_video`, the demo and ``facetransfer transfer`` share
+one definition of what is allowed (and one error message for each).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+from .errors import FaceTransferError
+
+__all__ = [
+    "RewriteError",
+    "TEXTURE_MODES",
+    "MOUTH_MODES",
+    "BLEND_MODES",
+    "SPEED_PRESETS",
+    "DEFAULT_SPEED",
+    "TRACK_METHODS",
+    "RewriteOptions",
+    "check_mode",
+    "check_track_method",
+]
+
+
+class RewriteError(FaceTransferError):
+    """Frames, tracks or a model that cannot be rendered back into footage."""
+
+
+#: Where the target's face texture comes from: one for the clip or the current frame's.
+TEXTURE_MODES = ("constant", "frame")
+#: Where the mouth texture comes from: the mouth source's frame at the matched time
+#: (``"frame"``) or the performance-driven texture function of §6 (``"function"``).
+MOUTH_MODES = ("frame", "function")
+#: Ways to put the rendered face into the frame: Pérez et al.'s Poisson solve (exact), a
+#: membrane (harmonic-like) correction interpolated by push-pull (fast), or a hard paste.
+BLEND_MODES = ("fast", "poisson", "none")
+#: Tracking presets of a transfer (:func:`facetransfer.track.presets.track_options`), fastest
+#: first.
+SPEED_PRESETS = ("fast", "balanced", "quality")
+#: The preset of the transfer and the CLI: as accurate as "balanced" on the synthetic footage
+#: and the real clips measured (see :func:`facetransfer.track.presets.track_options`), a third
+#: of its time.
+DEFAULT_SPEED = "fast"
+#: Trackers of :func:`facetransfer.track.obtain.obtain_track`.
+TRACK_METHODS = ("auto", "capture", "flow", "landmarks")
+
+
+def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> None:
+    """Raise :class:`RewriteError` ``"{name} must be one of {modes}, got {value!r}"`` unless
+    ``value`` is one of ``modes`` (joined by ``sep``; ``sep=None``: the tuple's repr)."""
+    if value not in modes:
+        allowed = repr(modes) if sep is None else sep.join(modes)
+        raise RewriteError(f"{name} must be one of {allowed}, got {value!r}")
+
+
+def check_track_method(method) -> None:
+    """Raise :class:`RewriteError` unless ``method`` is one of :data:`TRACK_METHODS`."""
+    if method not in TRACK_METHODS:
+        raise RewriteError(f"tracking method must be auto, capture, flow or landmarks, got "
+                           f"{method!r}")
+
+
+@dataclass(frozen=True)
+class RewriteOptions:
+    """How a new performance is rendered into footage (§6), checked when made.
+
+    Attributes
+    ----------
+    texture : {"frame", "constant"}
+        The target's face texture: the current frame's or one for the clip
+        (:func:`facetransfer.rewrite.rewrite_frames`).
+    mouth : {"frame", "function"} or None
+        The mouth texture; None: the job's default
+        (:func:`facetransfer.face_texture.default_mouth_mode`).
+    blend : {"fast", "poisson", "none"}
+        :func:`facetransfer.composite.membrane_blend`, Poisson blending or a hard paste.
+    feather : float
+        Soft-edge radius of the blend in pixels.
+    erode : int
+        The blend region is the rendered face mask eroded by this many pixels.
+    speed : {"fast", "balanced", "quality"}
+        Tracking preset of the videos tracked now.
+    track_method : {"auto", "capture", "flow", "landmarks"}
+        The tracker of the videos tracked now.
+
+    Raises
+    ------
+    RewriteError
+        An unknown mode string, a negative ``feather`` or ``erode``.
+    """
+
+    texture: str = "frame"
+    mouth: str | None = None
+    blend: str = "fast"
+    feather: float = 2.0
+    erode: int = 2
+    speed: str = DEFAULT_SPEED
+    track_method: str = "auto"
+
+    def __post_init__(self) -> None:
+        check_mode("texture", self.texture, TEXTURE_MODES, sep=None)
+        if self.mouth is not None:
+            check_mode("mouth", self.mouth, MOUTH_MODES)
+        check_mode("blend", self.blend, BLEND_MODES)
+        check_mode("speed", self.speed, SPEED_PRESETS)
+        check_track_method(self.track_method)
+        if not self.feather >= 0:
+            raise RewriteError(f"feather must be >= 0 pixels, got {self.feather!r}")
+        if int(self.erode) != self.erode or self.erode < 0:
+            raise RewriteError(f"erode must be an integer >= 0, got {self.erode!r}")
+
+    def with_(self, **changes) -> "RewriteOptions":
+        """These options with the given attributes replaced (None values are ignored);
+        validated again."""
+        changes = {k: v for k, v in changes.items() if v is not None}
+        return dataclasses.replace(self, **changes) if changes else self

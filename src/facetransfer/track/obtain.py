@@ -1,0 +1,331 @@
+"""The track of a video for a transfer (Vlasic et al. 2005, §5): read from a track file, or
+tracked now by the capture tracker, the optical-flow tracker of §5.1 or a landmark-only fit
+(§5.2), optionally in a forked background process (:func:`start_background_track`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import ShapeError, VideoError
+from ..rewrite_options import RewriteError, check_track_method
+from ..transfer import project_landmarks, take_frames
+from .result import Track
+
+log = logging.getLogger(__name__)
+
+__all__ = ["landmarks_file", "landmark_track", "obtain_track", "start_background_track"]
+
+
+def landmarks_file(video: str | os.PathLike) -> Path | None:
+    """``NAME.mediapipe478.npz`` next to ``NAME.mp4`` if it exists (precomputed landmarks)."""
+    p = Path(video)
+    cand = p.with_name(p.stem + ".mediapipe478.npz")
+    return cand if cand.is_file() else None
+
+
+def _detect_landmarks(frames, *, progress=None) -> np.ndarray:
+    """iBUG-68 points per frame with MediaPipe, (F, 68, 2), NaN where no face."""
+    from .init import MediaPipeDetector
+
+    out = np.full((len(frames), 68, 2), np.nan)
+    with MediaPipeDetector() as det:
+        for i, f in enumerate(frames):
+            pts = det.detect(np.asarray(f))
+            if pts is not None:
+                out[i] = pts[:, :2]
+            if progress:
+                progress(1)
+    return out
+
+
+def landmark_track(model, landmarks68: np.ndarray, *, fps: float, size: tuple[int, int],
+                   source: str = "", identity_frames: int = 8, progress=None):
+    """A track fitted to per-frame 2-D landmarks only (no optical flow): §5.2 on every frame.
+
+    The identity is fitted jointly-by-averaging over up to ``identity_frames`` frames spread over
+    the clip (all modes free), then every frame's pose and the varying modes are fitted with the
+    identity fixed, starting from the previous frame. Frames without landmarks are lost.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+    landmarks68 : (F, 68, 2) float
+        iBUG-68 pixel positions, NaN where no face.
+    fps : float
+    size : (W, H)
+
+    Returns
+    -------
+    Track
+    """
+    from .init import fit_landmarks
+
+    L = np.asarray(landmarks68, dtype=np.float64)
+    if L.ndim != 3 or L.shape[1:] != (68, 2):
+        raise ShapeError(f"landmarks must be (F, 68, 2), got {L.shape}")
+    n = L.shape[0]
+    found = np.isfinite(L).all(axis=(1, 2))
+    if not found.any():
+        raise VideoError(f"no face found in any frame of {source or 'the video'}")
+    idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
+    good = np.flatnonzero(found)
+    pick = good[np.linspace(0, good.size - 1, min(identity_frames, good.size)).round().astype(int)]
+    ids = [fit_landmarks(model, L[i], iterations=12).weights[idm] for i in pick]
+    wid = np.mean(ids, axis=0)
+    R, s, t, W = _fit_frames(model, L, found, idm, wid, progress)
+    tr = Track(fps=float(fps), frame_size=tuple(size), rotation=R, scale=s, translation=t,
+               weights=W, landmarks2d=np.zeros((n, 68, 2)),
+               confidence=found.astype(np.float64), lost=~found,
+               model_hash=model.content_hash, mode_names=model.mode_names, source=str(source),
+               info={"method": "landmarks"})
+    return project_landmarks(tr, model)
+
+
+def _fit_frames(model, L: np.ndarray, found: np.ndarray, idm: str, wid: np.ndarray, progress):
+    """Pose (R (F, 3, 3), s (F,), t (F, 2)) and weights (mode -> (F, r)) of every frame fitted
+    to its landmarks ``L`` (F, 68, 2) (§5.2) with the identity ``wid`` fixed, each frame
+    starting from the previous one; frames without landmarks (``~found``) keep the previous
+    frame's fit, frames before the first detection take its fit."""
+    from .init import fit_landmarks
+
+    n = L.shape[0]
+    varying = tuple(m for m in model.mode_names if m != idm)
+    R = np.tile(np.eye(3), (n, 1, 1))
+    s = np.ones(n)
+    t = np.zeros((n, 2))
+    W = {m: np.tile(model.weight_mean(m), (n, 1)) for m in model.mode_names}
+    W[idm][:] = wid
+    state = None
+    for i in range(n):
+        if found[i]:
+            if state is None:
+                st = fit_landmarks(model, L[i], modes=varying, iterations=10)
+                st = st.with_weights(idm, wid)
+                state = fit_landmarks(model, L[i], state=st, modes=varying, iterations=8)
+            else:
+                state = fit_landmarks(model, L[i], state=state, modes=varying, iterations=4)
+        if state is not None:
+            R[i], s[i], t[i] = state.pose.rotation, state.pose.scale, state.pose.translation
+            for m in varying:
+                W[m][i] = state.weights[m]
+        if progress:
+            progress(1)
+    first = int(np.flatnonzero(found)[0])  # frames before the first detection take its pose
+    R[:first], s[:first], t[:first] = R[first], s[first], t[first]
+    for m in varying:
+        W[m][:first] = W[m][first]
+    return R, s, t, W
+
+
+class _StageBars:
+    """A tracker's ``progress(stage, done, total)`` as one bar per stage (from
+    ``progress_factory(desc, total)``, none without it); the bars close with the block."""
+
+    def __init__(self, video, progress_factory) -> None:
+        self.name, self.factory, self.bars = Path(video).name, progress_factory, {}
+
+    def __call__(self, stage: str, done: int, total: int) -> None:
+        if self.factory is None:
+            return
+        bar = self.bars.get(stage)
+        if bar is None:
+            self.close()
+            bar = self.bars[stage] = self.factory(f"{self.name}: {stage}", total)
+        bar.update(done - bar.n)
+
+    def close(self) -> None:
+        for b in self.bars.values():
+            b.close()
+        self.bars = {}
+
+    def __enter__(self) -> "_StageBars":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def _capture(video, model, frames, fps, max_frames, progress_factory):
+    """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames."""
+    from .capture import capture_video
+
+    with _StageBars(video, progress_factory) as stage_progress:
+        tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
+                           source=str(video))
+    return dataclasses.replace(tr, fps=float(fps))
+
+
+def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
+                 track_file: str | os.PathLike | None = None, max_frames: int | None = None,
+                 method: str = "auto", progress_factory=None, options=None):
+    """The track of a video: read from ``track_file``, or tracked now.
+
+    ``method``: ``"auto"`` or ``"capture"`` use the capture tracker
+    (:func:`facetransfer.track.capture.capture_video`: the model fitted to MediaPipe's points
+    and their flow on every frame); ``"flow"`` the optical-flow tracker of §5.1
+    (:func:`facetransfer.track.track_video`, configured by ``options``); ``"landmarks"`` fits
+    landmarks (precomputed ``NAME.mediapipe478.npz`` next to the video, else MediaPipe).
+    ``options`` (a :class:`~facetransfer.track.TrackOptions`, e.g. from
+    :func:`facetransfer.track.presets.track_options`) configure the optical-flow tracker
+    (default: its own defaults).
+
+    Returns
+    -------
+    Track
+        Of at most ``max_frames`` frames (a longer track file is cut).
+    """
+    check_track_method(method)
+    if track_file is not None:
+        tr = Track.load(track_file)
+        tr.check_model(model)
+        if max_frames is not None and tr.n_frames > max_frames:
+            tr = take_frames(tr, np.arange(max_frames))
+        return tr
+    from ..io.video import read_video, video_info
+
+    info = video_info(video)
+    if frames is None:
+        frames, fps = read_video(video, max_frames=max_frames)
+    fps = info.fps if fps is None else fps
+    if method in ("auto", "capture"):
+        return _capture(video, model, frames, fps, max_frames, progress_factory)
+    if method == "flow":
+        return _flow(video, model, frames, fps, max_frames, progress_factory, options)
+    size = (frames.shape[2], frames.shape[1]) if hasattr(frames, "shape") else info.size
+    return _landmarks(video, model, frames, fps, size, progress_factory)
+
+
+def _flow(video, model, frames, fps, max_frames, progress_factory, options):
+    """The optical-flow tracker of §5.1 (:func:`facetransfer.track.track_video`) on decoded
+    frames, at the frame rate ``fps`` (an array of frames carries none)."""
+    try:
+        from .tracker import track_video
+    except ImportError:  # pragma: no cover - tracker not installed
+        raise RewriteError("the optical-flow tracker (facetransfer.track.track_video) is "
+                           "not available") from None
+    with _StageBars(video, progress_factory) as stage_progress:
+        tr = track_video(frames, model, max_frames=max_frames, progress=stage_progress,
+                         source=str(video), options=options)
+    if abs(tr.fps - fps) > 1e-9:
+        tr = dataclasses.replace(tr, fps=float(fps))
+    return tr
+
+
+def _bar(progress_factory, desc: str, total: int):
+    """A bar from ``progress_factory(desc, total)``, or None without a factory."""
+    return progress_factory(desc, total) if progress_factory else None
+
+
+def _close(bar) -> None:
+    if bar is not None and hasattr(bar, "close"):
+        bar.close()
+
+
+def _landmarks(video, model, frames, fps, size, progress_factory):
+    """A landmark-only fit (:func:`landmark_track`) to the precomputed MediaPipe points next
+    to the video (:func:`landmarks_file`), else to MediaPipe's detections now."""
+    n = len(frames)
+    lmf = landmarks_file(video)
+    if lmf is not None:
+        from ..io.landmarks import read_mediapipe_landmarks
+        from .landmarks import mediapipe_to_ibug
+
+        P = read_mediapipe_landmarks(lmf, n)
+        L = mediapipe_to_ibug(P[..., :2])
+        if L.shape[0] < n:
+            L = np.concatenate([L, np.full((n - L.shape[0], 68, 2), np.nan)])
+    else:
+        cb = _bar(progress_factory, f"landmarks {Path(video).name}", n)
+        L = _detect_landmarks(frames, progress=cb.update if cb is not None else None)
+        _close(cb)
+    cb = _bar(progress_factory, f"fit {Path(video).name}", n)
+    try:
+        return landmark_track(model, L, fps=fps, size=size, source=str(video),
+                              progress=cb.update if cb is not None else None)
+    finally:
+        _close(cb)
+
+
+# ---------------------------------------------------------------------------------------------
+# a track computed in a forked child process while the parent tracks another video
+# ---------------------------------------------------------------------------------------------
+
+class _BackgroundTrack:
+    """A track computed in a forked child process (:func:`start_background_track`)."""
+
+    def __init__(self, pool, future) -> None:
+        self._pool, self._future = pool, future
+
+    def result(self):
+        """The Track, or None when the child could not run (then the caller tracks itself).
+
+        Errors of the tracking itself (e.g. no face in the video) are raised here."""
+        from concurrent.futures.process import BrokenProcessPool
+
+        try:
+            return self._future.result()
+        except BrokenProcessPool as exc:
+            log.warning("background tracking failed (%s); tracking in this process", exc)
+            return None
+        except BaseException:  # e.g. Ctrl-C: do not wait for the child
+            self.cancel()
+            raise
+        finally:
+            self._pool.shutdown(wait=True)
+
+    def cancel(self) -> None:
+        """Stop the child (it may be half-way through the video) without waiting for it."""
+        self._future.cancel()
+        procs = getattr(self._pool, "_processes", None) or {}
+        for proc in list(procs.values()):
+            try:
+                proc.terminate()
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+#: (model, video, max_frames, method, options) handed to the forked child (not pickled)
+_BACKGROUND_JOB: tuple | None = None
+
+
+def _background_track_job():
+    from ..io.video import read_video
+
+    model, video, max_frames, method, options, decoded = _BACKGROUND_JOB
+    frames, fps = decoded if decoded is not None else read_video(video, max_frames=max_frames)
+    return obtain_track(video, model, frames=frames, fps=fps, max_frames=len(frames),
+                        method=method, options=options)
+
+
+def start_background_track(video, model, max_frames: int, *, method: str, options,
+                            parallel: bool | None, frames=None) -> _BackgroundTrack | None:
+    """Track ``video`` in a forked child process; None when not worth it or not possible.
+
+    ``frames``: its decoded ``(frames, fps)``, inherited by the child (else it decodes them)."""
+    import multiprocessing as mp
+    from concurrent.futures import ProcessPoolExecutor
+
+    global _BACKGROUND_JOB
+    if method == "landmarks":
+        return None
+    if parallel is None:
+        parallel = (os.cpu_count() or 1) >= 2
+    if not parallel or "fork" not in mp.get_all_start_methods():
+        return None
+    _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames)
+    try:
+        pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))
+        fut = pool.submit(_background_track_job)  # forks now: the child sees _BACKGROUND_JOB
+    except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. in a daemon process)
+        log.info("no background tracking (%s)", exc)
+        return None
+    finally:
+        _BACKGROUND_JOB = None
+    return _BackgroundTrack(pool, fut)

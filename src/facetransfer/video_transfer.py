@@ -1,0 +1,693 @@
+"""The video transfer job (Vlasic et al. 2005, §5, §6, Fig. 1, Fig. 7): read and track the
+inputs (or reuse their track files), recombine the performance, render it back into the target
+footage and write it with the target's audio.
+
+* :func:`plan_transfer` -> :class:`TransferPlan`: reading
+  (:func:`facetransfer.io.video.read_video`), tracking
+  (:func:`facetransfer.track.obtain.obtain_track`, the expression source in a forked process
+  while the target is tracked here), recombining (:func:`facetransfer.transfer.recombine`) or
+  a ready performance;
+* :func:`render_plan`: the frames rewritten (:func:`facetransfer.rewrite.rewrite_frames`) and
+  written (:func:`facetransfer.io.video.write_video_with_audio`);
+* :func:`transfer_video`: both, with the outputs checked before any work.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from .errors import VideoError
+from .face_texture import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
+                           resolve_mouth_mode, timeline_mouth_function)
+from .rewrite import rewrite_frames
+from .rewrite_options import DEFAULT_SPEED, RewriteError, RewriteOptions
+from .topology import MeshTopology
+from .track import obtain
+from .track.presets import track_options
+from .transfer import (constant_weights, project_landmarks, recombine, resample_track,
+                       take_frames, time_map)
+
+log = logging.getLogger(__name__)
+
+__all__ = [
+    "Source",
+    "TransferSources",
+    "TransferPlan",
+    "nearest_frames",
+    "plan_transfer",
+    "plan_sources",
+    "TransferResult",
+    "RenderResult",
+    "render_plan",
+    "transfer_video",
+    "write_mesh_sequence",
+]
+
+
+# ---------------------------------------------------------------------------------------------
+# the inputs: one video (and optionally its track file) per attribute
+# ---------------------------------------------------------------------------------------------
+
+@dataclass(frozen=True)
+class Source:
+    """One input video of a transfer and, optionally, its track file (reused, not tracked)."""
+
+    video: object
+    track: object = None
+
+
+@dataclass(frozen=True)
+class TransferSources:
+    """Where each attribute of the new performance comes from (§6, Fig. 1).
+
+    Attributes
+    ----------
+    target : Source
+        The footage rendered into (pose and identity by default).
+    expression, viseme, identity, pose : Source or None
+        Videos whose expression / viseme / identity / pose replace the target's.
+    identity_weights : (r,) array or None
+        Identity weights (instead of an identity video).
+    performance : Track or path-like or None
+        A ready new performance on the target's timeline instead of recombining.
+    """
+
+    target: Source
+    expression: Source | None = None
+    viseme: Source | None = None
+    identity: Source | None = None
+    pose: Source | None = None
+    identity_weights: object = None
+    performance: object = None
+
+    @classmethod
+    def of(cls, target, *, target_track=None, expression_from=None, expression_track=None,
+           viseme_from=None, viseme_track=None, identity=None, identity_from=None,
+           identity_track=None, pose_from=None, pose_track=None, performance=None
+           ) -> "TransferSources":
+        """The sources from the keywords of :func:`plan_transfer` (a track file without its
+        video is ignored)."""
+        if identity is not None and identity_from is not None:
+            raise RewriteError("give the identity either as weights or as a video, not both")
+
+        def src(video, track):
+            return None if video is None else Source(video, track)
+
+        return cls(Source(target, target_track), src(expression_from, expression_track),
+                   src(viseme_from, viseme_track), src(identity_from, identity_track),
+                   src(pose_from, pose_track), identity, performance)
+
+
+@dataclass(frozen=True)
+class TransferPlan:
+    """Everything needed to render a transfer (built by :func:`plan_transfer`).
+
+    Attributes
+    ----------
+    target_frames : (F, H, W, 3) uint8
+    fps : float
+        The target's frame rate (the output's).
+    target_track : Track
+    new_track : Track
+        The recombined performance on the target's timeline (``n_frames`` <= F).
+    mouth_frames : (Fs, Hs, Ws, 3) uint8
+        Frames the mouth texture comes from (the expression/viseme source, else the target).
+    mouth_track : Track
+        Their track resampled to the new timeline.
+    mouth_index : (n_frames,) int64
+        The mouth frame shown at each output frame.
+    source_tracks : dict
+        The tracks of the inputs as tracked (``"target"``, ``"expression"``, ...).
+    timings : dict
+        Seconds spent reading and tracking.
+    texture_frames : (Fm, Hm, Wm, 3) uint8 or None
+        The clip the mouth texture function (``mouth="function"``) is lifted from: the
+        viseme source, else the expression source, else the target; the target for a ready
+        performance. None: ``mouth_frames``.
+    texture_track : Track or None
+        Its own track (one row per frame of ``texture_frames``, not resampled).
+    performance : bool
+        Whether the new track is a ready (edited) performance rather than a recombination.
+    """
+
+    target_frames: np.ndarray
+    fps: float
+    target_track: object
+    new_track: object
+    mouth_frames: np.ndarray
+    mouth_track: object
+    mouth_index: np.ndarray
+    source_tracks: dict
+    timings: dict
+    texture_frames: np.ndarray | None = None
+    texture_track: object = None
+    performance: bool = False
+
+    def mouth_function(self, model, topo: MeshTopology | None = None, *,
+                       progress: Callable[[int], None] | None = None, **kwargs) -> MouthFunction:
+        """The mouth texture function lifted from :attr:`texture_frames`
+        (:func:`facetransfer.face_texture.mouth_texture_function`; ``kwargs``: ``tex_size``,
+        ``step``, ``max_frames``, ``k``)."""
+        if self.texture_frames is None or self.texture_track is None:
+            return timeline_mouth_function(model, self.mouth_frames, self.mouth_track,
+                                           self.mouth_index, self.n_frames, topo,
+                                           progress=progress, **kwargs)
+        m = min(len(self.texture_frames), self.texture_track.n_frames)
+        tr = self.texture_track
+        if tr.n_frames > m:
+            tr = take_frames(tr, np.arange(m))
+        return mouth_texture_function(model, self.texture_frames, tr, topo, progress=progress,
+                                      **kwargs)
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.new_track.n_frames)
+
+
+def _frames_needed(n_target: int, fps_target: float, fps_source: float) -> int:
+    """Source frames that cover ``n_target`` target frames (resampled by frame rate)."""
+    return int(np.ceil((n_target - 1) * fps_source / fps_target + 1e-9)) + 1
+
+
+def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None
+                   ) -> np.ndarray:
+    """For each query row the index of the nearest bank row (Euclidean), among ``valid`` ones.
+
+    The performance-driven texture of §6 ("the weighted sum of nearest neighbors") with one
+    neighbour: the frame of the texture video whose attributes are closest.
+
+    Parameters
+    ----------
+    query : (n, r)
+    bank : (m, r)
+    valid : (m,) bool, optional
+
+    Returns
+    -------
+    (n,) int64
+    """
+    Q = np.asarray(query, np.float64)
+    B = np.asarray(bank, np.float64)
+    ok = np.ones(B.shape[0], bool) if valid is None else np.asarray(valid, bool)
+    if not ok.any():
+        raise RewriteError("no frame to take a texture from (all lost)")
+    idx = np.flatnonzero(ok)
+    d = ((Q[:, None, :] - B[None, idx, :]) ** 2).sum(axis=-1)
+    return idx[np.argmin(d, axis=1)]
+
+
+def plan_transfer(target, model, *, target_track=None, expression_from=None,
+                  expression_track=None, viseme_from=None, viseme_track=None, identity=None,
+                  identity_from=None, identity_track=None, pose_from=None, pose_track=None,
+                  performance=None, align: str | None = None, max_frames: int | None = None,
+                  track_method: str = "auto", speed: str = DEFAULT_SPEED,
+                  parallel: bool | None = None, progress_factory=None) -> TransferPlan:
+    """Read and track the inputs and recombine the performance (§5, §6, Fig. 1, Fig. 7).
+
+    The keywords make the :class:`TransferSources` and the tracking part of the
+    :class:`~facetransfer.rewrite_options.RewriteOptions` of :func:`plan_sources`.
+
+    Parameters
+    ----------
+    target : path-like
+        The footage rendered into (pose and identity by default).
+    model : MultilinearModel
+    target_track, expression_track, viseme_track, identity_track, pose_track : path-like, optional
+        Track files to reuse instead of tracking the corresponding video.
+    expression_from, viseme_from, identity_from, pose_from : path-like, optional
+        Videos whose expression / viseme / identity / pose replace the target's.
+    identity : (r,) array, optional
+        Identity weights (instead of ``identity_from``).
+    performance : Track or path-like, optional
+        A ready new performance on the target's timeline (e.g. from ``facetransfer edit``,
+        Fig. 7E) instead of recombining; the mouth texture then comes from the target:
+        its frame whose expression is nearest (:func:`nearest_frames`, ``mouth="frame"``) or
+        the texture function lifted from its frames (``mouth="function"``).
+    align : {"trim", "loop", "hold"} or None
+        Time alignment of the sources (:func:`facetransfer.transfer.time_map`).
+    max_frames : int, optional
+        Use only the first N target frames.
+    track_method : {"auto", "capture", "flow", "landmarks"}
+        See :func:`facetransfer.track.obtain.obtain_track`.
+    speed : {"fast", "balanced", "quality"}
+        Tracking preset (:func:`facetransfer.track.presets.track_options`) for the videos
+        tracked now.
+    parallel : bool, optional
+        Track the expression source in a second (forked) process while the target is tracked
+        here. Default: when the machine has two or more CPUs and the platform can fork. The
+        tracks do not depend on it.
+
+    Raises
+    ------
+    VideoError
+        No face in the target (or in a whole source); unreadable videos.
+    TrackError, TransferError
+        Mismatched frame sizes, track files of another model or video.
+    """
+    sources = TransferSources.of(
+        target, target_track=target_track, expression_from=expression_from,
+        expression_track=expression_track, viseme_from=viseme_from, viseme_track=viseme_track,
+        identity=identity, identity_from=identity_from, identity_track=identity_track,
+        pose_from=pose_from, pose_track=pose_track, performance=performance)
+    options = RewriteOptions(speed=speed, track_method=track_method)  # before any work
+    return plan_sources(sources, model, options=options, align=align, max_frames=max_frames,
+                        parallel=parallel, progress_factory=progress_factory)
+
+
+def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | None = None,
+                 align: str | None = None, max_frames: int | None = None,
+                 parallel: bool | None = None, progress_factory=None) -> TransferPlan:
+    """:func:`plan_transfer` for :class:`TransferSources`: read, track, recombine.
+
+    ``options``: its ``speed`` and ``track_method`` shape the tracking of the videos tracked
+    now (default :class:`~facetransfer.rewrite_options.RewriteOptions`).
+    """
+    if max_frames is not None and int(max_frames) < 1:
+        raise RewriteError(f"max_frames must be >= 1, got {max_frames}")
+    options = RewriteOptions() if options is None else options
+    planner = _Planner(model, options.track_method, track_options(options.speed),
+                       progress_factory, {"read": 0.0, "track": 0.0})
+    frames, fps, pre_read = planner.read_target(sources, max_frames)
+    # the expression source is tracked in a second (forked) process while this one tracks the
+    # target; the child inherits the decoded frames (no second decoding, nothing pickled)
+    early = None
+    if pre_read is not None and sources.expression.track is None:
+        early = obtain.start_background_track(
+            sources.expression.video, model, len(pre_read[0]), frames=pre_read,
+            method=options.track_method, options=planner.track_options, parallel=parallel)
+    try:
+        tt = planner.target_track(sources.target, frames, fps)
+    except BaseException:
+        if early is not None:
+            early.cancel()
+        raise
+    inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings)
+    for kind in ("expression", "viseme", "pose", "identity"):
+        src = getattr(sources, kind)
+        if src is not None:
+            planner.read_source(inputs, kind, src, pre_read if kind == "expression" else None,
+                                early if kind == "expression" else None)
+    if sources.performance is not None:
+        return _performance_plan(inputs, sources, model)
+    return _recombined_plan(inputs, sources, model, align)
+
+
+@dataclass(frozen=True)
+class _Inputs:
+    """The decoded inputs of a plan: the target's frames and frame rate, and per kind
+    (``"target"``, ``"expression"``, ...) the track and (sources) the frames; the seconds
+    spent reading and tracking."""
+
+    frames: np.ndarray
+    fps: float
+    tracks: dict
+    source_frames: dict
+    timings: dict
+
+    @property
+    def size(self) -> tuple[int, int]:
+        return self.frames.shape[2], self.frames.shape[1]
+
+
+@dataclass(frozen=True)
+class _Planner:
+    """The reading and tracking steps of :func:`plan_sources`; ``timings`` accumulates the
+    seconds spent reading and tracking."""
+
+    model: object
+    track_method: str
+    track_options: object
+    progress_factory: object
+    timings: dict
+
+    def read_target(self, sources: TransferSources, max_frames):
+        """``(frames, fps, pre_read)``: the target's frames and, with an expression source,
+        that source's ``(frames, fps)`` decoded at the same time on a second thread and cut to
+        the frames the target's timeline needs (else None)."""
+        from .io.video import read_video, video_info
+
+        t0 = time.perf_counter()
+        target = sources.target.video
+        if sources.expression is None:
+            frames, fps = read_video(target, max_frames=max_frames)
+            self.timings["read"] += time.perf_counter() - t0
+            return frames, fps, None
+        from concurrent.futures import ThreadPoolExecutor
+
+        expression_from = sources.expression.video
+        ti, si = video_info(target), video_info(expression_from)
+        n_est = ti.n_frames if max_frames is None else min(int(max_frames), ti.n_frames)
+        with ThreadPoolExecutor(max_workers=2) as pool:
+            ft = pool.submit(read_video, target, max_frames=max_frames)
+            fs = pool.submit(read_video, expression_from,
+                             max_frames=_frames_needed(max(n_est, 1), ti.fps, si.fps) + 8)
+            frames, fps = ft.result()
+            sfr, sfps = fs.result()
+        need = _frames_needed(len(frames), fps, sfps)
+        if len(sfr) < need and len(sfr) < si.n_frames:  # the containers' counts were short
+            sfr, sfps = read_video(expression_from, max_frames=need)
+        self.timings["read"] += time.perf_counter() - t0
+        return frames, fps, (sfr[:need], sfps)
+
+    def track(self, video, track_file, frames, fps, limit):
+        """The track of ``video`` (:func:`facetransfer.track.obtain.obtain_track`), timed."""
+        t = time.perf_counter()
+        tr = obtain.obtain_track(video, self.model, frames=frames, fps=fps,
+                                 track_file=track_file, max_frames=limit,
+                                 method=self.track_method,
+                                 progress_factory=self.progress_factory,
+                                 options=self.track_options)
+        self.timings["track"] += time.perf_counter() - t
+        return tr
+
+    def target_track(self, target: Source, frames, fps):
+        """The target's track, checked against its frames (a face somewhere)."""
+        n, H, W = frames.shape[:3]
+        tt = self.track(target.video, target.track, frames, fps, n)
+        if target.track is not None:
+            tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H),
+                           what=f"target {target.video}")
+            if tt.n_frames < n:
+                raise RewriteError(f"target track {target.track} has {tt.n_frames} frames, the "
+                                   f"target video {n}")
+        if tt.lost.all():
+            raise VideoError(f"no face found in the target {target.video}")
+        return tt
+
+    def read_source(self, inputs: _Inputs, kind: str, src: Source, pre_read, early) -> None:
+        """Read and track a source (``pre_read``: its decoded frames; ``early``: its track
+        from the background process) into ``inputs``."""
+        from .io.video import read_video, video_info
+
+        need = _frames_needed(len(inputs.frames), inputs.fps, video_info(src.video).fps)
+        t = time.perf_counter()
+        fr, sfps = pre_read if pre_read is not None else read_video(src.video, max_frames=need)
+        self.timings["read"] += time.perf_counter() - t
+        tr = None
+        if early is not None:
+            t = time.perf_counter()
+            tr = early.result()  # None: the background job failed to run; track here
+            self.timings["track"] += time.perf_counter() - t
+            if tr is not None and len(fr) < tr.n_frames:
+                tr = take_frames(tr, np.arange(len(fr)))
+        if tr is None:
+            tr = self.track(src.video, src.track, fr, sfps, len(fr))
+        inputs.tracks[kind], inputs.source_frames[kind] = _checked_source(
+            kind, src, fr, tr, inputs.size)
+
+
+def _checked_source(kind: str, src: Source, fr, tr, size: tuple[int, int]):
+    """``(track, frames)`` of a source: a track file of another frame size refused, the
+    frames cut to the track, a face somewhere; a pose source of the target's frame size."""
+    if src.track is not None and tuple(tr.frame_size) != (fr.shape[2], fr.shape[1]):
+        raise RewriteError(f"{kind} track {src.track} is for {tr.frame_size[0]}x"
+                           f"{tr.frame_size[1]} frames but {src.video} is "
+                           f"{fr.shape[2]}x{fr.shape[1]}")
+    if tr.n_frames < len(fr):
+        fr = fr[:tr.n_frames]
+    if tr.lost.all():
+        raise VideoError(f"no face found in the {kind} source {src.video}")
+    if tr.lost.any():
+        log.info("%s source %s: face lost in %d frames (those keep the original frame)",
+                 kind, src.video, int(tr.lost.sum()))
+    if kind == "pose" and tuple(tr.frame_size) != tuple(size):
+        raise RewriteError(f"pose source {src.video} is {tr.frame_size[0]}x{tr.frame_size[1]}"
+                           f", the target {size[0]}x{size[1]}: frame sizes must match")
+    return tr, fr
+
+
+def _identity_weights(inputs: _Inputs, sources: TransferSources, model):
+    """The new identity: the weights given, the identity source's (mean over its frames), or
+    None (the target's)."""
+    if "identity" not in inputs.tracks:
+        return sources.identity_weights
+    idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
+    return constant_weights(inputs.tracks["identity"], idm)
+
+
+def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> TransferPlan:
+    """The plan of a ready performance: the mouth from the target's frame whose expression is
+    nearest (:func:`nearest_frames`)."""
+    from .track import Track
+
+    if set(inputs.tracks) != {"target"} or sources.identity_weights is not None:
+        raise RewriteError("a ready performance (--performance) excludes the other sources")
+    perf, tt, frames, n = sources.performance, inputs.tracks["target"], inputs.frames, \
+        len(inputs.frames)
+    new = perf if isinstance(perf, Track) else Track.load(perf)
+    new.check_model(model)
+    W, H = inputs.size
+    if tuple(new.frame_size) != (W, H):
+        raise RewriteError(f"performance is for {new.frame_size[0]}x{new.frame_size[1]} "
+                           f"frames, the target {sources.target.video} is {W}x{H}")
+    if new.n_frames > n:
+        new = take_frames(new, np.arange(n))
+    varying = [m for m in model.mode_names if m != "identity"] or list(model.mode_names)
+    q = np.concatenate([new.weights[m] for m in varying], axis=1)
+    b = np.concatenate([tt.weights[m] for m in varying], axis=1)
+    j = nearest_frames(q, b, ~tt.lost)
+    mt = take_frames(tt, j)
+    # the chosen frames' geometry, seen by their own cameras (texture lookup)
+    return TransferPlan(frames, inputs.fps, tt, new, frames, mt, j, inputs.tracks,
+                        inputs.timings, texture_frames=frames, texture_track=tt, performance=True)
+
+
+def _recombined_plan(inputs: _Inputs, sources: TransferSources, model, align) -> TransferPlan:
+    """The plan of a recombination (:func:`facetransfer.transfer.recombine`, Fig. 1): the
+    mouth texture from the source of the mouth's motion (visemes, else expressions), else the
+    target's own mouth."""
+    tracks, frames, fps, n = inputs.tracks, inputs.frames, inputs.fps, len(inputs.frames)
+    tt = tracks["target"]
+    new = recombine(tt, expression=tracks.get("expression"), viseme=tracks.get("viseme"),
+                    identity=_identity_weights(inputs, sources, model), pose=tracks.get("pose"),
+                    align=align)
+    new = project_landmarks(new, model)
+    mouth_kind = "viseme" if "viseme" in tracks else ("expression" if "expression" in tracks
+                                                      else None)
+    if mouth_kind is None:
+        mouth_frames, mouth_track = frames, take_frames(tt, np.arange(new.n_frames))
+        mouth_index = np.arange(new.n_frames)
+        tex_frames, tex_track = frames, tt
+    else:
+        ms = tracks[mouth_kind]
+        tm = time_map(ms.n_frames, ms.fps, n, fps, align=align)
+        mouth_track = take_frames(resample_track(ms, tm), np.arange(new.n_frames))
+        mouth_frames = inputs.source_frames[mouth_kind]
+        mouth_index = tm.nearest[:new.n_frames]
+        tex_frames, tex_track = mouth_frames, ms
+    return TransferPlan(frames, fps, tt, new, mouth_frames, mouth_track,
+                        np.asarray(mouth_index, np.int64), tracks, inputs.timings,
+                        texture_frames=tex_frames, texture_track=tex_track)
+
+
+@dataclass(frozen=True)
+class TransferResult:
+    """What :func:`transfer_video` wrote.
+
+    Attributes
+    ----------
+    path : Path
+    n_frames : int
+    n_rewritten : int
+        Frames where the face was rendered (the others keep the original).
+    audio : bool
+        Whether the target's audio was muxed in.
+    plan : TransferPlan
+    timings : dict
+        Seconds per stage (read, track, render, write).
+    """
+
+    path: Path
+    n_frames: int
+    n_rewritten: int
+    audio: bool
+    plan: TransferPlan
+    timings: dict
+
+
+def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: bool = True) -> int:
+    """Write the performance's meshes as ``frame_00000.obj`` ... (model faces), atomically each."""
+    from .io.mesh import write_mesh
+
+    d = Path(folder)
+    d.mkdir(parents=True, exist_ok=True)
+    for i in range(track.n_frames):
+        V = model.synthesize(track.weights_at(i))
+        write_mesh(d / f"frame_{i:05d}.obj", V, np.asarray(model.faces), uvs=model.uvs,
+                   overwrite=overwrite)
+    return track.n_frames
+
+
+@dataclass(frozen=True)
+class RenderResult:
+    """What :func:`render_plan` wrote.
+
+    Attributes
+    ----------
+    timings : dict
+        The plan's timings plus ``mouth`` (if lifted), ``render`` and ``write`` seconds.
+    n_rewritten : int
+        Frames where the face was rendered.
+    audio : bool
+        Whether audio was muxed in.
+    """
+
+    timings: dict
+    n_rewritten: int
+    audio: bool
+
+
+def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | None = None,
+                audio_from=None, overwrite: bool = False, progress_factory=None,
+                compose: Callable | None = None, video_options=None) -> RenderResult:
+    """Render a planned transfer into the video ``out`` (§6), timing each stage.
+
+    Lifts the mouth texture function first when the mouth mode is ``"function"`` (from
+    :attr:`TransferPlan.texture_frames`), then rewrites every frame
+    (:func:`facetransfer.rewrite.rewrite_frames`) and writes the video with the audio of
+    ``audio_from`` as the frames come.
+
+    Parameters
+    ----------
+    plan : TransferPlan
+    model : MultilinearModel
+    out : path-like
+        The video to write (atomically).
+    options : RewriteOptions, optional
+        Texture, mouth, blend, feather, erode; a mouth of None is
+        :func:`facetransfer.face_texture.default_mouth_mode` (the texture function for a ready
+        performance, the source frame for a transfer).
+    audio_from : path-like, optional
+    compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
+        The frame to write for output frame ``i`` (default: the rewritten image).
+    video_options : VideoOptions, optional
+        Codec and CRF (:class:`facetransfer.io.video.VideoOptions`; default H.264, CRF 18).
+
+    Returns
+    -------
+    RenderResult
+    """
+    from .io.video import write_video_with_audio
+
+    options = RewriteOptions() if options is None else options
+    options = options.with_(mouth=resolve_mouth_mode(options.mouth, model,
+                                                     performance=plan.performance))
+    timings = dict(plan.timings)
+    mouth_fn = None
+    if options.mouth == "function":
+        t = time.perf_counter()
+        mouth_fn = _lift_mouth(plan, model, progress_factory)
+        timings["mouth"] = time.perf_counter() - t
+    n = plan.n_frames
+    bar = progress_factory("render", n) if progress_factory else None
+    rewritten = [0]
+    t_render = [0.0]
+
+    def frames():
+        it = rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
+                            source_frames=plan.mouth_frames, source_track=plan.mouth_track,
+                            source_index=plan.mouth_index, options=options,
+                            mouth_function=mouth_fn,
+                            progress=bar.update if bar is not None else None)
+        for i in range(n):
+            t = time.perf_counter()
+            r = next(it)
+            frame = r.image if compose is None else compose(i, r)
+            t_render[0] += time.perf_counter() - t
+            rewritten[0] += bool(r.face_mask.any())
+            yield frame
+
+    t0 = time.perf_counter()
+    try:
+        audio = write_video_with_audio(out, frames(), plan.fps, audio_from=audio_from,
+                                       overwrite=overwrite, options=video_options)
+    finally:
+        if bar is not None:
+            bar.close()
+    timings["render"] = t_render[0]
+    timings["write"] = time.perf_counter() - t0 - t_render[0]
+    return RenderResult(timings, rewritten[0], audio)
+
+
+def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
+    """The plan's mouth texture function (:meth:`TransferPlan.mouth_function`), with a bar."""
+    total = min(MOUTH_MAX_FRAMES, len(plan.texture_frames) if plan.texture_frames is not None
+                else plan.n_frames)
+    lift_bar = progress_factory("mouth texture", total) if progress_factory else None
+    try:
+        return plan.mouth_function(model,
+                                   progress=lift_bar.update if lift_bar is not None else None)
+    finally:
+        if lift_bar is not None:
+            lift_bar.close()
+
+
+def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: bool) -> None:
+    """The outputs of :func:`transfer_video` can be written (before any work)."""
+    from .io.atomic import check_output_path
+    from .io.video import check_video_output
+
+    check_video_output(out, video_options, overwrite=overwrite)
+    if save_track is not None:
+        check_output_path(save_track, overwrite=overwrite)
+    if meshes_dir is not None:
+        md = Path(meshes_dir)
+        if not md.parent.is_dir():
+            raise RewriteError(f"folder {md.parent} for --meshes does not exist")
+        if not overwrite and md.is_dir() and any(md.glob("frame_*.obj")):
+            raise RewriteError(f"{md} already holds meshes; pass --overwrite to replace them")
+
+
+def transfer_video(target, out, model, *, sources: TransferSources | None = None,
+                   options: RewriteOptions | None = None, overwrite: bool = False,
+                   meshes_dir=None, save_track=None, progress_factory=None, video_options=None,
+                   align: str | None = None, max_frames: int | None = None,
+                   parallel: bool | None = None, texture: str | None = None,
+                   blend: str | None = None, mouth: str | None = None, speed: str | None = None,
+                   track_method: str | None = None, **source_keywords) -> TransferResult:
+    """The whole video rewrite (§6): plan (read, track, recombine), render, write with audio.
+
+    The inputs are ``sources`` (:class:`TransferSources`) or the keywords of
+    :meth:`TransferSources.of` (``target_track``, ``expression_from``, ``expression_track``,
+    ``viseme_from``, ..., ``performance``) with ``target``; how they are tracked and rendered
+    is ``options`` (:class:`~facetransfer.rewrite_options.RewriteOptions`), single attributes
+    replaced by ``texture``, ``blend``, ``mouth``, ``speed``, ``track_method``. ``align``,
+    ``max_frames``, ``parallel``: see :func:`plan_transfer`. The output video (and the
+    optional track and meshes) appear only when everything succeeded; an existing ``out`` is
+    replaced only with ``overwrite=True``. With the mouth mode ``"function"`` the function is
+    lifted from :attr:`TransferPlan.texture_frames`. ``video_options``: codec and CRF of
+    ``out`` (:class:`facetransfer.io.video.VideoOptions`); ``out`` may be an image sequence
+    (``frames/%05d.png``).
+
+    Returns
+    -------
+    TransferResult
+    """
+    _check_outputs(out, video_options=video_options, save_track=save_track,
+                   meshes_dir=meshes_dir, overwrite=overwrite)  # before any work
+    opts = (options or RewriteOptions()).with_(texture=texture, blend=blend, mouth=mouth,
+                                               speed=speed, track_method=track_method)
+    if sources is None:
+        sources = TransferSources.of(target, **source_keywords)
+    elif source_keywords:
+        raise RewriteError(f"give the sources either as TransferSources or as keywords, not "
+                           f"both ({', '.join(source_keywords)})")
+    resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
+    plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
+                        parallel=parallel, progress_factory=progress_factory)
+    rendered = render_plan(plan, model, out, options=opts, audio_from=target,
+                           overwrite=overwrite, progress_factory=progress_factory,
+                           video_options=video_options)
+    if save_track is not None:
+        plan.new_track.save(save_track, overwrite=overwrite)
+    if meshes_dir is not None:
+        write_mesh_sequence(meshes_dir, plan.new_track, model)
+    return TransferResult(Path(out), plan.n_frames, rendered.n_rewritten, rendered.audio, plan,
+                          rendered.timings)
