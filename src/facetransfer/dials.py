@@ -261,7 +261,7 @@ def dial_track(track, model, values: Mapping[str, float], *, dials: DialSet | No
         The track's model.
     values : dict dial name -> units
     """
-    from .transfer import project_landmarks
+    from .track.project import project_landmarks
 
     dials = dials or learn_dials(model)
     for name in values:

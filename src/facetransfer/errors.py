@@ -39,3 +39,7 @@ class TrackError(FaceTransferError):
 class OutputError(FaceTransferError):
     """An output cannot be written: bad path, exists without --overwrite, is also an input, or the
     write failed (no space left, read-only folder); the message names the output."""
+
+
+class RewriteError(FaceTransferError):
+    """Frames, tracks or a model that cannot be rendered back into footage."""

@@ -20,7 +20,8 @@ from typing import Callable
 
 import numpy as np
 
-from .rewrite_options import MOUTH_MODES, RewriteError, check_mode
+from .errors import RewriteError
+from .rewrite_options import MOUTH_MODES, check_mode
 from .topology import MeshTopology, close_mouth, mesh_topology
 
 log = logging.getLogger(__name__)
@@ -315,7 +316,7 @@ def timeline_mouth_function(model, frames, track, index: np.ndarray, n: int,
     (< ``n``) of ``track`` is the pose and weights shown at output frame ``i``, whose frame is
     ``frames[index[i]]`` (``kwargs``: ``tex_size``, ``step``, ``max_frames``, ``k``,
     ``progress``)."""
-    from .transfer import take_frames
+    from .track.project import take_frames
 
     return mouth_texture_function(model, frames, take_frames(track, np.arange(n)), topo,
                                   frame_index=np.asarray(index)[:n], **kwargs)

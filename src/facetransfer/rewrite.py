@@ -48,7 +48,8 @@ from .errors import ShapeError
 from .face_texture import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
-from .rewrite_options import BLEND_MODES, RewriteError, RewriteOptions, check_mode
+from .errors import RewriteError
+from .rewrite_options import BLEND_MODES, RewriteOptions, check_mode
 from .topology import MeshTopology, close_mouth, mesh_topology
 
 log = logging.getLogger(__name__)

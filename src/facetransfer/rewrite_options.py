@@ -12,7 +12,8 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 
-from .errors import FaceTransferError
+from .errors import RewriteError
+from .track.presets import DEFAULT_SPEED, SPEED_PRESETS, TRACK_METHODS, check_track_method
 
 __all__ = [
     "RewriteError",
@@ -28,10 +29,6 @@ __all__ = [
 ]
 
 
-class RewriteError(FaceTransferError):
-    """Frames, tracks or a model that cannot be rendered back into footage."""
-
-
 #: Where the target's face texture comes from: one for the clip or the current frame's.
 TEXTURE_MODES = ("constant", "frame")
 #: Where the mouth texture comes from: the mouth source's frame at the matched time
@@ -40,15 +37,6 @@ MOUTH_MODES = ("frame", "function")
 #: Ways to put the rendered face into the frame: Pérez et al.'s Poisson solve (exact), a
 #: membrane (harmonic-like) correction interpolated by push-pull (fast), or a hard paste.
 BLEND_MODES = ("fast", "poisson", "none")
-#: Tracking presets of a transfer (:func:`facetransfer.track.presets.track_options`), fastest
-#: first.
-SPEED_PRESETS = ("fast", "balanced", "quality")
-#: The preset of the transfer and the CLI: as accurate as "balanced" on the synthetic footage
-#: and the real clips measured (see :func:`facetransfer.track.presets.track_options`), a third
-#: of its time.
-DEFAULT_SPEED = "fast"
-#: Trackers of :func:`facetransfer.track.obtain.obtain_track`.
-TRACK_METHODS = ("auto", "capture", "flow", "landmarks")
 
 
 def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> None:
@@ -57,13 +45,6 @@ def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> 
     if value not in modes:
         allowed = repr(modes) if sep is None else sep.join(modes)
         raise RewriteError(f"{name} must be one of {allowed}, got {value!r}")
-
-
-def check_track_method(method) -> None:
-    """Raise :class:`RewriteError` unless ``method`` is one of :data:`TRACK_METHODS`."""
-    if method not in TRACK_METHODS:
-        raise RewriteError(f"tracking method must be auto, capture, flow or landmarks, got "
-                           f"{method!r}")
 
 
 @dataclass(frozen=True)

@@ -23,16 +23,16 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import VideoError
+from .errors import RewriteError, VideoError
 from .face_texture import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
 from .rewrite import rewrite_frames
-from .rewrite_options import DEFAULT_SPEED, RewriteError, RewriteOptions
+from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .topology import MeshTopology
 from .track import obtain
 from .track.presets import track_options
-from .transfer import (constant_weights, project_landmarks, recombine, resample_track,
-                       take_frames, time_map)
+from .track.project import project_landmarks, take_frames
+from .transfer import constant_weights, recombine, resample_track, time_map
 
 log = logging.getLogger(__name__)
 

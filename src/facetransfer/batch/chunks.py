@@ -164,7 +164,7 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
         Mismatched counts, lengths, frame sizes or models.
     """
     from ..track.result import Track
-    from ..transfer import project_landmarks
+    from ..track.project import project_landmarks
 
     tracks, chunks = list(tracks), list(chunks)
     _check_chunk_tracks(tracks, chunks)

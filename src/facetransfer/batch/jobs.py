@@ -168,7 +168,7 @@ def _identity(job, model):
 
 def transfer_pair(job, out: str, model, settings: dict) -> Row:
     """Rewrite one target as ``facetransfer transfer`` does
-    (:func:`facetransfer.rewrite.transfer_video`) and write ``out``.
+    (:func:`facetransfer.video_transfer.transfer_video`) and write ``out``.
 
     Parameters
     ----------

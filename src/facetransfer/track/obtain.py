@@ -13,8 +13,9 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import ShapeError, VideoError
-from ..rewrite_options import RewriteError, check_track_method
-from ..transfer import project_landmarks, take_frames
+from ..errors import RewriteError
+from .presets import check_track_method
+from .project import project_landmarks, take_frames
 from .result import Track
 
 log = logging.getLogger(__name__)

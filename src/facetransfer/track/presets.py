@@ -2,9 +2,24 @@
 
 from __future__ import annotations
 
-from ..rewrite_options import DEFAULT_SPEED, SPEED_PRESETS, check_mode
+from ..errors import RewriteError
 
-__all__ = ["SPEED_PRESETS", "DEFAULT_SPEED", "track_options"]
+__all__ = ["SPEED_PRESETS", "DEFAULT_SPEED", "TRACK_METHODS", "track_options", "check_track_method"]
+
+#: Tracking presets of a transfer (:func:`track_options`), fastest first.
+SPEED_PRESETS = ("fast", "balanced", "quality")
+#: The preset of the transfer and the CLI: as accurate as "balanced" on the synthetic footage
+#: and the real clips measured (see :func:`track_options`), a third of its time.
+DEFAULT_SPEED = "fast"
+#: Trackers of :func:`facetransfer.track.obtain.obtain_track`.
+TRACK_METHODS = ("auto", "capture", "flow", "landmarks")
+
+
+def check_track_method(method) -> None:
+    """Raise :class:`RewriteError` unless ``method`` is one of :data:`TRACK_METHODS`."""
+    if method not in TRACK_METHODS:
+        raise RewriteError(f"tracking method must be auto, capture, flow or landmarks, got "
+                           f"{method!r}")
 
 
 def track_options(speed: str = DEFAULT_SPEED):
@@ -41,7 +56,8 @@ def track_options(speed: str = DEFAULT_SPEED):
     """
     from .tracker import TrackOptions
 
-    check_mode("speed", speed, SPEED_PRESETS)
+    if speed not in SPEED_PRESETS:
+        raise RewriteError(f"speed must be one of {', '.join(SPEED_PRESETS)}, got {speed!r}")
     if speed == "balanced":
         return TrackOptions(reselect=4)
     if speed == "fast":

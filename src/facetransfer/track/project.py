@@ -1,0 +1,52 @@
+"""Operations on a whole track that need no footage: taking frames, re-projecting landmarks.
+
+Pure functions on :class:`facetransfer.track.result.Track`, shared by the transfer
+(:mod:`facetransfer.transfer`), the track's consumers (:mod:`facetransfer.track.obtain`, batch
+joins, dials) and the tests.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..arkit import attach_activations
+from ..errors import TrackError
+
+__all__ = ["take_frames", "project_landmarks"]
+
+
+def take_frames(track, idx: np.ndarray):
+    """Frames ``idx`` (int array) of a track, as a new track."""
+    return dataclasses.replace(
+        track, rotation=track.rotation[idx], scale=track.scale[idx],
+        translation=track.translation[idx],
+        weights={n: w[idx] for n, w in track.weights.items()},
+        landmarks2d=track.landmarks2d[idx], confidence=track.confidence[idx],
+        lost=track.lost[idx], info={},
+        blendshapes=None if track.blendshapes is None else track.blendshapes[idx])
+
+
+def project_landmarks(track, model):
+    """The track with ``landmarks2d`` recomputed from its weights and pose (Eq. (5), (7)).
+
+    Parameters
+    ----------
+    track : Track
+    model : MultilinearModel
+        Must have ``landmarks`` (68,).
+
+    Returns
+    -------
+    Track
+    """
+    if model.landmarks is None:
+        raise TrackError("the model has no landmark vertices")
+    lm = model.synthesize({n: track.weights[n] for n in model.mode_names},
+                          vertices=model.landmarks)  # (F, 68, 3)
+    Y = np.einsum("fij,fvj->fvi", track.rotation[:, :2], lm)  # (F, 68, 2)
+    px = np.empty_like(Y)
+    px[..., 0] = track.scale[:, None] * Y[..., 0] + track.translation[:, None, 0]  # Eq. (7)
+    px[..., 1] = -track.scale[:, None] * Y[..., 1] + track.translation[:, None, 1]
+    return attach_activations(dataclasses.replace(track, landmarks2d=px, info={}), model)
