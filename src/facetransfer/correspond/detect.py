@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FaceTransferError
+from ..geometry import barycentric_2d
 from .features import FeaturePoints
 
 #: iBUG-68 points kept by default: brows, nose, eyes, mouth (the jaw contour is a silhouette)
@@ -105,8 +106,6 @@ def lift_points(points2d: np.ndarray, vertices: np.ndarray, faces: np.ndarray, c
     The triangle seen at each point's pixel (z-buffer) and the point's barycentric coordinates
     in that triangle's projection (clamped to the triangle) give the 3D point.
     """
-    from ..texture import _bary2d
-
     H, W = raster.tri_id.shape
     xy = np.asarray(points2d, np.float64)
     ix, iy = np.rint(xy[:, 0]).astype(int), np.rint(xy[:, 1]).astype(int)
@@ -115,7 +114,7 @@ def lift_points(points2d: np.ndarray, vertices: np.ndarray, faces: np.ndarray, c
     tri[inside] = raster.tri_id[iy[inside], ix[inside]]
     ok = tri >= 0
     Ft = faces[tri[ok]]
-    b = _bary2d(camera.project(vertices[Ft.ravel()]).reshape(-1, 3, 2), xy[ok])
+    b = barycentric_2d(camera.project(vertices[Ft.ravel()]).reshape(-1, 3, 2), xy[ok])
     # a point within half a pixel of an edge may fall in the neighbour of the triangle seen at
     # its pixel centre: clamp to the triangle so that it stays on the surface
     b = np.clip(b, 0.0, None)
