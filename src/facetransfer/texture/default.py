@@ -64,16 +64,43 @@ def default_face_texture(model_or_uvs, size: int = 512, seed: int = 0, *,
     if source not in ("procedural", "lee-perry-smith", "auto"):
         raise TextureError(f"source must be 'procedural', 'lee-perry-smith' or 'auto', got {source!r}")
     if source != "procedural":
-        try:
-            if not uses_ict_uvs(model_or_uvs):
-                raise TextureError("the Lee Perry-Smith texture is carried onto ICT-FaceKit UVs; "
-                                   "this mesh's UVs are not ICT-FaceKit's")
-            return lee_perry_smith_template_texture(size)
-        except (FaceTransferError, RuntimeError, OSError, ImportError) as exc:
-            if source == "lee-perry-smith":
-                raise
-            log.info("default_face_texture: Lee Perry-Smith texture not available (%s); "
-                     "using the procedural texture", exc)
+        tex = _lee_perry_smith_or_none(model_or_uvs, size, required=source == "lee-perry-smith")
+        if tex is not None:
+            return tex
+    U, lm = _uvs_and_landmarks(model_or_uvs)
+    T = int(size)
+    if T != size or T < 8 or T > 8192:
+        raise TextureError(f"size must be an integer in 8..8192, got {size!r}")
+    tex = _skin(T, np.random.default_rng(seed))
+    if lm is not None:
+        L = np.asarray(lm, dtype=np.int64)
+        if L.ndim == 1 and L.size == 68 and L.min() >= 0 and L.max() < U.shape[0]:
+            tex = _paint_features(tex, U[L] * (T - 1) * [1, -1] + [0, T - 1], T)
+        else:
+            log.warning("default_face_texture: landmarks are not 68 valid vertex indices; "
+                        "painting skin only")
+    return texture_to_uint8(tex)
+
+
+def _lee_perry_smith_or_none(model_or_uvs, size: int, *, required: bool) -> np.ndarray | None:
+    """The Lee Perry-Smith texture for ICT-FaceKit UVs; None (logged) where it does not apply or
+    its assets are missing, unless ``required`` (then the error propagates)."""
+    try:
+        if not uses_ict_uvs(model_or_uvs):
+            raise TextureError("the Lee Perry-Smith texture is carried onto ICT-FaceKit UVs; "
+                               "this mesh's UVs are not ICT-FaceKit's")
+        return lee_perry_smith_template_texture(size)
+    except (FaceTransferError, RuntimeError, OSError, ImportError) as exc:
+        if required:
+            raise
+        log.info("default_face_texture: Lee Perry-Smith texture not available (%s); "
+                 "using the procedural texture", exc)
+    return None
+
+
+def _uvs_and_landmarks(model_or_uvs) -> tuple[np.ndarray, object]:
+    """The checked UVs ``(n, 2) float64`` of a model, data set, mesh or array, and its landmarks
+    (or None)."""
     if isinstance(model_or_uvs, np.ndarray):
         uvs, lm = model_or_uvs, None
     else:
@@ -84,10 +111,12 @@ def default_face_texture(model_or_uvs, size: int = 512, seed: int = 0, *,
     U = np.asarray(uvs, dtype=np.float64)
     if U.ndim != 2 or U.shape[1] != 2 or U.shape[0] == 0 or not np.all(np.isfinite(U)):
         raise ShapeError(f"uvs must be a finite (n, 2) array, got {U.shape}")
-    T = int(size)
-    if T != size or T < 8 or T > 8192:
-        raise TextureError(f"size must be an integer in 8..8192, got {size!r}")
-    rng = np.random.default_rng(seed)
+    return U, lm
+
+
+def _skin(T: int, rng: np.random.Generator) -> np.ndarray:
+    """Procedural skin ``(T, T, 3)`` float64 (0..255): a mid skin tone, slow brightness and redness
+    variation, and fine noise (gradients everywhere for a KLT tracker)."""
     base = np.array([214.0, 164.0, 138.0])  # a mid skin tone, RGB
     low = cv2.GaussianBlur(rng.normal(size=(T, T, 2)).astype(np.float32), (0, 0), T / 24)
     low /= np.maximum(low.std(axis=(0, 1)), 1e-6)
@@ -97,15 +126,7 @@ def default_face_texture(model_or_uvs, size: int = 512, seed: int = 0, *,
     mid *= 6.0 / max(float(mid.std()), 1e-6)
     fine = rng.normal(scale=5.0, size=(T, T)).astype(np.float32)
     fine = cv2.GaussianBlur(fine, (0, 0), 0.7) * 1.6
-    tex = base + low + (mid + fine)[..., None]
-    if lm is not None:
-        L = np.asarray(lm, dtype=np.int64)
-        if L.ndim == 1 and L.size == 68 and L.min() >= 0 and L.max() < U.shape[0]:
-            tex = _paint_features(tex, U[L] * (T - 1) * [1, -1] + [0, T - 1], T)
-        else:
-            log.warning("default_face_texture: landmarks are not 68 valid vertex indices; "
-                        "painting skin only")
-    return texture_to_uint8(tex)
+    return base + low + (mid + fine)[..., None]
 
 
 def _paint_features(tex: np.ndarray, pts: np.ndarray, T: int) -> np.ndarray:

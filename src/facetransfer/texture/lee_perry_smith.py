@@ -90,15 +90,11 @@ def lee_perry_smith_texture(fitted_vertices, faces, uvs, size: int = 512, *,
 
     V, F = check_vertices(fitted_vertices, faces)
     U = check_uvs(uvs, V.shape[0])
-    h = hashlib.sha256()
-    for a in (V, F, U):
-        h.update(np.ascontiguousarray(a).tobytes())
-    h.update(f"lps-v1-{int(size)}-{int(source_samples)}".encode())
-    path = cache_dir() / "textures" / f"lee-perry-smith-{h.hexdigest()[:16]}-{int(size)}.png"
-    if use_cache and path.is_file():
-        img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-        if img is not None and img.shape == (int(size), int(size), 3):
-            return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    key = _content_key((V, F, U), f"lps-v1-{int(size)}-{int(source_samples)}")
+    path = cache_dir() / "textures" / f"lee-perry-smith-{key}-{int(size)}.png"
+    cached = _read_cached_image(path, int(size)) if use_cache else None
+    if cached is not None:
+        return cached
     mesh, image = load_lee_perry_smith()
     tex = bake_texture(V, F, U, mesh.vertices, mesh.faces, mesh.uvs, image, size,
                        source_samples=source_samples).texture
@@ -107,6 +103,25 @@ def lee_perry_smith_texture(fitted_vertices, faces, uvs, size: int = 512, *,
         write_image(path, tex)
         log.info("cached the Lee Perry-Smith texture at %s", path)
     return tex
+
+
+def _content_key(arrays, tag: str) -> str:
+    """16 hex digits of the SHA-256 of the arrays' bytes and ``tag``: a cache key."""
+    h = hashlib.sha256()
+    for a in arrays:
+        h.update(np.ascontiguousarray(a).tobytes())
+    h.update(tag.encode())
+    return h.hexdigest()[:16]
+
+
+def _read_cached_image(path, T: int) -> np.ndarray | None:
+    """A cached ``(T, T, 3) uint8`` RGB texture, or None if missing, unreadable or not T x T."""
+    if not path.is_file():
+        return None
+    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if img is not None and img.shape == (T, T, 3):
+        return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
+    return None
 
 
 #: Bump when the Lee Perry-Smith template pipeline changes (invalidates cached results).
@@ -189,36 +204,17 @@ def lee_perry_smith_template_texture(size: int = 512, *, use_cache: bool = True)
     if T != size or T < 8 or T > 8192:
         raise TextureError(f"size must be an integer in 8..8192, got {size!r}")
     tmpl = ict_template("face")
-    h = hashlib.sha256()
-    for a in (tmpl.mesh.vertices, tmpl.mesh.faces, tmpl.mesh.uvs, tmpl.landmarks):
-        h.update(np.ascontiguousarray(a).tobytes())
-    h.update(f"lps-ict-v{_LPS_PIPELINE_VERSION}".encode())
-    key = h.hexdigest()[:16]
+    key = _content_key((tmpl.mesh.vertices, tmpl.mesh.faces, tmpl.mesh.uvs, tmpl.landmarks),
+                       f"lps-ict-v{_LPS_PIPELINE_VERSION}")
     folder = cache_dir() / "textures"
     tex_path = folder / f"lee-perry-smith-ict-face-{key}-{T}.png"
     fit_path = folder / f"lee-perry-smith-ict-face-{key}-fit.npy"
-    if use_cache and tex_path.is_file():
-        img = cv2.imread(str(tex_path), cv2.IMREAD_COLOR)
-        if img is not None and img.shape == (T, T, 3):
-            return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-    fitted = None
-    if use_cache and fit_path.is_file():
-        try:
-            fitted = np.load(fit_path, allow_pickle=False)
-        except (OSError, ValueError):
-            fitted = None
-        if fitted is not None and fitted.shape != tmpl.mesh.vertices.shape:
-            fitted = None
+    cached = _read_cached_image(tex_path, T) if use_cache else None
+    if cached is not None:
+        return cached
+    fitted = _read_cached_fit(fit_path, tmpl.mesh.vertices.shape) if use_cache else None
     if fitted is None:
-        from ..correspond.fitting import fit_template, load_template
-        from ..correspond.meshops import clean_scan
-
-        mesh, image = load_lee_perry_smith()
-        features = _lps_features(mesh, image)
-        scan = clean_scan(mesh.vertices, mesh.faces, name="LeePerrySmith.glb")
-        fit = fit_template(scan, features, load_template("ict"))   # with the identity prior
-        log.info("fitted the ICT template to the Lee Perry-Smith scan: %s", fit.stats)
-        fitted = fit.vertices
+        fitted = _fit_ict_to_lee_perry_smith()
         if use_cache:
             folder.mkdir(parents=True, exist_ok=True)
             with atomic_path(fit_path) as tmp:
@@ -228,3 +224,28 @@ def lee_perry_smith_template_texture(size: int = 512, *, use_cache: bool = True)
         folder.mkdir(parents=True, exist_ok=True)
         write_image(tex_path, tex)
     return tex
+
+
+def _read_cached_fit(path, shape: tuple) -> np.ndarray | None:
+    """A cached template fit of that ``shape`` (n, 3), or None if missing, unreadable or other."""
+    if not path.is_file():
+        return None
+    try:
+        fitted = np.load(path, allow_pickle=False)
+    except (OSError, ValueError):
+        return None
+    return fitted if fitted.shape == shape else None
+
+
+def _fit_ict_to_lee_perry_smith() -> np.ndarray:
+    """The ICT-FaceKit template (with its identity prior) fitted to the Lee Perry-Smith scan
+    (§4.2) from feature points detected on it: ``(n, 3)`` in the scan's coordinates."""
+    from ..correspond.fitting import fit_template, load_template
+    from ..correspond.meshops import clean_scan
+
+    mesh, image = load_lee_perry_smith()
+    features = _lps_features(mesh, image)
+    scan = clean_scan(mesh.vertices, mesh.faces, name="LeePerrySmith.glb")
+    fit = fit_template(scan, features, load_template("ict"))   # with the identity prior
+    log.info("fitted the ICT template to the Lee Perry-Smith scan: %s", fit.stats)
+    return fit.vertices

@@ -194,6 +194,15 @@ def _visible_points(P: np.ndarray, tri: np.ndarray, V: np.ndarray, F: np.ndarray
 # per-vertex and UV lifting
 # --------------------------------------------------------------------------------------------
 
+def _checked_inputs(frame, vertices, faces, raster, tol):
+    """The checked frame, vertices ``(n, 3)``, faces ``(F, 3)`` and raster of one lift, and its
+    depth tolerance (default :func:`.base.default_tol`)."""
+    f = check_frame(frame)
+    V, F = check_vertices(vertices, faces)
+    raster = check_raster(raster, f)
+    return f, V, F, raster, default_tol(V) if tol is None else float(tol)
+
+
 def lift_vertex_colors(frame, vertices, faces, camera, *, raster=None, power: float = 2.0,
                        tol: float | None = None) -> LiftedTexture:
     """Assign each mesh vertex the frame's colour where it projects (§6), with weight (1).
@@ -222,11 +231,8 @@ def lift_vertex_colors(frame, vertices, faces, camera, *, raster=None, power: fl
     ----------
     Vlasic et al. 2005, §6 ("assigning pixel colors to the corresponding mesh vertices").
     """
-    f = check_frame(frame)
-    V, F = check_vertices(vertices, faces)
+    f, V, F, raster, tol = _checked_inputs(frame, vertices, faces, raster, tol)
     H, W = f.shape[:2]
-    raster = check_raster(raster, f)
-    tol = default_tol(V) if tol is None else float(tol)
     vis = vertex_visibility(V, F, camera, (W, H), raster=raster, tol=tol)
     colors, w = _weighted_samples(f, V, vertex_normals(V, F), vis, camera, power,
                                   "lift_vertex_colors: no vertex")
@@ -269,18 +275,15 @@ def lift_uv_texture(frame, vertices, faces, uvs, camera, tex_size: int = 512, *,
     ----------
     Vlasic et al. 2005, §6.
     """
-    f = check_frame(frame)
-    V, F = check_vertices(vertices, faces)
+    f, V, F, raster, tol = _checked_inputs(frame, vertices, faces, raster, tol)
     U = check_uvs(uvs, V.shape[0])
     H, W = f.shape[:2]
-    raster = check_raster(raster, f)
     if atlas is None:
         atlas = uv_atlas(F, U, tex_size)
     elif not atlas.matches(F, U, tex_size):
         raise TextureError("atlas was built for other faces, uvs or tex_size")
     if raster is None:
         raster = rasterize(V, F, camera, (W, H))
-    tol = default_tol(V) if tol is None else float(tol)
     P = atlas.interpolate(V)  # (m, 3) texel surface points
     N = atlas.interpolate(vertex_normals(V, F))
     vis = _visible_points(P, atlas.texel_triangles, V, F, camera, raster, tol)
