@@ -12,9 +12,10 @@ from facetransfer.correspond import (PROTOCOL_CLOSED_MOUTH_21, PROTOCOL_NEUTRAL_
                                      read_features, similarity_procrustes,
                                      validate_features_on_surface, write_features)
 from facetransfer.correspond.features import FeatureError, features_from_dict
-from facetransfer.correspond.meshops import SurfaceQuery, closest_point_on_triangles, vertex_normals
+from facetransfer.correspond.meshops import SurfaceQuery, closest_point_on_triangles
 from facetransfer.correspond.synthetic import random_rotation
 from facetransfer.errors import FaceTransferError, MeshError, ShapeError
+from facetransfer.render import vertex_normals
 
 
 # ---------------------------------------------------------------- Procrustes (Umeyama 1991)

@@ -7,7 +7,12 @@ from pathlib import Path
 
 log = logging.getLogger(__name__)
 
-LPS_CREDIT = "Lee Perry-Smith (Infinite Realities), CC-BY 3.0"
+
+def _credit(scan) -> str | None:
+    """The Lee Perry-Smith credit line for that scan's outputs, None for other scans."""
+    from ..texture import LEE_PERRY_SMITH_CREDIT
+
+    return LEE_PERRY_SMITH_CREDIT if "leeperrysmith" in Path(scan).name.lower() else None
 
 
 def _add_texture_options(p, prefix: str = "") -> None:
@@ -160,7 +165,7 @@ def _write_detected(out, picture, scan, d) -> None:
     from ..correspond.features import IBUG_NAMES, write_features
     from ..io.atomic import write_image
 
-    credit = LPS_CREDIT if "leeperrysmith" in Path(scan).name.lower() else None
+    credit = _credit(scan)
     extra = {"scan": Path(scan).name,
              "note": "found by facetransfer scan features: MediaPipe face landmarker on a "
                      "rendering of the scan, lifted onto its surface",
@@ -180,88 +185,130 @@ def _write_detected(out, picture, scan, d) -> None:
 def _fit(args) -> int:
     import numpy as np
 
-    from ..correspond import fit_template, load_scan, load_template, read_features
+    from ..correspond import fit_template, load_scan, load_template
     from ..correspond.report import plot_fit, write_fit_report
-    from ..errors import MeshError
-    from ..io.atomic import check_output_path
-    from ..io.mesh import read_mesh, write_mesh
+    from ..io.mesh import write_mesh
 
     out = Path(args.out)
-    inputs = [args.scan, args.features if args.features != "auto" else None, args.texture,
-              args.reference, args.template_landmarks,
-              args.template if args.template != "ict" else None]
     stem = out.with_suffix("")
     report_path, png_path = Path(f"{stem}.report.json"), Path(f"{stem}.png")
-    for o in (out, report_path, png_path):
-        check_output_path(o, overwrite=args.overwrite, inputs=inputs)
-    if args.features == "auto":
-        from ..correspond.detect import INNER_FEATURES
-        from ..correspond.features import PROTOCOLS
-
-        fpath = Path(f"{stem}.features.json")
-        check_output_path(fpath, overwrite=args.overwrite, inputs=inputs)
-        ids = PROTOCOLS[args.protocol] if args.protocol else INNER_FEATURES
-        d = _detect(args.scan, args.texture, args.flip_v, "auto", ids)
-        _write_detected(fpath, Path(f"{stem}.features.png"), args.scan, d)
-        features = d.features
-        print(f"wrote {fpath} ({len(features.indices)} feature points found automatically)")
-        args.features = str(fpath)
-    else:
-        features = read_features(args.features, protocol=args.protocol)
+    inputs = _check_fit_outputs(args, (out, report_path, png_path))
+    features = _fit_features(args, stem, inputs)
     scan = load_scan(args.scan)
     template = load_template(args.template, landmarks=args.template_landmarks)
-    reference = None
-    if args.reference:
-        reference = read_mesh(args.reference).vertices
-        if reference.shape != template.vertices.shape:
-            raise MeshError(f"reference {args.reference} has {len(reference)} vertices; the template "
-                            f"has {len(template.vertices)} (it must be a fit in template topology)")
-    prior = "template"
-    if args.prior == "none":
-        prior = None
-    elif args.prior == "identity+expression":
-        if template.name != "ict":
-            raise MeshError(f"--prior identity+expression needs the ICT template, not {args.template}")
-        from ..correspond.prior import ict_prior
-
-        prior = ict_prior("identity+expression", neutral=template.vertices)
-    elif template.name == "ict" and reference is None:   # auto: the better of the two face spaces
-        from ..correspond.prior import ict_prior
-
-        prior = [template.prior, ict_prior("identity+expression", neutral=template.vertices)]
-    bar = None
-    if not args.no_progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=1, desc="fitting", unit="stage", leave=False)
-
-    def progress(i, n, name):
-        if bar is not None:
-            bar.total = n
-            bar.n = i
-            bar.set_postfix_str(name)
-            bar.refresh()
-
+    reference = _fit_reference(args.reference, template)
+    prior = _fit_prior(args.prior, args.template, template, reference)
+    bar = _StageBar(enabled=not args.no_progress)
     try:
         result = fit_template(scan, features, template, reference=reference, prior=prior,
-                              progress=progress)
+                              progress=bar)
     finally:
-        if bar is not None:
-            bar.close()
-    credit = LPS_CREDIT if "leeperrysmith" in Path(args.scan).name.lower() else None
+        bar.close()
+    credit = _credit(args.scan)
     write_fit_report(report_path, result, scan=str(args.scan), features=str(args.features),
                      template=str(args.template), credit=credit, repairs=scan.notes)
     plot_fit(png_path, result, title=f"fit of {Path(args.scan).name}", credit=credit)
     write_mesh(out, result.vertices, result.faces)
-    s = result.stats
+    _print_fit_summary((out, report_path, png_path), result.stats, scan.notes)
+    return 0 if np.isfinite(result.stats["mean"]) else 1
+
+
+def _check_fit_outputs(args, outputs) -> list:
+    """Refuse existing outputs (without --overwrite) and outputs that are inputs; the inputs."""
+    from ..io.atomic import check_output_path
+
+    inputs = [args.scan, args.features if args.features != "auto" else None, args.texture,
+              args.reference, args.template_landmarks,
+              args.template if args.template != "ict" else None]
+    for o in outputs:
+        check_output_path(o, overwrite=args.overwrite, inputs=inputs)
+    return inputs
+
+
+def _fit_features(args, stem: Path, inputs: list):
+    """The feature points of ``scan fit``: read from --features, or found (``auto``) and written
+    to STEM.features.json (then ``args.features`` names that file, for the report)."""
+    from ..correspond import read_features
+
+    if args.features != "auto":
+        return read_features(args.features, protocol=args.protocol)
+    from ..correspond.detect import INNER_FEATURES
+    from ..correspond.features import PROTOCOLS
+    from ..io.atomic import check_output_path
+
+    fpath = Path(f"{stem}.features.json")
+    check_output_path(fpath, overwrite=args.overwrite, inputs=inputs)
+    ids = PROTOCOLS[args.protocol] if args.protocol else INNER_FEATURES
+    d = _detect(args.scan, args.texture, args.flip_v, "auto", ids)
+    _write_detected(fpath, Path(f"{stem}.features.png"), args.scan, d)
+    print(f"wrote {fpath} ({len(d.features.indices)} feature points found automatically)")
+    args.features = str(fpath)
+    return d.features
+
+
+def _fit_reference(path, template):
+    """The --reference fit's vertices ``(n, 3)`` (template topology), or None."""
+    from ..errors import MeshError
+    from ..io.mesh import read_mesh
+
+    if not path:
+        return None
+    reference = read_mesh(path).vertices
+    if reference.shape != template.vertices.shape:
+        raise MeshError(f"reference {path} has {len(reference)} vertices; the template "
+                        f"has {len(template.vertices)} (it must be a fit in template topology)")
+    return reference
+
+
+def _fit_prior(choice: str, template_arg: str, template, reference):
+    """The ``prior`` argument of fit_template for --prior."""
+    from ..errors import MeshError
+
+    if choice == "none":
+        return None
+    if choice == "identity+expression":
+        if template.name != "ict":
+            raise MeshError(f"--prior identity+expression needs the ICT template, not {template_arg}")
+        from ..correspond.prior import ict_prior
+
+        return ict_prior("identity+expression", neutral=template.vertices)
+    if template.name == "ict" and reference is None:   # auto: the better of the two face spaces
+        from ..correspond.prior import ict_prior
+
+        return [template.prior, ict_prior("identity+expression", neutral=template.vertices)]
+    return "template"
+
+
+class _StageBar:
+    """A tqdm bar over the fitting stages, called as ``progress(i, n, name)`` by fit_template."""
+
+    def __init__(self, *, enabled: bool):
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=1, desc="fitting", unit="stage", leave=False)
+
+    def __call__(self, i: int, n: int, name: str) -> None:
+        if self.bar is not None:
+            self.bar.total = n
+            self.bar.n = i
+            self.bar.set_postfix_str(name)
+            self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _print_fit_summary(paths, s: dict, notes) -> None:
+    """The lines ``scan fit`` prints: outputs and distances, the prior chosen, the repairs."""
+    out, report_path, png_path = paths
     print(f"wrote {out}, {report_path}, {png_path}: surface distance mean {s['mean']:.4g}, "
           f"median {s['median']:.4g}, p95 {s['p95']:.4g}, max {s['max']:.4g} (scan units), "
           f"{s['seconds']:.1f} s")
     if s.get("prior"):
         print(f"shape prior: {s['prior']['name']}"
               + (" (chosen automatically: lower residual)" if "candidates" in s["prior"] else ""))
-    if scan.notes:
-        print("scan repaired: " + "; ".join(scan.notes))
-    if not np.isfinite(s["mean"]):
-        return 1
-    return 0
+    if notes:
+        print("scan repaired: " + "; ".join(notes))

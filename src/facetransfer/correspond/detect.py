@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import FaceTransferError
+from ..geometry import barycentric_2d
 from .features import FeaturePoints
 
 #: iBUG-68 points kept by default: brows, nose, eyes, mouth (the jaw contour is a silhouette)
@@ -84,18 +85,48 @@ def candidate_views() -> list[np.ndarray]:
     return out
 
 
-def _render(vertices, faces, rotation, size, uvs, texture, frame_vertices, fill, background):
-    from ..render import look_at_weak_perspective, render
+@dataclass(frozen=True, eq=False)
+class _ScanRenderer:
+    """How the scan is shown to the detector: with its colour map when it has one, otherwise
+    shaded in :data:`SKIN`, framed on ``frame_vertices`` (default all) filling ``fill`` of a
+    ``size`` x ``size`` image."""
 
-    cam = look_at_weak_perspective(vertices if frame_vertices is None else frame_vertices,
-                                   (size, size), rotation=rotation, fill=fill)
-    if texture is not None and uvs is not None:
-        r = render(vertices, faces, cam, (size, size), uvs=uvs, texture=texture,
-                   background=background)
-    else:
-        colors = np.tile(np.asarray(SKIN, np.uint8), (len(vertices), 1))
-        r = render(vertices, faces, cam, (size, size), colors=colors, background=background)
-    return cam, r
+    vertices: np.ndarray
+    faces: np.ndarray
+    uvs: np.ndarray | None
+    texture: np.ndarray | None
+    frame_vertices: np.ndarray | None
+    size: int
+    fill: float
+    background: tuple
+
+    def render(self, rotation: np.ndarray):
+        """The weak-perspective camera and the :class:`facetransfer.render.RenderResult` of the
+        view ``rotation`` (3, 3)."""
+        from ..render import look_at_weak_perspective, render
+
+        V, size = self.vertices, self.size
+        cam = look_at_weak_perspective(V if self.frame_vertices is None else self.frame_vertices,
+                                       (size, size), rotation=rotation, fill=self.fill)
+        if self.texture is not None and self.uvs is not None:
+            r = render(V, self.faces, cam, (size, size), uvs=self.uvs, texture=self.texture,
+                       background=self.background)
+        else:
+            colors = np.tile(np.asarray(SKIN, np.uint8), (len(V), 1))
+            r = render(V, self.faces, cam, (size, size), colors=colors, background=self.background)
+        return cam, r
+
+
+@dataclass(frozen=True, eq=False)
+class _Detection:
+    """One view's detection: the view, its camera and rendering, the iBUG-68 points in the image
+    ``(68, 2)`` and lifted onto the surface ``(68, 3)`` (NaN where they miss it)."""
+
+    rotation: np.ndarray
+    camera: object
+    rendering: object
+    points2d: np.ndarray
+    points3d: np.ndarray
 
 
 def lift_points(points2d: np.ndarray, vertices: np.ndarray, faces: np.ndarray, camera,
@@ -105,8 +136,6 @@ def lift_points(points2d: np.ndarray, vertices: np.ndarray, faces: np.ndarray, c
     The triangle seen at each point's pixel (z-buffer) and the point's barycentric coordinates
     in that triangle's projection (clamped to the triangle) give the 3D point.
     """
-    from ..texture import _bary2d
-
     H, W = raster.tri_id.shape
     xy = np.asarray(points2d, np.float64)
     ix, iy = np.rint(xy[:, 0]).astype(int), np.rint(xy[:, 1]).astype(int)
@@ -115,7 +144,7 @@ def lift_points(points2d: np.ndarray, vertices: np.ndarray, faces: np.ndarray, c
     tri[inside] = raster.tri_id[iy[inside], ix[inside]]
     ok = tri >= 0
     Ft = faces[tri[ok]]
-    b = _bary2d(camera.project(vertices[Ft.ravel()]).reshape(-1, 3, 2), xy[ok])
+    b = barycentric_2d(camera.project(vertices[Ft.ravel()]).reshape(-1, 3, 2), xy[ok])
     # a point within half a pixel of an edge may fall in the neighbour of the triangle seen at
     # its pixel centre: clamp to the triangle so that it stays on the surface
     b = np.clip(b, 0.0, None)
@@ -195,55 +224,78 @@ def detect_scan_features(vertices: np.ndarray, faces: np.ndarray, *, uvs=None, t
     FeatureDetectionError
         No face on any rendering, or fewer than 8 points on the surface.
     """
-    V = np.asarray(vertices, np.float64)
-    F = np.asarray(faces, np.int64)
     ids = np.asarray(sorted(set(int(i) for i in ids)), np.int64)
+    views = _views(view)
+    scan = _ScanRenderer(np.asarray(vertices, np.float64), np.asarray(faces, np.int64), uvs, texture,
+                         frame_vertices, size, fill, background)
     own = None
     if detector is None:
         from ..track.init import MediaPipeDetector
 
         detector = own = MediaPipeDetector()
     try:
-        if isinstance(view, str) and view == "front":
-            views = [np.eye(3)]
-        elif isinstance(view, str) and view == "auto":
-            views = candidate_views()
-        elif isinstance(view, str):
-            raise FeatureDetectionError(f"view must be 'auto', 'front' or a rotation, got {view!r}")
-        else:
-            views = [np.asarray(view, np.float64).reshape(3, 3)]
-        cands = []
-        for R in views:
-            cam, r = _render(V, F, R, size, uvs, texture, frame_vertices, fill, background)
-            p68 = detector.detect(r.image)
-            if p68 is None:
-                continue
-            ok, P = lift_points(p68, V, F, cam, r.raster)
-            P68 = np.full((68, 3), np.nan)
-            P68[np.flatnonzero(ok)] = P
-            if len(views) == 1 or _plausible(P68):
-                cands.append((R, cam, r, p68, P68))
-        if not cands:
-            raise FeatureDetectionError(
-                f"no face found on {len(views)} rendering(s) of the scan "
-                f"({'searched the 24 axis views' if len(views) > 1 else 'the given view'}); "
-                "place the feature points by hand")
-        R, cam, r, p68, P68 = cands[_consensus([c[4] for c in cands])]
+        best = _best_detection(scan, views, detector)
         if isinstance(view, str) and view == "auto":
-            # once more, looking straight at the face found
-            fr = _frontal(P68)
-            if fr is not None:
-                R2 = view_rotation(*fr)
-                cam2, r2 = _render(V, F, R2, size, uvs, texture, frame_vertices, fill, background)
-                q68 = detector.detect(r2.image)
-                if q68 is not None:
-                    R, cam, r, p68 = R2, cam2, r2, q68
-        xy = p68[ids]
-        ok, P = lift_points(xy, V, F, cam, r.raster)
+            best = _look_straight(scan, best, detector)
+        xy = best.points2d[ids]
+        ok, P = lift_points(xy, scan.vertices, scan.faces, best.camera, best.rendering.raster)
         if ok.sum() < 8:
             raise FeatureDetectionError(f"only {int(ok.sum())} detected points lie on the scan "
                                         "surface; at least 8 are needed")
-        return DetectedFeatures(FeaturePoints(ids[ok], P), R, r.image, xy[ok])
+        return DetectedFeatures(FeaturePoints(ids[ok], P), best.rotation, best.rendering.image,
+                                xy[ok])
     finally:
         if own is not None:
             own.close()
+
+
+def _views(view) -> list[np.ndarray]:
+    """The rotations (3, 3) to render for ``view`` ("front", "auto" or a rotation)."""
+    if isinstance(view, str) and view == "front":
+        return [np.eye(3)]
+    if isinstance(view, str) and view == "auto":
+        return candidate_views()
+    if isinstance(view, str):
+        raise FeatureDetectionError(f"view must be 'auto', 'front' or a rotation, got {view!r}")
+    return [np.asarray(view, np.float64).reshape(3, 3)]
+
+
+def _detect_view(scan: _ScanRenderer, rotation: np.ndarray, detector) -> _Detection | None:
+    """Render one view, detect, lift the 68 points onto the surface; None if no face is found."""
+    cam, r = scan.render(rotation)
+    p68 = detector.detect(r.image)
+    if p68 is None:
+        return None
+    ok, P = lift_points(p68, scan.vertices, scan.faces, cam, r.raster)
+    P68 = np.full((68, 3), np.nan)
+    P68[np.flatnonzero(ok)] = P
+    return _Detection(rotation, cam, r, p68, P68)
+
+
+def _best_detection(scan: _ScanRenderer, views: list, detector) -> _Detection:
+    """The plausible detection most others agree with (:func:`_consensus`); with a single view,
+    its detection. FeatureDetectionError if there is none."""
+    cands = []
+    for R in views:
+        d = _detect_view(scan, R, detector)
+        if d is not None and (len(views) == 1 or _plausible(d.points3d)):
+            cands.append(d)
+    if not cands:
+        raise FeatureDetectionError(
+            f"no face found on {len(views)} rendering(s) of the scan "
+            f"({'searched the 24 axis views' if len(views) > 1 else 'the given view'}); "
+            "place the feature points by hand")
+    return cands[_consensus([c.points3d for c in cands])]
+
+
+def _look_straight(scan: _ScanRenderer, best: _Detection, detector) -> _Detection:
+    """Once more, looking straight at the face found; ``best`` if that finds no face."""
+    fr = _frontal(best.points3d)
+    if fr is None:
+        return best
+    R2 = view_rotation(*fr)
+    cam2, r2 = scan.render(R2)
+    q68 = detector.detect(r2.image)
+    if q68 is None:
+        return best
+    return _Detection(R2, cam2, r2, q68, best.points3d)

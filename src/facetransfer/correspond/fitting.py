@@ -49,8 +49,9 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import FaceTransferError, MeshError
+from ..render import vertex_normals
 from .features import FeatureError, FeaturePoints, validate_features_on_surface
-from .meshops import ScanMesh, SurfaceQuery, face_normals, mesh_laplacian, vertex_normals
+from .meshops import ScanMesh, SurfaceQuery, face_normals, mesh_laplacian
 from .prior import ShapePrior, fit_shape_prior, ict_prior
 from .procrustes import Similarity, rotation_from_vector, similarity_procrustes
 
@@ -271,20 +272,75 @@ def upper_face_vertices(vertices: np.ndarray, landmarks: np.ndarray) -> np.ndarr
     return np.flatnonzero(np.isin(valid[nearest], UPPER_LANDMARKS))
 
 
-def _pairs(query: SurfaceQuery, x: np.ndarray, faces: np.ndarray, *, max_distance: float,
-           max_angle: float, normal_sign: float, idx: np.ndarray | None = None):
-    """Closest points of ``x`` (or of ``x[idx]``) and which pairs are accepted."""
-    vn = vertex_normals(x, faces)
-    if idx is not None:
-        x, vn = x[idx], vn[idx]
-    cp = query.closest(x)
-    cos = normal_sign * np.einsum("ij,ij->i", vn, cp.normal)
-    ok = (~cp.on_boundary) & (cp.distance <= max_distance) & (cos >= np.cos(np.radians(max_angle)))
-    return cp, ok, cos
+@dataclass(frozen=True, eq=False)
+class _WorkFrame:
+    """The scan in the normalised work frame (module docstring) and the closest-point rule.
+
+    The template side stays put (``x₀`` is the regularisation target); every alignment moves the
+    scan instead (:meth:`moved`).
+
+    Attributes
+    ----------
+    to_work : Similarity
+        Scan frame → work frame.
+    query : SurfaceQuery
+        The scan surface in work coordinates.
+    scan_vertices : (m, 3) float64
+        The scan, scan frame.
+    features : (k, 3) float64
+        The used feature points, scan frame.
+    features_w : (k, 3) float64
+        The same in work coordinates.
+    faces : (F, 3) int64
+        The template's triangles.
+    max_angle : float
+        Closest-point pairs whose normals differ more (degrees) are rejected.
+    normal_sign : float
+        ``±1``: the scan's winding relative to the template's (:func:`_normal_sign`).
+    """
+
+    to_work: Similarity
+    query: SurfaceQuery
+    scan_vertices: np.ndarray
+    features: np.ndarray
+    features_w: np.ndarray
+    faces: np.ndarray
+    max_angle: float
+    normal_sign: float = 1.0
+
+    @classmethod
+    def start(cls, to_work: Similarity, query_scan: SurfaceQuery, features: np.ndarray,
+              faces: np.ndarray, max_angle: float, x0: np.ndarray) -> "_WorkFrame":
+        """The scan of ``query_scan`` and its ``features`` (k, 3) moved by ``to_work``, its normals
+        oriented by agreement with the template ``x0`` (n, 3) (work frame)."""
+        scan_vertices = query_scan.vertices
+        query = query_scan.moved(to_work.apply(scan_vertices))
+        return cls(to_work, query, scan_vertices, features, to_work.apply(features), faces,
+                   max_angle, _normal_sign(query, x0, faces))
+
+    def moved(self, motion: Similarity) -> "_WorkFrame":
+        """The frame after the template side moved by ``motion``: the scan moves by its inverse."""
+        to_work = motion.inverse().compose(self.to_work)
+        return replace(self, to_work=to_work, query=self.query.moved(to_work.apply(self.scan_vertices)),
+                       features_w=to_work.apply(self.features))
+
+    def pairs(self, x: np.ndarray, max_distance: float, idx: np.ndarray | None = None):
+        """Closest points of ``x`` (n, 3) (or of ``x[idx]``) and which pairs are accepted.
+
+        Returns ``(cp, ok, cos)``: :class:`ClosestPoints`, ``(m,) bool`` and the normals' cosines.
+        """
+        vn = vertex_normals(x, self.faces)
+        if idx is not None:
+            x, vn = x[idx], vn[idx]
+        cp = self.query.closest(x)
+        cos = self.normal_sign * np.einsum("ij,ij->i", vn, cp.normal)
+        ok = (~cp.on_boundary) & (cp.distance <= max_distance) \
+            & (cos >= np.cos(np.radians(self.max_angle)))
+        return cp, ok, cos
 
 
-def _rigid_icp(query, x, faces, idx, *, iterations, max_angle, normal_sign,
-               start_distance=5.0, end_distance=0.5, keep=0.8):
+def _rigid_icp(work: _WorkFrame, x, idx, *, iterations, start_distance=5.0, end_distance=0.5,
+               keep=0.8):
     """Trimmed point-to-plane rigid ICP of vertices ``idx`` of ``x`` to the surface.
 
     Each step linearises the rotation and minimises ``Σ (n·(R x + t − c))²`` over the closest
@@ -296,8 +352,7 @@ def _rigid_icp(query, x, faces, idx, *, iterations, max_angle, normal_sign,
     cur = x
     for it in range(iterations):
         lim = max(end_distance, start_distance * 0.7 ** it)
-        cp, ok, _ = _pairs(query, cur, faces, max_distance=lim, max_angle=max_angle,
-                           normal_sign=normal_sign, idx=idx)
+        cp, ok, _ = work.pairs(cur, lim, idx=idx)
         sel = np.flatnonzero(ok)
         if len(sel) < 10:
             continue
@@ -353,22 +408,290 @@ def choose_prior(residuals: Sequence[float], *, margin: float = 0.1) -> int:
     return best
 
 
-def _prior_residual(query, pf, faces, sub, *, max_angle: float, normal_sign: float) -> float:
+@dataclass(frozen=True, eq=False)
+class _PriorPairs:
+    """Closest-point pairs for :func:`.prior.fit_shape_prior`: vertices ``sub`` of the face, with a
+    distance limit shrinking from 2 to 0.3 (normalised cm) over the iterations."""
+
+    work: _WorkFrame
+    sub: np.ndarray
+
+    def __call__(self, x: np.ndarray, it: int):
+        cp, ok, _ = self.work.pairs(x, max(0.3, 2.0 * 0.6 ** it), idx=self.sub)
+        return self.sub[ok], cp.points[ok], cp.normal[ok]
+
+
+def _prior_residual(work: _WorkFrame, pf, sub) -> float:
     """Median distance (work units) from a prior fit's posed face to the scan, over the sampled
     vertices that find a compatible closest point within 2 units."""
     x = pf.pose.apply(pf.face)
-    cp, ok, _ = _pairs(query, x, faces, max_distance=2.0, max_angle=max_angle,
-                       normal_sign=normal_sign, idx=sub)
+    cp, ok, _ = work.pairs(x, 2.0, idx=sub)
     return float(np.median(cp.distance[ok])) if ok.any() else float("inf")
+
+
+def _prior_candidates(prior, template: Template, reference) -> list[ShapePrior]:
+    """The face spaces to fit first (``prior`` of :func:`fit_template`), checked against the
+    template; none with a ``reference``."""
+    if isinstance(prior, str):
+        if prior != "template":
+            raise ValueError(f"prior must be a ShapePrior, 'template' or None, got {prior!r}")
+        prior = template.prior
+    if reference is not None:
+        prior = None
+    candidates = list(prior) if isinstance(prior, (list, tuple)) else [prior]
+    candidates = [c for c in candidates if c is not None]
+    for c in candidates:
+        if c.basis.shape[1:] != template.vertices.shape:
+            raise MeshError(f"shape prior {c.name} has basis {c.basis.shape}; the template "
+                            f"{template.name} needs (K, {len(template.vertices)}, 3)")
+    return candidates
+
+
+def _base_vertices(template: Template, reference) -> np.ndarray:
+    """The mesh to deform ``(n, 3)``: the template, or the reference fit of the cascade."""
+    base = template.vertices if reference is None else np.asarray(reference, dtype=np.float64)
+    if base.shape != template.vertices.shape or not np.all(np.isfinite(base)):
+        raise MeshError(f"reference fit must be finite {template.vertices.shape}, got {base.shape}")
+    return base
+
+
+def _usable_features(features: FeaturePoints, template: Template, query_scan: SurfaceQuery,
+                     tolerance: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Feature points on the scan that have a template landmark.
+
+    Returns ``(ibug (k,), points (k, 3), template vertices (k,))``; at least 8, or FeatureError.
+    """
+    validate_features_on_surface(features, query_scan.closest(features.points).distance,
+                                 rel_tol=tolerance, source="feature points")
+    lmv = template.landmarks[features.indices]
+    use = lmv >= 0
+    if use.sum() < 8:
+        raise FeatureError(f"only {int(use.sum())} feature points have a template landmark; "
+                           "at least 8 needed")
+    return features.indices[use], features.points[use], lmv[use]
+
+
+def _normalisation(base: np.ndarray, landmarks: np.ndarray) -> Similarity:
+    """Scale to the normalised frame: template landmark spread → :data:`REFERENCE_SPREAD`."""
+    valid_lm = landmarks[landmarks >= 0]
+    k = REFERENCE_SPREAD / _spread(base[valid_lm])
+    return Similarity(k, np.eye(3), np.zeros(3))
+
+
+def _normal_sign(query: SurfaceQuery, x0: np.ndarray, faces: np.ndarray) -> float:
+    """Scan normals may be wound either way: ``±1`` orienting them by agreement with ``x0``."""
+    cp0 = query.closest(x0)
+    vn0 = vertex_normals(x0, faces)
+    near = (~cp0.on_boundary) & (cp0.distance < 1.0)
+    dots = np.einsum("ij,ij->i", vn0, cp0.normal)[near]
+    return -1.0 if dots.size and np.median(dots) < 0 else 1.0
+
+
+def _prior_info(candidates: list, residuals: list, pick: int, pf, margin: float) -> dict:
+    """``stats["prior"]`` of :class:`FitResult`: the chosen face space and, with several, all."""
+    prior = candidates[pick]
+    info = {"name": prior.name, "n_components": prior.n_components,
+            "coefficient_norm": float(np.linalg.norm(pf.coefficients)),
+            "coefficients": [round(float(c), 6) for c in pf.coefficients],
+            "residual": residuals[pick]}
+    if len(candidates) > 1:
+        info["candidates"] = [{"name": c.name, "residual": r}
+                              for c, r in zip(candidates, residuals)]
+        info["chosen_by"] = (f"lowest median distance of the prior fit to the scan "
+                             f"(a later candidate must be {100 * margin:g}% lower)")
+        log.info("shape prior: %s (median distances %s)", prior.name,
+                 ", ".join(f"{r:.4g}" for r in residuals))
+    return info
+
+
+def _fit_priors(work: _WorkFrame, candidates: list, x0: np.ndarray, scale: float,
+                lmv: np.ndarray, *, iterations: int, lam: float, margin: float):
+    """The shape-prior stage (:mod:`.prior`): fit every candidate, keep one (:func:`choose_prior`).
+
+    Returns
+    -------
+    x0 : (n, 3) float64
+        The chosen prior's face ``x₀ + B w`` (work frame), the new regularisation target.
+    work : _WorkFrame
+        Moved so that the scan lies on that face (the prior face is not moved).
+    history : list of dict
+    info : dict
+        ``stats["prior"]``.
+    """
+    sub = np.arange(0, len(x0), max(1, len(x0) // 3000))  # 107 unknowns: 3000 pairs suffice
+    pairs_fn = _PriorPairs(work, sub)
+    fits = [fit_shape_prior(pairs_fn, x0, scale * c.basis, lmv, work.features_w,
+                            iterations=iterations, lam=lam * len(sub) / len(x0))
+            for c in candidates]
+    residuals = [_prior_residual(work, pf, sub) for pf in fits]
+    pick = choose_prior(residuals, margin=margin)
+    pf = fits[pick]
+    history = [{"stage": "shape prior", "iteration": i, **h} for i, h in enumerate(pf.history)]
+    return pf.face, work.moved(pf.pose), history, _prior_info(candidates, residuals, pick, pf, margin)
+
+
+def _data_terms(work: _WorkFrame, x: np.ndarray, lmv: np.ndarray, st: FitStage):
+    """The diagonal data part of Eq. (1) at the current fit ``x`` (n, 3).
+
+    Returns ``(weights (n,), weighted targets (n, 3), accepted pairs, their mean distance)``:
+    closest points with ``w_c`` and feature points with ``w_f``.
+    """
+    n = len(x)
+    wdiag = np.zeros(n)
+    target = np.zeros((n, 3))
+    if st.w_closest > 0:
+        cp, ok, _ = work.pairs(x, st.max_distance)
+        wdiag[ok] += st.w_closest
+        target[ok] += st.w_closest * cp.points[ok]
+        n_ok = int(ok.sum())
+        mean_d = float(cp.distance[ok].mean()) if ok.any() else None
+    else:
+        n_ok, mean_d = 0, None
+    np.add.at(wdiag, lmv, st.w_features)
+    np.add.at(target, lmv, st.w_features * work.features_w)
+    return wdiag, target, n_ok, mean_d
+
+
+def _deform(work: _WorkFrame, x0: np.ndarray, lmv: np.ndarray, schedule: Sequence[FitStage],
+            progress, first: int, n_stages: int) -> tuple[np.ndarray, list]:
+    """Minimise Eq. (1) stage by stage: per solve, closest points, then one sparse SPD system.
+
+    ``progress`` is called before each stage (numbered from ``first``) and once with ``"done"``.
+    Returns the fit ``x`` (n, 3) (work frame) and the per-solve history.
+    """
+    n = len(x0)
+    lap = mesh_laplacian(x0, work.faces)
+    ltl = (lap.T @ lap).tocsc()
+    eye = sp.identity(n, format="csc")
+    x = x0.copy()
+    history = []
+    for si, st in enumerate(schedule):
+        lu = None  # factorised at the stage's first solve
+        if progress is not None:
+            progress(si + first, n_stages, st.name)
+        for it in range(max(1, st.iterations)):
+            wdiag, target, n_ok, mean_d = _data_terms(work, x, lmv, st)
+            a = (st.w_smooth * ltl + sp.diags(wdiag) + (st.w_rest + 1e-9) * eye).tocsc()
+            rhs = target - wdiag[:, None] * x0                 # normal equations of Eq. (1) in d
+            d, lu = _solve(a, rhs, lu, x - x0)  # the stage's factorisation, once made
+            x = x0 + d
+            history.append({"stage": st.name, "iteration": it, "pairs": n_ok, "mean_distance": mean_d})
+            log.info("stage %s it %d: %d pairs, mean distance %s", st.name, it, n_ok, mean_d)
+            if st.w_closest == 0:
+                break
+    if progress is not None:
+        progress(n_stages, n_stages, "done")
+    return x, history
+
+
+def _surface_stats(query_scan: SurfaceQuery, out: np.ndarray, x: np.ndarray, x0: np.ndarray,
+                   faces: np.ndarray, resid: np.ndarray) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Distances ``(n,)`` of the fit ``out`` (scan frame) to the scan, coverage ``(n,) bool`` and
+    the first :attr:`FitResult.stats` (scan units; flipped triangles between ``x0`` and ``x``)."""
+    cp = query_scan.closest(out)
+    covered = ~cp.on_boundary
+    dist = cp.distance
+    fn0, _ = face_normals(x0, faces)
+    fn1, _ = face_normals(x, faces)
+    flipped = float(np.mean(np.einsum("ij,ij->i", fn0, fn1) < 0))
+    dc = dist[covered] if covered.any() else dist
+    stats = {"mean": float(dc.mean()), "median": float(np.median(dc)),
+             "p95": float(np.percentile(dc, 95)), "max": float(dc.max()),
+             "n_covered": int(covered.sum()), "n_vertices": int(len(x)),
+             "feature_rms": float(np.sqrt(np.mean(resid ** 2))), "flipped_fraction": flipped}
+    return dist, covered, stats
+
+
+def _check_converged(out: np.ndarray, stats: dict, scale_back: float, diverge_distance: float,
+                     diverge_flipped: float) -> None:
+    """Raise FitDivergedError when the fit is not finite, far from the scan or folded."""
+    flipped = stats["flipped_fraction"]
+    if not np.all(np.isfinite(out)) or stats["mean"] / scale_back > diverge_distance \
+            or flipped > diverge_flipped:
+        raise FitDivergedError(
+            f"fit diverged: mean distance to the scan {stats['mean']:.4g} scan units "
+            f"(limit {diverge_distance * scale_back:.4g}), {100 * flipped:.1f}% of triangles flipped "
+            f"(limit {100 * diverge_flipped:.0f}%); check the feature points")
+
+
+@dataclass(frozen=True, eq=False)
+class _Alignment:
+    """The used feature correspondences of one fit and its two frames.
+
+    Attributes
+    ----------
+    query_scan : SurfaceQuery
+        The scan, scan frame.
+    ibug : (k,) int64
+        iBUG-68 numbers of the used feature points.
+    points : (k, 3) float64
+        Their positions on the scan.
+    vertices : (k,) int64
+        Their template vertices.
+    sim : Similarity
+        Template (or reference) frame → scan frame, by Procrustes on the features (§4.2).
+    norm : Similarity
+        Template frame → normalised frame (:func:`_normalisation`).
+    """
+
+    query_scan: SurfaceQuery
+    ibug: np.ndarray
+    points: np.ndarray
+    vertices: np.ndarray
+    sim: Similarity
+    norm: Similarity
+
+    @classmethod
+    def build(cls, scan: ScanMesh, features: FeaturePoints, template: Template, base: np.ndarray,
+              *, with_scale: bool, tolerance: float) -> "_Alignment":
+        query_scan = SurfaceQuery(scan.vertices, scan.faces)
+        fidx, fpts, lmv = _usable_features(features, template, query_scan, tolerance)
+        sim = similarity_procrustes(base[lmv], fpts, with_scale=with_scale)  # Procrustes (§4.2)
+        return cls(query_scan, fidx, fpts, lmv, sim, _normalisation(base, template.landmarks))
+
+
+def _place_face(al: _Alignment, work: _WorkFrame, x0: np.ndarray, candidates: list,
+                template: Template, reference, progress, n_stages: int, **prior_options):
+    """Before Eq. (1): the shape prior's best face (:func:`_fit_priors`), or the reference
+    aligned rigidly on the upper face (the cascade); the scan moves, not ``x0``.
+
+    Returns ``(x0, work, history, stats["prior"])``.
+    """
+    history, prior_info = [], None
+    if candidates:
+        if progress is not None:
+            progress(0, n_stages, "shape prior")
+        x0, work, history, prior_info = _fit_priors(work, candidates, x0, al.norm.scale,
+                                                    al.vertices, **prior_options)
+    if reference is not None:
+        upper = upper_face_vertices(x0, template.landmarks)
+        work = work.moved(_rigid_icp(work, x0, upper, iterations=25))
+    return x0, work, history, prior_info
+
+
+def _checked_result(al: _Alignment, work: _WorkFrame, x: np.ndarray, x0: np.ndarray, history: list,
+                    prior_info, t0: float, diverge_distance: float, diverge_flipped: float
+                    ) -> FitResult:
+    """The fit ``x`` (work frame) back in scan units, with its statistics; FitDivergedError if it
+    is not finite, far from the scan or folded (:func:`_check_converged`)."""
+    back = work.to_work.inverse()
+    out = back.apply(x)
+    resid = np.linalg.norm(out[al.vertices] - al.points, axis=1)
+    dist, covered, stats = _surface_stats(al.query_scan, out, x, x0, work.faces, resid)
+    stats.update({"scan_units_per_template_unit": float(al.sim.scale),
+                  "seconds": time.perf_counter() - t0, "features_used": [int(i) for i in al.ibug],
+                  "prior": prior_info})
+    _check_converged(out, stats, 1.0 / work.to_work.scale, diverge_distance, diverge_flipped)
+    return FitResult(out, work.faces, dist, covered, back.compose(al.norm), resid, stats,
+                     tuple(history))
 
 
 def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
                  reference: np.ndarray | None = None,
                  prior: ShapePrior | Sequence[ShapePrior] | str | None = "template",
-                 prior_iterations: int = 12, prior_lambda: float = 0.1,
-                 prior_margin: float = 0.1,
-                 schedule: Sequence[FitStage] | None = None,
-                 max_angle: float = 60.0, feature_tolerance: float = 0.2,
+                 prior_iterations: int = 12, prior_lambda: float = 0.1, prior_margin: float = 0.1,
+                 schedule: Sequence[FitStage] | None = None, max_angle: float = 60.0,
+                 feature_tolerance: float = 0.2,
                  diverge_distance: float = 0.5, diverge_flipped: float = 0.05,
                  progress: Callable[[int, int, str], None] | None = None) -> FitResult:
     """Fit a template to a scan (§4.2).
@@ -382,22 +705,21 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     template : Template
         Defines the output topology and the landmark vertices.
     reference : (n, 3) float, optional
-        A previous fit of the same subject in ``template`` topology, in its own scan's
-        coordinates (the cascade): it is aligned rigidly on the upper face and deformed instead of
-        the template.
+        A previous fit of the same subject in ``template`` topology, in its own scan's coordinates
+        (the cascade): it is aligned rigidly on the upper face and deformed instead of the template.
     prior : ShapePrior, "template" or None
-        Fit this face space first (:func:`.prior.fit_shape_prior`) and deform its best face
-        instead of the template; ``"template"`` (default): the template's own prior, if any.
-        Not used with a ``reference`` (the reference already is the subject). A sequence of
-        priors: each is fitted, and the one whose face lies closest to the scan is kept
-        (:func:`choose_prior`); ``stats["prior"]`` names it and lists every candidate's residual.
+        Fit this face space first (:func:`.prior.fit_shape_prior`) and deform its best face instead
+        of the template; ``"template"`` (default): the template's own prior, if any. Not used with
+        a ``reference`` (the reference already is the subject). A sequence of priors: each is
+        fitted, and the one whose face lies closest to the scan is kept (:func:`choose_prior`);
+        ``stats["prior"]`` names it and lists every candidate's residual.
     prior_iterations : int
         Closest-point iterations of the prior fit.
     prior_lambda : float
         Weight of the prior ``‖w‖²`` against the proximity of all template vertices at unit weight.
     prior_margin : float
-        With several priors, a later (larger) one is chosen only if its residual is lower than
-        the best earlier one's by more than this fraction.
+        With several priors, a later (larger) one is chosen only if its residual is lower than the
+        best earlier one's by more than this fraction.
     schedule : sequence of FitStage, optional
         Default :data:`PRIOR_SCHEDULE` after a prior, :data:`DEFAULT_SCHEDULE` without.
     max_angle : float
@@ -427,154 +749,19 @@ def fit_template(scan: ScanMesh, features: FeaturePoints, template: Template, *,
     Vlasic et al. 2005, §4.2; Allen et al. 2003; Sumner & Popović 2004; Umeyama 1991.
     """
     t0 = time.perf_counter()
-    faces = template.faces
-    if isinstance(prior, str):
-        if prior != "template":
-            raise ValueError(f"prior must be a ShapePrior, 'template' or None, got {prior!r}")
-        prior = template.prior
-    if reference is not None:
-        prior = None
-    candidates = list(prior) if isinstance(prior, (list, tuple)) else [prior]
-    candidates = [c for c in candidates if c is not None]
-    prior = candidates[0] if candidates else None
-    for c in candidates:
-        if c.basis.shape[1:] != template.vertices.shape:
-            raise MeshError(f"shape prior {c.name} has basis {c.basis.shape}; the template "
-                            f"{template.name} needs (K, {len(template.vertices)}, 3)")
+    candidates = _prior_candidates(prior, template, reference)
     if schedule is None:
-        schedule = DEFAULT_SCHEDULE if prior is None else PRIOR_SCHEDULE
-    base = template.vertices if reference is None else np.asarray(reference, dtype=np.float64)
-    if base.shape != template.vertices.shape or not np.all(np.isfinite(base)):
-        raise MeshError(f"reference fit must be finite {template.vertices.shape}, got {base.shape}")
-    query_scan = SurfaceQuery(scan.vertices, scan.faces)
-    validate_features_on_surface(features, query_scan.closest(features.points).distance,
-                                 rel_tol=feature_tolerance, source="feature points")
-    lmv = template.landmarks[features.indices]
-    use = lmv >= 0
-    if use.sum() < 8:
-        raise FeatureError(f"only {int(use.sum())} feature points have a template landmark; "
-                           "at least 8 needed")
-    fidx, fpts, lmv = features.indices[use], features.points[use], lmv[use]
-    # Procrustes (§4.2): template/reference frame → scan frame.
-    sim = similarity_procrustes(base[lmv], fpts, with_scale=reference is None)
-    # Normalised frame: template landmark spread → REFERENCE_SPREAD (cm-like units).
-    valid_lm = template.landmarks[template.landmarks >= 0]
-    k = REFERENCE_SPREAD / _spread(base[valid_lm])
-    norm = Similarity(k, np.eye(3), np.zeros(3))
-    to_work = norm.compose(sim.inverse())              # scan → work
-    scan_w = to_work.apply(scan.vertices)
-    fpts_w = to_work.apply(fpts)
-    x0 = norm.apply(base)
-    query = query_scan.moved(scan_w)
-    # Scan normals may be wound either way: orient them by agreement with the template.
-    cp0 = query.closest(x0)
-    vn0 = vertex_normals(x0, faces)
-    near = (~cp0.on_boundary) & (cp0.distance < 1.0)
-    dots = np.einsum("ij,ij->i", vn0, cp0.normal)[near]
-    normal_sign = -1.0 if dots.size and np.median(dots) < 0 else 1.0
-    history = []
-    prior_info = None
-    n_stages = len(schedule) + (prior is not None)
-    if prior is not None:
-        if progress is not None:
-            progress(0, n_stages, "shape prior")
-        sub = np.arange(0, len(x0), max(1, len(x0) // 3000))  # 107 unknowns: 3000 pairs suffice
-
-        def pairs_fn(x, it):
-            cp, ok, _ = _pairs(query, x, faces, max_distance=max(0.3, 2.0 * 0.6 ** it),
-                               max_angle=max_angle, normal_sign=normal_sign, idx=sub)
-            return sub[ok], cp.points[ok], cp.normal[ok]
-
-        fits = [fit_shape_prior(pairs_fn, x0, k * c.basis, lmv, fpts_w,
-                                iterations=prior_iterations,
-                                lam=prior_lambda * len(sub) / len(x0)) for c in candidates]
-        residuals = [_prior_residual(query, pf, faces, sub, max_angle=max_angle,
-                                     normal_sign=normal_sign) for pf in fits]
-        pick = choose_prior(residuals, margin=prior_margin)
-        prior, pf = candidates[pick], fits[pick]
-        x0 = pf.face                                    # x₀ + B w
-        to_work = pf.pose.inverse().compose(to_work)   # move the scan, not the prior face
-        scan_w = to_work.apply(scan.vertices)
-        fpts_w = to_work.apply(fpts)
-        query = query.moved(scan_w)
-        history.extend({"stage": "shape prior", "iteration": i, **h} for i, h in enumerate(pf.history))
-        prior_info = {"name": prior.name, "n_components": prior.n_components,
-                      "coefficient_norm": float(np.linalg.norm(pf.coefficients)),
-                      "coefficients": [round(float(c), 6) for c in pf.coefficients],
-                      "residual": residuals[pick]}
-        if len(candidates) > 1:
-            prior_info["candidates"] = [{"name": c.name, "residual": r}
-                                        for c, r in zip(candidates, residuals)]
-            prior_info["chosen_by"] = (f"lowest median distance of the prior fit to the scan "
-                                       f"(a later candidate must be {100 * prior_margin:g}% "
-                                       "lower)")
-            log.info("shape prior: %s (median distances %s)", prior.name,
-                     ", ".join(f"{r:.4g}" for r in residuals))
-    if reference is not None:
-        upper = upper_face_vertices(x0, template.landmarks)
-        rig = _rigid_icp(query, x0, faces, upper, iterations=25, max_angle=max_angle,
-                         normal_sign=normal_sign)
-        # Move the scan instead of the reference, so x0 stays the regularisation target.
-        to_work = rig.inverse().compose(to_work)
-        scan_w = to_work.apply(scan.vertices)
-        fpts_w = to_work.apply(fpts)
-        query = query.moved(scan_w)
-    n = len(x0)
-    lap = mesh_laplacian(x0, faces)
-    ltl = (lap.T @ lap).tocsc()
-    eye = sp.identity(n, format="csc")
-    x = x0.copy()
-    for si, st in enumerate(schedule):
-        lu = None  # factorised at the stage's first solve
-        if progress is not None:
-            progress(si + (prior is not None), n_stages, st.name)
-        for it in range(max(1, st.iterations)):
-            wdiag = np.zeros(n)
-            target = np.zeros((n, 3))
-            if st.w_closest > 0:
-                cp, ok, _ = _pairs(query, x, faces, max_distance=st.max_distance,
-                                   max_angle=max_angle, normal_sign=normal_sign)
-                wdiag[ok] += st.w_closest
-                target[ok] += st.w_closest * cp.points[ok]
-                n_ok = int(ok.sum())
-                mean_d = float(cp.distance[ok].mean()) if ok.any() else None
-            else:
-                n_ok, mean_d = 0, None
-            np.add.at(wdiag, lmv, st.w_features)
-            np.add.at(target, lmv, st.w_features * fpts_w)
-            a = (st.w_smooth * ltl + sp.diags(wdiag) + (st.w_rest + 1e-9) * eye).tocsc()
-            rhs = target - wdiag[:, None] * x0                 # normal equations of Eq. (1) in d
-            d, lu = _solve(a, rhs, lu, x - x0)  # the stage's factorisation, once made
-            x = x0 + d
-            history.append({"stage": st.name, "iteration": it, "pairs": n_ok, "mean_distance": mean_d})
-            log.info("stage %s it %d: %d pairs, mean distance %s", st.name, it, n_ok, mean_d)
-            if st.w_closest == 0:
-                break
-    if progress is not None:
-        progress(n_stages, n_stages, "done")
-    # Final statistics in scan units.
-    back = to_work.inverse()
-    out = back.apply(x)
-    cp = query_scan.closest(out)
-    covered = ~cp.on_boundary
-    dist = cp.distance
-    scale_back = 1.0 / to_work.scale
-    fn0, _ = face_normals(x0, faces)
-    fn1, _ = face_normals(x, faces)
-    flipped = float(np.mean(np.einsum("ij,ij->i", fn0, fn1) < 0))
-    resid = np.linalg.norm(out[lmv] - fpts, axis=1)
-    dc = dist[covered] if covered.any() else dist
-    stats = {"mean": float(dc.mean()), "median": float(np.median(dc)),
-             "p95": float(np.percentile(dc, 95)), "max": float(dc.max()),
-             "n_covered": int(covered.sum()), "n_vertices": int(n),
-             "feature_rms": float(np.sqrt(np.mean(resid ** 2))), "flipped_fraction": flipped,
-             "scan_units_per_template_unit": float(sim.scale),
-             "seconds": time.perf_counter() - t0, "features_used": [int(i) for i in fidx],
-             "prior": prior_info}
-    if not np.all(np.isfinite(out)) or stats["mean"] / scale_back > diverge_distance \
-            or flipped > diverge_flipped:
-        raise FitDivergedError(
-            f"fit diverged: mean distance to the scan {stats['mean']:.4g} scan units "
-            f"(limit {diverge_distance * scale_back:.4g}), {100 * flipped:.1f}% of triangles flipped "
-            f"(limit {100 * diverge_flipped:.0f}%); check the feature points")
-    return FitResult(out, faces, dist, covered, back.compose(norm), resid, stats, tuple(history))
+        schedule = PRIOR_SCHEDULE if candidates else DEFAULT_SCHEDULE
+    base = _base_vertices(template, reference)
+    al = _Alignment.build(scan, features, template, base, with_scale=reference is None,
+                          tolerance=feature_tolerance)
+    x0 = al.norm.apply(base)
+    work = _WorkFrame.start(al.norm.compose(al.sim.inverse()), al.query_scan, al.points,
+                            template.faces, max_angle, x0)
+    n_stages = len(schedule) + bool(candidates)
+    x0, work, history, prior_info = _place_face(
+        al, work, x0, candidates, template, reference, progress, n_stages,
+        iterations=prior_iterations, lam=prior_lambda, margin=prior_margin)
+    x, stage_history = _deform(work, x0, al.vertices, schedule, progress, bool(candidates), n_stages)
+    return _checked_result(al, work, x, x0, history + stage_history, prior_info, t0,
+                           diverge_distance, diverge_flipped)

@@ -1,6 +1,8 @@
-"""Scan validation and repair, normals, Laplacians and closest points on a triangle surface.
+"""Scan validation and repair, face normals, Laplacians and closest points on a triangle surface.
 
 Everything here is plain array geometry: vertices ``(n, 3) float64``, triangles ``(F, 3) int64``.
+Vertex normals are :func:`facetransfer.render.vertex_normals` (area-weighted, unit, zero on
+vertices of no non-degenerate face).
 """
 
 from __future__ import annotations
@@ -45,16 +47,6 @@ def face_normals(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     norm = np.linalg.norm(cr, axis=1)
     n = cr / np.maximum(norm, 1e-300)[:, None]
     return n, 0.5 * norm
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals ``(n, 3)``."""
-    v = vertices
-    cr = np.cross(v[faces[:, 1]] - v[faces[:, 0]], v[faces[:, 2]] - v[faces[:, 0]])
-    vn = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(vn, faces[:, k], cr)
-    return vn / np.maximum(np.linalg.norm(vn, axis=1), 1e-300)[:, None]
 
 
 def edge_use_counts(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -144,6 +136,22 @@ def clean_scan(vertices: np.ndarray, faces: np.ndarray, *, name: str = "scan",
     by more than two triangles; on such an edge the two largest triangles are kept and the others
     dropped (:func:`drop_nonmanifold_faces`). Every repair is logged and listed in ``notes``.
     """
+    v, f, diag = _checked_scan_arrays(vertices, faces, name)
+    tol = 1e-9 * diag if merge_tol is None else float(merge_tol)
+    v, f, notes = _merge_duplicate_vertices(v, f, tol, name)
+    f, more = _drop_degenerate_faces(v, f, diag, name)
+    notes += more
+    f, more = _drop_repeated_faces(f, name)
+    notes += more
+    f, more = _drop_nonmanifold_edges(v, f, name)
+    notes += more
+    v, f, boundary = _drop_unused_vertices(v, f)
+    return ScanMesh(v, f, boundary, tuple(notes))
+
+
+def _checked_scan_arrays(vertices, faces, name: str) -> tuple[np.ndarray, np.ndarray, float]:
+    """Vertices ``(n, 3) float64``, faces ``(F, 3) int64`` and the bounding-box diagonal of a scan;
+    ShapeError or MeshError (naming ``name``) when it is empty, non-finite or badly indexed."""
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces)
     if v.ndim != 2 or v.shape[1] != 3:
@@ -159,38 +167,66 @@ def clean_scan(vertices: np.ndarray, faces: np.ndarray, *, name: str = "scan",
     f = f.astype(np.int64)
     if f.min() < 0 or f.max() >= len(v):
         raise MeshError(f"{name}: face indices outside 0..{len(v) - 1}")
-    notes = []
     diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
     if diag <= 0:
         raise MeshError(f"{name}: all scan vertices coincide")
-    tol = 1e-9 * diag if merge_tol is None else float(merge_tol)
+    return v, f, diag
+
+
+def _merge_duplicate_vertices(v: np.ndarray, f: np.ndarray, tol: float, name: str
+                              ) -> tuple[np.ndarray, np.ndarray, list]:
+    """Merge vertices closer than ``tol`` (on a grid of that step); returns ``(v, f, notes)``."""
     key = np.round(v / tol).astype(np.int64) if tol > 0 else v
     _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
     inv = inv.ravel()
+    notes = []
     if len(first) < len(v):
         notes.append(f"merged {len(v) - len(first)} duplicate vertices")
         log.info("%s: merged %d duplicate vertices", name, len(v) - len(first))
-    v = v[first]
-    f = inv[f]
+    return v[first], inv[f], notes
+
+
+def _drop_degenerate_faces(v: np.ndarray, f: np.ndarray, diag: float, name: str
+                           ) -> tuple[np.ndarray, list]:
+    """Drop faces with a repeated vertex or zero area; MeshError if none is left."""
     _, area = face_normals(v, f)
     degen = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2]) | (area <= 1e-14 * diag**2)
+    notes = []
     if degen.any():
         notes.append(f"dropped {int(degen.sum())} degenerate faces")
         log.warning("%s: dropped %d degenerate (zero-area) faces", name, int(degen.sum()))
         f = f[~degen]
     if len(f) == 0:
         raise MeshError(f"{name}: every scan triangle is degenerate (zero area)")
+    return f, notes
+
+
+def _drop_repeated_faces(f: np.ndarray, name: str) -> tuple[np.ndarray, list]:
+    """Keep the first of faces on the same three vertices, in their original order."""
     fs = np.sort(f, axis=1)
     _, uniq = np.unique(fs, axis=0, return_index=True)
+    notes = []
     if len(uniq) < len(f):
         notes.append(f"dropped {len(f) - len(uniq)} repeated faces")
         log.warning("%s: dropped %d repeated faces", name, len(f) - len(uniq))
         f = f[np.sort(uniq)]
+    return f, notes
+
+
+def _drop_nonmanifold_edges(v: np.ndarray, f: np.ndarray, name: str) -> tuple[np.ndarray, list]:
+    """:func:`drop_nonmanifold_faces`, with a note and a warning when it drops faces."""
     f, n_edges, n_dropped = drop_nonmanifold_faces(v, f)
+    notes = []
     if n_dropped:
         notes.append(f"dropped {n_dropped} faces on {n_edges} non-manifold edges")
         log.warning("%s: %d non-manifold edges (shared by more than two triangles); dropped %d "
                     "faces on them", name, n_edges, n_dropped)
+    return f, notes
+
+
+def _drop_unused_vertices(v: np.ndarray, f: np.ndarray
+                          ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Remove vertices no face uses (renumbering ``f``); also the boundary vertices ``(n,) bool``."""
     edges, counts, _ = edge_use_counts(f)
     used = np.zeros(len(v), dtype=bool)
     used[f.ravel()] = True
@@ -201,7 +237,7 @@ def clean_scan(vertices: np.ndarray, faces: np.ndarray, *, name: str = "scan",
         edges = remap[edges]
     boundary = np.zeros(len(v), dtype=bool)
     boundary[edges[counts == 1].ravel()] = True
-    return ScanMesh(v, f, boundary, tuple(notes))
+    return v, f, boundary
 
 
 def load_scan(path: str | os.PathLike) -> ScanMesh:

@@ -108,6 +108,31 @@ def _jacobian(b_rows: np.ndarray, p: np.ndarray) -> np.ndarray:
     return np.concatenate([b_rows, _skew_rows(p), eye, p[:, :, None]], axis=2)
 
 
+def _normal_equations(x: np.ndarray, c: np.ndarray, pose: Similarity, bt: np.ndarray, pairs,
+                      lmv: np.ndarray, fpts: np.ndarray, w_features: float, w_point: float
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """The data part of one Gauss-Newton step of Eq. (P): ``(a (K+7, K+7), b (K+7,))``.
+
+    ``x`` (n, 3) is the current face, ``c`` its centroid, ``bt`` (n, 3, K) the basis and
+    ``pairs`` the accepted ``(idx (m,), points (m, 3), normals (m, 3))``: point-to-plane plus
+    ``w_point`` point-to-point rows for the pairs, ``w_features`` point rows for the features.
+    """
+    idx, q, nrm = pairs
+    kk = bt.shape[2]
+    rows = np.concatenate([idx, lmv])
+    b_rows = pose.scale * np.einsum("ij,njk->nik", pose.rotation, bt[rows])  # ∂x/∂w
+    jac = _jacobian(b_rows, x[rows] - c)
+    jp, jf = jac[:len(idx)], jac[len(idx):].reshape(-1, kk + 7)
+    plane = np.einsum("md,mdk->mk", nrm, jp)                   # point-to-plane rows
+    r_plane = np.einsum("md,md->m", nrm, q - x[idx])
+    jpt = jp.reshape(-1, kk + 7)
+    r_pt = (q - x[idx]).reshape(-1)
+    r_f = (fpts - x[lmv]).reshape(-1)
+    a = plane.T @ plane + w_features * jf.T @ jf + w_point * jpt.T @ jpt
+    b = plane.T @ r_plane + w_features * jf.T @ r_f + w_point * jpt.T @ r_pt
+    return a, b
+
+
 def fit_shape_prior(pairs_fn, x0: np.ndarray, basis: np.ndarray, lmv: np.ndarray,
                     fpts: np.ndarray, *, iterations: int = 12, lam: float = 1.0,
                     w_features: float = 10.0, w_point: float = 0.05) -> PriorFit:
@@ -155,17 +180,7 @@ def fit_shape_prior(pairs_fn, x0: np.ndarray, basis: np.ndarray, lmv: np.ndarray
         hist.append({"pairs": int(len(idx)),
                      "mean_distance": float(np.mean(np.linalg.norm(x[idx] - q, axis=1)))
                      if len(idx) else None})
-        rows = np.concatenate([idx, lmv])
-        b_rows = pose.scale * np.einsum("ij,njk->nik", pose.rotation, bt[rows])  # ∂x/∂w
-        jac = _jacobian(b_rows, x[rows] - c)
-        jp, jf = jac[:len(idx)], jac[len(idx):].reshape(-1, kk + 7)
-        plane = np.einsum("md,mdk->mk", nrm, jp)                   # point-to-plane rows
-        r_plane = np.einsum("md,md->m", nrm, q - x[idx])
-        jpt = jp.reshape(-1, kk + 7)
-        r_pt = (q - x[idx]).reshape(-1)
-        r_f = (fpts - x[lmv]).reshape(-1)
-        a = plane.T @ plane + w_features * jf.T @ jf + w_point * jpt.T @ jpt
-        b = plane.T @ r_plane + w_features * jf.T @ r_f + w_point * jpt.T @ r_pt
+        a, b = _normal_equations(x, c, pose, bt, (idx, q, nrm), lmv, fpts, w_features, w_point)
         a[:kk, :kk] += lam * np.eye(kk)
         b[:kk] -= lam * w
         a[kk:, kk:] += 1e-9 * np.eye(7)

@@ -13,8 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..render import vertex_normals
 from .features import FeaturePoints
-from .meshops import ScanMesh, SurfaceQuery, clean_scan, vertex_normals
+from .meshops import ScanMesh, SurfaceQuery, clean_scan
 from .procrustes import Similarity
 
 
@@ -85,12 +86,33 @@ def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
     rng : numpy Generator
     """
     import matplotlib.tri as mtri
-    from scipy.spatial import Delaunay
 
     rng = np.random.default_rng(rng)
     truth = np.asarray(truth, dtype=np.float64)
-    tri = mtri.Triangulation(uvs[:, 0], uvs[:, 1], faces)
-    finder = tri.get_trifinder()
+    finder = mtri.Triangulation(uvs[:, 0], uvs[:, 1], faces).get_trifinder()
+    uv, tv, bary = _sample_uv_chart(uvs, faces, finder, n_points, rng)
+    pts = np.einsum("kj,kjd->kd", bary, truth[tv])
+    keep = _cut_mask(pts, truth[landmarks], crop, n_holes, hole_radius, rng)
+    uv, pts, tv, bary = uv[keep], pts[keep], tv[keep], bary[keep]
+    sf, med = _triangulate(uv, pts, finder)
+    sf, nrm = _orient_like_truth(sf, pts, bary, vertex_normals(truth, faces)[tv])
+    clean = clean_scan(pts, sf, name="synthetic scan")
+    cp = SurfaceQuery(clean.vertices, clean.faces).closest(truth)
+    observed = (cp.distance < observe_tol) & ~cp.on_boundary
+    pts = pts + rng.normal(0, noise, len(pts))[:, None] * nrm
+    sim = _scan_pose(transform, rng)
+    scan = clean_scan(sim.apply(pts), sf, name="synthetic scan")
+    ids, fp = _perturbed_features(pts, truth, landmarks, feature_ids, feature_noise, 1.5 * med, rng)
+    return SyntheticScan(scan, FeaturePoints(ids, sim.apply(fp)), sim, truth, observed)
+
+
+def _sample_uv_chart(uvs: np.ndarray, faces: np.ndarray, finder, n_points: int,
+                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """About ``n_points`` jittered hexagonal-grid points in the UV chart.
+
+    Returns ``uv (k, 2)``, the template triangle's vertices ``(k, 3)`` under each point and the
+    point's barycentric coordinates in it ``(k, 3)``.
+    """
     lo, hi = uvs.min(0), uvs.max(0)
     e1, e2 = uvs[faces[:, 1]] - uvs[faces[:, 0]], uvs[faces[:, 2]] - uvs[faces[:, 0]]
     area_uv = float(np.sum(np.abs(e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]))) / 2
@@ -104,11 +126,15 @@ def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
     a, b, c = uvs[tv[:, 0]], uvs[tv[:, 1]], uvs[tv[:, 2]]
     m = np.stack([b - a, c - a], axis=2)                        # (k, 2, 2)
     lam = np.linalg.solve(m, (uv - a)[:, :, None])[:, :, 0]
-    bary = np.column_stack([1 - lam.sum(1), lam])
-    pts = np.einsum("kj,kjd->kd", bary, truth[tv])
+    return uv, tv, np.column_stack([1 - lam.sum(1), lam])
+
+
+def _cut_mask(pts: np.ndarray, lmp: np.ndarray, crop: bool, n_holes: int, hole_radius: float,
+              rng: np.random.Generator) -> np.ndarray:
+    """Points ``(k,) bool`` kept: inside the front-view crop ellipse (from the landmark
+    positions ``lmp`` (68, 3)), outside ``n_holes`` balls around random kept points."""
     keep = np.ones(len(pts), dtype=bool)
     if crop:
-        lmp = truth[landmarks]
         cx, cy = lmp[:, 0].mean(), lmp[:, 1].mean()
         ax = 0.95 * (lmp[16, 0] - lmp[0, 0]) / 2 + 0.5
         ay = 1.25 * (lmp[:, 1].max() - lmp[:, 1].min()) / 2 + 1.0
@@ -116,45 +142,59 @@ def make_synthetic_scan(truth: np.ndarray, faces: np.ndarray, uvs: np.ndarray,
     for _ in range(n_holes):
         centre = pts[rng.choice(np.flatnonzero(keep))]
         keep &= np.linalg.norm(pts - centre, axis=1) > hole_radius
-    uv, pts = uv[keep], pts[keep]
-    d = Delaunay(uv)
-    sf = d.simplices.astype(np.int64)
+    return keep
+
+
+def _triangulate(uv: np.ndarray, pts: np.ndarray, finder) -> tuple[np.ndarray, float]:
+    """Delaunay triangles ``(F, 3)`` of the points in UV space, without those outside the chart
+    or with an edge over 3 median edges; also the median edge length (3D)."""
+    from scipy.spatial import Delaunay
+
+    sf = Delaunay(uv).simplices.astype(np.int64)
     cen = uv[sf].mean(axis=1)
     ok = finder(cen[:, 0], cen[:, 1]) >= 0
     e = np.stack([np.linalg.norm(pts[sf[:, i]] - pts[sf[:, (i + 1) % 3]], axis=1) for i in range(3)], 1)
     med = np.median(e)
     ok &= e.max(axis=1) < 3.0 * med
-    sf = sf[ok]
-    # The truth's orientation: flip Delaunay triangles to agree with the truth normals.
+    return sf[ok], med
+
+
+def _orient_like_truth(sf: np.ndarray, pts: np.ndarray, bary: np.ndarray, corner_normals: np.ndarray
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """Flip Delaunay triangles to agree with the truth's normals; the unit truth normal at every
+    point ``(k, 3)`` (``corner_normals`` (k, 3, 3): the truth's vertex normals of its triangle)."""
     cr = np.cross(pts[sf[:, 1]] - pts[sf[:, 0]], pts[sf[:, 2]] - pts[sf[:, 0]])
-    vn_truth = vertex_normals(truth, faces)
-    nrm_at = np.einsum("kj,kjd->kd", bary[keep], vn_truth[tv[keep]])
+    nrm_at = np.einsum("kj,kjd->kd", bary, corner_normals)
     flip = np.einsum("ij,ij->i", cr, nrm_at[sf].mean(axis=1)) < 0
     sf[flip] = sf[flip][:, ::-1]
-    nrm = nrm_at / np.linalg.norm(nrm_at, axis=1, keepdims=True)
-    clean = clean_scan(pts, sf, name="synthetic scan")
-    cp = SurfaceQuery(clean.vertices, clean.faces).closest(truth)
-    observed = (cp.distance < observe_tol) & ~cp.on_boundary
-    pts = pts + rng.normal(0, noise, len(pts))[:, None] * nrm
+    return sf, nrm_at / np.linalg.norm(nrm_at, axis=1, keepdims=True)
+
+
+def _scan_pose(transform: bool | Similarity, rng: np.random.Generator) -> Similarity:
+    """Truth frame → scan frame: ``transform`` itself, a random similarity, or the identity."""
     if isinstance(transform, Similarity):
-        sim = transform
-    elif transform:
-        sim = Similarity(float(np.exp(rng.uniform(np.log(0.3), np.log(3)))), random_rotation(rng),
-                         rng.normal(0, 20, 3))
-    else:
-        sim = Similarity.identity()
-    scan = clean_scan(sim.apply(pts), sf, name="synthetic scan")
+        return transform
+    if transform:
+        return Similarity(float(np.exp(rng.uniform(np.log(0.3), np.log(3)))), random_rotation(rng),
+                          rng.normal(0, 20, 3))
+    return Similarity.identity()
+
+
+def _perturbed_features(pts: np.ndarray, truth: np.ndarray, landmarks: np.ndarray, feature_ids,
+                        feature_noise: float, max_gap: float, rng: np.random.Generator
+                        ) -> tuple[np.ndarray, np.ndarray]:
+    """iBUG numbers ``(k,)`` and truth-frame points ``(k, 3)``: the landmark vertices the scan
+    still shows (a scan point within ``max_gap``), moved ``feature_noise`` in random directions."""
+    from scipy.spatial import cKDTree
+
     ids = np.arange(68) if feature_ids is None else np.asarray(sorted(feature_ids), dtype=np.int64)
     dirs = rng.normal(size=(len(ids), 3))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
     # Only landmarks the scan still shows can be marked on it.
-    from scipy.spatial import cKDTree
-
     gap, _ = cKDTree(pts).query(truth[landmarks[ids]])
-    seen = gap < 1.5 * med
+    seen = gap < max_gap
     ids, dirs = ids[seen], dirs[seen]
-    fp = truth[landmarks[ids]] + feature_noise * dirs
-    return SyntheticScan(scan, FeaturePoints(ids, sim.apply(fp)), sim, truth, observed)
+    return ids, truth[landmarks[ids]] + feature_noise * dirs
 
 
 def correspondence_error(fitted: np.ndarray, truth: np.ndarray, similarity: Similarity) -> np.ndarray:
