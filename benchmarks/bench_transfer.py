@@ -123,7 +123,7 @@ def track_frames(frames, model, fps, speed="balanced"):
 def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=print,
                       speeds=("balanced",)) -> dict:
     from facetransfer import rewrite as rw
-    from facetransfer import face_texture as ftex
+    from facetransfer.texture import face as ftex
     from facetransfer import topology
     from facetransfer import video_transfer as vt
     from facetransfer.synth import make_clip, random_performance

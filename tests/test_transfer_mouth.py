@@ -18,7 +18,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import rewrite as rw  # noqa: E402
-from facetransfer import face_texture as ftex  # noqa: E402
+from facetransfer.texture import face as ftex  # noqa: E402
 from facetransfer import rewrite_options as rwo  # noqa: E402
 from facetransfer import topology  # noqa: E402
 from facetransfer import video_transfer as vt  # noqa: E402

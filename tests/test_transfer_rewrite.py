@@ -9,7 +9,7 @@ import pytest
 
 from facetransfer import rewrite as rw
 from facetransfer import composite
-from facetransfer import face_texture as ftex
+from facetransfer.texture import face as ftex
 from facetransfer.track import obtain
 from facetransfer import rewrite_options as rwo
 from facetransfer import topology

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import AssetError
-from .face_texture import resolve_mouth_mode
+from .texture.face import resolve_mouth_mode
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .video_transfer import plan_transfer, render_plan
 
@@ -213,7 +213,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     texture, blend, mouth, track_method, speed : str
         The :class:`facetransfer.rewrite_options.RewriteOptions` of the transfer (checked
         before any work). ``track_method="auto"`` falls back to a landmark-only fit if tracking
-        fails; a mouth of None is :func:`facetransfer.face_texture.default_mouth_mode`.
+        fails; a mouth of None is :func:`facetransfer.texture.face.default_mouth_mode`.
     video_options : VideoOptions, optional
         Codec and CRF of the video (:class:`facetransfer.io.video.VideoOptions`).
 

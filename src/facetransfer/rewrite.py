@@ -14,7 +14,7 @@ For every frame of the target video (§6, Fig. 7C–7E):
    the closed gap) with the *source* performance's mouth (the source frame warped through the
    source's own tracked geometry: the performance-driven texture of §6 with the nearest
    neighbour being the source's own frame; or the texture function of §6,
-   :mod:`facetransfer.face_texture`);
+   :mod:`facetransfer.texture.face`);
 4. the rendered face is blended into the target frame in the gradient domain (Pérez et al.
    2003): ``blend="poisson"`` solves the Poisson equation exactly
    (:func:`facetransfer.composite.composite_face`); ``"fast"`` (default, ~5x faster) adds a
@@ -45,7 +45,7 @@ import numpy as np
 
 from .composite import _erode, _extend, composite_face, membrane_blend
 from .errors import ShapeError
-from .face_texture import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
+from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
 from .errors import RewriteError
@@ -318,11 +318,11 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         source frame shown at this time (``source_index``) warped through the source's own
         geometry (the performance-driven texture with one neighbour, the source's own frame; no
         mouth texture without a source). ``"function"``: the performance-driven texture
-        function of §6 (:func:`facetransfer.face_texture.mouth_texture_function`) queried with
+        function of §6 (:func:`facetransfer.texture.face.mouth_texture_function`) queried with
         the *new* performance's attribute vector at every frame; needs model UVs.
     mouth_function : MouthFunction, optional
         With ``mouth="function"``: the texture function to query. Default: lifted here from
-        the source frames (at most :data:`facetransfer.face_texture.MOUTH_MAX_FRAMES`), or
+        the source frames (at most :data:`facetransfer.texture.face.MOUTH_MAX_FRAMES`), or
         from the target's own frames when no source is given.
     workers : int, optional
         Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU);

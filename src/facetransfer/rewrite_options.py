@@ -58,7 +58,7 @@ class RewriteOptions:
         (:func:`facetransfer.rewrite.rewrite_frames`).
     mouth : {"frame", "function"} or None
         The mouth texture; None: the job's default
-        (:func:`facetransfer.face_texture.default_mouth_mode`).
+        (:func:`facetransfer.texture.face.default_mouth_mode`).
     blend : {"fast", "poisson", "none"}
         :func:`facetransfer.composite.membrane_blend`, Poisson blending or a hard paste.
     feather : float

@@ -24,7 +24,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import RewriteError, VideoError
-from .face_texture import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
+from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
 from .rewrite import rewrite_frames
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
@@ -153,7 +153,7 @@ class TransferPlan:
     def mouth_function(self, model, topo: MeshTopology | None = None, *,
                        progress: Callable[[int], None] | None = None, **kwargs) -> MouthFunction:
         """The mouth texture function lifted from :attr:`texture_frames`
-        (:func:`facetransfer.face_texture.mouth_texture_function`; ``kwargs``: ``tex_size``,
+        (:func:`facetransfer.texture.face.mouth_texture_function`; ``kwargs``: ``tex_size``,
         ``step``, ``max_frames``, ``k``)."""
         if self.texture_frames is None or self.texture_track is None:
             return timeline_mouth_function(model, self.mouth_frames, self.mouth_track,
@@ -562,7 +562,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
         The video to write (atomically).
     options : RewriteOptions, optional
         Texture, mouth, blend, feather, erode; a mouth of None is
-        :func:`facetransfer.face_texture.default_mouth_mode` (the texture function for a ready
+        :func:`facetransfer.texture.face.default_mouth_mode` (the texture function for a ready
         performance, the source frame for a transfer).
     audio_from : path-like, optional
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional

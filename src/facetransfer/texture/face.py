@@ -20,9 +20,16 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import RewriteError
-from .rewrite_options import MOUTH_MODES, check_mode
-from .topology import MeshTopology, close_mouth, mesh_topology
+from ..errors import RewriteError
+from ..render import sample_texture
+from ..rewrite_options import MOUTH_MODES, check_mode
+from ..topology import MeshTopology, close_mouth, mesh_topology
+from ..track.project import take_frames
+from .atlas import uv_atlas
+from .base import texture_to_uint8
+from .function import TextureFunction, attribute_vector
+from .lifting import lift_uv_texture
+from .merge import merge_textures
 
 log = logging.getLogger(__name__)
 
@@ -147,7 +154,6 @@ def merged_face_texture(frames, track, model, topo: MeshTopology, *, n_samples: 
     FaceTexture
         ``frame = -1``.
     """
-    from .texture import lift_uv_texture, merge_textures, texture_to_uint8, uv_atlas
 
     _closed_uvs(model, topo, "the model has no UVs: use the reference-frame texture")
     n = min(len(frames), track.n_frames)
@@ -216,7 +222,6 @@ class MouthFunction:
     def texture(self, attributes: np.ndarray) -> np.ndarray:
         """The mouth texture for one attribute vector (r,): Eq. (2) of
         :class:`~facetransfer.texture.TextureFunction`, ``(T, T, 3) uint8``."""
-        from .texture import texture_to_uint8
 
         a = np.asarray(attributes, np.float64)
         key = a.tobytes()
@@ -293,7 +298,6 @@ def mouth_texture_function(model, frames, track, topo: MeshTopology | None = Non
     ----------
     Vlasic et al. 2005, §6 (texture from video, the performance-driven texture function).
     """
-    from .texture import TextureFunction
 
     if len(model.mode_names) < 2:
         raise RewriteError("mouth='function' needs a model with an expression or viseme mode")
@@ -316,7 +320,6 @@ def timeline_mouth_function(model, frames, track, index: np.ndarray, n: int,
     (< ``n``) of ``track`` is the pose and weights shown at output frame ``i``, whose frame is
     ``frames[index[i]]`` (``kwargs``: ``tex_size``, ``step``, ``max_frames``, ``k``,
     ``progress``)."""
-    from .track.project import take_frames
 
     return mouth_texture_function(model, frames, take_frames(track, np.arange(n)), topo,
                                   frame_index=np.asarray(index)[:n], **kwargs)
@@ -348,7 +351,6 @@ def _lift_mouth_textures(model, frames, track, topo: MeshTopology, uvs: np.ndarr
                          idx: np.ndarray, rows: np.ndarray, tex_size: int, progress):
     """The UV textures (m, T, T, 3) float32, their texel weights (m, T, T) float32 and the
     attribute vectors (m, r) of the closed meshes of track ``rows`` (frames ``idx[rows]``)."""
-    from .texture import attribute_vector, lift_uv_texture, uv_atlas
 
     faces = topo.faces
     atlas = uv_atlas(faces, uvs, tex_size)
@@ -402,7 +404,6 @@ def _fill_closed_gap(texture: np.ndarray, weight: np.ndarray, frame: np.ndarray,
     seam between the lips, as the ``"frame"`` mouth shows it) with the small weight
     :data:`_GAP_FLOOR`, so any neighbour that did see them still wins. In place.
     """
-    from .render import sample_texture
 
     T = atlas.tex_size
     unseen = (gap & (weight < _GAP_FLOOR)).ravel()
