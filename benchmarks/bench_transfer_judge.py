@@ -1,56 +1,176 @@
 """Transfer fidelity by an independent judge (issue 13): MediaPipe on source, target and result.
 
-Runs Face Landmarker (Tasks API, VIDEO mode, blendshapes) on the three panels of a
-``source | target | result`` video (what ``facetransfer demo`` writes; made with the demo's default
-inputs when ``--video`` is absent) and correlates, over frames, the result's blendshapes and mouth
-opening (MediaPipe 13-14 over the outer eye corners 33-263) with the source's and the target's.
-A transfer carries the source when the result follows the source and not the target.
+Runs Face Landmarker (Tasks API, VIDEO mode, blendshapes) on the source (the frame matched by
+time), the target and the result of ``facetransfer transfer`` (default model, capture tracker,
+default settings) and correlates, over frames, the result's blendshapes and mouth opening
+(MediaPipe 13-14 over the outer eye corners 33-263) with the source's and the target's. A
+transfer carries the source when the result follows the source and not the target.
+
+Three real pairs of the data folder (``--pairs``, default all): the demo pair (``driving_d6``
+30 fps onto ``WDA_KatieHill_000`` 25 fps), ``driving_d9`` (30 fps, 512x480) onto ``face_2``
+(25 fps, 844²), and ``WDA_KatieHill_000`` onto ``driving_d6`` (the target talking with an open
+mouth). Each pair is rendered three times from the same tracks: ``before`` (the eye holes open:
+the target's own eyes show through, as before issue 13's eyes), ``after`` (:mod:`facetransfer.eyes`,
+the default) and ``eyes_only`` (the eyes as after, the brows textured from each target frame as
+before: which share of the brows' change is the texture's).
+The result frames are judged as rendered (before encoding). Tracks are cached in
+``OUT/judge_pairs/``.
+
+``--video V`` instead judges the three panels of a ``source | target | result`` video (what
+``facetransfer demo`` writes).
 
 Usage::
 
-    python benchmarks/bench_transfer_judge.py --out out/benchmarks [--video out/demo.mp4]
+    python benchmarks/bench_transfer_judge.py --out out/benchmarks [--pairs demo,fps,open]
+    python benchmarks/bench_transfer_judge.py --out out/benchmarks --video out/demo.mp4
 
-Writes ``OUT/transfer_judge.json`` and ``OUT/transfer_judge.png``.
+Writes ``OUT/transfer_judge.json``, ``OUT/transfer_judge.png`` and one contact picture per pair
+(``OUT/transfer_judge_PAIR.png``: source | target | before | after at the frames where the
+source's eyes are most closed and most open).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import functools
 import json
-import subprocess
 import sys
+import time
 from pathlib import Path
 
 import numpy as np
 
 SHAPES = ("jawOpen", "mouthPucker", "mouthSmileLeft", "mouthSmileRight", "browInnerUp",
           "eyeBlinkLeft", "eyeBlinkRight")
+#: name -> (source clip, target clip); target frames judged: FRAMES
+PAIRS = {"demo": ("driving_d6", "WDA_KatieHill_000"),
+         "fps": ("driving_d9", "face_2"),
+         "open": ("WDA_KatieHill_000", "driving_d6")}
+FRAMES = 120
 
 
-def panel_scores(video: Path, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`facetransfer.fidelity.panel_scores` of panel ``k`` (0, 1, 2) of the video."""
-    from facetransfer.fidelity import panel_scores as scores
+def scores(frames, fps: float):
+    """:func:`facetransfer.fidelity.panel_scores` of a frame sequence."""
+    from facetransfer.fidelity import panel_scores
+
+    return panel_scores(frames, fps)
+
+
+def compare(S, T, R) -> dict:
+    """Correlations of the result's scores with the source's and the target's, per measure."""
+    from facetransfer.arkit import MEDIAPIPE_NAMES
+    from facetransfer.fidelity import correlation as corr
+
+    (S, Sm), (T, Tm), (R, Rm) = S, T, R
+    out = {}
+    for n in SHAPES:
+        k = MEDIAPIPE_NAMES.index(n)
+        out[n] = {"result_source": corr(R[:, k], S[:, k]), "result_target": corr(R[:, k], T[:, k]),
+                  "amplitude": float(np.nanstd(R[:, k]) / max(np.nanstd(S[:, k]), 1e-9))}
+    out["mouth_opening"] = {"result_source": corr(Rm, Sm), "result_target": corr(Rm, Tm),
+                            "amplitude": float(np.nanstd(Rm) / max(np.nanstd(Sm), 1e-9))}
+    return out
+
+
+def judge_video(video: Path) -> dict:
+    """The judge on the three panels of a ``source | target | result`` video."""
     from facetransfer.io.video import iter_frames, video_info
 
     info = video_info(video)
     w = info.size[0] // 3
-    return scores((f[:, k * w:(k + 1) * w] for f in iter_frames(video)), info.fps)
+    S, T, R = (scores((f[:, k * w:(k + 1) * w] for f in iter_frames(video)), info.fps)
+               for k in range(3))
+    return compare(S, T, R)
 
 
-def judge(video: Path) -> dict:
+def _track(clip: str, model, cache: Path, data: Path) -> Path:
+    """The cached track file of ``clip`` (its first 150 frames, the capture tracker)."""
+    from facetransfer.track.obtain import obtain_track
+
+    p = cache / f"{clip}.track.npz"
+    if not p.exists():
+        tr = obtain_track(data / f"{clip}.mp4", model, max_frames=150)
+        tr.save(p, overwrite=True)
+    return p
+
+
+@contextlib.contextmanager
+def _brows(brows: bool):
+    """The ablation ``eyes_only``: the brows textured from each target frame (as before), the
+    eyes from the open-eyed frame (:func:`facetransfer.eyes.eye_texture` with ``brows=False``)."""
+    import facetransfer.eyes as fe
+
+    original = fe.eye_texture
+    if not brows:
+        fe.eye_texture = functools.partial(original, brows=False)
+    try:
+        yield
+    finally:
+        fe.eye_texture = original
+
+
+def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) -> dict:
+    """Render one pair before and after and judge both."""
+    import tempfile
+
+    from facetransfer import video_transfer as vt
+    from facetransfer.rewrite_options import RewriteOptions
+
+    src, tgt = PAIRS[name]
+    cache = out / "judge_pairs"
+    cache.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    plan = vt.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
+                            max_frames=frames, target_track=_track(tgt, model, cache, data),
+                            expression_track=_track(src, model, cache, data))
+    n = plan.n_frames
+    source = [plan.mouth_frames[plan.mouth_index[i]] for i in range(n)]
+    target = [plan.target_frames[i] for i in range(n)]
+    res, seconds = {}, {"plan": time.perf_counter() - t0}
+    for kind, eyes, brows in (("before", "target", False), ("after", "model", True),
+                              ("eyes_only", "model", False)):
+        frames: list[np.ndarray] = []
+        t = time.perf_counter()
+        with tempfile.TemporaryDirectory() as tmp, _brows(brows):
+            vt.render_plan(plan, model, Path(tmp) / "r.mp4", overwrite=True,
+                           options=RewriteOptions(eyes=eyes),
+                           compose=lambda i, r: frames.append(r.image) or r.image)
+        seconds[kind] = time.perf_counter() - t
+        res[kind] = frames
+    t = time.perf_counter()
+    S, T = scores(source, plan.fps), scores(target, plan.fps)
+    judged = {k: compare(S, T, scores(v, plan.fps)) for k, v in res.items()}
+    seconds["judge"] = time.perf_counter() - t
+    _picture(name, source, target, res, S[0], out / f"transfer_judge_{name}.png")
+    return {"source": src, "target": tgt, "frames": n, "fps": plan.fps, "seconds": seconds,
+            **judged}
+
+
+def _picture(name, source, target, res, S, path: Path) -> None:
+    """source | target | before | after at the source's most closed and most open eyes."""
+    import cv2
+
     from facetransfer.arkit import MEDIAPIPE_NAMES
-    from facetransfer.fidelity import correlation as _corr
+    from facetransfer.io.atomic import atomic_path
 
-    (S, Sm), (T, Tm), (R, Rm) = (panel_scores(video, k) for k in range(3))
-    out = {}
-    for n in SHAPES:
-        k = MEDIAPIPE_NAMES.index(n)
-        out[n] = {"result_source": _corr(R[:, k], S[:, k]),
-                  "result_target": _corr(R[:, k], T[:, k]),
-                  "amplitude": float(np.nanstd(R[:, k]) / max(np.nanstd(S[:, k]), 1e-9))}
-    out["mouth_opening"] = {"result_source": _corr(Rm, Sm), "result_target": _corr(Rm, Tm),
-                            "amplitude": float(np.nanstd(Rm) / max(np.nanstd(Sm), 1e-9))}
-    return out
+    blink = np.nanmean(S[:, [MEDIAPIPE_NAMES.index("eyeBlinkLeft"),
+                             MEDIAPIPE_NAMES.index("eyeBlinkRight")]], axis=1)
+    blink = np.where(np.isfinite(blink), blink, 0.5)
+    rows = []
+    for i in (int(np.argmax(blink)), int(np.argmin(blink))):
+        h = 320
+        tiles = [cv2.resize(np.asarray(f), (int(round(f.shape[1] * h / f.shape[0])), h),
+                            interpolation=cv2.INTER_AREA)
+                 for f in (source[i], target[i], res["before"][i], res["after"][i])]
+        row = np.concatenate(tiles, axis=1)
+        cv2.putText(row, f"{name} frame {i}: source | target | before | after", (8, 24),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 0), 2)
+        rows.append(row)
+    W = max(r.shape[1] for r in rows)
+    img = np.concatenate([np.pad(r, ((0, 0), (0, W - r.shape[1]), (0, 0))) for r in rows])
+    with atomic_path(path, overwrite=True) as tmp:
+        cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
 
 
 def plot(res: dict, path: Path) -> None:
@@ -61,17 +181,27 @@ def plot(res: dict, path: Path) -> None:
 
     from facetransfer.io.atomic import save_figure
 
-    names = list(res)
+    pairs = list(res)
+    names = list(next(iter(res.values()))["after"])
+    fig, axes = plt.subplots(len(pairs), 1, figsize=(11, 3.2 * len(pairs)), squeeze=False)
     x = np.arange(len(names))
-    fig, ax = plt.subplots(figsize=(10, 4))
-    ax.bar(x - 0.2, [res[n]["result_source"] for n in names], 0.4, label="result ~ source")
-    ax.bar(x + 0.2, [res[n]["result_target"] for n in names], 0.4, label="result ~ target")
-    ax.axhline(0.8, color="g", ls=":", lw=1)
-    ax.axhline(0.3, color="r", ls=":", lw=1)
-    ax.set_xticks(x, names, rotation=30, ha="right")
-    ax.set_ylabel("correlation over frames")
-    ax.set_title("transfer fidelity, judged by MediaPipe (green: 0.8 with the source; red: 0.3)")
-    ax.legend()
+    for ax, p in zip(axes[:, 0], pairs):
+        for j, (kind, key, c) in enumerate((("before", "result_source", "#9ecae1"),
+                                            ("after", "result_source", "#08519c"),
+                                            ("before", "result_target", "#fcbba1"),
+                                            ("after", "result_target", "#a50f15"))):
+            ax.bar(x - 0.3 + 0.2 * j, [res[p][kind][n][key] for n in names], 0.2, color=c,
+                   label=f"{kind}: result ~ {key.split('_')[1]}")
+        ax.axhline(0.8, color="g", ls=":", lw=1)
+        ax.axhline(0.6, color="g", ls="--", lw=0.8)
+        ax.axhline(0.3, color="r", ls=":", lw=1)
+        ax.set_xticks(x, names, rotation=20, ha="right")
+        ax.set_ylim(-1, 1)
+        ax.set_ylabel("r over frames")
+        ax.set_title(f"{p}: {res[p]['source']} -> {res[p]['target']} ({res[p]['frames']} frames)")
+    axes[0, 0].legend(fontsize=7, ncol=4, loc="lower left")
+    fig.suptitle("transfer fidelity judged by MediaPipe (targets: >= 0.8 / 0.6 with the source, "
+                 "<= 0.3 with the target for jawOpen)")
     fig.tight_layout()
     save_figure(fig, path)
     plt.close(fig)
@@ -80,23 +210,37 @@ def plot(res: dict, path: Path) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks")
-    ap.add_argument("--video", help="source | target | result video (default: run the demo)")
+    ap.add_argument("--video", help="judge the panels of a source | target | result video")
+    ap.add_argument("--pairs", default=",".join(PAIRS), help=f"of {', '.join(PAIRS)}")
+    ap.add_argument("--frames", type=int, default=FRAMES, help="target frames judged")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    video = Path(args.video) if args.video else out / "judge_demo" / "demo.mp4"
-    if not args.video:
-        exe = Path(sys.executable).parent / "facetransfer"
-        subprocess.run([str(exe), "demo", "--out", str(video.parent), "--overwrite"], check=True)
-    res = judge(video)
     from facetransfer.io.atomic import atomic_path
 
+    if args.video:
+        res = {"video": args.video, "scores": judge_video(Path(args.video))}
+        for n, r in res["scores"].items():
+            print(f"{n:15s} result~source {r['result_source']:+.2f}  result~target "
+                  f"{r['result_target']:+.2f}  amplitude {r['amplitude']:.2f}")
+        with atomic_path(out / "transfer_judge_video.json", overwrite=True) as tmp:
+            Path(tmp).write_text(json.dumps(res, indent=2))
+        return 0
+    from facetransfer.assets import data_dir
+    from facetransfer.default_model import load_default_model
+
+    data = Path(data_dir()) / "video"
+    model = load_default_model()
+    res = {}
+    for name in args.pairs.split(","):
+        res[name] = judge_pair(name, model, out, data, args.frames)
+        for kind in ("before", "after", "eyes_only"):
+            line = "  ".join(f"{n} {r['result_source']:+.2f}/{r['result_target']:+.2f}"
+                             for n, r in res[name][kind].items())
+            print(f"{name} {kind}: {line}", flush=True)
     with atomic_path(out / "transfer_judge.json", overwrite=True) as tmp:
-        Path(tmp).write_text(json.dumps({"video": str(video), "scores": res}, indent=2))
+        Path(tmp).write_text(json.dumps({"pairs": res}, indent=2))
     plot(res, out / "transfer_judge.png")
-    for n, r in res.items():
-        print(f"{n:15s} result~source {r['result_source']:+.2f}  result~target "
-              f"{r['result_target']:+.2f}  amplitude {r['amplitude']:.2f}")
     return 0
 
 

@@ -164,13 +164,17 @@ def test_eye_holes_show_the_target(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
     o = next(rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
-                               blend="none", topo=topo))
+                               blend="none", topo=topo, eyes="target"))
     # pixels inside the face's outline but not covered by the mesh: the eye holes
     import scipy.ndimage as ndi
 
     holes = ndi.binary_fill_holes(o.face_mask) & ~o.face_mask
     assert holes.sum() > 10
     np.testing.assert_array_equal(o.image[holes], fb[0][holes])
+    # with the eyes of the new performance (the default, facetransfer.eyes) they are rendered
+    e = next(rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
+                               blend="none", topo=topo))
+    assert e.face_mask[holes].all()
 
 
 def test_lost_frames_keep_the_original(quick_model, topo, synthetic):

@@ -21,7 +21,10 @@ For every frame of the target video (§6, Fig. 7C–7E):
    membrane correction interpolated from the region's outline
    (:func:`facetransfer.composite.membrane_blend`). The blend region stays a few pixels inside
    the rendered silhouette, so its boundary lies on the target's own face. The mesh's eye holes
-   are not part of the rendered mask, so the target's own eyes show through them (§6); outside
+   are closed and the lids, eyes and brows textured from an open-eyed target frame
+   (:mod:`facetransfer.eyes`, ``eyes="model"``, the default), so the new performance's blinks
+   show; with ``eyes="target"`` the holes stay out of the rendered mask and the target's own
+   eyes show through them (§6). Outside
    the (feathered) face mask the output equals the target frame exactly. Frames where the face
    is lost keep the original frame.
 
@@ -44,11 +47,11 @@ from typing import Callable, Iterator
 import numpy as np
 
 from .composite import _erode, _extend, composite_face, membrane_blend
-from .errors import ShapeError
+from .errors import RewriteError, ShapeError
+from .eyes import EyeTexture, eye_texture, paint_eyes
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
-from .errors import RewriteError
 from .rewrite_options import BLEND_MODES, RewriteOptions, check_mode
 from .topology import MeshTopology, close_mouth, mesh_topology
 
@@ -90,7 +93,8 @@ class RewriteFrame:
 def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: MeshTopology,
                   face_texture: FaceTexture, *, mouth_texture: FaceTexture | None = None,
                   blend: str = "fast", feather: float = 2.0, erode: int = 2,
-                  mouth_feather: float = 3.0, color_match: bool = False) -> RewriteFrame:
+                  mouth_feather: float = 3.0, color_match: bool = False,
+                  eye_texture: EyeTexture | None = None) -> RewriteFrame:
     """Render the new face into one target frame (§6).
 
     Parameters
@@ -116,6 +120,9 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         Soft-edge width in pixels of the source's mouth inside the face (``blend="fast"``).
     color_match : bool
         Match the rendered face's colour statistics to the target's before the Poisson blend.
+    eye_texture : EyeTexture, optional
+        The eye region's texture (``topo`` then has its eye holes closed:
+        :func:`facetransfer.eyes.eye_texture`); without it the target's eyes show through.
 
     Returns
     -------
@@ -140,7 +147,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     x0, y0, x1, y1 = box
     cam = camera if box == (0, 0, W, H) else _shift_camera(camera, x0, y0)
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
-                        feather, erode, mouth_feather, color_match)
+                        feather, erode, mouth_feather, color_match, eye_texture)
     return _paste(T, (box, res))
 
 
@@ -212,13 +219,15 @@ def _shift_camera(camera, x0: int, y0: int):
 
 
 def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
-                  mouth_feather, color_match) -> RewriteFrame:
+                  mouth_feather, color_match, eye_texture=None) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
     from .render import rasterize
 
     H, W = T.shape[:2]
     raster = rasterize(V, topo.faces, camera, (W, H))
     face_img, face_mask = _shade(raster, topo.faces, face_texture.uvs, face_texture.image)
+    if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
+        face_img = paint_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture)
     mouth_mask = np.zeros((H, W), bool)
     rendered = face_img
     mouth_img = None
@@ -286,7 +295,8 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
                    mouth: str | None = None, mouth_function: MouthFunction | None = None,
                    topo: MeshTopology | None = None, workers: int | None = None,
                    processes: bool | None = None,
-                   progress: Callable[[int], None] | None = None) -> Iterator[RewriteFrame]:
+                   progress: Callable[[int], None] | None = None,
+                   eyes: str | None = None) -> Iterator[RewriteFrame]:
     """Rewrite every target frame with the new performance (§6, Fig. 7).
 
     Parameters
@@ -333,13 +343,16 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         meshes are synthesised up front: the per-frame kernels mostly release the GIL).
     progress : callable(int), optional
         Called with 1 after each frame.
+    eyes : {"model", "target"}, optional
+        Replaces ``options.eyes``: the new performance's lids over an open-eyed target frame
+        (:mod:`facetransfer.eyes`, the default) or the target's own eyes through the holes.
 
     Yields
     ------
     RewriteFrame
     """
     opts = (options or RewriteOptions()).with_(texture=texture, blend=blend, feather=feather,
-                                                mouth=mouth)
+                                                mouth=mouth, eyes=eyes)
     one = _ClipRenderer.build(target_frames, target_track, new_track, model, opts,
                               source_frames=source_frames, source_track=source_track,
                               source_index=source_index, mouth_function=mouth_function,
@@ -441,6 +454,8 @@ class _ClipRenderer:
         Queried at every frame (``mouth="function"``); None: the source's frame, if any.
     with_mouth : bool
         The mouth comes from ``source_frames`` (``mouth="frame"`` with a source).
+    eye_tex : EyeTexture or None
+        The eye region's texture (``eyes="model"``; ``topo`` then has its eye holes closed).
     meshes : dict
         ``"new"``, ``"target"``, ``"source"`` meshes of every frame synthesised up front
         (:func:`_clip_meshes`); missing kinds are synthesised per frame.
@@ -460,6 +475,7 @@ class _ClipRenderer:
     mouth_function: MouthFunction | None
     with_mouth: bool
     meshes: dict
+    eye_tex: EyeTexture | None = None
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
@@ -483,6 +499,10 @@ class _ClipRenderer:
             const_tex = merged_face_texture(target_frames, target_track, model, topo) \
                 if model.uvs is not None else constant_face_texture(target_frames, target_track,
                                                                    model, topo)
+        eye_tex = None
+        if opts.eyes == "model" and not target_track.lost[:n].all():
+            # after the mouth function, which keeps the open topology (issue 13)
+            topo, eye_tex = eye_texture(target_frames, target_track, model, topo, n_frames=n)
         kinds = {"new": new_track}
         if const_tex is None:
             kinds["target"] = target_track
@@ -490,7 +510,7 @@ class _ClipRenderer:
             kinds["source"] = source_track
         return cls(target_frames, target_track, new_track, model, opts, topo, first,
                    source_frames, source_track, sidx, const_tex, fn, with_mouth,
-                   _clip_meshes(model, n, kinds))
+                   _clip_meshes(model, n, kinds), eye_tex)
 
     def mesh(self, kind: str, track, i: int) -> np.ndarray:
         """The mesh (n_vertices, 3) of frame ``i`` of ``track`` (its ``kind`` in :attr:`meshes`)."""
@@ -531,7 +551,7 @@ class _ClipRenderer:
         return rewrite_frame(frame, self.mesh("new", self.new_track, i),
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
-                             feather=o.feather, erode=o.erode)
+                             feather=o.feather, erode=o.erode, eye_texture=self.eye_tex)
 
 
 def _render_in_threads(one, n: int, workers: int, progress):

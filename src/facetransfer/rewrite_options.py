@@ -20,6 +20,7 @@ __all__ = [
     "TEXTURE_MODES",
     "MOUTH_MODES",
     "BLEND_MODES",
+    "EYE_MODES",
     "SPEED_PRESETS",
     "DEFAULT_SPEED",
     "TRACK_METHODS",
@@ -37,6 +38,9 @@ MOUTH_MODES = ("frame", "function")
 #: Ways to put the rendered face into the frame: Pérez et al.'s Poisson solve (exact), a
 #: membrane (harmonic-like) correction interpolated by push-pull (fast), or a hard paste.
 BLEND_MODES = ("fast", "poisson", "none")
+#: Where the eyes of the result come from: the model's lids over an open-eyed target frame, or
+#: the target's own eyes through the mesh's eye holes (§6).
+EYE_MODES = ("model", "target")
 
 
 def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> None:
@@ -69,6 +73,11 @@ class RewriteOptions:
         Tracking preset of the videos tracked now.
     track_method : {"auto", "capture", "flow", "landmarks"}
         The tracker of the videos tracked now.
+    eyes : {"model", "target"}
+        ``"model"``: the eye holes closed and the lids, eyes and brows of the new performance
+        rendered with an open-eyed target frame's texture (:mod:`facetransfer.eyes`), so the
+        new performance's blinks show; ``"target"``: the holes left open and the target's own
+        eyes showing through them, as in the paper (§6).
 
     Raises
     ------
@@ -83,6 +92,7 @@ class RewriteOptions:
     erode: int = 2
     speed: str = DEFAULT_SPEED
     track_method: str = "auto"
+    eyes: str = "model"
 
     def __post_init__(self) -> None:
         check_mode("texture", self.texture, TEXTURE_MODES, sep=None)
@@ -91,6 +101,7 @@ class RewriteOptions:
         check_mode("blend", self.blend, BLEND_MODES)
         check_mode("speed", self.speed, SPEED_PRESETS)
         check_track_method(self.track_method)
+        check_mode("eyes", self.eyes, EYE_MODES)
         if not self.feather >= 0:
             raise RewriteError(f"feather must be >= 0 pixels, got {self.feather!r}")
         if int(self.erode) != self.erode or self.erode < 0:

@@ -178,13 +178,14 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     model : MultilinearModel
     settings : dict
         ``texture``, ``blend``, ``mouth``, ``align``, ``max_frames``, ``track_method``,
-        ``speed`` as the ``transfer`` options.
+        ``speed``, ``eyes`` as the ``transfer`` options.
 
     Returns
     -------
     Row
     """
     from ..io.video import video_info
+    from ..rewrite_options import RewriteOptions
     from ..video_transfer import transfer_video
 
     t0 = time.perf_counter()
@@ -193,17 +194,19 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
               s.get("identity_from"), s.get("pose_from")):
         if v:
             video_info(v)  # a missing or unreadable input fails the row, naming the path
+    options = RewriteOptions(
+        texture=settings["texture"], blend=settings["blend"], mouth=settings["mouth"],
+        track_method=settings["track_method"], speed=settings["speed"],
+        eyes=settings.get("eyes", "model"))
     res = transfer_video(
-        str(job.target), out, model, overwrite=True, texture=settings["texture"],
-        blend=settings["blend"], mouth=settings["mouth"], progress_factory=None,
+        str(job.target), out, model, overwrite=True, options=options, progress_factory=None,
         target_track=s.get("target_track"), expression_from=s.get("expression_from"),
         expression_track=s.get("source_track"), viseme_from=s.get("viseme_from"),
         viseme_track=s.get("viseme_track"), identity=_identity(job, model),
         identity_from=s.get("identity_from"), identity_track=s.get("identity_track"),
         pose_from=s.get("pose_from"), pose_track=s.get("pose_track"),
         performance=s.get("performance"), align=settings["align"],
-        max_frames=settings["max_frames"], track_method=settings["track_method"],
-        speed=settings["speed"], parallel=False)
+        max_frames=settings["max_frames"], parallel=False)
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),

@@ -20,8 +20,8 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..transfer import ALIGN_MODES
-from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, MOUTH_MODES, SPEED_PRESETS,
-                               TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
+from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, MOUTH_MODES,
+                               SPEED_PRESETS, TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import MODEL_HELP, add_video_options, resolve_model, video_options
 from .track import CAPTURE_HELP
 
@@ -66,6 +66,10 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "a model with UVs); default: function with --performance, frame otherwise")
     p.add_argument("--blend", choices=BLEND_MODES, default="fast",
                    help="fast membrane blend, exact Poisson solve, or hard paste")
+    p.add_argument("--eyes", choices=EYE_MODES, default="model",
+                   help="model: the new performance's eyelids (blinks) rendered over an "
+                   "open-eyed target frame; target: the target's own eyes show through the "
+                   "mesh's eye holes, as in the paper")
     p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given: auto or capture ("
                    + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
@@ -81,7 +85,7 @@ def rewrite_options(args) -> RewriteOptions:
     """The :class:`~facetransfer.rewrite_options.RewriteOptions` of
     :func:`add_rewrite_options`' arguments."""
     return RewriteOptions(texture=args.texture, mouth=args.mouth, blend=args.blend,
-                          speed=args.speed, track_method=args.tracker)
+                          speed=args.speed, track_method=args.tracker, eyes=args.eyes)
 
 
 def _parser(sub, name: str, help: str, description: str):
@@ -424,7 +428,8 @@ def run_demo(args) -> int:
     model = resolve_model(args.model)
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
-               track_method=args.tracker, speed=args.speed, overwrite=args.overwrite,
+               track_method=args.tracker, speed=args.speed, eyes=args.eyes,
+               overwrite=args.overwrite,
                progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings
     print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "

@@ -1,0 +1,193 @@
+"""End to end of issue 13: a 10-second transfer's time per stage, and outside the face after
+encoding, decoded exactly.
+
+1. **Speed**: ``facetransfer transfer --target TARGET --expression-from SOURCE --out R.mp4`` (default
+   model, capture tracker, H.264 CRF 18) on 10 s of ``driving_d9`` (512x480, 30 fps: 300 frames)
+   with ``driving_d6`` as the source, timed as a command (wall clock, a fresh process), and the
+   same work in this process stage by stage (model load, read, track, render, write:
+   ``plan_transfer`` + ``render_plan``, what the command runs).
+2. **Outside the face**: the rewritten frames of that run (before encoding: exactly the target
+   frames as the project's reader decoded them, outside the face) are encoded by the project's
+   writer (``facetransfer.io.video.encode_video``, libx264, yuv420p) at each CRF offered and
+   compared with the **target file itself**, both decoded by the imageio-ffmpeg binary, over the
+   pixels outside the face mask (the rendered face's mask, dilated by 8 px) of every frame:
+
+   - ``y``: the luma planes as stored (``-pix_fmt yuv420p``, the Y plane, no colour conversion);
+   - ``rgb``: both converted to rgb24 by ffmpeg with exact rounding and full chroma
+     interpolation (``-sws_flags bicubic+accurate_rnd+full_chroma_int``).
+
+   The difference then holds everything the pipeline does to the pixels it does not mean to
+   change: the reader's YUV->RGB (OpenCV), the writer's RGB->YUV and the codec.
+
+Usage::
+
+    python benchmarks/bench_transfer_e2e.py --out out/benchmarks [--seconds 10]
+
+Writes ``OUT/transfer_e2e.json`` and ``OUT/transfer_e2e.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+CRFS = (0, 10, 14, 18, 23, 28)
+DILATE = 8
+GOAL_DB = 45.0
+
+
+def decode(path: Path, n: int, kind: str) -> np.ndarray:
+    """The first ``n`` frames of a video decoded by ffmpeg: ``"y"`` (F, H, W) the stored luma
+    plane, ``"rgb"`` (F, H, W, 3) rgb24 with exact conversion."""
+    import imageio_ffmpeg
+
+    if kind == "y":
+        gen = imageio_ffmpeg.read_frames(str(path), pix_fmt="yuv420p", bits_per_pixel=12)
+    else:
+        gen = imageio_ffmpeg.read_frames(str(path), output_params=[
+            "-sws_flags", "bicubic+accurate_rnd+full_chroma_int"])
+    W, H = next(gen)["size"]
+    out = []
+    for _, b in zip(range(n), gen):
+        a = np.frombuffer(b, np.uint8)
+        out.append(a[:W * H].reshape(H, W) if kind == "y" else a.reshape(H, W, 3))
+    gen.close()
+    return np.stack(out)
+
+
+def psnr(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
+    d = (a.astype(np.float64) - b.astype(np.float64))[where]
+    mse = float(np.mean(d ** 2))
+    return float("inf") if mse == 0 else 10 * np.log10(255.0 ** 2 / mse)
+
+
+def run_command(source: Path, target: Path, frames: int, out: Path) -> float:
+    """Wall seconds of ``facetransfer transfer`` in a fresh process."""
+    exe = Path(sys.executable).parent / "facetransfer"
+    t = time.perf_counter()
+    subprocess.run([str(exe), "transfer", "--target", str(target), "--expression-from",
+                    str(source), "--out", str(out), "--max-frames", str(frames), "--overwrite",
+                    "--no-progress"], check=True, capture_output=True)
+    return time.perf_counter() - t
+
+
+def staged(source: Path, target: Path, frames: int, out: Path):
+    """The same transfer in this process: seconds per stage, rewritten frames, face masks."""
+    import cv2
+
+    from facetransfer import video_transfer as vt
+    from facetransfer.default_model import load_default_model
+
+    t = time.perf_counter()
+    model = load_default_model()
+    timings = {"model": time.perf_counter() - t}
+    plan = vt.plan_transfer(target, model, expression_from=source, max_frames=frames)
+    kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * DILATE + 1, 2 * DILATE + 1))
+    imgs, masks = [], []
+
+    def keep(i, r):
+        imgs.append(r.image)
+        masks.append(cv2.dilate(r.face_mask.astype(np.uint8), kernel) > 0)
+        return r.image
+
+    done = vt.render_plan(plan, model, out, overwrite=True, compose=keep)
+    timings.update(done.timings)
+    return timings, np.stack(imgs), np.stack(masks), plan.fps
+
+
+def outside(target: Path, frames: np.ndarray, masks: np.ndarray, fps: float, tmp: Path) -> list:
+    from facetransfer.io.video import VideoOptions, encode_video
+
+    n = len(frames)
+    ref = {k: decode(target, n, k) for k in ("y", "rgb")}
+    keep = ~masks
+    rows = []
+    for crf in CRFS:
+        p = tmp / f"crf{crf}.mp4"
+        encode_video(p, frames, fps, options=VideoOptions("h264", crf), overwrite=True)
+        row = {"crf": crf, "mbit_per_s": p.stat().st_size * 8 / 1e6 / (n / fps)}
+        for k in ("y", "rgb"):
+            back = decode(p, n, k)
+            row[f"psnr_{k}"] = psnr(back, ref[k], keep)
+        print(f"  CRF {crf:2d}: outside the face Y {row['psnr_y']:.1f} dB, RGB (exact) "
+              f"{row['psnr_rgb']:.1f} dB, {row['mbit_per_s']:.2f} Mbit/s", flush=True)
+        rows.append(row)
+        p.unlink()
+    # before encoding: the rewritten frames against the target decoded exactly to rgb24
+    rows.append({"crf": None, "label": "before encoding (RGB, exact decode of the target)",
+                 "psnr_rgb": psnr(frames, ref["rgb"], keep)})
+    return rows
+
+
+def plot(report: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from facetransfer.io.atomic import save_figure
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4))
+    rows = [r for r in report["outside"] if r["crf"] is not None]
+    ax.plot([r["crf"] for r in rows], [r["psnr_y"] for r in rows], "o-", label="Y plane")
+    ax.plot([r["crf"] for r in rows], [r["psnr_rgb"] for r in rows], "s--",
+            label="rgb24, exact conversion")
+    ax.axhline(GOAL_DB, color="k", ls=":", lw=1)
+    ax.axvline(18, color="grey", lw=0.8)
+    ax.set_xlabel("CRF (H.264)")
+    ax.set_ylabel("PSNR outside the face vs the target file (dB)")
+    ax.set_title("outside the face, both decoded by ffmpeg")
+    ax.legend()
+    st = report["stages"]
+    names = [k for k in st if k != "total"]
+    bx.barh(names, [st[k] for k in names])
+    bx.set_xlabel("seconds")
+    bx.set_title(f"{report['seconds']:.0f} s of video: command {report['command_seconds']:.1f} s")
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="out/benchmarks")
+    ap.add_argument("--seconds", type=float, default=10.0)
+    ap.add_argument("--source", default="driving_d6")
+    ap.add_argument("--target", default="driving_d9")
+    args = ap.parse_args()
+    from facetransfer.assets import data_dir
+    from facetransfer.io.atomic import atomic_path
+    from facetransfer.io.video import video_info
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    data = Path(data_dir()) / "video"
+    source, target = data / f"{args.source}.mp4", data / f"{args.target}.mp4"
+    info = video_info(target)
+    n = int(round(args.seconds * info.fps))
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        cmd = run_command(source, target, n, tmp / "cmd.mp4")
+        print(f"command: {cmd:.1f} s for {n} frames", flush=True)
+        stages, frames, masks, fps = staged(source, target, n, tmp / "staged.mp4")
+        print("stages: " + ", ".join(f"{k} {v:.1f}" for k, v in stages.items()), flush=True)
+        rows = outside(target, frames, masks, fps, tmp)
+    stages["total"] = sum(stages.values())
+    report = {"source": source.name, "target": target.name, "frames": n, "fps": fps,
+              "size": list(info.size), "seconds": n / fps, "command_seconds": cmd,
+              "stages": stages, "outside_fraction": float((~masks).mean()), "outside": rows}
+    with atomic_path(out / "transfer_e2e.json", overwrite=True) as p:
+        Path(p).write_text(json.dumps(report, indent=2))
+    plot(report, out / "transfer_e2e.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,580 @@
+"""Eyes and brows that transfer: eyelids rendered from the model over an open-eyed target eye.
+
+The model mesh has holes where the eyes are (:attr:`facetransfer.rewrite.MeshTopology.eye_loops`).
+Left open, the target's own eyes show through them, and so do the target's own blinks (issue 13).
+Here, instead (Vlasic et al. 2005, §6: the face texture "from the target video (constant throughout
+the sequence)", applied to the eyes):
+
+1. each eye hole is closed by fill triangles between its upper and lower chain of boundary
+   vertices (:func:`fill_loop`, :func:`close_eyes`; no vertex is added);
+2. the eye region (the fill, and every triangle that an eye or brow blendshape moves:
+   :func:`region_faces`) is textured from one target frame where the eyes are open
+   (:func:`open_eye_frame`), looked up through the target's tracked geometry in that frame
+   (:func:`eye_texture`). The fill shows that frame's eyeball; the lids show its lid skin;
+   nothing of the region carries the target's own blinks or brow movements;
+3. the new mesh is rasterised with the fill (the z-buffer puts a closing lid in front of the
+   eyeball), and the eye region is pasted into the per-frame face shifted to its colours (the
+   frames' exposure may differ: :func:`paint_eyes`, :func:`match_outline`);
+4. when the target closes its eyes somewhere in the clip (:func:`closed_eye_frame`), that
+   frame's lids fade in as the new lids close (:meth:`EyeTexture.closing`), so a blink shows the
+   target's own closed lid rather than its open-eyed lid skin stretched.
+
+A blink of the new performance therefore closes the target's eye (its lid skin slides over the
+eyeball), and an open eye shows the target's eye from the reference frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
+from .errors import RewriteError
+from .render import shade_texture
+from .texture.face import frame_uvs
+from .topology import close_mouth
+
+log = logging.getLogger(__name__)
+
+__all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
+           "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
+           "paint_eyes", "match_outline", "lid_gap", "closed_eye_frame", "close_region"]
+
+#: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
+EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
+              "eyeSquintLeft", "eyeSquintRight")
+#: ARKit blendshapes of the brows (their texture then follows the new brows, not the target's).
+BROW_SHAPES = ("browDownLeft", "browDownRight", "browInnerUp", "browOuterUpLeft",
+               "browOuterUpRight")
+
+
+#: The brow region: vertices a brow shape moves by more than this fraction of its largest
+#: displacement (the brow shapes move the whole forehead a little; 0.1 would take most of it).
+BROW_THRESHOLD = 0.25
+#: The closed frame's texture fades in while the lids close from this to that fraction of the
+#: way from the open to the closed frame's gap (:meth:`EyeTexture.closing`).
+CLOSING_RAMP = (0.45, 0.6)
+#: Standard deviation in pixels of the fade between the closed frame's lids and the rest of the
+#: eye region (:func:`paint_eyes`).
+LID_SOFTNESS = 3.0
+#: Per-channel gains allowed between the eye region's frame and the current one
+#: (:func:`match_outline`).
+GAIN_RANGE = (0.7, 1.4)
+#: Holes of the eye region up to this many edge rings across are closed (:func:`close_region`).
+CLOSE_RINGS = 3
+
+
+@dataclass(frozen=True)
+class EyeTexture:
+    """The texture of the eye region for a whole clip.
+
+    Attributes
+    ----------
+    image : (Ht, Wt, 3) uint8
+        The open-eyed target frame.
+    uvs : (n_closed, 2) float64
+        Texture coordinates (v up, :func:`facetransfer.rewrite.frame_uvs`) of the closed mesh's
+        vertices in that frame.
+    select : (F',) bool
+        The triangles of the eye-closed topology textured from ``image``.
+    frame : int
+        The target frame ``image`` is.
+    side : (F',) int8
+        Which eye's lids a triangle belongs to (0: iBUG 36-41, 1: iBUG 42-47; -1: neither,
+        e.g. the brows), for the closed frame's texture.
+    lids : (2, 2, 2) int64
+        Per eye, two (upper, lower) lid vertex pairs (iBUG 37-41, 38-40; 43-47, 44-46) whose
+        distance measures the lid gap of a mesh.
+    gap_open : (2,) float
+        The lid gaps of the target's mesh in ``frame``.
+    closed_image : (Ht, Wt, 3) uint8 or None
+        A target frame with the eyes closed (None: the target never closes them).
+    closed_uvs : (n_closed, 2) float64 or None
+    gap_closed : (2,) float or None
+    closed_frame : int
+        -1 without a closed frame.
+    """
+
+    image: np.ndarray
+    uvs: np.ndarray
+    select: np.ndarray
+    frame: int
+    side: np.ndarray
+    lids: np.ndarray
+    gap_open: np.ndarray
+    closed_image: np.ndarray | None = None
+    closed_uvs: np.ndarray | None = None
+    gap_closed: np.ndarray | None = None
+    closed_frame: int = -1
+
+    def closing(self, vertices: np.ndarray) -> np.ndarray:
+        """The closed frame's share in each eye's texture for a mesh, ``(2,)`` in [0, 1].
+
+        How closed the mesh's lids are between the open and the closed frame (0 at the open
+        gap, 1 at the closed one) through a smoothstep over :data:`CLOSING_RAMP` (a short
+        cross-fade: half-way mixes of two lid positions look like a double exposure). Zeros
+        without a closed frame.
+        """
+        if self.closed_image is None:
+            return np.zeros(2)
+        g = lid_gap(vertices, self.lids)
+        span = np.maximum(self.gap_open - self.gap_closed, 1e-9)
+        lo, hi = CLOSING_RAMP
+        t = np.clip(((self.gap_open - g) / span - lo) / (hi - lo), 0.0, 1.0)
+        return t * t * (3.0 - 2.0 * t)
+
+
+def lid_gap(vertices: np.ndarray, lids: np.ndarray) -> np.ndarray:
+    """Mean distance of each eye's (upper, lower) lid vertex pairs, ``(2,)``.
+
+    Parameters
+    ----------
+    vertices : (n, 3)
+    lids : (2, 2, 2) int
+        Per eye, two (upper, lower) vertex pairs.
+    """
+    V = np.asarray(vertices, np.float64)
+    L = np.asarray(lids, np.int64)
+    return np.linalg.norm(V[L[..., 0]] - V[L[..., 1]], axis=-1).mean(axis=-1)
+
+
+# ---------------------------------------------------------------------------------------------
+# topology: the eye holes closed
+# ---------------------------------------------------------------------------------------------
+
+def fill_loop(loop: np.ndarray, vertices: np.ndarray) -> np.ndarray:
+    """Triangulate a hole between its two chains from corner to corner (a zipper).
+
+    The corners are the loop's vertices of least and greatest x (the eye's corners in model
+    coordinates, x to the side); the upper and lower chains are zipped in order of x, so each
+    triangle spans the opening from lid to lid (a blink shrinks them evenly).
+
+    Parameters
+    ----------
+    loop : (k,) int
+        A boundary loop (vertex indices in order), ``k >= 3``.
+    vertices : (n, 3) float
+        Vertex positions (the neutral face).
+
+    Returns
+    -------
+    (k - 2, 3) int64
+        Triangles of loop vertices, wound like the loop (the surrounding surface's winding
+        continues across the fill when the loop runs along its boundary half-edges, reversed).
+    """
+    L = np.asarray(loop, np.int64)
+    x = np.asarray(vertices, np.float64)[L, 0]
+    k = L.size
+    i0, i1 = int(np.argmin(x)), int(np.argmax(x))
+    a = L[np.arange(i0, i0 + (i1 - i0) % k + 1) % k]            # i0 -> i1 along the loop
+    b = L[np.arange(i0, i0 - (i0 - i1) % k - 1, -1) % k]        # i0 -> i1 the other way
+    xs = np.asarray(vertices, np.float64)[:, 0]
+    tris, p, q = [], 0, 0
+    while p < a.size - 1 or q < b.size - 1:
+        step_a = q == b.size - 1 or (p < a.size - 1 and xs[a[p + 1]] <= xs[b[q + 1]])
+        if step_a:
+            t = (a[p], a[p + 1], b[q])
+            p += 1
+        else:
+            t = (a[p], b[q + 1], b[q])
+            q += 1
+        if len(set(t)) == 3:
+            tris.append(t)
+    # chain a runs along the loop: triangle (a[p], a[p+1], .) uses the loop's edge direction;
+    # the surface beside the hole uses the reverse half-edge, so reverse every triangle
+    return np.asarray(tris, np.int64).reshape(-1, 3)[:, ::-1].copy()
+
+
+def close_eyes(topo, vertices: np.ndarray):
+    """The topology with its eye holes closed by :func:`fill_loop`.
+
+    Parameters
+    ----------
+    topo : MeshTopology
+        Of :func:`facetransfer.rewrite.mesh_topology`.
+    vertices : (n_vertices, 3)
+        The neutral face (orders the fill's chains).
+
+    Returns
+    -------
+    topo : MeshTopology
+        ``faces`` with the fill triangles appended (the vertex count, mouth faces and eye loops
+        unchanged).
+    fill : (m,) int64
+        Indices into the new ``faces`` of the fill triangles (empty without eye loops).
+    """
+    start = topo.faces.shape[0]
+    fills = [fill_loop(loop, vertices) for loop in topo.eye_loops]
+    if not fills:
+        return topo, np.zeros(0, np.int64)
+    fill = np.concatenate(fills)
+    faces = np.concatenate([topo.faces, fill])
+    return dataclasses.replace(topo, faces=faces), np.arange(start, faces.shape[0])
+
+
+# ---------------------------------------------------------------------------------------------
+# the eye region
+# ---------------------------------------------------------------------------------------------
+
+def region_vertices(model, names=EYE_SHAPES, *, threshold: float = 0.1,
+                    rig=None) -> np.ndarray | None:
+    """Vertices moved by the named ARKit blendshapes (of the model's mean person).
+
+    Parameters
+    ----------
+    model : MultilinearModel
+        An ARKit model (:func:`facetransfer.arkit.is_arkit_model`).
+    names : sequence of str
+        ARKit blendshape names.
+    threshold : float
+        A vertex belongs when some shape moves it by more than this fraction of that shape's
+        largest displacement.
+    rig : ExpressionRig, optional
+        :func:`facetransfer.arkit.expression_rig` of the model's mean person, if at hand (it
+        takes about a second for the default model).
+
+    Returns
+    -------
+    (n_vertices,) bool, or None when the model is not ARKit-named.
+    """
+
+    if not is_arkit_model(model) or not names:
+        return None
+    if rig is None:
+        rig = expression_rig(model, model.default_weights())
+    out = np.zeros(int(model.n_vertices), bool)
+    for n in names:
+        d = np.linalg.norm(rig.deltas[ARKIT_NAMES.index(n)], axis=1)
+        if d.max() > 0:
+            out |= d > threshold * d.max()
+    return out
+
+
+def region_faces(faces: np.ndarray, vertex_mask: np.ndarray, *, rings: int = 1) -> np.ndarray:
+    """Triangles with every vertex in ``vertex_mask``, grown by ``rings`` rings of neighbours.
+
+    Parameters
+    ----------
+    faces : (F, 3) int
+    vertex_mask : (n,) bool
+    rings : int
+
+    Returns
+    -------
+    (F,) bool
+    """
+    F = np.asarray(faces, np.int64)
+    v = np.zeros(int(F.max()) + 1 if F.size else 0, bool)
+    m = np.asarray(vertex_mask, bool)
+    v[:m.size] = m[:v.size]
+    sel = v[F].all(axis=1)
+    for _ in range(int(rings)):
+        v[F[sel].ravel()] = True
+        sel = v[F].any(axis=1)
+    return sel
+
+
+def close_region(faces: np.ndarray, vertex_mask: np.ndarray, rings: int = CLOSE_RINGS
+                 ) -> np.ndarray:
+    """Morphological closing of a vertex set on a mesh: grown by ``rings`` edge rings, then
+    shrunk by as many (holes narrower than about ``2 * rings`` rings are filled).
+
+    Parameters
+    ----------
+    faces : (F, 3) int
+    vertex_mask : (n,) bool
+    rings : int
+
+    Returns
+    -------
+    (n,) bool
+    """
+    F = np.asarray(faces, np.int64)
+
+    def grow(v):
+        v = v.copy()
+        v[F[v[F].any(axis=1)].ravel()] = True
+        return v
+
+    v = np.asarray(vertex_mask, bool).copy()
+    for _ in range(int(rings)):
+        v = grow(v)
+    for _ in range(int(rings)):
+        v = ~grow(~v)
+    return v | np.asarray(vertex_mask, bool)
+
+
+def _ring_vertices(faces: np.ndarray, loops, n: int, rings: int) -> np.ndarray:
+    """Vertices within ``rings`` edge rings of the loops (the region of non-ARKit models)."""
+    F = np.asarray(faces, np.int64)
+    v = np.zeros(n, bool)
+    for loop in loops:
+        v[np.asarray(loop, np.int64)] = True
+    for _ in range(int(rings)):
+        v[F[v[F].any(axis=1)].ravel()] = True
+    return v
+
+
+# ---------------------------------------------------------------------------------------------
+# the open-eyed reference frame
+# ---------------------------------------------------------------------------------------------
+
+def eye_openness(track) -> np.ndarray:
+    """How open the eyes are at each frame of a track, ``(F,)`` (larger: more open).
+
+    ``1 - mean(eyeBlinkLeft, eyeBlinkRight)`` of the track's ARKit activations when it has them;
+    otherwise the eyelid gap of its 68 landmarks (iBUG 37-41, 38-40, 43-47, 44-46 over the eye's
+    width); zeros when neither is known.
+    """
+    F = track.n_frames
+    if track.blendshapes is not None and track.blendshape_names is not None:
+        names = list(track.blendshape_names)
+        if "eyeBlinkLeft" in names and "eyeBlinkRight" in names:
+            b = np.asarray(track.blendshapes, np.float64)
+            return 1.0 - 0.5 * (b[:, names.index("eyeBlinkLeft")] +
+                                b[:, names.index("eyeBlinkRight")])
+    L = np.asarray(track.landmarks2d, np.float64)
+    if L.shape == (F, 68, 2) and np.isfinite(L).all() and np.ptp(L) > 0:
+        def gap(u, l):  # noqa: E306 - vertical gap of one lid pair
+            return np.linalg.norm(L[:, u] - L[:, l], axis=1)
+        w = (np.linalg.norm(L[:, 36] - L[:, 39], axis=1) +
+             np.linalg.norm(L[:, 42] - L[:, 45], axis=1))
+        return (gap(37, 41) + gap(38, 40) + gap(43, 47) + gap(44, 46)) / np.maximum(w, 1e-9)
+    return np.zeros(F)
+
+
+def closed_eye_frame(track, n_frames: int | None = None, *, min_drop: float = 0.4) -> int | None:
+    """The target frame with the eyes most closed, or None when they never close.
+
+    "Closed": :func:`eye_openness` falls below its median by at least ``min_drop`` of its median
+    (for ARKit activations: a blink of about 0.4 or more).
+    """
+    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
+    if good.size == 0:
+        return None
+    op = eye_openness(track)[good]
+    med = float(np.median(op))
+    j = int(np.argmin(op))
+    return int(good[j]) if med > 0 and op[j] <= (1.0 - min_drop) * med else None
+
+
+def open_eye_frame(track, n_frames: int | None = None, *, quantile: float = 0.75) -> int:
+    """The target frame to texture the eye region from: eyes open, facing the camera.
+
+    Among the frames (of the first ``n_frames``) where the face is not lost and the eyes are at
+    least as open as the ``quantile`` of :func:`eye_openness` (no blink, no squint), the one
+    facing the camera most squarely (plus half its tracking confidence), with the least brow
+    activity when the track has ARKit activations.
+
+    Raises
+    ------
+    RewriteError
+        The face is lost in every frame.
+    """
+
+    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
+    if good.size == 0:
+        raise RewriteError(f"the face is lost in every frame of "
+                           f"{track.source or 'the target'}")
+    op = eye_openness(track)[good]
+    cand = good[op >= np.quantile(op, quantile)]
+    score = track.rotation[cand, 2, 2] + 0.5 * np.asarray(track.confidence)[cand]
+    if track.blendshapes is not None and track.blendshape_names is not None:
+        names = list(track.blendshape_names)
+        cols = [names.index(n) for n in BROW_SHAPES if n in names]
+        if cols:
+            score = score - 0.5 * np.asarray(track.blendshapes, np.float64)[cand][:, cols].sum(1)
+    return int(cand[np.argmax(score)])
+
+
+def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | None = None,
+                rings: int = 4, n_frames: int | None = None):
+    """Close the eye holes and lift the eye region's texture from an open-eyed target frame.
+
+    Parameters
+    ----------
+    frames : sequence of (H, W, 3) uint8
+        The target video.
+    track : Track
+        The target's own track.
+    model : MultilinearModel
+    topo : MeshTopology
+        Of :func:`facetransfer.rewrite.mesh_topology` (eyes open).
+    brows : bool
+        The brows too (:data:`BROW_SHAPES`): textured from the same frame, they move with the new
+        performance only (issue 13, the brows).
+    frame : int, optional
+        The reference frame; default :func:`open_eye_frame`.
+    rings : int
+        For models without ARKit names: the eye region is this many rings around the holes.
+    n_frames : int, optional
+        Choose the reference frames among the first ``n_frames`` only (default: all).
+
+    Returns
+    -------
+    topo : MeshTopology
+        With the eye holes closed (:func:`close_eyes`).
+    texture : EyeTexture or None
+        None when the mesh has no eye holes.
+    """
+
+    if not topo.eye_loops:
+        return topo, None
+    V0 = model.synthesize(model.default_weights())
+    closed, fill = close_eyes(topo, V0)
+    select, lid_faces = _region_faces(model, topo, closed, fill, brows=brows, rings=rings)
+    pairs, side = _lid_sides(model, topo, closed, V0, lid_faces)
+
+    def lift(j):
+        img = np.asarray(frames[j])
+        Vj = close_mouth(model.synthesize(track.weights_at(j)), topo)
+        return img, frame_uvs(Vj, track.camera(j), (img.shape[1], img.shape[0])), \
+            lid_gap(Vj, pairs)
+
+    m = len(frames) if n_frames is None else min(int(n_frames), len(frames))
+    i = open_eye_frame(track, m) if frame is None else int(frame)
+    img, uvs, gap = lift(i)
+    tex = EyeTexture(img, uvs, select, i, side, pairs, gap)
+    c = closed_eye_frame(track, m)
+    if c is not None:
+        cimg, cuvs, cgap = lift(c)
+        if np.all(cgap < 0.7 * gap):  # the track closes the lids there too
+            tex = dataclasses.replace(tex, closed_image=cimg, closed_uvs=cuvs, gap_closed=cgap,
+                                      closed_frame=c)
+    log.info("eyes: textured from target frames %d (open) and %d (closed; -1: none), "
+             "%d triangles", i, tex.closed_frame, int(select.sum()))
+    return closed, tex
+
+
+# ---------------------------------------------------------------------------------------------
+# one frame
+# ---------------------------------------------------------------------------------------------
+
+def _region_faces(model, topo, closed, fill: np.ndarray, *, brows: bool, rings: int):
+    """The triangles (bool masks over ``closed.faces``) of the eye region and of the lids alone.
+
+    The region is what the ARKit eye shapes (and, with ``brows``, the brow shapes) move, or
+    ``rings`` rings around the holes for other models, closed over small holes, plus the
+    fill triangles ``fill`` of :func:`close_eyes`.
+    """
+    rig = expression_rig(model, model.default_weights()) if is_arkit_model(model) else None
+    lids = region_vertices(model, EYE_SHAPES, rig=rig)
+    if lids is None:
+        lids = _ring_vertices(closed.faces, topo.eye_loops, closed.n_closed, rings)
+    for loop in topo.eye_loops:
+        lids[np.asarray(loop, np.int64)] = True
+    verts = lids.copy()
+    if brows and is_arkit_model(model):
+        verts |= region_vertices(model, BROW_SHAPES, threshold=BROW_THRESHOLD, rig=rig)
+
+    def faces_of(v):
+        vmask = np.zeros(closed.n_closed, bool)
+        vmask[:v.size] = v
+        vmask = close_region(closed.faces, vmask)
+        sel = region_faces(closed.faces, vmask, rings=1)
+        sel[fill] = True
+        return sel
+
+    return faces_of(verts), faces_of(lids)
+
+
+def _lid_sides(model, topo, closed, V0: np.ndarray, lid_faces: np.ndarray):
+    """The iBUG lid landmark pairs ``(2, 2, 2)`` (eye, pair, upper/lower) and each triangle's
+    eye ``(m,) int8``: 0 right, 1 left, -1 not a lid triangle."""
+    lm = np.asarray(model.landmarks, np.int64)
+    pairs = np.array([[[lm[37], lm[41]], [lm[38], lm[40]]], [[lm[43], lm[47]], [lm[44], lm[46]]]])
+    mid = 0.5 * (V0[lm[36:42], 0].mean() + V0[lm[42:48], 0].mean())
+    cx = close_mouth(V0, topo)[closed.faces, 0].mean(axis=1)
+    side = ((cx > mid) == (V0[lm[42:48], 0].mean() > mid)).astype(np.int8)
+    side[~lid_faces] = -1
+    return pairs, side
+
+
+def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.ndarray,
+               face_mask: np.ndarray, texture: EyeTexture, *, feather: float = 3.0) -> np.ndarray:
+    """The rendered face with its eye region textured from the open-eyed frame.
+
+    The eye region's pixels (of the triangles ``texture.select`` that the z-buffer shows) are
+    shaded from ``texture`` and pasted into ``face_image`` shifted to its colours
+    (:func:`match_outline`). With a closed frame, each eye's lid pixels are
+    the mix of the open and the closed frame's texture by how closed the new mesh's lids are
+    (:meth:`EyeTexture.closing`): a blink shows the target's own closed lid.
+
+    Parameters
+    ----------
+    raster : Raster
+        Of the new mesh with the eye-closed topology (``faces``).
+    faces : (F', 3) int
+    vertices : (n_closed, 3)
+        The new mesh (model coordinates).
+    face_image : (H, W, 3) uint8
+        The face shaded from the face texture.
+    face_mask : (H, W) bool
+    texture : EyeTexture
+    feather : float
+        Soft-edge width in pixels of the region's outline.
+
+    Returns
+    -------
+    (H, W, 3) uint8
+        ``face_image`` with the eye region replaced.
+    """
+    import cv2
+
+
+    eye_img, eye_mask = shade_texture(raster, faces, texture.uvs, texture.image, texture.select)
+    eye_mask &= face_mask
+    if not eye_mask.any():
+        return face_image
+    a = texture.closing(vertices)
+    if a.max() > 0:
+        closed_img, _ = shade_texture(raster, faces, texture.closed_uvs, texture.closed_image,
+                                      texture.select)
+        t = np.where(raster.tri_id >= 0, texture.side[np.maximum(raster.tri_id, 0)], -1)
+        w = np.where(t >= 0, a[np.maximum(t, 0)], 0.0).astype(np.float32)
+        # soft where the lids meet the rest of the region (no step along triangle edges)
+        w = cv2.GaussianBlur(w, (0, 0), LID_SOFTNESS)[..., None]
+        eye_img = np.rint((1 - w) * eye_img + w * closed_img).astype(np.uint8)
+    return match_outline(face_image, eye_img, eye_mask, face_mask, feather=feather)
+
+
+def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
+                  *, feather: float = 3.0) -> np.ndarray:
+    """Paste ``part`` into ``face`` inside ``mask``, shifted to the face's colours.
+
+    ``face`` and ``part`` show the same surface there (the same person's skin lifted from two
+    frames), so their ratio is the change of exposure and white balance between the frames
+    plus the change of expression. ``part`` is scaled per channel by the ratio of the medians
+    of ``face`` and ``part`` over ``mask`` (inside the face, 2 px from its edge; clipped to
+    :data:`GAIN_RANGE`): robust to the expression's share and to hair, unlike a membrane pinned
+    at every outline pixel, and a gain keeps dark pixels (iris, lashes) dark where an offset
+    would tint them. The seam fades over ``feather`` pixels inside the mask.
+
+    Parameters
+    ----------
+    face, part : (H, W, 3) uint8
+    mask, face_mask : (H, W) bool
+    feather : float
+
+    Returns
+    -------
+    (H, W, 3) uint8
+    """
+    import cv2
+
+    m8 = mask.astype(np.uint8)
+    deep = cv2.erode(face_mask.astype(np.uint8), np.ones((5, 5), np.uint8),
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+    ring = mask & deep
+    f = part.astype(np.float32)
+    if ring.sum() >= 8:
+        gain = np.median(face[ring].astype(np.float32), axis=0) / \
+            np.maximum(np.median(f[ring], axis=0), 1.0)
+        f *= np.clip(gain, *GAIN_RANGE)
+    a = np.clip(cv2.distanceTransform(m8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) / max(feather, 1e-6),
+                0.0, 1.0)[..., None]
+    out = a * f + (1.0 - a) * face.astype(np.float32)
+    return np.where(mask[..., None], np.clip(np.rint(out), 0, 255), face).astype(np.uint8)

@@ -1,0 +1,215 @@
+"""Eyes that transfer (issue 13): the eye holes closed, lids and eyes from an open-eyed frame."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facetransfer import eyes
+from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+from facetransfer.render import rasterize
+from facetransfer.rewrite import rewrite_frame
+from facetransfer.texture.face import FaceTexture, frame_uvs
+from facetransfer.topology import boundary_loops, close_mouth, mesh_topology
+from facetransfer.track.result import Track
+
+SIZE = 256
+SKIN, TARGET_EYE, REF_EYE = (200, 150, 120), (0, 255, 0), (0, 0, 255)
+
+
+@pytest.fixture(scope="module")
+def setup(arkit_model):
+    topo = mesh_topology(arkit_model)
+    V0 = arkit_model.synthesize(arkit_model.default_weights())
+    closed, fill = eyes.close_eyes(topo, V0)
+    return arkit_model, topo, closed, fill
+
+
+def _track(model, activations: np.ndarray) -> Track:
+    """A frontal track of ``model``'s mean person with the given ARKit activations (F, 52)."""
+    F = activations.shape[0]
+    k = model.mode_index("identity")
+    return Track(fps=25.0, frame_size=(SIZE, SIZE), rotation=np.tile(np.eye(3), (F, 1, 1)),
+                 scale=np.full(F, 20.0), translation=np.tile([SIZE / 2, SIZE / 2 - 40.0], (F, 1)),
+                 weights={"identity": np.tile(model.weight_mean(k), (F, 1)),
+                          "expression": activations_to_weights(model, activations)},
+                 landmarks2d=np.zeros((F, 68, 2)), confidence=np.ones(F),
+                 lost=np.zeros(F, bool), model_hash=model.content_hash,
+                 mode_names=model.mode_names, source="synthetic.mp4",
+                 blendshapes=activations.astype(np.float32), blendshape_names=ARKIT_NAMES)
+
+
+def _acts(F: int = 1, blink: float = 0.0) -> np.ndarray:
+    a = np.zeros((F, 52), np.float32)
+    a[:, ARKIT_NAMES.index("eyeBlinkLeft")] = blink
+    a[:, ARKIT_NAMES.index("eyeBlinkRight")] = blink
+    return a
+
+
+def _eye_pixels(model, closed, fill, track, i: int = 0) -> np.ndarray:
+    """(H, W) bool: the pixels of the eye holes' fill in frame ``i`` of ``track`` (z-buffered)."""
+    V = close_mouth(model.synthesize(track.weights_at(i)), closed)
+    r = rasterize(V, closed.faces, track.camera(i), (SIZE, SIZE))
+    return np.isin(r.tri_id, fill)
+
+
+def _frame(eye_mask: np.ndarray, eye_colour) -> np.ndarray:
+    img = np.empty((SIZE, SIZE, 3), np.uint8)
+    img[:] = SKIN
+    img[eye_mask] = eye_colour
+    return img
+
+
+def test_fill_closes_each_eye_hole_with_consistent_winding(setup):
+    model, topo, closed, fill = setup
+    assert len(topo.eye_loops) == 2
+    assert fill.size == sum(len(loop) - 2 for loop in topo.eye_loops)
+    assert np.all(np.isin(closed.faces[fill], np.concatenate(topo.eye_loops)))
+    left = {frozenset(map(int, loop)) for loop in boundary_loops(closed.faces)}
+    for loop in topo.eye_loops:
+        assert frozenset(map(int, loop)) not in left  # the hole is no longer a boundary
+    # every directed half-edge once: the fill continues the surface's orientation
+    F = closed.faces
+    E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    assert np.unique(E, axis=0).shape[0] == E.shape[0]
+    assert closed.n_closed == topo.n_closed  # no vertex added
+
+
+def test_region_holds_the_lids_not_the_chin(setup):
+    model, *_ = setup
+    v = eyes.region_vertices(model, eyes.EYE_SHAPES)
+    lm = np.asarray(model.landmarks)
+    assert v[lm[[37, 38, 43, 44]]].all()  # upper lids
+    assert not v[lm[[8, 57, 30]]].any()  # chin, lower lip, nose tip
+    brows = eyes.region_vertices(model, eyes.BROW_SHAPES, threshold=eyes.BROW_THRESHOLD)
+    assert brows[lm[17:27]].mean() > 0.5 and not brows[lm[8]]
+
+
+def test_open_and_closed_reference_frames():
+    class T:  # the fields the frame choice reads
+        n_frames = 6
+        lost = np.array([False, False, True, False, False, False])
+        rotation = np.tile(np.eye(3), (6, 1, 1))
+        confidence = np.ones(6)
+        blendshape_names = ARKIT_NAMES
+        landmarks2d = np.zeros((6, 68, 2))
+        source = "t.mp4"
+    b = _acts(6)
+    b[:, ARKIT_NAMES.index("eyeBlinkLeft")] = b[:, ARKIT_NAMES.index("eyeBlinkRight")] = \
+        [0.3, 0.9, 0.0, 0.1, 0.05, 0.2]
+    b[4, ARKIT_NAMES.index("browInnerUp")] = 0.8  # open but brows raised
+    T.blendshapes = b
+    assert eyes.closed_eye_frame(T) == 1
+    assert eyes.open_eye_frame(T) == 3  # frame 2 (wider) is lost, frame 4 raises the brows
+    T.blendshapes = _acts(6, 0.1)
+    assert eyes.closed_eye_frame(T) is None  # never closes
+
+
+def test_open_lids_show_the_reference_eye_and_a_blink_covers_it(setup):
+    model, topo, closed, fill = setup
+    ref = _track(model, _acts(1, 0.0))
+    hole = _eye_pixels(model, closed, fill, ref)
+    assert hole.sum() > 40
+    ref_img = _frame(hole, REF_EYE)
+    target = _frame(hole, TARGET_EYE)  # the target's own eye, where the hole is
+    _, tex = eyes.eye_texture([ref_img], ref, model, topo)
+    assert tex.frame == 0 and tex.closed_image is None
+    Vt = close_mouth(model.synthesize(ref.weights_at(0)), topo)
+    face_tex = FaceTexture(target, frame_uvs(Vt, ref.camera(0), (SIZE, SIZE)), 0)
+    cam = ref.camera(0)
+
+    def result(blink: float, with_eyes: bool = True):
+        V = model.synthesize(_track(model, _acts(1, blink)).weights_at(0))
+        return rewrite_frame(target, V, cam, closed if with_eyes else topo, face_tex,
+                             eye_texture=tex if with_eyes else None, blend="none", erode=0)
+
+    def share(img, colour, where):
+        return np.mean(np.all(np.abs(img[where].astype(int) - colour) < 60, axis=-1))
+
+    inner = hole & ~np.logical_or.reduce([np.roll(hole, s, a) == 0 for s in (-2, 2)
+                                          for a in (0, 1)])
+    assert inner.sum() > 10
+    # before: the eye holes are not rendered and the target's own eye shows through
+    old = result(0.0, with_eyes=False)
+    assert not old.face_mask[inner].any() and share(old.image, TARGET_EYE, inner) == 1.0
+    # open: the rendered mask covers the eye and shows the reference frame's eye
+    opened = result(0.0)
+    assert opened.face_mask[inner].all()
+    assert share(opened.image, REF_EYE, inner) > 0.9
+    # closed: the lids cover the eye (skin, neither eye colour)
+    shut = result(1.0)
+    assert shut.face_mask[inner].all()
+    assert share(shut.image, REF_EYE, inner) < 0.15
+    assert share(shut.image, TARGET_EYE, inner) == 0.0
+    assert share(shut.image, SKIN, inner) > 0.8
+
+
+def test_a_closed_frame_textures_the_blink(setup):
+    model, topo, closed, fill = setup
+    track = _track(model, np.concatenate([_acts(1, 0.0), _acts(1, 1.0)]))
+    hole = _eye_pixels(model, closed, fill, track, 0)
+    lid = (180, 60, 60)  # the target's closed lid, painted where its open eye was
+    frames = [_frame(hole, REF_EYE), _frame(hole, lid)]
+    _, tex = eyes.eye_texture(frames, track, model, topo)
+    assert (tex.frame, tex.closed_frame) == (0, 1)
+    V = [model.synthesize(track.weights_at(i)) for i in (0, 1)]
+    np.testing.assert_allclose(tex.closing(V[0]), 0.0)
+    np.testing.assert_allclose(tex.closing(V[1]), 1.0)
+    # the blink shows the target's own closed lid; the open eye still the open frame's eye
+    cam = track.camera(0)
+    face_tex = FaceTexture(frames[0], frame_uvs(close_mouth(V[0], topo), cam, (SIZE, SIZE)), 0)
+    inner = hole & np.roll(hole, 3, 0) & np.roll(hole, -3, 0)
+    for v, colour in ((V[1], lid), (V[0], REF_EYE)):
+        r = rewrite_frame(frames[0], v, cam, closed, face_tex, eye_texture=tex, blend="none",
+                          erode=0)
+        near = np.all(np.abs(r.image[inner].astype(int) - colour) < 60, axis=-1)
+        assert near.mean() > 0.8
+
+
+def test_a_model_without_arkit_names_takes_rings_around_the_holes(quick_model):
+    topo = mesh_topology(quick_model)
+    k = quick_model.mode_index("identity")
+    F = 3
+    tr = Track(fps=25.0, frame_size=(SIZE, SIZE), rotation=np.tile(np.eye(3), (F, 1, 1)),
+               scale=np.full(F, 20.0), translation=np.tile([SIZE / 2, SIZE / 2], (F, 1)),
+               weights={m: np.tile(quick_model.weight_mean(quick_model.mode_index(m)), (F, 1))
+                        for m in quick_model.mode_names},
+               landmarks2d=np.zeros((F, 68, 2)), confidence=np.array([0.5, 1.0, 0.5]),
+               lost=np.zeros(F, bool), model_hash=quick_model.content_hash,
+               mode_names=quick_model.mode_names, source="q.mp4")
+    assert k >= 0
+    closed, tex = eyes.eye_texture(np.zeros((F, SIZE, SIZE, 3), np.uint8), tr, quick_model, topo,
+                                   rings=2)
+    assert tex.frame == 1 and tex.closed_image is None  # most confident; no lid gap known
+    loops = np.concatenate(topo.eye_loops)
+    touching = np.isin(closed.faces, loops).any(axis=1)
+    assert tex.select[touching].all()  # every triangle at a hole (and the fill)
+    assert 0 < tex.select.sum() < 0.3 * closed.faces.shape[0]
+
+
+def test_close_region_fills_a_small_hole_and_keeps_the_rest(setup):
+    model, topo, closed, fill = setup
+    F = closed.faces
+    lm = np.asarray(model.landmarks)
+    v = np.ones(closed.n_closed, bool)
+    # a hole of one ring around the nose tip, and the lower face left out
+    hole = np.zeros_like(v)
+    hole[lm[30]] = True
+    hole[F[hole[F].any(axis=1)].ravel()] = True
+    V0 = close_mouth(model.synthesize(model.default_weights()), topo)
+    low = V0[:, 1] < V0[lm[57], 1]
+    out = eyes.close_region(F, v & ~hole & ~low, rings=2)
+    assert out[hole].all()  # the hole is closed
+    assert not out[low & (V0[:, 1] < V0[lm[57], 1] - 2.0)].any()  # far from it, nothing grows
+
+
+def test_match_outline_takes_the_current_exposure():
+    rng = np.random.default_rng(0)
+    face = rng.integers(60, 200, (40, 50, 3)).astype(np.uint8)
+    mask = np.zeros((40, 50), bool)
+    mask[10:30, 12:40] = True
+    part = np.clip(face.astype(float) * [0.8, 0.9, 1.1], 0, 255).astype(np.uint8)  # other frame
+    out = eyes.match_outline(face, part, mask, np.ones_like(mask), feather=0.0)
+    np.testing.assert_array_equal(out[~mask], face[~mask])
+    assert np.abs(out[mask].astype(int) - face[mask].astype(int)).mean() < 2.0
+    assert np.abs(part[mask].astype(int) - face[mask].astype(int)).mean() > 8.0
