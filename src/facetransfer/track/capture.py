@@ -60,7 +60,7 @@ CORNER_WEIGHT = 3.0
 def capture_point_weights() -> np.ndarray:
     """The default reliability of the 68 iBUG points in the capture fit, (68,): the
     :data:`~facetransfer.track.landmarks.IBUG_WEIGHTS` with :data:`CORNERS` weighted up
-    (``bench_capture.py``: 7-point NME -0.02 to -0.24 points on the synthetic clips, the real
+    (``bench_capture.py``: 7-point NME 0 to -0.25 points on the synthetic clips, the real
     clips' correlations unchanged)."""
     w = np.array(IBUG_WEIGHTS, float)
     w[list(CORNERS)] *= CORNER_WEIGHT
