@@ -13,11 +13,14 @@ Measures, in one run, every tracker on the same frames:
    MediaPipe's 51 shapes and per key shape; correlation over frames of eye and mouth opening.
    Trackers: ``mediapipe`` (Face Landmarker, VIDEO mode, blendshapes), ``ours`` (the default
    tracker, ``capture_video``), ``klt`` (the paper's tracker, ``track_video`` with default
-   options), ``floor`` (the model fitted to the true 68 points on every frame).
+   options), ``floor`` (the model fitted to the true 68 points on every frame by
+   ``fit_landmarks``), ``capfloor`` (the capture tracker's own fit to the true 68 points: the
+   floor of ``ours``, its model and priors, without MediaPipe's errors).
 2. ``real``: clips of ``FACETRANSFER_DATA_DIR/video`` against their stored MediaPipe references:
    correlation and std ratio (ours / reference) of mouth opening, mouth width, eye opening and brow
    height (each / outer eye-corner distance) and of our activations against MediaPipe's
-   blendshapes; drift and jitter on ``driving_d6``.
+   blendshapes; drift and jitter on ``driving_d6``; gaze: Face Landmarker's eyeLook* against the
+   iris offsets of its own points 468-477 and against our eyeLook* activations.
 3. ``speed``: whole-process wall time of ``facetransfer track`` against a process running Face
    Landmarker in VIDEO mode over the same 354-frame 512x512 clip, in turn.
 
@@ -68,7 +71,7 @@ QUICK_REAL = (("WDA_KatieHill_000", 0, 100), ("driving_d6", 300, 120))
 TARGETS = {"mouth_open": 0.85, "mouth_width": 0.85, "eye_open": 0.85, "brow": 0.7,
            "jawOpen": 0.85, "eyeBlinkLeft": 0.85, "eyeBlinkRight": 0.85, "browInnerUp": 0.7,
            "std_ratio": (0.75, 1.33), "nme7": 0.025}
-TRACKERS = ("mediapipe", "ours", "klt", "floor")
+TRACKERS = ("mediapipe", "ours", "klt", "floor", "capfloor")
 FLOOR_PRIOR: list = [None]                    # --floor-prior
 QUIET = [True]                                # drop MediaPipe's native log lines (not with -v)
 
@@ -218,6 +221,19 @@ def run_ours(video: Path, model, max_frames: int | None = None, *, tracker: str 
             "lost": int(np.sum(tr.lost)), "has_blendshapes": tr.blendshapes is not None}
 
 
+def run_capture_floor(truth68: np.ndarray, model) -> dict:
+    """The capture tracker's own fit (default options) to the true 68 points of every frame,
+    without MediaPipe and flow: the floor of ``ours``, its model and priors."""
+    from facetransfer.track.capture import capture_detections
+    from facetransfer.track.detect import ClipDetections
+
+    tr = capture_detections(ClipDetections.from_points(np.asarray(truth68, np.float64)), model)
+    V = np.stack([model.synthesize(tr.weights_at(i)) for i in range(tr.n_frames)])
+    A = None if tr.blendshapes is None else np.asarray(tr.blendshapes, np.float64)
+    return {"landmarks": tr.landmarks2d, "activations": A, "vertices": V,
+            "vertex_subset": _model_subset(model)}
+
+
 def run_floor(truth68: np.ndarray, model, prior: float | None = None) -> dict:
     """The model fitted to the true 68 points on every frame (warm-started from the previous);
     ``prior``: :func:`~facetransfer.track.init.fit_landmarks`'s prior (default its own)."""
@@ -289,6 +305,8 @@ def run_synthetic(models: dict, trackers, cache: Path, quick: bool) -> dict:
                     elif tk in ("ours", "klt"):
                         pred = run_ours(clip.video, model,
                                         tracker="capture" if tk == "ours" else "klt")
+                    elif tk == "capfloor":
+                        pred = run_capture_floor(clip.landmarks, model)
                     else:
                         pred = run_floor(clip.landmarks, model, FLOOR_PRIOR[0])
                 except Exception as exc:  # a tracker that fails is a result, not a crash
@@ -316,7 +334,7 @@ def run_synthetic(models: dict, trackers, cache: Path, quick: bool) -> dict:
 
 
 _COLOURS = {"truth": (0, 220, 0), "ours": (230, 30, 30), "mediapipe": (40, 90, 255),
-            "floor": (240, 200, 0)}
+            "floor": (240, 200, 0), "capfloor": (200, 0, 200), "klt": (0, 200, 200)}
 
 
 def contact_sheet(sheets, path: Path) -> None:
@@ -403,6 +421,53 @@ def real_clip_scores(ours: dict, ref478: np.ndarray, mp_shapes: np.ndarray) -> d
     return out
 
 
+#: MediaPipe eye corners (outer, inner) and iris centre per eye, by the subject's side.
+_EYES = {"Right": (33, 133, 468), "Left": (263, 362, 473)}
+
+
+def iris_gaze(P: np.ndarray) -> dict[str, np.ndarray]:
+    """Gaze of each eye from MediaPipe's iris points, (F, 478, 2) -> per eye ``out`` (towards the
+    outer corner) and ``up``: the iris centre's offset from the eye-corner midpoint along and
+    across the eye axis, / the eye's corner distance, (F,) each."""
+    out = {}
+    mouth = P[:, 13]
+    for side, (o, i, c) in _EYES.items():
+        ax = P[:, o] - P[:, i]
+        w = np.linalg.norm(ax, axis=1)
+        u = ax / w[:, None]
+        n = np.stack([-u[:, 1], u[:, 0]], 1)
+        mid = (P[:, o] + P[:, i]) / 2
+        n *= np.sign(np.sum(n * (mid - mouth), axis=1))[:, None]     # towards the brows
+        d = P[:, c] - mid
+        out[f"out{side}"] = np.sum(d * u, axis=1) / w
+        out[f"up{side}"] = np.sum(d * n, axis=1) / w
+    return out
+
+
+def gaze_scores(mp478: np.ndarray, shapes: np.ndarray, A: np.ndarray | None) -> dict:
+    """Correlation over frames with Face Landmarker's own gaze (``eyeLookOut - eyeLookIn``,
+    ``eyeLookUp - eyeLookDown`` per eye) of (a) the iris offsets of :func:`iris_gaze` on the
+    same run's points (what an iris term could reach) and (b) our eyeLook* activations."""
+    from facetransfer.arkit import ARKIT_NAMES
+
+    F = len(mp478) if A is None else min(len(mp478), len(A))
+    g = iris_gaze(np.asarray(mp478[:F], np.float64))
+    col = lambda X, n: X[:F, ARKIT_NAMES.index(n)]  # noqa: E731
+    res = {}
+    for side in ("Left", "Right"):
+        ref = {"out": col(shapes, f"eyeLookOut{side}") - col(shapes, f"eyeLookIn{side}"),
+               "up": col(shapes, f"eyeLookUp{side}") - col(shapes, f"eyeLookDown{side}")}
+        for k, r in ref.items():
+            ours = None
+            if A is not None:
+                ours = (col(A, f"eyeLookOut{side}") - col(A, f"eyeLookIn{side}") if k == "out"
+                        else col(A, f"eyeLookUp{side}") - col(A, f"eyeLookDown{side}"))
+            res[f"{k}{side}"] = {"iris_corr": _r(corr(g[f"{k}{side}"], r)),
+                                 "ours_corr": None if ours is None else _r(corr(ours, r)),
+                                 "mediapipe_std": _r(float(np.std(r)))}
+    return res
+
+
 def peer_agreement(mp478: np.ndarray, ref478: np.ndarray) -> dict:
     """Today's Face Landmarker (Tasks API, VIDEO mode) against the stored reference (FaceMesh
     0.10.21) on the same frames: how far two MediaPipe versions agree, a ceiling for ours."""
@@ -467,6 +532,7 @@ def run_real(model, cache: Path, quick: bool) -> dict:
             continue
         r = real_clip_scores(ours, ref, shapes)
         r["mediapipe_vs_reference"] = peer_agreement(mp478, ref)
+        r["gaze"] = gaze_scores(mp478, shapes, ours["activations"])
         if name == "driving_d6":
             F = len(ours["landmarks"])
             r["drift_jitter"] = drift_jitter(ours["landmarks"], mediapipe_to_ibug(ref[:F]))
@@ -525,6 +591,12 @@ def print_real(real: dict) -> None:
         print("peer check, Face Landmarker now vs the stored reference (median corr/std ratio): "
               + ", ".join(f"{k} {np.median([p[k]['corr'] for p in peer]):.2f}/"
                           f"{np.median([p[k]['std_ratio'] for p in peer]):.2f}" for k in peer[0]))
+    gz = [c["gaze"] for c in real["clips"].values() if "gaze" in c]
+    if gz:
+        med = lambda k, f: np.nanmedian([np.nan if g[k][f] is None else g[k][f]  # noqa: E731
+                                         for g in gz])
+        print("gaze vs Face Landmarker's eyeLook* (median corr): " + ", ".join(
+            f"{k} iris {med(k, 'iris_corr'):.2f} ours {med(k, 'ours_corr'):.2f}" for k in gz[0]))
     for n, c in real["clips"].items():
         if "drift_jitter" in c:
             d = c["drift_jitter"]

@@ -10,7 +10,8 @@ from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.errors import TrackError, VideoError
 from facetransfer.render import rotation_from_euler
 from facetransfer.track.camera import Pose, project
-from facetransfer.track.capture import CaptureOptions, capture_detections
+from facetransfer.track.capture import (CORNERS, CaptureOptions, capture_detections,
+                                        capture_point_weights)
 from facetransfer.track.dense import mediapipe_correspondence
 from facetransfer.track.detect import ClipDetections
 from facetransfer.track.fit2d import box_qp, pose_gauss_newton
@@ -82,6 +83,26 @@ def test_capture_recovers_activations_and_points(arkit_model):
     assert tr.blendshapes[30, k] > 0.8 and tr.blendshapes[5, k] < 0.15  # a full blink
 
 
+def test_slow_temporal_holds_the_jaw_but_not_the_eyelids(arkit_model):
+    det, a, _ = _synthetic(arkit_model)
+    tr = capture_detections(det, arkit_model, fps=30, frame_size=(512, 512),
+                            options=CaptureOptions(slow_temporal=50.0))
+    jaw, blink = ARKIT_NAMES.index("jawOpen"), ARKIT_NAMES.index("eyeBlinkLeft")
+    # the jaw is pulled to the previous frame's value: it barely moves...
+    assert tr.blendshapes[:, jaw].std() < 0.5 * a[:, jaw].std()
+    # ...while the eyelids keep the weak temporal term and follow the 4-frame blink
+    assert np.corrcoef(tr.blendshapes[:, blink], a[:, blink])[0, 1] > 0.97
+
+
+def test_capture_point_weights_weigh_the_corners_up():
+    from facetransfer.track.landmarks import IBUG_WEIGHTS
+
+    w = capture_point_weights()
+    rest = np.setdiff1d(np.arange(68), CORNERS)
+    np.testing.assert_array_equal(w[rest], IBUG_WEIGHTS[rest])
+    np.testing.assert_allclose(w[list(CORNERS)], 3.0 * IBUG_WEIGHTS[list(CORNERS)])
+
+
 def test_face_appearing_late_marks_earlier_frames_lost(arkit_model):
     det, a, pts = _synthetic(arkit_model, F=40, late=12)
     tr = capture_detections(det, arkit_model, fps=30, frame_size=(512, 512))
@@ -122,6 +143,8 @@ def test_options_are_validated():
         CaptureOptions(flow=-1)
     with pytest.raises(TrackError):
         CaptureOptions(identity_frames=0)
+    with pytest.raises(TrackError):
+        CaptureOptions(slow_temporal=-1e-3)
 
 
 def test_capture_on_a_real_clip_follows_mediapipe(arkit_model, data_dir):

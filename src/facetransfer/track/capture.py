@@ -51,6 +51,24 @@ log = logging.getLogger(__name__)
 __all__ = ["CaptureOptions", "capture_video", "capture_detections", "detect_video"]
 
 Progress = Callable[[str, int, int], None]
+#: iBUG points of well-defined corners (outer and inner eye corners, nose tip, mouth corners):
+#: any detector places them most consistently, so they weigh :data:`CORNER_WEIGHT` times more.
+CORNERS = (36, 39, 42, 45, 30, 48, 54)
+CORNER_WEIGHT = 3.0
+
+
+def capture_point_weights() -> np.ndarray:
+    """The default reliability of the 68 iBUG points in the capture fit, (68,): the
+    :data:`~facetransfer.track.landmarks.IBUG_WEIGHTS` with :data:`CORNERS` weighted up
+    (``bench_capture.py``: 7-point NME 0 to -0.25 points on the synthetic clips, the real
+    clips' correlations unchanged)."""
+    w = np.array(IBUG_WEIGHTS, float)
+    w[list(CORNERS)] *= CORNER_WEIGHT
+    return w
+
+
+#: ARKit shapes of the eyelids: fast (a blink closes and opens in 4-6 frames).
+_EYELID = ("eyeBlink", "eyeSquint", "eyeWide")
 
 
 @dataclass(frozen=True)
@@ -71,7 +89,11 @@ class CaptureOptions:
         L1 weight on the activations (ARKit models: they are >= 0, so a linear term), which
         keeps shapes the 2-D points cannot tell apart switched off.
     temporal : float
-        Weight pulling a frame's expression toward the previous frame's.
+        Weight pulling a frame's expression toward the previous frame's (for an ARKit model:
+        the eyelid shapes', which blinks move within 2-3 frames).
+    slow_temporal : float
+        The same for every other ARKit shape (jaw, mouth, brows, cheeks: slower than a blink,
+        and noisier in 2-D points); not used for other models.
     flow : float
         Weight of the flow term relative to the detection term (0 = detections only).
     iterations : int
@@ -79,7 +101,7 @@ class CaptureOptions:
     smooth : float
         Sigma (frames) of a zero-phase smoothing of pose and expression afterwards (0 = off).
     point_weights : tuple of 68 float or None
-        Reliability of each iBUG point (default :data:`~facetransfer.track.landmarks.IBUG_WEIGHTS`).
+        Reliability of each iBUG point (default :func:`capture_point_weights`).
     offset_prior : float
         Ridge of the clip's static offset: a 3-D displacement of every tracked point, constant
         over the clip, fitted with the identity. It takes up how this face (and where the
@@ -101,6 +123,7 @@ class CaptureOptions:
     expression_prior: float = 1e-2
     sparsity: float = 0.0
     temporal: float = 2e-3
+    slow_temporal: float = 2e-2
     flow: float = 0.5
     iterations: int = 2
     smooth: float = 0.0
@@ -113,7 +136,7 @@ class CaptureOptions:
         for name in ("identity_frames", "identity_rounds", "iterations"):
             if int(getattr(self, name)) < 1:
                 raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("identity_prior", "expression_prior", "sparsity", "temporal", "flow",
+        for name in ("identity_prior", "expression_prior", "sparsity", "temporal", "slow_temporal", "flow",
                      "smooth", "dense", "offset_prior", "identity_expression_prior"):
             if not float(getattr(self, name)) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
@@ -187,6 +210,7 @@ class _Shape:
             self.size = len(self.used)
             self.x0 = np.zeros(self.size)
             self.ridge = activation_prior_scale()[self.used]                   # (K,)
+            self.fast = np.array([n.startswith(_EYELID) for n in ARKIT_NAMES])[self.used]
             self.u0, D = activation_basis(self.model)
             self.Du = D[self.used]                                             # (K, r)
         else:
@@ -231,8 +255,10 @@ class _Shape:
             Y = project_basis(self.D, pose)
             base = pose.project(self.N)
             G, h = targets_normal(Y, base, targets, iod)
+            lam_t = (np.where(self.fast, self.opt.temporal, self.opt.slow_temporal)
+                     if prev is not None else 0.0)                           # (K,)
             G = G + np.diag(lam_p * self.ridge + lam_t + 1e-9)
-            if lam_t:
+            if prev is not None:
                 h = h + lam_t * prev
             return box_qp(G, h - self.opt.sparsity, x, tol=1e-5)
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
@@ -471,8 +497,8 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         raise VideoError(f"no face found in {source or 'the video'} "
                          f"(searched frames 0-{det.n_frames - 1})")
     prog = progress or (lambda stage, done, total: None)
-    weights = np.asarray(opt.point_weights if opt.point_weights is not None else IBUG_WEIGHTS,
-                         float)
+    weights = np.asarray(opt.point_weights if opt.point_weights is not None
+                         else capture_point_weights(), float)
     dense = None
     if opt.dense > 0 and det.points478 is not None:
         from .dense import mediapipe_correspondence
