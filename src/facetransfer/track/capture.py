@@ -31,7 +31,6 @@ import copy
 import logging
 import time
 from dataclasses import dataclass, replace
-from typing import Callable
 
 import numpy as np
 
@@ -43,14 +42,15 @@ from .detect import ClipDetections, VideoLandmarker, detect_clip
 from .fit2d import box_qp, pose_gauss_newton, project_basis, targets_normal
 from .init import require_landmarks
 from .landmarks import IBUG_WEIGHTS
+from .options import Progress
 from .result import Track
+from .smooth import smooth_track
 from .solver import Prior
 
 log = logging.getLogger(__name__)
 
 __all__ = ["CaptureOptions", "capture_video", "capture_detections", "detect_video"]
 
-Progress = Callable[[str, int, int], None]
 #: iBUG points of well-defined corners (outer and inner eye corners, nose tip, mouth corners):
 #: any detector places them most consistently, so they weigh :data:`CORNER_WEIGHT` times more.
 CORNERS = (36, 39, 42, 45, 30, 48, 54)
@@ -537,8 +537,6 @@ def _fill_lost(states: list) -> tuple[list, np.ndarray]:
 
 
 def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
-    from .tracker import smooth_track
-
     full, lost = _fill_lost(states)
     F = len(full)
     R = np.stack([s.pose.rotation for s in full])

@@ -15,7 +15,7 @@ from ..errors import TrackError
 __all__ = ["TrackOptions", "Progress"]
 
 #: ``progress(stage, done, total)``: a tracker's report after each unit of work (a frame, a
-#: frame pair). Shared by the trackers (:mod:`.tracker`; :mod:`.capture` defines the same).
+#: frame pair). Shared by the trackers (:mod:`.tracker`, :mod:`.capture`).
 Progress = Callable[[str, int, int], None]
 
 
