@@ -99,15 +99,15 @@ def _track(clip: str, model, cache: Path, data: Path) -> Path:
 def _brows(brows: bool):
     """The ablation ``eyes_only``: the brows textured from each target frame (as before), the
     eyes from the open-eyed frame (:func:`facetransfer.eyes.eye_texture` with ``brows=False``)."""
-    import facetransfer.eyes as fe
+    import facetransfer.rewrite as rw  # the name the rewrite calls
 
-    original = fe.eye_texture
+    original = rw.eye_texture
     if not brows:
-        fe.eye_texture = functools.partial(original, brows=False)
+        rw.eye_texture = functools.partial(original, brows=False)
     try:
         yield
     finally:
-        fe.eye_texture = original
+        rw.eye_texture = original
 
 
 def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) -> dict:
