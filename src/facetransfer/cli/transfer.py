@@ -235,6 +235,21 @@ def _check_landmarks_file(video) -> None:
         read_mediapipe_landmarks(lmf)
 
 
+def _load_model_and_mediapipe(args, will_track: bool):
+    """The model (``--model`` or the default); when videos will be tracked, MediaPipe is
+    imported on a thread meanwhile (:func:`facetransfer.track.detect.preload_mediapipe`), and
+    is imported when this returns (before the tracking forks its background process)."""
+    if not will_track:
+        return resolve_model(args.model, progress=not args.no_progress)
+    from ..track.detect import preload_mediapipe
+
+    wait = preload_mediapipe()
+    try:
+        return resolve_model(args.model, progress=not args.no_progress)
+    finally:
+        wait()
+
+
 def run_transfer(args) -> int:
     from ..io.atomic import check_output_path
     from ..io.video import check_video_output, video_info
@@ -265,6 +280,7 @@ def run_transfer(args) -> int:
         check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
+    to_track = 0
     for v, tr in ((args.target, args.target_track), (args.expression_from, args.source_track),
                   (args.viseme_from, args.viseme_track), (args.identity_from, args.identity_track),
                   (args.pose_from, args.pose_track)):
@@ -272,7 +288,8 @@ def run_transfer(args) -> int:
             video_info(v)  # unreadable input: one line, before any work
             if not tr and not (v == args.target and args.performance):
                 _check_landmarks_file(v)
-    model = resolve_model(args.model, progress=not args.no_progress)
+                to_track += 1
+    model = _load_model_and_mediapipe(args, to_track > 0 and args.tracker != "landmarks")
     identity = None
     if args.identity_label:
         identity = identity_from_label(model, args.identity_label)
