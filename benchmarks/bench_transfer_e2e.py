@@ -102,8 +102,7 @@ def mediapipe_peer(target: Path, frames: int) -> dict:
     """The peer: MediaPipe Face Landmarker (Tasks API, VIDEO mode) over the same target frames
     in this process, with blendshapes (the judge's set-up) and without (what the capture
     tracker runs), and the seconds of importing MediaPipe in a fresh process."""
-    sys.path.insert(0, str(Path(__file__).parent))
-    from _mp_video import filtered_stderr, run_landmarker
+    from _mp_video import filtered_stderr, run_landmarker  # benchmarks/ is on sys.path
 
     from facetransfer.io.video import read_video
 
@@ -230,7 +229,11 @@ def main() -> int:
               flush=True)
         helps = help_seconds()
         print(f"--help: {helps:.2f} s", flush=True)
-        stages, frames, masks, fps = staged(source, target, n, tmp / "staged.mp4")
+        sys.path.insert(0, str(Path(__file__).parent))
+        from _mp_video import filtered_stderr
+
+        with filtered_stderr():  # MediaPipe's native log lines
+            stages, frames, masks, fps = staged(source, target, n, tmp / "staged.mp4")
         total = sum(stages.values())
         print("stages: " + ", ".join(f"{k} {v:.1f} s ({100 * v / total:.0f}%)"
                                      for k, v in stages.items()), flush=True)
