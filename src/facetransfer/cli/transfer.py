@@ -235,17 +235,17 @@ def _check_landmarks_file(video) -> None:
         read_mediapipe_landmarks(lmf)
 
 
-def _load_model_and_mediapipe(args, will_track: bool):
-    """The model (``--model`` or the default); when videos will be tracked, MediaPipe is
-    imported on a thread meanwhile (:func:`facetransfer.track.detect.preload_mediapipe`), and
+def _load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
+    """The model (``--model`` ``path`` or the default); when videos will be tracked, MediaPipe
+    is imported on a thread meanwhile (:func:`facetransfer.track.detect.preload_mediapipe`), and
     is imported when this returns (before the tracking forks its background process)."""
     if not will_track:
-        return resolve_model(args.model, progress=not args.no_progress)
+        return resolve_model(path, progress=progress)
     from ..track.detect import preload_mediapipe
 
     wait = preload_mediapipe()
     try:
-        return resolve_model(args.model, progress=not args.no_progress)
+        return resolve_model(path, progress=progress)
     finally:
         wait()
 
@@ -289,7 +289,8 @@ def run_transfer(args) -> int:
             if not tr and not (v == args.target and args.performance):
                 _check_landmarks_file(v)
                 to_track += 1
-    model = _load_model_and_mediapipe(args, to_track > 0 and args.tracker != "landmarks")
+    model = _load_model_and_mediapipe(args.model, to_track > 0 and args.tracker != "landmarks",
+                                      progress=not args.no_progress)
     identity = None
     if args.identity_label:
         identity = identity_from_label(model, args.identity_label)
@@ -409,7 +410,8 @@ def run_puppet(args) -> int:
     video_info(args.video)
     if not args.track:
         _check_landmarks_file(args.video)
-    model = resolve_model(args.model)
+    model = _load_model_and_mediapipe(args.model,
+                                      not args.track and args.tracker != "landmarks")
     wid = identity_from_label(model, args.identity)
     frames, fps = read_video(args.video, max_frames=args.max_frames)
     track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
@@ -442,7 +444,7 @@ def run_demo(args) -> int:
         raise FaceTransferError(f"--out {out} is a file; demo writes into a folder (give a "
                                 "folder name)")
     vopt = video_options(args)
-    model = resolve_model(args.model)
+    model = _load_model_and_mediapipe(args.model, args.tracker != "landmarks")
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
                track_method=args.tracker, speed=args.speed, eyes=args.eyes,
