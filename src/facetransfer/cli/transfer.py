@@ -225,8 +225,11 @@ def _positive(value, name):
         raise FaceTransferError(f"{name} must be >= 1, got {value}")
 
 
-def _check_landmarks_file(video) -> None:
-    """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work."""
+def _check_landmarks_file(video, tracker: str) -> None:
+    """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work
+    (only for ``--tracker landmarks``, the one tracker that reads it)."""
+    if tracker != "landmarks":
+        return
     from ..io.landmarks import read_mediapipe_landmarks
     from ..track.obtain import landmarks_file
 
@@ -287,7 +290,7 @@ def run_transfer(args) -> int:
         if v:
             video_info(v)  # unreadable input: one line, before any work
             if not tr and not (v == args.target and args.performance):
-                _check_landmarks_file(v)
+                _check_landmarks_file(v, args.tracker)
                 to_track += 1
     model = _load_model_and_mediapipe(args.model, to_track > 0 and args.tracker != "landmarks",
                                       progress=not args.no_progress)
@@ -409,7 +412,7 @@ def run_puppet(args) -> int:
                           inputs=[args.video, args.model, args.track])
     video_info(args.video)
     if not args.track:
-        _check_landmarks_file(args.video)
+        _check_landmarks_file(args.video, args.tracker)
     model = _load_model_and_mediapipe(args.model,
                                       not args.track and args.tracker != "landmarks")
     wid = identity_from_label(model, args.identity)
