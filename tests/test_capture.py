@@ -209,3 +209,21 @@ def test_cli_capture_removes_a_damaged_progress_file(data_dir, quick_model_path,
     assert main(["track", clip, "--model", str(quick_model_path), "--out", str(out),
                  "--max-frames", "5", "--overwrite"]) == 0
     assert partial.is_file()
+
+
+def test_preload_mediapipe_imports_it_on_a_thread():
+    """In a fresh interpreter: MediaPipe's Tasks API is not imported by the detector module
+    itself, and is once ``wait()`` returns (the forked tracker then inherits it)."""
+    import subprocess
+    import sys
+
+    code = ("import sys, threading\n"
+            "from facetransfer.track.detect import preload_mediapipe\n"
+            "name = 'mediapipe.tasks.python.vision'\n"
+            "before = name in sys.modules\n"
+            "wait = preload_mediapipe()\n"
+            "wait()\n"
+            "print(before, name in sys.modules, threading.active_count())\n")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["False", "True", "1"]

@@ -104,6 +104,13 @@ def test_native_log_lines_are_filtered_from_stderr():
             os.write(2, b"INFO: ")
             os.write(2, b"Created TensorFlow Lite XNNPACK delegate for CPU.")
             os.write(2, b"\\n")
+            # the forked tracker's lines interleaved with this process's
+            os.write(2, b"INFO: ")
+            os.write(2, b"W0000 00:00:1796153087.416123   21600 feedback.cc:121] Feedback\\n")
+            os.write(2, b"Created TensorFlow Lite XNNPACK delegate for CPU.\\n")
+            os.write(2, b"WARNING: ")
+            os.write(2, b"W0000 00:00:1796153087.5   21601 graph.cc:181] Sets xnnpack\\n")
+            os.write(2, b"Logging before InitGoogle() is written to STDERR\\n")
             print("\\rbar 50%", end="", file=sys.stderr, flush=True)
             print("facetransfer x: error: the tool's own line", file=sys.stderr)
             os.write(2, b"F0000 00:00:1.0  1 fatal.cc:1] a fatal native error\\n")
@@ -113,5 +120,6 @@ def test_native_log_lines_are_filtered_from_stderr():
     err = r.stderr.decode()
     assert r.returncode == 0
     assert "Feedback" not in err and "TensorFlow" not in err and "INFO" not in err
+    assert "xnnpack" not in err and "WARNING" not in err and "InitGoogle" not in err
     assert "\rbar 50%facetransfer x: error: the tool's own line\n" in err
     assert "a fatal native error" in err and err.endswith("after\n")

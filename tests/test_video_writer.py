@@ -254,6 +254,43 @@ def test_undecodable_output_is_refused(tmp_path, monkeypatch):
     assert out.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["v.mp4"]
 
 
+def _tone(tmp_path):
+    tone = tmp_path / "tone.m4a"
+    subprocess.run([iov.ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "sine=frequency=440:duration=2", "-c:a", "aac", str(tone)], check=True)
+    return tone
+
+
+@pytest.mark.parametrize("short,match", [
+    ("encoded", "4 frames were written but the file decodes to 1"),
+    ("muxed", "with the audio of .* it decodes to 1 frames, not 4")])
+def test_short_output_with_audio_is_refused(tmp_path, monkeypatch, short, match):
+    """With audio only the muxed file is decoded; when it is short, the message still says
+    which step lost frames (the encode or the mux), and nothing is written."""
+    tone = _tone(tmp_path)
+    out = tmp_path / "v.mp4"
+    real = iov.decoded_frame_count
+
+    def count(path):
+        muxed = ".audio.part" in Path(path).name
+        return 1 if muxed or short == "encoded" else real(path)
+
+    monkeypatch.setattr(iov, "decoded_frame_count", count)
+    with pytest.raises(VideoError, match=match):
+        encode_video(out, smooth_frames(n=4), 10, audio_from=tone)
+    assert not out.exists() and sorted(os.listdir(tmp_path)) == ["tone.m4a"]
+
+
+def test_audio_output_is_decoded_once(tmp_path, monkeypatch):
+    """A video with audio is checked by decoding the muxed file only (not the encode too)."""
+    tone = _tone(tmp_path)
+    real, calls = iov.decoded_frame_count, []
+    monkeypatch.setattr(iov, "decoded_frame_count", lambda p: calls.append(p) or real(p))
+    res = encode_video(tmp_path / "v.mp4", smooth_frames(n=4), 10, audio_from=tone)
+    assert res.audio and len(calls) == 1 and ".audio.part" in Path(calls[0]).name
+    assert real(res.path) == 4
+
+
 def test_video_info_of_written_video(tmp_path):
     p = encode_video(tmp_path / "v.mov", smooth_frames(n=6), 29.97).path
     info = video_info(p)

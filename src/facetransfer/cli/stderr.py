@@ -16,11 +16,14 @@ import re
 import threading
 from typing import Iterator
 
-#: native log lines to drop: glog/absl info, warning and error lines, TFLite's INFO lines
+#: native log lines to drop: glog/absl info, warning and error lines, TFLite's INFO lines.
+#: The forked background tracker writes to the same descriptor, so one process's ``INFO: ``
+#: may end up before the other's glog line, and its message on a line of its own.
 NATIVE_LOG = re.compile(
-    rb"^(?:[IWE]\d{4} [\d:.]+ +\d+ [^\]]*\] .*|INFO: Created TensorFlow Lite.*"
-    rb"|INFO: Initialized TensorFlow Lite.*|WARNING: All log messages before absl::InitializeLog"
-    rb".*|WARNING: Logging before InitGoogle\(\).*)\r?\n?$")
+    rb"^(?:(?:INFO: |WARNING: )?[IWE]\d{4} [\d:.]+ +\d+ [^\]]*\] .*"
+    rb"|(?:INFO: )?Created TensorFlow Lite.*|(?:INFO: )?Initialized TensorFlow Lite.*"
+    rb"|WARNING: All log messages before absl::InitializeLog.*"
+    rb"|(?:WARNING: )?Logging before InitGoogle\(\).*)\r?\n?$")
 
 
 _KEYWORDS = (b"INFO: ", b"WARNING: ", b"ERROR: ")

@@ -36,7 +36,7 @@ def partial_path(out) -> Path:
 def add_track_options(p) -> None:
     """The options that shape a track (``track`` and ``batch track``; defaults from the
     option classes)."""
-    from ..track.tracker import TrackOptions
+    from ..track.options import TrackOptions
 
     d = TrackOptions()
     p.add_argument("--tracker", choices=("capture", "klt"), default=None,
@@ -65,7 +65,7 @@ def track_settings(args):
     arguments (validated)."""
     from ..track.capture import CaptureOptions
     from ..track.settings import TrackerSettings
-    from ..track.tracker import TrackOptions
+    from ..track.options import TrackOptions
 
     klt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
                        n_points=args.points, keyframe=args.keyframe)

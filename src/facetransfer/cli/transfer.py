@@ -225,14 +225,32 @@ def _positive(value, name):
         raise FaceTransferError(f"{name} must be >= 1, got {value}")
 
 
-def _check_landmarks_file(video) -> None:
-    """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work."""
+def _check_landmarks_file(video, tracker: str) -> None:
+    """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work
+    (only for ``--tracker landmarks``, the one tracker that reads it)."""
+    if tracker != "landmarks":
+        return
     from ..io.landmarks import read_mediapipe_landmarks
     from ..track.obtain import landmarks_file
 
     lmf = landmarks_file(video)
     if lmf is not None:
         read_mediapipe_landmarks(lmf)
+
+
+def _load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
+    """The model (``--model`` ``path`` or the default); when videos will be tracked, MediaPipe
+    is imported on a thread meanwhile (:func:`facetransfer.track.detect.preload_mediapipe`), and
+    is imported when this returns (before the tracking forks its background process)."""
+    if not will_track:
+        return resolve_model(path, progress=progress)
+    from ..track.detect import preload_mediapipe
+
+    wait = preload_mediapipe()
+    try:
+        return resolve_model(path, progress=progress)
+    finally:
+        wait()
 
 
 def run_transfer(args) -> int:
@@ -265,14 +283,17 @@ def run_transfer(args) -> int:
         check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
+    to_track = 0
     for v, tr in ((args.target, args.target_track), (args.expression_from, args.source_track),
                   (args.viseme_from, args.viseme_track), (args.identity_from, args.identity_track),
                   (args.pose_from, args.pose_track)):
         if v:
             video_info(v)  # unreadable input: one line, before any work
             if not tr and not (v == args.target and args.performance):
-                _check_landmarks_file(v)
-    model = resolve_model(args.model, progress=not args.no_progress)
+                _check_landmarks_file(v, args.tracker)
+                to_track += 1
+    model = _load_model_and_mediapipe(args.model, to_track > 0 and args.tracker != "landmarks",
+                                      progress=not args.no_progress)
     identity = None
     if args.identity_label:
         identity = identity_from_label(model, args.identity_label)
@@ -391,8 +412,9 @@ def run_puppet(args) -> int:
                           inputs=[args.video, args.model, args.track])
     video_info(args.video)
     if not args.track:
-        _check_landmarks_file(args.video)
-    model = resolve_model(args.model)
+        _check_landmarks_file(args.video, args.tracker)
+    model = _load_model_and_mediapipe(args.model,
+                                      not args.track and args.tracker != "landmarks")
     wid = identity_from_label(model, args.identity)
     frames, fps = read_video(args.video, max_frames=args.max_frames)
     track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
@@ -425,7 +447,7 @@ def run_demo(args) -> int:
         raise FaceTransferError(f"--out {out} is a file; demo writes into a folder (give a "
                                 "folder name)")
     vopt = video_options(args)
-    model = resolve_model(args.model)
+    model = _load_model_and_mediapipe(args.model, args.tracker != "landmarks")
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
                track_method=args.tracker, speed=args.speed, eyes=args.eyes,

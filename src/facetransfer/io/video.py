@@ -394,6 +394,14 @@ def decoded_frame_count(path: str | os.PathLike) -> int:
     return int(found[-1])
 
 
+def _decoded_count_or_none(path) -> int | None:
+    """:func:`decoded_frame_count`, None when the file does not decode."""
+    try:
+        return decoded_frame_count(path)
+    except VideoError:
+        return None
+
+
 def has_audio(path: str | os.PathLike) -> bool:
     """Whether a media file has an audio stream (False when ffmpeg is unavailable)."""
     exe = ffmpeg_exe()
@@ -603,11 +611,11 @@ class VideoWriter:
         if proc.wait() != 0:
             raise self._ffmpeg_failed()
         self._proc = None
-        n = decoded_frame_count(self.tmp)
-        if n != self.n_frames:
-            raise VideoError(f"cannot write video {self.path}: {self.n_frames} frames were "
-                             f"written but the file decodes to {n}")
+        # the file is decoded once: the muxed file when there is audio (its video stream is
+        # a copy of the encoded one), else the encoded file
         audio = self.audio_from is not None and self._mux()
+        if not audio:
+            self._check_decodes()
         atomic, self._atomic = self._atomic, None
         atomic.__exit__(None, None, None)  # rename into place
         self._close_stderr()
@@ -619,11 +627,19 @@ class VideoWriter:
         os.close(fd)
         tmp2 = Path(name)
         try:
-            if not mux_audio(self.tmp, self.audio_from, tmp2, start=self.audio_start,
-                             duration=self.n_frames / self.fps):
+            try:
+                muxed = mux_audio(self.tmp, self.audio_from, tmp2, start=self.audio_start,
+                                  duration=self.n_frames / self.fps)
+            except VideoError:
+                self._check_decodes()  # a damaged encode is named as such
+                raise
+            if not muxed:
                 return False
-            n = decoded_frame_count(tmp2)
+            n = _decoded_count_or_none(tmp2)
             if n != self.n_frames:
+                self._check_decodes()  # the encoded file itself is short or damaged
+                if n is None:
+                    decoded_frame_count(tmp2)  # raises: the muxed file does not decode
                 raise VideoError(f"cannot write video {self.path}: with the audio of "
                                  f"{self.audio_from} it decodes to {n} frames, not "
                                  f"{self.n_frames}")
@@ -632,6 +648,13 @@ class VideoWriter:
         finally:
             with contextlib.suppress(FileNotFoundError):
                 tmp2.unlink()
+
+    def _check_decodes(self) -> None:
+        """The encoded file decodes to the frames written (else VideoError)."""
+        n = decoded_frame_count(self.tmp)
+        if n != self.n_frames:
+            raise VideoError(f"cannot write video {self.path}: {self.n_frames} frames were "
+                             f"written but the file decodes to {n}")
 
     def _commit_images(self) -> WrittenVideo:
         old = _pattern_files(self.path)

@@ -10,6 +10,7 @@ model to these measurements, so detections can be computed once and reused.
 from __future__ import annotations
 
 import os
+import threading
 from dataclasses import dataclass
 from typing import Callable, Iterable
 
@@ -20,7 +21,7 @@ from ..errors import ShapeError
 from .init import MediaPipeDetector, create_landmarker
 from .landmarks import mediapipe_to_ibug
 
-__all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow"]
+__all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow", "preload_mediapipe"]
 
 
 @dataclass(frozen=True)
@@ -85,6 +86,31 @@ class VideoLandmarker(MediaPipeDetector):
         ts = int(round(self._i * self._dt))
         self._i += 1
         return self._lm.detect_for_video(image, ts)
+
+
+def _import_mediapipe() -> None:
+    os.environ.setdefault("GLOG_minloglevel", "2")  # as create_landmarker, before the import
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    try:
+        from mediapipe.tasks.python import BaseOptions, vision  # noqa: F401
+    except Exception:  # noqa: BLE001 - create_landmarker's own import reports it
+        pass
+
+
+def preload_mediapipe() -> Callable[[], None]:
+    """Start importing MediaPipe's Tasks API on a background thread; returns ``wait()``.
+
+    The import takes about a second of a command's start-up (MediaPipe's package imports its
+    drawing utilities, matplotlib and its audio tasks); it holds the interpreter lock only part
+    of the time, so it overlaps work that mostly does not (reading and checking the model
+    file). Call ``wait()`` before forking (:func:`facetransfer.track.obtain.start_background_track`):
+    the child then inherits the imported modules instead of importing them again, and no import
+    lock is held across the fork. A failed import is silent here; the detector's own import
+    (:func:`facetransfer.track.init.create_landmarker`) reports it.
+    """
+    thread = threading.Thread(target=_import_mediapipe, name="import-mediapipe", daemon=True)
+    thread.start()
+    return thread.join
 
 
 def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
