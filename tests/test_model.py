@@ -166,3 +166,23 @@ def test_quick_ict_model_separates_identity_and_expression(quick_model, quick_ic
     err = np.abs(f - ds.vertices[3, 1]).max()
     assert err < 0.5  # cm; ranks 5/5 of 6/6
     assert m.landmarks.shape == (68,)
+
+
+def test_content_hash_is_the_sha256_of_the_arrays_bytes():
+    # the hash reads the arrays' memory without copying it; it must equal the plain definition
+    import hashlib
+    import json
+
+    from facetransfer.model import _content_hash
+
+    rng = np.random.default_rng(0)
+    arrays = {"a": rng.random((3, 4)), "b": np.arange(6).reshape(2, 3).T,
+              "c": np.array(["ab", "c"]), "d": np.array(3.0), "e": np.zeros((0, 3)),
+              "f": np.array([True, False]), "g": rng.random((4, 5)).astype(np.float32)[:, ::2]}
+    h = hashlib.sha256()
+    for name in sorted(arrays):
+        a = np.ascontiguousarray(arrays[name])
+        for part in (name.encode(), str(a.dtype).encode(), str(a.shape).encode(), a.tobytes()):
+            h.update(part)
+    h.update(json.dumps({"x": 1}, sort_keys=True).encode())
+    assert _content_hash(arrays, {"x": 1}) == h.hexdigest()

@@ -319,7 +319,7 @@ def _content_hash(arrays: Mapping[str, np.ndarray], meta: dict) -> str:
         h.update(name.encode())
         h.update(str(a.dtype).encode())
         h.update(str(a.shape).encode())
-        h.update(a.tobytes())
+        h.update(a.reshape(-1).view(np.uint8))  # the bytes of tobytes(), without a copy
     h.update(json.dumps(meta, sort_keys=True, default=_json_default).encode())
     return h.hexdigest()
 
