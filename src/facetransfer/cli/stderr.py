@@ -20,10 +20,12 @@ from typing import Iterator
 #: The forked background tracker writes to the same descriptor, so one process's ``INFO: ``
 #: may end up before the other's glog line, and its message on a line of its own.
 NATIVE_LOG = re.compile(
-    rb"^(?:(?:INFO: |WARNING: )?[IWE]\d{4} [\d:.]+ +\d+ [^\]]*\] .*"
-    rb"|(?:INFO: )?Created TensorFlow Lite.*|(?:INFO: )?Initialized TensorFlow Lite.*"
-    rb"|WARNING: All log messages before absl::InitializeLog.*"
-    rb"|(?:WARNING: )?Logging before InitGoogle\(\).*)\r?\n?$")
+    rb"^(?:(?:INFO: |WARNING: )*"  # a prefix may repeat: two processes' writes interleaved
+    rb"(?:[IWE]\d{4} [\d:.]+ +\d+ [^\]]*\] .*"
+    rb"|Created TensorFlow Lite.*|Initialized TensorFlow Lite.*"
+    rb"|All log messages before absl::InitializeLog.*"
+    rb"|Logging before InitGoogle\(\).*)"
+    rb"|(?:INFO: |WARNING: )+)\r?\n?$")  # or a prefix whose message went elsewhere
 
 
 _KEYWORDS = (b"INFO: ", b"WARNING: ", b"ERROR: ")
