@@ -265,7 +265,8 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
 # ------------------------------------------------------------------------------------ (d)
 def speed(model, *, seconds: float, size: int, log=print, tmpdir: Path,
           presets=("fast",)) -> dict:
-    from facetransfer.video_transfer import transfer_video
+    from facetransfer.rewrite_options import RewriteOptions
+    from facetransfer.video_transfer import TransferSources, transfer_video
     from facetransfer.synth import make_clip, random_performance
     from facetransfer.io.video import write_video
 
@@ -282,8 +283,9 @@ def speed(model, *, seconds: float, size: int, log=print, tmpdir: Path,
     runs = {}
     for preset in presets:
         c0, t0 = time.process_time(), time.perf_counter()
-        res = transfer_video(paths["target"], tmpdir / "result.mp4", model, overwrite=True,
-                             expression_from=paths["source"], speed=preset)
+        res = transfer_video(
+            TransferSources.of(paths["target"], expression_from=paths["source"]),
+            tmpdir / "result.mp4", model, overwrite=True, options=RewriteOptions(speed=preset))
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
         stages = dict(res.timings)
         total = sum(stages.values())

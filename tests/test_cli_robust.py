@@ -112,10 +112,10 @@ def test_native_log_lines_are_filtered_from_stderr():
             os.write(2, b"W0000 00:00:1796153087.5   21601 graph.cc:181] Sets xnnpack\\n")
             os.write(2, b"Logging before InitGoogle() is written to STDERR\\n")
             os.write(2, b"INFO: INFO: Created TensorFlow Lite XNNPACK delegate for CPU.\\n")
-            os.write(2, b"\\n")  # a blank line of the tool's own stays
             print("\\rbar 50%", end="", file=sys.stderr, flush=True)
             print("facetransfer x: error: the tool's own line", file=sys.stderr)
             os.write(2, b"F0000 00:00:1.0  1 fatal.cc:1] a fatal native error\\n")
+            os.write(2, b"\\n")  # a blank line stays (written after the prints: the pump is late)
         print("after", file=sys.stderr)
     """)
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, timeout=60)

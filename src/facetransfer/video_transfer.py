@@ -645,21 +645,18 @@ def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: boo
             raise RewriteError(f"{md} already holds meshes; pass --overwrite to replace them")
 
 
-def transfer_video(target, out, model, *, sources: TransferSources | None = None,
+def transfer_video(sources: TransferSources, out, model, *,
                    options: RewriteOptions | None = None, overwrite: bool = False,
                    meshes_dir=None, save_track=None, progress_factory=None, video_options=None,
                    align: str | None = None, max_frames: int | None = None,
-                   parallel: bool | None = None, texture: str | None = None,
-                   blend: str | None = None, mouth: str | None = None, speed: str | None = None,
-                   track_method: str | None = None, **source_keywords) -> TransferResult:
+                   parallel: bool | None = None) -> TransferResult:
     """The whole video rewrite (§6): plan (read, track, recombine), render, write with audio.
 
-    The inputs are ``sources`` (:class:`TransferSources`) or the keywords of
-    :meth:`TransferSources.of` (``target_track``, ``expression_from``, ``expression_track``,
-    ``viseme_from``, ..., ``performance``) with ``target``; how they are tracked and rendered
-    is ``options`` (:class:`~facetransfer.rewrite_options.RewriteOptions`), single attributes
-    replaced by ``texture``, ``blend``, ``mouth``, ``speed``, ``track_method``. ``align``,
-    ``max_frames``, ``parallel``: see :func:`plan_transfer`. The output video (and the
+    The inputs are ``sources`` (:class:`TransferSources`, e.g.
+    ``TransferSources.of(target, expression_from=...)``), with the target's audio; how they
+    are tracked and rendered is ``options``
+    (:class:`~facetransfer.rewrite_options.RewriteOptions`). ``align``, ``max_frames``,
+    ``parallel``: see :func:`plan_transfer`. The output video (and the
     optional track and meshes) appear only when everything succeeded; an existing ``out`` is
     replaced only with ``overwrite=True``. With the mouth mode ``"function"`` the function is
     lifted from :attr:`TransferPlan.texture_frames`. ``video_options``: codec and CRF of
@@ -672,17 +669,11 @@ def transfer_video(target, out, model, *, sources: TransferSources | None = None
     """
     _check_outputs(out, video_options=video_options, save_track=save_track,
                    meshes_dir=meshes_dir, overwrite=overwrite)  # before any work
-    opts = (options or RewriteOptions()).with_(texture=texture, blend=blend, mouth=mouth,
-                                               speed=speed, track_method=track_method)
-    if sources is None:
-        sources = TransferSources.of(target, **source_keywords)
-    elif source_keywords:
-        raise RewriteError(f"give the sources either as TransferSources or as keywords, not "
-                           f"both ({', '.join(source_keywords)})")
+    opts = RewriteOptions() if options is None else options
     resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
     plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
                         parallel=parallel, progress_factory=progress_factory)
-    rendered = render_plan(plan, model, out, options=opts, audio_from=target,
+    rendered = render_plan(plan, model, out, options=opts, audio_from=sources.target.video,
                            overwrite=overwrite, progress_factory=progress_factory,
                            video_options=video_options)
     if save_track is not None:

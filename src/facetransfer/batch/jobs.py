@@ -186,7 +186,7 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     """
     from ..io.video import video_info
     from ..rewrite_options import RewriteOptions
-    from ..video_transfer import transfer_video
+    from ..video_transfer import TransferSources, transfer_video
 
     t0 = time.perf_counter()
     s = job.sources
@@ -198,15 +198,17 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
         texture=settings["texture"], blend=settings["blend"], mouth=settings["mouth"],
         track_method=settings["track_method"], speed=settings["speed"],
         eyes=settings.get("eyes", "model"))
-    res = transfer_video(
-        str(job.target), out, model, overwrite=True, options=options, progress_factory=None,
-        target_track=s.get("target_track"), expression_from=s.get("expression_from"),
+    sources = TransferSources.of(
+        str(job.target), target_track=s.get("target_track"),
+        expression_from=s.get("expression_from"),
         expression_track=s.get("source_track"), viseme_from=s.get("viseme_from"),
         viseme_track=s.get("viseme_track"), identity=_identity(job, model),
         identity_from=s.get("identity_from"), identity_track=s.get("identity_track"),
         pose_from=s.get("pose_from"), pose_track=s.get("pose_track"),
-        performance=s.get("performance"), align=settings["align"],
-        max_frames=settings["max_frames"], parallel=False)
+        performance=s.get("performance"))
+    res = transfer_video(sources, out, model, overwrite=True, options=options,
+                         progress_factory=None, align=settings["align"],
+                         max_frames=settings["max_frames"], parallel=False)
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),

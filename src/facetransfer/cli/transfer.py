@@ -309,7 +309,7 @@ def run_transfer(args) -> int:
         identity_track=args.identity_track, pose_from=args.pose_from,
         pose_track=args.pose_track, performance=args.performance)
     res = transfer_video(
-        args.target, args.out, model, sources=sources, options=rewrite_options(args),
+        sources, args.out, model, options=rewrite_options(args),
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
         progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
         align=args.align, max_frames=args.max_frames)
