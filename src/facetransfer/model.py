@@ -256,7 +256,10 @@ class MultilinearModel:
         for j in reversed(range(self.n_modes)):
             if j == k:
                 continue
-            out = np.tensordot(out, ws[j], axes=([j + 1], [0]))
+            if j + 1 == out.ndim - 1:
+                out = np.tensordot(out, ws[j], axes=([j + 1], [0]))
+            else:  # an inner axis: a vector-matrix product per row, no transposed core copy
+                out = np.matmul(ws[j], np.moveaxis(out, j + 1, -2))
         return out.reshape(-1, 3, self.ranks[k])
 
     # ----------------------------------------------------------------- identity & i/o
