@@ -45,7 +45,7 @@ from .landmarks import IBUG_WEIGHTS
 from .options import Progress
 from .result import Track
 from .smooth import smooth_track
-from .solver import Prior
+from .solver import BasisCache, Prior
 
 log = logging.getLogger(__name__)
 
@@ -215,6 +215,9 @@ class _Shape:
             self.Du = D[self.used]                                             # (K, r)
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
+            self.precision = {m: p.Q @ p.inv_cov @ p.Q.T for m, p in self.priors.items()}
+            # the identity is fixed for this shape: contracted into the core once (Eq. (5))
+            self.cache = BasisCache(self.model, {self.id_name: identity} if self.id_name else {})
             self.sizes = [model.ranks[model.mode_index(m)] for m in self.per_frame]
             self.size = int(sum(self.sizes))
             self.x0 = np.concatenate([self.priors[m].mean for m in self.per_frame])
@@ -227,7 +230,9 @@ class _Shape:
 
     def basis(self, mode: str, weights: dict) -> np.ndarray:
         """Eq. (9) at the tracked points: ``(r, P, 3)``."""
-        return np.moveaxis(self.model.mode_basis(mode, weights), 2, 0)
+        if self.arkit:
+            return np.moveaxis(self.model.mode_basis(mode, weights), 2, 0)
+        return np.moveaxis(self.cache.basis(mode, weights), 2, 0)
 
     def weights(self, x: np.ndarray) -> dict:
         """Model weights of every per-frame mode for parameters ``x`` ``(..., size)``."""
@@ -242,10 +247,7 @@ class _Shape:
     def points(self, x: np.ndarray) -> np.ndarray:
         if self.arkit:
             return self.N + np.tensordot(x, self.D, axes=1)
-        w = self.weights(x)
-        if self.id_name:
-            w[self.id_name] = self.identity
-        return self.model.synthesize(w) + self.offset
+        return self.cache.shape(self.weights(x)) + self.offset
 
     def solve(self, pose: Pose, targets: list, iod: float, x: np.ndarray,
               prev: np.ndarray | None) -> np.ndarray:
@@ -272,8 +274,7 @@ class _Shape:
                 w[self.id_name] = self.identity
             Y = project_basis(self.basis(m, w), pose)                     # Eq. (9)
             G, h = targets_normal(Y, pose.project(self.offset), targets, iod)
-            pr = self.priors[m]
-            P = pr.Q @ pr.inv_cov @ pr.Q.T
+            pr, P = self.priors[m], self.precision[m]
             G = G + lam_p * P + (lam_t + 1e-9) * np.eye(len(pr.mean))
             h = h + lam_p * P @ pr.mean
             if lam_t:

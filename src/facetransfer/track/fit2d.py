@@ -40,7 +40,7 @@ def project_basis(B: np.ndarray, pose: Pose) -> np.ndarray:
     -------
     (k, n, 2) float64
     """
-    Y = pose.scale * np.einsum("ij,knj->kni", pose.rotation[:2], B)
+    Y = B @ (pose.scale * pose.rotation[:2].T)  # one matrix product (einsum: 3x slower)
     Y[..., 1] *= -1.0
     return Y
 
