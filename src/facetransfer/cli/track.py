@@ -119,10 +119,9 @@ def run(args) -> int:
               None if args.init == "auto" else args.init)
     vopt = video_options(args)
     if args.overlay:
-        check_video_output(args.overlay, vopt, overwrite=args.overwrite)
-    for path in (args.out, args.overlay):
-        if path and "%" not in Path(path).name:  # an image sequence is checked above
-            check_output_path(path, overwrite=args.overwrite, inputs=inputs)
+        check_video_output(args.overlay, vopt, overwrite=args.overwrite, inputs=inputs)
+    if args.out:
+        check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     if args.out and args.overlay:
         check_not_input(args.overlay, [args.out, partial_path(args.out)])
     if args.out:

@@ -278,9 +278,7 @@ def run_transfer(args) -> int:
               args.identity_weights if args.identity_weights and
               args.identity_weights.endswith(".npy") else None]
     vopt = video_options(args)
-    check_video_output(args.out, vopt, overwrite=args.overwrite)
-    if "%" not in Path(args.out).name:  # an image sequence is checked above
-        check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
+    check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
     to_track = 0
@@ -399,17 +397,14 @@ def run_edit(args) -> int:
 
 
 def run_puppet(args) -> int:
-    from ..io.atomic import check_output_path
     from ..io.video import check_video_output, read_video, video_info, write_video_with_audio
     from ..track.obtain import obtain_track
     from ..transfer import identity_from_label, puppet_frames
 
     _positive(args.max_frames, "--max-frames")
     vopt = video_options(args)
-    check_video_output(args.out, vopt, overwrite=args.overwrite)
-    if "%" not in Path(args.out).name:  # an image sequence is checked above
-        check_output_path(args.out, overwrite=args.overwrite,
-                          inputs=[args.video, args.model, args.track])
+    check_video_output(args.out, vopt, overwrite=args.overwrite,
+                       inputs=[args.video, args.model, args.track])
     video_info(args.video)
     if not args.track:
         _check_landmarks_file(args.video, args.tracker)

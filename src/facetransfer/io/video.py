@@ -301,12 +301,13 @@ def _pattern_files(pattern: Path) -> list[Path]:
 
 
 def check_video_output(path: str | os.PathLike, options: VideoOptions | None = None, *,
-                       overwrite: bool = True) -> VideoOutput:
+                       overwrite: bool = True, inputs=()) -> VideoOutput:
     """Validate where a video goes before any work: the kind of output, codec and container.
 
     ``path`` is a video (``.mp4``, ``.m4v``, ``.mov``, ``.mkv``, ``.avi``) or an image sequence
     whose name has one frame-number field (``frames/%05d.png``; ``.png``, ``.jpg``, ``.tif``,
-    ``.bmp``; frame 0 is the first).
+    ``.bmp``; frame 0 is the first). A video naming one of ``inputs`` (paths or None) is
+    refused (:func:`facetransfer.io.atomic.check_output_path`).
 
     Raises
     ------
@@ -342,7 +343,7 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
     if opt.codec == "prores" and suffix not in (".mov", ".mkv"):
         raise VideoError(f"output {p}: ProRes goes in a .mov or .mkv file, not {suffix}")
     require_encoder(opt.codec)
-    check_output_path(p, overwrite=overwrite)
+    check_output_path(p, overwrite=overwrite, inputs=inputs)
     return VideoOutput(p, "video", opt)
 
 
