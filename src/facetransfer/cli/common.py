@@ -39,6 +39,34 @@ def video_options(args):
     return VideoOptions(codec=args.codec, crf=args.crf, preset=args.preset)
 
 
+def tqdm_progress(desc: str, *, unit: str = "item", enabled: bool = True):
+    """A ``(done, total)`` progress callback drawing a tqdm bar on stderr (a terminal only),
+    and the function that closes it: ``(callback, close)``."""
+    state: dict = {}
+
+    def callback(done: int, total: int) -> None:
+        if "bar" not in state:
+            from tqdm import tqdm
+
+            state["bar"] = tqdm(total=total, desc=desc, unit=unit, leave=False,
+                                dynamic_ncols=True, file=sys.stderr,
+                                disable=not enabled or not sys.stderr.isatty())
+        bar = state["bar"]
+        bar.total = total
+        bar.update(done - bar.n)
+
+    def close() -> None:
+        if "bar" in state:
+            state["bar"].close()
+
+    return callback, close
+
+
+def announce(message: str) -> None:
+    """A library's one-line message (e.g. that the default model is being built) on stderr."""
+    print(message, file=sys.stderr, flush=True)
+
+
 def resolve_model(path, *, progress: bool = True):
     """``load_model(path)``, or the default model when ``path`` is None (built on first use
     with a tqdm bar on stderr, announced in one line).
@@ -53,25 +81,8 @@ def resolve_model(path, *, progress: bool = True):
         return load_model(path)
     from ..default_model import load_default_model
 
-    bar = None
-
-    def announce(message: str) -> None:
-        print(message, file=sys.stderr, flush=True)
-
-    def on_progress(done: int, total: int) -> None:
-        nonlocal bar
-        if not progress:
-            return
-        if bar is None:
-            from tqdm import tqdm
-
-            bar = tqdm(total=total, desc="default model", unit="identity", leave=False,
-                       dynamic_ncols=True, file=sys.stderr)
-        bar.total = total
-        bar.update(done - bar.n)
-
+    on_progress, close = tqdm_progress("default model", unit="identity", enabled=progress)
     try:
         return load_default_model(progress=on_progress, announce=announce)
     finally:
-        if bar is not None:
-            bar.close()
+        close()

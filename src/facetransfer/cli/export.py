@@ -42,25 +42,14 @@ def register(sub) -> None:
 def default_model_for(track):
     """The default model for a track given without ``--model`` (built once with a progress bar;
     an error asking for ``--model`` if the track was made with another model)."""
-    from tqdm import tqdm
-
     from ..export.common import resolve_model
+    from .common import announce, tqdm_progress
 
-    bar = None
-
-    def progress(done: int, total: int) -> None:
-        nonlocal bar
-        if bar is None:
-            bar = tqdm(total=total, desc="default model", unit="identity", leave=False,
-                       disable=not sys.stderr.isatty())
-        bar.update(done - bar.n)
-
+    progress, close = tqdm_progress("default model", unit="identity")
     try:
-        return resolve_model(track, progress=progress,
-                             announce=lambda m: print(m, file=sys.stderr))
+        return resolve_model(track, progress=progress, announce=announce)
     finally:
-        if bar is not None:
-            bar.close()
+        close()
 
 
 def _lift(track, model, args):

@@ -15,13 +15,13 @@ import logging
 import os
 import sys
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 from ..default_model import dataset_ranks as default_ranks  # the recipe ranks
 from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
+from .common import tqdm_progress
 
 log = logging.getLogger(__name__)
 
@@ -78,24 +78,6 @@ def parse_like(text: str) -> dict[str, str]:
     return out
 
 
-def _tqdm_progress(desc: str) -> tuple[Callable[[int, int], None], Callable[[], None]]:
-    from tqdm import tqdm
-
-    state: dict = {}
-
-    def cb(done: int, total: int) -> None:
-        if "bar" not in state:
-            state["bar"] = tqdm(total=total, desc=desc, unit="item", leave=False,
-                                disable=not sys.stderr.isatty())
-        state["bar"].update(done - state["bar"].n)
-
-    def close() -> None:
-        if "bar" in state:
-            state["bar"].close()
-
-    return cb, close
-
-
 # --------------------------------------------------------------------------------- build
 
 
@@ -114,7 +96,7 @@ def _fill_missing(dataset, method: str, seed: int):
     except ImportError:
         raise DatasetError(f"{len(missing)} missing cells ({shown}{more}) and imputation is not "
                            "available in this version") from None
-    cb, close = _tqdm_progress(f"impute ({method})")
+    cb, close = tqdm_progress(f"impute ({method})")
     try:
         res = impute_dataset(dataset, method=method, rng=np.random.default_rng(seed), progress=cb)
     finally:
@@ -128,15 +110,13 @@ def _fill_missing(dataset, method: str, seed: int):
 
 
 def available_memory() -> int:
-    """Bytes of memory available to a new job (``MemAvailable`` of /proc/meminfo, else the
-    physical memory)."""
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
+    """Bytes of memory available to a new job (``MemAvailable`` of /proc/meminfo, read by the
+    data-set builder's own check, else the physical memory)."""
+    from ..datasets.ict import _available_bytes
+
+    avail = _available_bytes()
+    if avail is not None:
+        return avail
     try:
         return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
     except (ValueError, OSError, AttributeError):
@@ -154,7 +134,7 @@ def build_memory_estimate(dataset: str, n_identities: int | None) -> int | None:
     keeps about :data:`BUILD_MEMORY_FACTOR` copies of it at its peak.
     """
     from ..datasets import ICT_DATASETS
-    from ..datasets.ict import load_recipes
+    from ..datasets.ict import REGIONS, load_recipes
 
     if dataset not in ICT_DATASETS:
         return None
@@ -164,11 +144,7 @@ def build_memory_estimate(dataset: str, n_identities: int | None) -> int | None:
     for mode in ("expressions", "visemes"):
         if mode in spec:
             cells *= len(spec[mode])
-    return int(BUILD_MEMORY_FACTOR * n_id * cells * ICT_FACE_VERTICES * 3 * 8)
-
-
-#: vertices of the ICT-FaceKit face area the data sets use (0..9408)
-ICT_FACE_VERTICES = 9409
+    return int(BUILD_MEMORY_FACTOR * n_id * cells * REGIONS["face"] * 3 * 8)
 
 
 def check_build_memory(dataset: str, n_identities: int | None) -> None:
@@ -192,7 +168,7 @@ def cmd_build(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--identities must be at least 2, got {args.identities}")
     check_build_memory(str(args.dataset), args.identities)
     assets.set_download_progress(sys.stderr.isatty())
-    cb, close = _tqdm_progress(f"dataset {args.dataset}")
+    cb, close = tqdm_progress(f"dataset {args.dataset}")
     try:
         ds = load_dataset(args.dataset, seed=args.seed, n_identities=args.identities, progress=cb)
     finally:
