@@ -235,7 +235,7 @@ def export_one(job, fmt: str, out: str, model=None, texture=None) -> Row:
 
     t0 = time.perf_counter()
     track = Track.load(job.track)
-    if model is None:
+    if model is None and fmt in ("glb", "usd"):  # livelink and json need no geometry
         from ..default_model import default_model_path
 
         if default_model_path().is_file():
