@@ -49,6 +49,7 @@ import numpy as np
 from .composite import _erode, _extend, composite_face, membrane_blend
 from .errors import RewriteError, ShapeError
 from .eyes import EyeTexture, eye_texture, paint_eyes
+from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
@@ -418,7 +419,6 @@ def _clip_mouth_function(model, topo: MeshTopology, new_track, target_frames, ta
         else:
             mouth_function = mouth_texture_function(model, target_frames, target_track, topo)
     if mouth_function is not None:
-        from .texture import attribute_vector
 
         n_attr = attribute_vector(model, new_track.weights_at(0)).shape[-1]
         if mouth_function.n_attributes != n_attr or \
@@ -529,9 +529,8 @@ class _ClipRenderer:
     def mouth_texture(self, i: int) -> FaceTexture | None:
         """The mouth texture at frame ``i``: the function's, the source frame's, or None."""
         if self.mouth_function is not None:
-            names = self.model.mode_names
             return self.mouth_function.face_texture(
-                np.concatenate([self.new_track.weights[m][i] for m in names[1:]]))
+                attribute_vector(self.model, self.new_track.weights_at(i)))
         if not self.with_mouth:
             return None
         j = int(self.sidx[i])
@@ -545,8 +544,7 @@ class _ClipRenderer:
         if frame.shape != self.first.shape:
             raise RewriteError(f"target frame {i} is {frame.shape}, frame 0 {self.first.shape}")
         if self.new_track.lost[i] or self.target_track.lost[i]:
-            empty = np.zeros(frame.shape[:2], bool)
-            return RewriteFrame(frame.copy(), np.zeros_like(frame), empty, empty)
+            return _paste(frame, None)
         o = self.options
         return rewrite_frame(frame, self.mesh("new", self.new_track, i),
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),

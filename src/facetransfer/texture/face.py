@@ -160,8 +160,7 @@ def merged_face_texture(frames, track, model, topo: MeshTopology, *, n_samples: 
     good = np.flatnonzero(~track.lost[:n])
     if good.size == 0:
         raise RewriteError(f"the face is lost in every frame of {track.source or 'the target'}")
-    pick = np.unique(good[np.linspace(0, good.size - 1, min(n_samples, good.size))
-                          .round().astype(int)])
+    pick = _even_pick(good, n_samples)
     faces = np.asarray(model.faces)
     atlas = uv_atlas(faces, model.uvs, tex_size)
     lifted = [lift_uv_texture(np.asarray(frames[i]), model.synthesize(track.weights_at(i)),
