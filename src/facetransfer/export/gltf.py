@@ -116,9 +116,12 @@ def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 1
 
 
 def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    import trimesh
+    """Unit vertex normals ``(n, 3) float32``: the renderer's (area-weighted), so a glb shades
+    like our own renders; (0, 0, 1) where a vertex has none."""
+    from ..render import vertex_normals
 
-    n = trimesh.Trimesh(vertices, faces, process=False).vertex_normals.astype(np.float32)
+    n = vertex_normals(np.asarray(vertices, np.float64), np.asarray(faces, np.int64))
+    n = n.astype(np.float32)
     bad = ~np.isfinite(n).all(axis=1) | (np.linalg.norm(n, axis=1) < 0.5)
     n[bad] = (0.0, 0.0, 1.0)
     return (n / np.linalg.norm(n, axis=1, keepdims=True)).astype(np.float32)
