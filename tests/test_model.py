@@ -45,6 +45,29 @@ def test_synthesize_batched_equals_loop():
                                                           if n != "identity"} | {"identity": W["identity"][0]}))
 
 
+@pytest.mark.parametrize("constant", [(), ("identity",), ("viseme",), ("expression",),
+                                      ("identity", "viseme"), ("identity", "expression",
+                                                               "viseme")])
+def test_synthesize_batch_with_modes_constant_over_the_batch(constant):
+    """A mode whose weights repeat over the batch is contracted once (a clip's identity):
+    every row still equals Eq. (5) by explicit mode products."""
+    from facetransfer import tensor as tl
+
+    ds = random_dataset(seed=4)
+    m = build_model(ds, {"identity": 3, "expression": 2, "viseme": 2})
+    rng = np.random.default_rng(5)
+    W = {n: rng.normal(size=(6, r)) for n, r in zip(m.mode_names, m.ranks)}
+    for n in constant:
+        W[n] = np.tile(W[n][2], (6, 1))
+    batch = m.synthesize(W)
+    assert batch.shape == (6, 40, 3)
+    for b in range(6):
+        ref = tl.multi_mode_dot(m.core, [None] + [W[n][b] for n in m.mode_names])
+        assert np.allclose(batch[b].ravel(), ref, atol=1e-12)
+    sub = m.synthesize(W, vertices=np.array([3, 7]))
+    assert np.allclose(sub, batch[:, [3, 7]], atol=1e-12)
+
+
 def test_synthesize_matches_explicit_mode_products():
     from facetransfer import tensor as tl
 

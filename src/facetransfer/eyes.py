@@ -33,7 +33,7 @@ import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .errors import RewriteError
-from .render import shade_texture
+from .render import Raster, shade_texture
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -524,9 +524,13 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
     """
     import cv2
 
-
+    box = _region_box(raster, texture.select, margin=int(np.ceil(4 * LID_SOFTNESS)) + 2)
+    if box is None:
+        return face_image
+    sl = (slice(box[1], box[3]), slice(box[0], box[2]))
+    raster = Raster(raster.depth[sl], raster.tri_id[sl], raster.bary[sl], raster.mask[sl])
     eye_img, eye_mask = shade_texture(raster, faces, texture.uvs, texture.image, texture.select)
-    eye_mask &= face_mask
+    eye_mask &= face_mask[sl]
     if not eye_mask.any():
         return face_image
     a = texture.closing(vertices)
@@ -538,7 +542,28 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
         # soft where the lids meet the rest of the region (no step along triangle edges)
         w = cv2.GaussianBlur(w, (0, 0), LID_SOFTNESS)[..., None]
         eye_img = np.rint((1 - w) * eye_img + w * closed_img).astype(np.uint8)
-    return match_outline(face_image, eye_img, eye_mask, face_mask, feather=feather)
+    out = face_image.copy()
+    out[sl] = match_outline(face_image[sl], eye_img, eye_mask, face_mask[sl], feather=feather)
+    return out
+
+
+def _region_box(raster, select: np.ndarray, *, margin: int) -> tuple[int, int, int, int] | None:
+    """``(x0, y0, x1, y1)`` of the pixels showing a ``select`` triangle, grown by ``margin``
+    and clipped to the raster; None when none shows.
+
+    The margin covers every filter :func:`paint_eyes` applies (the lids' blur reaches
+    ``4·LID_SOFTNESS``; the outline's erosion 2 px; the feather's distance transform sees a
+    zero pixel at the box's edge), so working on the box gives the same pixels as the whole
+    raster."""
+    import cv2
+
+    tid = raster.tri_id
+    shown = (tid >= 0) & np.asarray(select, bool)[np.maximum(tid, 0)]
+    x, y, w, h = cv2.boundingRect(shown.view(np.uint8))
+    if w == 0 or h == 0:
+        return None
+    H, W = tid.shape
+    return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, W), min(y + h + margin, H)
 
 
 def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
