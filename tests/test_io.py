@@ -120,3 +120,31 @@ def test_write_image_and_save_figure_are_atomic(tmp_path):
     fig = plt.figure()
     q = save_figure(fig, tmp_path / "f.png", dpi=20)
     assert q.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and not plt.fignum_exists(fig.number)
+
+
+def test_read_npz_maps_large_stored_members_and_reads_the_rest(tmp_path):
+    """``mmap_min_bytes``: stored members at least that big are read-only maps of the file with
+    the same values; compressed and small members are read as before; a truncated archive is
+    one clear error."""
+    from facetransfer.errors import ModelFileError
+    from facetransfer.io.npz import read_npz
+
+    rng = np.random.default_rng(0)
+    big = rng.normal(size=(300, 7, 5))
+    fort = np.asfortranarray(rng.normal(size=(40, 30)))
+    small = np.arange(6, dtype=np.int32)
+    p = tmp_path / "a.npz"
+    np.savez(p, big=big, fort=fort, small=small)
+    d = read_npz(p, "model file", ModelFileError, mmap_min_bytes=1000)
+    assert np.array_equal(d["big"], big) and np.array_equal(d["fort"], fort)
+    assert np.array_equal(d["small"], small) and d["small"].flags.writeable
+    assert not d["big"].flags.writeable and isinstance(d["big"].base, np.memmap)
+    assert type(d["big"]) is np.ndarray and d["fort"].flags.f_contiguous
+    pc = tmp_path / "c.npz"
+    np.savez_compressed(pc, big=big)
+    dc = read_npz(pc, "model file", ModelFileError, mmap_min_bytes=1000)
+    assert np.array_equal(dc["big"], big) and dc["big"].flags.writeable
+    pt = tmp_path / "t.npz"
+    pt.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
+    with pytest.raises(ModelFileError, match="t.npz"):
+        read_npz(pt, "model file", ModelFileError, mmap_min_bytes=1000)

@@ -342,7 +342,8 @@ def load_model(path: str | Path) -> MultilinearModel:
     from .io.npz import read_npz
 
     p = Path(path)
-    data = read_npz(p, "model file", ModelFileError)
+    # the core is mapped, not read (hundreds of MB; its sha256 is verified below)
+    data = read_npz(p, "model file", ModelFileError, mmap_min_bytes=1 << 24)
     if "metadata" not in data:
         raise ModelFileError(f"{p} is not a facetransfer model file (no metadata)")
     try:

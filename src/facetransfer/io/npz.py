@@ -36,7 +36,8 @@ def check_input_file(path: str | os.PathLike, what: str,
 
 
 def read_npz(path: str | os.PathLike, what: str,
-             error: type[FaceTransferError] = FaceTransferError) -> dict[str, np.ndarray]:
+             error: type[FaceTransferError] = FaceTransferError, *,
+             mmap_min_bytes: int | None = None) -> dict[str, np.ndarray]:
     """All arrays of an ``.npz`` file, read eagerly (no pickles).
 
     Parameters
@@ -46,6 +47,11 @@ def read_npz(path: str | os.PathLike, what: str,
         What the file should be, for messages (``"track file"``).
     error : FaceTransferError subclass
         Raised for any problem.
+    mmap_min_bytes : int, optional
+        Map members of at least this size that are stored uncompressed (``numpy.savez``) from
+        the file, read-only, instead of reading them (:func:`mapped_members`): pages are read
+        when first touched and shared between processes. The zip's CRC is then not checked:
+        for callers that verify the content themselves (a model file's sha256).
 
     Returns
     -------
@@ -67,11 +73,49 @@ def read_npz(path: str | os.PathLike, what: str,
         raise error(f"{what} {p} is not a {what} (a single .npy array, not an .npz archive)")
     try:
         with z:
-            return {k: z[k] for k in z.files}
+            mapped = {} if mmap_min_bytes is None else mapped_members(p, z, mmap_min_bytes)
+            return {k: mapped[k] if k in mapped else z[k] for k in z.files}
     except MemoryError:
         raise
     except Exception as exc:  # a damaged member: bad CRC, zlib.error, EOFError, pickle…
         raise error(f"{what} {p} is truncated or not a {what} ({_reason(exc)})") from None
+
+
+def mapped_members(path: Path, z: "np.lib.npyio.NpzFile", min_bytes: int
+                   ) -> dict[str, np.ndarray]:
+    """Read-only maps (base-class arrays viewing ``numpy.memmap``) of the members of the
+    archive ``z`` at ``path`` that are stored uncompressed, hold no objects and have at least
+    ``min_bytes`` bytes of data.
+
+    A stored zip member's bytes are the ``.npy`` file itself: its data start after the local
+    file header (30 bytes, the name and the extra field) and the ``.npy`` header.
+    """
+    import struct
+    import zipfile
+
+    out = {}
+    with open(path, "rb") as f:
+        for info in z.zip.infolist():
+            key = info.filename[:-4] if info.filename.endswith(".npy") else None
+            if key is None or info.compress_type != zipfile.ZIP_STORED or \
+                    info.file_size < min_bytes:
+                continue
+            f.seek(info.header_offset)
+            local = f.read(30)
+            if len(local) < 30 or local[:4] != b"PK\x03\x04":
+                continue  # let numpy report it
+            n_name, n_extra = struct.unpack("<HH", local[26:30])
+            f.seek(info.header_offset + 30 + n_name + n_extra)
+            version = np.lib.format.read_magic(f)
+            header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                      else np.lib.format.read_array_header_2_0)
+            shape, fortran, dtype = header(f)
+            if dtype.hasobject:
+                continue
+            mm = np.memmap(path, dtype=dtype, mode="r", offset=f.tell(), shape=shape,
+                           order="F" if fortran else "C")
+            out[key] = np.asarray(mm)
+    return out
 
 
 def _reason(exc: Exception) -> str:
