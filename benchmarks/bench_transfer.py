@@ -8,7 +8,9 @@ Measures, in one run:
     We track both videos (§5), transfer A's expressions onto B's footage and compare with the
     truth: PSNR and SSIM on the face region, and the landmark error (pixels) of the new
     performance. For reference: the same rewrite with the truth tracks (rendering error alone)
-    and the untouched target (what "doing nothing" scores). Rows ``..._mouth=function`` take
+    and the untouched target (what "doing nothing" scores). PSNR and SSIM also in the eye
+    region (lids, eyes and brows of the truth mesh: ``psnr_eyes_db``); rows ``..._eyes=target``
+    keep the target's own eyes (the holes open, ``--eyes target``). Rows ``..._mouth=function`` take
     the mouth from the texture function of §6 (``--mouth function``) instead of the source's
     frame; ``tracked_performance_mouth=...`` rewrite with a ready performance (``--performance``)
     whose mouth comes from the target's own footage (nearest frame or texture function).
@@ -119,6 +121,24 @@ def track_frames(frames, model, fps, speed="balanced"):
     return dataclasses.replace(tr, fps=float(fps))
 
 
+def eye_region_masks(model, topo, perf_t, frames_b, truth_b, size) -> list[np.ndarray]:
+    """Per frame, the pixels of the truth's eye region (issue 13): the triangles of
+    :func:`facetransfer.eyes.eye_texture` (lids, eyes, brows, the closed holes) on the truth
+    mesh, rasterised with the eye holes closed."""
+    from facetransfer.eyes import eye_texture
+    from facetransfer.render import rasterize
+    from facetransfer.topology import close_mouth
+
+    closed, tex = eye_texture(frames_b, truth_b, model, topo)
+    out = []
+    for i in range(perf_t.n_frames):
+        V = close_mouth(model.synthesize(perf_t.frame_weights(i)), closed)
+        tid = rasterize(V, closed.faces, perf_t.camera(i), size).tri_id
+        out.append((tid >= 0) & tex.select[np.maximum(tid, 0)] if tex is not None
+                   else np.zeros(tid.shape, bool))
+    return out
+
+
 # ------------------------------------------------------------------------------------ (a)-(c)
 def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=print,
                       speeds=("balanced",)) -> dict:
@@ -165,7 +185,8 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
         log(f"(a) tracked both clips with --speed {sp} in {track_seconds[sp]:.1f} s")
     topo = topology.mesh_topology(model)
 
-    def run(ta, tb, texture="frame", blend="fast", mouth="frame", mouth_from="source"):
+    def run(ta, tb, texture="frame", blend="fast", mouth="frame", mouth_from="source",
+            eyes="model"):
         """``mouth_from="target"``: the mouth from B's own footage, as for a ready performance
         (``--performance``): its nearest frame (``mouth="frame"``) or the texture function
         lifted from its frames."""
@@ -184,7 +205,7 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
                 src["mouth_function"] = ftex.mouth_texture_function(model, clip_b.frames, tb,
                                                                   topo)
         outs = list(rw.rewrite_frames(clip_b.frames, tb, new, model, texture=texture,
-                                      blend=blend, topo=topo, mouth=mouth, **src))
+                                      blend=blend, topo=topo, mouth=mouth, eyes=eyes, **src))
         return new, outs
 
     import scipy.ndimage as ndi
@@ -206,11 +227,18 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
         "tracked_performance_mouth=frame": (tr_a, tr_b, "frame", "fast", "frame", "target"),
         "tracked_performance_mouth=function": (tr_a, tr_b, "frame", "fast", "function",
                                                "target"),
+        # the eyes (issue 13): the target's own eyes through the mesh's holes (the paper's
+        # rewrite) instead of the new performance's lids over an open-eyed target frame
+        "tracked_frame_fast_eyes=target": (tr_a, tr_b, "frame", "fast", "frame", "source",
+                                           "target"),
+        "truth_tracks_frame_fast_eyes=target": (truth_a, truth_b, "frame", "fast", "frame",
+                                                "source", "target"),
     }
     for sp, (ta_, tb_) in other.items():
         runs[f"tracked_{sp}_preset_frame_fast"] = (ta_, tb_, "frame", "fast")
     masks = [face_mask(model, perf_t.frame_weights(i), perf_t.camera(i), (size, size))
              for i in range(n_frames)]
+    eye_masks = eye_region_masks(model, topo, perf_t, clip_b.frames, truth_b, (size, size))
     for name, (ta, tb, tex, bl, *mouth) in runs.items():
         t0 = time.perf_counter()
         new, outs = run(ta, tb, tex, bl, *mouth)
@@ -225,21 +253,32 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
                 else o.face_mask
             outside.append(sq_err(o.image, clip_b.frames[i], ~grown))
         mouth_errs = [sq_err(o.image, clip_t.frames[i], o.mouth_mask) for i, o in enumerate(outs)]
+        eye_errs = [sq_err(o.image, clip_t.frames[i], eye_masks[i]) for i, o in enumerate(outs)]
+        eye_ssim = [ssim(o.image, clip_t.frames[i], eye_masks[i]) for i, o in enumerate(outs)
+                    if eye_masks[i].any()]
         results[name] = {"psnr_face_db": psnr_of(errs), "psnr_face_db_min": float(np.min(p)),
                          "psnr_mouth_db": psnr_of(mouth_errs),
+                         "psnr_eyes_db": psnr_of(eye_errs),
+                         "ssim_eyes": float(np.mean(eye_ssim)) if eye_ssim else None,
                          "ssim_face": float(np.mean(s)),
                          "landmark_error_px": float(lm.mean()),
                          "psnr_outside_mask_db": psnr_of(outside),
                          "seconds_per_frame": dt / n_frames}
         if name == "tracked_frame_fast":
             result_frames = np.stack([o.image for o in outs])
-        log(f"(a) {name}: PSNR {psnr_of(errs):.2f} dB (mouth {psnr_of(mouth_errs):.2f}), "
+        log(f"(a) {name}: PSNR {psnr_of(errs):.2f} dB (mouth {psnr_of(mouth_errs):.2f}, "
+            f"eyes {psnr_of(eye_errs):.2f}), "
             f"SSIM {np.mean(s):.3f}, landmarks "
             f"{lm.mean():.2f} px, outside-mask PSNR {psnr_of(outside)}")
     base_p = [sq_err(clip_b.frames[i], clip_t.frames[i], masks[i]) for i in range(n_frames)]
     base_s = [ssim(clip_b.frames[i], clip_t.frames[i], masks[i]) for i in range(n_frames)]
+    base_e = [sq_err(clip_b.frames[i], clip_t.frames[i], eye_masks[i]) for i in range(n_frames)]
+    base_es = [ssim(clip_b.frames[i], clip_t.frames[i], eye_masks[i]) for i in range(n_frames)
+               if eye_masks[i].any()]
     results["untouched_target"] = {"psnr_face_db": psnr_of(base_p),
-                                   "ssim_face": float(np.mean(base_s))}
+                                   "ssim_face": float(np.mean(base_s)),
+                                   "psnr_eyes_db": psnr_of(base_e),
+                                   "ssim_eyes": float(np.mean(base_es)) if base_es else None}
 
     # (b) identity leakage: track the result again
     t0 = time.perf_counter()
