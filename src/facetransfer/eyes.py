@@ -571,12 +571,14 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     """Paste ``part`` into ``face`` inside ``mask``, shifted to the face's colours.
 
     ``face`` and ``part`` show the same surface there (the same person's skin lifted from two
-    frames), so their ratio is the change of exposure and white balance between the frames
-    plus the change of expression. ``part`` is scaled per channel by the ratio of the medians
-    of ``face`` and ``part`` over ``mask`` (inside the face, 2 px from its edge; clipped to
-    :data:`GAIN_RANGE`): robust to the expression's share and to hair, unlike a membrane pinned
-    at every outline pixel, and a gain keeps dark pixels (iris, lashes) dark where an offset
-    would tint them. The seam fades over ``feather`` pixels inside the mask.
+    frames), so their ratio is the change of exposure, white balance and shading between the
+    frames plus the change of expression. ``part`` is scaled per channel by a smooth gain
+    (:func:`gain_field`: the ratio's robust planar fit over ``mask`` inside the face, 2 px from
+    its edge, clipped to :data:`GAIN_RANGE`): robust to the expression's share and to hair,
+    unlike a membrane pinned at every outline pixel; planar, so that a light falling off across
+    the face as the head turns away from the reference frame is followed; and a gain keeps dark
+    pixels (iris, lashes) dark where an offset would tint them. The seam fades over ``feather``
+    pixels inside the mask.
 
     Parameters
     ----------
@@ -596,10 +598,50 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     ring = mask & deep
     f = part.astype(np.float32)
     if ring.sum() >= 8:
-        gain = np.median(face[ring].astype(np.float32), axis=0) / \
-            np.maximum(np.median(f[ring], axis=0), 1.0)
-        f *= np.clip(gain, *GAIN_RANGE)
+        f *= gain_field(face, part, ring)
     a = np.clip(cv2.distanceTransform(m8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) / max(feather, 1e-6),
                 0.0, 1.0)[..., None]
     out = a * f + (1.0 - a) * face.astype(np.float32)
     return np.where(mask[..., None], np.clip(np.rint(out), 0, 255), face).astype(np.uint8)
+
+
+def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
+               iterations: int = 5) -> np.ndarray:
+    """Per-channel gains ``(H, W, 3)`` float32 taking ``part`` to ``face``'s colours.
+
+    The log ratio ``log(1 + face) - log(1 + part)`` over the pixels ``where`` is fitted, per
+    channel, by a plane ``a + b x + c y`` in least absolute deviations (iteratively reweighted
+    least squares): the median's robustness (pixels whose content differs, e.g. the target's own
+    lids and lashes, are outvoted), plus the plane's gradient of shading. Coordinates are
+    centred on the pixels' centroid and scaled by their extent, so the gains do not depend on
+    the crop. Clipped to :data:`GAIN_RANGE`.
+
+    Parameters
+    ----------
+    face, part : (H, W, 3) uint8
+    where : (H, W) bool
+        At least 3 pixels not on one line.
+    iterations : int
+        Reweighting steps.
+
+    Returns
+    -------
+    (H, W, 3) float32
+    """
+    ys, xs = np.nonzero(where)
+    cy, cx = ys.mean(), xs.mean()
+    scale = float(max(np.ptp(ys), np.ptp(xs), 1))
+    A = np.stack([np.ones(ys.size), (xs - cx) / scale, (ys - cy) / scale], axis=1)   # (k, 3)
+    r = np.log1p(face[ys, xs].astype(np.float64)) - np.log1p(part[ys, xs].astype(np.float64))
+    w = np.ones_like(r)                                                            # (k, 3)
+    coef = np.zeros((3, 3))
+    for _ in range(int(iterations)):
+        for c in range(3):  # weighted normal equations, a tiny ridge for degenerate pixel sets
+            Aw = A * w[:, c:c + 1]
+            coef[:, c] = np.linalg.solve(Aw.T @ A + 1e-9 * np.eye(3), Aw.T @ r[:, c])
+        w = 1.0 / np.maximum(np.abs(r - A @ coef), 1e-3)  # |res| = res² / |res|: the L1 fit
+    H, W = where.shape
+    yy, xx = np.mgrid[0:H, 0:W]
+    field = coef[0] + ((xx - cx) / scale)[..., None] * coef[1] + \
+        ((yy - cy) / scale)[..., None] * coef[2]
+    return np.clip(np.exp(field), *GAIN_RANGE).astype(np.float32)
