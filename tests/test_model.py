@@ -148,6 +148,23 @@ def test_load_rejects_truncated_altered_newer_and_foreign_files(tmp_path):
         load_model(tmp_path / "nope.npz")
 
 
+@pytest.mark.parametrize("bad", [np.nan, np.inf, 1e308])
+def test_load_rejects_a_core_with_nan_or_inf_even_with_a_matching_checksum(tmp_path, bad):
+    """Finiteness is checked on the loaded (mapped) core, whatever the checksum says; huge
+    finite values (whose sum overflows) are still accepted."""
+    from facetransfer.model import MultilinearModel
+
+    m = build_model(random_dataset(seed=7))
+    core = m.core.copy()
+    core[(0,) * core.ndim] = bad
+    p = MultilinearModel(**{**m.__dict__, "core": core}).save(tmp_path / "bad.npz")
+    if np.isfinite(bad):
+        assert np.array_equal(load_model(p).core, core)
+    else:
+        with pytest.raises(ModelFileError, match="NaN or infinite"):
+            load_model(p)
+
+
 def test_save_is_atomic_and_refuses_overwrite(tmp_path):
     m = build_model(random_dataset(seed=8))
     p = m.save(tmp_path / "m.npz")

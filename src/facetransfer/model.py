@@ -383,6 +383,16 @@ _ARRAY_KINDS = {"core": "fiu", "faces": "iu", "uvs": "fiu", "landmarks": "iu",
                 "vertex_subset": "iu", "imputed": "b"}
 
 
+def _all_finite(a: np.ndarray) -> bool:
+    """No NaN or infinity in ``a``: a NaN or an infinity makes the sum non-finite, so a finite
+    sum settles it in one pass without a boolean copy (only a sum that overflows is checked
+    element by element)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if np.isfinite(a.sum()):
+            return True
+    return bool(np.isfinite(a).all())
+
+
 def _check_model_arrays(p: Path, data: dict, n_modes: int) -> None:
     """Dtypes, finiteness and shapes the model class does not check; ModelFileError names ``p``."""
     for name, a in data.items():
@@ -391,7 +401,7 @@ def _check_model_arrays(p: Path, data: dict, n_modes: int) -> None:
         if a.dtype.kind not in kinds:
             raise ModelFileError(f"model file {p}: {name} has dtype {a.dtype}, expected "
                                  + {"fiu": "numbers", "iu": "integers", "b": "booleans"}[kinds])
-        if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        if a.dtype.kind == "f" and not _all_finite(a):
             raise ModelFileError(f"model file {p}: {name} has NaN or infinite values")
     core = data["core"]
     n = core.shape[0] // 3 if core.ndim else 0
