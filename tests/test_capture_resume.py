@@ -251,7 +251,7 @@ def test_cli_capture_restart_and_other_runs_progress(clip, quick_model_path, tmp
 def test_mediapipe_resumed_mid_clip_agrees_with_an_uninterrupted_run(data_dir, tmp_path):
     """The real detector: frames before the seam come from the file (exact); from the seam on,
     MediaPipe's tracking state (warmed up on the 20 frames before) leaves sub-pixel
-    differences (measured 0.03-0.06 px mean at the seam, see VideoLandmarker)."""
+    differences (see VideoLandmarker); the flow into the seam frame is exact."""
     from facetransfer.track.detect import VideoLandmarker
 
     video = data_dir / "video" / "driving_d9.mp4"
@@ -274,5 +274,7 @@ def test_mediapipe_resumed_mid_clip_agrees_with_an_uninterrupted_run(data_dir, t
            ClipDetections(full.points[:k], full.flow[:k], full.points478[:k]))
     d = np.linalg.norm(res.points[k:] - full.points[k:], axis=2)          # (n - k, 68) px
     iod = np.linalg.norm(full.points[k, 36] - full.points[k, 45])
-    assert d.mean(axis=1).max() < 0.25 and d.max() < 0.01 * iod
-    assert np.all(np.isfinite(res.flow[k]) == np.isfinite(full.flow[k]))
+    # measured: 0.03-0.06 px mean per frame, 0.21 px at most (without the warm-up 1.6 px mean
+    # at the seam)
+    assert d.mean(axis=1).max() < 0.15 and d.max() < 0.5 and iod > 100
+    np.testing.assert_array_equal(res.flow[k], full.flow[k])  # frame k-1's points and image
