@@ -197,7 +197,8 @@ def _checked_model(path):
 def _capture(args, model, options, progress, bars):
     """The capture tracker; ``model`` may be a Future still loading. Returns (track, model).
 
-    The detections resume from ``partial_path(args.out)`` (:mod:`facetransfer.track.detect_checkpoint`).
+    The detections resume from ``partial_path(args.out)``
+    (:mod:`facetransfer.track.detect_checkpoint`).
     """
     from ..track.capture import capture_detections
     from ..track.detect_checkpoint import DetectionCheckpoint
