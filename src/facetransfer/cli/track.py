@@ -221,6 +221,8 @@ def _capture(args, model, options, progress, bars):
             ck.save(det, complete=True)                   # the fit restarts, detection does not
             raise
     except KeyboardInterrupt:
+        for b in bars.values():
+            b.close()                                     # the message on a line of its own
         print(f"interrupted; the progress is in {partial}: run the same command again to "
               "continue", file=sys.stderr)
         raise
