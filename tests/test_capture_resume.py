@@ -278,3 +278,26 @@ def test_mediapipe_resumed_mid_clip_agrees_with_an_uninterrupted_run(data_dir, t
     # at the seam)
     assert d.mean(axis=1).max() < 0.15 and d.max() < 0.5 and iod > 100
     np.testing.assert_array_equal(res.flow[k], full.flow[k])  # frame k-1's points and image
+
+
+def test_batch_track_clip_continues_an_interrupted_capture(clip, quick_model, tmp_path, fakes):
+    """``batch track`` (a whole clip, the capture tracker) resumes from ``NAME.partial.npz``
+    as ``facetransfer track`` does, and removes it once the track is written."""
+    from facetransfer.batch import jobs
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.track.settings import TrackerSettings
+
+    video = str(clip[0])
+    job, settings = ClipJob("c", video, "auto"), TrackerSettings()
+    ref = jobs._track(video, quick_model, "auto", settings, source=video, checkpoint=None)
+    out = tmp_path / "c.npz"
+    partial = jobs.partial_path(out)
+    fakes.stop_at = 25
+    with pytest.raises(KeyboardInterrupt):
+        jobs.track_clip(job, str(out), quick_model, settings)
+    assert partial.is_file() and not out.exists()
+    fakes.stop_at = None
+    row = jobs.track_clip(job, str(out), quick_model, settings)
+    assert row.status == "done" and not partial.exists()
+    assert fakes.made[-1].calls == F - 25 + FakeDetector.warmup_frames
+    np.testing.assert_allclose(Track.load(out).landmarks2d, ref.landmarks2d, atol=1e-9)
