@@ -78,6 +78,14 @@ def _key(video, max_frames=None):
     return detection_key(video_identity(str(video)), max_frames, "fake")
 
 
+def _stop_at(k):
+    """A progress callback interrupting the run once ``k`` frames are done."""
+    def stop(done, total):
+        if done == k:
+            raise KeyboardInterrupt
+    return stop
+
+
 def test_interrupted_detection_continues_exactly_where_it_stopped(clip, tmp_path):
     """Stopped after k frames, a second run detects only frames k.. (plus the detector's one
     warm-up frame) and gives exactly the uninterrupted run's detections, flow included."""
@@ -86,16 +94,24 @@ def test_interrupted_detection_continues_exactly_where_it_stopped(clip, tmp_path
     assert np.isfinite(full.flow[1:]).any() and not full.found[NO_FACE]
     k = 17
     ck = DetectionCheckpoint(tmp_path / "t.partial.npz", _key(video), every=1e9)
-
-    def stop(done, total):
-        if done == k:
-            raise KeyboardInterrupt
-
     with pytest.raises(KeyboardInterrupt):
-        detect_clip(iter_frames(video), FakeDetector(clip), keep478=True, progress=stop,
+        detect_clip(iter_frames(video), FakeDetector(clip), keep478=True, progress=_stop_at(k),
                     checkpoint=ck)
     saved = ck.load()
     assert saved is not None and saved.detections.n_frames == k and not saved.complete
+    # interrupted again while skipping the frames done (nothing new: the same file), then
+    # after a few new frames
+    with pytest.raises(KeyboardInterrupt):
+        detect_clip(iter_frames(video), FakeDetector(clip), keep478=True, progress=_stop_at(5),
+                    resume=saved.detections, checkpoint=ck)
+    _equal(ck.load().detections, saved.detections)
+    k2 = k + 6
+    with pytest.raises(KeyboardInterrupt):
+        detect_clip(iter_frames(video), FakeDetector(clip), keep478=True, progress=_stop_at(k2),
+                    resume=saved.detections, checkpoint=ck)
+    again = ck.load().detections
+    assert again.n_frames == k2
+    _equal(again, ClipDetections(full.points[:k2], full.flow[:k2], full.points478[:k2]))
     det = FakeDetector(clip)
     res = detect_clip(iter_frames(video), det, keep478=True, resume=saved.detections,
                       checkpoint=ck)
@@ -262,13 +278,9 @@ def test_mediapipe_resumed_mid_clip_agrees_with_an_uninterrupted_run(data_dir, t
         with VideoLandmarker(fps=25.0) as det:
             return detect_clip(iter_frames(video), det, n_frames=n, keep478=True, **kw)
 
-    def stop(done, total):
-        if done == k:
-            raise KeyboardInterrupt
-
     full = run()
     with pytest.raises(KeyboardInterrupt):
-        run(progress=stop, checkpoint=ck)
+        run(progress=_stop_at(k), checkpoint=ck)
     res = run(resume=ck.load().detections)
     _equal(ClipDetections(res.points[:k], res.flow[:k], res.points478[:k]),
            ClipDetections(full.points[:k], full.flow[:k], full.points478[:k]))
