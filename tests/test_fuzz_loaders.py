@@ -302,6 +302,47 @@ def test_partial_file_bad_arrays_mean_start_afresh(work, checkpoint_bytes, key, 
     assert r is None or isinstance(r, Resume)
 
 
+@pytest.fixture(scope="module")
+def detections_bytes(work):
+    from facetransfer.track.detect import ClipDetections
+    from facetransfer.track.detect_checkpoint import DetectionCheckpoint
+
+    rng = np.random.default_rng(0)
+    P = rng.normal(size=(3, 68, 2))
+    det = ClipDetections(P, np.zeros_like(P), rng.normal(size=(3, 478, 2)).astype(np.float32))
+    cp = DetectionCheckpoint(work / "d.partial.npz", "KEY")
+    cp.save(det)
+    assert cp.load() is not None
+    return cp.path.read_bytes()
+
+
+def _load_detections(p):
+    from facetransfer.track.detect_checkpoint import DetectionCheckpoint, SavedDetections
+
+    try:
+        r = DetectionCheckpoint(p, "KEY").load()
+    except Exception as exc:  # noqa: BLE001
+        pytest.fail(f"DetectionCheckpoint.load raised {exc.__class__.__name__}: {exc}")
+    assert r is None or isinstance(r, SavedDetections)
+
+
+@FUZZ
+@given(data=st.data())
+def test_detections_progress_file_damage_means_start_afresh(work, detections_bytes, data):
+    _load_detections(_put(work, "d.partial.npz", data.draw(damaged_bytes(detections_bytes))))
+
+
+@FUZZ
+@given(key=st.sampled_from(["points", "flow", "points478", "n_frames", "complete", "has478",
+                            "layout"]),
+       how=st.sampled_from(BAD_VALUES))
+def test_detections_progress_file_bad_arrays_mean_start_afresh(work, detections_bytes, key, how):
+    with np.load(io.BytesIO(detections_bytes)) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays[key] = mutate_array(arrays[key], how)
+    _load_detections(_put(work, "d.partial.npz", npz_bytes(arrays)))
+
+
 # ------------------------------------------------------------------------------ manifest
 @pytest.fixture(scope="module")
 def manifest(work):

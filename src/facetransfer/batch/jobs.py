@@ -58,6 +58,9 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
     if (tracker or settings.choose(init)) == "capture":
         from ..track.capture import capture_video
 
+        if checkpoint is not None and isinstance(video, (str, Path)):
+            return _capture_resuming(video, model, settings, source=source, fixed=fixed,
+                                     partial=checkpoint)
         return capture_video(video, model, options=settings.capture, source=source,
                              fixed=fixed)
     detector = _detector_for(init, settings.klt)
@@ -67,6 +70,30 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
     finally:
         if detector is not None:
             detector.close()
+
+
+def _capture_resuming(video, model, settings, *, source: str, fixed, partial):
+    """The capture tracker on a video file, its detections resumed from ``partial`` as in
+    ``facetransfer track`` (:mod:`facetransfer.track.detect_checkpoint`)."""
+    from ..track.capture import capture_video, detect_video
+    from ..track.detect_checkpoint import DetectionCheckpoint
+
+    ck = DetectionCheckpoint.for_video(partial, video, None)
+    saved = ck.load()
+    if saved is not None:
+        log.info("%s: continued an interrupted run from frame %d", source,
+                 saved.detections.n_frames)
+    if saved is not None and saved.complete:
+        det = saved.detections
+    else:
+        det = detect_video(video, source=source, checkpoint=ck,
+                           resume=None if saved is None else saved.detections)[0]
+    try:
+        return capture_video(video, model, options=settings.capture, detections=det,
+                             source=source, fixed=fixed)
+    except KeyboardInterrupt:
+        ck.save(det, complete=True)                       # the fit restarts, detection does not
+        raise
 
 
 def track_clip(job, out: str, model, options) -> Row:
@@ -91,6 +118,7 @@ def track_clip(job, out: str, model, options) -> Row:
     track = _track(str(job.video), model, job.init, options, source=str(job.video),
                    checkpoint=partial_path(out))
     track.save(out, overwrite=True)
+    partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
     return track_row(job.name, track, out, time.perf_counter() - t0)
 
 

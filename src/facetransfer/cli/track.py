@@ -158,6 +158,7 @@ def run(args) -> int:
         else:
             track = _track_klt(args, model, settings.klt, progress, bars)
         track.save(args.out, overwrite=args.overwrite)
+        partial_path(args.out).unlink(missing_ok=True)   # the progress of the run, if any
         n_lost = int(track.lost.sum())
         print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"
               f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
@@ -194,21 +195,53 @@ def _checked_model(path):
 
 
 def _capture(args, model, options, progress, bars):
-    """The capture tracker; ``model`` may be a Future still loading. Returns (track, model)."""
-    from ..track.capture import capture_detections, detect_video
-    from ..track.checkpoint import discard_if_damaged
+    """The capture tracker; ``model`` may be a Future still loading. Returns (track, model).
 
-    discard_if_damaged(partial_path(args.out))  # capture does not resume: only a damaged one goes
+    The detections resume from ``partial_path(args.out)``
+    (:mod:`facetransfer.track.detect_checkpoint`).
+    """
+    from ..track.capture import capture_detections
+    from ..track.detect_checkpoint import DetectionCheckpoint
+
+    partial = partial_path(args.out)
+    if args.restart and partial.exists():
+        partial.unlink()
+    ck = DetectionCheckpoint.for_video(partial, args.video, args.max_frames)
+    saved = ck.load()
+    if saved is not None:
+        print(f"continued an interrupted run from frame {saved.detections.n_frames}")
     try:
-        det, fps, size, src = detect_video(args.video, max_frames=args.max_frames,
-                                           progress=progress, source=str(args.video))
+        det, fps, size, src = _capture_detect(args, saved, ck, progress)
         if isinstance(model, Future):
             model = model.result()
-        return capture_detections(det, model, options=options, fps=fps, frame_size=size,
-                                  progress=progress, source=src), model
+        try:
+            return capture_detections(det, model, options=options, fps=fps, frame_size=size,
+                                      progress=progress, source=src), model
+        except KeyboardInterrupt:
+            ck.save(det, complete=True)                   # the fit restarts, detection does not
+            raise
+    except KeyboardInterrupt:
+        for b in bars.values():
+            b.close()                                     # the message on a line of its own
+        print(f"interrupted; the progress is in {partial}: run the same command again to "
+              "continue", file=sys.stderr)
+        raise
     finally:
         for b in bars.values():
             b.close()
+
+
+def _capture_detect(args, saved, ck, progress):
+    """The clip's detections, continued from ``saved``: (detections, fps, size, source)."""
+    from ..io.video import video_info
+    from ..track.capture import detect_video
+
+    if saved is not None and saved.complete:
+        info = video_info(args.video)
+        return saved.detections, info.fps, info.size, str(args.video)
+    return detect_video(args.video, max_frames=args.max_frames, progress=progress,
+                        source=str(args.video), checkpoint=ck,
+                        resume=None if saved is None else saved.detections)
 
 
 def _track_klt(args, model, opt, progress, bars):

@@ -606,11 +606,13 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
 
 
 def detect_video(video, *, detector=None, max_frames: int | None = None,
-                 progress: Progress | None = None, source: str | None = None
+                 progress: Progress | None = None, source: str | None = None,
+                 resume: ClipDetections | None = None, checkpoint=None
                  ) -> tuple[ClipDetections, float, tuple[int, int], str]:
     """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
 
-    Needs no model, so a caller may load the model meanwhile.
+    Needs no model, so a caller may load the model meanwhile. ``resume`` and ``checkpoint``:
+    as in :func:`facetransfer.track.detect.detect_clip`.
     """
     prog = progress or (lambda stage, done, total: None)
     fps, size, src, frames, n, total = _open(video, max_frames, source)
@@ -619,7 +621,8 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
         detector = own = VideoLandmarker(fps=fps)
     try:
         det = detect_clip(frames, detector, n_frames=n, keep478=True,
-                          progress=lambda d, t: prog("detect", d, max(total, d)))
+                          progress=lambda d, t: prog("detect", d, max(total, d)),
+                          resume=resume, checkpoint=checkpoint)
     finally:
         if own is not None:
             own.close()

@@ -1,0 +1,188 @@
+"""Resuming the capture tracker's detections after an interruption.
+
+Detection (:func:`facetransfer.track.detect.detect_clip`: MediaPipe and the point flow on every
+frame) is most of the capture tracker's time, so its results are what an interrupted run keeps:
+:class:`DetectionCheckpoint` saves the frames detected so far atomically every ~20 s and when the
+run is interrupted, and a later run of the same clip continues at the first frame not detected.
+The saved file is keyed by the video's identity, the frame limit and the detector (not the
+model: detection does not use it); a file of another run, of the KLT tracker
+(:mod:`facetransfer.track.checkpoint`) or a damaged one is ignored and replaced.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from ..io.atomic import atomic_path
+from .checkpoint import video_identity
+from .detect import ClipDetections
+
+log = logging.getLogger(__name__)
+
+__all__ = ["DETECT_CHECKPOINT_VERSION", "DetectionCheckpoint", "SavedDetections",
+           "detection_key", "landmarker_identity"]
+
+#: bumped when the saved layout changes (older files are then ignored)
+DETECT_CHECKPOINT_VERSION = 1
+#: what the file holds (a KLT tracker's progress file has no such entry)
+LAYOUT = "capture-detections"
+
+
+def detection_key(video_id: str, max_frames: int | None, detector_id: str) -> str:
+    """sha256 of everything saved detections depend on.
+
+    Parameters
+    ----------
+    video_id : str
+        :func:`facetransfer.track.checkpoint.video_identity` of the clip.
+    max_frames : int or None
+        The run's frame limit.
+    detector_id : str
+        Identifies the detector (e.g. :func:`landmarker_identity`).
+    """
+    doc = {"layout": LAYOUT, "video": video_id, "max_frames": max_frames,
+           "detector": detector_id, "version": DETECT_CHECKPOINT_VERSION}
+    return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
+
+
+def landmarker_identity() -> str:
+    """The default detector (MediaPipe Face Landmarker in video mode) by its registered sha256
+    and its warm-up (no file is read)."""
+    from ..assets import REGISTRY
+    from .detect import VideoLandmarker
+
+    sha = REGISTRY["face_landmarker"].files[0].sha256
+    return f"mediapipe-video:{sha}:warmup{VideoLandmarker.warmup_frames}"
+
+
+@dataclass(frozen=True)
+class SavedDetections:
+    """What a progress file restores.
+
+    Attributes
+    ----------
+    detections : ClipDetections
+        The first ``detections.n_frames`` frames.
+    complete : bool
+        Detection had finished (the run was interrupted while fitting).
+    """
+
+    detections: ClipDetections
+    complete: bool
+
+
+def _lossless32(a: np.ndarray) -> np.ndarray:
+    """``a`` as float32 when that loses nothing (the flow: OpenCV's float32 differences), else
+    float64."""
+    a32 = a.astype(np.float32)
+    return a32 if np.array_equal(a32.astype(a.dtype), a, equal_nan=True) else a
+
+
+class DetectionCheckpoint:
+    """The capture tracker's progress file (atomic ``.npz``): the detections of the first frames.
+
+    Parameters
+    ----------
+    path : path-like
+    key : str
+        :func:`detection_key` of the run.
+    every : float
+        Seconds between periodic saves (0 = after every frame).
+    budget : float
+        Largest share of the time spent saving: the next periodic save waits at least the last
+        save's duration divided by ``budget`` (the file grows with the clip; 30 min of video
+        is about 290 MB; ``inf``: no limit).
+    """
+
+    def __init__(self, path, key: str, *, every: float = 20.0, budget: float = 0.05) -> None:
+        self.path = Path(path)
+        self.key = key
+        self.every = float(every)
+        self.budget = float(budget)
+        self._last = time.monotonic()
+        self._wait = self.every
+        self.saves = 0
+
+    @classmethod
+    def for_video(cls, path, video: str | os.PathLike, max_frames: int | None,
+                  detector_id: str | None = None, **kw) -> "DetectionCheckpoint":
+        """The progress file of detecting ``video`` (a file) with the default detector."""
+        vid = video_identity(str(video))
+        return cls(path, detection_key(vid, max_frames, detector_id or landmarker_identity()),
+                   **kw)
+
+    def load(self) -> SavedDetections | None:
+        """The saved detections, or None (no file, another run's, unreadable or damaged)."""
+        if not self.path.is_file():
+            return None
+        try:
+            with np.load(self.path, allow_pickle=False) as z:
+                d = {k: z[k] for k in z.files}
+        except Exception as exc:  # empty, truncated, not an npz (zipfile, EOFError, ValueError…)
+            log.warning("removing unreadable progress file %s (%s); starting afresh", self.path,
+                        exc.__class__.__name__)
+            self.remove()
+            return None
+        if str(d.get("key", "")) != self.key:
+            what = ("another video, frame limit or detector" if str(d.get("layout", "")) == LAYOUT
+                    else "the klt tracker's progress")
+            log.warning("ignoring progress file %s of another run (%s); starting afresh",
+                        self.path, what)
+            return None
+        try:
+            return self._restore(d)
+        except Exception as exc:  # entries missing, wrong shapes or dtypes: a damaged file
+            log.warning("removing damaged progress file %s (%s); starting afresh", self.path,
+                        exc.__class__.__name__)
+            self.remove()
+            return None
+
+    @staticmethod
+    def _restore(d: dict) -> SavedDetections:
+        P = d["points"]
+        k = P.shape[0]
+        raw = d["points478"] if bool(d["has478"]) else None
+        if (k < 1 or P.shape != (k, 68, 2) or d["flow"].shape != P.shape
+                or int(d["n_frames"]) != k or (raw is not None and raw.shape != (k, 478, 2))):
+            raise ValueError("inconsistent arrays")
+        det = ClipDetections(P.astype(np.float64), d["flow"].astype(np.float64),
+                             None if raw is None else raw.astype(np.float32))
+        return SavedDetections(det, bool(d["complete"]))
+
+    def due(self) -> bool:
+        """Whether a periodic save is due."""
+        return time.monotonic() - self._last >= self._wait
+
+    def save(self, det: ClipDetections, *, complete: bool = False) -> None:
+        """Write the detections of the first ``det.n_frames`` frames atomically."""
+        t0 = time.monotonic()
+        arrays = {"key": np.array(self.key), "layout": np.array(LAYOUT),
+                  "version": np.array(DETECT_CHECKPOINT_VERSION),
+                  "n_frames": np.array(det.n_frames), "complete": np.array(bool(complete)),
+                  "points": _lossless32(det.points), "flow": _lossless32(det.flow),
+                  "has478": np.array(det.points478 is not None),
+                  "points478": (np.zeros((0, 478, 2), np.float32) if det.points478 is None
+                                else np.asarray(det.points478, np.float32))}
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(self.path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+        self._last = time.monotonic()
+        self._wait = max(self.every, (self._last - t0) / max(self.budget, 1e-6))
+        self.saves += 1
+        log.info("saved the detections of %d frames to %s", det.n_frames, self.path)
+
+    def remove(self) -> None:
+        """Delete the file (the track is written)."""
+        try:
+            self.path.unlink()
+        except FileNotFoundError:
+            pass
