@@ -213,22 +213,3 @@ class Checkpoint:
             self.path.unlink()
         except FileNotFoundError:
             pass
-
-
-def discard_if_damaged(path: str | os.PathLike) -> bool:
-    """Remove an unreadable progress file (empty, truncated, not an npz) with a warning.
-
-    For runs that do not resume from it (the capture tracker): a readable file of another run
-    is kept. Returns whether a file was removed.
-    """
-    p = Path(path)
-    if not p.is_file():
-        return False
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            z.files  # noqa: B018 - reading the directory is the check
-        return False
-    except Exception as exc:  # empty, truncated, not an npz (zipfile, EOFError, ValueError…)
-        log.warning("removing unreadable progress file %s (%s)", p, exc.__class__.__name__)
-        p.unlink()
-        return True
