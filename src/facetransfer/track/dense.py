@@ -6,32 +6,34 @@ stands for, so that the capture tracker (:mod:`facetransfer.track.capture`) can 
 all of them and not only to the 68 iBUG points:
 
 1. the canonical mesh (asset ``canonical_face_model``) is aligned to the model's mean face by a
-   similarity transform (Umeyama) on the 51 inner iBUG points, whose MediaPipe indices are
-   :data:`facetransfer.track.landmarks.MP_TO_IBUG` and whose model vertices are
-   ``model.landmarks``;
+   similarity transform (Umeyama) on the 51 inner iBUG points, placed on the canonical mesh by
+   the same weights as :func:`facetransfer.track.landmarks.mediapipe_to_ibug` uses
+   (:func:`~facetransfer.track.landmarks.mapping_matrix`, the calibrated correspondence) and
+   whose model vertices are ``model.landmarks``;
 2. the remaining misfit at those 51 points is interpolated over the mesh by a thin-plate spline
    (``scipy.interpolate.RBFInterpolator``);
 3. each warped point is projected onto the nearest point of the model's surface (trimesh), kept as
    a triangle and barycentric coordinates; points farther than ``max_distance`` are dropped.
 
-The result is cached in the user cache, keyed by the model's content hash.
+The result is cached in the user cache, keyed by the model's content hash and the iBUG weights.
 """
 
 from __future__ import annotations
 
+import hashlib
 import logging
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import ShapeError
-from .landmarks import MP_TO_IBUG
+from .landmarks import mapping_matrix
 
 log = logging.getLogger(__name__)
 
 __all__ = ["DenseCorrespondence", "mediapipe_correspondence", "umeyama"]
 
-CACHE_VERSION = 1
+CACHE_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -87,14 +89,14 @@ def _canonical() -> np.ndarray:
     return V
 
 
-def _compute(model, max_distance: float) -> DenseCorrespondence:
+def _compute(model, max_distance: float, anchors: np.ndarray) -> DenseCorrespondence:
     import trimesh
     from scipy.interpolate import RBFInterpolator
 
     neutral = model.synthesize(model.default_weights())
     canon = _canonical()
     inner = range(17, 68)
-    src = np.stack([canon[list(MP_TO_IBUG[i])].mean(0) for i in inner])
+    src = anchors[list(inner)] @ canon                                     # (51, 3)
     dst = neutral[model.landmarks[list(inner)]]
     s, R, t = umeyama(src, dst)
     warped = s * canon @ R.T + t
@@ -130,8 +132,10 @@ def mediapipe_correspondence(model, *, max_distance: float = 0.8,
 
     if model.landmarks is None:
         raise ShapeError("the model has no landmark vertices")
+    anchors = mapping_matrix(468)                                          # (68, 468)
+    tag = hashlib.sha256(np.ascontiguousarray(anchors).tobytes()).hexdigest()[:8]
     path = (cache_dir() / "correspondence" /
-            f"mp468-{model.content_hash[:20]}-{max_distance:g}-v{CACHE_VERSION}.npz")
+            f"mp468-{model.content_hash[:20]}-{max_distance:g}-v{CACHE_VERSION}-{tag}.npz")
     if use_cache and path.is_file():
         try:
             with np.load(path, allow_pickle=False) as z:
@@ -139,7 +143,7 @@ def mediapipe_correspondence(model, *, max_distance: float = 0.8,
                                            z["distance"])
         except (OSError, ValueError, KeyError) as exc:
             log.warning("ignoring unreadable %s (%s)", path, exc)
-    dc = _compute(model, max_distance)
+    dc = _compute(model, max_distance, anchors)
     if use_cache:
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
