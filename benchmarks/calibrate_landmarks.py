@@ -21,7 +21,14 @@ distance, ridge towards the table). The ridge is chosen by leave-one-clip-out cr
 Usage::
 
     FACETRANSFER_DATA_DIR=... python benchmarks/calibrate_landmarks.py [--out out/benchmarks]
-        [--clips 16] [--frames 48] [--k 8] [--keep 0,1,...] [--dry-run]
+        [--clips 16] [--frames 48] [--k 8] [--keep 0,1,...] [--dense] [--dry-run]
+
+``--dense`` also calibrates the dense correspondence of the default model (FaceKit topology,
+:mod:`facetransfer.track.dense`): for each MediaPipe point of the geometric correspondence, the
+triangle and barycentric point within 1.2 cm of it on the mean face whose *true* projections
+(the clips' face vertices through their known pose and camera) best match MediaPipe's point over
+all frames; first fitted on 12 clips and checked on the other 4, then fitted on all 16, and
+written to ``src/facetransfer/data/mediapipe_facekit_dense.json``.
 
 ``--keep``: iBUG points that keep the table's weights. Prints the cross-validation table and
 writes ``OUT/calibrate_landmarks.json`` (the figures) besides the data file.
@@ -98,7 +105,8 @@ def load_frames(cache: Path, specs) -> list[dict]:
         clip = cd.load_clip(cache, s, fk_loader=fk)
         with filtered_stderr(not log.isEnabledFor(logging.DEBUG)):
             pts, _ = cached_landmarker(clip.video, cache)
-        out.append({"spec": s, "points": pts[:, :468], "truth": clip.landmarks})
+        out.append({"spec": s, "points": pts[:, :468], "truth": clip.landmarks,
+                    "vertices": clip.vertices, "pose": clip.pose})
         log.info("clip %s: %d frames, %d without a face (%.1f s)", s.name, len(pts),
                  int(np.isnan(pts).any(axis=(1, 2)).sum()), time.perf_counter() - t0)
     return out
@@ -258,6 +266,113 @@ def choose_ridge(cv: dict, ridges, tolerance: float = 0.03) -> float:
     return float(max(r for r in ridges if cv[f"{r:g}"]["nme51"] <= (1 + tolerance) * best))
 
 
+# ------------------------------------------------------------------------------ dense
+def projected_vertices(clip: dict) -> np.ndarray:
+    """The true face-area vertices of a calibration clip projected as ``make_clip`` paints them,
+    (F, FACE_END, 2) float32 pixels."""
+    import _cvpaint as cvp
+
+    cam = cvp.Camera(size=cd.SIZE)
+    out = np.empty(clip["vertices"].shape[:2] + (2,), np.float32)
+    for i, (X, P) in enumerate(zip(clip["vertices"], clip["pose"])):
+        R = cvp.rotation_ypr(*P[:3])
+        out[i] = cvp.project(cvp.to_camera(X.astype(np.float64), R,
+                                           np.array([P[3], P[4], 0.0])), cam)
+    return out
+
+
+def calibrate_dense(clips, model, dc, *, radius: float = 1.2) -> tuple:
+    """Per MediaPipe point of the geometric correspondence ``dc``: the triangle and barycentric
+    point of the model's face (FaceKit topology) within ``radius`` cm of the geometric point on
+    the mean face whose true projections best match MediaPipe's point over ``clips``
+    (:func:`~facetransfer.track.calibration.best_triangle_point`).
+
+    Returns
+    -------
+    triangles (P, 3), bary (P, 3), rms_geometric (P,), rms_calibrated (P,)
+    """
+    from scipy.spatial import cKDTree
+
+    from facetransfer.track.calibration import best_triangle_point
+
+    V2 = np.concatenate([projected_vertices(c) for c in clips])             # (F, n, 2)
+    M = np.concatenate([c["points"] for c in clips])                        # (F, 468, 2)
+    T = np.concatenate([c["truth"] for c in clips])
+    ok = np.isfinite(M).all(axis=(1, 2))
+    V2, M, s = V2[ok], M[ok], np.linalg.norm(T[ok, 36] - T[ok, 45], axis=1)
+    neutral = model.synthesize(model.default_weights())
+    here = dc.sample(neutral)                                               # (P, 3)
+    tree = cKDTree(neutral)
+    faces = np.asarray(model.faces, np.int64)
+    tris, bary, rms0, rms1 = [], [], [], []
+    for p, j in enumerate(dc.mp_index):
+        near = np.zeros(len(neutral), bool)
+        near[tree.query_ball_point(here[p], radius)] = True
+        cand = np.unique(np.vstack([faces[near[faces].any(axis=1)], dc.triangles[p:p + 1]]),
+                         axis=0)
+        k, w, e = best_triangle_point(V2, M[:, j], s, cand)
+        geo = np.einsum("fkd,k->fd", V2[:, dc.triangles[p]], dc.bary[p]) - M[:, j]
+        tris.append(cand[k])
+        bary.append(w)
+        rms0.append(float(np.sqrt(((geo / s[:, None]) ** 2).sum(1).mean())))
+        rms1.append(e)
+    return np.array(tris), np.array(bary), np.array(rms0), np.array(rms1)
+
+
+def dense_error(clips, triangles, bary, mp_index) -> np.ndarray:
+    """Per point rms distance (/ true eye-corner distance) of MediaPipe's points from the
+    projections of their surface points, (P,)."""
+    V2 = np.concatenate([projected_vertices(c) for c in clips])
+    M = np.concatenate([c["points"] for c in clips])
+    T = np.concatenate([c["truth"] for c in clips])
+    ok = np.isfinite(M).all(axis=(1, 2))
+    s = np.linalg.norm(T[ok, 36] - T[ok, 45], axis=1)
+    Y = np.einsum("fpkd,pk->fpd", V2[ok][:, triangles], bary)
+    d = (Y - M[ok][:, mp_index]) / s[:, None, None]
+    return np.sqrt((d ** 2).sum(2).mean(0))
+
+
+def run_dense(args, clips) -> dict:
+    """Calibrate the dense correspondence of the default model (held-out check on the last 4
+    clips first) and write ``mediapipe_facekit_dense.json``."""
+    from facetransfer.default_model import load_default_model
+    from facetransfer.track.dense import faces_hash, mediapipe_correspondence
+
+    model = load_default_model(announce=log.info)
+    dc = mediapipe_correspondence(model, calibrated=False)
+    train, test = clips[:-4], clips[-4:]
+    tr, ba, _, _ = calibrate_dense(train, model, dc)
+    e_geo = dense_error(test, dc.triangles, dc.bary, dc.mp_index)
+    e_cal = dense_error(test, tr, ba, dc.mp_index)
+    held = {"clips": [c["spec"].name for c in test],
+            "rms_median_geometric": round(100 * float(np.median(e_geo)), 3),
+            "rms_median_calibrated": round(100 * float(np.median(e_cal)), 3),
+            "rms_mean_geometric": round(100 * float(np.mean(e_geo)), 3),
+            "rms_mean_calibrated": round(100 * float(np.mean(e_cal)), 3)}
+    print(f"dense points, held-out clips, rms % of eye distance: geometric median "
+          f"{held['rms_median_geometric']:.2f} mean {held['rms_mean_geometric']:.2f} -> calibrated "
+          f"median {held['rms_median_calibrated']:.2f} mean {held['rms_mean_calibrated']:.2f}")
+    tr, ba, _, _ = calibrate_dense(clips, model, dc)
+    doc = {"format": "facetransfer MediaPipe dense correspondence on a FaceKit-topology face",
+           "version": 1, "n_vertices": int(model.n_vertices),
+           "faces_sha256": faces_hash(model.faces),
+           "provenance": {"script": "benchmarks/calibrate_landmarks.py --dense",
+                          "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
+                          "clips": [c["spec"].name for c in clips],
+                          "identity_indices": [c["spec"].index for c in clips],
+                          "held_out_check": held},
+           "mp_index": dc.mp_index.tolist(), "triangles": tr.tolist(),
+           "bary": np.round(ba, 6).tolist()}
+    if not args.dry_run:
+        from facetransfer.io.atomic import write_text_atomic
+
+        dest = Path(__file__).resolve().parents[1] / "src/facetransfer/data/" \
+            "mediapipe_facekit_dense.json"
+        write_text_atomic(dest, json.dumps(doc) + "\n")
+        print(f"wrote {dest}")
+    return held
+
+
 def write_data(path: Path, points, provenance: dict) -> None:
     """The data file: weights per iBUG point (rounded to 1e-6, sum exactly 1) and provenance."""
     from facetransfer.io.atomic import write_text_atomic
@@ -287,6 +402,8 @@ def main(argv=None) -> int:
     ap.add_argument("--keep", default="", help="iBUG points keeping the table, e.g. 0,1,2")
     ap.add_argument("--ridge", type=float, default=None, help="skip the cross-validation")
     ap.add_argument("--dry-run", action="store_true", help="do not write the data file")
+    ap.add_argument("--dense", action="store_true",
+                    help="also calibrate the dense correspondence of the default model")
     ap.add_argument("-v", "--verbose", action="store_true")
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
@@ -365,6 +482,9 @@ def run(args, keep) -> int:
 
     out.mkdir(parents=True, exist_ok=True)
     write_text_atomic(out / "calibrate_landmarks.json", json.dumps(res, indent=1))
+    if args.dense:
+        res["dense"] = run_dense(args, clips)
+        write_text_atomic(out / "calibrate_landmarks.json", json.dumps(res, indent=1))
     if not args.dry_run:
         dest = Path(__file__).resolve().parents[1] / "src/facetransfer/data/mediapipe_ibug.json"
         write_data(dest, points, provenance)

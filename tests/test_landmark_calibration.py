@@ -132,3 +132,47 @@ def test_candidate_sets_add_the_nearest_canonical_vertices():
     assert cs[1].tolist() == [20, 22, 21, 19, 23]    # around the mean of the table's two
     assert len(cs) == 68 and all(len(set(c.tolist())) == len(c) for c in cs)
     assert len(MP_TO_IBUG) == 68
+
+
+# ------------------------------------------------------------------------------------ dense
+def test_best_triangle_point_recovers_a_planted_surface_point():
+    """Detections made from a known barycentric point of one triangle (projected vertices
+    moving over frames) pick that triangle and those coordinates among distractors."""
+    from facetransfer.track.calibration import best_triangle_point
+
+    rng = np.random.default_rng(7)
+    F, n = 80, 12
+    V2 = rng.uniform(0, 300, size=(1, n, 2)) + rng.normal(0, 8, size=(F, n, 2))
+    tris = np.array([[0, 1, 2], [3, 4, 5], [6, 7, 8], [9, 10, 11]])
+    b = np.array([0.2, 0.5, 0.3])
+    m = np.einsum("fkd,k->fd", V2[:, tris[2]], b)
+    k, w, rms = best_triangle_point(V2, m, np.full(F, 100.0), tris)
+    assert k == 2 and rms < 1e-9
+    np.testing.assert_allclose(w, b, atol=1e-9)
+    # a point outside every triangle is clipped onto the best one's boundary, weights >= 0
+    k, w, _ = best_triangle_point(V2, m + 40.0, np.full(F, 100.0), tris)
+    assert w.min() >= 0 and w.sum() == pytest.approx(1.0)
+    with pytest.raises(ShapeError):
+        best_triangle_point(V2, m, np.full(F, 100.0), np.zeros((0, 3), int))
+
+
+def test_calibrated_dense_file_matches_the_facekit_face_only(arkit_model):
+    """The packaged dense correspondence is used for FaceKit-topology models (the test model
+    has the FaceKit face's triangles) and ignored for any other topology."""
+    from dataclasses import replace
+
+    from facetransfer.track.dense import (DENSE_CALIBRATION_FILE, calibrated_correspondence,
+                                          faces_hash, mediapipe_correspondence)
+
+    doc = json.loads((resources.files("facetransfer") / "data" / DENSE_CALIBRATION_FILE)
+                     .read_text())
+    m = arkit_model
+    assert doc["faces_sha256"] == faces_hash(m.faces) and doc["n_vertices"] == m.n_vertices
+    dc = calibrated_correspondence(m)
+    assert dc is not None and len(dc.mp_index) == len(doc["mp_index"]) > 400
+    np.testing.assert_allclose(dc.bary.sum(axis=1), 1.0, atol=1e-5)
+    assert dc.bary.min() >= 0 and dc.triangles.max() < m.n_vertices
+    assert mediapipe_correspondence(m) is not None
+    np.testing.assert_array_equal(mediapipe_correspondence(m).triangles, dc.triangles)
+    other = replace(m, faces=m.faces[:, ::-1].copy())
+    assert calibrated_correspondence(other) is None

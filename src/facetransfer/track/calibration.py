@@ -31,7 +31,7 @@ import numpy as np
 from ..errors import ShapeError
 
 __all__ = ["CalibratedPoint", "candidate_sets", "solve_point_weights", "calibrate_mapping",
-           "mapping_error"]
+           "mapping_error", "best_triangle_point"]
 
 
 @dataclass(frozen=True)
@@ -175,3 +175,51 @@ def mapping_error(W: np.ndarray, points: np.ndarray, truth: np.ndarray, scale: n
     """Per-frame, per-point distance of ``W @ points`` from ``truth`` / ``scale``, (F, 68)."""
     Y = np.einsum("im,fmd->fid", np.asarray(W, np.float64), np.asarray(points, np.float64))
     return np.linalg.norm(Y - truth, axis=2) / np.asarray(scale, np.float64)[:, None]
+
+
+def best_triangle_point(V2: np.ndarray, m: np.ndarray, scale: np.ndarray, triangles: np.ndarray
+                        ) -> tuple[int, np.ndarray, float]:
+    """The surface point (a triangle and barycentric coordinates) whose projections best match
+    one detected point over frames.
+
+    For every candidate triangle the affine weights of its 3 vertices (sum 1) are solved by least
+    squares, ``min_w 1/F sum_f |V2_f[tri]^T w - m_f|^2 / s_f^2``, clipped into the triangle
+    (negative weights to 0, renormalised); the triangle with the smallest mean squared error wins.
+
+    Parameters
+    ----------
+    V2 : (F, n, 2) float
+        Projected true vertices per frame (pixels).
+    m : (F, 2) float
+        The detected point per frame.
+    scale : (F,) float
+        Per-frame normalisation (the true eye-corner distance).
+    triangles : (T, 3) int
+        Candidate triangles (vertex indices into ``V2``).
+
+    Returns
+    -------
+    index : int
+        Row of ``triangles``.
+    bary : (3,) float64
+    rms : float
+        Root mean squared normalised error of that point.
+    """
+    tri = np.asarray(triangles, np.int64)
+    if tri.ndim != 2 or tri.shape[1] != 3 or not len(tri):
+        raise ShapeError(f"triangles must be (T, 3), T > 0, got {tri.shape}")
+    s = np.asarray(scale, np.float64)[:, None, None]
+    A = np.asarray(V2, np.float64)[:, tri] / s[..., None]                  # (F, T, 3, 2)
+    mt = np.asarray(m, np.float64)[:, None, :] / s                         # (F, 1, 2)
+    E = A[:, :, 1:] - A[:, :, :1]                                           # (F, T, 2, 2)
+    r0 = A[:, :, 0] - mt                                                    # (F, T, 2)
+    N = np.einsum("ftkd,ftld->tkl", E, E) + 1e-12 * np.eye(2)
+    g = np.einsum("ftkd,ftd->tk", E, r0)
+    u = -np.linalg.solve(N, g[..., None])[..., 0]                           # (T, 2)
+    w = np.concatenate([1 - u.sum(1, keepdims=True), u], axis=1)
+    w = np.clip(w, 0.0, None)
+    w /= w.sum(axis=1, keepdims=True)
+    res = np.einsum("ftkd,tk->ftd", A, w) - mt                              # (F, T, 2)
+    err = (res ** 2).sum(axis=2).mean(axis=0)                               # (T,)
+    best = int(np.argmin(err))
+    return best, w[best], float(np.sqrt(err[best]))

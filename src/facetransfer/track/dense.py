@@ -16,11 +16,20 @@ all of them and not only to the 68 iBUG points:
    a triangle and barycentric coordinates; points farther than ``max_distance`` are dropped.
 
 The result is cached in the user cache, keyed by the model's content hash and the iBUG weights.
+
+For models with the ICT-FaceKit face's topology (the default model and every ``ict-*`` model:
+same vertex count and triangles, checked by a hash), a *calibrated* correspondence ships with
+the package (``data/mediapipe_facekit_dense.json``, :func:`calibrated_correspondence`): for each
+of these MediaPipe points, the surface point within 1.2 cm of the geometric one whose
+projections best matched MediaPipe's point on painted FaceKit faces with known geometry
+(``benchmarks/calibrate_landmarks.py --dense``; held-out rms 3.0 -> 2.5 % of the eye distance,
+median over the points). It is used instead of steps 1-3 unless ``calibrated=False``.
 """
 
 from __future__ import annotations
 
 import hashlib
+import json
 import logging
 from dataclasses import dataclass
 
@@ -31,7 +40,11 @@ from .landmarks import mapping_matrix
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DenseCorrespondence", "mediapipe_correspondence", "umeyama"]
+__all__ = ["DenseCorrespondence", "mediapipe_correspondence", "umeyama", "faces_hash",
+           "calibrated_correspondence", "DENSE_CALIBRATION_FILE"]
+
+#: The calibrated dense correspondence of FaceKit-topology models, in the package's data folder.
+DENSE_CALIBRATION_FILE = "mediapipe_facekit_dense.json"
 
 CACHE_VERSION = 2
 
@@ -115,8 +128,46 @@ def _compute(model, max_distance: float, anchors: np.ndarray) -> DenseCorrespond
                                np.clip(bary[keep], 0.0, 1.0), dist[keep])
 
 
-def mediapipe_correspondence(model, *, max_distance: float = 0.8,
-                             use_cache: bool = True) -> DenseCorrespondence:
+def faces_hash(faces: np.ndarray) -> str:
+    """SHA-256 of a triangle array as int64 (identifies a topology)."""
+    return hashlib.sha256(np.ascontiguousarray(faces, np.int64).tobytes()).hexdigest()
+
+
+def calibrated_correspondence(model) -> DenseCorrespondence | None:
+    """The calibrated dense correspondence of the package's ``mediapipe_facekit_dense.json``
+    when the model has its topology (same vertex count and triangles), else None.
+
+    The file (``benchmarks/calibrate_landmarks.py --dense``) holds, per MediaPipe point, the
+    triangle and barycentric point of the FaceKit face whose projections best matched
+    MediaPipe's point on painted faces with known geometry (searched within 1.2 cm of the
+    geometric correspondence's point).
+    """
+    from importlib import resources
+
+    path = resources.files("facetransfer") / "data" / DENSE_CALIBRATION_FILE
+    try:
+        doc = json.loads(path.read_text())
+        if (int(doc["n_vertices"]) != int(model.n_vertices)
+                or doc["faces_sha256"] != faces_hash(model.faces)):
+            return None
+        idx = np.asarray(doc["mp_index"], np.int64)
+        tri = np.asarray(doc["triangles"], np.int64)
+        bary = np.asarray(doc["bary"], np.float64)
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.warning("ignoring unreadable %s (%s)", path, exc)
+        return None
+    if (idx.ndim != 1 or tri.shape != (len(idx), 3) or bary.shape != (len(idx), 3)
+            or tri.min(initial=0) < 0 or tri.max(initial=0) >= model.n_vertices
+            or not np.allclose(bary.sum(axis=1), 1.0, atol=1e-5)):
+        log.warning("ignoring malformed %s", path)
+        return None
+    return DenseCorrespondence(idx, tri, bary, np.zeros(len(idx)))
+
+
+def mediapipe_correspondence(model, *, max_distance: float = 0.8, use_cache: bool = True,
+                             calibrated: bool = True) -> DenseCorrespondence:
     """The dense correspondence of a model (module notes), cached per model.
 
     Parameters
@@ -126,7 +177,14 @@ def mediapipe_correspondence(model, *, max_distance: float = 0.8,
     max_distance : float
         Canonical points farther than this from the surface after the warp are dropped (model
         units: cm for ICT models).
+    calibrated : bool
+        Use :func:`calibrated_correspondence` when the model has its topology (its ``distance``
+        is then 0).
     """
+    if calibrated:
+        dc = calibrated_correspondence(model)
+        if dc is not None:
+            return dc
     from ..assets import cache_dir
     from ..io.atomic import atomic_path
 
