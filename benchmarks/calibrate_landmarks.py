@@ -418,21 +418,11 @@ def main(argv=None) -> int:
     return run(args, keep)
 
 
-def run(args, keep) -> int:
-    import mediapipe
+def solve(args, clips, candidates, prior, keep) -> tuple[list, float, dict | None]:
+    """The calibrated points, the ridge and the cross-validation table (None with --ridge)."""
+    from facetransfer.track.calibration import calibrate_mapping
 
-    from facetransfer.track.calibration import calibrate_mapping, candidate_sets
-    from facetransfer.track.dense import _canonical
-    from facetransfer.track.landmarks import MP_TO_IBUG, table_matrix
-
-    out = Path(args.out)
-    cache = out / "capture_cache"
-    specs = calibration_specs(args.clips, args.frames)
-    clips = load_frames(cache, specs)
-    candidates = candidate_sets(_canonical(), MP_TO_IBUG, k=args.k)
-    prior = table_matrix(468)
-    cv = None
-    ridge = args.ridge
+    cv, ridge = None, args.ridge
     if ridge is None:
         cv = cross_validate(clips, candidates, prior, keep, RIDGES)
         ridge = choose_ridge(cv, RIDGES)
@@ -442,27 +432,27 @@ def run(args, keep) -> int:
             print(f"{k:10s} {v['nme7']:7.3f} {v['nme51']:7.3f} {v['jaw']:7.3f}"
                   + ("  <- chosen" if k == f"{ridge:g}" else ""))
     P, T, s = _stack(clips)
-    points = calibrate_mapping(P, T, s, candidates, prior, ridge=ridge, fixed=keep)
-    n_ok = int(np.isfinite(P).all(axis=(1, 2)).sum())
-    provenance = {
+    return calibrate_mapping(P, T, s, candidates, prior, ridge=ridge, fixed=keep), ridge, cv
+
+
+def provenance_of(args, specs, n_frames: int, ridge: float, keep, cv) -> dict:
+    """What the data file records about its making."""
+    import mediapipe
+
+    return {
         "script": "benchmarks/calibrate_landmarks.py", "prior": "facetransfer.track.landmarks."
         "MP_TO_IBUG", "date": time.strftime("%Y-%m-%d %H:%M:%S %Z"),
         "seed_stream": list(cd.SEED_STREAM), "start_seed": list(START_SEED),
         "data_version": cd.DATA_VERSION,
         "clips": [{"name": s_.name, "index": s_.index, "frames": s_.n_frames, "yaw0": s_.yaw0,
                    "pitch0": s_.pitch0, "start": [list(x) for x in s_.start]} for s_ in specs],
-        "frames": n_ok, "mediapipe": mediapipe.__version__, "mode": "VIDEO",
+        "frames": n_frames, "mediapipe": mediapipe.__version__, "mode": "VIDEO",
         "k_nearest": args.k, "ridge": ridge, "kept_table": keep,
         "benchmark_indices_excluded": [s_.index for s_ in cd.CLIPS],
         "cross_validation": cv}
-    res = {"provenance": provenance,
-           "stills": validate_stills({"table": prior, "calibrated": weight_matrix(points)}),
-           "noise_gain": {"max": round(float(np.sqrt((weight_matrix(points) ** 2).sum(1)).max()),
-                                       3),
-                          "median": round(float(np.median(np.sqrt((weight_matrix(points) ** 2)
-                                                                  .sum(1)))), 3)}}
-    res["benchmark_clips"] = benchmark_bias(cache, {"table": prior,
-                                                    "calibrated": weight_matrix(points)})
+
+
+def print_checks(res: dict) -> None:
     print("held out, the benchmark's clips: MediaPipe's mapped points, NME % and clip-mean "
           "offset % (table -> calibrated)")
     for clip, row in res["benchmark_clips"]["table"].items():
@@ -478,13 +468,35 @@ def run(args, keep) -> int:
             for k in ("nme7", "nme51", "jaw")))
     print(f"noise gain sqrt(sum w^2): median {res['noise_gain']['median']}, "
           f"max {res['noise_gain']['max']} (table: 0.71-1)")
-    from facetransfer.io.atomic import write_text_atomic
 
+
+def run(args, keep) -> int:
+    from facetransfer.io.atomic import write_text_atomic
+    from facetransfer.track.calibration import candidate_sets
+    from facetransfer.track.dense import _canonical
+    from facetransfer.track.landmarks import MP_TO_IBUG, table_matrix
+
+    out = Path(args.out)
+    cache = out / "capture_cache"
+    specs = calibration_specs(args.clips, args.frames)
+    clips = load_frames(cache, specs)
+    prior = table_matrix(468)
+    points, ridge, cv = solve(args, clips, candidate_sets(_canonical(), MP_TO_IBUG, k=args.k),
+                              prior, keep)
+    n_ok = int(sum(np.isfinite(c["points"]).all(axis=(1, 2)).sum() for c in clips))
+    provenance = provenance_of(args, specs, n_ok, ridge, keep, cv)
+    W = weight_matrix(points)
+    gain = np.sqrt((W ** 2).sum(axis=1))
+    res = {"provenance": provenance,
+           "stills": validate_stills({"table": prior, "calibrated": W}),
+           "noise_gain": {"max": round(float(gain.max()), 3),
+                          "median": round(float(np.median(gain)), 3)},
+           "benchmark_clips": benchmark_bias(cache, {"table": prior, "calibrated": W})}
+    print_checks(res)
     out.mkdir(parents=True, exist_ok=True)
-    write_text_atomic(out / "calibrate_landmarks.json", json.dumps(res, indent=1))
     if args.dense:
         res["dense"] = run_dense(args, clips)
-        write_text_atomic(out / "calibrate_landmarks.json", json.dumps(res, indent=1))
+    write_text_atomic(out / "calibrate_landmarks.json", json.dumps(res, indent=1))
     if not args.dry_run:
         dest = Path(__file__).resolve().parents[1] / "src/facetransfer/data/mediapipe_ibug.json"
         write_data(dest, points, provenance)
