@@ -31,7 +31,9 @@ all frames; first fitted on 12 clips and checked on the other 4, then fitted on 
 written to ``src/facetransfer/data/mediapipe_facekit_dense.json``.
 
 ``--keep``: iBUG points that keep the table's weights. Prints the cross-validation table and
-writes ``OUT/calibrate_landmarks.json`` (the figures) besides the data file.
+writes ``OUT/calibrate_landmarks.json`` (the figures) and ``OUT/calibrate_landmarks.png`` (the
+clip-mean offsets of both mappings on the benchmark's clips, and the stills) besides the data
+file.
 """
 
 from __future__ import annotations
@@ -226,12 +228,10 @@ BIASED = {"inner lip 61/63/65/67": [61, 63, 65, 67], "outer lip 49/53/56/58": [4
           "mouth corners 48/54": [48, 54]}
 
 
-def benchmark_bias(cache: Path, matrices: dict) -> dict:
-    """On the benchmark's own 4 clips (held out): the length of the clip-mean offset of each
-    mapping's points from the truth, in the face's frame (x along the true eye axis), % of the
-    true eye-corner distance, averaged over the points of each :data:`BIASED` group and over
-    the clips; and the 7- / 51-point NME median of the mapped MediaPipe points."""
-    rows: dict = {k: {} for k in matrices}
+def face_frame_offsets(cache: Path, matrices: dict) -> dict:
+    """Per benchmark clip: the true points and each mapping's offsets from them in the face's
+    frame (x along the true eye axis, / the true eye-corner distance), (F, 68, 2) each."""
+    out = {}
     for spec in cd.CLIPS:
         clip = cd.load_clip(cache, spec)
         with filtered_stderr(not log.isEnabledFor(logging.DEBUG)):
@@ -241,16 +241,71 @@ def benchmark_bias(cache: Path, matrices: dict) -> dict:
         s = np.linalg.norm(ax, axis=1)
         c, sn = ax[:, 0] / s, ax[:, 1] / s
         R = np.stack([np.stack([c, sn], 1), np.stack([-sn, c], 1)], 1)       # (F, 2, 2)
+        ctr = T[:, 36:48].mean(axis=1, keepdims=True)
+        row = {"truth": np.einsum("fij,fpj->fpi", R, T - ctr) / s[:, None, None]}
         for name, W in matrices.items():
             Y = np.einsum("im,fmd->fid", W, pts[:, :W.shape[1]])
-            d = np.einsum("fij,fpj->fpi", R, Y - T) / s[:, None, None]      # (F, 68, 2)
+            row[name] = np.einsum("fij,fpj->fpi", R, Y - T) / s[:, None, None]
+        out[spec.name] = row
+    return out
+
+
+def benchmark_bias(offsets: dict) -> dict:
+    """On the benchmark's own 4 clips (held out): the length of the clip-mean offset of each
+    mapping's points from the truth (:func:`face_frame_offsets`), % of the true eye-corner
+    distance, averaged over the points of each :data:`BIASED` group; and the 7- / 51-point NME
+    median of the mapped MediaPipe points."""
+    rows: dict = {}
+    for clip, row in offsets.items():
+        for name, d in row.items():
+            if name == "truth":
+                continue
             off = np.linalg.norm(np.nanmean(d, axis=0), axis=1)             # (68,)
             e = np.linalg.norm(d, axis=2)
-            r = rows[name].setdefault(spec.name, {})
-            r["nme7"] = round(100 * float(np.nanmedian(e[:, KEY7].mean(1))), 3)
-            r["nme51"] = round(100 * float(np.nanmedian(e[:, INNER51].mean(1))), 3)
-            r["bias"] = {g: round(100 * float(off[idx].mean()), 2) for g, idx in BIASED.items()}
+            rows.setdefault(name, {})[clip] = {
+                "nme7": round(100 * float(np.nanmedian(e[:, KEY7].mean(1))), 3),
+                "nme51": round(100 * float(np.nanmedian(e[:, INNER51].mean(1))), 3),
+                "bias": {g: round(100 * float(off[idx].mean()), 2) for g, idx in BIASED.items()}}
     return rows
+
+
+def plot_offsets(offsets: dict, stills: dict, path: Path, *, gain: float = 3.0) -> None:
+    """The clip-mean offsets of each mapping on the benchmark's clips, drawn ``gain`` times
+    enlarged on the mean true face (one colour per clip), and the stills' NME."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from facetransfer.io.atomic import save_figure
+
+    names = [k for k in next(iter(offsets.values())) if k != "truth"]
+    fig, axes = plt.subplots(1, len(names) + 1, figsize=(5.5 * (len(names) + 1), 5.5))
+    for ax, name in zip(axes, names):
+        for (clip, row), col in zip(offsets.items(), plt.cm.tab10.colors):
+            P = np.nanmean(row["truth"], axis=0)
+            D = np.nanmean(row[name], axis=0)
+            ax.scatter(P[17:, 0], P[17:, 1], s=4, color="0.6")
+            ax.quiver(P[17:, 0], P[17:, 1], gain * D[17:, 0], gain * D[17:, 1], color=col,
+                      angles="xy", scale_units="xy", scale=1, width=0.004, label=clip)
+        ax.set_title(f"{name}: clip-mean offset from the truth (x{gain:g})")
+        ax.set_aspect("equal")
+        ax.invert_yaxis()
+        ax.legend(fontsize=7)
+    ax = axes[-1]
+    x = np.arange(len(stills))
+    for k, (name, off) in enumerate((("table", -0.2), ("calibrated", 0.2))):
+        for j, (m, hatch) in enumerate((("nme7", ""), ("nme51", "//"))):
+            ax.bar(x + off + (j - 0.5) * 0.2, [r[name][m] for r in stills.values()], 0.2,
+                   color=("tab:gray", "tab:blue")[k], hatch=hatch,
+                   label=f"{name} {m.replace('nme', '')}-pt")
+    ax.set_xticks(x, list(stills))
+    ax.set_ylabel("NME, % of the human eye-corner distance")
+    ax.set_title("stills with human iBUG-68 points")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    save_figure(fig, path, dpi=100)
+    plt.close(fig)
 
 
 def _pct(e) -> float | None:
@@ -491,9 +546,12 @@ def run(args, keep) -> int:
            "stills": validate_stills({"table": prior, "calibrated": W}),
            "noise_gain": {"max": round(float(gain.max()), 3),
                           "median": round(float(np.median(gain)), 3)},
-           "benchmark_clips": benchmark_bias(cache, {"table": prior, "calibrated": W})}
+           }
+    offsets = face_frame_offsets(cache, {"table": prior, "calibrated": W})
+    res["benchmark_clips"] = benchmark_bias(offsets)
     print_checks(res)
     out.mkdir(parents=True, exist_ok=True)
+    plot_offsets(offsets, res["stills"], out / "calibrate_landmarks.png")
     if args.dense:
         res["dense"] = run_dense(args, clips)
     write_text_atomic(out / "calibrate_landmarks.json", json.dumps(res, indent=1))
