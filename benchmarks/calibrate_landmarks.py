@@ -389,7 +389,8 @@ def dense_error(clips, triangles, bary, mp_index) -> np.ndarray:
 
 def run_dense(args, clips) -> dict:
     """Calibrate the dense correspondence of the default model (held-out check on the last 4
-    clips first) and write ``mediapipe_facekit_dense.json``."""
+    clips first) and write ``mediapipe_facekit_dense.json``. The geometric correspondence it
+    starts from (the search centres) uses the iBUG mapping installed when the run starts."""
     from facetransfer.default_model import load_default_model
     from facetransfer.track.dense import faces_hash, mediapipe_correspondence
 
