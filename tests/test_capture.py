@@ -183,14 +183,16 @@ def test_dense_correspondence_puts_mediapipe_points_on_the_face(arkit_model):
     from facetransfer.track.dense import mediapipe_correspondence
 
     m = arkit_model
-    dc = mediapipe_correspondence(m, use_cache=False)
-    assert len(dc.mp_index) > 400
     V = m.synthesize(m.default_weights())
-    pts = dc.sample(V)
-    where = {int(k): j for j, k in enumerate(dc.mp_index)}
-    for mp_i, ibug in ((33, 36), (133, 39), (362, 42), (263, 45), (4, 30), (61, 48), (291, 54)):
-        d = np.linalg.norm(pts[where[mp_i]] - V[m.landmarks[ibug]])
-        assert d < 0.5, (mp_i, ibug, d)  # cm
+    for calibrated in (False, True):       # the geometric one and the packaged FaceKit one
+        dc = mediapipe_correspondence(m, use_cache=False, calibrated=calibrated)
+        assert len(dc.mp_index) > 400
+        pts = dc.sample(V)
+        where = {int(k): j for j, k in enumerate(dc.mp_index)}
+        for mp_i, ibug in ((33, 36), (133, 39), (362, 42), (263, 45), (4, 30), (61, 48),
+                           (291, 54)):
+            d = np.linalg.norm(pts[where[mp_i]] - V[m.landmarks[ibug]])
+            assert d < 0.5, (calibrated, mp_i, ibug, d)  # cm
 
 
 def test_cli_capture_removes_a_damaged_progress_file(data_dir, quick_model_path, tmp_path):

@@ -15,7 +15,7 @@ from facetransfer.track.init import check_init_points, fit_landmarks, load_init_
 from facetransfer.track.klt import (build_pyramid, klt_terms, klt_terms_at, sample_windows,
                                     solve_flow, window_offsets)
 from facetransfer.track.landmarks import (IBUG_WEIGHTS, MP_TO_IBUG, REQUIRED_IBUG,
-                                          mediapipe_to_ibug)
+                                          mediapipe_to_ibug, table_matrix)
 from facetransfer.track.solver import (FrameState, Prior, fit_points, full_jacobian,
                                        normal_equations, project_to_gauge, schur_reduce)
 
@@ -233,8 +233,8 @@ def test_mediapipe_to_ibug_table():
     for mp, ib in documented.items():
         assert MP_TO_IBUG[ib] == (mp,)
     P = np.arange(478 * 2, dtype=float).reshape(478, 2)
-    out = mediapipe_to_ibug(P)
-    assert out.shape == (68, 2)
+    assert mediapipe_to_ibug(P).shape == (68, 2)
+    out = table_matrix(478) @ P                  # the table (the calibration's origin)
     assert np.array_equal(out[36], P[33]) and np.allclose(out[17], (P[70] + P[46]) / 2)
     assert mediapipe_to_ibug(np.full((3, 478, 3), np.nan)).shape == (3, 68, 3)
     with pytest.raises(ValueError, match="478"):

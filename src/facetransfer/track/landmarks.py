@@ -8,17 +8,34 @@ brows, eyes and lips) and checked on two stills with human iBUG-68 annotation
 (``stills/breakingbad``, ``stills/takeo``): eyes, nose and lips agree to ~0.02-0.07 of the outer
 eye-corner distance; brows are the mean of MediaPipe's upper and lower brow contours (~0.08); the
 jaw line is intrinsically ambiguous (a contour, not a point) and gets a low :data:`IBUG_WEIGHTS`.
+
+That table (:data:`MP_TO_IBUG`) is the origin and the fallback. :func:`mediapipe_to_ibug` uses
+the *calibrated* correspondence of ``facetransfer/data/mediapipe_ibug.json``: each iBUG point is
+an affine combination (weights summing to 1) of its table points and up to 8 nearby MediaPipe
+points, solved by ``benchmarks/calibrate_landmarks.py`` (:mod:`facetransfer.track.calibration`)
+against the true iBUG vertices of ICT-FaceKit faces painted by the capture benchmark's generator
+on a seed stream disjoint from the benchmark's clips; the file records its provenance.
 """
 
 from __future__ import annotations
 
+import json
+import logging
 from functools import lru_cache
+from importlib import resources
 
 import numpy as np
 
-from ..errors import ShapeError
+from ..errors import FaceTransferError, ShapeError
 
-__all__ = ["MP_TO_IBUG", "IBUG_WEIGHTS", "REQUIRED_IBUG", "mediapipe_to_ibug", "ibug_names"]
+log = logging.getLogger(__name__)
+
+__all__ = ["MP_TO_IBUG", "IBUG_WEIGHTS", "REQUIRED_IBUG", "mediapipe_to_ibug", "ibug_names",
+           "table_matrix", "calibrated_matrix", "mapping_matrix", "read_correspondence",
+           "CALIBRATION_FILE"]
+
+#: The calibrated correspondence, in the package's data folder.
+CALIBRATION_FILE = "mediapipe_ibug.json"
 
 #: MediaPipe indices averaged for each iBUG-68 point (index = iBUG number, 0-based).
 MP_TO_IBUG: tuple[tuple[int, ...], ...] = (
@@ -54,6 +71,10 @@ REQUIRED_IBUG = (36, 39, 42, 45, 30, 48, 54)
 def mediapipe_to_ibug(points: np.ndarray) -> np.ndarray:
     """iBUG-68 points from MediaPipe's 478 (or 468) face landmarks.
 
+    Each iBUG point is a fixed affine combination of MediaPipe points (:func:`mapping_matrix`:
+    the calibrated correspondence, weights summing to 1), so the mapping commutes with any
+    affine map of the image.
+
     Parameters
     ----------
     points : (..., 478, d) or (..., 468, d) float
@@ -67,19 +88,80 @@ def mediapipe_to_ibug(points: np.ndarray) -> np.ndarray:
     P = np.asarray(points, dtype=np.float64)
     if P.ndim < 2 or P.shape[-2] < 468:
         raise ShapeError(f"MediaPipe landmarks must be (..., 478, d), got {P.shape}")
-    A = _averaging(P.shape[-2])                                            # (68, n)
+    A = mapping_matrix(P.shape[-2])                                        # (68, n)
     out = np.einsum("im,...md->...id", A, np.nan_to_num(P))
-    unknown = np.einsum("im,...m->...i", A > 0, np.isnan(P).any(axis=-1)) > 0
+    unknown = np.einsum("im,...m->...i", A != 0, np.isnan(P).any(axis=-1)) > 0
     out[unknown] = np.nan  # an iBUG point is unknown when any of its MediaPipe points is
     return out
 
 
+def mapping_matrix(n: int) -> np.ndarray:
+    """(68, n) weights of :func:`mediapipe_to_ibug`: the calibrated ones
+    (:func:`calibrated_matrix`), or the table's (:func:`table_matrix`) when the data file cannot
+    be read."""
+    try:
+        return calibrated_matrix(n)
+    except (OSError, FaceTransferError) as exc:
+        _warn_fallback(str(exc))
+        return table_matrix(n)
+
+
+@lru_cache(maxsize=1)
+def _warn_fallback(reason: str) -> None:
+    log.warning("using the uncalibrated MediaPipe-to-iBUG table: %s", reason)
+
+
 @lru_cache(maxsize=2)
-def _averaging(n: int) -> np.ndarray:
-    """(68, n) matrix averaging the MediaPipe points of each iBUG point."""
+def table_matrix(n: int) -> np.ndarray:
+    """(68, n) matrix averaging the MediaPipe points of each iBUG point (:data:`MP_TO_IBUG`)."""
     A = np.zeros((68, n))
     for i, idx in enumerate(MP_TO_IBUG):
         A[i, list(idx)] = 1.0 / len(idx)
+    A.setflags(write=False)
+    return A
+
+
+@lru_cache(maxsize=2)
+def calibrated_matrix(n: int) -> np.ndarray:
+    """(68, n) calibrated weights from the package's ``mediapipe_ibug.json`` (module notes);
+    see :func:`read_correspondence`."""
+    return read_correspondence(resources.files("facetransfer") / "data" / CALIBRATION_FILE, n)
+
+
+def read_correspondence(path, n: int) -> np.ndarray:
+    """(68, n) weight matrix of a correspondence file (``{"points": [{"ibug": i, "mediapipe":
+    [j, ...], "weights": [w, ...]}, ...]}``, written by ``benchmarks/calibrate_landmarks.py``).
+
+    Raises
+    ------
+    OSError
+        When the file cannot be read.
+    FaceTransferError
+        When it is malformed: not 68 distinct rows, an index outside ``0..n-1`` or a row not
+        summing to 1.
+    """
+    try:
+        rows = json.loads(path.read_text())["points"]
+    except (ValueError, KeyError, TypeError) as exc:
+        raise FaceTransferError(f"{path} is not a correspondence file ({exc})") from None
+    if not isinstance(rows, list) or len(rows) != 68:
+        raise FaceTransferError(f"{path} must list 68 iBUG points")
+    A = np.zeros((68, n))
+    seen = set()
+    for row in rows:
+        try:
+            i, idx = int(row["ibug"]), np.asarray(row["mediapipe"], np.int64)
+            w = np.asarray(row["weights"], np.float64)
+        except (KeyError, TypeError, ValueError) as exc:
+            raise FaceTransferError(f"{path}: bad row {row!r} ({exc})") from None
+        if not (0 <= i < 68 and i not in seen and idx.ndim == 1 and idx.shape == w.shape
+                and idx.size and idx.min() >= 0 and idx.max() < n
+                and np.isfinite(w).all() and abs(w.sum() - 1.0) < 1e-6):
+            raise FaceTransferError(f"{path}: iBUG point {i} must appear once, with weights "
+                                    f"summing to 1 over MediaPipe indices 0..{n - 1}")
+        seen.add(i)
+        A[i, idx] = w
+    A.setflags(write=False)
     return A
 
 
