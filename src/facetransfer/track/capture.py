@@ -115,6 +115,10 @@ class CaptureOptions:
     dense : float
         Weight of MediaPipe's other mesh points (:mod:`facetransfer.track.dense`) relative to an
         iBUG point of weight 1 (0 = the 68 iBUG points only).
+    gaze : bool
+        For an ARKit model with MediaPipe's iris points: the eyeLook* activations from the
+        iris centres and the head pose (:mod:`facetransfer.track.gaze`) instead of the lids
+        alone; frames without iris points keep the fitted values.
     """
 
     identity_frames: int = 24
@@ -131,6 +135,7 @@ class CaptureOptions:
     offset_prior: float = 1e-4
     identity_expression_prior: float = 3e-2
     dense: float = 0.3
+    gaze: bool = True
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
@@ -519,7 +524,7 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
     done = _track_run(shape, det, list(range(start, F)), seed, weights, opt, states, prog, 0)
     _track_run(shape, det, list(range(start - 1, -1, -1)), states[start], weights, opt, states,
                prog, done)
-    track = _assemble(model, shape, states, fps, frame_size, source, opt)
+    track = _assemble(model, shape, states, fps, frame_size, source, opt, det.points478)
     info = {"start_frame": start, "identity_frames": [int(i) for i in frames],
             "seconds_identity": t_id, "seconds_total": time.perf_counter() - t0,
             "tracker": "capture"}
@@ -537,7 +542,29 @@ def _fill_lost(states: list) -> tuple[list, np.ndarray]:
     return out, ~ok
 
 
-def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
+def _gaze_columns(shape: _Shape, X: np.ndarray, R, s, t, points478, lost) -> np.ndarray:
+    """``X`` (F, K) with the eyeLook* activations from the iris (:mod:`.gaze`) where the
+    frame is tracked and both iris centres are known."""
+    from .gaze import IRIS_INDEX, eye_model, gaze_activations, gaze_angles
+
+    P = np.asarray(points478)
+    if P.ndim != 3 or P.shape[1] <= max(IRIS_INDEX) or len(P) != len(X):
+        return X
+    iris = np.asarray(P[:, list(IRIS_INDEX)], np.float64)                  # (F, 2, 2)
+    ok = ~np.asarray(lost) & np.isfinite(iris).all(axis=(1, 2))
+    if not ok.any():
+        return X
+    act = gaze_activations(gaze_angles(eye_model(shape.N[:68]), iris[ok], R[ok], s[ok], t[ok]))
+    X = X.copy()
+    for name, a in act.items():
+        k = np.flatnonzero(shape.used == ARKIT_NAMES.index(name))
+        if len(k):
+            X[ok, k[0]] = a
+    return X
+
+
+def _assemble(model, shape: _Shape, states: list, fps, size, src, opt,
+              points478: np.ndarray | None = None) -> Track:
     full, lost = _fill_lost(states)
     F = len(full)
     R = np.stack([s.pose.rotation for s in full])
@@ -549,6 +576,8 @@ def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
         X = wx["x"]
         if shape.arkit:
             X = np.clip(X, 0.0, 1.0)
+    if shape.arkit and opt.gaze and points478 is not None:
+        X = _gaze_columns(shape, X, R, s, t, points478, lost)
     w = shape.weights(X)                                                  # (F, r) per mode
     if shape.id_name:
         w[shape.id_name] = np.tile(shape.identity, (F, 1))
