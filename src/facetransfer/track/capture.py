@@ -40,6 +40,7 @@ from ..errors import TrackError, VideoError
 from .camera import Pose, fit_affine_pose
 from .detect import ClipDetections, VideoLandmarker, detect_clip
 from .fit2d import box_qp, pose_gauss_newton, project_basis, targets_normal
+from .gaze import GAZE_NAMES, IRIS_INDEX, eye_model, gaze_activations, gaze_angles
 from .init import require_landmarks
 from .landmarks import IBUG_WEIGHTS
 from .options import Progress
@@ -116,9 +117,10 @@ class CaptureOptions:
         Weight of MediaPipe's other mesh points (:mod:`facetransfer.track.dense`) relative to an
         iBUG point of weight 1 (0 = the 68 iBUG points only).
     gaze : bool
-        For an ARKit model with MediaPipe's iris points: the eyeLook* activations from the
-        iris centres and the head pose (:mod:`facetransfer.track.gaze`) instead of the lids
-        alone; frames without iris points keep the fitted values.
+        For an ARKit model with MediaPipe's iris points: the eyeLook* activations follow the
+        iris centres at each pose step of the fit (:mod:`facetransfer.track.gaze`), and the
+        other shapes explain the lids given that gaze; frames without iris points fit them
+        from the lids as before.
     """
 
     identity_frames: int = 24
@@ -218,6 +220,9 @@ class _Shape:
             self.fast = np.array([n.startswith(_EYELID) for n in ARKIT_NAMES])[self.used]
             self.u0, D = activation_basis(self.model)
             self.Du = D[self.used]                                             # (K, r)
+            self.gaze_k = np.array([int(np.flatnonzero(self.used == ARKIT_NAMES.index(n))[0])
+                                    if ARKIT_NAMES.index(n) in self.used else -1
+                                    for n in GAZE_NAMES])                      # (8,) or -1
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
             self.precision = {m: p.Q @ p.inv_cov @ p.Q.T for m, p in self.priors.items()}
@@ -255,8 +260,9 @@ class _Shape:
         return self.cache.shape(self.weights(x)) + self.offset
 
     def solve(self, pose: Pose, targets: list, iod: float, x: np.ndarray,
-              prev: np.ndarray | None) -> np.ndarray:
-        """The per-frame parameters best explaining ``targets`` at ``pose``."""
+              prev: np.ndarray | None, fixed: np.ndarray | None = None) -> np.ndarray:
+        """The per-frame parameters best explaining ``targets`` at ``pose`` (ARKit: the
+        activations where ``fixed`` (K,) is finite held at its values)."""
         lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
         if self.arkit:
             Y = project_basis(self.D, pose)
@@ -267,7 +273,11 @@ class _Shape:
             G = G + np.diag(lam_p * self.ridge + lam_t + 1e-9)
             if prev is not None:
                 h = h + lam_t * prev
-            return box_qp(G, h - self.opt.sparsity, x, tol=1e-5)
+            lo, hi = 0.0, 1.0
+            if fixed is not None:
+                lo, hi = np.where(np.isfinite(fixed), fixed, 0.0), np.where(np.isfinite(fixed),
+                                                                            fixed, 1.0)
+            return box_qp(G, h - self.opt.sparsity, x, lo=lo, hi=hi, tol=1e-5)
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
 
     def _solve_modes(self, pose, targets, iod, x, prev, lam_p, lam_t):
@@ -300,16 +310,32 @@ def _residual(shape: _Shape, st_pose: Pose, x: np.ndarray, p: np.ndarray, w: np.
     return float(np.sqrt(np.sum(w * r2) / max(np.sum(w), 1e-12)) / iod)
 
 
+def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, iris: np.ndarray) -> np.ndarray:
+    """(K,) the eyeLook* activations from the iris centres ``iris`` (2, 2) at ``pose`` and the
+    frame's eye corners (:mod:`.gaze`), NaN for every other shape."""
+    ang = gaze_angles(eye_model(shape.points(x)[:68]), iris[None], pose.rotation[None],
+                      np.array([pose.scale]), pose.translation[None])
+    act = gaze_activations(ang)
+    out = np.full(shape.size, np.nan)
+    for n, k in zip(GAZE_NAMES, shape.gaze_k):
+        if k >= 0:
+            out[k] = act[n][0]
+    return out
+
+
 def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: np.ndarray,
-               prev: np.ndarray | None, iterations: int) -> _State:
-    """Alternate pose (Gauss-Newton) and expression (bounded or prior-weighted LS) for one frame."""
+               prev: np.ndarray | None, iterations: int, iris: np.ndarray | None = None
+               ) -> _State:
+    """Alternate pose (Gauss-Newton) and expression (bounded or prior-weighted LS) for one frame;
+    with ``iris`` (2, 2) (ARKit models) the eyeLook* activations follow the iris at each pose."""
     p, w = targets[0]
     if pose is None:
         ok = w > 0
         pose = fit_affine_pose(shape.points(x)[ok], p[ok])
     for _ in range(iterations):
         pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
-        x = shape.solve(pose, targets, iod, x, prev)
+        fixed = None if iris is None else _gaze_fixed(shape, pose, x, iris)
+        x = shape.solve(pose, targets, iod, x, prev, fixed)
     pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
     return _State(pose, x, _residual(shape, pose, x, p, w, iod))
 
@@ -371,6 +397,15 @@ def _solve_offset(shape: "_Shape", frames, states: list, det: ClipDetections, we
     return np.linalg.solve(A + lam * np.eye(3)[None], b[..., None])[..., 0]
 
 
+def _iris(det: ClipDetections, i: int, shape: _Shape, opt: CaptureOptions) -> np.ndarray | None:
+    """Frame ``i``'s two iris centres (2, 2) when the gaze comes from them, else None."""
+    P = det.points478
+    if not (opt.gaze and shape.arkit) or P is None or P.shape[1] <= max(IRIS_INDEX):
+        return None
+    q = np.asarray(P[i, list(IRIS_INDEX)], np.float64)
+    return q if np.isfinite(q).all() else None
+
+
 def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
     idx = np.flatnonzero(found)
     if len(idx) <= n:
@@ -415,7 +450,8 @@ def _fit_sample(shape: _Shape, det: ClipDetections, frames, weights, opt, states
         p, w = _detection(det, i, weights)
         st = None if states is None else states[j]
         out.append(_fit_frame(shape, [(p, w)], _iod(p), None if st is None else st.pose,
-                              shape.x0 if st is None else st.x, None, int(opt.iterations) + 1))
+                              shape.x0 if st is None else st.x, None, int(opt.iterations) + 1,
+                              _iris(det, i, shape, opt)))
     return out
 
 
@@ -452,7 +488,8 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State, we
         tg = _targets(det, i, prev_i if prev_i is not None else i, q, weights, opt, forward)
         st = _fit_frame(shape, tg, _iod(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
-                        None if prev is None or prev_i is None else prev.x, int(opt.iterations))
+                        None if prev is None or prev_i is None else prev.x, int(opt.iterations),
+                        _iris(det, i, shape, opt))
         states[i] = st
         prev, prev_i = st, i
         done += 1
@@ -524,7 +561,7 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
     done = _track_run(shape, det, list(range(start, F)), seed, weights, opt, states, prog, 0)
     _track_run(shape, det, list(range(start - 1, -1, -1)), states[start], weights, opt, states,
                prog, done)
-    track = _assemble(model, shape, states, fps, frame_size, source, opt, det.points478)
+    track = _assemble(model, shape, states, fps, frame_size, source, opt)
     info = {"start_frame": start, "identity_frames": [int(i) for i in frames],
             "seconds_identity": t_id, "seconds_total": time.perf_counter() - t0,
             "tracker": "capture"}
@@ -542,29 +579,7 @@ def _fill_lost(states: list) -> tuple[list, np.ndarray]:
     return out, ~ok
 
 
-def _gaze_columns(shape: _Shape, X: np.ndarray, R, s, t, points478, lost) -> np.ndarray:
-    """``X`` (F, K) with the eyeLook* activations from the iris (:mod:`.gaze`) where the
-    frame is tracked and both iris centres are known."""
-    from .gaze import IRIS_INDEX, eye_model, gaze_activations, gaze_angles
-
-    P = np.asarray(points478)
-    if P.ndim != 3 or P.shape[1] <= max(IRIS_INDEX) or len(P) != len(X):
-        return X
-    iris = np.asarray(P[:, list(IRIS_INDEX)], np.float64)                  # (F, 2, 2)
-    ok = ~np.asarray(lost) & np.isfinite(iris).all(axis=(1, 2))
-    if not ok.any():
-        return X
-    act = gaze_activations(gaze_angles(eye_model(shape.N[:68]), iris[ok], R[ok], s[ok], t[ok]))
-    X = X.copy()
-    for name, a in act.items():
-        k = np.flatnonzero(shape.used == ARKIT_NAMES.index(name))
-        if len(k):
-            X[ok, k[0]] = a
-    return X
-
-
-def _assemble(model, shape: _Shape, states: list, fps, size, src, opt,
-              points478: np.ndarray | None = None) -> Track:
+def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
     full, lost = _fill_lost(states)
     F = len(full)
     R = np.stack([s.pose.rotation for s in full])
@@ -576,8 +591,6 @@ def _assemble(model, shape: _Shape, states: list, fps, size, src, opt,
         X = wx["x"]
         if shape.arkit:
             X = np.clip(X, 0.0, 1.0)
-    if shape.arkit and opt.gaze and points478 is not None:
-        X = _gaze_columns(shape, X, R, s, t, points478, lost)
     w = shape.weights(X)                                                  # (F, r) per mode
     if shape.id_name:
         w[shape.id_name] = np.tile(shape.identity, (F, 1))
