@@ -12,7 +12,8 @@ from facetransfer.errors import ShapeError
 from facetransfer.render import rotation_from_euler
 from facetransfer.track.capture import CaptureOptions, capture_detections
 from facetransfer.track.detect import ClipDetections
-from facetransfer.track.gaze import (EYE_RADIUS, GAZE_NAMES, IRIS_INDEX, IRIS_REST, GazeOptions,
+from facetransfer.track.gaze import (EYE_RADIUS, GAZE_NAMES, IRIS_INDEX, IRIS_REST, MP_CORNER_INDEX,
+                                     MP_LID_INDEX, GazeOptions, usable_iris,
                                      eye_model, gaze_activations, gaze_angles, project_iris)
 
 
@@ -163,3 +164,27 @@ def test_capture_leaves_models_without_arkit_names_alone(quick_model):
     for m in a.weights:
         np.testing.assert_array_equal(a.weights[m], b.weights[m])
     np.testing.assert_array_equal(a.landmarks2d, b.landmarks2d)
+
+
+def test_usable_iris_bridges_closed_eyes():
+    F = 40
+    P = np.zeros((F, 478, 2))
+    for (o, i), (u, lo), c in zip(MP_CORNER_INDEX, MP_LID_INDEX, IRIS_INDEX):
+        P[:, o], P[:, i] = [0.0, 0.0], [30.0, 0.0]        # eye width 30 px
+        P[:, u], P[:, lo] = [15.0, -5.0], [15.0, 5.0]     # lid gap 10 px
+        P[:, c] = [15.0, 1.0]
+    P[4, 468] = [17.0, 1.0]                               # the right eye turns a little...
+    P[3, 159], P[3, 145] = [15.0, -1.0], [15.0, 1.0]      # ...after a blink in frame 3
+    P[3, 468] = [15.0, 4.0]                               # where its iris slid down
+    P[10:22, 386], P[10:22, 374] = [15.0, -1.0], [15.0, 1.0]   # the left eye shut 12 frames
+    P[6] = np.nan                                         # no face in frame 6
+    iris = usable_iris(P, max_gap=3)
+    np.testing.assert_allclose(iris[3, 0], [16.0, 1.0])   # offset interpolated from 2 and 4
+    np.testing.assert_allclose(iris[3, 1], [15.0, 1.0])
+    assert np.isnan(iris[6]).all()
+    np.testing.assert_allclose(iris[[10, 12, 19, 21], 1], [[15.0, 1.0]] * 4)
+    assert np.isnan(iris[13:19, 1]).all()                  # too far from an open frame
+    keep = np.setdiff1d(np.arange(F), [3, 6])
+    np.testing.assert_array_equal(iris[keep, 0], P[keep, 468])
+    with pytest.raises(ShapeError, match="478"):
+        usable_iris(P[:, :468])

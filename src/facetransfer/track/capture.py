@@ -40,7 +40,7 @@ from ..errors import TrackError, VideoError
 from .camera import Pose, fit_affine_pose
 from .detect import ClipDetections, VideoLandmarker, detect_clip
 from .fit2d import box_qp, pose_gauss_newton, project_basis, targets_normal
-from .gaze import GAZE_NAMES, IRIS_INDEX, eye_model, gaze_activations, gaze_angles
+from .gaze import GAZE_NAMES, IRIS_INDEX, eye_model, gaze_activations, gaze_angles, usable_iris
 from .init import require_landmarks
 from .landmarks import IBUG_WEIGHTS
 from .options import Progress
@@ -366,6 +366,7 @@ class _PointWeights:
 
     w: np.ndarray
     mp_index: np.ndarray | None = None
+    iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
 
 
 def _detection(det: ClipDetections, i: int, pw: _PointWeights) -> tuple[np.ndarray, np.ndarray]:
@@ -397,13 +398,12 @@ def _solve_offset(shape: "_Shape", frames, states: list, det: ClipDetections, we
     return np.linalg.solve(A + lam * np.eye(3)[None], b[..., None])[..., 0]
 
 
-def _iris(det: ClipDetections, i: int, shape: _Shape, opt: CaptureOptions) -> np.ndarray | None:
-    """Frame ``i``'s two iris centres (2, 2) when the gaze comes from them, else None."""
-    P = det.points478
-    if not (opt.gaze and shape.arkit) or P is None or P.shape[1] <= max(IRIS_INDEX):
+def _iris(weights: _PointWeights, i: int) -> np.ndarray | None:
+    """Frame ``i``'s two iris centres (2, 2) the gaze follows (NaN rows: that eye's free),
+    or None."""
+    if weights.iris is None or not np.isfinite(weights.iris[i]).any():
         return None
-    q = np.asarray(P[i, list(IRIS_INDEX)], np.float64)
-    return q if np.isfinite(q).all() else None
+    return weights.iris[i]
 
 
 def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
@@ -451,7 +451,7 @@ def _fit_sample(shape: _Shape, det: ClipDetections, frames, weights, opt, states
         st = None if states is None else states[j]
         out.append(_fit_frame(shape, [(p, w)], _iod(p), None if st is None else st.pose,
                               shape.x0 if st is None else st.x, None, int(opt.iterations) + 1,
-                              _iris(det, i, shape, opt)))
+                              _iris(weights, i)))
     return out
 
 
@@ -489,7 +489,7 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State, we
         st = _fit_frame(shape, tg, _iod(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
                         None if prev is None or prev_i is None else prev.x, int(opt.iterations),
-                        _iris(det, i, shape, opt))
+                        _iris(weights, i))
         states[i] = st
         prev, prev_i = st, i
         done += 1
@@ -549,7 +549,11 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         dense = mediapipe_correspondence(model)
         weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
     sampler = _Sampler(model, dense)
-    weights = _PointWeights(weights, sampler.mp_index)
+    iris = None
+    if opt.gaze and is_arkit_model(model) and det.points478 is not None \
+            and det.points478.shape[1] > max(IRIS_INDEX):
+        iris = usable_iris(det.points478)
+    weights = _PointWeights(weights, sampler.mp_index, iris)
     t0 = time.perf_counter()
     shape, sample_states, frames = _clip_identity(model, det, sampler, weights, opt, fixed, prog)
     t_id = time.perf_counter() - t0

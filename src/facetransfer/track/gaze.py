@@ -38,7 +38,7 @@ import numpy as np
 
 from ..errors import ShapeError
 
-__all__ = ["EyeModel", "eye_model", "gaze_angles", "gaze_direction", "project_iris",
+__all__ = ["EyeModel", "eye_model", "gaze_angles", "gaze_direction", "project_iris", "usable_iris",
            "GazeOptions", "gaze_activations", "GAZE_NAMES", "IRIS_INDEX", "CORNER_INDEX"]
 
 #: Eyes in this module's order: the subject's right eye, then the left.
@@ -49,6 +49,8 @@ CORNER_INDEX = ((36, 39), (45, 42))
 IRIS_INDEX = (468, 473)
 #: MediaPipe's eye corners (outer, inner) matching :data:`CORNER_INDEX`.
 MP_CORNER_INDEX = ((33, 133), (263, 362))
+#: MediaPipe's mid upper and lower lid points of each eye (:data:`EYES` order).
+MP_LID_INDEX = ((159, 145), (386, 374))
 
 #: Corner distance (inner to outer, 3-D) of FaceKit's generic neutral eye, cm (landmarks 42, 45).
 FACEKIT_EYE_WIDTH = 2.687
@@ -187,6 +189,59 @@ def gaze_angles(eyes: EyeModel, iris: np.ndarray, R: np.ndarray, s: np.ndarray,
     e = np.concatenate([q, ez], -1)                                       # R d, camera frame
     d = np.einsum("fji,fej->fei", R, e)                                   # R^T e
     return _angles(d)
+
+
+def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.6,
+                max_gap: int = 0) -> np.ndarray:
+    """The iris centres of a clip, bridged over frames where the lids hide the iris.
+
+    While the lids close (a blink, a squint) the detector's iris centre slides with them, which
+    would read as a downward gaze. An eye whose lid gap (mid upper to mid lower lid, / corner
+    distance) is below ``open_fraction`` of its median over the clip is closed: there the iris
+    is unknown, or with ``max_gap`` > 0 its offset from the eye corners' midpoint is
+    interpolated linearly from the open frames around (at most ``max_gap`` frames away), so
+    the gaze holds through a blink. (On the real clips of ``bench_capture.py`` bridging raised
+    the vertical gaze correlation 0.84/0.80 -> 0.90/0.89 but shrank the blinks' amplitude,
+    std ratio 0.91/1.03 -> 0.55/0.65: off by default.)
+
+    Parameters
+    ----------
+    points478 : (F, 478, 2) float
+        Face Landmarker's points per frame, NaN where no face was found.
+    open_fraction : float
+        Fraction of the clip's median lid gap below which an eye counts as closed.
+    max_gap : int
+        Farthest open frame (frames) a closed one is bridged from (0: no bridging).
+
+    Returns
+    -------
+    (F, 2, 2) float64
+        ``[frame, eye (EYES order), (x, y)]``, NaN where unknown.
+    """
+    P = np.asarray(points478, np.float64)
+    if P.ndim != 3 or P.shape[1] <= max(IRIS_INDEX) or P.shape[2] != 2:
+        raise ShapeError(f"usable_iris needs (F, 478, 2) points, got {P.shape}")
+    iris = P[:, list(IRIS_INDEX)].copy()
+    f = np.arange(len(P))
+    for k, ((o, i), (u, lo)) in enumerate(zip(MP_CORNER_INDEX, MP_LID_INDEX)):
+        gap = np.linalg.norm(P[:, u] - P[:, lo], axis=1) / np.linalg.norm(P[:, o] - P[:, i], axis=1)
+        ok = np.isfinite(gap) & np.isfinite(iris[:, k]).all(1)
+        if not ok.any():
+            continue
+        is_open = ok & (gap >= open_fraction * np.median(gap[ok]))
+        mid = (P[:, o] + P[:, i]) / 2
+        d = iris[:, k] - mid
+        iris[~is_open, k] = np.nan
+        good = np.flatnonzero(is_open)
+        if not len(good):
+            continue
+        near = np.abs(good[np.clip(np.searchsorted(good, f), 0, len(good) - 1)] - f)
+        near = np.minimum(near, np.abs(good[np.clip(np.searchsorted(good, f) - 1, 0,
+                                                     len(good) - 1)] - f))
+        fill = ~is_open & np.isfinite(mid).all(1) & (near <= max_gap)
+        for c in range(2):
+            iris[fill, k, c] = mid[fill, c] + np.interp(f[fill], good, d[good, c])
+    return iris
 
 
 #: ARKit's eyeLook* names this module writes.
