@@ -93,7 +93,8 @@ def test_activation_signs_follow_arkit():
     ang[0, :, 0] = np.deg2rad(15)    # both eyes toward the subject's left
     ang[1, :, 1] = np.deg2rad(-50)    # both down, beyond the range
     ang[2] = np.nan
-    a = gaze_activations(ang, GazeOptions(horizontal=np.deg2rad(30), vertical=np.deg2rad(25)))
+    opt = GazeOptions(horizontal=np.deg2rad(30), vertical=np.deg2rad(25))
+    a = gaze_activations(ang, opt)
     assert set(a) == set(GAZE_NAMES) and set(GAZE_NAMES) <= set(ARKIT_NAMES)
     assert a["eyeLookOutLeft"][0] == pytest.approx(0.5) and a["eyeLookInRight"][0] == pytest.approx(0.5)
     assert a["eyeLookInLeft"][0] == 0 and a["eyeLookOutRight"][0] == 0
@@ -101,6 +102,10 @@ def test_activation_signs_follow_arkit():
     assert a["eyeLookDownLeft"][1] == 1.0 and a["eyeLookDownRight"][1] == 1.0   # clipped
     assert a["eyeLookUpLeft"][1] == 0 and a["eyeLookOutLeft"][1] == 0
     assert all(np.isnan(v[2]) for v in a.values())
+    # a closed eye keeps its horizontal gaze, its vertical one is left to the lids
+    c = gaze_activations(ang, opt, closed=np.array([[True, False]] * 3))
+    assert c["eyeLookInRight"][0] == a["eyeLookInRight"][0] and np.isnan(c["eyeLookDownRight"][1])
+    assert c["eyeLookDownLeft"][1] == 1.0
 
 
 def _iris_clip(model, gaze_of_frame, F=30):
@@ -178,7 +183,10 @@ def test_usable_iris_bridges_closed_eyes():
     P[3, 468] = [15.0, 4.0]                               # where its iris slid down
     P[10:22, 386], P[10:22, 374] = [15.0, -1.0], [15.0, 1.0]   # the left eye shut 12 frames
     P[6] = np.nan                                         # no face in frame 6
-    iris = usable_iris(P, max_gap=3)
+    iris, closed = usable_iris(P, max_gap=3)
+    assert closed[3].tolist() == [True, False] and closed[10:22, 1].all()
+    assert closed.sum() == 13
+    assert np.isnan(usable_iris(P, max_gap=0)[0][3, 0]).all()      # not bridged
     np.testing.assert_allclose(iris[3, 0], [16.0, 1.0])   # offset interpolated from 2 and 4
     np.testing.assert_allclose(iris[3, 1], [15.0, 1.0])
     assert np.isnan(iris[6]).all()

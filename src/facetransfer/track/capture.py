@@ -310,12 +310,13 @@ def _residual(shape: _Shape, st_pose: Pose, x: np.ndarray, p: np.ndarray, w: np.
     return float(np.sqrt(np.sum(w * r2) / max(np.sum(w), 1e-12)) / iod)
 
 
-def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, iris: np.ndarray) -> np.ndarray:
-    """(K,) the eyeLook* activations from the iris centres ``iris`` (2, 2) at ``pose`` and the
-    frame's eye corners (:mod:`.gaze`), NaN for every other shape."""
+def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple) -> np.ndarray:
+    """(K,) the eyeLook* activations from ``gaze`` = (iris centres (2, 2), closed (2,)) at
+    ``pose`` and the frame's eye corners (:mod:`.gaze`), NaN for every other shape."""
+    iris, closed = gaze
     ang = gaze_angles(eye_model(shape.points(x)[:68]), iris[None], pose.rotation[None],
                       np.array([pose.scale]), pose.translation[None])
-    act = gaze_activations(ang)
+    act = gaze_activations(ang, closed=closed[None])
     out = np.full(shape.size, np.nan)
     for n, k in zip(GAZE_NAMES, shape.gaze_k):
         if k >= 0:
@@ -324,17 +325,18 @@ def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, iris: np.ndarray) -> n
 
 
 def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: np.ndarray,
-               prev: np.ndarray | None, iterations: int, iris: np.ndarray | None = None
+               prev: np.ndarray | None, iterations: int, gaze: tuple | None = None
                ) -> _State:
     """Alternate pose (Gauss-Newton) and expression (bounded or prior-weighted LS) for one frame;
-    with ``iris`` (2, 2) (ARKit models) the eyeLook* activations follow the iris at each pose."""
+    with ``gaze`` (:func:`_iris`; ARKit models) the eyeLook* activations follow the iris at
+    each pose."""
     p, w = targets[0]
     if pose is None:
         ok = w > 0
         pose = fit_affine_pose(shape.points(x)[ok], p[ok])
     for _ in range(iterations):
         pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
-        fixed = None if iris is None else _gaze_fixed(shape, pose, x, iris)
+        fixed = None if gaze is None else _gaze_fixed(shape, pose, x, gaze)
         x = shape.solve(pose, targets, iod, x, prev, fixed)
     pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
     return _State(pose, x, _residual(shape, pose, x, p, w, iod))
@@ -367,6 +369,7 @@ class _PointWeights:
     w: np.ndarray
     mp_index: np.ndarray | None = None
     iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
+    closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
 
 
 def _detection(det: ClipDetections, i: int, pw: _PointWeights) -> tuple[np.ndarray, np.ndarray]:
@@ -398,12 +401,12 @@ def _solve_offset(shape: "_Shape", frames, states: list, det: ClipDetections, we
     return np.linalg.solve(A + lam * np.eye(3)[None], b[..., None])[..., 0]
 
 
-def _iris(weights: _PointWeights, i: int) -> np.ndarray | None:
-    """Frame ``i``'s two iris centres (2, 2) the gaze follows (NaN rows: that eye's free),
-    or None."""
+def _iris(weights: _PointWeights, i: int) -> tuple | None:
+    """Frame ``i``'s two iris centres (2, 2) the gaze follows (NaN rows: that eye's free) and
+    which eyes are closed (2,), or None."""
     if weights.iris is None or not np.isfinite(weights.iris[i]).any():
         return None
-    return weights.iris[i]
+    return weights.iris[i], weights.closed[i]
 
 
 def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
@@ -549,11 +552,11 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         dense = mediapipe_correspondence(model)
         weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
     sampler = _Sampler(model, dense)
-    iris = None
+    iris = closed = None
     if opt.gaze and is_arkit_model(model) and det.points478 is not None \
             and det.points478.shape[1] > max(IRIS_INDEX):
-        iris = usable_iris(det.points478)
-    weights = _PointWeights(weights, sampler.mp_index, iris)
+        iris, closed = usable_iris(det.points478)
+    weights = _PointWeights(weights, sampler.mp_index, iris, closed)
     t0 = time.perf_counter()
     shape, sample_states, frames = _clip_identity(model, det, sampler, weights, opt, fixed, prog)
     t_id = time.perf_counter() - t0

@@ -192,17 +192,14 @@ def gaze_angles(eyes: EyeModel, iris: np.ndarray, R: np.ndarray, s: np.ndarray,
 
 
 def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.6,
-                max_gap: int = 0) -> np.ndarray:
+                max_gap: int = 15) -> tuple[np.ndarray, np.ndarray]:
     """The iris centres of a clip, bridged over frames where the lids hide the iris.
 
     While the lids close (a blink, a squint) the detector's iris centre slides with them, which
     would read as a downward gaze. An eye whose lid gap (mid upper to mid lower lid, / corner
-    distance) is below ``open_fraction`` of its median over the clip is closed: there the iris
-    is unknown, or with ``max_gap`` > 0 its offset from the eye corners' midpoint is
-    interpolated linearly from the open frames around (at most ``max_gap`` frames away), so
-    the gaze holds through a blink. (On the real clips of ``bench_capture.py`` bridging raised
-    the vertical gaze correlation 0.84/0.80 -> 0.90/0.89 but shrank the blinks' amplitude,
-    std ratio 0.91/1.03 -> 0.55/0.65: off by default.)
+    distance) is below ``open_fraction`` of its median over the clip is closed: there the
+    iris's offset from the eye corners' midpoint is interpolated linearly from the open frames
+    around (at most ``max_gap`` frames away), so the gaze holds through a blink.
 
     Parameters
     ----------
@@ -211,17 +208,20 @@ def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.6,
     open_fraction : float
         Fraction of the clip's median lid gap below which an eye counts as closed.
     max_gap : int
-        Farthest open frame (frames) a closed one is bridged from (0: no bridging).
+        Farthest open frame (frames) a closed one is bridged from (0: none).
 
     Returns
     -------
-    (F, 2, 2) float64
+    iris : (F, 2, 2) float64
         ``[frame, eye (EYES order), (x, y)]``, NaN where unknown.
+    closed : (F, 2) bool
+        Where the eye is closed (``iris`` bridged there, or NaN).
     """
     P = np.asarray(points478, np.float64)
     if P.ndim != 3 or P.shape[1] <= max(IRIS_INDEX) or P.shape[2] != 2:
         raise ShapeError(f"usable_iris needs (F, 478, 2) points, got {P.shape}")
     iris = P[:, list(IRIS_INDEX)].copy()
+    closed = np.zeros((len(P), 2), bool)
     f = np.arange(len(P))
     for k, ((o, i), (u, lo)) in enumerate(zip(MP_CORNER_INDEX, MP_LID_INDEX)):
         gap = np.linalg.norm(P[:, u] - P[:, lo], axis=1) / np.linalg.norm(P[:, o] - P[:, i], axis=1)
@@ -229,19 +229,20 @@ def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.6,
         if not ok.any():
             continue
         is_open = ok & (gap >= open_fraction * np.median(gap[ok]))
+        closed[:, k] = ok & ~is_open
         mid = (P[:, o] + P[:, i]) / 2
         d = iris[:, k] - mid
         iris[~is_open, k] = np.nan
         good = np.flatnonzero(is_open)
-        if not len(good):
+        if not len(good) or max_gap <= 0:
             continue
-        near = np.abs(good[np.clip(np.searchsorted(good, f), 0, len(good) - 1)] - f)
-        near = np.minimum(near, np.abs(good[np.clip(np.searchsorted(good, f) - 1, 0,
-                                                     len(good) - 1)] - f))
-        fill = ~is_open & np.isfinite(mid).all(1) & (near <= max_gap)
+        j = np.searchsorted(good, f)
+        near = np.minimum(np.abs(good[np.clip(j, 0, len(good) - 1)] - f),
+                          np.abs(good[np.clip(j - 1, 0, len(good) - 1)] - f))
+        fill = closed[:, k] & (near <= max_gap)
         for c in range(2):
             iris[fill, k, c] = mid[fill, c] + np.interp(f[fill], good, d[good, c])
-    return iris
+    return iris, closed
 
 
 #: ARKit's eyeLook* names this module writes.
@@ -270,7 +271,8 @@ class GazeOptions:
     vertical: float = float(np.deg2rad(28.0))
 
 
-def gaze_activations(angles: np.ndarray, options: GazeOptions | None = None) -> dict:
+def gaze_activations(angles: np.ndarray, options: GazeOptions | None = None,
+                     closed: np.ndarray | None = None) -> dict:
     """ARKit eyeLook* activations in [0, 1] from gaze angles.
 
     Parameters
@@ -278,6 +280,9 @@ def gaze_activations(angles: np.ndarray, options: GazeOptions | None = None) -> 
     angles : (F, 2, 2) float
         From :func:`gaze_angles` (``[frame, eye (right, left), (yaw, pitch)]``).
     options : GazeOptions
+    closed : (F, 2) bool, optional
+        Eyes whose lids are closed (:func:`usable_iris`): their Up/Down are NaN (left to the
+        lids, which a closed eye's vertical gaze would only fight), their In/Out kept.
 
     Returns
     -------
@@ -291,6 +296,8 @@ def gaze_activations(angles: np.ndarray, options: GazeOptions | None = None) -> 
     for k, eye in enumerate(EYES):
         h = a[:, k, 0] / opt.horizontal * (1.0 if eye == "Left" else -1.0)   # + = outward
         v = a[:, k, 1] / opt.vertical
+        if closed is not None:
+            v = np.where(np.asarray(closed)[:, k], np.nan, v)
         for name, x in (("Out", h), ("In", -h), ("Up", v), ("Down", -v)):
             out[f"eyeLook{name}{eye}"] = np.where(np.isfinite(x), np.clip(x, 0.0, 1.0), np.nan)
     return out
