@@ -191,7 +191,7 @@ def gaze_angles(eyes: EyeModel, iris: np.ndarray, R: np.ndarray, s: np.ndarray,
     return _angles(d)
 
 
-def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.6,
+def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.7,
                 max_gap: int = 15) -> tuple[np.ndarray, np.ndarray]:
     """The iris centres of a clip, bridged over frames where the lids hide the iris.
 
