@@ -35,6 +35,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from ..errors import ShapeError
 
@@ -191,13 +192,14 @@ def gaze_angles(eyes: EyeModel, iris: np.ndarray, R: np.ndarray, s: np.ndarray,
     return _angles(d)
 
 
-def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.7,
+def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.75, window: int = 31,
                 max_gap: int = 15) -> tuple[np.ndarray, np.ndarray]:
     """The iris centres of a clip, bridged over frames where the lids hide the iris.
 
     While the lids close (a blink, a squint) the detector's iris centre slides with them, which
     would read as a downward gaze. An eye whose lid gap (mid upper to mid lower lid, / corner
-    distance) is below ``open_fraction`` of its median over the clip is closed: there the
+    distance) is below ``open_fraction`` of its running median over ``window`` frames is
+    closed (a blink is a dip; looking down, which lowers the lids for longer, is not): there the
     iris's offset from the eye corners' midpoint is interpolated linearly from the open frames
     around (at most ``max_gap`` frames away), so the gaze holds through a blink.
 
@@ -206,7 +208,9 @@ def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.7,
     points478 : (F, 478, 2) float
         Face Landmarker's points per frame, NaN where no face was found.
     open_fraction : float
-        Fraction of the clip's median lid gap below which an eye counts as closed.
+        Fraction of the running median lid gap below which an eye counts as closed.
+    window : int
+        Frames of the running median (odd).
     max_gap : int
         Farthest open frame (frames) a closed one is bridged from (0: none).
 
@@ -228,7 +232,9 @@ def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.7,
         ok = np.isfinite(gap) & np.isfinite(iris[:, k]).all(1)
         if not ok.any():
             continue
-        is_open = ok & (gap >= open_fraction * np.median(gap[ok]))
+        base = median_filter(np.where(ok, gap, np.median(gap[ok])), size=int(window),
+                             mode="nearest")
+        is_open = ok & (gap >= open_fraction * base)
         closed[:, k] = ok & ~is_open
         mid = (P[:, o] + P[:, i]) / 2
         d = iris[:, k] - mid
