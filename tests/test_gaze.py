@@ -96,7 +96,8 @@ def test_activation_signs_follow_arkit():
     opt = GazeOptions(horizontal=np.deg2rad(30), vertical=np.deg2rad(25))
     a = gaze_activations(ang, opt)
     assert set(a) == set(GAZE_NAMES) and set(GAZE_NAMES) <= set(ARKIT_NAMES)
-    assert a["eyeLookOutLeft"][0] == pytest.approx(0.5) and a["eyeLookInRight"][0] == pytest.approx(0.5)
+    assert a["eyeLookOutLeft"][0] == pytest.approx(0.5)
+    assert a["eyeLookInRight"][0] == pytest.approx(0.5)
     assert a["eyeLookInLeft"][0] == 0 and a["eyeLookOutRight"][0] == 0
     assert a["eyeLookUpLeft"][0] == 0 and a["eyeLookDownRight"][0] == 0
     assert a["eyeLookDownLeft"][1] == 1.0 and a["eyeLookDownRight"][1] == 1.0   # clipped

@@ -15,7 +15,9 @@ frame and the drifting flow by measurements taken on every frame:
    reliability) and to the previous frame's fit moved by the point flow (the flow term), with a
    temporal term toward the previous frame. For a model whose expressions are ARKit blendshapes
    (:mod:`facetransfer.arkit`) the expression is solved as activations in [0, 1] (a bounded
-   least-squares step); for other models as the mode weights with their training prior.
+   least-squares step); for other models as the mode weights with their training prior. The
+   eyeLook* activations follow MediaPipe's iris centres at the fitted pose
+   (:mod:`facetransfer.track.gaze`): the model has no eyeballs.
 4. Frames without a detection are lost (the nearest tracked state is held); the face may appear
    late: tracking starts where it is.
 

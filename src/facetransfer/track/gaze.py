@@ -6,8 +6,8 @@ and the tracked pose says how the head is turned. A simple eyeball per eye turns
 gaze angles:
 
 - the iris at rest (looking straight ahead, along the head's +z) sits at :data:`IRIS_REST` from
-  the midpoint of the eye's corners (iBUG 36/39, 42/45 of the tracked neutral face), scaled by
-  the eye's width;
+  the midpoint of the eye's corners (iBUG 36/39, 42/45 of the tracked face), scaled by the
+  eye's width;
 - the eyeball turns about a centre :data:`EYE_RADIUS` behind that rest point, so the iris
   centre is ``c + r d`` for a unit gaze direction ``d``;
 - the camera is the tracker's weak perspective ``p = s F R[:2] X + t`` (Eq. (7), ``F = diag(1,
@@ -18,6 +18,9 @@ gaze angles:
 The iris sits in front of the eye corners, so on a turned head its 2-D offset from the corners
 moves although the eye does not: the pose takes that out (a naive 2-D offset is biased by about
 ``sin(yaw) * 0.55 cm``, 0.1 eye width at 30° yaw).
+
+While the lids close the detector's iris slides down with them: :func:`usable_iris` finds
+those frames (a dip of the lid gap) and bridges the iris over them.
 
 Angles are in radians, ``yaw`` positive toward the subject's left (the model's +x), ``pitch``
 positive up (+y). :func:`gaze_activations` maps them to ARKit's ``eyeLook*`` coefficients
