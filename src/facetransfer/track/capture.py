@@ -313,18 +313,23 @@ def _residual(shape: _Shape, st_pose: Pose, x: np.ndarray, p: np.ndarray, w: np.
     return float(np.sqrt(np.sum(w * r2) / max(np.sum(w), 1e-12)) / iod)
 
 
-def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple) -> np.ndarray:
-    """(K,) the eyeLook* activations from ``gaze`` = (iris centres (2, 2), closed (2,)) at
-    ``pose`` and the frame's eye corners (:mod:`.gaze`), NaN for every other shape."""
+def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The eyeLook* activations from ``gaze`` = (iris centres (2, 2), closed (2,)) at ``pose``
+    and the frame's eye corners (:mod:`.gaze`): ``(held in the fit, written after it)``, (K,)
+    each, NaN for every other shape. A closed eye's vertical gaze is 0 in the fit (its lids
+    are the blink's: eyeLookDown's lid drop would take half the blink) and its bridged value
+    after."""
     iris, closed = gaze
     ang = gaze_angles(eye_model(shape.points(x)[:68]), iris[None], pose.rotation[None],
                       np.array([pose.scale]), pose.translation[None])
-    act = gaze_activations(ang, closed=closed[None])
-    out = np.full(shape.size, np.nan)
+    after_, held_ = gaze_activations(ang), gaze_activations(ang, closed=closed[None])
+    held, after = np.full(shape.size, np.nan), np.full(shape.size, np.nan)
     for n, k in zip(GAZE_NAMES, shape.gaze_k):
         if k >= 0:
-            out[k] = act[n][0]
-    return out
+            after[k] = after_[n][0]
+            held[k] = held_[n][0] if np.isfinite(held_[n][0]) else after[k] * 0.0
+    return held, after
 
 
 def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: np.ndarray,
@@ -337,10 +342,13 @@ def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: n
     if pose is None:
         ok = w > 0
         pose = fit_affine_pose(shape.points(x)[ok], p[ok])
+    after = None
     for _ in range(iterations):
         pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
-        fixed = None if gaze is None else _gaze_fixed(shape, pose, x, gaze)
-        x = shape.solve(pose, targets, iod, x, prev, fixed)
+        held, after = (None, None) if gaze is None else _gaze_fixed(shape, pose, x, gaze)
+        x = shape.solve(pose, targets, iod, x, prev, held)
+    if after is not None:
+        x = np.where(np.isfinite(after), after, x)
     pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
     return _State(pose, x, _residual(shape, pose, x, p, w, iod))
 

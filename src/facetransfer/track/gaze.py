@@ -91,7 +91,8 @@ def eye_model(points68: np.ndarray, *, rest: tuple = IRIS_REST,
     Parameters
     ----------
     points68 : (68, 3) float
-        The iBUG-68 landmark vertices of the tracked (neutral) face, in the model's units (cm).
+        The iBUG-68 landmark vertices of the tracked face (a frame's fit or the neutral), in the
+        model's units (cm).
     rest : (3,) float
         Iris at rest minus the corners' midpoint for the left eye at FaceKit's eye width
         (:data:`IRIS_REST`); x mirrors for the right eye, all scale with the eye's width.
