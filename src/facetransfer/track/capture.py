@@ -121,9 +121,10 @@ class CaptureOptions:
     gaze : bool
         For an ARKit model with MediaPipe's iris points: the eyeLook* activations follow the
         iris centres at each pose step of the fit (:mod:`facetransfer.track.gaze`), and the
-        other shapes explain the lids given that gaze; a closing eye keeps its horizontal gaze
-        (bridged, :func:`~facetransfer.track.gaze.usable_iris`) and leaves the vertical one to
-        the lids; frames without iris points fit them from the lids as before.
+        other shapes explain the lids given that gaze; a closing eye's gaze is bridged
+        (:func:`~facetransfer.track.gaze.usable_iris`) and its lids are left to the blink
+        (its vertical gaze is 0 in the fit, the bridged value after); frames without iris
+        points fit eyeLook* from the lids as before.
     """
 
     identity_frames: int = 24

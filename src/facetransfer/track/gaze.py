@@ -291,8 +291,8 @@ def gaze_activations(angles: np.ndarray, options: GazeOptions | None = None,
         From :func:`gaze_angles` (``[frame, eye (right, left), (yaw, pitch)]``).
     options : GazeOptions
     closed : (F, 2) bool, optional
-        Eyes whose lids are closed (:func:`usable_iris`): their Up/Down are NaN (left to the
-        lids, which a closed eye's vertical gaze would only fight), their In/Out kept.
+        Eyes whose lids are closed (:func:`usable_iris`): their Up/Down are NaN (e.g. for a
+        fit that gives a closed eye's lids to the blink), their In/Out kept.
 
     Returns
     -------
