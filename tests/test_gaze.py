@@ -197,3 +197,26 @@ def test_usable_iris_bridges_closed_eyes():
     np.testing.assert_array_equal(iris[keep, 0], P[keep, 468])
     with pytest.raises(ShapeError, match="478"):
         usable_iris(P[:, :468])
+
+
+def test_a_closing_eye_leaves_its_lids_to_the_blink(arkit_model):
+    """The fit holds a closed eye's vertical gaze at 0 and writes its bridged value after."""
+    from facetransfer.track.camera import Pose
+    from facetransfer.track.capture import _gaze_fixed, _Sampler, _Shape
+
+    m = arkit_model
+    shape = _Shape(m, m.training_weights("identity", "id02"), _Sampler(m), CaptureOptions())
+    x = np.zeros(shape.size)
+    eyes = eye_model(shape.points(x)[:68])
+    pose = Pose(rotation_from_euler(20, 5, 0), 9.0, np.array([256.0, 240.0]))
+    ang = np.deg2rad([[[10.0, -14.0], [10.0, -14.0]]])                 # left and down
+    iris = project_iris(eyes, ang, pose.rotation[None], np.array([9.0]), pose.translation[None])
+    held, after = _gaze_fixed(shape, pose, x, (iris[0], np.array([True, False])))
+    want = gaze_activations(ang)
+    for n, k in zip(GAZE_NAMES, shape.gaze_k):
+        assert after[k] == pytest.approx(want[n][0], abs=1e-9), n
+        closed_vertical = n.endswith("Right") and ("Up" in n or "Down" in n)
+        assert held[k] == (0.0 if closed_vertical else pytest.approx(want[n][0], abs=1e-9)), n
+    assert want["eyeLookDownRight"][0] > 0.4 and want["eyeLookOutLeft"][0] > 0.2
+    others = np.setdiff1d(np.arange(shape.size), shape.gaze_k)
+    assert np.isnan(held[others]).all() and np.isnan(after[others]).all()
