@@ -15,7 +15,9 @@ frame and the drifting flow by measurements taken on every frame:
    reliability) and to the previous frame's fit moved by the point flow (the flow term), with a
    temporal term toward the previous frame. For a model whose expressions are ARKit blendshapes
    (:mod:`facetransfer.arkit`) the expression is solved as activations in [0, 1] (a bounded
-   least-squares step); for other models as the mode weights with their training prior.
+   least-squares step); for other models as the mode weights with their training prior. The
+   eyeLook* activations follow MediaPipe's iris centres at the fitted pose
+   (:mod:`facetransfer.track.gaze`): the model has no eyeballs.
 4. Frames without a detection are lost (the nearest tracked state is held); the face may appear
    late: tracking starts where it is.
 
@@ -40,6 +42,7 @@ from ..errors import TrackError, VideoError
 from .camera import Pose, fit_affine_pose
 from .detect import ClipDetections, VideoLandmarker, detect_clip
 from .fit2d import box_qp, pose_gauss_newton, project_basis, targets_normal
+from .gaze import GAZE_NAMES, IRIS_INDEX, eye_model, gaze_activations, gaze_angles, usable_iris
 from .init import require_landmarks
 from .landmarks import IBUG_WEIGHTS
 from .options import Progress
@@ -115,6 +118,13 @@ class CaptureOptions:
     dense : float
         Weight of MediaPipe's other mesh points (:mod:`facetransfer.track.dense`) relative to an
         iBUG point of weight 1 (0 = the 68 iBUG points only).
+    gaze : bool
+        For an ARKit model with MediaPipe's iris points: the eyeLook* activations follow the
+        iris centres at each pose step of the fit (:mod:`facetransfer.track.gaze`), and the
+        other shapes explain the lids given that gaze; a closing eye's gaze is bridged
+        (:func:`~facetransfer.track.gaze.usable_iris`) and its lids are left to the blink
+        (its vertical gaze is 0 in the fit, the bridged value after); frames without iris
+        points fit eyeLook* from the lids as before.
     """
 
     identity_frames: int = 24
@@ -131,6 +141,7 @@ class CaptureOptions:
     offset_prior: float = 1e-4
     identity_expression_prior: float = 3e-2
     dense: float = 0.3
+    gaze: bool = True
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
@@ -213,6 +224,9 @@ class _Shape:
             self.fast = np.array([n.startswith(_EYELID) for n in ARKIT_NAMES])[self.used]
             self.u0, D = activation_basis(self.model)
             self.Du = D[self.used]                                             # (K, r)
+            self.gaze_k = np.array([int(np.flatnonzero(self.used == ARKIT_NAMES.index(n))[0])
+                                    if ARKIT_NAMES.index(n) in self.used else -1
+                                    for n in GAZE_NAMES])                      # (8,) or -1
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
             self.precision = {m: p.Q @ p.inv_cov @ p.Q.T for m, p in self.priors.items()}
@@ -250,8 +264,9 @@ class _Shape:
         return self.cache.shape(self.weights(x)) + self.offset
 
     def solve(self, pose: Pose, targets: list, iod: float, x: np.ndarray,
-              prev: np.ndarray | None) -> np.ndarray:
-        """The per-frame parameters best explaining ``targets`` at ``pose``."""
+              prev: np.ndarray | None, fixed: np.ndarray | None = None) -> np.ndarray:
+        """The per-frame parameters best explaining ``targets`` at ``pose`` (ARKit: the
+        activations where ``fixed`` (K,) is finite held at its values)."""
         lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
         if self.arkit:
             Y = project_basis(self.D, pose)
@@ -262,7 +277,11 @@ class _Shape:
             G = G + np.diag(lam_p * self.ridge + lam_t + 1e-9)
             if prev is not None:
                 h = h + lam_t * prev
-            return box_qp(G, h - self.opt.sparsity, x, tol=1e-5)
+            lo, hi = 0.0, 1.0
+            if fixed is not None:
+                lo, hi = np.where(np.isfinite(fixed), fixed, 0.0), np.where(np.isfinite(fixed),
+                                                                            fixed, 1.0)
+            return box_qp(G, h - self.opt.sparsity, x, lo=lo, hi=hi, tol=1e-5)
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
 
     def _solve_modes(self, pose, targets, iod, x, prev, lam_p, lam_t):
@@ -295,16 +314,42 @@ def _residual(shape: _Shape, st_pose: Pose, x: np.ndarray, p: np.ndarray, w: np.
     return float(np.sqrt(np.sum(w * r2) / max(np.sum(w), 1e-12)) / iod)
 
 
+def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """The eyeLook* activations from ``gaze`` = (iris centres (2, 2), closed (2,)) at ``pose``
+    and the frame's eye corners (:mod:`.gaze`): ``(held in the fit, written after it)``, (K,)
+    each, NaN for every other shape. A closed eye's vertical gaze is 0 in the fit (its lids
+    are the blink's: eyeLookDown's lid drop would take half the blink) and its bridged value
+    after."""
+    iris, closed = gaze
+    ang = gaze_angles(eye_model(shape.points(x)[:68]), iris[None], pose.rotation[None],
+                      np.array([pose.scale]), pose.translation[None])
+    after_, held_ = gaze_activations(ang), gaze_activations(ang, closed=closed[None])
+    held, after = np.full(shape.size, np.nan), np.full(shape.size, np.nan)
+    for n, k in zip(GAZE_NAMES, shape.gaze_k):
+        if k >= 0:
+            after[k] = after_[n][0]
+            held[k] = held_[n][0] if np.isfinite(held_[n][0]) else after[k] * 0.0
+    return held, after
+
+
 def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: np.ndarray,
-               prev: np.ndarray | None, iterations: int) -> _State:
-    """Alternate pose (Gauss-Newton) and expression (bounded or prior-weighted LS) for one frame."""
+               prev: np.ndarray | None, iterations: int, gaze: tuple | None = None
+               ) -> _State:
+    """Alternate pose (Gauss-Newton) and expression (bounded or prior-weighted LS) for one frame;
+    with ``gaze`` (:func:`_iris`; ARKit models) the eyeLook* activations follow the iris at
+    each pose."""
     p, w = targets[0]
     if pose is None:
         ok = w > 0
         pose = fit_affine_pose(shape.points(x)[ok], p[ok])
+    after = None
     for _ in range(iterations):
         pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
-        x = shape.solve(pose, targets, iod, x, prev)
+        held, after = (None, None) if gaze is None else _gaze_fixed(shape, pose, x, gaze)
+        x = shape.solve(pose, targets, iod, x, prev, held)
+    if after is not None:
+        x = np.where(np.isfinite(after), after, x)
     pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
     return _State(pose, x, _residual(shape, pose, x, p, w, iod))
 
@@ -335,6 +380,8 @@ class _PointWeights:
 
     w: np.ndarray
     mp_index: np.ndarray | None = None
+    iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
+    closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
 
 
 def _detection(det: ClipDetections, i: int, pw: _PointWeights) -> tuple[np.ndarray, np.ndarray]:
@@ -364,6 +411,14 @@ def _solve_offset(shape: "_Shape", frames, states: list, det: ClipDetections, we
         b += w[:, None] * (r @ M)
     lam = opt.offset_prior * len(frames)
     return np.linalg.solve(A + lam * np.eye(3)[None], b[..., None])[..., 0]
+
+
+def _iris(weights: _PointWeights, i: int) -> tuple | None:
+    """Frame ``i``'s two iris centres (2, 2) the gaze follows (NaN rows: that eye's free) and
+    which eyes are closed (2,), or None."""
+    if weights.iris is None or not np.isfinite(weights.iris[i]).any():
+        return None
+    return weights.iris[i], weights.closed[i]
 
 
 def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
@@ -410,7 +465,8 @@ def _fit_sample(shape: _Shape, det: ClipDetections, frames, weights, opt, states
         p, w = _detection(det, i, weights)
         st = None if states is None else states[j]
         out.append(_fit_frame(shape, [(p, w)], _iod(p), None if st is None else st.pose,
-                              shape.x0 if st is None else st.x, None, int(opt.iterations) + 1))
+                              shape.x0 if st is None else st.x, None, int(opt.iterations) + 1,
+                              _iris(weights, i)))
     return out
 
 
@@ -447,7 +503,8 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State, we
         tg = _targets(det, i, prev_i if prev_i is not None else i, q, weights, opt, forward)
         st = _fit_frame(shape, tg, _iod(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
-                        None if prev is None or prev_i is None else prev.x, int(opt.iterations))
+                        None if prev is None or prev_i is None else prev.x, int(opt.iterations),
+                        _iris(weights, i))
         states[i] = st
         prev, prev_i = st, i
         done += 1
@@ -507,7 +564,11 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         dense = mediapipe_correspondence(model)
         weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
     sampler = _Sampler(model, dense)
-    weights = _PointWeights(weights, sampler.mp_index)
+    iris = closed = None
+    if opt.gaze and is_arkit_model(model) and det.points478 is not None \
+            and det.points478.shape[1] > max(IRIS_INDEX):
+        iris, closed = usable_iris(det.points478)
+    weights = _PointWeights(weights, sampler.mp_index, iris, closed)
     t0 = time.perf_counter()
     shape, sample_states, frames = _clip_identity(model, det, sampler, weights, opt, fixed, prog)
     t_id = time.perf_counter() - t0

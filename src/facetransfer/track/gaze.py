@@ -1,0 +1,313 @@
+"""Gaze from MediaPipe's iris centres: each eye's direction in the head's frame (beyond the paper).
+
+The face model has no eyeballs, so the 2-D fit sees gaze only through the eyelids. Face
+Landmarker also places each iris centre (points 468: the subject's right eye, 473: the left),
+and the tracked pose says how the head is turned. A simple eyeball per eye turns the two into
+gaze angles:
+
+- the iris at rest (looking straight ahead, along the head's +z) sits at :data:`IRIS_REST` from
+  the midpoint of the eye's corners (iBUG 36/39, 42/45 of the tracked face), scaled by the
+  eye's width;
+- the eyeball turns about a centre :data:`EYE_RADIUS` behind that rest point, so the iris
+  centre is ``c + r d`` for a unit gaze direction ``d``;
+- the camera is the tracker's weak perspective ``p = s F R[:2] X + t`` (Eq. (7), ``F = diag(1,
+  -1)``): ``R[:2] d = (F (p - t) / s - R[:2] c) / r`` gives ``R d`` up to the depth component,
+  which is the root toward the camera (a visible iris). One closed form per frame and eye,
+  vectorised over frames.
+
+The iris sits in front of the eye corners, so on a turned head its 2-D offset from the corners
+moves although the eye does not: the pose takes that out (a naive 2-D offset is biased by about
+``sin(yaw) * 0.55 cm``, 0.1 eye width at 30° yaw).
+
+While the lids close the detector's iris slides down with them: :func:`usable_iris` finds
+those frames (a dip of the lid gap) and bridges the iris over them.
+
+Angles are in radians, ``yaw`` positive toward the subject's left (the model's +x), ``pitch``
+positive up (+y). :func:`gaze_activations` maps them to ARKit's ``eyeLook*`` coefficients
+(``Left`` = the subject's own left eye, ``Out`` = toward that eye's ear).
+
+References
+----------
+ICT-FaceKit ``generic_neutral_mesh.obj`` (eye geometry measured there, see the constants);
+the Gullstrand schematic eye (entrance pupil ~3.0 mm behind the cornea) and the eye's centre of
+rotation ~13.5 mm behind the cornea (Fry & Hill 1962); MediaPipe Face Landmarker (iris points).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.ndimage import median_filter
+
+from ..errors import ShapeError
+
+__all__ = ["EyeModel", "eye_model", "gaze_angles", "gaze_direction", "project_iris", "usable_iris",
+           "GazeOptions", "gaze_activations", "GAZE_NAMES", "IRIS_INDEX", "CORNER_INDEX"]
+
+#: Eyes in this module's order: the subject's right eye, then the left.
+EYES = ("Right", "Left")
+#: iBUG-68 (outer, inner) corners of each eye, in :data:`EYES` order.
+CORNER_INDEX = ((36, 39), (45, 42))
+#: MediaPipe's iris centres (the subject's right eye, the left), of the 478 points.
+IRIS_INDEX = (468, 473)
+#: MediaPipe's eye corners (outer, inner) matching :data:`CORNER_INDEX`.
+MP_CORNER_INDEX = ((33, 133), (263, 362))
+#: MediaPipe's mid upper and lower lid points of each eye (:data:`EYES` order).
+MP_LID_INDEX = ((159, 145), (386, 374))
+
+#: Corner distance (inner to outer, 3-D) of FaceKit's generic neutral eye, cm (landmarks 42, 45).
+FACEKIT_EYE_WIDTH = 2.687
+#: Iris centre at rest minus the corners' midpoint, cm, for the left eye (+x = outward; the
+#: right eye mirrors x): the centre of the pupil vertices (those PupilDilate_L moves) of
+#: FaceKit's generic neutral eyeball, (3.29, 3.62, 9.45), against landmarks 42/45's midpoint
+#: (3.15, 3.34, 8.90). 0.55 cm in front of the corners.
+IRIS_REST = (0.14, 0.27, 0.55)
+#: Centre of rotation to the iris centre as seen (the entrance pupil), cm: 13.5 mm (centre of
+#: rotation behind the cornea, Fry & Hill 1962) - 3.0 mm (entrance pupil, Gullstrand).
+EYE_RADIUS = 1.05
+
+
+@dataclass(frozen=True)
+class EyeModel:
+    """Both eyeballs in the head's (model) frame.
+
+    Attributes
+    ----------
+    centre : (2, 3) float64
+        Centres of rotation, :data:`EYES` order.
+    radius : (2,) float64
+        Centre to iris centre.
+    """
+
+    centre: np.ndarray
+    radius: np.ndarray
+
+
+def eye_model(points68: np.ndarray, *, rest: tuple = IRIS_REST,
+              radius: float = EYE_RADIUS) -> EyeModel:
+    """Eyeballs placed behind the eye corners of a face.
+
+    Parameters
+    ----------
+    points68 : (68, 3) float
+        The iBUG-68 landmark vertices of the tracked face (a frame's fit or the neutral), in the
+        model's units (cm).
+    rest : (3,) float
+        Iris at rest minus the corners' midpoint for the left eye at FaceKit's eye width
+        (:data:`IRIS_REST`); x mirrors for the right eye, all scale with the eye's width.
+    radius : float
+        Centre of rotation to iris at FaceKit's eye width (:data:`EYE_RADIUS`).
+
+    Returns
+    -------
+    EyeModel
+    """
+    P = np.asarray(points68, np.float64)
+    if P.shape != (68, 3):
+        raise ShapeError(f"eye_model needs (68, 3) landmark vertices, got {P.shape}")
+    centres, radii = [], []
+    for k, (o, i) in enumerate(CORNER_INDEX):
+        k_scale = np.linalg.norm(P[o] - P[i]) / FACEKIT_EYE_WIDTH
+        off = np.array(rest, np.float64) * k_scale
+        off[0] *= 1.0 if EYES[k] == "Left" else -1.0
+        iris = (P[o] + P[i]) / 2 + off
+        centres.append(iris - np.array([0.0, 0.0, radius * k_scale]))
+        radii.append(radius * k_scale)
+    return EyeModel(np.stack(centres), np.array(radii))
+
+
+def gaze_direction(angles: np.ndarray) -> np.ndarray:
+    """Unit gaze directions in the head's frame, ``(..., 2) [yaw, pitch] -> (..., 3)``:
+    ``(sin yaw cos pitch, sin pitch, cos yaw cos pitch)``."""
+    a = np.asarray(angles, np.float64)
+    y, p = a[..., 0], a[..., 1]
+    return np.stack([np.sin(y) * np.cos(p), np.sin(p), np.cos(y) * np.cos(p)], -1)
+
+
+def _angles(d: np.ndarray) -> np.ndarray:
+    """Inverse of :func:`gaze_direction`, ``(..., 3) -> (..., 2)``."""
+    return np.stack([np.arctan2(d[..., 0], d[..., 2]),
+                     np.arctan2(d[..., 1], np.hypot(d[..., 0], d[..., 2]))], -1)
+
+
+def project_iris(eyes: EyeModel, angles: np.ndarray, R: np.ndarray, s: np.ndarray,
+                 t: np.ndarray) -> np.ndarray:
+    """Image positions of the iris centres for given gaze (the forward model of
+    :func:`gaze_angles`).
+
+    Parameters
+    ----------
+    eyes : EyeModel
+    angles : (F, 2, 2) float
+        ``[frame, eye, (yaw, pitch)]``.
+    R : (F, 3, 3), s : (F,), t : (F, 2)
+        Weak-perspective pose per frame.
+
+    Returns
+    -------
+    (F, 2, 2) float64
+        Pixels, ``[frame, eye, (x, y)]``.
+    """
+    X = eyes.centre[None] + eyes.radius[None, :, None] * gaze_direction(angles)   # (F, 2, 3)
+    Y = np.einsum("fij,fej->fei", np.asarray(R, np.float64)[:, :2], X)
+    Y = Y * np.asarray(s, np.float64)[:, None, None]
+    Y[..., 1] *= -1.0
+    return Y + np.asarray(t, np.float64)[:, None, :]
+
+
+def gaze_angles(eyes: EyeModel, iris: np.ndarray, R: np.ndarray, s: np.ndarray,
+                t: np.ndarray) -> np.ndarray:
+    """Each eye's gaze from its iris centre in the image, given the head's pose (closed form).
+
+    Parameters
+    ----------
+    eyes : EyeModel
+    iris : (F, 2, 2) float
+        Iris centres in pixels, ``[frame, eye (EYES order), (x, y)]``; NaN where unknown.
+    R : (F, 3, 3) float
+        Head rotation per frame.
+    s : (F,) float
+        Pixels per model unit.
+    t : (F, 2) float
+        Translation, pixels.
+
+    Returns
+    -------
+    (F, 2, 2) float64
+        ``[frame, eye, (yaw, pitch)]`` in radians in the head's frame; NaN where ``iris`` is. An
+        iris farther from the centre's image than the radius allows is taken on the eyeball's
+        silhouette (gaze perpendicular to the view).
+    """
+    p = np.asarray(iris, np.float64)
+    R = np.asarray(R, np.float64)
+    s = np.asarray(s, np.float64)
+    if p.ndim != 3 or p.shape[1:] != (2, 2) or R.shape != (len(p), 3, 3):
+        raise ShapeError(f"gaze_angles needs iris (F, 2, 2) and R (F, 3, 3), got {p.shape} "
+                         f"and {R.shape}")
+    q = (p - np.asarray(t, np.float64)[:, None, :]) / s[:, None, None]
+    q[..., 1] *= -1.0                                                     # F^-1 = F
+    q = (q - np.einsum("fij,ej->fei", R[:, :2], eyes.centre)) / eyes.radius[None, :, None]
+    n = np.linalg.norm(q, axis=-1, keepdims=True)
+    q = np.where(n > 1.0, q / np.maximum(n, 1e-300), q)
+    ez = np.sqrt(np.clip(1.0 - np.sum(q * q, axis=-1, keepdims=True), 0.0, None))
+    e = np.concatenate([q, ez], -1)                                       # R d, camera frame
+    d = np.einsum("fji,fej->fei", R, e)                                   # R^T e
+    return _angles(d)
+
+
+def usable_iris(points478: np.ndarray, *, open_fraction: float = 0.75, window: int = 31,
+                max_gap: int = 15) -> tuple[np.ndarray, np.ndarray]:
+    """The iris centres of a clip, bridged over frames where the lids hide the iris.
+
+    While the lids close (a blink, a squint) the detector's iris centre slides with them, which
+    would read as a downward gaze. An eye whose lid gap (mid upper to mid lower lid, / corner
+    distance) is below ``open_fraction`` of its running median over ``window`` frames is
+    closed (a blink is a dip; looking down, which lowers the lids for longer, is not): there the
+    iris's offset from the eye corners' midpoint is interpolated linearly from the open frames
+    around (at most ``max_gap`` frames away), so the gaze holds through a blink.
+
+    Parameters
+    ----------
+    points478 : (F, 478, 2) float
+        Face Landmarker's points per frame, NaN where no face was found.
+    open_fraction : float
+        Fraction of the running median lid gap below which an eye counts as closed.
+    window : int
+        Frames of the running median (odd).
+    max_gap : int
+        Farthest open frame (frames) a closed one is bridged from (0: none).
+
+    Returns
+    -------
+    iris : (F, 2, 2) float64
+        ``[frame, eye (EYES order), (x, y)]``, NaN where unknown.
+    closed : (F, 2) bool
+        Where the eye is closed (``iris`` bridged there, or NaN).
+    """
+    P = np.asarray(points478, np.float64)
+    if P.ndim != 3 or P.shape[1] <= max(IRIS_INDEX) or P.shape[2] != 2:
+        raise ShapeError(f"usable_iris needs (F, 478, 2) points, got {P.shape}")
+    iris = P[:, list(IRIS_INDEX)].copy()
+    closed = np.zeros((len(P), 2), bool)
+    f = np.arange(len(P))
+    for k, ((o, i), (u, lo)) in enumerate(zip(MP_CORNER_INDEX, MP_LID_INDEX)):
+        gap = np.linalg.norm(P[:, u] - P[:, lo], axis=1) / np.linalg.norm(P[:, o] - P[:, i], axis=1)
+        ok = np.isfinite(gap) & np.isfinite(iris[:, k]).all(1)
+        if not ok.any():
+            continue
+        base = median_filter(np.where(ok, gap, np.median(gap[ok])), size=int(window),
+                             mode="nearest")
+        is_open = ok & (gap >= open_fraction * base)
+        closed[:, k] = ok & ~is_open
+        mid = (P[:, o] + P[:, i]) / 2
+        d = iris[:, k] - mid
+        iris[~is_open, k] = np.nan
+        good = np.flatnonzero(is_open)
+        if not len(good) or max_gap <= 0:
+            continue
+        j = np.searchsorted(good, f)
+        near = np.minimum(np.abs(good[np.clip(j, 0, len(good) - 1)] - f),
+                          np.abs(good[np.clip(j - 1, 0, len(good) - 1)] - f))
+        fill = closed[:, k] & (near <= max_gap)
+        for c in range(2):
+            iris[fill, k, c] = mid[fill, c] + np.interp(f[fill], good, d[good, c])
+    return iris, closed
+
+
+#: ARKit's eyeLook* names this module writes.
+GAZE_NAMES = tuple(f"eyeLook{k}{e}" for e in ("Left", "Right")
+                   for k in ("Down", "In", "Out", "Up"))
+
+
+@dataclass(frozen=True)
+class GazeOptions:
+    """How gaze angles become ARKit activations.
+
+    Apple does not say which angle an eyeLook* of 1 means. The defaults match Face Landmarker's
+    own blendshapes: on the 4 real clips of ``benchmarks/bench_capture.py`` the regression of
+    our angle on its ``eyeLookOut - eyeLookIn`` is 34-36° per unit (median per eye), on
+    ``eyeLookUp - eyeLookDown`` 26-30° per unit.
+
+    Attributes
+    ----------
+    horizontal : float
+        Yaw (radians) that means activation 1 for eyeLookIn/Out.
+    vertical : float
+        Pitch (radians) that means activation 1 for eyeLookUp/Down.
+    """
+
+    horizontal: float = float(np.deg2rad(35.0))
+    vertical: float = float(np.deg2rad(28.0))
+
+
+def gaze_activations(angles: np.ndarray, options: GazeOptions | None = None,
+                     closed: np.ndarray | None = None) -> dict:
+    """ARKit eyeLook* activations in [0, 1] from gaze angles.
+
+    Parameters
+    ----------
+    angles : (F, 2, 2) float
+        From :func:`gaze_angles` (``[frame, eye (right, left), (yaw, pitch)]``).
+    options : GazeOptions
+    closed : (F, 2) bool, optional
+        Eyes whose lids are closed (:func:`usable_iris`): their Up/Down are NaN (e.g. for a
+        fit that gives a closed eye's lids to the blink), their In/Out kept.
+
+    Returns
+    -------
+    dict of str -> (F,) float64
+        One entry per name of :data:`GAZE_NAMES`; NaN where the angles are. Looking toward the
+        subject's left (yaw > 0) is ``eyeLookOutLeft`` and ``eyeLookInRight``.
+    """
+    opt = options or GazeOptions()
+    a = np.asarray(angles, np.float64)
+    out = {}
+    for k, eye in enumerate(EYES):
+        h = a[:, k, 0] / opt.horizontal * (1.0 if eye == "Left" else -1.0)   # + = outward
+        v = a[:, k, 1] / opt.vertical
+        if closed is not None:
+            v = np.where(np.asarray(closed)[:, k], np.nan, v)
+        for name, x in (("Out", h), ("In", -h), ("Up", v), ("Down", -v)):
+            out[f"eyeLook{name}{eye}"] = np.where(np.isfinite(x), np.clip(x, 0.0, 1.0), np.nan)
+    return out
