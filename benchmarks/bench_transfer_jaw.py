@@ -1,4 +1,4 @@
-"""Why the judge's jawOpen misses on the open-mouth pair (issue 13): ceiling, geometry, timing.
+"""Why the judge's jawOpen missed on the open-mouth pair (issue 13): ceiling, geometry, timing.
 
 ``bench_transfer_judge.py`` found MediaPipe's jawOpen of the result following the source's with
 r +0.53 only on ``WDA_KatieHill_000`` -> ``driving_d6`` (mouth opening +0.94). This script
@@ -25,12 +25,17 @@ result of the default transfer:
 * **source only**: on the source's own frames, MediaPipe's jawOpen against the capture
   tracker's jawOpen and against MediaPipe's lip gap and chin drop;
 * **timing**: correlations at frame lags -4..4 (a 25 -> 30 fps mismatch would peak off 0);
-* variants of the render (``--variants``): ``default``, ``mouth_function`` (the §6 texture
-  function for the mouth), ``no_mouth`` (the mouth textured from the target like the rest
-  of the face: what the source's mouth pixels add), ``source_turn`` (see above) and
-  ``mp_mouth`` (the jaw and lip activations of the new performance replaced by MediaPipe's
-  scores of the source: whether the capture's split of a mouth opening into jaw and lips is
-  what the judge disagrees with).
+* variants of the render (``--variants``): ``default`` (the rewrite's default: the chin and
+  jaw textured from a closed-mouth target frame, :mod:`facetransfer.jaw`), ``jaw_frame`` (the
+  jaw textured from each target frame, as before that), and probes of ``jaw_frame``:
+  ``mouth_function`` (the §6 texture function for the mouth), ``no_mouth`` (the mouth
+  textured from the target like the rest of the face: what the source's mouth pixels add),
+  ``source_turn`` (see above), ``mp_mouth`` (the jaw and lip activations of the new
+  performance replaced by MediaPipe's scores of the source: whether the capture's split of a
+  mouth opening into jaw and lips is what the judge disagrees with) and ``constant_texture``
+  (one face texture for the clip);
+* the target's share: the result's score regressed on the source's and the target's
+  (standardised), since source and target can correlate by chance (``source_target``).
 
 Usage::
 
@@ -154,15 +159,19 @@ def explained(jaw: np.ndarray, geo: dict) -> float:
 
 #: variant -> (RewriteOptions keywords, whether the source's mouth pixels are used)
 #: the variants rendered per pair unless ``--variants`` is given
-PAIR_VARIANTS = {"open": ("default", "mouth_function", "no_mouth", "source_turn", "mp_mouth")}
+PAIR_VARIANTS = {"open": ("default", "jaw_frame", "mouth_function", "no_mouth", "source_turn",
+                          "mp_mouth", "constant_texture")}
+#: variant -> (RewriteOptions keywords, whether the source's mouth pixels are used). ``default``
+#: is the rewrite's default (the jaw from a closed-mouth frame, :mod:`facetransfer.jaw`);
+#: ``jaw_frame`` the jaw textured from each target frame as before; the probes are variants of
+#: ``jaw_frame`` (what was measured to find the cause)
 VARIANTS = {"default": ({}, True),
-            "mouth_function": ({"mouth": "function"}, True),
-            "no_mouth": ({}, False),
-            "source_turn": ({}, True),
-            "mp_mouth": ({}, True),
-            "constant_texture": ({"texture": "constant"}, True),
             "jaw_frame": ({"jaw": "frame"}, True),
-            "jaw_closed": ({"jaw": "closed"}, True)}
+            "mouth_function": ({"mouth": "function", "jaw": "frame"}, True),
+            "no_mouth": ({"jaw": "frame"}, False),
+            "source_turn": ({"jaw": "frame"}, True),
+            "mp_mouth": ({"jaw": "frame"}, True),
+            "constant_texture": ({"texture": "constant"}, True)}
 #: the shapes the ``mp_mouth`` probe takes from MediaPipe's scores of the source
 MP_MOUTH = ("jawOpen", "mouthClose", "mouthUpperUpLeft", "mouthUpperUpRight",
             "mouthLowerDownLeft", "mouthLowerDownRight")
@@ -337,6 +346,7 @@ def _compare(S: dict, T: dict, R: dict, cap_new: np.ndarray) -> dict:
     for k in ("jawOpen", "lip_gap", "chin_drop", "jaw_3d"):
         out[k] = {"result_source": corr(R[k], S[k]), "result_target": corr(R[k], T[k]),
                   "source_target": corr(S[k], T[k]),
+                  "share": shares(R[k], S[k], T[k]),
                   "amplitude": float(np.nanstd(R[k]) / max(np.nanstd(S[k]), 1e-9)),
                   "lags": lagged(R[k], S[k])}
     out["cross"] = {"R_jaw~S_lip_gap": corr(R["jawOpen"], S["lip_gap"]),
@@ -372,6 +382,18 @@ def frontal(S: dict, R: dict, limit: float = FRONTAL) -> dict:
     return out
 
 
+def shares(r: np.ndarray, s: np.ndarray, t: np.ndarray) -> dict:
+    """The result's series regressed on the source's and the target's, all standardised:
+    ``{"source": b_s, "target": b_t}`` (the target's share of the result, with the source's
+    held fixed: unlike ``result ~ target`` not hidden by a chance correlation of the two)."""
+    z = [(x - np.nanmean(x)) / max(np.nanstd(x), 1e-12) for x in (r, s, t)]
+    ok = np.isfinite(z[0]) & np.isfinite(z[1]) & np.isfinite(z[2])
+    if ok.sum() < 5:
+        return {"source": float("nan"), "target": float("nan")}
+    b = np.linalg.lstsq(np.column_stack([z[1][ok], z[2][ok]]), z[0][ok], rcond=None)[0]
+    return {"source": float(b[0]), "target": float(b[1])}
+
+
 def turn_share(S: dict, R: dict) -> dict:
     """The head turn's share of the source's jawOpen: ``jawOpen ~ a lip_gap + b turn + c``
     fitted over the source's (time-matched) frames; the result's jawOpen against the source's
@@ -402,8 +424,7 @@ def plot(res: dict, path: Path) -> None:
     keys = ("jawOpen", "lip_gap", "chin_drop", "jaw_3d")
     fig, axes = plt.subplots(len(res), 4, figsize=(20, 2.8 * len(res)), squeeze=False)
     colours = {"source": "#08519c", "target": "#a50f15", "result_default": "k",
-               "result_mouth_function": "#31a354", "result_no_mouth": "#fd8d3c",
-               "result_source_turn": "#9e9ac8"}
+               "result_jaw_frame": "#fd8d3c"}
     for row, (p, r) in zip(axes, res.items()):
         for ax, k in zip(row, keys):
             for s, c in colours.items():
@@ -431,7 +452,8 @@ def _print(name: str, r: dict) -> None:
     print(f"{name} target only: {to}", flush=True)
     for v, c in r["variants"].items():
         line = "  ".join(f"{k} {c[k]['result_source']:+.2f}/{c[k]['result_target']:+.2f}"
-                         f" (s~t {c[k]['source_target']:+.2f}) "
+                         f" (s~t {c[k]['source_target']:+.2f}, share t "
+                         f"{c[k]['share']['target']:+.2f}) "
                          f"x{c[k]['amplitude']:.2f}" for k in ("jawOpen", "lip_gap", "chin_drop", "jaw_3d"))
         lag = max(c["jawOpen"]["lags"].items(), key=lambda kv: np.nan_to_num(kv[1], nan=-9))
         cross = "  ".join(f"{k} {x:+.2f}" for k, x in {**c["cross"], **c["turn"]}.items())
@@ -445,8 +467,8 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks")
     ap.add_argument("--pairs", default=",".join(PAIRS), help=f"of {', '.join(PAIRS)}")
-    ap.add_argument("--variants", help=f"of {', '.join(VARIANTS)} (default: all four on "
-                    "open, default and mouth_function elsewhere)")
+    ap.add_argument("--variants", help=f"of {', '.join(VARIANTS)} (default: all on open, "
+                    "default and jaw_frame elsewhere)")
     ap.add_argument("--frames", type=int, default=FRAMES, help="target frames judged")
     ap.add_argument("--fresh", action="store_true", help="re-render and re-judge (no cache)")
     args = ap.parse_args()
@@ -461,7 +483,7 @@ def main() -> int:
     res = {}
     for name in args.pairs.split(","):
         variants = (args.variants.split(",") if args.variants else
-                    PAIR_VARIANTS.get(name, ("default", "mouth_function")))
+                    PAIR_VARIANTS.get(name, ("default", "jaw_frame")))
         with filtered_stderr():
             res[name] = measure_pair(name, model, out, data, args.frames, variants, args.fresh)
         _print(name, res[name])

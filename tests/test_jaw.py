@@ -17,6 +17,7 @@ from facetransfer.track.result import Track
 
 SIZE = 256
 SKIN, SHADOW = (200, 150, 120), (70, 30, 30)
+SKIN_LIT = (220, 165, 132)  # the same skin 10% brighter (another frame's exposure)
 
 
 @pytest.fixture(scope="module")
@@ -94,10 +95,11 @@ def test_closed_reference_frame():
 
 
 def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
-    """Synthetic truth: the target opens its jaw in frame 1, and there the lower half of its
-    jaw region is in shadow; frame 0 has the mouth closed and no shadow. A closed new jaw
-    rendered into frame 1 takes the shadow from frame 1's texture (before); with the jaw
-    texture (from frame 0) it shows skin."""
+    """Synthetic truth: the target opens its jaw in frame 1, where the lower part of its jaw
+    region is in shadow and the exposure is 10% brighter; frame 0 has the mouth closed and no
+    shadow. A closed new jaw rendered into frame 1 takes the shadow from frame 1's texture
+    (before); with the jaw texture (from frame 0) it shows the skin at frame 1's exposure
+    (the gain is measured around the region, where the shadow is not)."""
     model, topo = setup
     target = _track(model, [0.0, 1.0])
     sel = jaw.jaw_region(model, topo)
@@ -105,7 +107,8 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     rows = np.flatnonzero(opened.any(axis=1))
     band = opened & (np.arange(SIZE)[:, None] > np.quantile(rows, 0.6))
     assert 0.15 < band.sum() / opened.sum() < 0.45
-    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8), np.full((SIZE, SIZE, 3), SKIN, np.uint8)]
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8),
+              np.full((SIZE, SIZE, 3), SKIN_LIT, np.uint8)]
     frames[1][band] = SHADOW
     tex = jaw.jaw_texture(frames, target, model, topo)
     assert tex.frame == 0 and tex.select.sum() == sel.sum()
@@ -119,14 +122,14 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     assert inner.sum() > 100
 
     def share(img, colour):
-        return np.mean(np.all(np.abs(img[inner].astype(int) - colour) < 40, axis=-1))
+        return np.mean(np.all(np.abs(img[inner].astype(int) - colour) < 8, axis=-1))
 
     before = rewrite_frame(frames[1], V, cam, topo, face_tex, blend="none", erode=0)
     after = rewrite_frame(frames[1], V, cam, topo, face_tex, jaw_texture=tex, blend="none",
                           erode=0)
     assert share(before.image, SHADOW) > 0.15  # the target's shading on the closed jaw
     assert share(after.image, SHADOW) < 0.01  # (the region's feathered outline aside)
-    assert share(after.image, SKIN) > 0.95
+    assert share(after.image, SKIN_LIT) > 0.95
     # only the jaw region changed: elsewhere the same frame
     np.testing.assert_array_equal(after.image[~region], before.image[~region])
 

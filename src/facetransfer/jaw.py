@@ -17,9 +17,10 @@ sequence)", applied to the jaw only):
 2. it is textured from one target frame whose mouth is closed and which faces the camera
    (:func:`closed_jaw_frame`), looked up through the target's tracked geometry in that frame
    (:func:`jaw_texture`);
-3. in every frame the region is pasted into the per-frame face shifted to its colours
+3. in every frame the region is pasted into the per-frame face scaled to its colours
    (:func:`paint_jaw`, :func:`facetransfer.eyes.match_outline`: the frames' exposure may
-   differ).
+   differ), compared over a ring of triangles around the region (:data:`RING`), which the
+   jaw does not move: inside the region the target's own opening would bias the ratio.
 """
 
 from __future__ import annotations
@@ -46,6 +47,8 @@ JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
 #: A vertex belongs to the jaw region when a jaw shape moves it by more than this fraction of
 #: that shape's largest displacement.
 JAW_THRESHOLD = 0.15
+#: Rings of triangles around the jaw region over which its exposure is matched.
+RING = 3
 
 
 @dataclass(frozen=True)
@@ -63,12 +66,16 @@ class JawTexture:
         The triangles of the topology textured from ``image``.
     frame : int
         The target frame ``image`` is.
+    ring : (F',) bool or None
+        The triangles around the region (not in it, not the mouth's) whose colours in
+        ``image`` and in the current frame set the region's gain; None: the region's own.
     """
 
     image: np.ndarray
     uvs: np.ndarray
     select: np.ndarray
     frame: int
+    ring: np.ndarray | None = None
 
 
 def jaw_region(model, topo, *, threshold: float = JAW_THRESHOLD, rig=None) -> np.ndarray | None:
@@ -80,6 +87,8 @@ def jaw_region(model, topo, *, threshold: float = JAW_THRESHOLD, rig=None) -> np
     """
     if not is_arkit_model(model):
         return None
+    if rig is None:
+        rig = expression_rig(model, model.default_weights())
     verts = region_vertices(model, JAW_SHAPES, threshold=threshold, rig=rig)
     vmask = np.zeros(topo.n_closed, bool)
     vmask[:verts.size] = verts
@@ -125,7 +134,7 @@ def closed_jaw_frame(track, n_frames: int | None = None, *, quantile: float = 0.
 
 
 def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
-                n_frames: int | None = None) -> JawTexture | None:
+                n_frames: int | None = None, rig=None) -> JawTexture | None:
     """Lift the jaw region's texture from a closed-mouth target frame.
 
     Parameters
@@ -141,13 +150,16 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
         The reference frame; default :func:`closed_jaw_frame`.
     n_frames : int, optional
         Choose the reference frame among the first ``n_frames`` only (default: all).
+    rig : ExpressionRig, optional
+        :func:`facetransfer.arkit.expression_rig` of the model's mean person, if at hand.
 
     Returns
     -------
     JawTexture or None
         None for a model without ARKit names or without a jaw region.
     """
-    rig = expression_rig(model, model.default_weights()) if is_arkit_model(model) else None
+    if not is_arkit_model(model):
+        return None
     select = jaw_region(model, topo, rig=rig)
     if select is None or not select.any():
         return None
@@ -156,8 +168,11 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
     img = np.asarray(frames[i])
     Vi = close_mouth(model.synthesize(track.weights_at(i)), topo)
     uvs = frame_uvs(Vi, track.camera(i), (img.shape[1], img.shape[0]))
+    ring = region_faces(topo.faces, np.isin(np.arange(topo.n_closed), topo.faces[select]),
+                        rings=RING) & ~select
+    ring[np.asarray(topo.mouth_faces, np.int64)] = False
     log.info("jaw: textured from target frame %d, %d triangles", i, int(select.sum()))
-    return JawTexture(img, uvs, select, i)
+    return JawTexture(img, uvs, select, i, ring)
 
 
 def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,
@@ -181,9 +196,15 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     (H, W, 3) uint8
         ``face_image`` with the jaw region replaced (shifted to its colours).
     """
-    img, mask = shade_texture(raster, faces, texture.uvs, texture.image, texture.select)
-    mask &= face_mask
+    sel = texture.select if texture.ring is None else texture.select | texture.ring
+    img, shown = shade_texture(raster, faces, texture.uvs, texture.image, sel)
+    shown &= face_mask
+    tri = np.maximum(raster.tri_id, 0)
+    mask = shown & texture.select[tri]
     if not mask.any():
         return face_image
-    return match_outline(face_image, img, mask, face_mask, feather=feather)
+    compare = None if texture.ring is None else shown & texture.ring[tri]
+    if compare is not None and compare.sum() < 8:
+        compare = None
+    return match_outline(face_image, img, mask, face_mask, feather=feather, compare=compare)
 

@@ -46,6 +46,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
+from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend
 from .errors import RewriteError, ShapeError
 from .eyes import EyeTexture, eye_texture, paint_eyes
@@ -451,6 +452,26 @@ def _clip_meshes(model, n: int, tracks: dict) -> dict:
             for kind, tr in tracks.items()}
 
 
+def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: int,
+                     opts: RewriteOptions, per_frame: bool):
+    """``(topo, eye texture, jaw texture)`` of a clip: the eye holes closed and the eye region
+    lifted (``eyes="model"``, :func:`facetransfer.eyes.eye_texture`), the jaw region lifted for
+    the final topology (``jaw="closed"`` with the per-frame face texture,
+    :func:`facetransfer.jaw.jaw_texture`); one expression rig for both."""
+    if target_track.lost[:n].all():
+        return topo, None, None
+    eyes, jaw = opts.eyes == "model", opts.jaw == "closed" and per_frame
+    rig = expression_rig(model, model.default_weights()) \
+        if is_arkit_model(model) and (eyes or jaw) else None
+    eye_tex = jaw_tex = None
+    if eyes:
+        topo, eye_tex = eye_texture(target_frames, target_track, model, topo, n_frames=n,
+                                    rig=rig)
+    if jaw:
+        jaw_tex = jaw_texture(target_frames, target_track, model, topo, n_frames=n, rig=rig)
+    return topo, eye_tex, jaw_tex
+
+
 @dataclass(frozen=True)
 class _ClipRenderer:
     """The per-frame work of :func:`rewrite_frames`: ``renderer(i) -> RewriteFrame``.
@@ -511,13 +532,9 @@ class _ClipRenderer:
             const_tex = merged_face_texture(target_frames, target_track, model, topo) \
                 if model.uvs is not None else constant_face_texture(target_frames, target_track,
                                                                    model, topo)
-        eye_tex = None
-        if opts.eyes == "model" and not target_track.lost[:n].all():
-            # after the mouth function, which keeps the open topology (issue 13)
-            topo, eye_tex = eye_texture(target_frames, target_track, model, topo, n_frames=n)
-        jaw_tex = None
-        if opts.jaw == "closed" and const_tex is None and not target_track.lost[:n].all():
-            jaw_tex = jaw_texture(target_frames, target_track, model, topo, n_frames=n)
+        # after the mouth function, which keeps the open topology (issue 13)
+        topo, eye_tex, jaw_tex = _region_textures(target_frames, target_track, model, topo, n,
+                                                  opts, const_tex is None)
         kinds = {"new": new_track}
         if const_tex is None:
             kinds["target"] = target_track
