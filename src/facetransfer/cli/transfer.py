@@ -450,7 +450,7 @@ def run_demo(args) -> int:
     model = _load_model_and_mediapipe(args.model, args.tracker != "landmarks")
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
-               track_method=args.tracker, speed=args.speed, eyes=args.eyes,
+               track_method=args.tracker, speed=args.speed, eyes=args.eyes, jaw=args.jaw,
                overwrite=args.overwrite,
                progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings
