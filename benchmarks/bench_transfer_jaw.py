@@ -26,9 +26,8 @@ result of the default transfer:
   tracker's jawOpen and against MediaPipe's lip gap and chin drop;
 * **timing**: correlations at frame lags -4..4 (a 25 -> 30 fps mismatch would peak off 0);
 * variants of the render (``--variants``): ``default`` (the rewrite's default: the chin and
-  jaw textured from target frames whose mouth opening matches the new performance's,
-  :mod:`facetransfer.jaw`), ``jaw_frame`` (the jaw textured from each target frame, as before
-  that), and probes of ``jaw_frame``:
+  jaw textured from a closed-mouth target frame, :mod:`facetransfer.jaw`), ``jaw_frame`` (the
+  jaw textured from each target frame, as before that), and probes of ``jaw_frame``:
   ``mouth_function`` (the §6 texture function for the mouth), ``no_mouth`` (the mouth
   textured from the target like the rest of the face: what the source's mouth pixels add),
   ``source_turn`` (see above), ``mp_mouth`` (the jaw and lip activations of the new
@@ -163,7 +162,7 @@ def explained(jaw: np.ndarray, geo: dict) -> float:
 PAIR_VARIANTS = {"open": ("default", "jaw_frame", "mouth_function", "no_mouth", "source_turn",
                           "mp_mouth", "constant_texture")}
 #: variant -> (RewriteOptions keywords, whether the source's mouth pixels are used). ``default``
-#: is the rewrite's default (the jaw from frames of a matching opening, :mod:`facetransfer.jaw`);
+#: is the rewrite's default (the jaw from a closed-mouth frame, :mod:`facetransfer.jaw`);
 #: ``jaw_frame`` the jaw textured from each target frame as before; the probes are variants of
 #: ``jaw_frame`` (what was measured to find the cause)
 VARIANTS = {"default": ({}, True),

@@ -65,49 +65,41 @@ def test_a_model_without_arkit_names_keeps_the_per_frame_jaw(quick_model):
     assert jaw.jaw_texture(frames, None, quick_model, topo) is None
 
 
-def test_reference_frames_span_the_openings_and_face_the_camera():
+def test_closed_reference_frame():
     class T:  # the fields the frame choice reads
-        lost = np.array([False, True, False, False, False, False, False, False])
-        rotation = np.tile(np.eye(3), (8, 1, 1))
-        confidence = np.ones(8)
+        lost = np.array([False, True, False, False, False, False])
+        rotation = np.tile(np.eye(3), (6, 1, 1))
+        confidence = np.ones(6)
+        blendshape_names = ARKIT_NAMES
+        landmarks2d = np.zeros((6, 68, 2))
         source = "t.mp4"
+    b = np.zeros((6, 52), np.float32)
+    b[:, ARKIT_NAMES.index("jawOpen")] = [0.6, 0.0, 0.05, 0.1, 0.5, 0.02]
+    T.blendshapes = b
+    T.rotation = T.rotation.copy()
     T.rotation[2] = [[0.8, 0, 0.6], [0, 1, 0], [-0.6, 0, 0.8]]  # turned away
-    opening = np.array([0.6, 0.0, 0.05, 0.1, 0.5, 0.02, 0.9, 0.51])
-    # by opening: 5 2 3 | 4 7 | 0 6 (frame 1 is lost); frame 2 is turned, the rest ties (the
-    # first wins)
-    np.testing.assert_array_equal(jaw.jaw_frames(T, opening, k=3), [5, 4, 0])
-    np.testing.assert_array_equal(jaw.jaw_frames(T, opening, 6, k=3), [5, 3, 0])  # 5 2 | 3 4 | 0
-    # one share each; frame 7 lies within SAME_OPENING of frame 4 and counts once
-    assert jaw.jaw_frames(T, opening, k=7).tolist() == [5, 2, 3, 4, 0, 6]
-    T.lost = np.ones(8, bool)
+    # frame 1 (closed) is lost; of the closed frames 2 and 5, frame 2 is turned
+    assert jaw.closed_jaw_frame(T) == 5
+    assert jaw.closed_jaw_frame(T, 5) == 2  # among the first five only
+    # without activations: the landmarks' lip gap
+    T.blendshapes = None
+    L = np.zeros((6, 68, 2))
+    L[:, 36], L[:, 45] = (0, 0), (10, 0)
+    L[:, 66, 1] = [4, 0, 3, 0.1, 2, 1]
+    T.landmarks2d = L
+    np.testing.assert_allclose(jaw.mouth_closure(T), [0.4, 0, 0.3, 0.01, 0.2, 0.1])
+    assert jaw.closed_jaw_frame(T) == 3
+    T.lost = np.ones(6, bool)
     with pytest.raises(RewriteError, match="lost in every frame"):
-        jaw.jaw_frames(T, opening)
-
-
-def test_mix_cross_fades_between_the_bracketing_openings():
-    tex = jaw.JawTexture((None,) * 3, np.zeros((3, 1, 2)), np.array([0.0, 0.4, 0.8]),
-                         np.arange(3), np.zeros(1, bool))
-    assert tex.mix(-0.1) == [(0, 1.0)] and tex.mix(0.9) == [(2, 1.0)]
-    assert tex.mix(0.4) in ([(1, 1.0)], [(0, 0.0), (1, 1.0)], [(1, 1.0), (2, 0.0)])
-    (k0, w0), (k1, w1) = tex.mix(0.6)
-    assert (k0, k1) == (1, 2) and w0 == pytest.approx(0.5) and w1 == pytest.approx(0.5)
-    (_, w0), (_, w1) = tex.mix(0.5)  # a smoothstep: nearer the closer frame than linear
-    assert w0 + w1 == pytest.approx(1.0) and w0 > 0.75
-
-
-def test_jaw_opening_reads_the_activation(setup):
-    model, _ = setup
-    np.testing.assert_allclose(jaw.jaw_opening(model, _track(model, [0.0, 0.3, 1.0])),
-                               [0.0, 0.3, 1.0], atol=1e-6)
+        jaw.closed_jaw_frame(T)
 
 
 def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     """Synthetic truth: the target opens its jaw in frame 1, where the lower part of its jaw
     region is in shadow and the exposure is 10% brighter; frame 0 has the mouth closed and no
     shadow. A closed new jaw rendered into frame 1 takes the shadow from frame 1's texture
-    (before); with the jaw texture it shows frame 0's skin at frame 1's exposure (the gain is
-    measured around the region, where the shadow is not). An open new jaw shows frame 1's
-    shading, the target's own at that opening."""
+    (before); with the jaw texture (from frame 0) it shows the skin at frame 1's exposure
+    (the gain is measured around the region, where the shadow is not)."""
     model, topo = setup
     target = _track(model, [0.0, 1.0])
     sel = jaw.jaw_region(model, topo)
@@ -119,8 +111,7 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
               np.full((SIZE, SIZE, 3), SKIN_LIT, np.uint8)]
     frames[1][band] = SHADOW
     tex = jaw.jaw_texture(frames, target, model, topo)
-    assert tex.frames.tolist() == [0, 1] and tex.select.sum() == sel.sum()
-    np.testing.assert_allclose(tex.openings, [0.0, 1.0], atol=1e-6)
+    assert tex.frame == 0 and tex.select.sum() == sel.sum()
     cam = target.camera(1)
     face_tex = FaceTexture(frames[1], frame_uvs(close_mouth(model.synthesize(
         target.weights_at(1)), topo), cam, (SIZE, SIZE)), 1)
@@ -134,23 +125,17 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
         return np.mean(np.all(np.abs(img[inner].astype(int) - colour) < 8, axis=-1))
 
     before = rewrite_frame(frames[1], V, cam, topo, face_tex, blend="none", erode=0)
-    after = rewrite_frame(frames[1], V, cam, topo, face_tex, jaw_texture=tex, jaw_open=0.0,
-                          blend="none", erode=0)
+    after = rewrite_frame(frames[1], V, cam, topo, face_tex, jaw_texture=tex, blend="none",
+                          erode=0)
     assert share(before.image, SHADOW) > 0.15  # the target's shading on the closed jaw
     assert share(after.image, SHADOW) < 0.01  # (the region's feathered outline aside)
     assert share(after.image, SKIN_LIT) > 0.95
     # only the jaw region changed: elsewhere the same frame
     np.testing.assert_array_equal(after.image[~region], before.image[~region])
-    # the new jaw as open as the target's in frame 1: its own texture there, shadow and all
-    V1 = model.synthesize(target.weights_at(1))
-    same = rewrite_frame(frames[1], V1, cam, topo, face_tex, blend="none", erode=0)
-    matched = rewrite_frame(frames[1], V1, cam, topo, face_tex, jaw_texture=tex, jaw_open=1.0,
-                            blend="none", erode=0)
-    assert np.abs(matched.image.astype(int) - same.image).max() <= 2
 
 
 def test_jaw_option():
-    assert RewriteOptions().jaw == "matched"
+    assert RewriteOptions().jaw == "closed"
     assert RewriteOptions(jaw="frame").jaw == "frame"
-    with pytest.raises(RewriteError, match="jaw must be one of matched, frame"):
+    with pytest.raises(RewriteError, match="jaw must be one of closed, frame"):
         RewriteOptions(jaw="open")

@@ -197,7 +197,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
              texture: str = "frame", blend: str = "fast", track_method: str = "auto",
              speed: str = DEFAULT_SPEED, progress_factory=None, mouth: str | None = None,
              overwrite: bool = True, video_options=None, judge: bool = True,
-             eyes: str = "model", jaw: str = "matched") -> DemoResult:
+             eyes: str = "model", jaw: str = "closed") -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
     Parameters

@@ -197,7 +197,7 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     options = RewriteOptions(
         texture=settings["texture"], blend=settings["blend"], mouth=settings["mouth"],
         track_method=settings["track_method"], speed=settings["speed"],
-        eyes=settings.get("eyes", "model"), jaw=settings.get("jaw", "matched"))
+        eyes=settings.get("eyes", "model"), jaw=settings.get("jaw", "closed"))
     sources = TransferSources.of(
         str(job.target), target_track=s.get("target_track"),
         expression_from=s.get("expression_from"),

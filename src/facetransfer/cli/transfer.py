@@ -70,10 +70,10 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    help="model: the new performance's eyelids (blinks) rendered over an "
                    "open-eyed target frame; target: the target's own eyes show through the "
                    "mesh's eye holes, as in the paper")
-    p.add_argument("--jaw", choices=JAW_MODES, default="matched",
-                   help="matched: the chin and jaw skin textured from target frames whose mouth "
-                   "opening matches the new performance's, so the target's own opening does not "
-                   "show; frame: from each target frame like the rest of the face")
+    p.add_argument("--jaw", choices=JAW_MODES, default="closed",
+                   help="closed: the chin and jaw skin textured from a target frame with the "
+                   "mouth closed, so the target's own mouth opening does not show; frame: from "
+                   "each target frame like the rest of the face")
     p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given: auto or capture ("
                    + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
