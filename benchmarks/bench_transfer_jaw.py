@@ -439,8 +439,8 @@ def plot(res: dict, path: Path) -> None:
     for ax in axes[-1]:
         ax.set_xlabel("target frame")
     fig.suptitle("MediaPipe on source (time-matched), target and result: jawOpen, inner lip gap "
-                 "(13-14) and chin drop (152-4), both over the eye-corner distance")
-    fig.tight_layout()
+                 "(13-14), chin drop (152-4) and 3-D jaw (152-6), over the eye-corner distance")
+    fig.tight_layout(rect=(0, 0, 1, 0.985))
     save_figure(fig, path)
     plt.close(fig)
 
