@@ -391,7 +391,7 @@ def open_eye_frame(track, n_frames: int | None = None, *, quantile: float = 0.75
 
 
 def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | None = None,
-                rings: int = 4, n_frames: int | None = None):
+                rings: int = 4, n_frames: int | None = None, rig=None):
     """Close the eye holes and lift the eye region's texture from an open-eyed target frame.
 
     Parameters
@@ -412,6 +412,8 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         For models without ARKit names: the eye region is this many rings around the holes.
     n_frames : int, optional
         Choose the reference frames among the first ``n_frames`` only (default: all).
+    rig : ExpressionRig, optional
+        :func:`facetransfer.arkit.expression_rig` of the model's mean person, if at hand.
 
     Returns
     -------
@@ -425,7 +427,8 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         return topo, None
     V0 = model.synthesize(model.default_weights())
     closed, fill = close_eyes(topo, V0)
-    select, lid_faces = _region_faces(model, topo, closed, fill, brows=brows, rings=rings)
+    select, lid_faces = _region_faces(model, topo, closed, fill, brows=brows, rings=rings,
+                                      rig=rig)
     pairs, side = _lid_sides(model, topo, closed, V0, lid_faces)
 
     def lift(j):
@@ -453,14 +456,16 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
 # one frame
 # ---------------------------------------------------------------------------------------------
 
-def _region_faces(model, topo, closed, fill: np.ndarray, *, brows: bool, rings: int):
+def _region_faces(model, topo, closed, fill: np.ndarray, *, brows: bool, rings: int,
+                  rig=None):
     """The triangles (bool masks over ``closed.faces``) of the eye region and of the lids alone.
 
     The region is what the ARKit eye shapes (and, with ``brows``, the brow shapes) move, or
     ``rings`` rings around the holes for other models, closed over small holes, plus the
     fill triangles ``fill`` of :func:`close_eyes`.
     """
-    rig = expression_rig(model, model.default_weights()) if is_arkit_model(model) else None
+    if rig is None and is_arkit_model(model):
+        rig = expression_rig(model, model.default_weights())
     lids = region_vertices(model, EYE_SHAPES, rig=rig)
     if lids is None:
         lids = _ring_vertices(closed.faces, topo.eye_loops, closed.n_closed, rings)
@@ -567,7 +572,7 @@ def _region_box(raster, select: np.ndarray, *, margin: int) -> tuple[int, int, i
 
 
 def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
-                  *, feather: float = 3.0) -> np.ndarray:
+                  *, feather: float = 3.0, compare: np.ndarray | None = None) -> np.ndarray:
     """Paste ``part`` into ``face`` inside ``mask``, shifted to the face's colours.
 
     ``face`` and ``part`` show the same surface there (the same person's skin lifted from two
@@ -585,6 +590,9 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     face, part : (H, W, 3) uint8
     mask, face_mask : (H, W) bool
     feather : float
+    compare : (H, W) bool, optional
+        Where ``face`` and ``part`` are compared instead of ``mask`` (a ring around the region
+        that the expression does not move, e.g.).
 
     Returns
     -------
@@ -595,7 +603,7 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     m8 = mask.astype(np.uint8)
     deep = cv2.erode(face_mask.astype(np.uint8), np.ones((5, 5), np.uint8),
                      borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
-    ring = mask & deep
+    ring = (mask if compare is None else compare) & deep
     f = part.astype(np.float32)
     if ring.sum() >= 8:
         f *= gain_field(face, part, ring)

@@ -46,9 +46,11 @@ from typing import Callable, Iterator
 
 import numpy as np
 
+from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend
 from .errors import RewriteError, ShapeError
 from .eyes import EyeTexture, eye_texture, paint_eyes
+from .jaw import JawTexture, jaw_texture, paint_jaw
 from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
@@ -95,7 +97,8 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
                   face_texture: FaceTexture, *, mouth_texture: FaceTexture | None = None,
                   blend: str = "fast", feather: float = 2.0, erode: int = 2,
                   mouth_feather: float = 3.0, color_match: bool = False,
-                  eye_texture: EyeTexture | None = None) -> RewriteFrame:
+                  eye_texture: EyeTexture | None = None,
+                  jaw_texture: JawTexture | None = None) -> RewriteFrame:
     """Render the new face into one target frame (§6).
 
     Parameters
@@ -124,6 +127,10 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     eye_texture : EyeTexture, optional
         The eye region's texture (``topo`` then has its eye holes closed:
         :func:`facetransfer.eyes.eye_texture`); without it the target's eyes show through.
+    jaw_texture : JawTexture, optional
+        The jaw region's texture from a closed-mouth target frame
+        (:func:`facetransfer.jaw.jaw_texture`, for ``topo``); without it the jaw is textured
+        from ``face_texture`` like the rest of the face.
 
     Returns
     -------
@@ -148,7 +155,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     x0, y0, x1, y1 = box
     cam = camera if box == (0, 0, W, H) else _shift_camera(camera, x0, y0)
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
-                        feather, erode, mouth_feather, color_match, eye_texture)
+                        feather, erode, mouth_feather, color_match, eye_texture, jaw_texture)
     return _paste(T, (box, res))
 
 
@@ -220,7 +227,8 @@ def _shift_camera(camera, x0: int, y0: int):
 
 
 def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
-                  mouth_feather, color_match, eye_texture=None) -> RewriteFrame:
+                  mouth_feather, color_match, eye_texture=None, jaw_texture=None
+                  ) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
     from .render import rasterize
 
@@ -229,6 +237,8 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     face_img, face_mask = _shade(raster, topo.faces, face_texture.uvs, face_texture.image)
     if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
         face_img = paint_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture)
+    if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
+        face_img = paint_jaw(raster, topo.faces, face_img, face_mask, jaw_texture)
     mouth_mask = np.zeros((H, W), bool)
     rendered = face_img
     mouth_img = None
@@ -442,6 +452,26 @@ def _clip_meshes(model, n: int, tracks: dict) -> dict:
             for kind, tr in tracks.items()}
 
 
+def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: int,
+                     opts: RewriteOptions, per_frame: bool):
+    """``(topo, eye texture, jaw texture)`` of a clip: the eye holes closed and the eye region
+    lifted (``eyes="model"``, :func:`facetransfer.eyes.eye_texture`), the jaw region lifted for
+    the final topology (``jaw="closed"`` with the per-frame face texture,
+    :func:`facetransfer.jaw.jaw_texture`); one expression rig for both."""
+    if target_track.lost[:n].all():
+        return topo, None, None
+    eyes, jaw = opts.eyes == "model", opts.jaw == "closed" and per_frame
+    rig = expression_rig(model, model.default_weights()) \
+        if is_arkit_model(model) and (eyes or jaw) else None
+    eye_tex = jaw_tex = None
+    if eyes:
+        topo, eye_tex = eye_texture(target_frames, target_track, model, topo, n_frames=n,
+                                    rig=rig)
+    if jaw:
+        jaw_tex = jaw_texture(target_frames, target_track, model, topo, n_frames=n, rig=rig)
+    return topo, eye_tex, jaw_tex
+
+
 @dataclass(frozen=True)
 class _ClipRenderer:
     """The per-frame work of :func:`rewrite_frames`: ``renderer(i) -> RewriteFrame``.
@@ -456,6 +486,8 @@ class _ClipRenderer:
         The mouth comes from ``source_frames`` (``mouth="frame"`` with a source).
     eye_tex : EyeTexture or None
         The eye region's texture (``eyes="model"``; ``topo`` then has its eye holes closed).
+    jaw_tex : JawTexture or None
+        The jaw region's texture (``jaw="closed"`` with the per-frame face texture).
     meshes : dict
         ``"new"``, ``"target"``, ``"source"`` meshes of every frame synthesised up front
         (:func:`_clip_meshes`); missing kinds are synthesised per frame.
@@ -476,6 +508,7 @@ class _ClipRenderer:
     with_mouth: bool
     meshes: dict
     eye_tex: EyeTexture | None = None
+    jaw_tex: JawTexture | None = None
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
@@ -499,10 +532,9 @@ class _ClipRenderer:
             const_tex = merged_face_texture(target_frames, target_track, model, topo) \
                 if model.uvs is not None else constant_face_texture(target_frames, target_track,
                                                                    model, topo)
-        eye_tex = None
-        if opts.eyes == "model" and not target_track.lost[:n].all():
-            # after the mouth function, which keeps the open topology (issue 13)
-            topo, eye_tex = eye_texture(target_frames, target_track, model, topo, n_frames=n)
+        # after the mouth function, which keeps the open topology (issue 13)
+        topo, eye_tex, jaw_tex = _region_textures(target_frames, target_track, model, topo, n,
+                                                  opts, const_tex is None)
         kinds = {"new": new_track}
         if const_tex is None:
             kinds["target"] = target_track
@@ -510,7 +542,7 @@ class _ClipRenderer:
             kinds["source"] = source_track
         return cls(target_frames, target_track, new_track, model, opts, topo, first,
                    source_frames, source_track, sidx, const_tex, fn, with_mouth,
-                   _clip_meshes(model, n, kinds), eye_tex)
+                   _clip_meshes(model, n, kinds), eye_tex, jaw_tex)
 
     def mesh(self, kind: str, track, i: int) -> np.ndarray:
         """The mesh (n_vertices, 3) of frame ``i`` of ``track`` (its ``kind`` in :attr:`meshes`)."""
@@ -549,7 +581,8 @@ class _ClipRenderer:
         return rewrite_frame(frame, self.mesh("new", self.new_track, i),
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
-                             feather=o.feather, erode=o.erode, eye_texture=self.eye_tex)
+                             feather=o.feather, erode=o.erode, eye_texture=self.eye_tex,
+                             jaw_texture=self.jaw_tex)
 
 
 def _render_in_threads(one, n: int, workers: int, progress):

@@ -21,6 +21,7 @@ __all__ = [
     "MOUTH_MODES",
     "BLEND_MODES",
     "EYE_MODES",
+    "JAW_MODES",
     "SPEED_PRESETS",
     "DEFAULT_SPEED",
     "TRACK_METHODS",
@@ -41,6 +42,9 @@ BLEND_MODES = ("fast", "poisson", "none")
 #: Where the eyes of the result come from: the model's lids over an open-eyed target frame, or
 #: the target's own eyes through the mesh's eye holes (§6).
 EYE_MODES = ("model", "target")
+#: Where the chin and jaw skin's texture comes from (with the per-frame face texture): one
+#: target frame with the mouth closed (:mod:`facetransfer.jaw`), or each target frame.
+JAW_MODES = ("closed", "frame")
 
 
 def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> None:
@@ -78,6 +82,11 @@ class RewriteOptions:
         rendered with an open-eyed target frame's texture (:mod:`facetransfer.eyes`), so the
         new performance's blinks show; ``"target"``: the holes left open and the target's own
         eyes showing through them, as in the paper (§6).
+    jaw : {"closed", "frame"}
+        ``"closed"``: the chin and jaw region textured from one target frame with the mouth
+        closed (:mod:`facetransfer.jaw`), so the target's own mouth opening does not show
+        in the result; ``"frame"``: from each target frame like the rest of the face. Only
+        with ``texture="frame"``.
 
     Raises
     ------
@@ -93,6 +102,7 @@ class RewriteOptions:
     speed: str = DEFAULT_SPEED
     track_method: str = "auto"
     eyes: str = "model"
+    jaw: str = "closed"
 
     def __post_init__(self) -> None:
         check_mode("texture", self.texture, TEXTURE_MODES, sep=None)
@@ -102,6 +112,7 @@ class RewriteOptions:
         check_mode("speed", self.speed, SPEED_PRESETS)
         check_track_method(self.track_method)
         check_mode("eyes", self.eyes, EYE_MODES)
+        check_mode("jaw", self.jaw, JAW_MODES)
         if not self.feather >= 0:
             raise RewriteError(f"feather must be >= 0 pixels, got {self.feather!r}")
         if int(self.erode) != self.erode or self.erode < 0:

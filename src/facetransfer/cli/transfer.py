@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..transfer import ALIGN_MODES
-from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, MOUTH_MODES,
+from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, JAW_MODES, MOUTH_MODES,
                                SPEED_PRESETS, TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import MODEL_HELP, add_video_options, resolve_model, video_options
 from .track import CAPTURE_HELP
@@ -70,6 +70,10 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    help="model: the new performance's eyelids (blinks) rendered over an "
                    "open-eyed target frame; target: the target's own eyes show through the "
                    "mesh's eye holes, as in the paper")
+    p.add_argument("--jaw", choices=JAW_MODES, default="closed",
+                   help="closed: the chin and jaw skin textured from a target frame with the "
+                   "mouth closed, so the target's own mouth opening does not show; frame: from "
+                   "each target frame like the rest of the face")
     p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given: auto or capture ("
                    + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
@@ -85,7 +89,8 @@ def rewrite_options(args) -> RewriteOptions:
     """The :class:`~facetransfer.rewrite_options.RewriteOptions` of
     :func:`add_rewrite_options`' arguments."""
     return RewriteOptions(texture=args.texture, mouth=args.mouth, blend=args.blend,
-                          speed=args.speed, track_method=args.tracker, eyes=args.eyes)
+                          speed=args.speed, track_method=args.tracker, eyes=args.eyes,
+                          jaw=args.jaw)
 
 
 def _parser(sub, name: str, help: str, description: str):
@@ -445,7 +450,7 @@ def run_demo(args) -> int:
     model = _load_model_and_mediapipe(args.model, args.tracker != "landmarks")
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
-               track_method=args.tracker, speed=args.speed, eyes=args.eyes,
+               track_method=args.tracker, speed=args.speed, eyes=args.eyes, jaw=args.jaw,
                overwrite=args.overwrite,
                progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings

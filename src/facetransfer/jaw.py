@@ -1,0 +1,215 @@
+"""A jaw that transfers: the chin and jaw skin textured from a closed-mouth target frame.
+
+The rewrite textures the face from each target frame (``texture="frame"``), looked up through
+the target's own tracked mesh. Where the target opens its mouth and the new performance does
+not, that lookup carries the target's own opening into the result: the chin's stretched skin
+and the shadows under the lower lip and along the jaw move with the target, not with the new
+jaw (issue 13: on the open-mouth pair ``WDA_KatieHill_000`` -> ``driving_d6`` MediaPipe's
+jawOpen of the result followed the target's with a standardised weight of +0.41; with one
+texture for the clip, +0.31 — ``benchmarks/bench_transfer_jaw.py``). The same held for the
+brows, solved in :mod:`facetransfer.eyes` by texturing them from one frame. Here likewise
+(Vlasic et al. 2005, §6: the face texture "from the target video (constant throughout the
+sequence)", applied to the jaw only):
+
+1. the jaw region is every triangle that the ARKit jaw shapes move (:data:`JAW_SHAPES`,
+   :func:`facetransfer.eyes.region_vertices`), without the mouth's triangles (those show the
+   source's mouth);
+2. it is textured from one target frame whose mouth is closed and which faces the camera
+   (:func:`closed_jaw_frame`), looked up through the target's tracked geometry in that frame
+   (:func:`jaw_texture`; five frames spanning the target's openings, cross-faded by the new
+   jaw's opening, measured the same on the jaw and worse on the smile: they show more of the
+   target's own mouth);
+3. in every frame the region is pasted into the per-frame face scaled to its colours
+   (:func:`paint_jaw`, :func:`facetransfer.eyes.match_outline`: the frames' exposure may
+   differ), compared over a ring of triangles around the region (:data:`RING`), which the
+   jaw does not move: inside the region the target's own opening would bias the ratio.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from .arkit import expression_rig, is_arkit_model
+from .errors import RewriteError
+from .eyes import close_region, match_outline, region_faces, region_vertices
+from .render import shade_texture
+from .texture.face import frame_uvs
+from .topology import close_mouth
+
+log = logging.getLogger(__name__)
+
+__all__ = ["JAW_SHAPES", "JAW_THRESHOLD", "JawTexture", "jaw_region", "mouth_closure",
+           "closed_jaw_frame", "jaw_texture", "paint_jaw"]
+
+#: ARKit blendshapes whose vertices take the closed-mouth frame's texture.
+JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
+#: A vertex belongs to the jaw region when a jaw shape moves it by more than this fraction of
+#: that shape's largest displacement.
+JAW_THRESHOLD = 0.15
+#: Rings of triangles around the jaw region over which its exposure is matched.
+RING = 3
+
+
+@dataclass(frozen=True)
+class JawTexture:
+    """The texture of the jaw region for a whole clip.
+
+    Attributes
+    ----------
+    image : (Ht, Wt, 3) uint8
+        The closed-mouth target frame.
+    uvs : (n_closed, 2) float64
+        Texture coordinates (v up, :func:`facetransfer.texture.face.frame_uvs`) of the closed
+        mesh's vertices in that frame.
+    select : (F',) bool
+        The triangles of the topology textured from ``image``.
+    frame : int
+        The target frame ``image`` is.
+    ring : (F',) bool or None
+        The triangles around the region (not in it, not the mouth's) whose colours in
+        ``image`` and in the current frame set the region's gain; None: the region's own.
+    """
+
+    image: np.ndarray
+    uvs: np.ndarray
+    select: np.ndarray
+    frame: int
+    ring: np.ndarray | None = None
+
+
+def jaw_region(model, topo, *, threshold: float = JAW_THRESHOLD, rig=None) -> np.ndarray | None:
+    """The jaw region's triangles, ``(len(topo.faces),) bool``, or None for a model without
+    ARKit names.
+
+    The triangles whose vertices the :data:`JAW_SHAPES` move (of the model's mean person; small
+    holes closed), without ``topo.mouth_faces``. It reaches along the jaw line and under the
+    chin, where the surface is seen nearly edge-on: the target's own chin outline and the
+    shadow below it are what moved with the target's opening (keeping only the triangles that
+    face the camera undid the fix on the open-mouth pair: ``BENCHMARKS.md``).
+    """
+    if not is_arkit_model(model):
+        return None
+    if rig is None:
+        rig = expression_rig(model, model.default_weights())
+    verts = region_vertices(model, JAW_SHAPES, threshold=threshold, rig=rig)
+    vmask = np.zeros(topo.n_closed, bool)
+    vmask[:verts.size] = verts
+    vmask = close_region(topo.faces, vmask)
+    sel = region_faces(topo.faces, vmask, rings=0)
+    sel[np.asarray(topo.mouth_faces, np.int64)] = False
+    return sel
+
+
+def mouth_closure(track) -> np.ndarray:
+    """How open each frame's mouth is, ``(F,)``: the jawOpen activation when the track has
+    ARKit activations, else the model landmarks' inner-lip gap (iBUG 62-66) over the outer
+    eye-corner distance (iBUG 36-45)."""
+    if track.blendshapes is not None and track.blendshape_names is not None:
+        names = list(track.blendshape_names)
+        if "jawOpen" in names:
+            return np.asarray(track.blendshapes, np.float64)[:, names.index("jawOpen")]
+    L = np.asarray(track.landmarks2d, np.float64)
+    eye = np.maximum(np.linalg.norm(L[:, 36] - L[:, 45], axis=1), 1e-9)
+    return np.linalg.norm(L[:, 62] - L[:, 66], axis=1) / eye
+
+
+def closed_jaw_frame(track, n_frames: int | None = None, *, quantile: float = 0.25) -> int:
+    """The target frame to texture the jaw from: mouth closed, facing the camera.
+
+    Among the frames (of the first ``n_frames``) where the face is not lost and the mouth is at
+    most as open as the ``quantile`` of :func:`mouth_closure`, the one facing the camera most
+    squarely (plus half its tracking confidence).
+
+    Raises
+    ------
+    RewriteError
+        The face is lost in every frame.
+    """
+    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
+    if good.size == 0:
+        raise RewriteError(f"the face is lost in every frame of "
+                           f"{track.source or 'the target'}")
+    op = mouth_closure(track)[good]
+    cand = good[op <= np.quantile(op, quantile)]
+    score = track.rotation[cand, 2, 2] + 0.5 * np.asarray(track.confidence)[cand]
+    return int(cand[np.argmax(score)])
+
+
+def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
+                n_frames: int | None = None, rig=None) -> JawTexture | None:
+    """Lift the jaw region's texture from a closed-mouth target frame.
+
+    Parameters
+    ----------
+    frames : sequence of (H, W, 3) uint8
+        The target video.
+    track : Track
+        The target's own track.
+    model : MultilinearModel
+    topo : MeshTopology
+        The topology the new face is rasterised with (eye holes closed or not).
+    frame : int, optional
+        The reference frame; default :func:`closed_jaw_frame`.
+    n_frames : int, optional
+        Choose the reference frame among the first ``n_frames`` only (default: all).
+    rig : ExpressionRig, optional
+        :func:`facetransfer.arkit.expression_rig` of the model's mean person, if at hand.
+
+    Returns
+    -------
+    JawTexture or None
+        None for a model without ARKit names or without a jaw region.
+    """
+    if not is_arkit_model(model):
+        return None
+    select = jaw_region(model, topo, rig=rig)
+    if select is None or not select.any():
+        return None
+    m = len(frames) if n_frames is None else min(int(n_frames), len(frames))
+    i = closed_jaw_frame(track, m) if frame is None else int(frame)
+    img = np.asarray(frames[i])
+    Vi = close_mouth(model.synthesize(track.weights_at(i)), topo)
+    uvs = frame_uvs(Vi, track.camera(i), (img.shape[1], img.shape[0]))
+    ring = region_faces(topo.faces, np.isin(np.arange(topo.n_closed), topo.faces[select]),
+                        rings=RING) & ~select
+    ring[np.asarray(topo.mouth_faces, np.int64)] = False
+    log.info("jaw: textured from target frame %d, %d triangles", i, int(select.sum()))
+    return JawTexture(img, uvs, select, i, ring)
+
+
+def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,
+              texture: JawTexture, *, feather: float = 4.0) -> np.ndarray:
+    """The rendered face with its jaw region textured from the closed-mouth frame.
+
+    Parameters
+    ----------
+    raster : Raster
+        Of the new mesh with the topology ``faces``.
+    faces : (F', 3) int
+    face_image : (H, W, 3) uint8
+        The face shaded from the face texture.
+    face_mask : (H, W) bool
+    texture : JawTexture
+    feather : float
+        Soft-edge width in pixels of the region's outline.
+
+    Returns
+    -------
+    (H, W, 3) uint8
+        ``face_image`` with the jaw region replaced (shifted to its colours).
+    """
+    sel = texture.select if texture.ring is None else texture.select | texture.ring
+    img, shown = shade_texture(raster, faces, texture.uvs, texture.image, sel)
+    shown &= face_mask
+    tri = np.maximum(raster.tri_id, 0)
+    mask = shown & texture.select[tri]
+    if not mask.any():
+        return face_image
+    compare = None if texture.ring is None else shown & texture.ring[tri]
+    if compare is not None and compare.sum() < 8:
+        compare = None
+    return match_outline(face_image, img, mask, face_mask, feather=feather, compare=compare)
+
