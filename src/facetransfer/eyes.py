@@ -600,22 +600,32 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     """
     import cv2
 
-    m8 = mask.astype(np.uint8)
+    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
+    if w == 0 or h == 0:
+        return face.copy()
     deep = cv2.erode(face_mask.astype(np.uint8), np.ones((5, 5), np.uint8),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
     ring = (mask if compare is None else compare) & deep
-    f = part.astype(np.float32)
+    box = (slice(y, y + h), slice(x, x + w))      # the work is done on the region's box only
+    f = part[box].astype(np.float32)
     if ring.sum() >= 8:
-        f *= gain_field(face, part, ring)
-    a = np.clip(cv2.distanceTransform(m8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE) / max(feather, 1e-6),
-                0.0, 1.0)[..., None]
-    out = a * f + (1.0 - a) * face.astype(np.float32)
-    return np.where(mask[..., None], np.clip(np.rint(out), 0, 255), face).astype(np.uint8)
+        f *= gain_field(face, part, ring, box=(x, y, x + w, y + h))
+    # the distance to the nearest pixel outside the region (one pixel of the box's border is
+    # outside it, or the image ends there: the same distances as over the whole image)
+    pad = np.pad(mask[box].view(np.uint8), 1)
+    a = np.clip(cv2.distanceTransform(pad, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
+                / max(feather, 1e-6), 0.0, 1.0)[..., None]
+    fb = face[box].astype(np.float32)
+    blended = np.clip(np.rint(fb + a * (f - fb)), 0, 255).astype(np.uint8)
+    out = face.copy()
+    out[box] = np.where(mask[box][..., None], blended, face[box])
+    return out
 
 
 def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
-               iterations: int = 5) -> np.ndarray:
-    """Per-channel gains ``(H, W, 3)`` float32 taking ``part`` to ``face``'s colours.
+               iterations: int = 5, box: tuple[int, int, int, int] | None = None,
+               max_samples: int = 4096) -> np.ndarray:
+    """Per-channel gains taking ``part`` to ``face``'s colours.
 
     The log ratio ``log(1 + face) - log(1 + part)`` over the pixels ``where`` is fitted, per
     channel, by a plane ``a + b x + c y`` in least absolute deviations (iteratively reweighted
@@ -631,25 +641,30 @@ def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
         At least 3 pixels not on one line.
     iterations : int
         Reweighting steps.
+    box : (x0, y0, x1, y1), optional
+        Return the gains of this box of pixels only (default: the whole image).
+    max_samples : int
+        At most this many of the ``where`` pixels (evenly strided) enter the fit.
 
     Returns
     -------
-    (H, W, 3) float32
+    (y1 - y0, x1 - x0, 3) float32
     """
     ys, xs = np.nonzero(where)
     cy, cx = ys.mean(), xs.mean()
     scale = float(max(np.ptp(ys), np.ptp(xs), 1))
+    step = max(1, -(-ys.size // int(max_samples)))
+    ys, xs = ys[::step], xs[::step]
     A = np.stack([np.ones(ys.size), (xs - cx) / scale, (ys - cy) / scale], axis=1)   # (k, 3)
     r = np.log1p(face[ys, xs].astype(np.float64)) - np.log1p(part[ys, xs].astype(np.float64))
     w = np.ones_like(r)                                                            # (k, 3)
-    coef = np.zeros((3, 3))
-    for _ in range(int(iterations)):
-        for c in range(3):  # weighted normal equations, a tiny ridge for degenerate pixel sets
-            Aw = A * w[:, c:c + 1]
-            coef[:, c] = np.linalg.solve(Aw.T @ A + 1e-9 * np.eye(3), Aw.T @ r[:, c])
+    for _ in range(int(iterations)):  # weighted normal equations of the 3 channels at once
+        Aw = (A[:, None, :] * w[:, :, None]).transpose(1, 2, 0)                 # (c, 3, k)
+        M = Aw @ A + 1e-9 * np.eye(3)                     # (c, 3, 3); tiny ridge: degenerate sets
+        coef = np.linalg.solve(M, Aw @ r.T[:, :, None])[..., 0].T               # (3, c)
         w = 1.0 / np.maximum(np.abs(r - A @ coef), 1e-3)  # |res| = res² / |res|: the L1 fit
-    H, W = where.shape
-    yy, xx = np.mgrid[0:H, 0:W]
-    field = coef[0] + ((xx - cx) / scale)[..., None] * coef[1] + \
-        ((yy - cy) / scale)[..., None] * coef[2]
-    return np.clip(np.exp(field), *GAIN_RANGE).astype(np.float32)
+    x0, y0, x1, y1 = (0, 0, where.shape[1], where.shape[0]) if box is None else box
+    # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns
+    gx = np.exp(((np.arange(x0, x1) - cx) / scale)[:, None] * coef[1])         # (w, c)
+    gy = np.exp(coef[0] + ((np.arange(y0, y1) - cy) / scale)[:, None] * coef[2])  # (h, c)
+    return np.clip(gy[:, None, :] * gx[None, :, :], *GAIN_RANGE).astype(np.float32)
