@@ -10,8 +10,8 @@ its columns by position, so the layout is the app's exactly:
 * one row per frame: timecode ``HH:MM:SS:FF.mmm`` (frame ``FF`` at the clip's nominal integer
   rate, ``.mmm`` the sub-frame in thousandths, as the app writes for 59.94 fps takes), the count
   ``61`` (52 + 9 values), the activations in [0, 1], then head yaw, pitch and roll in **radians**
-  (:func:`facetransfer.export.common.head_euler`) and the six eye angles (0: facetransfer does not
-  track gaze).
+  (:func:`facetransfer.export.common.head_euler`) and the six eye angles (0: the track holds no
+  eye angles; the gaze is in the eyeLook* activations, :mod:`facetransfer.track.gaze`).
 
 References
 ----------
