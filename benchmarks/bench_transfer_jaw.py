@@ -82,28 +82,11 @@ BRIDGE = 6
 
 
 def landmarker(frames, fps: float) -> tuple[np.ndarray, np.ndarray]:
-    """MediaPipe's blendshapes ``(F, 51)`` and points ``(F, 478, 3)`` (normalised image
-    coordinates x, y and its depth z, on about the scale of x) of frames in VIDEO mode; NaN
-    where no face was found."""
-    import mediapipe as mp
+    """MediaPipe's blendshapes ``(F, 51)`` and points ``(F, 478, 3)`` of frames in VIDEO mode
+    (:func:`facetransfer.fidelity.landmarker_scores`)."""
+    from facetransfer.fidelity import landmarker_scores
 
-    from facetransfer.track.init import create_landmarker
-
-    shapes, pts = [], []
-    lm = create_landmarker(video=True, blendshapes=True)
-    try:
-        for i, f in enumerate(frames):
-            img = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(f))
-            r = lm.detect_for_video(img, int(round(i * 1000.0 / fps)))
-            if not r.face_blendshapes:
-                shapes.append(np.full(51, np.nan))
-                pts.append(np.full((478, 3), np.nan))
-                continue
-            shapes.append([b.score for b in r.face_blendshapes[0]][1:52])
-            pts.append([(q.x, q.y, q.z) for q in r.face_landmarks[0]])
-    finally:
-        lm.close()
-    return np.asarray(shapes, float), np.asarray(pts, float)
+    return landmarker_scores(frames, fps)
 
 
 def geometry(pts: np.ndarray, size: tuple[int, int]) -> dict:

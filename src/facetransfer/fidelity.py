@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Fidelity", "judge_frames", "panel_scores", "correlation"]
+__all__ = ["Fidelity", "judge_frames", "panel_scores", "landmarker_scores", "correlation"]
 
 #: MediaPipe blendshape names reported (its order: :data:`facetransfer.arkit.MEDIAPIPE_NAMES`).
 JUDGED = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "browInnerUp", "mouthPucker")
@@ -49,13 +49,22 @@ def _mean(*values: float) -> float:
     return float(np.mean(ok)) if ok else float("nan")
 
 
-def panel_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
-    """MediaPipe's blendshapes ``(F, 51)`` and mouth opening ``(F,)`` of frames (NaN: no face)."""
+def landmarker_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
+    """MediaPipe Face Landmarker (VIDEO mode, blendshapes) on frames.
+
+    Returns
+    -------
+    shapes : (F, 51) float64
+        Its blendshape scores without ``_neutral`` (:data:`facetransfer.arkit.MEDIAPIPE_NAMES`).
+    points : (F, 478, 3) float64
+        Its points: normalised image x, y and its depth z (on about the scale of x).
+    Both NaN where no face was found.
+    """
     import mediapipe as mp
 
     from .track.init import create_landmarker
 
-    shapes, mouth = [], []
+    shapes, pts = [], []
     lm = create_landmarker(video=True, blendshapes=True)
     try:
         for i, f in enumerate(frames):
@@ -63,14 +72,22 @@ def panel_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
             r = lm.detect_for_video(img, int(round(i * 1000.0 / fps)))
             if not r.face_blendshapes:
                 shapes.append(np.full(51, np.nan))
-                mouth.append(np.nan)
+                pts.append(np.full((478, 3), np.nan))
                 continue
             shapes.append([b.score for b in r.face_blendshapes[0]][1:52])
-            L = np.array([(q.x, q.y) for q in r.face_landmarks[0]])
-            mouth.append(np.linalg.norm(L[13] - L[14]) / np.linalg.norm(L[33] - L[263]))
+            pts.append([(q.x, q.y, q.z) for q in r.face_landmarks[0]])
     finally:
         lm.close()
-    return np.asarray(shapes, float), np.asarray(mouth, float)
+    return np.asarray(shapes, float).reshape(-1, 51), np.asarray(pts, float).reshape(-1, 478, 3)
+
+
+def panel_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
+    """MediaPipe's blendshapes ``(F, 51)`` and mouth opening ``(F,)`` (inner lip gap 13–14 over
+    the outer eye corners 33–263) of frames (NaN: no face)."""
+    shapes, L = landmarker_scores(frames, fps)
+    mouth = np.linalg.norm(L[:, 13, :2] - L[:, 14, :2], axis=-1) / \
+        np.linalg.norm(L[:, 33, :2] - L[:, 263, :2], axis=-1)
+    return shapes, mouth
 
 
 #: Below this standard deviation over frames a score "does not move" (MediaPipe's video mode
