@@ -16,7 +16,8 @@ from facetransfer.topology import close_mouth, mesh_topology
 from facetransfer.track.result import Track
 
 SIZE = 256
-SKIN, SHADOW = (200, 150, 120), (70, 30, 30)
+SKIN, SHADOW = (200, 150, 120), (150, 105, 85)  # a shadow 1.3-1.45x darker than SKIN_LIT
+HAIR = (40, 30, 25)  # hair over the jaw line in the reference frame: another thing
 SKIN_LIT = (220, 165, 132)  # the same skin 10% brighter (another frame's exposure)
 
 
@@ -132,6 +133,15 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     assert share(after.image, SKIN_LIT) > 0.95
     # only the jaw region changed: elsewhere the same frame
     np.testing.assert_array_equal(after.image[~region], before.image[~region])
+    # hair over part of the jaw in the reference frame (5x darker than the skin the current
+    # frame shows there) is not pasted: those pixels keep the current frame's texture
+    hair = [f.copy() for f in frames]
+    hair[0][band] = HAIR
+    tex_h = jaw.jaw_texture(hair, target, model, topo)
+    plain = [np.full((SIZE, SIZE, 3), SKIN_LIT, np.uint8)] * 2
+    face_h = FaceTexture(plain[1], face_tex.uvs, 1)
+    out = rewrite_frame(plain[1], V, cam, topo, face_h, jaw_texture=tex_h, blend="none", erode=0)
+    assert share(out.image, HAIR) < 0.01 and share(out.image, SKIN_LIT) > 0.95
 
 
 def test_jaw_option():

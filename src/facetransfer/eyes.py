@@ -572,7 +572,8 @@ def _region_box(raster, select: np.ndarray, *, margin: int) -> tuple[int, int, i
 
 
 def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
-                  *, feather: float = 3.0, compare: np.ndarray | None = None) -> np.ndarray:
+                  *, feather: float = 3.0, compare: np.ndarray | None = None,
+                  reject: tuple[float, float] | None = None) -> np.ndarray:
     """Paste ``part`` into ``face`` inside ``mask``, shifted to the face's colours.
 
     ``face`` and ``part`` show the same surface there (the same person's skin lifted from two
@@ -593,6 +594,13 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     compare : (H, W) bool, optional
         Where ``face`` and ``part`` are compared instead of ``mask`` (a ring around the region
         that the expression does not move, e.g.).
+    reject : (lo, hi), optional
+        Pixels where the matched ``part`` and ``face`` differ by more than a factor
+        ``exp(lo)`` (in some channel, either way) fade back to ``face``, fully at ``exp(hi)``:
+        what the reference frame shows there is another thing (hair or the gap under it over
+        the jaw line of a frontal frame, where a turned head shows skin), not the same skin in
+        another expression. The price: a shadow the current frame's own expression casts that
+        is darker than that (the target's open jaw, deeper than ``exp(lo)``) shows again.
 
     Returns
     -------
@@ -616,10 +624,23 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     a = np.clip(cv2.distanceTransform(pad, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
                 / max(feather, 1e-6), 0.0, 1.0)[..., None]
     fb = face[box].astype(np.float32)
+    if reject is not None:
+        a = a * (1.0 - _rejected(f, fb, reject))[..., None]
     blended = np.clip(np.rint(fb + a * (f - fb)), 0, 255).astype(np.uint8)
     out = face.copy()
     out[box] = np.where(mask[box][..., None], blended, face[box])
     return out
+
+
+def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
+    """``(h, w)`` float32 in [0, 1]: how far each pixel's largest per-channel absolute log
+    ratio of ``f`` and ``fb`` lies between ``reject = (lo, hi)``, smoothed over ~2 pixels."""
+    import cv2
+
+    lo, hi = (float(v) for v in reject)
+    d = np.abs(np.log1p(f) - np.log1p(fb)).max(axis=-1)
+    r = np.clip((d - lo) / max(hi - lo, 1e-6), 0.0, 1.0).astype(np.float32)
+    return np.clip(cv2.GaussianBlur(r, (0, 0), 2.0) * 2.0, 0.0, 1.0)
 
 
 def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,

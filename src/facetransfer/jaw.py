@@ -51,6 +51,11 @@ JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
 JAW_THRESHOLD = 0.15
 #: Rings of triangles around the jaw region over which its exposure is matched.
 RING = 3
+#: Log ratios between the closed frame's texture (matched) and the current frame's from which
+#: a pixel fades back to the current frame (:func:`facetransfer.eyes.match_outline`): what the
+#: closed frame shows at the jaw line of a turned head is often hair or the gap under it (a
+#: black wedge under the ear of the demo's turned frames without it). A factor of 1.65-2.5.
+REJECT = (0.5, 0.9)
 
 
 @dataclass(frozen=True)
@@ -211,5 +216,6 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     compare = None if texture.ring is None else shown & texture.ring[tri]
     if compare is not None and compare.sum() < 8:
         compare = None
-    return match_outline(face_image, img, mask, face_mask, feather=feather, compare=compare)
+    return match_outline(face_image, img, mask, face_mask, feather=feather, compare=compare,
+                         reject=REJECT)
 
