@@ -259,10 +259,7 @@ class MultilinearModel:
         for j in reversed(range(self.n_modes)):
             if j == k:
                 continue
-            if j + 1 == out.ndim - 1:
-                out = np.tensordot(out, ws[j], axes=([j + 1], [0]))
-            else:  # an inner axis: a vector-matrix product per row, no transposed core copy
-                out = np.matmul(ws[j], np.moveaxis(out, j + 1, -2))
+            out = _contract_axis(out, j + 1, ws[j])
         return out.reshape(-1, 3, self.ranks[k])
 
     # ----------------------------------------------------------------- identity & i/o
@@ -520,9 +517,15 @@ def _contract_constant_modes(core: np.ndarray, ws: list[np.ndarray]
         if not (w == w[0]).all():
             left.append(ws[j])
             continue
-        axis = 1 + j  # the modes before j are all still there
-        if axis == out.ndim - 1:
-            out = out @ w[0]
-        else:  # an inner axis: a vector-matrix product per row, no transposed core copy
-            out = np.matmul(w[0], np.moveaxis(out, axis, -2))
+        out = _contract_axis(out, 1 + j, w[0])  # the modes before j are all still there
     return out, left[::-1]
+
+
+def _contract_axis(T: np.ndarray, axis: int, w: np.ndarray) -> np.ndarray:
+    """``T`` contracted with the vector ``w`` over ``axis`` (a mode product ``×_k wᵀ``).
+
+    The last axis is a matrix-vector product; an inner axis a vector-matrix product per
+    row, so the core is never copied transposed (``tensordot`` would)."""
+    if axis == T.ndim - 1:
+        return T @ w
+    return np.matmul(w, np.moveaxis(T, axis, -2))
