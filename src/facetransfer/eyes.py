@@ -41,7 +41,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
-           "paint_eyes", "match_outline", "lid_gap", "closed_eye_frame", "close_region"]
+           "paint_eyes", "match_outline", "lid_gap", "closed_eye_frame", "close_region",
+           "reference_frame", "gain_field"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -374,19 +375,46 @@ def open_eye_frame(track, n_frames: int | None = None, *, quantile: float = 0.75
     RewriteError
         The face is lost in every frame.
     """
-
-    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
-    if good.size == 0:
-        raise RewriteError(f"the face is lost in every frame of "
-                           f"{track.source or 'the target'}")
-    op = eye_openness(track)[good]
-    cand = good[op >= np.quantile(op, quantile)]
-    score = track.rotation[cand, 2, 2] + 0.5 * np.asarray(track.confidence)[cand]
+    penalty = None
     if track.blendshapes is not None and track.blendshape_names is not None:
         names = list(track.blendshape_names)
         cols = [names.index(n) for n in BROW_SHAPES if n in names]
         if cols:
-            score = score - 0.5 * np.asarray(track.blendshapes, np.float64)[cand][:, cols].sum(1)
+            penalty = 0.5 * np.asarray(track.blendshapes, np.float64)[:, cols].sum(1)
+    return reference_frame(track, eye_openness(track), n_frames, quantile, low=False,
+                           penalty=penalty)
+
+
+def reference_frame(track, values: np.ndarray, n_frames: int | None, quantile: float, *,
+                    low: bool, penalty: np.ndarray | None = None) -> int:
+    """A clip's reference frame for a texture: among the frames (of the first ``n_frames``)
+    where the face is not lost and ``values`` is at most (``low``) or at least its
+    ``quantile``, the one facing the camera most squarely plus half its tracking confidence,
+    minus ``penalty``.
+
+    Parameters
+    ----------
+    track : Track
+    values, penalty : (F,) float
+    n_frames : int or None
+    quantile : float
+    low : bool
+
+    Raises
+    ------
+    RewriteError
+        The face is lost in every frame.
+    """
+    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
+    if good.size == 0:
+        raise RewriteError(f"the face is lost in every frame of "
+                           f"{track.source or 'the target'}")
+    v = np.asarray(values, np.float64)[good]
+    cut = np.quantile(v, quantile)
+    cand = good[v <= cut] if low else good[v >= cut]
+    score = track.rotation[cand, 2, 2] + 0.5 * np.asarray(track.confidence)[cand]
+    if penalty is not None:
+        score = score - np.asarray(penalty, np.float64)[cand]
     return int(cand[np.argmax(score)])
 
 

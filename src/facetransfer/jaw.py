@@ -33,8 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
-from .errors import RewriteError
-from .eyes import close_region, match_outline, region_faces, region_vertices
+from .eyes import close_region, match_outline, reference_frame, region_faces, region_vertices
 from .render import shade_texture
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -133,14 +132,7 @@ def closed_jaw_frame(track, n_frames: int | None = None, *, quantile: float = 0.
     RewriteError
         The face is lost in every frame.
     """
-    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
-    if good.size == 0:
-        raise RewriteError(f"the face is lost in every frame of "
-                           f"{track.source or 'the target'}")
-    op = mouth_closure(track)[good]
-    cand = good[op <= np.quantile(op, quantile)]
-    score = track.rotation[cand, 2, 2] + 0.5 * np.asarray(track.confidence)[cand]
-    return int(cand[np.argmax(score)])
+    return reference_frame(track, mouth_closure(track), n_frames, quantile, low=True)
 
 
 def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
