@@ -118,7 +118,48 @@ class Resume:
     systems: list
 
 
-class Checkpoint:
+class ProgressFile:
+    """An atomic ``.npz`` progress file of a long run, keyed by what the run depends on.
+
+    Parameters
+    ----------
+    path : path-like
+    key : str
+        Identifies the run (a file with another key is another run's).
+    every : float
+        Seconds between periodic saves (0 = after every frame).
+    """
+
+    def __init__(self, path, key: str, *, every: float = 20.0) -> None:
+        self.path = Path(path)
+        self.key = key
+        self.every = float(every)
+        self._last = time.monotonic()
+        self._wait = self.every
+        self.saves = 0
+
+    def due(self) -> bool:
+        """Whether a periodic save is due."""
+        return time.monotonic() - self._last >= self._wait
+
+    def _write(self, arrays: dict) -> None:
+        """Write ``arrays`` to the file atomically (the folder is created if needed)."""
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(self.path) as tmp:
+            with open(tmp, "wb") as fh:
+                np.savez(fh, **arrays)
+        self._last = time.monotonic()
+        self.saves += 1
+
+    def remove(self) -> None:
+        """Delete the file (the run is complete)."""
+        try:
+            self.path.unlink()
+        except FileNotFoundError:
+            pass
+
+
+class Checkpoint(ProgressFile):
     """A tracking run's progress file (atomic ``.npz``).
 
     Parameters
@@ -133,12 +174,8 @@ class Checkpoint:
     """
 
     def __init__(self, path, key: str, modes, *, every: float = 20.0) -> None:
-        self.path = Path(path)
-        self.key = key
+        super().__init__(path, key, every=every)
         self.modes = tuple(modes)
-        self.every = float(every)
-        self._last = time.monotonic()
-        self.saves = 0
 
     def load(self) -> Resume | None:
         """The saved progress, or None (no file, another run's, unreadable)."""
@@ -178,9 +215,6 @@ class Checkpoint:
             raise ValueError("inconsistent arrays")
         return r
 
-    def due(self) -> bool:
-        return time.monotonic() - self._last >= self.every
-
     def save(self, *, start: int, L0, state0: FrameState, pass_index: int, next_frame: int,
              states: list, prev: list | None, conf, lost, reinit, systems) -> None:
         """Write the progress atomically (frames ``start .. next_frame - 1`` of the pass
@@ -201,15 +235,4 @@ class Checkpoint:
         else:
             arrays["sys_S"] = np.zeros((0, 0, 0))
             arrays["sys_c"] = np.zeros((0, 0))
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(self.path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **arrays)
-        self._last = time.monotonic()
-        self.saves += 1
-
-    def remove(self) -> None:
-        try:
-            self.path.unlink()
-        except FileNotFoundError:
-            pass
+        self._write(arrays)

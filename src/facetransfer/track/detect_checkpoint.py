@@ -17,12 +17,10 @@ import logging
 import os
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from ..io.atomic import atomic_path
-from .checkpoint import video_identity
+from .checkpoint import ProgressFile, video_identity
 from .detect import ClipDetections
 
 log = logging.getLogger(__name__)
@@ -86,7 +84,7 @@ def _lossless32(a: np.ndarray) -> np.ndarray:
     return a32 if np.array_equal(a32.astype(a.dtype), a, equal_nan=True) else a
 
 
-class DetectionCheckpoint:
+class DetectionCheckpoint(ProgressFile):
     """The capture tracker's progress file (atomic ``.npz``): the detections of the first frames.
 
     Parameters
@@ -103,13 +101,8 @@ class DetectionCheckpoint:
     """
 
     def __init__(self, path, key: str, *, every: float = 20.0, budget: float = 0.05) -> None:
-        self.path = Path(path)
-        self.key = key
-        self.every = float(every)
+        super().__init__(path, key, every=every)
         self.budget = float(budget)
-        self._last = time.monotonic()
-        self._wait = self.every
-        self.saves = 0
 
     @classmethod
     def for_video(cls, path, video: str | os.PathLike, max_frames: int | None,
@@ -157,10 +150,6 @@ class DetectionCheckpoint:
                              None if raw is None else raw.astype(np.float32))
         return SavedDetections(det, bool(d["complete"]))
 
-    def due(self) -> bool:
-        """Whether a periodic save is due."""
-        return time.monotonic() - self._last >= self._wait
-
     def save(self, det: ClipDetections, *, complete: bool = False) -> None:
         """Write the detections of the first ``det.n_frames`` frames atomically."""
         t0 = time.monotonic()
@@ -171,18 +160,7 @@ class DetectionCheckpoint:
                   "has478": np.array(det.points478 is not None),
                   "points478": (np.zeros((0, 478, 2), np.float32) if det.points478 is None
                                 else np.asarray(det.points478, np.float32))}
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(self.path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **arrays)
-        self._last = time.monotonic()
+        self._write(arrays)
         self._wait = max(self.every, (self._last - t0) / max(self.budget, 1e-6))
-        self.saves += 1
         log.info("saved the detections of %d frames to %s", det.n_frames, self.path)
 
-    def remove(self) -> None:
-        """Delete the file (the track is written)."""
-        try:
-            self.path.unlink()
-        except FileNotFoundError:
-            pass
