@@ -107,6 +107,8 @@ def mapped_members(path: Path, z: "np.lib.npyio.NpzFile", min_bytes: int
             n_name, n_extra = struct.unpack("<HH", local[26:30])
             f.seek(info.header_offset + 30 + n_name + n_extra)
             version = np.lib.format.read_magic(f)
+            if version not in ((1, 0), (2, 0)):
+                continue  # numpy's own reader knows the newer headers
             header = (np.lib.format.read_array_header_1_0 if version == (1, 0)
                       else np.lib.format.read_array_header_2_0)
             shape, fortran, dtype = header(f)
