@@ -386,6 +386,19 @@ def clip_dir(cache: Path, spec: ClipSpec) -> Path:
     return cache / f"synthetic-v{DATA_VERSION}-{spec.name}-{spec.n_frames}f-{spec.key()}"
 
 
+def facekit_loader(cache: Path):
+    """A function returning the FaceKit (:func:`load_facekit`), read on its first call only:
+    for :func:`load_clip` over many clips, most of them already in the cache."""
+    holder: dict = {}
+
+    def fk() -> FaceKit:
+        if "fk" not in holder:
+            log.info("reading the ICT-FaceKit parts (first clip to make only)")
+            holder["fk"] = load_facekit(cache)
+        return holder["fk"]
+    return fk
+
+
 def load_clip(cache: Path, spec: ClipSpec, fk_loader=None, progress=None) -> SyntheticClip:
     """The clip from the cache, made first if needed (``fk_loader()`` gives the FaceKit)."""
     d = clip_dir(cache, spec)

@@ -266,13 +266,7 @@ def synthetic_clips(cache: Path, quick: bool) -> list[cd.SyntheticClip]:
     from dataclasses import replace
 
     specs = [replace(s, n_frames=60) for s in cd.CLIPS[:2]] if quick else list(cd.CLIPS)
-    holder: dict = {}
-
-    def fk():
-        if "fk" not in holder:
-            log.info("reading the ICT-FaceKit parts (first run only)")
-            holder["fk"] = cd.load_facekit(cache)
-        return holder["fk"]
+    fk = cd.facekit_loader(cache)
 
     clips = []
     for s in specs:

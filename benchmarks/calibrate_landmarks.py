@@ -93,13 +93,7 @@ def calibration_specs(n_clips: int, n_frames: int) -> list[cd.ClipSpec]:
 
 def load_frames(cache: Path, specs) -> list[dict]:
     """Per clip: MediaPipe's 478 points (VIDEO mode) and the true 68 points, (F, ., 2)."""
-    holder: dict = {}
-
-    def fk():
-        if "fk" not in holder:
-            log.info("reading the ICT-FaceKit parts")
-            holder["fk"] = cd.load_facekit(cache)
-        return holder["fk"]
+    fk = cd.facekit_loader(cache)
 
     out = []
     for s in specs:
