@@ -165,6 +165,11 @@ def score_synthetic(clip: cd.SyntheticClip, pred: dict) -> dict:
         out["act_corr"] = {n: _r(corr(A[:, ARKIT_NAMES.index(n)],
                                       clip.activations[:, ARKIT_NAMES.index(n)]))
                            for n in KEY_SHAPES}
+        # amplitude against the truth: whether a score is compressed (std of the prediction
+        # over the std of the true activation, per key shape)
+        out["act_std_ratio"] = {n: _r(std_ratio(A[:, ARKIT_NAMES.index(n)],
+                                                clip.activations[:, ARKIT_NAMES.index(n)]))
+                                for n in KEY_SHAPES}
     V = pred.get("vertices")
     if V is not None:
         sub = pred["vertex_subset"]
@@ -507,13 +512,72 @@ def drift_jitter(P: np.ndarray, ref68: np.ndarray) -> dict:
             "frames": int(len(P))}
 
 
+#: MediaPipe points of the skull (eye corners, nose, forehead, cheeks): a frame's points are
+#: aligned on these (2-D similarity) before the mouth is read in the head's frame.
+_SKULL = (33, 133, 263, 362, 168, 6, 197, 195, 5, 4, 1, 10, 151, 9, 8, 107, 336, 234, 454, 127,
+          356)
+#: what a linear reading of Face Landmarker's jawOpen may use, in the head's frame: the inner
+#: lower lip (14), the inner upper lip (13), the chin (152), the outer lower lip (17) (heights)
+_JAW_READING = (14, 13, 152, 17)
+
+
+def _head_frame(P: np.ndarray, ref: np.ndarray) -> np.ndarray:
+    """(F, 478, 2) points each similarity-aligned on :data:`_SKULL` to ``ref`` (478, 2), in
+    units of ``ref``'s outer eye-corner distance."""
+    out = np.empty_like(P)
+    b = ref[list(_SKULL)] - ref[list(_SKULL)].mean(0)
+    for i, p in enumerate(P):
+        a = p[list(_SKULL)]
+        ma = a.mean(0)
+        U, sv, Vt = np.linalg.svd((a - ma).T @ b)
+        R = U @ Vt
+        out[i] = (p - ma) @ R * (sv.sum() / np.sum((a - ma) ** 2))
+    return out / np.linalg.norm(ref[33] - ref[263])
+
+
+def jaw_reading_ceiling(clips: dict) -> dict:
+    """How far Face Landmarker's own jawOpen is a geometric reading of its own landmarks.
+
+    ``clips``: name -> (points (F, 478, 2), blendshapes (F, 52)) of one Face Landmarker run.
+    Per clip, the correlation with its jawOpen of (a) its lip gap (13-14), (b) the least-squares
+    line through the mouth's heights in the head's frame (:data:`_JAW_READING`) fitted on the
+    *other* clips (leave one clip out), (c) the same fitted on the clip itself (an upper
+    bound of any linear reading). A tracker that reads the jaw from these points, as ours does,
+    should not be expected above (b).
+    """
+    from facetransfer.arkit import ARKIT_NAMES
+
+    j = ARKIT_NAMES.index("jawOpen")
+    ok = {n: v for n, v in clips.items() if len(v[0]) >= 10 and np.isfinite(v[0]).all()}
+    if len(ok) < 2:
+        return {}
+    ref = np.mean([v[0].mean(0) for v in ok.values()], axis=0)
+    X = {n: np.c_[_head_frame(v[0], ref)[:, list(_JAW_READING), 1], np.ones(len(v[0]))]
+         for n, v in ok.items()}
+    y = {n: v[1][:, j] for n, v in ok.items()}
+    out = {}
+    for n, (P, _) in ok.items():
+        gap = np.linalg.norm(P[:, 13] - P[:, 14], axis=1) / np.linalg.norm(P[:, 33] - P[:, 263],
+                                                                         axis=1)
+        others = [m for m in ok if m != n]
+        b = np.linalg.lstsq(np.concatenate([X[m] for m in others]),
+                            np.concatenate([y[m] for m in others]), rcond=None)[0]
+        own = np.linalg.lstsq(X[n], y[n], rcond=None)[0]
+        out[n] = {"lip_gap": _r(corr(gap, y[n])),
+                  "linear_other_clips": _r(corr(X[n] @ b, y[n])),
+                  "linear_own_clip": _r(corr(X[n] @ own, y[n]))}
+    out["median"] = {k: _r(float(np.median([v[k] for v in out.values() if v[k] is not None])))
+                     for k in ("lip_gap", "linear_other_clips", "linear_own_clip")}
+    return out
+
+
 def run_real(model, cache: Path, quick: bool) -> dict:
     """Our track on the real clips against the stored MediaPipe references."""
     from facetransfer.track.landmarks import mediapipe_to_ibug
 
     vdir = _data_dir() / "video"
     clips = QUICK_REAL if quick else [(c, 0, None) for c in REAL_CLIPS]
-    out = {"clips": {}}
+    out, landmarker = {"clips": {}}, {}
     for name, start, n in clips:
         video = vdir / f"{name}.mp4"
         refp = vdir / f"{name}.mediapipe478.npz"
@@ -526,6 +590,7 @@ def run_real(model, cache: Path, quick: bool) -> dict:
             video, ref = trimmed_clip(video, start, n, cache), ref[start:start + n]
         with filtered_stderr(QUIET[0]):
             mp478, shapes = cached_landmarker(video, cache)
+        landmarker[name] = (np.asarray(mp478, float)[..., :2], np.asarray(shapes, float))
         try:
             ours = run_ours(video, model, max_frames=n)
         except Exception as exc:
@@ -541,6 +606,7 @@ def run_real(model, cache: Path, quick: bool) -> dict:
         out["clips"][name] = r
         log.info("real %s: %s", name, {k: v["corr"] for k, v in r["measures"].items()})
     out["summary"] = real_summary(out["clips"])
+    out["jaw_reading_ceiling"] = jaw_reading_ceiling(landmarker)
     return out
 
 
@@ -599,6 +665,11 @@ def print_real(real: dict) -> None:
                                          for g in gz])
         print("gaze vs Face Landmarker's eyeLook* (median corr): " + ", ".join(
             f"{k} iris {med(k, 'iris_corr'):.2f} ours {med(k, 'ours_corr'):.2f}" for k in gz[0]))
+    ceil = real.get("jaw_reading_ceiling", {}).get("median")
+    if ceil:
+        print("Face Landmarker's jawOpen read from its own points (median corr): lip gap "
+              f"{ceil['lip_gap']:.2f}, linear fit on the other clips "
+              f"{ceil['linear_other_clips']:.2f}, on the clip itself {ceil['linear_own_clip']:.2f}")
     for n, c in real["clips"].items():
         if "drift_jitter" in c:
             d = c["drift_jitter"]
