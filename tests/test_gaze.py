@@ -109,6 +109,21 @@ def test_activation_signs_follow_arkit():
     assert c["eyeLookDownLeft"][1] == 1.0
 
 
+def test_activation_gaze_inverts_gaze_activations():
+    from facetransfer.track.gaze import activation_gaze
+
+    rng = np.random.default_rng(3)
+    ang = rng.uniform(-1, 1, (40, 2, 2)) * np.deg2rad([30.0, 24.0])  # inside the range
+    opt = GazeOptions(horizontal=np.deg2rad(30), vertical=np.deg2rad(25))
+    a = gaze_activations(ang, opt)
+    A = np.zeros((40, len(ARKIT_NAMES)))
+    for n, v in a.items():
+        A[:, ARKIT_NAMES.index(n)] = v
+    np.testing.assert_allclose(activation_gaze(A, opt), ang, atol=1e-12)
+    with pytest.raises(ValueError, match=r"\(F, 52\)"):
+        activation_gaze(A[:, :51])
+
+
 def _iris_clip(model, gaze_of_frame, F=30):
     """Exact detections of a neutral training face on a turning head, with iris centres placed
     by the eye model of its own landmarks; returns detections and the true angles."""

@@ -10,8 +10,10 @@ its columns by position, so the layout is the app's exactly:
 * one row per frame: timecode ``HH:MM:SS:FF.mmm`` (frame ``FF`` at the clip's nominal integer
   rate, ``.mmm`` the sub-frame in thousandths, as the app writes for 59.94 fps takes), the count
   ``61`` (52 + 9 values), the activations in [0, 1], then head yaw, pitch and roll in **radians**
-  (:func:`facetransfer.export.common.head_euler`) and the six eye angles (0: the track holds no
-  eye angles; the gaze is in the eyeLook* activations, :mod:`facetransfer.track.gaze`).
+  (:func:`facetransfer.export.common.head_euler`) and the six eye angles in radians, read back
+  from the eyeLook* activations (:func:`facetransfer.track.gaze.activation_gaze`: 35° per unit
+  of In/Out, 28° of Up/Down, the tracker's own scale) in the head's convention: yaw positive
+  toward the subject's left, pitch positive looking down, roll 0.
 
 References
 ----------
@@ -37,7 +39,7 @@ from ..io.atomic import write_text_atomic
 from .common import ExportError, head_euler, require_activations
 
 __all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "format_timecode", "parse_timecode",
-           "livelink_rows", "write_livelink", "read_livelink", "LiveLinkTake"]
+           "livelink_rows", "eye_angles", "write_livelink", "read_livelink", "LiveLinkTake"]
 
 #: The app's 52 blendshape columns, in its order.
 LIVELINK_NAMES: tuple[str, ...] = (
@@ -103,12 +105,26 @@ def livelink_rows(track) -> list[list[str]]:
     ypr = head_euler(track.rotation)  # (F, 3) radians
     pose = np.zeros((track.n_frames, len(POSE_COLUMNS)))
     pose[:, :3] = ypr
+    pose[:, 3:] = eye_angles(require_activations(track))
     count = str(len(LIVELINK_NAMES) + len(POSE_COLUMNS))
     rows = [list(HEADER)]
     for k in range(track.n_frames):
         rows.append([format_timecode(k, track.fps), count]
                     + [f"{v:.8f}" for v in a[k]] + [f"{v:.8f}" for v in pose[k]])
     return rows
+
+
+def eye_angles(activations: np.ndarray) -> np.ndarray:
+    """``LeftEyeYaw, LeftEyePitch, LeftEyeRoll, RightEyeYaw, RightEyePitch, RightEyeRoll`` in
+    radians, ``(F, 6)``, from the (F, 52) activations' eyeLook* (module notes)."""
+    from ..track.gaze import activation_gaze
+
+    g = activation_gaze(activations)           # (F, eye (right, left), (yaw, pitch up))
+    out = np.zeros((len(g), 6))
+    for col, k in ((0, 1), (3, 0)):            # the subject's left eye first, as the app
+        out[:, col] = g[:, k, 0]
+        out[:, col + 1] = -g[:, k, 1]           # the head's pitch: positive looks down
+    return out
 
 
 def write_livelink(track, out: str | os.PathLike, *, overwrite: bool = False) -> Path:

@@ -43,7 +43,8 @@ from scipy.ndimage import median_filter
 from ..errors import ShapeError
 
 __all__ = ["EyeModel", "eye_model", "gaze_angles", "gaze_direction", "project_iris", "usable_iris",
-           "GazeOptions", "gaze_activations", "GAZE_NAMES", "IRIS_INDEX", "CORNER_INDEX"]
+           "GazeOptions", "gaze_activations", "activation_gaze", "GAZE_NAMES", "IRIS_INDEX",
+           "CORNER_INDEX"]
 
 #: Eyes in this module's order: the subject's right eye, then the left.
 EYES = ("Right", "Left")
@@ -310,4 +311,35 @@ def gaze_activations(angles: np.ndarray, options: GazeOptions | None = None,
             v = np.where(np.asarray(closed)[:, k], np.nan, v)
         for name, x in (("Out", h), ("In", -h), ("Up", v), ("Down", -v)):
             out[f"eyeLook{name}{eye}"] = np.where(np.isfinite(x), np.clip(x, 0.0, 1.0), np.nan)
+    return out
+
+
+def activation_gaze(activations: np.ndarray, options: GazeOptions | None = None) -> np.ndarray:
+    """Gaze angles from ARKit eyeLook* activations: the inverse of :func:`gaze_activations`
+    where the activations are inside (0, 1) (one of each eye's In/Out and Up/Down pair is 0).
+
+    Parameters
+    ----------
+    activations : (F, 52) float
+        In :data:`facetransfer.arkit.ARKIT_NAMES` order.
+    options : GazeOptions
+
+    Returns
+    -------
+    (F, 2, 2) float64
+        ``[frame, eye (right, left), (yaw, pitch)]`` in radians, this module's convention
+        (yaw positive toward the subject's left, pitch positive up).
+    """
+    from ..arkit import ARKIT_NAMES
+
+    opt = options or GazeOptions()
+    a = np.asarray(activations, np.float64)
+    if a.ndim != 2 or a.shape[1] != len(ARKIT_NAMES):
+        raise ShapeError(f"activations must be (F, {len(ARKIT_NAMES)}), got shape {a.shape}")
+    col = {n: a[:, ARKIT_NAMES.index(n)] for n in GAZE_NAMES}
+    out = np.zeros((len(a), 2, 2))
+    for k, eye in enumerate(EYES):
+        outward = col[f"eyeLookOut{eye}"] - col[f"eyeLookIn{eye}"]
+        out[:, k, 0] = outward * opt.horizontal * (1.0 if eye == "Left" else -1.0)
+        out[:, k, 1] = (col[f"eyeLookUp{eye}"] - col[f"eyeLookDown{eye}"]) * opt.vertical
     return out
