@@ -313,3 +313,84 @@ def test_batch_track_clip_continues_an_interrupted_capture(clip, quick_model, tm
     assert row.status == "done" and not partial.exists()
     assert fakes.made[-1].calls == F - 25 + FakeDetector.warmup_frames
     np.testing.assert_allclose(Track.load(out).landmarks2d, ref.landmarks2d, atol=1e-9)
+
+
+# ------------------------------------------------------------------------------ the fit
+def _stop_tracking_at(k: int):
+    """A progress callback that interrupts the fit when ``k`` frames are tracked."""
+    def prog(stage, done, total):
+        if stage == "track" and done == k:
+            raise KeyboardInterrupt
+    return prog
+
+
+def _same_track(a: Track, b: Track) -> None:
+    for name in ("rotation", "scale", "translation", "landmarks2d", "confidence", "lost"):
+        np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+    for m in b.weights:
+        np.testing.assert_array_equal(a.weights[m], b.weights[m], err_msg=m)
+    if b.blendshapes is not None:
+        np.testing.assert_array_equal(a.blendshapes, b.blendshapes)
+
+
+def test_interrupted_fit_continues_exactly_where_it_stopped(clip, arkit_model, tmp_path,
+                                                            monkeypatch):
+    """Interrupted in the forward run and again in the backward run, the fit continues from
+    the saved frames (no identity phase, no frame fitted twice) and ends bit for bit where an
+    uninterrupted fit ends."""
+    from facetransfer.track import capture
+    from facetransfer.track.fit_checkpoint import fit_key
+
+    video, _, _ = clip
+    det = detect_clip(iter_frames(video), FakeDetector(clip), n_frames=F, keep478=True)
+    ref = capture.capture_detections(det, arkit_model)
+    start = ref.info["start_frame"]
+    assert 4 <= start <= F - 4                  # both runs are long enough to stop in
+    key = fit_key(arkit_model.content_hash, capture.CaptureOptions(), None)
+    path = tmp_path / "t.partial.npz"
+    fwd_stop, bwd_stop = (F - start) // 2, (F - start) + start // 2
+    with pytest.raises(KeyboardInterrupt):      # in the forward run
+        capture.capture_detections(det, arkit_model, checkpoint=DetectionCheckpoint(
+            path, "k", every=1e9), progress=_stop_tracking_at(fwd_stop))
+    ck = DetectionCheckpoint(path, "k", every=0.0)
+    assert ck.load().complete
+    fit = ck.saved_fit(key)
+    assert fit.forward_next == start + fwd_stop and fit.backward_next == start - 1
+    lost = int(start <= NO_FACE < fit.forward_next)
+    assert fit.valid.sum() == fwd_stop - lost and not fit.valid[fit.forward_next:].any()
+    with pytest.raises(KeyboardInterrupt):      # resumed, then stopped in the backward run
+        capture.capture_detections(det, arkit_model, checkpoint=ck,
+                                   progress=_stop_tracking_at(bwd_stop))
+    ck = DetectionCheckpoint(path, "k")
+    ck.load()
+    fit = ck.saved_fit(key)
+    assert fit.forward_next == F and fit.backward_next == start - 1 - start // 2
+    calls = {"identity": 0, "frames": 0}
+    real_id, real_fit = capture._clip_identity, capture._fit_frame
+    monkeypatch.setattr(capture, "_clip_identity",
+                        lambda *a, **k: calls.__setitem__("identity", 1) or real_id(*a, **k))
+    monkeypatch.setattr(capture, "_fit_frame",
+                        lambda *a, **k: calls.__setitem__("frames", calls["frames"] + 1)
+                        or real_fit(*a, **k))
+    out = capture.capture_detections(det, arkit_model, checkpoint=ck)
+    left = fit.backward_next + 1 - int(NO_FACE <= fit.backward_next)   # frames still to fit
+    assert calls == {"identity": 0, "frames": left}
+    _same_track(out, ref)
+
+
+def test_a_fit_of_other_options_is_not_continued(clip, quick_model, tmp_path, caplog):
+    from facetransfer.track import capture
+
+    video, _, _ = clip
+    det = detect_clip(iter_frames(video), FakeDetector(clip), n_frames=20, keep478=True)
+    path = tmp_path / "t.partial.npz"
+    with pytest.raises(KeyboardInterrupt):
+        capture.capture_detections(det, quick_model, checkpoint=DetectionCheckpoint(path, "k"),
+                                   progress=_stop_tracking_at(5))
+    other = capture.CaptureOptions(flow=0.25)
+    ck = DetectionCheckpoint(path, "k")
+    assert ck.load().complete
+    with caplog.at_level("WARNING"):
+        out = capture.capture_detections(det, quick_model, options=other, checkpoint=ck)
+    assert "another model or other options" in caplog.text
+    _same_track(out, capture.capture_detections(det, quick_model, options=other))

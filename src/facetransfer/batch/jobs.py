@@ -73,8 +73,8 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
 
 
 def _capture_resuming(video, model, settings, *, source: str, fixed, partial):
-    """The capture tracker on a video file, its detections resumed from ``partial`` as in
-    ``facetransfer track`` (:mod:`facetransfer.track.detect_checkpoint`)."""
+    """The capture tracker on a video file, its detections and fit resumed from ``partial`` as
+    in ``facetransfer track`` (:mod:`facetransfer.track.detect_checkpoint`)."""
     from ..track.capture import capture_video, detect_video
     from ..track.detect_checkpoint import DetectionCheckpoint
 
@@ -90,9 +90,9 @@ def _capture_resuming(video, model, settings, *, source: str, fixed, partial):
                            resume=None if saved is None else saved.detections)[0]
     try:
         return capture_video(video, model, options=settings.capture, detections=det,
-                             source=source, fixed=fixed)
+                             source=source, fixed=fixed, checkpoint=ck)
     except KeyboardInterrupt:
-        ck.save(det, complete=True)                       # the fit restarts, detection does not
+        ck.save(det, complete=True)                       # with the fit so far, if it began
         raise
 
 

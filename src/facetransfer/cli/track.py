@@ -197,8 +197,8 @@ def _checked_model(path):
 def _capture(args, model, options, progress, bars):
     """The capture tracker; ``model`` may be a Future still loading. Returns (track, model).
 
-    The detections resume from ``partial_path(args.out)``
-    (:mod:`facetransfer.track.detect_checkpoint`).
+    The detections and the fit resume from ``partial_path(args.out)``
+    (:mod:`facetransfer.track.detect_checkpoint`, :mod:`facetransfer.track.fit_checkpoint`).
     """
     from ..track.capture import capture_detections
     from ..track.detect_checkpoint import DetectionCheckpoint
@@ -216,9 +216,9 @@ def _capture(args, model, options, progress, bars):
             model = model.result()
         try:
             return capture_detections(det, model, options=options, fps=fps, frame_size=size,
-                                      progress=progress, source=src), model
+                                      progress=progress, source=src, checkpoint=ck), model
         except KeyboardInterrupt:
-            ck.save(det, complete=True)                   # the fit restarts, detection does not
+            ck.save(det, complete=True)                   # with the fit so far, if it began
             raise
     except KeyboardInterrupt:
         for b in bars.values():

@@ -21,6 +21,10 @@ frame and the drifting flow by measurements taken on every frame:
 4. Frames without a detection are lost (the nearest tracked state is held); the face may appear
    late: tracking starts where it is.
 
+An interrupted fit resumes (:mod:`facetransfer.track.fit_checkpoint`): with a ``checkpoint``,
+:func:`capture_detections` saves the identity phase and the frames fitted so far every few
+seconds and when interrupted, and continues from there, exactly, when run again.
+
 References
 ----------
 Vlasic et al. 2005, §5.1 (Eq. (7)-(9), identity over the clip); MediaPipe Face Landmarker;
@@ -41,6 +45,7 @@ from ..arkit import (ARKIT_NAMES, activation_basis, activation_prior_scale, expr
 from ..errors import TrackError, VideoError
 from .camera import Pose, fit_affine_pose
 from .detect import ClipDetections, VideoLandmarker, detect_clip
+from .fit_checkpoint import SavedFit, fit_key
 from .fit2d import box_qp, pose_gauss_newton, project_basis, targets_normal
 from .gaze import GAZE_NAMES, IRIS_INDEX, eye_model, gaze_activations, gaze_angles, usable_iris
 from .init import require_landmarks
@@ -485,16 +490,21 @@ def _targets(det: ClipDetections, i: int, j: int, prev_q: np.ndarray | None, wei
     return out
 
 
-def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State, weights,
-               opt: CaptureOptions, states: list, prog, done0: int) -> int:
-    """Track frames in ``order`` (consecutive, one direction) from the ``seed`` state."""
+def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State | None, weights,
+               opt: CaptureOptions, states: list, prog, done0: int, seed_index: int | None = None,
+               on_frame=None) -> int:
+    """Track frames in ``order`` (consecutive, one direction) from the ``seed`` state (of the
+    neighbouring frame ``seed_index``, when it was tracked in this run: then its flow and
+    temporal terms apply too); ``on_frame(i)`` after each frame."""
     prev: _State | None = seed
-    prev_i = None
+    prev_i = seed_index if seed is not None else None
     done = done0
     for i in order:
         if not det.found[i]:
             prev, prev_i = None, None
             done += 1
+            if on_frame is not None:
+                on_frame(i)
             continue
         q = None
         if prev is not None and prev_i is not None and abs(prev_i - i) == 1:
@@ -508,6 +518,8 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State, we
         states[i] = st
         prev, prev_i = st, i
         done += 1
+        if on_frame is not None:
+            on_frame(i)
         prog("track", done, det.n_frames)
     return done
 
@@ -515,7 +527,7 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State, we
 def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | None = None,
                        fps: float = 30.0, frame_size: tuple[int, int] = (0, 0),
                        fixed: dict | None = None, progress: Progress | None = None,
-                       source: str = "") -> Track:
+                       source: str = "", checkpoint=None) -> Track:
     """Fit the model to a clip's detections and flow (steps 2-4 of the module notes).
 
     Parameters
@@ -530,6 +542,11 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
         ``{"identity": (r,)}`` to keep a known identity.
     progress : callable(stage, done, total), optional
     source : str
+    checkpoint : DetectionCheckpoint, optional
+        Where the fit's progress is kept (:mod:`facetransfer.track.fit_checkpoint`): a fit it
+        holds for this model and these options is continued; the progress is saved when
+        ``checkpoint.due()`` and when the run is interrupted (``KeyboardInterrupt``). Any
+        object with ``due()``, ``saved_fit(key)`` and ``save_fit(det, key, fit)`` will do.
 
     Returns
     -------
@@ -540,10 +557,11 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
 
     with threadpool_limits(limits=1, user_api="blas"):  # small products: threads only cost
         return _capture_detections(det, model, options, fps, frame_size, fixed, progress,
-                                   source)
+                                   source, checkpoint)
 
 
-def _capture_detections(det, model, options, fps, frame_size, fixed, progress, source) -> Track:
+def _capture_detections(det, model, options, fps, frame_size, fixed, progress, source,
+                        checkpoint=None) -> Track:
     opt = options or CaptureOptions()
     require_landmarks(model)
     fixed = dict(fixed or {})
@@ -570,21 +588,100 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         iris, closed = usable_iris(det.points478)
     weights = _PointWeights(weights, sampler.mp_index, iris, closed)
     t0 = time.perf_counter()
-    shape, sample_states, frames = _clip_identity(model, det, sampler, weights, opt, fixed, prog)
+    key = None if checkpoint is None else fit_key(model.content_hash, opt, fixed)
+    saved = None if checkpoint is None else checkpoint.saved_fit(key)
+    if saved is not None and len(saved.valid) == det.n_frames:
+        run = _FitRun.restore(saved, model, sampler, opt)
+        log.info("continued an interrupted fit (%d of %d frames fitted)", int(saved.valid.sum()),
+                 det.n_frames)
+    else:
+        shape, sample_states, frames = _clip_identity(model, det, sampler, weights, opt, fixed,
+                                                      prog)
+        best = int(np.argmin([s.residual for s in sample_states]))
+        run = _FitRun(shape, np.asarray(frames), int(frames[best]), sample_states[best],
+                      [None] * det.n_frames, int(frames[best]), int(frames[best]) - 1)
     t_id = time.perf_counter() - t0
-    best = int(np.argmin([s.residual for s in sample_states]))
-    start = int(frames[best])
-    seed = sample_states[best]
-    states: list[_State | None] = [None] * det.n_frames
-    F = det.n_frames
-    done = _track_run(shape, det, list(range(start, F)), seed, weights, opt, states, prog, 0)
-    _track_run(shape, det, list(range(start - 1, -1, -1)), states[start], weights, opt, states,
-               prog, done)
-    track = _assemble(model, shape, states, fps, frame_size, source, opt)
-    info = {"start_frame": start, "identity_frames": [int(i) for i in frames],
+    save = None if checkpoint is None else (lambda: checkpoint.save_fit(det, key, run.saved()))
+    try:
+        _track_both(run, det, weights, opt, prog,
+                    None if save is None else (lambda: save() if checkpoint.due() else None))
+    except KeyboardInterrupt:
+        if save is not None:
+            save()
+        raise
+    track = _assemble(model, run.shape, run.states, fps, frame_size, source, opt)
+    info = {"start_frame": run.start, "identity_frames": [int(i) for i in run.frames],
             "seconds_identity": t_id, "seconds_total": time.perf_counter() - t0,
             "tracker": "capture"}
     return replace(track, info=info)
+
+
+@dataclass
+class _FitRun:
+    """A fit in progress (mutable: the runs fill ``states`` and advance ``forward_next`` /
+    ``backward_next``); :meth:`saved` and :meth:`restore` convert it for the progress file."""
+
+    shape: _Shape
+    frames: np.ndarray
+    start: int
+    seed: _State
+    states: list
+    forward_next: int
+    backward_next: int
+
+    def saved(self) -> SavedFit:
+        F = len(self.states)
+        ref = next((s for s in self.states if s is not None), self.seed)
+        R, sc, t = np.zeros((F, 3, 3)), np.zeros(F), np.zeros((F, 2))
+        x, r = np.zeros((F, len(ref.x))), np.zeros(F)
+        valid = np.array([s is not None for s in self.states], bool)
+        for i in np.flatnonzero(valid):
+            st = self.states[i]
+            R[i], sc[i], t[i], x[i], r[i] = (st.pose.rotation, st.pose.scale,
+                                             st.pose.translation, st.x, st.residual)
+        sd = self.seed
+        return SavedFit(self.shape.identity, self.shape.offset, self.frames, self.start,
+                        (sd.pose.rotation, sd.pose.scale, sd.pose.translation, sd.x,
+                         sd.residual), valid, R, sc, t, x, r, self.forward_next,
+                        self.backward_next)
+
+    @classmethod
+    def restore(cls, fit: SavedFit, model, sampler: _Sampler, opt: CaptureOptions) -> "_FitRun":
+        shape = _Shape(model, fit.identity, sampler, opt, fit.offset)
+        R, sc, t, x, r = fit.seed
+        states = [_State(Pose(fit.rotation[i], float(fit.scale[i]), fit.translation[i]),
+                         fit.x[i], float(fit.residual[i])) if fit.valid[i] else None
+                  for i in range(len(fit.valid))]
+        return cls(shape, fit.frames, fit.start, _State(Pose(R, sc, t), x, r), states,
+                   fit.forward_next, fit.backward_next)
+
+
+def _track_both(run: _FitRun, det: ClipDetections, weights, opt: CaptureOptions, prog,
+                maybe_save) -> None:
+    """The forward run (``run.start`` to the end), then the backward one (to frame 0), each
+    continued from where ``run`` stands; ``maybe_save()`` after every frame."""
+    F = det.n_frames
+    done = (run.forward_next - run.start) + (run.start - 1 - run.backward_next)
+
+    def advanced(attr, step):
+        def hook(i):
+            setattr(run, attr, i + step)
+            if maybe_save is not None:
+                maybe_save()
+        return hook
+
+    if run.forward_next < F:
+        j = run.forward_next - 1                        # the frame tracked before, if any
+        seed, at = ((run.seed, None) if run.forward_next == run.start
+                    else (run.states[j], j))
+        done = _track_run(run.shape, det, list(range(run.forward_next, F)), seed, weights, opt,
+                          run.states, prog, done, at, advanced("forward_next", 1))
+    if run.backward_next >= 0:
+        j = run.backward_next + 1
+        seed, at = ((run.states[run.start], None) if run.backward_next == run.start - 1
+                    else (run.states[j], j))
+        _track_run(run.shape, det, list(range(run.backward_next, -1, -1)), seed, weights, opt,
+                   run.states, prog, done, at, advanced("backward_next", -1))
 
 
 def _fill_lost(states: list) -> tuple[list, np.ndarray]:
@@ -634,7 +731,7 @@ def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
 def capture_video(video, model, *, options: CaptureOptions | None = None, detector=None,
                   detections: ClipDetections | None = None, max_frames: int | None = None,
                   fixed: dict | None = None, progress: Progress | None = None,
-                  source: str | None = None) -> Track:
+                  source: str | None = None, checkpoint=None) -> Track:
     """Capture a face's performance from a video (module notes): the default tracker.
 
     Parameters
@@ -648,6 +745,8 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         Reuse detections made before (the video is then read only for its size and rate).
     max_frames, fixed, progress, source
         As in :func:`facetransfer.track.track_video`.
+    checkpoint : DetectionCheckpoint, optional
+        The fit's progress (:func:`capture_detections`).
 
     Returns
     -------
@@ -663,7 +762,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         if n is not None and detections.n_frames != n:
             raise TrackError(f"detections have {detections.n_frames} frames, the video {n}")
     return capture_detections(detections, model, options=options, fps=fps, frame_size=size,
-                              fixed=fixed, progress=progress, source=src)
+                              fixed=fixed, progress=progress, source=src, checkpoint=checkpoint)
 
 
 def detect_video(video, *, detector=None, max_frames: int | None = None,

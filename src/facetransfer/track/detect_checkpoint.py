@@ -7,6 +7,10 @@ run is interrupted, and a later run of the same clip continues at the first fram
 The saved file is keyed by the video's identity, the frame limit and the detector (not the
 model: detection does not use it); a file of another run, of the KLT tracker
 (:mod:`facetransfer.track.checkpoint`) or a damaged one is ignored and replaced.
+
+Once detection is complete the same file also holds the fit in progress
+(:mod:`facetransfer.track.fit_checkpoint`, keyed by the model and the capture options as well):
+:meth:`DetectionCheckpoint.save_fit` and :meth:`DetectionCheckpoint.saved_fit`.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import numpy as np
 
 from .checkpoint import ProgressFile, video_identity
 from .detect import ClipDetections
+from .fit_checkpoint import SavedFit, pack_fit, unpack_fit
 
 log = logging.getLogger(__name__)
 
@@ -103,6 +108,7 @@ class DetectionCheckpoint(ProgressFile):
     def __init__(self, path, key: str, *, every: float = 20.0, budget: float = 0.05) -> None:
         super().__init__(path, key, every=every)
         self.budget = float(budget)
+        self._fit: tuple[str, SavedFit] | None = None   # the fit in progress, saved with each save
 
     @classmethod
     def for_video(cls, path, video: str | os.PathLike, max_frames: int | None,
@@ -131,7 +137,9 @@ class DetectionCheckpoint(ProgressFile):
                         self.path, what)
             return None
         try:
-            return self._restore(d)
+            saved = self._restore(d)
+            self._fit = unpack_fit(d) if saved.complete else None
+            return saved
         except Exception as exc:  # entries missing, wrong shapes or dtypes: a damaged file
             log.warning("removing damaged progress file %s (%s); starting afresh", self.path,
                         exc.__class__.__name__)
@@ -160,7 +168,25 @@ class DetectionCheckpoint(ProgressFile):
                   "has478": np.array(det.points478 is not None),
                   "points478": (np.zeros((0, 478, 2), np.float32) if det.points478 is None
                                 else np.asarray(det.points478, np.float32))}
+        if complete and self._fit is not None:
+            arrays.update(pack_fit(self._fit[1], self._fit[0]))
         self._write(arrays)
         self._wait = max(self.every, (self._last - t0) / max(self.budget, 1e-6))
         log.info("saved the detections of %d frames to %s", det.n_frames, self.path)
 
+    def saved_fit(self, key: str) -> SavedFit | None:
+        """The fit in progress that :meth:`load` found, if it is of the run ``key``
+        (:func:`facetransfer.track.fit_checkpoint.fit_key`), else None."""
+        if self._fit is None:
+            return None
+        if self._fit[0] != key:
+            log.warning("ignoring the fit saved in %s (another model or other options); "
+                        "fitting afresh", self.path)
+            return None
+        return self._fit[1]
+
+    def save_fit(self, det: ClipDetections, key: str, fit: SavedFit) -> None:
+        """Save the complete detections ``det`` with the fit in progress ``fit`` of run ``key``
+        (kept for every later :meth:`save`)."""
+        self._fit = (key, fit)
+        self.save(det, complete=True)
