@@ -5,7 +5,8 @@ encoding, decoded exactly.
    model, capture tracker, H.264 CRF 18) on 10 s of ``driving_d9`` (512x480, 30 fps: 300 frames)
    with ``driving_d6`` as the source, timed as a command (wall clock, a fresh process), and the
    same work in this process stage by stage (model load, read, track, render, write:
-   ``plan_transfer`` + ``render_plan``, what the command runs). The command runs twice in turn
+   ``plan_transfer`` + ``render_plan``, what the command runs). The command runs twice in turn,
+   with its CPU seconds (all its processes: half of that is the least wall time on 2 cores)
    (the first may pay numba's compilation and a cold page cache; the second is reported), and
    ``facetransfer --help`` is timed too. The peer: MediaPipe Face Landmarker in VIDEO mode over
    the same target frames (``benchmarks/_mp_video.py``), with and without blendshapes.
@@ -75,17 +76,29 @@ def _exe() -> str:
     return str(Path(sys.executable).parent / "facetransfer")
 
 
-def run_command(source: Path, target: Path, frames: int, out: Path, repeats: int = 2) -> list:
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of every finished child process and its own children."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def run_command(source: Path, target: Path, frames: int, out: Path, repeats: int = 2
+                ) -> tuple[list, list]:
     """Wall seconds of ``facetransfer transfer`` in a fresh process, ``repeats`` times in turn
-    (the first also pays numba's compilation when its cache is cold, and the page cache)."""
-    times = []
+    (the first also pays numba's compilation when its cache is cold, and the page cache), and
+    the CPU seconds of each run: the command, its forked tracker and its ffmpeg processes
+    together (what two cores must share: wall time cannot fall below half of it)."""
+    times, cpu = [], []
     for _ in range(repeats):
-        t = time.perf_counter()
+        t, c = time.perf_counter(), _children_cpu()
         subprocess.run([_exe(), "transfer", "--target", str(target), "--expression-from",
                         str(source), "--out", str(out), "--max-frames", str(frames),
                         "--overwrite", "--no-progress"], check=True, capture_output=True)
         times.append(time.perf_counter() - t)
-    return times
+        cpu.append(_children_cpu() - c)
+    return times, cpu
 
 
 def help_seconds(repeats: int = 3) -> float:
@@ -238,10 +251,10 @@ def main() -> int:
     n = int(round(args.seconds * info.fps))
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
-        runs = run_command(source, target, n, tmp / "cmd.mp4")
+        runs, cpus = run_command(source, target, n, tmp / "cmd.mp4")
         cmd = runs[-1]
-        print(f"command: {', '.join(f'{t:.1f}' for t in runs)} s for {n} frames (in turn)",
-              flush=True)
+        print(f"command: {', '.join(f'{t:.1f}' for t in runs)} s for {n} frames (in turn); "
+              f"CPU {', '.join(f'{c:.1f}' for c in cpus)} s (all its processes)", flush=True)
         helps = help_seconds()
         print(f"--help: {helps:.2f} s", flush=True)
         sys.path.insert(0, str(Path(__file__).parent))
@@ -259,7 +272,8 @@ def main() -> int:
     stages["total"] = total
     report = {"source": source.name, "target": target.name, "frames": n, "fps": fps,
               "size": list(info.size), "seconds": n / fps, "command_seconds": cmd,
-              "command_runs": runs, "help_seconds": helps,
+              "command_runs": runs, "command_cpu_seconds": cpus,
+              "command_cpu_floor_2_cores": cpus[-1] / 2, "help_seconds": helps,
               "command_beyond_stages": cmd - total, "stages": stages,
               "shares": {k: v / total for k, v in stages.items() if k != "total"},
               "mediapipe": peer,
