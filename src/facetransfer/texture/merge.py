@@ -22,6 +22,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from ..errors import ShapeError
+from ..render.raster import _maybe_njit
 from .base import TextureError, texture_to_uint8
 
 log = logging.getLogger(__name__)
@@ -136,34 +137,120 @@ def fill_holes(texture, known, *, method: str = "pushpull") -> np.ndarray:
     if method == "inpaint":
         filled = cv2.inpaint(texture_to_uint8(tex), (~k).astype(np.uint8), 3, cv2.INPAINT_TELEA)
         out = filled.astype(np.float32)
-    else:
-        out = _push_pull(tex, k.astype(np.float32))
-    out[k] = tex[k]
-    return out
+        out[k] = tex[k]
+        return out
+    return _push_pull(tex, k.astype(np.float32))  # equal to tex where known
 
 
 def _push_pull(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Push-pull: average known values down a pyramid, then fill holes from coarser levels."""
+    """Push-pull: average known values down a pyramid, then fill holes from coarser levels.
+
+    Pull: each level halves the previous one (odd sizes padded by a weightless row or column),
+    a texel the weighted mean of its 2x2 children, its weight their summed weight clipped to 1
+    so that known texels dominate. Push: from the coarsest level up, every texel is
+    ``a tex + (1 - a) up`` with ``a`` its weight clipped to [0, 1] and ``up`` the bilinear 2x
+    upsampling of the filled coarser level (half-pixel centres, edges clamped: as
+    ``cv2.resize(..., INTER_LINEAR)``). Two numba kernels per level.
+
+    Parameters
+    ----------
+    tex : (H, W, 3) float32
+    w : (H, W) float32
+        Weights in [0, 1] (0: unknown).
+
+    Returns
+    -------
+    (H, W, 3) float32
+    """
+    levels = [(np.ascontiguousarray(tex, np.float32), np.ascontiguousarray(w, np.float32))]
+    while levels[-1][1].shape[0] > 1 or levels[-1][1].shape[1] > 1:
+        c, wl = levels[-1]
+        Hc, Wc = (wl.shape[0] + 1) // 2, (wl.shape[1] + 1) // 2
+        cc, wc = np.empty((Hc, Wc, 3), np.float32), np.empty((Hc, Wc), np.float32)
+        _pull_kernel(c, wl, cc, wc)
+        levels.append((cc, wc))
+    filled = levels[-1][0]
+    for c, wl in reversed(levels[:-1]):
+        out = np.empty_like(c)
+        _push_kernel(c, wl, filled, out)
+        filled = out
+    return filled
+
+
+def _pull_kernel_py(tex, w, coarse, wc):  # pragma: no cover (numba)
+    """One pull step: ``coarse`` (Hc, Wc, 3) the weighted mean of each 2x2 block of ``tex``
+    (H, W, 3) (weights ``w`` (H, W); 0 where the block has no weight), ``wc`` (Hc, Wc) the
+    block's weight sum clipped to 1."""
     H, W = w.shape
-    if H <= 1 and W <= 1:
-        return tex
-    # pull (down): premultiplied 2x2 sums, weights clipped to 1 so that known texels dominate
-    Hp, Wp = H + (H % 2), W + (W % 2)
-    cp = np.zeros((Hp, Wp, 3), np.float32)
-    wp = np.zeros((Hp, Wp), np.float32)
-    cp[:H, :W] = tex * w[..., None]
-    wp[:H, :W] = w
-    # 2x2 block sums (an exact halving: INTER_AREA averages the blocks)
-    c2 = cv2.resize(cp, (Wp // 2, Hp // 2), interpolation=cv2.INTER_AREA) * np.float32(4)
-    w2 = cv2.resize(wp, (Wp // 2, Hp // 2), interpolation=cv2.INTER_AREA) * np.float32(4)
-    if c2.ndim == 2:  # a 1-pixel-wide level: cv2 drops the channel axis of (1, 1, 3)
-        c2 = c2.reshape(Hp // 2, Wp // 2, 3)
-    coarse = np.divide(c2, w2[..., None], out=np.zeros_like(c2), where=w2[..., None] > 0)
-    coarse = _push_pull(coarse, np.minimum(w2, 1.0))
-    # push (up): bilinear upsampling of the coarse level, blended in by missing weight
-    up = cv2.resize(coarse, (Wp, Hp), interpolation=cv2.INTER_LINEAR)[:H, :W]
-    a = np.clip(w, 0.0, 1.0)[..., None]
-    return a * tex + (1.0 - a) * up
+    Hc, Wc = wc.shape
+    for y in range(Hc):
+        for x in range(Wc):
+            s0 = np.float32(0.0)
+            s1 = np.float32(0.0)
+            s2 = np.float32(0.0)
+            sw = np.float32(0.0)
+            for yy in range(2 * y, min(2 * y + 2, H)):
+                for xx in range(2 * x, min(2 * x + 2, W)):
+                    a = w[yy, xx]
+                    sw += a
+                    s0 += a * tex[yy, xx, 0]
+                    s1 += a * tex[yy, xx, 1]
+                    s2 += a * tex[yy, xx, 2]
+            if sw > 0:
+                coarse[y, x, 0] = s0 / sw
+                coarse[y, x, 1] = s1 / sw
+                coarse[y, x, 2] = s2 / sw
+            else:
+                coarse[y, x, 0] = 0.0
+                coarse[y, x, 1] = 0.0
+                coarse[y, x, 2] = 0.0
+            wc[y, x] = min(sw, np.float32(1.0))
+
+
+def _up_index_py(i, n):  # pragma: no cover (numba)
+    """Source index and weight of the bilinear 2x upsampling of an axis of ``n`` samples at
+    destination index ``i`` (``cv2.resize`` INTER_LINEAR: centre ``i / 2 - 1/4``, clamped)."""
+    s = 0.5 * i - 0.25
+    i0 = int(np.floor(s))
+    f = s - i0
+    if i0 < 0:
+        i0, f = 0, 0.0
+    if i0 >= n - 1:
+        i0, f = n - 1, 0.0
+    return i0, min(i0 + 1, n - 1), np.float32(f)
+
+
+def _push_kernel_py(tex, w, coarse, out):  # pragma: no cover (numba)
+    """One push step: ``out = a tex + (1 - a) up`` per texel, ``a = clip(w, 0, 1)``, ``up`` the
+    bilinear 2x upsampling of ``coarse`` (Hc, Wc, 3)."""
+    H, W = w.shape
+    Hc, Wc = coarse.shape[0], coarse.shape[1]
+    xs0 = np.empty(W, np.int64)
+    xs1 = np.empty(W, np.int64)
+    fxs = np.empty(W, np.float32)
+    for x in range(W):
+        xs0[x], xs1[x], fxs[x] = _up_index(x, Wc)
+    one = np.float32(1.0)
+    for y in range(H):
+        y0, y1, fy = _up_index(y, Hc)
+        gy = one - fy
+        for x in range(W):
+            a = min(max(w[y, x], np.float32(0.0)), one)
+            if a >= one:
+                for k in range(3):
+                    out[y, x, k] = tex[y, x, k]
+                continue
+            x0, x1, fx = xs0[x], xs1[x], fxs[x]
+            gx = one - fx
+            for k in range(3):
+                top = coarse[y0, x0, k] * gx + coarse[y0, x1, k] * fx
+                bot = coarse[y1, x0, k] * gx + coarse[y1, x1, k] * fx
+                out[y, x, k] = a * tex[y, x, k] + (one - a) * (top * gy + bot * fy)
+
+
+_pull_kernel = _maybe_njit(_pull_kernel_py)
+_up_index = _maybe_njit(_up_index_py)
+_push_kernel = _maybe_njit(_push_kernel_py)
 
 
 def fill_vertex_colors(colors, known, faces) -> np.ndarray:
