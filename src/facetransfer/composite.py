@@ -36,6 +36,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from .errors import ShapeError, FaceTransferError
+from .render.raster import _maybe_njit
 
 log = logging.getLogger(__name__)
 
@@ -546,18 +547,85 @@ def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
     H, W = mask.shape
     y0, y1 = max(by - margin, 0), min(by + bh + margin, H)
     x0, x1 = max(bx - margin, 0), min(bx + bw + margin, W)
-    m = mask[y0:y1, x0:x1]
-    t = T[y0:y1, x0:x1].astype(np.float32)
-    s = np.asarray(source)[y0:y1, x0:x1].astype(np.float32)
-    f = s + _membrane(m, t, s, outlier, int(smooth_iterations))
-    if feather > 0:
-        # distance to the nearest pixel outside the region (the crop's margin is outside)
-        dist = cv2.distanceTransform(m.view(np.uint8), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
-        a = np.clip(dist / float(feather), 0.0, 1.0)[..., None]
-        f = a * f + (1.0 - a) * t
-    crop = np.clip(np.rint(f), 0, 255).astype(np.uint8)
-    out[y0:y1, x0:x1] = np.where(m[..., None], crop, T[y0:y1, x0:x1])
+    m = np.ascontiguousarray(mask[y0:y1, x0:x1])
+    t = np.ascontiguousarray(T[y0:y1, x0:x1])
+    s = np.ascontiguousarray(np.asarray(source)[y0:y1, x0:x1])
+    h = _membrane(m, t, s, outlier, int(smooth_iterations))
+    # the seam's fade: the distance to the nearest pixel outside the region over ``feather``
+    # (the crop's margin is outside; pixels beyond the image are not)
+    a = _feather_alpha(m, feather, edge_outside=False) if feather > 0 else \
+        m.astype(np.float32)
+    crop = out[y0:y1, x0:x1]
+    _membrane_paste(m, t, s, h, a, crop)  # in place: the region's pixels of ``out``
     return out
+
+
+def _feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.ndarray:
+    """``clip(d / feather, 0, 1)`` with ``d`` the Euclidean distance of each pixel of ``m``
+    (h, w) bool to the nearest pixel outside it (0 outside): (h, w) float32.
+
+    Equal to ``cv2.distanceTransform(..., DIST_L2, DIST_MASK_PRECISE)`` scaled and clipped, but
+    computed only where it is below 1: pixels whose ``(2r + 1)²`` window (``r = ceil(feather)``)
+    lies inside ``m`` are farther than ``feather`` from outside (a square erosion finds them);
+    the rest search their window. ``edge_outside``: pixels beyond the crop count as outside
+    (else, as OpenCV, they do not).
+    """
+    r = max(int(np.ceil(feather)), 1)
+    m8 = m.view(np.uint8)
+    deep = cv2.erode(m8, np.ones((2 * r + 1, 2 * r + 1), np.uint8),
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0 if edge_outside else 1)
+    a = np.empty(m.shape, np.float32)
+    _alpha_kernel(m8, deep, r, float(max(feather, 1e-6)), bool(edge_outside), a)
+    return a
+
+
+def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover (numba)
+    """The window search of :func:`_feather_alpha`, writing ``a`` (h, w) float32."""
+    h, w = m.shape
+    for y in range(h):
+        for x in range(w):
+            if m[y, x] == 0:
+                a[y, x] = 0.0
+                continue
+            if deep[y, x] != 0:
+                a[y, x] = 1.0
+                continue
+            best = (r + 1) * (r + 1) * 2
+            for dy in range(-r, r + 1):
+                yy = y + dy
+                row_out = yy < 0 or yy >= h
+                if row_out and not edge_outside:
+                    continue
+                for dx in range(-r, r + 1):
+                    xx = x + dx
+                    if xx < 0 or xx >= w:
+                        if not edge_outside:
+                            continue
+                    elif not row_out and m[yy, xx] != 0:
+                        continue
+                    best = min(best, dy * dy + dx * dx)
+            a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
+
+
+def _membrane_paste_py(m, t, s, h, a, out):  # pragma: no cover (numba)
+    """``out = rint(a (s + h) + (1 - a) t)`` clipped to 0..255 at the pixels of ``m`` (h, w)
+    (``t``, ``s``, ``out`` (h, w, 3) uint8, ``h`` (h, w, 3) and ``a`` (h, w) float32), in
+    float32 as :func:`membrane_blend` states it; ``out`` is left alone elsewhere."""
+    H, W = m.shape
+    one = np.float32(1.0)
+    for y in range(H):
+        for x in range(W):
+            if not m[y, x]:
+                continue
+            ay = a[y, x]
+            for k in range(3):
+                f = np.float32(s[y, x, k]) + h[y, x, k]
+                v = np.rint(ay * f + (one - ay) * np.float32(t[y, x, k]))
+                out[y, x, k] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
+
+
+_alpha_kernel = _maybe_njit(_alpha_kernel_py)
+_membrane_paste = _maybe_njit(_membrane_paste_py)
 
 
 def _outline(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None):
@@ -579,7 +647,7 @@ def _outline(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None)
                          borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
     ring = m & ~interior
     ry, rx = np.nonzero(ring)
-    dr = t[ry, rx] - s[ry, rx]                       # target - source on the outline
+    dr = t[ry, rx].astype(np.float32) - s[ry, rx]    # target - source on the outline
     if outlier is not None:
         # outline pixels where target and source disagree wildly (the silhouette moved with
         # the new expression, or hair crosses it) would bleed into the face: leave them out
@@ -600,14 +668,14 @@ def _membrane(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None
     from .texture import fill_holes
 
     ring, interior, ry, rx, dr = _outline(m, t, s, outlier)
-    d = np.zeros_like(t)
+    d = np.zeros(t.shape, np.float32)
     d[ry, rx] = dr
     h = fill_holes(d, ring)  # (h, w, 3): the membrane, = target - source on the outline
     # Jacobi sweeps of Laplace's equation (the mean of the 4 neighbours, one 3x3 filter per
     # sweep) smooth the push-pull result towards harmonic; the outline keeps its values
     h = np.ascontiguousarray(h, dtype=np.float32)
-    inner3 = np.repeat(interior[..., None], h.shape[2], axis=2)
+    inner = interior.view(np.uint8)
     for _ in range(int(smooth_iterations)):
-        np.copyto(h, cv2.filter2D(h, -1, _FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE),
-                  where=inner3)
+        sweep = cv2.filter2D(h, -1, _FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE)
+        cv2.copyTo(sweep, inner, h)  # in place, the interior only
     return h
