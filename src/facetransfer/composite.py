@@ -583,8 +583,15 @@ def _feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.n
 
 
 def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover (numba)
-    """The window search of :func:`_feather_alpha`, writing ``a`` (h, w) float32."""
+    """The window search of :func:`_feather_alpha`, writing ``a`` (h, w) float32: the window's
+    offsets in order of distance, up to the first outside pixel."""
     h, w = m.shape
+    k = 2 * r + 1
+    d2 = np.empty(k * k, np.int64)
+    for i in range(k * k):
+        d2[i] = (i // k - r) ** 2 + (i % k - r) ** 2
+    order = np.argsort(d2, kind="mergesort")
+    oy, ox, od = order // k - r, order % k - r, d2[order]
     for y in range(h):
         for x in range(w):
             if m[y, x] == 0:
@@ -593,20 +600,16 @@ def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover 
             if deep[y, x] != 0:
                 a[y, x] = 1.0
                 continue
-            best = (r + 1) * (r + 1) * 2
-            for dy in range(-r, r + 1):
-                yy = y + dy
-                row_out = yy < 0 or yy >= h
-                if row_out and not edge_outside:
-                    continue
-                for dx in range(-r, r + 1):
-                    xx = x + dx
-                    if xx < 0 or xx >= w:
-                        if not edge_outside:
-                            continue
-                    elif not row_out and m[yy, xx] != 0:
-                        continue
-                    best = min(best, dy * dy + dx * dx)
+            best = 2 * (r + 1) * (r + 1)
+            for i in range(k * k):
+                yy, xx = y + oy[i], x + ox[i]
+                if yy < 0 or yy >= h or xx < 0 or xx >= w:
+                    if edge_outside:
+                        best = od[i]
+                        break
+                elif m[yy, xx] == 0:
+                    best = od[i]
+                    break
             a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
 
 

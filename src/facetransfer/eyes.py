@@ -592,15 +592,30 @@ def _region_box(raster, select: np.ndarray, *, margin: int) -> tuple[int, int, i
     ``4·LID_SOFTNESS``; the outline's erosion 2 px; the feather's distance transform sees a
     zero pixel at the box's edge), so working on the box gives the same pixels as the whole
     raster."""
-    import cv2
-
-    tid = raster.tri_id
-    shown = (tid >= 0) & np.asarray(select, bool)[np.maximum(tid, 0)]
-    x, y, w, h = cv2.boundingRect(shown.view(np.uint8))
-    if w == 0 or h == 0:
+    tid = np.ascontiguousarray(raster.tri_id)
+    x, y, x1, y1 = _shown_box(tid, np.ascontiguousarray(select, dtype=bool))
+    w, h = x1 - x, y1 - y
+    if w <= 0 or h <= 0:
         return None
     H, W = tid.shape
     return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, W), min(y + h + margin, H)
+
+
+def _shown_box_py(tid, select):  # pragma: no cover (numba)
+    """``(x0, y0, x1, y1)`` (end exclusive; empty: x1 <= x0) of the pixels of ``tid`` (H, W)
+    showing a ``select`` (F,) triangle."""
+    H, W = tid.shape
+    x0, y0, x1, y1 = W, H, 0, 0
+    for y in range(H):
+        for x in range(W):
+            f = tid[y, x]
+            if f >= 0 and select[f]:
+                x0, x1 = min(x0, x), max(x1, x + 1)
+                y0, y1 = min(y0, y), max(y1, y + 1)
+    return x0, y0, x1, y1
+
+
+_shown_box = _maybe_njit(_shown_box_py)
 
 
 def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
@@ -704,8 +719,8 @@ def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
         for x in range(W):
             q = 1.0
             for k in range(3):
-                u = (1.0 + f[y, x, k]) / (1.0 + fb[y, x, k])
-                q = max(q, u, 1.0 / u)
+                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
+                q = max(q, max(u, v) / min(u, v))
             if q <= q_lo:
                 r[y, x] = 0.0
             elif q >= q_hi:
@@ -759,24 +774,57 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
     """The fit of :func:`gain_field` as its separable factors over ``box = (x0, y0, x1, y1)``:
     ``gy (y1 - y0, 3)`` and ``gx (x1 - x0, 3)`` float64, the unclipped gain at pixel ``(x, y)``
     being ``gy[y - y0] * gx[x - x0]``."""
-    ys, xs = np.nonzero(where)
+    import cv2
+
+    pts = cv2.findNonZero(np.ascontiguousarray(where).view(np.uint8))  # (n, [1,] 2): (x, y)
+    pts = np.zeros((0, 2), np.int64) if pts is None else pts.reshape(-1, 2).astype(np.int64)
+    xs, ys = pts[:, 0], pts[:, 1]                                      # in row-major order
     cy, cx = ys.mean(), xs.mean()
     scale = float(max(np.ptp(ys), np.ptp(xs), 1))
     step = max(1, -(-ys.size // int(max_samples)))
     ys, xs = ys[::step], xs[::step]
-    A = np.stack([np.ones(ys.size), (xs - cx) / scale, (ys - cy) / scale], axis=1)   # (k, 3)
-    AA = (A[:, :, None] * A[:, None, :]).reshape(-1, 9)                           # (k, 9)
     r = _LOG1P_U8[face[ys, xs]] - _LOG1P_U8[part[ys, xs]]                         # (k, 3)
-    w = np.ones_like(r)                                                            # (k, 3)
-    for _ in range(int(iterations)):  # weighted normal equations of the 3 channels at once
-        M = (w.T @ AA).reshape(-1, 3, 3) + 1e-9 * np.eye(3)   # (c, 3, 3); tiny ridge: degenerate
-        coef = np.linalg.solve(M, ((w * r).T @ A)[..., None])[..., 0].T            # (3, c)
-        w = 1.0 / np.maximum(np.abs(r - A @ coef), 1e-3)  # |res| = res² / |res|: the L1 fit
+    coef = np.empty((3, 3))
+    _plane_l1_kernel((xs - cx) / scale, (ys - cy) / scale, r, int(iterations), coef)
     x0, y0, x1, y1 = box
     # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns
     gx = np.exp(((np.arange(x0, x1) - cx) / scale)[:, None] * coef[1])         # (w, c)
     gy = np.exp(coef[0] + ((np.arange(y0, y1) - cy) / scale)[:, None] * coef[2])  # (h, c)
     return gy, gx
+
+
+def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
+    """Per channel c, the plane ``coef[:, c] = (a, b, c)`` fitting ``r[:, c]`` (k, 3) by
+    ``a + b u + c v`` in least absolute deviations: ``iterations`` steps of iteratively
+    reweighted least squares (weights ``1 / max(|residual|, 1e-3)``, from 1; the normal
+    equations with a ridge of 1e-9)."""
+    k = r.shape[0]
+    w = np.ones((k, 3))
+    M = np.empty((3, 3))
+    b = np.empty(3)
+    for _ in range(iterations):
+        for c in range(3):
+            M[:] = 0.0
+            b[:] = 0.0
+            for i in range(k):
+                wi, ui, vi = w[i, c], u[i], v[i]
+                M[0, 0] += wi
+                M[0, 1] += wi * ui
+                M[0, 2] += wi * vi
+                M[1, 1] += wi * ui * ui
+                M[1, 2] += wi * ui * vi
+                M[2, 2] += wi * vi * vi
+                b[0] += wi * r[i, c]
+                b[1] += wi * ui * r[i, c]
+                b[2] += wi * vi * r[i, c]
+            M[1, 0], M[2, 0], M[2, 1] = M[0, 1], M[0, 2], M[1, 2]
+            for j in range(3):
+                M[j, j] += 1e-9
+            coef[:, c] = np.linalg.solve(M, b)
+        for i in range(k):
+            for c in range(3):
+                e = abs(r[i, c] - coef[0, c] - coef[1, c] * u[i] - coef[2, c] * v[i])
+                w[i, c] = 1.0 / max(e, 1e-3)
 
 
 def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
@@ -792,3 +840,4 @@ def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
 
 
 _apply_gain = _maybe_njit(_apply_gain_py)
+_plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)
