@@ -652,7 +652,7 @@ def _outline(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None)
     interior = cv2.erode(m.view(np.uint8), np.ones((3, 3), np.uint8),
                          borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
     ring = m & ~interior
-    ry, rx = np.nonzero(ring)
+    ry, rx = _nonzero(ring)
     dr = t[ry, rx].astype(np.float32) - s[ry, rx]    # target - source on the outline
     if outlier is not None:
         # outline pixels where target and source disagree wildly (the silhouette moved with
@@ -663,6 +663,16 @@ def _outline(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None)
             interior = m & ~ring
             ry, rx, dr = ry[ok], rx[ok], dr[ok]
     return ring, interior, ry, rx, dr
+
+
+def _nonzero(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.nonzero`` of an (h, w) bool mask (rows, columns; row-major order), by
+    ``cv2.findNonZero``."""
+    pts = cv2.findNonZero(np.ascontiguousarray(mask).view(np.uint8))  # (n, [1,] 2): (x, y)
+    if pts is None:
+        return np.zeros(0, np.intp), np.zeros(0, np.intp)
+    pts = pts.reshape(-1, 2).astype(np.intp)
+    return pts[:, 1], pts[:, 0]
 
 
 def _membrane(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None,

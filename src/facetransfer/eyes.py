@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
-from .composite import _feather_alpha
+from .composite import _feather_alpha, _nonzero
 from .errors import RewriteError
 from .render import Raster, shade_texture
 from .render.raster import _maybe_njit
@@ -774,11 +774,7 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
     """The fit of :func:`gain_field` as its separable factors over ``box = (x0, y0, x1, y1)``:
     ``gy (y1 - y0, 3)`` and ``gx (x1 - x0, 3)`` float64, the unclipped gain at pixel ``(x, y)``
     being ``gy[y - y0] * gx[x - x0]``."""
-    import cv2
-
-    pts = cv2.findNonZero(np.ascontiguousarray(where).view(np.uint8))  # (n, [1,] 2): (x, y)
-    pts = np.zeros((0, 2), np.int64) if pts is None else pts.reshape(-1, 2).astype(np.int64)
-    xs, ys = pts[:, 0], pts[:, 1]                                      # in row-major order
+    ys, xs = _nonzero(where)
     cy, cx = ys.mean(), xs.mean()
     scale = float(max(np.ptp(ys), np.ptp(xs), 1))
     step = max(1, -(-ys.size // int(max_samples)))

@@ -150,7 +150,8 @@ def _push_pull(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
     so that known texels dominate. Push: from the coarsest level up, every texel is
     ``a tex + (1 - a) up`` with ``a`` its weight clipped to [0, 1] and ``up`` the bilinear 2x
     upsampling of the filled coarser level (half-pixel centres, edges clamped: as
-    ``cv2.resize(..., INTER_LINEAR)``). Two numba kernels per level.
+    ``cv2.resize(..., INTER_LINEAR)``). A numba kernel per level and step (the push by
+    ``cv2.resize`` and a masked copy when the weights are 0 or 1).
 
     Parameters
     ----------
@@ -170,10 +171,20 @@ def _push_pull(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
         _pull_kernel(c, wl, cc, wc)
         levels.append((cc, wc))
     filled = levels[-1][0]
+    binary = bool(np.all((w == 0) | (w == 1)))  # then so is every pulled level
     for c, wl in reversed(levels[:-1]):
-        out = np.empty_like(c)
-        _push_kernel(c, wl, filled, out)
-        filled = out
+        if binary:  # up, with the known texels copied over it (a = 0 or 1)
+            H, W = wl.shape
+            up = cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
+                            interpolation=cv2.INTER_LINEAR)[:H, :W]
+            if up.ndim == 2:  # a 1-pixel-wide level: cv2 drops the channel axis of (1, 1, 3)
+                up = up.reshape(H, W, 3)
+            cv2.copyTo(c, (wl > 0).view(np.uint8), up)
+            filled = np.ascontiguousarray(up)
+        else:
+            out = np.empty_like(c)
+            _push_kernel(c, wl, filled, out)
+            filled = out
     return filled
 
 
