@@ -139,31 +139,28 @@ def fill_holes(texture, known, *, method: str = "pushpull") -> np.ndarray:
         out = filled.astype(np.float32)
         out[k] = tex[k]
         return out
-    return _push_pull(tex, k.astype(np.float32))  # equal to tex where known
+    return _push_pull(tex, k)
 
 
-def _push_pull(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
+def _push_pull(tex: np.ndarray, known: np.ndarray) -> np.ndarray:
     """Push-pull: average known values down a pyramid, then fill holes from coarser levels.
 
-    Pull: each level halves the previous one (odd sizes padded by a weightless row or column),
-    a texel the weighted mean of its 2x2 children, its weight their summed weight clipped to 1
-    so that known texels dominate. Push: from the coarsest level up, every texel is
-    ``a tex + (1 - a) up`` with ``a`` its weight clipped to [0, 1] and ``up`` the bilinear 2x
-    upsampling of the filled coarser level (half-pixel centres, edges clamped: as
-    ``cv2.resize(..., INTER_LINEAR)``). A numba kernel per level and step (the push by
-    ``cv2.resize`` and a masked copy when the weights are 0 or 1).
+    Pull: each level halves the previous one (odd sizes padded by an unknown row or column), a
+    texel the mean of its known 2x2 children, known if one of them is (a numba kernel). Push:
+    from the coarsest level up, the unknown texels take the bilinear 2x upsampling of the
+    filled coarser level (``cv2.resize``, INTER_LINEAR), the known ones keep their value.
 
     Parameters
     ----------
     tex : (H, W, 3) float32
-    w : (H, W) float32
-        Weights in [0, 1] (0: unknown).
+    known : (H, W) bool
 
     Returns
     -------
     (H, W, 3) float32
+        Equal to ``tex`` where ``known``.
     """
-    levels = [(np.ascontiguousarray(tex, np.float32), np.ascontiguousarray(w, np.float32))]
+    levels = [(np.ascontiguousarray(tex, np.float32), known.astype(np.float32))]
     while levels[-1][1].shape[0] > 1 or levels[-1][1].shape[1] > 1:
         c, wl = levels[-1]
         Hc, Wc = (wl.shape[0] + 1) // 2, (wl.shape[1] + 1) // 2
@@ -171,27 +168,19 @@ def _push_pull(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
         _pull_kernel(c, wl, cc, wc)
         levels.append((cc, wc))
     filled = levels[-1][0]
-    binary = bool(np.all((w == 0) | (w == 1)))  # then so is every pulled level
     for c, wl in reversed(levels[:-1]):
-        if binary:  # up, with the known texels copied over it (a = 0 or 1)
-            H, W = wl.shape
-            up = cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
-                            interpolation=cv2.INTER_LINEAR)[:H, :W]
-            if up.ndim == 2:  # a 1-pixel-wide level: cv2 drops the channel axis of (1, 1, 3)
-                up = up.reshape(H, W, 3)
-            cv2.copyTo(c, (wl > 0).view(np.uint8), up)
-            filled = np.ascontiguousarray(up)
-        else:
-            out = np.empty_like(c)
-            _push_kernel(c, wl, filled, out)
-            filled = out
+        H, W = wl.shape
+        up = cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
+                        interpolation=cv2.INTER_LINEAR)[:H, :W]
+        cv2.copyTo(c, (wl > 0).view(np.uint8), up)  # the known texels over it
+        filled = np.ascontiguousarray(up)
     return filled
 
 
 def _pull_kernel_py(tex, w, coarse, wc):  # pragma: no cover (numba)
     """One pull step: ``coarse`` (Hc, Wc, 3) the weighted mean of each 2x2 block of ``tex``
-    (H, W, 3) (weights ``w`` (H, W); 0 where the block has no weight), ``wc`` (Hc, Wc) the
-    block's weight sum clipped to 1."""
+    (H, W, 3) (weights ``w`` (H, W), here 0 or 1; 0 where the block has no weight), ``wc``
+    (Hc, Wc) the block's weight sum clipped to 1."""
     H, W = w.shape
     Hc, Wc = wc.shape
     for y in range(Hc):
@@ -218,50 +207,7 @@ def _pull_kernel_py(tex, w, coarse, wc):  # pragma: no cover (numba)
             wc[y, x] = min(sw, np.float32(1.0))
 
 
-def _up_index_py(i, n):  # pragma: no cover (numba)
-    """Source index and weight of the bilinear 2x upsampling of an axis of ``n`` samples at
-    destination index ``i`` (``cv2.resize`` INTER_LINEAR: centre ``i / 2 - 1/4``, clamped)."""
-    s = 0.5 * i - 0.25
-    i0 = int(np.floor(s))
-    f = s - i0
-    if i0 < 0:
-        i0, f = 0, 0.0
-    if i0 >= n - 1:
-        i0, f = n - 1, 0.0
-    return i0, min(i0 + 1, n - 1), np.float32(f)
-
-
-def _push_kernel_py(tex, w, coarse, out):  # pragma: no cover (numba)
-    """One push step: ``out = a tex + (1 - a) up`` per texel, ``a = clip(w, 0, 1)``, ``up`` the
-    bilinear 2x upsampling of ``coarse`` (Hc, Wc, 3)."""
-    H, W = w.shape
-    Hc, Wc = coarse.shape[0], coarse.shape[1]
-    xs0 = np.empty(W, np.int64)
-    xs1 = np.empty(W, np.int64)
-    fxs = np.empty(W, np.float32)
-    for x in range(W):
-        xs0[x], xs1[x], fxs[x] = _up_index(x, Wc)
-    one = np.float32(1.0)
-    for y in range(H):
-        y0, y1, fy = _up_index(y, Hc)
-        gy = one - fy
-        for x in range(W):
-            a = min(max(w[y, x], np.float32(0.0)), one)
-            if a >= one:
-                for k in range(3):
-                    out[y, x, k] = tex[y, x, k]
-                continue
-            x0, x1, fx = xs0[x], xs1[x], fxs[x]
-            gx = one - fx
-            for k in range(3):
-                top = coarse[y0, x0, k] * gx + coarse[y0, x1, k] * fx
-                bot = coarse[y1, x0, k] * gx + coarse[y1, x1, k] * fx
-                out[y, x, k] = a * tex[y, x, k] + (one - a) * (top * gy + bot * fy)
-
-
 _pull_kernel = _maybe_njit(_pull_kernel_py)
-_up_index = _maybe_njit(_up_index_py)
-_push_kernel = _maybe_njit(_push_kernel_py)
 
 
 def fill_vertex_colors(colors, known, faces) -> np.ndarray:
