@@ -46,7 +46,6 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .allocator import retain_freed_memory
 from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend
 from .errors import RewriteError, ShapeError
@@ -372,14 +371,7 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
     Yields
     ------
     RewriteFrame
-
-    Notes
-    -----
-    The process's allocator is told to keep freed memory for reuse
-    (:func:`facetransfer.allocator.retain_freed_memory`, glibc only): each frame allocates and
-    frees ~10 MB of crop-sized arrays, which otherwise page-fault in again every frame.
     """
-    retain_freed_memory()
     opts = (options or RewriteOptions()).with_(texture=texture, blend=blend, feather=feather,
                                                 mouth=mouth, eyes=eyes)
     one = _ClipRenderer.build(target_frames, target_track, new_track, model, opts,
