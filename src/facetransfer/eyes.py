@@ -793,30 +793,38 @@ def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
     """Per channel c, the plane ``coef[:, c] = (a, b, c)`` fitting ``r[:, c]`` (k, 3) by
     ``a + b u + c v`` in least absolute deviations: ``iterations`` steps of iteratively
     reweighted least squares (weights ``1 / max(|residual|, 1e-3)``, from 1; the normal
-    equations with a ridge of 1e-9)."""
+    equations with a ridge of 1e-9, solved by Cramer's rule)."""
     k = r.shape[0]
     w = np.ones((k, 3))
-    M = np.empty((3, 3))
-    b = np.empty(3)
+    M = np.empty((3, 6))  # per channel: sum w, wu, wv, wuu, wuv, wvv
+    b = np.empty((3, 3))  # per channel: sum wr, wur, wvr
     for _ in range(iterations):
+        M[:] = 0.0
+        b[:] = 0.0
+        for i in range(k):
+            ui, vi = u[i], v[i]
+            uu, uv, vv = ui * ui, ui * vi, vi * vi
+            for c in range(3):
+                wi, wr = w[i, c], w[i, c] * r[i, c]
+                M[c, 0] += wi
+                M[c, 1] += wi * ui
+                M[c, 2] += wi * vi
+                M[c, 3] += wi * uu
+                M[c, 4] += wi * uv
+                M[c, 5] += wi * vv
+                b[c, 0] += wr
+                b[c, 1] += wr * ui
+                b[c, 2] += wr * vi
         for c in range(3):
-            M[:] = 0.0
-            b[:] = 0.0
-            for i in range(k):
-                wi, ui, vi = w[i, c], u[i], v[i]
-                M[0, 0] += wi
-                M[0, 1] += wi * ui
-                M[0, 2] += wi * vi
-                M[1, 1] += wi * ui * ui
-                M[1, 2] += wi * ui * vi
-                M[2, 2] += wi * vi * vi
-                b[0] += wi * r[i, c]
-                b[1] += wi * ui * r[i, c]
-                b[2] += wi * vi * r[i, c]
-            M[1, 0], M[2, 0], M[2, 1] = M[0, 1], M[0, 2], M[1, 2]
-            for j in range(3):
-                M[j, j] += 1e-9
-            coef[:, c] = np.linalg.solve(M, b)
+            a00, a01, a02 = M[c, 0] + 1e-9, M[c, 1], M[c, 2]
+            a11, a12, a22 = M[c, 3] + 1e-9, M[c, 4], M[c, 5] + 1e-9
+            c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+            c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            b0, b1, b2 = b[c, 0], b[c, 1], b[c, 2]
+            coef[0, c] = (c00 * b0 + c01 * b1 + c02 * b2) / det
+            coef[1, c] = (c01 * b0 + c11 * b1 + c12 * b2) / det
+            coef[2, c] = (c02 * b0 + c12 * b1 + c22 * b2) / det
         for i in range(k):
             for c in range(3):
                 e = abs(r[i, c] - coef[0, c] - coef[1, c] * u[i] - coef[2, c] * v[i])
