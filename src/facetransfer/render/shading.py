@@ -177,7 +177,8 @@ def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: n
         raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
     image = np.zeros((H, W, 3), np.uint8)
     mask = np.zeros((H, W), bool)
-    _shade_uv_kernel(np.ascontiguousarray(raster.tri_id), np.ascontiguousarray(raster.bary), Fa,
+    # the raster as it is (a box of a larger one is not copied: numba reads strided arrays)
+    _shade_uv_kernel(np.asarray(raster.tri_id, np.int32), np.asarray(raster.bary, np.float32), Fa,
                      U, np.ascontiguousarray(T), sel, image, mask)
     return image, mask
 
