@@ -187,3 +187,20 @@ def test_membrane_sweeps_on_the_interior_box_equal_the_whole_crop():
         sweep = cv2.filter2D(h, -1, composite._FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE)
         h = np.where(interior[..., None], sweep, h)
     np.testing.assert_array_equal(composite._membrane(m, t, s, None, 6), h)
+
+
+def test_shade_texture_refuses_a_raster_of_more_triangles():
+    from facetransfer.errors import ShapeError
+    from facetransfer.render import Raster, shade_texture
+
+    tid = np.full((4, 5), -1, np.int32)
+    tid[2, 3] = 7  # the faces given have 2 triangles
+    r = Raster(np.zeros((4, 5), np.float32), tid, np.full((4, 5, 3), 1 / 3, np.float32), tid >= 0)
+    F = np.array([[0, 1, 2], [1, 2, 3]])
+    uvs = np.random.default_rng(0).random((4, 2))
+    tex = np.zeros((8, 8, 3), np.uint8)
+    with pytest.raises(ShapeError, match="exceed the 2 faces"):
+        shade_texture(r, F, uvs, tex)
+    tid[2, 3] = 1
+    img, mask = shade_texture(r, F, uvs, tex)
+    assert mask.sum() == 1 and mask[2, 3]
