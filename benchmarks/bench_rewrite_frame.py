@@ -4,14 +4,15 @@ The issue-13 demo pair (``driving_d9`` as the target, the expressions of ``drivi
 model, capture tracker, the default :class:`~facetransfer.rewrite_options.RewriteOptions`):
 ``rewrite_frames`` on one worker, OpenCV on one thread, CPU seconds (``time.process_time``)
 per frame over ``--frames`` frames that follow the first ``--parity-frames`` (which pay the
-set-up and numba's cache load, and are kept for the comparison), in a fresh process per run. With ``--base SRC`` (the ``src`` folder of another revision, e.g.
-``git archive main src | tar -x -C /tmp/main``) both trees run in turn, ``--pairs`` times
-(the machine is shared: the spread between runs is the noise), and the first
+set-up and numba's cache load, and are kept for the comparison), in a fresh process per run.
+With ``--base-rev REV`` (a git revision of this repository, extracted to a temporary folder)
+or ``--base SRC`` (the ``src`` folder of another checkout) both trees run in turn, ``--pairs``
+times (the machine is shared: the spread between runs is the noise), and the first
 ``--parity-frames`` rewritten frames of the two are compared: PSNR over the face mask (the
 pixels either face covers) and over the whole frame, and the count of pixels that differ
-outside the face mask (0: the outside is bit-identical).
+outside the face mask (0: the outside is bit-identical). Without a base only this tree runs.
 
-    python benchmarks/bench_rewrite_frame.py --out out/benchmarks [--base /tmp/main/src]
+    python benchmarks/bench_rewrite_frame.py --out out/benchmarks [--base-rev main | --base SRC]
 
 Writes ``OUT/rewrite_frame.json`` and ``OUT/rewrite_frame.png``; the two clips' tracks are kept
 in ``OUT/rewrite_frame_tracks/`` for later runs.
@@ -90,6 +91,21 @@ def run(src: Path, tracks: Path, frames: int, parity: int, save: Path) -> dict:
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
+def _extract(rev: str) -> Path:
+    """The ``src`` folder of git revision ``rev`` of this repository, in a temporary folder."""
+    import io
+    import tarfile
+    import tempfile
+
+    repo = Path(__file__).resolve().parents[1]
+    tmp = Path(tempfile.mkdtemp(prefix="bench_rewrite_frame_"))
+    tar = subprocess.run(["git", "-C", str(repo), "archive", "--format=tar", rev, "src"],
+                         check=True, capture_output=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
+        t.extractall(tmp, filter="data")
+    return tmp / "src"
+
+
 def parity(a_path: Path, b_path: Path) -> dict:
     """Per-frame PSNR of two runs' frames over the face mask and the whole frame, and the
     pixels that differ outside the face mask."""
@@ -140,6 +156,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks", help="output folder")
     ap.add_argument("--base", help="the src folder of the revision to compare with")
+    ap.add_argument("--base-rev", help="or a git revision of this repository (e.g. main), "
+                    "extracted to a temporary folder")
     ap.add_argument("--frames", type=int, default=100, help="frames timed per run")
     ap.add_argument("--parity-frames", type=int, default=60, help="frames compared")
     ap.add_argument("--pairs", type=int, default=3, help="runs of each tree, in turn")
@@ -157,7 +175,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     tracks = out / "rewrite_frame_tracks"
     here = Path(__file__).resolve().parents[1] / "src"
-    trees = {"this tree": here} | ({"base": Path(args.base)} if args.base else {})
+    base = Path(args.base) if args.base else (_extract(args.base_rev) if args.base_rev else None)
+    trees = {"this tree": here} | ({"base": base} if base else {})
     runs = {name: [] for name in trees}
     for _ in range(args.pairs):
         for name, src in trees.items():
@@ -167,7 +186,8 @@ def main(argv=None) -> int:
             print(f"{name}: {r['per_frame_ms']:.1f} ms per frame", flush=True)
     res = {"frames": args.frames, "runs": runs, "load_average": os.getloadavg(),
            "median_ms": {k: float(np.median(v)) for k, v in runs.items()}}
-    if args.base:
+    if base:
+        res["base"] = str(args.base or args.base_rev)
         res["parity"] = parity(out / "rewrite_frame_this_tree.npz", out / "rewrite_frame_base.npz")
         p = res["parity"]
         print(f"parity: face PSNR min {min(p['face_psnr_db']):.1f} dB, whole frame min "
