@@ -32,8 +32,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
+from .composite import _feather_alpha, _nonzero
 from .errors import RewriteError
 from .render import Raster, shade_texture
+from .render.raster import _maybe_njit
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -64,6 +66,8 @@ LID_SOFTNESS = 3.0
 #: Per-channel gains allowed between the eye region's frame and the current one
 #: (:func:`match_outline`).
 GAIN_RANGE = (0.7, 1.4)
+#: Reweighting steps and most pixels of the robust fit of :func:`gain_field`.
+GAIN_ITERATIONS, GAIN_SAMPLES = 5, 4096
 #: Holes of the eye region up to this many edge rings across are closed (:func:`close_region`).
 CLOSE_RINGS = 3
 
@@ -588,15 +592,30 @@ def _region_box(raster, select: np.ndarray, *, margin: int) -> tuple[int, int, i
     ``4·LID_SOFTNESS``; the outline's erosion 2 px; the feather's distance transform sees a
     zero pixel at the box's edge), so working on the box gives the same pixels as the whole
     raster."""
-    import cv2
-
-    tid = raster.tri_id
-    shown = (tid >= 0) & np.asarray(select, bool)[np.maximum(tid, 0)]
-    x, y, w, h = cv2.boundingRect(shown.view(np.uint8))
-    if w == 0 or h == 0:
+    tid = np.ascontiguousarray(raster.tri_id)
+    x, y, x1, y1 = _shown_box(tid, np.ascontiguousarray(select, dtype=bool))
+    w, h = x1 - x, y1 - y
+    if w <= 0 or h <= 0:
         return None
     H, W = tid.shape
     return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, W), min(y + h + margin, H)
+
+
+def _shown_box_py(tid, select):  # pragma: no cover (numba)
+    """``(x0, y0, x1, y1)`` (end exclusive; empty: x1 <= x0) of the pixels of ``tid`` (H, W)
+    showing a ``select`` (F,) triangle."""
+    H, W = tid.shape
+    x0, y0, x1, y1 = W, H, 0, 0
+    for y in range(H):
+        for x in range(W):
+            f = tid[y, x]
+            if f >= 0 and select[f]:
+                x0, x1 = min(x0, x), max(x1, x + 1)
+                y0, y1 = min(y0, y), max(y1, y + 1)
+    return x0, y0, x1, y1
+
+
+_shown_box = _maybe_njit(_shown_box_py)
 
 
 def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
@@ -643,37 +662,80 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
                      borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
     ring = (mask if compare is None else compare) & deep
     box = (slice(y, y + h), slice(x, x + w))      # the work is done on the region's box only
-    f = part[box].astype(np.float32)
-    if ring.sum() >= 8:
-        f *= gain_field(face, part, ring, box=(x, y, x + w, y + h))
-    # the distance to the nearest pixel outside the region (one pixel of the box's border is
-    # outside it, or the image ends there: the same distances as over the whole image)
-    pad = np.pad(mask[box].view(np.uint8), 1)
-    a = np.clip(cv2.distanceTransform(pad, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
-                / max(feather, 1e-6), 0.0, 1.0)[..., None]
-    fb = face[box].astype(np.float32)
+    pb = np.ascontiguousarray(part[box])
+    if ring.sum() >= 8:  # part scaled by gain_field's gains
+        gy, gx = _gain_factors(face, part, ring, GAIN_ITERATIONS, (x, y, x + w, y + h),
+                                GAIN_SAMPLES)
+        f = np.empty(pb.shape, np.float32)
+        _apply_gain(pb, gy, gx, *GAIN_RANGE, f)
+    else:
+        f = pb.astype(np.float32)
+    # the distance to the nearest pixel outside the region (the box's edge counts as outside:
+    # one pixel beyond it is outside the region, or the image ends there)
+    mb = np.ascontiguousarray(mask[box])
+    a = _feather_alpha(mb, feather, edge_outside=True)
+    fb = np.ascontiguousarray(face[box])
     if reject is not None:
-        a = a * (1.0 - _rejected(f, fb, reject))[..., None]
-    blended = np.clip(np.rint(fb + a * (f - fb)), 0, 255).astype(np.uint8)
+        a *= 1.0 - _rejected(f, fb, reject)
     out = face.copy()
-    out[box] = np.where(mask[box][..., None], blended, face[box])
+    _outline_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
     return out
+
+
+def _outline_paste_py(m, fb, f, a, out):  # pragma: no cover (numba)
+    """``out = rint(fb + a (f - fb))`` clipped to 0..255 at the pixels of ``m`` (h, w) (``fb``,
+    ``out`` (h, w, 3) uint8, ``f`` (h, w, 3) and ``a`` (h, w) float32), in float32."""
+    H, W = m.shape
+    for y in range(H):
+        for x in range(W):
+            if not m[y, x]:
+                continue
+            ay = a[y, x]
+            for k in range(3):
+                b = np.float32(fb[y, x, k])
+                v = np.rint(b + ay * (f[y, x, k] - b))
+                out[y, x, k] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
 
 
 def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
     """``(h, w)`` float32 in [0, 1]: how far each pixel's largest per-channel absolute log
-    ratio of ``f`` and ``fb`` lies between ``reject = (lo, hi)``, smoothed over ~2 pixels."""
+    ratio of ``f`` (h, w, 3) float32 and ``fb`` (h, w, 3) uint8 (``|log(1 + f) - log(1 + fb)|``)
+    lies between ``reject = (lo, hi)``, smoothed over ~2 pixels."""
     import cv2
 
     lo, hi = (float(v) for v in reject)
-    d = np.abs(np.log1p(f) - np.log1p(fb)).max(axis=-1)
-    r = np.clip((d - lo) / max(hi - lo, 1e-6), 0.0, 1.0).astype(np.float32)
+    r = np.empty(f.shape[:2], np.float32)
+    _reject_kernel(f, fb, lo, max(hi - lo, 1e-6), r)
     return np.clip(cv2.GaussianBlur(r, (0, 0), 2.0) * 2.0, 0.0, 1.0)
 
 
+def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
+    """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel, with one
+    log per pixel (of the largest ratio ``(1 + f) / (1 + fb)`` or its inverse) and none where
+    that ratio lies outside ``exp(lo)..exp(lo + span)``."""
+    H, W = r.shape
+    q_lo, q_hi = np.exp(lo), np.exp(lo + span)
+    for y in range(H):
+        for x in range(W):
+            q = 1.0
+            for k in range(3):
+                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
+                q = max(q, max(u, v) / min(u, v))
+            if q <= q_lo:
+                r[y, x] = 0.0
+            elif q >= q_hi:
+                r[y, x] = 1.0
+            else:
+                r[y, x] = (np.log(q) - lo) / span
+
+
+_outline_paste = _maybe_njit(_outline_paste_py)
+_reject_kernel = _maybe_njit(_reject_kernel_py)
+
+
 def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
-               iterations: int = 5, box: tuple[int, int, int, int] | None = None,
-               max_samples: int = 4096) -> np.ndarray:
+               iterations: int = GAIN_ITERATIONS, box: tuple[int, int, int, int] | None = None,
+               max_samples: int = GAIN_SAMPLES) -> np.ndarray:
     """Per-channel gains taking ``part`` to ``face``'s colours.
 
     The log ratio ``log(1 + face) - log(1 + part)`` over the pixels ``where`` is fitted, per
@@ -699,21 +761,87 @@ def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
     -------
     (y1 - y0, x1 - x0, 3) float32
     """
-    ys, xs = np.nonzero(where)
+    x0, y0, x1, y1 = (0, 0, where.shape[1], where.shape[0]) if box is None else box
+    gy, gx = _gain_factors(face, part, where, iterations, (x0, y0, x1, y1), max_samples)
+    return np.clip(gy[:, None, :] * gx[None, :, :], *GAIN_RANGE).astype(np.float32)
+
+
+#: ``log(1 + v)`` of the 256 values of a uint8
+_LOG1P_U8 = np.log1p(np.arange(256, dtype=np.float64))
+
+
+def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
+    """The fit of :func:`gain_field` as its separable factors over ``box = (x0, y0, x1, y1)``:
+    ``gy (y1 - y0, 3)`` and ``gx (x1 - x0, 3)`` float64, the unclipped gain at pixel ``(x, y)``
+    being ``gy[y - y0] * gx[x - x0]``."""
+    ys, xs = _nonzero(where)
     cy, cx = ys.mean(), xs.mean()
     scale = float(max(np.ptp(ys), np.ptp(xs), 1))
     step = max(1, -(-ys.size // int(max_samples)))
     ys, xs = ys[::step], xs[::step]
-    A = np.stack([np.ones(ys.size), (xs - cx) / scale, (ys - cy) / scale], axis=1)   # (k, 3)
-    r = np.log1p(face[ys, xs].astype(np.float64)) - np.log1p(part[ys, xs].astype(np.float64))
-    w = np.ones_like(r)                                                            # (k, 3)
-    for _ in range(int(iterations)):  # weighted normal equations of the 3 channels at once
-        Aw = (A[:, None, :] * w[:, :, None]).transpose(1, 2, 0)                 # (c, 3, k)
-        M = Aw @ A + 1e-9 * np.eye(3)                     # (c, 3, 3); tiny ridge: degenerate sets
-        coef = np.linalg.solve(M, Aw @ r.T[:, :, None])[..., 0].T               # (3, c)
-        w = 1.0 / np.maximum(np.abs(r - A @ coef), 1e-3)  # |res| = res² / |res|: the L1 fit
-    x0, y0, x1, y1 = (0, 0, where.shape[1], where.shape[0]) if box is None else box
+    r = _LOG1P_U8[face[ys, xs]] - _LOG1P_U8[part[ys, xs]]                         # (k, 3)
+    coef = np.empty((3, 3))
+    _plane_l1_kernel((xs - cx) / scale, (ys - cy) / scale, r, int(iterations), coef)
+    x0, y0, x1, y1 = box
     # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns
     gx = np.exp(((np.arange(x0, x1) - cx) / scale)[:, None] * coef[1])         # (w, c)
     gy = np.exp(coef[0] + ((np.arange(y0, y1) - cy) / scale)[:, None] * coef[2])  # (h, c)
-    return np.clip(gy[:, None, :] * gx[None, :, :], *GAIN_RANGE).astype(np.float32)
+    return gy, gx
+
+
+def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
+    """Per channel c, the plane ``coef[:, c] = (a, b, c)`` fitting ``r[:, c]`` (k, 3) by
+    ``a + b u + c v`` in least absolute deviations: ``iterations`` steps of iteratively
+    reweighted least squares (weights ``1 / max(|residual|, 1e-3)``, from 1; the normal
+    equations with a ridge of 1e-9, solved by Cramer's rule)."""
+    k = r.shape[0]
+    w = np.ones((k, 3))
+    M = np.empty((3, 6))  # per channel: sum w, wu, wv, wuu, wuv, wvv
+    b = np.empty((3, 3))  # per channel: sum wr, wur, wvr
+    for _ in range(iterations):
+        M[:] = 0.0
+        b[:] = 0.0
+        for i in range(k):
+            ui, vi = u[i], v[i]
+            uu, uv, vv = ui * ui, ui * vi, vi * vi
+            for c in range(3):
+                wi, wr = w[i, c], w[i, c] * r[i, c]
+                M[c, 0] += wi
+                M[c, 1] += wi * ui
+                M[c, 2] += wi * vi
+                M[c, 3] += wi * uu
+                M[c, 4] += wi * uv
+                M[c, 5] += wi * vv
+                b[c, 0] += wr
+                b[c, 1] += wr * ui
+                b[c, 2] += wr * vi
+        for c in range(3):
+            a00, a01, a02 = M[c, 0] + 1e-9, M[c, 1], M[c, 2]
+            a11, a12, a22 = M[c, 3] + 1e-9, M[c, 4], M[c, 5] + 1e-9
+            c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+            c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+            det = a00 * c00 + a01 * c01 + a02 * c02
+            b0, b1, b2 = b[c, 0], b[c, 1], b[c, 2]
+            coef[0, c] = (c00 * b0 + c01 * b1 + c02 * b2) / det
+            coef[1, c] = (c01 * b0 + c11 * b1 + c12 * b2) / det
+            coef[2, c] = (c02 * b0 + c12 * b1 + c22 * b2) / det
+        for i in range(k):
+            for c in range(3):
+                e = abs(r[i, c] - coef[0, c] - coef[1, c] * u[i] - coef[2, c] * v[i])
+                w[i, c] = 1.0 / max(e, 1e-3)
+
+
+def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
+    """``f = part * clip(gy gx, lo, hi)`` (the float32 gain of :func:`gain_field`) per pixel
+    and channel: ``part`` (h, w, 3) uint8, ``gy`` (h, 3), ``gx`` (w, 3), ``f`` (h, w, 3)
+    float32."""
+    H, W = f.shape[0], f.shape[1]
+    for y in range(H):
+        for x in range(W):
+            for k in range(3):
+                g = np.float32(min(max(gy[y, k] * gx[x, k], lo), hi))
+                f[y, x, k] = np.float32(part[y, x, k]) * g
+
+
+_apply_gain = _maybe_njit(_apply_gain_py)
+_plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)

@@ -35,6 +35,7 @@ import numpy as np
 from .arkit import expression_rig, is_arkit_model
 from .eyes import close_region, match_outline, reference_frame, region_faces, region_vertices
 from .render import shade_texture
+from .render.raster import _maybe_njit
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -177,6 +178,26 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
     return JawTexture(img, uvs, select, i, ring)
 
 
+def _split_shown_py(tid, shown, face_mask, select, ring, mask, compare):  # pragma: no cover
+    """``mask = shown & face_mask & select[tid]``, ``compare = shown & face_mask & ring[tid]``
+    (all (H, W) bool; ``select``, ``ring`` (F',) bool) in one pass; returns their pixel
+    counts (numba)."""
+    H, W = tid.shape
+    n_mask = n_compare = 0
+    for y in range(H):
+        for x in range(W):
+            f = tid[y, x]
+            ok = f >= 0 and shown[y, x] and face_mask[y, x]
+            mask[y, x] = ok and select[f]
+            compare[y, x] = ok and ring[f]
+            n_mask += mask[y, x]
+            n_compare += compare[y, x]
+    return n_mask, n_compare
+
+
+_split_shown = _maybe_njit(_split_shown_py)
+
+
 def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,
               texture: JawTexture, *, feather: float = 4.0) -> np.ndarray:
     """The rendered face with its jaw region textured from the closed-mouth frame.
@@ -200,13 +221,15 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     """
     sel = texture.select if texture.ring is None else texture.select | texture.ring
     img, shown = shade_texture(raster, faces, texture.uvs, texture.image, sel)
-    shown &= face_mask
-    tri = np.maximum(raster.tri_id, 0)
-    mask = shown & texture.select[tri]
-    if not mask.any():
+    ring = np.zeros_like(texture.select) if texture.ring is None else texture.ring
+    mask, compare = np.empty_like(shown), np.empty_like(shown)
+    n_mask, n_compare = _split_shown(np.ascontiguousarray(raster.tri_id), shown,
+                                     np.ascontiguousarray(face_mask),
+                                     np.ascontiguousarray(texture.select, dtype=bool),
+                                     np.ascontiguousarray(ring, dtype=bool), mask, compare)
+    if n_mask == 0:
         return face_image
-    compare = None if texture.ring is None else shown & texture.ring[tri]
-    if compare is not None and compare.sum() < 8:
+    if texture.ring is None or n_compare < 8:
         compare = None
     return match_outline(face_image, img, mask, face_mask, feather=feather, compare=compare,
                          reject=REJECT)

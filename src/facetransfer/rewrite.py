@@ -206,11 +206,13 @@ def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int
     if not isinstance(camera, WeakPerspective):
         return 0, 0, W, H
     p = camera.project(V)
-    p = p[np.isfinite(p).all(axis=1)]
+    if not np.isfinite(p).all():  # (one flat pass; the rows' test only when needed)
+        p = p[np.isfinite(p).all(axis=1)]
     if p.size == 0:
         return None
-    lo = np.floor(p.min(axis=0)).astype(np.int64) - margin
-    hi = np.ceil(p.max(axis=0)).astype(np.int64) + margin + 1
+    x, y = p[:, 0], p[:, 1]  # the columns' extremes (faster than reducing (n, 2) over axis 0)
+    lo = np.floor([x.min(), y.min()]).astype(np.int64) - margin
+    hi = np.ceil([x.max(), y.max()]).astype(np.int64) + margin + 1
     x0, y0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
     x1, y1 = min(int(hi[0]), W), min(int(hi[1]), H)
     if x1 <= x0 or y1 <= y0:
@@ -247,7 +249,7 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
         sel[topo.mouth_faces] = True
         mouth_img, mouth_mask = _shade(raster, topo.faces, mouth_texture.uvs, mouth_texture.image,
                                        sel)
-        rendered = np.where(mouth_mask[..., None], mouth_img, face_img)
+        rendered = _over(face_img, mouth_img, mouth_mask)
     if not face_mask.any():
         return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask)
     # The blend region stays ``erode`` pixels inside the rendered silhouette, so its outline
@@ -257,13 +259,13 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     if not region.any():
         region = face_mask
     if blend == "none":
-        out = np.where(region[..., None], rendered, T)
+        out = _over(T, rendered, region)
     elif blend == "fast":
         face = rendered
         if mouth_img is not None and mouth_mask.any():
             # the source's mouth first takes the colours of the face around it (same membrane;
             # every outline pixel counts: skin tones of two people are expected to differ)
-            face = membrane_blend(np.where(face_mask[..., None], face_img, T), mouth_img,
+            face = membrane_blend(_over(T, face_img, face_mask), mouth_img,
                                   mouth_mask & region, feather=mouth_feather, outlier=None)
         out = membrane_blend(T, face, region, feather=feather)
     else:
@@ -281,6 +283,16 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     return RewriteFrame(np.ascontiguousarray(out, dtype=np.uint8), rendered, face_mask,
                         mouth_mask)
 
+
+
+def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``top`` (H, W, 3) where ``mask`` (H, W) bool, ``base`` (H, W, 3) elsewhere: a new array
+    (``np.where(mask[..., None], top, base)``, in one masked copy)."""
+    import cv2
+
+    out = np.array(base, copy=True, order="C")
+    cv2.copyTo(np.ascontiguousarray(top), np.ascontiguousarray(mask).view(np.uint8), out)
+    return out
 
 
 def _shade(raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,

@@ -120,11 +120,15 @@ _texel = _maybe_njit(_texel_py)
 
 def _shade_uv_kernel_py(tid, bary, F, uvs, tex, select, image, mask):  # pragma: no cover
     """Unlit texture shading of the covered pixels whose triangle is selected (bilinear,
-    the texel convention of :func:`sample_texture`)."""
+    the texel convention of :func:`sample_texture`). Returns False (and stops) at a triangle
+    index beyond ``F``."""
     H, W = tid.shape
+    n = F.shape[0]
     for iy in range(H):
         for ix in range(W):
             f = tid[iy, ix]
+            if f >= n:
+                return False
             if f < 0 or not select[f]:
                 continue
             mask[iy, ix] = True
@@ -134,6 +138,7 @@ def _shade_uv_kernel_py(tid, bary, F, uvs, tex, select, image, mask):  # pragma:
                        b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1])
             for k in range(3):
                 image[iy, ix, k] = min(max(np.rint(c[k]), 0.0), 255.0)
+    return True
 
 
 _shade_uv_kernel = _maybe_njit(_shade_uv_kernel_py)
@@ -173,12 +178,13 @@ def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: n
     if sel.shape != (len(Fa),):
         raise ShapeError(f"select must be ({len(Fa)},) bool, got {sel.shape}")
     H, W = raster.tri_id.shape
-    if raster.tri_id.size and raster.tri_id.max() >= len(Fa):
-        raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
     image = np.zeros((H, W, 3), np.uint8)
     mask = np.zeros((H, W), bool)
-    _shade_uv_kernel(np.ascontiguousarray(raster.tri_id), np.ascontiguousarray(raster.bary), Fa,
-                     U, np.ascontiguousarray(T), sel, image, mask)
+    # the raster as it is (a box of a larger one is not copied: numba reads strided arrays)
+    if not _shade_uv_kernel(np.asarray(raster.tri_id, np.int32),
+                            np.asarray(raster.bary, np.float32), Fa, U, np.ascontiguousarray(T),
+                            sel, image, mask):
+        raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
     return image, mask
 
 

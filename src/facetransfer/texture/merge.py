@@ -22,6 +22,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as sla
 
 from ..errors import ShapeError
+from ..render.raster import _maybe_njit
 from .base import TextureError, texture_to_uint8
 
 log = logging.getLogger(__name__)
@@ -136,34 +137,77 @@ def fill_holes(texture, known, *, method: str = "pushpull") -> np.ndarray:
     if method == "inpaint":
         filled = cv2.inpaint(texture_to_uint8(tex), (~k).astype(np.uint8), 3, cv2.INPAINT_TELEA)
         out = filled.astype(np.float32)
-    else:
-        out = _push_pull(tex, k.astype(np.float32))
-    out[k] = tex[k]
-    return out
+        out[k] = tex[k]
+        return out
+    return _push_pull(tex, k)
 
 
-def _push_pull(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """Push-pull: average known values down a pyramid, then fill holes from coarser levels."""
+def _push_pull(tex: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """Push-pull: average known values down a pyramid, then fill holes from coarser levels.
+
+    Pull: each level halves the previous one (odd sizes padded by an unknown row or column), a
+    texel the mean of its known 2x2 children, known if one of them is (a numba kernel). Push:
+    from the coarsest level up, the unknown texels take the bilinear 2x upsampling of the
+    filled coarser level (``cv2.resize``, INTER_LINEAR), the known ones keep their value.
+
+    Parameters
+    ----------
+    tex : (H, W, 3) float32
+    known : (H, W) bool
+
+    Returns
+    -------
+    (H, W, 3) float32
+        Equal to ``tex`` where ``known``.
+    """
+    levels = [(np.ascontiguousarray(tex, np.float32), known.astype(np.float32))]
+    while levels[-1][1].shape[0] > 1 or levels[-1][1].shape[1] > 1:
+        c, wl = levels[-1]
+        Hc, Wc = (wl.shape[0] + 1) // 2, (wl.shape[1] + 1) // 2
+        cc, wc = np.empty((Hc, Wc, 3), np.float32), np.empty((Hc, Wc), np.float32)
+        _pull_kernel(c, wl, cc, wc)
+        levels.append((cc, wc))
+    filled = levels[-1][0]
+    for c, wl in reversed(levels[:-1]):
+        H, W = wl.shape
+        up = cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
+                        interpolation=cv2.INTER_LINEAR)[:H, :W]
+        cv2.copyTo(c, (wl > 0).view(np.uint8), up)  # the known texels over it
+        filled = np.ascontiguousarray(up)
+    return filled
+
+
+def _pull_kernel_py(tex, w, coarse, wc):  # pragma: no cover (numba)
+    """One pull step: ``coarse`` (Hc, Wc, 3) the weighted mean of each 2x2 block of ``tex``
+    (H, W, 3) (weights ``w`` (H, W), here 0 or 1; 0 where the block has no weight), ``wc``
+    (Hc, Wc) the block's weight sum clipped to 1."""
     H, W = w.shape
-    if H <= 1 and W <= 1:
-        return tex
-    # pull (down): premultiplied 2x2 sums, weights clipped to 1 so that known texels dominate
-    Hp, Wp = H + (H % 2), W + (W % 2)
-    cp = np.zeros((Hp, Wp, 3), np.float32)
-    wp = np.zeros((Hp, Wp), np.float32)
-    cp[:H, :W] = tex * w[..., None]
-    wp[:H, :W] = w
-    # 2x2 block sums (an exact halving: INTER_AREA averages the blocks)
-    c2 = cv2.resize(cp, (Wp // 2, Hp // 2), interpolation=cv2.INTER_AREA) * np.float32(4)
-    w2 = cv2.resize(wp, (Wp // 2, Hp // 2), interpolation=cv2.INTER_AREA) * np.float32(4)
-    if c2.ndim == 2:  # a 1-pixel-wide level: cv2 drops the channel axis of (1, 1, 3)
-        c2 = c2.reshape(Hp // 2, Wp // 2, 3)
-    coarse = np.divide(c2, w2[..., None], out=np.zeros_like(c2), where=w2[..., None] > 0)
-    coarse = _push_pull(coarse, np.minimum(w2, 1.0))
-    # push (up): bilinear upsampling of the coarse level, blended in by missing weight
-    up = cv2.resize(coarse, (Wp, Hp), interpolation=cv2.INTER_LINEAR)[:H, :W]
-    a = np.clip(w, 0.0, 1.0)[..., None]
-    return a * tex + (1.0 - a) * up
+    Hc, Wc = wc.shape
+    for y in range(Hc):
+        for x in range(Wc):
+            s0 = np.float32(0.0)
+            s1 = np.float32(0.0)
+            s2 = np.float32(0.0)
+            sw = np.float32(0.0)
+            for yy in range(2 * y, min(2 * y + 2, H)):
+                for xx in range(2 * x, min(2 * x + 2, W)):
+                    a = w[yy, xx]
+                    sw += a
+                    s0 += a * tex[yy, xx, 0]
+                    s1 += a * tex[yy, xx, 1]
+                    s2 += a * tex[yy, xx, 2]
+            if sw > 0:
+                coarse[y, x, 0] = s0 / sw
+                coarse[y, x, 1] = s1 / sw
+                coarse[y, x, 2] = s2 / sw
+            else:
+                coarse[y, x, 0] = 0.0
+                coarse[y, x, 1] = 0.0
+                coarse[y, x, 2] = 0.0
+            wc[y, x] = min(sw, np.float32(1.0))
+
+
+_pull_kernel = _maybe_njit(_pull_kernel_py)
 
 
 def fill_vertex_colors(colors, known, faces) -> np.ndarray:

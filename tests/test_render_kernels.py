@@ -1,0 +1,206 @@
+"""The per-frame kernels of the rewrite (issue 13, speed) against their references.
+
+Each numba kernel or OpenCV shortcut that replaced numpy code in the per-frame render is
+compared with the formulation it replaced (written out here as the reference) or with a
+synthetic ground truth: the feather distances with ``cv2.distanceTransform``, the outline's
+pixels with ``np.nonzero``, push-pull with the numpy pyramid, the gain fit with the numpy
+normal equations, the rejection with ``log1p``, and the membrane's 4 Jacobi sweeps with the
+exact harmonic answer on a disc.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from facetransfer import composite, eyes
+from facetransfer.composite import _feather_alpha, _nonzero, membrane_blend
+from facetransfer.texture import fill_holes
+
+
+def _blobs(rng, shape, smooth=3.0, level=0.5) -> np.ndarray:
+    """A random (H, W) bool mask of smooth blobs."""
+    return cv2.GaussianBlur(rng.random(shape).astype(np.float32), (0, 0), smooth) > level
+
+
+@pytest.mark.parametrize("feather", [0.5, 2.0, 3.0, 4.0])
+@pytest.mark.parametrize("edge_outside", [False, True])
+def test_feather_alpha_equals_the_distance_transform(feather, edge_outside):
+    rng = np.random.default_rng(int(feather * 10) + edge_outside)
+    m = _blobs(rng, (61, 73), level=0.48)
+    m[:, :4] = True  # touches the crop's edge
+    m[20:23, 30:33] = False  # a small hole
+    m8 = m.view(np.uint8)
+    if edge_outside:
+        d = cv2.distanceTransform(np.pad(m8, 1), cv2.DIST_L2, cv2.DIST_MASK_PRECISE)[1:-1, 1:-1]
+    else:
+        d = cv2.distanceTransform(m8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
+    ref = np.clip(d / feather, 0.0, 1.0)
+    a = _feather_alpha(m, feather, edge_outside=edge_outside)
+    assert a.dtype == np.float32 and a.shape == m.shape
+    np.testing.assert_allclose(a, ref, rtol=0, atol=1e-6)
+    assert (a[~m] == 0).all() and (a[m] > 0).all()
+
+
+def test_nonzero_equals_numpy():
+    rng = np.random.default_rng(3)
+    m = rng.random((37, 53)) < 0.3
+    for mask in (m, np.zeros((5, 7), bool), np.ones((4, 3), bool)):
+        ry, rx = _nonzero(mask)
+        ey, ex = np.nonzero(mask)
+        np.testing.assert_array_equal(ry, ey)
+        np.testing.assert_array_equal(rx, ex)
+
+
+def _push_pull_reference(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """The numpy push-pull that the kernels replaced (2x2 block means by INTER_AREA, bilinear
+    push by INTER_LINEAR, blended by the weight)."""
+    H, W = w.shape
+    if H <= 1 and W <= 1:
+        return tex
+    Hp, Wp = H + (H % 2), W + (W % 2)
+    cp = np.zeros((Hp, Wp, 3), np.float32)
+    wp = np.zeros((Hp, Wp), np.float32)
+    cp[:H, :W] = tex * w[..., None]
+    wp[:H, :W] = w
+    c2 = cv2.resize(cp, (Wp // 2, Hp // 2), interpolation=cv2.INTER_AREA) * np.float32(4)
+    w2 = cv2.resize(wp, (Wp // 2, Hp // 2), interpolation=cv2.INTER_AREA) * np.float32(4)
+    c2 = c2.reshape(Hp // 2, Wp // 2, 3)
+    coarse = np.divide(c2, w2[..., None], out=np.zeros_like(c2), where=w2[..., None] > 0)
+    coarse = _push_pull_reference(coarse, np.minimum(w2, 1.0))
+    up = cv2.resize(coarse, (Wp, Hp), interpolation=cv2.INTER_LINEAR)[:H, :W]
+    a = np.clip(w, 0.0, 1.0)[..., None]
+    return a * tex + (1.0 - a) * up
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (1, 7), (5, 1), (13, 9), (64, 33), (101, 150)])
+def test_push_pull_equals_the_numpy_pyramid(shape):
+    rng = np.random.default_rng(shape[0] * 1000 + shape[1])
+    known = rng.random(shape) < 0.15
+    known.flat[0] = True
+    tex = (rng.random(shape + (3,)) * 255).astype(np.float32)
+    out = fill_holes(tex, known)
+    ref = _push_pull_reference(tex, known.astype(np.float32))
+    np.testing.assert_allclose(out, ref, rtol=0, atol=1e-3)
+    np.testing.assert_array_equal(out[known], tex[known])
+
+
+def _gain_coefficients_reference(face, part, where, iterations=5, max_samples=4096):
+    """The numpy IRLS of :func:`facetransfer.eyes.gain_field` before the kernel: (3, 3)
+    coefficients (a, b, c) per channel, and the centring (cx, cy, scale)."""
+    ys, xs = np.nonzero(where)
+    cy, cx = ys.mean(), xs.mean()
+    scale = float(max(np.ptp(ys), np.ptp(xs), 1))
+    step = max(1, -(-ys.size // int(max_samples)))
+    ys, xs = ys[::step], xs[::step]
+    A = np.stack([np.ones(ys.size), (xs - cx) / scale, (ys - cy) / scale], axis=1)
+    r = np.log1p(face[ys, xs].astype(np.float64)) - np.log1p(part[ys, xs].astype(np.float64))
+    w = np.ones_like(r)
+    for _ in range(iterations):
+        Aw = (A[:, None, :] * w[:, :, None]).transpose(1, 2, 0)
+        M = Aw @ A + 1e-9 * np.eye(3)
+        coef = np.linalg.solve(M, Aw @ r.T[:, :, None])[..., 0].T
+        w = 1.0 / np.maximum(np.abs(r - A @ coef), 1e-3)
+    return coef, cx, cy, scale
+
+
+def test_gain_field_equals_the_numpy_fit():
+    rng = np.random.default_rng(7)
+    H, W = 90, 120
+    yy, xx = np.mgrid[0:H, 0:W]
+    part = rng.integers(40, 220, (H, W, 3)).astype(np.uint8)
+    shade = np.exp(0.1 + 0.002 * xx - 0.0015 * yy)[..., None] * np.array([1.0, 0.9, 1.1])
+    face = np.clip(np.rint(part * shade + rng.normal(0, 3, (H, W, 3))), 0, 255).astype(np.uint8)
+    face[30:40, 50:70] = 10  # outliers the L1 fit outvotes
+    where = _blobs(rng, (H, W), smooth=6.0, level=0.45)
+    box = (10, 5, 100, 80)
+    coef, cx, cy, scale = _gain_coefficients_reference(face, part, where)
+    x = (np.arange(box[0], box[2]) - cx) / scale
+    y = (np.arange(box[1], box[3]) - cy) / scale
+    ref = np.exp(coef[0] + x[None, :, None] * coef[1] + y[:, None, None] * coef[2])
+    ref = np.clip(ref, *eyes.GAIN_RANGE)
+    g = eyes.gain_field(face, part, where, box=box)
+    assert g.shape == (box[3] - box[1], box[2] - box[0], 3) and g.dtype == np.float32
+    np.testing.assert_allclose(g, ref, rtol=1e-5)
+
+
+def test_rejected_equals_the_log_ratio():
+    rng = np.random.default_rng(11)
+    fb = rng.integers(0, 256, (40, 50, 3)).astype(np.uint8)
+    f = (fb * np.exp(rng.normal(0, 0.6, fb.shape))).astype(np.float32)
+    lo, hi = 0.5, 0.9
+    d = np.abs(np.log1p(f) - np.log1p(fb.astype(np.float32))).max(axis=-1)
+    r = np.clip((d - lo) / (hi - lo), 0.0, 1.0).astype(np.float32)
+    ref = np.clip(cv2.GaussianBlur(r, (0, 0), 2.0) * 2.0, 0.0, 1.0)
+    assert 0.05 < (r > 0).mean() < 0.95  # the ramp is exercised on both sides
+    np.testing.assert_allclose(eyes._rejected(f, fb, (lo, hi)), ref, rtol=0, atol=1e-5)
+
+
+def test_shown_box_equals_numpy():
+    rng = np.random.default_rng(5)
+    tid = rng.integers(-1, 50, (30, 40)).astype(np.int32)
+    select = np.zeros(50, bool)
+    select[[3, 17]] = True
+    shown = (tid >= 0) & select[np.maximum(tid, 0)]
+    ys, xs = np.nonzero(shown)
+    assert eyes._shown_box(tid, select) == (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1)
+    x0, y0, x1, y1 = eyes._shown_box(tid, np.zeros(50, bool))
+    assert x1 <= x0 and y1 <= y0
+
+
+def _harmonic_disc():
+    """A disc (128², radius 40), the target a harmonic function of (x, y) per channel (its
+    exact Poisson answer with a flat source is the target itself) and a flat source."""
+    yy, xx = np.mgrid[0:128, 0:128].astype(np.float64)
+    X, Y = xx - 64.3, yy - 63.7
+    mask = X ** 2 + Y ** 2 <= 40 ** 2
+    harm = 120 + 0.6 * X - 0.4 * Y + 0.01 * (X ** 2 - Y ** 2) + 0.006 * X * Y
+    truth = np.stack([harm, 0.8 * harm + 10, 200 - 0.5 * harm], axis=-1)
+    T = np.clip(np.rint(truth), 0, 255).astype(np.uint8)
+    return T, np.full_like(T, 64), mask, truth
+
+
+def test_membrane_four_sweeps_match_ten_on_a_harmonic_disc():
+    T, S, mask, truth = _harmonic_disc()
+    f4 = membrane_blend(T, S, mask, feather=0, outlier=None)  # the default: 4 sweeps
+    f10 = membrane_blend(T, S, mask, feather=0, smooth_iterations=10, outlier=None)
+    np.testing.assert_array_equal(f4[~mask], T[~mask])
+    np.testing.assert_array_equal(f10[~mask], T[~mask])
+    for f in (f4, f10):  # push-pull + sweeps: within 4 levels of the exact answer (range 80)
+        e = np.abs(f - truth)[mask]
+        assert e.max() < 4.0 and e.mean() < 0.85
+    assert np.abs(f4.astype(int) - f10)[mask].max() <= 1
+
+
+def test_membrane_sweeps_on_the_interior_box_equal_the_whole_crop():
+    """The sweeps on the interior's box give what sweeps over the whole crop give."""
+    rng = np.random.default_rng(2)
+    m = _blobs(rng, (70, 90), smooth=5.0, level=0.47)
+    t = rng.integers(0, 256, (70, 90, 3)).astype(np.uint8)
+    s = rng.integers(0, 256, (70, 90, 3)).astype(np.uint8)
+    ring, interior, ry, rx, dr = composite._outline(m, t, s, None)
+    d = np.zeros(t.shape, np.float32)
+    d[ry, rx] = dr
+    h = fill_holes(d, ring)
+    for _ in range(6):
+        sweep = cv2.filter2D(h, -1, composite._FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE)
+        h = np.where(interior[..., None], sweep, h)
+    np.testing.assert_array_equal(composite._membrane(m, t, s, None, 6), h)
+
+
+def test_shade_texture_refuses_a_raster_of_more_triangles():
+    from facetransfer.errors import ShapeError
+    from facetransfer.render import Raster, shade_texture
+
+    tid = np.full((4, 5), -1, np.int32)
+    tid[2, 3] = 7  # the faces given have 2 triangles
+    r = Raster(np.zeros((4, 5), np.float32), tid, np.full((4, 5, 3), 1 / 3, np.float32), tid >= 0)
+    F = np.array([[0, 1, 2], [1, 2, 3]])
+    uvs = np.random.default_rng(0).random((4, 2))
+    tex = np.zeros((8, 8, 3), np.uint8)
+    with pytest.raises(ShapeError, match="exceed the 2 faces"):
+        shade_texture(r, F, uvs, tex)
+    tid[2, 3] = 1
+    img, mask = shade_texture(r, F, uvs, tex)
+    assert mask.sum() == 1 and mask[2, 3]
