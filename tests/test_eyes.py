@@ -239,3 +239,44 @@ def test_gain_field_follows_a_shading_gradient_and_ignores_a_changed_patch():
     good = ~patch
     good[:2], good[-2:], good[:, :2], good[:, -2:] = False, False, False, False  # 2 px from the edge
     assert np.abs(out[good].astype(int) - face.astype(np.uint8)[good].astype(int)).mean() < 1.5
+
+
+HAIR, BROW = (45, 35, 30), (90, 60, 45)
+
+
+def test_hair_at_the_rim_of_the_reference_frame_is_not_pasted(setup):
+    """The reference frame shows hair over the region's rim (forehead, temples) where the current
+    frame shows skin: those pixels keep the current frame's skin. Its brows and eyes, as unlike
+    the current frame's skin, are pasted: the rule holds only away from the lids and brows."""
+    model, topo, closed, fill = setup
+    ref = _track(model, _acts(1, 0.0))
+    cam = ref.camera(0)
+    V = close_mouth(model.synthesize(ref.weights_at(0)), closed)
+    tid = rasterize(V, closed.faces, cam, (SIZE, SIZE)).tri_id
+    _, tex0 = eyes.eye_texture([_frame(np.zeros((SIZE, SIZE), bool), SKIN)], ref, model, topo)
+    assert tex0.rim is not None and 0 < tex0.rim.sum() < tex0.select.sum()
+    shown = tid >= 0
+    rim = shown & tex0.rim[np.maximum(tid, 0)]
+    core = shown & tex0.select[np.maximum(tid, 0)] & ~tex0.rim[np.maximum(tid, 0)]
+    hole = np.isin(tid, fill)
+    brow = core & ~hole & ~np.isin(tid, np.flatnonzero(tex0.side >= 0))   # neither lid nor eye
+    ref_img = _frame(hole, REF_EYE)
+    ref_img[rim], ref_img[brow] = HAIR, BROW
+    _, tex = eyes.eye_texture([ref_img], ref, model, topo)
+    target = _frame(hole, TARGET_EYE)
+    Vt = close_mouth(model.synthesize(ref.weights_at(0)), topo)
+    face_tex = FaceTexture(target, frame_uvs(Vt, cam, (SIZE, SIZE)), 0)
+    out = rewrite_frame(target, model.synthesize(ref.weights_at(0)), cam, closed, face_tex,
+                        eye_texture=tex, blend="none", erode=0).image
+
+    def inner(m):  # 3 px from the class's edge: away from the feathered seams and blur
+        return m & np.logical_and.reduce([np.roll(m, s, a) for s in (-3, 3) for a in (0, 1)])
+
+    def share(where, colour):
+        return np.mean(np.all(np.abs(out[where].astype(int) - colour) < 25, axis=-1))
+
+    r, b, e = inner(rim), inner(brow), inner(hole)
+    assert r.sum() > 50 and b.sum() > 30 and e.sum() > 10
+    assert share(r, HAIR) < 0.05 and share(r, SKIN) > 0.9    # the hair is not pasted
+    assert share(b, BROW) > 0.8                               # the brows are
+    assert share(e, REF_EYE) > 0.9                            # and so is the eye

@@ -70,6 +70,15 @@ GAIN_RANGE = (0.7, 1.4)
 GAIN_ITERATIONS, GAIN_SAMPLES = 5, 4096
 #: Holes of the eye region up to this many edge rings across are closed (:func:`close_region`).
 CLOSE_RINGS = 3
+#: The eye region's rim (:attr:`EyeTexture.rim`): its triangles farther than this (model
+#: units, cm for the FaceKit) from every lid and brow vertex: forehead, temples and cheek, skin
+#: without features of its own.
+RIM_DISTANCE = 1.2
+#: Log ratios between the reference frame's texture (matched) and the current frame's from
+#: which a rim pixel fades back to the current frame, fully at the second (a factor of
+#: 1.65-2.5, as :data:`facetransfer.jaw.REJECT`): at the hairline and the temples the reference
+#: frame often shows skin where the current frame shows hair.
+RIM_REJECT = (0.5, 0.9)
 
 
 @dataclass(frozen=True)
@@ -101,6 +110,10 @@ class EyeTexture:
     gap_closed : (2,) float or None
     closed_frame : int
         -1 without a closed frame.
+    rim : (F',) bool or None
+        The region's triangles away from the lids and brows (:data:`RIM_DISTANCE`), where a
+        pixel unlike the current frame's is taken for hair and fades back (:data:`RIM_REJECT`);
+        None: nowhere.
     """
 
     image: np.ndarray
@@ -114,6 +127,7 @@ class EyeTexture:
     closed_uvs: np.ndarray | None = None
     gap_closed: np.ndarray | None = None
     closed_frame: int = -1
+    rim: np.ndarray | None = None
 
     def closing(self, vertices: np.ndarray) -> np.ndarray:
         """The closed frame's share in each eye's texture for a mesh, ``(2,)`` in [0, 1].
@@ -462,6 +476,7 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
     select, lid_faces = _region_faces(model, topo, closed, fill, brows=brows, rings=rings,
                                       rig=rig)
     pairs, side = _lid_sides(model, topo, closed, V0, lid_faces)
+    rim = _rim_faces(model, closed, close_mouth(V0, topo), select, lid_faces)
 
     def lift(j):
         img = np.asarray(frames[j])
@@ -472,7 +487,7 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
     m = len(frames) if n_frames is None else min(int(n_frames), len(frames))
     i = open_eye_frame(track, m) if frame is None else int(frame)
     img, uvs, gap = lift(i)
-    tex = EyeTexture(img, uvs, select, i, side, pairs, gap)
+    tex = EyeTexture(img, uvs, select, i, side, pairs, gap, rim=rim)
     c = closed_eye_frame(track, m)
     if c is not None:
         cimg, cuvs, cgap = lift(c)
@@ -516,6 +531,20 @@ def _region_faces(model, topo, closed, fill: np.ndarray, *, brows: bool, rings: 
         return sel
 
     return faces_of(verts), faces_of(lids)
+
+
+def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray,
+               lid_faces: np.ndarray) -> np.ndarray:
+    """The region's triangles ``(F',) bool`` whose vertices all lie farther than
+    :data:`RIM_DISTANCE` from every vertex of the lid triangles and from the brow landmarks
+    (iBUG 17-26) of the closed mesh ``V`` (n_closed, 3)."""
+    from scipy.spatial import cKDTree
+
+    lm = np.asarray(model.landmarks, np.int64)
+    core = np.unique(np.concatenate([closed.faces[lid_faces].ravel(), lm[17:27]]))
+    d, _ = cKDTree(V[core]).query(V, k=1)
+    far = d > RIM_DISTANCE
+    return select & far[closed.faces].all(axis=1)
 
 
 def _lid_sides(model, topo, closed, V0: np.ndarray, lid_faces: np.ndarray):
@@ -579,8 +608,12 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
         # soft where the lids meet the rest of the region (no step along triangle edges)
         w = cv2.GaussianBlur(w, (0, 0), LID_SOFTNESS)[..., None]
         eye_img = np.rint((1 - w) * eye_img + w * closed_img).astype(np.uint8)
+    rim = None
+    if texture.rim is not None and texture.rim.any():
+        rim = eye_mask & texture.rim[np.maximum(raster.tri_id, 0)] & (raster.tri_id >= 0)
     out = face_image.copy()
-    out[sl] = match_outline(face_image[sl], eye_img, eye_mask, face_mask[sl], feather=feather)
+    out[sl] = match_outline(face_image[sl], eye_img, eye_mask, face_mask[sl], feather=feather,
+                            reject=None if rim is None else RIM_REJECT, reject_where=rim)
     return out
 
 
@@ -620,7 +653,8 @@ _shown_box = _maybe_njit(_shown_box_py)
 
 def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
                   *, feather: float = 3.0, compare: np.ndarray | None = None,
-                  reject: tuple[float, float] | None = None) -> np.ndarray:
+                  reject: tuple[float, float] | None = None,
+                  reject_where: np.ndarray | None = None) -> np.ndarray:
     """Paste ``part`` into ``face`` inside ``mask``, shifted to the face's colours.
 
     ``face`` and ``part`` show the same surface there (the same person's skin lifted from two
@@ -648,6 +682,8 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
         the jaw line of a frontal frame, where a turned head shows skin), not the same skin in
         another expression. The price: a shadow the current frame's own expression casts that
         is darker than that (the target's open jaw, deeper than ``exp(lo)``) shows again.
+    reject_where : (H, W) bool, optional
+        Only these pixels may be rejected (default: all of ``mask``).
 
     Returns
     -------
@@ -676,7 +712,10 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     a = _feather_alpha(mb, feather, edge_outside=True)
     fb = np.ascontiguousarray(face[box])
     if reject is not None:
-        a *= 1.0 - _rejected(f, fb, reject)
+        r = _rejected(f, fb, reject)
+        if reject_where is not None:
+            r *= np.ascontiguousarray(reject_where[box])
+        a *= 1.0 - r
     out = face.copy()
     _outline_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
     return out
