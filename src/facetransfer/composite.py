@@ -559,7 +559,8 @@ def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
     a = _feather_alpha(m, feather, edge_outside=False) if feather > 0 else \
         m.astype(np.float32)
     crop = out[y0:y1, x0:x1]
-    _membrane_paste(m, t, s, h, a, crop)  # in place: the region's pixels of ``out``
+    h += s                                 # f = source + h, in place (h is this call's own)
+    _blend_paste(m, t, h, a, crop)         # in place: the region's pixels of ``out``
     return out
 
 
@@ -613,25 +614,25 @@ def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover 
             a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
 
 
-def _membrane_paste_py(m, t, s, h, a, out):  # pragma: no cover (numba)
-    """``out = rint(a (s + h) + (1 - a) t)`` clipped to 0..255 at the pixels of ``m`` (h, w)
-    (``t``, ``s``, ``out`` (h, w, 3) uint8, ``h`` (h, w, 3) and ``a`` (h, w) float32), in
-    float32 as :func:`membrane_blend` states it; ``out`` is left alone elsewhere."""
+def _blend_paste_py(m, base, f, a, out):  # pragma: no cover (numba)
+    """``out = rint(base + a (f - base))`` clipped to 0..255 at the pixels of ``m`` (h, w)
+    (``base``, ``out`` (h, w, 3) uint8, ``f`` (h, w, 3) and ``a`` (h, w) float32), in float32;
+    ``out`` is left alone elsewhere. The paste of :func:`membrane_blend` (``f`` = source +
+    membrane, ``base`` = target) and of :func:`facetransfer.eyes.match_outline`."""
     H, W = m.shape
-    one = np.float32(1.0)
     for y in range(H):
         for x in range(W):
             if not m[y, x]:
                 continue
             ay = a[y, x]
             for k in range(3):
-                f = np.float32(s[y, x, k]) + h[y, x, k]
-                v = np.rint(ay * f + (one - ay) * np.float32(t[y, x, k]))
+                b = np.float32(base[y, x, k])
+                v = np.rint(b + ay * (f[y, x, k] - b))
                 out[y, x, k] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
 
 
 _alpha_kernel = _maybe_njit(_alpha_kernel_py)
-_membrane_paste = _maybe_njit(_membrane_paste_py)
+_blend_paste = _maybe_njit(_blend_paste_py)
 
 
 def _outline(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None):

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
-from .composite import _feather_alpha, _nonzero
+from .composite import _blend_paste, _feather_alpha, _nonzero
 from .errors import RewriteError
 from .render import Raster, shade_texture
 from .render.raster import _maybe_njit
@@ -717,23 +717,8 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
             r *= np.ascontiguousarray(reject_where[box])
         a *= 1.0 - r
     out = face.copy()
-    _outline_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
+    _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
     return out
-
-
-def _outline_paste_py(m, fb, f, a, out):  # pragma: no cover (numba)
-    """``out = rint(fb + a (f - fb))`` clipped to 0..255 at the pixels of ``m`` (h, w) (``fb``,
-    ``out`` (h, w, 3) uint8, ``f`` (h, w, 3) and ``a`` (h, w) float32), in float32."""
-    H, W = m.shape
-    for y in range(H):
-        for x in range(W):
-            if not m[y, x]:
-                continue
-            ay = a[y, x]
-            for k in range(3):
-                b = np.float32(fb[y, x, k])
-                v = np.rint(b + ay * (f[y, x, k] - b))
-                out[y, x, k] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
 
 
 def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
@@ -768,7 +753,6 @@ def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
                 r[y, x] = (np.log(q) - lo) / span
 
 
-_outline_paste = _maybe_njit(_outline_paste_py)
 _reject_kernel = _maybe_njit(_reject_kernel_py)
 
 
