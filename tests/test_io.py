@@ -3,6 +3,8 @@
 import subprocess
 import sys
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -91,6 +93,26 @@ def test_video_round_trip(tmp_path):
     (tmp_path / "junk.mp4").write_bytes(b"not a video at all" * 10)
     with pytest.raises(VideoError):
         read_video(tmp_path / "junk.mp4")
+
+
+@pytest.mark.parametrize("count", [2, 6, 40])
+def test_read_video_does_not_trust_the_containers_frame_count(tmp_path, monkeypatch, count):
+    """``read_video`` decodes into an array sized by the container's count: a count that is
+    short (grown) or long (cut) gives the same frames as decoding one by one."""
+    import facetransfer.io.video as v
+    from facetransfer.io.video import VideoInfo, iter_frames
+
+    rng = np.random.default_rng(2)
+    frames = rng.integers(0, 255, size=(9, 16, 24, 3), dtype=np.uint8)
+    p = write_video(tmp_path / "v.mp4", frames, 10)
+    each = np.stack(list(iter_frames(p)))
+    real = v.video_info(p)
+    monkeypatch.setattr(v, "video_info", lambda path: VideoInfo(Path(path), real.fps, count,
+                                                                real.size))
+    for kw, want in (({}, each), ({"start": 3}, each[3:]), ({"max_frames": 4}, each[:4]),
+                     ({"start": 2, "stop": 8}, each[2:8])):
+        back, _ = read_video(p, **kw)
+        np.testing.assert_array_equal(back, want)
 
 
 def test_cli_bad_input_is_one_line_exit_2(tmp_path):

@@ -101,9 +101,9 @@ def iter_frames(path: str | os.PathLike, *, start: int = 0,
     try:
         if start:
             cap.set(cv2.CAP_PROP_POS_FRAMES, start)
-        i = start
+        i, bgr = start, None
         while stop is None or i < stop:
-            ok, bgr = cap.read()
+            ok, bgr = cap.read(bgr)  # one decoding buffer for the whole clip
             if not ok:
                 break
             yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
@@ -126,13 +126,41 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     VideoError
         Missing, unreadable or empty video.
     """
+    import cv2
+
     info = video_info(path)
     if max_frames is not None:
         stop = start + max_frames if stop is None else min(stop, start + max_frames)
-    frames = list(iter_frames(path, start=start, stop=stop))
-    if not frames:
+    # decoded straight into one array sized by the container's count (grown if that was short):
+    # no per-frame copies to stack, a third of the memory touched
+    expect = max(int(info.n_frames) - start, 0)
+    expect = expect if stop is None else min(expect, max(stop - start, 0))
+    cap = _open(path)
+    out, n, bgr = None, 0, None
+    try:
+        if start:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        while stop is None or start + n < stop:
+            ok, bgr = cap.read(bgr)
+            if not ok:
+                break
+            if out is None or n == len(out):
+                out = _grown(out, n, max(expect, n + 1, 2 * n), bgr.shape)
+            cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=out[n])
+            n += 1
+    finally:
+        cap.release()
+    if n == 0:
         raise VideoError(f"video {path} has no frames (from frame {start})")
-    return np.stack(frames), info.fps
+    return out[:n], info.fps
+
+
+def _grown(frames: np.ndarray | None, n: int, size: int, shape) -> np.ndarray:
+    """A ``(size, H, W, 3) uint8`` array holding the first ``n`` of ``frames`` (None: none)."""
+    out = np.empty((size,) + tuple(shape), np.uint8)
+    if frames is not None and n:
+        out[:n] = frames[:n]
+    return out
 
 
 # ---------------------------------------------------------------------------------------------
