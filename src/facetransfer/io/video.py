@@ -145,7 +145,9 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
             if not ok:
                 break
             if out is None or n == len(out):
-                out = _grown(out, n, max(expect, n + 1, 2 * n), bgr.shape)
+                # a bogus count (some containers report billions) reserves at most ~1 GB
+                first = min(expect, max(1, _RESERVE_BYTES // max(bgr.size, 1)))
+                out = _grown(out, n, max(first, n + 1, 2 * n), bgr.shape)
             cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=out[n])
             n += 1
     finally:
@@ -153,6 +155,10 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     if n == 0:
         raise VideoError(f"video {path} has no frames (from frame {start})")
     return out[:n], info.fps
+
+
+#: Most bytes :func:`read_video` reserves from the container's frame count before decoding.
+_RESERVE_BYTES = 1 << 30
 
 
 def _grown(frames: np.ndarray | None, n: int, size: int, shape) -> np.ndarray:
