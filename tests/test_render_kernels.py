@@ -132,8 +132,13 @@ def test_rejected_equals_the_log_ratio():
     lo, hi = 0.5, 0.9
     d = np.abs(np.log1p(f) - np.log1p(fb.astype(np.float32))).max(axis=-1)
     r = np.clip((d - lo) / (hi - lo), 0.0, 1.0).astype(np.float32)
-    ref = np.clip(cv2.GaussianBlur(r, (0, 0), 2.0) * 2.0, 0.0, 1.0)
     assert 0.05 < (r > 0).mean() < 0.95  # the ramp is exercised on both sides
+    # grown by REJECT_GROW pixels: the largest value over the (2g + 1)^2 square around each
+    g = eyes.REJECT_GROW
+    pad = np.pad(r, g, constant_values=-np.inf)
+    grown = np.max([pad[g + dy: g + dy + r.shape[0], g + dx: g + dx + r.shape[1]]
+                    for dy in range(-g, g + 1) for dx in range(-g, g + 1)], axis=0)
+    ref = np.clip(cv2.GaussianBlur(grown.astype(np.float32), (0, 0), 2.0) * 2.0, 0.0, 1.0)
     np.testing.assert_allclose(eyes._rejected(f, fb, (lo, hi)), ref, rtol=0, atol=1e-5)
 
 

@@ -70,6 +70,9 @@ GAIN_RANGE = (0.7, 1.4)
 GAIN_ITERATIONS, GAIN_SAMPLES = 5, 4096
 #: Holes of the eye region up to this many edge rings across are closed (:func:`close_region`).
 CLOSE_RINGS = 3
+#: Pixels by which a rejection (:func:`match_outline`'s ``reject``) grows beyond the pixels
+#: that are unlike enough: the transition from skin to hair in the reference frame.
+REJECT_GROW = 2
 #: The eye region's rim (:attr:`EyeTexture.rim`): its triangles farther than this (model
 #: units, cm for the FaceKit) from every lid and brow vertex: forehead, temples and cheek, skin
 #: without features of its own.
@@ -724,12 +727,16 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
     """``(h, w)`` float32 in [0, 1]: how far each pixel's largest per-channel absolute log
     ratio of ``f`` (h, w, 3) float32 and ``fb`` (h, w, 3) uint8 (``|log(1 + f) - log(1 + fb)|``)
-    lies between ``reject = (lo, hi)``, smoothed over ~2 pixels."""
+    lies between ``reject = (lo, hi)``, grown by :data:`REJECT_GROW` pixels (the soft edge of
+    hair in the reference frame is less unlike the skin than the hair, and would be left as a
+    thin grey outline) and smoothed over ~2 pixels."""
     import cv2
 
     lo, hi = (float(v) for v in reject)
     r = np.empty(f.shape[:2], np.float32)
     _reject_kernel(f, fb, lo, max(hi - lo, 1e-6), r)
+    if REJECT_GROW > 0 and r.any():
+        r = cv2.dilate(r, np.ones((2 * REJECT_GROW + 1,) * 2, np.uint8))
     return np.clip(cv2.GaussianBlur(r, (0, 0), 2.0) * 2.0, 0.0, 1.0)
 
 
