@@ -522,16 +522,16 @@ _JAW_READING = (14, 13, 152, 17)
 
 
 def _head_frame(P: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """(F, 478, 2) points each similarity-aligned on :data:`_SKULL` to ``ref`` (478, 2), in
-    units of ``ref``'s outer eye-corner distance."""
+    """(F, 478, 2) points each similarity-aligned on :data:`_SKULL` to ``ref`` (478, 2) (Umeyama
+    1991, in 2-D, no reflection), centred, in units of ``ref``'s outer eye-corner distance."""
     out = np.empty_like(P)
     b = ref[list(_SKULL)] - ref[list(_SKULL)].mean(0)
     for i, p in enumerate(P):
         a = p[list(_SKULL)]
         ma = a.mean(0)
         U, sv, Vt = np.linalg.svd((a - ma).T @ b)
-        R = U @ Vt
-        out[i] = (p - ma) @ R * (sv.sum() / np.sum((a - ma) ** 2))
+        d = np.array([1.0, np.sign(np.linalg.det(U @ Vt))])
+        out[i] = (p - ma) @ (U * d) @ Vt * ((sv * d).sum() / np.sum((a - ma) ** 2))
     return out / np.linalg.norm(ref[33] - ref[263])
 
 

@@ -77,11 +77,13 @@ REJECT_GROW = 2
 #: units, cm for the FaceKit) from every lid and brow vertex: forehead, temples and cheek, skin
 #: without features of its own.
 RIM_DISTANCE = 1.2
-#: Log ratios between the reference frame's texture (matched) and the current frame's from
-#: which a rim pixel fades back to the current frame, fully at the second (a factor of
-#: 1.65-2.5, as :data:`facetransfer.jaw.REJECT`): at the hairline and the temples the reference
-#: frame often shows skin where the current frame shows hair.
-RIM_REJECT = (0.5, 0.9)
+#: Log ratios between a reference frame's texture (matched) and the current frame's from
+#: which a pixel fades back to the current frame, fully at the second (a factor of 1.65-2.5;
+#: :func:`match_outline`'s ``reject``): the reference frame shows another thing there, not the
+#: same skin in another expression. At the eye region's rim and at the hairline it often shows
+#: skin where the current frame shows hair; at the jaw line of a turned head
+#: (:mod:`facetransfer.jaw`) hair or the gap under it.
+REJECT = (0.5, 0.9)
 
 
 @dataclass(frozen=True)
@@ -115,7 +117,7 @@ class EyeTexture:
         -1 without a closed frame.
     rim : (F',) bool or None
         The region's triangles away from the lids and brows (:data:`RIM_DISTANCE`), where a
-        pixel unlike the current frame's is taken for hair and fades back (:data:`RIM_REJECT`);
+        pixel unlike the current frame's is taken for hair and fades back (:data:`REJECT`);
         None: nowhere.
     """
 
@@ -613,10 +615,10 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
         eye_img = np.rint((1 - w) * eye_img + w * closed_img).astype(np.uint8)
     rim = None
     if texture.rim is not None and texture.rim.any():
-        rim = eye_mask & texture.rim[np.maximum(raster.tri_id, 0)] & (raster.tri_id >= 0)
+        rim = eye_mask & texture.rim[np.maximum(raster.tri_id, 0)]  # eye_mask: shown pixels
     out = face_image.copy()
     out[sl] = match_outline(face_image[sl], eye_img, eye_mask, face_mask[sl], feather=feather,
-                            reject=None if rim is None else RIM_REJECT, reject_where=rim)
+                            reject=None if rim is None else REJECT, reject_where=rim)
     return out
 
 

@@ -33,7 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
-from .eyes import close_region, match_outline, reference_frame, region_faces, region_vertices
+from .eyes import (REJECT, close_region, match_outline, reference_frame, region_faces,
+                   region_vertices)
 from .render import shade_texture
 from .render.raster import _maybe_njit
 from .texture.face import frame_uvs
@@ -51,11 +52,10 @@ JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
 JAW_THRESHOLD = 0.15
 #: Rings of triangles around the jaw region over which its exposure is matched.
 RING = 3
-#: Log ratios between the closed frame's texture (matched) and the current frame's from which
-#: a pixel fades back to the current frame (:func:`facetransfer.eyes.match_outline`): what the
-#: closed frame shows at the jaw line of a turned head is often hair or the gap under it (a
-#: black wedge under the ear of the demo's turned frames without it). A factor of 1.65-2.5.
-REJECT = (0.5, 0.9)
+#: Where the closed frame's texture (matched) and the current frame's differ by more than
+#: :data:`facetransfer.eyes.REJECT`, a pixel fades back to the current frame: what the closed
+#: frame shows at the jaw line of a turned head is often hair or the gap under it (a black
+#: wedge under the ear of the demo's turned frames without it).
 
 
 @dataclass(frozen=True)

@@ -101,11 +101,12 @@ def parse_timecode(text: str, fps: float) -> float:
 
 def livelink_rows(track) -> list[list[str]]:
     """The CSV as rows of strings (header first)."""
-    a = require_activations(track)[:, _TO_ARKIT]  # (F, 52) in the app's order
+    acts = require_activations(track)             # (F, 52) in ARKIT_NAMES order
+    a = acts[:, _TO_ARKIT]                        # in the app's order
     ypr = head_euler(track.rotation)  # (F, 3) radians
     pose = np.zeros((track.n_frames, len(POSE_COLUMNS)))
     pose[:, :3] = ypr
-    pose[:, 3:] = eye_angles(require_activations(track))
+    pose[:, 3:] = eye_angles(acts)
     count = str(len(LIVELINK_NAMES) + len(POSE_COLUMNS))
     rows = [list(HEADER)]
     for k in range(track.n_frames):

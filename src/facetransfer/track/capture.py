@@ -601,13 +601,14 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         run = _FitRun(shape, np.asarray(frames), int(frames[best]), sample_states[best],
                       [None] * det.n_frames, int(frames[best]), int(frames[best]) - 1)
     t_id = time.perf_counter() - t0
-    save = None if checkpoint is None else (lambda: checkpoint.save_fit(det, key, run.saved()))
+    def save(due_only: bool) -> None:
+        if checkpoint is not None and (not due_only or checkpoint.due()):
+            checkpoint.save_fit(det, key, run.saved())
+
     try:
-        _track_both(run, det, weights, opt, prog,
-                    None if save is None else (lambda: save() if checkpoint.due() else None))
+        _track_both(run, det, weights, opt, prog, lambda: save(due_only=True))
     except KeyboardInterrupt:
-        if save is not None:
-            save()
+        save(due_only=False)
         raise
     track = _assemble(model, run.shape, run.states, fps, frame_size, source, opt)
     info = {"start_frame": run.start, "identity_frames": [int(i) for i in run.frames],
@@ -666,8 +667,7 @@ def _track_both(run: _FitRun, det: ClipDetections, weights, opt: CaptureOptions,
     def advanced(attr, step):
         def hook(i):
             setattr(run, attr, i + step)
-            if maybe_save is not None:
-                maybe_save()
+            maybe_save()
         return hook
 
     if run.forward_next < F:

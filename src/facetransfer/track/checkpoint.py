@@ -142,6 +142,19 @@ class ProgressFile:
         """Whether a periodic save is due."""
         return time.monotonic() - self._last >= self._wait
 
+    def _entries(self, unreadable: str) -> dict | None:
+        """The file's arrays by name; None when there is no file, or when it is not a readable
+        ``.npz`` (empty, truncated, another format): then ``unreadable`` is logged, a
+        ``%s (%s)`` message filled with the path and the error's type."""
+        if not self.path.is_file():
+            return None
+        try:
+            with np.load(self.path, allow_pickle=False) as z:
+                return {k: z[k] for k in z.files}
+        except Exception as exc:  # zipfile.BadZipFile, EOFError, ValueError, OSError…
+            log.warning(unreadable, self.path, exc.__class__.__name__)
+            return None
+
     def _write(self, arrays: dict) -> None:
         """Write ``arrays`` to the file atomically (the folder is created if needed)."""
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -179,14 +192,8 @@ class Checkpoint(ProgressFile):
 
     def load(self) -> Resume | None:
         """The saved progress, or None (no file, another run's, unreadable)."""
-        if not self.path.is_file():
-            return None
-        try:
-            with np.load(self.path, allow_pickle=False) as z:
-                d = {k: z[k] for k in z.files}
-        except Exception as exc:  # empty, truncated, not an npz (zipfile, EOFError, ValueError…)
-            log.warning("ignoring unreadable checkpoint %s (%s); starting afresh",
-                        self.path, exc.__class__.__name__)
+        d = self._entries("ignoring unreadable checkpoint %s (%s); starting afresh")
+        if d is None:
             return None
         if str(d.get("key", "")) != self.key:
             log.warning("checkpoint %s belongs to another run (video, model or options "

@@ -120,15 +120,9 @@ class DetectionCheckpoint(ProgressFile):
 
     def load(self) -> SavedDetections | None:
         """The saved detections, or None (no file, another run's, unreadable or damaged)."""
-        if not self.path.is_file():
-            return None
-        try:
-            with np.load(self.path, allow_pickle=False) as z:
-                d = {k: z[k] for k in z.files}
-        except Exception as exc:  # empty, truncated, not an npz (zipfile, EOFError, ValueError…)
-            log.warning("removing unreadable progress file %s (%s); starting afresh", self.path,
-                        exc.__class__.__name__)
-            self.remove()
+        d = self._entries("removing unreadable progress file %s (%s); starting afresh")
+        if d is None:
+            self.remove()                       # unreadable (or no file: nothing to remove)
             return None
         if str(d.get("key", "")) != self.key:
             what = ("another video, frame limit or detector" if str(d.get("layout", "")) == LAYOUT
