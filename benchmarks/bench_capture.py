@@ -63,7 +63,7 @@ KEY7 = [36, 39, 42, 45, 30, 48, 54]
 INNER51 = list(range(17, 68))
 NARROW = 6706                                 # FaceKit narrow face area: vertices 0..6705
 KEY_SHAPES = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthSmileLeft", "mouthSmileRight",
-              "browInnerUp", "browDownLeft")
+              "browInnerUp", "browDownLeft", "mouthFunnel", "mouthPucker")
 REAL_SHAPES = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "mouthSmileLeft", "mouthSmileRight",
                "browInnerUp", "mouthFunnel", "mouthPucker")
 REAL_CLIPS = ("face_2", "WDA_KatieHill_000", "driving_d9", "driving_d6")

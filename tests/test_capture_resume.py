@@ -68,10 +68,30 @@ class FakeDetector:
         pass
 
 
+class ScoredDetector(FakeDetector):
+    """:class:`FakeDetector` with blendshape scores (``detect_scored``, as MediaPipe's
+    landmarker made with blendshapes): jawOpen rises through the clip, the rest stay small."""
+
+    def detect_scored(self, frame):
+        i = self.index[_digest(frame)]
+        q = self.detect478(frame)
+        if q is None:
+            return None, None
+        s = np.full(52, np.nan, np.float32)
+        s[:51] = 0.05
+        s[0] = 0.1 + 0.02 * i                            # a score that moves
+        from facetransfer.arkit import ARKIT_NAMES
+        s[ARKIT_NAMES.index("jawOpen")] = 0.5 + 0.4 * np.sin(i / 4.0)
+        return q, s
+
+
 def _equal(a: ClipDetections, b: ClipDetections) -> None:
     np.testing.assert_array_equal(a.points, b.points)
     np.testing.assert_array_equal(a.flow, b.flow)
     np.testing.assert_array_equal(a.points478, b.points478)
+    assert (a.scores is None) == (b.scores is None)
+    if a.scores is not None:
+        np.testing.assert_array_equal(a.scores, b.scores)
 
 
 def _key(video, max_frames=None):
@@ -124,6 +144,24 @@ def test_interrupted_detection_continues_exactly_where_it_stopped(clip, tmp_path
     same = (cold.points478 == full.points478) | np.isnan(full.points478)
     differs = np.flatnonzero(~np.all(same, axis=(1, 2)))
     assert differs.tolist() == [k]
+
+
+def test_scores_are_saved_and_resumed_with_the_detections(clip, tmp_path):
+    """The blendshape scores go into the progress file and come back exactly; a resumed run's
+    scores equal an uninterrupted run's, the no-face frame's are NaN."""
+    video = clip[0]
+    full = detect_clip(iter_frames(video), ScoredDetector(clip), keep478=True)
+    assert full.scores.shape == (F, 52) and np.isnan(full.scores[NO_FACE]).all()
+    assert np.isnan(full.scores[:, -1]).all()               # tongueOut: never scored
+    ck = DetectionCheckpoint(tmp_path / "t.partial.npz", _key(video), every=1e9)
+    with pytest.raises(KeyboardInterrupt):
+        detect_clip(iter_frames(video), ScoredDetector(clip), keep478=True,
+                    progress=_stop_at(11), checkpoint=ck)
+    saved = ck.load()
+    assert saved.detections.scores.shape == (11, 52)
+    res = detect_clip(iter_frames(video), ScoredDetector(clip), keep478=True,
+                      resume=saved.detections, checkpoint=ck)
+    _equal(res, full)
 
 
 def test_periodic_saves_hold_every_finished_frame(clip, tmp_path):
@@ -394,3 +432,45 @@ def test_a_fit_of_other_options_is_not_continued(clip, quick_model, tmp_path, ca
         out = capture.capture_detections(det, quick_model, options=other, checkpoint=ck)
     assert "another model or other options" in caplog.text
     _same_track(out, capture.capture_detections(det, quick_model, options=other))
+
+
+def test_fit_interrupted_in_the_second_pass_continues_exactly(clip, arkit_model, tmp_path,
+                                                             monkeypatch):
+    """With the detector's scores the fit runs a second pass (stage ``refine``); interrupted
+    there, it continues with the saved score lines and the second pass's frames (no identity
+    phase, no first pass again) and ends bit for bit where an uninterrupted fit ends."""
+    from facetransfer.track import capture
+    from facetransfer.track.fit_checkpoint import fit_key
+
+    video, _, _ = clip
+    det = detect_clip(iter_frames(video), ScoredDetector(clip), n_frames=F, keep478=True)
+    ref = capture.capture_detections(det, arkit_model)
+    assert "jawOpen" in ref.info["score_shapes"]
+    one = capture.capture_detections(det, arkit_model,
+                                     options=capture.CaptureOptions(scores=0.0))
+    assert not np.array_equal(one.blendshapes, ref.blendshapes)   # the second pass did work
+    path = tmp_path / "t.partial.npz"
+    stop = 7
+
+    def prog(stage, done, total):
+        if stage == "refine" and done == stop:
+            raise KeyboardInterrupt
+    with pytest.raises(KeyboardInterrupt):
+        capture.capture_detections(det, arkit_model, progress=prog,
+                                   checkpoint=DetectionCheckpoint(path, "k", every=1e9))
+    ck = DetectionCheckpoint(path, "k")
+    assert ck.load().complete
+    fit = ck.saved_fit(fit_key(arkit_model.content_hash, capture.CaptureOptions(), None))
+    assert fit.lines is not None and fit.lines.shape == (2, 52)
+    lost = int(ref.info["start_frame"] <= NO_FACE < fit.forward_next)
+    assert fit.valid.sum() == stop - lost
+    calls = {"identity": 0, "frames": 0}
+    real_id, real_fit = capture._clip_identity, capture._fit_frame
+    monkeypatch.setattr(capture, "_clip_identity",
+                        lambda *a, **k: calls.__setitem__("identity", 1) or real_id(*a, **k))
+    monkeypatch.setattr(capture, "_fit_frame",
+                        lambda *a, **k: calls.__setitem__("frames", calls["frames"] + 1)
+                        or real_fit(*a, **k))
+    out = capture.capture_detections(det, arkit_model, checkpoint=ck)
+    assert calls == {"identity": 0, "frames": F - 1 - stop + lost}
+    _same_track(out, ref)

@@ -18,7 +18,10 @@ frame and the drifting flow by measurements taken on every frame:
    least-squares step); for other models as the mode weights with their training prior. The
    eyeLook* activations follow MediaPipe's iris centres at the fitted pose
    (:mod:`facetransfer.track.gaze`): the model has no eyeballs.
-4. Frames without a detection are lost (the nearest tracked state is held); the face may appear
+4. **A second pass** (:mod:`facetransfer.track.scores`), for an ARKit model: MediaPipe's own
+   blendshape scores of the jaw, the lips' funnel and pucker and the blinks, mapped per clip
+   onto the first pass's activations, pull every frame's activations in a second run.
+5. Frames without a detection are lost (the nearest tracked state is held); the face may appear
    late: tracking starts where it is.
 
 An interrupted fit resumes (:mod:`facetransfer.track.fit_checkpoint`): with a ``checkpoint``,
@@ -130,6 +133,11 @@ class CaptureOptions:
         (:func:`~facetransfer.track.gaze.usable_iris`) and its lids are left to the blink
         (its vertical gaze is 0 in the fit, the bridged value after); frames without iris
         points fit eyeLook* from the lids as before.
+    scores : float
+        For an ARKit model with the detector's blendshape scores: weight of the second pass's
+        ridge pulling each frame's activations of
+        :data:`~facetransfer.track.scores.SCORED_SHAPES` toward the scores mapped onto the
+        first pass (:mod:`facetransfer.track.scores`); 0 = one pass, points only.
     """
 
     identity_frames: int = 24
@@ -147,13 +155,14 @@ class CaptureOptions:
     identity_expression_prior: float = 3e-2
     dense: float = 0.3
     gaze: bool = True
+    scores: float = 1.0
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
             if int(getattr(self, name)) < 1:
                 raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("identity_prior", "expression_prior", "sparsity", "temporal", "slow_temporal", "flow",
-                     "smooth", "dense", "offset_prior", "identity_expression_prior"):
+                     "smooth", "dense", "offset_prior", "identity_expression_prior", "scores"):
             if not float(getattr(self, name)) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
         if self.point_weights is not None and len(self.point_weights) != 68:
@@ -269,9 +278,12 @@ class _Shape:
         return self.cache.shape(self.weights(x)) + self.offset
 
     def solve(self, pose: Pose, targets: list, iod: float, x: np.ndarray,
-              prev: np.ndarray | None, fixed: np.ndarray | None = None) -> np.ndarray:
+              prev: np.ndarray | None, fixed: np.ndarray | None = None,
+              anchor: np.ndarray | None = None) -> np.ndarray:
         """The per-frame parameters best explaining ``targets`` at ``pose`` (ARKit: the
-        activations where ``fixed`` (K,) is finite held at its values)."""
+        activations where ``fixed`` (K,) is finite held at its values, and pulled with weight
+        ``opt.scores`` toward ``anchor`` (K,) where it is finite: the mapped detector scores of
+        :mod:`facetransfer.track.scores`)."""
         lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
         if self.arkit:
             Y = project_basis(self.D, pose)
@@ -282,6 +294,10 @@ class _Shape:
             G = G + np.diag(lam_p * self.ridge + lam_t + 1e-9)
             if prev is not None:
                 h = h + lam_t * prev
+            if anchor is not None:
+                lam_a = np.where(np.isfinite(anchor), self.opt.scores, 0.0)      # (K,)
+                G = G + np.diag(lam_a)
+                h = h + lam_a * np.nan_to_num(anchor)
             lo, hi = 0.0, 1.0
             if fixed is not None:
                 lo, hi = np.where(np.isfinite(fixed), fixed, 0.0), np.where(np.isfinite(fixed),
@@ -339,8 +355,8 @@ def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple
 
 
 def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: np.ndarray,
-               prev: np.ndarray | None, iterations: int, gaze: tuple | None = None
-               ) -> _State:
+               prev: np.ndarray | None, iterations: int, gaze: tuple | None = None,
+               anchor: np.ndarray | None = None) -> _State:
     """Alternate pose (Gauss-Newton) and expression (bounded or prior-weighted LS) for one frame;
     with ``gaze`` (:func:`_iris`; ARKit models) the eyeLook* activations follow the iris at
     each pose."""
@@ -352,7 +368,7 @@ def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: n
     for _ in range(iterations):
         pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
         held, after = (None, None) if gaze is None else _gaze_fixed(shape, pose, x, gaze)
-        x = shape.solve(pose, targets, iod, x, prev, held)
+        x = shape.solve(pose, targets, iod, x, prev, held, anchor)
     if after is not None:
         x = np.where(np.isfinite(after), after, x)
     pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
@@ -387,6 +403,11 @@ class _PointWeights:
     mp_index: np.ndarray | None = None
     iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
     closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
+    anchors: np.ndarray | None = None  # (F, K) mapped detector scores (NaN: none)
+
+    def anchor(self, i: int) -> np.ndarray | None:
+        """Frame ``i``'s mapped scores (K,) for the fit, or None."""
+        return None if self.anchors is None else self.anchors[i]
 
 
 def _detection(det: ClipDetections, i: int, pw: _PointWeights) -> tuple[np.ndarray, np.ndarray]:
@@ -514,7 +535,7 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State | N
         st = _fit_frame(shape, tg, _iod(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
                         None if prev is None or prev_i is None else prev.x, int(opt.iterations),
-                        _iris(weights, i))
+                        _iris(weights, i), weights.anchor(i))
         states[i] = st
         prev, prev_i = st, i
         done += 1
@@ -573,20 +594,7 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         raise VideoError(f"no face found in {source or 'the video'} "
                          f"(searched frames 0-{det.n_frames - 1})")
     prog = progress or (lambda stage, done, total: None)
-    weights = np.asarray(opt.point_weights if opt.point_weights is not None
-                         else capture_point_weights(), float)
-    dense = None
-    if opt.dense > 0 and det.points478 is not None:
-        from .dense import mediapipe_correspondence
-
-        dense = mediapipe_correspondence(model)
-        weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
-    sampler = _Sampler(model, dense)
-    iris = closed = None
-    if opt.gaze and is_arkit_model(model) and det.points478 is not None \
-            and det.points478.shape[1] > max(IRIS_INDEX):
-        iris, closed = usable_iris(det.points478)
-    weights = _PointWeights(weights, sampler.mp_index, iris, closed)
+    weights, sampler = _point_weights(det, model, opt)
     t0 = time.perf_counter()
     key = None if checkpoint is None else fit_key(model.content_hash, opt, fixed)
     saved = None if checkpoint is None else checkpoint.saved_fit(key)
@@ -601,20 +609,69 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         run = _FitRun(shape, np.asarray(frames), int(frames[best]), sample_states[best],
                       [None] * det.n_frames, int(frames[best]), int(frames[best]) - 1)
     t_id = time.perf_counter() - t0
+
     def save(due_only: bool) -> None:
         if checkpoint is not None and (not due_only or checkpoint.due()):
             checkpoint.save_fit(det, key, run.saved())
 
     try:
-        _track_both(run, det, weights, opt, prog, lambda: save(due_only=True))
+        _track_passes(run, det, weights, opt, prog, lambda: save(due_only=True))
     except KeyboardInterrupt:
         save(due_only=False)
         raise
     track = _assemble(model, run.shape, run.states, fps, frame_size, source, opt)
     info = {"start_frame": run.start, "identity_frames": [int(i) for i in run.frames],
             "seconds_identity": t_id, "seconds_total": time.perf_counter() - t0,
-            "tracker": "capture"}
+            "tracker": "capture", "score_shapes": run.score_shapes()}
     return replace(track, info=info)
+
+
+def _point_weights(det: ClipDetections, model, opt: CaptureOptions
+                   ) -> tuple[_PointWeights, _Sampler]:
+    """The tracked points (iBUG-68, then MediaPipe's dense points with ``opt.dense``), their
+    reliabilities and the iris centres the gaze follows."""
+    weights = np.asarray(opt.point_weights if opt.point_weights is not None
+                         else capture_point_weights(), float)
+    dense = None
+    if opt.dense > 0 and det.points478 is not None:
+        from .dense import mediapipe_correspondence
+
+        dense = mediapipe_correspondence(model)
+        weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
+    sampler = _Sampler(model, dense)
+    iris = closed = None
+    if opt.gaze and is_arkit_model(model) and det.points478 is not None \
+            and det.points478.shape[1] > max(IRIS_INDEX):
+        iris, closed = usable_iris(det.points478)
+    return _PointWeights(weights, sampler.mp_index, iris, closed), sampler
+
+
+def _track_passes(run: "_FitRun", det: ClipDetections, weights: _PointWeights,
+                  opt: CaptureOptions, prog, maybe_save) -> None:
+    """Track the clip both ways (continuing ``run``); for an ARKit model with the detector's
+    scores and ``opt.scores > 0`` then once more with each frame pulled toward its mapped
+    scores (:mod:`facetransfer.track.scores`; progress stage ``"refine"``)."""
+    if run.lines is None:
+        _track_both(run, det, weights, opt, prog, maybe_save)
+        if not (opt.scores > 0 and det.scores is not None and run.shape.arkit):
+            return
+        run.begin_refine(_score_lines(run, det))
+    from .scores import score_targets
+
+    anchors = score_targets(run.lines, det.scores)[:, run.shape.used]
+    _track_both(run, det, replace(weights, anchors=anchors), opt,
+                lambda stage, done, total: prog("refine", done, total), maybe_save)
+
+
+def _score_lines(run: "_FitRun", det: ClipDetections):
+    """The lines mapping the detector's scores onto the first pass's activations."""
+    from .scores import fit_score_lines
+
+    A = np.full((det.n_frames, len(ARKIT_NAMES)), np.nan)
+    for i, st in enumerate(run.states):
+        if st is not None:
+            A[i, run.shape.used] = st.x
+    return fit_score_lines(A, det.scores)
 
 
 @dataclass
@@ -629,6 +686,18 @@ class _FitRun:
     states: list
     forward_next: int
     backward_next: int
+    lines: object = None      # ScoreLine of the second pass (then ``states`` are its), or None
+
+    def begin_refine(self, lines) -> None:
+        """Start the second pass (:func:`_track_passes`) with the score ``lines``."""
+        self.lines = lines
+        self.states = [None] * len(self.states)
+        self.forward_next, self.backward_next = self.start, self.start - 1
+
+    def score_shapes(self) -> list[str]:
+        """The ARKit shapes whose detector scores the fit read (none without a second pass)."""
+        return [] if self.lines is None else [ARKIT_NAMES[k] for k in
+                                              np.flatnonzero(self.lines.used())]
 
     def saved(self) -> SavedFit:
         F = len(self.states)
@@ -644,7 +713,9 @@ class _FitRun:
         return SavedFit(self.shape.identity, self.shape.offset, self.frames, self.start,
                         (sd.pose.rotation, sd.pose.scale, sd.pose.translation, sd.x,
                          sd.residual), valid, R, sc, t, x, r, self.forward_next,
-                        self.backward_next)
+                        self.backward_next,
+                        None if self.lines is None else np.stack([self.lines.offset,
+                                                                  self.lines.slope]))
 
     @classmethod
     def restore(cls, fit: SavedFit, model, sampler: _Sampler, opt: CaptureOptions) -> "_FitRun":
@@ -653,8 +724,13 @@ class _FitRun:
         states = [_State(Pose(fit.rotation[i], float(fit.scale[i]), fit.translation[i]),
                          fit.x[i], float(fit.residual[i])) if fit.valid[i] else None
                   for i in range(len(fit.valid))]
+        lines = None
+        if fit.lines is not None:
+            from .scores import ScoreLine
+
+            lines = ScoreLine(fit.lines[0], fit.lines[1])
         return cls(shape, fit.frames, fit.start, _State(Pose(R, sc, t), x, r), states,
-                   fit.forward_next, fit.backward_next)
+                   fit.forward_next, fit.backward_next, lines)
 
 
 def _track_both(run: _FitRun, det: ClipDetections, weights, opt: CaptureOptions, prog,
@@ -778,7 +854,7 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     fps, size, src, frames, n, total = _open(video, max_frames, source)
     own = None
     if detector is None:
-        detector = own = VideoLandmarker(fps=fps)
+        detector = own = VideoLandmarker(fps=fps, blendshapes=True)
     try:
         det = detect_clip(frames, detector, n_frames=n, keep478=True,
                           progress=lambda d, t: prog("detect", d, max(total, d)),

@@ -39,11 +39,17 @@ class ClipDetections:
         ``flow[0]`` is NaN.
     points478 : (F, 478, 2) float32 or None
         MediaPipe's raw points (kept for diagnostics and exports).
+    scores : (F, 52) float32 or None
+        MediaPipe's blendshape scores in :data:`facetransfer.arkit.ARKIT_NAMES` order, NaN
+        where it found no face and for ``tongueOut`` (it has no such score); the capture fit
+        reads them as a calibrated per-frame observation of the activations
+        (:mod:`facetransfer.track.scores`).
     """
 
     points: np.ndarray
     flow: np.ndarray
     points478: np.ndarray | None = None
+    scores: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         P = np.asarray(self.points, dtype=np.float64)
@@ -54,6 +60,11 @@ class ClipDetections:
             raise ShapeError(f"flow must be {P.shape}, got {Fl.shape}")
         object.__setattr__(self, "points", P)
         object.__setattr__(self, "flow", Fl)
+        if self.scores is not None:
+            S = np.asarray(self.scores, dtype=np.float32)
+            if S.shape != (P.shape[0], 52):
+                raise ShapeError(f"scores must be ({P.shape[0]}, 52), got {S.shape}")
+            object.__setattr__(self, "scores", S)
 
     @property
     def n_frames(self) -> int:
@@ -88,8 +99,9 @@ class VideoLandmarker(MediaPipeDetector):
     #: frames shown to the detector before a resumed run's first frame (see the class notes)
     warmup_frames = 20
 
-    def __init__(self, model_path: str | os.PathLike | None = None, *, fps: float = 30.0) -> None:
-        self._lm = create_landmarker(model_path, video=True)
+    def __init__(self, model_path: str | os.PathLike | None = None, *, fps: float = 30.0,
+                 blendshapes: bool = False) -> None:
+        self._lm = create_landmarker(model_path, video=True, blendshapes=blendshapes)
         self._dt = 1000.0 / max(float(fps), 1e-3)
         self._i = 0
 
@@ -158,15 +170,21 @@ class _Found:
         self.P: list = [] if resume is None else list(resume.points)
         self.Fl: list = [] if resume is None else list(resume.flow)
         self.raw: list = []
+        self.scores: list = []
         if keep478 and resume is not None:
             if resume.points478 is None:
                 raise ShapeError("resuming with keep478 needs the saved detections' points478")
             self.raw = list(resume.points478)
+        if resume is not None:
+            self.scores = (list(resume.scores) if resume.scores is not None
+                           else [_NAN52] * resume.n_frames)
 
-    def add(self, pts: np.ndarray, flow, q: np.ndarray | None) -> None:
+    def add(self, pts: np.ndarray, flow, q: np.ndarray | None,
+            scores: np.ndarray | None = None) -> None:
         if self.keep478:
             self.raw.append(np.full((478, 2), np.nan, np.float32) if q is None else
                             np.asarray(q[:478], np.float32))
+        self.scores.append(_NAN52 if scores is None else scores)
         self.P.append(pts)
         self.Fl.append(flow)                 # last: len(Fl) frames are complete
 
@@ -177,20 +195,28 @@ class _Found:
             raise ShapeError("the clip has no frames")
         self.Fl = [_NAN68 if f is None else f.result() if isinstance(f, Future) else f
                    for f in self.Fl]
+        S = np.stack(self.scores[:n])
         return ClipDetections(np.stack(self.P[:n]), np.stack(self.Fl),
-                              np.stack(self.raw[:n]) if self.keep478 else None)
+                              np.stack(self.raw[:n]) if self.keep478 else None,
+                              None if np.isnan(S).all() else S)
 
 
 _NAN68 = np.full((68, 2), np.nan)
+_NAN52 = np.full(52, np.nan, np.float32)
 
 
-def _detect_one(detector, fr: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-    """One frame's iBUG-68 points (NaN without a face) and the raw 478 (or None)."""
+def _detect_one(detector, fr: np.ndarray
+                ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+    """One frame's iBUG-68 points (NaN without a face), the raw 478 and the blendshape
+    scores (52,) (each None when the detector gives none)."""
+    if hasattr(detector, "detect_scored"):
+        q, scores = detector.detect_scored(fr)
+        return (_NAN68 if q is None else mediapipe_to_ibug(q)), q, scores
     if hasattr(detector, "detect478"):
         q = detector.detect478(fr)
-        return (_NAN68 if q is None else mediapipe_to_ibug(q)), q
+        return (_NAN68 if q is None else mediapipe_to_ibug(q)), q, None
     d = detector.detect(fr)
-    return (_NAN68 if d is None else np.asarray(d, dtype=np.float64)), None
+    return (_NAN68 if d is None else np.asarray(d, dtype=np.float64)), None, None
 
 
 def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None = None,
@@ -248,14 +274,14 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                     continue
                 if flow:
                     gray = pool.submit(cv2.cvtColor, np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY)
-                pts, q = _detect_one(detector, fr)
+                pts, q, scores = _detect_one(detector, fr)
                 f = None
                 if flow:
                     gray = gray.result()
                     if prev_gray is not None:
                         f = pool.submit(point_flow, prev_gray, gray, found.P[-1])
                     prev_gray = gray
-                found.add(pts, f, q)
+                found.add(pts, f, q, scores)
                 if checkpoint is not None and checkpoint.due():
                     checkpoint.save(found.result())
                 if progress is not None:

@@ -34,7 +34,7 @@ __all__ = ["DETECT_CHECKPOINT_VERSION", "DetectionCheckpoint", "SavedDetections"
            "detection_key", "landmarker_identity"]
 
 #: bumped when the saved layout changes (older files are then ignored)
-DETECT_CHECKPOINT_VERSION = 1
+DETECT_CHECKPOINT_VERSION = 2  # 2: with the blendshape scores
 #: what the file holds (a KLT tracker's progress file has no such entry)
 LAYOUT = "capture-detections"
 
@@ -148,8 +148,12 @@ class DetectionCheckpoint(ProgressFile):
         if (k < 1 or P.shape != (k, 68, 2) or d["flow"].shape != P.shape
                 or int(d["n_frames"]) != k or (raw is not None and raw.shape != (k, 478, 2))):
             raise ValueError("inconsistent arrays")
+        scores = d["scores"] if "scores" in d and d["scores"].size else None
+        if scores is not None and scores.shape != (k, 52):
+            raise ValueError("inconsistent arrays")
         det = ClipDetections(P.astype(np.float64), d["flow"].astype(np.float64),
-                             None if raw is None else raw.astype(np.float32))
+                             None if raw is None else raw.astype(np.float32),
+                             None if scores is None else scores.astype(np.float32))
         return SavedDetections(det, bool(d["complete"]))
 
     def save(self, det: ClipDetections, *, complete: bool = False) -> None:
@@ -161,7 +165,9 @@ class DetectionCheckpoint(ProgressFile):
                   "points": _lossless32(det.points), "flow": _lossless32(det.flow),
                   "has478": np.array(det.points478 is not None),
                   "points478": (np.zeros((0, 478, 2), np.float32) if det.points478 is None
-                                else np.asarray(det.points478, np.float32))}
+                                else np.asarray(det.points478, np.float32)),
+                  "scores": (np.zeros((0, 52), np.float32) if det.scores is None
+                             else np.asarray(det.scores, np.float32))}
         if complete and self._fit is not None:
             arrays.update(pack_fit(self._fit[1], self._fit[0]))
         self._write(arrays)

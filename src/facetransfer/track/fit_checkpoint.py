@@ -8,7 +8,9 @@ beside them, so that an interrupted fit continues at the frame it stopped at:
 
 - the identity phase's result: identity weights, the static offset of the tracked points, the
   sampled frames, the start frame and its seed state;
-- the frames fitted so far (pose, parameters, residual) and where each run stands.
+- the frames fitted so far (pose, parameters, residual) and where each run stands;
+- in the second pass (:mod:`facetransfer.track.scores`), the lines that map the detector's
+  scores onto the first pass's activations (the saved frames are then the second pass's).
 
 Everything is float64, saved and restored exactly, so a resumed fit equals an uninterrupted one
 bit for bit. A fit saved by another model, other options or another fixed identity has another
@@ -27,7 +29,7 @@ import numpy as np
 __all__ = ["FIT_VERSION", "fit_key", "SavedFit", "pack_fit", "unpack_fit"]
 
 #: bumped when the saved fit changes layout or meaning (older fits are then ignored)
-FIT_VERSION = 1
+FIT_VERSION = 2  # 2: the second pass (score lines)
 #: prefix of the fit's entries in the progress file
 PREFIX = "fit_"
 
@@ -72,6 +74,9 @@ class SavedFit:
         Their states (zeros where not ``valid``).
     forward_next, backward_next : int
         The next frame of the forward run (``F``: done) and of the backward run (-1: done).
+    lines : (2, 52) float64 or None
+        In the second pass: the score lines' offsets and slopes (NaN: a shape not read);
+        None in the first.
     """
 
     identity: np.ndarray | None
@@ -87,6 +92,7 @@ class SavedFit:
     residual: np.ndarray
     forward_next: int
     backward_next: int
+    lines: np.ndarray | None = None
 
 
 def pack_fit(fit: SavedFit, key: str) -> dict:
@@ -100,7 +106,8 @@ def pack_fit(fit: SavedFit, key: str) -> dict:
          "rotation": fit.rotation, "scale": fit.scale, "translation": fit.translation,
          "x": fit.x, "residual": fit.residual,
          "forward_next": np.array(int(fit.forward_next)),
-         "backward_next": np.array(int(fit.backward_next))}
+         "backward_next": np.array(int(fit.backward_next)),
+         "lines": np.zeros((0, 52)) if fit.lines is None else np.asarray(fit.lines, float)}
     return {PREFIX + k: np.asarray(v) for k, v in d.items()}
 
 
@@ -116,9 +123,11 @@ def unpack_fit(entries: dict) -> tuple[str, SavedFit] | None:
         return None
     d = {k[len(PREFIX):]: v for k, v in entries.items() if k.startswith(PREFIX)}
     F = len(d["valid"])
+    lines = np.asarray(d.get("lines", np.zeros((0, 52))), np.float64)
     shapes = {"rotation": (F, 3, 3), "scale": (F,), "translation": (F, 2), "residual": (F,)}
     if any(d[k].shape != v for k, v in shapes.items()) or d["x"].shape[0] != F \
-            or d["offset"].ndim != 2 or not 0 <= int(d["start"]) < F:
+            or d["offset"].ndim != 2 or not 0 <= int(d["start"]) < F \
+            or (lines.size and lines.shape != (2, 52)):
         raise ValueError("inconsistent fit arrays")
     fit = SavedFit(
         identity=d["identity"] if bool(d["has_identity"]) else None, offset=d["offset"],
@@ -127,5 +136,6 @@ def unpack_fit(entries: dict) -> tuple[str, SavedFit] | None:
               float(d["seed_residual"])),
         valid=d["valid"].astype(bool), rotation=d["rotation"], scale=d["scale"],
         translation=d["translation"], x=d["x"], residual=d["residual"],
-        forward_next=int(d["forward_next"]), backward_next=int(d["backward_next"]))
+        forward_next=int(d["forward_next"]), backward_next=int(d["backward_next"]),
+        lines=lines if lines.size else None)
     return str(d["key"]), fit

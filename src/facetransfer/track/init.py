@@ -152,15 +152,25 @@ class MediaPipeDetector:
 
     def detect478(self, frame: np.ndarray) -> np.ndarray | None:
         """MediaPipe's 478 landmarks in pixels (x, y), (478, 2), or None if no face."""
+        return self.detect_scored(frame)[0]
+
+    def detect_scored(self, frame: np.ndarray) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """``(points, scores)``: the 478 landmarks in pixels (478, 2) and, for a landmarker
+        made with blendshapes, its 52 scores in :data:`facetransfer.arkit.ARKIT_NAMES` order
+        (52,) float32 (NaN for ``tongueOut``, which it does not score); None without a face
+        (scores also None without blendshapes)."""
         import mediapipe as mp
 
         f = np.ascontiguousarray(frame, dtype=np.uint8)
         res = self._detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=f))
         if not res.face_landmarks:
-            return None
+            return None, None
         H, W = f.shape[:2]
         pts = np.array([(q.x, q.y) for q in res.face_landmarks[0]], dtype=np.float64)
-        return pts * (W, H) - 0.5  # normalised [0, 1] coordinates -> pixel centres at integers
+        scores = None
+        if getattr(res, "face_blendshapes", None):
+            scores = blendshape_scores(res.face_blendshapes[0])
+        return pts * (W, H) - 0.5, scores  # normalised [0, 1] -> pixel centres at integers
 
     def _detect(self, image):
         return self._lm.detect(image)
@@ -186,6 +196,20 @@ class MediaPipeDetector:
             self.close()
         except Exception:
             pass
+
+
+def blendshape_scores(categories) -> np.ndarray:
+    """MediaPipe's blendshape categories (``category_name``, ``score``) as (52,) float32 in
+    :data:`facetransfer.arkit.ARKIT_NAMES` order, NaN for a name it did not score."""
+    from ..arkit import ARKIT_NAMES
+
+    index = {n: k for k, n in enumerate(ARKIT_NAMES)}
+    out = np.full(len(ARKIT_NAMES), np.nan, np.float32)
+    for c in categories:
+        k = index.get(c.category_name)
+        if k is not None:
+            out[k] = c.score
+    return out
 
 
 def create_landmarker(model_path: str | os.PathLike | None = None, *, video: bool = False,

@@ -1,0 +1,110 @@
+"""MediaPipe's blendshape scores as a per-frame observation of the activations (beyond §5).
+
+Face Landmarker scores 51 of the 52 ARKit blendshapes in every frame from the image itself, not
+only from its landmarks. On footage with a known truth (``benchmarks/bench_capture.py``:
+identities outside the model, painted by OpenCV) its jawOpen and mouthPucker follow the truth
+better than any fit of our model to 2-D points can (jawOpen r 0.92-0.93 against 0.86-0.89),
+but on another scale: its scores are compressed by a factor that changes from clip to clip
+(0.35-0.71 of the true jawOpen's amplitude). So the capture tracker reads them through a
+per-clip line fitted to its own first pass:
+
+1. The clip is tracked from the points alone (:mod:`facetransfer.track.capture`).
+2. Per scored shape, a line maps the score onto that pass's activation: the reduced major axis
+   (the line through both means whose slope is the ratio of the standard deviations), so the
+   mapped score keeps the amplitude our geometry measured and takes its timing from the
+   detector.
+3. The clip is tracked again with a ridge pulling each frame's activation toward its mapped
+   score (:func:`score_targets`), beside the points, flow and temporal terms.
+
+References
+----------
+Vlasic et al. 2005, §5 (tracking with a multilinear model); MediaPipe Face Landmarker
+(blendshape scores); Sokal & Rohlf, *Biometry* (reduced major axis regression).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..arkit import ARKIT_NAMES
+from ..errors import ShapeError
+
+__all__ = ["SCORED_SHAPES", "ScoreLine", "fit_score_lines", "score_targets"]
+
+#: the shapes whose score the fit reads (``bench_capture.py``, synthetic clips with truth). Left
+#: out: the smiles (reading them raised the 51-shape activation error from 0.083 / 0.104 / 0.127
+#: / 0.088 to 0.087 / 0.105 / 0.138 / 0.094: mouthSmileRight's score follows a one-sided smile
+#: at r 0.49-0.52), the brows and squints (Face Landmarker's browInnerUp follows the truth better
+#: than our fit on 1 clip of 4, its eyeSquint on 2, all below r 0.4) and the gaze, which follows
+#: the iris (:mod:`facetransfer.track.gaze`)
+SCORED_SHAPES: tuple[str, ...] = (
+    "jawOpen", "mouthFunnel", "mouthPucker", "eyeBlinkLeft", "eyeBlinkRight")
+
+#: below this standard deviation over the clip a score says nothing (the shape never moves)
+MIN_SCORE_STD = 0.01
+
+
+@dataclass(frozen=True)
+class ScoreLine:
+    """Per ARKit shape, the line ``activation ≈ offset + slope * score`` of one clip.
+
+    Attributes
+    ----------
+    offset, slope : (52,) float64
+        In :data:`~facetransfer.arkit.ARKIT_NAMES` order; NaN for a shape not read.
+    """
+
+    offset: np.ndarray
+    slope: np.ndarray
+
+    def used(self) -> np.ndarray:
+        """(52,) bool: the shapes with a line."""
+        return np.isfinite(self.slope)
+
+
+def fit_score_lines(activations: np.ndarray, scores: np.ndarray,
+                    names: tuple[str, ...] = SCORED_SHAPES) -> ScoreLine:
+    """The reduced-major-axis line of each shape in ``names`` (module notes, step 2).
+
+    Parameters
+    ----------
+    activations : (F, 52) float
+        The first pass's activations; NaN rows (lost frames) are skipped.
+    scores : (F, 52) float
+        The detector's scores, NaN where it found no face.
+    names : tuple of str
+        ARKit names to fit.
+
+    Returns
+    -------
+    ScoreLine
+        ``slope = std(a) / std(s)``, ``offset = mean(a) - slope mean(s)`` over the frames where
+        both are known; no line where fewer than 8 such frames exist or the score's std is
+        below :data:`MIN_SCORE_STD`.
+    """
+    A, S = np.asarray(activations, np.float64), np.asarray(scores, np.float64)
+    if A.shape != S.shape or A.ndim != 2 or A.shape[1] != len(ARKIT_NAMES):
+        raise ShapeError(f"activations and scores must both be (F, {len(ARKIT_NAMES)}), got "
+                         f"{A.shape} and {S.shape}")
+    offset = np.full(len(ARKIT_NAMES), np.nan)
+    slope = np.full(len(ARKIT_NAMES), np.nan)
+    for n in names:
+        k = ARKIT_NAMES.index(n)
+        ok = np.isfinite(A[:, k]) & np.isfinite(S[:, k])
+        if ok.sum() < 8:
+            continue
+        a, s = A[ok, k], S[ok, k]
+        if s.std() < MIN_SCORE_STD:
+            continue
+        slope[k] = a.std() / s.std()
+        offset[k] = a.mean() - slope[k] * s.mean()
+    return ScoreLine(offset, slope)
+
+
+def score_targets(line: ScoreLine, scores: np.ndarray) -> np.ndarray:
+    """The mapped scores ``clip(offset + slope * score, 0, 1)``, (F, 52); NaN where a shape has
+    no line or the frame no score."""
+    S = np.asarray(scores, np.float64)
+    return np.clip(line.offset + line.slope * S, 0.0, 1.0)
