@@ -245,8 +245,8 @@ HAIR, BROW = (45, 35, 30), (90, 60, 45)
 
 
 def test_hair_at_the_rim_of_the_reference_frame_is_not_pasted(setup):
-    """The reference frame shows hair over the region's rim (forehead, temples) where the current
-    frame shows skin: those pixels keep the current frame's skin. Its brows and eyes, as unlike
+    """The reference frame shows hair over the region's rim (forehead, temples, the cheek below
+    the eye) where the current frame shows skin: those pixels keep the current frame's skin. Its brows and eyes, as unlike
     the current frame's skin, are pasted: the rule holds only away from the lids and brows."""
     model, topo, closed, fill = setup
     ref = _track(model, _acts(1, 0.0))
@@ -260,6 +260,12 @@ def test_hair_at_the_rim_of_the_reference_frame_is_not_pasted(setup):
     core = shown & tex0.select[np.maximum(tid, 0)] & ~tex0.rim[np.maximum(tid, 0)]
     hole = np.isin(tid, fill)
     brow = core & ~hole & ~np.isin(tid, np.flatnonzero(tex0.side >= 0))   # neither lid nor eye
+    rows = np.flatnonzero(rim.any(axis=1))
+    y = np.arange(SIZE)[:, None]
+    # hair over the forehead's top, and over the cheek that eyeSquint moves (the region's
+    # bottom: far from the lid margins, so rim too; the gap under the ear of a turned head)
+    rim &= (y < np.quantile(rows, 0.3)) | (y > np.quantile(rows, 0.9))
+    low = rim & (y > np.quantile(rows, 0.9))
     ref_img = _frame(hole, REF_EYE)
     ref_img[rim], ref_img[brow] = HAIR, BROW
     _, tex = eyes.eye_texture([ref_img], ref, model, topo)
@@ -278,5 +284,6 @@ def test_hair_at_the_rim_of_the_reference_frame_is_not_pasted(setup):
     r, b, e = inner(rim), inner(brow), inner(hole)
     assert r.sum() > 50 and b.sum() > 30 and e.sum() > 10
     assert share(r, HAIR) < 0.05 and share(r, SKIN) > 0.9    # the hair is not pasted
+    assert inner(low).sum() > 30 and share(inner(low), SKIN) > 0.9   # not on the cheek either
     assert share(b, BROW) > 0.8                               # the brows are
     assert share(e, REF_EYE) > 0.9                            # and so is the eye

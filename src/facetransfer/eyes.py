@@ -74,8 +74,10 @@ CLOSE_RINGS = 3
 #: that are unlike enough: the transition from skin to hair in the reference frame.
 REJECT_GROW = 2
 #: The eye region's rim (:attr:`EyeTexture.rim`): its triangles farther than this (model
-#: units, cm for the FaceKit) from every lid and brow vertex: forehead, temples and cheek, skin
-#: without features of its own.
+#: units, cm for the FaceKit) from the lid margins (iBUG 36-47) and the brows (iBUG 17-26):
+#: forehead, temples and cheek, skin without features of its own. (Measured from the margins,
+#: not from every vertex the lid shapes move: eyeSquint moves the cheek down to the jaw line,
+#: which a turned head shows beside the hair or the dark gap under it.)
 RIM_DISTANCE = 1.2
 #: Log ratios between a reference frame's texture (matched) and the current frame's from
 #: which a pixel fades back to the current frame, fully at the second (a factor of 1.65-2.5;
@@ -481,7 +483,7 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
     select, lid_faces = _region_faces(model, topo, closed, fill, brows=brows, rings=rings,
                                       rig=rig)
     pairs, side = _lid_sides(model, topo, closed, V0, lid_faces)
-    rim = _rim_faces(model, closed, close_mouth(V0, topo), select, lid_faces)
+    rim = _rim_faces(model, closed, close_mouth(V0, topo), select)
 
     def lift(j):
         img = np.asarray(frames[j])
@@ -538,15 +540,14 @@ def _region_faces(model, topo, closed, fill: np.ndarray, *, brows: bool, rings: 
     return faces_of(verts), faces_of(lids)
 
 
-def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray,
-               lid_faces: np.ndarray) -> np.ndarray:
+def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray) -> np.ndarray:
     """The region's triangles ``(F',) bool`` whose vertices all lie farther than
-    :data:`RIM_DISTANCE` from every vertex of the lid triangles and from the brow landmarks
-    (iBUG 17-26) of the closed mesh ``V`` (n_closed, 3)."""
+    :data:`RIM_DISTANCE` from the brow and lid-margin landmarks (iBUG 17-26, 36-47) of the
+    closed mesh ``V`` (n_closed, 3)."""
     from scipy.spatial import cKDTree
 
     lm = np.asarray(model.landmarks, np.int64)
-    core = np.unique(np.concatenate([closed.faces[lid_faces].ravel(), lm[17:27]]))
+    core = np.concatenate([lm[17:27], lm[36:48]])
     d, _ = cKDTree(V[core]).query(V, k=1)
     far = d > RIM_DISTANCE
     return select & far[closed.faces].all(axis=1)
