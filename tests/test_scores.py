@@ -72,3 +72,18 @@ def test_bad_shapes_are_refused():
         fit_score_lines(A[:, :51], S[:, :51])
     with pytest.raises(ShapeError, match="scores must be"):
         ClipDetections(np.zeros((3, 68, 2)), np.zeros((3, 68, 2)), None, np.zeros((3, 51)))
+
+
+def test_track_command_reads_the_scores_unless_told_not_to():
+    """``track --no-scores`` gives the capture options of one pass (points and flow only);
+    by default the second pass reads the scores (``CaptureOptions.scores``)."""
+    import argparse
+
+    from facetransfer.cli.track import add_track_options, track_settings
+    from facetransfer.track.capture import CaptureOptions
+
+    p = argparse.ArgumentParser()
+    add_track_options(p)
+    assert track_settings(p.parse_args([])).capture.scores == CaptureOptions().scores > 0
+    assert track_settings(p.parse_args(["--no-scores"])).capture.scores == 0.0
+    assert track_settings(p.parse_args(["--no-scores", "--smooth", "1"])).capture.smooth == 1.0

@@ -58,6 +58,11 @@ def add_track_options(p) -> None:
                    help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
     p.add_argument("--points", type=int, default=d.n_points,
                    help="[klt] tracked vertices per frame")
+    p.add_argument("--scores", action=argparse.BooleanOptionalAction, default=True,
+                   help="[capture] a second pass that reads Face Landmarker's own blendshape "
+                   "scores of the jaw, lips and blinks (facetransfer.track.scores); "
+                   "--no-scores: the landmarks and their flow only (a track that does not "
+                   "depend on its blendshape model)")
 
 
 def track_settings(args):
@@ -69,7 +74,8 @@ def track_settings(args):
 
     klt = TrackOptions(passes=args.passes, anchor=args.anchor, smooth=args.smooth,
                        n_points=args.points, keyframe=args.keyframe)
-    return TrackerSettings(args.tracker, klt, CaptureOptions(smooth=args.smooth))
+    scores = CaptureOptions().scores if args.scores else 0.0
+    return TrackerSettings(args.tracker, klt, CaptureOptions(smooth=args.smooth, scores=scores))
 
 
 def register(sub) -> None:
