@@ -55,6 +55,7 @@ from .init import require_landmarks
 from .landmarks import IBUG_WEIGHTS
 from .options import Progress
 from .result import Track
+from .scores import ScoreLine, fit_score_lines, score_targets
 from .smooth import smooth_track
 from .solver import BasisCache, Prior
 
@@ -549,7 +550,7 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
                        fps: float = 30.0, frame_size: tuple[int, int] = (0, 0),
                        fixed: dict | None = None, progress: Progress | None = None,
                        source: str = "", checkpoint=None) -> Track:
-    """Fit the model to a clip's detections and flow (steps 2-4 of the module notes).
+    """Fit the model to a clip's detections and flow (steps 2-5 of the module notes).
 
     Parameters
     ----------
@@ -656,17 +657,13 @@ def _track_passes(run: "_FitRun", det: ClipDetections, weights: _PointWeights,
         if not (opt.scores > 0 and det.scores is not None and run.shape.arkit):
             return
         run.begin_refine(_score_lines(run, det))
-    from .scores import score_targets
-
     anchors = score_targets(run.lines, det.scores)[:, run.shape.used]
     _track_both(run, det, replace(weights, anchors=anchors), opt,
                 lambda stage, done, total: prog("refine", done, total), maybe_save)
 
 
-def _score_lines(run: "_FitRun", det: ClipDetections):
+def _score_lines(run: "_FitRun", det: ClipDetections) -> ScoreLine:
     """The lines mapping the detector's scores onto the first pass's activations."""
-    from .scores import fit_score_lines
-
     A = np.full((det.n_frames, len(ARKIT_NAMES)), np.nan)
     for i, st in enumerate(run.states):
         if st is not None:
@@ -686,9 +683,9 @@ class _FitRun:
     states: list
     forward_next: int
     backward_next: int
-    lines: object = None      # ScoreLine of the second pass (then ``states`` are its), or None
+    lines: ScoreLine | None = None   # of the second pass (then ``states`` are its), or None
 
-    def begin_refine(self, lines) -> None:
+    def begin_refine(self, lines: ScoreLine) -> None:
         """Start the second pass (:func:`_track_passes`) with the score ``lines``."""
         self.lines = lines
         self.states = [None] * len(self.states)
@@ -724,11 +721,7 @@ class _FitRun:
         states = [_State(Pose(fit.rotation[i], float(fit.scale[i]), fit.translation[i]),
                          fit.x[i], float(fit.residual[i])) if fit.valid[i] else None
                   for i in range(len(fit.valid))]
-        lines = None
-        if fit.lines is not None:
-            from .scores import ScoreLine
-
-            lines = ScoreLine(fit.lines[0], fit.lines[1])
+        lines = None if fit.lines is None else ScoreLine(fit.lines[0], fit.lines[1])
         return cls(shape, fit.frames, fit.start, _State(Pose(R, sc, t), x, r), states,
                    fit.forward_next, fit.backward_next, lines)
 
