@@ -73,7 +73,7 @@ QUICK_REAL = (("WDA_KatieHill_000", 0, 100), ("driving_d6", 300, 120))
 TARGETS = {"mouth_open": 0.85, "mouth_width": 0.85, "eye_open": 0.85, "brow": 0.7,
            "jawOpen": 0.85, "eyeBlinkLeft": 0.85, "eyeBlinkRight": 0.85, "browInnerUp": 0.7,
            "std_ratio": (0.75, 1.33), "nme7": 0.025}
-TRACKERS = ("mediapipe", "mediapipe_table", "ours", "klt", "floor", "capfloor")
+TRACKERS = ("mediapipe", "mediapipe_table", "ours", "ours_points", "klt", "floor", "capfloor")
 FLOOR_PRIOR: list = [None]                    # --floor-prior
 QUIET = [True]                                # drop MediaPipe's native log lines (not with -v)
 
@@ -209,15 +209,18 @@ def run_mediapipe(video: Path, cache: Path, *, table: bool = False) -> dict:
 def run_ours(video: Path, model, max_frames: int | None = None, *, tracker: str = "capture"
              ) -> dict:
     """Our default tracker as ``facetransfer track`` runs it (``capture``: the model fitted to
-    detections and flow on every frame), or the paper's ``klt`` tracker (``track_video`` with
-    default options); its landmarks, activations and unposed face vertices per frame."""
+    detections and flow on every frame, then again with Face Landmarker's scores), the same
+    without the scores' second pass (``points``: ``track --no-scores``), or the paper's ``klt``
+    tracker (``track_video`` with default options); its landmarks, activations and unposed face
+    vertices per frame."""
     from facetransfer.track import track_video
-    from facetransfer.track.capture import capture_video
+    from facetransfer.track.capture import CaptureOptions, capture_video
 
     t0 = time.perf_counter()
     with filtered_stderr(QUIET[0]):
-        if tracker == "capture":
-            tr = capture_video(str(video), model, max_frames=max_frames)
+        if tracker in ("capture", "points"):
+            opts = CaptureOptions(scores=0.0) if tracker == "points" else None
+            tr = capture_video(str(video), model, max_frames=max_frames, options=opts)
         else:
             tr = track_video(str(video), model, max_frames=max_frames)
     sec = time.perf_counter() - t0
@@ -308,9 +311,9 @@ def run_synthetic(models: dict, trackers, cache: Path, quick: bool) -> dict:
                 try:
                     if tk.startswith("mediapipe"):
                         pred = run_mediapipe(clip.video, cache, table=tk == "mediapipe_table")
-                    elif tk in ("ours", "klt"):
-                        pred = run_ours(clip.video, model,
-                                        tracker="capture" if tk == "ours" else "klt")
+                    elif tk in ("ours", "ours_points", "klt"):
+                        pred = run_ours(clip.video, model, tracker={
+                            "ours": "capture", "ours_points": "points"}.get(tk, "klt"))
                     elif tk == "capfloor":
                         pred = run_capture_floor(clip.landmarks, model)
                     else:
@@ -339,7 +342,8 @@ def run_synthetic(models: dict, trackers, cache: Path, quick: bool) -> dict:
     return out
 
 
-_COLOURS = {"truth": (0, 220, 0), "ours": (230, 30, 30), "mediapipe": (40, 90, 255),
+_COLOURS = {"truth": (0, 220, 0), "ours": (230, 30, 30), "ours_points": (250, 140, 140),
+            "mediapipe": (40, 90, 255),
             "mediapipe_table": (120, 160, 255),
             "floor": (240, 200, 0), "capfloor": (200, 0, 200), "klt": (0, 200, 200)}
 
@@ -750,8 +754,8 @@ def run_speed(args, model, cache: Path) -> dict:
 
 # ------------------------------------------------------------------------------ plot
 def plot(res: dict, path: Path) -> None:
-    """Bars: 7-point NME per clip per tracker, activation error per key shape, real-clip
-    correlations against the targets, speed."""
+    """Bars: 7-point NME per clip per tracker, activation error and correlation with the truth
+    per key shape, real-clip correlations against the targets, speed."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -759,16 +763,17 @@ def plot(res: dict, path: Path) -> None:
 
     from facetransfer.io.atomic import save_figure
 
-    fig, axes = plt.subplots(2, 2, figsize=(14, 9))
+    fig, axes = plt.subplots(3, 2, figsize=(14, 13))
     syn, real, sp = res.get("synthetic"), res.get("real"), res.get("speed")
     if syn:
         _bars(axes[0, 0], syn["clips"], lambda m: m.get("nme7_median"), 100,
               "7-point NME, median (% of eye-corner distance)", target=100 * TARGETS["nme7"])
         _act_bars(axes[0, 1], syn["clips"])
+        _act_bars(axes[1, 0], syn["clips"], "act_corr")
     if real:
-        _real_bars(axes[1, 0], real)
+        _real_bars(axes[1, 1], real)
     if sp and "error" not in sp:
-        ax = axes[1, 1]
+        ax = axes[2, 0]
         ax.bar(["ours (facetransfer track)", "MediaPipe VIDEO"],
                [sp["ours_fps"], sp["mediapipe_fps"]], color=["tab:blue", "tab:orange"])
         ax.axhline(sp["mediapipe_fps"] / 2, color="k", ls="--", lw=1, label="target: half MediaPipe")
@@ -799,17 +804,20 @@ def _bars(ax, clips: dict, get, scale, title, target=None) -> None:
     ax.legend(fontsize=8)
 
 
-def _act_bars(ax, clips: dict) -> None:
-    tks = sorted({t for r in clips.values() for t, m in r.items() if m.get("act_mae")})
+def _act_bars(ax, clips: dict, key: str = "act_mae") -> None:
+    """Per key shape and tracker, the mean over clips of ``key`` (``act_mae`` or ``act_corr``;
+    clips where the shape does not move have no correlation)."""
+    tks = sorted({t for r in clips.values() for t, m in r.items() if m.get(key)})
     w = 0.8 / max(1, len(tks))
     for k, t in enumerate(tks):
-        vals = [np.nanmean([r[t]["act_mae"][n] for r in clips.values() if r.get(t, {})
-                            .get("act_mae") and r[t]["act_mae"][n] is not None] or [np.nan])
+        vals = [np.nanmean([r[t][key][n] for r in clips.values() if r.get(t, {})
+                            .get(key) and r[t][key].get(n) is not None] or [np.nan])
                 for n in KEY_SHAPES]
         ax.bar(np.arange(len(KEY_SHAPES)) + k * w, vals, w, label=t)
     ax.set_xticks(np.arange(len(KEY_SHAPES)) + w * (len(tks) - 1) / 2, KEY_SHAPES, rotation=30,
                   fontsize=8)
-    ax.set_title("activation mean absolute error vs truth (synthetic, mean over clips)")
+    what = "mean absolute error" if key == "act_mae" else "correlation over frames"
+    ax.set_title(f"activation {what} vs truth (synthetic, mean over clips)")
     ax.legend(fontsize=8)
 
 
