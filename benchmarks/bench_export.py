@@ -52,7 +52,8 @@ KEY_SHAPES = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")
 class RecordingLandmarker:
     """MediaPipe Face Landmarker in VIDEO mode that also keeps its 52 blendshapes per frame.
 
-    ``detect478(frame)`` is the tracker's detector interface (478 pixel points or None).
+    ``detect_scored(frame)`` is the tracker's detector interface (478 pixel points and 52
+    scores, or None twice); ``detect478(frame)`` the points alone.
     """
 
     def __init__(self, fps: float):
@@ -69,8 +70,13 @@ class RecordingLandmarker:
         self._i = 0
         self.scores: list = []  # per frame: {name: score} or None
 
-    def detect478(self, frame):
+    def detect_scored(self, frame):
+        """``(478 pixel points, 52 scores)`` or ``(None, None)``: what the tracker's own
+        detector gives (:meth:`facetransfer.track.init.MediaPipeDetector.detect_scored`), so
+        that the capture runs as ``facetransfer track`` runs it, second pass included."""
         import mediapipe as mp
+
+        from facetransfer.track.init import blendshape_scores
 
         f = np.ascontiguousarray(frame, dtype=np.uint8)
         res = self._lm.detect_for_video(mp.Image(image_format=mp.ImageFormat.SRGB, data=f),
@@ -78,10 +84,14 @@ class RecordingLandmarker:
         self._i += 1
         if not res.face_landmarks:
             self.scores.append(None)
-            return None
+            return None, None
         self.scores.append({c.category_name: c.score for c in res.face_blendshapes[0]})
         H, W = f.shape[:2]
-        return np.array([(q.x, q.y) for q in res.face_landmarks[0]]) * (W, H) - 0.5
+        pts = np.array([(q.x, q.y) for q in res.face_landmarks[0]]) * (W, H) - 0.5
+        return pts, blendshape_scores(res.face_blendshapes[0])
+
+    def detect478(self, frame):
+        return self.detect_scored(frame)[0]
 
     def close(self):
         self._lm.close()
