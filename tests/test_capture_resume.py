@@ -362,6 +362,21 @@ def _stop_tracking_at(k: int):
     return prog
 
 
+def _count_fits(monkeypatch) -> dict:
+    """``{"identity": 0 or 1, "frames": n}``, kept up to date: whether the capture ran its
+    identity phase and how many frames it fitted from now on."""
+    from facetransfer.track import capture
+
+    calls = {"identity": 0, "frames": 0}
+    real_id, real_fit = capture._clip_identity, capture._fit_frame
+    monkeypatch.setattr(capture, "_clip_identity",
+                        lambda *a, **k: calls.__setitem__("identity", 1) or real_id(*a, **k))
+    monkeypatch.setattr(capture, "_fit_frame",
+                        lambda *a, **k: calls.__setitem__("frames", calls["frames"] + 1)
+                        or real_fit(*a, **k))
+    return calls
+
+
 def _same_track(a: Track, b: Track) -> None:
     for name in ("rotation", "scale", "translation", "landmarks2d", "confidence", "lost"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
@@ -403,13 +418,7 @@ def test_interrupted_fit_continues_exactly_where_it_stopped(clip, arkit_model, t
     ck.load()
     fit = ck.saved_fit(key)
     assert fit.forward_next == F and fit.backward_next == start - 1 - start // 2
-    calls = {"identity": 0, "frames": 0}
-    real_id, real_fit = capture._clip_identity, capture._fit_frame
-    monkeypatch.setattr(capture, "_clip_identity",
-                        lambda *a, **k: calls.__setitem__("identity", 1) or real_id(*a, **k))
-    monkeypatch.setattr(capture, "_fit_frame",
-                        lambda *a, **k: calls.__setitem__("frames", calls["frames"] + 1)
-                        or real_fit(*a, **k))
+    calls = _count_fits(monkeypatch)
     out = capture.capture_detections(det, arkit_model, checkpoint=ck)
     left = fit.backward_next + 1 - int(NO_FACE <= fit.backward_next)   # frames still to fit
     assert calls == {"identity": 0, "frames": left}
@@ -464,13 +473,7 @@ def test_fit_interrupted_in_the_second_pass_continues_exactly(clip, arkit_model,
     assert fit.lines is not None and fit.lines.shape == (2, 52)
     lost = int(ref.info["start_frame"] <= NO_FACE < fit.forward_next)
     assert fit.valid.sum() == stop - lost
-    calls = {"identity": 0, "frames": 0}
-    real_id, real_fit = capture._clip_identity, capture._fit_frame
-    monkeypatch.setattr(capture, "_clip_identity",
-                        lambda *a, **k: calls.__setitem__("identity", 1) or real_id(*a, **k))
-    monkeypatch.setattr(capture, "_fit_frame",
-                        lambda *a, **k: calls.__setitem__("frames", calls["frames"] + 1)
-                        or real_fit(*a, **k))
+    calls = _count_fits(monkeypatch)
     out = capture.capture_detections(det, arkit_model, checkpoint=ck)
     assert calls == {"identity": 0, "frames": F - 1 - stop + lost}
     _same_track(out, ref)
