@@ -49,52 +49,21 @@ CLIPS = ("face_2", "WDA_KatieHill_000", "driving_d6", "driving_d9")
 KEY_SHAPES = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight")
 
 
-class RecordingLandmarker:
-    """MediaPipe Face Landmarker in VIDEO mode that also keeps its 52 blendshapes per frame.
+def _recording_landmarker(fps: float):
+    """The tracker's own detector (:class:`facetransfer.track.detect.VideoLandmarker`, with
+    blendshapes: the capture runs as ``facetransfer track`` runs it, second pass included)
+    that also keeps its scores: ``.scores``, per frame (52,) in ARKIT_NAMES order or None."""
+    from facetransfer.track.detect import VideoLandmarker
 
-    ``detect_scored(frame)`` is the tracker's detector interface (478 pixel points and 52
-    scores, or None twice); ``detect478(frame)`` the points alone.
-    """
+    class RecordingLandmarker(VideoLandmarker):
+        def detect_scored(self, frame):
+            pts, scores = super().detect_scored(frame)
+            self.scores.append(scores)
+            return pts, scores
 
-    def __init__(self, fps: float):
-        os.environ.setdefault("GLOG_minloglevel", "2")
-        from mediapipe.tasks.python import BaseOptions, vision
-
-        from facetransfer.track.init import _landmarker_path
-
-        opts = vision.FaceLandmarkerOptions(
-            base_options=BaseOptions(model_asset_path=str(_landmarker_path())),
-            running_mode=vision.RunningMode.VIDEO, num_faces=1, output_face_blendshapes=True)
-        self._lm = vision.FaceLandmarker.create_from_options(opts)
-        self._dt = 1000.0 / fps
-        self._i = 0
-        self.scores: list = []  # per frame: {name: score} or None
-
-    def detect_scored(self, frame):
-        """``(478 pixel points, 52 scores)`` or ``(None, None)``: what the tracker's own
-        detector gives (:meth:`facetransfer.track.init.MediaPipeDetector.detect_scored`), so
-        that the capture runs as ``facetransfer track`` runs it, second pass included."""
-        import mediapipe as mp
-
-        from facetransfer.track.init import blendshape_scores
-
-        f = np.ascontiguousarray(frame, dtype=np.uint8)
-        res = self._lm.detect_for_video(mp.Image(image_format=mp.ImageFormat.SRGB, data=f),
-                                        int(round(self._i * self._dt)))
-        self._i += 1
-        if not res.face_landmarks:
-            self.scores.append(None)
-            return None, None
-        self.scores.append({c.category_name: c.score for c in res.face_blendshapes[0]})
-        H, W = f.shape[:2]
-        pts = np.array([(q.x, q.y) for q in res.face_landmarks[0]]) * (W, H) - 0.5
-        return pts, blendshape_scores(res.face_blendshapes[0])
-
-    def detect478(self, frame):
-        return self.detect_scored(frame)[0]
-
-    def close(self):
-        self._lm.close()
+    det = RecordingLandmarker(fps=fps, blendshapes=True)
+    det.scores = []
+    return det
 
 
 def _track(clip: Path, model, detector, max_frames):
@@ -135,7 +104,7 @@ def agreement(model, data_dir: Path, clips, max_frames, tmp: Path) -> dict:
     for name in clips:
         clip = data_dir / "video" / f"{name}.mp4"
         info = video_info(clip)
-        det = RecordingLandmarker(info.fps)
+        det = _recording_landmarker(info.fps)
         t0 = time.perf_counter()
         try:
             track, tracker = _track(clip, model, det, max_frames)
@@ -147,7 +116,7 @@ def agreement(model, data_dir: Path, clips, max_frames, tmp: Path) -> dict:
         theirs = np.full((track.n_frames, len(ARKIT_NAMES)), np.nan)
         for k, s in enumerate(det.scores[:track.n_frames]):
             if s is not None:
-                theirs[k, :51] = [s[n] for n in MEDIAPIPE_NAMES]
+                theirs[k] = s                   # MEDIAPIPE_NAMES = ARKIT_NAMES[:51]
         ok = ~np.isnan(ours[:, 0]) & ~np.isnan(theirs[:, 0])
         per = {}
         for j, n in enumerate(MEDIAPIPE_NAMES):
