@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..arkit import ARKIT_NAMES
 from ..errors import AssetError, TrackError
 from .landmarks import IBUG_WEIGHTS, REQUIRED_IBUG, ibug_names, mediapipe_to_ibug
 from .solver import FrameState, fit_points
@@ -198,15 +199,16 @@ class MediaPipeDetector:
             pass
 
 
+#: Column of each ARKit name in :func:`blendshape_scores`' output.
+_ARKIT_INDEX = {n: k for k, n in enumerate(ARKIT_NAMES)}
+
+
 def blendshape_scores(categories) -> np.ndarray:
     """MediaPipe's blendshape categories (``category_name``, ``score``) as (52,) float32 in
     :data:`facetransfer.arkit.ARKIT_NAMES` order, NaN for a name it did not score."""
-    from ..arkit import ARKIT_NAMES
-
-    index = {n: k for k, n in enumerate(ARKIT_NAMES)}
     out = np.full(len(ARKIT_NAMES), np.nan, np.float32)
     for c in categories:
-        k = index.get(c.category_name)
+        k = _ARKIT_INDEX.get(c.category_name)
         if k is not None:
             out[k] = c.score
     return out
