@@ -52,10 +52,10 @@ JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
 JAW_THRESHOLD = 0.15
 #: Rings of triangles around the jaw region over which its exposure is matched.
 RING = 3
-#: Where the closed frame's texture (matched) and the current frame's differ by more than
-#: :data:`facetransfer.eyes.REJECT`, a pixel fades back to the current frame: what the closed
-#: frame shows at the jaw line of a turned head is often hair or the gap under it (a black
-#: wedge under the ear of the demo's turned frames without it).
+# Where the closed frame's texture (matched) and the current frame's differ by more than
+# facetransfer.eyes.REJECT, a pixel fades back to the current frame (paint_jaw): what the closed
+# frame shows at the jaw line of a turned head is often hair or the gap under it (a black
+# wedge under the ear of the demo's turned frames without it).
 
 
 @dataclass(frozen=True)
