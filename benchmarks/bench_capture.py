@@ -917,6 +917,8 @@ def synthetic_verdict(syn: dict) -> str:
         if o.get("nme7_median") is None:
             return "FAIL (ours missing)"
         peers = [r.get(t, {}).get("nme7_median") for t in ("mediapipe", "mediapipe_table")]
+        if all(m is None for m in peers):
+            return "not judged (no MediaPipe column in this run)"
         ok.append(o["nme7_median"] <= TARGETS["nme7"]
                   and all(m is None or o["nme7_median"] < m for m in peers))
     return "PASS" if all(ok) else f"FAIL ({sum(ok)}/{len(ok)} clips)"

@@ -226,10 +226,10 @@ class _Fakes:
 @pytest.fixture()
 def fakes(clip, monkeypatch):
     """The capture tracker's MediaPipe replaced by :class:`FakeDetector` (one per run)."""
-    from facetransfer.track import capture
+    from facetransfer.track import video_detect
 
     f = _Fakes(clip)
-    monkeypatch.setattr(capture, "VideoLandmarker", f)
+    monkeypatch.setattr(video_detect, "VideoLandmarker", f)
     return f
 
 

@@ -444,16 +444,19 @@ def register(sub) -> None:
 
     b = msub.add_parser("build", help="build a model from a data set")
     b.add_argument("--dataset", required=True,
-                   help="ict-bilinear, ict-trilinear, a manifest .csv, or a FaceWarehouse folder")
+                   help="ict-arkit, ict-bilinear, ict-trilinear, a manifest .csv, or a "
+                   "FaceWarehouse folder")
     b.add_argument("--ranks", help="ranks per mode, e.g. identity=9,expression=6 "
-                   "(default: 9/6 bilinear, 16/4/4 trilinear, full otherwise)")
+                   "(default: 40/52 ict-arkit, 9/6 ict-bilinear, 16/4/4 ict-trilinear, full "
+                   "otherwise)")
     b.add_argument("--refine", action=argparse.BooleanOptionalAction, default=True,
                    help="refine the N-mode SVD by alternating least squares (default on)")
     b.add_argument("--impute", choices=("ppca", "average", "none"), default="ppca",
                    help="how to fill missing cells (default ppca; none: missing cells are an error)")
     b.add_argument("--seed", type=int, default=0, help="seed of ICT identities and imputation")
     b.add_argument("--identities", type=int, default=None,
-                   help="number of identities (ICT data sets only; default 15 / 16)")
+                   help="number of identities (ICT data sets only; default 50 ict-arkit, 15 "
+                   "ict-bilinear, 16 ict-trilinear)")
     b.add_argument("--out", required=True, help="model file to write (.npz)")
     _overwrite_option(b)
     b.set_defaults(func=cmd_build)

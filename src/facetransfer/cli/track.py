@@ -14,6 +14,7 @@ landmarks in pixels, a confidence and a lost flag (see :mod:`facetransfer.track.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -90,6 +91,10 @@ def register(sub) -> None:
     p.add_argument("--out", help="track file to write (.npz)")
     add_track_options(p)
     p.add_argument("--max-frames", type=int, default=None, help="track only the first N frames")
+    p.add_argument("--workers", type=int, default=None,
+                   help="[capture] processes that run Face Landmarker, each on its own part of "
+                   "the clip (facetransfer.track.video_detect); default: 2 on a machine with two "
+                   "or more CPUs, for a clip with at least 200 frames left to detect")
     p.add_argument("--overlay", help="also write a video with the fitted mesh drawn (.mp4, "
                    "or an image sequence frames/%%05d.png)")
     add_video_options(p, what="--overlay")
@@ -121,6 +126,8 @@ def run(args) -> int:
         raise FaceTransferError("--from-track needs --overlay (the video to draw)")
     if args.max_frames is not None and args.max_frames < 1:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
+    if args.workers is not None and args.workers < 1:
+        raise FaceTransferError(f"--workers must be >= 1, got {args.workers}")
     inputs = (args.video, args.model, args.from_track,
               None if args.init == "auto" else args.init)
     vopt = video_options(args)
@@ -136,7 +143,11 @@ def run(args) -> int:
     tracker = settings.choose(args.init)
     video_info(args.video)  # unreadable / empty video: one line, before any work
     if args.from_track is None and tracker == "capture" and _model_on_disk(args.model):
-        # the capture tracker needs the model only after the detections: load it meanwhile
+        # the capture tracker needs the model only after the detections: load it meanwhile,
+        # and import MediaPipe meanwhile too (the detection waits for that import)
+        from ..track.detect import preload_mediapipe
+
+        preload_mediapipe()
         pool = ThreadPoolExecutor(max_workers=1)
         model = pool.submit(_checked_model, args.model)
         pool.shutdown(wait=False)
@@ -245,8 +256,9 @@ def _capture_detect(args, saved, ck, progress):
     if saved is not None and saved.complete:
         info = video_info(args.video)
         return saved.detections, info.fps, info.size, str(args.video)
+    workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
     return detect_video(args.video, max_frames=args.max_frames, progress=progress,
-                        source=str(args.video), checkpoint=ck,
+                        source=str(args.video), checkpoint=ck, workers=workers,
                         resume=None if saved is None else saved.detections)
 
 

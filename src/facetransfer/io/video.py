@@ -92,15 +92,23 @@ def video_info(path: str | os.PathLike) -> VideoInfo:
     return VideoInfo(Path(path), fps, n, size)
 
 
-def iter_frames(path: str | os.PathLike, *, start: int = 0,
-                stop: int | None = None) -> Iterator[np.ndarray]:
-    """Yield RGB frames ``(H, W, 3) uint8`` from ``start`` (inclusive) to ``stop`` (exclusive)."""
+def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
+                seek: bool = True) -> Iterator[np.ndarray]:
+    """Yield RGB frames ``(H, W, 3) uint8`` from ``start`` (inclusive) to ``stop`` (exclusive).
+
+    ``seek=False`` reaches ``start`` by decoding every frame before it (``grab``, no colour
+    conversion) instead of the container's seek, which OpenCV does not promise to be exact.
+    """
     import cv2
 
     cap = _open(path)
     try:
-        if start:
+        if start and seek:
             cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        elif start:
+            for _ in range(start):
+                if not cap.grab():
+                    return
         i, bgr = start, None
         while stop is None or i < stop:
             ok, bgr = cap.read(bgr)  # one decoding buffer for the whole clip

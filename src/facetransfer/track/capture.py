@@ -47,7 +47,8 @@ from ..arkit import (ARKIT_NAMES, activation_basis, activation_prior_scale, expr
                      is_arkit_model)
 from ..errors import TrackError, VideoError
 from .camera import Pose, fit_affine_pose
-from .detect import ClipDetections, VideoLandmarker, detect_clip
+from .detect import ClipDetections
+from .video_detect import _open, detect_video
 from .fit_checkpoint import SavedFit, fit_key
 from .fit2d import box_qp, pose_gauss_newton, project_basis, targets_normal
 from .gaze import GAZE_NAMES, IRIS_INDEX, eye_model, gaze_activations, gaze_angles, usable_iris
@@ -832,45 +833,3 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
             raise TrackError(f"detections have {detections.n_frames} frames, the video {n}")
     return capture_detections(detections, model, options=options, fps=fps, frame_size=size,
                               fixed=fixed, progress=progress, source=src, checkpoint=checkpoint)
-
-
-def detect_video(video, *, detector=None, max_frames: int | None = None,
-                 progress: Progress | None = None, source: str | None = None,
-                 resume: ClipDetections | None = None, checkpoint=None
-                 ) -> tuple[ClipDetections, float, tuple[int, int], str]:
-    """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
-
-    Needs no model, so a caller may load the model meanwhile. ``resume`` and ``checkpoint``:
-    as in :func:`facetransfer.track.detect.detect_clip`.
-    """
-    prog = progress or (lambda stage, done, total: None)
-    fps, size, src, frames, n, total = _open(video, max_frames, source)
-    own = None
-    if detector is None:
-        detector = own = VideoLandmarker(fps=fps, blendshapes=True)
-    try:
-        det = detect_clip(frames, detector, n_frames=n, keep478=True,
-                          progress=lambda d, t: prog("detect", d, max(total, d)),
-                          resume=resume, checkpoint=checkpoint)
-    finally:
-        if own is not None:
-            own.close()
-    return det, fps, size, src
-
-
-def _open(video, max_frames, source):
-    """``(fps, (W, H), source, frame iterator, frame count or None, count for a progress bar)``
-    of a path (the container's count, maybe approximate) or an array."""
-    if isinstance(video, np.ndarray) or (isinstance(video, (list, tuple))):
-        arr = np.asarray(video)
-        if arr.ndim != 4 or arr.shape[-1] != 3 or arr.shape[0] == 0:
-            raise VideoError(f"frames must be (F, H, W, 3) RGB with F >= 1, got {arr.shape}")
-        arr = arr[:max_frames] if max_frames is not None else arr
-        n = arr.shape[0]
-        return 25.0, (arr.shape[2], arr.shape[1]), source or "", iter(arr), n, n
-    from ..io.video import iter_frames, video_info
-
-    info = video_info(video)
-    total = max_frames if max_frames is not None else max(int(info.n_frames), 0)
-    return (info.fps, info.size, source if source is not None else str(video),
-            iter_frames(video, stop=max_frames), max_frames, total)

@@ -222,7 +222,7 @@ def _detect_one(detector, fr: np.ndarray
 def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None = None,
                 flow: bool = True, progress: Callable[[int, int], None] | None = None,
                 keep478: bool = False, resume: ClipDetections | None = None,
-                checkpoint=None) -> ClipDetections:
+                checkpoint=None, start: int = 0) -> ClipDetections:
     """Detect the face in every frame and the point flow between neighbouring frames.
 
     Parameters
@@ -248,12 +248,19 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
         Given the detections so far whenever ``due()`` and when interrupted
         (:class:`KeyboardInterrupt`, re-raised), e.g.
         :class:`facetransfer.track.detect_checkpoint.DetectionCheckpoint`.
+    start : int
+        Without ``resume``: detect from this frame on, as a resumed run would (the frames before
+        it decoded, the last ``warmup_frames`` of them shown to the detector); the result then
+        holds frames ``start ..`` only, and its first frame has no flow (no points before it).
+        Used by :mod:`facetransfer.track.video_detect` for a clip's later part.
 
     Returns
     -------
     ClipDetections
     """
-    k = 0 if resume is None else resume.n_frames
+    if resume is not None and start:
+        raise ValueError("detect_clip: give resume or start, not both")
+    k = int(start) if resume is None else resume.n_frames
     warm = k - int(getattr(detector, "warmup_frames", 0))
     found = _Found(keep478, resume)
     prev_gray = None
@@ -278,7 +285,7 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                 f = None
                 if flow:
                     gray = gray.result()
-                    if prev_gray is not None:
+                    if prev_gray is not None and found.P:
                         f = pool.submit(point_flow, prev_gray, gray, found.P[-1])
                     prev_gray = gray
                 found.add(pts, f, q, scores)

@@ -1,0 +1,300 @@
+"""Step 1 of the capture on a video: its detections, in one process or in two.
+
+:func:`detect_video` decodes a video (a file or an array of frames) once and runs
+:func:`facetransfer.track.detect.detect_clip` on it with Face Landmarker in video mode; it
+needs no model (a caller may load the model meanwhile).
+
+Face Landmarker runs on one core, and detecting every frame is most of what ``facetransfer
+track`` does (:mod:`facetransfer.track.capture`). With ``workers=2`` the clip's frames from
+``m`` on are detected by a forked child process while this process detects the frames before
+``m``; the two parts are joined in order.
+
+The child starts its own landmarker at frame ``m`` exactly as a resumed run does
+(:func:`facetransfer.track.detect.detect_clip` with ``start=m``): it decodes every frame before
+``m`` (no container seek: OpenCV's is not exact) and shows the last
+:attr:`~facetransfer.track.detect.VideoLandmarker.warmup_frames` of them to the detector, so the
+points of frame ``m`` and after differ from one process's by about as little as a resumed run's
+(the class notes measure 0.05 px on average). Frame ``m`` has no flow term: its flow would move
+the parent's points of frame ``m - 1``, which the child does not have.
+
+When the child cannot run or fails, the parent detects the rest itself (resuming from its own
+part), so the result never depends on the fork.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+from typing import Callable
+
+import numpy as np
+
+from ..errors import ShapeError, VideoError
+from .detect import ClipDetections, VideoLandmarker, detect_clip
+from .options import Progress
+
+log = logging.getLogger(__name__)
+
+__all__ = ["SPLIT_MIN_FRAMES", "SplitDetection", "detect_video", "finish_split", "join_detections",
+           "split_frame"]
+
+#: fewest frames left to detect for which a second process is worth its start-up (about 1 s:
+#: the fork, a landmarker of its own, decoding up to its first frame)
+SPLIT_MIN_FRAMES = 200
+
+
+def split_frame(done: int, total: int, workers: int) -> int | None:
+    """Where the child's part starts, or None when the clip is detected in one process.
+
+    Parameters
+    ----------
+    done : int
+        Frames already detected (a resumed run's).
+    total : int
+        Frames of the clip (the container's count: may be approximate).
+    workers : int
+        Processes allowed (1: no split).
+    """
+    left = int(total) - int(done)
+    if workers < 2 or left < SPLIT_MIN_FRAMES:
+        return None
+    return int(done) + left // 2
+
+
+def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetections:
+    """The detections of two consecutive parts of a clip as one, in order."""
+    def cat(a, b):
+        if a is None and b is None:
+            return None
+        if a is None or b is None:
+            raise ValueError("join_detections: one part has raw points or scores, the other not")
+        return np.concatenate([a, b])
+
+    scores = None
+    if first.scores is not None or second.scores is not None:
+        nan = np.full(52, np.nan, np.float32)
+        scores = np.concatenate([
+            first.scores if first.scores is not None else np.tile(nan, (first.n_frames, 1)),
+            second.scores if second.scores is not None else np.tile(nan, (second.n_frames, 1))])
+    return ClipDetections(np.concatenate([first.points, second.points]),
+                          np.concatenate([first.flow, second.flow]),
+                          cat(first.points478, second.points478), scores)
+
+
+#: (video, start, stop, fps, counter) handed to the forked child (not pickled)
+_JOB: tuple | None = None
+
+
+def _child_job() -> ClipDetections:
+    """In the child: detect frames ``start .. stop`` (or the clip's end) of the video."""
+    video, start, stop, fps, counter = _JOB
+    if isinstance(video, np.ndarray):
+        frames = iter(video[:stop])
+    else:
+        from ..io.video import iter_frames
+
+        warm = max(0, start - VideoLandmarker.warmup_frames)
+        frames = _offset(iter_frames(video, start=warm, stop=stop, seek=False), warm)
+    detector = _child_landmarker(fps)
+
+    def progress(done, total):
+        counter.value = max(0, done - start)
+
+    try:
+        return detect_clip(frames, detector, n_frames=stop, keep478=True, start=start,
+                           progress=progress)
+    except ShapeError:          # the clip ends at ``start``: no frames left for this part
+        return None
+    finally:
+        detector.close()
+
+
+def _child_landmarker(fps: float) -> VideoLandmarker:
+    """The child's own detector (MediaPipe, video mode, with blendshape scores)."""
+    return VideoLandmarker(fps=fps, blendshapes=True)
+
+
+def _offset(frames, k: int):
+    """``frames`` preceded by ``k`` placeholders (never shown to the detector: detect_clip only
+    shows the last ``warmup_frames`` frames before its start, and ``k`` leaves exactly those)."""
+    for _ in range(k):
+        yield None
+    yield from frames
+
+
+class SplitDetection:
+    """The later part of a clip, detected in a forked child (:func:`start`)."""
+
+    def __init__(self, pool, future, counter) -> None:
+        self._pool, self._future, self._counter = pool, future, counter
+
+    @classmethod
+    def start(cls, video, start: int, stop: int | None, fps: float) -> "SplitDetection | None":
+        """Fork the child that detects frames ``start .. stop`` of ``video`` (a path or an
+        (F, H, W, 3) array); None where the platform cannot fork. Call it before this process
+        creates its own landmarker (MediaPipe's threads do not survive a fork)."""
+        import multiprocessing as mp
+        from concurrent.futures import ProcessPoolExecutor
+
+        from .detect import _import_mediapipe
+
+        global _JOB
+        if "fork" not in mp.get_all_start_methods() or (os.cpu_count() or 1) < 2:
+            return None
+        # imported here, before the fork, so that the child inherits it and imports nothing
+        # while another thread of this process (e.g. a model loading) might hold an import lock
+        _import_mediapipe()
+        ctx = mp.get_context("fork")
+        counter = ctx.Value("i", 0, lock=False)
+        _JOB = (video, int(start), stop, float(fps), counter)
+        try:
+            pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
+            fut = pool.submit(_child_job)           # forks now: the child sees _JOB
+        except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. a daemon process)
+            log.info("detecting in one process (%s)", exc)
+            return None
+        finally:
+            _JOB = None
+        return cls(pool, fut, counter)
+
+    @property
+    def done(self) -> int:
+        """Frames the child has detected so far."""
+        return int(self._counter.value)
+
+    def result(self, poll: Callable[[int], None] | None = None
+               ) -> ClipDetections | None | bool:
+        """The child's detections; None when its part had no frames (the clip ended before
+        it); False when it failed (the caller then detects them itself).
+
+        ``poll(done)`` is called about five times a second while waiting (a progress bar).
+        """
+        from concurrent.futures import TimeoutError as FutureTimeout
+
+        try:
+            while True:
+                try:
+                    return self._future.result(timeout=0.2)
+                except FutureTimeout:
+                    if poll is not None:
+                        poll(self.done)
+        except BaseException as exc:
+            if isinstance(exc, (KeyboardInterrupt, SystemExit)):
+                self.cancel()
+                raise
+            log.warning("the second detection process failed (%s: %s); detecting its frames "
+                        "here", type(exc).__name__, exc)
+            return False
+        finally:
+            self._pool.shutdown(wait=False, cancel_futures=True)
+
+    def cancel(self) -> None:
+        """Stop the child without waiting for it."""
+        self._future.cancel()
+        for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
+            try:
+                proc.terminate()
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        self._pool.shutdown(wait=False, cancel_futures=True)
+
+
+def finish_split(first: ClipDetections, child: SplitDetection, start: int,
+                 redetect: Callable[[ClipDetections], ClipDetections],
+                 poll: Callable[[int], None] | None = None, checkpoint=None) -> ClipDetections:
+    """The whole clip's detections from this process's part and the child's.
+
+    Parameters
+    ----------
+    first : ClipDetections
+        Frames ``0 .. start - 1``, detected here (fewer when the clip ended before ``start``).
+    child : SplitDetection
+        Detecting frames ``start ..``.
+    redetect : callable(ClipDetections) -> ClipDetections
+        Detects the rest of the clip here, resuming after ``first``, if the child failed.
+    poll : callable(frames done by the child), optional
+    checkpoint : object with ``save(ClipDetections)``, optional
+        Given ``first`` when interrupted while waiting for the child.
+    """
+    if first.n_frames < start:                      # the clip ended in this process's part
+        child.cancel()
+        return first
+    try:
+        rest = child.result(poll)
+    except KeyboardInterrupt:
+        if checkpoint is not None:
+            checkpoint.save(first)
+        raise
+    if rest is False:
+        return redetect(first)
+    if rest is None:
+        return first
+    if poll is not None:
+        poll(rest.n_frames)                         # the bar ends at the clip's last frame
+    return join_detections(first, rest)
+
+
+def detect_video(video, *, detector=None, max_frames: int | None = None,
+                 progress: Progress | None = None, source: str | None = None,
+                 resume: ClipDetections | None = None, checkpoint=None, workers: int = 1
+                 ) -> tuple[ClipDetections, float, tuple[int, int], str]:
+    """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
+
+    Needs no model, so a caller may load the model meanwhile. ``resume`` and ``checkpoint``:
+    as in :func:`facetransfer.track.detect.detect_clip`. ``workers``: processes running the
+    default detector; with 2, the later half of a long enough clip is detected by a forked
+    child meanwhile (ignored with ``detector``).
+    """
+    prog = progress or (lambda stage, done, total: None)
+    fps, size, src, frames, n, total = _open(video, max_frames, source)
+    done = 0 if resume is None else resume.n_frames
+    m = split_frame(done, total, workers) if detector is None else None
+    child = None if m is None else SplitDetection.start(video, m, n, fps)
+    own = None
+    if detector is None:
+        detector = own = VideoLandmarker(fps=fps, blendshapes=True)
+
+    def report(d, t):                      # this process's frames, and the child's so far
+        d += child.done if child is not None else 0
+        prog("detect", d, max(total, d))
+
+    def report_child(c):                   # this process is done: the child's frames
+        prog("detect", m + c, max(total, m + c))
+
+    def redetect(first):
+        again = _open(video, max_frames, source)[3]
+        return detect_clip(again, detector, n_frames=n, keep478=True,
+                           progress=lambda d, t: prog("detect", d, max(total, d)),
+                           resume=first, checkpoint=checkpoint)
+
+    try:
+        det = detect_clip(frames, detector, n_frames=n if child is None else m, keep478=True,
+                          progress=report, resume=resume, checkpoint=checkpoint)
+        if child is not None:
+            det = finish_split(det, child, m, redetect, report_child, checkpoint)
+    except BaseException:
+        if child is not None:
+            child.cancel()
+        raise
+    finally:
+        if own is not None:
+            own.close()
+    return det, fps, size, src
+
+
+def _open(video, max_frames, source):
+    """``(fps, (W, H), source, frame iterator, frame count or None, count for a progress bar)``
+    of a path (the container's count, maybe approximate) or an array."""
+    if isinstance(video, np.ndarray) or (isinstance(video, (list, tuple))):
+        arr = np.asarray(video)
+        if arr.ndim != 4 or arr.shape[-1] != 3 or arr.shape[0] == 0:
+            raise VideoError(f"frames must be (F, H, W, 3) RGB with F >= 1, got {arr.shape}")
+        arr = arr[:max_frames] if max_frames is not None else arr
+        n = arr.shape[0]
+        return 25.0, (arr.shape[2], arr.shape[1]), source or "", iter(arr), n, n
+    from ..io.video import iter_frames, video_info
+
+    info = video_info(video)
+    total = max_frames if max_frames is not None else max(int(info.n_frames), 0)
+    return (info.fps, info.size, source if source is not None else str(video),
+            iter_frames(video, stop=max_frames), max_frames, total)

@@ -1,0 +1,161 @@
+"""A video's detections in one process or two (facetransfer.track.video_detect, issue 12 speed)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from facetransfer.cli.main import main
+from facetransfer.track import video_detect
+from facetransfer.track.detect import ClipDetections
+from facetransfer.track.video_detect import (detect_video, finish_split, join_detections,
+                                             split_frame)
+
+N = 64          # frames of driving_d9 detected in the tests with MediaPipe
+
+
+def _dets(n: int, offset: float = 0.0, scores: bool = True) -> ClipDetections:
+    rng = np.random.default_rng(int(offset))
+    P = rng.uniform(0, 100, (n, 68, 2)) + offset
+    fl = rng.normal(0, 1, (n, 68, 2))
+    q = rng.uniform(0, 100, (n, 478, 2)).astype(np.float32)
+    s = rng.uniform(0, 1, (n, 52)).astype(np.float32) if scores else None
+    return ClipDetections(P, fl, q, s)
+
+
+def test_split_frame_halves_what_is_left_of_a_long_enough_clip():
+    assert split_frame(0, 354, 2) == 177
+    assert split_frame(100, 400, 2) == 250                     # a resumed run: the rest halved
+    assert split_frame(0, 354, 1) is None                      # one worker
+    short = video_detect.SPLIT_MIN_FRAMES - 1
+    assert split_frame(0, short, 2) is None                    # not worth a second process
+    assert split_frame(300, 300 + short, 2) is None
+
+
+def test_join_detections_keeps_every_array_in_order():
+    a, b = _dets(5), _dets(7, offset=1000.0)
+    j = join_detections(a, b)
+    assert j.n_frames == 12
+    for name in ("points", "flow", "points478", "scores"):
+        np.testing.assert_array_equal(getattr(j, name)[:5], getattr(a, name))
+        np.testing.assert_array_equal(getattr(j, name)[5:], getattr(b, name))
+    k = join_detections(a, _dets(3, offset=7.0, scores=False))   # a part without scores
+    assert np.isnan(k.scores[5:]).all() and np.array_equal(k.scores[:5], a.scores)
+
+
+class _Child:
+    """Stands in for SplitDetection: returns ``value`` (or raises it) from result()."""
+
+    def __init__(self, value) -> None:
+        self.value, self.cancelled, self.polled = value, False, False
+
+    def result(self, poll=None):
+        if poll is not None:
+            poll(3)
+            self.polled = True
+        if isinstance(self.value, BaseException):
+            raise self.value
+        return self.value
+
+    def cancel(self) -> None:
+        self.cancelled = True
+
+
+class _Checkpoint:
+    def __init__(self) -> None:
+        self.saved = []
+
+    def save(self, det) -> None:
+        self.saved.append(det)
+
+
+def _never(first):
+    raise AssertionError("redetect must not be called")
+
+
+def test_finish_split_joins_the_childs_part():
+    first, rest = _dets(10), _dets(6, offset=500.0)
+    seen = []
+    out = finish_split(first, _Child(rest), 10, _never, poll=seen.append)
+    assert out.n_frames == 16 and np.array_equal(out.points[10:], rest.points) and seen == [3, 6]
+
+
+def test_finish_split_when_the_clip_ends_in_the_first_part():
+    first, child = _dets(8), _Child(_dets(4))
+    assert finish_split(first, child, 10, _never) is first and child.cancelled
+    assert finish_split(first, _Child(None), 8, _never) is first   # the child found no frames
+
+
+def test_finish_split_detects_the_rest_here_when_the_child_failed():
+    first, again = _dets(10), _dets(20)
+    calls = []
+
+    def redetect(f):
+        calls.append(f)
+        return again
+
+    assert finish_split(first, _Child(False), 10, redetect) is again and calls == [first]
+
+
+def test_finish_split_interrupted_saves_the_first_part():
+    first, ck = _dets(10), _Checkpoint()
+    with pytest.raises(KeyboardInterrupt):
+        finish_split(first, _Child(KeyboardInterrupt()), 10, _never, checkpoint=ck)
+    assert ck.saved == [first]
+
+
+@pytest.fixture(scope="module")
+def one_process(data_dir):
+    video = data_dir / "video" / "driving_d9.mp4"
+    return video, detect_video(video, max_frames=N, workers=1)[0]
+
+
+def _agree(split: ClipDetections, one: ClipDetections, m: int) -> None:
+    """Frames before ``m`` exactly as one process's; from ``m`` on within MediaPipe's own
+    warm-up differences (VideoLandmarker's notes: 0.05 px mean); no flow into frame ``m``."""
+    assert split.n_frames == one.n_frames == N
+    for name in ("points", "flow", "points478", "scores"):
+        np.testing.assert_array_equal(getattr(split, name)[:m], getattr(one, name)[:m])
+    d = np.linalg.norm(split.points[m:] - one.points[m:], axis=2)
+    assert d.mean(axis=1).max() < 0.15 and d.max() < 0.5
+    assert np.nanmax(np.abs(split.scores[m:] - one.scores[m:])) < 0.1     # tongueOut: NaN
+    f = np.abs(split.flow[m + 1:] - one.flow[m + 1:])
+    assert np.nanmean(f) < 0.05
+
+
+def test_two_processes_agree_with_one(one_process, monkeypatch):
+    video, one = one_process
+    monkeypatch.setattr(video_detect, "SPLIT_MIN_FRAMES", 20)
+    seen = []
+    split = detect_video(video, max_frames=N, workers=2,
+                         progress=lambda stage, d, t: seen.append(d))[0]
+    m = N // 2
+    _agree(split, one, m)
+    assert np.isnan(split.flow[m]).all() and not np.isnan(one.flow[m]).all()
+    assert max(seen) == N
+
+
+def _broken_landmarker(fps):
+    raise RuntimeError("no landmarker here")
+
+
+def test_a_failed_child_leaves_the_rest_to_this_process(one_process, monkeypatch, caplog):
+    video, one = one_process
+    monkeypatch.setattr(video_detect, "SPLIT_MIN_FRAMES", 20)
+
+    monkeypatch.setattr(video_detect, "_child_landmarker", _broken_landmarker)  # in the child
+    with caplog.at_level(logging.WARNING, logger="facetransfer.track.video_detect"):
+        split = detect_video(video, max_frames=N, workers=2)[0]
+    assert "the second detection process failed (RuntimeError: no landmarker here)" in caplog.text
+    m = N // 2
+    _agree(split, one, m)
+    np.testing.assert_array_equal(split.flow[m], one.flow[m])   # resumed here: flow is exact
+
+
+def test_cli_rejects_workers_below_one(tmp_path, capsys, data_dir):
+    code = main(["track", str(data_dir / "video" / "driving_d9.mp4"), "--out",
+                 str(tmp_path / "t.npz"), "--workers", "0"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and err == ["facetransfer track: error: --workers must be >= 1, got 0"]
