@@ -78,6 +78,25 @@ def test_synthesize_matches_explicit_mode_products():
     assert np.allclose(m.synthesize(w).ravel(), ref, atol=1e-12)
 
 
+def test_single_frames_with_recent_identities_are_eq5():
+    """One frame at a time, identities alternating among four (more than the model keeps
+    contracted): every frame still equals Eq. (5) by explicit mode products, and at most
+    ``_FIRST_MODE_KEPT`` contracted cores are kept per model."""
+    from facetransfer import model as model_module
+    from facetransfer import tensor as tl
+
+    ds = random_dataset(seed=6)
+    m = build_model(ds, {"identity": 3, "expression": 2, "viseme": 2})
+    rng = np.random.default_rng(7)
+    ids = rng.normal(size=(4, 3))
+    for t in range(12):
+        w = [ids[[0, 1, 0, 2, 3, 0][t % 6]], rng.normal(size=2), rng.normal(size=2)]
+        ref = tl.multi_mode_dot(m.core, [None] + w)
+        assert np.allclose(m.synthesize(w).ravel(), ref, atol=1e-12)
+        assert len(model_module._FIRST_MODE[m]) <= model_module._FIRST_MODE_KEPT
+    assert len(model_module._FIRST_MODE[m]) == model_module._FIRST_MODE_KEPT
+
+
 @pytest.mark.parametrize("mode", ["identity", "expression", "viseme"])
 def test_mode_basis_is_eq9(mode):
     ds = random_dataset(seed=3)

@@ -226,3 +226,16 @@ def test_project_landmarks_matches_camera(quick_model, quick_track):
     V = quick_model.synthesize(tr.weights_at(i))
     np.testing.assert_allclose(tr.landmarks2d[i], tr.camera(i).project(V[quick_model.landmarks]),
                                atol=1e-9)
+
+
+def test_puppet_meshes_in_chunks_are_eq5_per_frame(quick_model, quick_track, monkeypatch):
+    """puppet_frames synthesises its meshes PUPPET_CHUNK frames at a time: every frame, on
+    both sides of a chunk boundary, is Eq. (5) of that frame with the puppet's identity."""
+    from facetransfer import transfer
+
+    monkeypatch.setattr(transfer, "PUPPET_CHUNK", 3)
+    wid = quick_model.training_weights(0, quick_model.labels[0][1])
+    mesh = transfer._chunked_meshes(quick_track, quick_model, wid, "identity")
+    for i in [0, 2, 3, 4, quick_track.n_frames - 1, 1]:
+        w = quick_track.weights_at(i) | {"identity": wid}
+        np.testing.assert_allclose(mesh(i), quick_model.synthesize(w), atol=1e-9)

@@ -283,7 +283,7 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
             sources.expression.video, model, len(pre_read[0]), frames=pre_read,
             method=options.track_method, options=planner.track_options, parallel=parallel)
     try:
-        tt = planner.target_track(sources.target, frames, fps)
+        tt = planner.target_track(sources.target, frames, fps, alone=early is None)
     except BaseException:
         if early is not None:
             early.cancel()
@@ -356,21 +356,24 @@ class _Planner:
         self.timings["read"] += time.perf_counter() - t0
         return frames, fps, (sfr[:need], sfps)
 
-    def track(self, video, track_file, frames, fps, limit):
-        """The track of ``video`` (:func:`facetransfer.track.obtain.obtain_track`), timed."""
+    def track(self, video, track_file, frames, fps, limit, *, alone: bool = False):
+        """The track of ``video`` (:func:`facetransfer.track.obtain.obtain_track`), timed;
+        ``alone``: nothing else is tracked meanwhile, so its detection may take two processes
+        (:func:`facetransfer.track.video_detect.detect_video`)."""
         t = time.perf_counter()
+        workers = min(2, os.cpu_count() or 1) if alone else 1
         tr = obtain.obtain_track(video, self.model, frames=frames, fps=fps,
                                  track_file=track_file, max_frames=limit,
                                  method=self.track_method,
                                  progress_factory=self.progress_factory,
-                                 options=self.track_options)
+                                 options=self.track_options, workers=workers)
         self.timings["track"] += time.perf_counter() - t
         return tr
 
-    def target_track(self, target: Source, frames, fps):
+    def target_track(self, target: Source, frames, fps, *, alone: bool = False):
         """The target's track, checked against its frames (a face somewhere)."""
         n, H, W = frames.shape[:3]
-        tt = self.track(target.video, target.track, frames, fps, n)
+        tt = self.track(target.video, target.track, frames, fps, n, alone=alone)
         if target.track is not None:
             tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H),
                            what=f"target {target.video}")
@@ -397,8 +400,8 @@ class _Planner:
             self.timings["track"] += time.perf_counter() - t
             if tr is not None and len(fr) < tr.n_frames:
                 tr = take_frames(tr, np.arange(len(fr)))
-        if tr is None:
-            tr = self.track(src.video, src.track, fr, sfps, len(fr))
+        if tr is None:                       # tracked here, after the target: nothing beside it
+            tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True)
         inputs.tracks[kind], inputs.source_frames[kind] = _checked_source(
             kind, src, fr, tr, inputs.size)
 

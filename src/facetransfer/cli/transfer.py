@@ -15,6 +15,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 from pathlib import Path
 
@@ -419,7 +420,7 @@ def run_puppet(args) -> int:
     frames, fps = read_video(args.video, max_frames=args.max_frames)
     track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
                          max_frames=len(frames), method=args.tracker,
-                         progress_factory=_bar_factory())
+                         progress_factory=_bar_factory(), workers=min(2, os.cpu_count() or 1))
     if args.track:   # a track of another video would drive the face with the wrong motion
         track.check_video(len(frames), (frames.shape[2], frames.shape[1]),
                           what=f"video {args.video}")

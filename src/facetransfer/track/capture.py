@@ -801,7 +801,7 @@ def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
 def capture_video(video, model, *, options: CaptureOptions | None = None, detector=None,
                   detections: ClipDetections | None = None, max_frames: int | None = None,
                   fixed: dict | None = None, progress: Progress | None = None,
-                  source: str | None = None, checkpoint=None) -> Track:
+                  source: str | None = None, checkpoint=None, workers: int = 1) -> Track:
     """Capture a face's performance from a video (module notes): the default tracker.
 
     Parameters
@@ -817,6 +817,8 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         As in :func:`facetransfer.track.track_video`.
     checkpoint : DetectionCheckpoint, optional
         The fit's progress (:func:`capture_detections`).
+    workers : int
+        Processes running the default detector (:func:`~.video_detect.detect_video`).
 
     Returns
     -------
@@ -826,7 +828,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
     if detections is None:
         detections, fps, size, src = detect_video(video, detector=detector,
                                                   max_frames=max_frames, progress=progress,
-                                                  source=source)
+                                                  source=source, workers=workers)
     else:
         fps, size, src, _, n, _ = _open(video, max_frames, source)
         if n is not None and detections.n_frames != n:

@@ -152,19 +152,19 @@ class _StageBars:
         self.close()
 
 
-def _capture(video, model, frames, fps, max_frames, progress_factory):
+def _capture(video, model, frames, fps, max_frames, progress_factory, workers: int = 1):
     """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames."""
     from .capture import capture_video
 
     with _StageBars(video, progress_factory) as stage_progress:
         tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
-                           source=str(video))
+                           source=str(video), workers=workers)
     return dataclasses.replace(tr, fps=float(fps))
 
 
 def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
                  track_file: str | os.PathLike | None = None, max_frames: int | None = None,
-                 method: str = "auto", progress_factory=None, options=None):
+                 method: str = "auto", progress_factory=None, options=None, workers: int = 1):
     """The track of a video: read from ``track_file``, or tracked now.
 
     ``method``: ``"auto"`` or ``"capture"`` use the capture tracker
@@ -174,7 +174,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     landmarks (precomputed ``NAME.mediapipe478.npz`` next to the video, else MediaPipe).
     ``options`` (a :class:`~facetransfer.track.TrackOptions`, e.g. from
     :func:`facetransfer.track.presets.track_options`) configure the optical-flow tracker
-    (default: its own defaults).
+    (default: its own defaults). ``workers``: processes detecting the face for the capture
+    tracker (:func:`facetransfer.track.video_detect.detect_video`; 2 when nothing else runs
+    beside this track).
 
     Returns
     -------
@@ -195,7 +197,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         frames, fps = read_video(video, max_frames=max_frames)
     fps = info.fps if fps is None else fps
     if method in ("auto", "capture"):
-        return _capture(video, model, frames, fps, max_frames, progress_factory)
+        return _capture(video, model, frames, fps, max_frames, progress_factory, workers)
     if method == "flow":
         return _flow(video, model, frames, fps, max_frames, progress_factory, options)
     size = (frames.shape[2], frames.shape[1]) if hasattr(frames, "shape") else info.size
