@@ -18,7 +18,9 @@ points of frame ``m`` and after differ from one process's by about as little as 
 the parent's points of frame ``m - 1``, which the child does not have.
 
 When the child cannot run or fails, the parent detects the rest itself (resuming from its own
-part), so the result never depends on the fork.
+part), so the result never depends on the fork. An interrupted run keeps only the parent's
+frames in its progress file (:mod:`facetransfer.track.detect_checkpoint`): what the child had
+detected is detected again when the run continues.
 """
 
 from __future__ import annotations
