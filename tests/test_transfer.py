@@ -228,14 +228,29 @@ def test_project_landmarks_matches_camera(quick_model, quick_track):
                                atol=1e-9)
 
 
-def test_puppet_meshes_in_chunks_are_eq5_per_frame(quick_model, quick_track, monkeypatch):
-    """puppet_frames synthesises its meshes PUPPET_CHUNK frames at a time: every frame, on
-    both sides of a chunk boundary, is Eq. (5) of that frame with the puppet's identity."""
+def test_puppet_meshes_are_eq5_per_frame(quick_model, quick_track, monkeypatch):
+    """Every frame puppet_frames renders is Eq. (5) of that frame with the puppet's identity
+    (by explicit mode products), its mouth closed: the model's single-frame path, with the
+    identity contracted once for the clip, gives each frame's own mesh."""
+    from facetransfer import render as render_module
+    from facetransfer import tensor as tl
     from facetransfer import transfer
+    from facetransfer.topology import close_mouth, mesh_topology
 
-    monkeypatch.setattr(transfer, "PUPPET_CHUNK", 3)
+    seen = []
+    real = render_module.render
+
+    def spy(V, *a, **k):
+        seen.append(np.array(V))
+        return real(V, *a, **k)
+
+    monkeypatch.setattr(render_module, "render", spy)
     wid = quick_model.training_weights(0, quick_model.labels[0][1])
-    mesh = transfer._chunked_meshes(quick_track, quick_model, wid, "identity")
+    frames = list(transfer.puppet_frames(quick_track, quick_model, wid))
+    assert len(frames) == len(seen) == quick_track.n_frames
+    topo = mesh_topology(quick_model, lips=False)
     for i in [0, 2, 3, 4, quick_track.n_frames - 1, 1]:
         w = quick_track.weights_at(i) | {"identity": wid}
-        np.testing.assert_allclose(mesh(i), quick_model.synthesize(w), atol=1e-9)
+        ref = tl.multi_mode_dot(quick_model.core, [None] + [w[m] for m in quick_model.mode_names])
+        closed = close_mouth(ref.reshape(-1, 3), topo)
+        np.testing.assert_allclose(seen[i][:len(closed)], closed, atol=1e-9)

@@ -536,12 +536,13 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     n_all = topo.n_closed + len(topo.eye_loops)
     colors = np.broadcast_to(np.asarray(color, np.float64), (n_all, 3))
     last = bg
-    meshes = _chunked_meshes(track, model, wid, identity_mode)
     for i in range(track.n_frames):
         if track.lost[i]:
             yield last
             continue
-        V = close_mouth(meshes(i), topo)
+        w = track.weights_at(i)
+        w[identity_mode] = wid
+        V = close_mouth(model.synthesize(w), topo)  # the identity contracted once (model.py)
         if topo.eye_loops:
             V = np.concatenate([V] + [V[loop].mean(axis=0, keepdims=True)
                                       for loop in topo.eye_loops])
@@ -552,29 +553,6 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
         img = render(V, faces, cam, size, colors=colors, background=bg).image
         last = img
         yield img
-
-
-#: frames whose meshes :func:`puppet_frames` synthesises in one product (Eq. 5 batched)
-PUPPET_CHUNK = 32
-
-
-def _chunked_meshes(track, model, wid: np.ndarray, identity_mode: str):
-    """``mesh(i)``: Eq. (5) for frame ``i`` with the identity ``wid`` and the track's other
-    weights, synthesised :data:`PUPPET_CHUNK` frames at a time, so that the core is contracted
-    with the (constant) identity once per chunk instead of read whole for every frame."""
-    cache: dict = {}
-
-    def mesh(i: int) -> np.ndarray:
-        c = i // PUPPET_CHUNK
-        if c not in cache:
-            cache.clear()
-            rows = np.arange(c * PUPPET_CHUNK, min((c + 1) * PUPPET_CHUNK, track.n_frames))
-            w = {m: (wid[None] if m == identity_mode else np.asarray(track.weights[m])[rows])
-                 for m in track.mode_names}
-            cache[c] = model.synthesize(w)
-        return cache[c][i - c * PUPPET_CHUNK]
-
-    return mesh
 
 
 def identity_from_label(model, label: str, mode: str = "identity") -> np.ndarray:

@@ -31,6 +31,7 @@ from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .topology import MeshTopology
 from .track import obtain
 from .track.presets import track_options
+from .track.video_detect import default_workers
 from .track.project import project_landmarks, take_frames
 from .transfer import constant_weights, recombine, resample_track, time_map
 
@@ -361,7 +362,7 @@ class _Planner:
         ``alone``: nothing else is tracked meanwhile, so its detection may take two processes
         (:func:`facetransfer.track.video_detect.detect_video`)."""
         t = time.perf_counter()
-        workers = min(2, os.cpu_count() or 1) if alone else 1
+        workers = default_workers() if alone else 1
         tr = obtain.obtain_track(video, self.model, frames=frames, fps=fps,
                                  track_file=track_file, max_frames=limit,
                                  method=self.track_method,

@@ -14,7 +14,6 @@ landmarks in pixels, a confidence and a lost flag (see :mod:`facetransfer.track.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
@@ -252,11 +251,12 @@ def _capture_detect(args, saved, ck, progress):
     """The clip's detections, continued from ``saved``: (detections, fps, size, source)."""
     from ..io.video import video_info
     from ..track.capture import detect_video
+    from ..track.video_detect import default_workers
 
     if saved is not None and saved.complete:
         info = video_info(args.video)
         return saved.detections, info.fps, info.size, str(args.video)
-    workers = args.workers if args.workers is not None else min(2, os.cpu_count() or 1)
+    workers = args.workers if args.workers is not None else default_workers()
     return detect_video(args.video, max_frames=args.max_frames, progress=progress,
                         source=str(args.video), checkpoint=ck, workers=workers,
                         resume=None if saved is None else saved.detections)

@@ -15,7 +15,6 @@
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 from pathlib import Path
 
@@ -405,6 +404,7 @@ def run_edit(args) -> int:
 def run_puppet(args) -> int:
     from ..io.video import check_video_output, read_video, video_info, write_video_with_audio
     from ..track.obtain import obtain_track
+    from ..track.video_detect import default_workers
     from ..transfer import identity_from_label, puppet_frames
 
     _positive(args.max_frames, "--max-frames")
@@ -420,7 +420,7 @@ def run_puppet(args) -> int:
     frames, fps = read_video(args.video, max_frames=args.max_frames)
     track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
                          max_frames=len(frames), method=args.tracker,
-                         progress_factory=_bar_factory(), workers=min(2, os.cpu_count() or 1))
+                         progress_factory=_bar_factory(), workers=default_workers())
     if args.track:   # a track of another video would drive the face with the wrong motion
         track.check_video(len(frames), (frames.shape[2], frames.shape[1]),
                           what=f"video {args.video}")

@@ -37,12 +37,18 @@ from .options import Progress
 
 log = logging.getLogger(__name__)
 
-__all__ = ["SPLIT_MIN_FRAMES", "SplitDetection", "detect_video", "finish_split", "join_detections",
-           "split_frame"]
+__all__ = ["SPLIT_MIN_FRAMES", "SplitDetection", "default_workers", "detect_video", "finish_split",
+           "join_detections", "split_frame"]
 
 #: fewest frames left to detect for which a second process is worth its start-up (about 1 s:
 #: the fork, a landmarker of its own, decoding up to its first frame)
 SPLIT_MIN_FRAMES = 200
+
+
+def default_workers() -> int:
+    """Detection processes for a clip tracked with nothing else beside it: 2 on a machine with
+    two or more CPUs, else 1."""
+    return min(2, os.cpu_count() or 1)
 
 
 def split_frame(done: int, total: int, workers: int) -> int | None:
@@ -141,7 +147,7 @@ class SplitDetection:
         from .detect import _import_mediapipe
 
         global _JOB
-        if "fork" not in mp.get_all_start_methods() or (os.cpu_count() or 1) < 2:
+        if "fork" not in mp.get_all_start_methods():
             return None
         # imported here, before the fork, so that the child inherits it and imports nothing
         # while another thread of this process (e.g. a model loading) might hold an import lock
@@ -180,10 +186,7 @@ class SplitDetection:
                 except FutureTimeout:
                     if poll is not None:
                         poll(self.done)
-        except BaseException as exc:
-            if isinstance(exc, (KeyboardInterrupt, SystemExit)):
-                self.cancel()
-                raise
+        except Exception as exc:  # noqa: BLE001 - Ctrl-C passes: the caller cancels the child
             log.warning("the second detection process failed (%s: %s); detecting its frames "
                         "here", type(exc).__name__, exc)
             return False
