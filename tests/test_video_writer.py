@@ -243,13 +243,13 @@ def test_full_disk_on_a_real_small_filesystem(tmp_path):
         subprocess.run(["umount", str(mnt)], check=False)
 
 
-def test_undecodable_output_is_refused(tmp_path, monkeypatch):
-    """If the file ffmpeg wrote decodes to fewer frames than were sent, nothing is written."""
+def test_short_output_is_refused(tmp_path, monkeypatch):
+    """If the file ffmpeg wrote holds fewer frames than were sent, nothing is written."""
     out = tmp_path / "v.mp4"
     encode_video(out, smooth_frames(n=2), 25)
     before = out.read_bytes()
-    monkeypatch.setattr(iov, "decoded_frame_count", lambda path: 1)
-    with pytest.raises(VideoError, match="decodes to 1"):
+    monkeypatch.setattr(iov, "stored_frame_count", lambda path: 1)
+    with pytest.raises(VideoError, match="holds 1"):
         encode_video(out, smooth_frames(n=4), 25, overwrite=True)
     assert out.read_bytes() == before and sorted(os.listdir(tmp_path)) == ["v.mp4"]
 
@@ -261,34 +261,59 @@ def _tone(tmp_path):
     return tone
 
 
-@pytest.mark.parametrize("short,match", [
-    ("encoded", "4 frames were written but the file decodes to 1"),
-    ("muxed", "with the audio of .* it decodes to 1 frames, not 4")])
-def test_short_output_with_audio_is_refused(tmp_path, monkeypatch, short, match):
-    """With audio only the muxed file is decoded; when it is short, the message still says
-    which step lost frames (the encode or the mux), and nothing is written."""
+@pytest.mark.parametrize("known,short,match", [
+    (True, "encoded", "4 frames were written but the file holds 1"),
+    (False, "encoded", "4 frames were written but the file holds 1"),
+    (False, "muxed", "with the audio of .* it holds 1 frames, not 4")])
+def test_short_output_with_audio_is_refused(tmp_path, monkeypatch, known, short, match):
+    """With audio, the file with the audio is counted; when it is short, the message says
+    which step lost frames (the encode or a second pass's mux), and nothing is written. With
+    the number of frames ``known``, the audio is encoded in the same pass (no mux file)."""
     tone = _tone(tmp_path)
     out = tmp_path / "v.mp4"
-    real = iov.decoded_frame_count
+    real = iov.stored_frame_count
 
     def count(path):
         muxed = ".audio.part" in Path(path).name
         return 1 if muxed or short == "encoded" else real(path)
 
-    monkeypatch.setattr(iov, "decoded_frame_count", count)
+    monkeypatch.setattr(iov, "stored_frame_count", count)
+    frames = smooth_frames(n=4)
     with pytest.raises(VideoError, match=match):
-        encode_video(out, smooth_frames(n=4), 10, audio_from=tone)
+        encode_video(out, frames if known else iter(frames), 10, audio_from=tone)
     assert not out.exists() and sorted(os.listdir(tmp_path)) == ["tone.m4a"]
 
 
-def test_audio_output_is_decoded_once(tmp_path, monkeypatch):
-    """A video with audio is checked by decoding the muxed file only (not the encode too)."""
+@pytest.mark.parametrize("n_frames,passes", [(4, 1), (None, 2), (6, 2)])
+def test_audio_in_one_pass_when_the_frames_are_known(tmp_path, monkeypatch, n_frames, passes):
+    """With the frames known beforehand the audio is encoded with them (one ffmpeg run, the
+    file counted once); unknown, or promised wrong (6 for 4), it is muxed in a second run.
+    Either way the file has 4 frames and 0.4 s of audio (the tone lasts 2 s)."""
     tone = _tone(tmp_path)
-    real, calls = iov.decoded_frame_count, []
-    monkeypatch.setattr(iov, "decoded_frame_count", lambda p: calls.append(p) or real(p))
-    res = encode_video(tmp_path / "v.mp4", smooth_frames(n=4), 10, audio_from=tone)
-    assert res.audio and len(calls) == 1 and ".audio.part" in Path(calls[0]).name
-    assert real(res.path) == 4
+    real, calls = iov.stored_frame_count, []
+    monkeypatch.setattr(iov, "stored_frame_count", lambda p: calls.append(p) or real(p))
+    runs = []
+    real_mux = iov.mux_audio
+    monkeypatch.setattr(iov, "mux_audio", lambda *a, **k: runs.append(a) or real_mux(*a, **k))
+    res = encode_video(tmp_path / "v.mp4", iter(smooth_frames(n=4)), 10, audio_from=tone,
+                       n_frames=n_frames)
+    assert res.audio and len(calls) == 1 and 1 + len(runs) == passes
+    assert (".audio.part" in Path(calls[0]).name) == (passes == 2)
+    assert decoded_frame_count(res.path) == 4
+    out = subprocess.run([iov.ffmpeg_exe(), "-hide_banner", "-i", str(res.path)],
+                         capture_output=True, text=True).stderr
+    assert "Audio: aac" in out
+    h, m, s = re.search(r"Duration: (\d+):(\d+):([\d.]+)", out).groups()
+    assert float(s) == pytest.approx(0.4, abs=0.05)
+
+
+def test_stored_frame_count_agrees_with_decoding(tmp_path):
+    p = encode_video(tmp_path / "v.mp4", smooth_frames(n=7), 25).path
+    assert iov.stored_frame_count(p) == decoded_frame_count(p) == 7
+    bad = tmp_path / "bad.mp4"
+    bad.write_bytes(b"not a video")
+    with pytest.raises(VideoError, match="bad.mp4"):
+        iov.stored_frame_count(bad)
 
 
 def test_video_info_of_written_video(tmp_path):

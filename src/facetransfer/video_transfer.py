@@ -611,7 +611,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     t0 = time.perf_counter()
     try:
         audio = write_video_with_audio(out, frames(), plan.fps, audio_from=audio_from,
-                                       overwrite=overwrite, options=video_options)
+                                       overwrite=overwrite, options=video_options, n_frames=n)
     finally:
         if bar is not None:
             bar.close()

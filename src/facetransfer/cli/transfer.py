@@ -432,7 +432,8 @@ def run_puppet(args) -> int:
     it = puppet_frames(track, model, wid)
     audio = write_video_with_audio(
         args.out, tqdm(it, total=track.n_frames, desc="render", unit="frame", leave=False),
-        track.fps, audio_from=args.video, overwrite=args.overwrite, options=vopt)
+        track.fps, audio_from=args.video, overwrite=args.overwrite, options=vopt,
+        n_frames=track.n_frames)
     print(f"wrote {args.out}: {track.n_frames} frames of {args.identity}"
           + (", with the video's audio" if audio else ""))
     return 0
