@@ -170,3 +170,44 @@ def test_read_npz_maps_large_stored_members_and_reads_the_rest(tmp_path):
     pt.write_bytes(p.read_bytes()[: p.stat().st_size // 2])
     with pytest.raises(ModelFileError, match="t.npz"):
         read_npz(pt, "model file", ModelFileError, mmap_min_bytes=1000)
+
+
+def test_prefetch_hands_out_what_read_video_gives(tmp_path, monkeypatch):
+    """Background reads are handed out once, cut to the frames asked for; a read they do not
+    cover (more frames than decoded before the clip's end, another file, a second request)
+    is decoded on the spot; a damaged file raises when its frames are asked for."""
+    import facetransfer.io.video as v
+
+    rng = np.random.default_rng(3)
+    a = write_video(tmp_path / "a.mp4", rng.integers(0, 255, (9, 16, 24, 3), np.uint8), 10)
+    b = write_video(tmp_path / "b.mp4", rng.integers(0, 255, (5, 16, 24, 3), np.uint8), 25)
+    (tmp_path / "junk.mp4").write_bytes(b"not a video at all" * 10)
+    whole = {p: read_video(p)[0] for p in (a, b)}
+    direct = []
+    real = v.read_video
+    pre = v.Prefetch([(a, 6), (b, 50), (tmp_path / "junk.mp4", None)])
+    pre2 = v.Prefetch([(a, 6)])
+    monkeypatch.setattr(v, "read_video", lambda p, **k: direct.append(Path(p).name) or real(p, **k))
+    fr, fps = pre.read_video(tmp_path / "." / "a.mp4", max_frames=4)      # same file, cut
+    np.testing.assert_array_equal(fr, whole[a][:4])
+    assert fps == pytest.approx(10) and direct == []
+    np.testing.assert_array_equal(pre.read_video(b)[0], whole[b])          # ended early: all
+    np.testing.assert_array_equal(pre.read_video(a, max_frames=8)[0], whole[a][:8])  # again
+    assert direct == ["a.mp4"]
+    with pytest.raises(VideoError, match="junk.mp4"):
+        pre.read_video(tmp_path / "junk.mp4")
+    np.testing.assert_array_equal(pre2.read_video(a, max_frames=7)[0], whole[a][:7])  # > 6
+    assert direct == ["a.mp4", "a.mp4"]
+
+
+def test_frames_to_cover_another_rate(tmp_path):
+    from facetransfer.io.video import frames_covering, frames_to_cover
+
+    assert frames_covering(300, 30.0, 30.0) == 301            # one beyond the last time
+    assert frames_covering(300, 30.0, 25.0) == 251            # 299 / 30 s at 25 fps: 249.2
+    assert frames_covering(1, 30.0, 25.0) == 2
+    rng = np.random.default_rng(4)
+    t = write_video(tmp_path / "t.mp4", rng.integers(0, 255, (12, 16, 24, 3), np.uint8), 30)
+    s = write_video(tmp_path / "s.mp4", rng.integers(0, 255, (4, 16, 24, 3), np.uint8), 15)
+    assert frames_to_cover(t, s) == frames_covering(12, 30.0, 15.0) + 8 == 15
+    assert frames_to_cover(t, s, max_frames=5) == frames_covering(5, 30.0, 15.0) + 8 == 12

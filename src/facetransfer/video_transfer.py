@@ -172,9 +172,6 @@ class TransferPlan:
         return int(self.new_track.n_frames)
 
 
-def _frames_needed(n_target: int, fps_target: float, fps_source: float) -> int:
-    """Source frames that cover ``n_target`` target frames (resampled by frame rate)."""
-    return int(np.ceil((n_target - 1) * fps_source / fps_target + 1e-9)) + 1
 
 
 def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None
@@ -209,7 +206,8 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
                   identity_from=None, identity_track=None, pose_from=None, pose_track=None,
                   performance=None, align: str | None = None, max_frames: int | None = None,
                   track_method: str = "auto", speed: str = DEFAULT_SPEED,
-                  parallel: bool | None = None, progress_factory=None) -> TransferPlan:
+                  parallel: bool | None = None, progress_factory=None,
+                  reader=None) -> TransferPlan:
     """Read and track the inputs and recombine the performance (§5, §6, Fig. 1, Fig. 7).
 
     The keywords make the :class:`TransferSources` and the tracking part of the
@@ -244,6 +242,9 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         Track the expression source in a second (forked) process while the target is tracked
         here. Default: when the machine has two or more CPUs and the platform can fork. The
         tracks do not depend on it.
+    reader : callable(path, max_frames=...) -> (frames, fps), optional
+        How videos are decoded: :func:`facetransfer.io.video.read_video` (default) or the
+        :meth:`~facetransfer.io.video.Prefetch.read_video` of reads started earlier.
 
     Raises
     ------
@@ -259,22 +260,26 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         pose_from=pose_from, pose_track=pose_track, performance=performance)
     options = RewriteOptions(speed=speed, track_method=track_method)  # before any work
     return plan_sources(sources, model, options=options, align=align, max_frames=max_frames,
-                        parallel=parallel, progress_factory=progress_factory)
+                        parallel=parallel, progress_factory=progress_factory, reader=reader)
 
 
 def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | None = None,
                  align: str | None = None, max_frames: int | None = None,
-                 parallel: bool | None = None, progress_factory=None) -> TransferPlan:
+                 parallel: bool | None = None, progress_factory=None,
+                 reader=None) -> TransferPlan:
     """:func:`plan_transfer` for :class:`TransferSources`: read, track, recombine.
 
     ``options``: its ``speed`` and ``track_method`` shape the tracking of the videos tracked
-    now (default :class:`~facetransfer.rewrite_options.RewriteOptions`).
+    now (default :class:`~facetransfer.rewrite_options.RewriteOptions`); ``reader``: see
+    :func:`plan_transfer`.
     """
+    from .io.video import read_video
+
     if max_frames is not None and int(max_frames) < 1:
         raise RewriteError(f"max_frames must be >= 1, got {max_frames}")
     options = RewriteOptions() if options is None else options
     planner = _Planner(model, options.track_method, track_options(options.speed),
-                       progress_factory, {"read": 0.0, "track": 0.0})
+                       progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video)
     frames, fps, pre_read = planner.read_target(sources, max_frames)
     # the expression source is tracked in a second (forked) process while this one tracks the
     # target; the child inherits the decoded frames (no second decoding, nothing pickled)
@@ -327,13 +332,15 @@ class _Planner:
     track_options: object
     progress_factory: object
     timings: dict
+    reader: Callable
 
     def read_target(self, sources: TransferSources, max_frames):
         """``(frames, fps, pre_read)``: the target's frames and, with an expression source,
         that source's ``(frames, fps)`` decoded at the same time on a second thread and cut to
         the frames the target's timeline needs (else None)."""
-        from .io.video import read_video, video_info
+        from .io.video import frames_covering, frames_to_cover, video_info
 
+        read_video = self.reader
         t0 = time.perf_counter()
         target = sources.target.video
         if sources.expression is None:
@@ -343,15 +350,14 @@ class _Planner:
         from concurrent.futures import ThreadPoolExecutor
 
         expression_from = sources.expression.video
-        ti, si = video_info(target), video_info(expression_from)
-        n_est = ti.n_frames if max_frames is None else min(int(max_frames), ti.n_frames)
         with ThreadPoolExecutor(max_workers=2) as pool:
             ft = pool.submit(read_video, target, max_frames=max_frames)
             fs = pool.submit(read_video, expression_from,
-                             max_frames=_frames_needed(max(n_est, 1), ti.fps, si.fps) + 8)
+                             max_frames=frames_to_cover(target, expression_from, max_frames))
             frames, fps = ft.result()
             sfr, sfps = fs.result()
-        need = _frames_needed(len(frames), fps, sfps)
+        si = video_info(expression_from)
+        need = frames_covering(len(frames), fps, sfps)
         if len(sfr) < need and len(sfr) < si.n_frames:  # the containers' counts were short
             sfr, sfps = read_video(expression_from, max_frames=need)
         self.timings["read"] += time.perf_counter() - t0
@@ -388,11 +394,11 @@ class _Planner:
     def read_source(self, inputs: _Inputs, kind: str, src: Source, pre_read, early) -> None:
         """Read and track a source (``pre_read``: its decoded frames; ``early``: its track
         from the background process) into ``inputs``."""
-        from .io.video import read_video, video_info
+        from .io.video import frames_covering, video_info
 
-        need = _frames_needed(len(inputs.frames), inputs.fps, video_info(src.video).fps)
+        need = frames_covering(len(inputs.frames), inputs.fps, video_info(src.video).fps)
         t = time.perf_counter()
-        fr, sfps = pre_read if pre_read is not None else read_video(src.video, max_frames=need)
+        fr, sfps = pre_read if pre_read is not None else self.reader(src.video, max_frames=need)
         self.timings["read"] += time.perf_counter() - t
         tr = None
         if early is not None:
@@ -653,14 +659,14 @@ def transfer_video(sources: TransferSources, out, model, *,
                    options: RewriteOptions | None = None, overwrite: bool = False,
                    meshes_dir=None, save_track=None, progress_factory=None, video_options=None,
                    align: str | None = None, max_frames: int | None = None,
-                   parallel: bool | None = None) -> TransferResult:
+                   parallel: bool | None = None, reader=None) -> TransferResult:
     """The whole video rewrite (§6): plan (read, track, recombine), render, write with audio.
 
     The inputs are ``sources`` (:class:`TransferSources`, e.g.
     ``TransferSources.of(target, expression_from=...)``), with the target's audio; how they
     are tracked and rendered is ``options``
     (:class:`~facetransfer.rewrite_options.RewriteOptions`). ``align``, ``max_frames``,
-    ``parallel``: see :func:`plan_transfer`. The output video (and the
+    ``parallel``, ``reader``: see :func:`plan_transfer`. The output video (and the
     optional track and meshes) appear only when everything succeeded; an existing ``out`` is
     replaced only with ``overwrite=True``. With the mouth mode ``"function"`` the function is
     lifted from :attr:`TransferPlan.texture_frames`. ``video_options``: codec and CRF of
@@ -676,7 +682,7 @@ def transfer_video(sources: TransferSources, out, model, *,
     opts = RewriteOptions() if options is None else options
     resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
     plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
-                        parallel=parallel, progress_factory=progress_factory)
+                        parallel=parallel, progress_factory=progress_factory, reader=reader)
     rendered = render_plan(plan, model, out, options=opts, audio_from=sources.target.video,
                            overwrite=overwrite, progress_factory=progress_factory,
                            video_options=video_options)

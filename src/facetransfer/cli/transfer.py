@@ -258,6 +258,18 @@ def _load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
         wait()
 
 
+def _prefetch_inputs(args):
+    """The target and the expression source decoded on threads from now on, as the transfer
+    will read them (:class:`facetransfer.io.video.Prefetch`)."""
+    from ..io.video import Prefetch, frames_to_cover
+
+    reads = [(args.target, args.max_frames)]
+    if args.expression_from:
+        reads.append((args.expression_from,
+                      frames_to_cover(args.target, args.expression_from, args.max_frames)))
+    return Prefetch(reads)
+
+
 def run_transfer(args) -> int:
     from ..io.atomic import check_output_path
     from ..io.video import check_video_output, video_info
@@ -295,6 +307,7 @@ def run_transfer(args) -> int:
             if not tr and not (v == args.target and args.performance):
                 _check_landmarks_file(v, args.tracker)
                 to_track += 1
+    prefetch = _prefetch_inputs(args)  # decoded while the model and MediaPipe load
     model = _load_model_and_mediapipe(args.model, to_track > 0 and args.tracker != "landmarks",
                                       progress=not args.no_progress)
     identity = None
@@ -315,7 +328,7 @@ def run_transfer(args) -> int:
         sources, args.out, model, options=rewrite_options(args),
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
         progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
-        align=args.align, max_frames=args.max_frames)
+        align=args.align, max_frames=args.max_frames, reader=prefetch.read_video)
     kept = res.n_frames - res.n_rewritten
     print(f"wrote {res.path}: {res.n_frames} frames"
           + (f" ({kept} kept original: face lost)" if kept else "")
