@@ -6,6 +6,10 @@ the frame's detections), so the weights of the terms do not depend on the image 
 A 2-D target set is ``(p, w)``: pixel positions ``(n, 2)`` and per-point weights ``(n,)`` (0 where
 unknown). The camera is Eq. (7): ``p = s F R[:2] X + t``.
 
+For a linear basis ``D`` (the ARKit deltas) the projected basis ``Y = s F R[:2] D`` need not be
+formed per frame: its normal matrix is ``s² Σ_ab (R[:2]ᵀR[:2])_ab C_ab`` of the pose-free moments
+``C`` (:func:`gram_blocks`, once per shape and nominal weights; :func:`rig_normal`).
+
 References
 ----------
 Vlasic et al. 2005, §5.1, Eq. (7)-(9); the bounded activation step is a box-constrained
@@ -15,11 +19,14 @@ quadratic program solved by cyclic coordinate descent (projected Gauss-Seidel), 
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
-from .camera import Pose, compose, pose_jacobian, project
+from .camera import Pose
 
-__all__ = ["project_basis", "pose_gauss_newton", "box_qp", "normal_terms", "targets_normal"]
+__all__ = ["Targets", "project_basis", "pose_gauss_newton", "box_qp", "normal_terms",
+           "targets_normal", "gram_blocks", "rig_normal"]
 
 try:  # numba is a dependency; the fallback keeps the module importable while it compiles
     from numba import njit
@@ -45,15 +52,54 @@ def project_basis(B: np.ndarray, pose: Pose) -> np.ndarray:
     return Y
 
 
-def pose_gauss_newton(X: np.ndarray, targets: list, pose: Pose, iod: float, *,
+@dataclass(frozen=True)
+class Targets:
+    """A frame's 2-D target sets, stacked (see the module notes).
+
+    Attributes
+    ----------
+    p : (T, n, 2) float64
+        Pixel targets per set, 0 where unknown.
+    w : (T, n) float64
+        Their weights, 0 where unknown.
+    nominal : (n,) float64
+        The weights summed over the sets as they would be with every point known: the
+        :func:`gram_blocks` of a clip are made for these (:func:`rig_normal`).
+    """
+
+    p: np.ndarray
+    w: np.ndarray
+    nominal: np.ndarray
+
+    @classmethod
+    def stack(cls, targets: list, nominal: np.ndarray | None = None) -> "Targets":
+        """From a list of ``(p (n, 2), w (n,))`` (``p`` NaN allowed: its weight is set to 0);
+        ``nominal`` defaults to the summed weights."""
+        p = np.stack([np.asarray(p_, np.float64) for p_, _ in targets])
+        w = np.stack([np.asarray(w_, np.float64) for _, w_ in targets])
+        bad = ~np.isfinite(p).all(-1)
+        if bad.any():
+            p[bad] = 0.0
+            w[bad] = 0.0
+        return cls(p, w, w.sum(0) if nominal is None else np.asarray(nominal, np.float64))
+
+    def __len__(self) -> int:
+        return len(self.p)
+
+
+def pose_gauss_newton(X: np.ndarray, targets, pose: Pose, iod: float, *,
                       iterations: int = 2, damping: float = 1e-6) -> Pose:
     """Gauss-Newton steps of the weak-perspective pose (Eq. (7)) for fixed 3-D points.
+
+    Each step solves ``(JᵀWJ + damping I) δ = JᵀW r`` (``J``: :func:`~.camera.pose_jacobian`,
+    ``r``: target minus projection, in iod units), clips the rotation and log-scale steps to
+    ±0.3 and applies ``δ`` by :func:`~.camera.compose` (one compiled kernel).
 
     Parameters
     ----------
     X : (n, 3) float64
         Model points.
-    targets : list of (p (n, 2), w (n,))
+    targets : list of (p (n, 2), w (n,)), or Targets
         Weighted 2-D targets of the same points (weights 0 where unknown).
     pose : Pose
         Start.
@@ -64,23 +110,67 @@ def pose_gauss_newton(X: np.ndarray, targets: list, pose: Pose, iod: float, *,
     -------
     Pose
     """
+    tg = targets if isinstance(targets, Targets) else Targets.stack(targets)
+    X = np.ascontiguousarray(X, np.float64)
+    R = np.ascontiguousarray(pose.rotation, np.float64)
+    s, t = float(pose.scale), np.ascontiguousarray(pose.translation, np.float64)
     for _ in range(iterations):
-        Y = X @ pose.rotation.T
-        J = pose_jacobian(Y, pose.scale).reshape(-1, 6)      # (2n, 6)
-        q = project(X, pose.rotation, pose.scale, pose.translation)
-        A = damping * np.eye(6)
-        b = np.zeros(6)
-        for p, w in targets:
-            ww = np.repeat(w, 2) / iod ** 2
-            r = np.nan_to_num(p - q).ravel()
-            Jw = J * ww[:, None]
-            A += Jw.T @ J
-            b += Jw.T @ r
-        d = np.linalg.solve(A, b)
-        d[:3] = np.clip(d[:3], -0.3, 0.3)
-        d[3] = np.clip(d[3], -0.3, 0.3)
-        pose = compose(pose, d)
-    return pose
+        R, s, t = _pose_step(X, tg.p, tg.w, R, s, t, float(iod), float(damping))
+    return Pose(R, s, t)
+
+
+@njit(cache=True)
+def _pose_step(X, p, w, R, s, t, iod, damping):  # pragma: no cover (compiled)
+    """One damped Gauss-Newton step of Eq. (7) and its update (camera.compose)."""
+    A = np.zeros((6, 6))
+    b = np.zeros(6)
+    jx = np.zeros(6)
+    jy = np.zeros(6)
+    jx[4] = 1.0
+    jy[5] = 1.0
+    for i in range(6):
+        A[i, i] = damping
+    i2 = iod * iod
+    for n in range(X.shape[0]):
+        y0 = R[0, 0] * X[n, 0] + R[0, 1] * X[n, 1] + R[0, 2] * X[n, 2]
+        y1 = R[1, 0] * X[n, 0] + R[1, 1] * X[n, 1] + R[1, 2] * X[n, 2]
+        y2 = R[2, 0] * X[n, 0] + R[2, 1] * X[n, 1] + R[2, 2] * X[n, 2]
+        jx[1], jx[2], jx[3] = s * y2, -s * y1, s * y0             # camera.pose_jacobian
+        jy[0], jy[2], jy[3] = s * y2, -s * y0, -s * y1
+        for k in range(p.shape[0]):
+            wk = w[k, n] / i2
+            if wk == 0.0:
+                continue
+            rx = p[k, n, 0] - (s * y0 + t[0])
+            ry = p[k, n, 1] - (-(s * y1) + t[1])
+            for a in range(6):
+                b[a] += wk * (jx[a] * rx + jy[a] * ry)
+                for c in range(6):
+                    A[a, c] += wk * (jx[a] * jx[c] + jy[a] * jy[c])
+    d = np.linalg.solve(A, b)
+    for a in range(4):
+        d[a] = min(max(d[a], -0.3), 0.3)
+    return _compose(R, s, t, d)
+
+
+@njit(cache=True)
+def _compose(R, s, t, d):  # pragma: no cover (compiled)
+    """camera.compose: ``R <- orthonormalize(exp([ω]x) R)``, ``s <- s e^σ``, ``t <- t + τ``."""
+    th = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    K = np.array([[0.0, -d[2], d[1]], [d[2], 0.0, -d[0]], [-d[1], d[0], 0.0]])
+    E = np.eye(3) + K
+    if th >= 1e-12:
+        E = np.eye(3) + np.sin(th) / th * K + (1 - np.cos(th)) / th ** 2 * (K @ K)
+    Rn = E @ R
+    r0 = Rn[0] / np.sqrt(np.sum(Rn[0] * Rn[0]))
+    r1 = Rn[1] - np.sum(Rn[1] * r0) * r0
+    r1 = r1 / np.sqrt(np.sum(r1 * r1))
+    out = np.empty((3, 3))
+    out[0], out[1] = r0, r1
+    out[2, 0] = r0[1] * r1[2] - r0[2] * r1[1]
+    out[2, 1] = r0[2] * r1[0] - r0[0] * r1[2]
+    out[2, 2] = r0[0] * r1[1] - r0[1] * r1[0]
+    return out, s * np.exp(d[3]), t + d[4:6]
 
 
 def normal_terms(Y: np.ndarray, r: np.ndarray, w: np.ndarray, iod: float
@@ -117,6 +207,86 @@ def targets_normal(Y: np.ndarray, base: np.ndarray, targets: list, iod: float
         G += g_
         h += h_
     return G, h
+
+
+def gram_blocks(D: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Weighted second moments of a 3-D basis, the pose-free part of Eq. (9)'s normal matrix.
+
+    ``C[a, b] = Σ_p w_p D[:, p, a] D[:, p, b]ᵀ``: with ``Y = s F R[:2] D`` (Eq. (7), ``FᵀF = I``)
+    ``Σ_p w_p Y_pᵀ Y_p = s² Σ_ab M_ab C[a, b]`` for ``M = R[:2]ᵀ R[:2]`` (:func:`rig_normal`), so a
+    frame's normal matrix costs nine ``(k, k)`` sums instead of a ``(k, 2n)`` product.
+
+    Parameters
+    ----------
+    D : (k, n, 3) float64
+        Basis (e.g. the ARKit deltas at the tracked points).
+    w : (n,) float64
+        Point weights.
+
+    Returns
+    -------
+    (3, 3, k, k) float64
+        Symmetric: ``C[a, b] = C[b, a]ᵀ``.
+    """
+    Dt = np.ascontiguousarray(np.moveaxis(D, 2, 0))                        # (3, k, n)
+    k = D.shape[0]
+    C = np.empty((3, 3, k, k))
+    for a in range(3):
+        Dw = Dt[a] * w
+        for b in range(a, 3):
+            C[a, b] = Dw @ Dt[b].T
+            C[b, a] = C[a, b].T
+    return C
+
+
+def rig_normal(D: np.ndarray, blocks: np.ndarray, nominal: np.ndarray, pose: Pose,
+               p: np.ndarray, w: np.ndarray, base: np.ndarray, iod: float
+               ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`targets_normal` of ``project_basis(D, pose)`` from precomputed :func:`gram_blocks`.
+
+    ``G = s²/iod² (Σ_ab M_ab C_ab + Σ_{p: w_p ≠ n_p} (w_p - n_p) D_p M D_pᵀ)`` with ``M =
+    R[:2]ᵀ R[:2]``, ``C = gram_blocks(D, nominal)`` and ``w = Σ_t w_t`` (the correction runs over
+    the few points whose summed weight ``w_p`` differs from the nominal ``n_p``: lost points,
+    missing flow); ``h = s/iod² D (R[:2]ᵀ F Σ_t w_t (p_t - base))``, one ``(k, 3n)`` product.
+
+    Parameters
+    ----------
+    D : (k, n, 3) float64
+    blocks : (3, 3, k, k) float64
+        ``gram_blocks(D, nominal)``.
+    nominal : (n,) float64
+    pose : Pose
+    p : (T, n, 2) float64
+        Target sets (pixels; finite).
+    w : (T, n) float64
+        Their weights.
+    base : (n, 2) float64
+        The projection the residuals ``p - base`` are measured from.
+    iod : float
+
+    Returns
+    -------
+    G : (k, k), h : (k,)
+        As :func:`targets_normal` (Eq. (9) at a fixed pose, Eq. (7)).
+
+    References
+    ----------
+    Vlasic et al. 2005, Eq. (7), (9).
+    """
+    R2, s = pose.rotation[:2], pose.scale
+    M = R2.T @ R2                                                          # (3, 3)
+    c2 = s * s / (iod * iod)
+    G = np.tensordot(M, blocks, axes=2)                                    # Σ_ab M_ab C_ab
+    wt = w.sum(0)                                                          # (n,)
+    odd = np.flatnonzero(wt != nominal)
+    if odd.size:
+        E = D[:, odd]                                                      # (k, m, 3)
+        Ew = (E @ M) * (wt - nominal)[odd, None]
+        G += Ew.reshape(len(D), -1) @ E.reshape(len(D), -1).T
+    u = np.einsum("tn,tnc->nc", w, p - base)                               # Σ_t w_t r_t
+    u[:, 1] *= -1.0                                                        # F
+    h = D.reshape(len(D), -1) @ (u @ R2).ravel()                           # Dᵀ R[:2]ᵀ F r
+    return G * c2, h * (s / (iod * iod))
 
 
 @njit(cache=True)
