@@ -305,19 +305,21 @@ class _Shape:
         if self.arkit:
             G, h = rig_normal(self.D, self.blocks(targets.nominal), targets.nominal, pose,
                               targets.p, targets.w, pose.project(self.N), iod)   # Eq. (9)
+            diag = G.reshape(-1)[::self.size + 1]                              # view of G's diagonal
             lam_t = (np.where(self.fast, self.opt.temporal, self.opt.slow_temporal)
                      if prev is not None else 0.0)                           # (K,)
-            G = G + np.diag(lam_p * self.ridge + lam_t + 1e-9)
+            diag += lam_p * self.ridge + lam_t + 1e-9
             if prev is not None:
-                h = h + lam_t * prev
+                h += lam_t * prev
             if anchor is not None:
-                lam_a = np.where(np.isfinite(anchor), self.opt.scores, 0.0)      # (K,)
-                G = G + np.diag(lam_a)
-                h = h + lam_a * np.nan_to_num(anchor)
+                ok = np.isfinite(anchor)
+                lam_a = np.where(ok, self.opt.scores, 0.0)                   # (K,)
+                diag += lam_a
+                h += lam_a * np.where(ok, anchor, 0.0)
             lo, hi = 0.0, 1.0
             if fixed is not None:
-                lo, hi = np.where(np.isfinite(fixed), fixed, 0.0), np.where(np.isfinite(fixed),
-                                                                            fixed, 1.0)
+                ok = np.isfinite(fixed)
+                lo, hi = np.where(ok, fixed, 0.0), np.where(ok, fixed, 1.0)
             return box_qp(G, h - self.opt.sparsity, x, lo=lo, hi=hi, tol=1e-5)
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
 
@@ -527,16 +529,17 @@ def _targets(det: ClipDetections, i: int, j: int, prev_q: np.ndarray | None, wei
              forward: bool) -> Targets:
     """Detection term of frame ``i`` and, from its tracked neighbour ``j``, the flow term."""
     p, w = _detection(det, i, weights)
-    out, nominal = [(p, w)], weights.w
     if opt.flow > 0 and prev_q is not None:
-        d = np.full(p.shape, np.nan)
-        d[:68] = det.flow[i] if forward else -det.flow[j]   # flow[t] moves points of t-1 into t
-        q = prev_q + d
-        wf = np.where(np.isfinite(q).all(1), opt.flow * weights.w, 0.0)
-        if wf.any():
-            out.append((q, wf))
-            nominal = weights.flow_nominal(opt.flow)
-    return Targets.stack(out, nominal)
+        q = prev_q[:68] + (det.flow[i] if forward else -det.flow[j])  # flow[t]: t-1 into t
+        ok = np.isfinite(q).all(1)
+        if ok.any():
+            P = len(p)
+            pt, wt = np.zeros((2, P, 2)), np.zeros((2, P))
+            pt[0], wt[0] = np.where(w[:, None] > 0, p, 0.0), w
+            pt[1, :68] = np.where(ok[:, None], q, 0.0)
+            wt[1, :68] = np.where(ok, opt.flow * weights.w[:68], 0.0)     # dense points: no flow
+            return Targets(pt, wt, weights.flow_nominal(opt.flow))
+    return Targets.stack([(p, w)], weights.w)
 
 
 def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State | None, weights,
@@ -548,8 +551,9 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State | N
     prev: _State | None = seed
     prev_i = seed_index if seed is not None else None
     done = done0
+    found = det.found
     for i in order:
-        if not det.found[i]:
+        if not found[i]:
             prev, prev_i = None, None
             done += 1
             if on_frame is not None:

@@ -132,21 +132,27 @@ def _pose_step(X, p, w, R, s, t, iod, damping):  # pragma: no cover (compiled)
         A[i, i] = damping
     i2 = iod * iod
     for n in range(X.shape[0]):
+        ws, rx, ry = 0.0, 0.0, 0.0                     # Σ_t w_t, Σ_t w_t r_t at this point
         y0 = R[0, 0] * X[n, 0] + R[0, 1] * X[n, 1] + R[0, 2] * X[n, 2]
         y1 = R[1, 0] * X[n, 0] + R[1, 1] * X[n, 1] + R[1, 2] * X[n, 2]
+        for k in range(p.shape[0]):
+            if w[k, n] != 0.0:
+                ws += w[k, n]
+                rx += w[k, n] * (p[k, n, 0] - (s * y0 + t[0]))
+                ry += w[k, n] * (p[k, n, 1] - (-(s * y1) + t[1]))
+        if ws == 0.0:
+            continue
         y2 = R[2, 0] * X[n, 0] + R[2, 1] * X[n, 1] + R[2, 2] * X[n, 2]
         jx[1], jx[2], jx[3] = s * y2, -s * y1, s * y0             # camera.pose_jacobian
         jy[0], jy[2], jy[3] = s * y2, -s * y0, -s * y1
-        for k in range(p.shape[0]):
-            wk = w[k, n] / i2
-            if wk == 0.0:
-                continue
-            rx = p[k, n, 0] - (s * y0 + t[0])
-            ry = p[k, n, 1] - (-(s * y1) + t[1])
-            for a in range(6):
-                b[a] += wk * (jx[a] * rx + jy[a] * ry)
-                for c in range(6):
-                    A[a, c] += wk * (jx[a] * jx[c] + jy[a] * jy[c])
+        ws, rx, ry = ws / i2, rx / i2, ry / i2
+        for a in range(6):
+            b[a] += jx[a] * rx + jy[a] * ry
+            for c in range(a + 1):
+                A[a, c] += ws * (jx[a] * jx[c] + jy[a] * jy[c])
+    for a in range(6):
+        for c in range(a):
+            A[c, a] = A[a, c]
     d = np.linalg.solve(A, b)
     for a in range(4):
         d[a] = min(max(d[a], -0.3), 0.3)
@@ -274,18 +280,21 @@ def rig_normal(D: np.ndarray, blocks: np.ndarray, nominal: np.ndarray, pose: Pos
     Vlasic et al. 2005, Eq. (7), (9).
     """
     R2, s = pose.rotation[:2], pose.scale
+    k = len(D)
     M = R2.T @ R2                                                          # (3, 3)
     c2 = s * s / (iod * iod)
-    G = np.tensordot(M, blocks, axes=2)                                    # Σ_ab M_ab C_ab
-    wt = w.sum(0)                                                          # (n,)
+    G = (M.reshape(1, 9) @ blocks.reshape(9, -1)).reshape(k, k)           # Σ_ab M_ab C_ab
+    wt = w[0] if len(w) == 1 else w.sum(0)                                 # (n,)
     odd = np.flatnonzero(wt != nominal)
     if odd.size:
         E = D[:, odd]                                                      # (k, m, 3)
         Ew = (E @ M) * (wt - nominal)[odd, None]
-        G += Ew.reshape(len(D), -1) @ E.reshape(len(D), -1).T
-    u = np.einsum("tn,tnc->nc", w, p - base)                               # Σ_t w_t r_t
+        G += Ew.reshape(k, -1) @ E.reshape(k, -1).T
+    u = w[0][:, None] * (p[0] - base)                                      # Σ_t w_t r_t
+    for t in range(1, len(w)):
+        u += w[t][:, None] * (p[t] - base)
     u[:, 1] *= -1.0                                                        # F
-    h = D.reshape(len(D), -1) @ (u @ R2).ravel()                           # Dᵀ R[:2]ᵀ F r
+    h = D.reshape(k, -1) @ (u @ R2).ravel()                                # Dᵀ R[:2]ᵀ F r
     return G * c2, h * (s / (iod * iod))
 
 
@@ -329,8 +338,7 @@ def box_qp(G: np.ndarray, h: np.ndarray, x0: np.ndarray, *, lo: float | np.ndarr
     (k,) float64
     """
     k = h.shape[0]
-    lo_ = np.broadcast_to(np.asarray(lo, np.float64), (k,)).copy()
-    hi_ = np.broadcast_to(np.asarray(hi, np.float64), (k,)).copy()
-    x = np.clip(np.asarray(x0, np.float64), lo_, hi_).copy()
+    lo_, hi_ = np.full(k, lo, np.float64), np.full(k, hi, np.float64)   # broadcast copies
+    x = np.minimum(np.maximum(np.asarray(x0, np.float64), lo_), hi_)      # np.clip, new array
     return _box_qp(np.ascontiguousarray(G, np.float64), np.ascontiguousarray(h, np.float64), x,
                    lo_, hi_, int(sweeps), float(tol))
