@@ -267,6 +267,22 @@ class _Shape:
             return np.moveaxis(self.model.mode_basis(mode, weights), 2, 0)
         return np.moveaxis(self.cache.basis(mode, weights), 2, 0)
 
+    def identity_bases(self, X: np.ndarray, identity: np.ndarray) -> np.ndarray:
+        """Eq. (9)'s identity basis for each frame's parameters ``X`` (F, size), the identity
+        entry of the weights being ``identity``: ``(F, r, P, 3)`` (an ARKit model of identity
+        and expression: the expression mode of every frame contracted in one product)."""
+        m = self.model
+        if self.arkit and set(m.mode_names) == {"identity", "expression"}:
+            E = self.weights(X)["expression"]                                  # (F, r_e)
+            B = np.tensordot(E, m.core, axes=([1], [m.mode_index("expression") + 1]))
+            return np.moveaxis(B.reshape(len(E), -1, 3, B.shape[-1]), 3, 1)   # (F, 3P, r)
+        out = []
+        for x in X:
+            w = self.weights(x)
+            w[self.id_name] = identity
+            out.append(self.basis(self.id_name, w))
+        return np.stack(out)
+
     def weights(self, x: np.ndarray) -> dict:
         """Model weights of every per-frame mode for parameters ``x`` ``(..., size)``."""
         if self.arkit:
@@ -403,11 +419,10 @@ def _solve_identity(model, shape: _Shape, frames: list, states: list, det: ClipD
     r = prior.mean.size
     G = np.zeros((r, r))
     h = np.zeros(r)
-    for i, st in zip(frames, states):
+    bases = shape.identity_bases(np.stack([st.x for st in states]), prior.mean)  # (F, r, P, 3)
+    for i, st, B in zip(frames, states, bases):
         p, w = _detection(det, i, weights)
-        wts = shape.weights(st.x)
-        wts["identity"] = prior.mean
-        Y = project_basis(shape.basis("identity", wts), st.pose)             # (r, P, 2)
+        Y = project_basis(B, st.pose)                                        # (r, P, 2)
         g_, h_ = targets_normal(Y, st.pose.project(shape.offset), [(p, w)], _iod(p))
         G += g_
         h += h_
