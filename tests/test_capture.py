@@ -126,6 +126,24 @@ def test_rig_normal_matches_the_projected_basis(T):
     np.testing.assert_allclose(G, G.T, atol=1e-12 * np.abs(G0).max())
 
 
+def test_sampler_core_gives_the_tracked_points(arkit_model):
+    """The sampler's model synthesises the landmark vertices and MediaPipe's surface points of
+    the full model (Eq. (4) on a core with S applied), and is made once per model and points."""
+    from facetransfer.track.capture import _sampler
+
+    m = arkit_model
+    dense = mediapipe_correspondence(m)
+    rng = np.random.default_rng(6)
+    w = {n: rng.normal(size=(2, r)) for n, r in zip(m.mode_names, m.ranks)}
+    V = m.synthesize(w)                                                  # (2, n, 3)
+    want = np.concatenate([V[:, m.landmarks], dense.sample(V)], axis=1)
+    sampler = _sampler(m, dense)
+    np.testing.assert_allclose(sampler.model.synthesize(w), want, atol=1e-9)
+    np.testing.assert_array_equal(sampler.mp_index, dense.mp_index)
+    np.testing.assert_allclose(_sampler(m).model.synthesize(w), V[:, m.landmarks], atol=1e-9)
+    assert _sampler(m, dense) is sampler and _sampler(m) is not sampler
+
+
 def _synthetic(model, F=60, yaw0=25.0, late=0):
     """Exact 2-D landmarks of a training identity performing blinks, jaw and smiles."""
     t = np.arange(F)

@@ -184,32 +184,45 @@ class _State:
 class _Sampler:
     """The tracked points as a multilinear model of their own.
 
-    Points are linear in the vertices (``points = S @ vertices[verts]``, ``S`` ``(P, V)``; rows
+    Points are linear in the vertices (``points = S @ vertices``, ``S`` ``(P, n)`` sparse; rows
     0-67 are the iBUG landmark vertices, then the dense surface points), so applying ``S`` to
     the core once gives a model whose "vertices" are the tracked points: every Eq. (9) basis
-    of the run is then a contraction of a small core.
+    of the run is then a contraction of a small core. :func:`_sampler` keeps the last few.
     """
 
     def __init__(self, model, dense=None) -> None:
+        from scipy.sparse import csr_matrix
+
         from ..model import MultilinearModel
 
         lm = np.asarray(model.landmarks, np.int64)
         tris = np.zeros((0, 3), np.int64) if dense is None else dense.triangles
-        verts, inv = np.unique(np.concatenate([lm, tris.ravel()]), return_inverse=True)
-        from scipy.sparse import csr_matrix
-
-        P = 68 + len(tris)
+        P, n = 68 + len(tris), model.n_vertices
         rows = np.concatenate([np.arange(68), np.repeat(np.arange(68, P), 3)])
-        cols = np.concatenate([inv[:68], inv[68:]])
         vals = np.concatenate([np.ones(68), np.zeros(0) if dense is None else dense.bary.ravel()])
-        S = csr_matrix((vals, (rows, cols)), shape=(P, len(verts)))        # sums duplicates
-        vrows = (3 * verts[:, None] + np.arange(3)).ravel()
-        core = model.core[vrows].reshape(len(verts), -1)                   # (V, 3 r_1 ... r_K)
+        S = csr_matrix((vals, (rows, np.concatenate([lm, tris.ravel()]))), shape=(P, n))
+        core = model.core.reshape(n, -1)       # (n, 3 r_1 ... r_K): a view, rows read where used
         core = np.asarray(S @ core).reshape((3 * P,) + model.core.shape[1:])
         self.model = MultilinearModel(core=core, factors=model.factors,
                                       mode_names=model.mode_names, labels=model.labels,
                                       faces=np.zeros((0, 3), np.int64))
         self.mp_index = None if dense is None else dense.mp_index
+
+
+#: The last samplers made (:func:`_sampler`), by model and dense points.
+_SAMPLERS: dict = {}
+
+
+def _sampler(model, dense=None) -> _Sampler:
+    """``_Sampler(model, dense)``, reused while the model (its content hash) and the dense
+    points are those of one of the last two calls (a sampler is never changed)."""
+    key = (model.content_hash, None if dense is None else
+           (dense.mp_index.tobytes(), dense.triangles.tobytes(), dense.bary.tobytes()))
+    if key not in _SAMPLERS:
+        while len(_SAMPLERS) >= 2:
+            _SAMPLERS.pop(next(iter(_SAMPLERS)))
+        _SAMPLERS[key] = _Sampler(model, dense)
+    return _SAMPLERS[key]
 
 
 class _Shape:
@@ -685,7 +698,7 @@ def _point_weights(det: ClipDetections, model, opt: CaptureOptions
 
         dense = mediapipe_correspondence(model)
         weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
-    sampler = _Sampler(model, dense)
+    sampler = _sampler(model, dense)
     iris = closed = None
     if opt.gaze and is_arkit_model(model) and det.points478 is not None \
             and det.points478.shape[1] > max(IRIS_INDEX):
