@@ -15,7 +15,7 @@ from facetransfer.track.capture import (CORNERS, CaptureOptions, capture_detecti
 from facetransfer.track.dense import mediapipe_correspondence
 from facetransfer.track.detect import ClipDetections
 from facetransfer.track.fit2d import (Targets, box_qp, gram_blocks, pose_gauss_newton,
-                                      project_basis, rig_normal, targets_normal)
+                                      project_basis, rig_normal, rig_solve, targets_normal)
 
 
 def test_box_qp_matches_scipy_bounded_least_squares():
@@ -124,6 +124,28 @@ def test_rig_normal_matches_the_projected_basis(T):
         np.testing.assert_allclose(G, G0, rtol=1e-11, atol=1e-11 * np.abs(G0).max())
         np.testing.assert_allclose(h, h0, rtol=1e-11, atol=1e-11 * np.abs(h0).max())
     np.testing.assert_allclose(G, G.T, atol=1e-12 * np.abs(G0).max())
+
+
+def test_rig_solve_is_the_box_qp_of_the_normal_equations():
+    rng = np.random.default_rng(8)
+    K, n, iod = 9, 40, 17.0
+    D = rng.normal(size=(K, n, 3))
+    tg = Targets.stack(_random_targets(rng, n))
+    pose = Pose(so3_exp(rng.normal(size=3)), 2.2, rng.normal(size=2))
+    base = rng.normal(size=(n, 2)) * 40 + 200
+    nominal = tg.nominal.copy()
+    nominal[:4] += 1.0                                   # four points off their nominal weight
+    blocks = gram_blocks(D, nominal)
+    ridge, rhs = rng.uniform(0.01, 0.1, K), rng.normal(size=K)
+    lo, hi = np.zeros(K), np.ones(K)
+    lo[2] = hi[2] = 0.3                                  # held
+    x0 = rng.uniform(-0.5, 1.5, K)
+    x = rig_solve(D, blocks, nominal, pose, tg, base, iod, x0, ridge=ridge, rhs=rhs, lo=lo,
+                  hi=hi, tol=1e-12)
+    G, h = rig_normal(D, blocks, nominal, pose, tg.p, tg.w, base, iod)
+    want = box_qp(G + np.diag(ridge), h + rhs, x0, lo=lo, hi=hi, tol=1e-12)
+    np.testing.assert_allclose(x, want, atol=1e-10)
+    assert x[2] == 0.3 and x.min() >= 0 and x.max() <= 1 and 0 < x.max()
 
 
 def test_sampler_core_gives_the_tracked_points(arkit_model):

@@ -50,7 +50,7 @@ from .camera import Pose, fit_affine_pose
 from .detect import ClipDetections
 from .video_detect import _open, detect_video
 from .fit_checkpoint import SavedFit, fit_key
-from .fit2d import (Targets, box_qp, gram_blocks, pose_gauss_newton, project_basis, rig_normal,
+from .fit2d import (Targets, gram_blocks, pose_gauss_newton, project_basis, rig_solve,
                     targets_normal)
 from .gaze import GAZE_NAMES, IRIS_INDEX, frame_gaze_activations, usable_iris
 from .init import require_landmarks
@@ -259,6 +259,7 @@ class _Shape:
                                     for n in GAZE_NAMES])                      # (8,) or -1
             self._flat = (self.D.reshape(self.size, -1), self.N.ravel())      # (K, 3P), (3P,)
             self._blocks: dict = {}                                            # nominal -> C
+            self._zeros, self._ones = np.zeros(self.size), np.ones(self.size)  # the box
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
             self.precision = {m: p.Q @ p.inv_cov @ p.Q.T for m, p in self.priors.items()}
@@ -332,24 +333,22 @@ class _Shape:
         :mod:`facetransfer.track.scores`)."""
         lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
         if self.arkit:
-            G, h = rig_normal(self.D, self.blocks(targets.nominal), targets.nominal, pose,
-                              targets.p, targets.w, pose.project(self.N), iod)   # Eq. (9)
-            diag = G.reshape(-1)[::self.size + 1]                              # view of G's diagonal
             lam_t = (np.where(self.fast, self.opt.temporal, self.opt.slow_temporal)
                      if prev is not None else 0.0)                           # (K,)
-            diag += lam_p * self.ridge + lam_t + 1e-9
-            if prev is not None:
-                h += lam_t * prev
+            ridge = lam_p * self.ridge + lam_t + 1e-9
+            rhs = lam_t * prev if prev is not None else np.zeros(self.size)
             if anchor is not None:
                 ok = np.isfinite(anchor)
                 lam_a = np.where(ok, self.opt.scores, 0.0)                   # (K,)
-                diag += lam_a
-                h += lam_a * np.where(ok, anchor, 0.0)
-            lo, hi = 0.0, 1.0
+                ridge = ridge + lam_a
+                rhs = rhs + lam_a * np.where(ok, anchor, 0.0)
+            lo, hi = self._zeros, self._ones
             if fixed is not None:
                 ok = np.isfinite(fixed)
                 lo, hi = np.where(ok, fixed, 0.0), np.where(ok, fixed, 1.0)
-            return box_qp(G, h - self.opt.sparsity, x, lo=lo, hi=hi, tol=1e-5)
+            return rig_solve(self.D, self.blocks(targets.nominal), targets.nominal, pose, targets,
+                             pose.project(self.N), iod, x, ridge=ridge,
+                             rhs=rhs - self.opt.sparsity, lo=lo, hi=hi, tol=1e-5)   # Eq. (9)
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
 
     def _solve_modes(self, pose, targets, iod, x, prev, lam_p, lam_t):

@@ -26,7 +26,7 @@ import numpy as np
 from .camera import Pose
 
 __all__ = ["Targets", "project_basis", "pose_gauss_newton", "box_qp", "normal_terms",
-           "targets_normal", "gram_blocks", "rig_normal"]
+           "targets_normal", "gram_blocks", "rig_normal", "rig_solve"]
 
 try:  # numba is a dependency; the fallback keeps the module importable while it compiles
     from numba import njit
@@ -279,23 +279,98 @@ def rig_normal(D: np.ndarray, blocks: np.ndarray, nominal: np.ndarray, pose: Pos
     ----------
     Vlasic et al. 2005, Eq. (7), (9).
     """
-    R2, s = pose.rotation[:2], pose.scale
     k = len(D)
-    M = R2.T @ R2                                                          # (3, 3)
-    c2 = s * s / (iod * iod)
-    G = (M.reshape(1, 9) @ blocks.reshape(9, -1)).reshape(k, k)           # Σ_ab M_ab C_ab
-    wt = w[0] if len(w) == 1 else w.sum(0)                                 # (n,)
-    odd = np.flatnonzero(wt != nominal)
-    if odd.size:
-        E = D[:, odd]                                                      # (k, m, 3)
-        Ew = (E @ M) * (wt - nominal)[odd, None]
-        G += Ew.reshape(k, -1) @ E.reshape(k, -1).T
-    u = w[0][:, None] * (p[0] - base)                                      # Σ_t w_t r_t
-    for t in range(1, len(w)):
-        u += w[t][:, None] * (p[t] - base)
-    u[:, 1] *= -1.0                                                        # F
-    h = D.reshape(k, -1) @ (u @ R2).ravel()                                # Dᵀ R[:2]ᵀ F r
-    return G * c2, h * (s / (iod * iod))
+    return _rig_normal(D.reshape(k, -1), blocks.reshape(9, -1), nominal, pose.rotation,
+                       float(pose.scale), p, w, base, float(iod))
+
+
+def rig_solve(D: np.ndarray, blocks: np.ndarray, nominal: np.ndarray, pose: Pose,
+              targets: Targets, base: np.ndarray, iod: float, x0: np.ndarray, *,
+              ridge: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+              sweeps: int = 200, tol: float = 1e-7) -> np.ndarray:
+    """The bounded activations of one frame at a fixed pose: :func:`box_qp` of
+    ``(G + diag(ridge), h + rhs)`` with ``G, h`` from :func:`rig_normal`, in one compiled call.
+
+    Parameters
+    ----------
+    D, blocks, nominal, pose, base, iod
+        As :func:`rig_normal`.
+    targets : Targets
+        ``p``, ``w`` of :func:`rig_normal` (``targets.nominal`` is not read: ``nominal`` is).
+    x0 : (k,) float64
+        Start (clipped into the box).
+    ridge : (k,) float64
+        Added to the diagonal of ``G`` (priors, temporal terms).
+    rhs : (k,) float64
+        Added to ``h`` (their pulls, minus a sparsity weight).
+    lo, hi : (k,) float64
+        Bounds.
+
+    Returns
+    -------
+    (k,) float64
+
+    References
+    ----------
+    Vlasic et al. 2005, Eq. (7), (9).
+    """
+    k = len(D)
+    x = np.minimum(np.maximum(np.asarray(x0, np.float64), lo), hi)        # np.clip, new array
+    return _rig_solve(D.reshape(k, -1), blocks.reshape(9, -1), nominal, pose.rotation,
+                      float(pose.scale), targets.p, targets.w, base, float(iod),
+                      np.ascontiguousarray(ridge, np.float64),
+                      np.ascontiguousarray(rhs, np.float64), x,
+                      np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64),
+                      int(sweeps), float(tol))
+
+
+@njit(cache=True)
+def _rig_normal(D2, B9, nominal, R, s, p, w, base, iod):  # pragma: no cover (compiled)
+    """rig_normal on ``D2 = D.reshape(k, 3n)``, ``B9 = blocks.reshape(9, k²)``."""
+    k, n = D2.shape[0], nominal.shape[0]
+    M = np.empty(9)                                                        # R[:2]ᵀ R[:2]
+    for a in range(3):
+        for b in range(3):
+            M[3 * a + b] = R[0, a] * R[0, b] + R[1, a] * R[1, b]
+    G = np.dot(M, B9).reshape(k, k)                                        # Σ_ab M_ab C_ab
+    v = np.zeros(3 * n)                                                    # R[:2]ᵀ F Σ_t w_t r_t
+    odd = np.empty(n, np.int64)
+    m = 0
+    for i in range(n):
+        wt, rx, ry = 0.0, 0.0, 0.0
+        for t in range(w.shape[0]):
+            wt += w[t, i]
+            rx += w[t, i] * (p[t, i, 0] - base[i, 0])
+            ry += w[t, i] * (p[t, i, 1] - base[i, 1])
+        for c in range(3):
+            v[3 * i + c] = R[0, c] * rx - R[1, c] * ry
+        if wt != nominal[i]:                                   # off its nominal weight
+            odd[m] = i
+            m += 1
+    if m:
+        E, Ew = np.empty((k, 3 * m)), np.empty((k, 3 * m))
+        for j in range(m):
+            i = odd[j]
+            dw = -nominal[i]
+            for t in range(w.shape[0]):
+                dw += w[t, i]
+            for r in range(k):
+                for a in range(3):
+                    E[r, 3 * j + a] = D2[r, 3 * i + a]
+                    Ew[r, 3 * j + a] = dw * (D2[r, 3 * i] * M[a] + D2[r, 3 * i + 1] * M[3 + a]
+                                             + D2[r, 3 * i + 2] * M[6 + a])
+        G += np.dot(Ew, E.T)
+    c = s / (iod * iod)
+    return G * (s * c), np.dot(D2, v) * c
+
+
+@njit(cache=True)
+def _rig_solve(D2, B9, nominal, R, s, p, w, base, iod, ridge, rhs, x, lo, hi, sweeps,
+               tol):  # pragma: no cover (compiled)
+    G, h = _rig_normal(D2, B9, nominal, R, s, p, w, base, iod)
+    for j in range(G.shape[0]):
+        G[j, j] += ridge[j]
+    return _box_qp(G, h + rhs, x, lo, hi, sweeps, tol)
 
 
 @njit(cache=True)
