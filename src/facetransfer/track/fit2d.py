@@ -375,14 +375,19 @@ def _rig_solve(D2, B9, nominal, R, s, p, w, base, iod, ridge, rhs, x, lo, hi, sw
 
 @njit(cache=True)
 def _box_qp(G, h, x, lo, hi, sweeps, tol):  # pragma: no cover (compiled)
+    """Cyclic coordinate descent keeping the residual ``g = h - G x`` up to date: a coordinate
+    that moves costs one column update, one held at its bound nothing (the fresh dot product
+    of every coordinate in every sweep was latency-bound: ~4x slower on the 51 ARKit shapes)."""
     k = x.shape[0]
+    Gt = np.ascontiguousarray(G.T)                       # rows of Gt: columns of G
+    g = h.copy()
+    for j in range(k):
+        for m in range(k):
+            g[m] -= G[m, j] * x[j]
     for _ in range(sweeps):
         change = 0.0
         for j in range(k):
-            g = h[j]
-            for m in range(k):
-                g -= G[j, m] * x[m]
-            new = x[j] + g / G[j, j]
+            new = x[j] + g[j] / G[j, j]
             if new < lo[j]:
                 new = lo[j]
             elif new > hi[j]:
@@ -390,6 +395,8 @@ def _box_qp(G, h, x, lo, hi, sweeps, tol):  # pragma: no cover (compiled)
             d = new - x[j]
             if d != 0.0:
                 x[j] = new
+                for m in range(k):
+                    g[m] -= Gt[j, m] * d
                 change = max(change, abs(d))
         if change < tol:
             break
