@@ -114,7 +114,7 @@ def test_rig_normal_matches_the_projected_basis(T):
     D = rng.normal(size=(K, n, 3))
     targets = _random_targets(rng, n, T)
     tg = Targets.stack(targets)
-    nominal = rng.uniform(0.2, 3.0, n) * T               # differs from tg.w.sum(0) nearly everywhere
+    nominal = rng.uniform(0.2, 3.0, n) * T           # differs from tg.w.sum(0) nearly everywhere
     pose = Pose(so3_exp(rng.normal(size=3)), 3.7, rng.normal(size=2) * 9)
     base = rng.normal(size=(n, 2)) * 40 + 200
     Y = project_basis(D, pose)
@@ -135,13 +135,14 @@ def test_rig_solve_is_the_box_qp_of_the_normal_equations():
     base = rng.normal(size=(n, 2)) * 40 + 200
     nominal = tg.nominal.copy()
     nominal[:4] += 1.0                                   # four points off their nominal weight
+    tg = Targets(tg.p, tg.w, nominal)
     blocks = gram_blocks(D, nominal)
     ridge, rhs = rng.uniform(0.01, 0.1, K), rng.normal(size=K)
     lo, hi = np.zeros(K), np.ones(K)
     lo[2] = hi[2] = 0.3                                  # held
     x0 = rng.uniform(-0.5, 1.5, K)
-    x = rig_solve(D, blocks, nominal, pose, tg, base, iod, x0, ridge=ridge, rhs=rhs, lo=lo,
-                  hi=hi, tol=1e-12)
+    x = rig_solve(D, blocks, pose, tg, base, iod, x0, ridge=ridge, rhs=rhs, lo=lo, hi=hi,
+                  tol=1e-12)
     G, h = rig_normal(D, blocks, nominal, pose, tg.p, tg.w, base, iod)
     want = box_qp(G + np.diag(ridge), h + rhs, x0, lo=lo, hi=hi, tol=1e-12)
     np.testing.assert_allclose(x, want, atol=1e-10)

@@ -346,7 +346,7 @@ class _Shape:
             if fixed is not None:
                 ok = np.isfinite(fixed)
                 lo, hi = np.where(ok, fixed, 0.0), np.where(ok, fixed, 1.0)
-            return rig_solve(self.D, self.blocks(targets.nominal), targets.nominal, pose, targets,
+            return rig_solve(self.D, self.blocks(targets.nominal), pose, targets,
                              pose.project(self.N), iod, x, ridge=ridge,
                              rhs=rhs - self.opt.sparsity, lo=lo, hi=hi, tol=1e-5)   # Eq. (9)
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)

@@ -284,8 +284,8 @@ def rig_normal(D: np.ndarray, blocks: np.ndarray, nominal: np.ndarray, pose: Pos
                        float(pose.scale), p, w, base, float(iod))
 
 
-def rig_solve(D: np.ndarray, blocks: np.ndarray, nominal: np.ndarray, pose: Pose,
-              targets: Targets, base: np.ndarray, iod: float, x0: np.ndarray, *,
+def rig_solve(D: np.ndarray, blocks: np.ndarray, pose: Pose, targets: Targets,
+              base: np.ndarray, iod: float, x0: np.ndarray, *,
               ridge: np.ndarray, rhs: np.ndarray, lo: np.ndarray, hi: np.ndarray,
               sweeps: int = 200, tol: float = 1e-7) -> np.ndarray:
     """The bounded activations of one frame at a fixed pose: :func:`box_qp` of
@@ -293,10 +293,12 @@ def rig_solve(D: np.ndarray, blocks: np.ndarray, nominal: np.ndarray, pose: Pose
 
     Parameters
     ----------
-    D, blocks, nominal, pose, base, iod
+    D, pose, base, iod
         As :func:`rig_normal`.
+    blocks : (3, 3, k, k) float64
+        ``gram_blocks(D, targets.nominal)``.
     targets : Targets
-        ``p``, ``w`` of :func:`rig_normal` (``targets.nominal`` is not read: ``nominal`` is).
+        The frame's target sets (``p``, ``w`` and ``nominal`` of :func:`rig_normal`).
     x0 : (k,) float64
         Start (clipped into the box).
     ridge : (k,) float64
@@ -316,7 +318,7 @@ def rig_solve(D: np.ndarray, blocks: np.ndarray, nominal: np.ndarray, pose: Pose
     """
     k = len(D)
     x = np.minimum(np.maximum(np.asarray(x0, np.float64), lo), hi)        # np.clip, new array
-    return _rig_solve(D.reshape(k, -1), blocks.reshape(9, -1), nominal, pose.rotation,
+    return _rig_solve(D.reshape(k, -1), blocks.reshape(9, -1), targets.nominal, pose.rotation,
                       float(pose.scale), targets.p, targets.w, base, float(iod),
                       np.ascontiguousarray(ridge, np.float64),
                       np.ascontiguousarray(rhs, np.float64), x,
