@@ -9,12 +9,13 @@ from scipy.optimize import lsq_linear
 from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.errors import TrackError, VideoError
 from facetransfer.render import rotation_from_euler
-from facetransfer.track.camera import Pose, project
+from facetransfer.track.camera import Pose, compose, pose_jacobian, project, so3_exp
 from facetransfer.track.capture import (CORNERS, CaptureOptions, capture_detections,
                                         capture_point_weights)
 from facetransfer.track.dense import mediapipe_correspondence
 from facetransfer.track.detect import ClipDetections
-from facetransfer.track.fit2d import box_qp, pose_gauss_newton
+from facetransfer.track.fit2d import (Targets, box_qp, gram_blocks, pose_gauss_newton,
+                                      project_basis, rig_normal, rig_solve, targets_normal)
 
 
 def test_box_qp_matches_scipy_bounded_least_squares():
@@ -37,6 +38,133 @@ def test_pose_gauss_newton_recovers_a_pose():
     est = pose_gauss_newton(X, [(p, np.ones(68))], start, 100.0, iterations=15)
     np.testing.assert_allclose(est.rotation, true.rotation, atol=1e-8)
     assert est.scale == pytest.approx(12.0, rel=1e-9)
+
+
+def _random_targets(rng, n, T=2):
+    """``T`` weighted target sets over ``n`` points, with zero weights and unknown points."""
+    p = rng.normal(size=(T, n, 2)) * 40 + 200
+    w = rng.uniform(0.2, 3.0, (T, n))
+    w[:, rng.choice(n, n // 5, replace=False)] = 0.0
+    p[0, :3] = np.nan                                   # unknown points: weight 0 below
+    w[0, :3] = 0.0
+    return [(p[t], w[t]) for t in range(T)]
+
+
+def _pose_gauss_newton_direct(X, targets, pose, iod, iterations, damping=1e-6):
+    """Eq. (7) Gauss-Newton written out with camera.pose_jacobian and camera.compose."""
+    for _ in range(iterations):
+        J = pose_jacobian(X @ pose.rotation.T, pose.scale).reshape(-1, 6)
+        q = project(X, pose.rotation, pose.scale, pose.translation)
+        A, b = damping * np.eye(6), np.zeros(6)
+        for p, w in targets:
+            Jw = J * (np.repeat(w, 2) / iod ** 2)[:, None]
+            A += Jw.T @ J
+            b += Jw.T @ np.nan_to_num(p - q).ravel()
+        d = np.linalg.solve(A, b)
+        d[:4] = np.clip(d[:4], -0.3, 0.3)
+        pose = compose(pose, d)
+    return pose
+
+
+@pytest.mark.parametrize("iterations", [1, 3])
+def test_pose_gauss_newton_matches_the_direct_steps(iterations):
+    rng = np.random.default_rng(2)
+    X = rng.normal(size=(80, 3)) * 5
+    targets = _random_targets(rng, 80)
+    start = Pose(so3_exp(rng.normal(size=3) * 0.3), 2.5, np.array([200.0, 190.0]))
+    est = pose_gauss_newton(X, targets, start, 37.0, iterations=iterations)
+    ref = _pose_gauss_newton_direct(X, targets, start, 37.0, iterations)
+    np.testing.assert_allclose(est.rotation, ref.rotation, atol=1e-12)
+    assert est.scale == pytest.approx(ref.scale, rel=1e-12)
+    np.testing.assert_allclose(est.translation, ref.translation, atol=1e-10)
+    np.testing.assert_allclose(est.rotation @ est.rotation.T, np.eye(3), atol=1e-14)
+    big = pose_gauss_newton(X, targets, start, 0.01, iterations=1)   # clipped steps (±0.3)
+    assert big.scale == pytest.approx(_pose_gauss_newton_direct(X, targets, start, 0.01, 1).scale,
+                                      rel=1e-12)
+
+
+def test_targets_stack_zeroes_unknown_points():
+    rng = np.random.default_rng(3)
+    targets = _random_targets(rng, 20)
+    targets[1][0][7] = np.nan                          # unknown, but weighted: weight set to 0
+    tg = Targets.stack(targets)
+    assert tg.p.shape == (2, 20, 2) and len(tg) == 2 and np.isfinite(tg.p).all()
+    assert tg.w[1, 7] == 0 and (tg.w[0, :3] == 0).all()
+    np.testing.assert_array_equal(tg.nominal, tg.w.sum(0))
+    np.testing.assert_array_equal(Targets.stack(targets, np.ones(20)).nominal, np.ones(20))
+
+
+def test_gram_blocks_are_the_weighted_moments():
+    rng = np.random.default_rng(4)
+    D, w = rng.normal(size=(5, 30, 3)), rng.uniform(0, 2, 30)
+    w[::4] = 0.0
+    C = gram_blocks(D, w)
+    for a in range(3):
+        for b in range(3):
+            np.testing.assert_allclose(C[a, b], np.einsum("p,kp,lp->kl", w, D[..., a], D[..., b]),
+                                       atol=1e-12)
+
+
+@pytest.mark.parametrize("T", [1, 2])
+def test_rig_normal_matches_the_projected_basis(T):
+    """Eq. (9)'s normal equations from the pose-free moments equal the direct product of the
+    projected basis (Eq. (7)), also where the frame's weights differ from the nominal ones."""
+    rng = np.random.default_rng(5)
+    K, n, iod = 11, 60, 23.0
+    D = rng.normal(size=(K, n, 3))
+    targets = _random_targets(rng, n, T)
+    tg = Targets.stack(targets)
+    nominal = rng.uniform(0.2, 3.0, n) * T           # differs from tg.w.sum(0) nearly everywhere
+    pose = Pose(so3_exp(rng.normal(size=3)), 3.7, rng.normal(size=2) * 9)
+    base = rng.normal(size=(n, 2)) * 40 + 200
+    Y = project_basis(D, pose)
+    G0, h0 = targets_normal(Y, base, targets, iod)
+    for nom in (nominal, tg.nominal):
+        G, h = rig_normal(D, gram_blocks(D, nom), nom, pose, tg.p, tg.w, base, iod)
+        np.testing.assert_allclose(G, G0, rtol=1e-11, atol=1e-11 * np.abs(G0).max())
+        np.testing.assert_allclose(h, h0, rtol=1e-11, atol=1e-11 * np.abs(h0).max())
+    np.testing.assert_allclose(G, G.T, atol=1e-12 * np.abs(G0).max())
+
+
+def test_rig_solve_is_the_box_qp_of_the_normal_equations():
+    rng = np.random.default_rng(8)
+    K, n, iod = 9, 40, 17.0
+    D = rng.normal(size=(K, n, 3))
+    tg = Targets.stack(_random_targets(rng, n))
+    pose = Pose(so3_exp(rng.normal(size=3)), 2.2, rng.normal(size=2))
+    base = rng.normal(size=(n, 2)) * 40 + 200
+    nominal = tg.nominal.copy()
+    nominal[:4] += 1.0                                   # four points off their nominal weight
+    tg = Targets(tg.p, tg.w, nominal)
+    blocks = gram_blocks(D, nominal)
+    ridge, rhs = rng.uniform(0.01, 0.1, K), rng.normal(size=K)
+    lo, hi = np.zeros(K), np.ones(K)
+    lo[2] = hi[2] = 0.3                                  # held
+    x0 = rng.uniform(-0.5, 1.5, K)
+    x = rig_solve(D, blocks, pose, tg, base, iod, x0, ridge=ridge, rhs=rhs, lo=lo, hi=hi,
+                  tol=1e-12)
+    G, h = rig_normal(D, blocks, nominal, pose, tg.p, tg.w, base, iod)
+    want = box_qp(G + np.diag(ridge), h + rhs, x0, lo=lo, hi=hi, tol=1e-12)
+    np.testing.assert_allclose(x, want, atol=1e-10)
+    assert x[2] == 0.3 and x.min() >= 0 and x.max() <= 1 and 0 < x.max()
+
+
+def test_sampler_core_gives_the_tracked_points(arkit_model):
+    """The sampler's model synthesises the landmark vertices and MediaPipe's surface points of
+    the full model (Eq. (4) on a core with S applied), and is made once per model and points."""
+    from facetransfer.track.capture import _sampler
+
+    m = arkit_model
+    dense = mediapipe_correspondence(m)
+    rng = np.random.default_rng(6)
+    w = {n: rng.normal(size=(2, r)) for n, r in zip(m.mode_names, m.ranks)}
+    V = m.synthesize(w)                                                  # (2, n, 3)
+    want = np.concatenate([V[:, m.landmarks], dense.sample(V)], axis=1)
+    sampler = _sampler(m, dense)
+    np.testing.assert_allclose(sampler.model.synthesize(w), want, atol=1e-9)
+    np.testing.assert_array_equal(sampler.mp_index, dense.mp_index)
+    np.testing.assert_allclose(_sampler(m).model.synthesize(w), V[:, m.landmarks], atol=1e-9)
+    assert _sampler(m, dense) is sampler and _sampler(m) is not sampler
 
 
 def _synthetic(model, F=60, yaw0=25.0, late=0):

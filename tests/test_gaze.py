@@ -14,7 +14,8 @@ from facetransfer.track.capture import CaptureOptions, capture_detections
 from facetransfer.track.detect import ClipDetections
 from facetransfer.track.gaze import (EYE_RADIUS, GAZE_NAMES, IRIS_INDEX, IRIS_REST, MP_CORNER_INDEX,
                                      MP_LID_INDEX, GazeOptions, usable_iris,
-                                     eye_model, gaze_activations, gaze_angles, project_iris)
+                                     eye_model, frame_gaze_activations, gaze_activations,
+                                     gaze_angles, project_iris)
 
 
 def _face68(rng=None) -> np.ndarray:
@@ -235,3 +236,31 @@ def test_a_closing_eye_leaves_its_lids_to_the_blink(arkit_model):
     assert want["eyeLookDownRight"][0] > 0.4 and want["eyeLookOutLeft"][0] > 0.2
     others = np.setdiff1d(np.arange(shape.size), shape.gaze_k)
     assert np.isnan(held[others]).all() and np.isnan(after[others]).all()
+
+
+def test_frame_gaze_activations_match_the_vectorised_path():
+    """The compiled one-frame path equals eye_model + gaze_angles + gaze_activations (closed
+    eyes, unknown irises, irises off the eyeball's silhouette included)."""
+    rng = np.random.default_rng(7)
+    opt = GazeOptions(horizontal=0.5, vertical=0.4)
+    for trial in range(60):
+        P = _face68(rng)
+        R = rotation_from_euler(*rng.uniform(-35, 35, 3))
+        s, t = rng.uniform(5, 15), rng.normal(size=2) * 50 + 250
+        eyes = eye_model(P)
+        noise = 5.0 if trial % 3 == 0 else 0.05            # 5 px: beyond the silhouette
+        iris = project_iris(eyes, rng.normal(size=(1, 2, 2)) * 0.4, R[None], np.array([s]),
+                            t[None])[0] + rng.normal(size=(2, 2)) * noise
+        if trial % 5 == 0:
+            iris[trial % 2] = np.nan
+        closed = rng.uniform(size=2) < 0.3
+        ang = gaze_angles(eyes, iris[None], R[None], np.array([s]), t[None])
+        free, held = frame_gaze_activations(P, iris, closed, R, s, t, opt)
+        for got, want in ((free, gaze_activations(ang, opt)),
+                          (held, gaze_activations(ang, opt, closed=closed[None]))):
+            want = np.array([want[n][0] for n in GAZE_NAMES])
+            np.testing.assert_array_equal(np.isnan(got), np.isnan(want))
+            # on the silhouette the depth is sqrt(1 - |q|^2) of |q| = 1 up to round-off
+            np.testing.assert_allclose(got, want, atol=1e-6 if noise > 1 else 1e-12)
+    with pytest.raises(ShapeError, match="68"):
+        frame_gaze_activations(P[:60], iris, closed, R, s, t)

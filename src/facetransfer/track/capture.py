@@ -50,8 +50,9 @@ from .camera import Pose, fit_affine_pose
 from .detect import ClipDetections
 from .video_detect import _open, detect_video
 from .fit_checkpoint import SavedFit, fit_key
-from .fit2d import box_qp, pose_gauss_newton, project_basis, targets_normal
-from .gaze import GAZE_NAMES, IRIS_INDEX, eye_model, gaze_activations, gaze_angles, usable_iris
+from .fit2d import (Targets, gram_blocks, pose_gauss_newton, project_basis, rig_solve,
+                    targets_normal)
+from .gaze import GAZE_NAMES, IRIS_INDEX, frame_gaze_activations, usable_iris
 from .init import require_landmarks
 from .landmarks import IBUG_WEIGHTS
 from .options import Progress
@@ -183,32 +184,45 @@ class _State:
 class _Sampler:
     """The tracked points as a multilinear model of their own.
 
-    Points are linear in the vertices (``points = S @ vertices[verts]``, ``S`` ``(P, V)``; rows
+    Points are linear in the vertices (``points = S @ vertices``, ``S`` ``(P, n)`` sparse; rows
     0-67 are the iBUG landmark vertices, then the dense surface points), so applying ``S`` to
     the core once gives a model whose "vertices" are the tracked points: every Eq. (9) basis
-    of the run is then a contraction of a small core.
+    of the run is then a contraction of a small core. :func:`_sampler` keeps the last few.
     """
 
     def __init__(self, model, dense=None) -> None:
+        from scipy.sparse import csr_matrix
+
         from ..model import MultilinearModel
 
         lm = np.asarray(model.landmarks, np.int64)
         tris = np.zeros((0, 3), np.int64) if dense is None else dense.triangles
-        verts, inv = np.unique(np.concatenate([lm, tris.ravel()]), return_inverse=True)
-        from scipy.sparse import csr_matrix
-
-        P = 68 + len(tris)
+        P, n = 68 + len(tris), model.n_vertices
         rows = np.concatenate([np.arange(68), np.repeat(np.arange(68, P), 3)])
-        cols = np.concatenate([inv[:68], inv[68:]])
         vals = np.concatenate([np.ones(68), np.zeros(0) if dense is None else dense.bary.ravel()])
-        S = csr_matrix((vals, (rows, cols)), shape=(P, len(verts)))        # sums duplicates
-        vrows = (3 * verts[:, None] + np.arange(3)).ravel()
-        core = model.core[vrows].reshape(len(verts), -1)                   # (V, 3 r_1 ... r_K)
+        S = csr_matrix((vals, (rows, np.concatenate([lm, tris.ravel()]))), shape=(P, n))
+        core = model.core.reshape(n, -1)       # (n, 3 r_1 ... r_K): a view, rows read where used
         core = np.asarray(S @ core).reshape((3 * P,) + model.core.shape[1:])
         self.model = MultilinearModel(core=core, factors=model.factors,
                                       mode_names=model.mode_names, labels=model.labels,
                                       faces=np.zeros((0, 3), np.int64))
         self.mp_index = None if dense is None else dense.mp_index
+
+
+#: The last samplers made (:func:`_sampler`), by model and dense points.
+_SAMPLERS: dict = {}
+
+
+def _sampler(model, dense=None) -> _Sampler:
+    """``_Sampler(model, dense)``, reused while the model (its content hash) and the dense
+    points are those of one of the last two calls (a sampler is never changed)."""
+    key = (model.content_hash, None if dense is None else
+           (dense.mp_index.tobytes(), dense.triangles.tobytes(), dense.bary.tobytes()))
+    if key not in _SAMPLERS:
+        while len(_SAMPLERS) >= 2:
+            _SAMPLERS.pop(next(iter(_SAMPLERS)))
+        _SAMPLERS[key] = _Sampler(model, dense)
+    return _SAMPLERS[key]
 
 
 class _Shape:
@@ -243,6 +257,9 @@ class _Shape:
             self.gaze_k = np.array([int(np.flatnonzero(self.used == ARKIT_NAMES.index(n))[0])
                                     if ARKIT_NAMES.index(n) in self.used else -1
                                     for n in GAZE_NAMES])                      # (8,) or -1
+            self._flat = (self.D.reshape(self.size, -1), self.N.ravel())      # (K, 3P), (3P,)
+            self._blocks: dict = {}                                            # nominal -> C
+            self._zeros, self._ones = np.zeros(self.size), np.ones(self.size)  # the box
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
             self.precision = {m: p.Q @ p.inv_cov @ p.Q.T for m, p in self.priors.items()}
@@ -264,6 +281,22 @@ class _Shape:
             return np.moveaxis(self.model.mode_basis(mode, weights), 2, 0)
         return np.moveaxis(self.cache.basis(mode, weights), 2, 0)
 
+    def identity_bases(self, X: np.ndarray, identity: np.ndarray) -> np.ndarray:
+        """Eq. (9)'s identity basis for each frame's parameters ``X`` (F, size), the identity
+        entry of the weights being ``identity``: ``(F, r, P, 3)`` (an ARKit model of identity
+        and expression: the expression mode of every frame contracted in one product)."""
+        m = self.model
+        if self.arkit and set(m.mode_names) == {"identity", "expression"}:
+            E = self.weights(X)["expression"]                                  # (F, r_e)
+            B = np.tensordot(E, m.core, axes=([1], [m.mode_index("expression") + 1]))
+            return np.moveaxis(B.reshape(len(E), -1, 3, B.shape[-1]), 3, 1)   # (F, 3P, r)
+        out = []
+        for x in X:
+            w = self.weights(x)
+            w[self.id_name] = identity
+            out.append(self.basis(self.id_name, w))
+        return np.stack(out)
+
     def weights(self, x: np.ndarray) -> dict:
         """Model weights of every per-frame mode for parameters ``x`` ``(..., size)``."""
         if self.arkit:
@@ -275,11 +308,23 @@ class _Shape:
         return out
 
     def points(self, x: np.ndarray) -> np.ndarray:
+        """The tracked points ``(P, 3)`` for parameters ``x`` (ARKit: ``N + Σ_j x_j Δ_j``)."""
         if self.arkit:
-            return self.N + np.tensordot(x, self.D, axes=1)
+            D, N = self._flat
+            return (x @ D + N).reshape(-1, 3)
         return self.cache.shape(self.weights(x)) + self.offset
 
-    def solve(self, pose: Pose, targets: list, iod: float, x: np.ndarray,
+    def blocks(self, nominal: np.ndarray) -> np.ndarray:
+        """``gram_blocks(D, nominal)`` (ARKit), made once per nominal weights (a clip has two:
+        detections alone, detections and flow)."""
+        key = nominal.tobytes()
+        if key not in self._blocks:
+            if len(self._blocks) >= 4:
+                self._blocks.clear()
+            self._blocks[key] = gram_blocks(self.D, nominal)
+        return self._blocks[key]
+
+    def solve(self, pose: Pose, targets: Targets, iod: float, x: np.ndarray,
               prev: np.ndarray | None, fixed: np.ndarray | None = None,
               anchor: np.ndarray | None = None) -> np.ndarray:
         """The per-frame parameters best explaining ``targets`` at ``pose`` (ARKit: the
@@ -288,23 +333,22 @@ class _Shape:
         :mod:`facetransfer.track.scores`)."""
         lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
         if self.arkit:
-            Y = project_basis(self.D, pose)
-            base = pose.project(self.N)
-            G, h = targets_normal(Y, base, targets, iod)
             lam_t = (np.where(self.fast, self.opt.temporal, self.opt.slow_temporal)
                      if prev is not None else 0.0)                           # (K,)
-            G = G + np.diag(lam_p * self.ridge + lam_t + 1e-9)
-            if prev is not None:
-                h = h + lam_t * prev
+            ridge = lam_p * self.ridge + lam_t + 1e-9
+            rhs = lam_t * prev if prev is not None else np.zeros(self.size)
             if anchor is not None:
-                lam_a = np.where(np.isfinite(anchor), self.opt.scores, 0.0)      # (K,)
-                G = G + np.diag(lam_a)
-                h = h + lam_a * np.nan_to_num(anchor)
-            lo, hi = 0.0, 1.0
+                ok = np.isfinite(anchor)
+                lam_a = np.where(ok, self.opt.scores, 0.0)                   # (K,)
+                ridge = ridge + lam_a
+                rhs = rhs + lam_a * np.where(ok, anchor, 0.0)
+            lo, hi = self._zeros, self._ones
             if fixed is not None:
-                lo, hi = np.where(np.isfinite(fixed), fixed, 0.0), np.where(np.isfinite(fixed),
-                                                                            fixed, 1.0)
-            return box_qp(G, h - self.opt.sparsity, x, lo=lo, hi=hi, tol=1e-5)
+                ok = np.isfinite(fixed)
+                lo, hi = np.where(ok, fixed, 0.0), np.where(ok, fixed, 1.0)
+            return rig_solve(self.D, self.blocks(targets.nominal), pose, targets,
+                             pose.project(self.N), iod, x, ridge=ridge,
+                             rhs=rhs - self.opt.sparsity, lo=lo, hi=hi, tol=1e-5)   # Eq. (9)
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
 
     def _solve_modes(self, pose, targets, iod, x, prev, lam_p, lam_t):
@@ -315,7 +359,8 @@ class _Shape:
             if self.id_name:
                 w[self.id_name] = self.identity
             Y = project_basis(self.basis(m, w), pose)                     # Eq. (9)
-            G, h = targets_normal(Y, pose.project(self.offset), targets, iod)
+            G, h = targets_normal(Y, pose.project(self.offset), list(zip(targets.p, targets.w)),
+                                  iod)
             pr, P = self.priors[m], self.precision[m]
             G = G + lam_p * P + (lam_t + 1e-9) * np.eye(len(pr.mean))
             h = h + lam_p * P @ pr.mean
@@ -330,51 +375,53 @@ def _iod(points: np.ndarray) -> float:
     return d if np.isfinite(d) and d > 1.0 else float(np.nanmax(np.ptp(points, axis=0)) / 2)
 
 
-def _residual(shape: _Shape, st_pose: Pose, x: np.ndarray, p: np.ndarray, w: np.ndarray,
-              iod: float) -> float:
-    q = st_pose.project(shape.points(x))
-    r2 = np.nansum((q - p) ** 2, axis=1)
-    return float(np.sqrt(np.sum(w * r2) / max(np.sum(w), 1e-12)) / iod)
+def _residual(X: np.ndarray, st_pose: Pose, p: np.ndarray, w: np.ndarray, iod: float) -> float:
+    """Weighted rms distance (eye distances) of the points ``X`` (P, 3) at ``st_pose`` from
+    ``p`` (P, 2; weights ``w`` 0 where unknown)."""
+    r2 = np.sum((st_pose.project(X) - p) ** 2, axis=1)
+    return float(np.sqrt(np.dot(w, r2) / max(np.sum(w), 1e-12)) / iod)
 
 
-def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple
-                ) -> tuple[np.ndarray, np.ndarray]:
+def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple,
+                X: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The eyeLook* activations from ``gaze`` = (iris centres (2, 2), closed (2,)) at ``pose``
     and the frame's eye corners (:mod:`.gaze`): ``(held in the fit, written after it)``, (K,)
     each, NaN for every other shape. A closed eye's vertical gaze is 0 in the fit (its lids
     are the blink's: eyeLookDown's lid drop would take half the blink) and its bridged value
-    after."""
+    after. ``X`` (P, 3): ``shape.points(x)`` when known."""
     iris, closed = gaze
-    ang = gaze_angles(eye_model(shape.points(x)[:68]), iris[None], pose.rotation[None],
-                      np.array([pose.scale]), pose.translation[None])
-    after_, held_ = gaze_activations(ang), gaze_activations(ang, closed=closed[None])
+    X = shape.points(x) if X is None else X
+    after_, held_ = frame_gaze_activations(X[:68], iris, closed, pose.rotation, pose.scale,
+                                           pose.translation)                 # (8,) each
     held, after = np.full(shape.size, np.nan), np.full(shape.size, np.nan)
-    for n, k in zip(GAZE_NAMES, shape.gaze_k):
-        if k >= 0:
-            after[k] = after_[n][0]
-            held[k] = held_[n][0] if np.isfinite(held_[n][0]) else after[k] * 0.0
+    k = shape.gaze_k >= 0
+    after[shape.gaze_k[k]] = after_[k]
+    held[shape.gaze_k[k]] = np.where(np.isfinite(held_[k]), held_[k], after_[k] * 0.0)
     return held, after
 
 
-def _fit_frame(shape: _Shape, targets: list, iod: float, pose: Pose | None, x: np.ndarray,
+def _fit_frame(shape: _Shape, targets: Targets, iod: float, pose: Pose | None, x: np.ndarray,
                prev: np.ndarray | None, iterations: int, gaze: tuple | None = None,
                anchor: np.ndarray | None = None) -> _State:
-    """Alternate pose (Gauss-Newton) and expression (bounded or prior-weighted LS) for one frame;
-    with ``gaze`` (:func:`_iris`; ARKit models) the eyeLook* activations follow the iris at
-    each pose."""
-    p, w = targets[0]
+    """Alternate pose (Gauss-Newton, Eq. (7)) and expression (bounded or prior-weighted LS,
+    Eq. (9)) for one frame (``targets``: the detections first); with ``gaze`` (:func:`_iris`;
+    ARKit models) the eyeLook* activations follow the iris at each pose."""
+    p, w = targets.p[0], targets.w[0]
+    X = shape.points(x)                                                     # (P, 3)
     if pose is None:
         ok = w > 0
-        pose = fit_affine_pose(shape.points(x)[ok], p[ok])
+        pose = fit_affine_pose(X[ok], p[ok])
     after = None
     for _ in range(iterations):
-        pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
-        held, after = (None, None) if gaze is None else _gaze_fixed(shape, pose, x, gaze)
+        pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
+        held, after = (None, None) if gaze is None else _gaze_fixed(shape, pose, x, gaze, X)
         x = shape.solve(pose, targets, iod, x, prev, held, anchor)
+        X = shape.points(x)
     if after is not None:
         x = np.where(np.isfinite(after), after, x)
-    pose = pose_gauss_newton(shape.points(x), targets, pose, iod, iterations=1)
-    return _State(pose, x, _residual(shape, pose, x, p, w, iod))
+        X = shape.points(x)
+    pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
+    return _State(pose, x, _residual(X, pose, p, w, iod))
 
 
 def _solve_identity(model, shape: _Shape, frames: list, states: list, det: ClipDetections,
@@ -384,11 +431,10 @@ def _solve_identity(model, shape: _Shape, frames: list, states: list, det: ClipD
     r = prior.mean.size
     G = np.zeros((r, r))
     h = np.zeros(r)
-    for i, st in zip(frames, states):
+    bases = shape.identity_bases(np.stack([st.x for st in states]), prior.mean)  # (F, r, P, 3)
+    for i, st, B in zip(frames, states, bases):
         p, w = _detection(det, i, weights)
-        wts = shape.weights(st.x)
-        wts["identity"] = prior.mean
-        Y = project_basis(shape.basis("identity", wts), st.pose)             # (r, P, 2)
+        Y = project_basis(B, st.pose)                                        # (r, P, 2)
         g_, h_ = targets_normal(Y, st.pose.project(shape.offset), [(p, w)], _iod(p))
         G += g_
         h += h_
@@ -406,6 +452,13 @@ class _PointWeights:
     iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
     closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
     anchors: np.ndarray | None = None  # (F, K) mapped detector scores (NaN: none)
+
+    def flow_nominal(self, flow: float) -> np.ndarray:
+        """Summed weights (P,) of the detection and flow terms with every point known (the
+        flow moves the 68 iBUG points only)."""
+        wf = flow * self.w
+        wf[68:] = 0.0
+        return self.w + wf
 
     def anchor(self, i: int) -> np.ndarray | None:
         """Frame ``i``'s mapped scores (K,) for the fit, or None."""
@@ -492,25 +545,28 @@ def _fit_sample(shape: _Shape, det: ClipDetections, frames, weights, opt, states
     for j, i in enumerate(frames):
         p, w = _detection(det, i, weights)
         st = None if states is None else states[j]
-        out.append(_fit_frame(shape, [(p, w)], _iod(p), None if st is None else st.pose,
+        out.append(_fit_frame(shape, Targets.stack([(p, w)], weights.w), _iod(p),
+                              None if st is None else st.pose,
                               shape.x0 if st is None else st.x, None, int(opt.iterations) + 1,
                               _iris(weights, i)))
     return out
 
 
 def _targets(det: ClipDetections, i: int, j: int, prev_q: np.ndarray | None, weights, opt,
-             forward: bool) -> list:
+             forward: bool) -> Targets:
     """Detection term of frame ``i`` and, from its tracked neighbour ``j``, the flow term."""
     p, w = _detection(det, i, weights)
-    out = [(p, w)]
     if opt.flow > 0 and prev_q is not None:
-        d = np.full(p.shape, np.nan)
-        d[:68] = det.flow[i] if forward else -det.flow[j]   # flow[t] moves points of t-1 into t
-        q = prev_q + d
-        wf = np.where(np.isfinite(q).all(1), opt.flow * weights.w, 0.0)
-        if wf.any():
-            out.append((q, wf))
-    return out
+        q = prev_q[:68] + (det.flow[i] if forward else -det.flow[j])  # flow[t]: t-1 into t
+        ok = np.isfinite(q).all(1)
+        if ok.any():
+            P = len(p)
+            pt, wt = np.zeros((2, P, 2)), np.zeros((2, P))
+            pt[0], wt[0] = np.where(w[:, None] > 0, p, 0.0), w
+            pt[1, :68] = np.where(ok[:, None], q, 0.0)
+            wt[1, :68] = np.where(ok, opt.flow * weights.w[:68], 0.0)     # dense points: no flow
+            return Targets(pt, wt, weights.flow_nominal(opt.flow))
+    return Targets.stack([(p, w)], weights.w)
 
 
 def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State | None, weights,
@@ -522,8 +578,9 @@ def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State | N
     prev: _State | None = seed
     prev_i = seed_index if seed is not None else None
     done = done0
+    found = det.found
     for i in order:
-        if not det.found[i]:
+        if not found[i]:
             prev, prev_i = None, None
             done += 1
             if on_frame is not None:
@@ -640,7 +697,7 @@ def _point_weights(det: ClipDetections, model, opt: CaptureOptions
 
         dense = mediapipe_correspondence(model)
         weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
-    sampler = _Sampler(model, dense)
+    sampler = _sampler(model, dense)
     iris = closed = None
     if opt.gaze and is_arkit_model(model) and det.points478 is not None \
             and det.points478.shape[1] > max(IRIS_INDEX):

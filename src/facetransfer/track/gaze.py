@@ -14,6 +14,8 @@ gaze angles:
   -1)``): ``R[:2] d = (F (p - t) / s - R[:2] c) / r`` gives ``R d`` up to the depth component,
   which is the root toward the camera (a visible iris). One closed form per frame and eye,
   vectorised over frames.
+  :func:`frame_gaze_activations` is the same for one frame, compiled (the capture fit asks at
+  every pose step).
 
 The iris sits in front of the eye corners, so on a turned head its 2-D offset from the corners
 moves although the eye does not: the pose takes that out (a naive 2-D offset is biased by about
@@ -42,7 +44,14 @@ from scipy.ndimage import median_filter
 
 from ..errors import ShapeError
 
-__all__ = ["EyeModel", "eye_model", "gaze_angles", "gaze_direction", "project_iris", "usable_iris",
+try:  # numba is a dependency; the fallback keeps the module importable while it compiles
+    from numba import njit
+except ImportError:  # pragma: no cover
+    def njit(*a, **k):
+        return (lambda f: f) if not (a and callable(a[0])) else a[0]
+
+__all__ = ["EyeModel", "eye_model", "gaze_angles", "frame_gaze_activations", "gaze_direction",
+           "project_iris", "usable_iris",
            "GazeOptions", "gaze_activations", "activation_gaze", "GAZE_NAMES", "IRIS_INDEX",
            "CORNER_INDEX"]
 
@@ -342,4 +351,77 @@ def activation_gaze(activations: np.ndarray, options: GazeOptions | None = None)
         outward = col[f"eyeLookOut{eye}"] - col[f"eyeLookIn{eye}"]
         out[:, k, 0] = outward * opt.horizontal * (1.0 if eye == "Left" else -1.0)
         out[:, k, 1] = (col[f"eyeLookUp{eye}"] - col[f"eyeLookDown{eye}"]) * opt.vertical
+    return out
+
+
+def frame_gaze_activations(points68: np.ndarray, iris: np.ndarray, closed: np.ndarray,
+                           R: np.ndarray, s: float, t: np.ndarray,
+                           options: GazeOptions | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """One frame's eyeLook* activations: :func:`eye_model`, :func:`gaze_angles` and
+    :func:`gaze_activations` in one compiled step (the capture fit calls it at every pose step).
+
+    Parameters
+    ----------
+    points68 : (68, 3) float64
+        The tracked face's landmark vertices (only the eye corners are read).
+    iris : (2, 2) float64
+        Iris centres in pixels, :data:`EYES` order; NaN where unknown.
+    closed : (2,) bool
+        Eyes with closed lids (their Up/Down are NaN in ``held``).
+    R : (3, 3), s : float, t : (2,)
+        The head's weak-perspective pose (Eq. (7)).
+    options : GazeOptions
+
+    Returns
+    -------
+    free : (8,) float64
+        ``gaze_activations(angles)`` in :data:`GAZE_NAMES` order.
+    held : (8,) float64
+        ``gaze_activations(angles, closed=closed)`` likewise.
+    """
+    P = np.asarray(points68, np.float64)
+    if P.shape != (68, 3):
+        raise ShapeError(f"frame_gaze_activations needs (68, 3) landmark vertices, got {P.shape}")
+    opt = options or GazeOptions()
+    corners = np.ascontiguousarray(P[np.array(CORNER_INDEX)])              # (eye, o/i, 3)
+    out = _frame_gaze(corners, np.ascontiguousarray(iris, np.float64),
+                      np.asarray(closed, np.bool_), np.ascontiguousarray(R, np.float64),
+                      float(s), np.ascontiguousarray(t, np.float64),
+                      np.asarray(IRIS_REST, np.float64), float(EYE_RADIUS),
+                      float(opt.horizontal), float(opt.vertical))
+    return out[0], out[1]
+
+
+@njit(cache=True)
+def _frame_gaze(corners, iris, closed, R, s, t, rest, radius, horizontal,
+                vertical):  # pragma: no cover (compiled)
+    """The per-frame body of eye_model, gaze_angles and gaze_activations: (2, 8) free, held."""
+    out = np.full((2, 8), np.nan)
+    for k in range(2):                                    # EYES: Right, Left
+        sign = 1.0 if k == 1 else -1.0
+        o, i = corners[k, 0], corners[k, 1]
+        dc = o - i
+        ks = np.sqrt(np.sum(dc * dc)) / FACEKIT_EYE_WIDTH
+        centre = (o + i) / 2 + rest * ks * np.array([sign, 1.0, 1.0])     # eye_model
+        centre[2] -= radius * ks
+        q0 = (iris[k, 0] - t[0]) / s
+        q1 = -((iris[k, 1] - t[1]) / s)                                   # F^-1 = F
+        r = radius * ks
+        q0 = (q0 - (R[0, 0] * centre[0] + R[0, 1] * centre[1] + R[0, 2] * centre[2])) / r
+        q1 = (q1 - (R[1, 0] * centre[0] + R[1, 1] * centre[1] + R[1, 2] * centre[2])) / r
+        n = np.sqrt(q0 * q0 + q1 * q1)
+        if n > 1.0:
+            q0, q1 = q0 / max(n, 1e-300), q1 / max(n, 1e-300)
+        ez = np.sqrt(max(1.0 - (q0 * q0 + q1 * q1), 0.0)) if np.isfinite(n) else np.nan
+        d0 = R[0, 0] * q0 + R[1, 0] * q1 + R[2, 0] * ez                    # Rᵀ e
+        d1 = R[0, 1] * q0 + R[1, 1] * q1 + R[2, 1] * ez
+        d2 = R[0, 2] * q0 + R[1, 2] * q1 + R[2, 2] * ez
+        h = np.arctan2(d0, d2) / horizontal * sign                        # + = outward
+        v = np.arctan2(d1, np.hypot(d0, d2)) / vertical
+        col = 4 * (1 - k)                                                 # GAZE_NAMES: Left first
+        for row in range(2):
+            vv = np.nan if (row == 1 and closed[k]) else v
+            for j, x in enumerate((-vv, -h, h, vv)):                      # Down, In, Out, Up
+                if np.isfinite(x):
+                    out[row, col + j] = min(max(x, 0.0), 1.0)
     return out
