@@ -839,7 +839,9 @@ def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
         w[shape.id_name] = np.tile(shape.identity, (F, 1))
     res = np.array([s_.residual for s_ in full])
     conf = np.where(lost, 0.0, np.clip(1.0 - res / 0.15, 0.0, 1.0))
-    Xl = model.synthesize(w, vertices=model.landmarks)                  # (F, 68, 3)
+    # the tracked landmarks: the model's landmark vertices plus the clip's static offset (rows
+    # 0-67 of the tracked points), as the fit placed them on the detections
+    Xl = model.synthesize(w, vertices=model.landmarks) + shape.offset[:68]  # (F, 68, 3)
     Y = np.einsum("fij,fnj->fni", R[:, :2], Xl) * s[:, None, None]
     Y[..., 1] *= -1
     L = Y + t[:, None, :]

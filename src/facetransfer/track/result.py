@@ -16,7 +16,7 @@ key                 shape / dtype        meaning
 ``scale``           (F,) float64         pixels per model unit per frame
 ``translation``     (F, 2) float64       pixel position of the model origin per frame
 ``weights_<mode>``  (F, r_mode) float64  attribute weights of each mode per frame
-``landmarks2d``     (F, 68, 2) float64   pixel positions of the model's 68 landmark vertices
+``landmarks2d``     (F, 68, 2) float64   pixel positions of the 68 tracked landmarks
 ``confidence``      (F,) float64         tracking confidence in [0, 1]
 ``lost``            (F,) bool            frames where the face was lost (pose held/re-initialised)
 ``model_hash``      () str               :attr:`MultilinearModel.content_hash` of the model used
@@ -60,7 +60,8 @@ class Track:
     weights : dict mode name -> (F, r) float64
         The identity (constant mode) has the same row on every frame.
     landmarks2d : (F, 68, 2) float64
-        Pixel positions of the model's iBUG-68 landmark vertices.
+        Pixel positions of the iBUG-68 landmarks: the model's landmark vertices, plus the
+        clip's static 3-D offset in a capture track (:mod:`facetransfer.track.capture`).
     confidence : (F,) float64 in [0, 1]
     lost : (F,) bool
     model_hash : str
