@@ -156,12 +156,16 @@ def test_bad_outputs(tmp_path, out, match):
 
 
 def test_preset_reaches_x264(tmp_path):
-    # x264 writes its settings into the stream: subme 7 is medium's, subme 2 veryfast's
+    # x264 writes its settings into the stream: subme 7 is medium's, 4 faster's (the
+    # default), 2 veryfast's
     fast = encode_video(tmp_path / "f.mp4", smooth_frames(n=3), 25,
                         options=VideoOptions(preset="veryfast")).path
     assert b"subme=2 " in fast.read_bytes()
-    slow = encode_video(tmp_path / "m.mp4", smooth_frames(n=3), 25).path
+    slow = encode_video(tmp_path / "m.mp4", smooth_frames(n=3), 25,
+                        options=VideoOptions(preset="medium")).path
     assert b"subme=7 " in slow.read_bytes()
+    default = encode_video(tmp_path / "d.mp4", smooth_frames(n=3), 25).path
+    assert b"subme=4 " in default.read_bytes()
 
 
 @pytest.mark.parametrize("kw,match", [({"crf": 52}, "0 to 51"), ({"crf": -1}, "0 to 51"),

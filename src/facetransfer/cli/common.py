@@ -28,8 +28,9 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video") ->
                    help=f"constant rate factor of h264/h265, {CRF_RANGE[0]} (best) to "
                    f"{CRF_RANGE[1]}; default {DEFAULT_CRF}")
     p.add_argument("--preset", choices=PRESETS, default=DEFAULT_PRESET, metavar="PRESET",
-                   help="x264/x265 speed preset, ultrafast ... veryslow: veryfast costs less "
-                   "than half the CPU of medium for slightly less quality at the same CRF")
+                   help=f"x264/x265 speed preset, ultrafast ... veryslow (default "
+                   f"{DEFAULT_PRESET}): slower ones cost more CPU for slightly better quality "
+                   "at the same CRF (medium: 1.6x the CPU, +0.07 dB)")
 
 
 def video_options(args):
