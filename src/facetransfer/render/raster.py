@@ -275,7 +275,11 @@ def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  #
     ``bary`` (H, W, 3) float32 at every pixel a triangle wins. Returns the bounding box
     ``(x_lo, y_lo, x_hi, y_hi)`` (inclusive) of the pixels written (empty: lo > hi).
 
-    Must stay operation-for-operation equal to :func:`rasterize_reference`.
+    Must stay operation-for-operation equal to :func:`rasterize_reference`. A row of the
+    bounding box is left at its first pixel outside after one inside: the pixels of a row
+    inside a triangle are one run, also in floating point (each edge function is a monotone
+    function of ``px`` along the row, its operations being correctly rounded), so nothing
+    after it is inside.
     """
     bx0, by0, bx1, by1 = W, H, -1, -1
     for f in range(F.shape[0]):
@@ -300,16 +304,21 @@ def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  #
         wrote = False
         for iy in range(int(ymin), int(ymax) + 1):
             py = float(iy)
+            entered = False
             for ix in range(int(xmin), int(xmax) + 1):
                 px = float(ix)
                 w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
                 w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
                 w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
                 if pos:
-                    if w0 < 0 or w1 < 0 or w2 < 0:
-                        continue
-                elif w0 > 0 or w1 > 0 or w2 > 0:
+                    inside = not (w0 < 0 or w1 < 0 or w2 < 0)
+                else:
+                    inside = not (w0 > 0 or w1 > 0 or w2 > 0)
+                if not inside:
+                    if entered:  # past the row's run of inside pixels
+                        break
                     continue
+                entered = True
                 b0 = w0 / area
                 b1 = w1 / area
                 b2 = w2 / area
