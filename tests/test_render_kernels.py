@@ -154,6 +154,32 @@ def test_shown_box_equals_numpy():
     assert x1 <= x0 and y1 <= y0
 
 
+def test_gain_samples_equal_numpy():
+    """The kernel's centring and samples are numpy's (mean of the coordinates, every
+    step-th pixel in row-major order), to the bit."""
+    rng = np.random.default_rng(11)
+    H, W = 70, 90
+    face = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    part = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    where = _blobs(rng, (H, W), smooth=4.0, level=0.5)
+    ys, xs = np.nonzero(where)
+    cy, cx = ys.mean(), xs.mean()
+    scale = float(max(np.ptp(ys), np.ptp(xs), 1))
+    step = -(-ys.size // 500)
+    ys, xs = ys[::step], xs[::step]
+    pts = cv2.findNonZero(where.view(np.uint8)).reshape(-1, 2)
+    k = ys.size
+    u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
+    eyes._gain_samples(pts, face, part, 500, eyes._LOG1P_U8, u, v, r, centre)
+    np.testing.assert_array_equal(centre, [cx, cy, scale])
+    np.testing.assert_array_equal(u, (xs - cx) / scale)
+    np.testing.assert_array_equal(v, (ys - cy) / scale)
+    np.testing.assert_array_equal(r, np.log1p(face[ys, xs].astype(np.float64))
+                                  - np.log1p(part[ys, xs].astype(np.float64)))
+    with pytest.raises(ValueError, match="empty mask"):
+        eyes.gain_field(face, part, np.zeros((H, W), bool))
+
+
 def _harmonic_disc():
     """A disc (128², radius 40), the target a harmonic function of (x, y) per channel (its
     exact Poisson answer with a flat source is the target itself) and a flat source."""

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
-from .composite import _blend_paste, _feather_alpha, _nonzero
+from .composite import _blend_paste, _feather_alpha
 from .errors import RewriteError
 from .render import Raster, shade_texture
 from .render.raster import _maybe_njit
@@ -807,19 +807,56 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
     """The fit of :func:`gain_field` as its separable factors over ``box = (x0, y0, x1, y1)``:
     ``gy (y1 - y0, 3)`` and ``gx (x1 - x0, 3)`` float64, the unclipped gain at pixel ``(x, y)``
     being ``gy[y - y0] * gx[x - x0]``."""
-    ys, xs = _nonzero(where)
-    cy, cx = ys.mean(), xs.mean()
-    scale = float(max(np.ptp(ys), np.ptp(xs), 1))
-    step = max(1, -(-ys.size // int(max_samples)))
-    ys, xs = ys[::step], xs[::step]
-    r = _LOG1P_U8[face[ys, xs]] - _LOG1P_U8[part[ys, xs]]                         # (k, 3)
+    import cv2
+
+    pts = cv2.findNonZero(np.ascontiguousarray(where).view(np.uint8))  # (n, 1, 2): (x, y)
+    if pts is None:
+        raise RewriteError("the gain fit needs at least one pixel, got an empty mask")
+    n = pts.shape[0]
+    k = -(-n // max(1, -(-n // int(max_samples))))  # the samples: every step-th pixel
+    u, v, r = np.empty(k), np.empty(k), np.empty((k, 3))
+    centre = np.empty(3)
+    _gain_samples(pts.reshape(n, 2), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
+    cx, cy, scale = centre
     coef = np.empty((3, 3))
-    _plane_l1_kernel((xs - cx) / scale, (ys - cy) / scale, r, int(iterations), coef)
+    _plane_l1_kernel(u, v, r, int(iterations), coef)
     x0, y0, x1, y1 = box
     # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns
     gx = np.exp(((np.arange(x0, x1) - cx) / scale)[:, None] * coef[1])         # (w, c)
     gy = np.exp(coef[0] + ((np.arange(y0, y1) - cy) / scale)[:, None] * coef[2])  # (h, c)
     return gy, gx
+
+
+def _gain_samples_py(pts, face, part, max_samples, lut, u, v, r, centre):  # pragma: no cover
+    """The samples of :func:`gain_field`'s fit from the pixels ``pts`` (n, 2) int32 ``(x, y)``
+    in row-major order (``cv2.findNonZero``; numba): ``centre = (cx, cy, scale)``, the pixels'
+    mean position and the larger extent of their rows and columns (at least 1); for every
+    ``step``-th pixel (``step = ceil(n / max_samples)``) the centred, scaled coordinates
+    ``u = (x - cx) / scale``, ``v = (y - cy) / scale`` and the log ratios ``r = lut[face] -
+    lut[part]`` (3 channels). The means are the integer sums over ``n`` (as numpy's mean of
+    the coordinates, whose float sums are exact)."""
+    n = pts.shape[0]
+    sx = sy = 0
+    x_lo = x_hi = pts[0, 0]
+    y_lo = y_hi = pts[0, 1]
+    for i in range(n):
+        x, y = pts[i, 0], pts[i, 1]
+        sx += x
+        sy += y
+        x_lo, x_hi = min(x_lo, x), max(x_hi, x)
+        y_lo, y_hi = min(y_lo, y), max(y_hi, y)
+    cx, cy = float(sx) / float(n), float(sy) / float(n)
+    scale = float(max(y_hi - y_lo, x_hi - x_lo, 1))
+    step = max(1, -(-n // max_samples))
+    j = 0
+    for i in range(0, n, step):
+        x, y = np.int64(pts[i, 0]), np.int64(pts[i, 1])
+        u[j] = (x - cx) / scale
+        v[j] = (y - cy) / scale
+        for c in range(3):
+            r[j, c] = lut[face[y, x, c]] - lut[part[y, x, c]]
+        j += 1
+    centre[0], centre[1], centre[2] = cx, cy, scale
 
 
 def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
@@ -877,4 +914,5 @@ def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
 
 
 _apply_gain = _maybe_njit(_apply_gain_py)
+_gain_samples = _maybe_njit(_gain_samples_py)
 _plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)
