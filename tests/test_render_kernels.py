@@ -142,16 +142,15 @@ def test_rejected_equals_the_log_ratio():
     np.testing.assert_allclose(eyes._rejected(f, fb, (lo, hi)), ref, rtol=0, atol=1e-5)
 
 
-def test_shown_box_equals_numpy():
+def test_region_box_is_the_shown_pixels_box_grown():
     rng = np.random.default_rng(5)
-    tid = rng.integers(-1, 50, (30, 40)).astype(np.int32)
-    select = np.zeros(50, bool)
-    select[[3, 17]] = True
-    shown = (tid >= 0) & select[np.maximum(tid, 0)]
+    shown = np.zeros((30, 40), np.uint8)
+    shown[rng.integers(8, 20, 6), rng.integers(10, 30, 6)] = 2  # any nonzero label bit
     ys, xs = np.nonzero(shown)
-    assert eyes._shown_box(tid, select) == (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1)
-    x0, y0, x1, y1 = eyes._shown_box(tid, np.zeros(50, bool))
-    assert x1 <= x0 and y1 <= y0
+    assert eyes._region_box(shown, margin=3) == (xs.min() - 3, ys.min() - 3, xs.max() + 4,
+                                                 ys.max() + 4)
+    assert eyes._region_box(shown, margin=12) == (0, 0, 40, 30)  # clipped to the image
+    assert eyes._region_box(np.zeros((30, 40), np.uint8), margin=3) is None
 
 
 def test_gain_samples_equal_numpy():

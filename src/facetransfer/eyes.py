@@ -34,7 +34,7 @@ import numpy as np
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import _blend_paste, _feather_alpha
 from .errors import RewriteError
-from .render import Raster, shade_texture
+from .render import Raster, shade_layers, shade_texture
 from .render.raster import _maybe_njit
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -594,19 +594,44 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
     (H, W, 3) uint8
         ``face_image`` with the eye region replaced.
     """
+    flags = eye_flags(texture, shown=1, rim=16)
+    (eye_img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
+    return _paint_eyes(raster, faces, vertices, face_image, face_mask, texture, eye_img,
+                       labels, (1, 16), feather=feather)
+
+
+def eye_flags(texture: EyeTexture, *, shown: int, rim: int) -> np.ndarray:
+    """Per triangle of the eye-closed topology, ``(F',) uint8``: the bit ``shown`` on the eye
+    region's triangles (``texture.select``) and ``rim`` on its rim (:attr:`EyeTexture.rim`),
+    for :func:`facetransfer.render.shade_layers`."""
+    flags = np.asarray(texture.select, bool).view(np.uint8) * np.uint8(shown)
+    if texture.rim is not None:
+        flags |= np.asarray(texture.rim, bool).view(np.uint8) * np.uint8(rim)
+    return flags
+
+
+def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeTexture,
+                eye_img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
+                feather: float = 3.0) -> np.ndarray:
+    """:func:`paint_eyes` with the region shaded already: ``eye_img`` (H, W, 3) the eye
+    texture on the region's triangles, ``labels`` (H, W) uint8 of
+    :func:`facetransfer.render.shade_layers` with the bits ``(shown, rim)`` of
+    :func:`eye_flags`."""
     import cv2
 
-    box = _region_box(raster, texture.select, margin=int(np.ceil(4 * LID_SOFTNESS)) + 2)
+    box = _region_box(np.bitwise_and(labels, bits[0]), margin=int(np.ceil(4 * LID_SOFTNESS)) + 2)
     if box is None:
         return face_image
     sl = (slice(box[1], box[3]), slice(box[0], box[2]))
-    raster = Raster(raster.depth[sl], raster.tri_id[sl], raster.bary[sl], raster.mask[sl])
-    eye_img, eye_mask = shade_texture(raster, faces, texture.uvs, texture.image, texture.select)
+    lab = labels[sl]
+    eye_img = eye_img[sl]
+    eye_mask = (lab & bits[0]).view(bool) if bits[0] == 1 else (lab & bits[0]) != 0
     eye_mask &= face_mask[sl]
     if not eye_mask.any():
         return face_image
     a = texture.closing(vertices)
     if a.max() > 0:
+        raster = Raster(raster.depth[sl], raster.tri_id[sl], raster.bary[sl], raster.mask[sl])
         closed_img, _ = shade_texture(raster, faces, texture.closed_uvs, texture.closed_image,
                                       texture.select)
         t = np.where(raster.tri_id >= 0, texture.side[np.maximum(raster.tri_id, 0)], -1)
@@ -616,45 +641,28 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
         eye_img = np.rint((1 - w) * eye_img + w * closed_img).astype(np.uint8)
     rim = None
     if texture.rim is not None and texture.rim.any():
-        rim = eye_mask & texture.rim[np.maximum(raster.tri_id, 0)]  # eye_mask: shown pixels
+        rim = eye_mask & ((lab & bits[1]) != 0)  # eye_mask: shown pixels
     out = face_image.copy()
     out[sl] = match_outline(face_image[sl], eye_img, eye_mask, face_mask[sl], feather=feather,
                             reject=None if rim is None else REJECT, reject_where=rim)
     return out
 
 
-def _region_box(raster, select: np.ndarray, *, margin: int) -> tuple[int, int, int, int] | None:
-    """``(x0, y0, x1, y1)`` of the pixels showing a ``select`` triangle, grown by ``margin``
-    and clipped to the raster; None when none shows.
+def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] | None:
+    """``(x0, y0, x1, y1)`` of the nonzero pixels of ``shown`` (H, W) uint8 (those showing
+    the region), grown by ``margin`` and clipped to the image; None when none shows.
 
     The margin covers every filter :func:`paint_eyes` applies (the lids' blur reaches
     ``4·LID_SOFTNESS``; the outline's erosion 2 px; the feather's distance transform sees a
     zero pixel at the box's edge), so working on the box gives the same pixels as the whole
     raster."""
-    tid = np.ascontiguousarray(raster.tri_id)
-    x, y, x1, y1 = _shown_box(tid, np.ascontiguousarray(select, dtype=bool))
-    w, h = x1 - x, y1 - y
+    import cv2
+
+    x, y, w, h = cv2.boundingRect(np.ascontiguousarray(shown))
     if w <= 0 or h <= 0:
         return None
-    H, W = tid.shape
+    H, W = shown.shape
     return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, W), min(y + h + margin, H)
-
-
-def _shown_box_py(tid, select):  # pragma: no cover (numba)
-    """``(x0, y0, x1, y1)`` (end exclusive; empty: x1 <= x0) of the pixels of ``tid`` (H, W)
-    showing a ``select`` (F,) triangle."""
-    H, W = tid.shape
-    x0, y0, x1, y1 = W, H, 0, 0
-    for y in range(H):
-        for x in range(W):
-            f = tid[y, x]
-            if f >= 0 and select[f]:
-                x0, x1 = min(x0, x), max(x1, x + 1)
-                y0, y1 = min(y0, y), max(y1, y + 1)
-    return x0, y0, x1, y1
-
-
-_shown_box = _maybe_njit(_shown_box_py)
 
 
 def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,

@@ -49,12 +49,13 @@ import numpy as np
 from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend
 from .errors import RewriteError, ShapeError
-from .eyes import EyeTexture, eye_texture, paint_eyes
-from .jaw import JawTexture, jaw_texture, paint_jaw
+from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
+from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
 from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
+from .render import shade_layers
 from .rewrite_options import BLEND_MODES, RewriteOptions, check_mode
 from .topology import MeshTopology, close_mouth, mesh_topology
 
@@ -234,22 +235,10 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
     from .render import rasterize
 
-    H, W = T.shape[:2]
-    raster = rasterize(V, topo.faces, camera, (W, H))
-    face_img, face_mask = _shade(raster, topo.faces, face_texture.uvs, face_texture.image)
-    if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
-        face_img = paint_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture)
-    if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
-        face_img = paint_jaw(raster, topo.faces, face_img, face_mask, jaw_texture)
-    mouth_mask = np.zeros((H, W), bool)
-    rendered = face_img
-    mouth_img = None
-    if mouth_texture is not None and topo.mouth_faces.size:
-        sel = np.zeros(topo.faces.shape[0], bool)
-        sel[topo.mouth_faces] = True
-        mouth_img, mouth_mask = _shade(raster, topo.faces, mouth_texture.uvs, mouth_texture.image,
-                                       sel)
-        rendered = _over(face_img, mouth_img, mouth_mask)
+    raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
+    face_img, face_mask, mouth_img, mouth_mask = _shade_frame(
+        raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture)
+    rendered = face_img if mouth_img is None else _over(face_img, mouth_img, mouth_mask)
     if not face_mask.any():
         return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask)
     # The blend region stays ``erode`` pixels inside the rendered silhouette, so its outline
@@ -295,16 +284,55 @@ def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def _shade(raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,
-           select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Texture the pixels of a raster: ``(image (H, W, 3) uint8, mask (H, W) bool)``.
+#: The layers of one frame's shading (bits of :func:`facetransfer.render.shade_layers`' flags):
+#: the face texture (every triangle), the eye region's, the jaw region's (and its ring), the
+#: source's mouth; and labels: the eye region's rim, the jaw region, the jaw region's ring.
+_FACE, _EYES, _JAW, _MOUTH = 1, 2, 4, 8
+_RIM, _JAW_REGION, _JAW_RING = 16, 32, 64
 
-    ``select`` (F',) bool restricts to some triangles (the rest stay black, outside the mask).
-    One pass of :func:`facetransfer.render.shade_texture`.
+
+def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTexture,
+                 mouth_texture: FaceTexture | None, eye_texture: EyeTexture | None,
+                 jaw_texture: JawTexture | None):
+    """The new face textured at one frame (§6): every texture it takes sampled in one pass
+    over the raster (:func:`facetransfer.render.shade_layers`), then the eye and jaw regions
+    pasted into the face (:func:`facetransfer.eyes.paint_eyes`,
+    :func:`facetransfer.jaw.paint_jaw`).
+
+    Returns
+    -------
+    face_img : (H, W, 3) uint8
+        The face texture, eye and jaw regions painted (black outside ``face_mask``).
+    face_mask : (H, W) bool
+        The pixels the mesh covers.
+    mouth_img : (H, W, 3) uint8 or None
+        The source's mouth on the mouth's triangles; None without a mouth texture.
+    mouth_mask : (H, W) bool
     """
-    from .render import shade_texture
-
-    return shade_texture(raster, faces, uvs, np.asarray(texture, np.uint8), select)
+    flags = np.full(topo.faces.shape[0], _FACE, np.uint8)
+    layers = [(face_texture.uvs, np.asarray(face_texture.image, np.uint8)), None, None, None]
+    if eye_texture is not None:
+        flags |= eye_flags(eye_texture, shown=_EYES, rim=_RIM)
+        layers[1] = (eye_texture.uvs, eye_texture.image)
+    if jaw_texture is not None:
+        flags |= jaw_flags(jaw_texture, shaded=_JAW, region=_JAW_REGION, ring=_JAW_RING)
+        layers[2] = (jaw_texture.uvs, jaw_texture.image)
+    with_mouth = mouth_texture is not None and topo.mouth_faces.size > 0
+    if with_mouth:
+        flags[topo.mouth_faces] |= _MOUTH
+        layers[3] = (mouth_texture.uvs, np.asarray(mouth_texture.image, np.uint8))
+    (face_img, eye_img, jaw_img, mouth_img), labels = shade_layers(raster, topo.faces, layers,
+                                                                   flags)
+    face_mask = labels != 0  # every covered pixel has the face's bit
+    if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
+        face_img = _paint_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture, eye_img,
+                               labels, (_EYES, _RIM))
+    if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
+        face_img = _paint_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
+                              (_JAW_REGION, _JAW_RING))
+    mouth_mask = np.bitwise_and(labels, _MOUTH) != 0 if with_mouth else \
+        np.zeros(labels.shape, bool)
+    return face_img, face_mask, mouth_img, mouth_mask
 
 
 # ---------------------------------------------------------------------------------------------

@@ -33,8 +33,15 @@ except ImportError:  # pragma: no cover
 __all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference"]
 
 
-def _maybe_njit(fn):
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn) if _HAVE_NUMBA else fn
+def _maybe_njit(fn, *, inline: bool = False):
+    """``fn`` compiled by numba (cached, no GIL, numpy's error model). ``inline``: inlined
+    into the kernels that call it, at numba's IR level (a cached kernel is its own LLVM
+    module, so LLVM does not inline across kernels: a small helper called per pixel would
+    otherwise cost a call with every array argument spilled to the stack)."""
+    if not _HAVE_NUMBA:
+        return fn
+    return numba.njit(cache=True, nogil=True, error_model="numpy",
+                      inline="always" if inline else "never")(fn)
 
 
 class RenderError(MeshError):
