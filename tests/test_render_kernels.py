@@ -234,3 +234,23 @@ def test_shade_texture_refuses_a_raster_of_more_triangles():
     tid[2, 3] = 1
     img, mask = shade_texture(r, F, uvs, tex)
     assert mask.sum() == 1 and mask[2, 3]
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (2, 3), (5, 1), (13, 9), (64, 33), (101, 150)])
+def test_push_pull_points_equal_fill_holes(shape):
+    """The sparse finest pull gives fill_holes' texels to the bit."""
+    from facetransfer.texture.merge import push_pull_points
+
+    rng = np.random.default_rng(shape[0] * 7 + shape[1])
+    known = rng.random(shape) < 0.1
+    known.flat[-1] = True
+    ry, rx = np.nonzero(known)
+    vals = rng.normal(0, 40, (ry.size, 3)).astype(np.float32)
+    vals[0] = -0.0  # a negative zero sums as the dense kernel's
+    d = np.zeros(shape + (3,), np.float32)
+    d[ry, rx] = vals
+    np.testing.assert_array_equal(push_pull_points(shape, ry, rx, vals), fill_holes(d, known))
+    every = np.nonzero(np.ones(shape, bool))  # every pixel known: nothing to fill
+    full = rng.normal(0, 1, (every[0].size, 3)).astype(np.float32)
+    np.testing.assert_array_equal(push_pull_points(shape, *every, full),
+                                  full.reshape(shape + (3,)))

@@ -680,14 +680,14 @@ def _membrane(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None
               smooth_iterations: int) -> np.ndarray:
     """The membrane ``h`` (h, w, 3) float32 of :func:`membrane_blend`: ``t - s`` on the outline
     of ``m`` (:func:`_outline`), interpolated inside by push-pull
-    (:func:`facetransfer.texture.fill_holes`) and ``smooth_iterations`` Jacobi sweeps of
-    Laplace's equation."""
-    from .texture import fill_holes
+    (:func:`facetransfer.texture.fill_holes`, from the outline's pixels:
+    :func:`facetransfer.texture.merge.push_pull_points`) and ``smooth_iterations`` Jacobi
+    sweeps of Laplace's equation."""
+    from .texture.merge import push_pull_points
 
     ring, interior, ry, rx, dr = _outline(m, t, s, outlier)
-    d = np.zeros(t.shape, np.float32)
-    d[ry, rx] = dr
-    h = fill_holes(d, ring)  # (h, w, 3): the membrane, = target - source on the outline
+    # (h, w, 3): the membrane, = target - source on the outline (fill_holes of the outline)
+    h = push_pull_points(m.shape, ry, rx, dr)
     # Jacobi sweeps of Laplace's equation (the mean of the 4 neighbours, one 3x3 filter per
     # sweep) smooth the push-pull result towards harmonic; the outline keeps its values
     h = np.ascontiguousarray(h, dtype=np.float32)
