@@ -116,6 +116,26 @@ def test_mesh_topology_finds_mouth_and_eyes(quick_model, topo):
         topology.close_mouth(V[:10], topo)
 
 
+def test_inside_polygon_equals_matplotlib():
+    """The lips' polygon test decides as matplotlib's Path.contains_points, vertices and
+    edge midpoints included."""
+    from matplotlib.path import Path
+
+    rng = np.random.default_rng(12)
+    for t in range(30):
+        k = int(rng.integers(3, 14))
+        ang = np.sort(rng.random(k)) * 2 * np.pi
+        poly = np.stack([np.cos(ang), np.sin(ang)], 1) * rng.uniform(0.3, 1, (k, 1))
+        if t % 3 == 0:  # self-intersecting
+            poly = rng.normal(size=(k, 2))
+        pts = rng.uniform(-1.2, 1.2, (500, 2))
+        pts[:k] = poly
+        pts[k:2 * k] = (poly + np.roll(poly, -1, 0)) / 2
+        got = topology.inside_polygon(poly, pts)
+        np.testing.assert_array_equal(got, Path(poly).contains_points(pts))
+        assert 0 < got.sum() < 500
+
+
 # --------------------------------------------------------------------------------- blending
 def test_membrane_blend_outside_exact_and_recovers_offset():
     yy, xx = np.mgrid[0:60, 0:70]

@@ -544,12 +544,14 @@ def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray) -> np.ndarray:
     """The region's triangles ``(F',) bool`` whose vertices all lie farther than
     :data:`RIM_DISTANCE` from the brow and lid-margin landmarks (iBUG 17-26, 36-47) of the
     closed mesh ``V`` (n_closed, 3)."""
-    from scipy.spatial import cKDTree
-
     lm = np.asarray(model.landmarks, np.int64)
-    core = np.concatenate([lm[17:27], lm[36:48]])
-    d, _ = cKDTree(V[core]).query(V, k=1)
-    far = d > RIM_DISTANCE
+    core = V[np.concatenate([lm[17:27], lm[36:48]])]
+    # the nearest of the 22 landmarks by brute force (a k-d tree is no faster for 22 points,
+    # and importing scipy.spatial costs 0.1 s)
+    d2 = np.full(V.shape[0], np.inf)
+    for c in core:
+        np.minimum(d2, ((V - c) ** 2).sum(axis=1), out=d2)
+    far = np.sqrt(d2) > RIM_DISTANCE
     return select & far[closed.faces].all(axis=1)
 
 
