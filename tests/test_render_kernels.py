@@ -254,3 +254,23 @@ def test_push_pull_points_equal_fill_holes(shape):
     full = rng.normal(0, 1, (every[0].size, 3)).astype(np.float32)
     np.testing.assert_array_equal(push_pull_points(shape, *every, full),
                                   full.reshape(shape + (3,)))
+
+
+def test_reject_kernel_equals_the_quotients_at_the_ramp_edge():
+    """The division-free test for pixels below the ramp decides as the quotients do, also for
+    ratios within a few ulps of exp(lo)."""
+    rng = np.random.default_rng(13)
+    lo, span = 0.5, 0.4
+    fb = rng.integers(0, 256, (60, 50, 3)).astype(np.uint8)
+    q = np.exp(lo) * (1.0 + rng.integers(-4, 5, (60, 50, 3)) * 2.0 ** -52)
+    q[:20] = rng.uniform(0.5, 2.0, (20, 50, 3))  # and ratios anywhere
+    f = ((1.0 + fb) * np.where(rng.random((60, 50, 3)) < 0.5, q, 1 / q) - 1.0)
+    f = np.maximum(f, 0).astype(np.float32)
+    u, v = 1.0 + f.astype(np.float64), 1.0 + fb
+    ratio = np.maximum(np.maximum(u, v) / np.minimum(u, v), 1.0).max(axis=-1)
+    want = np.where(ratio <= np.exp(lo), 0.0,
+                    np.where(ratio >= np.exp(lo + span), 1.0, (np.log(ratio) - lo) / span))
+    r = np.empty((60, 50), np.float32)
+    eyes._reject_kernel(f, fb, lo, span, r)
+    np.testing.assert_array_equal(r, want.astype(np.float32))
+    assert 0 < (r == 0).mean() < 1

@@ -223,10 +223,7 @@ def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int
 
 def _shift_camera(camera, x0: int, y0: int):
     """The camera of the crop whose top-left pixel is ``(x0, y0)`` of the frame."""
-    import dataclasses
-
-    t = np.asarray(camera.translation, np.float64) - np.array([x0, y0], np.float64)
-    return dataclasses.replace(camera, translation=t)
+    return camera.shifted(float(x0), float(y0))
 
 
 def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
