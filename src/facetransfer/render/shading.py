@@ -118,11 +118,16 @@ def _texel_py(tex, u, v):  # pragma: no cover (numba)
 _texel = _maybe_njit(_texel_py)
 
 
+#: The 256 values of a uint8 as float64 (a texel's conversion as a table look-up, in L1)
+_U8_AS_FLOAT = np.arange(256, dtype=np.float64)
+
+
 def _shade_pixel_py(tex, uvs, i0, i1, i2, b0, b1, b2, image, iy, ix):  # pragma: no cover
     """``image[iy, ix]`` = the bilinear sample of ``tex`` (Ht, Wt, 3) uint8 at the barycentric
     interpolation ``b0 uvs[i0] + b1 uvs[i1] + b2 uvs[i2]``, rounded and clipped to 0..255: the
     arithmetic of :func:`_texel` (hence of :func:`sample_texture`), the texels addressed by
-    unsigned indices (clamped to the image already: no negative-index wrapping) (numba)."""
+    unsigned indices (clamped to the image already: no negative-index wrapping) and converted
+    by :data:`_U8_AS_FLOAT` (numba, inlined)."""
     Ht, Wt = tex.shape[0], tex.shape[1]
     u = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
     v = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
@@ -137,10 +142,11 @@ def _shade_pixel_py(tex, uvs, i0, i1, i2, b0, b1, b2, image, iy, ix):  # pragma:
     gu = 1.0 - fu
     gv = 1.0 - fv
     a0, a1, d0, d1 = np.uint64(r0), np.uint64(r1), np.uint64(c0), np.uint64(c1)
+    lut = _U8_AS_FLOAT
     for k in range(3):
         kk = np.uint64(k)
-        c = (tex[a0, d0, kk] * gu + tex[a0, d1, kk] * fu) * gv \
-            + (tex[a1, d0, kk] * gu + tex[a1, d1, kk] * fu) * fv
+        c = (lut[tex[a0, d0, kk]] * gu + lut[tex[a0, d1, kk]] * fu) * gv \
+            + (lut[tex[a1, d0, kk]] * gu + lut[tex[a1, d1, kk]] * fu) * fv
         image[iy, ix, k] = min(max(np.rint(c), 0.0), 255.0)
 
 
