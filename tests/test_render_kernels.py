@@ -274,3 +274,23 @@ def test_reject_kernel_equals_the_quotients_at_the_ramp_edge():
     eyes._reject_kernel(f, fb, lo, span, r)
     np.testing.assert_array_equal(r, want.astype(np.float32))
     assert 0 < (r == 0).mean() < 1
+
+
+def test_blend_paste_rejected_equals_the_numpy_fade():
+    """The paste with the rejection taken inside equals numpy's r = clip(2 blur, 0, 1),
+    r *= where, a *= 1 - r and the plain paste, bit for bit."""
+    rng = np.random.default_rng(17)
+    h, w = 40, 50
+    m = rng.random((h, w)) < 0.7
+    where = rng.random((h, w)) < 0.5
+    base = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    f = (rng.random((h, w, 3)) * 300).astype(np.float32)
+    a = rng.random((h, w)).astype(np.float32)
+    blur = (rng.random((h, w)) * 0.8).astype(np.float32)
+    out1, out2 = base.copy(), base.copy()
+    eyes._blend_paste_rejected(m, base, f, a, blur, where, out1)
+    r = np.clip(blur * 2.0, 0.0, 1.0)
+    r *= where
+    composite._blend_paste(m, base, f, a * (1.0 - r), out2)
+    np.testing.assert_array_equal(out1, out2)
+    assert (out1 != base).any()

@@ -737,13 +737,12 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     mb = np.ascontiguousarray(mask[box])
     a = _feather_alpha(mb, feather, edge_outside=True)
     fb = np.ascontiguousarray(face[box])
-    if reject is not None:
-        r = _rejected(f, fb, reject)
-        if reject_where is not None:
-            r *= np.ascontiguousarray(reject_where[box])
-        a *= 1.0 - r
     out = face.copy()
-    _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
+    if reject is None:
+        _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
+    else:  # the fade a (1 - r), r = _rejected where reject_where, taken in the paste
+        where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
+        _blend_paste_rejected(mb, fb, f, a, _rejection_blur(f, fb, reject), where, out[box])
     return out
 
 
@@ -753,6 +752,12 @@ def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.
     lies between ``reject = (lo, hi)``, grown by :data:`REJECT_GROW` pixels (the soft edge of
     hair in the reference frame is less unlike the skin than the hair, and would be left as a
     thin grey outline) and smoothed over ~2 pixels."""
+    return np.clip(_rejection_blur(f, fb, reject) * 2.0, 0.0, 1.0)
+
+
+def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
+    """:func:`_rejected` before its last step (``clip(2 b, 0, 1)``): the grown ramp blurred,
+    ``(h, w)`` float32."""
     import cv2
 
     lo, hi = (float(v) for v in reject)
@@ -760,7 +765,26 @@ def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.
     _reject_kernel(f, fb, lo, max(hi - lo, 1e-6), r)
     if REJECT_GROW > 0 and r.any():
         r = cv2.dilate(r, np.ones((2 * REJECT_GROW + 1,) * 2, np.uint8))
-    return np.clip(cv2.GaussianBlur(r, (0, 0), 2.0) * 2.0, 0.0, 1.0)
+    return cv2.GaussianBlur(r, (0, 0), 2.0)
+
+
+def _blend_paste_rejected_py(m, base, f, a, blur, where, out):  # pragma: no cover (numba)
+    """:func:`facetransfer.composite._blend_paste` with the fade ``a (1 - r)``, ``r =
+    clip(2 blur, 0, 1)`` where ``where`` (h, w) bool and 0 elsewhere: match_outline's
+    rejection (:func:`_rejected`) taken in the paste, in float32 as numpy's ``r *= where;
+    a *= 1.0 - r`` were, without three passes of their own."""
+    H, W = m.shape
+    one, zero = np.float32(1.0), np.float32(0.0)
+    for y in range(H):
+        for x in range(W):
+            if not m[y, x]:
+                continue
+            r = min(max(blur[y, x] * np.float32(2.0), zero), one) if where[y, x] else zero
+            ay = a[y, x] * (one - r)
+            for k in range(3):
+                b = np.float32(base[y, x, k])
+                v = np.rint(b + ay * (f[y, x, k] - b))
+                out[y, x, k] = np.uint8(min(max(v, zero), np.float32(255.0)))
 
 
 def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
@@ -949,4 +973,5 @@ def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
 
 _apply_gain = _maybe_njit(_apply_gain_py)
 _gain_samples = _maybe_njit(_gain_samples_py)
+_blend_paste_rejected = _maybe_njit(_blend_paste_rejected_py)
 _plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)
