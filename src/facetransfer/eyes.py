@@ -608,8 +608,8 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
     """
     flags = eye_flags(texture, shown=1, rim=16)
     (eye_img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
-    return _paint_eyes(raster, faces, vertices, face_image, face_mask, texture, eye_img,
-                       labels, (1, 16), feather=feather)
+    return _paint_eyes(raster, faces, vertices, np.array(face_image, copy=True), face_mask,
+                       texture, eye_img, labels, (1, 16), feather=feather)
 
 
 def eye_flags(texture: EyeTexture, *, shown: int, rim: int) -> np.ndarray:
@@ -625,10 +625,10 @@ def eye_flags(texture: EyeTexture, *, shown: int, rim: int) -> np.ndarray:
 def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeTexture,
                 eye_img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
                 feather: float = 3.0) -> np.ndarray:
-    """:func:`paint_eyes` with the region shaded already: ``eye_img`` (H, W, 3) the eye
+    """:func:`paint_eyes` with the region shaded already (``eye_img`` (H, W, 3) the eye
     texture on the region's triangles, ``labels`` (H, W) uint8 of
     :func:`facetransfer.render.shade_layers` with the bits ``(shown, rim)`` of
-    :func:`eye_flags`."""
+    :func:`eye_flags`), painting ``face_image`` in place and returning it."""
     import cv2
 
     box = _region_box(np.bitwise_and(labels, bits[0]), margin=int(np.ceil(4 * LID_SOFTNESS)) + 2)
@@ -654,10 +654,10 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     rim = None
     if texture.rim is not None and texture.rim.any():
         rim = eye_mask & ((lab & bits[1]) != 0)  # eye_mask: shown pixels
-    out = face_image.copy()
-    out[sl] = match_outline(face_image[sl], eye_img, eye_mask, face_mask[sl], feather=feather,
-                            reject=None if rim is None else REJECT, reject_where=rim)
-    return out
+    _match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],
+                        feather=feather, compare=None, reject=None if rim is None else REJECT,
+                        reject_where=rim)
+    return face_image
 
 
 def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] | None:
@@ -715,11 +715,22 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     -------
     (H, W, 3) uint8
     """
+    out = face.copy()
+    _match_outline_into(face, part, mask, face_mask, out, feather=feather, compare=compare,
+                        reject=reject, reject_where=reject_where)
+    return out
+
+
+def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
+                        reject_where) -> None:
+    """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
+    pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
+    the region's pixels are written."""
     import cv2
 
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
-        return face.copy()
+        return
     deep = cv2.erode(face_mask.astype(np.uint8), np.ones((5, 5), np.uint8),
                      borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
     ring = (mask if compare is None else compare) & deep
@@ -737,13 +748,11 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     mb = np.ascontiguousarray(mask[box])
     a = _feather_alpha(mb, feather, edge_outside=True)
     fb = np.ascontiguousarray(face[box])
-    out = face.copy()
     if reject is None:
         _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
     else:  # the fade a (1 - r), r = _rejected where reject_where, taken in the paste
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
         _blend_paste_rejected(mb, fb, f, a, _rejection_blur(f, fb, reject), where, out[box])
-    return out
 
 
 def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
-from .eyes import (REJECT, close_region, match_outline, reference_frame, region_faces,
+from .eyes import (REJECT, _match_outline_into, close_region, reference_frame, region_faces,
                    region_vertices)
 from .render import shade_layers
 from .texture.face import frame_uvs
@@ -200,7 +200,8 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     """
     flags = jaw_flags(texture, shaded=1, region=2, ring=4)
     (img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
-    return _paint_jaw(face_image, face_mask, texture, img, labels, (2, 4), feather=feather)
+    return _paint_jaw(np.array(face_image, copy=True), face_mask, texture, img, labels, (2, 4),
+                      feather=feather)
 
 
 def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np.ndarray:
@@ -218,10 +219,10 @@ def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np
 def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTexture,
                img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
                feather: float = 4.0) -> np.ndarray:
-    """:func:`paint_jaw` with the region shaded already: ``img`` (H, W, 3) the closed-mouth
+    """:func:`paint_jaw` with the region shaded already (``img`` (H, W, 3) the closed-mouth
     frame on the region and its ring, ``labels`` (H, W) uint8 of
     :func:`facetransfer.render.shade_layers` with the bits ``(region, ring)`` of
-    :func:`jaw_flags`."""
+    :func:`jaw_flags`), painting ``face_image`` in place and returning it."""
     mask = np.bitwise_and(labels, bits[0]) != 0
     mask &= face_mask
     n_mask = np.count_nonzero(mask)
@@ -233,5 +234,6 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
         compare &= face_mask
         if np.count_nonzero(compare) < 8:
             compare = None
-    return match_outline(face_image, img, mask, face_mask, feather=feather, compare=compare,
-                         reject=REJECT)
+    _match_outline_into(face_image, img, mask, face_mask, face_image, feather=feather,
+                        compare=compare, reject=REJECT, reject_where=None)
+    return face_image

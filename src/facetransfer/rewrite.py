@@ -253,8 +253,8 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
         if mouth_img is not None and mouth_mask.any():
             # the source's mouth first takes the colours of the face around it (same membrane;
             # every outline pixel counts: skin tones of two people are expected to differ)
-            face = membrane_blend(_over(T, face_img, face_mask), mouth_img,
-                                  mouth_mask & region, feather=mouth_feather, outlier=None)
+            face = _blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region,
+                                mouth_feather)
         out = membrane_blend(T, face, region, feather=feather)
     else:
         # The guidance field on the region's outline is the source's difference across it, so
@@ -271,6 +271,34 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     return RewriteFrame(np.ascontiguousarray(out, dtype=np.uint8), rendered, face_mask,
                         mouth_mask)
 
+
+
+def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
+                 mouth_img: np.ndarray, mask: np.ndarray, feather: float) -> np.ndarray:
+    """``face_img`` with the source's mouth blended in where ``mask`` (H, W) bool: the pixels
+    of ``membrane_blend(_over(T, face_img, face_mask), mouth_img, mask, outlier=None)`` inside
+    the face, which are all the face's blend reads of it (the source of
+    :func:`facetransfer.composite.membrane_blend` is read inside its region only).
+
+    Computed on the box that blend works on (the mask's box grown by its margin: the same
+    pixels, so the same result) and written into ``face_img`` in place."""
+    import cv2
+
+    bx, by, bw, bh = cv2.boundingRect(mask.view(np.uint8))
+    if bw == 0 or bh == 0:
+        return face_img
+    H, W = mask.shape
+    margin = _MEMBRANE_MARGIN
+    sub = (slice(max(by - margin, 0), min(by + bh + margin, H)),
+           slice(max(bx - margin, 0), min(bx + bw + margin, W)))
+    base = _over(T[sub], face_img[sub], face_mask[sub])
+    face_img[sub] = membrane_blend(base, mouth_img[sub], mask[sub], feather=feather,
+                                   margin=margin, outlier=None)
+    return face_img
+
+
+#: :func:`facetransfer.composite.membrane_blend`'s margin around its region
+_MEMBRANE_MARGIN = 8
 
 
 def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
