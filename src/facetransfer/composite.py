@@ -497,8 +497,9 @@ _CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8)
 def _erode(mask: np.ndarray, iterations: int) -> np.ndarray:
     """Binary erosion by the 4-connected cross, pixels beyond the image counting as outside
     (equal to ``scipy.ndimage.binary_erosion(mask, iterations=iterations)``)."""
-    return cv2.erode(mask.astype(np.uint8), _CROSS, iterations=int(iterations),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+    m8 = np.ascontiguousarray(mask, dtype=bool).view(np.uint8)  # 0/1 bytes, no copy
+    return cv2.erode(m8, _CROSS, iterations=int(iterations), borderType=cv2.BORDER_CONSTANT,
+                     borderValue=0).view(bool)
 
 
 #: the mean of the 4 neighbours (a Jacobi sweep of Laplace's equation)
