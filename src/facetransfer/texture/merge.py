@@ -27,7 +27,8 @@ from .base import TextureError, texture_to_uint8
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MergedTexture", "merge_textures", "fill_holes", "fill_vertex_colors", "push_pull_points"]
+__all__ = ["MergedTexture", "merge_textures", "fill_holes", "fill_vertex_colors",
+           "push_pull_points"]
 
 
 class MergedTexture(NamedTuple):
