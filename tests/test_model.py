@@ -97,6 +97,28 @@ def test_single_frames_with_recent_identities_are_eq5():
     assert len(model_module._FIRST_MODE[m]) == model_module._FIRST_MODE_KEPT
 
 
+def test_batch_with_one_identity_shares_the_single_frames_contraction():
+    """A batch whose identity alone is constant takes its contracted core from the memo of
+    the single frames (the same product): its meshes equal the batch product over that core
+    bit for bit, and no second core is kept for it."""
+    from facetransfer import model as model_module
+
+    ds = random_dataset(seed=8)
+    m = build_model(ds, {"identity": 3, "expression": 2, "viseme": 2})
+    rng = np.random.default_rng(9)
+    wid = rng.normal(size=3)
+    W = {"identity": np.tile(wid, (5, 1)), "expression": rng.normal(size=(5, 2)),
+         "viseme": rng.normal(size=(5, 2))}
+    m.synthesize({n: w[0] for n, w in W.items()})  # a single frame: the memo of wid
+    assert len(model_module._FIRST_MODE[m]) == 1
+    batch = m.synthesize(W)
+    assert len(model_module._FIRST_MODE[m]) == 1
+    core = model_module._contract_axis(m.core, 1, wid)
+    kron = (W["expression"][:, :, None] * W["viseme"][:, None, :]).reshape(5, -1)
+    want = (core.reshape(core.shape[0], -1) @ kron.T).T.reshape(5, -1, 3)
+    np.testing.assert_array_equal(batch, want)
+
+
 @pytest.mark.parametrize("mode", ["identity", "expression", "viseme"])
 def test_mode_basis_is_eq9(mode):
     ds = random_dataset(seed=3)

@@ -464,3 +464,31 @@ def test_shade_texture_equals_numpy_lookup_on_selected_triangles():
         shade_texture(r, F, uvs, tex, select[:-1])
     with pytest.raises(AssetError):
         shade_texture(r, F, uvs, tex.astype(np.float32))
+
+
+def test_shade_layers_equal_one_pass_per_layer_and_label_pixels():
+    from facetransfer.render import shade_layers, shade_texture
+
+    P, F = cap_mesh(16, 16)
+    rng = np.random.default_rng(5)
+    r = rasterize(P, F, look_at_weak_perspective(P, (90, 70)), (90, 70))
+    uvs = [rng.random((len(P), 2)) for _ in range(2)]
+    texs = [rng.integers(0, 256, (37, 53, 3), dtype=np.uint8),
+            rng.integers(0, 256, (20, 31, 3), dtype=np.uint8)]
+    sel = [rng.random(len(F)) < 0.7, rng.random(len(F)) < 0.3]
+    label = rng.random(len(F)) < 0.4
+    # layers in slots 0 and 2 (slot 1 unused), a label on bit 6
+    flags = sel[0].astype(np.uint8) | (sel[1].astype(np.uint8) << 2) | \
+        (label.astype(np.uint8) << 6)
+    images, labels = shade_layers(r, F, [(uvs[0], texs[0]), None, (uvs[1], texs[1])], flags)
+    assert images[1] is None and len(images) == 3
+    for img, k in ((images[0], 0), (images[2], 1)):
+        want, mask = shade_texture(r, F, uvs[k], texs[k], sel[k])
+        assert mask.sum() > 300
+        np.testing.assert_array_equal(img, want)
+    tid = r.tri_id
+    np.testing.assert_array_equal(labels, np.where(tid >= 0, flags[np.maximum(tid, 0)], 0))
+    with pytest.raises(ShapeError, match="not given"):  # slot 1 is None
+        shade_layers(r, F, [(uvs[0], texs[0]), None, (uvs[1], texs[1])], flags | 2)
+    with pytest.raises(ShapeError, match="not given"):  # slot 2 beyond the layers given
+        shade_layers(r, F, [(uvs[0], texs[0])], flags)

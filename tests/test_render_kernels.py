@@ -142,16 +142,41 @@ def test_rejected_equals_the_log_ratio():
     np.testing.assert_allclose(eyes._rejected(f, fb, (lo, hi)), ref, rtol=0, atol=1e-5)
 
 
-def test_shown_box_equals_numpy():
+def test_region_box_is_the_shown_pixels_box_grown():
     rng = np.random.default_rng(5)
-    tid = rng.integers(-1, 50, (30, 40)).astype(np.int32)
-    select = np.zeros(50, bool)
-    select[[3, 17]] = True
-    shown = (tid >= 0) & select[np.maximum(tid, 0)]
+    shown = np.zeros((30, 40), np.uint8)
+    shown[rng.integers(8, 20, 6), rng.integers(10, 30, 6)] = 2  # any nonzero label bit
     ys, xs = np.nonzero(shown)
-    assert eyes._shown_box(tid, select) == (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1)
-    x0, y0, x1, y1 = eyes._shown_box(tid, np.zeros(50, bool))
-    assert x1 <= x0 and y1 <= y0
+    assert eyes._region_box(shown, margin=3) == (xs.min() - 3, ys.min() - 3, xs.max() + 4,
+                                                 ys.max() + 4)
+    assert eyes._region_box(shown, margin=12) == (0, 0, 40, 30)  # clipped to the image
+    assert eyes._region_box(np.zeros((30, 40), np.uint8), margin=3) is None
+
+
+def test_gain_samples_equal_numpy():
+    """The kernel's centring and samples are numpy's (mean of the coordinates, every
+    step-th pixel in row-major order), to the bit."""
+    rng = np.random.default_rng(11)
+    H, W = 70, 90
+    face = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    part = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    where = _blobs(rng, (H, W), smooth=4.0, level=0.5)
+    ys, xs = np.nonzero(where)
+    cy, cx = ys.mean(), xs.mean()
+    scale = float(max(np.ptp(ys), np.ptp(xs), 1))
+    step = -(-ys.size // 500)
+    ys, xs = ys[::step], xs[::step]
+    pts = cv2.findNonZero(where.view(np.uint8)).reshape(-1, 2)
+    k = ys.size
+    u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
+    eyes._gain_samples(pts, face, part, 500, eyes._LOG1P_U8, u, v, r, centre)
+    np.testing.assert_array_equal(centre, [cx, cy, scale])
+    np.testing.assert_array_equal(u, (xs - cx) / scale)
+    np.testing.assert_array_equal(v, (ys - cy) / scale)
+    np.testing.assert_array_equal(r, np.log1p(face[ys, xs].astype(np.float64))
+                                  - np.log1p(part[ys, xs].astype(np.float64)))
+    with pytest.raises(ValueError, match="empty mask"):
+        eyes.gain_field(face, part, np.zeros((H, W), bool))
 
 
 def _harmonic_disc():
@@ -209,3 +234,63 @@ def test_shade_texture_refuses_a_raster_of_more_triangles():
     tid[2, 3] = 1
     img, mask = shade_texture(r, F, uvs, tex)
     assert mask.sum() == 1 and mask[2, 3]
+
+
+@pytest.mark.parametrize("shape", [(1, 1), (2, 3), (5, 1), (13, 9), (64, 33), (101, 150)])
+def test_push_pull_points_equal_fill_holes(shape):
+    """The sparse finest pull gives fill_holes' texels to the bit."""
+    from facetransfer.texture.merge import push_pull_points
+
+    rng = np.random.default_rng(shape[0] * 7 + shape[1])
+    known = rng.random(shape) < 0.1
+    known.flat[-1] = True
+    ry, rx = np.nonzero(known)
+    vals = rng.normal(0, 40, (ry.size, 3)).astype(np.float32)
+    vals[0] = -0.0  # a negative zero sums as the dense kernel's
+    d = np.zeros(shape + (3,), np.float32)
+    d[ry, rx] = vals
+    np.testing.assert_array_equal(push_pull_points(shape, ry, rx, vals), fill_holes(d, known))
+    every = np.nonzero(np.ones(shape, bool))  # every pixel known: nothing to fill
+    full = rng.normal(0, 1, (every[0].size, 3)).astype(np.float32)
+    np.testing.assert_array_equal(push_pull_points(shape, *every, full),
+                                  full.reshape(shape + (3,)))
+
+
+def test_reject_kernel_equals_the_quotients_at_the_ramp_edge():
+    """The division-free test for pixels below the ramp decides as the quotients do, also for
+    ratios within a few ulps of exp(lo)."""
+    rng = np.random.default_rng(13)
+    lo, span = 0.5, 0.4
+    fb = rng.integers(0, 256, (60, 50, 3)).astype(np.uint8)
+    q = np.exp(lo) * (1.0 + rng.integers(-4, 5, (60, 50, 3)) * 2.0 ** -52)
+    q[:20] = rng.uniform(0.5, 2.0, (20, 50, 3))  # and ratios anywhere
+    f = ((1.0 + fb) * np.where(rng.random((60, 50, 3)) < 0.5, q, 1 / q) - 1.0)
+    f = np.maximum(f, 0).astype(np.float32)
+    u, v = 1.0 + f.astype(np.float64), 1.0 + fb
+    ratio = np.maximum(np.maximum(u, v) / np.minimum(u, v), 1.0).max(axis=-1)
+    want = np.where(ratio <= np.exp(lo), 0.0,
+                    np.where(ratio >= np.exp(lo + span), 1.0, (np.log(ratio) - lo) / span))
+    r = np.empty((60, 50), np.float32)
+    eyes._reject_kernel(f, fb, lo, span, r)
+    np.testing.assert_array_equal(r, want.astype(np.float32))
+    assert 0 < (r == 0).mean() < 1
+
+
+def test_blend_paste_rejected_equals_the_numpy_fade():
+    """The paste with the rejection taken inside equals numpy's r = clip(2 blur, 0, 1),
+    r *= where, a *= 1 - r and the plain paste, bit for bit."""
+    rng = np.random.default_rng(17)
+    h, w = 40, 50
+    m = rng.random((h, w)) < 0.7
+    where = rng.random((h, w)) < 0.5
+    base = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    f = (rng.random((h, w, 3)) * 300).astype(np.float32)
+    a = rng.random((h, w)).astype(np.float32)
+    blur = (rng.random((h, w)) * 0.8).astype(np.float32)
+    out1, out2 = base.copy(), base.copy()
+    eyes._blend_paste_rejected(m, base, f, a, blur, where, out1)
+    r = np.clip(blur * 2.0, 0.0, 1.0)
+    r *= where
+    composite._blend_paste(m, base, f, a * (1.0 - r), out2)
+    np.testing.assert_array_equal(out1, out2)
+    assert (out1 != base).any()

@@ -116,7 +116,47 @@ def test_mesh_topology_finds_mouth_and_eyes(quick_model, topo):
         topology.close_mouth(V[:10], topo)
 
 
+def test_inside_polygon_equals_matplotlib():
+    """The lips' polygon test decides as matplotlib's Path.contains_points, vertices and
+    edge midpoints included."""
+    from matplotlib.path import Path
+
+    rng = np.random.default_rng(12)
+    for t in range(30):
+        k = int(rng.integers(3, 14))
+        ang = np.sort(rng.random(k)) * 2 * np.pi
+        poly = np.stack([np.cos(ang), np.sin(ang)], 1) * rng.uniform(0.3, 1, (k, 1))
+        if t % 3 == 0:  # self-intersecting
+            poly = rng.normal(size=(k, 2))
+        pts = rng.uniform(-1.2, 1.2, (500, 2))
+        pts[:k] = poly
+        pts[k:2 * k] = (poly + np.roll(poly, -1, 0)) / 2
+        got = topology.inside_polygon(poly, pts)
+        np.testing.assert_array_equal(got, Path(poly).contains_points(pts))
+        assert 0 < got.sum() < 500
+
+
 # --------------------------------------------------------------------------------- blending
+def test_blend_mouth_equals_the_membrane_on_the_whole_crop_inside_the_face():
+    """The mouth's blend on its box, in place, gives the whole crop's blend inside the face
+    (all the face's own blend reads of it), also with the box clipped by the crop's edge."""
+    rng = np.random.default_rng(21)
+    H, W = 90, 120
+    T = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    face_img = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    face_mask = np.zeros((H, W), bool)
+    face_mask[10:85, 5:110] = True
+    mouth_img = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    for box in ((slice(50, 70), slice(40, 80)), (slice(78, 85), slice(5, 30))):
+        mask = np.zeros((H, W), bool)
+        mask[box] = True
+        want = composite.membrane_blend(rw._over(T, face_img, face_mask), mouth_img, mask,
+                                        feather=3.0, outlier=None)
+        got = rw._blend_mouth(T, face_img.copy(), face_mask, mouth_img, mask, 3.0)
+        np.testing.assert_array_equal(got[face_mask], want[face_mask])
+        assert (got[mask] != face_img[mask]).any()
+
+
 def test_membrane_blend_outside_exact_and_recovers_offset():
     yy, xx = np.mgrid[0:60, 0:70]
     T = np.stack([60 + 2 * xx, 50 + 2 * yy, 120 + xx - yy], axis=-1).astype(np.uint8)

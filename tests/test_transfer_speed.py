@@ -180,6 +180,28 @@ def test_crop_of_and_paste_round_trip(synthetic):
     np.testing.assert_array_equal(rw._paste(T, None).image, T)
 
 
+def test_frame_meshes_are_the_clip_meshes_frame_contiguous():
+    """_FrameMeshes serves every frame of a clip's product (frame axis fastest) as a
+    C-contiguous copy of the same values, across chunks and on another thread."""
+    import threading
+
+    rng = np.random.default_rng(3)
+    F, n = 2 * rw._MESH_CHUNK + 3, 11  # the last chunk partial
+    meshes = (rng.normal(size=(3 * n, 4)) @ rng.normal(size=(4, F))).T.reshape(F, n, 3)
+    assert not meshes[0].flags.c_contiguous
+    fm = rw._FrameMeshes({"new": meshes})
+    for i in list(range(F)) + [0, F - 1, 5]:
+        V = fm.frame("new", i)
+        assert V.flags.c_contiguous
+        np.testing.assert_array_equal(V, meshes[i])
+    seen = []
+    t = threading.Thread(target=lambda: seen.append(fm.frame("new", F - 2).copy()))
+    t.start()
+    t.join()
+    np.testing.assert_array_equal(seen[0], meshes[F - 2])
+    assert "new" in fm and "target" not in fm
+
+
 def test_defaults_agree():
     import inspect
 

@@ -497,8 +497,9 @@ _CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8)
 def _erode(mask: np.ndarray, iterations: int) -> np.ndarray:
     """Binary erosion by the 4-connected cross, pixels beyond the image counting as outside
     (equal to ``scipy.ndimage.binary_erosion(mask, iterations=iterations)``)."""
-    return cv2.erode(mask.astype(np.uint8), _CROSS, iterations=int(iterations),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0).astype(bool)
+    m8 = np.ascontiguousarray(mask, dtype=bool).view(np.uint8)  # 0/1 bytes, no copy
+    return cv2.erode(m8, _CROSS, iterations=int(iterations), borderType=cv2.BORDER_CONSTANT,
+                     borderValue=0).view(bool)
 
 
 #: the mean of the 4 neighbours (a Jacobi sweep of Laplace's equation)
@@ -559,8 +560,7 @@ def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
     a = _feather_alpha(m, feather, edge_outside=False) if feather > 0 else \
         m.astype(np.float32)
     crop = out[y0:y1, x0:x1]
-    h += s                                 # f = source + h, in place (h is this call's own)
-    _blend_paste(m, t, h, a, crop)         # in place: the region's pixels of ``out``
+    _blend_paste_membrane(m, t, h, s, a, crop)  # in place: the region's pixels of ``out``
     return out
 
 
@@ -631,8 +631,42 @@ def _blend_paste_py(m, base, f, a, out):  # pragma: no cover (numba)
                 out[y, x, k] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
 
 
+def _blend_paste_membrane_py(m, base, h, s, a, out):  # pragma: no cover (numba)
+    """:func:`_blend_paste` with ``f = h + s`` (the membrane ``h`` (h, w, 3) float32 plus the
+    source ``s`` (h, w, 3) uint8, added in float32 as ``h += s`` would) at the pixels of
+    ``m``: the paste of :func:`membrane_blend` in one pass."""
+    H, W = m.shape
+    for y in range(H):
+        for x in range(W):
+            if not m[y, x]:
+                continue
+            ay = a[y, x]
+            for k in range(3):
+                b = np.float32(base[y, x, k])
+                f = h[y, x, k] + np.float32(s[y, x, k])
+                v = np.rint(b + ay * (f - b))
+                out[y, x, k] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
+
+
+def _ring_differences_py(ry, rx, t, s, dr):  # pragma: no cover (numba)
+    """``dr = t - s`` (float32) at the pixels ``(ry, rx)``; returns the largest absolute
+    channel difference of each pixel, ``(k,)`` float32."""
+    big = np.empty(ry.shape[0], np.float32)
+    for i in range(ry.shape[0]):
+        y, x = ry[i], rx[i]
+        mx = np.float32(0.0)
+        for c in range(3):
+            d = np.float32(t[y, x, c]) - np.float32(s[y, x, c])
+            dr[i, c] = d
+            mx = max(mx, abs(d))
+        big[i] = mx
+    return big
+
+
 _alpha_kernel = _maybe_njit(_alpha_kernel_py)
 _blend_paste = _maybe_njit(_blend_paste_py)
+_blend_paste_membrane = _maybe_njit(_blend_paste_membrane_py)
+_ring_differences = _maybe_njit(_ring_differences_py)
 
 
 def _outline(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None):
@@ -654,11 +688,12 @@ def _outline(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None)
                          borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
     ring = m & ~interior
     ry, rx = _nonzero(ring)
-    dr = t[ry, rx].astype(np.float32) - s[ry, rx]    # target - source on the outline
+    dr = np.empty((ry.size, 3), np.float32)
+    big = _ring_differences(ry, rx, t, s, dr)       # target - source on the outline
     if outlier is not None:
         # outline pixels where target and source disagree wildly (the silhouette moved with
         # the new expression, or hair crosses it) would bleed into the face: leave them out
-        ok = np.abs(dr).max(axis=-1) < float(outlier)
+        ok = big < float(outlier)
         if ok.sum() >= 0.25 * ok.size and not ok.all():
             ring[ry[~ok], rx[~ok]] = False
             interior = m & ~ring
@@ -680,14 +715,14 @@ def _membrane(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None
               smooth_iterations: int) -> np.ndarray:
     """The membrane ``h`` (h, w, 3) float32 of :func:`membrane_blend`: ``t - s`` on the outline
     of ``m`` (:func:`_outline`), interpolated inside by push-pull
-    (:func:`facetransfer.texture.fill_holes`) and ``smooth_iterations`` Jacobi sweeps of
-    Laplace's equation."""
-    from .texture import fill_holes
+    (:func:`facetransfer.texture.fill_holes`, from the outline's pixels:
+    :func:`facetransfer.texture.merge.push_pull_points`) and ``smooth_iterations`` Jacobi
+    sweeps of Laplace's equation."""
+    from .texture.merge import push_pull_points
 
     ring, interior, ry, rx, dr = _outline(m, t, s, outlier)
-    d = np.zeros(t.shape, np.float32)
-    d[ry, rx] = dr
-    h = fill_holes(d, ring)  # (h, w, 3): the membrane, = target - source on the outline
+    # (h, w, 3): the membrane, = target - source on the outline (fill_holes of the outline)
+    h = push_pull_points(m.shape, ry, rx, dr)
     # Jacobi sweeps of Laplace's equation (the mean of the 4 neighbours, one 3x3 filter per
     # sweep) smooth the push-pull result towards harmonic; the outline keeps its values
     h = np.ascontiguousarray(h, dtype=np.float32)

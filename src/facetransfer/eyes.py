@@ -27,14 +27,15 @@ from __future__ import annotations
 
 import dataclasses
 import logging
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
-from .composite import _blend_paste, _feather_alpha, _nonzero
+from .composite import _blend_paste, _feather_alpha
 from .errors import RewriteError
-from .render import Raster, shade_texture
+from .render import Raster, shade_layers, shade_texture
 from .render.raster import _maybe_njit
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -146,11 +147,17 @@ class EyeTexture:
         """
         if self.closed_image is None:
             return np.zeros(2)
-        g = lid_gap(vertices, self.lids)
-        span = np.maximum(self.gap_open - self.gap_closed, 1e-9)
         lo, hi = CLOSING_RAMP
-        t = np.clip(((self.gap_open - g) / span - lo) / (hi - lo), 0.0, 1.0)
-        return t * t * (3.0 - 2.0 * t)
+        out = np.empty(2)
+        # per eye in Python floats: the same IEEE operations as numpy's on (2,) arrays,
+        # without a dozen numpy calls a frame
+        for e, (g, g_open, g_closed) in enumerate(zip(lid_gap(vertices, self.lids).tolist(),
+                                                      np.asarray(self.gap_open).tolist(),
+                                                      np.asarray(self.gap_closed).tolist())):
+            t = min(max(((g_open - g) / max(g_open - g_closed, 1e-9) - lo) / (hi - lo), 0.0),
+                    1.0)
+            out[e] = t * t * (3.0 - 2.0 * t)
+        return out
 
 
 def lid_gap(vertices: np.ndarray, lids: np.ndarray) -> np.ndarray:
@@ -162,9 +169,12 @@ def lid_gap(vertices: np.ndarray, lids: np.ndarray) -> np.ndarray:
     lids : (2, 2, 2) int
         Per eye, two (upper, lower) vertex pairs.
     """
-    V = np.asarray(vertices, np.float64)
-    L = np.asarray(lids, np.int64)
-    return np.linalg.norm(V[L[..., 0]] - V[L[..., 1]], axis=-1).mean(axis=-1)
+    P = np.asarray(vertices, np.float64)[np.asarray(lids, np.int64).reshape(4, 2)].tolist()
+    # per pair sqrt((dx² + dy²) + dz²) and per eye the mean of two, in Python floats: the
+    # operations (and their order) of np.linalg.norm(axis=-1) and mean(axis=-1)
+    d = [math.sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1])
+                   + (a[2] - b[2]) * (a[2] - b[2])) for a, b in P]
+    return np.array([(d[0] + d[1]) / 2, (d[2] + d[3]) / 2])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -544,12 +554,14 @@ def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray) -> np.ndarray:
     """The region's triangles ``(F',) bool`` whose vertices all lie farther than
     :data:`RIM_DISTANCE` from the brow and lid-margin landmarks (iBUG 17-26, 36-47) of the
     closed mesh ``V`` (n_closed, 3)."""
-    from scipy.spatial import cKDTree
-
     lm = np.asarray(model.landmarks, np.int64)
-    core = np.concatenate([lm[17:27], lm[36:48]])
-    d, _ = cKDTree(V[core]).query(V, k=1)
-    far = d > RIM_DISTANCE
+    core = V[np.concatenate([lm[17:27], lm[36:48]])]
+    # the nearest of the 22 landmarks by brute force (a k-d tree is no faster for 22 points,
+    # and importing scipy.spatial costs 0.1 s)
+    d2 = np.full(V.shape[0], np.inf)
+    for c in core:
+        np.minimum(d2, ((V - c) ** 2).sum(axis=1), out=d2)
+    far = np.sqrt(d2) > RIM_DISTANCE
     return select & far[closed.faces].all(axis=1)
 
 
@@ -594,19 +606,44 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
     (H, W, 3) uint8
         ``face_image`` with the eye region replaced.
     """
+    flags = eye_flags(texture, shown=1, rim=16)
+    (eye_img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
+    return _paint_eyes(raster, faces, vertices, np.array(face_image, copy=True), face_mask,
+                       texture, eye_img, labels, (1, 16), feather=feather)
+
+
+def eye_flags(texture: EyeTexture, *, shown: int, rim: int) -> np.ndarray:
+    """Per triangle of the eye-closed topology, ``(F',) uint8``: the bit ``shown`` on the eye
+    region's triangles (``texture.select``) and ``rim`` on its rim (:attr:`EyeTexture.rim`),
+    for :func:`facetransfer.render.shade_layers`."""
+    flags = np.asarray(texture.select, bool).view(np.uint8) * np.uint8(shown)
+    if texture.rim is not None:
+        flags |= np.asarray(texture.rim, bool).view(np.uint8) * np.uint8(rim)
+    return flags
+
+
+def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeTexture,
+                eye_img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
+                feather: float = 3.0) -> np.ndarray:
+    """:func:`paint_eyes` with the region shaded already (``eye_img`` (H, W, 3) the eye
+    texture on the region's triangles, ``labels`` (H, W) uint8 of
+    :func:`facetransfer.render.shade_layers` with the bits ``(shown, rim)`` of
+    :func:`eye_flags`), painting ``face_image`` in place and returning it."""
     import cv2
 
-    box = _region_box(raster, texture.select, margin=int(np.ceil(4 * LID_SOFTNESS)) + 2)
+    box = _region_box(np.bitwise_and(labels, bits[0]), margin=int(np.ceil(4 * LID_SOFTNESS)) + 2)
     if box is None:
         return face_image
     sl = (slice(box[1], box[3]), slice(box[0], box[2]))
-    raster = Raster(raster.depth[sl], raster.tri_id[sl], raster.bary[sl], raster.mask[sl])
-    eye_img, eye_mask = shade_texture(raster, faces, texture.uvs, texture.image, texture.select)
+    lab = labels[sl]
+    eye_img = eye_img[sl]
+    eye_mask = (lab & bits[0]).view(bool) if bits[0] == 1 else (lab & bits[0]) != 0
     eye_mask &= face_mask[sl]
     if not eye_mask.any():
         return face_image
     a = texture.closing(vertices)
     if a.max() > 0:
+        raster = Raster(raster.depth[sl], raster.tri_id[sl], raster.bary[sl], raster.mask[sl])
         closed_img, _ = shade_texture(raster, faces, texture.closed_uvs, texture.closed_image,
                                       texture.select)
         t = np.where(raster.tri_id >= 0, texture.side[np.maximum(raster.tri_id, 0)], -1)
@@ -616,45 +653,28 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
         eye_img = np.rint((1 - w) * eye_img + w * closed_img).astype(np.uint8)
     rim = None
     if texture.rim is not None and texture.rim.any():
-        rim = eye_mask & texture.rim[np.maximum(raster.tri_id, 0)]  # eye_mask: shown pixels
-    out = face_image.copy()
-    out[sl] = match_outline(face_image[sl], eye_img, eye_mask, face_mask[sl], feather=feather,
-                            reject=None if rim is None else REJECT, reject_where=rim)
-    return out
+        rim = eye_mask & ((lab & bits[1]) != 0)  # eye_mask: shown pixels
+    _match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],
+                        feather=feather, compare=None, reject=None if rim is None else REJECT,
+                        reject_where=rim)
+    return face_image
 
 
-def _region_box(raster, select: np.ndarray, *, margin: int) -> tuple[int, int, int, int] | None:
-    """``(x0, y0, x1, y1)`` of the pixels showing a ``select`` triangle, grown by ``margin``
-    and clipped to the raster; None when none shows.
+def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] | None:
+    """``(x0, y0, x1, y1)`` of the nonzero pixels of ``shown`` (H, W) uint8 (those showing
+    the region), grown by ``margin`` and clipped to the image; None when none shows.
 
     The margin covers every filter :func:`paint_eyes` applies (the lids' blur reaches
     ``4·LID_SOFTNESS``; the outline's erosion 2 px; the feather's distance transform sees a
     zero pixel at the box's edge), so working on the box gives the same pixels as the whole
     raster."""
-    tid = np.ascontiguousarray(raster.tri_id)
-    x, y, x1, y1 = _shown_box(tid, np.ascontiguousarray(select, dtype=bool))
-    w, h = x1 - x, y1 - y
+    import cv2
+
+    x, y, w, h = cv2.boundingRect(np.ascontiguousarray(shown))
     if w <= 0 or h <= 0:
         return None
-    H, W = tid.shape
+    H, W = shown.shape
     return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, W), min(y + h + margin, H)
-
-
-def _shown_box_py(tid, select):  # pragma: no cover (numba)
-    """``(x0, y0, x1, y1)`` (end exclusive; empty: x1 <= x0) of the pixels of ``tid`` (H, W)
-    showing a ``select`` (F,) triangle."""
-    H, W = tid.shape
-    x0, y0, x1, y1 = W, H, 0, 0
-    for y in range(H):
-        for x in range(W):
-            f = tid[y, x]
-            if f >= 0 and select[f]:
-                x0, x1 = min(x0, x), max(x1, x + 1)
-                y0, y1 = min(y0, y), max(y1, y + 1)
-    return x0, y0, x1, y1
-
-
-_shown_box = _maybe_njit(_shown_box_py)
 
 
 def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
@@ -695,11 +715,22 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     -------
     (H, W, 3) uint8
     """
+    out = face.copy()
+    _match_outline_into(face, part, mask, face_mask, out, feather=feather, compare=compare,
+                        reject=reject, reject_where=reject_where)
+    return out
+
+
+def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
+                        reject_where) -> None:
+    """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
+    pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
+    the region's pixels are written."""
     import cv2
 
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
-        return face.copy()
+        return
     deep = cv2.erode(face_mask.astype(np.uint8), np.ones((5, 5), np.uint8),
                      borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
     ring = (mask if compare is None else compare) & deep
@@ -717,14 +748,11 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     mb = np.ascontiguousarray(mask[box])
     a = _feather_alpha(mb, feather, edge_outside=True)
     fb = np.ascontiguousarray(face[box])
-    if reject is not None:
-        r = _rejected(f, fb, reject)
-        if reject_where is not None:
-            r *= np.ascontiguousarray(reject_where[box])
-        a *= 1.0 - r
-    out = face.copy()
-    _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
-    return out
+    if reject is None:
+        _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
+    else:  # the fade a (1 - r), r = _rejected where reject_where, taken in the paste
+        where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
+        _blend_paste_rejected(mb, fb, f, a, _rejection_blur(f, fb, reject), where, out[box])
 
 
 def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
@@ -733,6 +761,12 @@ def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.
     lies between ``reject = (lo, hi)``, grown by :data:`REJECT_GROW` pixels (the soft edge of
     hair in the reference frame is less unlike the skin than the hair, and would be left as a
     thin grey outline) and smoothed over ~2 pixels."""
+    return np.clip(_rejection_blur(f, fb, reject) * 2.0, 0.0, 1.0)
+
+
+def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
+    """:func:`_rejected` before its last step (``clip(2 b, 0, 1)``): the grown ramp blurred,
+    ``(h, w)`` float32."""
     import cv2
 
     lo, hi = (float(v) for v in reject)
@@ -740,17 +774,50 @@ def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.
     _reject_kernel(f, fb, lo, max(hi - lo, 1e-6), r)
     if REJECT_GROW > 0 and r.any():
         r = cv2.dilate(r, np.ones((2 * REJECT_GROW + 1,) * 2, np.uint8))
-    return np.clip(cv2.GaussianBlur(r, (0, 0), 2.0) * 2.0, 0.0, 1.0)
+    return cv2.GaussianBlur(r, (0, 0), 2.0)
+
+
+def _blend_paste_rejected_py(m, base, f, a, blur, where, out):  # pragma: no cover (numba)
+    """:func:`facetransfer.composite._blend_paste` with the fade ``a (1 - r)``, ``r =
+    clip(2 blur, 0, 1)`` where ``where`` (h, w) bool and 0 elsewhere: match_outline's
+    rejection (:func:`_rejected`) taken in the paste, in float32 as numpy's ``r *= where;
+    a *= 1.0 - r`` were, without three passes of their own."""
+    H, W = m.shape
+    one, zero = np.float32(1.0), np.float32(0.0)
+    for y in range(H):
+        for x in range(W):
+            if not m[y, x]:
+                continue
+            r = min(max(blur[y, x] * np.float32(2.0), zero), one) if where[y, x] else zero
+            ay = a[y, x] * (one - r)
+            for k in range(3):
+                b = np.float32(base[y, x, k])
+                v = np.rint(b + ay * (f[y, x, k] - b))
+                out[y, x, k] = np.uint8(min(max(v, zero), np.float32(255.0)))
 
 
 def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
     """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel, with one
     log per pixel (of the largest ratio ``(1 + f) / (1 + fb)`` or its inverse) and none where
-    that ratio lies outside ``exp(lo)..exp(lo + span)``."""
+    that ratio lies outside ``exp(lo)..exp(lo + span)``.
+
+    Most pixels are below the ramp: they are found without division, by ``max <= q' min``
+    in every channel with ``q'`` a little under ``exp(lo)`` (then the exact ratio is below
+    ``exp(lo)``, so its correctly rounded quotient is at most that: the same 0 as the
+    quotients give)."""
     H, W = r.shape
     q_lo, q_hi = np.exp(lo), np.exp(lo + span)
+    q_safe = q_lo * (1.0 - 2.0 ** -50)
     for y in range(H):
         for x in range(W):
+            below = True
+            for k in range(3):
+                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
+                if max(u, v) > q_safe * min(u, v):
+                    below = False
+            if below:
+                r[y, x] = 0.0
+                continue
             q = 1.0
             for k in range(3):
                 u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
@@ -807,19 +874,56 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
     """The fit of :func:`gain_field` as its separable factors over ``box = (x0, y0, x1, y1)``:
     ``gy (y1 - y0, 3)`` and ``gx (x1 - x0, 3)`` float64, the unclipped gain at pixel ``(x, y)``
     being ``gy[y - y0] * gx[x - x0]``."""
-    ys, xs = _nonzero(where)
-    cy, cx = ys.mean(), xs.mean()
-    scale = float(max(np.ptp(ys), np.ptp(xs), 1))
-    step = max(1, -(-ys.size // int(max_samples)))
-    ys, xs = ys[::step], xs[::step]
-    r = _LOG1P_U8[face[ys, xs]] - _LOG1P_U8[part[ys, xs]]                         # (k, 3)
+    import cv2
+
+    pts = cv2.findNonZero(np.ascontiguousarray(where).view(np.uint8))  # (n, 1, 2): (x, y)
+    if pts is None:
+        raise RewriteError("the gain fit needs at least one pixel, got an empty mask")
+    n = pts.shape[0]
+    k = -(-n // max(1, -(-n // int(max_samples))))  # the samples: every step-th pixel
+    u, v, r = np.empty(k), np.empty(k), np.empty((k, 3))
+    centre = np.empty(3)
+    _gain_samples(pts.reshape(n, 2), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
+    cx, cy, scale = centre
     coef = np.empty((3, 3))
-    _plane_l1_kernel((xs - cx) / scale, (ys - cy) / scale, r, int(iterations), coef)
+    _plane_l1_kernel(u, v, r, int(iterations), coef)
     x0, y0, x1, y1 = box
     # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns
     gx = np.exp(((np.arange(x0, x1) - cx) / scale)[:, None] * coef[1])         # (w, c)
     gy = np.exp(coef[0] + ((np.arange(y0, y1) - cy) / scale)[:, None] * coef[2])  # (h, c)
     return gy, gx
+
+
+def _gain_samples_py(pts, face, part, max_samples, lut, u, v, r, centre):  # pragma: no cover
+    """The samples of :func:`gain_field`'s fit from the pixels ``pts`` (n, 2) int32 ``(x, y)``
+    in row-major order (``cv2.findNonZero``; numba): ``centre = (cx, cy, scale)``, the pixels'
+    mean position and the larger extent of their rows and columns (at least 1); for every
+    ``step``-th pixel (``step = ceil(n / max_samples)``) the centred, scaled coordinates
+    ``u = (x - cx) / scale``, ``v = (y - cy) / scale`` and the log ratios ``r = lut[face] -
+    lut[part]`` (3 channels). The means are the integer sums over ``n`` (as numpy's mean of
+    the coordinates, whose float sums are exact)."""
+    n = pts.shape[0]
+    sx = sy = 0
+    x_lo = x_hi = pts[0, 0]
+    y_lo = y_hi = pts[0, 1]
+    for i in range(n):
+        x, y = pts[i, 0], pts[i, 1]
+        sx += x
+        sy += y
+        x_lo, x_hi = min(x_lo, x), max(x_hi, x)
+        y_lo, y_hi = min(y_lo, y), max(y_hi, y)
+    cx, cy = float(sx) / float(n), float(sy) / float(n)
+    scale = float(max(y_hi - y_lo, x_hi - x_lo, 1))
+    step = max(1, -(-n // max_samples))
+    j = 0
+    for i in range(0, n, step):
+        x, y = np.int64(pts[i, 0]), np.int64(pts[i, 1])
+        u[j] = (x - cx) / scale
+        v[j] = (y - cy) / scale
+        for c in range(3):
+            r[j, c] = lut[face[y, x, c]] - lut[part[y, x, c]]
+        j += 1
+    centre[0], centre[1], centre[2] = cx, cy, scale
 
 
 def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
@@ -877,4 +981,6 @@ def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
 
 
 _apply_gain = _maybe_njit(_apply_gain_py)
+_gain_samples = _maybe_njit(_gain_samples_py)
+_blend_paste_rejected = _maybe_njit(_blend_paste_rejected_py)
 _plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)

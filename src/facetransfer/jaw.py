@@ -33,10 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
-from .eyes import (REJECT, close_region, match_outline, reference_frame, region_faces,
+from .eyes import (REJECT, _match_outline_into, close_region, reference_frame, region_faces,
                    region_vertices)
-from .render import shade_texture
-from .render.raster import _maybe_njit
+from .render import shade_layers
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -178,26 +177,6 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
     return JawTexture(img, uvs, select, i, ring)
 
 
-def _split_shown_py(tid, shown, face_mask, select, ring, mask, compare):  # pragma: no cover
-    """``mask = shown & face_mask & select[tid]``, ``compare = shown & face_mask & ring[tid]``
-    (all (H, W) bool; ``select``, ``ring`` (F',) bool) in one pass; returns their pixel
-    counts (numba)."""
-    H, W = tid.shape
-    n_mask = n_compare = 0
-    for y in range(H):
-        for x in range(W):
-            f = tid[y, x]
-            ok = f >= 0 and shown[y, x] and face_mask[y, x]
-            mask[y, x] = ok and select[f]
-            compare[y, x] = ok and ring[f]
-            n_mask += mask[y, x]
-            n_compare += compare[y, x]
-    return n_mask, n_compare
-
-
-_split_shown = _maybe_njit(_split_shown_py)
-
-
 def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,
               texture: JawTexture, *, feather: float = 4.0) -> np.ndarray:
     """The rendered face with its jaw region textured from the closed-mouth frame.
@@ -219,18 +198,42 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     (H, W, 3) uint8
         ``face_image`` with the jaw region replaced (shifted to its colours).
     """
-    sel = texture.select if texture.ring is None else texture.select | texture.ring
-    img, shown = shade_texture(raster, faces, texture.uvs, texture.image, sel)
-    ring = np.zeros_like(texture.select) if texture.ring is None else texture.ring
-    mask, compare = np.empty_like(shown), np.empty_like(shown)
-    n_mask, n_compare = _split_shown(np.ascontiguousarray(raster.tri_id), shown,
-                                     np.ascontiguousarray(face_mask),
-                                     np.ascontiguousarray(texture.select, dtype=bool),
-                                     np.ascontiguousarray(ring, dtype=bool), mask, compare)
+    flags = jaw_flags(texture, shaded=1, region=2, ring=4)
+    (img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
+    return _paint_jaw(np.array(face_image, copy=True), face_mask, texture, img, labels, (2, 4),
+                      feather=feather)
+
+
+def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np.ndarray:
+    """Per triangle, ``(F',) uint8``: the bit ``shaded`` on the triangles textured from the
+    closed-mouth frame (the region and its ring), ``region`` on the region's
+    (``texture.select``), ``ring`` on the ring's (``texture.ring``), for
+    :func:`facetransfer.render.shade_layers`."""
+    sel = np.asarray(texture.select, bool).view(np.uint8)
+    flags = sel * np.uint8(shaded | region)
+    if texture.ring is not None:
+        flags |= np.asarray(texture.ring, bool).view(np.uint8) * np.uint8(shaded | ring)
+    return flags
+
+
+def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTexture,
+               img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
+               feather: float = 4.0) -> np.ndarray:
+    """:func:`paint_jaw` with the region shaded already (``img`` (H, W, 3) the closed-mouth
+    frame on the region and its ring, ``labels`` (H, W) uint8 of
+    :func:`facetransfer.render.shade_layers` with the bits ``(region, ring)`` of
+    :func:`jaw_flags`), painting ``face_image`` in place and returning it."""
+    mask = np.bitwise_and(labels, bits[0]) != 0
+    mask &= face_mask
+    n_mask = np.count_nonzero(mask)
     if n_mask == 0:
         return face_image
-    if texture.ring is None or n_compare < 8:
-        compare = None
-    return match_outline(face_image, img, mask, face_mask, feather=feather, compare=compare,
-                         reject=REJECT)
-
+    compare = None
+    if texture.ring is not None:
+        compare = np.bitwise_and(labels, bits[1]) != 0
+        compare &= face_mask
+        if np.count_nonzero(compare) < 8:
+            compare = None
+    _match_outline_into(face_image, img, mask, face_mask, face_image, feather=feather,
+                        compare=compare, reject=REJECT, reject_where=None)
+    return face_image

@@ -224,7 +224,7 @@ class MultilinearModel:
         batch = np.broadcast_shapes(*[w.shape[:-1] for w in ws])
         core = self._core_rows(vertices)
         if math.prod(batch) > 1:  # e.g. one identity for a whole clip: contract it once
-            core, ws = _contract_constant_modes(core, ws)
+            core, ws = self._batch_contracted(core, ws, vertices)
         elif vertices is None and len(ws) > 1:  # one frame: the identity of the frame before
             core, ws = self._first_mode_contracted(ws)
         # Eq. (5) as one matrix product: the outer product of the mode weights (a Kronecker
@@ -238,6 +238,17 @@ class MultilinearModel:
         flat = core.reshape(core.shape[0], -1)
         out = (flat @ kron.reshape(-1, kron.shape[-1]).T).T
         return out.reshape(batch + (-1, 3))
+
+    def _batch_contracted(self, core: np.ndarray, ws: list, vertices) -> tuple[np.ndarray, list]:
+        """:func:`_contract_constant_modes` for a batch; when the first mode (the identity) is
+        the only constant one and the whole mesh is wanted, its contraction is the memo of
+        :meth:`_first_mode_contracted` (the same product: a clip's meshes and its single
+        frames with that identity share it; 0.1 s a contraction for the default model)."""
+        const = [bool((w == w.reshape(-1, w.shape[-1])[0]).all()) for w in ws]
+        if vertices is None and len(ws) > 1 and const[0] and not any(const[1:]):
+            return self._first_mode_contracted([ws[0].reshape(-1, ws[0].shape[-1])[0]]
+                                               + list(ws[1:]))
+        return _contract_constant_modes(core, ws)
 
     def _first_mode_contracted(self, ws: list) -> tuple[np.ndarray, list]:
         """The core contracted with ``ws[0]`` (one frame's first-mode weights), kept for the

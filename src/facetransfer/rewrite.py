@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import logging
 import os
+import threading
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
@@ -49,12 +50,14 @@ import numpy as np
 from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend
 from .errors import RewriteError, ShapeError
-from .eyes import EyeTexture, eye_texture, paint_eyes
-from .jaw import JawTexture, jaw_texture, paint_jaw
+from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
+from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
 from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
+from .render import shade_layers
+from .render.raster import _maybe_njit
 from .rewrite_options import BLEND_MODES, RewriteOptions, check_mode
 from .topology import MeshTopology, close_mouth, mesh_topology
 
@@ -222,10 +225,7 @@ def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int
 
 def _shift_camera(camera, x0: int, y0: int):
     """The camera of the crop whose top-left pixel is ``(x0, y0)`` of the frame."""
-    import dataclasses
-
-    t = np.asarray(camera.translation, np.float64) - np.array([x0, y0], np.float64)
-    return dataclasses.replace(camera, translation=t)
+    return camera.shifted(float(x0), float(y0))
 
 
 def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
@@ -234,22 +234,10 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
     from .render import rasterize
 
-    H, W = T.shape[:2]
-    raster = rasterize(V, topo.faces, camera, (W, H))
-    face_img, face_mask = _shade(raster, topo.faces, face_texture.uvs, face_texture.image)
-    if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
-        face_img = paint_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture)
-    if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
-        face_img = paint_jaw(raster, topo.faces, face_img, face_mask, jaw_texture)
-    mouth_mask = np.zeros((H, W), bool)
-    rendered = face_img
-    mouth_img = None
-    if mouth_texture is not None and topo.mouth_faces.size:
-        sel = np.zeros(topo.faces.shape[0], bool)
-        sel[topo.mouth_faces] = True
-        mouth_img, mouth_mask = _shade(raster, topo.faces, mouth_texture.uvs, mouth_texture.image,
-                                       sel)
-        rendered = _over(face_img, mouth_img, mouth_mask)
+    raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
+    face_img, face_mask, mouth_img, mouth_mask = _shade_frame(
+        raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture)
+    rendered = face_img if mouth_img is None else _over(face_img, mouth_img, mouth_mask)
     if not face_mask.any():
         return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask)
     # The blend region stays ``erode`` pixels inside the rendered silhouette, so its outline
@@ -265,8 +253,8 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
         if mouth_img is not None and mouth_mask.any():
             # the source's mouth first takes the colours of the face around it (same membrane;
             # every outline pixel counts: skin tones of two people are expected to differ)
-            face = membrane_blend(_over(T, face_img, face_mask), mouth_img,
-                                  mouth_mask & region, feather=mouth_feather, outlier=None)
+            face = _blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region,
+                                mouth_feather)
         out = membrane_blend(T, face, region, feather=feather)
     else:
         # The guidance field on the region's outline is the source's difference across it, so
@@ -285,6 +273,34 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
 
 
 
+def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
+                 mouth_img: np.ndarray, mask: np.ndarray, feather: float) -> np.ndarray:
+    """``face_img`` with the source's mouth blended in where ``mask`` (H, W) bool: the pixels
+    of ``membrane_blend(_over(T, face_img, face_mask), mouth_img, mask, outlier=None)`` inside
+    the face, which are all the face's blend reads of it (the source of
+    :func:`facetransfer.composite.membrane_blend` is read inside its region only).
+
+    Computed on the box that blend works on (the mask's box grown by its margin: the same
+    pixels, so the same result) and written into ``face_img`` in place."""
+    import cv2
+
+    bx, by, bw, bh = cv2.boundingRect(mask.view(np.uint8))
+    if bw == 0 or bh == 0:
+        return face_img
+    H, W = mask.shape
+    margin = _MEMBRANE_MARGIN
+    sub = (slice(max(by - margin, 0), min(by + bh + margin, H)),
+           slice(max(bx - margin, 0), min(bx + bw + margin, W)))
+    base = _over(T[sub], face_img[sub], face_mask[sub])
+    face_img[sub] = membrane_blend(base, mouth_img[sub], mask[sub], feather=feather,
+                                   margin=margin, outlier=None)
+    return face_img
+
+
+#: :func:`facetransfer.composite.membrane_blend`'s margin around its region
+_MEMBRANE_MARGIN = 8
+
+
 def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """``top`` (H, W, 3) where ``mask`` (H, W) bool, ``base`` (H, W, 3) elsewhere: a new array
     (``np.where(mask[..., None], top, base)``, in one masked copy)."""
@@ -295,16 +311,55 @@ def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
     return out
 
 
-def _shade(raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,
-           select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Texture the pixels of a raster: ``(image (H, W, 3) uint8, mask (H, W) bool)``.
+#: The layers of one frame's shading (bits of :func:`facetransfer.render.shade_layers`' flags):
+#: the face texture (every triangle), the eye region's, the jaw region's (and its ring), the
+#: source's mouth; and labels: the eye region's rim, the jaw region, the jaw region's ring.
+_FACE, _EYES, _JAW, _MOUTH = 1, 2, 4, 8
+_RIM, _JAW_REGION, _JAW_RING = 16, 32, 64
 
-    ``select`` (F',) bool restricts to some triangles (the rest stay black, outside the mask).
-    One pass of :func:`facetransfer.render.shade_texture`.
+
+def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTexture,
+                 mouth_texture: FaceTexture | None, eye_texture: EyeTexture | None,
+                 jaw_texture: JawTexture | None):
+    """The new face textured at one frame (§6): every texture it takes sampled in one pass
+    over the raster (:func:`facetransfer.render.shade_layers`), then the eye and jaw regions
+    pasted into the face (:func:`facetransfer.eyes.paint_eyes`,
+    :func:`facetransfer.jaw.paint_jaw`).
+
+    Returns
+    -------
+    face_img : (H, W, 3) uint8
+        The face texture, eye and jaw regions painted (black outside ``face_mask``).
+    face_mask : (H, W) bool
+        The pixels the mesh covers.
+    mouth_img : (H, W, 3) uint8 or None
+        The source's mouth on the mouth's triangles; None without a mouth texture.
+    mouth_mask : (H, W) bool
     """
-    from .render import shade_texture
-
-    return shade_texture(raster, faces, uvs, np.asarray(texture, np.uint8), select)
+    flags = np.full(topo.faces.shape[0], _FACE, np.uint8)
+    layers = [(face_texture.uvs, np.asarray(face_texture.image, np.uint8)), None, None, None]
+    if eye_texture is not None:
+        flags |= eye_flags(eye_texture, shown=_EYES, rim=_RIM)
+        layers[1] = (eye_texture.uvs, eye_texture.image)
+    if jaw_texture is not None:
+        flags |= jaw_flags(jaw_texture, shaded=_JAW, region=_JAW_REGION, ring=_JAW_RING)
+        layers[2] = (jaw_texture.uvs, jaw_texture.image)
+    with_mouth = mouth_texture is not None and topo.mouth_faces.size > 0
+    if with_mouth:
+        flags[topo.mouth_faces] |= _MOUTH
+        layers[3] = (mouth_texture.uvs, np.asarray(mouth_texture.image, np.uint8))
+    (face_img, eye_img, jaw_img, mouth_img), labels = shade_layers(raster, topo.faces, layers,
+                                                                   flags)
+    face_mask = labels != 0  # every covered pixel has the face's bit
+    if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
+        face_img = _paint_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture, eye_img,
+                               labels, (_EYES, _RIM))
+    if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
+        face_img = _paint_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
+                              (_JAW_REGION, _JAW_RING))
+    mouth_mask = np.bitwise_and(labels, _MOUTH) != 0 if with_mouth else \
+        np.zeros(labels.shape, bool)
+    return face_img, face_mask, mouth_img, mouth_mask
 
 
 # ---------------------------------------------------------------------------------------------
@@ -464,6 +519,58 @@ def _clip_meshes(model, n: int, tracks: dict) -> dict:
             for kind, tr in tracks.items()}
 
 
+#: Frames of a clip's meshes copied out together (:class:`_FrameMeshes`).
+_MESH_CHUNK = 8
+
+
+class _FrameMeshes:
+    """A clip's meshes (:func:`_clip_meshes`) frame by frame, from frame-contiguous copies.
+
+    The clip's meshes of a kind are one product ``(3n, F)`` seen as ``(F, n, 3)``: a frame's
+    mesh is one value in each of ``3n`` rows, a cache line apiece (0.17 ms a mesh to gather,
+    three meshes a frame). Here :data:`_MESH_CHUNK` consecutive frames are copied out at once
+    (each row's values of those frames are adjacent), into a buffer kept per thread and kind;
+    a frame's mesh is a view of it, valid until that thread asks for another chunk of the
+    kind (the render copies it when closing the mouth).
+    """
+
+    def __init__(self, meshes: dict) -> None:
+        self.meshes = meshes
+        self._local = threading.local()
+
+    def __contains__(self, kind: str) -> bool:
+        return kind in self.meshes
+
+    def __getitem__(self, kind: str) -> np.ndarray:
+        return self.meshes[kind]
+
+    def frame(self, kind: str, i: int) -> np.ndarray:
+        """The mesh ``(n, 3)`` float64 of frame ``i`` of ``kind`` (C-contiguous, the same
+        values as ``meshes[kind][i]``)."""
+        chunks = self._local.__dict__.setdefault("chunks", {})
+        src = self.meshes[kind]
+        i0 = i - i % _MESH_CHUNK
+        held = chunks.get(kind)
+        if held is None or held[0] != i0:
+            block = np.empty((_MESH_CHUNK,) + src.shape[1:]) if held is None else held[1]
+            _copy_frames(src, i0, block[:min(_MESH_CHUNK, src.shape[0] - i0)])
+            chunks[kind] = held = (i0, block)
+        return held[1][i - i0]
+
+
+def _copy_frames_py(src, i0, dst):  # pragma: no cover (numba)
+    """``dst[r] = src[i0 + r]`` for the ``len(dst)`` frames of ``src`` (F, n, 3) from
+    ``i0``, reading each vertex coordinate's frames together (they are adjacent in a
+    clip's product)."""
+    for v in range(src.shape[1]):
+        for c in range(3):
+            for r in range(dst.shape[0]):
+                dst[r, v, c] = src[i0 + r, v, c]
+
+
+_copy_frames = _maybe_njit(_copy_frames_py)
+
+
 def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: int,
                      opts: RewriteOptions, per_frame: bool):
     """``(topo, eye texture, jaw texture)`` of a clip: the eye holes closed and the eye region
@@ -500,7 +607,7 @@ class _ClipRenderer:
         The eye region's texture (``eyes="model"``; ``topo`` then has its eye holes closed).
     jaw_tex : JawTexture or None
         The jaw region's texture (``jaw="closed"`` with the per-frame face texture).
-    meshes : dict
+    meshes : _FrameMeshes
         ``"new"``, ``"target"``, ``"source"`` meshes of every frame synthesised up front
         (:func:`_clip_meshes`); missing kinds are synthesised per frame.
     """
@@ -518,7 +625,7 @@ class _ClipRenderer:
     const_tex: FaceTexture | None
     mouth_function: MouthFunction | None
     with_mouth: bool
-    meshes: dict
+    meshes: "_FrameMeshes"
     eye_tex: EyeTexture | None = None
     jaw_tex: JawTexture | None = None
 
@@ -554,12 +661,12 @@ class _ClipRenderer:
             kinds["source"] = source_track
         return cls(target_frames, target_track, new_track, model, opts, topo, first,
                    source_frames, source_track, sidx, const_tex, fn, with_mouth,
-                   _clip_meshes(model, n, kinds), eye_tex, jaw_tex)
+                   _FrameMeshes(_clip_meshes(model, n, kinds)), eye_tex, jaw_tex)
 
     def mesh(self, kind: str, track, i: int) -> np.ndarray:
         """The mesh (n_vertices, 3) of frame ``i`` of ``track`` (its ``kind`` in :attr:`meshes`)."""
         if kind in self.meshes:
-            return self.meshes[kind][i]
+            return self.meshes.frame(kind, i)
         return self.model.synthesize(track.weights_at(i))
 
     def face_texture(self, frame: np.ndarray, i: int) -> FaceTexture:

@@ -16,7 +16,7 @@ from .errors import ShapeError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MeshTopology", "mesh_topology", "boundary_loops", "close_mouth"]
+__all__ = ["MeshTopology", "mesh_topology", "boundary_loops", "close_mouth", "inside_polygon"]
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
@@ -166,14 +166,40 @@ def _mouth_region(F: np.ndarray, V: np.ndarray, lm: np.ndarray, loop: np.ndarray
     if lips:
         # the lips: triangles inside the outer lip contour (iBUG 48-59) seen from the front,
         # grown by 10% about its centre
-        from matplotlib.path import Path as _Path
-
         poly = lm[48:60, :2]
         ctr = poly.mean(0)
-        inside = _Path(ctr + 1.1 * (poly - ctr)).contains_points(V[:, :2])
+        inside = inside_polygon(ctr + 1.1 * (poly - ctr), V[:, :2])
         inside &= V[:, 2] > V[loop, 2].min() - 0.5 * _face_size(lm)  # the front of the face
         mouth.update(int(t) for t in np.flatnonzero(inside[F].all(axis=1)))
     return np.asarray(sorted(mouth), dtype=np.int64)
+
+
+def inside_polygon(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Which points lie inside a closed polygon (even-odd rule, crossings of a ray to +x).
+
+    The test of ``matplotlib.path.Path(polygon).contains_points(points)`` (its crossing
+    test with the same arithmetic, edge by edge in the polygon's order, the closing edge
+    last), so points on an edge are decided as there, without importing matplotlib
+    (0.2 s).
+
+    Parameters
+    ----------
+    polygon : (k, 2) float
+        Vertices in order; the last joins the first.
+    points : (n, 2) float
+
+    Returns
+    -------
+    (n,) bool
+    """
+    P = np.asarray(polygon, np.float64)
+    tx, ty = (np.asarray(points, np.float64)[:, j] for j in (0, 1))
+    inside = np.zeros(tx.shape, bool)
+    for (x0, y0), (x1, y1) in zip(P, np.roll(P, -1, axis=0)):
+        above0, above1 = y0 >= ty, y1 >= ty
+        hit = ((y1 - ty) * (x0 - x1) >= (x1 - tx) * (y0 - y1)) == above1
+        inside ^= (above0 != above1) & hit
+    return inside
 
 
 def close_mouth(vertices: np.ndarray, topo: MeshTopology) -> np.ndarray:

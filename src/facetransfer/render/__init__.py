@@ -50,7 +50,7 @@ from .cameras import (Pinhole, WeakPerspective, _as_size, euler_from_rotation,
 from .raster import (Raster, Rasterizer, RenderError, _check_mesh, _check_not_all_degenerate,
                      _rasterize_checked, rasterize, rasterize_reference)
 from .shading import (_check_colors, check_shading, check_textured, sample_texture,
-                      shade_image, shade_texture, vertex_normals)
+                      shade_image, shade_layers, shade_texture, vertex_normals)
 from .visibility import _tolerance, _visibility, vertex_visibility
 
 log = logging.getLogger(__name__)
@@ -73,6 +73,7 @@ __all__ = [
     "render_model",
     "sample_texture",
     "shade_texture",
+    "shade_layers",
 ]
 
 

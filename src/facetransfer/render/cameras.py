@@ -31,13 +31,26 @@ class Camera(Protocol):
     def to_camera(self, X: np.ndarray) -> np.ndarray: ...
 
 
+#: ``np.allclose(R @ R.T, I, atol=1e-6)``'s bound per entry (``atol + rtol |I|``)
+_ORTHONORMAL_TOL = 1e-6 + 1e-5 * np.eye(3)
+
+
 def _as_rotation(R) -> np.ndarray:
+    """``R`` as a (3, 3) float64 proper rotation; ShapeError otherwise. (The test of
+    ``np.allclose`` written out, and the determinant's sign by the triple product: a camera
+    is made several times a frame.)"""
     R = np.asarray(R, dtype=np.float64)
-    if R.shape != (3, 3) or not np.all(np.isfinite(R)):
+    if R.shape != (3, 3) or not np.isfinite(R).all():
         raise ShapeError(f"rotation must be a finite (3, 3) array, got shape {R.shape}")
-    if not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+    if not (np.abs(R @ R.T - np.eye(3)) <= _ORTHONORMAL_TOL).all() or _det3(R) < 0:
         raise ShapeError("rotation must be a proper rotation matrix (R R^T = I, det R = +1)")
     return R
+
+
+def _det3(R: np.ndarray) -> float:
+    """The determinant of a (3, 3) matrix, ``R[0] · (R[1] × R[2])``."""
+    (a, b, c), (d, e, f), (g, h, i) = R.tolist()
+    return a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g)
 
 
 def _as_vector(x, n: int, what: str) -> np.ndarray:
@@ -84,6 +97,16 @@ class WeakPerspective:
         object.__setattr__(self, "scale", s)
         object.__setattr__(self, "rotation", _as_rotation(self.rotation))
         object.__setattr__(self, "translation", t)
+
+    def shifted(self, dx: float, dy: float) -> "WeakPerspective":
+        """The camera of the crop whose top-left pixel is ``(dx, dy)``: the translation less
+        ``(dx, dy)`` (scale and rotation as they are, not checked again)."""
+        out = object.__new__(WeakPerspective)
+        object.__setattr__(out, "scale", self.scale)
+        object.__setattr__(out, "rotation", self.rotation)
+        object.__setattr__(out, "translation",
+                           self.translation - np.array([dx, dy], np.float64))
+        return out
 
     def to_camera(self, X: np.ndarray) -> np.ndarray:
         """Rotated coordinates ``R @ X`` per point, (n, 3) -> (n, 3)."""

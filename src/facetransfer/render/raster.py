@@ -33,8 +33,15 @@ except ImportError:  # pragma: no cover
 __all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference"]
 
 
-def _maybe_njit(fn):
-    return numba.njit(cache=True, nogil=True, error_model="numpy")(fn) if _HAVE_NUMBA else fn
+def _maybe_njit(fn, *, inline: bool = False):
+    """``fn`` compiled by numba (cached, no GIL, numpy's error model). ``inline``: inlined
+    into the kernels that call it, at numba's IR level (a cached kernel is its own LLVM
+    module, so LLVM does not inline across kernels: a small helper called per pixel would
+    otherwise cost a call with every array argument spilled to the stack)."""
+    if not _HAVE_NUMBA:
+        return fn
+    return numba.njit(cache=True, nogil=True, error_model="numpy",
+                      inline="always" if inline else "never")(fn)
 
 
 class RenderError(MeshError):
@@ -270,12 +277,47 @@ def rasterize_reference(vertices: np.ndarray, faces: np.ndarray, camera, size: t
 # numba kernel
 # --------------------------------------------------------------------------------------------
 
+def _edges_py(x0, y0, x1, y1, x2, y2, px, py):  # pragma: no cover (numba, inlined)
+    """The edge functions of pixel centre ``(px, py)`` (as :func:`_edges_np`)."""
+    w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
+    w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
+    w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
+    return w0, w1, w2
+
+
+_edges = _maybe_njit(_edges_py, inline=True)
+
+
+def _row_run_py(x0, y0, x1, y1, x2, y2, pos, py, lo, hi):  # pragma: no cover (numba, inlined)
+    """``(first, last)`` of the pixels ``lo..hi`` of row ``py`` inside the triangle (the rule
+    of :func:`rasterize`; none: ``first > last``), in one pass without a branch per pixel.
+    They are one run: each edge function is monotone along a row, also in floating point."""
+    first, last = hi + 1, lo - 1
+    for ix in range(lo, hi + 1):
+        w0, w1, w2 = _edges(x0, y0, x1, y1, x2, y2, float(ix), py)
+        if pos:
+            inside = not ((w0 < 0) | (w1 < 0) | (w2 < 0))
+        else:
+            inside = not ((w0 > 0) | (w1 > 0) | (w2 > 0))
+        first = min(first, ix) if inside else first
+        last = ix if inside else last
+    return first, last
+
+
+_row_run = _maybe_njit(_row_run_py, inline=True)
+
+
 def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  # pragma: no cover
     """Z-buffer loop over triangles; fills ``zbuf`` (H, W) float32, ``tid`` (H, W) int32 and
     ``bary`` (H, W, 3) float32 at every pixel a triangle wins. Returns the bounding box
     ``(x_lo, y_lo, x_hi, y_hi)`` (inclusive) of the pixels written (empty: lo > hi).
 
-    Must stay operation-for-operation equal to :func:`rasterize_reference`.
+    Must stay operation-for-operation equal to :func:`rasterize_reference`. The pixels of a
+    bounding-box row inside a triangle are one run, also in floating point (each edge
+    function is a monotone function of ``px`` along the row, its operations being correctly
+    rounded): a first pass over the row finds the run's ends without a branch per pixel
+    (:func:`_row_run`; the inside test mispredicts at both ends of every short row), a
+    second shades the run.
     """
     bx0, by0, bx1, by1 = W, H, -1, -1
     for f in range(F.shape[0]):
@@ -300,16 +342,9 @@ def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  #
         wrote = False
         for iy in range(int(ymin), int(ymax) + 1):
             py = float(iy)
-            for ix in range(int(xmin), int(xmax) + 1):
-                px = float(ix)
-                w0 = (x2 - x1) * (py - y1) - (y2 - y1) * (px - x1)
-                w1 = (x0 - x2) * (py - y2) - (y0 - y2) * (px - x2)
-                w2 = (x1 - x0) * (py - y0) - (y1 - y0) * (px - x0)
-                if pos:
-                    if w0 < 0 or w1 < 0 or w2 < 0:
-                        continue
-                elif w0 > 0 or w1 > 0 or w2 > 0:
-                    continue
+            first, last = _row_run(x0, y0, x1, y1, x2, y2, pos, py, int(xmin), int(xmax))
+            for ix in range(first, last + 1):
+                w0, w1, w2 = _edges(x0, y0, x1, y1, x2, y2, float(ix), py)
                 b0 = w0 / area
                 b1 = w1 / area
                 b2 = w2 / area

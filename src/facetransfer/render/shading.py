@@ -9,7 +9,7 @@ import numpy as np
 from ..errors import AssetError, ShapeError
 from .raster import Raster, RenderError, _check_mesh, _face_cross, _maybe_njit
 
-__all__ = ["vertex_normals", "sample_texture", "shade_texture"]
+__all__ = ["vertex_normals", "sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS"]
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -118,10 +118,50 @@ def _texel_py(tex, u, v):  # pragma: no cover (numba)
 _texel = _maybe_njit(_texel_py)
 
 
-def _shade_uv_kernel_py(tid, bary, F, uvs, tex, select, image, mask):  # pragma: no cover
-    """Unlit texture shading of the covered pixels whose triangle is selected (bilinear,
-    the texel convention of :func:`sample_texture`). Returns False (and stops) at a triangle
-    index beyond ``F``."""
+#: The 256 values of a uint8 as float64 (a texel's conversion as a table look-up, in L1)
+_U8_AS_FLOAT = np.arange(256, dtype=np.float64)
+
+
+def _shade_pixel_py(tex, uvs, i0, i1, i2, b0, b1, b2, image, iy, ix):  # pragma: no cover
+    """``image[iy, ix]`` = the bilinear sample of ``tex`` (Ht, Wt, 3) uint8 at the barycentric
+    interpolation ``b0 uvs[i0] + b1 uvs[i1] + b2 uvs[i2]``, rounded and clipped to 0..255: the
+    arithmetic of :func:`_texel` (hence of :func:`sample_texture`), the texels addressed by
+    unsigned indices (clamped to the image already: no negative-index wrapping) and converted
+    by :data:`_U8_AS_FLOAT` (numba, inlined)."""
+    Ht, Wt = tex.shape[0], tex.shape[1]
+    u = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
+    v = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
+    u = min(max(u, 0.0), 1.0) * (Wt - 1)
+    v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
+    c0 = min(int(np.floor(u)), Wt - 1)
+    r0 = min(int(np.floor(v)), Ht - 1)
+    c1 = min(c0 + 1, Wt - 1)
+    r1 = min(r0 + 1, Ht - 1)
+    fu = u - c0
+    fv = v - r0
+    gu = 1.0 - fu
+    gv = 1.0 - fv
+    a0, a1, d0, d1 = np.uint64(r0), np.uint64(r1), np.uint64(c0), np.uint64(c1)
+    lut = _U8_AS_FLOAT
+    for k in range(3):
+        kk = np.uint64(k)
+        c = (lut[tex[a0, d0, kk]] * gu + lut[tex[a0, d1, kk]] * fu) * gv \
+            + (lut[tex[a1, d0, kk]] * gu + lut[tex[a1, d1, kk]] * fu) * fv
+        image[iy, ix, k] = min(max(np.rint(c), 0.0), 255.0)
+
+
+_shade_pixel = _maybe_njit(_shade_pixel_py, inline=True)
+
+
+def _shade_layers_kernel_py(tid, bary, F, flags, uv0, tex0, img0, uv1, tex1, img1, uv2, tex2,
+                            img2, uv3, tex3, img3, labels):  # pragma: no cover (numba)
+    """Unlit texture shading of up to four layers in one pass over a raster.
+
+    At a pixel covered by triangle ``f``: ``labels[iy, ix] = flags[f]``, and layer ``k``'s
+    image ``img<k>`` takes the bilinear sample of ``tex<k>`` at the barycentric interpolation
+    of ``uv<k>`` where bit ``1 << k`` of ``flags[f]`` is set (:func:`_shade_pixel`; layers are
+    separate arguments: a tuple indexed per pixel is several times slower in numba). Returns
+    False (and stops) at a triangle index beyond ``F``."""
     H, W = tid.shape
     n = F.shape[0]
     for iy in range(H):
@@ -129,19 +169,96 @@ def _shade_uv_kernel_py(tid, bary, F, uvs, tex, select, image, mask):  # pragma:
             f = tid[iy, ix]
             if f >= n:
                 return False
-            if f < 0 or not select[f]:
+            if f < 0:
                 continue
-            mask[iy, ix] = True
+            fl = flags[f]
+            labels[iy, ix] = fl
+            if (fl & 15) == 0:
+                continue
             i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
             b0, b1, b2 = float(bary[iy, ix, 0]), float(bary[iy, ix, 1]), float(bary[iy, ix, 2])
-            c = _texel(tex, b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0],
-                       b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1])
-            for k in range(3):
-                image[iy, ix, k] = min(max(np.rint(c[k]), 0.0), 255.0)
+            if fl & 1:
+                _shade_pixel(tex0, uv0, i0, i1, i2, b0, b1, b2, img0, iy, ix)
+            if fl & 2:
+                _shade_pixel(tex1, uv1, i0, i1, i2, b0, b1, b2, img1, iy, ix)
+            if fl & 4:
+                _shade_pixel(tex2, uv2, i0, i1, i2, b0, b1, b2, img2, iy, ix)
+            if fl & 8:
+                _shade_pixel(tex3, uv3, i0, i1, i2, b0, b1, b2, img3, iy, ix)
     return True
 
 
-_shade_uv_kernel = _maybe_njit(_shade_uv_kernel_py)
+_shade_layers_kernel = _maybe_njit(_shade_layers_kernel_py)
+
+#: Layers :func:`shade_layers` shades in one pass.
+MAX_LAYERS = 4
+
+
+def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray
+                 ) -> tuple[list[np.ndarray], np.ndarray]:
+    """Texture the pixels of a raster with several textures in one pass (numba), unlit.
+
+    Layer ``k`` is shaded at the pixels whose triangle has bit ``1 << k`` of ``flags`` set:
+    each such pixel takes the bilinear texture sample (:func:`sample_texture`) at the
+    barycentric interpolation of the layer's uvs. The higher bits of ``flags`` (4 to 7) only
+    label pixels: ``labels`` is ``flags`` of each covered pixel's triangle (0 where nothing
+    is), so any set of triangles yields its pixels (``labels & bit``) without another pass
+    over the raster.
+
+    Parameters
+    ----------
+    raster : Raster
+        Of a mesh with faces ``faces``.
+    faces : (F, 3) int
+    layers : sequence of (uvs (n, 2) float, texture (Ht, Wt, 3) uint8) or None
+        At most :data:`MAX_LAYERS`; the uvs (v up) are of the mesh's vertices. None: a slot
+        not used (no flag may select it).
+    flags : (F,) uint8
+        Per triangle: the layers that shade it (bits 0-3) and labels (bits 4-7).
+
+    Returns
+    -------
+    images : list of (H, W, 3) uint8 or None
+        One per layer, black where the layer is not shaded (None for an unused slot).
+    labels : (H, W) uint8
+    """
+    Fa = np.ascontiguousarray(faces, dtype=np.int64)
+    fl = np.ascontiguousarray(flags, dtype=np.uint8)
+    if fl.shape != (len(Fa),):
+        raise ShapeError(f"flags must be ({len(Fa)},) uint8, got {fl.shape}")
+    if not 1 <= len(layers) <= MAX_LAYERS:
+        raise ShapeError(f"shade_layers takes 1 to {MAX_LAYERS} layers, got {len(layers)}")
+    n_given = len(layers)
+    layers = list(layers) + [None] * (MAX_LAYERS - n_given)
+    unused = sum(1 << k for k, layer in enumerate(layers) if layer is None)
+    if fl.size and int(np.bitwise_or.reduce(fl)) & unused:
+        raise ShapeError("flags select a layer that is not given")
+    H, W = raster.tri_id.shape
+    n_vertices = int(Fa.max()) + 1 if Fa.size else 0
+    args, images = [], []
+    for layer in layers:
+        if layer is None:  # no flag selects it: never read or written
+            args += [_DUMMY_UV, _DUMMY_TEX, _DUMMY_TEX]
+            images.append(None)
+            continue
+        images.append(np.zeros((H, W, 3), np.uint8))
+        args += [_check_uvs(layer[0], n_vertices),
+                 np.ascontiguousarray(_check_texture(layer[1])), images[-1]]
+    labels = np.zeros((H, W), np.uint8)
+    # the raster as it is (a box of a larger one is not copied: numba reads strided arrays)
+    if not _shade_layers_kernel(np.asarray(raster.tri_id, np.int32),
+                                np.asarray(raster.bary, np.float32), Fa, fl, *args, labels):
+        raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
+    return images[:n_given], labels
+
+
+def _check_uvs(uvs, n_vertices: int) -> np.ndarray:
+    """``uvs`` as a C-contiguous (n, 2) float64 array of at least ``n_vertices`` rows (the
+    vertices the faces index)."""
+    U = np.ascontiguousarray(uvs, dtype=np.float64)
+    if U.ndim != 2 or U.shape[1] != 2 or n_vertices > U.shape[0]:
+        raise ShapeError(f"uvs must be (n, 2) covering the faces' vertices, got {U.shape}")
+    return U
 
 
 def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,
@@ -149,7 +266,8 @@ def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: n
     """Texture the pixels of a raster without lighting, in one pass (numba).
 
     Every pixel covered by a (selected) triangle takes the bilinear texture sample
-    (:func:`sample_texture`) at the barycentric interpolation of its triangle's ``uvs``.
+    (:func:`sample_texture`) at the barycentric interpolation of its triangle's ``uvs``
+    (:func:`shade_layers` with one layer).
 
     Parameters
     ----------
@@ -169,23 +287,13 @@ def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: n
     mask : (H, W) bool
         The shaded pixels.
     """
-    T = _check_texture(texture)
-    Fa = np.ascontiguousarray(faces, dtype=np.int64)
-    U = np.ascontiguousarray(uvs, dtype=np.float64)
-    if U.ndim != 2 or U.shape[1] != 2 or (Fa.size and Fa.max() >= U.shape[0]):
-        raise ShapeError(f"uvs must be (n, 2) covering the faces' vertices, got {U.shape}")
-    sel = np.ones(len(Fa), bool) if select is None else np.ascontiguousarray(select, dtype=bool)
-    if sel.shape != (len(Fa),):
-        raise ShapeError(f"select must be ({len(Fa)},) bool, got {sel.shape}")
-    H, W = raster.tri_id.shape
-    image = np.zeros((H, W, 3), np.uint8)
-    mask = np.zeros((H, W), bool)
-    # the raster as it is (a box of a larger one is not copied: numba reads strided arrays)
-    if not _shade_uv_kernel(np.asarray(raster.tri_id, np.int32),
-                            np.asarray(raster.bary, np.float32), Fa, U, np.ascontiguousarray(T),
-                            sel, image, mask):
-        raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
-    return image, mask
+    n = len(faces)
+    sel = np.ones(n, np.uint8) if select is None else \
+        np.ascontiguousarray(select, dtype=bool).view(np.uint8)
+    if sel.shape != (n,):
+        raise ShapeError(f"select must be ({n},) bool, got {sel.shape}")
+    (image,), labels = shade_layers(raster, faces, [(uvs, texture)], sel)
+    return image, labels.view(bool)
 
 
 def check_shading(shading: str, ambient: float) -> None:
@@ -286,3 +394,4 @@ def _shade_kernel_py(tid, bary, F, src, colors, uvs, tex, lambert, normals, ligh
 
 
 _shade_kernel = _maybe_njit(_shade_kernel_py)
+

@@ -69,8 +69,11 @@ def frame_uvs(vertices: np.ndarray, camera, size: tuple[int, int]) -> np.ndarray
     (n, 2) float64
     """
     W, H = size
-    p = camera.project(vertices)
-    return np.stack([p[:, 0] / max(W - 1, 1), 1.0 - p[:, 1] / max(H - 1, 1)], axis=1)
+    uv = camera.project(vertices)  # a new (n, 2) array, turned into uvs in place
+    uv[:, 0] /= max(W - 1, 1)
+    np.divide(uv[:, 1], max(H - 1, 1), out=uv[:, 1])
+    np.subtract(1.0, uv[:, 1], out=uv[:, 1])
+    return uv
 
 
 

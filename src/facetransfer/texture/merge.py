@@ -27,7 +27,8 @@ from .base import TextureError, texture_to_uint8
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MergedTexture", "merge_textures", "fill_holes", "fill_vertex_colors"]
+__all__ = ["MergedTexture", "merge_textures", "fill_holes", "fill_vertex_colors",
+           "push_pull_points"]
 
 
 class MergedTexture(NamedTuple):
@@ -160,7 +161,12 @@ def _push_pull(tex: np.ndarray, known: np.ndarray) -> np.ndarray:
     (H, W, 3) float32
         Equal to ``tex`` where ``known``.
     """
-    levels = [(np.ascontiguousarray(tex, np.float32), known.astype(np.float32))]
+    return _push_pull_levels([(np.ascontiguousarray(tex, np.float32), known.astype(np.float32))])
+
+
+def _push_pull_levels(levels: list) -> np.ndarray:
+    """:func:`_push_pull` from its finest level ``levels[0] = (texels (H, W, 3), weights (H, W))``
+    float32 (0/1 weights): the pyramid pulled to 1x1 and pushed back; the filled finest level."""
     while levels[-1][1].shape[0] > 1 or levels[-1][1].shape[1] > 1:
         c, wl = levels[-1]
         Hc, Wc = (wl.shape[0] + 1) // 2, (wl.shape[1] + 1) // 2
@@ -169,12 +175,78 @@ def _push_pull(tex: np.ndarray, known: np.ndarray) -> np.ndarray:
         levels.append((cc, wc))
     filled = levels[-1][0]
     for c, wl in reversed(levels[:-1]):
-        H, W = wl.shape
-        up = cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
-                        interpolation=cv2.INTER_LINEAR)[:H, :W]
-        cv2.copyTo(c, (wl > 0).view(np.uint8), up)  # the known texels over it
-        filled = np.ascontiguousarray(up)
+        filled = _push(filled, wl.shape)
+        cv2.copyTo(c, (wl > 0).view(np.uint8), filled)  # the known texels over it
     return filled
+
+
+def _push(coarse: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
+    """The bilinear 2x upsampling (``cv2.resize``, INTER_LINEAR) of a filled level
+    ``coarse`` (h, w, 3), cut to the finer level's ``shape = (H, W)``: a new C-contiguous
+    (H, W, 3) float32 array."""
+    H, W = shape
+    up = cv2.resize(coarse, (2 * coarse.shape[1], 2 * coarse.shape[0]),
+                    interpolation=cv2.INTER_LINEAR)
+    return np.ascontiguousarray(up[:H, :W])
+
+
+def push_pull_points(shape: tuple[int, int], ry: np.ndarray, rx: np.ndarray,
+                     values: np.ndarray) -> np.ndarray:
+    """:func:`fill_holes` (push-pull) of an image known only at a few pixels.
+
+    The same texels as ``fill_holes(d, known)`` with ``d`` zero but ``d[ry, rx] = values``
+    and ``known`` the pixels ``(ry, rx)``, without the dense finest level: its pull (each
+    2x2 block's mean of its known pixels, summed in row-major order as the pull kernel
+    does) is accumulated from the points, and its push writes ``values`` at the points.
+
+    Parameters
+    ----------
+    shape : (H, W)
+    ry, rx : (k,) int
+        Distinct pixels in row-major order (e.g. ``np.nonzero`` of a mask).
+    values : (k, 3) float32
+
+    Returns
+    -------
+    (H, W, 3) float32
+    """
+    H, W = shape
+    vals = np.ascontiguousarray(values, np.float32)
+    if H * W <= 1 or ry.size in (0, H * W):  # nothing to pull, or nothing to fill
+        d = np.zeros((H, W, 3), np.float32)
+        d[ry, rx] = vals
+        known = np.zeros((H, W), bool)
+        known[ry, rx] = True
+        return fill_holes(d, known)
+    Hc, Wc = (H + 1) // 2, (W + 1) // 2
+    cc, wc = np.zeros((Hc, Wc, 3), np.float32), np.zeros((Hc, Wc), np.float32)
+    _pull_points(np.asarray(ry, np.int64), np.asarray(rx, np.int64), vals, cc, wc)
+    filled = _push(_push_pull_levels([(cc, wc)]), (H, W))
+    filled[ry, rx] = vals
+    return filled
+
+
+def _pull_points_py(ry, rx, vals, coarse, wc):  # pragma: no cover (numba)
+    """The finest pull step of :func:`_pull_kernel` from known pixels only: ``coarse``
+    (Hc, Wc, 3) and ``wc`` (Hc, Wc) zero on entry; each point's values added to its 2x2
+    block's sums in the points' (row-major) order, as the kernel adds a block's pixels (its
+    unknown pixels add zeros, which change no sum), then the means and the weights clipped
+    to 1."""
+    for i in range(ry.shape[0]):
+        y, x = ry[i] // 2, rx[i] // 2
+        wc[y, x] += np.float32(1.0)
+        coarse[y, x, 0] += vals[i, 0]
+        coarse[y, x, 1] += vals[i, 1]
+        coarse[y, x, 2] += vals[i, 2]
+    Hc, Wc = wc.shape
+    for y in range(Hc):
+        for x in range(Wc):
+            sw = wc[y, x]
+            if sw > 0:
+                coarse[y, x, 0] = coarse[y, x, 0] / sw
+                coarse[y, x, 1] = coarse[y, x, 1] / sw
+                coarse[y, x, 2] = coarse[y, x, 2] / sw
+                wc[y, x] = min(sw, np.float32(1.0))
 
 
 def _pull_kernel_py(tex, w, coarse, wc):  # pragma: no cover (numba)
@@ -208,6 +280,7 @@ def _pull_kernel_py(tex, w, coarse, wc):  # pragma: no cover (numba)
 
 
 _pull_kernel = _maybe_njit(_pull_kernel_py)
+_pull_points = _maybe_njit(_pull_points_py)
 
 
 def fill_vertex_colors(colors, known, faces) -> np.ndarray:
