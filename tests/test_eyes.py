@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facetransfer import eyes
+from facetransfer import eyes, patch
 from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.render import rasterize
 from facetransfer.rewrite import rewrite_frame
@@ -209,7 +209,7 @@ def test_match_outline_takes_the_current_exposure():
     mask = np.zeros((40, 50), bool)
     mask[10:30, 12:40] = True
     part = np.clip(face.astype(float) * [0.8, 0.9, 1.1], 0, 255).astype(np.uint8)  # other frame
-    out = eyes.match_outline(face, part, mask, np.ones_like(mask), feather=0.0)
+    out = patch.match_outline(face, part, mask, np.ones_like(mask), feather=0.0)
     np.testing.assert_array_equal(out[~mask], face[~mask])
     assert np.abs(out[mask].astype(int) - face[mask].astype(int)).mean() < 2.0
     assert np.abs(part[mask].astype(int) - face[mask].astype(int)).mean() > 8.0
@@ -225,18 +225,18 @@ def test_gain_field_follows_a_shading_gradient_and_ignores_a_changed_patch():
     xx = np.mgrid[0:H, 0:W][1]
     shade = np.exp(-0.3 * (xx - 30) / 60)[..., None] * np.array([1.0, 0.95, 1.05])  # gain part->face
     part = (face + 1) / shade - 1
-    patch = np.zeros((H, W), bool)
-    patch[5:17, 8:28] = True                   # 240 of 1,200 px: other content
-    part[patch] = 20.0
+    other = np.zeros((H, W), bool)
+    other[5:17, 8:28] = True                   # 240 of 1,200 px: other content
+    part[other] = 20.0
     where = np.ones((H, W), bool)
-    g = eyes.gain_field(face.astype(np.uint8), np.rint(part).astype(np.uint8), where,
+    g = patch.gain_field(face.astype(np.uint8), np.rint(part).astype(np.uint8), where,
                         iterations=20)
-    err = np.abs(g[~patch] / shade[~patch] - 1)
+    err = np.abs(g[~other] / shade[~other] - 1)
     assert err.max() < 0.03                    # uint8 rounding only
     assert g[..., 0].mean(axis=0)[-1] < g[..., 0].mean(axis=0)[0] - 0.2  # the gradient is there
-    out = eyes.match_outline(face.astype(np.uint8), np.rint(part).astype(np.uint8), where,
+    out = patch.match_outline(face.astype(np.uint8), np.rint(part).astype(np.uint8), where,
                              np.ones_like(where), feather=0.0)
-    good = ~patch
+    good = ~other
     good[:2], good[-2:], good[:, :2], good[:, -2:] = False, False, False, False  # 2 px from the edge
     assert np.abs(out[good].astype(int) - face.astype(np.uint8)[good].astype(int)).mean() < 1.5
 

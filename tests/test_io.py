@@ -176,6 +176,7 @@ def test_prefetch_hands_out_what_read_video_gives(tmp_path, monkeypatch):
     """Background reads are handed out once, cut to the frames asked for; a read they do not
     cover (more frames than decoded before the clip's end, another file, a second request)
     is decoded on the spot; a damaged file raises when its frames are asked for."""
+    import facetransfer.io.prefetch as pf
     import facetransfer.io.video as v
 
     rng = np.random.default_rng(3)
@@ -185,8 +186,8 @@ def test_prefetch_hands_out_what_read_video_gives(tmp_path, monkeypatch):
     whole = {p: read_video(p)[0] for p in (a, b)}
     direct = []
     real = v.read_video
-    pre = v.Prefetch([(a, 6), (b, 50), (tmp_path / "junk.mp4", None)])
-    pre2 = v.Prefetch([(a, 6)])
+    pre = pf.Prefetch([(a, 6), (b, 50), (tmp_path / "junk.mp4", None)])
+    pre2 = pf.Prefetch([(a, 6)])
     monkeypatch.setattr(v, "read_video", lambda p, **k: direct.append(Path(p).name) or real(p, **k))
     fr, fps = pre.read_video(tmp_path / "." / "a.mp4", max_frames=4)      # same file, cut
     np.testing.assert_array_equal(fr, whole[a][:4])
@@ -201,7 +202,7 @@ def test_prefetch_hands_out_what_read_video_gives(tmp_path, monkeypatch):
 
 
 def test_frames_to_cover_another_rate(tmp_path):
-    from facetransfer.io.video import frames_covering, frames_to_cover
+    from facetransfer.io.prefetch import frames_covering, frames_to_cover
 
     assert frames_covering(300, 30.0, 30.0) == 301            # one beyond the last time
     assert frames_covering(300, 30.0, 25.0) == 251            # 299 / 30 s at 25 fps: 249.2

@@ -14,7 +14,7 @@ import cv2
 import numpy as np
 import pytest
 
-from facetransfer import composite, eyes
+from facetransfer import composite, eyes, patch
 from facetransfer.composite import _feather_alpha, _nonzero, membrane_blend
 from facetransfer.texture import fill_holes
 
@@ -87,7 +87,7 @@ def test_push_pull_equals_the_numpy_pyramid(shape):
 
 
 def _gain_coefficients_reference(face, part, where, iterations=5, max_samples=4096):
-    """The numpy IRLS of :func:`facetransfer.eyes.gain_field` before the kernel: (3, 3)
+    """The numpy IRLS of :func:`facetransfer.patch.gain_field` before the kernel: (3, 3)
     coefficients (a, b, c) per channel, and the centring (cx, cy, scale)."""
     ys, xs = np.nonzero(where)
     cy, cx = ys.mean(), xs.mean()
@@ -119,8 +119,8 @@ def test_gain_field_equals_the_numpy_fit():
     x = (np.arange(box[0], box[2]) - cx) / scale
     y = (np.arange(box[1], box[3]) - cy) / scale
     ref = np.exp(coef[0] + x[None, :, None] * coef[1] + y[:, None, None] * coef[2])
-    ref = np.clip(ref, *eyes.GAIN_RANGE)
-    g = eyes.gain_field(face, part, where, box=box)
+    ref = np.clip(ref, *patch.GAIN_RANGE)
+    g = patch.gain_field(face, part, where, box=box)
     assert g.shape == (box[3] - box[1], box[2] - box[0], 3) and g.dtype == np.float32
     np.testing.assert_allclose(g, ref, rtol=1e-5)
 
@@ -134,12 +134,12 @@ def test_rejected_equals_the_log_ratio():
     r = np.clip((d - lo) / (hi - lo), 0.0, 1.0).astype(np.float32)
     assert 0.05 < (r > 0).mean() < 0.95  # the ramp is exercised on both sides
     # grown by REJECT_GROW pixels: the largest value over the (2g + 1)^2 square around each
-    g = eyes.REJECT_GROW
+    g = patch.REJECT_GROW
     pad = np.pad(r, g, constant_values=-np.inf)
     grown = np.max([pad[g + dy: g + dy + r.shape[0], g + dx: g + dx + r.shape[1]]
                     for dy in range(-g, g + 1) for dx in range(-g, g + 1)], axis=0)
     ref = np.clip(cv2.GaussianBlur(grown.astype(np.float32), (0, 0), 2.0) * 2.0, 0.0, 1.0)
-    np.testing.assert_allclose(eyes._rejected(f, fb, (lo, hi)), ref, rtol=0, atol=1e-5)
+    np.testing.assert_allclose(patch._rejected(f, fb, (lo, hi)), ref, rtol=0, atol=1e-5)
 
 
 def test_region_box_is_the_shown_pixels_box_grown():
@@ -169,14 +169,14 @@ def test_gain_samples_equal_numpy():
     pts = cv2.findNonZero(where.view(np.uint8)).reshape(-1, 2)
     k = ys.size
     u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
-    eyes._gain_samples(pts, face, part, 500, eyes._LOG1P_U8, u, v, r, centre)
+    patch._gain_samples(pts, face, part, 500, patch._LOG1P_U8, u, v, r, centre)
     np.testing.assert_array_equal(centre, [cx, cy, scale])
     np.testing.assert_array_equal(u, (xs - cx) / scale)
     np.testing.assert_array_equal(v, (ys - cy) / scale)
     np.testing.assert_array_equal(r, np.log1p(face[ys, xs].astype(np.float64))
                                   - np.log1p(part[ys, xs].astype(np.float64)))
     with pytest.raises(ValueError, match="empty mask"):
-        eyes.gain_field(face, part, np.zeros((H, W), bool))
+        patch.gain_field(face, part, np.zeros((H, W), bool))
 
 
 def _harmonic_disc():
@@ -271,7 +271,7 @@ def test_reject_kernel_equals_the_quotients_at_the_ramp_edge():
     want = np.where(ratio <= np.exp(lo), 0.0,
                     np.where(ratio >= np.exp(lo + span), 1.0, (np.log(ratio) - lo) / span))
     r = np.empty((60, 50), np.float32)
-    eyes._reject_kernel(f, fb, lo, span, r)
+    patch._reject_kernel(f, fb, lo, span, r)
     np.testing.assert_array_equal(r, want.astype(np.float32))
     assert 0 < (r == 0).mean() < 1
 
@@ -288,7 +288,7 @@ def test_blend_paste_rejected_equals_the_numpy_fade():
     a = rng.random((h, w)).astype(np.float32)
     blur = (rng.random((h, w)) * 0.8).astype(np.float32)
     out1, out2 = base.copy(), base.copy()
-    eyes._blend_paste_rejected(m, base, f, a, blur, where, out1)
+    patch._blend_paste_rejected(m, base, f, a, blur, where, out1)
     r = np.clip(blur * 2.0, 0.0, 1.0)
     r *= where
     composite._blend_paste(m, base, f, a * (1.0 - r), out2)

@@ -618,7 +618,7 @@ def _blend_paste_py(m, base, f, a, out):  # pragma: no cover (numba)
     """``out = rint(base + a (f - base))`` clipped to 0..255 at the pixels of ``m`` (h, w)
     (``base``, ``out`` (h, w, 3) uint8, ``f`` (h, w, 3) and ``a`` (h, w) float32), in float32;
     ``out`` is left alone elsewhere. The paste of :func:`membrane_blend` (``f`` = source +
-    membrane, ``base`` = target) and of :func:`facetransfer.eyes.match_outline`."""
+    membrane, ``base`` = target) and of :func:`facetransfer.patch.match_outline`."""
     H, W = m.shape
     for y in range(H):
         for x in range(W):

@@ -33,10 +33,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
-from .composite import _blend_paste, _feather_alpha
 from .errors import RewriteError
+from .patch import REJECT, _match_outline_into
 from .render import Raster, shade_layers, shade_texture
-from .render.raster import _maybe_njit
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -44,8 +43,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
-           "paint_eyes", "match_outline", "lid_gap", "closed_eye_frame", "close_region",
-           "reference_frame", "gain_field"]
+           "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -64,29 +62,14 @@ CLOSING_RAMP = (0.45, 0.6)
 #: Standard deviation in pixels of the fade between the closed frame's lids and the rest of the
 #: eye region (:func:`paint_eyes`).
 LID_SOFTNESS = 3.0
-#: Per-channel gains allowed between the eye region's frame and the current one
-#: (:func:`match_outline`).
-GAIN_RANGE = (0.7, 1.4)
-#: Reweighting steps and most pixels of the robust fit of :func:`gain_field`.
-GAIN_ITERATIONS, GAIN_SAMPLES = 5, 4096
 #: Holes of the eye region up to this many edge rings across are closed (:func:`close_region`).
 CLOSE_RINGS = 3
-#: Pixels by which a rejection (:func:`match_outline`'s ``reject``) grows beyond the pixels
-#: that are unlike enough: the transition from skin to hair in the reference frame.
-REJECT_GROW = 2
 #: The eye region's rim (:attr:`EyeTexture.rim`): its triangles farther than this (model
 #: units, cm for the FaceKit) from the lid margins (iBUG 36-47) and the brows (iBUG 17-26):
 #: forehead, temples and cheek, skin without features of its own. (Measured from the margins,
 #: not from every vertex the lid shapes move: eyeSquint moves the cheek down to the jaw line,
 #: which a turned head shows beside the hair or the dark gap under it.)
 RIM_DISTANCE = 1.2
-#: Log ratios between a reference frame's texture (matched) and the current frame's from
-#: which a pixel fades back to the current frame, fully at the second (a factor of 1.65-2.5;
-#: :func:`match_outline`'s ``reject``): the reference frame shows another thing there, not the
-#: same skin in another expression. At the eye region's rim and at the hairline it often shows
-#: skin where the current frame shows hair; at the jaw line of a turned head
-#: (:mod:`facetransfer.jaw`) hair or the gap under it.
-REJECT = (0.5, 0.9)
 
 
 @dataclass(frozen=True)
@@ -675,312 +658,3 @@ def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] 
         return None
     H, W = shown.shape
     return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, W), min(y + h + margin, H)
-
-
-def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mask: np.ndarray,
-                  *, feather: float = 3.0, compare: np.ndarray | None = None,
-                  reject: tuple[float, float] | None = None,
-                  reject_where: np.ndarray | None = None) -> np.ndarray:
-    """Paste ``part`` into ``face`` inside ``mask``, shifted to the face's colours.
-
-    ``face`` and ``part`` show the same surface there (the same person's skin lifted from two
-    frames), so their ratio is the change of exposure, white balance and shading between the
-    frames plus the change of expression. ``part`` is scaled per channel by a smooth gain
-    (:func:`gain_field`: the ratio's robust planar fit over ``mask`` inside the face, 2 px from
-    its edge, clipped to :data:`GAIN_RANGE`): robust to the expression's share and to hair,
-    unlike a membrane pinned at every outline pixel; planar, so that a light falling off across
-    the face as the head turns away from the reference frame is followed; and a gain keeps dark
-    pixels (iris, lashes) dark where an offset would tint them. The seam fades over ``feather``
-    pixels inside the mask.
-
-    Parameters
-    ----------
-    face, part : (H, W, 3) uint8
-    mask, face_mask : (H, W) bool
-    feather : float
-    compare : (H, W) bool, optional
-        Where ``face`` and ``part`` are compared instead of ``mask`` (a ring around the region
-        that the expression does not move, e.g.).
-    reject : (lo, hi), optional
-        Pixels where the matched ``part`` and ``face`` differ by more than a factor
-        ``exp(lo)`` (in some channel, either way) fade back to ``face``, fully at ``exp(hi)``:
-        what the reference frame shows there is another thing (hair or the gap under it over
-        the jaw line of a frontal frame, where a turned head shows skin), not the same skin in
-        another expression. The price: a shadow the current frame's own expression casts that
-        is darker than that (the target's open jaw, deeper than ``exp(lo)``) shows again.
-    reject_where : (H, W) bool, optional
-        Only these pixels may be rejected (default: all of ``mask``).
-
-    Returns
-    -------
-    (H, W, 3) uint8
-    """
-    out = face.copy()
-    _match_outline_into(face, part, mask, face_mask, out, feather=feather, compare=compare,
-                        reject=reject, reject_where=reject_where)
-    return out
-
-
-def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
-                        reject_where) -> None:
-    """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
-    pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
-    the region's pixels are written."""
-    import cv2
-
-    x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
-    if w == 0 or h == 0:
-        return
-    deep = cv2.erode(face_mask.astype(np.uint8), np.ones((5, 5), np.uint8),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
-    ring = (mask if compare is None else compare) & deep
-    box = (slice(y, y + h), slice(x, x + w))      # the work is done on the region's box only
-    pb = np.ascontiguousarray(part[box])
-    if ring.sum() >= 8:  # part scaled by gain_field's gains
-        gy, gx = _gain_factors(face, part, ring, GAIN_ITERATIONS, (x, y, x + w, y + h),
-                                GAIN_SAMPLES)
-        f = np.empty(pb.shape, np.float32)
-        _apply_gain(pb, gy, gx, *GAIN_RANGE, f)
-    else:
-        f = pb.astype(np.float32)
-    # the distance to the nearest pixel outside the region (the box's edge counts as outside:
-    # one pixel beyond it is outside the region, or the image ends there)
-    mb = np.ascontiguousarray(mask[box])
-    a = _feather_alpha(mb, feather, edge_outside=True)
-    fb = np.ascontiguousarray(face[box])
-    if reject is None:
-        _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
-    else:  # the fade a (1 - r), r = _rejected where reject_where, taken in the paste
-        where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
-        _blend_paste_rejected(mb, fb, f, a, _rejection_blur(f, fb, reject), where, out[box])
-
-
-def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
-    """``(h, w)`` float32 in [0, 1]: how far each pixel's largest per-channel absolute log
-    ratio of ``f`` (h, w, 3) float32 and ``fb`` (h, w, 3) uint8 (``|log(1 + f) - log(1 + fb)|``)
-    lies between ``reject = (lo, hi)``, grown by :data:`REJECT_GROW` pixels (the soft edge of
-    hair in the reference frame is less unlike the skin than the hair, and would be left as a
-    thin grey outline) and smoothed over ~2 pixels."""
-    return np.clip(_rejection_blur(f, fb, reject) * 2.0, 0.0, 1.0)
-
-
-def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
-    """:func:`_rejected` before its last step (``clip(2 b, 0, 1)``): the grown ramp blurred,
-    ``(h, w)`` float32."""
-    import cv2
-
-    lo, hi = (float(v) for v in reject)
-    r = np.empty(f.shape[:2], np.float32)
-    _reject_kernel(f, fb, lo, max(hi - lo, 1e-6), r)
-    if REJECT_GROW > 0 and r.any():
-        r = cv2.dilate(r, np.ones((2 * REJECT_GROW + 1,) * 2, np.uint8))
-    return cv2.GaussianBlur(r, (0, 0), 2.0)
-
-
-def _blend_paste_rejected_py(m, base, f, a, blur, where, out):  # pragma: no cover (numba)
-    """:func:`facetransfer.composite._blend_paste` with the fade ``a (1 - r)``, ``r =
-    clip(2 blur, 0, 1)`` where ``where`` (h, w) bool and 0 elsewhere: match_outline's
-    rejection (:func:`_rejected`) taken in the paste, in float32 as numpy's ``r *= where;
-    a *= 1.0 - r`` were, without three passes of their own."""
-    H, W = m.shape
-    one, zero = np.float32(1.0), np.float32(0.0)
-    for y in range(H):
-        for x in range(W):
-            if not m[y, x]:
-                continue
-            r = min(max(blur[y, x] * np.float32(2.0), zero), one) if where[y, x] else zero
-            ay = a[y, x] * (one - r)
-            for k in range(3):
-                b = np.float32(base[y, x, k])
-                v = np.rint(b + ay * (f[y, x, k] - b))
-                out[y, x, k] = np.uint8(min(max(v, zero), np.float32(255.0)))
-
-
-def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
-    """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel, with one
-    log per pixel (of the largest ratio ``(1 + f) / (1 + fb)`` or its inverse) and none where
-    that ratio lies outside ``exp(lo)..exp(lo + span)``.
-
-    Most pixels are below the ramp: they are found without division, by ``max <= q' min``
-    in every channel with ``q'`` a little under ``exp(lo)`` (then the exact ratio is below
-    ``exp(lo)``, so its correctly rounded quotient is at most that: the same 0 as the
-    quotients give)."""
-    H, W = r.shape
-    q_lo, q_hi = np.exp(lo), np.exp(lo + span)
-    q_safe = q_lo * (1.0 - 2.0 ** -50)
-    for y in range(H):
-        for x in range(W):
-            below = True
-            for k in range(3):
-                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
-                if max(u, v) > q_safe * min(u, v):
-                    below = False
-            if below:
-                r[y, x] = 0.0
-                continue
-            q = 1.0
-            for k in range(3):
-                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
-                q = max(q, max(u, v) / min(u, v))
-            if q <= q_lo:
-                r[y, x] = 0.0
-            elif q >= q_hi:
-                r[y, x] = 1.0
-            else:
-                r[y, x] = (np.log(q) - lo) / span
-
-
-_reject_kernel = _maybe_njit(_reject_kernel_py)
-
-
-def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
-               iterations: int = GAIN_ITERATIONS, box: tuple[int, int, int, int] | None = None,
-               max_samples: int = GAIN_SAMPLES) -> np.ndarray:
-    """Per-channel gains taking ``part`` to ``face``'s colours.
-
-    The log ratio ``log(1 + face) - log(1 + part)`` over the pixels ``where`` is fitted, per
-    channel, by a plane ``a + b x + c y`` in least absolute deviations (iteratively reweighted
-    least squares): the median's robustness (pixels whose content differs, e.g. the target's own
-    lids and lashes, are outvoted), plus the plane's gradient of shading. Coordinates are
-    centred on the pixels' centroid and scaled by their extent, so the gains do not depend on
-    the crop. Clipped to :data:`GAIN_RANGE`.
-
-    Parameters
-    ----------
-    face, part : (H, W, 3) uint8
-    where : (H, W) bool
-        At least 3 pixels not on one line.
-    iterations : int
-        Reweighting steps.
-    box : (x0, y0, x1, y1), optional
-        Return the gains of this box of pixels only (default: the whole image).
-    max_samples : int
-        At most this many of the ``where`` pixels (evenly strided) enter the fit.
-
-    Returns
-    -------
-    (y1 - y0, x1 - x0, 3) float32
-    """
-    x0, y0, x1, y1 = (0, 0, where.shape[1], where.shape[0]) if box is None else box
-    gy, gx = _gain_factors(face, part, where, iterations, (x0, y0, x1, y1), max_samples)
-    return np.clip(gy[:, None, :] * gx[None, :, :], *GAIN_RANGE).astype(np.float32)
-
-
-#: ``log(1 + v)`` of the 256 values of a uint8
-_LOG1P_U8 = np.log1p(np.arange(256, dtype=np.float64))
-
-
-def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
-    """The fit of :func:`gain_field` as its separable factors over ``box = (x0, y0, x1, y1)``:
-    ``gy (y1 - y0, 3)`` and ``gx (x1 - x0, 3)`` float64, the unclipped gain at pixel ``(x, y)``
-    being ``gy[y - y0] * gx[x - x0]``."""
-    import cv2
-
-    pts = cv2.findNonZero(np.ascontiguousarray(where).view(np.uint8))  # (n, 1, 2): (x, y)
-    if pts is None:
-        raise RewriteError("the gain fit needs at least one pixel, got an empty mask")
-    n = pts.shape[0]
-    k = -(-n // max(1, -(-n // int(max_samples))))  # the samples: every step-th pixel
-    u, v, r = np.empty(k), np.empty(k), np.empty((k, 3))
-    centre = np.empty(3)
-    _gain_samples(pts.reshape(n, 2), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
-    cx, cy, scale = centre
-    coef = np.empty((3, 3))
-    _plane_l1_kernel(u, v, r, int(iterations), coef)
-    x0, y0, x1, y1 = box
-    # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns
-    gx = np.exp(((np.arange(x0, x1) - cx) / scale)[:, None] * coef[1])         # (w, c)
-    gy = np.exp(coef[0] + ((np.arange(y0, y1) - cy) / scale)[:, None] * coef[2])  # (h, c)
-    return gy, gx
-
-
-def _gain_samples_py(pts, face, part, max_samples, lut, u, v, r, centre):  # pragma: no cover
-    """The samples of :func:`gain_field`'s fit from the pixels ``pts`` (n, 2) int32 ``(x, y)``
-    in row-major order (``cv2.findNonZero``; numba): ``centre = (cx, cy, scale)``, the pixels'
-    mean position and the larger extent of their rows and columns (at least 1); for every
-    ``step``-th pixel (``step = ceil(n / max_samples)``) the centred, scaled coordinates
-    ``u = (x - cx) / scale``, ``v = (y - cy) / scale`` and the log ratios ``r = lut[face] -
-    lut[part]`` (3 channels). The means are the integer sums over ``n`` (as numpy's mean of
-    the coordinates, whose float sums are exact)."""
-    n = pts.shape[0]
-    sx = sy = 0
-    x_lo = x_hi = pts[0, 0]
-    y_lo = y_hi = pts[0, 1]
-    for i in range(n):
-        x, y = pts[i, 0], pts[i, 1]
-        sx += x
-        sy += y
-        x_lo, x_hi = min(x_lo, x), max(x_hi, x)
-        y_lo, y_hi = min(y_lo, y), max(y_hi, y)
-    cx, cy = float(sx) / float(n), float(sy) / float(n)
-    scale = float(max(y_hi - y_lo, x_hi - x_lo, 1))
-    step = max(1, -(-n // max_samples))
-    j = 0
-    for i in range(0, n, step):
-        x, y = np.int64(pts[i, 0]), np.int64(pts[i, 1])
-        u[j] = (x - cx) / scale
-        v[j] = (y - cy) / scale
-        for c in range(3):
-            r[j, c] = lut[face[y, x, c]] - lut[part[y, x, c]]
-        j += 1
-    centre[0], centre[1], centre[2] = cx, cy, scale
-
-
-def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
-    """Per channel c, the plane ``coef[:, c] = (a, b, c)`` fitting ``r[:, c]`` (k, 3) by
-    ``a + b u + c v`` in least absolute deviations: ``iterations`` steps of iteratively
-    reweighted least squares (weights ``1 / max(|residual|, 1e-3)``, from 1; the normal
-    equations with a ridge of 1e-9, solved by Cramer's rule)."""
-    k = r.shape[0]
-    w = np.ones((k, 3))
-    M = np.empty((3, 6))  # per channel: sum w, wu, wv, wuu, wuv, wvv
-    b = np.empty((3, 3))  # per channel: sum wr, wur, wvr
-    for _ in range(iterations):
-        M[:] = 0.0
-        b[:] = 0.0
-        for i in range(k):
-            ui, vi = u[i], v[i]
-            uu, uv, vv = ui * ui, ui * vi, vi * vi
-            for c in range(3):
-                wi, wr = w[i, c], w[i, c] * r[i, c]
-                M[c, 0] += wi
-                M[c, 1] += wi * ui
-                M[c, 2] += wi * vi
-                M[c, 3] += wi * uu
-                M[c, 4] += wi * uv
-                M[c, 5] += wi * vv
-                b[c, 0] += wr
-                b[c, 1] += wr * ui
-                b[c, 2] += wr * vi
-        for c in range(3):
-            a00, a01, a02 = M[c, 0] + 1e-9, M[c, 1], M[c, 2]
-            a11, a12, a22 = M[c, 3] + 1e-9, M[c, 4], M[c, 5] + 1e-9
-            c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
-            c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
-            det = a00 * c00 + a01 * c01 + a02 * c02
-            b0, b1, b2 = b[c, 0], b[c, 1], b[c, 2]
-            coef[0, c] = (c00 * b0 + c01 * b1 + c02 * b2) / det
-            coef[1, c] = (c01 * b0 + c11 * b1 + c12 * b2) / det
-            coef[2, c] = (c02 * b0 + c12 * b1 + c22 * b2) / det
-        for i in range(k):
-            for c in range(3):
-                e = abs(r[i, c] - coef[0, c] - coef[1, c] * u[i] - coef[2, c] * v[i])
-                w[i, c] = 1.0 / max(e, 1e-3)
-
-
-def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
-    """``f = part * clip(gy gx, lo, hi)`` (the float32 gain of :func:`gain_field`) per pixel
-    and channel: ``part`` (h, w, 3) uint8, ``gy`` (h, 3), ``gx`` (w, 3), ``f`` (h, w, 3)
-    float32."""
-    H, W = f.shape[0], f.shape[1]
-    for y in range(H):
-        for x in range(W):
-            for k in range(3):
-                g = np.float32(min(max(gy[y, k] * gx[x, k], lo), hi))
-                f[y, x, k] = np.float32(part[y, x, k]) * g
-
-
-_apply_gain = _maybe_njit(_apply_gain_py)
-_gain_samples = _maybe_njit(_gain_samples_py)
-_blend_paste_rejected = _maybe_njit(_blend_paste_rejected_py)
-_plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)

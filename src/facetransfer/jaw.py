@@ -20,7 +20,7 @@ sequence)", applied to the jaw only):
    jaw's opening, measured the same on the jaw and worse on the smile: they show more of the
    target's own mouth);
 3. in every frame the region is pasted into the per-frame face scaled to its colours
-   (:func:`paint_jaw`, :func:`facetransfer.eyes.match_outline`: the frames' exposure may
+   (:func:`paint_jaw`, :func:`facetransfer.patch.match_outline`: the frames' exposure may
    differ), compared over a ring of triangles around the region (:data:`RING`), which the
    jaw does not move: inside the region the target's own opening would bias the ratio.
 """
@@ -33,8 +33,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
-from .eyes import (REJECT, _match_outline_into, close_region, reference_frame, region_faces,
-                   region_vertices)
+from .eyes import close_region, reference_frame, region_faces, region_vertices
+from .patch import REJECT, _match_outline_into
 from .render import shade_layers
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -52,7 +52,7 @@ JAW_THRESHOLD = 0.15
 #: Rings of triangles around the jaw region over which its exposure is matched.
 RING = 3
 # Where the closed frame's texture (matched) and the current frame's differ by more than
-# facetransfer.eyes.REJECT, a pixel fades back to the current frame (paint_jaw): what the closed
+# facetransfer.patch.REJECT, a pixel fades back to the current frame (paint_jaw): what the closed
 # frame shows at the jaw line of a turned head is often hair or the gap under it (a black
 # wedge under the ear of the demo's turned frames without it).
 

@@ -244,7 +244,7 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         tracks do not depend on it.
     reader : callable(path, max_frames=...) -> (frames, fps), optional
         How videos are decoded: :func:`facetransfer.io.video.read_video` (default) or the
-        :meth:`~facetransfer.io.video.Prefetch.read_video` of reads started earlier.
+        :meth:`~facetransfer.io.prefetch.Prefetch.read_video` of reads started earlier.
 
     Raises
     ------
@@ -338,7 +338,8 @@ class _Planner:
         """``(frames, fps, pre_read)``: the target's frames and, with an expression source,
         that source's ``(frames, fps)`` decoded at the same time on a second thread and cut to
         the frames the target's timeline needs (else None)."""
-        from .io.video import frames_covering, frames_to_cover, video_info
+        from .io.prefetch import frames_covering, frames_to_cover
+        from .io.video import video_info
 
         read_video = self.reader
         t0 = time.perf_counter()
@@ -394,7 +395,8 @@ class _Planner:
     def read_source(self, inputs: _Inputs, kind: str, src: Source, pre_read, early) -> None:
         """Read and track a source (``pre_read``: its decoded frames; ``early``: its track
         from the background process) into ``inputs``."""
-        from .io.video import frames_covering, video_info
+        from .io.prefetch import frames_covering
+        from .io.video import video_info
 
         need = frames_covering(len(inputs.frames), inputs.fps, video_info(src.video).fps)
         t = time.perf_counter()

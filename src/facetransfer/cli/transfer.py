@@ -245,23 +245,31 @@ def _check_landmarks_file(video, tracker: str) -> None:
 
 def _load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
     """The model (``--model`` ``path`` or the default); when videos will be tracked, MediaPipe
-    is imported on a thread meanwhile (:func:`facetransfer.track.detect.preload_mediapipe`), and
-    is imported when this returns (before the tracking forks its background process)."""
+    is imported and the capture's compiled kernels loaded on threads meanwhile
+    (:func:`facetransfer.track.detect.preload_mediapipe`,
+    :func:`facetransfer.track.capture.load_kernels`), done when this returns: before the
+    tracking forks its background process, which inherits them."""
     if not will_track:
         return resolve_model(path, progress=progress)
+    import threading
+
+    from ..track.capture import load_kernels
     from ..track.detect import preload_mediapipe
 
     wait = preload_mediapipe()
+    kernels = threading.Thread(target=load_kernels, name="load-kernels", daemon=True)
+    kernels.start()
     try:
         return resolve_model(path, progress=progress)
     finally:
         wait()
+        kernels.join()
 
 
 def _prefetch_inputs(args):
     """The target and the expression source decoded on threads from now on, as the transfer
-    will read them (:class:`facetransfer.io.video.Prefetch`)."""
-    from ..io.video import Prefetch, frames_to_cover
+    will read them (:class:`facetransfer.io.prefetch.Prefetch`)."""
+    from ..io.prefetch import Prefetch, frames_to_cover
 
     reads = [(args.target, args.max_frames)]
     if args.expression_from:
@@ -273,8 +281,6 @@ def _prefetch_inputs(args):
 def run_transfer(args) -> int:
     from ..io.atomic import check_output_path
     from ..io.video import check_video_output, video_info
-    from ..transfer import identity_from_label, parse_weights
-    from ..video_transfer import TransferSources, transfer_video
 
     _positive(args.max_frames, "--max-frames")
     if not (args.expression_from or args.viseme_from or args.identity_from
@@ -307,7 +313,11 @@ def run_transfer(args) -> int:
             if not tr and not (v == args.target and args.performance):
                 _check_landmarks_file(v, args.tracker)
                 to_track += 1
-    prefetch = _prefetch_inputs(args)  # decoded while the model and MediaPipe load
+    # decoded from now on, while the modules import and the model and MediaPipe load
+    prefetch = _prefetch_inputs(args)
+    from ..transfer import identity_from_label, parse_weights
+    from ..video_transfer import TransferSources, transfer_video
+
     model = _load_model_and_mediapipe(args.model, to_track > 0 and args.tracker != "landmarks",
                                       progress=not args.no_progress)
     identity = None

@@ -18,6 +18,17 @@ Typical use::
 """
 
 from .result import Track
-from .tracker import FaceTracker, TrackOptions, track_video
 
 __all__ = ["Track", "TrackOptions", "FaceTracker", "track_video"]
+
+#: names imported on first use: the KLT tracker brings numba and scipy, which a command that
+#: only needs a track file or the presets (``facetransfer --help``, the CLI's parser) skips
+_LAZY = {"TrackOptions": "tracker", "FaceTracker": "tracker", "track_video": "tracker"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        from importlib import import_module
+
+        return getattr(import_module(f"{__name__}.{_LAZY[name]}"), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
