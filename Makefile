@@ -10,6 +10,7 @@ $(STAMP): pyproject.toml
 	test -x $(BIN)/python || $(PY) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test,bench]'
+	$(BIN)/python -m compileall -q src  # bytecode, as a regular install has (PYTHONDONTWRITEBYTECODE)
 	touch $(STAMP)
 
 venv: $(STAMP)
