@@ -62,8 +62,8 @@ class Prefetch:
 
     def read_video(self, path: str | os.PathLike, *, max_frames: int | None = None
                    ) -> tuple[np.ndarray, float]:
-        """:func:`~facetransfer.io.video.read_video` of the first ``max_frames`` frames (taken from a background read
-        when it covers them; each background read is handed out once)."""
+        """:func:`~facetransfer.io.video.read_video` of the first ``max_frames`` frames
+        (taken from a background read when it covers them; each is handed out once)."""
         n, job = self._jobs.pop(_key(path), (None, None))
         if job is not None:
             frames, fps = job.result()

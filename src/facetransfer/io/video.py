@@ -430,14 +430,7 @@ def decoded_frame_count(path: str | os.PathLike) -> int:
     VideoError
         If ffmpeg cannot decode the file.
     """
-    exe = _require_ffmpeg()
-    res = subprocess.run([exe, "-hide_banner", "-nostdin", "-v", "error", "-stats", "-i",
-                          str(path), "-map", "0:v:0", "-f", "null", "-"],
-                         capture_output=True, text=True)
-    found = re.findall(r"frame=\s*(\d+)", res.stderr)
-    if res.returncode != 0 or not found:
-        raise _ffmpeg_error(res.stderr, f"video {path} does not decode")
-    return int(found[-1])
+    return _ffmpeg_frame_count(path, [], "does not decode")
 
 
 def stored_frame_count(path: str | os.PathLike) -> int:
@@ -449,13 +442,19 @@ def stored_frame_count(path: str | os.PathLike) -> int:
     VideoError
         If ffmpeg cannot read the file.
     """
+    return _ffmpeg_frame_count(path, ["-c", "copy"], "cannot be read")
+
+
+def _ffmpeg_frame_count(path, args: list[str], failure: str) -> int:
+    """The last ``frame=`` count ffmpeg reports while it reads the first video stream of
+    ``path`` into the null muxer with the output ``args``."""
     exe = _require_ffmpeg()
     res = subprocess.run([exe, "-hide_banner", "-nostdin", "-v", "error", "-stats", "-i",
-                          str(path), "-map", "0:v:0", "-c", "copy", "-f", "null", "-"],
+                          str(path), "-map", "0:v:0", *args, "-f", "null", "-"],
                          capture_output=True, text=True)
     found = re.findall(r"frame=\s*(\d+)", res.stderr)
     if res.returncode != 0 or not found:
-        raise _ffmpeg_error(res.stderr, f"video {path} cannot be read")
+        raise _ffmpeg_error(res.stderr, f"video {path} {failure}")
     return int(found[-1])
 
 
@@ -528,7 +527,8 @@ class VideoWriter:
     The audio of ``audio_from`` (AAC) is encoded by the same ffmpeg process when the number of
     frames is known beforehand (``n_frames``), else muxed in a second pass after the encode.
     :meth:`close` checks ffmpeg's exit status and that the file holds as many frames as were
-    written (:func:`stored_frame_count`) and only then renames the file into place; on any failure it raises :class:`~facetransfer.errors.VideoError` and an existing
+    written (:func:`stored_frame_count`) and only then renames the file into place; on any
+    failure it raises :class:`~facetransfer.errors.VideoError` and an existing
     output is left untouched. An image sequence is written into a temporary folder beside the
     frames and each file is renamed into place at the end (surplus frames of an older, longer
     sequence are removed).

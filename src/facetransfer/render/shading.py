@@ -94,18 +94,24 @@ def sample_texture(texture: np.ndarray, uv: np.ndarray) -> np.ndarray:
     return top * (1 - fv) + bot * fv
 
 
-def _texel_py(tex, u, v):  # pragma: no cover (numba)
-    """Bilinear sample (r, g, b) of ``tex`` at texture coordinates ``(u, v)`` (v up, clamped to
-    [0, 1]): texel ``(col, row) = (u (Wt - 1), (1 - v) (Ht - 1))``, as :func:`sample_texture`."""
-    Ht, Wt = tex.shape[0], tex.shape[1]
+def _texel_at_py(Ht, Wt, u, v):  # pragma: no cover (numba, inlined)
+    """The bilinear footprint of texture coordinates ``(u, v)`` (v up, clamped to [0, 1]) in a
+    ``(Ht, Wt)`` texture: rows ``r0, r1``, columns ``c0, c1`` and weights ``fu, fv`` of texel
+    ``(col, row) = (u (Wt - 1), (1 - v) (Ht - 1))``, as :func:`sample_texture`."""
     u = min(max(u, 0.0), 1.0) * (Wt - 1)
     v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
     c0 = min(int(np.floor(u)), Wt - 1)
     r0 = min(int(np.floor(v)), Ht - 1)
-    c1 = min(c0 + 1, Wt - 1)
-    r1 = min(r0 + 1, Ht - 1)
-    fu = u - c0
-    fv = v - r0
+    return r0, min(r0 + 1, Ht - 1), c0, min(c0 + 1, Wt - 1), u - c0, v - r0
+
+
+_texel_at = _maybe_njit(_texel_at_py, inline=True)
+
+
+def _texel_py(tex, u, v):  # pragma: no cover (numba)
+    """Bilinear sample (r, g, b) of ``tex`` at texture coordinates ``(u, v)``
+    (:func:`_texel_at`)."""
+    r0, r1, c0, c1, fu, fv = _texel_at(tex.shape[0], tex.shape[1], u, v)
     out0 = (tex[r0, c0, 0] * (1.0 - fu) + tex[r0, c1, 0] * fu) * (1.0 - fv) \
         + (tex[r1, c0, 0] * (1.0 - fu) + tex[r1, c1, 0] * fu) * fv
     out1 = (tex[r0, c0, 1] * (1.0 - fu) + tex[r0, c1, 1] * fu) * (1.0 - fv) \
@@ -128,17 +134,9 @@ def _shade_pixel_py(tex, uvs, i0, i1, i2, b0, b1, b2, image, iy, ix):  # pragma:
     arithmetic of :func:`_texel` (hence of :func:`sample_texture`), the texels addressed by
     unsigned indices (clamped to the image already: no negative-index wrapping) and converted
     by :data:`_U8_AS_FLOAT` (numba, inlined)."""
-    Ht, Wt = tex.shape[0], tex.shape[1]
-    u = b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0]
-    v = b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1]
-    u = min(max(u, 0.0), 1.0) * (Wt - 1)
-    v = (1.0 - min(max(v, 0.0), 1.0)) * (Ht - 1)
-    c0 = min(int(np.floor(u)), Wt - 1)
-    r0 = min(int(np.floor(v)), Ht - 1)
-    c1 = min(c0 + 1, Wt - 1)
-    r1 = min(r0 + 1, Ht - 1)
-    fu = u - c0
-    fv = v - r0
+    r0, r1, c0, c1, fu, fv = _texel_at(tex.shape[0], tex.shape[1],
+                                       b0 * uvs[i0, 0] + b1 * uvs[i1, 0] + b2 * uvs[i2, 0],
+                                       b0 * uvs[i0, 1] + b1 * uvs[i1, 1] + b2 * uvs[i2, 1])
     gu = 1.0 - fu
     gv = 1.0 - fv
     a0, a1, d0, d1 = np.uint64(r0), np.uint64(r1), np.uint64(c0), np.uint64(c1)

@@ -674,9 +674,9 @@ def load_kernels() -> None:
     from numba's cache by running each once on a tiny problem.
 
     numba starts up on the first compiled call of a process (about 0.25 s here). A command
-    that tracks a second clip in a forked child (:func:`facetransfer.track.obtain.start_background_track`)
-    calls this before the fork, while its own start-up leaves a core idle: the child then
-    inherits the loaded kernels instead of starting numba again at its fit.
+    that tracks a second clip in a forked child
+    (:func:`facetransfer.track.obtain.start_background_track`) calls this before the fork: the
+    child then inherits the loaded kernels instead of starting numba again at its fit.
     """
     R, t = np.eye(3), np.zeros(2)
     X = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
