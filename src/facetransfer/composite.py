@@ -614,6 +614,16 @@ def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover 
             a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
 
 
+def _blend_value_py(b, ay, f):  # pragma: no cover (numba, inlined)
+    """``rint(b + ay (f - b))`` clipped to 0..255 as uint8, in float32 (``b`` a uint8 value)."""
+    bf = np.float32(b)
+    v = np.rint(bf + ay * (f - bf))
+    return np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
+
+
+_blend_value = _maybe_njit(_blend_value_py, inline=True)
+
+
 def _blend_paste_py(m, base, f, a, out):  # pragma: no cover (numba)
     """``out = rint(base + a (f - base))`` clipped to 0..255 at the pixels of ``m`` (h, w)
     (``base``, ``out`` (h, w, 3) uint8, ``f`` (h, w, 3) and ``a`` (h, w) float32), in float32;
@@ -626,9 +636,7 @@ def _blend_paste_py(m, base, f, a, out):  # pragma: no cover (numba)
                 continue
             ay = a[y, x]
             for k in range(3):
-                b = np.float32(base[y, x, k])
-                v = np.rint(b + ay * (f[y, x, k] - b))
-                out[y, x, k] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
+                out[y, x, k] = _blend_value(base[y, x, k], ay, f[y, x, k])
 
 
 def _blend_paste_membrane_py(m, base, h, s, a, out):  # pragma: no cover (numba)
@@ -642,10 +650,7 @@ def _blend_paste_membrane_py(m, base, h, s, a, out):  # pragma: no cover (numba)
                 continue
             ay = a[y, x]
             for k in range(3):
-                b = np.float32(base[y, x, k])
-                f = h[y, x, k] + np.float32(s[y, x, k])
-                v = np.rint(b + ay * (f - b))
-                out[y, x, k] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
+                out[y, x, k] = _blend_value(base[y, x, k], ay, h[y, x, k] + np.float32(s[y, x, k]))
 
 
 def _ring_differences_py(ry, rx, t, s, dr):  # pragma: no cover (numba)
