@@ -152,7 +152,7 @@ def test_rig_solve_is_the_box_qp_of_the_normal_equations():
 def test_sampler_core_gives_the_tracked_points(arkit_model):
     """The sampler's model synthesises the landmark vertices and MediaPipe's surface points of
     the full model (Eq. (4) on a core with S applied), and is made once per model and points."""
-    from facetransfer.track.capture import _sampler
+    from facetransfer.track.capture_points import sampler as _sampler
 
     m = arkit_model
     dense = mediapipe_correspondence(m)

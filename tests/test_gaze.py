@@ -218,10 +218,11 @@ def test_usable_iris_bridges_closed_eyes():
 def test_a_closing_eye_leaves_its_lids_to_the_blink(arkit_model):
     """The fit holds a closed eye's vertical gaze at 0 and writes its bridged value after."""
     from facetransfer.track.camera import Pose
-    from facetransfer.track.capture import _gaze_fixed, _Sampler, _Shape
+    from facetransfer.track.capture import _gaze_fixed
+    from facetransfer.track.capture_points import Sampler, Shape
 
     m = arkit_model
-    shape = _Shape(m, m.training_weights("identity", "id02"), _Sampler(m), CaptureOptions())
+    shape = Shape(m, m.training_weights("identity", "id02"), Sampler(m), CaptureOptions())
     x = np.zeros(shape.size)
     eyes = eye_model(shape.points(x)[:68])
     pose = Pose(rotation_from_euler(20, 5, 0), 9.0, np.array([256.0, 240.0]))

@@ -272,7 +272,6 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
                         mouth_mask)
 
 
-
 def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
                  mouth_img: np.ndarray, mask: np.ndarray, feather: float) -> np.ndarray:
     """``face_img`` with the source's mouth blended in where ``mask`` (H, W) bool: the pixels

@@ -172,8 +172,6 @@ class TransferPlan:
         return int(self.new_track.n_frames)
 
 
-
-
 def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None
                    ) -> np.ndarray:
     """For each query row the index of the nearest bank row (Euclidean), among ``valid`` ones.

@@ -76,9 +76,6 @@ def frame_uvs(vertices: np.ndarray, camera, size: tuple[int, int]) -> np.ndarray
     return uv
 
 
-
-
-
 @dataclass(frozen=True)
 class FaceTexture:
     """A texture image and the texture coordinates of the closed mesh's vertices.

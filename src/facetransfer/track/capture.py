@@ -48,7 +48,8 @@ import numpy as np
 from ..arkit import ARKIT_NAMES, is_arkit_model
 from ..errors import TrackError, VideoError
 from .camera import Pose, fit_affine_pose
-from .capture_points import Sampler as _Sampler, Shape as _Shape, sampler as _sampler
+from . import capture_points
+from .capture_points import Sampler, Shape
 from .detect import ClipDetections
 from .fit_checkpoint import SavedFit, fit_key
 from .fit2d import (Targets, box_qp, gram_blocks, pose_gauss_newton, project_basis, rig_solve,
@@ -82,8 +83,6 @@ def capture_point_weights() -> np.ndarray:
     w = np.array(IBUG_WEIGHTS, float)
     w[list(CORNERS)] *= CORNER_WEIGHT
     return w
-
-
 
 
 @dataclass(frozen=True)
@@ -194,7 +193,7 @@ def _residual(X: np.ndarray, st_pose: Pose, p: np.ndarray, w: np.ndarray, iod: f
     return float(np.sqrt(np.dot(w, r2) / max(np.sum(w), 1e-12)) / iod)
 
 
-def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple,
+def _gaze_fixed(shape: Shape, pose: Pose, x: np.ndarray, gaze: tuple,
                 X: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The eyeLook* activations from ``gaze`` = (iris centres (2, 2), closed (2,)) at ``pose``
     and the frame's eye corners (:mod:`.gaze`): ``(held in the fit, written after it)``, (K,)
@@ -212,7 +211,7 @@ def _gaze_fixed(shape: _Shape, pose: Pose, x: np.ndarray, gaze: tuple,
     return held, after
 
 
-def _fit_frame(shape: _Shape, targets: Targets, iod: float, pose: Pose | None, x: np.ndarray,
+def _fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x: np.ndarray,
                prev: np.ndarray | None, iterations: int, gaze: tuple | None = None,
                anchor: np.ndarray | None = None) -> _State:
     """Alternate pose (Gauss-Newton, Eq. (7)) and expression (bounded or prior-weighted LS,
@@ -236,7 +235,7 @@ def _fit_frame(shape: _Shape, targets: Targets, iod: float, pose: Pose | None, x
     return _State(pose, x, _residual(X, pose, p, w, iod))
 
 
-def _solve_identity(model, shape: _Shape, frames: list, states: list, det: ClipDetections,
+def _solve_identity(model, shape: Shape, frames: list, states: list, det: ClipDetections,
                     weights: np.ndarray, opt: CaptureOptions) -> np.ndarray:
     """One identity for the sampled frames (Eq. (9), identity mode free, training prior)."""
     prior = Prior.from_model(model, "identity")
@@ -285,7 +284,7 @@ def _detection(det: ClipDetections, i: int, pw: _PointWeights) -> tuple[np.ndarr
     return p, np.where(np.isfinite(p).all(1), pw.w, 0.0)
 
 
-def _solve_offset(shape: "_Shape", frames, states: list, det: ClipDetections, weights,
+def _solve_offset(shape: "Shape", frames, states: list, det: ClipDetections, weights,
                   opt: CaptureOptions) -> np.ndarray:
     """The clip's static offset ``o`` (P, 3): per point, ``min Σ_f w |r_f - s_f F R_f[:2] o|²
     + λ |o|²`` over the sampled frames, residuals ``r_f`` of the fit without the offset (in eye
@@ -321,8 +320,8 @@ def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
     return idx[np.unique(np.linspace(0, len(idx) - 1, n).round().astype(int))]
 
 
-def _clip_identity(model, det: ClipDetections, lm: _Sampler, weights, opt: CaptureOptions,
-                   fixed, prog) -> tuple[_Shape, list, np.ndarray]:
+def _clip_identity(model, det: ClipDetections, lm: Sampler, weights, opt: CaptureOptions,
+                   fixed, prog) -> tuple[Shape, list, np.ndarray]:
     """Identity from frames spread through the clip; returns the shape, sample states, frames."""
     frames = _sample_frames(det.found, int(opt.identity_frames))
     has_id = "identity" in model.mode_names
@@ -330,7 +329,7 @@ def _clip_identity(model, det: ClipDetections, lm: _Sampler, weights, opt: Captu
     if has_id:
         ident = (np.asarray(fixed["identity"], float) if "identity" in fixed
                  else Prior.from_model(model, "identity").mean)
-    shape = _Shape(model, ident, lm, opt)
+    shape = Shape(model, ident, lm, opt)
     solve_id = has_id and "identity" not in fixed
     use_offset = np.isfinite(opt.offset_prior)
     rounds = int(opt.identity_rounds) if solve_id else 0
@@ -338,11 +337,11 @@ def _clip_identity(model, det: ClipDetections, lm: _Sampler, weights, opt: Captu
     states = _fit_sample(shape, det, frames, weights, opt_id, None)
     for rnd in range(rounds):  # identity first: it takes all it can explain
         ident = _solve_identity(model, shape, list(frames), states, det, weights, opt)
-        shape = _Shape(model, ident, lm, opt)
+        shape = Shape(model, ident, lm, opt)
         states = _fit_sample(shape, det, frames, weights, opt_id, states)
         prog("identity", rnd + 1, rounds + 2 * use_offset)
     for rnd in range(2 if use_offset else 0):  # then the offset: what no identity shows
-        shape = _Shape(model, ident, lm, opt,
+        shape = Shape(model, ident, lm, opt,
                        _solve_offset(shape, frames, states, det, weights, opt))
         states = _fit_sample(shape, det, frames, weights, opt_id, states)
         prog("identity", rounds + rnd + 1, rounds + 2)
@@ -350,7 +349,7 @@ def _clip_identity(model, det: ClipDetections, lm: _Sampler, weights, opt: Captu
     return shape, states, frames
 
 
-def _fit_sample(shape: _Shape, det: ClipDetections, frames, weights, opt, states) -> list:
+def _fit_sample(shape: Shape, det: ClipDetections, frames, weights, opt, states) -> list:
     """Fit every sampled frame on its own (pose and expression), warm-started from ``states``."""
     shape = shape.with_options(opt)
     out = []
@@ -381,7 +380,7 @@ def _targets(det: ClipDetections, i: int, j: int, prev_q: np.ndarray | None, wei
     return Targets.stack([(p, w)], weights.w)
 
 
-def _track_run(shape: _Shape, det: ClipDetections, order: list, seed: _State | None, weights,
+def _track_run(shape: Shape, det: ClipDetections, order: list, seed: _State | None, weights,
                opt: CaptureOptions, states: list, prog, done0: int, seed_index: int | None = None,
                on_frame=None) -> int:
     """Track frames in ``order`` (consecutive, one direction) from the ``seed`` state (of the
@@ -498,7 +497,7 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
 
 
 def _point_weights(det: ClipDetections, model, opt: CaptureOptions
-                   ) -> tuple[_PointWeights, _Sampler]:
+                   ) -> tuple[_PointWeights, Sampler]:
     """The tracked points (iBUG-68, then MediaPipe's dense points with ``opt.dense``), their
     reliabilities and the iris centres the gaze follows."""
     weights = np.asarray(opt.point_weights if opt.point_weights is not None
@@ -509,7 +508,7 @@ def _point_weights(det: ClipDetections, model, opt: CaptureOptions
 
         dense = mediapipe_correspondence(model)
         weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
-    sampler = _sampler(model, dense)
+    sampler = capture_points.sampler(model, dense)
     iris = closed = None
     if opt.gaze and is_arkit_model(model) and det.points478 is not None \
             and det.points478.shape[1] > max(IRIS_INDEX):
@@ -546,7 +545,7 @@ class _FitRun:
     """A fit in progress (mutable: the runs fill ``states`` and advance ``forward_next`` /
     ``backward_next``); :meth:`saved` and :meth:`restore` convert it for the progress file."""
 
-    shape: _Shape
+    shape: Shape
     frames: np.ndarray
     start: int
     seed: _State
@@ -585,8 +584,8 @@ class _FitRun:
                                                                   self.lines.slope]))
 
     @classmethod
-    def restore(cls, fit: SavedFit, model, sampler: _Sampler, opt: CaptureOptions) -> "_FitRun":
-        shape = _Shape(model, fit.identity, sampler, opt, fit.offset)
+    def restore(cls, fit: SavedFit, model, sampler: Sampler, opt: CaptureOptions) -> "_FitRun":
+        shape = Shape(model, fit.identity, sampler, opt, fit.offset)
         R, sc, t, x, r = fit.seed
         states = [_State(Pose(fit.rotation[i], float(fit.scale[i]), fit.translation[i]),
                          fit.x[i], float(fit.residual[i])) if fit.valid[i] else None
@@ -634,7 +633,7 @@ def _fill_lost(states: list) -> tuple[list, np.ndarray]:
     return out, ~ok
 
 
-def _assemble(model, shape: _Shape, states: list, fps, size, src, opt) -> Track:
+def _assemble(model, shape: Shape, states: list, fps, size, src, opt) -> Track:
     full, lost = _fill_lost(states)
     F = len(full)
     R = np.stack([s.pose.rotation for s in full])
