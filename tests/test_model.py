@@ -189,6 +189,44 @@ def test_load_rejects_truncated_altered_newer_and_foreign_files(tmp_path):
         load_model(tmp_path / "nope.npz")
 
 
+def test_a_verified_file_is_not_hashed_again_until_it_changes(tmp_path, monkeypatch):
+    """The sha256 of a file as it is on disk is computed once (io.verified); a rewrite of the
+    same size with another modification time, or a file modified moments ago, is hashed."""
+    import os
+
+    from facetransfer import model as model_module
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    calls = []
+    real = model_module._content_hash
+    monkeypatch.setattr(model_module, "_content_hash", lambda a, m: calls.append(1) or real(a, m))
+    m = build_model(random_dataset(seed=3))
+    p = m.save(tmp_path / "m.npz")
+    want = m.content_hash
+    calls.clear()                   # the save's and the model's own hashes
+    load_model(p)
+    load_model(p)
+    assert len(calls) == 2          # modified moments ago: not recorded, hashed every time
+    os.utime(p, (1.6e9, 1.6e9))
+    assert load_model(p).content_hash == want and len(calls) == 3
+    assert load_model(p).content_hash == want and len(calls) == 3   # remembered
+    with np.load(p) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["core"] = arrays["core"] + 1e-9           # same size, stored checksum kept
+    np.savez(p, **arrays)
+    assert p.stat().st_size == (tmp_path / "m.npz").stat().st_size
+    os.utime(p, (1.6e9 + 1, 1.6e9 + 1))
+    with pytest.raises(ModelFileError, match="checksum"):
+        load_model(p)
+    assert len(calls) == 4
+    q = m.save(tmp_path / "q.npz")
+    os.utime(q, (1.6e9, 1.6e9))
+    record = tmp_path / "cache" / "facetransfer" / "verified-checksums.json"
+    record.write_text("{not json")                  # a damaged record: the full check
+    calls.clear()
+    assert load_model(q).content_hash == want and load_model(q) and len(calls) == 1
+
+
 @pytest.mark.parametrize("bad", [np.nan, np.inf, 1e308])
 def test_load_rejects_a_core_with_nan_or_inf_even_with_a_matching_checksum(tmp_path, bad):
     """Finiteness is checked on the loaded (mapped) core, whatever the checksum says; huge

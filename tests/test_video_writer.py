@@ -73,6 +73,30 @@ def test_h264_by_default_yuv420p_crf18_and_decodes(tmp_path):
     assert b"crf=18.0" in res.path.read_bytes()
 
 
+def test_frames_reach_ffmpeg_as_its_own_yuv420p_conversion():
+    """The writer pipes 4:2:0 planes made by OpenCV: the same BT.601 limited-range matrix as
+    ffmpeg's own ``rgb24`` -> ``yuv420p`` (Y to 1 level), chroma of each 2x2 block's mean."""
+    frames = np.concatenate([smooth_frames(n=1), noisy_frames(n=1, h=64, w=96)])
+    for f in frames:
+        res = subprocess.run([iov.ffmpeg_exe(), "-loglevel", "error", "-f", "rawvideo",
+                              "-pix_fmt", "rgb24", "-s", "96x64", "-i", "-", "-f", "rawvideo",
+                              "-pix_fmt", "yuv420p", "-"], input=f.tobytes(),
+                             capture_output=True, check=True)
+        theirs = np.frombuffer(res.stdout, np.uint8).astype(int)
+        ours = iov._yuv420p(f).ravel().astype(int)
+        assert ours.shape == theirs.shape == (96 * 64 * 3 // 2,)
+        n = 96 * 64
+        assert np.abs(ours[:n] - theirs[:n]).max() <= 1
+        rgb = f.astype(np.float64)
+        luma = 16 + (65.481 * rgb[..., 0] + 128.553 * rgb[..., 1] + 24.966 * rgb[..., 2]) / 255
+        assert np.abs(ours[:n].reshape(64, 96) - luma).max() <= 1   # BT.601, limited range
+        cb = 128 + (-37.797 * rgb[..., 0] - 74.203 * rgb[..., 1] + 112.0 * rgb[..., 2]) / 255
+        cr = 128 + (112.0 * rgb[..., 0] - 93.786 * rgb[..., 1] - 18.214 * rgb[..., 2]) / 255
+        for plane, ref in ((ours[n:n + n // 4], cb), (ours[n + n // 4:], cr)):
+            ref = ref.reshape(32, 2, 48, 2).mean(axis=(1, 3))
+            assert np.abs(plane.reshape(32, 48) - ref).max() <= 1
+
+
 def test_odd_size_is_padded_to_even_by_repeating_edges(tmp_path):
     frames = smooth_frames(n=4, h=33, w=47)
     res = encode_video(tmp_path / "odd.mp4", frames, 10)

@@ -33,6 +33,7 @@ from . import tensor as tl
 from .datasets.base import FaceDataset
 from .errors import DatasetError, ModelFileError, ShapeError
 from .io.atomic import atomic_path
+from .io.verified import remember_verified, was_verified
 
 log = logging.getLogger(__name__)
 
@@ -375,6 +376,12 @@ def load_model(path: str | Path) -> MultilinearModel:
     ModelFileError
         Missing, truncated or altered file (checksum mismatch), not a model file, or a newer
         format version.
+
+    Notes
+    -----
+    The sha256 is computed once per file as it is on disk: a file whose inode, size and
+    modification time are those it had when it last matched is not hashed again
+    (:mod:`facetransfer.io.verified`).
     """
     from .io.npz import read_npz
 
@@ -397,8 +404,10 @@ def load_model(path: str | Path) -> MultilinearModel:
         raise ModelFileError(f"model file {p} has format version {version}, newer than this "
                              f"facetransfer reads ({FORMAT_VERSION}); upgrade facetransfer")
     expected = meta.pop("sha256", None)
-    if expected != _content_hash(data, meta):
-        raise ModelFileError(f"model file {p} fails its checksum: it was altered or damaged")
+    if not (isinstance(expected, str) and was_verified(p, expected)):
+        if expected != _content_hash(data, meta):
+            raise ModelFileError(f"model file {p} fails its checksum: it was altered or damaged")
+        remember_verified(p, expected)    # the next load of this very file skips the hashing
     try:
         K = len(meta["mode_names"])
         _check_model_arrays(p, data, K)

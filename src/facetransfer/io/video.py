@@ -518,6 +518,30 @@ def _fps_arg(fps: float) -> str:
     return str(Fraction(float(fps)).limit_denominator(100000))
 
 
+#: ITU-R BT.601 chroma in limited range (Cb, Cr rows; RGB columns, then the offset), as
+#: ffmpeg converts ``rgb24`` to ``yuv420p``.
+_BT601_CHROMA = np.array([[-37.797, -74.203, 112.0, 128 * 255.0],
+                          [112.0, -93.786, -18.214, 128 * 255.0]]) / 255.0
+
+
+def _yuv420p(rgb: np.ndarray) -> np.ndarray:
+    """The planar 8-bit 4:2:0 frame (Y, then U, then V; ``(3 H / 2, W)`` uint8) of an
+    ``(H, W, 3)`` uint8 RGB frame of even size: ITU-R BT.601 in limited range, what ffmpeg's
+    ``rgb24`` to ``yuv420p`` conversion gives (Y to within 1 level); each chroma sample is
+    that of its 2x2 pixels' mean colour (OpenCV's own I420 takes the top-left pixel's)."""
+    import cv2
+
+    H, W = rgb.shape[:2]
+    out = cv2.cvtColor(rgb, cv2.COLOR_RGB2YUV_I420)
+    mean = cv2.resize(rgb, (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+    uv = cv2.transform(mean, _BT601_CHROMA)            # (H/2, W/2, 2) uint8, rounded
+    n = H * W
+    planes = out.reshape(-1)
+    planes[n:n + n // 4] = uv[..., 0].reshape(-1)
+    planes[n + n // 4:] = uv[..., 1].reshape(-1)
+    return out
+
+
 class VideoWriter:
     """Write RGB frames to a video (H.264 by default) or an image sequence, atomically.
 
@@ -591,6 +615,10 @@ class VideoWriter:
         exe = require_encoder(self.options.codec)
         w, h = self.size
         even_h = self.options.codec != "prores"  # 4:2:0 halves both, ProRes 4:2:2 the width
+        # 4:2:0 codecs get their planes from OpenCV (BT.601 limited range, as ffmpeg's own
+        # conversion; chroma the mean of each 2x2 block): half the bytes through the pipe and
+        # no scaler in ffmpeg (BENCHMARKS.md, "End to end")
+        self._pipe_format = "yuv420p" if even_h else "rgb24"
         self.stored_size = (w + w % 2, h + (h % 2 if even_h else 0))
         if self.stored_size != self.size:
             log.info("%s: odd frame size %dx%d stored as %dx%d (edge pixels repeated)",
@@ -598,7 +626,7 @@ class VideoWriter:
         self._atomic = atomic_path(self.path, overwrite=True)  # checked in __init__
         self.tmp = self._atomic.__enter__()
         cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",
-               "-pix_fmt", "rgb24", "-s", "{}x{}".format(*self.stored_size),
+               "-pix_fmt", self._pipe_format, "-s", "{}x{}".format(*self.stored_size),
                "-framerate", _fps_arg(self.fps), "-i", "-", *self._audio_input(),
                *_encode_args(self.options, self.path.suffix.lower()),
                "-f", VIDEO_SUFFIXES[self.path.suffix.lower()], str(self.tmp)]
@@ -636,6 +664,8 @@ class VideoWriter:
             pad = (self.stored_size[1] - self.size[1], self.stored_size[0] - self.size[0])
             if any(pad):
                 img = np.pad(img, ((0, pad[0]), (0, pad[1]), (0, 0)), mode="edge")
+            if self._pipe_format == "yuv420p":
+                img = _yuv420p(img)
             try:
                 self._proc.stdin.write(memoryview(img).cast("B"))
             except OSError:  # ffmpeg stopped (full disk, killed...): report why
