@@ -243,14 +243,13 @@ def _check_landmarks_file(video, tracker: str) -> None:
         read_mediapipe_landmarks(lmf)
 
 
-def _load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
-    """The model (``--model`` ``path`` or the default); when videos will be tracked, MediaPipe
-    is imported and the capture's compiled kernels loaded on threads meanwhile
-    (:func:`facetransfer.track.detect.preload_mediapipe`,
-    :func:`facetransfer.track.capture.load_kernels`), done when this returns: before the
-    tracking forks its background process, which inherits them."""
+def _start_tracker_loads(will_track: bool):
+    """When videos will be tracked, MediaPipe imported and the capture's compiled kernels
+    loaded on threads from now on (:func:`facetransfer.track.detect.preload_mediapipe`,
+    :func:`facetransfer.track.capture.load_kernels`); returns ``wait()``, to be called before
+    the tracking forks its background process, which then inherits them."""
     if not will_track:
-        return resolve_model(path, progress=progress)
+        return lambda: None
     import threading
 
     from ..track.capture import load_kernels
@@ -259,11 +258,22 @@ def _load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
     wait = preload_mediapipe()
     kernels = threading.Thread(target=load_kernels, name="load-kernels", daemon=True)
     kernels.start()
+
+    def done():
+        wait()
+        kernels.join()
+
+    return done
+
+
+def _load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
+    """The model (``--model`` ``path`` or the default), with :func:`_start_tracker_loads`'
+    threads running meanwhile and done when this returns."""
+    wait = _start_tracker_loads(will_track)
     try:
         return resolve_model(path, progress=progress)
     finally:
         wait()
-        kernels.join()
 
 
 def _prefetch_inputs(args):
@@ -315,11 +325,14 @@ def run_transfer(args) -> int:
                 to_track += 1
     # decoded from now on, while the modules import and the model and MediaPipe load
     prefetch = _prefetch_inputs(args)
-    from ..transfer import identity_from_label, parse_weights
-    from ..video_transfer import TransferSources, transfer_video
+    loads = _start_tracker_loads(to_track > 0 and args.tracker != "landmarks")
+    try:
+        from ..transfer import identity_from_label, parse_weights
+        from ..video_transfer import TransferSources, transfer_video
 
-    model = _load_model_and_mediapipe(args.model, to_track > 0 and args.tracker != "landmarks",
-                                      progress=not args.no_progress)
+        model = resolve_model(args.model, progress=not args.no_progress)
+    finally:
+        loads()
     identity = None
     if args.identity_label:
         identity = identity_from_label(model, args.identity_label)
