@@ -159,3 +159,22 @@ def test_cli_rejects_workers_below_one(tmp_path, capsys, data_dir):
                  str(tmp_path / "t.npz"), "--workers", "0"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and err == ["facetransfer track: error: --workers must be >= 1, got 0"]
+
+
+def test_mediapipe_loads_without_its_drawing_helpers_until_they_are_used():
+    """import_tasks_api makes MediaPipe's drawing helpers (matplotlib's pyplot) and its
+    microphone module (sounddevice) lazy; they still work when used."""
+    import subprocess
+    import sys
+
+    code = ("import sys\n"
+            "from facetransfer.track.init import import_tasks_api\n"
+            "BaseOptions, vision = import_tasks_api()\n"
+            "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported'\n"
+            "assert vision.FaceLandmarkerOptions and BaseOptions\n"
+            "spec = vision.drawing_utils.DrawingSpec(color=(1, 2, 3))\n"
+            "assert spec.color == (1, 2, 3) and 'matplotlib.pyplot' in sys.modules\n"
+            "assert vision.drawing_styles.get_default_face_mesh_contours_style()\n"
+            "print('ok')\n")
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr[-2000:]

@@ -60,9 +60,10 @@ def landmarker_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray
         Its points: normalised image x, y and its depth z (on about the scale of x).
     Both NaN where no face was found.
     """
-    import mediapipe as mp
+    from .track.init import create_landmarker, import_tasks_api
 
-    from .track.init import create_landmarker
+    import_tasks_api()   # first: MediaPipe's package then skips its drawing helpers
+    import mediapipe as mp
 
     shapes, pts = [], []
     lm = create_landmarker(video=True, blendshapes=True)

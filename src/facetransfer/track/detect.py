@@ -19,7 +19,7 @@ import cv2
 import numpy as np
 
 from ..errors import ShapeError
-from .init import MediaPipeDetector, create_landmarker
+from .init import MediaPipeDetector, create_landmarker, import_tasks_api
 from .landmarks import mediapipe_to_ibug
 
 __all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow", "preload_mediapipe"]
@@ -112,10 +112,8 @@ class VideoLandmarker(MediaPipeDetector):
 
 
 def _import_mediapipe() -> None:
-    os.environ.setdefault("GLOG_minloglevel", "2")  # as create_landmarker, before the import
-    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
     try:
-        from mediapipe.tasks.python import BaseOptions, vision  # noqa: F401
+        import_tasks_api()
     except Exception:  # noqa: BLE001 - create_landmarker's own import reports it
         pass
 
@@ -123,10 +121,9 @@ def _import_mediapipe() -> None:
 def preload_mediapipe() -> Callable[[], None]:
     """Start importing MediaPipe's Tasks API on a background thread; returns ``wait()``.
 
-    The import takes about a second of a command's start-up (MediaPipe's package imports its
-    drawing utilities, matplotlib and its audio tasks); it holds the interpreter lock only part
-    of the time, so it overlaps work that mostly does not (reading and checking the model
-    file). Call ``wait()`` before forking (:func:`facetransfer.track.obtain.start_background_track`):
+    The import (:func:`facetransfer.track.init.import_tasks_api`: 0.25 CPU-s here, 0.85 with
+    the drawing helpers MediaPipe's package would import) holds the interpreter lock only part
+    of the time, so it overlaps work that mostly does not (decoding, reading the model file). Call ``wait()`` before forking (:func:`facetransfer.track.obtain.start_background_track`):
     the child then inherits the imported modules instead of importing them again, and no import
     lock is held across the fork. A failed import is silent here; the detector's own import
     (:func:`facetransfer.track.init.create_landmarker`) reports it.

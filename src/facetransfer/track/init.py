@@ -214,6 +214,57 @@ def blendshape_scores(categories) -> np.ndarray:
     return out
 
 
+#: Modules that MediaPipe's Tasks API imports for what this package never calls: its drawing
+#: helpers (which import matplotlib's pyplot) and the microphone of its audio tasks. They are
+#: loaded lazily (:func:`import_tasks_api`).
+UNUSED_BY_TRACKING = frozenset({"mediapipe.tasks.python.vision.drawing_styles",
+                                "mediapipe.tasks.python.vision.drawing_utils", "sounddevice"})
+
+
+class _LazyFinder:
+    """A meta path finder that gives the modules ``names`` a
+    :class:`importlib.util.LazyLoader`: importing one binds it as usual, and its code runs on
+    the first access of one of its attributes."""
+
+    def __init__(self, names: frozenset) -> None:
+        self.names = names
+
+    def find_spec(self, name, path, target=None):
+        import importlib.machinery
+        import importlib.util
+
+        if name not in self.names:
+            return None
+        spec = importlib.machinery.PathFinder.find_spec(name, path)
+        if spec is None or spec.loader is None or not hasattr(spec.loader, "exec_module"):
+            return None
+        spec.loader = importlib.util.LazyLoader(spec.loader)
+        return spec
+
+
+def import_tasks_api():
+    """``(BaseOptions, vision)`` of MediaPipe's Tasks API, its C++ logging set to errors only.
+
+    Importing ``mediapipe.tasks.python`` also imports its drawing helpers (matplotlib's pyplot)
+    and ``sounddevice``: 0.55 of its 0.85 CPU-s here (``python -X importtime``). Those modules
+    (:data:`UNUSED_BY_TRACKING`) are made lazy first: each loads, whole, on its first use.
+
+    Raises
+    ------
+    ImportError
+        MediaPipe is not installed or cannot be imported.
+    """
+    import sys
+
+    os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ logging: errors only
+    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
+    if not any(isinstance(f, _LazyFinder) for f in sys.meta_path):
+        sys.meta_path.insert(0, _LazyFinder(UNUSED_BY_TRACKING))
+    from mediapipe.tasks.python import BaseOptions, vision
+
+    return BaseOptions, vision
+
+
 def create_landmarker(model_path: str | os.PathLike | None = None, *, video: bool = False,
                       blendshapes: bool = False):
     """A MediaPipe ``FaceLandmarker`` (Tasks API, one face) in IMAGE or VIDEO running mode.
@@ -221,10 +272,8 @@ def create_landmarker(model_path: str | os.PathLike | None = None, *, video: boo
     ``model_path``: ``face_landmarker.task`` (default from the asset registry);
     ``blendshapes``: also output its 52 blendshape scores.
     """
-    os.environ.setdefault("GLOG_minloglevel", "2")  # MediaPipe's C++ logging: errors only
-    os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
     try:
-        from mediapipe.tasks.python import BaseOptions, vision
+        BaseOptions, vision = import_tasks_api()
     except ImportError as exc:  # pragma: no cover
         raise AssetError(f"mediapipe is not installed ({exc})") from None
     p = Path(_landmarker_path() if model_path is None else model_path)
