@@ -190,16 +190,18 @@ def test_load_rejects_truncated_altered_newer_and_foreign_files(tmp_path):
 
 
 def test_a_verified_file_is_not_hashed_again_until_it_changes(tmp_path, monkeypatch):
-    """The sha256 of a file as it is on disk is computed once (io.verified); a rewrite of the
-    same size with another modification time, or a file modified moments ago, is hashed."""
+    """The sha256 and NaN scan of a file as it is on disk are done once (io.verified); a
+    rewrite of the same size with another modification time, or a file modified moments ago,
+    is checked again."""
     import os
 
     from facetransfer import model as model_module
 
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    calls = []
-    real = model_module._content_hash
+    calls, scans = [], []
+    real, scan = model_module._content_hash, model_module._all_finite
     monkeypatch.setattr(model_module, "_content_hash", lambda a, m: calls.append(1) or real(a, m))
+    monkeypatch.setattr(model_module, "_all_finite", lambda a: scans.append(1) or scan(a))
     m = build_model(random_dataset(seed=3))
     p = m.save(tmp_path / "m.npz")
     want = m.content_hash
@@ -209,7 +211,9 @@ def test_a_verified_file_is_not_hashed_again_until_it_changes(tmp_path, monkeypa
     assert len(calls) == 2          # modified moments ago: not recorded, hashed every time
     os.utime(p, (1.6e9, 1.6e9))
     assert load_model(p).content_hash == want and len(calls) == 3
+    scans.clear()
     assert load_model(p).content_hash == want and len(calls) == 3   # remembered
+    assert not scans                                                  # nor scanned for NaN
     with np.load(p) as z:
         arrays = {k: z[k] for k in z.files}
     arrays["core"] = arrays["core"] + 1e-9           # same size, stored checksum kept

@@ -379,9 +379,9 @@ def load_model(path: str | Path) -> MultilinearModel:
 
     Notes
     -----
-    The sha256 is computed once per file as it is on disk: a file whose inode, size and
-    modification time are those it had when it last matched is not hashed again
-    (:mod:`facetransfer.io.verified`).
+    The sha256 and the scan for NaN and infinities are done once per file as it is on disk: a
+    file whose inode, size and modification time are those it had when it last passed them is
+    not read whole again (:mod:`facetransfer.io.verified`).
     """
     from .io.npz import read_npz
 
@@ -404,13 +404,13 @@ def load_model(path: str | Path) -> MultilinearModel:
         raise ModelFileError(f"model file {p} has format version {version}, newer than this "
                              f"facetransfer reads ({FORMAT_VERSION}); upgrade facetransfer")
     expected = meta.pop("sha256", None)
-    if not (isinstance(expected, str) and was_verified(p, expected)):
-        if expected != _content_hash(data, meta):
-            raise ModelFileError(f"model file {p} fails its checksum: it was altered or damaged")
-        remember_verified(p, expected)    # the next load of this very file skips the hashing
+    # a file that passed every check below, unchanged since: not hashed or scanned again
+    known = isinstance(expected, str) and was_verified(p, expected)
+    if not known and expected != _content_hash(data, meta):
+        raise ModelFileError(f"model file {p} fails its checksum: it was altered or damaged")
     try:
         K = len(meta["mode_names"])
-        _check_model_arrays(p, data, K)
+        _check_model_arrays(p, data, K, finite=not known)
         model = MultilinearModel(
             core=data["core"], factors=tuple(data[f"factor_{k}"] for k in range(K)),
             mode_names=tuple(meta["mode_names"]), labels=tuple(tuple(l) for l in meta["labels"]),
@@ -420,6 +420,8 @@ def load_model(path: str | Path) -> MultilinearModel:
             imputed=data.get("imputed"), provenance=meta.get("provenance", {}))
     except (KeyError, ValueError, TypeError, IndexError) as exc:  # ShapeError is a ValueError
         raise ModelFileError(f"model file {p} is incomplete or inconsistent: {exc}") from None
+    if not known:
+        remember_verified(p, expected)
     _HASHES[model] = expected  # verified above: the same sha256 that content_hash gives
     return model
 
@@ -439,15 +441,16 @@ def _all_finite(a: np.ndarray) -> bool:
     return bool(np.isfinite(a).all())
 
 
-def _check_model_arrays(p: Path, data: dict, n_modes: int) -> None:
-    """Dtypes, finiteness and shapes the model class does not check; ModelFileError names ``p``."""
+def _check_model_arrays(p: Path, data: dict, n_modes: int, *, finite: bool = True) -> None:
+    """Dtypes, finiteness (unless not ``finite``) and shapes the model class does not check;
+    ModelFileError names ``p``."""
     for name, a in data.items():
         base = name.rsplit("_", 1)[0] if name[-1].isdigit() else name
         kinds = _ARRAY_KINDS.get(base, "fiu")
         if a.dtype.kind not in kinds:
             raise ModelFileError(f"model file {p}: {name} has dtype {a.dtype}, expected "
                                  + {"fiu": "numbers", "iu": "integers", "b": "booleans"}[kinds])
-        if a.dtype.kind == "f" and not _all_finite(a):
+        if finite and a.dtype.kind == "f" and not _all_finite(a):
             raise ModelFileError(f"model file {p}: {name} has NaN or infinite values")
     core = data["core"]
     n = core.shape[0] // 3 if core.ndim else 0
