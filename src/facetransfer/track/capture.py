@@ -23,6 +23,9 @@ frame and the drifting flow by measurements taken on every frame:
    onto the first pass's activations, pull every frame's activations in a second run.
 5. Frames without a detection are lost (the nearest tracked state is held); the face may appear
    late: tracking starts where it is.
+6. The track's pose has the head's pitch the detector shows too small restored
+   (``CaptureOptions.pitch_gain``, :func:`restore_pitch`); its landmarks are the fitted points
+   at that pose.
 
 The model at the tracked points, and one frame's solve at a fixed pose, are
 :mod:`facetransfer.track.capture_points`; the small solvers are :mod:`facetransfer.track.fit2d`.
@@ -73,6 +76,14 @@ __all__ = ["CaptureOptions", "capture_video", "capture_detections", "detect_vide
 #: any detector places them most consistently, so they weigh :data:`CORNER_WEIGHT` times more.
 CORNERS = (36, 39, 42, 45, 30, 48, 54)
 CORNER_WEIGHT = 3.0
+
+
+#: Face Landmarker's head pitch over the true one, as the capture fit reads it
+#: (``benchmarks/calibrate_pitch.py``, 16 calibration clips disjoint from the benchmark's: a
+#: rigid fit of the true faces to the detector's points has a median slope of 0.84 against the
+#: same fit to the true points, the capture's pitch 0.82 against its pitch on the true points;
+#: this gain gives the smallest sum of the 7- and 51-point NME there, flat over 0.88-0.92).
+DETECTOR_PITCH_GAIN = 0.92
 
 
 def capture_point_weights() -> np.ndarray:
@@ -141,6 +152,11 @@ class CaptureOptions:
         ridge pulling each frame's activations of
         :data:`~facetransfer.track.scores.SCORED_SHAPES` toward the scores mapped onto the
         first pass (:mod:`facetransfer.track.scores`); 0 = one pass, points only.
+    pitch_gain : float
+        The detector's head pitch over the head's (:data:`DETECTOR_PITCH_GAIN`): Face
+        Landmarker's points show a head nodding up or down as one nodding less, and the fit,
+        which follows them, inherits that; the track's pose has its pitch divided by this
+        (:func:`restore_pitch`; the fit itself is unchanged). 1 = off (exact points).
     """
 
     identity_frames: int = 24
@@ -159,6 +175,7 @@ class CaptureOptions:
     dense: float = 0.3
     gaze: bool = True
     scores: float = 1.0
+    pitch_gain: float = DETECTOR_PITCH_GAIN
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
@@ -168,6 +185,8 @@ class CaptureOptions:
                      "smooth", "dense", "offset_prior", "identity_expression_prior", "scores"):
             if not float(getattr(self, name)) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.5 <= float(self.pitch_gain) <= 2.0:
+            raise TrackError(f"pitch_gain must be in [0.5, 2], got {self.pitch_gain}")
         if self.point_weights is not None and len(self.point_weights) != 68:
             raise TrackError(f"point_weights must have 68 entries, got {len(self.point_weights)}")
 
@@ -653,6 +672,7 @@ def _assemble(model, shape: Shape, states: list, fps, size, src, opt) -> Track:
     # the tracked landmarks: the model's landmark vertices plus the clip's static offset (rows
     # 0-67 of the tracked points), as the fit placed them on the detections
     Xl = model.synthesize(w, vertices=model.landmarks) + shape.offset[:68]  # (F, 68, 3)
+    R, t = restore_pitch(R, s, t, Xl, capture_point_weights(), opt.pitch_gain)
     Y = np.einsum("fij,fnj->fni", R[:, :2], Xl) * s[:, None, None]
     Y[..., 1] *= -1
     L = Y + t[:, None, :]
@@ -666,6 +686,45 @@ def _assemble(model, shape: Shape, states: list, fps, size, src, opt) -> Track:
                  translation=t, weights=w, landmarks2d=L, confidence=conf, lost=lost,
                  model_hash=model.content_hash, mode_names=tuple(model.mode_names), source=src,
                  blendshapes=blend, blendshape_names=names)
+
+
+def restore_pitch(R: np.ndarray, s: np.ndarray, t: np.ndarray, X: np.ndarray, w: np.ndarray,
+                  gain: float) -> tuple[np.ndarray, np.ndarray]:
+    """The head's pose from one fitted to points that show its pitch ``gain`` times too small.
+
+    With ``R = Rx(a) Ry(b) Rz(c)`` (pitch ``a`` about the camera's x axis after yaw ``b`` and
+    roll ``c``), the pitch becomes ``a / gain``; the translation keeps the ``w``-weighted
+    centroid of the points ``X`` where the fitted pose projects it (:class:`.camera.Pose`).
+
+    Parameters
+    ----------
+    R : (F, 3, 3) float
+    s : (F,) float
+    t : (F, 2) float
+    X : (F, P, 3) float
+        Each frame's tracked points, model units.
+    w : (P,) float
+    gain : float
+        1 returns ``R`` and ``t`` as they are.
+
+    Returns
+    -------
+    R, t : (F, 3, 3), (F, 2) float
+    """
+    if float(gain) == 1.0:
+        return R, t
+    a = np.arctan2(-R[:, 1, 2], R[:, 2, 2])                                   # (F,)
+    d = a / float(gain) - a
+    Rx = np.zeros_like(R)
+    Rx[:, 0, 0] = 1.0
+    Rx[:, 1, 1] = Rx[:, 2, 2] = np.cos(d)
+    Rx[:, 2, 1] = np.sin(d)
+    Rx[:, 1, 2] = -Rx[:, 2, 1]
+    R2 = Rx @ R
+    c = np.einsum("p,fpk->fk", np.asarray(w, float) / np.sum(w), X)          # (F, 3)
+    shift = np.einsum("fij,fj->fi", R[:, :2] - R2[:, :2], c) * np.asarray(s)[:, None]
+    shift[:, 1] *= -1.0
+    return R2, t + shift
 
 
 def load_kernels() -> None:
