@@ -236,12 +236,14 @@ def run_ours(video: Path, model, max_frames: int | None = None, *, tracker: str 
 
 
 def run_capture_floor(truth68: np.ndarray, model) -> dict:
-    """The capture tracker's own fit (default options) to the true 68 points of every frame,
-    without MediaPipe and flow: the floor of ``ours``, its model and priors."""
-    from facetransfer.track.capture import capture_detections
+    """The capture tracker's own fit (default options, but no correction of the detector's
+    pitch: these points are exact) to the true 68 points of every frame, without MediaPipe and
+    flow: the floor of ``ours``, its model and priors."""
+    from facetransfer.track.capture import CaptureOptions, capture_detections
     from facetransfer.track.detect import ClipDetections
 
-    tr = capture_detections(ClipDetections.from_points(np.asarray(truth68, np.float64)), model)
+    tr = capture_detections(ClipDetections.from_points(np.asarray(truth68, np.float64)), model,
+                            options=CaptureOptions(pitch_gain=1.0))
     V = np.stack([model.synthesize(tr.weights_at(i)) for i in range(tr.n_frames)])
     A = None if tr.blendshapes is None else np.asarray(tr.blendshapes, np.float64)
     return {"landmarks": tr.landmarks2d, "activations": A, "vertices": V,

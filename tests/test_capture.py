@@ -10,8 +10,9 @@ from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.errors import TrackError, VideoError
 from facetransfer.render import rotation_from_euler
 from facetransfer.track.camera import Pose, compose, pose_jacobian, project, so3_exp
-from facetransfer.track.capture import (CORNERS, CaptureOptions, capture_detections,
-                                        capture_point_weights)
+from facetransfer.track.capture import (CORNERS, DETECTOR_PITCH_GAIN, CaptureOptions,
+                                        capture_detections, capture_point_weights,
+                                        restore_pitch)
 from facetransfer.track.dense import mediapipe_correspondence
 from facetransfer.track.detect import ClipDetections
 from facetransfer.track.fit2d import (Targets, box_qp, gram_blocks, pose_gauss_newton,
@@ -167,10 +168,20 @@ def test_sampler_core_gives_the_tracked_points(arkit_model):
     assert _sampler(m, dense) is sampler and _sampler(m) is not sampler
 
 
-def _synthetic(model, F=60, yaw0=25.0, late=0, offset=None):
+def _pitched(R, gain):
+    """``R = Rx(a) R0`` with its pitch ``a`` (about the camera's x axis) times ``gain``."""
+    a = np.arctan2(-R[1, 2], R[2, 2])
+    return so3_exp(np.array([(gain - 1.0) * a, 0.0, 0.0])) @ R
+
+
+def _synthetic(model, F=60, yaw0=25.0, late=0, offset=None, pitch=8.0, seen_pitch=1.0,
+               view=None):
     """Exact 2-D landmarks of a training identity performing blinks, jaw and smiles (with
     ``offset`` (68, 3): the landmarks displaced by it in 3-D, as a face outside the model's
-    identity space or a detector's consistent placement would be)."""
+    identity space or a detector's consistent placement would be). The detections show the
+    head's pitch (amplitude ``pitch`` degrees) times ``seen_pitch``; the returned points are
+    the true ones. ``view`` (68, 3): a further displacement times the sine of the head's yaw
+    (``R[0, 2]``), as a detector placing its points otherwise on either side would make."""
     t = np.arange(F)
     a = np.zeros((F, 52))
     j = {n: ARKIT_NAMES.index(n) for n in ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight",
@@ -185,14 +196,20 @@ def _synthetic(model, F=60, yaw0=25.0, late=0, offset=None):
     V = model.synthesize({"identity": np.tile(w_id, (F, 1)), "expression": w_ex})
     dc = mediapipe_correspondence(model)
     yaw = yaw0 * np.cos(t / 15.0)
-    poses = [(rotation_from_euler(yaw[i], 8 * np.sin(t[i] / 11), 0), 9.0,
-              np.array([256.0 + t[i], 240.0])) for i in range(F)]
+
+    true = [(rotation_from_euler(yaw[i], pitch * np.sin(t[i] / 11), 0), 9.0,
+             np.array([256.0 + t[i], 240.0])) for i in range(F)]
+    seen = [(_pitched(R, seen_pitch), s, t_) for R, s, t_ in true]
     L = V[:, model.landmarks] + (0.0 if offset is None else offset)
-    pts = np.stack([project(L[i], *poses[i]) for i in range(F)])
+    if view is not None:
+        L = L + np.array([R[0, 2] for R, _, _ in seen])[:, None, None] * view
+    pts = np.stack([project(L[i], *seen[i]) for i in range(F)])
     mp = np.full((F, 478, 2), np.nan)
-    mp[:, dc.mp_index] = np.stack([project(dc.sample(V[i]), *poses[i]) for i in range(F)])
+    mp[:, dc.mp_index] = np.stack([project(dc.sample(V[i]), *seen[i]) for i in range(F)])
     flow = np.full_like(pts, np.nan)
     flow[1:] = pts[1:] - pts[:-1]
+    if seen_pitch != 1.0:
+        pts = np.stack([project(L[i], *true[i]) for i in range(F)])
     pts[:late] = np.nan
     mp[:late] = np.nan
     flow[:late + 1] = np.nan
@@ -218,14 +235,75 @@ def test_tracked_landmarks_keep_the_clips_static_offset(arkit_model):
     """The reported landmarks are the fitted points: the model's landmark vertices plus the
     clip's static 3-D offset. Landmarks displaced by a static field the identity space cannot
     show (2.5 mm per coordinate) are followed to 0.4 % of the eye distance (without the offset
-    in the output: 3.8 %; on exact landmarks 0.35 % against 0.9 %)."""
+    in the output: 3.8 %; on exact landmarks 0.35 % against 0.9 %). The points are exact: no
+    detector's pitch to restore (``pitch_gain=1``)."""
     off = np.random.default_rng(0).normal(0.0, 0.25, (68, 3))          # cm
     for offset, bound in ((None, 0.005), (off, 0.006)):
         det, _, pts = _synthetic(arkit_model, offset=offset)
-        tr = capture_detections(det, arkit_model, fps=30, frame_size=(512, 512))
+        tr = capture_detections(det, arkit_model, fps=30, frame_size=(512, 512),
+                                options=CaptureOptions(pitch_gain=1.0))
         iod = np.linalg.norm(pts[:, 36] - pts[:, 45], axis=1)
         err = np.linalg.norm(tr.landmarks2d - pts, axis=2).mean(axis=1) / iod
         assert np.median(err) < bound
+
+
+def test_restore_pitch_divides_the_pitch_and_keeps_the_centroid():
+    rng = np.random.default_rng(3)
+    R = np.stack([rotation_from_euler(*rng.uniform(-30, 30, 3)) for _ in range(5)])
+    s, t = rng.uniform(5, 10, 5), rng.uniform(100, 300, (5, 2))
+    X, w = rng.normal(size=(5, 68, 3)), rng.uniform(0.2, 3.0, 68)
+    R2, t2 = restore_pitch(R, s, t, X, w, 0.8)
+    pitch = lambda R_: np.arctan2(-R_[:, 1, 2], R_[:, 2, 2])
+    np.testing.assert_allclose(pitch(R2), pitch(R) / 0.8, atol=1e-12)
+    np.testing.assert_allclose(R2 @ np.transpose(R2, (0, 2, 1)),
+                               np.broadcast_to(np.eye(3), R.shape), atol=1e-12)
+    # the same rotation after the pitch: R = Rx(a) R0 and R2 = Rx(a / 0.8) R0
+    for i in range(5):
+        np.testing.assert_allclose(_pitched(R2[i], 0.8), R[i], atol=1e-12)
+        c = w @ X[i] / w.sum()
+        np.testing.assert_allclose(project(c, R2[i], s[i], t2[i]), project(c, R[i], s[i], t[i]),
+                                   atol=1e-9)
+    same = restore_pitch(R, s, t, X, w, 1.0)
+    assert same[0] is R and same[1] is t
+
+
+def test_the_track_divides_the_fitted_pitch_by_the_detectors_gain(arkit_model):
+    """The same fit, reported with its pitch divided by ``pitch_gain``: the activations are
+    those of ``pitch_gain=1``, the landmarks the same 3-D points at the restored pose (their
+    weighted centroid where it was), and with a head nodding ±20° the points move by 0.6 % of
+    the eye distance (median)."""
+    det, _, pts = _synthetic(arkit_model, pitch=20.0, seen_pitch=DETECTOR_PITCH_GAIN)
+    on, off = (capture_detections(det, arkit_model, fps=30, frame_size=(512, 512),
+                                  options=CaptureOptions(pitch_gain=g))
+               for g in (DETECTOR_PITCH_GAIN, 1.0))
+    assert CaptureOptions().pitch_gain == DETECTOR_PITCH_GAIN < 1.0
+    np.testing.assert_array_equal(on.blendshapes, off.blendshapes)
+    np.testing.assert_array_equal(on.scale, off.scale)
+    pitch = lambda R: np.arctan2(-R[:, 1, 2], R[:, 2, 2])
+    np.testing.assert_allclose(pitch(on.rotation), pitch(off.rotation) / DETECTOR_PITCH_GAIN,
+                               atol=1e-9)
+    w = capture_point_weights()
+    np.testing.assert_allclose(np.einsum("p,fpk->fk", w, on.landmarks2d),
+                               np.einsum("p,fpk->fk", w, off.landmarks2d), atol=1e-6 * w.sum())
+    iod = np.linalg.norm(pts[:, 36] - pts[:, 45], axis=1)
+    moved = np.linalg.norm(on.landmarks2d - off.landmarks2d, axis=2).mean(axis=1) / iod
+    assert 0.003 < np.median(moved) < 0.03
+
+
+def test_the_offset_follows_points_placed_otherwise_on_either_side(arkit_model):
+    """Landmarks displaced by a static 3-D field plus one times the sine of the head's yaw
+    (2.5 mm per coordinate each; the head turning ±25°) are followed to 0.4 % of the eye
+    distance with the offset's view-dependent part, 0.8 % with the static offset alone."""
+    rng = np.random.default_rng(1)
+    off, view = rng.normal(0.0, 0.25, (2, 68, 3))                        # cm
+    det, _, pts = _synthetic(arkit_model, offset=off, view=view)
+    iod = np.linalg.norm(pts[:, 36] - pts[:, 45], axis=1)
+    err = {}
+    for prior in (CaptureOptions().view_offset_prior, np.inf):
+        tr = capture_detections(det, arkit_model, fps=30, frame_size=(512, 512),
+                                options=CaptureOptions(pitch_gain=1.0, view_offset_prior=prior))
+        err[prior] = np.median(np.linalg.norm(tr.landmarks2d - pts, axis=2).mean(axis=1) / iod)
+    assert err[CaptureOptions().view_offset_prior] < 0.005 < 0.0065 < err[np.inf]
 
 
 def test_slow_temporal_holds_the_jaw_but_not_the_eyelids(arkit_model):
@@ -290,6 +368,8 @@ def test_options_are_validated():
         CaptureOptions(identity_frames=0)
     with pytest.raises(TrackError):
         CaptureOptions(slow_temporal=-1e-3)
+    with pytest.raises(TrackError):
+        CaptureOptions(pitch_gain=0.0)
 
 
 def test_capture_on_a_real_clip_follows_mediapipe(arkit_model, data_dir):

@@ -23,6 +23,9 @@ frame and the drifting flow by measurements taken on every frame:
    onto the first pass's activations, pull every frame's activations in a second run.
 5. Frames without a detection are lost (the nearest tracked state is held); the face may appear
    late: tracking starts where it is.
+6. The track's pose has the head's pitch the detector shows too small restored
+   (``CaptureOptions.pitch_gain``, :func:`restore_pitch`); its landmarks are the fitted points
+   at that pose.
 
 The model at the tracked points, and one frame's solve at a fixed pose, are
 :mod:`facetransfer.track.capture_points`; the small solvers are :mod:`facetransfer.track.fit2d`.
@@ -73,6 +76,14 @@ __all__ = ["CaptureOptions", "capture_video", "capture_detections", "detect_vide
 #: any detector places them most consistently, so they weigh :data:`CORNER_WEIGHT` times more.
 CORNERS = (36, 39, 42, 45, 30, 48, 54)
 CORNER_WEIGHT = 3.0
+
+
+#: Face Landmarker's head pitch over the true one, as the capture fit reads it
+#: (``benchmarks/calibrate_pitch.py``, 16 calibration clips disjoint from the benchmark's: a
+#: rigid fit of the true faces to the detector's points has a median slope of 0.84 against the
+#: same fit to the true points, the capture's pitch 0.82 against its pitch on the true points;
+#: this gain gives the smallest sum of the 7- and 51-point NME there, flat over 0.88-0.92).
+DETECTOR_PITCH_GAIN = 0.92
 
 
 def capture_point_weights() -> np.ndarray:
@@ -141,6 +152,16 @@ class CaptureOptions:
         ridge pulling each frame's activations of
         :data:`~facetransfer.track.scores.SCORED_SHAPES` toward the scores mapped onto the
         first pass (:mod:`facetransfer.track.scores`); 0 = one pass, points only.
+    view_offset_prior : float
+        Ridge of the offset's view-dependent part: a second 3-D field of the tracked points,
+        times the sine of the head's yaw, fitted with the static one (the detector places its
+        points on a face turned one way otherwise than on one turned the other way); the same
+        ridge as ``offset_prior`` by default. ``inf`` = off (or with the offset off).
+    pitch_gain : float
+        The detector's head pitch over the head's (:data:`DETECTOR_PITCH_GAIN`): Face
+        Landmarker's points show a head nodding up or down as one nodding less, and the fit,
+        which follows them, inherits that; the track's pose has its pitch divided by this
+        (:func:`restore_pitch`; the fit itself is unchanged). 1 = off (exact points).
     """
 
     identity_frames: int = 24
@@ -159,15 +180,20 @@ class CaptureOptions:
     dense: float = 0.3
     gaze: bool = True
     scores: float = 1.0
+    view_offset_prior: float = 1e-4
+    pitch_gain: float = DETECTOR_PITCH_GAIN
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
             if int(getattr(self, name)) < 1:
                 raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("identity_prior", "expression_prior", "sparsity", "temporal", "slow_temporal", "flow",
-                     "smooth", "dense", "offset_prior", "identity_expression_prior", "scores"):
+                     "smooth", "dense", "offset_prior", "identity_expression_prior", "scores",
+                     "view_offset_prior"):
             if not float(getattr(self, name)) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
+        if not 0.5 <= float(self.pitch_gain) <= 2.0:
+            raise TrackError(f"pitch_gain must be in [0.5, 2], got {self.pitch_gain}")
         if self.point_weights is not None and len(self.point_weights) != 68:
             raise TrackError(f"point_weights must have 68 entries, got {len(self.point_weights)}")
 
@@ -179,6 +205,11 @@ class _State:
     pose: Pose
     x: np.ndarray          # ARKit: (K,) activations; generic: concatenated per-frame weights
     residual: float        # weighted rms of the detection term, in eye distances
+
+
+def _sin_yaw(pose: Pose) -> float:
+    """Sine of the yaw ``b`` of ``R = Rx(a) Ry(b) Rz(c)``: ``R[0, 2]``."""
+    return float(np.clip(pose.rotation[0, 2], -1.0, 1.0))
 
 
 def _iod(points: np.ndarray) -> float:
@@ -218,13 +249,17 @@ def _fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x:
     Eq. (9)) for one frame (``targets``: the detections first); with ``gaze`` (:func:`_iris`;
     ARKit models) the eyeLook* activations follow the iris at each pose."""
     p, w = targets.p[0], targets.w[0]
-    X = shape.points(x)                                                     # (P, 3)
+    base = shape
     if pose is None:
+        X = shape.points(x)                                                 # (P, 3)
         ok = w > 0
         pose = fit_affine_pose(X[ok], p[ok])
+    shape = base.at_view(_sin_yaw(pose))                 # the offset at the head's yaw
+    X = shape.points(x)
     after = None
     for _ in range(iterations):
         pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
+        shape = base.at_view(_sin_yaw(pose))
         held, after = (None, None) if gaze is None else _gaze_fixed(shape, pose, x, gaze, X)
         x = shape.solve(pose, targets, iod, x, prev, held, anchor)
         X = shape.points(x)
@@ -246,7 +281,8 @@ def _solve_identity(model, shape: Shape, frames: list, states: list, det: ClipDe
     for i, st, B in zip(frames, states, bases):
         p, w = _detection(det, i, weights)
         Y = project_basis(B, st.pose)                                        # (r, P, 2)
-        g_, h_ = targets_normal(Y, st.pose.project(shape.offset), [(p, w)], _iod(p))
+        g_, h_ = targets_normal(Y, st.pose.project(shape.offset_at(_sin_yaw(st.pose))),
+                                [(p, w)], _iod(p))
         G += g_
         h += h_
     P = prior.Q @ prior.inv_cov @ prior.Q.T
@@ -285,13 +321,17 @@ def _detection(det: ClipDetections, i: int, pw: _PointWeights) -> tuple[np.ndarr
 
 
 def _solve_offset(shape: "Shape", frames, states: list, det: ClipDetections, weights,
-                  opt: CaptureOptions) -> np.ndarray:
-    """The clip's static offset ``o`` (P, 3): per point, ``min Σ_f w |r_f - s_f F R_f[:2] o|²
-    + λ |o|²`` over the sampled frames, residuals ``r_f`` of the fit without the offset (in eye
-    distances)."""
+                  opt: CaptureOptions) -> tuple[np.ndarray, np.ndarray | None]:
+    """The clip's offset of the tracked points: its static part ``o`` (P, 3) and, unless
+    ``opt.view_offset_prior`` is infinite, its view-dependent part ``v`` (P, 3) (else None).
+
+    Per point, ``min Σ_f w |r_f - s_f F R_f[:2] (o + sin(b_f) v)|² + λ |o|² + λ_v |v|²`` over
+    the sampled frames (``b_f`` their yaw), residuals ``r_f`` of the fit without the offset (in
+    eye distances)."""
     P = shape.offset.shape[0]
-    A = np.zeros((P, 3, 3))
-    b = np.zeros((P, 3))
+    k = 6 if np.isfinite(opt.view_offset_prior) else 3
+    A = np.zeros((P, k, k))
+    b = np.zeros((P, k))
     for i, st in zip(frames, states):
         p, w = _detection(det, i, weights)
         iod = _iod(det.points[i])
@@ -299,10 +339,13 @@ def _solve_offset(shape: "Shape", frames, states: list, det: ClipDetections, wei
         r = np.nan_to_num(p - q) / iod
         M = st.pose.scale / iod * st.pose.rotation[:2].copy()               # (2, 3)
         M[1] *= -1.0
+        if k == 6:
+            M = np.concatenate([M, _sin_yaw(st.pose) * M], axis=1)            # (2, 6)
         A += w[:, None, None] * (M.T @ M)[None]
         b += w[:, None] * (r @ M)
-    lam = opt.offset_prior * len(frames)
-    return np.linalg.solve(A + lam * np.eye(3)[None], b[..., None])[..., 0]
+    ridge = np.repeat([opt.offset_prior, opt.view_offset_prior], 3)[:k] * len(frames)
+    u = np.linalg.solve(A + np.diag(ridge)[None], b[..., None])[..., 0]
+    return u[:, :3], (u[:, 3:] if k == 6 else None)
 
 
 def _iris(weights: _PointWeights, i: int) -> tuple | None:
@@ -342,7 +385,7 @@ def _clip_identity(model, det: ClipDetections, lm: Sampler, weights, opt: Captur
         prog("identity", rnd + 1, rounds + 2 * use_offset)
     for rnd in range(2 if use_offset else 0):  # then the offset: what no identity shows
         shape = Shape(model, ident, lm, opt,
-                       _solve_offset(shape, frames, states, det, weights, opt))
+                      *_solve_offset(shape, frames, states, det, weights, opt))
         states = _fit_sample(shape, det, frames, weights, opt_id, states)
         prog("identity", rounds + rnd + 1, rounds + 2)
     states = _fit_sample(shape, det, frames, weights, opt, states)
@@ -399,7 +442,7 @@ def _track_run(shape: Shape, det: ClipDetections, order: list, seed: _State | No
             continue
         q = None
         if prev is not None and prev_i is not None and abs(prev_i - i) == 1:
-            q = prev.pose.project(shape.points(prev.x))
+            q = prev.pose.project(shape.at_view(_sin_yaw(prev.pose)).points(prev.x))
         forward = prev_i is not None and i > prev_i
         tg = _targets(det, i, prev_i if prev_i is not None else i, q, weights, opt, forward)
         st = _fit_frame(shape, tg, _iod(det.points[i]), None if prev is None else prev.pose,
@@ -576,7 +619,9 @@ class _FitRun:
             R[i], sc[i], t[i], x[i], r[i] = (st.pose.rotation, st.pose.scale,
                                              st.pose.translation, st.x, st.residual)
         sd = self.seed
-        return SavedFit(self.shape.identity, self.shape.offset, self.frames, self.start,
+        offset = self.shape.offset if self.shape.view is None else \
+            np.concatenate([self.shape.offset, self.shape.view], axis=1)
+        return SavedFit(self.shape.identity, offset, self.frames, self.start,
                         (sd.pose.rotation, sd.pose.scale, sd.pose.translation, sd.x,
                          sd.residual), valid, R, sc, t, x, r, self.forward_next,
                         self.backward_next,
@@ -585,7 +630,9 @@ class _FitRun:
 
     @classmethod
     def restore(cls, fit: SavedFit, model, sampler: Sampler, opt: CaptureOptions) -> "_FitRun":
-        shape = Shape(model, fit.identity, sampler, opt, fit.offset)
+        o = np.asarray(fit.offset)                      # (P, 3) or, with the view, (P, 6)
+        shape = Shape(model, fit.identity, sampler, opt, o[:, :3],
+                      o[:, 3:] if o.shape[1] == 6 else None)
         R, sc, t, x, r = fit.seed
         states = [_State(Pose(fit.rotation[i], float(fit.scale[i]), fit.translation[i]),
                          fit.x[i], float(fit.residual[i])) if fit.valid[i] else None
@@ -653,6 +700,9 @@ def _assemble(model, shape: Shape, states: list, fps, size, src, opt) -> Track:
     # the tracked landmarks: the model's landmark vertices plus the clip's static offset (rows
     # 0-67 of the tracked points), as the fit placed them on the detections
     Xl = model.synthesize(w, vertices=model.landmarks) + shape.offset[:68]  # (F, 68, 3)
+    if shape.view is not None:                          # the offset at each frame's yaw
+        Xl = Xl + np.clip(R[:, 0, 2], -1.0, 1.0)[:, None, None] * shape.view[:68]
+    R, t = restore_pitch(R, s, t, Xl, capture_point_weights(), opt.pitch_gain)
     Y = np.einsum("fij,fnj->fni", R[:, :2], Xl) * s[:, None, None]
     Y[..., 1] *= -1
     L = Y + t[:, None, :]
@@ -666,6 +716,45 @@ def _assemble(model, shape: Shape, states: list, fps, size, src, opt) -> Track:
                  translation=t, weights=w, landmarks2d=L, confidence=conf, lost=lost,
                  model_hash=model.content_hash, mode_names=tuple(model.mode_names), source=src,
                  blendshapes=blend, blendshape_names=names)
+
+
+def restore_pitch(R: np.ndarray, s: np.ndarray, t: np.ndarray, X: np.ndarray, w: np.ndarray,
+                  gain: float) -> tuple[np.ndarray, np.ndarray]:
+    """The head's pose from one fitted to points that show its pitch ``gain`` times too small.
+
+    With ``R = Rx(a) Ry(b) Rz(c)`` (pitch ``a`` about the camera's x axis after yaw ``b`` and
+    roll ``c``), the pitch becomes ``a / gain``; the translation keeps the ``w``-weighted
+    centroid of the points ``X`` where the fitted pose projects it (:class:`.camera.Pose`).
+
+    Parameters
+    ----------
+    R : (F, 3, 3) float
+    s : (F,) float
+    t : (F, 2) float
+    X : (F, P, 3) float
+        Each frame's tracked points, model units.
+    w : (P,) float
+    gain : float
+        1 returns ``R`` and ``t`` as they are.
+
+    Returns
+    -------
+    R, t : (F, 3, 3), (F, 2) float
+    """
+    if float(gain) == 1.0:
+        return R, t
+    a = np.arctan2(-R[:, 1, 2], R[:, 2, 2])                                   # (F,)
+    d = a / float(gain) - a
+    Rx = np.zeros_like(R)
+    Rx[:, 0, 0] = 1.0
+    Rx[:, 1, 1] = Rx[:, 2, 2] = np.cos(d)
+    Rx[:, 2, 1] = np.sin(d)
+    Rx[:, 1, 2] = -Rx[:, 2, 1]
+    R2 = Rx @ R
+    c = np.einsum("p,fpk->fk", np.asarray(w, float) / np.sum(w), X)          # (F, 3)
+    shift = np.einsum("fij,fj->fi", R[:, :2] - R2[:, :2], c) * np.asarray(s)[:, None]
+    shift[:, 1] *= -1.0
+    return R2, t + shift
 
 
 def load_kernels() -> None:

@@ -78,10 +78,12 @@ class Shape:
     """
 
     def __init__(self, model, identity: np.ndarray | None, sampler: Sampler,
-                 opt, offset: np.ndarray | None = None):  # opt: capture.CaptureOptions
+                 opt, offset: np.ndarray | None = None,
+                 view: np.ndarray | None = None):  # opt: capture.CaptureOptions
         self.model, self.opt = sampler.model, opt                           # points model
         P = sampler.model.n_vertices
         self.offset = np.zeros((P, 3)) if offset is None else offset        # (P, 3) static
+        self.view = view                    # (P, 3): the offset's part times sin(yaw), or None
         self.arkit = is_arkit_model(model)
         self.id_name = "identity" if "identity" in model.mode_names else None
         self.per_frame = tuple(m for m in model.mode_names if m != self.id_name)
@@ -113,6 +115,25 @@ class Shape:
             self.sizes = [model.ranks[model.mode_index(m)] for m in self.per_frame]
             self.size = int(sum(self.sizes))
             self.x0 = np.concatenate([self.priors[m].mean for m in self.per_frame])
+
+    def offset_at(self, sin_yaw: float) -> np.ndarray:
+        """The offset of the tracked points at a head yaw: ``offset + sin_yaw view``, (P, 3)."""
+        return self.offset if self.view is None else self.offset + float(sin_yaw) * self.view
+
+    def at_view(self, sin_yaw: float) -> "Shape":
+        """The same shape with the offset at a head yaw (:meth:`offset_at`): itself without a
+        view-dependent offset."""
+        if self.view is None:
+            return self
+        other = copy.copy(self)
+        d = float(sin_yaw) * self.view
+        if self.arkit:
+            other.N = self.N + d
+            other._flat = (self._flat[0], other.N.ravel())
+        else:
+            other.offset = self.offset + d
+        other.view = None
+        return other
 
     def with_options(self, opt) -> "Shape":
         """The same shape solved with other settings (e.g. the identity phase's priors)."""

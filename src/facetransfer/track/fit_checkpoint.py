@@ -60,8 +60,9 @@ class SavedFit:
     Attributes
     ----------
     identity : (r,) float64 or None
-    offset : (P, 3) float64
-        Static offset of the tracked points.
+    offset : (P, 3) or (P, 6) float64
+        Static offset of the tracked points; with a view-dependent part
+        (``CaptureOptions.view_offset_prior``), that part after it.
     frames : (n,) int64
         The frames the identity was fitted on.
     start : int
