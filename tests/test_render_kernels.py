@@ -169,7 +169,7 @@ def test_gain_samples_equal_numpy():
     pts = cv2.findNonZero(where.view(np.uint8)).reshape(-1, 2)
     k = ys.size
     u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
-    patch._gain_samples(pts, face, part, 500, patch._LOG1P_U8, u, v, r, centre)
+    patch._gain_samples(pts, 0, 0, 0, 0, face, part, 500, patch._LOG1P_U8, u, v, r, centre)
     np.testing.assert_array_equal(centre, [cx, cy, scale])
     np.testing.assert_array_equal(u, (xs - cx) / scale)
     np.testing.assert_array_equal(v, (ys - cy) / scale)
@@ -177,6 +177,32 @@ def test_gain_samples_equal_numpy():
                                   - np.log1p(part[ys, xs].astype(np.float64)))
     with pytest.raises(ValueError, match="empty mask"):
         patch.gain_field(face, part, np.zeros((H, W), bool))
+
+
+def test_match_outline_on_a_crop_with_its_origin_equals_the_whole_image():
+    """The jaw's paste works on the box of its region and ring grown by 2 px, the gain fit
+    in the frame's coordinates (``origin``): the same pixels as on the whole image."""
+    rng = np.random.default_rng(5)
+    H, W = 90, 110
+    face = rng.integers(40, 220, (H, W, 3), dtype=np.uint8)
+    part = np.clip(face * 1.1 + rng.normal(0, 20, face.shape), 0, 255).astype(np.uint8)
+    yy, xx = np.mgrid[0:H, 0:W]
+    face_mask = ((yy - 45) / 40.0) ** 2 + ((xx - 50) / 48.0) ** 2 <= 1
+    face_mask &= _blobs(rng, (H, W), smooth=1.5, level=0.2)  # a few holes
+    mask = face_mask & (yy > 50) & (xx > 30) & (xx < 85)
+    compare = face_mask & (yy > 40) & (xx > 22) & (xx < 93) & ~mask
+    assert mask.sum() > 200 and compare.sum() > 200
+    kw = dict(feather=4.0, compare=compare, reject=patch.REJECT, reject_where=None)
+    whole = face.copy()
+    patch._match_outline_into(face, part, mask, face_mask, whole, **kw)
+    ys, xs = np.nonzero(mask | compare)
+    sl = (slice(max(ys.min() - 2, 0), ys.max() + 3), slice(max(xs.min() - 2, 0), xs.max() + 3))
+    crop = face.copy()
+    kw["compare"] = compare[sl]
+    patch._match_outline_into(crop[sl], part[sl], mask[sl], face_mask[sl], crop[sl], **kw,
+                              origin=(sl[1].start, sl[0].start))
+    assert (whole != face).any()
+    np.testing.assert_array_equal(crop, whole)
 
 
 def _harmonic_disc():

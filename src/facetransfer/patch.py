@@ -11,6 +11,7 @@ and the seam is feathered (:func:`match_outline`).
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from .composite import _blend_paste, _feather_alpha
@@ -81,23 +82,24 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 
 
 def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
-                        reject_where) -> None:
+                        reject_where, origin: tuple[int, int] = (0, 0)) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
-    the region's pixels are written."""
-    import cv2
-
+    the region's pixels are written. ``origin``: the position ``(x, y)`` of these arrays'
+    top-left pixel in the image whose coordinates the gain fit takes (a crop of it whose
+    border lies at least 2 pixels beyond ``mask`` and ``compare`` gives that image's
+    pixels)."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
-    deep = cv2.erode(face_mask.astype(np.uint8), np.ones((5, 5), np.uint8),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
-    ring = (mask if compare is None else compare) & deep
+    ring, rbox = _ring(mask if compare is None else compare, face_mask)
     box = (slice(y, y + h), slice(x, x + w))      # the work is done on the region's box only
     pb = np.ascontiguousarray(part[box])
-    if ring.sum() >= 8:  # part scaled by gain_field's gains
-        gy, gx = _gain_factors(face, part, ring, GAIN_ITERATIONS, (x, y, x + w, y + h),
-                                GAIN_SAMPLES)
+    if ring is not None and np.count_nonzero(ring) >= 8:  # part scaled by gain_field's gains
+        ox, oy = origin
+        gy, gx = _gain_factors(face, part, ring, GAIN_ITERATIONS,
+                               (x + ox, y + oy, x + w + ox, y + h + oy), GAIN_SAMPLES,
+                               origin=(rbox[0], rbox[1]), shift=origin)
         f = np.empty(pb.shape, np.float32)
         _apply_gain(pb, gy, gx, *GAIN_RANGE, f)
     else:
@@ -112,6 +114,26 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     else:  # the fade a (1 - r), r = _rejected where reject_where, taken in the paste
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
         _blend_paste_rejected(mb, fb, f, a, _rejection_blur(f, fb, reject), where, out[box])
+
+
+def _ring(compare: np.ndarray, face_mask: np.ndarray):
+    """The pixels of ``compare`` (H, W) bool at least 2 pixels inside ``face_mask`` (H, W) bool
+    (its 5 x 5 erosion, pixels beyond the image outside) on the box of ``compare`` only:
+    ``(ring (h, w) bool or None, (x0, y0))`` (None: ``compare`` is empty)."""
+    x, y, w, h = cv2.boundingRect(compare.view(np.uint8))
+    if w == 0 or h == 0:
+        return None, (0, 0)
+    H, W = face_mask.shape
+    # the erosion on the box grown by its reach (2 px, clipped to the image): the box's pixels
+    # see their true neighbours, the image's border stays outside
+    gx0, gy0, gx1, gy1 = max(x - 2, 0), max(y - 2, 0), min(x + w + 2, W), min(y + h + 2, H)
+    grown = np.ascontiguousarray(face_mask[gy0:gy1, gx0:gx1]).view(np.uint8)
+    deep = cv2.erode(grown, _SQUARE5, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    ring = compare[y:y + h, x:x + w] & deep[y - gy0:y - gy0 + h, x - gx0:x - gx0 + w].view(bool)
+    return ring, (x, y)
+
+
+_SQUARE5 = np.ones((5, 5), np.uint8)
 
 
 def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
@@ -229,12 +251,14 @@ def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
 _LOG1P_U8 = np.log1p(np.arange(256, dtype=np.float64))
 
 
-def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
+def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
+                  origin: tuple[int, int] = (0, 0), shift: tuple[int, int] = (0, 0)):
     """The fit of :func:`gain_field` as its separable factors over ``box = (x0, y0, x1, y1)``:
     ``gy (y1 - y0, 3)`` and ``gx (x1 - x0, 3)`` float64, the unclipped gain at pixel ``(x, y)``
-    being ``gy[y - y0] * gx[x - x0]``."""
-    import cv2
+    being ``gy[y - y0] * gx[x - x0]``.
 
+    ``where`` may be a crop of the mask whose top-left pixel is ``origin`` in ``face`` and
+    ``part``; the fit's coordinates are those of ``face`` plus ``shift`` (as ``box``'s)."""
     pts = cv2.findNonZero(np.ascontiguousarray(where).view(np.uint8))  # (n, 1, 2): (x, y)
     if pts is None:
         raise RewriteError("the gain fit needs at least one pixel, got an empty mask")
@@ -242,7 +266,8 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
     k = -(-n // max(1, -(-n // int(max_samples))))  # the samples: every step-th pixel
     u, v, r = np.empty(k), np.empty(k), np.empty((k, 3))
     centre = np.empty(3)
-    _gain_samples(pts.reshape(n, 2), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
+    _gain_samples(pts.reshape(n, 2), int(origin[0]), int(origin[1]), int(shift[0]),
+                  int(shift[1]), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
     cx, cy, scale = centre
     coef = np.empty((3, 3))
     _plane_l1_kernel(u, v, r, int(iterations), coef)
@@ -253,32 +278,36 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
     return gy, gx
 
 
-def _gain_samples_py(pts, face, part, max_samples, lut, u, v, r, centre):  # pragma: no cover
-    """The samples of :func:`gain_field`'s fit from the pixels ``pts`` (n, 2) int32 ``(x, y)``
-    in row-major order (``cv2.findNonZero``; numba): ``centre = (cx, cy, scale)``, the pixels'
-    mean position and the larger extent of their rows and columns (at least 1); for every
-    ``step``-th pixel (``step = ceil(n / max_samples)``) the centred, scaled coordinates
-    ``u = (x - cx) / scale``, ``v = (y - cy) / scale`` and the log ratios ``r = lut[face] -
-    lut[part]`` (3 channels). The means are the integer sums over ``n`` (as numpy's mean of
-    the coordinates, whose float sums are exact)."""
+def _gain_samples_py(pts, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v, r,
+                     centre):  # pragma: no cover (numba)
+    """The samples of :func:`gain_field`'s fit from the pixels ``pts + (ox, oy)`` (n, 2) int32
+    ``(x, y)`` of ``face`` and ``part`` in row-major order (``cv2.findNonZero`` of a crop
+    whose top-left pixel is ``(ox, oy)``; numba), at coordinates shifted by ``(sx0, sy0)``:
+    ``centre = (cx, cy, scale)``, the pixels' mean position and the larger extent of their
+    rows and columns (at least 1); for every ``step``-th pixel (``step = ceil(n /
+    max_samples)``) the centred, scaled coordinates ``u = (x - cx) / scale``, ``v = (y - cy) /
+    scale`` and the log ratios ``r = lut[face] - lut[part]`` (3 channels). The means are the
+    integer sums over ``n`` (as numpy's mean of the coordinates, whose float sums are
+    exact)."""
     n = pts.shape[0]
+    dx, dy = np.int64(ox) + np.int64(sx0), np.int64(oy) + np.int64(sy0)
     sx = sy = 0
     x_lo = x_hi = pts[0, 0]
     y_lo = y_hi = pts[0, 1]
     for i in range(n):
-        x, y = pts[i, 0], pts[i, 1]
+        x, y = pts[i, 0] + dx, pts[i, 1] + dy
         sx += x
         sy += y
-        x_lo, x_hi = min(x_lo, x), max(x_hi, x)
-        y_lo, y_hi = min(y_lo, y), max(y_hi, y)
+        x_lo, x_hi = min(x_lo, pts[i, 0]), max(x_hi, pts[i, 0])
+        y_lo, y_hi = min(y_lo, pts[i, 1]), max(y_hi, pts[i, 1])
     cx, cy = float(sx) / float(n), float(sy) / float(n)
     scale = float(max(y_hi - y_lo, x_hi - x_lo, 1))
     step = max(1, -(-n // max_samples))
     j = 0
     for i in range(0, n, step):
-        x, y = np.int64(pts[i, 0]), np.int64(pts[i, 1])
-        u[j] = (x - cx) / scale
-        v[j] = (y - cy) / scale
+        x, y = np.int64(pts[i, 0]) + ox, np.int64(pts[i, 1]) + oy
+        u[j] = (x + sx0 - cx) / scale
+        v[j] = (y + sy0 - cy) / scale
         for c in range(3):
             r[j, c] = lut[face[y, x, c]] - lut[part[y, x, c]]
         j += 1
