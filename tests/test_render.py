@@ -489,6 +489,31 @@ def test_shade_texture_equals_numpy_lookup_on_selected_triangles():
         shade_texture(r, F, uvs, tex.astype(np.float32))
 
 
+def test_shade_layers_kernel_equals_its_python_twin():
+    # four layers over a small raster: the compiled kernel and its pure-Python source
+    from facetransfer.render.shading import _shade_layers_kernel, _shade_layers_kernel_py
+
+    P, F = cap_mesh(8, 8)
+    rng = np.random.default_rng(9)
+    r = rasterize(P, F, look_at_weak_perspective(P, (30, 24)), (30, 24))
+    flags = rng.integers(0, 256, len(F)).astype(np.uint8)
+    layers = [(rng.random((len(P), 2)), rng.integers(0, 256, (9 + k, 13, 3), dtype=np.uint8))
+              for k in range(4)]
+    out = []
+    for kernel in (_shade_layers_kernel, _shade_layers_kernel_py):
+        args = []
+        for uv, tex in layers:
+            args += [uv, tex, np.zeros((24, 30, 3), np.uint8)]
+        labels = np.zeros((24, 30), np.uint8)
+        ok = kernel(r.tri_id, r.bary, F.astype(np.int64), flags, *args, labels,
+                    np.empty((30, 4, 4), np.int64), np.empty((30, 4, 2)), np.empty(30, np.uint8))
+        out.append([ok, labels] + args[2::3])
+    assert out[0][0] and out[1][0]
+    assert (out[0][2] > 0).any(axis=-1).sum() > 100
+    for a, b in zip(out[0][1:], out[1][1:]):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_shade_layers_equal_one_pass_per_layer_and_label_pixels():
     from facetransfer.render import shade_layers, shade_texture
 
