@@ -570,22 +570,27 @@ def _feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.n
 
     Equal to ``cv2.distanceTransform(..., DIST_L2, DIST_MASK_PRECISE)`` scaled and clipped, but
     computed only where it is below 1: pixels whose ``(2r + 1)²`` window (``r = ceil(feather)``)
-    lies inside ``m`` are farther than ``feather`` from outside (a square erosion finds them);
-    the rest search their window. ``edge_outside``: pixels beyond the crop count as outside
-    (else, as OpenCV, they do not).
+    lies inside ``m`` are farther than ``feather`` from outside (a square erosion finds them,
+    1 there, 0 elsewhere, in one conversion); the rest of ``m`` (its band along the outline,
+    from ``cv2.findNonZero``) search their window. ``edge_outside``: pixels beyond the crop
+    count as outside (else, as OpenCV, they do not).
     """
     r = max(int(np.ceil(feather)), 1)
     m8 = m.view(np.uint8)
     deep = cv2.erode(m8, np.ones((2 * r + 1, 2 * r + 1), np.uint8),
                      borderType=cv2.BORDER_CONSTANT, borderValue=0 if edge_outside else 1)
-    a = np.empty(m.shape, np.float32)
-    _alpha_kernel(m8, deep, r, float(max(feather, 1e-6)), bool(edge_outside), a)
+    a = deep.astype(np.float32)  # deep lies in m (each window holds its own pixel)
+    band = cv2.findNonZero(cv2.subtract(m8, deep))  # (k, 1, 2): (x, y)
+    if band is not None:
+        _alpha_kernel(m8, band.reshape(-1, 2), r, float(max(feather, 1e-6)),
+                      bool(edge_outside), a)
     return a
 
 
-def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover (numba)
-    """The window search of :func:`_feather_alpha`, writing ``a`` (h, w) float32: the window's
-    offsets in order of distance, up to the first outside pixel."""
+def _alpha_kernel_py(m, band, r, feather, edge_outside, a):  # pragma: no cover (numba)
+    """The window search of :func:`_feather_alpha` at the pixels ``band`` (k, 2) int32
+    ``(x, y)`` of ``m`` (h, w) uint8, writing ``a`` (h, w) float32 there: the window's offsets
+    in order of distance, up to the first outside pixel."""
     h, w = m.shape
     k = 2 * r + 1
     d2 = np.empty(k * k, np.int64)
@@ -593,25 +598,19 @@ def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover 
         d2[i] = (i // k - r) ** 2 + (i % k - r) ** 2
     order = np.argsort(d2, kind="mergesort")
     oy, ox, od = order // k - r, order % k - r, d2[order]
-    for y in range(h):
-        for x in range(w):
-            if m[y, x] == 0:
-                a[y, x] = 0.0
-                continue
-            if deep[y, x] != 0:
-                a[y, x] = 1.0
-                continue
-            best = 2 * (r + 1) * (r + 1)
-            for i in range(k * k):
-                yy, xx = y + oy[i], x + ox[i]
-                if yy < 0 or yy >= h or xx < 0 or xx >= w:
-                    if edge_outside:
-                        best = od[i]
-                        break
-                elif m[yy, xx] == 0:
+    for j in range(band.shape[0]):
+        x, y = band[j, 0], band[j, 1]
+        best = 2 * (r + 1) * (r + 1)
+        for i in range(k * k):
+            yy, xx = y + oy[i], x + ox[i]
+            if yy < 0 or yy >= h or xx < 0 or xx >= w:
+                if edge_outside:
                     best = od[i]
                     break
-            a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
+            elif m[yy, xx] == 0:
+                best = od[i]
+                break
+        a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
 
 
 def _blend_value_py(b, ay, f):  # pragma: no cover (numba, inlined)
