@@ -303,20 +303,38 @@ def test_reject_kernel_equals_the_quotients_at_the_ramp_edge():
 
 
 def test_blend_paste_rejected_equals_the_numpy_fade():
-    """The paste with the rejection taken inside equals numpy's r = clip(2 blur, 0, 1),
-    r *= where, a *= 1 - r and the plain paste, bit for bit."""
+    """The rejection's fade and the paste (kernels over rows of channel values) equal numpy's
+    r = clip(2 blur, 0, 1), r *= where, a *= 1 - r and rint(base + a (f - base)) clipped,
+    where m, in float32, bit for bit; outside m the image is left alone (a view of a larger
+    one, written in place)."""
     rng = np.random.default_rng(17)
     h, w = 40, 50
     m = rng.random((h, w)) < 0.7
     where = rng.random((h, w)) < 0.5
     base = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
-    f = (rng.random((h, w, 3)) * 300).astype(np.float32)
+    f = (rng.random((h, w, 3)) * 300 - 20).astype(np.float32)
     a = rng.random((h, w)).astype(np.float32)
     blur = (rng.random((h, w)) * 0.8).astype(np.float32)
-    out1, out2 = base.copy(), base.copy()
-    patch._blend_paste_rejected(m, base, f, a, blur, where, out1)
-    r = np.clip(blur * 2.0, 0.0, 1.0)
+    big = rng.integers(0, 256, (h + 6, w + 9, 3), dtype=np.uint8)
+    before = big.copy()
+    faded = a.copy()
+    patch._reject_fade(blur, where, faded)
+    composite._blend_paste(m, base, f, faded, big[2:2 + h, 5:5 + w])
+    r = np.clip(blur * np.float32(2.0), np.float32(0.0), np.float32(1.0))
     r *= where
-    composite._blend_paste(m, base, f, a * (1.0 - r), out2)
-    np.testing.assert_array_equal(out1, out2)
-    assert (out1 != base).any()
+    fade = (a * (np.float32(1.0) - r))[..., None]
+    b = base.astype(np.float32)
+    want = np.clip(np.rint(b + fade * (f - b)), 0, 255).astype(np.uint8)
+    want = np.where(m[..., None], want, before[2:2 + h, 5:5 + w])
+    np.testing.assert_array_equal(faded, fade[..., 0])
+    np.testing.assert_array_equal(big[2:2 + h, 5:5 + w], want)
+    before[2:2 + h, 5:5 + w] = want
+    np.testing.assert_array_equal(big, before)  # nothing written outside the crop
+    assert (want != base).any()
+    # the membrane's paste: f + s in float32
+    s = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    out = base.copy()
+    composite._blend_paste(m, base, f, a, out, s=s)
+    fs = f + s.astype(np.float32)
+    want = np.clip(np.rint(b + a[..., None] * (fs - b)), 0, 255).astype(np.uint8)
+    np.testing.assert_array_equal(out, np.where(m[..., None], want, base))

@@ -109,11 +109,10 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     mb = np.ascontiguousarray(mask[box])
     a = _feather_alpha(mb, feather, edge_outside=True)
     fb = np.ascontiguousarray(face[box])
-    if reject is None:
-        _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
-    else:  # the fade a (1 - r), r = _rejected where reject_where, taken in the paste
+    if reject is not None:  # the fade a (1 - r), r = _rejected where reject_where
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
-        _blend_paste_rejected(mb, fb, f, a, _rejection_blur(f, fb, reject), where, out[box])
+        _reject_fade(_rejection_blur(f, fb, reject), where, a)
+    _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
 
 
 def _ring(compare: np.ndarray, face_mask: np.ndarray):
@@ -158,23 +157,16 @@ def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) 
     return cv2.GaussianBlur(r, (0, 0), 2.0)
 
 
-def _blend_paste_rejected_py(m, base, f, a, blur, where, out):  # pragma: no cover (numba)
-    """:func:`facetransfer.composite._blend_paste` with the fade ``a (1 - r)``, ``r =
-    clip(2 blur, 0, 1)`` where ``where`` (h, w) bool and 0 elsewhere: match_outline's
-    rejection (:func:`_rejected`) taken in the paste, in float32 as numpy's ``r *= where;
-    a *= 1.0 - r`` were, without three passes of their own."""
-    H, W = m.shape
+def _reject_fade_py(blur, where, a):  # pragma: no cover (numba)
+    """``a *= 1 - r`` with ``r = clip(2 blur, 0, 1)`` where ``where`` (h, w) bool and 0
+    elsewhere: match_outline's rejection (:func:`_rejected`) in float32 as numpy's ``r *=
+    where; a *= 1.0 - r`` were, in one pass (``a``, ``blur`` (h, w) float32)."""
+    H, W = a.shape
     one, zero = np.float32(1.0), np.float32(0.0)
     for y in range(H):
         for x in range(W):
-            if not m[y, x]:
-                continue
-            r = min(max(blur[y, x] * np.float32(2.0), zero), one) if where[y, x] else zero
-            ay = a[y, x] * (one - r)
-            for k in range(3):
-                b = np.float32(base[y, x, k])
-                v = np.rint(b + ay * (f[y, x, k] - b))
-                out[y, x, k] = np.uint8(min(max(v, zero), np.float32(255.0)))
+            r = min(max(blur[y, x] * np.float32(2.0), zero), one)
+            a[y, x] = a[y, x] * (one - (r if where[y, x] else zero))
 
 
 def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
@@ -370,5 +362,5 @@ def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
 
 _apply_gain = _maybe_njit(_apply_gain_py)
 _gain_samples = _maybe_njit(_gain_samples_py)
-_blend_paste_rejected = _maybe_njit(_blend_paste_rejected_py)
+_reject_fade = _maybe_njit(_reject_fade_py)
 _plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)
