@@ -125,6 +125,19 @@ def test_gain_field_equals_the_numpy_fit():
     np.testing.assert_allclose(g, ref, rtol=1e-5)
 
 
+def test_apply_gain_equals_numpy():
+    """The gain's kernel over rows of channel values is numpy's clipped outer product of the
+    separable factors times the part, in float32, bit for bit."""
+    rng = np.random.default_rng(23)
+    h, w = 31, 45
+    part = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    gy, gx = rng.uniform(0.5, 1.5, (h, 3)), rng.uniform(0.6, 1.6, (w, 3))
+    f = np.empty((h, w, 3), np.float32)
+    patch._apply_gain(part, gy, gx, *patch.GAIN_RANGE, f)
+    g = np.clip(gy[:, None, :] * gx[None, :, :], *patch.GAIN_RANGE).astype(np.float32)
+    np.testing.assert_array_equal(f, part.astype(np.float32) * g)
+
+
 def test_rejected_equals_the_log_ratio():
     rng = np.random.default_rng(11)
     fb = rng.integers(0, 256, (40, 50, 3)).astype(np.uint8)

@@ -14,7 +14,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .composite import _blend_paste, _feather_alpha
+from .composite import _blend_paste, _feather_alpha, _rows
 from .errors import RewriteError
 from .render.raster import _maybe_njit
 
@@ -348,19 +348,32 @@ def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
                 w[i, c] = 1.0 / max(e, 1e-3)
 
 
-def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
+def _apply_gain(part: np.ndarray, gy: np.ndarray, gx: np.ndarray, lo: float, hi: float,
+                f: np.ndarray) -> None:
     """``f = part * clip(gy gx, lo, hi)`` (the float32 gain of :func:`gain_field`) per pixel
-    and channel: ``part`` (h, w, 3) uint8, ``gy`` (h, 3), ``gx`` (w, 3), ``f`` (h, w, 3)
-    float32."""
-    H, W = f.shape[0], f.shape[1]
+    and channel: ``part`` (h, w, 3) uint8, ``gy`` (h, 3), ``gx`` (w, 3) float64, ``f``
+    (h, w, 3) float32, all C-contiguous; by rows of channel values (vectorised)."""
+    h, w = part.shape[:2]
+    _gain_rows(_rows(part), np.ascontiguousarray(gy), np.ascontiguousarray(gx).reshape(3 * w),
+               lo, hi, _rows(f), np.empty(3 * w))
+
+
+def _gain_rows_py(part, gy, gx, lo, hi, f, row):  # pragma: no cover (numba)
+    """:func:`_apply_gain` on rows ``(h, 3 w)`` of channel values, ``gx`` (3 w,) float64 and
+    ``row`` (3 w,) float64 scratch (a row's ``gy`` repeated per pixel)."""
+    H, L = f.shape
     for y in range(H):
-        for x in range(W):
-            for k in range(3):
-                g = np.float32(min(max(gy[y, k] * gx[x, k], lo), hi))
-                f[y, x, k] = np.float32(part[y, x, k]) * g
+        g0, g1, g2 = gy[y, 0], gy[y, 1], gy[y, 2]
+        for x in range(L // 3):
+            row[3 * x] = g0
+            row[3 * x + 1] = g1
+            row[3 * x + 2] = g2
+        for j in range(L):
+            g = np.float32(min(max(row[j] * gx[j], lo), hi))
+            f[y, j] = np.float32(part[y, j]) * g
 
 
-_apply_gain = _maybe_njit(_apply_gain_py)
+_gain_rows = _maybe_njit(_gain_rows_py)
 _gain_samples = _maybe_njit(_gain_samples_py)
 _reject_fade = _maybe_njit(_reject_fade_py)
 _plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)
