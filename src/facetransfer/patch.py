@@ -310,42 +310,66 @@ def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
     """Per channel c, the plane ``coef[:, c] = (a, b, c)`` fitting ``r[:, c]`` (k, 3) by
     ``a + b u + c v`` in least absolute deviations: ``iterations`` steps of iteratively
     reweighted least squares (weights ``1 / max(|residual|, 1e-3)``, from 1; the normal
-    equations with a ridge of 1e-9, solved by Cramer's rule)."""
+    equations with a ridge of 1e-9, solved by Cramer's rule). The weights and residuals are
+    kept per channel (contiguous: the reweighting is vectorised), the sums in registers."""
     k = r.shape[0]
-    w = np.ones((k, 3))
-    M = np.empty((3, 6))  # per channel: sum w, wu, wv, wuu, wuv, wvv
-    b = np.empty((3, 3))  # per channel: sum wr, wur, wvr
-    for _ in range(iterations):
-        M[:] = 0.0
-        b[:] = 0.0
-        for i in range(k):
-            ui, vi = u[i], v[i]
-            uu, uv, vv = ui * ui, ui * vi, vi * vi
-            for c in range(3):
-                wi, wr = w[i, c], w[i, c] * r[i, c]
-                M[c, 0] += wi
-                M[c, 1] += wi * ui
-                M[c, 2] += wi * vi
-                M[c, 3] += wi * uu
-                M[c, 4] += wi * uv
-                M[c, 5] += wi * vv
-                b[c, 0] += wr
-                b[c, 1] += wr * ui
-                b[c, 2] += wr * vi
+    w = np.ones((3, k))
+    rt = np.empty((3, k))
+    for i in range(k):
         for c in range(3):
-            a00, a01, a02 = M[c, 0] + 1e-9, M[c, 1], M[c, 2]
-            a11, a12, a22 = M[c, 3] + 1e-9, M[c, 4], M[c, 5] + 1e-9
-            c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
-            c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
-            det = a00 * c00 + a01 * c01 + a02 * c02
-            b0, b1, b2 = b[c, 0], b[c, 1], b[c, 2]
-            coef[0, c] = (c00 * b0 + c01 * b1 + c02 * b2) / det
-            coef[1, c] = (c01 * b0 + c11 * b1 + c12 * b2) / det
-            coef[2, c] = (c02 * b0 + c12 * b1 + c22 * b2) / det
-        for i in range(k):
-            for c in range(3):
-                e = abs(r[i, c] - coef[0, c] - coef[1, c] * u[i] - coef[2, c] * v[i])
-                w[i, c] = 1.0 / max(e, 1e-3)
+            rt[c, i] = r[i, c]
+    sums = np.empty((3, 9))  # per channel: sum w, wu, wv, wuu, wuv, wvv, wr, wur, wvr
+    for _ in range(iterations):
+        for c in range(3):
+            _plane_sums(u, v, rt[c], w[c], sums[c])
+            _solve_plane(sums[c], coef, c)
+        for c in range(3):
+            _reweight(u, v, rt[c], coef[0, c], coef[1, c], coef[2, c], w[c])
+
+
+def _plane_sums_py(u, v, r, w, out):  # pragma: no cover (numba, inlined)
+    """The weighted moments of one channel, ``out`` (9,) = sums over i of ``w, w u, w v,
+    w u², w u v, w v², w r, w r u, w r v`` (in order of i)."""
+    s0 = s1 = s2 = s3 = s4 = s5 = t0 = t1 = t2 = 0.0
+    for i in range(r.shape[0]):
+        ui, vi = u[i], v[i]
+        wi, wr = w[i], w[i] * r[i]
+        s0 += wi
+        s1 += wi * ui
+        s2 += wi * vi
+        s3 += wi * (ui * ui)
+        s4 += wi * (ui * vi)
+        s5 += wi * (vi * vi)
+        t0 += wr
+        t1 += wr * ui
+        t2 += wr * vi
+    out[0], out[1], out[2], out[3], out[4] = s0, s1, s2, s3, s4
+    out[5], out[6], out[7], out[8] = s5, t0, t1, t2
+
+
+def _solve_plane_py(m, coef, c):  # pragma: no cover (numba, inlined)
+    """``coef[:, c]`` from the moments ``m`` (9,) of :func:`_plane_sums`: the normal
+    equations with a ridge of 1e-9, by Cramer's rule."""
+    a00, a01, a02 = m[0] + 1e-9, m[1], m[2]
+    a11, a12, a22 = m[3] + 1e-9, m[4], m[5] + 1e-9
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    b0, b1, b2 = m[6], m[7], m[8]
+    coef[0, c] = (c00 * b0 + c01 * b1 + c02 * b2) / det
+    coef[1, c] = (c01 * b0 + c11 * b1 + c12 * b2) / det
+    coef[2, c] = (c02 * b0 + c12 * b1 + c22 * b2) / det
+
+
+def _reweight_py(u, v, r, a, b, c, w):  # pragma: no cover (numba, inlined)
+    """``w = 1 / max(|r - a - b u - c v|, 1e-3)`` (one channel's weights, vectorised)."""
+    for i in range(r.shape[0]):
+        w[i] = 1.0 / max(abs(r[i] - a - b * u[i] - c * v[i]), 1e-3)
+
+
+_plane_sums = _maybe_njit(_plane_sums_py, inline=True)
+_solve_plane = _maybe_njit(_solve_plane_py, inline=True)
+_reweight = _maybe_njit(_reweight_py, inline=True)
 
 
 def _apply_gain(part: np.ndarray, gy: np.ndarray, gx: np.ndarray, lo: float, hi: float,
