@@ -310,13 +310,15 @@ def test_push_pull_points_equal_fill_holes(shape):
                                   full.reshape(shape + (3,)))
 
 
-def test_reject_kernel_equals_the_quotients_at_the_ramp_edge():
-    """The division-free test for pixels below the ramp decides as the quotients do, also for
-    ratios within a few ulps of exp(lo)."""
+@pytest.mark.parametrize("edge", ["below", "beyond"])
+def test_reject_kernel_equals_the_quotients_at_the_ramp_edge(edge):
+    """The division-free tests for pixels below and beyond the ramp decide as the quotients
+    do, also for ratios within a few ulps of exp(lo) and exp(lo + span)."""
     rng = np.random.default_rng(13)
     lo, span = 0.5, 0.4
     fb = rng.integers(0, 256, (60, 50, 3)).astype(np.uint8)
-    q = np.exp(lo) * (1.0 + rng.integers(-4, 5, (60, 50, 3)) * 2.0 ** -52)
+    at = np.exp(lo) if edge == "below" else np.exp(lo + span)
+    q = at * (1.0 + rng.integers(-4, 5, (60, 50, 3)) * 2.0 ** -52)
     q[:20] = rng.uniform(0.5, 2.0, (20, 50, 3))  # and ratios anywhere
     f = ((1.0 + fb) * np.where(rng.random((60, 50, 3)) < 0.5, q, 1 / q) - 1.0)
     f = np.maximum(f, 0).astype(np.float32)

@@ -169,31 +169,42 @@ def _reject_fade_py(blur, where, a):  # pragma: no cover (numba)
             a[y, x] = a[y, x] * (one - (r if where[y, x] else zero))
 
 
-def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
-    """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel, with one
-    log per pixel (of the largest ratio ``(1 + f) / (1 + fb)`` or its inverse) and none where
-    that ratio lies outside ``exp(lo)..exp(lo + span)``.
+def _reject_kernel(f: np.ndarray, fb: np.ndarray, lo: float, span: float,
+                   r: np.ndarray) -> None:
+    """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel: ``f``
+    (h, w, 3) float32, ``fb`` (h, w, 3) uint8 (both C-contiguous), ``r`` (h, w) float32
+    (:func:`_reject_rows`)."""
+    cls = np.empty(3 * r.shape[1], np.uint8)
+    _reject_rows(_rows(f), _rows(fb), float(lo), float(span), r, cls)
 
-    Most pixels are below the ramp: they are found without division, by ``max <= q' min``
-    in every channel with ``q'`` a little under ``exp(lo)`` (then the exact ratio is below
-    ``exp(lo)``, so its correctly rounded quotient is at most that: the same 0 as the
-    quotients give)."""
+
+def _reject_rows_py(f, fb, lo, span, r, cls):  # pragma: no cover (numba)
+    """:func:`_reject_kernel` on rows ``(h, 3 w)`` of channel values, with one log per pixel
+    (of the largest ratio ``(1 + f) / (1 + fb)`` or its inverse) and none where that ratio
+    lies outside ``exp(lo)..exp(lo + span)``.
+
+    Most pixels are decided without division, a row's channel values at once (vectorised,
+    into ``cls`` (3 w,) uint8): below the ramp by ``max <= q' min`` in every channel with
+    ``q'`` a little under ``exp(lo)`` (then the exact ratio is below ``exp(lo)``, so its
+    correctly rounded quotient is at most that: the same 0 as the quotients give), beyond it
+    by ``max > q'' min`` in some channel with ``q''`` a little over ``exp(lo + span)`` (then
+    the quotient is at least that: 1)."""
     H, W = r.shape
     q_lo, q_hi = np.exp(lo), np.exp(lo + span)
-    q_safe = q_lo * (1.0 - 2.0 ** -50)
+    q_safe, q_sure = q_lo * (1.0 - 2.0 ** -50), q_hi * (1.0 + 2.0 ** -50)
     for y in range(H):
+        for j in range(3 * W):  # 0: below, 1: undecided, 2: beyond
+            u, v = 1.0 + np.float64(f[y, j]), 1.0 + np.float64(fb[y, j])
+            a, b = max(u, v), min(u, v)
+            cls[j] = np.uint8(a > q_safe * b) + np.uint8(a > q_sure * b)
         for x in range(W):
-            below = True
-            for k in range(3):
-                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
-                if max(u, v) > q_safe * min(u, v):
-                    below = False
-            if below:
-                r[y, x] = 0.0
+            c = max(cls[3 * x], max(cls[3 * x + 1], cls[3 * x + 2]))
+            if c != 1:
+                r[y, x] = 0.0 if c == 0 else 1.0
                 continue
             q = 1.0
-            for k in range(3):
-                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
+            for k in range(3 * x, 3 * x + 3):
+                u, v = 1.0 + f[y, k], 1.0 + fb[y, k]
                 q = max(q, max(u, v) / min(u, v))
             if q <= q_lo:
                 r[y, x] = 0.0
@@ -203,7 +214,7 @@ def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
                 r[y, x] = (np.log(q) - lo) / span
 
 
-_reject_kernel = _maybe_njit(_reject_kernel_py)
+_reject_rows = _maybe_njit(_reject_rows_py)
 
 
 def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
