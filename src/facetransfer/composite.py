@@ -649,7 +649,8 @@ def _per_channel(x: np.ndarray) -> np.ndarray:
 
 def _rows(x: np.ndarray) -> np.ndarray:
     """``x`` (h, w, 3), rows of contiguous pixels (a crop of an image), seen as ``(h, 3 w)``
-    without a copy (ValueError if that needs one: a write would be lost)."""
+    without a copy (numpy refuses, AttributeError, where that needs one: a write to a copy
+    would be lost)."""
     v = x.view()
     v.shape = (x.shape[0], x.shape[1] * x.shape[2])
     return v

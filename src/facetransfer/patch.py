@@ -172,10 +172,10 @@ def _reject_fade_py(blur, where, a):  # pragma: no cover (numba)
 def _reject_kernel(f: np.ndarray, fb: np.ndarray, lo: float, span: float,
                    r: np.ndarray) -> None:
     """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel: ``f``
-    (h, w, 3) float32, ``fb`` (h, w, 3) uint8 (both C-contiguous), ``r`` (h, w) float32
-    (:func:`_reject_rows`)."""
+    (h, w, 3) float32, ``fb`` (h, w, 3) uint8, ``r`` (h, w) float32 (:func:`_reject_rows`)."""
     cls = np.empty(3 * r.shape[1], np.uint8)
-    _reject_rows(_rows(f), _rows(fb), float(lo), float(span), r, cls)
+    _reject_rows(_rows(np.ascontiguousarray(f)), _rows(np.ascontiguousarray(fb)), float(lo),
+                 float(span), r, cls)
 
 
 def _reject_rows_py(f, fb, lo, span, r, cls):  # pragma: no cover (numba)
