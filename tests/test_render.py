@@ -192,6 +192,29 @@ def test_numba_equals_reference_cap_mesh_both_cameras(seed):
         np.testing.assert_array_equal(a.depth, b.depth)
         np.testing.assert_array_equal(a.bary, b.bary)
 
+def test_raster_kernel_equals_its_python_twin():
+    # triangles of a few pixels (one 8 x 8 tile) and larger ones (several tiles, cut by the
+    # image's edge): the compiled kernel and its pure-Python source give the same buffers
+    from facetransfer.render.raster import _raster_kernel, _raster_kernel_py, _screen
+
+    rng = np.random.default_rng(7)
+    V = rng.uniform(-1, 1, size=(60, 3))
+    F = np.concatenate([rng.integers(0, 60, size=(12, 3)),
+                        np.arange(48).reshape(16, 3)])  # neighbours in the cloud: small ones
+    cam = WeakPerspective(30.0, rotation_from_euler(10.0, -20.0, 5.0), np.array([20.0, 17.0]))
+    xy, z, q = _screen(V, cam)
+    out = []
+    for kernel in (_raster_kernel, _raster_kernel_py):
+        bufs = (np.full((33, 37), -np.inf, np.float32), np.full((33, 37), -1, np.int32),
+                np.zeros((33, 37, 3), np.float32))
+        box = kernel(xy, z, q, F, 37, 33, False, False, *bufs)
+        out.append((tuple(int(b) for b in box),) + bufs)
+    assert (out[0][2] >= 0).sum() > 300
+    assert out[0][0] == out[1][0]
+    for a, b in zip(out[0][1:], out[1][1:]):
+        np.testing.assert_array_equal(a, b)
+
+
 
 def test_pinhole_barycentrics_are_perspective_correct():
     # a slanted quad: the 3D point rebuilt from the barycentrics must project to the pixel centre
@@ -464,6 +487,31 @@ def test_shade_texture_equals_numpy_lookup_on_selected_triangles():
         shade_texture(r, F, uvs, tex, select[:-1])
     with pytest.raises(AssetError):
         shade_texture(r, F, uvs, tex.astype(np.float32))
+
+
+def test_shade_layers_kernel_equals_its_python_twin():
+    # four layers over a small raster: the compiled kernel and its pure-Python source
+    from facetransfer.render.shading import _shade_layers_kernel, _shade_layers_kernel_py
+
+    P, F = cap_mesh(8, 8)
+    rng = np.random.default_rng(9)
+    r = rasterize(P, F, look_at_weak_perspective(P, (30, 24)), (30, 24))
+    flags = rng.integers(0, 256, len(F)).astype(np.uint8)
+    layers = [(rng.random((len(P), 2)), rng.integers(0, 256, (9 + k, 13, 3), dtype=np.uint8))
+              for k in range(4)]
+    out = []
+    for kernel in (_shade_layers_kernel, _shade_layers_kernel_py):
+        args = []
+        for uv, tex in layers:
+            args += [uv, tex, np.zeros((24, 30, 3), np.uint8)]
+        labels = np.zeros((24, 30), np.uint8)
+        ok = kernel(r.tri_id, r.bary, F.astype(np.int64), flags, *args, labels,
+                    np.empty((30, 4, 4), np.int64), np.empty((30, 4, 2)), np.empty(30, np.uint8))
+        out.append([ok, labels] + args[2::3])
+    assert out[0][0] and out[1][0]
+    assert (out[0][2] > 0).any(axis=-1).sum() > 100
+    for a, b in zip(out[0][1:], out[1][1:]):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_shade_layers_equal_one_pass_per_layer_and_label_pixels():

@@ -125,6 +125,34 @@ def test_gain_field_equals_the_numpy_fit():
     np.testing.assert_allclose(g, ref, rtol=1e-5)
 
 
+def test_apply_gain_equals_numpy():
+    """The gain's kernel over rows of channel values is numpy's clipped outer product of the
+    separable factors times the part, in float32, bit for bit."""
+    rng = np.random.default_rng(23)
+    h, w = 31, 45
+    part = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    gy, gx = rng.uniform(0.5, 1.5, (h, 3)), rng.uniform(0.6, 1.6, (w, 3))
+    f = np.empty((h, w, 3), np.float32)
+    patch._apply_gain(part, gy, gx, *patch.GAIN_RANGE, f)
+    g = np.clip(gy[:, None, :] * gx[None, :, :], *patch.GAIN_RANGE).astype(np.float32)
+    np.testing.assert_array_equal(f, part.astype(np.float32) * g)
+
+
+def test_plane_l1_kernel_equals_its_python_twin():
+    """The robust plane fit's kernel (moments in registers, weights per channel) and its
+    pure-Python source give the same planes, bit for bit."""
+    rng = np.random.default_rng(29)
+    k = 300
+    u, v = rng.uniform(-0.5, 0.5, k), rng.uniform(-0.5, 0.5, k)
+    r = 0.1 + 0.3 * u[:, None] - 0.2 * v[:, None] + rng.normal(0, 0.05, (k, 3))
+    r[:20] += 2.0  # outliers
+    a, b = np.empty((3, 3)), np.empty((3, 3))
+    patch._plane_l1_kernel(u, v, r, 5, a)
+    patch._plane_l1_kernel_py(u, v, r, 5, b)
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_allclose(a[1], 0.3, atol=0.03)
+
+
 def test_rejected_equals_the_log_ratio():
     rng = np.random.default_rng(11)
     fb = rng.integers(0, 256, (40, 50, 3)).astype(np.uint8)
@@ -169,7 +197,7 @@ def test_gain_samples_equal_numpy():
     pts = cv2.findNonZero(where.view(np.uint8)).reshape(-1, 2)
     k = ys.size
     u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
-    patch._gain_samples(pts, face, part, 500, patch._LOG1P_U8, u, v, r, centre)
+    patch._gain_samples(pts, 0, 0, 0, 0, face, part, 500, patch._LOG1P_U8, u, v, r, centre)
     np.testing.assert_array_equal(centre, [cx, cy, scale])
     np.testing.assert_array_equal(u, (xs - cx) / scale)
     np.testing.assert_array_equal(v, (ys - cy) / scale)
@@ -177,6 +205,32 @@ def test_gain_samples_equal_numpy():
                                   - np.log1p(part[ys, xs].astype(np.float64)))
     with pytest.raises(ValueError, match="empty mask"):
         patch.gain_field(face, part, np.zeros((H, W), bool))
+
+
+def test_match_outline_on_a_crop_with_its_origin_equals_the_whole_image():
+    """The jaw's paste works on the box of its region and ring grown by 2 px, the gain fit
+    in the frame's coordinates (``origin``): the same pixels as on the whole image."""
+    rng = np.random.default_rng(5)
+    H, W = 90, 110
+    face = rng.integers(40, 220, (H, W, 3), dtype=np.uint8)
+    part = np.clip(face * 1.1 + rng.normal(0, 20, face.shape), 0, 255).astype(np.uint8)
+    yy, xx = np.mgrid[0:H, 0:W]
+    face_mask = ((yy - 45) / 40.0) ** 2 + ((xx - 50) / 48.0) ** 2 <= 1
+    face_mask &= _blobs(rng, (H, W), smooth=1.5, level=0.2)  # a few holes
+    mask = face_mask & (yy > 50) & (xx > 30) & (xx < 85)
+    compare = face_mask & (yy > 40) & (xx > 22) & (xx < 93) & ~mask
+    assert mask.sum() > 200 and compare.sum() > 200
+    kw = dict(feather=4.0, compare=compare, reject=patch.REJECT, reject_where=None)
+    whole = face.copy()
+    patch._match_outline_into(face, part, mask, face_mask, whole, **kw)
+    ys, xs = np.nonzero(mask | compare)
+    sl = (slice(max(ys.min() - 2, 0), ys.max() + 3), slice(max(xs.min() - 2, 0), xs.max() + 3))
+    crop = face.copy()
+    kw["compare"] = compare[sl]
+    patch._match_outline_into(crop[sl], part[sl], mask[sl], face_mask[sl], crop[sl], **kw,
+                              origin=(sl[1].start, sl[0].start))
+    assert (whole != face).any()
+    np.testing.assert_array_equal(crop, whole)
 
 
 def _harmonic_disc():
@@ -256,13 +310,15 @@ def test_push_pull_points_equal_fill_holes(shape):
                                   full.reshape(shape + (3,)))
 
 
-def test_reject_kernel_equals_the_quotients_at_the_ramp_edge():
-    """The division-free test for pixels below the ramp decides as the quotients do, also for
-    ratios within a few ulps of exp(lo)."""
+@pytest.mark.parametrize("edge", ["below", "beyond"])
+def test_reject_kernel_equals_the_quotients_at_the_ramp_edge(edge):
+    """The division-free tests for pixels below and beyond the ramp decide as the quotients
+    do, also for ratios within a few ulps of exp(lo) and exp(lo + span)."""
     rng = np.random.default_rng(13)
     lo, span = 0.5, 0.4
     fb = rng.integers(0, 256, (60, 50, 3)).astype(np.uint8)
-    q = np.exp(lo) * (1.0 + rng.integers(-4, 5, (60, 50, 3)) * 2.0 ** -52)
+    at = np.exp(lo) if edge == "below" else np.exp(lo + span)
+    q = at * (1.0 + rng.integers(-4, 5, (60, 50, 3)) * 2.0 ** -52)
     q[:20] = rng.uniform(0.5, 2.0, (20, 50, 3))  # and ratios anywhere
     f = ((1.0 + fb) * np.where(rng.random((60, 50, 3)) < 0.5, q, 1 / q) - 1.0)
     f = np.maximum(f, 0).astype(np.float32)
@@ -277,20 +333,38 @@ def test_reject_kernel_equals_the_quotients_at_the_ramp_edge():
 
 
 def test_blend_paste_rejected_equals_the_numpy_fade():
-    """The paste with the rejection taken inside equals numpy's r = clip(2 blur, 0, 1),
-    r *= where, a *= 1 - r and the plain paste, bit for bit."""
+    """The rejection's fade and the paste (kernels over rows of channel values) equal numpy's
+    r = clip(2 blur, 0, 1), r *= where, a *= 1 - r and rint(base + a (f - base)) clipped,
+    where m, in float32, bit for bit; outside m the image is left alone (a view of a larger
+    one, written in place)."""
     rng = np.random.default_rng(17)
     h, w = 40, 50
     m = rng.random((h, w)) < 0.7
     where = rng.random((h, w)) < 0.5
     base = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
-    f = (rng.random((h, w, 3)) * 300).astype(np.float32)
+    f = (rng.random((h, w, 3)) * 300 - 20).astype(np.float32)
     a = rng.random((h, w)).astype(np.float32)
     blur = (rng.random((h, w)) * 0.8).astype(np.float32)
-    out1, out2 = base.copy(), base.copy()
-    patch._blend_paste_rejected(m, base, f, a, blur, where, out1)
-    r = np.clip(blur * 2.0, 0.0, 1.0)
+    big = rng.integers(0, 256, (h + 6, w + 9, 3), dtype=np.uint8)
+    before = big.copy()
+    faded = a.copy()
+    patch._reject_fade(blur, where, faded)
+    composite._blend_paste(m, base, f, faded, big[2:2 + h, 5:5 + w])
+    r = np.clip(blur * np.float32(2.0), np.float32(0.0), np.float32(1.0))
     r *= where
-    composite._blend_paste(m, base, f, a * (1.0 - r), out2)
-    np.testing.assert_array_equal(out1, out2)
-    assert (out1 != base).any()
+    fade = (a * (np.float32(1.0) - r))[..., None]
+    b = base.astype(np.float32)
+    want = np.clip(np.rint(b + fade * (f - b)), 0, 255).astype(np.uint8)
+    want = np.where(m[..., None], want, before[2:2 + h, 5:5 + w])
+    np.testing.assert_array_equal(faded, fade[..., 0])
+    np.testing.assert_array_equal(big[2:2 + h, 5:5 + w], want)
+    before[2:2 + h, 5:5 + w] = want
+    np.testing.assert_array_equal(big, before)  # nothing written outside the crop
+    assert (want != base).any()
+    # the membrane's paste: f + s in float32
+    s = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    out = base.copy()
+    composite._blend_paste(m, base, f, a, out, s=s)
+    fs = f + s.astype(np.float32)
+    want = np.clip(np.rint(b + a[..., None] * (fs - b)), 0, 255).astype(np.uint8)
+    np.testing.assert_array_equal(out, np.where(m[..., None], want, base))

@@ -30,6 +30,7 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
@@ -223,17 +224,34 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
     frame on the region and its ring, ``labels`` (H, W) uint8 of
     :func:`facetransfer.render.shade_layers` with the bits ``(region, ring)`` of
     :func:`jaw_flags`), painting ``face_image`` in place and returning it."""
-    mask = np.bitwise_and(labels, bits[0]) != 0
-    mask &= face_mask
-    n_mask = np.count_nonzero(mask)
-    if n_mask == 0:
+    # the work on the box of the region and its ring, grown by the 2 px the ring's erosion
+    # reaches (patch._ring); the gain fit keeps the frame's coordinates (origin)
+    sl = _label_box(labels, bits[0] | bits[1], margin=2)
+    if sl is None:
+        return face_image
+    lab, fm = labels[sl], face_mask[sl]
+    mask = np.bitwise_and(lab, bits[0]) != 0
+    mask &= fm
+    if np.count_nonzero(mask) == 0:
         return face_image
     compare = None
     if texture.ring is not None:
-        compare = np.bitwise_and(labels, bits[1]) != 0
-        compare &= face_mask
+        compare = np.bitwise_and(lab, bits[1]) != 0
+        compare &= fm
         if np.count_nonzero(compare) < 8:
             compare = None
-    _match_outline_into(face_image, img, mask, face_mask, face_image, feather=feather,
-                        compare=compare, reject=REJECT, reject_where=None)
+    _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
+                        compare=compare, reject=REJECT, reject_where=None,
+                        origin=(sl[1].start, sl[0].start))
     return face_image
+
+
+def _label_box(labels: np.ndarray, bits: int, *, margin: int):
+    """``(rows, columns)`` slices of the box of the pixels of ``labels`` (H, W) uint8 with one
+    of ``bits`` set, grown by ``margin`` and clipped to the image; None when there are none."""
+    x, y, w, h = cv2.boundingRect(np.bitwise_and(labels, np.uint8(bits)))
+    if w == 0 or h == 0:
+        return None
+    H, W = labels.shape
+    return (slice(max(y - margin, 0), min(y + h + margin, H)),
+            slice(max(x - margin, 0), min(x + w + margin, W)))

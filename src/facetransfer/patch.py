@@ -11,9 +11,10 @@ and the seam is feathered (:func:`match_outline`).
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
-from .composite import _blend_paste, _feather_alpha
+from .composite import _blend_paste, _feather_alpha, _rows
 from .errors import RewriteError
 from .render.raster import _maybe_njit
 
@@ -81,23 +82,24 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 
 
 def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
-                        reject_where) -> None:
+                        reject_where, origin: tuple[int, int] = (0, 0)) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
-    the region's pixels are written."""
-    import cv2
-
+    the region's pixels are written. ``origin``: the position ``(x, y)`` of these arrays'
+    top-left pixel in the image whose coordinates the gain fit takes (a crop of it whose
+    border lies at least 2 pixels beyond ``mask`` and ``compare`` gives that image's
+    pixels)."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
-    deep = cv2.erode(face_mask.astype(np.uint8), np.ones((5, 5), np.uint8),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
-    ring = (mask if compare is None else compare) & deep
+    ring, rbox = _ring(mask if compare is None else compare, face_mask)
     box = (slice(y, y + h), slice(x, x + w))      # the work is done on the region's box only
     pb = np.ascontiguousarray(part[box])
-    if ring.sum() >= 8:  # part scaled by gain_field's gains
-        gy, gx = _gain_factors(face, part, ring, GAIN_ITERATIONS, (x, y, x + w, y + h),
-                                GAIN_SAMPLES)
+    if ring is not None and np.count_nonzero(ring) >= 8:  # part scaled by gain_field's gains
+        ox, oy = origin
+        gy, gx = _gain_factors(face, part, ring, GAIN_ITERATIONS,
+                               (x + ox, y + oy, x + w + ox, y + h + oy), GAIN_SAMPLES,
+                               origin=(rbox[0], rbox[1]), shift=origin)
         f = np.empty(pb.shape, np.float32)
         _apply_gain(pb, gy, gx, *GAIN_RANGE, f)
     else:
@@ -107,11 +109,30 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     mb = np.ascontiguousarray(mask[box])
     a = _feather_alpha(mb, feather, edge_outside=True)
     fb = np.ascontiguousarray(face[box])
-    if reject is None:
-        _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
-    else:  # the fade a (1 - r), r = _rejected where reject_where, taken in the paste
+    if reject is not None:  # the fade a (1 - r), r = _rejected where reject_where
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
-        _blend_paste_rejected(mb, fb, f, a, _rejection_blur(f, fb, reject), where, out[box])
+        _reject_fade(_rejection_blur(f, fb, reject), where, a)
+    _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
+
+
+def _ring(compare: np.ndarray, face_mask: np.ndarray):
+    """The pixels of ``compare`` (H, W) bool at least 2 pixels inside ``face_mask`` (H, W) bool
+    (its 5 x 5 erosion, pixels beyond the image outside) on the box of ``compare`` only:
+    ``(ring (h, w) bool or None, (x0, y0))`` (None: ``compare`` is empty)."""
+    x, y, w, h = cv2.boundingRect(compare.view(np.uint8))
+    if w == 0 or h == 0:
+        return None, (0, 0)
+    H, W = face_mask.shape
+    # the erosion on the box grown by its reach (2 px, clipped to the image): the box's pixels
+    # see their true neighbours, the image's border stays outside
+    gx0, gy0, gx1, gy1 = max(x - 2, 0), max(y - 2, 0), min(x + w + 2, W), min(y + h + 2, H)
+    grown = np.ascontiguousarray(face_mask[gy0:gy1, gx0:gx1]).view(np.uint8)
+    deep = cv2.erode(grown, _SQUARE5, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    ring = compare[y:y + h, x:x + w] & deep[y - gy0:y - gy0 + h, x - gx0:x - gx0 + w].view(bool)
+    return ring, (x, y)
+
+
+_SQUARE5 = np.ones((5, 5), np.uint8)
 
 
 def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
@@ -136,50 +157,54 @@ def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) 
     return cv2.GaussianBlur(r, (0, 0), 2.0)
 
 
-def _blend_paste_rejected_py(m, base, f, a, blur, where, out):  # pragma: no cover (numba)
-    """:func:`facetransfer.composite._blend_paste` with the fade ``a (1 - r)``, ``r =
-    clip(2 blur, 0, 1)`` where ``where`` (h, w) bool and 0 elsewhere: match_outline's
-    rejection (:func:`_rejected`) taken in the paste, in float32 as numpy's ``r *= where;
-    a *= 1.0 - r`` were, without three passes of their own."""
-    H, W = m.shape
+def _reject_fade_py(blur, where, a):  # pragma: no cover (numba)
+    """``a *= 1 - r`` with ``r = clip(2 blur, 0, 1)`` where ``where`` (h, w) bool and 0
+    elsewhere: match_outline's rejection (:func:`_rejected`) in float32 as numpy's ``r *=
+    where; a *= 1.0 - r`` were, in one pass (``a``, ``blur`` (h, w) float32)."""
+    H, W = a.shape
     one, zero = np.float32(1.0), np.float32(0.0)
     for y in range(H):
         for x in range(W):
-            if not m[y, x]:
-                continue
-            r = min(max(blur[y, x] * np.float32(2.0), zero), one) if where[y, x] else zero
-            ay = a[y, x] * (one - r)
-            for k in range(3):
-                b = np.float32(base[y, x, k])
-                v = np.rint(b + ay * (f[y, x, k] - b))
-                out[y, x, k] = np.uint8(min(max(v, zero), np.float32(255.0)))
+            r = min(max(blur[y, x] * np.float32(2.0), zero), one)
+            a[y, x] = a[y, x] * (one - (r if where[y, x] else zero))
 
 
-def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
-    """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel, with one
-    log per pixel (of the largest ratio ``(1 + f) / (1 + fb)`` or its inverse) and none where
-    that ratio lies outside ``exp(lo)..exp(lo + span)``.
+def _reject_kernel(f: np.ndarray, fb: np.ndarray, lo: float, span: float,
+                   r: np.ndarray) -> None:
+    """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel: ``f``
+    (h, w, 3) float32, ``fb`` (h, w, 3) uint8, ``r`` (h, w) float32 (:func:`_reject_rows`)."""
+    cls = np.empty(3 * r.shape[1], np.uint8)
+    _reject_rows(_rows(np.ascontiguousarray(f)), _rows(np.ascontiguousarray(fb)), float(lo),
+                 float(span), r, cls)
 
-    Most pixels are below the ramp: they are found without division, by ``max <= q' min``
-    in every channel with ``q'`` a little under ``exp(lo)`` (then the exact ratio is below
-    ``exp(lo)``, so its correctly rounded quotient is at most that: the same 0 as the
-    quotients give)."""
+
+def _reject_rows_py(f, fb, lo, span, r, cls):  # pragma: no cover (numba)
+    """:func:`_reject_kernel` on rows ``(h, 3 w)`` of channel values, with one log per pixel
+    (of the largest ratio ``(1 + f) / (1 + fb)`` or its inverse) and none where that ratio
+    lies outside ``exp(lo)..exp(lo + span)``.
+
+    Most pixels are decided without division, a row's channel values at once (vectorised,
+    into ``cls`` (3 w,) uint8): below the ramp by ``max <= q' min`` in every channel with
+    ``q'`` a little under ``exp(lo)`` (then the exact ratio is below ``exp(lo)``, so its
+    correctly rounded quotient is at most that: the same 0 as the quotients give), beyond it
+    by ``max > q'' min`` in some channel with ``q''`` a little over ``exp(lo + span)`` (then
+    the quotient is at least that: 1)."""
     H, W = r.shape
     q_lo, q_hi = np.exp(lo), np.exp(lo + span)
-    q_safe = q_lo * (1.0 - 2.0 ** -50)
+    q_safe, q_sure = q_lo * (1.0 - 2.0 ** -50), q_hi * (1.0 + 2.0 ** -50)
     for y in range(H):
+        for j in range(3 * W):  # 0: below, 1: undecided, 2: beyond
+            u, v = 1.0 + np.float64(f[y, j]), 1.0 + np.float64(fb[y, j])
+            a, b = max(u, v), min(u, v)
+            cls[j] = np.uint8(a > q_safe * b) + np.uint8(a > q_sure * b)
         for x in range(W):
-            below = True
-            for k in range(3):
-                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
-                if max(u, v) > q_safe * min(u, v):
-                    below = False
-            if below:
-                r[y, x] = 0.0
+            c = max(cls[3 * x], max(cls[3 * x + 1], cls[3 * x + 2]))
+            if c != 1:
+                r[y, x] = 0.0 if c == 0 else 1.0
                 continue
             q = 1.0
-            for k in range(3):
-                u, v = 1.0 + f[y, x, k], 1.0 + fb[y, x, k]
+            for k in range(3 * x, 3 * x + 3):
+                u, v = 1.0 + f[y, k], 1.0 + fb[y, k]
                 q = max(q, max(u, v) / min(u, v))
             if q <= q_lo:
                 r[y, x] = 0.0
@@ -189,7 +214,7 @@ def _reject_kernel_py(f, fb, lo, span, r):  # pragma: no cover (numba)
                 r[y, x] = (np.log(q) - lo) / span
 
 
-_reject_kernel = _maybe_njit(_reject_kernel_py)
+_reject_rows = _maybe_njit(_reject_rows_py)
 
 
 def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
@@ -229,12 +254,14 @@ def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
 _LOG1P_U8 = np.log1p(np.arange(256, dtype=np.float64))
 
 
-def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
+def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
+                  origin: tuple[int, int] = (0, 0), shift: tuple[int, int] = (0, 0)):
     """The fit of :func:`gain_field` as its separable factors over ``box = (x0, y0, x1, y1)``:
     ``gy (y1 - y0, 3)`` and ``gx (x1 - x0, 3)`` float64, the unclipped gain at pixel ``(x, y)``
-    being ``gy[y - y0] * gx[x - x0]``."""
-    import cv2
+    being ``gy[y - y0] * gx[x - x0]``.
 
+    ``where`` may be a crop of the mask whose top-left pixel is ``origin`` in ``face`` and
+    ``part``; the fit's coordinates are those of ``face`` plus ``shift`` (as ``box``'s)."""
     pts = cv2.findNonZero(np.ascontiguousarray(where).view(np.uint8))  # (n, 1, 2): (x, y)
     if pts is None:
         raise RewriteError("the gain fit needs at least one pixel, got an empty mask")
@@ -242,7 +269,8 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
     k = -(-n // max(1, -(-n // int(max_samples))))  # the samples: every step-th pixel
     u, v, r = np.empty(k), np.empty(k), np.empty((k, 3))
     centre = np.empty(3)
-    _gain_samples(pts.reshape(n, 2), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
+    _gain_samples(pts.reshape(n, 2), int(origin[0]), int(origin[1]), int(shift[0]),
+                  int(shift[1]), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
     cx, cy, scale = centre
     coef = np.empty((3, 3))
     _plane_l1_kernel(u, v, r, int(iterations), coef)
@@ -253,32 +281,36 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int):
     return gy, gx
 
 
-def _gain_samples_py(pts, face, part, max_samples, lut, u, v, r, centre):  # pragma: no cover
-    """The samples of :func:`gain_field`'s fit from the pixels ``pts`` (n, 2) int32 ``(x, y)``
-    in row-major order (``cv2.findNonZero``; numba): ``centre = (cx, cy, scale)``, the pixels'
-    mean position and the larger extent of their rows and columns (at least 1); for every
-    ``step``-th pixel (``step = ceil(n / max_samples)``) the centred, scaled coordinates
-    ``u = (x - cx) / scale``, ``v = (y - cy) / scale`` and the log ratios ``r = lut[face] -
-    lut[part]`` (3 channels). The means are the integer sums over ``n`` (as numpy's mean of
-    the coordinates, whose float sums are exact)."""
+def _gain_samples_py(pts, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v, r,
+                     centre):  # pragma: no cover (numba)
+    """The samples of :func:`gain_field`'s fit from the pixels ``pts + (ox, oy)`` (n, 2) int32
+    ``(x, y)`` of ``face`` and ``part`` in row-major order (``cv2.findNonZero`` of a crop
+    whose top-left pixel is ``(ox, oy)``; numba), at coordinates shifted by ``(sx0, sy0)``:
+    ``centre = (cx, cy, scale)``, the pixels' mean position and the larger extent of their
+    rows and columns (at least 1); for every ``step``-th pixel (``step = ceil(n /
+    max_samples)``) the centred, scaled coordinates ``u = (x - cx) / scale``, ``v = (y - cy) /
+    scale`` and the log ratios ``r = lut[face] - lut[part]`` (3 channels). The means are the
+    integer sums over ``n`` (as numpy's mean of the coordinates, whose float sums are
+    exact)."""
     n = pts.shape[0]
+    dx, dy = np.int64(ox) + np.int64(sx0), np.int64(oy) + np.int64(sy0)
     sx = sy = 0
     x_lo = x_hi = pts[0, 0]
     y_lo = y_hi = pts[0, 1]
     for i in range(n):
-        x, y = pts[i, 0], pts[i, 1]
+        x, y = pts[i, 0] + dx, pts[i, 1] + dy
         sx += x
         sy += y
-        x_lo, x_hi = min(x_lo, x), max(x_hi, x)
-        y_lo, y_hi = min(y_lo, y), max(y_hi, y)
+        x_lo, x_hi = min(x_lo, pts[i, 0]), max(x_hi, pts[i, 0])
+        y_lo, y_hi = min(y_lo, pts[i, 1]), max(y_hi, pts[i, 1])
     cx, cy = float(sx) / float(n), float(sy) / float(n)
     scale = float(max(y_hi - y_lo, x_hi - x_lo, 1))
     step = max(1, -(-n // max_samples))
     j = 0
     for i in range(0, n, step):
-        x, y = np.int64(pts[i, 0]), np.int64(pts[i, 1])
-        u[j] = (x - cx) / scale
-        v[j] = (y - cy) / scale
+        x, y = np.int64(pts[i, 0]) + ox, np.int64(pts[i, 1]) + oy
+        u[j] = (x + sx0 - cx) / scale
+        v[j] = (y + sy0 - cy) / scale
         for c in range(3):
             r[j, c] = lut[face[y, x, c]] - lut[part[y, x, c]]
         j += 1
@@ -289,57 +321,94 @@ def _plane_l1_kernel_py(u, v, r, iterations, coef):  # pragma: no cover (numba)
     """Per channel c, the plane ``coef[:, c] = (a, b, c)`` fitting ``r[:, c]`` (k, 3) by
     ``a + b u + c v`` in least absolute deviations: ``iterations`` steps of iteratively
     reweighted least squares (weights ``1 / max(|residual|, 1e-3)``, from 1; the normal
-    equations with a ridge of 1e-9, solved by Cramer's rule)."""
+    equations with a ridge of 1e-9, solved by Cramer's rule). The weights and residuals are
+    kept per channel (contiguous: the reweighting is vectorised), the sums in registers."""
     k = r.shape[0]
-    w = np.ones((k, 3))
-    M = np.empty((3, 6))  # per channel: sum w, wu, wv, wuu, wuv, wvv
-    b = np.empty((3, 3))  # per channel: sum wr, wur, wvr
-    for _ in range(iterations):
-        M[:] = 0.0
-        b[:] = 0.0
-        for i in range(k):
-            ui, vi = u[i], v[i]
-            uu, uv, vv = ui * ui, ui * vi, vi * vi
-            for c in range(3):
-                wi, wr = w[i, c], w[i, c] * r[i, c]
-                M[c, 0] += wi
-                M[c, 1] += wi * ui
-                M[c, 2] += wi * vi
-                M[c, 3] += wi * uu
-                M[c, 4] += wi * uv
-                M[c, 5] += wi * vv
-                b[c, 0] += wr
-                b[c, 1] += wr * ui
-                b[c, 2] += wr * vi
+    w = np.ones((3, k))
+    rt = np.empty((3, k))
+    for i in range(k):
         for c in range(3):
-            a00, a01, a02 = M[c, 0] + 1e-9, M[c, 1], M[c, 2]
-            a11, a12, a22 = M[c, 3] + 1e-9, M[c, 4], M[c, 5] + 1e-9
-            c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
-            c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
-            det = a00 * c00 + a01 * c01 + a02 * c02
-            b0, b1, b2 = b[c, 0], b[c, 1], b[c, 2]
-            coef[0, c] = (c00 * b0 + c01 * b1 + c02 * b2) / det
-            coef[1, c] = (c01 * b0 + c11 * b1 + c12 * b2) / det
-            coef[2, c] = (c02 * b0 + c12 * b1 + c22 * b2) / det
-        for i in range(k):
-            for c in range(3):
-                e = abs(r[i, c] - coef[0, c] - coef[1, c] * u[i] - coef[2, c] * v[i])
-                w[i, c] = 1.0 / max(e, 1e-3)
+            rt[c, i] = r[i, c]
+    sums = np.empty((3, 9))  # per channel: sum w, wu, wv, wuu, wuv, wvv, wr, wur, wvr
+    for _ in range(iterations):
+        for c in range(3):
+            _plane_sums(u, v, rt[c], w[c], sums[c])
+            _solve_plane(sums[c], coef, c)
+        for c in range(3):
+            _reweight(u, v, rt[c], coef[0, c], coef[1, c], coef[2, c], w[c])
 
 
-def _apply_gain_py(part, gy, gx, lo, hi, f):  # pragma: no cover (numba)
+def _plane_sums_py(u, v, r, w, out):  # pragma: no cover (numba, inlined)
+    """The weighted moments of one channel, ``out`` (9,) = sums over i of ``w, w u, w v,
+    w u², w u v, w v², w r, w r u, w r v`` (in order of i)."""
+    s0 = s1 = s2 = s3 = s4 = s5 = t0 = t1 = t2 = 0.0
+    for i in range(r.shape[0]):
+        ui, vi = u[i], v[i]
+        wi, wr = w[i], w[i] * r[i]
+        s0 += wi
+        s1 += wi * ui
+        s2 += wi * vi
+        s3 += wi * (ui * ui)
+        s4 += wi * (ui * vi)
+        s5 += wi * (vi * vi)
+        t0 += wr
+        t1 += wr * ui
+        t2 += wr * vi
+    out[0], out[1], out[2], out[3], out[4] = s0, s1, s2, s3, s4
+    out[5], out[6], out[7], out[8] = s5, t0, t1, t2
+
+
+def _solve_plane_py(m, coef, c):  # pragma: no cover (numba, inlined)
+    """``coef[:, c]`` from the moments ``m`` (9,) of :func:`_plane_sums`: the normal
+    equations with a ridge of 1e-9, by Cramer's rule."""
+    a00, a01, a02 = m[0] + 1e-9, m[1], m[2]
+    a11, a12, a22 = m[3] + 1e-9, m[4], m[5] + 1e-9
+    c00, c01, c02 = a11 * a22 - a12 * a12, a02 * a12 - a01 * a22, a01 * a12 - a02 * a11
+    c11, c12, c22 = a00 * a22 - a02 * a02, a01 * a02 - a00 * a12, a00 * a11 - a01 * a01
+    det = a00 * c00 + a01 * c01 + a02 * c02
+    b0, b1, b2 = m[6], m[7], m[8]
+    coef[0, c] = (c00 * b0 + c01 * b1 + c02 * b2) / det
+    coef[1, c] = (c01 * b0 + c11 * b1 + c12 * b2) / det
+    coef[2, c] = (c02 * b0 + c12 * b1 + c22 * b2) / det
+
+
+def _reweight_py(u, v, r, a, b, c, w):  # pragma: no cover (numba, inlined)
+    """``w = 1 / max(|r - a - b u - c v|, 1e-3)`` (one channel's weights, vectorised)."""
+    for i in range(r.shape[0]):
+        w[i] = 1.0 / max(abs(r[i] - a - b * u[i] - c * v[i]), 1e-3)
+
+
+_plane_sums = _maybe_njit(_plane_sums_py, inline=True)
+_solve_plane = _maybe_njit(_solve_plane_py, inline=True)
+_reweight = _maybe_njit(_reweight_py, inline=True)
+
+
+def _apply_gain(part: np.ndarray, gy: np.ndarray, gx: np.ndarray, lo: float, hi: float,
+                f: np.ndarray) -> None:
     """``f = part * clip(gy gx, lo, hi)`` (the float32 gain of :func:`gain_field`) per pixel
-    and channel: ``part`` (h, w, 3) uint8, ``gy`` (h, 3), ``gx`` (w, 3), ``f`` (h, w, 3)
-    float32."""
-    H, W = f.shape[0], f.shape[1]
+    and channel: ``part`` (h, w, 3) uint8, ``gy`` (h, 3), ``gx`` (w, 3) float64, ``f``
+    (h, w, 3) float32, all C-contiguous; by rows of channel values (vectorised)."""
+    h, w = part.shape[:2]
+    _gain_rows(_rows(part), np.ascontiguousarray(gy), np.ascontiguousarray(gx).reshape(3 * w),
+               lo, hi, _rows(f), np.empty(3 * w))
+
+
+def _gain_rows_py(part, gy, gx, lo, hi, f, row):  # pragma: no cover (numba)
+    """:func:`_apply_gain` on rows ``(h, 3 w)`` of channel values, ``gx`` (3 w,) float64 and
+    ``row`` (3 w,) float64 scratch (a row's ``gy`` repeated per pixel)."""
+    H, L = f.shape
     for y in range(H):
-        for x in range(W):
-            for k in range(3):
-                g = np.float32(min(max(gy[y, k] * gx[x, k], lo), hi))
-                f[y, x, k] = np.float32(part[y, x, k]) * g
+        g0, g1, g2 = gy[y, 0], gy[y, 1], gy[y, 2]
+        for x in range(L // 3):
+            row[3 * x] = g0
+            row[3 * x + 1] = g1
+            row[3 * x + 2] = g2
+        for j in range(L):
+            g = np.float32(min(max(row[j] * gx[j], lo), hi))
+            f[y, j] = np.float32(part[y, j]) * g
 
 
-_apply_gain = _maybe_njit(_apply_gain_py)
+_gain_rows = _maybe_njit(_gain_rows_py)
 _gain_samples = _maybe_njit(_gain_samples_py)
-_blend_paste_rejected = _maybe_njit(_blend_paste_rejected_py)
+_reject_fade = _maybe_njit(_reject_fade_py)
 _plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)

@@ -288,23 +288,87 @@ def _edges_py(x0, y0, x1, y1, x2, y2, px, py):  # pragma: no cover (numba, inlin
 _edges = _maybe_njit(_edges_py, inline=True)
 
 
-def _row_run_py(x0, y0, x1, y1, x2, y2, pos, py, lo, hi):  # pragma: no cover (numba, inlined)
-    """``(first, last)`` of the pixels ``lo..hi`` of row ``py`` inside the triangle (the rule
-    of :func:`rasterize`; none: ``first > last``), in one pass without a branch per pixel.
-    They are one run: each edge function is monotone along a row, also in floating point."""
-    first, last = hi + 1, lo - 1
-    for ix in range(lo, hi + 1):
+def _trailing_zeros_py(m):  # pragma: no cover (numba: an intrinsic)
+    """The index of the lowest set bit of ``m`` (a non-zero uint64)."""
+    m = int(m)
+    return (m & -m).bit_length() - 1
+
+
+if _HAVE_NUMBA:
+    from numba.cpython.unsafe.numbers import trailing_zeros as _tzcnt
+
+    def _trailing_zeros_nb(m):  # pragma: no cover (numba, inlined)
+        return _tzcnt(m)
+
+    _trailing_zeros = _maybe_njit(_trailing_zeros_nb, inline=True)
+else:  # pragma: no cover
+    _trailing_zeros = _trailing_zeros_py
+
+#: The side of a tile of :func:`_raster_kernel`: one bit per pixel of a uint64
+_TILE = 8
+
+
+def _tile_row_py(x0, y0, x1, y1, x2, y2, pos, tx, hi, py):  # pragma: no cover (numba, inlined)
+    """Bit ``c`` (uint64) set where pixel ``tx + c`` (``c < 8``, at most ``hi``) of row ``py``
+    lies inside the triangle (the rule of :func:`rasterize`): eight pixels at once, without a
+    branch per pixel (vectorised)."""
+    bits = np.uint64(0)
+    for c in range(_TILE):
+        ix = tx + c
         w0, w1, w2 = _edges(x0, y0, x1, y1, x2, y2, float(ix), py)
         if pos:
             inside = not ((w0 < 0) | (w1 < 0) | (w2 < 0))
         else:
             inside = not ((w0 > 0) | (w1 > 0) | (w2 > 0))
-        first = min(first, ix) if inside else first
-        last = ix if inside else last
-    return first, last
+        bits |= np.uint64(inside & (ix <= hi)) << np.uint64(c)
+    return bits
 
 
-_row_run = _maybe_njit(_row_run_py, inline=True)
+_tile_row = _maybe_njit(_tile_row_py, inline=True)
+
+
+def _tile_mask_py(x0, y0, x1, y1, x2, y2, pos, tx, ty, hi, yhi):  # pragma: no cover (numba)
+    """The inside pixels of the 8 x 8 tile whose top-left pixel is ``(tx, ty)``, up to column
+    ``hi`` and row ``yhi``: bit ``8 r + c`` (uint64) for pixel ``(tx + c, ty + r)``."""
+    m = np.uint64(0)
+    for r in range(_TILE):
+        bits = _tile_row(x0, y0, x1, y1, x2, y2, pos, tx, hi, float(ty + r))
+        m |= (bits if ty + r <= yhi else np.uint64(0)) << np.uint64(_TILE * r)
+    return m
+
+
+_tile_mask = _maybe_njit(_tile_mask_py, inline=True)
+
+
+def _draw_pixel_py(tri, f, area, perspective, iy, ix, zbuf, tid, bary):  # pragma: no cover
+    """The z-buffer test and write of pixel ``(ix, iy)`` inside triangle ``f``, whose screen
+    coordinates, depths and perspective weights are ``tri = (x0, y0, x1, y1, x2, y2, z0, z1,
+    z2, q0, q1, q2)``; True if it wins (numba, inlined)."""
+    x0, y0, x1, y1, x2, y2, z0, z1, z2, q0, q1, q2 = tri
+    w0, w1, w2 = _edges(x0, y0, x1, y1, x2, y2, float(ix), float(iy))
+    b0 = w0 / area
+    b1 = w1 / area
+    b2 = w2 / area
+    if perspective:
+        c0 = b0 * q0
+        c1 = b1 * q1
+        c2 = b2 * q2
+        s = c0 + c1 + c2
+        b0 = c0 / s
+        b1 = c1 / s
+        b2 = c2 / s
+    d = np.float32(b0 * z0 + b1 * z1 + b2 * z2)
+    if d > zbuf[iy, ix]:
+        zbuf[iy, ix] = d
+        tid[iy, ix] = f
+        bary[iy, ix, 0] = b0
+        bary[iy, ix, 1] = b1
+        bary[iy, ix, 2] = b2
+        return True
+    return False
+
+
+_draw_pixel = _maybe_njit(_draw_pixel_py, inline=True)
 
 
 def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  # pragma: no cover
@@ -312,12 +376,12 @@ def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  #
     ``bary`` (H, W, 3) float32 at every pixel a triangle wins. Returns the bounding box
     ``(x_lo, y_lo, x_hi, y_hi)`` (inclusive) of the pixels written (empty: lo > hi).
 
-    Must stay operation-for-operation equal to :func:`rasterize_reference`. The pixels of a
-    bounding-box row inside a triangle are one run, also in floating point (each edge
-    function is a monotone function of ``px`` along the row, its operations being correctly
-    rounded): a first pass over the row finds the run's ends without a branch per pixel
-    (:func:`_row_run`; the inside test mispredicts at both ends of every short row), a
-    second shades the run.
+    Must stay operation-for-operation equal to :func:`rasterize_reference`. A triangle's
+    bounding box is covered by 8 x 8 tiles; a tile's inside pixels are found at once, as the
+    bits of a uint64 (:func:`_tile_mask`, no branch per pixel: the inside test mispredicts at
+    both ends of every short row, and most triangles of a face span a few pixels), and only
+    those are drawn, lowest bit first (the order of a triangle's own pixels changes nothing:
+    each is written once).
     """
     bx0, by0, bx1, by1 = W, H, -1, -1
     for f in range(F.shape[0]):
@@ -337,38 +401,24 @@ def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  #
         ymax = min(np.floor(max(y0, y1, y2)), H - 1.0)
         if xmin > xmax or ymin > ymax:
             continue
-        z0, z1, z2 = z[i0], z[i1], z[i2]
+        tri = (x0, y0, x1, y1, x2, y2, z[i0], z[i1], z[i2], q0, q1, q2)
         pos = area > 0
+        lo, hi, ylo, yhi = int(xmin), int(xmax), int(ymin), int(ymax)
         wrote = False
-        for iy in range(int(ymin), int(ymax) + 1):
-            py = float(iy)
-            first, last = _row_run(x0, y0, x1, y1, x2, y2, pos, py, int(xmin), int(xmax))
-            for ix in range(first, last + 1):
-                w0, w1, w2 = _edges(x0, y0, x1, y1, x2, y2, float(ix), py)
-                b0 = w0 / area
-                b1 = w1 / area
-                b2 = w2 / area
-                if perspective:
-                    c0 = b0 * q0
-                    c1 = b1 * q1
-                    c2 = b2 * q2
-                    s = c0 + c1 + c2
-                    b0 = c0 / s
-                    b1 = c1 / s
-                    b2 = c2 / s
-                d = np.float32(b0 * z0 + b1 * z1 + b2 * z2)
-                if d > zbuf[iy, ix]:
-                    zbuf[iy, ix] = d
-                    tid[iy, ix] = f
-                    bary[iy, ix, 0] = b0
-                    bary[iy, ix, 1] = b1
-                    bary[iy, ix, 2] = b2
-                    wrote = True
+        for tx in range(lo, hi + 1, _TILE):
+            for ty in range(ylo, yhi + 1, _TILE):
+                m = np.uint64(_tile_mask(x0, y0, x1, y1, x2, y2, pos, tx, ty, hi, yhi))
+                while m != 0:
+                    k = _trailing_zeros(m)
+                    m &= m - np.uint64(1)
+                    if _draw_pixel(tri, f, area, perspective, ty + k // _TILE, tx + k % _TILE,
+                                   zbuf, tid, bary):
+                        wrote = True
         if wrote:
-            bx0 = min(bx0, int(xmin))
-            by0 = min(by0, int(ymin))
-            bx1 = max(bx1, int(xmax))
-            by1 = max(by1, int(ymax))
+            bx0 = min(bx0, lo)
+            by0 = min(by0, ylo)
+            bx1 = max(bx1, hi)
+            by1 = max(by1, yhi)
     return bx0, by0, bx1, by1
 
 
