@@ -1,0 +1,126 @@
+"""End to end of issue 13, this tree against another revision, in turn, with the peer each round.
+
+The machine's speed drifts by 20-35 % within an hour (Face Landmarker alone on the same 300
+frames took 2.2 to 3.1 s in one session), so a change to the transfer's speed is measured
+against the revision before it in the same run: each round runs the peer (Face Landmarker in
+VIDEO mode with blendshapes on the target's 300 frames, a fresh process), then the base's
+``facetransfer transfer``, then this tree's, on issue 13's 10-second pair (``driving_d9`` with
+the expressions of ``driving_d6``, default model, H.264 CRF 18). Wall seconds, and the CPU
+seconds of each command with its forked tracker and its ffmpeg. Both trees' bytecode is
+compiled first and each command runs once before the rounds (numba's caches, the page cache).
+
+    python benchmarks/bench_transfer_e2e_ab.py --base-rev main~5 --rounds 3 --out out/benchmarks
+
+Writes ``OUT/transfer_e2e_ab.json`` and ``OUT/transfer_e2e_ab.png``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_rewrite_frame import _extract  # noqa: E402
+
+TARGET, SOURCE, FRAMES = "driving_d9.mp4", "driving_d6.mp4", 300
+
+
+def _children_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _videos() -> tuple[Path, Path]:
+    from facetransfer.assets import data_dir
+
+    root = data_dir() / "video"
+    return root / TARGET, root / SOURCE
+
+
+def command(src: Path, out: Path) -> tuple[float, float]:
+    """Wall and CPU seconds of one ``facetransfer transfer`` with ``src`` first on the path."""
+    target, source = _videos()
+    env = dict(os.environ, PYTHONPATH=str(src))
+    exe = str(Path(sys.executable).parent / "facetransfer")
+    t, c = time.perf_counter(), _children_cpu()
+    subprocess.run([exe, "transfer", "--target", str(target), "--expression-from", str(source),
+                    "--out", str(out), "--max-frames", str(FRAMES), "--overwrite",
+                    "--no-progress"], check=True, capture_output=True, env=env)
+    return time.perf_counter() - t, _children_cpu() - c
+
+
+def peer() -> float:
+    """Seconds of Face Landmarker alone on the target's frames, in a fresh process."""
+    target, _ = _videos()
+    code = ("import sys, time\n"
+            f"sys.path.insert(0, {str(Path(__file__).resolve().parent)!r})\n"
+            "from _mp_video import filtered_stderr, run_landmarker\n"
+            "from facetransfer.io.video import read_video\n"
+            f"fr, _ = read_video({str(target)!r}, max_frames={FRAMES})\n"
+            "with filtered_stderr():\n"
+            "    run_landmarker(fr[:2])\n"
+            "    t = time.perf_counter()\n"
+            "    run_landmarker(fr, blendshapes=True)\n"
+            "    print(time.perf_counter() - t)\n")
+    res = subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True)
+    return float(res.stdout.split()[-1])
+
+
+def plot(rows: list, path: Path) -> None:
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4))
+    x = np.arange(len(rows))
+    for key, colour in (("peer", "tab:grey"), ("base", "tab:orange"), ("new", "tab:blue")):
+        ax.plot(x, [r[key] for r in rows], "o-", color=colour,
+                label={"peer": "Face Landmarker alone", "base": "base revision",
+                       "new": "this tree"}[key])
+    ax.axhline(10.0, color="k", lw=0.8, ls="--", label="the clip's 10 s")
+    ax.set_xticks(x, [f"round {i + 1}" for i in x])
+    ax.set_ylabel("wall seconds")
+    ax.set_title("10-s transfer end to end, in turn")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--base-rev", required=True, help="git revision of this repository")
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--out", default="out/benchmarks")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    trees = {"base": _extract(args.base_rev), "new": Path(__file__).resolve().parents[1] / "src"}
+    for src in trees.values():
+        subprocess.run([sys.executable, "-m", "compileall", "-q", str(src)], check=True)
+        command(src, out / "ab.mp4")                       # warm: caches, page cache
+    rows = []
+    for r in range(args.rounds):
+        row = {"peer": round(peer(), 2)}
+        for name, src in trees.items():
+            wall, cpu = command(src, out / "ab.mp4")
+            row[name], row[f"{name}_cpu"] = round(wall, 2), round(cpu, 1)
+        print(row, flush=True)
+        rows.append(row)
+    med = {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
+    print("medians: " + ", ".join(f"{k} {v:.2f}" for k, v in med.items()))
+    (out / "transfer_e2e_ab.json").write_text(json.dumps(
+        {"base_rev": args.base_rev, "rounds": rows, "medians": med}, indent=1))
+    plot(rows, out / "transfer_e2e_ab.png")
+    (out / "ab.mp4").unlink(missing_ok=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
