@@ -240,3 +240,16 @@ def test_valid_mask_uses_target_gradient_on_invalid_edges():
     assert np.abs(plain.astype(int) - t)[m].mean() > 20
     with pytest.raises(ShapeError):
         poisson_blend_multi(t, [(s, m, m.astype(np.uint8))])
+
+
+def test_membrane_crop_is_the_masks_box_grown_by_the_margin_and_clipped():
+    from facetransfer.composite import MEMBRANE_MARGIN, membrane_crop
+
+    mask = np.zeros((40, 50), bool)
+    assert membrane_crop(mask) is None
+    mask[10:14, 20:31] = True
+    assert membrane_crop(mask, 3) == (slice(7, 17), slice(17, 34))
+    m = MEMBRANE_MARGIN
+    assert membrane_crop(mask) == (slice(10 - m, 14 + m), slice(20 - m, 31 + m))
+    mask[0, 49] = True                                   # the box reaches the image's corner
+    assert membrane_crop(mask, 5) == (slice(0, 19), slice(15, 50))

@@ -48,6 +48,8 @@ __all__ = [
     "match_color",
     "composite_face",
     "membrane_blend",
+    "membrane_crop",
+    "MEMBRANE_MARGIN",
 ]
 
 _METHODS = ("auto", "opencv", "solver")
@@ -506,8 +508,25 @@ def _erode(mask: np.ndarray, iterations: int) -> np.ndarray:
 _FOUR_NEIGHBOURS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.float32)
 
 
+#: Pixels around the region's bounding box in :func:`membrane_blend`'s working crop.
+MEMBRANE_MARGIN = 8
+
+
+def membrane_crop(mask: np.ndarray, margin: int = MEMBRANE_MARGIN
+                  ) -> tuple[slice, slice] | None:
+    """The working crop of :func:`membrane_blend` over ``mask`` (H, W) bool: ``(rows,
+    columns)`` slices of its bounding box grown by ``margin`` and clipped to the image, or
+    None when the mask is empty. Outside it the blend reads nothing and writes nothing."""
+    bx, by, bw, bh = cv2.boundingRect(mask.view(np.uint8))
+    if bw == 0 or bh == 0:
+        return None
+    H, W = mask.shape
+    return (slice(max(by - margin, 0), min(by + bh + margin, H)),
+            slice(max(bx - margin, 0), min(bx + bw + margin, W)))
+
+
 def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
-                   feather: float = 2.0, margin: int = 8,
+                   feather: float = 2.0, margin: int = MEMBRANE_MARGIN,
                    smooth_iterations: int = 4, outlier: float | None = 40.0) -> np.ndarray:
     """Seamless paste by a membrane correction (an approximation of Poisson blending).
 
@@ -545,21 +564,18 @@ def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
     T = np.asarray(target)
     out = T.copy()
     mask = np.asarray(mask, bool)
-    bx, by, bw, bh = cv2.boundingRect(mask.view(np.uint8))
-    if bw == 0 or bh == 0:
+    box = membrane_crop(mask, margin)
+    if box is None:
         return out
-    H, W = mask.shape
-    y0, y1 = max(by - margin, 0), min(by + bh + margin, H)
-    x0, x1 = max(bx - margin, 0), min(bx + bw + margin, W)
-    m = np.ascontiguousarray(mask[y0:y1, x0:x1])
-    t = np.ascontiguousarray(T[y0:y1, x0:x1])
-    s = np.ascontiguousarray(np.asarray(source)[y0:y1, x0:x1])
+    m = np.ascontiguousarray(mask[box])
+    t = np.ascontiguousarray(T[box])
+    s = np.ascontiguousarray(np.asarray(source)[box])
     h = _membrane(m, t, s, outlier, int(smooth_iterations))
     # the seam's fade: the distance to the nearest pixel outside the region over ``feather``
     # (the crop's margin is outside; pixels beyond the image are not)
     a = _feather_alpha(m, feather, edge_outside=False) if feather > 0 else \
         m.astype(np.float32)
-    crop = out[y0:y1, x0:x1]
+    crop = out[box]
     _blend_paste(m, t, h, a, crop, s=s)  # in place: the region's pixels of ``out``
     return out
 

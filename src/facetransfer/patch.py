@@ -147,8 +147,6 @@ def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.
 def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
     """:func:`_rejected` before its last step (``clip(2 b, 0, 1)``): the grown ramp blurred,
     ``(h, w)`` float32."""
-    import cv2
-
     lo, hi = (float(v) for v in reject)
     r = np.empty(f.shape[:2], np.float32)
     _reject_kernel(f, fb, lo, max(hi - lo, 1e-6), r)

@@ -48,7 +48,7 @@ from typing import Callable, Iterator
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
-from .composite import _erode, _extend, composite_face, membrane_blend
+from .composite import _erode, _extend, composite_face, membrane_blend, membrane_crop
 from .errors import RewriteError, ShapeError
 from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
 from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
@@ -279,25 +279,15 @@ def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
     the face, which are all the face's blend reads of it (the source of
     :func:`facetransfer.composite.membrane_blend` is read inside its region only).
 
-    Computed on the box that blend works on (the mask's box grown by its margin: the same
-    pixels, so the same result) and written into ``face_img`` in place."""
-    import cv2
-
-    bx, by, bw, bh = cv2.boundingRect(mask.view(np.uint8))
-    if bw == 0 or bh == 0:
+    Computed on the crop that blend works on (:func:`facetransfer.composite.membrane_crop`:
+    the same pixels, so the same result) and written into ``face_img`` in place."""
+    sub = membrane_crop(mask)
+    if sub is None:
         return face_img
-    H, W = mask.shape
-    margin = _MEMBRANE_MARGIN
-    sub = (slice(max(by - margin, 0), min(by + bh + margin, H)),
-           slice(max(bx - margin, 0), min(bx + bw + margin, W)))
     base = _over(T[sub], face_img[sub], face_mask[sub])
     face_img[sub] = membrane_blend(base, mouth_img[sub], mask[sub], feather=feather,
-                                   margin=margin, outlier=None)
+                                   outlier=None)
     return face_img
-
-
-#: :func:`facetransfer.composite.membrane_blend`'s margin around its region
-_MEMBRANE_MARGIN = 8
 
 
 def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:

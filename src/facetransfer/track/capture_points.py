@@ -2,8 +2,8 @@
 
 :class:`Sampler` turns the model into one whose "vertices" are the tracked points (the iBUG-68
 landmark vertices, then MediaPipe's dense surface points), and :class:`Shape` is the face at
-those points as a linear function of one frame's parameters for a fixed identity and static
-offset: the person's ARKit rig with bounded activations, or the per-frame modes of another
+those points as a linear function of one frame's parameters for a fixed identity and offset
+(static, plus a part that follows the head's yaw: :meth:`Shape.at_view`): the person's ARKit rig with bounded activations, or the per-frame modes of another
 model with their training priors (Vlasic et al. 2005, Eq. (5), (9)). ``Shape.solve`` fits those
 parameters to a frame's 2-D targets at a fixed pose (Eq. (7)).
 """

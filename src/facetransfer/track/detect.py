@@ -123,7 +123,8 @@ def preload_mediapipe() -> Callable[[], None]:
 
     The import (:func:`facetransfer.track.init.import_tasks_api`: 0.25 CPU-s here, 0.85 with
     the drawing helpers MediaPipe's package would import) holds the interpreter lock only part
-    of the time, so it overlaps work that mostly does not (decoding, reading the model file). Call ``wait()`` before forking (:func:`facetransfer.track.obtain.start_background_track`):
+    of the time, so it overlaps work that mostly does not (decoding, reading the model file).
+    Call ``wait()`` before forking (:func:`facetransfer.track.obtain.start_background_track`):
     the child then inherits the imported modules instead of importing them again, and no import
     lock is held across the fork. A failed import is silent here; the detector's own import
     (:func:`facetransfer.track.init.create_landmarker`) reports it.

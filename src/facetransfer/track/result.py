@@ -60,8 +60,9 @@ class Track:
     weights : dict mode name -> (F, r) float64
         The identity (constant mode) has the same row on every frame.
     landmarks2d : (F, 68, 2) float64
-        Pixel positions of the iBUG-68 landmarks: the model's landmark vertices, plus the
-        clip's static 3-D offset in a capture track (:mod:`facetransfer.track.capture`).
+        Pixel positions of the iBUG-68 landmarks: the model's landmark vertices; in a capture
+        track with the clip's 3-D offsets added (static and view-dependent), at the pose with
+        the pitch restored (:mod:`facetransfer.track.capture`).
     confidence : (F,) float64 in [0, 1]
     lost : (F,) bool
     model_hash : str
