@@ -215,3 +215,22 @@ def test_missing_cells_with_real_imputation(tmp_path, capsys):
     filled = m.synthesize(m.like(identity="id1", expression="ex2"))
     truth = cell_vertices(1, 2)
     assert np.linalg.norm(filled - truth) / np.linalg.norm(truth) < 1e-3
+
+
+def test_console_script_freezes_the_collector_and_a_caller_keeps_it(model_path, capsys,
+                                                                      monkeypatch):
+    """The console script (``main()`` with no argv) freezes every live object when its command
+    returns, which spares the interpreter's final collection; ``main(argv)`` called by a
+    program that goes on leaves the collector as it was."""
+    import gc
+
+    gc.unfreeze()
+    code, out, _ = run(capsys, "model", "info", model_path)
+    assert code == 0 and gc.get_freeze_count() == 0
+    monkeypatch.setattr(sys, "argv", ["facetransfer", "model", "info", str(model_path)])
+    try:
+        assert main() == 0
+        assert gc.get_freeze_count() > 1000
+    finally:
+        gc.unfreeze()
+    assert capsys.readouterr().out == out

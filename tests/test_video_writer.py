@@ -356,3 +356,36 @@ def test_output_that_is_the_audio_input_is_refused(tmp_path):
     with pytest.raises(VideoError, match="also the audio input"):
         encode_video(p, smooth_frames(n=3), 25, audio_from=p, overwrite=True)
     assert p.read_bytes() == before
+
+
+def _audio_packets(path) -> list[str]:
+    """The MD5 of each audio packet of ``path`` as stored (stream copy, no decoding)."""
+    out = subprocess.run([iov.ffmpeg_exe(), "-v", "error", "-i", str(path), "-map", "0:a:0",
+                          "-c", "copy", "-f", "framemd5", "-"], capture_output=True, text=True,
+                         check=True).stdout
+    return [line.rsplit(",", 1)[1].strip() for line in out.splitlines()
+            if line and not line.startswith("#")]
+
+
+@pytest.mark.parametrize("n_frames", [4, None])
+def test_aac_audio_is_copied_not_encoded_again(tmp_path, n_frames):
+    """AAC audio goes into an MP4 as it is stored (no second lossy generation): the output's
+    audio packets are the source's first ones, byte for byte, in one pass or muxed after."""
+    tone = _tone(tmp_path)
+    assert iov.audio_codec(tone) == "aac"
+    res = encode_video(tmp_path / "v.mp4", iter(smooth_frames(n=4)), 10, audio_from=tone,
+                       n_frames=n_frames)
+    ours, theirs = _audio_packets(res.path), _audio_packets(tone)
+    assert res.audio and 15 <= len(ours) < len(theirs)    # 0.4 s of 2 s: ~19 of ~95 packets
+    assert ours == theirs[:len(ours)]
+
+
+def test_audio_of_another_codec_is_encoded_to_aac(tmp_path):
+    """Audio an MP4 does not take as it is (PCM from a WAV) is encoded to AAC."""
+    wav = tmp_path / "tone.wav"
+    subprocess.run([iov.ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "sine=frequency=440:duration=2", str(wav)], check=True)
+    assert iov.audio_codec(wav) == "pcm_s16le"
+    res = encode_video(tmp_path / "v.mp4", smooth_frames(n=4), 10, audio_from=wav)
+    assert res.audio and iov.audio_codec(res.path) == "aac"
+    assert iov.audio_codec(encode_video(tmp_path / "m.mp4", smooth_frames(n=2), 10).path) is None

@@ -39,7 +39,7 @@ __all__ = ["VideoInfo", "video_info", "iter_frames", "read_video", "CODECS", "DE
            "VideoOutput", "WrittenVideo", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
            "is_image_pattern", "frame_path", "check_video_output", "decoded_frame_count",
            "stored_frame_count",
-           "has_audio", "mux_audio", "VideoWriter", "encode_video", "write_video",
+           "has_audio", "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
            "write_video_with_audio"]
 
 
@@ -468,21 +468,39 @@ def _stored_count_or_none(path) -> int | None:
 
 def has_audio(path: str | os.PathLike) -> bool:
     """Whether a media file has an audio stream (False when ffmpeg is unavailable)."""
+    return audio_codec(path) is not None
+
+
+def audio_codec(path: str | os.PathLike) -> str | None:
+    """The codec of a media file's first audio stream as ffmpeg names it (``"aac"``,
+    ``"mp3"``, ``"opus"``, ...); None without one or without ffmpeg."""
     exe = ffmpeg_exe()
     if exe is None:
-        return False
+        return None
     res = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)], capture_output=True,
                          text=True)
-    return "Audio:" in res.stderr
+    found = re.search(r"Stream #[^\n]*?: Audio: ([\w-]+)", res.stderr)
+    return found.group(1) if found else None
+
+
+#: Audio codecs copied as they are into the containers that hold them: no second lossy
+#: generation, no encoding time (0.2 CPU-s of a 10-second transfer). Other audio becomes AAC.
+COPIED_AUDIO = {"aac": ("mp4", "mov", "matroska")}
+
+
+def _audio_codec_args(codec: str, fmt: str) -> list[str]:
+    """``-c:a`` of audio in ``codec`` written into the container ``fmt`` (ffmpeg's name)."""
+    return ["-c:a", "copy" if fmt in COPIED_AUDIO.get(codec, ()) else "aac"]
 
 
 def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str | os.PathLike, *,
               start: float = 0.0, duration: float | None = None) -> bool:
     """Copy ``video``'s frames and ``audio_from``'s audio into ``out``.
 
-    The video stream is copied as is; the audio is re-encoded to AAC, starting at ``start``
-    seconds and cut to ``duration`` (default: the shorter stream). Returns False (and logs
-    why) when there is no ffmpeg or no audio, in which case ``out`` is not written.
+    The video stream is copied as is; the audio too when the container holds its codec
+    (:data:`COPIED_AUDIO`), else it is encoded to AAC; it starts at ``start`` seconds and is
+    cut to ``duration`` (default: the shorter stream). Returns False (and logs why) when there
+    is no ffmpeg or no audio, in which case ``out`` is not written.
 
     Raises
     ------
@@ -493,7 +511,8 @@ def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str 
     if exe is None:
         log.info("no ffmpeg available (pip install imageio-ffmpeg): output has no audio")
         return False
-    if not has_audio(audio_from):
+    codec = audio_codec(audio_from)
+    if codec is None:
         log.info("%s has no audio track; the output has none either", audio_from)
         return False
     fmt = VIDEO_SUFFIXES.get(Path(out).suffix.lower(), "mp4")
@@ -501,7 +520,7 @@ def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str 
     if start:
         cmd += ["-ss", f"{start:.3f}"]
     cmd += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy",
-            "-c:a", "aac"]
+            *_audio_codec_args(codec, fmt)]
     # cut to the video's length; a shorter audio track just ends early
     cmd += ["-shortest"] if duration is None else ["-t", f"{duration:.3f}"]
     if fmt in ("mp4", "mov"):
@@ -548,8 +567,9 @@ class VideoWriter:
     Frames are piped to the ffmpeg binary of imageio-ffmpeg (the library's own writer neither
     reports ffmpeg's exit status nor captures its messages, both of which this one needs),
     into a temporary file beside the output (:func:`facetransfer.io.atomic.atomic_path`).
-    The audio of ``audio_from`` (AAC) is encoded by the same ffmpeg process when the number of
-    frames is known beforehand (``n_frames``), else muxed in a second pass after the encode.
+    The audio of ``audio_from`` (copied, or encoded to AAC: :func:`mux_audio`) is written by
+    the same ffmpeg process when the number of frames is known beforehand (``n_frames``), else
+    muxed in a second pass after the encode.
     :meth:`close` checks ffmpeg's exit status and that the file holds as many frames as were
     written (:func:`stored_frame_count`) and only then renames the file into place; on any
     failure it raises :class:`~facetransfer.errors.VideoError` and an existing
@@ -642,13 +662,17 @@ class VideoWriter:
     def _audio_input(self) -> list[str]:
         """ffmpeg arguments adding the audio of ``audio_from`` to the encode (one pass): its
         stream from ``audio_start`` on, cut to the promised frames' length; none when the
-        number of frames is unknown or the file has no audio."""
-        if self.audio_from is None or not self.expected or not has_audio(self.audio_from):
+        number of frames is unknown or the file has no audio (copied or encoded as
+        :func:`mux_audio` says)."""
+        codec = None if self.audio_from is None or not self.expected \
+            else audio_codec(self.audio_from)
+        if codec is None:
             return []
         self._inline_audio = True
         start = ["-ss", f"{self.audio_start:.3f}"] if self.audio_start else []
         return [*start, "-t", f"{self.expected / self.fps:.3f}", "-i", str(self.audio_from),
-                "-map", "0:v:0", "-map", "1:a:0", "-c:a", "aac"]
+                "-map", "0:v:0", "-map", "1:a:0",
+                *_audio_codec_args(codec, VIDEO_SUFFIXES[self.path.suffix.lower()])]
 
     def write(self, frame: np.ndarray) -> None:
         """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size."""
