@@ -32,8 +32,6 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 import scipy.ndimage as ndi
-import scipy.sparse as sp
-import scipy.sparse.linalg as sla
 
 from .errors import ShapeError, FaceTransferError
 from .render.raster import _maybe_njit
@@ -141,6 +139,9 @@ def _edge_guidance(sources, alphas, valids, target, axis: int, mixed: bool) -> n
 def _solve_poisson(target: np.ndarray, sources: Sequence[np.ndarray], alphas: Sequence[np.ndarray],
                    valids: Sequence[np.ndarray | None], region: np.ndarray, mixed: bool) -> np.ndarray:
     """Solve Pérez et al. Eq. (7) inside ``region`` (bool, (h, w)) of a crop; float64 (h, w, 3)."""
+    import scipy.sparse as sp  # here: the default (membrane) blend never needs the solver
+    import scipy.sparse.linalg as sla
+
     h, w = region.shape
     n = int(region.sum())
     idx = -np.ones((h, w), dtype=np.int64)

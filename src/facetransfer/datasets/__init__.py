@@ -6,17 +6,35 @@ FaceWarehouse folder layout (:mod:`.facewarehouse`); :func:`load_dataset` picks 
 
 from __future__ import annotations
 
+import importlib
 import os
 from pathlib import Path
 from typing import Callable
 
 from ..errors import DatasetError
 from .base import FaceDataset
-from .deformation import (DeformationTransfer, deformation_gradients, transfer_deformation,
-                          triangle_frames)
-from .facewarehouse import is_facewarehouse_dir, read_facewarehouse
-from .ict import ICT_DATASETS, IctTemplate, build_ict_dataset, ict_template, load_recipes
-from .manifest import read_manifest
+
+#: The other public names and the submodule of each, imported on first use (PEP 562): a model
+#: load needs only :class:`FaceDataset`, and the builders bring SciPy's sparse solvers (0.1-0.2 s
+#: of every command's start-up otherwise).
+_LAZY = {"DeformationTransfer": "deformation", "deformation_gradients": "deformation",
+         "transfer_deformation": "deformation", "triangle_frames": "deformation",
+         "is_facewarehouse_dir": "facewarehouse", "read_facewarehouse": "facewarehouse",
+         "ICT_DATASETS": "ict", "IctTemplate": "ict", "build_ict_dataset": "ict",
+         "ict_template": "ict", "load_recipes": "ict", "read_manifest": "manifest"}
+
+
+def __getattr__(name: str):
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY))
 
 __all__ = [
     "FaceDataset",
@@ -54,6 +72,10 @@ def load_dataset(spec: str | os.PathLike, *, seed: int = 0, n_identities: int | 
     DatasetError
         If the spec is none of these.
     """
+    from .facewarehouse import is_facewarehouse_dir, read_facewarehouse
+    from .ict import ICT_DATASETS, build_ict_dataset
+    from .manifest import read_manifest
+
     s = str(spec)
     if s in ICT_DATASETS:
         return build_ict_dataset(s, seed=seed, n_identities=n_identities, progress=progress)

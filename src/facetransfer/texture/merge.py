@@ -18,8 +18,6 @@ from typing import NamedTuple
 
 import cv2
 import numpy as np
-import scipy.sparse as sp
-import scipy.sparse.linalg as sla
 
 from ..errors import ShapeError
 from ..render.raster import _maybe_njit
@@ -299,6 +297,9 @@ def fill_vertex_colors(colors, known, faces) -> np.ndarray:
     -------
     (n, 3) float32
     """
+    import scipy.sparse as sp  # here: a transfer's default textures never solve
+    import scipy.sparse.linalg as sla
+
     C = np.asarray(colors, dtype=np.float64)
     k = np.asarray(known)
     if C.ndim != 2 or C.shape[1] != 3 or k.shape != (C.shape[0],) or k.dtype != bool:
