@@ -28,8 +28,6 @@ import logging
 import os
 import shutil
 import threading
-import urllib.error
-import urllib.request
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
@@ -290,6 +288,9 @@ def fetch(url: str, dest: str | os.PathLike, sha256: str, *, name: str = "",
     if os.environ.get(OFFLINE_ENV, "").strip() not in ("", "0"):
         raise AssetError(f"asset {label!r} is not available offline ({OFFLINE_ENV} is set); "
                          f"it is downloaded from {url}; {hint}")
+    import urllib.error  # here: every command imports this module, few download
+    import urllib.request
+
     tmp = dest.with_name(f".{dest.name}.{os.getpid()}.part")
     h = hashlib.sha256()
     bar = None
