@@ -19,7 +19,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import time
@@ -29,13 +28,9 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_rewrite_frame import _extract  # noqa: E402
+from bench_transfer_e2e import _children_cpu  # noqa: E402
 
 TARGET, SOURCE, FRAMES = "driving_d9.mp4", "driving_d6.mp4", 300
-
-
-def _children_cpu() -> float:
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
 
 
 def _videos() -> tuple[Path, Path]:

@@ -47,6 +47,7 @@ __all__ = [
     "composite_face",
     "membrane_blend",
     "membrane_crop",
+    "mask_box",
     "MEMBRANE_MARGIN",
 ]
 
@@ -513,17 +514,24 @@ _FOUR_NEIGHBOURS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.fl
 MEMBRANE_MARGIN = 8
 
 
-def membrane_crop(mask: np.ndarray, margin: int = MEMBRANE_MARGIN
-                  ) -> tuple[slice, slice] | None:
-    """The working crop of :func:`membrane_blend` over ``mask`` (H, W) bool: ``(rows,
-    columns)`` slices of its bounding box grown by ``margin`` and clipped to the image, or
-    None when the mask is empty. Outside it the blend reads nothing and writes nothing."""
-    bx, by, bw, bh = cv2.boundingRect(mask.view(np.uint8))
-    if bw == 0 or bh == 0:
+def mask_box(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:
+    """``(rows, columns)`` slices of the bounding box of the nonzero pixels of ``mask`` (H, W)
+    bool or uint8, grown by ``margin`` and clipped to the image; None when there are none."""
+    m = mask.view(np.uint8) if mask.dtype == bool else mask
+    bx, by, bw, bh = cv2.boundingRect(np.ascontiguousarray(m))
+    if bw <= 0 or bh <= 0:
         return None
     H, W = mask.shape
     return (slice(max(by - margin, 0), min(by + bh + margin, H)),
             slice(max(bx - margin, 0), min(bx + bw + margin, W)))
+
+
+def membrane_crop(mask: np.ndarray, margin: int = MEMBRANE_MARGIN
+                  ) -> tuple[slice, slice] | None:
+    """The working crop of :func:`membrane_blend` over ``mask`` (H, W) bool
+    (:func:`mask_box`), or None when the mask is empty. Outside it the blend reads nothing and
+    writes nothing."""
+    return mask_box(mask, margin)
 
 
 def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
@@ -770,15 +778,13 @@ def _membrane(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None
     # Jacobi sweeps of Laplace's equation (the mean of the 4 neighbours, one 3x3 filter per
     # sweep) smooth the push-pull result towards harmonic; the outline keeps its values
     h = np.ascontiguousarray(h, dtype=np.float32)
-    bx, by, bw, bh = cv2.boundingRect(interior.view(np.uint8))
-    if bw == 0 or bh == 0 or smooth_iterations <= 0:
-        return h
     # the sweeps work on the interior's box grown by the pixel its neighbours reach (the same
     # values as over the whole crop: an interior pixel's 4 neighbours lie in the region)
-    y0, y1 = max(by - 1, 0), min(by + bh + 1, h.shape[0])
-    x0, x1 = max(bx - 1, 0), min(bx + bw + 1, h.shape[1])
-    hb = h[y0:y1, x0:x1]
-    inner = np.ascontiguousarray(interior[y0:y1, x0:x1]).view(np.uint8)
+    box = mask_box(interior, 1)
+    if box is None or smooth_iterations <= 0:
+        return h
+    hb = h[box]
+    inner = np.ascontiguousarray(interior[box]).view(np.uint8)
     for _ in range(int(smooth_iterations)):
         sweep = cv2.filter2D(hb, -1, _FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE)
         cv2.copyTo(sweep, inner, hb)  # in place, the interior only

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
+from .composite import mask_box
 from .errors import RewriteError
 from .patch import REJECT, _match_outline_into
 from .render import Raster, shade_layers, shade_texture
@@ -651,10 +652,5 @@ def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] 
     ``4·LID_SOFTNESS``; the outline's erosion 2 px; the feather's distance transform sees a
     zero pixel at the box's edge), so working on the box gives the same pixels as the whole
     raster."""
-    import cv2
-
-    x, y, w, h = cv2.boundingRect(np.ascontiguousarray(shown))
-    if w <= 0 or h <= 0:
-        return None
-    H, W = shown.shape
-    return max(x - margin, 0), max(y - margin, 0), min(x + w + margin, W), min(y + h + margin, H)
+    sl = mask_box(shown, margin)
+    return None if sl is None else (sl[1].start, sl[0].start, sl[1].stop, sl[0].stop)

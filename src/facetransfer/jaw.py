@@ -30,10 +30,10 @@ from __future__ import annotations
 import logging
 from dataclasses import dataclass
 
-import cv2
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
+from .composite import mask_box
 from .eyes import close_region, reference_frame, region_faces, region_vertices
 from .patch import REJECT, _match_outline_into
 from .render import shade_layers
@@ -226,7 +226,7 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
     :func:`jaw_flags`), painting ``face_image`` in place and returning it."""
     # the work on the box of the region and its ring, grown by the 2 px the ring's erosion
     # reaches (patch._ring); the gain fit keeps the frame's coordinates (origin)
-    sl = _label_box(labels, bits[0] | bits[1], margin=2)
+    sl = mask_box(np.bitwise_and(labels, np.uint8(bits[0] | bits[1])), 2)
     if sl is None:
         return face_image
     lab, fm = labels[sl], face_mask[sl]
@@ -244,14 +244,3 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
                         compare=compare, reject=REJECT, reject_where=None,
                         origin=(sl[1].start, sl[0].start))
     return face_image
-
-
-def _label_box(labels: np.ndarray, bits: int, *, margin: int):
-    """``(rows, columns)`` slices of the box of the pixels of ``labels`` (H, W) uint8 with one
-    of ``bits`` set, grown by ``margin`` and clipped to the image; None when there are none."""
-    x, y, w, h = cv2.boundingRect(np.bitwise_and(labels, np.uint8(bits)))
-    if w == 0 or h == 0:
-        return None
-    H, W = labels.shape
-    return (slice(max(y - margin, 0), min(y + h + margin, H)),
-            slice(max(x - margin, 0), min(x + w + margin, W)))
