@@ -434,6 +434,41 @@ def real_clip_scores(ours: dict, ref478: np.ndarray, mp_shapes: np.ndarray) -> d
     return out
 
 
+#: MediaPipe lid pairs per eye (the subject's side) for :func:`blink_levels`
+_LIDS = {"Left": ((385, 380), (387, 373)), "Right": ((160, 144), (158, 153))}
+
+
+def blink_levels(A: np.ndarray | None, shapes: np.ndarray, ref478: np.ndarray, *,
+                 closed: float = 0.35, opened: float = 0.9) -> dict:
+    """eyeBlink* where the reference's own lids say the eye is closed and where it is open.
+
+    ARKit defines eyeBlink as 0 for an open eye and 1 for a closed one, so on real footage,
+    with no truth, the frames whose lid gap (the reference's points, / the eye-corner
+    distance) is below ``closed`` times the clip's median gap should score near 1 and those
+    above ``opened`` times it near 0. Per eye: the number of closed frames and the mean score
+    there and on open frames, ours and Face Landmarker's; a scale that differs between the two
+    shows as a different span (closed - open), which a std ratio cannot place.
+    """
+    from facetransfer.arkit import ARKIT_NAMES
+
+    F = len(shapes) if A is None else min(len(A), len(shapes), len(ref478))
+    P = np.asarray(ref478[:F], np.float64)
+    s = np.linalg.norm(P[:, 33] - P[:, 263], axis=1)
+    out = {}
+    for side, pairs in _LIDS.items():
+        gap = sum(np.linalg.norm(P[:, i] - P[:, j], axis=1) for i, j in pairs) / 2 / s
+        med = np.median(gap)
+        shut, wide = gap < closed * med, gap > opened * med
+        k = ARKIT_NAMES.index(f"eyeBlink{side}")
+        lv = lambda x, m: _r(float(np.mean(x[m]))) if m.any() else None  # noqa: E731
+        row = {"closed_frames": int(shut.sum()),
+               "mediapipe": {"closed": lv(shapes[:F, k], shut), "open": lv(shapes[:F, k], wide)}}
+        if A is not None:
+            row["ours"] = {"closed": lv(A[:F, k], shut), "open": lv(A[:F, k], wide)}
+        out[f"eyeBlink{side}"] = row
+    return out
+
+
 #: MediaPipe eye corners (outer, inner) and iris centre per eye, by the subject's side.
 _EYES = {"Right": (33, 133, 468), "Left": (263, 362, 473)}
 
@@ -606,6 +641,7 @@ def run_real(model, cache: Path, quick: bool) -> dict:
         r = real_clip_scores(ours, ref, shapes)
         r["mediapipe_vs_reference"] = peer_agreement(mp478, ref)
         r["gaze"] = gaze_scores(mp478, shapes, ours["activations"])
+        r["blink_levels"] = blink_levels(ours["activations"], shapes, ref)
         if name == "driving_d6":
             F = len(ours["landmarks"])
             r["drift_jitter"] = drift_jitter(ours["landmarks"], mediapipe_to_ibug(ref[:F]))
@@ -671,6 +707,7 @@ def print_real(real: dict) -> None:
                                          for g in gz])
         print("gaze vs Face Landmarker's eyeLook* (median corr): " + ", ".join(
             f"{k} iris {med(k, 'iris_corr'):.2f} ours {med(k, 'ours_corr'):.2f}" for k in gz[0]))
+    _print_blink_levels(real)
     ceil = real.get("jaw_reading_ceiling", {}).get("median")
     if ceil:
         print("Face Landmarker's jawOpen read from its own points (median corr): lip gap "
@@ -682,6 +719,19 @@ def print_real(real: dict) -> None:
             print(f"{n}: jitter {d['jitter']} (reference {d['jitter_reference']}), drift "
                   f"{d['drift']} over {d['frames']} frames; tracking {c['fps']} fps, "
                   f"{c['lost']} lost")
+
+
+def _print_blink_levels(real: dict) -> None:
+    """One line per clip and eye with a closed frame: eyeBlink* on closed / open lids."""
+    print("eyeBlink* where the reference's lids are closed (<35 % of the median gap) / open "
+          "(ARKit: 1 / 0), ours vs Face Landmarker:")
+    for n, c in real["clips"].items():
+        for eye, row in c.get("blink_levels", {}).items():
+            if not row["closed_frames"] or "ours" not in row:
+                continue
+            o, m = row["ours"], row["mediapipe"]
+            print(f"  {n} {eye} ({row['closed_frames']} closed frames): ours {o['closed']:.2f} / "
+                  f"{o['open']:.2f}, Face Landmarker {m['closed']:.2f} / {m['open']:.2f}")
 
 
 def _fmt(v) -> str:
