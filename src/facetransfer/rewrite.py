@@ -52,6 +52,7 @@ from .composite import _erode, _extend, composite_face, membrane_blend, membrane
 from .errors import RewriteError, ShapeError
 from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
 from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
+from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
 from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
@@ -599,6 +600,9 @@ class _ClipRenderer:
     meshes : _FrameMeshes
         ``"new"``, ``"target"``, ``"source"`` meshes of every frame synthesised up front
         (:func:`_clip_meshes`); missing kinds are synthesised per frame.
+    lips : LipResidual or None
+        The source's residual at the lips (``lips="residual"`` with the source's frames and
+        a track with detections, :mod:`facetransfer.lips`).
     """
 
     target_frames: object
@@ -617,6 +621,7 @@ class _ClipRenderer:
     meshes: "_FrameMeshes"
     eye_tex: EyeTexture | None = None
     jaw_tex: JawTexture | None = None
+    lips: LipResidual | None = None
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
@@ -648,9 +653,11 @@ class _ClipRenderer:
             kinds["target"] = target_track
         if with_mouth:
             kinds["source"] = source_track
+        lips = clip_lip_residual(model, topo, source_track) \
+            if with_mouth and opts.lips == "residual" else None
         return cls(target_frames, target_track, new_track, model, opts, topo, first,
                    source_frames, source_track, sidx, const_tex, fn, with_mouth,
-                   _FrameMeshes(_clip_meshes(model, n, kinds)), eye_tex, jaw_tex)
+                   _FrameMeshes(_clip_meshes(model, n, kinds)), eye_tex, jaw_tex, lips)
 
     def mesh(self, kind: str, track, i: int) -> np.ndarray:
         """The mesh (n_vertices, 3) of frame ``i`` of ``track`` (its ``kind`` in :attr:`meshes`)."""
@@ -676,8 +683,22 @@ class _ClipRenderer:
         j = int(self.sidx[i])
         sf = np.asarray(self.source_frames[j])
         Vs = close_mouth(self.mesh("source", self.source_track, i), self.topo)
-        return FaceTexture(sf, frame_uvs(Vs, self.source_track.camera(i),
-                                         (sf.shape[1], sf.shape[0])), j)
+        size = (sf.shape[1], sf.shape[0])
+        uvs = frame_uvs(Vs, self.source_track.camera(i), size)
+        if self.lips is not None:  # the image's lips onto the mesh's (facetransfer.lips)
+            uvs = warp_uvs(uvs, self.lips.warp, self.lips.texture[i], size)
+        return FaceTexture(sf, uvs, j)
+
+    def new_mesh(self, i: int) -> np.ndarray:
+        """The new face at frame ``i`` (n_vertices, 3), with the source's lip residual added
+        (:func:`facetransfer.lips.displace_lips`) when :attr:`lips` is set."""
+        V = self.mesh("new", self.new_track, i)
+        if self.lips is None:
+            return V
+        Vs = self.mesh("source", self.source_track, i)
+        return displace_lips(V, self.lips.warp, self.lips.shape[i],
+                             self.source_track.rotation[i], self.source_track.scale[i],
+                             mouth_width_ratio(V, Vs, self.lips.warp))
 
     def __call__(self, i: int) -> RewriteFrame:
         frame = np.asarray(self.target_frames[i])
@@ -686,7 +707,7 @@ class _ClipRenderer:
         if self.new_track.lost[i] or self.target_track.lost[i]:
             return _paste(frame, None)
         o = self.options
-        return rewrite_frame(frame, self.mesh("new", self.new_track, i),
+        return rewrite_frame(frame, self.new_mesh(i),
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
                              feather=o.feather, erode=o.erode, eye_texture=self.eye_tex,
