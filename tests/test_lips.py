@@ -215,3 +215,11 @@ def test_the_new_lips_close_where_the_sources_detected_lips_close(setup):
     uv1 = r.mouth_texture(1).uvs
     moved = np.flatnonzero(np.abs(uv1 - uv0).sum(1) > 1e-9)
     assert np.isin(L[[62, 66]], moved).all() and np.isin(moved, r.lips.warp.vertices).all()
+
+
+def test_lips_option_is_validated():
+    from facetransfer.errors import RewriteError
+
+    assert RewriteOptions().lips == "residual"
+    with pytest.raises(RewriteError, match="lips must be one of residual, model"):
+        RewriteOptions(lips="detected")
