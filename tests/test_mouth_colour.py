@@ -3,6 +3,7 @@ outline do not tint the teeth."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -30,7 +31,8 @@ def scene(arkit_model):
     w = model.default_weights()
     w["expression"] = activations_to_weights(model, a)[0]
     V = close_mouth(model.synthesize(w), topo)
-    cam = WeakPerspective(scale=20.0, rotation=np.eye(3), translation=np.array([SIZE / 2, SIZE / 2 - 40.0]))
+    cam = WeakPerspective(scale=20.0, rotation=np.eye(3),
+                          translation=np.array([SIZE / 2, SIZE / 2 - 40.0]))
     return model, topo, V, cam
 
 
@@ -54,7 +56,6 @@ def test_teeth_take_the_skins_gain_not_the_lipsticks_offset(scene):
     out = rewrite_frame(target, V, cam, topo, FaceTexture(target, uvs),
                         mouth_texture=FaceTexture(src, uvs), blend="fast")
     r = rasterize(V, topo.faces, cam, (SIZE, SIZE))
-    import cv2
     inside = cv2.erode((r.tri_id >= nF).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
     assert inside.sum() > 30
     teeth = out.image[inside].astype(float).mean(axis=0)

@@ -107,6 +107,8 @@ def clip_lip_residual(model, topo: MeshTopology, source_track) -> LipResidual | 
     None when the track has no detections or the model no lips to move."""
     res = lip_residuals(source_track)
     if res is None:
+        log.info("lips: the mouth source's track keeps no detections (an older track file, or "
+                 "not the capture tracker's): its lips as fitted")
         return None
     warp = lip_warp(model, topo)
     if warp is None:
