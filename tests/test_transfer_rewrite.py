@@ -137,9 +137,10 @@ def test_inside_polygon_equals_matplotlib():
 
 
 # --------------------------------------------------------------------------------- blending
-def test_blend_mouth_equals_the_membrane_on_the_whole_crop_inside_the_face():
-    """The mouth's blend on its box, in place, gives the whole crop's blend inside the face
-    (all the face's own blend reads of it), also with the box clipped by the crop's edge."""
+def test_membrane_mouth_equals_the_membrane_on_the_whole_crop_inside_the_face():
+    """The mouth's membrane (without a ring of skin to fit a gain on, and so with no ring) on
+    its box, in place, gives the whole crop's blend inside the face (all the face's own blend
+    reads of it), also with the box clipped by the crop's edge."""
     rng = np.random.default_rng(21)
     H, W = 90, 120
     T = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
@@ -152,7 +153,9 @@ def test_blend_mouth_equals_the_membrane_on_the_whole_crop_inside_the_face():
         mask[box] = True
         want = composite.membrane_blend(rw._over(T, face_img, face_mask), mouth_img, mask,
                                         feather=3.0, outlier=None)
-        got = rw._blend_mouth(T, face_img.copy(), face_mask, mouth_img, mask, 3.0)
+        got = rw._membrane_mouth(T, face_img.copy(), face_mask, mouth_img, mask, 3.0)
+        np.testing.assert_array_equal(got[face_mask], want[face_mask])
+        got = rw._blend_mouth(T, face_img.copy(), face_mask, mouth_img, mask, None, 3.0)
         np.testing.assert_array_equal(got[face_mask], want[face_mask])
         assert (got[mask] != face_img[mask]).any()
 

@@ -60,7 +60,7 @@ def test_face_box_crop_matches_the_full_frame(quick_model, topo, synthetic, blen
         cropped = rw.rewrite_frame(fb[i], V, new.camera(i), topo, tex, mouth_texture=mouth,
                                    blend=blend)
         full = rw._rewrite_crop(fb[i], V, new.camera(i), topo, tex, mouth, blend, 2.0, 2, 3.0,
-                                False)
+                                False, mouth_ring=rw.mouth_ring_faces(topo))
         box = rw._face_box(V, new.camera(i), (128, 128), margin=20)
         assert box is not None and box != (0, 0, 128, 128)  # the crop really is smaller
         for a, b in zip(dataclasses.astuple(cropped), dataclasses.astuple(full)):

@@ -82,10 +82,12 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 
 
 def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
-                        reject_where, origin: tuple[int, int] = (0, 0)) -> None:
+                        reject_where, origin: tuple[int, int] = (0, 0),
+                        gain_range: tuple[float, float] = GAIN_RANGE) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
-    the region's pixels are written. ``origin``: the position ``(x, y)`` of these arrays'
+    the region's pixels are written; ``gain_range``: the gains' clip (default
+    :data:`GAIN_RANGE`). ``origin``: the position ``(x, y)`` of these arrays'
     top-left pixel in the image whose coordinates the gain fit takes (a crop of it whose
     border lies at least 2 pixels beyond ``mask`` and ``compare`` gives that image's
     pixels)."""
@@ -101,7 +103,7 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
                                (x + ox, y + oy, x + w + ox, y + h + oy), GAIN_SAMPLES,
                                origin=(rbox[0], rbox[1]), shift=origin)
         f = np.empty(pb.shape, np.float32)
-        _apply_gain(pb, gy, gx, *GAIN_RANGE, f)
+        _apply_gain(pb, gy, gx, *gain_range, f)
     else:
         f = pb.astype(np.float32)
     # the distance to the nearest pixel outside the region (the box's edge counts as outside:

@@ -13,8 +13,10 @@ For every frame of the target video (§6, Fig. 7C–7E):
    lifted from the current target frame, which keeps that frame's lighting), the mouth (lips and
    the closed gap) with the *source* performance's mouth (the source frame warped through the
    source's own tracked geometry: the performance-driven texture of §6 with the nearest
-   neighbour being the source's own frame; or the texture function of §6,
-   :mod:`facetransfer.texture.face`);
+   neighbour being the source's own frame, read where the source's lips were detected and the
+   new lips moved by the fit's residual there, :mod:`facetransfer.lips`; or the texture
+   function of §6, :mod:`facetransfer.texture.face`), scaled to the face's colours by a gain
+   fitted on the skin around it (:func:`rewrite_frame`'s ``mouth_feather``);
 4. the rendered face is blended into the target frame in the gradient domain (Pérez et al.
    2003): ``blend="poisson"`` solves the Poisson equation exactly
    (:func:`facetransfer.composite.composite_face`); ``"fast"`` (default, ~5x faster) adds a
@@ -48,10 +50,13 @@ from typing import Callable, Iterator
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
-from .composite import _erode, _extend, composite_face, membrane_blend, membrane_crop
+from .composite import (_erode, _extend, composite_face, mask_box, membrane_blend,
+                        membrane_crop)
 from .errors import RewriteError, ShapeError
-from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
+from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture, region_faces
 from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
+from .patch import _match_outline_into
+from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
 from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
@@ -63,10 +68,18 @@ from .topology import MeshTopology, close_mouth, mesh_topology
 
 log = logging.getLogger(__name__)
 
+#: Rings of triangles around the mouth over which its gain is fitted (:func:`mouth_ring_faces`).
+MOUTH_RING = 3
+#: Per-channel gains allowed between the source's skin and the target's around the mouth: two
+#: people under two lights differ more than one person's frames
+#: (:data:`facetransfer.patch.GAIN_RANGE`, 0.7-1.4).
+MOUTH_GAIN_RANGE = (0.4, 2.5)
+
 __all__ = [
     "RewriteFrame",
     "rewrite_frame",
     "rewrite_frames",
+    "mouth_ring_faces",
 ]
 
 
@@ -101,7 +114,8 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
                   blend: str = "fast", feather: float = 2.0, erode: int = 2,
                   mouth_feather: float = 3.0, color_match: bool = False,
                   eye_texture: EyeTexture | None = None,
-                  jaw_texture: JawTexture | None = None) -> RewriteFrame:
+                  jaw_texture: JawTexture | None = None,
+                  mouth_ring: np.ndarray | None = None) -> RewriteFrame:
     """Render the new face into one target frame (§6).
 
     Parameters
@@ -125,6 +139,12 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         The blend region is the rendered face mask eroded by this many pixels.
     mouth_feather : float
         Soft-edge width in pixels of the source's mouth inside the face (``blend="fast"``).
+        There the mouth is scaled per channel to the face's colours by a smooth gain fitted on
+        the skin around it (:func:`facetransfer.patch.match_outline` over ``mouth_ring``): the
+        two people's skin tones and the two videos' light differ, and a gain carries that
+        difference into the teeth and the mouth's inside without tinting them, where an offset
+        pinned at the lips' outline (a membrane) turned the teeth green or white-hot when the
+        source's lips are painted (issue 13).
     color_match : bool
         Match the rendered face's colour statistics to the target's before the Poisson blend.
     eye_texture : EyeTexture, optional
@@ -134,6 +154,9 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         The jaw region's texture from a closed-mouth target frame
         (:func:`facetransfer.jaw.jaw_texture`, for ``topo``); without it the jaw is textured
         from ``face_texture`` like the rest of the face.
+    mouth_ring : (F',) bool, optional
+        The triangles around the mouth whose colours in the source's frame and in the face
+        set the mouth's gain; default :func:`mouth_ring_faces` of ``topo``.
 
     Returns
     -------
@@ -157,8 +180,11 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         return _paste(T, None)
     x0, y0, x1, y1 = box
     cam = camera if box == (0, 0, W, H) else _shift_camera(camera, x0, y0)
+    if mouth_texture is not None and mouth_ring is None:
+        mouth_ring = mouth_ring_faces(topo)
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
-                        feather, erode, mouth_feather, color_match, eye_texture, jaw_texture)
+                        feather, erode, mouth_feather, color_match, eye_texture, jaw_texture,
+                        mouth_ring)
     return _paste(T, (box, res))
 
 
@@ -229,14 +255,14 @@ def _shift_camera(camera, x0: int, y0: int):
 
 
 def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
-                  mouth_feather, color_match, eye_texture=None, jaw_texture=None
-                  ) -> RewriteFrame:
+                  mouth_feather, color_match, eye_texture=None, jaw_texture=None,
+                  mouth_ring=None) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
     from .render import rasterize
 
     raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
-    face_img, face_mask, mouth_img, mouth_mask = _shade_frame(
-        raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture)
+    face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(
+        raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring)
     rendered = face_img if mouth_img is None else _over(face_img, mouth_img, mouth_mask)
     if not face_mask.any():
         return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask)
@@ -251,9 +277,8 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     elif blend == "fast":
         face = rendered
         if mouth_img is not None and mouth_mask.any():
-            # the source's mouth first takes the colours of the face around it (same membrane;
-            # every outline pixel counts: skin tones of two people are expected to differ)
-            face = _blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region,
+            # the source's mouth first takes the colours of the face around it (a gain)
+            face = _blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region, ring,
                                 mouth_feather)
         out = membrane_blend(T, face, region, feather=feather)
     else:
@@ -273,14 +298,34 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
 
 
 def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
-                 mouth_img: np.ndarray, mask: np.ndarray, feather: float) -> np.ndarray:
+                 mouth_img: np.ndarray, mask: np.ndarray, ring: np.ndarray | None,
+                 feather: float) -> np.ndarray:
+    """``face_img`` with the source's mouth pasted where ``mask`` (H, W) bool, scaled per
+    channel by the smooth gain of the face's colours over the source's on ``ring`` (H, W) bool,
+    the skin around the mouth (:func:`facetransfer.patch.match_outline`, no rejection: the
+    mouth is the source's wherever it differs), its outline feathered over ``feather`` pixels;
+    written into ``face_img`` in place, on the box of the mouth and its ring. Without a ring
+    (the §6 texture function's mouth, which has no skin around it) or with fewer than 8 of its
+    pixels in sight: :func:`_membrane_mouth`."""
+    sl = mask_box(mask if ring is None else mask | ring, 2)
+    if sl is None:
+        return face_img
+    m, fm = mask[sl], face_mask[sl]
+    compare = None if ring is None else ring[sl] & fm
+    if compare is None or np.count_nonzero(compare) < 8:
+        return _membrane_mouth(T, face_img, face_mask, mouth_img, mask, feather)
+    _match_outline_into(face_img[sl], mouth_img[sl], m, fm, face_img[sl], feather=feather,
+                        compare=compare, reject=None, reject_where=None,
+                        origin=(sl[1].start, sl[0].start), gain_range=MOUTH_GAIN_RANGE)
+    return face_img
+
+
+def _membrane_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
+                    mouth_img: np.ndarray, mask: np.ndarray, feather: float) -> np.ndarray:
     """``face_img`` with the source's mouth blended in where ``mask`` (H, W) bool: the pixels
     of ``membrane_blend(_over(T, face_img, face_mask), mouth_img, mask, outlier=None)`` inside
-    the face, which are all the face's blend reads of it (the source of
-    :func:`facetransfer.composite.membrane_blend` is read inside its region only).
-
-    Computed on the crop that blend works on (:func:`facetransfer.composite.membrane_crop`:
-    the same pixels, so the same result) and written into ``face_img`` in place."""
+    the face (every outline pixel counts: skin tones of two people are expected to differ),
+    computed on the crop that blend works on and written into ``face_img`` in place."""
     sub = membrane_crop(mask)
     if sub is None:
         return face_img
@@ -288,6 +333,18 @@ def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
     face_img[sub] = membrane_blend(base, mouth_img[sub], mask[sub], feather=feather,
                                    outlier=None)
     return face_img
+
+
+def mouth_ring_faces(topo: MeshTopology, *, rings: int = MOUTH_RING) -> np.ndarray:
+    """The ``rings`` rings of triangles around ``topo.mouth_faces`` (not those), ``(F',) bool``:
+    the skin whose colours in the source's frame and in the face set the mouth's gain."""
+    sel = np.zeros(len(topo.faces), bool)
+    sel[np.asarray(topo.mouth_faces, np.int64)] = True
+    if not sel.any():
+        return sel
+    inner = np.zeros(int(np.max(topo.faces)) + 1, bool)
+    inner[topo.faces[sel].ravel()] = True
+    return region_faces(topo.faces, inner, rings=rings) & ~sel
 
 
 def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
@@ -304,12 +361,12 @@ def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
 #: the face texture (every triangle), the eye region's, the jaw region's (and its ring), the
 #: source's mouth; and labels: the eye region's rim, the jaw region, the jaw region's ring.
 _FACE, _EYES, _JAW, _MOUTH = 1, 2, 4, 8
-_RIM, _JAW_REGION, _JAW_RING = 16, 32, 64
+_RIM, _JAW_REGION, _JAW_RING, _MOUTH_RING = 16, 32, 64, 128
 
 
 def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTexture,
                  mouth_texture: FaceTexture | None, eye_texture: EyeTexture | None,
-                 jaw_texture: JawTexture | None):
+                 jaw_texture: JawTexture | None, mouth_ring: np.ndarray | None = None):
     """The new face textured at one frame (§6): every texture it takes sampled in one pass
     over the raster (:func:`facetransfer.render.shade_layers`), then the eye and jaw regions
     pasted into the face (:func:`facetransfer.eyes.paint_eyes`,
@@ -324,6 +381,9 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTe
     mouth_img : (H, W, 3) uint8 or None
         The source's mouth on the mouth's triangles; None without a mouth texture.
     mouth_mask : (H, W) bool
+    ring : (H, W) bool or None
+        The pixels of ``mouth_ring``'s triangles, where ``mouth_img`` holds the source's frame
+        too (to compare with the face); None without a mouth texture or a ring.
     """
     flags = np.full(topo.faces.shape[0], _FACE, np.uint8)
     layers = [(face_texture.uvs, np.asarray(face_texture.image, np.uint8)), None, None, None]
@@ -336,6 +396,8 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTe
     with_mouth = mouth_texture is not None and topo.mouth_faces.size > 0
     if with_mouth:
         flags[topo.mouth_faces] |= _MOUTH
+        if mouth_ring is not None:
+            flags[np.asarray(mouth_ring, bool)] |= _MOUTH | _MOUTH_RING
         layers[3] = (mouth_texture.uvs, np.asarray(mouth_texture.image, np.uint8))
     (face_img, eye_img, jaw_img, mouth_img), labels = shade_layers(raster, topo.faces, layers,
                                                                    flags)
@@ -346,9 +408,15 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTe
     if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
         face_img = _paint_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
                               (_JAW_REGION, _JAW_RING))
-    mouth_mask = np.bitwise_and(labels, _MOUTH) != 0 if with_mouth else \
-        np.zeros(labels.shape, bool)
-    return face_img, face_mask, mouth_img, mouth_mask
+    ring = None
+    if with_mouth:
+        mouth_mask = np.bitwise_and(labels, _MOUTH) != 0
+        if mouth_ring is not None:
+            ring = np.bitwise_and(labels, _MOUTH_RING) != 0
+            mouth_mask &= ~ring
+    else:
+        mouth_mask = np.zeros(labels.shape, bool)
+    return face_img, face_mask, mouth_img, mouth_mask, ring
 
 
 # ---------------------------------------------------------------------------------------------
@@ -599,6 +667,11 @@ class _ClipRenderer:
     meshes : _FrameMeshes
         ``"new"``, ``"target"``, ``"source"`` meshes of every frame synthesised up front
         (:func:`_clip_meshes`); missing kinds are synthesised per frame.
+    lips : LipResidual or None
+        The source's residual at the lips (``lips="residual"`` with the source's frames and
+        a track with detections, :mod:`facetransfer.lips`).
+    ring : (F',) bool or None
+        :func:`mouth_ring_faces` of ``topo``, when the mouth is textured.
     """
 
     target_frames: object
@@ -617,6 +690,8 @@ class _ClipRenderer:
     meshes: "_FrameMeshes"
     eye_tex: EyeTexture | None = None
     jaw_tex: JawTexture | None = None
+    lips: LipResidual | None = None
+    ring: np.ndarray | None = None
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
@@ -648,9 +723,12 @@ class _ClipRenderer:
             kinds["target"] = target_track
         if with_mouth:
             kinds["source"] = source_track
+        lips = clip_lip_residual(model, topo, source_track) \
+            if with_mouth and opts.lips == "residual" else None
         return cls(target_frames, target_track, new_track, model, opts, topo, first,
                    source_frames, source_track, sidx, const_tex, fn, with_mouth,
-                   _FrameMeshes(_clip_meshes(model, n, kinds)), eye_tex, jaw_tex)
+                   _FrameMeshes(_clip_meshes(model, n, kinds)), eye_tex, jaw_tex, lips,
+                   mouth_ring_faces(topo) if with_mouth else None)
 
     def mesh(self, kind: str, track, i: int) -> np.ndarray:
         """The mesh (n_vertices, 3) of frame ``i`` of ``track`` (its ``kind`` in :attr:`meshes`)."""
@@ -676,8 +754,22 @@ class _ClipRenderer:
         j = int(self.sidx[i])
         sf = np.asarray(self.source_frames[j])
         Vs = close_mouth(self.mesh("source", self.source_track, i), self.topo)
-        return FaceTexture(sf, frame_uvs(Vs, self.source_track.camera(i),
-                                         (sf.shape[1], sf.shape[0])), j)
+        size = (sf.shape[1], sf.shape[0])
+        uvs = frame_uvs(Vs, self.source_track.camera(i), size)
+        if self.lips is not None:  # the image's lips onto the mesh's (facetransfer.lips)
+            uvs = warp_uvs(uvs, self.lips.warp, self.lips.texture[i], size)
+        return FaceTexture(sf, uvs, j)
+
+    def new_mesh(self, i: int) -> np.ndarray:
+        """The new face at frame ``i`` (n_vertices, 3), with the source's lip residual added
+        (:func:`facetransfer.lips.displace_lips`) when :attr:`lips` is set."""
+        V = self.mesh("new", self.new_track, i)
+        if self.lips is None:
+            return V
+        Vs = self.mesh("source", self.source_track, i)
+        return displace_lips(V, self.lips.warp, self.lips.shape[i],
+                             self.source_track.rotation[i], self.source_track.scale[i],
+                             mouth_width_ratio(V, Vs, self.lips.warp))
 
     def __call__(self, i: int) -> RewriteFrame:
         frame = np.asarray(self.target_frames[i])
@@ -686,11 +778,11 @@ class _ClipRenderer:
         if self.new_track.lost[i] or self.target_track.lost[i]:
             return _paste(frame, None)
         o = self.options
-        return rewrite_frame(frame, self.mesh("new", self.new_track, i),
+        return rewrite_frame(frame, self.new_mesh(i),
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
                              feather=o.feather, erode=o.erode, eye_texture=self.eye_tex,
-                             jaw_texture=self.jaw_tex)
+                             jaw_texture=self.jaw_tex, mouth_ring=self.ring)
 
 
 def _render_in_threads(one, n: int, workers: int, progress):

@@ -22,6 +22,7 @@ __all__ = [
     "BLEND_MODES",
     "EYE_MODES",
     "JAW_MODES",
+    "LIP_MODES",
     "SPEED_PRESETS",
     "DEFAULT_SPEED",
     "TRACK_METHODS",
@@ -45,6 +46,10 @@ EYE_MODES = ("model", "target")
 #: Where the chin and jaw skin's texture comes from (with the per-frame face texture): one
 #: target frame with the mouth closed (:mod:`facetransfer.jaw`), or each target frame.
 JAW_MODES = ("closed", "frame")
+#: How the source's lips reach the result (with the source's frame as the mouth texture): with
+#: the capture's residual at the lips (:mod:`facetransfer.lips`: the texture read where the
+#: detected lips are, the new lips moved by the residual's shape) or as the model fitted them.
+LIP_MODES = ("residual", "model")
 
 
 def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> None:
@@ -87,6 +92,12 @@ class RewriteOptions:
         closed (:mod:`facetransfer.jaw`), so the target's own mouth opening does not show
         in the result; ``"frame"``: from each target frame like the rest of the face. Only
         with ``texture="frame"``.
+    lips : {"residual", "model"}
+        ``"residual"``: the source's lips beyond what the model's shapes fit, from the
+        detections the capture kept (:mod:`facetransfer.lips`): the mouth texture read where
+        the source's lips are detected and the new face's lips moved by the fit's residual;
+        a source track without detections (or ``"model"``) renders the lips as fitted. Only
+        with the source's frame as the mouth texture (``mouth="frame"``).
 
     Raises
     ------
@@ -103,6 +114,7 @@ class RewriteOptions:
     track_method: str = "auto"
     eyes: str = "model"
     jaw: str = "closed"
+    lips: str = "residual"
 
     def __post_init__(self) -> None:
         check_mode("texture", self.texture, TEXTURE_MODES, sep=None)
@@ -113,6 +125,7 @@ class RewriteOptions:
         check_track_method(self.track_method)
         check_mode("eyes", self.eyes, EYE_MODES)
         check_mode("jaw", self.jaw, JAW_MODES)
+        check_mode("lips", self.lips, LIP_MODES)
         if not self.feather >= 0:
             raise RewriteError(f"feather must be >= 0 pixels, got {self.feather!r}")
         if int(self.erode) != self.erode or self.erode < 0:

@@ -207,6 +207,11 @@ def resample_track(track, tmap: TimeMap):
         lost=lost,
         blendshapes=(None if track.blendshapes is None else  # affine in the weights (Eq. A)
                      np.clip(_interp_rows(track.blendshapes, t), 0.0, 1.0)),
+        # an observation of a frame, not interpolated: the nearest frame's (whose image a
+        # resampled mouth is textured from, video_transfer's ``mouth_index``)
+        detections2d=(None if track.detections2d is None else
+                      track.detections2d[np.minimum(np.floor(t + 0.5).astype(np.int64),
+                                                    track.n_frames - 1)]),
         info={},
     )
 
@@ -308,7 +313,8 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         base, rotation=posed.rotation.copy(), scale=posed.scale.copy(),
         translation=posed.translation.copy(), landmarks2d=posed.landmarks2d.copy(),
         weights=weights, lost=lost, confidence=conf, info={},
-        blendshapes=None, blendshape_names=None)  # new weights: project_landmarks attaches them
+        blendshapes=None, blendshape_names=None,  # new weights: project_landmarks attaches them
+        detections2d=None)  # a new performance: nobody detected it
 
 
 def _on_timeline(target, sources: dict, align: str | None):

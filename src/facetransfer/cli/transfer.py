@@ -20,8 +20,9 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..transfer import ALIGN_MODES
-from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, JAW_MODES, MOUTH_MODES,
-                               SPEED_PRESETS, TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
+from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, JAW_MODES, LIP_MODES,
+                               MOUTH_MODES, SPEED_PRESETS, TEXTURE_MODES, TRACK_METHODS,
+                               RewriteOptions)
 from .common import MODEL_HELP, add_video_options, resolve_model, video_options
 from .track import CAPTURE_HELP
 
@@ -74,6 +75,10 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    help="closed: the chin and jaw skin textured from a target frame with the "
                    "mouth closed, so the target's own mouth opening does not show; frame: from "
                    "each target frame like the rest of the face")
+    p.add_argument("--lips", choices=LIP_MODES, default="residual",
+                   help="residual: the source's lips beyond what the model fits (the capture's "
+                   "residual at the lip points): the mouth texture read where the source's lips "
+                   "are detected and the new lips moved by it; model: the lips as fitted")
     p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given: auto or capture ("
                    + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
@@ -90,7 +95,7 @@ def rewrite_options(args) -> RewriteOptions:
     :func:`add_rewrite_options`' arguments."""
     return RewriteOptions(texture=args.texture, mouth=args.mouth, blend=args.blend,
                           speed=args.speed, track_method=args.tracker, eyes=args.eyes,
-                          jaw=args.jaw)
+                          jaw=args.jaw, lips=args.lips)
 
 
 def _parser(sub, name: str, help: str, description: str):

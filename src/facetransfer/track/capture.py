@@ -25,7 +25,8 @@ frame and the drifting flow by measurements taken on every frame:
    late: tracking starts where it is.
 6. The track's pose has the head's pitch the detector shows too small restored
    (``CaptureOptions.pitch_gain``, :func:`restore_pitch`); its landmarks are the fitted points
-   at that pose.
+   at that pose, and it keeps the detections it was fitted to (``Track.detections2d``: their
+   difference at the lips is what :mod:`facetransfer.lips` carries into a transfer).
 
 The model at the tracked points, and one frame's solve at a fixed pose, are
 :mod:`facetransfer.track.capture_points`; the small solvers are :mod:`facetransfer.track.fit2d`.
@@ -536,7 +537,9 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
     info = {"start_frame": run.start, "identity_frames": [int(i) for i in run.frames],
             "seconds_identity": t_id, "seconds_total": time.perf_counter() - t0,
             "tracker": "capture", "score_shapes": run.score_shapes()}
-    return replace(track, info=info)
+    # the detections themselves: the fit's residual at the lips carries the lips the model's
+    # shapes cannot reach (facetransfer.lips)
+    return replace(track, info=info, detections2d=det.points)
 
 
 def _point_weights(det: ClipDetections, model, opt: CaptureOptions

@@ -25,7 +25,8 @@ def take_frames(track, idx: np.ndarray):
         weights={n: w[idx] for n, w in track.weights.items()},
         landmarks2d=track.landmarks2d[idx], confidence=track.confidence[idx],
         lost=track.lost[idx], info={},
-        blendshapes=None if track.blendshapes is None else track.blendshapes[idx])
+        blendshapes=None if track.blendshapes is None else track.blendshapes[idx],
+        detections2d=None if track.detections2d is None else track.detections2d[idx])
 
 
 def project_landmarks(track, model):

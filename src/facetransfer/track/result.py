@@ -74,6 +74,11 @@ class Track:
         :mod:`facetransfer.arkit`); ``None`` otherwise.
     blendshape_names : tuple of str or None
         Names of the ``blendshapes`` columns (:data:`facetransfer.arkit.ARKIT_NAMES`).
+    detections2d : (F, 68, 2) float64 or None
+        The detector's iBUG-68 points in pixels that the fit was fitted to (a capture track,
+        :mod:`facetransfer.track.capture`), NaN where it found no face; ``detections2d -
+        landmarks2d`` is the fit's residual (what the model did not follow, e.g. the lips,
+        :mod:`facetransfer.lips`). None: not recorded.
     info : dict
         Free-form run details (not saved; e.g. per-pass residuals).
     """
@@ -93,6 +98,7 @@ class Track:
     blendshapes: np.ndarray | None = None
     blendshape_names: tuple[str, ...] | None = None
     info: dict = field(default_factory=dict)
+    detections2d: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         R = np.asarray(self.rotation, dtype=np.float64)
@@ -149,6 +155,13 @@ class Track:
         set_(self, "model_hash", str(self.model_hash))
         set_(self, "source", str(self.source))
         self._check_blendshapes(F)
+        if self.detections2d is not None:
+            D = np.asarray(self.detections2d, dtype=np.float64)
+            if D.shape != (F, 68, 2):
+                raise TrackError(f"track detections2d must have shape {(F, 68, 2)}, got {D.shape}")
+            if np.isinf(D).any():
+                raise TrackError("track detections2d must be finite or NaN (no face)")
+            set_(self, "detections2d", D)
 
     def _check_blendshapes(self, F: int) -> None:
         if self.blendshapes is None:
@@ -227,6 +240,8 @@ class Track:
         if self.blendshapes is not None:
             arrays["blendshapes"] = self.blendshapes
             arrays["blendshape_names"] = np.array(self.blendshape_names)
+        if self.detections2d is not None:
+            arrays["detections2d"] = self.detections2d
         with atomic_path(path, overwrite=overwrite) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
@@ -280,6 +295,7 @@ class Track:
                        blendshapes=data.get("blendshapes"),
                        blendshape_names=(None if "blendshape_names" not in data else
                                          tuple(str(n) for n in
-                                               np.atleast_1d(data["blendshape_names"]))))
+                                               np.atleast_1d(data["blendshape_names"]))),
+                       detections2d=data.get("detections2d"))
         except (TrackError, ValueError, TypeError, OverflowError) as exc:
             raise TrackError(f"track file {p} is invalid: {exc}") from None
