@@ -159,3 +159,28 @@ def test_seam_difference_sees_a_step(quick_model):
     d = np.linalg.norm(np.diff(stepped.landmarks2d, axis=0), axis=2).mean(1)
     np.testing.assert_allclose(rep.motion_px[0], d[25:35].max())
     assert rep.motion_px[0] >= 3 * np.sqrt(2) - motion[29] > rep.whole_motion_px[0]
+
+
+def test_join_keeps_the_detections_of_the_nearer_chunk(quick_model):
+    """A capture track's detections (what the lips' residual reads) survive the join: outside
+    the overlaps each frame's own, inside it the nearer chunk's, the other's where that one
+    found no face; without detections in every chunk, none."""
+    whole = _truth_track(quick_model, 60)
+    cs = plan_chunks(60, 35, 10)                     # frames 25..34 shared
+    rng = np.random.default_rng(3)
+    dets = [rng.normal(100, 20, (c.n_frames, 68, 2)) for c in cs]
+    dets[0][26] = np.nan                             # frame 26: the first chunk found no face
+    dets[1][7] = np.nan                              # frame 32: the second chunk found none
+    pieces = [_piece(whole, c, detections2d=d) for c, d in zip(cs, dets)]
+    joined = join_tracks(pieces, cs, quick_model)
+    D = joined.detections2d
+    assert D.shape == (60, 68, 2) and not np.isnan(D).any()
+    np.testing.assert_array_equal(D[:25], dets[0][:25])
+    np.testing.assert_array_equal(D[35:], dets[1][10:])
+    first, second = [25, 27, 28, 29], [30, 31, 33, 34]   # the halves of the overlap
+    np.testing.assert_array_equal(D[first], dets[0][first])
+    np.testing.assert_array_equal(D[second], dets[1][[f - 25 for f in second]])
+    np.testing.assert_array_equal(D[26], dets[1][1])          # the first chunk's missing
+    np.testing.assert_array_equal(D[32], dets[0][32])         # the second chunk's missing
+    pieces[1] = _piece(whole, cs[1])
+    assert join_tracks(pieces, cs, quick_model).detections2d is None

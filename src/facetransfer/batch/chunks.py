@@ -23,7 +23,7 @@ import numpy as np
 from .manifest import BatchError
 
 __all__ = ["Chunk", "plan_chunks", "crossfade", "slerp_rotations", "join_tracks",
-           "SeamReport", "seam_difference"]
+           "join_detections", "SeamReport", "seam_difference"]
 
 
 @dataclass(frozen=True)
@@ -156,7 +156,9 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
     Track
         ``sum(chunk lengths) - overlaps`` frames; fps, size, source and model hash of the first
         track; landmarks and ARKit activations recomputed
-        (:func:`facetransfer.transfer.project_landmarks`).
+        (:func:`facetransfer.transfer.project_landmarks`); the detections joined
+        (:func:`join_detections`), so that a transfer from the joined track still carries the
+        source's lips (:mod:`facetransfer.lips`).
 
     Raises
     ------
@@ -189,8 +191,31 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
                    scale=full["scale"], translation=full["translation"],
                    weights=full["weights"], landmarks2d=np.zeros((F, 68, 2)),
                    confidence=np.clip(full["confidence"], 0, 1), lost=full["lost"],
-                   model_hash=t0.model_hash, mode_names=t0.mode_names, source=t0.source)
+                   model_hash=t0.model_hash, mode_names=t0.mode_names, source=t0.source,
+                   detections2d=join_detections(tracks, chunks))
     return dataclasses.replace(project_landmarks(joined, model), source=t0.source)
+
+
+def join_detections(tracks, chunks) -> np.ndarray | None:
+    """The chunks' detections (``Track.detections2d``, (n, 68, 2) each) as one (F, 68, 2) array,
+    None unless every chunk has them. Detections are measurements of a frame, not estimates to
+    blend: a frame two chunks share takes the nearer chunk's (the first half of the overlap the
+    earlier chunk's, the rest the later one's), or the other's where that chunk found no face."""
+    if not tracks or any(t.detections2d is None for t in tracks):
+        return None
+    D = np.full((chunks[-1].stop, 68, 2), np.nan)
+    prev = None
+    for c, t in zip(chunks, tracks):
+        d = np.asarray(t.detections2d, np.float64)
+        o = 0 if prev is None else prev.stop - c.start      # frames shared with the previous
+        keep = D[c.start:c.start + o]                         # the previous chunk's, a view
+        mine = d[:o]
+        first = np.arange(o) < o - o // 2                     # the earlier chunk's half
+        take = np.where(first[:, None, None], np.isnan(keep) & ~np.isnan(mine), ~np.isnan(mine))
+        keep[take] = mine[take]
+        D[c.start + o:c.stop] = d[o:]
+        prev = c
+    return D
 
 
 def _check_chunk_tracks(tracks: list, chunks: list) -> None:
