@@ -1,5 +1,5 @@
 """The source's mouth takes the face's colours by a gain (issue 13): painted lips at the mouth's
-outline do not tint the teeth."""
+outline do not tint the teeth, and neither does the hue of the two people's skins."""
 
 from __future__ import annotations
 
@@ -46,7 +46,7 @@ def _source_frame(topo, V, cam, n_model_faces: int) -> np.ndarray:
     return img.astype(np.uint8)
 
 
-def test_teeth_take_the_skins_gain_not_the_lipsticks_offset(scene):
+def test_teeth_keep_their_hue_and_lips_take_the_skins_gain(scene):
     model, topo, V, cam = scene
     nF = len(model.faces)
     src = _source_frame(topo, V, cam, nF)
@@ -59,10 +59,18 @@ def test_teeth_take_the_skins_gain_not_the_lipsticks_offset(scene):
     inside = cv2.erode((r.tri_id >= nF).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
     assert inside.sum() > 30
     teeth = out.image[inside].astype(float).mean(axis=0)
-    # the teeth lit as the target's skin is: scaled by the skins' ratio, hue kept
-    want = np.clip(TEETH * SKIN_TARGET / SKIN_SOURCE, 0, 255)
-    assert np.abs(teeth - want).max() < 12, (teeth, want)
-    assert teeth[0] > teeth[1] > teeth[2] - 2     # not the green (or cyan) of an offset
+    # the teeth as bright as the target's skin is over the source's (the geometric mean of the
+    # skins' ratios), their own hue kept: the skins' hue difference is the two people's
+    grey = np.exp(np.mean(np.log(SKIN_TARGET / SKIN_SOURCE)))
+    want = TEETH * grey
+    assert np.abs(teeth - want).max() < 6, (teeth, want)
+    np.testing.assert_allclose(teeth / teeth.sum(), TEETH / TEETH.sum(), atol=0.006)
+    # the lips (the mouth's triangles outside the fan) take the skins' ratio per channel
+    lips = np.isin(r.tri_id, topo.mouth_faces) & (r.tri_id < nF)
+    lips = cv2.erode(lips.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert lips.sum() > 30
+    lip = out.image[lips].astype(float).mean(axis=0)
+    assert np.abs(lip - LIPSTICK * SKIN_TARGET / SKIN_SOURCE).max() < 8, lip
     # the skin around the mouth is the target's
     ring = np.isin(r.tri_id, np.flatnonzero(mouth_ring_faces(topo)))
     ring = cv2.erode(ring.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0

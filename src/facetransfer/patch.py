@@ -83,14 +83,16 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 
 def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
                         reject_where, origin: tuple[int, int] = (0, 0),
-                        gain_range: tuple[float, float] = GAIN_RANGE) -> None:
+                        gain_range: tuple[float, float] = GAIN_RANGE,
+                        grey_where: np.ndarray | None = None) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
     the region's pixels are written; ``gain_range``: the gains' clip (default
     :data:`GAIN_RANGE`). ``origin``: the position ``(x, y)`` of these arrays'
     top-left pixel in the image whose coordinates the gain fit takes (a crop of it whose
     border lies at least 2 pixels beyond ``mask`` and ``compare`` gives that image's
-    pixels)."""
+    pixels). ``grey_where`` (H, W) bool: pixels scaled by one gain for the three channels (the
+    geometric mean of the channels' gains, :func:`_grey`), which keeps their hue."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
@@ -104,6 +106,10 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
                                origin=(rbox[0], rbox[1]), shift=origin)
         f = np.empty(pb.shape, np.float32)
         _apply_gain(pb, gy, gx, *gain_range, f)
+        if grey_where is not None and grey_where[box].any():
+            g = np.empty(pb.shape, np.float32)
+            _apply_gain(pb, _grey(gy), _grey(gx), *gain_range, g)
+            np.copyto(f, g, where=grey_where[box][..., None])
     else:
         f = pb.astype(np.float32)
     # the distance to the nearest pixel outside the region (the box's edge counts as outside:
@@ -115,6 +121,12 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
         _reject_fade(_rejection_blur(f, fb, reject), where, a)
     _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
+
+
+def _grey(g: np.ndarray) -> np.ndarray:
+    """Per-channel gain factors (n, 3) as one factor for all three: the geometric mean of each
+    row, so the gain's product over rows and columns is the mean of the channels' log gains."""
+    return np.repeat(np.exp(np.log(g).mean(axis=1, keepdims=True)), 3, axis=1)
 
 
 def _ring(compare: np.ndarray, face_mask: np.ndarray):

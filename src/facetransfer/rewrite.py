@@ -279,7 +279,7 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
         if mouth_img is not None and mouth_mask.any():
             # the source's mouth first takes the colours of the face around it (a gain)
             face = _blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region, ring,
-                                mouth_feather)
+                                mouth_feather, _inside_mouth(raster.tri_id, topo))
         out = membrane_blend(T, face, region, feather=feather)
     else:
         # The guidance field on the region's outline is the source's difference across it, so
@@ -297,16 +297,37 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
                         mouth_mask)
 
 
+def _inside_mouth(tri_id: np.ndarray, topo: MeshTopology) -> np.ndarray | None:
+    """(H, W) bool: the pixels of the mouth-closing fan (the mouth's inside: teeth, tongue, the
+    dark cavity, which the lips' warp puts there, :mod:`facetransfer.lips`); None without a
+    fan. The fan follows the model's faces in ``topo.faces`` (:func:`mesh_topology`)."""
+    k = int(topo.mouth_loop.size)
+    if not k:
+        return None
+    f0 = _fan_start(topo)
+    return (tri_id >= f0) & (tri_id < f0 + k)
+
+
+def _fan_start(topo: MeshTopology) -> int:
+    """Index in ``topo.faces`` of the mouth fan's first triangle (its third vertex is the
+    closed mesh's centre vertex ``topo.n_vertices``)."""
+    return int(np.argmax(topo.faces[:, 2] == topo.n_vertices))
+
+
 def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
                  mouth_img: np.ndarray, mask: np.ndarray, ring: np.ndarray | None,
-                 feather: float) -> np.ndarray:
+                 feather: float, inside: np.ndarray | None = None) -> np.ndarray:
     """``face_img`` with the source's mouth pasted where ``mask`` (H, W) bool, scaled per
     channel by the smooth gain of the face's colours over the source's on ``ring`` (H, W) bool,
     the skin around the mouth (:func:`facetransfer.patch.match_outline`, no rejection: the
     mouth is the source's wherever it differs), its outline feathered over ``feather`` pixels;
-    written into ``face_img`` in place, on the box of the mouth and its ring. Without a ring
-    (the §6 texture function's mouth, which has no skin around it) or with fewer than 8 of its
-    pixels in sight: :func:`_membrane_mouth`."""
+    written into ``face_img`` in place, on the box of the mouth and its ring. The mouth's
+    inside (``inside`` (H, W) bool, :func:`_inside_mouth`) takes one gain for the three channels
+    instead: the ratio of two people's skin carries their skin tones as well as the two videos'
+    light, and per channel it tinted the teeth (green-white on ``make demo``'s pair, whose
+    target's skin is yellower than the source's), where the lips and the skin they bring along
+    take the target's hue. Without a ring (the §6 texture function's mouth, which has no skin
+    around it) or with fewer than 8 of its pixels in sight: :func:`_membrane_mouth`."""
     sl = mask_box(mask if ring is None else mask | ring, 2)
     if sl is None:
         return face_img
@@ -316,7 +337,8 @@ def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
         return _membrane_mouth(T, face_img, face_mask, mouth_img, mask, feather)
     _match_outline_into(face_img[sl], mouth_img[sl], m, fm, face_img[sl], feather=feather,
                         compare=compare, reject=None, reject_where=None,
-                        origin=(sl[1].start, sl[0].start), gain_range=MOUTH_GAIN_RANGE)
+                        origin=(sl[1].start, sl[0].start), gain_range=MOUTH_GAIN_RANGE,
+                        grey_where=None if inside is None else inside[sl])
     return face_img
 
 
