@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from facetransfer import jaw
-from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.render import rasterize
 from facetransfer.rewrite import rewrite_frame
 from facetransfer.rewrite_options import RewriteOptions
@@ -14,6 +14,8 @@ from facetransfer.errors import RewriteError
 from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology
 from facetransfer.track.result import Track
+
+from conftest import jaw_open_track
 
 SIZE = 256
 SKIN, SHADOW = (200, 150, 120), (150, 105, 85)  # a shadow 1.3-1.45x darker than SKIN_LIT
@@ -28,18 +30,7 @@ def setup(arkit_model):
 
 def _track(model, jaw_open) -> Track:
     """A frontal track of ``model``'s mean person with the given jawOpen per frame."""
-    a = np.zeros((len(jaw_open), 52), np.float32)
-    a[:, ARKIT_NAMES.index("jawOpen")] = jaw_open
-    F = a.shape[0]
-    k = model.mode_index("identity")
-    return Track(fps=25.0, frame_size=(SIZE, SIZE), rotation=np.tile(np.eye(3), (F, 1, 1)),
-                 scale=np.full(F, 20.0), translation=np.tile([SIZE / 2, SIZE / 2 - 40.0], (F, 1)),
-                 weights={"identity": np.tile(model.weight_mean(k), (F, 1)),
-                          "expression": activations_to_weights(model, a)},
-                 landmarks2d=np.zeros((F, 68, 2)), confidence=np.ones(F),
-                 lost=np.zeros(F, bool), model_hash=model.content_hash,
-                 mode_names=model.mode_names, source="synthetic.mp4",
-                 blendshapes=a, blendshape_names=ARKIT_NAMES)
+    return jaw_open_track(model, jaw_open, size=SIZE)
 
 
 def _region_pixels(model, topo, track, i: int, select: np.ndarray) -> np.ndarray:

@@ -8,7 +8,6 @@ import numpy as np
 import pytest
 
 from facetransfer import lips
-from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.errors import ShapeError, TrackError
 from facetransfer.rewrite import _ClipRenderer
 from facetransfer.rewrite_options import RewriteOptions
@@ -17,6 +16,8 @@ from facetransfer.topology import close_mouth, mesh_topology
 from facetransfer.track.project import project_landmarks, take_frames
 from facetransfer.track.result import Track
 from facetransfer.transfer import resample_track, time_map
+
+from conftest import jaw_open_track
 
 SIZE = 256
 LIPS = list(lips.LIP_POINTS)
@@ -30,20 +31,8 @@ def setup(arkit_model):
 def _track(model, jaw_open, *, scale=20.0, rotation=None) -> Track:
     """A track of ``model``'s mean person with the given jawOpen per frame, its landmarks
     projected (Eq. (7))."""
-    a = np.zeros((len(jaw_open), 52), np.float32)
-    a[:, ARKIT_NAMES.index("jawOpen")] = jaw_open
-    F = a.shape[0]
-    k = model.mode_index("identity")
-    R = np.tile(np.eye(3) if rotation is None else rotation, (F, 1, 1))
-    tr = Track(fps=25.0, frame_size=(SIZE, SIZE), rotation=R, scale=np.full(F, scale),
-               translation=np.tile([SIZE / 2, SIZE / 2 - 40.0], (F, 1)),
-               weights={"identity": np.tile(model.weight_mean(k), (F, 1)),
-                        "expression": activations_to_weights(model, a)},
-               landmarks2d=np.zeros((F, 68, 2)), confidence=np.ones(F),
-               lost=np.zeros(F, bool), model_hash=model.content_hash,
-               mode_names=model.mode_names, source="synthetic.mp4",
-               blendshapes=a, blendshape_names=ARKIT_NAMES)
-    return project_landmarks(tr, model)
+    return project_landmarks(jaw_open_track(model, jaw_open, size=SIZE, scale=scale,
+                                            rotation=rotation), model)
 
 
 # --- the spline --------------------------------------------------------------------------------
