@@ -9,7 +9,8 @@ import pytest
 
 from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.render import rasterize
-from facetransfer.rewrite import mouth_ring_faces, rewrite_frame
+from facetransfer.mouth import mouth_ring_faces
+from facetransfer.rewrite import rewrite_frame
 from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology
 from facetransfer.render.cameras import WeakPerspective
@@ -39,7 +40,7 @@ def scene(arkit_model):
 def _source_frame(topo, V, cam, n_model_faces: int) -> np.ndarray:
     """The source: pale skin, the mouth's own triangles painted with lipstick, its gap teeth."""
     r = rasterize(V, topo.faces, cam, (SIZE, SIZE))
-    img = np.empty((SIZE, SIZE, 3)) + SKIN_SOURCE
+    img = np.tile(SKIN_SOURCE, (SIZE, SIZE, 1))
     mouth = np.isin(r.tri_id, topo.mouth_faces)
     img[mouth] = LIPSTICK
     img[r.tri_id >= n_model_faces] = TEETH            # the closing fan: the mouth's inside

@@ -9,6 +9,7 @@ import pytest
 
 from facetransfer import rewrite as rw
 from facetransfer import composite
+from facetransfer import mouth
 from facetransfer.texture import face as ftex
 from facetransfer.track import obtain
 from facetransfer import rewrite_options as rwo
@@ -151,11 +152,11 @@ def test_membrane_mouth_equals_the_membrane_on_the_whole_crop_inside_the_face():
     for box in ((slice(50, 70), slice(40, 80)), (slice(78, 85), slice(5, 30))):
         mask = np.zeros((H, W), bool)
         mask[box] = True
-        want = composite.membrane_blend(rw._over(T, face_img, face_mask), mouth_img, mask,
+        want = composite.membrane_blend(composite.over(T, face_img, face_mask), mouth_img, mask,
                                         feather=3.0, outlier=None)
-        got = rw._membrane_mouth(T, face_img.copy(), face_mask, mouth_img, mask, 3.0)
+        got = mouth._membrane_mouth(T, face_img.copy(), face_mask, mouth_img, mask, 3.0)
         np.testing.assert_array_equal(got[face_mask], want[face_mask])
-        got = rw._blend_mouth(T, face_img.copy(), face_mask, mouth_img, mask, None, 3.0)
+        got = mouth.blend_mouth(T, face_img.copy(), face_mask, mouth_img, mask, None, 3.0)
         np.testing.assert_array_equal(got[face_mask], want[face_mask])
         assert (got[mask] != face_img[mask]).any()
 

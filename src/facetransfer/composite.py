@@ -48,6 +48,7 @@ __all__ = [
     "membrane_blend",
     "membrane_crop",
     "mask_box",
+    "over",
     "MEMBRANE_MARGIN",
 ]
 
@@ -512,6 +513,14 @@ _FOUR_NEIGHBOURS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.fl
 
 #: Pixels around the region's bounding box in :func:`membrane_blend`'s working crop.
 MEMBRANE_MARGIN = 8
+
+
+def over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """``top`` (H, W, 3) where ``mask`` (H, W) bool, ``base`` (H, W, 3) elsewhere: a new array
+    (``np.where(mask[..., None], top, base)``, in one masked copy)."""
+    out = np.array(base, copy=True, order="C")
+    cv2.copyTo(np.ascontiguousarray(top), np.ascontiguousarray(mask).view(np.uint8), out)
+    return out
 
 
 def mask_box(mask: np.ndarray, margin: int) -> tuple[slice, slice] | None:

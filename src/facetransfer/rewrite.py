@@ -16,7 +16,7 @@ For every frame of the target video (§6, Fig. 7C–7E):
    neighbour being the source's own frame, read where the source's lips were detected and the
    new lips moved by the fit's residual there, :mod:`facetransfer.lips`; or the texture
    function of §6, :mod:`facetransfer.texture.face`), scaled to the face's colours by a gain
-   fitted on the skin around it (:func:`rewrite_frame`'s ``mouth_feather``);
+   fitted on the skin around it (:mod:`facetransfer.mouth`);
 4. the rendered face is blended into the target frame in the gradient domain (Pérez et al.
    2003): ``blend="poisson"`` solves the Poisson equation exactly
    (:func:`facetransfer.composite.composite_face`); ``"fast"`` (default, ~5x faster) adds a
@@ -50,13 +50,12 @@ from typing import Callable, Iterator
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
-from .composite import (_erode, _extend, composite_face, mask_box, membrane_blend,
-                        membrane_crop)
+from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
-from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture, region_faces
+from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
 from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
-from .patch import _match_outline_into
 from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
+from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
@@ -68,18 +67,11 @@ from .topology import MeshTopology, close_mouth, mesh_topology
 
 log = logging.getLogger(__name__)
 
-#: Rings of triangles around the mouth over which its gain is fitted (:func:`mouth_ring_faces`).
-MOUTH_RING = 3
-#: Per-channel gains allowed between the source's skin and the target's around the mouth: two
-#: people under two lights differ more than one person's frames
-#: (:data:`facetransfer.patch.GAIN_RANGE`, 0.7-1.4).
-MOUTH_GAIN_RANGE = (0.4, 2.5)
 
 __all__ = [
     "RewriteFrame",
     "rewrite_frame",
     "rewrite_frames",
-    "mouth_ring_faces",
 ]
 
 
@@ -156,7 +148,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         from ``face_texture`` like the rest of the face.
     mouth_ring : (F',) bool, optional
         The triangles around the mouth whose colours in the source's frame and in the face
-        set the mouth's gain; default :func:`mouth_ring_faces` of ``topo``.
+        set the mouth's gain; default :func:`facetransfer.mouth.mouth_ring_faces` of ``topo``.
 
     Returns
     -------
@@ -263,7 +255,7 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(
         raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring)
-    rendered = face_img if mouth_img is None else _over(face_img, mouth_img, mouth_mask)
+    rendered = face_img if mouth_img is None else over(face_img, mouth_img, mouth_mask)
     if not face_mask.any():
         return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask)
     # The blend region stays ``erode`` pixels inside the rendered silhouette, so its outline
@@ -273,13 +265,13 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     if not region.any():
         region = face_mask
     if blend == "none":
-        out = _over(T, rendered, region)
+        out = over(T, rendered, region)
     elif blend == "fast":
         face = rendered
         if mouth_img is not None and mouth_mask.any():
             # the source's mouth first takes the colours of the face around it (a gain)
-            face = _blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region, ring,
-                                mouth_feather, _inside_mouth(raster.tri_id, topo))
+            face = blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region, ring,
+                               mouth_feather, inside_mouth(raster.tri_id, topo))
         out = membrane_blend(T, face, region, feather=feather)
     else:
         # The guidance field on the region's outline is the source's difference across it, so
@@ -295,88 +287,6 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
                                  feather=feather)
     return RewriteFrame(np.ascontiguousarray(out, dtype=np.uint8), rendered, face_mask,
                         mouth_mask)
-
-
-def _inside_mouth(tri_id: np.ndarray, topo: MeshTopology) -> np.ndarray | None:
-    """(H, W) bool: the pixels of the mouth-closing fan (the mouth's inside: teeth, tongue, the
-    dark cavity, which the lips' warp puts there, :mod:`facetransfer.lips`); None without a
-    fan. The fan follows the model's faces in ``topo.faces`` (:func:`mesh_topology`)."""
-    k = int(topo.mouth_loop.size)
-    if not k:
-        return None
-    f0 = _fan_start(topo)
-    return (tri_id >= f0) & (tri_id < f0 + k)
-
-
-def _fan_start(topo: MeshTopology) -> int:
-    """Index in ``topo.faces`` of the mouth fan's first triangle (its third vertex is the
-    closed mesh's centre vertex ``topo.n_vertices``)."""
-    return int(np.argmax(topo.faces[:, 2] == topo.n_vertices))
-
-
-def _blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
-                 mouth_img: np.ndarray, mask: np.ndarray, ring: np.ndarray | None,
-                 feather: float, inside: np.ndarray | None = None) -> np.ndarray:
-    """``face_img`` with the source's mouth pasted where ``mask`` (H, W) bool, scaled per
-    channel by the smooth gain of the face's colours over the source's on ``ring`` (H, W) bool,
-    the skin around the mouth (:func:`facetransfer.patch.match_outline`, no rejection: the
-    mouth is the source's wherever it differs), its outline feathered over ``feather`` pixels;
-    written into ``face_img`` in place, on the box of the mouth and its ring. The mouth's
-    inside (``inside`` (H, W) bool, :func:`_inside_mouth`) takes one gain for the three channels
-    instead: the ratio of two people's skin carries their skin tones as well as the two videos'
-    light, and per channel it tinted the teeth (green-white on ``make demo``'s pair, whose
-    target's skin is yellower than the source's), where the lips and the skin they bring along
-    take the target's hue. Without a ring (the §6 texture function's mouth, which has no skin
-    around it) or with fewer than 8 of its pixels in sight: :func:`_membrane_mouth`."""
-    sl = mask_box(mask if ring is None else mask | ring, 2)
-    if sl is None:
-        return face_img
-    m, fm = mask[sl], face_mask[sl]
-    compare = None if ring is None else ring[sl] & fm
-    if compare is None or np.count_nonzero(compare) < 8:
-        return _membrane_mouth(T, face_img, face_mask, mouth_img, mask, feather)
-    _match_outline_into(face_img[sl], mouth_img[sl], m, fm, face_img[sl], feather=feather,
-                        compare=compare, reject=None, reject_where=None,
-                        origin=(sl[1].start, sl[0].start), gain_range=MOUTH_GAIN_RANGE,
-                        grey_where=None if inside is None else inside[sl])
-    return face_img
-
-
-def _membrane_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
-                    mouth_img: np.ndarray, mask: np.ndarray, feather: float) -> np.ndarray:
-    """``face_img`` with the source's mouth blended in where ``mask`` (H, W) bool: the pixels
-    of ``membrane_blend(_over(T, face_img, face_mask), mouth_img, mask, outlier=None)`` inside
-    the face (every outline pixel counts: skin tones of two people are expected to differ),
-    computed on the crop that blend works on and written into ``face_img`` in place."""
-    sub = membrane_crop(mask)
-    if sub is None:
-        return face_img
-    base = _over(T[sub], face_img[sub], face_mask[sub])
-    face_img[sub] = membrane_blend(base, mouth_img[sub], mask[sub], feather=feather,
-                                   outlier=None)
-    return face_img
-
-
-def mouth_ring_faces(topo: MeshTopology, *, rings: int = MOUTH_RING) -> np.ndarray:
-    """The ``rings`` rings of triangles around ``topo.mouth_faces`` (not those), ``(F',) bool``:
-    the skin whose colours in the source's frame and in the face set the mouth's gain."""
-    sel = np.zeros(len(topo.faces), bool)
-    sel[np.asarray(topo.mouth_faces, np.int64)] = True
-    if not sel.any():
-        return sel
-    inner = np.zeros(int(np.max(topo.faces)) + 1, bool)
-    inner[topo.faces[sel].ravel()] = True
-    return region_faces(topo.faces, inner, rings=rings) & ~sel
-
-
-def _over(base: np.ndarray, top: np.ndarray, mask: np.ndarray) -> np.ndarray:
-    """``top`` (H, W, 3) where ``mask`` (H, W) bool, ``base`` (H, W, 3) elsewhere: a new array
-    (``np.where(mask[..., None], top, base)``, in one masked copy)."""
-    import cv2
-
-    out = np.array(base, copy=True, order="C")
-    cv2.copyTo(np.ascontiguousarray(top), np.ascontiguousarray(mask).view(np.uint8), out)
-    return out
 
 
 #: The layers of one frame's shading (bits of :func:`facetransfer.render.shade_layers`' flags):
@@ -693,7 +603,7 @@ class _ClipRenderer:
         The source's residual at the lips (``lips="residual"`` with the source's frames and
         a track with detections, :mod:`facetransfer.lips`).
     ring : (F',) bool or None
-        :func:`mouth_ring_faces` of ``topo``, when the mouth is textured.
+        :func:`facetransfer.mouth.mouth_ring_faces` of ``topo``, when the mouth is textured.
     """
 
     target_frames: object

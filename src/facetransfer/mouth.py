@@ -1,0 +1,107 @@
+"""The source's mouth in a rewritten face (§6, Fig. 7D): the skin around it, its inside, and the
+colours it takes.
+
+The rewrite (:mod:`facetransfer.rewrite`) textures the mouth's triangles from the mouth's source
+(the source frame, or the texture function of §6) and pastes them into the new face. Two
+people's skin and two videos' light differ there, so the pasted mouth is first scaled to the
+face's colours by a smooth gain (:func:`facetransfer.patch.match_outline`) fitted on a few rings
+of skin triangles around it (:func:`mouth_ring_faces`), seen in both the source's frame and the
+face: per channel on the lips and the skin they bring along, one gain for the three channels on
+the mouth's inside (:func:`inside_mouth`, the teeth and tongue), whose hue is the source's own.
+Where no skin around the mouth is seen (the texture function's mouth) an offset pinned at the
+mouth's outline (a membrane, :func:`facetransfer.composite.membrane_blend`) does it instead.
+
+References
+----------
+Vlasic et al. 2005, §6 (the mouth from the source video); Pérez et al. 2003 (the membrane).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .composite import mask_box, membrane_blend, membrane_crop, over
+from .eyes import region_faces
+from .patch import _match_outline_into
+from .topology import MeshTopology
+
+__all__ = ["MOUTH_RING", "MOUTH_GAIN_RANGE", "mouth_ring_faces", "inside_mouth", "blend_mouth"]
+
+#: Rings of triangles around the mouth over which its gain is fitted (:func:`mouth_ring_faces`).
+MOUTH_RING = 3
+#: Per-channel gains allowed between the source's skin and the target's around the mouth: two
+#: people under two lights differ more than one person's frames
+#: (:data:`facetransfer.patch.GAIN_RANGE`, 0.7-1.4).
+MOUTH_GAIN_RANGE = (0.4, 2.5)
+
+
+def inside_mouth(tri_id: np.ndarray, topo: MeshTopology) -> np.ndarray | None:
+    """(H, W) bool: the pixels of the mouth-closing fan (the mouth's inside: teeth, tongue, the
+    dark cavity, which the lips' warp puts there, :mod:`facetransfer.lips`); None without a
+    fan. The fan follows the model's faces in ``topo.faces`` (:func:`mesh_topology`)."""
+    k = int(topo.mouth_loop.size)
+    if not k:
+        return None
+    f0 = _fan_start(topo)
+    return (tri_id >= f0) & (tri_id < f0 + k)
+
+
+def _fan_start(topo: MeshTopology) -> int:
+    """Index in ``topo.faces`` of the mouth fan's first triangle (its third vertex is the
+    closed mesh's centre vertex ``topo.n_vertices``)."""
+    return int(np.argmax(topo.faces[:, 2] == topo.n_vertices))
+
+
+def blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
+                 mouth_img: np.ndarray, mask: np.ndarray, ring: np.ndarray | None,
+                 feather: float, inside: np.ndarray | None = None) -> np.ndarray:
+    """``face_img`` with the source's mouth pasted where ``mask`` (H, W) bool, scaled per
+    channel by the smooth gain of the face's colours over the source's on ``ring`` (H, W) bool,
+    the skin around the mouth (:func:`facetransfer.patch.match_outline`, no rejection: the
+    mouth is the source's wherever it differs), its outline feathered over ``feather`` pixels;
+    written into ``face_img`` in place, on the box of the mouth and its ring. The mouth's
+    inside (``inside`` (H, W) bool, :func:`inside_mouth`) takes one gain for the three channels
+    instead: the ratio of two people's skin carries their skin tones as well as the two videos'
+    light, and per channel it tinted the teeth (green-white on ``make demo``'s pair, whose
+    target's skin is yellower than the source's), where the lips and the skin they bring along
+    take the target's hue. Without a ring (the §6 texture function's mouth, which has no skin
+    around it) or with fewer than 8 of its pixels in sight: :func:`_membrane_mouth`."""
+    sl = mask_box(mask if ring is None else mask | ring, 2)
+    if sl is None:
+        return face_img
+    m, fm = mask[sl], face_mask[sl]
+    compare = None if ring is None else ring[sl] & fm
+    if compare is None or np.count_nonzero(compare) < 8:
+        return _membrane_mouth(T, face_img, face_mask, mouth_img, mask, feather)
+    _match_outline_into(face_img[sl], mouth_img[sl], m, fm, face_img[sl], feather=feather,
+                        compare=compare, reject=None, reject_where=None,
+                        origin=(sl[1].start, sl[0].start), gain_range=MOUTH_GAIN_RANGE,
+                        grey_where=None if inside is None else inside[sl])
+    return face_img
+
+
+def _membrane_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
+                    mouth_img: np.ndarray, mask: np.ndarray, feather: float) -> np.ndarray:
+    """``face_img`` with the source's mouth blended in where ``mask`` (H, W) bool: the pixels
+    of ``membrane_blend(over(T, face_img, face_mask), mouth_img, mask, outlier=None)`` inside
+    the face (every outline pixel counts: skin tones of two people are expected to differ),
+    computed on the crop that blend works on and written into ``face_img`` in place."""
+    sub = membrane_crop(mask)
+    if sub is None:
+        return face_img
+    base = over(T[sub], face_img[sub], face_mask[sub])
+    face_img[sub] = membrane_blend(base, mouth_img[sub], mask[sub], feather=feather,
+                                   outlier=None)
+    return face_img
+
+
+def mouth_ring_faces(topo: MeshTopology, *, rings: int = MOUTH_RING) -> np.ndarray:
+    """The ``rings`` rings of triangles around ``topo.mouth_faces`` (not those), ``(F',) bool``:
+    the skin whose colours in the source's frame and in the face set the mouth's gain."""
+    sel = np.zeros(len(topo.faces), bool)
+    sel[np.asarray(topo.mouth_faces, np.int64)] = True
+    if not sel.any():
+        return sel
+    inner = np.zeros(int(np.max(topo.faces)) + 1, bool)
+    inner[topo.faces[sel].ravel()] = True
+    return region_faces(topo.faces, inner, rings=rings) & ~sel
