@@ -52,6 +52,21 @@ def test_tps_interpolates_its_control_points_and_reproduces_affine_maps():
     assert np.allclose(Ms @ (C @ A + b), C @ A + b, atol=1e-9)
 
 
+@pytest.mark.parametrize("smoothing", [0.0, 1e-3, 0.1])
+def test_tps_is_scipys_thin_plate_spline(smoothing):
+    """The reference: SciPy's RBFInterpolator with the thin-plate kernel ``r² log r`` and a linear
+    polynomial, fitted to the identity's columns; its kernel is half of ours (``r² log r²``), so
+    its smoothing is half of ours."""
+    from scipy.interpolate import RBFInterpolator
+
+    rng = np.random.default_rng(5)
+    C = rng.uniform(-1, 1, (20, 2))
+    X = rng.uniform(-1.5, 1.5, (300, 2))
+    want = RBFInterpolator(C, np.eye(20), kernel="thin_plate_spline", smoothing=smoothing / 2,
+                           degree=1)(X)
+    np.testing.assert_allclose(lips.tps_influence(C, X, smoothing=smoothing), want, atol=1e-10)
+
+
 @pytest.mark.parametrize("control, points", [(np.zeros((2, 2)), np.zeros((4, 2))),
                                              (np.zeros((5, 3)), np.zeros((4, 2))),
                                              (np.zeros((5, 2)), np.zeros(4))])
