@@ -36,25 +36,18 @@ MOUTH_GAIN_RANGE = (0.4, 2.5)
 
 
 def inside_mouth(tri_id: np.ndarray, topo: MeshTopology) -> np.ndarray | None:
-    """(H, W) bool: the pixels of the mouth-closing fan (the mouth's inside: teeth, tongue, the
-    dark cavity, which the lips' warp puts there, :mod:`facetransfer.lips`); None without a
-    fan. The fan follows the model's faces in ``topo.faces`` (:func:`mesh_topology`)."""
-    k = int(topo.mouth_loop.size)
-    if not k:
+    """(H, W) bool: the pixels of the mouth-closing fan (:attr:`MeshTopology.mouth_fan`: the
+    mouth's inside, teeth, tongue and the dark cavity, which the lips' warp puts there,
+    :mod:`facetransfer.lips`); None without a fan."""
+    fan = topo.mouth_fan
+    if fan.stop == fan.start:
         return None
-    f0 = _fan_start(topo)
-    return (tri_id >= f0) & (tri_id < f0 + k)
-
-
-def _fan_start(topo: MeshTopology) -> int:
-    """Index in ``topo.faces`` of the mouth fan's first triangle (its third vertex is the
-    closed mesh's centre vertex ``topo.n_vertices``)."""
-    return int(np.argmax(topo.faces[:, 2] == topo.n_vertices))
+    return (tri_id >= fan.start) & (tri_id < fan.stop)
 
 
 def blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
-                 mouth_img: np.ndarray, mask: np.ndarray, ring: np.ndarray | None,
-                 feather: float, inside: np.ndarray | None = None) -> np.ndarray:
+                mouth_img: np.ndarray, mask: np.ndarray, ring: np.ndarray | None,
+                feather: float, inside: np.ndarray | None = None) -> np.ndarray:
     """``face_img`` with the source's mouth pasted where ``mask`` (H, W) bool, scaled per
     channel by the smooth gain of the face's colours over the source's on ``ring`` (H, W) bool,
     the skin around the mouth (:func:`facetransfer.patch.match_outline`, no rejection: the

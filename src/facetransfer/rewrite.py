@@ -67,7 +67,6 @@ from .topology import MeshTopology, close_mouth, mesh_topology
 
 log = logging.getLogger(__name__)
 
-
 __all__ = [
     "RewriteFrame",
     "rewrite_frame",
@@ -131,12 +130,9 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         The blend region is the rendered face mask eroded by this many pixels.
     mouth_feather : float
         Soft-edge width in pixels of the source's mouth inside the face (``blend="fast"``).
-        There the mouth is scaled per channel to the face's colours by a smooth gain fitted on
-        the skin around it (:func:`facetransfer.patch.match_outline` over ``mouth_ring``): the
-        two people's skin tones and the two videos' light differ, and a gain carries that
-        difference into the teeth and the mouth's inside without tinting them, where an offset
-        pinned at the lips' outline (a membrane) turned the teeth green or white-hot when the
-        source's lips are painted (issue 13).
+        There the mouth takes the face's colours by a smooth gain fitted on the skin around it
+        (``mouth_ring``; :func:`facetransfer.mouth.blend_mouth`: per channel on the lips, one
+        gain for the three channels on the mouth's inside).
     color_match : bool
         Match the rendered face's colour statistics to the target's before the Poisson blend.
     eye_texture : EyeTexture, optional

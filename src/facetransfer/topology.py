@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -83,6 +84,15 @@ class MeshTopology:
     def n_closed(self) -> int:
         """Vertices of the closed mesh."""
         return self.n_vertices + (1 if self.mouth_loop.size else 0)
+
+    @cached_property
+    def mouth_fan(self) -> slice:
+        """The mouth-closing fan's rows of ``faces``: ``mouth_loop.size`` triangles from the
+        first one with the closed mesh's centre vertex ``n_vertices`` (empty without a mouth
+        gap). Triangles appended later (the eyes' fill) come after it."""
+        k = int(self.mouth_loop.size)
+        f0 = int(np.argmax(self.faces[:, 2] == self.n_vertices)) if k else 0
+        return slice(f0, f0 + k)
 
 
 def mesh_topology(model, *, mouth_rings: int = 1, lips: bool = True) -> MeshTopology:

@@ -210,8 +210,7 @@ def resample_track(track, tmap: TimeMap):
         # an observation of a frame, not interpolated: the nearest frame's (whose image a
         # resampled mouth is textured from, video_transfer's ``mouth_index``)
         detections2d=(None if track.detections2d is None else
-                      track.detections2d[np.minimum(np.floor(t + 0.5).astype(np.int64),
-                                                    track.n_frames - 1)]),
+                      track.detections2d[np.minimum(tmap.nearest, track.n_frames - 1)]),
         info={},
     )
 
