@@ -83,7 +83,8 @@ def worker(tracks: Path, frames: int, parity: int, save: Path) -> dict:
 
 def run(src: Path, tracks: Path, frames: int, parity: int, save: Path) -> dict:
     """:func:`worker` in a fresh process with ``src`` first on its path."""
-    env = dict(os.environ, PYTHONPATH=str(src))
+    # OpenBLAS on one thread, as the commands that render run it (facetransfer.cli.main.serial_blas)
+    env = dict(os.environ, PYTHONPATH=str(src), OPENBLAS_NUM_THREADS="1")
     out = subprocess.run([sys.executable, __file__, "--worker", "--tracks", str(tracks),
                           "--frames", str(frames), "--parity-frames", str(parity),
                           "--save", str(save)], env=env, check=True, capture_output=True,

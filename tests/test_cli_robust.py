@@ -126,3 +126,39 @@ def test_native_log_lines_are_filtered_from_stderr():
     assert "\rbar 50%facetransfer x: error: the tool's own line\n" in err
     assert err.count("\n\n") == 1  # the blank line (through the filter, so maybe later)
     assert "a fatal native error" in err and err.endswith("after\n")
+
+
+# ------------------------------------------------------------------------------ native threads
+def test_serial_blas_only_for_the_commands_that_run_their_own_parallel_work():
+    from facetransfer.cli.main import SERIAL_BLAS_COMMANDS, serial_blas
+
+    for argv in (["transfer", "--target", "t.mp4"], ["-v", "track", "v.mp4"], ["demo"]):
+        env = {}
+        assert serial_blas(argv, env) and env == {"OPENBLAS_NUM_THREADS": "1"}
+    env = {"OPENBLAS_NUM_THREADS": "2"}  # the user's choice is kept
+    assert serial_blas(["puppet", "x"], env) and env["OPENBLAS_NUM_THREADS"] == "2"
+    for argv in (["model", "build", "ict-arkit"], ["--help"], []):
+        env = {}
+        assert not serial_blas(argv, env) and env == {}
+    assert {"track", "transfer", "puppet", "demo", "edit"} == SERIAL_BLAS_COMMANDS
+
+
+def test_console_script_sets_serial_blas_before_numpy_loads_openblas():
+    """main() without argv (the console script) sets the variable before anything imports
+    NumPy, whose OpenBLAS reads it once, when it loads."""
+    code = textwrap.dedent(f"""
+        import os, sys
+        sys.path.insert(0, {SRC!r})
+        os.environ.pop("OPENBLAS_NUM_THREADS", None)
+        sys.argv = ["facetransfer", "transfer", "--help"]
+        from facetransfer.cli.main import main
+        assert "numpy" not in sys.modules
+        try:
+            main()
+        except SystemExit:
+            pass
+        print(os.environ.get("OPENBLAS_NUM_THREADS"), "numpy" in sys.modules)
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.split()[-2:] == ["1", "True"]

@@ -180,26 +180,40 @@ def test_crop_of_and_paste_round_trip(synthetic):
     np.testing.assert_array_equal(rw._paste(T, None).image, T)
 
 
-def test_frame_meshes_are_the_clip_meshes_frame_contiguous():
-    """_FrameMeshes serves every frame of a clip's product (frame axis fastest) as a
-    C-contiguous copy of the same values, across chunks and on another thread."""
+def test_frame_meshes_are_the_clip_meshes_a_chunk_at_a_time(quick_model):
+    """_FrameMeshes serves every frame of a track as model.synthesize of that frame, C-contiguous,
+    across chunks, on another thread, and for a track whose identity changes (synthesised
+    whole); it never holds a clip-sized array for a track with one identity."""
     import threading
+    from types import SimpleNamespace
 
     rng = np.random.default_rng(3)
-    F, n = 2 * rw._MESH_CHUNK + 3, 11  # the last chunk partial
-    meshes = (rng.normal(size=(3 * n, 4)) @ rng.normal(size=(4, F))).T.reshape(F, n, 3)
-    assert not meshes[0].flags.c_contiguous
-    fm = rw._FrameMeshes({"new": meshes})
-    for i in list(range(F)) + [0, F - 1, 5]:
-        V = fm.frame("new", i)
-        assert V.flags.c_contiguous
-        np.testing.assert_array_equal(V, meshes[i])
+    m = quick_model
+    F = 2 * rw._MESH_CHUNK + 3  # the last chunk partial
+    ident = np.tile(rng.normal(size=m.ranks[0]), (F, 1))
+    expr = rng.normal(size=(F, m.ranks[1]))
+    moving = ident + 0.1 * rng.normal(size=ident.shape)
+    tracks = {kind: SimpleNamespace(weights={"identity": w, "expression": expr},
+                                    mode_names=m.mode_names)
+              for kind, w in (("new", ident), ("target", moving))}
+    fm = rw._FrameMeshes(m, tracks, F)
+    for kind, w in (("new", ident), ("target", moving)):
+        for i in list(range(F)) + [0, F - 1, 5]:
+            V = fm.frame(kind, i)
+            assert V.flags.c_contiguous and V.shape == (m.n_vertices, 3)
+            np.testing.assert_allclose(V, m.synthesize({"identity": w[i], "expression": expr[i]}),
+                                       rtol=0, atol=1e-12)
+    held = fm._local.chunks
+    fm.frame("new", F - 1)
+    assert held["new"][0] == F - 3 and len(held["new"][1]) == 3  # the last chunk, partial
+    assert len(held["target"][1]) == F  # identity moving: the whole clip
     seen = []
     t = threading.Thread(target=lambda: seen.append(fm.frame("new", F - 2).copy()))
     t.start()
     t.join()
-    np.testing.assert_array_equal(seen[0], meshes[F - 2])
-    assert "new" in fm and "target" not in fm
+    np.testing.assert_allclose(seen[0], m.synthesize({"identity": ident[F - 2],
+                                                      "expression": expr[F - 2]}), atol=1e-12)
+    assert "new" in fm and "source" not in fm
 
 
 def test_defaults_agree():

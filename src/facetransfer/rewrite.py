@@ -61,7 +61,6 @@ from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, fr
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
 from .render import shade_layers
-from .render.raster import _maybe_njit
 from .rewrite_options import BLEND_MODES, RewriteOptions, check_mode
 from .topology import MeshTopology, close_mouth, mesh_topology
 
@@ -443,10 +442,6 @@ def _render(one, target_frames, n: int, workers: int | None, processes: bool | N
         yield from _render_in_threads(one, n, workers, progress)
 
 
-#: :func:`rewrite_frames` synthesises all of a clip's meshes up front below this many bytes
-_MESH_CACHE_BYTES = 1 << 30
-
-
 def _check_clip(target_frames, target_track, new_track, source_track, with_mouth: bool
                 ) -> np.ndarray:
     """Frame counts and sizes of a clip to rewrite; returns the first target frame."""
@@ -491,69 +486,55 @@ def _clip_mouth_function(model, topo: MeshTopology, new_track, target_frames, ta
     return mouth_function
 
 
-def _clip_meshes(model, n: int, tracks: dict) -> dict:
-    """Eq. (5) batched for every frame of each track in ``tracks`` (kind -> Track): one matrix
-    product per track, no linear algebra left in the per-frame work that runs in parallel;
-    ``{}`` when the meshes would take more than :data:`_MESH_CACHE_BYTES`."""
-    if n * int(model.n_vertices) * 3 * 8 * len(tracks) > _MESH_CACHE_BYTES:
-        return {}
-    rows = np.arange(n)
-    names = {kind: (model.mode_names if kind == "new" else tr.mode_names)
-             for kind, tr in tracks.items()}
-    return {kind: model.synthesize({m: tr.weights[m][rows] for m in names[kind]})
-            for kind, tr in tracks.items()}
-
-
-#: Frames of a clip's meshes copied out together (:class:`_FrameMeshes`).
-_MESH_CHUNK = 8
+#: Frames of a clip's meshes synthesised together (:class:`_FrameMeshes`).
+_MESH_CHUNK = 16
 
 
 class _FrameMeshes:
-    """A clip's meshes (:func:`_clip_meshes`) frame by frame, from frame-contiguous copies.
+    """A clip's meshes (Eq. 5) frame by frame, synthesised a few frames at a time.
 
-    The clip's meshes of a kind are one product ``(3n, F)`` seen as ``(F, n, 3)``: a frame's
-    mesh is one value in each of ``3n`` rows, a cache line apiece (0.17 ms a mesh to gather,
-    three meshes a frame). Here :data:`_MESH_CHUNK` consecutive frames are copied out at once
-    (each row's values of those frames are adjacent), into a buffer kept per thread and kind;
-    a frame's mesh is a view of it, valid until that thread asks for another chunk of the
-    kind (the render copies it when closing the mouth).
+    Each kind (``"new"``, ``"target"``, ``"source"``: a track) gets its
+    :meth:`~facetransfer.model.MultilinearModel.clip_basis` once, on the first thread that
+    asks (the core contracted with the track's identity, 0.1 s for the default model); then
+    :data:`_MESH_CHUNK` consecutive frames are one product, made by the thread that renders
+    them, into a buffer kept per thread and kind. A frame's mesh is a view of that buffer,
+    valid until the thread asks for another chunk of the kind (the render copies it when
+    closing the mouth). Nothing the size of the clip is held: the clip's meshes up front cost
+    the render's set-up 0.6 s on one core and 200 MB of fresh memory (BENCHMARKS.md,
+    "Fourteenth session"). A track whose identity changes over the clip (more than one mode
+    left) is synthesised whole, once per thread.
     """
 
-    def __init__(self, meshes: dict) -> None:
-        self.meshes = meshes
+    def __init__(self, model, tracks: dict, n: int) -> None:
+        self.model, self.tracks, self.n = model, tracks, n
+        self._bases: dict = {}
+        self._lock = threading.Lock()
         self._local = threading.local()
 
     def __contains__(self, kind: str) -> bool:
-        return kind in self.meshes
+        return kind in self.tracks
 
-    def __getitem__(self, kind: str) -> np.ndarray:
-        return self.meshes[kind]
+    def basis(self, kind: str):
+        """The kind's :class:`~facetransfer.model.ClipBasis` over the first ``n`` frames."""
+        with self._lock:
+            basis = self._bases.get(kind)
+            if basis is None:
+                tr = self.tracks[kind]
+                names = self.model.mode_names if kind == "new" else tr.mode_names
+                basis = self._bases[kind] = self.model.clip_basis(
+                    {m: tr.weights[m][:self.n] for m in names})
+        return basis
 
     def frame(self, kind: str, i: int) -> np.ndarray:
-        """The mesh ``(n, 3)`` float64 of frame ``i`` of ``kind`` (C-contiguous, the same
-        values as ``meshes[kind][i]``)."""
+        """The mesh ``(n_vertices, 3)`` float64 of frame ``i`` of ``kind`` (C-contiguous)."""
         chunks = self._local.__dict__.setdefault("chunks", {})
-        src = self.meshes[kind]
-        i0 = i - i % _MESH_CHUNK
         held = chunks.get(kind)
-        if held is None or held[0] != i0:
-            block = np.empty((_MESH_CHUNK,) + src.shape[1:]) if held is None else held[1]
-            _copy_frames(src, i0, block[:min(_MESH_CHUNK, src.shape[0] - i0)])
-            chunks[kind] = held = (i0, block)
-        return held[1][i - i0]
-
-
-def _copy_frames_py(src, i0, dst):  # pragma: no cover (numba)
-    """``dst[r] = src[i0 + r]`` for the ``len(dst)`` frames of ``src`` (F, n, 3) from
-    ``i0``, reading each vertex coordinate's frames together (they are adjacent in a
-    clip's product)."""
-    for v in range(src.shape[1]):
-        for c in range(3):
-            for r in range(dst.shape[0]):
-                dst[r, v, c] = src[i0 + r, v, c]
-
-
-_copy_frames = _maybe_njit(_copy_frames_py)
+        if held is None or not held[0] <= i < held[0] + len(held[1]):
+            basis = self.basis(kind)
+            k = _MESH_CHUNK if basis.modes_left <= 1 else self.n
+            i0 = i - i % k
+            chunks[kind] = held = (i0, basis.meshes(np.arange(i0, min(i0 + k, self.n))))
+        return held[1][i - held[0]]
 
 
 def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: int,
@@ -593,8 +574,8 @@ class _ClipRenderer:
     jaw_tex : JawTexture or None
         The jaw region's texture (``jaw="closed"`` with the per-frame face texture).
     meshes : _FrameMeshes
-        ``"new"``, ``"target"``, ``"source"`` meshes of every frame synthesised up front
-        (:func:`_clip_meshes`); missing kinds are synthesised per frame.
+        ``"new"``, ``"target"``, ``"source"`` meshes, a few frames at a time; missing kinds
+        are synthesised per frame.
     lips : LipResidual or None
         The source's residual at the lips (``lips="residual"`` with the source's frames and
         a track with detections, :mod:`facetransfer.lips`).
@@ -655,7 +636,7 @@ class _ClipRenderer:
             if with_mouth and opts.lips == "residual" else None
         return cls(target_frames, target_track, new_track, model, opts, topo, first,
                    source_frames, source_track, sidx, const_tex, fn, with_mouth,
-                   _FrameMeshes(_clip_meshes(model, n, kinds)), eye_tex, jaw_tex, lips,
+                   _FrameMeshes(model, kinds, n), eye_tex, jaw_tex, lips,
                    mouth_ring_faces(topo) if with_mouth else None)
 
     def mesh(self, kind: str, track, i: int) -> np.ndarray:

@@ -61,6 +61,27 @@ def configure_logging(verbose: bool) -> None:
         logging.getLogger(name).setLevel(logging.ERROR)
 
 
+#: Commands that already keep every core busy on their own (a forked tracker or detector,
+#: the render's threads, ffmpeg): OpenBLAS's own threads only spin beside them.
+SERIAL_BLAS_COMMANDS = frozenset({"track", "transfer", "edit", "puppet", "demo"})
+
+
+def serial_blas(argv: list[str], environ=os.environ) -> bool:
+    """Ask OpenBLAS for one thread when ``argv``'s command is in :data:`SERIAL_BLAS_COMMANDS`.
+
+    OpenBLAS reads ``OPENBLAS_NUM_THREADS`` once, when NumPy (or SciPy) loads it, so this runs
+    before the parser imports the subcommands; a value the user set is kept. Its worker threads
+    busy-wait between calls: in a 10-second transfer on 2 cores they took 1.1-2 of the ~20
+    CPU-seconds while the tracker's and the render's own threads waited for the cores
+    (BENCHMARKS.md, "Fourteenth session"). Returns whether the command is one of them.
+    """
+    command = next((a for a in argv if not a.startswith("-")), None)
+    if command not in SERIAL_BLAS_COMMANDS:
+        return False
+    environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    return True
+
+
 def error_line(command: str, exc: BaseException) -> str:
     """The one line a failed command prints (no traceback)."""
     if isinstance(exc, ValueError):  # every project error subclasses ValueError
@@ -82,8 +103,11 @@ def main(argv: list[str] | None = None) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input or usage, 130 interrupted).
 
     Called with no ``argv`` (the console script), native libraries' log lines are filtered out
-    of stderr unless ``-v`` is given (:mod:`.stderr`).
+    of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
+    parallel work keep OpenBLAS to one thread (:func:`serial_blas`).
     """
+    if argv is None:
+        serial_blas(sys.argv[1:])
     parser = build_parser()
     args = parser.parse_args(argv)
     configure_logging(args.verbose)
