@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -122,6 +124,12 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     assert share(before.image, SHADOW) > 0.15  # the target's shading on the closed jaw
     assert share(after.image, SHADOW) < 0.01  # (the region's feathered outline aside)
     assert share(after.image, SKIN_LIT) > 0.95
+    # at half strength (JawTexture.at: a frame whose own jaw is half-way from the reference's)
+    # the region is the even mix of the two, to rounding
+    half = rewrite_frame(frames[1], V, cam, topo, face_tex, blend="none", erode=0,
+                         jaw_texture=dataclasses.replace(tex, strength=0.5))
+    mid = (before.image[inner].astype(float) + after.image[inner]) / 2
+    assert np.abs(half.image[inner] - mid).max() <= 1.0
     # only the jaw region changed: elsewhere the same frame
     np.testing.assert_array_equal(after.image[~region], before.image[~region])
     # hair over part of the jaw in the reference frame (5x darker than the skin the current
@@ -145,6 +153,55 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     shown = inner & edge
     assert shown.sum() > 20
     assert np.mean(np.all(np.abs(out.image[shown].astype(int) - SKIN_LIT) < 8, axis=-1)) > 0.9
+
+
+def test_strength_follows_the_targets_own_jaw_away_from_the_reference_frame(setup):
+    """jaw_strength on the mean person, whose region moves with jawOpen alone: the distance is
+    the activation itself (relative to the jawOpen shape), so the strength is JAW_BLEND's
+    smoothstep of it; 0 in the reference frame and near it (no paste: JawTexture.at gives
+    None and the frame keeps its own texture), 1 from the ramp's end."""
+    model, topo = setup
+    opening = np.array([0.0, 0.03, 0.1, 0.13, 0.2, 1.0])
+    target = _track(model, opening)
+    sel = jaw.jaw_region(model, topo)
+    s = jaw.jaw_strength(model, target, topo, sel, 0)
+    lo, hi = jaw.JAW_BLEND
+    t = np.clip((opening - lo) / (hi - lo), 0, 1)
+    np.testing.assert_allclose(s, t * t * (3 - 2 * t), atol=1e-9)
+    assert s[0] == s[1] == 0 and 0 < s[2] < s[3] < 1 and s[4] == s[5] == 1
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8)] * len(opening)
+    tex = jaw.jaw_texture(frames, target, model, topo)
+    assert tex.frame == 0
+    np.testing.assert_array_equal(tex.strengths, s)
+    assert tex.at(0) is None and tex.at(1) is None
+    assert tex.at(2).strength == s[2] and tex.at(5).strength == 1.0
+    assert dataclasses.replace(tex, strengths=None).at(0).strength == 1.0
+
+
+def test_the_region_keeps_the_reference_frames_hue(setup):
+    """The region is scaled by one gain for its three channels (the geometric mean of the
+    ring's): a current frame whose skin around the region is tinted (here 13 % greener: in
+    ``make demo`` a smile's blush, lips or hair in the ring) brightens the pasted skin without
+    tinting it."""
+    model, topo = setup
+    target = _track(model, [0.0, 1.0])
+    tint = (200, 170, 120)
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8), np.full((SIZE, SIZE, 3), tint, np.uint8)]
+    tex = jaw.jaw_texture(frames, target, model, topo)
+    assert tex.frame == 0 and tex.at(1).strength == 1.0
+    cam = target.camera(1)
+    face_tex = FaceTexture(frames[1], frame_uvs(close_mouth(model.synthesize(
+        target.weights_at(1)), topo), cam, (SIZE, SIZE)), 1)
+    closed = _track(model, [0.0])
+    region = _region_pixels(model, topo, closed, 0, jaw.jaw_region(model, topo))
+    inner = region & np.roll(region, 3, 0) & np.roll(region, -3, 0) & \
+        np.roll(region, 3, 1) & np.roll(region, -3, 1)
+    assert inner.sum() > 100
+    out = rewrite_frame(frames[1], model.synthesize(closed.weights_at(0)), cam, topo, face_tex,
+                        jaw_texture=tex.at(1), blend="none", erode=0)
+    px = out.image[inner].astype(float)
+    np.testing.assert_allclose(np.median(px[:, 1] / px[:, 0]), SKIN[1] / SKIN[0], atol=0.02)
+    np.testing.assert_allclose(np.median(px[:, 0]), SKIN[0] * (170 / 150) ** (1 / 3), atol=3)
 
 
 def test_jaw_option():

@@ -22,17 +22,27 @@ sequence)", applied to the jaw only):
 3. in every frame the region is pasted into the per-frame face scaled to its colours
    (:func:`paint_jaw`, :func:`facetransfer.patch.match_outline`: the frames' exposure may
    differ), compared over a ring of triangles around the region (:data:`RING`), which the
-   jaw does not move: inside the region the target's own opening would bias the ratio.
+   jaw does not move: inside the region the target's own opening would bias the ratio. One
+   gain for the three channels (the geometric mean of the ring's, as the mouth's inside in
+   :mod:`facetransfer.mouth`): the same person's skin keeps its hue from frame to frame,
+   and per channel a smile's blush, the lips or hair in the ring tinted the region (a green
+   chin in ``make demo``'s smiling frames);
+4. only as far as the target's own expression moves the region away from the reference
+   frame's (:func:`jaw_strength`): where the target's jaw region is as in the reference frame,
+   its own frame shows it already, lit as it is now. The closed frame's texture seen from
+   another head pose is stretched and lit from elsewhere (seams and dark or green patches on
+   the cheeks of ``make demo``'s turned and smiling frames: BENCHMARKS.md, "Fourteenth
+   session"); the frames that need it fade it in.
 """
 
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .arkit import expression_rig, is_arkit_model
+from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
 from .eyes import close_region, reference_frame, region_faces, region_vertices
 from .patch import REJECT, _match_outline_into
@@ -52,6 +62,11 @@ JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
 JAW_THRESHOLD = 0.15
 #: Rings of triangles around the jaw region over which its exposure is matched.
 RING = 3
+#: :func:`jaw_strength`'s ramp: the closed frame's texture starts to show where the target's jaw
+#: region has moved from the reference frame's by the first fraction of the jawOpen shape's
+#: displacement (RMS over the region, the model's mean person: 1.7 cm for the default model),
+#: and shows fully from the second (0.06-0.16: 1-2.7 mm).
+JAW_BLEND = (0.06, 0.16)
 # Where the closed frame's texture (matched) and the current frame's differ by more than
 # facetransfer.patch.REJECT, a pixel fades back to the current frame (paint_jaw): what the closed
 # frame shows at the jaw line of a turned head is often hair or the gap under it (a black
@@ -76,6 +91,11 @@ class JawTexture:
     ring : (F',) bool or None
         The triangles around the region (not in it, not the mouth's) whose colours in
         ``image`` and in the current frame set the region's gain; None: the region's own.
+    strengths : (F,) float64 in [0, 1] or None
+        Per target frame, how much the region takes of ``image`` (:func:`jaw_strength`);
+        None: fully in every frame.
+    strength : float
+        This frame's (:meth:`at`): the opacity of the region's paste.
     """
 
     image: np.ndarray
@@ -83,6 +103,16 @@ class JawTexture:
     select: np.ndarray
     frame: int
     ring: np.ndarray | None = None
+    strengths: np.ndarray | None = None
+    strength: float = 1.0
+
+    def at(self, i: int) -> "JawTexture | None":
+        """The texture for target frame ``i`` with its :attr:`strength`; None where it is 0
+        (the frame is left as its own texture shows it)."""
+        if self.strengths is None:
+            return self
+        s = float(self.strengths[i])
+        return None if s <= 0.0 else replace(self, strength=s)
 
 
 def jaw_region(model, topo, *, threshold: float = JAW_THRESHOLD, rig=None) -> np.ndarray | None:
@@ -174,8 +204,50 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
     ring = region_faces(topo.faces, np.isin(np.arange(topo.n_closed), topo.faces[select]),
                         rings=RING) & ~select
     ring[np.asarray(topo.mouth_faces, np.int64)] = False
-    log.info("jaw: textured from target frame %d, %d triangles", i, int(select.sum()))
-    return JawTexture(img, uvs, select, i, ring)
+    strengths = jaw_strength(model, track, topo, select, i, rig=rig)
+    log.info("jaw: textured from target frame %d, %d triangles, in %d of %d frames", i,
+             int(select.sum()), int(np.count_nonzero(strengths)), len(strengths))
+    return JawTexture(img, uvs, select, i, ring, strengths)
+
+
+def jaw_strength(model, track, topo, select: np.ndarray, reference: int, *, rig=None,
+                 ramp: tuple[float, float] = JAW_BLEND) -> np.ndarray:
+    """How much of the reference frame's texture the jaw region takes in each frame, ``(F,)``
+    float64 in [0, 1].
+
+    ``d_i``, the RMS over the region's vertices of the target's face in frame ``i`` (Eq. 5:
+    its identity and that frame's expression, no pose) minus its face in the ``reference``
+    frame, divided by the RMS of the jawOpen shape's displacement there (the model's mean
+    person), goes through a smoothstep from ``ramp[0]`` to ``ramp[1]``.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+        ARKit-named (:func:`facetransfer.arkit.is_arkit_model`).
+    track : Track
+        The target's.
+    topo : MeshTopology
+    select : (F',) bool
+        The region's triangles (:func:`jaw_region`).
+    reference : int
+        The frame the region is textured from.
+    rig : ExpressionRig, optional
+        :func:`facetransfer.arkit.expression_rig` of the model's mean person, if at hand.
+    ramp : (float, float)
+        :data:`JAW_BLEND`.
+    """
+    verts = np.unique(np.asarray(topo.faces)[select])
+    verts = verts[verts < model.n_vertices]
+    if rig is None:
+        rig = expression_rig(model, model.default_weights(), vertices=verts)
+        full = rig.deltas[ARKIT_NAMES.index("jawOpen")]
+    else:
+        full = rig.deltas[ARKIT_NAMES.index("jawOpen")][verts]
+    V = model.synthesize({m: track.weights[m] for m in track.mode_names}, vertices=verts)
+    d = np.sqrt(((V - V[reference]) ** 2).sum(-1).mean(-1))
+    d /= max(float(np.sqrt((full ** 2).sum(-1).mean())), 1e-12)
+    t = np.clip((d - ramp[0]) / max(ramp[1] - ramp[0], 1e-12), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
 
 
 def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,
@@ -242,5 +314,6 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
             compare = None
     _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
                         compare=compare, reject=REJECT, reject_where=None,
-                        origin=(sl[1].start, sl[0].start))
+                        origin=(sl[1].start, sl[0].start), opacity=texture.strength,
+                        grey_where=mask)
     return face_image

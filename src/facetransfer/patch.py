@@ -84,7 +84,7 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
                         reject_where, origin: tuple[int, int] = (0, 0),
                         gain_range: tuple[float, float] = GAIN_RANGE,
-                        grey_where: np.ndarray | None = None) -> None:
+                        grey_where: np.ndarray | None = None, opacity: float = 1.0) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
     the region's pixels are written; ``gain_range``: the gains' clip (default
@@ -92,7 +92,8 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     top-left pixel in the image whose coordinates the gain fit takes (a crop of it whose
     border lies at least 2 pixels beyond ``mask`` and ``compare`` gives that image's
     pixels). ``grey_where`` (H, W) bool: pixels scaled by one gain for the three channels (the
-    geometric mean of the channels' gains, :func:`_grey`), which keeps their hue."""
+    geometric mean of the channels' gains, :func:`_grey`), which keeps their hue.
+    ``opacity`` in (0, 1]: the paste's alpha scaled by it."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
@@ -116,6 +117,8 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     # one pixel beyond it is outside the region, or the image ends there)
     mb = np.ascontiguousarray(mask[box])
     a = _feather_alpha(mb, feather, edge_outside=True)
+    if opacity < 1.0:
+        a *= np.float32(opacity)
     fb = np.ascontiguousarray(face[box])
     if reject is not None:  # the fade a (1 - r), r = _rejected where reject_where
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])

@@ -139,8 +139,9 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         :func:`facetransfer.eyes.eye_texture`); without it the target's eyes show through.
     jaw_texture : JawTexture, optional
         The jaw region's texture from a closed-mouth target frame
-        (:func:`facetransfer.jaw.jaw_texture`, for ``topo``); without it the jaw is textured
-        from ``face_texture`` like the rest of the face.
+        (:func:`facetransfer.jaw.jaw_texture`, for ``topo``), pasted at its ``strength``
+        (:meth:`facetransfer.jaw.JawTexture.at` gives a frame's); without it the jaw is
+        textured from ``face_texture`` like the rest of the face.
     mouth_ring : (F',) bool, optional
         The triangles around the mouth whose colours in the source's frame and in the face
         set the mouth's gain; default :func:`facetransfer.mouth.mouth_ring_faces` of ``topo``.
@@ -691,7 +692,8 @@ class _ClipRenderer:
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
                              feather=o.feather, erode=o.erode, eye_texture=self.eye_tex,
-                             jaw_texture=self.jaw_tex, mouth_ring=self.ring)
+                             jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
+                             mouth_ring=self.ring)
 
 
 def _render_in_threads(one, n: int, workers: int, progress):
