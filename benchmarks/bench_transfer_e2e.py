@@ -34,13 +34,18 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-import numpy as np
+# the stages in this process run as the command runs them: OpenBLAS on one thread
+# (facetransfer.cli.main.serial_blas), set before NumPy loads it
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np  # noqa: E402
 
 CRFS = (0, 10, 14, 18, 23, 28)
 DILATE = 8
