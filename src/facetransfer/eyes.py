@@ -638,9 +638,11 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     rim = None
     if texture.rim is not None and texture.rim.any():
         rim = eye_mask & ((lab & bits[1]) != 0)  # eye_mask: shown pixels
+    # the region's own shading brought to the frame's (patch._shading_field): textured from
+    # one frame under another head pose, its cheeks and temples showed patches with seams
     _match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],
                         feather=feather, compare=None, reject=None if rim is None else REJECT,
-                        reject_where=rim)
+                        reject_where=rim, shading=True)
     return face_image
 
 

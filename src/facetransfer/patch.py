@@ -84,7 +84,8 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
                         reject_where, origin: tuple[int, int] = (0, 0),
                         gain_range: tuple[float, float] = GAIN_RANGE,
-                        grey_where: np.ndarray | None = None, opacity: float = 1.0) -> None:
+                        grey_where: np.ndarray | None = None, opacity: float = 1.0,
+                        shading: bool = False) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
     the region's pixels are written; ``gain_range``: the gains' clip (default
@@ -93,7 +94,9 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     border lies at least 2 pixels beyond ``mask`` and ``compare`` gives that image's
     pixels). ``grey_where`` (H, W) bool: pixels scaled by one gain for the three channels (the
     geometric mean of the channels' gains, :func:`_grey`), which keeps their hue.
-    ``opacity`` in (0, 1]: the paste's alpha scaled by it."""
+    ``opacity`` in (0, 1]: the paste's alpha scaled by it. ``shading``: the gained part is
+    then brought to the face's own low-frequency shading (:func:`_shading_field`), compared
+    where the gain is."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
@@ -113,6 +116,8 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
             np.copyto(f, g, where=grey_where[box][..., None])
     else:
         f = pb.astype(np.float32)
+    if shading and ring is not None:
+        _shade_to(f, face, ring, rbox, (x, y, w, h))
     # the distance to the nearest pixel outside the region (the box's edge counts as outside:
     # one pixel beyond it is outside the region, or the image ends there)
     mb = np.ascontiguousarray(mask[box])
@@ -124,6 +129,81 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
         _reject_fade(_rejection_blur(f, fb, reject), where, a)
     _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
+
+
+#: :func:`_shading_field`: the Gaussian's standard deviation in pixels, how far a compared
+#: block's ratio may be from 1 (its log) and still count, the grid's step in pixels, and the
+#: clip of the field's gain.
+SHADING_SIGMA = 6.0
+SHADING_LIMIT = 0.25
+SHADING_STEP = 3
+SHADING_RANGE = (0.8, 1.25)
+
+
+def _shade_to(f: np.ndarray, face: np.ndarray, ring: np.ndarray, rbox: tuple[int, int],
+              box: tuple[int, int, int, int]) -> None:
+    """``f`` (h, w, 3) float32, the gained part on the region's box ``box = (x, y, w, h)`` of
+    ``face``, times :func:`_shading_field` of it against ``face`` over the compared pixels
+    ``ring`` (its top-left pixel at ``rbox``), in place."""
+    x, y, w, h = box
+    rx, ry = rbox
+    valid = np.zeros((h, w), bool)
+    # the compared pixels that fall in the region's box
+    ax0, ay0 = max(x, rx), max(y, ry)
+    ax1, ay1 = min(x + w, rx + ring.shape[1]), min(y + h, ry + ring.shape[0])
+    if ax1 <= ax0 or ay1 <= ay0:
+        return
+    valid[ay0 - y:ay1 - y, ax0 - x:ax1 - x] = ring[ay0 - ry:ay1 - ry, ax0 - rx:ax1 - rx]
+    g = _shading_field(f, face[y:y + h, x:x + w], valid)
+    if g is not None:
+        cv2.multiply(f, g, dst=f)
+
+
+def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray
+                   ) -> np.ndarray | None:
+    """The smooth per-channel gain ``(h, w, 3)`` float32 that brings ``part`` (h, w, 3)
+    float32 to ``face``'s (h, w, 3) uint8 low-frequency shading, or None where no pixel
+    compares.
+
+    On a grid :data:`SHADING_STEP` times coarser (block means), over the blocks at least
+    half of whose pixels are ``valid`` (h, w) bool and whose channel ratios ``(1 + face) /
+    (1 + part)`` all lie within ``exp(±SHADING_LIMIT)`` (unlike blocks, another thing or
+    another expression, do not count): the ratio of the two images' Gaussian-weighted sums
+    (:data:`SHADING_SIGMA` pixels), a normalised convolution; 1 where the weights sum to
+    5 % of a full neighbourhood or less; clipped to :data:`SHADING_RANGE`; interpolated back
+    to every pixel. The plane of gains (:func:`gain_field`) matches the exposure; this
+    matches what another head pose does to the shading inside the region, so the region
+    does not show as patches with seams (the eye region of ``make demo``'s turned frames:
+    BENCHMARKS.md, "Fourteenth session").
+    """
+    k = SHADING_STEP
+    h, w = valid.shape
+    if h < k or w < k:
+        return None
+    # everything on the coarse grid: block means of both images and of the compared pixels,
+    # over whole k x k blocks (OpenCV's fast path; the last h % k rows and w % k columns do
+    # not count, and the field, interpolated back over all of them, is stretched by < k px)
+    size, hk, wk = (w // k, h // k), h - h % k, w - w % k
+    m = cv2.resize(valid[:hk, :wk].view(np.uint8).astype(np.float32), size,
+                   interpolation=cv2.INTER_AREA)
+    f1 = cv2.add(cv2.resize(face[:hk, :wk], size, interpolation=cv2.INTER_AREA)
+                 .astype(np.float32), 1.0)
+    p1 = cv2.add(cv2.resize(part[:hk, :wk], size, interpolation=cv2.INTER_AREA), 1.0)
+    lim = float(np.exp(SHADING_LIMIT))
+    # every channel's ratio within the limit (cv2.inRange: one pass; numpy's reductions over
+    # a last axis of 3 took 40 times longer), on blocks mostly of compared pixels
+    ok = cv2.inRange(cv2.divide(f1, p1), (1.0 / lim,) * 3, (lim,) * 3) > 0
+    m[~ok | (m < 0.5)] = 0.0
+    if not m.any():
+        return None
+    m3 = cv2.merge([m, m, m])
+    s = SHADING_SIGMA / k
+    num, den, wt = (cv2.GaussianBlur(a, (0, 0), s)
+                    for a in (cv2.multiply(f1, m3), cv2.multiply(p1, m3), m))
+    g = cv2.divide(num, np.maximum(den, 1e-6))
+    np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])  # a full neighbourhood sums to 1
+    np.clip(g, *SHADING_RANGE, out=g)
+    return cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
 def _grey(g: np.ndarray) -> np.ndarray:

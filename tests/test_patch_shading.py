@@ -1,0 +1,71 @@
+"""The shading field of a pasted region (facetransfer.patch._shading_field, issue 13): the
+reference frame's texture brought to the current frame's low-frequency shading, unlike pixels
+left out."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from facetransfer import patch
+
+H, W = 120, 150
+
+
+def _skin() -> np.ndarray:
+    """A textured skin patch (H, W, 3) float32: a colour with fine noise (the detail the field
+    must keep)."""
+    rng = np.random.default_rng(0)
+    base = np.array([190.0, 140.0, 115.0], np.float32)
+    return (base * (1 + 0.05 * rng.standard_normal((H, W, 1)))).astype(np.float32)
+
+
+def _shading() -> np.ndarray:
+    """A smooth shading (H, W, 1): a bump 15 % brighter left of the middle, 8 % darker at
+    the right edge (no plane fits it)."""
+    yy, xx = np.mgrid[0:H, 0:W].astype(np.float32)
+    bump = 0.15 * np.exp(-((xx - 50) ** 2 + (yy - 60) ** 2) / (2 * 25.0 ** 2))
+    return (1 + bump - 0.08 * (xx / W) ** 4)[..., None]
+
+
+def test_the_field_is_the_smooth_shading_between_the_two():
+    part = _skin()
+    face = np.clip(np.rint(part * _shading()), 0, 255).astype(np.uint8)
+    g = patch._shading_field(part, face, np.ones((H, W), bool))
+    assert g.shape == (H, W, 3) and g.dtype == np.float32
+    inner = (slice(15, H - 15), slice(15, W - 15))
+    want = np.repeat(_shading(), 3, axis=2)[inner]
+    # the noise averages out: within 1.5 % of the true shading, away from the border
+    np.testing.assert_allclose(g[inner], want, atol=0.015)
+    # and it is smooth: the part's detail stays (corrected, it is the face to rounding)
+    err = np.abs(part * g - face)[inner]
+    assert np.median(err) < 2.0
+
+
+def test_unlike_pixels_do_not_count_and_nothing_to_compare_gives_none():
+    part = _skin()
+    face = np.clip(np.rint(part * 1.1), 0, 255).astype(np.uint8)
+    hair = face.copy()
+    hair[40:80, 60:100] = (40, 30, 25)  # hair in the current frame: 4x darker
+    g = patch._shading_field(part, hair, np.ones((H, W), bool))
+    # beside the hair the gain is the skin's 1.1, not pulled down by the hair
+    np.testing.assert_allclose(g[40:80, 20:50], 1.1, atol=0.02)
+    np.testing.assert_allclose(g[85:110, 60:100], 1.1, atol=0.02)
+    # only the compared pixels count: a face 30 % brighter outside them changes nothing
+    valid = np.zeros((H, W), bool)
+    valid[:, : W // 2] = True
+    bright = face.copy()
+    bright[:, W // 2 + 10:] = np.clip(part[:, W // 2 + 10:] * 1.3, 0, 255).astype(np.uint8)
+    g2 = patch._shading_field(part, bright, valid)
+    np.testing.assert_allclose(g2[:, : W // 2 - 10], 1.1, atol=0.02)
+    assert patch._shading_field(part, face, np.zeros((H, W), bool)) is None
+    assert patch._shading_field(part[:2, :2], face[:2, :2], np.ones((2, 2), bool)) is None
+
+
+def test_the_gain_is_clipped():
+    part = _skin()
+    face = np.clip(np.rint(part * 1.5), 0, 255).astype(np.uint8)  # beyond the limit: unlike
+    assert patch._shading_field(part, face, np.ones((H, W), bool)) is None
+    face = np.clip(np.rint(part * 1.2), 0, 255).astype(np.uint8)
+    g = patch._shading_field(part, face, np.ones((H, W), bool))
+    assert g.max() <= patch.SHADING_RANGE[1] and g.min() >= patch.SHADING_RANGE[0]
+    np.testing.assert_allclose(np.median(g), 1.2, atol=0.02)
