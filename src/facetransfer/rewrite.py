@@ -498,9 +498,9 @@ class _FrameMeshes:
     :meth:`~facetransfer.model.MultilinearModel.clip_basis` once, on the first thread that
     asks (the core contracted with the track's identity, 0.1 s for the default model); then
     :data:`_MESH_CHUNK` consecutive frames are one product, made by the thread that renders
-    them, into a buffer kept per thread and kind. A frame's mesh is a view of that buffer,
-    valid until the thread asks for another chunk of the kind (the render copies it when
-    closing the mouth). Nothing the size of the clip is held: the clip's meshes up front cost
+    them and kept per thread and kind until it asks for another chunk of the kind; a frame's
+    mesh is a view of that chunk's array (a new array per chunk: a view stays valid). Nothing
+    the size of the clip is held: the clip's meshes up front cost
     the render's set-up 0.6 s on one core and 200 MB of fresh memory (BENCHMARKS.md,
     "Fourteenth session"). A track whose identity changes over the clip (more than one mode
     left) is synthesised whole, once per thread.
