@@ -44,7 +44,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
-           "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame"]
+           "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
+           "faces_around"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -295,6 +296,18 @@ def region_faces(faces: np.ndarray, vertex_mask: np.ndarray, *, rings: int = 1) 
         v[F[sel].ravel()] = True
         sel = v[F].any(axis=1)
     return sel
+
+
+def faces_around(faces: np.ndarray, select: np.ndarray, *, rings: int) -> np.ndarray:
+    """The ``rings`` rings of triangles around the triangles ``select`` (F,) bool, not those
+    (:func:`region_faces` of their vertices): ``(F,) bool``, none when ``select`` is empty."""
+    F = np.asarray(faces, np.int64)
+    sel = np.asarray(select, bool)
+    if not sel.any():
+        return np.zeros(len(F), bool)
+    inner = np.zeros(int(F.max()) + 1, bool)
+    inner[F[sel].ravel()] = True
+    return region_faces(F, inner, rings=rings) & ~sel
 
 
 def close_region(faces: np.ndarray, vertex_mask: np.ndarray, rings: int = CLOSE_RINGS

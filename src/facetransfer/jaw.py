@@ -44,7 +44,7 @@ import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
-from .eyes import close_region, reference_frame, region_faces, region_vertices
+from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
 from .patch import REJECT, _match_outline_into
 from .render import shade_layers
 from .texture.face import frame_uvs
@@ -201,8 +201,7 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
     img = np.asarray(frames[i])
     Vi = close_mouth(model.synthesize(track.weights_at(i)), topo)
     uvs = frame_uvs(Vi, track.camera(i), (img.shape[1], img.shape[0]))
-    ring = region_faces(topo.faces, np.isin(np.arange(topo.n_closed), topo.faces[select]),
-                        rings=RING) & ~select
+    ring = faces_around(topo.faces, select, rings=RING)
     ring[np.asarray(topo.mouth_faces, np.int64)] = False
     strengths = jaw_strength(model, track, topo, select, i, rig=rig)
     log.info("jaw: textured from target frame %d, %d triangles, in %d of %d frames", i,
@@ -315,5 +314,5 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
     _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
                         compare=compare, reject=REJECT, reject_where=None,
                         origin=(sl[1].start, sl[0].start), opacity=texture.strength,
-                        grey_where=mask)
+                        grey_where=True)
     return face_image

@@ -21,7 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from .composite import mask_box, membrane_blend, membrane_crop, over
-from .eyes import region_faces
+from .eyes import faces_around
 from .patch import _match_outline_into
 from .topology import MeshTopology
 
@@ -93,8 +93,4 @@ def mouth_ring_faces(topo: MeshTopology, *, rings: int = MOUTH_RING) -> np.ndarr
     the skin whose colours in the source's frame and in the face set the mouth's gain."""
     sel = np.zeros(len(topo.faces), bool)
     sel[np.asarray(topo.mouth_faces, np.int64)] = True
-    if not sel.any():
-        return sel
-    inner = np.zeros(int(np.max(topo.faces)) + 1, bool)
-    inner[topo.faces[sel].ravel()] = True
-    return region_faces(topo.faces, inner, rings=rings) & ~sel
+    return faces_around(topo.faces, sel, rings=rings)

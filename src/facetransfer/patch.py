@@ -84,7 +84,7 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
                         reject_where, origin: tuple[int, int] = (0, 0),
                         gain_range: tuple[float, float] = GAIN_RANGE,
-                        grey_where: np.ndarray | None = None, opacity: float = 1.0,
+                        grey_where: np.ndarray | bool | None = None, opacity: float = 1.0,
                         shading: bool = False) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
@@ -93,7 +93,7 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     top-left pixel in the image whose coordinates the gain fit takes (a crop of it whose
     border lies at least 2 pixels beyond ``mask`` and ``compare`` gives that image's
     pixels). ``grey_where`` (H, W) bool: pixels scaled by one gain for the three channels (the
-    geometric mean of the channels' gains, :func:`_grey`), which keeps their hue.
+    geometric mean of the channels' gains, :func:`_grey`), which keeps their hue; True: all.
     ``opacity`` in (0, 1]: the paste's alpha scaled by it. ``shading``: the gained part is
     then brought to the face's own low-frequency shading (:func:`_shading_field`), compared
     where the gain is."""
@@ -108,9 +108,11 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
         gy, gx = _gain_factors(face, part, ring, GAIN_ITERATIONS,
                                (x + ox, y + oy, x + w + ox, y + h + oy), GAIN_SAMPLES,
                                origin=(rbox[0], rbox[1]), shift=origin)
+        if grey_where is True:
+            gy, gx = _grey(gy), _grey(gx)
         f = np.empty(pb.shape, np.float32)
         _apply_gain(pb, gy, gx, *gain_range, f)
-        if grey_where is not None and grey_where[box].any():
+        if isinstance(grey_where, np.ndarray) and grey_where[box].any():
             g = np.empty(pb.shape, np.float32)
             _apply_gain(pb, _grey(gy), _grey(gx), *gain_range, g)
             np.copyto(f, g, where=grey_where[box][..., None])
