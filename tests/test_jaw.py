@@ -124,10 +124,11 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     assert share(before.image, SHADOW) > 0.15  # the target's shading on the closed jaw
     assert share(after.image, SHADOW) < 0.01  # (the region's feathered outline aside)
     assert share(after.image, SKIN_LIT) > 0.95
-    # at half strength (JawTexture.at: a frame whose own jaw is half-way from the reference's)
-    # the region is the even mix of the two, to rounding
+    # at half strength on every vertex (JawTexture.at: where the target's own skin moved
+    # half-way from the reference frame's) the region is the even mix of the two, to rounding
     half = rewrite_frame(frames[1], V, cam, topo, face_tex, blend="none", erode=0,
-                         jaw_texture=dataclasses.replace(tex, strength=0.5))
+                         jaw_texture=dataclasses.replace(
+                             tex, alpha=np.full(len(tex.uvs), 0.5, np.float32)))
     mid = (before.image[inner].astype(float) + after.image[inner]) / 2
     assert np.abs(half.image[inner] - mid).max() <= 1.0
     # only the jaw region changed: elsewhere the same frame
@@ -155,53 +156,89 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     assert np.mean(np.all(np.abs(out.image[shown].astype(int) - SKIN_LIT) < 8, axis=-1)) > 0.9
 
 
-def test_strength_follows_the_targets_own_jaw_away_from_the_reference_frame(setup):
-    """jaw_strength on the mean person, whose region moves with jawOpen alone: the distance is
-    the activation itself (relative to the jawOpen shape), so the strength is JAW_BLEND's
-    smoothstep of it; 0 in the reference frame and near it (no paste: JawTexture.at gives
-    None and the frame keeps its own texture), 1 from the ramp's end."""
+def test_strength_follows_the_targets_own_skin_away_from_the_reference_frame(setup):
+    """jaw_strengths on the mean person, whose region moves with jawOpen alone: a vertex's
+    distance from the reference frame is the activation times that vertex's share of the
+    jawOpen shape (its displacement over the shape's RMS over the region), so its strength is
+    JAW_BLEND's smoothstep of that; 0 everywhere in the reference frame and near it (no
+    paste: JawTexture.at gives None and the frame keeps its own texture); at full opening the
+    chin takes the reference frame and the skin jawOpen hardly moves keeps its own."""
     model, topo = setup
-    opening = np.array([0.0, 0.03, 0.1, 0.13, 0.2, 1.0])
+    opening = np.array([0.0, 0.01, 0.3, 1.0])
     target = _track(model, opening)
     sel = jaw.jaw_region(model, topo)
-    s = jaw.jaw_strength(model, target, topo, sel, 0)
+    verts, s = jaw.jaw_strengths(model, target, topo, sel, 0)
+    full = model.synthesize(target.weights_at(3))[verts] - model.synthesize(
+        target.weights_at(0))[verts]
+    share = np.linalg.norm(full, axis=1) / np.sqrt((full ** 2).sum(1).mean())
     lo, hi = jaw.JAW_BLEND
-    t = np.clip((opening - lo) / (hi - lo), 0, 1)
-    np.testing.assert_allclose(s, t * t * (3 - 2 * t), atol=1e-9)
-    assert s[0] == s[1] == 0 and 0 < s[2] < s[3] < 1 and s[4] == s[5] == 1
+    t = np.clip((opening[:, None] * share[None] - lo) / (hi - lo), 0, 1)
+    np.testing.assert_allclose(s, t * t * (3 - 2 * t), atol=1e-5)
+    assert s.shape == (len(opening), verts.size) and s.dtype == np.float32
+    assert s[0].max() == 0 and s[1].max() == 0
+    assert 0.3 < np.mean(s[3] == 1) < 1 and np.mean(s[3] == 0) > 0.02  # chin; by the ear
+    assert np.all(s[3] >= s[2])
     frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8)] * len(opening)
     tex = jaw.jaw_texture(frames, target, model, topo)
     assert tex.frame == 0
+    np.testing.assert_array_equal(tex.verts, verts)
     np.testing.assert_array_equal(tex.strengths, s)
     assert tex.at(0) is None and tex.at(1) is None
-    assert tex.at(2).strength == s[2] and tex.at(5).strength == 1.0
-    assert dataclasses.replace(tex, strengths=None).at(0).strength == 1.0
+    a = tex.at(3).alpha
+    assert a.shape == (len(tex.uvs),)
+    np.testing.assert_array_equal(a[verts], s[3])
+    assert dataclasses.replace(tex, strengths=None).at(0).alpha is None  # fully opaque
 
 
-def test_the_region_keeps_the_reference_frames_hue(setup):
-    """The region is scaled by one gain for its three channels (the geometric mean of the
-    ring's): a current frame whose skin around the region is tinted (here 13 % greener: in
-    ``make demo`` a smile's blush, lips or hair in the ring) brightens the pasted skin without
-    tinting it."""
-    model, topo = setup
+def _closed_jaw_in(model, topo, frame1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A closed new jaw rendered into ``frame1`` (frame 1 of a target opening its jaw, frame 0
+    of plain SKIN the reference): ``(image, inner)``, the result and the region's pixels at
+    least 3 px inside it."""
     target = _track(model, [0.0, 1.0])
-    tint = (200, 170, 120)
-    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8), np.full((SIZE, SIZE, 3), tint, np.uint8)]
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8), frame1]
     tex = jaw.jaw_texture(frames, target, model, topo)
-    assert tex.frame == 0 and tex.at(1).strength == 1.0
+    assert tex.frame == 0 and tex.at(1).alpha.max() == 1.0
     cam = target.camera(1)
-    face_tex = FaceTexture(frames[1], frame_uvs(close_mouth(model.synthesize(
+    face_tex = FaceTexture(frame1, frame_uvs(close_mouth(model.synthesize(
         target.weights_at(1)), topo), cam, (SIZE, SIZE)), 1)
     closed = _track(model, [0.0])
     region = _region_pixels(model, topo, closed, 0, jaw.jaw_region(model, topo))
     inner = region & np.roll(region, 3, 0) & np.roll(region, -3, 0) & \
         np.roll(region, 3, 1) & np.roll(region, -3, 1)
     assert inner.sum() > 100
-    out = rewrite_frame(frames[1], model.synthesize(closed.weights_at(0)), cam, topo, face_tex,
+    out = rewrite_frame(frame1, model.synthesize(closed.weights_at(0)), cam, topo, face_tex,
                         jaw_texture=tex.at(1), blend="none", erode=0)
-    px = out.image[inner].astype(float)
+    return out.image, inner
+
+
+def test_another_colour_around_the_region_does_not_tint_it(setup):
+    """One gain for the three channels (the geometric mean of the ring's), and a hue field
+    that leaves out what is unlike skin: a current frame whose ring around the region shows
+    another thing (here lipstick red; in ``make demo`` a smile's blush, lips or hair) leaves
+    the pasted skin's hue the reference frame's (a per-channel gain reddened it)."""
+    model, topo = setup
+    target = _track(model, [0.0, 1.0])
+    red = np.full((SIZE, SIZE, 3), (200, 60, 60), np.uint8)
+    red[_region_pixels(model, topo, target, 1, jaw.jaw_region(model, topo))] = SKIN
+    img, inner = _closed_jaw_in(model, topo, red)
+    px = img[inner].astype(float)
     np.testing.assert_allclose(np.median(px[:, 1] / px[:, 0]), SKIN[1] / SKIN[0], atol=0.02)
-    np.testing.assert_allclose(np.median(px[:, 0]), SKIN[0] * (170 / 150) ** (1 / 3), atol=3)
+    np.testing.assert_allclose(np.median(px[:, 2] / px[:, 0]), SKIN[2] / SKIN[0], atol=0.02)
+
+
+def test_the_region_takes_the_current_frames_hue_of_the_same_skin(setup):
+    """Where the current frame shows the same skin in another hue (here 13 % greener all
+    over: another light, another head pose; the orange cheek of ``make demo``'s turned
+    open-mouth frame), the region takes that hue (JAW_HUE_SIGMA), at the brightness of the
+    one gain."""
+    model, topo = setup
+    tint = (200, 170, 120)
+    img, inner = _closed_jaw_in(model, topo, np.full((SIZE, SIZE, 3), tint, np.uint8))
+    px = img[inner].astype(float)
+    np.testing.assert_allclose(np.median(px[:, 1] / px[:, 0]), tint[1] / tint[0], atol=0.02)
+    np.testing.assert_allclose(np.median(px[:, 2] / px[:, 0]), tint[2] / tint[0], atol=0.02)
+    grey = np.exp(np.log(px + 1).mean(axis=1)) - 1
+    np.testing.assert_allclose(np.median(grey), np.prod(tint) ** (1 / 3), rtol=0.03)
 
 
 def test_jaw_option():

@@ -69,3 +69,30 @@ def test_the_gain_is_clipped():
     g = patch._shading_field(part, face, np.ones((H, W), bool))
     assert g.max() <= patch.SHADING_RANGE[1] and g.min() >= patch.SHADING_RANGE[0]
     np.testing.assert_allclose(np.median(g), 1.2, atol=0.02)
+
+
+def _hue() -> np.ndarray:
+    """A smooth change of hue (H, W, 3) of product 1 over the channels: red up and blue
+    down by up to 10 % toward the right (another light on the same skin)."""
+    xx = np.mgrid[0:H, 0:W][1].astype(np.float32) / W
+    lr = np.stack([0.1 * xx, -0.02 * xx, -0.08 * xx], axis=2)
+    return np.exp(lr - lr.mean(axis=2, keepdims=True))
+
+
+def test_the_hue_field_carries_the_hue_and_leaves_the_brightness():
+    """patch._hue_field: the part takes the face's smooth hue; a brightness difference (here
+    the face 30 % darker: the region's own shadow, another exposure) stays the part's, and
+    blocks unlike skin (hair) do not count."""
+    part = _skin()
+    face = np.clip(np.rint(part * _hue() * 0.7), 0, 255).astype(np.uint8)
+    hair = face.copy()
+    hair[:, :30] = (40, 30, 25)
+    for f in (face, hair):
+        g = patch._hue_field(part, f, np.ones((H, W), bool), 10.0)
+        assert g.shape == (H, W, 3) and g.dtype == np.float32
+        inner = (slice(12, H - 12), slice(45, W - 12))
+        np.testing.assert_allclose(g[inner], _hue()[inner], atol=0.015)
+        # of product 1: the brightness is left to the gain
+        np.testing.assert_allclose(np.log(g).sum(axis=2), 0, atol=1e-4)
+    # nothing to compare: no field
+    assert patch._hue_field(part, face, np.zeros((H, W), bool), 10.0) is None

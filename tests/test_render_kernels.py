@@ -368,3 +368,26 @@ def test_blend_paste_rejected_equals_the_numpy_fade():
     fs = f + s.astype(np.float32)
     want = np.clip(np.rint(b + a[..., None] * (fs - b)), 0, 255).astype(np.uint8)
     np.testing.assert_array_equal(out, np.where(m[..., None], want, base))
+
+
+def test_interpolate_vertex_values_is_the_barycentric_mix():
+    """render.interpolate_vertex_values against numpy: at every covered pixel the barycentric
+    mix of its triangle's three values, 0 elsewhere; a box gives the same pixels."""
+    from facetransfer.render import WeakPerspective, interpolate_vertex_values, rasterize
+
+    rng = np.random.default_rng(3)
+    V = np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0], [0, 0, 0.5]], float)
+    F = np.array([[0, 1, 4], [1, 2, 4], [2, 3, 4], [3, 0, 4]])
+    r = rasterize(V, F, WeakPerspective(20.0, np.eye(3), np.array([32.0, 30.0])), (64, 60))
+    vals = rng.uniform(0, 1, len(V))
+    got = interpolate_vertex_values(r, F, vals)
+    cov = r.tri_id >= 0
+    assert cov.sum() > 500
+    want = np.zeros(r.tri_id.shape)
+    want[cov] = (r.bary[cov] * vals[F[r.tri_id[cov]]]).sum(axis=1)
+    assert got.dtype == np.float32
+    np.testing.assert_allclose(got, want, atol=1e-6)
+    box = (slice(10, 40), slice(5, 50))
+    np.testing.assert_array_equal(interpolate_vertex_values(r, F, vals, box=box), got[box])
+    with pytest.raises(ValueError, match="values"):
+        interpolate_vertex_values(r, F, vals[:3])

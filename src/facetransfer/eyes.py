@@ -35,7 +35,7 @@ import numpy as np
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
 from .errors import RewriteError
-from .patch import REJECT, _match_outline_into
+from .patch import REJECT, SHADING_SIGMA, _match_outline_into
 from .render import Raster, shade_layers, shade_texture
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -655,7 +655,7 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     # one frame under another head pose, its cheeks and temples showed patches with seams
     _match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],
                         feather=feather, compare=None, reject=None if rim is None else REJECT,
-                        reject_where=rim, shading=True)
+                        reject_where=rim, shading=SHADING_SIGMA)
     return face_image
 
 

@@ -24,15 +24,18 @@ sequence)", applied to the jaw only):
    differ), compared over a ring of triangles around the region (:data:`RING`), which the
    jaw does not move: inside the region the target's own opening would bias the ratio. One
    gain for the three channels (the geometric mean of the ring's, as the mouth's inside in
-   :mod:`facetransfer.mouth`): the same person's skin keeps its hue from frame to frame,
-   and per channel a smile's blush, the lips or hair in the ring tinted the region (a green
-   chin in ``make demo``'s smiling frames);
-4. only as far as the target's own expression moves the region away from the reference
-   frame's (:func:`jaw_strength`): where the target's jaw region is as in the reference frame,
-   its own frame shows it already, lit as it is now. The closed frame's texture seen from
-   another head pose is stretched and lit from elsewhere (seams and dark or green patches on
-   the cheeks of ``make demo``'s turned and smiling frames: BENCHMARKS.md, "Fourteenth
-   session"); the frames that need it fade it in.
+   :mod:`facetransfer.mouth`): per channel a smile's blush, the lips or hair in the ring
+   tinted the region (a green chin in ``make demo``'s smiling frames). The hue is then the
+   current frame's, smooth (:data:`JAW_HUE_SIGMA`), compared over the region and its ring
+   where both show like skin: the same skin under another head pose and light has another
+   hue (an orange cheek in the demo's turned open-mouth frame);
+4. only where the target's own expression moves the region away from the reference
+   frame's (:func:`jaw_strengths`, per vertex): where the target's skin is where the
+   reference frame's is, its own frame shows it already, lit as it is now. The closed frame's
+   texture seen from another head pose is stretched and lit from elsewhere (seams and dark,
+   green or orange patches on the cheeks of ``make demo``'s turned and smiling frames:
+   BENCHMARKS.md, "Fourteenth session", "Fifteenth session"); the skin that moved fades it
+   in, the rest of the region keeps its own frame's.
 """
 
 from __future__ import annotations
@@ -46,14 +49,14 @@ from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
 from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
 from .patch import REJECT, _match_outline_into
-from .render import shade_layers
+from .render import interpolate_vertex_values, shade_layers
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
 log = logging.getLogger(__name__)
 
 __all__ = ["JAW_SHAPES", "JAW_THRESHOLD", "JawTexture", "jaw_region", "mouth_closure",
-           "closed_jaw_frame", "jaw_texture", "paint_jaw"]
+           "closed_jaw_frame", "jaw_texture", "jaw_strengths", "paint_jaw"]
 
 #: ARKit blendshapes whose vertices take the closed-mouth frame's texture.
 JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
@@ -62,11 +65,18 @@ JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
 JAW_THRESHOLD = 0.15
 #: Rings of triangles around the jaw region over which its exposure is matched.
 RING = 3
-#: :func:`jaw_strength`'s ramp: the closed frame's texture starts to show where the target's jaw
-#: region has moved from the reference frame's by the first fraction of the jawOpen shape's
-#: displacement (RMS over the region, the model's mean person: 1.7 cm for the default model),
-#: and shows fully from the second (0.06-0.16: 1-2.7 mm).
-JAW_BLEND = (0.06, 0.16)
+#: :func:`jaw_strengths`' ramp: the closed frame's texture starts to show at a vertex of the
+#: jaw region that the target's expression has moved from where it is in the reference frame
+#: by the first fraction of the jawOpen shape's displacement (its RMS over the region, the
+#: model's mean person: 1.7 cm for the default model), and shows fully from the second
+#: (0.05-0.15: 0.85-2.6 mm).
+JAW_BLEND = (0.05, 0.15)
+#: The scale (pixels) at which the region takes the current frame's hue
+#: (:func:`facetransfer.patch._hue_field`, compared over the region and its ring): the
+#: closed frame's skin seen under another head pose has another hue (an orange patch on the
+#: cheek of ``make demo``'s turned open-mouth frame, where the frame shows it pale); its
+#: brightness stays the gain's, so the target's own shadows do not come back.
+JAW_HUE_SIGMA = 10.0
 # Where the closed frame's texture (matched) and the current frame's differ by more than
 # facetransfer.patch.REJECT, a pixel fades back to the current frame (paint_jaw): what the closed
 # frame shows at the jaw line of a turned head is often hair or the gap under it (a black
@@ -91,11 +101,14 @@ class JawTexture:
     ring : (F',) bool or None
         The triangles around the region (not in it, not the mouth's) whose colours in
         ``image`` and in the current frame set the region's gain; None: the region's own.
-    strengths : (F,) float64 in [0, 1] or None
-        Per target frame, how much the region takes of ``image`` (:func:`jaw_strength`);
-        None: fully in every frame.
-    strength : float
-        This frame's (:meth:`at`): the opacity of the region's paste.
+    verts : (m,) int64 or None
+        The vertices of the region's triangles that :attr:`strengths` gives.
+    strengths : (F, m) float32 in [0, 1] or None
+        Per target frame and vertex of :attr:`verts`, how much the region takes of ``image``
+        there (:func:`jaw_strengths`); None: fully everywhere in every frame.
+    alpha : (n,) float32 or None
+        This frame's (:meth:`at`), per vertex of the topology: the opacity of the region's
+        paste, interpolated over its pixels; None: fully opaque.
     """
 
     image: np.ndarray
@@ -103,16 +116,24 @@ class JawTexture:
     select: np.ndarray
     frame: int
     ring: np.ndarray | None = None
+    verts: np.ndarray | None = None
     strengths: np.ndarray | None = None
-    strength: float = 1.0
+    alpha: np.ndarray | None = None
 
     def at(self, i: int) -> "JawTexture | None":
-        """The texture for target frame ``i`` with its :attr:`strength`; None where it is 0
-        (the frame is left as its own texture shows it)."""
+        """The texture for target frame ``i`` with its per-vertex :attr:`alpha`; None where
+        no vertex takes any (the frame is left as its own texture shows it)."""
         if self.strengths is None:
             return self
-        s = float(self.strengths[i])
-        return None if s <= 0.0 else replace(self, strength=s)
+        s = self.strengths[i]
+        top = float(s.max()) if s.size else 0.0
+        if top <= 0.0:
+            return None
+        # vertices of the region's triangles without a strength (none of the model's) take
+        # the frame's largest
+        alpha = np.full(len(self.uvs), top, np.float32)
+        alpha[self.verts] = s
+        return replace(self, alpha=alpha)
 
 
 def jaw_region(model, topo, *, threshold: float = JAW_THRESHOLD, rig=None) -> np.ndarray | None:
@@ -203,21 +224,25 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
     uvs = frame_uvs(Vi, track.camera(i), (img.shape[1], img.shape[0]))
     ring = faces_around(topo.faces, select, rings=RING)
     ring[np.asarray(topo.mouth_faces, np.int64)] = False
-    strengths = jaw_strength(model, track, topo, select, i, rig=rig)
+    verts, strengths = jaw_strengths(model, track, topo, select, i, rig=rig)
+    shown = strengths.max(axis=1) > 0 if verts.size else np.zeros(len(strengths), bool)
     log.info("jaw: textured from target frame %d, %d triangles, in %d of %d frames", i,
-             int(select.sum()), int(np.count_nonzero(strengths)), len(strengths))
-    return JawTexture(img, uvs, select, i, ring, strengths)
+             int(select.sum()), int(np.count_nonzero(shown)), len(strengths))
+    return JawTexture(img, uvs, select, i, ring, verts, strengths)
 
 
-def jaw_strength(model, track, topo, select: np.ndarray, reference: int, *, rig=None,
-                 ramp: tuple[float, float] = JAW_BLEND) -> np.ndarray:
-    """How much of the reference frame's texture the jaw region takes in each frame, ``(F,)``
-    float64 in [0, 1].
+def jaw_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig=None,
+                  ramp: tuple[float, float] = JAW_BLEND) -> tuple[np.ndarray, np.ndarray]:
+    """How much of the reference frame's texture each vertex of the jaw region takes in each
+    frame: ``(verts (m,) int64, strengths (F, m) float32 in [0, 1])``.
 
-    ``d_i``, the RMS over the region's vertices of the target's face in frame ``i`` (Eq. 5:
-    its identity and that frame's expression, no pose) minus its face in the ``reference``
-    frame, divided by the RMS of the jawOpen shape's displacement there (the model's mean
-    person), goes through a smoothstep from ``ramp[0]`` to ``ramp[1]``.
+    ``d``, the distance of a vertex of the target's face in frame ``i`` (Eq. 5: its identity
+    and that frame's expression, no pose) from the same vertex in the ``reference`` frame,
+    divided by the RMS over the region of the jawOpen shape's displacement (the model's mean
+    person), goes through a smoothstep from ``ramp[0]`` to ``ramp[1]``. The skin the target's
+    own expression moved (the chin of an opened jaw, the cheeks of a smile) takes the
+    reference frame; the skin that stayed (the cheek by the ear of an opened jaw) keeps its
+    own frame's texture, lit as the frame is.
 
     Parameters
     ----------
@@ -236,17 +261,17 @@ def jaw_strength(model, track, topo, select: np.ndarray, reference: int, *, rig=
         :data:`JAW_BLEND`.
     """
     verts = np.unique(np.asarray(topo.faces)[select])
-    verts = verts[verts < model.n_vertices]
+    verts = verts[verts < model.n_vertices].astype(np.int64)
     if rig is None:
         rig = expression_rig(model, model.default_weights(), vertices=verts)
         full = rig.deltas[ARKIT_NAMES.index("jawOpen")]
     else:
         full = rig.deltas[ARKIT_NAMES.index("jawOpen")][verts]
     V = model.synthesize({m: track.weights[m] for m in track.mode_names}, vertices=verts)
-    d = np.sqrt(((V - V[reference]) ** 2).sum(-1).mean(-1))
+    d = np.sqrt(((V - V[reference]) ** 2).sum(-1))
     d /= max(float(np.sqrt((full ** 2).sum(-1).mean())), 1e-12)
     t = np.clip((d - ramp[0]) / max(ramp[1] - ramp[0], 1e-12), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
+    return verts, (t * t * (3.0 - 2.0 * t)).astype(np.float32)
 
 
 def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,
@@ -273,7 +298,7 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     flags = jaw_flags(texture, shaded=1, region=2, ring=4)
     (img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
     return _paint_jaw(np.array(face_image, copy=True), face_mask, texture, img, labels, (2, 4),
-                      feather=feather)
+                      raster, faces, feather=feather)
 
 
 def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np.ndarray:
@@ -289,12 +314,13 @@ def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np
 
 
 def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTexture,
-               img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
+               img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], raster, faces, *,
                feather: float = 4.0) -> np.ndarray:
     """:func:`paint_jaw` with the region shaded already (``img`` (H, W, 3) the closed-mouth
     frame on the region and its ring, ``labels`` (H, W) uint8 of
     :func:`facetransfer.render.shade_layers` with the bits ``(region, ring)`` of
-    :func:`jaw_flags`), painting ``face_image`` in place and returning it."""
+    :func:`jaw_flags`; ``raster`` and ``faces`` interpolate :attr:`JawTexture.alpha`),
+    painting ``face_image`` in place and returning it."""
     # the work on the box of the region and its ring, grown by the 2 px the ring's erosion
     # reaches (patch._ring); the gain fit keeps the frame's coordinates (origin)
     sl = mask_box(np.bitwise_and(labels, np.uint8(bits[0] | bits[1])), 2)
@@ -311,8 +337,10 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
         compare &= fm
         if np.count_nonzero(compare) < 8:
             compare = None
+    opacity = 1.0 if texture.alpha is None else \
+        interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
     _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
                         compare=compare, reject=REJECT, reject_where=None,
-                        origin=(sl[1].start, sl[0].start), opacity=texture.strength,
-                        grey_where=True)
+                        origin=(sl[1].start, sl[0].start), opacity=opacity,
+                        grey_where=True, hue=JAW_HUE_SIGMA)
     return face_image

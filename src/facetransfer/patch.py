@@ -84,8 +84,9 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
 def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
                         reject_where, origin: tuple[int, int] = (0, 0),
                         gain_range: tuple[float, float] = GAIN_RANGE,
-                        grey_where: np.ndarray | bool | None = None, opacity: float = 1.0,
-                        shading: bool = False) -> None:
+                        grey_where: np.ndarray | bool | None = None,
+                        opacity: float | np.ndarray = 1.0, shading: float = 0.0,
+                        hue: float = 0.0) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
     the region's pixels are written; ``gain_range``: the gains' clip (default
@@ -94,9 +95,10 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     border lies at least 2 pixels beyond ``mask`` and ``compare`` gives that image's
     pixels). ``grey_where`` (H, W) bool: pixels scaled by one gain for the three channels (the
     geometric mean of the channels' gains, :func:`_grey`), which keeps their hue; True: all.
-    ``opacity`` in (0, 1]: the paste's alpha scaled by it. ``shading``: the gained part is
-    then brought to the face's own low-frequency shading (:func:`_shading_field`), compared
-    where the gain is."""
+    ``opacity`` in [0, 1], a number or per pixel (H, W) float32: the paste's alpha scaled
+    by it. ``shading`` > 0: the gained part is then brought to the face's own low-frequency
+    shading at that scale (:func:`_shading_field`, its Gaussian's standard deviation in
+    pixels), compared where the gain is."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
@@ -118,13 +120,22 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
             np.copyto(f, g, where=grey_where[box][..., None])
     else:
         f = pb.astype(np.float32)
-    if shading and ring is not None:
-        _shade_to(f, face, ring, rbox, (x, y, w, h))
+    if shading > 0 and ring is not None:
+        _shade_to(f, face, ring, rbox, (x, y, w, h), shading)
+    if hue > 0:
+        valid = np.array(mask[box], copy=True)
+        if ring is not None:
+            _or_box(valid, ring, rbox, (x, y, w, h))
+        g = _hue_field(f, face[box], valid, hue)
+        if g is not None:
+            cv2.multiply(f, g, dst=f)
     # the distance to the nearest pixel outside the region (the box's edge counts as outside:
     # one pixel beyond it is outside the region, or the image ends there)
     mb = np.ascontiguousarray(mask[box])
     a = _feather_alpha(mb, feather, edge_outside=True)
-    if opacity < 1.0:
+    if isinstance(opacity, np.ndarray):
+        a *= opacity[box]
+    elif opacity < 1.0:
         a *= np.float32(opacity)
     fb = np.ascontiguousarray(face[box])
     if reject is not None:  # the fade a (1 - r), r = _rejected where reject_where
@@ -143,10 +154,10 @@ SHADING_RANGE = (0.8, 1.25)
 
 
 def _shade_to(f: np.ndarray, face: np.ndarray, ring: np.ndarray, rbox: tuple[int, int],
-              box: tuple[int, int, int, int]) -> None:
+              box: tuple[int, int, int, int], sigma: float = SHADING_SIGMA) -> None:
     """``f`` (h, w, 3) float32, the gained part on the region's box ``box = (x, y, w, h)`` of
     ``face``, times :func:`_shading_field` of it against ``face`` over the compared pixels
-    ``ring`` (its top-left pixel at ``rbox``), in place."""
+    ``ring`` (its top-left pixel at ``rbox``) at the scale ``sigma``, in place."""
     x, y, w, h = box
     rx, ry = rbox
     valid = np.zeros((h, w), bool)
@@ -156,13 +167,13 @@ def _shade_to(f: np.ndarray, face: np.ndarray, ring: np.ndarray, rbox: tuple[int
     if ax1 <= ax0 or ay1 <= ay0:
         return
     valid[ay0 - y:ay1 - y, ax0 - x:ax1 - x] = ring[ay0 - ry:ay1 - ry, ax0 - rx:ax1 - rx]
-    g = _shading_field(f, face[y:y + h, x:x + w], valid)
+    g = _shading_field(f, face[y:y + h, x:x + w], valid, sigma)
     if g is not None:
         cv2.multiply(f, g, dst=f)
 
 
-def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray
-                   ) -> np.ndarray | None:
+def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray,
+                   sigma: float = SHADING_SIGMA) -> np.ndarray | None:
     """The smooth per-channel gain ``(h, w, 3)`` float32 that brings ``part`` (h, w, 3)
     float32 to ``face``'s (h, w, 3) uint8 low-frequency shading, or None where no pixel
     compares.
@@ -171,7 +182,7 @@ def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray
     half of whose pixels are ``valid`` (h, w) bool and whose channel ratios ``(1 + face) /
     (1 + part)`` all lie within ``exp(±SHADING_LIMIT)`` (unlike blocks, another thing or
     another expression, do not count): the ratio of the two images' Gaussian-weighted sums
-    (:data:`SHADING_SIGMA` pixels), a normalised convolution; 1 where the weights sum to
+    (``sigma`` pixels), a normalised convolution; 1 where the weights sum to
     5 % of a full neighbourhood or less; clipped to :data:`SHADING_RANGE`; interpolated back
     to every pixel. The plane of gains (:func:`gain_field`) matches the exposure; this
     matches what another head pose does to the shading inside the region, so the region
@@ -199,12 +210,72 @@ def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray
     if not m.any():
         return None
     m3 = cv2.merge([m, m, m])
-    s = SHADING_SIGMA / k
+    s = sigma / k
     num, den, wt = (cv2.GaussianBlur(a, (0, 0), s)
                     for a in (cv2.multiply(f1, m3), cv2.multiply(p1, m3), m))
     g = cv2.divide(num, np.maximum(den, 1e-6))
     np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])  # a full neighbourhood sums to 1
     np.clip(g, *SHADING_RANGE, out=g)
+    return cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def _or_box(valid: np.ndarray, ring: np.ndarray, rbox: tuple[int, int],
+            box: tuple[int, int, int, int]) -> None:
+    """``valid`` (h, w) bool on the box ``box = (x, y, w, h)``, or-ed in place with the pixels
+    of ``ring`` (its top-left pixel at ``rbox``) that fall in it."""
+    x, y, w, h = box
+    rx, ry = rbox
+    ax0, ay0 = max(x, rx), max(y, ry)
+    ax1, ay1 = min(x + w, rx + ring.shape[1]), min(y + h, ry + ring.shape[0])
+    if ax1 > ax0 and ay1 > ay0:
+        valid[ay0 - y:ay1 - y, ax0 - x:ax1 - x] |= ring[ay0 - ry:ay1 - ry, ax0 - rx:ax1 - rx]
+
+
+#: :func:`_hue_field`: how far a compared block's brightness ratio (its log) and each
+#: channel's hue ratio may be from 1 and still count, and the clip of the field's gain.
+HUE_LIMITS = (0.4, 0.3)
+HUE_RANGE = (0.8, 1.25)
+_THIRDS = np.full((1, 3), 1.0 / 3.0, np.float32)  # cv2.transform: the mean of 3 channels
+
+
+def _hue_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray, sigma: float
+               ) -> np.ndarray | None:
+    """The smooth per-channel gain ``(h, w, 3)`` float32 of product 1 over the channels that
+    brings ``part``'s (h, w, 3) float32 hue to ``face``'s (h, w, 3) uint8 at the scale
+    ``sigma`` (pixels), leaving its brightness: :func:`_shading_field`'s ratio of
+    Gaussian-weighted sums over the ``valid`` blocks, divided by its geometric mean over the
+    channels, on blocks whose brightness ratio lies within ``exp(±HUE_LIMITS[0])`` and whose
+    channels' hue ratios lie within ``exp(±HUE_LIMITS[1])`` (hair, teeth, lips: another
+    thing); None where no block compares."""
+    k = SHADING_STEP
+    h, w = valid.shape
+    if h < k or w < k:
+        return None
+    size, hk, wk = (w // k, h // k), h - h % k, w - w % k
+    m = cv2.resize(valid[:hk, :wk].view(np.uint8).astype(np.float32), size,
+                   interpolation=cv2.INTER_AREA)
+    f1 = cv2.add(cv2.resize(face[:hk, :wk], size, interpolation=cv2.INTER_AREA)
+                 .astype(np.float32), 1.0)
+    p1 = cv2.add(cv2.resize(part[:hk, :wk], size, interpolation=cv2.INTER_AREA), 1.0)
+    # the log ratios, their mean over the channels (the brightness) and the rest (the hue);
+    # OpenCV throughout: numpy's reductions over a last axis of 3 are many times slower
+    lr = cv2.subtract(cv2.log(f1), cv2.log(p1))
+    grey = cv2.transform(lr, _THIRDS)
+    ok = cv2.inRange(cv2.subtract(lr, cv2.merge([grey, grey, grey])), (-HUE_LIMITS[1],) * 3,
+                     (HUE_LIMITS[1],) * 3) > 0
+    ok &= cv2.inRange(grey, -HUE_LIMITS[0], HUE_LIMITS[0]) > 0
+    m[~ok | (m < 0.5)] = 0.0
+    if not m.any():
+        return None
+    m3 = cv2.merge([m, m, m])
+    s = sigma / k
+    num, den, wt = (cv2.GaussianBlur(a, (0, 0), s)
+                    for a in (cv2.multiply(f1, m3), cv2.multiply(p1, m3), m))
+    lg = cv2.subtract(cv2.log(cv2.max(num, 1e-6)), cv2.log(cv2.max(den, 1e-6)))
+    mean = cv2.transform(lg, _THIRDS)
+    g = cv2.exp(cv2.subtract(lg, cv2.merge([mean, mean, mean])))
+    np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])
+    np.clip(g, *HUE_RANGE, out=g)
     return cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
 
 

@@ -335,7 +335,7 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTe
                                labels, (_EYES, _RIM))
     if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
         face_img = _paint_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
-                              (_JAW_REGION, _JAW_RING))
+                              (_JAW_REGION, _JAW_RING), raster, topo.faces)
     ring = None
     if with_mouth:
         mouth_mask = np.bitwise_and(labels, _MOUTH) != 0

@@ -49,8 +49,8 @@ from .cameras import (Pinhole, WeakPerspective, _as_size, euler_from_rotation,
                       look_at_weak_perspective, rotation_from_euler)
 from .raster import (Raster, Rasterizer, RenderError, _check_mesh, _check_not_all_degenerate,
                      _rasterize_checked, rasterize, rasterize_reference)
-from .shading import (_check_colors, check_shading, check_textured, sample_texture,
-                      shade_image, shade_layers, shade_texture, vertex_normals)
+from .shading import (_check_colors, check_shading, check_textured, interpolate_vertex_values,
+                      sample_texture, shade_image, shade_layers, shade_texture, vertex_normals)
 from .visibility import _tolerance, _visibility, vertex_visibility
 
 log = logging.getLogger(__name__)
@@ -74,6 +74,7 @@ __all__ = [
     "sample_texture",
     "shade_texture",
     "shade_layers",
+    "interpolate_vertex_values",
 ]
 
 

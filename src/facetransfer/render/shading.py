@@ -9,7 +9,8 @@ import numpy as np
 from ..errors import AssetError, ShapeError
 from .raster import Raster, RenderError, _check_mesh, _face_cross, _maybe_njit
 
-__all__ = ["vertex_normals", "sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS"]
+__all__ = ["vertex_normals", "sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS",
+           "interpolate_vertex_values"]
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -285,6 +286,59 @@ def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray
                                 *scratch):
         raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
     return images[:n_given], labels
+
+
+def interpolate_vertex_values(raster: Raster, faces: np.ndarray, values: np.ndarray,
+                              box: tuple[slice, slice] | None = None) -> np.ndarray:
+    """A per-vertex scalar at the pixels of a raster, barycentrically interpolated.
+
+    Parameters
+    ----------
+    raster : Raster
+        Of a mesh with faces ``faces``.
+    faces : (F, 3) int
+    values : (n,) float
+        One value per vertex the faces index.
+    box : (slice, slice), optional
+        ``(rows, columns)`` of the raster to interpolate over (default: all of it), with
+        unit steps.
+
+    Returns
+    -------
+    (h, w) float32
+        At a covered pixel, ``sum_k bary[k] * values[faces[tri, k]]``; 0 where nothing is.
+    """
+    Fa = np.ascontiguousarray(faces, dtype=np.int64)
+    v = np.ascontiguousarray(values, dtype=np.float32)
+    if v.ndim != 1 or (Fa.size and v.shape[0] <= int(Fa.max())):
+        raise ShapeError(f"values must be (n,) covering the faces' vertices, got {v.shape}")
+    tid, bary = np.asarray(raster.tri_id, np.int32), np.asarray(raster.bary, np.float32)
+    if box is not None:
+        tid, bary = tid[box], bary[box]
+    out = np.zeros(tid.shape, np.float32)
+    if not _interpolate_kernel(tid, bary, Fa, v, out):
+        raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
+    return out
+
+
+def _interpolate_kernel_py(tid, bary, F, values, out):  # pragma: no cover (numba)
+    """:func:`interpolate_vertex_values` into ``out`` (H, W) float32; False (and stops) at a
+    triangle index beyond ``F``."""
+    H, W = tid.shape
+    n = F.shape[0]
+    for iy in range(H):
+        for ix in range(W):
+            f = tid[iy, ix]
+            if f < 0:
+                continue
+            if f >= n:
+                return False
+            out[iy, ix] = (bary[iy, ix, 0] * values[F[f, 0]] + bary[iy, ix, 1] * values[F[f, 1]]
+                           + bary[iy, ix, 2] * values[F[f, 2]])
+    return True
+
+
+_interpolate_kernel = _maybe_njit(_interpolate_kernel_py)
 
 
 def _check_uvs(uvs, n_vertices: int) -> np.ndarray:
