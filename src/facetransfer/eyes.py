@@ -36,7 +36,7 @@ from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
 from .errors import RewriteError
 from .patch import REJECT, SHADING_SIGMA, _match_outline_into
-from .render import Raster, shade_layers, shade_texture
+from .render import Raster, shade_layers, shade_texture, vertex_normals
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -45,7 +45,7 @@ log = logging.getLogger(__name__)
 __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
-           "faces_around"]
+           "faces_around", "FACING", "facing_weights", "smoothstep"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -72,6 +72,12 @@ CLOSE_RINGS = 3
 #: not from every vertex the lid shapes move: eyeSquint moves the cheek down to the jaw line,
 #: which a turned head shows beside the hair or the dark gap under it.)
 RIM_DISTANCE = 1.2
+#: :func:`facing_weights`' ramp: a vertex that a region's reference frame sees edge-on (its
+#: normal's component toward the camera below the first value) keeps the current frame's
+#: texture, one it sees squarely (above the second) takes the reference frame's. What a frame
+#: shows of the skin it sees edge-on is the neck, hair or an outline a few pixels off (a pale
+#: V under the chin of ``make demo``'s smiling frame, from the jaw's reference frame).
+FACING = (0.1, 0.4)
 
 
 @dataclass(frozen=True)
@@ -669,3 +675,20 @@ def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] 
     raster."""
     sl = mask_box(shown, margin)
     return None if sl is None else (sl[1].start, sl[0].start, sl[1].stop, sl[0].stop)
+
+
+def facing_weights(V: np.ndarray, faces: np.ndarray, rotation: np.ndarray, verts: np.ndarray,
+                   ramp: tuple[float, float] = FACING) -> np.ndarray:
+    """How squarely the reference frame sees each vertex, ``(m,)`` float32 in [0, 1]: the
+    smoothstep from ``ramp[0]`` to ``ramp[1]`` of the component toward the camera of the
+    unit normal (:func:`facetransfer.render.vertex_normals`) of ``V`` (n, 3), the mesh in
+    the frame (no pose), turned by the frame's ``rotation`` (3, 3), at the vertices
+    ``verts`` (m,)."""
+    N = vertex_normals(V, faces)[verts] @ np.asarray(rotation, np.float64).T
+    return smoothstep(N[:, 2], ramp).astype(np.float32)
+
+
+def smoothstep(x: np.ndarray, ramp: tuple[float, float]) -> np.ndarray:
+    """``3 t² - 2 t³`` of ``t = (x - ramp[0]) / (ramp[1] - ramp[0])`` clipped to [0, 1]."""
+    t = np.clip((x - ramp[0]) / max(ramp[1] - ramp[0], 1e-12), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)

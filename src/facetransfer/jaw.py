@@ -36,7 +36,7 @@ sequence)", applied to the jaw only):
    green or orange patches on the cheeks of ``make demo``'s turned and smiling frames:
    BENCHMARKS.md, "Fourteenth session", "Fifteenth session"); the skin that moved fades it
    in, the rest of the region keeps its own frame's; so does the skin that the reference frame
-   sees edge-on (:func:`facing_weights`: the jaw line, under the chin).
+   sees edge-on (:func:`facetransfer.eyes.facing_weights`: the jaw line, under the chin).
 """
 
 from __future__ import annotations
@@ -48,16 +48,17 @@ import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
-from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
+from .eyes import (close_region, faces_around, facing_weights, reference_frame, region_faces,
+                   region_vertices, smoothstep)
 from .patch import REJECT, _match_outline_into
-from .render import interpolate_vertex_values, shade_layers, vertex_normals
+from .render import interpolate_vertex_values, shade_layers
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
 log = logging.getLogger(__name__)
 
 __all__ = ["JAW_SHAPES", "JAW_THRESHOLD", "JawTexture", "jaw_region", "mouth_closure",
-           "closed_jaw_frame", "jaw_texture", "jaw_strengths", "facing_weights", "paint_jaw"]
+           "closed_jaw_frame", "jaw_texture", "jaw_strengths", "paint_jaw"]
 
 #: ARKit blendshapes whose vertices take the closed-mouth frame's texture.
 JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
@@ -78,12 +79,6 @@ JAW_BLEND = (0.05, 0.15)
 #: cheek of ``make demo``'s turned open-mouth frame, where the frame shows it pale); its
 #: brightness stays the gain's, so the target's own shadows do not come back.
 JAW_HUE_SIGMA = 10.0
-#: :func:`facing_weights`' ramp: a vertex that the reference frame sees edge-on (its normal's
-#: component toward the camera below the first value) keeps the current frame's texture, one
-#: it sees squarely (above the second) takes the reference frame's. What a frontal frame shows
-#: along the jaw line and under the chin is the neck or the jaw's outline a few pixels off (a
-#: pale V under the chin of ``make demo``'s smiling frame).
-JAW_FACING = (0.1, 0.4)
 # Where the closed frame's texture (matched) and the current frame's differ by more than
 # facetransfer.patch.REJECT, a pixel fades back to the current frame (paint_jaw): what the closed
 # frame shows at the jaw line of a turned head is often hair or the gap under it (a black
@@ -278,24 +273,7 @@ def jaw_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig
     V = model.synthesize({m: track.weights[m] for m in track.mode_names}, vertices=verts)
     d = np.sqrt(((V - V[reference]) ** 2).sum(-1))
     d /= max(float(np.sqrt((full ** 2).sum(-1).mean())), 1e-12)
-    return verts, _smoothstep(d, ramp).astype(np.float32)
-
-
-def facing_weights(V: np.ndarray, faces: np.ndarray, rotation: np.ndarray, verts: np.ndarray,
-                   ramp: tuple[float, float] = JAW_FACING) -> np.ndarray:
-    """How squarely the reference frame sees each vertex, ``(m,)`` float32 in [0, 1]: the
-    smoothstep from ``ramp[0]`` to ``ramp[1]`` of the component toward the camera of the
-    unit normal (:func:`facetransfer.render.vertex_normals`) of ``V`` (n, 3), the mesh in
-    the frame (no pose), turned by the frame's ``rotation`` (3, 3), at the vertices
-    ``verts`` (m,)."""
-    N = vertex_normals(V, faces)[verts] @ np.asarray(rotation, np.float64).T
-    return _smoothstep(N[:, 2], ramp).astype(np.float32)
-
-
-def _smoothstep(x: np.ndarray, ramp: tuple[float, float]) -> np.ndarray:
-    """``3 t² - 2 t³`` of ``t = (x - ramp[0]) / (ramp[1] - ramp[0])`` clipped to [0, 1]."""
-    t = np.clip((x - ramp[0]) / max(ramp[1] - ramp[0], 1e-12), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)
+    return verts, smoothstep(d, ramp).astype(np.float32)
 
 
 def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,
