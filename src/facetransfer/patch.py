@@ -98,7 +98,9 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     ``opacity`` in [0, 1], a number or per pixel (H, W) float32: the paste's alpha scaled
     by it. ``shading`` > 0: the gained part is then brought to the face's own low-frequency
     shading at that scale (:func:`_shading_field`, its Gaussian's standard deviation in
-    pixels), compared where the gain is."""
+    pixels), compared where the gain is. ``hue`` > 0: then to the face's smooth hue at that
+    scale, its brightness kept (:func:`_hue_field`), compared over the region and where the
+    gain is."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
@@ -159,17 +161,41 @@ def _shade_to(f: np.ndarray, face: np.ndarray, ring: np.ndarray, rbox: tuple[int
     ``face``, times :func:`_shading_field` of it against ``face`` over the compared pixels
     ``ring`` (its top-left pixel at ``rbox``) at the scale ``sigma``, in place."""
     x, y, w, h = box
-    rx, ry = rbox
     valid = np.zeros((h, w), bool)
-    # the compared pixels that fall in the region's box
-    ax0, ay0 = max(x, rx), max(y, ry)
-    ax1, ay1 = min(x + w, rx + ring.shape[1]), min(y + h, ry + ring.shape[0])
-    if ax1 <= ax0 or ay1 <= ay0:
-        return
-    valid[ay0 - y:ay1 - y, ax0 - x:ax1 - x] = ring[ay0 - ry:ay1 - ry, ax0 - rx:ax1 - rx]
+    _or_box(valid, ring, rbox, box)  # the compared pixels that fall in the region's box
     g = _shading_field(f, face[y:y + h, x:x + w], valid, sigma)
     if g is not None:
         cv2.multiply(f, g, dst=f)
+
+
+def _coarse(part: np.ndarray, face: np.ndarray, valid: np.ndarray):
+    """The two images and the compared pixels on a grid :data:`SHADING_STEP` times coarser:
+    ``(f1, p1, m)``, the block means of ``face`` (h, w, 3) uint8 and ``part`` (h, w, 3)
+    float32 plus 1 and the share of ``valid`` (h, w) bool pixels per block, all float32; None
+    for a box smaller than a block. Over whole blocks (OpenCV's fast path; the last
+    ``h % k`` rows and ``w % k`` columns do not count, and a field interpolated back over all
+    of them is stretched by less than a block)."""
+    k = SHADING_STEP
+    h, w = valid.shape
+    if h < k or w < k:
+        return None
+    size, hk, wk = (w // k, h // k), h - h % k, w - w % k
+    m = cv2.resize(valid[:hk, :wk].view(np.uint8).astype(np.float32), size,
+                   interpolation=cv2.INTER_AREA)
+    f1 = cv2.add(cv2.resize(face[:hk, :wk], size, interpolation=cv2.INTER_AREA)
+                 .astype(np.float32), 1.0)
+    p1 = cv2.add(cv2.resize(part[:hk, :wk], size, interpolation=cv2.INTER_AREA), 1.0)
+    return f1, p1, m
+
+
+def _weighted_sums(f1: np.ndarray, p1: np.ndarray, m: np.ndarray, sigma: float):
+    """The Gaussian-weighted sums (``sigma`` pixels of the full grid) of the coarse images
+    over the blocks of weight ``m``, and of the weights: ``(num, den, wt)``, a normalised
+    convolution's parts (a full neighbourhood's weights sum to 1)."""
+    m3 = cv2.merge([m, m, m])
+    s = sigma / SHADING_STEP
+    return tuple(cv2.GaussianBlur(a, (0, 0), s)
+                 for a in (cv2.multiply(f1, m3), cv2.multiply(p1, m3), m))
 
 
 def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray,
@@ -178,30 +204,21 @@ def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray,
     float32 to ``face``'s (h, w, 3) uint8 low-frequency shading, or None where no pixel
     compares.
 
-    On a grid :data:`SHADING_STEP` times coarser (block means), over the blocks at least
-    half of whose pixels are ``valid`` (h, w) bool and whose channel ratios ``(1 + face) /
-    (1 + part)`` all lie within ``exp(±SHADING_LIMIT)`` (unlike blocks, another thing or
-    another expression, do not count): the ratio of the two images' Gaussian-weighted sums
-    (``sigma`` pixels), a normalised convolution; 1 where the weights sum to
-    5 % of a full neighbourhood or less; clipped to :data:`SHADING_RANGE`; interpolated back
-    to every pixel. The plane of gains (:func:`gain_field`) matches the exposure; this
-    matches what another head pose does to the shading inside the region, so the region
-    does not show as patches with seams (the eye region of ``make demo``'s turned frames:
-    BENCHMARKS.md, "Fourteenth session").
+    On a grid :data:`SHADING_STEP` times coarser (block means, :func:`_coarse`), over the
+    blocks at least half of whose pixels are ``valid`` (h, w) bool and whose channel ratios
+    ``(1 + face) / (1 + part)`` all lie within ``exp(±SHADING_LIMIT)`` (unlike blocks,
+    another thing or another expression, do not count): the ratio of the two images'
+    Gaussian-weighted sums (``sigma`` pixels), a normalised convolution; 1 where the weights
+    sum to 5 % of a full neighbourhood or less; clipped to :data:`SHADING_RANGE`;
+    interpolated back to every pixel. The plane of gains (:func:`gain_field`) matches the
+    exposure; this matches what another head pose does to the shading inside the region, so
+    the region does not show as patches with seams (the eye region of ``make demo``'s turned
+    frames: BENCHMARKS.md, "Fourteenth session").
     """
-    k = SHADING_STEP
-    h, w = valid.shape
-    if h < k or w < k:
+    grid = _coarse(part, face, valid)
+    if grid is None:
         return None
-    # everything on the coarse grid: block means of both images and of the compared pixels,
-    # over whole k x k blocks (OpenCV's fast path; the last h % k rows and w % k columns do
-    # not count, and the field, interpolated back over all of them, is stretched by < k px)
-    size, hk, wk = (w // k, h // k), h - h % k, w - w % k
-    m = cv2.resize(valid[:hk, :wk].view(np.uint8).astype(np.float32), size,
-                   interpolation=cv2.INTER_AREA)
-    f1 = cv2.add(cv2.resize(face[:hk, :wk], size, interpolation=cv2.INTER_AREA)
-                 .astype(np.float32), 1.0)
-    p1 = cv2.add(cv2.resize(part[:hk, :wk], size, interpolation=cv2.INTER_AREA), 1.0)
+    f1, p1, m = grid
     lim = float(np.exp(SHADING_LIMIT))
     # every channel's ratio within the limit (cv2.inRange: one pass; numpy's reductions over
     # a last axis of 3 took 40 times longer), on blocks mostly of compared pixels
@@ -209,13 +226,11 @@ def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray,
     m[~ok | (m < 0.5)] = 0.0
     if not m.any():
         return None
-    m3 = cv2.merge([m, m, m])
-    s = sigma / k
-    num, den, wt = (cv2.GaussianBlur(a, (0, 0), s)
-                    for a in (cv2.multiply(f1, m3), cv2.multiply(p1, m3), m))
+    num, den, wt = _weighted_sums(f1, p1, m, sigma)
     g = cv2.divide(num, np.maximum(den, 1e-6))
     np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])  # a full neighbourhood sums to 1
     np.clip(g, *SHADING_RANGE, out=g)
+    h, w = valid.shape
     return cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
@@ -247,16 +262,10 @@ def _hue_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray, sigma: flo
     channels, on blocks whose brightness ratio lies within ``exp(±HUE_LIMITS[0])`` and whose
     channels' hue ratios lie within ``exp(±HUE_LIMITS[1])`` (hair, teeth, lips: another
     thing); None where no block compares."""
-    k = SHADING_STEP
-    h, w = valid.shape
-    if h < k or w < k:
+    grid = _coarse(part, face, valid)
+    if grid is None:
         return None
-    size, hk, wk = (w // k, h // k), h - h % k, w - w % k
-    m = cv2.resize(valid[:hk, :wk].view(np.uint8).astype(np.float32), size,
-                   interpolation=cv2.INTER_AREA)
-    f1 = cv2.add(cv2.resize(face[:hk, :wk], size, interpolation=cv2.INTER_AREA)
-                 .astype(np.float32), 1.0)
-    p1 = cv2.add(cv2.resize(part[:hk, :wk], size, interpolation=cv2.INTER_AREA), 1.0)
+    f1, p1, m = grid
     # the log ratios, their mean over the channels (the brightness) and the rest (the hue);
     # OpenCV throughout: numpy's reductions over a last axis of 3 are many times slower
     lr = cv2.subtract(cv2.log(f1), cv2.log(p1))
@@ -267,15 +276,13 @@ def _hue_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray, sigma: flo
     m[~ok | (m < 0.5)] = 0.0
     if not m.any():
         return None
-    m3 = cv2.merge([m, m, m])
-    s = sigma / k
-    num, den, wt = (cv2.GaussianBlur(a, (0, 0), s)
-                    for a in (cv2.multiply(f1, m3), cv2.multiply(p1, m3), m))
+    num, den, wt = _weighted_sums(f1, p1, m, sigma)
     lg = cv2.subtract(cv2.log(cv2.max(num, 1e-6)), cv2.log(cv2.max(den, 1e-6)))
     mean = cv2.transform(lg, _THIRDS)
     g = cv2.exp(cv2.subtract(lg, cv2.merge([mean, mean, mean])))
     np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])
     np.clip(g, *HUE_RANGE, out=g)
+    h, w = valid.shape
     return cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
