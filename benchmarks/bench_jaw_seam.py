@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from _revision import extract_src  # benchmarks/ is on sys.path
+
 FRAMES = 120
 BAND = 5
 SIGMA = 6.0
@@ -139,20 +141,6 @@ def step(image: np.ndarray, region: np.ndarray, face: np.ndarray) -> float:
     return float(np.linalg.norm(means[0] - means[1], axis=1).mean())
 
 
-def _extract(rev: str) -> Path:
-    import io
-    import tarfile
-    import tempfile
-
-    repo = Path(__file__).resolve().parents[1]
-    tmp = Path(tempfile.mkdtemp(prefix="bench_jaw_seam_"))
-    tar = subprocess.run(["git", "-C", str(repo), "archive", "--format=tar", rev, "src"],
-                         check=True, capture_output=True).stdout
-    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
-        t.extractall(tmp, filter="data")
-    return tmp / "src"
-
-
 def plot(res: dict, path: Path) -> None:
     import matplotlib
 
@@ -187,7 +175,7 @@ def main(argv=None) -> int:
     tracks = out / "jaw_seam_tracks"
     trees = {"this tree": Path(__file__).resolve().parents[1] / "src"}
     if a.base_rev:
-        trees[f"base {a.base_rev}"] = _extract(a.base_rev)
+        trees[f"base {a.base_rev}"] = extract_src(a.base_rev, "bench_jaw_seam_")
     images = {name: render(src, tracks, out / f"jaw_seam_{i}.npy")
               for i, (name, src) in enumerate(trees.items())}
     region, face, pasted, target = region_masks(tracks)

@@ -30,6 +30,8 @@ from pathlib import Path
 
 import numpy as np
 
+from _revision import extract_src  # benchmarks/ is on sys.path
+
 TARGET, SOURCE = "driving_d9.mp4", "driving_d6.mp4"
 #: frames of the target used (10 s at 30 fps, as issue 13's end-to-end goal)
 CLIP = 300
@@ -90,21 +92,6 @@ def run(src: Path, tracks: Path, frames: int, parity: int, save: Path) -> dict:
                           "--save", str(save)], env=env, check=True, capture_output=True,
                          text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
-
-
-def _extract(rev: str) -> Path:
-    """The ``src`` folder of git revision ``rev`` of this repository, in a temporary folder."""
-    import io
-    import tarfile
-    import tempfile
-
-    repo = Path(__file__).resolve().parents[1]
-    tmp = Path(tempfile.mkdtemp(prefix="bench_rewrite_frame_"))
-    tar = subprocess.run(["git", "-C", str(repo), "archive", "--format=tar", rev, "src"],
-                         check=True, capture_output=True).stdout
-    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
-        t.extractall(tmp, filter="data")
-    return tmp / "src"
 
 
 def parity(a_path: Path, b_path: Path) -> dict:
@@ -176,7 +163,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     tracks = out / "rewrite_frame_tracks"
     here = Path(__file__).resolve().parents[1] / "src"
-    base = Path(args.base) if args.base else (_extract(args.base_rev) if args.base_rev else None)
+    base = Path(args.base) if args.base else (
+        extract_src(args.base_rev, "bench_rewrite_frame_") if args.base_rev else None)
     trees = {"this tree": here} | ({"base": base} if base else {})
     runs = {name: [] for name in trees}
     for _ in range(args.pairs):

@@ -1,0 +1,26 @@
+"""Another revision of this repository's ``src``, for benchmarks that run two trees in turn.
+
+:func:`extract_src` writes a git revision's ``src`` folder to a temporary folder (``git
+archive``); a benchmark then runs its worker in a fresh process with that folder first on
+``PYTHONPATH`` (``bench_rewrite_frame.py``, ``bench_jaw_seam.py``).
+"""
+
+from __future__ import annotations
+
+import io
+import subprocess
+import tarfile
+import tempfile
+from pathlib import Path
+
+
+def extract_src(rev: str, prefix: str = "bench_") -> Path:
+    """The ``src`` folder of git revision ``rev`` of this repository, in a new temporary folder
+    whose name starts with ``prefix``."""
+    repo = Path(__file__).resolve().parents[1]
+    tmp = Path(tempfile.mkdtemp(prefix=prefix))
+    tar = subprocess.run(["git", "-C", str(repo), "archive", "--format=tar", rev, "src"],
+                         check=True, capture_output=True).stdout
+    with tarfile.open(fileobj=io.BytesIO(tar)) as t:
+        t.extractall(tmp, filter="data")
+    return tmp / "src"
