@@ -5,8 +5,10 @@ encoding, decoded exactly.
    model, capture tracker, H.264 CRF 18) on 10 s of ``driving_d9`` (512x480, 30 fps: 300 frames)
    with ``driving_d6`` as the source, timed as a command (wall clock, a fresh process), and the
    same work in this process stage by stage (model load, read, track, render, write:
-   ``plan_transfer`` + ``render_plan``, what the command runs). The command runs twice in turn,
-   with its CPU seconds (all its processes: half of that is the least wall time on 2 cores)
+   ``plan_transfer`` + ``render_plan``, what the command runs; with the CPU seconds of the
+   plan and of the render, in this process and in its children: the forked tracker, the ffmpeg
+   encoder). The command runs twice in turn, with its CPU seconds (all its processes: half of
+   that is the least wall time on 2 cores)
    (the first may pay numba's compilation and a cold page cache; the second is reported), and
    ``facetransfer --help`` is timed too. The peer: MediaPipe Face Landmarker in VIDEO mode over
    the same target frames (``benchmarks/_mp_video.py``), with and without blendshapes.
@@ -141,8 +143,18 @@ def mediapipe_peer(target: Path, frames: int) -> dict:
     return out
 
 
+def _cpu() -> tuple[float, float]:
+    """CPU seconds (user + system) of this process and of its finished children."""
+    import resource
+
+    a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return a.ru_utime + a.ru_stime, b.ru_utime + b.ru_stime
+
+
 def staged(source: Path, target: Path, frames: int, out: Path):
-    """The same transfer in this process: seconds per stage, rewritten frames, face masks."""
+    """The same transfer in this process: seconds per stage, CPU seconds of the plan (reading
+    and tracking: this process and the forked tracker) and of the render (this process's
+    threads and the ffmpeg encoder), rewritten frames, face masks."""
     import cv2
 
     from facetransfer import video_transfer as vt
@@ -151,7 +163,9 @@ def staged(source: Path, target: Path, frames: int, out: Path):
     t = time.perf_counter()
     model = load_default_model()
     timings = {"model": time.perf_counter() - t}
+    c0 = _cpu()
     plan = vt.plan_transfer(target, model, expression_from=source, max_frames=frames)
+    c1 = _cpu()
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * DILATE + 1, 2 * DILATE + 1))
     imgs, masks = [], []
 
@@ -161,9 +175,12 @@ def staged(source: Path, target: Path, frames: int, out: Path):
         return r.image
 
     done = vt.render_plan(plan, model, out, overwrite=True, compose=keep)
+    c2 = _cpu()
     timings.update(done.timings)
+    cpu = {"plan": {"this_process": c1[0] - c0[0], "children": c1[1] - c0[1]},
+           "render": {"this_process": c2[0] - c1[0], "children": c2[1] - c1[1]}}
     targets = np.stack([np.asarray(plan.target_frames[i]) for i in range(len(imgs))])
-    return timings, np.stack(imgs), np.stack(masks), plan.fps, targets
+    return timings, cpu, np.stack(imgs), np.stack(masks), plan.fps, targets
 
 
 def outside(target: Path, frames: np.ndarray, masks: np.ndarray, fps: float, tmp: Path,
@@ -266,10 +283,14 @@ def main() -> int:
         from _mp_video import filtered_stderr
 
         with filtered_stderr():  # MediaPipe's native log lines
-            stages, frames, masks, fps, targets = staged(source, target, n, tmp / "staged.mp4")
+            stages, stage_cpu, frames, masks, fps, targets = staged(source, target, n,
+                                                                    tmp / "staged.mp4")
         total = sum(stages.values())
         print("stages: " + ", ".join(f"{k} {v:.1f} s ({100 * v / total:.0f}%)"
                                      for k, v in stages.items()), flush=True)
+        print("CPU: " + "; ".join(f"{k} {v['this_process']:.1f} s here, {v['children']:.1f} s "
+                                  f"in child processes" for k, v in stage_cpu.items())
+              + " (plan: the forked tracker; render: the ffmpeg encoder)", flush=True)
         peer = mediapipe_peer(target, n)
         print("MediaPipe VIDEO mode on the same frames: " + ", ".join(
             f"{k} {v:.1f}" for k, v in peer.items()), flush=True)
@@ -279,7 +300,7 @@ def main() -> int:
               "size": list(info.size), "seconds": n / fps, "command_seconds": cmd,
               "command_runs": runs, "command_cpu_seconds": cpus,
               "command_cpu_floor_2_cores": cpus[-1] / 2, "help_seconds": helps,
-              "command_beyond_stages": cmd - total, "stages": stages,
+              "command_beyond_stages": cmd - total, "stages": stages, "stage_cpu": stage_cpu,
               "shares": {k: v / total for k, v in stages.items() if k != "total"},
               "mediapipe": peer,
               "outside_fraction": float((~masks).mean()), "outside": rows}
