@@ -277,3 +277,42 @@ def test_what_the_reference_frame_sees_edge_on_keeps_the_current_frames_texture(
     frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8)] * 2
     tex = jaw.jaw_texture(frames, target, model, topo)
     np.testing.assert_allclose(tex.strengths, s * w[None], atol=1e-6)
+
+
+def test_only_the_skin_that_moved_takes_the_reference_frame(setup):
+    """Per vertex (JawTexture.at's alpha, interpolated over the pixels): rendered into a frame
+    whose skin shows fine detail (a checker) over a plain reference frame, the pixels whose
+    vertices the target's own opening did not move (alpha 0) keep the frame's texture to the
+    level, and those it moved fully (alpha 1) take the reference frame's plain skin."""
+    from facetransfer.render import interpolate_vertex_values
+
+    model, topo = setup
+    target = _track(model, [0.0, 0.3])
+    yy, xx = np.mgrid[0:SIZE, 0:SIZE]
+    checker = np.where(((yy // 2) + (xx // 2)) % 2 == 0, 15, -15)[..., None]
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8),
+              np.clip(np.array(SKIN) + checker, 0, 255).astype(np.uint8)]
+    tex = jaw.jaw_texture(frames, target, model, topo)
+    at = tex.at(1)
+    assert at is not None and at.alpha.min() == 0 and at.alpha.max() == 1
+    cam = target.camera(1)
+    V = model.synthesize(target.weights_at(1))  # the new face: the target's own, here
+    Vc = close_mouth(V, topo)
+    face_tex = FaceTexture(frames[1], frame_uvs(Vc, cam, (SIZE, SIZE)), 1)
+    before = rewrite_frame(frames[1], V, cam, topo, face_tex, blend="none", erode=0)
+    after = rewrite_frame(frames[1], V, cam, topo, face_tex, jaw_texture=at, blend="none",
+                          erode=0)
+    r = rasterize(Vc, topo.faces, cam, (SIZE, SIZE))
+    alpha = interpolate_vertex_values(r, topo.faces, at.alpha)
+    region = _region_pixels(model, topo, target, 1, tex.select)
+    inner = region.copy()
+    for ax in (0, 1):
+        for d in (-5, 5):
+            inner &= np.roll(region, d, ax)
+    still, moved = inner & (alpha == 0), inner & (alpha == 1)
+    assert still.sum() > 30 and moved.sum() > 200
+    diff = np.abs(after.image.astype(int) - before.image.astype(int)).max(axis=-1)
+    assert diff[still].max() <= 1
+    # the checker (std 15 levels per channel) gone: what is left is the gain's smooth plane
+    g_before, g_after = before.image[..., 1][moved], after.image[..., 1][moved]
+    assert np.std(g_before) > 12 and np.std(g_after) < 0.25 * np.std(g_before)
