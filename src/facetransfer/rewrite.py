@@ -139,9 +139,9 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         :func:`facetransfer.eyes.eye_texture`); without it the target's eyes show through.
     jaw_texture : JawTexture, optional
         The jaw region's texture from a closed-mouth target frame
-        (:func:`facetransfer.jaw.jaw_texture`, for ``topo``), pasted at its ``strength``
-        (:meth:`facetransfer.jaw.JawTexture.at` gives a frame's); without it the jaw is
-        textured from ``face_texture`` like the rest of the face.
+        (:func:`facetransfer.jaw.jaw_texture`, for ``topo``), pasted with its per-vertex
+        ``alpha`` (:meth:`facetransfer.jaw.JawTexture.at` gives a frame's); without it the jaw
+        is textured from ``face_texture`` like the rest of the face.
     mouth_ring : (F',) bool, optional
         The triangles around the mouth whose colours in the source's frame and in the face
         set the mouth's gain; default :func:`facetransfer.mouth.mouth_ring_faces` of ``topo``.
