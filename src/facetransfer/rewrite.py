@@ -41,6 +41,7 @@ Pérez, Gangnet, Blake. Poisson image editing. SIGGRAPH 2003.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import threading
@@ -54,6 +55,7 @@ from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
 from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
 from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
+from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights, tint_mouth
 from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.function import attribute_vector
@@ -105,7 +107,8 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
                   mouth_feather: float = 3.0, color_match: bool = False,
                   eye_texture: EyeTexture | None = None,
                   jaw_texture: JawTexture | None = None,
-                  mouth_ring: np.ndarray | None = None) -> RewriteFrame:
+                  mouth_ring: np.ndarray | None = None,
+                  lip_tint: LipTint | None = None) -> RewriteFrame:
     """Render the new face into one target frame (§6).
 
     Parameters
@@ -145,6 +148,9 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     mouth_ring : (F',) bool, optional
         The triangles around the mouth whose colours in the source's frame and in the face
         set the mouth's gain; default :func:`facetransfer.mouth.mouth_ring_faces` of ``topo``.
+    lip_tint : LipTint, optional
+        The target's lip colour for the source's lips (:mod:`facetransfer.lip_colour`);
+        without it the lips keep the source's colour against the skin.
 
     Returns
     -------
@@ -172,7 +178,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         mouth_ring = mouth_ring_faces(topo)
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
                         feather, erode, mouth_feather, color_match, eye_texture, jaw_texture,
-                        mouth_ring)
+                        mouth_ring, lip_tint)
     return _paste(T, (box, res))
 
 
@@ -244,13 +250,17 @@ def _shift_camera(camera, x0: int, y0: int):
 
 def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
                   mouth_feather, color_match, eye_texture=None, jaw_texture=None,
-                  mouth_ring=None) -> RewriteFrame:
+                  mouth_ring=None, lip_tint=None) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
     from .render import rasterize
 
     raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(
         raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring)
+    if lip_tint is not None and mouth_img is not None:  # the target's lip colour, not inside
+        fan = inside_mouth(raster.tri_id, topo)
+        tint_mouth(mouth_img, raster, topo.faces, lip_tint,
+                   mouth_mask if fan is None else mouth_mask & ~fan)
     rendered = face_img if mouth_img is None else over(face_img, mouth_img, mouth_mask)
     if not face_mask.any():
         return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask)
@@ -582,6 +592,10 @@ class _ClipRenderer:
         a track with detections, :mod:`facetransfer.lips`).
     ring : (F',) bool or None
         :func:`facetransfer.mouth.mouth_ring_faces` of ``topo``, when the mouth is textured.
+    lip_tint : LipTint or None
+        The target's lip colour for the source's lips (``lip_colour="target"`` with the
+        source's frames as the mouth texture, :mod:`facetransfer.lip_colour`; the §6 texture
+        function's atlas holds no skin around the mouth to compare with).
     """
 
     target_frames: object
@@ -602,6 +616,7 @@ class _ClipRenderer:
     jaw_tex: JawTexture | None = None
     lips: LipResidual | None = None
     ring: np.ndarray | None = None
+    lip_tint: LipTint | None = None
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
@@ -635,10 +650,37 @@ class _ClipRenderer:
             kinds["source"] = source_track
         lips = clip_lip_residual(model, topo, source_track) \
             if with_mouth and opts.lips == "residual" else None
-        return cls(target_frames, target_track, new_track, model, opts, topo, first,
-                   source_frames, source_track, sidx, const_tex, fn, with_mouth,
-                   _FrameMeshes(model, kinds, n), eye_tex, jaw_tex, lips,
-                   mouth_ring_faces(topo) if with_mouth else None)
+        renderer = cls(target_frames, target_track, new_track, model, opts, topo, first,
+                       source_frames, source_track, sidx, const_tex, fn, with_mouth,
+                       _FrameMeshes(model, kinds, n), eye_tex, jaw_tex, lips,
+                       mouth_ring_faces(topo) if with_mouth else None)
+        if opts.lip_colour == "target" and with_mouth and model.landmarks is not None:
+            renderer = dataclasses.replace(renderer, lip_tint=renderer.clip_lip_tint())
+        return renderer
+
+    def clip_lip_tint(self) -> LipTint | None:
+        """The target's lip colour over the source's (:mod:`facetransfer.lip_colour`), read
+        from up to :data:`facetransfer.lip_colour.SAMPLES` frames spread through the clip
+        where neither face is lost, through the textures the frames are rendered with."""
+        weights, lips = lip_vertex_weights(self.model, self.topo)
+        ring = mouth_ring_faces(self.topo) if self.ring is None else self.ring
+        skin = np.setdiff1d(np.unique(self.topo.faces[ring]), np.flatnonzero(weights > 0))
+        n = self.new_track.n_frames  # the target's track may be longer (align="trim")
+        ok = np.flatnonzero(~(self.new_track.lost | self.target_track.lost[:n]))
+        if ok.size == 0 or lips.size == 0 or skin.size == 0:
+            return None
+        pick = ok[np.unique(np.linspace(0, ok.size - 1, min(LIP_SAMPLES, ok.size)).round()
+                            .astype(np.int64))]
+        target = (self.face_texture(np.asarray(self.target_frames[i]), int(i)) for i in pick)
+        source = (self.mouth_texture(int(i)) for i in pick)
+        tr = lip_ratio(((t.image, t.uvs) for t in target), lips, skin)
+        sr = lip_ratio(((t.image, t.uvs) for t in source if t is not None), lips, skin)
+        if tr is None or sr is None:
+            return None
+        tint = LipTint.of(weights, tr, sr)
+        log.info("lip colour: the target's lips over the source's %s (RGB)",
+                 np.array2string(tint.tint, precision=2))
+        return tint
 
     def mesh(self, kind: str, track, i: int) -> np.ndarray:
         """The mesh (n_vertices, 3) of frame ``i`` of ``track`` (its ``kind`` in :attr:`meshes`)."""
@@ -693,7 +735,7 @@ class _ClipRenderer:
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
                              feather=o.feather, erode=o.erode, eye_texture=self.eye_tex,
                              jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
-                             mouth_ring=self.ring)
+                             mouth_ring=self.ring, lip_tint=self.lip_tint)
 
 
 def _render_in_threads(one, n: int, workers: int, progress):

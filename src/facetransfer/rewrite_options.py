@@ -23,6 +23,7 @@ __all__ = [
     "EYE_MODES",
     "JAW_MODES",
     "LIP_MODES",
+    "LIP_COLOUR_MODES",
     "SPEED_PRESETS",
     "DEFAULT_SPEED",
     "TRACK_METHODS",
@@ -50,6 +51,9 @@ JAW_MODES = ("closed", "frame")
 #: the capture's residual at the lips (:mod:`facetransfer.lips`: the texture read where the
 #: detected lips are, the new lips moved by the residual's shape) or as the model fitted them.
 LIP_MODES = ("residual", "model")
+#: Whose colour the lips of the result take (with a mouth from another clip): the target's
+#: lips against its skin (:mod:`facetransfer.lip_colour`) or the source's, as §6 pastes them.
+LIP_COLOUR_MODES = ("target", "source")
 
 
 def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> None:
@@ -98,6 +102,11 @@ class RewriteOptions:
         the source's lips are detected and the new face's lips moved by the fit's residual;
         a source track without detections (or ``"model"``) renders the lips as fitted. Only
         with the source's frame as the mouth texture (``mouth="frame"``).
+    lip_colour : {"target", "source"}
+        ``"target"``: the source's lips take the target's lip colour (its lips against its
+        skin, :mod:`facetransfer.lip_colour`), so a target's lipstick stays; ``"source"``:
+        the source's lips keep their own colour against the skin (§6). Only with the
+        source's frame as the mouth texture (``mouth="frame"``).
 
     Raises
     ------
@@ -115,6 +124,7 @@ class RewriteOptions:
     eyes: str = "model"
     jaw: str = "closed"
     lips: str = "residual"
+    lip_colour: str = "target"
 
     def __post_init__(self) -> None:
         check_mode("texture", self.texture, TEXTURE_MODES, sep=None)
@@ -126,6 +136,7 @@ class RewriteOptions:
         check_mode("eyes", self.eyes, EYE_MODES)
         check_mode("jaw", self.jaw, JAW_MODES)
         check_mode("lips", self.lips, LIP_MODES)
+        check_mode("lip_colour", self.lip_colour, LIP_COLOUR_MODES)
         if not self.feather >= 0:
             raise RewriteError(f"feather must be >= 0 pixels, got {self.feather!r}")
         if int(self.erode) != self.erode or self.erode < 0:

@@ -206,7 +206,7 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     model : MultilinearModel
     settings : dict
         ``texture``, ``blend``, ``mouth``, ``align``, ``max_frames``, ``track_method``,
-        ``speed``, ``eyes``, ``jaw`` as the ``transfer`` options.
+        ``speed``, ``eyes``, ``jaw``, ``lips``, ``lip_colour`` as the ``transfer`` options.
 
     Returns
     -------
@@ -225,7 +225,8 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     options = RewriteOptions(
         texture=settings["texture"], blend=settings["blend"], mouth=settings["mouth"],
         track_method=settings["track_method"], speed=settings["speed"],
-        eyes=settings.get("eyes", "model"), jaw=settings.get("jaw", "closed"))
+        eyes=settings.get("eyes", "model"), jaw=settings.get("jaw", "closed"),
+        lips=settings.get("lips", "residual"), lip_colour=settings.get("lip_colour", "target"))
     sources = TransferSources.of(
         str(job.target), target_track=s.get("target_track"),
         expression_from=s.get("expression_from"),

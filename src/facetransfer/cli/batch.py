@@ -173,7 +173,7 @@ def run_transfer(args) -> int:
     settings = {"texture": args.texture, "blend": args.blend, "mouth": args.mouth,
                 "align": args.align, "max_frames": args.max_frames,
                 "track_method": args.tracker, "speed": args.speed, "eyes": args.eyes,
-                "jaw": args.jaw}
+                "jaw": args.jaw, "lips": args.lips, "lip_colour": args.lip_colour}
     return _run(args, "transfer", len(jobs), lambda client, progress: batch_transfer(
         jobs, args.out, model, client=client, settings=settings, overwrite=args.overwrite,
         progress=progress))

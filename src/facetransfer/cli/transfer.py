@@ -20,9 +20,9 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..transfer import ALIGN_MODES
-from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, JAW_MODES, LIP_MODES,
-                               MOUTH_MODES, SPEED_PRESETS, TEXTURE_MODES, TRACK_METHODS,
-                               RewriteOptions)
+from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, JAW_MODES,
+                               LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
+                               TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import MODEL_HELP, add_video_options, resolve_model, video_options
 from .track import CAPTURE_HELP
 
@@ -79,6 +79,10 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    help="residual: the source's lips beyond what the model fits (the capture's "
                    "residual at the lip points): the mouth texture read where the source's lips "
                    "are detected and the new lips moved by it; model: the lips as fitted")
+    p.add_argument("--lip-colour", choices=LIP_COLOUR_MODES, default="target",
+                   help="target: the source's lips take the target's lip colour against its "
+                   "skin (a target's lipstick stays); source: they keep the source's own, as "
+                   "the paper pastes them (with --mouth frame)")
     p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given: auto or capture ("
                    + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
@@ -95,7 +99,7 @@ def rewrite_options(args) -> RewriteOptions:
     :func:`add_rewrite_options`' arguments."""
     return RewriteOptions(texture=args.texture, mouth=args.mouth, blend=args.blend,
                           speed=args.speed, track_method=args.tracker, eyes=args.eyes,
-                          jaw=args.jaw, lips=args.lips)
+                          jaw=args.jaw, lips=args.lips, lip_colour=args.lip_colour)
 
 
 def _parser(sub, name: str, help: str, description: str):

@@ -1,0 +1,168 @@
+"""The target's lip colour on the source's mouth.
+
+The rewrite textures the mouth, lips included, from the mouth's source (§6: "the mouth texture
+from the source video"; :mod:`facetransfer.mouth`) and scales it to the face's colours by a
+gain fitted on the skin around it. That gain maps the source's skin onto the target's, so the
+lips keep the source's colour relative to its skin: on ``make demo``'s pair the target's red
+lipstick became the source's pale lips, a part of the source's identity in the result.
+
+Lip colour is a property of the person (the lips' tint against the skin beside them), not of the
+expression. So, per clip:
+
+1. the lips are the vertices inside the outer lip contour (iBUG 48-59) of the model's mean face,
+   seen from the front, fading out over a band around it (:func:`lip_vertex_weights`);
+2. in a few frames spread through each clip the colour of the lips' middle band (away from
+   the mouth's opening, where teeth or the gap may show) and of the skin ring around the
+   mouth is read through the clip's tracked geometry, as the texture is; their per-channel
+   ratio, the median over frames, is the clip's lip tint (:func:`lip_ratio`);
+3. the source's mouth texture is multiplied, per channel and weighted by the lips' weight at
+   each pixel, by the target's tint over the source's (:func:`tint_mouth`), before the gain
+   to the face's colours. The skin, the teeth and the mouth's inside are not touched.
+
+The same person's clip on both sides gives a tint of 1 up to noise.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import ShapeError
+from .render import interpolate_vertex_values, sample_texture
+from .topology import MeshTopology, inside_polygon
+
+__all__ = ["LIP_LEVELS", "TINT_RANGE", "LipTint", "lip_vertex_weights", "lip_ratio",
+           "tint_mouth"]
+
+#: The outer lip contour's scales about its centre at which a vertex's weight steps down:
+#: inside the first scale 1, beyond the last 0 (the mouth's region reaches 1.1).
+LIP_LEVELS = (0.9, 0.97, 1.04)
+#: The inner lip contour (iBUG 60-67) grown by this about its centre: vertices inside it are
+#: not read for the lips' colour (the opening, teeth and gap may show there).
+INNER_GROWTH = 1.35
+#: Per-channel tints allowed (two people's lips against their skin).
+TINT_RANGE = (0.5, 2.0)
+#: Frames read per clip for its lips' colour.
+SAMPLES = 24
+
+
+@dataclass(frozen=True)
+class LipTint:
+    """The lips' per-vertex weight and the per-channel tint from the source's lips to the
+    target's.
+
+    Attributes
+    ----------
+    weights : (n_closed,) float32
+        1 on the lips, 0 off them (:func:`lip_vertex_weights`).
+    tint : (3,) float64
+        Multiplies the source's lips (RGB): the target's lip-to-skin ratio over the source's.
+    target_ratio, source_ratio : (3,) float64
+        Each clip's lip-to-skin ratio (:func:`lip_ratio`).
+    """
+
+    weights: np.ndarray
+    tint: np.ndarray
+    target_ratio: np.ndarray
+    source_ratio: np.ndarray
+
+    @classmethod
+    def of(cls, weights: np.ndarray, target_ratio: np.ndarray, source_ratio: np.ndarray
+           ) -> "LipTint":
+        """From the two clips' :func:`lip_ratio`, clipped to :data:`TINT_RANGE`."""
+        tr, sr = (np.asarray(r, np.float64).reshape(3) for r in (target_ratio, source_ratio))
+        return cls(np.asarray(weights, np.float32), np.clip(tr / sr, *TINT_RANGE), tr, sr)
+
+
+def _mean_face_landmarks(model) -> tuple[np.ndarray, np.ndarray]:
+    """``(V, lm)``: the mean face (n, 3) and its 68 landmarks (68, 3)."""
+    V = model.synthesize(model.default_weights())
+    return V, V[np.asarray(model.landmarks)]
+
+
+def _inside_scaled(poly: np.ndarray, points: np.ndarray, scale: float) -> np.ndarray:
+    """(n,) bool: ``points`` (n, 2) inside ``poly`` (k, 2) scaled by ``scale`` about its
+    centre."""
+    ctr = poly.mean(0)
+    return inside_polygon(ctr + scale * (poly - ctr), points)
+
+
+def lip_vertex_weights(model, topo: MeshTopology) -> tuple[np.ndarray, np.ndarray]:
+    """The lips' weight per vertex of the closed mesh, and the vertices to read their colour at.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+        With iBUG-68 landmarks.
+    topo : MeshTopology
+
+    Returns
+    -------
+    weights : (n_closed,) float32
+        The fraction of :data:`LIP_LEVELS` at whose scale of the mean face's outer lip contour
+        the vertex lies inside (seen from the front, on the face's front); 0 for the mouth's
+        centre vertex.
+    read : (m,) int64
+        Vertices of weight 1 outside the inner lip contour grown by :data:`INNER_GROWTH`.
+    """
+    if model.landmarks is None:
+        raise ShapeError("the model has no landmarks: the lips cannot be found")
+    V, lm = _mean_face_landmarks(model)
+    outer, inner = lm[48:60, :2], lm[60:68, :2]
+    front = V[:, 2] > lm[48:68, 2].min() - 0.25 * float(np.linalg.norm(lm[36] - lm[45]))
+    w = np.zeros(topo.n_closed, np.float32)
+    for s in LIP_LEVELS:
+        w[:len(V)] += (_inside_scaled(outer, V[:, :2], s) & front) / len(LIP_LEVELS)
+    read = (w[:len(V)] >= 1.0) & ~_inside_scaled(inner, V[:, :2], INNER_GROWTH)
+    return w, np.flatnonzero(read)
+
+
+def lip_ratio(samples, lips: np.ndarray, skin: np.ndarray) -> np.ndarray | None:
+    """A clip's lips over its skin, per channel.
+
+    Parameters
+    ----------
+    samples : iterable of (image (H, W, 3) uint8, uvs (n_closed, 2))
+        Frames of the clip and their texture coordinates (v up, :func:`frame_uvs`).
+    lips, skin : (m,) int
+        The vertices read as lips and as the skin around them.
+
+    Returns
+    -------
+    (3,) float64 or None
+        The median over frames of the ratio of the median colours (RGB); None without a frame.
+    """
+    ratios = []
+    for image, uvs in samples:
+        uv = np.asarray(uvs, np.float64)
+        a = np.median(sample_texture(image, uv[lips]), axis=0)
+        b = np.median(sample_texture(image, uv[skin]), axis=0)
+        ratios.append((a + 1.0) / (b + 1.0))
+    return np.median(np.asarray(ratios), axis=0) if ratios else None
+
+
+def tint_mouth(mouth_img: np.ndarray, raster, faces: np.ndarray, tint: LipTint,
+               mask: np.ndarray) -> None:
+    """Multiply the source's lips by the tint, in place.
+
+    Parameters
+    ----------
+    mouth_img : (H, W, 3) uint8
+        The mouth's texture at the raster's pixels.
+    raster : Raster
+        Of the closed mesh with ``faces``.
+    faces : (F, 3) int
+    tint : LipTint
+    mask : (H, W) bool
+        The mouth's pixels (outside it nothing changes).
+    """
+    ys, xs = np.nonzero(mask)
+    if ys.size == 0:
+        return
+    box = (slice(int(ys.min()), int(ys.max()) + 1), slice(int(xs.min()), int(xs.max()) + 1))
+    w = interpolate_vertex_values(raster, faces, tint.weights, box)
+    w *= mask[box]
+    gain = 1.0 + w[..., None] * (tint.tint.astype(np.float32) - 1.0)
+    sub = mouth_img[box]
+    sub[...] = np.clip(sub * gain + 0.5, 0, 255).astype(np.uint8)
