@@ -1,0 +1,215 @@
+"""The lips' colour of a transfer, judged by an independent detector (issue 13: identity).
+
+The result's lips should carry the source's movement in the target's colour (a target's
+lipstick is not an expression). On the three real pairs of ``bench_transfer_judge.py`` (120
+target frames each, the same cached tracks in ``OUT/judge_pairs/``) the default transfer is
+rendered twice, ``--lip-colour source`` (the source's lips against its skin, as §6 pastes them)
+and ``--lip-colour target`` (:mod:`facetransfer.lip_colour`). MediaPipe Face Landmarker finds
+the lips in the source (the frame matched by time), the target and both results: the pixels
+between its outer and inner lip contours, eroded by one pixel. Their median colour in CIELAB
+(OpenCV's conversion of the 8-bit RGB frame scaled to 0..1, L 0..100) is compared frame by
+frame:
+
+- ``de_target``: CIE76 ΔE between the result's lips and the target's in the same frame;
+- ``de_source``: between the result's lips and the source's;
+- the floor: the target's lips in a frame against their median over the clip (the target's own
+  variation: expression, light, the detector's contour).
+
+Usage::
+
+    python benchmarks/bench_lip_colour.py --out out/benchmarks [--pairs demo,fps,open]
+
+Writes ``OUT/lip_colour.json``, ``OUT/lip_colour.png`` (ΔE per pair) and
+``OUT/lip_colour_PAIR.png`` (source | target | source colour | target colour, lips enlarged).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from bench_transfer_judge import FRAMES, PAIRS, _track  # noqa: E402
+
+#: MediaPipe face mesh's outer and inner lip contours, in order around the mouth.
+OUTER = (61, 146, 91, 181, 84, 17, 314, 405, 321, 375, 291, 409, 270, 269, 267, 0, 37, 39, 40,
+         185)
+INNER = (78, 95, 88, 178, 87, 14, 317, 402, 318, 324, 308, 415, 310, 311, 312, 13, 82, 81, 80,
+         191)
+MODES = ("source", "target")
+
+
+def lip_lab(frames, fps: float) -> tuple[np.ndarray, np.ndarray]:
+    """``(lab (F, 3), boxes (F, 4))``: the median CIELAB colour of each frame's lips (NaN where
+    MediaPipe finds no face or fewer than 20 lip pixels) and the lips' box ``x0, y0, x1, y1``."""
+    import cv2
+
+    from facetransfer.fidelity import landmarker_scores
+
+    _, P = landmarker_scores(frames, fps)
+    lab = np.full((len(frames), 3), np.nan)
+    boxes = np.zeros((len(frames), 4), np.int64)
+    for i, f in enumerate(frames):
+        if not np.isfinite(P[i]).all():
+            continue
+        H, W = f.shape[:2]
+        xy = P[i, :, :2] * (W, H)
+        mask = np.zeros((H, W), np.uint8)
+        cv2.fillPoly(mask, [np.rint(xy[list(OUTER)]).astype(np.int32)], 1)
+        cv2.fillPoly(mask, [np.rint(xy[list(INNER)]).astype(np.int32)], 0)
+        mask = cv2.erode(mask, np.ones((3, 3), np.uint8)) > 0
+        if mask.sum() < 20:
+            continue
+        L = cv2.cvtColor(np.asarray(f, np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+        lab[i] = np.median(L[mask], axis=0)
+        o = xy[list(OUTER)]
+        boxes[i] = (*np.floor(o.min(0)).astype(int), *np.ceil(o.max(0)).astype(int))
+    return lab, boxes
+
+
+def delta_e(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """CIE76 ΔE per row (NaN where either is)."""
+    return np.linalg.norm(a - b, axis=-1)
+
+
+def _stats(x: np.ndarray) -> dict:
+    x = x[np.isfinite(x)]
+    return {"median": float(np.median(x)), "p90": float(np.percentile(x, 90)),
+            "frames": int(x.size)} if x.size else {"median": None, "p90": None, "frames": 0}
+
+
+def run_pair(name: str, model, out: Path, data: Path, frames: int) -> tuple[dict, dict]:
+    """Render one pair in both modes and judge the lips; ``(figures, panels for the picture)``."""
+    from facetransfer import video_transfer as vt
+    from facetransfer.rewrite_options import RewriteOptions
+
+    src, tgt = PAIRS[name]
+    cache = out / "judge_pairs"
+    cache.mkdir(parents=True, exist_ok=True)
+    plan = vt.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
+                            max_frames=frames, target_track=_track(tgt, model, cache, data),
+                            expression_track=_track(src, model, cache, data))
+    n = plan.n_frames
+    panels = {"source": [plan.mouth_frames[plan.mouth_index[i]] for i in range(n)],
+              "target": [plan.target_frames[i] for i in range(n)]}
+    for mode in MODES:
+        imgs: list[np.ndarray] = []
+        with tempfile.TemporaryDirectory() as tmp:
+            vt.render_plan(plan, model, Path(tmp) / "r.mp4", overwrite=True,
+                           options=RewriteOptions(lip_colour=mode),
+                           compose=lambda i, r: imgs.append(r.image) or r.image)
+        panels[f"result_{mode}"] = imgs
+    lab = {k: lip_lab(v, plan.fps) for k, v in panels.items()}
+    T, S = lab["target"][0], lab["source"][0]
+    res = {"source": src, "target": tgt, "frames": n,
+           "floor": _stats(delta_e(T, np.nanmedian(T, axis=0))),
+           "source_vs_target": _stats(delta_e(S, T)),
+           "lab": {k: np.nanmedian(v[0], axis=0).round(2).tolist() for k, v in lab.items()}}
+    for mode in MODES:
+        R = lab[f"result_{mode}"][0]
+        res[f"lip_colour_{mode}"] = {"de_target": _stats(delta_e(R, T)),
+                                     "de_source": _stats(delta_e(R, S))}
+    return res, {"panels": panels, "boxes": lab["target"][1]}
+
+
+def picture(name: str, panels: dict, boxes: np.ndarray, path: Path) -> None:
+    """Four frames: source | target | source colour | target colour, around the target's
+    lips (the same box in every panel but the source's, which has its own size)."""
+    import cv2
+
+    from facetransfer.io.atomic import atomic_path
+
+    n = len(panels["target"])
+    rows = []
+    for i in np.linspace(0, n - 1, 4).round().astype(int):
+        x0, y0, x1, y1 = boxes[i]
+        if x1 <= x0:
+            continue
+        w, h = x1 - x0, y1 - y0
+        H, W = panels["source"][i].shape[:2]
+        tiles = [panels["source"][i][H // 2:, W // 4: 3 * W // 4]]  # its own lower face
+        tiles += [panels[k][i][max(y0 - h, 0): y1 + h, max(x0 - w // 2, 0): x1 + w // 2]
+                  for k in ("target", "result_source", "result_target")]
+        tiles = [cv2.resize(np.asarray(t), (240, 180), interpolation=cv2.INTER_CUBIC)
+                 for t in tiles]
+        row = np.concatenate(tiles, axis=1)
+        cv2.putText(row, f"{name} {i}: source | target | --lip-colour source | target", (6, 16),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 0), 1)
+        rows.append(row)
+    with atomic_path(path, overwrite=True) as tmp:
+        cv2.imwrite(str(tmp), cv2.cvtColor(np.concatenate(rows), cv2.COLOR_RGB2BGR))
+
+
+def plot(res: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from facetransfer.io.atomic import save_figure
+
+    pairs = list(res)
+    x = np.arange(len(pairs))
+    fig, ax = plt.subplots(figsize=(10, 4.5))
+    for j, (key, label, c) in enumerate(
+            ((("lip_colour_source", "de_target"), "--lip-colour source: result ~ target",
+              "#fcbba1"),
+             (("lip_colour_target", "de_target"), "--lip-colour target: result ~ target",
+              "#a50f15"),
+             (("lip_colour_source", "de_source"), "--lip-colour source: result ~ source",
+              "#9ecae1"),
+             (("lip_colour_target", "de_source"), "--lip-colour target: result ~ source",
+              "#08519c"))):
+        ax.bar(x - 0.3 + 0.2 * j, [res[p][key[0]][key[1]]["median"] for p in pairs], 0.2,
+               color=c, label=label)
+    ax.scatter(x, [res[p]["floor"]["median"] for p in pairs], marker="_", s=600, color="k",
+               label="floor: the target's lips against their clip median", zorder=3)
+    ax.set_xticks(x, [f"{p}\n{res[p]['source']} -> {res[p]['target']}" for p in pairs],
+                  fontsize=8)
+    ax.set_ylabel("median CIE76 ΔE of the lips")
+    ax.legend(fontsize=7)
+    ax.set_title("the lips' colour judged by MediaPipe's lip contours")
+    fig.tight_layout()
+    save_figure(fig, path)
+    plt.close(fig)
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", default="out/benchmarks")
+    ap.add_argument("--pairs", default=",".join(PAIRS), help=f"of {', '.join(PAIRS)}")
+    ap.add_argument("--frames", type=int, default=FRAMES, help="target frames judged")
+    args = ap.parse_args()
+    from facetransfer.assets import data_dir
+    from facetransfer.default_model import load_default_model
+    from facetransfer.io.atomic import atomic_path
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    data = Path(data_dir()) / "video"
+    model = load_default_model()
+    res = {}
+    for name in args.pairs.split(","):
+        res[name], pics = run_pair(name, model, out, data, args.frames)
+        picture(name, pics["panels"], pics["boxes"], out / f"lip_colour_{name}.png")
+        r = res[name]
+        print(f"{name}: floor {r['floor']['median']:.1f}; source~target "
+              f"{r['source_vs_target']['median']:.1f}; " + "; ".join(
+                  f"--lip-colour {m}: ~target {r['lip_colour_' + m]['de_target']['median']:.1f} "
+                  f"(p90 {r['lip_colour_' + m]['de_target']['p90']:.1f}), ~source "
+                  f"{r['lip_colour_' + m]['de_source']['median']:.1f}" for m in MODES),
+              flush=True)
+    with atomic_path(out / "lip_colour.json", overwrite=True) as tmp:
+        Path(tmp).write_text(json.dumps({"pairs": res}, indent=2))
+    plot(res, out / "lip_colour.png")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
