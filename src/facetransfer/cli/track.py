@@ -114,10 +114,31 @@ def _bar(desc: str, total: int):
 
 
 def run(args) -> int:
-    from ..io.video import check_video_output, video_info
-    from ..track.overlay import write_overlay
+    from ..io.video import video_info
     from ..track.result import Track
     from ..track.tracker import frame_source
+
+    vopt = _check_outputs(args)
+    settings = track_settings(args)                                   # validates the options
+    tracker = settings.choose(args.init)
+    video_info(args.video)  # unreadable / empty video: one line, before any work
+    model = _model_meanwhile(args, tracker)
+    if args.from_track is not None:
+        track = Track.load(args.from_track)
+        frames = frame_source(args.video, args.max_frames)
+        track.check_video(frames.n, frames.size, what=f"video {args.video}")
+        track.check_model(model)
+    else:
+        track, model = _track_and_save(args, model, settings, tracker)
+    if args.overlay:
+        _overlay(args, track, model, vopt)
+    return 0
+
+
+def _check_outputs(args):
+    """The arguments' one-line errors and the outputs checked before any work (not an input,
+    not existing without ``--overwrite``); returns the video options of ``--overlay``."""
+    from ..io.video import check_video_output
 
     if args.from_track is None and not args.out:
         raise FaceTransferError("--out is required (the track file to write)")
@@ -134,63 +155,67 @@ def run(args) -> int:
         check_video_output(args.overlay, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.out:
         check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
-    if args.out and args.overlay:
-        check_not_input(args.overlay, [args.out, partial_path(args.out)])
-    if args.out:
+        if args.overlay:
+            check_not_input(args.overlay, [args.out, partial_path(args.out)])
         check_not_input(partial_path(args.out), inputs)
-    settings = track_settings(args)                                   # validates the options
-    tracker = settings.choose(args.init)
-    video_info(args.video)  # unreadable / empty video: one line, before any work
+    return vopt
+
+
+def _model_meanwhile(args, tracker: str):
+    """The model, or a future of it: the capture tracker needs the model only after the
+    detections, so a model file is loaded on a thread meanwhile (and MediaPipe imported: the
+    detection waits for that import)."""
     if args.from_track is None and tracker == "capture" and _model_on_disk(args.model):
-        # the capture tracker needs the model only after the detections: load it meanwhile,
-        # and import MediaPipe meanwhile too (the detection waits for that import)
         from ..track.detect import preload_mediapipe
 
         preload_mediapipe()
         pool = ThreadPoolExecutor(max_workers=1)
         model = pool.submit(_checked_model, args.model)
         pool.shutdown(wait=False)
+        return model
+    return _checked_model(args.model)
+
+
+def _track_and_save(args, model, settings, tracker: str):
+    """Track the video with a progress bar per stage, write ``--out`` and say what it holds;
+    ``(track, model)``."""
+    bars: dict[str, object] = {}
+
+    def progress(stage: str, done: int, total: int) -> None:
+        bar = bars.get(stage)
+        if bar is None:
+            for b in bars.values():
+                b.close()
+            bar = bars[stage] = _bar(stage, total)
+        bar.update(done - bar.n)
+
+    if tracker == "capture":
+        track, model = _capture(args, model, settings.capture, progress, bars)
     else:
-        model = _checked_model(args.model)
+        track = _track_klt(args, model, settings.klt, progress, bars)
+    track.save(args.out, overwrite=args.overwrite)
+    partial_path(args.out).unlink(missing_ok=True)   # the progress of the run, if any
+    n_lost = int(track.lost.sum())
+    print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"
+          f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
+          + (f", {n_lost} lost" if n_lost else ""))
+    if track.blendshapes is None:
+        print("note: the model's expressions are not ARKit blendshapes, so the track has no "
+              "blendshape activations (the default model, ict-arkit, gives them)")
+    return track, model
 
-    if args.from_track is not None:
-        track = Track.load(args.from_track)
-        frames = frame_source(args.video, args.max_frames)
-        track.check_video(frames.n, frames.size, what=f"video {args.video}")
-        track.check_model(model)
-    else:
-        bars: dict[str, object] = {}
 
-        def progress(stage: str, done: int, total: int) -> None:
-            bar = bars.get(stage)
-            if bar is None:
-                for b in bars.values():
-                    b.close()
-                bar = bars[stage] = _bar(stage, total)
-            bar.update(done - bar.n)
+def _overlay(args, track, model, vopt) -> None:
+    """Write ``--overlay``: the track drawn over the video."""
+    from ..track.overlay import write_overlay
 
-        if tracker == "capture":
-            track, model = _capture(args, model, settings.capture, progress, bars)
-        else:
-            track = _track_klt(args, model, settings.klt, progress, bars)
-        track.save(args.out, overwrite=args.overwrite)
-        partial_path(args.out).unlink(missing_ok=True)   # the progress of the run, if any
-        n_lost = int(track.lost.sum())
-        print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"
-              f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
-              + (f", {n_lost} lost" if n_lost else ""))
-        if track.blendshapes is None:
-            print("note: the model's expressions are not ARKit blendshapes, so the track has no "
-                  "blendshape activations (the default model, ict-arkit, gives them)")
-    if args.overlay:
-        bar = _bar("overlay", track.n_frames)
-        try:
-            write_overlay(args.video, track, model, args.overlay, progress=bar.update,
-                          overwrite=args.overwrite, options=vopt)
-        finally:
-            bar.close()
-        print(f"wrote {args.overlay}")
-    return 0
+    bar = _bar("overlay", track.n_frames)
+    try:
+        write_overlay(args.video, track, model, args.overlay, progress=bar.update,
+                      overwrite=args.overwrite, options=vopt)
+    finally:
+        bar.close()
+    print(f"wrote {args.overlay}")
 
 
 def _model_on_disk(path) -> bool:

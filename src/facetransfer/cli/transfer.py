@@ -298,6 +298,41 @@ def _prefetch_inputs(args):
 
 
 def run_transfer(args) -> int:
+    vopt, to_track = _check_transfer_args(args)
+    # decoded from now on, while the modules import and the model and MediaPipe load
+    prefetch = _prefetch_inputs(args)
+    loads = _start_tracker_loads(to_track > 0 and args.tracker != "landmarks")
+    try:
+        from ..video_transfer import TransferSources, transfer_video
+
+        model = resolve_model(args.model, progress=not args.no_progress)
+    finally:
+        loads()
+    sources = TransferSources.of(
+        args.target, target_track=args.target_track, expression_from=args.expression_from,
+        expression_track=args.source_track, viseme_from=args.viseme_from,
+        viseme_track=args.viseme_track, identity=_chosen_identity(model, args),
+        identity_from=args.identity_from, identity_track=args.identity_track,
+        pose_from=args.pose_from, pose_track=args.pose_track, performance=args.performance)
+    res = transfer_video(
+        sources, args.out, model, options=rewrite_options(args),
+        overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
+        progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
+        align=args.align, max_frames=args.max_frames, reader=prefetch.read_video)
+    kept = res.n_frames - res.n_rewritten
+    print(f"wrote {res.path}: {res.n_frames} frames"
+          + (f" ({kept} kept original: face lost)" if kept else "")
+          + (", with the target's audio" if res.audio else ", no audio"))
+    if args.save_track:
+        print(f"wrote {args.save_track}")
+    if args.meshes:
+        print(f"wrote {res.n_frames} meshes to {args.meshes}")
+    return 0
+
+
+def _check_transfer_args(args):
+    """The arguments' one-line errors, the outputs and every input video checked before any
+    work; ``(video options, how many videos are to be tracked)``."""
     from ..io.atomic import check_output_path
     from ..io.video import check_video_output, video_info
 
@@ -332,16 +367,14 @@ def run_transfer(args) -> int:
             if not tr and not (v == args.target and args.performance):
                 _check_landmarks_file(v, args.tracker)
                 to_track += 1
-    # decoded from now on, while the modules import and the model and MediaPipe load
-    prefetch = _prefetch_inputs(args)
-    loads = _start_tracker_loads(to_track > 0 and args.tracker != "landmarks")
-    try:
-        from ..transfer import identity_from_label, parse_weights
-        from ..video_transfer import TransferSources, transfer_video
+    return vopt, to_track
 
-        model = resolve_model(args.model, progress=not args.no_progress)
-    finally:
-        loads()
+
+def _chosen_identity(model, args):
+    """The identity weights of ``--identity-label`` / ``--identity-weights``, with
+    ``--identity-dials`` applied; None: from the tracks."""
+    from ..transfer import identity_from_label, parse_weights
+
     identity = None
     if args.identity_label:
         identity = identity_from_label(model, args.identity_label)
@@ -350,26 +383,7 @@ def run_transfer(args) -> int:
         identity = parse_weights(args.identity_weights, model.ranks[model.mode_index(idm)])
     if args.identity_dials:
         identity = _dialled_identity(model, identity, args)
-    sources = TransferSources.of(
-        args.target, target_track=args.target_track, expression_from=args.expression_from,
-        expression_track=args.source_track, viseme_from=args.viseme_from,
-        viseme_track=args.viseme_track, identity=identity, identity_from=args.identity_from,
-        identity_track=args.identity_track, pose_from=args.pose_from,
-        pose_track=args.pose_track, performance=args.performance)
-    res = transfer_video(
-        sources, args.out, model, options=rewrite_options(args),
-        overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
-        progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
-        align=args.align, max_frames=args.max_frames, reader=prefetch.read_video)
-    kept = res.n_frames - res.n_rewritten
-    print(f"wrote {res.path}: {res.n_frames} frames"
-          + (f" ({kept} kept original: face lost)" if kept else "")
-          + (", with the target's audio" if res.audio else ", no audio"))
-    if args.save_track:
-        print(f"wrote {args.save_track}")
-    if args.meshes:
-        print(f"wrote {res.n_frames} meshes to {args.meshes}")
-    return 0
+    return identity
 
 
 def _dialled_identity(model, identity, args):
