@@ -35,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from bench_transfer_judge import FRAMES, PAIRS, _track  # noqa: E402
+from bench_transfer_judge import PAIRS, _track, add_pair_options  # noqa: E402
 
 #: MediaPipe face mesh's outer and inner lip contours, in order around the mouth.
 OUTER = (61, 146, 91, 181, 84, 17, 314, 405, 321, 375, 291, 409, 270, 269, 267, 0, 37, 39, 40,
@@ -183,8 +183,7 @@ def plot(res: dict, path: Path) -> None:
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks")
-    ap.add_argument("--pairs", default=",".join(PAIRS), help=f"of {', '.join(PAIRS)}")
-    ap.add_argument("--frames", type=int, default=FRAMES, help="target frames judged")
+    add_pair_options(ap)
     args = ap.parse_args()
     from facetransfer.assets import data_dir
     from facetransfer.default_model import load_default_model

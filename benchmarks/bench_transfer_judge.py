@@ -207,12 +207,17 @@ def plot(res: dict, path: Path) -> None:
     plt.close(fig)
 
 
+def add_pair_options(ap: argparse.ArgumentParser) -> None:
+    """``--pairs`` (of :data:`PAIRS`) and ``--frames`` (target frames judged)."""
+    ap.add_argument("--pairs", default=",".join(PAIRS), help=f"of {', '.join(PAIRS)}")
+    ap.add_argument("--frames", type=int, default=FRAMES, help="target frames judged")
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks")
     ap.add_argument("--video", help="judge the panels of a source | target | result video")
-    ap.add_argument("--pairs", default=",".join(PAIRS), help=f"of {', '.join(PAIRS)}")
-    ap.add_argument("--frames", type=int, default=FRAMES, help="target frames judged")
+    add_pair_options(ap)
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
