@@ -167,3 +167,24 @@ def test_source_colour_and_bad_mode():
     assert RewriteOptions().lip_colour == "target"
     with pytest.raises(RewriteError, match="lip_colour must be one of target, source"):
         RewriteOptions(lip_colour="lipstick")
+
+
+def test_the_option_reaches_the_rewrite_from_transfer_and_batch_transfer():
+    """``--lip-colour`` (and ``--lips``, which batch transfer dropped before) from the command
+    line to the :class:`RewriteOptions` of ``transfer`` and of each ``batch transfer`` job."""
+    from facetransfer.batch.jobs import rewrite_options as job_options
+    from facetransfer.cli.batch import transfer_settings
+    from facetransfer.cli.main import build_parser
+    from facetransfer.cli.transfer import rewrite_options
+
+    p = build_parser()
+    base = ["transfer", "--target", "t.mp4", "--expression-from", "s.mp4", "--out", "o.mp4"]
+    assert rewrite_options(p.parse_args(base)).lip_colour == "target"
+    o = rewrite_options(p.parse_args(base + ["--lip-colour", "source", "--lips", "model"]))
+    assert (o.lip_colour, o.lips) == ("source", "model")
+    batch = ["batch", "transfer", "--manifest", "pairs.csv", "--out", "d"]
+    o = job_options(transfer_settings(p.parse_args(batch)))
+    assert (o.lip_colour, o.lips) == ("target", "residual")
+    o = job_options(transfer_settings(p.parse_args(batch + ["--lip-colour", "source",
+                                                            "--lips", "model"])))
+    assert (o.lip_colour, o.lips) == ("source", "model")

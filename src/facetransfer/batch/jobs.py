@@ -213,7 +213,6 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     Row
     """
     from ..io.video import video_info
-    from ..rewrite_options import RewriteOptions
     from ..video_transfer import TransferSources, transfer_video
 
     t0 = time.perf_counter()
@@ -222,11 +221,7 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
               s.get("identity_from"), s.get("pose_from")):
         if v:
             video_info(v)  # a missing or unreadable input fails the row, naming the path
-    options = RewriteOptions(
-        texture=settings["texture"], blend=settings["blend"], mouth=settings["mouth"],
-        track_method=settings["track_method"], speed=settings["speed"],
-        eyes=settings.get("eyes", "model"), jaw=settings.get("jaw", "closed"),
-        lips=settings.get("lips", "residual"), lip_colour=settings.get("lip_colour", "target"))
+    options = rewrite_options(settings)
     sources = TransferSources.of(
         str(job.target), target_track=s.get("target_track"),
         expression_from=s.get("expression_from"),
@@ -242,6 +237,19 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
                output=str(out))
+
+
+def rewrite_options(settings: dict):
+    """The :class:`~facetransfer.rewrite_options.RewriteOptions` of a batch transfer's
+    settings (those of ``facetransfer transfer``; ``eyes``, ``jaw``, ``lips`` and
+    ``lip_colour`` default to its defaults)."""
+    from ..rewrite_options import RewriteOptions
+
+    return RewriteOptions(
+        texture=settings["texture"], blend=settings["blend"], mouth=settings["mouth"],
+        track_method=settings["track_method"], speed=settings["speed"],
+        eyes=settings.get("eyes", "model"), jaw=settings.get("jaw", "closed"),
+        lips=settings.get("lips", "residual"), lip_colour=settings.get("lip_colour", "target"))
 
 
 @functools.lru_cache(maxsize=1)

@@ -162,6 +162,15 @@ def run_track(args) -> int:
         overlap=args.overlap, overwrite=args.overwrite, progress=progress))
 
 
+def transfer_settings(args) -> dict:
+    """The settings of ``batch transfer`` (:func:`facetransfer.batch.jobs.transfer_pair`):
+    the ``transfer`` options it shares."""
+    return {"texture": args.texture, "blend": args.blend, "mouth": args.mouth,
+            "align": args.align, "max_frames": args.max_frames,
+            "track_method": args.tracker, "speed": args.speed, "eyes": args.eyes,
+            "jaw": args.jaw, "lips": args.lips, "lip_colour": args.lip_colour}
+
+
 def run_transfer(args) -> int:
     from ..batch import batch_transfer, pair_jobs
 
@@ -170,10 +179,7 @@ def run_transfer(args) -> int:
     jobs = pair_jobs(args.manifest)
     _check_cluster_args(args)
     model = resolve_model(args.model)
-    settings = {"texture": args.texture, "blend": args.blend, "mouth": args.mouth,
-                "align": args.align, "max_frames": args.max_frames,
-                "track_method": args.tracker, "speed": args.speed, "eyes": args.eyes,
-                "jaw": args.jaw, "lips": args.lips, "lip_colour": args.lip_colour}
+    settings = transfer_settings(args)
     return _run(args, "transfer", len(jobs), lambda client, progress: batch_transfer(
         jobs, args.out, model, client=client, settings=settings, overwrite=args.overwrite,
         progress=progress))
