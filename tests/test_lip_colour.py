@@ -188,3 +188,36 @@ def test_the_option_reaches_the_rewrite_from_transfer_and_batch_transfer():
     o = job_options(transfer_settings(p.parse_args(batch + ["--lip-colour", "source",
                                                             "--lips", "model"])))
     assert (o.lip_colour, o.lips) == ("source", "model")
+
+
+def test_the_demo_command_passes_every_rewrite_option(monkeypatch):
+    """``facetransfer demo`` accepts the rewrite options of ``transfer``; each reaches
+    :func:`facetransfer.demo.run_demo` (``--lips`` and ``--lip-colour`` were accepted and
+    dropped before)."""
+    import facetransfer.cli.transfer as ct
+    import facetransfer.demo as demo
+    from facetransfer.cli.main import build_parser
+
+    seen = {}
+
+    class Stop(Exception):
+        pass
+
+    def fake(out, **kw):
+        seen.update(kw)
+        raise Stop
+
+    monkeypatch.setattr(demo, "run_demo", fake)
+    monkeypatch.setattr(ct, "_load_model_and_mediapipe", lambda *a: None)
+    args = build_parser().parse_args(["demo", "--out", "o", "--lips", "model", "--lip-colour",
+                                      "source", "--jaw", "frame", "--eyes", "target"])
+    with pytest.raises(Stop):
+        ct.run_demo(args)
+    assert {k: seen[k] for k in ("lips", "lip_colour", "jaw", "eyes")} == {
+        "lips": "model", "lip_colour": "source", "jaw": "frame", "eyes": "target"}
+    # and run_demo makes its options of them: a bad one is refused before any work
+    monkeypatch.undo()
+    with pytest.raises(RewriteError, match="lip_colour must be one of"):
+        demo.run_demo("/nonexistent/demo-out", lip_colour="lipstick")
+    with pytest.raises(RewriteError, match="lips must be one of"):
+        demo.run_demo("/nonexistent/demo-out", lips="painted")

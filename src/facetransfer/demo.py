@@ -197,7 +197,8 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
              texture: str = "frame", blend: str = "fast", track_method: str = "auto",
              speed: str = DEFAULT_SPEED, progress_factory=None, mouth: str | None = None,
              overwrite: bool = True, video_options=None, judge: bool = True,
-             eyes: str = "model", jaw: str = "closed") -> DemoResult:
+             eyes: str = "model", jaw: str = "closed", lips: str = "residual",
+             lip_colour: str = "target") -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
     Parameters
@@ -211,7 +212,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
         Default: :func:`default_inputs`.
     model : MultilinearModel, optional
         Default: :func:`ensure_default_model`.
-    texture, blend, mouth, track_method, speed, eyes, jaw : str
+    texture, blend, mouth, track_method, speed, eyes, jaw, lips, lip_colour : str
         The :class:`facetransfer.rewrite_options.RewriteOptions` of the transfer (checked
         before any work). ``track_method="auto"`` falls back to a landmark-only fit if tracking
         fails; a mouth of None is :func:`facetransfer.texture.face.default_mouth_mode`.
@@ -223,7 +224,8 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     DemoResult
     """
     opts = RewriteOptions(texture=texture, mouth=mouth, blend=blend, speed=speed,
-                          track_method=track_method, eyes=eyes, jaw=jaw)
+                          track_method=track_method, eyes=eyes, jaw=jaw, lips=lips,
+                          lip_colour=lip_colour)
     if model is not None:  # an unusable mouth mode fails before any work
         resolve_mouth_mode(opts.mouth, model)
     timings: dict[str, float] = {}

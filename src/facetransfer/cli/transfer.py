@@ -512,7 +512,7 @@ def run_demo(args) -> int:
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
                track_method=args.tracker, speed=args.speed, eyes=args.eyes, jaw=args.jaw,
-               overwrite=args.overwrite,
+               lips=args.lips, lip_colour=args.lip_colour, overwrite=args.overwrite,
                progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings
     print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "
