@@ -28,9 +28,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .composite import mask_box
 from .errors import ShapeError
 from .render import interpolate_vertex_values, sample_texture
-from .topology import MeshTopology, inside_polygon
+from .topology import MeshTopology, _face_size, inside_polygon
 
 __all__ = ["LIP_LEVELS", "TINT_RANGE", "LipTint", "lip_vertex_weights", "lip_ratio",
            "tint_mouth"]
@@ -110,7 +111,7 @@ def lip_vertex_weights(model, topo: MeshTopology) -> tuple[np.ndarray, np.ndarra
         raise ShapeError("the model has no landmarks: the lips cannot be found")
     V, lm = _mean_face_landmarks(model)
     outer, inner = lm[48:60, :2], lm[60:68, :2]
-    front = V[:, 2] > lm[48:68, 2].min() - 0.25 * float(np.linalg.norm(lm[36] - lm[45]))
+    front = V[:, 2] > lm[48:68, 2].min() - 0.25 * _face_size(lm)
     w = np.zeros(topo.n_closed, np.float32)
     for s in LIP_LEVELS:
         w[:len(V)] += (_inside_scaled(outer, V[:, :2], s) & front) / len(LIP_LEVELS)
@@ -134,10 +135,10 @@ def lip_ratio(samples, lips: np.ndarray, skin: np.ndarray) -> np.ndarray | None:
         The median over frames of the ratio of the median colours (RGB); None without a frame.
     """
     ratios = []
-    for image, uvs in samples:
-        uv = np.asarray(uvs, np.float64)
-        a = np.median(sample_texture(image, uv[lips]), axis=0)
-        b = np.median(sample_texture(image, uv[skin]), axis=0)
+    both = np.concatenate([lips, skin])
+    for image, uvs in samples:  # one look-up per frame (it converts the image once)
+        c = sample_texture(image, np.asarray(uvs, np.float64)[both])
+        a, b = np.median(c[:len(lips)], axis=0), np.median(c[len(lips):], axis=0)
         ratios.append((a + 1.0) / (b + 1.0))
     return np.median(np.asarray(ratios), axis=0) if ratios else None
 
@@ -157,10 +158,9 @@ def tint_mouth(mouth_img: np.ndarray, raster, faces: np.ndarray, tint: LipTint,
     mask : (H, W) bool
         The mouth's pixels (outside it nothing changes).
     """
-    ys, xs = np.nonzero(mask)
-    if ys.size == 0:
+    box = mask_box(mask, 0)
+    if box is None:
         return
-    box = (slice(int(ys.min()), int(ys.max()) + 1), slice(int(xs.min()), int(xs.max()) + 1))
     w = interpolate_vertex_values(raster, faces, tint.weights, box)
     w *= mask[box]
     gain = 1.0 + w[..., None] * (tint.tint.astype(np.float32) - 1.0)

@@ -257,8 +257,8 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(
         raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring)
+    fan = inside_mouth(raster.tri_id, topo) if mouth_img is not None else None
     if lip_tint is not None and mouth_img is not None:  # the target's lip colour, not inside
-        fan = inside_mouth(raster.tri_id, topo)
         tint_mouth(mouth_img, raster, topo.faces, lip_tint,
                    mouth_mask if fan is None else mouth_mask & ~fan)
     rendered = face_img if mouth_img is None else over(face_img, mouth_img, mouth_mask)
@@ -277,7 +277,7 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
         if mouth_img is not None and mouth_mask.any():
             # the source's mouth first takes the colours of the face around it (a gain)
             face = blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region, ring,
-                               mouth_feather, inside_mouth(raster.tri_id, topo))
+                               mouth_feather, fan)
         out = membrane_blend(T, face, region, feather=feather)
     else:
         # The guidance field on the region's outline is the source's difference across it, so
@@ -663,20 +663,20 @@ class _ClipRenderer:
         from up to :data:`facetransfer.lip_colour.SAMPLES` frames spread through the clip
         where neither face is lost, through the textures the frames are rendered with."""
         weights, lips = lip_vertex_weights(self.model, self.topo)
-        ring = mouth_ring_faces(self.topo) if self.ring is None else self.ring
-        skin = np.setdiff1d(np.unique(self.topo.faces[ring]), np.flatnonzero(weights > 0))
+        skin = np.setdiff1d(np.unique(self.topo.faces[self.ring]), np.flatnonzero(weights > 0))
         n = self.new_track.n_frames  # the target's track may be longer (align="trim")
         ok = np.flatnonzero(~(self.new_track.lost | self.target_track.lost[:n]))
         if ok.size == 0 or lips.size == 0 or skin.size == 0:
             return None
         pick = ok[np.unique(np.linspace(0, ok.size - 1, min(LIP_SAMPLES, ok.size)).round()
                             .astype(np.int64))]
-        target = (self.face_texture(np.asarray(self.target_frames[i]), int(i)) for i in pick)
-        source = (self.mouth_texture(int(i)) for i in pick)
+        Vt = self._meshes_at("target", self.target_track, pick)
+        Vs = self._meshes_at("source", self.source_track, pick)
+        target = (self.face_texture(np.asarray(self.target_frames[i]), int(i), V)
+                  for i, V in zip(pick, Vt))
+        source = (self.mouth_texture(int(i), V) for i, V in zip(pick, Vs))
         tr = lip_ratio(((t.image, t.uvs) for t in target), lips, skin)
-        sr = lip_ratio(((t.image, t.uvs) for t in source if t is not None), lips, skin)
-        if tr is None or sr is None:
-            return None
+        sr = lip_ratio(((t.image, t.uvs) for t in source), lips, skin)
         tint = LipTint.of(weights, tr, sr)
         log.info("lip colour: the target's lips over the source's %s (RGB)",
                  np.array2string(tint.tint, precision=2))
@@ -688,16 +688,27 @@ class _ClipRenderer:
             return self.meshes.frame(kind, i)
         return self.model.synthesize(track.weights_at(i))
 
-    def face_texture(self, frame: np.ndarray, i: int) -> FaceTexture:
-        """The target's face texture at frame ``i``."""
+    def _meshes_at(self, kind: str, track, frames: np.ndarray) -> np.ndarray:
+        """The meshes ``(len(frames), n_vertices, 3)`` of some frames of ``track``: one
+        product of the kind's clip basis (not a chunk of :attr:`meshes` per frame)."""
+        if kind in self.meshes:
+            return self.meshes.basis(kind).meshes(np.asarray(frames, np.int64))
+        return np.stack([self.model.synthesize(track.weights_at(int(i))) for i in frames])
+
+    def face_texture(self, frame: np.ndarray, i: int, mesh: np.ndarray | None = None
+                     ) -> FaceTexture:
+        """The target's face texture at frame ``i`` (``mesh``: the target's, if at hand)."""
         if self.const_tex is not None:
             return self.const_tex
-        Vt = close_mouth(self.mesh("target", self.target_track, i), self.topo)
+        if mesh is None:
+            mesh = self.mesh("target", self.target_track, i)
+        Vt = close_mouth(mesh, self.topo)
         size = (frame.shape[1], frame.shape[0])
         return FaceTexture(frame, frame_uvs(Vt, self.target_track.camera(i), size), i)
 
-    def mouth_texture(self, i: int) -> FaceTexture | None:
-        """The mouth texture at frame ``i``: the function's, the source frame's, or None."""
+    def mouth_texture(self, i: int, mesh: np.ndarray | None = None) -> FaceTexture | None:
+        """The mouth texture at frame ``i``: the function's, the source frame's (``mesh``:
+        the source's, if at hand), or None."""
         if self.mouth_function is not None:
             return self.mouth_function.face_texture(
                 attribute_vector(self.model, self.new_track.weights_at(i)))
@@ -705,7 +716,9 @@ class _ClipRenderer:
             return None
         j = int(self.sidx[i])
         sf = np.asarray(self.source_frames[j])
-        Vs = close_mouth(self.mesh("source", self.source_track, i), self.topo)
+        if mesh is None:
+            mesh = self.mesh("source", self.source_track, i)
+        Vs = close_mouth(mesh, self.topo)
         size = (sf.shape[1], sf.shape[0])
         uvs = frame_uvs(Vs, self.source_track.camera(i), size)
         if self.lips is not None:  # the image's lips onto the mesh's (facetransfer.lips)
