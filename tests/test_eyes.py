@@ -287,3 +287,63 @@ def test_hair_at_the_rim_of_the_reference_frame_is_not_pasted(setup):
     assert inner(low).sum() > 30 and share(inner(low), SKIN) > 0.9   # not on the cheek either
     assert share(b, BROW) > 0.8                               # the brows are
     assert share(e, REF_EYE) > 0.9                            # and so is the eye
+
+
+def test_eye_strengths_follow_the_targets_own_movement_from_the_reference(setup):
+    """0 where the target's face is as in the reference frame; a brow raise moves the
+    forehead (the rim) and a blink the upper lids, both beyond the ramp."""
+    model, topo, closed, fill = setup
+    acts = _acts(3, 0.0)
+    acts[1, ARKIT_NAMES.index("browInnerUp")] = 1.0
+    acts[2] = _acts(1, 1.0)[0]
+    track = _track(model, acts)
+    verts, s = eyes.eye_strengths(model, track, closed, np.ones(len(closed.faces), bool), 0)
+    assert s.shape == (3, verts.size) and s.dtype == np.float32
+    np.testing.assert_array_equal(s[0], 0.0)
+    lm = np.asarray(model.landmarks)
+    at = {int(v): j for j, v in enumerate(verts)}
+    assert all(s[2, at[int(lm[k])]] == 1.0 for k in (37, 38, 43, 44))   # upper lids, blink
+    assert all(s[2, at[int(lm[k])]] < 0.5 for k in (8, 30, 33))         # chin, nose: still
+    assert s[1].max() == 1.0 and s[1, at[int(lm[8])]] == 0.0
+
+
+def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference(setup):
+    """A highlight on the forehead of the reference frame (the rim) is not pasted into frames
+    where the target's forehead is where the reference frame has it: they show that skin
+    already (``make demo``'s bright forehead blob); where the target raised its brows, the
+    reference frame's rim is pasted. The lids and eyes are always the reference frame's."""
+    from facetransfer.rewrite import rewrite_frames
+
+    model, topo, closed, fill = setup
+    acts = _acts(7, 0.0)
+    acts[4:, ARKIT_NAMES.index("browInnerUp")] = 1.0     # frames 4-6: the target's brows up
+    target, new = _track(model, acts), _track(model, _acts(7, 0.0))
+    hole = _eye_pixels(model, closed, fill, target, 0)
+    V = close_mouth(model.synthesize(target.weights_at(0)), closed)
+    tid = rasterize(V, closed.faces, target.camera(0), (SIZE, SIZE)).tri_id
+    _, tex = eyes.eye_texture([_frame(hole, REF_EYE)], target, model, topo, frame=0)
+    rim = (tid >= 0) & tex.rim[np.maximum(tid, 0)]
+    rows = np.flatnonzero(rim.any(axis=1))
+    y = np.arange(SIZE)[:, None]
+    blob = rim & (y >= rows[0] + 4) & (y < rows[0] + 10)  # a highlight across the forehead
+    ref = _frame(hole, REF_EYE)
+    ref[blob] = HIGHLIGHT
+    frames = [ref] + [_frame(hole, TARGET_EYE)] * 6
+    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
+                                           workers=1)]
+
+    def mean(img, where):
+        return img[where].astype(float).mean(axis=0)
+
+    b = blob & np.roll(blob, 2, 1) & np.roll(blob, -2, 1)
+    e = hole & np.logical_and.reduce([np.roll(hole, s, a) for s in (-2, 2) for a in (0, 1)])
+    assert b.sum() > 20 and e.sum() > 10
+    assert np.abs(mean(out[2], b) - SKIN).max() < 6           # the frame's own forehead
+    assert np.abs(mean(out[0], b) - HIGHLIGHT).max() < 12     # the reference frame itself
+    for i in (2, 5):                                           # the eyes: the reference's
+        assert np.abs(mean(out[i], e) - REF_EYE).max() < 40
+    # the raised brows moved the forehead: the reference's rim (its highlight) is pasted there
+    assert (mean(out[5], b) - SKIN).min() > 0.3 * (np.subtract(HIGHLIGHT, SKIN)).min()
+
+
+HIGHLIGHT = (235, 180, 150)

@@ -48,8 +48,8 @@ import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
-from .eyes import (close_region, faces_around, facing_weights, reference_frame, region_faces,
-                   region_vertices, smoothstep)
+from .eyes import (close_region, faces_around, facing_weights, moved_strengths, reference_frame,
+                   region_faces, region_vertices, vertex_alpha)
 from .patch import REJECT, _match_outline_into
 from .render import interpolate_vertex_values, shade_layers
 from .texture.face import frame_uvs
@@ -128,14 +128,9 @@ class JawTexture:
         if self.strengths is None:
             return self
         s = self.strengths[i]
-        top = float(s.max()) if s.size else 0.0
-        if top <= 0.0:
+        if not s.size or float(s.max()) <= 0.0:
             return None
-        # vertices of the region's triangles without a strength (none of the model's) take
-        # the frame's largest
-        alpha = np.full(len(self.uvs), top, np.float32)
-        alpha[self.verts] = s
-        return replace(self, alpha=alpha)
+        return replace(self, alpha=vertex_alpha(len(self.uvs), self.verts, s))
 
 
 def jaw_region(model, topo, *, threshold: float = JAW_THRESHOLD, rig=None) -> np.ndarray | None:
@@ -270,10 +265,8 @@ def jaw_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig
         full = rig.deltas[ARKIT_NAMES.index("jawOpen")]
     else:
         full = rig.deltas[ARKIT_NAMES.index("jawOpen")][verts]
-    V = model.synthesize({m: track.weights[m] for m in track.mode_names}, vertices=verts)
-    d = np.sqrt(((V - V[reference]) ** 2).sum(-1))
-    d /= max(float(np.sqrt((full ** 2).sum(-1).mean())), 1e-12)
-    return verts, smoothstep(d, ramp).astype(np.float32)
+    scale = float(np.sqrt((full ** 2).sum(-1).mean()))
+    return moved_strengths(model, track, topo, select, reference, scale, ramp)
 
 
 def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,

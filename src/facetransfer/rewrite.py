@@ -746,7 +746,7 @@ class _ClipRenderer:
         return rewrite_frame(frame, self.new_mesh(i),
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
-                             feather=o.feather, erode=o.erode, eye_texture=self.eye_tex,
+                             feather=o.feather, erode=o.erode, eye_texture=None if self.eye_tex is None else self.eye_tex.at(i),
                              jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
                              mouth_ring=self.ring, lip_tint=self.lip_tint)
 
