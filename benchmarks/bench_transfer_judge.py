@@ -2,8 +2,9 @@
 
 Runs Face Landmarker (Tasks API, VIDEO mode, blendshapes) on the source (the frame matched by
 time), the target and the result of ``facetransfer transfer`` (default model, capture tracker,
-default settings) and correlates, over frames, the result's blendshapes and mouth opening
-(MediaPipe 13-14 over the outer eye corners 33-263) with the source's and the target's. A
+default settings) and correlates, over frames, the result's blendshapes, mouth opening
+(MediaPipe 13-14 over the outer eye corners 33-263) and gaze (its eyeLook* scores, horizontal
+and vertical) with the source's and the target's. A
 transfer carries the source when the result follows the source and not the target.
 
 Three real pairs of the data folder (``--pairs``, default all): the demo pair (``driving_d6``
@@ -70,7 +71,30 @@ def compare(S, T, R) -> dict:
                   "amplitude": float(np.nanstd(R[:, k]) / max(np.nanstd(S[:, k]), 1e-9))}
     out["mouth_opening"] = {"result_source": corr(Rm, Sm), "result_target": corr(Rm, Tm),
                             "amplitude": float(np.nanstd(Rm) / max(np.nanstd(Sm), 1e-9))}
+    for name, fn in (("gaze_horizontal", gaze_horizontal), ("gaze_vertical", gaze_vertical)):
+        r, s, t = fn(R), fn(S), fn(T)
+        out[name] = {"result_source": corr(r, s), "result_target": corr(r, t),
+                     "amplitude": float(np.nanstd(r) / max(np.nanstd(s), 1e-9))}
     return out
+
+
+def _look(X, name: str):
+    from facetransfer.arkit import MEDIAPIPE_NAMES
+
+    return X[:, MEDIAPIPE_NAMES.index(name)]
+
+
+def gaze_horizontal(X):
+    """The eyes' gaze toward the subject's left (ARKit eyeLook*: the left eye's Out minus In,
+    the right eye's In minus Out), averaged over the eyes, per frame."""
+    return 0.5 * (_look(X, "eyeLookOutLeft") - _look(X, "eyeLookInLeft")
+                  + _look(X, "eyeLookInRight") - _look(X, "eyeLookOutRight"))
+
+
+def gaze_vertical(X):
+    """The eyes' gaze up (eyeLookUp minus eyeLookDown), averaged over the eyes, per frame."""
+    return 0.5 * (_look(X, "eyeLookUpLeft") - _look(X, "eyeLookDownLeft")
+                  + _look(X, "eyeLookUpRight") - _look(X, "eyeLookDownRight"))
 
 
 def judge_video(video: Path) -> dict:

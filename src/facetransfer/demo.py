@@ -198,7 +198,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
              speed: str = DEFAULT_SPEED, progress_factory=None, mouth: str | None = None,
              overwrite: bool = True, video_options=None, judge: bool = True,
              eyes: str = "model", jaw: str = "closed", lips: str = "residual",
-             lip_colour: str = "target") -> DemoResult:
+             lip_colour: str = "target", gaze: str = "performance") -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
     Parameters
@@ -212,7 +212,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
         Default: :func:`default_inputs`.
     model : MultilinearModel, optional
         Default: :func:`ensure_default_model`.
-    texture, blend, mouth, track_method, speed, eyes, jaw, lips, lip_colour : str
+    texture, blend, mouth, track_method, speed, eyes, jaw, lips, lip_colour, gaze : str
         The :class:`facetransfer.rewrite_options.RewriteOptions` of the transfer (checked
         before any work). ``track_method="auto"`` falls back to a landmark-only fit if tracking
         fails; a mouth of None is :func:`facetransfer.texture.face.default_mouth_mode`.
@@ -225,7 +225,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     """
     opts = RewriteOptions(texture=texture, mouth=mouth, blend=blend, speed=speed,
                           track_method=track_method, eyes=eyes, jaw=jaw, lips=lips,
-                          lip_colour=lip_colour)
+                          lip_colour=lip_colour, gaze=gaze)
     if model is not None:  # an unusable mouth mode fails before any work
         resolve_mouth_mode(opts.mouth, model)
     timings: dict[str, float] = {}

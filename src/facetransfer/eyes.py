@@ -22,10 +22,13 @@ the sequence)", applied to the eyes):
    :data:`RIM_DISTANCE`) is pasted only where the target's own expression moved it from where
    the reference frame has it (:func:`eye_strengths`, per vertex, like the jaw's): elsewhere the
    current frame shows the same skin already, lit as it is now (a bright blob on the forehead
-   of ``make demo``'s turned frames was the reference frame's highlight).
+   of ``make demo``'s turned frames was the reference frame's highlight);
+6. each eye's eyeball is turned to the new performance's gaze (its eyeLook* activations:
+   :mod:`facetransfer.eyeballs`), where the target's track has eyeLook* activations too.
 
 A blink of the new performance therefore closes the target's eye (its lid skin slides over the
-eyeball), and an open eye shows the target's eye from the reference frame.
+eyeball), and an open eye shows the target's eye from the reference frame, looking where the new
+performance looks.
 """
 
 from __future__ import annotations
@@ -40,6 +43,7 @@ import numpy as np
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
 from .errors import RewriteError
+from .eyeballs import Eyeballs, eyeballs_of, shift_eyeballs
 from .patch import REJECT, SHADING_SIGMA, _match_outline_into
 from .render import (Raster, interpolate_vertex_values, shade_layers, shade_texture,
                      vertex_normals)
@@ -137,6 +141,11 @@ class EyeTexture:
     alpha : (n_closed,) float32 or None
         This frame's (:meth:`at`), per vertex: the opacity of the region's paste (where the
         new lids close, at least their closed-frame share); None: fully opaque.
+    eyeballs : Eyeballs or None
+        The reference frame's eyeballs, turned to each frame's gaze
+        (:mod:`facetransfer.eyeballs`); None: the reference frame's gaze throughout.
+    gaze_shift : (2, 2) float64 or None
+        This frame's (:meth:`at`): each iris's shift in the reference frame's pixels.
     """
 
     image: np.ndarray
@@ -154,13 +163,22 @@ class EyeTexture:
     verts: np.ndarray | None = None
     strengths: np.ndarray | None = None
     alpha: np.ndarray | None = None
+    eyeballs: Eyeballs | None = None
+    gaze_shift: np.ndarray | None = None
 
-    def at(self, i: int) -> "EyeTexture":
-        """The texture for target frame ``i`` with its per-vertex :attr:`alpha`."""
-        if self.strengths is None:
-            return self
-        return dataclasses.replace(self, alpha=vertex_alpha(len(self.uvs), self.verts,
-                                                            self.strengths[i]))
+    def at(self, i: int, gaze: np.ndarray | None = None) -> "EyeTexture":
+        """The texture for target frame ``i`` with its per-vertex :attr:`alpha` and, for the
+        new performance's gaze ``gaze`` (2, 2) (:func:`facetransfer.track.gaze.activation_gaze`),
+        its eyeballs' :attr:`gaze_shift`."""
+        out = self
+        if self.strengths is not None:
+            out = dataclasses.replace(out, alpha=vertex_alpha(len(self.uvs), self.verts,
+                                                              self.strengths[i]))
+        if gaze is not None and self.eyeballs is not None and np.isfinite(gaze).all():
+            shift = self.eyeballs.shift(gaze)
+            if shift.any():  # the reference frame's own gaze: its eyeballs as they are
+                out = dataclasses.replace(out, gaze_shift=shift)
+        return out
 
     def closing(self, vertices: np.ndarray) -> np.ndarray:
         """The closed frame's share in each eye's texture for a mesh, ``(2,)`` in [0, 1].
@@ -536,11 +554,11 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         img = np.asarray(frames[j])
         Vj = close_mouth(model.synthesize(track.weights_at(j)), topo)
         return img, frame_uvs(Vj, track.camera(j), (img.shape[1], img.shape[0])), \
-            lid_gap(Vj, pairs)
+            lid_gap(Vj, pairs), Vj
 
     m = len(frames) if n_frames is None else min(int(n_frames), len(frames))
     i = open_eye_frame(track, m) if frame is None else int(frame)
-    img, uvs, gap = lift(i)
+    img, uvs, gap, Vi = lift(i)
     tex = EyeTexture(img, uvs, select, i, side, pairs, gap, rim=rim)
     if is_arkit_model(model) and rim.any():
         verts, strengths = eye_strengths(model, track, closed, select, i, rig=rig)
@@ -548,9 +566,13 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         core[np.asarray(closed.faces)[select & ~rim].ravel()] = True
         strengths[:, core[verts]] = 1.0
         tex = dataclasses.replace(tex, verts=verts, strengths=strengths)
+    fill_eye = np.full(len(closed.faces), -1, np.int8)
+    fill_eye[fill] = side[fill]
+    tex = dataclasses.replace(tex, eyeballs=eyeballs_of(img, track, i, model, closed.faces,
+                                                         Vi, fill_eye))
     c = closed_eye_frame(track, m)
     if c is not None:
-        cimg, cuvs, cgap = lift(c)
+        cimg, cuvs, cgap, _ = lift(c)
         if np.all(cgap < 0.7 * gap):  # the track closes the lids there too
             tex = dataclasses.replace(tex, closed_image=cimg, closed_uvs=cuvs, gap_closed=cgap,
                                       closed_frame=c)
@@ -682,6 +704,10 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     sl = (slice(box[1], box[3]), slice(box[0], box[2]))
     lab = labels[sl]
     eye_img = eye_img[sl]
+    if texture.gaze_shift is not None:  # the eyeballs turned to the new gaze
+        eye_img = np.array(eye_img, copy=True)
+        shift_eyeballs(eye_img, raster.tri_id[sl], raster.bary[sl], faces, texture.uvs,
+                       texture.eyeballs, texture.gaze_shift)
     eye_mask = (lab & bits[0]).view(bool) if bits[0] == 1 else (lab & bits[0]) != 0
     eye_mask &= face_mask[sl]
     if not eye_mask.any():

@@ -50,7 +50,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .arkit import expression_rig, is_arkit_model
+from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
 from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
@@ -596,6 +596,9 @@ class _ClipRenderer:
         The target's lip colour for the source's lips (``lip_colour="target"`` with the
         source's frames as the mouth texture, :mod:`facetransfer.lip_colour`; the §6 texture
         function's atlas holds no skin around the mouth to compare with).
+    gaze : (F, 2, 2) float64 or None
+        The new performance's gaze per frame (its eyeLook* activations), where the eye region
+        turns the reference frame's eyeballs to it (:mod:`facetransfer.eyeballs`).
     """
 
     target_frames: object
@@ -617,6 +620,7 @@ class _ClipRenderer:
     lips: LipResidual | None = None
     ring: np.ndarray | None = None
     lip_tint: LipTint | None = None
+    gaze: np.ndarray | None = None
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
@@ -656,6 +660,9 @@ class _ClipRenderer:
                        mouth_ring_faces(topo) if with_mouth else None)
         if opts.lip_colour == "target" and with_mouth and model.landmarks is not None:
             renderer = dataclasses.replace(renderer, lip_tint=renderer.clip_lip_tint())
+        if eye_tex is not None and eye_tex.eyeballs is not None:
+            renderer = dataclasses.replace(renderer, gaze=_track_gaze(
+                new_track if opts.gaze == "performance" else target_track))
         return renderer
 
     def clip_lip_tint(self) -> LipTint | None:
@@ -746,9 +753,21 @@ class _ClipRenderer:
         return rewrite_frame(frame, self.new_mesh(i),
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
-                             feather=o.feather, erode=o.erode, eye_texture=None if self.eye_tex is None else self.eye_tex.at(i),
+                             feather=o.feather, erode=o.erode, eye_texture=None if self.eye_tex is None else self.eye_tex.at(
+                                 i, None if self.gaze is None else self.gaze[i]),
                              jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
                              mouth_ring=self.ring, lip_tint=self.lip_tint)
+
+
+def _track_gaze(track) -> np.ndarray | None:
+    """``(F, 2, 2)`` gaze angles of a track's eyeLook* activations
+    (:func:`facetransfer.track.gaze.activation_gaze`), or None without ARKit blendshapes."""
+    from .track.gaze import activation_gaze
+
+    b, names = track.blendshapes, track.blendshape_names
+    if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES):
+        return None
+    return activation_gaze(np.asarray(b, np.float64))
 
 
 def _render_in_threads(one, n: int, workers: int, progress):

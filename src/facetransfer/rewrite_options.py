@@ -54,6 +54,10 @@ LIP_MODES = ("residual", "model")
 #: Whose colour the lips of the result take (with a mouth from another clip): the target's
 #: lips against its skin (:mod:`facetransfer.lip_colour`) or the source's, as §6 pastes them.
 LIP_COLOUR_MODES = ("target", "source")
+#: Where the eyes of the result look (with ``eyes="model"``): where the new performance looks
+#: (its eyeLook* activations, :mod:`facetransfer.eyeballs`) or where the target looks in each
+#: of its own frames.
+GAZE_MODES = ("performance", "target")
 
 
 def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> None:
@@ -107,6 +111,11 @@ class RewriteOptions:
         skin, :mod:`facetransfer.lip_colour`), so a target's lipstick stays; ``"source"``:
         the source's lips keep their own colour against the skin (§6). Only with the
         source's frame as the mouth texture (``mouth="frame"``).
+    gaze : {"performance", "target"}
+        ``"performance"``: the eyes look where the new performance looks (its eyeLook*
+        activations turn the open-eyed frame's eyeballs, :mod:`facetransfer.eyeballs`);
+        ``"target"``: where the target looks in each of its own frames (eye contact kept).
+        Only with ``eyes="model"`` and tracks with ARKit blendshapes.
 
     Raises
     ------
@@ -125,6 +134,7 @@ class RewriteOptions:
     jaw: str = "closed"
     lips: str = "residual"
     lip_colour: str = "target"
+    gaze: str = "performance"
 
     def __post_init__(self) -> None:
         check_mode("texture", self.texture, TEXTURE_MODES, sep=None)
@@ -137,6 +147,7 @@ class RewriteOptions:
         check_mode("jaw", self.jaw, JAW_MODES)
         check_mode("lips", self.lips, LIP_MODES)
         check_mode("lip_colour", self.lip_colour, LIP_COLOUR_MODES)
+        check_mode("gaze", self.gaze, GAZE_MODES)
         if not self.feather >= 0:
             raise RewriteError(f"feather must be >= 0 pixels, got {self.feather!r}")
         if int(self.erode) != self.erode or self.erode < 0:

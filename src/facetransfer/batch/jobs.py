@@ -206,7 +206,8 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     model : MultilinearModel
     settings : dict
         ``texture``, ``blend``, ``mouth``, ``align``, ``max_frames``, ``track_method``,
-        ``speed``, ``eyes``, ``jaw``, ``lips``, ``lip_colour`` as the ``transfer`` options.
+        ``speed``, ``eyes``, ``jaw``, ``lips``, ``lip_colour``, ``gaze`` as the ``transfer``
+        options.
 
     Returns
     -------
@@ -241,15 +242,16 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
 
 def rewrite_options(settings: dict):
     """The :class:`~facetransfer.rewrite_options.RewriteOptions` of a batch transfer's
-    settings (those of ``facetransfer transfer``; ``eyes``, ``jaw``, ``lips`` and
-    ``lip_colour`` default to its defaults)."""
+    settings (those of ``facetransfer transfer``; ``eyes``, ``jaw``, ``lips``,
+    ``lip_colour`` and ``gaze`` default to its defaults)."""
     from ..rewrite_options import RewriteOptions
 
     return RewriteOptions(
         texture=settings["texture"], blend=settings["blend"], mouth=settings["mouth"],
         track_method=settings["track_method"], speed=settings["speed"],
         eyes=settings.get("eyes", "model"), jaw=settings.get("jaw", "closed"),
-        lips=settings.get("lips", "residual"), lip_colour=settings.get("lip_colour", "target"))
+        lips=settings.get("lips", "residual"), lip_colour=settings.get("lip_colour", "target"),
+        gaze=settings.get("gaze", "performance"))
 
 
 @functools.lru_cache(maxsize=1)

@@ -168,7 +168,8 @@ def transfer_settings(args) -> dict:
     return {"texture": args.texture, "blend": args.blend, "mouth": args.mouth,
             "align": args.align, "max_frames": args.max_frames,
             "track_method": args.tracker, "speed": args.speed, "eyes": args.eyes,
-            "jaw": args.jaw, "lips": args.lips, "lip_colour": args.lip_colour}
+            "jaw": args.jaw, "lips": args.lips, "lip_colour": args.lip_colour,
+            "gaze": args.gaze}
 
 
 def run_transfer(args) -> int:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..transfer import ALIGN_MODES
-from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, JAW_MODES,
+from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES, JAW_MODES,
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import MODEL_HELP, add_video_options, resolve_model, video_options
@@ -83,6 +83,10 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    help="target: the source's lips take the target's lip colour against its "
                    "skin (a target's lipstick stays); source: they keep the source's own, as "
                    "the paper pastes them (with --mouth frame)")
+    p.add_argument("--gaze", choices=GAZE_MODES, default="performance",
+                   help="performance: the eyes look where the new performance looks (its "
+                   "eyeLook* activations); target: where the target looks in each of its own "
+                   "frames (with --eyes model)")
     p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given: auto or capture ("
                    + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
@@ -99,7 +103,8 @@ def rewrite_options(args) -> RewriteOptions:
     :func:`add_rewrite_options`' arguments."""
     return RewriteOptions(texture=args.texture, mouth=args.mouth, blend=args.blend,
                           speed=args.speed, track_method=args.tracker, eyes=args.eyes,
-                          jaw=args.jaw, lips=args.lips, lip_colour=args.lip_colour)
+                          jaw=args.jaw, lips=args.lips, lip_colour=args.lip_colour,
+                          gaze=args.gaze)
 
 
 def _parser(sub, name: str, help: str, description: str):
@@ -512,7 +517,8 @@ def run_demo(args) -> int:
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
                model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
                track_method=args.tracker, speed=args.speed, eyes=args.eyes, jaw=args.jaw,
-               lips=args.lips, lip_colour=args.lip_colour, overwrite=args.overwrite,
+               lips=args.lips, lip_colour=args.lip_colour, gaze=args.gaze,
+               overwrite=args.overwrite,
                progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings
     print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "

@@ -1,0 +1,162 @@
+"""The eyeballs turned to the new performance's gaze (beyond the paper).
+
+The eye region (:mod:`facetransfer.eyes`) shows one target frame's eyeball through the new lids,
+so the result kept that frame's gaze in every frame, whatever the source looked at. Here each
+eye's eyeball texture is shifted, per frame, by how far the new performance's gaze moves the
+iris from where the reference frame's gaze has it, both as the reference frame sees them: an
+eyeball behind each eye's corners (:func:`facetransfer.track.gaze.eye_model`) turned by the
+eyeLook* activations (:func:`facetransfer.track.gaze.activation_gaze`, the inverse of what the
+tracker reads from Face Landmarker's iris points) and projected with that frame's pose
+(:func:`facetransfer.track.gaze.project_iris`). What the shift uncovers beyond the reference
+frame's eye opening (the sclera under its lids) is filled once per clip from the opening's
+nearest pixel (:func:`extend_eyeballs`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .track.gaze import activation_gaze, eye_model, project_iris
+
+__all__ = ["GROW", "LIMIT", "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs"]
+
+#: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
+#: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
+#: where the track's margin is a little off) is redone too.
+GROW, RIM = 0.35, 1
+#: The largest shift of an iris, a fraction of its eye's width in the reference frame (beyond it
+#: the inpainted sclera would show more than the eye).
+LIMIT = 0.3
+
+
+@dataclass(frozen=True)
+class Eyeballs:
+    """The reference frame's eyeballs, to be turned to another gaze.
+
+    Attributes
+    ----------
+    image : (H, W, 3) uint8
+        The reference frame with each eye's opening extended under its lids
+        (:func:`extend_eyeballs`).
+    eyes : EyeModel
+        The target's eyeballs in the reference frame (model units).
+    angles : (2, 2) float64
+        The reference frame's gaze, ``[eye (right, left), (yaw, pitch)]`` (radians).
+    pose : tuple
+        ``(R (3, 3), s, t (2,))``, the reference frame's weak-perspective pose.
+    fill_eye : (F',) int8
+        Per triangle of the eye-closed topology, the eye (0 right, 1 left) whose opening a fill
+        triangle closes; -1 for the others.
+    limit : (2,) float64
+        Each eye's largest shift in pixels (:data:`LIMIT`).
+    """
+
+    image: np.ndarray
+    eyes: object
+    angles: np.ndarray
+    pose: tuple
+    fill_eye: np.ndarray
+    limit: np.ndarray
+
+    def shift(self, angles: np.ndarray) -> np.ndarray:
+        """``(2, 2)`` pixels, ``[eye, (x, y)]``: where gaze ``angles`` (2, 2) puts each iris in
+        the reference frame, minus where its own gaze does, at most :attr:`limit` long."""
+        R, s, t = self.pose
+        both = np.stack([np.asarray(angles, np.float64), self.angles])
+        p = project_iris(self.eyes, both, np.stack([R, R]), np.array([s, s]), np.stack([t, t]))
+        d = p[0] - p[1]
+        n = np.linalg.norm(d, axis=1)
+        scale = np.where(n > self.limit, self.limit / np.maximum(n, 1e-12), 1.0)
+        return d * scale[:, None]
+
+
+def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
+                    rim: int = RIM) -> np.ndarray:
+    """``image`` (H, W, 3) uint8 with each pixel within ``grow`` pixels of ``opening`` (H, W)
+    bool (the eyes' openings), and of the opening's own outer ``rim`` pixels, taking the colour
+    of the nearest pixel of the rest of the opening: the eyeball continued under the lids (the
+    sclera beyond the corners, the iris above and below)."""
+    import cv2
+
+    core = cv2.erode(opening.view(np.uint8), np.ones((3, 3), np.uint8), iterations=rim) \
+        if rim > 0 else opening.view(np.uint8)
+    out = np.array(image, copy=True)
+    if not core.any():
+        return out
+    # the nearest core pixel of every pixel: distanceTransform's labels of the zero pixels
+    # (the core, one label each, numbered in row-major order)
+    dist, label = cv2.distanceTransformWithLabels((core == 0).view(np.uint8), cv2.DIST_L2, 5,
+                                                  labelType=cv2.DIST_LABEL_PIXEL)
+    ring = (dist > 0) & (dist <= grow + rim)
+    ys, xs = np.nonzero(ring)
+    src = np.argwhere(core != 0)[label[ys, xs] - 1]
+    out[ys, xs] = image[src[:, 0], src[:, 1]]
+    return out
+
+
+def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: np.ndarray,
+                fill_eye: np.ndarray) -> Eyeballs | None:
+    """The eyeballs of the target's frame ``i`` (``image``), or None where the track has no
+    eyeLook* activations.
+
+    Parameters
+    ----------
+    image : (H, W, 3) uint8
+    track : Track
+        The target's (ARKit blendshapes).
+    i : int
+    model : MultilinearModel
+    faces : (F', 3) int
+        The eye-closed topology.
+    V : (n_closed, 3)
+        The target's mesh in frame ``i`` (model coordinates, eyes and mouth closed).
+    fill_eye : (F',) int8
+        See :attr:`Eyeballs.fill_eye`.
+    """
+    from .arkit import ARKIT_NAMES
+    from .render import rasterize
+
+    b = getattr(track, "blendshapes", None)
+    names = getattr(track, "blendshape_names", None)
+    if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES) \
+            or model.landmarks is None or not (fill_eye >= 0).any():
+        return None
+    cam = track.camera(i)
+    H, W = image.shape[:2]
+    lm = np.asarray(model.landmarks, np.int64)
+    eyes = eye_model(V[lm])
+    px = cam.project(V[lm[[36, 39, 42, 45]]])
+    width = np.array([np.linalg.norm(px[0] - px[1]), np.linalg.norm(px[2] - px[3])])
+    tid = rasterize(V, faces, cam, (W, H)).tri_id
+    opening = (tid >= 0) & (fill_eye[np.maximum(tid, 0)] >= 0)
+    ext = extend_eyeballs(image, opening, grow=max(int(round(GROW * width.max())), 2))
+    angles = activation_gaze(np.asarray(b, np.float64)[i:i + 1])[0]
+    pose = (np.asarray(track.rotation[i], np.float64), float(track.scale[i]),
+            np.asarray(track.translation[i], np.float64))
+    return Eyeballs(ext, eyes, angles, pose, np.asarray(fill_eye, np.int8), LIMIT * width)
+
+
+def shift_eyeballs(eye_img: np.ndarray, tri_id: np.ndarray, bary: np.ndarray, faces: np.ndarray,
+                   uvs: np.ndarray, eyeballs: Eyeballs, shift: np.ndarray) -> None:
+    """Resample, in place, the pixels of ``eye_img`` (h, w, 3) uint8 that show a fill triangle
+    (``tri_id`` (h, w), ``bary`` (h, w, 3) of the raster over the same pixels) from
+    :attr:`Eyeballs.image` moved by ``shift`` (2, 2) pixels per eye (:meth:`Eyeballs.shift`):
+    a pixel whose surface point the reference frame sees at ``q`` shows what it has at
+    ``q - shift``. ``uvs`` (n, 2): the reference frame's texture coordinates
+    (:func:`facetransfer.texture.face.frame_uvs`)."""
+    import cv2
+
+    eye = np.where(tri_id >= 0, eyeballs.fill_eye[np.maximum(tri_id, 0)], -1)
+    ys, xs = np.nonzero(eye >= 0)
+    if ys.size == 0:
+        return
+    tri = tri_id[ys, xs]
+    uv = np.einsum("nk,nkc->nc", bary[ys, xs].astype(np.float64), uvs[faces[tri]])
+    H, W = eyeballs.image.shape[:2]
+    d = shift[eye[ys, xs]]
+    mx = (uv[:, 0] * (W - 1) - d[:, 0]).astype(np.float32)[None]
+    my = ((1.0 - uv[:, 1]) * (H - 1) - d[:, 1]).astype(np.float32)[None]
+    eye_img[ys, xs] = cv2.remap(eyeballs.image, mx, my, cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)[0]

@@ -1,0 +1,163 @@
+"""The eyeballs turned to the new performance's gaze (facetransfer.eyeballs, issue 13)."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from facetransfer import eyeballs, eyes
+from facetransfer.arkit import ARKIT_NAMES
+from facetransfer.render import rasterize
+from facetransfer.rewrite import rewrite_frames
+from facetransfer.topology import close_mouth, mesh_topology
+from facetransfer.track.gaze import activation_gaze, eye_model, project_iris
+from test_eyes import SIZE, _acts, _track
+
+SCLERA, IRIS, SKIN = (235, 235, 230), (30, 40, 60), (200, 150, 120)
+
+
+@pytest.fixture(scope="module")
+def scene(arkit_model):
+    """The mean person facing the camera, an open eye painted white with a dark iris where its
+    gaze (straight ahead) puts it."""
+    model = arkit_model
+    topo = mesh_topology(model)
+    closed, fill = eyes.close_eyes(topo, model.synthesize(model.default_weights()))
+    track = _track(model, _acts(1, 0.0))
+    V = close_mouth(model.synthesize(track.weights_at(0)), closed)
+    tid = rasterize(V, closed.faces, track.camera(0), (SIZE, SIZE)).tri_id
+    hole = np.isin(tid, fill)
+    lm = np.asarray(model.landmarks)
+    iris = project_iris(eye_model(V[lm]), np.zeros((1, 2, 2)), track.rotation[:1],
+                        track.scale[:1], track.translation[:1])[0]
+    img = np.empty((SIZE, SIZE, 3), np.uint8)
+    img[:] = SKIN
+    img[hole] = SCLERA
+    yy, xx = np.mgrid[:SIZE, :SIZE]
+    for p in iris:
+        img[hole & ((xx - p[0]) ** 2 + (yy - p[1]) ** 2 <= 4.5 ** 2)] = IRIS
+    return model, topo, closed, fill, track, V, tid, iris, img
+
+
+def _look(eye: str, direction: str, value: float, F: int = 1) -> np.ndarray:
+    a = _acts(F, 0.0)
+    a[:, ARKIT_NAMES.index(f"eyeLook{direction}{eye}")] = value
+    return a
+
+
+def test_the_shift_is_the_irises_move_in_the_reference_frame(scene):
+    model, topo, closed, fill, track, V, tid, iris, img = scene
+    fill_eye = np.full(len(closed.faces), -1, np.int8)
+    fill_eye[fill] = 0
+    balls = eyeballs.eyeballs_of(img, track, 0, model, closed.faces, V, fill_eye)
+    np.testing.assert_allclose(balls.angles, 0.0)
+    np.testing.assert_array_equal(balls.shift(np.zeros((2, 2))), 0.0)
+    # the left eye looking out (toward the subject's left: the image's right for a frontal
+    # face), by the forward model's own numbers
+    g = activation_gaze(_look("Left", "Out", 0.5))[0]
+    d = balls.shift(g)
+    want = project_iris(balls.eyes, g[None], track.rotation[:1], track.scale[:1],
+                        track.translation[:1])[0] - iris
+    np.testing.assert_allclose(d, want, atol=1e-9)
+    assert d[1, 0] > 3.0 and abs(d[1, 1]) < 0.5 and np.all(d[0] == 0)
+    # far beyond: at most LIMIT of the eye's width
+    far = balls.shift(activation_gaze(_look("Left", "Out", 1.0))[0] * 3)
+    assert np.linalg.norm(far[1]) == pytest.approx(balls.limit[1])
+    assert balls.limit[1] == pytest.approx(eyeballs.LIMIT * np.linalg.norm(
+        np.subtract(*track.camera(0).project(V[np.asarray(model.landmarks)[[42, 45]]]))))
+
+
+def test_extend_eyeballs_continues_the_opening_under_the_lids():
+    img = np.zeros((40, 60, 3), np.uint8)
+    img[:] = SKIN
+    opening = np.zeros((40, 60), bool)
+    opening[15:25, 20:40] = True
+    img[opening] = SCLERA
+    img[15, 20:40] = (0, 0, 0)                    # lashes on the opening's rim
+    out = eyeballs.extend_eyeballs(img, opening, grow=4)
+    ring = np.zeros_like(opening)       # within 3 pixels of the opening, straight out
+    ring[12:28, 20:40] = True
+    ring[15:25, 17:43] = True
+    ring &= ~opening
+    assert np.abs(out[ring].astype(int) - SCLERA).max() == 0      # sclera under the lids
+    np.testing.assert_array_equal(out[16:24, 21:39], img[16:24, 21:39])   # the core kept
+    assert np.abs(out[15, 20:40].astype(int) - SCLERA).max() == 0  # the lashes' rim redone
+    far = np.ones_like(opening)         # beyond grow + rim of the opening
+    far[9:31, 14:46] = False
+    np.testing.assert_array_equal(out[far], img[far])              # the rest untouched
+
+
+def test_a_transfer_turns_the_eyes_to_the_new_gaze(scene):
+    """The target looks straight ahead; the new performance looks to the subject's left and
+    down: each rendered iris sits where the eyeball model puts it (a pixel or so), and without
+    the new gaze (a track without blendshapes) where the target's was."""
+    model, topo, closed, fill, track, V, tid, iris, img = scene
+    look = _look("Left", "Out", 0.5) + _look("Right", "In", 0.5) + _look("Left", "Down", 0.3) \
+        + _look("Right", "Down", 0.3)
+    new = _track(model, look)
+    out = next(rewrite_frames([img], track, new, model, blend="none", workers=1)).image
+    g = activation_gaze(look)
+    want = project_iris(eye_model(V[np.asarray(model.landmarks)]), g, track.rotation[:1],
+                        track.scale[:1], track.translation[:1])[0]
+    Vn = close_mouth(model.synthesize(new.weights_at(0)), closed)
+    new_hole = np.isin(rasterize(Vn, closed.faces, track.camera(0), (SIZE, SIZE)).tri_id, fill)
+    yy, xx = np.mgrid[:SIZE, :SIZE]
+
+    def disk(p, r):
+        return (xx - p[0]) ** 2 + (yy - p[1]) ** 2 <= r ** 2
+
+    def centre(m):
+        return np.array([xx[m].mean(), yy[m].mean()])
+
+    still = dataclasses.replace(new, blendshapes=None, blendshape_names=None)
+    out0 = next(rewrite_frames([img], track, still, model, blend="none", workers=1)).image
+    for e in (0, 1):
+        move = want[e] - iris[e]
+        assert np.linalg.norm(move) > 3.0
+        dark = new_hole & disk(iris[e], 12) & (out.astype(int).sum(-1) < 300)
+        truth = new_hole & disk(want[e], 4.5)   # the painted iris moved, where the lids show it
+        assert dark.sum() > 20 and abs(int(dark.sum()) - int(truth.sum())) < 0.3 * truth.sum()
+        # within a pixel and a half (the lids that eyeLookDown lowers stretch the fill's
+        # mapping, and the iris with it: so does the result without the new gaze)
+        np.testing.assert_allclose(centre(dark), centre(truth), atol=1.5)
+        dark0 = new_hole & disk(iris[e], 12) & (out0.astype(int).sum(-1) < 300)
+        np.testing.assert_allclose(centre(dark0), centre(new_hole & disk(iris[e], 4.5)),
+                                   atol=2.0)
+        along = (centre(dark) - centre(dark0)) @ move / (move @ move)
+        assert 0.8 < along < 1.2
+
+
+def test_the_target_gaze_keeps_the_targets_own_eye_direction(scene):
+    """``gaze="target"``: the eyes look where the target looks in each of its frames, not where
+    the new performance does (the option reaches the rewrite from ``transfer``, ``batch
+    transfer`` and ``demo``)."""
+    from facetransfer.batch.jobs import rewrite_options as job_options
+    from facetransfer.cli.batch import transfer_settings
+    from facetransfer.cli.main import build_parser
+    from facetransfer.cli.transfer import rewrite_options
+    from facetransfer.errors import RewriteError
+    from facetransfer.rewrite_options import RewriteOptions
+
+    model, topo, closed, fill, track, V, tid, iris, img = scene
+    new = _track(model, _look("Left", "Out", 0.6) + _look("Right", "In", 0.6))
+    both = {}
+    for gaze in ("performance", "target"):
+        both[gaze] = next(rewrite_frames([img], track, new, model, workers=1, blend="none",
+                                         options=RewriteOptions(gaze=gaze))).image
+    still = dataclasses.replace(new, blendshapes=None, blendshape_names=None)
+    unturned = next(rewrite_frames([img], track, still, model, workers=1, blend="none")).image
+    # the target looks straight ahead in its frame (the reference frame): no turn at all
+    np.testing.assert_array_equal(both["target"], unturned)
+    moved = np.abs(both["performance"].astype(int) - unturned).max(axis=-1) > 100
+    assert moved.sum() > 20
+    with pytest.raises(RewriteError, match="gaze must be one of performance, target"):
+        RewriteOptions(gaze="camera")
+    p = build_parser()
+    base = ["transfer", "--target", "t.mp4", "--expression-from", "s.mp4", "--out", "o.mp4"]
+    assert rewrite_options(p.parse_args(base)).gaze == "performance"
+    assert rewrite_options(p.parse_args(base + ["--gaze", "target"])).gaze == "target"
+    batch = ["batch", "transfer", "--manifest", "pairs.csv", "--out", "d", "--gaze", "target"]
+    assert job_options(transfer_settings(p.parse_args(batch))).gaze == "target"
+    assert p.parse_args(["demo", "--out", "o", "--gaze", "target"]).gaze == "target"
