@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_rewrite_frame import _extract  # noqa: E402
+from _revision import extract_src  # noqa: E402
 from bench_transfer_e2e import _children_cpu  # noqa: E402
 
 TARGET, SOURCE, FRAMES = "driving_d9.mp4", "driving_d6.mp4", 300
@@ -96,7 +96,7 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    trees = {"base": _extract(args.base_rev), "new": Path(__file__).resolve().parents[1] / "src"}
+    trees = {"base": extract_src(args.base_rev, "bench_e2e_ab_"), "new": Path(__file__).resolve().parents[1] / "src"}
     for src in trees.values():
         subprocess.run([sys.executable, "-m", "compileall", "-q", str(src)], check=True)
         command(src, out / "ab.mp4")                       # warm: caches, page cache

@@ -51,6 +51,8 @@ class Eyeballs:
         triangle closes; -1 for the others.
     limit : (2,) float64
         Each eye's largest shift in pixels (:data:`LIMIT`).
+    lookup : (F' + 1,) int8
+        :attr:`fill_eye` after a -1: indexed by a raster's ``tri_id + 1``.
     """
 
     image: np.ndarray
@@ -59,6 +61,7 @@ class Eyeballs:
     pose: tuple
     fill_eye: np.ndarray
     limit: np.ndarray
+    lookup: np.ndarray
 
     def shift(self, angles: np.ndarray) -> np.ndarray:
         """``(2, 2)`` pixels, ``[eye, (x, y)]``: where gaze ``angles`` (2, 2) puts each iris in
@@ -135,7 +138,9 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     angles = activation_gaze(np.asarray(b, np.float64)[i:i + 1])[0]
     pose = (np.asarray(track.rotation[i], np.float64), float(track.scale[i]),
             np.asarray(track.translation[i], np.float64))
-    return Eyeballs(ext, eyes, angles, pose, np.asarray(fill_eye, np.int8), LIMIT * width)
+    fill_eye = np.asarray(fill_eye, np.int8)
+    return Eyeballs(ext, eyes, angles, pose, fill_eye, LIMIT * width,
+                    np.concatenate([np.array([-1], np.int8), fill_eye]))
 
 
 def shift_eyeballs(eye_img: np.ndarray, tri_id: np.ndarray, bary: np.ndarray, faces: np.ndarray,
@@ -148,14 +153,17 @@ def shift_eyeballs(eye_img: np.ndarray, tri_id: np.ndarray, bary: np.ndarray, fa
     (:func:`facetransfer.texture.face.frame_uvs`)."""
     import cv2
 
-    eye = np.where(tri_id >= 0, eyeballs.fill_eye[np.maximum(tri_id, 0)], -1)
-    ys, xs = np.nonzero(eye >= 0)
-    if ys.size == 0:
+    # the fill's pixels through a lookup table of tri_id + 1 (-1, the background, is entry 0):
+    # three passes over the region's box, which holds the brows and cheeks too
+    eye = eyeballs.lookup.take(tri_id + 1)
+    flat = np.flatnonzero(eye >= 0)
+    if flat.size == 0:
         return
+    ys, xs = np.divmod(flat, tri_id.shape[1])
     tri = tri_id[ys, xs]
     uv = np.einsum("nk,nkc->nc", bary[ys, xs].astype(np.float64), uvs[faces[tri]])
     H, W = eyeballs.image.shape[:2]
-    d = shift[eye[ys, xs]]
+    d = shift[eye.ravel()[flat]]
     mx = (uv[:, 0] * (W - 1) - d[:, 0]).astype(np.float32)[None]
     my = ((1.0 - uv[:, 1]) * (H - 1) - d[:, 1]).astype(np.float32)[None]
     eye_img[ys, xs] = cv2.remap(eyeballs.image, mx, my, cv2.INTER_LINEAR,
