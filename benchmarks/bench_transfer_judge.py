@@ -61,7 +61,7 @@ def scores(frames, fps: float):
 def compare(S, T, R) -> dict:
     """Correlations of the result's scores with the source's and the target's, per measure."""
     from facetransfer.arkit import MEDIAPIPE_NAMES
-    from facetransfer.fidelity import correlation as corr
+    from facetransfer.fidelity import correlation as corr, gaze
 
     (S, Sm), (T, Tm), (R, Rm) = S, T, R
     out = {}
@@ -71,30 +71,11 @@ def compare(S, T, R) -> dict:
                   "amplitude": float(np.nanstd(R[:, k]) / max(np.nanstd(S[:, k]), 1e-9))}
     out["mouth_opening"] = {"result_source": corr(Rm, Sm), "result_target": corr(Rm, Tm),
                             "amplitude": float(np.nanstd(Rm) / max(np.nanstd(Sm), 1e-9))}
-    for name, fn in (("gaze_horizontal", gaze_horizontal), ("gaze_vertical", gaze_vertical)):
-        r, s, t = fn(R), fn(S), fn(T)
+    for j, name in enumerate(("gaze_horizontal", "gaze_vertical")):
+        r, s, t = gaze(R)[:, j], gaze(S)[:, j], gaze(T)[:, j]
         out[name] = {"result_source": corr(r, s), "result_target": corr(r, t),
                      "amplitude": float(np.nanstd(r) / max(np.nanstd(s), 1e-9))}
     return out
-
-
-def _look(X, name: str):
-    from facetransfer.arkit import MEDIAPIPE_NAMES
-
-    return X[:, MEDIAPIPE_NAMES.index(name)]
-
-
-def gaze_horizontal(X):
-    """The eyes' gaze toward the subject's left (ARKit eyeLook*: the left eye's Out minus In,
-    the right eye's In minus Out), averaged over the eyes, per frame."""
-    return 0.5 * (_look(X, "eyeLookOutLeft") - _look(X, "eyeLookInLeft")
-                  + _look(X, "eyeLookInRight") - _look(X, "eyeLookOutRight"))
-
-
-def gaze_vertical(X):
-    """The eyes' gaze up (eyeLookUp minus eyeLookDown), averaged over the eyes, per frame."""
-    return 0.5 * (_look(X, "eyeLookUpLeft") - _look(X, "eyeLookDownLeft")
-                  + _look(X, "eyeLookUpRight") - _look(X, "eyeLookDownRight"))
 
 
 def judge_video(video: Path) -> dict:

@@ -17,8 +17,11 @@ def test_a_result_equal_to_the_source_follows_it_exactly(data_dir):
     assert abs(fid.with_source["jawOpen"] - 1.0) < 1e-6
     assert abs(fid.with_source["mouthOpening"] - 1.0) < 1e-6
     assert fid.with_target["jawOpen"] < 0.9
+    assert abs(fid.with_source["gazeHorizontal"] - 1.0) < 1e-6
+    assert abs(fid.with_source["gazeVertical"] - 1.0) < 1e-6
     line = fid.line()
     assert "jawOpen r=+1.00 with the source" in line and "\n" not in line
+    assert "gaze +1.00 / " in line
 
 
 def test_a_frozen_result_has_no_correlation(data_dir):
@@ -29,3 +32,17 @@ def test_a_frozen_result_has_no_correlation(data_dir):
     frozen = np.repeat(src[:1], len(src), axis=0)
     fid = judge_frames(src, src, frozen, fps=fps)
     assert np.isnan(fid.with_source["jawOpen"])  # the result never moves: nothing to follow
+
+
+def test_gaze_is_toward_the_subjects_left_and_up():
+    from facetransfer.arkit import MEDIAPIPE_NAMES
+    from facetransfer.fidelity import gaze
+
+    S = np.zeros((3, 51))
+    S[0, MEDIAPIPE_NAMES.index("eyeLookOutLeft")] = 0.6    # both eyes to the subject's left
+    S[0, MEDIAPIPE_NAMES.index("eyeLookInRight")] = 0.4
+    S[1, MEDIAPIPE_NAMES.index("eyeLookInLeft")] = 0.5     # to the right
+    S[1, MEDIAPIPE_NAMES.index("eyeLookOutRight")] = 0.5
+    S[2, MEDIAPIPE_NAMES.index("eyeLookDownLeft")] = 0.2   # down
+    S[2, MEDIAPIPE_NAMES.index("eyeLookDownRight")] = 0.4
+    np.testing.assert_allclose(gaze(S), [[0.5, 0.0], [-0.5, 0.0], [0.0, -0.3]])

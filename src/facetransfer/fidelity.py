@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Fidelity", "judge_frames", "panel_scores", "landmarker_scores", "correlation"]
+__all__ = ["Fidelity", "judge_frames", "panel_scores", "landmarker_scores", "correlation",
+           "gaze"]
 
 #: MediaPipe blendshape names reported (its order: :data:`facetransfer.arkit.MEDIAPIPE_NAMES`).
 JUDGED = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "browInnerUp", "mouthPucker")
@@ -26,22 +27,24 @@ class Fidelity:
     Attributes
     ----------
     with_source, with_target : dict name -> float
-        For :data:`JUDGED` and ``"mouthOpening"`` (inner lip gap / outer eye-corner distance);
-        NaN where MediaPipe found too few faces.
+        For :data:`JUDGED`, ``"mouthOpening"`` (inner lip gap / outer eye-corner distance) and
+        ``"gazeHorizontal"``, ``"gazeVertical"`` (:func:`gaze`); NaN where MediaPipe found too
+        few faces or a measure does not move.
     """
 
     with_source: dict
     with_target: dict
 
     def line(self) -> str:
-        """One line for people: the jaw, the mouth opening and the blinks."""
+        """One line for people: the jaw, the mouth opening, the blinks and the gaze."""
         s, t = self.with_source, self.with_target
         blink_s = _mean(s["eyeBlinkLeft"], s["eyeBlinkRight"])
         blink_t = _mean(t["eyeBlinkLeft"], t["eyeBlinkRight"])
         return (f"fidelity (MediaPipe on the result): jawOpen r={s['jawOpen']:+.2f} with the "
                 f"source, {t['jawOpen']:+.2f} with the target; mouth opening "
                 f"{s['mouthOpening']:+.2f} / {t['mouthOpening']:+.2f}; blinks {blink_s:+.2f} / "
-                f"{blink_t:+.2f}")
+                f"{blink_t:+.2f}; gaze {s['gazeHorizontal']:+.2f} / "
+                f"{t['gazeHorizontal']:+.2f}")
 
 
 def _mean(*values: float) -> float:
@@ -104,6 +107,21 @@ def correlation(a: np.ndarray, b: np.ndarray) -> float:
     return float(np.corrcoef(a[ok], b[ok])[0, 1])
 
 
+def gaze(shapes: np.ndarray) -> np.ndarray:
+    """``(F, 2)``: the eyes' gaze from Face Landmarker's scores ``shapes`` (F, 51)
+    (:data:`facetransfer.arkit.MEDIAPIPE_NAMES`), toward the subject's left (the left eye's
+    eyeLookOut minus In, the right eye's In minus Out) and up (eyeLookUp minus Down), each the
+    mean of the two eyes."""
+    from .arkit import MEDIAPIPE_NAMES
+
+    def c(name):
+        return np.asarray(shapes, np.float64)[:, MEDIAPIPE_NAMES.index(name)]
+
+    h = c("eyeLookOutLeft") - c("eyeLookInLeft") + c("eyeLookInRight") - c("eyeLookOutRight")
+    v = c("eyeLookUpLeft") - c("eyeLookDownLeft") + c("eyeLookUpRight") - c("eyeLookDownRight")
+    return 0.5 * np.stack([h, v], axis=1)
+
+
 def judge_frames(source, target, result, fps: float = 25.0) -> Fidelity:
     """:class:`Fidelity` of time-aligned frame sequences (each an iterable of (H, W, 3) uint8)."""
     from .arkit import MEDIAPIPE_NAMES
@@ -114,4 +132,7 @@ def judge_frames(source, target, result, fps: float = 25.0) -> Fidelity:
         k = MEDIAPIPE_NAMES.index(n)
         ws[n], wt[n] = correlation(R[:, k], S[:, k]), correlation(R[:, k], T[:, k])
     ws["mouthOpening"], wt["mouthOpening"] = correlation(Rm, Sm), correlation(Rm, Tm)
+    (Sg, Tg, Rg) = (gaze(x) for x in (S, T, R))
+    for j, n in enumerate(("gazeHorizontal", "gazeVertical")):
+        ws[n], wt[n] = correlation(Rg[:, j], Sg[:, j]), correlation(Rg[:, j], Tg[:, j])
     return Fidelity(ws, wt)
