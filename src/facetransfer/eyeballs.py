@@ -20,7 +20,8 @@ import numpy as np
 
 from .track.gaze import activation_gaze, eye_model, project_iris
 
-__all__ = ["GROW", "LIMIT", "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs"]
+__all__ = ["GROW", "LIMIT", "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs",
+           "track_gaze"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
@@ -53,6 +54,8 @@ class Eyeballs:
         Each eye's largest shift in pixels (:data:`LIMIT`).
     lookup : (F' + 1,) int8
         :attr:`fill_eye` after a -1: indexed by a raster's ``tri_id + 1``.
+    iris : (2, 2) float64
+        Where :attr:`angles` put each iris in the reference frame (pixels).
     """
 
     image: np.ndarray
@@ -62,17 +65,34 @@ class Eyeballs:
     fill_eye: np.ndarray
     limit: np.ndarray
     lookup: np.ndarray
+    iris: np.ndarray
 
     def shift(self, angles: np.ndarray) -> np.ndarray:
         """``(2, 2)`` pixels, ``[eye, (x, y)]``: where gaze ``angles`` (2, 2) puts each iris in
-        the reference frame, minus where its own gaze does, at most :attr:`limit` long."""
-        R, s, t = self.pose
-        both = np.stack([np.asarray(angles, np.float64), self.angles])
-        p = project_iris(self.eyes, both, np.stack([R, R]), np.array([s, s]), np.stack([t, t]))
-        d = p[0] - p[1]
+        the reference frame, minus where its own gaze does (:attr:`iris`), at most
+        :attr:`limit` long."""
+        d = _project(self.eyes, angles, self.pose) - self.iris
         n = np.linalg.norm(d, axis=1)
         scale = np.where(n > self.limit, self.limit / np.maximum(n, 1e-12), 1.0)
         return d * scale[:, None]
+
+
+def _project(eyes, angles: np.ndarray, pose: tuple) -> np.ndarray:
+    """``(2, 2)``: :func:`facetransfer.track.gaze.project_iris` of one frame."""
+    R, s, t = pose
+    return project_iris(eyes, np.asarray(angles, np.float64)[None], R[None], np.array([s]),
+                        t[None])[0]
+
+
+def track_gaze(track) -> np.ndarray | None:
+    """``(F, 2, 2)`` gaze angles of a track's eyeLook* activations
+    (:func:`facetransfer.track.gaze.activation_gaze`), or None without ARKit blendshapes."""
+    from .arkit import ARKIT_NAMES
+
+    b, names = track.blendshapes, track.blendshape_names
+    if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES):
+        return None
+    return activation_gaze(np.asarray(b, np.float64))
 
 
 def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
@@ -118,13 +138,10 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     fill_eye : (F',) int8
         See :attr:`Eyeballs.fill_eye`.
     """
-    from .arkit import ARKIT_NAMES
     from .render import rasterize
 
-    b = getattr(track, "blendshapes", None)
-    names = getattr(track, "blendshape_names", None)
-    if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES) \
-            or model.landmarks is None or not (fill_eye >= 0).any():
+    gaze = track_gaze(track)
+    if gaze is None or model.landmarks is None or not (fill_eye >= 0).any():
         return None
     cam = track.camera(i)
     H, W = image.shape[:2]
@@ -135,12 +152,12 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     tid = rasterize(V, faces, cam, (W, H)).tri_id
     opening = (tid >= 0) & (fill_eye[np.maximum(tid, 0)] >= 0)
     ext = extend_eyeballs(image, opening, grow=max(int(round(GROW * width.max())), 2))
-    angles = activation_gaze(np.asarray(b, np.float64)[i:i + 1])[0]
     pose = (np.asarray(track.rotation[i], np.float64), float(track.scale[i]),
             np.asarray(track.translation[i], np.float64))
     fill_eye = np.asarray(fill_eye, np.int8)
-    return Eyeballs(ext, eyes, angles, pose, fill_eye, LIMIT * width,
-                    np.concatenate([np.array([-1], np.int8), fill_eye]))
+    return Eyeballs(ext, eyes, gaze[i], pose, fill_eye, LIMIT * width,
+                    np.concatenate([np.array([-1], np.int8), fill_eye]),
+                    _project(eyes, gaze[i], pose))
 
 
 def shift_eyeballs(eye_img: np.ndarray, tri_id: np.ndarray, bary: np.ndarray, faces: np.ndarray,

@@ -56,7 +56,7 @@ __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
            "faces_around", "FACING", "facing_weights", "smoothstep", "EYE_BLEND",
-           "moved_strengths", "eye_strengths", "vertex_alpha"]
+           "model_vertices", "moved_strengths", "eye_strengths", "vertex_alpha"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -133,11 +133,11 @@ class EyeTexture:
         pixel unlike the current frame's is taken for hair and fades back (:data:`REJECT`);
         None: nowhere.
     verts : (m,) int64 or None
-        The vertices of the region's triangles that :attr:`strengths` gives.
+        The vertices of the rim's triangles, which :attr:`strengths` gives.
     strengths : (F, m) float32 in [0, 1] or None
-        Per target frame and vertex of :attr:`verts`, how much the region takes of ``image``
-        there (:func:`eye_strengths` on the rim, 1 on the lids, eyes and brows); None: fully
-        everywhere in every frame.
+        Per target frame and vertex of :attr:`verts`, how much the region takes
+        of ``image`` there (:func:`eye_strengths`; 1 where the rim meets the lids and brows,
+        and at every vertex not in :attr:`verts`); None: fully everywhere in every frame.
     alpha : (n_closed,) float32 or None
         This frame's (:meth:`at`), per vertex: the opacity of the region's paste (where the
         new lids close, at least their closed-frame share); None: fully opaque.
@@ -173,7 +173,7 @@ class EyeTexture:
         out = self
         if self.strengths is not None:
             out = dataclasses.replace(out, alpha=vertex_alpha(len(self.uvs), self.verts,
-                                                              self.strengths[i]))
+                                                              self.strengths[i], rest=1.0))
         if gaze is not None and self.eyeballs is not None and np.isfinite(gaze).all():
             shift = self.eyeballs.shift(gaze)
             if shift.any():  # the reference frame's own gaze: its eyeballs as they are
@@ -543,6 +543,8 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
 
     if not topo.eye_loops:
         return topo, None
+    if rig is None and is_arkit_model(model):  # one rig for the region and the rim's strengths
+        rig = expression_rig(model, model.default_weights())
     V0 = model.synthesize(model.default_weights())
     closed, fill = close_eyes(topo, V0)
     select, lid_faces = _region_faces(model, topo, closed, fill, brows=brows, rings=rings,
@@ -561,10 +563,10 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
     img, uvs, gap, Vi = lift(i)
     tex = EyeTexture(img, uvs, select, i, side, pairs, gap, rim=rim)
     if is_arkit_model(model) and rim.any():
-        verts, strengths = eye_strengths(model, track, closed, select, i, rig=rig)
+        verts, strengths = eye_strengths(model, track, closed, rim, i, rig=rig)
         core = np.zeros(closed.n_closed, bool)  # lids, eyes, brows: always the reference's
         core[np.asarray(closed.faces)[select & ~rim].ravel()] = True
-        strengths[:, core[verts]] = 1.0
+        strengths[:, core[verts]] = 1.0       # the rim's vertices on the core's outline
         tex = dataclasses.replace(tex, verts=verts, strengths=strengths)
     fill_eye = np.full(len(closed.faces), -1, np.int8)
     fill_eye[fill] = side[fill]
@@ -704,8 +706,7 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     sl = (slice(box[1], box[3]), slice(box[0], box[2]))
     lab = labels[sl]
     eye_img = eye_img[sl]
-    if texture.gaze_shift is not None:  # the eyeballs turned to the new gaze
-        eye_img = np.array(eye_img, copy=True)
+    if texture.gaze_shift is not None:  # the eyeballs turned to the new gaze (in place)
         shift_eyeballs(eye_img, raster.tri_id[sl], raster.bary[sl], faces, texture.uvs,
                        texture.eyeballs, texture.gaze_shift)
     eye_mask = (lab & bits[0]).view(bool) if bits[0] == 1 else (lab & bits[0]) != 0
@@ -713,8 +714,6 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     if not eye_mask.any():
         return face_image
     a = texture.closing(vertices)
-    if texture.alpha is not None and a.max() <= 0 and texture.alpha.max() <= 0:
-        return face_image  # the target's lids and brows are where the reference frame's are
     opacity = 1.0 if texture.alpha is None else \
         interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
     if a.max() > 0:
@@ -763,10 +762,17 @@ def facing_weights(V: np.ndarray, faces: np.ndarray, rotation: np.ndarray, verts
     return smoothstep(N[:, 2], ramp).astype(np.float32)
 
 
-def moved_strengths(model, track, topo, select: np.ndarray, reference: int, scale: float,
-                    ramp: tuple[float, float]) -> tuple[np.ndarray, np.ndarray]:
-    """How much of a reference frame's texture each vertex of a region takes in each frame:
-    ``(verts (m,) int64, strengths (F, m) float32 in [0, 1])``.
+def model_vertices(model, topo, select: np.ndarray) -> np.ndarray:
+    """``(m,) int64``: the model's vertices of the triangles ``select`` (F',) bool of
+    ``topo`` (without those a closed mouth adds)."""
+    verts = np.unique(np.asarray(topo.faces)[select])
+    return verts[verts < model.n_vertices].astype(np.int64)
+
+
+def moved_strengths(model, track, verts: np.ndarray, reference: int, scale: float,
+                    ramp: tuple[float, float]) -> np.ndarray:
+    """How much of a reference frame's texture each vertex ``verts`` (m,) of a region takes in
+    each frame: ``(F, m) float32`` in [0, 1].
 
     ``d``, the distance of a vertex of the target's face in frame ``i`` (Eq. 5: its identity
     and that frame's expression, no pose) from the same vertex in the ``reference`` frame,
@@ -779,21 +785,18 @@ def moved_strengths(model, track, topo, select: np.ndarray, reference: int, scal
     model : MultilinearModel
     track : Track
         The target's.
-    topo : MeshTopology
-    select : (F',) bool
-        The region's triangles.
+    verts : (m,) int64
+        The region's vertices (:func:`model_vertices`).
     reference : int
         The frame the region is textured from.
     scale : float
         The distance (model units) the ramp is a fraction of.
     ramp : (float, float)
     """
-    verts = np.unique(np.asarray(topo.faces)[select])
-    verts = verts[verts < model.n_vertices].astype(np.int64)
     V = model.synthesize({m: track.weights[m] for m in track.mode_names}, vertices=verts)
     d = np.sqrt(((V - V[reference]) ** 2).sum(-1))
     d /= max(float(scale), 1e-12)
-    return verts, smoothstep(d, ramp).astype(np.float32)
+    return smoothstep(d, ramp).astype(np.float32)
 
 
 def eye_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig=None,
@@ -805,13 +808,16 @@ def eye_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig
         rig = expression_rig(model, model.default_weights())
     scale = max(float(np.sqrt((rig.deltas[ARKIT_NAMES.index(n)] ** 2).sum(-1)).max())
                 for n in ("eyeBlinkLeft", "eyeBlinkRight"))
-    return moved_strengths(model, track, topo, select, reference, scale, ramp)
+    verts = model_vertices(model, topo, select)
+    return verts, moved_strengths(model, track, verts, reference, scale, ramp)
 
 
-def vertex_alpha(n: int, verts: np.ndarray, strengths: np.ndarray) -> np.ndarray:
-    """``(n,) float32``: ``strengths`` (m,) at ``verts`` (m,); the other vertices (those a
-    region's triangles have beyond the model's, e.g. the closed mouth's) take their largest."""
-    top = float(strengths.max()) if strengths.size else 0.0
+def vertex_alpha(n: int, verts: np.ndarray, strengths: np.ndarray, *,
+                 rest: float | None = None) -> np.ndarray:
+    """``(n,) float32``: ``strengths`` (m,) at ``verts`` (m,); the other vertices take ``rest``,
+    by default the largest of ``strengths`` (those a region's triangles have beyond the
+    model's, e.g. the closed mouth's)."""
+    top = (float(strengths.max()) if strengths.size else 0.0) if rest is None else float(rest)
     alpha = np.full(n, top, np.float32)
     alpha[verts] = strengths
     return alpha

@@ -48,8 +48,8 @@ import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
-from .eyes import (close_region, faces_around, facing_weights, moved_strengths, reference_frame,
-                   region_faces, region_vertices, vertex_alpha)
+from .eyes import (close_region, faces_around, facing_weights, model_vertices, moved_strengths,
+                   reference_frame, region_faces, region_vertices, vertex_alpha)
 from .patch import REJECT, _match_outline_into
 from .render import interpolate_vertex_values, shade_layers
 from .texture.face import frame_uvs
@@ -258,15 +258,14 @@ def jaw_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig
     ramp : (float, float)
         :data:`JAW_BLEND`.
     """
-    verts = np.unique(np.asarray(topo.faces)[select])
-    verts = verts[verts < model.n_vertices].astype(np.int64)
+    verts = model_vertices(model, topo, select)
     if rig is None:
         rig = expression_rig(model, model.default_weights(), vertices=verts)
         full = rig.deltas[ARKIT_NAMES.index("jawOpen")]
     else:
         full = rig.deltas[ARKIT_NAMES.index("jawOpen")][verts]
     scale = float(np.sqrt((full ** 2).sum(-1).mean()))
-    return moved_strengths(model, track, topo, select, reference, scale, ramp)
+    return verts, moved_strengths(model, track, verts, reference, scale, ramp)
 
 
 def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.ndarray,

@@ -50,9 +50,10 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
+from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
+from .eyeballs import track_gaze
 from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
 from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
 from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights, tint_mouth
@@ -661,7 +662,7 @@ class _ClipRenderer:
         if opts.lip_colour == "target" and with_mouth and model.landmarks is not None:
             renderer = dataclasses.replace(renderer, lip_tint=renderer.clip_lip_tint())
         if eye_tex is not None and eye_tex.eyeballs is not None:
-            renderer = dataclasses.replace(renderer, gaze=_track_gaze(
+            renderer = dataclasses.replace(renderer, gaze=track_gaze(
                 new_track if opts.gaze == "performance" else target_track))
         return renderer
 
@@ -757,17 +758,6 @@ class _ClipRenderer:
                                  i, None if self.gaze is None else self.gaze[i]),
                              jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
                              mouth_ring=self.ring, lip_tint=self.lip_tint)
-
-
-def _track_gaze(track) -> np.ndarray | None:
-    """``(F, 2, 2)`` gaze angles of a track's eyeLook* activations
-    (:func:`facetransfer.track.gaze.activation_gaze`), or None without ARKit blendshapes."""
-    from .track.gaze import activation_gaze
-
-    b, names = track.blendshapes, track.blendshape_names
-    if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES):
-        return None
-    return activation_gaze(np.asarray(b, np.float64))
 
 
 def _render_in_threads(one, n: int, workers: int, progress):
