@@ -2,10 +2,13 @@
 
 Runs Face Landmarker (Tasks API, VIDEO mode, blendshapes) on the source (the frame matched by
 time), the target and the result of ``facetransfer transfer`` (default model, capture tracker,
-default settings) and correlates, over frames, the result's blendshapes, mouth opening
-(MediaPipe 13-14 over the outer eye corners 33-263) and gaze (its eyeLook* scores, horizontal
-and vertical) with the source's and the target's. A
-transfer carries the source when the result follows the source and not the target.
+default settings) and correlates, over frames, the result's blendshapes (:data:`SHAPES`), the
+distances of :data:`GEOMETRY` between its points over the outer eye corners 33-263 (mouth
+opening 13-14, eye opening and brow height as ``bench_capture.py`` measures them on real clips)
+and gaze (its eyeLook* scores, horizontal and vertical) with the source's and the target's,
+with the ratio of their standard deviations (the result's amplitude over the source's). A
+transfer carries the source when the result follows the source, at its amplitude, and not the
+target.
 
 Three real pairs of the data folder (``--pairs``, default all): the demo pair (``driving_d6``
 30 fps onto ``WDA_KatieHill_000`` 25 fps), ``driving_d9`` (30 fps, 512x480) onto ``face_2``
@@ -43,7 +46,9 @@ from pathlib import Path
 import numpy as np
 
 SHAPES = ("jawOpen", "mouthPucker", "mouthSmileLeft", "mouthSmileRight", "browInnerUp",
-          "eyeBlinkLeft", "eyeBlinkRight")
+          "eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight", "eyeSquintLeft",
+          "eyeSquintRight", "browOuterUpLeft", "browOuterUpRight", "browDownLeft",
+          "browDownRight")
 #: name -> (source clip, target clip); target frames judged: FRAMES
 PAIRS = {"demo": ("driving_d6", "WDA_KatieHill_000"),
          "fps": ("driving_d9", "face_2"),
@@ -51,26 +56,43 @@ PAIRS = {"demo": ("driving_d6", "WDA_KatieHill_000"),
 FRAMES = 120
 
 
-def scores(frames, fps: float):
-    """:func:`facetransfer.fidelity.panel_scores` of a frame sequence."""
-    from facetransfer.fidelity import panel_scores
+#: Distances between MediaPipe's points over the outer eye corners (33-263), the capture
+#: benchmark's real-clip measures (issue 12): name -> pairs of points, averaged.
+GEOMETRY = {"mouth_opening": ((13, 14),),
+            "eye_opening_right": ((160, 144), (158, 153)),
+            "eye_opening_left": ((385, 380), (387, 373)),
+            "brow_height_right": ((105, 159),),
+            "brow_height_left": ((334, 386),)}
 
-    return panel_scores(frames, fps)
+
+def scores(frames, fps: float):
+    """Face Landmarker's blendshapes ``(F, 51)`` and the :data:`GEOMETRY` measures
+    ``{name: (F,)}`` of a frame sequence (:func:`facetransfer.fidelity.landmarker_scores`)."""
+    from facetransfer.fidelity import landmarker_scores
+
+    shapes, P = landmarker_scores(frames, fps)
+    eye = np.linalg.norm(P[:, 33, :2] - P[:, 263, :2], axis=-1)
+    geo = {name: np.mean([np.linalg.norm(P[:, a, :2] - P[:, b, :2], axis=-1) for a, b in pairs],
+                         axis=0) / eye for name, pairs in GEOMETRY.items()}
+    return shapes, geo
 
 
 def compare(S, T, R) -> dict:
-    """Correlations of the result's scores with the source's and the target's, per measure."""
+    """Correlations of the result's scores with the source's and the target's, per measure,
+    and the amplitude ratio (the result's standard deviation over the source's)."""
     from facetransfer.arkit import MEDIAPIPE_NAMES
     from facetransfer.fidelity import correlation as corr, gaze
 
-    (S, Sm), (T, Tm), (R, Rm) = S, T, R
+    (S, Sg), (T, Tg), (R, Rg) = S, T, R
     out = {}
     for n in SHAPES:
         k = MEDIAPIPE_NAMES.index(n)
         out[n] = {"result_source": corr(R[:, k], S[:, k]), "result_target": corr(R[:, k], T[:, k]),
                   "amplitude": float(np.nanstd(R[:, k]) / max(np.nanstd(S[:, k]), 1e-9))}
-    out["mouth_opening"] = {"result_source": corr(Rm, Sm), "result_target": corr(Rm, Tm),
-                            "amplitude": float(np.nanstd(Rm) / max(np.nanstd(Sm), 1e-9))}
+    for n in GEOMETRY:
+        r, s, t = Rg[n], Sg[n], Tg[n]
+        out[n] = {"result_source": corr(r, s), "result_target": corr(r, t),
+                  "amplitude": float(np.nanstd(r) / max(np.nanstd(s), 1e-9))}
     for j, name in enumerate(("gaze_horizontal", "gaze_vertical")):
         r, s, t = gaze(R)[:, j], gaze(S)[:, j], gaze(T)[:, j]
         out[name] = {"result_source": corr(r, s), "result_target": corr(r, t),
@@ -188,7 +210,8 @@ def plot(res: dict, path: Path) -> None:
 
     pairs = list(res)
     names = list(next(iter(res.values()))["after"])
-    fig, axes = plt.subplots(len(pairs), 1, figsize=(11, 3.2 * len(pairs)), squeeze=False)
+    size = (max(11.0, 0.6 * len(names)), 3.2 * len(pairs))
+    fig, axes = plt.subplots(len(pairs), 1, figsize=size, squeeze=False)
     x = np.arange(len(names))
     for ax, p in zip(axes[:, 0], pairs):
         for j, (kind, key, c) in enumerate((("before", "result_source", "#9ecae1"),
