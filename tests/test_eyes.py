@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from facetransfer import eyes, patch
+from facetransfer import eyes, patch, region_weights
 from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.render import rasterize
 from facetransfer.rewrite import rewrite_frame
@@ -347,3 +347,64 @@ def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference
 
 
 HIGHLIGHT = (235, 180, 150)
+
+
+def test_a_strand_over_the_brows_of_the_reference_frame_only_is_not_pasted(setup):
+    """The reference frame shows a strand of hair over the brows' region, away from the lids,
+    where every other frame of the clip shows skin (``make demo``'s fringe over the brow's
+    tail): those vertices are unusual (:func:`facetransfer.region_weights.usual_weights`) and
+    keep the current frame, in frames where the target is still and where it raised its brows. The
+    eyes are still the reference frame's. (Before the rule the strand was pasted into every
+    frame: the region away from the rim was always the reference frame's.)"""
+    from facetransfer.rewrite import rewrite_frames
+
+    model, topo, closed, fill = setup
+    acts = _acts(7, 0.0)
+    acts[4:, ARKIT_NAMES.index("browInnerUp")] = 1.0     # frames 4-6: the target's brows up
+    target, new = _track(model, acts), _track(model, _acts(7, 0.0))
+    hole = _eye_pixels(model, closed, fill, target, 0)
+    V = close_mouth(model.synthesize(target.weights_at(0)), closed)
+    tid = rasterize(V, closed.faces, target.camera(0), (SIZE, SIZE)).tri_id
+    _, tex = eyes.eye_texture([_frame(hole, REF_EYE)], target, model, topo, frame=0)
+    t = np.maximum(tid, 0)
+    core = (tid >= 0) & tex.select[t] & ~tex.rim[t] & ~np.isin(tid, fill)
+    lids = target.camera(0).project(V[np.asarray(model.landmarks)[36:48]])
+    yy, xx = np.mgrid[:SIZE, :SIZE]
+    near = np.min([(xx - p[0]) ** 2 + (yy - p[1]) ** 2 for p in lids], axis=0)
+    far = near > (1.5 * eyes.LID_DISTANCE * target.scale[0]) ** 2        # away from the lids
+    strand = core & far                                 # the brows, away from the lids
+    ref = _frame(hole, REF_EYE)
+    ref[strand] = HAIR
+    frames = [ref] + [_frame(hole, TARGET_EYE)] * 6
+    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
+                                           workers=1)]
+    s = strand & np.logical_and.reduce([np.roll(strand, k, a) for k in (-2, 2) for a in (0, 1)])
+    e = hole & np.logical_and.reduce([np.roll(hole, k, a) for k in (-2, 2) for a in (0, 1)])
+    assert s.sum() > 30 and e.sum() > 10
+    for i in (2, 5):    # skin (the strand's edge, by the protected lids, fades over a triangle)
+        off = np.abs(out[i][s].astype(float) - SKIN).max(axis=-1)
+        assert np.mean(off < 10) > 0.6 and off.mean() < 20   # without the rule: 0 and 154
+        assert np.abs(out[i][e].astype(float).mean(axis=0) - REF_EYE).max() < 40
+    assert np.abs(out[0][s].astype(float).mean(axis=0) - HAIR).max() < 10   # its own frame
+
+
+def test_usual_weights_mark_what_only_the_reference_frame_shows(setup):
+    """A clip of skin whose reference frame is brighter overall (its exposure) and shows a
+    strand of hair over some vertices: 0 at those vertices, 1 elsewhere; the exposure alone
+    marks nothing."""
+    model, topo, closed, fill = setup
+    track = _track(model, _acts(9, 0.0))
+    verts = region_weights.model_vertices(model, closed, np.ones(len(closed.faces), bool))
+    P = track.camera(0).project(model.synthesize(track.weights_at(0), vertices=verts))
+    frames = [_frame(np.zeros((SIZE, SIZE), bool), SKIN) for _ in range(9)]
+    ref = np.clip(frames[0].astype(float) * 1.2, 0, 255).astype(np.uint8)
+    ref[100:110, 60:200] = HAIR
+    frames[4] = ref
+    w = region_weights.usual_weights(frames, track, model, verts, 4)
+    assert w.shape == verts.shape and w.dtype == np.float32
+    inside = (P[:, 1] > 101) & (P[:, 1] < 108) & (P[:, 0] > 61) & (P[:, 0] < 198)
+    outside = (np.abs(P[:, 1] - 105) > 8) | (P[:, 0] < 55) | (P[:, 0] > 205)
+    assert inside.sum() > 10 and outside.sum() > 100
+    np.testing.assert_array_equal(w[inside], 0.0)
+    np.testing.assert_array_equal(w[outside], 1.0)
+    np.testing.assert_array_equal(region_weights.usual_weights(frames, track, model, verts, 0), 1.0)

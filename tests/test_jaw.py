@@ -7,7 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from facetransfer import eyes, jaw
+from facetransfer import jaw, region_weights
 from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.render import rasterize
 from facetransfer.rewrite import rewrite_frame
@@ -248,31 +248,31 @@ def test_jaw_option():
 
 
 def test_what_the_reference_frame_sees_edge_on_keeps_the_current_frames_texture(setup):
-    """eyes.facing_weights: on the mean person seen from the front, the chin's front (its normal
-    toward the camera) weighs 1 and the skin under the chin (seen edge-on or from behind)
-    0; turning the head down brings the skin under the chin into view; the strengths of a
+    """region_weights.facing_weights: on the mean person seen from the front, the chin's front
+    (its normal toward the camera) weighs 1 and the skin under the chin (seen edge-on or from
+    behind) 0; turning the head down brings the skin under the chin into view; the strengths of a
     jaw texture are jaw_strengths times these."""
     model, topo = setup
     target = _track(model, [0.0, 1.0])
     sel = jaw.jaw_region(model, topo)
     V = close_mouth(model.synthesize(target.weights_at(0)), topo)
     verts, s = jaw.jaw_strengths(model, target, topo, sel, 0)
-    w = eyes.facing_weights(V, topo.faces, np.eye(3), verts)
+    w = region_weights.facing_weights(V, topo.faces, np.eye(3), verts)
     assert w.dtype == np.float32 and w.shape == verts.shape
     # against trimesh's vertex normals (another implementation): the smoothstep of their
     # component toward the camera (+z: depth grows toward the camera)
     import trimesh
 
     n = trimesh.Trimesh(V, topo.faces, process=False).vertex_normals[verts]
-    lo, hi = eyes.FACING
+    lo, hi = region_weights.FACING
     t = np.clip((n[:, 2] - lo) / (hi - lo), 0, 1)
     assert np.mean(np.abs(w - t * t * (3 - 2 * t)) < 0.05) > 0.95
     front, under = n[:, 2] > 0.8, n[:, 1] < -0.8  # the chin's front; under the chin
     assert front.sum() > 50 and under.sum() > 20
     assert np.all(w[front] == 1) and w[under].mean() < 0.3
     c, si = np.cos(-0.5), np.sin(-0.5)  # turned about x: the camera sees under the chin
-    turned = eyes.facing_weights(V, topo.faces, np.array([[1, 0, 0], [0, c, -si], [0, si, c]]),
-                                verts)
+    turned = region_weights.facing_weights(
+        V, topo.faces, np.array([[1, 0, 0], [0, c, -si], [0, si, c]]), verts)
     assert turned[under].mean() > w[under].mean() + 0.4
     frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8)] * 2
     tex = jaw.jaw_texture(frames, target, model, topo)

@@ -23,7 +23,11 @@ the sequence)", applied to the eyes):
    the reference frame has it (:func:`eye_strengths`, per vertex, like the jaw's): elsewhere the
    current frame shows the same skin already, lit as it is now (a bright blob on the forehead
    of ``make demo``'s turned frames was the reference frame's highlight);
-6. each eye's eyeball is turned to the new performance's gaze (its eyeLook* activations:
+6. away from the lids (:data:`LID_DISTANCE`), a vertex where the reference frame shows what
+   the clip usually does not (:func:`usual_weights`: its colour against the median of 24
+   frames; most often a strand of the fringe over the brow's tail) keeps the current frame's
+   texture: ``make demo``'s forehead carried frame 3's fringe into every frame;
+7. each eye's eyeball is turned to the new performance's gaze (its eyeLook* activations:
    :mod:`facetransfer.eyeballs`), where the target's track has eyeLook* activations too.
 
 A blink of the new performance therefore closes the target's eye (its lid skin slides over the
@@ -45,8 +49,8 @@ from .composite import mask_box
 from .errors import RewriteError
 from .eyeballs import Eyeballs, eyeballs_of, shift_eyeballs
 from .patch import REJECT, SHADING_SIGMA, _match_outline_into
-from .render import (Raster, interpolate_vertex_values, shade_layers, shade_texture,
-                     vertex_normals)
+from .region_weights import model_vertices, moved_strengths, usual_weights, vertex_alpha
+from .render import Raster, interpolate_vertex_values, shade_layers, shade_texture
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -55,8 +59,7 @@ log = logging.getLogger(__name__)
 __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
-           "faces_around", "FACING", "facing_weights", "smoothstep", "EYE_BLEND",
-           "model_vertices", "moved_strengths", "eye_strengths", "vertex_alpha"]
+           "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -83,12 +86,6 @@ CLOSE_RINGS = 3
 #: not from every vertex the lid shapes move: eyeSquint moves the cheek down to the jaw line,
 #: which a turned head shows beside the hair or the dark gap under it.)
 RIM_DISTANCE = 1.2
-#: :func:`facing_weights`' ramp: a vertex that a region's reference frame sees edge-on (its
-#: normal's component toward the camera below the first value) keeps the current frame's
-#: texture, one it sees squarely (above the second) takes the reference frame's. What a frame
-#: shows of the skin it sees edge-on is the neck, hair or an outline a few pixels off (a pale
-#: V under the chin of ``make demo``'s smiling frame, from the jaw's reference frame).
-FACING = (0.1, 0.4)
 #: :func:`eye_strengths`' ramp: the open-eyed frame's texture starts to show at a vertex of the
 #: eye region's rim that the target's own expression has moved from where it is in that frame
 #: by the first fraction of the eyeBlink shapes' largest displacement (the model's mean person:
@@ -97,6 +94,11 @@ FACING = (0.1, 0.4)
 #: target's lid gap) lost the judge's blinks and brows on the demo pair (BENCHMARKS.md,
 #: "Seventeenth session").
 EYE_BLEND = (0.05, 0.15)
+#: Vertices of the eye region within this distance (model units, cm for the FaceKit) of the lid
+#: margins' landmarks (iBUG 36-47) take the reference frame's texture whatever
+#: :func:`usual_weights` says: the lids and the eyes, whose colours a blink or a glance
+#: changes from frame to frame.
+LID_DISTANCE = 0.6
 
 
 @dataclass(frozen=True)
@@ -133,11 +135,13 @@ class EyeTexture:
         pixel unlike the current frame's is taken for hair and fades back (:data:`REJECT`);
         None: nowhere.
     verts : (m,) int64 or None
-        The vertices of the rim's triangles, which :attr:`strengths` gives.
+        The vertices of the rim's triangles and of the region's away from the lids
+        (:data:`LID_DISTANCE`), which :attr:`strengths` gives.
     strengths : (F, m) float32 in [0, 1] or None
         Per target frame and vertex of :attr:`verts`, how much the region takes
-        of ``image`` there (:func:`eye_strengths`; 1 where the rim meets the lids and brows,
-        and at every vertex not in :attr:`verts`); None: fully everywhere in every frame.
+        of ``image`` there: on the rim :func:`eye_strengths` (1 where the rim meets the lids
+        and brows), times :func:`usual_weights` away from the lids; 1 at every vertex not in
+        :attr:`verts`. None: fully everywhere in every frame.
     alpha : (n_closed,) float32 or None
         This frame's (:meth:`at`), per vertex: the opacity of the region's paste (where the
         new lids close, at least their closed-frame share); None: fully opaque.
@@ -564,9 +568,11 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
     tex = EyeTexture(img, uvs, select, i, side, pairs, gap, rim=rim)
     if is_arkit_model(model) and rim.any():
         verts, strengths = eye_strengths(model, track, closed, rim, i, rig=rig)
-        core = np.zeros(closed.n_closed, bool)  # lids, eyes, brows: always the reference's
+        core = np.zeros(closed.n_closed, bool)  # lids, eyes, brows: the reference's
         core[np.asarray(closed.faces)[select & ~rim].ravel()] = True
         strengths[:, core[verts]] = 1.0       # the rim's vertices on the core's outline
+        verts, strengths = _unless_unusual(frames, track, model, closed, select, i, m, verts,
+                                           strengths, close_mouth(V0, topo))
         tex = dataclasses.replace(tex, verts=verts, strengths=strengths)
     fill_eye = np.full(len(closed.faces), -1, np.int8)
     fill_eye[fill] = side[fill]
@@ -615,6 +621,25 @@ def _region_faces(model, topo, closed, fill: np.ndarray, *, brows: bool, rings: 
         return sel
 
     return faces_of(verts), faces_of(lids)
+
+
+def _unless_unusual(frames, track, model, closed, select: np.ndarray, reference: int,
+                    n_frames: int, verts: np.ndarray, strengths: np.ndarray, V: np.ndarray):
+    """The region's per-vertex strengths ``(verts', (F, m'))``: the rim's ``strengths`` (of
+    ``verts``) and 1 elsewhere, times :func:`usual_weights` at every vertex of the region
+    ``select`` farther than :data:`LID_DISTANCE` from the lid margins (``V`` (n_closed, 3),
+    the mean face): a strand of the fringe in the reference frame is not pasted into every
+    frame, over the brow's tail or the forehead (``make demo``)."""
+    lm = np.asarray(model.landmarks, np.int64)[36:48]
+    region = model_vertices(model, closed, select)
+    d = np.sqrt(((V[region, None, :] - V[None, lm, :]) ** 2).sum(-1)).min(axis=1)
+    far = region[d > LID_DISTANCE]
+    allv = np.union1d(verts, far)
+    out = np.ones((strengths.shape[0], allv.size), np.float32)
+    out[:, np.searchsorted(allv, verts)] = strengths
+    out[:, np.searchsorted(allv, far)] *= usual_weights(frames, track, model, far, reference,
+                                                        n_frames)[None]
+    return allv, out
 
 
 def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray) -> np.ndarray:
@@ -751,54 +776,6 @@ def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] 
     return None if sl is None else (sl[1].start, sl[0].start, sl[1].stop, sl[0].stop)
 
 
-def facing_weights(V: np.ndarray, faces: np.ndarray, rotation: np.ndarray, verts: np.ndarray,
-                   ramp: tuple[float, float] = FACING) -> np.ndarray:
-    """How squarely the reference frame sees each vertex, ``(m,)`` float32 in [0, 1]: the
-    smoothstep from ``ramp[0]`` to ``ramp[1]`` of the component toward the camera of the
-    unit normal (:func:`facetransfer.render.vertex_normals`) of ``V`` (n, 3), the mesh in
-    the frame (no pose), turned by the frame's ``rotation`` (3, 3), at the vertices
-    ``verts`` (m,)."""
-    N = vertex_normals(V, faces)[verts] @ np.asarray(rotation, np.float64).T
-    return smoothstep(N[:, 2], ramp).astype(np.float32)
-
-
-def model_vertices(model, topo, select: np.ndarray) -> np.ndarray:
-    """``(m,) int64``: the model's vertices of the triangles ``select`` (F',) bool of
-    ``topo`` (without those a closed mouth adds)."""
-    verts = np.unique(np.asarray(topo.faces)[select])
-    return verts[verts < model.n_vertices].astype(np.int64)
-
-
-def moved_strengths(model, track, verts: np.ndarray, reference: int, scale: float,
-                    ramp: tuple[float, float]) -> np.ndarray:
-    """How much of a reference frame's texture each vertex ``verts`` (m,) of a region takes in
-    each frame: ``(F, m) float32`` in [0, 1].
-
-    ``d``, the distance of a vertex of the target's face in frame ``i`` (Eq. 5: its identity
-    and that frame's expression, no pose) from the same vertex in the ``reference`` frame,
-    divided by ``scale``, goes through a smoothstep from ``ramp[0]`` to ``ramp[1]``: the skin
-    the target's own expression moved takes the reference frame; the skin that stayed keeps
-    its own frame's texture, lit as the frame is.
-
-    Parameters
-    ----------
-    model : MultilinearModel
-    track : Track
-        The target's.
-    verts : (m,) int64
-        The region's vertices (:func:`model_vertices`).
-    reference : int
-        The frame the region is textured from.
-    scale : float
-        The distance (model units) the ramp is a fraction of.
-    ramp : (float, float)
-    """
-    V = model.synthesize({m: track.weights[m] for m in track.mode_names}, vertices=verts)
-    d = np.sqrt(((V - V[reference]) ** 2).sum(-1))
-    d /= max(float(scale), 1e-12)
-    return smoothstep(d, ramp).astype(np.float32)
-
-
 def eye_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig=None,
                   ramp: tuple[float, float] = EYE_BLEND) -> tuple[np.ndarray, np.ndarray]:
     """:func:`moved_strengths` of the eye region, ``ramp`` (:data:`EYE_BLEND`) a fraction of
@@ -811,19 +788,3 @@ def eye_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig
     verts = model_vertices(model, topo, select)
     return verts, moved_strengths(model, track, verts, reference, scale, ramp)
 
-
-def vertex_alpha(n: int, verts: np.ndarray, strengths: np.ndarray, *,
-                 rest: float | None = None) -> np.ndarray:
-    """``(n,) float32``: ``strengths`` (m,) at ``verts`` (m,); the other vertices take ``rest``,
-    by default the largest of ``strengths`` (those a region's triangles have beyond the
-    model's, e.g. the closed mouth's)."""
-    top = (float(strengths.max()) if strengths.size else 0.0) if rest is None else float(rest)
-    alpha = np.full(n, top, np.float32)
-    alpha[verts] = strengths
-    return alpha
-
-
-def smoothstep(x: np.ndarray, ramp: tuple[float, float]) -> np.ndarray:
-    """``3 t² - 2 t³`` of ``t = (x - ramp[0]) / (ramp[1] - ramp[0])`` clipped to [0, 1]."""
-    t = np.clip((x - ramp[0]) / max(ramp[1] - ramp[0], 1e-12), 0.0, 1.0)
-    return t * t * (3.0 - 2.0 * t)

@@ -36,7 +36,7 @@ sequence)", applied to the jaw only):
    green or orange patches on the cheeks of ``make demo``'s turned and smiling frames:
    BENCHMARKS.md, "Fourteenth session", "Fifteenth session"); the skin that moved fades it
    in, the rest of the region keeps its own frame's; so does the skin that the reference frame
-   sees edge-on (:func:`facetransfer.eyes.facing_weights`: the jaw line, under the chin).
+   sees edge-on (:func:`facetransfer.region_weights.facing_weights`: the jaw line, under the chin).
 """
 
 from __future__ import annotations
@@ -48,8 +48,8 @@ import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
-from .eyes import (close_region, faces_around, facing_weights, model_vertices, moved_strengths,
-                   reference_frame, region_faces, region_vertices, vertex_alpha)
+from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
+from .region_weights import facing_weights, model_vertices, moved_strengths, vertex_alpha
 from .patch import REJECT, _match_outline_into
 from .render import interpolate_vertex_values, shade_layers
 from .texture.face import frame_uvs

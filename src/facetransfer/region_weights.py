@@ -1,0 +1,155 @@
+"""Per-vertex weights of a face region textured from one reference frame of the target.
+
+The eye region (:mod:`facetransfer.eyes`) and the jaw region (:mod:`facetransfer.jaw`) of a
+transfer take their texture from one target frame (Vlasic et al. 2005, §6: a texture "constant
+throughout the sequence") rather than from each frame, which carries the target's own
+expression. How much of that frame shows at each vertex, in each frame, is the product of
+weights defined here, interpolated over the triangles (:func:`vertex_alpha`):
+
+- :func:`moved_strengths`: where the target's own expression moved the skin from where the
+  reference frame has it (elsewhere the current frame shows the same skin, lit as it is now);
+- :func:`facing_weights`: where the reference frame sees the skin squarely, not edge-on;
+- :func:`usual_weights`: where the reference frame shows what the clip usually shows there,
+  not a strand of hair that lies elsewhere in the other frames.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .render import vertex_normals
+
+__all__ = ["FACING", "USUAL", "USUAL_SAMPLES", "facing_weights", "model_vertices",
+           "moved_strengths", "usual_weights", "vertex_alpha", "smoothstep"]
+
+#: :func:`facing_weights`' ramp: a vertex that a region's reference frame sees edge-on (its
+#: normal's component toward the camera below the first value) keeps the current frame's
+#: texture, one it sees squarely (above the second) takes the reference frame's. What a frame
+#: shows of the skin it sees edge-on is the neck, hair or an outline a few pixels off (a pale
+#: V under the chin of ``make demo``'s smiling frame, from the jaw's reference frame).
+FACING = (0.1, 0.4)
+#: :func:`usual_weights`' ramp: a vertex of the eye region (away from the lids) whose colour in
+#: the reference frame differs from its median over the clip (after the two's overall gain) by
+#: the first log ratio (in the channel that differs most) starts to keep the current frame's
+#: texture, and keeps it fully from the second (a factor of 1.5-2): the reference frame shows
+#: something else there than the clip usually does, most often a strand of the fringe
+#: (``make demo``'s forehead carried frame 3's fringe into every frame). A ramp of 0.15-0.3
+#: also took the reference frame's own expression (its smile's shading) for unusual, and the
+#: target's brows came back: BENCHMARKS.md, "Eighteenth session".
+USUAL = (0.4, 0.7)
+#: Frames sampled for :func:`usual_weights`' median (evenly spread, not lost).
+USUAL_SAMPLES = 24
+
+
+def facing_weights(V: np.ndarray, faces: np.ndarray, rotation: np.ndarray, verts: np.ndarray,
+                   ramp: tuple[float, float] = FACING) -> np.ndarray:
+    """How squarely the reference frame sees each vertex, ``(m,)`` float32 in [0, 1]: the
+    smoothstep from ``ramp[0]`` to ``ramp[1]`` of the component toward the camera of the
+    unit normal (:func:`facetransfer.render.vertex_normals`) of ``V`` (n, 3), the mesh in
+    the frame (no pose), turned by the frame's ``rotation`` (3, 3), at the vertices
+    ``verts`` (m,)."""
+    N = vertex_normals(V, faces)[verts] @ np.asarray(rotation, np.float64).T
+    return smoothstep(N[:, 2], ramp).astype(np.float32)
+
+
+def model_vertices(model, topo, select: np.ndarray) -> np.ndarray:
+    """``(m,) int64``: the model's vertices of the triangles ``select`` (F',) bool of
+    ``topo`` (without those a closed mouth adds)."""
+    verts = np.unique(np.asarray(topo.faces)[select])
+    return verts[verts < model.n_vertices].astype(np.int64)
+
+
+def moved_strengths(model, track, verts: np.ndarray, reference: int, scale: float,
+                    ramp: tuple[float, float]) -> np.ndarray:
+    """How much of a reference frame's texture each vertex ``verts`` (m,) of a region takes in
+    each frame: ``(F, m) float32`` in [0, 1].
+
+    ``d``, the distance of a vertex of the target's face in frame ``i`` (Eq. 5: its identity
+    and that frame's expression, no pose) from the same vertex in the ``reference`` frame,
+    divided by ``scale``, goes through a smoothstep from ``ramp[0]`` to ``ramp[1]``: the skin
+    the target's own expression moved takes the reference frame; the skin that stayed keeps
+    its own frame's texture, lit as the frame is.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+    track : Track
+        The target's.
+    verts : (m,) int64
+        The region's vertices (:func:`model_vertices`).
+    reference : int
+        The frame the region is textured from.
+    scale : float
+        The distance (model units) the ramp is a fraction of.
+    ramp : (float, float)
+    """
+    V = model.synthesize({m: track.weights[m] for m in track.mode_names}, vertices=verts)
+    d = np.sqrt(((V - V[reference]) ** 2).sum(-1))
+    d /= max(float(scale), 1e-12)
+    return smoothstep(d, ramp).astype(np.float32)
+
+
+def usual_weights(frames, track, model, verts: np.ndarray, reference: int,
+                  n_frames: int | None = None, *, ramp: tuple[float, float] = USUAL,
+                  samples: int = USUAL_SAMPLES) -> np.ndarray:
+    """How usual the reference frame's texture is at each vertex ``verts`` (m,): ``(m,)``
+    float32 in [0, 1], 1 where it shows what the clip usually shows there.
+
+    Each vertex's colour is read (bilinearly) in ``samples`` frames spread over the clip (of
+    the first ``n_frames``, not lost) through the target's tracked mesh (Eq. 5) and camera
+    (Eq. 7); ``d`` is the largest over the channels of ``|log(c_ref + 8) - log(c_med + 8) -
+    g|``, the reference frame's colour against the samples' median, ``g`` the channel's median
+    of that difference over the vertices (the frames' overall exposure); the weight is ``1 -
+    smoothstep(d, ramp)``.
+
+    Parameters
+    ----------
+    frames : sequence of (H, W, 3) uint8
+    track : Track
+        The target's.
+    model : MultilinearModel
+    verts : (m,) int64
+        Vertices of the model (:func:`model_vertices`).
+    reference : int
+    n_frames : int, optional
+    ramp : (float, float)
+    samples : int
+    """
+    import cv2
+
+    good = np.flatnonzero(~np.asarray(track.lost, bool)[:n_frames])
+    verts = np.asarray(verts, np.int64)
+    if good.size < 3 or verts.size == 0:
+        return np.ones(verts.size, np.float32)
+    pick = good[np.unique(np.linspace(0, good.size - 1, samples).round().astype(np.int64))]
+    rows = np.append(pick, int(reference))
+    V = model.synthesize({m: np.asarray(track.weights[m])[rows] for m in track.mode_names},
+                         vertices=verts)                       # one product: (k + 1, m, 3)
+
+    def colours(k):
+        P = track.camera(int(rows[k])).project(V[k]).astype(np.float32)
+        img = np.asarray(frames[int(rows[k])], np.float32)
+        return np.log(cv2.remap(img, P[None, :, 0], P[None, :, 1], cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)[0] + 8.0)
+
+    med = np.median(np.stack([colours(k) for k in range(len(pick))]), axis=0)   # (m, 3)
+    diff = colours(len(pick)) - med
+    d = np.abs(diff - np.median(diff, axis=0)).max(axis=1)
+    return (1.0 - smoothstep(d, ramp)).astype(np.float32)
+
+
+def vertex_alpha(n: int, verts: np.ndarray, strengths: np.ndarray, *,
+                 rest: float | None = None) -> np.ndarray:
+    """``(n,) float32``: ``strengths`` (m,) at ``verts`` (m,); the other vertices take ``rest``,
+    by default the largest of ``strengths`` (those a region's triangles have beyond the
+    model's, e.g. the closed mouth's)."""
+    top = (float(strengths.max()) if strengths.size else 0.0) if rest is None else float(rest)
+    alpha = np.full(n, top, np.float32)
+    alpha[verts] = strengths
+    return alpha
+
+
+def smoothstep(x: np.ndarray, ramp: tuple[float, float]) -> np.ndarray:
+    """``3 t² - 2 t³`` of ``t = (x - ramp[0]) / (ramp[1] - ramp[0])`` clipped to [0, 1]."""
+    t = np.clip((x - ramp[0]) / max(ramp[1] - ramp[0], 1e-12), 0.0, 1.0)
+    return t * t * (3.0 - 2.0 * t)
