@@ -24,9 +24,10 @@ the sequence)", applied to the eyes):
    current frame shows the same skin already, lit as it is now (a bright blob on the forehead
    of ``make demo``'s turned frames was the reference frame's highlight);
 6. away from the lids (:data:`LID_DISTANCE`), a vertex where the reference frame shows what
-   the clip usually does not (:func:`usual_weights`: its colour against the median of 24
-   frames; most often a strand of the fringe over the brow's tail) keeps the current frame's
-   texture: ``make demo``'s forehead carried frame 3's fringe into every frame;
+   the clip usually does not (:func:`facetransfer.region_weights.usual_weights`: its colour
+   against the median of 24 frames; most often a strand of the fringe over the brow's tail)
+   keeps the current frame's texture: ``make demo``'s forehead carried frame 3's fringe into
+   every frame;
 7. each eye's eyeball is turned to the new performance's gaze (its eyeLook* activations:
    :mod:`facetransfer.eyeballs`), where the target's track has eyeLook* activations too.
 
@@ -59,7 +60,7 @@ log = logging.getLogger(__name__)
 __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
-           "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE"]
+           "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE", "LID_BLINK"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -96,9 +97,15 @@ RIM_DISTANCE = 1.2
 EYE_BLEND = (0.05, 0.15)
 #: Vertices of the eye region within this distance (model units, cm for the FaceKit) of the lid
 #: margins' landmarks (iBUG 36-47) take the reference frame's texture whatever
-#: :func:`usual_weights` says: the lids and the eyes, whose colours a blink or a glance
-#: changes from frame to frame.
+#: :func:`facetransfer.region_weights.usual_weights` says: the lids and the eyes, whose
+#: colours a blink or a glance changes from frame to frame.
 LID_DISTANCE = 0.6
+#: ... and so do the vertices a blink moves by more than this fraction of its largest
+#: displacement (0.3 mm for the default model: the upper lid up to its crease). Without them
+#: the crease's colour, which the target's own blinks change, came from the current frame
+#: where the reference frame's was unusual, and the demo's blinks followed the source 0.07
+#: less (BENCHMARKS.md, "Eighteenth session").
+LID_BLINK = 0.03
 
 
 @dataclass(frozen=True)
@@ -140,7 +147,8 @@ class EyeTexture:
     strengths : (F, m) float32 in [0, 1] or None
         Per target frame and vertex of :attr:`verts`, how much the region takes
         of ``image`` there: on the rim :func:`eye_strengths` (1 where the rim meets the lids
-        and brows), times :func:`usual_weights` away from the lids; 1 at every vertex not in
+        and brows), times :func:`facetransfer.region_weights.usual_weights` away from the
+        lids; 1 at every vertex not in
         :attr:`verts`. None: fully everywhere in every frame.
     alpha : (n_closed,) float32 or None
         This frame's (:meth:`at`), per vertex: the opacity of the region's paste (where the
@@ -572,7 +580,7 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         core[np.asarray(closed.faces)[select & ~rim].ravel()] = True
         strengths[:, core[verts]] = 1.0       # the rim's vertices on the core's outline
         verts, strengths = _unless_unusual(frames, track, model, closed, select, i, m, verts,
-                                           strengths, close_mouth(V0, topo))
+                                           strengths, close_mouth(V0, topo), rig)
         tex = dataclasses.replace(tex, verts=verts, strengths=strengths)
     fill_eye = np.full(len(closed.faces), -1, np.int8)
     fill_eye[fill] = side[fill]
@@ -624,16 +632,20 @@ def _region_faces(model, topo, closed, fill: np.ndarray, *, brows: bool, rings: 
 
 
 def _unless_unusual(frames, track, model, closed, select: np.ndarray, reference: int,
-                    n_frames: int, verts: np.ndarray, strengths: np.ndarray, V: np.ndarray):
+                    n_frames: int, verts: np.ndarray, strengths: np.ndarray, V: np.ndarray,
+                    rig=None):
     """The region's per-vertex strengths ``(verts', (F, m'))``: the rim's ``strengths`` (of
-    ``verts``) and 1 elsewhere, times :func:`usual_weights` at every vertex of the region
-    ``select`` farther than :data:`LID_DISTANCE` from the lid margins (``V`` (n_closed, 3),
-    the mean face): a strand of the fringe in the reference frame is not pasted into every
-    frame, over the brow's tail or the forehead (``make demo``)."""
+    ``verts``) and 1 elsewhere, times :func:`facetransfer.region_weights.usual_weights` at
+    every vertex of the region ``select`` away from the lids (farther than
+    :data:`LID_DISTANCE` from the lid margins of ``V`` (n_closed, 3), the mean face, and not
+    moved by a blink: :data:`LID_BLINK`): a strand of the fringe in the reference frame is not
+    pasted into every frame, over the brow's tail or the forehead (``make demo``)."""
     lm = np.asarray(model.landmarks, np.int64)[36:48]
     region = model_vertices(model, closed, select)
     d = np.sqrt(((V[region, None, :] - V[None, lm, :]) ** 2).sum(-1)).min(axis=1)
-    far = region[d > LID_DISTANCE]
+    lids = region_vertices(model, ("eyeBlinkLeft", "eyeBlinkRight"), threshold=LID_BLINK,
+                           rig=rig)
+    far = region[(d > LID_DISTANCE) & ~lids[region]]
     allv = np.union1d(verts, far)
     out = np.ones((strengths.shape[0], allv.size), np.float32)
     out[:, np.searchsorted(allv, verts)] = strengths
