@@ -307,13 +307,10 @@ def test_eye_strengths_follow_the_targets_own_movement_from_the_reference(setup)
     assert s[1].max() == 1.0 and s[1, at[int(lm[8])]] == 0.0
 
 
-def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference(setup):
-    """A highlight on the forehead of the reference frame (the rim) is not pasted into frames
-    where the target's forehead is where the reference frame has it: they show that skin
-    already (``make demo``'s bright forehead blob); where the target raised its brows, the
-    reference frame's rim is pasted. The lids and eyes are always the reference frame's."""
-    from facetransfer.rewrite import rewrite_frames
-
+def _brows_up_clip(setup):
+    """A still target of 7 frames that raises its brows in frames 4-6, a still new
+    performance, and frame 0 as the eye region's reference: ``(target, new, hole (H, W) bool,
+    V (n_closed, 3), tri_id (H, W), texture)``."""
     model, topo, closed, fill = setup
     acts = _acts(7, 0.0)
     acts[4:, ARKIT_NAMES.index("browInnerUp")] = 1.0     # frames 4-6: the target's brows up
@@ -322,6 +319,18 @@ def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference
     V = close_mouth(model.synthesize(target.weights_at(0)), closed)
     tid = rasterize(V, closed.faces, target.camera(0), (SIZE, SIZE)).tri_id
     _, tex = eyes.eye_texture([_frame(hole, REF_EYE)], target, model, topo, frame=0)
+    return target, new, hole, V, tid, tex
+
+
+def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference(setup):
+    """A highlight on the forehead of the reference frame (the rim) is not pasted into frames
+    where the target's forehead is where the reference frame has it: they show that skin
+    already (``make demo``'s bright forehead blob); where the target raised its brows, the
+    reference frame's rim is pasted. The lids and eyes are always the reference frame's."""
+    from facetransfer.rewrite import rewrite_frames
+
+    model, topo, closed, fill = setup
+    target, new, hole, V, tid, tex = _brows_up_clip(setup)
     rim = (tid >= 0) & tex.rim[np.maximum(tid, 0)]
     rows = np.flatnonzero(rim.any(axis=1))
     y = np.arange(SIZE)[:, None]
@@ -359,13 +368,7 @@ def test_a_strand_over_the_brows_of_the_reference_frame_only_is_not_pasted(setup
     from facetransfer.rewrite import rewrite_frames
 
     model, topo, closed, fill = setup
-    acts = _acts(7, 0.0)
-    acts[4:, ARKIT_NAMES.index("browInnerUp")] = 1.0     # frames 4-6: the target's brows up
-    target, new = _track(model, acts), _track(model, _acts(7, 0.0))
-    hole = _eye_pixels(model, closed, fill, target, 0)
-    V = close_mouth(model.synthesize(target.weights_at(0)), closed)
-    tid = rasterize(V, closed.faces, target.camera(0), (SIZE, SIZE)).tri_id
-    _, tex = eyes.eye_texture([_frame(hole, REF_EYE)], target, model, topo, frame=0)
+    target, new, hole, V, tid, tex = _brows_up_clip(setup)
     t = np.maximum(tid, 0)
     core = (tid >= 0) & tex.select[t] & ~tex.rim[t] & ~np.isin(tid, fill)
     # the triangles away from the lids: no vertex near the lid margins or moved by a blink
