@@ -55,6 +55,7 @@ os.environ.setdefault("GLOG_minloglevel", "2")
 os.environ.setdefault("TF_CPP_MIN_LOG_LEVEL", "2")
 
 import _capture_data as cd  # noqa: E402
+import _mp_points as mp  # noqa: E402
 from _mp_video import cached_landmarker, filtered_stderr  # noqa: E402
 
 log = logging.getLogger("bench_capture")
@@ -115,12 +116,11 @@ def openings(P: np.ndarray) -> dict[str, np.ndarray]:
 
 
 def openings_mp(P: np.ndarray) -> dict[str, np.ndarray]:
-    """The same measures from MediaPipe's 478 points (F, 478, 2)."""
-    d = lambda i, j: np.linalg.norm(P[:, i] - P[:, j], axis=1)  # noqa: E731
-    s = d(33, 263)
-    return {"mouth_open": d(13, 14) / s, "mouth_width": d(61, 291) / s,
-            "eye_open": (d(160, 144) + d(158, 153) + d(385, 380) + d(387, 373)) / 4 / s,
-            "brow": (d(105, 159) + d(334, 386)) / 2 / s}
+    """The same measures from MediaPipe's 478 points (F, 478, 2) (:mod:`_mp_points`)."""
+    return {"mouth_open": mp.measure(P, mp.MOUTH_OPEN),
+            "mouth_width": mp.measure(P, mp.MOUTH_WIDTH),
+            "eye_open": mp.measure(P, mp.LIDS["Right"] + mp.LIDS["Left"]),
+            "brow": mp.measure(P, mp.BROWS["Right"] + mp.BROWS["Left"])}
 
 
 def corr(a: np.ndarray, b: np.ndarray) -> float | None:
@@ -434,9 +434,6 @@ def real_clip_scores(ours: dict, ref478: np.ndarray, mp_shapes: np.ndarray) -> d
     return out
 
 
-#: MediaPipe lid pairs per eye (the subject's side) for :func:`blink_levels`
-_LIDS = {"Left": ((385, 380), (387, 373)), "Right": ((160, 144), (158, 153))}
-
 
 def blink_levels(A: np.ndarray | None, shapes: np.ndarray, ref478: np.ndarray, *,
                  closed: float = 0.35, opened: float = 0.9) -> dict:
@@ -453,10 +450,9 @@ def blink_levels(A: np.ndarray | None, shapes: np.ndarray, ref478: np.ndarray, *
 
     F = len(shapes) if A is None else min(len(A), len(shapes), len(ref478))
     P = np.asarray(ref478[:F], np.float64)
-    s = np.linalg.norm(P[:, 33] - P[:, 263], axis=1)
     out = {}
-    for side, pairs in _LIDS.items():
-        gap = sum(np.linalg.norm(P[:, i] - P[:, j], axis=1) for i, j in pairs) / 2 / s
+    for side, pairs in mp.LIDS.items():
+        gap = mp.measure(P, pairs)
         med = np.median(gap)
         shut, wide = gap < closed * med, gap > opened * med
         k = ARKIT_NAMES.index(f"eyeBlink{side}")

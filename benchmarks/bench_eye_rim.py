@@ -50,12 +50,13 @@ def _always():
     """The eye region without :func:`facetransfer.region_weights.usual_weights` (as before it)."""
     import facetransfer.eyes as eyes
 
-    original = eyes._unless_unusual
-    eyes._unless_unusual = lambda *a, **k: (a[7], a[8])   # (verts, strengths) unchanged
+    original = eyes.usual_weights      # the name eyes calls: every vertex usual
+    eyes.usual_weights = lambda frames, track, model, verts, *a, **k: np.ones(len(verts),
+                                                                              np.float32)
     try:
         yield
     finally:
-        eyes._unless_unusual = original
+        eyes.usual_weights = original
 
 
 def self_transfer(frames, track, model) -> list[np.ndarray]:

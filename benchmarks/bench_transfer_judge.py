@@ -45,6 +45,10 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import _mp_points as mp  # noqa: E402
+
 SHAPES = ("jawOpen", "mouthPucker", "mouthSmileLeft", "mouthSmileRight", "browInnerUp",
           "eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight", "eyeSquintLeft",
           "eyeSquintRight", "browOuterUpLeft", "browOuterUpRight", "browDownLeft",
@@ -57,12 +61,11 @@ FRAMES = 120
 
 
 #: Distances between MediaPipe's points over the outer eye corners (33-263), the capture
-#: benchmark's real-clip measures (issue 12): name -> pairs of points, averaged.
-GEOMETRY = {"mouth_opening": ((13, 14),),
-            "eye_opening_right": ((160, 144), (158, 153)),
-            "eye_opening_left": ((385, 380), (387, 373)),
-            "brow_height_right": ((105, 159),),
-            "brow_height_left": ((334, 386),)}
+#: benchmark's real-clip measures (issue 12; :mod:`_mp_points`): name -> pairs of points,
+#: averaged.
+GEOMETRY = {"mouth_opening": mp.MOUTH_OPEN,
+            "eye_opening_right": mp.LIDS["Right"], "eye_opening_left": mp.LIDS["Left"],
+            "brow_height_right": mp.BROWS["Right"], "brow_height_left": mp.BROWS["Left"]}
 
 
 def scores(frames, fps: float):
@@ -71,10 +74,7 @@ def scores(frames, fps: float):
     from facetransfer.fidelity import landmarker_scores
 
     shapes, P = landmarker_scores(frames, fps)
-    eye = np.linalg.norm(P[:, 33, :2] - P[:, 263, :2], axis=-1)
-    geo = {name: np.mean([np.linalg.norm(P[:, a, :2] - P[:, b, :2], axis=-1) for a, b in pairs],
-                         axis=0) / eye for name, pairs in GEOMETRY.items()}
-    return shapes, geo
+    return shapes, {name: mp.measure(P, pairs) for name, pairs in GEOMETRY.items()}
 
 
 def compare(S, T, R) -> dict:

@@ -47,13 +47,11 @@ class Eyeballs:
         The reference frame's gaze, ``[eye (right, left), (yaw, pitch)]`` (radians).
     pose : tuple
         ``(R (3, 3), s, t (2,))``, the reference frame's weak-perspective pose.
-    fill_eye : (F',) int8
-        Per triangle of the eye-closed topology, the eye (0 right, 1 left) whose opening a fill
-        triangle closes; -1 for the others.
     limit : (2,) float64
         Each eye's largest shift in pixels (:data:`LIMIT`).
     lookup : (F' + 1,) int8
-        :attr:`fill_eye` after a -1: indexed by a raster's ``tri_id + 1``.
+        Indexed by a raster's ``tri_id + 1``: the eye (0 right, 1 left) whose opening a fill
+        triangle of the eye-closed topology closes; -1 for the others and for the background.
     iris : (2, 2) float64
         Where :attr:`angles` put each iris in the reference frame (pixels).
     """
@@ -62,7 +60,6 @@ class Eyeballs:
     eyes: object
     angles: np.ndarray
     pose: tuple
-    fill_eye: np.ndarray
     limit: np.ndarray
     lookup: np.ndarray
     iris: np.ndarray
@@ -136,7 +133,8 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     V : (n_closed, 3)
         The target's mesh in frame ``i`` (model coordinates, eyes and mouth closed).
     fill_eye : (F',) int8
-        See :attr:`Eyeballs.fill_eye`.
+        Per triangle of the eye-closed topology, the eye (0 right, 1 left) whose opening a
+        fill triangle closes; -1 for the others.
     """
     from .render import rasterize
 
@@ -154,9 +152,8 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     ext = extend_eyeballs(image, opening, grow=max(int(round(GROW * width.max())), 2))
     pose = (np.asarray(track.rotation[i], np.float64), float(track.scale[i]),
             np.asarray(track.translation[i], np.float64))
-    fill_eye = np.asarray(fill_eye, np.int8)
-    return Eyeballs(ext, eyes, gaze[i], pose, fill_eye, LIMIT * width,
-                    np.concatenate([np.array([-1], np.int8), fill_eye]),
+    return Eyeballs(ext, eyes, gaze[i], pose, LIMIT * width,
+                    np.concatenate([np.array([-1], np.int8), np.asarray(fill_eye, np.int8)]),
                     _project(eyes, gaze[i], pose))
 
 

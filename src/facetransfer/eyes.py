@@ -561,8 +561,9 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
     closed, fill = close_eyes(topo, V0)
     select, lid_faces = _region_faces(model, topo, closed, fill, brows=brows, rings=rings,
                                       rig=rig)
-    pairs, side = _lid_sides(model, topo, closed, V0, lid_faces)
-    rim = _rim_faces(model, closed, close_mouth(V0, topo), select)
+    V0c = close_mouth(V0, topo)                 # the mean face in the closed topology
+    pairs, side = _lid_sides(model, closed, V0c, lid_faces)
+    rim = _rim_faces(model, closed, V0c, select)
 
     def lift(j):
         img = np.asarray(frames[j])
@@ -580,7 +581,7 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         core[np.asarray(closed.faces)[select & ~rim].ravel()] = True
         strengths[:, core[verts]] = 1.0       # the rim's vertices on the core's outline
         verts, strengths = _unless_unusual(frames, track, model, closed, select, i, m, verts,
-                                           strengths, close_mouth(V0, topo), rig)
+                                           strengths, V0c, rig)
         tex = dataclasses.replace(tex, verts=verts, strengths=strengths)
     fill_eye = np.full(len(closed.faces), -1, np.int8)
     fill_eye[fill] = side[fill]
@@ -669,13 +670,14 @@ def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray) -> np.ndarray:
     return select & far[closed.faces].all(axis=1)
 
 
-def _lid_sides(model, topo, closed, V0: np.ndarray, lid_faces: np.ndarray):
+def _lid_sides(model, closed, V0: np.ndarray, lid_faces: np.ndarray):
     """The iBUG lid landmark pairs ``(2, 2, 2)`` (eye, pair, upper/lower) and each triangle's
-    eye ``(m,) int8``: 0 right, 1 left, -1 not a lid triangle."""
+    eye ``(m,) int8``: 0 right, 1 left, -1 not a lid triangle (``V0`` (n_closed, 3): the mean
+    face in the closed topology)."""
     lm = np.asarray(model.landmarks, np.int64)
     pairs = np.array([[[lm[37], lm[41]], [lm[38], lm[40]]], [[lm[43], lm[47]], [lm[44], lm[46]]]])
     mid = 0.5 * (V0[lm[36:42], 0].mean() + V0[lm[42:48], 0].mean())
-    cx = close_mouth(V0, topo)[closed.faces, 0].mean(axis=1)
+    cx = V0[closed.faces, 0].mean(axis=1)
     side = ((cx > mid) == (V0[lm[42:48], 0].mean() > mid)).astype(np.int8)
     side[~lid_faces] = -1
     return pairs, side

@@ -751,11 +751,12 @@ class _ClipRenderer:
         if self.new_track.lost[i] or self.target_track.lost[i]:
             return _paste(frame, None)
         o = self.options
+        eye_i = None if self.eye_tex is None else \
+            self.eye_tex.at(i, None if self.gaze is None else self.gaze[i])
         return rewrite_frame(frame, self.new_mesh(i),
                              self.new_track.camera(i), self.topo, self.face_texture(frame, i),
                              mouth_texture=self.mouth_texture(i), blend=o.blend,
-                             feather=o.feather, erode=o.erode, eye_texture=None if self.eye_tex is None else self.eye_tex.at(
-                                 i, None if self.gaze is None else self.gaze[i]),
+                             feather=o.feather, erode=o.erode, eye_texture=eye_i,
                              jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
                              mouth_ring=self.ring, lip_tint=self.lip_tint)
 
