@@ -88,7 +88,8 @@ def test_push_pull_equals_the_numpy_pyramid(shape):
 
 def _gain_coefficients_reference(face, part, where, iterations=5, max_samples=4096):
     """The numpy IRLS of :func:`facetransfer.patch.gain_field` before the kernel: (3, 3)
-    coefficients (a, b, c) per channel, and the centring (cx, cy, scale)."""
+    coefficients (a, b, c) per channel, the centring (cx, cy, scale), and the range of the
+    centred, scaled columns and rows within which the plane is evaluated (held beyond)."""
     ys, xs = np.nonzero(where)
     cy, cx = ys.mean(), xs.mean()
     scale = float(max(np.ptp(ys), np.ptp(xs), 1))
@@ -102,7 +103,8 @@ def _gain_coefficients_reference(face, part, where, iterations=5, max_samples=40
         M = Aw @ A + 1e-9 * np.eye(3)
         coef = np.linalg.solve(M, Aw @ r.T[:, :, None])[..., 0].T
         w = 1.0 / np.maximum(np.abs(r - A @ coef), 1e-3)
-    return coef, cx, cy, scale
+    q = (100 * patch.GAIN_SUPPORT, 100 * (1 - patch.GAIN_SUPPORT))  # the samples' middle
+    return coef, cx, cy, scale, np.percentile(A[:, 1], q), np.percentile(A[:, 2], q)
 
 
 def test_gain_field_equals_the_numpy_fit():
@@ -115,9 +117,9 @@ def test_gain_field_equals_the_numpy_fit():
     face[30:40, 50:70] = 10  # outliers the L1 fit outvotes
     where = _blobs(rng, (H, W), smooth=6.0, level=0.45)
     box = (10, 5, 100, 80)
-    coef, cx, cy, scale = _gain_coefficients_reference(face, part, where)
-    x = (np.arange(box[0], box[2]) - cx) / scale
-    y = (np.arange(box[1], box[3]) - cy) / scale
+    coef, cx, cy, scale, xq, yq = _gain_coefficients_reference(face, part, where)
+    x = np.clip((np.arange(box[0], box[2]) - cx) / scale, *xq)
+    y = np.clip((np.arange(box[1], box[3]) - cy) / scale, *yq)
     ref = np.exp(coef[0] + x[None, :, None] * coef[1] + y[:, None, None] * coef[2])
     ref = np.clip(ref, *patch.GAIN_RANGE)
     g = patch.gain_field(face, part, where, box=box)

@@ -25,6 +25,13 @@ __all__ = ["GAIN_RANGE", "REJECT", "REJECT_GROW", "match_outline", "gain_field"]
 GAIN_RANGE = (0.7, 1.4)
 #: Reweighting steps and most pixels of the robust fit of :func:`gain_field`.
 GAIN_ITERATIONS, GAIN_SAMPLES = 5, 4096
+#: The plane of :func:`gain_field` is held constant beyond this fraction of its samples at
+#: each end of their columns and of their rows: it is evaluated where the compared pixels
+#: lie, not extrapolated from a few of them. (The jaw region's ring in a smiling, open-mouthed
+#: frame of ``make demo`` lies almost wholly above the chin; 4 % of its pixels, under the chin
+#: where the target's own opening shades the neck, tilted the plane and darkened the new chin
+#: by a quarter: BENCHMARKS.md, "Nineteenth session".)
+GAIN_SUPPORT = 0.1
 #: Pixels by which a rejection (:func:`match_outline`'s ``reject``) grows beyond the pixels
 #: that are unlike enough: the transition from skin to hair in the reference frame.
 REJECT_GROW = 2
@@ -402,7 +409,9 @@ def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
     least squares): the median's robustness (pixels whose content differs, e.g. the target's own
     lids and lashes, are outvoted), plus the plane's gradient of shading. Coordinates are
     centred on the pixels' centroid and scaled by their extent, so the gains do not depend on
-    the crop. Clipped to :data:`GAIN_RANGE`.
+    the crop. The plane is evaluated where the pixels lie: beyond the middle of their columns
+    and rows (:data:`GAIN_SUPPORT`) it is held at its value there, not extrapolated from the
+    few pixels beyond. Clipped to :data:`GAIN_RANGE`.
 
     Parameters
     ----------
@@ -450,9 +459,15 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
     coef = np.empty((3, 3))
     _plane_l1_kernel(u, v, r, int(iterations), coef)
     x0, y0, x1, y1 = box
-    # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns
-    gx = np.exp(((np.arange(x0, x1) - cx) / scale)[:, None] * coef[1])         # (w, c)
-    gy = np.exp(coef[0] + ((np.arange(y0, y1) - cy) / scale)[:, None] * coef[2])  # (h, c)
+    # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns,
+    # each coordinate held within the samples' middle (GAIN_SUPPORT; 0: extrapolated)
+    xs, ys = (np.arange(x0, x1) - cx) / scale, (np.arange(y0, y1) - cy) / scale
+    if GAIN_SUPPORT > 0:
+        q = (100 * GAIN_SUPPORT, 100 * (1 - GAIN_SUPPORT))
+        np.clip(xs, *np.percentile(u, q), out=xs)
+        np.clip(ys, *np.percentile(v, q), out=ys)
+    gx = np.exp(xs[:, None] * coef[1])                                      # (w, c)
+    gy = np.exp(coef[0] + ys[:, None] * coef[2])                            # (h, c)
     return gy, gx
 
 
