@@ -13,6 +13,7 @@ levels), and each whole frame's PSNR. Used by ``bench_eye_rim.py`` and
 
 from __future__ import annotations
 
+import argparse
 import time
 from pathlib import Path
 
@@ -135,3 +136,13 @@ def run(out: Path, variants: dict, stem: str, title: str) -> dict:
         Path(tmp).write_text(json.dumps(res, indent=2))
     plot(res, (na, nb), title, out / f"{stem}.png")
     return res
+
+
+def main(doc: str, variants: dict, stem: str, title: str, argv=None) -> int:
+    """A benchmark script's command line: ``--out`` (default ``out/benchmarks``), then
+    :func:`run`."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--out", default="out/benchmarks")
+    args = ap.parse_args(argv)
+    run(Path(args.out), variants, stem, title)
+    return 0

@@ -27,7 +27,6 @@ Writes ``OUT/eye_rim.json``, ``OUT/eye_rim.png`` (error per clip) and ``OUT/eye_
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import sys
 from pathlib import Path
@@ -36,7 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _self_transfer import run  # noqa: E402
+from _self_transfer import main  # noqa: E402
 
 
 @contextlib.contextmanager
@@ -53,14 +52,6 @@ def _always():
         eyes.usual_weights = original
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="out/benchmarks")
-    args = ap.parse_args()
-    run(Path(args.out), {"always": _always, "usual": contextlib.nullcontext}, "eye_rim",
-        "self-transfer: the pixels the rule changes, against the target frame")
-    return 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(__doc__, {"always": _always, "usual": contextlib.nullcontext}, "eye_rim",
+                  "self-transfer: the pixels the rule changes, against the target frame"))

@@ -26,14 +26,13 @@ most).
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _self_transfer import run  # noqa: E402
+from _self_transfer import main  # noqa: E402
 
 
 @contextlib.contextmanager
@@ -49,14 +48,6 @@ def _extrapolated():
         patch.GAIN_SUPPORT = original
 
 
-def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="out/benchmarks")
-    args = ap.parse_args()
-    run(Path(args.out), {"extrapolated": _extrapolated, "held": contextlib.nullcontext},
-        "gain_support", "self-transfer: the pixels the gain's support changes")
-    return 0
-
-
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(main(__doc__, {"extrapolated": _extrapolated, "held": contextlib.nullcontext},
+                  "gain_support", "self-transfer: the pixels the gain's support changes"))
