@@ -463,12 +463,21 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
     # each coordinate held within the samples' middle (GAIN_SUPPORT; 0: extrapolated)
     xs, ys = (np.arange(x0, x1) - cx) / scale, (np.arange(y0, y1) - cy) / scale
     if GAIN_SUPPORT > 0:
-        q = (100 * GAIN_SUPPORT, 100 * (1 - GAIN_SUPPORT))
-        np.clip(xs, *np.percentile(u, q), out=xs)
-        np.clip(ys, *np.percentile(v, q), out=ys)
+        np.clip(xs, *_middle(u, GAIN_SUPPORT), out=xs)
+        np.clip(ys, *_middle(v, GAIN_SUPPORT), out=ys)
     gx = np.exp(xs[:, None] * coef[1])                                      # (w, c)
     gy = np.exp(coef[0] + ys[:, None] * coef[2])                            # (h, c)
     return gy, gx
+
+
+def _middle(a: np.ndarray, fraction: float, most: int = 1024) -> tuple[float, float]:
+    """The order statistics of ``a`` (k,) that leave ``fraction`` of it on either side, read
+    on at most ``most`` of its values (evenly strided): ``(low, high)``."""
+    b = a[::max(1, a.size // most)]
+    lo = int(round(fraction * (b.size - 1)))
+    hi = b.size - 1 - lo
+    part = np.partition(b, (lo, hi))
+    return float(part[lo]), float(part[hi])
 
 
 def _gain_samples_py(pts, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v, r,
