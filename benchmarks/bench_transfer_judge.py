@@ -79,25 +79,36 @@ def scores(frames, fps: float):
 
 def compare(S, T, R) -> dict:
     """Correlations of the result's scores with the source's and the target's, per measure,
-    and the amplitude ratio (the result's standard deviation over the source's)."""
+    the amplitude ratio (the result's standard deviation over the source's), and the control
+    ``source_target``: the source's with the target's (two clips' signals correlated by
+    chance, which a result between them inherits)."""
     from facetransfer.arkit import MEDIAPIPE_NAMES
-    from facetransfer.fidelity import correlation as corr, gaze
+    from facetransfer.fidelity import gaze
 
     (S, Sg), (T, Tg), (R, Rg) = S, T, R
     out = {}
     for n in SHAPES:
         k = MEDIAPIPE_NAMES.index(n)
-        out[n] = {"result_source": corr(R[:, k], S[:, k]), "result_target": corr(R[:, k], T[:, k]),
-                  "amplitude": float(np.nanstd(R[:, k]) / max(np.nanstd(S[:, k]), 1e-9))}
+        out[n] = _measure(S[:, k], T[:, k], R[:, k])
     for n in GEOMETRY:
-        r, s, t = Rg[n], Sg[n], Tg[n]
-        out[n] = {"result_source": corr(r, s), "result_target": corr(r, t),
-                  "amplitude": float(np.nanstd(r) / max(np.nanstd(s), 1e-9))}
+        out[n] = _measure(Sg[n], Tg[n], Rg[n])
     for j, name in enumerate(("gaze_horizontal", "gaze_vertical")):
-        r, s, t = gaze(R)[:, j], gaze(S)[:, j], gaze(T)[:, j]
-        out[name] = {"result_source": corr(r, s), "result_target": corr(r, t),
-                     "amplitude": float(np.nanstd(r) / max(np.nanstd(s), 1e-9))}
+        out[name] = _measure(gaze(S)[:, j], gaze(T)[:, j], gaze(R)[:, j])
     return out
+
+
+def _measure(s: np.ndarray, t: np.ndarray, r: np.ndarray) -> dict:
+    """One measure of :func:`compare` from its source, target and result series (F,), with
+    ``target_partial``: the result's correlation with the target once the source is
+    partialled out (what of the target's own signal the result carries beyond what the source
+    shares with it by chance; NaN where the result follows the source exactly)."""
+    from facetransfer.fidelity import correlation as corr
+
+    rs, rt, st = corr(r, s), corr(r, t), corr(s, t)
+    den = np.sqrt(max((1 - rs * rs) * (1 - st * st), 0.0))
+    return {"result_source": rs, "result_target": rt, "source_target": st,
+            "target_partial": float((rt - rs * st) / den) if den > 1e-9 else float("nan"),
+            "amplitude": float(np.nanstd(r) / max(np.nanstd(s), 1e-9))}
 
 
 def judge_video(video: Path) -> dict:
