@@ -77,11 +77,14 @@ def scores(frames, fps: float):
     return shapes, {name: mp.measure(P, pairs) for name, pairs in GEOMETRY.items()}
 
 
-def compare(S, T, R) -> dict:
+def compare(S, T, R, pose: np.ndarray | None = None) -> dict:
     """Correlations of the result's scores with the source's and the target's, per measure,
-    the amplitude ratio (the result's standard deviation over the source's), and the control
-    ``source_target``: the source's with the target's (two clips' signals correlated by
-    chance, which a result between them inherits)."""
+    the amplitude ratio (the result's standard deviation over the source's), and the
+    controls: ``source_target``, the source's with the target's (two clips' signals correlated
+    by chance, which a result between them inherits); ``target_partial``, the result's with
+    the target's once the source is partialled out; with the target's head ``pose`` (F, 2)
+    (pitch, yaw in degrees), ``target_partial_pose``, once the pose is partialled out too
+    (the result keeps the target's pose, and the detector's brows and gaze move with it)."""
     from facetransfer.arkit import MEDIAPIPE_NAMES
     from facetransfer.fidelity import gaze
 
@@ -89,26 +92,40 @@ def compare(S, T, R) -> dict:
     out = {}
     for n in SHAPES:
         k = MEDIAPIPE_NAMES.index(n)
-        out[n] = _measure(S[:, k], T[:, k], R[:, k])
+        out[n] = _measure(S[:, k], T[:, k], R[:, k], pose)
     for n in GEOMETRY:
-        out[n] = _measure(Sg[n], Tg[n], Rg[n])
+        out[n] = _measure(Sg[n], Tg[n], Rg[n], pose)
     for j, name in enumerate(("gaze_horizontal", "gaze_vertical")):
-        out[name] = _measure(gaze(S)[:, j], gaze(T)[:, j], gaze(R)[:, j])
+        out[name] = _measure(gaze(S)[:, j], gaze(T)[:, j], gaze(R)[:, j], pose)
     return out
 
 
-def _measure(s: np.ndarray, t: np.ndarray, r: np.ndarray) -> dict:
-    """One measure of :func:`compare` from its source, target and result series (F,), with
-    ``target_partial``: the result's correlation with the target once the source is
-    partialled out (what of the target's own signal the result carries beyond what the source
-    shares with it by chance; NaN where the result follows the source exactly)."""
+def _measure(s: np.ndarray, t: np.ndarray, r: np.ndarray, pose: np.ndarray | None = None
+             ) -> dict:
+    """One measure of :func:`compare` from its source, target and result series (F,)."""
     from facetransfer.fidelity import correlation as corr
 
-    rs, rt, st = corr(r, s), corr(r, t), corr(s, t)
-    den = np.sqrt(max((1 - rs * rs) * (1 - st * st), 0.0))
-    return {"result_source": rs, "result_target": rt, "source_target": st,
-            "target_partial": float((rt - rs * st) / den) if den > 1e-9 else float("nan"),
-            "amplitude": float(np.nanstd(r) / max(np.nanstd(s), 1e-9))}
+    out = {"result_source": corr(r, s), "result_target": corr(r, t), "source_target": corr(s, t),
+           "target_partial": _partial(r, t, [s]),
+           "amplitude": float(np.nanstd(r) / max(np.nanstd(s), 1e-9))}
+    if pose is not None:
+        out["target_partial_pose"] = _partial(r, t, [s, *np.asarray(pose, np.float64).T])
+    return out
+
+
+def _partial(r: np.ndarray, t: np.ndarray, controls: list) -> float:
+    """The correlation of ``r`` and ``t`` (F,) once the ``controls`` (each (F,)) and a constant
+    are regressed out of both (least squares over the frames where all are finite); NaN where
+    fewer than 8 frames are or a residual is constant."""
+    X = np.column_stack([np.ones(len(r)), *controls]).astype(np.float64)
+    ok = np.isfinite(X).all(axis=1) & np.isfinite(r) & np.isfinite(t)
+    if ok.sum() < 8:
+        return float("nan")
+    X, a, b = X[ok], np.asarray(r, np.float64)[ok], np.asarray(t, np.float64)[ok]
+    ea = a - X @ np.linalg.lstsq(X, a, rcond=None)[0]
+    eb = b - X @ np.linalg.lstsq(X, b, rcond=None)[0]
+    den = np.sqrt((ea @ ea) * (eb @ eb))
+    return float(ea @ eb / den) if den > 1e-12 else float("nan")
 
 
 def judge_video(video: Path) -> dict:
@@ -178,7 +195,10 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) ->
         res[kind] = frames
     t = time.perf_counter()
     S, T = scores(source, plan.fps), scores(target, plan.fps)
-    judged = {k: compare(S, T, scores(v, plan.fps)) for k, v in res.items()}
+    R = np.asarray(plan.target_track.rotation, np.float64)[:n]
+    pose = np.degrees(np.column_stack([np.arcsin(np.clip(-R[:, 1, 2], -1, 1)),
+                                       np.arcsin(np.clip(R[:, 0, 2], -1, 1))]))
+    judged = {k: compare(S, T, scores(v, plan.fps), pose) for k, v in res.items()}
     seconds["judge"] = time.perf_counter() - t
     _picture(name, source, target, res, S[0], out / f"transfer_judge_{name}.png")
     return {"source": src, "target": tgt, "frames": n, "fps": plan.fps, "seconds": seconds,
