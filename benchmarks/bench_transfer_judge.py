@@ -170,6 +170,7 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) ->
     import tempfile
 
     from facetransfer import video_transfer as vt
+    from facetransfer.export.common import head_euler
     from facetransfer.rewrite_options import RewriteOptions
 
     src, tgt = PAIRS[name]
@@ -195,9 +196,7 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) ->
         res[kind] = frames
     t = time.perf_counter()
     S, T = scores(source, plan.fps), scores(target, plan.fps)
-    R = np.asarray(plan.target_track.rotation, np.float64)[:n]
-    pose = np.degrees(np.column_stack([np.arcsin(np.clip(-R[:, 1, 2], -1, 1)),
-                                       np.arcsin(np.clip(R[:, 0, 2], -1, 1))]))
+    pose = np.degrees(head_euler(plan.target_track.rotation[:n])[:, [1, 0]])  # pitch, yaw
     judged = {k: compare(S, T, scores(v, plan.fps), pose) for k, v in res.items()}
     seconds["judge"] = time.perf_counter() - t
     _picture(name, source, target, res, S[0], out / f"transfer_judge_{name}.png")

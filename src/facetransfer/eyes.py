@@ -641,9 +641,8 @@ def _unless_unusual(frames, track, model, closed, select: np.ndarray, reference:
     :data:`LID_DISTANCE` from the lid margins of ``V`` (n_closed, 3), the mean face, and not
     moved by a blink: :data:`LID_BLINK`): a strand of the fringe in the reference frame is not
     pasted into every frame, over the brow's tail or the forehead (``make demo``)."""
-    lm = np.asarray(model.landmarks, np.int64)[36:48]
     region = model_vertices(model, closed, select)
-    d = np.sqrt(((V[region, None, :] - V[None, lm, :]) ** 2).sum(-1)).min(axis=1)
+    d = _nearest_distance(V[region], V[np.asarray(model.landmarks, np.int64)[36:48]])
     lids = region_vertices(model, ("eyeBlinkLeft", "eyeBlinkRight"), threshold=LID_BLINK,
                            rig=rig)
     far = region[(d > LID_DISTANCE) & ~lids[region]]
@@ -660,14 +659,18 @@ def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray) -> np.ndarray:
     :data:`RIM_DISTANCE` from the brow and lid-margin landmarks (iBUG 17-26, 36-47) of the
     closed mesh ``V`` (n_closed, 3)."""
     lm = np.asarray(model.landmarks, np.int64)
-    core = V[np.concatenate([lm[17:27], lm[36:48]])]
-    # the nearest of the 22 landmarks by brute force (a k-d tree is no faster for 22 points,
-    # and importing scipy.spatial costs 0.1 s)
-    d2 = np.full(V.shape[0], np.inf)
-    for c in core:
-        np.minimum(d2, ((V - c) ** 2).sum(axis=1), out=d2)
-    far = np.sqrt(d2) > RIM_DISTANCE
+    far = _nearest_distance(V, V[np.concatenate([lm[17:27], lm[36:48]])]) > RIM_DISTANCE
     return select & far[closed.faces].all(axis=1)
+
+
+def _nearest_distance(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """``(n,)``: each point of ``P`` (n, 3)'s distance to the nearest of the few points ``Q``
+    (k, 3), by brute force (a k-d tree is no faster for a few dozen points, and importing
+    scipy.spatial costs 0.1 s)."""
+    d2 = np.full(P.shape[0], np.inf)
+    for q in Q:
+        np.minimum(d2, ((P - q) ** 2).sum(axis=1), out=d2)
+    return np.sqrt(d2)
 
 
 def _lid_sides(model, closed, V0: np.ndarray, lid_faces: np.ndarray):
