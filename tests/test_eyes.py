@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 
 from facetransfer import eyes, patch, region_weights
+from facetransfer.region_weights import vertex_alpha
 from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.render import rasterize
 from facetransfer.rewrite import rewrite_frame
@@ -428,6 +431,84 @@ def test_a_strand_over_the_brows_of_the_reference_frame_only_is_not_pasted(setup
         assert np.mean(off < 10) > 0.75 and off.mean() < 10    # without the rule: 0 and ~150
         assert np.abs(out[i][e].astype(float).mean(axis=0) - REF_EYE).max() < 40
     assert np.abs(out[0][s].astype(float).mean(axis=0) - HAIR).max() < 10   # its own frame
+
+@pytest.mark.parametrize("rule", [True, False])
+def test_a_strand_of_the_current_frame_only_is_not_painted_over(setup, monkeypatch, rule):
+    """Frame 5 (the target's brows raised: the region takes the reference frame there) shows a
+    strand of hair by one brow, away from the lids, farther than
+    :data:`facetransfer.eyes.BROW_KEEP` from the brows and off the rim (where a pixel this
+    unlike the paste is rejected anyway, :data:`facetransfer.patch.REJECT`), where the
+    reference frame and every other frame show skin (``make demo``'s turned frames, whose
+    fringe lies over a brow's tail): with :data:`facetransfer.eyes.FRAME_RULE` the frame keeps
+    its own strand; without it the reference frame's skin is painted over the strand. Frame 6
+    (raised too, no strand) shows skin either way."""
+    from facetransfer.rewrite import rewrite_frames
+
+    monkeypatch.setattr(eyes, "FRAME_RULE", rule)
+    model, topo, closed, fill = setup
+    target, new, hole, V, tid, tex = _brows_up_clip(setup)
+    t = np.maximum(tid, 0)
+    V0 = close_mouth(model.synthesize(model.default_weights()), closed)
+    lm = np.asarray(model.landmarks)
+
+    def near(idx, dist):
+        return np.sqrt(((V0[:, None] - V0[None, idx]) ** 2).sum(-1)).min(axis=1) <= dist
+
+    held = near(lm[36:48], eyes.LID_DISTANCE) | near(lm[17:27], eyes.BROW_KEEP)
+    held[:model.n_vertices] |= eyes.region_vertices(model, ("eyeBlinkLeft", "eyeBlinkRight"),
+                                                    threshold=eyes.LID_BLINK)
+    pasted = vertex_alpha(len(tex.uvs), tex.verts, tex.strengths[5], rest=1.0) > 0.99
+    faces = np.asarray(closed.faces)
+    free = (tid >= 0) & tex.select[t] & ~np.isin(tid, fill) & ~held[faces].any(axis=1)[t] \
+        & pasted[faces].all(axis=1)[t] & ~tex.rim[t]       # where frame 5 takes the reference,
+    free &= np.arange(SIZE)[None, :] > SIZE // 2           # not on the rim (no rejection
+    #                                                        there); one brow: a strand
+    frames = [_frame(hole, REF_EYE)] + [_frame(hole, TARGET_EYE)] * 6
+    frames[5] = frames[5].copy()
+    frames[5][free] = HAIR
+    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
+                                           workers=1)]
+    s = free & np.logical_and.reduce([np.roll(free, k, a) for k in (-2, 2) for a in (0, 1)])
+    assert s.sum() > 50
+    hair = np.abs(out[5][s].astype(float) - HAIR).max(axis=-1)
+    skin = np.abs(out[5][s].astype(float) - SKIN).max(axis=-1)
+    if rule:  # the frame's own strand (its texture lifted through the raised brows and laid
+        #       on the still new face: a part of the band shows the skin beside it, and its
+        #       edge blends over the triangles; 0.59 and 0.01 measured)
+        assert np.mean(hair < 10) > 0.5 and np.mean(skin < 10) < 0.05
+    else:     # the reference's skin painted over it (1.0 measured)
+        assert np.mean(skin < 10) > 0.95
+    assert np.abs(out[6][s].astype(float) - SKIN).max(axis=-1).mean() < 6
+
+
+def test_usual_weights_of_frames_against_the_reference(setup):
+    """Every frame of a clip of skin against its reference frame (4, brighter overall): 0 at
+    the vertices under a strand that frame 6 alone shows, 1 everywhere else and in every other
+    frame (the exposure alone marks nothing); a lost frame is 1; without ``against``, the row
+    of the reference is :func:`facetransfer.region_weights.usual_weights`."""
+    model, topo, closed, fill = setup
+    track = _track(model, _acts(9, 0.0))
+    verts = region_weights.model_vertices(model, closed, np.ones(len(closed.faces), bool))
+    P = track.camera(0).project(model.synthesize(track.weights_at(0), vertices=verts))
+    frames = [_frame(np.zeros((SIZE, SIZE), bool), SKIN) for _ in range(9)]
+    frames[4] = np.clip(frames[0].astype(float) * 1.2, 0, 255).astype(np.uint8)
+    frames[6] = frames[6].copy()
+    frames[6][100:110, 60:200] = HAIR
+    w = region_weights.usual_weights_of(frames, track, model, verts, np.arange(9), against=4)
+    assert w.shape == (9, verts.size) and w.dtype == np.float32
+    inside = (P[:, 1] > 101) & (P[:, 1] < 108) & (P[:, 0] > 61) & (P[:, 0] < 198)
+    outside = (np.abs(P[:, 1] - 105) > 8) | (P[:, 0] < 55) | (P[:, 0] > 205)
+    assert inside.sum() > 10 and outside.sum() > 100
+    np.testing.assert_array_equal(w[6, inside], 0.0)
+    np.testing.assert_array_equal(w[6, outside], 1.0)
+    np.testing.assert_array_equal(np.delete(w, 6, axis=0), 1.0)
+    lost = dataclasses.replace(track, lost=np.arange(9) == 6)
+    np.testing.assert_array_equal(
+        region_weights.usual_weights_of(frames, lost, model, verts, [6], against=4), 1.0)
+    np.testing.assert_array_equal(
+        region_weights.usual_weights_of(frames, track, model, verts, [6]),
+        region_weights.usual_weights(frames, track, model, verts, 6)[None])
+
 
 def test_usual_weights_mark_what_only_the_reference_frame_shows(setup):
     """A clip of skin whose reference frame is brighter overall (its exposure) and shows a

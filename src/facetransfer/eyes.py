@@ -27,7 +27,9 @@ the sequence)", applied to the eyes):
    the clip usually does not (:func:`facetransfer.region_weights.usual_weights`: its colour
    against the median of 24 frames; most often a strand of the fringe over the brow's tail)
    keeps the current frame's texture: ``make demo``'s forehead carried frame 3's fringe into
-   every frame;
+   every frame; and, farther than :data:`BROW_KEEP` from the brows, so does a vertex where the
+   current frame shows something else than the reference frame (:data:`FRAME_RULE`: its own
+   strand of the fringe, over a brow's tail in ``make demo``'s turned frames);
 7. each eye's eyeball is turned to the new performance's gaze (its eyeLook* activations:
    :mod:`facetransfer.eyeballs`), where the target's track has eyeLook* activations too.
 
@@ -50,7 +52,7 @@ from .composite import mask_box
 from .errors import RewriteError
 from .eyeballs import Eyeballs, eyeballs_of, shift_eyeballs
 from .patch import REJECT, SHADING_SIGMA, _match_outline_into
-from .region_weights import model_vertices, moved_strengths, usual_weights, vertex_alpha
+from .region_weights import model_vertices, moved_strengths, usual_weights_of, vertex_alpha
 from .render import Raster, interpolate_vertex_values, shade_layers, shade_texture
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -106,6 +108,18 @@ LID_DISTANCE = 0.6
 #: where the reference frame's was unusual, and the demo's blinks followed the source 0.07
 #: less (BENCHMARKS.md, "Eighteenth session").
 LID_BLINK = 0.03
+#: The eye region's vertices away from the lids and farther than :data:`BROW_KEEP` from the
+#: brows keep the current frame's texture wherever that frame's colour there differs from the
+#: reference frame's (:func:`facetransfer.region_weights.usual_weights_of` against it, the ramp
+#: :data:`~facetransfer.region_weights.USUAL`): a strand of the target's fringe that lies over
+#: the forehead or a brow's tail in the current frame only is not painted over with the
+#: reference frame's skin or strands (``make demo``'s turned frames 35, 60, 71).
+FRAME_RULE = True
+#: Distance (cm, the mean face) from the brows' landmarks (iBUG 17-26) within which
+#: :data:`FRAME_RULE` does not apply: the target's own brows moving in the current frame change
+#: the colours there too, and came back (demo browInnerUp ~ target +0.13 -> +0.53 with the rule
+#: everywhere, +0.28 beyond 0.6 cm, +0.08 beyond 1 cm; BENCHMARKS.md, "Twentieth session").
+BROW_KEEP = 1.0
 
 
 @dataclass(frozen=True)
@@ -640,7 +654,10 @@ def _unless_unusual(frames, track, model, closed, select: np.ndarray, reference:
     every vertex of the region ``select`` away from the lids (farther than
     :data:`LID_DISTANCE` from the lid margins of ``V`` (n_closed, 3), the mean face, and not
     moved by a blink: :data:`LID_BLINK`): a strand of the fringe in the reference frame is not
-    pasted into every frame, over the brow's tail or the forehead (``make demo``)."""
+    pasted into every frame, over the brow's tail or the forehead (``make demo``). With
+    :data:`FRAME_RULE`, those of them farther than :data:`BROW_KEEP` from the brows also take,
+    per frame, :func:`facetransfer.region_weights.usual_weights_of` of that frame against the
+    reference: a strand in the current frame only is not painted over."""
     region = model_vertices(model, closed, select)
     d = _nearest_distance(V[region], V[np.asarray(model.landmarks, np.int64)[36:48]])
     lids = region_vertices(model, ("eyeBlinkLeft", "eyeBlinkRight"), threshold=LID_BLINK,
@@ -649,8 +666,14 @@ def _unless_unusual(frames, track, model, closed, select: np.ndarray, reference:
     allv = np.union1d(verts, far)
     out = np.ones((strengths.shape[0], allv.size), np.float32)
     out[:, np.searchsorted(allv, verts)] = strengths
-    out[:, np.searchsorted(allv, far)] *= usual_weights(frames, track, model, far, reference,
-                                                        n_frames)[None]
+    cols = np.searchsorted(allv, far)
+    out[:, cols] *= usual_weights_of(frames, track, model, far, [reference], n_frames)
+    n = min(out.shape[0], len(frames))
+    if FRAME_RULE and n > 0:  # where the current frame differs: its own strand of hair
+        brows = V[np.asarray(model.landmarks, np.int64)[17:27]]
+        loose = _nearest_distance(V[far], brows) > BROW_KEEP
+        out[:n, cols[loose]] *= usual_weights_of(frames, track, model, far[loose],
+                                                 np.arange(n), n_frames, against=reference)
     return allv, out
 
 

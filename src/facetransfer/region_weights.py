@@ -10,7 +10,8 @@ weights defined here, interpolated over the triangles (:func:`vertex_alpha`):
   reference frame has it (elsewhere the current frame shows the same skin, lit as it is now);
 - :func:`facing_weights`: where the reference frame sees the skin squarely, not edge-on;
 - :func:`usual_weights`: where the reference frame shows what the clip usually shows there,
-  not a strand of hair that lies elsewhere in the other frames.
+  not a strand of hair that lies elsewhere in the other frames; :func:`usual_weights_of`: the
+  same for every frame, or each frame against the reference (a strand of the current frame's).
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ import numpy as np
 from .render import vertex_normals
 
 __all__ = ["FACING", "USUAL", "USUAL_SAMPLES", "facing_weights", "model_vertices",
-           "moved_strengths", "usual_weights", "vertex_alpha", "smoothstep"]
+           "moved_strengths", "usual_weights", "usual_weights_of", "vertex_alpha", "smoothstep"]
 
 #: :func:`facing_weights`' ramp: a vertex that a region's reference frame sees edge-on (its
 #: normal's component toward the camera below the first value) keeps the current frame's
@@ -115,27 +116,79 @@ def usual_weights(frames, track, model, verts: np.ndarray, reference: int,
     ramp : (float, float)
     samples : int
     """
+    return usual_weights_of(frames, track, model, verts, [int(reference)], n_frames,
+                            ramp=ramp, samples=samples)[0]
+
+
+def usual_weights_of(frames, track, model, verts: np.ndarray, rows, n_frames: int | None = None,
+                     *, ramp: tuple[float, float] = USUAL,
+                     samples: int = USUAL_SAMPLES, against: int | None = None) -> np.ndarray:
+    """:func:`usual_weights` of each frame of ``rows``: ``(k, m)`` float32 in [0, 1].
+
+    Each frame's colours (as :func:`usual_weights` reads them) are compared with the median of
+    ``samples`` frames of the clip, or with frame ``against``'s: how far what a frame shows at
+    a vertex differs from what the clip usually shows there, or from what that frame shows.
+
+    Parameters
+    ----------
+    frames, track, model, verts, n_frames, ramp, samples
+        As :func:`usual_weights`.
+    rows : (k,) int
+        The frames judged; a lost one gets 1.
+    against : int, optional
+        The frame compared with instead of the clip's median.
+
+    Returns
+    -------
+    (k, m) float32
+        1 everywhere when fewer than 3 of the first ``n_frames`` frames are not lost.
+    """
+    verts = np.asarray(verts, np.int64)
+    rows = np.asarray(rows, np.int64).reshape(-1)
+    lost = np.asarray(track.lost, bool)
+    out = np.ones((rows.size, verts.size), np.float32)
+    good = np.flatnonzero(~lost[:n_frames])
+    if good.size < 3 or verts.size == 0:
+        return out
+    pick = good[np.unique(np.linspace(0, good.size - 1, samples).round().astype(np.int64))]
+    med = np.median(_vertex_colours(frames, track, model, verts, pick), axis=0) \
+        if against is None else _vertex_colours(frames, track, model, verts,
+                                                np.array([int(against)]))[0]
+    test = np.flatnonzero(~lost[rows])
+    for lo in range(0, test.size, 64):                # (64, m, 3) meshes at a time
+        k = test[lo:lo + 64]
+        diff = _vertex_colours(frames, track, model, verts, rows[k]) - med
+        d = np.abs(diff - np.median(diff, axis=1, keepdims=True)).max(axis=2)
+        out[k] = 1.0 - smoothstep(d, ramp)
+    return out
+
+
+def _vertex_colours(frames, track, model, verts: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """``(k, m, 3)`` float32: ``log(c + 8)`` of the colour (bilinear) under each vertex
+    ``verts`` (m,) of the target's tracked mesh (Eq. 5) and camera (Eq. 7) in each frame of
+    ``rows`` (k,) (one product for the k meshes)."""
     import cv2
 
-    good = np.flatnonzero(~np.asarray(track.lost, bool)[:n_frames])
-    verts = np.asarray(verts, np.int64)
-    if good.size < 3 or verts.size == 0:
-        return np.ones(verts.size, np.float32)
-    pick = good[np.unique(np.linspace(0, good.size - 1, samples).round().astype(np.int64))]
-    rows = np.append(pick, int(reference))
     V = model.synthesize({m: np.asarray(track.weights[m])[rows] for m in track.mode_names},
-                         vertices=verts)                       # one product: (k + 1, m, 3)
+                         vertices=verts)
+    V = V.reshape(len(rows), len(verts), 3)
+    out = np.empty((len(rows), len(verts), 3), np.float32)
+    for k, r in enumerate(rows.tolist()):
+        P = track.camera(r).project(V[k]).astype(np.float32)
+        img = np.asarray(frames[r])
+        (x0, x1), (y0, y1) = (_span(P[:, j], img.shape[1 - j]) for j in (0, 1))
+        crop = img[y0:y1, x0:x1].astype(np.float32)   # the points' box, not the whole frame
+        out[k] = cv2.remap(crop, P[None, :, 0] - x0, P[None, :, 1] - y0, cv2.INTER_LINEAR,
+                           borderMode=cv2.BORDER_REPLICATE)[0]
+    return np.log(out + 8.0)
 
-    def colours(k):
-        P = track.camera(int(rows[k])).project(V[k]).astype(np.float32)
-        img = np.asarray(frames[int(rows[k])], np.float32)
-        return np.log(cv2.remap(img, P[None, :, 0], P[None, :, 1], cv2.INTER_LINEAR,
-                                borderMode=cv2.BORDER_REPLICATE)[0] + 8.0)
 
-    med = np.median(np.stack([colours(k) for k in range(len(pick))]), axis=0)   # (m, 3)
-    diff = colours(len(pick)) - med
-    d = np.abs(diff - np.median(diff, axis=0)).max(axis=1)
-    return (1.0 - smoothstep(d, ramp)).astype(np.float32)
+def _span(x: np.ndarray, n: int) -> tuple[int, int]:
+    """The pixels ``[lo, hi)`` of an axis of ``n`` that bilinear reads at the coordinates ``x``
+    touch, with a margin, clipped to the axis (outside it the border replicates the same edge
+    pixels, so remapping the span gives what remapping the whole axis does)."""
+    lo = max(0, min(int(np.floor(x.min())) - 2, n - 1))
+    return lo, max(lo + 1, min(n, int(np.ceil(x.max())) + 3))
 
 
 def vertex_alpha(n: int, verts: np.ndarray, strengths: np.ndarray, *,
