@@ -7,9 +7,10 @@ the reference frame shows what the clip usually does not (its own strand of the 
 71) it is the current frame whose fringe lies over a brow's tail, and the reference frame's
 skin and strands were painted over it: a mottled patch with a hard edge in the hair. With
 :data:`facetransfer.eyes.FRAME_RULE` (the default) every vertex of the region away from the
-lids and farther than :data:`facetransfer.eyes.BROW_KEEP` from the brows also keeps, per
-frame, the current frame where that frame's colour differs from the reference frame's
-(:func:`facetransfer.region_weights.usual_weights_of` against it).
+lids also keeps, per frame, the current frame where that frame's colour differs from the
+reference frame's (:func:`facetransfer.region_weights.usual_weights_of` against it); within
+:data:`facetransfer.eyes.BROW_KEEP` of the brows only where the target's expression did not
+move the vertex from where the reference frame has it.
 
 Truth without a judge: a **self-transfer** (``benchmarks/_self_transfer.py``) of the judge's
 three target clips without the rule (``reference``) and with it (``frame rule``): the error

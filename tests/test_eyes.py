@@ -481,6 +481,51 @@ def test_a_strand_of_the_current_frame_only_is_not_painted_over(setup, monkeypat
     assert np.abs(out[6][s].astype(float) - SKIN).max(axis=-1).mean() < 6
 
 
+def test_near_the_brows_a_frame_keeps_its_strand_only_where_the_target_did_not_move(setup):
+    """The region's strengths (1: the reference frame; 0: the current frame) at its vertices
+    within :data:`facetransfer.eyes.BROW_KEEP` of the brows, away from the lids and not on the
+    rim, under a strand painted over one brow in a still frame (2) and in a frame whose brows the
+    target raised (5): 0 in frame 2 (the frame's own strand), 1 where frame 5's brows moved the
+    vertex (the target's brow changes the colours there too); 1 in the frames without it."""
+    model, topo, closed, fill = setup
+    acts = _acts(7, 0.0)
+    acts[4:, ARKIT_NAMES.index("browInnerUp")] = 1.0
+    target = _track(model, acts)                            # lowered: the brows in view
+    target = dataclasses.replace(target, translation=target.translation + [0.0, 90.0])
+    V0 = close_mouth(model.synthesize(model.default_weights()), closed)
+    lm = np.asarray(model.landmarks)
+
+    def near(idx, dist):
+        return np.sqrt(((V0[:, None] - V0[None, idx]) ** 2).sum(-1)).min(axis=1) <= dist
+
+    hole = _eye_pixels(model, closed, fill, target, 0)
+    frames = [_frame(hole, REF_EYE)] + [_frame(hole, TARGET_EYE)] * 6
+    _, tex = eyes.eye_texture(frames, target, model, topo, frame=0)
+    core = np.zeros(closed.n_closed, bool)                   # not on the rim
+    core[np.asarray(closed.faces)[tex.select & ~tex.rim].ravel()] = True
+    lid = near(lm[36:48], eyes.LID_DISTANCE)
+    lid[:model.n_vertices] |= eyes.region_vertices(model, ("eyeBlinkLeft", "eyeBlinkRight"),
+                                                   threshold=eyes.LID_BLINK)
+    P = {i: target.camera(i).project(model.synthesize(target.weights_at(i))) for i in (2, 5)}
+    box = (slice(60, 128), slice(SIZE // 2, SIZE))           # over one brow
+    inside = np.ones(len(tex.verts), bool)
+    for i in (2, 5):
+        x, y = P[i][tex.verts].T
+        inside &= (y > box[0].start + 3) & (y < box[0].stop - 3) & (x > box[1].start + 3)
+    cand = inside & near(lm[17:27], eyes.BROW_KEEP)[tex.verts] & ~lid[tex.verts] \
+        & core[tex.verts]
+    moved5 = eyes.eye_strengths(model, target, closed, tex.select, 0)[1][5]
+    moved = np.isin(tex.verts, eyes.model_vertices(model, closed, tex.select)[moved5 > 0.99])
+    for i in (2, 5):
+        frames[i] = frames[i].copy()
+        frames[i][box] = HAIR
+    _, tex = eyes.eye_texture(frames, target, model, topo, frame=0)
+    assert cand.sum() > 5 and (cand & moved).sum() > 5
+    np.testing.assert_array_equal(tex.strengths[2, cand], 0.0)
+    np.testing.assert_array_equal(tex.strengths[5, cand & moved], 1.0)
+    np.testing.assert_array_equal(tex.strengths[[1, 3, 6]][:, cand], 1.0)
+
+
 def test_usual_weights_of_frames_against_the_reference(setup):
     """Every frame of a clip of skin against its reference frame (4, brighter overall): 0 at
     the vertices under a strand that frame 6 alone shows, 1 everywhere else and in every other

@@ -27,9 +27,10 @@ the sequence)", applied to the eyes):
    the clip usually does not (:func:`facetransfer.region_weights.usual_weights`: its colour
    against the median of 24 frames; most often a strand of the fringe over the brow's tail)
    keeps the current frame's texture: ``make demo``'s forehead carried frame 3's fringe into
-   every frame; and, farther than :data:`BROW_KEEP` from the brows, so does a vertex where the
-   current frame shows something else than the reference frame (:data:`FRAME_RULE`: its own
-   strand of the fringe, over a brow's tail in ``make demo``'s turned frames);
+   every frame; and so does a vertex where the current frame shows something else than the
+   reference frame (:data:`FRAME_RULE`: its own strand of the fringe, over a brow's tail in
+   ``make demo``'s turned frames), near the brows only where the target's expression did not
+   move it (:data:`BROW_KEEP`);
 7. each eye's eyeball is turned to the new performance's gaze (its eyeLook* activations:
    :mod:`facetransfer.eyeballs`), where the target's track has eyeLook* activations too.
 
@@ -116,9 +117,11 @@ LID_BLINK = 0.03
 #: reference frame's skin or strands (``make demo``'s turned frames 35, 60, 71).
 FRAME_RULE = True
 #: Distance (cm, the mean face) from the brows' landmarks (iBUG 17-26) within which
-#: :data:`FRAME_RULE` does not apply: the target's own brows moving in the current frame change
-#: the colours there too, and came back (demo browInnerUp ~ target +0.13 -> +0.53 with the rule
-#: everywhere, +0.28 beyond 0.6 cm, +0.08 beyond 1 cm; BENCHMARKS.md, "Twentieth session").
+#: :data:`FRAME_RULE` applies only where the target's expression has not moved the vertex from
+#: where the reference frame has it (:func:`eye_strengths`' ramp): the target's own brows moving
+#: in the current frame change the colours there too, and came back (demo browInnerUp ~ target
+#: +0.13 -> +0.53 with the rule everywhere, +0.28 beyond 0.6 cm, +0.08 beyond 1 cm, +0.05 with
+#: the rule moved-gated within 1 cm; BENCHMARKS.md, "Twentieth session").
 BROW_KEEP = 1.0
 
 
@@ -655,9 +658,8 @@ def _unless_unusual(frames, track, model, closed, select: np.ndarray, reference:
     :data:`LID_DISTANCE` from the lid margins of ``V`` (n_closed, 3), the mean face, and not
     moved by a blink: :data:`LID_BLINK`): a strand of the fringe in the reference frame is not
     pasted into every frame, over the brow's tail or the forehead (``make demo``). With
-    :data:`FRAME_RULE`, those of them farther than :data:`BROW_KEEP` from the brows also take,
-    per frame, :func:`facetransfer.region_weights.usual_weights_of` of that frame against the
-    reference: a strand in the current frame only is not painted over."""
+    :data:`FRAME_RULE`, times :func:`_frame_rule` per frame: a strand in the current frame only
+    is not painted over."""
     region = model_vertices(model, closed, select)
     d = _nearest_distance(V[region], V[np.asarray(model.landmarks, np.int64)[36:48]])
     lids = region_vertices(model, ("eyeBlinkLeft", "eyeBlinkRight"), threshold=LID_BLINK,
@@ -670,11 +672,26 @@ def _unless_unusual(frames, track, model, closed, select: np.ndarray, reference:
     out[:, cols] *= usual_weights_of(frames, track, model, far, [reference], n_frames)
     n = min(out.shape[0], len(frames))
     if FRAME_RULE and n > 0:  # where the current frame differs: its own strand of hair
-        brows = V[np.asarray(model.landmarks, np.int64)[17:27]]
-        loose = _nearest_distance(V[far], brows) > BROW_KEEP
-        out[:n, cols[loose]] *= usual_weights_of(frames, track, model, far[loose],
-                                                 np.arange(n), n_frames, against=reference)
+        out[:n, cols] *= _frame_rule(frames, track, model, far, V, reference, n, n_frames, rig)
     return allv, out
+
+
+def _frame_rule(frames, track, model, far: np.ndarray, V: np.ndarray, reference: int, n: int,
+                n_frames: int, rig=None) -> np.ndarray:
+    """:data:`FRAME_RULE`'s factor of the vertices ``far`` (m,) in the first ``n`` frames,
+    ``(n, m)`` float32: :func:`facetransfer.region_weights.usual_weights_of` of each frame
+    against the ``reference``; within :data:`BROW_KEEP` of the brows (of ``V``, the mean face)
+    only as far as the target's expression left the vertex where the reference frame has it
+    (``1 - (1 - u) (1 - moved)``, ``moved`` of :func:`eye_strengths`' ramp): there a brow
+    the target raised changes the colours too."""
+    u = usual_weights_of(frames, track, model, far, np.arange(n), n_frames, against=reference)
+    near = _nearest_distance(V[far], V[np.asarray(model.landmarks, np.int64)[17:27]]) \
+        <= BROW_KEEP
+    if near.any():
+        moved = moved_strengths(model, track, far[near], reference, _blink_scale(model, rig),
+                                EYE_BLEND)
+        u[:, near] = 1.0 - (1.0 - u[:, near]) * (1.0 - moved[:n])
+    return u
 
 
 def _rim_faces(model, closed, V: np.ndarray, select: np.ndarray) -> np.ndarray:
@@ -819,12 +836,16 @@ def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] 
 def eye_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig=None,
                   ramp: tuple[float, float] = EYE_BLEND) -> tuple[np.ndarray, np.ndarray]:
     """:func:`moved_strengths` of the eye region, ``ramp`` (:data:`EYE_BLEND`) a fraction of
-    the largest displacement of the eyeBlink shapes (the model's mean person; ``rig``:
+    the largest displacement of the eyeBlink shapes (:func:`_blink_scale`)."""
+    verts = model_vertices(model, topo, select)
+    return verts, moved_strengths(model, track, verts, reference, _blink_scale(model, rig), ramp)
+
+
+def _blink_scale(model, rig=None) -> float:
+    """The largest displacement of the eyeBlink shapes of the model's mean person (``rig``:
     :func:`facetransfer.arkit.expression_rig` of it, if at hand)."""
     if rig is None:
         rig = expression_rig(model, model.default_weights())
-    scale = max(float(np.sqrt((rig.deltas[ARKIT_NAMES.index(n)] ** 2).sum(-1)).max())
-                for n in ("eyeBlinkLeft", "eyeBlinkRight"))
-    verts = model_vertices(model, topo, select)
-    return verts, moved_strengths(model, track, verts, reference, scale, ramp)
+    return max(float(np.sqrt((rig.deltas[ARKIT_NAMES.index(n)] ** 2).sum(-1)).max())
+               for n in ("eyeBlinkLeft", "eyeBlinkRight"))
 
