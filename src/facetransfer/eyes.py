@@ -109,11 +109,12 @@ LID_DISTANCE = 0.6
 #: where the reference frame's was unusual, and the demo's blinks followed the source 0.07
 #: less (BENCHMARKS.md, "Eighteenth session").
 LID_BLINK = 0.03
-#: The eye region's vertices away from the lids and farther than :data:`BROW_KEEP` from the
-#: brows keep the current frame's texture wherever that frame's colour there differs from the
-#: reference frame's (:func:`facetransfer.region_weights.usual_weights_of` against it, the ramp
-#: :data:`~facetransfer.region_weights.USUAL`): a strand of the target's fringe that lies over
-#: the forehead or a brow's tail in the current frame only is not painted over with the
+#: The eye region's vertices away from the lids keep the current frame's texture wherever that
+#: frame's colour there differs from the reference frame's
+#: (:func:`facetransfer.region_weights.usual_weights_of` against it, the ramp
+#: :data:`~facetransfer.region_weights.USUAL`; near the brows only where the target's
+#: expression did not move them, :data:`BROW_KEEP`): a strand of the target's fringe that lies
+#: over the forehead or a brow's tail in the current frame only is not painted over with the
 #: reference frame's skin or strands (``make demo``'s turned frames 35, 60, 71).
 FRAME_RULE = True
 #: Distance (cm, the mean face) from the brows' landmarks (iBUG 17-26) within which
