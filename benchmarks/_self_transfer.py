@@ -14,6 +14,8 @@ levels), and each whole frame's PSNR. Used by ``bench_eye_rim.py`` and
 from __future__ import annotations
 
 import argparse
+import contextlib
+import importlib
 import time
 from pathlib import Path
 
@@ -23,6 +25,19 @@ from bench_transfer_judge import PAIRS, _track  # noqa: F401 (benchmarks/ is on 
 
 #: A pixel counts as changed by a rule beyond this many levels in a channel.
 CHANGED = 2
+
+
+@contextlib.contextmanager
+def patched(module: str, name: str, value):
+    """``module.name`` set to ``value`` while the context lasts: a variant that switches a
+    rule off (the module's constant, or the function it calls)."""
+    mod = importlib.import_module(module)
+    original = getattr(mod, name)
+    setattr(mod, name, value)
+    try:
+        yield
+    finally:
+        setattr(mod, name, original)
 
 
 def self_transfer(frames, track, model) -> list[np.ndarray]:

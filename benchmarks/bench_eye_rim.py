@@ -35,21 +35,17 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _self_transfer import main  # noqa: E402
+from _self_transfer import main, patched  # noqa: E402
 
 
-@contextlib.contextmanager
 def _always():
-    """The eye region without :func:`facetransfer.region_weights.usual_weights` (as before it)."""
-    import facetransfer.eyes as eyes
-
-    original = eyes.usual_weights      # the name eyes calls: every vertex usual
-    eyes.usual_weights = lambda frames, track, model, verts, *a, **k: np.ones(len(verts),
-                                                                              np.float32)
-    try:
-        yield
-    finally:
-        eyes.usual_weights = original
+    """The eye region without the usual rules (as before them): every vertex usual, in the
+    reference frame and, since the twentieth session, in each frame
+    (:func:`facetransfer.region_weights.usual_weights_of`, the name :mod:`facetransfer.eyes`
+    calls)."""
+    return patched("facetransfer.eyes", "usual_weights_of",
+                   lambda frames, track, model, verts, rows, *a, **k:
+                   np.ones((len(rows), len(verts)), np.float32))
 
 
 if __name__ == "__main__":

@@ -35,20 +35,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _self_transfer import main  # noqa: E402
+from _self_transfer import main, patched  # noqa: E402
 
 
-@contextlib.contextmanager
 def _without():
     """The region's vertices judged by the reference frame alone (as before the rule)."""
-    import facetransfer.eyes as eyes
-
-    original = eyes.FRAME_RULE
-    eyes.FRAME_RULE = False
-    try:
-        yield
-    finally:
-        eyes.FRAME_RULE = original
+    return patched("facetransfer.eyes", "FRAME_RULE", False)
 
 
 if __name__ == "__main__":

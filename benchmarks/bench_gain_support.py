@@ -32,20 +32,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _self_transfer import main  # noqa: E402
+from _self_transfer import main, patched  # noqa: E402
 
 
-@contextlib.contextmanager
 def _extrapolated():
     """The gain's plane evaluated over the whole region (as before the support)."""
-    import facetransfer.patch as patch
-
-    original = patch.GAIN_SUPPORT
-    patch.GAIN_SUPPORT = 0.0
-    try:
-        yield
-    finally:
-        patch.GAIN_SUPPORT = original
+    return patched("facetransfer.patch", "GAIN_SUPPORT", 0.0)
 
 
 if __name__ == "__main__":
