@@ -155,8 +155,8 @@ def usual_weights_of(frames, track, model, verts: np.ndarray, rows, n_frames: in
         if against is None else _vertex_colours(frames, track, model, verts,
                                                 np.array([int(against)]))[0]
     test = np.flatnonzero(~lost[rows])
-    for lo in range(0, test.size, 64):                # (64, m, 3) meshes at a time
-        k = test[lo:lo + 64]
+    for lo in range(0, test.size, 512):               # (512, m, 3) meshes at a time
+        k = test[lo:lo + 512]
         diff = _vertex_colours(frames, track, model, verts, rows[k]) - med
         d = np.abs(diff - np.median(diff, axis=1, keepdims=True)).max(axis=2)
         out[k] = 1.0 - smoothstep(d, ramp)
