@@ -575,3 +575,17 @@ def test_usual_weights_mark_what_only_the_reference_frame_shows(setup):
     np.testing.assert_array_equal(w[inside], 0.0)
     np.testing.assert_array_equal(w[outside], 1.0)
     np.testing.assert_array_equal(region_weights.usual_weights(frames, track, model, verts, 0), 1.0)
+
+
+def test_usual_weights_of_a_frame_whose_mesh_leaves_the_image(setup):
+    """A frame whose tracked mesh lies wholly outside the image reads the border pixels (no
+    error): against a clip of skin it is usual."""
+    model, topo, closed, fill = setup
+    track = _track(model, _acts(5, 0.0))
+    verts = region_weights.model_vertices(model, closed, np.ones(len(closed.faces), bool))
+    t = track.translation.copy()
+    t[3] += [4 * SIZE, 4 * SIZE]
+    frames = [_frame(np.zeros((SIZE, SIZE), bool), SKIN) for _ in range(5)]
+    w = region_weights.usual_weights_of(frames, dataclasses.replace(track, translation=t),
+                                        model, verts, [3], against=0)
+    np.testing.assert_array_equal(w, 1.0)

@@ -186,7 +186,11 @@ def _vertex_colours(frames, track, model, verts: np.ndarray, rows: np.ndarray) -
 def _span(x: np.ndarray, n: int) -> tuple[int, int]:
     """The pixels ``[lo, hi)`` of an axis of ``n`` that bilinear reads at the coordinates ``x``
     touch, with a margin, clipped to the axis (outside it the border replicates the same edge
-    pixels, so remapping the span gives what remapping the whole axis does)."""
+    pixels, so remapping the span gives what remapping the whole axis does); the whole axis
+    when no coordinate is finite."""
+    x = x[np.isfinite(x)]
+    if x.size == 0:
+        return 0, n
     lo = max(0, min(int(np.floor(x.min())) - 2, n - 1))
     return lo, max(lo + 1, min(n, int(np.ceil(x.max())) + 3))
 
