@@ -671,8 +671,8 @@ def _unless_unusual(frames, track, model, closed, select: np.ndarray, reference:
     out[:, np.searchsorted(allv, verts)] = strengths
     cols = np.searchsorted(allv, far)
     out[:, cols] *= usual_weights_of(frames, track, model, far, [reference], n_frames)
-    n = min(out.shape[0], len(frames))
-    if FRAME_RULE and n > 0:  # where the current frame differs: its own strand of hair
+    if FRAME_RULE:  # where the current frame differs: its own strand of hair
+        n = min(out.shape[0], n_frames)  # the frames the clip renders, not the track's rest
         out[:n, cols] *= _frame_rule(frames, track, model, far, V, reference, n, n_frames, rig)
     return allv, out
 
