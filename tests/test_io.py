@@ -95,12 +95,20 @@ def test_video_round_trip(tmp_path):
         read_video(tmp_path / "junk.mp4")
 
 
+@pytest.mark.parametrize("spill", [False, True])
 @pytest.mark.parametrize("count", [2, 6, 40, 10 ** 12])
-def test_read_video_does_not_trust_the_containers_frame_count(tmp_path, monkeypatch, count):
+def test_read_video_does_not_trust_the_containers_frame_count(tmp_path, monkeypatch, count,
+                                                               spill):
     """``read_video`` decodes into an array sized by the container's count: a count that is
-    short (grown) or long (cut) gives the same frames as decoding one by one."""
+    short (grown) or long (cut) gives the same frames as decoding one by one, in memory or
+    (``spill``: past the frame budget) in a file."""
     import facetransfer.io.video as v
     from facetransfer.io.video import VideoInfo, iter_frames
+
+    if spill:
+        (tmp_path / "frames").mkdir()
+        monkeypatch.setenv("FACETRANSFER_TMPDIR", str(tmp_path / "frames"))
+        monkeypatch.setenv("FACETRANSFER_FRAME_MEMORY", "0")
 
     rng = np.random.default_rng(2)
     frames = rng.integers(0, 255, size=(9, 16, 24, 3), dtype=np.uint8)
@@ -113,6 +121,7 @@ def test_read_video_does_not_trust_the_containers_frame_count(tmp_path, monkeypa
                      ({"start": 2, "stop": 8}, each[2:8])):
         back, _ = read_video(p, **kw)
         np.testing.assert_array_equal(back, want)
+        assert isinstance(back, np.memmap) == spill
 
 
 def test_cli_bad_input_is_one_line_exit_2(tmp_path):

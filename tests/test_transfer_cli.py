@@ -67,6 +67,28 @@ def test_transfer_with_track_files(clips, quick_model_path, tmp_path, capsys):
     assert diff[:10, :10].max() <= 6  # mp4v re-encoding only
 
 
+def test_transfer_with_frames_past_the_memory_budget(clips, quick_model_path, tmp_path, capsys,
+                                                     monkeypatch):
+    """Frames decoded into a file (the budget 0) transfer exactly as frames in memory do, and
+    leave nothing in the frame files' folder."""
+    outs = {}
+    for spill in (False, True):
+        if spill:
+            (tmp_path / "frames").mkdir()
+            monkeypatch.setenv("FACETRANSFER_TMPDIR", str(tmp_path / "frames"))
+            monkeypatch.setenv("FACETRANSFER_FRAME_MEMORY", "0")
+        outs[spill] = tmp_path / f"out_{spill}.mp4"
+        code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                            clips["target_track"], "--expression-from", clips["source"],
+                            "--source-track", clips["source_track"], "--model",
+                            quick_model_path, "--out", outs[spill], "--no-progress"], capsys)
+        assert code == 0, err
+    a, _ = read_video(outs[False])
+    b, _ = read_video(outs[True])
+    np.testing.assert_array_equal(a, b)
+    assert list((tmp_path / "frames").iterdir()) == []
+
+
 def test_transfer_refuses_existing_output(clips, quick_model_path, tmp_path, capsys):
     out = tmp_path / "exists.mp4"
     out.write_bytes(b"keep me")

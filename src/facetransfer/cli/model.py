@@ -21,6 +21,7 @@ import numpy as np
 from ..default_model import dataset_ranks as default_ranks  # the recipe ranks
 from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
+from ..io.memory import available_memory  # a name of this module: tests replace it
 from .common import tqdm_progress
 
 log = logging.getLogger(__name__)
@@ -107,20 +108,6 @@ def _fill_missing(dataset, method: str, seed: int):
                                        imputed_cells=cells, impute_method=method)
     print(f"imputed {int(imputed.sum())} missing cells ({method})", file=sys.stderr)
     return filled, imputed
-
-
-def available_memory() -> int:
-    """Bytes of memory available to a new job (``MemAvailable`` of /proc/meminfo, read by the
-    data-set builder's own check, else the physical memory)."""
-    from ..datasets.ict import _available_bytes
-
-    avail = _available_bytes()
-    if avail is not None:
-        return avail
-    try:
-        return int(os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE"))
-    except (ValueError, OSError, AttributeError):
-        return 1 << 62
 
 
 #: peak memory of a build as a multiple of the data tensor (data set, tensor, unfoldings, SVD)

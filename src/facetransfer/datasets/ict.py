@@ -41,6 +41,7 @@ import numpy as np
 from .. import assets
 from ..errors import DatasetError
 from ..io.atomic import atomic_path
+from ..io.memory import available_bytes
 from ..io.mesh import Mesh, read_obj, read_obj_vertices
 from .base import FaceDataset
 from .deformation import DeformationTransfer, component_anchors, deformation_gradients
@@ -373,15 +374,8 @@ def build_memory_bytes(n_identities: int, n_cells: int, n_vertices: int) -> int:
     return int(4 * tensor + 8 * 3 * n_vertices * (_N_IDENTITY_COMPONENTS + n_cells))
 
 
-def _available_bytes() -> int | None:
-    try:
-        with open("/proc/meminfo") as fh:
-            for line in fh:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        pass
-    return None
+#: the memory available (a name of this module: tests replace it)
+_available_bytes = available_bytes
 
 
 def check_build_memory(name: str, n_identities: int, spec: Mapping, region: str) -> None:

@@ -137,13 +137,16 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     """
     import cv2
 
+    from .memory import frame_budget, grow_frames
+
     info = video_info(path)
     if max_frames is not None:
         stop = start + max_frames if stop is None else min(stop, start + max_frames)
     # decoded straight into one array sized by the container's count (grown if that was short):
-    # no per-frame copies to stack, a third of the memory touched
+    # no per-frame copies to stack, a third of the memory touched; on disk past the budget
     expect = max(int(info.n_frames) - start, 0)
     expect = expect if stop is None else min(expect, max(stop - start, 0))
+    budget = frame_budget()
     cap = _open(path)
     out, n, bgr = None, 0, None
     try:
@@ -154,9 +157,9 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
             if not ok:
                 break
             if out is None or n == len(out):
-                # a bogus count (some containers report billions) reserves at most ~1 GB
-                first = min(expect, max(1, _RESERVE_BYTES // max(bgr.size, 1)))
-                out = _grown(out, n, max(first, n + 1, 2 * n), bgr.shape)
+                size = _first_size(expect, bgr.size, budget) if out is None else 2 * n
+                out = grow_frames(out, n, max(size, n + 1), bgr.shape, what=f"video {path}",
+                                  budget=budget)
             cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=out[n])
             n += 1
     finally:
@@ -166,16 +169,21 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     return out[:n], info.fps
 
 
-#: Most bytes :func:`read_video` reserves from the container's frame count before decoding.
+#: Most bytes :func:`read_video` reserves before decoding when the container's frame count is
+#: beyond what memory and disk could hold (a bogus count: some containers report billions).
 _RESERVE_BYTES = 1 << 30
 
 
-def _grown(frames: np.ndarray | None, n: int, size: int, shape) -> np.ndarray:
-    """A ``(size, H, W, 3) uint8`` array holding the first ``n`` of ``frames`` (None: none)."""
-    out = np.empty((size,) + tuple(shape), np.uint8)
-    if frames is not None and n:
-        out[:n] = frames[:n]
-    return out
+def _first_size(expect: int, frame_bytes: int, budget: int) -> int:
+    """Frames to reserve before the first is decoded: the container's count, unless it would
+    not fit in the frame budget nor on the frame files' disk (a bogus count)."""
+    from .memory import frame_disk_free
+
+    if expect * frame_bytes <= max(budget, frame_disk_free()):
+        return max(expect, 1)
+    # a bogus count: what the old reservation held in memory (its pages touched only when
+    # decoded into), or 64 MB of a file (reserved on disk at once), then doubled as decoded
+    return max(1, min(_RESERVE_BYTES, max(budget, 1 << 26)) // max(frame_bytes, 1))
 
 
 # ---------------------------------------------------------------------------------------------
