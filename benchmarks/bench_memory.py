@@ -203,7 +203,10 @@ def main() -> int:
                 g.rmdir()
             except OSError:
                 pass
-    (out / "memory.json").write_text(json.dumps(report, indent=1))
+    from facetransfer.io.atomic import atomic_path
+
+    with atomic_path(out / "memory.json", overwrite=True) as p:
+        Path(p).write_text(json.dumps(report, indent=1))
     plot(report, out / "memory.png")
     return 0
 

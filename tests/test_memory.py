@@ -57,6 +57,17 @@ def test_a_disk_without_room_is_one_clear_error(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_file_system_that_cannot_reserve_is_written_as_is(tmp_path, monkeypatch):
+    def unsupported(fd, offset, length):
+        raise OSError(errno.EOPNOTSUPP, os.strerror(errno.EOPNOTSUPP))
+
+    monkeypatch.setenv("FACETRANSFER_TMPDIR", str(tmp_path))
+    monkeypatch.setattr(os, "posix_fallocate", unsupported, raising=False)
+    a = memory.frame_array(3, (4, 5, 3), what="v", budget=0)
+    a[:] = 7
+    assert isinstance(a, np.memmap) and int(a.sum()) == 7 * a.size
+
+
 @pytest.mark.parametrize("text, want", [("512M", 512 << 20), ("4G", 4 << 30), ("1.5g", 3 << 29),
                                         ("100000", 100000), ("2GiB", 2 << 30), (" 7k ", 7168)])
 def test_parse_bytes(text, want):

@@ -19,6 +19,7 @@ FACETRANSFER_TMPDIR
 
 from __future__ import annotations
 
+import errno
 import os
 import re
 import shutil
@@ -137,15 +138,22 @@ def _reserve(fh, nbytes: int, folder: str, what: str) -> None:
     """Give the file ``fh`` ``nbytes`` bytes of disk now (a mapped page written later on a
     full disk would kill the process); a clear error where the disk has not got them."""
     fh.truncate(nbytes)
-    if hasattr(os, "posix_fallocate"):
-        try:
-            os.posix_fallocate(fh.fileno(), 0, nbytes)
-        except OSError as exc:
-            free = shutil.disk_usage(folder).free
-            raise VideoError(f"{what} needs {nbytes / 2**30:.1f} GiB on disk for its frames "
-                             f"and {folder} has {free / 2**30:.1f} GiB free "
-                             f"({os.strerror(exc.errno or 0)}); set FACETRANSFER_TMPDIR to a "
-                             f"folder on a larger disk, or use fewer frames") from None
+    if not hasattr(os, "posix_fallocate"):
+        return
+    try:
+        os.posix_fallocate(fh.fileno(), 0, nbytes)
+    except OSError as exc:
+        if exc.errno not in _NO_ROOM:     # a file system that cannot reserve: written as is
+            return
+        free = shutil.disk_usage(folder).free
+        raise VideoError(f"{what} needs {nbytes / 2**30:.1f} GiB on disk for its frames and "
+                         f"{folder} has {free / 2**30:.1f} GiB free "
+                         f"({os.strerror(exc.errno)}); set FACETRANSFER_TMPDIR to a folder on "
+                         f"a larger disk, or use fewer frames (--max-frames)") from None
+
+
+#: ``posix_fallocate`` errors that mean the disk (or the user's quota) has no room
+_NO_ROOM = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
 def frame_array(n: int, shape: tuple, *, what: str, budget: int | None = None) -> np.ndarray:
