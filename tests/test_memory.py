@@ -57,6 +57,13 @@ def test_a_disk_without_room_is_one_clear_error(tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+def test_a_missing_frame_folder_is_named(tmp_path, monkeypatch):
+    monkeypatch.setenv("FACETRANSFER_TMPDIR", str(tmp_path / "none"))
+    with pytest.raises(VideoError, match=r"video a\.mp4 .*FACETRANSFER_TMPDIR .*none is not a "
+                                         r"folder"):
+        memory.frame_array(2, (3,), what="video a.mp4", budget=0)
+
+
 def test_a_file_system_that_cannot_reserve_is_written_as_is(tmp_path, monkeypatch):
     def unsupported(fd, offset, length):
         raise OSError(errno.EOPNOTSUPP, os.strerror(errno.EOPNOTSUPP))

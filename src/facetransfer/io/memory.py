@@ -183,6 +183,9 @@ def frame_array(n: int, shape: tuple, *, what: str, budget: int | None = None) -
     if nbytes <= budget:
         return np.empty(shape, np.uint8)
     folder = _frame_dir()
+    if not os.path.isdir(folder):
+        raise VideoError(f"{what} is decoded into a file (its frames exceed the memory budget) "
+                         f"but FACETRANSFER_TMPDIR {folder} is not a folder")
     with tempfile.TemporaryFile(dir=folder, prefix="facetransfer-frames-") as fh:
         _reserve(fh, nbytes, folder, what)
         # the map holds its own descriptor: closing the file here leaves it readable, and the
