@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import VideoError
 
 __all__ = ["available_bytes", "available_memory", "cgroup_headroom", "frame_budget", "frame_array", "frame_disk_free",
-           "grow_frames",
+           "first_frame_count", "grow_frames",
            "FRAME_MEMORY_FRACTION", "parse_bytes"]
 
 #: Share of the available memory one clip's decoded frames may take (a transfer decodes two
@@ -132,6 +132,21 @@ def frame_disk_free() -> int:
         return int(shutil.disk_usage(_frame_dir()).free)
     except OSError:
         return 0
+
+
+#: Most bytes :func:`first_frame_count` reserves when the container's frame count is beyond
+#: what memory and disk could hold (a bogus count: some containers report billions).
+_RESERVE_BYTES = 1 << 30
+
+
+def first_frame_count(expect: int, frame_bytes: int, budget: int) -> int:
+    """Frames to reserve before the first is decoded: the container's count ``expect``,
+    unless it would fit neither in the frame budget nor on the frame files' disk (a bogus
+    count): then what the old reservation held in memory (its pages touched only when decoded
+    into), or 64 MB of a file (reserved on disk at once), doubled as decoded."""
+    if expect * frame_bytes <= max(budget, frame_disk_free()):
+        return max(expect, 1)
+    return max(1, min(_RESERVE_BYTES, max(budget, 1 << 26)) // max(frame_bytes, 1))
 
 
 def _reserve(fh, nbytes: int, folder: str, what: str) -> None:

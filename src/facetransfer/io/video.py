@@ -137,7 +137,7 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     """
     import cv2
 
-    from .memory import frame_budget, grow_frames
+    from .memory import first_frame_count, frame_budget, grow_frames
 
     info = video_info(path)
     if max_frames is not None:
@@ -157,7 +157,7 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
             if not ok:
                 break
             if out is None or n == len(out):
-                size = _first_size(expect, bgr.size, budget) if out is None else 2 * n
+                size = first_frame_count(expect, bgr.size, budget) if out is None else 2 * n
                 out = grow_frames(out, n, max(size, n + 1), bgr.shape, what=f"video {path}",
                                   budget=budget)
             cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=out[n])
@@ -167,23 +167,6 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     if n == 0:
         raise VideoError(f"video {path} has no frames (from frame {start})")
     return out[:n], info.fps
-
-
-#: Most bytes :func:`read_video` reserves before decoding when the container's frame count is
-#: beyond what memory and disk could hold (a bogus count: some containers report billions).
-_RESERVE_BYTES = 1 << 30
-
-
-def _first_size(expect: int, frame_bytes: int, budget: int) -> int:
-    """Frames to reserve before the first is decoded: the container's count, unless it would
-    not fit in the frame budget nor on the frame files' disk (a bogus count)."""
-    from .memory import frame_disk_free
-
-    if expect * frame_bytes <= max(budget, frame_disk_free()):
-        return max(expect, 1)
-    # a bogus count: what the old reservation held in memory (its pages touched only when
-    # decoded into), or 64 MB of a file (reserved on disk at once), then doubled as decoded
-    return max(1, min(_RESERVE_BYTES, max(budget, 1 << 26)) // max(frame_bytes, 1))
 
 
 # ---------------------------------------------------------------------------------------------
