@@ -190,7 +190,7 @@ def main() -> int:
     try:
         for g in groups:
             for name, budget in modes.items():
-                env = dict(os.environ, FACETRANSFER_FRAME_MEMORY=budget)
+                env = dict(os.environ, FACETRANSFER_FRAME_MEMORY=budget, FACETRANSFER_TRACK_CACHE="off")
                 key = name if g is None else f"{name}, {args.limit} limit"
                 r = run(target, source, work / "result.mp4", env, g)
                 report["runs"][key] = r

@@ -43,6 +43,9 @@ import tempfile
 import time
 from pathlib import Path
 
+# timed from scratch: no track reused from the track cache (facetransfer.track.cache)
+os.environ["FACETRANSFER_TRACK_CACHE"] = "off"
+
 # the stages in this process run as the command runs them: OpenBLAS on one thread
 # (facetransfer.cli.main.serial_blas), set before NumPy loads it
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")

@@ -11,6 +11,8 @@ import pytest
 
 os.environ.setdefault("OMP_NUM_THREADS", "2")
 os.environ.setdefault("MPLBACKEND", "Agg")
+# the track cache off: each test tracks what it tracks (tests/test_track_cache.py turns it on)
+os.environ["FACETRANSFER_TRACK_CACHE"] = "off"
 
 
 @pytest.fixture(scope="session")

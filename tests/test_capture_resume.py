@@ -353,6 +353,44 @@ def test_batch_track_clip_continues_an_interrupted_capture(clip, quick_model, tm
     np.testing.assert_allclose(Track.load(out).landmarks2d, ref.landmarks2d, atol=1e-9)
 
 
+def test_a_transfers_track_is_kept_continued_and_reused_in_the_cache(clip, quick_model, tmp_path,
+                                                                     fakes, monkeypatch):
+    """``obtain_track`` (the tracking of ``transfer``, ``puppet`` and ``demo``) with the track
+    cache: interrupted, its progress waits in the cache and the next run continues it; then the
+    same frames of the same file come from the cache with no detector made; a touched file or
+    another frame count is tracked afresh."""
+    import os
+
+    from facetransfer.io.video import read_video
+    from facetransfer.track.obtain import obtain_track
+
+    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    tracks = tmp_path / "cache" / "facetransfer" / "tracks"
+    video = clip[0]
+    frames, fps = read_video(video)
+    ref = obtain_track(video, quick_model, frames=frames, fps=fps, cache=False)
+    assert not tracks.exists()
+    fakes.stop_at = 25
+    with pytest.raises(KeyboardInterrupt):
+        obtain_track(video, quick_model, frames=frames, fps=fps)
+    assert len(list(tracks.glob("*.partial.npz"))) == 1
+    fakes.stop_at = None
+    tr = obtain_track(video, quick_model, frames=frames, fps=fps)
+    assert fakes.made[-1].calls == F - 25 + FakeDetector.warmup_frames
+    np.testing.assert_allclose(tr.landmarks2d, ref.landmarks2d, atol=1e-9)
+    assert [p.name.endswith(".partial.npz") for p in tracks.iterdir()] == [False]
+    made = len(fakes.made)
+    _same_track(obtain_track(video, quick_model, frames=frames, fps=fps), tr)
+    assert len(fakes.made) == made                           # from the cache
+    obtain_track(video, quick_model, frames=frames, fps=fps, max_frames=F - 5)
+    assert len(fakes.made) == made + 1 and len(list(tracks.glob("*.npz"))) == 2
+    st = os.stat(video)
+    os.utime(video, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))
+    obtain_track(video, quick_model, frames=frames, fps=fps)
+    assert len(fakes.made) == made + 2
+
+
 # ------------------------------------------------------------------------------ the fit
 def _stop_tracking_at(k: int):
     """A progress callback that interrupts the fit when ``k`` frames are tracked."""

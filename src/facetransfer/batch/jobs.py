@@ -59,8 +59,10 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
         from ..track.capture import capture_video
 
         if checkpoint is not None and isinstance(video, (str, Path)):
-            return _capture_resuming(video, model, settings, source=source, fixed=fixed,
-                                     partial=checkpoint)
+            from ..track.obtain import capture_resuming
+
+            return capture_resuming(video, model, checkpoint, options=settings.capture,
+                                    source=source, fixed=fixed)
         return capture_video(video, model, options=settings.capture, source=source,
                              fixed=fixed)
     detector = _detector_for(init, settings.klt)
@@ -70,30 +72,6 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
     finally:
         if detector is not None:
             detector.close()
-
-
-def _capture_resuming(video, model, settings, *, source: str, fixed, partial):
-    """The capture tracker on a video file, its detections and fit resumed from ``partial`` as
-    in ``facetransfer track`` (:mod:`facetransfer.track.detect_checkpoint`)."""
-    from ..track.capture import capture_video, detect_video
-    from ..track.detect_checkpoint import DetectionCheckpoint
-
-    ck = DetectionCheckpoint.for_video(partial, video, None)
-    saved = ck.load()
-    if saved is not None:
-        log.info("%s: continued an interrupted run from frame %d", source,
-                 saved.detections.n_frames)
-    if saved is not None and saved.complete:
-        det = saved.detections
-    else:
-        det = detect_video(video, source=source, checkpoint=ck,
-                           resume=None if saved is None else saved.detections)[0]
-    try:
-        return capture_video(video, model, options=settings.capture, detections=det,
-                             source=source, fixed=fixed, checkpoint=ck)
-    except KeyboardInterrupt:
-        ck.save(det, complete=True)                       # with the fit so far, if it began
-        raise
 
 
 def track_clip(job, out: str, model, options) -> Row:

@@ -14,13 +14,15 @@ import numpy as np
 
 from ..errors import ShapeError, VideoError
 from ..errors import RewriteError
+from .cache import cached_track, partial_path, store_track, track_key
 from .presets import check_track_method
 from .project import project_landmarks, take_frames
 from .result import Track
 
 log = logging.getLogger(__name__)
 
-__all__ = ["landmarks_file", "landmark_track", "obtain_track", "start_background_track"]
+__all__ = ["capture_resuming", "landmarks_file", "landmark_track", "obtain_track",
+           "start_background_track"]
 
 
 def landmarks_file(video: str | os.PathLike) -> Path | None:
@@ -152,20 +154,64 @@ class _StageBars:
         self.close()
 
 
-def _capture(video, model, frames, fps, max_frames, progress_factory, workers: int = 1):
-    """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames."""
+def _capture(video, model, frames, fps, max_frames, progress_factory, workers: int = 1,
+             partial: Path | None = None):
+    """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames; with
+    ``partial``, its progress saved there and continued from there (:func:`capture_resuming`)."""
     from .capture import capture_video
 
     with _StageBars(video, progress_factory) as stage_progress:
-        tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
-                           source=str(video), workers=workers)
+        if partial is None:
+            tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
+                               source=str(video), workers=workers)
+        else:
+            tr = capture_resuming(video, model, partial, frames=frames[:max_frames],
+                                  source=str(video), progress=stage_progress, workers=workers)
     return dataclasses.replace(tr, fps=float(fps))
+
+
+def _partial(key: str | None) -> Path | None:
+    """The capture's progress file of a cache key, or None (no key, or no cache folder)."""
+    try:
+        return None if key is None else partial_path(key)
+    except OSError:
+        return None
+
+
+def capture_resuming(video, model, partial, *, frames=None, options=None, source=None,
+                     fixed=None, progress=None, workers: int = 1):
+    """The capture tracker on the file ``video`` (or its decoded ``frames``) with its progress
+    kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
+    fit), continued from there when it holds this run's: an interrupted run loses nothing."""
+    from .capture import capture_video
+    from .detect_checkpoint import DetectionCheckpoint
+    from .video_detect import detect_video
+
+    clip = video if frames is None else frames
+    ck = DetectionCheckpoint.for_video(partial, video, None if frames is None else len(frames))
+    saved = ck.load()
+    if saved is not None:
+        log.info("%s: continued an interrupted run from frame %d", source,
+                 saved.detections.n_frames)
+    if saved is not None and saved.complete:
+        det = saved.detections
+    else:
+        det = detect_video(clip, source=source, checkpoint=ck, progress=progress,
+                           resume=None if saved is None else saved.detections,
+                           workers=workers)[0]
+    try:
+        return capture_video(clip, model, options=options, detections=det, source=source,
+                             fixed=fixed, checkpoint=ck, progress=progress)
+    except KeyboardInterrupt:
+        ck.save(det, complete=True)                       # with the fit so far, if it began
+        raise
 
 
 def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
                  track_file: str | os.PathLike | None = None, max_frames: int | None = None,
-                 method: str = "auto", progress_factory=None, options=None, workers: int = 1):
-    """The track of a video: read from ``track_file``, or tracked now.
+                 method: str = "auto", progress_factory=None, options=None, workers: int = 1,
+                 cache: bool = True):
+    """The track of a video: read from ``track_file``, or from the track cache, or tracked now.
 
     ``method``: ``"auto"`` or ``"capture"`` use the capture tracker
     (:func:`facetransfer.track.capture.capture_video`: the model fitted to MediaPipe's points
@@ -176,7 +222,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     :func:`facetransfer.track.presets.track_options`) configure the optical-flow tracker
     (default: its own defaults). ``workers``: processes detecting the face for the capture
     tracker (:func:`facetransfer.track.video_detect.detect_video`; 2 when nothing else runs
-    beside this track).
+    beside this track). ``cache``: keep the track made in the user's track cache and reuse
+    one kept there (:mod:`facetransfer.track.cache`; the capture tracker's progress is saved
+    there too and continued by the next run).
 
     Returns
     -------
@@ -196,12 +244,27 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     if frames is None:
         frames, fps = read_video(video, max_frames=max_frames)
     fps = info.fps if fps is None else fps
+    n = len(frames) if max_frames is None else min(len(frames), int(max_frames))
+    key = track_key(video, n, method, options if method == "flow" else None, model) \
+        if cache else None
+    tr = cached_track(key, model)
+    if tr is not None:
+        log.info("%s: the track of %d frames from the cache", video, n)
+        bar = _bar(progress_factory, f"track {Path(video).name} (from the cache)", n)
+        if bar is not None:
+            bar.update(n)
+        _close(bar)
+        return dataclasses.replace(tr, fps=float(fps))
     if method in ("auto", "capture"):
-        return _capture(video, model, frames, fps, max_frames, progress_factory, workers)
-    if method == "flow":
-        return _flow(video, model, frames, fps, max_frames, progress_factory, options)
-    size = (frames.shape[2], frames.shape[1]) if hasattr(frames, "shape") else info.size
-    return _landmarks(video, model, frames, fps, size, progress_factory)
+        tr = _capture(video, model, frames, fps, max_frames, progress_factory, workers,
+                      _partial(key))
+    elif method == "flow":
+        tr = _flow(video, model, frames, fps, max_frames, progress_factory, options)
+    else:
+        size = (frames.shape[2], frames.shape[1]) if hasattr(frames, "shape") else info.size
+        tr = _landmarks(video, model, frames, fps, size, progress_factory)
+    store_track(key, tr)
+    return tr
 
 
 def _flow(video, model, frames, fps, max_frames, progress_factory, options):

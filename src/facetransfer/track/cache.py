@@ -1,0 +1,144 @@
+"""Tracks a transfer made, kept in the user cache: run again, the same command reuses them, and
+an interrupted one continues its tracking where it stopped.
+
+``facetransfer track`` writes its track where the user says and resumes from ``OUT.partial.npz``.
+``transfer``, ``puppet`` and ``demo`` track their videos as a step of a longer job and wrote the
+tracks nowhere: a second run with another ``--crf`` or texture option tracked both clips again,
+and an interrupted one lost its tracking. Now :func:`facetransfer.track.obtain.obtain_track`
+keeps each track it makes under ``$XDG_CACHE_HOME/facetransfer/tracks`` (default
+``~/.cache/facetransfer/tracks``) by a key of everything the track depends on
+(:func:`track_key`): the video file (resolved path, size, modification time), the frames
+tracked, the tracker and its options, the model's content, and the code and data that make a
+track (:func:`code_fingerprint`: a changed tracker never reads an old track). The capture
+tracker's progress (detections, then the fit) is saved beside it while it runs
+(:mod:`facetransfer.track.detect_checkpoint`) and continued by the next run.
+
+The cache keeps the :data:`KEEP` most recently used tracks. ``FACETRANSFER_TRACK_CACHE=off``
+turns it off (nothing read or written).
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import logging
+import os
+from pathlib import Path
+
+log = logging.getLogger(__name__)
+
+__all__ = ["KEEP", "LAYOUT", "cache_enabled", "code_fingerprint", "track_dir", "track_key",
+           "cached_track", "store_track", "partial_path"]
+
+#: The cache's layout: a change of what a key means (or of the trackers' results) changes it.
+LAYOUT = "tracks-1"
+#: Tracks kept (the least recently used beyond are removed when one is stored).
+KEEP = 64
+
+
+def cache_enabled() -> bool:
+    """False when ``FACETRANSFER_TRACK_CACHE`` is ``off`` (or ``0``, ``no``, ``false``)."""
+    v = os.environ.get("FACETRANSFER_TRACK_CACHE", "").strip().lower()
+    return v not in ("off", "0", "no", "false")
+
+
+def track_dir() -> Path:
+    """``$XDG_CACHE_HOME/facetransfer/tracks``."""
+    from ..assets import cache_dir
+
+    return cache_dir() / "tracks"
+
+
+def track_key(video, n_frames: int, method: str, options, model) -> str | None:
+    """The cache key of tracking the first ``n_frames`` frames of the file ``video`` with
+    ``method`` and ``options`` (their ``repr``: frozen dataclasses) and ``model``; None where
+    ``video`` is not a file (nothing to key by) or the cache is off."""
+    if not cache_enabled() or video is None or not os.path.isfile(os.fspath(video)):
+        return None
+    from .. import __version__
+    from .checkpoint import video_identity
+
+    what = {"layout": LAYOUT, "version": __version__, "code": code_fingerprint(),
+            "video": video_identity(os.fspath(video)),
+            "frames": int(n_frames), "method": str(method), "options": repr(options),
+            "model": str(model.content_hash)}
+    return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:32]
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """A digest of what makes a track besides its inputs: the sources of
+    :mod:`facetransfer.track`, of the model and ARKit modules, the package's data files (the
+    landmark mappings) and MediaPipe's version."""
+    from importlib import metadata
+
+    root = Path(__file__).resolve().parent.parent
+    files = sorted((root / "track").glob("*.py")) + sorted((root / "data").glob("*.json"))
+    files += [root / n for n in ("arkit.py", "model.py", "tensor.py")]
+    h = hashlib.sha256()
+    for f in files:
+        h.update(f.name.encode())
+        h.update(f.read_bytes() if f.is_file() else b"")
+    try:
+        h.update(metadata.version("mediapipe").encode())
+    except metadata.PackageNotFoundError:  # pragma: no cover - mediapipe is a dependency
+        pass
+    return h.hexdigest()[:16]
+
+
+def _path(key: str) -> Path:
+    return track_dir() / f"{key}.npz"
+
+
+def partial_path(key: str) -> Path:
+    """Where the capture tracker's progress for ``key`` is saved while it runs."""
+    return track_dir() / f"{key}.partial.npz"
+
+
+def cached_track(key: str | None, model):
+    """The cached track of ``key`` (its use recorded), or None: no key, none cached, or an
+    unreadable or foreign file (removed, with a warning)."""
+    from .result import Track
+
+    if key is None:
+        return None
+    try:
+        p = _path(key)
+    except OSError:                       # no cache folder can be made: nothing cached
+        return None
+    if not p.is_file():
+        return None
+    try:
+        tr = Track.load(p)
+        tr.check_model(model)
+    except (ValueError, OSError, EOFError) as exc:
+        log.warning("removing unreadable cached track %s (%s)", p, exc)
+        p.unlink(missing_ok=True)
+        return None
+    os.utime(p)
+    return tr
+
+
+def store_track(key: str | None, track) -> None:
+    """Keep ``track`` under ``key`` (atomically), remove its progress file and the least
+    recently used tracks beyond :data:`KEEP`. A cache that cannot be written is skipped with
+    a warning: the job does not fail for it."""
+    if key is None:
+        return
+    try:
+        folder = track_dir()
+        folder.mkdir(parents=True, exist_ok=True)
+        track.save(_path(key), overwrite=True)
+        partial_path(key).unlink(missing_ok=True)
+        _prune(folder, KEEP)
+    except OSError as exc:
+        log.warning("could not keep the track in the cache (%s)", exc)
+
+
+def _prune(folder: Path, keep: int) -> None:
+    files = sorted((p for p in folder.glob("*.npz") if not p.name.endswith(".partial.npz")),
+                   key=lambda p: p.stat().st_mtime, reverse=True)
+    for p in files[keep:]:
+        p.unlink(missing_ok=True)
+        p.with_name(p.stem + ".partial.npz").unlink(missing_ok=True)

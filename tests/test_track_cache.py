@@ -1,0 +1,82 @@
+"""The track cache of transfer, puppet and demo (facetransfer.track.cache)."""
+
+import logging
+
+import numpy as np
+import pytest
+
+from facetransfer.track import cache
+
+
+class _Model:
+    def __init__(self, h):
+        self.content_hash = h
+
+
+@pytest.fixture
+def on(tmp_path, monkeypatch):
+    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    video = tmp_path / "v.mp4"
+    video.write_bytes(b"not decoded here")
+    return video
+
+
+def test_the_key_holds_everything_a_track_depends_on(on, tmp_path, monkeypatch):
+    k = cache.track_key(on, 10, "capture", None, _Model("a"))
+    assert k is not None and k == cache.track_key(str(on), 10, "capture", None, _Model("a"))
+    others = [cache.track_key(on, 11, "capture", None, _Model("a")),
+              cache.track_key(on, 10, "flow", None, _Model("a")),
+              cache.track_key(on, 10, "flow", ("options", 2), _Model("a")),
+              cache.track_key(on, 10, "capture", None, _Model("b"))]
+    assert len({k, *others}) == 5
+    monkeypatch.setattr(cache, "code_fingerprint", lambda: "another tracker")
+    assert cache.track_key(on, 10, "capture", None, _Model("a")) != k
+    assert cache.track_key(tmp_path / "none.mp4", 10, "capture", None, _Model("a")) is None
+    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", "off")
+    assert cache.track_key(on, 10, "capture", None, _Model("a")) is None
+
+
+def _track(n=4):
+    from facetransfer.track.result import Track
+
+    names = ("identity", "expression")
+    return Track(fps=25.0, frame_size=(64, 48), rotation=np.tile(np.eye(3), (n, 1, 1)),
+                 scale=np.ones(n), translation=np.zeros((n, 2)),
+                 weights={"identity": np.ones((n, 2)), "expression": np.zeros((n, 3))},
+                 landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),
+                 lost=np.zeros(n, bool), model_hash="m", mode_names=names)
+
+
+def test_stored_tracks_come_back_and_the_oldest_go(on, monkeypatch):
+    monkeypatch.setattr(cache, "KEEP", 2)
+    model = _Model("m")
+    monkeypatch.setattr(type(_track()), "check_model", lambda self, m: None)
+    for i, key in enumerate(("k1", "k2", "k3")):
+        cache.partial_path(key).parent.mkdir(parents=True, exist_ok=True)
+        cache.partial_path(key).write_bytes(b"progress")
+        cache.store_track(key, _track(4 + i))
+        assert not cache.partial_path(key).exists()
+        import os
+        os.utime(cache.track_dir() / f"{key}.npz", (1000 + i, 1000 + i))
+    assert sorted(p.name for p in cache.track_dir().iterdir()) == ["k2.npz", "k3.npz"]
+    assert cache.cached_track("k3", model).n_frames == 6
+    assert cache.cached_track("k1", model) is None and cache.cached_track(None, model) is None
+
+
+def test_a_damaged_cached_track_is_removed_with_a_warning(on, caplog):
+    cache.track_dir().mkdir(parents=True)
+    bad = cache.track_dir() / "kx.npz"
+    bad.write_bytes(b"PK\x03\x04 damaged")
+    with caplog.at_level(logging.WARNING, logger="facetransfer.track.cache"):
+        assert cache.cached_track("kx", _Model("m")) is None
+    assert not bad.exists() and "removing unreadable cached track" in caplog.text
+
+
+def test_a_cache_that_cannot_be_written_does_not_fail_the_job(on, tmp_path, monkeypatch,
+                                                               caplog):
+    blocker = tmp_path / "cache"
+    blocker.write_text("a file where the cache folder should be")
+    with caplog.at_level(logging.WARNING, logger="facetransfer.track.cache"):
+        cache.store_track("k", _track())
+    assert "could not keep the track in the cache" in caplog.text
