@@ -89,6 +89,25 @@ def test_transfer_with_frames_past_the_memory_budget(clips, quick_model_path, tm
     assert list((tmp_path / "frames").iterdir()) == []
 
 
+@pytest.mark.parametrize("cache", ["on", "off"])
+def test_an_interrupted_transfer_says_what_it_kept(clips, quick_model_path, tmp_path, capsys,
+                                                   monkeypatch, cache):
+    """Ctrl-C: exit 130, one line; with the track cache on it says the tracking is kept."""
+    import facetransfer.video_transfer as vt
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(vt, "transfer_video", interrupted)
+    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", cache)
+    code, _, err = run(["transfer", "--target", clips["target"], "--expression-from",
+                        clips["source"], "--model", quick_model_path, "--out",
+                        tmp_path / "o.mp4", "--no-progress"], capsys)
+    assert code == 130 and len(err.strip().splitlines()) == 1
+    assert err.startswith("facetransfer transfer: interrupted")
+    assert ("kept in the track cache" in err) == (cache == "on")
+
+
 def test_transfer_refuses_existing_output(clips, quick_model_path, tmp_path, capsys):
     out = tmp_path / "exists.mp4"
     out.write_bytes(b"keep me")

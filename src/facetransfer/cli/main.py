@@ -150,8 +150,22 @@ def _run(args) -> int:
         print(error_line(args.command, exc), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"facetransfer {args.command}: interrupted", file=sys.stderr)
+        print(f"facetransfer {args.command}: interrupted{_kept(args.command)}", file=sys.stderr)
         return 130
+
+
+#: Commands whose tracking goes through the track cache (facetransfer.track.cache)
+CACHED_TRACKING = ("transfer", "puppet", "demo")
+
+
+def _kept(command: str) -> str:
+    """What an interrupted ``command`` keeps for the next run (the track cache's progress)."""
+    from ..track.cache import cache_enabled
+
+    if command in CACHED_TRACKING and cache_enabled():
+        return ("; the tracking done so far is kept in the track cache: the same command "
+                "continues from it")
+    return ""
 
 
 if __name__ == "__main__":  # pragma: no cover
