@@ -319,3 +319,53 @@ def test_glb_texture_lifted_from_the_video(case, tmp_path, capsys):
     assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
                  str(short), "--out", str(tmp_path / "y.glb")]) == 2
     assert "frames" in capsys.readouterr().err
+
+
+# ------------------------------------------------------------------------------ neutral pose
+def test_neutral_calibration_values():
+    """``(a - n) / (1 - n)`` clipped, the gaze as tracked; auto takes the least summed frame
+    that is not lost (gaze not counted)."""
+    from facetransfer.export.neutral import calibrated, neutral_frame
+
+    a = np.zeros((4, 52))
+    wide, look, jaw = (ARKIT_NAMES.index(n) for n in ("eyeWideLeft", "eyeLookUpLeft", "jawOpen"))
+    a[:, wide] = [0.3, 0.2, 0.6, 1.0]
+    a[:, jaw] = [0.1, 0.05, 0.0, 0.5]
+    a[:, look] = [0.0, 0.9, 0.2, 0.1]            # frame 1: the most gaze, the least expression
+    assert neutral_frame(a) == 1
+    assert neutral_frame(a, lost=np.array([False, True, False, False])) == 0
+    c = calibrated(a, 1)
+    np.testing.assert_allclose(c[:, wide], [0.125, 0.0, 0.5, 1.0], atol=1e-7)
+    np.testing.assert_allclose(c[:, jaw], [0.1 / 0.95 - 0.05 / 0.95, 0.0, 0.0,
+                                           0.45 / 0.95], atol=1e-7)
+    np.testing.assert_allclose(c[:, look], a[:, look], atol=1e-7)   # the gaze untouched
+    a[1, wide] = 0.97                                            # measured from 0.9 at most
+    np.testing.assert_allclose(calibrated(a, 1)[:, wide], [0.0, 0.7, 0.0, 1.0], atol=1e-6)
+
+
+def test_export_cli_neutral(case, tmp_path, capsys):
+    from facetransfer.export.livelink import read_livelink
+    from facetransfer.export.neutral import calibrated, neutral_frame
+
+    _, track, a, _ = case
+    tp = tmp_path / "t.npz"
+    track.save(tp)
+    out = tmp_path / "n.csv"
+    assert main(["export", str(tp), "--format", "livelink", "--out", str(out),
+                 "--neutral", "auto"]) == 0
+    i = neutral_frame(a, track.lost)
+    assert f"measured from the neutral frame {i}" in capsys.readouterr().out
+    take = read_livelink(out)
+    np.testing.assert_allclose(take.activations, calibrated(a, i), atol=1e-6)
+    gaze = np.array([n.startswith("eyeLook") for n in ARKIT_NAMES])
+    assert np.abs(take.activations[i][~gaze]).max() < 1e-6          # the neutral frame: 0
+    np.testing.assert_allclose(take.activations[:, gaze], a[:, gaze], atol=1e-6)
+    assert main(["export", str(tp), "--format", "livelink", "--out", str(tmp_path / "f.csv"),
+                 "--neutral", "2"]) == 0
+    np.testing.assert_allclose(read_livelink(tmp_path / "f.csv").activations, calibrated(a, 2),
+                               atol=1e-6)
+    for bad, msg in (("x", "frame number or auto"), (str(track.n_frames), "the track has frames")):
+        assert main(["export", str(tp), "--format", "json", "--out", str(tmp_path / "b.json"),
+                     "--neutral", bad]) == 2
+        err = capsys.readouterr().err
+        assert msg in err and len(err.strip().splitlines()) == 1

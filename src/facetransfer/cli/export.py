@@ -4,6 +4,7 @@
     facetransfer export TRACK.npz --format glb --out face.glb [--texture TEX.png | --texture-from V.mp4]
     facetransfer export TRACK.npz --format usd --out face.usd [--model M.npz]
     facetransfer export TRACK.npz --format json --out blendshapes.json    # MediaPipe layout
+    facetransfer export TRACK.npz --format livelink --out take.csv --neutral auto  # calibrated
 """
 
 from __future__ import annotations
@@ -35,6 +36,11 @@ def register(sub) -> None:
                    help="lift the texture from the tracked video instead (glb only)")
     p.add_argument("--texture-step", type=int, default=10, metavar="N",
                    help="with --texture-from: use every N-th frame (default 10)")
+    p.add_argument("--neutral", metavar="FRAME|auto",
+                   help="measure every activation from this frame's, as Live Link Face's "
+                   "calibration does (the neutral frame exports 0, a full shape still 1; the gaze "
+                   "as tracked); auto: the frame whose activations sum least (default: as "
+                   "tracked)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
 
@@ -88,10 +94,16 @@ def run(args: argparse.Namespace) -> int:
         model = load_model(args.model)
     elif args.format in ("glb", "usd"):
         model = default_model_for(track)
+    if args.neutral is not None:
+        from ..export.neutral import with_neutral
+
+        track = with_neutral(track, args.neutral)     # checked before a texture is lifted
     texture = args.texture
     if args.texture_from:
         texture = _lift(track, model, args)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
                         texture=texture)
-    print(f"wrote {path}: {track.n_frames} frames ({args.format})")
+    neutral = track.info.get("neutral_frame") if args.neutral is not None else None
+    print(f"wrote {path}: {track.n_frames} frames ({args.format})"
+          + (f", measured from the neutral frame {neutral}" if neutral is not None else ""))
     return 0

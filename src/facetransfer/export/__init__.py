@@ -12,7 +12,8 @@ usd         usd           UsdSkel blend shapes + SkelAnimation (needs ``usd-core
 json        mpjson        per-frame scores in MediaPipe Face Landmarker's layout
 ==========  ============  ===========================================================
 
-The browser dial editor is :mod:`facetransfer.export.viewer`.
+The browser dial editor is :mod:`facetransfer.export.viewer`; a neutral pose for the curves
+(Live Link Face's calibration) is :mod:`facetransfer.export.neutral`.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from pathlib import Path
 
 from ..io.atomic import check_output_path
 from .common import ExportError, require_activations, resolve_model
+from .neutral import with_neutral
 
 __all__ = ["FORMATS", "ExportError", "export_track"]
 
@@ -30,7 +32,7 @@ FORMATS: dict[str, str] = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "js
 
 
 def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwrite: bool = False,
-                 texture=None) -> Path:
+                 texture=None, neutral=None) -> Path:
     """Write ``track`` in format ``fmt`` to ``out`` and return the path.
 
     Parameters
@@ -45,12 +47,15 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     overwrite : bool
     texture : path or (H, W, 3) uint8, optional
         Base-colour texture in the template's UV layout (``glb`` only).
+    neutral : int or "auto", optional
+        Measure the activations from this frame's (:mod:`facetransfer.export.neutral`: Live
+        Link Face's calibration); None: as tracked.
 
     Raises
     ------
     ExportError
         Unknown format, no activations, a model that does not match, a texture for a format
-        without one.
+        without one, a neutral frame outside the track.
     """
     if fmt not in FORMATS:
         raise ExportError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
@@ -58,6 +63,7 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     if texture is not None and fmt != "glb":
         raise ExportError(f"a texture is written only into glb files, not {fmt}")
     require_activations(track)
+    track = with_neutral(track, neutral)
     if fmt == "livelink":
         from .livelink import write_livelink
 

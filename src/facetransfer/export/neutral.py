@@ -1,0 +1,95 @@
+"""A neutral pose for the exported curves (beyond the paper): what Live Link Face calls
+calibration.
+
+An ARKit activation means "how far from this person's rest". A capture reads the rest of a
+face the model cannot show exactly as a few shapes held on all clip long (a resting ``eyeWide``
+of 0.1-0.3 on faces MediaPipe scores at 0.01, BENCHMARKS.md "Twenty-first session"): an
+animation rig driven by those curves never rests. Live Link Face lets its user record a neutral
+face and measures every later frame from it; ``facetransfer export --neutral FRAME`` does the
+same with a frame of the track, or ``--neutral auto`` with the frame whose non-gaze activations
+sum least (the most relaxed face of the clip):
+
+    a' = clip((a - n) / (1 - n), 0, 1)
+
+per shape, ``n`` the neutral frame's activation (at most :data:`MAX_NEUTRAL`), so the neutral
+frame exports 0 and a fully active shape still exports 1. The gaze (``eyeLook*``) is left as
+tracked: it comes from the iris, and 0 means looking straight ahead, not "at rest".
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+from ..arkit import ARKIT_NAMES
+from .common import ExportError, require_activations
+
+__all__ = ["MAX_NEUTRAL", "calibrated", "neutral_frame", "with_neutral"]
+
+#: Highest neutral level a shape is measured from (above, the rescaling would amplify noise).
+MAX_NEUTRAL = 0.9
+#: The shapes left as tracked: the gaze.
+_GAZE = np.array([n.startswith("eyeLook") for n in ARKIT_NAMES])
+
+
+def neutral_frame(activations: np.ndarray, lost: np.ndarray | None = None) -> int:
+    """The frame whose non-gaze activations sum least, among the frames not ``lost``.
+
+    Parameters
+    ----------
+    activations : (F, 52) float
+        In :data:`~facetransfer.arkit.ARKIT_NAMES` order.
+    lost : (F,) bool, optional
+
+    Raises
+    ------
+    ExportError
+        Every frame lost.
+    """
+    a = np.asarray(activations, np.float64)
+    total = np.nansum(a[:, ~_GAZE], axis=1)
+    ok = np.isfinite(a[:, ~_GAZE]).all(axis=1)
+    if lost is not None:
+        ok &= ~np.asarray(lost, bool)
+    if not ok.any():
+        raise ExportError("no frame of the track has a face to take as the neutral pose")
+    return int(np.flatnonzero(ok)[np.argmin(total[ok])])
+
+
+def calibrated(activations: np.ndarray, neutral: int) -> np.ndarray:
+    """The activations measured from frame ``neutral`` (module notes), ``(F, 52) float32``."""
+    a = np.asarray(activations, np.float64)
+    n = np.clip(a[int(neutral)], 0.0, MAX_NEUTRAL)
+    n[_GAZE] = 0.0
+    return np.clip((a - n) / (1.0 - n), 0.0, 1.0).astype(np.float32)
+
+
+def with_neutral(track, neutral):
+    """``track`` with its activations measured from a neutral frame: ``neutral`` a frame
+    index, ``"auto"`` (:func:`neutral_frame`) or None (the track unchanged). The frame used is
+    recorded in ``info["neutral_frame"]``.
+
+    Raises
+    ------
+    ExportError
+        A frame index outside the track, a lost frame, or another word than ``auto``.
+    """
+    if neutral is None:
+        return track
+    a = require_activations(track)
+    if isinstance(neutral, str) and neutral.strip().lower() == "auto":
+        i = neutral_frame(a, track.lost)
+    else:
+        try:
+            i = int(neutral)
+        except (TypeError, ValueError):
+            raise ExportError(f"--neutral must be a frame number or auto, got {neutral!r}") \
+                from None
+        if not 0 <= i < track.n_frames:
+            raise ExportError(f"--neutral {i}: the track has frames 0 to {track.n_frames - 1}")
+        if bool(np.asarray(track.lost)[i]):
+            raise ExportError(f"--neutral {i}: the face is lost in that frame")
+    return dataclasses.replace(track, blendshapes=calibrated(a, i),
+                               blendshape_names=ARKIT_NAMES,
+                               info={**track.info, "neutral_frame": i})
