@@ -27,13 +27,14 @@ Writes ``OUT/memory.json`` and ``OUT/memory.png``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from _report import arguments, save_plot  # benchmarks/ is on sys.path
 
 DATA = Path(os.environ.get("FACETRANSFER_DATA_DIR", "../shared/data")) / "video"
 CGROUP = Path("/sys/fs/cgroup/memory")
@@ -137,8 +138,6 @@ def plot(report: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from facetransfer.io.atomic import save_figure
-
     runs = report["runs"]
     fig, axes = plt.subplots(1, len(runs), figsize=(4.2 * len(runs), 3.6), sharey=True)
     for ax, (name, r) in zip(axes, runs.items()):
@@ -150,14 +149,11 @@ def plot(report: dict, path: Path) -> None:
         ax.set_xlabel("seconds")
     axes[0].set_ylabel("resident memory (GiB)")
     axes[0].legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
+    save_plot(fig, path)
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="out/benchmarks")
+    ap = arguments(__doc__)
     ap.add_argument("--frames", type=int, default=None, help="frames of each clip (all)")
     ap.add_argument("--budget", default="1G", help="frame memory of the files run")
     ap.add_argument("--limit", default=None, help="also run both in a cgroup of this memory")

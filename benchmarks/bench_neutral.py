@@ -19,11 +19,12 @@ Writes ``OUT/neutral.json`` and ``OUT/neutral.png``.
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
 from pathlib import Path
+
+from _report import arguments, save_plot  # benchmarks/ is on sys.path
 
 import numpy as np
 
@@ -91,8 +92,6 @@ def plot(report: dict, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from facetransfer.io.atomic import save_figure
-
     s = report["summary"]
     x = np.arange(len(SHAPES))
     fig, ax = plt.subplots(figsize=(11, 3.8))
@@ -103,14 +102,11 @@ def plot(report: dict, path: Path) -> None:
     ax.set_ylabel("|mean level - Face Landmarker's|\n(median over 4 clips)")
     ax.set_title("where the exported curves rest, against Face Landmarker on the same frames")
     ax.legend()
-    fig.tight_layout()
-    save_figure(fig, path)
-    plt.close(fig)
+    save_plot(fig, path)
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", default="out/benchmarks")
+    ap = arguments(__doc__)
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from facetransfer.default_model import load_default_model
