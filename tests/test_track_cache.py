@@ -80,3 +80,21 @@ def test_a_cache_that_cannot_be_written_does_not_fail_the_job(on, tmp_path, monk
     with caplog.at_level(logging.WARNING, logger="facetransfer.track.cache"):
         cache.store_track("k", _track())
     assert "could not keep the track in the cache" in caplog.text
+
+
+def test_a_landmark_fits_key_follows_its_points_file(on, tmp_path):
+    """The landmark fit reads ``NAME.mediapipe478.npz`` beside the video: a new points file is
+    another key."""
+    import os
+
+    from facetransfer.track.obtain import _depends
+
+    assert _depends("landmarks", on, None) is None
+    pts = tmp_path / "v.mediapipe478.npz"
+    pts.write_bytes(b"points")
+    first = cache.track_key(on, 10, "landmarks", _depends("landmarks", on, None), _Model("m"))
+    st = os.stat(pts)
+    os.utime(pts, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))
+    again = cache.track_key(on, 10, "landmarks", _depends("landmarks", on, None), _Model("m"))
+    assert first is not None and again is not None and first != again
+    assert _depends("flow", on, ("opts",)) == ("opts",) and _depends("capture", on, 1) is None

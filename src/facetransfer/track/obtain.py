@@ -170,6 +170,19 @@ def _capture(video, model, frames, fps, max_frames, progress_factory, workers: i
     return dataclasses.replace(tr, fps=float(fps))
 
 
+def _depends(method: str, video, options):
+    """What a track of ``method`` depends on beyond the video, frames and model (its cache
+    key): the flow tracker's options, the landmark fit's precomputed points file."""
+    if method == "flow":
+        return options
+    if method == "landmarks":
+        from .checkpoint import video_identity
+
+        lmf = landmarks_file(video)
+        return None if lmf is None else video_identity(str(lmf))
+    return None
+
+
 def _partial(key: str | None) -> Path | None:
     """The capture's progress file of a cache key, or None (no key, or no cache folder)."""
     try:
@@ -245,7 +258,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         frames, fps = read_video(video, max_frames=max_frames)
     fps = info.fps if fps is None else fps
     n = len(frames) if max_frames is None else min(len(frames), int(max_frames))
-    key = track_key(video, n, method, options if method == "flow" else None, model) \
+    key = track_key(video, n, method, _depends(method, video, options), model) \
         if cache else None
     tr = cached_track(key, model)
     if tr is not None:
