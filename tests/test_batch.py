@@ -228,10 +228,15 @@ def test_batch_transfer_calls_what_transfer_calls(clips, quick_model_path, inpro
 
 
 def _stub_export(monkeypatch, calls):
-    mod = types.ModuleType("facetransfer.export")
+    import facetransfer.cli.export  # noqa: F401 - the CLI's own import, before the stand-in
+    import facetransfer.export as real
 
-    def export_track(track, fmt, out, *, model=None, overwrite=False, texture=None):
-        calls.append((track.n_frames, fmt, model is not None))
+    mod = types.ModuleType("facetransfer.export")
+    mod.FORMATS = real.FORMATS
+
+    def export_track(track, fmt, out, *, model=None, overwrite=False, texture=None,
+                     neutral=None):
+        calls.append((track.n_frames, fmt, model is not None, neutral))
         with open(out, "w") as fh:
             json.dump({"frames": track.n_frames, "format": fmt}, fh)
         return out
@@ -258,12 +263,15 @@ def test_batch_export_on_a_running_scheduler(clips, quick_model_path, tmp_path, 
                       dashboard_address=None) as running:
         code, _, _ = _cli(capsys, "batch", "export", t1, t2, "--format", "livelink", "--out",
                           out, "--model", quick_model_path, "--scheduler",
-                          running.scheduler_address)
-    assert code == 1 and calls == [(8, "livelink", True)]
+                          running.scheduler_address, "--neutral", "auto")
+    assert code == 1 and calls == [(8, "livelink", True, "auto")]
     assert json.loads((out / "one.csv").read_text()) == {"frames": 8, "format": "livelink"}
     rows = _summary(out / "summary.csv")
     assert rows["one"]["status"] == "done" and rows["two"]["status"] == "failed"
     assert "two.npz" in rows["two"]["error"]
+    code, _, lines = _cli(capsys, "batch", "export", t1, "--format", "json", "--out",
+                          tmp_path / "exp2", "--neutral", "middle")
+    assert code == 2 and len(lines) == 1 and "--neutral must be a frame number or auto" in lines[0]
 
 
 def test_batch_export_with_the_real_module(clips, quick_model_path, inproc, tmp_path, capsys):

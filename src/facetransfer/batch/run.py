@@ -316,7 +316,8 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
 
 
 def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
-                 overwrite: bool = False, progress: Progress | None = None) -> BatchResult:
+                 overwrite: bool = False, progress: Progress | None = None,
+                 neutral=None) -> BatchResult:
     """Export many track files with :func:`facetransfer.export.export_track`:
     ``DIR/NAME.<ext>`` per track (:data:`~facetransfer.batch.jobs.EXPORT_EXTENSIONS`).
 
@@ -332,6 +333,8 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         Passed to ``export_track``.
     overwrite : bool
         Redo every export (default: skip existing outputs).
+    neutral : int or "auto", optional
+        Each track's activations measured from this frame's (``export_track``).
 
     Returns
     -------
@@ -345,7 +348,7 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
                                  for j in jobs if outs[j.name].is_file()}
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
-                                                 texture, pure=False), model)
+                                                 texture, neutral, pure=False), model)
 
 
 def _simple(client, jobs, out_dir, outs, done, progress, submit, model) -> BatchResult:

@@ -93,6 +93,9 @@ def register(sub) -> None:
     e.add_argument("--format", required=True, choices=("livelink", "glb", "usd", "json"))
     e.add_argument("--model", metavar="M.npz",
                    help="the model of the tracks (default: the default model)")
+    e.add_argument("--neutral", metavar="FRAME|auto",
+                   help="measure each track's activations from this frame's, as `facetransfer "
+                   "export --neutral` (default: as tracked)")
     _cluster_options(e)
     e.set_defaults(func=run_export)
 
@@ -192,10 +195,13 @@ def run_export(args) -> int:
 
     jobs = export_jobs(args.tracks)
     _check_cluster_args(args)
+    if args.neutral is not None and args.neutral.strip().lower() != "auto" and \
+            not args.neutral.strip().isdigit():
+        raise FaceTransferError(f"--neutral must be a frame number or auto, got {args.neutral!r}")
     model = load_model(args.model) if args.model else None  # None: export_track's default
     return _run(args, "export", len(jobs), lambda client, progress: batch_export(
         jobs, args.out, args.format, client=client, model=model, overwrite=args.overwrite,
-        progress=progress))
+        progress=progress, neutral=args.neutral))
 
 
 def _check_cluster_args(args) -> None:
