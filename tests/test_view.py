@@ -110,6 +110,29 @@ def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
     assert '"n_frames": 0' in page
 
 
+def test_view_neutral_pose(arkit_model, pages, tmp_path, capsys):
+    """``--neutral 2``: the page's activations are the calibrated ones (decoded from the page);
+    a model has no neutral frame."""
+    import base64
+    import re
+
+    from facetransfer.export.neutral import calibrated
+
+    _, _, track, a = pages
+    mp, tp = tmp_path / "m.npz", tmp_path / "t.npz"
+    arkit_model.save(mp)
+    track.save(tp)
+    out = tmp_path / "n.html"
+    assert main(["view", str(tp), "--model", str(mp), "--out", str(out), "--neutral", "2"]) == 0
+    capsys.readouterr()
+    blobs = [np.frombuffer(base64.b64decode(b), np.float32)
+             for b in re.findall(r'"activations": "([A-Za-z0-9+/=]+)"', out.read_text())]
+    assert len(blobs) == 1
+    np.testing.assert_allclose(blobs[0].reshape(a.shape), calibrated(a, 2), atol=1e-6)
+    assert main(["view", str(mp), "--out", str(tmp_path / "m.html"), "--neutral", "auto"]) == 2
+    assert "--neutral is for a track" in capsys.readouterr().err
+
+
 def test_page_of_a_model_without_arkit_shapes(quick_model):
     import json
 

@@ -1,7 +1,7 @@
 """``facetransfer view``: a self-contained HTML dial editor for a model or a track.
 
     facetransfer view MODEL.npz --out page.html
-    facetransfer view TRACK.npz --out page.html [--model M.npz]
+    facetransfer view TRACK.npz --out page.html [--model M.npz] [--neutral auto]
 """
 
 from __future__ import annotations
@@ -20,6 +20,9 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, metavar="PAGE.html")
     p.add_argument("--model", metavar="M.npz", help="for a track: its model (default: the "
                    "default model, if the track was made with it)")
+    p.add_argument("--neutral", metavar="FRAME|auto",
+                   help="for a track: its activations measured from this frame's, as "
+                   "`facetransfer export --neutral` (default: as tracked)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing page")
     p.set_defaults(func=run)
 
@@ -51,6 +54,7 @@ def run(args: argparse.Namespace) -> int:
         from .export import default_model_for
 
         model = default_model_for(Track.load(args.source))
-    path = write_viewer(args.source, args.out, model=model, overwrite=args.overwrite)
+    path = write_viewer(args.source, args.out, model=model, overwrite=args.overwrite,
+                        neutral=args.neutral)
     print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
     return 0

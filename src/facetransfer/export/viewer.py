@@ -125,7 +125,7 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
 
 
 def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=None,
-                 overwrite: bool = False) -> Path:
+                 overwrite: bool = False, neutral=None) -> Path:
     """Write the page for ``source`` (a model ``.npz`` or a ``TRACK.npz``) and return its path.
 
     Parameters
@@ -134,6 +134,9 @@ def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=Non
         A model file or a track file (told apart by their contents).
     model : MultilinearModel, optional
         For a track: its model (default: the default model, if the track was made with it).
+    neutral : int or "auto", optional
+        For a track: its activations measured from this frame's
+        (:mod:`facetransfer.export.neutral`); a model has none.
     """
     from ..errors import ModelFileError
     from ..model import load_model
@@ -148,8 +151,12 @@ def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=Non
             is_track = "rotation" in z.files and "mode_names" in z.files
     except (OSError, ValueError, EOFError, zipfile.BadZipFile):
         raise ExportError(f"{src} is neither a model nor a track file (not an .npz)") from None
+    if neutral is not None and not is_track:
+        raise ExportError(f"--neutral is for a track; {src} is a model")
     if is_track:
-        track = Track.load(src)
+        from .neutral import with_neutral
+
+        track = with_neutral(Track.load(src), neutral)
         page = viewer_page(resolve_model(track, model), track=track, title=src.name)
     else:
         try:
