@@ -8,8 +8,8 @@ and an interrupted one lost its tracking. Now :func:`facetransfer.track.obtain.o
 keeps each track it makes under ``$XDG_CACHE_HOME/facetransfer/tracks`` (default
 ``~/.cache/facetransfer/tracks``) by a key of everything the track depends on
 (:func:`track_key`): the video file (resolved path, size, modification time), the frames
-tracked, the tracker and its options, the model's content, and the code and data that make a
-track (:func:`code_fingerprint`: a changed tracker never reads an old track). The capture
+tracked, the tracker and its options, the model's content, and the code, data and libraries
+that make a track (:func:`code_fingerprint`: a changed tracker never reads an old track). The capture
 tracker's progress (detections, then the fit) is saved beside it while it runs
 (:mod:`facetransfer.track.detect_checkpoint`) and continued by the next run.
 
@@ -70,7 +70,8 @@ def track_key(video, n_frames: int, method: str, options, model) -> str | None:
 def code_fingerprint() -> str:
     """A digest of what makes a track besides its inputs: the sources of
     :mod:`facetransfer.track`, of the model and ARKit modules, the package's data files (the
-    landmark mappings) and MediaPipe's version."""
+    landmark mappings), and the versions of MediaPipe (the detector) and OpenCV (the decoder
+    and the point flow)."""
     from importlib import metadata
 
     root = Path(__file__).resolve().parent.parent
@@ -80,10 +81,14 @@ def code_fingerprint() -> str:
     for f in files:
         h.update(f.name.encode())
         h.update(f.read_bytes() if f.is_file() else b"")
-    try:
-        h.update(metadata.version("mediapipe").encode())
-    except metadata.PackageNotFoundError:  # pragma: no cover - mediapipe is a dependency
-        pass
+    for dist in ("mediapipe", "opencv-python-headless", "opencv-contrib-python"):
+        try:
+            h.update(f"{dist}={metadata.version(dist)}".encode())
+        except metadata.PackageNotFoundError:
+            pass
+    import cv2
+
+    h.update(str(cv2.__version__).encode())
     return h.hexdigest()[:16]
 
 
