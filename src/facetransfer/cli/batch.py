@@ -195,9 +195,10 @@ def run_export(args) -> int:
 
     jobs = export_jobs(args.tracks)
     _check_cluster_args(args)
-    if args.neutral is not None and args.neutral.strip().lower() != "auto" and \
-            not args.neutral.strip().isdigit():
-        raise FaceTransferError(f"--neutral must be a frame number or auto, got {args.neutral!r}")
+    if args.neutral is not None:  # checked before any clip runs
+        from ..export.neutral import neutral_arg
+
+        neutral_arg(args.neutral)
     model = load_model(args.model) if args.model else None  # None: export_track's default
     return _run(args, "export", len(jobs), lambda client, progress: batch_export(
         jobs, args.out, args.format, client=client, model=model, overwrite=args.overwrite,

@@ -41,7 +41,7 @@ import numpy as np
 from .. import assets
 from ..errors import DatasetError
 from ..io.atomic import atomic_path
-from ..io.memory import available_bytes
+from ..io.memory import available_memory
 from ..io.mesh import Mesh, read_obj, read_obj_vertices
 from .base import FaceDataset
 from .deformation import DeformationTransfer, component_anchors, deformation_gradients
@@ -374,8 +374,8 @@ def build_memory_bytes(n_identities: int, n_cells: int, n_vertices: int) -> int:
     return int(4 * tensor + 8 * 3 * n_vertices * (_N_IDENTITY_COMPONENTS + n_cells))
 
 
-#: the memory available (a name of this module: tests replace it)
-_available_bytes = available_bytes
+#: the memory available, a container's limit included (a name of this module: tests replace it)
+_available_bytes = available_memory
 
 
 def check_build_memory(name: str, n_identities: int, spec: Mapping, region: str) -> None:

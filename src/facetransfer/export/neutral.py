@@ -25,7 +25,7 @@ import numpy as np
 from ..arkit import ARKIT_NAMES
 from .common import ExportError, require_activations
 
-__all__ = ["MAX_NEUTRAL", "calibrated", "neutral_frame", "with_neutral"]
+__all__ = ["MAX_NEUTRAL", "calibrated", "neutral_arg", "neutral_frame", "with_neutral"]
 
 #: Highest neutral level a shape is measured from (above, the rescaling would amplify noise).
 MAX_NEUTRAL = 0.9
@@ -65,6 +65,25 @@ def calibrated(activations: np.ndarray, neutral: int) -> np.ndarray:
     return np.clip((a - n) / (1.0 - n), 0.0, 1.0).astype(np.float32)
 
 
+def neutral_arg(value) -> int | str:
+    """``--neutral``'s value: a frame number (int >= 0) or ``"auto"``.
+
+    Raises
+    ------
+    ExportError
+        Anything else.
+    """
+    if isinstance(value, str) and value.strip().lower() == "auto":
+        return "auto"
+    try:
+        i = int(value)
+    except (TypeError, ValueError):
+        i = -1
+    if i < 0:
+        raise ExportError(f"--neutral must be a frame number or auto, got {value!r}")
+    return i
+
+
 def with_neutral(track, neutral):
     """``track`` with its activations measured from a neutral frame: ``neutral`` a frame
     index, ``"auto"`` (:func:`neutral_frame`) or None (the track unchanged). The frame used is
@@ -78,18 +97,13 @@ def with_neutral(track, neutral):
     if neutral is None:
         return track
     a = require_activations(track)
-    if isinstance(neutral, str) and neutral.strip().lower() == "auto":
+    i = neutral_arg(neutral)
+    if i == "auto":
         i = neutral_frame(a, track.lost)
-    else:
-        try:
-            i = int(neutral)
-        except (TypeError, ValueError):
-            raise ExportError(f"--neutral must be a frame number or auto, got {neutral!r}") \
-                from None
-        if not 0 <= i < track.n_frames:
-            raise ExportError(f"--neutral {i}: the track has frames 0 to {track.n_frames - 1}")
-        if bool(np.asarray(track.lost)[i]):
-            raise ExportError(f"--neutral {i}: the face is lost in that frame")
+    elif i >= track.n_frames:
+        raise ExportError(f"--neutral {i}: the track has frames 0 to {track.n_frames - 1}")
+    elif bool(np.asarray(track.lost)[i]):
+        raise ExportError(f"--neutral {i}: the face is lost in that frame")
     return dataclasses.replace(track, blendshapes=calibrated(a, i),
                                blendshape_names=ARKIT_NAMES,
                                info={**track.info, "neutral_frame": i})

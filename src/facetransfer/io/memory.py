@@ -29,9 +29,9 @@ import numpy as np
 
 from ..errors import VideoError
 
-__all__ = ["available_bytes", "available_memory", "cgroup_headroom", "frame_budget", "frame_array", "frame_disk_free",
-           "first_frame_count", "grow_frames",
-           "FRAME_MEMORY_FRACTION", "parse_bytes"]
+__all__ = ["FRAME_MEMORY_FRACTION", "available_bytes", "available_memory", "cgroup_headroom",
+           "first_frame_count", "frame_array", "frame_budget", "frame_disk_free", "grow_frames",
+           "parse_bytes"]
 
 #: Share of the available memory one clip's decoded frames may take (a transfer decodes two
 #: clips at once, and tracks and renders beside them).
@@ -144,7 +144,8 @@ def first_frame_count(expect: int, frame_bytes: int, budget: int) -> int:
     unless it would fit neither in the frame budget nor on the frame files' disk (a bogus
     count): then what the old reservation held in memory (its pages touched only when decoded
     into), or 64 MB of a file (reserved on disk at once), doubled as decoded."""
-    if expect * frame_bytes <= max(budget, frame_disk_free()):
+    need = expect * frame_bytes
+    if need <= budget or need <= frame_disk_free():   # the disk asked only past the budget
         return max(expect, 1)
     return max(1, min(_RESERVE_BYTES, max(budget, 1 << 26)) // max(frame_bytes, 1))
 

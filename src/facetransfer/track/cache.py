@@ -81,14 +81,9 @@ def code_fingerprint() -> str:
     for f in files:
         h.update(f.name.encode())
         h.update(f.read_bytes() if f.is_file() else b"")
-    for dist in ("mediapipe", "opencv-python-headless", "opencv-contrib-python"):
-        try:
-            h.update(f"{dist}={metadata.version(dist)}".encode())
-        except metadata.PackageNotFoundError:
-            pass
     import cv2
 
-    h.update(str(cv2.__version__).encode())
+    h.update(f"mediapipe={metadata.version('mediapipe')} cv2={cv2.__version__}".encode())
     return h.hexdigest()[:16]
 
 
@@ -121,7 +116,10 @@ def cached_track(key: str | None, model):
         log.warning("removing unreadable cached track %s (%s)", p, exc)
         p.unlink(missing_ok=True)
         return None
-    os.utime(p)
+    try:
+        os.utime(p)                       # its use, for the pruning
+    except OSError:
+        pass
     return tr
 
 
@@ -142,8 +140,13 @@ def store_track(key: str | None, track) -> None:
 
 
 def _prune(folder: Path, keep: int) -> None:
-    files = sorted((p for p in folder.glob("*.npz") if not p.name.endswith(".partial.npz")),
-                   key=lambda p: p.stat().st_mtime, reverse=True)
-    for p in files[keep:]:
+    """Keep the ``keep`` most recently used tracks and the ``keep`` most recent progress files
+    (an interrupted run never run again leaves one)."""
+    def newest_first(paths):
+        return sorted(paths, key=lambda p: p.stat().st_mtime, reverse=True)
+
+    everything = list(folder.glob("*.npz"))
+    partial = [p for p in everything if p.name.endswith(".partial.npz")]
+    tracks = [p for p in everything if not p.name.endswith(".partial.npz")]
+    for p in newest_first(tracks)[keep:] + newest_first(partial)[keep:]:
         p.unlink(missing_ok=True)
-        p.with_name(p.stem + ".partial.npz").unlink(missing_ok=True)
