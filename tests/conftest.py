@@ -11,7 +11,9 @@ import pytest
 
 os.environ.setdefault("OMP_NUM_THREADS", "2")
 os.environ.setdefault("MPLBACKEND", "Agg")
-# the track cache off: each test tracks what it tracks (tests/test_track_cache.py turns it on)
+# the track cache off: each test tracks what it tracks (tests/test_track_cache.py turns it on);
+# the render cache stays on, the default path of a transfer's video (a finished render leaves
+# nothing in it; tests of an interrupted one give it a folder of their own)
 os.environ["FACETRANSFER_TRACK_CACHE"] = "off"
 
 

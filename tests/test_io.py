@@ -102,7 +102,7 @@ def test_read_video_does_not_trust_the_containers_frame_count(tmp_path, monkeypa
     """``read_video`` decodes into an array sized by the container's count: a count that is
     short (grown) or long (cut) gives the same frames as decoding one by one, in memory or
     (``spill``: past the frame budget) in a file."""
-    import facetransfer.io.video as v
+    import facetransfer.io.video_read as v
     from facetransfer.io.video import VideoInfo, iter_frames
 
     if spill:

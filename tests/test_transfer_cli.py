@@ -89,23 +89,32 @@ def test_transfer_with_frames_past_the_memory_budget(clips, quick_model_path, tm
     assert list((tmp_path / "frames").iterdir()) == []
 
 
-@pytest.mark.parametrize("cache", ["on", "off"])
+@pytest.mark.parametrize("tracks, renders", [("on", "on"), ("on", "off"), ("off", "on"),
+                                             ("off", "off")])
 def test_an_interrupted_transfer_says_what_it_kept(clips, quick_model_path, tmp_path, capsys,
-                                                   monkeypatch, cache):
-    """Ctrl-C: exit 130, one line; with the track cache on it says the tracking is kept."""
+                                                   monkeypatch, tracks, renders):
+    """Ctrl-C: exit 130, one line saying what the track and render caches keep."""
     import facetransfer.video_transfer as vt
 
     def interrupted(*a, **k):
         raise KeyboardInterrupt
 
     monkeypatch.setattr(vt, "transfer_video", interrupted)
-    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", cache)
+    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", tracks)
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", renders)
     code, _, err = run(["transfer", "--target", clips["target"], "--expression-from",
                         clips["source"], "--model", quick_model_path, "--out",
                         tmp_path / "o.mp4", "--no-progress"], capsys)
     assert code == 130 and len(err.strip().splitlines()) == 1
     assert err.startswith("facetransfer transfer: interrupted")
-    assert ("kept in the track cache" in err) == (cache == "on")
+    said = {("on", "on"): "; the tracking and the frames rendered so far are kept in the cache",
+            ("on", "off"): "; the tracking done so far is kept in the track cache",
+            ("off", "on"): "; the frames rendered so far are kept in the render cache",
+            ("off", "off"): None}[tracks, renders]
+    if said is None:
+        assert err.strip() == "facetransfer transfer: interrupted"
+    else:
+        assert err.startswith("facetransfer transfer: interrupted" + said)
 
 
 def test_transfer_refuses_existing_output(clips, quick_model_path, tmp_path, capsys):
@@ -283,3 +292,78 @@ def test_landmarks_file_is_checked_only_for_the_tracker_that_reads_it(tmp_path):
         _check_landmarks_file(video, "landmarks")
     for tracker in ("auto", "capture", "flow"):
         assert _check_landmarks_file(video, tracker) is None
+
+
+def test_an_interrupted_transfer_renders_only_the_frames_it_had_not(clips, quick_model_path,
+                                                                   tmp_path, capsys,
+                                                                   monkeypatch):
+    """Ctrl-C in the render, then the same command: only the frames no kept part holds are
+    rendered, and the video equals one rendered at once (lossless: the parts do not show)."""
+    import facetransfer.rewrite as rw
+    from facetransfer.io import video_parts
+
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(video_parts, "PART_FRAMES", 2)
+    real, calls, stop = rw._ClipRenderer.__call__, [], [3]
+
+    def counted(self, i):  # frame 3 interrupted, whichever thread renders what when
+        if stop[0] is not None and i >= stop[0]:
+            raise KeyboardInterrupt
+        calls.append(i)
+        return real(self, i)
+
+    monkeypatch.setattr(rw._ClipRenderer, "__call__", counted)
+    argv = ["transfer", "--target", clips["target"], "--target-track", clips["target_track"],
+            "--expression-from", clips["source"], "--source-track", clips["source_track"],
+            "--model", quick_model_path, "--crf", "0", "--no-progress", "--out"]
+    code, _, err = run(argv + [tmp_path / "o.mp4"], capsys)
+    assert code == 130 and "the frames rendered so far are kept" in err
+    [folder] = (tmp_path / "cache" / "facetransfer" / "renders").iterdir()
+    # a full part of frames 0-1 and frame 2, finished by ffmpeg when interrupted
+    assert [(p.start, p.frames) for p in video_parts.kept_parts(folder)] == [(0, 2), (2, 1)]
+    assert not (tmp_path / "o.mp4").exists()
+    stop[0], calls[:] = None, []
+    code, out, err = run(argv + [tmp_path / "o.mp4"], capsys)
+    assert code == 0, err
+    assert "continued an interrupted render from frame 3" in out
+    assert sorted(calls) == [3, 4, 5] and not folder.exists()
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "off")
+    code, _, err = run(argv + [tmp_path / "once.mp4"], capsys)
+    assert code == 0, err
+    a, b = read_video(tmp_path / "o.mp4")[0], read_video(tmp_path / "once.mp4")[0]
+    assert a.shape == b.shape == (6, *a.shape[1:]) and np.array_equal(a, b)
+
+
+def test_sigterm_keeps_what_an_interrupt_keeps(clips, quick_model_path, tmp_path, capsys,
+                                              monkeypatch):
+    """``kill`` (SIGTERM) ends the command as Ctrl-C does, exit 143, one line; a child forked
+    meanwhile dies of SIGTERM as before; the handler is restored afterwards."""
+    import os
+    import signal
+    import time
+
+    import facetransfer.video_transfer as vt
+
+    before = signal.getsignal(signal.SIGTERM)
+    child_handler = []
+
+    def killed(*a, **k):
+        pid = os.fork()
+        if pid == 0:  # the child reports whether SIGTERM would kill it
+            os._exit(0 if signal.getsignal(signal.SIGTERM) == signal.SIG_DFL else 1)
+        child_handler.append(os.waitpid(pid, 0)[1])
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(5)  # the handler raises here
+        raise AssertionError("SIGTERM was not turned into an interrupt")
+
+    monkeypatch.setattr(vt, "transfer_video", killed)
+    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", "on")
+    code, _, err = run(["transfer", "--target", clips["target"], "--expression-from",
+                        clips["source"], "--model", quick_model_path, "--out",
+                        tmp_path / "o.mp4", "--no-progress"], capsys)
+    assert code == 143 and len(err.strip().splitlines()) == 1
+    assert err.startswith("facetransfer transfer: terminated; the tracking and the frames "
+                          "rendered so far are kept in the cache")
+    assert child_handler == [0]
+    assert signal.getsignal(signal.SIGTERM) is before

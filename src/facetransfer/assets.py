@@ -196,6 +196,13 @@ def data_dir() -> Path | None:
     return Path(v).expanduser() if v else None
 
 
+def switched_off(variable: str) -> bool:
+    """Whether the environment variable ``variable`` says ``off`` (or ``0``, ``no``,
+    ``false``): the switches of the caches (``FACETRANSFER_TRACK_CACHE``,
+    ``FACETRANSFER_RENDER_CACHE``)."""
+    return os.environ.get(variable, "").strip().lower() in ("off", "0", "no", "false")
+
+
 def cache_dir() -> Path:
     """User cache folder ``$XDG_CACHE_HOME/facetransfer`` (default ``~/.cache/facetransfer``).
 

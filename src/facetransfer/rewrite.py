@@ -370,7 +370,7 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
                    topo: MeshTopology | None = None, workers: int | None = None,
                    processes: bool | None = None,
                    progress: Callable[[int], None] | None = None,
-                   eyes: str | None = None) -> Iterator[RewriteFrame]:
+                   eyes: str | None = None, start: int = 0) -> Iterator[RewriteFrame]:
     """Rewrite every target frame with the new performance (§6, Fig. 7).
 
     Parameters
@@ -420,10 +420,14 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
     eyes : {"model", "target"}, optional
         Replaces ``options.eyes``: the new performance's lids over an open-eyed target frame
         (:mod:`facetransfer.eyes`, the default) or the target's own eyes through the holes.
+    start : int
+        The first frame to yield (a render continued after an interruption): frames are
+        independent, so frame ``i`` is the same whatever ``start``.
 
     Yields
     ------
     RewriteFrame
+        Frames ``start`` to ``new_track.n_frames - 1``.
     """
     opts = (options or RewriteOptions()).with_(texture=texture, blend=blend, feather=feather,
                                                 mouth=mouth, eyes=eyes)
@@ -431,12 +435,30 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
                               source_frames=source_frames, source_track=source_track,
                               source_index=source_index, mouth_function=mouth_function,
                               topo=topo)
-    yield from _render(one, target_frames, new_track.n_frames, workers, processes, progress)
+    n, start = new_track.n_frames, int(start)
+    if not 0 <= start <= n:
+        raise RewriteError(f"start frame {start} is outside the {n} frames")
+    if start:
+        one = _Shifted(one, start)
+    yield from _render(one, target_frames, n - start, workers, processes, progress, start)
 
 
-def _render(one, target_frames, n: int, workers: int | None, processes: bool | None, progress):
+@dataclass(frozen=True)
+class _Shifted:
+    """``one(i + start)``: the per-frame renderer of a render that starts at ``start``."""
+
+    one: Callable[[int], RewriteFrame]
+    start: int
+
+    def __call__(self, i: int) -> RewriteFrame:
+        return self.one(i + self.start)
+
+
+def _render(one, target_frames, n: int, workers: int | None, processes: bool | None, progress,
+            offset: int = 0):
     """Yield ``one(i)`` for i < n in order: here, on threads or in forked processes (see
-    :func:`rewrite_frames`' ``workers`` and ``processes``)."""
+    :func:`rewrite_frames`' ``workers`` and ``processes``); ``one(i)`` renders the target frame
+    ``offset + i``."""
     workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
     if workers == 1 or n < 2:
         for i in range(n):
@@ -449,7 +471,7 @@ def _render(one, target_frames, n: int, workers: int | None, processes: bool | N
     if processes is None:
         processes = _RENDER_IN_PROCESSES and n >= 16  # worth a fork for longer clips only
     if processes and "fork" in mp.get_all_start_methods():
-        yield from _render_in_processes(one, target_frames, n, workers, progress)
+        yield from _render_in_processes(one, target_frames, n, workers, progress, offset)
     else:
         yield from _render_in_threads(one, n, workers, progress)
 
@@ -797,24 +819,26 @@ _RENDER_JOB: Callable | None = None
 
 def _render_job(i: int):
     frame = _RENDER_JOB(i)
-    return _crop_of(np.asarray(_RENDER_FRAMES[i]), frame)
+    return _crop_of(np.asarray(_RENDER_FRAMES[_RENDER_OFFSET + i]), frame)
 
 
 _RENDER_FRAMES = None
+_RENDER_OFFSET = 0
 
 
-def _render_in_processes(one, target_frames, n: int, workers: int, progress):
-    """Yield ``one(i)`` for i < n, computed in ``workers`` forked processes, in order.
+def _render_in_processes(one, target_frames, n: int, workers: int, progress, offset: int = 0):
+    """Yield ``one(i)`` for i < n, computed in ``workers`` forked processes, in order (the
+    target frame of ``one(i)`` is ``offset + i``).
 
     Workers send back only the changed crop of each frame (:func:`_crop_of`); if the pool
     breaks, the remaining frames are rendered here."""
-    global _RENDER_JOB, _RENDER_FRAMES
+    global _RENDER_JOB, _RENDER_FRAMES, _RENDER_OFFSET
     import multiprocessing as mp
     from collections import deque
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
-    _RENDER_JOB, _RENDER_FRAMES = one, target_frames
+    _RENDER_JOB, _RENDER_FRAMES, _RENDER_OFFSET = one, target_frames, offset
     try:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"))
         pending: deque = deque()
@@ -841,7 +865,7 @@ def _render_in_processes(one, target_frames, n: int, workers: int, progress):
                         pending.append(pool.submit(_render_job, nxt))
                         nxt += 1
                     part = pending.popleft().result()
-                    res = _paste(np.asarray(target_frames[done]), part)
+                    res = _paste(np.asarray(target_frames[offset + done]), part)
                 except BrokenProcessPool as exc:
                     log.warning("render workers failed (%s); rendering here", exc)
                     broken = True

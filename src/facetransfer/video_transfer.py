@@ -14,6 +14,7 @@ footage and write it with the target's audio.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import os
 import time
@@ -512,6 +513,8 @@ class TransferResult:
     plan : TransferPlan
     timings : dict
         Seconds per stage (read, track, render, write).
+    resumed : int
+        Frames rendered by an interrupted run and taken up by this one.
     """
 
     path: Path
@@ -520,6 +523,7 @@ class TransferResult:
     audio: bool
     plan: TransferPlan
     timings: dict
+    resumed: int = 0
 
 
 def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: bool = True) -> int:
@@ -547,16 +551,20 @@ class RenderResult:
         Frames where the face was rendered.
     audio : bool
         Whether audio was muxed in.
+    resumed : int
+        Frames an interrupted run had rendered and this one took up (``resume``).
     """
 
     timings: dict
     n_rewritten: int
     audio: bool
+    resumed: int = 0
 
 
 def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | None = None,
                 audio_from=None, overwrite: bool = False, progress_factory=None,
-                compose: Callable | None = None, video_options=None) -> RenderResult:
+                compose: Callable | None = None, video_options=None,
+                resume: bool = False) -> RenderResult:
     """Render a planned transfer into the video ``out`` (§6), timing each stage.
 
     Lifts the mouth texture function first when the mouth mode is ``"function"`` (from
@@ -579,51 +587,122 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
         The frame to write for output frame ``i`` (default: the rewritten image).
     video_options : VideoOptions, optional
         Codec and CRF (:class:`facetransfer.io.video.VideoOptions`; default H.264, CRF 18).
+    resume : bool
+        Encode a video file (not an image sequence; no ``compose``) in parts kept in the
+        render cache (:mod:`facetransfer.render_cache`) until it is written: a run interrupted
+        here leaves them, and the same render run again continues after the last frame they
+        hold.
 
     Returns
     -------
     RenderResult
     """
-    from .io.video import write_video_with_audio
-
     options = RewriteOptions() if options is None else options
     options = options.with_(mouth=resolve_mouth_mode(options.mouth, model,
                                                      performance=plan.performance))
     timings = dict(plan.timings)
-    mouth_fn = None
-    if options.mouth == "function":
-        t = time.perf_counter()
-        mouth_fn = _lift_mouth(plan, model, progress_factory)
-        timings["mouth"] = time.perf_counter() - t
     n = plan.n_frames
-    bar = progress_factory("render", n) if progress_factory else None
-    rewritten = [0]
-    t_render = [0.0]
+    writer = _parts_writer(plan, model, out, options, video_options, audio_from, overwrite) \
+        if resume and compose is None else None
+    start = 0 if writer is None else writer.done
+    with contextlib.ExitStack() as stack:
+        if writer is not None:  # parts kept on an error or interrupt, joined on success
+            stack.enter_context(writer)
+        mouth_fn = None
+        if options.mouth == "function" and start < n:
+            t = time.perf_counter()
+            mouth_fn = _lift_mouth(plan, model, progress_factory)
+            timings["mouth"] = time.perf_counter() - t
+        bar = progress_factory("render", n) if progress_factory else None
+        if bar is not None:
+            stack.callback(bar.close)
+            bar.update(start)
+        render = _Frames(plan, model, options, mouth_fn, compose, bar, start)
+        t0 = time.perf_counter()
+        if writer is None:
+            from .io.video import write_video_with_audio
 
-    def frames():
-        it = rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
-                            source_frames=plan.mouth_frames, source_track=plan.mouth_track,
-                            source_index=plan.mouth_index, options=options,
-                            mouth_function=mouth_fn,
-                            progress=bar.update if bar is not None else None)
-        for i in range(n):
+            audio = write_video_with_audio(out, render(), plan.fps, audio_from=audio_from,
+                                           overwrite=overwrite, options=video_options,
+                                           n_frames=n)
+        else:
+            for frame, face in render.with_faces():
+                writer.write(frame, marked=face)
+    if writer is not None:
+        audio, render.rewritten = writer.result.audio, writer.marked
+    timings["render"] = render.seconds
+    timings["write"] = time.perf_counter() - t0 - render.seconds
+    return RenderResult(timings, render.rewritten, audio, start)
+
+
+@dataclass
+class _Frames:
+    """The rewritten frames of a plan from ``start`` on (:func:`rewrite_frames`), timed and
+    counted: ``seconds`` spent rendering, ``rewritten`` frames that show a face."""
+
+    plan: TransferPlan
+    model: object
+    options: RewriteOptions
+    mouth_fn: object
+    compose: Callable | None
+    bar: object
+    start: int
+    seconds: float = 0.0
+    rewritten: int = 0
+
+    def with_faces(self):
+        """Yield ``(frame, whether a face was rendered)``."""
+        p = self.plan
+        if self.start >= p.n_frames:
+            return
+        it = rewrite_frames(p.target_frames, p.target_track, p.new_track, self.model,
+                            source_frames=p.mouth_frames, source_track=p.mouth_track,
+                            source_index=p.mouth_index, options=self.options,
+                            mouth_function=self.mouth_fn, start=self.start,
+                            progress=self.bar.update if self.bar is not None else None)
+        for i in range(self.start, p.n_frames):
             t = time.perf_counter()
             r = next(it)
-            frame = r.image if compose is None else compose(i, r)
-            t_render[0] += time.perf_counter() - t
-            rewritten[0] += bool(r.face_mask.any())
+            frame = r.image if self.compose is None else self.compose(i, r)
+            self.seconds += time.perf_counter() - t
+            face = bool(r.face_mask.any())
+            self.rewritten += face
+            yield frame, face
+
+    def __call__(self):
+        """Yield the frames."""
+        for frame, _ in self.with_faces():
             yield frame
 
-    t0 = time.perf_counter()
+
+def _parts_writer(plan: TransferPlan, model, out, options, video_options, audio_from,
+                  overwrite: bool):
+    """A :class:`facetransfer.io.video_parts.PartsWriter` for ``out`` in the render cache's
+    folder of this render, or None: the cache is off, ``out`` is an image sequence, or another
+    process renders the same frames now."""
+    from .io.video import is_image_pattern
+    from .io.video_parts import PartsBusy, PartsWriter
+    from .render_cache import parts_folder, render_key
+
+    if is_image_pattern(out):
+        return None
+    key = render_key(plan, model, options, video_options)
+    if key is None:
+        return None
+    first = np.asarray(plan.target_frames[0])
     try:
-        audio = write_video_with_audio(out, frames(), plan.fps, audio_from=audio_from,
-                                       overwrite=overwrite, options=video_options, n_frames=n)
-    finally:
-        if bar is not None:
-            bar.close()
-    timings["render"] = t_render[0]
-    timings["write"] = time.perf_counter() - t0 - t_render[0]
-    return RenderResult(timings, rewritten[0], audio)
+        writer = PartsWriter(parts_folder(key), out, plan.fps, (first.shape[1], first.shape[0]),
+                             n_frames=plan.n_frames, options=video_options,
+                             audio_from=audio_from, overwrite=overwrite)
+    except PartsBusy as exc:
+        log.warning("%s: writing the video in one piece", exc)
+        return None
+    except OSError as exc:  # the cache cannot be written: the job does not fail for it
+        log.warning("the render cache cannot be used (%s): writing the video in one piece", exc)
+        return None
+    if writer.done:
+        log.info("%s: continuing an interrupted render from frame %d", out, writer.done)
+    return writer
 
 
 def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
@@ -671,7 +750,9 @@ def transfer_video(sources: TransferSources, out, model, *,
     replaced only with ``overwrite=True``. With the mouth mode ``"function"`` the function is
     lifted from :attr:`TransferPlan.texture_frames`. ``video_options``: codec and CRF of
     ``out`` (:class:`facetransfer.io.video.VideoOptions`); ``out`` may be an image sequence
-    (``frames/%05d.png``).
+    (``frames/%05d.png``). A video file is rendered in parts kept in the render cache
+    (:mod:`facetransfer.render_cache`): an interrupted transfer run again renders only the
+    frames it had not.
 
     Returns
     -------
@@ -685,10 +766,10 @@ def transfer_video(sources: TransferSources, out, model, *,
                         parallel=parallel, progress_factory=progress_factory, reader=reader)
     rendered = render_plan(plan, model, out, options=opts, audio_from=sources.target.video,
                            overwrite=overwrite, progress_factory=progress_factory,
-                           video_options=video_options)
+                           video_options=video_options, resume=True)
     if save_track is not None:
         plan.new_track.save(save_track, overwrite=overwrite)
     if meshes_dir is not None:
         write_mesh_sequence(meshes_dir, plan.new_track, model)
     return TransferResult(Path(out), plan.n_frames, rendered.n_rewritten, rendered.audio, plan,
-                          rendered.timings)
+                          rendered.timings, rendered.resumed)

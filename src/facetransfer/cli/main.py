@@ -100,7 +100,8 @@ def error_line(command: str, exc: BaseException) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Run the CLI; returns the exit status (0 ok, 2 bad input or usage, 130 interrupted).
+    """Run the CLI; returns the exit status (0 ok, 2 bad input or usage, 130 interrupted by
+    Ctrl-C, 143 terminated by SIGTERM, after keeping what an interrupt keeps).
 
     Called with no ``argv`` (the console script), native libraries' log lines are filtered out
     of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
@@ -140,7 +141,46 @@ def _exiting(status: int) -> int:
     return status
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a scheduler's pre-emption, ``timeout``), raised where the command is,
+    so that it keeps what an interrupt keeps (progress files, the caches' partial work, the
+    video part being written) instead of dying where it stands."""
+
+
+def _terminated(signum, frame):
+    raise Terminated
+
+
+def _default_sigterm_in_child() -> None:
+    """A forked child (a background tracker, a render worker) dies of SIGTERM, as before: its
+    parent stops it so (``Process.terminate``)."""
+    import signal
+
+    if signal.getsignal(signal.SIGTERM) is _terminated:
+        signal.signal(signal.SIGTERM, signal.SIG_DFL)
+
+
+_AT_FORK: list = []
+
+
+def _catching_sigterm():
+    """Route SIGTERM to :class:`Terminated` (main thread only; forked children keep the
+    default); returns the old handler to restore, or None."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    if not _AT_FORK:
+        os.register_at_fork(after_in_child=_default_sigterm_in_child)
+        _AT_FORK.append(True)
+    return signal.signal(signal.SIGTERM, _terminated)
+
+
 def _run(args) -> int:
+    import signal
+
+    previous = _catching_sigterm()
     try:
         return int(args.func(args) or 0)
     except (ValueError, OSError, MemoryError, EOFError, zipfile.BadZipFile) as exc:
@@ -149,22 +189,41 @@ def _run(args) -> int:
             logging.getLogger("facetransfer").exception("details")
         print(error_line(args.command, exc), file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print(f"facetransfer {args.command}: interrupted{_kept(args.command)}", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:
+        what, status = ("terminated", 143) if isinstance(exc, Terminated) else \
+            ("interrupted", 130)
+        print(f"facetransfer {args.command}: {what}{_kept(args.command)}", file=sys.stderr)
+        return status
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 #: Commands whose tracking goes through the track cache (facetransfer.track.cache)
 CACHED_TRACKING = ("transfer", "puppet", "demo")
 
 
-def _kept(command: str) -> str:
-    """What an interrupted ``command`` keeps for the next run (the track cache's progress)."""
-    from ..track.cache import cache_enabled
+#: Commands whose render goes through the render cache (facetransfer.render_cache)
+CACHED_RENDERING = ("transfer",)
 
-    if command in CACHED_TRACKING and cache_enabled():
+
+def _kept(command: str) -> str:
+    """What an interrupted ``command`` keeps for the next run (the track cache's progress, the
+    render cache's parts)."""
+    from ..render_cache import cache_enabled as rendering
+    from ..track.cache import cache_enabled as tracking
+
+    track = command in CACHED_TRACKING and tracking()
+    render = command in CACHED_RENDERING and rendering()
+    if track and render:
+        return ("; the tracking and the frames rendered so far are kept in the cache: the same "
+                "command continues from them")
+    if track:
         return ("; the tracking done so far is kept in the track cache: the same command "
                 "continues from it")
+    if render:
+        return ("; the frames rendered so far are kept in the render cache: the same command "
+                "continues from them")
     return ""
 
 

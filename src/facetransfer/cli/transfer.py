@@ -325,6 +325,8 @@ def run_transfer(args) -> int:
         progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
         align=args.align, max_frames=args.max_frames, reader=prefetch.read_video)
     kept = res.n_frames - res.n_rewritten
+    if res.resumed:
+        print(f"continued an interrupted render from frame {res.resumed}")
     print(f"wrote {res.path}: {res.n_frames} frames"
           + (f" ({kept} kept original: face lost)" if kept else "")
           + (", with the target's audio" if res.audio else ", no audio"))

@@ -117,8 +117,9 @@ def _pid_alive(pid: int) -> bool:
     return True
 
 
-def _locked(path: Path) -> bool:
-    """Whether another process holds the writer's lock on ``path``."""
+def locked_elsewhere(path: str | os.PathLike) -> bool:
+    """Whether another process holds an exclusive ``flock`` on the file ``path`` (a writer's
+    lock; False when there is no such file)."""
     try:
         fd = os.open(path, os.O_RDONLY | os.O_NOFOLLOW)
     except OSError:
@@ -160,7 +161,7 @@ def remove_stale_temps(path: str | os.PathLike) -> list[Path]:
             if not q.is_file() or q.is_symlink():
                 continue
             pid = int(m.group(1))
-            if (pid != os.getpid() and _pid_alive(pid)) or _locked(q):
+            if (pid != os.getpid() and _pid_alive(pid)) or locked_elsewhere(q):
                 continue
             q.unlink()
         except OSError:

@@ -1,7 +1,7 @@
 """Video input and output. Frames are ``(H, W, 3) uint8`` RGB.
 
-Reading decodes with OpenCV, lazily (:func:`iter_frames`) or all at once (:func:`read_video`).
-Writing is one writer for every command that writes video (:class:`VideoWriter`,
+Reading decodes with OpenCV, lazily (:func:`iter_frames`) or all at once (:func:`read_video`),
+in :mod:`facetransfer.io.video_read` (its names are this module's too). Writing is one writer for every command that writes video (:class:`VideoWriter`,
 :func:`encode_video`): H.264 by default (libx264 through the ffmpeg binary of imageio-ffmpeg,
 ``yuv420p``, CRF 18), H.265 or ProRes (:class:`VideoOptions`), or an image sequence
 (``frames/%05d.png``), with the audio of another file muxed in. It writes to a temporary file
@@ -25,12 +25,13 @@ import tempfile
 from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
-from typing import Callable, Iterable, Iterator
+from typing import Callable, Iterable
 
 import numpy as np
 
 from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
+from .video_read import VideoInfo, iter_frames, read_video, video_info  # noqa: F401 (API)
 
 log = logging.getLogger(__name__)
 
@@ -41,132 +42,6 @@ __all__ = ["VideoInfo", "video_info", "iter_frames", "read_video", "CODECS", "DE
            "stored_frame_count",
            "has_audio", "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
            "write_video_with_audio"]
-
-
-@dataclass(frozen=True)
-class VideoInfo:
-    """Basic facts about a video file.
-
-    Attributes
-    ----------
-    path : Path
-    fps : float
-    n_frames : int
-        As reported by the container (may be approximate for some codecs).
-    size : (int, int)
-        ``(width, height)`` in pixels.
-    """
-
-    path: Path
-    fps: float
-    n_frames: int
-    size: tuple[int, int]
-
-
-def _open(path: str | os.PathLike):
-    import cv2
-
-    p = Path(path)
-    if not p.is_file():
-        raise VideoError(f"video {p} does not exist")
-    if p.stat().st_size == 0:
-        raise VideoError(f"video {p} is empty")
-    cap = cv2.VideoCapture(str(p))
-    if not cap.isOpened():
-        raise VideoError(f"cannot read video {p}: not a video OpenCV can decode")
-    return cap
-
-
-def video_info(path: str | os.PathLike) -> VideoInfo:
-    """Read a video's frame rate, frame count and size without decoding it."""
-    import cv2
-
-    cap = _open(path)
-    try:
-        fps = float(cap.get(cv2.CAP_PROP_FPS)) or 25.0
-        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-        size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-    finally:
-        cap.release()
-    if size[0] <= 0 or size[1] <= 0:
-        raise VideoError(f"video {path} has no frames")
-    return VideoInfo(Path(path), fps, n, size)
-
-
-def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
-                seek: bool = True) -> Iterator[np.ndarray]:
-    """Yield RGB frames ``(H, W, 3) uint8`` from ``start`` (inclusive) to ``stop`` (exclusive).
-
-    ``seek=False`` reaches ``start`` by decoding every frame before it (``grab``, no colour
-    conversion) instead of the container's seek, which OpenCV does not promise to be exact.
-    """
-    import cv2
-
-    cap = _open(path)
-    try:
-        if start and seek:
-            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
-        elif start:
-            for _ in range(start):
-                if not cap.grab():
-                    return
-        i, bgr = start, None
-        while stop is None or i < stop:
-            ok, bgr = cap.read(bgr)  # one decoding buffer for the whole clip
-            if not ok:
-                break
-            yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-            i += 1
-    finally:
-        cap.release()
-
-
-def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
-               max_frames: int | None = None) -> tuple[np.ndarray, float]:
-    """Decode frames into one array.
-
-    Returns
-    -------
-    frames : (F, H, W, 3) uint8
-    fps : float
-
-    Raises
-    ------
-    VideoError
-        Missing, unreadable or empty video.
-    """
-    import cv2
-
-    from .memory import first_frame_count, frame_budget, grow_frames
-
-    info = video_info(path)
-    if max_frames is not None:
-        stop = start + max_frames if stop is None else min(stop, start + max_frames)
-    # decoded straight into one array sized by the container's count (grown if that was short):
-    # no per-frame copies to stack, a third of the memory touched; on disk past the budget
-    expect = max(int(info.n_frames) - start, 0)
-    expect = expect if stop is None else min(expect, max(stop - start, 0))
-    budget = frame_budget()
-    cap = _open(path)
-    out, n, bgr = None, 0, None
-    try:
-        if start:
-            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
-        while stop is None or start + n < stop:
-            ok, bgr = cap.read(bgr)
-            if not ok:
-                break
-            if out is None or n == len(out):
-                size = first_frame_count(expect, bgr.size, budget) if out is None else 2 * n
-                out = grow_frames(out, n, max(size, n + 1), bgr.shape, what=f"video {path}",
-                                  budget=budget)
-            cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=out[n])
-            n += 1
-    finally:
-        cap.release()
-    if n == 0:
-        raise VideoError(f"video {path} has no frames (from frame {start})")
-    return out[:n], info.fps
 
 
 # ---------------------------------------------------------------------------------------------
@@ -586,6 +461,10 @@ class VideoWriter:
         The frames that will be written. With audio, the audio is then cut to their length and
         encoded while the frames are (one pass); if another number is written, or without it,
         the audio is muxed after the encode.
+    detached : bool
+        Run ffmpeg in a session of its own: a Ctrl-C in the terminal reaches this process
+        only, which may then keep the frames written so far (``close(prefix=True)``; a video
+        written in parts, :mod:`facetransfer.io.video_parts`).
 
     Use as a context manager; the output appears only when the block ends without error.
     """
@@ -593,7 +472,7 @@ class VideoWriter:
     def __init__(self, path: str | os.PathLike, fps: float, size: tuple[int, int], *,
                  options: VideoOptions | None = None, audio_from: str | os.PathLike | None = None,
                  audio_start: float = 0.0, overwrite: bool = True,
-                 n_frames: int | None = None) -> None:
+                 n_frames: int | None = None, detached: bool = False) -> None:
         if not (np.isfinite(fps) and fps > 0):
             raise VideoError(f"frame rate must be positive, got {fps}")
         if len(size) != 2 or min(int(size[0]), int(size[1])) < 1:
@@ -608,6 +487,7 @@ class VideoWriter:
         self.n_frames = 0
         self.expected = None if n_frames is None else int(n_frames)
         self._inline_audio = False
+        self._detached = bool(detached)
         self.result: WrittenVideo | None = None
         self._proc = None
         self._tmpdir: Path | None = None
@@ -645,7 +525,8 @@ class VideoWriter:
         self._stderr = tempfile.TemporaryFile()
         try:
             self._proc = subprocess.Popen(cmd, stdin=subprocess.PIPE,
-                                          stdout=subprocess.DEVNULL, stderr=self._stderr)
+                                          stdout=subprocess.DEVNULL, stderr=self._stderr,
+                                          start_new_session=self._detached)
         except OSError as exc:
             self._abort()
             raise VideoError(f"cannot start ffmpeg ({exe}) to write {self.path}: {exc}") from None
@@ -709,8 +590,12 @@ class VideoWriter:
         what = f"cannot write video {self.path} (ffmpeg {why})"
         return _ffmpeg_error(err, what) if err.strip() else VideoError(what)
 
-    def close(self, *, commit: bool = True) -> WrittenVideo | None:
+    def close(self, *, commit: bool = True, prefix: bool = False) -> WrittenVideo | None:
         """Finish the output (``commit``) or discard it; returns what was written.
+
+        ``prefix``: a video whose last write may have been cut short (an interrupt in the
+        middle of a frame) keeps the whole frames ffmpeg received, one fewer than written at
+        most (``n_frames`` is then what the file holds; none: nothing written, None returned).
 
         Raises
         ------
@@ -718,28 +603,37 @@ class VideoWriter:
             No frames, ffmpeg failed, the file does not decode to the frames written, or the
             audio could not be muxed. The output is then not written (an old one is kept).
         """
-        if self.result is not None:
-            return self.result
+        if self.result is not None or (self._proc is None and self._tmpdir is None):
+            return self.result  # written, or already discarded
         try:
             if not commit:
                 self._abort()
                 return None
             if self.n_frames == 0:
+                if prefix:
+                    self._abort()
+                    return None
                 raise VideoError(f"no frames to write to {self.path}")
             self.result = self._commit_images() if self._tmpdir is not None else \
-                self._commit_video()
+                self._commit_video(prefix)
             return self.result
         except BaseException:
             self._abort()
             raise
 
-    def _commit_video(self) -> WrittenVideo:
+    def _commit_video(self, prefix: bool = False) -> WrittenVideo | None:
         proc = self._proc
         with contextlib.suppress(OSError):
             proc.stdin.close()
         if proc.wait() != 0:
             raise self._ffmpeg_failed()
         self._proc = None
+        if prefix:  # a frame cut short in the pipe is dropped by ffmpeg's raw demuxer
+            stored = _stored_count_or_none(self.tmp)
+            if not stored or stored > self.n_frames:
+                self._abort()
+                return None
+            self.n_frames = stored
         # the audio went in with the frames when as many were written as promised; else it is
         # muxed now, from the encoded video stream (the frames are counted in the muxed file)
         if self._inline_audio and self.n_frames == self.expected:

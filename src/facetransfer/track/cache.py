@@ -39,8 +39,9 @@ KEEP = 64
 
 def cache_enabled() -> bool:
     """False when ``FACETRANSFER_TRACK_CACHE`` is ``off`` (or ``0``, ``no``, ``false``)."""
-    v = os.environ.get("FACETRANSFER_TRACK_CACHE", "").strip().lower()
-    return v not in ("off", "0", "no", "false")
+    from ..assets import switched_off
+
+    return not switched_off("FACETRANSFER_TRACK_CACHE")
 
 
 def track_dir() -> Path:

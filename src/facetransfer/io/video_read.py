@@ -1,0 +1,143 @@
+"""Video input: decoding a file into ``(H, W, 3) uint8`` RGB frames with OpenCV, lazily
+(:func:`iter_frames`) or all at once (:func:`read_video`, into memory or, past the frame budget
+of :mod:`facetransfer.io.memory`, into an unnamed file). Its names are also those of
+:mod:`facetransfer.io.video`, the module of video input and output."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterator
+
+import numpy as np
+
+from ..errors import VideoError
+
+__all__ = ["VideoInfo", "video_info", "iter_frames", "read_video"]
+
+
+@dataclass(frozen=True)
+class VideoInfo:
+    """Basic facts about a video file.
+
+    Attributes
+    ----------
+    path : Path
+    fps : float
+    n_frames : int
+        As reported by the container (may be approximate for some codecs).
+    size : (int, int)
+        ``(width, height)`` in pixels.
+    """
+
+    path: Path
+    fps: float
+    n_frames: int
+    size: tuple[int, int]
+
+
+def _open(path: str | os.PathLike):
+    import cv2
+
+    p = Path(path)
+    if not p.is_file():
+        raise VideoError(f"video {p} does not exist")
+    if p.stat().st_size == 0:
+        raise VideoError(f"video {p} is empty")
+    cap = cv2.VideoCapture(str(p))
+    if not cap.isOpened():
+        raise VideoError(f"cannot read video {p}: not a video OpenCV can decode")
+    return cap
+
+
+def video_info(path: str | os.PathLike) -> VideoInfo:
+    """Read a video's frame rate, frame count and size without decoding it."""
+    import cv2
+
+    cap = _open(path)
+    try:
+        fps = float(cap.get(cv2.CAP_PROP_FPS)) or 25.0
+        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+    finally:
+        cap.release()
+    if size[0] <= 0 or size[1] <= 0:
+        raise VideoError(f"video {path} has no frames")
+    return VideoInfo(Path(path), fps, n, size)
+
+
+def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
+                seek: bool = True) -> Iterator[np.ndarray]:
+    """Yield RGB frames ``(H, W, 3) uint8`` from ``start`` (inclusive) to ``stop`` (exclusive).
+
+    ``seek=False`` reaches ``start`` by decoding every frame before it (``grab``, no colour
+    conversion) instead of the container's seek, which OpenCV does not promise to be exact.
+    """
+    import cv2
+
+    cap = _open(path)
+    try:
+        if start and seek:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        elif start:
+            for _ in range(start):
+                if not cap.grab():
+                    return
+        i, bgr = start, None
+        while stop is None or i < stop:
+            ok, bgr = cap.read(bgr)  # one decoding buffer for the whole clip
+            if not ok:
+                break
+            yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+            i += 1
+    finally:
+        cap.release()
+
+
+def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
+               max_frames: int | None = None) -> tuple[np.ndarray, float]:
+    """Decode frames into one array.
+
+    Returns
+    -------
+    frames : (F, H, W, 3) uint8
+    fps : float
+
+    Raises
+    ------
+    VideoError
+        Missing, unreadable or empty video.
+    """
+    import cv2
+
+    from .memory import first_frame_count, frame_budget, grow_frames
+
+    info = video_info(path)
+    if max_frames is not None:
+        stop = start + max_frames if stop is None else min(stop, start + max_frames)
+    # decoded straight into one array sized by the container's count (grown if that was short):
+    # no per-frame copies to stack, a third of the memory touched; on disk past the budget
+    expect = max(int(info.n_frames) - start, 0)
+    expect = expect if stop is None else min(expect, max(stop - start, 0))
+    budget = frame_budget()
+    cap = _open(path)
+    out, n, bgr = None, 0, None
+    try:
+        if start:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        while stop is None or start + n < stop:
+            ok, bgr = cap.read(bgr)
+            if not ok:
+                break
+            if out is None or n == len(out):
+                size = first_frame_count(expect, bgr.size, budget) if out is None else 2 * n
+                out = grow_frames(out, n, max(size, n + 1), bgr.shape, what=f"video {path}",
+                                  budget=budget)
+            cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=out[n])
+            n += 1
+    finally:
+        cap.release()
+    if n == 0:
+        raise VideoError(f"video {path} has no frames (from frame {start})")
+    return out[:n], info.fps

@@ -1,0 +1,166 @@
+"""Frames a transfer rendered, kept until its video is written: an interrupted ``transfer``
+continues its render where it stopped.
+
+The tracks of a transfer are kept by :mod:`facetransfer.track.cache`; its render, the longer
+step at high resolution (a minute of 1080p is about ten minutes of rendering on two cores), was
+lost to a Ctrl-C. Now :func:`facetransfer.video_transfer.render_plan` encodes the frames into
+parts (:mod:`facetransfer.io.video_parts`) in a folder of
+``$XDG_CACHE_HOME/facetransfer/renders`` named by a key of everything the frames depend on
+(:func:`render_key`): the plan's frames (a digest of every frame's every 16th row), its tracks
+and frame indices, the model's content, the render options, the codec options, and the package's
+code and data (:func:`code_fingerprint`). The same command run again finds the parts and renders
+only the frames they do not hold; a finished video removes its folder. Folders of interrupted
+renders never run again are removed beyond the :data:`KEEP` most recent.
+
+``FACETRANSFER_RENDER_CACHE=off`` turns it off: the video is then encoded in one piece, as
+an image sequence always is.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import hashlib
+import json
+import logging
+import os
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+__all__ = ["LAYOUT", "KEEP", "ROW_STEP", "cache_enabled", "render_dir", "render_key",
+           "code_fingerprint", "parts_folder"]
+
+#: The cache's layout: a change of what a key means changes it.
+LAYOUT = "renders-1"
+#: Folders of unfinished renders kept (the least recently used beyond are removed).
+KEEP = 4
+#: Rows of each frame in the key's digest of the footage (every ROW_STEP-th row).
+ROW_STEP = 16
+
+
+def cache_enabled() -> bool:
+    """False when ``FACETRANSFER_RENDER_CACHE`` is ``off`` (or ``0``, ``no``, ``false``)."""
+    from .assets import switched_off
+
+    return not switched_off("FACETRANSFER_RENDER_CACHE")
+
+
+def render_dir() -> Path:
+    """``$XDG_CACHE_HOME/facetransfer/renders``."""
+    from .assets import cache_dir
+
+    return cache_dir() / "renders"
+
+
+def _update_frames(h, frames) -> None:
+    """Digest every frame of ``frames`` (F, H, W, 3) by its every :data:`ROW_STEP`-th row."""
+    if frames is None:
+        h.update(b"none")
+        return
+    h.update(repr((len(frames), np.asarray(frames[0]).shape)).encode())
+    for f in frames:
+        h.update(np.ascontiguousarray(np.asarray(f)[::ROW_STEP]).tobytes())
+
+
+def _update_value(h, value) -> None:
+    """Digest a track's field (arrays by their bytes, dicts by sorted key)."""
+    if isinstance(value, np.ndarray):
+        h.update(f"{value.dtype}{value.shape}".encode())
+        h.update(np.ascontiguousarray(value).tobytes())
+    elif isinstance(value, dict):
+        for k in sorted(value):
+            h.update(str(k).encode())
+            _update_value(h, value[k])
+    else:
+        h.update(repr(value).encode())
+
+
+def _update_track(h, track) -> None:
+    """Digest a :class:`~facetransfer.track.result.Track` by every field but ``info`` (which
+    holds timings)."""
+    if track is None:
+        h.update(b"none")
+        return
+    for f in dataclasses.fields(track):
+        if f.name != "info":
+            h.update(f.name.encode())
+            _update_value(h, getattr(track, f.name))
+
+
+def render_key(plan, model, options, video_options) -> str | None:
+    """The key of rendering ``plan`` (a :class:`~facetransfer.video_transfer.TransferPlan`)
+    with ``model``, ``options`` (:class:`~facetransfer.rewrite_options.RewriteOptions`) and
+    ``video_options`` (:class:`~facetransfer.io.video.VideoOptions` or None); None when the
+    cache is off."""
+    if not cache_enabled():
+        return None
+    from . import __version__
+    from .io.video_parts import PART_FRAMES
+
+    h = hashlib.sha256()
+    what = {"layout": LAYOUT, "version": __version__, "code": code_fingerprint(),
+            "model": str(model.content_hash), "options": repr(options),
+            "video": repr(video_options), "fps": float(plan.fps), "parts": PART_FRAMES,
+            "performance": bool(plan.performance)}
+    h.update(json.dumps(what, sort_keys=True).encode())
+    for frames in (plan.target_frames, plan.mouth_frames, plan.texture_frames):
+        _update_frames(h, frames)
+    for tr in (plan.target_track, plan.new_track, plan.mouth_track, plan.texture_track):
+        _update_track(h, tr)
+    _update_value(h, np.asarray(plan.mouth_index))
+    return h.hexdigest()[:32]
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """A digest of the package's sources and data files and of the libraries that shape a
+    rendered frame or its encoding (NumPy, OpenCV, numba, imageio-ffmpeg's ffmpeg)."""
+    from importlib import metadata
+
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for f in sorted(root.rglob("*.py")) + sorted((root / "data").glob("*.json")):
+        h.update(str(f.relative_to(root)).encode())
+        h.update(f.read_bytes())
+    for lib in ("numpy", "opencv-python-headless", "numba", "imageio-ffmpeg"):
+        try:
+            h.update(f"{lib}={metadata.version(lib)}".encode())
+        except metadata.PackageNotFoundError:
+            h.update(f"{lib}=none".encode())
+    return h.hexdigest()[:16]
+
+
+def parts_folder(key: str) -> Path:
+    """The parts folder of ``key`` (its use recorded); folders of other keys beyond the
+    :data:`KEEP` most recently used are removed (:func:`_prune`)."""
+    folder = render_dir() / key
+    folder.mkdir(parents=True, exist_ok=True)
+    try:
+        os.utime(folder)
+    except OSError:
+        pass
+    _prune(folder.parent, KEEP, current=folder)
+    return folder
+
+
+def _prune(root: Path, keep: int, current: Path) -> None:
+    """Remove the folders of ``root`` beyond the ``keep`` most recently used, never
+    ``current`` nor one another process is writing into."""
+    from .io.video_parts import folder_in_use
+
+    def mtime(p: Path) -> float:
+        try:
+            return p.stat().st_mtime
+        except OSError:
+            return 0.0
+
+    folders = sorted((p for p in root.iterdir() if p.is_dir() and p != current), key=mtime,
+                     reverse=True)
+    for p in folders[max(0, keep - 1):]:
+        if not folder_in_use(p):
+            log.info("removing the unfinished render %s", p)
+            shutil.rmtree(p, ignore_errors=True)

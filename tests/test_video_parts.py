@@ -1,0 +1,151 @@
+"""A video written in parts that outlive an interruption (facetransfer.io.video_parts)."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from facetransfer.errors import VideoError
+from facetransfer.io import video_parts as vp
+from facetransfer.io.video import (VideoOptions, VideoWriter, encode_video, has_audio,
+                                   read_video, stored_frame_count)
+
+LOSSLESS = VideoOptions(crf=0)  # x264 lossless in YUV: decoded frames do not depend on parts
+
+
+def _frames(n=23, h=48, w=64, seed=0):
+    rng = np.random.default_rng(seed)
+    base = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
+    return [np.roll(base, 3 * i, axis=1) for i in range(n)]
+
+
+@pytest.fixture
+def small_parts(monkeypatch):
+    monkeypatch.setattr(vp, "PART_FRAMES", 5)
+
+
+def _write(folder, out, frames, *, stop=None, audio_from=None, overwrite=True):
+    """Write ``frames`` from where the folder's parts end; Ctrl-C before frame ``stop``."""
+    w = vp.PartsWriter(folder, out, 25.0, (frames[0].shape[1], frames[0].shape[0]),
+                       n_frames=len(frames), options=LOSSLESS, audio_from=audio_from,
+                       overwrite=overwrite)
+    start = w.done
+    with w:
+        for i in range(start, len(frames)):
+            if i == stop:
+                raise KeyboardInterrupt
+            w.write(frames[i], marked=i % 2 == 0)
+    return w, start
+
+
+def test_an_interrupted_video_continues_and_equals_one_written_at_once(small_parts, tmp_path):
+    frames = _frames()
+    folder, out = tmp_path / "parts", tmp_path / "out.mp4"
+    with pytest.raises(KeyboardInterrupt):
+        _write(folder, out, frames, stop=12)
+    kept = vp.kept_parts(folder)
+    # two full parts and the 2 frames of the third (ffmpeg finished it): nothing lost
+    assert [(p.start, p.frames, p.marked) for p in kept] == [(0, 5, 3), (5, 5, 2), (10, 2, 1)]
+    assert not out.exists()
+    w, start = _write(folder, out, frames)
+    assert start == 12 and w.resumed == 12
+    assert w.result.n_frames == 23 and w.marked == 12  # even frames 0..22
+    assert not folder.exists()
+    one = tmp_path / "one.mp4"
+    encode_video(one, frames, 25.0, options=LOSSLESS)
+    a, fps = read_video(out)
+    b, _ = read_video(one)
+    assert fps == 25.0 and a.shape == b.shape == (23, 48, 64, 3)
+    assert np.array_equal(a, b)
+
+
+def test_the_joined_video_carries_the_audio(small_parts, tmp_path, data_dir):
+    clip = data_dir / "video" / "driving_d9.mp4"
+    if not has_audio(clip):
+        pytest.skip("the clip has no audio")
+    w, _ = _write(tmp_path / "p", tmp_path / "a.mp4", _frames(12), audio_from=clip)
+    assert w.result.audio and has_audio(tmp_path / "a.mp4")
+    assert stored_frame_count(tmp_path / "a.mp4") == 12
+
+
+def test_a_frame_cut_short_in_the_pipe_is_dropped(tmp_path):
+    """An interrupt in the middle of a frame's bytes: the part keeps the whole frames."""
+    frames = _frames(4)
+    w = VideoWriter(tmp_path / "p.mov", 25.0, (64, 48), options=LOSSLESS, detached=True)
+    for f in frames[:3]:
+        w.write(f)
+    w._proc.stdin.write(b"\x10" * 1000)  # part of a fourth frame
+    done = w.close(prefix=True)
+    assert done is not None and done.n_frames == 3 == stored_frame_count(tmp_path / "p.mov")
+    assert np.array_equal(read_video(tmp_path / "p.mov")[0], read_video(_one(tmp_path, frames[:3]))[0])
+
+
+def _one(tmp_path, frames):
+    p = tmp_path / "ref.mp4"
+    encode_video(p, frames, 25.0, options=LOSSLESS)
+    return p
+
+
+def test_a_detached_ffmpeg_is_out_of_the_terminals_reach(tmp_path):
+    w = VideoWriter(tmp_path / "p.mov", 25.0, (64, 48), detached=True)
+    try:
+        assert os.getsid(w._proc.pid) == w._proc.pid != os.getsid(0)
+    finally:
+        w.close(commit=False)
+    w = VideoWriter(tmp_path / "q.mov", 25.0, (64, 48))
+    try:
+        assert os.getsid(w._proc.pid) == os.getsid(0)
+    finally:
+        w.close(commit=False)
+    assert not any(tmp_path.iterdir())
+
+
+def test_a_damaged_part_and_those_after_it_are_dropped(small_parts, tmp_path):
+    frames = _frames(17)
+    folder = tmp_path / "parts"
+    with pytest.raises(KeyboardInterrupt):
+        _write(folder, tmp_path / "o.mp4", frames, stop=15)
+    assert [p.frames for p in vp.kept_parts(folder)] == [5, 5, 5]
+    (folder / "00000005.mov").write_bytes(b"damaged")
+    (folder / ".00000015.123-abc.part.mov").write_bytes(b"left by a killed writer")
+    kept = vp.kept_parts(folder)
+    assert [(p.start, p.frames) for p in kept] == [(0, 5)]
+    assert sorted(os.listdir(folder)) == ["00000000.mov", "lock", "parts.json"]
+    assert json.loads((folder / "parts.json").read_text())["parts"][0]["frames"] == 5
+    w, start = _write(folder, tmp_path / "o.mp4", frames)
+    assert start == 5 and np.array_equal(read_video(tmp_path / "o.mp4")[0],
+                                         read_video(_one(tmp_path, frames))[0])
+
+
+def test_parts_of_a_longer_video_are_not_taken_up(small_parts, tmp_path):
+    folder = tmp_path / "parts"
+    with pytest.raises(KeyboardInterrupt):
+        _write(folder, tmp_path / "o.mp4", _frames(20), stop=12)
+    w, start = _write(folder, tmp_path / "o.mp4", _frames(8, seed=1))
+    assert start == 0 and w.result.n_frames == 8
+
+
+def test_one_writer_at_a_time(tmp_path):
+    folder = tmp_path / "parts"
+    w = vp.PartsWriter(folder, tmp_path / "o.mp4", 25.0, (64, 48), n_frames=3)
+    try:
+        assert vp.folder_in_use(folder)
+        with pytest.raises(vp.PartsBusy, match=str(folder)):
+            vp.PartsWriter(folder, tmp_path / "o2.mp4", 25.0, (64, 48), n_frames=3)
+    finally:
+        w.close(commit=False)
+    assert not vp.folder_in_use(folder)
+
+
+def test_what_cannot_be_written_in_parts(tmp_path):
+    with pytest.raises(VideoError, match="image sequence"):
+        vp.PartsWriter(tmp_path / "p", tmp_path / "f%03d.png", 25.0, (64, 48), n_frames=3)
+    (tmp_path / "o.mp4").write_bytes(b"keep")
+    with pytest.raises(ValueError, match="--overwrite"):
+        vp.PartsWriter(tmp_path / "p", tmp_path / "o.mp4", 25.0, (64, 48), n_frames=3)
+    w = vp.PartsWriter(tmp_path / "p", tmp_path / "x.mp4", 25.0, (64, 48), n_frames=3)
+    w.write(_frames(1)[0])
+    with pytest.raises(VideoError, match="1 frames were written, not 3"):
+        w.close()
+    assert (tmp_path / "o.mp4").read_bytes() == b"keep" and not (tmp_path / "x.mp4").exists()
