@@ -149,3 +149,21 @@ def test_what_cannot_be_written_in_parts(tmp_path):
     with pytest.raises(VideoError, match="1 frames were written, not 3"):
         w.close()
     assert (tmp_path / "o.mp4").read_bytes() == b"keep" and not (tmp_path / "x.mp4").exists()
+
+
+@pytest.mark.parametrize("suffix", [".mp4", ".mov", ".mkv", ".avi"])
+def test_every_container_keeps_the_frames_and_their_rate(small_parts, tmp_path, suffix):
+    """Parts joined into each container decode to the frames, at the rate written (an AVI
+    once reported 600 fps: the parts' time base)."""
+    from facetransfer.io.video import video_info
+
+    frames = _frames(12)
+    w = vp.PartsWriter(tmp_path / "p", tmp_path / f"o{suffix}", 29.97, (64, 48), n_frames=12,
+                       options=LOSSLESS)
+    with w:
+        for f in frames:
+            w.write(f)
+    out = tmp_path / f"o{suffix}"
+    assert video_info(out).fps == pytest.approx(29.97, abs=0.01)
+    assert stored_frame_count(out) == 12
+    assert np.array_equal(read_video(out)[0], read_video(_one(tmp_path, frames))[0])

@@ -33,7 +33,7 @@ import numpy as np
 from ..errors import VideoError
 from .atomic import atomic_path, locked_elsewhere, write_text_atomic
 from .video import (VIDEO_SUFFIXES, VideoOptions, VideoWriter, WrittenVideo, _audio_codec_args,
-                    _ffmpeg_error, _require_ffmpeg, audio_codec, check_video_output,
+                    _ffmpeg_error, _fps_arg, _require_ffmpeg, audio_codec, check_video_output,
                     stored_frame_count)
 
 log = logging.getLogger(__name__)
@@ -308,6 +308,8 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
     extra = ["-movflags", "+faststart"] if fmt in ("mp4", "mov") else []
     if opt.codec == "h265" and fmt in ("mp4", "mov"):
         extra += ["-tag:v", "hvc1"]
+    if fmt == "avi":  # a constant rate (else the parts' 1/15360 s ticks: "600 fps"), its tag
+        extra += ["-r", _fps_arg(fps)] + (["-tag:v", "H264"] if opt.codec == "h264" else [])
     with atomic_path(out, overwrite=True) as tmp:
         res = subprocess.run([_require_ffmpeg(), "-hide_banner", "-nostdin", "-loglevel", "error",
                               "-y", "-f", "concat", "-safe", "0", "-i", str(listing), *audio,
