@@ -85,7 +85,9 @@ def kept_parts(folder: str | os.PathLike, *, verify: bool = True) -> list[Part]:
     """The finished parts in ``folder`` that follow on from frame 0 without a gap, each file
     present and (``verify``) holding the frames listed (:func:`stored_frame_count`, ~20 ms a
     part). Files of parts beyond the first missing or damaged one are removed, as is
-    anything else a killed writer left in the folder; the manifest is rewritten to match."""
+    anything else a killed writer left in the folder; the manifest is rewritten to match.
+    Called with the folder's lock held (:class:`PartsWriter` takes it) or while no writer
+    runs: it removes what a live writer would be writing."""
     folder = Path(folder)
     listed = _read_manifest(folder)
     good: list[Part] = []
