@@ -136,6 +136,7 @@ def test_one_writer_at_a_time(tmp_path):
     finally:
         w.close(commit=False)
     assert not vp.folder_in_use(folder)
+    assert not folder.exists()  # interrupted before its first frame: nothing kept
 
 
 def test_what_cannot_be_written_in_parts(tmp_path):

@@ -249,6 +249,8 @@ class PartsWriter:
         try:
             if not commit:
                 self._keep()
+                if not self.parts:  # nothing to continue from: no empty folder left behind
+                    shutil.rmtree(self.folder, ignore_errors=True)
                 return None
             self._finish_current(prefix=False)
             if self.done != self.n_frames:
