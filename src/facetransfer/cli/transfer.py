@@ -139,7 +139,9 @@ def _register_transfer(sub) -> None:
         "Video rewrite (Vlasic et al. 2005, §6, Fig. 1, Fig. 7): track the videos (or reuse "
         "track files), take each attribute from its chosen video, render the new face into "
         "the target footage with the target's texture and the source's mouth, blend, and keep "
-        "the target's audio.")
+        "the target's audio. Interrupted (Ctrl-C, SIGTERM), it keeps its tracking and the "
+        "frames it rendered in the user cache: the same command continues from them "
+        "(FACETRANSFER_TRACK_CACHE=off, FACETRANSFER_RENDER_CACHE=off: nothing kept).")
     _add_sources(p)
     p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     p.add_argument("--align", choices=ALIGN_MODES, default=None, help=ALIGN_HELP)
