@@ -82,6 +82,39 @@ def test_a_cache_that_cannot_be_written_does_not_fail_the_job(on, tmp_path, monk
     assert "could not keep the track in the cache" in caplog.text
 
 
+def test_a_full_cache_disk_does_not_fail_the_job(on, tmp_path, monkeypatch, caplog):
+    """A full disk is an OutputError (io.atomic), not an OSError: the cached track and the
+    capture's progress file of the cache are warnings; a progress file elsewhere (`track`'s,
+    beside its output) still fails."""
+    from facetransfer.errors import OutputError
+    from facetransfer.track.detect_checkpoint import DetectionCheckpoint
+    from facetransfer.track.result import Track
+
+    def full(*a, **k):
+        raise OutputError("cannot write x.npz: no space left on the device")
+
+    monkeypatch.setattr(Track, "save", full)
+    with caplog.at_level(logging.WARNING):
+        cache.store_track("k", _track())
+    assert "could not keep the track in the cache (cannot write x.npz: no space left" in \
+        caplog.text
+    import facetransfer.track.checkpoint as ckmod
+
+    monkeypatch.setattr(ckmod, "atomic_path", full)
+    arrays = {"a": np.zeros(3)}
+    kept = DetectionCheckpoint(tmp_path / "p.npz", "key", every=0.0, best_effort=True)
+    assert kept.due()
+    with caplog.at_level(logging.WARNING):
+        kept._write(arrays)
+    assert "could not save the progress to" in caplog.text and "no space left" in caplog.text
+    assert not kept.due() and kept.saves == 0
+    kept._write(arrays)  # no second attempt, no second warning
+    assert caplog.text.count("could not save the progress") == 1
+    strict = DetectionCheckpoint(tmp_path / "q.npz", "key", every=0.0)
+    with pytest.raises(OutputError, match="no space left"):
+        strict._write(arrays)
+
+
 def test_a_landmark_fits_key_follows_its_points_file(on, tmp_path):
     """The landmark fit reads ``NAME.mediapipe478.npz`` beside the video: a new points file is
     another key."""

@@ -168,3 +168,23 @@ def test_every_container_keeps_the_frames_and_their_rate(small_parts, tmp_path, 
     assert video_info(out).fps == pytest.approx(29.97, abs=0.01)
     assert stored_frame_count(out) == 12
     assert np.array_equal(read_video(out)[0], read_video(_one(tmp_path, frames))[0])
+
+
+def test_a_part_that_cannot_be_written_says_where_and_the_way_around(tmp_path, monkeypatch):
+    from facetransfer.io import video as iov
+
+    def full(self, frame):
+        raise VideoError(f"cannot write video {self.path} (ffmpeg exit status 1): No space "
+                         "left on device")
+
+    monkeypatch.setattr(iov.VideoWriter, "write", full)
+    w = vp.PartsWriter(tmp_path / "p", tmp_path / "o.mp4", 25.0, (64, 48), n_frames=3)
+    with pytest.raises(VideoError) as err:
+        with w:
+            w.write(_frames(1)[0])
+    msg = str(err.value)
+    assert "00000000.mov" in msg and "No space left on device" in msg
+    assert f"a part of {tmp_path / 'o.mp4'} in the render cache" in msg
+    assert "FACETRANSFER_RENDER_CACHE=off" in msg and len(msg.splitlines()) == 1
+    assert not (tmp_path / "o.mp4").exists()
+    assert not (tmp_path / "p").exists()  # no part kept: no folder left

@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import VideoError
+from ..errors import OutputError, VideoError
 from .atomic import atomic_path, locked_elsewhere, write_text_atomic
 from .video import (VIDEO_SUFFIXES, VideoOptions, VideoWriter, WrittenVideo, _audio_codec_args,
                     _ffmpeg_error, _fps_arg, _require_ffmpeg, audio_codec, check_video_output,
@@ -189,8 +189,23 @@ class PartsWriter:
         :meth:`close`: every one marked, in this run and in the kept parts)."""
         return sum(p.marked for p in self.parts)
 
+    @contextlib.contextmanager
+    def _in_the_cache(self):
+        """A failed write of a part (a full disk...) says where it was written and the way
+        around it, besides what went wrong."""
+        try:
+            yield
+        except (VideoError, OutputError) as exc:
+            raise VideoError(f"{exc} (a part of {self.output.path} in the render cache; "
+                             "FACETRANSFER_RENDER_CACHE=off writes the video in one piece)"
+                             ) from None
+
     def write(self, frame: np.ndarray, *, marked: bool = False) -> None:
         """Append the next ``(H, W, 3) uint8`` frame (``marked``: counted in :attr:`marked`)."""
+        with self._in_the_cache():
+            self._write(frame, marked)
+
+    def _write(self, frame: np.ndarray, marked: bool) -> None:
         if self._writer is None:
             if self._next >= self.n_frames:
                 raise VideoError(f"{self.output.path}: all {self.n_frames} frames are written")
@@ -249,10 +264,9 @@ class PartsWriter:
         try:
             if not commit:
                 self._keep()
-                if not self.parts:  # nothing to continue from: no empty folder left behind
-                    shutil.rmtree(self.folder, ignore_errors=True)
                 return None
-            self._finish_current(prefix=False)
+            with self._in_the_cache():
+                self._finish_current(prefix=False)
             if self.done != self.n_frames:
                 raise VideoError(f"{self.output.path}: {self.done} frames were written, not "
                                  f"{self.n_frames}")
@@ -262,6 +276,8 @@ class PartsWriter:
             shutil.rmtree(self.folder, ignore_errors=True)
             return self.result
         finally:
+            if self.result is None and not self.parts:  # nothing to continue from
+                shutil.rmtree(self.folder, ignore_errors=True)
             self._unlock()
 
     def _keep(self) -> None:

@@ -26,6 +26,8 @@ import logging
 import os
 from pathlib import Path
 
+from ..errors import OutputError
+
 log = logging.getLogger(__name__)
 
 __all__ = ["KEEP", "LAYOUT", "cache_enabled", "code_fingerprint", "track_dir", "track_key",
@@ -136,7 +138,7 @@ def store_track(key: str | None, track) -> None:
         track.save(_path(key), overwrite=True)
         partial_path(key).unlink(missing_ok=True)
         _prune(folder, KEEP)
-    except OSError as exc:
+    except (OSError, OutputError) as exc:  # a full disk is an OutputError (io.atomic)
         log.warning("could not keep the track in the cache (%s)", exc)
 
 

@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import OutputError
 from ..io.atomic import atomic_path
 from .camera import Pose
 from .solver import FrameState
@@ -128,19 +129,25 @@ class ProgressFile:
         Identifies the run (a file with another key is another run's).
     every : float
         Seconds between periodic saves (0 = after every frame).
+    best_effort : bool
+        A save that cannot be written (a full disk, an unwritable folder) is a warning and no
+        more saves follow, instead of an error: a cache's progress file, which must never fail
+        the job it belongs to (:mod:`facetransfer.track.cache`).
     """
 
-    def __init__(self, path, key: str, *, every: float = 20.0) -> None:
+    def __init__(self, path, key: str, *, every: float = 20.0, best_effort: bool = False) -> None:
         self.path = Path(path)
         self.key = key
         self.every = float(every)
+        self.best_effort = bool(best_effort)
         self._last = time.monotonic()
         self._wait = self.every
+        self._broken = False
         self.saves = 0
 
     def due(self) -> bool:
-        """Whether a periodic save is due."""
-        return time.monotonic() - self._last >= self._wait
+        """Whether a periodic save is due (never after a best-effort save failed)."""
+        return not self._broken and time.monotonic() - self._last >= self._wait
 
     def _entries(self, unreadable: str) -> dict | None:
         """The file's arrays by name; None when there is no file, or when it is not a readable
@@ -157,10 +164,20 @@ class ProgressFile:
 
     def _write(self, arrays: dict) -> None:
         """Write ``arrays`` to the file atomically (the folder is created if needed)."""
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        with atomic_path(self.path) as tmp:
-            with open(tmp, "wb") as fh:
-                np.savez(fh, **arrays)
+        if self._broken:
+            return
+        try:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(self.path) as tmp:
+                with open(tmp, "wb") as fh:
+                    np.savez(fh, **arrays)
+        except (OSError, OutputError) as exc:
+            if not self.best_effort:
+                raise
+            self._broken = True
+            log.warning("could not save the progress to %s (%s); going on without it",
+                        self.path, exc)
+            return
         self._last = time.monotonic()
         self.saves += 1
 

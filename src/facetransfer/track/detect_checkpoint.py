@@ -103,10 +103,13 @@ class DetectionCheckpoint(ProgressFile):
         Largest share of the time spent saving: the next periodic save waits at least the last
         save's duration divided by ``budget`` (the file grows with the clip; 30 min of video
         is about 290 MB; ``inf``: no limit).
+    best_effort : bool
+        See :class:`~facetransfer.track.checkpoint.ProgressFile`.
     """
 
-    def __init__(self, path, key: str, *, every: float = 20.0, budget: float = 0.05) -> None:
-        super().__init__(path, key, every=every)
+    def __init__(self, path, key: str, *, every: float = 20.0, budget: float = 0.05,
+                 best_effort: bool = False) -> None:
+        super().__init__(path, key, every=every, best_effort=best_effort)
         self.budget = float(budget)
         self._fit: tuple[str, SavedFit] | None = None   # the fit in progress, saved with each save
 

@@ -166,7 +166,8 @@ def _capture(video, model, frames, fps, max_frames, progress_factory, workers: i
                                source=str(video), workers=workers)
         else:
             tr = capture_resuming(video, model, partial, frames=frames[:max_frames],
-                                  source=str(video), progress=stage_progress, workers=workers)
+                                  source=str(video), progress=stage_progress, workers=workers,
+                                  best_effort=True)  # the track cache's: never fails the job
     return dataclasses.replace(tr, fps=float(fps))
 
 
@@ -192,16 +193,18 @@ def _partial(key: str | None) -> Path | None:
 
 
 def capture_resuming(video, model, partial, *, frames=None, options=None, source=None,
-                     fixed=None, progress=None, workers: int = 1):
+                     fixed=None, progress=None, workers: int = 1, best_effort: bool = False):
     """The capture tracker on the file ``video`` (or its decoded ``frames``) with its progress
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
-    fit), continued from there when it holds this run's: an interrupted run loses nothing."""
+    fit), continued from there when it holds this run's: an interrupted run loses nothing.
+    ``best_effort``: a progress file that cannot be written is a warning, not an error."""
     from .capture import capture_video
     from .detect_checkpoint import DetectionCheckpoint
     from .video_detect import detect_video
 
     clip = video if frames is None else frames
-    ck = DetectionCheckpoint.for_video(partial, video, None if frames is None else len(frames))
+    ck = DetectionCheckpoint.for_video(partial, video, None if frames is None else len(frames),
+                                       best_effort=best_effort)
     saved = ck.load()
     if saved is not None:
         log.info("%s: continued an interrupted run from frame %d", source,
