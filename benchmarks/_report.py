@@ -1,9 +1,12 @@
-"""What every benchmark script does around its measurements: its command line (``--out``)
-and writing its plot."""
+"""What every benchmark script does around its measurements: its command line (``--out``),
+the ``facetransfer`` command it times and the CPU its child processes took, and writing its
+plot."""
 
 from __future__ import annotations
 
 import argparse
+import resource
+import sys
 from pathlib import Path
 
 
@@ -23,3 +26,14 @@ def save_plot(fig, path: Path) -> None:
     fig.tight_layout()
     save_figure(fig, path)
     plt.close(fig)
+
+
+def facetransfer_exe() -> str:
+    """The console script of the running environment."""
+    return str(Path(sys.executable).parent / "facetransfer")
+
+
+def children_cpu() -> float:
+    """CPU seconds (user + system) of every finished child process and its own children."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime

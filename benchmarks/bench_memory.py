@@ -34,7 +34,7 @@ import sys
 import time
 from pathlib import Path
 
-from _report import arguments, save_plot  # benchmarks/ is on sys.path
+from _report import arguments, facetransfer_exe, save_plot  # benchmarks/ is on sys.path
 
 DATA = Path(os.environ.get("FACETRANSFER_DATA_DIR", "../shared/data")) / "video"
 CGROUP = Path("/sys/fs/cgroup/memory")
@@ -90,7 +90,7 @@ def _pss(pids: list[int]) -> tuple[int, int]:
 
 def run(target: Path, source: Path, out: Path, env: dict, cgroup: Path | None) -> dict:
     """The command once, its memory sampled; in ``cgroup`` when given."""
-    exe = str(Path(sys.executable).parent / "facetransfer")
+    exe = facetransfer_exe()
     cmd = [exe, "transfer", "--target", str(target), "--expression-from", str(source),
            "--out", str(out), "--overwrite", "--no-progress"]
     pre = None

@@ -30,7 +30,6 @@ from __future__ import annotations
 import json
 import os
 import re
-import resource
 import signal
 import subprocess
 import sys
@@ -40,26 +39,17 @@ from pathlib import Path
 
 import numpy as np
 
-from _report import arguments, save_plot  # benchmarks/ is on sys.path
+from _report import arguments, children_cpu, facetransfer_exe, save_plot  # benchmarks/ on sys.path
 
 DATA = Path(os.environ.get("FACETRANSFER_DATA_DIR", "../shared/data")) / "video"
-
-
-def _exe() -> str:
-    return str(Path(sys.executable).with_name("facetransfer"))
-
-
-def _children_cpu() -> float:
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
 
 
 def run(args: list[str], env: dict, interrupt_after: float | None = None) -> dict:
     """One run of ``facetransfer transfer ARGS`` in its own process group: wall and CPU
     seconds, exit status, the frame a continued render started from."""
-    t, c = time.perf_counter(), _children_cpu()
+    t, c = time.perf_counter(), children_cpu()
     # SIGINT as a terminal has it: a shell's background job starts with it ignored
-    p = subprocess.Popen([_exe(), "transfer", *args], env=env, stdout=subprocess.PIPE,
+    p = subprocess.Popen([facetransfer_exe(), "transfer", *args], env=env, stdout=subprocess.PIPE,
                          stderr=subprocess.PIPE, text=True, start_new_session=True,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     if interrupt_after is not None:
@@ -69,7 +59,7 @@ def run(args: list[str], env: dict, interrupt_after: float | None = None) -> dic
             os.killpg(p.pid, signal.SIGINT)
     out, err = p.communicate()
     found = re.search(r"continued an interrupted render from frame (\d+)", out)
-    return {"seconds": time.perf_counter() - t, "cpu_seconds": _children_cpu() - c,
+    return {"seconds": time.perf_counter() - t, "cpu_seconds": children_cpu() - c,
             "status": p.returncode, "resumed_from": int(found.group(1)) if found else 0,
             "stderr": err.strip().splitlines()[-1:] if p.returncode else []}
 

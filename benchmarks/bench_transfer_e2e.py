@@ -51,6 +51,7 @@ os.environ["FACETRANSFER_TRACK_CACHE"] = "off"
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
+from _report import children_cpu, facetransfer_exe  # noqa: E402  (benchmarks/ on sys.path)
 
 CRFS = (0, 10, 14, 18, 23, 28)
 DILATE = 8
@@ -82,18 +83,6 @@ def psnr(a: np.ndarray, b: np.ndarray, where: np.ndarray) -> float:
     return float("inf") if mse == 0 else 10 * np.log10(255.0 ** 2 / mse)
 
 
-def _exe() -> str:
-    return str(Path(sys.executable).parent / "facetransfer")
-
-
-def _children_cpu() -> float:
-    """CPU seconds (user + system) of every finished child process and its own children."""
-    import resource
-
-    r = resource.getrusage(resource.RUSAGE_CHILDREN)
-    return r.ru_utime + r.ru_stime
-
-
 def run_command(source: Path, target: Path, frames: int, out: Path, repeats: int = 2
                 ) -> tuple[list, list]:
     """Wall seconds of ``facetransfer transfer`` in a fresh process, ``repeats`` times in turn
@@ -102,12 +91,12 @@ def run_command(source: Path, target: Path, frames: int, out: Path, repeats: int
     together (what two cores must share: wall time cannot fall below half of it)."""
     times, cpu = [], []
     for _ in range(repeats):
-        t, c = time.perf_counter(), _children_cpu()
-        subprocess.run([_exe(), "transfer", "--target", str(target), "--expression-from",
+        t, c = time.perf_counter(), children_cpu()
+        subprocess.run([facetransfer_exe(), "transfer", "--target", str(target), "--expression-from",
                         str(source), "--out", str(out), "--max-frames", str(frames),
                         "--overwrite", "--no-progress"], check=True, capture_output=True)
         times.append(time.perf_counter() - t)
-        cpu.append(_children_cpu() - c)
+        cpu.append(children_cpu() - c)
     return times, cpu
 
 
@@ -116,7 +105,7 @@ def help_seconds(repeats: int = 3) -> float:
     times = []
     for _ in range(repeats):
         t = time.perf_counter()
-        subprocess.run([_exe(), "--help"], check=True, capture_output=True)
+        subprocess.run([facetransfer_exe(), "--help"], check=True, capture_output=True)
         times.append(time.perf_counter() - t)
     return min(times)
 

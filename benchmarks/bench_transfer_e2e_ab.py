@@ -31,7 +31,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from _revision import extract_src  # noqa: E402
-from bench_transfer_e2e import _children_cpu  # noqa: E402
+from _report import children_cpu, facetransfer_exe  # noqa: E402
 
 TARGET, SOURCE, FRAMES = "driving_d9.mp4", "driving_d6.mp4", 300
 
@@ -47,12 +47,12 @@ def command(src: Path, out: Path) -> tuple[float, float]:
     """Wall and CPU seconds of one ``facetransfer transfer`` with ``src`` first on the path."""
     target, source = _videos()
     env = dict(os.environ, PYTHONPATH=str(src))
-    exe = str(Path(sys.executable).parent / "facetransfer")
-    t, c = time.perf_counter(), _children_cpu()
+    exe = facetransfer_exe()
+    t, c = time.perf_counter(), children_cpu()
     subprocess.run([exe, "transfer", "--target", str(target), "--expression-from", str(source),
                     "--out", str(out), "--max-frames", str(FRAMES), "--overwrite",
                     "--no-progress"], check=True, capture_output=True, env=env)
-    return time.perf_counter() - t, _children_cpu() - c
+    return time.perf_counter() - t, children_cpu() - c
 
 
 def peer() -> float:

@@ -290,6 +290,24 @@ def test_parallel_rendering_is_deterministic(quick_model, topo, synthetic):
         np.testing.assert_array_equal(a, b)
 
 
+@pytest.mark.parametrize("workers, processes", [(1, False), (2, False), (2, True)])
+def test_a_render_started_later_gives_the_same_frames(quick_model, topo, synthetic, workers,
+                                                      processes):
+    """``rewrite_frames(start=k)``: frames k.. equal those of a whole render, here, on threads
+    and in forked processes (a render continued after an interruption)."""
+    fa, ta, fb, tb, truth = synthetic
+    new = recombine(tb, expression=ta)
+    kw = dict(source_frames=fa, source_track=ta, topo=topo)
+    whole = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, workers=1, **kw)]
+    later = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, workers=workers,
+                                                processes=processes, start=2, **kw)]
+    assert len(later) == len(whole) - 2
+    for a, b in zip(later, whole[2:]):
+        np.testing.assert_array_equal(a, b)
+    with pytest.raises(rwo.RewriteError, match="outside"):
+        next(rw.rewrite_frames(fb, tb, new, quick_model, start=len(whole) + 1, **kw))
+
+
 def test_erode_equals_scipy_binary_erosion():
     import scipy.ndimage as ndi
 

@@ -107,7 +107,12 @@ def render_key(plan, model, options, video_options) -> str | None:
             "video": repr(video_options), "fps": float(plan.fps), "parts": PART_FRAMES,
             "performance": bool(plan.performance)}
     h.update(json.dumps(what, sort_keys=True).encode())
-    for frames in (plan.target_frames, plan.mouth_frames, plan.texture_frames):
+    digested: dict[int, int] = {}  # a clip that is also another role is digested once
+    for role, frames in enumerate((plan.target_frames, plan.mouth_frames, plan.texture_frames)):
+        if frames is not None and id(frames) in digested:
+            h.update(f"as {digested[id(frames)]}".encode())
+            continue
+        digested[id(frames)] = role
         _update_frames(h, frames)
     for tr in (plan.target_track, plan.new_track, plan.mouth_track, plan.texture_track):
         _update_track(h, tr)
@@ -121,17 +126,16 @@ def code_fingerprint() -> str:
     rendered frame or its encoding (NumPy, OpenCV, numba, imageio-ffmpeg's ffmpeg)."""
     from importlib import metadata
 
+    import cv2
+    import numba
+
+    from .track.cache import code_digest
+
     root = Path(__file__).resolve().parent
-    h = hashlib.sha256()
-    for f in sorted(root.rglob("*.py")) + sorted((root / "data").glob("*.json")):
-        h.update(str(f.relative_to(root)).encode())
-        h.update(f.read_bytes())
-    for lib in ("numpy", "opencv-python-headless", "numba", "imageio-ffmpeg"):
-        try:
-            h.update(f"{lib}={metadata.version(lib)}".encode())
-        except metadata.PackageNotFoundError:
-            h.update(f"{lib}=none".encode())
-    return h.hexdigest()[:16]
+    files = sorted(root.rglob("*.py")) + sorted((root / "data").glob("*.json"))
+    return code_digest(root, files, f"numpy={np.__version__} cv2={cv2.__version__} "
+                                    f"numba={numba.__version__} "
+                                    f"imageio-ffmpeg={metadata.version('imageio-ffmpeg')}")
 
 
 def parts_folder(key: str) -> Path:

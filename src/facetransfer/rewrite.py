@@ -438,30 +438,16 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
     n, start = new_track.n_frames, int(start)
     if not 0 <= start <= n:
         raise RewriteError(f"start frame {start} is outside the {n} frames")
-    if start:
-        one = _Shifted(one, start)
-    yield from _render(one, target_frames, n - start, workers, processes, progress, start)
+    yield from _render(one, target_frames, range(start, n), workers, processes, progress)
 
 
-@dataclass(frozen=True)
-class _Shifted:
-    """``one(i + start)``: the per-frame renderer of a render that starts at ``start``."""
-
-    one: Callable[[int], RewriteFrame]
-    start: int
-
-    def __call__(self, i: int) -> RewriteFrame:
-        return self.one(i + self.start)
-
-
-def _render(one, target_frames, n: int, workers: int | None, processes: bool | None, progress,
-            offset: int = 0):
-    """Yield ``one(i)`` for i < n in order: here, on threads or in forked processes (see
-    :func:`rewrite_frames`' ``workers`` and ``processes``); ``one(i)`` renders the target frame
-    ``offset + i``."""
+def _render(one, target_frames, todo: range, workers: int | None, processes: bool | None,
+            progress):
+    """Yield ``one(i)`` for i in ``todo`` in order: here, on threads or in forked processes
+    (see :func:`rewrite_frames`' ``workers`` and ``processes``)."""
     workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
-    if workers == 1 or n < 2:
-        for i in range(n):
+    if workers == 1 or len(todo) < 2:
+        for i in todo:
             yield one(i)
             if progress:
                 progress(1)
@@ -469,11 +455,11 @@ def _render(one, target_frames, n: int, workers: int | None, processes: bool | N
     import multiprocessing as mp
 
     if processes is None:
-        processes = _RENDER_IN_PROCESSES and n >= 16  # worth a fork for longer clips only
+        processes = _RENDER_IN_PROCESSES and len(todo) >= 16  # worth a fork for long clips only
     if processes and "fork" in mp.get_all_start_methods():
-        yield from _render_in_processes(one, target_frames, n, workers, progress, offset)
+        yield from _render_in_processes(one, target_frames, todo, workers, progress)
     else:
-        yield from _render_in_threads(one, n, workers, progress)
+        yield from _render_in_threads(one, todo, workers, progress)
 
 
 def _check_clip(target_frames, target_track, new_track, source_track, with_mouth: bool
@@ -783,8 +769,8 @@ class _ClipRenderer:
                              mouth_ring=self.ring, lip_tint=self.lip_tint)
 
 
-def _render_in_threads(one, n: int, workers: int, progress):
-    """Yield ``one(i)`` for i < n, computed on ``workers`` threads, in order.
+def _render_in_threads(one, todo: range, workers: int, progress):
+    """Yield ``one(i)`` for i in ``todo``, computed on ``workers`` threads, in order.
 
     Frames are independent: the rasteriser and most numpy kernels release the GIL; the
     look-ahead is bounded (twice the workers)."""
@@ -793,7 +779,7 @@ def _render_in_threads(one, n: int, workers: int, progress):
 
     with ThreadPoolExecutor(max_workers=workers) as pool:
         pending: deque = deque()
-        nxt = 0
+        nxt, n = todo.start, todo.stop
         while nxt < n or pending:
             while nxt < n and len(pending) < 2 * workers:
                 pending.append(pool.submit(one, nxt))
@@ -819,30 +805,28 @@ _RENDER_JOB: Callable | None = None
 
 def _render_job(i: int):
     frame = _RENDER_JOB(i)
-    return _crop_of(np.asarray(_RENDER_FRAMES[_RENDER_OFFSET + i]), frame)
+    return _crop_of(np.asarray(_RENDER_FRAMES[i]), frame)
 
 
 _RENDER_FRAMES = None
-_RENDER_OFFSET = 0
 
 
-def _render_in_processes(one, target_frames, n: int, workers: int, progress, offset: int = 0):
-    """Yield ``one(i)`` for i < n, computed in ``workers`` forked processes, in order (the
-    target frame of ``one(i)`` is ``offset + i``).
+def _render_in_processes(one, target_frames, todo: range, workers: int, progress):
+    """Yield ``one(i)`` for i in ``todo``, computed in ``workers`` forked processes, in order.
 
     Workers send back only the changed crop of each frame (:func:`_crop_of`); if the pool
     breaks, the remaining frames are rendered here."""
-    global _RENDER_JOB, _RENDER_FRAMES, _RENDER_OFFSET
+    global _RENDER_JOB, _RENDER_FRAMES
     import multiprocessing as mp
     from collections import deque
     from concurrent.futures import ProcessPoolExecutor
     from concurrent.futures.process import BrokenProcessPool
 
-    _RENDER_JOB, _RENDER_FRAMES, _RENDER_OFFSET = one, target_frames, offset
+    _RENDER_JOB, _RENDER_FRAMES = one, target_frames
+    nxt, n = todo.start, todo.stop
     try:
         pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"))
         pending: deque = deque()
-        nxt = 0
         try:
             pending.append(pool.submit(_render_job, nxt))  # forks the workers now
             nxt += 1
@@ -850,12 +834,12 @@ def _render_in_processes(one, target_frames, n: int, workers: int, progress, off
             _RENDER_JOB, _RENDER_FRAMES = None, None
     except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. in a daemon process)
         log.info("no worker processes (%s): rendering here", exc)
-        for i in range(n):
+        for i in todo:
             yield one(i)
             if progress:
                 progress(1)
         return
-    done = 0
+    done = todo.start
     broken = False
     try:
         while done < n:
@@ -865,7 +849,7 @@ def _render_in_processes(one, target_frames, n: int, workers: int, progress, off
                         pending.append(pool.submit(_render_job, nxt))
                         nxt += 1
                     part = pending.popleft().result()
-                    res = _paste(np.asarray(target_frames[offset + done]), part)
+                    res = _paste(np.asarray(target_frames[done]), part)
                 except BrokenProcessPool as exc:
                     log.warning("render workers failed (%s); rendering here", exc)
                     broken = True

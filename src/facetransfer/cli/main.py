@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import functools
 import importlib
 import logging
 import os
@@ -160,7 +161,11 @@ def _default_sigterm_in_child() -> None:
         signal.signal(signal.SIGTERM, signal.SIG_DFL)
 
 
-_AT_FORK: list = []
+@functools.cache
+def _reset_sigterm_in_children() -> None:
+    """Register :func:`_default_sigterm_in_child` for every later fork (once: a registration
+    cannot be undone)."""
+    os.register_at_fork(after_in_child=_default_sigterm_in_child)
 
 
 def _catching_sigterm():
@@ -171,9 +176,7 @@ def _catching_sigterm():
 
     if threading.current_thread() is not threading.main_thread():
         return None
-    if not _AT_FORK:
-        os.register_at_fork(after_in_child=_default_sigterm_in_child)
-        _AT_FORK.append(True)
+    _reset_sigterm_in_children()
     return signal.signal(signal.SIGTERM, _terminated)
 
 

@@ -267,11 +267,32 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
             "-pix_fmt", "yuv420p"]
     if opt.codec == "h265":
         args += ["-x265-params", "log-level=error"]
-        if suffix in (".mp4", ".m4v", ".mov"):
-            args += ["-tag:v", "hvc1"]  # what Apple players expect of HEVC in MP4
-    if suffix in (".mp4", ".m4v", ".mov"):
-        args += ["-movflags", "+faststart"]
-    return args
+    return args + _container_args(opt, suffix)
+
+
+def _container_args(opt: VideoOptions, suffix: str) -> list[str]:
+    """ffmpeg output arguments an MP4 / QuickTime file asks of its video: HEVC tagged ``hvc1``
+    (what Apple players expect) and the index at the front (``+faststart``)."""
+    if suffix not in (".mp4", ".m4v", ".mov"):
+        return []
+    return (["-tag:v", "hvc1"] if opt.codec == "h265" else []) + ["-movflags", "+faststart"]
+
+
+def _stored_size(size: tuple[int, int], codec: str) -> tuple[int, int]:
+    """``(width, height)`` as a codec stores frames of ``size``: 4:2:0 rounds both up to even,
+    ProRes 4:2:2 the width only (edge pixels repeated)."""
+    w, h = int(size[0]), int(size[1])
+    return w + w % 2, h + (h % 2 if codec != "prores" else 0)
+
+
+def _audio_input_args(audio_from, codec: str, fmt: str, *, start: float = 0.0,
+                      duration: float) -> list[str]:
+    """ffmpeg arguments adding the audio of ``audio_from`` (in ``codec``) as the second input
+    of a video written into the container ``fmt``: from ``start`` seconds, cut to
+    ``duration``, copied or encoded as :func:`_audio_codec_args` says."""
+    return [*(["-ss", f"{start:.3f}"] if start else []), "-t", f"{duration:.3f}",
+            "-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0",
+            *_audio_codec_args(codec, fmt)]
 
 
 _CAUSES = ("No space left", "Disk quota", "File too large", "Permission denied",
@@ -505,12 +526,11 @@ class VideoWriter:
     def _open_ffmpeg(self) -> None:
         exe = require_encoder(self.options.codec)
         w, h = self.size
-        even_h = self.options.codec != "prores"  # 4:2:0 halves both, ProRes 4:2:2 the width
         # 4:2:0 codecs get their planes from OpenCV (BT.601 limited range, as ffmpeg's own
         # conversion; chroma the mean of each 2x2 block): half the bytes through the pipe and
         # no scaler in ffmpeg (BENCHMARKS.md, "End to end")
-        self._pipe_format = "yuv420p" if even_h else "rgb24"
-        self.stored_size = (w + w % 2, h + (h % 2 if even_h else 0))
+        self._pipe_format = "rgb24" if self.options.codec == "prores" else "yuv420p"
+        self.stored_size = _stored_size(self.size, self.options.codec)
         if self.stored_size != self.size:
             log.info("%s: odd frame size %dx%d stored as %dx%d (edge pixels repeated)",
                      self.path, w, h, *self.stored_size)
@@ -541,10 +561,8 @@ class VideoWriter:
         if codec is None:
             return []
         self._inline_audio = True
-        start = ["-ss", f"{self.audio_start:.3f}"] if self.audio_start else []
-        return [*start, "-t", f"{self.expected / self.fps:.3f}", "-i", str(self.audio_from),
-                "-map", "0:v:0", "-map", "1:a:0",
-                *_audio_codec_args(codec, VIDEO_SUFFIXES[self.path.suffix.lower()])]
+        return _audio_input_args(self.audio_from, codec, VIDEO_SUFFIXES[self.path.suffix.lower()],
+                                 start=self.audio_start, duration=self.expected / self.fps)
 
     def write(self, frame: np.ndarray) -> None:
         """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size."""

@@ -32,9 +32,9 @@ import numpy as np
 
 from ..errors import OutputError, VideoError
 from .atomic import atomic_path, locked_elsewhere, write_text_atomic
-from .video import (VIDEO_SUFFIXES, VideoOptions, VideoWriter, WrittenVideo, _audio_codec_args,
-                    _ffmpeg_error, _fps_arg, _require_ffmpeg, audio_codec, check_video_output,
-                    stored_frame_count)
+from .video import (VIDEO_SUFFIXES, VideoOptions, VideoWriter, WrittenVideo, _audio_input_args,
+                    _container_args, _ffmpeg_error, _fps_arg, _require_ffmpeg, _stored_size,
+                    audio_codec, check_video_output, stored_frame_count)
 
 log = logging.getLogger(__name__)
 
@@ -322,12 +322,8 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
     listing.write_text("ffconcat version 1.0\n" + "".join(f"file '{p.name}'\n" for p in parts))
     fmt = VIDEO_SUFFIXES[out.suffix.lower()]
     codec = None if audio_from is None else audio_codec(audio_from)
-    audio = [] if codec is None else ["-t", f"{n / fps:.3f}", "-i", str(audio_from),
-                                      "-map", "0:v:0", "-map", "1:a:0",
-                                      *_audio_codec_args(codec, fmt)]
-    extra = ["-movflags", "+faststart"] if fmt in ("mp4", "mov") else []
-    if opt.codec == "h265" and fmt in ("mp4", "mov"):
-        extra += ["-tag:v", "hvc1"]
+    audio = [] if codec is None else _audio_input_args(audio_from, codec, fmt, duration=n / fps)
+    extra = _container_args(opt, out.suffix.lower())
     if fmt == "avi":  # a constant rate (else the parts' 1/15360 s ticks: "600 fps"), its tag
         extra += ["-r", _fps_arg(fps)] + (["-tag:v", "H264"] if opt.codec == "h264" else [])
     with atomic_path(out, overwrite=True) as tmp:
@@ -343,6 +339,4 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
                              f"file {stored}")
     with contextlib.suppress(OSError):
         listing.unlink()
-    w, h = int(size[0]), int(size[1])
-    stored_size = (w + w % 2, h + (h % 2 if opt.codec != "prores" else 0))  # as VideoWriter
-    return WrittenVideo(out, n, stored_size, codec is not None)
+    return WrittenVideo(out, n, _stored_size(size, opt.codec), codec is not None)

@@ -30,8 +30,8 @@ from ..errors import OutputError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["KEEP", "LAYOUT", "cache_enabled", "code_fingerprint", "track_dir", "track_key",
-           "cached_track", "store_track", "partial_path"]
+__all__ = ["KEEP", "LAYOUT", "cache_enabled", "code_digest", "code_fingerprint", "track_dir",
+           "track_key", "cached_track", "store_track", "partial_path"]
 
 #: The cache's layout: a change of what a key means (or of the trackers' results) changes it.
 LAYOUT = "tracks-1"
@@ -77,16 +77,24 @@ def code_fingerprint() -> str:
     and the point flow)."""
     from importlib import metadata
 
+    import cv2
+
     root = Path(__file__).resolve().parent.parent
     files = sorted((root / "track").glob("*.py")) + sorted((root / "data").glob("*.json"))
     files += [root / n for n in ("arkit.py", "model.py", "tensor.py")]
+    return code_digest(root, files, f"mediapipe={metadata.version('mediapipe')} "
+                                    f"cv2={cv2.__version__}")
+
+
+def code_digest(root: Path, files, versions: str) -> str:
+    """A digest of ``files`` (their paths under ``root`` and contents; a missing one counts
+    as empty) and of ``versions`` (the libraries' versions, as the caller names them): what a
+    cache's key holds of the code that made an entry (also :mod:`facetransfer.render_cache`)."""
     h = hashlib.sha256()
     for f in files:
-        h.update(f.name.encode())
+        h.update(str(Path(f).relative_to(root)).encode())
         h.update(f.read_bytes() if f.is_file() else b"")
-    import cv2
-
-    h.update(f"mediapipe={metadata.version('mediapipe')} cv2={cv2.__version__}".encode())
+    h.update(versions.encode())
     return h.hexdigest()[:16]
 
 
