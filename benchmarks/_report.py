@@ -1,6 +1,6 @@
 """What every benchmark script does around its measurements: its command line (``--out``),
 the ``facetransfer`` command it times and the CPU its child processes took, and writing its
-plot."""
+JSON and its plot."""
 
 from __future__ import annotations
 
@@ -15,6 +15,15 @@ def arguments(doc: str) -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(description=doc.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks", help="output folder")
     return ap
+
+
+def save_json(report: dict, path: Path) -> None:
+    """Write ``report`` to ``path`` as indented JSON, atomically."""
+    import json
+
+    from facetransfer.io.atomic import write_text_atomic
+
+    write_text_atomic(path, json.dumps(report, indent=1))
 
 
 def save_plot(fig, path: Path) -> None:

@@ -27,14 +27,13 @@ Writes ``OUT/memory.json`` and ``OUT/memory.png``.
 
 from __future__ import annotations
 
-import json
 import os
 import subprocess
 import sys
 import time
 from pathlib import Path
 
-from _report import arguments, facetransfer_exe, save_plot  # benchmarks/ is on sys.path
+from _report import arguments, facetransfer_exe, save_json, save_plot  # benchmarks/ is on sys.path
 
 DATA = Path(os.environ.get("FACETRANSFER_DATA_DIR", "../shared/data")) / "video"
 CGROUP = Path("/sys/fs/cgroup/memory")
@@ -199,10 +198,7 @@ def main() -> int:
                 g.rmdir()
             except OSError:
                 pass
-    from facetransfer.io.atomic import atomic_path
-
-    with atomic_path(out / "memory.json", overwrite=True) as p:
-        Path(p).write_text(json.dumps(report, indent=1))
+    save_json(report, out / "memory.json")
     plot(report, out / "memory.png")
     return 0
 

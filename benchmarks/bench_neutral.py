@@ -19,12 +19,11 @@ Writes ``OUT/neutral.json`` and ``OUT/neutral.png``.
 
 from __future__ import annotations
 
-import json
 import os
 import sys
 from pathlib import Path
 
-from _report import arguments, save_plot  # benchmarks/ is on sys.path
+from _report import arguments, save_json, save_plot  # benchmarks/ is on sys.path
 
 import numpy as np
 
@@ -110,7 +109,6 @@ def main() -> int:
     args = ap.parse_args()
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from facetransfer.default_model import load_default_model
-    from facetransfer.io.atomic import atomic_path
 
     data = Path(os.environ.get("FACETRANSFER_DATA_DIR", "../shared/data")) / "video"
     out = Path(args.out)
@@ -129,8 +127,7 @@ def main() -> int:
         t, c = report["summary"]["tracked"][n], report["summary"]["calibrated"][n]
         print(f"  {n:16s} level gap {t['level_gap']:.3f} -> {c['level_gap']:.3f}; r "
               f"{t['r']} -> {c['r']}; amplitude {t['amplitude']} -> {c['amplitude']}")
-    with atomic_path(out / "neutral.json", overwrite=True) as p:
-        Path(p).write_text(json.dumps(report, indent=1))
+    save_json(report, out / "neutral.json")
     plot(report, out / "neutral.png")
     return 0
 

@@ -27,7 +27,6 @@ Writes ``OUT/render_resume.json`` and ``OUT/render_resume.png``.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import signal
@@ -39,7 +38,8 @@ from pathlib import Path
 
 import numpy as np
 
-from _report import arguments, children_cpu, facetransfer_exe, save_plot  # benchmarks/ on sys.path
+# benchmarks/ is on sys.path
+from _report import arguments, children_cpu, facetransfer_exe, save_json, save_plot
 
 DATA = Path(os.environ.get("FACETRANSFER_DATA_DIR", "../shared/data")) / "video"
 
@@ -165,7 +165,7 @@ def main() -> int:
               "rounds": args.rounds, "interrupt_at": args.at, "summary": summary(res["runs"]),
               "resumed_from": int(np.median([x["resumed_from"] for x in res["runs"]["resumed"]])),
               **res}
-    (out / "render_resume.json").write_text(json.dumps(report, indent=2))
+    save_json(report, out / "render_resume.json")
     plot(report, out / "render_resume.png")
     for k, v in report["summary"].items():
         print(f"{k}: {v['median_seconds']:.1f} s, {v['median_cpu_seconds']:.1f} CPU-s")

@@ -35,7 +35,6 @@ Writes ``OUT/transfer_e2e.json`` and ``OUT/transfer_e2e.png``.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import subprocess
 import sys
@@ -51,7 +50,7 @@ os.environ["FACETRANSFER_TRACK_CACHE"] = "off"
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import numpy as np  # noqa: E402
-from _report import children_cpu, facetransfer_exe  # noqa: E402  (benchmarks/ on sys.path)
+from _report import children_cpu, facetransfer_exe, save_json  # noqa: E402  (on sys.path)
 
 CRFS = (0, 10, 14, 18, 23, 28)
 DILATE = 8
@@ -254,7 +253,6 @@ def main() -> int:
     ap.add_argument("--target", default="driving_d9")
     args = ap.parse_args()
     from facetransfer.assets import data_dir
-    from facetransfer.io.atomic import atomic_path
     from facetransfer.io.video import video_info
 
     out = Path(args.out)
@@ -296,8 +294,7 @@ def main() -> int:
               "shares": {k: v / total for k, v in stages.items() if k != "total"},
               "mediapipe": peer,
               "outside_fraction": float((~masks).mean()), "outside": rows}
-    with atomic_path(out / "transfer_e2e.json", overwrite=True) as p:
-        Path(p).write_text(json.dumps(report, indent=2))
+    save_json(report, out / "transfer_e2e.json")
     plot(report, out / "transfer_e2e.png")
     return 0
 
