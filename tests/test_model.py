@@ -66,6 +66,38 @@ def test_synthesize_batch_with_modes_constant_over_the_batch(constant):
         assert np.allclose(batch[b].ravel(), ref, atol=1e-12)
     sub = m.synthesize(W, vertices=np.array([3, 7]))
     assert np.allclose(sub, batch[:, [3, 7]], atol=1e-12)
+    many = np.arange(1, 40, 3)  # an eighth of the vertices or more: the contracted identity
+    assert np.allclose(m.synthesize(W, vertices=many), batch[:, many], atol=1e-12)
+
+
+@pytest.mark.parametrize("many", [False, True])
+def test_synthesize_vertices_from_the_contracted_identity(many):
+    """A selection of vertices with one identity over the batch takes the rows of the core
+    contracted with it (kept from a whole-mesh call, or made for a large selection): the same
+    values as the whole mesh's rows, for one frame and a batch, whatever the memo holds."""
+    from facetransfer import model as model_module
+
+    ds = random_dataset(d=(5, 4), seed=6)
+    m = build_model(ds, refine=False)
+    rng = np.random.default_rng(7)
+    ident, expr = rng.normal(size=5), rng.normal(size=(4, 4))
+    W = {"identity": np.tile(ident, (4, 1)), "expression": expr}
+    whole = m.synthesize(W)
+    verts = np.arange(0, 40, 2) if many else np.array([9, 2, 31])
+    model_module._FIRST_MODE.pop(m, None)
+    cold = m.synthesize(W, vertices=verts)  # nothing kept: memo only for a large selection
+    assert (m in model_module._FIRST_MODE) == many
+    m.synthesize({"identity": ident, "expression": expr[0]})  # one frame keeps its identity
+    warm = m.synthesize(W, vertices=verts)
+    one = m.synthesize({"identity": ident, "expression": expr[1]}, vertices=verts)
+    for got in (cold, warm):
+        assert np.allclose(got, whole[:, verts], atol=1e-12)
+    assert np.allclose(one, whole[1, verts], atol=1e-12)
+    # another identity per row: the core's own rows, as before
+    W2 = {"identity": rng.normal(size=(4, 5)), "expression": expr}
+    assert np.allclose(m.synthesize(W2, vertices=verts), m.synthesize(W2)[:, verts], atol=1e-12)
+    with pytest.raises(ShapeError, match="vertex indices"):
+        m.synthesize(W, vertices=np.array([0, 40]))
 
 
 def test_synthesize_matches_explicit_mode_products():
