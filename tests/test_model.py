@@ -165,6 +165,8 @@ def test_mode_basis_is_eq9(mode):
     w2 = dict(w, **{mode: rng.normal(size=len(w[mode]))})
     assert np.allclose(B @ w2[mode], m.synthesize(w2)[vs], atol=1e-12)
     assert np.allclose(m.mode_basis(mode, w)[vs], B)
+    # the identity's contraction now kept (synthesize): the same basis from its rows
+    assert np.allclose(m.mode_basis(mode, w, vertices=vs), B, atol=1e-12)
 
 
 def test_truncated_model_reports_explained_variance_and_error():

@@ -334,12 +334,17 @@ class MultilinearModel:
         """
         k = self.mode_index(mode)
         ws = self._weights_list(weights)
-        core = self._core_rows(vertices)
-        out = core
-        for j in reversed(range(self.n_modes)):
-            if j == k:
-                continue
-            out = _contract_axis(out, j + 1, ws[j])
+        first = 0
+        if k != 0 and (vertices is None or self._first_mode_worth(ws[0], vertices)):
+            out, _ = self._first_mode_contracted(ws)  # the identity's, kept (synthesize)
+            if vertices is not None:
+                out = out[self._rows(vertices)]
+            first = 1
+        else:
+            out = self._core_rows(vertices)
+        for j in reversed(range(first, self.n_modes)):
+            if j != k:
+                out = _contract_axis(out, j + 1 - first, ws[j])
         return out.reshape(-1, 3, self.ranks[k])
 
     # ----------------------------------------------------------------- identity & i/o
