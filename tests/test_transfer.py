@@ -81,6 +81,18 @@ def test_resample_track_interpolates_and_propagates_lost():
     np.testing.assert_array_equal(rs.lost, [False, False, False, True, True, True, False])
 
 
+def test_resample_track_keeps_a_constant_identity_bit_for_bit():
+    """Between two equal rows the interpolation is that row exactly (the render contracts a
+    constant identity once; an ulp apart, it would take it for one that changes)."""
+    tr = make_track(40, r=(40, 4), seed=3)
+    tm = time_map(40, 29.97, 47, 25.0)
+    rs = resample_track(tr, tm)
+    a = tr.weights["identity"][0]
+    assert (rs.weights["identity"] == a).all()
+    f = np.asarray(tm.source_time) % 1
+    assert (a * (1 - f[:, None]) + a * f[:, None] != a).any()  # what the other form gives
+
+
 # ------------------------------------------------------------------------------ recombine
 def test_recombine_expression_from_source_keeps_target_identity_and_pose():
     tgt, src = make_track(8, seed=1), make_track(8, seed=2)

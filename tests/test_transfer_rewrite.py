@@ -308,6 +308,28 @@ def test_a_render_started_later_gives_the_same_frames(quick_model, topo, synthet
         next(rw.rewrite_frames(fb, tb, new, quick_model, start=len(whole) + 1, **kw))
 
 
+def test_an_identity_ulps_apart_is_contracted_once(quick_model, topo, synthetic):
+    """A source track whose identity differs by an ulp or two from frame to frame (resampled
+    or filtered elsewhere) renders as its constant identity does, through one contracted
+    basis; an identity that truly changes keeps every frame's own."""
+    fa, ta, fb, tb, truth = synthetic
+    new = recombine(tb, expression=ta)
+    ident = ta.weights["identity"]
+    nudged = ident * (1 + np.arange(len(ident))[:, None] * 2e-16)
+    assert (nudged != ident[0]).any()
+    ta2 = dataclasses.replace(ta, weights=dict(ta.weights, identity=nudged))
+    kw = dict(source_frames=fa, topo=topo, workers=1)
+    exact = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, source_track=ta, **kw)]
+    near = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, source_track=ta2, **kw)]
+    for a, b in zip(exact, near):
+        np.testing.assert_array_equal(a, b)
+    meshes = rw._FrameMeshes(quick_model, {"source": ta2}, ta2.n_frames)
+    assert meshes.basis("source").modes_left == 1
+    moved = ident + np.linspace(0, 1e-3, len(ident))[:, None]
+    assert (rw._constant_if_nearly(moved) == moved).all()
+    assert (rw._constant_if_nearly(nudged) == ident[0]).all()
+
+
 def test_erode_equals_scipy_binary_erosion():
     import scipy.ndimage as ndi
 

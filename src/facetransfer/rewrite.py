@@ -542,7 +542,7 @@ class _FrameMeshes:
                 tr = self.tracks[kind]
                 names = self.model.mode_names if kind == "new" else tr.mode_names
                 basis = self._bases[kind] = self.model.clip_basis(
-                    {m: tr.weights[m][:self.n] for m in names})
+                    {m: _constant_if_nearly(tr.weights[m][:self.n]) for m in names})
         return basis
 
     def frame(self, kind: str, i: int) -> np.ndarray:
@@ -555,6 +555,19 @@ class _FrameMeshes:
             i0 = i - i % k
             chunks[kind] = held = (i0, basis.meshes(np.arange(i0, min(i0 + k, self.n))))
         return held[1][i - held[0]]
+
+
+def _constant_if_nearly(w: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
+    """A mode's weights ``(F, r)``, their first row repeated when every row is within ``rtol``
+    of it (relative to its largest entry): an identity a few ulps apart over the clip (from a
+    track resampled or filtered elsewhere) is contracted once (:meth:`facetransfer.model.
+    MultilinearModel.clip_basis`), not carried through every frame's product (~300 times the
+    cost, and the clip's meshes made whole)."""
+    w = np.asarray(w)
+    if w.ndim != 2 or len(w) < 2:
+        return w
+    tol = rtol * max(1.0, float(np.abs(w[0]).max()))
+    return np.broadcast_to(w[0], w.shape) if float(np.abs(w - w[0]).max()) <= tol else w
 
 
 def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: int,
