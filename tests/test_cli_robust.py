@@ -162,3 +162,47 @@ def test_console_script_sets_serial_blas_before_numpy_loads_openblas():
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert r.returncode == 0, r.stderr
     assert r.stdout.split()[-2:] == ["1", "True"]
+
+
+# ------------------------------------------------------------------------------ --no-progress
+class _Terminal:
+    """A stderr that says it is a terminal and keeps what is written to it."""
+
+    def __init__(self) -> None:
+        self.text = ""
+
+    def isatty(self) -> bool:
+        return True
+
+    def write(self, s: str) -> int:
+        self.text += s
+        return len(s)
+
+    def flush(self) -> None:
+        pass
+
+
+def test_every_command_takes_no_progress_and_it_silences_the_bars(monkeypatch):
+    """Every command and subcommand accepts ``--no-progress``; a bar then draws nothing even on
+    a terminal, where without it it draws."""
+    from facetransfer.cli import common
+    from facetransfer.cli.main import _leaf_parsers, build_parser
+
+    parser = build_parser()
+    leaves = list(_leaf_parsers(parser))
+    assert len(leaves) >= 15
+    assert all("--no-progress" in p._option_string_actions for p in leaves)
+    assert parser.parse_args(["track", "v.mp4", "--no-progress"]).no_progress
+    assert not parser.parse_args(["model", "info", "m.npz"]).no_progress
+    try:
+        for enabled in (True, False):
+            term = _Terminal()
+            monkeypatch.setattr(sys, "stderr", term)
+            common.set_progress(enabled)
+            assert common.progress_shown() is enabled
+            cb, close = common.tqdm_progress("frames")
+            cb(3, 10)
+            close()
+            assert ("frames" in term.text) is enabled
+    finally:
+        common.set_progress(True)

@@ -17,6 +17,27 @@ MODEL_HELP = ("multilinear model (.npz); default: the default model (ict-arkit, 
               "blendshapes), built once into the user cache on first use")
 
 
+#: ``--no-progress`` (every command takes it): progress bars off even on a terminal.
+_PROGRESS_OFF = False
+
+
+def set_progress(enabled: bool) -> None:
+    """Progress bars on (the default: where stderr is a terminal) or off (``--no-progress``)."""
+    global _PROGRESS_OFF
+    _PROGRESS_OFF = not enabled
+
+
+def progress_disabled() -> bool | None:
+    """tqdm's ``disable`` for a command's bars: True after ``--no-progress``, else None (tqdm's
+    own rule: a bar only where stderr is a terminal, never in a log file or a pipe)."""
+    return True if _PROGRESS_OFF else None
+
+
+def progress_shown() -> bool:
+    """Whether a bar would be drawn now: stderr is a terminal and no ``--no-progress``."""
+    return not _PROGRESS_OFF and sys.stderr.isatty()
+
+
 def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video") -> None:
     """Add ``--codec``, ``--crf`` and ``--preset`` (one definition for every command that
     writes video)."""
@@ -51,7 +72,7 @@ def tqdm_progress(desc: str, *, unit: str = "item", enabled: bool = True):
 
             state["bar"] = tqdm(total=total, desc=desc, unit=unit, leave=False,
                                 dynamic_ncols=True, file=sys.stderr,
-                                disable=not enabled or not sys.stderr.isatty())
+                                disable=True if not enabled else progress_disabled())
         bar = state["bar"]
         bar.total = total
         bar.update(done - bar.n)

@@ -13,6 +13,7 @@ import argparse
 import sys
 
 from ..export import FORMATS
+from .common import progress_disabled
 
 
 def register(sub) -> None:
@@ -64,7 +65,7 @@ def _lift(track, model, args):
     from ..export.gltf import lift_clip_texture
 
     with tqdm(total=(track.n_frames + args.texture_step - 1) // args.texture_step,
-              desc="texture lift", unit="frame", disable=not sys.stderr.isatty()) as bar:
+              desc="texture lift", unit="frame", disable=progress_disabled()) as bar:
         return lift_clip_texture(track, model, args.texture_from, step=args.texture_step,
                                  progress=bar.update)
 

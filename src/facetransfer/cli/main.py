@@ -37,7 +37,22 @@ def build_parser() -> argparse.ArgumentParser:
     for name in SUBCOMMAND_MODULES:
         module = importlib.import_module(f"{__package__}.{name}")
         module.register(sub)
+    for leaf in _leaf_parsers(parser):
+        if "--no-progress" not in leaf._option_string_actions:
+            leaf.add_argument("--no-progress", action="store_true",
+                              help="no progress bars (they are drawn only on a terminal)")
     return parser
+
+
+def _leaf_parsers(parser: argparse.ArgumentParser):
+    """The parsers of every command and subcommand (``model build``, ...) that has no
+    subcommands of its own."""
+    subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    if not subs:
+        yield parser
+    for action in subs:
+        for child in dict.fromkeys(action.choices.values()):  # aliases: one parser
+            yield from _leaf_parsers(child)
 
 
 #: environment that silences the C++ logs of MediaPipe / TensorFlow Lite / absl unless -v
@@ -113,6 +128,9 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     configure_logging(args.verbose)
+    from .common import set_progress
+
+    set_progress(not getattr(args, "no_progress", False))
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

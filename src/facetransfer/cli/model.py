@@ -22,7 +22,7 @@ from ..default_model import dataset_ranks as default_ranks  # the recipe ranks
 from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
 from ..io.memory import available_memory  # a name of this module: tests replace it
-from .common import tqdm_progress
+from .common import progress_shown, tqdm_progress
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +154,7 @@ def cmd_build(args: argparse.Namespace) -> int:
     if args.identities is not None and args.identities < 2:
         raise FaceTransferError(f"--identities must be at least 2, got {args.identities}")
     check_build_memory(str(args.dataset), args.identities)
-    assets.set_download_progress(sys.stderr.isatty())
+    assets.set_download_progress(progress_shown())
     cb, close = tqdm_progress(f"dataset {args.dataset}")
     try:
         ds = load_dataset(args.dataset, seed=args.seed, n_identities=args.identities, progress=cb)

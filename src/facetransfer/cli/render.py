@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import add_video_options, video_options
+from .common import add_video_options, progress_disabled, video_options
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
 
@@ -178,7 +178,7 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
                 spec["n_frames"] = args.frames
             perf = performance_from_spec(model, spec)
     with tqdm(total=perf.n_frames, desc="synth-video", unit="frame",
-              disable=not sys.stderr.isatty()) as bar:
+              disable=progress_disabled()) as bar:
         truth = synthesize_video(model, perf, out, seed=args.seed, texture=texture,
                                  progress=bar.update, overwrite=args.overwrite, options=vopt)
     print(f"wrote {out} ({perf.n_frames} frames, {perf.size[0]}x{perf.size[1]} at "

@@ -21,6 +21,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
+from .common import progress_disabled
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -124,7 +125,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
                                 f"{info.size[0]}x{info.size[1]}")
     n = int(track.scale.shape[0])
     with tqdm(total=(n + args.step - 1) // args.step, desc="texture lift", unit="frame",
-              disable=not sys.stderr.isatty()) as bar:
+              disable=progress_disabled()) as bar:
         lt = lift_track(model, iter_frames(args.video), track, tex_size=args.size,
                         step=args.step, progress=bar.update)
     merged = merge_textures(lt.lifted)

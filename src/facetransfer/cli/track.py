@@ -20,7 +20,8 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
-from .common import MODEL_HELP, add_video_options, resolve_model, video_options
+from .common import (MODEL_HELP, add_video_options, progress_disabled, resolve_model,
+                     video_options)
 
 
 #: What the capture tracker does, for the help of every ``--tracker`` option.
@@ -110,7 +111,8 @@ def register(sub) -> None:
 def _bar(desc: str, total: int):
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit="frame", leave=False, dynamic_ncols=True)
+    return tqdm(total=total, desc=desc, unit="frame", leave=False, dynamic_ncols=True,
+                disable=progress_disabled())
 
 
 def run(args) -> int:

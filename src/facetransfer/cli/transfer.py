@@ -23,7 +23,8 @@ from ..transfer import ALIGN_MODES
 from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES, JAW_MODES,
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
-from .common import MODEL_HELP, add_video_options, resolve_model, video_options
+from .common import (MODEL_HELP, add_video_options, progress_disabled, resolve_model,
+                     video_options)
 from .track import CAPTURE_HELP
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
@@ -40,7 +41,7 @@ def _bar_factory(enabled: bool = True):
 
     def make(desc, total):
         return tqdm(total=total, desc=desc, unit="frame", leave=False, dynamic_ncols=True,
-                    file=sys.stderr)
+                    file=sys.stderr, disable=progress_disabled())
 
     return make
 
@@ -499,7 +500,8 @@ def run_puppet(args) -> int:
     frames = None
     it = puppet_frames(track, model, wid)
     audio = write_video_with_audio(
-        args.out, tqdm(it, total=track.n_frames, desc="render", unit="frame", leave=False),
+        args.out, tqdm(it, total=track.n_frames, desc="render", unit="frame", leave=False,
+                        disable=progress_disabled()),
         track.fps, audio_from=args.video, overwrite=args.overwrite, options=vopt,
         n_frames=track.n_frames)
     print(f"wrote {args.out}: {track.n_frames} frames of {args.identity}"
