@@ -57,8 +57,9 @@ def test_the_key_holds_everything_the_frames_depend_on(on, monkeypatch):
               rc.render_key(_plan(fps=30.0), model, opts, None),
               rc.render_key(_plan(), _Model("b"), opts, None),
               rc.render_key(_plan(), model, opts.with_(texture="constant"), None),
-              rc.render_key(_plan(), model, opts, VideoOptions(crf=20))]
-    assert len({k, *others}) == 8
+              rc.render_key(_plan(), model, opts, VideoOptions(crf=20)),
+              rc.render_key(_plan(), model, opts, None, images=True)]
+    assert len({k, *others}) == 9
     monkeypatch.setattr(rc, "code_fingerprint", lambda: "another renderer")
     assert rc.render_key(_plan(), model, opts, None) != k
     monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "off")

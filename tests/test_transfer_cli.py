@@ -335,6 +335,54 @@ def test_an_interrupted_transfer_renders_only_the_frames_it_had_not(clips, quick
     assert a.shape == b.shape == (6, *a.shape[1:]) and np.array_equal(a, b)
 
 
+def test_an_interrupted_image_sequence_continues(clips, quick_model_path, tmp_path, capsys,
+                                                monkeypatch):
+    """``--out frames/%03d.png``: Ctrl-C in the render keeps the frames written (none of them
+    beside the pattern yet, an older sequence untouched); the same command renders only the
+    rest, and the frames equal those of a sequence written at once."""
+    import facetransfer.rewrite as rw
+    from facetransfer.io import sequence_parts
+
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    real, calls, stop = rw._ClipRenderer.__call__, [], [4]
+
+    def counted(self, i):
+        if stop[0] is not None and i >= stop[0]:
+            raise KeyboardInterrupt
+        calls.append(i)
+        return real(self, i)
+
+    monkeypatch.setattr(rw._ClipRenderer, "__call__", counted)
+    out = tmp_path / "seq"
+    out.mkdir()
+    for i in range(9):  # an older, longer sequence of the same pattern
+        (out / f"f{i:03d}.png").write_bytes(b"old")
+    argv = ["transfer", "--target", clips["target"], "--target-track", clips["target_track"],
+            "--expression-from", clips["source"], "--source-track", clips["source_track"],
+            "--model", quick_model_path, "--no-progress", "--overwrite", "--out"]
+    code, _, err = run(argv + [out / "f%03d.png"], capsys)
+    assert code == 130 and "the frames rendered so far are kept" in err
+    [folder] = (tmp_path / "cache" / "facetransfer" / "renders").iterdir()
+    assert sequence_parts.kept_frames(folder, "f%03d.png", 6) == [True] * 4
+    assert all((out / f"f{i:03d}.png").read_bytes() == b"old" for i in range(9))
+    stop[0], calls[:] = None, []
+    code, text, err = run(argv + [out / "f%03d.png"], capsys)
+    assert code == 0, err
+    assert "continued an interrupted render from frame 4" in text
+    assert sorted(calls) == [4, 5] and not folder.exists()
+    assert sorted(q.name for q in out.iterdir()) == [f"f{i:03d}.png" for i in range(6)]
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "off")
+    code, _, err = run(argv + [tmp_path / "once%03d.png"], capsys)
+    assert code == 0, err
+    from PIL import Image
+
+    for i in range(6):
+        a = np.asarray(Image.open(out / f"f{i:03d}.png"))
+        b = np.asarray(Image.open(tmp_path / f"once{i:03d}.png"))
+        assert a.shape == b.shape and a.ndim == 3 and np.array_equal(a, b)
+
+
 def test_sigterm_keeps_what_an_interrupt_keeps(clips, quick_model_path, tmp_path, capsys,
                                               monkeypatch):
     """``kill`` (SIGTERM) ends the command as Ctrl-C does, exit 143, one line; a child forked

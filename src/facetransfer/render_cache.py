@@ -4,7 +4,8 @@ continues its render where it stopped.
 The tracks of a transfer are kept by :mod:`facetransfer.track.cache`; its render, the longer
 step at high resolution (a minute of 1080p is about ten minutes of rendering on two cores), was
 lost to a Ctrl-C. Now :func:`facetransfer.video_transfer.render_plan` encodes the frames into
-parts (:mod:`facetransfer.io.video_parts`) in a folder of
+parts (:mod:`facetransfer.io.video_parts`), or writes an image sequence's files
+(:mod:`facetransfer.io.sequence_parts`), in a folder of
 ``$XDG_CACHE_HOME/facetransfer/renders`` named by a key of everything the frames depend on
 (:func:`render_key`): the plan's frames (a digest of every frame's every 16th row), its tracks
 and frame indices, the model's content, the render options, the codec options, and the package's
@@ -12,8 +13,8 @@ code and data (:func:`code_fingerprint`). The same command run again finds the p
 only the frames they do not hold; a finished video removes its folder. Folders of interrupted
 renders never run again are removed beyond the :data:`KEEP` most recent.
 
-``FACETRANSFER_RENDER_CACHE=off`` turns it off: the video is then encoded in one piece, as
-an image sequence always is.
+``FACETRANSFER_RENDER_CACHE=off`` turns it off: the video is then encoded in one piece, and
+an image sequence written beside its pattern.
 """
 
 from __future__ import annotations
@@ -91,11 +92,12 @@ def _update_track(h, track) -> None:
             _update_value(h, getattr(track, f.name))
 
 
-def render_key(plan, model, options, video_options) -> str | None:
+def render_key(plan, model, options, video_options, *, images: bool = False) -> str | None:
     """The key of rendering ``plan`` (a :class:`~facetransfer.video_transfer.TransferPlan`)
     with ``model``, ``options`` (:class:`~facetransfer.rewrite_options.RewriteOptions`) and
-    ``video_options`` (:class:`~facetransfer.io.video.VideoOptions` or None); None when the
-    cache is off."""
+    ``video_options`` (:class:`~facetransfer.io.video.VideoOptions` or None) into a video, or
+    (``images``) into an image sequence (:mod:`facetransfer.io.sequence_parts`); None when
+    the cache is off."""
     if not cache_enabled():
         return None
     from . import __version__
@@ -105,7 +107,7 @@ def render_key(plan, model, options, video_options) -> str | None:
     what = {"layout": LAYOUT, "version": __version__, "code": code_fingerprint(),
             "model": str(model.content_hash), "options": repr(options),
             "video": repr(video_options), "fps": float(plan.fps), "parts": PART_FRAMES,
-            "performance": bool(plan.performance)}
+            "performance": bool(plan.performance), "images": bool(images)}
     h.update(json.dumps(what, sort_keys=True).encode())
     digested: dict[int, int] = {}  # a clip that is also another role is digested once
     for role, frames in enumerate((plan.target_frames, plan.mouth_frames, plan.texture_frames)):

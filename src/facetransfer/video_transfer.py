@@ -677,23 +677,29 @@ class _Frames:
 
 def _parts_writer(plan: TransferPlan, model, out, options, video_options, audio_from,
                   overwrite: bool):
-    """A :class:`facetransfer.io.video_parts.PartsWriter` for ``out`` in the render cache's
-    folder of this render, or None: the cache is off, ``out`` is an image sequence, or another
-    process renders the same frames now."""
+    """A writer for ``out`` in the render cache's folder of this render that keeps what it
+    wrote when interrupted: a :class:`facetransfer.io.video_parts.PartsWriter` (a video) or a
+    :class:`facetransfer.io.sequence_parts.SequenceWriter` (an image sequence); None: the
+    cache is off, or another process renders the same frames now."""
+    from .io.sequence_parts import SequenceWriter
     from .io.video import is_image_pattern
     from .io.video_parts import PartsBusy, PartsWriter
     from .render_cache import parts_folder, render_key
 
-    if is_image_pattern(out):
-        return None
-    key = render_key(plan, model, options, video_options)
+    images = is_image_pattern(out)
+    key = render_key(plan, model, options, video_options, images=images)
     if key is None:
         return None
     first = np.asarray(plan.target_frames[0])
+    size = (first.shape[1], first.shape[0])
     try:
-        writer = PartsWriter(parts_folder(key), out, plan.fps, (first.shape[1], first.shape[0]),
-                             n_frames=plan.n_frames, options=video_options,
-                             audio_from=audio_from, overwrite=overwrite)
+        if images:
+            writer = SequenceWriter(parts_folder(key), out, size, n_frames=plan.n_frames,
+                                    overwrite=overwrite)
+        else:
+            writer = PartsWriter(parts_folder(key), out, plan.fps, size, n_frames=plan.n_frames,
+                                 options=video_options, audio_from=audio_from,
+                                 overwrite=overwrite)
     except PartsBusy as exc:
         log.warning("%s: writing the video in one piece", exc)
         return None

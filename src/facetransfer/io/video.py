@@ -38,7 +38,8 @@ log = logging.getLogger(__name__)
 __all__ = ["VideoInfo", "video_info", "iter_frames", "read_video", "CODECS", "DEFAULT_CODEC",
            "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
            "VideoOutput", "WrittenVideo", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
-           "is_image_pattern", "frame_path", "check_video_output", "decoded_frame_count",
+           "is_image_pattern", "frame_path", "save_frame_image", "check_video_output",
+           "decoded_frame_count",
            "stored_frame_count",
            "has_audio", "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
            "write_video_with_audio"]
@@ -188,6 +189,24 @@ def require_encoder(codec: str) -> str:
         raise VideoError(f"the ffmpeg binary {exe} lacks the {enc} encoder needed for "
                          f"--codec {codec}; choose another --codec or install an ffmpeg with it")
     return exe
+
+
+#: PIL's options per file type of an image sequence: PNG at zlib level 1 (PIL's default, 6,
+#: took 67 ms a 512x480 frame, three times the render's own CPU; level 1 21 ms for 15 % more
+#: bytes, measured), JPEG at quality 95 (PIL's default, 75, is a preview's).
+_FRAME_SAVE = {".png": {"compress_level": 1}, ".jpg": {"quality": 95},
+               ".jpeg": {"quality": 95}}
+
+
+def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
+                     suffix: str | None = None) -> None:
+    """Write one frame of an image sequence, ``(H, W, 3) uint8`` RGB, to ``path`` in the file
+    type of ``suffix`` (default: ``path``'s own; one of :data:`IMAGE_SUFFIXES`)."""
+    from PIL import Image
+
+    suffix = (suffix or Path(path).suffix).lower()
+    Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8)).save(
+        path, format=Image.registered_extensions()[suffix], **_FRAME_SAVE.get(suffix, {}))
 
 
 def is_image_pattern(path: str | os.PathLike) -> bool:
@@ -587,11 +606,9 @@ class VideoWriter:
         self.n_frames += 1
 
     def _write_image(self, img: np.ndarray) -> None:
-        from PIL import Image
-
         f = self._tmpdir / (self.path.name % self.n_frames)
         try:
-            Image.fromarray(img).save(f)
+            save_frame_image(img, f)
         except (OSError, ValueError) as exc:  # full disk, unwritable folder, unknown format
             raise VideoError(f"cannot write frame {f.name} of {self.path}: {exc}") from None
 

@@ -1,0 +1,129 @@
+"""An image sequence written through a folder that outlives an interruption
+(facetransfer.io.sequence_parts)."""
+
+import errno
+import json
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from facetransfer.errors import VideoError
+from facetransfer.io import sequence_parts as sp
+from facetransfer.io.video_parts import PartsBusy
+
+
+def _frames(n=7, h=24, w=32, seed=0):
+    rng = np.random.default_rng(seed)
+    return [rng.integers(0, 256, (h, w, 3), dtype=np.uint8) for _ in range(n)]
+
+
+def _write(folder, out, frames, *, stop=None, overwrite=True):
+    """Write ``frames`` from where the folder's frames end; Ctrl-C before frame ``stop``."""
+    w = sp.SequenceWriter(folder, out, (frames[0].shape[1], frames[0].shape[0]),
+                          n_frames=len(frames), overwrite=overwrite)
+    start = w.done
+    with w:
+        for i in range(start, len(frames)):
+            if i == stop:
+                raise KeyboardInterrupt
+            w.write(frames[i], marked=i % 3 == 0)
+    return w, start
+
+
+def _read(pattern, n):
+    return [np.asarray(Image.open(str(pattern) % i)) for i in range(n)]
+
+
+def test_an_interrupted_sequence_continues_and_equals_one_written_at_once(tmp_path):
+    frames, folder, out = _frames(), tmp_path / "cache", tmp_path / "out" / "f%04d.png"
+    with pytest.raises(KeyboardInterrupt):
+        _write(folder, out, frames, stop=5)
+    assert sp.kept_frames(folder, "f%04d.png", 7) == [True, False, False, True, False]
+    assert not out.parent.exists() or not any(out.parent.iterdir())  # nothing in place yet
+    (folder / ".f0005.png.tmp").write_bytes(b"half a frame")  # what a killed writer leaves
+    w, start = _write(folder, out, frames)
+    assert start == 5 and w.resumed == 5 and w.marked == 3 and not folder.exists()
+    assert w.result.n_frames == 7 and w.result.kind == "images"
+    for got, want in zip(_read(out, 7), frames):
+        np.testing.assert_array_equal(got, want)
+    whole, _ = _write(tmp_path / "c2", tmp_path / "once%04d.png", frames)
+    assert whole.resumed == 0
+    for i in range(7):
+        assert (out.parent / (out.name % i)).read_bytes() == \
+            (tmp_path / f"once{i:04d}.png").read_bytes()
+
+
+def test_frames_after_a_missing_one_and_another_sequences_are_not_taken_up(tmp_path):
+    frames, folder, out = _frames(), tmp_path / "cache", tmp_path / "f%03d.png"
+    with pytest.raises(KeyboardInterrupt):
+        _write(folder, out, frames, stop=6)
+    (folder / "f002.png").unlink()
+    assert sp.kept_frames(folder, "f%03d.png", 7) == [True, False]
+    assert sorted(p.name for p in folder.iterdir()) == ["f000.png", "f001.png", "frames.json",
+                                                        "lock"]
+    assert sp.kept_frames(folder, "g%03d.png", 7) == []  # another pattern: start again
+    assert sp.kept_frames(folder, "f%03d.png", 7) == []
+    (folder / "frames.json").write_text("{not json")
+    assert sp.kept_frames(folder, "f%03d.png", 7) == []
+    assert json.loads((folder / "frames.json").read_text())["marked"] == []
+
+
+def test_an_older_longer_sequence_is_replaced_only_at_the_end(tmp_path):
+    frames, folder = _frames(4), tmp_path / "cache"
+    for i in range(6):
+        (tmp_path / f"f{i:02d}.png").write_bytes(b"old")
+    (tmp_path / "other.png").write_bytes(b"keep")
+    with pytest.raises(ValueError, match="--overwrite"):
+        sp.SequenceWriter(folder, tmp_path / "f%02d.png", (32, 24), n_frames=4)
+    with pytest.raises(KeyboardInterrupt):
+        _write(folder, tmp_path / "f%02d.png", frames, stop=2)
+    assert all((tmp_path / f"f{i:02d}.png").read_bytes() == b"old" for i in range(6))
+    _write(folder, tmp_path / "f%02d.png", frames)
+    assert sorted(p.name for p in tmp_path.iterdir() if p.suffix == ".png") == \
+        ["f00.png", "f01.png", "f02.png", "f03.png", "other.png"]
+
+
+def test_what_a_sequence_writer_refuses(tmp_path):
+    with pytest.raises(VideoError, match="not an image sequence"):
+        sp.SequenceWriter(tmp_path / "c", tmp_path / "o.mp4", (32, 24), n_frames=3)
+    w = sp.SequenceWriter(tmp_path / "c", tmp_path / "f%02d.png", (32, 24), n_frames=2)
+    with pytest.raises(PartsBusy, match="another process"):
+        sp.SequenceWriter(tmp_path / "c", tmp_path / "f%02d.png", (32, 24), n_frames=2)
+    with pytest.raises(VideoError, match="does not match the size"):
+        w.write(np.zeros((8, 8, 3), np.uint8))
+    w.write(_frames(1)[0])
+    with pytest.raises(VideoError, match="1 frames were written, not 2"):
+        w.close()
+    assert not (tmp_path / "f00.png").exists() and (tmp_path / "c" / "f00.png").exists()
+
+
+def test_a_frame_that_cannot_be_written_says_where_and_the_way_around(tmp_path, monkeypatch):
+    w = sp.SequenceWriter(tmp_path / "c", tmp_path / "f%02d.png", (32, 24), n_frames=2)
+
+    def full(self, fp, *a, **k):
+        open(fp, "wb").write(b"par")
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(Image.Image, "save", full)
+    with pytest.raises(VideoError, match=r"frame f00.png of .*f%02d.png in the render cache "
+                                         r".*FACETRANSFER_RENDER_CACHE=off"):
+        w.write(_frames(1)[0])
+    assert w.done == 0 and not (tmp_path / "c" / ".f00.png.tmp").exists()
+    w.close(commit=False)
+    assert not (tmp_path / "c").exists()  # nothing to continue from
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tif", ".tiff", ".bmp", ".jpg", ".jpeg"])
+def test_each_file_type_of_a_sequence_is_written(tmp_path, suffix):
+    """Every image type a sequence takes: lossless ones exact, JPEG at quality 95 (within a
+    few levels on a smooth image; PIL's default, 75, is coarser)."""
+    from facetransfer.io.video import IMAGE_SUFFIXES, save_frame_image
+
+    assert suffix in IMAGE_SUFFIXES
+    y, x = np.mgrid[0:48, 0:64]
+    img = np.stack([x * 4, y * 5, (x + y) * 2], axis=-1).astype(np.uint8)
+    save_frame_image(img, tmp_path / "f.tmp", suffix=suffix)  # the type from ``suffix``
+    back = np.asarray(Image.open(tmp_path / "f.tmp").convert("RGB")).astype(int)
+    err = np.abs(back - img).max()
+    assert err == 0 if suffix not in (".jpg", ".jpeg") else 0 < err <= 6
