@@ -8,6 +8,8 @@ import numpy as np
 import pytest
 from PIL import Image
 
+from _writing import write_rest
+
 from facetransfer.errors import VideoError
 from facetransfer.io import sequence_parts as sp
 from facetransfer.io.video_parts import PartsBusy
@@ -22,13 +24,7 @@ def _write(folder, out, frames, *, stop=None, overwrite=True):
     """Write ``frames`` from where the folder's frames end; Ctrl-C before frame ``stop``."""
     w = sp.SequenceWriter(folder, out, (frames[0].shape[1], frames[0].shape[0]),
                           n_frames=len(frames), overwrite=overwrite)
-    start = w.done
-    with w:
-        for i in range(start, len(frames)):
-            if i == stop:
-                raise KeyboardInterrupt
-            w.write(frames[i], marked=i % 3 == 0)
-    return w, start
+    return w, write_rest(w, frames, stop=stop, marked=lambda i: i % 3 == 0)
 
 
 def _read(pattern, n):

@@ -6,6 +6,8 @@ import os
 import numpy as np
 import pytest
 
+from _writing import write_rest
+
 from facetransfer.errors import VideoError
 from facetransfer.io import video_parts as vp
 from facetransfer.io.video import (VideoOptions, VideoWriter, encode_video, has_audio,
@@ -30,13 +32,7 @@ def _write(folder, out, frames, *, stop=None, audio_from=None, overwrite=True):
     w = vp.PartsWriter(folder, out, 25.0, (frames[0].shape[1], frames[0].shape[0]),
                        n_frames=len(frames), options=LOSSLESS, audio_from=audio_from,
                        overwrite=overwrite)
-    start = w.done
-    with w:
-        for i in range(start, len(frames)):
-            if i == stop:
-                raise KeyboardInterrupt
-            w.write(frames[i], marked=i % 2 == 0)
-    return w, start
+    return w, write_rest(w, frames, stop=stop, marked=lambda i: i % 2 == 0)
 
 
 def test_an_interrupted_video_continues_and_equals_one_written_at_once(small_parts, tmp_path):
