@@ -57,12 +57,18 @@ def test_frames_after_a_missing_one_and_another_sequences_are_not_taken_up(tmp_p
     (folder / "f002.png").unlink()
     assert sp.kept_frames(folder, "f%03d.png", 7) == [True, False]
     assert sorted(p.name for p in folder.iterdir()) == ["f000.png", "f001.png", "frames.json",
-                                                        "lock"]
+                                                        "lock", "marks"]
+    assert (folder / "marks").read_bytes() == b"10"
+    (folder / "f002.png").write_bytes(b"a frame whose mark a kill prevented")
+    assert sp.kept_frames(folder, "f%03d.png", 7) == [True, False]
+    assert not (folder / "f002.png").exists()
     assert sp.kept_frames(folder, "g%03d.png", 7) == []  # another pattern: start again
     assert sp.kept_frames(folder, "f%03d.png", 7) == []
     (folder / "frames.json").write_text("{not json")
     assert sp.kept_frames(folder, "f%03d.png", 7) == []
-    assert json.loads((folder / "frames.json").read_text())["marked"] == []
+    assert json.loads((folder / "frames.json").read_text()) == {"name": "f%03d.png",
+                                                                 "n_frames": 7}
+    assert (folder / "marks").read_bytes() == b""
 
 
 def test_an_older_longer_sequence_is_replaced_only_at_the_end(tmp_path):

@@ -4,9 +4,10 @@ into place at the end.
 The image-sequence counterpart of :mod:`facetransfer.io.video_parts`: ``facetransfer transfer
 --out frames/%05d.png`` renders into a folder of its own in the render cache
 (:mod:`facetransfer.render_cache`), one finished file per frame (each written under a temporary
-name and renamed), listed in the folder's manifest after it. An interrupted run keeps every
-listed frame, a run killed outright too (at most the frame being written is lost); the next
-run with the same folder starts at the first frame not listed (:attr:`SequenceWriter.done`).
+name and renamed), then its mark appended to the folder's list of marks (one byte a frame: a
+constant cost whatever the sequence's length). An interrupted run keeps every frame marked, a
+run killed outright too (at most the frame being written is lost); the next run with the same
+folder starts at the first frame not kept (:attr:`SequenceWriter.done`).
 When every frame is written the files are moved beside the pattern (renamed, or copied from
 another file system), frames of an older, longer sequence of the same pattern are removed, and
 the folder is removed: a sequence that has been half-replaced never exists before the last
@@ -25,50 +26,55 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import OutputError, VideoError
-from .atomic import write_text_atomic
-from .video import WrittenVideo, _pattern_files, check_video_output, save_frame_image
+from .atomic import write_bytes_atomic, write_text_atomic
+from .video import WrittenVideo, check_video_output, place_sequence, save_frame_image
 from .video_parts import _LOCK, PartsBusy, _lock
 
 log = logging.getLogger(__name__)
 
 __all__ = ["SequenceWriter", "kept_frames"]
 
-#: The folder's record of the frames written so far (JSON), replaced atomically after each.
+#: The folder's sequence (JSON: the pattern's name and the frame count), written when taken up.
 MANIFEST = "frames.json"
+#: One byte per frame written (``1``: marked, ``0``: not), appended after the frame's file.
+MARKS = "marks"
 
 
 def kept_frames(folder: str | os.PathLike, name: str, n_frames: int) -> list[bool]:
     """The frames kept in ``folder`` for the pattern ``name`` (e.g. ``%05d.png``) of a sequence
-    of ``n_frames``: one mark per frame that follows on from frame 0 without a gap, listed in
-    the manifest and present as a file. Anything else (a manifest of another pattern or
-    length, files past the first missing one, a killed writer's temporary file) is removed
-    and the manifest rewritten to match. Called with the folder's lock held."""
+    of ``n_frames``: one mark per frame that follows on from frame 0 without a gap, marked and
+    present as a file. Anything else (the frames of another pattern or length, files past the
+    first missing or unmarked one, a killed writer's temporary file) is removed and the
+    folder's records rewritten to match. Called with the folder's lock held."""
     folder = Path(folder)
-    try:
-        rec = json.loads((folder / MANIFEST).read_text())
-        marks = [bool(m) for m in rec["marked"]] \
-            if rec.get("name") == name and int(rec.get("n_frames", -1)) == n_frames else []
-    except FileNotFoundError:
-        marks = []
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        log.warning("ignoring the unreadable list of frames in %s (%s)", folder, exc)
-        marks = []
+    marks = _read_marks(folder, name, n_frames)
     kept = 0
     while kept < min(len(marks), n_frames) and (folder / (name % kept)).is_file():
         kept += 1
     marks = marks[:kept]
-    keep = {name % i for i in range(kept)} | {MANIFEST, _LOCK}
+    keep = {name % i for i in range(kept)} | {MANIFEST, MARKS, _LOCK}
     for f in folder.iterdir() if folder.is_dir() else ():
         if f.name not in keep:
             with contextlib.suppress(OSError):
                 shutil.rmtree(f) if f.is_dir() and not f.is_symlink() else f.unlink()
-    _write_manifest(folder, name, n_frames, marks)
+    write_text_atomic(folder / MANIFEST, json.dumps({"name": name, "n_frames": n_frames}))
+    write_bytes_atomic(folder / MARKS, bytes(b"01"[m] for m in marks))
     return marks
 
 
-def _write_manifest(folder: Path, name: str, n_frames: int, marks: list[bool]) -> None:
-    write_text_atomic(folder / MANIFEST, json.dumps({"name": name, "n_frames": n_frames,
-                                                     "marked": [int(m) for m in marks]}))
+def _read_marks(folder: Path, name: str, n_frames: int) -> list[bool]:
+    """The marks recorded in ``folder`` for this sequence (none for another's, or unreadable
+    records)."""
+    try:
+        rec = json.loads((folder / MANIFEST).read_text())
+        if rec.get("name") != name or int(rec.get("n_frames", -1)) != n_frames:
+            return []
+        return [b == ord("1") for b in (folder / MARKS).read_bytes()]
+    except FileNotFoundError:
+        return []
+    except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+        log.warning("ignoring the unreadable record of frames in %s (%s)", folder, exc)
+        return []
 
 
 class SequenceWriter:
@@ -129,8 +135,9 @@ class SequenceWriter:
         try:
             save_frame_image(frame, tmp, suffix=Path(name).suffix)
             os.replace(tmp, self.folder / name)
+            with open(self.folder / MARKS, "ab") as fh:  # after the frame: it counts from now
+                fh.write(b"1" if marked else b"0")
             self.marks.append(bool(marked))
-            _write_manifest(self.folder, self.name, self.n_frames, self.marks)
         except (OSError, ValueError, OutputError) as exc:  # full disk, unknown format
             with contextlib.suppress(OSError):
                 tmp.unlink()
@@ -148,7 +155,7 @@ class SequenceWriter:
                 if self.done != self.n_frames:
                     raise VideoError(f"{self.output.path}: {self.done} frames were written, "
                                      f"not {self.n_frames}")
-                self._move_into_place()
+                place_sequence(self.folder, self.output.path, self.n_frames)
                 shutil.rmtree(self.folder, ignore_errors=True)
                 self.result = WrittenVideo(self.output.path, self.n_frames, self.size, False,
                                            "images")
@@ -158,20 +165,6 @@ class SequenceWriter:
                 shutil.rmtree(self.folder, ignore_errors=True)
             fd, self._lock_fd = self._lock_fd, None
             os.close(fd)
-
-    def _move_into_place(self) -> None:
-        """The frames beside the pattern (renamed, or moved across file systems) and the
-        files of an older, longer sequence of the same pattern removed."""
-        dest = self.output.path.parent
-        dest.mkdir(parents=True, exist_ok=True)
-        old = _pattern_files(self.output.path)
-        names = [self.name % i for i in range(self.n_frames)]
-        for name in names:
-            shutil.move(self.folder / name, dest / name)
-        keep = set(names)
-        for q in old:
-            if q.name not in keep:
-                q.unlink()
 
     def __enter__(self) -> "SequenceWriter":
         return self

@@ -1,7 +1,8 @@
 """Video input and output. Frames are ``(H, W, 3) uint8`` RGB.
 
 Reading decodes with OpenCV, lazily (:func:`iter_frames`) or all at once (:func:`read_video`),
-in :mod:`facetransfer.io.video_read` (its names are this module's too). Writing is one writer for every command that writes video (:class:`VideoWriter`,
+in :mod:`facetransfer.io.video_read` (its names are this module's too). Writing is one writer
+for every command that writes video (:class:`VideoWriter`,
 :func:`encode_video`): H.264 by default (libx264 through the ffmpeg binary of imageio-ffmpeg,
 ``yuv420p``, CRF 18), H.265 or ProRes (:class:`VideoOptions`), or an image sequence
 (``frames/%05d.png``), with the audio of another file muxed in. It writes to a temporary file
@@ -38,7 +39,8 @@ log = logging.getLogger(__name__)
 __all__ = ["VideoInfo", "video_info", "iter_frames", "read_video", "CODECS", "DEFAULT_CODEC",
            "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
            "VideoOutput", "WrittenVideo", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
-           "is_image_pattern", "frame_path", "save_frame_image", "check_video_output",
+           "is_image_pattern", "frame_path", "save_frame_image", "place_sequence",
+           "check_video_output",
            "decoded_frame_count",
            "stored_frame_count",
            "has_audio", "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
@@ -228,6 +230,22 @@ def _pattern_files(pattern: Path) -> list[Path]:
     rx = re.compile(re.escape(pattern.name[:m.start()]) + r"\d+"
                     + re.escape(pattern.name[m.end():]) + r"\Z")
     return sorted(q for q in pattern.parent.iterdir() if rx.match(q.name))
+
+
+def place_sequence(folder: str | os.PathLike, pattern: str | os.PathLike, n_frames: int) -> None:
+    """Move the finished frames ``0 .. n_frames - 1`` of the image sequence ``pattern`` from
+    ``folder`` beside the pattern (renamed; moved across file systems) and remove the files of
+    an older, longer sequence of the same pattern, which would be mistaken for its frames."""
+    pattern = Path(pattern)
+    pattern.parent.mkdir(parents=True, exist_ok=True)
+    old = _pattern_files(pattern)
+    names = [pattern.name % i for i in range(n_frames)]
+    for name in names:
+        shutil.move(Path(folder) / name, pattern.parent / name)
+    keep = set(names)
+    for q in old:
+        if q.name not in keep:
+            q.unlink()
 
 
 def check_video_output(path: str | os.PathLike, options: VideoOptions | None = None, *,
@@ -719,14 +737,7 @@ class VideoWriter:
                              f"written but the file holds {n}")
 
     def _commit_images(self) -> WrittenVideo:
-        old = _pattern_files(self.path)
-        names = [self.path.name % i for i in range(self.n_frames)]
-        for name in names:
-            os.replace(self._tmpdir / name, self.path.parent / name)
-        keep = set(names)
-        for q in old:  # frames of an older, longer sequence would be mistaken for ours
-            if q.name not in keep:
-                q.unlink()
+        place_sequence(self._tmpdir, self.path, self.n_frames)
         self._tmpdir.rmdir()
         self._tmpdir = None
         return WrittenVideo(self.path, self.n_frames, self.size, False, "images")
