@@ -588,10 +588,10 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     video_options : VideoOptions, optional
         Codec and CRF (:class:`facetransfer.io.video.VideoOptions`; default H.264, CRF 18).
     resume : bool
-        Encode a video file (not an image sequence; no ``compose``) in parts kept in the
-        render cache (:mod:`facetransfer.render_cache`) until it is written: a run interrupted
-        here leaves them, and the same render run again continues after the last frame they
-        hold.
+        Write the output (no ``compose``) through the render cache
+        (:mod:`facetransfer.render_cache`) until it is complete: a video in parts, an image
+        sequence frame by frame. A run interrupted here leaves them, and the same render run
+        again continues after the last frame they hold.
 
     Returns
     -------
@@ -701,10 +701,10 @@ def _parts_writer(plan: TransferPlan, model, out, options, video_options, audio_
                                  options=video_options, audio_from=audio_from,
                                  overwrite=overwrite)
     except PartsBusy as exc:
-        log.warning("%s: writing the video in one piece", exc)
+        log.warning("%s: writing %s without the render cache", exc, out)
         return None
     except OSError as exc:  # the cache cannot be written: the job does not fail for it
-        log.warning("the render cache cannot be used (%s): writing the video in one piece", exc)
+        log.warning("the render cache cannot be used (%s): writing %s without it", exc, out)
         return None
     if writer.done:
         log.info("%s: continuing an interrupted render from frame %d", out, writer.done)

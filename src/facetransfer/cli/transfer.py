@@ -33,9 +33,10 @@ ALIGN_HELP = ("how to fit a source of another length: trim (stop where the short
               "always has the target's frame rate)")
 
 
-def _bar_factory(enabled: bool = True):
-    """``factory(desc, total) -> tqdm`` for library progress (stderr), or None."""
-    if not enabled:
+def _bar_factory():
+    """``factory(desc, total) -> tqdm`` for library progress (stderr), or None after
+    ``--no-progress``."""
+    if progress_disabled():
         return None
     from tqdm import tqdm
 
@@ -325,7 +326,7 @@ def run_transfer(args) -> int:
     res = transfer_video(
         sources, args.out, model, options=rewrite_options(args),
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
-        progress_factory=_bar_factory(not args.no_progress), video_options=vopt,
+        progress_factory=_bar_factory(), video_options=vopt,
         align=args.align, max_frames=args.max_frames, reader=prefetch.read_video)
     kept = res.n_frames - res.n_rewritten
     if res.resumed:
