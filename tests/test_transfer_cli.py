@@ -415,3 +415,41 @@ def test_sigterm_keeps_what_an_interrupt_keeps(clips, quick_model_path, tmp_path
                           "rendered so far are kept in the cache")
     assert child_handler == [0]
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+@pytest.mark.parametrize("cache", ["on", "off"])
+def test_the_targets_pixel_aspect_ratio_is_kept(clips, quick_model_path, tmp_path, capsys,
+                                                 monkeypatch, cache):
+    """A target whose pixels are not square (8:9: its 96 columns shown as 85) gives a result,
+    a puppet video and a track overlay shown at its shape: in parts (the render cache) or in
+    one piece; ``--crf 0`` and the same frames as a square-pixel target's result."""
+    from facetransfer.io.video import VideoOptions, video_info
+
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", cache)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    target = tmp_path / "narrow.mkv"
+    write_video(target, read_video(clips["target"])[0], 25.0,
+                options=VideoOptions(crf=0, sar=(8, 9)))
+    square = tmp_path / "square.mkv"
+    write_video(square, read_video(clips["target"])[0], 25.0, options=VideoOptions(crf=0))
+    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
+              "--source-track", clips["source_track"], "--model", quick_model_path,
+              "--crf", "0", "--no-progress"]
+    for tgt, out in ((target, "out.mp4"), (square, "sq.mp4")):
+        code, _, err = run(["transfer", "--target", tgt, *common, "--out", tmp_path / out],
+                           capsys)
+        assert code == 0, err
+    assert video_info(tmp_path / "out.mp4").sar == (8, 9)
+    assert video_info(tmp_path / "sq.mp4").sar == (1, 1)
+    np.testing.assert_array_equal(read_video(tmp_path / "out.mp4")[0],
+                                  read_video(tmp_path / "sq.mp4")[0])
+    code, _, err = run(["puppet", target, "--model", quick_model_path, "--identity", "id04",
+                        "--track", clips["target_track"], "--out", tmp_path / "p.mp4",
+                        "--no-progress"], capsys)
+    assert code == 0, err
+    assert video_info(tmp_path / "p.mp4").sar == (8, 9)
+    code, _, err = run(["track", target, "--model", quick_model_path, "--out",
+                        tmp_path / "t.npz", "--overlay", tmp_path / "ov.mp4", "--no-progress"],
+                       capsys)
+    assert code == 0, err
+    assert video_info(tmp_path / "ov.mp4").sar == (8, 9)

@@ -195,7 +195,11 @@ def test_preset_reaches_x264(tmp_path):
 @pytest.mark.parametrize("kw,match", [({"crf": 52}, "0 to 51"), ({"crf": -1}, "0 to 51"),
                                       ({"preset": "warp"}, "preset must be one of"),
                                       ({"crf": 2.5}, "integer"), ({"codec": "vp9"}, "h264"),
-                                      ({"codec": "prores", "crf": 10}, "prores")])
+                                      ({"codec": "prores", "crf": 10}, "prores"),
+                                      ({"sar": (0, 1)}, "pixel aspect"),
+                                      ({"sar": (1.5, 2)}, "pixel aspect"),
+                                      ({"sar": (1, 2, 3)}, "pixel aspect"),
+                                      ({"sar": (70000, 1)}, "pixel aspect")])
 def test_bad_options(kw, match):
     with pytest.raises(VideoError, match=match):
         VideoOptions(**kw)
@@ -348,6 +352,45 @@ def test_video_info_of_written_video(tmp_path):
     p = encode_video(tmp_path / "v.mov", smooth_frames(n=6), 29.97).path
     info = video_info(p)
     assert info.n_frames == 6 and info.fps == pytest.approx(29.97, abs=1e-3)
+
+
+@pytest.mark.parametrize("codec,suffix", [("h264", ".mp4"), ("h265", ".mkv"),
+                                          ("prores", ".mov")])
+def test_pixel_aspect_ratio_is_written_and_read_back(tmp_path, codec, suffix):
+    """A 15:16 pixel aspect (a 96x64 video shown 90x64) reaches the file's header and
+    OpenCV reads it back; the pixels are those written without it."""
+    if iov.CODECS[codec] not in iov.ffmpeg_encoders(iov.ffmpeg_exe()):
+        pytest.skip(f"this ffmpeg has no {codec} encoder")
+    frames = smooth_frames(n=4)
+    plain = encode_video(tmp_path / f"plain{suffix}", frames, 25,
+                         options=VideoOptions(codec=codec)).path
+    wide = encode_video(tmp_path / f"sar{suffix}", frames, 25,
+                        options=VideoOptions(codec=codec, sar=(30, 32))).path
+    assert VideoOptions(sar=(30, 32)).sar == (15, 16)  # in lowest terms
+    assert video_info(wide).sar == (15, 16) and video_info(plain).sar == (1, 1)
+    assert "SAR 15:16" in stream_info(wide)
+    np.testing.assert_array_equal(read_video(wide)[0], read_video(plain)[0])
+
+
+def test_keeping_aspect_takes_the_inputs_unless_given(tmp_path):
+    src = encode_video(tmp_path / "src.mp4", smooth_frames(n=2), 25,
+                       options=VideoOptions(sar=(8, 9))).path
+    square = encode_video(tmp_path / "sq.mp4", smooth_frames(n=2), 25).path
+    assert iov.keeping_aspect(None, src) == VideoOptions(sar=(8, 9))
+    assert iov.keeping_aspect(VideoOptions(crf=20), src) == VideoOptions(crf=20, sar=(8, 9))
+    assert iov.keeping_aspect(VideoOptions(sar=(4, 3)), src).sar == (4, 3)  # given: kept
+    assert iov.keeping_aspect(None, square).sar is None
+    assert iov.keeping_aspect(None, None) == VideoOptions()
+    still = tmp_path / "still.png"
+    still.write_bytes(b"not a video")
+    assert iov.keeping_aspect(None, still).sar is None
+
+
+@pytest.mark.parametrize("num,den,want", [(15, 16, (15, 16)), (30.0, 32.0, (15, 16)),
+                                          (0, 1, (1, 1)), (1, 0, (1, 1)), (-4, 3, (1, 1)),
+                                          (float("nan"), 1, (1, 1)), (1.5, 1, (1, 1))])
+def test_pixel_aspect_of_what_a_container_reports(num, den, want):
+    assert iov.pixel_aspect(num, den) == want
 
 
 def test_output_that_is_the_audio_input_is_refused(tmp_path):

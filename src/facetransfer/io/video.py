@@ -32,13 +32,14 @@ import numpy as np
 
 from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
-from .video_read import VideoInfo, iter_frames, read_video, video_info  # noqa: F401 (API)
+from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
+                         video_info)
 
 log = logging.getLogger(__name__)
 
-__all__ = ["VideoInfo", "video_info", "iter_frames", "read_video", "CODECS", "DEFAULT_CODEC",
+__all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video", "CODECS", "DEFAULT_CODEC",
            "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
-           "VideoOutput", "WrittenVideo", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
+           "VideoOutput", "WrittenVideo", "keeping_aspect", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
            "is_image_pattern", "frame_path", "save_frame_image", "place_sequence",
            "check_video_output",
            "decoded_frame_count",
@@ -87,11 +88,17 @@ class VideoOptions:
     preset : str
         x264 / x265 speed preset (:data:`PRESETS`): faster ones cost less CPU for a little less
         quality or bigger files at the same CRF (figures in BENCHMARKS.md).
+    sar : (int, int), optional
+        The pixel aspect ratio written into the video's header (its sample aspect ratio), so
+        that players show it at the shape of the video it rewrites (e.g. (15, 16): a 512x480
+        video shown 480x480). None: square pixels, nothing written; the commands that rewrite a
+        video take that video's (:func:`keeping_aspect`). Image sequences carry none.
     """
 
     codec: str = DEFAULT_CODEC
     crf: int | None = None
     preset: str = DEFAULT_PRESET
+    sar: tuple[int, int] | None = None
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -106,6 +113,8 @@ class VideoOptions:
             if isinstance(self.crf, bool) or int(self.crf) != self.crf or not lo <= self.crf <= hi:
                 raise VideoError(f"CRF must be an integer from {lo} to {hi} (lower is better; "
                                  f"default {DEFAULT_CRF}), got {self.crf}")
+        if self.sar is not None:
+            object.__setattr__(self, "sar", _checked_aspect(self.sar))
 
     @property
     def effective_crf(self) -> int | None:
@@ -305,6 +314,47 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     if opt.codec == "h265":
         args += ["-x265-params", "log-level=error"]
     return args + _container_args(opt, suffix)
+
+
+def _checked_aspect(sar) -> tuple[int, int]:
+    """``sar`` as two positive integers up to 65535 (H.264's bound) in lowest terms;
+    VideoError otherwise."""
+    try:
+        n, d = (int(x) for x in sar)
+        ok = (n, d) == tuple(sar) and 1 <= n <= 65535 and 1 <= d <= 65535
+    except (TypeError, ValueError, OverflowError):
+        ok = False
+    if not ok:
+        raise VideoError(f"a pixel aspect ratio must be two integers from 1 to 65535, e.g. "
+                         f"(15, 16), got {sar!r}")
+    return pixel_aspect(n, d)
+
+
+def _aspect_args(opt: VideoOptions) -> list[str]:
+    """ffmpeg arguments giving the frames the pixel aspect ratio ``opt.sar`` (the encoder
+    writes it into the stream, the container into its header); none for square pixels."""
+    if opt.sar is None or opt.sar == (1, 1):
+        return []
+    return ["-vf", "setsar={}/{}".format(*opt.sar)]
+
+
+def keeping_aspect(options: VideoOptions | None, video) -> VideoOptions:
+    """``options`` (default :class:`VideoOptions`) with the pixel aspect ratio of the video
+    file ``video`` when they give none: the output of a command that rewrites ``video`` is
+    shown at ``video``'s shape (a video whose pixels are not square, e.g. 512x480 shown as
+    480x480, would otherwise play 7 % wider). None or an image: ``options`` as they are."""
+    options = VideoOptions() if options is None else options
+    if options.sar is not None or video is None or not Path(video).is_file():
+        return options
+    try:
+        sar = video_info(video).sar
+    except VideoError:  # not a video (e.g. a still): square pixels
+        return options
+    if sar == (1, 1):
+        return options
+    from dataclasses import replace
+
+    return replace(options, sar=sar)
 
 
 def _container_args(opt: VideoOptions, suffix: str) -> list[str]:
@@ -576,7 +626,7 @@ class VideoWriter:
         cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",
                "-pix_fmt", self._pipe_format, "-s", "{}x{}".format(*self.stored_size),
                "-framerate", _fps_arg(self.fps), "-i", "-", *self._audio_input(),
-               *_encode_args(self.options, self.path.suffix.lower()),
+               *_aspect_args(self.options), *_encode_args(self.options, self.path.suffix.lower()),
                "-f", VIDEO_SUFFIXES[self.path.suffix.lower()], str(self.tmp)]
         log.debug("ffmpeg: %s", " ".join(cmd))
         self._stderr = tempfile.TemporaryFile()

@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import VideoError
 
-__all__ = ["VideoInfo", "video_info", "iter_frames", "read_video"]
+__all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video"]
 
 
 @dataclass(frozen=True)
@@ -29,12 +29,16 @@ class VideoInfo:
         As reported by the container (may be approximate for some codecs).
     size : (int, int)
         ``(width, height)`` in pixels.
+    sar : (int, int)
+        The pixel (sample) aspect ratio ``(width, height)`` of a pixel, in lowest terms: (1, 1)
+        for square pixels or none given; e.g. (15, 16) for a 512x480 video shown 480x480.
     """
 
     path: Path
     fps: float
     n_frames: int
     size: tuple[int, int]
+    sar: tuple[int, int] = (1, 1)
 
 
 def _open(path: str | os.PathLike):
@@ -60,11 +64,27 @@ def video_info(path: str | os.PathLike) -> VideoInfo:
         fps = float(cap.get(cv2.CAP_PROP_FPS)) or 25.0
         n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
         size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        sar = pixel_aspect(cap.get(cv2.CAP_PROP_SAR_NUM), cap.get(cv2.CAP_PROP_SAR_DEN))
     finally:
         cap.release()
     if size[0] <= 0 or size[1] <= 0:
         raise VideoError(f"video {path} has no frames")
-    return VideoInfo(Path(path), fps, n, size)
+    return VideoInfo(Path(path), fps, n, size, sar)
+
+
+def pixel_aspect(num, den) -> tuple[int, int]:
+    """A pixel aspect ratio ``num:den`` in lowest terms; (1, 1) when either is not a positive
+    integer (a container that gives none reports 0:1)."""
+    from math import gcd
+
+    try:
+        n, d = int(num), int(den)
+    except (TypeError, ValueError, OverflowError):
+        return (1, 1)
+    if n <= 0 or d <= 0 or n != num or d != den:
+        return (1, 1)
+    g = gcd(n, d)
+    return (n // g, d // g)
 
 
 def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
