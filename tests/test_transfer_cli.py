@@ -422,8 +422,9 @@ def test_the_targets_pixel_aspect_ratio_is_kept(clips, quick_model_path, tmp_pat
                                                  monkeypatch, cache):
     """A target whose pixels are not square (8:9: its 96 columns shown as 85) gives a result,
     a puppet video and a track overlay shown at its shape: in parts (the render cache) or in
-    one piece; ``--crf 0`` and the same frames as a square-pixel target's result."""
-    from facetransfer.io.video import VideoOptions, video_info
+    one piece; ``--crf 0`` and the same frames as a square-pixel target's result. The colour
+    matrix is named where the target names one, and left to the player where it does not."""
+    from facetransfer.io.video import VideoOptions, colour_matrix, video_info
 
     monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", cache)
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
@@ -431,7 +432,8 @@ def test_the_targets_pixel_aspect_ratio_is_kept(clips, quick_model_path, tmp_pat
     write_video(target, read_video(clips["target"])[0], 25.0,
                 options=VideoOptions(crf=0, sar=(8, 9)))
     square = tmp_path / "square.mkv"
-    write_video(square, read_video(clips["target"])[0], 25.0, options=VideoOptions(crf=0))
+    write_video(square, read_video(clips["target"])[0], 25.0,
+                options=VideoOptions(crf=0, colour_tags=False))
     common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
               "--source-track", clips["source_track"], "--model", quick_model_path,
               "--crf", "0", "--no-progress"]
@@ -441,6 +443,8 @@ def test_the_targets_pixel_aspect_ratio_is_kept(clips, quick_model_path, tmp_pat
         assert code == 0, err
     assert video_info(tmp_path / "out.mp4").sar == (8, 9)
     assert video_info(tmp_path / "sq.mp4").sar == (1, 1)
+    assert colour_matrix(tmp_path / "out.mp4") == "smpte170m"
+    assert colour_matrix(tmp_path / "sq.mp4") is None
     np.testing.assert_array_equal(read_video(tmp_path / "out.mp4")[0],
                                   read_video(tmp_path / "sq.mp4")[0])
     code, _, err = run(["puppet", target, "--model", quick_model_path, "--identity", "id04",

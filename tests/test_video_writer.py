@@ -372,18 +372,56 @@ def test_pixel_aspect_ratio_is_written_and_read_back(tmp_path, codec, suffix):
     np.testing.assert_array_equal(read_video(wide)[0], read_video(plain)[0])
 
 
-def test_keeping_aspect_takes_the_inputs_unless_given(tmp_path):
+def test_like_video_takes_the_inputs_aspect_unless_given(tmp_path):
     src = encode_video(tmp_path / "src.mp4", smooth_frames(n=2), 25,
                        options=VideoOptions(sar=(8, 9))).path
     square = encode_video(tmp_path / "sq.mp4", smooth_frames(n=2), 25).path
-    assert iov.keeping_aspect(None, src) == VideoOptions(sar=(8, 9))
-    assert iov.keeping_aspect(VideoOptions(crf=20), src) == VideoOptions(crf=20, sar=(8, 9))
-    assert iov.keeping_aspect(VideoOptions(sar=(4, 3)), src).sar == (4, 3)  # given: kept
-    assert iov.keeping_aspect(None, square).sar is None
-    assert iov.keeping_aspect(None, None) == VideoOptions()
+    assert iov.like_video(None, src) == VideoOptions(sar=(8, 9))
+    assert iov.like_video(VideoOptions(crf=20), src) == VideoOptions(crf=20, sar=(8, 9))
+    assert iov.like_video(VideoOptions(sar=(4, 3)), src).sar == (4, 3)  # given: kept
+    assert iov.like_video(None, square) == VideoOptions()
+    assert iov.like_video(None, None) == VideoOptions()
     still = tmp_path / "still.png"
     still.write_bytes(b"not a video")
-    assert iov.keeping_aspect(None, still).sar is None
+    assert iov.like_video(None, still) == VideoOptions()
+
+
+@pytest.mark.parametrize("codec,suffix", [("h264", ".mp4"), ("h265", ".mkv"),
+                                          ("prores", ".mov")])
+def test_colour_matrix_named_in_the_header_unless_the_input_names_none(tmp_path, codec,
+                                                                       suffix):
+    """Every video names the BT.601 matrix and limited range its frames were converted with;
+    a video rewriting one whose header names no matrix names none either (a player guesses
+    alike for both); OpenCV reads either back to the same pixels."""
+    if iov.CODECS[codec] not in iov.ffmpeg_encoders(iov.ffmpeg_exe()):
+        pytest.skip(f"this ffmpeg has no {codec} encoder")
+    frames = smooth_frames(n=3)
+    tagged = encode_video(tmp_path / f"t{suffix}", frames, 25,
+                          options=VideoOptions(codec=codec)).path
+    plain = encode_video(tmp_path / f"p{suffix}", frames, 25,
+                         options=VideoOptions(codec=codec, colour_tags=False)).path
+    assert iov.colour_matrix(tagged) == "smpte170m" and "(tv, smpte170m" in stream_info(tagged)
+    assert iov.colour_matrix(plain) is None
+    np.testing.assert_array_equal(read_video(tagged)[0], read_video(plain)[0])
+    assert iov.like_video(None, tagged).colour_tags
+    assert not iov.like_video(None, plain).colour_tags
+    assert not iov.like_video(VideoOptions(codec=codec), plain).colour_tags
+
+
+def test_opencv_decodes_by_the_named_matrix(tmp_path):
+    """Why the tags matter: the same YCbCr planes named BT.709 decode to other RGB than
+    unnamed ones (OpenCV: BT.601), by the matrices' difference on a saturated red."""
+    frames = np.zeros((2, 32, 32, 3), np.uint8)
+    frames[..., 0] = 220
+    base = encode_video(tmp_path / "a.mp4", frames, 25,
+                        options=VideoOptions(crf=0, colour_tags=False)).path
+    named = tmp_path / "b.mp4"
+    subprocess.run([iov.ffmpeg_exe(), "-v", "error", "-i", str(base), "-c", "copy",
+                    "-bsf:v", "h264_metadata=matrix_coefficients=1", str(named)], check=True)
+    assert iov.colour_matrix(named) == "bt709" and iov.colour_matrix(base) is None
+    a, b = read_video(base)[0][0, 16, 16].astype(int), read_video(named)[0][0, 16, 16].astype(int)
+    assert abs(a[0] - 220) <= 2 and abs(a[1]) <= 2  # BT.601 both ways
+    assert abs(b[0] - a[0]) >= 15  # the same planes as BT.709: another red
 
 
 @pytest.mark.parametrize("num,den,want", [(15, 16, (15, 16)), (30.0, 32.0, (15, 16)),

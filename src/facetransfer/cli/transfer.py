@@ -472,7 +472,7 @@ def run_edit(args) -> int:
 
 
 def run_puppet(args) -> int:
-    from ..io.video import (check_video_output, keeping_aspect, read_video, video_info,
+    from ..io.video import (check_video_output, like_video, read_video, video_info,
                             write_video_with_audio)
     from ..track.obtain import obtain_track
     from ..track.video_detect import default_workers
@@ -505,7 +505,7 @@ def run_puppet(args) -> int:
         args.out, tqdm(it, total=track.n_frames, desc="render", unit="frame", leave=False,
                         disable=progress_disabled()),
         track.fps, audio_from=args.video, overwrite=args.overwrite,
-        options=keeping_aspect(vopt, args.video), n_frames=track.n_frames)
+        options=like_video(vopt, args.video), n_frames=track.n_frames)
     print(f"wrote {args.out}: {track.n_frames} frames of {args.identity}"
           + (", with the video's audio" if audio else ""))
     return 0

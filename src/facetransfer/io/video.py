@@ -39,7 +39,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video", "CODECS", "DEFAULT_CODEC",
            "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
-           "VideoOutput", "WrittenVideo", "keeping_aspect", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
+           "VideoOutput", "WrittenVideo", "like_video", "colour_matrix", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
            "is_image_pattern", "frame_path", "save_frame_image", "place_sequence",
            "check_video_output",
            "decoded_frame_count",
@@ -92,13 +92,18 @@ class VideoOptions:
         The pixel aspect ratio written into the video's header (its sample aspect ratio), so
         that players show it at the shape of the video it rewrites (e.g. (15, 16): a 512x480
         video shown 480x480). None: square pixels, nothing written; the commands that rewrite a
-        video take that video's (:func:`keeping_aspect`). Image sequences carry none.
+        video take that video's (:func:`like_video`). Image sequences carry none.
+    colour_tags : bool
+        Name the colour matrix and range of the frames' conversion (BT.601, limited) in the
+        header. False leaves them unspecified, for a video that rewrites one which names none:
+        a player then guesses alike for both (:func:`like_video`).
     """
 
     codec: str = DEFAULT_CODEC
     crf: int | None = None
     preset: str = DEFAULT_PRESET
     sar: tuple[int, int] | None = None
+    colour_tags: bool = True
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -304,13 +309,23 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
     return VideoOutput(p, "video", opt)
 
 
+#: The colour of a video written (:attr:`VideoOptions.colour_tags`), in its header: the BT.601
+#: matrix in limited range, the conversion its frames had (:func:`_yuv420p`; ffmpeg's own for
+#: ProRes). OpenCV decodes a video by the matrix its header names (e.g. BT.709): left
+#: unspecified, the rewritten video would be guessed at by players, most taking BT.709 for HD
+#: (reds and skin drawn a little off the target's).
+_COLOUR_TAGS = ["-colorspace", "smpte170m", "-color_range", "tv"]
+
+
 def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     """ffmpeg output arguments of a codec (libx264/libx265 4:2:0 or ProRes 422 HQ)."""
     enc = CODECS[opt.codec]
+    tags = _COLOUR_TAGS if opt.colour_tags else []
     if opt.codec == "prores":
-        return ["-c:v", enc, "-profile:v", "3", "-pix_fmt", "yuv422p10le", "-vendor", "apl0"]
+        return ["-c:v", enc, "-profile:v", "3", "-pix_fmt", "yuv422p10le", "-vendor", "apl0",
+                *tags]
     args = ["-c:v", enc, "-preset", opt.preset, "-crf", str(opt.effective_crf),
-            "-pix_fmt", "yuv420p"]
+            "-pix_fmt", "yuv420p", *tags]
     if opt.codec == "h265":
         args += ["-x265-params", "log-level=error"]
     return args + _container_args(opt, suffix)
@@ -338,23 +353,54 @@ def _aspect_args(opt: VideoOptions) -> list[str]:
     return ["-vf", "setsar={}/{}".format(*opt.sar)]
 
 
-def keeping_aspect(options: VideoOptions | None, video) -> VideoOptions:
-    """``options`` (default :class:`VideoOptions`) with the pixel aspect ratio of the video
-    file ``video`` when they give none: the output of a command that rewrites ``video`` is
-    shown at ``video``'s shape (a video whose pixels are not square, e.g. 512x480 shown as
-    480x480, would otherwise play 7 % wider). None or an image: ``options`` as they are."""
+def like_video(options: VideoOptions | None, video) -> VideoOptions:
+    """``options`` (default :class:`VideoOptions`) for a video that rewrites the video file
+    ``video``, shown as it is shown: its pixel aspect ratio when ``options`` give none (a
+    video of pixels that are not square, e.g. 512x480 shown 480x480, would otherwise play 7 %
+    wider), and colour tags only where ``video`` names a colour matrix (:func:`colour_matrix`;
+    without one, OpenCV decoded it as BT.601 and players guess alike for both). None or not a
+    video: ``options`` as they are."""
+    from dataclasses import replace
+
     options = VideoOptions() if options is None else options
-    if options.sar is not None or video is None or not Path(video).is_file():
+    if video is None or not Path(video).is_file():
         return options
     try:
         sar = video_info(video).sar
     except VideoError:  # not a video (e.g. a still): square pixels
         return options
-    if sar == (1, 1):
-        return options
-    from dataclasses import replace
+    if options.sar is None and sar != (1, 1):
+        options = replace(options, sar=sar)
+    if options.colour_tags and colour_matrix(video) is None:
+        options = replace(options, colour_tags=False)
+    return options
 
-    return replace(options, sar=sar)
+
+def colour_matrix(path: str | os.PathLike) -> str | None:
+    """The colour matrix (YCbCr coefficients) a video's header names, as ffmpeg names it
+    (``"bt709"``, ``"smpte170m"``, ``"bt470bg"``, ...); None when it names none or ffmpeg is
+    not there. Read from ffmpeg's description of the first video stream, whose pixel format
+    lists range, ``matrix[/primaries/transfer]`` and field order:
+    ``yuv420p(tv, bt709, progressive)``."""
+    exe = ffmpeg_exe()
+    if exe is None:
+        return None
+    res = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)], capture_output=True,
+                         text=True)
+    found = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^)]*)\)", res.stderr)
+    if not found:
+        return None
+    for item in (x.strip() for x in found.group(1).split(",")):
+        name = item.split("/")[0]
+        if ("/" in item or name in _MATRICES) and name not in ("unknown", "reserved"):
+            return name
+    return None
+
+
+#: ffmpeg's names of colour matrices (``AVColorSpace``) as they stand alone in its description.
+_MATRICES = ("rgb", "bt709", "fcc", "bt470bg", "smpte170m", "smpte240m", "ycgco", "bt2020nc",
+             "bt2020c", "smpte2085", "chroma-derived-nc", "chroma-derived-c", "ictcp", "ipt-c2",
+             "ycgco-re", "ycgco-ro")
 
 
 def _container_args(opt: VideoOptions, suffix: str) -> list[str]:

@@ -117,13 +117,13 @@ def write_overlay(video, track, model, path, *, progress=None, overwrite: bool =
     progress : callable(int), optional
         Called with 1 per frame written.
     options : VideoOptions, optional
-        Codec and CRF (default H.264, CRF 18); the pixel aspect ratio is ``video``'s unless
-        they give one.
+        Codec and CRF (default H.264, CRF 18); pixel aspect ratio and colour tags as
+        ``video``'s (:func:`~facetransfer.io.video.like_video`).
     """
-    from ..io.video import VideoWriter, iter_frames, keeping_aspect
+    from ..io.video import VideoWriter, iter_frames, like_video
 
     with VideoWriter(path, track.fps, track.frame_size, overwrite=overwrite,
-                     options=keeping_aspect(options, video)) as w:
+                     options=like_video(options, video)) as w:
         for img in overlay_frames(iter_frames(video, stop=track.n_frames), track, model):
             w.write(img)
             if progress is not None:
