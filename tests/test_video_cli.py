@@ -177,4 +177,7 @@ def test_no_third_party_lines_unless_verbose(data_dir, quick_model_path, tmp_pat
 
     assert native(loud.stderr)          # MediaPipe did speak (the test can fail)
     assert native(quiet.stderr) == []
+    after = subprocess.run(base + argv + ["--overwrite", "-v"], capture_output=True, text=True,
+                           env=env)             # -v after the command, as users type it
+    assert after.returncode == 0 and native(after.stderr), after.stderr
     assert "wrote" in quiet.stdout

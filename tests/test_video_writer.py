@@ -470,3 +470,19 @@ def test_audio_of_another_codec_is_encoded_to_aac(tmp_path):
     res = encode_video(tmp_path / "v.mp4", smooth_frames(n=4), 10, audio_from=wav)
     assert res.audio and iov.audio_codec(res.path) == "aac"
     assert iov.audio_codec(encode_video(tmp_path / "m.mp4", smooth_frames(n=2), 10).path) is None
+
+
+@pytest.mark.parametrize("pixels,want", [
+    ("yuv420p(tv, bt709, progressive)", "bt709"),
+    ("yuv420p(tv, smpte170m/unknown/unknown, progressive)", "smpte170m"),
+    ("yuvj420p(pc, bt470bg/bt470bg/smpte170m)", "bt470bg"),
+    ("yuv420p(tv, unknown/bt709/bt709, progressive)", None),
+    ("yuv420p(progressive)", None), ("yuv420p(tv, progressive)", None), ("yuv420p", None)])
+def test_matrix_named_in_ffmpegs_description(pixels, want):
+    from facetransfer.io.video_display import matrix_named
+
+    text = ("Input #0, mov,mp4,m4a,3gp,3g2,mj2, from 'x.mp4':\n"
+            "  Stream #0:0[0x1](und): Audio: aac (LC) (mp4a / 0x6134706D), 44100 Hz, stereo\n"
+            f"  Stream #0:1[0x2](und): Video: h264 (High) (avc1 / 0x31637661), {pixels}, "
+            "512x480 [SAR 15:16 DAR 1:1], 789 kb/s, 30 fps\n")
+    assert matrix_named(text) == want

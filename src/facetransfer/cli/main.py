@@ -41,6 +41,10 @@ def build_parser() -> argparse.ArgumentParser:
         if "--no-progress" not in leaf._option_string_actions:
             leaf.add_argument("--no-progress", action="store_true",
                               help="no progress bars (they are drawn only on a terminal)")
+        # also after the command (``facetransfer track V --out T -v``); no default, so a -v
+        # before the command is not undone by the command's parser
+        leaf.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
+                          help="as facetransfer -v")
     return parser
 
 

@@ -32,19 +32,19 @@ import numpy as np
 
 from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
+from .video_display import COLOUR_TAGS, aspect_args, checked_aspect, matrix_named
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
 
 log = logging.getLogger(__name__)
 
-__all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video", "CODECS", "DEFAULT_CODEC",
-           "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions",
-           "VideoOutput", "WrittenVideo", "like_video", "colour_matrix", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
+__all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video", "CODECS",
+           "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET",
+           "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions", "VideoOutput", "WrittenVideo",
+           "like_video", "colour_matrix", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
            "is_image_pattern", "frame_path", "save_frame_image", "place_sequence",
-           "check_video_output",
-           "decoded_frame_count",
-           "stored_frame_count",
-           "has_audio", "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
+           "check_video_output", "decoded_frame_count", "stored_frame_count", "has_audio",
+           "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
            "write_video_with_audio"]
 
 
@@ -119,7 +119,7 @@ class VideoOptions:
                 raise VideoError(f"CRF must be an integer from {lo} to {hi} (lower is better; "
                                  f"default {DEFAULT_CRF}), got {self.crf}")
         if self.sar is not None:
-            object.__setattr__(self, "sar", _checked_aspect(self.sar))
+            object.__setattr__(self, "sar", checked_aspect(self.sar))
 
     @property
     def effective_crf(self) -> int | None:
@@ -309,18 +309,10 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
     return VideoOutput(p, "video", opt)
 
 
-#: The colour of a video written (:attr:`VideoOptions.colour_tags`), in its header: the BT.601
-#: matrix in limited range, the conversion its frames had (:func:`_yuv420p`; ffmpeg's own for
-#: ProRes). OpenCV decodes a video by the matrix its header names (e.g. BT.709): left
-#: unspecified, the rewritten video would be guessed at by players, most taking BT.709 for HD
-#: (reds and skin drawn a little off the target's).
-_COLOUR_TAGS = ["-colorspace", "smpte170m", "-color_range", "tv"]
-
-
 def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     """ffmpeg output arguments of a codec (libx264/libx265 4:2:0 or ProRes 422 HQ)."""
     enc = CODECS[opt.codec]
-    tags = _COLOUR_TAGS if opt.colour_tags else []
+    tags = COLOUR_TAGS if opt.colour_tags else []
     if opt.codec == "prores":
         return ["-c:v", enc, "-profile:v", "3", "-pix_fmt", "yuv422p10le", "-vendor", "apl0",
                 *tags]
@@ -329,78 +321,6 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     if opt.codec == "h265":
         args += ["-x265-params", "log-level=error"]
     return args + _container_args(opt, suffix)
-
-
-def _checked_aspect(sar) -> tuple[int, int]:
-    """``sar`` as two positive integers up to 65535 (H.264's bound) in lowest terms;
-    VideoError otherwise."""
-    try:
-        n, d = (int(x) for x in sar)
-        ok = (n, d) == tuple(sar) and 1 <= n <= 65535 and 1 <= d <= 65535
-    except (TypeError, ValueError, OverflowError):
-        ok = False
-    if not ok:
-        raise VideoError(f"a pixel aspect ratio must be two integers from 1 to 65535, e.g. "
-                         f"(15, 16), got {sar!r}")
-    return pixel_aspect(n, d)
-
-
-def _aspect_args(opt: VideoOptions) -> list[str]:
-    """ffmpeg arguments giving the frames the pixel aspect ratio ``opt.sar`` (the encoder
-    writes it into the stream, the container into its header); none for square pixels."""
-    if opt.sar is None or opt.sar == (1, 1):
-        return []
-    return ["-vf", "setsar={}/{}".format(*opt.sar)]
-
-
-def like_video(options: VideoOptions | None, video) -> VideoOptions:
-    """``options`` (default :class:`VideoOptions`) for a video that rewrites the video file
-    ``video``, shown as it is shown: its pixel aspect ratio when ``options`` give none (a
-    video of pixels that are not square, e.g. 512x480 shown 480x480, would otherwise play 7 %
-    wider), and colour tags only where ``video`` names a colour matrix (:func:`colour_matrix`;
-    without one, OpenCV decoded it as BT.601 and players guess alike for both). None or not a
-    video: ``options`` as they are."""
-    from dataclasses import replace
-
-    options = VideoOptions() if options is None else options
-    if video is None or not Path(video).is_file():
-        return options
-    try:
-        sar = video_info(video).sar
-    except VideoError:  # not a video (e.g. a still): square pixels
-        return options
-    if options.sar is None and sar != (1, 1):
-        options = replace(options, sar=sar)
-    if options.colour_tags and colour_matrix(video) is None:
-        options = replace(options, colour_tags=False)
-    return options
-
-
-def colour_matrix(path: str | os.PathLike) -> str | None:
-    """The colour matrix (YCbCr coefficients) a video's header names, as ffmpeg names it
-    (``"bt709"``, ``"smpte170m"``, ``"bt470bg"``, ...); None when it names none or ffmpeg is
-    not there. Read from ffmpeg's description of the first video stream, whose pixel format
-    lists range, ``matrix[/primaries/transfer]`` and field order:
-    ``yuv420p(tv, bt709, progressive)``."""
-    exe = ffmpeg_exe()
-    if exe is None:
-        return None
-    res = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)], capture_output=True,
-                         text=True)
-    found = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^)]*)\)", res.stderr)
-    if not found:
-        return None
-    for item in (x.strip() for x in found.group(1).split(",")):
-        name = item.split("/")[0]
-        if ("/" in item or name in _MATRICES) and name not in ("unknown", "reserved"):
-            return name
-    return None
-
-
-#: ffmpeg's names of colour matrices (``AVColorSpace``) as they stand alone in its description.
-_MATRICES = ("rgb", "bt709", "fcc", "bt470bg", "smpte170m", "smpte240m", "ycgco", "bt2020nc",
-             "bt2020c", "smpte2085", "chroma-derived-nc", "chroma-derived-c", "ictcp", "ipt-c2",
-             "ycgco-re", "ycgco-ro")
 
 
 def _container_args(opt: VideoOptions, suffix: str) -> list[str]:
@@ -494,13 +414,47 @@ def has_audio(path: str | os.PathLike) -> bool:
 def audio_codec(path: str | os.PathLike) -> str | None:
     """The codec of a media file's first audio stream as ffmpeg names it (``"aac"``,
     ``"mp3"``, ``"opus"``, ...); None without one or without ffmpeg."""
+    found = re.search(r"Stream #[^\n]*?: Audio: ([\w-]+)", _described(path))
+    return found.group(1) if found else None
+
+
+def colour_matrix(path: str | os.PathLike) -> str | None:
+    """The colour matrix a video's header names, as ffmpeg names it (``"bt709"``,
+    ``"smpte170m"``, ...; :func:`~facetransfer.io.video_display.matrix_named`); None when it
+    names none or without ffmpeg."""
+    return matrix_named(_described(path))
+
+
+def _described(path) -> str:
+    """ffmpeg's description of a media file (its streams), "" without ffmpeg."""
     exe = ffmpeg_exe()
     if exe is None:
-        return None
-    res = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)], capture_output=True,
-                         text=True)
-    found = re.search(r"Stream #[^\n]*?: Audio: ([\w-]+)", res.stderr)
-    return found.group(1) if found else None
+        return ""
+    return subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)],
+                          capture_output=True, text=True).stderr
+
+
+def like_video(options: VideoOptions | None, video) -> VideoOptions:
+    """``options`` (default :class:`VideoOptions`) for a video that rewrites the video file
+    ``video``, to be shown as it is shown (:mod:`facetransfer.io.video_display`): its pixel
+    aspect ratio when ``options`` give none (a video of pixels that are not square, e.g.
+    512x480 shown 480x480, would otherwise play 7 % wider), and colour tags only where
+    ``video`` names a colour matrix (:func:`colour_matrix`; without one, OpenCV decoded it as
+    BT.601 and players guess alike for both). None or not a video: ``options`` as they are."""
+    from dataclasses import replace
+
+    options = VideoOptions() if options is None else options
+    if video is None or not Path(video).is_file():
+        return options
+    try:
+        sar = video_info(video).sar
+    except VideoError:  # not a video (e.g. a still): square pixels
+        return options
+    if options.sar is None and sar != (1, 1):
+        options = replace(options, sar=sar)
+    if options.colour_tags and colour_matrix(video) is None:
+        options = replace(options, colour_tags=False)
+    return options
 
 
 #: Audio codecs copied as they are into the containers that hold them: no second lossy
@@ -672,7 +626,8 @@ class VideoWriter:
         cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",
                "-pix_fmt", self._pipe_format, "-s", "{}x{}".format(*self.stored_size),
                "-framerate", _fps_arg(self.fps), "-i", "-", *self._audio_input(),
-               *_aspect_args(self.options), *_encode_args(self.options, self.path.suffix.lower()),
+               *aspect_args(self.options.sar),
+               *_encode_args(self.options, self.path.suffix.lower()),
                "-f", VIDEO_SUFFIXES[self.path.suffix.lower()], str(self.tmp)]
         log.debug("ffmpeg: %s", " ".join(cmd))
         self._stderr = tempfile.TemporaryFile()
