@@ -457,3 +457,58 @@ def test_the_targets_pixel_aspect_ratio_is_kept(clips, quick_model_path, tmp_pat
                        capsys)
     assert code == 0, err
     assert video_info(tmp_path / "ov.mp4").sar == (8, 9)
+
+
+def test_an_interrupted_puppet_renders_only_the_frames_it_had_not(clips, quick_model_path,
+                                                                 tmp_path, capsys, monkeypatch):
+    """``puppet`` keeps its render in parts as ``transfer`` does: Ctrl-C at frame 3, then the
+    same command renders frames 3-5 only, and the video equals one written at once."""
+    import facetransfer.render as render_module
+    from facetransfer.io import video_parts
+
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(video_parts, "PART_FRAMES", 2)
+    real, drawn, stop = render_module.render, [], [3]
+
+    def counted(*a, **k):  # one call a frame, in order
+        if stop[0] is not None and len(drawn) >= stop[0]:
+            raise KeyboardInterrupt
+        drawn.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(render_module, "render", counted)
+    argv = ["puppet", clips["source"], "--model", quick_model_path, "--identity", "id04",
+            "--track", clips["source_track"], "--crf", "0", "--no-progress", "--out"]
+    code, _, err = run(argv + [tmp_path / "p.mp4"], capsys)
+    assert code == 130 and "the frames rendered so far are kept" in err
+    assert not (tmp_path / "p.mp4").exists()
+    stop[0], drawn[:] = None, []
+    code, out, err = run(argv + [tmp_path / "p.mp4"], capsys)
+    assert code == 0, err
+    assert "continued an interrupted render from frame 3" in out and len(drawn) == 3
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "off")
+    code, _, err = run(argv + [tmp_path / "once.mp4"], capsys)
+    assert code == 0, err
+    a, b = read_video(tmp_path / "p.mp4")[0], read_video(tmp_path / "once.mp4")[0]
+    assert a.shape == b.shape == (6, *a.shape[1:]) and np.array_equal(a, b)
+
+
+def test_puppet_start_repeats_the_last_good_frame_before_it(clips, quick_model):
+    """``puppet_frames(start=k)`` gives the frames a whole run gives from k on, also where
+    frame k is lost (it repeats the good frame before it, rendered for the purpose)."""
+    import dataclasses
+
+    from facetransfer.transfer import identity_from_label, puppet_frames
+
+    track = Track.load(clips["source_track"])
+    lost = np.zeros(track.n_frames, bool)
+    lost[[3, 4]] = True
+    track = dataclasses.replace(track, lost=lost)
+    wid = identity_from_label(quick_model, "id04")
+    whole = list(puppet_frames(track, quick_model, wid))
+    assert np.array_equal(whole[3], whole[2]) and not np.array_equal(whole[5], whole[2])
+    for k in (0, 3, 4, 5):
+        part = list(puppet_frames(track, quick_model, wid, start=k))
+        assert len(part) == 6 - k
+        assert all(np.array_equal(a, b) for a, b in zip(part, whole[k:]))

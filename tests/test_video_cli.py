@@ -102,25 +102,38 @@ sys.exit(main(sys.argv[1:]))
 """
 
 
-def test_full_disk_exits_2_and_keeps_the_old_video(clip_and_track, quick_model_path, tmp_path):
-    """Issue 16, defect 1: no "wrote ..." and exit 0 over a broken file; the old one survives."""
+@pytest.mark.parametrize("cache", ["off", "on"])
+def test_full_disk_exits_2_and_keeps_the_old_video(clip_and_track, quick_model_path, tmp_path,
+                                                   cache):
+    """Issue 16, defect 1: no "wrote ..." and exit 0 over a broken file; the old one survives.
+    Written in one piece, the line names the output; in parts (the render cache), the part,
+    the output and the way around it."""
     video, track = clip_and_track
-    out = tmp_path / "p.mp4"
+    d = tmp_path / "out"
+    d.mkdir()
+    out = d / "p.mp4"
     argv = ["puppet", str(video), "--model", str(quick_model_path), "--identity", "id01",
             "--track", str(track), "--out", str(out)]
     assert main(argv) == 0
     before = out.read_bytes()
     assert len(before) > 1500
+    env = {**os.environ, "PYTHONPATH": str(SRC), "FACETRANSFER_RENDER_CACHE": cache,
+           "XDG_CACHE_HOME": str(tmp_path / "cache")}
     r = subprocess.run([sys.executable, "-c", _FULL_DISK, *argv, "--overwrite"],
-                       capture_output=True, env={**os.environ, "PYTHONPATH": str(SRC)})
+                       capture_output=True, env=env)
     stdout, stderr = r.stdout.decode(), r.stderr.decode()  # bytes: keep tqdm's \r as they are
     lines = [ln.split("\r")[-1] for ln in stderr.split("\n")]  # a bar's last state per line
     lines = [ln for ln in lines if ln.strip()]
     assert r.returncode == 2 and "wrote" not in stdout, stdout + stderr
     assert len(lines) == 1 and lines[0].startswith("facetransfer puppet: error: cannot write "
-                                                   f"video {out}"), lines
+                                                   "video "), lines
+    if cache == "off":
+        assert lines[0].startswith(f"facetransfer puppet: error: cannot write video {out}")
+    else:
+        assert f"a part of {out} in the render cache" in lines[0]
+        assert "FACETRANSFER_RENDER_CACHE=off" in lines[0]
     assert out.read_bytes() == before
-    assert sorted(os.listdir(tmp_path)) == ["p.mp4"]
+    assert sorted(os.listdir(d)) == ["p.mp4"]
 
 
 def test_default_model_when_model_is_absent(clip_and_track, quick_model, tmp_path, capsys,

@@ -1,5 +1,5 @@
 """Frames a transfer rendered, kept until its video is written: an interrupted ``transfer``
-continues its render where it stopped.
+(or ``puppet``) continues its render where it stopped.
 
 The tracks of a transfer are kept by :mod:`facetransfer.track.cache`; its render, the longer
 step at high resolution (a minute of 1080p is about ten minutes of rendering on two cores), was
@@ -9,7 +9,8 @@ parts (:mod:`facetransfer.io.video_parts`), or writes an image sequence's files
 ``$XDG_CACHE_HOME/facetransfer/renders`` named by a key of everything the frames depend on
 (:func:`render_key`): the plan's frames (a digest of every frame's every 16th row), its tracks
 and frame indices, the model's content, the render options, the codec options, and the package's
-code and data (:func:`code_fingerprint`). The same command run again finds the parts and renders
+code and data (:func:`code_fingerprint`); a puppet video's by :func:`puppet_key`. The same
+command run again finds the parts (:func:`parts_writer`) and renders
 only the frames they do not hold; a finished video removes its folder. Folders of interrupted
 renders never run again are removed beyond the :data:`KEEP` most recent.
 
@@ -33,7 +34,7 @@ import numpy as np
 log = logging.getLogger(__name__)
 
 __all__ = ["LAYOUT", "KEEP", "ROW_STEP", "cache_enabled", "render_dir", "render_key",
-           "code_fingerprint", "parts_folder"]
+           "puppet_key", "code_fingerprint", "parts_writer", "parts_folder"]
 
 #: The cache's layout: a change of what a key means changes it.
 LAYOUT = "renders-1"
@@ -100,15 +101,8 @@ def render_key(plan, model, options, video_options, *, images: bool = False) -> 
     the cache is off."""
     if not cache_enabled():
         return None
-    from . import __version__
-    from .io.video_parts import PART_FRAMES
-
-    h = hashlib.sha256()
-    what = {"layout": LAYOUT, "version": __version__, "code": code_fingerprint(),
-            "model": str(model.content_hash), "options": repr(options),
-            "video": repr(video_options), "fps": float(plan.fps), "parts": PART_FRAMES,
-            "performance": bool(plan.performance), "images": bool(images)}
-    h.update(json.dumps(what, sort_keys=True).encode())
+    h = _keyed(model, video_options, plan.fps, images, options=repr(options),
+               performance=bool(plan.performance))
     digested: dict[int, int] = {}  # a clip that is also another role is digested once
     for role, frames in enumerate((plan.target_frames, plan.mouth_frames, plan.texture_frames)):
         if frames is not None and id(frames) in digested:
@@ -120,6 +114,33 @@ def render_key(plan, model, options, video_options, *, images: bool = False) -> 
         _update_track(h, tr)
     _update_value(h, np.asarray(plan.mouth_index))
     return h.hexdigest()[:32]
+
+
+def puppet_key(track, model, identity, video_options, *, images: bool = False) -> str | None:
+    """The key of a puppet video (:func:`facetransfer.transfer.puppet_frames`): ``track``
+    driving the identity weights ``identity`` of ``model``, written with ``video_options``
+    into a video or (``images``) an image sequence; None when the cache is off."""
+    if not cache_enabled():
+        return None
+    h = _keyed(model, video_options, track.fps, images, kind="puppet")
+    _update_track(h, track)
+    _update_value(h, np.asarray(identity, np.float64))
+    return h.hexdigest()[:32]
+
+
+def _keyed(model, video_options, fps: float, images: bool, **what):
+    """A sha256 of what every render's key holds (layout, package version and code, the
+    model's content, the codec options, frame rate, part length, video or images) and
+    ``what``, ready for the render's own frames and tracks."""
+    from . import __version__
+    from .io.video_parts import PART_FRAMES
+
+    what.update(layout=LAYOUT, version=__version__, code=code_fingerprint(),
+                model=str(model.content_hash), video=repr(video_options), fps=float(fps),
+                parts=PART_FRAMES, images=bool(images))
+    h = hashlib.sha256()
+    h.update(json.dumps(what, sort_keys=True).encode())
+    return h
 
 
 @functools.lru_cache(maxsize=1)
@@ -138,6 +159,40 @@ def code_fingerprint() -> str:
     return code_digest(root, files, f"numpy={np.__version__} cv2={cv2.__version__} "
                                     f"numba={numba.__version__} "
                                     f"imageio-ffmpeg={metadata.version('imageio-ffmpeg')}")
+
+
+def parts_writer(key: str | None, out, fps: float, size: tuple[int, int], n_frames: int, *,
+                 video_options=None, audio_from=None, overwrite: bool = False):
+    """A writer of ``out`` into the parts folder of ``key`` that keeps what it wrote when
+    interrupted: a :class:`~facetransfer.io.video_parts.PartsWriter` (a video of
+    ``n_frames`` frames of ``size`` (W, H) at ``fps``) or a
+    :class:`~facetransfer.io.sequence_parts.SequenceWriter` (an image sequence). Its ``done``
+    frames are those an earlier, interrupted run kept (logged). None (the caller writes in one
+    piece): no ``key`` (the cache is off), another process writes that folder now, or the
+    cache cannot be written (warned, naming ``out``)."""
+    from .io.sequence_parts import SequenceWriter
+    from .io.video import is_image_pattern
+    from .io.video_parts import PartsBusy, PartsWriter
+
+    if key is None:
+        return None
+    try:
+        if is_image_pattern(out):
+            writer = SequenceWriter(parts_folder(key), out, size, n_frames=n_frames,
+                                    overwrite=overwrite)
+        else:
+            writer = PartsWriter(parts_folder(key), out, fps, size, n_frames=n_frames,
+                                 options=video_options, audio_from=audio_from,
+                                 overwrite=overwrite)
+    except PartsBusy as exc:
+        log.warning("%s: writing %s without the render cache", exc, out)
+        return None
+    except OSError as exc:  # the cache cannot be written: the job does not fail for it
+        log.warning("the render cache cannot be used (%s): writing %s without it", exc, out)
+        return None
+    if writer.done:
+        log.info("%s: continuing an interrupted render from frame %d", out, writer.done)
+    return writer
 
 
 def parts_folder(key: str) -> Path:

@@ -507,12 +507,14 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
 
 def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] | None = None,
                   background=(40, 40, 48), identity_mode: str = "identity",
-                  color=(205, 170, 150)) -> Iterator[np.ndarray]:
+                  color=(205, 170, 150), start: int = 0) -> Iterator[np.ndarray]:
     """Drive a synthetic actor (an identity of the model) with a tracked performance.
 
     Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
     track's camera, Lambert-shaded on a plain background, with the mouth gap and eye holes
     closed; lost frames repeat the last good one (or the background before the first).
+    ``start``: yield frames ``start`` to the end only (those of a whole run: a render
+    continued after an interrupt).
 
     Parameters
     ----------
@@ -546,11 +548,8 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     faces = np.concatenate(faces)
     n_all = topo.n_closed + len(topo.eye_loops)
     colors = np.broadcast_to(np.asarray(color, np.float64), (n_all, 3))
-    last = bg
-    for i in range(track.n_frames):
-        if track.lost[i]:
-            yield last
-            continue
+
+    def draw(i: int) -> np.ndarray:
         w = track.weights_at(i)
         w[identity_mode] = wid
         V = close_mouth(model.synthesize(w), topo)  # the identity contracted once (model.py)
@@ -561,9 +560,17 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
         if (sx, sy) != (1.0, 1.0):
             cam = type(cam)(cam.scale * np.sqrt(sx * sy), cam.rotation,
                             cam.translation * np.array([sx, sy]))
-        img = render(V, faces, cam, size, colors=colors, background=bg).image
-        last = img
-        yield img
+        return render(V, faces, cam, size, colors=colors, background=bg).image
+
+    lost = np.asarray(track.lost, bool)
+    last = None
+    for i in range(max(0, int(start)), track.n_frames):
+        if not lost[i]:
+            last = draw(i)
+        elif last is None:  # a lost frame repeats the last good one before it
+            before = np.flatnonzero(~lost[:i])
+            last = draw(int(before[-1])) if len(before) else bg
+        yield last
 
 
 def identity_from_label(model, label: str, mode: str = "identity") -> np.ndarray:

@@ -684,37 +684,17 @@ class _Frames:
 def _parts_writer(plan: TransferPlan, model, out, options, video_options, audio_from,
                   overwrite: bool):
     """A writer for ``out`` in the render cache's folder of this render that keeps what it
-    wrote when interrupted: a :class:`facetransfer.io.video_parts.PartsWriter` (a video) or a
-    :class:`facetransfer.io.sequence_parts.SequenceWriter` (an image sequence); None: the
-    cache is off, or another process renders the same frames now."""
-    from .io.sequence_parts import SequenceWriter
+    wrote when interrupted (:func:`facetransfer.render_cache.parts_writer`); None: the cache
+    is off, or another process renders the same frames now."""
     from .io.video import is_image_pattern
-    from .io.video_parts import PartsBusy, PartsWriter
-    from .render_cache import parts_folder, render_key
+    from .render_cache import parts_writer, render_key
 
     images = is_image_pattern(out)
     key = render_key(plan, model, options, video_options, images=images)
-    if key is None:
-        return None
     first = np.asarray(plan.target_frames[0])
-    size = (first.shape[1], first.shape[0])
-    try:
-        if images:
-            writer = SequenceWriter(parts_folder(key), out, size, n_frames=plan.n_frames,
-                                    overwrite=overwrite)
-        else:
-            writer = PartsWriter(parts_folder(key), out, plan.fps, size, n_frames=plan.n_frames,
-                                 options=video_options, audio_from=audio_from,
-                                 overwrite=overwrite)
-    except PartsBusy as exc:
-        log.warning("%s: writing %s without the render cache", exc, out)
-        return None
-    except OSError as exc:  # the cache cannot be written: the job does not fail for it
-        log.warning("the render cache cannot be used (%s): writing %s without it", exc, out)
-        return None
-    if writer.done:
-        log.info("%s: continuing an interrupted render from frame %d", out, writer.done)
-    return writer
+    return parts_writer(key, out, plan.fps, (first.shape[1], first.shape[0]), plan.n_frames,
+                        video_options=video_options, audio_from=audio_from,
+                        overwrite=overwrite)
 
 
 def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:

@@ -229,7 +229,7 @@ CACHED_TRACKING = ("transfer", "puppet", "demo")
 
 
 #: Commands whose render goes through the render cache (facetransfer.render_cache)
-CACHED_RENDERING = ("transfer",)
+CACHED_RENDERING = ("transfer", "puppet")
 
 
 def _kept(command: str) -> str:
