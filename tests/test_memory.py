@@ -45,6 +45,38 @@ def test_frame_array_and_its_growth_keep_the_frames(tmp_path, monkeypatch):
     np.testing.assert_array_equal(grown[:3], big)
 
 
+def _vm_flags(a: np.ndarray) -> list[str] | None:
+    """The kernel's VmFlags of the mapping holding ``a``'s middle byte (None: not found;
+    advice covers the whole 2 MB pages inside an array, not its first bytes)."""
+    addr = a.__array_interface__["data"][0] + a.nbytes // 2
+    flags, inside = None, False
+    with open("/proc/self/smaps") as fh:
+        for line in fh:
+            head = line.split()[0]
+            if "-" in head and all(c in "0123456789abcdef-" for c in head):
+                lo, hi = (int(x, 16) for x in head.split("-"))
+                inside = lo <= addr < hi
+            elif inside and line.startswith("VmFlags:"):
+                flags = line.split()[1:]
+    return flags
+
+
+@pytest.mark.skipif(not os.path.exists("/proc/self/smaps"), reason="Linux only")
+def test_frames_in_memory_are_not_advised_into_huge_pages():
+    """NumPy advises huge pages for its large arrays ("hg"); a clip's frames get ordinary
+    pages (the kernel's compaction for that advice stalled the first write of the frames)."""
+    frames = memory.frame_array(8, (480, 640, 3), what="v", budget=1 << 30)   # 7.4 MB
+    frames[:] = 7                                   # writable, uninitialised until written
+    assert type(frames) is np.ndarray and frames.shape == (8, 480, 640, 3)
+    assert (frames == 7).all()
+    plain = np.empty(frames.shape, np.uint8)
+    plain[:] = 7
+    mine, numpy_s = _vm_flags(frames), _vm_flags(plain)
+    assert mine is not None and "hg" not in mine
+    if numpy_s is None or "hg" not in numpy_s:
+        pytest.skip("this NumPy or kernel advises no huge pages: nothing to compare")
+
+
 def test_a_disk_without_room_is_one_clear_error(tmp_path, monkeypatch):
     def full(fd, offset, length):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))
