@@ -354,18 +354,27 @@ def test_video_info_of_written_video(tmp_path):
     assert info.n_frames == 6 and info.fps == pytest.approx(29.97, abs=1e-3)
 
 
-@pytest.mark.parametrize("codec,suffix", [("h264", ".mp4"), ("h265", ".mkv"),
-                                          ("prores", ".mov")])
+#: every codec, in a container that holds it
+EVERY_CODEC = pytest.mark.parametrize("codec,suffix", [("h264", ".mp4"), ("h265", ".mkv"),
+                                                       ("prores", ".mov")])
+
+
+def _plain_and_with(tmp_path, codec: str, suffix: str, **option) -> tuple[Path, Path]:
+    """The same frames written with ``VideoOptions(codec)`` and with ``option`` too (the test
+    skipped where this ffmpeg has no encoder of ``codec``)."""
+    if iov.CODECS[codec] not in iov.ffmpeg_encoders(iov.ffmpeg_exe()):
+        pytest.skip(f"this ffmpeg has no {codec} encoder")
+    frames = smooth_frames(n=3)
+    return tuple(encode_video(tmp_path / f"{name}{suffix}", frames, 25,
+                              options=VideoOptions(codec=codec, **kw)).path
+                 for name, kw in (("plain", {}), ("with", option)))
+
+
+@EVERY_CODEC
 def test_pixel_aspect_ratio_is_written_and_read_back(tmp_path, codec, suffix):
     """A 15:16 pixel aspect (a 96x64 video shown 90x64) reaches the file's header and
     OpenCV reads it back; the pixels are those written without it."""
-    if iov.CODECS[codec] not in iov.ffmpeg_encoders(iov.ffmpeg_exe()):
-        pytest.skip(f"this ffmpeg has no {codec} encoder")
-    frames = smooth_frames(n=4)
-    plain = encode_video(tmp_path / f"plain{suffix}", frames, 25,
-                         options=VideoOptions(codec=codec)).path
-    wide = encode_video(tmp_path / f"sar{suffix}", frames, 25,
-                        options=VideoOptions(codec=codec, sar=(30, 32))).path
+    plain, wide = _plain_and_with(tmp_path, codec, suffix, sar=(30, 32))
     assert VideoOptions(sar=(30, 32)).sar == (15, 16)  # in lowest terms
     assert video_info(wide).sar == (15, 16) and video_info(plain).sar == (1, 1)
     assert "SAR 15:16" in stream_info(wide)
@@ -386,20 +395,13 @@ def test_like_video_takes_the_inputs_aspect_unless_given(tmp_path):
     assert iov.like_video(None, still) == VideoOptions()
 
 
-@pytest.mark.parametrize("codec,suffix", [("h264", ".mp4"), ("h265", ".mkv"),
-                                          ("prores", ".mov")])
+@EVERY_CODEC
 def test_colour_matrix_named_in_the_header_unless_the_input_names_none(tmp_path, codec,
                                                                        suffix):
     """Every video names the BT.601 matrix and limited range its frames were converted with;
     a video rewriting one whose header names no matrix names none either (a player guesses
     alike for both); OpenCV reads either back to the same pixels."""
-    if iov.CODECS[codec] not in iov.ffmpeg_encoders(iov.ffmpeg_exe()):
-        pytest.skip(f"this ffmpeg has no {codec} encoder")
-    frames = smooth_frames(n=3)
-    tagged = encode_video(tmp_path / f"t{suffix}", frames, 25,
-                          options=VideoOptions(codec=codec)).path
-    plain = encode_video(tmp_path / f"p{suffix}", frames, 25,
-                         options=VideoOptions(codec=codec, colour_tags=False)).path
+    tagged, plain = _plain_and_with(tmp_path, codec, suffix, colour_tags=False)
     assert iov.colour_matrix(tagged) == "smpte170m" and "(tv, smpte170m" in stream_info(tagged)
     assert iov.colour_matrix(plain) is None
     np.testing.assert_array_equal(read_video(tagged)[0], read_video(plain)[0])
