@@ -32,6 +32,7 @@ import numpy as np
 
 from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
+from .ffmpeg import ffmpeg_exe
 from .video_display import COLOUR_TAGS, aspect_args, checked_aspect, matrix_named
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
@@ -160,16 +161,6 @@ class WrittenVideo:
     size: tuple[int, int]
     audio: bool
     kind: str = "video"
-
-
-def ffmpeg_exe() -> str | None:
-    """Path of an ffmpeg binary (imageio-ffmpeg's, else one on PATH), or None."""
-    try:
-        import imageio_ffmpeg
-
-        return imageio_ffmpeg.get_ffmpeg_exe()
-    except Exception:  # noqa: BLE001 - missing package or binary: fall back to PATH
-        return shutil.which("ffmpeg")
 
 
 def _require_ffmpeg() -> str:

@@ -1,18 +1,20 @@
 """Video input: decoding a file into ``(H, W, 3) uint8`` RGB frames with OpenCV, lazily
 (:func:`iter_frames`) or all at once (:func:`read_video`, into memory or, past the frame budget
-of :mod:`facetransfer.io.memory`, into an unnamed file). Its names are also those of
+of :mod:`facetransfer.io.memory`, into an unnamed file); a video of variable frame rate on a
+constant-rate timeline (:mod:`facetransfer.io.video_timeline`). Its names are also those of
 :mod:`facetransfer.io.video`, the module of video input and output."""
 
 from __future__ import annotations
 
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Iterator
 
 import numpy as np
 
 from ..errors import VideoError
+from .video_timeline import timeline
 
 __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video"]
 
@@ -26,12 +28,17 @@ class VideoInfo:
     path : Path
     fps : float
     n_frames : int
-        As reported by the container (may be approximate for some codecs).
+        As reported by the container (may be approximate for some codecs); for a video of
+        variable frame rate, the steps of its constant-rate timeline.
     size : (int, int)
         ``(width, height)`` in pixels.
     sar : (int, int)
         The pixel (sample) aspect ratio ``(width, height)`` of a pixel, in lowest terms: (1, 1)
         for square pixels or none given; e.g. (15, 16) for a 512x480 video shown 480x480.
+    steps : tuple of int, optional
+        For a video of variable frame rate, the stored frame shown at each of its ``n_frames``
+        steps of ``1 / fps`` seconds (:func:`facetransfer.io.video_timeline.timeline`): what
+        the readers yield. None: every stored frame in turn.
     """
 
     path: Path
@@ -39,6 +46,7 @@ class VideoInfo:
     n_frames: int
     size: tuple[int, int]
     sar: tuple[int, int] = (1, 1)
+    steps: tuple[int, ...] | None = field(default=None, repr=False)
 
 
 def _open(path: str | os.PathLike):
@@ -56,7 +64,8 @@ def _open(path: str | os.PathLike):
 
 
 def video_info(path: str | os.PathLike) -> VideoInfo:
-    """Read a video's frame rate, frame count and size without decoding it."""
+    """Read a video's frame rate, frame count and size without decoding it (and, where its
+    frames are uneven in time, its constant-rate timeline)."""
     import cv2
 
     cap = _open(path)
@@ -69,7 +78,10 @@ def video_info(path: str | os.PathLike) -> VideoInfo:
         cap.release()
     if size[0] <= 0 or size[1] <= 0:
         raise VideoError(f"video {path} has no frames")
-    return VideoInfo(Path(path), fps, n, size, sar)
+    even = timeline(path, n)
+    if even is None:
+        return VideoInfo(Path(path), fps, n, size, sar)
+    return VideoInfo(Path(path), even[0], len(even[1]), size, sar, even[1])
 
 
 def pixel_aspect(num, den) -> tuple[int, int]:
@@ -89,11 +101,34 @@ def pixel_aspect(num, den) -> tuple[int, int]:
 
 def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
                 seek: bool = True) -> Iterator[np.ndarray]:
-    """Yield RGB frames ``(H, W, 3) uint8`` from ``start`` (inclusive) to ``stop`` (exclusive).
+    """Yield RGB frames ``(H, W, 3) uint8`` from ``start`` (inclusive) to ``stop`` (exclusive):
+    of a video of variable frame rate, the steps of its constant-rate timeline
+    (:attr:`VideoInfo.steps`; each a frame of its own).
 
     ``seek=False`` reaches ``start`` by decoding every frame before it (``grab``, no colour
     conversion) instead of the container's seek, which OpenCV does not promise to be exact.
     """
+    steps = video_info(path).steps
+    if steps is None:
+        yield from _stored_frames(path, start=start, stop=stop, seek=seek)
+        return
+    stop = len(steps) if stop is None else min(stop, len(steps))
+    if start >= stop:
+        return
+    stored = _stored_frames(path, start=steps[start], stop=steps[stop - 1] + 1, seek=False)
+    shown, frame = steps[start] - 1, None
+    for k in range(start, stop):
+        while shown < steps[k]:
+            frame = next(stored, None)
+            shown += 1
+            if frame is None:
+                return
+        yield frame.copy()
+
+
+def _stored_frames(path, *, start: int, stop: int | None, seek: bool) -> Iterator[np.ndarray]:
+    """The stored frames ``start`` to ``stop`` in turn (:func:`iter_frames` of an even
+    video)."""
     import cv2
 
     cap = _open(path)
@@ -141,23 +176,44 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     expect = max(int(info.n_frames) - start, 0)
     expect = expect if stop is None else min(expect, max(stop - start, 0))
     budget = frame_budget()
+    if info.steps is None:      # BGR buffers converted into place
+        source, put = _decoded(path, start, stop), _bgr_to_rgb
+    else:                       # the timeline's steps, RGB
+        source, put = iter_frames(path, start=start, stop=stop), np.copyto
+    out, n = None, 0
+    for frame in source:
+        if out is None or n == len(out):
+            size = first_frame_count(expect, frame.size, budget) if out is None else 2 * n
+            out = grow_frames(out, n, max(size, n + 1), frame.shape, what=f"video {path}",
+                              budget=budget)
+        put(out[n], frame)
+        n += 1
+    if n == 0:
+        raise VideoError(f"video {path} has no frames (from frame {start})")
+    return out[:n], info.fps
+
+
+def _bgr_to_rgb(dst: np.ndarray, bgr: np.ndarray) -> None:
+    import cv2
+
+    cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=dst)
+
+
+def _decoded(path, start: int, stop: int | None) -> Iterator[np.ndarray]:
+    """The stored frames ``start`` to ``stop`` as BGR, in one buffer reused for each (the
+    container's seek to ``start``)."""
+    import cv2
+
     cap = _open(path)
-    out, n, bgr = None, 0, None
     try:
         if start:
             cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        n, bgr = 0, None
         while stop is None or start + n < stop:
             ok, bgr = cap.read(bgr)
             if not ok:
                 break
-            if out is None or n == len(out):
-                size = first_frame_count(expect, bgr.size, budget) if out is None else 2 * n
-                out = grow_frames(out, n, max(size, n + 1), bgr.shape, what=f"video {path}",
-                                  budget=budget)
-            cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=out[n])
+            yield bgr
             n += 1
     finally:
         cap.release()
-    if n == 0:
-        raise VideoError(f"video {path} has no frames (from frame {start})")
-    return out[:n], info.fps

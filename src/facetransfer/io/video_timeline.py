@@ -1,0 +1,111 @@
+"""A video's frames on a constant-rate timeline, where its stored frames are unevenly spaced.
+
+Phones and screen recorders write videos of variable frame rate: a frame's presentation time
+is in the container, and the frames may stop for a while (a freeze, dropped frames in the dark)
+and resume. Decoded one after another at the average rate, such a video's frames drift from its
+audio: after a 1-second gap in the middle of an 11-second clip, frames shown up to 0.5 s away
+from their sound. The commands write constant-rate videos with the input's audio, so where the
+stored frames are uneven they read the video on a constant-rate timeline instead: step ``k``
+(at ``k / fps`` seconds from the first frame) shows the last stored frame whose time rounds to
+a step at or before it. Frames repeat across a gap and, where they come faster than the rate,
+some are passed over. :func:`timeline` works it out from the packets' times in the container
+(ffmpeg's ``framecrc`` muxer: no decoding); :func:`facetransfer.io.video_read.video_info` and
+the readers use it.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+import os
+import re
+import subprocess
+from fractions import Fraction
+from pathlib import Path
+
+import numpy as np
+
+from .ffmpeg import ffmpeg_exe
+
+log = logging.getLogger(__name__)
+
+__all__ = ["UNEVEN", "packet_times", "timeline"]
+
+#: A video's frames are uneven when an interval between two of them is outside this range of
+#: their median interval (a millisecond time base's 33/34 ms steps are even).
+UNEVEN = (0.5, 1.5)
+
+
+def packet_times(path: str | os.PathLike) -> np.ndarray | None:
+    """The presentation times (seconds, ascending) of the first video stream's packets, as the
+    container stores them (ffmpeg's ``framecrc`` of a stream copy: nothing decoded); None
+    without ffmpeg, or where a packet has no time."""
+    exe = ffmpeg_exe()
+    if exe is None:
+        return None
+    res = subprocess.run([exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-i",
+                          str(path), "-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"],
+                         capture_output=True, text=True)
+    return _framecrc_times(res.stdout) if res.returncode == 0 else None
+
+
+def _framecrc_times(text: str) -> np.ndarray | None:
+    """The sorted times in seconds of a ``framecrc`` listing of one stream (lines
+    ``stream, dts, pts, duration, size, checksum``, time base ``#tb 0: num/den``)."""
+    tb = re.search(r"^#tb 0: (\d+)/(\d+)", text, re.M)
+    if not tb:
+        return None
+    pts = []
+    for line in text.splitlines():
+        if line.startswith("#"):
+            continue
+        parts = [p.strip() for p in line.split(",")]
+        if len(parts) < 4 or parts[0] != "0":
+            continue
+        try:
+            pts.append(int(parts[2]))
+        except ValueError:
+            return None
+    if not pts or min(pts) <= -(1 << 62):      # AV_NOPTS_VALUE: a packet without a time
+        return None
+    return np.sort(np.asarray(pts, np.float64)) * float(Fraction(int(tb[1]), int(tb[2])))
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_timeline(path: str, size: int, mtime: int, n_frames: int):
+    return _timeline(packet_times(path), n_frames, path)
+
+
+def timeline(path: str | os.PathLike, n_frames: int) -> tuple[float, tuple[int, ...]] | None:
+    """``(fps, steps)`` of a video whose ``n_frames`` stored frames are uneven in time
+    (:data:`UNEVEN`): the constant rate (the reciprocal of their median interval) and, for each
+    of its steps, the index of the stored frame shown then; None for an even video (or when the
+    packets cannot be read, or their number is not ``n_frames``: read as it is stored). Kept per
+    file (path, size, modification time); said once in a warning."""
+    p = Path(path)
+    try:
+        st = p.stat()
+    except OSError:
+        return None
+    return _cached_timeline(os.path.realpath(p), st.st_size, st.st_mtime_ns, int(n_frames))
+
+
+def _timeline(times: np.ndarray | None, n_frames: int, path: str):
+    """:func:`timeline` of the packet ``times`` (seconds, sorted)."""
+    if times is None or len(times) < 3 or len(times) != n_frames:
+        return None
+    gaps = np.diff(times)
+    median = float(np.median(gaps))
+    lo, hi = UNEVEN
+    usual = (gaps >= lo * median) & (gaps <= hi * median)
+    if median <= 0 or usual.all():
+        return None
+    step = float(gaps[usual].mean())    # a millisecond time base's 33, 34, 33 ms: 29.97 fps
+    at = np.rint((times - times[0]) / step).astype(np.int64)   # each frame's step
+    steps = np.searchsorted(at, np.arange(int(at[-1]) + 1), side="right") - 1
+    worst = int(np.argmax(gaps))
+    log.warning("%s has a variable frame rate (frames %d and %d are %.2f s apart, %.3f s "
+                "usual): read at a constant %.3f fps, %d frames for its %d, so that it stays "
+                "in step with its audio", path, worst, worst + 1, gaps[worst], step, 1 / step,
+                len(steps), len(times))
+    return round(1.0 / step, 6), tuple(int(i) for i in steps)

@@ -1,0 +1,102 @@
+"""Videos of variable frame rate read on a constant-rate timeline (facetransfer.io.video_timeline)."""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+
+import numpy as np
+import pytest
+
+from facetransfer.io import video_timeline as vt
+from facetransfer.io.video import VideoOptions, encode_video, ffmpeg_exe
+from facetransfer.io.video_read import iter_frames, read_video, video_info
+
+LISTING = """#extradata 0:       54, 0xe3fc1382
+#software: Lavf63.1.102
+#tb 0: 1/15360
+#media_type 0: video
+0,      -1024,          0,      512,    28155, 0x272c98c7
+0,       -512,       2048,      512,    10123, 0xa26893a8, F=0x0
+0,          0,       1024,      512,     2094, 0x9e600d91, F=0x0
+0,        512,        512,      512,     1053, 0x592103a0, F=0x0
+"""
+
+
+def test_framecrc_times_are_sorted_seconds():
+    np.testing.assert_allclose(vt._framecrc_times(LISTING), np.array([0, 1, 2, 4]) * 512 / 15360)
+    assert vt._framecrc_times("0, 0, 0, 1, 1, 0x0\n") is None            # no time base
+    nopts = LISTING.replace("  2048,", " -9223372036854775808,")
+    assert vt._framecrc_times(nopts) is None                            # a packet without time
+
+
+@pytest.mark.parametrize("times,want", [
+    (np.arange(10) / 30, None),                                          # even
+    (np.cumsum([0] + [0.033, 0.034, 0.033] * 5), None),                  # a millisecond time base
+    (np.r_[np.arange(5), np.arange(5) + 8] / 10, [0, 1, 2, 3, 4, 4, 4, 4, 5, 6, 7, 8, 9]),
+    (np.r_[0, 0.1, 0.2, 0.21, 0.3, 0.4, 0.5, 0.6], [0, 1, 3, 4, 5, 6, 7]),  # two in a step: the later
+])
+def test_timeline_steps(times, want, caplog):
+    with caplog.at_level(logging.WARNING):
+        got = vt._timeline(np.asarray(times, float), len(times), "v.mp4")
+    if want is None:
+        assert got is None and not caplog.records
+        return
+    fps, steps = got
+    assert list(steps) == want
+    assert "v.mp4 has a variable frame rate" in caplog.text
+
+
+def test_timeline_needs_every_packet():
+    times = np.r_[np.arange(5), np.arange(5) + 8] / 10
+    assert vt._timeline(times, len(times) + 1, "v.mp4") is None        # a count that differs
+    assert vt._timeline(None, 10, "v.mp4") is None
+
+
+@pytest.fixture(scope="module")
+def uneven(tmp_path_factory):
+    """12 frames of grey levels 0, 20, ... 220 at 10 fps, frames 6-11 shown 0.5 s late: a
+    5-step gap (re-timed by ffmpeg, losslessly encoded)."""
+    d = tmp_path_factory.mktemp("vfr")
+    frames = np.repeat((np.arange(12) * 20).astype(np.uint8)[:, None, None, None], 3, axis=3)
+    frames = np.broadcast_to(frames, (12, 32, 48, 3)).copy()
+    even = encode_video(d / "even.mp4", frames, 10, options=VideoOptions(crf=0)).path
+    out = d / "uneven.mp4"
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(even), "-vf",
+                    "setpts='if(gte(N,6),N+5,N)/10/TB'", "-fps_mode", "vfr", "-c:v", "libx264",
+                    "-crf", "0", str(out)], check=True)
+    return even, out
+
+
+def _levels(frames) -> list[int]:
+    return [int(round(float(f.mean()) / 20)) for f in frames]
+
+
+def test_an_uneven_video_is_read_on_its_constant_rate_timeline(uneven):
+    even, path = uneven
+    info = video_info(path)
+    assert info.fps == pytest.approx(10) and info.n_frames == 17
+    frames, fps = read_video(path)
+    want = [0, 1, 2, 3, 4, 5, 5, 5, 5, 5, 5, 6, 7, 8, 9, 10, 11]
+    assert fps == pytest.approx(10) and _levels(frames) == want
+    for start, stop, seek in ((0, None, True), (4, 12, True), (7, 9, False), (12, 30, True)):
+        got = list(iter_frames(path, start=start, stop=stop, seek=seek))
+        assert _levels(got) == want[start:stop]
+        assert all(np.array_equal(a, b) for a, b in zip(got, frames[start:stop]))
+    assert _levels(read_video(path, start=3, max_frames=5)[0]) == want[3:8]
+    a, b = list(iter_frames(path, start=6, stop=8))
+    a[:] = 255                                  # a frame yielded twice is two arrays
+    assert b.max() < 255
+    plain = video_info(even)                    # an even video: as stored, no steps
+    assert plain.steps is None and plain.n_frames == 12
+
+
+def test_the_warning_is_said_once_per_file(uneven, caplog):
+    _, path = uneven
+    vt._cached_timeline.cache_clear()
+    with caplog.at_level(logging.WARNING):
+        for _ in range(3):
+            video_info(path)
+            read_video(path)
+    assert caplog.text.count("has a variable frame rate") == 1
+    assert "read at a constant 10.000 fps, 17 frames for its 12" in caplog.text
