@@ -199,7 +199,9 @@ def test_preset_reaches_x264(tmp_path):
                                       ({"sar": (0, 1)}, "pixel aspect"),
                                       ({"sar": (1.5, 2)}, "pixel aspect"),
                                       ({"sar": (1, 2, 3)}, "pixel aspect"),
-                                      ({"sar": (70000, 1)}, "pixel aspect")])
+                                      ({"sar": (70000, 1)}, "pixel aspect"),
+                                      ({"primaries": "bt709,x"}, "colour name"),
+                                      ({"transfer": 709}, "colour name")])
 def test_bad_options(kw, match):
     with pytest.raises(VideoError, match=match):
         VideoOptions(**kw)
@@ -410,6 +412,36 @@ def test_colour_matrix_named_in_the_header_unless_the_input_names_none(tmp_path,
     assert not iov.like_video(VideoOptions(codec=codec), plain).colour_tags
 
 
+@EVERY_CODEC
+def test_primaries_and_transfer_named_as_given(tmp_path, codec, suffix):
+    """The primaries and transfer of the video a result rewrites reach the header beside the
+    BT.601 matrix (ffmpeg takes them from the frames: set by a filter, not its output options);
+    the pixels are those written without them."""
+    from facetransfer.io.video_display import ColourTags
+
+    plain, named = _plain_and_with(tmp_path, codec, suffix, primaries="bt709", transfer="bt709")
+    assert iov.video_colour(named) == ColourTags("smpte170m", "bt709", "bt709")
+    assert iov.video_colour(plain) == ColourTags("smpte170m", None, None)
+    np.testing.assert_array_equal(read_video(named)[0], read_video(plain)[0])
+
+
+def test_like_video_takes_an_sdr_inputs_colour_and_warns_of_hdr_once(tmp_path, caplog):
+    sdr = encode_video(tmp_path / "sdr.mp4", smooth_frames(n=2), 25,
+                       options=VideoOptions(primaries="bt709", transfer="bt709")).path
+    opt = iov.like_video(None, sdr)
+    assert (opt.colour_tags, opt.primaries, opt.transfer) == (True, "bt709", "bt709")
+    given = iov.like_video(VideoOptions(primaries="smpte170m"), sdr)     # given: kept
+    assert (given.primaries, given.transfer) == ("smpte170m", None)
+    hlg = encode_video(tmp_path / "hlg.mp4", smooth_frames(n=2), 25,
+                       options=VideoOptions(primaries="bt2020", transfer="arib-std-b67")).path
+    with caplog.at_level("WARNING"):
+        for _ in range(2):
+            opt = iov.like_video(None, hlg)
+    assert (opt.primaries, opt.transfer) == (None, None)   # written as what it is read as
+    assert caplog.text.count("is HDR or wide-gamut video") == 1
+    assert "transfer arib-std-b67" in caplog.text
+
+
 def test_opencv_decodes_by_the_named_matrix(tmp_path):
     """Why the tags matter: the same YCbCr planes named BT.709 decode to other RGB than
     unnamed ones (OpenCV: BT.601), by the matrices' difference on a saturated red."""
@@ -481,10 +513,17 @@ def test_audio_of_another_codec_is_encoded_to_aac(tmp_path):
     ("yuv420p(tv, unknown/bt709/bt709, progressive)", None),
     ("yuv420p(progressive)", None), ("yuv420p(tv, progressive)", None), ("yuv420p", None)])
 def test_matrix_named_in_ffmpegs_description(pixels, want):
-    from facetransfer.io.video_display import matrix_named
+    from facetransfer.io.video_display import colour_named, matrix_named
 
     text = ("Input #0, mov,mp4,m4a,3gp,3g2,mj2, from 'x.mp4':\n"
             "  Stream #0:0[0x1](und): Audio: aac (LC) (mp4a / 0x6134706D), 44100 Hz, stereo\n"
             f"  Stream #0:1[0x2](und): Video: h264 (High) (avc1 / 0x31637661), {pixels}, "
             "512x480 [SAR 15:16 DAR 1:1], 789 kb/s, 30 fps\n")
     assert matrix_named(text) == want
+    tags = colour_named(text)
+    if "/" in pixels:                           # matrix/primaries/transfer
+        said = pixels.split(", ")[1].rstrip(")").split("/")
+        assert [tags.matrix, tags.primaries, tags.transfer] == [
+            None if n == "unknown" else n for n in said[:3]] + [None] * (3 - len(said))
+    elif want:                                  # one name: all three
+        assert tags.primaries == tags.transfer == want

@@ -33,7 +33,8 @@ import numpy as np
 from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
 from .ffmpeg import ffmpeg_exe
-from .video_display import COLOUR_TAGS, aspect_args, checked_aspect, matrix_named
+from .video_display import (COLOUR_TAGS, checked_aspect, checked_colour_name,  # noqa: F401
+                            colour_matrix, described, frame_args, video_colour)
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
 
@@ -42,7 +43,7 @@ log = logging.getLogger(__name__)
 __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video", "CODECS",
            "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET",
            "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions", "VideoOutput", "WrittenVideo",
-           "like_video", "colour_matrix", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
+           "like_video", "colour_matrix", "video_colour", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
            "is_image_pattern", "frame_path", "save_frame_image", "place_sequence",
            "check_video_output", "decoded_frame_count", "stored_frame_count", "has_audio",
            "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
@@ -98,6 +99,11 @@ class VideoOptions:
         Name the colour matrix and range of the frames' conversion (BT.601, limited) in the
         header. False leaves them unspecified, for a video that rewrites one which names none:
         a player then guesses alike for both (:func:`like_video`).
+    primaries, transfer : str, optional
+        The colour primaries and transfer characteristic named in the header, as ffmpeg names
+        them (``"bt709"``; HLG ``"arib-std-b67"``): a rewritten video's RGB values are those
+        its input's decoding gave, so they are its input's (:func:`like_video`). None: not
+        named.
     """
 
     codec: str = DEFAULT_CODEC
@@ -105,6 +111,8 @@ class VideoOptions:
     preset: str = DEFAULT_PRESET
     sar: tuple[int, int] | None = None
     colour_tags: bool = True
+    primaries: str | None = None
+    transfer: str | None = None
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -121,6 +129,8 @@ class VideoOptions:
                                  f"default {DEFAULT_CRF}), got {self.crf}")
         if self.sar is not None:
             object.__setattr__(self, "sar", checked_aspect(self.sar))
+        checked_colour_name(self.primaries, "primaries")
+        checked_colour_name(self.transfer, "transfer")
 
     @property
     def effective_crf(self) -> int | None:
@@ -405,24 +415,8 @@ def has_audio(path: str | os.PathLike) -> bool:
 def audio_codec(path: str | os.PathLike) -> str | None:
     """The codec of a media file's first audio stream as ffmpeg names it (``"aac"``,
     ``"mp3"``, ``"opus"``, ...); None without one or without ffmpeg."""
-    found = re.search(r"Stream #[^\n]*?: Audio: ([\w-]+)", _described(path))
+    found = re.search(r"Stream #[^\n]*?: Audio: ([\w-]+)", described(path))
     return found.group(1) if found else None
-
-
-def colour_matrix(path: str | os.PathLike) -> str | None:
-    """The colour matrix a video's header names, as ffmpeg names it (``"bt709"``,
-    ``"smpte170m"``, ...; :func:`~facetransfer.io.video_display.matrix_named`); None when it
-    names none or without ffmpeg."""
-    return matrix_named(_described(path))
-
-
-def _described(path) -> str:
-    """ffmpeg's description of a media file (its streams), "" without ffmpeg."""
-    exe = ffmpeg_exe()
-    if exe is None:
-        return ""
-    return subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)],
-                          capture_output=True, text=True).stderr
 
 
 def like_video(options: VideoOptions | None, video) -> VideoOptions:
@@ -431,7 +425,10 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
     aspect ratio when ``options`` give none (a video of pixels that are not square, e.g.
     512x480 shown 480x480, would otherwise play 7 % wider), and colour tags only where
     ``video`` names a colour matrix (:func:`colour_matrix`; without one, OpenCV decoded it as
-    BT.601 and players guess alike for both). None or not a video: ``options`` as they are."""
+    BT.601 and players guess alike for both), with its primaries and transfer where ``options``
+    name none and they are those of SDR video (an HDR video is warned of once: decoded to 8-bit
+    SDR without tone mapping, and OpenCV decodes BT.2020-tagged frames by other coefficients).
+    None or not a video: ``options`` as they are."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
@@ -441,11 +438,24 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
         sar = video_info(video).sar
     except VideoError:  # not a video (e.g. a still): square pixels
         return options
+    tags = video_colour(video)
     if options.sar is None and sar != (1, 1):
         options = replace(options, sar=sar)
-    if options.colour_tags and colour_matrix(video) is None:
+    if options.colour_tags and tags.matrix is None:
         options = replace(options, colour_tags=False)
+    if tags.hdr or tags.primaries == "bt2020":
+        _warn_hdr(str(video), tags)
+    elif options.primaries is None and options.transfer is None:
+        options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
     return options
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_hdr(video: str, tags) -> None:
+    """Say once that ``video`` is HDR (or wide-gamut) and read as 8-bit SDR."""
+    log.warning("%s is HDR or wide-gamut video (primaries %s, transfer %s): it is decoded to "
+                "8-bit SDR without tone mapping, so the result is SDR and looks flatter than "
+                "the original does in an HDR player", video, tags.primaries, tags.transfer)
 
 
 #: Audio codecs copied as they are into the containers that hold them: no second lossy
@@ -617,7 +627,7 @@ class VideoWriter:
         cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",
                "-pix_fmt", self._pipe_format, "-s", "{}x{}".format(*self.stored_size),
                "-framerate", _fps_arg(self.fps), "-i", "-", *self._audio_input(),
-               *aspect_args(self.options.sar),
+               *frame_args(self.options.sar, self.options.primaries, self.options.transfer),
                *_encode_args(self.options, self.path.suffix.lower()),
                "-f", VIDEO_SUFFIXES[self.path.suffix.lower()], str(self.tmp)]
         log.debug("ffmpeg: %s", " ".join(cmd))

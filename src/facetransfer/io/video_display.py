@@ -10,12 +10,18 @@ RGB. :func:`facetransfer.io.video.like_video` makes the options of a video that 
 
 from __future__ import annotations
 
+import os
 import re
+import subprocess
+from dataclasses import dataclass
 
 from ..errors import VideoError
+from .ffmpeg import ffmpeg_exe
 from .video_read import pixel_aspect
 
-__all__ = ["COLOUR_TAGS", "checked_aspect", "aspect_args", "matrix_named"]
+__all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "frame_args",
+           "colour_named", "matrix_named", "checked_colour_name", "described", "video_colour",
+           "colour_matrix"]
 
 #: ffmpeg arguments naming the colour of a video written
 #: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
@@ -40,31 +46,108 @@ def checked_aspect(sar) -> tuple[int, int]:
     return pixel_aspect(n, d)
 
 
-def aspect_args(sar: tuple[int, int] | None) -> list[str]:
-    """ffmpeg arguments giving the frames the pixel aspect ratio ``sar`` (the encoder
-    writes it into the stream, the container into its header); none for square pixels."""
-    if sar is None or tuple(sar) == (1, 1):
-        return []
-    return ["-vf", "setsar={}/{}".format(*sar)]
+def frame_args(sar: tuple[int, int] | None, primaries: str | None = None,
+               transfer: str | None = None) -> list[str]:
+    """ffmpeg arguments giving the frames the pixel aspect ratio ``sar`` and the colour
+    ``primaries`` and ``transfer`` (filters ``setsar``, ``setparams``: the encoder writes them
+    into the stream, the container into its header; ffmpeg takes a frame's primaries and
+    transfer over ``-color_primaries`` / ``-color_trc``); none for square pixels and no names."""
+    chain = []
+    if sar is not None and tuple(sar) != (1, 1):
+        chain.append("setsar={}/{}".format(*sar))
+    named = [f"{k}={v}" for k, v in (("color_primaries", primaries), ("color_trc", transfer))
+             if v]
+    if named:
+        chain.append("setparams=" + ":".join(named))
+    return ["-vf", ",".join(chain)] if chain else []
+
+
+@dataclass(frozen=True)
+class ColourTags:
+    """What a video's header says of its colour, as ffmpeg names it (None: nothing said).
+
+    Attributes
+    ----------
+    matrix : str or None
+        The YCbCr coefficients (``"bt709"``, ``"smpte170m"``, ``"bt2020nc"``, ...).
+    primaries : str or None
+        The RGB primaries (``"bt709"``, ``"bt2020"``, ...).
+    transfer : str or None
+        The transfer characteristic (``"bt709"``, ``"arib-std-b67"`` for HLG, ``"smpte2084"``
+        for PQ, ...).
+    """
+
+    matrix: str | None = None
+    primaries: str | None = None
+    transfer: str | None = None
+
+    @property
+    def hdr(self) -> bool:
+        """A transfer of high dynamic range (HLG or PQ)."""
+        return self.transfer in HDR_TRANSFERS
+
+
+#: Transfer characteristics of high dynamic range: HLG (phones' default HDR) and PQ.
+HDR_TRANSFERS = ("arib-std-b67", "smpte2084")
+
+
+def colour_named(description: str) -> ColourTags:
+    """The colour tags ffmpeg's description of a media file (``ffmpeg -i``'s output) gives its
+    first video stream: the stream's pixel format lists range, ``matrix/primaries/transfer``
+    (one name where the three are the same) and field order, e.g.
+    ``yuv420p10le(tv, bt2020nc/bt2020/arib-std-b67, progressive)``."""
+    found = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^)]*)\)", description)
+    if not found:
+        return ColourTags()
+    for item in (x.strip() for x in found.group(1).split(",")):
+        if "/" in item:
+            names = [_said(n) for n in item.split("/")][:3]
+            return ColourTags(*names)
+        if item in _MATRICES:
+            return ColourTags(item, item, item)
+    return ColourTags()
 
 
 def matrix_named(description: str) -> str | None:
-    """The colour matrix (YCbCr coefficients) ffmpeg's description of a media file
-    (``ffmpeg -i``'s output) names for its first video stream, as ffmpeg names it (``"bt709"``,
-    ``"smpte170m"``, ``"bt470bg"``, ...); None when it names none. The stream's pixel format
-    lists range, ``matrix[/primaries/transfer]`` and field order:
-    ``yuv420p(tv, bt709, progressive)``."""
-    found = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^)]*)\)", description)
-    if not found:
-        return None
-    for item in (x.strip() for x in found.group(1).split(",")):
-        name = item.split("/")[0]
-        if ("/" in item or name in _MATRICES) and name not in ("unknown", "reserved"):
-            return name
-    return None
+    """The colour matrix of :func:`colour_named` (None: none named)."""
+    return colour_named(description).matrix
+
+
+def _said(name: str) -> str | None:
+    """An ffmpeg colour name, None for one that says nothing."""
+    return None if name in ("unknown", "reserved", "unspecified", "") else name
+
+
+def checked_colour_name(name, what: str) -> str | None:
+    """``name`` (None or an ffmpeg colour name such as ``bt709``) checked; VideoError
+    otherwise (it becomes an ffmpeg argument)."""
+    if name is None or (isinstance(name, str) and re.fullmatch(r"[a-z0-9][a-z0-9_-]*", name)):
+        return name
+    raise VideoError(f"{what} must be an ffmpeg colour name such as 'bt709', got {name!r}")
 
 
 #: ffmpeg's names of colour matrices (``AVColorSpace``) as they stand alone in its description.
 _MATRICES = ("rgb", "bt709", "fcc", "bt470bg", "smpte170m", "smpte240m", "ycgco", "bt2020nc",
              "bt2020c", "smpte2085", "chroma-derived-nc", "chroma-derived-c", "ictcp", "ipt-c2",
              "ycgco-re", "ycgco-ro")
+
+
+def described(path: str | os.PathLike) -> str:
+    """ffmpeg's description of a media file (its streams), "" without ffmpeg."""
+    exe = ffmpeg_exe()
+    if exe is None:
+        return ""
+    return subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)],
+                          capture_output=True, text=True).stderr
+
+
+def video_colour(path: str | os.PathLike) -> ColourTags:
+    """What a video's header says of its colour (:func:`colour_named`; nothing without
+    ffmpeg)."""
+    return colour_named(described(path))
+
+
+def colour_matrix(path: str | os.PathLike) -> str | None:
+    """The colour matrix a video's header names, as ffmpeg names it (``"bt709"``,
+    ``"smpte170m"``, ...); None when it names none or without ffmpeg."""
+    return video_colour(path).matrix
