@@ -1,11 +1,13 @@
-"""How a video is shown: its pixel aspect ratio and its colour matrix, read from a video's
-header and written into the header of the video that rewrites it.
+"""How a video is shown: its pixel aspect ratio and its colour (matrix, primaries, transfer),
+read from a video's header and written into the header of the video that rewrites it.
 
 A rewritten video keeps the pixels of the video it rewrites outside the face; it should also be
-shown as that video is. Two facts of the header decide that beside the pixels: the pixel
-(sample) aspect ratio, e.g. a 512x480 video shown 480x480 (:attr:`VideoInfo.sar
-<facetransfer.io.video_read.VideoInfo>`), and the colour matrix by which players turn YCbCr into
-RGB. :func:`facetransfer.io.video.like_video` makes the options of a video that keep both.
+shown as that video is. Facts of the header decide that beside the pixels: the pixel (sample)
+aspect ratio, e.g. a 512x480 video shown 480x480 (:attr:`VideoInfo.sar
+<facetransfer.io.video_read.VideoInfo>`), the colour matrix by which players turn YCbCr into
+RGB, and the primaries and transfer of that RGB (:class:`ColourTags`, read from ffmpeg's
+description of the file). :func:`facetransfer.io.video.like_video` makes the options of a video
+that keep them.
 """
 
 from __future__ import annotations
