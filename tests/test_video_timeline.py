@@ -7,6 +7,8 @@ import subprocess
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from facetransfer.io import video_timeline as vt
 from facetransfer.io.video import VideoOptions, encode_video, ffmpeg_exe
@@ -26,6 +28,7 @@ LISTING = """#extradata 0:       54, 0xe3fc1382
 def test_framecrc_times_are_sorted_seconds():
     np.testing.assert_allclose(vt._framecrc_times(LISTING), np.array([0, 1, 2, 4]) * 512 / 15360)
     assert vt._framecrc_times("0, 0, 0, 1, 1, 0x0\n") is None            # no time base
+    assert vt._framecrc_times("#tb 0: 1/0\n0, 0, 0, 1, 1, 0x0\n") is None  # a zero one
     nopts = LISTING.replace("  2048,", " -9223372036854775808,")
     assert vt._framecrc_times(nopts) is None                            # a packet without time
 
@@ -45,6 +48,22 @@ def test_timeline_steps(times, want, caplog):
     fps, steps = got
     assert list(steps) == want
     assert "v.mp4 has a variable frame rate" in caplog.text
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(alphabet="#tb0123456789:/ ,-\nxF=a", max_size=300))
+def test_the_listing_parser_never_raises(text):
+    """Whatever ffmpeg prints (a damaged file's listing), the times are None or sorted."""
+    times = vt._framecrc_times(text)
+    assert times is None or (np.all(np.diff(times) >= 0) and np.isfinite(times).all())
+
+
+@settings(max_examples=300, deadline=None)
+@given(st.text(max_size=200))
+def test_the_colour_description_parser_never_raises(pixels):
+    from facetransfer.io.video_display import colour_named
+
+    colour_named(f"  Stream #0:0: Video: h264, {pixels}, 512x480\n")
 
 
 def test_timeline_needs_every_packet():

@@ -53,7 +53,7 @@ def _framecrc_times(text: str) -> np.ndarray | None:
     """The sorted times in seconds of a ``framecrc`` listing of one stream (lines
     ``stream, dts, pts, duration, size, checksum``, time base ``#tb 0: num/den``)."""
     tb = re.search(r"^#tb 0: (\d+)/(\d+)", text, re.M)
-    if not tb:
+    if not tb or int(tb[2]) == 0:
         return None
     pts = []
     for line in text.splitlines():
