@@ -476,6 +476,7 @@ def run_puppet(args) -> int:
     from ..track.obtain import obtain_track
     from ..track.video_detect import default_workers
     from ..transfer import identity_from_label
+    from ..video_transfer import puppet_video
 
     _positive(args.max_frames, "--max-frames")
     vopt = video_options(args)
@@ -497,50 +498,15 @@ def run_puppet(args) -> int:
     if track.lost.all():
         raise FaceTransferError(f"no face found in {args.video}")
     frames = None
-    audio, resumed = _write_puppet(args, track, model, wid, like_video(vopt, args.video))
+    audio, resumed = puppet_video(track, model, wid, args.out,
+                                  video_options=like_video(vopt, args.video),
+                                  audio_from=args.video, overwrite=args.overwrite,
+                                  progress_factory=_bar_factory())
     if resumed:
         print(f"continued an interrupted render from frame {resumed}")
     print(f"wrote {args.out}: {track.n_frames} frames of {args.identity}"
           + (", with the video's audio" if audio else ""))
     return 0
-
-
-def _write_puppet(args, track, model, wid, vopt) -> tuple[bool, int]:
-    """Write the puppet video (or image sequence) of ``track`` driving the identity ``wid``
-    through the render cache (:func:`facetransfer.render_cache.parts_writer`): an
-    interrupted run keeps the frames written, and the same command renders only the rest.
-    Returns (whether the video's audio was muxed in, the frame it continued from)."""
-    from tqdm import tqdm
-
-    from ..io.video import is_image_pattern, write_video_with_audio
-    from ..render_cache import parts_writer, puppet_key
-    from ..transfer import puppet_frames
-
-    n = track.n_frames
-    key = puppet_key(track, model, wid, vopt, images=is_image_pattern(args.out))
-    writer = parts_writer(key, args.out, track.fps, tuple(track.frame_size), n,
-                          video_options=vopt, audio_from=args.video, overwrite=args.overwrite)
-    start = 0 if writer is None else writer.done
-    frames = puppet_frames(track, model, wid, start=start)
-    with tqdm(total=n, initial=start, desc="render", unit="frame", leave=False,
-              disable=progress_disabled()) as bar:
-        if writer is None:
-            audio = write_video_with_audio(
-                args.out, _counted(frames, bar), track.fps, audio_from=args.video,
-                overwrite=args.overwrite, options=vopt, n_frames=n)
-            return audio, 0
-        with writer:  # parts kept on an error or interrupt, joined on success
-            for f in frames:
-                writer.write(f, marked=True)
-                bar.update(1)
-    return writer.result.audio, start
-
-
-def _counted(frames, bar):
-    """Yield ``frames``, counting each on ``bar`` (a tqdm bar) once it is taken."""
-    for f in frames:
-        yield f
-        bar.update(1)
 
 
 def run_demo(args) -> int:
