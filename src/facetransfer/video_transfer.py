@@ -9,7 +9,12 @@ footage and write it with the target's audio.
   a ready performance;
 * :func:`render_plan`: the frames rewritten (:func:`facetransfer.rewrite.rewrite_frames`) and
   written (:func:`facetransfer.io.video.write_video_with_audio`);
-* :func:`transfer_video`: both, with the outputs checked before any work.
+* :func:`transfer_video`: both, with the outputs checked before any work;
+* :func:`puppet_video`: a model identity driven by a track, written as a video (Fig. 1's
+  puppetry).
+
+Both writers go through the render cache (:mod:`facetransfer.render_cache`): an interrupted
+render continues where it stopped.
 """
 
 from __future__ import annotations
