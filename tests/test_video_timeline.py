@@ -112,7 +112,10 @@ def test_an_uneven_video_is_read_on_its_constant_rate_timeline(uneven):
 
 def test_the_warning_is_said_once_per_file(uneven, caplog):
     _, path = uneven
+    from facetransfer.io import video_read
+
     vt._cached_timeline.cache_clear()
+    video_read._kept_info.cache_clear()     # the file as if never read in this process
     with caplog.at_level(logging.WARNING):
         for _ in range(3):
             video_info(path)

@@ -465,6 +465,20 @@ def test_pixel_aspect_of_what_a_container_reports(num, den, want):
     assert iov.pixel_aspect(num, den) == want
 
 
+def test_what_is_read_of_a_video_follows_the_file(tmp_path):
+    """video_info and ffmpeg's description are kept per file (its stamp): the same path
+    written again is read again."""
+    p = tmp_path / "v.mp4"
+    encode_video(p, smooth_frames(n=6), 25)
+    assert video_info(p).n_frames == 6 and iov.colour_matrix(p) == "smpte170m"
+    assert video_info(p) is not video_info(p) and video_info(p) == video_info(str(p))
+    encode_video(p, smooth_frames(n=9), 30, options=VideoOptions(colour_tags=False),
+                 overwrite=True)
+    info = video_info(p)
+    assert info.n_frames == 9 and info.fps == pytest.approx(30)
+    assert iov.colour_matrix(p) is None
+
+
 def test_output_that_is_the_audio_input_is_refused(tmp_path):
     p = encode_video(tmp_path / "v.mp4", smooth_frames(n=2), 25).path
     before = p.read_bytes()
@@ -513,13 +527,13 @@ def test_audio_of_another_codec_is_encoded_to_aac(tmp_path):
     ("yuv420p(tv, unknown/bt709/bt709, progressive)", None),
     ("yuv420p(progressive)", None), ("yuv420p(tv, progressive)", None), ("yuv420p", None)])
 def test_matrix_named_in_ffmpegs_description(pixels, want):
-    from facetransfer.io.video_display import colour_named, matrix_named
+    from facetransfer.io.video_display import colour_named
 
     text = ("Input #0, mov,mp4,m4a,3gp,3g2,mj2, from 'x.mp4':\n"
             "  Stream #0:0[0x1](und): Audio: aac (LC) (mp4a / 0x6134706D), 44100 Hz, stereo\n"
             f"  Stream #0:1[0x2](und): Video: h264 (High) (avc1 / 0x31637661), {pixels}, "
             "512x480 [SAR 15:16 DAR 1:1], 789 kb/s, 30 fps\n")
-    assert matrix_named(text) == want
+    assert colour_named(text).matrix == want
     tags = colour_named(text)
     if "/" in pixels:                           # matrix/primaries/transfer
         said = pixels.split(", ")[1].rstrip(")").split("/")

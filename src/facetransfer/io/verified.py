@@ -22,7 +22,7 @@ from pathlib import Path
 
 log = logging.getLogger(__name__)
 
-__all__ = ["KEEP", "RACY_SECONDS", "RECORD", "remember_verified", "was_verified"]
+__all__ = ["KEEP", "RACY_SECONDS", "RECORD", "file_stamp", "remember_verified", "was_verified"]
 
 #: The record file's name in the user cache.
 RECORD = "verified-checksums.json"
@@ -40,8 +40,10 @@ def _record_path() -> Path:
     return cache_dir() / RECORD
 
 
-def _stamp(path: str | os.PathLike) -> str:
-    """The file's identity on disk: resolved path, device, inode, size, mtime in ns."""
+def file_stamp(path: str | os.PathLike) -> str:
+    """The file's identity on disk: resolved path, device, inode, size, mtime in ns (also the
+    key of what is read from a file once per process, e.g.
+    :func:`facetransfer.io.video_read.video_info`). OSError when it cannot be read."""
     p = Path(path).resolve()
     st = p.stat()
     return f"{p}|{st.st_dev}|{st.st_ino}|{st.st_size}|{st.st_mtime_ns}"
@@ -59,7 +61,7 @@ def was_verified(path: str | os.PathLike, checksum: str) -> bool:
     """True when ``path``, as it is on disk now, was recorded with ``checksum``
     (:func:`remember_verified`)."""
     try:
-        stamp = _stamp(path)
+        stamp = file_stamp(path)
     except OSError:
         return False
     return _read().get(stamp) == checksum
@@ -74,7 +76,7 @@ def remember_verified(path: str | os.PathLike, checksum: str) -> None:
     try:
         if time.time() - Path(path).stat().st_mtime < RACY_SECONDS:
             return
-        stamp = _stamp(path)
+        stamp = file_stamp(path)
         records = _read()
         records.pop(stamp, None)
         records[stamp] = checksum                       # newest last

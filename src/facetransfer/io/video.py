@@ -43,9 +43,9 @@ log = logging.getLogger(__name__)
 __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video", "CODECS",
            "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET",
            "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions", "VideoOutput", "WrittenVideo",
-           "like_video", "colour_matrix", "video_colour", "ffmpeg_exe", "ffmpeg_encoders", "require_encoder",
-           "is_image_pattern", "frame_path", "save_frame_image", "place_sequence",
-           "check_video_output", "decoded_frame_count", "stored_frame_count", "has_audio",
+           "like_video", "colour_matrix", "video_colour", "ffmpeg_exe", "ffmpeg_encoders",
+           "require_encoder", "is_image_pattern", "frame_path", "save_frame_image",
+           "place_sequence", "check_video_output", "decoded_frame_count", "stored_frame_count", "has_audio",
            "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
            "write_video_with_audio"]
 
@@ -443,7 +443,7 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
         options = replace(options, sar=sar)
     if options.colour_tags and tags.matrix is None:
         options = replace(options, colour_tags=False)
-    if tags.hdr or tags.primaries == "bt2020":
+    if tags.beyond_sdr:
         _warn_hdr(str(video), tags)
     elif options.primaries is None and options.transfer is None:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)

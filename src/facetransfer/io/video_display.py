@@ -12,6 +12,7 @@ that keep them.
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import subprocess
@@ -19,10 +20,11 @@ from dataclasses import dataclass
 
 from ..errors import VideoError
 from .ffmpeg import ffmpeg_exe
+from .verified import file_stamp
 from .video_read import pixel_aspect
 
 __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "frame_args",
-           "colour_named", "matrix_named", "checked_colour_name", "described", "video_colour",
+           "colour_named", "checked_colour_name", "described", "video_colour",
            "colour_matrix"]
 
 #: ffmpeg arguments naming the colour of a video written
@@ -84,9 +86,10 @@ class ColourTags:
     transfer: str | None = None
 
     @property
-    def hdr(self) -> bool:
-        """A transfer of high dynamic range (HLG or PQ)."""
-        return self.transfer in HDR_TRANSFERS
+    def beyond_sdr(self) -> bool:
+        """A transfer of high dynamic range (HLG or PQ) or BT.2020's wide gamut: what 8-bit SDR
+        decoding does not show as a player does."""
+        return self.transfer in HDR_TRANSFERS or self.primaries == "bt2020"
 
 
 #: Transfer characteristics of high dynamic range: HLG (phones' default HDR) and PQ.
@@ -110,11 +113,6 @@ def colour_named(description: str) -> ColourTags:
     return ColourTags()
 
 
-def matrix_named(description: str) -> str | None:
-    """The colour matrix of :func:`colour_named` (None: none named)."""
-    return colour_named(description).matrix
-
-
 def _said(name: str) -> str | None:
     """An ffmpeg colour name, None for one that says nothing."""
     return None if name in ("unknown", "reserved", "unspecified", "") else name
@@ -135,11 +133,25 @@ _MATRICES = ("rgb", "bt709", "fcc", "bt470bg", "smpte170m", "smpte240m", "ycgco"
 
 
 def described(path: str | os.PathLike) -> str:
-    """ffmpeg's description of a media file (its streams), "" without ffmpeg."""
+    """ffmpeg's description of a media file (its streams), "" without ffmpeg; kept per file
+    (:func:`facetransfer.io.verified.file_stamp`: its colour and its audio are asked of it)."""
+    try:
+        stamp = file_stamp(path)
+    except OSError:         # missing: ffmpeg says so, nothing kept
+        return _describe(str(path))
+    return _kept_description(str(path), stamp)
+
+
+@functools.lru_cache(maxsize=32)
+def _kept_description(path: str, stamp: str) -> str:
+    return _describe(path)
+
+
+def _describe(path: str) -> str:
     exe = ffmpeg_exe()
     if exe is None:
         return ""
-    return subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(path)],
+    return subprocess.run([exe, "-hide_banner", "-nostdin", "-i", path],
                           capture_output=True, text=True).stderr
 
 

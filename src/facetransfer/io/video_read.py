@@ -6,6 +6,7 @@ constant-rate timeline (:mod:`facetransfer.io.video_timeline`). Its names are al
 
 from __future__ import annotations
 
+import functools
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -14,6 +15,7 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import VideoError
+from .verified import file_stamp
 from .video_timeline import timeline
 
 __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video"]
@@ -65,7 +67,25 @@ def _open(path: str | os.PathLike):
 
 def video_info(path: str | os.PathLike) -> VideoInfo:
     """Read a video's frame rate, frame count and size without decoding it (and, where its
-    frames are uneven in time, its constant-rate timeline)."""
+    frames are uneven in time, its constant-rate timeline). Kept per file
+    (:func:`facetransfer.io.verified.file_stamp`): a transfer asks a dozen times of each input,
+    and every reader asks."""
+    from dataclasses import replace
+
+    try:
+        stamp = file_stamp(path)
+    except OSError:         # missing or unreadable: :func:`_open`'s error
+        return _video_info(path)
+    return replace(_kept_info(str(path), stamp), path=Path(path))
+
+
+@functools.lru_cache(maxsize=64)
+def _kept_info(path: str, stamp: str) -> VideoInfo:
+    return _video_info(path)
+
+
+def _video_info(path) -> VideoInfo:
+    """:func:`video_info` read from the file."""
     import cv2
 
     cap = _open(path)

@@ -21,11 +21,11 @@ import os
 import re
 import subprocess
 from fractions import Fraction
-from pathlib import Path
 
 import numpy as np
 
 from .ffmpeg import ffmpeg_exe
+from .verified import file_stamp
 
 log = logging.getLogger(__name__)
 
@@ -72,7 +72,7 @@ def _framecrc_times(text: str) -> np.ndarray | None:
 
 
 @functools.lru_cache(maxsize=32)
-def _cached_timeline(path: str, size: int, mtime: int, n_frames: int):
+def _cached_timeline(path: str, stamp: str, n_frames: int):
     return _timeline(packet_times(path), n_frames, path)
 
 
@@ -81,13 +81,12 @@ def timeline(path: str | os.PathLike, n_frames: int) -> tuple[float, tuple[int, 
     (:data:`UNEVEN`): the constant rate (the reciprocal of their median interval) and, for each
     of its steps, the index of the stored frame shown then; None for an even video (or when the
     packets cannot be read, or their number is not ``n_frames``: read as it is stored). Kept per
-    file (path, size, modification time); said once in a warning."""
-    p = Path(path)
+    file (:func:`facetransfer.io.verified.file_stamp`); said once in a warning."""
     try:
-        st = p.stat()
+        stamp = file_stamp(path)
     except OSError:
         return None
-    return _cached_timeline(os.path.realpath(p), st.st_size, st.st_mtime_ns, int(n_frames))
+    return _cached_timeline(str(path), stamp, int(n_frames))
 
 
 def _timeline(times: np.ndarray | None, n_frames: int, path: str):
