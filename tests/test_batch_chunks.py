@@ -17,9 +17,10 @@ from facetransfer.batch.chunks import Chunk, crossfade, slerp_rotations
 
 # no health check on the drawing's speed: a busy machine (CI beside other jobs) is not a defect
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
-@given(n=st.integers(1, 3000), chunk=st.integers(2, 400), data=st.data())
-def test_plan_chunks_covers_the_clip_with_the_fewest_chunks(n, chunk, data):
-    overlap = data.draw(st.integers(1, chunk // 2))
+@given(n=st.integers(1, 3000),
+       sizes=st.integers(2, 400).flatmap(lambda c: st.tuples(st.just(c), st.integers(1, c // 2))))
+def test_plan_chunks_covers_the_clip_with_the_fewest_chunks(n, sizes):
+    chunk, overlap = sizes
     cs = plan_chunks(n, chunk, overlap)
     if n <= chunk:
         assert cs == (Chunk(0, 0, n),)

@@ -420,7 +420,7 @@ def test_sigterm_keeps_what_an_interrupt_keeps(clips, quick_model_path, tmp_path
 @pytest.mark.parametrize("cache", ["on", "off"])
 def test_the_targets_pixel_aspect_ratio_is_kept(clips, quick_model_path, tmp_path, capsys,
                                                  monkeypatch, cache):
-    """A target whose pixels are not square (8:9: its 96 columns shown as 85) gives a result,
+    """A target whose pixels are not square (8:9: its 128 columns shown as 114) gives a result,
     a puppet video and a track overlay shown at its shape: in parts (the render cache) or in
     one piece; ``--crf 0`` and the same frames as a square-pixel target's result. The colour
     matrix is named where the target names one, and left to the player where it does not."""
@@ -457,6 +457,9 @@ def test_the_targets_pixel_aspect_ratio_is_kept(clips, quick_model_path, tmp_pat
                        capsys)
     assert code == 0, err
     assert video_info(tmp_path / "ov.mp4").sar == (8, 9)
+    # tracked at the shown shape (114 of 128 columns), told in the stored pixels
+    tr = Track.load(tmp_path / "t.npz")
+    assert tr.pixel_aspect == 114 / 128 and tr.frame_size == (128, 128)
 
 
 def test_an_interrupted_puppet_renders_only_the_frames_it_had_not(clips, quick_model_path,

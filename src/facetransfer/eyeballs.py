@@ -46,7 +46,7 @@ class Eyeballs:
     angles : (2, 2) float64
         The reference frame's gaze, ``[eye (right, left), (yaw, pitch)]`` (radians).
     pose : tuple
-        ``(R (3, 3), s, t (2,))``, the reference frame's weak-perspective pose.
+        ``(R (3, 3), s, t (2,), pixel aspect)``, the reference frame's weak-perspective pose.
     limit : (2,) float64
         Each eye's largest shift in pixels (:data:`LIMIT`).
     lookup : (F' + 1,) int8
@@ -75,10 +75,14 @@ class Eyeballs:
 
 
 def _project(eyes, angles: np.ndarray, pose: tuple) -> np.ndarray:
-    """``(2, 2)``: :func:`facetransfer.track.gaze.project_iris` of one frame."""
-    R, s, t = pose
-    return project_iris(eyes, np.asarray(angles, np.float64)[None], R[None], np.array([s]),
-                        t[None])[0]
+    """``(2, 2)``: :func:`facetransfer.track.gaze.project_iris` of one frame, pose ``(R, s, t,
+    pixel aspect)`` (columns ``t_x + (x - t_x) / aspect``: :mod:`facetransfer.track.aspect`)."""
+    R, s, t, aspect = pose
+    p = project_iris(eyes, np.asarray(angles, np.float64)[None], R[None], np.array([s]),
+                     t[None])[0]
+    if aspect != 1.0:
+        p[:, 0] = t[0] + (p[:, 0] - t[0]) / aspect
+    return p
 
 
 def track_gaze(track) -> np.ndarray | None:
@@ -151,7 +155,7 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     opening = (tid >= 0) & (fill_eye[np.maximum(tid, 0)] >= 0)
     ext = extend_eyeballs(image, opening, grow=max(int(round(GROW * width.max())), 2))
     pose = (np.asarray(track.rotation[i], np.float64), float(track.scale[i]),
-            np.asarray(track.translation[i], np.float64))
+            np.asarray(track.translation[i], np.float64), float(track.pixel_aspect))
     return Eyeballs(ext, eyes, gaze[i], pose, LIMIT * width,
                     np.concatenate([np.array([-1], np.int8), np.asarray(fill_eye, np.int8)]),
                     _project(eyes, gaze[i], pose))

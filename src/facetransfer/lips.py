@@ -115,7 +115,11 @@ def clip_lip_residual(model, topo: MeshTopology, source_track) -> LipResidual | 
         return None
     log.info("lips: the source's residual at the lips, median %.2f px",
              float(np.median(np.linalg.norm(res, axis=-1))))
-    return LipResidual(warp, res, lip_shape_residuals(res, source_track.lost))
+    # the shape is lifted into the head's frame by the camera's one scale (displace_lips): its
+    # columns in square pixels (facetransfer.track.aspect)
+    shape = lip_shape_residuals(res * np.array([source_track.pixel_aspect, 1.0]),
+                                source_track.lost)
+    return LipResidual(warp, res, shape)
 
 
 def lip_warp(model, topo: MeshTopology, *, smoothing: float = LIP_SMOOTHING) -> LipWarp | None:

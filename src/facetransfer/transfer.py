@@ -294,6 +294,10 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         raise TransferError(f"pose source frames are {pose.frame_size[0]}x{pose.frame_size[1]}, "
                             f"the target's {target.frame_size[0]}x{target.frame_size[1]}: the "
                             f"pose source must have the target's frame size")
+    if pose is not None and pose.pixel_aspect != target.pixel_aspect:
+        raise TransferError(f"pose source pixels are {pose.pixel_aspect:.4g} times as wide as "
+                            f"tall, the target's {target.pixel_aspect:.4g}: the pose source "
+                            f"must have the target's pixel shape")
     base, resampled = _on_timeline(target, sources, align)
     n_out = base.n_frames
     posed = resampled.get("pose", base)
@@ -559,7 +563,7 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
         cam = track.camera(i)
         if (sx, sy) != (1.0, 1.0):
             cam = type(cam)(cam.scale * np.sqrt(sx * sy), cam.rotation,
-                            cam.translation * np.array([sx, sy]))
+                            cam.translation * np.array([sx, sy]), cam.pixel_aspect)
         return render(V, faces, cam, size, colors=colors, background=bg).image
 
     lost = np.asarray(track.lost, bool)

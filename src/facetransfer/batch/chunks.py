@@ -192,7 +192,7 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
                    weights=full["weights"], landmarks2d=np.zeros((F, 68, 2)),
                    confidence=np.clip(full["confidence"], 0, 1), lost=full["lost"],
                    model_hash=t0.model_hash, mode_names=t0.mode_names, source=t0.source,
-                   detections2d=join_detections(tracks, chunks))
+                   detections2d=join_detections(tracks, chunks), pixel_aspect=t0.pixel_aspect)
     return dataclasses.replace(project_landmarks(joined, model), source=t0.source)
 
 

@@ -48,8 +48,9 @@ def _detector_for(init: str, options):
 
 
 def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=None,
-           tracker: str | None = None):
-    """As ``facetransfer track``: the tracker ``settings`` choose for ``init`` (or ``tracker``)."""
+           tracker: str | None = None, pixel_aspect: float | None = None):
+    """As ``facetransfer track``: the tracker ``settings`` choose for ``init`` (or ``tracker``);
+    ``pixel_aspect``: of frames given as an array (:mod:`facetransfer.track.aspect`)."""
     from ..track.tracker import track_video
 
     if (tracker or settings.choose(init)) == "capture":
@@ -61,7 +62,7 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
             return capture_resuming(video, model, checkpoint, options=settings.capture,
                                     source=source, fixed=fixed)
         return capture_video(video, model, options=settings.capture, source=source,
-                             fixed=fixed)
+                             fixed=fixed, pixel_aspect=pixel_aspect)
     detector = _detector_for(init, settings.klt)
     try:
         return track_video(video, model, init=init, options=settings.klt, source=source,
@@ -129,6 +130,7 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
         The chunk's track (frames of the chunk, the video's frame rate).
     """
     from ..io.video import read_video
+    from ..track.aspect import video_aspect
 
     t0 = time.perf_counter()
     frames, fps = read_video(job.video, start=chunk.start, stop=chunk.stop)
@@ -140,7 +142,8 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
             fixed = {"identity": first.track.weights["identity"][0]}
         init = "auto"  # the user's points are for the clip's first frame only
     track = _track(frames, model, init, options, source=str(job.video), fixed=fixed,
-                   checkpoint=partial_path(out, f".chunk{chunk.index:03d}"), tracker=tracker)
+                   checkpoint=partial_path(out, f".chunk{chunk.index:03d}"), tracker=tracker,
+                   pixel_aspect=video_aspect(job.video))
     return ChunkResult(dataclasses.replace(track, fps=fps), time.perf_counter() - t0)
 
 

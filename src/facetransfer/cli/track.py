@@ -290,9 +290,11 @@ def _capture_detect(args, saved, ck, progress):
 
 
 def _track_klt(args, model, opt, progress, bars):
+    from ..track.aspect import warn_stored_fit
     from ..track.init import LazyDetector
     from ..track.tracker import track_video
 
+    warn_stored_fit(args.video, "optical-flow tracker")
     # auto init and anchoring create MediaPipe themselves; with user points it is only
     # loaded if the face is lost (recovery)
     detector = None if (args.init == "auto" or args.anchor) else LazyDetector()

@@ -113,12 +113,18 @@ def head_quaternions(rotation: np.ndarray) -> np.ndarray:
 
 
 def head_translation(track) -> np.ndarray:
-    """Per-frame translation of the model origin in model units, ``(F, 3) float64``."""
+    """Per-frame translation of the model origin in model units, ``(F, 3) float64``, from the
+    frame's centre (as the video is shown: a track of non-square pixels,
+    :mod:`facetransfer.track.aspect`, in square ones)."""
+    from ..track.aspect import to_shown_x
+
     W, H = track.frame_size
+    a = float(track.pixel_aspect)
     s = np.asarray(track.scale, np.float64)
     t = np.asarray(track.translation, np.float64)
     out = np.zeros((track.n_frames, 3))
-    out[:, 0] = (t[:, 0] - W / 2.0) / s
+    tx = t[:, 0] if a == 1.0 else to_shown_x(t[:, 0], a)
+    out[:, 0] = (tx - W * a / 2.0) / s
     out[:, 1] = -(t[:, 1] - H / 2.0) / s
     return out
 

@@ -80,11 +80,17 @@ class WeakPerspective:
         ``R``, model to camera rotation (camera looks along -z, y up).
     translation : (2,) float64
         ``t``, pixel position of the model origin (x right, y down).
+    pixel_aspect : float
+        ``a`` > 0, the width of a pixel over its height (a video's sample aspect ratio, as the
+        frames were resampled to square pixels for tracking: :mod:`facetransfer.track.aspect`);
+        a model unit spans ``s / a`` pixels across and ``s`` down: ``x = s (R X)_x / a + t_x``.
+        1 for square pixels.
     """
 
     scale: float
     rotation: np.ndarray
     translation: np.ndarray
+    pixel_aspect: float = 1.0
 
     #: The projection does not divide by depth.
     perspective = False
@@ -94,6 +100,11 @@ class WeakPerspective:
         if not np.isfinite(s) or s <= 0:
             raise ShapeError(f"camera scale must be a finite number > 0, got {self.scale}")
         t = _as_vector(self.translation, 2, "weak-perspective translation")
+        a = float(self.pixel_aspect)
+        if not np.isfinite(a) or a <= 0:
+            raise ShapeError(f"camera pixel aspect must be a finite number > 0, got "
+                             f"{self.pixel_aspect}")
+        object.__setattr__(self, "pixel_aspect", a)
         object.__setattr__(self, "scale", s)
         object.__setattr__(self, "rotation", _as_rotation(self.rotation))
         object.__setattr__(self, "translation", t)
@@ -103,6 +114,7 @@ class WeakPerspective:
         ``(dx, dy)`` (scale and rotation as they are, not checked again)."""
         out = object.__new__(WeakPerspective)
         object.__setattr__(out, "scale", self.scale)
+        object.__setattr__(out, "pixel_aspect", self.pixel_aspect)
         object.__setattr__(out, "rotation", self.rotation)
         object.__setattr__(out, "translation",
                            self.translation - np.array([dx, dy], np.float64))
@@ -113,10 +125,11 @@ class WeakPerspective:
         return _as_points(X) @ self.rotation.T
 
     def project(self, X: np.ndarray) -> np.ndarray:
-        """Pixels ``s * diag(1, -1) @ R[:2] @ X + t`` (Eq. (7)), (n, 3) -> (n, 2)."""
+        """Pixels ``s * diag(1 / a, -1) @ R[:2] @ X + t`` (Eq. (7); ``a`` the pixel aspect,
+        1 for square pixels), (n, 3) -> (n, 2)."""
         Y = _as_points(X) @ self.rotation[:2].T  # (n, 2)
         out = np.empty_like(Y)
-        out[:, 0] = self.scale * Y[:, 0] + self.translation[0]
+        out[:, 0] = (self.scale / self.pixel_aspect) * Y[:, 0] + self.translation[0]
         out[:, 1] = -self.scale * Y[:, 1] + self.translation[1]
         return out
 

@@ -354,7 +354,8 @@ def lift_track(model, frames, track, *, tex_size: int = 256, step: int = 1, powe
             continue
         w = {m: np.asarray(track.weights[m])[i] for m in model.mode_names}
         V = model.synthesize(w)  # Eq. (5)
-        cam = WeakPerspective(float(track.scale[i]), track.rotation[i], track.translation[i])
+        cam = WeakPerspective(float(track.scale[i]), track.rotation[i], track.translation[i],
+                              getattr(track, "pixel_aspect", 1.0))
         lifted.append(lift_uv_texture(frame, V, faces, model.uvs, cam, tex_size, atlas=atlas,
                                       power=power))
         attrs.append(attribute_vector(model, w))

@@ -51,6 +51,7 @@ import numpy as np
 
 from ..arkit import ARKIT_NAMES, is_arkit_model
 from ..errors import TrackError, VideoError
+from .aspect import stored_pixels
 from .camera import Pose, fit_affine_pose
 from . import capture_points
 from .capture_points import Sampler, Shape
@@ -538,8 +539,8 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
             "seconds_identity": t_id, "seconds_total": time.perf_counter() - t0,
             "tracker": "capture", "score_shapes": run.score_shapes()}
     # the detections themselves: the fit's residual at the lips carries the lips the model's
-    # shapes cannot reach (facetransfer.lips)
-    return replace(track, info=info, detections2d=det.points)
+    # shapes cannot reach (facetransfer.lips); fitted in square pixels, told in stored ones
+    return stored_pixels(replace(track, info=info, detections2d=det.points), det.pixel_aspect)
 
 
 def _point_weights(det: ClipDetections, model, opt: CaptureOptions
@@ -787,7 +788,8 @@ def load_kernels() -> None:
 def capture_video(video, model, *, options: CaptureOptions | None = None, detector=None,
                   detections: ClipDetections | None = None, max_frames: int | None = None,
                   fixed: dict | None = None, progress: Progress | None = None,
-                  source: str | None = None, checkpoint=None, workers: int = 1) -> Track:
+                  source: str | None = None, checkpoint=None, workers: int = 1,
+                  pixel_aspect: float | None = None) -> Track:
     """Capture a face's performance from a video (module notes): the default tracker.
 
     Parameters
@@ -805,6 +807,10 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         The fit's progress (:func:`capture_detections`).
     workers : int
         Processes running the default detector (:func:`~.video_detect.detect_video`).
+    pixel_aspect : float, optional
+        Of the video's pixels (default: a file's own; 1 for an array): the face is detected
+        and fitted in square pixels and the track told in the stored ones
+        (:mod:`facetransfer.track.aspect`).
 
     Returns
     -------
@@ -814,7 +820,8 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
     if detections is None:
         detections, fps, size, src = detect_video(video, detector=detector,
                                                   max_frames=max_frames, progress=progress,
-                                                  source=source, workers=workers)
+                                                  source=source, workers=workers,
+                                                  pixel_aspect=pixel_aspect)
     else:
         fps, size, src, _, n, _ = _open(video, max_frames, source)
         if n is not None and detections.n_frames != n:

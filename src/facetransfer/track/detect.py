@@ -44,12 +44,16 @@ class ClipDetections:
         where it found no face and for ``tongueOut`` (it has no such score); the capture fit
         reads them as a calibrated per-frame observation of the activations
         (:mod:`facetransfer.track.scores`).
+    pixel_aspect : float
+        The points are in the frames resampled to square pixels (their columns ``round(W
+        pixel_aspect)``, :mod:`facetransfer.track.aspect`); 1: the stored pixels are square.
     """
 
     points: np.ndarray
     flow: np.ndarray
     points478: np.ndarray | None = None
     scores: np.ndarray | None = None
+    pixel_aspect: float = 1.0
 
     def __post_init__(self) -> None:
         P = np.asarray(self.points, dtype=np.float64)
@@ -65,6 +69,10 @@ class ClipDetections:
             if S.shape != (P.shape[0], 52):
                 raise ShapeError(f"scores must be ({P.shape[0]}, 52), got {S.shape}")
             object.__setattr__(self, "scores", S)
+        a = float(self.pixel_aspect)
+        if not np.isfinite(a) or a <= 0:
+            raise ShapeError(f"pixel_aspect must be > 0, got {self.pixel_aspect}")
+        object.__setattr__(self, "pixel_aspect", a)
 
     @property
     def n_frames(self) -> int:
@@ -163,8 +171,13 @@ class _Found:
     """What :func:`detect_clip` has found so far: per frame the points, the flow (a future while
     it is computed) and MediaPipe's raw points."""
 
-    def __init__(self, keep478: bool, resume: ClipDetections | None) -> None:
+    def __init__(self, keep478: bool, resume: ClipDetections | None, aspect: float = 1.0
+                 ) -> None:
         self.keep478 = keep478
+        self.aspect = aspect
+        if resume is not None and resume.pixel_aspect != aspect:
+            raise ShapeError(f"resuming detections of pixel aspect {resume.pixel_aspect} on "
+                             f"frames of {aspect}")
         self.P: list = [] if resume is None else list(resume.points)
         self.Fl: list = [] if resume is None else list(resume.flow)
         self.raw: list = []
@@ -196,11 +209,19 @@ class _Found:
         S = np.stack(self.scores[:n])
         return ClipDetections(np.stack(self.P[:n]), np.stack(self.Fl),
                               np.stack(self.raw[:n]) if self.keep478 else None,
-                              None if np.isnan(S).all() else S)
+                              None if np.isnan(S).all() else S, self.aspect)
 
 
 _NAN68 = np.full((68, 2), np.nan)
 _NAN52 = np.full(52, np.nan, np.float32)
+
+
+def _skipped(detector, fr: np.ndarray, show: bool, last: bool, prev_gray):
+    """A frame a resumed run detected before: shown to the detector when ``show`` (its
+    warm-up); its grey image is the flow's start when ``last``. Returns the flow's start."""
+    if show:
+        _detect_one(detector, fr)
+    return cv2.cvtColor(np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY) if last else prev_gray
 
 
 def _detect_one(detector, fr: np.ndarray
@@ -220,7 +241,7 @@ def _detect_one(detector, fr: np.ndarray
 def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None = None,
                 flow: bool = True, progress: Callable[[int, int], None] | None = None,
                 keep478: bool = False, resume: ClipDetections | None = None,
-                checkpoint=None, start: int = 0) -> ClipDetections:
+                checkpoint=None, start: int = 0, pixel_aspect: float = 1.0) -> ClipDetections:
     """Detect the face in every frame and the point flow between neighbouring frames.
 
     Parameters
@@ -251,6 +272,9 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
         it decoded, the last ``warmup_frames`` of them shown to the detector); the result then
         holds frames ``start ..`` only, and its first frame has no flow (no points before it).
         Used by :mod:`facetransfer.track.video_detect` for a clip's later part.
+    pixel_aspect : float
+        The frames are a video's resampled by it to square pixels (:mod:`.aspect`): the result
+        says so (:attr:`ClipDetections.pixel_aspect`), and ``resume`` must.
 
     Returns
     -------
@@ -260,8 +284,9 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
         raise ValueError("detect_clip: give resume or start, not both")
     k = int(start) if resume is None else resume.n_frames
     warm = k - int(getattr(detector, "warmup_frames", 0))
-    found = _Found(keep478, resume)
+    found = _Found(keep478, resume, float(pixel_aspect))
     prev_gray = None
+    tick = progress or (lambda done, total: None)
     # the flow of frame i-1's points runs on a second thread while frame i is detected (OpenCV
     # and MediaPipe both release the GIL): on two cores it costs almost no time
     with ThreadPoolExecutor(max_workers=1) as pool:
@@ -270,12 +295,8 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                 if n_frames is not None and i >= n_frames:
                     break
                 if i < k:                                  # done before: skipped
-                    if i >= warm:
-                        _detect_one(detector, fr)
-                    if flow and i == k - 1:
-                        prev_gray = cv2.cvtColor(np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY)
-                    if progress is not None:
-                        progress(i + 1, n_frames or 0)
+                    prev_gray = _skipped(detector, fr, i >= warm, flow and i == k - 1, prev_gray)
+                    tick(i + 1, n_frames or 0)
                     continue
                 if flow:
                     gray = pool.submit(cv2.cvtColor, np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY)
@@ -289,8 +310,7 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                 found.add(pts, f, q, scores)
                 if checkpoint is not None and checkpoint.due():
                     checkpoint.save(found.result())
-                if progress is not None:
-                    progress(i + 1, n_frames or 0)
+                tick(i + 1, n_frames or 0)
         except KeyboardInterrupt:
             if checkpoint is not None and found.Fl:
                 checkpoint.save(found.result())

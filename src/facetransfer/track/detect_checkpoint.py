@@ -34,7 +34,7 @@ __all__ = ["DETECT_CHECKPOINT_VERSION", "DetectionCheckpoint", "SavedDetections"
            "detection_key", "landmarker_identity"]
 
 #: bumped when the saved layout changes (older files are then ignored)
-DETECT_CHECKPOINT_VERSION = 2  # 2: with the blendshape scores
+DETECT_CHECKPOINT_VERSION = 3  # 2: with the blendshape scores; 3: in square pixels
 #: what the file holds (a KLT tracker's progress file has no such entry)
 LAYOUT = "capture-detections"
 
@@ -156,7 +156,8 @@ class DetectionCheckpoint(ProgressFile):
             raise ValueError("inconsistent arrays")
         det = ClipDetections(P.astype(np.float64), d["flow"].astype(np.float64),
                              None if raw is None else raw.astype(np.float32),
-                             None if scores is None else scores.astype(np.float32))
+                             None if scores is None else scores.astype(np.float32),
+                             float(d["pixel_aspect"]))
         return SavedDetections(det, bool(d["complete"]))
 
     def save(self, det: ClipDetections, *, complete: bool = False) -> None:
@@ -170,7 +171,8 @@ class DetectionCheckpoint(ProgressFile):
                   "points478": (np.zeros((0, 478, 2), np.float32) if det.points478 is None
                                 else np.asarray(det.points478, np.float32)),
                   "scores": (np.zeros((0, 52), np.float32) if det.scores is None
-                             else np.asarray(det.scores, np.float32))}
+                             else np.asarray(det.scores, np.float32)),
+                  "pixel_aspect": np.float64(det.pixel_aspect)}
         if complete and self._fit is not None:
             arrays.update(pack_fit(self._fit[1], self._fit[0]))
         self._write(arrays)

@@ -14,6 +14,7 @@ import numpy as np
 
 from ..errors import ShapeError, VideoError
 from ..errors import RewriteError
+from .aspect import warn_stored_fit
 from .cache import cached_track, partial_path, store_track, track_key
 from .presets import check_track_method
 from .project import project_landmarks, take_frames
@@ -158,12 +159,14 @@ def _capture(video, model, frames, fps, max_frames, progress_factory, workers: i
              partial: Path | None = None):
     """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames; with
     ``partial``, its progress saved there and continued from there (:func:`capture_resuming`)."""
+    from .aspect import video_aspect
     from .capture import capture_video
 
     with _StageBars(video, progress_factory) as stage_progress:
         if partial is None:
             tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
-                               source=str(video), workers=workers)
+                               source=str(video), workers=workers,
+                               pixel_aspect=video_aspect(video))
         else:
             tr = capture_resuming(video, model, partial, frames=frames[:max_frames],
                                   source=str(video), progress=stage_progress, workers=workers,
@@ -198,6 +201,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
     fit), continued from there when it holds this run's: an interrupted run loses nothing.
     ``best_effort``: a progress file that cannot be written is a warning, not an error."""
+    from .aspect import video_aspect
     from .capture import capture_video
     from .detect_checkpoint import DetectionCheckpoint
     from .video_detect import detect_video
@@ -205,6 +209,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     clip = video if frames is None else frames
     ck = DetectionCheckpoint.for_video(partial, video, None if frames is None else len(frames),
                                        best_effort=best_effort)
+    aspect = video_aspect(video)
     saved = ck.load()
     if saved is not None:
         log.info("%s: continued an interrupted run from frame %d", source,
@@ -214,7 +219,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     else:
         det = detect_video(clip, source=source, checkpoint=ck, progress=progress,
                            resume=None if saved is None else saved.detections,
-                           workers=workers)[0]
+                           workers=workers, pixel_aspect=aspect)[0]
     try:
         return capture_video(clip, model, options=options, detections=det, source=source,
                              fixed=fixed, checkpoint=ck, progress=progress)
@@ -275,8 +280,10 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         tr = _capture(video, model, frames, fps, max_frames, progress_factory, workers,
                       _partial(key))
     elif method == "flow":
+        warn_stored_fit(video, "optical-flow tracker")
         tr = _flow(video, model, frames, fps, max_frames, progress_factory, options)
     else:
+        warn_stored_fit(video, "landmark fit")
         size = (frames.shape[2], frames.shape[1]) if hasattr(frames, "shape") else info.size
         tr = _landmarks(video, model, frames, fps, size, progress_factory)
     store_track(key, tr)

@@ -48,6 +48,7 @@ def project_landmarks(track, model):
                           vertices=model.landmarks)  # (F, 68, 3)
     Y = np.einsum("fij,fvj->fvi", track.rotation[:, :2], lm)  # (F, 68, 2)
     px = np.empty_like(Y)
-    px[..., 0] = track.scale[:, None] * Y[..., 0] + track.translation[:, None, 0]  # Eq. (7)
+    px[..., 0] = (track.scale[:, None] / track.pixel_aspect) * Y[..., 0] \
+        + track.translation[:, None, 0]                       # Eq. (7), the pixels' aspect
     px[..., 1] = -track.scale[:, None] * Y[..., 1] + track.translation[:, None, 1]
     return attach_activations(dataclasses.replace(track, landmarks2d=px, info={}), model)

@@ -24,6 +24,8 @@ key                 shape / dtype        meaning
 ``source``          () str               the tracked video's path
 ``blendshapes``     (F, 52) float32      ARKit activations in [0, 1] (only for an ARKit model)
 ``blendshape_names``(52,) str            their names, :data:`facetransfer.arkit.ARKIT_NAMES`
+``detections2d``    (F, 68, 2) float64   the detector's points the fit took (a capture track)
+``pixel_aspect``    () float64           a pixel's width over its height (absent: 1)
 ``format_version``  () int64             version of this layout
 ==================  ===================  ===========================================================
 """
@@ -81,6 +83,11 @@ class Track:
         :mod:`facetransfer.lips`). None: not recorded.
     info : dict
         Free-form run details (not saved; e.g. per-pass residuals).
+    pixel_aspect : float
+        The width of the video's pixels over their height, as the capture tracker resampled
+        the frames to square pixels to fit (:mod:`facetransfer.track.aspect`): the camera's
+        ``x = s (R X)_x / pixel_aspect + t_x``; every pixel position (``translation``,
+        ``landmarks2d``, ``detections2d``) is in the stored pixels. 1 for square pixels.
     """
 
     fps: float
@@ -99,6 +106,7 @@ class Track:
     blendshape_names: tuple[str, ...] | None = None
     info: dict = field(default_factory=dict)
     detections2d: np.ndarray | None = None
+    pixel_aspect: float = 1.0
 
     def __post_init__(self) -> None:
         R = np.asarray(self.rotation, dtype=np.float64)
@@ -152,6 +160,10 @@ class Track:
         if not np.isfinite(fps) or fps <= 0:
             raise TrackError(f"track fps must be > 0, got {self.fps}")
         set_(self, "fps", fps)
+        aspect = float(self.pixel_aspect)
+        if not np.isfinite(aspect) or aspect <= 0:
+            raise TrackError(f"track pixel_aspect must be > 0, got {self.pixel_aspect}")
+        set_(self, "pixel_aspect", aspect)
         set_(self, "model_hash", str(self.model_hash))
         set_(self, "source", str(self.source))
         self._check_blendshapes(F)
@@ -194,7 +206,8 @@ class Track:
         from ..render import WeakPerspective
 
         i = self._check_frame(i)
-        return WeakPerspective(float(self.scale[i]), self.rotation[i], self.translation[i])
+        return WeakPerspective(float(self.scale[i]), self.rotation[i], self.translation[i],
+                               self.pixel_aspect)
 
     def weights_at(self, i: int) -> dict[str, np.ndarray]:
         """Weights of every mode at frame ``i``: dict mode name -> (r,) (copies)."""
@@ -233,7 +246,7 @@ class Track:
             "rotation": self.rotation, "scale": self.scale, "translation": self.translation,
             "landmarks2d": self.landmarks2d, "confidence": self.confidence, "lost": self.lost,
             "model_hash": np.array(self.model_hash), "mode_names": np.array(self.mode_names),
-            "source": np.array(self.source),
+            "source": np.array(self.source), "pixel_aspect": np.float64(self.pixel_aspect),
         }
         for n in self.mode_names:
             arrays[f"weights_{n}"] = self.weights[n]
@@ -296,6 +309,8 @@ class Track:
                        blendshape_names=(None if "blendshape_names" not in data else
                                          tuple(str(n) for n in
                                                np.atleast_1d(data["blendshape_names"]))),
-                       detections2d=data.get("detections2d"))
+                       detections2d=data.get("detections2d"),
+                       pixel_aspect=(scalar(data, "pixel_aspect", float, p, "track file",
+                                            TrackError) if "pixel_aspect" in data else 1.0))
         except (TrackError, ValueError, TypeError, OverflowError) as exc:
             raise TrackError(f"track file {p} is invalid: {exc}") from None

@@ -32,6 +32,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import ShapeError, VideoError
+from .aspect import display_frames, video_aspect
 from .detect import ClipDetections, VideoLandmarker, detect_clip
 from .options import Progress
 
@@ -84,18 +85,21 @@ def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetect
         scores = np.concatenate([
             first.scores if first.scores is not None else np.tile(nan, (first.n_frames, 1)),
             second.scores if second.scores is not None else np.tile(nan, (second.n_frames, 1))])
+    if first.pixel_aspect != second.pixel_aspect:
+        raise ValueError(f"join_detections: parts of pixel aspect {first.pixel_aspect} and "
+                         f"{second.pixel_aspect}")
     return ClipDetections(np.concatenate([first.points, second.points]),
                           np.concatenate([first.flow, second.flow]),
-                          cat(first.points478, second.points478), scores)
+                          cat(first.points478, second.points478), scores, first.pixel_aspect)
 
 
-#: (video, start, stop, fps, counter) handed to the forked child (not pickled)
+#: (video, start, stop, fps, counter, pixel aspect) handed to the forked child (not pickled)
 _JOB: tuple | None = None
 
 
 def _child_job() -> ClipDetections:
     """In the child: detect frames ``start .. stop`` (or the clip's end) of the video."""
-    video, start, stop, fps, counter = _JOB
+    video, start, stop, fps, counter, aspect = _JOB
     if isinstance(video, np.ndarray):
         frames = iter(video[:stop])
     else:
@@ -109,8 +113,8 @@ def _child_job() -> ClipDetections:
         counter.value = max(0, done - start)
 
     try:
-        return detect_clip(frames, detector, n_frames=stop, keep478=True, start=start,
-                           progress=progress)
+        return detect_clip(display_frames(frames, aspect), detector, n_frames=stop,
+                           keep478=True, start=start, progress=progress, pixel_aspect=aspect)
     except ShapeError:          # the clip ends at ``start``: no frames left for this part
         return None
     finally:
@@ -137,10 +141,13 @@ class SplitDetection:
         self._pool, self._future, self._counter = pool, future, counter
 
     @classmethod
-    def start(cls, video, start: int, stop: int | None, fps: float) -> "SplitDetection | None":
+    def start(cls, video, start: int, stop: int | None, fps: float, aspect: float = 1.0
+              ) -> "SplitDetection | None":
         """Fork the child that detects frames ``start .. stop`` of ``video`` (a path or an
-        (F, H, W, 3) array); None where the platform cannot fork. Call it before this process
-        creates its own landmarker (MediaPipe's threads do not survive a fork)."""
+        (F, H, W, 3) array), resampled to square pixels by ``aspect``
+        (:func:`facetransfer.track.aspect.display_frames`); None where the platform cannot
+        fork. Call it before this process creates its own landmarker (MediaPipe's threads do
+        not survive a fork)."""
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
 
@@ -154,7 +161,7 @@ class SplitDetection:
         _import_mediapipe()
         ctx = mp.get_context("fork")
         counter = ctx.Value("i", 0, lock=False)
-        _JOB = (video, int(start), stop, float(fps), counter)
+        _JOB = (video, int(start), stop, float(fps), counter, float(aspect))
         try:
             pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
             fut = pool.submit(_child_job)           # forks now: the child sees _JOB
@@ -241,20 +248,26 @@ def finish_split(first: ClipDetections, child: SplitDetection, start: int,
 
 def detect_video(video, *, detector=None, max_frames: int | None = None,
                  progress: Progress | None = None, source: str | None = None,
-                 resume: ClipDetections | None = None, checkpoint=None, workers: int = 1
+                 resume: ClipDetections | None = None, checkpoint=None, workers: int = 1,
+                 pixel_aspect: float | None = None
                  ) -> tuple[ClipDetections, float, tuple[int, int], str]:
     """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
 
     Needs no model, so a caller may load the model meanwhile. ``resume`` and ``checkpoint``:
     as in :func:`facetransfer.track.detect.detect_clip`. ``workers``: processes running the
     default detector; with 2, the later half of a long enough clip is detected by a forked
-    child meanwhile (ignored with ``detector``).
+    child meanwhile (ignored with ``detector``). ``pixel_aspect``: of the video's pixels
+    (default: a file's own, :func:`facetransfer.track.aspect.video_aspect`; 1 for an array):
+    the frames are detected resampled to square pixels, and the detections say so
+    (:attr:`~facetransfer.track.detect.ClipDetections.pixel_aspect`). The size returned is
+    the stored frames'.
     """
     prog = progress or (lambda stage, done, total: None)
     fps, size, src, frames, n, total = _open(video, max_frames, source)
+    aspect = video_aspect(video) if pixel_aspect is None else float(pixel_aspect)
     done = 0 if resume is None else resume.n_frames
     m = split_frame(done, total, workers) if detector is None else None
-    child = None if m is None else SplitDetection.start(video, m, n, fps)
+    child = None if m is None else SplitDetection.start(video, m, n, fps, aspect)
     own = None
     if detector is None:
         detector = own = VideoLandmarker(fps=fps, blendshapes=True)
@@ -267,14 +280,15 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
         prog("detect", m + c, max(total, m + c))
 
     def redetect(first):
-        again = _open(video, max_frames, source)[3]
+        again = display_frames(_open(video, max_frames, source)[3], aspect)
         return detect_clip(again, detector, n_frames=n, keep478=True,
                            progress=lambda d, t: prog("detect", d, max(total, d)),
-                           resume=first, checkpoint=checkpoint)
+                           resume=first, checkpoint=checkpoint, pixel_aspect=aspect)
 
     try:
-        det = detect_clip(frames, detector, n_frames=n if child is None else m, keep478=True,
-                          progress=report, resume=resume, checkpoint=checkpoint)
+        det = detect_clip(display_frames(frames, aspect), detector,
+                          n_frames=n if child is None else m, keep478=True, progress=report,
+                          resume=resume, checkpoint=checkpoint, pixel_aspect=aspect)
         if child is not None:
             det = finish_split(det, child, m, redetect, report_child, checkpoint)
     except BaseException:

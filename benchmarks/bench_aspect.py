@@ -1,0 +1,158 @@
+"""Capture of videos whose pixels are not square, against the same clips in square pixels.
+
+Archive and broadcast video often stores pixels that are shown wider or narrower than tall
+(HDV 1440x1080 shown 1920x1080; DV 720x480 at 10:11). For each real clip of the data folder
+(first ``--frames`` frames), this script writes it losslessly in square pixels, squeezed to 4/5
+of its width with a sample aspect ratio of 5:4, and stretched to 4/3 of its width at 3:4 (all
+three shown alike), then tracks every version with the default ``facetransfer`` capture and
+compares each with the square clip's track:
+
+* ``ours``: the capture as it is (the frames resampled to square pixels for detection and fit,
+  :mod:`facetransfer.track.aspect`);
+* ``stored``: the same capture told to ignore the aspect (``pixel_aspect=1``: how every version
+  before the twenty-fifth session tracked such a clip);
+* the peer, Face Landmarker in VIDEO mode, run on the stored frames as any caller of MediaPipe
+  would (its blendshapes against its own on the square clip).
+
+Per clip and version: mean absolute difference of the ARKit activations over the mouth's,
+jaw's, eyes' and brows' 14 channels, and of jawOpen alone; the identity weights' largest
+difference (ours and ``stored``). Writes ``OUT/aspect.json`` and ``OUT/aspect.png``::
+
+    PYTHONPATH=src FACETRANSFER_DATA_DIR=... python benchmarks/bench_aspect.py --out out/benchmarks
+"""
+
+from __future__ import annotations
+
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))
+
+from _mp_video import run_landmarker  # noqa: E402
+from _report import arguments, save_json, save_plot  # noqa: E402
+
+CHANNELS = ("jawOpen", "mouthSmileLeft", "mouthSmileRight", "mouthPucker", "mouthFunnel",
+            "mouthStretchLeft", "mouthStretchRight", "mouthPressLeft", "mouthPressRight",
+            "eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "browInnerUp", "browDownLeft")
+CLIPS = ("driving_d6", "driving_d9", "WDA_KatieHill_000", "face_2")
+#: (name, factor of the width, sample aspect ratio): each shown as the square clip
+VERSIONS = (("squeezed 5:4", 0.8, (5, 4)), ("stretched 3:4", 4 / 3, (3, 4)))
+
+
+def _versions(clip: Path, n: int, d: Path) -> dict:
+    """The clip's first ``n`` frames, square, then each of :data:`VERSIONS`, losslessly."""
+    import cv2
+
+    from facetransfer.io.video import VideoOptions, read_video, video_info, write_video
+
+    frames, fps = read_video(clip, max_frames=n)
+    if video_info(clip).sar != (1, 1):       # shown shape first: the square clip is the truth
+        from facetransfer.track.aspect import display_frames, video_aspect
+
+        frames = np.stack(list(display_frames(frames, video_aspect(clip))))
+    out = {"square": d / "square.mkv"}
+    write_video(out["square"], frames, fps, options=VideoOptions(crf=0))
+    H, W = frames.shape[1:3]
+    for name, k, sar in VERSIONS:
+        w = int(round(W * k))
+        mode = cv2.INTER_AREA if k < 1 else cv2.INTER_CUBIC
+        v = np.stack([cv2.resize(f, (w, H), interpolation=mode) for f in frames])
+        out[name] = d / f"{name.split()[0]}.mkv"
+        write_video(out[name], v, fps, options=VideoOptions(crf=0, sar=sar))
+    return out
+
+
+def _columns(names) -> list[int]:
+    return [list(names).index(c) for c in CHANNELS]
+
+
+def _compare(a: np.ndarray, b: np.ndarray, cols: list[int]) -> dict:
+    ok = np.isfinite(a[:, cols]).all(1) & np.isfinite(b[:, cols]).all(1)
+    d = np.abs(a[ok][:, cols] - b[ok][:, cols])
+    return {"mean_abs": float(d.mean()), "jawOpen_mean_abs": float(d[:, 0].mean()),
+            "jawOpen_r": float(np.corrcoef(a[ok][:, cols[0]], b[ok][:, cols[0]])[0, 1])}
+
+
+def _clip_rows(clip: Path, model, n: int) -> dict:
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.track.capture import capture_video
+
+    cols = _columns(ARKIT_NAMES)
+    rows = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        paths = _versions(clip, n, Path(tmp))
+        ref = capture_video(paths["square"], model)
+        mp_ref = run_landmarker(paths["square"])[1]
+        for name, _, _ in VERSIONS:
+            ours = capture_video(paths[name], model)
+            stored = capture_video(paths[name], model, pixel_aspect=1.0)
+            peer = run_landmarker(paths[name])[1]
+            rows[name] = {
+                "pixel_aspect": ours.pixel_aspect,
+                "ours": _compare(ours.blendshapes, ref.blendshapes, cols),
+                "stored": _compare(stored.blendshapes, ref.blendshapes, cols),
+                "face_landmarker": _compare(peer, mp_ref, cols),
+                "identity_max_abs": {
+                    "ours": float(np.abs(ours.weights["identity"][0]
+                                         - ref.weights["identity"][0]).max()),
+                    "stored": float(np.abs(stored.weights["identity"][0]
+                                           - ref.weights["identity"][0]).max()),
+                    "scale": float(np.abs(ref.weights["identity"][0]).max())},
+                "head_scale_ratio": {"ours": float(np.median(ours.scale / ref.scale)),
+                                     "stored": float(np.median(stored.scale / ref.scale))}}
+            print(f"{clip.stem:18s} {name:14s} ours {rows[name]['ours']['mean_abs']:.3f}  "
+                  f"stored {rows[name]['stored']['mean_abs']:.3f}  Face Landmarker "
+                  f"{rows[name]['face_landmarker']['mean_abs']:.3f}", flush=True)
+    return rows
+
+
+def _plot(report: dict, path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    labels, series = [], {"ours": [], "stored": [], "face_landmarker": []}
+    for clip, rows in report["clips"].items():
+        for name, row in rows.items():
+            labels.append(f"{clip}\n{name}")
+            for k in series:
+                series[k].append(row[k]["mean_abs"])
+    x = np.arange(len(labels))
+    fig, ax = plt.subplots(figsize=(max(8, 1.1 * len(labels)), 4.5))
+    names = {"ours": "ours (square pixels)", "stored": "ours, stored pixels (before)",
+             "face_landmarker": "Face Landmarker on the stored frames"}
+    for j, (k, v) in enumerate(series.items()):
+        ax.bar(x + (j - 1) * 0.27, v, 0.27, label=names[k])
+    ax.set_xticks(x, labels, fontsize=7)
+    ax.set_ylabel("mean |activation - square clip's|")
+    ax.set_title("ARKit activations of non-square-pixel copies against the square clip")
+    ax.legend(fontsize=8)
+    save_plot(fig, path)
+
+
+def main() -> None:
+    ap = arguments(__doc__)
+    ap.add_argument("--frames", type=int, default=150)
+    args = ap.parse_args()
+    from facetransfer.assets import data_dir
+    from facetransfer.default_model import load_default_model
+
+    model = load_default_model()
+    video = Path(data_dir()) / "video"
+    report = {"frames": args.frames, "channels": list(CHANNELS),
+              "versions": [{"name": n, "width_factor": k, "sar": list(s)} for n, k, s in VERSIONS],
+              "clips": {c: _clip_rows(video / f"{c}.mp4", model, args.frames) for c in CLIPS}}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    save_json(report, out / "aspect.json")
+    _plot(report, out / "aspect.png")
+    print(f"wrote {out / 'aspect.json'} and {out / 'aspect.png'}")
+
+
+if __name__ == "__main__":
+    main()

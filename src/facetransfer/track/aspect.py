@@ -1,0 +1,138 @@
+"""Tracking a video of non-square pixels: the face seen at its shown shape.
+
+Some videos store pixels that are shown wider or narrower than tall (a sample aspect ratio,
+:attr:`facetransfer.io.video.VideoInfo.sar`): HDV's 1440x1080 is shown 1920x1080 (4:3), DV's
+720x480 at 10:11 or 40:33, and ``driving_d9`` of the data folder, 512x480, at 15:16. In the
+stored pixels the face is squeezed or stretched across; the model's weak-perspective camera
+(Eq. (7), one scale for both axes) would fit that stretch with a wider or narrower person and
+other expressions (an HDV-style copy of ``driving_d6``: jawOpen's mean 0.53 against 0.37 in
+square pixels, mouthPucker's 0.47 against 0.25), and Face Landmarker would see the squeezed face
+too.
+
+So the capture tracker sees the frames resampled to square pixels (their height kept, their
+width ``round(W sar)``: :func:`display_frames`), fits there with the paper's camera, and its
+track is then expressed in the stored pixels (:func:`stored_pixels`): the camera keeps its
+scale and rotation and gains the pixel aspect ``a = W_shown / W`` (``x = s (R X)_x / a + t_x``,
+:class:`facetransfer.render.WeakPerspective`), so the rewrite, the overlay and the texture see
+the stored frames as they are, while the identity, the expression and the head pose exported
+are the face's own.
+
+Coordinates map between the two by the resampling's pixel centres (OpenCV's
+``cv2.resize``): ``x_stored = (x_shown + 0.5) / a - 0.5``, ``y`` unchanged.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+from typing import Iterable, Iterator
+
+import numpy as np
+
+log = logging.getLogger(__name__)
+
+__all__ = ["SQUARE", "shown_width", "video_aspect", "aspect_of", "display_frames",
+           "to_stored_x", "to_shown_x", "stored_pixels", "warn_stored_fit"]
+
+#: The pixel aspect of square pixels.
+SQUARE = 1.0
+
+
+def shown_width(width: int, sar: tuple[int, int]) -> int:
+    """The width in square pixels of ``width`` stored pixels of sample aspect ratio ``sar``
+    ``(num, den)``: ``round(width num / den)``, at least 1."""
+    n, d = (int(v) for v in sar)
+    return max(1, int(round(int(width) * n / d)))
+
+
+def aspect_of(width: int, sar: tuple[int, int]) -> float:
+    """The pixel aspect the frames are resampled by: ``shown_width / width`` (exactly what
+    :func:`display_frames` does, which differs from ``sar`` by the rounding to whole pixels);
+    :data:`SQUARE` where the rounding leaves the width as it is."""
+    w = int(width)
+    return shown_width(w, sar) / w if w > 0 else SQUARE
+
+
+def video_aspect(video) -> float:
+    """The pixel aspect of a video file (:func:`aspect_of` its width and sample aspect
+    ratio); :data:`SQUARE` for an array of frames, which carries none."""
+    if not isinstance(video, (str, os.PathLike)):
+        return SQUARE
+    from ..io.video import video_info
+
+    info = video_info(video)
+    return aspect_of(info.size[0], info.sar)
+
+
+def warn_stored_fit(video, tracker: str) -> None:
+    """Warn that ``tracker`` (the paper's optical-flow tracker, or a fit to a landmark file)
+    fits a video of non-square pixels in its stored pixels: its identity and head pose carry
+    the stretch, which the default capture tracker removes. Silent for square pixels and
+    arrays."""
+    a = video_aspect(video)
+    if a != SQUARE:
+        log.warning("%s: its pixels are %.3g times as wide as tall; the %s fits them as "
+                    "stored, so the identity and head pose carry that stretch (the default "
+                    "capture tracker fits the face at its shown shape)", video, a, tracker)
+
+
+def display_frames(frames: Iterable, aspect: float) -> Iterator:
+    """``frames`` (H, W, 3) resampled to ``round(W aspect)`` columns (``cv2.INTER_AREA`` when
+    narrower, ``cv2.INTER_LINEAR`` when wider), rows as they are; items that are None (a
+    skipped frame's placeholder) pass as they are. With :data:`SQUARE`, ``frames`` itself."""
+    if aspect == SQUARE:
+        yield from frames
+        return
+    import cv2
+
+    for fr in frames:
+        if fr is None:
+            yield None
+            continue
+        H, W = fr.shape[:2]
+        w = max(1, int(round(W * aspect)))
+        mode = cv2.INTER_AREA if w < W else cv2.INTER_LINEAR
+        yield cv2.resize(np.ascontiguousarray(fr), (w, H), interpolation=mode)
+
+
+def to_stored_x(x: np.ndarray, aspect: float) -> np.ndarray:
+    """Shown-pixel columns ``x`` as stored-pixel columns: ``(x + 0.5) / aspect - 0.5``."""
+    return (np.asarray(x, np.float64) + 0.5) / aspect - 0.5
+
+
+def to_shown_x(x: np.ndarray, aspect: float) -> np.ndarray:
+    """Stored-pixel columns ``x`` as shown-pixel columns (the inverse of
+    :func:`to_stored_x`)."""
+    return (np.asarray(x, np.float64) + 0.5) * aspect - 0.5
+
+
+def _stored_points(P: np.ndarray | None, aspect: float) -> np.ndarray | None:
+    if P is None:
+        return None
+    out = np.array(P, np.float64, copy=True)
+    out[..., 0] = to_stored_x(out[..., 0], aspect)
+    return out
+
+
+def stored_pixels(track, aspect: float):
+    """A track fitted in shown (square) pixels expressed in the stored pixels of a video of
+    pixel aspect ``aspect`` (module notes): translations, tracked and detected points mapped
+    by :func:`to_stored_x`, the camera given the pixel aspect. ``track`` itself for
+    :data:`SQUARE`.
+
+    Parameters
+    ----------
+    track : Track
+        With :attr:`~facetransfer.track.result.Track.pixel_aspect` 1 and ``frame_size`` the
+        stored frames'.
+    aspect : float
+        ``W_shown / W`` (:func:`aspect_of`).
+    """
+    if aspect == SQUARE:
+        return track
+    t = np.array(track.translation, np.float64, copy=True)
+    t[:, 0] = to_stored_x(t[:, 0], aspect)
+    return dataclasses.replace(track, translation=t, pixel_aspect=float(aspect),
+                               landmarks2d=_stored_points(track.landmarks2d, aspect),
+                               detections2d=_stored_points(track.detections2d, aspect))
