@@ -82,13 +82,15 @@ def _frames(video):
     return gen(), float(fps)
 
 
-def run_landmarker(video, *, blendshapes: bool = True, task: str | os.PathLike | None = None
-                   ) -> tuple[np.ndarray, np.ndarray]:
+def run_landmarker(video, *, blendshapes: bool = True, task: str | os.PathLike | None = None,
+                   fps: float | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Run Face Landmarker (Tasks API, VIDEO mode, one face) over a clip.
 
     Parameters
     ----------
     video : path-like or iterable of (H, W, 3) uint8 RGB frames
+    fps : float, optional
+        The frames' rate (their timestamps); default a file's own, 30 for frames.
 
     Returns
     -------
@@ -108,7 +110,8 @@ def run_landmarker(video, *, blendshapes: bool = True, task: str | os.PathLike |
         base_options=BaseOptions(model_asset_path=str(task or _task_path())),
         running_mode=vision.RunningMode.VIDEO, num_faces=1,
         output_face_blendshapes=blendshapes)
-    frames, fps = _frames(video)
+    frames, own_fps = _frames(video)
+    fps = own_fps if fps is None else float(fps)
     pts, shp = [], []
     with vision.FaceLandmarker.create_from_options(opts) as lm:
         for i, f in enumerate(frames):
@@ -140,17 +143,44 @@ def _content_key(path: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def cached_landmarker(video: Path, cache: Path) -> tuple[np.ndarray, np.ndarray]:
+def shown_landmarker(video: Path) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`run_landmarker` on a clip file seen at its shown shape: a clip whose pixels are
+    not square (its sample aspect ratio) resampled to square pixels first (OpenCV, its width
+    ``round(W sar)``, as the tracker sees it); the points told in the stored pixels again
+    (``x = (x_shown + 0.5) / a - 0.5``)."""
+    import cv2
+
+    from facetransfer.io.video import video_info
+
+    info = video_info(video)
+    if tuple(info.sar) == (1, 1):
+        return run_landmarker(video)
+    W, H = info.size
+    w = max(1, round(W * info.sar[0] / info.sar[1]))
+    mode = cv2.INTER_AREA if w < W else cv2.INTER_LINEAR
+    frames, _ = _frames(video)
+    pts, shp = run_landmarker((cv2.resize(f, (w, H), interpolation=mode) for f in frames),
+                              fps=info.fps)
+    pts[..., 0] = (pts[..., 0] + 0.5) * (W / w) - 0.5
+    return pts, shp
+
+
+def cached_landmarker(video: Path, cache: Path, *, shown: bool = False
+                      ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`run_landmarker` of a clip file, cached in ``cache`` by the clip's bytes and the
-    MediaPipe version."""
+    MediaPipe version; with ``shown``, :func:`shown_landmarker` (a clip of square pixels: the
+    same)."""
     from facetransfer.io.atomic import atomic_path
+    from facetransfer.io.video import video_info
 
     video = Path(video)
-    path = cache / "mediapipe" / f"{video.stem}-{_content_key(video)}.npz"
+    shown = shown and tuple(video_info(video).sar) != (1, 1)
+    tail = "-shown" if shown else ""
+    path = cache / "mediapipe" / f"{video.stem}-{_content_key(video)}{tail}.npz"
     if path.is_file():
         with np.load(path) as z:
             return z["points"], z["blendshapes"]
-    pts, shp = run_landmarker(video)
+    pts, shp = shown_landmarker(video) if shown else run_landmarker(video)
     path.parent.mkdir(parents=True, exist_ok=True)
     with atomic_path(path) as tmp:
         np.savez_compressed(tmp, points=pts, blendshapes=shp)

@@ -200,7 +200,7 @@ def run_mediapipe(video: Path, cache: Path, *, table: bool = False) -> dict:
     from facetransfer.track.landmarks import mediapipe_to_ibug, table_matrix
 
     with filtered_stderr(QUIET[0]):
-        pts, shp = cached_landmarker(video, cache)
+        pts, shp = cached_landmarker(video, cache, shown=True)
     L = np.einsum("im,fmd->fid", table_matrix(pts.shape[1]), pts) if table else \
         mediapipe_to_ibug(pts)
     return {"landmarks": L, "activations": shp, "points478": pts}
@@ -626,7 +626,7 @@ def run_real(model, cache: Path, quick: bool) -> dict:
         if start:
             video, ref = trimmed_clip(video, start, n, cache), ref[start:start + n]
         with filtered_stderr(QUIET[0]):
-            mp478, shapes = cached_landmarker(video, cache)
+            mp478, shapes = cached_landmarker(video, cache, shown=True)
         landmarker[name] = (np.asarray(mp478, float)[..., :2], np.asarray(shapes, float))
         try:
             ours = run_ours(video, model, max_frames=n)

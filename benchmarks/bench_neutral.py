@@ -59,7 +59,7 @@ def clip_rows(name: str, data: Path, cache: Path, model) -> dict:
 
     video = data / f"{name}.mp4"
     with filtered_stderr():
-        _, scores = cached_landmarker(video, cache)
+        _, scores = cached_landmarker(video, cache, shown=True)
         track = capture_video(str(video), model)
     a = np.asarray(track.blendshapes, np.float64)
     n = min(len(a), len(scores))

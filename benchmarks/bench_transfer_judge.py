@@ -68,13 +68,31 @@ GEOMETRY = {"mouth_opening": mp.MOUTH_OPEN,
             "brow_height_right": mp.BROWS["Right"], "brow_height_left": mp.BROWS["Left"]}
 
 
-def scores(frames, fps: float):
+def scores(frames, fps: float, sar: tuple[int, int] = (1, 1)):
     """Face Landmarker's blendshapes ``(F, 51)`` and the :data:`GEOMETRY` measures
-    ``{name: (F,)}`` of a frame sequence (:func:`facetransfer.fidelity.landmarker_scores`)."""
+    ``{name: (F,)}`` of a frame sequence (:func:`facetransfer.fidelity.landmarker_scores`),
+    seen at its shown shape: frames of a sample aspect ratio ``sar`` other than 1:1 resampled
+    to square pixels here (as the tracker sees them; done by the script, so that it judges an
+    older tree's results alike)."""
     from facetransfer.fidelity import landmarker_scores
 
-    shapes, P = landmarker_scores(frames, fps)
+    shapes, P = landmarker_scores(_shown(frames, sar), fps)
     return shapes, {name: mp.measure(P, pairs) for name, pairs in GEOMETRY.items()}
+
+
+def _shown(frames, sar: tuple[int, int]):
+    """``frames`` resampled to square pixels (their width ``round(W sar)``)."""
+    import cv2
+
+    if tuple(sar) == (1, 1):
+        return frames
+    out = []
+    for f in frames:
+        H, W = f.shape[:2]
+        w = max(1, round(W * sar[0] / sar[1]))
+        out.append(cv2.resize(np.ascontiguousarray(f), (w, H),
+                              interpolation=cv2.INTER_AREA if w < W else cv2.INTER_LINEAR))
+    return out
 
 
 def compare(S, T, R, pose: np.ndarray | None = None) -> dict:
@@ -171,6 +189,7 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) ->
 
     from facetransfer import video_transfer as vt
     from facetransfer.export.common import head_euler
+    from facetransfer.io.video import video_info
     from facetransfer.rewrite_options import RewriteOptions
 
     src, tgt = PAIRS[name]
@@ -195,9 +214,10 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) ->
         seconds[kind] = time.perf_counter() - t
         res[kind] = frames
     t = time.perf_counter()
-    S, T = scores(source, plan.fps), scores(target, plan.fps)
+    sar = {c: video_info(data / f"{c}.mp4").sar for c in (src, tgt)}
+    S, T = scores(source, plan.fps, sar[src]), scores(target, plan.fps, sar[tgt])
     pose = np.degrees(head_euler(plan.target_track.rotation[:n])[:, [1, 0]])  # pitch, yaw
-    judged = {k: compare(S, T, scores(v, plan.fps), pose) for k, v in res.items()}
+    judged = {k: compare(S, T, scores(v, plan.fps, sar[tgt]), pose) for k, v in res.items()}
     seconds["judge"] = time.perf_counter() - t
     _picture(name, source, target, res, S[0], out / f"transfer_judge_{name}.png")
     return {"source": src, "target": tgt, "frames": n, "fps": plan.fps, "seconds": seconds,

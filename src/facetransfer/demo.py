@@ -242,7 +242,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
                            overwrite=overwrite, progress_factory=progress_factory,
                            compose=sheet.compose, video_options=video_options)
     timings.update(rendered.timings)
-    fid = _judge(sheet.panels, plan.fps) if judge else None
+    fid = _judge(sheet.panels, plan.fps, _aspects(plan)) if judge else None
     timings["judge"] = time.perf_counter() - t0 - sum(timings.values())
     contact_sheet(sheet.sheet_frames, sheet_path, overwrite=overwrite,
                   caption=None if fid is None else fid.line())
@@ -330,14 +330,20 @@ class _DemoFrames:
         return frame
 
 
-def _judge(panels, fps):
+def _aspects(plan) -> tuple[float, float, float]:
+    """The pixel aspects of the source, target and result panels (their tracks')."""
+    a = plan.target_track.pixel_aspect
+    return (a if plan.mouth_track is None else plan.mouth_track.pixel_aspect), a, a
+
+
+def _judge(panels, fps, aspects=(1.0, 1.0, 1.0)):
     """The independent judge on the three panels (:mod:`facetransfer.fidelity`), or None if
     MediaPipe is unavailable."""
     from .errors import FaceTransferError
     from .fidelity import judge_frames
 
     try:
-        return judge_frames(*panels, fps=fps)
+        return judge_frames(*panels, fps=fps, aspects=aspects)
     except (FaceTransferError, ImportError) as exc:
         log.warning("no fidelity figures: %s", exc)
         return None

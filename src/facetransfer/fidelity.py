@@ -52,8 +52,12 @@ def _mean(*values: float) -> float:
     return float(np.mean(ok)) if ok else float("nan")
 
 
-def landmarker_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
-    """MediaPipe Face Landmarker (VIDEO mode, blendshapes) on frames.
+def landmarker_scores(frames, fps: float = 25.0, pixel_aspect: float = 1.0
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """MediaPipe Face Landmarker (VIDEO mode, blendshapes) on frames, shown at their shape:
+    frames of ``pixel_aspect`` other than 1 resampled to square pixels
+    (:func:`facetransfer.track.aspect.display_frames`; on the stored frames Face Landmarker's
+    scores differ by 0.03-0.10 on average, ``benchmarks/bench_aspect.py``).
 
     Returns
     -------
@@ -63,6 +67,7 @@ def landmarker_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray
         Its points: normalised image x, y and its depth z (on about the scale of x).
     Both NaN where no face was found.
     """
+    from .track.aspect import display_frames
     from .track.init import create_landmarker, import_tasks_api
 
     import_tasks_api()   # first: MediaPipe's package then skips its drawing helpers
@@ -71,7 +76,7 @@ def landmarker_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray
     shapes, pts = [], []
     lm = create_landmarker(video=True, blendshapes=True)
     try:
-        for i, f in enumerate(frames):
+        for i, f in enumerate(display_frames(frames, pixel_aspect)):
             img = mp.Image(image_format=mp.ImageFormat.SRGB, data=np.ascontiguousarray(f))
             r = lm.detect_for_video(img, int(round(i * 1000.0 / fps)))
             if not r.face_blendshapes:
@@ -85,10 +90,11 @@ def landmarker_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray
     return np.asarray(shapes, float).reshape(-1, 51), np.asarray(pts, float).reshape(-1, 478, 3)
 
 
-def panel_scores(frames, fps: float = 25.0) -> tuple[np.ndarray, np.ndarray]:
+def panel_scores(frames, fps: float = 25.0, pixel_aspect: float = 1.0
+                 ) -> tuple[np.ndarray, np.ndarray]:
     """MediaPipe's blendshapes ``(F, 51)`` and mouth opening ``(F,)`` (inner lip gap 13–14 over
-    the outer eye corners 33–263) of frames (NaN: no face)."""
-    shapes, L = landmarker_scores(frames, fps)
+    the outer eye corners 33–263) of frames (NaN: no face), as :func:`landmarker_scores`."""
+    shapes, L = landmarker_scores(frames, fps, pixel_aspect)
     mouth = np.linalg.norm(L[:, 13, :2] - L[:, 14, :2], axis=-1) / \
         np.linalg.norm(L[:, 33, :2] - L[:, 263, :2], axis=-1)
     return shapes, mouth
@@ -122,11 +128,14 @@ def gaze(shapes: np.ndarray) -> np.ndarray:
     return 0.5 * np.stack([h, v], axis=1)
 
 
-def judge_frames(source, target, result, fps: float = 25.0) -> Fidelity:
-    """:class:`Fidelity` of time-aligned frame sequences (each an iterable of (H, W, 3) uint8)."""
+def judge_frames(source, target, result, fps: float = 25.0,
+                 aspects: tuple[float, float, float] = (1.0, 1.0, 1.0)) -> Fidelity:
+    """:class:`Fidelity` of time-aligned frame sequences (each an iterable of (H, W, 3) uint8),
+    of the pixel aspects ``aspects`` (:func:`landmarker_scores`: each seen at its shape)."""
     from .arkit import MEDIAPIPE_NAMES
 
-    (S, Sm), (T, Tm), (R, Rm) = (panel_scores(x, fps) for x in (source, target, result))
+    (S, Sm), (T, Tm), (R, Rm) = (panel_scores(x, fps, a)
+                                 for x, a in zip((source, target, result), aspects))
     ws, wt = {}, {}
     for n in JUDGED:
         k = MEDIAPIPE_NAMES.index(n)
