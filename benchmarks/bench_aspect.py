@@ -9,14 +9,23 @@ compares each with the square clip's track:
 
 * ``ours``: the capture as it is (the frames resampled to square pixels for detection and fit,
   :mod:`facetransfer.track.aspect`);
-* ``stored``: the same capture told to ignore the aspect (``pixel_aspect=1``: how every version
+* ``stored``: the same capture told to ignore the aspect (``view=View()``: how every version
   before the twenty-fifth session tracked such a clip);
 * the peer, Face Landmarker in VIDEO mode, run on the stored frames as any caller of MediaPipe
   would (its blendshapes against its own on the square clip).
 
 Per clip and version: mean absolute difference of the ARKit activations over the mouth's,
 jaw's, eyes' and brows' 14 channels, and of jawOpen alone; the identity weights' largest
-difference (ours and ``stored``). Writes ``OUT/aspect.json`` and ``OUT/aspect.png``::
+difference (ours and ``stored``).
+
+Interlaced video too (DV, HDV and broadcast are): ``2 --frames`` frames of each clip woven in
+pairs into interlaced ones (the first of a pair gives the top field, shown first; H.264 coded
+interlaced, lossless, at half the rate) against the progressive frames of those first fields:
+``ours`` (the tracker shown the first field), ``woven`` (shown the woven frames,
+``view=View()``), and Face Landmarker on the woven frames against itself on the first fields.
+(Before the twenty-fifth session OpenCV read such a file as black frames: no face at all.)
+
+Writes ``OUT/aspect.json`` and ``OUT/aspect.png``::
 
     PYTHONPATH=src FACETRANSFER_DATA_DIR=... python benchmarks/bench_aspect.py --out out/benchmarks
 """
@@ -70,6 +79,48 @@ def _columns(names) -> list[int]:
     return [list(names).index(c) for c in CHANNELS]
 
 
+def _interlaced(clip: Path, n: int, d: Path) -> tuple[Path, Path]:
+    """``2 n`` frames of a clip woven into ``n`` interlaced ones (top field first) and the
+    ``n`` progressive frames of their first fields, both lossless, at half the clip's rate."""
+    from facetransfer.io.video import VideoOptions, read_video, write_video
+
+    frames, fps = read_video(clip, max_frames=2 * n)
+    firsts = frames[0::2][: len(frames) // 2]
+    woven = firsts.copy()
+    woven[:, 1::2] = frames[1::2][: len(woven), 1::2]
+    paths = d / "firsts.mkv", d / "woven.mp4"
+    write_video(paths[0], firsts, fps / 2, options=VideoOptions(crf=0))
+    write_video(paths[1], woven, fps / 2, options=VideoOptions(crf=0, field="top"))
+    return paths
+
+
+def _peer(path: Path) -> np.ndarray:
+    """Face Landmarker's blendshapes on a clip decoded by ``facetransfer`` (OpenCV, which
+    :func:`run_landmarker` reads a path with, returns an interlaced H.264's frames black)."""
+    from facetransfer.io.video import read_video
+
+    frames, fps = read_video(path)
+    return run_landmarker(list(frames), fps=fps)[1]
+
+
+def _interlaced_row(clip: Path, model, n: int, cols: list[int]) -> dict:
+    from facetransfer.track.aspect import View
+    from facetransfer.track.capture import capture_video
+
+    with tempfile.TemporaryDirectory() as tmp:
+        firsts, woven = _interlaced(clip, n, Path(tmp))
+        ref = capture_video(firsts, model)
+        ours = capture_video(woven, model)
+        flat = capture_video(woven, model, view=View())
+        row = {"ours": _compare(ours.blendshapes, ref.blendshapes, cols),
+               "stored": _compare(flat.blendshapes, ref.blendshapes, cols),
+               "face_landmarker": _compare(_peer(woven), _peer(firsts), cols)}
+    print(f"{clip.stem:18s} interlaced     ours {row['ours']['mean_abs']:.3f}  woven "
+          f"{row['stored']['mean_abs']:.3f}  Face Landmarker "
+          f"{row['face_landmarker']['mean_abs']:.3f}", flush=True)
+    return row
+
+
 def _compare(a: np.ndarray, b: np.ndarray, cols: list[int]) -> dict:
     ok = np.isfinite(a[:, cols]).all(1) & np.isfinite(b[:, cols]).all(1)
     d = np.abs(a[ok][:, cols] - b[ok][:, cols])
@@ -79,6 +130,7 @@ def _compare(a: np.ndarray, b: np.ndarray, cols: list[int]) -> dict:
 
 def _clip_rows(clip: Path, model, n: int) -> dict:
     from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.track.aspect import View
     from facetransfer.track.capture import capture_video
 
     cols = _columns(ARKIT_NAMES)
@@ -89,7 +141,7 @@ def _clip_rows(clip: Path, model, n: int) -> dict:
         mp_ref = run_landmarker(paths["square"])[1]
         for name, _, _ in VERSIONS:
             ours = capture_video(paths[name], model)
-            stored = capture_video(paths[name], model, pixel_aspect=1.0)
+            stored = capture_video(paths[name], model, view=View())
             peer = run_landmarker(paths[name])[1]
             rows[name] = {
                 "pixel_aspect": ours.pixel_aspect,
@@ -107,6 +159,7 @@ def _clip_rows(clip: Path, model, n: int) -> dict:
             print(f"{clip.stem:18s} {name:14s} ours {rows[name]['ours']['mean_abs']:.3f}  "
                   f"stored {rows[name]['stored']['mean_abs']:.3f}  Face Landmarker "
                   f"{rows[name]['face_landmarker']['mean_abs']:.3f}", flush=True)
+    rows["interlaced"] = _interlaced_row(clip, model, n, cols)
     return rows
 
 
@@ -124,8 +177,9 @@ def _plot(report: dict, path: Path) -> None:
                 series[k].append(row[k]["mean_abs"])
     x = np.arange(len(labels))
     fig, ax = plt.subplots(figsize=(max(8, 1.1 * len(labels)), 4.5))
-    names = {"ours": "ours (square pixels)", "stored": "ours, stored pixels (before)",
-             "face_landmarker": "Face Landmarker on the stored frames"}
+    names = {"ours": "ours (square pixels; interlaced: the first field)",
+             "stored": "ours, stored pixels (interlaced: the woven frames)",
+             "face_landmarker": "Face Landmarker on the stored (woven) frames"}
     for j, (k, v) in enumerate(series.items()):
         ax.bar(x + (j - 1) * 0.27, v, 0.27, label=names[k])
     ax.set_xticks(x, labels, fontsize=7)

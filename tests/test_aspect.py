@@ -10,8 +10,8 @@ import pytest
 
 from facetransfer.errors import TrackError
 from facetransfer.render import WeakPerspective, rotation_from_euler
-from facetransfer.track.aspect import (aspect_of, display_frames, shown_width, stored_pixels,
-                                       to_shown_x, to_stored_x)
+from facetransfer.track.aspect import (View, aspect_of, display_frames, first_field,
+                                       shown_width, stored_pixels, to_shown_x, to_stored_x)
 from facetransfer.track.result import Track
 
 
@@ -137,7 +137,7 @@ def test_a_squeezed_clip_is_captured_as_the_square_one(arkit_model, data_dir, tm
     square, squeezed = _two_shapes(data_dir, tmp_path, 60)
     ref = capture_video(square, arkit_model)
     tr = capture_video(squeezed, arkit_model)
-    flat = capture_video(squeezed, arkit_model, pixel_aspect=1.0)
+    flat = capture_video(squeezed, arkit_model, view=View())
     assert tr.pixel_aspect == 1.25 and tr.frame_size == (384, 480) and flat.pixel_aspect == 1.0
     mouth = [ARKIT_NAMES.index(n) for n in ("jawOpen", "mouthSmileLeft", "mouthSmileRight",
                                             "mouthPucker", "mouthFunnel")]

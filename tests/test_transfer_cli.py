@@ -515,3 +515,27 @@ def test_puppet_start_repeats_the_last_good_frame_before_it(clips, quick_model):
         part = list(puppet_frames(track, quick_model, wid, start=k))
         assert len(part) == 6 - k
         assert all(np.array_equal(a, b) for a, b in zip(part, whole[k:]))
+
+
+def test_an_interlaced_target_gives_an_interlaced_result(clips, quick_model_path, tmp_path,
+                                                         capsys):
+    """A target coded interlaced (top field first), which OpenCV reads as black frames, is
+    rewritten as the same frames coded progressive are, and the result is interlaced too."""
+    from facetransfer.io.video import VideoOptions
+    from facetransfer.io.video_display import first_field
+
+    frames = read_video(clips["target"])[0]
+    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
+              "--source-track", clips["source_track"], "--model", quick_model_path,
+              "--crf", "0", "--no-progress"]
+    results = []
+    for name, field in (("interlaced", "top"), ("progressive", None)):
+        target = tmp_path / f"{name}.mp4"
+        write_video(target, frames, 25.0, options=VideoOptions(crf=0, field=field))
+        out = tmp_path / f"{name}_out.mp4"
+        code, _, err = run(["transfer", "--target", target, *common, "--out", out], capsys)
+        assert code == 0, err
+        assert first_field(out) == field
+        results.append(read_video(out)[0].astype(int))
+    assert results[0].shape == results[1].shape and results[0].mean() > 50
+    assert np.abs(results[0] - results[1]).mean() < 1.0

@@ -122,3 +122,12 @@ def test_the_warning_is_said_once_per_file(uneven, caplog):
             read_video(path)
     assert caplog.text.count("has a variable frame rate") == 1
     assert "read at a constant 10.000 fps, 17 frames for its 12" in caplog.text
+
+
+def test_times_beyond_a_floats_range_are_no_times():
+    """Found by the fuzz test above once: a 400-digit time raised OverflowError."""
+    line = "0, 0, {}, 1, 2, x\n"
+    assert vt._framecrc_times("#tb 0: 1/1\n" + line.format("9" * 400)) is None
+    assert vt._framecrc_times("#tb 0: " + "9" * 400 + "/1\n" + line.format(5)) is None
+    assert vt._framecrc_times("#tb 0: " + "9" * 300 + "/1\n" + line.format("9" * 300)) is None
+    np.testing.assert_allclose(vt._framecrc_times("#tb 0: 1/30\n" + line.format(6)), [0.2])

@@ -13,6 +13,7 @@ import pytest
 
 from facetransfer.errors import VideoError
 from facetransfer.io import video as iov
+from facetransfer.io.video_like import like_video
 from facetransfer.io.video import (VideoOptions, VideoWriter, check_video_output,
                                    decoded_frame_count, encode_video, has_audio, read_video,
                                    video_info)
@@ -387,14 +388,14 @@ def test_like_video_takes_the_inputs_aspect_unless_given(tmp_path):
     src = encode_video(tmp_path / "src.mp4", smooth_frames(n=2), 25,
                        options=VideoOptions(sar=(8, 9))).path
     square = encode_video(tmp_path / "sq.mp4", smooth_frames(n=2), 25).path
-    assert iov.like_video(None, src) == VideoOptions(sar=(8, 9))
-    assert iov.like_video(VideoOptions(crf=20), src) == VideoOptions(crf=20, sar=(8, 9))
-    assert iov.like_video(VideoOptions(sar=(4, 3)), src).sar == (4, 3)  # given: kept
-    assert iov.like_video(None, square) == VideoOptions()
-    assert iov.like_video(None, None) == VideoOptions()
+    assert like_video(None, src) == VideoOptions(sar=(8, 9))
+    assert like_video(VideoOptions(crf=20), src) == VideoOptions(crf=20, sar=(8, 9))
+    assert like_video(VideoOptions(sar=(4, 3)), src).sar == (4, 3)  # given: kept
+    assert like_video(None, square) == VideoOptions()
+    assert like_video(None, None) == VideoOptions()
     still = tmp_path / "still.png"
     still.write_bytes(b"not a video")
-    assert iov.like_video(None, still) == VideoOptions()
+    assert like_video(None, still) == VideoOptions()
 
 
 @EVERY_CODEC
@@ -407,9 +408,9 @@ def test_colour_matrix_named_in_the_header_unless_the_input_names_none(tmp_path,
     assert iov.colour_matrix(tagged) == "smpte170m" and "(tv, smpte170m" in stream_info(tagged)
     assert iov.colour_matrix(plain) is None
     np.testing.assert_array_equal(read_video(tagged)[0], read_video(plain)[0])
-    assert iov.like_video(None, tagged).colour_tags
-    assert not iov.like_video(None, plain).colour_tags
-    assert not iov.like_video(VideoOptions(codec=codec), plain).colour_tags
+    assert like_video(None, tagged).colour_tags
+    assert not like_video(None, plain).colour_tags
+    assert not like_video(VideoOptions(codec=codec), plain).colour_tags
 
 
 @EVERY_CODEC
@@ -428,15 +429,15 @@ def test_primaries_and_transfer_named_as_given(tmp_path, codec, suffix):
 def test_like_video_takes_an_sdr_inputs_colour_and_warns_of_hdr_once(tmp_path, caplog):
     sdr = encode_video(tmp_path / "sdr.mp4", smooth_frames(n=2), 25,
                        options=VideoOptions(primaries="bt709", transfer="bt709")).path
-    opt = iov.like_video(None, sdr)
+    opt = like_video(None, sdr)
     assert (opt.colour_tags, opt.primaries, opt.transfer) == (True, "bt709", "bt709")
-    given = iov.like_video(VideoOptions(primaries="smpte170m"), sdr)     # given: kept
+    given = like_video(VideoOptions(primaries="smpte170m"), sdr)     # given: kept
     assert (given.primaries, given.transfer) == ("smpte170m", None)
     hlg = encode_video(tmp_path / "hlg.mp4", smooth_frames(n=2), 25,
                        options=VideoOptions(primaries="bt2020", transfer="arib-std-b67")).path
     with caplog.at_level("WARNING"):
         for _ in range(2):
-            opt = iov.like_video(None, hlg)
+            opt = like_video(None, hlg)
     assert (opt.primaries, opt.transfer) == (None, None)   # written as what it is read as
     assert caplog.text.count("is HDR or wide-gamut video") == 1
     assert "transfer arib-std-b67" in caplog.text

@@ -590,7 +590,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
         performance, the source frame for a transfer).
     audio_from : path-like, optional
         The target video: its audio is kept, and (without ``compose``) its pixel aspect ratio
-        and whether a colour matrix is named (:func:`facetransfer.io.video.like_video`).
+        and whether a colour matrix is named (:func:`facetransfer.io.video_like.like_video`).
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
         The frame to write for output frame ``i`` (default: the rewritten image).
     video_options : VideoOptions, optional
@@ -609,7 +609,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     options = options.with_(mouth=resolve_mouth_mode(options.mouth, model,
                                                      performance=plan.performance))
     if compose is None:
-        from .io.video import like_video
+        from .io.video_like import like_video
 
         video_options = like_video(video_options, audio_from)
     timings = dict(plan.timings)

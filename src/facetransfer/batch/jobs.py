@@ -48,9 +48,10 @@ def _detector_for(init: str, options):
 
 
 def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=None,
-           tracker: str | None = None, pixel_aspect: float | None = None):
+           tracker: str | None = None, view=None):
     """As ``facetransfer track``: the tracker ``settings`` choose for ``init`` (or ``tracker``);
-    ``pixel_aspect``: of frames given as an array (:mod:`facetransfer.track.aspect`)."""
+    ``view``: how frames given as an array are shown (:class:`facetransfer.track.aspect.View`
+    of their video)."""
     from ..track.tracker import track_video
 
     if (tracker or settings.choose(init)) == "capture":
@@ -62,7 +63,7 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
             return capture_resuming(video, model, checkpoint, options=settings.capture,
                                     source=source, fixed=fixed)
         return capture_video(video, model, options=settings.capture, source=source,
-                             fixed=fixed, pixel_aspect=pixel_aspect)
+                             fixed=fixed, view=view)
     detector = _detector_for(init, settings.klt)
     try:
         return track_video(video, model, init=init, options=settings.klt, source=source,
@@ -130,7 +131,7 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
         The chunk's track (frames of the chunk, the video's frame rate).
     """
     from ..io.video import read_video
-    from ..track.aspect import video_aspect
+    from ..track.aspect import View
 
     t0 = time.perf_counter()
     frames, fps = read_video(job.video, start=chunk.start, stop=chunk.stop)
@@ -143,7 +144,7 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
         init = "auto"  # the user's points are for the clip's first frame only
     track = _track(frames, model, init, options, source=str(job.video), fixed=fixed,
                    checkpoint=partial_path(out, f".chunk{chunk.index:03d}"), tracker=tracker,
-                   pixel_aspect=video_aspect(job.video))
+                   view=View.of(job.video))
     return ChunkResult(dataclasses.replace(track, fps=fps), time.perf_counter() - t0)
 
 

@@ -472,7 +472,8 @@ def run_edit(args) -> int:
 
 
 def run_puppet(args) -> int:
-    from ..io.video import check_video_output, like_video, read_video, video_info
+    from ..io.video import check_video_output, read_video, video_info
+    from ..io.video_like import like_video
     from ..track.obtain import obtain_track
     from ..track.video_detect import default_workers
     from ..transfer import identity_from_label

@@ -43,7 +43,7 @@ log = logging.getLogger(__name__)
 __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video", "CODECS",
            "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET",
            "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions", "VideoOutput", "WrittenVideo",
-           "like_video", "colour_matrix", "video_colour", "ffmpeg_exe", "ffmpeg_encoders",
+           "colour_matrix", "video_colour", "ffmpeg_exe", "ffmpeg_encoders",
            "require_encoder", "is_image_pattern", "frame_path", "save_frame_image",
            "place_sequence", "check_video_output", "decoded_frame_count", "stored_frame_count", "has_audio",
            "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
@@ -104,6 +104,10 @@ class VideoOptions:
         them (``"bt709"``; HLG ``"arib-std-b67"``): a rewritten video's RGB values are those
         its input's decoding gave, so they are its input's (:func:`like_video`). None: not
         named.
+    field : {"top", "bottom"}, optional
+        Interlaced video: the field shown first, written into the stream (H.264 and ProRes
+        coded interlaced), so that players show a rewritten interlaced video as they showed it
+        (:func:`like_video`); x265 writes progressive frames. None: progressive.
     """
 
     codec: str = DEFAULT_CODEC
@@ -113,6 +117,7 @@ class VideoOptions:
     colour_tags: bool = True
     primaries: str | None = None
     transfer: str | None = None
+    field: str | None = None
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -131,6 +136,8 @@ class VideoOptions:
             object.__setattr__(self, "sar", checked_aspect(self.sar))
         checked_colour_name(self.primaries, "primaries")
         checked_colour_name(self.transfer, "transfer")
+        if self.field not in (None, "top", "bottom"):
+            raise VideoError(f"field must be 'top', 'bottom' or None, got {self.field!r}")
 
     @property
     def effective_crf(self) -> int | None:
@@ -316,9 +323,11 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     tags = COLOUR_TAGS if opt.colour_tags else []
     if opt.codec == "prores":
         return ["-c:v", enc, "-profile:v", "3", "-pix_fmt", "yuv422p10le", "-vendor", "apl0",
-                *tags]
+                *tags, *(["-flags", "+ildct"] if opt.field else [])]
     args = ["-c:v", enc, "-preset", opt.preset, "-crf", str(opt.effective_crf),
             "-pix_fmt", "yuv420p", *tags]
+    if opt.field and opt.codec == "h264":   # interlaced coding (fields and frames adaptively)
+        args += ["-flags", "+ildct+ilme"]
     if opt.codec == "h265":
         args += ["-x265-params", "log-level=error"]
     return args + _container_args(opt, suffix)
@@ -419,47 +428,6 @@ def audio_codec(path: str | os.PathLike) -> str | None:
     return found.group(1) if found else None
 
 
-def like_video(options: VideoOptions | None, video) -> VideoOptions:
-    """``options`` (default :class:`VideoOptions`) for a video that rewrites the video file
-    ``video``, to be shown as it is shown (:mod:`facetransfer.io.video_display`): its pixel
-    aspect ratio when ``options`` give none (a video of pixels that are not square, e.g.
-    512x480 shown 480x480, would otherwise play 7 % wider), and colour tags only where
-    ``video`` names a colour matrix (:func:`colour_matrix`; without one, OpenCV decoded it as
-    BT.601 and players guess alike for both), with its primaries and transfer where ``options``
-    name none and they are those of SDR video (an HDR video is warned of once: decoded to 8-bit
-    SDR without tone mapping, and OpenCV decodes BT.2020-tagged frames by other coefficients).
-    None or not a video: ``options`` as they are."""
-    from dataclasses import replace
-
-    options = VideoOptions() if options is None else options
-    if video is None or not Path(video).is_file():
-        return options
-    try:
-        sar = video_info(video).sar
-    except VideoError:  # not a video (e.g. a still): square pixels
-        return options
-    tags = video_colour(video)
-    if options.sar is None and sar != (1, 1):
-        options = replace(options, sar=sar)
-    if options.colour_tags and tags.matrix is None:
-        options = replace(options, colour_tags=False)
-    if tags.beyond_sdr:
-        _warn_hdr(str(video), tags)
-    elif options.primaries is None and options.transfer is None:
-        options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
-    return options
-
-
-@functools.lru_cache(maxsize=16)
-def _warn_hdr(video: str, tags) -> None:
-    """Say once that ``video`` is HDR (or wide-gamut) and read as 8-bit SDR."""
-    log.warning("%s is HDR or wide-gamut video (primaries %s, transfer %s): it is decoded to "
-                "8-bit SDR without tone mapping, so the result is SDR and looks flatter than "
-                "the original does in an HDR player", video, tags.primaries, tags.transfer)
-
-
-#: Audio codecs copied as they are into the containers that hold them: no second lossy
-#: generation, no encoding time (0.2 CPU-s of a 10-second transfer). Other audio becomes AAC.
 COPIED_AUDIO = {"aac": ("mp4", "mov", "matroska")}
 
 
@@ -627,7 +595,8 @@ class VideoWriter:
         cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",
                "-pix_fmt", self._pipe_format, "-s", "{}x{}".format(*self.stored_size),
                "-framerate", _fps_arg(self.fps), "-i", "-", *self._audio_input(),
-               *frame_args(self.options.sar, self.options.primaries, self.options.transfer),
+               *frame_args(self.options.sar, self.options.primaries, self.options.transfer,
+                           self.options.field if self.options.codec != "h265" else None),
                *_encode_args(self.options, self.path.suffix.lower()),
                "-f", VIDEO_SUFFIXES[self.path.suffix.lower()], str(self.tmp)]
         log.debug("ffmpeg: %s", " ".join(cmd))

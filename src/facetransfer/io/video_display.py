@@ -6,7 +6,7 @@ shown as that video is. Facts of the header decide that beside the pixels: the p
 aspect ratio, e.g. a 512x480 video shown 480x480 (:attr:`VideoInfo.sar
 <facetransfer.io.video_read.VideoInfo>`), the colour matrix by which players turn YCbCr into
 RGB, and the primaries and transfer of that RGB (:class:`ColourTags`, read from ffmpeg's
-description of the file). :func:`facetransfer.io.video.like_video` makes the options of a video
+description of the file). :func:`facetransfer.io.video_like.like_video` makes the options of a video
 that keep them.
 """
 
@@ -21,11 +21,10 @@ from dataclasses import dataclass
 from ..errors import VideoError
 from .ffmpeg import ffmpeg_exe
 from .verified import file_stamp
-from .video_read import pixel_aspect
 
-__all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "frame_args",
-           "colour_named", "checked_colour_name", "described", "video_colour",
-           "colour_matrix"]
+__all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
+           "frame_args", "colour_named", "checked_colour_name", "described", "video_colour",
+           "colour_matrix", "field_order", "field_order_named", "first_field"]
 
 #: ffmpeg arguments naming the colour of a video written
 #: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
@@ -34,6 +33,21 @@ __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "fram
 #: unspecified, the rewritten video would be guessed at by players, most taking BT.709 for HD
 #: (reds and skin drawn a little off the target's).
 COLOUR_TAGS = ["-colorspace", "smpte170m", "-color_range", "tv"]
+
+
+def pixel_aspect(num, den) -> tuple[int, int]:
+    """A pixel aspect ratio ``num:den`` in lowest terms; (1, 1) when either is not a positive
+    integer (a container that gives none reports 0:1)."""
+    from math import gcd
+
+    try:
+        n, d = int(num), int(den)
+    except (TypeError, ValueError, OverflowError):
+        return (1, 1)
+    if n <= 0 or d <= 0 or n != num or d != den:
+        return (1, 1)
+    g = gcd(n, d)
+    return (n // g, d // g)
 
 
 def checked_aspect(sar) -> tuple[int, int]:
@@ -51,16 +65,19 @@ def checked_aspect(sar) -> tuple[int, int]:
 
 
 def frame_args(sar: tuple[int, int] | None, primaries: str | None = None,
-               transfer: str | None = None) -> list[str]:
-    """ffmpeg arguments giving the frames the pixel aspect ratio ``sar`` and the colour
-    ``primaries`` and ``transfer`` (filters ``setsar``, ``setparams``: the encoder writes them
-    into the stream, the container into its header; ffmpeg takes a frame's primaries and
-    transfer over ``-color_primaries`` / ``-color_trc``); none for square pixels and no names."""
+               transfer: str | None = None, field: str | None = None) -> list[str]:
+    """ffmpeg arguments giving the frames the pixel aspect ratio ``sar``, the colour
+    ``primaries`` and ``transfer``, and for interlaced video the ``field`` shown first
+    (``"top"``, ``"bottom"``) (filters ``setsar``, ``setparams``: the encoder writes them into
+    the stream, the container into its header; ffmpeg takes a frame's primaries and transfer
+    over ``-color_primaries`` / ``-color_trc``); none for square, progressive pixels and no
+    names."""
     chain = []
     if sar is not None and tuple(sar) != (1, 1):
         chain.append("setsar={}/{}".format(*sar))
-    named = [f"{k}={v}" for k, v in (("color_primaries", primaries), ("color_trc", transfer))
-             if v]
+    modes = {"top": "tff", "bottom": "bff"}
+    named = [f"{k}={v}" for k, v in (("color_primaries", primaries), ("color_trc", transfer),
+                                     ("field_mode", modes.get(field or ""))) if v]
     if named:
         chain.append("setparams=" + ":".join(named))
     return ["-vf", ",".join(chain)] if chain else []
@@ -111,6 +128,56 @@ def colour_named(description: str) -> ColourTags:
         if item in _MATRICES:
             return ColourTags(item, item, item)
     return ColourTags()
+
+
+#: ffmpeg's words for a field order (its description) and the ``-field_order`` values.
+_FIELD_ORDERS = (("top coded first", "tb"), ("bottom coded first", "bt"), ("top first", "tt"),
+                 ("bottom first", "bb"))
+
+
+def field_order_named(description: str) -> str | None:
+    """The field order ffmpeg's description of a media file gives its first video stream, as
+    ``-field_order`` names it (``"tt"``: top field first, ``"bb"``, ``"tb"``, ``"bt"``: coded
+    in the other order); None for progressive video or none said."""
+    found = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^\n]*?)\)(?:,|$)",
+                      description, re.MULTILINE)
+    if not found:
+        return None
+    said = found.group(1)
+    return next((code for words, code in _FIELD_ORDERS if words in said), None)
+
+
+def field_order(path: str | os.PathLike) -> str | None:
+    """What a video's header says of its fields (:func:`field_order_named`; None without
+    ffmpeg)."""
+    return field_order_named(described(path))
+
+
+def first_field(path: str | os.PathLike) -> str | None:
+    """The field an interlaced video shows first, ``"top"`` or ``"bottom"``, as ffmpeg decodes
+    its first frame (``showinfo``: the header's order is not always the frames', and ffmpeg
+    itself writes top-first frames as "top coded first"); None for progressive video (its
+    header names no field order, or its frames are progressive) or without ffmpeg. Kept per
+    file."""
+    if field_order(path) is None:
+        return None
+    try:
+        stamp = file_stamp(path)
+    except OSError:
+        return None
+    return _kept_field(str(path), stamp)
+
+
+@functools.lru_cache(maxsize=32)
+def _kept_field(path: str, stamp: str) -> str | None:
+    exe = ffmpeg_exe()
+    if exe is None:
+        return None
+    info = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", path, "-map", "0:v:0",
+                           "-vf", "showinfo", "-frames:v", "1", "-f", "null", "-"],
+                          capture_output=True, text=True).stderr
+    found = re.search(r"showinfo[^\n]* i:([TBP])", info)
+    return {"T": "top", "B": "bottom"}.get(found.group(1)) if found else None
 
 
 def _said(name: str) -> str | None:

@@ -1,12 +1,14 @@
 """Video input: decoding a file into ``(H, W, 3) uint8`` RGB frames with OpenCV, lazily
 (:func:`iter_frames`) or all at once (:func:`read_video`, into memory or, past the frame budget
 of :mod:`facetransfer.io.memory`, into an unnamed file); a video of variable frame rate on a
-constant-rate timeline (:mod:`facetransfer.io.video_timeline`). Its names are also those of
-:mod:`facetransfer.io.video`, the module of video input and output."""
+constant-rate timeline (:mod:`facetransfer.io.video_timeline`); interlaced pictures OpenCV
+returns black through the ffmpeg binary (:mod:`facetransfer.io.video_pipe`). Its names are
+also those of :mod:`facetransfer.io.video`, the module of video input and output."""
 
 from __future__ import annotations
 
 import functools
+import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -16,7 +18,11 @@ import numpy as np
 
 from ..errors import VideoError
 from .verified import file_stamp
+from .video_display import first_field, pixel_aspect  # noqa: F401 (pixel_aspect: API)
+from .video_pipe import piped_frames
 from .video_timeline import timeline
+
+log = logging.getLogger(__name__)
 
 __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video"]
 
@@ -41,6 +47,9 @@ class VideoInfo:
         For a video of variable frame rate, the stored frame shown at each of its ``n_frames``
         steps of ``1 / fps`` seconds (:func:`facetransfer.io.video_timeline.timeline`): what
         the readers yield. None: every stored frame in turn.
+    piped : bool
+        Decoded by the ffmpeg binary (:mod:`facetransfer.io.video_pipe`): interlaced video,
+        whose pictures OpenCV returns black (or as garbage).
     """
 
     path: Path
@@ -49,6 +58,7 @@ class VideoInfo:
     size: tuple[int, int]
     sar: tuple[int, int] = (1, 1)
     steps: tuple[int, ...] | None = field(default=None, repr=False)
+    piped: bool = False
 
 
 def _open(path: str | os.PathLike):
@@ -88,35 +98,25 @@ def _video_info(path) -> VideoInfo:
     """:func:`video_info` read from the file."""
     import cv2
 
+
     cap = _open(path)
     try:
         fps = float(cap.get(cv2.CAP_PROP_FPS)) or 25.0
         n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
         size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         sar = pixel_aspect(cap.get(cv2.CAP_PROP_SAR_NUM), cap.get(cv2.CAP_PROP_SAR_DEN))
+        piped = size[0] > 0 and size[1] > 0 and first_field(path) is not None
     finally:
         cap.release()
     if size[0] <= 0 or size[1] <= 0:
         raise VideoError(f"video {path} has no frames")
+    if piped:
+        log.info("%s: interlaced; decoded by ffmpeg (OpenCV's frames would be black or "
+                 "garbage)", path)
     even = timeline(path, n)
     if even is None:
-        return VideoInfo(Path(path), fps, n, size, sar)
-    return VideoInfo(Path(path), even[0], len(even[1]), size, sar, even[1])
-
-
-def pixel_aspect(num, den) -> tuple[int, int]:
-    """A pixel aspect ratio ``num:den`` in lowest terms; (1, 1) when either is not a positive
-    integer (a container that gives none reports 0:1)."""
-    from math import gcd
-
-    try:
-        n, d = int(num), int(den)
-    except (TypeError, ValueError, OverflowError):
-        return (1, 1)
-    if n <= 0 or d <= 0 or n != num or d != den:
-        return (1, 1)
-    g = gcd(n, d)
-    return (n // g, d // g)
+        return VideoInfo(Path(path), fps, n, size, sar, piped=piped)
+    return VideoInfo(Path(path), even[0], len(even[1]), size, sar, even[1], piped)
 
 
 def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
@@ -151,6 +151,10 @@ def _stored_frames(path, *, start: int, stop: int | None, seek: bool) -> Iterato
     video)."""
     import cv2
 
+    info = video_info(path)
+    if info.piped:
+        yield from piped_frames(path, info.size, start=start, stop=stop)
+        return
     cap = _open(path)
     try:
         if start and seek:
@@ -196,7 +200,9 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     expect = max(int(info.n_frames) - start, 0)
     expect = expect if stop is None else min(expect, max(stop - start, 0))
     budget = frame_budget()
-    if info.steps is None:      # BGR buffers converted into place
+    if info.piped:              # RGB from ffmpeg (interlaced: OpenCV's are black)
+        source, put = piped_frames(path, info.size, start=start, stop=stop), np.copyto
+    elif info.steps is None:    # BGR buffers converted into place
         source, put = _decoded(path, start, stop), _bgr_to_rgb
     else:                       # the timeline's steps, RGB
         source, put = iter_frames(path, start=start, stop=stop), np.copyto

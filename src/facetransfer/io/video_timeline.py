@@ -68,7 +68,13 @@ def _framecrc_times(text: str) -> np.ndarray | None:
             return None
     if not pts or min(pts) <= -(1 << 62):      # AV_NOPTS_VALUE: a packet without a time
         return None
-    return np.sort(np.asarray(pts, np.float64)) * float(Fraction(int(tb[1]), int(tb[2])))
+    try:                                        # numbers beyond a float's range: no times
+        with np.errstate(over="ignore"):
+            times = np.sort(np.asarray(pts, np.float64)) * float(Fraction(int(tb[1]),
+                                                                          int(tb[2])))
+    except OverflowError:
+        return None
+    return times if np.isfinite(times).all() else None
 
 
 @functools.lru_cache(maxsize=32)

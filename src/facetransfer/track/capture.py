@@ -789,7 +789,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
                   detections: ClipDetections | None = None, max_frames: int | None = None,
                   fixed: dict | None = None, progress: Progress | None = None,
                   source: str | None = None, checkpoint=None, workers: int = 1,
-                  pixel_aspect: float | None = None) -> Track:
+                  view=None) -> Track:
     """Capture a face's performance from a video (module notes): the default tracker.
 
     Parameters
@@ -807,9 +807,9 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         The fit's progress (:func:`capture_detections`).
     workers : int
         Processes running the default detector (:func:`~.video_detect.detect_video`).
-    pixel_aspect : float, optional
-        Of the video's pixels (default: a file's own; 1 for an array): the face is detected
-        and fitted in square pixels and the track told in the stored ones
+    view : facetransfer.track.aspect.View, optional
+        How the detector is shown the frames (default: a file's own; an array as it is): in
+        square pixels, the track told in the stored ones, and of interlaced video one field
         (:mod:`facetransfer.track.aspect`).
 
     Returns
@@ -821,7 +821,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         detections, fps, size, src = detect_video(video, detector=detector,
                                                   max_frames=max_frames, progress=progress,
                                                   source=source, workers=workers,
-                                                  pixel_aspect=pixel_aspect)
+                                                  view=view)
     else:
         fps, size, src, _, n, _ = _open(video, max_frames, source)
         if n is not None and detections.n_frames != n:

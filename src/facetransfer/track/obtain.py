@@ -159,14 +159,13 @@ def _capture(video, model, frames, fps, max_frames, progress_factory, workers: i
              partial: Path | None = None):
     """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames; with
     ``partial``, its progress saved there and continued from there (:func:`capture_resuming`)."""
-    from .aspect import video_aspect
+    from .aspect import View
     from .capture import capture_video
 
     with _StageBars(video, progress_factory) as stage_progress:
         if partial is None:
             tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
-                               source=str(video), workers=workers,
-                               pixel_aspect=video_aspect(video))
+                               source=str(video), workers=workers, view=View.of(video))
         else:
             tr = capture_resuming(video, model, partial, frames=frames[:max_frames],
                                   source=str(video), progress=stage_progress, workers=workers,
@@ -201,7 +200,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
     fit), continued from there when it holds this run's: an interrupted run loses nothing.
     ``best_effort``: a progress file that cannot be written is a warning, not an error."""
-    from .aspect import video_aspect
+    from .aspect import View
     from .capture import capture_video
     from .detect_checkpoint import DetectionCheckpoint
     from .video_detect import detect_video
@@ -209,7 +208,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     clip = video if frames is None else frames
     ck = DetectionCheckpoint.for_video(partial, video, None if frames is None else len(frames),
                                        best_effort=best_effort)
-    aspect = video_aspect(video)
+    view = View.of(video)
     saved = ck.load()
     if saved is not None:
         log.info("%s: continued an interrupted run from frame %d", source,
@@ -219,7 +218,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     else:
         det = detect_video(clip, source=source, checkpoint=ck, progress=progress,
                            resume=None if saved is None else saved.detections,
-                           workers=workers, pixel_aspect=aspect)[0]
+                           workers=workers, view=view)[0]
     try:
         return capture_video(clip, model, options=options, detections=det, source=source,
                              fixed=fixed, checkpoint=ck, progress=progress)

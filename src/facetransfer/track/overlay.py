@@ -118,9 +118,10 @@ def write_overlay(video, track, model, path, *, progress=None, overwrite: bool =
         Called with 1 per frame written.
     options : VideoOptions, optional
         Codec and CRF (default H.264, CRF 18); pixel aspect ratio and colour tags as
-        ``video``'s (:func:`~facetransfer.io.video.like_video`).
+        ``video``'s (:func:`~facetransfer.io.video_like.like_video`).
     """
-    from ..io.video import VideoWriter, iter_frames, like_video
+    from ..io.video import VideoWriter, iter_frames
+    from ..io.video_like import like_video
 
     with VideoWriter(path, track.fps, track.frame_size, overwrite=overwrite,
                      options=like_video(options, video)) as w:

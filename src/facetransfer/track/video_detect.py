@@ -32,7 +32,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import ShapeError, VideoError
-from .aspect import display_frames, video_aspect
+from .aspect import View
 from .detect import ClipDetections, VideoLandmarker, detect_clip
 from .options import Progress
 
@@ -93,13 +93,13 @@ def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetect
                           cat(first.points478, second.points478), scores, first.pixel_aspect)
 
 
-#: (video, start, stop, fps, counter, pixel aspect) handed to the forked child (not pickled)
+#: (video, start, stop, fps, counter, View) handed to the forked child (not pickled)
 _JOB: tuple | None = None
 
 
 def _child_job() -> ClipDetections:
     """In the child: detect frames ``start .. stop`` (or the clip's end) of the video."""
-    video, start, stop, fps, counter, aspect = _JOB
+    video, start, stop, fps, counter, view = _JOB
     if isinstance(video, np.ndarray):
         frames = iter(video[:stop])
     else:
@@ -113,8 +113,8 @@ def _child_job() -> ClipDetections:
         counter.value = max(0, done - start)
 
     try:
-        return detect_clip(display_frames(frames, aspect), detector, n_frames=stop,
-                           keep478=True, start=start, progress=progress, pixel_aspect=aspect)
+        return detect_clip(view.frames(frames), detector, n_frames=stop,
+                           keep478=True, start=start, progress=progress, pixel_aspect=view.aspect)
     except ShapeError:          # the clip ends at ``start``: no frames left for this part
         return None
     finally:
@@ -141,13 +141,12 @@ class SplitDetection:
         self._pool, self._future, self._counter = pool, future, counter
 
     @classmethod
-    def start(cls, video, start: int, stop: int | None, fps: float, aspect: float = 1.0
+    def start(cls, video, start: int, stop: int | None, fps: float, view: View = View()
               ) -> "SplitDetection | None":
         """Fork the child that detects frames ``start .. stop`` of ``video`` (a path or an
-        (F, H, W, 3) array), resampled to square pixels by ``aspect``
-        (:func:`facetransfer.track.aspect.display_frames`); None where the platform cannot
-        fork. Call it before this process creates its own landmarker (MediaPipe's threads do
-        not survive a fork)."""
+        (F, H, W, 3) array), as ``view`` shows them (:class:`facetransfer.track.aspect.View`);
+        None where the platform cannot fork. Call it before this process creates its own
+        landmarker (MediaPipe's threads do not survive a fork)."""
         import multiprocessing as mp
         from concurrent.futures import ProcessPoolExecutor
 
@@ -161,7 +160,7 @@ class SplitDetection:
         _import_mediapipe()
         ctx = mp.get_context("fork")
         counter = ctx.Value("i", 0, lock=False)
-        _JOB = (video, int(start), stop, float(fps), counter, float(aspect))
+        _JOB = (video, int(start), stop, float(fps), counter, view)
         try:
             pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
             fut = pool.submit(_child_job)           # forks now: the child sees _JOB
@@ -249,25 +248,25 @@ def finish_split(first: ClipDetections, child: SplitDetection, start: int,
 def detect_video(video, *, detector=None, max_frames: int | None = None,
                  progress: Progress | None = None, source: str | None = None,
                  resume: ClipDetections | None = None, checkpoint=None, workers: int = 1,
-                 pixel_aspect: float | None = None
+                 view: View | None = None
                  ) -> tuple[ClipDetections, float, tuple[int, int], str]:
     """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
 
     Needs no model, so a caller may load the model meanwhile. ``resume`` and ``checkpoint``:
     as in :func:`facetransfer.track.detect.detect_clip`. ``workers``: processes running the
     default detector; with 2, the later half of a long enough clip is detected by a forked
-    child meanwhile (ignored with ``detector``). ``pixel_aspect``: of the video's pixels
-    (default: a file's own, :func:`facetransfer.track.aspect.video_aspect`; 1 for an array):
-    the frames are detected resampled to square pixels, and the detections say so
-    (:attr:`~facetransfer.track.detect.ClipDetections.pixel_aspect`). The size returned is
-    the stored frames'.
+    child meanwhile (ignored with ``detector``). ``view``: how the frames are shown to the
+    detector (:class:`facetransfer.track.aspect.View`; default a file's own: resampled to
+    square pixels, one field of interlaced video; an array as it is); the detections say
+    their pixels' aspect (:attr:`~facetransfer.track.detect.ClipDetections.pixel_aspect`). The
+    size returned is the stored frames'.
     """
     prog = progress or (lambda stage, done, total: None)
     fps, size, src, frames, n, total = _open(video, max_frames, source)
-    aspect = video_aspect(video) if pixel_aspect is None else float(pixel_aspect)
+    view = View.of(video) if view is None else view
     done = 0 if resume is None else resume.n_frames
     m = split_frame(done, total, workers) if detector is None else None
-    child = None if m is None else SplitDetection.start(video, m, n, fps, aspect)
+    child = None if m is None else SplitDetection.start(video, m, n, fps, view)
     own = None
     if detector is None:
         detector = own = VideoLandmarker(fps=fps, blendshapes=True)
@@ -280,15 +279,15 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
         prog("detect", m + c, max(total, m + c))
 
     def redetect(first):
-        again = display_frames(_open(video, max_frames, source)[3], aspect)
+        again = view.frames(_open(video, max_frames, source)[3])
         return detect_clip(again, detector, n_frames=n, keep478=True,
                            progress=lambda d, t: prog("detect", d, max(total, d)),
-                           resume=first, checkpoint=checkpoint, pixel_aspect=aspect)
+                           resume=first, checkpoint=checkpoint, pixel_aspect=view.aspect)
 
     try:
-        det = detect_clip(display_frames(frames, aspect), detector,
+        det = detect_clip(view.frames(frames), detector,
                           n_frames=n if child is None else m, keep478=True, progress=report,
-                          resume=resume, checkpoint=checkpoint, pixel_aspect=aspect)
+                          resume=resume, checkpoint=checkpoint, pixel_aspect=view.aspect)
         if child is not None:
             det = finish_split(det, child, m, redetect, report_child, checkpoint)
     except BaseException:

@@ -1,0 +1,74 @@
+"""The options of a video written in place of another (:func:`like_video`): shown at its shape,
+in its colour and with its fields, as the video it rewrites was."""
+
+from __future__ import annotations
+
+import functools
+import logging
+from pathlib import Path
+
+from ..errors import VideoError
+from .video import VideoOptions, video_info
+from .video_display import first_field, video_colour
+
+log = logging.getLogger(__name__)
+
+__all__ = ["like_video"]
+
+
+def like_video(options: VideoOptions | None, video) -> VideoOptions:
+    """``options`` (default :class:`VideoOptions`) for a video that rewrites the video file
+    ``video``, to be shown as it is shown (:mod:`facetransfer.io.video_display`): its pixel
+    aspect ratio when ``options`` give none (a video of pixels that are not square, e.g.
+    512x480 shown 480x480, would otherwise play 7 % wider), and colour tags only where
+    ``video`` names a colour matrix (:func:`~facetransfer.io.video_display.colour_matrix`; without one, OpenCV decoded it as
+    BT.601 and players guess alike for both), with its primaries and transfer where ``options``
+    name none and they are those of SDR video (an HDR video is warned of once: decoded to 8-bit
+    SDR without tone mapping, and OpenCV decodes BT.2020-tagged frames by other coefficients),
+    and of an interlaced video the field shown first (H.264 and ProRes; warned of once for
+    H.265, which writes progressive frames). None or not a video: ``options`` as they are."""
+    from dataclasses import replace
+
+    options = VideoOptions() if options is None else options
+    if video is None or not Path(video).is_file():
+        return options
+    try:
+        sar = video_info(video).sar
+    except VideoError:  # not a video (e.g. a still): square pixels
+        return options
+    tags = video_colour(video)
+    if options.sar is None and sar != (1, 1):
+        options = replace(options, sar=sar)
+    if options.colour_tags and tags.matrix is None:
+        options = replace(options, colour_tags=False)
+    if tags.beyond_sdr:
+        _warn_hdr(str(video), tags)
+    elif options.primaries is None and options.transfer is None:
+        options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
+    field = first_field(video)
+    if field is not None and options.field is None:
+        if options.codec == "h265":
+            _warn_progressive(str(video))
+        else:
+            options = replace(options, field=field)
+    return options
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_progressive(video: str) -> None:
+    """Say once that an interlaced ``video`` is rewritten as progressive H.265."""
+    log.warning("%s is interlaced; x265 writes progressive frames, so players show the "
+                "result's fields woven (use --codec h264 or prores to keep them interlaced)",
+                video)
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_hdr(video: str, tags) -> None:
+    """Say once that ``video`` is HDR (or wide-gamut) and read as 8-bit SDR."""
+    log.warning("%s is HDR or wide-gamut video (primaries %s, transfer %s): it is decoded to "
+                "8-bit SDR without tone mapping, so the result is SDR and looks flatter than "
+                "the original does in an HDR player", video, tags.primaries, tags.transfer)
+
+
+#: Audio codecs copied as they are into the containers that hold them: no second lossy
+#: generation, no encoding time (0.2 CPU-s of a 10-second transfer). Other audio becomes AAC.

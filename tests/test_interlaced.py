@@ -1,0 +1,109 @@
+"""Interlaced video: decoded by ffmpeg where OpenCV returns black frames, tracked on its first
+field, written back interlaced (facetransfer.io.video_pipe, facetransfer.track.aspect)."""
+
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+import pytest
+
+from facetransfer.io.video import VideoOptions, read_video, video_info, write_video
+from facetransfer.io.video_like import like_video
+from facetransfer.io.video_display import field_order_named, first_field
+from facetransfer.track.aspect import View, first_field as field_frame
+
+
+def _woven(frames: np.ndarray, top_first: bool = True) -> np.ndarray:
+    """Pairs of progressive frames woven into interlaced ones: the first of each pair gives
+    the field shown first (the top rows 0, 2, ... for ``top_first``), the second the other."""
+    a, b = frames[0::2], frames[1::2]
+    n = min(len(a), len(b))
+    out = a[:n].copy()
+    k = 1 if top_first else 0
+    out[:, k::2] = b[:n, k::2]
+    return out
+
+
+@pytest.fixture(scope="module")
+def interlaced(data_dir, tmp_path_factory):
+    """60 frames of ``driving_d6`` woven into 30 interlaced ones (top field first), written
+    losslessly as interlaced H.264 at 15 fps; and the progressive frames of its first fields."""
+    frames = read_video(data_dir / "video" / "driving_d6.mp4", max_frames=60)[0]
+    d = tmp_path_factory.mktemp("interlaced")
+    woven = _woven(frames)
+    path = d / "woven.mp4"
+    write_video(path, woven, 15.0, options=VideoOptions(crf=0, field="top"))
+    firsts = d / "firsts.mkv"
+    write_video(firsts, frames[0::2], 15.0, options=VideoOptions(crf=0))
+    return path, woven, firsts
+
+
+def test_field_orders_are_read_from_ffmpegs_description():
+    def desc(s):
+        return f"  Stream #0:0[0x1](und): Video: h264 (High), {s}, 1920x1080, 25 fps\n" \
+               "  Stream #0:1: Audio: aac (LC), 48000 Hz, stereo, fltp (default)"
+    assert field_order_named(desc("yuv420p(top first)")) == "tt"
+    assert field_order_named(desc("yuv420p(tv, bt709, bottom first)")) == "bb"
+    assert field_order_named(desc("yuv422p10le(tv, top coded first (swapped))")) == "tb"
+    assert field_order_named(desc("yuv420p(tv, bt709, bottom coded first (swapped))")) == "bt"
+    assert field_order_named(desc("yuv420p(tv, bt709, progressive)")) is None
+    assert field_order_named(desc("yuv420p")) is None
+    assert field_order_named("") is None
+
+
+def test_an_interlaced_h264_is_read_as_its_woven_frames(interlaced, data_dir):
+    """OpenCV returns this file's frames black (or as garbage); read through ffmpeg they are
+    the woven frames written (lossless but for the YUV round trip)."""
+    import cv2
+
+    path, woven, _ = interlaced
+    assert first_field(path) == "top" and video_info(path).piped
+    ok, bgr = cv2.VideoCapture(str(path)).read()
+    assert ok and np.abs(bgr[..., ::-1].astype(int) - woven[0]).mean() > 20   # the defect
+    got = read_video(path)[0]
+    assert got.shape == woven.shape
+    assert np.abs(got.astype(int) - woven).mean() < 2.0      # 4:2:0 of woven chroma
+    np.testing.assert_array_equal(read_video(path, start=7, max_frames=3)[0], got[7:10])
+    progressive = data_dir / "video" / "driving_d6.mp4"
+    assert first_field(progressive) is None and not video_info(progressive).piped
+
+
+def test_the_first_field_keeps_its_rows_and_fills_the_others_between_them():
+    f = (np.arange(9, dtype=np.uint8) * 20)[:, None, None].repeat(2, 1).repeat(3, 2)
+    f[1::2] = 255                              # the second field: another instant
+    top = field_frame(f, "top")
+    np.testing.assert_array_equal(top[0::2], f[0::2])
+    np.testing.assert_array_equal(top[1:8:2, 0, 0], [20, 60, 100, 140])
+    f = (np.arange(8, dtype=np.uint8) * 20)[:, None, None].repeat(2, 1).repeat(3, 2)
+    f[0::2] = 255
+    bottom = field_frame(f, "bottom")
+    np.testing.assert_array_equal(bottom[1::2], f[1::2])
+    np.testing.assert_array_equal(bottom[0::2, 0, 0], [20, 40, 80, 120])   # row 0: its edge
+
+
+def test_an_interlaced_clip_is_captured_as_its_first_fields(interlaced, arkit_model):
+    """Tracked on its first field, the woven clip gives the activations of the progressive
+    frames of those fields; on the woven frames (two instants a frame) several times further."""
+    from facetransfer.track.capture import capture_video
+
+    path, _, firsts = interlaced
+    ref = capture_video(firsts, arkit_model)
+    tr = capture_video(path, arkit_model)
+    woven = capture_video(path, arkit_model, view=View())
+    assert tr.n_frames == ref.n_frames == 30 and tr.frame_size == ref.frame_size
+    err = np.abs(tr.blendshapes - ref.blendshapes).mean()
+    err_woven = np.abs(woven.blendshapes - ref.blendshapes).mean()
+    assert err < 0.01 and err_woven > 2 * err
+
+
+def test_a_rewritten_interlaced_video_stays_interlaced(interlaced, tmp_path, caplog):
+    path, woven, _ = interlaced
+    opts = like_video(None, path)
+    assert opts.field == "top"
+    out = tmp_path / "again.mov"
+    write_video(out, woven[:4], 15.0, options=VideoOptions(codec="prores", field="bottom"))
+    assert first_field(out) == "bottom"
+    with caplog.at_level(logging.WARNING, logger="facetransfer.io.video_like"):
+        assert like_video(VideoOptions(codec="h265"), path).field is None
+    assert "x265 writes progressive frames" in caplog.text
