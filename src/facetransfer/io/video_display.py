@@ -24,7 +24,7 @@ from .verified import file_stamp
 
 __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
            "frame_args", "colour_named", "checked_colour_name", "described", "video_colour",
-           "colour_matrix", "field_order", "field_order_named", "first_field"]
+           "colour_matrix", "field_named", "first_field", "exact_seek", "EXACT_SEEK"]
 
 #: ffmpeg arguments naming the colour of a video written
 #: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
@@ -130,54 +130,33 @@ def colour_named(description: str) -> ColourTags:
     return ColourTags()
 
 
-#: ffmpeg's words for a field order (its description) and the ``-field_order`` values.
-_FIELD_ORDERS = (("top coded first", "tb"), ("bottom coded first", "bt"), ("top first", "tt"),
-                 ("bottom first", "bb"))
-
-
-def field_order_named(description: str) -> str | None:
-    """The field order ffmpeg's description of a media file gives its first video stream, as
-    ``-field_order`` names it (``"tt"``: top field first, ``"bb"``, ``"tb"``, ``"bt"``: coded
-    in the other order); None for progressive video or none said."""
-    found = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^\n]*?)\)(?:,|$)",
-                      description, re.MULTILINE)
-    if not found:
-        return None
-    said = found.group(1)
-    return next((code for words, code in _FIELD_ORDERS if words in said), None)
-
-
-def field_order(path: str | os.PathLike) -> str | None:
-    """What a video's header says of its fields (:func:`field_order_named`; None without
-    ffmpeg)."""
-    return field_order_named(described(path))
+def field_named(description: str) -> str | None:
+    """The field an interlaced video shows first, ``"top"`` or ``"bottom"``, from ffmpeg's
+    ``showinfo`` line of its first decoded frame in :func:`described`'s text (``i:T``,
+    ``i:B``; ``i:P``: progressive, None); None where it decoded none. The frame's own flag:
+    a header may name no field order (DV) or another (ffmpeg writes top-first frames as "top
+    coded first")."""
+    found = re.search(r"showinfo[^\n]* i:([TBP])", description)
+    return {"T": "top", "B": "bottom"}.get(found.group(1)) if found else None
 
 
 def first_field(path: str | os.PathLike) -> str | None:
-    """The field an interlaced video shows first, ``"top"`` or ``"bottom"``, as ffmpeg decodes
-    its first frame (``showinfo``: the header's order is not always the frames', and ffmpeg
-    itself writes top-first frames as "top coded first"); None for progressive video (its
-    header names no field order, or its frames are progressive) or without ffmpeg. Kept per
-    file."""
-    if field_order(path) is None:
-        return None
-    try:
-        stamp = file_stamp(path)
-    except OSError:
-        return None
-    return _kept_field(str(path), stamp)
+    """The field an interlaced video shows first (:func:`field_named`); None for progressive
+    video or without ffmpeg."""
+    return field_named(described(path))
 
 
-@functools.lru_cache(maxsize=32)
-def _kept_field(path: str, stamp: str) -> str | None:
-    exe = ffmpeg_exe()
-    if exe is None:
-        return None
-    info = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", path, "-map", "0:v:0",
-                           "-vf", "showinfo", "-frames:v", "1", "-f", "null", "-"],
-                          capture_output=True, text=True).stderr
-    found = re.search(r"showinfo[^\n]* i:([TBP])", info)
-    return {"T": "top", "B": "bottom"}.get(found.group(1)) if found else None
+#: ffmpeg's demuxers whose seeks OpenCV lands exactly on the frame asked (measured: MP4 and
+#: QuickTime, Matroska and WebM, AVI); in others (MPEG transport streams of H.264, as AVCHD
+#: camcorders write) it may land nowhere.
+EXACT_SEEK = ("mov,mp4,m4a,3gp,3g2,mj2", "matroska,webm", "avi")
+
+
+def exact_seek(path: str | os.PathLike) -> bool:
+    """Whether OpenCV's seek in a video's container is exact (:data:`EXACT_SEEK`, by the
+    demuxer ffmpeg names in :func:`described`); False without ffmpeg."""
+    found = re.search(r"^Input #0, ([^ ]+), from", described(path), re.MULTILINE)
+    return bool(found) and found.group(1) in EXACT_SEEK
 
 
 def _said(name: str) -> str | None:
@@ -200,8 +179,10 @@ _MATRICES = ("rgb", "bt709", "fcc", "bt470bg", "smpte170m", "smpte240m", "ycgco"
 
 
 def described(path: str | os.PathLike) -> str:
-    """ffmpeg's description of a media file (its streams), "" without ffmpeg; kept per file
-    (:func:`facetransfer.io.verified.file_stamp`: its colour and its audio are asked of it)."""
+    """ffmpeg's description of a media file (its container and streams) and of its first
+    video frame decoded (``showinfo``: whether it is interlaced, :func:`field_named`), "" without
+    ffmpeg; kept per file (:func:`facetransfer.io.verified.file_stamp`: its colour, audio,
+    fields and container are asked of it)."""
     try:
         stamp = file_stamp(path)
     except OSError:         # missing: ffmpeg says so, nothing kept
@@ -218,7 +199,8 @@ def _describe(path: str) -> str:
     exe = ffmpeg_exe()
     if exe is None:
         return ""
-    return subprocess.run([exe, "-hide_banner", "-nostdin", "-i", path],
+    return subprocess.run([exe, "-hide_banner", "-nostdin", "-i", path, "-map", "0:v:0?",
+                           "-vf", "showinfo", "-frames:v", "1", "-f", "null", "-"],
                           capture_output=True, text=True).stderr
 
 

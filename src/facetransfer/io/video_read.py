@@ -157,12 +157,8 @@ def _stored_frames(path, *, start: int, stop: int | None, seek: bool) -> Iterato
         return
     cap = _open(path)
     try:
-        if start and seek:
-            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
-        elif start:
-            for _ in range(start):
-                if not cap.grab():
-                    return
+        if not _at(cap, path, start, seek):
+            return
         i, bgr = start, None
         while stop is None or i < stop:
             ok, bgr = cap.read(bgr)  # one decoding buffer for the whole clip
@@ -219,6 +215,23 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     return out[:n], info.fps
 
 
+def _at(cap, path, start: int, seek: bool) -> bool:
+    """Put an opened capture at stored frame ``start``: by the container's seek where ``seek``
+    and OpenCV's is exact in it (:func:`facetransfer.io.video_display.exact_seek`; in an MPEG
+    transport stream of H.264 it lands nowhere), else by decoding every frame before it
+    (``grab``: no colour conversion). False where the clip ends before ``start``."""
+    import cv2
+
+    from .video_display import exact_seek
+
+    if not start:
+        return True
+    if seek and exact_seek(path):
+        cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        return True
+    return all(cap.grab() for _ in range(start))
+
+
 def _bgr_to_rgb(dst: np.ndarray, bgr: np.ndarray) -> None:
     import cv2
 
@@ -227,13 +240,11 @@ def _bgr_to_rgb(dst: np.ndarray, bgr: np.ndarray) -> None:
 
 def _decoded(path, start: int, stop: int | None) -> Iterator[np.ndarray]:
     """The stored frames ``start`` to ``stop`` as BGR, in one buffer reused for each (the
-    container's seek to ``start``)."""
-    import cv2
-
+    container's seek to ``start`` where it is exact, :func:`_at`)."""
     cap = _open(path)
     try:
-        if start:
-            cap.set(cv2.CAP_PROP_POS_FRAMES, start)
+        if not _at(cap, path, start, True):
+            return
         n, bgr = 0, None
         while stop is None or start + n < stop:
             ok, bgr = cap.read(bgr)

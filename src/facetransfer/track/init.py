@@ -215,10 +215,13 @@ def blendshape_scores(categories) -> np.ndarray:
 
 
 #: Modules that MediaPipe's Tasks API imports for what this package never calls: its drawing
-#: helpers (which import matplotlib's pyplot) and the microphone of its audio tasks. They are
-#: loaded lazily (:func:`import_tasks_api`).
+#: helpers (which import matplotlib's pyplot) and the microphone of its audio tasks (which
+#: imports ``sounddevice``, and catches the OSError of a machine without PortAudio: that
+#: module lazy instead, its error came at the first look at it, e.g. hypothesis's scan of
+#: ``sys.modules``). They are loaded lazily (:func:`import_tasks_api`).
 UNUSED_BY_TRACKING = frozenset({"mediapipe.tasks.python.vision.drawing_styles",
-                                "mediapipe.tasks.python.vision.drawing_utils", "sounddevice"})
+                                "mediapipe.tasks.python.vision.drawing_utils",
+                                "mediapipe.tasks.python.audio.core.audio_record"})
 
 
 class _LazyFinder:
