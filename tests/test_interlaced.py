@@ -57,7 +57,8 @@ def _ffmpeg(*args) -> None:
 
 
 @pytest.mark.parametrize("kind", ["dv", "ts"])
-def test_dv_and_transport_streams_read_whole_and_from_any_frame(data_dir, tmp_path, kind):
+def test_dv_and_transport_streams_read_whole_and_from_any_frame(data_dir, tmp_path, kind,
+                                                                caplog):
     """DV (interlaced with no field order in its header: OpenCV's frames were black) and H.264
     in an MPEG transport stream (AVCHD's .mts: OpenCV's seek landed nowhere, so reading from
     frame 40 found no frames)."""
@@ -77,6 +78,12 @@ def test_dv_and_transport_streams_read_whole_and_from_any_frame(data_dir, tmp_pa
     later = read_video(path, start=40, max_frames=5)[0]
     np.testing.assert_array_equal(later, frames[40:45])
     np.testing.assert_array_equal(np.stack(list(iter_frames(path, start=40, stop=45))), later)
+    from facetransfer.track.aspect import warn_stored_fit
+
+    with caplog.at_level(logging.WARNING, logger="facetransfer.track.aspect"):
+        warn_stored_fit(path, "optical-flow tracker")
+    said = ["0.91 times as wide as tall" in caplog.text, "is interlaced" in caplog.text]
+    assert said == ([True, True] if kind == "dv" else [False, False])
 
 
 def test_an_interlaced_h264_is_read_as_its_woven_frames(interlaced, data_dir):

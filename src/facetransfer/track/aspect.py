@@ -136,14 +136,18 @@ def first_field(frame: np.ndarray, field: str) -> np.ndarray:
 
 def warn_stored_fit(video, tracker: str) -> None:
     """Warn that ``tracker`` (the paper's optical-flow tracker, or a fit to a landmark file)
-    fits a video of non-square pixels in its stored pixels: its identity and head pose carry
-    the stretch, which the default capture tracker removes. Silent for square pixels and
-    arrays."""
-    a = video_aspect(video)
-    if a != SQUARE:
+    fits a video as stored: of non-square pixels, its identity and head pose carry the
+    stretch; interlaced, its frames hold two instants. The default capture tracker sees
+    neither (:class:`View`). Silent for square, progressive pixels and arrays."""
+    view = View.of(video)
+    if view.aspect != SQUARE:
         log.warning("%s: its pixels are %.3g times as wide as tall; the %s fits them as "
                     "stored, so the identity and head pose carry that stretch (the default "
-                    "capture tracker fits the face at its shown shape)", video, a, tracker)
+                    "capture tracker fits the face at its shown shape)", video, view.aspect,
+                    tracker)
+    if view.field is not None:
+        log.warning("%s is interlaced; the %s sees its frames woven, two instants in each "
+                    "(the default capture tracker sees one field)", video, tracker)
 
 
 def display_frames(frames: Iterable, aspect: float) -> Iterator:
