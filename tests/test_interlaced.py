@@ -39,13 +39,19 @@ def interlaced(data_dir, tmp_path_factory):
     return path, woven, firsts
 
 
-def test_the_first_field_is_read_from_ffmpegs_first_frame():
-    def desc(i):
-        return ("Input #0, avi, from 'x.avi':\n  Stream #0:0: Video: dvvideo, yuv411p, 720x480\n"
+def test_the_first_field_is_read_from_the_first_frame_else_the_header():
+    def desc(i, fields=""):
+        return ("Input #0, avi, from 'x.avi':\n"
+                f"  Stream #0:0: Video: dvvideo, yuv411p{fields}, 720x480 [SAR 10:11], 25 fps\n"
                 f"[Parsed_showinfo_0 @ 0x1] n:   0 pts:      0 fmt:yuv411p s:720x480 i:{i} "
                 "iskey:1 type:I\n")
     assert field_named(desc("T")) == "top" and field_named(desc("B")) == "bottom"
     assert field_named(desc("P")) is None and field_named("") is None
+    # a first frame progressive in a stream whose header says interlaced (broadcast captures)
+    assert field_named(desc("P", "(tv, bt709, bottom first)")) == "bottom"
+    assert field_named(desc("P", "(top coded first (swapped))")) == "top"
+    assert field_named(desc("P", "(tv, bt709, progressive)")) is None
+    assert field_named(desc("B", "(top first)")) == "bottom"          # the frame's own flag
 
 
 def _ffmpeg(*args) -> None:

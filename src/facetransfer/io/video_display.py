@@ -130,14 +130,26 @@ def colour_named(description: str) -> ColourTags:
     return ColourTags()
 
 
+#: The field shown first by the words of ffmpeg's description of a stream's field order (it
+#: writes top-first frames as "top coded first", so the field coded first is taken).
+_HEADER_FIELDS = (("top coded first", "top"), ("bottom coded first", "bottom"),
+                  ("top first", "top"), ("bottom first", "bottom"))
+
+
 def field_named(description: str) -> str | None:
-    """The field an interlaced video shows first, ``"top"`` or ``"bottom"``, from ffmpeg's
-    ``showinfo`` line of its first decoded frame in :func:`described`'s text (``i:T``,
-    ``i:B``; ``i:P``: progressive, None); None where it decoded none. The frame's own flag:
-    a header may name no field order (DV) or another (ffmpeg writes top-first frames as "top
-    coded first")."""
+    """The field an interlaced video shows first, ``"top"`` or ``"bottom"``, in
+    :func:`described`'s text: the ``showinfo`` line of its first decoded frame (``i:T``,
+    ``i:B``: the frame's own flag; a header may name no field order, as DV's), else the field
+    order its header names (a stream whose first frame is progressive may hold interlaced ones
+    later: broadcast captures, PAFF); None for neither."""
     found = re.search(r"showinfo[^\n]* i:([TBP])", description)
-    return {"T": "top", "B": "bottom"}.get(found.group(1)) if found else None
+    frame = {"T": "top", "B": "bottom"}.get(found.group(1)) if found else None
+    if frame is not None:
+        return frame
+    header = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^\n]*?)\)(?:,|$)",
+                       description, re.MULTILINE)
+    said = header.group(1) if header else ""
+    return next((field for words, field in _HEADER_FIELDS if words in said), None)
 
 
 def first_field(path: str | os.PathLike) -> str | None:
