@@ -278,6 +278,8 @@ def cases(fx: Path) -> list[Case]:
         Case("a PNG passed as a model", ["model", "info", "face.png"], setup=_png,
              forbid=("allow_pickle", "pickle"), names="face.png"),
         Case("a folder passed as a model", ["model", "info", "."], forbid=("does not exist",)),
+        Case("a folder passed as a video", ["probe", "."], forbid=("does not exist",)),
+        Case("a track passed as a video", ["probe", T], setup=_copy(T), names=T),
         Case("a folder passed as a track", ["edit", ".", "--model", M, "--scale", "smile=2",
                                             "--out", "o.npz"], setup=_copy(M), forbid=("does not exist",)),
         Case("third-party log lines before the tool's line (no face)",

@@ -143,3 +143,26 @@ def test_a_rewritten_interlaced_video_stays_interlaced(interlaced, tmp_path, cap
     with caplog.at_level(logging.WARNING, logger="facetransfer.io.video_like"):
         assert like_video(VideoOptions(codec="h265"), path).field is None
     assert "x265 writes progressive frames" in caplog.text
+
+
+def test_probe_says_how_a_video_is_read(interlaced, data_dir, tmp_path, capsys):
+    import json
+
+    from facetransfer.cli.main import main
+
+    path = interlaced[0]
+    d9 = data_dir / "video" / "driving_d9.mp4"
+    assert main(["probe", str(path), str(d9), "--json"]) == 0
+    woven, shown = json.loads(capsys.readouterr().out)
+    assert (woven["field"], woven["decoder"], woven["n_frames"], woven["fps"]) == \
+        ("top", "ffmpeg", 30, 15.0)
+    assert woven["size"] == woven["shown_size"] == [480, 480] and woven["audio"] is None
+    assert (shown["sar"], shown["shown_size"], shown["field"], shown["decoder"]) == \
+        ([15, 16], [480, 480], None, "OpenCV")
+    assert shown["exact_seek"] and shown["audio"] == "aac"
+    assert main(["probe", str(path)]) == 0
+    text = capsys.readouterr().out
+    assert "interlaced, top field first (decoded by ffmpeg" in text
+    assert main(["probe", str(tmp_path / "none.mp4")]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"facetransfer probe: error: video {tmp_path / 'none.mp4'} does not exist"]

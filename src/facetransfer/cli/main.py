@@ -20,7 +20,7 @@ from .. import __version__
 
 #: Subcommand modules, in help order. Each defines ``register(subparsers)``.
 SUBCOMMAND_MODULES = ("model", "impute", "scan", "render", "texture", "track", "transfer",
-                      "export", "view", "batch")
+                      "export", "view", "batch", "probe")
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -24,7 +24,7 @@ from .verified import file_stamp
 
 __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
            "frame_args", "colour_named", "checked_colour_name", "described", "video_colour",
-           "colour_matrix", "field_named", "first_field", "exact_seek", "EXACT_SEEK"]
+           "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK"]
 
 #: ffmpeg arguments naming the colour of a video written
 #: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
@@ -164,11 +164,17 @@ def first_field(path: str | os.PathLike) -> str | None:
 EXACT_SEEK = ("mov,mp4,m4a,3gp,3g2,mj2", "matroska,webm", "avi")
 
 
-def exact_seek(path: str | os.PathLike) -> bool:
-    """Whether OpenCV's seek in a video's container is exact (:data:`EXACT_SEEK`, by the
-    demuxer ffmpeg names in :func:`described`); False without ffmpeg."""
+def container(path: str | os.PathLike) -> str | None:
+    """The demuxer ffmpeg reads a media file with, as it names it in :func:`described`
+    (``"mov,mp4,m4a,3gp,3g2,mj2"``, ``"mpegts"``, ...); None without ffmpeg."""
     found = re.search(r"^Input #0, ([^ ]+), from", described(path), re.MULTILINE)
-    return bool(found) and found.group(1) in EXACT_SEEK
+    return found.group(1) if found else None
+
+
+def exact_seek(path: str | os.PathLike) -> bool:
+    """Whether OpenCV's seek in a video's container is exact (:data:`EXACT_SEEK`, by
+    :func:`container`); False without ffmpeg."""
+    return container(path) in EXACT_SEEK
 
 
 def _said(name: str) -> str | None:

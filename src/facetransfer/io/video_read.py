@@ -65,6 +65,8 @@ def _open(path: str | os.PathLike):
     import cv2
 
     p = Path(path)
+    if p.is_dir():
+        raise VideoError(f"video {p} is a folder, not a video file")
     if not p.is_file():
         raise VideoError(f"video {p} does not exist")
     if p.stat().st_size == 0:
@@ -102,7 +104,7 @@ def _video_info(path) -> VideoInfo:
     cap = _open(path)
     try:
         fps = float(cap.get(cv2.CAP_PROP_FPS)) or 25.0
-        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
+        n = max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)  # a still gives -2**63: none
         size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         sar = pixel_aspect(cap.get(cv2.CAP_PROP_SAR_NUM), cap.get(cv2.CAP_PROP_SAR_DEN))
         piped = size[0] > 0 and size[1] > 0 and first_field(path) is not None

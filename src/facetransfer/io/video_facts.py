@@ -1,0 +1,112 @@
+"""What facetransfer sees of a video file, in one place (``facetransfer probe``): its stored and
+shown size, its rate and timeline, its fields, colour and audio, and how it is decoded.
+
+Footage from phones, camcorders and archives differs from the data folder's clips in ways that
+change what the commands do: pixels that are not square (tracked resampled to square ones),
+interlaced fields (decoded by ffmpeg, tracked on the field shown first, written back
+interlaced), a variable frame rate (read on a constant-rate timeline), a container whose seeks
+are not exact (decoded from its start), HDR colour (decoded to SDR). :func:`video_facts`
+gathers them from :mod:`facetransfer.io.video_read` and :mod:`facetransfer.io.video_display`;
+:func:`fact_lines` says them.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import asdict, dataclass
+
+from .video import audio_codec
+from .video_display import ColourTags, container, exact_seek, first_field, video_colour
+from .video_read import video_info
+
+__all__ = ["VideoFacts", "video_facts", "fact_lines"]
+
+
+@dataclass(frozen=True)
+class VideoFacts:
+    """A video file as facetransfer reads it.
+
+    Attributes
+    ----------
+    path : str
+    container : str or None
+        ffmpeg's demuxer (``"mov,mp4,m4a,3gp,3g2,mj2"``, ``"mpegts"``, ...).
+    size, shown_size : (int, int)
+        ``(W, H)`` stored, and as shown (the width times the pixel aspect ratio ``sar``).
+    sar : (int, int)
+    fps : float
+        The constant rate it is read at.
+    n_frames : int
+        Frames read (for a variable frame rate, the steps of its timeline).
+    variable_rate : bool
+    seconds : float
+    field : {"top", "bottom"} or None
+        Interlaced: the field shown first (the one tracked).
+    decoder : {"OpenCV", "ffmpeg"}
+    exact_seek : bool
+        OpenCV's seek lands on the frame asked (else reading from a later frame decodes the
+        frames before it).
+    colour : ColourTags
+    audio : str or None
+        The first audio stream's codec.
+    """
+
+    path: str
+    container: str | None
+    size: tuple[int, int]
+    shown_size: tuple[int, int]
+    sar: tuple[int, int]
+    fps: float
+    n_frames: int
+    variable_rate: bool
+    seconds: float
+    field: str | None
+    decoder: str
+    exact_seek: bool
+    colour: ColourTags
+    audio: str | None
+
+    def as_dict(self) -> dict:
+        """The facts as JSON-ready values."""
+        d = asdict(self)
+        d["colour"] = asdict(self.colour)
+        return d
+
+
+def video_facts(path: str | os.PathLike) -> VideoFacts:
+    """The :class:`VideoFacts` of a video file (VideoError for a missing or unreadable one)."""
+    info = video_info(path)
+    W, H = info.size
+    n, d = info.sar
+    return VideoFacts(str(path), container(path), (W, H),
+                      (max(1, round(W * n / d)), H), info.sar, float(info.fps),
+                      int(info.n_frames), info.steps is not None,
+                      float(info.n_frames / info.fps) if info.fps else 0.0, first_field(path),
+                      "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
+                      video_colour(path), audio_codec(path))
+
+
+def fact_lines(f: VideoFacts) -> list[str]:
+    """The facts as a few lines for a person, with what each means for the commands."""
+    size = "{}x{}".format(*f.size)
+    if f.shown_size != f.size:
+        size += (" stored, shown {}x{} (pixels {}:{}: tracked resampled to square pixels, "
+                 "results written with the same ratio)").format(*f.shown_size, *f.sar)
+    rate = f"{f.fps:.3f}".rstrip("0").rstrip(".")
+    timing = f"{rate} fps, {f.n_frames} frames, {f.seconds:.1f} s" if f.n_frames > 0 else \
+        f"{rate} fps, its frame count not in its header (a still image?)"
+    if f.variable_rate:
+        timing += " (variable frame rate: read on this constant-rate timeline)"
+    fields = "progressive" if f.field is None else \
+        (f"interlaced, {f.field} field first (decoded by {f.decoder}, tracked on that field, "
+         "results written interlaced)")
+    named = (f.colour.matrix, f.colour.primaries, f.colour.transfer)
+    colour = "colour not named (read as BT.601)" if not any(named) else \
+        "colour {} (matrix/primaries/transfer)".format("/".join(x or "?" for x in named)) + \
+        (": HDR or wide gamut, decoded to 8-bit SDR" if f.colour.beyond_sdr else "")
+    reading = f"read by {f.decoder}; " + ("seeks exact" if f.exact_seek else
+                                          "seeks not exact: a later frame is reached by "
+                                          "decoding the ones before it")
+    return [f"{f.path}: {size}", f"  {timing}; {fields}",
+            f"  {colour}; audio {f.audio or 'none'}",
+            f"  container {f.container or '?'}; {reading}"]
