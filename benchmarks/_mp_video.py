@@ -148,21 +148,29 @@ def shown_landmarker(video: Path) -> tuple[np.ndarray, np.ndarray]:
     not square (its sample aspect ratio) resampled to square pixels first (OpenCV, its width
     ``round(W sar)``, as the tracker sees it); the points told in the stored pixels again
     (``x = (x_shown + 0.5) / a - 0.5``)."""
-    import cv2
-
     from facetransfer.io.video import video_info
 
     info = video_info(video)
     if tuple(info.sar) == (1, 1):
         return run_landmarker(video)
-    W, H = info.size
+    W = info.size[0]
     w = max(1, round(W * info.sar[0] / info.sar[1]))
-    mode = cv2.INTER_AREA if w < W else cv2.INTER_LINEAR
-    frames, _ = _frames(video)
-    pts, shp = run_landmarker((cv2.resize(f, (w, H), interpolation=mode) for f in frames),
-                              fps=info.fps)
+    pts, shp = run_landmarker(shown_frames(_frames(video)[0], info.sar), fps=info.fps)
     pts[..., 0] = (pts[..., 0] + 0.5) * (W / w) - 0.5
     return pts, shp
+
+
+def shown_frames(frames, sar: tuple[int, int]):
+    """``frames`` resampled to square pixels (their width ``round(W sar)``; OpenCV, area
+    averaging when narrower, linear when wider), as the tracker sees them; written here, not
+    taken from ``facetransfer``, so that an older tree's results are judged alike."""
+    import cv2
+
+    for f in frames:
+        H, W = f.shape[:2]
+        w = max(1, round(W * sar[0] / sar[1]))
+        yield cv2.resize(np.ascontiguousarray(f), (w, H),
+                         interpolation=cv2.INTER_AREA if w < W else cv2.INTER_LINEAR)
 
 
 def cached_landmarker(video: Path, cache: Path, *, shown: bool = False

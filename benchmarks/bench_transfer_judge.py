@@ -81,18 +81,10 @@ def scores(frames, fps: float, sar: tuple[int, int] = (1, 1)):
 
 
 def _shown(frames, sar: tuple[int, int]):
-    """``frames`` resampled to square pixels (their width ``round(W sar)``)."""
-    import cv2
+    """``frames`` resampled to square pixels (:func:`_mp_video.shown_frames`)."""
+    from _mp_video import shown_frames
 
-    if tuple(sar) == (1, 1):
-        return frames
-    out = []
-    for f in frames:
-        H, W = f.shape[:2]
-        w = max(1, round(W * sar[0] / sar[1]))
-        out.append(cv2.resize(np.ascontiguousarray(f), (w, H),
-                              interpolation=cv2.INTER_AREA if w < W else cv2.INTER_LINEAR))
-    return out
+    return frames if tuple(sar) == (1, 1) else list(shown_frames(frames, sar))
 
 
 def compare(S, T, R, pose: np.ndarray | None = None) -> dict:

@@ -10,7 +10,7 @@ import pytest
 
 from facetransfer.errors import TrackError
 from facetransfer.render import WeakPerspective, rotation_from_euler
-from facetransfer.track.aspect import (View, aspect_of, display_frames, first_field,
+from facetransfer.track.aspect import (View, aspect_of, display_frames,
                                        shown_width, stored_pixels, to_shown_x, to_stored_x)
 from facetransfer.track.result import Track
 

@@ -11,7 +11,7 @@ import pytest
 from facetransfer.io.video import VideoOptions, iter_frames, read_video, video_info, write_video
 from facetransfer.io.video_like import like_video
 from facetransfer.io.video_display import exact_seek, field_named, first_field
-from facetransfer.track.aspect import View, first_field as field_frame
+from facetransfer.track.aspect import View, field_frame
 
 
 def _woven(frames: np.ndarray, top_first: bool = True) -> np.ndarray:

@@ -6,8 +6,8 @@ shown as that video is. Facts of the header decide that beside the pixels: the p
 aspect ratio, e.g. a 512x480 video shown 480x480 (:attr:`VideoInfo.sar
 <facetransfer.io.video_read.VideoInfo>`), the colour matrix by which players turn YCbCr into
 RGB, and the primaries and transfer of that RGB (:class:`ColourTags`, read from ffmpeg's
-description of the file). :func:`facetransfer.io.video_like.like_video` makes the options of a video
-that keep them.
+description of the file), and the fields of interlaced video (:func:`first_field`).
+:func:`facetransfer.io.video_like.like_video` makes the options of a video that keep them.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ from .ffmpeg import ffmpeg_exe
 from .verified import file_stamp
 
 __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
+           "shown_width",
            "frame_args", "colour_named", "checked_colour_name", "described", "video_colour",
            "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK"]
 
@@ -48,6 +49,13 @@ def pixel_aspect(num, den) -> tuple[int, int]:
         return (1, 1)
     g = gcd(n, d)
     return (n // g, d // g)
+
+
+def shown_width(width: int, sar: tuple[int, int]) -> int:
+    """The width in square pixels of ``width`` stored pixels of sample aspect ratio ``sar``
+    ``(num, den)``: ``round(width num / den)``, at least 1."""
+    n, d = (int(v) for v in sar)
+    return max(1, int(round(int(width) * n / d)))
 
 
 def checked_aspect(sar) -> tuple[int, int]:
@@ -118,10 +126,7 @@ def colour_named(description: str) -> ColourTags:
     first video stream: the stream's pixel format lists range, ``matrix/primaries/transfer``
     (one name where the three are the same) and field order, e.g.
     ``yuv420p10le(tv, bt2020nc/bt2020/arib-std-b67, progressive)``."""
-    found = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^)]*)\)", description)
-    if not found:
-        return ColourTags()
-    for item in (x.strip() for x in found.group(1).split(",")):
+    for item in (x.strip() for x in _stream_details(description).split(",")):
         if "/" in item:
             names = [_said(n) for n in item.split("/")][:3]
             return ColourTags(*names)
@@ -146,10 +151,16 @@ def field_named(description: str) -> str | None:
     frame = {"T": "top", "B": "bottom"}.get(found.group(1)) if found else None
     if frame is not None:
         return frame
-    header = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^\n]*?)\)(?:,|$)",
-                       description, re.MULTILINE)
-    said = header.group(1) if header else ""
+    said = _stream_details(description)
     return next((field for words, field in _HEADER_FIELDS if words in said), None)
+
+
+def _stream_details(description: str) -> str:
+    """What ffmpeg's description gives in parentheses after the first video stream's pixel
+    format: range, colour names, field order (``"tv, bt709, top first"``); "" for none."""
+    found = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, [a-z0-9_]+\(([^\n]*?)\)(?:,|$)",
+                      description, re.MULTILINE)
+    return found.group(1) if found else ""
 
 
 def first_field(path: str | os.PathLike) -> str | None:

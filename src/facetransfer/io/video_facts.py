@@ -16,7 +16,8 @@ import os
 from dataclasses import asdict, dataclass
 
 from .video import audio_codec
-from .video_display import ColourTags, container, exact_seek, first_field, video_colour
+from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
+                            video_colour)
 from .video_read import video_info
 
 __all__ = ["VideoFacts", "video_facts", "fact_lines"]
@@ -67,19 +68,16 @@ class VideoFacts:
     audio: str | None
 
     def as_dict(self) -> dict:
-        """The facts as JSON-ready values."""
-        d = asdict(self)
-        d["colour"] = asdict(self.colour)
-        return d
+        """The facts as JSON-ready values (the colour tags a dict of their own)."""
+        return asdict(self)
 
 
 def video_facts(path: str | os.PathLike) -> VideoFacts:
     """The :class:`VideoFacts` of a video file (VideoError for a missing or unreadable one)."""
     info = video_info(path)
     W, H = info.size
-    n, d = info.sar
-    return VideoFacts(str(path), container(path), (W, H),
-                      (max(1, round(W * n / d)), H), info.sar, float(info.fps),
+    return VideoFacts(str(path), container(path), (W, H), (shown_width(W, info.sar), H),
+                      info.sar, float(info.fps),
                       int(info.n_frames), info.steps is not None,
                       float(info.n_frames / info.fps) if info.fps else 0.0, first_field(path),
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),

@@ -20,13 +20,14 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
     """``options`` (default :class:`VideoOptions`) for a video that rewrites the video file
     ``video``, to be shown as it is shown (:mod:`facetransfer.io.video_display`): its pixel
     aspect ratio when ``options`` give none (a video of pixels that are not square, e.g.
-    512x480 shown 480x480, would otherwise play 7 % wider), and colour tags only where
-    ``video`` names a colour matrix (:func:`~facetransfer.io.video_display.colour_matrix`; without one, OpenCV decoded it as
-    BT.601 and players guess alike for both), with its primaries and transfer where ``options``
-    name none and they are those of SDR video (an HDR video is warned of once: decoded to 8-bit
-    SDR without tone mapping, and OpenCV decodes BT.2020-tagged frames by other coefficients),
-    and of an interlaced video the field shown first (H.264 and ProRes; warned of once for
-    H.265, which writes progressive frames). None or not a video: ``options`` as they are."""
+    512x480 shown 480x480, would otherwise play 7 % wider); colour tags only where ``video``
+    names a colour matrix (:func:`~facetransfer.io.video_display.colour_matrix`; without
+    one, OpenCV decoded it as BT.601 and players guess alike for both), with its primaries and
+    transfer where ``options`` name none and they are those of SDR video (an HDR video is
+    warned of once: decoded to 8-bit SDR without tone mapping, and OpenCV decodes
+    BT.2020-tagged frames by other coefficients); and of an interlaced video the field shown
+    first (H.264 and ProRes; warned of once for H.265, which writes progressive frames). None
+    or not a video: ``options`` as they are."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
@@ -68,7 +69,3 @@ def _warn_hdr(video: str, tags) -> None:
     log.warning("%s is HDR or wide-gamut video (primaries %s, transfer %s): it is decoded to "
                 "8-bit SDR without tone mapping, so the result is SDR and looks flatter than "
                 "the original does in an HDR player", video, tags.primaries, tags.transfer)
-
-
-#: Audio codecs copied as they are into the containers that hold them: no second lossy
-#: generation, no encoding time (0.2 CPU-s of a 10-second transfer). Other audio becomes AAC.

@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import VideoError
 from .verified import file_stamp
-from .video_display import first_field, pixel_aspect  # noqa: F401 (pixel_aspect: API)
+from .video_display import exact_seek, first_field, pixel_aspect  # noqa: F401 (pixel_aspect: API)
 from .video_pipe import piped_frames
 from .video_timeline import timeline
 
@@ -100,7 +100,6 @@ def _video_info(path) -> VideoInfo:
     """:func:`video_info` read from the file."""
     import cv2
 
-
     cap = _open(path)
     try:
         fps = float(cap.get(cv2.CAP_PROP_FPS)) or 25.0
@@ -157,19 +156,8 @@ def _stored_frames(path, *, start: int, stop: int | None, seek: bool) -> Iterato
     if info.piped:
         yield from piped_frames(path, info.size, start=start, stop=stop)
         return
-    cap = _open(path)
-    try:
-        if not _at(cap, path, start, seek):
-            return
-        i, bgr = start, None
-        while stop is None or i < stop:
-            ok, bgr = cap.read(bgr)  # one decoding buffer for the whole clip
-            if not ok:
-                break
-            yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-            i += 1
-    finally:
-        cap.release()
+    for bgr in _decoded(path, start, stop, seek):
+        yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
 def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
@@ -224,8 +212,6 @@ def _at(cap, path, start: int, seek: bool) -> bool:
     (``grab``: no colour conversion). False where the clip ends before ``start``."""
     import cv2
 
-    from .video_display import exact_seek
-
     if not start:
         return True
     if seek and exact_seek(path):
@@ -240,12 +226,12 @@ def _bgr_to_rgb(dst: np.ndarray, bgr: np.ndarray) -> None:
     cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB, dst=dst)
 
 
-def _decoded(path, start: int, stop: int | None) -> Iterator[np.ndarray]:
-    """The stored frames ``start`` to ``stop`` as BGR, in one buffer reused for each (the
-    container's seek to ``start`` where it is exact, :func:`_at`)."""
+def _decoded(path, start: int, stop: int | None, seek: bool = True) -> Iterator[np.ndarray]:
+    """The stored frames ``start`` to ``stop`` as BGR, in one decoding buffer reused for each
+    (reached by the container's seek to ``start`` where ``seek`` and it is exact, :func:`_at`)."""
     cap = _open(path)
     try:
-        if not _at(cap, path, start, True):
+        if not _at(cap, path, start, seek):
             return
         n, bgr = 0, None
         while stop is None or start + n < stop:

@@ -21,7 +21,7 @@ from typing import NamedTuple
 import numpy as np
 
 from ..geometry import barycentric_2d
-from ..render import WeakPerspective, rasterize, vertex_normals, vertex_visibility
+from ..render import rasterize, vertex_normals, vertex_visibility
 from .atlas import UVAtlas, uv_atlas
 from .base import TextureError, check_frame, check_raster, check_uvs, check_vertices, default_tol
 from .function import attribute_vector
@@ -324,8 +324,8 @@ def lift_track(model, frames, track, *, tex_size: int = 256, step: int = 1, powe
     frames : iterable of (H, W, 3) uint8
         The clip's frames in order, from frame 0 (e.g. :func:`facetransfer.io.video.iter_frames`).
     track : Track or SyntheticTruth
-        Anything with ``rotation (F, 3, 3)``, ``scale (F,)``, ``translation (F, 2)`` and
-        ``weights`` (mode -> (F, r)): the per-frame pose of Eq. (7) and weights of Eq. (5).
+        Anything with ``camera(i)`` (the weak-perspective camera of Eq. (7) at frame ``i``),
+        ``scale (F,)`` and ``weights`` (mode -> (F, r), Eq. (5)).
     tex_size : int, keyword-only
     step : int, keyword-only
         Use frames 0, step, 2 step, ...
@@ -354,10 +354,8 @@ def lift_track(model, frames, track, *, tex_size: int = 256, step: int = 1, powe
             continue
         w = {m: np.asarray(track.weights[m])[i] for m in model.mode_names}
         V = model.synthesize(w)  # Eq. (5)
-        cam = WeakPerspective(float(track.scale[i]), track.rotation[i], track.translation[i],
-                              getattr(track, "pixel_aspect", 1.0))
-        lifted.append(lift_uv_texture(frame, V, faces, model.uvs, cam, tex_size, atlas=atlas,
-                                      power=power))
+        lifted.append(lift_uv_texture(frame, V, faces, model.uvs, track.camera(i), tex_size,
+                                      atlas=atlas, power=power))
         attrs.append(attribute_vector(model, w))
         used.append(i)
         if progress is not None:

@@ -24,7 +24,7 @@ Coordinates map between the two by the resampling's pixel centres (OpenCV's
 An interlaced video (DV, HDV, AVCHD, broadcast) stores in each frame two fields, its even and
 its odd rows, filmed half a frame apart: where the face moves, its rows alternate between two
 instants (a blink half done, the jaw at two openings). The tracker sees the field shown first
-alone (:func:`first_field`: its rows kept, the other field's interpolated between them, so no
+alone (:func:`field_frame`: its rows kept, the other field's interpolated between them, so no
 row moves), and the track is that field's instant. On an interlaced copy of ``driving_d6``
 (30 fps woven into 15 fps fields) against the progressive frames of its first fields: jawOpen r
 0.978 woven, 0.995 one field; eyeBlinkRight 0.953 and 0.994, its largest error 0.67 and 0.17.
@@ -40,20 +40,16 @@ from typing import Iterable, Iterator
 
 import numpy as np
 
+from ..io.video_display import first_field, shown_width
+from ..io.video_read import video_info
+
 log = logging.getLogger(__name__)
 
 __all__ = ["SQUARE", "View", "shown_width", "video_aspect", "aspect_of", "display_frames",
-           "first_field", "to_stored_x", "to_shown_x", "stored_pixels", "warn_stored_fit"]
+           "field_frame", "to_stored_x", "to_shown_x", "stored_pixels", "warn_stored_fit"]
 
 #: The pixel aspect of square pixels.
 SQUARE = 1.0
-
-
-def shown_width(width: int, sar: tuple[int, int]) -> int:
-    """The width in square pixels of ``width`` stored pixels of sample aspect ratio ``sar``
-    ``(num, den)``: ``round(width num / den)``, at least 1."""
-    n, d = (int(v) for v in sar)
-    return max(1, int(round(int(width) * n / d)))
 
 
 def aspect_of(width: int, sar: tuple[int, int]) -> float:
@@ -69,8 +65,6 @@ def video_aspect(video) -> float:
     ratio); :data:`SQUARE` for an array of frames, which carries none."""
     if not isinstance(video, (str, os.PathLike)):
         return SQUARE
-    from ..io.video import video_info
-
     info = video_info(video)
     return aspect_of(info.size[0], info.sar)
 
@@ -84,7 +78,7 @@ class View:
     aspect : float
         The pixels' aspect: frames resampled by it to square pixels (:func:`display_frames`).
     field : {"top", "bottom"} or None
-        Interlaced video: the field shown first, alone (:func:`first_field`); None:
+        Interlaced video: the field shown first, alone (:func:`field_frame`); None:
         progressive.
     """
 
@@ -106,18 +100,16 @@ class View:
         carries neither."""
         if not isinstance(video, (str, os.PathLike)):
             return cls()
-        from ..io.video_display import first_field
-
         return cls(video_aspect(video), first_field(video))
 
     def frames(self, frames: Iterable) -> Iterator:
         """``frames`` as the tracker sees them (None placeholders pass)."""
         if self.field is not None:
-            frames = (None if f is None else first_field(f, self.field) for f in frames)
+            frames = (None if f is None else field_frame(f, self.field) for f in frames)
         return display_frames(frames, self.aspect)
 
 
-def first_field(frame: np.ndarray, field: str) -> np.ndarray:
+def field_frame(frame: np.ndarray, field: str) -> np.ndarray:
     """One field of an interlaced frame ``(H, W, ...)`` at full height: its rows (``"top"``:
     0, 2, 4, ...; ``"bottom"``: 1, 3, ...) kept in place, each row of the other field the mean
     of the field's rows beside it (rounded; the field's own row at the frame's edge)."""
