@@ -165,10 +165,22 @@ def read_manifest(path: str | os.PathLike, *, required: tuple[str, ...],
 
 
 def _name(explicit: str | None, path: str | os.PathLike, where: str) -> str:
-    name = explicit or Path(path).stem
+    name = explicit or _stem(path)
     if not name or name in (".", "..") or "/" in name or "\\" in name or name.startswith("."):
         raise BatchError(f"{where}: {name!r} cannot be an output file name")
     return name
+
+
+def _stem(path: str | os.PathLike) -> str:
+    """A video's name for its outputs: its file name without the extension; of an image
+    sequence, without the frame-number field too (``plate/kh.####.png``: ``kh``), else its
+    folder's name (``shot12/%04d.png``: ``shot12``)."""
+    from ..io.video_sequence import FRAME_FIELD, is_sequence
+
+    p = Path(path)
+    if not is_sequence(p):
+        return p.stem
+    return FRAME_FIELD.sub("", p.stem).strip("._- ") or p.resolve().parent.name
 
 
 def clip_jobs(videos=(), manifest: str | os.PathLike | None = None, *,

@@ -45,7 +45,38 @@ def build_parser() -> argparse.ArgumentParser:
         # before the command is not undone by the command's parser
         leaf.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS,
                           help="as facetransfer -v")
+        if leaf.prog.split(" ", 1)[-1] in READING_COMMANDS:
+            leaf.add_argument("--sequence-fps", type=_rate, metavar="FPS",
+                              help="frame rate of image-sequence inputs (plate/%%04d.png, "
+                              "plate/####.png), which store none (default 24)")
     return parser
+
+
+#: Commands that read videos, and so image sequences, whose rate ``--sequence-fps`` gives.
+READING_COMMANDS = frozenset({"track", "transfer", "edit", "puppet", "demo", "export", "probe",
+                              "texture lift", "batch track", "batch transfer"})
+
+
+def _rate(text: str) -> float:
+    """``--sequence-fps``'s value: frames a second in (0, 1000]."""
+    try:
+        fps = float(text)
+    except ValueError:
+        fps = float("nan")
+    if not 0 < fps <= 1000:
+        raise argparse.ArgumentTypeError(f"expected a frame rate in (0, 1000], got {text!r}")
+    return fps
+
+
+def use_sequence_rate(args, environ=os.environ) -> None:
+    """Give ``--sequence-fps`` to the readers of image sequences, and to the processes this
+    one starts (a forked tracker, Dask's local workers), through
+    :data:`facetransfer.io.video_sequence.SEQUENCE_FPS_VARIABLE`."""
+    fps = getattr(args, "sequence_fps", None)
+    if fps is not None:
+        from ..io.video_sequence import SEQUENCE_FPS_VARIABLE
+
+        environ[SEQUENCE_FPS_VARIABLE] = repr(fps)
 
 
 def _leaf_parsers(parser: argparse.ArgumentParser):
@@ -134,6 +165,7 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     configure_logging(args.verbose)
+    use_sequence_rate(args)
     from .common import set_progress
 
     set_progress(not getattr(args, "no_progress", False))

@@ -113,10 +113,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--step must be >= 1, got {args.step}")
     if not 8 <= args.size <= 4096:
         raise FaceTransferError(f"--size must be in 8..4096, got {args.size}")
-    from ..io.npz import check_input_file
-
-    check_input_file(args.video, "video")
-    info = video_info(args.video)
+    info = video_info(args.video)       # a file or an image sequence, checked
     track = _load_track(args.track)
     model = _load_model(args.model)
     if tuple(track.frame_size) != tuple(info.size):

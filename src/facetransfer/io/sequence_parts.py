@@ -96,11 +96,15 @@ class SequenceWriter:
     n_frames : int
         Frames of the whole sequence.
     overwrite : bool
+    first_number : int
+        Number of its first frame beside the pattern (in the folder they count from 0).
     """
 
     def __init__(self, folder: str | os.PathLike, out: str | os.PathLike,
-                 size: tuple[int, int], *, n_frames: int, overwrite: bool = False) -> None:
+                 size: tuple[int, int], *, n_frames: int, overwrite: bool = False,
+                 first_number: int = 0) -> None:
         self.output = check_video_output(out, None, overwrite=overwrite)
+        self.first_number = int(first_number)
         if self.output.kind != "images":
             raise VideoError(f"{out}: not an image sequence (a video is written in parts by "
                              "facetransfer.io.video_parts)")
@@ -155,7 +159,8 @@ class SequenceWriter:
                 if self.done != self.n_frames:
                     raise VideoError(f"{self.output.path}: {self.done} frames were written, "
                                      f"not {self.n_frames}")
-                place_sequence(self.folder, self.output.path, self.n_frames)
+                place_sequence(self.folder, self.output.path, self.n_frames,
+                               first=self.first_number)
                 shutil.rmtree(self.folder, ignore_errors=True)
                 self.result = WrittenVideo(self.output.path, self.n_frames, self.size, False,
                                            "images")

@@ -37,6 +37,7 @@ from .video_display import (COLOUR_TAGS, checked_aspect, checked_colour_name,  #
                             colour_matrix, described, frame_args, video_colour)
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
+from .video_sequence import IMAGE_SUFFIXES, is_sequence, percent_pattern, same_sequence_files
 
 log = logging.getLogger(__name__)
 
@@ -69,8 +70,6 @@ DEFAULT_PRESET = "faster"
 #: Video containers by extension (the ffmpeg muxer of each).
 VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska",
                   ".avi": "avi"}
-#: Image formats of a frame sequence (``frames/%05d.png``).
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 _PATTERN = re.compile(r"%0?\d*d")
 
 
@@ -108,6 +107,10 @@ class VideoOptions:
         Interlaced video: the field shown first, written into the stream (H.264 and ProRes
         coded interlaced), so that players show a rewritten interlaced video as they showed
         it; not with H.265 (x265 writes progressive frames). None: progressive.
+    first_number : int, optional
+        An image sequence's number of its first frame. None: 0, but the commands that rewrite
+        an image sequence number theirs as it is numbered (a plate's 1001 on), as
+        :func:`~facetransfer.io.video_like.like_video` gives.
     """
 
     codec: str = DEFAULT_CODEC
@@ -118,6 +121,7 @@ class VideoOptions:
     primaries: str | None = None
     transfer: str | None = None
     field: str | None = None
+    first_number: int | None = None
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -141,6 +145,10 @@ class VideoOptions:
         if self.field is not None and self.codec == "h265":
             raise VideoError("x265 writes progressive frames: an interlaced video (field "
                              f"{self.field!r}) needs codec h264 or prores")
+        n = self.first_number
+        if n is not None and (isinstance(n, bool) or int(n) != n or n < 0):
+            raise VideoError(f"an image sequence's first frame number must be an integer >= 0, "
+                             f"got {n!r}")
 
     @property
     def effective_crf(self) -> int | None:
@@ -257,16 +265,18 @@ def _pattern_files(pattern: Path) -> list[Path]:
     return sorted(q for q in pattern.parent.iterdir() if rx.match(q.name))
 
 
-def place_sequence(folder: str | os.PathLike, pattern: str | os.PathLike, n_frames: int) -> None:
+def place_sequence(folder: str | os.PathLike, pattern: str | os.PathLike, n_frames: int, *,
+                   first: int = 0) -> None:
     """Move the finished frames ``0 .. n_frames - 1`` of the image sequence ``pattern`` from
-    ``folder`` beside the pattern (renamed; moved across file systems) and remove the files of
-    an older, longer sequence of the same pattern, which would be mistaken for its frames."""
+    ``folder`` beside the pattern (renamed; moved across file systems), numbered from ``first``
+    there, and remove the files of an older, longer sequence of the same pattern, which would
+    be mistaken for its frames."""
     pattern = Path(pattern)
     pattern.parent.mkdir(parents=True, exist_ok=True)
     old = _pattern_files(pattern)
-    names = [pattern.name % i for i in range(n_frames)]
-    for name in names:
-        shutil.move(Path(folder) / name, pattern.parent / name)
+    names = [pattern.name % (first + i) for i in range(n_frames)]
+    for i, name in enumerate(names):
+        shutil.move(Path(folder) / (pattern.name % i), pattern.parent / name)
     keep = set(names)
     for q in old:
         if q.name not in keep:
@@ -280,7 +290,9 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
     ``path`` is a video (``.mp4``, ``.m4v``, ``.mov``, ``.mkv``, ``.avi``) or an image sequence
     whose name has one frame-number field (``frames/%05d.png``; ``.png``, ``.jpg``, ``.tif``,
     ``.bmp``; frame 0 is the first). A video naming one of ``inputs`` (paths or None) is
-    refused (:func:`facetransfer.io.atomic.check_output_path`).
+    refused (:func:`facetransfer.io.atomic.check_output_path`), and so is a sequence whose
+    files could be an input sequence's (:func:`facetransfer.io.video_sequence.same_sequence_files`:
+    its frames would be replaced, the rest removed).
 
     Raises
     ------
@@ -299,12 +311,19 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
         if len(fields) != 1 or p.name.count("%") != 1:
             raise VideoError(f"output {p}: an image-sequence pattern needs exactly one frame "
                              "number field like %05d (e.g. frames/%05d.png)")
+        same = next((q for q in inputs if is_sequence(q) and same_sequence_files(p, q)), None)
+        if same is not None:
+            raise VideoError(f"output {p} would write over the frames of the input {same}; "
+                             "choose another name or folder")
         if not p.parent.parent.is_dir() and not p.parent.is_dir():
             raise VideoError(f"output folder {p.parent} does not exist (for {p})")
         if not overwrite and _pattern_files(p):
             raise VideoError(f"output frames {p} exist ({len(_pattern_files(p))} files); pass "
                              "--overwrite to replace them")
         return VideoOutput(p, "images", opt)
+    if suffix in IMAGE_SUFFIXES and "#" in p.name:
+        raise VideoError(f"output {p}: write an output sequence's frame number as "
+                         f"{percent_pattern(p).name} (#### is read in input sequences only)")
     if suffix in IMAGE_SUFFIXES:
         raise VideoError(f"output {p} is an image: for an image sequence put a frame number "
                          f"in the name (e.g. {p.with_name(p.stem + '_%05d' + p.suffix)}); for "
@@ -763,7 +782,8 @@ class VideoWriter:
                              f"written but the file holds {n}")
 
     def _commit_images(self) -> WrittenVideo:
-        place_sequence(self._tmpdir, self.path, self.n_frames)
+        place_sequence(self._tmpdir, self.path, self.n_frames,
+                       first=self.output.options.first_number or 0)
         self._tmpdir.rmdir()
         self._tmpdir = None
         return WrittenVideo(self.path, self.n_frames, self.size, False, "images")

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from ..errors import VideoError
 from .ffmpeg import ffmpeg_exe
 from .verified import file_stamp
+from .video_sequence import is_sequence
 
 __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
            "shown_width",
@@ -211,7 +212,10 @@ def described(path: str | os.PathLike) -> str:
     """ffmpeg's description of a media file (its container and streams) and of its first
     video frame decoded (``showinfo``: whether it is interlaced, :func:`field_named`), "" without
     ffmpeg; kept per file (:func:`facetransfer.io.verified.file_stamp`: its colour, audio,
-    fields and container are asked of it)."""
+    fields and container are asked of it); "" for an image sequence
+    (:mod:`facetransfer.io.video_sequence`: no container, audio, fields or colour names)."""
+    if is_sequence(path):
+        return ""
     try:
         stamp = file_stamp(path)
     except OSError:         # missing: ffmpeg says so, nothing kept

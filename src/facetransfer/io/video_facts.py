@@ -19,6 +19,7 @@ from .video import audio_codec
 from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
                             video_colour)
 from .video_read import video_info
+from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["VideoFacts", "video_facts", "fact_lines"]
 
@@ -50,6 +51,9 @@ class VideoFacts:
     colour : ColourTags
     audio : str or None
         The first audio stream's codec.
+    first_number : int or None
+        An image sequence's first frame number (its container is ``"image sequence"``); None
+        for a video file.
     """
 
     path: str
@@ -66,6 +70,7 @@ class VideoFacts:
     exact_seek: bool
     colour: ColourTags
     audio: str | None
+    first_number: int | None = None
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -73,9 +78,14 @@ class VideoFacts:
 
 
 def video_facts(path: str | os.PathLike) -> VideoFacts:
-    """The :class:`VideoFacts` of a video file (VideoError for a missing or unreadable one)."""
+    """The :class:`VideoFacts` of a video file or image sequence (VideoError for a missing or
+    unreadable one)."""
     info = video_info(path)
     W, H = info.size
+    if is_sequence(path):
+        return VideoFacts(str(path), "image sequence", (W, H), (W, H), (1, 1), float(info.fps),
+                          int(info.n_frames), False, float(info.n_frames / info.fps), None,
+                          "OpenCV", True, ColourTags(), None, open_sequence(path).first)
     return VideoFacts(str(path), container(path), (W, H), (shown_width(W, info.sar), H),
                       info.sar, float(info.fps),
                       int(info.n_frames), info.steps is not None,
@@ -105,6 +115,12 @@ def fact_lines(f: VideoFacts) -> list[str]:
     reading = f"read by {f.decoder}; " + ("seeks exact" if f.exact_seek else
                                           "seeks not exact: a later frame is reached by "
                                           "decoding the ones before it")
+    if f.first_number is not None:
+        last = f.first_number + f.n_frames - 1
+        return [f"{f.path}: {size}",
+                f"  image sequence, frames {f.first_number}-{last}; read at {timing} (it "
+                "stores no rate: --sequence-fps gives it)",
+                "  RGB images, read as they are (16 bits scaled to 8, alpha dropped); no audio"]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}",
             f"  container {f.container or '?'}; {reading}"]

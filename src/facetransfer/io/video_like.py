@@ -10,6 +10,7 @@ from pathlib import Path
 from ..errors import VideoError
 from .video import VideoOptions, video_info
 from .video_display import first_field, video_colour
+from .video_sequence import is_sequence, open_sequence
 
 log = logging.getLogger(__name__)
 
@@ -26,11 +27,16 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
     transfer where ``options`` name none and they are those of SDR video (an HDR video is
     warned of once: decoded to 8-bit SDR without tone mapping, and OpenCV decodes
     BT.2020-tagged frames by other coefficients); and of an interlaced video the field shown
-    first (H.264 and ProRes; warned of once for H.265, which writes progressive frames). None
-    or not a video: ``options`` as they are."""
+    first (H.264 and ProRes; warned of once for H.265, which writes progressive frames). Of an
+    image sequence (:mod:`facetransfer.io.video_sequence`) its first frame number, for an
+    output sequence numbered as it is. None or not a video: ``options`` as they are."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
+    if video is not None and is_sequence(video):
+        if options.first_number is None:
+            options = replace(options, first_number=open_sequence(video).first)
+        return options
     if video is None or not Path(video).is_file():
         return options
     try:

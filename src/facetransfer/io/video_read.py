@@ -2,7 +2,8 @@
 (:func:`iter_frames`) or all at once (:func:`read_video`, into memory or, past the frame budget
 of :mod:`facetransfer.io.memory`, into an unnamed file); a video of variable frame rate on a
 constant-rate timeline (:mod:`facetransfer.io.video_timeline`); interlaced pictures OpenCV
-returns black through the ffmpeg binary (:mod:`facetransfer.io.video_pipe`). Its names are
+returns black through the ffmpeg binary (:mod:`facetransfer.io.video_pipe`); an image sequence
+(``plate/%04d.png``) frame by frame (:mod:`facetransfer.io.video_sequence`). Its names are
 also those of :mod:`facetransfer.io.video`, the module of video input and output."""
 
 from __future__ import annotations
@@ -20,6 +21,8 @@ from ..errors import VideoError
 from .verified import file_stamp
 from .video_display import exact_seek, first_field, pixel_aspect  # noqa: F401 (pixel_aspect: API)
 from .video_pipe import piped_frames
+from .video_sequence import (is_sequence, open_sequence, sequence_frames, sequence_stamp,
+                             suggested_pattern)
 from .video_timeline import timeline
 
 log = logging.getLogger(__name__)
@@ -34,7 +37,9 @@ class VideoInfo:
     Attributes
     ----------
     path : Path
+        The file, or an image sequence's pattern (``plate/%04d.png``).
     fps : float
+        An image sequence's: :func:`facetransfer.io.video_sequence.sequence_fps`.
     n_frames : int
         As reported by the container (may be approximate for some codecs); for a video of
         variable frame rate, the steps of its constant-rate timeline.
@@ -66,7 +71,9 @@ def _open(path: str | os.PathLike):
 
     p = Path(path)
     if p.is_dir():
-        raise VideoError(f"video {p} is a folder, not a video file")
+        pattern = suggested_pattern(p)
+        hint = "" if pattern is None else f" (its image sequence: give {pattern})"
+        raise VideoError(f"video {p} is a folder, not a video file{hint}")
     if not p.is_file():
         raise VideoError(f"video {p} does not exist")
     if p.stat().st_size == 0:
@@ -85,7 +92,7 @@ def video_info(path: str | os.PathLike) -> VideoInfo:
     from dataclasses import replace
 
     try:
-        stamp = file_stamp(path)
+        stamp = sequence_stamp(path) if is_sequence(path) else file_stamp(path)
     except OSError:         # missing or unreadable: :func:`_open`'s error
         return _video_info(path)
     return replace(_kept_info(str(path), stamp), path=Path(path))
@@ -100,6 +107,9 @@ def _video_info(path) -> VideoInfo:
     """:func:`video_info` read from the file."""
     import cv2
 
+    if is_sequence(path):
+        seq = open_sequence(path)
+        return VideoInfo(Path(path), seq.fps, seq.n_frames, seq.size)
     cap = _open(path)
     try:
         fps = float(cap.get(cv2.CAP_PROP_FPS)) or 25.0
@@ -153,6 +163,9 @@ def _stored_frames(path, *, start: int, stop: int | None, seek: bool) -> Iterato
     import cv2
 
     info = video_info(path)
+    if is_sequence(path):
+        yield from sequence_frames(path, start=start, stop=stop)
+        return
     if info.piped:
         yield from piped_frames(path, info.size, start=start, stop=stop)
         return
@@ -186,7 +199,9 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     expect = max(int(info.n_frames) - start, 0)
     expect = expect if stop is None else min(expect, max(stop - start, 0))
     budget = frame_budget()
-    if info.piped:              # RGB from ffmpeg (interlaced: OpenCV's are black)
+    if is_sequence(path):       # RGB, file by file
+        source, put = sequence_frames(path, start=start, stop=stop), np.copyto
+    elif info.piped:            # RGB from ffmpeg (interlaced: OpenCV's are black)
         source, put = piped_frames(path, info.size, start=start, stop=stop), np.copyto
     elif info.steps is None:    # BGR buffers converted into place
         source, put = _decoded(path, start, stop), _bgr_to_rgb

@@ -26,6 +26,7 @@ import numpy as np
 
 from .ffmpeg import ffmpeg_exe
 from .verified import file_stamp
+from .video_sequence import is_sequence
 
 log = logging.getLogger(__name__)
 
@@ -87,7 +88,10 @@ def timeline(path: str | os.PathLike, n_frames: int) -> tuple[float, tuple[int, 
     (:data:`UNEVEN`): the constant rate (the reciprocal of their median interval) and, for each
     of its steps, the index of the stored frame shown then; None for an even video (or when the
     packets cannot be read, or their number is not ``n_frames``: read as it is stored). Kept per
-    file (:func:`facetransfer.io.verified.file_stamp`); said once in a warning."""
+    file (:func:`facetransfer.io.verified.file_stamp`); said once in a warning. An image
+    sequence is even (:mod:`facetransfer.io.video_sequence`)."""
+    if is_sequence(path):
+        return None
     try:
         stamp = file_stamp(path)
     except OSError:

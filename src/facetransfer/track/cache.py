@@ -56,8 +56,11 @@ def track_dir() -> Path:
 def track_key(video, n_frames: int, method: str, options, model) -> str | None:
     """The cache key of tracking the first ``n_frames`` frames of the file ``video`` with
     ``method`` and ``options`` (their ``repr``: frozen dataclasses) and ``model``; None where
-    ``video`` is not a file (nothing to key by) or the cache is off."""
-    if not cache_enabled() or video is None or not os.path.isfile(os.fspath(video)):
+    ``video`` is neither a file nor an image sequence (nothing to key by) or the cache is off."""
+    from ..io.video_sequence import is_sequence
+
+    if not cache_enabled() or video is None or not (os.path.isfile(os.fspath(video))
+                                                   or is_sequence(video)):
         return None
     from .. import __version__
     from .checkpoint import video_identity

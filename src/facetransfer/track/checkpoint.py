@@ -56,8 +56,13 @@ def checkpoint_key(video_id: str, n_frames: int, model_hash: str, options, init,
 
 def video_identity(path: str | None, first: np.ndarray | None = None,
                    last: np.ndarray | None = None) -> str:
-    """A video file by its resolved path, size and modification time; an in-memory clip by the
+    """A video file by its resolved path, size and modification time; an image sequence by its
+    files' (:func:`facetransfer.io.video_sequence.sequence_stamp`); an in-memory clip by the
     checksum of its first and last frames."""
+    from ..io.video_sequence import is_sequence, sequence_stamp
+
+    if path and is_sequence(path):
+        return "sequence:" + sequence_stamp(path)
     if path:
         st = os.stat(path)
         return f"{Path(path).resolve()}:{st.st_size}:{st.st_mtime_ns}"
