@@ -173,6 +173,26 @@ def _png(cd, fx):
     cv2.imwrite(str(cd / "face.png"), np.zeros((8, 8, 3), np.uint8))
 
 
+def _plate(gap: bool = False, suffix: str = ".png"):
+    """A plate of clip.mp4's first 5 frames, plate/f.0001.png ... (frame 3 missing: ``gap``;
+    ``suffix`` .exr: empty files of a format refused by name)."""
+    def setup(cd, fx):
+        import cv2
+
+        (cd / "plate").mkdir()
+        cap = cv2.VideoCapture(str(fx / "clip.mp4"))
+        for i in range(1, 6):
+            ok, bgr = cap.read()
+            if gap and i == 3:
+                continue
+            if suffix == ".png":
+                cv2.imwrite(str(cd / "plate" / f"f.{i:04d}.png"), bgr)
+            else:
+                (cd / "plate" / f"f.{i:04d}{suffix}").write_bytes(b"\x76\x2f\x31\x01")
+        cap.release()
+    return setup
+
+
 def _nonmanifold(cd, fx):
     """A vertex-clustered ICT face in a smile: the fit must not refuse it."""
     sys.path.insert(0, str(HERE.parent / "tests"))
@@ -280,6 +300,16 @@ def cases(fx: Path) -> list[Case]:
         Case("a folder passed as a model", ["model", "info", "."], forbid=("does not exist",)),
         Case("a folder passed as a video", ["probe", "."], forbid=("does not exist",)),
         Case("a track passed as a video", ["probe", T], setup=_copy(T), names=T),
+        Case("a plate with a missing frame", ["probe", "plate/f.####.png"],
+             setup=_plate(gap=True), names="f.0003.png"),
+        Case("an OpenEXR plate", ["probe", "plate/f.%04d.exr"], setup=_plate(suffix=".exr"),
+             names="plate/f.%04d.exr"),
+        Case("an overlay written over the plate it tracks",
+             ["track", "plate/f.####.png", "--model", M, "--out", "t.npz", "--overlay",
+              "plate/f.%04d.png", "--overwrite"], setup=_both(_copy(M), _plate()),
+             protect=["plate/f.0001.png", "plate/f.0005.png"], names="plate/f.####.png"),
+        Case("a plate's folder passed as a video", ["probe", "plate"], setup=_plate(),
+             names="plate/f.%04d.png"),
         Case("a folder passed as a track", ["edit", ".", "--model", M, "--scale", "smile=2",
                                             "--out", "o.npz"], setup=_copy(M), forbid=("does not exist",)),
         Case("third-party log lines before the tool's line (no face)",

@@ -81,8 +81,8 @@ def test_what_a_sequence_cannot_be(frames, tmp_path, monkeypatch):
     (tmp_path / "broken").mkdir()
     (tmp_path / "broken" / "sh010.1001.png").write_bytes(b"not a png")
     cases = {
-        tmp_path / "gap" / "sh010.%04d.png": "frame 1003 is missing (sh010.1003.png), frames "
-                                             "1001-1002 and 1004-... are present",
+        tmp_path / "gap" / "sh010.%04d.png": "frame 1003 is missing (sh010.1003.png): frames "
+                                             "1001-1002 and 1004 are present",
         tmp_path / "empty" / "sh010.####.png": "no file matches it (e.g. sh010.0001.png",
         tmp_path / "none" / "x_%04d.png": "folder " + str(tmp_path / "none") + " does not exist",
         tmp_path / "broken" / "sh010.####.png": "cannot read frame file",
@@ -182,7 +182,7 @@ def test_a_plate_is_rewritten_as_the_video_of_its_frames(clips, quick_model_path
     plate = tmp_path / "plate" / "sh010.####.png"
     (tmp_path / "out").mkdir()
     code = main(["transfer", "--target", str(plate), *map(str, common), "--sequence-fps", "25",
-                 "--out", str(tmp_path / "out" / "sh010_ft.%04d.png")])
+                 "--out", str(tmp_path / "out" / "sh010_ft.####.png")])   # as %04d
     assert code == 0, capsys.readouterr().err
     names = sorted(q.name for q in (tmp_path / "out").iterdir())
     assert names == [f"sh010_ft.{1001 + i:04d}.png" for i in range(len(target))]

@@ -54,6 +54,14 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video") ->
                    "at the same CRF (medium: 1.6x the CPU, +0.07 dB)")
 
 
+def video_out(text: str) -> str:
+    """A video output's argument, an image sequence's ``####`` field written as printf's
+    (``out/sh010.####.png`` -> ``out/sh010.%04d.png``), as input sequences are named."""
+    from ..io.video_sequence import is_sequence, percent_pattern
+
+    return str(percent_pattern(text)) if "#" in text and is_sequence(text) else text
+
+
 def video_options(args):
     """The :class:`~facetransfer.io.video.VideoOptions` of parsed arguments (validated)."""
     from ..io.video import VideoOptions

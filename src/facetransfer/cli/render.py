@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import add_video_options, progress_disabled, video_options
+from .common import add_video_options, progress_disabled, video_options, video_out
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
 
@@ -219,7 +219,7 @@ def register(sub) -> None:
     s.add_argument("--texture", default="procedural",
                    help="'procedural' (default: band-limited skin, KLT-friendly), 'default' "
                    "(facetransfer.texture.default_face_texture) or a UV texture image file")
-    s.add_argument("--out", required=True, help="CLIP.mp4")
+    s.add_argument("--out", required=True, type=video_out, help="CLIP.mp4")
     s.add_argument("--overwrite", action="store_true",
                    help="replace existing outputs (CLIP.mp4 and CLIP.truth.npz)")
     add_video_options(s)

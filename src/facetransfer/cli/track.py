@@ -21,7 +21,7 @@ from pathlib import Path
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
 from .common import (MODEL_HELP, add_video_options, progress_disabled, resolve_model,
-                     video_options)
+                     video_options, video_out)
 
 
 #: What the capture tracker does, for the help of every ``--tracker`` option.
@@ -95,8 +95,9 @@ def register(sub) -> None:
                    help="[capture] processes that run Face Landmarker, each on its own part of "
                    "the clip (facetransfer.track.video_detect); default: 2 on a machine with two "
                    "or more CPUs, for a clip with at least 200 frames left to detect")
-    p.add_argument("--overlay", help="also write a video with the fitted mesh drawn (.mp4, "
-                   "or an image sequence frames/%%05d.png)")
+    p.add_argument("--overlay", type=video_out,
+                   help="also write a video with the fitted mesh drawn (.mp4, or an image "
+                   "sequence frames/%%05d.png or frames/#####.png)")
     add_video_options(p, what="--overlay")
     p.add_argument("--restart", action="store_true",
                    help="ignore the progress of an interrupted run (OUT with suffix "

@@ -24,7 +24,7 @@ from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import (MODEL_HELP, add_video_options, progress_disabled, resolve_model,
-                     video_options)
+                     video_options, video_out)
 from .track import CAPTURE_HELP
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
@@ -119,7 +119,8 @@ def _add_output(p, func, *, metavar: str, help: str | None = None, video: bool =
                 overwrite_help: str = "replace an existing output") -> None:
     """``--out`` (with the video options when ``video``), ``--overwrite`` and the function
     that runs the subcommand."""
-    p.add_argument("--out", required=True, metavar=metavar, help=help)
+    p.add_argument("--out", required=True, metavar=metavar, help=help,
+                   type=video_out if video else str)
     if video:
         add_video_options(p)
     p.add_argument("--overwrite", action="store_true", help=overwrite_help)

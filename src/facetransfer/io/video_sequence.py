@@ -179,15 +179,22 @@ def _opened(path: str, stamp: str) -> Sequence:
         n += 1
     if len(files) > n:
         after = min(k for k in files if k > first + n)
+        end = after
+        while end + 1 in files:
+            end += 1
         raise VideoError(f"image sequence {p}: frame {first + n} is missing "
-                         f"({_numbered(p, first + n).name}), frames {first}-{first + n - 1} and "
-                         f"{after}-... are present; a sequence runs without gaps")
+                         f"({_numbered(p, first + n).name}): frames {_span(first, first + n - 1)}"
+                         f" and {_span(after, end)} are present; a sequence runs without gaps")
     image = _read_frame(files[first], p)
     fps = sequence_fps()
     if not os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip():
         log.warning("%s: an image sequence stores no frame rate; read at %g fps "
                     "(--sequence-fps to give its own)", p, fps)
     return Sequence(p, first, n, (image.shape[1], image.shape[0]), fps)
+
+
+def _span(a: int, b: int) -> str:
+    return str(a) if a == b else f"{a}-{b}"
 
 
 def _read_frame(file: Path, pattern: Path) -> np.ndarray:
