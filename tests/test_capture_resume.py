@@ -229,7 +229,7 @@ def fakes(clip, monkeypatch):
     from facetransfer.track import video_detect
 
     f = _Fakes(clip)
-    monkeypatch.setattr(video_detect, "VideoLandmarker", f)
+    monkeypatch.setattr(video_detect, "FollowingLandmarker", f)
     return f
 
 

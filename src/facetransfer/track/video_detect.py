@@ -34,6 +34,7 @@ import numpy as np
 from ..errors import ShapeError, VideoError
 from .aspect import View
 from .detect import ClipDetections, VideoLandmarker, detect_clip
+from .face_crop import FollowingLandmarker
 from .options import Progress
 
 log = logging.getLogger(__name__)
@@ -121,9 +122,10 @@ def _child_job() -> ClipDetections:
         detector.close()
 
 
-def _child_landmarker(fps: float) -> VideoLandmarker:
-    """The child's own detector (MediaPipe, video mode, with blendshape scores)."""
-    return VideoLandmarker(fps=fps, blendshapes=True)
+def _child_landmarker(fps: float) -> FollowingLandmarker:
+    """The child's own detector (MediaPipe, video mode, with blendshape scores; a small face
+    followed in a crop)."""
+    return FollowingLandmarker(fps=fps, blendshapes=True)
 
 
 def _offset(frames, k: int):
@@ -269,7 +271,7 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     child = None if m is None else SplitDetection.start(video, m, n, fps, view)
     own = None
     if detector is None:
-        detector = own = VideoLandmarker(fps=fps, blendshapes=True)
+        detector = own = FollowingLandmarker(fps=fps, blendshapes=True)
 
     def report(d, t):                      # this process's frames, and the child's so far
         d += child.done if child is not None else 0

@@ -1,0 +1,186 @@
+"""Small faces in large frames: the face found in tiles of the frame and followed in a crop.
+
+Face Landmarker looks for a face in the whole frame shrunk to its detector's 128x128 input, so
+a face under about a tenth of the frame's height (a medium-wide shot in HD: the actor's face 150
+pixels high in 1080 rows) is never found, and the capture says "no face found". The landmark
+model itself, once given the face's region, reads it from the full-resolution frame.
+
+:class:`FollowingLandmarker` is the detector of the capture's detections
+(:func:`facetransfer.track.detect.detect_clip`): each frame goes to Face Landmarker whole, as
+before, while that finds the face. Where it does not, and the frame is large enough to hold a
+face too small for the whole-frame search (:func:`search_tiles` gives more than one tile), the
+frame is searched tile by tile (overlapping squares of half its shorter side, then a quarter),
+and the face found is then followed in a square crop about it (:func:`crop_about`: three times
+the face's size, moved with it every frame) by a second landmarker in video mode, the points
+shifted back to the frame. When the face grows past :data:`WHOLE_FRAME_SHARE` of the frame, or
+the crop loses it, the whole frame is tried again. Footage whose face the whole-frame detector
+finds is detected exactly as before.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .detect import VideoLandmarker
+from .init import MediaPipeDetector
+
+__all__ = ["WHOLE_FRAME_SHARE", "CROP_FACES", "SEARCH_EVERY", "SEARCH_SLOWER", "search_tiles",
+           "face_box",
+           "crop_about", "FollowingLandmarker"]
+
+#: A face found in a crop whose size (its points' larger extent) passes this share of the
+#: frame's shorter side goes back to the whole-frame detector, which finds faces this large.
+WHOLE_FRAME_SHARE = 0.3
+#: The crop's side in face sizes (the landmark model's region is ~1.5 face sizes; the rest
+#: leaves room for the motion between two frames).
+CROP_FACES = 3.0
+#: In a run of frames without a face, the tiles are searched in one frame of this many (a
+#: search of a 1080p frame runs the detector on up to 119 tiles), one of five times as many
+#: after :data:`SEARCH_SLOWER` frames: a clip whose face is away for a while stays cheap.
+SEARCH_EVERY = 5
+SEARCH_SLOWER = 50
+#: The smallest tile side searched, pixels (the detector's input is 128; a face in a smaller
+#: tile is too small for the landmark model too).
+_MIN_TILE = 192
+
+
+def search_tiles(size: tuple[int, int]) -> list[tuple[int, int, int]]:
+    """Square tiles ``(x0, y0, side)`` that cover a frame of ``size`` (W, H) at two scales,
+    half and a quarter of its shorter side (overlapping by half a tile), the coarser first;
+    none for a frame whose shorter side is under two of the smallest tiles (the whole-frame
+    search already sees every face the landmark model can read there)."""
+    W, H = (int(v) for v in size)
+    tiles = []
+    for share in (0.5, 0.25):
+        side = int(min(W, H) * share)
+        if side < _MIN_TILE:
+            break
+        step = side // 2
+        xs = list(range(0, max(W - side, 0) + 1, step))
+        ys = list(range(0, max(H - side, 0) + 1, step))
+        if xs[-1] != W - side:
+            xs.append(W - side)
+        if ys[-1] != H - side:
+            ys.append(H - side)
+        tiles += [(x, y, side) for y in ys for x in xs]
+    return tiles
+
+
+def face_box(points: np.ndarray) -> tuple[float, float, float]:
+    """``(cx, cy, size)``: the centre of a face's points (N, 2) and their larger extent."""
+    P = np.asarray(points, dtype=np.float64)
+    lo, hi = np.nanmin(P, axis=0), np.nanmax(P, axis=0)
+    return float((lo[0] + hi[0]) / 2), float((lo[1] + hi[1]) / 2), float(max(hi - lo))
+
+
+def crop_about(box: tuple[float, float, float], size: tuple[int, int]) -> tuple[int, int, int]:
+    """The square crop ``(x0, y0, side)`` of :data:`CROP_FACES` face sizes centred on ``box``
+    (:func:`face_box`), kept inside a frame of ``size`` (W, H) (moved in, never cut)."""
+    W, H = (int(v) for v in size)
+    cx, cy, s = box
+    side = int(min(max(CROP_FACES * s, _MIN_TILE), W, H))
+    x0 = int(np.clip(round(cx - side / 2), 0, W - side))
+    y0 = int(np.clip(round(cy - side / 2), 0, H - side))
+    return x0, y0, side
+
+
+def _timed(lm: VideoLandmarker, frame: int) -> VideoLandmarker:
+    """``lm`` with its clock at frame ``frame`` at least (a landmarker not shown every frame;
+    its timestamps must still increase)."""
+    lm._i = max(lm._i, int(frame))
+    return lm
+
+
+class FollowingLandmarker:
+    """Face Landmarker on the whole frame, and where that finds no face, in tiles and then in a
+    crop that follows the face (see the module notes). Has the detector interface of
+    :func:`facetransfer.track.detect.detect_clip`: ``detect_scored(frame)`` in frame order,
+    ``warmup_frames``, ``close()``.
+
+    Parameters
+    ----------
+    fps : float
+        The clip's rate (the video-mode landmarkers' timestamps).
+    blendshapes : bool
+        Also return the 52 blendshape scores.
+    model_path : path-like, optional
+    """
+
+    warmup_frames = VideoLandmarker.warmup_frames
+
+    def __init__(self, *, fps: float = 30.0, blendshapes: bool = True,
+                 model_path: str | os.PathLike | None = None) -> None:
+        self._whole = VideoLandmarker(model_path, fps=fps, blendshapes=blendshapes)
+        self._args = (model_path, float(fps), bool(blendshapes))
+        self._crop_lm = None            # created when first needed: most clips never do
+        self._search_lm = None
+        self.crop: tuple[int, int, int] | None = None
+        self._missed = 0                # frames since the last face (the search's rhythm)
+        self._frame = 0                 # frames seen: the landmarkers' clock
+
+    def detect_scored(self, frame: np.ndarray):
+        """``(points (478, 2) in the frame's pixels, scores (52,))`` or ``(None, None)``."""
+        found = self._in_crop(frame) if self.crop is not None else (None, None)
+        if found[0] is None:
+            found = _timed(self._whole, self._frame).detect_scored(frame)
+        if found[0] is None:
+            found = self._searched(frame)
+        self._missed = 0 if found[0] is not None else self._missed + 1
+        self._frame += 1
+        return found
+
+    def _in_crop(self, frame: np.ndarray):
+        """The face in the crop (its points in the frame's pixels), the crop moved with it; the
+        crop given up when it loses the face or the face has grown large."""
+        x0, y0, side = self.crop
+        q, scores = self._crop_landmarker().detect_scored(
+            np.ascontiguousarray(frame[y0:y0 + side, x0:x0 + side]))
+        if q is None:
+            self.crop = None
+            return None, None
+        q = q + (x0, y0)
+        box = face_box(q)
+        H, W = frame.shape[:2]
+        self.crop = None if box[2] > WHOLE_FRAME_SHARE * min(W, H) else crop_about(box, (W, H))
+        return q, scores
+
+    def _searched(self, frame: np.ndarray):
+        """The face in the first tile that shows one (a search in one frame of
+        :data:`SEARCH_EVERY` without a face); its crop then followed."""
+        H, W = frame.shape[:2]
+        tiles = search_tiles((W, H))
+        every = SEARCH_EVERY * (1 if self._missed < SEARCH_SLOWER else 5)
+        if not tiles or self._missed % every:
+            return None, None
+        for x0, y0, side in tiles:
+            q, _ = self._search_landmarker().detect_scored(
+                np.ascontiguousarray(frame[y0:y0 + side, x0:x0 + side]))
+            if q is not None:
+                self.crop = crop_about(face_box(q + (x0, y0)), (W, H))
+                return self._in_crop(frame)
+        return None, None
+
+    def _crop_landmarker(self) -> VideoLandmarker:
+        if self._crop_lm is None:
+            path, fps, blendshapes = self._args
+            self._crop_lm = VideoLandmarker(path, fps=fps, blendshapes=blendshapes)
+        return _timed(self._crop_lm, self._frame)
+
+    def _search_landmarker(self) -> MediaPipeDetector:
+        if self._search_lm is None:
+            self._search_lm = MediaPipeDetector(self._args[0])
+        return self._search_lm
+
+    def close(self) -> None:
+        for lm in (self._whole, self._crop_lm, self._search_lm):
+            if lm is not None:
+                lm.close()
+        self._crop_lm = self._search_lm = None
+
+    def __enter__(self) -> "FollowingLandmarker":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

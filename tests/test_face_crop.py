@@ -1,0 +1,114 @@
+"""Small faces in large frames (facetransfer.track.face_crop): found in tiles, followed in a
+crop, read as the same face seen large; footage whose face the whole-frame detector finds is
+detected exactly as before."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from facetransfer.io.video import read_video
+from facetransfer.track.detect import VideoLandmarker, detect_clip
+from facetransfer.track.face_crop import (CROP_FACES, SEARCH_EVERY, FollowingLandmarker,
+                                          crop_about, face_box, search_tiles)
+
+
+@pytest.fixture(scope="module")
+def frames(data_dir):
+    return read_video(data_dir / "video" / "driving_d6.mp4", max_frames=24)[0]
+
+
+def _small(frames, scale: float, at=(700, 260), size=(1280, 720)):
+    """The frames shrunk by ``scale`` and pasted at ``at`` into grey frames of ``size``."""
+    W, H = size
+    out = np.full((len(frames), H, W, 3), 118, np.uint8)
+    for k, f in enumerate(frames):
+        s = cv2.resize(f, None, fx=scale, fy=scale, interpolation=cv2.INTER_AREA)
+        out[k, at[1]:at[1] + s.shape[0], at[0]:at[0] + s.shape[1]] = s
+    return out
+
+
+def test_the_tiles_cover_the_frame_at_two_scales():
+    for size in ((1920, 1080), (1280, 720), (720, 1280), (500, 390)):
+        W, H = size
+        tiles = search_tiles(size)
+        for side in {t[2] for t in tiles}:
+            seen = np.zeros((H, W), bool)
+            for x, y, s in tiles:
+                assert 0 <= x <= W - s and 0 <= y <= H - s
+                if s == side:
+                    seen[y:y + s, x:x + s] = True
+            assert seen.all()
+        assert sorted({t[2] for t in tiles}, reverse=True) == \
+            [int(min(size) * f) for f in (0.5, 0.25) if min(size) * f >= 192]
+    assert len(search_tiles((1920, 1080))) == 21 + 98
+    assert search_tiles((320, 240)) == []            # the whole frame sees what can be read
+
+
+def test_the_crop_holds_the_face_and_stays_in_the_frame():
+    box = face_box(np.array([[100.0, 50.0], [160.0, 130.0]]))
+    assert box == (130.0, 90.0, 80.0)
+    assert crop_about(box, (1920, 1080)) == (10, 0, CROP_FACES * 80)   # moved in at the top
+    assert crop_about((500.0, 400.0, 80.0), (1920, 1080)) == (380, 280, 240)   # centred
+    assert crop_about((1900.0, 1070.0, 100.0), (1920, 1080)) == (1620, 780, 300)
+    assert crop_about((50.0, 50.0, 400.0), (640, 360))[2] == 360
+
+
+def test_a_face_the_whole_frame_shows_is_detected_as_before(frames):
+    """While the whole-frame detector finds the face, the crops are never used: the same
+    points and scores, frame for frame."""
+    with VideoLandmarker(fps=30.0, blendshapes=True) as lm:
+        a = detect_clip(frames, lm, flow=False, keep478=True)
+    with FollowingLandmarker(fps=30.0) as fl:
+        b = detect_clip(frames, fl, flow=False, keep478=True)
+        assert fl._crop_lm is None and fl._search_lm is None
+    assert np.array_equal(a.points478, b.points478) and np.array_equal(a.scores, b.scores,
+                                                                        equal_nan=True)
+
+
+@pytest.mark.parametrize("scale", [0.3, 0.2])
+def test_a_small_face_is_found_and_read_as_the_large_one(frames, scale):
+    """driving_d6 shrunk to a face of ~70-100 pixels in a 1280x720 frame: Face Landmarker on
+    the whole frame finds nothing; followed in a crop, every frame's points, taken back to the
+    large face's pixels, lie within a few hundredths of its eye distance of the points of the
+    large face, and its scores follow the large face's."""
+    at = (700, 260)
+    small = _small(frames, scale, at)
+    with VideoLandmarker(fps=30.0, blendshapes=True) as lm:
+        whole = detect_clip(small, lm, flow=False)
+    assert not whole.found.any()
+    with FollowingLandmarker(fps=30.0) as fl:
+        got = detect_clip(small, fl, flow=False, keep478=True)
+    with VideoLandmarker(fps=30.0, blendshapes=True) as lm:
+        large = detect_clip(frames, lm, flow=False)
+    assert got.found.all()
+    back = (got.points - at) / scale
+    eyes = np.linalg.norm(large.points[:, 36] - large.points[:, 45], axis=1)
+    err = np.linalg.norm(back - large.points, axis=2).mean(axis=1) / eyes
+    assert np.median(err) < 0.04 and err.max() < 0.08
+    from facetransfer.arkit import ARKIT_NAMES
+
+    jaw = list(ARKIT_NAMES).index("jawOpen")
+    assert np.abs(got.scores[:, jaw] - large.scores[:, jaw]).mean() < 0.06
+
+
+def test_frames_without_a_face_are_searched_in_a_rhythm(monkeypatch):
+    """Large frames without a face: the tiles are searched in frames 0, 5, 10, ... only, every
+    tile of both scales each time."""
+    import facetransfer.track.face_crop as fc
+
+    seen = []
+    real = fc.FollowingLandmarker._search_landmarker
+
+    def counted(self):
+        seen.append(self._frame)
+        return real(self)
+
+    monkeypatch.setattr(fc.FollowingLandmarker, "_search_landmarker", counted)
+    blank = np.full((12, 720, 1280, 3), 90, np.uint8)
+    with FollowingLandmarker(fps=30.0) as fl:
+        d = detect_clip(blank, fl, flow=False)
+    assert not d.found.any()
+    assert sorted(set(seen)) == [0, SEARCH_EVERY, 2 * SEARCH_EVERY]
+    assert len(seen) == 3 * len(search_tiles((1280, 720)))
