@@ -37,6 +37,28 @@ def save_plot(fig, path: Path) -> None:
     plt.close(fig)
 
 
+def clip_benchmark(doc: str, stem: str, clips, clip_rows, plot, **extra) -> None:
+    """The main of a benchmark over real clips of the data folder: ``--out`` and ``--frames``
+    (default 150) parsed, ``clip_rows(video, model, frames)`` run for each of ``clips`` with
+    the default model, ``OUT/<stem>.json`` (with ``extra``) and ``OUT/<stem>.png``
+    (``plot(report, path)``) written."""
+    ap = arguments(doc)
+    ap.add_argument("--frames", type=int, default=150)
+    args = ap.parse_args()
+    from facetransfer.assets import data_dir
+    from facetransfer.default_model import load_default_model
+
+    model = load_default_model()
+    video = Path(data_dir()) / "video"
+    report = {"frames": args.frames, **extra,
+              "clips": {c: clip_rows(video / f"{c}.mp4", model, args.frames) for c in clips}}
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    save_json(report, out / f"{stem}.json")
+    plot(report, out / f"{stem}.png")
+    print(f"wrote {out / f'{stem}.json'} and {out / f'{stem}.png'}")
+
+
 def facetransfer_exe() -> str:
     """The console script of the running environment."""
     return str(Path(sys.executable).parent / "facetransfer")

@@ -42,7 +42,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from _mp_video import run_landmarker  # noqa: E402
-from _report import arguments, save_json, save_plot  # noqa: E402
+from _report import clip_benchmark, save_plot  # noqa: E402
 
 CHANNELS = ("jawOpen", "mouthSmileLeft", "mouthSmileRight", "mouthPucker", "mouthFunnel",
             "mouthStretchLeft", "mouthStretchRight", "mouthPressLeft", "mouthPressRight",
@@ -190,22 +190,9 @@ def _plot(report: dict, path: Path) -> None:
 
 
 def main() -> None:
-    ap = arguments(__doc__)
-    ap.add_argument("--frames", type=int, default=150)
-    args = ap.parse_args()
-    from facetransfer.assets import data_dir
-    from facetransfer.default_model import load_default_model
-
-    model = load_default_model()
-    video = Path(data_dir()) / "video"
-    report = {"frames": args.frames, "channels": list(CHANNELS),
-              "versions": [{"name": n, "width_factor": k, "sar": list(s)} for n, k, s in VERSIONS],
-              "clips": {c: _clip_rows(video / f"{c}.mp4", model, args.frames) for c in CLIPS}}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    save_json(report, out / "aspect.json")
-    _plot(report, out / "aspect.png")
-    print(f"wrote {out / 'aspect.json'} and {out / 'aspect.png'}")
+    clip_benchmark(__doc__, "aspect", CLIPS, _clip_rows, _plot, channels=list(CHANNELS),
+                   versions=[{"name": n, "width_factor": k, "sar": list(s)}
+                             for n, k, s in VERSIONS])
 
 
 if __name__ == "__main__":

@@ -35,7 +35,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from _mp_video import run_landmarker  # noqa: E402
-from _report import arguments, save_json, save_plot  # noqa: E402
+from _report import clip_benchmark, save_plot  # noqa: E402
 from bench_aspect import CHANNELS, CLIPS, _columns, _compare  # noqa: E402
 
 #: Shrink factors of the close clips' frames (480-844 pixels square) in a 1920x1080 frame.
@@ -133,22 +133,8 @@ def _plot(report: dict, path: Path) -> None:
 
 
 def main() -> None:
-    ap = arguments(__doc__)
-    ap.add_argument("--frames", type=int, default=150)
-    args = ap.parse_args()
-    from facetransfer.assets import data_dir
-    from facetransfer.default_model import load_default_model
-
-    model = load_default_model()
-    video = Path(data_dir()) / "video"
-    report = {"frames": args.frames, "channels": list(CHANNELS), "frame": list(FRAME),
-              "scales": list(SCALES),
-              "clips": {c: _clip_rows(video / f"{c}.mp4", model, args.frames) for c in CLIPS}}
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    save_json(report, out / "small_face.json")
-    _plot(report, out / "small_face.png")
-    print(f"wrote {out / 'small_face.json'} and {out / 'small_face.png'}")
+    clip_benchmark(__doc__, "small_face", CLIPS, _clip_rows, _plot, channels=list(CHANNELS),
+                   frame=list(FRAME), scales=list(SCALES))
 
 
 if __name__ == "__main__":

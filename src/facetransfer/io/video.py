@@ -37,7 +37,8 @@ from .video_display import (COLOUR_TAGS, checked_aspect, checked_colour_name,  #
                             colour_matrix, described, frame_args, video_colour)
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
-from .video_sequence import IMAGE_SUFFIXES, is_sequence, percent_pattern, same_sequence_files
+from .video_sequence import (IMAGE_SUFFIXES, is_sequence, percent_pattern, same_sequence_files,
+                             sequence_files)
 
 log = logging.getLogger(__name__)
 
@@ -259,10 +260,7 @@ def _pattern_files(pattern: Path) -> list[Path]:
     """Existing files of an image sequence (names matching the pattern exactly)."""
     if not pattern.parent.is_dir():
         return []
-    m = _PATTERN.search(pattern.name)
-    rx = re.compile(re.escape(pattern.name[:m.start()]) + r"\d+"
-                    + re.escape(pattern.name[m.end():]) + r"\Z")
-    return sorted(q for q in pattern.parent.iterdir() if rx.match(q.name))
+    return sorted(sequence_files(pattern).values())
 
 
 def place_sequence(folder: str | os.PathLike, pattern: str | os.PathLike, n_frames: int, *,

@@ -27,7 +27,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["IMAGE_SUFFIXES", "FRAME_FIELD", "DEFAULT_SEQUENCE_FPS", "SEQUENCE_FPS_VARIABLE",
            "Sequence", "is_sequence", "percent_pattern", "sequence_fps", "sequence_stamp",
-           "open_sequence", "sequence_frames", "suggested_pattern", "same_sequence_files"]
+           "sequence_files", "open_sequence", "sequence_frames", "suggested_pattern",
+           "same_sequence_files"]
 
 #: Image formats of a frame sequence, read and written (``frames/%05d.png``).
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
@@ -114,8 +115,15 @@ def sequence_fps() -> float:
     return fps
 
 
-def _listing(pattern: Path) -> dict[int, Path]:
-    """The files of ``pattern``'s folder that its field matches, by frame number."""
+def sequence_files(pattern) -> dict[int, Path]:
+    """The files of ``pattern``'s folder that its field matches (at least as many digits as
+    the field is wide), by frame number.
+
+    Raises
+    ------
+    VideoError
+        Not exactly one frame-number field, or no such folder.
+    """
     p = percent_pattern(pattern)
     fields = FRAME_FIELD.findall(p.name)
     if len(fields) != 1 or p.name.count("%") != 1:
@@ -140,7 +148,7 @@ def sequence_stamp(path) -> str:
     """An image sequence's identity on disk and its rate: its folder, and every frame file's
     name, size and modification time (a frame replaced, added or removed changes it)."""
     h = hashlib.sha256()
-    files = _listing(Path(path))
+    files = sequence_files(Path(path))
     for k in sorted(files):
         st = files[k].stat()
         h.update(f"{files[k].name}|{st.st_size}|{st.st_mtime_ns};".encode())
@@ -169,7 +177,7 @@ def open_sequence(path) -> Sequence:
 @functools.lru_cache(maxsize=32)
 def _opened(path: str, stamp: str) -> Sequence:
     p = Path(path)
-    files = _listing(p)
+    files = sequence_files(p)
     if not files:
         raise VideoError(f"image sequence {p}: no file matches it (e.g. "
                          f"{_numbered(p, 1).name} would)")
@@ -272,7 +280,7 @@ def suggested_pattern(folder) -> Path | None:
         if runs:
             m = runs[-1]
             pattern = Path(folder) / f"{name[:m.start()]}%0{len(m.group(0))}d{name[m.end():]}"
-            if len(_listing(pattern)) > 1:      # a sequence, not a numbered still
+            if len(sequence_files(pattern)) > 1:      # a sequence, not a numbered still
                 return pattern
     return None
 
