@@ -112,3 +112,60 @@ def test_frames_without_a_face_are_searched_in_a_rhythm(monkeypatch):
     assert not d.found.any()
     assert sorted(set(seen)) == [0, SEARCH_EVERY, 2 * SEARCH_EVERY]
     assert len(seen) == 3 * len(search_tiles((1280, 720)))
+
+
+def test_the_subject_is_the_face_nearest_its_last_place():
+    from facetransfer.track.face_crop import choose_subject, moved_away
+
+    boxes = [(100.0, 100.0, 50.0), (400.0, 120.0, 90.0), (700.0, 90.0, 60.0)]
+    assert choose_subject(boxes, None) == 1                       # the largest
+    assert choose_subject(boxes, (660.0, 100.0, 60.0)) == 2       # the nearest
+    assert not moved_away((130.0, 110.0, 50.0), (100.0, 100.0, 50.0))
+    assert moved_away((160.0, 100.0, 50.0), (100.0, 100.0, 50.0))
+
+
+@pytest.fixture(scope="module")
+def two_faces(data_dir, frames):
+    """driving_d6 on the left, WDA_KatieHill_000 on the right, 480x480 each."""
+    right = read_video(data_dir / "video" / "WDA_KatieHill_000.mp4", max_frames=len(frames))[0]
+    right = np.stack([cv2.resize(f, (480, 480), interpolation=cv2.INTER_AREA) for f in right])
+    return np.concatenate([frames, right], axis=2)
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_of_two_faces_the_subject_is_followed_in_every_frame(two_faces, side):
+    """Given where the subject was, the landmarker follows that face (in a crop where Face
+    Landmarker's own choice is the other), in every frame."""
+    subject = (240.0, 260.0, 150.0) if side == "left" else (720.0, 260.0, 150.0)
+    with FollowingLandmarker(fps=30.0, subject=subject) as fl:
+        d = detect_clip(two_faces, fl, flow=False)
+    x = np.nanmean(d.points[..., 0], axis=1)
+    assert d.found.all()
+    assert ((x < 480) if side == "left" else (x > 480)).all()
+
+
+def test_a_second_process_on_another_face_is_detected_again():
+    from facetransfer.track.detect import ClipDetections
+    from facetransfer.track.video_detect import finish_split, other_face
+
+    face = np.random.default_rng(0).uniform(0, 100, (68, 2))
+    first = ClipDetections.from_points(np.stack([face, face + 2]))
+    same = ClipDetections.from_points(np.stack([face + 4, face + 6]))
+    other = ClipDetections.from_points(np.stack([face + (400, 0), face + (402, 0)]))
+    assert not other_face(first, same) and other_face(first, other)
+
+    class Child:
+        def __init__(self, rest):
+            self.rest = rest
+
+        def result(self, poll=None):
+            return self.rest
+
+    redone = []
+
+    def redetect(f):
+        redone.append(f)
+        return ClipDetections.from_points(np.stack([face, face + 2, face + 4, face + 6]))
+
+    assert finish_split(first, Child(same), 2, redetect).n_frames == 4 and not redone
+    assert finish_split(first, Child(other), 2, redetect).n_frames == 4 and redone == [first]

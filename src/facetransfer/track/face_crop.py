@@ -15,6 +15,16 @@ the face's size, moved with it every frame) by a second landmarker in video mode
 shifted back to the frame. When the face grows past :data:`WHOLE_FRAME_SHARE` of the frame, or
 the crop loses it, the whole frame is tried again. Footage whose face the whole-frame detector
 finds is detected exactly as before.
+
+Several faces (an interview, a two-shot): Face Landmarker follows one face, whichever it found
+first, and may take another after a loss, as may the second detection process that starts in
+the clip's middle (:mod:`facetransfer.track.video_detect`), so a track could change person. The
+face followed is the *subject*, the face first found: when the whole-frame landmarker's face is
+farther from the subject's last place than its own size (:func:`moved_away`), the frame's faces
+are counted (an IMAGE-mode landmarker finding up to :data:`MOST_FACES`, made only then); of
+several, the nearest to that place is the subject (:func:`choose_subject`), followed in a crop
+from then on. A second detection process that starts on another face is detected again
+(:func:`facetransfer.track.video_detect.other_face`).
 """
 
 from __future__ import annotations
@@ -26,8 +36,8 @@ import numpy as np
 from .detect import VideoLandmarker
 from .init import MediaPipeDetector
 
-__all__ = ["WHOLE_FRAME_SHARE", "CROP_FACES", "SEARCH_EVERY", "SEARCH_SLOWER", "search_tiles",
-           "face_box",
+__all__ = ["WHOLE_FRAME_SHARE", "CROP_FACES", "SEARCH_EVERY", "SEARCH_SLOWER", "MOST_FACES",
+           "search_tiles", "face_box", "choose_subject", "moved_away",
            "crop_about", "FollowingLandmarker"]
 
 #: A face found in a crop whose size (its points' larger extent) passes this share of the
@@ -41,6 +51,8 @@ CROP_FACES = 3.0
 #: after :data:`SEARCH_SLOWER` frames: a clip whose face is away for a while stays cheap.
 SEARCH_EVERY = 5
 SEARCH_SLOWER = 50
+#: The most faces counted when choosing the subject.
+MOST_FACES = 4
 #: The smallest tile side searched, pixels (the detector's input is 128; a face in a smaller
 #: tile is too small for the landmark model too).
 _MIN_TILE = 192
@@ -86,6 +98,21 @@ def crop_about(box: tuple[float, float, float], size: tuple[int, int]) -> tuple[
     return x0, y0, side
 
 
+def choose_subject(boxes: list[tuple[float, float, float]],
+                   last: tuple[float, float, float] | None) -> int:
+    """Which of several faces' boxes (:func:`face_box`) is the subject: the nearest to its
+    ``last`` box, or without one the largest."""
+    if last is None:
+        return int(np.argmax([b[2] for b in boxes]))
+    return int(np.argmin([np.hypot(b[0] - last[0], b[1] - last[1]) for b in boxes]))
+
+
+def moved_away(box: tuple[float, float, float], last: tuple[float, float, float]) -> bool:
+    """Whether a face's box is not where the subject's ``last`` box was: farther than that
+    face's size (a frame's motion is a fraction of it)."""
+    return bool(np.hypot(box[0] - last[0], box[1] - last[1]) > last[2])
+
+
 def _timed(lm: VideoLandmarker, frame: int) -> VideoLandmarker:
     """``lm`` with its clock at frame ``frame`` at least (a landmarker not shown every frame;
     its timestamps must still increase)."""
@@ -106,17 +133,23 @@ class FollowingLandmarker:
     blendshapes : bool
         Also return the 52 blendshape scores.
     model_path : path-like, optional
+    subject : (cx, cy, size), optional
+        Where the face to follow was last (:func:`face_box`): of several faces, the nearest to
+        it is followed (a detection continued from another's frames).
     """
 
     warmup_frames = VideoLandmarker.warmup_frames
 
     def __init__(self, *, fps: float = 30.0, blendshapes: bool = True,
-                 model_path: str | os.PathLike | None = None) -> None:
+                 model_path: str | os.PathLike | None = None, subject=None) -> None:
         self._whole = VideoLandmarker(model_path, fps=fps, blendshapes=blendshapes)
         self._args = (model_path, float(fps), bool(blendshapes))
         self._crop_lm = None            # created when first needed: most clips never do
         self._search_lm = None
+        self._faces_lm = None
         self.crop: tuple[int, int, int] | None = None
+        self.last = None if subject is None else tuple(float(v) for v in subject)
+        self.several = False            # several faces seen: the subject kept in a crop
         self._missed = 0                # frames since the last face (the search's rhythm)
         self._frame = 0                 # frames seen: the landmarkers' clock
 
@@ -125,11 +158,32 @@ class FollowingLandmarker:
         found = self._in_crop(frame) if self.crop is not None else (None, None)
         if found[0] is None:
             found = _timed(self._whole, self._frame).detect_scored(frame)
+            if found[0] is not None and self.last is not None and \
+                    moved_away(face_box(found[0]), self.last):
+                found = self._subject(frame, found)
         if found[0] is None:
             found = self._searched(frame)
         self._missed = 0 if found[0] is not None else self._missed + 1
+        if found[0] is not None:
+            self.last = face_box(found[0])
         self._frame += 1
         return found
+
+    def _subject(self, frame: np.ndarray, found):
+        """``found`` (the whole frame's face) where it is the only face or the subject
+        (:func:`choose_subject`), else the subject followed in a crop."""
+        if self._faces_lm is None:
+            self._faces_lm = MediaPipeDetector(self._args[0], faces=MOST_FACES)
+        boxes = [face_box(q) for q in self._faces_lm.detect_every(frame)]
+        if len(boxes) < 2:
+            return found
+        self.several = True
+        box = boxes[choose_subject(boxes, self.last)]
+        if not moved_away(face_box(found[0]), box):     # the whole frame's face is the subject
+            return found
+        H, W = frame.shape[:2]
+        self.crop = crop_about(box, (W, H))
+        return self._in_crop(frame)
 
     def _in_crop(self, frame: np.ndarray):
         """The face in the crop (its points in the frame's pixels), the crop moved with it; the
@@ -143,7 +197,8 @@ class FollowingLandmarker:
         q = q + (x0, y0)
         box = face_box(q)
         H, W = frame.shape[:2]
-        self.crop = None if box[2] > WHOLE_FRAME_SHARE * min(W, H) else crop_about(box, (W, H))
+        large = box[2] > WHOLE_FRAME_SHARE * min(W, H) and not self.several
+        self.crop = None if large else crop_about(box, (W, H))
         return q, scores
 
     def _searched(self, frame: np.ndarray):
@@ -174,10 +229,10 @@ class FollowingLandmarker:
         return self._search_lm
 
     def close(self) -> None:
-        for lm in (self._whole, self._crop_lm, self._search_lm):
+        for lm in (self._whole, self._crop_lm, self._search_lm, self._faces_lm):
             if lm is not None:
                 lm.close()
-        self._crop_lm = self._search_lm = None
+        self._crop_lm = self._search_lm = self._faces_lm = None
 
     def __enter__(self) -> "FollowingLandmarker":
         return self

@@ -144,12 +144,24 @@ class MediaPipeDetector:
     model_path : path-like, optional
         ``face_landmarker.task``; default from the asset registry
         (``facetransfer.assets.asset_path("face_landmarker")``).
+    faces : int
+        The most faces :meth:`detect_every` finds (the others give the first).
 
     Use as a context manager or call :meth:`close`.
     """
 
-    def __init__(self, model_path: str | os.PathLike | None = None) -> None:
-        self._lm = create_landmarker(model_path, video=False)
+    def __init__(self, model_path: str | os.PathLike | None = None, *, faces: int = 1) -> None:
+        self._lm = create_landmarker(model_path, video=False, faces=faces)
+
+    def detect_every(self, frame: np.ndarray) -> list[np.ndarray]:
+        """Every face found (up to ``faces``): MediaPipe's 478 landmarks of each in pixels."""
+        import mediapipe as mp
+
+        f = np.ascontiguousarray(frame, dtype=np.uint8)
+        H, W = f.shape[:2]
+        res = self._detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=f))
+        return [np.array([(q.x, q.y) for q in face], dtype=np.float64) * (W, H) - 0.5
+                for face in res.face_landmarks]
 
     def detect478(self, frame: np.ndarray) -> np.ndarray | None:
         """MediaPipe's 478 landmarks in pixels (x, y), (478, 2), or None if no face."""
@@ -269,11 +281,11 @@ def import_tasks_api():
 
 
 def create_landmarker(model_path: str | os.PathLike | None = None, *, video: bool = False,
-                      blendshapes: bool = False):
-    """A MediaPipe ``FaceLandmarker`` (Tasks API, one face) in IMAGE or VIDEO running mode.
+                      blendshapes: bool = False, faces: int = 1):
+    """A MediaPipe ``FaceLandmarker`` (Tasks API) in IMAGE or VIDEO running mode.
 
     ``model_path``: ``face_landmarker.task`` (default from the asset registry);
-    ``blendshapes``: also output its 52 blendshape scores.
+    ``blendshapes``: also output its 52 blendshape scores; ``faces``: the most faces it finds.
     """
     try:
         BaseOptions, vision = import_tasks_api()
@@ -284,7 +296,7 @@ def create_landmarker(model_path: str | os.PathLike | None = None, *, video: boo
         raise AssetError(f"face landmarker model {p} does not exist")
     mode = vision.RunningMode.VIDEO if video else vision.RunningMode.IMAGE
     opts = vision.FaceLandmarkerOptions(base_options=BaseOptions(model_asset_path=str(p)),
-                                        running_mode=mode, num_faces=1,
+                                        running_mode=mode, num_faces=int(faces),
                                         output_face_blendshapes=bool(blendshapes))
     return vision.FaceLandmarker.create_from_options(opts)
 

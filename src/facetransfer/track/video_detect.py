@@ -34,13 +34,13 @@ import numpy as np
 from ..errors import ShapeError, VideoError
 from .aspect import View
 from .detect import ClipDetections, VideoLandmarker, detect_clip
-from .face_crop import FollowingLandmarker
+from .face_crop import FollowingLandmarker, face_box, moved_away
 from .options import Progress
 
 log = logging.getLogger(__name__)
 
 __all__ = ["SPLIT_MIN_FRAMES", "SplitDetection", "default_workers", "detect_video", "finish_split",
-           "join_detections", "split_frame"]
+           "join_detections", "other_face", "split_frame"]
 
 #: fewest frames left to detect for which a second process is worth its start-up (about 1 s:
 #: the fork, a landmarker of its own, decoding up to its first frame)
@@ -224,7 +224,8 @@ def finish_split(first: ClipDetections, child: SplitDetection, start: int,
     child : SplitDetection
         Detecting frames ``start ..``.
     redetect : callable(ClipDetections) -> ClipDetections
-        Detects the rest of the clip here, resuming after ``first``, if the child failed.
+        Detects the rest of the clip here, resuming after ``first``, if the child failed or
+        followed another face than this process (:func:`other_face`).
     poll : callable(frames done by the child), optional
     checkpoint : object with ``save(ClipDetections)``, optional
         Given ``first`` when interrupted while waiting for the child.
@@ -242,9 +243,26 @@ def finish_split(first: ClipDetections, child: SplitDetection, start: int,
         return redetect(first)
     if rest is None:
         return first
+    if other_face(first, rest):
+        log.info("the second detection process followed another face from frame %d: "
+                 "detecting its part again here", start)
+        return redetect(first)
     if poll is not None:
         poll(rest.n_frames)                         # the bar ends at the clip's last frame
     return join_detections(first, rest)
+
+
+def other_face(first: ClipDetections, rest: ClipDetections) -> bool:
+    """Whether the part ``rest`` starts on another face than ``first`` ends with: the face of
+    its first frame farther from that of ``first``'s last frame than the face's size
+    (:func:`facetransfer.track.face_crop.moved_away`; a clip with several people, whose second
+    process chose another person). False where either frame has no face."""
+    if not first.n_frames or not rest.n_frames:
+        return False
+    a, b = first.points[-1], rest.points[0]
+    if not (np.isfinite(a).all() and np.isfinite(b).all()):
+        return False
+    return moved_away(face_box(b), face_box(a))
 
 
 def detect_video(video, *, detector=None, max_frames: int | None = None,
