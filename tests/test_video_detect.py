@@ -76,7 +76,7 @@ def _never(first):
 
 
 def test_finish_split_joins_the_childs_part():
-    first, rest = _dets(10), _dets(6, offset=500.0)
+    first, rest = _dets(10), _dets(6, offset=1.0)   # the same face, other points
     seen = []
     out = finish_split(first, _Child(rest), 10, _never, poll=seen.append)
     assert out.n_frames == 16 and np.array_equal(out.points[10:], rest.points) and seen == [3, 6]
