@@ -8,7 +8,7 @@ model itself, once given the face's region, reads it from the full-resolution fr
 :class:`FollowingLandmarker` is the detector of the capture's detections
 (:func:`facetransfer.track.detect.detect_clip`): each frame goes to Face Landmarker whole, as
 before, while that finds the face. Where it does not, and the frame is large enough to hold a
-face too small for the whole-frame search (:func:`search_tiles` gives more than one tile), the
+face too small for the whole-frame search (:func:`search_tiles` gives it tiles), the
 frame is searched tile by tile (overlapping squares of half its shorter side, then a quarter),
 and the face found is then followed in a square crop about it (:func:`crop_about`: three times
 the face's size, moved with it every frame) by a second landmarker in video mode, the points
