@@ -65,6 +65,7 @@ from .landmarks import IBUG_WEIGHTS
 from .options import Progress
 from .result import Track
 from .scores import ScoreLine, fit_score_lines, score_targets
+from .shots import joined_shots, shot_detections, shot_spans, shot_starts
 from .smooth import smooth_track
 from .solver import Prior
 from .video_detect import _open, detect_video
@@ -492,8 +493,31 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
     from threadpoolctl import threadpool_limits
 
     with threadpool_limits(limits=1, user_api="blas"):  # small products: threads only cost
-        return _capture_detections(det, model, options, fps, frame_size, fixed, progress,
-                                   source, checkpoint)
+        spans = shot_spans(shot_starts(det), det.n_frames)
+        if len(spans) == 1:
+            return _capture_detections(det, model, options, fps, frame_size, fixed, progress,
+                                       source, checkpoint)
+        return _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
+                              source)
+
+
+def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
+                   source) -> Track:
+    """A clip edited from several shots (:mod:`facetransfer.track.shots`), each captured on its
+    own (its own identity; no flow or smoothing across a cut), joined; the fit's progress is
+    not kept for such a clip."""
+    log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own, with "
+                "its own identity", source or "the video", "s" if len(spans) > 2 else "",
+                ", ".join(str(a) for a, _ in spans[1:]))
+    tracks = []
+    for a, b in spans:
+        sub = shot_detections(det, a, b)
+        tracks.append(_capture_detections(sub, model, options, fps, frame_size, fixed,
+                                          progress, source) if sub.found.any() else None)
+    if all(t is None for t in tracks):
+        raise VideoError(f"no face found in {source or 'the video'} "
+                         f"(searched frames 0-{det.n_frames - 1})")
+    return joined_shots(tracks, spans)
 
 
 def _capture_detections(det, model, options, fps, frame_size, fixed, progress, source,

@@ -22,7 +22,8 @@ from ..errors import ShapeError
 from .init import MediaPipeDetector, create_landmarker, import_tasks_api
 from .landmarks import mediapipe_to_ibug
 
-__all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow", "preload_mediapipe"]
+__all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow", "picture_change",
+           "preload_mediapipe"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +48,11 @@ class ClipDetections:
     pixel_aspect : float
         The points are in the frames resampled to square pixels (their columns ``round(W
         pixel_aspect)``, :mod:`facetransfer.track.aspect`); 1: the stored pixels are square.
+    change : (F,) float32 or None
+        How much each frame's picture differs from the previous one's: the mean absolute
+        difference of their 32x32 grey thumbnails, in levels (NaN for a first frame); where it
+        jumps, the clip cuts to another shot (:mod:`facetransfer.track.shots`). None: not
+        measured (detections without the flow).
     """
 
     points: np.ndarray
@@ -54,6 +60,7 @@ class ClipDetections:
     points478: np.ndarray | None = None
     scores: np.ndarray | None = None
     pixel_aspect: float = 1.0
+    change: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         P = np.asarray(self.points, dtype=np.float64)
@@ -69,6 +76,11 @@ class ClipDetections:
             if S.shape != (P.shape[0], 52):
                 raise ShapeError(f"scores must be ({P.shape[0]}, 52), got {S.shape}")
             object.__setattr__(self, "scores", S)
+        if self.change is not None:
+            C = np.asarray(self.change, dtype=np.float32)
+            if C.shape != (P.shape[0],):
+                raise ShapeError(f"change must be ({P.shape[0]},), got {C.shape}")
+            object.__setattr__(self, "change", C)
         a = float(self.pixel_aspect)
         if not np.isfinite(a) or a <= 0:
             raise ShapeError(f"pixel_aspect must be > 0, got {self.pixel_aspect}")
@@ -167,6 +179,14 @@ def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
     return out
 
 
+def picture_change(prev_gray: np.ndarray, gray: np.ndarray) -> float:
+    """Mean absolute difference of two grey frames' 32x32 thumbnails, in levels
+    (:attr:`ClipDetections.change`)."""
+    a, b = (cv2.resize(g, (32, 32), interpolation=cv2.INTER_AREA).astype(np.float32)
+            for g in (prev_gray, gray))
+    return float(np.abs(a - b).mean())
+
+
 class _Found:
     """What :func:`detect_clip` has found so far: per frame the points, the flow (a future while
     it is computed) and MediaPipe's raw points."""
@@ -180,6 +200,8 @@ class _Found:
                              f"frames of {aspect}")
         self.P: list = [] if resume is None else list(resume.points)
         self.Fl: list = [] if resume is None else list(resume.flow)
+        self.change: list = [] if resume is None else (
+            list(resume.change) if resume.change is not None else [np.nan] * resume.n_frames)
         self.raw: list = []
         self.scores: list = []
         if keep478 and resume is not None:
@@ -191,7 +213,8 @@ class _Found:
                            else [_NAN52] * resume.n_frames)
 
     def add(self, pts: np.ndarray, flow, q: np.ndarray | None,
-            scores: np.ndarray | None = None) -> None:
+            scores: np.ndarray | None = None, change: float = np.nan) -> None:
+        self.change.append(change)
         if self.keep478:
             self.raw.append(np.full((478, 2), np.nan, np.float32) if q is None else
                             np.asarray(q[:478], np.float32))
@@ -207,9 +230,11 @@ class _Found:
         self.Fl = [_NAN68 if f is None else f.result() if isinstance(f, Future) else f
                    for f in self.Fl]
         S = np.stack(self.scores[:n])
+        C = np.asarray(self.change[:n], np.float32)
         return ClipDetections(np.stack(self.P[:n]), np.stack(self.Fl),
                               np.stack(self.raw[:n]) if self.keep478 else None,
-                              None if np.isnan(S).all() else S, self.aspect)
+                              None if np.isnan(S).all() else S, self.aspect,
+                              None if np.isnan(C).all() else C)
 
 
 _NAN68 = np.full((68, 2), np.nan)
@@ -301,13 +326,15 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                 if flow:
                     gray = pool.submit(cv2.cvtColor, np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY)
                 pts, q, scores = _detect_one(detector, fr)
-                f = None
+                f, change = None, np.nan
                 if flow:
                     gray = gray.result()
                     if prev_gray is not None and found.P:
                         f = pool.submit(point_flow, prev_gray, gray, found.P[-1])
+                    if prev_gray is not None:
+                        change = picture_change(prev_gray, gray)
                     prev_gray = gray
-                found.add(pts, f, q, scores)
+                found.add(pts, f, q, scores, change)
                 if checkpoint is not None and checkpoint.due():
                     checkpoint.save(found.result())
                 tick(i + 1, n_frames or 0)

@@ -154,10 +154,13 @@ class DetectionCheckpoint(ProgressFile):
         scores = d["scores"] if "scores" in d and d["scores"].size else None
         if scores is not None and scores.shape != (k, 52):
             raise ValueError("inconsistent arrays")
+        change = d["change"] if "change" in d and d["change"].size else None
+        if change is not None and change.shape != (k,):
+            raise ValueError("inconsistent arrays")
         det = ClipDetections(P.astype(np.float64), d["flow"].astype(np.float64),
                              None if raw is None else raw.astype(np.float32),
                              None if scores is None else scores.astype(np.float32),
-                             float(d["pixel_aspect"]))
+                             float(d["pixel_aspect"]), change)
         return SavedDetections(det, bool(d["complete"]))
 
     def save(self, det: ClipDetections, *, complete: bool = False) -> None:
@@ -172,7 +175,9 @@ class DetectionCheckpoint(ProgressFile):
                                 else np.asarray(det.points478, np.float32)),
                   "scores": (np.zeros((0, 52), np.float32) if det.scores is None
                              else np.asarray(det.scores, np.float32)),
-                  "pixel_aspect": np.float64(det.pixel_aspect)}
+                  "pixel_aspect": np.float64(det.pixel_aspect),
+                  "change": (np.zeros(0, np.float32) if det.change is None
+                             else np.asarray(det.change, np.float32))}
         if complete and self._fit is not None:
             arrays.update(pack_fit(self._fit[1], self._fit[0]))
         self._write(arrays)

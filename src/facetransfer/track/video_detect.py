@@ -89,9 +89,14 @@ def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetect
     if first.pixel_aspect != second.pixel_aspect:
         raise ValueError(f"join_detections: parts of pixel aspect {first.pixel_aspect} and "
                          f"{second.pixel_aspect}")
+    change = None
+    if first.change is not None or second.change is not None:
+        change = np.concatenate([np.full(d.n_frames, np.nan, np.float32) if d.change is None
+                                 else d.change for d in (first, second)])
     return ClipDetections(np.concatenate([first.points, second.points]),
                           np.concatenate([first.flow, second.flow]),
-                          cat(first.points478, second.points478), scores, first.pixel_aspect)
+                          cat(first.points478, second.points478), scores, first.pixel_aspect,
+                          change)
 
 
 #: (video, start, stop, fps, counter, View) handed to the forked child (not pickled)

@@ -1,0 +1,77 @@
+"""Cuts in an edited clip (facetransfer.track.shots): found from the picture's change and the
+flow's failure, each shot captured on its own with its own identity."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from facetransfer.io.video import read_video
+from facetransfer.track.detect import ClipDetections, picture_change
+from facetransfer.track.shots import MIN_SHOT, shot_spans, shot_starts
+
+
+def _det(n: int, cuts=(), *, flow_ok=(), faces=True) -> ClipDetections:
+    """Detections of ``n`` frames whose picture changes by 2 levels a frame and by 50 at
+    ``cuts``, the flow failing there unless in ``flow_ok``."""
+    rng = np.random.default_rng(0)
+    P = rng.uniform(100, 200, (n, 68, 2)) if faces else np.full((n, 68, 2), np.nan)
+    F = rng.normal(0, 0.5, (n, 68, 2))
+    change = np.full(n, 2.0, np.float32) + rng.uniform(-0.5, 0.5, n).astype(np.float32)
+    change[0] = np.nan
+    F[0] = np.nan
+    for t in cuts:
+        change[t] = 50.0
+        if t not in flow_ok:
+            F[t] = np.nan
+    return ClipDetections(P, F, change=change)
+
+
+def test_a_cut_is_a_sudden_change_where_the_flow_fails():
+    assert shot_starts(_det(60, [30])) == [30]
+    assert shot_starts(_det(60, [20, 40])) == [20, 40]
+    assert shot_starts(_det(60, [30], flow_ok=[30])) == []          # a face still followed
+    assert shot_starts(_det(60, [30], faces=False)) == [30]         # no face: the picture only
+    assert shot_starts(_det(60, [30, 32])) == []                    # a flash: in and out
+    assert shot_starts(_det(60, [MIN_SHOT - 1])) == []              # too short a shot
+    assert shot_starts(_det(60)) == [] and shot_starts(ClipDetections.from_points(
+        np.zeros((60, 68, 2)))) == []                               # not measured
+    assert shot_spans([20, 40], 60) == [(0, 20), (20, 40), (40, 60)]
+
+
+def test_the_picture_change_of_two_frames():
+    a = np.full((64, 96), 100, np.uint8)
+    b = a.copy()
+    b[:, :48] = 140
+    assert picture_change(a, a) == 0.0
+    assert picture_change(a, b) == pytest.approx(20.0)
+
+
+@pytest.fixture(scope="module")
+def edited(data_dir):
+    """40 frames of driving_d6 cut to 40 of WDA_KatieHill_000 (480x480 both)."""
+    a = read_video(data_dir / "video" / "driving_d6.mp4", max_frames=40)[0]
+    b = read_video(data_dir / "video" / "WDA_KatieHill_000.mp4", max_frames=40)[0]
+    b = np.stack([cv2.resize(f, (480, 480), interpolation=cv2.INTER_AREA) for f in b])
+    return a, b
+
+
+def test_each_shot_of_an_edited_clip_is_captured_with_its_own_identity(edited, arkit_model,
+                                                                       caplog):
+    """The cut is found; each shot's identity is the one the shot captured alone gets, and the
+    activations too (before: one identity for both people)."""
+    from facetransfer.track.capture import capture_video
+
+    a, b = edited
+    with caplog.at_level("WARNING"):
+        both = capture_video(np.concatenate([a, b]), arkit_model, workers=1)
+    assert "cuts to another shot at frame 40" in caplog.text
+    assert both.info["shot_starts"] == [40] and not both.lost.any()
+    ident = both.weights["identity"]
+    assert np.array_equal(ident[0], ident[39]) and np.array_equal(ident[40], ident[79])
+    assert np.abs(ident[0] - ident[40]).max() > 0.05
+    for part, sl in ((a, slice(0, 40)), (b, slice(40, 80))):
+        alone = capture_video(part, arkit_model, workers=1)
+        assert np.abs(ident[sl][0] - alone.weights["identity"][0]).max() < 0.01
+        assert np.abs(both.blendshapes[sl] - alone.blendshapes).mean() < 0.03
