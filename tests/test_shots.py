@@ -67,7 +67,7 @@ def test_each_shot_of_an_edited_clip_is_captured_with_its_own_identity(edited, a
     with caplog.at_level("WARNING"):
         both = capture_video(np.concatenate([a, b]), arkit_model, workers=1)
     assert "cuts to another shot at frame 40" in caplog.text
-    assert both.info["shot_starts"] == [40] and not both.lost.any()
+    assert both.shot_starts == (40,) and not both.lost.any()
     ident = both.weights["identity"]
     assert np.array_equal(ident[0], ident[39]) and np.array_equal(ident[40], ident[79])
     assert np.abs(ident[0] - ident[40]).max() > 0.05
@@ -75,3 +75,43 @@ def test_each_shot_of_an_edited_clip_is_captured_with_its_own_identity(edited, a
         alone = capture_video(part, arkit_model, workers=1)
         assert np.abs(ident[sl][0] - alone.weights["identity"][0]).max() < 0.01
         assert np.abs(both.blendshapes[sl] - alone.blendshapes).mean() < 0.03
+
+
+def test_a_two_shot_target_is_rewritten_as_its_shots_alone(quick_model, tmp_path_factory):
+    """Each shot of an edited target is rendered as a clip of its own (its own reference
+    frames): the frames equal those of each shot rewritten alone; the shots survive a track
+    file and a run of frames taken."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_transfer_rewrite import render_clip
+
+    from facetransfer.rewrite import rewrite_frames
+    from facetransfer.texture import default_face_texture
+    from facetransfer.topology import mesh_topology
+    from facetransfer.track import Track
+    from facetransfer.track.project import take_frames
+    from facetransfer.track.shots import joined_shots
+
+    m = quick_model
+    topo, tex = mesh_topology(m), default_face_texture(m, 256)
+    smile = [m.training_weights("expression", e) for e in ("smile", "open", "smile", "neutral")]
+    fa, ta = render_clip(m, topo, tex, "id01", smile, [0, 4, 8, 4], seed=1)
+    fb, tb = render_clip(m, topo, tex, "id03", smile[::-1], [-4, 0, 4, 8], seed=2)
+    both = joined_shots([ta, tb], [(0, 4), (4, 8)])
+    assert both.shot_starts == (4,)
+    path = tmp_path_factory.mktemp("shots") / "t.npz"
+    both.save(path)
+    both = Track.load(path)
+    assert both.shot_starts == (4,) and take_frames(both, np.arange(2, 7)).shot_starts == (2,)
+    assert take_frames(both, np.array([0, 5])).shot_starts == ()
+    frames = np.concatenate([fa, fb])
+    new = both                                     # the clip's own performance
+    joined = [r.image for r in rewrite_frames(frames, both, new, m, topo=topo, workers=1)]
+    alone = [r.image for f, t in ((fa, ta), (fb, tb))
+             for r in rewrite_frames(f, t, t, m, topo=topo, workers=1)]
+    assert all(np.array_equal(a, b) for a, b in zip(joined, alone))
+    later = [r.image for r in rewrite_frames(frames, both, new, m, topo=topo, workers=1,
+                                             start=5)]
+    assert all(np.array_equal(a, b) for a, b in zip(later, alone[5:]))

@@ -431,14 +431,47 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
     """
     opts = (options or RewriteOptions()).with_(texture=texture, blend=blend, feather=feather,
                                                 mouth=mouth, eyes=eyes)
-    one = _ClipRenderer.build(target_frames, target_track, new_track, model, opts,
-                              source_frames=source_frames, source_track=source_track,
-                              source_index=source_index, mouth_function=mouth_function,
-                              topo=topo)
     n, start = new_track.n_frames, int(start)
     if not 0 <= start <= n:
         raise RewriteError(f"start frame {start} is outside the {n} frames")
-    yield from _render(one, target_frames, range(start, n), workers, processes, progress)
+    from .track.shots import shot_spans
+
+    for a, b in shot_spans([c for c in target_track.shot_starts if c < n], n):
+        if b <= start:
+            continue
+        shot = _Shot(a, b, n).of(target_frames, target_track, new_track, source_track,
+                                 source_index)
+        one = _ClipRenderer.build(shot[0], shot[1], shot[2], model, opts,
+                                  source_frames=source_frames, source_track=shot[3],
+                                  source_index=shot[4], mouth_function=mouth_function,
+                                  topo=topo)
+        yield from _render(one, shot[0], range(max(start, a) - a, b - a), workers, processes,
+                           progress)
+
+
+@dataclass(frozen=True)
+class _Shot:
+    """Frames ``start .. stop - 1`` of a clip of ``n`` frames: a shot of an edited target
+    (:attr:`facetransfer.track.Track.shot_starts`), rendered as a clip of its own, so that its
+    reference frames (the eyes', the jaw's, the lips' colour) are its own."""
+
+    start: int
+    stop: int
+    n: int
+
+    def of(self, target_frames, target_track, new_track, source_track, source_index):
+        """``(target frames, target track, new track, source track, source index)`` of the
+        shot (all of them for a clip of one shot)."""
+        if (self.start, self.stop) == (0, self.n):
+            return target_frames, target_track, new_track, source_track, source_index
+        from .track.project import take_frames
+
+        idx = np.arange(self.start, self.stop)
+        return (target_frames[self.start:self.stop], take_frames(target_track, idx),
+                take_frames(new_track, idx),
+                None if source_track is None else take_frames(source_track, idx),
+                np.asarray(source_index)[idx] if source_index is not None else
+                (None if source_track is None else idx))
 
 
 def _render(one, target_frames, todo: range, workers: int | None, processes: bool | None,

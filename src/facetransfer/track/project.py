@@ -18,9 +18,14 @@ __all__ = ["take_frames", "project_landmarks"]
 
 
 def take_frames(track, idx: np.ndarray):
-    """Frames ``idx`` (int array) of a track, as a new track."""
+    """Frames ``idx`` (int array) of a track, as a new track (its shots kept where ``idx`` is a
+    run of consecutive frames)."""
+    idx = np.asarray(idx, dtype=np.int64)
+    run = idx.size > 0 and np.array_equal(idx, np.arange(idx[0], idx[0] + idx.size))
+    starts = tuple(int(a - idx[0]) for a in track.shot_starts
+                   if run and idx[0] < a < idx[0] + idx.size)
     return dataclasses.replace(
-        track, rotation=track.rotation[idx], scale=track.scale[idx],
+        track, shot_starts=starts, rotation=track.rotation[idx], scale=track.scale[idx],
         translation=track.translation[idx],
         weights={n: w[idx] for n, w in track.weights.items()},
         landmarks2d=track.landmarks2d[idx], confidence=track.confidence[idx],

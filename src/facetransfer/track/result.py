@@ -88,6 +88,10 @@ class Track:
         the frames to square pixels to fit (:mod:`facetransfer.track.aspect`): the camera's
         ``x = s (R X)_x / pixel_aspect + t_x``; every pixel position (``translation``,
         ``landmarks2d``, ``detections2d``) is in the stored pixels. 1 for square pixels.
+    shot_starts : tuple of int
+        Frames where a new shot starts in a clip edited from several
+        (:mod:`facetransfer.track.shots`: each captured on its own, its own identity; the
+        rewrite chooses its reference frames within each); empty for one shot.
     """
 
     fps: float
@@ -107,6 +111,7 @@ class Track:
     info: dict = field(default_factory=dict)
     detections2d: np.ndarray | None = None
     pixel_aspect: float = 1.0
+    shot_starts: tuple[int, ...] = ()
 
     def __post_init__(self) -> None:
         R = np.asarray(self.rotation, dtype=np.float64)
@@ -164,6 +169,11 @@ class Track:
         if not np.isfinite(aspect) or aspect <= 0:
             raise TrackError(f"track pixel_aspect must be > 0, got {self.pixel_aspect}")
         set_(self, "pixel_aspect", aspect)
+        starts = tuple(int(v) for v in np.asarray(self.shot_starts, dtype=np.int64).ravel())
+        if any(not 0 < a < F for a in starts) or list(starts) != sorted(set(starts)):
+            raise TrackError(f"track shot_starts must be increasing frames in 1..{F - 1}, got "
+                             f"{list(starts)}")
+        set_(self, "shot_starts", starts)
         set_(self, "model_hash", str(self.model_hash))
         set_(self, "source", str(self.source))
         self._check_blendshapes(F)
@@ -255,6 +265,8 @@ class Track:
             arrays["blendshape_names"] = np.array(self.blendshape_names)
         if self.detections2d is not None:
             arrays["detections2d"] = self.detections2d
+        if self.shot_starts:
+            arrays["shot_starts"] = np.asarray(self.shot_starts, np.int64)
         with atomic_path(path, overwrite=overwrite) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
@@ -311,6 +323,7 @@ class Track:
                                                np.atleast_1d(data["blendshape_names"]))),
                        detections2d=data.get("detections2d"),
                        pixel_aspect=(scalar(data, "pixel_aspect", float, p, "track file",
-                                            TrackError) if "pixel_aspect" in data else 1.0))
+                                            TrackError) if "pixel_aspect" in data else 1.0),
+                       shot_starts=tuple(np.asarray(data.get("shot_starts", ())).ravel()))
         except (TrackError, ValueError, TypeError, OverflowError) as exc:
             raise TrackError(f"track file {p} is invalid: {exc}") from None

@@ -114,4 +114,4 @@ def joined_shots(tracks: list, spans: list[tuple[int, int]]):
                    detections2d=cat("detections2d"),
                    weights={m: np.concatenate([t.weights[m] for t in parts])
                             for m in first.weights},
-                   info={**tracks[done[0]].info, "shot_starts": [a for a, _ in spans[1:]]})
+                   info=dict(tracks[done[0]].info), shot_starts=tuple(a for a, _ in spans[1:]))
