@@ -368,10 +368,10 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
                    blend: str | None = None, feather: float | None = None,
                    mouth: str | None = None, mouth_function: MouthFunction | None = None,
                    topo: MeshTopology | None = None, workers: int | None = None,
-                   processes: bool | None = None,
-                   progress: Callable[[int], None] | None = None,
+                   processes: bool | None = None, progress: Callable[[int], None] | None = None,
                    eyes: str | None = None, start: int = 0) -> Iterator[RewriteFrame]:
-    """Rewrite every target frame with the new performance (§6, Fig. 7).
+    """Rewrite every target frame with the new performance (§6, Fig. 7); each shot of an
+    edited target (``target_track.shot_starts``) as a clip of its own.
 
     Parameters
     ----------
@@ -412,9 +412,8 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU);
         the output order and values do not depend on it.
     processes : bool, optional
-        With ``workers > 1``: render in forked worker processes instead of threads (where the
-        platform can fork). Default: threads (measured a little faster on 2 cores once the
-        meshes are synthesised up front: the per-frame kernels mostly release the GIL).
+        With ``workers > 1``: render in forked processes (where the platform can fork), not
+        threads (the default: a little faster on 2 cores; the kernels release the GIL).
     progress : callable(int), optional
         Called with 1 after each frame.
     eyes : {"model", "target"}, optional
@@ -434,44 +433,15 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
     n, start = new_track.n_frames, int(start)
     if not 0 <= start <= n:
         raise RewriteError(f"start frame {start} is outside the {n} frames")
-    from .track.shots import shot_spans
+    from .track.shots import shots_from
 
-    for a, b in shot_spans([c for c in target_track.shot_starts if c < n], n):
-        if b <= start:
-            continue
-        shot = _Shot(a, b, n).of(target_frames, target_track, new_track, source_track,
-                                 source_index)
-        one = _ClipRenderer.build(shot[0], shot[1], shot[2], model, opts,
-                                  source_frames=source_frames, source_track=shot[3],
-                                  source_index=shot[4], mouth_function=mouth_function,
-                                  topo=topo)
-        yield from _render(one, shot[0], range(max(start, a) - a, b - a), workers, processes,
+    for a, b, (frames, tt, new, st, si) in shots_from(start, n, target_frames, target_track,
+                                                      new_track, source_track, source_index):
+        one = _ClipRenderer.build(frames, tt, new, model, opts, source_frames=source_frames,
+                                  source_track=st, source_index=si,
+                                  mouth_function=mouth_function, topo=topo)
+        yield from _render(one, frames, range(max(start, a) - a, b - a), workers, processes,
                            progress)
-
-
-@dataclass(frozen=True)
-class _Shot:
-    """Frames ``start .. stop - 1`` of a clip of ``n`` frames: a shot of an edited target
-    (:attr:`facetransfer.track.Track.shot_starts`), rendered as a clip of its own, so that its
-    reference frames (the eyes', the jaw's, the lips' colour) are its own."""
-
-    start: int
-    stop: int
-    n: int
-
-    def of(self, target_frames, target_track, new_track, source_track, source_index):
-        """``(target frames, target track, new track, source track, source index)`` of the
-        shot (all of them for a clip of one shot)."""
-        if (self.start, self.stop) == (0, self.n):
-            return target_frames, target_track, new_track, source_track, source_index
-        from .track.project import take_frames
-
-        idx = np.arange(self.start, self.stop)
-        return (target_frames[self.start:self.stop], take_frames(target_track, idx),
-                take_frames(new_track, idx),
-                None if source_track is None else take_frames(source_track, idx),
-                np.asarray(source_index)[idx] if source_index is not None else
-                (None if source_track is None else idx))
 
 
 def _render(one, target_frames, todo: range, workers: int | None, processes: bool | None,

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["CUT_RATIO", "CUT_LEVELS", "CUT_FLOW_FAILED", "MIN_SHOT", "shot_starts", "shot_spans",
-           "shot_detections", "joined_shots"]
+           "shot_detections", "joined_shots", "shots_from", "shot_inputs"]
 
 #: A cut's picture change over the median change of the frames around it (±15).
 CUT_RATIO = 12.0
@@ -115,3 +115,31 @@ def joined_shots(tracks: list, spans: list[tuple[int, int]]):
                    weights={m: np.concatenate([t.weights[m] for t in parts])
                             for m in first.weights},
                    info=dict(tracks[done[0]].info), shot_starts=tuple(a for a, _ in spans[1:]))
+
+
+def shots_from(first: int, n: int, target_frames, target_track, new_track, source_track,
+               source_index):
+    """``(start, stop, inputs)`` of each shot of a rewrite of ``n`` frames from frame
+    ``first`` on (the shots of ``target_track.shot_starts``; :func:`shot_inputs`)."""
+    for a, b in shot_spans([c for c in target_track.shot_starts if c < n], n):
+        if b > first:
+            yield a, b, shot_inputs(a, b, n, target_frames, target_track, new_track,
+                                    source_track, source_index)
+
+
+def shot_inputs(start: int, stop: int, n: int, target_frames, target_track, new_track,
+                source_track, source_index):
+    """``(target frames, target track, new track, source track, source index)`` of frames
+    ``start .. stop - 1`` of a rewrite of ``n`` frames (all of them for the whole clip): a shot
+    rewritten as a clip of its own (:func:`facetransfer.rewrite.rewrite_frames`), so that its
+    reference frames (the eyes', the jaw's, the lips' colour) are its own."""
+    if (start, stop) == (0, n):
+        return target_frames, target_track, new_track, source_track, source_index
+    from .project import take_frames
+
+    idx = np.arange(start, stop)
+    return (target_frames[start:stop], take_frames(target_track, idx),
+            take_frames(new_track, idx),
+            None if source_track is None else take_frames(source_track, idx),
+            np.asarray(source_index)[idx] if source_index is not None else
+            (None if source_track is None else idx))
