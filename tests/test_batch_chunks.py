@@ -186,3 +186,25 @@ def test_join_keeps_the_detections_of_the_nearer_chunk(quick_model):
     np.testing.assert_array_equal(D[32], dets[0][32])         # the second chunk's missing
     pieces[1] = _piece(whole, cs[1])
     assert join_tracks(pieces, cs, quick_model).detections2d is None
+
+
+def test_join_keeps_each_shots_identity(quick_model):
+    """Chunks of a clip edited from two shots: the cut (seen by both chunks where they overlap,
+    or by one) is kept once, and each shot takes the identity of the chunk where it starts."""
+    whole = _truth_track(quick_model, 60)
+    cs = plan_chunks(60, 35, 10)                       # (0, 35), (25, 60)
+    other = quick_model.training_weights("identity", "id02")
+    for cut, seen_by in ((30, (0, 1)), (15, (0,)), (45, (1,))):
+        pieces = []
+        for k, c in enumerate(cs):
+            ident = np.array([other if c.start + i >= cut else whole.weights["identity"][0]
+                              for i in range(c.n_frames)])
+            starts = (cut - c.start,) if k in seen_by else ()
+            pieces.append(_piece(whole, c, weights={"identity": ident, "expression":
+                                                    whole.weights["expression"][c.start:c.stop]},
+                                 shot_starts=starts))
+        joined = join_tracks(pieces, cs, quick_model)
+        assert joined.shot_starts == (cut,)
+        ident = joined.weights["identity"]
+        assert np.array_equal(ident[:cut], np.tile(whole.weights["identity"][0], (cut, 1)))
+        assert np.array_equal(ident[cut:], np.tile(other, (60 - cut, 1)))

@@ -149,7 +149,9 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
     model : MultilinearModel
         The model of the tracks (landmarks are recomputed with it).
     constant : tuple of str
-        Modes constant over the clip (taken from the first chunk, not blended).
+        Modes constant over the clip (taken from the first chunk, not blended); over each
+        shot of a clip edited from several (the chunks' ``shot_starts``: taken from the chunk
+        where the shot starts).
 
     Returns
     -------
@@ -167,6 +169,7 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
     """
     from ..track.result import Track
     from ..track.project import project_landmarks
+    from ..track.shots import shot_spans
 
     tracks, chunks = list(tracks), list(chunks)
     _check_chunk_tracks(tracks, chunks)
@@ -184,16 +187,33 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
         _put(full, _blend(_fields_of(full, shared), _fields(t, slice(0, o)), crossfade(o),
                           constant), shared)
         _put(full, _fields(t, slice(o, None)), slice(prev.stop, c.stop))
-    for m in constant:  # one identity for the clip
+    starts = _shot_starts(tracks, chunks)
+    for m in constant:  # one identity for the clip, or a shot of an edited one
         if m in full["weights"]:
-            full["weights"][m][:] = t0.weights[m][0]
+            for a, b in shot_spans(starts, F):
+                k, c = next((k, c) for k, c in enumerate(chunks) if c.start <= a < c.stop)
+                full["weights"][m][a:b] = tracks[k].weights[m][a - c.start]
     joined = Track(fps=t0.fps, frame_size=t0.frame_size, rotation=full["rotation"],
                    scale=full["scale"], translation=full["translation"],
                    weights=full["weights"], landmarks2d=np.zeros((F, 68, 2)),
                    confidence=np.clip(full["confidence"], 0, 1), lost=full["lost"],
                    model_hash=t0.model_hash, mode_names=t0.mode_names, source=t0.source,
-                   detections2d=join_detections(tracks, chunks), pixel_aspect=t0.pixel_aspect)
+                   detections2d=join_detections(tracks, chunks), pixel_aspect=t0.pixel_aspect,
+                   shot_starts=starts)
     return dataclasses.replace(project_landmarks(joined, model), source=t0.source)
+
+
+def _shot_starts(tracks, chunks) -> tuple[int, ...]:
+    """The clip's cuts (:attr:`facetransfer.track.Track.shot_starts`) from its chunks' (a cut
+    in an overlap seen by both chunks once; cuts closer than a shortest shot, once)."""
+    from ..track.shots import MIN_SHOT
+
+    seen = sorted({c.start + s for t, c in zip(tracks, chunks) for s in t.shot_starts})
+    starts: list[int] = []
+    for s in seen:
+        if not starts or s - starts[-1] >= MIN_SHOT:
+            starts.append(s)
+    return tuple(starts)
 
 
 def join_detections(tracks, chunks) -> np.ndarray | None:
