@@ -115,3 +115,19 @@ def test_a_two_shot_target_is_rewritten_as_its_shots_alone(quick_model, tmp_path
     later = [r.image for r in rewrite_frames(frames, both, new, m, topo=topo, workers=1,
                                              start=5)]
     assert all(np.array_equal(a, b) for a, b in zip(later, alone[5:]))
+
+
+def test_a_fixed_identity_is_the_first_shots(edited, arkit_model):
+    """An identity held fixed (a later chunk of ``batch track --chunk``) is the face the clip
+    starts with: the shots after a cut get their own."""
+    from facetransfer.track.capture import capture_video
+
+    from facetransfer.track.solver import Prior
+
+    a, b = edited
+    w = Prior.from_model(arkit_model, "identity").mean          # the model's mean face
+    both = capture_video(np.concatenate([a, b]), arkit_model, workers=1,
+                         fixed={"identity": w})
+    ident = both.weights["identity"]
+    assert np.allclose(ident[:40], w)
+    assert np.abs(ident[40] - w).max() > 0.05 and np.array_equal(ident[40], ident[79])

@@ -504,16 +504,18 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
 def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
                    source) -> Track:
     """A clip edited from several shots (:mod:`facetransfer.track.shots`), each captured on its
-    own (its own identity; no flow or smoothing across a cut), joined; the fit's progress is
-    not kept for such a clip."""
+    own (its own identity; no flow or smoothing across a cut), joined; a ``fixed`` identity is
+    the first shot's (the face the clip starts with); the fit's progress is not kept for such
+    a clip."""
     log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own, with "
                 "its own identity", source or "the video", "s" if len(spans) > 2 else "",
                 ", ".join(str(a) for a, _ in spans[1:]))
     tracks = []
     for a, b in spans:
         sub = shot_detections(det, a, b)
-        tracks.append(_capture_detections(sub, model, options, fps, frame_size, fixed,
-                                          progress, source) if sub.found.any() else None)
+        tracks.append(_capture_detections(sub, model, options, fps, frame_size,
+                                          fixed if a == 0 else None, progress, source)
+                      if sub.found.any() else None)
     if all(t is None for t in tracks):
         raise VideoError(f"no face found in {source or 'the video'} "
                          f"(searched frames 0-{det.n_frames - 1})")
