@@ -183,7 +183,9 @@ def test_a_plate_is_rewritten_as_the_video_of_its_frames(clips, quick_model_path
     (tmp_path / "out").mkdir()
     code = main(["transfer", "--target", str(plate), *map(str, common), "--sequence-fps", "25",
                  "--out", str(tmp_path / "out" / "sh010_ft.####.png")])   # as %04d
-    assert code == 0, capsys.readouterr().err
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert f"{len(target)} frames numbered 1001-{1000 + len(target)}, no audio" in out.out
     names = sorted(q.name for q in (tmp_path / "out").iterdir())
     assert names == [f"sh010_ft.{1001 + i:04d}.png" for i in range(len(target))]
     code = main(["transfer", "--target", str(lossless), *map(str, common),

@@ -100,6 +100,17 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "quality (three passes) for hard footage")
 
 
+def _numbered(out, target, n: int) -> str:
+    """How an output sequence rewriting a plate is numbered (as the plate), else ""."""
+    from ..io.video import is_image_pattern
+    from ..io.video_sequence import is_sequence, open_sequence
+
+    if not (is_image_pattern(out) and is_sequence(target)):
+        return ""
+    first = open_sequence(target).first
+    return f" numbered {first}-{first + n - 1}"
+
+
 def rewrite_options(args) -> RewriteOptions:
     """The :class:`~facetransfer.rewrite_options.RewriteOptions` of
     :func:`add_rewrite_options`' arguments."""
@@ -332,7 +343,8 @@ def run_transfer(args) -> int:
     kept = res.n_frames - res.n_rewritten
     if res.resumed:
         print(f"continued an interrupted render from frame {res.resumed}")
-    print(f"wrote {res.path}: {res.n_frames} frames"
+    print(f"wrote {res.path}: {res.n_frames} frames" + _numbered(args.out, args.target,
+                                                              res.n_frames)
           + (f" ({kept} kept original: face lost)" if kept else "")
           + (", with the target's audio" if res.audio else ", no audio"))
     if args.save_track:
