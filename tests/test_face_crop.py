@@ -169,3 +169,36 @@ def test_a_second_process_on_another_face_is_detected_again():
 
     assert finish_split(first, Child(same), 2, redetect).n_frames == 4 and not redone
     assert finish_split(first, Child(other), 2, redetect).n_frames == 4 and redone == [first]
+
+
+def test_the_face_to_track_is_said_by_its_place():
+    from facetransfer.errors import TrackError
+    from facetransfer.track.face_crop import subject_point
+
+    assert subject_point("left", (960, 480)) == (0.0, 239.5, 0.0)
+    assert subject_point("Right", (960, 480)) == (959.0, 239.5, 0.0)
+    assert subject_point("700,200", (960, 480)) == (700.0, 200.0, 0.0)
+    for bad in ("middle", "1000,10", "3", "a,b"):
+        with pytest.raises(TrackError, match="--face must be left, right, centre or pixels"):
+            subject_point(bad, (960, 480))
+
+
+@pytest.mark.parametrize("side", ["left", "right"])
+def test_detect_video_follows_the_face_said(two_faces, side):
+    from facetransfer.track.face_crop import subject_point
+    from facetransfer.track.video_detect import detect_video
+
+    det = detect_video(two_faces, subject=subject_point(side, (960, 480)))[0]
+    x = np.nanmean(det.points[..., 0], axis=1)
+    assert det.found.all() and ((x < 480) if side == "left" else (x > 480)).all()
+
+
+def test_track_refuses_a_face_it_cannot_place(data_dir, tmp_path, capsys):
+    from facetransfer.cli.main import main
+
+    code = main(["track", str(data_dir / "video" / "face_2.mp4"), "--out",
+                 str(tmp_path / "t.npz"), "--face", "upstairs", "--no-progress"])
+    assert code == 2
+    assert "--face must be left, right, centre or pixels X,Y inside the 844x844 frame, got " \
+           "'upstairs'" in capsys.readouterr().err
+    assert not (tmp_path / "t.npz").exists()

@@ -137,7 +137,7 @@ def test_two_processes_agree_with_one(one_process, monkeypatch):
     assert max(seen) == N
 
 
-def _broken_landmarker(fps):
+def _broken_landmarker(fps, subject=None):
     raise RuntimeError("no landmarker here")
 
 

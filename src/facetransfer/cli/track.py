@@ -99,6 +99,9 @@ def register(sub) -> None:
                    help="also write a video with the fitted mesh drawn (.mp4, or an image "
                    "sequence frames/%%05d.png or frames/#####.png)")
     add_video_options(p, what="--overlay")
+    p.add_argument("--face", metavar="WHERE",
+                   help="[capture] with several people in the frame, the one to track: left, "
+                   "right, centre, or pixels X,Y near the face (default: the face found first)")
     p.add_argument("--restart", action="store_true",
                    help="ignore the progress of an interrupted run (OUT with suffix "
                    ".partial.npz; by default tracking continues from it)")
@@ -245,12 +248,15 @@ def _capture(args, model, options, progress, bars):
     (:mod:`facetransfer.track.detect_checkpoint`, :mod:`facetransfer.track.fit_checkpoint`).
     """
     from ..track.capture import capture_detections
-    from ..track.detect_checkpoint import DetectionCheckpoint
+    from ..track.detect_checkpoint import DetectionCheckpoint, landmarker_identity
 
     partial = partial_path(args.out)
     if args.restart and partial.exists():
         partial.unlink()
-    ck = DetectionCheckpoint.for_video(partial, args.video, args.max_frames)
+    face = getattr(args, "face", None)
+    ck = DetectionCheckpoint.for_video(
+        partial, args.video, args.max_frames,
+        None if face is None else f"{landmarker_identity()}|face={face}")
     saved = ck.load()
     if saved is not None:
         print(f"continued an interrupted run from frame {saved.detections.n_frames}")
@@ -285,9 +291,14 @@ def _capture_detect(args, saved, ck, progress):
         info = video_info(args.video)
         return saved.detections, info.fps, info.size, str(args.video)
     workers = args.workers if args.workers is not None else default_workers()
+    subject = None
+    if getattr(args, "face", None) is not None:
+        from ..track.face_crop import subject_point
+
+        subject = subject_point(args.face, video_info(args.video).size)
     return detect_video(args.video, max_frames=args.max_frames, progress=progress,
                         source=str(args.video), checkpoint=ck, workers=workers,
-                        resume=None if saved is None else saved.detections)
+                        resume=None if saved is None else saved.detections, subject=subject)
 
 
 def _track_klt(args, model, opt, progress, bars):

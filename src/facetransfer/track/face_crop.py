@@ -38,7 +38,7 @@ from .init import MediaPipeDetector
 
 __all__ = ["WHOLE_FRAME_SHARE", "CROP_FACES", "SEARCH_EVERY", "SEARCH_SLOWER", "MOST_FACES",
            "search_tiles", "face_box", "choose_subject", "moved_away",
-           "crop_about", "FollowingLandmarker"]
+           "crop_about", "FACE_PLACES", "subject_point", "FollowingLandmarker"]
 
 #: A face found in a crop whose size (its points' larger extent) passes this share of the
 #: frame's shorter side goes back to the whole-frame detector, which finds faces this large.
@@ -113,6 +113,38 @@ def moved_away(box: tuple[float, float, float], last: tuple[float, float, float]
     return bool(np.hypot(box[0] - last[0], box[1] - last[1]) > last[2])
 
 
+#: Where ``track --face`` may say the subject is, as a share of the frame's width and height.
+FACE_PLACES = {"left": (0.0, 0.5), "right": (1.0, 0.5), "centre": (0.5, 0.5),
+               "center": (0.5, 0.5)}
+
+
+def subject_point(text: str, size: tuple[int, int]) -> tuple[float, float, float]:
+    """The subject of ``track --face`` in a frame of ``size`` (W, H): ``"left"``, ``"right"``,
+    ``"centre"`` or pixels ``"X,Y"``, as a box of no size (:func:`face_box`): of several faces,
+    the nearest is followed from the first frame on.
+
+    Raises
+    ------
+    TrackError
+        Anything else, or a point outside the frame.
+    """
+    from ..errors import TrackError
+
+    W, H = (float(v) for v in size)
+    said = str(text).strip().lower()
+    if said in FACE_PLACES:
+        fx, fy = FACE_PLACES[said]
+        return fx * (W - 1), fy * (H - 1), 0.0
+    try:
+        x, y = (float(v) for v in said.split(","))
+    except ValueError:
+        x = y = float("nan")
+    if not (0 <= x < W and 0 <= y < H):
+        raise TrackError(f"--face must be left, right, centre or pixels X,Y inside the "
+                         f"{int(W)}x{int(H)} frame, got {text!r}")
+    return x, y, 0.0
+
+
 def _timed(lm: VideoLandmarker, frame: int) -> VideoLandmarker:
     """``lm`` with its clock at frame ``frame`` at least (a landmarker not shown every frame;
     its timestamps must still increase)."""
@@ -134,8 +166,8 @@ class FollowingLandmarker:
         Also return the 52 blendshape scores.
     model_path : path-like, optional
     subject : (cx, cy, size), optional
-        Where the face to follow was last (:func:`face_box`): of several faces, the nearest to
-        it is followed (a detection continued from another's frames).
+        Where the face to follow was last (:func:`face_box`), or a point (size 0,
+        :func:`subject_point`): of several faces, the nearest to it is followed.
     """
 
     warmup_frames = VideoLandmarker.warmup_frames

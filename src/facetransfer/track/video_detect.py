@@ -105,7 +105,7 @@ _JOB: tuple | None = None
 
 def _child_job() -> ClipDetections:
     """In the child: detect frames ``start .. stop`` (or the clip's end) of the video."""
-    video, start, stop, fps, counter, view = _JOB
+    video, start, stop, fps, counter, view, subject = _JOB
     if isinstance(video, np.ndarray):
         frames = iter(video[:stop])
     else:
@@ -113,7 +113,7 @@ def _child_job() -> ClipDetections:
 
         warm = max(0, start - VideoLandmarker.warmup_frames)
         frames = _offset(iter_frames(video, start=warm, stop=stop, seek=False), warm)
-    detector = _child_landmarker(fps)
+    detector = _child_landmarker(fps, subject)
 
     def progress(done, total):
         counter.value = max(0, done - start)
@@ -127,10 +127,10 @@ def _child_job() -> ClipDetections:
         detector.close()
 
 
-def _child_landmarker(fps: float) -> FollowingLandmarker:
+def _child_landmarker(fps: float, subject=None) -> FollowingLandmarker:
     """The child's own detector (MediaPipe, video mode, with blendshape scores; a small face
-    followed in a crop)."""
-    return FollowingLandmarker(fps=fps, blendshapes=True)
+    followed in a crop; of several, the one nearest ``subject``)."""
+    return FollowingLandmarker(fps=fps, blendshapes=True, subject=subject)
 
 
 def _offset(frames, k: int):
@@ -148,8 +148,8 @@ class SplitDetection:
         self._pool, self._future, self._counter = pool, future, counter
 
     @classmethod
-    def start(cls, video, start: int, stop: int | None, fps: float, view: View = View()
-              ) -> "SplitDetection | None":
+    def start(cls, video, start: int, stop: int | None, fps: float, view: View = View(),
+              subject=None) -> "SplitDetection | None":
         """Fork the child that detects frames ``start .. stop`` of ``video`` (a path or an
         (F, H, W, 3) array), as ``view`` shows them (:class:`facetransfer.track.aspect.View`);
         None where the platform cannot fork. Call it before this process creates its own
@@ -167,7 +167,7 @@ class SplitDetection:
         _import_mediapipe()
         ctx = mp.get_context("fork")
         counter = ctx.Value("i", 0, lock=False)
-        _JOB = (video, int(start), stop, float(fps), counter, view)
+        _JOB = (video, int(start), stop, float(fps), counter, view, subject)
         try:
             pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
             fut = pool.submit(_child_job)           # forks now: the child sees _JOB
@@ -273,7 +273,7 @@ def other_face(first: ClipDetections, rest: ClipDetections) -> bool:
 def detect_video(video, *, detector=None, max_frames: int | None = None,
                  progress: Progress | None = None, source: str | None = None,
                  resume: ClipDetections | None = None, checkpoint=None, workers: int = 1,
-                 view: View | None = None
+                 view: View | None = None, subject=None
                  ) -> tuple[ClipDetections, float, tuple[int, int], str]:
     """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
 
@@ -284,17 +284,21 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     detector (:class:`facetransfer.track.aspect.View`; default a file's own: resampled to
     square pixels, one field of interlaced video; an array as it is); the detections say
     their pixels' aspect (:attr:`~facetransfer.track.detect.ClipDetections.pixel_aspect`). The
-    size returned is the stored frames'.
+    size returned is the stored frames'. ``subject``: of several faces, follow the one nearest
+    this point ``(x, y, 0)`` in the stored pixels
+    (:func:`facetransfer.track.face_crop.subject_point`).
     """
     prog = progress or (lambda stage, done, total: None)
     fps, size, src, frames, n, total = _open(video, max_frames, source)
     view = View.of(video) if view is None else view
+    if subject is not None:                # in the pixels the detector is shown
+        subject = ((subject[0] + 0.5) * view.aspect - 0.5, subject[1], 0.0)
     done = 0 if resume is None else resume.n_frames
     m = split_frame(done, total, workers) if detector is None else None
-    child = None if m is None else SplitDetection.start(video, m, n, fps, view)
+    child = None if m is None else SplitDetection.start(video, m, n, fps, view, subject)
     own = None
     if detector is None:
-        detector = own = FollowingLandmarker(fps=fps, blendshapes=True)
+        detector = own = FollowingLandmarker(fps=fps, blendshapes=True, subject=subject)
 
     def report(d, t):                      # this process's frames, and the child's so far
         d += child.done if child is not None else 0
