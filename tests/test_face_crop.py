@@ -202,3 +202,22 @@ def test_track_refuses_a_face_it_cannot_place(data_dir, tmp_path, capsys):
     assert "--face must be left, right, centre or pixels X,Y inside the 844x844 frame, got " \
            "'upstairs'" in capsys.readouterr().err
     assert not (tmp_path / "t.npz").exists()
+
+
+def test_a_transfer_tracks_the_faces_it_is_told(two_faces, arkit_model, tmp_path):
+    """``transfer --target-face`` / ``--source-face`` reach the tracker of each video (a track
+    of each face of a two-shot, kept apart in the track cache)."""
+    from facetransfer.io.video import VideoOptions, write_video
+    from facetransfer.track.obtain import obtain_track
+    from facetransfer.video_transfer import TransferSources
+
+    sources = TransferSources.of("t.mp4", expression_from="s.mp4", viseme_from="v.mp4",
+                                 target_face="right", source_face="left")
+    assert sources.target.face == "right"
+    assert sources.expression.face == sources.viseme.face == "left"
+    path = tmp_path / "two.mkv"
+    write_video(path, two_faces, 25.0, options=VideoOptions(crf=0))
+    for side in ("left", "right"):
+        tr = obtain_track(path, arkit_model, face=side, workers=1)
+        x = tr.translation[:, 0]
+        assert not tr.lost.any() and ((x < 480) if side == "left" else (x > 480)).all()

@@ -65,10 +65,13 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Source:
-    """One input video of a transfer and, optionally, its track file (reused, not tracked)."""
+    """One input video of a transfer and, optionally, its track file (reused, not tracked) and
+    the face to track of several (``"left"``, ``"right"``, ``"centre"``, ``"X,Y"``;
+    :func:`facetransfer.track.face_crop.subject_point`)."""
 
     video: object
     track: object = None
+    face: str | None = None
 
 
 @dataclass(frozen=True)
@@ -98,17 +101,18 @@ class TransferSources:
     @classmethod
     def of(cls, target, *, target_track=None, expression_from=None, expression_track=None,
            viseme_from=None, viseme_track=None, identity=None, identity_from=None,
-           identity_track=None, pose_from=None, pose_track=None, performance=None
-           ) -> "TransferSources":
+           identity_track=None, pose_from=None, pose_track=None, performance=None,
+           target_face=None, source_face=None) -> "TransferSources":
         """The sources from the keywords of :func:`plan_transfer` (a track file without its
-        video is ignored)."""
+        video is ignored; ``source_face``: the face to track in every source video)."""
         if identity is not None and identity_from is not None:
             raise RewriteError("give the identity either as weights or as a video, not both")
 
         def src(video, track):
-            return None if video is None else Source(video, track)
+            return None if video is None else Source(video, track, source_face)
 
-        return cls(Source(target, target_track), src(expression_from, expression_track),
+        return cls(Source(target, target_track, target_face),
+                   src(expression_from, expression_track),
                    src(viseme_from, viseme_track), src(identity_from, identity_track),
                    src(pose_from, pose_track), identity, performance)
 
@@ -292,7 +296,8 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     if pre_read is not None and sources.expression.track is None:
         early = obtain.start_background_track(
             sources.expression.video, model, len(pre_read[0]), frames=pre_read,
-            method=options.track_method, options=planner.track_options, parallel=parallel)
+            method=options.track_method, options=planner.track_options, parallel=parallel,
+            face=sources.expression.face)
     try:
         tt = planner.target_track(sources.target, frames, fps, alone=early is None)
     except BaseException:
@@ -369,24 +374,26 @@ class _Planner:
         self.timings["read"] += time.perf_counter() - t0
         return frames, fps, (sfr[:need], sfps)
 
-    def track(self, video, track_file, frames, fps, limit, *, alone: bool = False):
-        """The track of ``video`` (:func:`facetransfer.track.obtain.obtain_track`), timed;
-        ``alone``: nothing else is tracked meanwhile, so its detection may take two processes
-        (:func:`facetransfer.track.video_detect.detect_video`)."""
+    def track(self, video, track_file, frames, fps, limit, *, alone: bool = False,
+              face: str | None = None):
+        """The track of ``video`` (:func:`facetransfer.track.obtain.obtain_track`, of several
+        people the ``face``), timed; ``alone``: nothing else is tracked meanwhile, so its
+        detection may take two processes (:func:`facetransfer.track.video_detect.detect_video`)."""
         t = time.perf_counter()
         workers = default_workers() if alone else 1
         tr = obtain.obtain_track(video, self.model, frames=frames, fps=fps,
                                  track_file=track_file, max_frames=limit,
                                  method=self.track_method,
                                  progress_factory=self.progress_factory,
-                                 options=self.track_options, workers=workers)
+                                 options=self.track_options, workers=workers, face=face)
         self.timings["track"] += time.perf_counter() - t
         return tr
 
     def target_track(self, target: Source, frames, fps, *, alone: bool = False):
         """The target's track, checked against its frames (a face somewhere)."""
         n, H, W = frames.shape[:3]
-        tt = self.track(target.video, target.track, frames, fps, n, alone=alone)
+        tt = self.track(target.video, target.track, frames, fps, n, alone=alone,
+                        face=target.face)
         if target.track is not None:
             tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H),
                            what=f"target {target.video}")
@@ -415,7 +422,8 @@ class _Planner:
             if tr is not None and len(fr) < tr.n_frames:
                 tr = take_frames(tr, np.arange(len(fr)))
         if tr is None:                       # tracked here, after the target: nothing beside it
-            tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True)
+            tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True,
+                            face=src.face)
         inputs.tracks[kind], inputs.source_frames[kind] = _checked_source(
             kind, src, fr, tr, inputs.size)
 

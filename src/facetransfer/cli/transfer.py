@@ -194,6 +194,12 @@ def _add_sources(p) -> None:
     p.add_argument("--performance", metavar="NEW.npz",
                    help="render a ready performance on the target's timeline (e.g. the output "
                    "of `facetransfer edit`) instead of combining sources")
+    p.add_argument("--target-face", metavar="WHERE",
+                   help="with several people in the target, the one to rewrite: left, right, "
+                   "centre, or pixels X,Y near the face (default: the face found first)")
+    p.add_argument("--source-face", metavar="WHERE",
+                   help="with several people in the source videos, the one to take: as "
+                   "--target-face")
 
 
 def _register_edit(sub) -> None:
@@ -334,7 +340,8 @@ def run_transfer(args) -> int:
         expression_track=args.source_track, viseme_from=args.viseme_from,
         viseme_track=args.viseme_track, identity=_chosen_identity(model, args),
         identity_from=args.identity_from, identity_track=args.identity_track,
-        pose_from=args.pose_from, pose_track=args.pose_track, performance=args.performance)
+        pose_from=args.pose_from, pose_track=args.pose_track, performance=args.performance,
+        target_face=args.target_face, source_face=args.source_face)
     res = transfer_video(
         sources, args.out, model, options=rewrite_options(args),
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,

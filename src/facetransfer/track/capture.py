@@ -815,7 +815,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
                   detections: ClipDetections | None = None, max_frames: int | None = None,
                   fixed: dict | None = None, progress: Progress | None = None,
                   source: str | None = None, checkpoint=None, workers: int = 1,
-                  view=None) -> Track:
+                  view=None, subject=None) -> Track:
     """Capture a face's performance from a video (module notes): the default tracker.
 
     Parameters
@@ -837,6 +837,9 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         How the detector is shown the frames (default: a file's own; an array as it is): in
         square pixels, the track told in the stored ones, and of interlaced video one field
         (:mod:`facetransfer.track.aspect`).
+    subject : (x, y, 0), optional
+        Of several people, follow the face nearest this point
+        (:func:`facetransfer.track.face_crop.subject_point`).
 
     Returns
     -------
@@ -847,7 +850,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         detections, fps, size, src = detect_video(video, detector=detector,
                                                   max_frames=max_frames, progress=progress,
                                                   source=source, workers=workers,
-                                                  view=view)
+                                                  view=view, subject=subject)
     else:
         fps, size, src, _, n, _ = _open(video, max_frames, source)
         if n is not None and detections.n_frames != n:

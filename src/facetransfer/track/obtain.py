@@ -156,26 +156,32 @@ class _StageBars:
 
 
 def _capture(video, model, frames, fps, max_frames, progress_factory, workers: int = 1,
-             partial: Path | None = None):
+             partial: Path | None = None, subject=None):
     """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames; with
-    ``partial``, its progress saved there and continued from there (:func:`capture_resuming`)."""
+    ``partial``, its progress saved there and continued from there (:func:`capture_resuming`);
+    ``subject``: of several people, the face nearest this point."""
     from .aspect import View
     from .capture import capture_video
 
     with _StageBars(video, progress_factory) as stage_progress:
         if partial is None:
             tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
-                               source=str(video), workers=workers, view=View.of(video))
+                               source=str(video), workers=workers, view=View.of(video),
+                               subject=subject)
         else:
             tr = capture_resuming(video, model, partial, frames=frames[:max_frames],
                                   source=str(video), progress=stage_progress, workers=workers,
-                                  best_effort=True)  # the track cache's: never fails the job
+                                  best_effort=True,  # the track cache's: never fails the job
+                                  subject=subject)
     return dataclasses.replace(tr, fps=float(fps))
 
 
-def _depends(method: str, video, options):
+def _depends(method: str, video, options, face=None):
     """What a track of ``method`` depends on beyond the video, frames and model (its cache
-    key): the flow tracker's options, the landmark fit's precomputed points file."""
+    key): the flow tracker's options, the landmark fit's precomputed points file, the capture
+    tracker's ``face`` (of several people, which)."""
+    if method in ("auto", "capture"):
+        return None if face is None else f"face={face}"
     if method == "flow":
         return options
     if method == "landmarks":
@@ -195,11 +201,14 @@ def _partial(key: str | None) -> Path | None:
 
 
 def capture_resuming(video, model, partial, *, frames=None, options=None, source=None,
-                     fixed=None, progress=None, workers: int = 1, best_effort: bool = False):
+                     fixed=None, progress=None, workers: int = 1, best_effort: bool = False,
+                     subject=None):
     """The capture tracker on the file ``video`` (or its decoded ``frames``) with its progress
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
     fit), continued from there when it holds this run's: an interrupted run loses nothing.
-    ``best_effort``: a progress file that cannot be written is a warning, not an error."""
+    ``best_effort``: a progress file that cannot be written is a warning, not an error;
+    ``subject``: of several people, the face nearest this point (the caller keys ``partial``
+    by it)."""
     from .aspect import View
     from .capture import capture_video
     from .detect_checkpoint import DetectionCheckpoint
@@ -218,7 +227,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     else:
         det = detect_video(clip, source=source, checkpoint=ck, progress=progress,
                            resume=None if saved is None else saved.detections,
-                           workers=workers, view=view)[0]
+                           workers=workers, view=view, subject=subject)[0]
     try:
         return capture_video(clip, model, options=options, detections=det, source=source,
                              fixed=fixed, checkpoint=ck, progress=progress)
@@ -230,7 +239,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
 def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
                  track_file: str | os.PathLike | None = None, max_frames: int | None = None,
                  method: str = "auto", progress_factory=None, options=None, workers: int = 1,
-                 cache: bool = True):
+                 cache: bool = True, face: str | None = None):
     """The track of a video: read from ``track_file``, or from the track cache, or tracked now.
 
     ``method``: ``"auto"`` or ``"capture"`` use the capture tracker
@@ -244,7 +253,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     tracker (:func:`facetransfer.track.video_detect.detect_video`; 2 when nothing else runs
     beside this track). ``cache``: keep the track made in the user's track cache and reuse
     one kept there (:mod:`facetransfer.track.cache`; the capture tracker's progress is saved
-    there too and continued by the next run).
+    there too and continued by the next run). ``face``: of several people, the one the capture
+    tracker follows (``"left"``, ``"right"``, ``"centre"`` or ``"X,Y"``,
+    :func:`facetransfer.track.face_crop.subject_point`).
 
     Returns
     -------
@@ -265,7 +276,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         frames, fps = read_video(video, max_frames=max_frames)
     fps = info.fps if fps is None else fps
     n = len(frames) if max_frames is None else min(len(frames), int(max_frames))
-    key = track_key(video, n, method, _depends(method, video, options), model) \
+    key = track_key(video, n, method, _depends(method, video, options, face), model) \
         if cache else None
     tr = cached_track(key, model)
     if tr is not None:
@@ -276,8 +287,11 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         _close(bar)
         return dataclasses.replace(tr, fps=float(fps))
     if method in ("auto", "capture"):
+        from .face_crop import subject_point
+
+        subject = None if face is None else subject_point(face, info.size)
         tr = _capture(video, model, frames, fps, max_frames, progress_factory, workers,
-                      _partial(key))
+                      _partial(key), subject)
     elif method == "flow":
         warn_stored_fit(video, "optical-flow tracker")
         tr = _flow(video, model, frames, fps, max_frames, progress_factory, options)
@@ -379,24 +393,27 @@ class _BackgroundTrack:
         self._pool.shutdown(wait=False, cancel_futures=True)
 
 
-#: (model, video, max_frames, method, options) handed to the forked child (not pickled)
+#: (model, video, max_frames, method, options, frames, face) handed to the forked child (not
+#: pickled)
 _BACKGROUND_JOB: tuple | None = None
 
 
 def _background_track_job():
     from ..io.video import read_video
 
-    model, video, max_frames, method, options, decoded = _BACKGROUND_JOB
+    model, video, max_frames, method, options, decoded, face = _BACKGROUND_JOB
     frames, fps = decoded if decoded is not None else read_video(video, max_frames=max_frames)
     return obtain_track(video, model, frames=frames, fps=fps, max_frames=len(frames),
-                        method=method, options=options)
+                        method=method, options=options, face=face)
 
 
 def start_background_track(video, model, max_frames: int, *, method: str, options,
-                            parallel: bool | None, frames=None) -> _BackgroundTrack | None:
+                            parallel: bool | None, frames=None,
+                            face: str | None = None) -> _BackgroundTrack | None:
     """Track ``video`` in a forked child process; None when not worth it or not possible.
 
-    ``frames``: its decoded ``(frames, fps)``, inherited by the child (else it decodes them)."""
+    ``frames``: its decoded ``(frames, fps)``, inherited by the child (else it decodes them);
+    ``face``: as :func:`obtain_track`'s."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -407,7 +424,7 @@ def start_background_track(video, model, max_frames: int, *, method: str, option
         parallel = (os.cpu_count() or 1) >= 2
     if not parallel or "fork" not in mp.get_all_start_methods():
         return None
-    _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames)
+    _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames, face)
     try:
         pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))
         fut = pool.submit(_background_track_job)  # forks now: the child sees _BACKGROUND_JOB
