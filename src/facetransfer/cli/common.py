@@ -54,6 +54,12 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video") ->
                    "at the same CRF (medium: 1.6x the CPU, +0.07 dB)")
 
 
+#: What ``--face`` / ``--target-face`` / ``--source-face`` take
+#: (:func:`facetransfer.track.face_crop.subject_point`).
+FACE_WHERE = ("left, right, centre, or pixels X,Y near the face (default: the face found "
+              "first)")
+
+
 def video_out(text: str) -> str:
     """A video output's argument, an image sequence's ``####`` field written as printf's
     (``out/sh010.####.png`` -> ``out/sh010.%04d.png``), as input sequences are named."""

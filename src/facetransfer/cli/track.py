@@ -20,8 +20,8 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
-from .common import (MODEL_HELP, add_video_options, progress_disabled, resolve_model,
-                     video_options, video_out)
+from .common import (FACE_WHERE, MODEL_HELP, add_video_options, progress_disabled,
+                     resolve_model, video_options, video_out)
 
 
 #: What the capture tracker does, for the help of every ``--tracker`` option.
@@ -100,8 +100,8 @@ def register(sub) -> None:
                    "sequence frames/%%05d.png or frames/#####.png)")
     add_video_options(p, what="--overlay")
     p.add_argument("--face", metavar="WHERE",
-                   help="[capture] with several people in the frame, the one to track: left, "
-                   "right, centre, or pixels X,Y near the face (default: the face found first)")
+                   help="[capture] with several people in the frame, the one to track: "
+                   + FACE_WHERE)
     p.add_argument("--restart", action="store_true",
                    help="ignore the progress of an interrupted run (OUT with suffix "
                    ".partial.npz; by default tracking continues from it)")

@@ -23,8 +23,8 @@ from ..transfer import ALIGN_MODES
 from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES, JAW_MODES,
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
-from .common import (MODEL_HELP, add_video_options, progress_disabled, resolve_model,
-                     video_options, video_out)
+from .common import (FACE_WHERE, MODEL_HELP, add_video_options, progress_disabled,
+                     resolve_model, video_options, video_out)
 from .track import CAPTURE_HELP
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
@@ -194,12 +194,9 @@ def _add_sources(p) -> None:
     p.add_argument("--performance", metavar="NEW.npz",
                    help="render a ready performance on the target's timeline (e.g. the output "
                    "of `facetransfer edit`) instead of combining sources")
-    p.add_argument("--target-face", metavar="WHERE",
-                   help="with several people in the target, the one to rewrite: left, right, "
-                   "centre, or pixels X,Y near the face (default: the face found first)")
-    p.add_argument("--source-face", metavar="WHERE",
-                   help="with several people in the source videos, the one to take: as "
-                   "--target-face")
+    for flag, role in (("--target-face", "in the target, the one to rewrite"),
+                       ("--source-face", "in the source videos, the one to take")):
+        p.add_argument(flag, metavar="WHERE", help=f"with several people {role}: {FACE_WHERE}")
 
 
 def _register_edit(sub) -> None:
