@@ -517,9 +517,13 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
                                           fixed if a == 0 else None, progress, source)
                       if sub.found.any() else None)
     if all(t is None for t in tracks):
-        raise VideoError(f"no face found in {source or 'the video'} "
-                         f"(searched frames 0-{det.n_frames - 1})")
+        raise _no_face(source, det.n_frames)
     return joined_shots(tracks, spans)
+
+
+def _no_face(source, n_frames: int) -> VideoError:
+    return VideoError(f"no face found in {source or 'the video'} "
+                      f"(searched frames 0-{n_frames - 1})")
 
 
 def _capture_detections(det, model, options, fps, frame_size, fixed, progress, source,
@@ -532,8 +536,7 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         raise TrackError(f"capture can keep only the identity fixed, got {sorted(unknown)}")
     found = det.found
     if not found.any():
-        raise VideoError(f"no face found in {source or 'the video'} "
-                         f"(searched frames 0-{det.n_frames - 1})")
+        raise _no_face(source, det.n_frames)
     prog = progress or (lambda stage, done, total: None)
     weights, sampler = _point_weights(det, model, opt)
     t0 = time.perf_counter()

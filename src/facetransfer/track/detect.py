@@ -130,6 +130,12 @@ class VideoLandmarker(MediaPipeDetector):
         self._i += 1
         return self._lm.detect_for_video(image, ts)
 
+    def at_least(self, frame: int) -> "VideoLandmarker":
+        """This landmarker with its clock at frame ``frame`` at least (one not shown every
+        frame of a clip: its timestamps must still increase)."""
+        self._i = max(self._i, int(frame))
+        return self
+
 
 def _import_mediapipe() -> None:
     try:
@@ -179,12 +185,15 @@ def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
     return out
 
 
+def thumbnail(gray: np.ndarray) -> np.ndarray:
+    """A grey frame's 32x32 thumbnail, float32 (:func:`picture_change`)."""
+    return cv2.resize(gray, (32, 32), interpolation=cv2.INTER_AREA).astype(np.float32)
+
+
 def picture_change(prev_gray: np.ndarray, gray: np.ndarray) -> float:
     """Mean absolute difference of two grey frames' 32x32 thumbnails, in levels
     (:attr:`ClipDetections.change`)."""
-    a, b = (cv2.resize(g, (32, 32), interpolation=cv2.INTER_AREA).astype(np.float32)
-            for g in (prev_gray, gray))
-    return float(np.abs(a - b).mean())
+    return float(np.abs(thumbnail(prev_gray) - thumbnail(gray)).mean())
 
 
 class _Found:
@@ -241,12 +250,19 @@ _NAN68 = np.full((68, 2), np.nan)
 _NAN52 = np.full(52, np.nan, np.float32)
 
 
-def _skipped(detector, fr: np.ndarray, show: bool, last: bool, prev_gray):
+def _skipped(detector, fr: np.ndarray, show: bool, last: bool, prev):
     """A frame a resumed run detected before: shown to the detector when ``show`` (its
-    warm-up); its grey image is the flow's start when ``last``. Returns the flow's start."""
+    warm-up); its grey image (and thumbnail) is the flow's start when ``last``. Returns the
+    flow's start."""
     if show:
         _detect_one(detector, fr)
-    return cv2.cvtColor(np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY) if last else prev_gray
+    return _grey(fr) if last else prev
+
+
+def _grey(fr: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's grey image (the flow's) and its :func:`thumbnail` (the picture change's)."""
+    gray = cv2.cvtColor(np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY)
+    return gray, thumbnail(gray)
 
 
 def _detect_one(detector, fr: np.ndarray
@@ -310,7 +326,7 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
     k = int(start) if resume is None else resume.n_frames
     warm = k - int(getattr(detector, "warmup_frames", 0))
     found = _Found(keep478, resume, float(pixel_aspect))
-    prev_gray = None
+    prev = None                      # the previous frame's grey image and thumbnail
     tick = progress or (lambda done, total: None)
     # the flow of frame i-1's points runs on a second thread while frame i is detected (OpenCV
     # and MediaPipe both release the GIL): on two cores it costs almost no time
@@ -320,20 +336,20 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                 if n_frames is not None and i >= n_frames:
                     break
                 if i < k:                                  # done before: skipped
-                    prev_gray = _skipped(detector, fr, i >= warm, flow and i == k - 1, prev_gray)
+                    prev = _skipped(detector, fr, i >= warm, flow and i == k - 1, prev)
                     tick(i + 1, n_frames or 0)
                     continue
                 if flow:
-                    gray = pool.submit(cv2.cvtColor, np.ascontiguousarray(fr), cv2.COLOR_RGB2GRAY)
+                    grey = pool.submit(_grey, fr)
                 pts, q, scores = _detect_one(detector, fr)
                 f, change = None, np.nan
                 if flow:
-                    gray = gray.result()
-                    if prev_gray is not None and found.P:
-                        f = pool.submit(point_flow, prev_gray, gray, found.P[-1])
-                    if prev_gray is not None:
-                        change = picture_change(prev_gray, gray)
-                    prev_gray = gray
+                    gray, thumb = grey.result()
+                    if prev is not None:
+                        if found.P:
+                            f = pool.submit(point_flow, prev[0], gray, found.P[-1])
+                        change = float(np.abs(thumb - prev[1]).mean())   # picture_change
+                    prev = gray, thumb
                 found.add(pts, f, q, scores, change)
                 if checkpoint is not None and checkpoint.due():
                     checkpoint.save(found.result())

@@ -51,7 +51,7 @@ CROP_FACES = 3.0
 #: after :data:`SEARCH_SLOWER` frames: a clip whose face is away for a while stays cheap.
 SEARCH_EVERY = 5
 SEARCH_SLOWER = 50
-#: The most faces counted when choosing the subject.
+#: The most faces the IMAGE-mode landmarker finds (the tiles searched, the faces counted).
 MOST_FACES = 4
 #: The smallest tile side searched, pixels (the detector's input is 128; a face in a smaller
 #: tile is too small for the landmark model too).
@@ -145,13 +145,6 @@ def subject_point(text: str, size: tuple[int, int]) -> tuple[float, float, float
     return x, y, 0.0
 
 
-def _timed(lm: VideoLandmarker, frame: int) -> VideoLandmarker:
-    """``lm`` with its clock at frame ``frame`` at least (a landmarker not shown every frame;
-    its timestamps must still increase)."""
-    lm._i = max(lm._i, int(frame))
-    return lm
-
-
 class FollowingLandmarker:
     """Face Landmarker on the whole frame, and where that finds no face, in tiles and then in a
     crop that follows the face (see the module notes). Has the detector interface of
@@ -177,8 +170,7 @@ class FollowingLandmarker:
         self._whole = VideoLandmarker(model_path, fps=fps, blendshapes=blendshapes)
         self._args = (model_path, float(fps), bool(blendshapes))
         self._crop_lm = None            # created when first needed: most clips never do
-        self._search_lm = None
-        self._faces_lm = None
+        self._search_lm = None          # IMAGE mode, up to MOST_FACES: tiles and counting
         self.crop: tuple[int, int, int] | None = None
         self.last = None if subject is None else tuple(float(v) for v in subject)
         self.several = False            # several faces seen: the subject kept in a crop
@@ -189,7 +181,7 @@ class FollowingLandmarker:
         """``(points (478, 2) in the frame's pixels, scores (52,))`` or ``(None, None)``."""
         found = self._in_crop(frame) if self.crop is not None else (None, None)
         if found[0] is None:
-            found = _timed(self._whole, self._frame).detect_scored(frame)
+            found = self._whole.at_least(self._frame).detect_scored(frame)
             if found[0] is not None and self.last is not None and \
                     moved_away(face_box(found[0]), self.last):
                 found = self._subject(frame, found)
@@ -204,9 +196,7 @@ class FollowingLandmarker:
     def _subject(self, frame: np.ndarray, found):
         """``found`` (the whole frame's face) where it is the only face or the subject
         (:func:`choose_subject`), else the subject followed in a crop."""
-        if self._faces_lm is None:
-            self._faces_lm = MediaPipeDetector(self._args[0], faces=MOST_FACES)
-        boxes = [face_box(q) for q in self._faces_lm.detect_every(frame)]
+        boxes = [face_box(q) for q in self._search_landmarker().detect_every(frame)]
         if len(boxes) < 2:
             return found
         self.several = True
@@ -253,18 +243,18 @@ class FollowingLandmarker:
         if self._crop_lm is None:
             path, fps, blendshapes = self._args
             self._crop_lm = VideoLandmarker(path, fps=fps, blendshapes=blendshapes)
-        return _timed(self._crop_lm, self._frame)
+        return self._crop_lm.at_least(self._frame)
 
     def _search_landmarker(self) -> MediaPipeDetector:
         if self._search_lm is None:
-            self._search_lm = MediaPipeDetector(self._args[0])
+            self._search_lm = MediaPipeDetector(self._args[0], faces=MOST_FACES)
         return self._search_lm
 
     def close(self) -> None:
-        for lm in (self._whole, self._crop_lm, self._search_lm, self._faces_lm):
+        for lm in (self._whole, self._crop_lm, self._search_lm):
             if lm is not None:
                 lm.close()
-        self._crop_lm = self._search_lm = self._faces_lm = None
+        self._crop_lm = self._search_lm = None
 
     def __enter__(self) -> "FollowingLandmarker":
         return self

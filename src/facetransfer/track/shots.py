@@ -102,7 +102,7 @@ def joined_shots(tracks: list, spans: list[tuple[int, int]]):
             t = take_frames(tracks[j], np.full(b - a, frame))
             t = replace(t, lost=np.ones(b - a, bool), confidence=np.zeros(b - a))
         parts.append(t)
-    first = parts[0] if tracks[0] is not None else tracks[done[0]]
+    first = parts[0]
 
     def cat(name):
         arrays = [getattr(t, name) for t in parts]

@@ -32,7 +32,7 @@ from typing import Callable
 import numpy as np
 
 from ..errors import ShapeError, VideoError
-from .aspect import View
+from .aspect import View, to_shown_x
 from .detect import ClipDetections, VideoLandmarker, detect_clip
 from .face_crop import FollowingLandmarker, face_box, moved_away
 from .options import Progress
@@ -80,26 +80,28 @@ def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetect
             raise ValueError("join_detections: one part has raw points or scores, the other not")
         return np.concatenate([a, b])
 
-    scores = None
-    if first.scores is not None or second.scores is not None:
-        nan = np.full(52, np.nan, np.float32)
-        scores = np.concatenate([
-            first.scores if first.scores is not None else np.tile(nan, (first.n_frames, 1)),
-            second.scores if second.scores is not None else np.tile(nan, (second.n_frames, 1))])
     if first.pixel_aspect != second.pixel_aspect:
         raise ValueError(f"join_detections: parts of pixel aspect {first.pixel_aspect} and "
                          f"{second.pixel_aspect}")
-    change = None
-    if first.change is not None or second.change is not None:
-        change = np.concatenate([np.full(d.n_frames, np.nan, np.float32) if d.change is None
-                                 else d.change for d in (first, second)])
     return ClipDetections(np.concatenate([first.points, second.points]),
                           np.concatenate([first.flow, second.flow]),
-                          cat(first.points478, second.points478), scores, first.pixel_aspect,
-                          change)
+                          cat(first.points478, second.points478),
+                          _nan_filled((first, second), "scores"), first.pixel_aspect,
+                          _nan_filled((first, second), "change"))
 
 
-#: (video, start, stop, fps, counter, View) handed to the forked child (not pickled)
+def _nan_filled(parts, name: str):
+    """The parts' per-frame array ``name`` (scores, picture change) as one, NaN for a part
+    without it; None when no part has it."""
+    arrays = [getattr(d, name) for d in parts]
+    like = next((a for a in arrays if a is not None), None)
+    if like is None:
+        return None
+    return np.concatenate([np.full((d.n_frames,) + like.shape[1:], np.nan, np.float32)
+                           if a is None else a for d, a in zip(parts, arrays)])
+
+
+#: (video, start, stop, fps, counter, View, subject) handed to the forked child (not pickled)
 _JOB: tuple | None = None
 
 
@@ -292,7 +294,7 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     fps, size, src, frames, n, total = _open(video, max_frames, source)
     view = View.of(video) if view is None else view
     if subject is not None:                # in the pixels the detector is shown
-        subject = ((subject[0] + 0.5) * view.aspect - 0.5, subject[1], 0.0)
+        subject = (float(to_shown_x(subject[0], view.aspect)), subject[1], 0.0)
     done = 0 if resume is None else resume.n_frames
     m = split_frame(done, total, workers) if detector is None else None
     child = None if m is None else SplitDetection.start(video, m, n, fps, view, subject)
