@@ -39,6 +39,31 @@ def test_bad_clip_manifests(tmp_path, text, message):
     assert message in str(e.value) and "bad.csv" in str(e.value)
 
 
+def test_the_face_to_track_per_clip_and_per_pair(tmp_path):
+    """``face`` (clips) and ``target_face`` / ``source_face`` (pairs) are values, not paths; an
+    empty cell takes ``--face``; a cell that names no place fails before any clip runs."""
+    man = tmp_path / "clips.csv"
+    man.write_text('video,face\na.mp4,right\nb.mp4,\nc.mp4,"120, 80"\n')
+    jobs = clip_jobs(["d.mp4"], man, face="left")
+    assert [(j.name, j.face) for j in jobs] == [("d", "left"), ("a", "right"), ("b", "left"),
+                                                ("c", "120, 80")]
+    assert clip_jobs(["d.mp4"])[0].face is None
+    with pytest.raises(BatchError, match="--face must be left, right, centre or pixels X,Y, "
+                                         "got 'upstairs'"):
+        clip_jobs(["d.mp4"], face="upstairs")
+    man.write_text("video,face\na.mp4,right\nb.mp4,middle\n")
+    with pytest.raises(BatchError, match=r"clips.csv row 2: face must be left, right, centre "
+                                         r"or pixels X,Y, got 'middle'"):
+        clip_jobs(manifest=man)
+    pairs = tmp_path / "pairs.csv"
+    pairs.write_text("target,expression_from,target_face,source_face\nt.mp4,s.mp4,right,left\n")
+    assert pair_jobs(pairs)[0].sources == {"expression_from": str(tmp_path / "s.mp4"),
+                                           "target_face": "right", "source_face": "left"}
+    pairs.write_text('target,expression_from,source_face\nt.mp4,s.mp4,"-3,4"\n')
+    with pytest.raises(BatchError, match="pairs.csv row 1: source_face must be left"):
+        pair_jobs(pairs)
+
+
 def test_missing_manifest_and_no_clips(tmp_path):
     with pytest.raises(BatchError, match="manifest .*nope.csv does not exist"):
         clip_jobs(manifest=tmp_path / "nope.csv")

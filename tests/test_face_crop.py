@@ -221,3 +221,111 @@ def test_a_transfer_tracks_the_faces_it_is_told(two_faces, arkit_model, tmp_path
         tr = obtain_track(path, arkit_model, face=side, workers=1)
         x = tr.translation[:, 0]
         assert not tr.lost.any() and ((x < 480) if side == "left" else (x > 480)).all()
+
+
+@pytest.mark.parametrize("chunk", [False, True])
+def test_batch_tracks_the_face_it_is_told(two_faces, arkit_model, tmp_path, chunk):
+    """``batch track --face`` (a clip's ``face``) reaches the capture of the whole clip and of
+    each chunk: the right face of the two-shot in every frame; another face's progress file is
+    not continued."""
+    from facetransfer.batch import jobs as J
+    from facetransfer.batch.chunks import Chunk
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.io.video import VideoOptions, write_video
+    from facetransfer.track import Track
+    from facetransfer.track.settings import TrackerSettings
+
+    path = tmp_path / "two.mkv"
+    write_video(path, two_faces, 25.0, options=VideoOptions(crf=0))
+    out = tmp_path / "two.npz"
+    for side in ("left", "right"):
+        job = ClipJob("two", str(path), "auto", side)
+        if chunk:
+            tr = J.track_chunk(job, Chunk(1, 8, 24), str(out), arkit_model,
+                               TrackerSettings()).track
+        else:
+            J.track_clip(job, str(out), arkit_model, TrackerSettings())
+            tr = Track.load(out)
+        x = tr.translation[:, 0]
+        assert not tr.lost.any() and ((x < 480) if side == "left" else (x > 480)).all()
+
+
+def test_a_face_for_the_flow_tracker_is_refused(data_dir, tmp_path, capsys):
+    from facetransfer.cli.main import main
+
+    video = data_dir / "video" / "face_2.mp4"
+    code = main(["batch", "track", str(video), "--out", str(tmp_path / "o"), "--face", "left",
+                 "--tracker", "klt", "--no-progress"])
+    assert code == 2
+    assert "clip face_2: a face ('left') is for the capture tracker" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_puppet_follows_the_face_it_is_told(two_faces, arkit_model, tmp_path, monkeypatch,
+                                              capsys):
+    """``puppet --face`` reaches the tracker (its track follows the right face); a face it
+    cannot place is one line before any work."""
+    from facetransfer.cli.main import main
+    from facetransfer.io.video import VideoOptions, write_video
+    from facetransfer.track import obtain
+
+    path = tmp_path / "two.mkv"
+    write_video(path, two_faces[:8], 25.0, options=VideoOptions(crf=0))
+    tracks = []
+    real = obtain.obtain_track
+
+    def recorded(*a, **k):
+        tracks.append((k.get("face"), real(*a, **k)))
+        return tracks[-1][1]
+
+    monkeypatch.setattr(obtain, "obtain_track", recorded)
+    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", "off")
+    out, model = tmp_path / "p.mp4", tmp_path / "m.npz"
+    arkit_model.save(model)
+    code = main(["puppet", str(path), "--model", str(model), "--identity", "id01", "--face",
+                 "right", "--out", str(out), "--no-progress"])
+    (face, tr), = tracks
+    assert code == 0 and out.is_file() and face == "right"
+    assert not tr.lost.any() and (tr.translation[:, 0] > 480).all()
+    code = main(["puppet", str(path), "--model", str(model), "--identity", "id01", "--face",
+                 "2000,10", "--out", str(tmp_path / "q.mp4"), "--no-progress"])
+    assert code == 2 and "--face must be left, right, centre or pixels X,Y inside the 960x480 " \
+        "frame, got '2000,10'" in capsys.readouterr().err
+    assert len(tracks) == 1 and not (tmp_path / "q.mp4").exists()
+
+
+def test_transfer_face_options_are_placed_before_any_work(data_dir, tmp_path, capsys):
+    from facetransfer.cli.main import main
+
+    v = data_dir / "video"
+    for flag, video in (("--target-face", "face_2.mp4"), ("--source-face", "driving_d6.mp4")):
+        code = main(["transfer", "--target", str(v / "face_2.mp4"), "--expression-from",
+                     str(v / "driving_d6.mp4"), flag, "900,10", "--out",
+                     str(tmp_path / "o.mp4"), "--no-progress"])
+        size = "844x844" if video == "face_2.mp4" else "480x480"
+        assert code == 2 and f"{flag} must be left, right, centre or pixels X,Y inside the " \
+            f"{size} frame, got '900,10'" in capsys.readouterr().err
+    assert not (tmp_path / "o.mp4").exists()
+
+
+def test_a_batch_pair_hands_its_faces_to_the_transfer(data_dir, monkeypatch, tmp_path):
+    from facetransfer import video_transfer
+    from facetransfer.batch import jobs as J
+    from facetransfer.batch.manifest import pair_jobs
+
+    v = data_dir / "video"
+    man = tmp_path / "pairs.csv"
+    man.write_text("target,expression_from,target_face,source_face\n"
+                   f"{v / 'face_2.mp4'},{v / 'driving_d6.mp4'},right,left\n")
+    seen = []
+
+    def stop(sources, *a, **k):
+        seen.append(sources)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(video_transfer, "transfer_video", stop)
+    with pytest.raises(KeyboardInterrupt):
+        J.transfer_pair(pair_jobs(man)[0], str(tmp_path / "o.mp4"), None,
+                        {"texture": "frame", "blend": "poisson", "mouth": None, "align": "trim",
+                         "max_frames": None, "track_method": "auto", "speed": "fast"})
+    assert seen[0].target.face == "right" and seen[0].expression.face == "left"

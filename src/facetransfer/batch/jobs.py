@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .manifest import BatchError
 from .summary import Row
 
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
@@ -48,22 +49,29 @@ def _detector_for(init: str, options):
 
 
 def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=None,
-           tracker: str | None = None, view=None):
+           tracker: str | None = None, view=None, face: str | None = None):
     """As ``facetransfer track``: the tracker ``settings`` choose for ``init`` (or ``tracker``);
     ``view``: how frames given as an array are shown (:class:`facetransfer.track.aspect.View`
-    of their video)."""
+    of their video); ``face``: of several people, the one the capture tracker follows."""
     from ..track.tracker import track_video
 
     if (tracker or settings.choose(init)) == "capture":
         from ..track.capture import capture_video
 
+        subject = _subject(face, video, source)
         if checkpoint is not None and isinstance(video, (str, Path)):
+            from ..track.detect_checkpoint import face_detector_id
             from ..track.obtain import capture_resuming
 
             return capture_resuming(video, model, checkpoint, options=settings.capture,
-                                    source=source, fixed=fixed)
+                                    source=source, fixed=fixed, subject=subject,
+                                    detector_id=face_detector_id(face))
         return capture_video(video, model, options=settings.capture, source=source,
-                             fixed=fixed, view=view)
+                             fixed=fixed, view=view, subject=subject)
+    if face is not None:
+        raise BatchError(f"{source}: face {face!r} is for the capture tracker (the clip is "
+                         "tracked with the optical-flow tracker, which follows the face found "
+                         "first)")
     detector = _detector_for(init, settings.klt)
     try:
         return track_video(video, model, init=init, options=settings.klt, source=source,
@@ -71,6 +79,17 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
     finally:
         if detector is not None:
             detector.close()
+
+
+def _subject(face: str | None, video, source: str):
+    """The point ``face`` names in the frames of ``video`` (a path, or decoded frames of the
+    video ``source``), or None."""
+    if face is None:
+        return None
+    from ..io.video import video_info
+    from ..track.face_crop import subject_point
+
+    return subject_point(face, video_info(source).size, what=f"{source}: face")
 
 
 def track_clip(job, out: str, model, options) -> Row:
@@ -93,7 +112,7 @@ def track_clip(job, out: str, model, options) -> Row:
     t0 = time.perf_counter()
     video_info(job.video)  # missing / not a video: one line naming the path
     track = _track(str(job.video), model, job.init, options, source=str(job.video),
-                   checkpoint=partial_path(out))
+                   checkpoint=partial_path(out), face=job.face)
     track.save(out, overwrite=True)
     partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
     return track_row(job.name, track, out, time.perf_counter() - t0)
@@ -144,7 +163,7 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
         init = "auto"  # the user's points are for the clip's first frame only
     track = _track(frames, model, init, options, source=str(job.video), fixed=fixed,
                    checkpoint=partial_path(out, f".chunk{chunk.index:03d}"), tracker=tracker,
-                   view=View.of(job.video))
+                   view=View.of(job.video), face=job.face)
     return ChunkResult(dataclasses.replace(track, fps=fps), time.perf_counter() - t0)
 
 
@@ -209,7 +228,8 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
         viseme_track=s.get("viseme_track"), identity=_identity(job, model),
         identity_from=s.get("identity_from"), identity_track=s.get("identity_track"),
         pose_from=s.get("pose_from"), pose_track=s.get("pose_track"),
-        performance=s.get("performance"))
+        performance=s.get("performance"), target_face=s.get("target_face"),
+        source_face=s.get("source_face"))
     res = transfer_video(sources, out, model, overwrite=True, options=options,
                          progress_factory=None, align=settings["align"],
                          max_frames=settings["max_frames"], parallel=False)

@@ -10,12 +10,14 @@ anything runs.
 ==================  =========================================================================
 manifest            columns
 ==================  =========================================================================
-clips (``track``)   ``video`` (required), ``name``, ``init`` (POINTS.json; default ``auto``)
+clips (``track``)   ``video`` (required), ``name``, ``init`` (POINTS.json; default ``auto``),
+                    ``face`` (of several people, the one to track, as ``track --face``)
 pairs (``transfer``) ``target`` (required), ``name``, the sources of ``facetransfer transfer``:
                     ``expression_from``, ``viseme_from``, ``identity_from``, ``pose_from``,
                     ``performance``, their track files ``target_track``, ``source_track``,
-                    ``viseme_track``, ``identity_track``, ``pose_track``, and
-                    ``identity_label`` / ``identity_weights``
+                    ``viseme_track``, ``identity_track``, ``pose_track``,
+                    ``identity_label`` / ``identity_weights``, and ``target_face`` /
+                    ``source_face`` (as ``transfer --target-face`` / ``--source-face``)
 ==================  =========================================================================
 """
 
@@ -38,13 +40,14 @@ class BatchError(FaceTransferError):
 
 
 #: Columns of a clips manifest (``video`` required).
-CLIP_COLUMNS = ("video", "name", "init")
+CLIP_COLUMNS = ("video", "name", "init", "face")
 #: Columns of a pairs manifest holding paths (``target`` required).
 PAIR_PATH_COLUMNS = ("target", "expression_from", "viseme_from", "identity_from", "pose_from",
                      "performance", "target_track", "source_track", "viseme_track",
                      "identity_track", "pose_track")
 #: Columns of a pairs manifest holding values (not paths).
-PAIR_VALUE_COLUMNS = ("name", "identity_label", "identity_weights")
+PAIR_VALUE_COLUMNS = ("name", "identity_label", "identity_weights", "target_face",
+                      "source_face")
 #: The source columns of which a pair needs at least one (as ``transfer`` does).
 PAIR_SOURCES = ("expression_from", "viseme_from", "identity_from", "pose_from", "performance",
                 "identity_label", "identity_weights")
@@ -61,11 +64,15 @@ class ClipJob:
         As given (recorded as the track's ``source``, as ``facetransfer track`` does).
     init : str
         ``"auto"`` or the path of a POINTS.json for the clip's first frame.
+    face : str or None
+        Of several people, the one to track (``"left"``, ``"right"``, ``"centre"``, ``"X,Y"``:
+        :func:`facetransfer.track.face_crop.subject_point`); None: the face found first.
     """
 
     name: str
     video: str
     init: str = "auto"
+    face: str | None = None
 
     @property
     def inputs(self) -> tuple[Path, ...]:
@@ -164,6 +171,20 @@ def read_manifest(path: str | os.PathLike, *, required: tuple[str, ...],
     return rows
 
 
+def _check_face(text: str | None, what: str) -> None:
+    """A face cell or option that names a place (:func:`facetransfer.track.face_crop.
+    face_place`; whether a point lies in the frame is checked when the clip is read)."""
+    if text is None:
+        return
+    from ..errors import TrackError
+    from ..track.face_crop import face_place
+
+    try:
+        face_place(text, what)
+    except TrackError as exc:
+        raise BatchError(str(exc)) from None
+
+
 def _name(explicit: str | None, path: str | os.PathLike, where: str) -> str:
     name = explicit or _stem(path)
     if not name or name in (".", "..") or "/" in name or "\\" in name or name.startswith("."):
@@ -184,22 +205,26 @@ def _stem(path: str | os.PathLike) -> str:
 
 
 def clip_jobs(videos=(), manifest: str | os.PathLike | None = None, *,
-              init: str = "auto") -> list[ClipJob]:
-    """The clips of ``batch track``: videos given directly (with the initial points ``init``)
-    and/or the rows of a manifest (with their ``init`` column).
+              init: str = "auto", face: str | None = None) -> list[ClipJob]:
+    """The clips of ``batch track``: videos given directly (with the initial points ``init``
+    and the person ``face``) and/or the rows of a manifest (with their ``init`` and ``face``
+    columns; an empty ``face`` cell takes ``face``).
 
     Raises
     ------
     BatchError
-        No clip at all, a bad manifest, or two clips with the same name.
+        No clip at all, a bad manifest, a face that names no place, or two clips with the
+        same name.
     """
-    jobs = [ClipJob(_name(None, v, f"video {v}"), str(v), str(init)) for v in videos]
+    _check_face(face, "--face")
+    jobs = [ClipJob(_name(None, v, f"video {v}"), str(v), str(init), face) for v in videos]
     if manifest is not None:
         for i, row in enumerate(read_manifest(manifest, required=("video",),
                                               allowed=CLIP_COLUMNS, paths=("video", "init"))):
             where = f"manifest {manifest} row {i + 1}"
+            _check_face(row.get("face"), f"{where}: face")
             jobs.append(ClipJob(_name(row.get("name"), row["video"], where), row["video"],
-                                row.get("init", "auto")))
+                                row.get("init", "auto"), row.get("face", face)))
     if not jobs:
         raise BatchError("no clips: give VIDEO files or --manifest clips.csv")
     check_unique_names(jobs)
@@ -226,6 +251,8 @@ def pair_jobs(manifest: str | os.PathLike) -> list[PairJob]:
                 raise BatchError(f"{where}: {track} needs {video} (the video it belongs to)")
         if not any(row.get(c) for c in PAIR_SOURCES):
             raise BatchError(f"{where}: nothing to transfer (give one of {list(PAIR_SOURCES)})")
+        for col in ("target_face", "source_face"):
+            _check_face(row.get(col), f"{where}: {col}")
         if row.get("identity_from") and (row.get("identity_label") or row.get("identity_weights")):
             raise BatchError(f"{where}: give one of identity_from, identity_label, "
                              "identity_weights")

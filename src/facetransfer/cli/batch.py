@@ -2,7 +2,7 @@
 
     facetransfer batch track VIDEO... | --manifest clips.csv --out DIR [--workers N]
                              [--scheduler tcp://HOST:8786] [--chunk N [--overlap N]]
-                             [--model M.npz] [track options] [--overwrite]
+                             [--model M.npz] [--face WHERE] [track options] [--overwrite]
     facetransfer batch transfer --manifest pairs.csv --out DIR [--model M.npz] [transfer options]
     facetransfer batch export TRACK... --format livelink|glb|usd|json --out DIR [--model M.npz]
 
@@ -16,7 +16,7 @@ from __future__ import annotations
 import sys
 
 from ..errors import FaceTransferError
-from .common import resolve_model
+from .common import FACE_WHERE, resolve_model
 
 
 def _cluster_options(p) -> None:
@@ -62,13 +62,17 @@ def register(sub) -> None:
                       "the seams (one identity per clip).")
     t.add_argument("videos", nargs="*", metavar="VIDEO", help="videos to track")
     t.add_argument("--manifest", metavar="clips.csv",
-                   help="CSV with a video column (and name, init); paths relative to it")
+                   help="CSV with a video column (and name, init, face); paths relative to it")
     t.add_argument("--model", metavar="M.npz", help="model (default: the default model)")
     t.add_argument("--chunk", type=int, default=0,
                    help="split clips longer than this many frames into overlapping chunks "
                    "tracked in parallel (0 = never)")
     t.add_argument("--overlap", type=int, default=DEFAULT_OVERLAP,
                    help="frames shared by neighbouring chunks (cross-faded)")
+    t.add_argument("--face", metavar="WHERE",
+                   help=f"[capture] with several people in the frame, the one to track in "
+                   f"every clip (a manifest's face column gives it per clip): {FACE_WHERE}; "
+                   "each chunk of a --chunk clip starts on the face nearest it")
     _track_options(t)
     _cluster_options(t)
     t.set_defaults(func=run_track)
@@ -78,7 +82,8 @@ def register(sub) -> None:
                       "manifest (columns target, expression_from, and the other sources: "
                       "viseme_from, identity_from, identity_label, identity_weights, pose_from, "
                       "performance, and track files target_track, source_track, viseme_track, "
-                      "identity_track, pose_track; name).")
+                      "identity_track, pose_track; with several people, target_face and "
+                      "source_face as --target-face / --source-face; name).")
     r.add_argument("--manifest", required=True, metavar="pairs.csv")
     r.add_argument("--model", metavar="M.npz", help="model (default: the default model)")
     r.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
@@ -155,8 +160,12 @@ def run_track(args) -> int:
     if not args.videos and not args.manifest:
         raise FaceTransferError("give VIDEO files or --manifest clips.csv")
     # duplicate names are refused before anything runs
-    jobs = clip_jobs(args.videos, args.manifest, init=args.init)
+    jobs = clip_jobs(args.videos, args.manifest, init=args.init, face=args.face)
     opt = track_settings(args)  # validates the options
+    for job in jobs:
+        if job.face is not None and opt.choose(job.init) != "capture":
+            raise FaceTransferError(f"clip {job.name}: a face ({job.face!r}) is for the capture "
+                                    "tracker (--tracker capture, or auto without --init points)")
     _check_cluster_args(args)
     model = resolve_model(args.model)
     require_landmarks(model)

@@ -60,6 +60,18 @@ FACE_WHERE = ("left, right, centre, or pixels X,Y near the face (default: the fa
               "first)")
 
 
+def check_face(text: str | None, video, flag: str = "--face") -> None:
+    """``flag``'s value placed in ``video``'s frame (:func:`facetransfer.track.face_crop.
+    subject_point`), so that a face option it cannot place fails before any work, naming
+    ``flag``; nothing for None."""
+    if text is None:
+        return
+    from ..io.video import video_info
+    from ..track.face_crop import subject_point
+
+    subject_point(text, video_info(video).size, what=flag)
+
+
 def video_out(text: str) -> str:
     """A video output's argument, an image sequence's ``####`` field written as printf's
     (``out/sh010.####.png`` -> ``out/sh010.%04d.png``), as input sequences are named."""

@@ -248,15 +248,13 @@ def _capture(args, model, options, progress, bars):
     (:mod:`facetransfer.track.detect_checkpoint`, :mod:`facetransfer.track.fit_checkpoint`).
     """
     from ..track.capture import capture_detections
-    from ..track.detect_checkpoint import DetectionCheckpoint, landmarker_identity
+    from ..track.detect_checkpoint import DetectionCheckpoint, face_detector_id
 
     partial = partial_path(args.out)
     if args.restart and partial.exists():
         partial.unlink()
-    face = getattr(args, "face", None)
-    ck = DetectionCheckpoint.for_video(
-        partial, args.video, args.max_frames,
-        None if face is None else f"{landmarker_identity()}|face={face}")
+    ck = DetectionCheckpoint.for_video(partial, args.video, args.max_frames,
+                                       face_detector_id(getattr(args, "face", None)))
     saved = ck.load()
     if saved is not None:
         print(f"continued an interrupted run from frame {saved.detections.n_frames}")

@@ -23,7 +23,7 @@ from ..transfer import ALIGN_MODES
 from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES, JAW_MODES,
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
-from .common import (FACE_WHERE, MODEL_HELP, add_video_options, progress_disabled,
+from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, progress_disabled,
                      resolve_model, video_options, video_out)
 from .track import CAPTURE_HELP
 
@@ -230,6 +230,9 @@ def _register_puppet(sub) -> None:
     q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
     q.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given")
+    q.add_argument("--face", metavar="WHERE",
+                   help=f"with several people, the one whose performance drives the puppet: "
+                   f"{FACE_WHERE}")
     _add_output(q, run_puppet, metavar="OUT.mp4", video=True,
                 help="video (.mp4...) or image sequence (frames/%%05d.png)")
 
@@ -394,6 +397,8 @@ def _check_transfer_args(args):
             video_info(v)  # unreadable input: one line, before any work
             if not tr and not (v == args.target and args.performance):
                 _check_landmarks_file(v, args.tracker)
+                check_face(args.target_face if v == args.target else args.source_face, v,
+                           "--target-face" if v == args.target else "--source-face")
                 to_track += 1
     return vopt, to_track
 
@@ -503,13 +508,15 @@ def run_puppet(args) -> int:
     video_info(args.video)
     if not args.track:
         _check_landmarks_file(args.video, args.tracker)
+        check_face(args.face, args.video)
     model = _load_model_and_mediapipe(args.model,
                                       not args.track and args.tracker != "landmarks")
     wid = identity_from_label(model, args.identity)
     frames, fps = read_video(args.video, max_frames=args.max_frames)
     track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
                          max_frames=len(frames), method=args.tracker,
-                         progress_factory=_bar_factory(), workers=default_workers())
+                         progress_factory=_bar_factory(), workers=default_workers(),
+                         face=args.face)
     if args.track:   # a track of another video would drive the face with the wrong motion
         track.check_video(len(frames), (frames.shape[2], frames.shape[1]),
                           what=f"video {args.video}")

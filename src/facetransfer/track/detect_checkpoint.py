@@ -31,7 +31,7 @@ from .fit_checkpoint import SavedFit, pack_fit, unpack_fit
 log = logging.getLogger(__name__)
 
 __all__ = ["DETECT_CHECKPOINT_VERSION", "DetectionCheckpoint", "SavedDetections",
-           "detection_key", "landmarker_identity"]
+           "detection_key", "landmarker_identity", "face_detector_id"]
 
 #: bumped when the saved layout changes (older files are then ignored)
 DETECT_CHECKPOINT_VERSION = 3  # 2: with the blendshape scores; 3: in square pixels
@@ -64,6 +64,13 @@ def landmarker_identity() -> str:
 
     sha = REGISTRY["face_landmarker"].files[0].sha256
     return f"mediapipe-video:{sha}:warmup{VideoLandmarker.warmup_frames}"
+
+
+def face_detector_id(face: str | None) -> str | None:
+    """The detector's part of a progress file's key when ``face`` says which of several people
+    is detected (``track --face``), so that another person's progress is not continued; None
+    (the default detector's) without one."""
+    return None if face is None else f"{landmarker_identity()}|face={face}"
 
 
 @dataclass(frozen=True)

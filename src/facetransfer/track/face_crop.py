@@ -38,7 +38,7 @@ from .init import MediaPipeDetector
 
 __all__ = ["WHOLE_FRAME_SHARE", "CROP_FACES", "SEARCH_EVERY", "SEARCH_SLOWER", "MOST_FACES",
            "search_tiles", "face_box", "choose_subject", "moved_away",
-           "crop_about", "FACE_PLACES", "subject_point", "FollowingLandmarker"]
+           "crop_about", "FACE_PLACES", "face_place", "subject_point", "FollowingLandmarker"]
 
 #: A face found in a crop whose size (its points' larger extent) passes this share of the
 #: frame's shorter side goes back to the whole-frame detector, which finds faces this large.
@@ -118,29 +118,52 @@ FACE_PLACES = {"left": (0.0, 0.5), "right": (1.0, 0.5), "centre": (0.5, 0.5),
                "center": (0.5, 0.5)}
 
 
-def subject_point(text: str, size: tuple[int, int]) -> tuple[float, float, float]:
-    """The subject of ``track --face`` in a frame of ``size`` (W, H): ``"left"``, ``"right"``,
-    ``"centre"`` or pixels ``"X,Y"``, as a box of no size (:func:`face_box`): of several faces,
-    the nearest is followed from the first frame on.
+def face_place(text: str, what: str = "--face") -> tuple[str, tuple[float, float]]:
+    """What ``--face`` says, before any frame is seen: ``("share", (fx, fy))`` for ``"left"``,
+    ``"right"``, ``"centre"`` (:data:`FACE_PLACES`), ``("pixels", (x, y))`` for ``"X,Y"``.
 
     Raises
     ------
     TrackError
-        Anything else, or a point outside the frame.
+        Anything else (a batch manifest's cell is checked so before any clip runs); the
+        message names the option or cell ``what``.
     """
     from ..errors import TrackError
 
-    W, H = (float(v) for v in size)
     said = str(text).strip().lower()
     if said in FACE_PLACES:
-        fx, fy = FACE_PLACES[said]
-        return fx * (W - 1), fy * (H - 1), 0.0
+        return "share", FACE_PLACES[said]
     try:
         x, y = (float(v) for v in said.split(","))
     except ValueError:
         x = y = float("nan")
+    if not (x >= 0 and y >= 0 and np.isfinite(x + y)):
+        raise TrackError(f"{what} must be left, right, centre or pixels X,Y, got {text!r}")
+    return "pixels", (x, y)
+
+
+def subject_point(text: str, size: tuple[int, int], what: str = "--face"
+                  ) -> tuple[float, float, float]:
+    """The subject of ``track --face`` in a frame of ``size`` (W, H): ``"left"``, ``"right"``,
+    ``"centre"`` or pixels ``"X,Y"`` (:func:`face_place`), as a box of no size
+    (:func:`face_box`): of several faces, the nearest is followed from the first frame on.
+
+    Raises
+    ------
+    TrackError
+        Anything else, or a point outside the frame (the message names ``what``).
+    """
+    from ..errors import TrackError
+
+    W, H = (float(v) for v in size)
+    try:
+        kind, (x, y) = face_place(text)
+    except TrackError:
+        kind, x, y = "pixels", -1.0, -1.0
+    if kind == "share":
+        return x * (W - 1), y * (H - 1), 0.0
     if not (0 <= x < W and 0 <= y < H):
-        raise TrackError(f"--face must be left, right, centre or pixels X,Y inside the "
+        raise TrackError(f"{what} must be left, right, centre or pixels X,Y inside the "
                          f"{int(W)}x{int(H)} frame, got {text!r}")
     return x, y, 0.0
 

@@ -202,13 +202,14 @@ def _partial(key: str | None) -> Path | None:
 
 def capture_resuming(video, model, partial, *, frames=None, options=None, source=None,
                      fixed=None, progress=None, workers: int = 1, best_effort: bool = False,
-                     subject=None):
+                     subject=None, detector_id: str | None = None):
     """The capture tracker on the file ``video`` (or its decoded ``frames``) with its progress
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
     fit), continued from there when it holds this run's: an interrupted run loses nothing.
     ``best_effort``: a progress file that cannot be written is a warning, not an error;
     ``subject``: of several people, the face nearest this point (the caller keys ``partial``
-    by it)."""
+    by it: its path, or ``detector_id``, the key's detector part,
+    :func:`facetransfer.track.detect_checkpoint.face_detector_id`)."""
     from .aspect import View
     from .capture import capture_video
     from .detect_checkpoint import DetectionCheckpoint
@@ -216,7 +217,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
 
     clip = video if frames is None else frames
     ck = DetectionCheckpoint.for_video(partial, video, None if frames is None else len(frames),
-                                       best_effort=best_effort)
+                                       detector_id, best_effort=best_effort)
     view = View.of(video)
     saved = ck.load()
     if saved is not None:
