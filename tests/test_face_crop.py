@@ -329,3 +329,27 @@ def test_a_batch_pair_hands_its_faces_to_the_transfer(data_dir, monkeypatch, tmp
                         {"texture": "frame", "blend": "poisson", "mouth": None, "align": "trim",
                          "max_frames": None, "track_method": "auto", "speed": "fast"})
     assert seen[0].target.face == "right" and seen[0].expression.face == "left"
+
+
+def test_a_face_is_refused_by_the_trackers_that_cannot_follow_it(data_dir, tmp_path, capsys):
+    """Only the capture tracker follows a face said; the others would follow the face found
+    first, so a face given to them is one line, not ignored."""
+    from facetransfer.cli.main import main
+    from facetransfer.errors import TrackError
+    from facetransfer.track.obtain import obtain_track
+
+    v = str(data_dir / "video" / "face_2.mp4")
+    runs = [(["track", v, "--out", str(tmp_path / "t.npz"), "--tracker", "klt", "--face",
+              "left"], "--face is for the capture tracker"),
+            (["transfer", "--target", v, "--expression-from", v, "--tracker", "flow",
+              "--source-face", "left", "--out", str(tmp_path / "o.mp4")],
+             "--source-face is for the capture tracker (--tracker auto or capture), not "
+             "--tracker flow"),
+            (["puppet", v, "--identity", "id01", "--tracker", "landmarks", "--face", "right",
+              "--out", str(tmp_path / "p.mp4")], "--face is for the capture tracker")]
+    for argv, message in runs:
+        assert main(argv + ["--no-progress"]) == 2
+        assert message in capsys.readouterr().err, argv
+    assert not list(tmp_path.iterdir())
+    with pytest.raises(TrackError, match="is for the capture tracker, not the flow tracker"):
+        obtain_track(v, None, method="flow", face="left")

@@ -60,12 +60,19 @@ FACE_WHERE = ("left, right, centre, or pixels X,Y near the face (default: the fa
               "first)")
 
 
-def check_face(text: str | None, video, flag: str = "--face") -> None:
+def check_face(text: str | None, video, flag: str = "--face", tracker: str = "auto") -> None:
     """``flag``'s value placed in ``video``'s frame (:func:`facetransfer.track.face_crop.
-    subject_point`), so that a face option it cannot place fails before any work, naming
+    subject_point`), so that a face option it cannot place, or one given to a ``tracker`` other
+    than the capture tracker (which alone follows a face said), fails before any work, naming
     ``flag``; nothing for None."""
     if text is None:
         return
+    if tracker not in ("auto", "capture"):
+        from ..errors import FaceTransferError
+
+        raise FaceTransferError(f"{flag} is for the capture tracker (--tracker auto or "
+                                f"capture), not --tracker {tracker}, which follows the face "
+                                "found first")
     from ..io.video import video_info
     from ..track.face_crop import subject_point
 

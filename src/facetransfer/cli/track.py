@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
-from .common import (FACE_WHERE, MODEL_HELP, add_video_options, progress_disabled,
+from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, progress_disabled,
                      resolve_model, video_options, video_out)
 
 
@@ -128,6 +128,12 @@ def run(args) -> int:
     settings = track_settings(args)                                   # validates the options
     tracker = settings.choose(args.init)
     video_info(args.video)  # unreadable / empty video: one line, before any work
+    if args.face is not None and args.from_track is None:
+        if tracker != "capture":
+            raise FaceTransferError(f"--face is for the capture tracker (--tracker capture, or "
+                                    f"auto without --init points), not the {tracker} tracker, "
+                                    "which follows the face found first")
+        check_face(args.face, args.video)
     model = _model_meanwhile(args, tracker)
     if args.from_track is not None:
         track = Track.load(args.from_track)

@@ -390,15 +390,17 @@ def _check_transfer_args(args):
     if args.save_track:
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
     to_track = 0
-    for v, tr in ((args.target, args.target_track), (args.expression_from, args.source_track),
-                  (args.viseme_from, args.viseme_track), (args.identity_from, args.identity_track),
-                  (args.pose_from, args.pose_track)):
+    for k, (v, tr) in enumerate(((args.target, args.target_track),
+                                 (args.expression_from, args.source_track),
+                                 (args.viseme_from, args.viseme_track),
+                                 (args.identity_from, args.identity_track),
+                                 (args.pose_from, args.pose_track))):
         if v:
             video_info(v)  # unreadable input: one line, before any work
             if not tr and not (v == args.target and args.performance):
                 _check_landmarks_file(v, args.tracker)
-                check_face(args.target_face if v == args.target else args.source_face, v,
-                           "--target-face" if v == args.target else "--source-face")
+                check_face(*((args.target_face, v, "--target-face") if k == 0 else
+                             (args.source_face, v, "--source-face")), args.tracker)
                 to_track += 1
     return vopt, to_track
 
@@ -508,7 +510,7 @@ def run_puppet(args) -> int:
     video_info(args.video)
     if not args.track:
         _check_landmarks_file(args.video, args.tracker)
-        check_face(args.face, args.video)
+        check_face(args.face, args.video, tracker=args.tracker)
     model = _load_model_and_mediapipe(args.model,
                                       not args.track and args.tracker != "landmarks")
     wid = identity_from_label(model, args.identity)

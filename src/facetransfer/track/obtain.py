@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import ShapeError, VideoError
+from ..errors import ShapeError, TrackError, VideoError
 from ..errors import RewriteError
 from .aspect import warn_stored_fit
 from .cache import cached_track, partial_path, store_track, track_key
@@ -264,6 +264,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         Of at most ``max_frames`` frames (a longer track file is cut).
     """
     check_track_method(method)
+    if face is not None and method not in ("auto", "capture"):
+        raise TrackError(f"a face to follow ({face!r}) is for the capture tracker, not the "
+                         f"{method} tracker, which follows the face found first")
     if track_file is not None:
         tr = Track.load(track_file)
         tr.check_model(model)
