@@ -30,6 +30,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import RewriteError, VideoError
+from .io.exr import plate_grading
 from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
 from .rewrite import rewrite_frames
@@ -637,7 +638,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
         if bar is not None:
             stack.callback(bar.close)
             bar.update(start)
-        render = _Frames(plan, model, options, mouth_fn, compose, bar, start)
+        render = _Frames(plan, model, options, mouth_fn, compose, bar, start,
+                         None if compose is not None else plate_grading(out, audio_from))
         t0 = time.perf_counter()
         if writer is None:
             from .io.video import write_video_with_audio
@@ -658,7 +660,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
 @dataclass
 class _Frames:
     """The rewritten frames of a plan from ``start`` on (:func:`rewrite_frames`), timed and
-    counted: ``seconds`` spent rendering, ``rewritten`` frames that show a face."""
+    counted: ``seconds`` spent rendering, ``rewritten`` frames that show a face; of an OpenEXR
+    plate written as OpenEXR, in its linear light (``grading``)."""
 
     plan: TransferPlan
     model: object
@@ -667,6 +670,7 @@ class _Frames:
     compose: Callable | None
     bar: object
     start: int
+    grading: object = None    # an OpenEXR plate's (facetransfer.io.exr.PlateGrading)
     seconds: float = 0.0
     rewritten: int = 0
 
@@ -684,6 +688,8 @@ class _Frames:
             t = time.perf_counter()
             r = next(it)
             frame = r.image if self.compose is None else self.compose(i, r)
+            if self.grading is not None:
+                frame = self.grading(i, np.asarray(p.target_frames[i]), frame)
             self.seconds += time.perf_counter() - t
             face = bool(r.face_mask.any())
             self.rewritten += face

@@ -127,7 +127,8 @@ class SequenceWriter:
         return sum(self.marks)
 
     def write(self, frame: np.ndarray, *, marked: bool = False) -> None:
-        """Write the next ``(H, W, 3) uint8`` frame (``marked``: counted in :attr:`marked`)."""
+        """Write the next ``(H, W, 3) uint8`` frame (``marked``: counted in :attr:`marked`; of an
+        OpenEXR sequence, float16 or float32 linear RGB too)."""
         i = self.done
         if i >= self.n_frames:
             raise VideoError(f"{self.output.path}: all {self.n_frames} frames are written")

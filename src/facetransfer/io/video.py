@@ -237,12 +237,24 @@ _FRAME_SAVE = {".png": {"compress_level": 1}, ".jpg": {"quality": 95},
 def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
                      suffix: str | None = None) -> None:
     """Write one frame of an image sequence, ``(H, W, 3) uint8`` RGB, to ``path`` in the file
-    type of ``suffix`` (default: ``path``'s own; one of :data:`IMAGE_SUFFIXES`)."""
+    type of ``suffix`` (default: ``path``'s own; one of :data:`IMAGE_SUFFIXES`); an OpenEXR
+    frame may also be linear float RGB (:func:`facetransfer.io.exr.write_exr`)."""
     from PIL import Image
 
     suffix = (suffix or Path(path).suffix).lower()
+    if suffix == ".exr":
+        from .exr import write_exr
+
+        write_exr(path, rgb)
+        return
     Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8)).save(
         path, format=Image.registered_extensions()[suffix], **_FRAME_SAVE.get(suffix, {}))
+
+
+def _linear(frame: np.ndarray, path) -> bool:
+    """Whether ``frame`` is linear float RGB for an OpenEXR sequence ``path`` (written as it
+    is, not as 8-bit RGB)."""
+    return frame.dtype in (np.float16, np.float32) and Path(path).suffix.lower() == ".exr"
 
 
 def is_image_pattern(path: str | os.PathLike) -> bool:
@@ -645,25 +657,28 @@ class VideoWriter:
                                  start=self.audio_start, duration=self.expected / self.fps)
 
     def write(self, frame: np.ndarray) -> None:
-        """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size."""
+        """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size (of an OpenEXR
+        sequence, float16 or float32 linear RGB too: :func:`facetransfer.io.exr.write_exr`)."""
         if self.result is not None or (self._proc is None and self._tmpdir is None):
             raise VideoError(f"video {self.path} is already closed")
         if frame.shape != (self.size[1], self.size[0], 3):
             raise VideoError(f"frame of shape {frame.shape} does not match video size "
                              f"{self.size[0]}x{self.size[1]} of {self.path}")
-        img = np.ascontiguousarray(frame, dtype=np.uint8)
         if self._tmpdir is not None:
-            self._write_image(img)
-        else:
-            pad = (self.stored_size[1] - self.size[1], self.stored_size[0] - self.size[0])
-            if any(pad):
-                img = np.pad(img, ((0, pad[0]), (0, pad[1]), (0, 0)), mode="edge")
-            if self._pipe_format == "yuv420p":
-                img = _yuv420p(img)
-            try:
-                self._proc.stdin.write(memoryview(img).cast("B"))
-            except OSError:  # ffmpeg stopped (full disk, killed...): report why
-                raise self._ffmpeg_failed() from None
+            self._write_image(frame if _linear(frame, self.path) else
+                              np.ascontiguousarray(frame, dtype=np.uint8))
+            self.n_frames += 1
+            return
+        img = np.ascontiguousarray(frame, dtype=np.uint8)
+        pad = (self.stored_size[1] - self.size[1], self.stored_size[0] - self.size[0])
+        if any(pad):
+            img = np.pad(img, ((0, pad[0]), (0, pad[1]), (0, 0)), mode="edge")
+        if self._pipe_format == "yuv420p":
+            img = _yuv420p(img)
+        try:
+            self._proc.stdin.write(memoryview(img).cast("B"))
+        except OSError:  # ffmpeg stopped (full disk, killed...): report why
+            raise self._ffmpeg_failed() from None
         self.n_frames += 1
 
     def _write_image(self, img: np.ndarray) -> None:

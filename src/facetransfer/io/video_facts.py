@@ -120,7 +120,11 @@ def fact_lines(f: VideoFacts) -> list[str]:
         return [f"{f.path}: {size}",
                 f"  image sequence, frames {f.first_number}-{last}; read at {timing} (it "
                 "stores no rate: --sequence-fps gives it)",
-                "  RGB images, read as they are (16 bits scaled to 8, alpha dropped); no audio"]
+                ("  OpenEXR, scene-linear: shown through the sRGB curve (above 1 as white) "
+                 "to be tracked; a rewrite written as .exr keeps every float it does not "
+                 "change; no audio" if str(f.path).lower().endswith(".exr") else
+                 "  RGB images, read as they are (16 bits scaled to 8, alpha dropped); no "
+                 "audio")]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}",
             f"  container {f.container or '?'}; {reading}"]

@@ -3,7 +3,8 @@
 
 A sequence starts at its lowest frame number present (0, 1, 1001, ...) and runs without a gap;
 its frames are PNG, JPEG, TIFF or BMP files (8 or 16 bits a channel, grey or colour; an alpha
-channel is dropped), read by OpenCV and given as ``(H, W, 3) uint8`` RGB. A sequence stores no
+channel is dropped), read by OpenCV and given as ``(H, W, 3) uint8`` RGB, or OpenEXR files of
+scene-linear floats, shown through the sRGB curve (:mod:`facetransfer.io.exr`). A sequence stores no
 frame rate: it is read at :data:`DEFAULT_SEQUENCE_FPS` unless ``FACETRANSFER_SEQUENCE_FPS`` (the
 commands' ``--sequence-fps``) gives another. It has no audio, no fields and square pixels.
 """
@@ -31,10 +32,10 @@ __all__ = ["IMAGE_SUFFIXES", "FRAME_FIELD", "DEFAULT_SEQUENCE_FPS", "SEQUENCE_FP
            "same_sequence_files"]
 
 #: Image formats of a frame sequence, read and written (``frames/%05d.png``).
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
-#: Image formats of plates that a sequence refuses by name: their pixels are scene-linear or
-#: log (OpenEXR, Cineon/DPX) and need the user's colour pipeline to become video RGB.
-_SCENE_SUFFIXES = (".exr", ".dpx", ".cin", ".hdr")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr")
+#: Image formats of plates that a sequence refuses by name: their pixels are log or of
+#: unknown scale (Cineon/DPX, Radiance) and need the user's colour pipeline to become video RGB.
+_SCENE_SUFFIXES = (".dpx", ".cin", ".hdr")
 #: A frame-number field: printf's ``%d``/``%05d``, or a run of ``#`` (one digit each).
 FRAME_FIELD = re.compile(r"%0?\d*d|#+")
 #: The frame rate of a sequence when none is given: film's and the compositing packages'.
@@ -169,8 +170,9 @@ def open_sequence(path) -> Sequence:
     p = Path(path)
     if p.suffix.lower() in _SCENE_SUFFIXES:
         raise VideoError(f"image sequence {p}: {p.suffix} frames are not read (their pixels "
-                         "are scene-linear or log); write the plate as PNG or TIFF (8 or 16 "
-                         "bits, display-referred sRGB / Rec.709) first")
+                         "are log or of unknown scale); write the plate as OpenEXR (scene-"
+                         "linear), or as PNG or TIFF (8 or 16 bits, display-referred sRGB / "
+                         "Rec.709) first")
     return _opened(str(p), sequence_stamp(p))
 
 
@@ -207,9 +209,14 @@ def _span(a: int, b: int) -> str:
 
 def _read_frame(file: Path, pattern: Path) -> np.ndarray:
     """One frame file as ``(H, W, 3) uint8`` BGR (16 bits scaled, grey expanded, alpha
-    dropped, a JPEG's EXIF orientation applied)."""
+    dropped, a JPEG's EXIF orientation applied; OpenEXR's linear floats shown through the sRGB
+    curve, :func:`facetransfer.io.exr.srgb_encode`)."""
     import cv2
 
+    if file.suffix.lower() == ".exr":
+        from .exr import read_exr, srgb_encode
+
+        return srgb_encode(read_exr(file)[..., ::-1])
     bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
     if bgr is None:
         raise VideoError(f"image sequence {pattern}: cannot read frame file {file} (not an "

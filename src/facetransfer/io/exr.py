@@ -1,0 +1,193 @@
+"""OpenEXR plates: scene-linear frames shown to the tracker through the sRGB curve, and a
+rewritten plate that keeps every float the rewrite did not change.
+
+A VFX plate is often a sequence of OpenEXR files (``plate/sh010.%04d.exr``) of scene-linear RGB
+in half or single floats. The tracker, the texture and the rewrite work on display-referred
+8-bit RGB, so an EXR frame is *shown* through the sRGB transfer curve (IEC 61966-2-1; the
+linear values clipped to [0, 1]: highlights above 1 read as white) to become the frame every
+other module sees (:func:`srgb_encode`).
+
+A rewrite written as EXR (``--out out/sh010.%04d.exr``) goes back to linear light: of an EXR
+plate, each output pixel is the plate's own float plus the rewrite's change in linear light,
+``P + dec(R) - dec(T)`` with ``dec`` the inverse curve (:func:`srgb_decode`), ``R`` the
+rewritten and ``T`` the shown target pixel; where the rewrite changed nothing (``R == T``,
+everything outside the face), the plate's float is written unchanged, bit for bit, values
+beyond [0, 1] included (:func:`graded_frame`). Of any other target, an EXR frame is the
+rewritten 8-bit frame decoded to linear. EXR files are written in the plate's own pixel type
+(half or float, :func:`exr_pixel_type`; half for a target of another kind), RGB, ZIP-
+compressed; other header attributes (timecode, chromaticities) and an alpha channel are not
+carried over.
+
+OpenCV reads and writes OpenEXR only when ``OPENCV_IO_ENABLE_OPENEXR`` is set (its codec is off
+by default for untrusted files); it is set here, before the first EXR file is touched, unless
+the user set it.
+"""
+
+from __future__ import annotations
+
+import functools
+import os
+import struct
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import VideoError
+
+__all__ = ["EXR_SUFFIX", "srgb_encode", "srgb_decode", "read_exr", "write_exr",
+           "exr_pixel_type", "graded_frame", "is_exr", "PlateGrading", "plate_grading"]
+
+EXR_SUFFIX = ".exr"
+_MAGIC = b"\x76\x2f\x31\x01"
+#: OpenEXR's channel pixel types (the ``chlist`` attribute).
+_PIXEL_TYPES = {0: "uint", 1: "half", 2: "float"}
+
+
+def is_exr(path) -> bool:
+    """Whether ``path`` (a file or a sequence's pattern) names OpenEXR frames."""
+    return Path(path).suffix.lower() == EXR_SUFFIX
+
+
+def _cv2():
+    """OpenCV with its OpenEXR codec enabled (unless the user said otherwise)."""
+    os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")
+    import cv2
+
+    return cv2
+
+
+def srgb_encode(linear: np.ndarray) -> np.ndarray:
+    """Linear RGB (any shape, float) shown as 8-bit sRGB: clipped to [0, 1], the IEC 61966-2-1
+    curve (``12.92 x`` up to 0.0031308, ``1.055 x^(1/2.4) - 0.055`` above), rounded."""
+    x = np.clip(np.asarray(linear, np.float32), 0.0, 1.0)
+    v = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+    return np.rint(v * 255.0).astype(np.uint8)
+
+
+@functools.lru_cache(maxsize=1)
+def _decode_table() -> np.ndarray:
+    v = np.arange(256, dtype=np.float64) / 255.0
+    lin = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+    return lin.astype(np.float32)
+
+
+def srgb_decode(encoded: np.ndarray) -> np.ndarray:
+    """8-bit sRGB (any shape, uint8) back to linear float32 (the inverse of
+    :func:`srgb_encode` on its 256 levels)."""
+    return _decode_table()[np.asarray(encoded, np.uint8)]
+
+
+def exr_pixel_type(path) -> str:
+    """The pixel type of an OpenEXR file's first channel, ``"half"``, ``"float"`` or
+    ``"uint"``, read from its header's ``channels`` attribute.
+
+    Raises
+    ------
+    VideoError
+        Not an OpenEXR file, or a header without channels.
+    """
+    with open(path, "rb") as fh:
+        head = fh.read(65536)
+    if head[:4] != _MAGIC:
+        raise VideoError(f"{path} is not an OpenEXR file")
+    at = 8
+    while at < len(head) and head[at] != 0:
+        name_end = head.index(b"\0", at)
+        type_end = head.index(b"\0", name_end + 1)
+        size = struct.unpack_from("<i", head, type_end + 1)[0]
+        value = type_end + 5
+        if head[at:name_end] == b"channels" and head[name_end + 1:type_end] == b"chlist":
+            ptype = struct.unpack_from("<i", head, head.index(b"\0", value) + 1)[0]
+            return _PIXEL_TYPES.get(ptype, "float")
+        at = value + size
+    raise VideoError(f"{path}: no channels in its OpenEXR header")
+
+
+def read_exr(path) -> np.ndarray:
+    """An OpenEXR frame as ``(H, W, 3)`` float32 linear RGB (grey expanded, alpha dropped).
+
+    Raises
+    ------
+    VideoError
+        Unreadable (naming the file).
+    """
+    cv2 = _cv2()
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    if img is None or img.dtype != np.float32:
+        raise VideoError(f"cannot read the OpenEXR frame {path} (damaged, or not RGB floats)")
+    if img.ndim == 2:
+        return np.repeat(img[..., None], 3, axis=2)
+    return np.ascontiguousarray(img[..., 2::-1])
+
+
+def write_exr(path, rgb: np.ndarray) -> None:
+    """Write ``(H, W, 3)`` linear RGB as an OpenEXR file, ZIP-compressed: float32 as single
+    floats, float16 as half floats, uint8 (sRGB) decoded (:func:`srgb_decode`) to half floats
+    (which hold each of its 256 levels exactly enough to encode back to it).
+
+    Raises
+    ------
+    ValueError
+        OpenCV could not write it.
+    """
+    cv2 = _cv2()
+    half = rgb.dtype != np.float32
+    lin = srgb_decode(rgb) if rgb.dtype == np.uint8 else np.asarray(rgb, np.float32)
+    params = [cv2.IMWRITE_EXR_TYPE,
+              cv2.IMWRITE_EXR_TYPE_HALF if half else cv2.IMWRITE_EXR_TYPE_FLOAT,
+              cv2.IMWRITE_EXR_COMPRESSION, cv2.IMWRITE_EXR_COMPRESSION_ZIP]
+    # encoded in memory: OpenCV chooses the format by the name's extension, and the writers
+    # write under temporary names (.tmp)
+    ok, buf = cv2.imencode(EXR_SUFFIX, np.ascontiguousarray(lin[..., ::-1]), params)
+    if not ok:
+        raise ValueError(f"OpenCV could not encode {path} as OpenEXR")
+    Path(path).write_bytes(buf.tobytes())
+
+
+def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
+    """The rewritten frame in the plate's linear light: ``plate`` (H, W, 3) float32 where
+    ``rewritten`` equals ``shown`` (both (H, W, 3) uint8, the plate shown through
+    :func:`srgb_encode` and its rewrite), else ``plate + dec(rewritten) - dec(shown)``.
+
+    Returns
+    -------
+    (H, W, 3) float32
+    """
+    out = np.array(plate, np.float32, copy=True)
+    changed = np.any(rewritten != shown, axis=2)
+    out[changed] += srgb_decode(rewritten[changed]) - srgb_decode(shown[changed])
+    return out
+
+
+class PlateGrading:
+    """The rewritten frames of an OpenEXR plate in its own linear light and pixel type
+    (:func:`graded_frame`): ``grading(i, shown, rewritten)`` for output frame ``i``, which
+    rewrites the plate's frame ``i``.
+
+    Parameters
+    ----------
+    plate : path-like
+        The plate's pattern (``plate/sh010.%04d.exr``).
+    """
+
+    def __init__(self, plate) -> None:
+        from .video_sequence import open_sequence
+
+        self.sequence = open_sequence(plate)
+        kind = exr_pixel_type(self.sequence.file(0))
+        self.dtype = np.float16 if kind == "half" else np.float32
+
+    def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
+        plate = read_exr(self.sequence.file(i))
+        return graded_frame(plate, shown, rewritten).astype(self.dtype)
+
+
+def plate_grading(out, target) -> PlateGrading | None:
+    """The grading of a rewrite written as the OpenEXR sequence ``out`` of the OpenEXR plate
+    ``target``; None for any other output or target (an 8-bit frame written as EXR is then
+    decoded to linear by :func:`write_exr`)."""
+    from .video_sequence import is_sequence
+
+    if target is None or not (is_exr(out) and is_exr(target) and is_sequence(target)):
+        return None
+    return PlateGrading(target)

@@ -1,0 +1,137 @@
+"""OpenEXR plates (facetransfer.io.exr): scene-linear frames shown through the sRGB curve to the
+tracker, read as the frames they hold; a rewrite written as OpenEXR keeps every float it does
+not change, bit for bit, and is the rewrite of the same frames in 8 bits where it does."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer.errors import VideoError  # noqa: E402
+from facetransfer.io.exr import (exr_pixel_type, graded_frame, read_exr, srgb_decode,  # noqa: E402
+                                 srgb_encode, write_exr)
+from facetransfer.io.video import VideoOptions, read_video, write_video  # noqa: E402
+from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
+
+
+def test_the_srgb_curve_is_iec_61966_2_1_and_inverts_on_every_level():
+    levels = np.arange(256, dtype=np.uint8)
+    assert np.array_equal(srgb_encode(srgb_decode(levels)), levels)
+    # the curve's points: its linear segment's end, mid grey, 128, and clipping
+    assert srgb_encode(np.array([0.0031308, 0.2158605, 0.5, 1.0, 4.0, -0.5])).tolist() == \
+        [10, 128, 188, 255, 255, 0]
+    assert srgb_decode(np.array([0, 10, 128, 255])) == pytest.approx(
+        [0.0, 10 / 255 / 12.92, ((128 / 255 + 0.055) / 1.055) ** 2.4, 1.0], rel=1e-6)
+    # half floats hold every level closely enough to encode back to it
+    assert np.array_equal(srgb_encode(srgb_decode(levels).astype(np.float16)), levels)
+
+
+def test_exr_files_keep_their_floats_and_say_their_pixel_type(tmp_path):
+    rng = np.random.default_rng(0)
+    lin = (rng.random((30, 40, 3)) * 6 - 1).astype(np.float32)   # beyond [0, 1] both ways
+    write_exr(tmp_path / "f.exr", lin)
+    write_exr(tmp_path / "h.exr", lin.astype(np.float16))
+    write_exr(tmp_path / "u.exr", srgb_encode(lin))
+    assert [exr_pixel_type(tmp_path / f"{k}.exr") for k in "fhu"] == ["float", "half", "half"]
+    assert np.array_equal(read_exr(tmp_path / "f.exr"), lin)
+    assert np.array_equal(read_exr(tmp_path / "h.exr"), lin.astype(np.float16).astype(np.float32))
+    assert np.array_equal(srgb_encode(read_exr(tmp_path / "u.exr")), srgb_encode(lin))
+    (tmp_path / "x.exr").write_bytes(b"\x89PNG not an exr")
+    with pytest.raises(VideoError, match="x.exr is not an OpenEXR file"):
+        exr_pixel_type(tmp_path / "x.exr")
+    with pytest.raises(VideoError, match="cannot read the OpenEXR frame .*x.exr"):
+        read_exr(tmp_path / "x.exr")
+
+
+def test_a_graded_frame_changes_only_what_the_rewrite_changed():
+    rng = np.random.default_rng(1)
+    plate = (rng.random((20, 30, 3)) * 3 - 0.2).astype(np.float32)
+    shown = srgb_encode(plate)
+    rewritten = shown.copy()
+    rewritten[5:9, 10:20] = rng.integers(0, 256, (4, 10, 3), dtype=np.uint8)
+    out = graded_frame(plate, shown, rewritten)
+    changed = np.any(rewritten != shown, axis=2)
+    assert changed.sum() > 30 and np.array_equal(out[~changed], plate[~changed])
+    expect = plate + (srgb_decode(rewritten) - srgb_decode(shown))
+    assert np.array_equal(out[changed], expect[changed])
+    inside = changed & (plate <= 1).all(axis=2) & (plate >= 0).all(axis=2)
+    # shown as the rewrite, but for the plate's detail finer than a level
+    assert np.abs(srgb_encode(out[inside]).astype(int) - rewritten[inside]).max() <= 1
+
+
+@pytest.fixture(scope="module")
+def target(clips, tmp_path_factory):
+    """The synthetic target's frames as a lossless video decodes them."""
+    lossless = tmp_path_factory.mktemp("exr") / "target.mkv"
+    write_video(lossless, read_video(clips["target"])[0], 25.0, options=VideoOptions(crf=0))
+    return lossless, read_video(lossless)[0]
+
+
+def _exr_plate(folder: Path, frames, bright_rows: int = 0) -> Path:
+    """The frames as a half-float plate numbered from 1001, the top ``bright_rows`` three
+    times brighter (beyond 1 where they were white)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for i, rgb in enumerate(frames):
+        lin = srgb_decode(rgb)
+        lin[:bright_rows] *= 3.0
+        write_exr(folder / f"sh010.{1001 + i:04d}.exr", lin.astype(np.float16))
+    return folder / "sh010.####.exr"
+
+
+def test_an_exr_plate_reads_as_the_frames_it_holds(target, tmp_path, capsys, monkeypatch):
+    from facetransfer.cli.main import main
+
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
+    _, frames = target
+    plate = _exr_plate(tmp_path, frames)
+    got, _ = read_video(plate)
+    assert np.array_equal(got, frames)
+    assert main(["probe", str(plate), "--sequence-fps", "25"]) == 0
+    assert "OpenEXR, scene-linear: shown through the sRGB curve" in capsys.readouterr().out
+
+
+def test_an_exr_plate_is_rewritten_in_its_own_floats(clips, target, quick_model_path, tmp_path,
+                                                    capsys, monkeypatch):
+    """Onto a half-float plate, the rewrite written as OpenEXR: numbered as the plate, half
+    floats, every pixel the rewrite did not change the plate's float (highlights above 1
+    included), every changed one the 8-bit rewrite of the same frames (a PNG sequence of the
+    video) shown through the curve."""
+    from facetransfer.cli.main import main
+
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
+    lossless, frames = target
+    plate = _exr_plate(tmp_path / "plate", frames, bright_rows=6)
+    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
+              "--source-track", clips["source_track"], "--model", quick_model_path,
+              "--no-progress", "--sequence-fps", "25"]
+    (tmp_path / "out").mkdir()
+    code = main(["transfer", "--target", str(plate), *map(str, common),
+                 "--out", str(tmp_path / "out" / "ft.%04d.exr")])
+    assert code == 0, capsys.readouterr().err
+    code = main(["transfer", "--target", str(lossless), *map(str, common),
+                 "--out", str(tmp_path / "png_%03d.png")])
+    assert code == 0, capsys.readouterr().err
+    changed_any = 0
+    for i in range(len(frames)):
+        out = tmp_path / "out" / f"ft.{1001 + i:04d}.exr"
+        assert exr_pixel_type(out) == "half"
+        got = read_exr(out)
+        src = read_exr(tmp_path / "plate" / f"sh010.{1001 + i:04d}.exr")
+        rewritten = _png(tmp_path / f"png_{i:03d}.png")
+        same = np.all(rewritten == frames[i], axis=2)
+        assert np.array_equal(got[same], src[same])
+        assert np.array_equal(srgb_encode(got[~same][:, None])[:, 0], rewritten[~same])
+        assert src[:6].max() > 1.0 and np.array_equal(got[:6], src[:6])  # outside the face
+        changed_any += int((~same).sum())
+    assert changed_any > 1000
+
+
+def _png(path: Path) -> np.ndarray:
+    import cv2
+
+    return cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
