@@ -57,11 +57,19 @@ def test_a_graded_frame_changes_only_what_the_rewrite_changed():
     out = graded_frame(plate, shown, rewritten)
     changed = np.any(rewritten != shown, axis=2)
     assert changed.sum() > 30 and np.array_equal(out[~changed], plate[~changed])
-    expect = plate + (srgb_decode(rewritten) - srgb_decode(shown))
-    assert np.array_equal(out[changed], expect[changed])
-    inside = changed & (plate <= 1).all(axis=2) & (plate >= 0).all(axis=2)
-    # shown as the rewrite, but for the plate's detail finer than a level
-    assert np.abs(srgb_encode(out[inside]).astype(int) - rewritten[inside]).max() <= 1
+    inside = (plate >= 0) & (plate <= 1)
+    # the plate's part below a level, in levels: at most half of one
+    level = np.where(plate <= 0.0031308, 12.92 * plate,
+                     1.055 * np.abs(plate) ** (1 / 2.4) - 0.055) * 255
+    detail = np.where(inside, level - shown, 0.0)
+    assert np.abs(detail).max() <= 0.5 + 1e-4
+    again = np.where(inside, 1.055 * np.abs(out) ** (1 / 2.4) - 0.055, 0) * 255
+    big = inside & (out > 0.0031308) & changed[..., None]
+    assert np.abs(again[big] - (rewritten + detail)[big]).max() < 1e-3
+    assert np.array_equal(srgb_encode(out[changed]), rewritten[changed])  # shown as rewritten
+    assert ((~inside) & changed[..., None]).sum() > 10    # some clipped, and not glowing:
+    assert np.array_equal(out[(~inside) & changed[..., None]],
+                          srgb_decode(rewritten)[(~inside) & changed[..., None]])
 
 
 @pytest.fixture(scope="module")

@@ -9,13 +9,16 @@ other module sees (:func:`srgb_encode`).
 
 A rewrite written as EXR (``--out out/sh010.%04d.exr``) goes back to linear light: of an EXR
 plate, each output pixel is the plate's own float plus the rewrite's change in linear light,
-``P + dec(R) - dec(T)`` with ``dec`` the inverse curve (:func:`srgb_decode`), ``R`` the
-rewritten and ``T`` the shown target pixel; where the rewrite changed nothing (``R == T``,
-everything outside the face), the plate's float is written unchanged, bit for bit, values
-beyond [0, 1] included (:func:`graded_frame`). Of any other target, an EXR frame is the
+``dec(R + (enc(P) - T))`` with ``enc`` the curve before rounding, ``dec`` its inverse, ``R``
+the rewritten and ``T`` the shown target pixel: the rewrite with the plate's detail finer than
+an 8-bit level kept (in a channel whose plate value lies outside [0, 1], clipped when shown,
+the rewrite's own ``dec(R)``: the face drawn over a highlight does not glow with it); where the
+rewrite changed nothing (``R == T``, everything outside the face), the plate's float is
+written unchanged, bit for bit, values beyond [0, 1] included (:func:`graded_frame`). Of any other target, an EXR frame is the
 rewritten 8-bit frame decoded to linear. EXR files are written in the plate's own pixel type
-(half or float, :func:`exr_pixel_type`; half for a target of another kind), RGB, ZIP-
-compressed; other header attributes (timecode, chromaticities) and an alpha channel are not
+(half or float, :func:`exr_pixel_type`; half for a target of another kind), RGB, PIZ-
+compressed (lossless, a fifth the size of uncompressed half floats for a video frame, written
+four times faster than ZIP); other header attributes (timecode, chromaticities) and an alpha channel are not
 carried over.
 
 OpenCV reads and writes OpenEXR only when ``OPENCV_IO_ENABLE_OPENEXR`` is set (its codec is off
@@ -56,19 +59,28 @@ def _cv2():
     return cv2
 
 
+def _curve(x: np.ndarray) -> np.ndarray:
+    """The IEC 61966-2-1 curve of linear values clipped to [0, 1], in levels (0 to 255, not
+    rounded): ``12.92 x`` up to 0.0031308, ``1.055 x^(1/2.4) - 0.055`` above."""
+    x = np.clip(np.asarray(x, np.float32), 0.0, 1.0)
+    return 255.0 * np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
+
+
+def _uncurve(v: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`_curve`: levels (float, 0 to 255) to linear float32."""
+    v = np.clip(np.asarray(v, np.float64), 0.0, 255.0) / 255.0
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4).astype(np.float32)
+
+
 def srgb_encode(linear: np.ndarray) -> np.ndarray:
     """Linear RGB (any shape, float) shown as 8-bit sRGB: clipped to [0, 1], the IEC 61966-2-1
-    curve (``12.92 x`` up to 0.0031308, ``1.055 x^(1/2.4) - 0.055`` above), rounded."""
-    x = np.clip(np.asarray(linear, np.float32), 0.0, 1.0)
-    v = np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
-    return np.rint(v * 255.0).astype(np.uint8)
+    curve (:func:`_curve`), rounded."""
+    return np.rint(_curve(linear)).astype(np.uint8)
 
 
 @functools.lru_cache(maxsize=1)
 def _decode_table() -> np.ndarray:
-    v = np.arange(256, dtype=np.float64) / 255.0
-    lin = np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
-    return lin.astype(np.float32)
+    return _uncurve(np.arange(256, dtype=np.float64))
 
 
 def srgb_decode(encoded: np.ndarray) -> np.ndarray:
@@ -121,7 +133,7 @@ def read_exr(path) -> np.ndarray:
 
 
 def write_exr(path, rgb: np.ndarray) -> None:
-    """Write ``(H, W, 3)`` linear RGB as an OpenEXR file, ZIP-compressed: float32 as single
+    """Write ``(H, W, 3)`` linear RGB as an OpenEXR file, PIZ-compressed: float32 as single
     floats, float16 as half floats, uint8 (sRGB) decoded (:func:`srgb_decode`) to half floats
     (which hold each of its 256 levels exactly enough to encode back to it).
 
@@ -135,7 +147,7 @@ def write_exr(path, rgb: np.ndarray) -> None:
     lin = srgb_decode(rgb) if rgb.dtype == np.uint8 else np.asarray(rgb, np.float32)
     params = [cv2.IMWRITE_EXR_TYPE,
               cv2.IMWRITE_EXR_TYPE_HALF if half else cv2.IMWRITE_EXR_TYPE_FLOAT,
-              cv2.IMWRITE_EXR_COMPRESSION, cv2.IMWRITE_EXR_COMPRESSION_ZIP]
+              cv2.IMWRITE_EXR_COMPRESSION, cv2.IMWRITE_EXR_COMPRESSION_PIZ]
     # encoded in memory: OpenCV chooses the format by the name's extension, and the writers
     # write under temporary names (.tmp)
     ok, buf = cv2.imencode(EXR_SUFFIX, np.ascontiguousarray(lin[..., ::-1]), params)
@@ -147,7 +159,10 @@ def write_exr(path, rgb: np.ndarray) -> None:
 def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
     """The rewritten frame in the plate's linear light: ``plate`` (H, W, 3) float32 where
     ``rewritten`` equals ``shown`` (both (H, W, 3) uint8, the plate shown through
-    :func:`srgb_encode` and its rewrite), else ``plate + dec(rewritten) - dec(shown)``.
+    :func:`srgb_encode` and its rewrite), else the rewritten level plus the plate's part
+    below a level (its unrounded level less ``shown``, at most half a level), decoded; in a
+    channel whose plate value lies outside [0, 1], ``rewritten`` decoded
+    (:func:`srgb_decode`).
 
     Returns
     -------
@@ -155,7 +170,9 @@ def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) ->
     """
     out = np.array(plate, np.float32, copy=True)
     changed = np.any(rewritten != shown, axis=2)
-    out[changed] += srgb_decode(rewritten[changed]) - srgb_decode(shown[changed])
+    p = out[changed]
+    detail = np.where((p >= 0.0) & (p <= 1.0), _curve(p) - shown[changed], 0.0)
+    out[changed] = _uncurve(rewritten[changed] + detail)
     return out
 
 
