@@ -599,7 +599,9 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
         performance, the source frame for a transfer).
     audio_from : path-like, optional
         The target video: its audio is kept, and (without ``compose``) its pixel aspect ratio
-        and whether a colour matrix is named (:func:`facetransfer.io.video_like.like_video`).
+        and whether a colour matrix is named (:func:`facetransfer.io.video_like.like_video`);
+        of an OpenEXR plate rewritten as OpenEXR, its floats where the rewrite changes nothing
+        (:func:`facetransfer.io.exr.plate_grading`).
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
         The frame to write for output frame ``i`` (default: the rewritten image).
     video_options : VideoOptions, optional
