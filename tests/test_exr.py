@@ -143,3 +143,29 @@ def _png(path: Path) -> np.ndarray:
     import cv2
 
     return cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+
+
+def _windowed(src: Path, dst: Path, data, shown) -> None:
+    """``src`` with its header's data and display windows set to ``data`` and ``shown``
+    (x0, y0, x1, y1): the same pixels, placed in a larger frame."""
+    import struct
+
+    b = bytearray(src.read_bytes())
+    for name, box in ((b"dataWindow", data), (b"displayWindow", shown)):
+        at = b.index(name + b"\0box2i\0") + len(name) + 7 + 4
+        struct.pack_into("<4i", b, at, *box)
+    dst.write_bytes(bytes(b))
+
+
+def test_a_frame_cropped_to_its_content_is_placed_in_its_display_window(tmp_path):
+    """Compositing packages write a frame's data window (its content's box) inside a larger
+    display window: read, it is the display window with the data where it belongs."""
+    rng = np.random.default_rng(2)
+    lin = rng.random((30, 40, 3)).astype(np.float16).astype(np.float32)
+    write_exr(tmp_path / "a.exr", lin)
+    _windowed(tmp_path / "a.exr", tmp_path / "b.exr", (10, 0, 49, 29), (0, 0, 99, 79))
+    got = read_exr(tmp_path / "b.exr")
+    assert got.shape == (80, 100, 3)
+    assert np.array_equal(got[0:30, 10:50], lin) and got[30:].max() == 0 == got[:, :10].max()
+    _windowed(tmp_path / "a.exr", tmp_path / "c.exr", (-5, 0, 34, 29), (0, 0, 19, 9))
+    assert np.array_equal(read_exr(tmp_path / "c.exr"), lin[:10, 5:25])   # beyond: cut

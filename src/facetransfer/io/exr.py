@@ -5,7 +5,8 @@ A VFX plate is often a sequence of OpenEXR files (``plate/sh010.%04d.exr``) of s
 in half or single floats. The tracker, the texture and the rewrite work on display-referred
 8-bit RGB, so an EXR frame is *shown* through the sRGB transfer curve (IEC 61966-2-1; the
 linear values clipped to [0, 1]: highlights above 1 read as white) to become the frame every
-other module sees (:func:`srgb_encode`).
+other module sees (:func:`srgb_encode`); a frame is its display window, a data window cropped
+to the content placed in it on black (:func:`read_exr`).
 
 A rewrite written as EXR (``--out out/sh010.%04d.exr``) goes back to linear light: of an EXR
 plate, each output pixel is the plate's own float plus the rewrite's change in linear light,
@@ -89,6 +90,34 @@ def srgb_decode(encoded: np.ndarray) -> np.ndarray:
     return _decode_table()[np.asarray(encoded, np.uint8)]
 
 
+def _attributes(path) -> dict[str, tuple[bytes, bytes]]:
+    """An OpenEXR file's header attributes, ``name -> (type, value bytes)`` (a single-part
+    file's: the header ends at its first empty name).
+
+    Raises
+    ------
+    VideoError
+        Not an OpenEXR file.
+    """
+    with open(path, "rb") as fh:
+        head = fh.read(65536)
+    if head[:4] != _MAGIC:
+        raise VideoError(f"{path} is not an OpenEXR file")
+    out, at = {}, 8
+    try:
+        while at < len(head) and head[at] != 0:
+            name_end = head.index(b"\0", at)
+            type_end = head.index(b"\0", name_end + 1)
+            size = struct.unpack_from("<i", head, type_end + 1)[0]
+            value = type_end + 5
+            out[head[at:name_end].decode("latin-1")] = (head[name_end + 1:type_end],
+                                                         head[value:value + size])
+            at = value + size
+    except (ValueError, struct.error):
+        raise VideoError(f"{path}: a damaged OpenEXR header") from None
+    return out
+
+
 def exr_pixel_type(path) -> str:
     """The pixel type of an OpenEXR file's first channel, ``"half"``, ``"float"`` or
     ``"uint"``, read from its header's ``channels`` attribute.
@@ -98,25 +127,29 @@ def exr_pixel_type(path) -> str:
     VideoError
         Not an OpenEXR file, or a header without channels.
     """
-    with open(path, "rb") as fh:
-        head = fh.read(65536)
-    if head[:4] != _MAGIC:
-        raise VideoError(f"{path} is not an OpenEXR file")
-    at = 8
-    while at < len(head) and head[at] != 0:
-        name_end = head.index(b"\0", at)
-        type_end = head.index(b"\0", name_end + 1)
-        size = struct.unpack_from("<i", head, type_end + 1)[0]
-        value = type_end + 5
-        if head[at:name_end] == b"channels" and head[name_end + 1:type_end] == b"chlist":
-            ptype = struct.unpack_from("<i", head, head.index(b"\0", value) + 1)[0]
-            return _PIXEL_TYPES.get(ptype, "float")
-        at = value + size
-    raise VideoError(f"{path}: no channels in its OpenEXR header")
+    kind, value = _attributes(path).get("channels", (b"", b""))
+    if kind != b"chlist" or b"\0" not in value:
+        raise VideoError(f"{path}: no channels in its OpenEXR header")
+    ptype = struct.unpack_from("<i", value, value.index(b"\0") + 1)[0]
+    return _PIXEL_TYPES.get(ptype, "float")
+
+
+def _windows(path) -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """The file's data and display windows, each ``(x0, y0, x1, y1)`` inclusive."""
+    attrs = _attributes(path)
+    boxes = []
+    for name in ("dataWindow", "displayWindow"):
+        kind, value = attrs.get(name, (b"", b""))
+        if kind != b"box2i" or len(value) != 16:
+            raise VideoError(f"{path}: no {name} in its OpenEXR header")
+        boxes.append(struct.unpack("<4i", value))
+    return boxes[0], boxes[1]
 
 
 def read_exr(path) -> np.ndarray:
-    """An OpenEXR frame as ``(H, W, 3)`` float32 linear RGB (grey expanded, alpha dropped).
+    """An OpenEXR frame as ``(H, W, 3)`` float32 linear RGB of its display window (grey
+    expanded, alpha dropped; a data window smaller than the display window, as compositing
+    packages write a frame cropped to its content, placed in it on black).
 
     Raises
     ------
@@ -127,9 +160,19 @@ def read_exr(path) -> np.ndarray:
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None or img.dtype != np.float32:
         raise VideoError(f"cannot read the OpenEXR frame {path} (damaged, or not RGB floats)")
-    if img.ndim == 2:
-        return np.repeat(img[..., None], 3, axis=2)
-    return np.ascontiguousarray(img[..., 2::-1])
+    rgb = np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else \
+        np.ascontiguousarray(img[..., 2::-1])
+    data, shown = _windows(path)
+    if data == shown:
+        return rgb
+    W, H = shown[2] - shown[0] + 1, shown[3] - shown[1] + 1
+    out = np.zeros((H, W, 3), np.float32)
+    x0, y0 = data[0] - shown[0], data[1] - shown[1]
+    ax, ay = max(x0, 0), max(y0, 0)
+    bx, by = min(x0 + rgb.shape[1], W), min(y0 + rgb.shape[0], H)
+    if bx > ax and by > ay:
+        out[ay:by, ax:bx] = rgb[ay - y0:by - y0, ax - x0:bx - x0]
+    return out
 
 
 def write_exr(path, rgb: np.ndarray) -> None:
