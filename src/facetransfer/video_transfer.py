@@ -30,6 +30,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import RewriteError, VideoError
+from .io.ahead import ordered_ahead
 from .io.exr import plate_grading
 from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
@@ -686,16 +687,24 @@ class _Frames:
                             source_index=p.mouth_index, options=self.options,
                             mouth_function=self.mouth_fn, start=self.start,
                             progress=self.bar.update if self.bar is not None else None)
-        for i in range(self.start, p.n_frames):
+        frames = ((frame, face) for _, frame, face in self._composed(it))
+        if self.grading is not None:   # graded on threads, a few frames ahead of the writer
+            frames = ordered_ahead(self._graded, self._composed(it), ahead=4, workers=2)
+        for frame, face in frames:
+            self.rewritten += face
+            yield frame, face
+
+    def _composed(self, it):
+        """``(i, frame, face)`` of each output frame, the rendering timed."""
+        for i in range(self.start, self.plan.n_frames):
             t = time.perf_counter()
             r = next(it)
             frame = r.image if self.compose is None else self.compose(i, r)
-            if self.grading is not None:
-                frame = self.grading(i, np.asarray(p.target_frames[i]), frame)
             self.seconds += time.perf_counter() - t
-            face = bool(r.face_mask.any())
-            self.rewritten += face
-            yield frame, face
+            yield i, frame, bool(r.face_mask.any())
+
+    def _graded(self, i: int, frame, face: bool):
+        return self.grading(i, np.asarray(self.plan.target_frames[i]), frame), face
 
     def __call__(self):
         """Yield the frames."""

@@ -252,25 +252,13 @@ _AHEAD = 6
 
 def _decoded_ahead(seq: Sequence, frames: range) -> Iterator[tuple[int, np.ndarray]]:
     """``(i, BGR frame)`` for each of ``frames`` in turn, the next :data:`_AHEAD` files decoded
-    meanwhile by a pool of threads (as many as cores, at most 4)."""
-    from collections import deque
-    from concurrent.futures import ThreadPoolExecutor
+    meanwhile on threads (:func:`facetransfer.io.ahead.ordered_ahead`)."""
+    from .ahead import ordered_ahead
 
-    with ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1))) as pool:
-        pending = deque()
-        todo = iter(frames)
-        try:
-            for i in todo:
-                pending.append((i, pool.submit(_read_frame, seq.file(i), seq.pattern)))
-                if len(pending) > _AHEAD:
-                    j, fut = pending.popleft()
-                    yield j, fut.result()
-            while pending:
-                j, fut = pending.popleft()
-                yield j, fut.result()
-        finally:
-            for _, fut in pending:
-                fut.cancel()
+    def read(i: int):
+        return i, _read_frame(seq.file(i), seq.pattern)
+
+    yield from ordered_ahead(read, ((i,) for i in frames), ahead=_AHEAD)
 
 
 def suggested_pattern(folder) -> Path | None:
