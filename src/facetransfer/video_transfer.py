@@ -31,7 +31,7 @@ import numpy as np
 
 from .errors import RewriteError, VideoError
 from .io.ahead import ordered_ahead
-from .io.exr import plate_grading
+from .io.exr_plate import plate_grading
 from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
 from .rewrite import rewrite_frames
@@ -601,8 +601,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     audio_from : path-like, optional
         The target video: its audio is kept, and (without ``compose``) its pixel aspect ratio
         and whether a colour matrix is named (:func:`facetransfer.io.video_like.like_video`);
-        of an OpenEXR plate rewritten as OpenEXR, its floats where the rewrite changes nothing
-        (:func:`facetransfer.io.exr.plate_grading`).
+        an OpenEXR plate's floats where the rewrite changes nothing (an .exr ``out``).
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
         The frame to write for output frame ``i`` (default: the rewritten image).
     video_options : VideoOptions, optional
@@ -673,7 +672,7 @@ class _Frames:
     compose: Callable | None
     bar: object
     start: int
-    grading: object = None    # an OpenEXR plate's (facetransfer.io.exr.PlateGrading)
+    grading: object = None    # an OpenEXR plate's (facetransfer.io.exr_plate.PlateGrading)
     seconds: float = 0.0
     rewritten: int = 0
 

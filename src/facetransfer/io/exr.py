@@ -39,7 +39,7 @@ import numpy as np
 from ..errors import VideoError
 
 __all__ = ["EXR_SUFFIX", "srgb_encode", "srgb_decode", "read_exr", "write_exr",
-           "exr_pixel_type", "graded_frame", "is_exr", "PlateGrading", "plate_grading"]
+           "exr_pixel_type", "graded_frame", "is_exr"]
 
 EXR_SUFFIX = ".exr"
 _MAGIC = b"\x76\x2f\x31\x01"
@@ -218,36 +218,3 @@ def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) ->
     out[changed] = _uncurve(rewritten[changed] + detail)
     return out
 
-
-class PlateGrading:
-    """The rewritten frames of an OpenEXR plate in its own linear light and pixel type
-    (:func:`graded_frame`): ``grading(i, shown, rewritten)`` for output frame ``i``, which
-    rewrites the plate's frame ``i``.
-
-    Parameters
-    ----------
-    plate : path-like
-        The plate's pattern (``plate/sh010.%04d.exr``).
-    """
-
-    def __init__(self, plate) -> None:
-        from .video_sequence import open_sequence
-
-        self.sequence = open_sequence(plate)
-        kind = exr_pixel_type(self.sequence.file(0))
-        self.dtype = np.float16 if kind == "half" else np.float32
-
-    def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
-        plate = read_exr(self.sequence.file(i))
-        return graded_frame(plate, shown, rewritten).astype(self.dtype)
-
-
-def plate_grading(out, target) -> PlateGrading | None:
-    """The grading of a rewrite written as the OpenEXR sequence ``out`` of the OpenEXR plate
-    ``target``; None for any other output or target (an 8-bit frame written as EXR is then
-    decoded to linear by :func:`write_exr`)."""
-    from .video_sequence import is_sequence
-
-    if target is None or not (is_exr(out) and is_exr(target) and is_sequence(target)):
-        return None
-    return PlateGrading(target)

@@ -1,0 +1,41 @@
+"""A rewrite of an OpenEXR plate written as OpenEXR, in the plate's own floats and pixel type
+(:func:`facetransfer.io.exr.graded_frame` frame by frame)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .exr import exr_pixel_type, graded_frame, is_exr, read_exr
+from .video_sequence import is_sequence, open_sequence
+
+__all__ = ["PlateGrading", "plate_grading"]
+
+
+class PlateGrading:
+    """The rewritten frames of an OpenEXR plate in its own linear light and pixel type
+    (:func:`~facetransfer.io.exr.graded_frame`): ``grading(i, shown, rewritten)`` for output
+    frame ``i``, which rewrites the plate's frame ``i``.
+
+    Parameters
+    ----------
+    plate : path-like
+        The plate's pattern (``plate/sh010.%04d.exr``).
+    """
+
+    def __init__(self, plate) -> None:
+        self.sequence = open_sequence(plate)
+        kind = exr_pixel_type(self.sequence.file(0))
+        self.dtype = np.float16 if kind == "half" else np.float32
+
+    def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
+        plate = read_exr(self.sequence.file(i))
+        return graded_frame(plate, shown, rewritten).astype(self.dtype)
+
+
+def plate_grading(out, target) -> PlateGrading | None:
+    """The grading of a rewrite written as the OpenEXR sequence ``out`` of the OpenEXR plate
+    ``target``; None for any other output or target (an 8-bit frame written as EXR is then
+    decoded to linear by :func:`~facetransfer.io.exr.write_exr`)."""
+    if target is None or not (is_exr(out) and is_exr(target) and is_sequence(target)):
+        return None
+    return PlateGrading(target)
