@@ -131,3 +131,31 @@ def test_a_fixed_identity_is_the_first_shots(edited, arkit_model):
     ident = both.weights["identity"]
     assert np.allclose(ident[:40], w)
     assert np.abs(ident[40] - w).max() > 0.05 and np.array_equal(ident[40], ident[79])
+
+
+def test_a_chunk_after_a_cut_it_cannot_see_gets_its_own_identity(edited, arkit_model,
+                                                                 tmp_path, caplog):
+    """``batch track --chunk``: a later chunk is captured with the first chunk's identity where
+    it begins on that person, and with its own where the clip cut to another person in an
+    earlier chunk (before: the first person's identity, fitted to the other face)."""
+    from facetransfer.batch import jobs as J
+    from facetransfer.batch.chunks import Chunk
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.io.video import VideoOptions, write_video
+    from facetransfer.track.capture import capture_video
+    from facetransfer.track.settings import TrackerSettings
+
+    a, b = edited
+    path = tmp_path / "edited.mkv"
+    write_video(path, np.concatenate([a, b]), 25.0, options=VideoOptions(crf=0))
+    job, out, opt = ClipJob("edited", str(path)), str(tmp_path / "e.npz"), TrackerSettings()
+    first = J.track_chunk(job, Chunk(0, 0, 30), out, arkit_model, opt)
+    w = first.track.weights["identity"][0]
+    same = J.track_chunk(job, Chunk(1, 10, 40), out, arkit_model, opt, first).track
+    assert np.array_equal(same.weights["identity"], np.tile(w, (30, 1)))
+    with caplog.at_level("WARNING"):
+        other = J.track_chunk(job, Chunk(2, 50, 80), out, arkit_model, opt, first).track
+    assert "frames 50-79 begin on another face than the clip's first" in caplog.text
+    alone = capture_video(read_video(path, start=50, stop=80)[0], arkit_model, workers=1)
+    assert np.abs(other.weights["identity"][0] - w).max() > 0.1
+    assert np.allclose(other.weights["identity"], alone.weights["identity"])

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import functools
+import logging
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +21,8 @@ import numpy as np
 
 from .manifest import BatchError
 from .summary import Row
+
+log = logging.getLogger(__name__)
 
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS"]
@@ -131,7 +134,8 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
 
     The first chunk starts from the clip's initial points (``job.init``) and solves the
     identity; every later chunk starts from detected landmarks with the identity of ``first``
-    (the first chunk's result) held fixed.
+    (the first chunk's result) held fixed; with the capture tracker, only where the chunk
+    begins on that person (else its own: the clip cut to another one before it).
 
     Parameters
     ----------
@@ -161,10 +165,35 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
         if "identity" in first.track.weights:
             fixed = {"identity": first.track.weights["identity"][0]}
         init = "auto"  # the user's points are for the clip's first frame only
-    track = _track(frames, model, init, options, source=str(job.video), fixed=fixed,
-                   checkpoint=partial_path(out, f".chunk{chunk.index:03d}"), tracker=tracker,
-                   view=View.of(job.video), face=job.face)
+    if fixed is not None and tracker == "capture":
+        track = _chunk_capture(frames, model, options, job, chunk, fixed["identity"])
+    else:
+        track = _track(frames, model, init, options, source=str(job.video), fixed=fixed,
+                       checkpoint=partial_path(out, f".chunk{chunk.index:03d}"),
+                       tracker=tracker, view=View.of(job.video), face=job.face)
     return ChunkResult(dataclasses.replace(track, fps=fps), time.perf_counter() - t0)
+
+
+def _chunk_capture(frames, model, options, job, chunk, identity):
+    """A later chunk's capture: with the first chunk's ``identity`` held fixed where the
+    chunk begins on that person (:func:`facetransfer.track.shots.same_face` of the chunk's own
+    identity), else with its own (the clip cut to another person in an earlier chunk, which
+    this chunk cannot see)."""
+    from ..track.aspect import View
+    from ..track.capture import capture_detections
+    from ..track.shots import same_face
+    from ..track.video_detect import detect_video
+
+    source = str(job.video)
+    det, fps, size, src = detect_video(frames, source=source, view=View.of(job.video),
+                                       subject=_subject(job.face, frames, source))
+    kw = dict(options=options.capture, fps=fps, frame_size=size, source=src)
+    own = capture_detections(det, model, **kw)
+    if same_face(model, own.weights["identity"][0], identity):
+        return capture_detections(det, model, fixed={"identity": identity}, **kw)
+    log.warning("%s: frames %d-%d begin on another face than the clip's first (a cut before "
+                "them): captured with their own identity", source, chunk.start, chunk.stop - 1)
+    return own
 
 
 def join_clip(job, out: str, model, chunks, results) -> Row:
