@@ -175,7 +175,8 @@ def _png(cd, fx):
 
 def _plate(gap: bool = False, suffix: str = ".png"):
     """A plate of clip.mp4's first 5 frames, plate/f.0001.png ... (frame 3 missing: ``gap``;
-    ``suffix`` .exr: empty files of a format refused by name)."""
+    another ``suffix``: files of four bytes, an OpenEXR file's magic number: damaged OpenEXR
+    frames, or a format refused by name)."""
     def setup(cd, fx):
         import cv2
 
@@ -302,8 +303,10 @@ def cases(fx: Path) -> list[Case]:
         Case("a track passed as a video", ["probe", T], setup=_copy(T), names=T),
         Case("a plate with a missing frame", ["probe", "plate/f.####.png"],
              setup=_plate(gap=True), names="f.0003.png"),
-        Case("an OpenEXR plate", ["probe", "plate/f.%04d.exr"], setup=_plate(suffix=".exr"),
-             names="plate/f.%04d.exr"),
+        Case("a damaged OpenEXR plate", ["probe", "plate/f.%04d.exr"],
+             setup=_plate(suffix=".exr"), names="plate/f.0001.exr"),
+        Case("a DPX plate", ["probe", "plate/f.%04d.dpx"], setup=_plate(suffix=".dpx"),
+             names="plate/f.%04d.dpx"),
         Case("an overlay written over the plate it tracks",
              ["track", "plate/f.####.png", "--model", M, "--out", "t.npz", "--overlay",
               "plate/f.%04d.png", "--overwrite"], setup=_both(_copy(M), _plate()),

@@ -169,3 +169,24 @@ def test_a_frame_cropped_to_its_content_is_placed_in_its_display_window(tmp_path
     assert np.array_equal(got[0:30, 10:50], lin) and got[30:].max() == 0 == got[:, :10].max()
     _windowed(tmp_path / "a.exr", tmp_path / "c.exr", (-5, 0, 34, 29), (0, 0, 19, 9))
     assert np.array_equal(read_exr(tmp_path / "c.exr"), lin[:10, 5:25])   # beyond: cut
+
+
+def test_a_damaged_exr_frame_is_one_line_naming_it(tmp_path):
+    """A damaged frame of an OpenEXR plate: one line naming its file, exit status 2, and not
+    OpenCV's own log line (in a fresh process, as a user runs it)."""
+    import os
+    import subprocess
+
+    rng = np.random.default_rng(3)
+    for i in (1, 2, 3):
+        write_exr(tmp_path / f"p.{i:04d}.exr", rng.random((16, 24, 3)).astype(np.float16))
+    good = (tmp_path / "p.0002.exr").read_bytes()
+    (tmp_path / "p.0002.exr").write_bytes(good[:len(good) // 2])
+    exe = Path(sys.executable).with_name("facetransfer")
+    res = subprocess.run([str(exe), "track", str(tmp_path / "p.####.exr"), "--out",
+                          str(tmp_path / "t.npz"), "--no-progress"], capture_output=True,
+                         text=True, env=dict(os.environ, FACETRANSFER_SEQUENCE_FPS="25"))
+    lines = res.stderr.strip().splitlines()
+    assert res.returncode == 2 and len(lines) == 1, res.stderr
+    assert lines[0].startswith("facetransfer track: error: cannot read the OpenEXR frame ")
+    assert lines[0].endswith("p.0002.exr (damaged, or not RGB floats)")

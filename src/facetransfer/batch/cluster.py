@@ -132,8 +132,9 @@ def _local_cluster(n: int, processes: bool, verbose: bool):
     level = logging.INFO if verbose else logging.CRITICAL  # a failed task is its clip's row
     kw = {}
     if processes and not verbose:  # native log lines of MediaPipe and FFmpeg in the workers
-        kw["env"] = {"GLOG_minloglevel": os.environ.get("GLOG_minloglevel", "2"),
-                     "OPENCV_FFMPEG_LOGLEVEL": os.environ.get("OPENCV_FFMPEG_LOGLEVEL", "-8")}
+        kw["env"] = {k: os.environ.get(k, v) for k, v in (
+            ("GLOG_minloglevel", "2"), ("OPENCV_FFMPEG_LOGLEVEL", "-8"),
+            ("OPENCV_LOG_LEVEL", "SILENT"))}
     # workers that may start processes of their own (the renderer forks for long clips)
     with config.set({"distributed.worker.daemon": False}):
         return LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,

@@ -90,11 +90,12 @@ def _leaf_parsers(parser: argparse.ArgumentParser):
             yield from _leaf_parsers(child)
 
 
-#: environment that silences the C++ logs of MediaPipe / TensorFlow Lite / absl, and of the
-#: FFmpeg inside OpenCV (an interlaced picture it cannot convert, facetransfer.io.video_pipe),
-#: unless -v
+#: environment that silences the C++ logs of MediaPipe / TensorFlow Lite / absl, of the
+#: FFmpeg inside OpenCV (an interlaced picture it cannot convert, facetransfer.io.video_pipe)
+#: and of OpenCV itself (a damaged frame file, which the tool's own line names), unless -v
 QUIET_NATIVE_LOGS = {"GLOG_minloglevel": "2", "TF_CPP_MIN_LOG_LEVEL": "3",
-                     "ABSL_MIN_LOG_LEVEL": "2", "OPENCV_FFMPEG_LOGLEVEL": "-8"}
+                     "ABSL_MIN_LOG_LEVEL": "2", "OPENCV_FFMPEG_LOGLEVEL": "-8",
+                     "OPENCV_LOG_LEVEL": "SILENT"}
 
 
 def configure_logging(verbose: bool) -> None:
