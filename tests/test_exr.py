@@ -27,6 +27,8 @@ def test_the_srgb_curve_is_iec_61966_2_1_and_inverts_on_every_level():
         [10, 128, 188, 255, 255, 0]
     assert srgb_decode(np.array([0, 10, 128, 255])) == pytest.approx(
         [0.0, 10 / 255 / 12.92, ((128 / 255 + 0.055) / 1.055) ** 2.4, 1.0], rel=1e-6)
+    # a renderer's NaN shows black, infinities clip
+    assert srgb_encode(np.array([np.nan, np.inf, -np.inf])).tolist() == [0, 255, 0]
     # half floats hold every level closely enough to encode back to it
     assert np.array_equal(srgb_encode(srgb_decode(levels).astype(np.float16)), levels)
 

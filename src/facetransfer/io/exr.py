@@ -8,19 +8,18 @@ linear values clipped to [0, 1]: highlights above 1 read as white) to become the
 other module sees (:func:`srgb_encode`); a frame is its display window, a data window cropped
 to the content placed in it on black (:func:`read_exr`).
 
-A rewrite written as EXR (``--out out/sh010.%04d.exr``) goes back to linear light: of an EXR
-plate, each output pixel is the plate's own float plus the rewrite's change in linear light,
-``dec(R + (enc(P) - T))`` with ``enc`` the curve before rounding, ``dec`` its inverse, ``R``
-the rewritten and ``T`` the shown target pixel: the rewrite with the plate's detail finer than
-an 8-bit level kept (in a channel whose plate value lies outside [0, 1], clipped when shown,
-the rewrite's own ``dec(R)``: the face drawn over a highlight does not glow with it); where the
-rewrite changed nothing (``R == T``, everything outside the face), the plate's float is
-written unchanged, bit for bit, values beyond [0, 1] included (:func:`graded_frame`). Of any other target, an EXR frame is the
-rewritten 8-bit frame decoded to linear. EXR files are written in the plate's own pixel type
-(half or float, :func:`exr_pixel_type`; half for a target of another kind), RGB, PIZ-
-compressed (lossless, a fifth the size of uncompressed half floats for a video frame, written
-four times faster than ZIP); other header attributes (timecode, chromaticities) and an alpha channel are not
-carried over.
+A rewrite written as EXR (``--out out/sh010.%04d.exr``) goes back to linear light. Of an EXR
+plate, a pixel the rewrite left unchanged (``R == T``, ``R`` the rewritten and ``T`` the shown
+pixel: everything outside the face) is the plate's float ``P``, bit for bit, values beyond
+[0, 1] and NaN included; a changed one is ``dec(R + (enc(P) - T))``, ``enc`` the curve before
+rounding and ``dec`` its inverse: the rewrite with the plate's detail finer than an 8-bit level
+kept, or where a channel of ``P`` lies outside [0, 1] (clipped when shown) the rewrite's own
+``dec(R)``, so that a face drawn over a highlight does not glow with it
+(:func:`graded_frame`). Of any other target, an EXR frame is the rewritten 8-bit frame decoded
+to linear. EXR files are written in the plate's own pixel type (half or float,
+:func:`exr_pixel_type`; half for a target of another kind), RGB, PIZ-compressed (lossless; for a
+480x480 frame half ZIP's size, written four times faster); other header attributes (timecode,
+chromaticities) and an alpha channel are not carried over.
 
 OpenCV reads and writes OpenEXR only when ``OPENCV_IO_ENABLE_OPENEXR`` is set (its codec is off
 by default for untrusted files); it is set here, before the first EXR file is touched, unless
@@ -63,7 +62,7 @@ def _cv2():
 def _curve(x: np.ndarray) -> np.ndarray:
     """The IEC 61966-2-1 curve of linear values clipped to [0, 1], in levels (0 to 255, not
     rounded): ``12.92 x`` up to 0.0031308, ``1.055 x^(1/2.4) - 0.055`` above."""
-    x = np.clip(np.asarray(x, np.float32), 0.0, 1.0)
+    x = np.clip(np.nan_to_num(np.asarray(x, np.float32), nan=0.0), 0.0, 1.0)  # NaN: black
     return 255.0 * np.where(x <= 0.0031308, 12.92 * x, 1.055 * np.power(x, 1.0 / 2.4) - 0.055)
 
 
