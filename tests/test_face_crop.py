@@ -353,3 +353,42 @@ def test_a_face_is_refused_by_the_trackers_that_cannot_follow_it(data_dir, tmp_p
     assert not list(tmp_path.iterdir())
     with pytest.raises(TrackError, match="is for the capture tracker, not the flow tracker"):
         obtain_track(v, None, method="flow", face="left")
+
+
+def _blurred(clip, frames, box):
+    """``clip`` with the region ``box`` (x0, y0, x1, y1) blurred past recognition in
+    ``frames``: a face turned away or behind something, the rest of the picture as it was."""
+    out = clip.copy()
+    x0, y0, x1, y1 = box
+    for i in frames:
+        out[i, y0:y1, x0:x1] = cv2.GaussianBlur(out[i, y0:y1, x0:x1], (0, 0), 25)
+    return out
+
+
+def _sides(det) -> str:
+    x = np.array([np.nan if not f else np.nanmean(p[:, 0]) for f, p in zip(det.found,
+                                                                            det.points)])
+    return "".join("-" if np.isnan(v) else ("L" if v < 480 else "R") for v in x)
+
+
+def test_a_hidden_subject_is_lost_not_taken_for_the_other_person(two_faces):
+    """The subject (left) hidden for 8 frames while the other person stays in view: those
+    frames have no face, and the subject is followed again when it shows (before: the other
+    person from then on, to the end)."""
+    hidden = _blurred(two_faces, range(8, 16), (120, 60, 380, 400))
+    for subject in (None, (0.0, 239.5, 0.0)):
+        with FollowingLandmarker(fps=30.0, subject=subject) as fl:
+            det = detect_clip(hidden, fl, flow=False)
+        assert _sides(det) == "L" * 8 + "-" * 8 + "L" * 8
+
+
+def test_after_a_cut_the_one_face_found_is_followed(two_faces, data_dir):
+    """A two-shot cut to a close-up of the other person: the picture jumps, so the one face is
+    followed (as at a clip's start), not taken for a hidden subject."""
+    close = read_video(data_dir / "video" / "WDA_KatieHill_000.mp4", max_frames=8)[0]
+    close = np.stack([cv2.resize(f, (480, 480), interpolation=cv2.INTER_AREA) for f in close])
+    grey = np.full((8, 480, 960, 3), 118, np.uint8)
+    grey[:, :, 440:920] = close                                   # far from the left face
+    with FollowingLandmarker(fps=30.0) as fl:
+        det = detect_clip(np.concatenate([two_faces[:8], grey]), fl, flow=False)
+    assert _sides(det) == "L" * 8 + "R" * 8

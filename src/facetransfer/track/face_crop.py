@@ -24,7 +24,11 @@ farther from the subject's last place than its own size (:func:`moved_away`), th
 are counted (an IMAGE-mode landmarker finding up to :data:`MOST_FACES`, made only then); of
 several, the nearest to that place is the subject (:func:`choose_subject`), followed in a crop
 from then on. A second detection process that starts on another face is detected again
-(:func:`facetransfer.track.video_detect.other_face`).
+(:func:`facetransfer.track.video_detect.other_face`). Where the subject is hidden (turned
+away, behind something) while another person stays in view, the one face found far from the
+subject's last place is that person's when the shot holds several people (counted then, or in
+the frame before) and did not cut there (:data:`CUT_CHANGE`): those frames have no face, and
+the subject is followed again when it shows (:meth:`FollowingLandmarker._other_person`).
 """
 
 from __future__ import annotations
@@ -37,6 +41,7 @@ from .detect import VideoLandmarker
 from .init import MediaPipeDetector
 
 __all__ = ["WHOLE_FRAME_SHARE", "CROP_FACES", "SEARCH_EVERY", "SEARCH_SLOWER", "MOST_FACES",
+           "CUT_CHANGE",
            "search_tiles", "face_box", "choose_subject", "moved_away",
            "crop_about", "FACE_PLACES", "face_place", "subject_point", "FollowingLandmarker"]
 
@@ -53,6 +58,10 @@ SEARCH_EVERY = 5
 SEARCH_SLOWER = 50
 #: The most faces the IMAGE-mode landmarker finds (the tiles searched, the faces counted).
 MOST_FACES = 4
+#: A picture change (:func:`facetransfer.track.detect.picture_change`, levels) from which a
+#: frame is another shot's for the subject's rule: within the data folder's clips at most 12.2,
+#: at edited cuts 36-72 (:mod:`facetransfer.track.shots`).
+CUT_CHANGE = 25.0
 #: The smallest tile side searched, pixels (the detector's input is 128; a face in a smaller
 #: tile is too small for the landmark model too).
 _MIN_TILE = 192
@@ -199,27 +208,35 @@ class FollowingLandmarker:
         self.several = False            # several faces seen: the subject kept in a crop
         self._missed = 0                # frames since the last face (the search's rhythm)
         self._frame = 0                 # frames seen: the landmarkers' clock
+        self._prev = None               # the frame before (a hidden subject's, a cut's)
+        self._hidden = False            # this frame: only another person's face is seen
 
     def detect_scored(self, frame: np.ndarray):
         """``(points (478, 2) in the frame's pixels, scores (52,))`` or ``(None, None)``."""
         found = self._in_crop(frame) if self.crop is not None else (None, None)
+        self._hidden = False
         if found[0] is None:
             found = self._whole.at_least(self._frame).detect_scored(frame)
             if found[0] is not None and self.last is not None and \
                     moved_away(face_box(found[0]), self.last):
                 found = self._subject(frame, found)
-        if found[0] is None:
+        if found[0] is None and not self._hidden:
             found = self._searched(frame)
         self._missed = 0 if found[0] is not None else self._missed + 1
         if found[0] is not None:
             self.last = face_box(found[0])
         self._frame += 1
+        self._prev = frame
         return found
 
     def _subject(self, frame: np.ndarray, found):
         """``found`` (the whole frame's face) where it is the only face or the subject
-        (:func:`choose_subject`), else the subject followed in a crop."""
+        (:func:`choose_subject`), else the subject followed in a crop; none where the one face
+        is another person's, the subject hidden (:meth:`_other_person`)."""
         boxes = [face_box(q) for q in self._search_landmarker().detect_every(frame)]
+        if len(boxes) == 1 and self._other_person(frame):
+            self._hidden = True
+            return None, None
         if len(boxes) < 2:
             return found
         self.several = True
@@ -229,6 +246,26 @@ class FollowingLandmarker:
         H, W = frame.shape[:2]
         self.crop = crop_about(box, (W, H))
         return self._in_crop(frame)
+
+    def _other_person(self, frame: np.ndarray) -> bool:
+        """Whether the one face in ``frame``, far from the subject's last place, is another
+        person's: the shot holds several people (counted now, or in the frame before, where
+        the subject was) and did not cut here (:data:`CUT_CHANGE`: after a cut the face found
+        is followed, as at a clip's start)."""
+        import cv2
+
+        from .detect import picture_change
+
+        if self._prev is None:
+            return False
+        grey = [cv2.cvtColor(np.ascontiguousarray(f), cv2.COLOR_RGB2GRAY)
+                for f in (self._prev, frame)]
+        if picture_change(*grey) >= CUT_CHANGE:
+            self.several = False
+            return False
+        if not self.several:
+            self.several = len(self._search_landmarker().detect_every(self._prev)) >= 2
+        return self.several
 
     def _in_crop(self, frame: np.ndarray):
         """The face in the crop (its points in the frame's pixels), the crop moved with it; the
@@ -248,7 +285,8 @@ class FollowingLandmarker:
 
     def _searched(self, frame: np.ndarray):
         """The face in the first tile that shows one (a search in one frame of
-        :data:`SEARCH_EVERY` without a face); its crop then followed."""
+        :data:`SEARCH_EVERY` without a face); its crop then followed; none where it is another
+        person's, the subject hidden (:meth:`_other_person`)."""
         H, W = frame.shape[:2]
         tiles = search_tiles((W, H))
         every = SEARCH_EVERY * (1 if self._missed < SEARCH_SLOWER else 5)
@@ -258,7 +296,11 @@ class FollowingLandmarker:
             q, _ = self._search_landmarker().detect_scored(
                 np.ascontiguousarray(frame[y0:y0 + side, x0:x0 + side]))
             if q is not None:
-                self.crop = crop_about(face_box(q + (x0, y0)), (W, H))
+                box = face_box(q + (x0, y0))
+                if self.last is not None and moved_away(box, self.last) and \
+                        self._other_person(frame):
+                    return None, None                  # the subject hidden
+                self.crop = crop_about(box, (W, H))
                 return self._in_crop(frame)
         return None, None
 
