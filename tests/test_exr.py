@@ -13,8 +13,8 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer.errors import VideoError  # noqa: E402
-from facetransfer.io.exr import (exr_pixel_type, graded_frame, read_exr, srgb_decode,  # noqa: E402
-                                 srgb_encode, write_exr)
+from facetransfer.io.exr import (exr_pixel_type, graded_frame, read_exr,  # noqa: E402
+                                 read_exr_image, srgb_decode, srgb_encode, write_exr)
 from facetransfer.io.video import VideoOptions, read_video, write_video  # noqa: E402
 from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
 
@@ -84,12 +84,19 @@ def target(clips, tmp_path_factory):
 
 def _exr_plate(folder: Path, frames, bright_rows: int = 0) -> Path:
     """The frames as a half-float plate numbered from 1001, the top ``bright_rows`` three
-    times brighter (beyond 1 where they were white)."""
+    times brighter (beyond 1 where they were white), as a compositing package writes one:
+    ZIP-compressed, with an alpha channel and an attribute of its own (its shot)."""
+    import OpenEXR
+
     folder.mkdir(parents=True, exist_ok=True)
     for i, rgb in enumerate(frames):
         lin = srgb_decode(rgb)
         lin[:bright_rows] *= 3.0
-        write_exr(folder / f"sh010.{1001 + i:04d}.exr", lin.astype(np.float16))
+        alpha = np.full(lin.shape[:2], 0.25 + i / 100, np.float16)
+        header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage,
+                  "shot": "sh010"}
+        with OpenEXR.File(header, {"RGB": lin.astype(np.float16), "A": alpha}) as f:
+            f.write(str(folder / f"sh010.{1001 + i:04d}.exr"))
     return folder / "sh010.####.exr"
 
 
@@ -138,6 +145,12 @@ def test_an_exr_plate_is_rewritten_in_its_own_floats(clips, target, quick_model_
         assert np.array_equal(srgb_encode(got[~same][:, None])[:, 0], rewritten[~same])
         assert src[:6].max() > 1.0 and np.array_equal(got[:6], src[:6])  # outside the face
         changed_any += int((~same).sum())
+        # the rest of the plate's file as it was: its alpha, its attributes, its compression
+        plate_file, out_file = (read_exr_image(tmp_path / "plate" / f"sh010.{1001 + i:04d}.exr"),
+                                read_exr_image(out))
+        assert np.array_equal(out_file.other["A"], plate_file.other["A"])
+        assert out_file.header["shot"] == "sh010"
+        assert out_file.header["compression"] == plate_file.header["compression"]
     assert changed_any > 1000
 
 

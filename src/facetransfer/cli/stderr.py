@@ -1,6 +1,6 @@
 """Keep native libraries' log lines off the terminal unless ``-v`` is given.
 
-MediaPipe, TensorFlow Lite and absl write their own log lines (``W0000 00:00:... file.cc:121]
+MediaPipe, TensorFlow Lite, absl and OpenEXR write their own log lines (``W0000 00:00:... file.cc:121]
 ...``, ``INFO: Created TensorFlow Lite XNNPACK delegate``) straight to file descriptor 2, from C++,
 past Python's logging. :func:`filtered_stderr` points descriptor 2 at a pipe read by a thread
 that forwards everything except those lines (fatal ``F`` lines still pass), so the tool's own
@@ -24,7 +24,8 @@ NATIVE_LOG = re.compile(
     rb"(?:[IWE]\d{4} [\d:.]+ +\d+ [^\]]*\] .*"
     rb"|Created TensorFlow Lite.*|Initialized TensorFlow Lite.*"
     rb"|All log messages before absl::InitializeLog.*"
-    rb"|Logging before InitGoogle\(\).*)"
+    rb"|Logging before InitGoogle\(\).*"
+    rb"|.*\(EXR_ERR_[A-Z_]+\) .*)"  # OpenEXR's own report of a damaged file
     rb"|(?:INFO: |WARNING: )+)\r?\n?$")  # or a prefix whose message went elsewhere
 
 

@@ -16,47 +16,35 @@ rounding and ``dec`` its inverse: the rewrite with the plate's detail finer than
 kept, or where a channel of ``P`` lies outside [0, 1] (clipped when shown) the rewrite's own
 ``dec(R)``, so that a face drawn over a highlight does not glow with it
 (:func:`graded_frame`). Of any other target, an EXR frame is the rewritten 8-bit frame decoded
-to linear. EXR files are written in the plate's own pixel type (half or float,
-:func:`exr_pixel_type`; half for a target of another kind), RGB, PIZ-compressed (lossless; for a
-480x480 frame half ZIP's size, written four times faster); other header attributes (timecode,
-chromaticities) and an alpha channel are not carried over.
-
-OpenCV reads and writes OpenEXR only when ``OPENCV_IO_ENABLE_OPENEXR`` is set (its codec is off
-by default for untrusted files); it is set here, before the first EXR file is touched, unless
-the user set it.
+to linear. EXR files are written in the plate's own pixel type (half or float; half for a target of another
+kind) with the plate's header (timecode, chromaticities, compression and every other attribute)
+and its other channels (alpha, depth) as they were; a file of another target is PIZ-compressed
+(lossless). OpenEXR files are read and written by the OpenEXR project's own Python bindings
+(``OpenEXR``): RGB or grey channels, scanline or tiled, the first part of a multi-part file.
 """
 
 from __future__ import annotations
 
 import functools
-import os
-import struct
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import VideoError
 
-__all__ = ["EXR_SUFFIX", "srgb_encode", "srgb_decode", "read_exr", "write_exr",
-           "exr_pixel_type", "graded_frame", "is_exr"]
+__all__ = ["EXR_SUFFIX", "ExrImage", "srgb_encode", "srgb_decode", "read_exr", "read_exr_image",
+           "write_exr", "exr_pixel_type", "graded_frame", "is_exr"]
 
 EXR_SUFFIX = ".exr"
 _MAGIC = b"\x76\x2f\x31\x01"
-#: OpenEXR's channel pixel types (the ``chlist`` attribute).
-_PIXEL_TYPES = {0: "uint", 1: "half", 2: "float"}
+#: The header attributes the bindings derive from the pixels a file is written with.
+_DERIVED = ("channels",)
 
 
 def is_exr(path) -> bool:
     """Whether ``path`` (a file or a sequence's pattern) names OpenEXR frames."""
     return Path(path).suffix.lower() == EXR_SUFFIX
-
-
-def _cv2():
-    """OpenCV with its OpenEXR codec enabled (unless the user said otherwise)."""
-    os.environ.setdefault("OPENCV_IO_ENABLE_OPENEXR", "1")
-    import cv2
-
-    return cv2
 
 
 def _curve(x: np.ndarray) -> np.ndarray:
@@ -89,113 +77,172 @@ def srgb_decode(encoded: np.ndarray) -> np.ndarray:
     return _decode_table()[np.asarray(encoded, np.uint8)]
 
 
-def _attributes(path) -> dict[str, tuple[bytes, bytes]]:
-    """An OpenEXR file's header attributes, ``name -> (type, value bytes)`` (a single-part
-    file's: the header ends at its first empty name).
+@dataclass(frozen=True, eq=False)
+class ExrImage:
+    """An OpenEXR frame: its RGB, and the rest of the file as it was.
+
+    Attributes
+    ----------
+    rgb : (h, w, 3) float16 or float32
+        Linear RGB of the data window (a grey file's channel repeated).
+    header : dict
+        The file's attributes (OpenEXR's names: ``dataWindow``, ``displayWindow``,
+        ``compression``, ``timeCode``, ...).
+    other : dict
+        Its other channels (alpha, depth ...), name -> (h, w) array.
+    """
+
+    rgb: np.ndarray
+    header: dict = field(default_factory=dict)
+    other: dict = field(default_factory=dict)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """The display window's frame shape, ``(H, W, 3)`` (what a writer checks)."""
+        if "displayWindow" not in self.header:
+            return self.rgb.shape[0], self.rgb.shape[1], 3
+        (x0, y0), (x1, y1) = self.header["displayWindow"]
+        return int(y1 - y0 + 1), int(x1 - x0 + 1), 3
+
+    @property
+    def dtype(self) -> np.dtype:
+        return self.rgb.dtype
+
+    def displayed(self) -> np.ndarray:
+        """``(H, W, 3)`` float32 RGB of the display window: the data window placed in it, on
+        black (compositing packages write a frame cropped to its content)."""
+        rgb = np.asarray(self.rgb, np.float32)
+        H, W, _ = self.shape
+        if self._offset() == (0, 0) and rgb.shape[:2] == (H, W):
+            return rgb
+        out = np.zeros((H, W, 3), np.float32)
+        frame, data = self._overlap()
+        out[frame] = rgb[data]
+        return out
+
+    def with_rgb(self, displayed: np.ndarray) -> "ExrImage":
+        """This image with the RGB of ``displayed`` (H, W, 3), the display window's, cut to
+        the data window, in this image's pixel type."""
+        rgb = np.zeros(self.rgb.shape, self.rgb.dtype)
+        frame, data = self._overlap()
+        rgb[data] = displayed[frame]
+        return ExrImage(rgb, self.header, self.other)
+
+    def _offset(self) -> tuple[int, int]:
+        """The data window's top-left pixel in the display window's coordinates."""
+        if "dataWindow" not in self.header or "displayWindow" not in self.header:
+            return 0, 0
+        (dx, dy), _ = self.header["dataWindow"]
+        (sx, sy), _ = self.header["displayWindow"]
+        return int(dx - sx), int(dy - sy)
+
+    def _overlap(self):
+        """The slices of the display window's frame and of the data window that show the same
+        pixels (empty where they do not meet)."""
+        x0, y0 = self._offset()
+        h, w = self.rgb.shape[:2]
+        H, W, _ = self.shape
+        ax, ay = max(x0, 0), max(y0, 0)
+        bx, by = max(min(x0 + w, W), ax), max(min(y0 + h, H), ay)
+        return ((slice(ay, by), slice(ax, bx)),
+                (slice(ay - y0, by - y0), slice(ax - x0, bx - x0)))
+
+
+def read_exr_image(path) -> ExrImage:
+    """An OpenEXR file as :class:`ExrImage` (its first part).
 
     Raises
     ------
     VideoError
-        Not an OpenEXR file.
+        Not an OpenEXR file, damaged, or without RGB or grey channels (naming the file).
     """
-    with open(path, "rb") as fh:
-        head = fh.read(65536)
-    if head[:4] != _MAGIC:
-        raise VideoError(f"{path} is not an OpenEXR file")
-    out, at = {}, 8
+    import OpenEXR
+
     try:
-        while at < len(head) and head[at] != 0:
-            name_end = head.index(b"\0", at)
-            type_end = head.index(b"\0", name_end + 1)
-            size = struct.unpack_from("<i", head, type_end + 1)[0]
-            value = type_end + 5
-            out[head[at:name_end].decode("latin-1")] = (head[name_end + 1:type_end],
-                                                         head[value:value + size])
-            at = value + size
-    except (ValueError, struct.error):
-        raise VideoError(f"{path}: a damaged OpenEXR header") from None
-    return out
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+    except OSError as exc:
+        raise VideoError(f"cannot read the OpenEXR frame {path} ({exc.strerror})") from None
+    if magic != _MAGIC:
+        raise VideoError(f"cannot read the OpenEXR frame {path} ({Path(path).name} is not an "
+                         "OpenEXR file)")
+    try:
+        with OpenEXR.File(str(path)) as f:
+            header = dict(f.header())
+            channels = {k: np.asarray(c.pixels) for k, c in f.channels().items()}
+    except Exception:  # noqa: BLE001 (the bindings raise several kinds)
+        raise VideoError(f"cannot read the OpenEXR frame {path} (damaged, or not RGB "
+                         "floats)") from None
+    return _image(path, header, channels)
 
 
-def exr_pixel_type(path) -> str:
-    """The pixel type of an OpenEXR file's first channel, ``"half"``, ``"float"`` or
-    ``"uint"``, read from its header's ``channels`` attribute.
-
-    Raises
-    ------
-    VideoError
-        Not an OpenEXR file, or a header without channels.
-    """
-    kind, value = _attributes(path).get("channels", (b"", b""))
-    if kind != b"chlist" or b"\0" not in value:
-        raise VideoError(f"{path}: no channels in its OpenEXR header")
-    ptype = struct.unpack_from("<i", value, value.index(b"\0") + 1)[0]
-    return _PIXEL_TYPES.get(ptype, "float")
-
-
-def _windows(path) -> tuple[tuple[int, ...], tuple[int, ...]]:
-    """The file's data and display windows, each ``(x0, y0, x1, y1)`` inclusive."""
-    attrs = _attributes(path)
-    boxes = []
-    for name in ("dataWindow", "displayWindow"):
-        kind, value = attrs.get(name, (b"", b""))
-        if kind != b"box2i" or len(value) != 16:
-            raise VideoError(f"{path}: no {name} in its OpenEXR header")
-        boxes.append(struct.unpack("<4i", value))
-    return boxes[0], boxes[1]
+def _image(path, header: dict, channels: dict) -> ExrImage:
+    """The :class:`ExrImage` of a file's channels as the bindings give them (``RGB`` or
+    ``RGBA`` interleaved, the others by name)."""
+    for name in ("RGB", "RGBA"):
+        if name in channels:
+            rgb = channels.pop(name)
+            if name == "RGBA":
+                channels["A"] = np.ascontiguousarray(rgb[..., 3])
+            return ExrImage(np.ascontiguousarray(rgb[..., :3]), header, channels)
+    grey = next((k for k in ("Y", "L", "G") if k in channels), None)
+    if grey is None or channels[grey].dtype.kind != "f":
+        raise VideoError(f"cannot read the OpenEXR frame {path} (no RGB or grey floats: "
+                         f"channels {', '.join(sorted(channels)) or 'none'})")
+    g = channels.pop(grey)
+    return ExrImage(np.repeat(g[..., None], 3, axis=2), header, channels)
 
 
 def read_exr(path) -> np.ndarray:
-    """An OpenEXR frame as ``(H, W, 3)`` float32 linear RGB of its display window (grey
-    expanded, alpha dropped; a data window smaller than the display window, as compositing
-    packages write a frame cropped to its content, placed in it on black).
+    """An OpenEXR frame as ``(H, W, 3)`` float32 linear RGB of its display window
+    (:meth:`ExrImage.displayed`; grey expanded, alpha and other channels left out).
 
     Raises
     ------
     VideoError
         Unreadable (naming the file).
     """
-    cv2 = _cv2()
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    if img is None or img.dtype != np.float32:
-        raise VideoError(f"cannot read the OpenEXR frame {path} (damaged, or not RGB floats)")
-    rgb = np.repeat(img[..., None], 3, axis=2) if img.ndim == 2 else \
-        np.ascontiguousarray(img[..., 2::-1])
-    data, shown = _windows(path)
-    if data == shown:
-        return rgb
-    W, H = shown[2] - shown[0] + 1, shown[3] - shown[1] + 1
-    out = np.zeros((H, W, 3), np.float32)
-    x0, y0 = data[0] - shown[0], data[1] - shown[1]
-    ax, ay = max(x0, 0), max(y0, 0)
-    bx, by = min(x0 + rgb.shape[1], W), min(y0 + rgb.shape[0], H)
-    if bx > ax and by > ay:
-        out[ay:by, ax:bx] = rgb[ay - y0:by - y0, ax - x0:bx - x0]
-    return out
+    return read_exr_image(path).displayed()
 
 
-def write_exr(path, rgb: np.ndarray) -> None:
-    """Write ``(H, W, 3)`` linear RGB as an OpenEXR file, PIZ-compressed: float32 as single
-    floats, float16 as half floats, uint8 (sRGB) decoded (:func:`srgb_decode`) to half floats
-    (which hold each of its 256 levels exactly enough to encode back to it).
+def exr_pixel_type(path) -> str:
+    """The pixel type of an OpenEXR file's RGB, ``"half"``, ``"float"`` or ``"uint"``.
+
+    Raises
+    ------
+    VideoError
+        Not an OpenEXR file, or unreadable.
+    """
+    kind = read_exr_image(path).rgb.dtype
+    return {np.dtype(np.float16): "half", np.dtype(np.float32): "float"}.get(kind, "uint")
+
+
+def write_exr(path, rgb) -> None:
+    """Write an OpenEXR file: an :class:`ExrImage` with its header and other channels, or
+    ``(H, W, 3)`` linear RGB, PIZ-compressed: float32 as single floats, float16 as half floats,
+    uint8 (sRGB) decoded (:func:`srgb_decode`) to half floats (which hold each of its 256
+    levels exactly enough to encode back to it).
 
     Raises
     ------
     ValueError
-        OpenCV could not write it.
+        The bindings could not write it.
     """
-    cv2 = _cv2()
-    half = rgb.dtype != np.float32
-    lin = srgb_decode(rgb) if rgb.dtype == np.uint8 else np.asarray(rgb, np.float32)
-    params = [cv2.IMWRITE_EXR_TYPE,
-              cv2.IMWRITE_EXR_TYPE_HALF if half else cv2.IMWRITE_EXR_TYPE_FLOAT,
-              cv2.IMWRITE_EXR_COMPRESSION, cv2.IMWRITE_EXR_COMPRESSION_PIZ]
-    # encoded in memory: OpenCV chooses the format by the name's extension, and the writers
-    # write under temporary names (.tmp)
-    ok, buf = cv2.imencode(EXR_SUFFIX, np.ascontiguousarray(lin[..., ::-1]), params)
-    if not ok:
-        raise ValueError(f"OpenCV could not encode {path} as OpenEXR")
-    Path(path).write_bytes(buf.tobytes())
+    import OpenEXR
+
+    if isinstance(rgb, ExrImage):
+        header = {k: v for k, v in rgb.header.items() if k not in _DERIVED}
+        channels = {"RGB": np.ascontiguousarray(rgb.rgb), **rgb.other}
+    else:
+        lin = srgb_decode(rgb).astype(np.float16) if rgb.dtype == np.uint8 else \
+            np.ascontiguousarray(rgb, np.float16 if rgb.dtype == np.float16 else np.float32)
+        header = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage}
+        channels = {"RGB": lin}
+    try:
+        with OpenEXR.File(header, channels) as f:
+            f.write(str(path))
+    except Exception as exc:  # noqa: BLE001 (the bindings raise several kinds)
+        raise ValueError(f"cannot write the OpenEXR file {path} ({exc})") from None
 
 
 def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:

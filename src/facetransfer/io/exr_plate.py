@@ -1,11 +1,11 @@
-"""A rewrite of an OpenEXR plate written as OpenEXR, in the plate's own floats and pixel type
-(:func:`facetransfer.io.exr.graded_frame` frame by frame)."""
+"""A rewrite of an OpenEXR plate written as OpenEXR, in the plate's own floats, pixel type,
+header and other channels (:func:`facetransfer.io.exr.graded_frame` frame by frame)."""
 
 from __future__ import annotations
 
 import numpy as np
 
-from .exr import exr_pixel_type, graded_frame, is_exr, read_exr
+from .exr import ExrImage, graded_frame, is_exr, read_exr_image
 from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["PlateGrading", "plate_grading"]
@@ -24,12 +24,12 @@ class PlateGrading:
 
     def __init__(self, plate) -> None:
         self.sequence = open_sequence(plate)
-        kind = exr_pixel_type(self.sequence.file(0))
-        self.dtype = np.float16 if kind == "half" else np.float32
 
-    def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
-        plate = read_exr(self.sequence.file(i))
-        return graded_frame(plate, shown, rewritten).astype(self.dtype)
+    def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> ExrImage:
+        """The plate's frame ``i`` with its RGB graded, in its pixel type, with its header
+        and its other channels (alpha ...) as they were."""
+        plate = read_exr_image(self.sequence.file(i))
+        return plate.with_rgb(graded_frame(plate.displayed(), shown, rewritten))
 
 
 def plate_grading(out, target) -> PlateGrading | None:

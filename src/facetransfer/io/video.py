@@ -238,7 +238,8 @@ def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
                      suffix: str | None = None) -> None:
     """Write one frame of an image sequence, ``(H, W, 3) uint8`` RGB, to ``path`` in the file
     type of ``suffix`` (default: ``path``'s own; one of :data:`IMAGE_SUFFIXES`); an OpenEXR
-    frame may also be linear float RGB (:func:`facetransfer.io.exr.write_exr`)."""
+    frame may also be linear float RGB or an :class:`~facetransfer.io.exr.ExrImage`
+    (:func:`facetransfer.io.exr.write_exr`)."""
     from PIL import Image
 
     suffix = (suffix or Path(path).suffix).lower()
@@ -251,9 +252,10 @@ def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
         path, format=Image.registered_extensions()[suffix], **_FRAME_SAVE.get(suffix, {}))
 
 
-def _linear(frame: np.ndarray, path) -> bool:
-    """Whether ``frame`` is linear float RGB for an OpenEXR sequence ``path`` (written as it
-    is, not as 8-bit RGB)."""
+def _linear(frame, path) -> bool:
+    """Whether ``frame`` is linear float RGB (an array, or a
+    :class:`facetransfer.io.exr.ExrImage`) for an OpenEXR sequence ``path`` (written as it is,
+    not as 8-bit RGB)."""
     return frame.dtype in (np.float16, np.float32) and Path(path).suffix.lower() == ".exr"
 
 
@@ -658,7 +660,8 @@ class VideoWriter:
 
     def write(self, frame: np.ndarray) -> None:
         """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size (of an OpenEXR
-        sequence, float16 or float32 linear RGB too: :func:`facetransfer.io.exr.write_exr`)."""
+        sequence, float16 or float32 linear RGB too, or an
+        :class:`~facetransfer.io.exr.ExrImage`: :func:`facetransfer.io.exr.write_exr`)."""
         if self.result is not None or (self._proc is None and self._tmpdir is None):
             raise VideoError(f"video {self.path} is already closed")
         if frame.shape != (self.size[1], self.size[0], 3):
