@@ -15,12 +15,12 @@ pixel: everything outside the face) is the plate's float ``P``, bit for bit, val
 rounding and ``dec`` its inverse: the rewrite with the plate's detail finer than an 8-bit level
 kept, or where a channel of ``P`` lies outside [0, 1] (clipped when shown) the rewrite's own
 ``dec(R)``, so that a face drawn over a highlight does not glow with it
-(:func:`graded_frame`). Of any other target, an EXR frame is the rewritten 8-bit frame decoded
-to linear. EXR files are written in the plate's own pixel type (half or float; half for a target of another
-kind) with the plate's header (timecode, chromaticities, compression and every other attribute)
-and its other channels (alpha, depth) as they were; a file of another target is PIZ-compressed
-(lossless). OpenEXR files are read and written by the OpenEXR project's own Python bindings
-(``OpenEXR``): RGB or grey channels, scanline or tiled, the first part of a multi-part file.
+(:func:`graded_frame`), in the plate's own pixel type, with its header (timecode,
+chromaticities, compression, every other attribute) and its other channels (alpha, depth) as
+they were (:class:`ExrImage`, :mod:`facetransfer.io.exr_plate`). Of any other target, an EXR
+frame is the rewritten 8-bit frame decoded to half floats, PIZ-compressed (lossless). OpenEXR
+files are read and written by the OpenEXR project's own Python bindings (``OpenEXR``): RGB or
+grey channels, scanline or tiled, the first part of a multi-part file.
 """
 
 from __future__ import annotations
