@@ -184,6 +184,13 @@ def test_a_frame_cropped_to_its_content_is_placed_in_its_display_window(tmp_path
     assert np.array_equal(got[0:30, 10:50], lin) and got[30:].max() == 0 == got[:, :10].max()
     _windowed(tmp_path / "a.exr", tmp_path / "c.exr", (-5, 0, 34, 29), (0, 0, 19, 9))
     assert np.array_equal(read_exr(tmp_path / "c.exr"), lin[:10, 5:25])   # beyond: cut
+    # rewritten, the data window beyond the display window (overscan) is kept as it was
+    over = read_exr_image(tmp_path / "c.exr")
+    shown = over.displayed()
+    again = over.with_rgb(shown + 1)
+    assert np.array_equal(again.rgb[:10, 5:25], (shown + 1).astype(over.rgb.dtype))
+    assert np.array_equal(again.rgb[10:], over.rgb[10:]) and \
+        np.array_equal(again.rgb[:, :5], over.rgb[:, :5])
 
 
 def test_a_damaged_exr_frame_is_one_line_naming_it(tmp_path):

@@ -121,9 +121,10 @@ class ExrImage:
         return out
 
     def with_rgb(self, displayed: np.ndarray) -> "ExrImage":
-        """This image with the RGB of ``displayed`` (H, W, 3), the display window's, cut to
-        the data window, in this image's pixel type."""
-        rgb = np.zeros(self.rgb.shape, self.rgb.dtype)
+        """This image with the RGB of ``displayed`` (H, W, 3), the display window's, where the
+        data window shows it, in this image's pixel type; the data window's pixels beyond the
+        display window (overscan) as they were."""
+        rgb = self.rgb.copy()
         frame, data = self._overlap()
         rgb[data] = displayed[frame]
         return ExrImage(rgb, self.header, self.other)
