@@ -13,8 +13,9 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer.errors import VideoError  # noqa: E402
-from facetransfer.io.exr import (exr_pixel_type, graded_frame, read_exr,  # noqa: E402
-                                 read_exr_image, srgb_decode, srgb_encode, write_exr)
+from facetransfer.io.exr import (ExrImage, exr_pixel_type, graded_frame, read_exr,  # noqa: E402
+                                 read_exr_image, shown_frame, srgb_decode, srgb_encode,
+                                 write_exr)
 from facetransfer.io.video import VideoOptions, read_video, write_video  # noqa: E402
 from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
 
@@ -29,6 +30,10 @@ def test_the_srgb_curve_is_iec_61966_2_1_and_inverts_on_every_level():
         [0.0, 10 / 255 / 12.92, ((128 / 255 + 0.055) / 1.055) ** 2.4, 1.0], rel=1e-6)
     # a renderer's NaN shows black, infinities clip
     assert srgb_encode(np.array([np.nan, np.inf, -np.inf])).tolist() == [0, 255, 0]
+    # a half-float frame is shown by a table of every half value: the curve's own levels
+    every = np.arange(65536, dtype=np.uint16).view(np.float16).reshape(256, 256, 1)
+    every = np.repeat(every, 3, axis=2)
+    assert np.array_equal(shown_frame(ExrImage(every)), srgb_encode(every.astype(np.float32)))
     # half floats hold every level closely enough to encode back to it
     assert np.array_equal(srgb_encode(srgb_decode(levels).astype(np.float16)), levels)
 
@@ -184,6 +189,9 @@ def test_a_frame_cropped_to_its_content_is_placed_in_its_display_window(tmp_path
     assert np.array_equal(got[0:30, 10:50], lin) and got[30:].max() == 0 == got[:, :10].max()
     _windowed(tmp_path / "a.exr", tmp_path / "c.exr", (-5, 0, 34, 29), (0, 0, 19, 9))
     assert np.array_equal(read_exr(tmp_path / "c.exr"), lin[:10, 5:25])   # beyond: cut
+    for name in ("b", "c"):     # shown as its display window through the curve
+        image = read_exr_image(tmp_path / f"{name}.exr")
+        assert np.array_equal(shown_frame(image), srgb_encode(image.displayed()))
     # rewritten, the data window beyond the display window (overscan) is kept as it was
     over = read_exr_image(tmp_path / "c.exr")
     shown = over.displayed()

@@ -215,9 +215,9 @@ def _read_frame(file: Path, pattern: Path) -> np.ndarray:
     import cv2
 
     if file.suffix.lower() == ".exr":
-        from .exr import read_exr, srgb_encode
+        from .exr import read_exr_image, shown_frame
 
-        return srgb_encode(read_exr(file)[..., ::-1])
+        return np.ascontiguousarray(shown_frame(read_exr_image(file))[..., ::-1])
     bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
     if bgr is None:
         raise VideoError(f"image sequence {pattern}: cannot read frame file {file} (not an "
