@@ -686,8 +686,9 @@ class _Frames:
                             source_index=p.mouth_index, options=self.options,
                             mouth_function=self.mouth_fn, start=self.start,
                             progress=self.bar.update if self.bar is not None else None)
-        frames = ((frame, face) for _, frame, face in self._composed(it))
-        if self.grading is not None:   # graded on threads, a few frames ahead of the writer
+        if self.grading is None:
+            frames = ((frame, face) for _, frame, face in self._composed(it))
+        else:                          # graded on threads, a few frames ahead of the writer
             frames = ordered_ahead(self._graded, self._composed(it), ahead=4, workers=2)
         for frame, face in frames:
             self.rewritten += face

@@ -78,8 +78,7 @@ def shown_frame(image: "ExrImage") -> np.ndarray:
     half value, the same levels a fifth of the time)."""
     if image.rgb.dtype != np.float16:
         return srgb_encode(image.displayed())
-    levels = ExrImage(_half_table()[image.rgb.view(np.uint16)], image.header)
-    return levels.displayed().astype(np.uint8)
+    return image.placed(_half_table()[image.rgb.view(np.uint16)])
 
 
 @functools.lru_cache(maxsize=1)
@@ -127,13 +126,17 @@ class ExrImage:
     def displayed(self) -> np.ndarray:
         """``(H, W, 3)`` float32 RGB of the display window: the data window placed in it, on
         black (compositing packages write a frame cropped to its content)."""
-        rgb = np.asarray(self.rgb, np.float32)
+        return self.placed(np.asarray(self.rgb, np.float32))
+
+    def placed(self, values: np.ndarray) -> np.ndarray:
+        """``values`` (h, w, 3), any type, on the data window, placed in the display window
+        (zero elsewhere); ``values`` itself where the two windows are one."""
         H, W, _ = self.shape
-        if self._offset() == (0, 0) and rgb.shape[:2] == (H, W):
-            return rgb
-        out = np.zeros((H, W, 3), np.float32)
+        if self._offset() == (0, 0) and values.shape[:2] == (H, W):
+            return values
+        out = np.zeros((H, W, 3), values.dtype)
         frame, data = self._overlap()
-        out[frame] = rgb[data]
+        out[frame] = values[data]
         return out
 
     def with_rgb(self, displayed: np.ndarray) -> "ExrImage":

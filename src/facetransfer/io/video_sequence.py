@@ -209,20 +209,20 @@ def _span(a: int, b: int) -> str:
 
 
 def _read_frame(file: Path, pattern: Path) -> np.ndarray:
-    """One frame file as ``(H, W, 3) uint8`` BGR (16 bits scaled, grey expanded, alpha
+    """One frame file as ``(H, W, 3) uint8`` RGB (16 bits scaled, grey expanded, alpha
     dropped, a JPEG's EXIF orientation applied; OpenEXR's linear floats shown through the sRGB
-    curve, :func:`facetransfer.io.exr.srgb_encode`)."""
+    curve, :func:`facetransfer.io.exr.shown_frame`)."""
     import cv2
 
     if file.suffix.lower() == ".exr":
         from .exr import read_exr_image, shown_frame
 
-        return np.ascontiguousarray(shown_frame(read_exr_image(file))[..., ::-1])
+        return shown_frame(read_exr_image(file))
     bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
     if bgr is None:
         raise VideoError(f"image sequence {pattern}: cannot read frame file {file} (not an "
                          "image OpenCV decodes, or damaged)")
-    return bgr
+    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
 def sequence_frames(path, *, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
@@ -234,16 +234,14 @@ def sequence_frames(path, *, start: int = 0, stop: int | None = None) -> Iterato
     VideoError
         A frame of another size than the first, or unreadable (naming its file).
     """
-    import cv2
-
     seq = open_sequence(path)
     stop = seq.n_frames if stop is None else min(stop, seq.n_frames)
     W, H = seq.size
-    for i, bgr in _decoded_ahead(seq, range(max(start, 0), stop)):
-        if bgr.shape[:2] != (H, W):
+    for i, rgb in _decoded_ahead(seq, range(max(start, 0), stop)):
+        if rgb.shape[:2] != (H, W):
             raise VideoError(f"image sequence {seq.pattern}: frame file {seq.file(i)} is "
-                             f"{bgr.shape[1]}x{bgr.shape[0]}, its first frame {W}x{H}")
-        yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+                             f"{rgb.shape[1]}x{rgb.shape[0]}, its first frame {W}x{H}")
+        yield rgb
 
 
 #: Frame files decoded ahead of the one yielded, on threads (OpenCV's decoders release the
@@ -252,7 +250,7 @@ _AHEAD = 6
 
 
 def _decoded_ahead(seq: Sequence, frames: range) -> Iterator[tuple[int, np.ndarray]]:
-    """``(i, BGR frame)`` for each of ``frames`` in turn, the next :data:`_AHEAD` files decoded
+    """``(i, RGB frame)`` for each of ``frames`` in turn, the next :data:`_AHEAD` files decoded
     meanwhile on threads (:func:`facetransfer.io.ahead.ordered_ahead`)."""
     from .ahead import ordered_ahead
 
