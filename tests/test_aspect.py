@@ -163,3 +163,51 @@ def test_the_fidelity_judge_sees_a_squeezed_clip_at_its_shape(data_dir, tmp_path
     stored = landmarker_scores(squeezed, 30.0)[0]
     err, err_stored = np.nanmean(np.abs(shown - ref)), np.nanmean(np.abs(stored - ref))
     assert err < 0.01 and err_stored > 3 * err
+
+
+def _turned(clip, out):
+    """``clip`` stored turned a quarter clockwise (lossless), with a display matrix that turns
+    it back upright for players (a phone held upright stores its video so)."""
+    import subprocess
+
+    import imageio_ffmpeg
+
+    from facetransfer.io.video import VideoOptions, read_video, write_video
+    from facetransfer.io.video_read import video_info
+
+    frames, fps = read_video(clip)
+    n, d = video_info(clip).sar
+    stored = out.with_name("stored.mkv")
+    write_video(stored, np.stack([np.rot90(f, k=-1) for f in frames]), fps,
+                options=VideoOptions(crf=0, sar=(d, n)))
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-v", "error", "-display_rotation", "90",
+                    "-i", str(stored), "-c", "copy", str(out)], check=True)
+    return frames
+
+
+def test_a_turned_clip_is_read_upright_with_its_pixels_turned_too(arkit_model, data_dir,
+                                                                  tmp_path):
+    """A clip whose display matrix turns it a quarter (stored 480x384 in pixels 4:5) is read
+    and captured as it is shown: upright, 384x480 in pixels 5:4, the same capture as the
+    upright clip; ``probe`` says so. Before, its pixels' ratio was taken unturned: the face
+    tracked 1.56 times too wide."""
+    from facetransfer.io.video import read_video
+    from facetransfer.io.video_facts import fact_lines, video_facts
+    from facetransfer.io.video_read import video_info
+    from facetransfer.track.capture import capture_video
+
+    squeezed = _two_shapes(data_dir, tmp_path, 30)[1]
+    upright = _turned(squeezed, tmp_path / "turned.mp4")
+    info = video_info(tmp_path / "turned.mp4")
+    assert (info.turn, info.size, info.sar) == (270, (384, 480), (5, 4))
+    got = read_video(tmp_path / "turned.mp4")[0]
+    assert got.shape == upright.shape
+    err = np.abs(got.astype(int) - upright).mean()      # chroma resampled once more
+    assert err < 2.0 and np.abs(got.astype(int) - upright[:, ::-1, ::-1]).mean() > 10 * err
+    line = fact_lines(video_facts(tmp_path / "turned.mp4"))[0]
+    assert "stored 480x384, turned 270 degrees clockwise" in line and "shown 480x480" in line
+    ref, tr = capture_video(squeezed, arkit_model), capture_video(tmp_path / "turned.mp4",
+                                                                   arkit_model)
+    assert tr.pixel_aspect == 1.25 and tr.frame_size == (384, 480)
+    assert np.abs(tr.blendshapes - ref.blendshapes).mean() < 0.01
+    np.testing.assert_allclose(tr.weights["identity"][0], ref.weights["identity"][0], atol=0.02)

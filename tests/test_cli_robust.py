@@ -4,6 +4,7 @@ one line for OS errors, and native libraries' log lines kept off stderr."""
 from __future__ import annotations
 
 import errno
+import os
 import subprocess
 import sys
 import textwrap
@@ -206,3 +207,20 @@ def test_every_command_takes_no_progress_and_it_silences_the_bars(monkeypatch):
             assert ("frames" in term.text) is enabled
     finally:
         common.set_progress(True)
+
+
+# ------------------------------------------------------------------------------ a closed pipe
+def test_output_read_by_a_reader_that_stops_ends_quietly(data_dir):
+    """``facetransfer probe V V ... | head -1``: the command stops where its reader did, with
+    no error line (before: "error: Broken pipe", status 2) and a shell's status for SIGPIPE;
+    a real error still says its line."""
+    clip = str(data_dir / "video" / "driving_d9.mp4")
+    script = (f"{sys.executable} -m facetransfer.cli.main probe " + " ".join([clip] * 40)
+              + " | head -c 20; echo \" ${PIPESTATUS[0]}\"")
+    env = {**os.environ, "PYTHONPATH": SRC}
+    r = subprocess.run(["bash", "-c", script], capture_output=True, text=True, timeout=120,
+                       env=env)
+    assert r.stdout == clip[:20] + " 141\n" and r.stderr == ""
+    r = subprocess.run([sys.executable, "-m", "facetransfer.cli.main", "probe", clip + ".no"],
+                       capture_output=True, text=True, timeout=120, env=env)
+    assert r.returncode == 2 and "does not exist" in r.stderr

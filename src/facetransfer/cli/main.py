@@ -245,6 +245,8 @@ def _run(args) -> int:
         return int(args.func(args) or 0)
     except (ValueError, OSError, MemoryError, EOFError, zipfile.BadZipFile) as exc:
         # bad input, a failed write or read (permissions, full disk), a job too large
+        if isinstance(exc, BrokenPipeError) and _stdout_gone():
+            return 141        # read by ``| head``, which stopped reading: nothing to say
         if args.verbose:
             logging.getLogger("facetransfer").exception("details")
         print(error_line(args.command, exc), file=sys.stderr)
@@ -257,6 +259,26 @@ def _run(args) -> int:
     finally:
         if previous is not None:
             signal.signal(signal.SIGTERM, previous)
+
+
+def _stdout_gone() -> bool:
+    """Whether standard output's reader has gone (``facetransfer probe V | head -1``); if so,
+    it is pointed at the null device so that the interpreter's last flush says nothing
+    either (the exit status is then 141, a shell's for a command stopped by SIGPIPE)."""
+    import select
+
+    try:
+        fd = sys.stdout.fileno()
+        poll = select.poll()
+        poll.register(fd, select.POLLOUT)
+        if not any(ev & select.POLLERR for _, ev in poll.poll(0)):  # a pipe without reader
+            return False
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, fd)
+        os.close(null)
+    except (OSError, ValueError, AttributeError):   # no file descriptor (captured output)
+        return False
+    return True
 
 
 #: Commands whose tracking goes through the track cache (facetransfer.track.cache)

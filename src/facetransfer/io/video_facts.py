@@ -34,8 +34,10 @@ class VideoFacts:
     container : str or None
         ffmpeg's demuxer (``"mov,mp4,m4a,3gp,3g2,mj2"``, ``"mpegts"``, ...).
     size, shown_size : (int, int)
-        ``(W, H)`` stored, and as shown (the width times the pixel aspect ratio ``sar``).
+        ``(W, H)`` as read (stored, or turned upright: ``turn``), and as shown (the width
+        times the pixel aspect ratio ``sar``).
     sar : (int, int)
+        The pixel aspect ratio of the frames as read.
     fps : float
         The constant rate it is read at.
     n_frames : int
@@ -54,6 +56,9 @@ class VideoFacts:
     first_number : int or None
         An image sequence's first frame number (its container is ``"image sequence"``); None
         for a video file.
+    turn : int
+        Degrees clockwise the display matrix turns the stored pictures (the frames are read
+        turned, as players show them): :attr:`facetransfer.io.video_read.VideoInfo.turn`.
     """
 
     path: str
@@ -71,6 +76,7 @@ class VideoFacts:
     colour: ColourTags
     audio: str | None
     first_number: int | None = None
+    turn: int = 0
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -91,15 +97,20 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       int(info.n_frames), info.steps is not None,
                       float(info.n_frames / info.fps) if info.fps else 0.0, first_field(path),
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
-                      video_colour(path), audio_codec(path))
+                      video_colour(path), audio_codec(path), turn=info.turn)
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
     """The facts as a few lines for a person, with what each means for the commands."""
     size = "{}x{}".format(*f.size)
+    if f.turn:
+        stored = f.size if f.turn == 180 else f.size[::-1]
+        size += (" upright (stored {}x{}, turned {} degrees clockwise by its display matrix "
+                 "as players show it; results written upright)").format(*stored, f.turn)
     if f.shown_size != f.size:
-        size += (" stored, shown {}x{} (pixels {}:{}: tracked resampled to square pixels, "
-                 "results written with the same ratio)").format(*f.shown_size, *f.sar)
+        size += ("{}, shown {}x{} (pixels {}:{}: tracked resampled to square pixels, "
+                 "results written with the same ratio)").format(
+                     " stored" if f.turn == 0 else "", *f.shown_size, *f.sar)
     rate = f"{f.fps:.3f}".rstrip("0").rstrip(".")
     timing = f"{rate} fps, {f.n_frames} frames, {f.seconds:.1f} s" if f.n_frames > 0 else \
         f"{rate} fps, its frame count not in its header (a still image?)"

@@ -55,6 +55,11 @@ class VideoInfo:
     piped : bool
         Decoded by the ffmpeg binary (:mod:`facetransfer.io.video_pipe`): interlaced video,
         whose pictures OpenCV returns black (or as garbage).
+    turn : {0, 90, 180, 270}
+        Degrees clockwise the video's display matrix turns its stored pictures (a phone held
+        upright or upside down): the frames are read turned, as a player shows them (OpenCV
+        and ffmpeg both turn them), so ``size`` and ``sar`` are the turned frames' (a quarter
+        turn swaps the stored width and height, and the pixel aspect ratio's terms).
     """
 
     path: Path
@@ -64,6 +69,7 @@ class VideoInfo:
     sar: tuple[int, int] = (1, 1)
     steps: tuple[int, ...] | None = field(default=None, repr=False)
     piped: bool = False
+    turn: int = 0
 
 
 def _open(path: str | os.PathLike):
@@ -116,18 +122,34 @@ def _video_info(path) -> VideoInfo:
         n = max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)  # a still gives -2**63: none
         size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
         sar = pixel_aspect(cap.get(cv2.CAP_PROP_SAR_NUM), cap.get(cv2.CAP_PROP_SAR_DEN))
+        turn = display_turn(cap)
         piped = size[0] > 0 and size[1] > 0 and first_field(path) is not None
     finally:
         cap.release()
     if size[0] <= 0 or size[1] <= 0:
         raise VideoError(f"video {path} has no frames")
+    if turn in (90, 270):      # the stream's ratio is of its stored pixels, turned with them
+        sar = (sar[1], sar[0])
     if piped:
         log.info("%s: interlaced; decoded by ffmpeg (OpenCV's frames would be black or "
                  "garbage)", path)
     even = timeline(path, n)
     if even is None:
-        return VideoInfo(Path(path), fps, n, size, sar, piped=piped)
-    return VideoInfo(Path(path), even[0], len(even[1]), size, sar, even[1], piped)
+        return VideoInfo(Path(path), fps, n, size, sar, piped=piped, turn=turn)
+    return VideoInfo(Path(path), even[0], len(even[1]), size, sar, even[1], piped, turn)
+
+
+def display_turn(cap) -> int:
+    """Degrees clockwise (0, 90, 180 or 270) that an opened ``cv2.VideoCapture`` turns its
+    frames by the video's display matrix (0 where OpenCV does not turn them)."""
+    import cv2
+
+    if not cap.get(cv2.CAP_PROP_ORIENTATION_AUTO):
+        return 0
+    meta = cap.get(cv2.CAP_PROP_ORIENTATION_META)
+    if not np.isfinite(meta):
+        return 0
+    return int(round(meta / 90.0)) % 4 * 90
 
 
 def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
