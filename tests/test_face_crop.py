@@ -93,7 +93,7 @@ def test_a_small_face_is_found_and_read_as_the_large_one(frames, scale):
     assert np.abs(got.scores[:, jaw] - large.scores[:, jaw]).mean() < 0.06
 
 
-def test_frames_without_a_face_are_searched_in_a_rhythm(monkeypatch):
+def test_frames_without_a_face_are_searched_in_a_rhythm(monkeypatch, data_dir):
     """Large frames without a face: the tiles are searched in frames 0, 5, 10, ... only, every
     tile of both scales each time."""
     import facetransfer.track.face_crop as fc
