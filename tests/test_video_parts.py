@@ -184,3 +184,51 @@ def test_a_part_that_cannot_be_written_says_where_and_the_way_around(tmp_path, m
     assert "FACETRANSFER_RENDER_CACHE=off" in msg and len(msg.splitlines()) == 1
     assert not (tmp_path / "o.mp4").exists()
     assert not (tmp_path / "p").exists()  # no part kept: no folder left
+
+
+def test_the_joined_video_and_a_video_written_at_once_carry_the_start_timecode(
+        small_parts, tmp_path, data_dir):
+    """A timecode in the options (a rewritten plate's, :func:`like_video`) is the written
+    file's start timecode: joined from parts (each part without one), with the audio muxed
+    in, or encoded at once; in MP4, QuickTime and Matroska files (AVI holds none). The
+    parts' frames are unchanged by it."""
+    from facetransfer.io.video_display import timecode_of
+
+    frames, tc = _frames(12), "01:02:03:04"
+    opt = VideoOptions(crf=0, timecode=tc)
+    for name in ("j.mp4", "j.mov", "j.mkv", "j.avi"):
+        w = vp.PartsWriter(tmp_path / ("p" + name), tmp_path / name, 25.0, (64, 48),
+                           n_frames=12, options=opt, overwrite=True)
+        write_rest(w, frames)
+        assert timecode_of(tmp_path / name) == (None if name.endswith("avi") else tc)
+    assert np.array_equal(read_video(tmp_path / "j.mov")[0],
+                          read_video(_one(tmp_path, frames))[0])
+    clip = data_dir / "video" / "driving_d9.mp4"
+    encode_video(tmp_path / "a.mp4", frames, 25.0, options=VideoOptions(timecode="10:00:00:00"),
+                 audio_from=clip)
+    assert timecode_of(tmp_path / "a.mp4") == "10:00:00:00" and has_audio(tmp_path / "a.mp4")
+    assert timecode_of(clip) is None
+
+
+def test_a_timecode_is_checked_before_it_reaches_ffmpeg():
+    from facetransfer.io.video_display import checked_timecode
+
+    for good in ("00:00:00:00", "23:59:59;29", "01:00:00.12"):
+        assert checked_timecode(good) == good
+    for bad in ("1:00:00:00", "01:00:00:00 -y", "01:61:00:00", 3600, ""):
+        with pytest.raises(VideoError, match="timecode"):
+            VideoOptions(timecode=bad)
+
+
+def test_a_rewrite_takes_its_videos_timecode_and_probe_says_it(tmp_path):
+    from facetransfer.io.video_facts import fact_lines, video_facts
+    from facetransfer.io.video_like import like_video
+
+    plate, plain = tmp_path / "plate.mov", tmp_path / "plain.mov"
+    encode_video(plate, _frames(3), 25.0, options=VideoOptions(timecode="01:00:10:05"))
+    encode_video(plain, _frames(3), 25.0)
+    assert like_video(None, plate).timecode == "01:00:10:05"
+    assert like_video(VideoOptions(timecode="02:00:00:00"), plate).timecode == "02:00:00:00"
+    assert like_video(None, plain).timecode is None
+    assert "; timecode 01:00:10:05 (the results start at it)" in fact_lines(video_facts(plate))[2]
+    assert "timecode" not in " ".join(fact_lines(video_facts(plain)))

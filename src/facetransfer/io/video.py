@@ -34,6 +34,7 @@ from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
 from .ffmpeg import ffmpeg_exe
 from .video_display import (COLOUR_TAGS, checked_aspect, checked_colour_name,  # noqa: F401
+                            checked_timecode,
                             colour_matrix, described, frame_args, video_colour)
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
@@ -112,6 +113,12 @@ class VideoOptions:
         An image sequence's number of its first frame. None: 0, but the commands that rewrite
         an image sequence number theirs as it is numbered (a plate's 1001 on), as
         :func:`~facetransfer.io.video_like.like_video` gives.
+    timecode : str, optional
+        The start timecode written into an MP4, QuickTime or Matroska file (``HH:MM:SS:FF``,
+        ``;`` before the frames of a drop-frame one): a ``tmcd`` track, a tag. None: none; the
+        commands that rewrite a video carry its own (its first frame is theirs), as
+        :func:`~facetransfer.io.video_like.like_video` gives, so that an editor conforms the
+        result where the shot was. AVI files and image sequences carry none.
     """
 
     codec: str = DEFAULT_CODEC
@@ -123,6 +130,7 @@ class VideoOptions:
     transfer: str | None = None
     field: str | None = None
     first_number: int | None = None
+    timecode: str | None = None
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -146,6 +154,7 @@ class VideoOptions:
         if self.field is not None and self.codec == "h265":
             raise VideoError("x265 writes progressive frames: an interlaced video (field "
                              f"{self.field!r}) needs codec h264 or prores")
+        checked_timecode(self.timecode)
         n = self.first_number
         if n is not None and (isinstance(n, bool) or int(n) != n or n < 0):
             raise VideoError(f"an image sequence's first frame number must be an integer >= 0, "
@@ -369,10 +378,20 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
 
 def _container_args(opt: VideoOptions, suffix: str) -> list[str]:
     """ffmpeg output arguments an MP4 / QuickTime file asks of its video: HEVC tagged ``hvc1``
-    (what Apple players expect) and the index at the front (``+faststart``)."""
+    (what Apple players expect) and the index at the front (``+faststart``); and the start
+    timecode (:func:`_timecode_args`)."""
+    tc = _timecode_args(opt.timecode, suffix)
     if suffix not in (".mp4", ".m4v", ".mov"):
+        return tc
+    return (["-tag:v", "hvc1"] if opt.codec == "h265" else []) + ["-movflags", "+faststart"] + tc
+
+
+def _timecode_args(timecode: str | None, suffix: str) -> list[str]:
+    """``-timecode`` of a file that holds one (MP4 and QuickTime: a ``tmcd`` track; Matroska:
+    a tag); none for AVI or without a timecode."""
+    if timecode is None or suffix not in (".mp4", ".m4v", ".mov", ".mkv"):
         return []
-    return (["-tag:v", "hvc1"] if opt.codec == "h265" else []) + ["-movflags", "+faststart"]
+    return ["-timecode", timecode]
 
 
 def _stored_size(size: tuple[int, int], codec: str) -> tuple[int, int]:
@@ -473,13 +492,15 @@ def _audio_codec_args(codec: str, fmt: str) -> list[str]:
 
 
 def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str | os.PathLike, *,
-              start: float = 0.0, duration: float | None = None) -> bool:
+              start: float = 0.0, duration: float | None = None,
+              timecode: str | None = None) -> bool:
     """Copy ``video``'s frames and ``audio_from``'s audio into ``out``.
 
     The video stream is copied as is; the audio too when the container holds its codec
     (:data:`COPIED_AUDIO`), else it is encoded to AAC; it starts at ``start`` seconds and is
-    cut to ``duration`` (default: the shorter stream). Returns False (and logs why) when there
-    is no ffmpeg or no audio, in which case ``out`` is not written.
+    cut to ``duration`` (default: the shorter stream). ``timecode``: the start timecode
+    written (:attr:`VideoOptions.timecode`; the video's own is not copied). Returns False (and
+    logs why) when there is no ffmpeg or no audio, in which case ``out`` is not written.
 
     Raises
     ------
@@ -504,7 +525,8 @@ def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str 
     cmd += ["-shortest"] if duration is None else ["-t", f"{duration:.3f}"]
     if fmt in ("mp4", "mov"):
         cmd += ["-movflags", "+faststart"]
-    cmd += ["-f", fmt, str(out)]
+    cmd += [*_timecode_args(checked_timecode(timecode), Path(out).suffix.lower()), "-f", fmt,
+            str(out)]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode != 0:
         raise _ffmpeg_error(res.stderr, f"cannot mux the audio of {audio_from} into {out}")
@@ -770,7 +792,8 @@ class VideoWriter:
         try:
             try:
                 muxed = mux_audio(self.tmp, self.audio_from, tmp2, start=self.audio_start,
-                                  duration=self.n_frames / self.fps)
+                                  duration=self.n_frames / self.fps,
+                                  timecode=self.options.timecode)
             except VideoError:
                 self._check_count()  # a damaged encode is named as such
                 raise

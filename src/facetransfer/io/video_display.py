@@ -26,7 +26,8 @@ from .video_sequence import is_sequence
 __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
            "shown_width",
            "frame_args", "colour_named", "checked_colour_name", "described", "video_colour",
-           "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK"]
+           "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK",
+           "checked_timecode", "timecode_of"]
 
 #: ffmpeg arguments naming the colour of a video written
 #: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
@@ -174,6 +175,31 @@ def first_field(path: str | os.PathLike) -> str | None:
 #: QuickTime, Matroska and WebM, AVI); in others (MPEG transport streams of H.264, as AVCHD
 #: camcorders write) it may land nowhere.
 EXACT_SEEK = ("mov,mp4,m4a,3gp,3g2,mj2", "matroska,webm", "avi")
+
+
+#: A SMPTE timecode as ffmpeg reads and writes it: ``HH:MM:SS:FF``, ``;`` (or ``.``) before
+#: the frames of a drop-frame one (29.97 fps)
+_TIMECODE = re.compile(r"\d{2}:[0-5]\d:[0-5]\d[:;.]\d{2,3}")
+
+
+def timecode_of(path: str | os.PathLike) -> str | None:
+    """A video's start timecode (the first it names in :func:`described`: a QuickTime / MP4
+    ``tmcd`` track's, a Matroska or MXF tag's), e.g. ``"01:00:00:00"``; None without one (or
+    without ffmpeg). A camera's or an editor's: what a conform matches shots by."""
+    found = re.search(r"^\s*timecode\s*:\s*(\S+)\s*$", described(path),
+                      re.MULTILINE | re.IGNORECASE)
+    if found is None or not _TIMECODE.fullmatch(found.group(1)):
+        return None
+    return found.group(1)
+
+
+def checked_timecode(timecode) -> str | None:
+    """``timecode`` (None or ``HH:MM:SS:FF``, ``;`` for drop frame) checked; VideoError
+    otherwise (it becomes an ffmpeg argument)."""
+    if timecode is None or (isinstance(timecode, str) and _TIMECODE.fullmatch(timecode)):
+        return timecode
+    raise VideoError(f"a timecode must read HH:MM:SS:FF (HH:MM:SS;FF for drop frame), got "
+                     f"{timecode!r}")
 
 
 def container(path: str | os.PathLike) -> str | None:

@@ -17,7 +17,7 @@ from dataclasses import asdict, dataclass
 
 from .video import audio_codec
 from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
-                            video_colour)
+                            timecode_of, video_colour)
 from .video_read import video_info
 from .video_sequence import is_sequence, open_sequence
 
@@ -59,6 +59,9 @@ class VideoFacts:
     turn : int
         Degrees clockwise the display matrix turns the stored pictures (the frames are read
         turned, as players show them): :attr:`facetransfer.io.video_read.VideoInfo.turn`.
+    timecode : str or None
+        Its start timecode (:func:`facetransfer.io.video_display.timecode_of`), which the
+        results that rewrite it carry.
     """
 
     path: str
@@ -77,6 +80,7 @@ class VideoFacts:
     audio: str | None
     first_number: int | None = None
     turn: int = 0
+    timecode: str | None = None
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -97,7 +101,8 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       int(info.n_frames), info.steps is not None,
                       float(info.n_frames / info.fps) if info.fps else 0.0, first_field(path),
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
-                      video_colour(path), audio_codec(path), turn=info.turn)
+                      video_colour(path), audio_codec(path), turn=info.turn,
+                      timecode=timecode_of(path))
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
@@ -137,5 +142,7 @@ def fact_lines(f: VideoFacts) -> list[str]:
                  "  RGB images, read as they are (16 bits scaled to 8, alpha dropped); no "
                  "audio")]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
-            f"  {colour}; audio {f.audio or 'none'}",
+            f"  {colour}; audio {f.audio or 'none'}" + (
+                "" if f.timecode is None else
+                f"; timecode {f.timecode} (the results start at it)"),
             f"  container {f.container or '?'}; {reading}"]

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..errors import VideoError
 from .video import VideoOptions, video_info
-from .video_display import first_field, video_colour
+from .video_display import first_field, timecode_of, video_colour
 from .video_sequence import is_sequence, open_sequence
 
 log = logging.getLogger(__name__)
@@ -29,7 +29,9 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
     BT.2020-tagged frames by other coefficients); and of an interlaced video the field shown
     first (H.264 and ProRes; warned of once for H.265, which writes progressive frames). Of an
     image sequence (:mod:`facetransfer.io.video_sequence`) its first frame number, for an
-    output sequence numbered as it is. None or not a video: ``options`` as they are."""
+    output sequence numbered as it is; of a video with a start timecode (a camera's, an
+    editor's), that timecode, where ``options`` give none (:attr:`VideoOptions.timecode`: the
+    rewrite starts at its first frame). None or not a video: ``options`` as they are."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
@@ -52,6 +54,8 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
         _warn_hdr(str(video), tags)
     elif options.primaries is None and options.transfer is None:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
+    if options.timecode is None and timecode_of(video) is not None:
+        options = replace(options, timecode=timecode_of(video))
     field = first_field(video)
     if field is not None and options.field is None:
         if options.codec == "h265":

@@ -25,7 +25,7 @@ import os
 import shutil
 import subprocess
 import threading
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -209,8 +209,10 @@ class PartsWriter:
         if self._writer is None:
             if self._next >= self.n_frames:
                 raise VideoError(f"{self.output.path}: all {self.n_frames} frames are written")
+            # a part holds frames only: the join writes the start timecode once
             self._writer = VideoWriter(self.folder / f"{self._next:08d}{_SUFFIX}", self.fps,
-                                       self.size, options=self.output.options, detached=True)
+                                       self.size, detached=True,
+                                       options=replace(self.output.options, timecode=None))
             self._part_start, self._marks = self._next, []
         self._writer.write(frame)
         self._marks.append(bool(marked))
