@@ -20,6 +20,7 @@ render continues where it stopped.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import logging
 import os
 import time
@@ -288,6 +289,7 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
 
     if max_frames is not None and int(max_frames) < 1:
         raise RewriteError(f"max_frames must be >= 1, got {max_frames}")
+    sources = _take_as_performance(sources, align)
     options = RewriteOptions() if options is None else options
     planner = _Planner(model, options.track_method, track_options(options.speed),
                        progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video)
@@ -315,6 +317,26 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     if sources.performance is not None:
         return _performance_plan(inputs, sources, model)
     return _recombined_plan(inputs, sources, model, align)
+
+
+def _take_as_performance(sources: TransferSources, align) -> TransferSources:
+    """``sources`` with an expression source that is a Live Link Face take
+    (:mod:`facetransfer.take`) as the ready performance it makes once the target is tracked;
+    a take drives the target alone."""
+    from .take import Take, is_take
+
+    if sources.expression is None or not is_take(sources.expression.video):
+        return sources
+    path = sources.expression.video
+    others = [name for name, given in (
+        ("a viseme source", sources.viseme), ("an identity", sources.identity or (
+            sources.identity_weights is not None)), ("a pose source", sources.pose),
+        ("a ready performance", sources.performance), ("a source track",
+                                                        sources.expression.track)) if given]
+    if others:
+        raise RewriteError(f"a Live Link Face take ({path}) drives the target's expression "
+                           f"alone; it cannot be combined with {others[0]}")
+    return dataclasses.replace(sources, expression=None, performance=Take(Path(path), align))
 
 
 @dataclass(frozen=True)
@@ -462,13 +484,17 @@ def _identity_weights(inputs: _Inputs, sources: TransferSources, model):
 def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> TransferPlan:
     """The plan of a ready performance: the mouth from the target's frame whose expression is
     nearest (:func:`nearest_frames`)."""
+    from .take import Take
     from .track import Track
 
     if set(inputs.tracks) != {"target"} or sources.identity_weights is not None:
         raise RewriteError("a ready performance (--performance) excludes the other sources")
     perf, tt, frames, n = sources.performance, inputs.tracks["target"], inputs.frames, \
         len(inputs.frames)
-    new = perf if isinstance(perf, Track) else Track.load(perf)
+    if isinstance(perf, Take):
+        new = perf.performance(tt, model)
+    else:
+        new = perf if isinstance(perf, Track) else Track.load(perf)
     new.check_model(model)
     W, H = inputs.size
     if tuple(new.frame_size) != (W, H):

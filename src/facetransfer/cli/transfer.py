@@ -173,7 +173,10 @@ def _add_sources(p) -> None:
     """``transfer``'s inputs: the target and, per attribute, a video and its track file."""
     p.add_argument("--target", required=True, metavar="T.mp4", help="footage to rewrite")
     p.add_argument("--target-track", metavar="T.npz", help="track file of the target (reused)")
-    p.add_argument("--expression-from", metavar="S.mp4", help="video whose expressions to use")
+    p.add_argument("--expression-from", metavar="S.mp4",
+                   help="video whose expressions to use, or a Live Link Face take (S.csv: its "
+                   "ARKit activations by its timecodes; the mouth's texture then comes from "
+                   "the target)")
     p.add_argument("--source-track", metavar="S.npz", help="track file of --expression-from")
     p.add_argument("--viseme-from", metavar="S2.mp4",
                    help="video whose visemes to use (trilinear models)")
@@ -317,8 +320,10 @@ def _prefetch_inputs(args):
     will read them (:class:`facetransfer.io.prefetch.Prefetch`)."""
     from ..io.prefetch import Prefetch, frames_to_cover
 
+    from ..take import is_take
+
     reads = [(args.target, args.max_frames)]
-    if args.expression_from:
+    if args.expression_from and not is_take(args.expression_from):
         reads.append((args.expression_from,
                       frames_to_cover(args.target, args.expression_from, args.max_frames)))
     return Prefetch(reads)
@@ -389,12 +394,18 @@ def _check_transfer_args(args):
     check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
+    from ..take import is_take
+
+    if is_take(args.expression_from):
+        _check_take(args)
     to_track = 0
     for k, (v, tr) in enumerate(((args.target, args.target_track),
                                  (args.expression_from, args.source_track),
                                  (args.viseme_from, args.viseme_track),
                                  (args.identity_from, args.identity_track),
                                  (args.pose_from, args.pose_track))):
+        if v and k == 1 and is_take(v):
+            continue                # read by _check_take; nothing to track
         if v:
             video_info(v)  # unreadable input: one line, before any work
             if not tr and not (v == args.target and args.performance):
@@ -403,6 +414,34 @@ def _check_transfer_args(args):
                              (args.source_face, v, "--source-face")), args.tracker)
                 to_track += 1
     return vopt, to_track
+
+
+def _check_take(args) -> None:
+    """A Live Link Face take given as ``--expression-from``: readable, with rising timecodes,
+    and not combined with what it cannot be (one line each, before any work)."""
+    from ..export.common import ExportError
+    from ..export.livelink import read_livelink
+    from ..take import take_seconds
+
+    path = args.expression_from
+    for flag, given in (("--source-track", args.source_track), ("--viseme-from", args.viseme_from),
+                        ("--identity-from", args.identity_from), ("--pose-from", args.pose_from),
+                        ("--performance", args.performance),
+                        ("--identity-weights", args.identity_weights),
+                        ("--identity-label", args.identity_label),
+                        ("--identity-dials", args.identity_dials)):
+        if given:
+            raise FaceTransferError(f"--expression-from {path} is a Live Link Face take, which "
+                                    f"drives the target alone: {flag} cannot be added")
+    if not Path(path).is_file():
+        raise FaceTransferError(f"--expression-from {path} does not exist")
+    try:
+        take = read_livelink(path)
+    except (ExportError, UnicodeDecodeError) as exc:
+        raise FaceTransferError(f"--expression-from {path}: {exc}") from None
+    if not take.timecodes:
+        raise FaceTransferError(f"--expression-from {path}: the take has no rows")
+    take_seconds(take.timecodes, warn=False)
 
 
 def _chosen_identity(model, args):

@@ -33,9 +33,10 @@ import numpy as np
 from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
 from .ffmpeg import ffmpeg_exe
-from .video_display import (COLOUR_TAGS, checked_aspect, checked_colour_name,  # noqa: F401
-                            checked_timecode,
-                            colour_matrix, described, frame_args, video_colour)
+from .video_display import (COLOUR_TAGS, checked_timecode, colour_matrix,  # noqa: F401
+                            described, frame_args, video_colour)
+from .video_options import (CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF,  # noqa: F401 (API)
+                            DEFAULT_PRESET, PRESETS, VideoOptions)
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
 from .video_sequence import (IMAGE_SUFFIXES, is_sequence, percent_pattern, same_sequence_files,
@@ -57,114 +58,10 @@ __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video
 # writing: one writer for every command (H.264 by default, H.265, ProRes, image sequences)
 # ---------------------------------------------------------------------------------------------
 
-#: Codec names of ``--codec`` and the ffmpeg encoder each needs.
-CODECS = {"h264": "libx264", "h265": "libx265", "prores": "prores_ks"}
-DEFAULT_CODEC = "h264"
-#: Constant rate factor of H.264 / H.265 when none is given (x264: 18 is "visually lossless").
-DEFAULT_CRF = 18
-CRF_RANGE = (0, 51)  # x264 and x265, 8-bit
-#: x264 / x265 speed presets, fastest first.
-PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
-           "veryslow")
-#: The default preset: x264's "faster" costs 64 % of the CPU of its own default, "medium",
-#: for 0.07 dB less over the face of a transfer at CRF 18 (BENCHMARKS.md, "End to end").
-DEFAULT_PRESET = "faster"
 #: Video containers by extension (the ffmpeg muxer of each).
 VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska",
                   ".avi": "avi"}
 _PATTERN = re.compile(r"%0?\d*d")
-
-
-@dataclass(frozen=True)
-class VideoOptions:
-    """How to encode a video.
-
-    Attributes
-    ----------
-    codec : {"h264", "h265", "prores"}
-        H.264 (libx264) and H.265 (libx265) are written as 8-bit 4:2:0 (``yuv420p``), what
-        browsers and phones play; ProRes 422 HQ (prores_ks, 10-bit 4:2:2) for editing, in
-        ``.mov`` or ``.mkv``.
-    crf : int, optional
-        Constant rate factor of H.264 / H.265, 0 (lossless in YUV) to 51; lower is better and
-        bigger. Default :data:`DEFAULT_CRF`. ProRes has none.
-    preset : str
-        x264 / x265 speed preset (:data:`PRESETS`): faster ones cost less CPU for a little less
-        quality or bigger files at the same CRF (figures in BENCHMARKS.md).
-    sar : (int, int), optional
-        The pixel aspect ratio written into the video's header (its sample aspect ratio), so
-        that players show it at the shape of the video it rewrites (e.g. (15, 16): a 512x480
-        video shown 480x480). None: square pixels, nothing written; the commands that rewrite a
-        video take that video's (:func:`~facetransfer.io.video_like.like_video`, as the
-        attributes below). Image sequences carry none.
-    colour_tags : bool
-        Name the colour matrix and range of the frames' conversion (BT.601, limited) in the
-        header. False leaves them unspecified, for a video that rewrites one which names none:
-        a player then guesses alike for both.
-    primaries, transfer : str, optional
-        The colour primaries and transfer characteristic named in the header, as ffmpeg names
-        them (``"bt709"``; HLG ``"arib-std-b67"``): a rewritten video's RGB values are those
-        its input's decoding gave, so they are its input's. None: not named.
-    field : {"top", "bottom"}, optional
-        Interlaced video: the field shown first, written into the stream (H.264 and ProRes
-        coded interlaced), so that players show a rewritten interlaced video as they showed
-        it; not with H.265 (x265 writes progressive frames). None: progressive.
-    first_number : int, optional
-        An image sequence's number of its first frame. None: 0, but the commands that rewrite
-        an image sequence number theirs as it is numbered (a plate's 1001 on), as
-        :func:`~facetransfer.io.video_like.like_video` gives.
-    timecode : str, optional
-        The start timecode written into an MP4, QuickTime or Matroska file (``HH:MM:SS:FF``,
-        ``;`` before the frames of a drop-frame one): a ``tmcd`` track, a tag. None: none; the
-        commands that rewrite a video carry its own (its first frame is theirs), as
-        :func:`~facetransfer.io.video_like.like_video` gives, so that an editor conforms the
-        result where the shot was. AVI files and image sequences carry none.
-    """
-
-    codec: str = DEFAULT_CODEC
-    crf: int | None = None
-    preset: str = DEFAULT_PRESET
-    sar: tuple[int, int] | None = None
-    colour_tags: bool = True
-    primaries: str | None = None
-    transfer: str | None = None
-    field: str | None = None
-    first_number: int | None = None
-    timecode: str | None = None
-
-    def __post_init__(self) -> None:
-        if self.codec not in CODECS:
-            raise VideoError(f"codec must be one of {', '.join(CODECS)}, got {self.codec!r}")
-        if self.preset not in PRESETS:
-            raise VideoError(f"preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
-        if self.crf is not None:
-            if self.codec == "prores":
-                raise VideoError("--crf applies to h264 and h265; prores has a fixed quality "
-                                 "(profile HQ)")
-            lo, hi = CRF_RANGE
-            if isinstance(self.crf, bool) or int(self.crf) != self.crf or not lo <= self.crf <= hi:
-                raise VideoError(f"CRF must be an integer from {lo} to {hi} (lower is better; "
-                                 f"default {DEFAULT_CRF}), got {self.crf}")
-        if self.sar is not None:
-            object.__setattr__(self, "sar", checked_aspect(self.sar))
-        checked_colour_name(self.primaries, "primaries")
-        checked_colour_name(self.transfer, "transfer")
-        if self.field not in (None, "top", "bottom"):
-            raise VideoError(f"field must be 'top', 'bottom' or None, got {self.field!r}")
-        if self.field is not None and self.codec == "h265":
-            raise VideoError("x265 writes progressive frames: an interlaced video (field "
-                             f"{self.field!r}) needs codec h264 or prores")
-        checked_timecode(self.timecode)
-        n = self.first_number
-        if n is not None and (isinstance(n, bool) or int(n) != n or n < 0):
-            raise VideoError(f"an image sequence's first frame number must be an integer >= 0, "
-                             f"got {n!r}")
-
-    @property
-    def effective_crf(self) -> int | None:
-        """The CRF used (None for ProRes)."""
-        return None if self.codec == "prores" else int(DEFAULT_CRF if self.crf is None
-                                                       else self.crf)
 
 
 @dataclass(frozen=True)

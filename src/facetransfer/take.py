@@ -1,0 +1,184 @@
+"""A Live Link Face take as the expression source of a transfer (§6, Fig. 7C with a recorded
+performance).
+
+An animator records a take with Epic Games' Live Link Face app (an iPhone's ARKit tracker: 52
+blendshape activations and the head's rotation per row, :mod:`facetransfer.export.livelink`)
+and wants the person in some footage to perform it: ``facetransfer transfer --target T.mp4
+--expression-from take.csv``. For a model whose expressions are ARKit blendshapes (the default
+``ict-arkit``) the activations are expression weights exactly (Eq. (A),
+:func:`facetransfer.arkit.activations_to_weights`), so the take is a new performance without
+any tracking of the source: the target's own track with its expression weights replaced by the
+take's, resampled to the target's frames by the take's timecodes. Identity and head pose stay
+the target's (as for a video source); the eyes look where the take's eyeLook* say. A take has
+no pictures, so the mouth's texture comes from the target's own frames (the texture function
+of §6 queried with the new expression, as for a ready performance).
+
+Timecodes are ``HH:MM:SS:FF.mmm``: ``FF`` a frame at the take's nominal rate, ``.mmm`` its
+thousandths. The rate is not written in the file: a take that passes a second shows it (its
+frame numbers wrap after the last, :func:`take_rate`); one within a second is read at the
+smallest usual rate above its frame numbers, with a warning.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .transfer import TransferError
+
+log = logging.getLogger(__name__)
+
+__all__ = ["TIMECODE_RATES", "Take", "is_take", "take_rate", "take_seconds", "take_on_timeline",
+           "take_performance"]
+
+#: Nominal timecode rates (frames per second) a take's ``FF`` field may count in.
+TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 100, 120)
+
+_TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2}):(\d{2,3})(?:\.(\d{1,3}))?$")
+
+
+@dataclass(frozen=True)
+class Take:
+    """A take standing for the new performance of a transfer until the target is tracked
+    (:func:`facetransfer.video_transfer.plan_sources`): its file and time alignment."""
+
+    path: Path
+    align: str | None = None
+
+    def performance(self, target_track, model):
+        """:func:`take_performance` on ``target_track``'s timeline."""
+        return take_performance(self.path, target_track, model, align=self.align)
+
+
+def is_take(path) -> bool:
+    """Whether an expression source names a Live Link Face take (a ``.csv`` file) rather than
+    a video."""
+    return path is not None and Path(os.fspath(path)).suffix.lower() == ".csv"
+
+
+def _fields(timecodes) -> np.ndarray:
+    """``(F, 5)`` int: hours, minutes, seconds, frame, thousandths of each timecode."""
+    out = []
+    for t in timecodes:
+        m = _TC.match(str(t).strip())
+        if m is None:
+            raise TransferError(f"timecode {t!r} is not HH:MM:SS:FF.mmm")
+        hh, mm, ss, ff, milli = m.groups()
+        out.append((int(hh), int(mm), int(ss), int(ff), int((milli or "0").ljust(3, "0"))))
+    return np.array(out, np.int64).reshape(-1, 5)
+
+
+def take_rate(timecodes, *, warn: bool = True) -> int:
+    """The nominal rate of a take's timecodes: the smallest of :data:`TIMECODE_RATES` above
+    every frame number ``FF`` it holds. Sure where the take passes a second (its frame numbers
+    wrap after the last one of its rate); a take within one second is said in the log to be a
+    guess. TransferError beyond every rate."""
+    f = _fields(timecodes)
+    top = int(f[:, 3].max(initial=0))
+    seconds = f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]
+    wrapped = bool(seconds.size) and seconds.max() > seconds.min()
+    for rate in TIMECODE_RATES:
+        if rate > top:
+            if warn and not wrapped:
+                log.warning("the take lies within one second of timecode: its frames are taken "
+                            "at %d a second (the smallest timecode rate above its frame "
+                            "numbers)", rate)
+            return rate
+    raise TransferError(f"timecode frame {top} is beyond every timecode rate "
+                        f"({TIMECODE_RATES[-1]} fps)")
+
+
+def take_seconds(timecodes, *, warn: bool = True) -> np.ndarray:
+    """``(F,)`` seconds of each row after the take's first, from its timecodes at
+    :func:`take_rate` (``warn``: its guess said; TransferError if they go back in time)."""
+    f = _fields(timecodes)
+    rate = take_rate(timecodes, warn=warn)
+    t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / rate
+    if t.size and np.any(np.diff(t) < 0):
+        k = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
+        raise TransferError(f"the take's timecodes go back in time at row {k + 1} "
+                            f"({timecodes[k]} after {timecodes[k - 1]})")
+    return t - (t[0] if t.size else 0.0)
+
+
+def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps: float, *,
+                     align: str | None = None) -> np.ndarray:
+    """A take's rows ``values`` (F, k) at ``seconds`` (F,) resampled to frames ``j / fps``,
+    linearly between rows.
+
+    ``align`` as :func:`facetransfer.transfer.time_map`: ``"trim"`` stops at the take's end,
+    ``"hold"`` holds its last row, ``"loop"`` restarts it; None: ``"trim"`` when the take is
+    at least as long as the ``n_frames``, else ``"hold"``.
+
+    Returns
+    -------
+    (m, k) float64
+        ``m = n_frames`` except with ``"trim"`` (the frames the take covers, at least 1).
+    """
+    t, v = np.asarray(seconds, np.float64), np.asarray(values, np.float64)
+    if align not in (None, "trim", "hold", "loop"):
+        raise TransferError(f"align must be trim, hold or loop, got {align!r}")
+    end = float(t[-1]) if t.size else 0.0
+    when = np.arange(int(n_frames)) / float(fps)
+    if align is None:
+        align = "trim" if end >= when[-1] else "hold"
+    if align == "trim":
+        when = when[when <= end + 0.5 / fps] if end > 0 else when[:1]
+    elif align == "loop" and end > 0:
+        when = np.mod(when, end + 1.0 / fps)
+    return np.stack([np.interp(when, t, v[:, c]) for c in range(v.shape[1])], axis=1) \
+        if v.shape[1] else np.zeros((when.size, 0))
+
+
+def take_performance(path, target_track, model, *, align: str | None = None):
+    """The performance of the target's person acting a Live Link Face take (module notes).
+
+    Parameters
+    ----------
+    path : path-like
+        The take (CSV, :func:`facetransfer.export.livelink.read_livelink`).
+    target_track : Track
+        The target's own track: its identity, pose, timeline and lost frames.
+    model : MultilinearModel
+        With ARKit-named expressions (:func:`facetransfer.arkit.is_arkit_model`).
+    align : {"trim", "hold", "loop"}, optional
+        See :func:`take_on_timeline`.
+
+    Returns
+    -------
+    Track
+        On the target's timeline (its frames, or those the take covers with ``"trim"``), with
+        ``landmarks2d`` and ``blendshapes`` recomputed.
+
+    Raises
+    ------
+    TransferError
+        The model's expressions are not ARKit's, or the take is not one.
+    """
+    from .arkit import activations_to_weights, attach_activations, is_arkit_model
+    from .export.common import ExportError
+    from .export.livelink import read_livelink
+    from .track.project import project_landmarks, take_frames
+
+    if not is_arkit_model(model):
+        raise TransferError(f"a Live Link Face take ({path}) drives a model whose expressions "
+                            "are ARKit blendshapes (the default model, 'ict-arkit')")
+    try:
+        take = read_livelink(path)
+    except (ExportError, OSError, UnicodeDecodeError) as exc:
+        raise TransferError(f"--expression-from {path}: {exc}") from None
+    if not len(take.timecodes):
+        raise TransferError(f"the take {path} has no rows")
+    a = take_on_timeline(take_seconds(take.timecodes), take.activations,
+                         target_track.n_frames, target_track.fps, align=align)
+    new = take_frames(target_track, np.arange(len(a)))
+    weights = dict(new.weights)
+    weights["expression"] = activations_to_weights(model, np.clip(a, 0.0, 1.0))
+    new = dataclasses.replace(new, weights=weights)
+    return attach_activations(project_landmarks(new, model), model)

@@ -1,0 +1,136 @@
+"""A Live Link Face take as a transfer's expression source (facetransfer.take)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer.take import (is_take, take_on_timeline, take_performance, take_rate,  # noqa: E402
+                               take_seconds)
+from facetransfer.transfer import TransferError  # noqa: E402
+
+
+def test_timecodes_count_in_the_takes_own_rate():
+    tc = [f"10:00:0{s}:{f:02d}.000" for s in (0, 1) for f in range(60)]   # 60 fps
+    assert take_rate(tc) == 60
+    np.testing.assert_allclose(take_seconds(tc), np.arange(120) / 60, atol=1e-9)
+    # 30 nominal frames a second, rows half a frame apart (the app's 59.94 fps takes)
+    tc = ["00:00:00:00.000", "00:00:00:00.500", "00:00:00:01.000", "00:00:00:29.500",
+          "00:00:01:00.000"]
+    assert take_rate(tc) == 30
+    np.testing.assert_allclose(take_seconds(tc), [0, 0.5 / 30, 1 / 30, 29.5 / 30, 1.0])
+    assert take_rate(["00:00:00:23.000"]) == 24 and take_rate(["00:00:00:24.000"]) == 25
+    assert take_rate(["00:00:00:26.000", "00:00:00:28.000", "00:00:01:00.000"]) == 30
+    with pytest.raises(TransferError, match="back in time at row 3"):
+        take_seconds(["00:00:01:00.000", "00:00:01:01.000", "00:00:00:05.000"])
+    with pytest.raises(TransferError, match="HH:MM:SS:FF"):
+        take_seconds(["00:00:01"])
+    assert is_take("a/b.CSV") and not is_take("a/b.mp4") and not is_take(None)
+
+
+def test_a_take_is_resampled_onto_the_targets_frames():
+    t = np.linspace(0.0, 1.0, 11)                    # rows every 0.1 s, value 10 t
+    v = np.stack([10 * t, 1 - t], axis=1)
+    got = take_on_timeline(t, v, 20, 25.0)           # the take is longer: trimmed to 20
+    np.testing.assert_allclose(got[:, 0], 10 * np.arange(20) / 25.0)
+    held = take_on_timeline(t, v, 40, 25.0)          # shorter: its last row held
+    assert held.shape == (40, 2) and np.all(held[25:, 0] == 10.0)
+    assert take_on_timeline(t, v, 40, 25.0, align="trim").shape == (26, 2)
+    looped = take_on_timeline(t, v, 40, 25.0, align="loop")
+    np.testing.assert_allclose(looped[30, 0], 10 * (30 / 25.0 - 1.04))
+    with pytest.raises(TransferError, match="align"):
+        take_on_timeline(t, v, 5, 25.0, align="stretch")
+
+
+def test_a_take_written_from_a_track_drives_the_same_expressions(arkit_model, make_arkit_track,
+                                                                  tmp_path):
+    """The exporter's take of a track, driving that track's own person: its activations come
+    back (to the CSV's 8 decimals), identity and pose stay the target's, landmarks and
+    blendshapes are the new expression's."""
+    from facetransfer.export.livelink import write_livelink
+
+    track, a, _ = make_arkit_track(arkit_model, 30, fps=25.0)     # 1.2 s: its rate shows
+    take = write_livelink(track, tmp_path / "take.csv")
+    target, _, _ = make_arkit_track(arkit_model, 30, seed=5, identity=2, fps=25.0)
+    new = take_performance(take, target, arkit_model)
+    assert new.n_frames == 30
+    np.testing.assert_allclose(new.blendshapes, a, atol=1e-6)
+    np.testing.assert_array_equal(new.weights["identity"], target.weights["identity"])
+    np.testing.assert_array_equal(new.rotation, target.rotation)
+    assert not np.allclose(new.landmarks2d, target.landmarks2d)
+    slow, _, _ = make_arkit_track(arkit_model, 60, seed=5, identity=2, fps=50.0)
+    twice = take_performance(take, slow, arkit_model)          # a 50 fps target: 2 frames a row
+    np.testing.assert_allclose(twice.blendshapes[::2], a, atol=1e-6)
+    np.testing.assert_allclose(twice.blendshapes[1:-1:2], (a[:-1] + a[1:]) / 2, atol=1e-6)
+
+
+def test_a_take_needs_a_model_of_arkit_expressions(quick_model, arkit_model, make_arkit_track,
+                                                   tmp_path):
+    from facetransfer.export.livelink import write_livelink
+
+    track, _, _ = make_arkit_track(arkit_model, 4)
+    take = write_livelink(track, tmp_path / "take.csv")
+    with pytest.raises(TransferError, match="ARKit blendshapes"):
+        take_performance(take, track, quick_model)
+    (tmp_path / "bad.csv").write_text("Timecode,BlendShapeCount,EyeBlinkLeft\n")
+    with pytest.raises(TransferError, match="lacks the columns"):
+        take_performance(tmp_path / "bad.csv", track, arkit_model)
+
+
+@pytest.fixture(scope="module")
+def arkit_clip(arkit_model, tmp_path_factory):
+    """A 10-frame target clip of the ARKit model's person 2 (neutral, turning), its truth
+    track and the model file."""
+    from test_transfer_rewrite import render_clip
+
+    from facetransfer.io.video import write_video
+    from facetransfer.texture import default_face_texture
+    from facetransfer.topology import mesh_topology
+
+    m = arkit_model
+    d = tmp_path_factory.mktemp("take")
+    neutral = m.training_weights("expression", "neutral")
+    frames, track = render_clip(m, mesh_topology(m), default_face_texture(m, 256),
+                                m.labels[0][2], [neutral] * 10, [0, 2, 4, 6, 8, 6, 4, 2, 0, -2],
+                                seed=3)
+    write_video(d / "target.mp4", frames, 25.0)
+    track.save(d / "target.npz")
+    m.save(d / "arkit.npz")
+    return d
+
+
+def test_transfer_from_a_take_on_the_command_line(arkit_clip, arkit_model, make_arkit_track,
+                                                  tmp_path, capsys):
+    """``transfer --expression-from take.csv``: the new performance is the take's (its
+    activations at the target's frames), the video is written; what a take cannot be
+    combined with, and a damaged take, are one line each before any work."""
+    from facetransfer.cli.main import main
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.io.video import read_video
+    from facetransfer.track import Track
+
+    track, a, _ = make_arkit_track(arkit_model, 30, fps=25.0)
+    take = write_livelink(track, tmp_path / "take.csv")      # longer: the first 10 frames
+    d = arkit_clip
+    base = ["transfer", "--target", d / "target.mp4", "--target-track", d / "target.npz",
+            "--model", d / "arkit.npz", "--no-progress", "--expression-from"]
+    code = main([str(x) for x in base + [take, "--out", tmp_path / "out.mp4", "--save-track",
+                                         tmp_path / "new.npz"]])
+    assert code == 0, capsys.readouterr().err
+    new = Track.load(tmp_path / "new.npz")
+    np.testing.assert_allclose(new.blendshapes, a[:10], atol=1e-6)
+    assert read_video(tmp_path / "out.mp4")[0].shape == read_video(d / "target.mp4")[0].shape
+    capsys.readouterr()
+    (tmp_path / "bad.csv").write_text("Timecode,BlendShapeCount\n00:00:00:00.000,61\n")
+    for extra, said in (([take, "--pose-from", d / "target.mp4"], "--pose-from cannot be added"),
+                        ([tmp_path / "bad.csv"], "lacks the columns"),
+                        ([tmp_path / "none.csv"], "does not exist")):
+        code = main([str(x) for x in base + extra + ["--out", tmp_path / "o2.mp4"]])
+        err = capsys.readouterr().err
+        assert code == 2 and said in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "o2.mp4").exists()
