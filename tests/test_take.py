@@ -134,3 +134,33 @@ def test_transfer_from_a_take_on_the_command_line(arkit_clip, arkit_model, make_
         err = capsys.readouterr().err
         assert code == 2 and said in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "o2.mp4").exists()
+
+
+def test_a_batch_of_pairs_takes_a_take_as_transfer_does(arkit_clip, arkit_model,
+                                                        make_arkit_track, tmp_path, capsys,
+                                                        monkeypatch):
+    """A pairs manifest whose ``expression_from`` is a take: the row is rendered (before, its
+    inputs were all opened as videos: "not a video"), the same video as ``transfer`` writes."""
+    import functools
+
+    from facetransfer.batch import cluster
+    from facetransfer.cli.main import main
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.io.video import read_video
+
+    monkeypatch.setattr(cluster, "open_client",
+                        functools.partial(cluster.open_client, processes=False))
+    take = write_livelink(make_arkit_track(arkit_model, 30, fps=25.0)[0], tmp_path / "take.csv")
+    d = arkit_clip
+    common = ["--model", d / "arkit.npz"]
+    assert main([str(x) for x in ["transfer", "--target", d / "target.mp4", "--target-track",
+                                  d / "target.npz", "--expression-from", take, "--out",
+                                  tmp_path / "ref.mp4", "--no-progress"] + common]) == 0
+    man = tmp_path / "pairs.csv"
+    man.write_text("name,target,target_track,expression_from\n"
+                   f"t,{d / 'target.mp4'},{d / 'target.npz'},{take}\n")
+    assert main([str(x) for x in ["batch", "transfer", "--manifest", man, "--out",
+                                  tmp_path / "out", "--workers", "1"] + common]) == 0
+    capsys.readouterr()
+    np.testing.assert_array_equal(read_video(tmp_path / "out" / "t.mp4")[0],
+                                  read_video(tmp_path / "ref.mp4")[0])

@@ -241,13 +241,14 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     Row
     """
     from ..io.video import video_info
+    from ..take import is_take
     from ..video_transfer import TransferSources, transfer_video
 
     t0 = time.perf_counter()
     s = job.sources
     for v in (job.target, s.get("expression_from"), s.get("viseme_from"),
               s.get("identity_from"), s.get("pose_from")):
-        if v:
+        if v and not is_take(v):   # a take (Live Link Face CSV) is read by the plan
             video_info(v)  # a missing or unreadable input fails the row, naming the path
     options = rewrite_options(settings)
     sources = TransferSources.of(
