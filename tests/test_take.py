@@ -77,7 +77,7 @@ def test_a_take_needs_a_model_of_arkit_expressions(quick_model, arkit_model, mak
     take = write_livelink(track, tmp_path / "take.csv")
     with pytest.raises(TransferError, match="ARKit blendshapes"):
         take_performance(take, track, quick_model)
-    (tmp_path / "bad.csv").write_text("Timecode,BlendShapeCount,EyeBlinkLeft\n")
+    (tmp_path / "bad.csv").write_text("Timecode,BlendShapeCount,HeadYaw\n00:00:00:00,0,0\n")
     with pytest.raises(TransferError, match="lacks the columns"):
         take_performance(tmp_path / "bad.csv", track, arkit_model)
 
@@ -164,3 +164,39 @@ def test_a_batch_of_pairs_takes_a_take_as_transfer_does(arkit_clip, arkit_model,
     capsys.readouterr()
     np.testing.assert_array_equal(read_video(tmp_path / "out" / "t.mp4")[0],
                                   read_video(tmp_path / "ref.mp4")[0])
+
+
+def test_takes_written_by_other_tools_are_read(arkit_model, make_arkit_track, tmp_path,
+                                               caplog):
+    """Names in ARKit's camelCase, no rotation columns, a shape left out, timecodes without
+    thousandths at 60 a second: the shapes given are the take's, the one left out is 0 (said
+    once), the rows 1/60 s apart. A file without any shape column stays refused."""
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.export.livelink import read_livelink
+
+    rng = np.random.default_rng(1)
+    names = [n for n in ARKIT_NAMES if n != "tongueOut"]
+    a = rng.uniform(0, 1, (90, len(names)))
+    lines = ["Timecode,BlendShapeCount," + ",".join(names)]
+    for k in range(90):
+        s, f = divmod(k, 60)
+        lines.append(f"00:00:0{s}:{f:02d},{len(names)}," + ",".join(f"{v:.6f}" for v in a[k]))
+    (tmp_path / "other.csv").write_text("\n".join(lines) + "\n")
+    take = read_livelink(tmp_path / "other.csv", lenient=True)
+    assert "TongueOut" in take.missing and "HeadYaw" in take.missing
+    got = take.activations[:, [ARKIT_NAMES.index(n) for n in names]]
+    np.testing.assert_allclose(got, a, atol=1e-6)
+    assert np.all(take.activations[:, ARKIT_NAMES.index("tongueOut")] == 0)
+    np.testing.assert_allclose(take_seconds(take.timecodes), np.arange(90) / 60)
+    with pytest.raises(Exception, match="lacks the columns"):
+        read_livelink(tmp_path / "other.csv")                   # the app's layout: strict
+    target, _, _ = make_arkit_track(arkit_model, 30, fps=20.0)  # 1.5 s at 20 fps
+    with caplog.at_level("WARNING", logger="facetransfer.take"):
+        new = take_performance(tmp_path / "other.csv", target, arkit_model)
+    assert [r.message for r in caplog.records if "tongueOut" in r.message.lower()
+            or "TongueOut" in r.message][0].endswith("TongueOut: taken as 0")
+    np.testing.assert_allclose(new.blendshapes[:, ARKIT_NAMES.index("jawOpen")],
+                               a[::3, names.index("jawOpen")], atol=1e-5)
+    (tmp_path / "none.csv").write_text("Timecode,BlendShapeCount,HeadYaw\n00:00:00:00,0,0.1\n")
+    with pytest.raises(TransferError, match="lacks the columns"):
+        take_performance(tmp_path / "none.csv", target, arkit_model)

@@ -163,18 +163,21 @@ def take_performance(path, target_track, model, *, align: str | None = None):
     """
     from .arkit import activations_to_weights, attach_activations, is_arkit_model
     from .export.common import ExportError
-    from .export.livelink import read_livelink
+    from .export.livelink import POSE_COLUMNS, read_livelink
     from .track.project import project_landmarks, take_frames
 
     if not is_arkit_model(model):
         raise TransferError(f"a Live Link Face take ({path}) drives a model whose expressions "
                             "are ARKit blendshapes (the default model, 'ict-arkit')")
     try:
-        take = read_livelink(path)
+        take = read_livelink(path, lenient=True)
     except (ExportError, OSError, UnicodeDecodeError) as exc:
         raise TransferError(f"--expression-from {path}: {exc}") from None
     if not len(take.timecodes):
         raise TransferError(f"the take {path} has no rows")
+    shapes = [n for n in take.missing if n not in POSE_COLUMNS]
+    if shapes:
+        log.warning("the take %s has no column %s: taken as 0", path, ", ".join(shapes))
     a = take_on_timeline(take_seconds(take.timecodes), take.activations,
                          target_track.n_frames, target_track.fps, align=align)
     new = take_frames(target_track, np.arange(len(a)))

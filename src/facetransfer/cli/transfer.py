@@ -436,7 +436,7 @@ def _check_take(args) -> None:
     if not Path(path).is_file():
         raise FaceTransferError(f"--expression-from {path} does not exist")
     try:
-        take = read_livelink(path)
+        take = read_livelink(path, lenient=True)
     except (ExportError, UnicodeDecodeError) as exc:
         raise FaceTransferError(f"--expression-from {path}: {exc}") from None
     if not take.timecodes:

@@ -146,37 +146,52 @@ class LiveLinkTake:
         In :data:`facetransfer.arkit.ARKIT_NAMES` order.
     pose : (F, 9) float64
         :data:`POSE_COLUMNS`, radians.
+    missing : tuple of str
+        Columns the file lacks, read as 0 (``lenient`` reading only).
     """
 
     timecodes: tuple[str, ...]
     activations: np.ndarray
     pose: np.ndarray
+    missing: tuple[str, ...] = ()
 
     def frames(self, fps: float) -> np.ndarray:
         """Frame index of every row at ``fps``, ``(F,) float64``."""
         return np.array([parse_timecode(t, fps) for t in self.timecodes])
 
 
-def read_livelink(path: str | os.PathLike) -> LiveLinkTake:
-    """Read a Live Link Face CSV (columns by name; the app's header is required)."""
+def read_livelink(path: str | os.PathLike, *, lenient: bool = False) -> LiveLinkTake:
+    """Read a Live Link Face CSV (columns by name; the app's header is required).
+
+    ``lenient``: takes written by other tools, too: names matched whatever their case
+    (``eyeBlinkLeft``), timecodes without thousandths, and columns missing (the eyes' roll,
+    ``TongueOut``, a tool's fewer shapes) read as 0 and listed in
+    :attr:`LiveLinkTake.missing`; at least one blendshape column is needed.
+    """
     p = Path(path)
     with open(p, newline="") as fh:
         rows = list(csv.reader(fh))
-    if not rows or tuple(rows[0][:2]) != HEADER[:2]:
+    if not rows or [c.strip().lower() for c in rows[0][:2]] != ["timecode", "blendshapecount"]:
         raise ExportError(f"{p} is not a Live Link Face CSV (header must start "
                           f"'Timecode,BlendShapeCount')")
-    col = {n: i for i, n in enumerate(rows[0])}
-    missing = [n for n in LIVELINK_NAMES + POSE_COLUMNS if n not in col]
-    if missing:
+    key = (lambda n: n.strip().lower()) if lenient else (lambda n: n)
+    col = {key(n): i for i, n in enumerate(rows[0])}
+    missing = [n for n in LIVELINK_NAMES + POSE_COLUMNS if key(n) not in col]
+    if missing and (not lenient or len(missing) >= len(LIVELINK_NAMES) + len(POSE_COLUMNS)
+                    or all(n in missing for n in LIVELINK_NAMES)):
         raise ExportError(f"{p} lacks the columns {missing[:5]}")
     body = [r for r in rows[1:] if r]
+
+    def values(names):
+        return np.array([[float(r[col[key(n)]]) if key(n) in col else 0.0 for n in names]
+                         for r in body]).reshape(-1, len(names))
+
     try:
-        a = np.array([[float(r[col[n]]) for n in LIVELINK_NAMES] for r in body]).reshape(-1, 52)
-        pose = np.array([[float(r[col[n]]) for n in POSE_COLUMNS] for r in body]).reshape(-1, 9)
+        a, pose = values(LIVELINK_NAMES), values(POSE_COLUMNS)
     except (ValueError, IndexError) as exc:
         raise ExportError(f"{p} has a malformed row ({exc})") from None
     act = np.zeros_like(a)
     act[:, _TO_ARKIT] = a
     if not np.all(np.isfinite(act)) or not np.all(np.isfinite(pose)):
         raise ExportError(f"{p} has non-finite values")
-    return LiveLinkTake(tuple(r[0] for r in body), act, pose)
+    return LiveLinkTake(tuple(r[0].strip() for r in body), act, pose, tuple(missing))
