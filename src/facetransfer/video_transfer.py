@@ -328,14 +328,15 @@ def _take_as_performance(sources: TransferSources, align) -> TransferSources:
     if sources.expression is None or not is_take(sources.expression.video):
         return sources
     path = sources.expression.video
-    others = [name for name, given in (
-        ("a viseme source", sources.viseme), ("an identity", sources.identity or (
-            sources.identity_weights is not None)), ("a pose source", sources.pose),
-        ("a ready performance", sources.performance), ("a source track",
-                                                        sources.expression.track)) if given]
-    if others:
-        raise RewriteError(f"a Live Link Face take ({path}) drives the target's expression "
-                           f"alone; it cannot be combined with {others[0]}")
+    beside = {"a viseme source": sources.viseme is not None,
+              "an identity": sources.identity is not None or sources.identity_weights is not None,
+              "a pose source": sources.pose is not None,
+              "a ready performance": sources.performance is not None,
+              "a source track": sources.expression.track is not None}
+    for what, given in beside.items():
+        if given:
+            raise RewriteError(f"a Live Link Face take ({path}) drives the target's expression "
+                               f"alone; it cannot be combined with {what}")
     return dataclasses.replace(sources, expression=None, performance=Take(Path(path), align))
 
 
