@@ -200,3 +200,39 @@ def test_takes_written_by_other_tools_are_read(arkit_model, make_arkit_track, tm
     (tmp_path / "none.csv").write_text("Timecode,BlendShapeCount,HeadYaw\n00:00:00:00,0,0.1\n")
     with pytest.raises(TransferError, match="lacks the columns"):
         take_performance(tmp_path / "none.csv", target, arkit_model)
+
+
+def test_a_take_seen_on_a_face_has_its_curves_and_its_heads_rotation(arkit_model,
+                                                                     make_arkit_track,
+                                                                     tmp_path, capsys):
+    """``take_track`` (what ``puppet take.csv`` renders): the take's activations at its own
+    rate and the head's rotation its yaw, pitch and roll give back (the inverse of the
+    exporter's angles, to the CSV's decimals); ``puppet`` writes its frames."""
+    from facetransfer.cli.main import main
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.io.video import read_video
+    from facetransfer.take import take_track
+
+    track, a, _ = make_arkit_track(arkit_model, 30, fps=25.0)
+    take = write_livelink(track, tmp_path / "take.csv")
+    wid = arkit_model.factors[0][2]
+    got = take_track(take, arkit_model, wid)
+    assert got.fps == 25.0 and got.n_frames == 30 and got.frame_size == (512, 512)
+    np.testing.assert_allclose(got.blendshapes, a, atol=1e-6)
+    np.testing.assert_allclose(got.rotation, track.rotation, atol=1e-6)
+    np.testing.assert_array_equal(got.weights["identity"][0], wid)
+    assert np.all((got.landmarks2d > 0) & (got.landmarks2d < 512))
+    model = tmp_path / "arkit.npz"
+    arkit_model.save(model)
+    out = tmp_path / "preview.mp4"
+    code = main([str(x) for x in ["puppet", take, "--identity", arkit_model.labels[0][2],
+                                  "--model", model, "--out", out, "--max-frames", 12,
+                                  "--no-progress"]])
+    assert code == 0, capsys.readouterr().err
+    frames, fps = read_video(out)
+    assert frames.shape == (12, 512, 512, 3) and fps == 25.0
+    assert frames[:, 256].std() > 10                       # a face, not the plain background
+    code = main([str(x) for x in ["puppet", take, "--identity", arkit_model.labels[0][2],
+                                  "--model", model, "--out", tmp_path / "o.mp4", "--face",
+                                  "left"]])
+    assert code == 2 and "--face is for a video" in capsys.readouterr().err

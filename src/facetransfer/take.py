@@ -35,7 +35,10 @@ from .transfer import TransferError
 log = logging.getLogger(__name__)
 
 __all__ = ["TIMECODE_RATES", "Take", "is_take", "take_rate", "take_seconds", "take_on_timeline",
-           "take_performance"]
+           "take_performance", "take_track", "PREVIEW_SIZE"]
+
+#: The frame size of a take shown on a model (:func:`take_track`, ``facetransfer puppet``).
+PREVIEW_SIZE = (512, 512)
 
 #: Nominal timecode rates (frames per second) a take's ``FF`` field may count in.
 TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 100, 120)
@@ -161,23 +164,10 @@ def take_performance(path, target_track, model, *, align: str | None = None):
     TransferError
         The model's expressions are not ARKit's, or the take is not one.
     """
-    from .arkit import activations_to_weights, attach_activations, is_arkit_model
-    from .export.common import ExportError
-    from .export.livelink import POSE_COLUMNS, read_livelink
+    from .arkit import activations_to_weights, attach_activations
     from .track.project import project_landmarks, take_frames
 
-    if not is_arkit_model(model):
-        raise TransferError(f"a Live Link Face take ({path}) drives a model whose expressions "
-                            "are ARKit blendshapes (the default model, 'ict-arkit')")
-    try:
-        take = read_livelink(path, lenient=True)
-    except (ExportError, OSError, UnicodeDecodeError) as exc:
-        raise TransferError(f"--expression-from {path}: {exc}") from None
-    if not len(take.timecodes):
-        raise TransferError(f"the take {path} has no rows")
-    shapes = [n for n in take.missing if n not in POSE_COLUMNS]
-    if shapes:
-        log.warning("the take %s has no column %s: taken as 0", path, ", ".join(shapes))
+    take = _read(path, model)
     a = take_on_timeline(take_seconds(take.timecodes), take.activations,
                          target_track.n_frames, target_track.fps, align=align)
     new = take_frames(target_track, np.arange(len(a)))
@@ -185,3 +175,72 @@ def take_performance(path, target_track, model, *, align: str | None = None):
     weights["expression"] = activations_to_weights(model, np.clip(a, 0.0, 1.0))
     new = dataclasses.replace(new, weights=weights)
     return attach_activations(project_landmarks(new, model), model)
+
+
+def _read(path, model):
+    """The take at ``path`` (lenient, :func:`facetransfer.export.livelink.read_livelink`) for a
+    model of ARKit expressions; TransferError otherwise, or without rows. Columns of shapes it
+    lacks are said once."""
+    from .arkit import is_arkit_model
+    from .export.common import ExportError
+    from .export.livelink import POSE_COLUMNS, read_livelink
+
+    if not is_arkit_model(model):
+        raise TransferError(f"a Live Link Face take ({path}) drives a model whose expressions "
+                            "are ARKit blendshapes (the default model, 'ict-arkit')")
+    try:
+        take = read_livelink(path, lenient=True)
+    except (ExportError, OSError, UnicodeDecodeError) as exc:
+        raise TransferError(f"{path}: {exc}") from None
+    if not len(take.timecodes):
+        raise TransferError(f"the take {path} has no rows")
+    shapes = [n for n in take.missing if n not in POSE_COLUMNS]
+    if shapes:
+        log.warning("the take %s has no column %s: taken as 0", path, ", ".join(shapes))
+    return take
+
+
+def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PREVIEW_SIZE,
+               max_frames: int | None = None):
+    """A take as a track of its own: ``identity`` (the model's identity weights) performing it
+    with the take's head rotation, framed in ``size`` (the model's mean face filling 0.6 of
+    it), at the timecode rate nearest the take's rows (``max_frames``: the first ones).
+
+    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``
+    (radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)``: the inverse of
+    :func:`facetransfer.export.common.head_euler`). What ``facetransfer puppet take.csv``
+    renders: the take seen on a face before it goes into a scene.
+
+    Returns
+    -------
+    Track
+    """
+    from scipy.spatial.transform import Rotation
+
+    from .arkit import ARKIT_NAMES, activations_to_weights
+    from .render import look_at_weak_perspective
+    from .track.project import project_landmarks
+    from .track.result import Track
+
+    take = _read(path, model)
+    t = take_seconds(take.timecodes)
+    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0 / TIMECODE_RATES[2]
+    fps = float(min(TIMECODE_RATES, key=lambda r: abs(1.0 / r - step)))
+    n = int(np.floor(t[-1] * fps + 1e-6)) + 1
+    n = n if max_frames is None else min(n, int(max_frames))
+    rows = take_on_timeline(t, np.hstack([take.activations, take.pose[:, :3]]), n, fps,
+                            align="hold")
+    a, ypr = np.clip(rows[:, :52], 0.0, 1.0), rows[:, 52:]
+    k = model.mode_index("identity")
+    wid = np.asarray(identity, np.float64).ravel()
+    cam = look_at_weak_perspective(model.synthesize(model.default_weights()), size, fill=0.6)
+    track = Track(fps=fps, frame_size=tuple(size),
+                  rotation=Rotation.from_euler("YXZ", ypr).as_matrix(),
+                  scale=np.full(n, cam.scale), translation=np.tile(cam.translation, (n, 1)),
+                  weights={model.mode_names[k]: np.tile(wid, (n, 1)),
+                           "expression": activations_to_weights(model, a)},
+                  landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),
+                  lost=np.zeros(n, bool), model_hash=model.content_hash,
+                  mode_names=model.mode_names, source=str(path),
+                  blendshapes=a.astype(np.float32), blendshape_names=ARKIT_NAMES)
+    return project_landmarks(track, model)

@@ -225,7 +225,9 @@ def _register_puppet(sub) -> None:
     q = _parser(
         sub, "puppet", "drive a model identity from a video (puppetry)",
         "Track a video (or reuse its track) and render an identity of the model performing "
-        "it, alone on a plain background (Vlasic et al. 2005, §5).")
+        "it, alone on a plain background (Vlasic et al. 2005, §5). A Live Link Face take "
+        "(TAKE.csv) instead of a video: the identity performs its ARKit curves with its "
+        "head's rotation (a preview of the take).")
     q.add_argument("video", metavar="VIDEO")
     q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     q.add_argument("--identity", required=True, metavar="LABEL", help="training identity label")
@@ -542,10 +544,14 @@ def run_puppet(args) -> int:
     from ..transfer import identity_from_label
     from ..video_transfer import puppet_video
 
+    from ..take import is_take
+
     _positive(args.max_frames, "--max-frames")
     vopt = video_options(args)
     check_video_output(args.out, vopt, overwrite=args.overwrite,
                        inputs=[args.video, args.model, args.track])
+    if is_take(args.video):
+        return _puppet_take(args, vopt)
     video_info(args.video)
     if not args.track:
         _check_landmarks_file(args.video, args.tracker)
@@ -572,6 +578,31 @@ def run_puppet(args) -> int:
         print(f"continued an interrupted render from frame {resumed}")
     print(f"wrote {args.out}: {track.n_frames} frames of {args.identity}"
           + (", with the video's audio" if audio else ""))
+    return 0
+
+
+def _puppet_take(args, vopt) -> int:
+    """``puppet take.csv``: the identity performing a Live Link Face take, with its head's
+    rotation (:func:`facetransfer.take.take_track`), on a plain background."""
+    from ..take import PREVIEW_SIZE, take_track
+    from ..transfer import identity_from_label
+    from ..video_transfer import puppet_video
+
+    for flag, given in (("--track", args.track), ("--face", args.face)):
+        if given:
+            raise FaceTransferError(f"{args.video} is a Live Link Face take: {flag} is for a "
+                                    "video")
+    if not Path(args.video).is_file():
+        raise FaceTransferError(f"take {args.video} does not exist")
+    model = resolve_model(args.model, progress=not args.no_progress)
+    wid = identity_from_label(model, args.identity)
+    track = take_track(args.video, model, wid, max_frames=args.max_frames)
+    _, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
+                              overwrite=args.overwrite, progress_factory=_bar_factory())
+    if resumed:
+        print(f"continued an interrupted render from frame {resumed}")
+    print(f"wrote {args.out}: {track.n_frames} frames of {args.identity} performing the take "
+          f"{args.video} ({track.fps:g} fps, {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]})")
     return 0
 
 
