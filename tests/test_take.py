@@ -236,3 +236,41 @@ def test_a_take_seen_on_a_face_has_its_curves_and_its_heads_rotation(arkit_model
                                   "--model", model, "--out", tmp_path / "o.mp4", "--face",
                                   "left"]])
     assert code == 2 and "--face is for a video" in capsys.readouterr().err
+
+
+def test_a_take_is_placed_by_the_targets_timecode(arkit_clip, arkit_model, make_arkit_track,
+                                                  tmp_path, capsys, caplog):
+    """A take recorded beside the camera, both clocks synced: the target's first frame is the
+    take's row at the target's start timecode (``--take-sync timecode``, the default); with
+    ``--take-sync start``, or a timecode the take does not span, its first row."""
+    from facetransfer.cli.main import main
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.io.video import VideoOptions, read_video, write_video
+    from facetransfer.take import timecode_seconds
+    from facetransfer.track import Track
+
+    assert timecode_seconds("01:00:00:00", 25.0) == 3600.0
+    assert timecode_seconds("00:01:00;02", 29.97) == pytest.approx(1800 / 29.97)  # dropped 0, 1
+    assert timecode_seconds("00:10:00;00", 30000 / 1001) == pytest.approx(17982 * 1.001 / 30)
+    track, a, _ = make_arkit_track(arkit_model, 75, fps=25.0)        # 00:00:00:00 .. 00:00:02:24
+    take = write_livelink(track, tmp_path / "take.csv")
+    target, _, _ = make_arkit_track(arkit_model, 10, seed=5, identity=2, fps=25.0)
+    at = take_performance(take, target, arkit_model, start_timecode="00:00:01:05")
+    np.testing.assert_allclose(at.blendshapes, a[30:40], atol=1e-6)
+    with caplog.at_level("WARNING", logger="facetransfer.take"):
+        late = take_performance(take, target, arkit_model, start_timecode="00:01:00:00")
+    np.testing.assert_allclose(late.blendshapes, a[:10], atol=1e-6)
+    assert "does not span the target's start timecode 00:01:00:00" in caplog.text
+    d = arkit_clip
+    plate = tmp_path / "plate.mov"
+    write_video(plate, read_video(d / "target.mp4")[0], 25.0,
+                options=VideoOptions(crf=0, timecode="00:00:02:00"))
+    for sync, first in (("timecode", 50), ("start", 0)):
+        code = main([str(x) for x in [
+            "transfer", "--target", plate, "--target-track", d / "target.npz", "--model",
+            d / "arkit.npz", "--expression-from", take, "--take-sync", sync, "--out",
+            tmp_path / f"{sync}.mp4", "--save-track", tmp_path / f"{sync}.npz",
+            "--no-progress"]])
+        assert code == 0, capsys.readouterr().err
+        got = Track.load(tmp_path / f"{sync}.npz").blendshapes
+        np.testing.assert_allclose(got, a[first:first + 10], atol=1e-6)

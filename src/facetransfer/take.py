@@ -34,7 +34,7 @@ from .transfer import TransferError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["TIMECODE_RATES", "Take", "is_take", "take_rate", "take_seconds", "take_on_timeline",
+__all__ = ["TIMECODE_RATES", "TAKE_SYNCS", "Take", "is_take", "timecode_seconds", "take_start", "take_rate", "take_seconds", "take_on_timeline",
            "take_performance", "take_track", "PREVIEW_SIZE"]
 
 #: The frame size of a take shown on a model (:func:`take_track`, ``facetransfer puppet``).
@@ -43,20 +43,29 @@ PREVIEW_SIZE = (512, 512)
 #: Nominal timecode rates (frames per second) a take's ``FF`` field may count in.
 TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 100, 120)
 
-_TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2}):(\d{2,3})(?:\.(\d{1,3}))?$")
+_TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2})[:;](\d{2,3})(?:\.(\d{1,3}))?$")
+
+
+#: How a take is placed on the target's timeline: ``"timecode"``, the target's start timecode
+#: found among the take's (where both have one; else as ``"start"``); ``"start"``, the take's
+#: first row at the target's first frame.
+TAKE_SYNCS = ("timecode", "start")
 
 
 @dataclass(frozen=True)
 class Take:
     """A take standing for the new performance of a transfer until the target is tracked
-    (:func:`facetransfer.video_transfer.plan_sources`): its file and time alignment."""
+    (:func:`facetransfer.video_transfer.plan_sources`): its file, time alignment, and the
+    target's start timecode at its frame rate (None: placed at the take's first row)."""
 
     path: Path
     align: str | None = None
+    start_timecode: str | None = None
 
     def performance(self, target_track, model):
         """:func:`take_performance` on ``target_track``'s timeline."""
-        return take_performance(self.path, target_track, model, align=self.align)
+        return take_performance(self.path, target_track, model, align=self.align,
+                                start_timecode=self.start_timecode)
 
 
 def is_take(path) -> bool:
@@ -102,7 +111,7 @@ def take_seconds(timecodes, *, warn: bool = True) -> np.ndarray:
     :func:`take_rate` (``warn``: its guess said; TransferError if they go back in time)."""
     f = _fields(timecodes)
     rate = take_rate(timecodes, warn=warn)
-    t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / rate
+    t = _label_seconds(f, rate)
     if t.size and np.any(np.diff(t) < 0):
         k = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
         raise TransferError(f"the take's timecodes go back in time at row {k + 1} "
@@ -110,12 +119,41 @@ def take_seconds(timecodes, *, warn: bool = True) -> np.ndarray:
     return t - (t[0] if t.size else 0.0)
 
 
-def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps: float, *,
-                     align: str | None = None) -> np.ndarray:
-    """A take's rows ``values`` (F, k) at ``seconds`` (F,) resampled to frames ``j / fps``,
-    linearly between rows.
+def _label_seconds(f: np.ndarray, rate: int) -> np.ndarray:
+    """Seconds since midnight of timecode fields ``f`` (F, 5) counted at ``rate``."""
+    return (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / rate
 
-    ``align`` as :func:`facetransfer.transfer.time_map`: ``"trim"`` stops at the take's end,
+
+def take_start(timecodes) -> float:
+    """The take's first row as seconds since midnight of its timecode (:func:`take_rate`)."""
+    return float(_label_seconds(_fields(timecodes[:1]), take_rate(timecodes, warn=False))[0])
+
+
+def timecode_seconds(timecode: str, fps: float) -> float:
+    """A video's timecode (``HH:MM:SS:FF``; ``;`` before the frames of a drop-frame one) as
+    seconds since midnight at its frame rate ``fps``: ``FF`` counts frames of the nominal rate
+    ``round(fps)``; a drop-frame timecode (29.97 or 59.94 fps) skips 2 (4) frame numbers each
+    minute but every tenth, so its frames are counted back and divided by the true rate."""
+    m = re.fullmatch(r"(\d{2}):(\d{2}):(\d{2})([:;.])(\d{2,3})", str(timecode).strip())
+    if m is None:
+        raise TransferError(f"timecode {timecode!r} is not HH:MM:SS:FF")
+    hh, mm, ss, sep, ff = m.groups()
+    rate = max(1, int(round(float(fps))))
+    if sep == ":":
+        return int(hh) * 3600 + int(mm) * 60 + int(ss) + int(ff) / rate
+    drop = 2 * rate // 30                             # 2 at 29.97, 4 at 59.94
+    minutes = int(hh) * 60 + int(mm)
+    frame = (minutes * 60 + int(ss)) * rate + int(ff) - drop * (minutes - minutes // 10)
+    return frame / (rate * 1000.0 / 1001.0)
+
+
+def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps: float, *,
+                     align: str | None = None, start: float = 0.0) -> np.ndarray:
+    """A take's rows ``values`` (F, k) at ``seconds`` (F,) resampled to frames
+    ``start + j / fps``, linearly between rows.
+
+    ``start``: the take's time (seconds after its first row) at frame 0. ``align`` as
+    :func:`facetransfer.transfer.time_map`: ``"trim"`` stops at the take's end,
     ``"hold"`` holds its last row, ``"loop"`` restarts it; None: ``"trim"`` when the take is
     at least as long as the ``n_frames``, else ``"hold"``.
 
@@ -128,18 +166,19 @@ def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps
     if align not in (None, "trim", "hold", "loop"):
         raise TransferError(f"align must be trim, hold or loop, got {align!r}")
     end = float(t[-1]) if t.size else 0.0
-    when = np.arange(int(n_frames)) / float(fps)
+    when = float(start) + np.arange(int(n_frames)) / float(fps)
     if align is None:
         align = "trim" if end >= when[-1] else "hold"
     if align == "trim":
-        when = when[when <= end + 0.5 / fps] if end > 0 else when[:1]
+        when = when[when <= end + 0.5 / fps] if end > when[0] else when[:1]
     elif align == "loop" and end > 0:
         when = np.mod(when, end + 1.0 / fps)
     return np.stack([np.interp(when, t, v[:, c]) for c in range(v.shape[1])], axis=1) \
         if v.shape[1] else np.zeros((when.size, 0))
 
 
-def take_performance(path, target_track, model, *, align: str | None = None):
+def take_performance(path, target_track, model, *, align: str | None = None,
+                     start_timecode: str | None = None):
     """The performance of the target's person acting a Live Link Face take (module notes).
 
     Parameters
@@ -152,6 +191,10 @@ def take_performance(path, target_track, model, *, align: str | None = None):
         With ARKit-named expressions (:func:`facetransfer.arkit.is_arkit_model`).
     align : {"trim", "hold", "loop"}, optional
         See :func:`take_on_timeline`.
+    start_timecode : str, optional
+        The target's start timecode (:func:`facetransfer.io.video_display.timecode_of`): where
+        the take's timecodes span it, the take is placed by it (a take recorded beside the
+        camera, both clocks synced); else from the take's first row (said in the log).
 
     Returns
     -------
@@ -168,13 +211,33 @@ def take_performance(path, target_track, model, *, align: str | None = None):
     from .track.project import project_landmarks, take_frames
 
     take = _read(path, model)
-    a = take_on_timeline(take_seconds(take.timecodes), take.activations,
-                         target_track.n_frames, target_track.fps, align=align)
+    t = take_seconds(take.timecodes)
+    start = _synced_start(take.timecodes, t, start_timecode, target_track.fps, path)
+    a = take_on_timeline(t, take.activations, target_track.n_frames, target_track.fps,
+                         align=align, start=start)
     new = take_frames(target_track, np.arange(len(a)))
     weights = dict(new.weights)
     weights["expression"] = activations_to_weights(model, np.clip(a, 0.0, 1.0))
     new = dataclasses.replace(new, weights=weights)
     return attach_activations(project_landmarks(new, model), model)
+
+
+def _synced_start(timecodes, t: np.ndarray, start_timecode: str | None, fps: float,
+                  path) -> float:
+    """Seconds into the take at the target's first frame: where its timecodes span the
+    target's ``start_timecode``, that moment (said in the log); else 0."""
+    if start_timecode is None:
+        return 0.0
+    offset = timecode_seconds(start_timecode, fps) - take_start(timecodes)
+    if 0.0 <= offset <= float(t[-1]):
+        log.warning("the take %s is placed by timecode: the target's first frame "
+                    "(%s) is %.3f s into it (--take-sync start: from its first row)", path,
+                    start_timecode, offset)
+        return offset
+    log.warning("the take %s (timecodes %s to %s) does not span the target's start timecode "
+                "%s: placed from its first row", path, timecodes[0], timecodes[-1],
+                start_timecode)
+    return 0.0
 
 
 def _read(path, model):

@@ -91,6 +91,9 @@ class TransferSources:
         Identity weights (instead of an identity video).
     performance : Track or path-like or None
         A ready new performance on the target's timeline instead of recombining.
+    take_sync : {"timecode", "start"}
+        Where an expression source that is a Live Link Face take starts on the target's
+        timeline (:data:`facetransfer.take.TAKE_SYNCS`).
     """
 
     target: Source
@@ -100,12 +103,14 @@ class TransferSources:
     pose: Source | None = None
     identity_weights: object = None
     performance: object = None
+    take_sync: str = "timecode"
 
     @classmethod
     def of(cls, target, *, target_track=None, expression_from=None, expression_track=None,
            viseme_from=None, viseme_track=None, identity=None, identity_from=None,
            identity_track=None, pose_from=None, pose_track=None, performance=None,
-           target_face=None, source_face=None) -> "TransferSources":
+           target_face=None, source_face=None, take_sync: str = "timecode"
+           ) -> "TransferSources":
         """The sources from the keywords of :func:`plan_transfer` (a track file without its
         video is ignored; ``source_face``: the face to track in every source video)."""
         if identity is not None and identity_from is not None:
@@ -114,10 +119,12 @@ class TransferSources:
         def src(video, track):
             return None if video is None else Source(video, track, source_face)
 
+        if take_sync not in ("timecode", "start"):
+            raise RewriteError(f"take_sync must be timecode or start, got {take_sync!r}")
         return cls(Source(target, target_track, target_face),
                    src(expression_from, expression_track),
                    src(viseme_from, viseme_track), src(identity_from, identity_track),
-                   src(pose_from, pose_track), identity, performance)
+                   src(pose_from, pose_track), identity, performance, take_sync)
 
 
 @dataclass(frozen=True)
@@ -337,7 +344,13 @@ def _take_as_performance(sources: TransferSources, align) -> TransferSources:
         if given:
             raise RewriteError(f"a Live Link Face take ({path}) drives the target's expression "
                                f"alone; it cannot be combined with {what}")
-    return dataclasses.replace(sources, expression=None, performance=Take(Path(path), align))
+    start = None
+    if sources.take_sync == "timecode" and Path(sources.target.video).is_file():
+        from .io.video_display import timecode_of
+
+        start = timecode_of(sources.target.video)
+    return dataclasses.replace(sources, expression=None,
+                               performance=Take(Path(path), align, start))
 
 
 @dataclass(frozen=True)

@@ -159,6 +159,11 @@ def _register_transfer(sub) -> None:
     _add_sources(p)
     p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     p.add_argument("--align", choices=ALIGN_MODES, default=None, help=ALIGN_HELP)
+    p.add_argument("--take-sync", choices=("timecode", "start"), default="timecode",
+                   help="a Live Link Face take as --expression-from: placed by the target's "
+                   "start timecode where the take's timecodes span it (clocks synced on set), "
+                   "else from its first row (timecode, the default); or always from its first "
+                   "row (start)")
     p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
@@ -348,7 +353,8 @@ def run_transfer(args) -> int:
         viseme_track=args.viseme_track, identity=_chosen_identity(model, args),
         identity_from=args.identity_from, identity_track=args.identity_track,
         pose_from=args.pose_from, pose_track=args.pose_track, performance=args.performance,
-        target_face=args.target_face, source_face=args.source_face)
+        target_face=args.target_face, source_face=args.source_face,
+        take_sync=args.take_sync)
     res = transfer_video(
         sources, args.out, model, options=rewrite_options(args),
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
