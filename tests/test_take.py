@@ -274,3 +274,49 @@ def test_a_take_is_placed_by_the_targets_timecode(arkit_clip, arkit_model, make_
         assert code == 0, capsys.readouterr().err
         got = Track.load(tmp_path / f"{sync}.npz").blendshapes
         np.testing.assert_allclose(got, a[first:first + 10], atol=1e-6)
+
+
+def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_clip, arkit_model,
+                                                                       tmp_path, capsys):
+    """``export --format livelink`` of a plate's track: the take's first row is the plate's
+    start timecode (``--timecode source``, the default), so that it lines up with the plate
+    in an editor and ``transfer`` places it back by it, to the frame; a timecode given, or
+    none; a bad one is one line."""
+    import dataclasses
+
+    from facetransfer.arkit import attach_activations
+    from facetransfer.cli.main import main
+    from facetransfer.export.livelink import format_timecode, read_livelink
+    from facetransfer.io.video import VideoOptions, read_video, write_video
+    from facetransfer.io.video_display import timecode_seconds
+    from facetransfer.track import Track
+
+    assert format_timecode(0, 25.0, 3600.0) == "01:00:00:00.000"
+    assert format_timecode(3, 25.0, timecode_seconds("01:00:00:10", 25.0)) == "01:00:00:13.000"
+    d = arkit_clip
+    plate = tmp_path / "plate.mov"
+    write_video(plate, read_video(d / "target.mp4")[0], 25.0,
+                options=VideoOptions(crf=0, timecode="00:00:02:00"))
+    tr = attach_activations(Track.load(d / "target.npz"), arkit_model)
+    tr = dataclasses.replace(tr, source=str(plate))
+    tr.save(tmp_path / "plate.npz")
+    base = ["export", tmp_path / "plate.npz", "--format", "livelink", "--model",
+            d / "arkit.npz", "--overwrite", "--out"]
+    for extra, first in (([], "00:00:02:00.000"), (["--timecode", "none"], "00:00:00:00.000"),
+                         (["--timecode", "01:00:00:05"], "01:00:00:05.000")):
+        assert main([str(x) for x in base + [tmp_path / "take.csv"] + extra]) == 0
+        assert read_livelink(tmp_path / "take.csv").timecodes[0] == first
+    assert "from timecode 01:00:00:05 (--timecode)" in capsys.readouterr().out
+    assert main([str(x) for x in base + [tmp_path / "take.csv"]]) == 0
+    code = main([str(x) for x in [
+        "transfer", "--target", plate, "--target-track", tmp_path / "plate.npz", "--model",
+        d / "arkit.npz", "--expression-from", tmp_path / "take.csv", "--out",
+        tmp_path / "back.mp4", "--save-track", tmp_path / "back.npz", "--no-progress"]])
+    assert code == 0, capsys.readouterr().err
+    np.testing.assert_allclose(Track.load(tmp_path / "back.npz").blendshapes, tr.blendshapes,
+                               atol=1e-6)
+    capsys.readouterr()
+    for extra in (["--timecode", "1:00"], ["--timecode", "01:00:00:00", "--format", "json"]):
+        code = main([str(x) for x in base + [tmp_path / "t2.csv"] + extra])
+        err = capsys.readouterr().err
+        assert code == 2 and "timecode" in err and len(err.strip().splitlines()) == 1, err

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .io.video_display import timecode_seconds
 from .transfer import TransferError
 
 log = logging.getLogger(__name__)
@@ -127,24 +128,6 @@ def _label_seconds(f: np.ndarray, rate: int) -> np.ndarray:
 def take_start(timecodes) -> float:
     """The take's first row as seconds since midnight of its timecode (:func:`take_rate`)."""
     return float(_label_seconds(_fields(timecodes[:1]), take_rate(timecodes, warn=False))[0])
-
-
-def timecode_seconds(timecode: str, fps: float) -> float:
-    """A video's timecode (``HH:MM:SS:FF``; ``;`` before the frames of a drop-frame one) as
-    seconds since midnight at its frame rate ``fps``: ``FF`` counts frames of the nominal rate
-    ``round(fps)``; a drop-frame timecode (29.97 or 59.94 fps) skips 2 (4) frame numbers each
-    minute but every tenth, so its frames are counted back and divided by the true rate."""
-    m = re.fullmatch(r"(\d{2}):(\d{2}):(\d{2})([:;.])(\d{2,3})", str(timecode).strip())
-    if m is None:
-        raise TransferError(f"timecode {timecode!r} is not HH:MM:SS:FF")
-    hh, mm, ss, sep, ff = m.groups()
-    rate = max(1, int(round(float(fps))))
-    if sep == ":":
-        return int(hh) * 3600 + int(mm) * 60 + int(ss) + int(ff) / rate
-    drop = 2 * rate // 30                             # 2 at 29.97, 4 at 59.94
-    minutes = int(hh) * 60 + int(mm)
-    frame = (minutes * 60 + int(ss)) * rate + int(ff) - drop * (minutes - minutes // 10)
-    return frame / (rate * 1000.0 / 1001.0)
 
 
 def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps: float, *,

@@ -42,8 +42,32 @@ def register(sub) -> None:
                    "calibration does (the neutral frame exports 0, a full shape still 1; the gaze "
                    "as tracked); auto: the frame whose activations sum least (default: as "
                    "tracked)")
+    p.add_argument("--timecode", default="source", metavar="HH:MM:SS:FF|source|none",
+                   help="livelink: the first row's timecode: the tracked video's start timecode "
+                   "where it has one (source, the default: a take then lines up with the plate "
+                   "in an editor or Unreal, and `transfer --expression-from` places it back by "
+                   "it), a timecode (';' before the frames of a drop-frame one), or none "
+                   "(00:00:00:00)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
+
+
+def _start_timecode(args, track) -> tuple[str | None, str]:
+    """The livelink take's first timecode (``--timecode``) and where it came from ("" for
+    none)."""
+    from pathlib import Path
+
+    from ..io.video_display import checked_timecode, timecode_of
+
+    if args.format != "livelink" or args.timecode == "none":
+        return None, ""
+    if args.timecode != "source":
+        return checked_timecode(args.timecode), "--timecode"
+    src = Path(track.source) if track.source else None
+    if src is None or not src.is_file():
+        return None, ""
+    tc = timecode_of(src)
+    return tc, (f"the start timecode of {src}" if tc else "")
 
 
 def default_model_for(track):
@@ -102,9 +126,13 @@ def run(args: argparse.Namespace) -> int:
     texture = args.texture
     if args.texture_from:
         texture = _lift(track, model, args)
+    if args.timecode not in ("source", "none") and args.format != "livelink":
+        raise FaceTransferError(f"--timecode: only livelink takes carry one, not {args.format}")
+    timecode, said = _start_timecode(args, track)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
-                        texture=texture)
+                        texture=texture, timecode=timecode)
     neutral = track.info.get("neutral_frame") if args.neutral is not None else None
     print(f"wrote {path}: {track.n_frames} frames ({args.format})"
-          + (f", measured from the neutral frame {neutral}" if neutral is not None else ""))
+          + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
+          + (f", from timecode {timecode} ({said})" if timecode else ""))
     return 0

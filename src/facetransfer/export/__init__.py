@@ -32,7 +32,7 @@ FORMATS: dict[str, str] = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "js
 
 
 def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwrite: bool = False,
-                 texture=None, neutral=None) -> Path:
+                 texture=None, neutral=None, timecode: str | None = None) -> Path:
     """Write ``track`` in format ``fmt`` to ``out`` and return the path.
 
     Parameters
@@ -62,6 +62,8 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     check_output_path(out, overwrite=overwrite)
     if texture is not None and fmt != "glb":
         raise ExportError(f"a texture is written only into glb files, not {fmt}")
+    if timecode is not None and fmt != "livelink":
+        raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
     require_activations(track)
     track = with_neutral(track, neutral)
     if fmt == "livelink":
@@ -69,7 +71,8 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
 
         if model is not None:
             track.check_model(model)
-        return write_livelink(track, out, overwrite=overwrite)
+        start = 0.0 if timecode is None else _timecode_start(timecode, track.fps)
+        return write_livelink(track, out, overwrite=overwrite, start=start)
     if fmt == "json":
         from .mpjson import write_mediapipe_json
 
@@ -84,3 +87,16 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     from .usd import write_usd
 
     return write_usd(track, model, out, overwrite=overwrite)
+
+
+def _timecode_start(timecode: str, fps: float) -> float:
+    """A start timecode (``HH:MM:SS:FF``, ``;`` for drop frame) as seconds of the day at
+    ``fps`` (:func:`facetransfer.io.video_display.timecode_seconds`), ExportError when it is
+    not one."""
+    from ..errors import VideoError
+    from ..io.video_display import timecode_seconds
+
+    try:
+        return timecode_seconds(timecode, fps)
+    except VideoError as exc:
+        raise ExportError(str(exc)) from None

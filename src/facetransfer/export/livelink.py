@@ -72,14 +72,15 @@ def _nominal_rate(fps: float) -> int:
     return max(1, int(round(float(fps))))
 
 
-def format_timecode(frame: int, fps: float) -> str:
-    """``HH:MM:SS:FF.mmm`` of a frame index at ``fps`` (frame 0 is ``00:00:00:00.000``).
+def format_timecode(frame: int, fps: float, start: float = 0.0) -> str:
+    """``HH:MM:SS:FF.mmm`` of a frame index at ``fps`` (frame 0 is ``00:00:00:00.000``, or the
+    time of day ``start`` seconds).
 
-    Time ``k / fps`` is counted in frames of the nominal rate ``round(fps)``: ``FF`` is the frame
-    within the second, ``mmm`` the thousandths of a frame (0 for integer rates).
+    Time ``start + k / fps`` is counted in frames of the nominal rate ``round(fps)``: ``FF`` is
+    the frame within the second, ``mmm`` the thousandths of a frame (0 for integer rates).
     """
     rate = _nominal_rate(fps)
-    units = round(int(frame) * rate / float(fps) * 1000)  # thousandths of a nominal frame
+    units = round(int(frame) * rate / float(fps) * 1000 + float(start) * rate * 1000)
     whole, milli = divmod(units, 1000)
     secs, ff = divmod(whole, rate)
     mins, ss = divmod(secs, 60)
@@ -99,8 +100,9 @@ def parse_timecode(text: str, fps: float) -> float:
     return nominal * float(fps) / rate
 
 
-def livelink_rows(track) -> list[list[str]]:
-    """The CSV as rows of strings (header first)."""
+def livelink_rows(track, start: float = 0.0) -> list[list[str]]:
+    """The CSV as rows of strings (header first); ``start``: the first row's time of day in
+    seconds (:func:`format_timecode`)."""
     acts = require_activations(track)             # (F, 52) in ARKIT_NAMES order
     a = acts[:, _TO_ARKIT]                        # in the app's order
     ypr = head_euler(track.rotation)  # (F, 3) radians
@@ -110,7 +112,7 @@ def livelink_rows(track) -> list[list[str]]:
     count = str(len(LIVELINK_NAMES) + len(POSE_COLUMNS))
     rows = [list(HEADER)]
     for k in range(track.n_frames):
-        rows.append([format_timecode(k, track.fps), count]
+        rows.append([format_timecode(k, track.fps, start), count]
                     + [f"{v:.8f}" for v in a[k]] + [f"{v:.8f}" for v in pose[k]])
     return rows
 
@@ -128,10 +130,13 @@ def eye_angles(activations: np.ndarray) -> np.ndarray:
     return out
 
 
-def write_livelink(track, out: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write the track as a Live Link Face CSV take (atomically) and return the path."""
+def write_livelink(track, out: str | os.PathLike, *, overwrite: bool = False,
+                   start: float = 0.0) -> Path:
+    """Write the track as a Live Link Face CSV take (atomically) and return the path;
+    ``start``: its first row's time of day in seconds (its video's start timecode,
+    :func:`facetransfer.take.timecode_seconds`)."""
     buf = io.StringIO()
-    csv.writer(buf, lineterminator="\n").writerows(livelink_rows(track))
+    csv.writer(buf, lineterminator="\n").writerows(livelink_rows(track, start))
     return write_text_atomic(out, buf.getvalue(), overwrite=overwrite)
 
 

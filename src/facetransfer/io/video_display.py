@@ -27,7 +27,7 @@ __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixe
            "shown_width",
            "frame_args", "colour_named", "checked_colour_name", "described", "video_colour",
            "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK",
-           "checked_timecode", "timecode_of"]
+           "checked_timecode", "timecode_of", "timecode_seconds"]
 
 #: ffmpeg arguments naming the colour of a video written
 #: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
@@ -200,6 +200,24 @@ def checked_timecode(timecode) -> str | None:
         return timecode
     raise VideoError(f"a timecode must read HH:MM:SS:FF (HH:MM:SS;FF for drop frame), got "
                      f"{timecode!r}")
+
+
+def timecode_seconds(timecode: str, fps: float) -> float:
+    """A video's timecode (``HH:MM:SS:FF``; ``;`` before the frames of a drop-frame one) as
+    seconds since midnight at its frame rate ``fps``: ``FF`` counts frames of the nominal rate
+    ``round(fps)``; a drop-frame timecode (29.97 or 59.94 fps) skips 2 (4) frame numbers each
+    minute but every tenth, so its frames are counted back and divided by the true rate."""
+    m = re.fullmatch(r"(\d{2}):(\d{2}):(\d{2})([:;.])(\d{2,3})", str(timecode).strip())
+    if m is None:
+        raise VideoError(f"timecode {timecode!r} is not HH:MM:SS:FF")
+    hh, mm, ss, sep, ff = m.groups()
+    rate = max(1, int(round(float(fps))))
+    if sep == ":":
+        return int(hh) * 3600 + int(mm) * 60 + int(ss) + int(ff) / rate
+    drop = 2 * rate // 30                             # 2 at 29.97, 4 at 59.94
+    minutes = int(hh) * 60 + int(mm)
+    frame = (minutes * 60 + int(ss)) * rate + int(ff) - drop * (minutes - minutes // 10)
+    return frame / (rate * 1000.0 / 1001.0)
 
 
 def container(path: str | os.PathLike) -> str | None:
