@@ -316,6 +316,18 @@ def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_cli
     np.testing.assert_allclose(Track.load(tmp_path / "back.npz").blendshapes, tr.blendshapes,
                                atol=1e-6)
     capsys.readouterr()
+    import functools
+
+    from facetransfer.batch import cluster
+
+    with pytest.MonkeyPatch.context() as mp:     # batch export: the same first timecode
+        mp.setattr(cluster, "open_client", functools.partial(cluster.open_client,
+                                                             processes=False))
+        assert main([str(x) for x in ["batch", "export", tmp_path / "plate.npz", "--format",
+                                      "livelink", "--out", tmp_path / "b", "--model",
+                                      d / "arkit.npz", "--workers", "1"]]) == 0
+    assert read_livelink(tmp_path / "b" / "plate.csv").timecodes[0] == "00:00:02:00.000"
+    capsys.readouterr()
     for extra in (["--timecode", "1:00"], ["--timecode", "01:00:00:00", "--format", "json"]):
         code = main([str(x) for x in base + [tmp_path / "t2.csv"] + extra])
         err = capsys.readouterr().err

@@ -55,19 +55,15 @@ def register(sub) -> None:
 def _start_timecode(args, track) -> tuple[str | None, str]:
     """The livelink take's first timecode (``--timecode``) and where it came from ("" for
     none)."""
-    from pathlib import Path
-
-    from ..io.video_display import checked_timecode, timecode_of
+    from ..export.livelink import source_timecode
+    from ..io.video_display import checked_timecode
 
     if args.format != "livelink" or args.timecode == "none":
         return None, ""
     if args.timecode != "source":
         return checked_timecode(args.timecode), "--timecode"
-    src = Path(track.source) if track.source else None
-    if src is None or not src.is_file():
-        return None, ""
-    tc = timecode_of(src)
-    return tc, (f"the start timecode of {src}" if tc else "")
+    tc = source_timecode(track)
+    return tc, (f"the start timecode of {track.source}" if tc else "")
 
 
 def default_model_for(track):

@@ -39,6 +39,7 @@ from ..io.atomic import write_text_atomic
 from .common import ExportError, head_euler, require_activations
 
 __all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "format_timecode", "parse_timecode",
+           "source_timecode",
            "livelink_rows", "eye_angles", "write_livelink", "read_livelink", "LiveLinkTake"]
 
 #: The app's 52 blendshape columns, in its order.
@@ -200,3 +201,18 @@ def read_livelink(path: str | os.PathLike, *, lenient: bool = False) -> LiveLink
     if not np.all(np.isfinite(act)) or not np.all(np.isfinite(pose)):
         raise ExportError(f"{p} has non-finite values")
     return LiveLinkTake(tuple(r[0].strip() for r in body), act, pose, tuple(missing))
+
+
+def source_timecode(track) -> str | None:
+    """The start timecode of the video a track was made from
+    (:func:`facetransfer.io.video_display.timecode_of`), where its ``source`` names a video
+    file that has one; else None. A take exported with it lines up with that video."""
+    from ..io.video_display import timecode_of
+
+    src = Path(track.source) if track.source else None
+    if src is None or not src.is_file():
+        return None
+    try:
+        return timecode_of(src)
+    except ValueError:          # not a media file ffmpeg reads
+        return None
