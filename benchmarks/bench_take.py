@@ -112,12 +112,8 @@ def plot(res: dict, path: Path) -> None:
         for j, (kind, c) in enumerate((("video", "#6baed6"), ("take", "#08519c"))):
             ax.bar(x - 0.2 + 0.4 * j, [r[kind][k]["result_source"] for k in REPORTED], 0.4,
                    color=c, label=f"from the {kind}: result ~ source")
-        ax.axhline(0.8, color="g", ls=":", lw=1)
-        ax.axhline(0.6, color="g", ls="--", lw=0.8)
-        ax.set_xticks(x, REPORTED, rotation=20, ha="right")
-        ax.set_ylim(-1, 1)
-        ax.set_ylabel("r over frames")
-        ax.set_title(f"{name}: {r['source']} -> {r['target']} ({r['frames']} frames)")
+        judge.decorate(ax, REPORTED, f"{name}: {r['source']} -> {r['target']} "
+                       f"({r['frames']} frames)", target_line=False)
     axes[0, 0].legend(fontsize=8, loc="lower left")
     fig.suptitle("a transfer driven by the source video and by its Live Link Face take, "
                  "judged by Face Landmarker")

@@ -242,6 +242,19 @@ def _picture(name, source, target, res, S, path: Path) -> None:
         cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
 
 
+def decorate(ax, names, title: str, *, target_line: bool = True) -> None:
+    """A judge's axes: the issue's lines (0.8 and 0.6 with the source; 0.3 with the target),
+    the measures' ``names`` below their bars, r from -1 to 1."""
+    ax.axhline(0.8, color="g", ls=":", lw=1)
+    ax.axhline(0.6, color="g", ls="--", lw=0.8)
+    if target_line:
+        ax.axhline(0.3, color="r", ls=":", lw=1)
+    ax.set_xticks(np.arange(len(names)), names, rotation=20, ha="right")
+    ax.set_ylim(-1, 1)
+    ax.set_ylabel("r over frames")
+    ax.set_title(title)
+
+
 def plot(res: dict, path: Path) -> None:
     import matplotlib
 
@@ -262,13 +275,8 @@ def plot(res: dict, path: Path) -> None:
                                             ("after", "result_target", "#a50f15"))):
             ax.bar(x - 0.3 + 0.2 * j, [res[p][kind][n][key] for n in names], 0.2, color=c,
                    label=f"{kind}: result ~ {key.split('_')[1]}")
-        ax.axhline(0.8, color="g", ls=":", lw=1)
-        ax.axhline(0.6, color="g", ls="--", lw=0.8)
-        ax.axhline(0.3, color="r", ls=":", lw=1)
-        ax.set_xticks(x, names, rotation=20, ha="right")
-        ax.set_ylim(-1, 1)
-        ax.set_ylabel("r over frames")
-        ax.set_title(f"{p}: {res[p]['source']} -> {res[p]['target']} ({res[p]['frames']} frames)")
+        decorate(ax, names, f"{p}: {res[p]['source']} -> {res[p]['target']} "
+                 f"({res[p]['frames']} frames)")
     axes[0, 0].legend(fontsize=7, ncol=4, loc="lower left")
     fig.suptitle("transfer fidelity judged by MediaPipe (targets: >= 0.8 / 0.6 with the source, "
                  "<= 0.3 with the target for jawOpen)")
