@@ -169,7 +169,7 @@ def test_a_batch_of_pairs_takes_a_take_as_transfer_does(arkit_clip, arkit_model,
 def test_takes_written_by_other_tools_are_read(arkit_model, make_arkit_track, tmp_path,
                                                caplog):
     """Names in ARKit's camelCase, no rotation columns, a shape left out, timecodes without
-    thousandths at 60 a second: the shapes given are the take's, the one left out is 0 (said
+    thousandths at 60 a second, a byte-order mark and CRLF lines (a spreadsheet's save): the shapes given are the take's, the one left out is 0 (said
     once), the rows 1/60 s apart. A file without any shape column stays refused."""
     from facetransfer.arkit import ARKIT_NAMES
     from facetransfer.export.livelink import read_livelink
@@ -181,7 +181,8 @@ def test_takes_written_by_other_tools_are_read(arkit_model, make_arkit_track, tm
     for k in range(90):
         s, f = divmod(k, 60)
         lines.append(f"00:00:0{s}:{f:02d},{len(names)}," + ",".join(f"{v:.6f}" for v in a[k]))
-    (tmp_path / "other.csv").write_text("\n".join(lines) + "\n")
+    (tmp_path / "other.csv").write_text("\ufeff" + "\r\n".join(lines) + "\r\n",
+                                        encoding="utf-8")      # as a spreadsheet saves it
     take = read_livelink(tmp_path / "other.csv", lenient=True)
     assert "TongueOut" in take.missing and "HeadYaw" in take.missing
     got = take.activations[:, [ARKIT_NAMES.index(n) for n in names]]
