@@ -114,6 +114,19 @@ def _truncated(src: str, frac: float = 0.5):
     return lambda fx: (fx / src).read_bytes()[: int((fx / src).stat().st_size * frac)]
 
 
+def _take(bad_row: bool = False) -> bytes:
+    """A Live Link Face take of 30 rows at 30 fps (all activations 0.1); ``bad_row``: its
+    third row's first value not a number."""
+    sys.path.insert(0, str(HERE.parent / "src"))
+    from facetransfer.export.livelink import HEADER
+
+    rows = [",".join(HEADER)]
+    for k in range(30):
+        values = ["abc" if bad_row and k == 2 else "0.1"] + ["0.1"] * 60
+        rows.append(f"00:00:{k // 30:02d}:{k % 30:02d}.000,61," + ",".join(values))
+    return ("\n".join(rows) + "\n").encode()
+
+
 def _both(*fns):
     def setup(cd, fx):
         for f in fns:
@@ -315,6 +328,21 @@ def cases(fx: Path) -> list[Case]:
              names="plate/f.%04d.png"),
         Case("a folder passed as a track", ["edit", ".", "--model", M, "--scale", "smile=2",
                                             "--out", "o.npz"], setup=_copy(M), forbid=("does not exist",)),
+        Case("a take with a damaged row", ["transfer", "--target", C, "--expression-from",
+                                           "take.csv", "--model", M, "--out", "o.mp4"],
+             setup=_both(_copy(M, C), _write("take.csv", _take(bad_row=True))),
+             names="take.csv"),
+        Case("a take for a model without ARKit expressions",
+             ["transfer", "--target", C, "--expression-from", "take.csv", "--model", M,
+              "--out", "o.mp4"], setup=_both(_copy(M, C), _write("take.csv", _take())),
+             names="take.csv"),
+        Case("a take with --pose-from", ["transfer", "--target", C, "--expression-from",
+                                         "take.csv", "--pose-from", C, "--model", M, "--out",
+                                         "o.mp4"],
+             setup=_both(_copy(M, C), _write("take.csv", _take())), names="take.csv"),
+        Case("export --timecode not a timecode", ["export", T, "--format", "livelink",
+                                                  "--timecode", "10:00", "--out", "t.csv"],
+             setup=_copy(T), forbid=("Traceback",)),
         Case("third-party log lines before the tool's line (no face)",
              ["track", "blank.mp4", "--model", M, "--out", "t.npz"], setup=_copy(M, "blank.mp4")),
         # 8. raw scans

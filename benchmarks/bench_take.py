@@ -44,14 +44,18 @@ REPORTED = ("jawOpen", "mouth_opening", "mouthSmileLeft", "mouthPucker", "eyeBli
             "eyeBlinkRight", "browInnerUp", "brow_height_left", "gaze_horizontal")
 
 
-def _render(plan, model) -> tuple[list, float]:
-    """The rewritten frames of a plan (before encoding) and the render's seconds."""
+def _render(plan, model, mouth: str | None = None) -> tuple[list, float]:
+    """The rewritten frames of a plan (before encoding) and the render's seconds (``mouth``:
+    the mouth's texture, :class:`~facetransfer.rewrite_options.RewriteOptions`; None: the
+    default)."""
     from facetransfer import video_transfer as vt
+    from facetransfer.rewrite_options import RewriteOptions
 
     frames: list[np.ndarray] = []
     t = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
         vt.render_plan(plan, model, Path(tmp) / "r.mp4", overwrite=True,
+                       options=RewriteOptions(mouth=mouth),
                        compose=lambda i, r: frames.append(r.image) or r.image)
     return frames, time.perf_counter() - t
 
@@ -75,8 +79,10 @@ def take_pair(name: str, model, out: Path, data: Path, n: int = judge.FRAMES) ->
     taken = vt.plan_transfer(data / f"{tgt}.mp4", model, expression_from=take, **common)
     m = min(video.n_frames, taken.n_frames)
     results, seconds = {}, {}
-    for kind, plan in (("video", video), ("take", taken)):
-        results[kind], seconds[kind] = _render(plan, model)
+    for kind, plan, mouth in (("video", video, None), ("take", taken, None),
+                              ("take_frame", taken, "frame"), ("take_function", taken,
+                                                                 "function")):
+        results[kind], seconds[kind] = _render(plan, model, mouth)
     sar = {c: video_info(data / f"{c}.mp4").sar for c in (src, tgt)}
     source = [video.mouth_frames[video.mouth_index[i]] for i in range(m)]
     S = judge.scores(source, video.fps, sar[src])
@@ -87,15 +93,19 @@ def take_pair(name: str, model, out: Path, data: Path, n: int = judge.FRAMES) ->
     return {"source": src, "target": tgt, "frames": m, "render_seconds": seconds, **judged}
 
 
+KINDS = ("video", "take", "take_frame", "take_function")
+
+
 def _line(name: str, r: dict) -> str:
     cells = []
     for k in REPORTED:
-        v, t = r["video"][k], r["take"][k]
-        cells.append(f"{k} {v['result_source']:+.2f}/{t['result_source']:+.2f} "
-                     f"(amp {v['amplitude']:.2f}/{t['amplitude']:.2f})")
-    jaw = (r["video"]["jawOpen"]["result_target"], r["take"]["jawOpen"]["result_target"])
-    return (f"{name}: result ~ source, video / take: " + "; ".join(cells)
-            + f"; jawOpen ~ target {jaw[0]:+.2f}/{jaw[1]:+.2f}")
+        rs = "/".join(f"{r[c][k]['result_source']:+.2f}" for c in KINDS)
+        amp = "/".join(f"{r[c][k]['amplitude']:.2f}" for c in KINDS)
+        cells.append(f"{k} {rs} (amp {amp})")
+    jaw = "/".join(f"{r[c]['jawOpen']['result_target']:+.2f}" for c in KINDS)
+    return (f"{name}: result ~ source, {' / '.join(KINDS)}: " + "; ".join(cells)
+            + f"; jawOpen ~ target {jaw}; render seconds "
+            + "/".join(f"{r['render_seconds'][c]:.1f}" for c in KINDS))
 
 
 def plot(res: dict, path: Path) -> None:

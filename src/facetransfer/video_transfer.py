@@ -296,7 +296,7 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
 
     if max_frames is not None and int(max_frames) < 1:
         raise RewriteError(f"max_frames must be >= 1, got {max_frames}")
-    sources = _take_as_performance(sources, align)
+    sources = _take_as_performance(sources, align, model)
     options = RewriteOptions() if options is None else options
     planner = _Planner(model, options.track_method, track_options(options.speed),
                        progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video)
@@ -326,15 +326,19 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     return _recombined_plan(inputs, sources, model, align)
 
 
-def _take_as_performance(sources: TransferSources, align) -> TransferSources:
+def _take_as_performance(sources: TransferSources, align, model) -> TransferSources:
     """``sources`` with an expression source that is a Live Link Face take
     (:mod:`facetransfer.take`) as the ready performance it makes once the target is tracked;
-    a take drives the target alone."""
+    a take drives the target alone, a model of ARKit expressions (checked before any work)."""
+    from .arkit import is_arkit_model
     from .take import Take, is_take
 
     if sources.expression is None or not is_take(sources.expression.video):
         return sources
     path = sources.expression.video
+    if not is_arkit_model(model):
+        raise RewriteError(f"a Live Link Face take ({path}) drives a model whose expressions "
+                           "are ARKit blendshapes (the default model, 'ict-arkit')")
     beside = {"a viseme source": sources.viseme is not None,
               "an identity": sources.identity is not None or sources.identity_weights is not None,
               "a pose source": sources.pose is not None,
