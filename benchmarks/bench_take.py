@@ -90,7 +90,28 @@ def take_pair(name: str, model, out: Path, data: Path, n: int = judge.FRAMES) ->
     pose = np.degrees(head_euler(video.target_track.rotation[:m])[:, [1, 0]])
     judged = {k: judge.compare(S, T, judge.scores(v[:m], video.fps, sar[tgt]), pose)
               for k, v in results.items()}
-    return {"source": src, "target": tgt, "frames": m, "render_seconds": seconds, **judged}
+    box = _mouth_box(video.new_track.landmarks2d[:m, 48:68], video.target_frames[0].shape)
+    flicker = {k: mouth_flicker(v[:m], box) for k, v in results.items()}
+    flicker["target"] = mouth_flicker([video.target_frames[i] for i in range(m)], box)
+    return {"source": src, "target": tgt, "frames": m, "render_seconds": seconds,
+            "mouth_flicker": flicker, **judged}
+
+
+def _mouth_box(lips: np.ndarray, shape) -> tuple[slice, slice]:
+    """The box (rows, columns) holding every frame's mouth points ``lips`` (F, 20, 2), grown by
+    a fifth of its size, within a frame of ``shape``."""
+    lo, hi = np.nanmin(lips, axis=(0, 1)), np.nanmax(lips, axis=(0, 1))
+    pad = 0.2 * (hi - lo)
+    (x0, y0), (x1, y1) = np.floor(lo - pad).astype(int), np.ceil(hi + pad).astype(int)
+    return slice(max(y0, 0), min(y1, shape[0])), slice(max(x0, 0), min(x1, shape[1]))
+
+
+def mouth_flicker(frames, box: tuple[slice, slice]) -> float:
+    """Mean absolute second difference over time, in levels, of the pixels in ``box``:
+    ``|I_t - (I_{t-1} + I_{t+1}) / 2|``. Smooth motion costs little; a texture that changes
+    from one frame to the next and back (a mouth taken from another frame) a lot."""
+    a = np.stack([np.asarray(f)[box] for f in frames]).astype(np.float32)
+    return float(np.abs(a[1:-1] - 0.5 * (a[:-2] + a[2:])).mean())
 
 
 KINDS = ("video", "take", "take_frame", "take_function")
@@ -105,7 +126,9 @@ def _line(name: str, r: dict) -> str:
     jaw = "/".join(f"{r[c]['jawOpen']['result_target']:+.2f}" for c in KINDS)
     return (f"{name}: result ~ source, {' / '.join(KINDS)}: " + "; ".join(cells)
             + f"; jawOpen ~ target {jaw}; render seconds "
-            + "/".join(f"{r['render_seconds'][c]:.1f}" for c in KINDS))
+            + "/".join(f"{r['render_seconds'][c]:.1f}" for c in KINDS)
+            + "; mouth flicker (levels) " + "/".join(f"{r['mouth_flicker'][c]:.2f}"
+                                                     for c in KINDS + ("target",)))
 
 
 def plot(res: dict, path: Path) -> None:
