@@ -15,6 +15,7 @@ the performance-driven mouth texture.
 from __future__ import annotations
 
 import logging
+import os
 from dataclasses import dataclass
 from typing import Callable
 
@@ -351,6 +352,8 @@ def _lift_mouth_textures(model, frames, track, topo: MeshTopology, uvs: np.ndarr
     """The UV textures (m, T, T, 3) float32, their texel weights (m, T, T) float32 and the
     attribute vectors (m, r) of the closed meshes of track ``rows`` (frames ``idx[rows]``)."""
 
+    from ..io.ahead import ordered_ahead
+
     faces = topo.faces
     atlas = uv_atlas(faces, uvs, tex_size)
     # texels of the mouth-closing fan (its triangles come after the model's)
@@ -358,16 +361,21 @@ def _lift_mouth_textures(model, frames, track, topo: MeshTopology, uvs: np.ndarr
     textures = np.empty((rows.size, tex_size, tex_size, 3), np.float32)
     weights = np.empty((rows.size, tex_size, tex_size), np.float32)
     attrs = np.empty((rows.size, len(attribute_vector(model, track.weights_at(int(rows[0]))))))
-    for j, r in enumerate(rows):
-        w = track.weights_at(int(r))
+
+    def lift(j: int, r: int) -> None:                 # frame j's texture, weights, attributes
+        w = track.weights_at(r)
         V = close_mouth(model.synthesize(w), topo)  # Eq. (5), mouth closed
         frame = np.asarray(frames[int(idx[r])])
-        cam = track.camera(int(r))
+        cam = track.camera(r)
         lifted = lift_uv_texture(frame, V, faces, uvs, cam, tex_size, atlas=atlas)
         textures[j], weights[j] = lifted.texture, lifted.weight
         if gap.any():
             _fill_closed_gap(textures[j], weights[j], frame, V, cam, atlas, gap)
         attrs[j] = attribute_vector(model, w)
+
+    # two frames at a time: NumPy's gathers and the raster kernel release the GIL
+    for _ in ordered_ahead(lift, ((j, int(r)) for j, r in enumerate(rows)), ahead=2,
+                           workers=LIFT_THREADS):
         if progress:
             progress(1)
     return textures, weights, attrs
@@ -390,6 +398,11 @@ def resolve_mouth_mode(mouth: str | None, model, *, performance: bool = False) -
 
 #: weight of the closed gap's texels where a frame did not see them (:func:`_fill_closed_gap`)
 _GAP_FLOOR = 1e-3
+
+
+#: Frames lifted at once by :func:`mouth_texture_function` (threads; the result does not
+#: depend on it)
+LIFT_THREADS = min(2, os.cpu_count() or 1)
 
 
 def _fill_closed_gap(texture: np.ndarray, weight: np.ndarray, frame: np.ndarray,
