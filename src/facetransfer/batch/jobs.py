@@ -310,13 +310,8 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None) 
         if default_model_path().is_file():
             default, h = _default_model()
             model = default if track.model_hash == h else None
-    timecode = None
-    if fmt == "livelink":         # the take starts at its video's timecode, as `export` does
-        from ..export.livelink import source_timecode
-
-        timecode = source_timecode(track)
     path = export_track(track, fmt, out, model=model, overwrite=True, texture=texture,
-                        neutral=neutral, timecode=timecode)
+                        neutral=neutral)
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
                seconds=time.perf_counter() - t0,
                mean_confidence=float(np.mean(track.confidence)), output=str(path))

@@ -32,7 +32,7 @@ FORMATS: dict[str, str] = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "js
 
 
 def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwrite: bool = False,
-                 texture=None, neutral=None, timecode: str | None = None) -> Path:
+                 texture=None, neutral=None, timecode: str | None = "source") -> Path:
     """Write ``track`` in format ``fmt`` to ``out`` and return the path.
 
     Parameters
@@ -50,6 +50,11 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     neutral : int or "auto", optional
         Measure the activations from this frame's (:mod:`facetransfer.export.neutral`: Live
         Link Face's calibration); None: as tracked.
+    timecode : str or None
+        ``livelink``: the first row's timecode (``HH:MM:SS:FF``, ``;`` for drop frame);
+        ``"source"`` (default): the start timecode of the video the track was made from, where
+        it has one (:func:`facetransfer.export.livelink.source_timecode`); None:
+        ``00:00:00:00``. Other formats carry none.
 
     Raises
     ------
@@ -62,7 +67,7 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     check_output_path(out, overwrite=overwrite)
     if texture is not None and fmt != "glb":
         raise ExportError(f"a texture is written only into glb files, not {fmt}")
-    if timecode is not None and fmt != "livelink":
+    if timecode not in (None, "source") and fmt != "livelink":
         raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
     require_activations(track)
     track = with_neutral(track, neutral)
@@ -71,6 +76,10 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
 
         if model is not None:
             track.check_model(model)
+        from .livelink import source_timecode
+
+        if timecode == "source":
+            timecode = source_timecode(track)
         start = 0.0 if timecode is None else _timecode_start(timecode, track.fps)
         return write_livelink(track, out, overwrite=overwrite, start=start)
     if fmt == "json":
