@@ -242,7 +242,9 @@ def _run(args) -> int:
 
     previous = _catching_sigterm()
     try:
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()      # what the command said, while a closed pipe can be caught here
+        return status
     except (ValueError, OSError, MemoryError, EOFError, zipfile.BadZipFile) as exc:
         # bad input, a failed write or read (permissions, full disk), a job too large
         if isinstance(exc, BrokenPipeError) and _stdout_gone():
