@@ -154,3 +154,27 @@ def test_page_of_a_model_without_arkit_shapes(quick_model):
                                    .training_weights(1, shapes[0])}) \
         - quick_model.synthesize({**rest, "identity": w})
     np.testing.assert_allclose(first, want, atol=2 * data["target_scales"][0])
+
+
+def test_view_of_a_live_link_face_take(arkit_model, pages, tmp_path, capsys):
+    """``view take.csv``: the page's timeline holds the take's activations (decoded from the
+    page) and as many frames; a take is no track for ``--neutral``."""
+    import base64
+
+    from facetransfer.export.livelink import write_livelink
+
+    _, _, track, a = pages
+    mp = tmp_path / "m.npz"
+    arkit_model.save(mp)
+    take = write_livelink(track, tmp_path / "take.csv")
+    out = tmp_path / "take.html"
+    assert main(["view", str(take), "--model", str(mp), "--out", str(out)]) == 0
+    capsys.readouterr()
+    page = out.read_text()
+    blobs = [np.frombuffer(base64.b64decode(b), np.float32)
+             for b in re.findall(r'"activations": "([A-Za-z0-9+/=]+)"', page)]
+    assert len(blobs) == 1 and f'"n_frames": {len(a)}' in page
+    np.testing.assert_allclose(blobs[0].reshape(a.shape), a, atol=1e-6)
+    assert main(["view", str(take), "--model", str(mp), "--out", str(tmp_path / "n.html"),
+                 "--neutral", "auto"]) == 2
+    assert "--neutral is for a track" in capsys.readouterr().err

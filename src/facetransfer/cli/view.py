@@ -2,6 +2,7 @@
 
     facetransfer view MODEL.npz --out page.html
     facetransfer view TRACK.npz --out page.html [--model M.npz] [--neutral auto]
+    facetransfer view TAKE.csv --out page.html [--model M.npz]     # a Live Link Face take
 """
 
 from __future__ import annotations
@@ -16,7 +17,9 @@ def register(sub) -> None:
         "dials and head pose (and a timeline for a track)",
         description="One HTML file, no network needed: three.js inlined, a slider per "
         "blendshape and per identity dial, head pose, and for a track a timeline.")
-    p.add_argument("source", metavar="MODEL.npz|TRACK.npz")
+    p.add_argument("source", metavar="MODEL.npz|TRACK.npz|TAKE.csv",
+                   help="a model, a track, or a Live Link Face take (its curves and head "
+                   "rotation on the model's mean person)")
     p.add_argument("--out", required=True, metavar="PAGE.html")
     p.add_argument("--model", metavar="M.npz", help="for a track: its model (default: the "
                    "default model, if the track was made with it)")
@@ -39,11 +42,37 @@ def _is_track(path) -> bool:
         return False  # write_viewer reports it
 
 
+def _take_page(args: argparse.Namespace):
+    """The page of a Live Link Face take: the model's mean person performing it with its
+    head's rotation (:func:`facetransfer.take.take_track`), on the track's timeline."""
+    from pathlib import Path
+
+    from ..errors import FaceTransferError
+    from ..export.viewer import viewer_page
+    from ..io.atomic import write_text_atomic
+    from ..take import take_track
+    from .common import resolve_model
+
+    if args.neutral is not None:
+        raise FaceTransferError(f"--neutral is for a track; {args.source} is a take")
+    if not Path(args.source).is_file():
+        raise FaceTransferError(f"take {args.source} does not exist")
+    model = resolve_model(args.model)
+    track = take_track(args.source, model, model.weight_mean(model.mode_index("identity")))
+    page = viewer_page(model, track=track, title=Path(args.source).name)
+    return write_text_atomic(args.out, page, overwrite=args.overwrite)
+
+
 def run(args: argparse.Namespace) -> int:
     from ..export.viewer import write_viewer
     from ..io.atomic import check_output_path
+    from ..take import is_take
 
     check_output_path(args.out, overwrite=args.overwrite)
+    if is_take(args.source):
+        path = _take_page(args)
+        print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
+        return 0
     model = None
     if args.model:
         from ..model import load_model
