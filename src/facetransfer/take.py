@@ -16,7 +16,12 @@ of §6 queried with the new expression, as for a ready performance).
 Timecodes are ``HH:MM:SS:FF.mmm``: ``FF`` a frame at the take's nominal rate, ``.mmm`` its
 thousandths. The rate is not written in the file: a take that passes a second shows it (its
 frame numbers wrap after the last, :func:`take_rate`); one within a second is read at the
-smallest usual rate above its frame numbers, with a warning.
+smallest usual rate above its frame numbers, with a warning. A take recorded beside the camera
+with synced clocks is placed by the target's start timecode (:data:`TAKE_SYNCS`).
+
+:func:`take_track` makes a take a track of its own (the model's person performing it with the
+take's head rotation): what ``facetransfer puppet take.csv`` renders and ``facetransfer view
+take.csv`` shows.
 """
 
 from __future__ import annotations
@@ -35,8 +40,9 @@ from .transfer import TransferError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["TIMECODE_RATES", "TAKE_SYNCS", "Take", "is_take", "timecode_seconds", "take_start", "take_rate", "take_seconds", "take_on_timeline",
-           "take_performance", "take_track", "PREVIEW_SIZE"]
+__all__ = ["TIMECODE_RATES", "TAKE_SYNCS", "PREVIEW_SIZE", "Take", "is_take", "timecode_seconds",
+           "take_start", "take_rate", "take_seconds", "take_on_timeline", "take_performance",
+           "take_track"]
 
 #: The frame size of a take shown on a model (:func:`take_track`, ``facetransfer puppet``).
 PREVIEW_SIZE = (512, 512)

@@ -159,6 +159,7 @@ def _register_transfer(sub) -> None:
     _add_sources(p)
     p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     p.add_argument("--align", choices=ALIGN_MODES, default=None, help=ALIGN_HELP)
+    # facetransfer.take.TAKE_SYNCS, spelt here: the parser imports no NumPy
     p.add_argument("--take-sync", choices=("timecode", "start"), default="timecode",
                    help="a Live Link Face take as --expression-from: placed by the target's "
                    "start timecode where the take's timecodes span it (clocks synced on set), "
