@@ -41,8 +41,7 @@ from .transfer import TransferError
 log = logging.getLogger(__name__)
 
 __all__ = ["TIMECODE_RATES", "TAKE_SYNCS", "PREVIEW_SIZE", "Take", "is_take", "timecode_seconds",
-           "take_start", "take_rate", "take_seconds", "take_on_timeline", "take_performance",
-           "take_track"]
+           "take_rate", "take_seconds", "take_on_timeline", "take_performance", "take_track"]
 
 #: The frame size of a take shown on a model (:func:`take_track`, ``facetransfer puppet``).
 PREVIEW_SIZE = (512, 512)
@@ -98,7 +97,11 @@ def take_rate(timecodes, *, warn: bool = True) -> int:
     every frame number ``FF`` it holds. Sure where the take passes a second (its frame numbers
     wrap after the last one of its rate); a take within one second is said in the log to be a
     guess. TransferError beyond every rate."""
-    f = _fields(timecodes)
+    return _rate(_fields(timecodes), warn)
+
+
+def _rate(f: np.ndarray, warn: bool) -> int:
+    """:func:`take_rate` of parsed timecode fields ``f`` (F, 5)."""
     top = int(f[:, 3].max(initial=0))
     seconds = f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]
     wrapped = bool(seconds.size) and seconds.max() > seconds.min()
@@ -116,24 +119,20 @@ def take_rate(timecodes, *, warn: bool = True) -> int:
 def take_seconds(timecodes, *, warn: bool = True) -> np.ndarray:
     """``(F,)`` seconds of each row after the take's first, from its timecodes at
     :func:`take_rate` (``warn``: its guess said; TransferError if they go back in time)."""
+    t = _clock(timecodes, warn)
+    return t - (t[0] if t.size else 0.0)
+
+
+def _clock(timecodes, warn: bool) -> np.ndarray:
+    """``(F,)`` seconds since midnight of each row's timecode, counted at :func:`take_rate`;
+    TransferError where they go back in time."""
     f = _fields(timecodes)
-    rate = take_rate(timecodes, warn=warn)
-    t = _label_seconds(f, rate)
+    t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / _rate(f, warn)
     if t.size and np.any(np.diff(t) < 0):
         k = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
         raise TransferError(f"the take's timecodes go back in time at row {k + 1} "
                             f"({timecodes[k]} after {timecodes[k - 1]})")
-    return t - (t[0] if t.size else 0.0)
-
-
-def _label_seconds(f: np.ndarray, rate: int) -> np.ndarray:
-    """Seconds since midnight of timecode fields ``f`` (F, 5) counted at ``rate``."""
-    return (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / rate
-
-
-def take_start(timecodes) -> float:
-    """The take's first row as seconds since midnight of its timecode (:func:`take_rate`)."""
-    return float(_label_seconds(_fields(timecodes[:1]), take_rate(timecodes, warn=False))[0])
+    return t
 
 
 def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps: float, *,
@@ -200,8 +199,9 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     from .track.project import project_landmarks, take_frames
 
     take = _read(path, model)
-    t = take_seconds(take.timecodes)
-    start = _synced_start(take.timecodes, t, start_timecode, target_track.fps, path)
+    clock = _clock(take.timecodes, True)
+    t = clock - clock[0]
+    start = _synced_start(take.timecodes, clock, start_timecode, target_track.fps, path)
     a = take_on_timeline(t, take.activations, target_track.n_frames, target_track.fps,
                          align=align, start=start)
     new = take_frames(target_track, np.arange(len(a)))
@@ -211,14 +211,15 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     return attach_activations(project_landmarks(new, model), model)
 
 
-def _synced_start(timecodes, t: np.ndarray, start_timecode: str | None, fps: float,
+def _synced_start(timecodes, clock: np.ndarray, start_timecode: str | None, fps: float,
                   path) -> float:
-    """Seconds into the take at the target's first frame: where its timecodes span the
-    target's ``start_timecode``, that moment (said in the log); else 0."""
+    """Seconds into the take (rows at ``clock``, seconds since midnight) at the target's first
+    frame: where its timecodes span the target's ``start_timecode``, that moment (said in the
+    log); else 0."""
     if start_timecode is None:
         return 0.0
-    offset = timecode_seconds(start_timecode, fps) - take_start(timecodes)
-    if 0.0 <= offset <= float(t[-1]):
+    offset = timecode_seconds(start_timecode, fps) - float(clock[0])
+    if 0.0 <= offset <= float(clock[-1] - clock[0]):
         log.warning("the take %s is placed by timecode: the target's first frame "
                     "(%s) is %.3f s into it (--take-sync start: from its first row)", path,
                     start_timecode, offset)

@@ -119,8 +119,11 @@ class TransferSources:
         def src(video, track):
             return None if video is None else Source(video, track, source_face)
 
-        if take_sync not in ("timecode", "start"):
-            raise RewriteError(f"take_sync must be timecode or start, got {take_sync!r}")
+        from .take import TAKE_SYNCS
+
+        if take_sync not in TAKE_SYNCS:
+            raise RewriteError(f"take_sync must be one of {', '.join(TAKE_SYNCS)}, got "
+                               f"{take_sync!r}")
         return cls(Source(target, target_track, target_face),
                    src(expression_from, expression_track),
                    src(viseme_from, viseme_track), src(identity_from, identity_track),

@@ -61,6 +61,8 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     ExportError
         Unknown format, no activations, a model that does not match, a texture for a format
         without one, a neutral frame outside the track.
+    VideoError
+        A ``timecode`` that is not one.
     """
     if fmt not in FORMATS:
         raise ExportError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
@@ -76,11 +78,12 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
 
         if model is not None:
             track.check_model(model)
+        from ..io.video_display import timecode_seconds
         from .livelink import source_timecode
 
         if timecode == "source":
             timecode = source_timecode(track)
-        start = 0.0 if timecode is None else _timecode_start(timecode, track.fps)
+        start = 0.0 if timecode is None else timecode_seconds(timecode, track.fps)
         return write_livelink(track, out, overwrite=overwrite, start=start)
     if fmt == "json":
         from .mpjson import write_mediapipe_json
@@ -96,16 +99,3 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     from .usd import write_usd
 
     return write_usd(track, model, out, overwrite=overwrite)
-
-
-def _timecode_start(timecode: str, fps: float) -> float:
-    """A start timecode (``HH:MM:SS:FF``, ``;`` for drop frame) as seconds of the day at
-    ``fps`` (:func:`facetransfer.io.video_display.timecode_seconds`), ExportError when it is
-    not one."""
-    from ..errors import VideoError
-    from ..io.video_display import timecode_seconds
-
-    try:
-        return timecode_seconds(timecode, fps)
-    except VideoError as exc:
-        raise ExportError(str(exc)) from None

@@ -183,8 +183,7 @@ def read_livelink(path: str | os.PathLike, *, lenient: bool = False) -> LiveLink
     key = (lambda n: n.strip().lower()) if lenient else (lambda n: n)
     col = {key(n): i for i, n in enumerate(rows[0])}
     missing = [n for n in LIVELINK_NAMES + POSE_COLUMNS if key(n) not in col]
-    if missing and (not lenient or len(missing) >= len(LIVELINK_NAMES) + len(POSE_COLUMNS)
-                    or all(n in missing for n in LIVELINK_NAMES)):
+    if missing and (not lenient or all(n in missing for n in LIVELINK_NAMES)):
         raise ExportError(f"{p} lacks the columns {missing[:5]}")
     body = [r for r in rows[1:] if r]
 
