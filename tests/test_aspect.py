@@ -40,7 +40,10 @@ def test_display_frames_resample_columns_and_pass_placeholders():
     fr = np.random.default_rng(0).integers(0, 256, (6, 10, 3), np.uint8)
     out = list(display_frames([fr, None, fr], 0.8))
     assert out[1] is None and out[0].shape == (6, 8, 3)
-    np.testing.assert_array_equal(out[0], cv2.resize(fr, (8, 6), interpolation=cv2.INTER_AREA))
+    np.testing.assert_array_equal(out[0], cv2.resize(fr, (8, 6), interpolation=cv2.INTER_LINEAR))
+    half = list(display_frames([fr], 0.5))[0]          # narrower than LINEAR_SHRINK: averaged
+    np.testing.assert_array_equal(half, cv2.resize(fr, (5, 6), interpolation=cv2.INTER_AREA))
+    assert not np.array_equal(half, cv2.resize(fr, (5, 6), interpolation=cv2.INTER_LINEAR))
     frames = [fr]
     assert list(display_frames(frames, 1.0))[0] is fr
 
