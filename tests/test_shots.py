@@ -77,6 +77,21 @@ def test_each_shot_of_an_edited_clip_is_captured_with_its_own_identity(edited, a
         assert np.abs(both.blendshapes[sl] - alone.blendshapes).mean() < 0.03
 
 
+def test_a_clip_that_opens_on_black_is_no_cut_only_lost_until_the_face(edited, arkit_model,
+                                                                         caplog):
+    """30 black frames, then the face: its frames before are lost, the rest captured as the
+    face's frames alone, and no cut to "another shot" is said (there is one person)."""
+    from facetransfer.track.capture import capture_video
+
+    a = edited[0]
+    with caplog.at_level("WARNING"):
+        tr = capture_video(np.concatenate([np.zeros_like(a[:30]), a]), arkit_model, workers=1)
+    assert "cuts to another shot" not in caplog.text
+    assert tr.lost[:30].all() and not tr.lost[30:].any()
+    alone = capture_video(a, arkit_model, workers=1)
+    assert np.abs(tr.blendshapes[30:] - alone.blendshapes).mean() < 0.03
+
+
 def test_a_two_shot_target_is_rewritten_as_its_shots_alone(quick_model, tmp_path_factory):
     """Each shot of an edited target is rendered as a clip of its own (its own reference
     frames): the frames equal those of each shot rewritten alone; the shots survive a track

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 import re
 import subprocess
@@ -107,6 +108,25 @@ def test_odd_size_is_padded_to_even_by_repeating_edges(tmp_path):
     assert psnr(back[:, :33, :47], frames) > 35.5   # measured 36.9 dB
     # the added row and column repeat the last ones (up to coding)
     assert np.abs(back[:, 33].astype(int) - back[:, 32].astype(int)).mean() < 3
+
+
+def test_an_odd_size_grown_is_said_once_naming_the_output(tmp_path, caplog):
+    """A compositor laying the result over the plate must know it is a pixel larger: one
+    warning naming the output (not a part file), none for an even size."""
+    from facetransfer.io.video_parts import PartsWriter
+
+    frames = smooth_frames(n=3, h=33, w=47)
+    out = tmp_path / "res.mp4"
+    with caplog.at_level(logging.WARNING, logger="facetransfer.io"):
+        w = PartsWriter(tmp_path / "parts", out, 10, (47, 33), n_frames=3)
+        for f in frames:
+            w.write(f)
+        w.close()
+        encode_video(tmp_path / "even.mp4", smooth_frames(n=2, h=34, w=48), 10)
+    said = [r.getMessage() for r in caplog.records if "odd size" in r.getMessage()]
+    assert said == [f"{out}: the frames' odd size 47x33 is stored as 48x34, the edge repeated "
+                    "(4:2:0 holds even sizes only); an image sequence keeps 47x33"]
+    assert read_video(out)[0].shape == (3, 34, 48, 3)
 
 
 @pytest.mark.parametrize("codec,suffix,name,db", [("h265", ".mkv", "hevc", 37.0),

@@ -117,6 +117,11 @@ def tqdm_progress(desc: str, *, unit: str = "item", enabled: bool = True):
     return callback, close
 
 
+def frame_count(n: int) -> str:
+    """``"1 frame"``, ``"N frames"``: the count of a command's summary line."""
+    return f"{n} frame" if n == 1 else f"{n} frames"
+
+
 def announce(message: str) -> None:
     """A library's one-line message (e.g. that the default model is being built) on stderr."""
     print(message, file=sys.stderr, flush=True)

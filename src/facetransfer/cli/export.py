@@ -13,7 +13,7 @@ import argparse
 import sys
 
 from ..export import FORMATS
-from .common import progress_disabled
+from .common import frame_count, progress_disabled
 
 
 def register(sub) -> None:
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
                         texture=texture, timecode=timecode)
     neutral = track.info.get("neutral_frame") if args.neutral is not None else None
-    print(f"wrote {path}: {track.n_frames} frames ({args.format})"
+    print(f"wrote {path}: {frame_count(track.n_frames)} ({args.format})"
           + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
           + (f", from timecode {timecode} ({said})" if timecode else ""))
     return 0

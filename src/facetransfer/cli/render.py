@@ -19,7 +19,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import add_video_options, progress_disabled, video_options, video_out
+from .common import add_video_options, frame_count, progress_disabled, video_options, video_out
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
 
@@ -181,7 +181,7 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
               disable=progress_disabled()) as bar:
         truth = synthesize_video(model, perf, out, seed=args.seed, texture=texture,
                                  progress=bar.update, overwrite=args.overwrite, options=vopt)
-    print(f"wrote {out} ({perf.n_frames} frames, {perf.size[0]}x{perf.size[1]} at "
+    print(f"wrote {out} ({frame_count(perf.n_frames)}, {perf.size[0]}x{perf.size[1]} at "
           f"{perf.fps:g} fps) and {truth_path(out)}; mean vertex visibility "
           f"{truth.visible.mean():.2f}")
     return 0

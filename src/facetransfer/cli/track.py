@@ -20,8 +20,8 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
-from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, progress_disabled,
-                     resolve_model, video_options, video_out)
+from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, frame_count,
+                     progress_disabled, resolve_model, video_options, video_out)
 
 
 #: What the capture tracker does, for the help of every ``--tracker`` option.
@@ -208,7 +208,7 @@ def _track_and_save(args, model, settings, tracker: str):
     track.save(args.out, overwrite=args.overwrite)
     partial_path(args.out).unlink(missing_ok=True)   # the progress of the run, if any
     n_lost = int(track.lost.sum())
-    print(f"wrote {args.out}: {track.n_frames} frames, {track.frame_size[0]}x"
+    print(f"wrote {args.out}: {frame_count(track.n_frames)}, {track.frame_size[0]}x"
           f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
           + (f", {n_lost} lost" if n_lost else ""))
     if track.blendshapes is None:

@@ -23,8 +23,8 @@ from ..transfer import ALIGN_MODES
 from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES, JAW_MODES,
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
-from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, progress_disabled,
-                     resolve_model, video_options, video_out)
+from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, frame_count,
+                     progress_disabled, resolve_model, video_options, video_out)
 from .track import CAPTURE_HELP
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
@@ -364,7 +364,7 @@ def run_transfer(args) -> int:
     kept = res.n_frames - res.n_rewritten
     if res.resumed:
         print(f"continued an interrupted render from frame {res.resumed}")
-    print(f"wrote {res.path}: {res.n_frames} frames" + _numbered(args.out, args.target,
+    print(f"wrote {res.path}: {frame_count(res.n_frames)}" + _numbered(args.out, args.target,
                                                               res.n_frames)
           + (f" ({kept} kept original: face lost)" if kept else "")
           + (", with the target's audio" if res.audio else ", no audio"))
@@ -538,7 +538,7 @@ def run_edit(args) -> int:
 
         new = dial_track(new, model, dial_values)
     new.save(args.out, overwrite=args.overwrite)
-    print(f"wrote {args.out}: {new.n_frames} frames, {len(adds)} addition(s), "
+    print(f"wrote {args.out}: {frame_count(new.n_frames)}, {len(adds)} addition(s), "
           f"{len(scales)} scaling(s)" + (f", dials {args.identity_dials}" if dial_values else ""))
     return 0
 
@@ -583,7 +583,7 @@ def run_puppet(args) -> int:
                                   progress_factory=_bar_factory())
     if resumed:
         print(f"continued an interrupted render from frame {resumed}")
-    print(f"wrote {args.out}: {track.n_frames} frames of {args.identity}"
+    print(f"wrote {args.out}: {frame_count(track.n_frames)} of {args.identity}"
           + (", with the video's audio" if audio else ""))
     return 0
 
@@ -608,8 +608,8 @@ def _puppet_take(args, vopt) -> int:
                               overwrite=args.overwrite, progress_factory=_bar_factory())
     if resumed:
         print(f"continued an interrupted render from frame {resumed}")
-    print(f"wrote {args.out}: {track.n_frames} frames of {args.identity} performing the take "
-          f"{args.video} ({track.fps:g} fps, {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]})")
+    print(f"wrote {args.out}: {frame_count(track.n_frames)} of {args.identity} performing the "
+          f"take {args.video} ({track.fps:g} fps, {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]})")
     return 0
 
 
@@ -631,8 +631,8 @@ def run_demo(args) -> int:
                overwrite=args.overwrite,
                progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings
-    print(f"wrote {res.video} ({res.n_frames} frames: source | target | result), {res.sheet}, "
-          f"{res.track}")
+    print(f"wrote {res.video} ({frame_count(res.n_frames)}: source | target | result), "
+          f"{res.sheet}, {res.track}")
     print("seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items())
           + ("" if res.method == "auto" else f" (tracking: {res.method})"))
     if res.fidelity is not None:

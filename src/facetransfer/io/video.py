@@ -50,8 +50,8 @@ __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video
            "colour_matrix", "video_colour", "ffmpeg_exe", "ffmpeg_encoders",
            "require_encoder", "is_image_pattern", "frame_path", "save_frame_image",
            "place_sequence", "check_video_output", "decoded_frame_count", "stored_frame_count",
-           "has_audio", "audio_codec", "mux_audio", "VideoWriter", "encode_video", "write_video",
-           "write_video_with_audio"]
+           "has_audio", "audio_codec", "mux_audio", "warn_if_grown", "VideoWriter",
+           "encode_video", "write_video", "write_video_with_audio"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -298,6 +298,18 @@ def _stored_size(size: tuple[int, int], codec: str) -> tuple[int, int]:
     return w + w % 2, h + (h % 2 if codec != "prores" else 0)
 
 
+def warn_if_grown(path, size: tuple[int, int], codec: str) -> None:
+    """Warn (once per output) that a video of ``size`` is stored larger than its frames: the
+    frame of a plate of odd size grows by a column or row repeating its edge
+    (:func:`_stored_size`), which a compositor laying the result over the plate must know."""
+    stored = _stored_size(size, codec)
+    if stored != (int(size[0]), int(size[1])):
+        log.warning("%s: the frames' odd size %dx%d is stored as %dx%d, the edge repeated "
+                    "(%s holds even sizes only); an image sequence keeps %dx%d", path,
+                    size[0], size[1], *stored, "4:2:0" if codec != "prores" else "4:2:2",
+                    size[0], size[1])
+
+
 def _audio_input_args(audio_from, codec: str, fmt: str, *, start: float = 0.0,
                       duration: float) -> list[str]:
     """ffmpeg arguments adding the audio of ``audio_from`` (in ``codec``) as the second input
@@ -536,15 +548,13 @@ class VideoWriter:
 
     def _open_ffmpeg(self) -> None:
         exe = require_encoder(self.options.codec)
-        w, h = self.size
         # 4:2:0 codecs get their planes from OpenCV (BT.601 limited range, as ffmpeg's own
         # conversion; chroma the mean of each 2x2 block): half the bytes through the pipe and
         # no scaler in ffmpeg (BENCHMARKS.md, "End to end")
         self._pipe_format = "rgb24" if self.options.codec == "prores" else "yuv420p"
         self.stored_size = _stored_size(self.size, self.options.codec)
-        if self.stored_size != self.size:
-            log.info("%s: odd frame size %dx%d stored as %dx%d (edge pixels repeated)",
-                     self.path, w, h, *self.stored_size)
+        if not self._detached:   # a part of a longer video: the parts' writer warns, once
+            warn_if_grown(self.path, self.size, self.options.codec)
         self._atomic = atomic_path(self.path, overwrite=True)  # checked in __init__
         self.tmp = self._atomic.__enter__()
         cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",

@@ -34,7 +34,7 @@ from ..errors import OutputError, VideoError
 from .atomic import atomic_path, locked_elsewhere, write_text_atomic
 from .video import (VIDEO_SUFFIXES, VideoOptions, VideoWriter, WrittenVideo, _audio_input_args,
                     _container_args, _ffmpeg_error, _fps_arg, _require_ffmpeg, _stored_size,
-                    audio_codec, check_video_output, stored_frame_count)
+                    audio_codec, check_video_output, stored_frame_count, warn_if_grown)
 
 log = logging.getLogger(__name__)
 
@@ -163,6 +163,7 @@ class PartsWriter:
         if self.output.kind != "video":
             raise VideoError(f"{out}: an image sequence is not written in parts")
         self.folder, self.fps, self.size = Path(folder), float(fps), tuple(size)
+        warn_if_grown(self.output.path, self.size, self.output.options.codec)
         self.n_frames, self.audio_from = int(n_frames), audio_from
         self.folder.mkdir(parents=True, exist_ok=True)
         self._lock_fd = _lock(self.folder)

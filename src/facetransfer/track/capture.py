@@ -507,15 +507,15 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
     own (its own identity; no flow or smoothing across a cut), joined; a ``fixed`` identity is
     the first shot's (the face the clip starts with); the fit's progress is not kept for such
     a clip."""
-    log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own, with "
-                "its own identity", source or "the video", "s" if len(spans) > 2 else "",
-                ", ".join(str(a) for a, _ in spans[1:]))
-    tracks = []
-    for a, b in spans:
-        sub = shot_detections(det, a, b)
-        tracks.append(_capture_detections(sub, model, options, fps, frame_size,
-                                          fixed if a == 0 else None, progress, source)
-                      if sub.found.any() else None)
+    subs = [shot_detections(det, a, b) for a, b in spans]
+    faced = [a for (a, _), sub in zip(spans, subs) if sub.found.any()]
+    if len(faced) > 1:  # a shot without a face (a clip that opens on black) is only lost
+        log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own, "
+                    "with its own identity", source or "the video", "s" if len(faced) > 2
+                    else "", ", ".join(str(a) for a in faced[1:]))
+    tracks = [_capture_detections(sub, model, options, fps, frame_size,
+                                  fixed if a == 0 else None, progress, source)
+              if sub.found.any() else None for (a, _), sub in zip(spans, subs)]
     if all(t is None for t in tracks):
         raise _no_face(source, det.n_frames)
     return joined_shots(tracks, spans)
