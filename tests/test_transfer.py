@@ -81,6 +81,23 @@ def test_resample_track_interpolates_and_propagates_lost():
     np.testing.assert_array_equal(rs.lost, [False, False, False, True, True, True, False])
 
 
+def test_a_resampled_tracks_cut_moves_with_it_and_no_frame_blends_two_shots():
+    """A source edited from two shots (a cut at its frame 6) read at another rate and cut
+    short: the cut lands on the first frame reading the second shot, the frame between the
+    shots is the first shot's last, and a cut beyond the frames read is dropped (before: the
+    source's numbering kept, "shot_starts must be increasing frames in 1..m")."""
+    tr = dataclasses.replace(make_track(10), shot_starts=(6,))
+    rs = resample_track(tr, time_map(10, 12.5, 9, 25))    # times 0, .5, ..., 4
+    assert rs.shot_starts == ()                            # the cut is not reached
+    rs = resample_track(tr, time_map(10, 20, 10, 25))     # times 0, .8, ..., 7.2
+    t = np.arange(10) * 0.8                                # frame 7 reads 5.6: between shots
+    assert rs.shot_starts == (8,)                          # 6.4 is the first in the second
+    w = tr.weights["expression"]
+    np.testing.assert_array_equal(rs.weights["expression"][7], w[5])
+    np.testing.assert_allclose(rs.weights["expression"][8], w[6] + (w[7] - w[6]) * (t[8] - 6))
+    np.testing.assert_allclose(rs.weights["expression"][6], w[4] + (w[5] - w[4]) * (t[6] - 4))
+
+
 def test_resample_track_keeps_a_constant_identity_bit_for_bit():
     """Between two equal rows the interpolation is that row exactly (the render contracts a
     constant identity once; an ulp apart, it would take it for one that changes)."""

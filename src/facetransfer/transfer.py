@@ -179,8 +179,10 @@ def resample_track(track, tmap: TimeMap):
     """The track sampled at ``tmap.source_time`` (linear in pose and weights).
 
     Rotations are interpolated linearly and projected back onto rotations; a resampled frame is
-    lost if either source frame it reads is lost. Frame rate and size are kept (the caller sets
-    the target's with :func:`dataclasses.replace`).
+    lost if either source frame it reads is lost. A frame between the two sides of a cut
+    (``track.shot_starts``) takes the earlier shot's last frame (two shots are not blended),
+    and the cuts move to the first frames that read their shots. Frame rate and size are kept
+    (the caller sets the target's with :func:`dataclasses.replace`).
 
     Parameters
     ----------
@@ -199,11 +201,12 @@ def resample_track(track, tmap: TimeMap):
         raise TransferError(f"time map reads source frames {t.min():.1f}..{t.max():.1f}, "
                             f"outside the track's {track.n_frames} frames")
     i0 = np.floor(t).astype(np.int64)
+    t = np.where(np.isin(np.minimum(i0 + 1, track.n_frames - 1), track.shot_starts), i0, t)
     i1 = np.minimum(i0 + 1, track.n_frames - 1)
     frac = t - i0
     lost = track.lost[i0] | ((frac > 1e-9) & track.lost[i1])
     return dataclasses.replace(
-        track,
+        track, shot_starts=_resampled_starts(track.shot_starts, t),
         rotation=_orthonormalize(_interp_rows(track.rotation, t)),
         scale=_interp_rows(track.scale, t),
         translation=_interp_rows(track.translation, t),
@@ -219,6 +222,16 @@ def resample_track(track, tmap: TimeMap):
                       track.detections2d[np.minimum(tmap.nearest, track.n_frames - 1)]),
         info={},
     )
+
+
+def _resampled_starts(starts, t: np.ndarray) -> tuple[int, ...]:
+    """The cuts ``starts`` (source frames) of a track resampled at source times ``t`` (m,): the
+    first frame reading each cut's shot, where that is neither the first frame nor past the
+    last; none when ``t`` runs back somewhere (a cut is then no frame's)."""
+    if not starts or len(t) < 2 or np.any(np.diff(t) < 0):
+        return ()
+    ks = np.searchsorted(t, np.asarray(starts, np.float64) - 1e-9, side="left")
+    return tuple(sorted({int(k) for k in ks if 0 < k < len(t)}))
 
 
 # ---------------------------------------------------------------------------------------------
