@@ -165,14 +165,20 @@ def test_mediapipe_loads_without_its_drawing_helpers_until_they_are_used():
     """import_tasks_api makes MediaPipe's drawing helpers (matplotlib's pyplot) and its
     microphone module (which imports sounddevice) lazy; they still work when used, and a look
     at every loaded module (hypothesis scans sys.modules so) raises nothing: sounddevice
-    itself lazy raised PortAudio's OSError there on a machine without it."""
+    itself lazy raised PortAudio's OSError there on a machine without it. PortAudio is not
+    even searched for (before, the audio classifier's annotations loaded the microphone's
+    module as the package imported: sounddevice tried and failed, unseen, on every start)."""
     import subprocess
     import sys
 
-    code = ("import sys\n"
+    code = ("import sys, ctypes.util\n"
+            "looked = []\n"
+            "find = ctypes.util.find_library\n"
+            "ctypes.util.find_library = lambda name: looked.append(name) or find(name)\n"
             "from facetransfer.track.init import import_tasks_api\n"
             "BaseOptions, vision = import_tasks_api()\n"
             "assert 'matplotlib.pyplot' not in sys.modules, 'pyplot imported'\n"
+            "assert not looked, f'searched for {looked}'\n"
             "assert vision.FaceLandmarkerOptions and BaseOptions\n"
             "spec = vision.drawing_utils.DrawingSpec(color=(1, 2, 3))\n"
             "assert spec.color == (1, 2, 3) and 'matplotlib.pyplot' in sys.modules\n"

@@ -227,13 +227,21 @@ def blendshape_scores(categories) -> np.ndarray:
 
 
 #: Modules that MediaPipe's Tasks API imports for what this package never calls: its drawing
-#: helpers (which import matplotlib's pyplot) and the microphone of its audio tasks (which
-#: imports ``sounddevice``, and catches the OSError of a machine without PortAudio: that
-#: module lazy instead, its error came at the first look at it, e.g. hypothesis's scan of
-#: ``sys.modules``). They are loaded lazily (:func:`import_tasks_api`).
+#: helpers (which import matplotlib's pyplot), its audio, text, retrieval and decision tasks,
+#: and the microphone of the audio tasks (which imports ``sounddevice``, and catches the
+#: OSError of a machine without PortAudio: that module lazy instead, its error came at the
+#: first look at it, e.g. hypothesis's scan of ``sys.modules``). The audio package itself
+#: too: its classifier's annotations look into the microphone's module as the class is
+#: made, so that module alone lazy still loaded, searching for PortAudio with the compiler
+#: and linker (``ctypes.util.find_library``; 0.03 CPU-s of processes a start). They are
+#: loaded lazily (:func:`import_tasks_api`).
 UNUSED_BY_TRACKING = frozenset({"mediapipe.tasks.python.vision.drawing_styles",
                                 "mediapipe.tasks.python.vision.drawing_utils",
-                                "mediapipe.tasks.python.audio.core.audio_record"})
+                                "mediapipe.tasks.python.audio",
+                                "mediapipe.tasks.python.audio.core.audio_record",
+                                "mediapipe.tasks.python.text",
+                                "mediapipe.tasks.python.retrieval",
+                                "mediapipe.tasks.python.decision"})
 
 
 class _LazyFinder:
