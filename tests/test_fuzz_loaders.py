@@ -508,3 +508,51 @@ def test_texture_image_loader(work, png_bytes, data):
     p = _put(work, "tex.png", data.draw(damaged_bytes(png_bytes)))
     check_loader(load_texture_image, p,
                  ok=lambda im: im.dtype == np.uint8 and im.ndim == 3 and im.shape[2] == 3)
+
+
+# ------------------------------------------------------------------------------ Live Link take
+@pytest.fixture(scope="module")
+def take_bytes():
+    """A Live Link Face take of 40 rows across a second, every column the app writes."""
+    from facetransfer.export.livelink import LIVELINK_NAMES, POSE_COLUMNS
+
+    head = ["Timecode", "BlendShapeCount", *LIVELINK_NAMES, *POSE_COLUMNS]
+    rows = [",".join(head)]
+    for i in range(40):
+        cells = [f"{(i * j % 17) / 17:.4f}" for j in range(len(head) - 2)]
+        rows.append(",".join([f"01:02:{3 + i // 30:02d}:{i % 30:02d}.{i * 7 % 1000:03d}", "61",
+                              *cells]))
+    return ("\n".join(rows) + "\n").encode()
+
+
+#: cells a take's damage may put in place of one (text where numbers belong, timecodes that
+#: are not, NUL)
+TAKE_CELLS = ["", "nan", "inf", "-1e400", "abc", "01:02:03", "99:99:99:99", "00:00:00:00.5",
+              " ", "\0"]
+
+
+@FUZZ
+@given(data=st.data(), lenient=st.booleans())
+def test_live_link_take_loader(work, take_bytes, data, lenient):
+    """A damaged take (bytes, or one cell replaced) is read with finite activations or gives
+    one error naming it; its timecodes then give seconds or a TransferError (before: bytes
+    that are not UTF-8 raised UnicodeDecodeError, not the library's error)."""
+    from facetransfer.export.livelink import read_livelink
+    from facetransfer.take import take_seconds
+
+    raw = data.draw(damaged_bytes(take_bytes))
+    lines = raw.decode("utf-8", "replace").split("\n")
+    if data.draw(st.booleans()) and len(lines) > 2:
+        k = data.draw(st.integers(0, len(lines) - 1))
+        cells = lines[k].split(",")
+        cells[data.draw(st.integers(0, len(cells) - 1))] = data.draw(st.sampled_from(TAKE_CELLS))
+        lines[k] = ",".join(cells)
+        raw = "\n".join(lines).encode()
+    p = _put(work, "take.csv", raw)
+    take = check_loader(lambda q: read_livelink(q, lenient=lenient), p,
+                        ok=lambda t: np.isfinite(t.activations).all())
+    if take is not None:
+        try:
+            take_seconds(take.timecodes, warn=False)
+        except FaceTransferError:
+            pass

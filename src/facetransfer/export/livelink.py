@@ -175,8 +175,11 @@ def read_livelink(path: str | os.PathLike, *, lenient: bool = False) -> LiveLink
     :attr:`LiveLinkTake.missing`; at least one blendshape column is needed.
     """
     p = Path(path)
-    with open(p, newline="", encoding="utf-8-sig") as fh:   # a spreadsheet's byte-order mark
-        rows = list(csv.reader(fh))
+    try:
+        with open(p, newline="", encoding="utf-8-sig") as fh:  # a spreadsheet's byte-order mark
+            rows = list(csv.reader(fh))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise ExportError(f"{p} is not a Live Link Face CSV (not UTF-8 text: {exc})") from None
     if not rows or [c.strip().lower() for c in rows[0][:2]] != ["timecode", "blendshapecount"]:
         raise ExportError(f"{p} is not a Live Link Face CSV (header must start "
                           f"'Timecode,BlendShapeCount')")
