@@ -556,3 +556,65 @@ def test_live_link_take_loader(work, take_bytes, data, lenient):
             take_seconds(take.timecodes, warn=False)
         except FaceTransferError:
             pass
+
+
+# ------------------------------------------------------------------------------ MediaPipe JSON
+def _blendshape_doc(n: int = 3) -> dict:
+    """A blendshape document in MediaPipe's per-frame layout (frame 1 without a face)."""
+    from facetransfer.export.mpjson import CATEGORY_NAMES
+
+    cats = [{"index": i, "score": 0.5, "categoryName": c, "displayName": ""}
+            for i, c in enumerate(CATEGORY_NAMES)]
+    return {"fps": 30.0, "frames": [{"frameIndex": k, "faceBlendshapes": [] if k == 1 else
+                                     [{"categories": cats}]} for k in range(n)]}
+
+
+@FUZZ
+@given(data=st.data())
+def test_blendshape_json_loader(work, data):
+    """Damaged bytes, or a frame's entry replaced by arbitrary JSON, give scores or one error
+    naming the file (before: an entry of the wrong type raised AttributeError/KeyError)."""
+    from facetransfer.export.mpjson import read_mediapipe_json
+
+    doc = _blendshape_doc()
+    if data.draw(st.booleans()):
+        raw = data.draw(damaged_bytes(json.dumps(doc).encode()))
+    else:
+        where = data.draw(st.sampled_from(["frame", "faces", "category", "score"]))
+        junk = data.draw(JSON_VALUES)
+        if where == "frame":
+            doc["frames"][0] = junk
+        elif where == "faces":
+            doc["frames"][2]["faceBlendshapes"] = junk
+        elif where == "category":
+            doc["frames"][0]["faceBlendshapes"][0]["categories"][3] = junk
+        else:
+            doc["frames"][2]["faceBlendshapes"][0]["categories"][5]["score"] = junk
+        raw = json.dumps(doc, allow_nan=True).encode()
+    p = _put(work, "shapes.json", raw)
+    check_loader(read_mediapipe_json, p, ok=lambda a: a.ndim == 2 and a.shape[1] == 52)
+
+
+# ------------------------------------------------------------------------------ batch CSVs
+@FUZZ
+@given(data=st.data())
+def test_batch_summary_loader(work, data):
+    from facetransfer.batch.summary import Row, read_summary, write_summary
+
+    good = _put(work, "summary_good.csv", b"")
+    write_summary(good, [Row("a", "done", 10, 30.0, 1.5, 0.9, "", "a.npz"),
+                         Row("b", "failed", error="no face found in b.mp4")])
+    p = _put(work, "summary.csv", data.draw(damaged_bytes(good.read_bytes())))
+    check_loader(read_summary, p, ok=lambda rows: all(isinstance(r, Row) for r in rows))
+
+
+@FUZZ
+@given(data=st.data())
+def test_batch_manifest_loader(work, data):
+    from facetransfer.batch.manifest import read_manifest
+
+    good = b"video,name,face\nclips/a.mp4,a,left\nb.mp4,,\n"
+    p = _put(work, "clips.csv", data.draw(damaged_bytes(good)))
+    check_loader(lambda q: read_manifest(q, required=("video",), allowed=("video", "name", "face"),
+                                         paths=("video",)), p,
+                 ok=lambda rows: rows and all(r.get("video") for r in rows))

@@ -24,6 +24,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 
 from ..io.atomic import write_text_atomic
+from .manifest import BatchError
 
 __all__ = ["Row", "SUMMARY_COLUMNS", "STATUSES", "write_summary", "read_summary"]
 
@@ -78,12 +79,18 @@ def write_summary(path: str | os.PathLike, rows) -> Path:
 
 
 def read_summary(path: str | os.PathLike) -> list[Row]:
-    """Read a ``summary.csv`` written by :func:`write_summary`."""
+    """Read a ``summary.csv`` written by :func:`write_summary`; BatchError naming the file
+    where it is not one (a column missing, a number that is not)."""
     def num(s, kind):
         return kind(s) if s != "" else None
 
-    with open(path, newline="", encoding="utf-8") as fh:
-        return [Row(clip=r["clip"], status=r["status"], frames=num(r["frames"], int),
-                    fps=num(r["fps"], float), seconds=float(r["seconds"] or 0),
-                    mean_confidence=num(r["mean_confidence"], float), error=r["error"],
-                    output=r.get("output", "")) for r in csv.DictReader(fh)]
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            return [Row(clip=r["clip"], status=r["status"], frames=num(r["frames"], int),
+                        fps=num(r["fps"], float), seconds=float(r["seconds"] or 0),
+                        mean_confidence=num(r["mean_confidence"], float), error=r["error"],
+                        output=r.get("output") or "") for r in csv.DictReader(fh)]
+    except OSError as exc:
+        raise BatchError(f"cannot read the batch summary {path} ({exc.strerror})") from None
+    except (KeyError, TypeError, ValueError, csv.Error) as exc:
+        raise BatchError(f"{path} is not a batch summary ({exc!r})") from None

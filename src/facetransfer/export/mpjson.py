@@ -80,13 +80,22 @@ def read_mediapipe_json(path: str | os.PathLike) -> np.ndarray:
         frames = doc["frames"]
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ExportError(f"{p} is not a blendshape JSON file ({exc})") from None
-    out = np.full((len(frames), len(ARKIT_NAMES)), np.nan)
-    for k, fr in enumerate(frames):
-        faces = fr.get("faceBlendshapes") or []
-        if not faces:
-            continue
-        out[k] = 0.0
-        for c in faces[0]["categories"]:
-            if c["categoryName"] in ARKIT_NAMES:
-                out[k, ARKIT_NAMES.index(c["categoryName"])] = float(c["score"])
+    try:
+        out = np.full((len(frames), len(ARKIT_NAMES)), np.nan)
+        for k, fr in enumerate(frames):
+            _read_frame(fr, out[k])
+    except (AttributeError, KeyError, TypeError, ValueError, IndexError) as exc:
+        raise ExportError(f"{p} is not a blendshape JSON file (frame layout: {exc!r})") from None
     return out
+
+
+def _read_frame(fr: dict, row: np.ndarray) -> None:
+    """One frame of :func:`read_mediapipe_json` into ``row`` (52,): its first face's scores
+    (0 for a category it lacks), NaN left where it has no face."""
+    faces = fr.get("faceBlendshapes") or []
+    if not faces:
+        return
+    row[:] = 0.0
+    for c in faces[0]["categories"]:
+        if c["categoryName"] in ARKIT_NAMES:
+            row[ARKIT_NAMES.index(c["categoryName"])] = float(c["score"])
