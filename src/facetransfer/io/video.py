@@ -305,9 +305,9 @@ def warn_if_grown(path, size: tuple[int, int], codec: str) -> None:
     stored = _stored_size(size, codec)
     if stored != (int(size[0]), int(size[1])):
         log.warning("%s: the frames' odd size %dx%d is stored as %dx%d, the edge repeated "
-                    "(%s holds even sizes only); an image sequence keeps %dx%d", path,
-                    size[0], size[1], *stored, "4:2:0" if codec != "prores" else "4:2:2",
-                    size[0], size[1])
+                    "(%s); an image sequence keeps %dx%d", path, size[0], size[1], *stored,
+                    "4:2:0 holds even sizes only" if codec != "prores"
+                    else "4:2:2 holds even widths only", size[0], size[1])
 
 
 def _audio_input_args(audio_from, codec: str, fmt: str, *, start: float = 0.0,
