@@ -90,6 +90,11 @@ def test_a_clip_that_opens_on_black_is_no_cut_only_lost_until_the_face(edited, a
     assert tr.lost[:30].all() and not tr.lost[30:].any()
     alone = capture_video(a, arkit_model, workers=1)
     assert np.abs(tr.blendshapes[30:] - alone.blendshapes).mean() < 0.03
+    # an identity held fixed (a chunk of ``batch track --chunk``) is the face's, black or not
+    held = alone.weights["identity"][0] * 0.9
+    fixed = capture_video(np.concatenate([np.zeros_like(a[:30]), a]), arkit_model, workers=1,
+                          fixed={"identity": held})
+    np.testing.assert_array_equal(fixed.weights["identity"][30:], np.tile(held, (len(a), 1)))
 
 
 def test_a_two_shot_target_is_rewritten_as_its_shots_alone(quick_model, tmp_path_factory):

@@ -505,8 +505,8 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
                    source) -> Track:
     """A clip edited from several shots (:mod:`facetransfer.track.shots`), each captured on its
     own (its own identity; no flow or smoothing across a cut), joined; a ``fixed`` identity is
-    the first shot's (the face the clip starts with); the fit's progress is not kept for such
-    a clip."""
+    the first shot's with a face (the face the clip starts with, after any black opening); the
+    fit's progress is not kept for such a clip."""
     subs = [shot_detections(det, a, b) for a, b in spans]
     faced = [a for (a, _), sub in zip(spans, subs) if sub.found.any()]
     if len(faced) > 1:  # a shot without a face (a clip that opens on black) is only lost
@@ -514,7 +514,7 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
                     "with its own identity", source or "the video", "s" if len(faced) > 2
                     else "", ", ".join(str(a) for a in faced[1:]))
     tracks = [_capture_detections(sub, model, options, fps, frame_size,
-                                  fixed if a == 0 else None, progress, source)
+                                  fixed if a == faced[0] else None, progress, source)
               if sub.found.any() else None for (a, _), sub in zip(spans, subs)]
     if all(t is None for t in tracks):
         raise _no_face(source, det.n_frames)
