@@ -223,6 +223,40 @@ def test_usd_blend_shapes_and_animation(case, tmp_path):
     assert pxr is not None
 
 
+def test_usd_of_a_plate_numbered_from_1001_lies_on_its_frames(case, tmp_path):
+    """A track of an image sequence numbered from 1001 (a VFX plate) exports time codes
+    1001...: frame k's weights at 1001 + k; with ``timecode=None``, and for a video's track,
+    from 0."""
+    import dataclasses
+
+    import cv2
+
+    pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    from pxr import Usd, UsdSkel
+
+    model, track, a, _ = case
+    plate = tmp_path / "plate"
+    plate.mkdir()
+    for n in (1001, 1002, 1003):
+        cv2.imwrite(str(plate / f"f.{n:04d}.png"), np.full((8, 8, 3), 90, np.uint8))
+    on_plate = dataclasses.replace(track, source=str(plate / "f.%04d.png"))
+
+    def weights_at(path, t):
+        stage = Usd.Stage.Open(str(path))
+        anim = UsdSkel.Animation(stage.GetPrimAtPath("/Face/Skel/Anim"))
+        return stage, np.array(anim.GetBlendShapeWeightsAttr().Get(Usd.TimeCode(t)))
+
+    stage, w = weights_at(export_track(on_plate, "usd", tmp_path / "p.usda", model=model), 1004)
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (1001, 1000 + track.n_frames)
+    np.testing.assert_allclose(w, a[3], atol=1e-7)
+    stage, w = weights_at(export_track(on_plate, "usd", tmp_path / "z.usda", model=model,
+                                       timecode=None), 3)
+    assert stage.GetStartTimeCode() == 0
+    np.testing.assert_allclose(w, a[3], atol=1e-7)
+    stage, _ = weights_at(export_track(track, "usd", tmp_path / "v.usda", model=model), 0)
+    assert stage.GetStartTimeCode() == 0
+
+
 # ------------------------------------------------------------------------------ bad input
 def test_export_errors(case, tmp_path, monkeypatch):
     import dataclasses

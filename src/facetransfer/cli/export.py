@@ -47,7 +47,9 @@ def register(sub) -> None:
                    "where it has one (source, the default: a take then lines up with the plate "
                    "in an editor or Unreal, and `transfer --expression-from` places it back by "
                    "it), a timecode (';' before the frames of a drop-frame one), or none "
-                   "(00:00:00:00)")
+                   "(00:00:00:00). usd: source (the default) starts the time codes at the "
+                   "first frame number of the image sequence tracked (a plate numbered from "
+                   "1001: 1001), none at 0")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
 
@@ -125,10 +127,22 @@ def run(args: argparse.Namespace) -> int:
     if args.timecode not in ("source", "none") and args.format != "livelink":
         raise FaceTransferError(f"--timecode: only livelink takes carry one, not {args.format}")
     timecode, said = _start_timecode(args, track)
+    if args.format == "usd" and args.timecode == "source":
+        timecode, said = "source", _first_frame_said(track)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
                         texture=texture, timecode=timecode)
     neutral = track.info.get("neutral_frame") if args.neutral is not None else None
     print(f"wrote {path}: {frame_count(track.n_frames)} ({args.format})"
           + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
-          + (f", from timecode {timecode} ({said})" if timecode else ""))
+          + (f", from timecode {timecode} ({said})" if timecode and timecode != "source"
+             else (f", {said}" if said else "")))
     return 0
+
+
+def _first_frame_said(track) -> str:
+    """What the USD's time codes start from, where not 0 (:func:`facetransfer.export.usd.
+    source_first_frame`)."""
+    from ..export.usd import source_first_frame
+
+    first = source_first_frame(track)
+    return f"time codes from {first}, the first frame of {track.source}" if first else ""

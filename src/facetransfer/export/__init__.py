@@ -54,7 +54,10 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
         ``livelink``: the first row's timecode (``HH:MM:SS:FF``, ``;`` for drop frame);
         ``"source"`` (default): the start timecode of the video the track was made from, where
         it has one (:func:`facetransfer.export.livelink.source_timecode`); None:
-        ``00:00:00:00``. Other formats carry none.
+        ``00:00:00:00``. ``usd``: ``"source"`` (default) starts the time codes at the first
+        frame number of the image sequence the track was made from (1001 for a plate numbered
+        from 1001; :func:`facetransfer.export.usd.source_first_frame`), None at 0. Other
+        formats carry none.
 
     Raises
     ------
@@ -96,6 +99,7 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
         from .gltf import write_glb
 
         return write_glb(track, model, out, overwrite=overwrite, texture=texture)
-    from .usd import write_usd
+    from .usd import source_first_frame, write_usd
 
-    return write_usd(track, model, out, overwrite=overwrite)
+    return write_usd(track, model, out, overwrite=overwrite,
+                     first_frame=source_first_frame(track) if timecode == "source" else 0)

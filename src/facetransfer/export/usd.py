@@ -10,7 +10,9 @@ Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
                           skel:blendShapes + skel:blendShapeTargets, every vertex on "head"
         /Face/Mesh/<name> BlendShape: offsets f_j - f_0 (pointIndices when sparse)
 
-Time codes are frame indices (``timeCodesPerSecond`` = the clip's fps).
+Time codes are frame numbers (``timeCodesPerSecond`` = the clip's fps): from 0, or, for a
+track of an image sequence numbered from N (a VFX plate's 1001), from N, so that the
+animation lies on the plate's own frames in a compositor or DCC (:func:`source_first_frame`).
 
 References
 ----------
@@ -30,7 +32,7 @@ from ..io.atomic import atomic_path
 from .common import ExportError, head_quaternions, head_translation, identity_rig, \
     require_activations
 
-__all__ = ["write_usd", "USD_SUFFIXES"]
+__all__ = ["write_usd", "source_first_frame", "USD_SUFFIXES"]
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
 
@@ -76,7 +78,23 @@ def _blend_shapes(stage, mesh, rig, pxr):
     return paths
 
 
-def _animation(stage, track, activations, pxr):
+def source_first_frame(track) -> int:
+    """The first frame number of the image sequence a track was made from (1001 for a plate
+    numbered from 1001), where ``track.source`` names one that can be read; else 0 (a video,
+    or a source no longer there)."""
+    from ..errors import FaceTransferError
+    from ..io.video_sequence import is_sequence, sequence_files
+
+    if not is_sequence(track.source):
+        return 0
+    try:
+        files = sequence_files(track.source)
+    except (FaceTransferError, OSError):
+        return 0
+    return int(min(files)) if files else 0
+
+
+def _animation(stage, track, activations, pxr, first: int = 0):
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     anim = UsdSkel.Animation.Define(stage, "/Face/Skel/Anim")
     anim.CreateJointsAttr(["head"])
@@ -87,7 +105,7 @@ def _animation(stage, track, activations, pxr):
     Q = head_quaternions(track.rotation)
     one = Vt.Vec3hArray([Gf.Vec3h(1, 1, 1)])
     for k in range(track.n_frames):
-        t = Usd.TimeCode(k)
+        t = Usd.TimeCode(first + k)
         w.Set(Vt.FloatArray.FromNumpy(activations[k].astype(np.float32)), t)
         tr.Set(Vt.Vec3fArray([Gf.Vec3f(*map(float, T[k]))]), t)
         x, y, z, r = (float(v) for v in Q[k])
@@ -96,8 +114,10 @@ def _animation(stage, track, activations, pxr):
     return anim
 
 
-def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write the track as USD (``.usd``/``.usdc`` binary, ``.usda`` text) and return the path."""
+def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
+              first_frame: int = 0) -> Path:
+    """Write the track as USD (``.usd``/``.usdc`` binary, ``.usda`` text) and return the path;
+    frame k at time code ``first_frame + k``."""
     pxr = _pxr()
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     if Path(out).suffix.lower() not in USD_SUFFIXES:
@@ -109,15 +129,15 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False) 
     UsdGeom.SetStageMetersPerUnit(stage, 0.01)
     stage.SetTimeCodesPerSecond(track.fps)
     stage.SetFramesPerSecond(track.fps)
-    stage.SetStartTimeCode(0)
-    stage.SetEndTimeCode(track.n_frames - 1)
+    stage.SetStartTimeCode(first_frame)
+    stage.SetEndTimeCode(first_frame + track.n_frames - 1)
     root = UsdSkel.Root.Define(stage, "/Face")
     stage.SetDefaultPrim(root.GetPrim())
     skel = UsdSkel.Skeleton.Define(stage, "/Face/Skel")
     skel.CreateJointsAttr(["head"])
     skel.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
     skel.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(1)]))
-    anim = _animation(stage, track, a, pxr)
+    anim = _animation(stage, track, a, pxr, int(first_frame))
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
         [anim.GetPath()])
     mesh = _mesh(stage, rig, model, pxr)
