@@ -75,6 +75,15 @@ class LipTint:
         tr, sr = (np.asarray(r, np.float64).reshape(3) for r in (target_ratio, source_ratio))
         return cls(np.asarray(weights, np.float32), np.clip(tr / sr, *TINT_RANGE), tr, sr)
 
+    def grey(self) -> "LipTint":
+        """The tint for a monochrome target (:mod:`facetransfer.monochrome`): one factor for
+        the three channels, the target's lip-to-skin ratio over the source's in BT.601 luma,
+        clipped to :data:`TINT_RANGE` (per channel, a grey target's ratio over a colour
+        source's turned red lips cyan)."""
+        luma = np.array([0.299, 0.587, 0.114])
+        t = float(np.clip((luma @ self.target_ratio) / (luma @ self.source_ratio), *TINT_RANGE))
+        return LipTint(self.weights, np.full(3, t), self.target_ratio, self.source_ratio)
+
 
 def _mean_face_landmarks(model) -> tuple[np.ndarray, np.ndarray]:
     """``(V, lm)``: the mean face (n, 3) and its 68 landmarks (68, 3)."""

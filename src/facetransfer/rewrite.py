@@ -59,6 +59,7 @@ from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
 from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights, tint_mouth
 from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
+from .monochrome import is_monochrome, monochrome_changes
 from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
@@ -624,6 +625,9 @@ class _ClipRenderer:
     gaze : (F, 2, 2) float64 or None
         The new performance's gaze per frame (its eyeLook* activations), where the eye region
         turns the reference frame's eyeballs to it (:mod:`facetransfer.eyeballs`).
+    mono : bool
+        The target is monochrome: the pixels the rewrite changes are brought to grey
+        (:mod:`facetransfer.monochrome`).
     """
 
     target_frames: object
@@ -646,6 +650,7 @@ class _ClipRenderer:
     ring: np.ndarray | None = None
     lip_tint: LipTint | None = None
     gaze: np.ndarray | None = None
+    mono: bool = False
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
@@ -679,12 +684,15 @@ class _ClipRenderer:
             kinds["source"] = source_track
         lips = clip_lip_residual(model, topo, source_track) \
             if with_mouth and opts.lips == "residual" else None
+        mono = is_monochrome(target_frames, n)
         renderer = cls(target_frames, target_track, new_track, model, opts, topo, first,
                        source_frames, source_track, sidx, const_tex, fn, with_mouth,
                        _FrameMeshes(model, kinds, n), eye_tex, jaw_tex, lips,
-                       mouth_ring_faces(topo) if with_mouth else None)
+                       mouth_ring_faces(topo) if with_mouth else None, mono=mono)
         if opts.lip_colour == "target" and with_mouth and model.landmarks is not None:
-            renderer = dataclasses.replace(renderer, lip_tint=renderer.clip_lip_tint())
+            tint = renderer.clip_lip_tint()
+            renderer = dataclasses.replace(renderer, lip_tint=tint.grey() if mono and tint
+                                           else tint)
         if eye_tex is not None and eye_tex.eyeballs is not None:
             renderer = dataclasses.replace(renderer, gaze=track_gaze(
                 new_track if opts.gaze == "performance" else target_track))
@@ -777,12 +785,15 @@ class _ClipRenderer:
         o = self.options
         eye_i = None if self.eye_tex is None else \
             self.eye_tex.at(i, None if self.gaze is None else self.gaze[i])
-        return rewrite_frame(frame, self.new_mesh(i),
-                             self.new_track.camera(i), self.topo, self.face_texture(frame, i),
-                             mouth_texture=self.mouth_texture(i), blend=o.blend,
-                             feather=o.feather, erode=o.erode, eye_texture=eye_i,
-                             jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
-                             mouth_ring=self.ring, lip_tint=self.lip_tint)
+        res = rewrite_frame(frame, self.new_mesh(i),
+                            self.new_track.camera(i), self.topo, self.face_texture(frame, i),
+                            mouth_texture=self.mouth_texture(i), blend=o.blend,
+                            feather=o.feather, erode=o.erode, eye_texture=eye_i,
+                            jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
+                            mouth_ring=self.ring, lip_tint=self.lip_tint)
+        if self.mono:
+            res = dataclasses.replace(res, image=monochrome_changes(res.image, frame))
+        return res
 
 
 def _render_in_threads(one, todo: range, workers: int, progress):
