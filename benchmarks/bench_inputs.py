@@ -11,7 +11,8 @@ and is judged on what a user sees and keeps:
   to an even size for 4:2:0, with a warning saying so) and, for a black-and-white target, a
   black-and-white result (:mod:`facetransfer.monochrome`), or status 2 with one line of the
   tool's own (an input that cannot be used) and no traceback;
-* the result's middle frame goes into a contact picture.
+* the result's frame at three quarters of its length goes into a contact picture (past a
+  black opening).
 
 Writes ``OUT/inputs.json`` and ``OUT/inputs.png``::
 
@@ -107,14 +108,14 @@ def judge(run: dict, target: Path, out: Path) -> dict:
     return run
 
 
-def middle_frame(path: Path) -> np.ndarray | None:
+def late_frame(path: Path) -> np.ndarray | None:
     from facetransfer.io.video import read_video
 
     try:
         frames = read_video(path)[0]
     except Exception:  # noqa: BLE001 - an unreadable result shows as a blank cell
         return None
-    return frames[len(frames) // 2]
+    return frames[(3 * len(frames)) // 4]
 
 
 def _plot(rows: list[dict], pictures: dict, path: Path) -> None:
@@ -134,7 +135,7 @@ def _plot(rows: list[dict], pictures: dict, path: Path) -> None:
             verdict = "ok" if r["ok"] else "NOT OK"
             ax.set_title(f"{row['input']}\n{role.replace('_', ' ')}: {verdict}" if i == 0 else
                          f"{role.replace('_', ' ')}: {verdict}", fontsize=6)
-    fig.suptitle("facetransfer transfer on unusual inputs (middle frame of each result)",
+    fig.suptitle("facetransfer transfer on unusual inputs (each result at 3/4 of its length)",
                  fontsize=9)
     save_plot(fig, path)
 
@@ -157,7 +158,7 @@ def main() -> int:
                 res = folder / f"r{k}_{role}.mp4"
                 row[role] = judge(run_transfer(target, source, res), target, res)
                 if row[role]["status"] == 0:
-                    pictures[(name, role)] = middle_frame(res)
+                    pictures[(name, role)] = late_frame(res)
                 print(f"{name:22s} {role:9s} status {row[role]['status']} "
                       f"{'ok' if row[role]['ok'] else 'NOT OK'} "
                       f"{(row[role]['stderr'] or [''])[-1][:100]}")
