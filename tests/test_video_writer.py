@@ -541,6 +541,28 @@ def test_audio_of_another_codec_is_encoded_to_aac(tmp_path):
     assert iov.audio_codec(encode_video(tmp_path / "m.mp4", smooth_frames(n=2), 10).path) is None
 
 
+@pytest.mark.parametrize("n_frames,second,copied", [(4, "aac", True), (None, "aac", True),
+                                                    (4, "pcm_s16le", False)])
+def test_every_audio_stream_is_kept(tmp_path, n_frames, second, copied):
+    """A target with two audio streams (a second language, a commentary, a camera's separate
+    channel) keeps both, in order: copied when the container takes every one as it is, else
+    all encoded to AAC (before: the first only, the rest lost without a word)."""
+    two = tmp_path / "two.mov"
+    subprocess.run([iov.ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "sine=frequency=440:duration=2", "-f", "lavfi", "-i",
+                    "sine=frequency=660:duration=2", "-map", "0", "-map", "1", "-c:a:0", "aac",
+                    "-c:a:1", second, "-ac:a:1", "1", str(two)], check=True)
+    assert iov.audio_codecs(two) == ("aac", second)
+    res = encode_video(tmp_path / "v.mp4", iter(smooth_frames(n=4)), 10, audio_from=two,
+                       n_frames=n_frames)
+    assert res.audio and iov.audio_codecs(res.path) == ("aac", "aac")
+    out = subprocess.run([iov.ffmpeg_exe(), "-hide_banner", "-i", str(res.path)],
+                         capture_output=True, text=True).stderr
+    assert re.findall(r"Audio: aac[^\n]*?(stereo|mono)", out) == ["mono", "mono"]
+    if copied:
+        assert _audio_packets(res.path) == _audio_packets(two)[:len(_audio_packets(res.path))]
+
+
 @pytest.mark.parametrize("pixels,want", [
     ("yuv420p(tv, bt709, progressive)", "bt709"),
     ("yuv420p(tv, smpte170m/unknown/unknown, progressive)", "smpte170m"),

@@ -50,8 +50,8 @@ __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video
            "colour_matrix", "video_colour", "ffmpeg_exe", "ffmpeg_encoders",
            "require_encoder", "is_image_pattern", "frame_path", "save_frame_image",
            "place_sequence", "check_video_output", "decoded_frame_count", "stored_frame_count",
-           "has_audio", "audio_codec", "mux_audio", "warn_if_grown", "VideoWriter",
-           "encode_video", "write_video", "write_video_with_audio"]
+           "has_audio", "audio_codec", "audio_codecs", "mux_audio", "warn_if_grown",
+           "VideoWriter", "encode_video", "write_video", "write_video_with_audio"]
 
 
 # ---------------------------------------------------------------------------------------------
@@ -310,14 +310,14 @@ def warn_if_grown(path, size: tuple[int, int], codec: str) -> None:
                     else "4:2:2 holds even widths only", size[0], size[1])
 
 
-def _audio_input_args(audio_from, codec: str, fmt: str, *, start: float = 0.0,
+def _audio_input_args(audio_from, codecs: tuple[str, ...], fmt: str, *, start: float = 0.0,
                       duration: float) -> list[str]:
-    """ffmpeg arguments adding the audio of ``audio_from`` (in ``codec``) as the second input
-    of a video written into the container ``fmt``: from ``start`` seconds, cut to
-    ``duration``, copied or encoded as :func:`_audio_codec_args` says."""
+    """ffmpeg arguments adding every audio stream of ``audio_from`` (in ``codecs``) as the
+    second input of a video written into the container ``fmt``: from ``start`` seconds, cut
+    to ``duration``, copied or encoded as :func:`_audio_codec_args` says."""
     return [*(["-ss", f"{start:.3f}"] if start else []), "-t", f"{duration:.3f}",
-            "-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0",
-            *_audio_codec_args(codec, fmt)]
+            "-i", str(audio_from), "-map", "0:v:0", "-map", "1:a",
+            *_audio_codec_args(codecs, fmt)]
 
 
 _CAUSES = ("No space left", "Disk quota", "File too large", "Permission denied",
@@ -386,8 +386,15 @@ def has_audio(path: str | os.PathLike) -> bool:
 def audio_codec(path: str | os.PathLike) -> str | None:
     """The codec of a media file's first audio stream as ffmpeg names it (``"aac"``,
     ``"mp3"``, ``"opus"``, ...); None without one or without ffmpeg."""
-    found = re.search(r"Stream #[^\n]*?: Audio: ([\w-]+)", described(path))
-    return found.group(1) if found else None
+    codecs = audio_codecs(path)
+    return codecs[0] if codecs else None
+
+
+def audio_codecs(path: str | os.PathLike) -> tuple[str, ...]:
+    """The codecs of every audio stream of a media file, in order (a second language, a
+    commentary, a camera's separate channels); empty without one or without ffmpeg."""
+    inputs = described(path).split("Stream mapping:")[0]   # not the decode's own output
+    return tuple(re.findall(r"Stream #[^\n]*?: Audio: ([\w-]+)", inputs))
 
 
 #: Audio codecs copied as they are into the containers that hold them: no second lossy
@@ -395,9 +402,11 @@ def audio_codec(path: str | os.PathLike) -> str | None:
 COPIED_AUDIO = {"aac": ("mp4", "mov", "matroska")}
 
 
-def _audio_codec_args(codec: str, fmt: str) -> list[str]:
-    """``-c:a`` of audio in ``codec`` written into the container ``fmt`` (ffmpeg's name)."""
-    return ["-c:a", "copy" if fmt in COPIED_AUDIO.get(codec, ()) else "aac"]
+def _audio_codec_args(codecs: tuple[str, ...], fmt: str) -> list[str]:
+    """``-c:a`` of audio streams in ``codecs`` written into the container ``fmt`` (ffmpeg's
+    name): copied when the container holds every one of them, else all encoded to AAC."""
+    copy = bool(codecs) and all(fmt in COPIED_AUDIO.get(c, ()) for c in codecs)
+    return ["-c:a", "copy" if copy else "aac"]
 
 
 def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str | os.PathLike, *,
@@ -420,16 +429,16 @@ def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str 
     if exe is None:
         log.info("no ffmpeg available (pip install imageio-ffmpeg): output has no audio")
         return False
-    codec = audio_codec(audio_from)
-    if codec is None:
+    codecs = audio_codecs(audio_from)
+    if not codecs:
         log.info("%s has no audio track; the output has none either", audio_from)
         return False
     fmt = VIDEO_SUFFIXES.get(Path(out).suffix.lower(), "mp4")
     cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-i", str(video)]
     if start:
         cmd += ["-ss", f"{start:.3f}"]
-    cmd += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a:0", "-c:v", "copy",
-            *_audio_codec_args(codec, fmt)]
+    cmd += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a", "-c:v", "copy",
+            *_audio_codec_args(codecs, fmt)]
     # cut to the video's length; a shorter audio track just ends early
     cmd += ["-shortest"] if duration is None else ["-t", f"{duration:.3f}"]
     if fmt in ("mp4", "mov"):
@@ -579,12 +588,13 @@ class VideoWriter:
         stream from ``audio_start`` on, cut to the promised frames' length; none when the
         number of frames is unknown or the file has no audio (copied or encoded as
         :func:`mux_audio` says)."""
-        codec = None if self.audio_from is None or not self.expected \
-            else audio_codec(self.audio_from)
-        if codec is None:
+        codecs = () if self.audio_from is None or not self.expected \
+            else audio_codecs(self.audio_from)
+        if not codecs:
             return []
         self._inline_audio = True
-        return _audio_input_args(self.audio_from, codec, VIDEO_SUFFIXES[self.path.suffix.lower()],
+        return _audio_input_args(self.audio_from, codecs,
+                                 VIDEO_SUFFIXES[self.path.suffix.lower()],
                                  start=self.audio_start, duration=self.expected / self.fps)
 
     def write(self, frame: np.ndarray) -> None:

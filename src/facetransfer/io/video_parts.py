@@ -34,7 +34,7 @@ from ..errors import OutputError, VideoError
 from .atomic import atomic_path, locked_elsewhere, write_text_atomic
 from .video import (VIDEO_SUFFIXES, VideoOptions, VideoWriter, WrittenVideo, _audio_input_args,
                     _container_args, _ffmpeg_error, _fps_arg, _require_ffmpeg, _stored_size,
-                    audio_codec, check_video_output, stored_frame_count, warn_if_grown)
+                    audio_codecs, check_video_output, stored_frame_count, warn_if_grown)
 
 log = logging.getLogger(__name__)
 
@@ -324,8 +324,8 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
     listing = folder / "join.ffconcat"
     listing.write_text("ffconcat version 1.0\n" + "".join(f"file '{p.name}'\n" for p in parts))
     fmt = VIDEO_SUFFIXES[out.suffix.lower()]
-    codec = None if audio_from is None else audio_codec(audio_from)
-    audio = [] if codec is None else _audio_input_args(audio_from, codec, fmt, duration=n / fps)
+    codecs = () if audio_from is None else audio_codecs(audio_from)
+    audio = _audio_input_args(audio_from, codecs, fmt, duration=n / fps) if codecs else []
     extra = _container_args(opt, out.suffix.lower())
     if fmt == "avi":  # a constant rate (else the parts' 1/15360 s ticks: "600 fps"), its tag
         extra += ["-r", _fps_arg(fps)] + (["-tag:v", "H264"] if opt.codec == "h264" else [])
@@ -342,4 +342,4 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
                              f"file {stored}")
     with contextlib.suppress(OSError):
         listing.unlink()
-    return WrittenVideo(out, n, _stored_size(size, opt.codec), codec is not None)
+    return WrittenVideo(out, n, _stored_size(size, opt.codec), bool(codecs))
