@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 from dataclasses import asdict, dataclass
 
-from .video import audio_codec
+from .video import audio_codecs
 from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
                             timecode_of, video_colour)
 from .video_read import video_info
@@ -52,7 +52,7 @@ class VideoFacts:
         frames before it).
     colour : ColourTags
     audio : str or None
-        The first audio stream's codec.
+        The audio streams' codecs, comma-separated (every one is kept in a rewrite).
     first_number : int or None
         An image sequence's first frame number (its container is ``"image sequence"``); None
         for a video file.
@@ -101,7 +101,7 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       int(info.n_frames), info.steps is not None,
                       float(info.n_frames / info.fps) if info.fps else 0.0, first_field(path),
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
-                      video_colour(path), audio_codec(path), turn=info.turn,
+                      video_colour(path), ", ".join(audio_codecs(path)) or None, turn=info.turn,
                       timecode=timecode_of(path))
 
 
