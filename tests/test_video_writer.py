@@ -404,6 +404,31 @@ def test_pixel_aspect_ratio_is_written_and_read_back(tmp_path, codec, suffix):
     np.testing.assert_array_equal(read_video(wide)[0], read_video(plain)[0])
 
 
+def test_a_plate_with_alpha_is_said_to_lose_it(tmp_path, caplog):
+    """A ProRes 4444 video with alpha and an RGBA PNG sequence: one warning each that the
+    result carries no alpha (before: dropped without a word); none for opaque ones."""
+    import cv2
+
+    alpha = tmp_path / "a.mov"
+    subprocess.run([iov.ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "testsrc=size=64x48:rate=10:duration=0.3", "-c:v", "prores_ks",
+                    "-profile:v", "4", "-pix_fmt", "yuva444p10le", str(alpha)], check=True)
+    opaque = encode_video(tmp_path / "o.mp4", smooth_frames(n=2), 10).path
+    plate = tmp_path / "plate"
+    plate.mkdir()
+    for k in (1001, 1002):
+        cv2.imwrite(str(plate / f"p.{k}.png"), np.full((8, 8, 4), 128, np.uint8))
+        cv2.imwrite(str(plate / f"q.{k}.png"), np.full((8, 8, 3), 128, np.uint8))
+    with caplog.at_level(logging.WARNING, logger="facetransfer.io"):
+        for v in (alpha, opaque, plate / "p.%04d.png", plate / "q.%04d.png"):
+            like_video(None, v)
+    said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
+    assert said == [f"{alpha} has an alpha channel; the result is written without one (colour "
+                    "only; an OpenEXR plate's alpha is kept)",
+                    f"{plate / 'p.%04d.png'} has an alpha channel; the result is written "
+                    "without one (colour only; an OpenEXR plate's alpha is kept)"]
+
+
 def test_like_video_takes_the_inputs_aspect_unless_given(tmp_path):
     src = encode_video(tmp_path / "src.mp4", smooth_frames(n=2), 25,
                        options=VideoOptions(sar=(8, 9))).path

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import functools
 import logging
+import re
 from pathlib import Path
 
 from ..errors import VideoError
@@ -36,8 +37,11 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
 
     options = VideoOptions() if options is None else options
     if video is not None and is_sequence(video):
+        seq = open_sequence(video)
+        if _sequence_alpha(seq):
+            _warn_alpha(str(video))
         if options.first_number is None:
-            options = replace(options, first_number=open_sequence(video).first)
+            options = replace(options, first_number=seq.first)
         return options
     if video is None or not Path(video).is_file():
         return options
@@ -46,6 +50,8 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
     except VideoError:  # not a video (e.g. a still): square pixels
         return options
     tags = video_colour(video)
+    if _video_alpha(video):
+        _warn_alpha(str(video))
     if options.sar is None and sar != (1, 1):
         options = replace(options, sar=sar)
     if options.colour_tags and tags.matrix is None:
@@ -63,6 +69,39 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
         else:
             options = replace(options, field=field)
     return options
+
+
+#: ffmpeg's pixel formats that carry an alpha plane (ProRes 4444, PNG, QuickTime RLE, VP9).
+_ALPHA_FORMATS = re.compile(r"(yuva|rgba|bgra|argb|abgr|gbrap|ya8|ya16|rgba64|bgra64)")
+
+
+def _video_alpha(video) -> bool:
+    """Whether a video file's first video stream stores an alpha plane (its pixel format as
+    ffmpeg describes it)."""
+    from .video_display import described
+
+    m = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, ([a-z0-9]+)(?:\(|,)",
+                  described(video).split("Stream mapping:")[0])
+    return bool(m and _ALPHA_FORMATS.match(m.group(1)))
+
+
+def _sequence_alpha(seq) -> bool:
+    """Whether an image sequence's first frame has an alpha channel (OpenEXR plates keep
+    theirs: :mod:`facetransfer.io.exr_plate`)."""
+    import cv2
+
+    f = seq.file(0)
+    if f.suffix.lower() == ".exr":
+        return False
+    img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
+    return img is not None and img.ndim == 3 and img.shape[2] in (2, 4)
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_alpha(video: str) -> None:
+    """Say once that ``video``'s alpha is not carried into the rewrite."""
+    log.warning("%s has an alpha channel; the result is written without one (colour only; "
+                "an OpenEXR plate's alpha is kept)", video)
 
 
 @functools.lru_cache(maxsize=16)
