@@ -29,7 +29,6 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -48,8 +47,6 @@ PREVIEW_SIZE = (512, 512)
 
 #: Nominal timecode rates (frames per second) a take's ``FF`` field may count in.
 TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 100, 120)
-
-_TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2})[:;](\d{2,3})(?:\.(\d{1,3}))?$")
 
 
 #: How a take is placed on the target's timeline: ``"timecode"``, the target's start timecode
@@ -81,15 +78,15 @@ def is_take(path) -> bool:
 
 
 def _fields(timecodes) -> np.ndarray:
-    """``(F, 5)`` int: hours, minutes, seconds, frame, thousandths of each timecode."""
-    out = []
-    for t in timecodes:
-        m = _TC.match(str(t).strip())
-        if m is None:
-            raise TransferError(f"timecode {t!r} is not HH:MM:SS:FF.mmm")
-        hh, mm, ss, ff, milli = m.groups()
-        out.append((int(hh), int(mm), int(ss), int(ff), int((milli or "0").ljust(3, "0"))))
-    return np.array(out, np.int64).reshape(-1, 5)
+    """:func:`facetransfer.export.livelink.timecode_fields` (hours, minutes, seconds, frame,
+    thousandths), a timecode that is not one a TransferError."""
+    from .export.common import ExportError
+    from .export.livelink import timecode_fields
+
+    try:
+        return timecode_fields(timecodes)
+    except ExportError as exc:
+        raise TransferError(str(exc)) from None
 
 
 def take_rate(timecodes, *, warn: bool = True) -> int:

@@ -39,7 +39,7 @@ from ..io.atomic import write_text_atomic
 from .common import ExportError, head_euler, require_activations
 
 __all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "format_timecode", "parse_timecode",
-           "source_timecode",
+           "timecode_fields", "source_timecode",
            "livelink_rows", "eye_angles", "write_livelink", "read_livelink", "LiveLinkTake"]
 
 #: The app's 52 blendshape columns, in its order.
@@ -66,7 +66,9 @@ _TO_ARKIT = np.array([ARKIT_NAMES.index(n[0].lower() + n[1:]) for n in LIVELINK_
 if sorted(_TO_ARKIT.tolist()) != list(range(len(ARKIT_NAMES))):  # a packaging error
     raise ImportError("LIVELINK_NAMES is not a permutation of ARKIT_NAMES")
 
-_TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2}):(\d{2,3})\.(\d{3})$")
+#: A take's timecode: ``HH:MM:SS:FF.mmm`` as the app writes it; other tools' without the
+#: thousandths, or ``;`` before the frames of a drop-frame one.
+_TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2})[:;](\d{2,3})(?:\.(\d{1,3}))?$")
 
 
 def _nominal_rate(fps: float) -> int:
@@ -89,13 +91,23 @@ def format_timecode(frame: int, fps: float, start: float = 0.0) -> str:
     return f"{hh:02d}:{mm:02d}:{ss:02d}:{ff:02d}.{milli:03d}"
 
 
+def timecode_fields(timecodes) -> np.ndarray:
+    """``(F, 5)`` int: hours, minutes, seconds, frame and thousandths of a frame of each
+    timecode (:data:`_TC`; thousandths 0 where a timecode has none)."""
+    out = []
+    for t in timecodes:
+        m = _TC.match(str(t).strip())
+        if m is None:
+            raise ExportError(f"timecode {t!r} is not HH:MM:SS:FF.mmm")
+        hh, mm, ss, ff, milli = m.groups()
+        out.append((int(hh), int(mm), int(ss), int(ff), int((milli or "0").ljust(3, "0"))))
+    return np.array(out, np.int64).reshape(-1, 5)
+
+
 def parse_timecode(text: str, fps: float) -> float:
     """Frame index (float) of a ``HH:MM:SS:FF.mmm`` timecode at ``fps``; inverse of
     :func:`format_timecode`."""
-    m = _TC.match(text.strip())
-    if not m:
-        raise ExportError(f"timecode {text!r} is not HH:MM:SS:FF.mmm")
-    hh, mm, ss, ff, milli = (int(g) for g in m.groups())
+    hh, mm, ss, ff, milli = (int(v) for v in timecode_fields([text])[0])
     rate = _nominal_rate(fps)
     nominal = ((hh * 60 + mm) * 60 + ss) * rate + ff + milli / 1000.0
     return nominal * float(fps) / rate
@@ -135,7 +147,7 @@ def write_livelink(track, out: str | os.PathLike, *, overwrite: bool = False,
                    start: float = 0.0) -> Path:
     """Write the track as a Live Link Face CSV take (atomically) and return the path;
     ``start``: its first row's time of day in seconds (its video's start timecode,
-    :func:`facetransfer.take.timecode_seconds`)."""
+    :func:`facetransfer.io.video_display.timecode_seconds`)."""
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerows(livelink_rows(track, start))
     return write_text_atomic(out, buf.getvalue(), overwrite=overwrite)

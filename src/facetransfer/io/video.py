@@ -34,7 +34,7 @@ from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
 from .ffmpeg import ffmpeg_exe
 from .video_display import (COLOUR_TAGS, checked_timecode, colour_matrix,  # noqa: F401
-                            described, frame_args, video_colour)
+                            described, described_input, frame_args, video_colour)
 from .video_options import (CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF,  # noqa: F401 (API)
                             DEFAULT_PRESET, PRESETS, VideoOptions)
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
@@ -393,8 +393,7 @@ def audio_codec(path: str | os.PathLike) -> str | None:
 def audio_codecs(path: str | os.PathLike) -> tuple[str, ...]:
     """The codecs of every audio stream of a media file, in order (a second language, a
     commentary, a camera's separate channels); empty without one or without ffmpeg."""
-    inputs = described(path).split("Stream mapping:")[0]   # not the decode's own output
-    return tuple(re.findall(r"Stream #[^\n]*?: Audio: ([\w-]+)", inputs))
+    return tuple(re.findall(r"Stream #[^\n]*?: Audio: ([\w-]+)", described_input(path)))
 
 
 #: Audio codecs copied as they are into the containers that hold them: no second lossy

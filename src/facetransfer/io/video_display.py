@@ -25,7 +25,8 @@ from .video_sequence import is_sequence
 
 __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
            "shown_width",
-           "frame_args", "colour_named", "checked_colour_name", "described", "video_colour",
+           "frame_args", "colour_named", "checked_colour_name", "described", "described_input",
+           "video_colour",
            "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK",
            "checked_timecode", "timecode_of", "timecode_seconds"]
 
@@ -183,10 +184,10 @@ _TIMECODE = re.compile(r"\d{2}:[0-5]\d:[0-5]\d[:;.]\d{2,3}")
 
 
 def timecode_of(path: str | os.PathLike) -> str | None:
-    """A video's start timecode (the first it names in :func:`described`: a QuickTime / MP4
-    ``tmcd`` track's, a Matroska or MXF tag's), e.g. ``"01:00:00:00"``; None without one (or
-    without ffmpeg). A camera's or an editor's: what a conform matches shots by."""
-    found = re.search(r"^\s*timecode\s*:\s*(\S+)\s*$", described(path),
+    """A video's start timecode (the first it names in :func:`described_input`: a QuickTime /
+    MP4 ``tmcd`` track's, a Matroska or MXF tag's), e.g. ``"01:00:00:00"``; None without one
+    (or without ffmpeg). A camera's or an editor's: what a conform matches shots by."""
+    found = re.search(r"^\s*timecode\s*:\s*(\S+)\s*$", described_input(path),
                       re.MULTILINE | re.IGNORECASE)
     if found is None or not _TIMECODE.fullmatch(found.group(1)):
         return None
@@ -265,6 +266,13 @@ def described(path: str | os.PathLike) -> str:
     except OSError:         # missing: ffmpeg says so, nothing kept
         return _describe(str(path))
     return _kept_description(str(path), stamp)
+
+
+def described_input(path: str | os.PathLike) -> str:
+    """The part of :func:`described` that describes the file itself (its container and
+    streams), not the decode of its first frame that follows (whose own output streams would
+    otherwise be read as the file's)."""
+    return described(path).split("Stream mapping:")[0]
 
 
 @functools.lru_cache(maxsize=32)

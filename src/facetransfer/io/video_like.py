@@ -10,7 +10,7 @@ from pathlib import Path
 
 from ..errors import VideoError
 from .video import VideoOptions, video_info
-from .video_display import first_field, timecode_of, video_colour
+from .video_display import described_input, first_field, timecode_of, video_colour
 from .video_sequence import is_sequence, open_sequence
 
 log = logging.getLogger(__name__)
@@ -60,7 +60,7 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
         _warn_hdr(str(video), tags)
     elif options.primaries is None and options.transfer is None:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
-    if options.timecode is None and timecode_of(video) is not None:
+    if options.timecode is None:
         options = replace(options, timecode=timecode_of(video))
     field = first_field(video)
     if field is not None and options.field is None:
@@ -78,10 +78,8 @@ _ALPHA_FORMATS = re.compile(r"(yuva|rgba|bgra|argb|abgr|gbrap|ya8|ya16|rgba64|bg
 def _video_alpha(video) -> bool:
     """Whether a video file's first video stream stores an alpha plane (its pixel format as
     ffmpeg describes it)."""
-    from .video_display import described
-
     m = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, ([a-z0-9]+)(?:\(|,)",
-                  described(video).split("Stream mapping:")[0])
+                  described_input(video))
     return bool(m and _ALPHA_FORMATS.match(m.group(1)))
 
 

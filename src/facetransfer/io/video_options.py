@@ -24,6 +24,8 @@ PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "sl
 #: The default preset: x264's "faster" costs 64 % of the CPU of its own default, "medium",
 #: for 0.07 dB less over the face of a transfer at CRF 18 (BENCHMARKS.md, "End to end").
 DEFAULT_PRESET = "faster"
+
+
 @dataclass(frozen=True)
 class VideoOptions:
     """How to encode a video.
