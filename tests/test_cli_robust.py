@@ -135,9 +135,11 @@ def test_serial_blas_only_for_the_commands_that_run_their_own_parallel_work():
 
     for argv in (["transfer", "--target", "t.mp4"], ["-v", "track", "v.mp4"], ["demo"]):
         env = {}
-        assert serial_blas(argv, env) and env == {"OPENBLAS_NUM_THREADS": "1"}
-    env = {"OPENBLAS_NUM_THREADS": "2"}  # the user's choice is kept
-    assert serial_blas(["puppet", "x"], env) and env["OPENBLAS_NUM_THREADS"] == "2"
+        assert serial_blas(argv, env)
+        assert env == {"OPENBLAS_NUM_THREADS": "1", "OPENCV_FOR_THREADS_NUM": "1"}
+    env = {"OPENBLAS_NUM_THREADS": "2", "OPENCV_FOR_THREADS_NUM": "3"}  # the user's choice is kept
+    assert serial_blas(["puppet", "x"], env)
+    assert env == {"OPENBLAS_NUM_THREADS": "2", "OPENCV_FOR_THREADS_NUM": "3"}
     for argv in (["model", "build", "ict-arkit"], ["--help"], []):
         env = {}
         assert not serial_blas(argv, env) and env == {}
@@ -145,8 +147,8 @@ def test_serial_blas_only_for_the_commands_that_run_their_own_parallel_work():
 
 
 def test_console_script_sets_serial_blas_before_numpy_loads_openblas():
-    """main() without argv (the console script) sets the variable before anything imports
-    NumPy, whose OpenBLAS reads it once, when it loads."""
+    """main() without argv (the console script) sets the variables before anything imports
+    NumPy, whose OpenBLAS reads its once, when it loads (and OpenCV its own, when imported)."""
     code = textwrap.dedent(f"""
         import os, sys
         sys.path.insert(0, {SRC!r})
@@ -158,11 +160,15 @@ def test_console_script_sets_serial_blas_before_numpy_loads_openblas():
             main()
         except SystemExit:
             pass
-        print(os.environ.get("OPENBLAS_NUM_THREADS"), "numpy" in sys.modules)
+        import cv2
+        print(os.environ.get("OPENBLAS_NUM_THREADS"), "numpy" in sys.modules,
+              cv2.getNumThreads())
     """)
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    env = {k: v for k, v in os.environ.items() if k != "OPENCV_FOR_THREADS_NUM"}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env=env)
     assert r.returncode == 0, r.stderr
-    assert r.stdout.split()[-2:] == ["1", "True"]
+    assert r.stdout.split()[-3:] == ["1", "True", "1"]  # OpenCV's pool: one thread
 
 
 # ------------------------------------------------------------------------------ --no-progress

@@ -131,10 +131,14 @@ def _local_cluster(n: int, processes: bool, verbose: bool):
 
     level = logging.INFO if verbose else logging.CRITICAL  # a failed task is its clip's row
     kw = {}
-    if processes and not verbose:  # native log lines of MediaPipe and FFmpeg in the workers
-        kw["env"] = {k: os.environ.get(k, v) for k, v in (
-            ("GLOG_minloglevel", "2"), ("OPENCV_FFMPEG_LOGLEVEL", "-8"),
-            ("OPENCV_LOG_LEVEL", "SILENT"))}
+    if processes:
+        # OpenCV's parallel_for_ on one thread, as Dask's nanny sets OpenBLAS's (a worker per
+        # core: a pool's threads would only spin beside the others, cli.main.SERIAL_POOLS);
+        # without -v, no native log lines of MediaPipe and FFmpeg in the workers
+        quiet = () if verbose else (("GLOG_minloglevel", "2"), ("OPENCV_FFMPEG_LOGLEVEL", "-8"),
+                                    ("OPENCV_LOG_LEVEL", "SILENT"))
+        kw["env"] = {k: os.environ.get(k, v)
+                     for k, v in (("OPENCV_FOR_THREADS_NUM", "1"), *quiet)}
     # workers that may start processes of their own (the renderer forks for long clips)
     with config.set({"distributed.worker.daemon": False}):
         return LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,

@@ -116,23 +116,31 @@ def configure_logging(verbose: bool) -> None:
 
 
 #: Commands that already keep every core busy on their own (a forked tracker or detector,
-#: the render's threads, ffmpeg): OpenBLAS's own threads only spin beside them.
+#: the render's threads, ffmpeg): OpenBLAS's and OpenCV's own threads only spin beside them.
 SERIAL_BLAS_COMMANDS = frozenset({"track", "transfer", "edit", "puppet", "demo"})
+
+#: The variables that give OpenBLAS and OpenCV's ``parallel_for_`` one thread each, read once
+#: when each library loads.
+SERIAL_POOLS = {"OPENBLAS_NUM_THREADS": "1", "OPENCV_FOR_THREADS_NUM": "1"}
 
 
 def serial_blas(argv: list[str], environ=os.environ) -> bool:
-    """Ask OpenBLAS for one thread when ``argv``'s command is in :data:`SERIAL_BLAS_COMMANDS`.
+    """Ask OpenBLAS and OpenCV for one thread (:data:`SERIAL_POOLS`) when ``argv``'s command
+    is in :data:`SERIAL_BLAS_COMMANDS`.
 
-    OpenBLAS reads ``OPENBLAS_NUM_THREADS`` once, when NumPy (or SciPy) loads it, so this runs
-    before the parser imports the subcommands; a value the user set is kept. Its worker threads
-    busy-wait between calls: in a 10-second transfer on 2 cores they took 1.1-2 of the ~20
-    CPU-seconds while the tracker's and the render's own threads waited for the cores
-    (BENCHMARKS.md, "Fourteenth session"). Returns whether the command is one of them.
+    Both read their variable once, when NumPy (or SciPy) loads OpenBLAS and when ``cv2`` is
+    imported, so this runs before the parser imports the subcommands; a value the user set
+    is kept. Their worker threads busy-wait between calls (OpenCV's in ``sched_yield``): in a
+    10-second transfer on 2 cores OpenBLAS's took 1.1-2 of the ~20 CPU-seconds (BENCHMARKS.md,
+    "Fourteenth session") and OpenCV's ~0.4 of ~18 plus as much again in the kernel, while the
+    tracker's and the render's own threads waited for the cores ("Thirtieth session").
+    Returns whether the command is one of them.
     """
     command = next((a for a in argv if not a.startswith("-")), None)
     if command not in SERIAL_BLAS_COMMANDS:
         return False
-    environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    for name, value in SERIAL_POOLS.items():
+        environ.setdefault(name, value)
     return True
 
 
@@ -159,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
 
     Called with no ``argv`` (the console script), native libraries' log lines are filtered out
     of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
-    parallel work keep OpenBLAS to one thread (:func:`serial_blas`).
+    parallel work keep OpenBLAS and OpenCV to one thread each (:func:`serial_blas`).
     """
     if argv is None:
         serial_blas(sys.argv[1:])
