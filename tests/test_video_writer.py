@@ -406,7 +406,8 @@ def test_pixel_aspect_ratio_is_written_and_read_back(tmp_path, codec, suffix):
 
 def test_a_plate_with_alpha_is_said_to_lose_it(tmp_path, caplog):
     """A ProRes 4444 video with alpha and an RGBA PNG sequence: one warning each that the
-    result carries no alpha (before: dropped without a word); none for opaque ones."""
+    result carries no alpha (before: dropped without a word); none for opaque ones, nor for
+    the PNG plate written as a PNG sequence (which keeps it: tests/test_plate_alpha.py)."""
     import cv2
 
     alpha = tmp_path / "a.mov"
@@ -420,13 +421,15 @@ def test_a_plate_with_alpha_is_said_to_lose_it(tmp_path, caplog):
         cv2.imwrite(str(plate / f"p.{k}.png"), np.full((8, 8, 4), 128, np.uint8))
         cv2.imwrite(str(plate / f"q.{k}.png"), np.full((8, 8, 3), 128, np.uint8))
     with caplog.at_level(logging.WARNING, logger="facetransfer.io"):
+        for v in (plate / "p.%04d.png", plate / "q.%04d.png"):
+            like_video(None, v, tmp_path / "r.%04d.png")  # a PNG plate's alpha: kept
+        assert not [r for r in caplog.records if "has an alpha" in r.getMessage()]
         for v in (alpha, opaque, plate / "p.%04d.png", plate / "q.%04d.png"):
             like_video(None, v)
     said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
-    assert said == [f"{alpha} has an alpha channel; the result is written without one (colour "
-                    "only; an OpenEXR plate's alpha is kept)",
-                    f"{plate / 'p.%04d.png'} has an alpha channel; the result is written "
-                    "without one (colour only; an OpenEXR plate's alpha is kept)"]
+    why = ("has an alpha channel; the result is written without one (colour only; a PNG "
+           "sequence keeps a PNG plate's, OpenEXR an OpenEXR plate's)")
+    assert said == [f"{alpha} {why}", f"{plate / 'p.%04d.png'} {why}"]
 
 
 def test_like_video_takes_the_inputs_aspect_unless_given(tmp_path):

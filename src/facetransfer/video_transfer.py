@@ -33,6 +33,7 @@ import numpy as np
 from .errors import RewriteError, VideoError
 from .io.ahead import ordered_ahead
 from .io.exr_plate import plate_grading
+from .io.plate_alpha import plate_alpha
 from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
 from .rewrite import rewrite_frames
@@ -648,7 +649,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     audio_from : path-like, optional
         The target video: its audio is kept, and (without ``compose``) its pixel aspect ratio
         and whether a colour matrix is named (:func:`facetransfer.io.video_like.like_video`);
-        an OpenEXR plate's floats where the rewrite changes nothing (an .exr ``out``).
+        an OpenEXR plate's floats where the rewrite changes nothing (an .exr ``out``); an
+        RGBA PNG plate's alpha (a .png sequence ``out``).
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
         The frame to write for output frame ``i`` (default: the rewritten image).
     video_options : VideoOptions, optional
@@ -669,7 +671,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     if compose is None:
         from .io.video_like import like_video
 
-        video_options = like_video(video_options, audio_from)
+        video_options = like_video(video_options, audio_from, out)
     timings = dict(plan.timings)
     n = plan.n_frames
     writer = _parts_writer(plan, model, out, options, video_options, audio_from, overwrite) \
@@ -688,7 +690,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
             stack.callback(bar.close)
             bar.update(start)
         render = _Frames(plan, model, options, mouth_fn, compose, bar, start,
-                         None if compose is not None else plate_grading(out, audio_from))
+                         None if compose is not None else
+                         plate_grading(out, audio_from) or plate_alpha(out, audio_from))
         t0 = time.perf_counter()
         if writer is None:
             from .io.video import write_video_with_audio
@@ -710,7 +713,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
 class _Frames:
     """The rewritten frames of a plan from ``start`` on (:func:`rewrite_frames`), timed and
     counted: ``seconds`` spent rendering, ``rewritten`` frames that show a face; of an OpenEXR
-    plate written as OpenEXR, in its linear light (``grading``)."""
+    plate written as OpenEXR, in its linear light, and of an RGBA PNG plate written as PNG,
+    with its alpha (``grading``)."""
 
     plan: TransferPlan
     model: object
@@ -719,7 +723,9 @@ class _Frames:
     compose: Callable | None
     bar: object
     start: int
-    grading: object = None    # an OpenEXR plate's (facetransfer.io.exr_plate.PlateGrading)
+    # an OpenEXR plate's (facetransfer.io.exr_plate.PlateGrading) or an RGBA image plate's
+    # alpha (facetransfer.io.plate_alpha.PlateAlpha): output frame i from the rewritten one
+    grading: object = None
     seconds: float = 0.0
     rewritten: int = 0
 

@@ -27,7 +27,8 @@ import numpy as np
 
 from ..errors import OutputError, VideoError
 from .atomic import write_bytes_atomic, write_text_atomic
-from .video import WrittenVideo, check_video_output, place_sequence, save_frame_image
+from .video import (WrittenVideo, check_video_output, fits_output, place_sequence,
+                    save_frame_image)
 from .video_parts import _LOCK, PartsBusy, _lock
 
 log = logging.getLogger(__name__)
@@ -127,12 +128,13 @@ class SequenceWriter:
         return sum(self.marks)
 
     def write(self, frame: np.ndarray, *, marked: bool = False) -> None:
-        """Write the next ``(H, W, 3) uint8`` frame (``marked``: counted in :attr:`marked`; of an
-        OpenEXR sequence, float16 or float32 linear RGB too)."""
+        """Write the next ``(H, W, 3) uint8`` frame (``marked``: counted in :attr:`marked`; of a
+        PNG sequence, ``(H, W, 4)`` RGBA too; of an OpenEXR sequence, float16 or
+        float32 linear RGB)."""
         i = self.done
         if i >= self.n_frames:
             raise VideoError(f"{self.output.path}: all {self.n_frames} frames are written")
-        if frame.shape != (self.size[1], self.size[0], 3):
+        if not fits_output(frame.shape, self.size, self.output.path):
             raise VideoError(f"frame of shape {frame.shape} does not match the size "
                              f"{self.size[0]}x{self.size[1]} of {self.output.path}")
         name = self.name % i

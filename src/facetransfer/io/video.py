@@ -142,10 +142,10 @@ _FRAME_SAVE = {".png": {"compress_level": 1}, ".jpg": {"quality": 95},
 
 def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
                      suffix: str | None = None) -> None:
-    """Write one frame of an image sequence, ``(H, W, 3) uint8`` RGB, to ``path`` in the file
-    type of ``suffix`` (default: ``path``'s own; one of :data:`IMAGE_SUFFIXES`); an OpenEXR
-    frame may also be linear float RGB or an :class:`~facetransfer.io.exr.ExrImage`
-    (:func:`facetransfer.io.exr.write_exr`)."""
+    """Write one frame of an image sequence, ``(H, W, 3) uint8`` RGB (or ``(H, W, 4)`` RGBA of a
+    PNG), to ``path`` in the file type of ``suffix`` (default: ``path``'s own; one of
+    :data:`IMAGE_SUFFIXES`); an OpenEXR frame may also be linear float RGB or an
+    :class:`~facetransfer.io.exr.ExrImage` (:func:`facetransfer.io.exr.write_exr`)."""
     from PIL import Image
 
     suffix = (suffix or Path(path).suffix).lower()
@@ -163,6 +163,16 @@ def _linear(frame, path) -> bool:
     :class:`facetransfer.io.exr.ExrImage`) for an OpenEXR sequence ``path`` (written as it is,
     not as 8-bit RGB)."""
     return frame.dtype in (np.float16, np.float32) and Path(path).suffix.lower() == ".exr"
+
+
+def fits_output(shape: tuple, size: tuple[int, int], path: str | os.PathLike) -> bool:
+    """Whether a frame of ``shape`` can be written into the output ``path`` of ``size``
+    (W, H): ``(H, W, 3)`` colour, or ``(H, W, 4)`` RGBA into an image sequence that holds alpha
+    (:func:`facetransfer.io.plate_alpha.keeps_alpha`)."""
+    from .plate_alpha import keeps_alpha
+
+    H, W = size[1], size[0]
+    return tuple(shape) == (H, W, 3) or (tuple(shape) == (H, W, 4) and keeps_alpha(path))
 
 
 def is_image_pattern(path: str | os.PathLike) -> bool:
@@ -597,12 +607,12 @@ class VideoWriter:
                                  start=self.audio_start, duration=self.expected / self.fps)
 
     def write(self, frame: np.ndarray) -> None:
-        """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size (of an OpenEXR
-        sequence, float16 or float32 linear RGB too, or an
-        :class:`~facetransfer.io.exr.ExrImage`: :func:`facetransfer.io.exr.write_exr`)."""
+        """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size (of a PNG sequence,
+        ``(H, W, 4)`` RGBA too; of an OpenEXR sequence, float16 or float32 linear RGB,
+        or an :class:`~facetransfer.io.exr.ExrImage`: :func:`facetransfer.io.exr.write_exr`)."""
         if self.result is not None or (self._proc is None and self._tmpdir is None):
             raise VideoError(f"video {self.path} is already closed")
-        if frame.shape != (self.size[1], self.size[0], 3):
+        if not fits_output(frame.shape, self.size, self.path):
             raise VideoError(f"frame of shape {frame.shape} does not match video size "
                              f"{self.size[0]}x{self.size[1]} of {self.path}")
         if self._tmpdir is not None:

@@ -10,6 +10,7 @@ from pathlib import Path
 
 from ..errors import VideoError
 from .video import VideoOptions, video_info
+from .plate_alpha import keeps_alpha, sequence_has_alpha
 from .video_display import described_input, first_field, timecode_of, video_colour
 from .video_sequence import is_sequence, open_sequence
 
@@ -18,7 +19,7 @@ log = logging.getLogger(__name__)
 __all__ = ["like_video"]
 
 
-def like_video(options: VideoOptions | None, video) -> VideoOptions:
+def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     """``options`` (default :class:`VideoOptions`) for a video that rewrites the video file
     ``video``, to be shown as it is shown (:mod:`facetransfer.io.video_display`): its pixel
     aspect ratio when ``options`` give none (a video of pixels that are not square, e.g.
@@ -32,13 +33,16 @@ def like_video(options: VideoOptions | None, video) -> VideoOptions:
     image sequence (:mod:`facetransfer.io.video_sequence`) its first frame number, for an
     output sequence numbered as it is; of a video with a start timecode (a camera's, an
     editor's), that timecode, where ``options`` give none (:attr:`VideoOptions.timecode`: the
-    rewrite starts at its first frame). None or not a video: ``options`` as they are."""
+    rewrite starts at its first frame). None or not a video: ``options`` as they are. A
+    ``video`` with an alpha channel is warned of once unless the output ``out`` keeps it (an
+    RGBA PNG plate written as a PNG sequence, :mod:`facetransfer.io.plate_alpha`)."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
     if video is not None and is_sequence(video):
         seq = open_sequence(video)
-        if _sequence_alpha(seq):
+        if sequence_has_alpha(seq) and not (out is not None and keeps_alpha(out)
+                                            and keeps_alpha(video)):
             _warn_alpha(str(video))
         if options.first_number is None:
             options = replace(options, first_number=seq.first)
@@ -83,23 +87,11 @@ def _video_alpha(video) -> bool:
     return bool(m and _ALPHA_FORMATS.match(m.group(1)))
 
 
-def _sequence_alpha(seq) -> bool:
-    """Whether an image sequence's first frame has an alpha channel (OpenEXR plates keep
-    theirs: :mod:`facetransfer.io.exr_plate`)."""
-    import cv2
-
-    f = seq.file(0)
-    if f.suffix.lower() == ".exr":
-        return False
-    img = cv2.imread(str(f), cv2.IMREAD_UNCHANGED)
-    return img is not None and img.ndim == 3 and img.shape[2] in (2, 4)
-
-
 @functools.lru_cache(maxsize=16)
 def _warn_alpha(video: str) -> None:
     """Say once that ``video``'s alpha is not carried into the rewrite."""
     log.warning("%s has an alpha channel; the result is written without one (colour only; "
-                "an OpenEXR plate's alpha is kept)", video)
+                "a PNG sequence keeps a PNG plate's, OpenEXR an OpenEXR plate's)", video)
 
 
 @functools.lru_cache(maxsize=16)

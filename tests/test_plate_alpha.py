@@ -1,0 +1,156 @@
+"""An RGBA PNG plate (facetransfer.io.plate_alpha): its alpha carried into a rewrite written as
+a PNG sequence, frame by frame and unchanged; the colour the rewrite of the same frames
+without alpha; other outputs (and TIFF plates) said, once, to lose it."""
+
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer.errors import VideoError  # noqa: E402
+from facetransfer.io.plate_alpha import (PlateAlpha, keeps_alpha, plate_alpha,  # noqa: E402
+                                         sequence_has_alpha)
+from facetransfer.io.video import VideoOptions, VideoWriter, read_video, write_video  # noqa: E402
+from facetransfer.io.video_sequence import open_sequence  # noqa: E402
+from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
+
+
+def _imwrite_rgba(path: Path, rgb: np.ndarray, alpha: np.ndarray) -> None:
+    import cv2
+
+    bgra = np.dstack([rgb[..., ::-1], alpha])
+    assert cv2.imwrite(str(path), bgra)
+
+
+def _rgba_plate(folder: Path, frames, *, suffix: str = ".png", first: int = 1001) -> Path:
+    """The frames as an RGBA sequence numbered from ``first``, as a keyer writes one: each
+    frame's alpha a ramp of its own (0 at the left edge, opaque in the middle)."""
+    folder.mkdir(parents=True, exist_ok=True)
+    for i, rgb in enumerate(frames):
+        H, W = rgb.shape[:2]
+        ramp = np.clip(np.arange(W) * 4 + i, 0, 255).astype(np.uint8)
+        _imwrite_rgba(folder / f"sh010.{first + i:04d}{suffix}", rgb, np.tile(ramp, (H, 1)))
+    return folder / f"sh010.%04d{suffix}"
+
+
+def _read_rgba(path: Path) -> np.ndarray:
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    assert img is not None and img.shape[2] == 4, path
+    return np.dstack([img[..., 2::-1], img[..., 3]])
+
+
+def test_what_keeps_alpha_and_which_plates_have_it(tmp_path):
+    frames = np.full((2, 8, 10, 3), 90, np.uint8)
+    plate = _rgba_plate(tmp_path / "a", frames)
+    opaque = tmp_path / "b"
+    opaque.mkdir()
+    import cv2
+
+    for k in (1, 2):
+        cv2.imwrite(str(opaque / f"o.{k:04d}.png"), frames[0])
+    assert sequence_has_alpha(open_sequence(plate))
+    assert not sequence_has_alpha(open_sequence(opaque / "o.%04d.png"))
+    for out, keeps in (("o/%04d.png", True), ("o/f.%05d.PNG", True), ("o/%04d.tif", False),
+                       ("o/%04d.jpg", False), ("o/%04d.exr", False), ("o.mov", False),
+                       ("o.png", False)):
+        assert keeps_alpha(out) is keeps, out
+    assert isinstance(plate_alpha(tmp_path / "r.%04d.png", plate), PlateAlpha)
+    assert plate_alpha(tmp_path / "r.%04d.jpg", plate) is None
+    assert plate_alpha(tmp_path / "r.mp4", plate) is None
+    assert plate_alpha(tmp_path / "r.%04d.png", opaque / "o.%04d.png") is None
+    assert plate_alpha(tmp_path / "r.%04d.png", None) is None
+    # a TIFF's alpha may be associated or not (OpenCV reads an unassociated one's colour
+    # premultiplied): not carried
+    tiff = _rgba_plate(tmp_path / "t", frames, suffix=".tif")
+    assert sequence_has_alpha(open_sequence(tiff)) and plate_alpha(tmp_path / "r.%04d.png",
+                                                                    tiff) is None
+
+
+def test_plate_alpha_reads_8_and_16_bit_alpha_and_checks_the_size(tmp_path):
+    import cv2
+
+    (tmp_path / "p").mkdir()
+    rgb = np.random.default_rng(0).integers(0, 256, (6, 5, 3), dtype=np.uint8)
+    a16 = np.array([[0, 257, 32767, 65535, 128]] * 6, np.uint16)
+    cv2.imwrite(str(tmp_path / "p" / "f.0001.png"), np.dstack([rgb.astype(np.uint16) * 257, a16]))
+    cv2.imwrite(str(tmp_path / "p" / "f.0002.png"), rgb)   # a frame without alpha: opaque
+    cv2.imwrite(str(tmp_path / "p" / "f.0003.png"), np.zeros((4, 5, 4), np.uint8))
+    pa = PlateAlpha(tmp_path / "p" / "f.%04d.png")
+    out = pa(0, rgb, rgb)
+    assert out.dtype == np.uint8 and out.shape == (6, 5, 4)
+    assert np.array_equal(out[..., :3], rgb)
+    assert out[0, :, 3].tolist() == [0, 1, 127, 255, 0]  # 16-bit alpha rounded to 8 bits
+    assert np.array_equal(pa(1, rgb, rgb)[..., 3], np.full((6, 5), 255, np.uint8))
+    with pytest.raises(VideoError, match=r"f\.0003\.png of the plate is 5x4, the rewrite 5x6"):
+        pa(2, rgb, rgb)
+
+
+def test_an_rgba_frame_is_written_only_where_the_output_holds_alpha(tmp_path):
+    rgba = np.random.default_rng(1).integers(0, 256, (2, 6, 8, 4), dtype=np.uint8)
+    out = write_video(tmp_path / "s/%03d.png", rgba, 25.0)
+    for i in range(2):
+        assert np.array_equal(_read_rgba(Path(str(out) % i)), rgba[i])
+    for pattern in ("j/%03d.jpg", "t/%03d.tif", "v.mp4"):
+        with pytest.raises(VideoError, match=r"frame of shape \(6, 8, 4\) does not match"), \
+                VideoWriter(tmp_path / pattern, 25.0, (8, 6)) as w:
+            w.write(rgba[0])
+
+
+@pytest.mark.parametrize("cache", ["on", "off"])
+def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, tmp_path,
+                                                       capsys, caplog, monkeypatch, cache):
+    """Onto an RGBA PNG plate numbered from 1001, written as a PNG sequence (through the
+    render cache's frames, and straight to the pattern without it): every
+    frame's alpha the plate's, bit for bit; its colour the rewrite of the same frames without
+    alpha (a lossless video of them); numbered as the plate; no warning. Written as JPEG:
+    colour only, and the warning says so."""
+    from facetransfer.cli.main import main
+
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", cache)
+    lossless = tmp_path / "target.mkv"
+    write_video(lossless, read_video(clips["target"])[0], 25.0, options=VideoOptions(crf=0))
+    frames = read_video(lossless)[0]
+    plate = _rgba_plate(tmp_path / "plate", frames)
+    assert np.array_equal(read_video(plate)[0], frames)  # the colour read as stored
+    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
+              "--source-track", clips["source_track"], "--model", quick_model_path,
+              "--no-progress", "--sequence-fps", "25"]
+    (tmp_path / "out").mkdir()
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        code = main(["transfer", "--target", str(plate), *map(str, common),
+                     "--out", str(tmp_path / "out" / "ft.%04d.png")])
+        assert code == 0, capsys.readouterr().err
+        assert not [r for r in caplog.records if "alpha" in r.getMessage()]
+        code = main(["transfer", "--target", str(lossless), *map(str, common),
+                     "--out", str(tmp_path / "png_%03d.png")])
+        assert code == 0, capsys.readouterr().err
+        code = main(["transfer", "--target", str(plate), *map(str, common),
+                     "--out", str(tmp_path / "jpg" / "ft.%04d.jpg")])
+        assert code == 0, capsys.readouterr().err
+    said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
+    assert said == [f"{plate} has an alpha channel; the result is written without one (colour "
+                    "only; a PNG sequence keeps a PNG plate's, OpenEXR an OpenEXR plate's)"]
+    changed = 0
+    for i in range(len(frames)):
+        got = _read_rgba(tmp_path / "out" / f"ft.{1001 + i:04d}.png")
+        src = _read_rgba(tmp_path / "plate" / f"sh010.{1001 + i:04d}.png")
+        rewritten = _read_rgba_or_rgb(tmp_path / f"png_{i:03d}.png")
+        assert np.array_equal(got[..., 3], src[..., 3])
+        assert np.array_equal(got[..., :3], rewritten)
+        changed += int((rewritten != frames[i]).any(axis=2).sum())
+    assert changed > 1000  # the face was rewritten
+
+
+def _read_rgba_or_rgb(path: Path) -> np.ndarray:
+    import cv2
+
+    return cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
