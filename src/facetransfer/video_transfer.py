@@ -690,8 +690,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
             stack.callback(bar.close)
             bar.update(start)
         render = _Frames(plan, model, options, mouth_fn, compose, bar, start,
-                         None if compose is not None else
-                         plate_grading(out, audio_from) or plate_alpha(out, audio_from))
+                         None if compose is not None else _plate_output(out, audio_from))
         t0 = time.perf_counter()
         if writer is None:
             from .io.video import write_video_with_audio
@@ -707,6 +706,13 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     timings["render"] = render.seconds
     timings["write"] = time.perf_counter() - t0 - render.seconds
     return RenderResult(timings, render.rewritten, audio, start)
+
+
+def _plate_output(out, target):
+    """What output frame ``i`` is made of the rewritten one beyond its colour: an OpenEXR
+    plate's floats (:func:`~facetransfer.io.exr_plate.plate_grading`) or an RGBA PNG plate's
+    alpha (:func:`~facetransfer.io.plate_alpha.plate_alpha`); None: the colour alone."""
+    return plate_grading(out, target) or plate_alpha(out, target)
 
 
 @dataclass
