@@ -32,8 +32,7 @@ import numpy as np
 
 from .errors import RewriteError, VideoError
 from .io.ahead import ordered_ahead
-from .io.exr_plate import plate_grading
-from .io.plate_alpha import plate_alpha
+from .io.plate_alpha import plate_output
 from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
 from .rewrite import rewrite_frames
@@ -648,9 +647,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
         performance, the source frame for a transfer).
     audio_from : path-like, optional
         The target video: its audio is kept, and (without ``compose``) its pixel aspect ratio
-        and whether a colour matrix is named (:func:`facetransfer.io.video_like.like_video`);
-        an OpenEXR plate's floats where the rewrite changes nothing (an .exr ``out``); an
-        RGBA PNG plate's alpha (a .png sequence ``out``).
+        and colour matrix (:func:`facetransfer.io.video_like.like_video`); an OpenEXR plate's
+        floats, an RGBA PNG plate's alpha (:func:`facetransfer.io.plate_alpha.plate_output`).
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
         The frame to write for output frame ``i`` (default: the rewritten image).
     video_options : VideoOptions, optional
@@ -690,7 +688,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
             stack.callback(bar.close)
             bar.update(start)
         render = _Frames(plan, model, options, mouth_fn, compose, bar, start,
-                         None if compose is not None else _plate_output(out, audio_from))
+                         None if compose is not None else plate_output(out, audio_from))
         t0 = time.perf_counter()
         if writer is None:
             from .io.video import write_video_with_audio
@@ -708,13 +706,6 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     return RenderResult(timings, render.rewritten, audio, start)
 
 
-def _plate_output(out, target):
-    """What output frame ``i`` is made of the rewritten one beyond its colour: an OpenEXR
-    plate's floats (:func:`~facetransfer.io.exr_plate.plate_grading`) or an RGBA PNG plate's
-    alpha (:func:`~facetransfer.io.plate_alpha.plate_alpha`); None: the colour alone."""
-    return plate_grading(out, target) or plate_alpha(out, target)
-
-
 @dataclass
 class _Frames:
     """The rewritten frames of a plan from ``start`` on (:func:`rewrite_frames`), timed and
@@ -729,9 +720,7 @@ class _Frames:
     compose: Callable | None
     bar: object
     start: int
-    # an OpenEXR plate's (facetransfer.io.exr_plate.PlateGrading) or an RGBA image plate's
-    # alpha (facetransfer.io.plate_alpha.PlateAlpha): output frame i from the rewritten one
-    grading: object = None
+    grading: object = None    # facetransfer.io.plate_alpha.plate_output's
     seconds: float = 0.0
     rewritten: int = 0
 

@@ -19,7 +19,8 @@ import numpy as np
 from ..errors import VideoError
 from .video_sequence import is_sequence, open_sequence
 
-__all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "keeps_alpha", "plate_alpha", "sequence_has_alpha"]
+__all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "keeps_alpha", "plate_alpha", "plate_output",
+           "sequence_has_alpha"]
 
 #: Image-sequence outputs whose frames hold an alpha channel (8-bit RGBA, straight) and plates
 #: whose alpha is carried into them.
@@ -98,3 +99,13 @@ def plate_alpha(out, target) -> PlateAlpha | None:
             or not is_sequence(target):
         return None
     return PlateAlpha(target) if sequence_has_alpha(open_sequence(target)) else None
+
+
+def plate_output(out, target):
+    """How output frame ``i`` of a rewrite of ``target`` written as ``out`` is made from the
+    rewritten colour beyond it: an OpenEXR plate's floats
+    (:func:`~facetransfer.io.exr_plate.plate_grading`) or an RGBA PNG plate's alpha
+    (:func:`plate_alpha`), as ``f(i, shown, rewritten)``; None: the colour alone."""
+    from .exr_plate import plate_grading
+
+    return plate_grading(out, target) or plate_alpha(out, target)
