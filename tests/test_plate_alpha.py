@@ -1,10 +1,12 @@
-"""An RGBA PNG plate (facetransfer.io.plate_alpha): its alpha carried into a rewrite written as
-a PNG sequence, frame by frame and unchanged; the colour the rewrite of the same frames
-without alpha; other outputs (and TIFF plates) said, once, to lose it."""
+"""A target's alpha (facetransfer.io.plate_alpha): an RGBA PNG plate's carried into a rewrite
+written as a PNG sequence, a video's (ProRes 4444) into one written as ProRes, frame by frame
+and unchanged; the colour the rewrite of the same frames without alpha; other outputs (and
+TIFF plates) said, once, to lose it."""
 
 from __future__ import annotations
 
 import logging
+import os
 import sys
 from pathlib import Path
 
@@ -15,7 +17,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer.errors import VideoError  # noqa: E402
 from facetransfer.io.plate_alpha import (PlateAlpha, keeps_alpha, plate_alpha,  # noqa: E402
-                                         sequence_has_alpha)
+                                         sequence_has_alpha, video_has_alpha)
 from facetransfer.io.video import VideoOptions, VideoWriter, read_video, write_video  # noqa: E402
 from facetransfer.io.video_sequence import open_sequence  # noqa: E402
 from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
@@ -138,7 +140,8 @@ def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, 
         assert code == 0, capsys.readouterr().err
     said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
     assert said == [f"{plate} has an alpha channel; the result is written without one (colour "
-                    "only; a PNG sequence keeps a PNG plate's, OpenEXR an OpenEXR plate's)"]
+                    "only; ProRes or a PNG sequence keeps a video's, a PNG sequence a PNG "
+                    "plate's, OpenEXR an OpenEXR plate's)"]
     changed = 0
     for i in range(len(frames)):
         got = _read_rgba(tmp_path / "out" / f"ft.{1001 + i:04d}.png")
@@ -154,3 +157,106 @@ def _read_rgba_or_rgb(path: Path) -> np.ndarray:
     import cv2
 
     return cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
+
+
+def _prores_4444(path: Path, rgba: np.ndarray, fps: float = 25.0) -> Path:
+    """``rgba`` (F, H, W, 4) as ProRes 4444 with its alpha plane in 16 bits."""
+    import subprocess
+
+    from facetransfer.io.ffmpeg import ffmpeg_exe
+
+    F, H, W, _ = rgba.shape
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgba", "-s",
+                    f"{W}x{H}", "-r", str(fps), "-i", "-", "-c:v", "prores_ks", "-profile:v", "4",
+                    "-pix_fmt", "yuva444p10le", "-alpha_bits", "16", str(path)],
+                   input=np.ascontiguousarray(rgba).tobytes(), check=True)
+    return path
+
+
+def _video_alpha(path: Path, size: tuple[int, int]) -> np.ndarray:
+    """Every frame's alpha plane of a video, (F, H, W) uint8 (16 bits rounded)."""
+    import subprocess
+
+    from facetransfer.io.ffmpeg import ffmpeg_exe
+
+    W, H = size
+    raw = subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(path), "-vf", "alphaextract",
+                          "-f", "rawvideo", "-pix_fmt", "gray16le", "-"],
+                         capture_output=True, check=True).stdout
+    a16 = np.frombuffer(raw, "<u2").reshape(-1, H, W).astype(np.uint32)
+    return ((a16 + 128) // 257).astype(np.uint8)
+
+
+def test_video_alpha_reads_each_frames_alpha_in_any_order_a_few_ahead(tmp_path):
+    from facetransfer.io.plate_alpha import VideoAlpha
+
+    rng = np.random.default_rng(2)
+    rgba = rng.integers(0, 256, (6, 16, 24, 4), dtype=np.uint8)
+    mov = _prores_4444(tmp_path / "a.mov", rgba)
+    assert video_has_alpha(mov)
+    assert not video_has_alpha(write_video(tmp_path / "o.mp4", rgba[..., :3], 25.0))
+    va = VideoAlpha(mov, start=1)
+    got = {i: va.alpha(i) for i in (2, 1, 4, 3)}   # as two threads a few frames ahead ask
+    for i, a in got.items():
+        assert np.array_equal(a, rgba[i, ..., 3]), i
+    with pytest.raises(VideoError, match="frame 2 .* was read already"):
+        va.alpha(2)
+    out = va(5, None, rgba[5, ..., :3])
+    assert np.array_equal(out, rgba[5])
+    va.close()
+    with pytest.raises(VideoError, match=r"alpha plane is written as ProRes 4444 only, not h264"):
+        VideoOptions(alpha=True)
+
+
+def test_a_transfer_onto_a_prores_4444_target_keeps_its_alpha(clips, quick_model_path, tmp_path,
+                                                              capsys, caplog):
+    """Onto a ProRes 4444 target with alpha, written with --codec prores (through the render
+    cache's parts and without it): ProRes 4444, every frame's alpha the target's, bit for bit
+    (in 8 bits); the colour the ProRes 422 rewrite of the same frames without alpha, up to
+    the codecs; as a PNG sequence, RGBA frames with the same alpha; no warning. Written as H.264 (the default), colour only, and the warning says
+    that ProRes keeps it."""
+    from facetransfer.cli.main import main
+    from facetransfer.io.video_display import described_input
+
+    frames = read_video(clips["target"])[0]
+    F, H, W, _ = frames.shape
+    ramp = np.clip(np.arange(W)[None, :] * 3 + np.arange(F)[:, None], 0, 255).astype(np.uint8)
+    alpha = np.broadcast_to(ramp[:, None, :], (F, H, W))
+    target = _prores_4444(tmp_path / "target.mov", np.concatenate([frames, alpha[..., None]], 3))
+    opaque = tmp_path / "opaque.mov"
+    write_video(opaque, frames, 25.0, options=VideoOptions(codec="prores"))
+    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
+              "--source-track", clips["source_track"], "--model", quick_model_path,
+              "--no-progress", "--overwrite"]
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        for cache in ("on", "off"):
+            os.environ["FACETRANSFER_RENDER_CACHE"] = cache
+            try:
+                out = tmp_path / f"r_{cache}.mov"
+                assert main(["transfer", "--target", str(target), *map(str, common),
+                             "--codec", "prores", "--out", str(out)]) == 0, \
+                    capsys.readouterr().err
+            finally:
+                os.environ.pop("FACETRANSFER_RENDER_CACHE")
+            assert "prores (4444)" in described_input(out) and video_has_alpha(out)
+            assert np.array_equal(_video_alpha(out, (W, H)), alpha)
+        (tmp_path / "png").mkdir()   # as a PNG sequence: RGBA frames with the same alpha
+        assert main(["transfer", "--target", str(target), *map(str, common),
+                     "--out", str(tmp_path / "png" / "r.%04d.png")]) == 0
+        for i in range(F):
+            assert np.array_equal(_read_rgba(tmp_path / "png" / f"r.{i:04d}.png")[..., 3],
+                                  alpha[i])
+        assert not [r for r in caplog.records if "has an alpha" in r.getMessage()]
+        assert main(["transfer", "--target", str(opaque), *map(str, common),
+                     "--codec", "prores", "--out", str(tmp_path / "plain.mov")]) == 0
+        assert main(["transfer", "--target", str(target), *map(str, common),
+                     "--out", str(tmp_path / "r.mp4")]) == 0
+    said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
+    assert len(said) == 1 and said[0].startswith(f"{target} has an alpha channel; the result "
+                                                 "is written without one (colour only; ProRes "
+                                                 "or a PNG sequence keeps a video's")
+    assert not video_has_alpha(tmp_path / "r.mp4")
+    got, plain = read_video(tmp_path / "r_on.mov")[0], read_video(tmp_path / "plain.mov")[0]
+    mse = np.mean((got.astype(np.float64) - plain) ** 2)
+    assert 10 * np.log10(255.0 ** 2 / mse) > 38  # the same rewrite, 4444 against 422 HQ
+    assert (got != frames).any(axis=3).sum() > 1000  # the face was rewritten

@@ -33,6 +33,7 @@ import numpy as np
 from .errors import RewriteError, VideoError
 from .io.ahead import ordered_ahead
 from .io.plate_alpha import plate_output
+from .io.video_like import like_video
 from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
 from .rewrite import rewrite_frames
@@ -667,8 +668,6 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     options = options.with_(mouth=resolve_mouth_mode(options.mouth, model,
                                                      performance=plan.performance))
     if compose is None:
-        from .io.video_like import like_video
-
         video_options = like_video(video_options, audio_from, out)
     timings = dict(plan.timings)
     n = plan.n_frames
@@ -688,7 +687,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
             stack.callback(bar.close)
             bar.update(start)
         render = _Frames(plan, model, options, mouth_fn, compose, bar, start,
-                         None if compose is not None else plate_output(out, audio_from))
+                         None if compose is not None else
+                         plate_output(out, audio_from, video_options, start))
         t0 = time.perf_counter()
         if writer is None:
             from .io.video import write_video_with_audio
@@ -738,9 +738,12 @@ class _Frames:
             frames = ((frame, face) for _, frame, face in self._composed(it))
         else:                          # graded on threads, a few frames ahead of the writer
             frames = ordered_ahead(self._graded, self._composed(it), ahead=4, workers=2)
-        for frame, face in frames:
-            self.rewritten += face
-            yield frame, face
+        try:
+            for frame, face in frames:
+                self.rewritten += face
+                yield frame, face
+        finally:                       # a video's alpha decoder (io.plate_alpha.VideoAlpha)
+            getattr(self.grading, "close", lambda: None)()
 
     def _composed(self, it):
         """``(i, frame, face)`` of each output frame, the rendering timed."""

@@ -1,26 +1,34 @@
-"""The alpha channel of an image-sequence plate (an RGBA PNG, as a compositing package or a
-keyer writes one) carried into a rewrite written as a PNG sequence: each output frame the
-rewritten colour with the plate frame's own alpha, unchanged.
+"""The alpha channel of a target carried into its rewrite: an RGBA PNG plate (as a compositing
+package or a keyer writes one) written as a PNG sequence, and a video with alpha (ProRes 4444,
+QuickTime PNG or Animation) written as ProRes 4444 (``--codec prores``) or as a PNG
+sequence. Each
+output frame is the rewritten colour with the target frame's own alpha, unchanged (rounded
+to 8 bits).
 
 A PNG's colour is straight (not premultiplied) by its specification and is read as stored
-(OpenCV drops the alpha plane), so the rewrite's colour goes back beside the same alpha. An
-OpenEXR plate keeps its alpha by :mod:`facetransfer.io.exr_plate`. A TIFF's alpha may be
-associated or not, and OpenCV reads an unassociated one's colour premultiplied: a TIFF plate,
-a video with alpha (ProRes 4444) and every other output are written colour only
-(:func:`facetransfer.io.video_like.like_video` says so).
+(OpenCV drops the alpha plane); a video's colour is decoded apart from its alpha plane; so
+the rewrite's colour goes back beside the same alpha. An OpenEXR plate keeps its alpha by
+:mod:`facetransfer.io.exr_plate`. A TIFF's alpha may be associated or not, and OpenCV reads an
+unassociated one's colour premultiplied: a TIFF plate and every other output are written
+colour only (:func:`facetransfer.io.video_like.like_video` says so).
 """
 
 from __future__ import annotations
 
+import re
+import subprocess
+import threading
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import VideoError
+from .ffmpeg import ffmpeg_exe
+from .video_display import described_input
 from .video_sequence import is_sequence, open_sequence
 
-__all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "keeps_alpha", "plate_alpha", "plate_output",
-           "sequence_has_alpha"]
+__all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
+           "plate_output", "sequence_has_alpha", "video_has_alpha"]
 
 #: Image-sequence outputs whose frames hold an alpha channel (8-bit RGBA, straight) and plates
 #: whose alpha is carried into them.
@@ -44,6 +52,18 @@ def sequence_has_alpha(seq) -> bool:
     :mod:`facetransfer.io.exr_plate` keeps)."""
     f = seq.file(0)
     return f.suffix.lower() != ".exr" and _has_alpha(_read_unchanged(f))
+
+
+#: ffmpeg's pixel formats that carry an alpha plane (ProRes 4444, PNG, QuickTime RLE, VP9).
+_ALPHA_FORMATS = re.compile(r"(yuva|rgba|bgra|argb|abgr|gbrap|ya8|ya16|rgba64|bgra64)")
+
+
+def video_has_alpha(video) -> bool:
+    """Whether a video file's first video stream stores an alpha plane (its pixel format as
+    ffmpeg describes it)."""
+    m = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, ([a-z0-9]+)(?:\(|,)",
+                  described_input(video))
+    return bool(m and _ALPHA_FORMATS.match(m.group(1)))
 
 
 def keeps_alpha(out) -> bool:
@@ -91,21 +111,108 @@ class PlateAlpha:
         return np.dstack([rgb, a])
 
 
-def plate_alpha(out, target) -> PlateAlpha | None:
-    """The alpha of the image-sequence plate ``target`` for the rewrite written as ``out``:
-    None unless ``out`` keeps alpha (:func:`keeps_alpha`) and ``target`` is a sequence of
-    the same kind whose first frame has it (:func:`sequence_has_alpha`)."""
-    if target is None or not keeps_alpha(out) or not keeps_alpha(target) \
-            or not is_sequence(target):
+class VideoAlpha:
+    """``alpha(i, shown, rewritten)`` of a video with an alpha plane, as :class:`PlateAlpha`:
+    output frame ``i`` as ``(H, W, 4) uint8``, the rewritten colour with the alpha of the
+    video's stored frame ``i`` (ffmpeg's ``alphaextract``, 16 bits rounded to 8), decoded
+    in order by one ffmpeg process as the frames are asked for (any order a few frames
+    ahead: the frames decoded and not yet asked for are kept).
+
+    Parameters
+    ----------
+    video : path-like
+    start : int
+        The first frame that will be asked for (the frames before it are decoded and
+        dropped).
+    """
+
+    def __init__(self, video, start: int = 0) -> None:
+        self.video = Path(video)
+        self._next, self._kept, self._size = 0, {}, None
+        self._lock = threading.Lock()
+        self._proc = None
+        self._start = int(start)
+
+    def _open(self) -> None:
+        exe = ffmpeg_exe()
+        if exe is None:
+            raise VideoError(f"no ffmpeg binary found to read the alpha of {self.video}")
+        from .video_read import video_info
+
+        self._size = video_info(self.video).size
+        self._proc = subprocess.Popen(
+            [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-i", str(self.video),
+             "-map", "0:v:0", "-fps_mode", "passthrough", "-vf", "alphaextract", "-f",
+             "rawvideo", "-pix_fmt", "gray16le", "-"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+
+    def _read_next(self) -> np.ndarray:
+        w, h = self._size
+        buf = self._proc.stdout.read(w * h * 2)
+        if len(buf) != w * h * 2:
+            raise VideoError(f"the alpha of {self.video} ends at frame {self._next}")
+        a16 = np.frombuffer(buf, "<u2").reshape(h, w).astype(np.uint32)
+        return ((a16 + 128) // 257).astype(np.uint8)
+
+    def alpha(self, i: int) -> np.ndarray:
+        """``(H, W) uint8``: the alpha of the video's frame ``i`` (``i`` at least ``start``,
+        each asked for once)."""
+        with self._lock:
+            if self._proc is None:
+                self._open()
+            while self._next <= i:
+                a = self._read_next()
+                if self._next >= self._start:
+                    self._kept[self._next] = a
+                self._next += 1
+            if i not in self._kept:
+                raise VideoError(f"the alpha of frame {i} of {self.video} was read already")
+            return self._kept.pop(i)
+
+    def close(self) -> None:
+        """Stop the decoder (also when not every frame was asked for)."""
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+            proc.stdout.close()
+
+    def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
+        """Output frame ``i`` (``shown`` is not needed)."""
+        a = self.alpha(i)
+        rgb = np.asarray(rewritten, np.uint8)
+        if a.shape != rgb.shape[:2]:
+            raise VideoError(f"the alpha of {self.video} is {a.shape[1]}x{a.shape[0]}, the "
+                             f"rewrite {rgb.shape[1]}x{rgb.shape[0]} (a turned video: its alpha "
+                             "is not carried)")
+        return np.dstack([rgb, a])
+
+
+def plate_alpha(out, target, options=None, start: int = 0):
+    """The alpha of the target ``target`` for the rewrite written as ``out`` with the video
+    options ``options``: a :class:`PlateAlpha` when ``out`` keeps alpha (:func:`keeps_alpha`)
+    and ``target`` is a sequence of the same kind whose first frame has it
+    (:func:`sequence_has_alpha`); a :class:`VideoAlpha` (from frame ``start`` on) of a video
+    target with alpha written as a PNG sequence, or when ``options`` ask for it
+    (:attr:`~facetransfer.io.video_options.VideoOptions.alpha`, set by
+    :func:`~facetransfer.io.video_like.like_video` for one written as ProRes); else None."""
+    if target is None:
+        return None
+    if not is_sequence(target):   # a video: written as ProRes 4444, or as a PNG sequence
+        carried = getattr(options, "alpha", False) or (keeps_alpha(out)
+                                                       and video_has_alpha(target))
+        return VideoAlpha(target, start) if carried else None
+    if not keeps_alpha(out) or not keeps_alpha(target) or not is_sequence(target):
         return None
     return PlateAlpha(target) if sequence_has_alpha(open_sequence(target)) else None
 
 
-def plate_output(out, target):
-    """How output frame ``i`` of a rewrite of ``target`` written as ``out`` is made from the
-    rewritten colour beyond it: an OpenEXR plate's floats
-    (:func:`~facetransfer.io.exr_plate.plate_grading`) or an RGBA PNG plate's alpha
-    (:func:`plate_alpha`), as ``f(i, shown, rewritten)``; None: the colour alone."""
+def plate_output(out, target, options=None, start: int = 0):
+    """How output frame ``i`` of a rewrite of ``target`` written as ``out`` (with the video
+    options ``options``, from frame ``start`` on) is made from the rewritten colour beyond
+    it: an OpenEXR plate's floats (:func:`~facetransfer.io.exr_plate.plate_grading`) or the
+    target's alpha (:func:`plate_alpha`), as ``f(i, shown, rewritten)``; None: the colour
+    alone."""
     from .exr_plate import plate_grading
 
-    return plate_grading(out, target) or plate_alpha(out, target)
+    return plate_grading(out, target) or plate_alpha(out, target, options, start)

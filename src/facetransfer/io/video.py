@@ -165,13 +165,17 @@ def _linear(frame, path) -> bool:
     return frame.dtype in (np.float16, np.float32) and Path(path).suffix.lower() == ".exr"
 
 
-def fits_output(shape: tuple, size: tuple[int, int], path: str | os.PathLike) -> bool:
+def fits_output(shape: tuple, size: tuple[int, int], path: str | os.PathLike,
+                alpha: bool = False) -> bool:
     """Whether a frame of ``shape`` can be written into the output ``path`` of ``size``
     (W, H): ``(H, W, 3)`` colour, or ``(H, W, 4)`` RGBA into an image sequence that holds alpha
-    (:func:`facetransfer.io.plate_alpha.keeps_alpha`)."""
+    (:func:`facetransfer.io.plate_alpha.keeps_alpha`); a video written with an alpha plane
+    (``alpha``: :attr:`VideoOptions.alpha`) takes RGBA only."""
     from .plate_alpha import keeps_alpha
 
     H, W = size[1], size[0]
+    if alpha and not is_image_pattern(path):
+        return tuple(shape) == (H, W, 4)
     return tuple(shape) == (H, W, 3) or (tuple(shape) == (H, W, 4) and keeps_alpha(path))
 
 
@@ -271,9 +275,11 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     """ffmpeg output arguments of a codec (libx264/libx265 4:2:0 or ProRes 422 HQ)."""
     enc = CODECS[opt.codec]
     tags = COLOUR_TAGS if opt.colour_tags else []
-    if opt.codec == "prores":
-        return ["-c:v", enc, "-profile:v", "3", "-pix_fmt", "yuv422p10le", "-vendor", "apl0",
-                *tags, *(["-flags", "+ildct"] if opt.field else [])]
+    if opt.codec == "prores":  # 422 HQ, or 4444 with its alpha plane losslessly in 16 bits
+        fmt = ["-profile:v", "4", "-pix_fmt", "yuva444p10le", "-alpha_bits", "16"] \
+            if opt.alpha else ["-profile:v", "3", "-pix_fmt", "yuv422p10le"]
+        return ["-c:v", enc, *fmt, "-vendor", "apl0", *tags,
+                *(["-flags", "+ildct"] if opt.field else [])]
     args = ["-c:v", enc, "-preset", opt.preset, "-crf", str(opt.effective_crf),
             "-pix_fmt", "yuv420p", *tags]
     if opt.field:                           # interlaced coding (fields and frames adaptively)
@@ -569,7 +575,8 @@ class VideoWriter:
         # 4:2:0 codecs get their planes from OpenCV (BT.601 limited range, as ffmpeg's own
         # conversion; chroma the mean of each 2x2 block): half the bytes through the pipe and
         # no scaler in ffmpeg (BENCHMARKS.md, "End to end")
-        self._pipe_format = "rgb24" if self.options.codec == "prores" else "yuv420p"
+        self._pipe_format = "rgba" if self.options.alpha else \
+            "rgb24" if self.options.codec == "prores" else "yuv420p"
         self.stored_size = _stored_size(self.size, self.options.codec)
         if not self._detached:   # a part of a longer video: the parts' writer warns, once
             warn_if_grown(self.path, self.size, self.options.codec)
@@ -612,7 +619,7 @@ class VideoWriter:
         or an :class:`~facetransfer.io.exr.ExrImage`: :func:`facetransfer.io.exr.write_exr`)."""
         if self.result is not None or (self._proc is None and self._tmpdir is None):
             raise VideoError(f"video {self.path} is already closed")
-        if not fits_output(frame.shape, self.size, self.path):
+        if not fits_output(frame.shape, self.size, self.path, self.options.alpha):
             raise VideoError(f"frame of shape {frame.shape} does not match video size "
                              f"{self.size[0]}x{self.size[1]} of {self.path}")
         if self._tmpdir is not None:

@@ -5,13 +5,12 @@ from __future__ import annotations
 
 import functools
 import logging
-import re
 from pathlib import Path
 
 from ..errors import VideoError
-from .video import VideoOptions, video_info
-from .plate_alpha import keeps_alpha, sequence_has_alpha
-from .video_display import described_input, first_field, timecode_of, video_colour
+from .video import VideoOptions, is_image_pattern, video_info
+from .plate_alpha import keeps_alpha, sequence_has_alpha, video_has_alpha
+from .video_display import first_field, timecode_of, video_colour
 from .video_sequence import is_sequence, open_sequence
 
 log = logging.getLogger(__name__)
@@ -34,8 +33,10 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     output sequence numbered as it is; of a video with a start timecode (a camera's, an
     editor's), that timecode, where ``options`` give none (:attr:`VideoOptions.timecode`: the
     rewrite starts at its first frame). None or not a video: ``options`` as they are. A
-    ``video`` with an alpha channel is warned of once unless the output ``out`` keeps it (an
-    RGBA PNG plate written as a PNG sequence, :mod:`facetransfer.io.plate_alpha`)."""
+    ``video`` with an alpha channel is warned of once unless the output ``out`` (given by a
+    command that carries alpha) keeps it (:mod:`facetransfer.io.plate_alpha`): an RGBA PNG
+    plate or a video written as a PNG sequence, a video written as ProRes (then 4444 with
+    its alpha, :attr:`VideoOptions.alpha`)."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
@@ -54,8 +55,11 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     except VideoError:  # not a video (e.g. a still): square pixels
         return options
     tags = video_colour(video)
-    if _video_alpha(video):
-        _warn_alpha(str(video))
+    if video_has_alpha(video):
+        if out is not None and options.codec == "prores" and not is_image_pattern(out):
+            options = replace(options, alpha=True)
+        elif out is None or not keeps_alpha(out):
+            _warn_alpha(str(video))
     if options.sar is None and sar != (1, 1):
         options = replace(options, sar=sar)
     if options.colour_tags and tags.matrix is None:
@@ -75,23 +79,12 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     return options
 
 
-#: ffmpeg's pixel formats that carry an alpha plane (ProRes 4444, PNG, QuickTime RLE, VP9).
-_ALPHA_FORMATS = re.compile(r"(yuva|rgba|bgra|argb|abgr|gbrap|ya8|ya16|rgba64|bgra64)")
-
-
-def _video_alpha(video) -> bool:
-    """Whether a video file's first video stream stores an alpha plane (its pixel format as
-    ffmpeg describes it)."""
-    m = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, ([a-z0-9]+)(?:\(|,)",
-                  described_input(video))
-    return bool(m and _ALPHA_FORMATS.match(m.group(1)))
-
-
 @functools.lru_cache(maxsize=16)
 def _warn_alpha(video: str) -> None:
     """Say once that ``video``'s alpha is not carried into the rewrite."""
     log.warning("%s has an alpha channel; the result is written without one (colour only; "
-                "a PNG sequence keeps a PNG plate's, OpenEXR an OpenEXR plate's)", video)
+                "ProRes or a PNG sequence keeps a video's, a PNG sequence a PNG plate's, "
+                "OpenEXR an OpenEXR plate's)", video)
 
 
 @functools.lru_cache(maxsize=16)

@@ -70,6 +70,10 @@ class VideoOptions:
         commands that rewrite a video carry its own (its first frame is theirs), as
         :func:`~facetransfer.io.video_like.like_video` gives, so that an editor conforms the
         result where the shot was. AVI files and image sequences carry none.
+    alpha : bool
+        ProRes 4444 with an alpha plane (frames ``(H, W, 4)`` RGBA) instead of 422 HQ: what
+        :func:`~facetransfer.io.video_like.like_video` asks for a video target with alpha
+        written as ProRes by a command that carries it (:mod:`facetransfer.io.plate_alpha`).
     """
 
     codec: str = DEFAULT_CODEC
@@ -82,6 +86,7 @@ class VideoOptions:
     field: str | None = None
     first_number: int | None = None
     timecode: str | None = None
+    alpha: bool = False
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -106,6 +111,8 @@ class VideoOptions:
             raise VideoError("x265 writes progressive frames: an interlaced video (field "
                              f"{self.field!r}) needs codec h264 or prores")
         checked_timecode(self.timecode)
+        if self.alpha and self.codec != "prores":
+            raise VideoError(f"an alpha plane is written as ProRes 4444 only, not {self.codec}")
         n = self.first_number
         if n is not None and (isinstance(n, bool) or int(n) != n or n < 0):
             raise VideoError(f"an image sequence's first frame number must be an integer >= 0, "
