@@ -272,10 +272,11 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
 
 
 def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
-    """ffmpeg output arguments of a codec (libx264/libx265 4:2:0 or ProRes 422 HQ)."""
+    """ffmpeg output arguments of a codec (libx264/libx265 4:2:0, ProRes 422 HQ or 4444 with
+    alpha)."""
     enc = CODECS[opt.codec]
     tags = COLOUR_TAGS if opt.colour_tags else []
-    if opt.codec == "prores":  # 422 HQ, or 4444 with its alpha plane losslessly in 16 bits
+    if opt.codec == "prores":  # 422 HQ, or 4444 with its alpha plane (stored in 16 bits)
         fmt = ["-profile:v", "4", "-pix_fmt", "yuva444p10le", "-alpha_bits", "16"] \
             if opt.alpha else ["-profile:v", "3", "-pix_fmt", "yuv422p10le"]
         return ["-c:v", enc, *fmt, "-vendor", "apl0", *tags,
