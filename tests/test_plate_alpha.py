@@ -1,7 +1,7 @@
-"""A target's alpha (facetransfer.io.plate_alpha): an RGBA PNG plate's carried into a rewrite
-written as a PNG sequence, a video's (ProRes 4444) into one written as ProRes, frame by frame
-and unchanged; the colour the rewrite of the same frames without alpha; other outputs (and
-TIFF plates) said, once, to lose it."""
+"""A target's alpha (facetransfer.io.plate_alpha): an RGBA PNG or TIFF plate's carried into a
+rewrite written as a PNG or TIFF sequence, a video's (ProRes 4444) into one written as ProRes,
+frame by frame and unchanged; the colour the rewrite of the same frames without alpha; other
+outputs (and TIFFs of associated alpha) said, once, to lose it."""
 
 from __future__ import annotations
 
@@ -24,10 +24,10 @@ from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic c
 
 
 def _imwrite_rgba(path: Path, rgb: np.ndarray, alpha: np.ndarray) -> None:
-    import cv2
+    """As a keyer writes it: a PNG, or a TIFF with unassociated (straight) alpha (Pillow's)."""
+    from PIL import Image
 
-    bgra = np.dstack([rgb[..., ::-1], alpha])
-    assert cv2.imwrite(str(path), bgra)
+    Image.fromarray(np.dstack([rgb, alpha])).save(path)
 
 
 def _rgba_plate(folder: Path, frames, *, suffix: str = ".png", first: int = 1001) -> Path:
@@ -42,11 +42,12 @@ def _rgba_plate(folder: Path, frames, *, suffix: str = ".png", first: int = 1001
 
 
 def _read_rgba(path: Path) -> np.ndarray:
-    import cv2
+    """The stored RGBA (Pillow: OpenCV premultiplies a straight TIFF's colour)."""
+    from PIL import Image
 
-    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
-    assert img is not None and img.shape[2] == 4, path
-    return np.dstack([img[..., 2::-1], img[..., 3]])
+    with Image.open(path) as im:
+        assert im.mode == "RGBA", (path, im.mode)
+        return np.asarray(im)
 
 
 def test_what_keeps_alpha_and_which_plates_have_it(tmp_path):
@@ -60,20 +61,74 @@ def test_what_keeps_alpha_and_which_plates_have_it(tmp_path):
         cv2.imwrite(str(opaque / f"o.{k:04d}.png"), frames[0])
     assert sequence_has_alpha(open_sequence(plate))
     assert not sequence_has_alpha(open_sequence(opaque / "o.%04d.png"))
-    for out, keeps in (("o/%04d.png", True), ("o/f.%05d.PNG", True), ("o/%04d.tif", False),
-                       ("o/%04d.jpg", False), ("o/%04d.exr", False), ("o.mov", False),
-                       ("o.png", False)):
+    for out, keeps in (("o/%04d.png", True), ("o/f.%05d.PNG", True), ("o/%04d.tif", True),
+                       ("o/%04d.TIFF", True), ("o/%04d.jpg", False), ("o/%04d.exr", False),
+                       ("o.mov", False), ("o.png", False)):
         assert keeps_alpha(out) is keeps, out
     assert isinstance(plate_alpha(tmp_path / "r.%04d.png", plate), PlateAlpha)
     assert plate_alpha(tmp_path / "r.%04d.jpg", plate) is None
     assert plate_alpha(tmp_path / "r.mp4", plate) is None
     assert plate_alpha(tmp_path / "r.%04d.png", opaque / "o.%04d.png") is None
     assert plate_alpha(tmp_path / "r.%04d.png", None) is None
-    # a TIFF's alpha may be associated or not (OpenCV reads an unassociated one's colour
-    # premultiplied): not carried
+    # a TIFF with straight alpha: carried; one whose alpha is associated (its colour stored
+    # premultiplied, ExtraSamples 1): not
     tiff = _rgba_plate(tmp_path / "t", frames, suffix=".tif")
-    assert sequence_has_alpha(open_sequence(tiff)) and plate_alpha(tmp_path / "r.%04d.png",
-                                                                    tiff) is None
+    assert isinstance(plate_alpha(tmp_path / "r.%04d.png", tiff), PlateAlpha)
+    _associate(tiff, 2)
+    assert sequence_has_alpha(open_sequence(tiff))
+    assert plate_alpha(tmp_path / "r.%04d.tif", tiff) is None
+
+
+def _associate(pattern: Path, n: int) -> None:
+    """Mark the first ``n`` TIFF frames' alpha associated (ExtraSamples 1 in place of 2)."""
+    from PIL import Image
+
+    for i in range(n):
+        f = Path(str(pattern) % (1001 + i))
+        with Image.open(f) as im:
+            off = next(o for o in _tag_offsets(f) if o[0] == 338)[1]
+        data = bytearray(f.read_bytes())
+        assert data[off:off + 2] in (b"\x02\x00", b"\x00\x02")
+        data[off:off + 2] = b"\x01\x00" if data[off] == 2 else b"\x00\x01"
+        f.write_bytes(bytes(data))
+        with Image.open(f) as im:
+            assert im.tag_v2.get(338) == (1,)
+
+
+def _tag_offsets(f: Path):
+    """``(tag, offset of its inline value)`` of a little- or big-endian TIFF's first IFD."""
+    import struct
+
+    b = f.read_bytes()
+    e = "<" if b[:2] == b"II" else ">"
+    ifd = struct.unpack(e + "I", b[4:8])[0]
+    n = struct.unpack(e + "H", b[ifd:ifd + 2])[0]
+    for k in range(n):
+        at = ifd + 2 + 12 * k
+        yield struct.unpack(e + "H", b[at:at + 2])[0], at + 8
+
+
+def test_a_straight_tiff_plate_reads_as_stored(tmp_path, monkeypatch):
+    """OpenCV reads an RGBA TIFF with unassociated alpha premultiplied; the sequence reader
+    gives its stored colour (before: semi-transparent pixels darker than stored); an
+    associated one's stored colour is read as it is stored too."""
+    import cv2
+
+    from facetransfer.io.video_sequence import tiff_alpha_kind
+
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")
+    rng = np.random.default_rng(3)
+    frames = rng.integers(0, 256, (2, 6, 10, 3), dtype=np.uint8)
+    plate = _rgba_plate(tmp_path / "t", frames, suffix=".tif")
+    first = Path(str(plate) % 1001)
+    assert tiff_alpha_kind(first) == "straight"
+    premultiplied = cv2.imread(str(first), cv2.IMREAD_COLOR)[..., ::-1]
+    assert not np.array_equal(premultiplied, frames[0])  # OpenCV's own reading
+    assert np.array_equal(read_video(plate)[0], frames)
+    _associate(plate, 2)
+    assert tiff_alpha_kind(first) == "premultiplied"
+    as_opencv = [cv2.imread(str(plate) % (1001 + i))[..., ::-1] for i in range(2)]
+    assert np.array_equal(read_video(plate)[0], np.stack(as_opencv))  # read as before
 
 
 def test_plate_alpha_reads_8_and_16_bit_alpha_and_checks_the_size(tmp_path):
@@ -97,18 +152,20 @@ def test_plate_alpha_reads_8_and_16_bit_alpha_and_checks_the_size(tmp_path):
 
 def test_an_rgba_frame_is_written_only_where_the_output_holds_alpha(tmp_path):
     rgba = np.random.default_rng(1).integers(0, 256, (2, 6, 8, 4), dtype=np.uint8)
-    out = write_video(tmp_path / "s/%03d.png", rgba, 25.0)
-    for i in range(2):
-        assert np.array_equal(_read_rgba(Path(str(out) % i)), rgba[i])
-    for pattern in ("j/%03d.jpg", "t/%03d.tif", "v.mp4"):
+    for pattern in ("s/%03d.png", "t/%03d.tif"):
+        out = write_video(tmp_path / pattern, rgba, 25.0)
+        for i in range(2):
+            assert np.array_equal(_read_rgba(Path(str(out) % i)), rgba[i]), pattern
+    for pattern in ("j/%03d.jpg", "v.mp4"):
         with pytest.raises(VideoError, match=r"frame of shape \(6, 8, 4\) does not match"), \
                 VideoWriter(tmp_path / pattern, 25.0, (8, 6)) as w:
             w.write(rgba[0])
 
 
-@pytest.mark.parametrize("cache", ["on", "off"])
+@pytest.mark.parametrize("cache,suffix", [("on", ".png"), ("off", ".png"), ("on", ".tif")])
 def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, tmp_path,
-                                                       capsys, caplog, monkeypatch, cache):
+                                                       capsys, caplog, monkeypatch, cache,
+                                                       suffix):
     """Onto an RGBA PNG plate numbered from 1001, written as a PNG sequence (through the
     render cache's frames, and straight to the pattern without it): every
     frame's alpha the plate's, bit for bit; its colour the rewrite of the same frames without
@@ -121,7 +178,7 @@ def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, 
     lossless = tmp_path / "target.mkv"
     write_video(lossless, read_video(clips["target"])[0], 25.0, options=VideoOptions(crf=0))
     frames = read_video(lossless)[0]
-    plate = _rgba_plate(tmp_path / "plate", frames)
+    plate = _rgba_plate(tmp_path / "plate", frames, suffix=suffix)
     assert np.array_equal(read_video(plate)[0], frames)  # the colour read as stored
     common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
               "--source-track", clips["source_track"], "--model", quick_model_path,
@@ -129,7 +186,7 @@ def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, 
     (tmp_path / "out").mkdir()
     with caplog.at_level(logging.WARNING, logger="facetransfer"):
         code = main(["transfer", "--target", str(plate), *map(str, common),
-                     "--out", str(tmp_path / "out" / "ft.%04d.png")])
+                     "--out", str(tmp_path / "out" / f"ft.%04d{suffix}")])
         assert code == 0, capsys.readouterr().err
         assert not [r for r in caplog.records if "alpha" in r.getMessage()]
         code = main(["transfer", "--target", str(lossless), *map(str, common),
@@ -140,12 +197,12 @@ def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, 
         assert code == 0, capsys.readouterr().err
     said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
     assert said == [f"{plate} has an alpha channel; the result is written without one (colour "
-                    "only; ProRes or a PNG sequence keeps a video's, a PNG sequence a PNG "
-                    "plate's, OpenEXR an OpenEXR plate's)"]
+                    "only; transfer keeps a target's in ProRes 4444 and PNG or TIFF "
+                    "sequences, an OpenEXR plate's in OpenEXR)"]
     changed = 0
     for i in range(len(frames)):
-        got = _read_rgba(tmp_path / "out" / f"ft.{1001 + i:04d}.png")
-        src = _read_rgba(tmp_path / "plate" / f"sh010.{1001 + i:04d}.png")
+        got = _read_rgba(tmp_path / "out" / f"ft.{1001 + i:04d}{suffix}")
+        src = _read_rgba(tmp_path / "plate" / f"sh010.{1001 + i:04d}{suffix}")
         rewritten = _read_rgba_or_rgb(tmp_path / f"png_{i:03d}.png")
         assert np.array_equal(got[..., 3], src[..., 3])
         assert np.array_equal(got[..., :3], rewritten)
@@ -253,8 +310,8 @@ def test_a_transfer_onto_a_prores_4444_target_keeps_its_alpha(clips, quick_model
                      "--out", str(tmp_path / "r.mp4")]) == 0
     said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
     assert len(said) == 1 and said[0].startswith(f"{target} has an alpha channel; the result "
-                                                 "is written without one (colour only; ProRes "
-                                                 "or a PNG sequence keeps a video's")
+                                                 "is written without one (colour only; "
+                                                 "transfer keeps a target's in ProRes 4444")
     assert not video_has_alpha(tmp_path / "r.mp4")
     got, plain = read_video(tmp_path / "r_on.mov")[0], read_video(tmp_path / "plain.mov")[0]
     mse = np.mean((got.astype(np.float64) - plain) ** 2)

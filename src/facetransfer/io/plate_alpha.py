@@ -1,16 +1,17 @@
-"""The alpha channel of a target carried into its rewrite: an RGBA PNG plate (as a compositing
-package or a keyer writes one) written as a PNG sequence, and a video with alpha (ProRes 4444,
-QuickTime PNG or Animation) written as ProRes 4444 (``--codec prores``) or as a PNG
-sequence. Each
-output frame is the rewritten colour with the target frame's own alpha, unchanged (rounded
-to 8 bits).
+"""The alpha channel of a target carried into its rewrite: an RGBA PNG or TIFF plate (as a
+compositing package or a keyer writes one) written as a PNG or TIFF sequence, and a video with
+alpha (ProRes 4444, QuickTime PNG or Animation) written as ProRes 4444 (``--codec prores``) or
+as a PNG or TIFF sequence. Each output frame is the rewritten colour with the target frame's
+own alpha, unchanged (rounded to 8 bits).
 
-A PNG's colour is straight (not premultiplied) by its specification and is read as stored
-(OpenCV drops the alpha plane); a video's colour is decoded apart from its alpha plane; so
-the rewrite's colour goes back beside the same alpha. An OpenEXR plate keeps its alpha by
-:mod:`facetransfer.io.exr_plate`. A TIFF's alpha may be associated or not, and OpenCV reads an
-unassociated one's colour premultiplied: a TIFF plate and every other output are written
-colour only (:func:`facetransfer.io.video_like.like_video` says so).
+The colour goes back as it was read: straight, beside the same alpha. A PNG's colour is
+straight by its specification; a TIFF's is when its alpha is unassociated (what Pillow and
+most tools write; :func:`facetransfer.io.video_sequence.tiff_alpha_kind`), read as stored
+(not through OpenCV, which premultiplies it); a video's colour is decoded apart from its alpha
+plane. A TIFF with associated alpha (its colour stored premultiplied) keeps only its colour.
+An OpenEXR plate keeps its alpha by :mod:`facetransfer.io.exr_plate`. Every other output
+(H.264, H.265, JPEG) is written colour only (:func:`facetransfer.io.video_like.like_video`
+says so).
 """
 
 from __future__ import annotations
@@ -25,14 +26,14 @@ import numpy as np
 from ..errors import VideoError
 from .ffmpeg import ffmpeg_exe
 from .video_display import described_input
-from .video_sequence import is_sequence, open_sequence
+from .video_sequence import is_sequence, open_sequence, tiff_alpha_kind
 
 __all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
-           "plate_output", "sequence_has_alpha", "video_has_alpha"]
+           "plate_output", "sequence_alpha_kept", "sequence_has_alpha", "video_has_alpha"]
 
 #: Image-sequence outputs whose frames hold an alpha channel (8-bit RGBA, straight) and plates
 #: whose alpha is carried into them.
-ALPHA_SUFFIXES = (".png",)
+ALPHA_SUFFIXES = (".png", ".tif", ".tiff")
 
 
 def _read_unchanged(path: Path) -> np.ndarray | None:
@@ -188,6 +189,16 @@ class VideoAlpha:
         return np.dstack([rgb, a])
 
 
+def sequence_alpha_kept(out, plate) -> bool:
+    """Whether the alpha of the image-sequence plate ``plate`` is carried into the output
+    ``out``: both hold alpha (:func:`keeps_alpha`), and a TIFF plate's is straight (an
+    associated one, whose colour is stored premultiplied, would not match the straight alpha
+    the output is written with: :func:`facetransfer.io.video_sequence.tiff_alpha_kind`)."""
+    if not (keeps_alpha(out) and keeps_alpha(plate)):
+        return False
+    return tiff_alpha_kind(open_sequence(plate).file(0)) != "premultiplied"
+
+
 def plate_alpha(out, target, options=None, start: int = 0):
     """The alpha of the target ``target`` for the rewrite written as ``out`` with the video
     options ``options``: a :class:`PlateAlpha` when ``out`` keeps alpha (:func:`keeps_alpha`)
@@ -202,7 +213,7 @@ def plate_alpha(out, target, options=None, start: int = 0):
         carried = getattr(options, "alpha", False) or (keeps_alpha(out)
                                                        and video_has_alpha(target))
         return VideoAlpha(target, start) if carried else None
-    if not keeps_alpha(out) or not keeps_alpha(target) or not is_sequence(target):
+    if not is_sequence(target) or not sequence_alpha_kept(out, target):
         return None
     return PlateAlpha(target) if sequence_has_alpha(open_sequence(target)) else None
 

@@ -9,7 +9,7 @@ from pathlib import Path
 
 from ..errors import VideoError
 from .video import VideoOptions, is_image_pattern, video_info
-from .plate_alpha import keeps_alpha, sequence_has_alpha, video_has_alpha
+from .plate_alpha import keeps_alpha, sequence_alpha_kept, sequence_has_alpha, video_has_alpha
 from .video_display import first_field, timecode_of, video_colour
 from .video_sequence import is_sequence, open_sequence
 
@@ -35,15 +35,15 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     rewrite starts at its first frame). None or not a video: ``options`` as they are. A
     ``video`` with an alpha channel is warned of once unless the output ``out`` (given by a
     command that carries alpha) keeps it (:mod:`facetransfer.io.plate_alpha`): an RGBA PNG
-    plate or a video written as a PNG sequence, a video written as ProRes (then 4444 with
-    its alpha, :attr:`VideoOptions.alpha`)."""
+    or TIFF plate or a video written as a PNG or TIFF sequence, a video written as ProRes
+    (then 4444 with its alpha, :attr:`VideoOptions.alpha`)."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
     if video is not None and is_sequence(video):
         seq = open_sequence(video)
-        if sequence_has_alpha(seq) and not (out is not None and keeps_alpha(out)
-                                            and keeps_alpha(video)):
+        if sequence_has_alpha(seq) and not (out is not None
+                                            and sequence_alpha_kept(out, video)):
             _warn_alpha(str(video))
         if options.first_number is None:
             options = replace(options, first_number=seq.first)
@@ -83,8 +83,8 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
 def _warn_alpha(video: str) -> None:
     """Say once that ``video``'s alpha is not carried into the rewrite."""
     log.warning("%s has an alpha channel; the result is written without one (colour only; "
-                "ProRes or a PNG sequence keeps a video's, a PNG sequence a PNG plate's, "
-                "OpenEXR an OpenEXR plate's)", video)
+                "transfer keeps a target's in ProRes 4444 and PNG or TIFF sequences, an "
+                "OpenEXR plate's in OpenEXR)", video)
 
 
 @functools.lru_cache(maxsize=16)

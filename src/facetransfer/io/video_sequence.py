@@ -210,19 +210,55 @@ def _span(a: int, b: int) -> str:
 
 def _read_frame(file: Path, pattern: Path) -> np.ndarray:
     """One frame file as ``(H, W, 3) uint8`` RGB (16 bits scaled, grey expanded, alpha
-    dropped, a JPEG's EXIF orientation applied; OpenEXR's linear floats shown through the sRGB
-    curve, :func:`facetransfer.io.exr.shown_frame`)."""
+    dropped with the colour as stored, a JPEG's EXIF orientation applied; OpenEXR's linear
+    floats shown through the sRGB curve, :func:`facetransfer.io.exr.shown_frame`)."""
     import cv2
 
     if file.suffix.lower() == ".exr":
         from .exr import read_exr_image, shown_frame
 
         return shown_frame(read_exr_image(file))
+    if file.suffix.lower() in (".tif", ".tiff"):
+        straight = _straight_tiff(file)
+        if straight is not None:
+            return straight
     bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
     if bgr is None:
         raise VideoError(f"image sequence {pattern}: cannot read frame file {file} (not an "
                          "image OpenCV decodes, or damaged)")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def tiff_alpha_kind(file: Path) -> str | None:
+    """How an 8-bit RGBA TIFF's alpha is stored: ``"straight"`` (unassociated, TIFF's
+    ExtraSamples 2, what Pillow writes), ``"premultiplied"`` (associated, ExtraSamples 1);
+    None for any other file (no alpha, another bit depth, unreadable)."""
+    from PIL import Image
+
+    try:
+        with Image.open(file) as im:
+            bits = im.tag_v2.get(258) if hasattr(im, "tag_v2") else None
+            if bits not in ((8, 8, 8, 8),):
+                return None
+            kind = {(2,): "straight", (1,): "premultiplied"}.get(im.tag_v2.get(338))
+            return kind if im.mode in ("RGBA", "RGBa") else None
+    except (OSError, ValueError):
+        return None
+
+
+def _straight_tiff(file: Path) -> np.ndarray | None:
+    """An 8-bit RGBA TIFF with straight alpha as its stored RGB, ``(H, W, 3) uint8`` (OpenCV's
+    reader, libtiff's RGBA interface, returns that colour premultiplied by the alpha); None
+    for any other file, which OpenCV reads as stored."""
+    from PIL import Image
+
+    if tiff_alpha_kind(file) != "straight":
+        return None
+    try:
+        with Image.open(file) as im:
+            return np.asarray(im.convert("RGB"))
+    except (OSError, ValueError):
+        return None   # OpenCV's reader names what is wrong
 
 
 def sequence_frames(path, *, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
