@@ -221,9 +221,12 @@ def plate_alpha(out, target, options=None, start: int = 0):
 def plate_output(out, target, options=None, start: int = 0):
     """How output frame ``i`` of a rewrite of ``target`` written as ``out`` (with the video
     options ``options``, from frame ``start`` on) is made from the rewritten colour beyond
-    it: an OpenEXR plate's floats (:func:`~facetransfer.io.exr_plate.plate_grading`) or the
-    target's alpha (:func:`plate_alpha`), as ``f(i, shown, rewritten)``; None: the colour
+    it: an OpenEXR plate's floats (:func:`~facetransfer.io.exr_plate.plate_grading`), a 16-bit
+    plate's values (:func:`~facetransfer.io.plate_depth.plate_depth`, with a PNG's alpha) or
+    the target's alpha (:func:`plate_alpha`), as ``f(i, shown, rewritten)``; None: the colour
     alone."""
     from .exr_plate import plate_grading
+    from .plate_depth import plate_depth
 
-    return plate_grading(out, target) or plate_alpha(out, target, options, start)
+    return plate_grading(out, target) or plate_depth(out, target) \
+        or plate_alpha(out, target, options, start)

@@ -143,8 +143,9 @@ _FRAME_SAVE = {".png": {"compress_level": 1}, ".jpg": {"quality": 95},
 def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
                      suffix: str | None = None) -> None:
     """Write one frame of an image sequence, ``(H, W, 3) uint8`` RGB (or ``(H, W, 4)`` RGBA of a
-    PNG), to ``path`` in the file type of ``suffix`` (default: ``path``'s own; one of
-    :data:`IMAGE_SUFFIXES`); an OpenEXR frame may also be linear float RGB or an
+    PNG or TIFF), to ``path`` in the file type of ``suffix`` (default: ``path``'s own; one of
+    :data:`IMAGE_SUFFIXES`); a PNG or TIFF frame may also be uint16, grey ``(H, W)``, RGB or
+    RGBA (:mod:`facetransfer.io.plate_depth`), an OpenEXR frame linear float RGB or an
     :class:`~facetransfer.io.exr.ExrImage` (:func:`facetransfer.io.exr.write_exr`)."""
     from PIL import Image
 
@@ -154,8 +155,26 @@ def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
 
         write_exr(path, rgb)
         return
+    if rgb.dtype == np.uint16:
+        _save_deep(rgb, path, suffix)
+        return
     Image.fromarray(np.ascontiguousarray(rgb, dtype=np.uint8)).save(
         path, format=Image.registered_extensions()[suffix], **_FRAME_SAVE.get(suffix, {}))
+
+
+def _save_deep(img: np.ndarray, path, suffix: str) -> None:
+    """A 16-bit grey, RGB or RGBA frame as a PNG or TIFF (OpenCV's encoder: Pillow writes no
+    16-bit colour)."""
+    import cv2
+
+    if suffix not in (".png", ".tif", ".tiff"):
+        raise VideoError(f"{path}: 16-bit frames are written as PNG or TIFF, not {suffix}")
+    if img.ndim == 3:
+        img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR if img.shape[2] == 3 else cv2.COLOR_RGBA2BGRA)
+    ok, data = cv2.imencode(suffix, img)
+    if not ok:
+        raise VideoError(f"cannot encode the 16-bit frame {path}")
+    Path(path).write_bytes(data.tobytes())
 
 
 def _linear(frame, path) -> bool:
@@ -168,14 +187,16 @@ def _linear(frame, path) -> bool:
 def fits_output(shape: tuple, size: tuple[int, int], path: str | os.PathLike,
                 alpha: bool = False) -> bool:
     """Whether a frame of ``shape`` can be written into the output ``path`` of ``size``
-    (W, H): ``(H, W, 3)`` colour, or ``(H, W, 4)`` RGBA into an image sequence that holds alpha
-    (:func:`facetransfer.io.plate_alpha.keeps_alpha`); a video written with an alpha plane
-    (``alpha``: :attr:`VideoOptions.alpha`) takes RGBA only."""
+    (W, H): ``(H, W, 3)`` colour, or ``(H, W, 4)`` RGBA (and ``(H, W)`` grey) into a PNG or TIFF
+    sequence (:func:`facetransfer.io.plate_alpha.keeps_alpha`); a video written with an alpha
+    plane (``alpha``: :attr:`VideoOptions.alpha`) takes RGBA only."""
     from .plate_alpha import keeps_alpha
 
     H, W = size[1], size[0]
     if alpha and not is_image_pattern(path):
         return tuple(shape) == (H, W, 4)
+    if tuple(shape) == (H, W):   # a 16-bit grey plate's frame (facetransfer.io.plate_depth)
+        return keeps_alpha(path)
     return tuple(shape) == (H, W, 3) or (tuple(shape) == (H, W, 4) and keeps_alpha(path))
 
 
@@ -624,8 +645,8 @@ class VideoWriter:
             raise VideoError(f"frame of shape {frame.shape} does not match video size "
                              f"{self.size[0]}x{self.size[1]} of {self.path}")
         if self._tmpdir is not None:
-            self._write_image(frame if _linear(frame, self.path) else
-                              np.ascontiguousarray(frame, dtype=np.uint8))
+            self._write_image(frame if _linear(frame, self.path) or frame.dtype == np.uint16
+                              else np.ascontiguousarray(frame, dtype=np.uint8))
             self.n_frames += 1
             return
         img = np.ascontiguousarray(frame, dtype=np.uint8)

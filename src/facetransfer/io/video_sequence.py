@@ -209,9 +209,10 @@ def _span(a: int, b: int) -> str:
 
 
 def _read_frame(file: Path, pattern: Path) -> np.ndarray:
-    """One frame file as ``(H, W, 3) uint8`` RGB (16 bits scaled, grey expanded, alpha
-    dropped with the colour as stored, a JPEG's EXIF orientation applied; OpenEXR's linear
-    floats shown through the sRGB curve, :func:`facetransfer.io.exr.shown_frame`)."""
+    """One frame file as ``(H, W, 3) uint8`` RGB (16 bits rounded to 8, :func:`shown_16`; grey
+    expanded, alpha dropped with the colour as stored, a JPEG's EXIF orientation applied;
+    OpenEXR's linear floats shown through the sRGB curve,
+    :func:`facetransfer.io.exr.shown_frame`)."""
     import cv2
 
     if file.suffix.lower() == ".exr":
@@ -222,11 +223,48 @@ def _read_frame(file: Path, pattern: Path) -> np.ndarray:
         straight = _straight_tiff(file)
         if straight is not None:
             return straight
+    if bit_depth(file) == 16:
+        deep = cv2.imread(str(file), cv2.IMREAD_UNCHANGED)
+        if deep is not None and deep.dtype == np.uint16:
+            return shown_16(deep)
     bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
     if bgr is None:
         raise VideoError(f"image sequence {pattern}: cannot read frame file {file} (not an "
                          "image OpenCV decodes, or damaged)")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def bit_depth(file: Path) -> int | None:
+    """Bits a sample of a PNG or TIFF frame file (from its header: PNG's IHDR, TIFF's
+    BitsPerSample); None for other files or an unreadable header."""
+    suffix = file.suffix.lower()
+    try:
+        if suffix == ".png":
+            with open(file, "rb") as fh:
+                head = fh.read(25)
+            return head[24] if len(head) == 25 and head[12:16] == b"IHDR" else None
+        if suffix in (".tif", ".tiff"):
+            from PIL import Image
+
+            with Image.open(file) as im:
+                bits = im.tag_v2.get(258)
+                return int(bits[0]) if bits else None
+    except (OSError, ValueError, IndexError):
+        return None
+    return None
+
+
+def shown_16(deep: np.ndarray) -> np.ndarray:
+    """A 16-bit frame as OpenCV stores it (grey, grey + alpha, BGR, BGRA) as the ``(H, W, 3)
+    uint8`` RGB the tools see: each value ``v`` as ``round(v / 257)`` (65535 -> 255, the
+    inverse of ``8-bit * 257``), the alpha dropped."""
+    v = deep.astype(np.uint32)
+    eight = ((v * 2 + 257) // 514).astype(np.uint8)
+    if eight.ndim == 2:
+        return np.repeat(eight[..., None], 3, axis=2)
+    if eight.shape[2] <= 2:
+        return np.repeat(eight[..., :1], 3, axis=2)
+    return np.ascontiguousarray(eight[..., 2::-1])
 
 
 def tiff_alpha_kind(file: Path) -> str | None:

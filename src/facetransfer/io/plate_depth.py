@@ -1,0 +1,119 @@
+"""A 16-bit PNG or TIFF plate rewritten as a PNG or TIFF sequence in 16 bits: every pixel the
+rewrite did not change is the plate's own value, to the bit, and a changed one is the 8-bit
+rewrite with the plate's own detail below 8 bits (its grain).
+
+The tracker and the rewrite see such a plate in 8 bits (each value ``v`` as ``round(v / 257)``,
+:func:`facetransfer.io.video_sequence.shown_16`), so an 8-bit result would lose the fine
+levels of every pixel of the frame, the face's surroundings included. Here a changed pixel is
+``rewritten * 257 + (v - round(v / 257) * 257)`` (clipped), which reads back as ``rewritten``
+in 8 bits; an unchanged one is ``v``. Grey
+plates stay grey; a PNG plate's 16-bit alpha is kept as it is (a TIFF plate with alpha, or a
+grey one with alpha, is written in 8 bits, :mod:`facetransfer.io.plate_alpha`: OpenCV writes
+no TIFF alpha tag, nor grey + alpha).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import VideoError
+from .video_sequence import is_sequence, open_sequence
+
+__all__ = ["DEPTH_SUFFIXES", "PlateDepth", "plate_depth", "deep_frame"]
+
+#: Image-sequence plates and outputs kept in 16 bits.
+DEPTH_SUFFIXES = (".png", ".tif", ".tiff")
+
+
+def _read_deep(path: Path) -> np.ndarray | None:
+    import cv2
+
+    return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+
+
+def deep_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
+    """One output frame of a 16-bit plate (module notes).
+
+    Parameters
+    ----------
+    plate : (H, W), (H, W, 3) or (H, W, 4) uint16
+        The plate's frame: grey, RGB or RGBA.
+    shown : (H, W, 3) uint8
+        The frame the rewrite was made from (RGB, the plate's high bytes).
+    rewritten : (H, W, 3) uint8
+        The rewrite (RGB; of a grey plate, grey).
+
+    Returns
+    -------
+    ndarray, the plate's shape, uint16
+        The plate's value where the rewrite changed nothing, else the rewrite's value with the
+        plate's detail below 8 bits; the alpha channel as the plate's.
+    """
+    rew = np.asarray(rewritten, np.uint8)
+    changed = (rew != np.asarray(shown, np.uint8)).any(axis=2)
+    out = np.array(plate, dtype=np.uint16, copy=True)
+    colour = out if out.ndim == 2 else out[..., :3]      # a view: written in place
+    high = (rew[..., 0] if out.ndim == 2 else rew).astype(np.int64)
+    v = colour.astype(np.int64)
+    fine = v - (v * 2 + 257) // 514 * 257                # below 8 bits: -128..128
+    new = np.clip(high * 257 + fine, 0, 65535).astype(np.uint16)
+    colour[changed] = new[changed]
+    return out
+
+
+class PlateDepth:
+    """``depth(i, shown, rewritten)``: output frame ``i`` of a 16-bit plate (:func:`deep_frame`),
+    grey ``(H, W)``, RGB ``(H, W, 3)`` or RGBA ``(H, W, 4)`` uint16.
+
+    Parameters
+    ----------
+    plate : path-like
+        The plate's pattern (``plate/sh010.%04d.tif``).
+    """
+
+    def __init__(self, plate) -> None:
+        self.sequence = open_sequence(plate)
+
+    def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
+        f = self.sequence.file(i)
+        plate = _read_deep(f)
+        if plate is None or plate.dtype != np.uint16 or _channels(plate) not in (1, 3, 4):
+            raise VideoError(f"frame {f} of the 16-bit plate {self.sequence.pattern} is not "
+                             "16-bit grey, RGB or RGBA (its first frame is)")
+        if plate.shape[:2] != np.shape(rewritten)[:2]:
+            raise VideoError(f"frame {f} of the plate is {plate.shape[1]}x{plate.shape[0]}, "
+                             f"the rewrite {np.shape(rewritten)[1]}x{np.shape(rewritten)[0]}")
+        return deep_frame(_rgb_order(plate), shown, rewritten)
+
+
+def _channels(img: np.ndarray) -> int:
+    return 1 if img.ndim == 2 else int(img.shape[2])
+
+
+def _rgb_order(img: np.ndarray) -> np.ndarray:
+    """OpenCV's BGR / BGRA as RGB / RGBA (grey as it is)."""
+    import cv2
+
+    if img.ndim == 2:
+        return img
+    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB if img.shape[2] == 3 else cv2.COLOR_BGRA2RGBA)
+
+
+def plate_depth(out, target) -> PlateDepth | None:
+    """The 16-bit grading of the plate ``target`` rewritten as ``out``: a PNG or TIFF sequence
+    of a PNG or TIFF plate whose first frame is 16 bits (a TIFF one without alpha); else
+    None."""
+    if target is None or not is_sequence(target):
+        return None
+    p, o = Path(target), Path(out)
+    if "%" not in o.name or o.suffix.lower() not in DEPTH_SUFFIXES \
+            or p.suffix.lower() not in DEPTH_SUFFIXES:
+        return None
+    first = _read_deep(open_sequence(target).file(0))
+    if first is None or first.dtype != np.uint16 or _channels(first) not in (1, 3, 4):
+        return None   # 8 bits, or grey + alpha: written in 8 bits
+    if _channels(first) == 4 and (o.suffix.lower() != ".png" or p.suffix.lower() != ".png"):
+        return None   # written in 8 bits with its alpha (OpenCV writes no TIFF alpha tag)
+    return PlateDepth(target)
