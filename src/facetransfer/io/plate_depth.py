@@ -55,11 +55,10 @@ def deep_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> n
     changed = (rew != np.asarray(shown, np.uint8)).any(axis=2)
     out = np.array(plate, dtype=np.uint16, copy=True)
     colour = out if out.ndim == 2 else out[..., :3]      # a view: written in place
-    high = (rew[..., 0] if out.ndim == 2 else rew).astype(np.int64)
-    v = colour.astype(np.int64)
+    v = colour[changed].astype(np.int32)                 # the changed pixels only
+    high = (rew[..., 0] if out.ndim == 2 else rew)[changed].astype(np.int32)
     fine = v - (v * 2 + 257) // 514 * 257                # below 8 bits: -128..128
-    new = np.clip(high * 257 + fine, 0, 65535).astype(np.uint16)
-    colour[changed] = new[changed]
+    colour[changed] = np.clip(high * 257 + fine, 0, 65535)
     return out
 
 

@@ -171,7 +171,10 @@ def _save_deep(img: np.ndarray, path, suffix: str) -> None:
         raise VideoError(f"{path}: 16-bit frames are written as PNG or TIFF, not {suffix}")
     if img.ndim == 3:
         img = cv2.cvtColor(img, cv2.COLOR_RGB2BGR if img.shape[2] == 3 else cv2.COLOR_RGBA2BGRA)
-    ok, data = cv2.imencode(suffix, img)
+    # a TIFF uncompressed, as Pillow writes the 8-bit ones (OpenCV's LZW: 21 ms a 480x480 frame
+    # of grain for 0 % fewer bytes; uncompressed 0.3 ms)
+    params = [cv2.IMWRITE_TIFF_COMPRESSION, 1] if suffix != ".png" else []
+    ok, data = cv2.imencode(suffix, img, params)
     if not ok:
         raise VideoError(f"cannot encode the 16-bit frame {path}")
     Path(path).write_bytes(data.tobytes())
