@@ -32,7 +32,7 @@ import numpy as np
 
 from .errors import RewriteError, VideoError
 from .io.ahead import ordered_ahead
-from .io.plate_alpha import plate_output
+from .io.plate_output import plate_output
 from .io.video_like import like_video
 from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
                            resolve_mouth_mode, timeline_mouth_function)
@@ -649,7 +649,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     audio_from : path-like, optional
         The target video: its audio is kept, and (without ``compose``) its pixel aspect ratio
         and colour matrix (:func:`facetransfer.io.video_like.like_video`); an OpenEXR plate's
-        floats, an RGBA PNG plate's alpha (:func:`facetransfer.io.plate_alpha.plate_output`).
+        floats, a 16-bit plate's values, its alpha (:mod:`facetransfer.io.plate_output`).
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
         The frame to write for output frame ``i`` (default: the rewritten image).
     video_options : VideoOptions, optional
@@ -720,7 +720,7 @@ class _Frames:
     compose: Callable | None
     bar: object
     start: int
-    grading: object = None    # facetransfer.io.plate_alpha.plate_output's
+    grading: object = None    # facetransfer.io.plate_output.plate_output's
     seconds: float = 0.0
     rewritten: int = 0
 

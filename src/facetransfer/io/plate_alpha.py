@@ -29,7 +29,7 @@ from .video_display import described_input
 from .video_sequence import is_sequence, open_sequence, tiff_alpha_kind
 
 __all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
-           "plate_output", "sequence_alpha_kept", "sequence_has_alpha", "video_has_alpha"]
+           "sequence_alpha_kept", "sequence_has_alpha", "video_has_alpha"]
 
 #: Image-sequence outputs whose frames hold an alpha channel (8-bit RGBA, straight) and plates
 #: whose alpha is carried into them.
@@ -216,17 +216,3 @@ def plate_alpha(out, target, options=None, start: int = 0):
     if not is_sequence(target) or not sequence_alpha_kept(out, target):
         return None
     return PlateAlpha(target) if sequence_has_alpha(open_sequence(target)) else None
-
-
-def plate_output(out, target, options=None, start: int = 0):
-    """How output frame ``i`` of a rewrite of ``target`` written as ``out`` (with the video
-    options ``options``, from frame ``start`` on) is made from the rewritten colour beyond
-    it: an OpenEXR plate's floats (:func:`~facetransfer.io.exr_plate.plate_grading`), a 16-bit
-    plate's values (:func:`~facetransfer.io.plate_depth.plate_depth`, with a PNG's alpha) or
-    the target's alpha (:func:`plate_alpha`), as ``f(i, shown, rewritten)``; None: the colour
-    alone."""
-    from .exr_plate import plate_grading
-    from .plate_depth import plate_depth
-
-    return plate_grading(out, target) or plate_depth(out, target) \
-        or plate_alpha(out, target, options, start)
