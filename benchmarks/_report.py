@@ -17,6 +17,19 @@ def arguments(doc: str) -> argparse.ArgumentParser:
     return ap
 
 
+def out_and_data(doc: str) -> tuple[Path, Path]:
+    """``(--out, created; the asset mirror)`` of a script run on the data folder's clips (its
+    ``FACETRANSFER_DATA_DIR``), its command line described by ``doc``."""
+    from facetransfer.assets import data_dir
+
+    out = Path(arguments(doc).parse_args().out)
+    out.mkdir(parents=True, exist_ok=True)
+    root = data_dir()
+    if root is None:
+        raise SystemExit("set FACETRANSFER_DATA_DIR to the asset mirror (its video/ clips)")
+    return out, Path(root)
+
+
 def save_json(report: dict, path: Path) -> None:
     """Write ``report`` to ``path`` as indented JSON, atomically."""
     import json

@@ -32,7 +32,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _report import arguments, facetransfer_exe, save_json, save_plot  # noqa: E402
+from _report import facetransfer_exe, out_and_data, save_json, save_plot  # noqa: E402
 
 SECONDS = 3
 #: frames of each transfer (the target's first; 90: all of a re-encoded clip's 3 seconds)
@@ -141,12 +141,7 @@ def _plot(rows: list[dict], pictures: dict, path: Path) -> None:
 
 
 def main() -> int:
-    from facetransfer.assets import data_dir
-
-    args = arguments(__doc__).parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    data = Path(data_dir())
+    out, data = out_and_data(__doc__)
     other = data / "video" / "WDA_KatieHill_000.mp4"
     rows, pictures = [], {}
     with tempfile.TemporaryDirectory() as tmp:

@@ -27,7 +27,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _report import arguments, facetransfer_exe, save_json  # noqa: E402
+from _report import facetransfer_exe, out_and_data, save_json  # noqa: E402
 
 SECONDS = 3
 
@@ -81,12 +81,7 @@ def judge(out: Path, plates: list, first: int = 1001) -> dict:
 
 
 def main() -> int:
-    from facetransfer.assets import data_dir
-
-    args = arguments(__doc__).parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    data = Path(data_dir())
+    out, data = out_and_data(__doc__)
     source = data / "video" / "WDA_KatieHill_000.mp4"
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
