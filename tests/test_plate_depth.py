@@ -157,3 +157,36 @@ def test_a_transfer_onto_a_16_bit_plate_keeps_its_values(clips, quick_model_path
             assert np.array_equal(got[..., 3], plates[i][..., 3])
         changed_any += int((~same).sum())
     assert changed_any > 1000   # the face was rewritten
+
+
+def test_probe_says_what_a_rewrite_keeps_of_a_plate(tmp_path, monkeypatch):
+    """``probe`` names a plate's depth and alpha, and a video's alpha plane, with what a
+    rewrite keeps of them; an 8-bit opaque plate and an opaque video say neither."""
+    import cv2
+
+    from facetransfer.io.video_facts import fact_lines, video_facts
+
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")
+    for name, img in (("deep", np.full((8, 8, 4), 40000, np.uint16)),
+                      ("flat", np.full((8, 8, 3), 90, np.uint8))):
+        (tmp_path / name).mkdir()
+        for k in (1, 2):
+            cv2.imwrite(str(tmp_path / name / f"p.{k:04d}.png"), img)
+    deep = video_facts(tmp_path / "deep" / "p.%04d.png")
+    assert (deep.bits, deep.alpha) == (16, True)
+    assert fact_lines(deep)[-1] == ("  RGB images, 16 bits, seen in 8 (a PNG or TIFF sequence "
+                                    "written from it stays 16-bit); alpha: kept by transfer in "
+                                    "a PNG or TIFF sequence; no audio")
+    flat = video_facts(tmp_path / "flat" / "p.%04d.png")
+    assert (flat.bits, flat.alpha) == (8, False)
+    assert fact_lines(flat)[-1] == "  RGB images, 8 bits; no audio"
+    rgba = np.random.default_rng(5).integers(0, 256, (3, 16, 24, 4), dtype=np.uint8)
+    from test_plate_alpha import _prores_4444
+
+    mov = _prores_4444(tmp_path / "a.mov", rgba)
+    assert video_facts(mov).alpha and fact_lines(video_facts(mov))[-1] == (
+        "  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG or TIFF "
+        "sequence")
+    plain = write_video(tmp_path / "o.mp4", rgba[..., :3], 25.0)
+    assert not video_facts(plain).alpha
+    assert not any("alpha" in ln for ln in fact_lines(video_facts(plain)))

@@ -18,8 +18,9 @@ from dataclasses import asdict, dataclass
 from .video import audio_codecs
 from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
                             timecode_of, video_colour)
+from .plate_alpha import sequence_has_alpha, video_has_alpha
 from .video_read import video_info
-from .video_sequence import is_sequence, open_sequence
+from .video_sequence import bit_depth, is_sequence, open_sequence
 
 __all__ = ["VideoFacts", "video_facts", "fact_lines"]
 
@@ -62,6 +63,12 @@ class VideoFacts:
     timecode : str or None
         Its start timecode (:func:`facetransfer.io.video_display.timecode_of`), which the
         results that rewrite it carry.
+    alpha : bool
+        It has an alpha channel (:mod:`facetransfer.io.plate_alpha`: kept where the output
+        holds it).
+    bits : int
+        An image sequence's bits a sample (16: kept in a PNG or TIFF sequence,
+        :mod:`facetransfer.io.plate_depth`); 8 for a video (decoded to 8 bits).
     """
 
     path: str
@@ -81,6 +88,8 @@ class VideoFacts:
     first_number: int | None = None
     turn: int = 0
     timecode: str | None = None
+    alpha: bool = False
+    bits: int = 8
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -93,16 +102,18 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
     info = video_info(path)
     W, H = info.size
     if is_sequence(path):
+        seq = open_sequence(path)
         return VideoFacts(str(path), "image sequence", (W, H), (W, H), (1, 1), float(info.fps),
                           int(info.n_frames), False, float(info.n_frames / info.fps), None,
-                          "OpenCV", True, ColourTags(), None, open_sequence(path).first)
+                          "OpenCV", True, ColourTags(), None, seq.first,
+                          alpha=sequence_has_alpha(seq), bits=bit_depth(seq.file(0)) or 8)
     return VideoFacts(str(path), container(path), (W, H), (shown_width(W, info.sar), H),
                       info.sar, float(info.fps),
                       int(info.n_frames), info.steps is not None,
                       float(info.n_frames / info.fps) if info.fps else 0.0, first_field(path),
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
                       video_colour(path), ", ".join(audio_codecs(path)) or None, turn=info.turn,
-                      timecode=timecode_of(path))
+                      timecode=timecode_of(path), alpha=video_has_alpha(path))
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
@@ -139,10 +150,19 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 ("  OpenEXR, scene-linear: shown through the sRGB curve (above 1 as white) "
                  "to be tracked; a rewrite written as .exr keeps every float it does not "
                  "change; no audio" if str(f.path).lower().endswith(".exr") else
-                 "  RGB images, read as they are (16 bits scaled to 8, alpha dropped); no "
-                 "audio")]
+                 f"  {_image_kind(f)}; no audio")]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}" + (
                 "" if f.timecode is None else
                 f"; timecode {f.timecode} (the results start at it)"),
-            f"  container {f.container or '?'}; {reading}"]
+            f"  container {f.container or '?'}; {reading}"] + (
+                ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG or "
+                 "TIFF sequence"] if f.alpha else [])
+
+
+def _image_kind(f: VideoFacts) -> str:
+    """What an image sequence's frames hold and what a rewrite keeps of it."""
+    depth = "16 bits, seen in 8 (a PNG or TIFF sequence written from it stays 16-bit)" \
+        if f.bits == 16 else f"{f.bits} bits"
+    alpha = ("; alpha: kept by transfer in a PNG or TIFF sequence" if f.alpha else "")
+    return f"RGB images, {depth}{alpha}"
