@@ -114,7 +114,7 @@ def test_a_straight_tiff_plate_reads_as_stored(tmp_path, monkeypatch):
     associated one's stored colour is read as it is stored too."""
     import cv2
 
-    from facetransfer.io.video_sequence import tiff_alpha_kind
+    from facetransfer.io.frame_file import tiff_alpha_kind
 
     monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")
     rng = np.random.default_rng(3)

@@ -40,7 +40,7 @@ def _read16(path: Path) -> np.ndarray:
 
 def test_deep_frame_keeps_the_plate_where_nothing_changed():
     rng = np.random.default_rng(0)
-    from facetransfer.io.video_sequence import shown_16
+    from facetransfer.io.frame_file import shown_16
 
     eight = lambda a: np.rint(a / 257.0).astype(np.uint8)  # noqa: E731 (round(v / 257))
     every = np.arange(65536, dtype=np.uint16).reshape(256, 256)

@@ -6,7 +6,7 @@ own alpha, unchanged (rounded to 8 bits).
 
 The colour goes back as it was read: straight, beside the same alpha. A PNG's colour is
 straight by its specification; a TIFF's is when its alpha is unassociated (what Pillow and
-most tools write; :func:`facetransfer.io.video_sequence.tiff_alpha_kind`), read as stored
+most tools write; :func:`facetransfer.io.frame_file.tiff_alpha_kind`), read as stored
 (not through OpenCV, which premultiplies it); a video's colour is decoded apart from its alpha
 plane. A TIFF with associated alpha (its colour stored premultiplied) keeps only its colour.
 An OpenEXR plate keeps its alpha by :mod:`facetransfer.io.exr_plate`. Every other output
@@ -26,7 +26,8 @@ import numpy as np
 from ..errors import VideoError
 from .ffmpeg import ffmpeg_exe
 from .video_display import described_input
-from .video_sequence import is_sequence, open_sequence, tiff_alpha_kind
+from .frame_file import tiff_alpha_kind
+from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
            "sequence_alpha_kept", "sequence_has_alpha", "video_has_alpha"]
@@ -193,7 +194,7 @@ def sequence_alpha_kept(out, plate) -> bool:
     """Whether the alpha of the image-sequence plate ``plate`` is carried into the output
     ``out``: both hold alpha (:func:`keeps_alpha`), and a TIFF plate's is straight (an
     associated one, whose colour is stored premultiplied, would not match the straight alpha
-    the output is written with: :func:`facetransfer.io.video_sequence.tiff_alpha_kind`)."""
+    the output is written with: :func:`facetransfer.io.frame_file.tiff_alpha_kind`)."""
     if not (keeps_alpha(out) and keeps_alpha(plate)):
         return False
     return tiff_alpha_kind(open_sequence(plate).file(0)) != "premultiplied"

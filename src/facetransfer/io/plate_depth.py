@@ -3,7 +3,7 @@ rewrite did not change is the plate's own value, to the bit, and a changed one i
 rewrite with the plate's own detail below 8 bits (its grain).
 
 The tracker and the rewrite see such a plate in 8 bits (each value ``v`` as ``round(v / 257)``,
-:func:`facetransfer.io.video_sequence.shown_16`), so an 8-bit result would lose the fine
+:func:`facetransfer.io.frame_file.shown_16`), so an 8-bit result would lose the fine
 levels of every pixel of the frame, the face's surroundings included. Here a changed pixel is
 ``rewritten * 257 + (v - round(v / 257) * 257)`` (clipped), which reads back as ``rewritten``
 in 8 bits; an unchanged one is ``v``. Grey

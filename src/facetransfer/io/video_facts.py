@@ -20,7 +20,8 @@ from .video_display import (ColourTags, container, exact_seek, first_field, show
                             timecode_of, video_colour)
 from .plate_alpha import sequence_has_alpha, video_has_alpha
 from .video_read import video_info
-from .video_sequence import bit_depth, is_sequence, open_sequence
+from .frame_file import bit_depth
+from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["VideoFacts", "video_facts", "fact_lines"]
 

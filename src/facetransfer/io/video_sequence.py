@@ -24,6 +24,7 @@ from typing import Iterator
 import numpy as np
 
 from ..errors import VideoError
+from .frame_file import read_frame_file
 
 log = logging.getLogger(__name__)
 
@@ -196,7 +197,7 @@ def _opened(path: str, stamp: str) -> Sequence:
         raise VideoError(f"image sequence {p}: frame {first + n} is missing "
                          f"({_numbered(p, first + n).name}): frames {_span(first, first + n - 1)}"
                          f" and {_span(after, end)} are present; a sequence runs without gaps")
-    image = _read_frame(files[first], p)
+    image = read_frame_file(files[first], p)
     fps = sequence_fps()
     if not os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip():
         log.warning("%s: an image sequence stores no frame rate; read at %g fps "
@@ -206,97 +207,6 @@ def _opened(path: str, stamp: str) -> Sequence:
 
 def _span(a: int, b: int) -> str:
     return str(a) if a == b else f"{a}-{b}"
-
-
-def _read_frame(file: Path, pattern: Path) -> np.ndarray:
-    """One frame file as ``(H, W, 3) uint8`` RGB (16 bits rounded to 8, :func:`shown_16`; grey
-    expanded, alpha dropped with the colour as stored, a JPEG's EXIF orientation applied;
-    OpenEXR's linear floats shown through the sRGB curve,
-    :func:`facetransfer.io.exr.shown_frame`)."""
-    import cv2
-
-    if file.suffix.lower() == ".exr":
-        from .exr import read_exr_image, shown_frame
-
-        return shown_frame(read_exr_image(file))
-    if file.suffix.lower() in (".tif", ".tiff"):
-        straight = _straight_tiff(file)
-        if straight is not None:
-            return straight
-    if bit_depth(file) == 16:
-        deep = cv2.imread(str(file), cv2.IMREAD_UNCHANGED)
-        if deep is not None and deep.dtype == np.uint16:
-            return shown_16(deep)
-    bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
-    if bgr is None:
-        raise VideoError(f"image sequence {pattern}: cannot read frame file {file} (not an "
-                         "image OpenCV decodes, or damaged)")
-    return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-
-
-def bit_depth(file: Path) -> int | None:
-    """Bits a sample of a PNG or TIFF frame file (from its header: PNG's IHDR, TIFF's
-    BitsPerSample); None for other files or an unreadable header."""
-    suffix = file.suffix.lower()
-    try:
-        if suffix == ".png":
-            with open(file, "rb") as fh:
-                head = fh.read(25)
-            return head[24] if len(head) == 25 and head[12:16] == b"IHDR" else None
-        if suffix in (".tif", ".tiff"):
-            from PIL import Image
-
-            with Image.open(file) as im:
-                bits = im.tag_v2.get(258)
-                return int(bits[0]) if bits else None
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
-def shown_16(deep: np.ndarray) -> np.ndarray:
-    """A 16-bit frame as OpenCV stores it (grey, grey + alpha, BGR, BGRA) as the ``(H, W, 3)
-    uint8`` RGB the tools see: each value ``v`` as ``round(v / 257)`` (65535 -> 255, the
-    inverse of ``8-bit * 257``), the alpha dropped."""
-    v = deep.astype(np.uint32)
-    eight = ((v * 2 + 257) // 514).astype(np.uint8)
-    if eight.ndim == 2:
-        return np.repeat(eight[..., None], 3, axis=2)
-    if eight.shape[2] <= 2:
-        return np.repeat(eight[..., :1], 3, axis=2)
-    return np.ascontiguousarray(eight[..., 2::-1])
-
-
-def tiff_alpha_kind(file: Path) -> str | None:
-    """How an 8-bit RGBA TIFF's alpha is stored: ``"straight"`` (unassociated, TIFF's
-    ExtraSamples 2, what Pillow writes), ``"premultiplied"`` (associated, ExtraSamples 1);
-    None for any other file (no alpha, another bit depth, unreadable)."""
-    from PIL import Image
-
-    try:
-        with Image.open(file) as im:
-            bits = im.tag_v2.get(258) if hasattr(im, "tag_v2") else None
-            if bits not in ((8, 8, 8, 8),):
-                return None
-            kind = {(2,): "straight", (1,): "premultiplied"}.get(im.tag_v2.get(338))
-            return kind if im.mode in ("RGBA", "RGBa") else None
-    except (OSError, ValueError):
-        return None
-
-
-def _straight_tiff(file: Path) -> np.ndarray | None:
-    """An 8-bit RGBA TIFF with straight alpha as its stored RGB, ``(H, W, 3) uint8`` (OpenCV's
-    reader, libtiff's RGBA interface, returns that colour premultiplied by the alpha); None
-    for any other file, which OpenCV reads as stored."""
-    from PIL import Image
-
-    if tiff_alpha_kind(file) != "straight":
-        return None
-    try:
-        with Image.open(file) as im:
-            return np.asarray(im.convert("RGB"))
-    except (OSError, ValueError):
-        return None   # OpenCV's reader names what is wrong
 
 
 def sequence_frames(path, *, start: int = 0, stop: int | None = None) -> Iterator[np.ndarray]:
@@ -329,7 +239,7 @@ def _decoded_ahead(seq: Sequence, frames: range) -> Iterator[tuple[int, np.ndarr
     from .ahead import ordered_ahead
 
     def read(i: int):
-        return i, _read_frame(seq.file(i), seq.pattern)
+        return i, read_frame_file(seq.file(i), seq.pattern)
 
     yield from ordered_ahead(read, ((i,) for i in frames), ahead=_AHEAD)
 
