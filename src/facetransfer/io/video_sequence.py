@@ -3,8 +3,9 @@
 
 A sequence starts at its lowest frame number present (0, 1, 1001, ...) and runs without a gap;
 its frames are PNG, JPEG, TIFF or BMP files (8 or 16 bits a channel, grey or colour; an alpha
-channel is dropped), read by OpenCV and given as ``(H, W, 3) uint8`` RGB, or OpenEXR files of
-scene-linear floats, shown through the sRGB curve (:mod:`facetransfer.io.exr`). A sequence
+channel is set aside), given as ``(H, W, 3) uint8`` RGB (:mod:`facetransfer.io.frame_file`), or
+OpenEXR files of scene-linear floats, shown through the sRGB curve (:mod:`facetransfer.io.exr`).
+A sequence
 stores no frame rate: it is read at :data:`DEFAULT_SEQUENCE_FPS` unless
 ``FACETRANSFER_SEQUENCE_FPS`` (the commands' ``--sequence-fps``) gives another. It has no audio,
 no fields and square pixels.
