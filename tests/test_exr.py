@@ -134,7 +134,9 @@ def test_an_exr_plate_is_rewritten_in_its_own_floats(clips, target, quick_model_
     (tmp_path / "out").mkdir()
     code = main(["transfer", "--target", str(plate), *map(str, common),
                  "--out", str(tmp_path / "out" / "ft.%04d.exr")])
-    assert code == 0, capsys.readouterr().err
+    out = capsys.readouterr()
+    assert code == 0, out.err
+    assert ", in the plate's floats, with its other channels, no audio" in out.out
     code = main(["transfer", "--target", str(lossless), *map(str, common),
                  "--out", str(tmp_path / "png_%03d.png")])
     assert code == 0, capsys.readouterr().err

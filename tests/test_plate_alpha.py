@@ -187,14 +187,18 @@ def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, 
     with caplog.at_level(logging.WARNING, logger="facetransfer"):
         code = main(["transfer", "--target", str(plate), *map(str, common),
                      "--out", str(tmp_path / "out" / f"ft.%04d{suffix}")])
-        assert code == 0, capsys.readouterr().err
+        out = capsys.readouterr()
+        assert code == 0, out.err
+        assert ", with the plate's alpha, no audio" in out.out  # the summary line says it
         assert not [r for r in caplog.records if "alpha" in r.getMessage()]
         code = main(["transfer", "--target", str(lossless), *map(str, common),
                      "--out", str(tmp_path / "png_%03d.png")])
         assert code == 0, capsys.readouterr().err
         code = main(["transfer", "--target", str(plate), *map(str, common),
                      "--out", str(tmp_path / "jpg" / "ft.%04d.jpg")])
-        assert code == 0, capsys.readouterr().err
+        out = capsys.readouterr()
+        assert code == 0, out.err
+        assert "alpha" not in out.out
     said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
     assert said == [f"{plate} has an alpha channel; the result is written without one (colour "
                     "only; transfer keeps a target's in ProRes 4444 and PNG or TIFF "
@@ -293,6 +297,7 @@ def test_a_transfer_onto_a_prores_4444_target_keeps_its_alpha(clips, quick_model
                 assert main(["transfer", "--target", str(target), *map(str, common),
                              "--codec", "prores", "--out", str(out)]) == 0, \
                     capsys.readouterr().err
+                assert ", with the target's alpha" in capsys.readouterr().out
             finally:
                 os.environ.pop("FACETRANSFER_RENDER_CACHE")
             assert "prores (4444)" in described_input(out) and video_has_alpha(out)

@@ -137,6 +137,9 @@ def test_a_transfer_onto_a_16_bit_plate_keeps_its_values(clips, quick_model_path
     assert main(["transfer", "--target", str(plate), *map(str, common),
                  "--out", str(tmp_path / "out" / f"ft.%04d{suffix}")]) == 0, \
         capsys.readouterr().err
+    said = capsys.readouterr().out   # the summary line says what was kept
+    assert ", in the plate's 16 bits" + (", with its alpha" if kind == "rgba" else "") + \
+        ", no audio" in said
     assert main(["transfer", "--target", str(plate), *map(str, common), "--out",
                  str(tmp_path / "eight" / "ft.%04d.jpg")]) == 0   # 8 bits: the same rewrite
     changed_any = 0

@@ -35,7 +35,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from .arkit import attach_activations
-from .errors import FaceTransferError
+from .errors import FaceTransferError, RewriteError
 from .topology import close_mouth, mesh_topology
 from .track.project import project_landmarks, take_frames
 
@@ -43,6 +43,7 @@ log = logging.getLogger(__name__)
 
 __all__ = [
     "ALIGN_MODES",
+    "nearest_frames",
     "TransferError",
     "TimeMap",
     "time_map",
@@ -617,3 +618,30 @@ def parse_weights(text: str, r: int, *, what: str = "--identity-weights") -> np.
     if vals.shape != (r,) or not np.all(np.isfinite(vals)):
         raise TransferError(f"{what}: expected {r} finite numbers, got {vals.size}")
     return vals
+
+
+def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None
+                   ) -> np.ndarray:
+    """For each query row the index of the nearest bank row (Euclidean), among ``valid`` ones.
+
+    The performance-driven texture of §6 ("the weighted sum of nearest neighbors") with one
+    neighbour: the frame of the texture video whose attributes are closest.
+
+    Parameters
+    ----------
+    query : (n, r)
+    bank : (m, r)
+    valid : (m,) bool, optional
+
+    Returns
+    -------
+    (n,) int64
+    """
+    Q = np.asarray(query, np.float64)
+    B = np.asarray(bank, np.float64)
+    ok = np.ones(B.shape[0], bool) if valid is None else np.asarray(valid, bool)
+    if not ok.any():
+        raise RewriteError("no frame to take a texture from (all lost)")
+    idx = np.flatnonzero(ok)
+    d = ((Q[:, None, :] - B[None, idx, :]) ** 2).sum(axis=-1)
+    return idx[np.argmin(d, axis=1)]

@@ -43,7 +43,7 @@ from .track import obtain
 from .track.presets import track_options
 from .track.video_detect import default_workers
 from .track.project import project_landmarks, take_frames
-from .transfer import constant_weights, recombine, resample_track, time_map
+from .transfer import constant_weights, nearest_frames, recombine, resample_track, time_map
 
 log = logging.getLogger(__name__)
 
@@ -195,33 +195,6 @@ class TransferPlan:
     @property
     def n_frames(self) -> int:
         return int(self.new_track.n_frames)
-
-
-def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None
-                   ) -> np.ndarray:
-    """For each query row the index of the nearest bank row (Euclidean), among ``valid`` ones.
-
-    The performance-driven texture of §6 ("the weighted sum of nearest neighbors") with one
-    neighbour: the frame of the texture video whose attributes are closest.
-
-    Parameters
-    ----------
-    query : (n, r)
-    bank : (m, r)
-    valid : (m,) bool, optional
-
-    Returns
-    -------
-    (n,) int64
-    """
-    Q = np.asarray(query, np.float64)
-    B = np.asarray(bank, np.float64)
-    ok = np.ones(B.shape[0], bool) if valid is None else np.asarray(valid, bool)
-    if not ok.any():
-        raise RewriteError("no frame to take a texture from (all lost)")
-    idx = np.flatnonzero(ok)
-    d = ((Q[:, None, :] - B[None, idx, :]) ** 2).sum(axis=-1)
-    return idx[np.argmin(d, axis=1)]
 
 
 def plan_transfer(target, model, *, target_track=None, expression_from=None,
@@ -579,6 +552,10 @@ class TransferResult:
         Seconds per stage (read, track, render, write).
     resumed : int
         Frames rendered by an interrupted run and taken up by this one.
+    kept : str or None
+        What the output kept of its target beyond the colour, as the summary line says it
+        (``"with the plate's alpha"``, ...: :mod:`facetransfer.io.plate_output`); None: the
+        colour alone.
     """
 
     path: Path
@@ -588,6 +565,7 @@ class TransferResult:
     plan: TransferPlan
     timings: dict
     resumed: int = 0
+    kept: str | None = None
 
 
 def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: bool = True) -> int:
@@ -617,12 +595,15 @@ class RenderResult:
         Whether audio was muxed in.
     resumed : int
         Frames an interrupted run had rendered and this one took up (``resume``).
+    kept : str or None
+        As :attr:`TransferResult.kept`.
     """
 
     timings: dict
     n_rewritten: int
     audio: bool
     resumed: int = 0
+    kept: str | None = None
 
 
 def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | None = None,
@@ -703,7 +684,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
         audio, render.rewritten = writer.result.audio, writer.marked
     timings["render"] = render.seconds
     timings["write"] = time.perf_counter() - t0 - render.seconds
-    return RenderResult(timings, render.rewritten, audio, start)
+    return RenderResult(timings, render.rewritten, audio, start,
+                        getattr(render.grading, "kept", None))
 
 
 @dataclass
@@ -846,7 +828,7 @@ def transfer_video(sources: TransferSources, out, model, *,
     if meshes_dir is not None:
         write_mesh_sequence(meshes_dir, plan.new_track, model)
     return TransferResult(Path(out), plan.n_frames, rendered.n_rewritten, rendered.audio, plan,
-                          rendered.timings, rendered.resumed)
+                          rendered.timings, rendered.resumed, rendered.kept)
 
 
 def puppet_video(track, model, identity: np.ndarray, out, *, video_options=None,

@@ -367,6 +367,7 @@ def run_transfer(args) -> int:
     print(f"wrote {res.path}: {frame_count(res.n_frames)}" + _numbered(args.out, args.target,
                                                               res.n_frames)
           + (f" ({kept} kept original: face lost)" if kept else "")
+          + (f", {res.kept}" if res.kept else "")
           + (", with the target's audio" if res.audio else ", no audio"))
     if args.save_track:
         print(f"wrote {args.save_track}")

@@ -22,6 +22,9 @@ class PlateGrading:
         The plate's pattern (``plate/sh010.%04d.exr``).
     """
 
+    #: What the output keeps of the plate (the transfer's summary line says it).
+    kept = "in the plate's floats, with its other channels"
+
     def __init__(self, plate) -> None:
         self.sequence = open_sequence(plate)
 

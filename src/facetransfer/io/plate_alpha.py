@@ -85,6 +85,9 @@ class PlateAlpha:
         The plate's pattern (``plate/sh010.%04d.png``).
     """
 
+    #: What the output keeps of the plate (the transfer's summary line says it).
+    kept = "with the plate's alpha"
+
     def __init__(self, plate) -> None:
         self.sequence = open_sequence(plate)
 
@@ -127,6 +130,9 @@ class VideoAlpha:
         The first frame that will be asked for (the frames before it are decoded and
         dropped).
     """
+
+    #: What the output keeps of the video (the transfer's summary line says it).
+    kept = "with the target's alpha"
 
     def __init__(self, video, start: int = 0) -> None:
         self.video = Path(video)

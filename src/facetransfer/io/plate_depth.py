@@ -74,6 +74,10 @@ class PlateDepth:
 
     def __init__(self, plate) -> None:
         self.sequence = open_sequence(plate)
+        first = _read_deep(self.sequence.file(0))
+        #: What the output keeps of the plate (the transfer's summary line says it).
+        self.kept = "in the plate's 16 bits" + (", with its alpha" if first is not None and
+                                                _channels(first) == 4 else "")
 
     def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
         f = self.sequence.file(i)
