@@ -618,3 +618,50 @@ def test_batch_manifest_loader(work, data):
     check_loader(lambda q: read_manifest(q, required=("video",), allowed=("video", "name", "face"),
                                          paths=("video",)), p,
                  ok=lambda rows: rows and all(r.get("video") for r in rows))
+
+
+# ------------------------------------------------------------------------------ plate frames
+@pytest.fixture(scope="module")
+def plate_frames():
+    """A straight-alpha RGBA TIFF (Pillow's) and a 16-bit RGBA PNG, as bytes."""
+    import cv2
+    from PIL import Image
+
+    rgba = np.random.default_rng(0).integers(0, 256, (16, 16, 4), dtype=np.uint8)
+    buf = io.BytesIO()
+    Image.fromarray(rgba).save(buf, format="TIFF")
+    ok, png = cv2.imencode(".png", rgba.astype(np.uint16) * 257)
+    assert ok
+    return {".tif": buf.getvalue(), ".png": png.tobytes()}
+
+
+@FUZZ
+@given(data=st.data(), suffix=st.sampled_from([".tif", ".png"]))
+def test_plate_frame_loader(work, plate_frames, data, suffix):
+    """A damaged frame of a TIFF or 16-bit PNG plate: one error naming the plate, never
+    Pillow's own (struct.error, TypeError, DecompressionBombError were found this way)."""
+    from facetransfer.io.frame_file import read_frame_file
+
+    p = _put(work, f"p.0001{suffix}", data.draw(damaged_bytes(plate_frames[suffix])))
+    check_loader(lambda q: read_frame_file(q, work / f"p.%04d{suffix}"), p,
+                 ok=lambda a: a.dtype == np.uint8 and a.ndim == 3 and a.shape[2] == 3)
+
+
+def test_a_plate_frame_of_absurd_size_is_one_error(work, plate_frames):
+    """A TIFF whose header claims a huge width (Pillow's DecompressionBombError when opened):
+    one error naming the plate, not Pillow's."""
+    import struct
+
+    from facetransfer.io.frame_file import read_frame_file
+
+    b = bytearray(plate_frames[".tif"])
+    e = "<" if b[:2] == b"II" else ">"
+    ifd = struct.unpack(e + "I", b[4:8])[0]
+    for k in range(struct.unpack(e + "H", b[ifd:ifd + 2])[0]):
+        at = ifd + 2 + 12 * k
+        tag, typ = struct.unpack(e + "HH", b[at:at + 4])
+        if tag in (256, 257):   # ImageWidth, ImageLength
+            b[at + 8:at + 12] = struct.pack(e + ("H" if typ == 3 else "I"), 60000).ljust(4, b"\0")
+    p = _put(work, "huge.0001.tif", bytes(b))
+    with pytest.raises(FaceTransferError, match="huge"):
+        read_frame_file(p, work / "huge.%04d.tif")

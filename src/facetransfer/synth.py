@@ -642,7 +642,9 @@ def load_texture_image(path: str | os.PathLike) -> np.ndarray:
     p = Path(path)
     if not p.is_file():
         raise AssetError(f"texture image {p} does not exist")
-    img = cv2.imread(str(p), cv2.IMREAD_COLOR)
+    from .io.frame_file import read_image
+
+    img = read_image(p, cv2.IMREAD_COLOR)
     if img is None or img.ndim != 3 or img.shape[2] != 3:
         raise AssetError(f"texture {p} is not an image OpenCV can read")
     return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)

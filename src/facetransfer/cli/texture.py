@@ -37,10 +37,11 @@ def _read_image(path: str, what: str, *, gray: bool = False) -> np.ndarray:
     """An RGB image ``(H, W, 3) uint8`` (or grey ``(H, W)``); one clear error if unreadable."""
     import cv2
 
+    from ..io.frame_file import read_image
     from ..io.npz import check_input_file
 
     p = check_input_file(path, what)
-    img = cv2.imread(str(p), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
+    img = read_image(Path(p), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
     if img is None:
         raise FaceTransferError(f"{what} {p} is not an image OpenCV can read")
     return img if gray else cv2.cvtColor(img, cv2.COLOR_BGR2RGB)

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..errors import VideoError
 
-__all__ = ["read_frame_file", "bit_depth", "shown_16", "tiff_alpha_kind"]
+__all__ = ["read_frame_file", "read_image", "bit_depth", "shown_16", "tiff_alpha_kind"]
 
 
 def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
@@ -34,14 +34,27 @@ def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
         if straight is not None:
             return straight
     if bit_depth(file) == 16:
-        deep = cv2.imread(str(file), cv2.IMREAD_UNCHANGED)
+        deep = read_image(file, cv2.IMREAD_UNCHANGED)
         if deep is not None and deep.dtype == np.uint16:
             return shown_16(deep)
-    bgr = cv2.imread(str(file), cv2.IMREAD_COLOR)
+    bgr = read_image(file, cv2.IMREAD_COLOR)
     if bgr is None:
         raise VideoError(f"image sequence {pattern}: cannot read frame file {file} (not an "
                          "image OpenCV decodes, or damaged)")
     return cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+
+
+def read_image(file: Path, flags: int) -> np.ndarray | None:
+    """``cv2.imread(file, flags)``: None where OpenCV cannot decode it; VideoError naming the
+    file where OpenCV refuses it (its own exception: e.g. a header claiming more pixels than
+    OpenCV reads, ``CV_IO_MAX_IMAGE_PIXELS``)."""
+    import cv2
+
+    try:
+        return cv2.imread(str(file), flags)
+    except cv2.error as exc:
+        why = str(exc).strip().splitlines()[-1] if str(exc).strip() else "refused"
+        raise VideoError(f"cannot read image file {file} (OpenCV: {why})") from None
 
 
 def bit_depth(file: Path) -> int | None:
@@ -59,8 +72,8 @@ def bit_depth(file: Path) -> int | None:
             with Image.open(file) as im:
                 bits = im.tag_v2.get(258)
                 return int(bits[0]) if bits else None
-    except (OSError, ValueError, IndexError):
-        return None
+    except Exception:  # noqa: BLE001 - a damaged header (Pillow raises several kinds): None,
+        return None     # and OpenCV's reader names the file
     return None
 
 
@@ -90,8 +103,8 @@ def tiff_alpha_kind(file: Path) -> str | None:
                 return None
             kind = {(2,): "straight", (1,): "premultiplied"}.get(im.tag_v2.get(338))
             return kind if im.mode in ("RGBA", "RGBa") else None
-    except (OSError, ValueError):
-        return None
+    except Exception:  # noqa: BLE001 - a damaged header (Pillow raises several kinds, and a
+        return None     # DecompressionBombError for a huge frame): OpenCV reads the file
 
 
 def _straight_tiff(file: Path) -> np.ndarray | None:
@@ -105,5 +118,5 @@ def _straight_tiff(file: Path) -> np.ndarray | None:
     try:
         with Image.open(file) as im:
             return np.asarray(im.convert("RGB"))
-    except (OSError, ValueError):
-        return None   # OpenCV's reader names what is wrong
+    except Exception:  # noqa: BLE001 - damaged or huge (Pillow's DecompressionBombError):
+        return None     # OpenCV's reader reads it or names what is wrong

@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import VideoError
 from .ffmpeg import ffmpeg_exe
 from .video_display import described_input
-from .frame_file import tiff_alpha_kind
+from .frame_file import read_image, tiff_alpha_kind
 from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
@@ -41,7 +41,7 @@ def _read_unchanged(path: Path) -> np.ndarray | None:
     """The image file as stored (every channel, its bit depth), or None if unreadable."""
     import cv2
 
-    return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    return read_image(Path(path), cv2.IMREAD_UNCHANGED)
 
 
 def _has_alpha(img: np.ndarray | None) -> bool:

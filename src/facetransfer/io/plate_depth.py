@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VideoError
+from .frame_file import read_image
 from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["DEPTH_SUFFIXES", "PlateDepth", "plate_depth", "deep_frame"]
@@ -30,7 +31,7 @@ DEPTH_SUFFIXES = (".png", ".tif", ".tiff")
 def _read_deep(path: Path) -> np.ndarray | None:
     import cv2
 
-    return cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    return read_image(Path(path), cv2.IMREAD_UNCHANGED)
 
 
 def deep_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
