@@ -635,6 +635,7 @@ def plate_frames():
     return {".tif": buf.getvalue(), ".png": png.tobytes()}
 
 
+@pytest.mark.filterwarnings("ignore:Truncated File Read:UserWarning")  # Pillow's, true
 @FUZZ
 @given(data=st.data(), suffix=st.sampled_from([".tif", ".png"]))
 def test_plate_frame_loader(work, plate_frames, data, suffix):
