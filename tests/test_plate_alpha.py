@@ -160,6 +160,9 @@ def test_an_rgba_frame_is_written_only_where_the_output_holds_alpha(tmp_path):
         with pytest.raises(VideoError, match=r"frame of shape \(6, 8, 4\) does not match"), \
                 VideoWriter(tmp_path / pattern, 25.0, (8, 6)) as w:
             w.write(rgba[0])
+    with pytest.raises(VideoError, match=r"16-bit frames are written to PNG or TIFF"), \
+            VideoWriter(tmp_path / "w.mp4", 25.0, (8, 6)) as w:
+        w.write(rgba[0, ..., :3].astype(np.uint16) * 257)   # not wrapped to 8 bits unsaid
 
 
 @pytest.mark.parametrize("cache,suffix", [("on", ".png"), ("off", ".png"), ("on", ".tif")])

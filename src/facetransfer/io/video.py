@@ -639,14 +639,17 @@ class VideoWriter:
                                  start=self.audio_start, duration=self.expected / self.fps)
 
     def write(self, frame: np.ndarray) -> None:
-        """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size (of a PNG sequence,
-        ``(H, W, 4)`` RGBA too; of an OpenEXR sequence, float16 or float32 linear RGB,
-        or an :class:`~facetransfer.io.exr.ExrImage`: :func:`facetransfer.io.exr.write_exr`)."""
+        """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size (of a PNG or TIFF
+        sequence, ``(H, W, 4)`` RGBA and uint16 too; of a video written with alpha, RGBA; of an
+        OpenEXR sequence, float16 or float32 linear RGB, or an
+        :class:`~facetransfer.io.exr.ExrImage`: :func:`facetransfer.io.exr.write_exr`)."""
         if self.result is not None or (self._proc is None and self._tmpdir is None):
             raise VideoError(f"video {self.path} is already closed")
         if not fits_output(frame.shape, self.size, self.path, self.options.alpha):
             raise VideoError(f"frame of shape {frame.shape} does not match video size "
                              f"{self.size[0]}x{self.size[1]} of {self.path}")
+        if self._tmpdir is None and frame.dtype == np.uint16:
+            raise VideoError(f"{self.path}: 16-bit frames are written to PNG or TIFF sequences")
         if self._tmpdir is not None:
             self._write_image(frame if _linear(frame, self.path) or frame.dtype == np.uint16
                               else np.ascontiguousarray(frame, dtype=np.uint8))
