@@ -691,9 +691,9 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
 @dataclass
 class _Frames:
     """The rewritten frames of a plan from ``start`` on (:func:`rewrite_frames`), timed and
-    counted: ``seconds`` spent rendering, ``rewritten`` frames that show a face; of an OpenEXR
-    plate written as OpenEXR, in its linear light, and of an RGBA PNG plate written as PNG,
-    with its alpha (``grading``)."""
+    counted: ``seconds`` spent rendering, ``rewritten`` frames that show a face; with what
+    each output frame keeps of its target beyond the colour (``grading``:
+    :func:`facetransfer.io.plate_output.plate_output`)."""
 
     plan: TransferPlan
     model: object

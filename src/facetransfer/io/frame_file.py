@@ -15,7 +15,8 @@ import numpy as np
 
 from ..errors import VideoError
 
-__all__ = ["read_frame_file", "read_image", "bit_depth", "shown_16", "tiff_alpha_kind"]
+__all__ = ["read_frame_file", "read_image", "bit_depth", "eight_bits", "shown_16",
+           "tiff_alpha_kind"]
 
 
 def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
@@ -29,11 +30,13 @@ def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
         from .exr import read_exr_image, shown_frame
 
         return shown_frame(read_exr_image(file))
-    if file.suffix.lower() in (".tif", ".tiff"):
+    is_tiff = file.suffix.lower() in (".tif", ".tiff")
+    tiff = _tiff_header(file) if is_tiff else None   # one look for both questions below
+    if _alpha_kind(tiff) == "straight":
         straight = _straight_tiff(file)
         if straight is not None:
             return straight
-    if bit_depth(file) == 16:
+    if ((tiff[0] if tiff else None) if is_tiff else bit_depth(file)) == 16:
         deep = read_image(file, cv2.IMREAD_UNCHANGED)
         if deep is not None and deep.dtype == np.uint16:
             return shown_16(deep)
@@ -61,28 +64,44 @@ def bit_depth(file: Path) -> int | None:
     """Bits a sample of a PNG or TIFF frame file (from its header: PNG's IHDR, TIFF's
     BitsPerSample); None for other files or an unreadable header."""
     suffix = file.suffix.lower()
+    if suffix in (".tif", ".tiff"):
+        tiff = _tiff_header(file)
+        return None if tiff is None else tiff[0]
+    if suffix != ".png":
+        return None
     try:
-        if suffix == ".png":
-            with open(file, "rb") as fh:
-                head = fh.read(25)
-            return head[24] if len(head) == 25 and head[12:16] == b"IHDR" else None
-        if suffix in (".tif", ".tiff"):
-            from PIL import Image
+        with open(file, "rb") as fh:
+            head = fh.read(25)
+    except OSError:
+        return None   # OpenCV's reader names the file
+    return head[24] if len(head) == 25 and head[12:16] == b"IHDR" else None
 
-            with Image.open(file) as im:
-                bits = im.tag_v2.get(258)
-                return int(bits[0]) if bits else None
-    except Exception:  # noqa: BLE001 - a damaged header (Pillow raises several kinds): None,
-        return None     # and OpenCV's reader names the file
-    return None
+
+def _tiff_header(file: Path) -> tuple[int | None, tuple, tuple, str] | None:
+    """``(bits of the first sample, bits of every sample, ExtraSamples, Pillow's mode)`` of a
+    TIFF, from its header (Pillow reads no pixels); None where the header cannot be read."""
+    from PIL import Image
+
+    try:
+        with Image.open(file) as im:
+            bits = im.tag_v2.get(258)
+            return (int(bits[0]) if bits else None, tuple(bits or ()),
+                    tuple(im.tag_v2.get(338) or ()), im.mode)
+    except Exception:  # noqa: BLE001 - a damaged header (Pillow raises several kinds, and a
+        return None     # DecompressionBombError for a huge frame): OpenCV's reader decides
+
+
+def eight_bits(v: np.ndarray) -> np.ndarray:
+    """16-bit values as 8-bit ones, ``round(v / 257)`` (65535 -> 255: the inverse of
+    ``8-bit * 257``), uint8 of ``v``'s shape."""
+    return ((np.asarray(v, np.uint32) * 2 + 257) // 514).astype(np.uint8)
 
 
 def shown_16(deep: np.ndarray) -> np.ndarray:
     """A 16-bit frame as OpenCV stores it (grey, grey + alpha, BGR, BGRA) as the ``(H, W, 3)
     uint8`` RGB the tools see: each value ``v`` as ``round(v / 257)`` (65535 -> 255, the
     inverse of ``8-bit * 257``), the alpha dropped."""
-    v = deep.astype(np.uint32)
-    eight = ((v * 2 + 257) // 514).astype(np.uint8)
+    eight = eight_bits(deep)
     if eight.ndim == 2:
         return np.repeat(eight[..., None], 3, axis=2)
     if eight.shape[2] <= 2:
@@ -94,27 +113,24 @@ def tiff_alpha_kind(file: Path) -> str | None:
     """How an 8-bit RGBA TIFF's alpha is stored: ``"straight"`` (unassociated, TIFF's
     ExtraSamples 2, what Pillow writes), ``"premultiplied"`` (associated, ExtraSamples 1);
     None for any other file (no alpha, another bit depth, unreadable)."""
-    from PIL import Image
+    return _alpha_kind(_tiff_header(file) if file.suffix.lower() in (".tif", ".tiff")
+                       else None)
 
-    try:
-        with Image.open(file) as im:
-            bits = im.tag_v2.get(258) if hasattr(im, "tag_v2") else None
-            if bits not in ((8, 8, 8, 8),):
-                return None
-            kind = {(2,): "straight", (1,): "premultiplied"}.get(im.tag_v2.get(338))
-            return kind if im.mode in ("RGBA", "RGBa") else None
-    except Exception:  # noqa: BLE001 - a damaged header (Pillow raises several kinds, and a
-        return None     # DecompressionBombError for a huge frame): OpenCV reads the file
+
+def _alpha_kind(tiff) -> str | None:
+    """:func:`tiff_alpha_kind` of a header read by :func:`_tiff_header` (None: not a TIFF)."""
+    if tiff is None or tiff[1] != (8, 8, 8, 8) or tiff[3] not in ("RGBA", "RGBa"):
+        return None
+    return {(2,): "straight", (1,): "premultiplied"}.get(tiff[2])
 
 
 def _straight_tiff(file: Path) -> np.ndarray | None:
-    """An 8-bit RGBA TIFF with straight alpha as its stored RGB, ``(H, W, 3) uint8`` (OpenCV's
-    reader, libtiff's RGBA interface, returns that colour premultiplied by the alpha); None
-    for any other file, which OpenCV reads as stored."""
+    """An 8-bit RGBA TIFF with straight alpha (:func:`tiff_alpha_kind`) as its stored RGB,
+    ``(H, W, 3) uint8`` (OpenCV's reader, libtiff's RGBA interface, returns that colour
+    premultiplied by the alpha); None where Pillow cannot decode it (OpenCV then reads it or
+    names what is wrong)."""
     from PIL import Image
 
-    if tiff_alpha_kind(file) != "straight":
-        return None
     try:
         with Image.open(file) as im:
             return np.asarray(im.convert("RGB"))

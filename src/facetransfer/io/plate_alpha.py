@@ -26,7 +26,7 @@ import numpy as np
 from ..errors import VideoError
 from .ffmpeg import ffmpeg_exe
 from .video_display import described_input
-from .frame_file import read_image, tiff_alpha_kind
+from .frame_file import eight_bits, read_image, tiff_alpha_kind
 from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
@@ -100,20 +100,12 @@ class PlateAlpha:
         if not _has_alpha(img):
             return np.full(img.shape[:2], 255, np.uint8)
         a = img[..., -1]
-        if a.dtype == np.uint16:
-            return ((a.astype(np.uint32) + 128) // 257).astype(np.uint8)
-        return a
+        return eight_bits(a) if a.dtype == np.uint16 else a
 
     def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
         """Output frame ``i`` (``shown``, the plate's frame as read, is not needed: the alpha is
         read from its file)."""
-        a = self.alpha(i)
-        rgb = np.asarray(rewritten, np.uint8)
-        if a.shape != rgb.shape[:2]:
-            raise VideoError(f"frame {self.sequence.file(i)} of the plate is "
-                             f"{a.shape[1]}x{a.shape[0]}, the rewrite "
-                             f"{rgb.shape[1]}x{rgb.shape[0]}")
-        return np.dstack([rgb, a])
+        return _beside(rewritten, self.alpha(i), f"frame {self.sequence.file(i)} of the plate")
 
 
 class VideoAlpha:
@@ -159,8 +151,7 @@ class VideoAlpha:
         buf = self._proc.stdout.read(w * h * 2)
         if len(buf) != w * h * 2:
             raise VideoError(f"the alpha of {self.video} ends at frame {self._next}")
-        a16 = np.frombuffer(buf, "<u2").reshape(h, w).astype(np.uint32)
-        return ((a16 + 128) // 257).astype(np.uint8)
+        return eight_bits(np.frombuffer(buf, "<u2").reshape(h, w))
 
     def alpha(self, i: int) -> np.ndarray:
         """``(H, W) uint8``: the alpha of the video's frame ``i`` (``i`` at least ``start``,
@@ -187,13 +178,17 @@ class VideoAlpha:
 
     def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
         """Output frame ``i`` (``shown`` is not needed)."""
-        a = self.alpha(i)
-        rgb = np.asarray(rewritten, np.uint8)
-        if a.shape != rgb.shape[:2]:
-            raise VideoError(f"the alpha of {self.video} is {a.shape[1]}x{a.shape[0]}, the "
-                             f"rewrite {rgb.shape[1]}x{rgb.shape[0]} (a turned video: its alpha "
-                             "is not carried)")
-        return np.dstack([rgb, a])
+        return _beside(rewritten, self.alpha(i), f"the alpha of {self.video}")
+
+
+def _beside(rewritten: np.ndarray, a: np.ndarray, what: str) -> np.ndarray:
+    """``(H, W, 4) uint8``: the rewritten colour with the alpha ``a`` (H, W); VideoError
+    naming ``what`` the alpha is when it is of another size."""
+    rgb = np.asarray(rewritten, np.uint8)
+    if a.shape != rgb.shape[:2]:
+        raise VideoError(f"{what} is {a.shape[1]}x{a.shape[0]}, the rewrite "
+                         f"{rgb.shape[1]}x{rgb.shape[0]}")
+    return np.dstack([rgb, a])
 
 
 def sequence_alpha_kept(out, plate) -> bool:
@@ -220,6 +215,6 @@ def plate_alpha(out, target, options=None, start: int = 0):
         carried = getattr(options, "alpha", False) or (keeps_alpha(out)
                                                        and video_has_alpha(target))
         return VideoAlpha(target, start) if carried else None
-    if not is_sequence(target) or not sequence_alpha_kept(out, target):
+    if not sequence_alpha_kept(out, target):
         return None
     return PlateAlpha(target) if sequence_has_alpha(open_sequence(target)) else None

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VideoError
-from .frame_file import read_image
+from .frame_file import eight_bits, read_image
 from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["DEPTH_SUFFIXES", "PlateDepth", "plate_depth", "deep_frame"]
@@ -58,7 +58,7 @@ def deep_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> n
     colour = out if out.ndim == 2 else out[..., :3]      # a view: written in place
     v = colour[changed].astype(np.int32)                 # the changed pixels only
     high = (rew[..., 0] if out.ndim == 2 else rew)[changed].astype(np.int32)
-    fine = v - (v * 2 + 257) // 514 * 257                # below 8 bits: -128..128
+    fine = v - eight_bits(v).astype(np.int32) * 257      # below 8 bits: -128..128
     colour[changed] = np.clip(high * 257 + fine, 0, 65535)
     return out
 
@@ -71,14 +71,14 @@ class PlateDepth:
     ----------
     plate : path-like
         The plate's pattern (``plate/sh010.%04d.tif``).
+    alpha : bool
+        Its frames are RGBA (said in :attr:`kept`).
     """
 
-    def __init__(self, plate) -> None:
+    def __init__(self, plate, alpha: bool = False) -> None:
         self.sequence = open_sequence(plate)
-        first = _read_deep(self.sequence.file(0))
         #: What the output keeps of the plate (the transfer's summary line says it).
-        self.kept = "in the plate's 16 bits" + (", with its alpha" if first is not None and
-                                                _channels(first) == 4 else "")
+        self.kept = "in the plate's 16 bits" + (", with its alpha" if alpha else "")
 
     def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
         f = self.sequence.file(i)
@@ -120,4 +120,4 @@ def plate_depth(out, target) -> PlateDepth | None:
         return None   # 8 bits, or grey + alpha: written in 8 bits
     if _channels(first) == 4 and (o.suffix.lower() != ".png" or p.suffix.lower() != ".png"):
         return None   # written in 8 bits with its alpha (OpenCV writes no TIFF alpha tag)
-    return PlateDepth(target)
+    return PlateDepth(target, alpha=_channels(first) == 4)
