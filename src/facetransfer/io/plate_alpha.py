@@ -17,16 +17,13 @@ says so).
 from __future__ import annotations
 
 import re
-import subprocess
-import threading
 from pathlib import Path
 
 import numpy as np
 
 from ..errors import VideoError
-from .ffmpeg import ffmpeg_exe
-from .video_display import described_input
 from .frame_file import eight_bits, read_image, tiff_alpha_kind
+from .video_planes import DecodedPlanes, stored_pixel_format
 from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
@@ -63,9 +60,8 @@ _ALPHA_FORMATS = re.compile(r"(yuva|rgba|bgra|argb|abgr|gbrap|ya8|ya16|rgba64|bg
 def video_has_alpha(video) -> bool:
     """Whether a video file's first video stream stores an alpha plane (its pixel format as
     ffmpeg describes it)."""
-    m = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, ([a-z0-9]+)(?:\(|,)",
-                  described_input(video))
-    return bool(m and _ALPHA_FORMATS.match(m.group(1)))
+    fmt = stored_pixel_format(video)
+    return bool(fmt and _ALPHA_FORMATS.match(fmt))
 
 
 def keeps_alpha(out) -> bool:
@@ -111,16 +107,14 @@ class PlateAlpha:
 class VideoAlpha:
     """``alpha(i, shown, rewritten)`` of a video with an alpha plane, as :class:`PlateAlpha`:
     output frame ``i`` as ``(H, W, 4) uint8``, the rewritten colour with the alpha of the
-    video's stored frame ``i`` (ffmpeg's ``alphaextract``, 16 bits rounded to 8), decoded
-    in order by one ffmpeg process as the frames are asked for (any order a few frames
-    ahead: the frames decoded and not yet asked for are kept).
+    video's stored frame ``i`` (ffmpeg's ``alphaextract``, 16 bits rounded to 8;
+    :class:`facetransfer.io.video_planes.DecodedPlanes`).
 
     Parameters
     ----------
     video : path-like
     start : int
-        The first frame that will be asked for (the frames before it are decoded and
-        dropped).
+        The first frame that will be asked for.
     """
 
     #: What the output keeps of the video (the transfer's summary line says it).
@@ -128,53 +122,17 @@ class VideoAlpha:
 
     def __init__(self, video, start: int = 0) -> None:
         self.video = Path(video)
-        self._next, self._kept, self._size = 0, {}, None
-        self._lock = threading.Lock()
-        self._proc = None
-        self._start = int(start)
-
-    def _open(self) -> None:
-        exe = ffmpeg_exe()
-        if exe is None:
-            raise VideoError(f"no ffmpeg binary found to read the alpha of {self.video}")
-        from .video_read import video_info
-
-        self._size = video_info(self.video).size
-        self._proc = subprocess.Popen(
-            [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-i", str(self.video),
-             "-map", "0:v:0", "-fps_mode", "passthrough", "-vf", "alphaextract", "-f",
-             "rawvideo", "-pix_fmt", "gray16le", "-"],
-            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
-
-    def _read_next(self) -> np.ndarray:
-        w, h = self._size
-        buf = self._proc.stdout.read(w * h * 2)
-        if len(buf) != w * h * 2:
-            raise VideoError(f"the alpha of {self.video} ends at frame {self._next}")
-        return eight_bits(np.frombuffer(buf, "<u2").reshape(h, w))
+        self._planes = DecodedPlanes(video, "gray16le", "the alpha of", filters="alphaextract",
+                                     start=start)
 
     def alpha(self, i: int) -> np.ndarray:
         """``(H, W) uint8``: the alpha of the video's frame ``i`` (``i`` at least ``start``,
         each asked for once)."""
-        with self._lock:
-            if self._proc is None:
-                self._open()
-            while self._next <= i:
-                a = self._read_next()
-                if self._next >= self._start:
-                    self._kept[self._next] = a
-                self._next += 1
-            if i not in self._kept:
-                raise VideoError(f"the alpha of frame {i} of {self.video} was read already")
-            return self._kept.pop(i)
+        return eight_bits(self._planes.frame(i)[..., 0])
 
     def close(self) -> None:
         """Stop the decoder (also when not every frame was asked for)."""
-        proc, self._proc = self._proc, None
-        if proc is not None:
-            proc.kill()
-            proc.wait()
-            proc.stdout.close()
+        self._planes.close()
 
     def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
         """Output frame ``i`` (``shown`` is not needed)."""

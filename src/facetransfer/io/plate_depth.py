@@ -1,12 +1,15 @@
 """A 16-bit PNG or TIFF plate rewritten as a PNG or TIFF sequence in 16 bits: every pixel the
-rewrite did not change is the plate's own value, to the bit, and a changed one is the 8-bit
-rewrite with the plate's own detail below 8 bits (its grain).
+rewrite did not change is the plate's own value, to the bit, and a changed one is the plate's
+value moved by the rewrite's change (its detail below 8 bits, its grain, kept).
 
 The tracker and the rewrite see such a plate in 8 bits (each value ``v`` as ``round(v / 257)``,
 :func:`facetransfer.io.frame_file.shown_16`), so an 8-bit result would lose the fine
-levels of every pixel of the frame, the face's surroundings included. Here a changed pixel is
-``rewritten * 257 + (v - round(v / 257) * 257)`` (clipped), which reads back as ``rewritten``
-in 8 bits; an unchanged one is ``v``. Grey
+levels of every pixel of the frame, the face's surroundings included. Here a changed sample is
+``v + (rewritten - shown) * 257`` (clipped), which reads back as ``rewritten`` in 8 bits
+(``shown`` is the frame the rewrite was made from, ``round(v / 257)``); an unchanged one is
+``v``. :func:`deep_frame` is also how a video of more than 8 bits is rewritten
+(:mod:`facetransfer.io.video_depth`), whose 8-bit frames come from another decoder: the change
+is added to its 16-bit decode, so the face meets its surroundings without a step. Grey
 plates stay grey; a PNG plate's 16-bit alpha is kept as it is (a TIFF plate with alpha, or a
 grey one with alpha, is written in 8 bits, :mod:`facetransfer.io.plate_alpha`: OpenCV writes
 no TIFF alpha tag, nor grey + alpha).
@@ -19,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VideoError
-from .frame_file import eight_bits, read_image
+from .frame_file import read_image
 from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["DEPTH_SUFFIXES", "PlateDepth", "plate_depth", "deep_frame"]
@@ -35,32 +38,36 @@ def _read_deep(path: Path) -> np.ndarray | None:
 
 
 def deep_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
-    """One output frame of a 16-bit plate (module notes).
+    """One output frame of a 16-bit plate (module notes): ``plate + (rewritten - shown) * 257``.
 
     Parameters
     ----------
     plate : (H, W), (H, W, 3) or (H, W, 4) uint16
         The plate's frame: grey, RGB or RGBA.
     shown : (H, W, 3) uint8
-        The frame the rewrite was made from (RGB, the plate's high bytes).
+        The frame the rewrite was made from (RGB; of a plate, its values in 8 bits).
     rewritten : (H, W, 3) uint8
         The rewrite (RGB; of a grey plate, grey).
 
     Returns
     -------
     ndarray, the plate's shape, uint16
-        The plate's value where the rewrite changed nothing, else the rewrite's value with the
-        plate's detail below 8 bits; the alpha channel as the plate's.
+        The plate's value where the rewrite changed nothing, else moved by the rewrite's change
+        (clipped to 0..65535); the alpha channel as the plate's.
     """
     rew = np.asarray(rewritten, np.uint8)
-    changed = (rew != np.asarray(shown, np.uint8)).any(axis=2)
-    out = np.array(plate, dtype=np.uint16, copy=True)
-    colour = out if out.ndim == 2 else out[..., :3]      # a view: written in place
-    v = colour[changed].astype(np.int32)                 # the changed pixels only
-    high = (rew[..., 0] if out.ndim == 2 else rew)[changed].astype(np.int32)
-    fine = v - eight_bits(v).astype(np.int32) * 257      # below 8 bits: -128..128
-    colour[changed] = np.clip(high * 257 + fine, 0, 65535)
-    return out
+    shown = np.asarray(shown, np.uint8)
+    plate = np.asarray(plate, np.uint16)
+    colour = plate if plate.ndim == 2 else plate[..., :3]
+    moved = rew.astype(np.int32)                         # the whole frame at once: 0.5 ms
+    moved -= shown                                       # at 480x480 (12 ms picking the
+    moved *= 257                                         # changed pixels out)
+    moved = moved[..., 0] if plate.ndim == 2 else moved
+    moved += colour                                      # a sample not changed stays itself
+    np.clip(moved, 0, 65535, out=moved)
+    if plate.ndim == 2 or plate.shape[2] == 3:
+        return moved.astype(np.uint16)
+    return np.dstack([moved.astype(np.uint16), plate[..., 3]])
 
 
 class PlateDepth:

@@ -520,6 +520,14 @@ def _yuv420p(rgb: np.ndarray) -> np.ndarray:
     return out
 
 
+def _deep(frame: np.ndarray) -> np.ndarray:
+    """A frame as 16-bit samples (8-bit ones as ``v * 257``), little-endian, for ffmpeg's
+    ``rgb48le`` / ``rgba64le``."""
+    if frame.dtype == np.uint16:
+        return np.ascontiguousarray(frame, dtype="<u2")
+    return np.ascontiguousarray(frame, dtype=np.uint8).astype("<u2") * np.uint16(257)
+
+
 class VideoWriter:
     """Write RGB frames to a video (H.264 by default) or an image sequence, atomically.
 
@@ -600,8 +608,9 @@ class VideoWriter:
         # 4:2:0 codecs get their planes from OpenCV (BT.601 limited range, as ffmpeg's own
         # conversion; chroma the mean of each 2x2 block): half the bytes through the pipe and
         # no scaler in ffmpeg (BENCHMARKS.md, "End to end")
-        self._pipe_format = "rgba" if self.options.alpha else \
-            "rgb24" if self.options.codec == "prores" else "yuv420p"
+        deep = self.options.deep                 # 16 bits a sample (io.video_depth)
+        self._pipe_format = ("rgba64le" if deep else "rgba") if self.options.alpha else \
+            ("rgb48le" if deep else "rgb24") if self.options.codec == "prores" else "yuv420p"
         self.stored_size = _stored_size(self.size, self.options.codec)
         if not self._detached:   # a part of a longer video: the parts' writer warns, once
             warn_if_grown(self.path, self.size, self.options.codec)
@@ -640,22 +649,23 @@ class VideoWriter:
 
     def write(self, frame: np.ndarray) -> None:
         """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size (of a PNG or TIFF
-        sequence, ``(H, W, 4)`` RGBA and uint16 too; of a video written with alpha, RGBA; of an
-        OpenEXR sequence, float16 or float32 linear RGB, or an
+        sequence, ``(H, W, 4)`` RGBA and uint16 too; of a video written with alpha, RGBA; of one
+        written in 16 bits (:attr:`VideoOptions.deep`), uint16 too; of an OpenEXR sequence, float16 or float32 linear RGB, or an
         :class:`~facetransfer.io.exr.ExrImage`: :func:`facetransfer.io.exr.write_exr`)."""
         if self.result is not None or (self._proc is None and self._tmpdir is None):
             raise VideoError(f"video {self.path} is already closed")
         if not fits_output(frame.shape, self.size, self.path, self.options.alpha):
             raise VideoError(f"frame of shape {frame.shape} does not match video size "
                              f"{self.size[0]}x{self.size[1]} of {self.path}")
-        if self._tmpdir is None and frame.dtype == np.uint16:
-            raise VideoError(f"{self.path}: 16-bit frames are written to PNG or TIFF sequences")
+        if self._tmpdir is None and frame.dtype == np.uint16 and not self.options.deep:
+            raise VideoError(f"{self.path}: 16-bit frames are written to PNG or TIFF sequences "
+                             "(or to ProRes with VideoOptions.deep)")
         if self._tmpdir is not None:
             self._write_image(frame if _linear(frame, self.path) or frame.dtype == np.uint16
                               else np.ascontiguousarray(frame, dtype=np.uint8))
             self.n_frames += 1
             return
-        img = np.ascontiguousarray(frame, dtype=np.uint8)
+        img = _deep(frame) if self.options.deep else np.ascontiguousarray(frame, dtype=np.uint8)
         pad = (self.stored_size[1] - self.size[1], self.stored_size[0] - self.size[0])
         if any(pad):
             img = np.pad(img, ((0, pad[0]), (0, pad[1]), (0, 0)), mode="edge")

@@ -19,6 +19,7 @@ from .video import audio_codecs
 from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
                             timecode_of, video_colour)
 from .plate_alpha import sequence_has_alpha, video_has_alpha
+from .video_depth import video_bits
 from .video_read import video_info
 from .frame_file import bit_depth
 from .video_sequence import is_sequence, open_sequence
@@ -68,8 +69,9 @@ class VideoFacts:
         It has an alpha channel (:mod:`facetransfer.io.plate_alpha`: kept where the output
         holds it).
     bits : int
-        An image sequence's bits a sample (16: kept in a PNG or TIFF sequence,
-        :mod:`facetransfer.io.plate_depth`); 8 for a video (decoded to 8 bits).
+        Its bits a sample: an image sequence's (16: kept in a PNG or TIFF sequence,
+        :mod:`facetransfer.io.plate_depth`), a video's as ffmpeg decodes it (more than 8: kept
+        in ProRes or a PNG or TIFF sequence, :mod:`facetransfer.io.video_depth`).
     """
 
     path: str
@@ -114,7 +116,8 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       float(info.n_frames / info.fps) if info.fps else 0.0, first_field(path),
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
                       video_colour(path), ", ".join(audio_codecs(path)) or None, turn=info.turn,
-                      timecode=timecode_of(path), alpha=video_has_alpha(path))
+                      timecode=timecode_of(path), alpha=video_has_alpha(path),
+                      bits=video_bits(path))
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
@@ -157,6 +160,8 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 "" if f.timecode is None else
                 f"; timecode {f.timecode} (the results start at it)"),
             f"  container {f.container or '?'}; {reading}"] + (
+                [f"  {f.bits} bits a sample, seen in 8: kept by transfer in ProRes (--codec "
+                 "prores, 10 bits) or a 16-bit PNG or TIFF sequence"] if f.bits > 8 else []) + (
                 ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG or "
                  "TIFF sequence"] if f.alpha else [])
 

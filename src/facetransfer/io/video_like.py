@@ -10,6 +10,7 @@ from pathlib import Path
 from ..errors import VideoError
 from .video import VideoOptions, is_image_pattern, video_info
 from .plate_alpha import keeps_alpha, sequence_alpha_kept, sequence_has_alpha, video_has_alpha
+from .video_depth import video_bits
 from .video_display import first_field, timecode_of, video_colour
 from .video_sequence import is_sequence, open_sequence
 
@@ -36,7 +37,9 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     ``video`` with an alpha channel is warned of once unless the output ``out`` (given by a
     command that carries alpha) keeps it (:mod:`facetransfer.io.plate_alpha`): an RGBA PNG
     or TIFF plate or a video written as a PNG or TIFF sequence, a video written as ProRes
-    (then 4444 with its alpha, :attr:`VideoOptions.alpha`)."""
+    (then 4444 with its alpha, :attr:`VideoOptions.alpha`). A video of more than 8 bits
+    written as ProRes by such a command is written from 16-bit frames
+    (:attr:`VideoOptions.deep`, :mod:`facetransfer.io.video_depth`)."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
@@ -60,6 +63,9 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
             options = replace(options, alpha=True)
         elif out is None or not keeps_alpha(out):
             _warn_alpha(str(video))
+    if out is not None and options.codec == "prores" and not is_image_pattern(out) \
+            and video_bits(video) > 8:   # its depth kept (io.video_depth)
+        options = replace(options, deep=True)
     if options.sar is None and sar != (1, 1):
         options = replace(options, sar=sar)
     if options.colour_tags and tags.matrix is None:

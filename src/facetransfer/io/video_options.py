@@ -74,6 +74,12 @@ class VideoOptions:
         ProRes 4444 with an alpha plane (frames ``(H, W, 4)`` RGBA) instead of 422 HQ: what
         :func:`~facetransfer.io.video_like.like_video` asks for a video target with alpha
         written as ProRes by a command that carries it (:mod:`facetransfer.io.plate_alpha`).
+    deep : bool
+        Frames are given in 16 bits (``uint16``; 8-bit ones are taken as ``v * 257``) and
+        reach ProRes's 10 bits without passing through 8: what
+        :func:`~facetransfer.io.video_like.like_video` asks for a video target of more than 8
+        bits written as ProRes by a command that carries its depth
+        (:mod:`facetransfer.io.video_depth`).
     """
 
     codec: str = DEFAULT_CODEC
@@ -87,6 +93,7 @@ class VideoOptions:
     first_number: int | None = None
     timecode: str | None = None
     alpha: bool = False
+    deep: bool = False
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -113,6 +120,8 @@ class VideoOptions:
         checked_timecode(self.timecode)
         if self.alpha and self.codec != "prores":
             raise VideoError(f"an alpha plane is written as ProRes 4444 only, not {self.codec}")
+        if self.deep and self.codec != "prores":
+            raise VideoError(f"16-bit frames are written as ProRes only, not {self.codec}")
         n = self.first_number
         if n is not None and (isinstance(n, bool) or int(n) != n or n < 0):
             raise VideoError(f"an image sequence's first frame number must be an integer >= 0, "

@@ -1,0 +1,107 @@
+"""A video's frames decoded a second time, by the ffmpeg binary, in a form the 8-bit frames
+the tools read (:mod:`facetransfer.io.video_read`) do not hold: its alpha plane
+(:mod:`facetransfer.io.plate_alpha`), its colour in 16 bits (:mod:`facetransfer.io.video_depth`).
+
+One ffmpeg process decodes the first video stream in order, every stored frame as it is
+(``-fps_mode passthrough``: the frames the reader sees), as raw 16-bit samples; frames are
+asked for by number, in any order a few frames ahead (the rewrite's threads): the frames
+decoded and not yet asked for are kept until they are.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import threading
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import VideoError
+from .ffmpeg import ffmpeg_exe
+from .video_display import described_input
+
+__all__ = ["DecodedPlanes", "stored_pixel_format"]
+
+
+def stored_pixel_format(video) -> str | None:
+    """The pixel format of a video file's first video stream as ffmpeg names it
+    (``"yuv422p10le"``, ``"yuva444p10le"``), or None."""
+    import re
+
+    m = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, ([a-z0-9]+)(?:\(|,)",
+                  described_input(video))
+    return m.group(1) if m else None
+
+
+class DecodedPlanes:
+    """``frame(i)``: frame ``i`` of a video decoded by ffmpeg as ``(H, W, C) uint16``.
+
+    Parameters
+    ----------
+    video : path-like
+    pix_fmt : {"gray16le", "rgb48le", "rgba64le"}
+        The raw samples asked of ffmpeg (little-endian 16 bits; 1, 3 or 4 channels).
+    what : str
+        What the frames are, for errors ("the alpha of", "the 16-bit colour of").
+    filters : str, optional
+        An ffmpeg filter chain applied first (``"alphaextract"``).
+    start : int
+        The first frame that will be asked for (the frames before it are decoded and dropped).
+    """
+
+    _CHANNELS = {"gray16le": 1, "rgb48le": 3, "rgba64le": 4}
+
+    def __init__(self, video, pix_fmt: str, what: str, *, filters: str | None = None,
+                 start: int = 0) -> None:
+        self.video, self.pix_fmt, self.what = Path(video), pix_fmt, what
+        self._channels = self._CHANNELS[pix_fmt]
+        self._filters = filters
+        self._next, self._kept, self._size = 0, {}, None
+        self._lock = threading.Lock()
+        self._proc = None
+        self._start = int(start)
+
+    def _open(self) -> None:
+        exe = ffmpeg_exe()
+        if exe is None:
+            raise VideoError(f"no ffmpeg binary found to read {self.what} {self.video}")
+        from .video_read import video_info
+
+        self._size = video_info(self.video).size
+        vf = ["-vf", self._filters] if self._filters else []
+        self._proc = subprocess.Popen(
+            [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-i", str(self.video),
+             "-map", "0:v:0", "-fps_mode", "passthrough", *vf, "-f", "rawvideo",
+             "-pix_fmt", self.pix_fmt, "-"],
+            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL)
+
+    def _read_next(self) -> np.ndarray:
+        w, h = self._size
+        n = w * h * self._channels * 2
+        buf = self._proc.stdout.read(n)
+        if len(buf) != n:
+            raise VideoError(f"{self.what} {self.video} ends at frame {self._next}")
+        return np.frombuffer(buf, "<u2").reshape(h, w, self._channels)
+
+    def frame(self, i: int) -> np.ndarray:
+        """``(H, W, C) uint16``: the video's frame ``i`` (``i`` at least ``start``, each asked
+        for once)."""
+        with self._lock:
+            if self._proc is None:
+                self._open()
+            while self._next <= i:
+                a = self._read_next()
+                if self._next >= self._start:
+                    self._kept[self._next] = a
+                self._next += 1
+            if i not in self._kept:
+                raise VideoError(f"{self.what} frame {i} of {self.video} was read already")
+            return self._kept.pop(i)
+
+    def close(self) -> None:
+        """Stop the decoder (also when not every frame was asked for)."""
+        proc, self._proc = self._proc, None
+        if proc is not None:
+            proc.kill()
+            proc.wait()
+            proc.stdout.close()
