@@ -3,14 +3,16 @@
 The first three seconds of ``driving_d6`` (the expressions of ``WDA_KatieHill_000``) as a
 10-bit video with detail below 8 bits, as a camera or a grade leaves one: each frame's levels
 times 257 plus a smooth detail of its own (a blurred noise field, -128..128 in 16 bits),
-encoded as ProRes 422 HQ and as 10-bit H.265 (4:2:0). Each is rewritten as ProRes
-(``--codec prores``) and as a PNG sequence, in a fresh process, by this tree and, with
+encoded as ProRes 422 HQ, as 10-bit H.265 (4:2:0) and as a phone's HDR video (10-bit H.265,
+BT.2020, HLG). Each is rewritten as ProRes (``--codec prores``), as H.265 (``--codec h265``)
+and as a PNG sequence, in a fresh process (the track cache off), by this tree and, with
 ``--base-src OLD/src``, by another one in the same run. Judged against the target's own 16-bit
 decode (ffmpeg, the same decoder for both): outside the face (the pixels this tree's PNG
 output leaves at the target's value, grown by 3 pixels), the RMS and largest difference in
 8-bit levels and the share of pixels equal to the target's to the bit; inside it, how far the
 16-bit output read in 8 bits is from the 8-bit rewrite of the other tree (the two decoders'
-rounding carried with the change); the output's bits and the command's seconds.
+rounding carried with the change); the output's bits and colour tags, whether the command
+warned of HDR, and its seconds.
 
     FACETRANSFER_DATA_DIR=... python benchmarks/bench_video_depth.py --out out/benchmarks \
         [--base-src OLD/src]
@@ -38,8 +40,13 @@ SECONDS = 3
 TARGETS = {"prores422": ("mov", ["-c:v", "prores_ks", "-profile:v", "3",
                                  "-pix_fmt", "yuv422p10le"]),
            "hevc10": ("mp4", ["-c:v", "libx265", "-pix_fmt", "yuv420p10le", "-crf", "8",
-                              "-x265-params", "log-level=error"])}
-OUTPUTS = {"prores": ("r.mov", ["--codec", "prores"]), "png": ("png/r.%04d.png", [])}
+                              "-x265-params", "log-level=error"]),
+           "hlg10": ("mp4", ["-vf", "setparams=color_primaries=bt2020:color_trc=arib-std-b67:"
+                             "colorspace=bt2020nc", "-c:v", "libx265", "-pix_fmt",
+                             "yuv420p10le", "-colorspace", "bt2020nc", "-crf", "8",
+                             "-x265-params", "log-level=error"])}
+OUTPUTS = {"prores": ("r.mov", ["--codec", "prores"]), "h265": ("r.mp4", ["--codec", "h265"]),
+           "png": ("png/r.%04d.png", [])}
 
 
 def make_targets(data: Path, folder: Path) -> dict:
@@ -89,7 +96,7 @@ def decode16(path: Path) -> np.ndarray:
 
 
 def run(target: Path, out: Path, args: list, source: Path, src: str | None) -> dict:
-    env = dict(os.environ)
+    env = dict(os.environ, FACETRANSFER_TRACK_CACHE="off")   # each run tracks: fair seconds
     if src:
         env["PYTHONPATH"] = src
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -97,8 +104,17 @@ def run(target: Path, out: Path, args: list, source: Path, src: str | None) -> d
     p = subprocess.run([facetransfer_exe(), "transfer", "--target", str(target),
                         "--expression-from", str(source), "--out", str(out), "--no-progress",
                         *args], capture_output=True, text=True, env=env)
-    return {"status": p.returncode, "seconds": round(time.perf_counter() - t, 2),
-            "said": p.stdout.strip().splitlines()[-1:] or p.stderr.strip().splitlines()[-1:]}
+    row = {"status": p.returncode, "seconds": round(time.perf_counter() - t, 2),
+           "said": p.stdout.strip().splitlines()[-1:] or p.stderr.strip().splitlines()[-1:],
+           "warned_hdr": "HDR" in p.stderr}
+    if p.returncode == 0 and "%" not in out.name:
+        from facetransfer.io.video_depth import video_bits
+        from facetransfer.io.video_display import video_colour
+
+        tags = video_colour(out)
+        row |= {"bits": video_bits(out), "colour": f"{tags.matrix}/{tags.primaries}/"
+                                                   f"{tags.transfer}"}
+    return row
 
 
 def judge(got: np.ndarray, truth: np.ndarray, face: np.ndarray,

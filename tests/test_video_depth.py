@@ -58,6 +58,14 @@ def _with_fine(frames: np.ndarray, seed: int) -> np.ndarray:
         .astype(np.uint16)
 
 
+def _ramps(S: int, F: int = 3) -> np.ndarray:
+    """``(F, S, S, 3) uint8``: smooth colour ramps, a little different each frame (what a
+    codec keeps within a fraction of a level)."""
+    y, x = np.mgrid[0:S, 0:S] * 32 // S
+    return np.array([np.dstack([40 + x * 5 + k, 60 + y * 4, 200 - x * 2 - y * 2])
+                     for k in range(F)]).astype(np.uint8)
+
+
 def test_pixel_format_bits():
     for fmt, bits in (("yuv420p", 8), ("yuvj420p", 8), ("nv12", 8), ("rgb24", 8), ("bgra", 8),
                       ("ya8", 8), ("yuv422p10le", 10), ("yuva444p10le", 10), ("p010le", 10),
@@ -114,8 +122,13 @@ def test_which_targets_and_outputs_are_written_deep(tmp_path):
     assert not like_video(prores, ten).deep                      # a command that does not carry it
     assert not like_video(None, ten, tmp_path / "r.mp4").deep    # H.264: 8 bits
     assert not like_video(prores, h264, tmp_path / "r.mov").deep
-    with pytest.raises(VideoError, match="16-bit frames are written as ProRes only, not h264"):
+    assert like_video(VideoOptions("h265"), ten, tmp_path / "r.mp4").deep   # Main 10
+    with pytest.raises(VideoError, match="16-bit frames are written as ProRes or H.265 only, "
+                                         "not h264"):
         VideoOptions(deep=True)
+    with pytest.raises(VideoError, match="by the bt709 matrix are written as ProRes or in 16 "
+                                         "bits only"):
+        VideoOptions(matrix="bt709")
     deep = like_video(prores, ten, tmp_path / "r.mov")
     assert isinstance(video_depth(tmp_path / "r.mov", ten, deep), VideoDepth)
     assert video_depth(tmp_path / "r.mov", ten, prores) is None
@@ -128,8 +141,8 @@ def test_which_targets_and_outputs_are_written_deep(tmp_path):
     from facetransfer.io.video_facts import fact_lines, video_facts
 
     assert fact_lines(video_facts(ten))[-1] == (
-        "  10 bits a sample, seen in 8: kept by transfer in ProRes (--codec prores, 10 bits) "
-        "or a 16-bit PNG or TIFF sequence")
+        "  10 bits a sample, seen in 8: kept by transfer in ProRes or H.265 (--codec prores or "
+        "h265: 10 bits, an HDR video's colour too) or a 16-bit PNG or TIFF sequence")
     assert video_facts(h264).bits == 8 and not any("bits" in ln
                                                    for ln in fact_lines(video_facts(h264)))
 
@@ -138,9 +151,7 @@ def test_the_writer_pipes_16_bit_frames_into_prores(tmp_path):
     """16-bit frames reach ProRes's 10 bits (their detail below 8 bits kept); 8-bit frames
     into the same writer are v * 257; a 16-bit frame into an 8-bit writer is refused."""
     S = 128   # smooth colour ramps (ProRes keeps them within a fraction of a level)
-    y, x = np.mgrid[0:S, 0:S] // 4
-    frames = np.array([np.dstack([40 + x * 5 + k, 60 + y * 4, 200 - x * 2 - y * 2])
-                       for k in range(3)]).astype(np.uint8)
+    frames = _ramps(S)
     deep16 = _with_fine(frames, 5)
     out = tmp_path / "deep.mov"
     with VideoWriter(out, 25.0, (S, S), options=VideoOptions("prores", deep=True)) as w:
@@ -208,3 +219,43 @@ def test_a_transfer_onto_a_10_bit_target_keeps_its_depth(clips, quick_model_path
     # ProRes's own loss on this rough synthetic texture is ~0.6 of a level; through 8 bits
     # (OpenCV's rounding, the other decoder's) more than twice that
     assert rms(out) < 0.6 * rms(plain)
+
+
+def _hlg(path: Path, frames: np.ndarray) -> Path:
+    """A phone's kind of HDR video: 10-bit HEVC, BT.2020 primaries and matrix, HLG."""
+    return _encode16(path, _with_fine(frames, 7), [
+        "-vf", "setparams=color_primaries=bt2020:color_trc=arib-std-b67:colorspace=bt2020nc",
+        "-c:v", "libx265", "-pix_fmt", "yuv420p10le", "-colorspace", "bt2020nc",
+        "-x265-params", "log-level=error"])
+
+
+def test_an_hdr_target_written_deep_keeps_its_colour(tmp_path, caplog):
+    """An HLG target written as H.265 or ProRes: 16-bit frames converted by its own matrix,
+    its primaries and transfer named, no warning; as H.264, 8-bit SDR and the warning; as a
+    16-bit PNG sequence (its values as decoded), no warning."""
+    import logging
+
+    from facetransfer.io.video_display import video_colour
+
+    hlg = _hlg(tmp_path / "hlg.mp4", _ramps(64))
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        for codec in ("h265", "prores"):
+            opt = like_video(VideoOptions(codec), hlg, tmp_path / "r.mov")
+            assert (opt.deep, opt.matrix, opt.primaries, opt.transfer) == (
+                True, "bt2020nc", "bt2020", "arib-std-b67"), codec
+        like_video(None, hlg, tmp_path / "s" / "%04d.png")
+        assert not caplog.records
+        opt = like_video(None, hlg, tmp_path / "r.mp4")
+    assert (opt.deep, opt.matrix, opt.primaries) == (False, "smpte170m", None)
+    assert len(caplog.records) == 1 and "HDR" in caplog.records[0].getMessage()
+    deep = like_video(VideoOptions("h265"), hlg, tmp_path / "r.mp4")
+    out = tmp_path / "r.mp4"
+    truth = _decode16(hlg, (64, 64))
+    with VideoWriter(out, 25.0, (64, 64), options=deep) as w:
+        for f in truth:
+            w.write(f)
+    tags = video_colour(out)
+    assert (tags.matrix, tags.primaries, tags.transfer) == ("bt2020nc", "bt2020", "arib-std-b67")
+    assert video_bits(out) == 10
+    err = (_decode16(out, (64, 64)).astype(np.float64) - truth) / 257.0
+    assert np.sqrt((err ** 2).mean()) < 1.0   # x265 at CRF 18 (0.6 here); by another matrix: tens

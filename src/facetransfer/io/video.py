@@ -299,14 +299,14 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     """ffmpeg output arguments of a codec (libx264/libx265 4:2:0, ProRes 422 HQ or 4444 with
     alpha)."""
     enc = CODECS[opt.codec]
-    tags = COLOUR_TAGS if opt.colour_tags else []
+    tags = ["-colorspace", opt.matrix, "-color_range", "tv"] if opt.colour_tags else []
     if opt.codec == "prores":  # 422 HQ, or 4444 with its alpha plane (stored in 16 bits)
         fmt = ["-profile:v", "4", "-pix_fmt", "yuva444p10le", "-alpha_bits", "16"] \
             if opt.alpha else ["-profile:v", "3", "-pix_fmt", "yuv422p10le"]
         return ["-c:v", enc, *fmt, "-vendor", "apl0", *tags,
                 *(["-flags", "+ildct"] if opt.field else [])]
     args = ["-c:v", enc, "-preset", opt.preset, "-crf", str(opt.effective_crf),
-            "-pix_fmt", "yuv420p", *tags]
+            "-pix_fmt", "yuv420p10le" if opt.deep else "yuv420p", *tags]
     if opt.field:                           # interlaced coding (fields and frames adaptively)
         args += ["-flags", "+ildct+ilme"]
     if opt.codec == "h265":
@@ -610,7 +610,7 @@ class VideoWriter:
         # no scaler in ffmpeg (BENCHMARKS.md, "End to end")
         deep = self.options.deep                 # 16 bits a sample (io.video_depth)
         self._pipe_format = ("rgba64le" if deep else "rgba") if self.options.alpha else \
-            ("rgb48le" if deep else "rgb24") if self.options.codec == "prores" else "yuv420p"
+            "rgb48le" if deep else "rgb24" if self.options.codec == "prores" else "yuv420p"
         self.stored_size = _stored_size(self.size, self.options.codec)
         if not self._detached:   # a part of a longer video: the parts' writer warns, once
             warn_if_grown(self.path, self.size, self.options.codec)

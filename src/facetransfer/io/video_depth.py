@@ -1,6 +1,6 @@
-"""A video of more than 8 bits (ProRes 422 and 4444, 10-bit H.264 and HEVC, 16-bit PNG in a
-QuickTime file) rewritten in its own depth: as ProRes (10 bits in the file, ``--codec
-prores``) or as a 16-bit PNG or TIFF sequence.
+"""A video of more than 8 bits (ProRes 422 and 4444, 10-bit H.264 and HEVC, a phone's HDR
+video, 16-bit PNG in a QuickTime file) rewritten in its own depth: as ProRes or H.265 (10 bits
+in the file, ``--codec prores``, ``--codec h265``) or as a 16-bit PNG or TIFF sequence.
 
 The tools see every video in 8 bits (:mod:`facetransfer.io.video_read`, OpenCV's decoder), so
 a rewrite written from those frames would lose the levels below 8 bits of every pixel, the
@@ -102,7 +102,7 @@ class VideoDepth:
 
 def video_depth(out, target, options=None, start: int = 0) -> VideoDepth | None:
     """The 16-bit decode of the video ``target`` of more than 8 bits, rewritten as ``out``:
-    ProRes (``options`` asking for it, :attr:`~facetransfer.io.video_options.VideoOptions.deep`,
+    ProRes or H.265 (``options`` asking for it, :attr:`~facetransfer.io.video_options.VideoOptions.deep`,
     set by :func:`~facetransfer.io.video_like.like_video`; its alpha as ``options.alpha``
     says) or a PNG or TIFF sequence (a PNG one with the video's alpha); None otherwise (an
     8-bit video, H.264 or H.265 written, a TIFF sequence of a video with alpha: written by

@@ -142,7 +142,9 @@ def fact_lines(f: VideoFacts) -> list[str]:
     named = (f.colour.matrix, f.colour.primaries, f.colour.transfer)
     colour = "colour not named (read as BT.601)" if not any(named) else \
         "colour {} (matrix/primaries/transfer)".format("/".join(x or "?" for x in named)) + \
-        (": HDR or wide gamut, decoded to 8-bit SDR" if f.colour.beyond_sdr else "")
+        (": HDR or wide gamut, decoded to 8-bit SDR" + (" (kept by a 10-bit output)"
+                                                          if f.bits > 8 else "")
+         if f.colour.beyond_sdr else "")
     reading = f"read by {f.decoder}; " + ("seeks exact" if f.exact_seek else
                                           "seeks not exact: a later frame is reached by "
                                           "decoding the ones before it")
@@ -160,8 +162,9 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 "" if f.timecode is None else
                 f"; timecode {f.timecode} (the results start at it)"),
             f"  container {f.container or '?'}; {reading}"] + (
-                [f"  {f.bits} bits a sample, seen in 8: kept by transfer in ProRes (--codec "
-                 "prores, 10 bits) or a 16-bit PNG or TIFF sequence"] if f.bits > 8 else []) + (
+                [f"  {f.bits} bits a sample, seen in 8: kept by transfer in ProRes or H.265 "
+                 "(--codec prores or h265: 10 bits, an HDR video's colour too) or a 16-bit PNG "
+                 "or TIFF sequence"] if f.bits > 8 else []) + (
                 ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG or "
                  "TIFF sequence"] if f.alpha else [])
 

@@ -9,6 +9,8 @@ from pathlib import Path
 
 from ..errors import VideoError
 from .video import VideoOptions, is_image_pattern, video_info
+from .plate_depth import DEPTH_SUFFIXES
+from .video_options import DEEP_CODECS
 from .plate_alpha import keeps_alpha, sequence_alpha_kept, sequence_has_alpha, video_has_alpha
 from .video_depth import video_bits
 from .video_display import first_field, timecode_of, video_colour
@@ -38,8 +40,10 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     command that carries alpha) keeps it (:mod:`facetransfer.io.plate_alpha`): an RGBA PNG
     or TIFF plate or a video written as a PNG or TIFF sequence, a video written as ProRes
     (then 4444 with its alpha, :attr:`VideoOptions.alpha`). A video of more than 8 bits
-    written as ProRes by such a command is written from 16-bit frames
-    (:attr:`VideoOptions.deep`, :mod:`facetransfer.io.video_depth`)."""
+    written as ProRes or H.265 by such a command is written from 16-bit frames, converted by
+    its own matrix (:attr:`VideoOptions.deep`, :mod:`facetransfer.io.video_depth`); an HDR
+    one then keeps its primaries and transfer (its values are its own outside the face) and
+    is not warned of, nor is one written as a 16-bit image sequence."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
@@ -63,14 +67,16 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
             options = replace(options, alpha=True)
         elif out is None or not keeps_alpha(out):
             _warn_alpha(str(video))
-    if out is not None and options.codec == "prores" and not is_image_pattern(out) \
-            and video_bits(video) > 8:   # its depth kept (io.video_depth)
-        options = replace(options, deep=True)
+    if out is not None and options.codec in DEEP_CODECS and not is_image_pattern(out) \
+            and video_bits(video) > 8:   # its depth kept (io.video_depth), by its own matrix
+        options = replace(options, deep=True, matrix=tags.matrix or options.matrix)
     if options.sar is None and sar != (1, 1):
         options = replace(options, sar=sar)
     if options.colour_tags and tags.matrix is None:
         options = replace(options, colour_tags=False)
-    if tags.beyond_sdr:
+    deep = options.deep or (out is not None and is_image_pattern(out) and video_bits(video) > 8
+                            and Path(out).suffix.lower() in DEPTH_SUFFIXES)
+    if tags.beyond_sdr and not deep:
         _warn_hdr(str(video), tags)
     elif options.primaries is None and options.transfer is None:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)

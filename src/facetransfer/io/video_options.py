@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from ..errors import VideoError
 from .video_display import checked_aspect, checked_colour_name, checked_timecode
 
-__all__ = ["CODECS", "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET",
+__all__ = ["CODECS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET",
            "VideoOptions"]
 
 #: Codec names of ``--codec`` and the ffmpeg encoder each needs.
@@ -21,6 +21,8 @@ CRF_RANGE = (0, 51)  # x264 and x265, 8-bit
 #: x264 / x265 speed presets, fastest first.
 PRESETS = ("ultrafast", "superfast", "veryfast", "faster", "fast", "medium", "slow", "slower",
            "veryslow")
+#: Codecs written from 16-bit frames (:attr:`VideoOptions.deep`), 10 bits in the file.
+DEEP_CODECS = ("prores", "h265")
 #: The default preset: x264's "faster" costs 64 % of the CPU of its own default, "medium",
 #: for 0.07 dB less over the face of a transfer at CRF 18 (BENCHMARKS.md, "End to end").
 DEFAULT_PRESET = "faster"
@@ -49,9 +51,14 @@ class VideoOptions:
         video take that video's (:func:`~facetransfer.io.video_like.like_video`, as the
         attributes below). Image sequences carry none.
     colour_tags : bool
-        Name the colour matrix and range of the frames' conversion (BT.601, limited) in the
+        Name the colour matrix and range of the frames' conversion (``matrix``, limited) in the
         header. False leaves them unspecified, for a video that rewrites one which names none:
         a player then guesses alike for both.
+    matrix : str
+        The YCbCr matrix the RGB frames are converted by, as ffmpeg names it: BT.601
+        (``"smpte170m"``), or for frames ffmpeg converts itself (ProRes, 16-bit frames) any it
+        knows (``"bt709"``, ``"bt2020nc"``: a deep HDR video's, as
+        :func:`~facetransfer.io.video_like.like_video` carries it).
     primaries, transfer : str, optional
         The colour primaries and transfer characteristic named in the header, as ffmpeg names
         them (``"bt709"``; HLG ``"arib-std-b67"``): a rewritten video's RGB values are those
@@ -76,9 +83,9 @@ class VideoOptions:
         written as ProRes by a command that carries it (:mod:`facetransfer.io.plate_alpha`).
     deep : bool
         Frames are given in 16 bits (``uint16``; 8-bit ones are taken as ``v * 257``) and
-        reach ProRes's 10 bits without passing through 8: what
-        :func:`~facetransfer.io.video_like.like_video` asks for a video target of more than 8
-        bits written as ProRes by a command that carries its depth
+        reach the file's 10 bits without passing through 8: ProRes, or H.265 written as Main 10
+        (``yuv420p10le``); what :func:`~facetransfer.io.video_like.like_video` asks for a
+        video target of more than 8 bits written as either by a command that carries its depth
         (:mod:`facetransfer.io.video_depth`).
     """
 
@@ -94,6 +101,7 @@ class VideoOptions:
     timecode: str | None = None
     alpha: bool = False
     deep: bool = False
+    matrix: str = "smpte170m"
 
     def __post_init__(self) -> None:
         if self.codec not in CODECS:
@@ -120,8 +128,13 @@ class VideoOptions:
         checked_timecode(self.timecode)
         if self.alpha and self.codec != "prores":
             raise VideoError(f"an alpha plane is written as ProRes 4444 only, not {self.codec}")
-        if self.deep and self.codec != "prores":
-            raise VideoError(f"16-bit frames are written as ProRes only, not {self.codec}")
+        if self.deep and self.codec not in DEEP_CODECS:
+            raise VideoError(f"16-bit frames are written as ProRes or H.265 only, not "
+                             f"{self.codec}")
+        if checked_colour_name(self.matrix, "matrix") != "smpte170m" and not (
+                self.deep or self.codec == "prores"):
+            raise VideoError(f"frames converted by the {self.matrix} matrix are written as "
+                             "ProRes or in 16 bits only (8-bit H.264 and H.265 by BT.601)")
         n = self.first_number
         if n is not None and (isinstance(n, bool) or int(n) != n or n < 0):
             raise VideoError(f"an image sequence's first frame number must be an integer >= 0, "
