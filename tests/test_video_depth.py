@@ -259,3 +259,29 @@ def test_an_hdr_target_written_deep_keeps_its_colour(tmp_path, caplog):
     assert video_bits(out) == 10
     err = (_decode16(out, (64, 64)).astype(np.float64) - truth) / 257.0
     assert np.sqrt((err ** 2).mean()) < 1.0   # x265 at CRF 18 (0.6 here); by another matrix: tens
+
+
+def test_decoded_planes_follow_a_variable_rates_timeline(tmp_path):
+    """A video of variable frame rate is read on its constant-rate timeline: frame ``i`` of
+    the 16-bit decode is the stored frame the reader's frame ``i`` shows (repeated across the
+    gap), from any start."""
+    from facetransfer.io.video_read import video_info
+
+    levels = (np.arange(12) * 5000 + 1000).astype(np.uint16)
+    frames16 = np.broadcast_to(levels[:, None, None, None], (12, 16, 24, 3)).copy()
+    lossless = ["-c:v", "png", "-pix_fmt", "rgb48be"]   # 16-bit PNG in QuickTime: counted
+    even = _encode16(tmp_path / "even.mov", frames16, lossless, fps=10)
+    uneven = tmp_path / "uneven.mov"
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(even), "-vf",
+                    "setpts='if(gte(N,6),N+5,N)/10/TB'", "-fps_mode", "vfr", *lossless,
+                    str(uneven)], check=True)
+    steps = video_info(uneven).steps
+    assert steps is not None and len(steps) == 17          # a 5-step gap after frame 5
+    shown = read_video(uneven)[0][:, 0, 0, 0]
+    for start in (0, 4, 8):
+        planes = DecodedPlanes(uneven, "rgb48le", "the 16-bit colour of", start=start)
+        got = [int(planes.frame(i)[0, 0, 0]) for i in range(start, 17)]
+        assert got == [int(levels[s]) for s in steps[start:]], start
+        # the frames the reader shows (OpenCV takes this codec's 16 bits as v / 256)
+        assert np.abs(np.array(got) / 256.0 - shown[start:]).max() <= 0.5
+        planes.close()

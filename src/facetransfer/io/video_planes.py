@@ -3,13 +3,17 @@ the tools read (:mod:`facetransfer.io.video_read`) do not hold: its alpha plane
 (:mod:`facetransfer.io.plate_alpha`), its colour in 16 bits (:mod:`facetransfer.io.video_depth`).
 
 One ffmpeg process decodes the first video stream in order, every stored frame as it is
-(``-fps_mode passthrough``: the frames the reader sees), as raw 16-bit samples; frames are
-asked for by number, in any order a few frames ahead (the rewrite's threads): the frames
-decoded and not yet asked for are kept until they are.
+(``-fps_mode passthrough``), as raw 16-bit samples; frames are asked for by number, in any
+order a few frames ahead (the rewrite's threads): the frames decoded and not yet asked for are
+kept until they are. The numbers are the reader's: a video of variable frame rate is read on
+its constant-rate timeline (:mod:`facetransfer.io.video_timeline`), so frame ``i`` is the
+stored frame its step ``i`` shows (kept while a later step shows it again; stored frames no
+step shows are passed over).
 """
 
 from __future__ import annotations
 
+import re
 import subprocess
 import threading
 from pathlib import Path
@@ -26,8 +30,6 @@ __all__ = ["DecodedPlanes", "stored_pixel_format"]
 def stored_pixel_format(video) -> str | None:
     """The pixel format of a video file's first video stream as ffmpeg names it
     (``"yuv422p10le"``, ``"yuva444p10le"``), or None."""
-    import re
-
     m = re.search(r"Stream #[^\n]*?: Video: [^\n]*?, ([a-z0-9]+)(?:\(|,)",
                   described_input(video))
     return m.group(1) if m else None
@@ -60,14 +62,21 @@ class DecodedPlanes:
         self._lock = threading.Lock()
         self._proc = None
         self._start = int(start)
+        self._steps, self._shown = None, None   # a variable rate's timeline (module notes)
 
     def _open(self) -> None:
         exe = ffmpeg_exe()
         if exe is None:
             raise VideoError(f"no ffmpeg binary found to read {self.what} {self.video}")
+        from collections import Counter
+
         from .video_read import video_info
 
-        self._size = video_info(self.video).size
+        info = video_info(self.video)
+        self._size = info.size
+        if info.steps is not None:   # each stored frame: how many steps from start show it
+            self._steps = info.steps
+            self._shown = Counter(info.steps[self._start:])
         vf = ["-vf", self._filters] if self._filters else []
         self._proc = subprocess.Popen(
             [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-i", str(self.video),
@@ -89,14 +98,32 @@ class DecodedPlanes:
         with self._lock:
             if self._proc is None:
                 self._open()
-            while self._next <= i:
+            s = self._stored(i)
+            while self._next <= s:
                 a = self._read_next()
-                if self._next >= self._start:
+                if self._wanted(self._next):
                     self._kept[self._next] = a
                 self._next += 1
-            if i not in self._kept:
+            if s not in self._kept:
                 raise VideoError(f"{self.what} frame {i} of {self.video} was read already")
-            return self._kept.pop(i)
+            if self._shown is None:
+                return self._kept.pop(s)
+            self._shown[s] -= 1
+            return self._kept[s] if self._shown[s] > 0 else self._kept.pop(s)
+
+    def _stored(self, i: int) -> int:
+        """The stored frame that frame ``i`` shows."""
+        if self._steps is None:
+            return int(i)
+        if not 0 <= i < len(self._steps):
+            raise VideoError(f"{self.what} {self.video} ends at frame {len(self._steps)}")
+        return int(self._steps[i])
+
+    def _wanted(self, s: int) -> bool:
+        """Whether stored frame ``s`` will be asked for (from ``start`` on)."""
+        if self._shown is None:
+            return s >= self._start
+        return self._shown.get(s, 0) > 0
 
     def close(self) -> None:
         """Stop the decoder (also when not every frame was asked for)."""
