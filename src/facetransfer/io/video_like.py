@@ -76,8 +76,8 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         options = replace(options, colour_tags=False)
     deep = options.deep or (out is not None and is_image_pattern(out) and video_bits(video) > 8
                             and Path(out).suffix.lower() in DEPTH_SUFFIXES)
-    if tags.beyond_sdr and not deep:
-        _warn_hdr(str(video), tags)
+    if tags.beyond_sdr and not deep:   # a command that carries depth could have kept it
+        _warn_hdr(str(video), tags, out is not None and video_bits(video) > 8)
     elif options.primaries is None and options.transfer is None:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
     if options.timecode is None:
@@ -108,8 +108,11 @@ def _warn_progressive(video: str) -> None:
 
 
 @functools.lru_cache(maxsize=16)
-def _warn_hdr(video: str, tags) -> None:
-    """Say once that ``video`` is HDR (or wide-gamut) and read as 8-bit SDR."""
+def _warn_hdr(video: str, tags, keepable: bool = False) -> None:
+    """Say once that ``video`` is HDR (or wide-gamut) and read as 8-bit SDR (and, when
+    ``keepable``, which outputs would have kept it: :mod:`facetransfer.io.video_depth`)."""
     log.warning("%s is HDR or wide-gamut video (primaries %s, transfer %s): it is decoded to "
                 "8-bit SDR without tone mapping, so the result is SDR and looks flatter than "
-                "the original does in an HDR player", video, tags.primaries, tags.transfer)
+                "the original does in an HDR player%s", video, tags.primaries, tags.transfer,
+                " (--codec h265 or prores, or a 16-bit PNG or TIFF sequence, keeps its 10 bits "
+                "and its colour)" if keepable else "")
