@@ -650,8 +650,9 @@ class VideoWriter:
     def write(self, frame: np.ndarray) -> None:
         """Append one ``(H, W, 3) uint8`` RGB frame of the writer's size (of a PNG or TIFF
         sequence, ``(H, W, 4)`` RGBA and uint16 too; of a video written with alpha, RGBA; of one
-        written in 16 bits (:attr:`VideoOptions.deep`), uint16 too; of an OpenEXR sequence, float16 or float32 linear RGB, or an
-        :class:`~facetransfer.io.exr.ExrImage`: :func:`facetransfer.io.exr.write_exr`)."""
+        written in 16 bits (:attr:`VideoOptions.deep`), uint16 too; of an OpenEXR sequence,
+        float16 or float32 linear RGB, or an :class:`~facetransfer.io.exr.ExrImage`:
+        :func:`facetransfer.io.exr.write_exr`)."""
         if self.result is not None or (self._proc is None and self._tmpdir is None):
             raise VideoError(f"video {self.path} is already closed")
         if not fits_output(frame.shape, self.size, self.path, self.options.alpha):
@@ -659,7 +660,7 @@ class VideoWriter:
                              f"{self.size[0]}x{self.size[1]} of {self.path}")
         if self._tmpdir is None and frame.dtype == np.uint16 and not self.options.deep:
             raise VideoError(f"{self.path}: 16-bit frames are written to PNG or TIFF sequences "
-                             "(or to ProRes with VideoOptions.deep)")
+                             "(or to ProRes or H.265 with VideoOptions.deep)")
         if self._tmpdir is not None:
             self._write_image(frame if _linear(frame, self.path) or frame.dtype == np.uint16
                               else np.ascontiguousarray(frame, dtype=np.uint8))

@@ -102,10 +102,11 @@ class VideoDepth:
 
 def video_depth(out, target, options=None, start: int = 0) -> VideoDepth | None:
     """The 16-bit decode of the video ``target`` of more than 8 bits, rewritten as ``out``:
-    ProRes or H.265 (``options`` asking for it, :attr:`~facetransfer.io.video_options.VideoOptions.deep`,
-    set by :func:`~facetransfer.io.video_like.like_video`; its alpha as ``options.alpha``
-    says) or a PNG or TIFF sequence (a PNG one with the video's alpha); None otherwise (an
-    8-bit video, H.264 or H.265 written, a TIFF sequence of a video with alpha: written by
+    ProRes or H.265 (``options`` asking for it,
+    :attr:`~facetransfer.io.video_options.VideoOptions.deep`, set by
+    :func:`~facetransfer.io.video_like.like_video`; its alpha as ``options.alpha`` says) or a
+    PNG or TIFF sequence (a PNG one with the video's alpha); None otherwise (an 8-bit video,
+    H.264 written, a TIFF sequence of a video with alpha: written by
     :mod:`facetransfer.io.plate_alpha` in 8 bits with its alpha)."""
     if target is None or is_sequence(target) or not Path(target).is_file():
         return None

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from ..errors import VideoError
 from .video_display import checked_aspect, checked_colour_name, checked_timecode
 
-__all__ = ["CODECS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET",
-           "VideoOptions"]
+__all__ = ["CODECS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS",
+           "DEFAULT_PRESET", "VideoOptions"]
 
 #: Codec names of ``--codec`` and the ffmpeg encoder each needs.
 CODECS = {"h264": "libx264", "h265": "libx265", "prores": "prores_ks"}
