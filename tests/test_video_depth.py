@@ -111,6 +111,29 @@ def test_decoded_planes_reads_16_bit_frames_in_any_order_a_few_ahead(tmp_path):
     short.close()
 
 
+def test_a_deep_target_written_in_8_bits_is_warned_of_once(tmp_path, caplog):
+    """A transfer (a command that carries depth) writing a 10-bit target as H.264 or JPEG
+    says once that its depth is lost and what keeps it; ProRes, H.265 and 16-bit sequences,
+    an 8-bit target and a command that does not carry depth say nothing."""
+    import logging
+
+    frames = _ramps(32)
+    ten = _encode16(tmp_path / "ten.mov", _with_fine(frames, 9), PRORES)
+    eight = write_video(tmp_path / "eight.mp4", frames, 25.0)
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        like_video(VideoOptions("prores"), ten, tmp_path / "r.mov")
+        like_video(VideoOptions("h265"), ten, tmp_path / "r.mp4")
+        like_video(None, ten, tmp_path / "s" / "%04d.png")
+        like_video(None, eight, tmp_path / "r.mp4")
+        like_video(None, ten)
+        assert not caplog.records
+        for out in ("r.mp4", "r2.mp4", "s/%04d.jpg"):
+            like_video(None, ten, tmp_path / out)
+    said = [r.getMessage() for r in caplog.records]
+    assert said == [f"{ten} has 10 bits a sample; the result is written in 8 (--codec prores "
+                    "or h265, or a 16-bit PNG or TIFF sequence, keeps them)"]
+
+
 def test_which_targets_and_outputs_are_written_deep(tmp_path):
     frames = np.random.default_rng(2).integers(0, 256, (3, 16, 16, 3), dtype=np.uint8)
     ten = _encode16(tmp_path / "ten.mov", _with_fine(frames, 3), PRORES)

@@ -43,7 +43,8 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     written as ProRes or H.265 by such a command is written from 16-bit frames, converted by
     its own matrix (:attr:`VideoOptions.deep`, :mod:`facetransfer.io.video_depth`); an HDR
     one then keeps its primaries and transfer (its values are its own outside the face) and
-    is not warned of, nor is one written as a 16-bit image sequence."""
+    is not warned of, nor is one written as a 16-bit image sequence; written otherwise (H.264,
+    JPEG) by such a command, a deep video is warned of once."""
     from dataclasses import replace
 
     options = VideoOptions() if options is None else options
@@ -78,6 +79,8 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
                             and Path(out).suffix.lower() in DEPTH_SUFFIXES)
     if tags.beyond_sdr and not deep:   # a command that carries depth could have kept it
         _warn_hdr(str(video), tags, out is not None and video_bits(video) > 8)
+    elif out is not None and not deep and video_bits(video) > 8:
+        _warn_depth(str(video), video_bits(video))
     elif options.primaries is None and options.transfer is None:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
     if options.timecode is None:
@@ -105,6 +108,13 @@ def _warn_progressive(video: str) -> None:
     log.warning("%s is interlaced; x265 writes progressive frames, so players show the "
                 "result's fields woven (use --codec h264 or prores to keep them interlaced)",
                 video)
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_depth(video: str, bits: int) -> None:
+    """Say once that ``video``'s samples below 8 bits are not carried into the rewrite."""
+    log.warning("%s has %d bits a sample; the result is written in 8 (--codec prores or "
+                "h265, or a 16-bit PNG or TIFF sequence, keeps them)", video, bits)
 
 
 @functools.lru_cache(maxsize=16)
