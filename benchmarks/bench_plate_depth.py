@@ -11,7 +11,7 @@ older tree (``PYTHONPATH=OLD/src``) to see what was written before.
 
     FACETRANSFER_DATA_DIR=... python benchmarks/bench_plate_depth.py --out out/benchmarks
 
-Writes ``OUT/plate_depth.json``.
+Writes ``OUT/plate_depth.json`` and ``OUT/plate_depth.png``.
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _report import facetransfer_exe, out_and_data, save_json  # noqa: E402
+from _report import facetransfer_exe, out_and_data, save_json, save_plot  # noqa: E402
 
 SECONDS = 3
 
@@ -80,6 +80,26 @@ def judge(out: Path, plates: list, first: int = 1001) -> dict:
             "largest_difference_outside_face": worst}
 
 
+def plot(rows: list[dict], path: Path) -> None:
+    """Each plate's share of pixels equal to the plate's to the bit and the largest difference
+    outside the face, with the bits written."""
+    import matplotlib.pyplot as plt
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(6.4, 2.8))
+    names = [f"{r['plate']}\n({r.get('bits', '?')} bits written)" for r in rows]
+    a.bar_label(a.bar(names, [100 * r.get("pixels_exact_share", 0.0) for r in rows]),
+                fmt="%.1f", fontsize=7)
+    a.set_ylabel("pixels equal to the plate's, %")
+    worst = [r.get("largest_difference_outside_face", 0) for r in rows]
+    b.bar_label(b.bar(names, worst), fontsize=7)
+    b.set_ylim(0, max(1, *worst) * 1.2)
+    b.set_ylabel("largest difference outside\nthe face, 16-bit levels")
+    for ax in (a, b):
+        ax.tick_params(axis="x", labelsize=7)
+    fig.suptitle("a 16-bit plate through transfer", fontsize=9)
+    save_plot(fig, path)
+
+
 def main() -> int:
     out, data = out_and_data(__doc__)
     source = data / "video" / "WDA_KatieHill_000.mp4"
@@ -105,7 +125,8 @@ def main() -> int:
              r.get("largest_difference_outside_face") == 0 for r in rows)
     save_json({"benchmark": "a 16-bit plate through transfer", "seconds_of_clip": SECONDS,
                "rows": rows, "all_ok": ok}, out / "plate_depth.json")
-    print(f"all ok: {ok}; wrote {out / 'plate_depth.json'}")
+    plot(rows, out / "plate_depth.png")
+    print(f"all ok: {ok}; wrote {out / 'plate_depth.json'} and {out / 'plate_depth.png'}")
     return 0 if ok else 1
 
 

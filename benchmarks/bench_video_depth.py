@@ -17,7 +17,7 @@ warned of HDR, and its seconds.
     FACETRANSFER_DATA_DIR=... python benchmarks/bench_video_depth.py --out out/benchmarks \
         [--base-src OLD/src]
 
-Writes ``OUT/video_depth.json``.
+Writes ``OUT/video_depth.json`` and ``OUT/video_depth.png``.
 """
 
 from __future__ import annotations
@@ -34,7 +34,7 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _report import arguments, facetransfer_exe, save_json  # noqa: E402
+from _report import arguments, facetransfer_exe, save_json, save_plot  # noqa: E402
 
 SECONDS = 3
 TARGETS = {"prores422": ("mov", ["-c:v", "prores_ks", "-profile:v", "3",
@@ -135,6 +135,33 @@ def judge(got: np.ndarray, truth: np.ndarray, face: np.ndarray,
     return row
 
 
+def plot(rows: list[dict], path: Path) -> None:
+    """Outside the face, RMS in 8-bit levels, each target and output, this tree beside the
+    other (log scale: an HDR target written as SDR is tens of levels off)."""
+    import matplotlib.pyplot as plt
+
+    cases = list(dict.fromkeys((r["target"], r["output"]) for r in rows))
+    trees = list(dict.fromkeys(r["tree"] for r in rows))
+    fig, ax = plt.subplots(figsize=(1.0 + 0.9 * len(cases), 3.2))
+    width = 0.8 / len(trees)
+    for k, tree in enumerate(trees):
+        got = {(r["target"], r["output"]): r.get("outside_rms_levels") for r in rows
+               if r["tree"] == tree}
+        xs = np.arange(len(cases)) + (k - (len(trees) - 1) / 2) * width
+        vals = [max(got.get(c) or 0.0, 1e-3) for c in cases]
+        ax.bar(xs, vals, width, label=tree)
+        for x, c in zip(xs, cases):
+            if got.get(c) == 0:
+                ax.text(x, 1.5e-3, "0", ha="center", fontsize=7)
+    ax.set_yscale("log")
+    ax.set_xticks(np.arange(len(cases)), [f"{t}\n-> {o}" for t, o in cases], fontsize=7)
+    ax.set_ylabel("outside the face: RMS, 8-bit levels")
+    ax.set_title("a deep video target through transfer, against its own 16-bit decode",
+                 fontsize=9)
+    ax.legend(fontsize=7)
+    save_plot(fig, path)
+
+
 def main() -> int:
     ap = arguments(__doc__)
     ap.add_argument("--base-src", help="another tree's src folder, run beside this one")
@@ -178,7 +205,8 @@ def main() -> int:
         if r["tree"] == "this tree" and r["output"] == "png")
     save_json({"benchmark": "a 10-bit video target through transfer",
                "seconds_of_clip": SECONDS, "rows": rows, "all_ok": ok}, out / "video_depth.json")
-    print(f"all ok: {ok}; wrote {out / 'video_depth.json'}")
+    plot(rows, out / "video_depth.png")
+    print(f"all ok: {ok}; wrote {out / 'video_depth.json'} and {out / 'video_depth.png'}")
     return 0 if ok else 1
 
 
