@@ -1,10 +1,14 @@
-"""The ffmpeg binary every video command runs: imageio-ffmpeg's, else one on ``PATH``."""
+"""The ffmpeg binary every video command runs: imageio-ffmpeg's, else one on ``PATH``; and
+what its messages say when it fails."""
 
 from __future__ import annotations
 
+import re
 import shutil
 
-__all__ = ["ffmpeg_exe"]
+from ..errors import VideoError
+
+__all__ = ["ffmpeg_error", "ffmpeg_exe"]
 
 
 def ffmpeg_exe() -> str | None:
@@ -15,3 +19,20 @@ def ffmpeg_exe() -> str | None:
         return imageio_ffmpeg.get_ffmpeg_exe()
     except Exception:  # noqa: BLE001 - missing package or binary: fall back to PATH
         return shutil.which("ffmpeg")
+
+
+#: Words of ffmpeg's messages that name why it failed.
+_CAUSES = ("No space left", "Disk quota", "File too large", "Permission denied",
+           "Read-only file system", "Input/output error")
+
+
+def ffmpeg_error(stderr: bytes | str, what: str) -> VideoError:
+    """A VideoError saying ``what`` failed and why, from ffmpeg's ``stderr``: the line naming
+    a cause (a full disk, a permission) if any, else its last line."""
+    text = stderr.decode("utf-8", "replace") if isinstance(stderr, bytes) else stderr
+    # "[out#0/mp4 @ 0x55d0...] Error closing file: ..." -> "Error closing file: ..."
+    lines = [re.sub(r"^\[[^\]]* @ 0x[0-9a-f]+\]\s*", "", ln.strip())
+             for ln in text.splitlines() if ln.strip()]
+    # the cause (a full disk...) may come before ffmpeg's closing remarks: prefer it
+    cause = [ln for ln in lines if any(k in ln for k in _CAUSES)]
+    return VideoError(f"{what}: {(cause or lines or ['ffmpeg failed'])[-1]}")

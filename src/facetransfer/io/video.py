@@ -32,11 +32,14 @@ import numpy as np
 
 from ..errors import VideoError
 from .atomic import atomic_path, check_output_path
-from .ffmpeg import ffmpeg_exe
+from .ffmpeg import ffmpeg_error, ffmpeg_exe
+from .video_audio import (COPIED_AUDIO, audio_codec, audio_codecs, audio_input_args,  # noqa: F401
+                          has_audio, mux_audio)
 from .video_display import (COLOUR_TAGS, checked_timecode, colour_matrix,  # noqa: F401
-                            described, described_input, frame_args, video_colour)
+                            described, described_input, frame_args, timecode_args,
+                            video_colour)
 from .video_options import (CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF,  # noqa: F401 (API)
-                            DEFAULT_PRESET, PRESETS, VideoOptions)
+                            DEFAULT_PRESET, PRESETS, VIDEO_SUFFIXES, VideoOptions)
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
 from .video_sequence import (IMAGE_SUFFIXES, is_sequence, percent_pattern, same_sequence_files,
@@ -58,9 +61,6 @@ __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video
 # writing: one writer for every command (H.264 by default, H.265, ProRes, image sequences)
 # ---------------------------------------------------------------------------------------------
 
-#: Video containers by extension (the ffmpeg muxer of each).
-VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska",
-                  ".avi": "avi"}
 _PATTERN = re.compile(r"%0?\d*d")
 
 
@@ -317,19 +317,11 @@ def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
 def _container_args(opt: VideoOptions, suffix: str) -> list[str]:
     """ffmpeg output arguments an MP4 / QuickTime file asks of its video: HEVC tagged ``hvc1``
     (what Apple players expect) and the index at the front (``+faststart``); and the start
-    timecode (:func:`_timecode_args`)."""
-    tc = _timecode_args(opt.timecode, suffix)
+    timecode (:func:`~facetransfer.io.video_display.timecode_args`)."""
+    tc = timecode_args(opt.timecode, suffix)
     if suffix not in (".mp4", ".m4v", ".mov"):
         return tc
     return (["-tag:v", "hvc1"] if opt.codec == "h265" else []) + ["-movflags", "+faststart"] + tc
-
-
-def _timecode_args(timecode: str | None, suffix: str) -> list[str]:
-    """``-timecode`` of a file that holds one (MP4 and QuickTime: a ``tmcd`` track; Matroska:
-    a tag); none for AVI or without a timecode."""
-    if timecode is None or suffix not in (".mp4", ".m4v", ".mov", ".mkv"):
-        return []
-    return ["-timecode", timecode]
 
 
 def _stored_size(size: tuple[int, int], codec: str) -> tuple[int, int]:
@@ -349,30 +341,6 @@ def warn_if_grown(path, size: tuple[int, int], codec: str) -> None:
                     "(%s); an image sequence keeps %dx%d", path, size[0], size[1], *stored,
                     "4:2:0 holds even sizes only" if codec != "prores"
                     else "4:2:2 holds even widths only", size[0], size[1])
-
-
-def _audio_input_args(audio_from, codecs: tuple[str, ...], fmt: str, *, start: float = 0.0,
-                      duration: float) -> list[str]:
-    """ffmpeg arguments adding every audio stream of ``audio_from`` (in ``codecs``) as the
-    second input of a video written into the container ``fmt``: from ``start`` seconds, cut
-    to ``duration``, copied or encoded as :func:`_audio_codec_args` says."""
-    return [*(["-ss", f"{start:.3f}"] if start else []), "-t", f"{duration:.3f}",
-            "-i", str(audio_from), "-map", "0:v:0", "-map", "1:a",
-            *_audio_codec_args(codecs, fmt)]
-
-
-_CAUSES = ("No space left", "Disk quota", "File too large", "Permission denied",
-           "Read-only file system", "Input/output error")
-
-
-def _ffmpeg_error(stderr: bytes | str, what: str) -> VideoError:
-    text = stderr.decode("utf-8", "replace") if isinstance(stderr, bytes) else stderr
-    # "[out#0/mp4 @ 0x55d0...] Error closing file: ..." -> "Error closing file: ..."
-    lines = [re.sub(r"^\[[^\]]* @ 0x[0-9a-f]+\]\s*", "", ln.strip())
-             for ln in text.splitlines() if ln.strip()]
-    # the cause (a full disk...) may come before ffmpeg's closing remarks: prefer it
-    cause = [ln for ln in lines if any(k in ln for k in _CAUSES)]
-    return VideoError(f"{what}: {(cause or lines or ['ffmpeg failed'])[-1]}")
 
 
 def decoded_frame_count(path: str | os.PathLike) -> int:
@@ -407,7 +375,7 @@ def _ffmpeg_frame_count(path, args: list[str], failure: str) -> int:
                          capture_output=True, text=True)
     found = re.findall(r"frame=\s*(\d+)", res.stderr)
     if res.returncode != 0 or not found:
-        raise _ffmpeg_error(res.stderr, f"video {path} {failure}")
+        raise ffmpeg_error(res.stderr, f"video {path} {failure}")
     return int(found[-1])
 
 
@@ -417,78 +385,6 @@ def _stored_count_or_none(path) -> int | None:
         return stored_frame_count(path)
     except VideoError:
         return None
-
-
-def has_audio(path: str | os.PathLike) -> bool:
-    """Whether a media file has an audio stream (False when ffmpeg is unavailable)."""
-    return audio_codec(path) is not None
-
-
-def audio_codec(path: str | os.PathLike) -> str | None:
-    """The codec of a media file's first audio stream as ffmpeg names it (``"aac"``,
-    ``"mp3"``, ``"opus"``, ...); None without one or without ffmpeg."""
-    codecs = audio_codecs(path)
-    return codecs[0] if codecs else None
-
-
-def audio_codecs(path: str | os.PathLike) -> tuple[str, ...]:
-    """The codecs of every audio stream of a media file, in order (a second language, a
-    commentary, a camera's separate channels); empty without one or without ffmpeg."""
-    return tuple(re.findall(r"Stream #[^\n]*?: Audio: ([\w-]+)", described_input(path)))
-
-
-#: Audio codecs copied as they are into the containers that hold them: no second lossy
-#: generation, no encoding time (0.2 CPU-s of a 10-second transfer). Other audio becomes AAC.
-COPIED_AUDIO = {"aac": ("mp4", "mov", "matroska")}
-
-
-def _audio_codec_args(codecs: tuple[str, ...], fmt: str) -> list[str]:
-    """``-c:a`` of audio streams in ``codecs`` written into the container ``fmt`` (ffmpeg's
-    name): copied when the container holds every one of them, else all encoded to AAC."""
-    copy = bool(codecs) and all(fmt in COPIED_AUDIO.get(c, ()) for c in codecs)
-    return ["-c:a", "copy" if copy else "aac"]
-
-
-def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str | os.PathLike, *,
-              start: float = 0.0, duration: float | None = None,
-              timecode: str | None = None) -> bool:
-    """Copy ``video``'s frames and ``audio_from``'s audio into ``out``.
-
-    The video stream is copied as is; the audio too when the container holds its codec
-    (:data:`COPIED_AUDIO`), else it is encoded to AAC; it starts at ``start`` seconds and is
-    cut to ``duration`` (default: the shorter stream). ``timecode``: the start timecode
-    written (:attr:`VideoOptions.timecode`; the video's own is not copied). Returns False (and
-    logs why) when there is no ffmpeg or no audio, in which case ``out`` is not written.
-
-    Raises
-    ------
-    VideoError
-        If ffmpeg fails (e.g. the disk is full).
-    """
-    exe = ffmpeg_exe()
-    if exe is None:
-        log.info("no ffmpeg available (pip install imageio-ffmpeg): output has no audio")
-        return False
-    codecs = audio_codecs(audio_from)
-    if not codecs:
-        log.info("%s has no audio track; the output has none either", audio_from)
-        return False
-    fmt = VIDEO_SUFFIXES.get(Path(out).suffix.lower(), "mp4")
-    cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-i", str(video)]
-    if start:
-        cmd += ["-ss", f"{start:.3f}"]
-    cmd += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a", "-c:v", "copy",
-            *_audio_codec_args(codecs, fmt)]
-    # cut to the video's length; a shorter audio track just ends early
-    cmd += ["-shortest"] if duration is None else ["-t", f"{duration:.3f}"]
-    if fmt in ("mp4", "mov"):
-        cmd += ["-movflags", "+faststart"]
-    cmd += [*_timecode_args(checked_timecode(timecode), Path(out).suffix.lower()), "-f", fmt,
-            str(out)]
-    res = subprocess.run(cmd, capture_output=True, text=True)
-    if res.returncode != 0:
-        raise _ffmpeg_error(res.stderr, f"cannot mux the audio of {audio_from} into {out}")
-    return True
 
 
 def _fps_arg(fps: float) -> str:
@@ -643,7 +539,7 @@ class VideoWriter:
         if not codecs:
             return []
         self._inline_audio = True
-        return _audio_input_args(self.audio_from, codecs,
+        return audio_input_args(self.audio_from, codecs,
                                  VIDEO_SUFFIXES[self.path.suffix.lower()],
                                  start=self.audio_start, duration=self.expected / self.fps)
 
@@ -696,7 +592,7 @@ class VideoWriter:
         if -rc == getattr(signal, "SIGXFSZ", -1):
             why += ": file size limit exceeded"
         what = f"cannot write video {self.path} (ffmpeg {why})"
-        return _ffmpeg_error(err, what) if err.strip() else VideoError(what)
+        return ffmpeg_error(err, what) if err.strip() else VideoError(what)
 
     def close(self, *, commit: bool = True, prefix: bool = False) -> WrittenVideo | None:
         """Finish the output (``commit``) or discard it; returns what was written.

@@ -28,7 +28,7 @@ __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixe
            "frame_args", "colour_named", "checked_colour_name", "described", "described_input",
            "video_colour",
            "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK",
-           "checked_timecode", "timecode_of", "timecode_seconds"]
+           "checked_timecode", "timecode_args", "timecode_of", "timecode_seconds"]
 
 #: ffmpeg arguments naming the colour of a video written
 #: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
@@ -201,6 +201,14 @@ def checked_timecode(timecode) -> str | None:
         return timecode
     raise VideoError(f"a timecode must read HH:MM:SS:FF (HH:MM:SS;FF for drop frame), got "
                      f"{timecode!r}")
+
+
+def timecode_args(timecode: str | None, suffix: str) -> list[str]:
+    """``-timecode`` of a file that holds one (MP4 and QuickTime: a ``tmcd`` track; Matroska:
+    a tag); none for AVI or without a timecode."""
+    if timecode is None or suffix not in (".mp4", ".m4v", ".mov", ".mkv"):
+        return []
+    return ["-timecode", timecode]
 
 
 def timecode_seconds(timecode: str, fps: float) -> float:

@@ -15,7 +15,7 @@ from __future__ import annotations
 import os
 from dataclasses import asdict, dataclass
 
-from .video import audio_codecs
+from .video_audio import audio_codecs
 from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
                             timecode_of, video_colour)
 from .plate_alpha import sequence_has_alpha, video_has_alpha

@@ -10,8 +10,11 @@ from ..errors import VideoError
 from .video_display import checked_aspect, checked_colour_name, checked_timecode
 
 __all__ = ["CODECS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS",
-           "DEFAULT_PRESET", "VideoOptions"]
+           "DEFAULT_PRESET", "VIDEO_SUFFIXES", "VideoOptions"]
 
+#: Video containers by extension (the ffmpeg muxer of each).
+VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska",
+                  ".avi": "avi"}
 #: Codec names of ``--codec`` and the ffmpeg encoder each needs.
 CODECS = {"h264": "libx264", "h265": "libx265", "prores": "prores_ks"}
 DEFAULT_CODEC = "h264"

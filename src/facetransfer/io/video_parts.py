@@ -32,9 +32,12 @@ import numpy as np
 
 from ..errors import OutputError, VideoError
 from .atomic import atomic_path, locked_elsewhere, write_text_atomic
-from .video import (VIDEO_SUFFIXES, VideoOptions, VideoWriter, WrittenVideo, _audio_input_args,
-                    _container_args, _ffmpeg_error, _fps_arg, _require_ffmpeg, _stored_size,
-                    audio_codecs, check_video_output, stored_frame_count, warn_if_grown)
+from .ffmpeg import ffmpeg_error
+from .video import (VideoOptions, VideoWriter, WrittenVideo, _container_args, _fps_arg,
+                    _require_ffmpeg, _stored_size, check_video_output, stored_frame_count,
+                    warn_if_grown)
+from .video_audio import audio_codecs, audio_input_args
+from .video_options import VIDEO_SUFFIXES
 
 log = logging.getLogger(__name__)
 
@@ -325,7 +328,7 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
     listing.write_text("ffconcat version 1.0\n" + "".join(f"file '{p.name}'\n" for p in parts))
     fmt = VIDEO_SUFFIXES[out.suffix.lower()]
     codecs = () if audio_from is None else audio_codecs(audio_from)
-    audio = _audio_input_args(audio_from, codecs, fmt, duration=n / fps) if codecs else []
+    audio = audio_input_args(audio_from, codecs, fmt, duration=n / fps) if codecs else []
     extra = _container_args(opt, out.suffix.lower())
     if fmt == "avi":  # a constant rate (else the parts' 1/15360 s ticks: "600 fps"), its tag
         extra += ["-r", _fps_arg(fps)] + (["-tag:v", "H264"] if opt.codec == "h264" else [])
@@ -335,7 +338,7 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
                               "-c:v", "copy", *extra, "-f", fmt, str(tmp)],
                              capture_output=True, text=True)
         if res.returncode != 0:
-            raise _ffmpeg_error(res.stderr, f"cannot join the parts of {out}")
+            raise ffmpeg_error(res.stderr, f"cannot join the parts of {out}")
         stored = stored_frame_count(tmp)
         if stored != n:
             raise VideoError(f"cannot write video {out}: its parts hold {n} frames, the joined "
