@@ -88,9 +88,9 @@ def test_deep_frame_moves_the_16_bit_decode_by_the_change():
     assert np.array_equal(out[0, 0], v[0, 0])                        # unchanged: to the bit
     assert np.array_equal(out[0, 1], [5000 + 2 * 257, 5000 - 257, 5000])
     assert np.array_equal(out[0, 2], [65535, 0, 40000 + 5 * 257])    # clipped at both ends
-    rgba = np.dstack([v, np.array([[7, 8, 9]], np.uint16)])
-    assert np.array_equal(deep_frame(rgba, shown, rew)[..., 3], [[7, 8, 9]])
-    assert np.array_equal(deep_frame(v, shown, rew)[..., :3], out)
+    rgba = deep_frame(np.dstack([v, np.array([[7, 8, 9]], np.uint16)]), shown, rew)
+    assert np.array_equal(rgba[..., 3], [[7, 8, 9]])                # the alpha as it was
+    assert np.array_equal(rgba[..., :3], out)                        # the colour as RGB's
 
 
 def test_decoded_planes_reads_16_bit_frames_in_any_order_a_few_ahead(tmp_path):
