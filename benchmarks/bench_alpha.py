@@ -124,11 +124,25 @@ def read_result(out: Path, size: tuple[int, int]):
     files = sorted(out.parent.glob(out.name.split("%")[0] + "*" + out.suffix))
     imgs = []
     for f in files:    # as stored (OpenCV premultiplies a straight TIFF's colour)
+        if f.suffix.lower() == ".png":   # 16-bit ones too (of a deep target), rounded
+            imgs.append(_png_rgba8(f))
+            continue
         with Image.open(f) as im:
             imgs.append(np.asarray(im))
     rgb = np.stack([im[..., :3] for im in imgs])
     alpha = np.stack([im[..., 3] for im in imgs]) if imgs[0].shape[2] == 4 else None
     return rgb, alpha
+
+
+def _png_rgba8(path: Path) -> np.ndarray:
+    """A PNG's RGB(A) in 8 bits (a 16-bit one's values rounded, ``(v + 128) // 257``)."""
+    import cv2
+
+    img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    img = cv2.cvtColor(img, cv2.COLOR_BGRA2RGBA if img.shape[2] == 4 else cv2.COLOR_BGR2RGB)
+    if img.dtype == np.uint16:
+        img = ((img.astype(np.uint32) + 128) // 257).astype(np.uint8)
+    return img
 
 
 def run(target: Path, source: Path, out: Path, extra=()) -> dict:

@@ -14,7 +14,8 @@ surroundings without a step. A video's alpha plane is carried in 16 bits beside 
 4444, a PNG sequence; a TIFF sequence's alpha is written in 8 bits by
 :mod:`facetransfer.io.plate_alpha`), its bits repeated below its depth as ffmpeg's own
 ``alphaextract`` gives them (``rgba64le`` leaves them 0: an opaque 12-bit alpha would read
-65520, not 65535).
+65520, not 65535); into ProRes on the 10-bit grid its encoder takes back exactly, so the
+output's alpha decodes as the target's did.
 """
 
 from __future__ import annotations
@@ -77,6 +78,7 @@ class VideoDepth:
     def __init__(self, video, bits: int, alpha: bool = False, start: int = 0,
                  written: int = 16) -> None:
         self.video, self._bits, self._alpha = Path(video), int(bits), bool(alpha)
+        self._written = int(written)
         self._planes = DecodedPlanes(video, "rgba64le" if alpha else "rgb48le",
                                      "the 16-bit colour of", start=start)
         depth = f"the target's {bits} bits" if written >= bits else \
@@ -91,13 +93,25 @@ class VideoDepth:
                              f"{plane.shape[0]} in 16 bits, the rewrite is "
                              f"{np.shape(rewritten)[1]}x{np.shape(rewritten)[0]}")
         out = deep_frame(plane, shown, rewritten)
-        if self._alpha and 8 <= self._bits < 16:   # ffmpeg's rgba64le: a << (16 - bits)
-            out[..., 3] |= out[..., 3] >> self._bits   # its bits repeated: opaque is 65535
+        if self._alpha:
+            out[..., 3] = _alpha_for(out[..., 3], self._bits, self._written)
         return out
 
     def close(self) -> None:
         """Stop the decoder (also when not every frame was asked for)."""
         self._planes.close()
+
+
+def _alpha_for(a: np.ndarray, bits: int, written: int) -> np.ndarray:
+    """A video's decoded alpha ``a`` (uint16, of a ``bits``-bit stream as ffmpeg's
+    ``rgba64le`` gives it: ``v << (16 - bits)``) for an output of ``written`` bits: its bits
+    repeated below its depth (as ffmpeg's ``alphaextract`` gives them: opaque is 65535); for
+    ProRes (10), on the 10-bit grid as ``v10 << 6``, which ffmpeg's conversion to 10 bits
+    (rounding) takes back to ``v10`` exactly: the output's alpha decodes as the target's."""
+    a = a | (a >> bits) if 8 <= bits < 16 else a
+    if written != 10:
+        return a
+    return (((a.astype(np.uint32) * 1023 + 32767) // 65535) << 6).astype(np.uint16)
 
 
 def video_depth(out, target, options=None, start: int = 0) -> VideoDepth | None:
