@@ -227,6 +227,45 @@ def test_batch_transfer_calls_what_transfer_calls(clips, quick_model_path, inpro
     assert rows["gone"]["status"] == "failed" and "gone.mp4" in rows["gone"]["error"]
 
 
+def test_batch_transfer_writes_the_codec_asked_for(clips, quick_model_path, inproc, tmp_path,
+                                                   capsys):
+    """``--codec prores`` writes DIR/NAME.mov as ProRes, and of a 10-bit target in its depth
+    (as ``transfer`` does); ``--codec h265 --crf 23`` DIR/NAME.mp4 as H.265; a bad --crf is one
+    line and status 2 before any clip runs."""
+    import subprocess
+
+    from facetransfer.io.ffmpeg import ffmpeg_exe
+    from facetransfer.io.video_depth import video_bits
+    from facetransfer.io.video_display import described_input
+
+    (va, pa, _), (vb, pb, _) = clips["a"], clips["b"]
+    ta, tb = tmp_path / "ta.npz", tmp_path / "tb.npz"
+    for v, p, t in ((va, pa, ta), (vb, pb, tb)):
+        assert _cli(capsys, "track", v, "--model", quick_model_path, "--out", t, "--init", p,
+                    "--passes", "1")[0] == 0
+    deep = tmp_path / "a10.mov"   # the target as 10-bit ProRes
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(va), "-c:v", "prores_ks",
+                    "-profile:v", "3", "-pix_fmt", "yuv422p10le", str(deep)], check=True)
+    man = tmp_path / "pairs.csv"
+    man.write_text("name,target,target_track,expression_from,source_track\n"
+                   f"ab,{deep},{ta},{vb},{tb}\n")
+    out = tmp_path / "out"
+    code, _, err = _cli(capsys, "batch", "transfer", "--manifest", man, "--model",
+                        quick_model_path, "--out", out, "--workers", "1", "--codec", "prores")
+    assert code == 0, err
+    assert "prores" in described_input(out / "ab.mov") and video_bits(out / "ab.mov") == 10
+    assert not (out / "ab.mp4").exists()
+    assert _summary(out / "summary.csv")["ab"]["output"] == str(out / "ab.mov")
+    code, _, err = _cli(capsys, "batch", "transfer", "--manifest", man, "--model",
+                        quick_model_path, "--out", out, "--workers", "1", "--codec", "h265",
+                        "--crf", "23")
+    assert code == 0, err
+    assert "hevc" in described_input(out / "ab.mp4") and len(read_video(out / "ab.mp4")[0]) == 8
+    code, _, err = _cli(capsys, "batch", "transfer", "--manifest", man, "--model",
+                        quick_model_path, "--out", out, "--crf", "60")
+    assert code == 2 and len(err) == 1 and "CRF must be an integer from 0 to 51" in err[0]
+
+
 def _stub_export(monkeypatch, calls):
     import facetransfer.cli.export  # noqa: F401 - the CLI's own import, before the stand-in
     import facetransfer.export as real

@@ -16,7 +16,7 @@ from __future__ import annotations
 import sys
 
 from ..errors import FaceTransferError
-from .common import FACE_WHERE, resolve_model
+from .common import FACE_WHERE, add_video_options, resolve_model, video_options
 
 
 def _cluster_options(p) -> None:
@@ -77,7 +77,8 @@ def register(sub) -> None:
     _cluster_options(t)
     t.set_defaults(func=run_track)
 
-    r = bs.add_parser("transfer", formatter_class=fmt, help="many transfers: DIR/NAME.mp4 each",
+    r = bs.add_parser("transfer", formatter_class=fmt,
+                      help="many transfers: DIR/NAME.mp4 each (.mov as ProRes)",
                       description="Run `facetransfer transfer` for every row of a pairs "
                       "manifest (columns target, expression_from, and the other sources: "
                       "viseme_from, identity_from, identity_label, identity_weights, pose_from, "
@@ -89,6 +90,7 @@ def register(sub) -> None:
     r.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
     r.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
     add_rewrite_options(r)
+    add_video_options(r, what="each result (ProRes: DIR/NAME.mov)")
     _cluster_options(r)
     r.set_defaults(func=run_transfer)
 
@@ -181,7 +183,7 @@ def transfer_settings(args) -> dict:
             "align": args.align, "max_frames": args.max_frames,
             "track_method": args.tracker, "speed": args.speed, "eyes": args.eyes,
             "jaw": args.jaw, "lips": args.lips, "lip_colour": args.lip_colour,
-            "gaze": args.gaze}
+            "gaze": args.gaze, "codec": args.codec, "crf": args.crf, "preset": args.preset}
 
 
 def run_transfer(args) -> int:
@@ -189,6 +191,7 @@ def run_transfer(args) -> int:
 
     if args.max_frames is not None and args.max_frames < 1:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
+    video_options(args)   # a bad --crf fails before any work
     jobs = pair_jobs(args.manifest)
     _check_cluster_args(args)
     model = resolve_model(args.model)
