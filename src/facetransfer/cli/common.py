@@ -44,7 +44,8 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video") ->
     p.add_argument("--codec", choices=tuple(CODECS), default=DEFAULT_CODEC,
                    help=f"codec of {what}: h264 (libx264, yuv420p: plays in browsers), h265 "
                    "(libx265) or prores (ProRes 422 HQ, .mov/.mkv; 4444 keeping a target's "
-                   "alpha); ignored for an image sequence (--out frames/%%05d.png)")
+                   "alpha); h265 and prores keep a 10-bit or HDR target's depth and colour; "
+                   "ignored for an image sequence (--out frames/%%05d.png)")
     p.add_argument("--crf", type=int, default=None,
                    help=f"constant rate factor of h264/h265, {CRF_RANGE[0]} (best) to "
                    f"{CRF_RANGE[1]}; default {DEFAULT_CRF}")
