@@ -134,6 +134,38 @@ def test_a_deep_target_written_in_8_bits_is_warned_of_once(tmp_path, caplog):
                     "or h265, or a 16-bit PNG or TIFF sequence, keeps them)"]
 
 
+def test_a_deep_sdr_target_written_in_8_bits_keeps_its_colour_names(tmp_path, caplog):
+    """The depth warning does not cost a 10-bit BT.709 target's primaries and transfer in an
+    H.264 result (they are still named, as an 8-bit target's are); a 10-bit target with alpha
+    written as a TIFF sequence (its alpha kept in 8 bits) is warned of as not deep."""
+    import logging
+
+    frames = _ramps(32)
+    tagged = _encode16(tmp_path / "709.mov", _with_fine(frames, 10), [
+        "-vf", "setparams=color_primaries=bt709:color_trc=bt709:colorspace=bt709", *PRORES,
+        "-colorspace", "bt709"])
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        opt = like_video(None, tagged, tmp_path / "r.mp4")
+    assert (opt.deep, opt.primaries, opt.transfer) == (False, "bt709", "bt709")
+    assert len(caplog.records) == 1 and "has 10 bits a sample" in caplog.records[0].getMessage()
+    deep = like_video(VideoOptions("prores"), tagged, tmp_path / "r.mov")
+    assert (deep.deep, deep.matrix, deep.primaries, deep.transfer) == (
+        True, "bt709", "bt709", "bt709")
+    from test_plate_alpha import _prores_4444
+
+    rgba = np.random.default_rng(11).integers(0, 256, (2, 16, 16, 4), dtype=np.uint8)
+    mov = _prores_4444(tmp_path / "a.mov", rgba)   # decodes in 12 bits
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        like_video(None, mov, tmp_path / "png" / "%04d.png")    # 16 bits with its alpha
+        assert not caplog.records
+        like_video(None, mov, tmp_path / "tif" / "%04d.tif")    # alpha kept, in 8 bits
+    assert [r.getMessage() for r in caplog.records] == [
+        f"{mov} has 12 bits a sample; the result is written in 8 (--codec prores or h265, or "
+        "a 16-bit PNG or TIFF sequence, keeps them)"]
+    assert video_depth(tmp_path / "tif" / "%04d.tif", mov) is None
+
+
 def test_which_targets_and_outputs_are_written_deep(tmp_path):
     frames = np.random.default_rng(2).integers(0, 256, (3, 16, 16, 3), dtype=np.uint8)
     ten = _encode16(tmp_path / "ten.mov", _with_fine(frames, 3), PRORES)

@@ -28,10 +28,11 @@ import numpy as np
 from ..errors import VideoError
 from .plate_alpha import video_has_alpha
 from .plate_depth import DEPTH_SUFFIXES, deep_frame
+from .video_options import DEEP_CODECS
 from .video_planes import DecodedPlanes, stored_pixel_format
 from .video_sequence import is_sequence
 
-__all__ = ["VideoDepth", "pixel_format_bits", "video_bits", "video_depth"]
+__all__ = ["VideoDepth", "keeps_depth", "pixel_format_bits", "video_bits", "video_depth"]
 
 #: ffmpeg's pixel formats of 16-bit samples whose names carry no bit depth.
 _SIXTEEN = re.compile(r"(rgb|bgr)48|(rgba|bgra)64|ya16")
@@ -114,6 +115,19 @@ def _alpha_for(a: np.ndarray, bits: int, written: int) -> np.ndarray:
     return (((a.astype(np.uint32) * 1023 + 32767) // 65535) << 6).astype(np.uint16)
 
 
+def keeps_depth(out, video, codec: str) -> bool:
+    """Whether the output ``out`` (a video written with ``codec``) of the video target
+    ``video`` holds its samples beyond 8 bits: ProRes or H.265
+    (:data:`~facetransfer.io.video_options.DEEP_CODECS`), a PNG or TIFF sequence (a PNG one
+    only for a video with alpha: OpenCV writes no TIFF alpha tag)."""
+    o = Path(out)
+    if "%" not in o.name:
+        return codec in DEEP_CODECS
+    if o.suffix.lower() not in DEPTH_SUFFIXES:
+        return False
+    return o.suffix.lower() == ".png" or not video_has_alpha(video)
+
+
 def video_depth(out, target, options=None, start: int = 0) -> VideoDepth | None:
     """The 16-bit decode of the video ``target`` of more than 8 bits, rewritten as ``out``:
     ProRes or H.265 (``options`` asking for it,
@@ -124,17 +138,11 @@ def video_depth(out, target, options=None, start: int = 0) -> VideoDepth | None:
     :mod:`facetransfer.io.plate_alpha` in 8 bits with its alpha)."""
     if target is None or is_sequence(target) or not Path(target).is_file():
         return None
-    o = Path(out)
-    if "%" in o.name:
-        if o.suffix.lower() not in DEPTH_SUFFIXES:
-            return None
+    if "%" in Path(out).name:
         bits = video_bits(target)
-        if bits <= 8:
+        if bits <= 8 or not keeps_depth(out, target, ""):
             return None
-        alpha = video_has_alpha(target)
-        if alpha and o.suffix.lower() != ".png":
-            return None
-        return VideoDepth(target, bits, alpha, start)
+        return VideoDepth(target, bits, video_has_alpha(target), start)
     if not getattr(options, "deep", False):
         return None
     return VideoDepth(target, video_bits(target), bool(options.alpha), start, written=10)

@@ -9,10 +9,8 @@ from pathlib import Path
 
 from ..errors import VideoError
 from .video import VideoOptions, is_image_pattern, video_info
-from .plate_depth import DEPTH_SUFFIXES
-from .video_options import DEEP_CODECS
 from .plate_alpha import keeps_alpha, sequence_alpha_kept, sequence_has_alpha, video_has_alpha
-from .video_depth import video_bits
+from .video_depth import keeps_depth, video_bits
 from .video_display import first_field, timecode_of, video_colour
 from .video_sequence import is_sequence, open_sequence
 
@@ -68,19 +66,18 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
             options = replace(options, alpha=True)
         elif out is None or not keeps_alpha(out):
             _warn_alpha(str(video))
-    if out is not None and options.codec in DEEP_CODECS and not is_image_pattern(out) \
-            and video_bits(video) > 8:   # its depth kept (io.video_depth), by its own matrix
+    bits = video_bits(video) if out is not None else 8   # carried by this command?
+    deep = bits > 8 and keeps_depth(out, video, options.codec)
+    if deep and not is_image_pattern(out):   # its depth kept (io.video_depth), its matrix
         options = replace(options, deep=True, matrix=tags.matrix or options.matrix)
     if options.sar is None and sar != (1, 1):
         options = replace(options, sar=sar)
     if options.colour_tags and tags.matrix is None:
         options = replace(options, colour_tags=False)
-    deep = options.deep or (out is not None and is_image_pattern(out) and video_bits(video) > 8
-                            and Path(out).suffix.lower() in DEPTH_SUFFIXES)
+    if bits > 8 and not deep and not tags.beyond_sdr:
+        _warn_depth(str(video), bits)
     if tags.beyond_sdr and not deep:   # a command that carries depth could have kept it
-        _warn_hdr(str(video), tags, out is not None and video_bits(video) > 8)
-    elif out is not None and not deep and video_bits(video) > 8:
-        _warn_depth(str(video), video_bits(video))
+        _warn_hdr(str(video), tags, bits > 8)
     elif options.primaries is None and options.transfer is None:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
     if options.timecode is None:
