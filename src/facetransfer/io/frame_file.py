@@ -15,8 +15,8 @@ import numpy as np
 
 from ..errors import VideoError
 
-__all__ = ["read_frame_file", "read_image", "bit_depth", "eight_bits", "shown_16",
-           "tiff_alpha_kind"]
+__all__ = ["read_frame_file", "read_image", "read_unchanged", "bit_depth", "eight_bits",
+           "shown_16", "tiff_alpha_kind"]
 
 
 def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
@@ -58,6 +58,14 @@ def read_image(file: Path, flags: int) -> np.ndarray | None:
     except cv2.error as exc:
         why = str(exc).strip().splitlines()[-1] if str(exc).strip() else "refused"
         raise VideoError(f"cannot read image file {file} (OpenCV: {why})") from None
+
+
+def read_unchanged(file) -> np.ndarray | None:
+    """An image file as stored (every channel, its bit depth; OpenCV's channel order), or
+    None where OpenCV cannot decode it (:func:`read_image`)."""
+    import cv2
+
+    return read_image(Path(file), cv2.IMREAD_UNCHANGED)
 
 
 def bit_depth(file: Path) -> int | None:

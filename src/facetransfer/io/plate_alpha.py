@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VideoError
-from .frame_file import eight_bits, read_image, tiff_alpha_kind
+from .frame_file import eight_bits, read_unchanged, tiff_alpha_kind
 from .video_planes import DecodedPlanes, stored_pixel_format
 from .video_sequence import is_sequence, open_sequence
 
@@ -34,13 +34,6 @@ __all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_a
 ALPHA_SUFFIXES = (".png", ".tif", ".tiff")
 
 
-def _read_unchanged(path: Path) -> np.ndarray | None:
-    """The image file as stored (every channel, its bit depth), or None if unreadable."""
-    import cv2
-
-    return read_image(Path(path), cv2.IMREAD_UNCHANGED)
-
-
 def _has_alpha(img: np.ndarray | None) -> bool:
     return img is not None and img.ndim == 3 and img.shape[2] in (2, 4)
 
@@ -50,7 +43,7 @@ def sequence_has_alpha(seq) -> bool:
     a PNG or TIFF; not looked for in OpenEXR frames, whose channels
     :mod:`facetransfer.io.exr_plate` keeps)."""
     f = seq.file(0)
-    return f.suffix.lower() != ".exr" and _has_alpha(_read_unchanged(f))
+    return f.suffix.lower() != ".exr" and _has_alpha(read_unchanged(f))
 
 
 #: ffmpeg's pixel formats that carry an alpha plane (ProRes 4444, PNG, QuickTime RLE, VP9).
@@ -90,7 +83,7 @@ class PlateAlpha:
     def alpha(self, i: int) -> np.ndarray:
         """``(H, W) uint8``: the alpha of the plate's frame ``i``."""
         f = self.sequence.file(i)
-        img = _read_unchanged(f)
+        img = read_unchanged(f)
         if img is None:
             raise VideoError(f"cannot read frame {f} of the plate {self.sequence.pattern}")
         if not _has_alpha(img):

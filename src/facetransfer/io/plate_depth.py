@@ -22,19 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VideoError
-from .frame_file import read_image
+from .frame_file import read_unchanged
 from .video_sequence import is_sequence, open_sequence
 
 __all__ = ["DEPTH_SUFFIXES", "PlateDepth", "plate_depth", "deep_frame"]
 
 #: Image-sequence plates and outputs kept in 16 bits.
 DEPTH_SUFFIXES = (".png", ".tif", ".tiff")
-
-
-def _read_deep(path: Path) -> np.ndarray | None:
-    import cv2
-
-    return read_image(Path(path), cv2.IMREAD_UNCHANGED)
 
 
 def deep_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
@@ -89,7 +83,7 @@ class PlateDepth:
 
     def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
         f = self.sequence.file(i)
-        plate = _read_deep(f)
+        plate = read_unchanged(f)
         if plate is None or plate.dtype != np.uint16 or _channels(plate) not in (1, 3, 4):
             raise VideoError(f"frame {f} of the 16-bit plate {self.sequence.pattern} is not "
                              "16-bit grey, RGB or RGBA (its first frame is)")
@@ -122,7 +116,7 @@ def plate_depth(out, target) -> PlateDepth | None:
     if "%" not in o.name or o.suffix.lower() not in DEPTH_SUFFIXES \
             or p.suffix.lower() not in DEPTH_SUFFIXES:
         return None
-    first = _read_deep(open_sequence(target).file(0))
+    first = read_unchanged(open_sequence(target).file(0))
     if first is None or first.dtype != np.uint16 or _channels(first) not in (1, 3, 4):
         return None   # 8 bits, or grey + alpha: written in 8 bits
     if _channels(first) == 4 and (o.suffix.lower() != ".png" or p.suffix.lower() != ".png"):
