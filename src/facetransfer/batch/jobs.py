@@ -25,8 +25,7 @@ from .summary import Row
 log = logging.getLogger(__name__)
 
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
-           "join_clip", "transfer_pair", "batch_video_options", "export_one", "count_frames",
-           "EXPORT_EXTENSIONS"]
+           "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS"]
 
 #: File extension of each ``batch export`` format.
 EXPORT_EXTENSIONS = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "json": ".json"}
@@ -234,9 +233,9 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     model : MultilinearModel
     settings : dict
         ``texture``, ``blend``, ``mouth``, ``align``, ``max_frames``, ``track_method``,
-        ``speed``, ``eyes``, ``jaw``, ``lips``, ``lip_colour``, ``gaze``, ``codec``, ``crf``,
-        ``preset`` as the ``transfer`` options (the video's default H.264, CRF 18, when
-        absent).
+        ``speed``, ``eyes``, ``jaw``, ``lips``, ``lip_colour``, ``gaze`` as the ``transfer``
+        options, and ``video``, its :class:`~facetransfer.io.video_options.VideoOptions`
+        (absent: H.264, CRF 18).
 
     Returns
     -------
@@ -265,20 +264,11 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     res = transfer_video(sources, out, model, overwrite=True, options=options,
                          progress_factory=None, align=settings["align"],
                          max_frames=settings["max_frames"], parallel=False,
-                         video_options=batch_video_options(settings))
+                         video_options=settings.get("video"))
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
                output=str(out))
-
-
-def batch_video_options(settings: dict):
-    """The :class:`~facetransfer.io.video_options.VideoOptions` of a batch transfer's
-    settings (``codec``, ``crf``, ``preset``; each absent one the default)."""
-    from ..io.video_options import DEFAULT_CODEC, DEFAULT_PRESET, VideoOptions
-
-    return VideoOptions(codec=settings.get("codec") or DEFAULT_CODEC, crf=settings.get("crf"),
-                        preset=settings.get("preset") or DEFAULT_PRESET)
 
 
 def rewrite_options(settings: dict):

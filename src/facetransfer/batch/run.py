@@ -289,7 +289,7 @@ def _done_video(out: Path, name: str) -> Row | None:
 def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: bool = False,
                    progress: Progress | None = None) -> BatchResult:
     """Rewrite many targets as ``facetransfer transfer`` does: ``DIR/NAME.mp4`` per pair
-    (``DIR/NAME.mov`` with ``settings["codec"]`` ``"prores"``).
+    (``DIR/NAME.mov`` when ``settings["video"]`` writes ProRes).
 
     Parameters
     ----------
@@ -308,7 +308,8 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     BatchResult
     """
     out_dir = prepare_out_dir(out_dir)
-    outs = _outputs(jobs, out_dir, ".mov" if settings.get("codec") == "prores" else ".mp4")
+    prores = getattr(settings.get("video"), "codec", None) == "prores"
+    outs = _outputs(jobs, out_dir, ".mov" if prores else ".mp4")
     done = {} if overwrite else {j.name: r for j in jobs
                                  if (r := _done_video(outs[j.name], j.name)) is not None}
     return _simple(client, jobs, out_dir, outs, done, progress,

@@ -183,7 +183,7 @@ def transfer_settings(args) -> dict:
             "align": args.align, "max_frames": args.max_frames,
             "track_method": args.tracker, "speed": args.speed, "eyes": args.eyes,
             "jaw": args.jaw, "lips": args.lips, "lip_colour": args.lip_colour,
-            "gaze": args.gaze, "codec": args.codec, "crf": args.crf, "preset": args.preset}
+            "gaze": args.gaze, "video": video_options(args)}
 
 
 def run_transfer(args) -> int:
@@ -191,11 +191,10 @@ def run_transfer(args) -> int:
 
     if args.max_frames is not None and args.max_frames < 1:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
-    video_options(args)   # a bad --crf fails before any work
+    settings = transfer_settings(args)   # a bad --crf fails before any work
     jobs = pair_jobs(args.manifest)
     _check_cluster_args(args)
     model = resolve_model(args.model)
-    settings = transfer_settings(args)
     return _run(args, "transfer", len(jobs), lambda client, progress: batch_transfer(
         jobs, args.out, model, client=client, settings=settings, overwrite=args.overwrite,
         progress=progress))
