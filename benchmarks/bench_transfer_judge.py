@@ -164,15 +164,15 @@ def _track(clip: str, model, cache: Path, data: Path) -> Path:
 def _brows(brows: bool):
     """The ablation ``eyes_only``: the brows textured from each target frame (as before), the
     eyes from the open-eyed frame (:func:`facetransfer.eyes.eye_texture` with ``brows=False``)."""
-    import facetransfer.rewrite as rw  # the name the rewrite calls
+    import facetransfer.eye_views as ev  # the name the rewrite's eye textures call
 
-    original = rw.eye_texture
+    original = ev.eye_texture
     if not brows:
-        rw.eye_texture = functools.partial(original, brows=False)
+        ev.eye_texture = functools.partial(original, brows=False)
     try:
         yield
     finally:
-        rw.eye_texture = original
+        ev.eye_texture = original
 
 
 def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) -> dict:

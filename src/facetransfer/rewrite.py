@@ -54,7 +54,8 @@ from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
 from .eyeballs import track_gaze
-from .eyes import EyeTexture, _paint_eyes, eye_flags, eye_texture
+from .eye_views import blend_renders, eye_texture_by_view, views_at
+from .eyes import EyeTexture, _paint_eyes, eye_flags
 from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
 from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights, tint_mouth
 from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
@@ -587,8 +588,8 @@ def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: 
         if is_arkit_model(model) and (eyes or jaw) else None
     eye_tex = jaw_tex = None
     if eyes:
-        topo, eye_tex = eye_texture(target_frames, target_track, model, topo, n_frames=n,
-                                    rig=rig)
+        topo, eye_tex = eye_texture_by_view(target_frames, target_track, model, topo,
+                                            n_frames=n, rig=rig)
     if jaw:
         jaw_tex = jaw_texture(target_frames, target_track, model, topo, n_frames=n, rig=rig)
     return topo, eye_tex, jaw_tex
@@ -782,15 +783,14 @@ class _ClipRenderer:
             raise RewriteError(f"target frame {i} is {frame.shape}, frame 0 {self.first.shape}")
         if self.new_track.lost[i] or self.target_track.lost[i]:
             return _paste(frame, None)
-        o = self.options
-        eye_i = None if self.eye_tex is None else \
-            self.eye_tex.at(i, None if self.gaze is None else self.gaze[i])
-        res = rewrite_frame(frame, self.new_mesh(i),
-                            self.new_track.camera(i), self.topo, self.face_texture(frame, i),
-                            mouth_texture=self.mouth_texture(i), blend=o.blend,
-                            feather=o.feather, erode=o.erode, eye_texture=eye_i,
-                            jaw_texture=None if self.jaw_tex is None else self.jaw_tex.at(i),
-                            mouth_ring=self.ring, lip_tint=self.lip_tint)
+        o, V, tex, mouth = self.options, self.new_mesh(i), self.face_texture(frame, i), \
+            self.mouth_texture(i)
+        jaw = None if self.jaw_tex is None else self.jaw_tex.at(i)
+        res = blend_renders([(rewrite_frame(
+            frame, V, self.new_track.camera(i), self.topo, tex, mouth_texture=mouth,
+            blend=o.blend, feather=o.feather, erode=o.erode, eye_texture=eye, jaw_texture=jaw,
+            mouth_ring=self.ring, lip_tint=self.lip_tint), w)
+            for eye, w in views_at(self.eye_tex, i, self.gaze)])
         if self.mono:
             res = dataclasses.replace(res, image=monochrome_changes(res.image, frame))
         return res
