@@ -164,7 +164,7 @@ def _track(clip: str, model, cache: Path, data: Path) -> Path:
 def _brows(brows: bool):
     """The ablation ``eyes_only``: the brows textured from each target frame (as before), the
     eyes from the open-eyed frame (:func:`facetransfer.eyes.eye_texture` with ``brows=False``)."""
-    import facetransfer.eye_views as ev  # the name the rewrite's eye textures call
+    import facetransfer.region_views as ev  # the name the rewrite's eye textures call
 
     original = ev.eye_texture
     if not brows:

@@ -54,9 +54,9 @@ from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
 from .eyeballs import track_gaze
-from .eye_views import blend_renders, eye_texture_by_view, views_at
+from .region_views import blend_renders, eye_texture_by_view, jaw_texture_by_view, views_at
 from .eyes import EyeTexture, _paint_eyes, eye_flags
-from .jaw import JawTexture, _paint_jaw, jaw_flags, jaw_texture
+from .jaw import JawTexture, _paint_jaw, jaw_flags
 from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights, tint_mouth
 from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
@@ -591,7 +591,8 @@ def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: 
         topo, eye_tex = eye_texture_by_view(target_frames, target_track, model, topo,
                                             n_frames=n, rig=rig)
     if jaw:
-        jaw_tex = jaw_texture(target_frames, target_track, model, topo, n_frames=n, rig=rig)
+        jaw_tex = jaw_texture_by_view(target_frames, target_track, model, topo, n_frames=n,
+                                      rig=rig)
     return topo, eye_tex, jaw_tex
 
 
@@ -785,12 +786,12 @@ class _ClipRenderer:
             return _paste(frame, None)
         o, V, tex, mouth = self.options, self.new_mesh(i), self.face_texture(frame, i), \
             self.mouth_texture(i)
-        jaw = None if self.jaw_tex is None else self.jaw_tex.at(i)
         res = blend_renders([(rewrite_frame(
             frame, V, self.new_track.camera(i), self.topo, tex, mouth_texture=mouth,
             blend=o.blend, feather=o.feather, erode=o.erode, eye_texture=eye, jaw_texture=jaw,
-            mouth_ring=self.ring, lip_tint=self.lip_tint), w)
-            for eye, w in views_at(self.eye_tex, i, self.gaze)])
+            mouth_ring=self.ring, lip_tint=self.lip_tint), we * wj)
+            for eye, we in views_at(self.eye_tex, i, None if self.gaze is None else self.gaze[i])
+            for jaw, wj in views_at(self.jaw_tex, i)])
         if self.mono:
             res = dataclasses.replace(res, image=monochrome_changes(res.image, frame))
         return res
