@@ -7,8 +7,9 @@ clips of ``bench_transfer_judge.py`` (the 150 frames of their cached tracks in
 ``OUT/judge_pairs/``) are rewritten under two variants (context managers that switch a rule
 off or on); on the pixels where the variants' results differ (by more than :data:`CHANGED`
 levels in a channel), the mean absolute error of each against the target frame (RGB
-levels), and each whole frame's PSNR. Used by ``bench_eye_rim.py`` and
-``bench_gain_support.py``.
+levels), and each whole frame's PSNR. Used by ``bench_eye_rim.py``,
+``bench_frame_rule.py``, ``bench_gain_support.py`` and ``bench_region_views.py``
+(:func:`switch_main`).
 """
 
 from __future__ import annotations
@@ -151,6 +152,14 @@ def run(out: Path, variants: dict, stem: str, title: str) -> dict:
         Path(tmp).write_text(json.dumps(res, indent=2))
     plot(res, (na, nb), title, out / f"{stem}.png")
     return res
+
+
+def switch_main(doc: str, off: str, module: str, name: str, value, on: str, stem: str,
+                title: str) -> int:
+    """:func:`main` of a benchmark script that compares a rule switched off (``module.name``
+    set to ``value``, the variant ``off``) with the code as it is (the variant ``on``)."""
+    return main(doc, {off: lambda: patched(module, name, value), on: contextlib.nullcontext},
+                stem, title)
 
 
 def main(doc: str, variants: dict, stem: str, title: str, argv=None) -> int:

@@ -29,20 +29,14 @@ most).
 
 from __future__ import annotations
 
-import contextlib
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _self_transfer import main, patched  # noqa: E402
-
-
-def _without():
-    """The region's vertices judged by the reference frame alone (as before the rule)."""
-    return patched("facetransfer.eyes", "FRAME_RULE", False)
-
+from _self_transfer import switch_main  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main(__doc__, {"reference": _without, "frame rule": contextlib.nullcontext},
-                  "frame_rule", "self-transfer: the pixels the frame rule changes"))
+    sys.exit(switch_main(
+        __doc__, "reference", "facetransfer.eyes", "FRAME_RULE", False, "frame rule",
+        "frame_rule", "self-transfer: the pixels the frame rule changes"))

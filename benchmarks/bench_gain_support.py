@@ -26,20 +26,14 @@ most).
 
 from __future__ import annotations
 
-import contextlib
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _self_transfer import main, patched  # noqa: E402
-
-
-def _extrapolated():
-    """The gain's plane evaluated over the whole region (as before the support)."""
-    return patched("facetransfer.patch", "GAIN_SUPPORT", 0.0)
-
+from _self_transfer import switch_main  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main(__doc__, {"extrapolated": _extrapolated, "held": contextlib.nullcontext},
-                  "gain_support", "self-transfer: the pixels the gain's support changes"))
+    sys.exit(switch_main(
+        __doc__, "extrapolated", "facetransfer.patch", "GAIN_SUPPORT", 0.0, "held",
+        "gain_support", "self-transfer: the pixels the gain's support changes"))

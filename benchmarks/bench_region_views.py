@@ -29,20 +29,14 @@ most).
 
 from __future__ import annotations
 
-import contextlib
 import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from _self_transfer import main, patched  # noqa: E402
-
-
-def _one():
-    """One reference frame a region for the whole clip (as before)."""
-    return patched("facetransfer.region_views", "MAX_VIEWS", 1)
-
+from _self_transfer import switch_main  # noqa: E402
 
 if __name__ == "__main__":
-    sys.exit(main(__doc__, {"one reference": _one, "by view": contextlib.nullcontext},
-                  "region_views", "self-transfer: the pixels the references by view change"))
+    sys.exit(switch_main(
+        __doc__, "one reference", "facetransfer.region_views", "MAX_VIEWS", 1, "by view",
+        "region_views", "self-transfer: the pixels the references by view change"))

@@ -137,18 +137,19 @@ def synthetic_arkit_track(model, n_frames: int = 12, *, seed: int = 0, identity:
     return track, a, ang
 
 
-def jaw_open_track(model, jaw_open, *, size: int = 256, scale: float = 20.0, rotation=None):
-    """A track of ``model``'s mean person facing the camera (or turned by ``rotation``) with the
-    given jawOpen per frame and every other activation 0, centred 40 px above the middle of a
-    ``size``² frame; landmarks zero (project them when needed)."""
+def mean_person_track(model, activations, *, size: int = 256, scale: float = 20.0,
+                      rotation=None):
+    """A track of ``model``'s mean person with the ARKit ``activations`` (F, 52), facing the
+    camera (or turned by ``rotation``: (3, 3), or (F, 3, 3) a frame), centred 40 px above the
+    middle of a ``size``² frame; landmarks zero (project them when needed)."""
     from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
     from facetransfer.track.result import Track
 
-    a = np.zeros((len(jaw_open), 52), np.float32)
-    a[:, ARKIT_NAMES.index("jawOpen")] = jaw_open
+    a = np.asarray(activations, np.float32)
     F = a.shape[0]
     k = model.mode_index("identity")
-    R = np.tile(np.eye(3) if rotation is None else rotation, (F, 1, 1))
+    R = np.eye(3) if rotation is None else np.asarray(rotation, np.float64)
+    R = np.broadcast_to(R, (F, 3, 3)).copy()
     return Track(fps=25.0, frame_size=(size, size), rotation=R, scale=np.full(F, scale),
                  translation=np.tile([size / 2, size / 2 - 40.0], (F, 1)),
                  weights={"identity": np.tile(model.weight_mean(k), (F, 1)),
@@ -157,6 +158,16 @@ def jaw_open_track(model, jaw_open, *, size: int = 256, scale: float = 20.0, rot
                  lost=np.zeros(F, bool), model_hash=model.content_hash,
                  mode_names=model.mode_names, source="synthetic.mp4",
                  blendshapes=a, blendshape_names=ARKIT_NAMES)
+
+
+def jaw_open_track(model, jaw_open, *, size: int = 256, scale: float = 20.0, rotation=None):
+    """:func:`mean_person_track` with the given jawOpen per frame and every other activation
+    0."""
+    from facetransfer.arkit import ARKIT_NAMES
+
+    a = np.zeros((len(jaw_open), 52), np.float32)
+    a[:, ARKIT_NAMES.index("jawOpen")] = jaw_open
+    return mean_person_track(model, a, size=size, scale=scale, rotation=rotation)
 
 
 @pytest.fixture(scope="session")

@@ -16,6 +16,8 @@ from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import boundary_loops, close_mouth, mesh_topology
 from facetransfer.track.result import Track
 
+from conftest import mean_person_track
+
 SIZE = 256
 SKIN, TARGET_EYE, REF_EYE = (200, 150, 120), (0, 255, 0), (0, 0, 255)
 
@@ -30,16 +32,7 @@ def setup(arkit_model):
 
 def _track(model, activations: np.ndarray) -> Track:
     """A frontal track of ``model``'s mean person with the given ARKit activations (F, 52)."""
-    F = activations.shape[0]
-    k = model.mode_index("identity")
-    return Track(fps=25.0, frame_size=(SIZE, SIZE), rotation=np.tile(np.eye(3), (F, 1, 1)),
-                 scale=np.full(F, 20.0), translation=np.tile([SIZE / 2, SIZE / 2 - 40.0], (F, 1)),
-                 weights={"identity": np.tile(model.weight_mean(k), (F, 1)),
-                          "expression": activations_to_weights(model, activations)},
-                 landmarks2d=np.zeros((F, 68, 2)), confidence=np.ones(F),
-                 lost=np.zeros(F, bool), model_hash=model.content_hash,
-                 mode_names=model.mode_names, source="synthetic.mp4",
-                 blendshapes=activations.astype(np.float32), blendshape_names=ARKIT_NAMES)
+    return mean_person_track(model, activations, size=SIZE)
 
 
 def _acts(F: int = 1, blink: float = 0.0) -> np.ndarray:

@@ -6,10 +6,12 @@ import numpy as np
 import pytest
 
 from facetransfer import region_views
-from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.region_views import (RegionViews, blend_renders, fade_weights,
                                        pick_views, view_angles, view_references, views_at)
 from facetransfer.track.result import Track
+
+from conftest import mean_person_track
 
 SIZE = 256
 BROWS = ("browInnerUp", "browOuterUpLeft", "browOuterUpRight")
@@ -23,17 +25,8 @@ def _yaw(deg: float) -> np.ndarray:
 def _track(model, yaws, acts=None) -> Track:
     """The model's mean person at the head yaws (degrees) ``yaws`` (F,), open eyes, with ARKit
     activations ``acts`` (F, 52) (default zeros)."""
-    F = len(yaws)
-    acts = np.zeros((F, 52), np.float32) if acts is None else acts
-    k = model.mode_index("identity")
-    return Track(fps=25.0, frame_size=(SIZE, SIZE), rotation=np.stack([_yaw(y) for y in yaws]),
-                 scale=np.full(F, 20.0), translation=np.tile([SIZE / 2, SIZE / 2 - 30.0], (F, 1)),
-                 weights={"identity": np.tile(model.weight_mean(k), (F, 1)),
-                          "expression": activations_to_weights(model, acts)},
-                 landmarks2d=np.zeros((F, 68, 2)), confidence=np.ones(F),
-                 lost=np.zeros(F, bool), model_hash=model.content_hash,
-                 mode_names=model.mode_names, source="synthetic.mp4",
-                 blendshapes=acts.astype(np.float32), blendshape_names=ARKIT_NAMES)
+    acts = np.zeros((len(yaws), 52), np.float32) if acts is None else acts
+    return mean_person_track(model, acts, size=SIZE, rotation=np.stack([_yaw(y) for y in yaws]))
 
 
 def test_view_angles_are_the_rotations_between_frames():
