@@ -22,6 +22,7 @@ def test_a_result_equal_to_the_source_follows_it_exactly(data_dir):
     line = fid.line()
     assert "jawOpen r=+1.00 with the source" in line and "\n" not in line
     assert "gaze +1.00 / " in line
+    assert abs(fid.with_source["browInnerUp"] - 1.0) < 1e-6 and "brows +1.00 / " in line
 
 
 def test_a_frozen_result_has_no_correlation(data_dir):

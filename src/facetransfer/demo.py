@@ -170,9 +170,11 @@ def contact_sheet(frames: list[np.ndarray], path, *, columns: int = 2, scale: fl
             row.append(np.zeros_like(small[0]))
         rows.append(np.hstack(row))
     sheet = np.vstack(rows)
-    if caption:
+    if caption:  # at 0.5 of the font's height, smaller if it would not fit the width
+        (w, _), _ = cv2.getTextSize(caption, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
+        size = min(0.5, 0.5 * (sheet.shape[1] - 16) / max(w, 1))
         band = np.full((28, sheet.shape[1], 3), 255, np.uint8)
-        cv2.putText(band, caption, (8, 19), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (20, 20, 20), 1,
+        cv2.putText(band, caption, (8, 19), cv2.FONT_HERSHEY_SIMPLEX, size, (20, 20, 20), 1,
                     cv2.LINE_AA)
         sheet = np.vstack([sheet, band])
     with atomic_path(path, overwrite=overwrite) as tmp:

@@ -36,15 +36,16 @@ class Fidelity:
     with_target: dict
 
     def line(self) -> str:
-        """One line for people: the jaw, the mouth opening, the blinks and the gaze."""
+        """One line for people: the jaw, the mouth opening, the blinks, the brows (browInnerUp)
+        and the gaze (horizontal), each with the source / with the target."""
         s, t = self.with_source, self.with_target
         blink_s = _mean(s["eyeBlinkLeft"], s["eyeBlinkRight"])
         blink_t = _mean(t["eyeBlinkLeft"], t["eyeBlinkRight"])
         return (f"fidelity (MediaPipe on the result): jawOpen r={s['jawOpen']:+.2f} with the "
                 f"source, {t['jawOpen']:+.2f} with the target; mouth opening "
                 f"{s['mouthOpening']:+.2f} / {t['mouthOpening']:+.2f}; blinks {blink_s:+.2f} / "
-                f"{blink_t:+.2f}; gaze {s['gazeHorizontal']:+.2f} / "
-                f"{t['gazeHorizontal']:+.2f}")
+                f"{blink_t:+.2f}; brows {s['browInnerUp']:+.2f} / {t['browInnerUp']:+.2f}; "
+                f"gaze {s['gazeHorizontal']:+.2f} / {t['gazeHorizontal']:+.2f}")
 
 
 def _mean(*values: float) -> float:
