@@ -116,7 +116,7 @@ def views_at(tex, i: int, *args) -> list:
 
 def blend_renders(renders: list):
     """One rendered frame (:class:`facetransfer.rewrite.RewriteFrame`) from ``[(frame,
-    share), ...]`` of the same frame rendered with each eye texture: the images mixed by the
+    share), ...]`` of the same frame rendered with each region texture: the images mixed by the
     shares (the masks are the same mesh's)."""
     if len(renders) == 1:
         return renders[0][0]

@@ -55,6 +55,7 @@ from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
 from .eyeballs import track_gaze
 from .region_views import blend_renders, eye_texture_by_view, jaw_texture_by_view, views_at
+from .rim import frame_shift, inward_rim
 from .eyes import EyeTexture, _paint_eyes, eye_flags
 from .jaw import JawTexture, _paint_jaw, jaw_flags
 from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights, tint_mouth
@@ -179,9 +180,10 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     cam = camera if box == (0, 0, W, H) else _shift_camera(camera, x0, y0)
     if mouth_texture is not None and mouth_ring is None:
         mouth_ring = mouth_ring_faces(topo)
+    shift = frame_shift(V, camera, face_texture, target_frame)  # None: not the frame's own
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
                         feather, erode, mouth_feather, color_match, eye_texture, jaw_texture,
-                        mouth_ring, lip_tint)
+                        mouth_ring, lip_tint, shift)
     return _paste(T, (box, res))
 
 
@@ -253,7 +255,7 @@ def _shift_camera(camera, x0: int, y0: int):
 
 def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
                   mouth_feather, color_match, eye_texture=None, jaw_texture=None,
-                  mouth_ring=None, lip_tint=None) -> RewriteFrame:
+                  mouth_ring=None, lip_tint=None, shift=None) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
     from .render import rasterize
 
@@ -271,6 +273,8 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     # (the Dirichlet boundary of the Poisson problem) lies on the target's own face, which
     # covers the same silhouette up to the change of expression, not on the background.
     region = _erode(face_mask, int(erode)) if erode > 0 else face_mask
+    if shift is not None:  # not the target's own outline drawn inside a narrower face
+        region &= ~inward_rim(face_mask, raster, topo.faces, shift)
     if not region.any():
         region = face_mask
     if blend == "none":
