@@ -38,9 +38,7 @@ def outward_shift(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
     """``(n,) float32``: per vertex, how much farther from the centre of ``P`` its texture
     position ``Q`` lies than its own position ``P`` (both (n, 2) pixels): positive where the
     new outline lies inside the one the texture was lifted through."""
-    c = P.mean(axis=0)
-    return (np.hypot(Q[:, 0] - c[0], Q[:, 1] - c[1])
-            - np.hypot(P[:, 0] - c[0], P[:, 1] - c[1])).astype(np.float32)
+    return _shift_about(P.mean(axis=0), P, Q)
 
 
 def texture_positions(uvs: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -50,31 +48,58 @@ def texture_positions(uvs: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return np.stack([uvs[:, 0] * max(W - 1, 1), (1.0 - uvs[:, 1]) * max(H - 1, 1)], axis=1)
 
 
-def frame_shift(V: np.ndarray, camera, face_texture, frame: np.ndarray) -> np.ndarray | None:
+def frame_shift(V: np.ndarray, camera, face_texture, frame: np.ndarray):
     """:func:`outward_shift` of a new face ``V`` (n_closed, 3) seen by ``camera`` against its
     ``face_texture`` when that texture is the ``frame`` itself (a per-frame texture, its uvs
-    the frame's pixels: :func:`facetransfer.texture.face.frame_uvs`); None for another one (a
-    clip's texture, whose uvs are no frame's pixels)."""
+    the frame's pixels: :func:`facetransfer.texture.face.frame_uvs`), as a function of vertex
+    indices ``(m,) -> (m,) float32`` (the outer band needs a few thousand of the mesh's
+    vertices); None for another texture (a clip's, whose uvs are no frame's pixels)."""
     if face_texture.image is not frame:
         return None
     H, W = frame.shape[:2]
-    return outward_shift(camera.project(V), texture_positions(face_texture.uvs, (W, H)))
+    c = camera.project(V[::16]).mean(axis=0)      # the face's centre (a sixteenth of it will do)
+
+    def shift(idx: np.ndarray) -> np.ndarray:
+        return _shift_about(c, camera.project(V[idx]),
+                            texture_positions(face_texture.uvs[idx], (W, H)))
+
+    return shift
 
 
-def inward_rim(face_mask: np.ndarray, raster, faces: np.ndarray, shift: np.ndarray
-               ) -> np.ndarray:
+def _shift_about(c: np.ndarray, P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """:func:`outward_shift` about the centre ``c`` (2,)."""
+    return (np.hypot(Q[:, 0] - c[0], Q[:, 1] - c[1])
+            - np.hypot(P[:, 0] - c[0], P[:, 1] - c[1])).astype(np.float32)
+
+
+def inward_rim(face_mask: np.ndarray, raster, faces: np.ndarray, shift) -> np.ndarray:
     """``(H, W) bool``: the pixels of the rendered face's outer band (:data:`RIM` of its size)
-    whose texture lies more than :data:`MOVED` pixels farther out than they do (``shift``:
-    :func:`outward_shift` per vertex, interpolated over the raster of ``faces``)."""
+    whose texture lies more than :data:`MOVED` pixels, and at most :data:`REACH` band widths,
+    farther out than they do (``shift``: per vertex, an ``(n,)`` array or :func:`frame_shift`'s
+    function of vertex indices; interpolated over the raster of ``faces``)."""
+    import cv2
+
     out = np.zeros(face_mask.shape, bool)
-    if not (np.asarray(shift) > MOVED).any():
-        return out
     k = max(2, int(round(RIM * np.sqrt(np.count_nonzero(face_mask)))))
-    ys, xs = np.nonzero(face_mask & ~_erode(face_mask, k))
-    tri = np.asarray(raster.tri_id)[ys, xs]
-    ok = tri >= 0
-    ys, xs, tri = ys[ok], xs[ok], tri[ok]
-    v = np.asarray(shift, np.float32)[np.asarray(faces, np.int64)[tri]]        # (m, 3)
-    d = np.einsum("mk,mk->m", np.asarray(raster.bary)[ys, xs], v)
-    out[ys, xs] = (d > MOVED) & (d <= REACH * k)
+    band = face_mask & ~_erode(face_mask, k)
+    pts = cv2.findNonZero(band.view(np.uint8))                     # (m, 1, 2) x, y; or None
+    if pts is None:
+        return out
+    flat = pts[:, 0, 1].astype(np.int64) * band.shape[1] + pts[:, 0, 0]
+    tri = np.asarray(raster.tri_id).ravel()[flat]
+    flat, tri = flat[tri >= 0], tri[tri >= 0]
+    if tri.size == 0:
+        return out
+    corners = np.asarray(faces, np.int64)[tri]                                  # (m, 3)
+    if callable(shift):
+        need = np.zeros(int(corners.max()) + 1, bool)
+        need[corners] = True
+        idx = np.flatnonzero(need)
+        full = np.empty(need.size, np.float32)
+        full[idx] = shift(idx)
+        v = full[corners]
+    else:
+        v = np.asarray(shift, np.float32)[corners]
+    d = np.einsum("mk,mk->m", np.asarray(raster.bary).reshape(-1, 3)[flat], v)
+    out.ravel()[flat] = (d > MOVED) & (d <= REACH * k)
     return out
