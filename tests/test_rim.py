@@ -95,8 +95,8 @@ def test_the_same_outline_keeps_its_band(narrower):
     r = rasterize(Vc, topo.faces, target.camera(0), (SIZE, SIZE))
     P = target.camera(0).project(Vc)
     shift = rim.outward_shift(P, rim.texture_positions(tex.uvs, (SIZE, SIZE)))
-    assert not rim.inward_rim(r.mask, r, topo.faces, shift).any()
-    inward = rim.inward_rim(r.mask, r, topo.faces, np.full(len(Vc), 5.0, np.float32))
+    assert not rim.inward_rim(r.mask, r, topo.faces, lambda idx: shift[idx]).any()
+    inward = rim.inward_rim(r.mask, r, topo.faces, lambda idx: np.full(len(idx), 5.0))
     from facetransfer.composite import _erode
 
     k = max(2, int(round(rim.RIM * np.sqrt(r.mask.sum()))))

@@ -63,7 +63,8 @@ log = logging.getLogger(__name__)
 __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
-           "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE", "LID_BLINK"]
+           "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE", "LID_BLINK",
+           "shape_activity", "reference_candidates"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -495,14 +496,30 @@ def open_eye_frame(track, n_frames: int | None = None, *, quantile: float = 0.75
     RewriteError
         The face is lost in every frame.
     """
-    penalty = None
-    if track.blendshapes is not None and track.blendshape_names is not None:
-        names = list(track.blendshape_names)
-        cols = [names.index(n) for n in BROW_SHAPES if n in names]
-        if cols:
-            penalty = 0.5 * np.asarray(track.blendshapes, np.float64)[:, cols].sum(1)
     return reference_frame(track, eye_openness(track), n_frames, quantile, low=False,
-                           penalty=penalty)
+                           penalty=shape_activity(track, BROW_SHAPES))
+
+
+def shape_activity(track, names) -> np.ndarray | None:
+    """``(F,)``: half the sum of the track's ARKit activations ``names`` in each frame (the
+    reference frames' penalty for an expression of their own), or None without them."""
+    if track.blendshapes is None or track.blendshape_names is None:
+        return None
+    have = list(track.blendshape_names)
+    cols = [have.index(n) for n in names if n in have]
+    return 0.5 * np.asarray(track.blendshapes, np.float64)[:, cols].sum(1) if cols else None
+
+
+def reference_candidates(track, values: np.ndarray, n_frames: int | None, quantile: float, *,
+                         low: bool) -> np.ndarray:
+    """The frames (of the first ``n_frames``) where the face is not lost and ``values`` (F,)
+    is at most (``low``) or at least its ``quantile`` over them; empty when every one is lost."""
+    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
+    if good.size == 0:
+        return good
+    v = np.asarray(values, np.float64)[good]
+    cut = np.quantile(v, quantile)
+    return good[v <= cut] if low else good[v >= cut]
 
 
 def reference_frame(track, values: np.ndarray, n_frames: int | None, quantile: float, *,
@@ -525,13 +542,10 @@ def reference_frame(track, values: np.ndarray, n_frames: int | None, quantile: f
     RewriteError
         The face is lost in every frame.
     """
-    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
-    if good.size == 0:
+    cand = reference_candidates(track, values, n_frames, quantile, low=low)
+    if cand.size == 0:
         raise RewriteError(f"the face is lost in every frame of "
                            f"{track.source or 'the target'}")
-    v = np.asarray(values, np.float64)[good]
-    cut = np.quantile(v, quantile)
-    cand = good[v <= cut] if low else good[v >= cut]
     score = track.rotation[cand, 2, 2] + 0.5 * np.asarray(track.confidence)[cand]
     if penalty is not None:
         score = score - np.asarray(penalty, np.float64)[cand]

@@ -28,7 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .eyes import BROW_SHAPES, EyeTexture, eye_openness, eye_texture
+from .eyes import (BROW_SHAPES, EyeTexture, eye_openness, eye_texture, reference_candidates,
+                   shape_activity)
 from .jaw import jaw_texture, mouth_closure
 
 log = logging.getLogger(__name__)
@@ -138,21 +139,12 @@ def _candidates(track, n: int, region: str) -> tuple[np.ndarray, np.ndarray]:
     """The frames (of the first ``n``, not lost) that could be a ``region``'s reference (eyes
     as open as :data:`CANDIDATE_QUANTILE` of the clip's or more; a mouth as closed or more), and
     their expression in degrees (:data:`EXPRESSION_COST`, :data:`COST_SHAPES`)."""
-    good = np.flatnonzero(~np.asarray(track.lost, bool)[:n])
-    if region == "eyes":
-        v = eye_openness(track)[good]
-        cand = good[v >= np.quantile(v, CANDIDATE_QUANTILE)]
-    else:
-        v = mouth_closure(track)[good]
-        cand = good[v <= np.quantile(v, CANDIDATE_QUANTILE)]
-    cost = np.zeros(cand.size)
-    if track.blendshapes is not None and track.blendshape_names is not None:
-        names = list(track.blendshape_names)
-        cols = [names.index(b) for b in COST_SHAPES[region] if b in names]
-        if cols:
-            b = np.asarray(track.blendshapes, np.float64)[cand][:, cols]
-            cost = EXPRESSION_COST * 0.5 * b.sum(axis=1)
-    return cand, cost
+    eyes = region == "eyes"
+    cand = reference_candidates(track, eye_openness(track) if eyes else mouth_closure(track), n,
+                                CANDIDATE_QUANTILE, low=not eyes)
+    activity = shape_activity(track, COST_SHAPES[region])
+    return cand, (np.zeros(cand.size) if activity is None
+                  else EXPRESSION_COST * activity[cand])
 
 
 def view_references(track, n: int, first: int, region: str = "eyes") -> list[int]:
@@ -164,7 +156,7 @@ def view_references(track, n: int, first: int, region: str = "eyes") -> list[int
     :data:`MIN_GAIN` of that total; at most :data:`MAX_VIEWS`."""
     refs = [int(first)]
     good = np.flatnonzero(~np.asarray(track.lost, bool)[:n])
-    cand, cost = _candidates(track, n, region) if good.size else (np.zeros(0, np.int64), None)
+    cand, cost = _candidates(track, n, region)
     if cand.size == 0:
         return refs
     A = view_angles(track.rotation, cand)[good] + cost[None, :]   # (good frames, candidates)

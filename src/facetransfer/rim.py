@@ -15,6 +15,7 @@ would have covered anyway; only where the outline moved in by at most the band's
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 
 from .composite import _erode
@@ -34,11 +35,14 @@ MOVED = 1.5
 REACH = 1.0
 
 
-def outward_shift(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """``(n,) float32``: per vertex, how much farther from the centre of ``P`` its texture
-    position ``Q`` lies than its own position ``P`` (both (n, 2) pixels): positive where the
-    new outline lies inside the one the texture was lifted through."""
-    return _shift_about(P.mean(axis=0), P, Q)
+def outward_shift(P: np.ndarray, Q: np.ndarray, centre: np.ndarray | None = None) -> np.ndarray:
+    """``(n,) float32``: per vertex, how much farther from the ``centre`` (2,) (default: that
+    of ``P``) its texture position ``Q`` lies than its own position ``P`` (both (n, 2)
+    pixels): positive where the new outline lies inside the one the texture was lifted
+    through."""
+    c = P.mean(axis=0) if centre is None else centre
+    return (np.hypot(Q[:, 0] - c[0], Q[:, 1] - c[1])
+            - np.hypot(P[:, 0] - c[0], P[:, 1] - c[1])).astype(np.float32)
 
 
 def texture_positions(uvs: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -60,25 +64,17 @@ def frame_shift(V: np.ndarray, camera, face_texture, frame: np.ndarray):
     c = camera.project(V[::16]).mean(axis=0)      # the face's centre (a sixteenth of it will do)
 
     def shift(idx: np.ndarray) -> np.ndarray:
-        return _shift_about(c, camera.project(V[idx]),
-                            texture_positions(face_texture.uvs[idx], (W, H)))
+        return outward_shift(camera.project(V[idx]),
+                             texture_positions(face_texture.uvs[idx], (W, H)), c)
 
     return shift
-
-
-def _shift_about(c: np.ndarray, P: np.ndarray, Q: np.ndarray) -> np.ndarray:
-    """:func:`outward_shift` about the centre ``c`` (2,)."""
-    return (np.hypot(Q[:, 0] - c[0], Q[:, 1] - c[1])
-            - np.hypot(P[:, 0] - c[0], P[:, 1] - c[1])).astype(np.float32)
 
 
 def inward_rim(face_mask: np.ndarray, raster, faces: np.ndarray, shift) -> np.ndarray:
     """``(H, W) bool``: the pixels of the rendered face's outer band (:data:`RIM` of its size)
     whose texture lies more than :data:`MOVED` pixels, and at most :data:`REACH` band widths,
-    farther out than they do (``shift``: per vertex, an ``(n,)`` array or :func:`frame_shift`'s
-    function of vertex indices; interpolated over the raster of ``faces``)."""
-    import cv2
-
+    farther out than they do (``shift``: :func:`frame_shift`'s function of vertex indices,
+    asked for the band's vertices and interpolated over the raster of ``faces``)."""
     out = np.zeros(face_mask.shape, bool)
     k = max(2, int(round(RIM * np.sqrt(np.count_nonzero(face_mask)))))
     band = face_mask & ~_erode(face_mask, k)
@@ -91,15 +87,11 @@ def inward_rim(face_mask: np.ndarray, raster, faces: np.ndarray, shift) -> np.nd
     if tri.size == 0:
         return out
     corners = np.asarray(faces, np.int64)[tri]                                  # (m, 3)
-    if callable(shift):
-        need = np.zeros(int(corners.max()) + 1, bool)
-        need[corners] = True
-        idx = np.flatnonzero(need)
-        full = np.empty(need.size, np.float32)
-        full[idx] = shift(idx)
-        v = full[corners]
-    else:
-        v = np.asarray(shift, np.float32)[corners]
-    d = np.einsum("mk,mk->m", np.asarray(raster.bary).reshape(-1, 3)[flat], v)
+    need = np.zeros(int(corners.max()) + 1, bool)
+    need[corners] = True
+    idx = np.flatnonzero(need)
+    full = np.empty(need.size, np.float32)
+    full[idx] = shift(idx)
+    d = np.einsum("mk,mk->m", np.asarray(raster.bary).reshape(-1, 3)[flat], full[corners])
     out.ravel()[flat] = (d > MOVED) & (d <= REACH * k)
     return out
