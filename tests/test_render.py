@@ -216,6 +216,55 @@ def test_raster_kernel_equals_its_python_twin():
 
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_coverage_is_the_rasters_mask(seed):
+    """:func:`facetransfer.render.raster.coverage` of a 2D soup (cut by the image's edge,
+    degenerate triangles among them) is the raster's mask of the same triangles drawn at
+    those pixels, with and without the back faces; its compiled kernel is its Python twin."""
+    from facetransfer.render.raster import _coverage_kernel, _coverage_kernel_py, coverage
+
+    rng = np.random.default_rng(seed)
+    P = rng.uniform([-10, -10], [90, 70], size=(200, 2))
+    F = np.concatenate([rng.integers(0, 200, size=(300, 3)), [[0, 0, 1], [2, 3, 2]]])
+    pixels = WeakPerspective(1.0, np.diag([1.0, -1.0, -1.0]), np.zeros(2))
+    for front in (False, True):
+        got = coverage(P, F, (80, 60), front=front)
+        want = rasterize(np.c_[P, np.zeros(200)], F, pixels, (80, 60),
+                         cull_backfaces=front).mask
+        assert want.sum() > 1000
+        np.testing.assert_array_equal(got, want)
+    twins = [np.zeros((60, 80), np.uint8) for _ in range(2)]
+    for kernel, mask in zip((_coverage_kernel, _coverage_kernel_py), twins):
+        kernel(P, F.astype(np.int64), 80, 60, True, np.zeros((0, 0), np.uint8), mask)
+    np.testing.assert_array_equal(twins[0], twins[1])
+
+
+def test_coverage_with_known_pixels_skips_the_triangles_inside_them():
+    """A grid of small triangles over a rectangle: given its middle as ``known``, coverage is
+    the same (the triangles two pixels inside it are skipped, the rest drawn); ``known``
+    pixels outside the mesh are kept; bad points, faces and ``known`` are refused."""
+    from facetransfer.render.raster import coverage
+
+    n = 21
+    g = np.stack(np.meshgrid(np.linspace(5, 55, n), np.linspace(4, 34, n)), -1).reshape(-1, 2)
+    i = np.arange(n - 1)
+    a = (i[:, None] * n + i[None, :]).ravel()
+    F = np.concatenate([np.c_[a, a + n, a + 1], np.c_[a + 1, a + n, a + n + 1]])
+    whole = coverage(g, F, (60, 40))
+    known = np.zeros((40, 60), bool)
+    known[10:30, 12:50] = True
+    np.testing.assert_array_equal(coverage(g, F, (60, 40), known=known), whole)
+    extra = known.copy()
+    extra[38, 58] = True
+    assert coverage(g, F, (60, 40), known=extra)[38, 58]
+    with pytest.raises(ShapeError, match="points"):
+        coverage(np.c_[g, g[:, :1]], F, (60, 40))
+    with pytest.raises(ShapeError, match="faces"):
+        coverage(g, F + len(g), (60, 40))
+    with pytest.raises(ShapeError, match="known"):
+        coverage(g, F, (60, 40), known=known[:20])
+
+
 def test_pinhole_barycentrics_are_perspective_correct():
     # a slanted quad: the 3D point rebuilt from the barycentrics must project to the pixel centre
     V = np.array([[-1.0, -1.0, 0.0], [1.0, -1.0, -1.5], [1.0, 1.0, -1.5], [-1.0, 1.0, 0.0]])

@@ -7,6 +7,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+from facetransfer import frame_meshes
 from facetransfer import rewrite as rw
 from facetransfer import composite
 from facetransfer import mouth
@@ -323,11 +324,11 @@ def test_an_identity_ulps_apart_is_contracted_once(quick_model, topo, synthetic)
     near = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, source_track=ta2, **kw)]
     for a, b in zip(exact, near):
         np.testing.assert_array_equal(a, b)
-    meshes = rw._FrameMeshes(quick_model, {"source": ta2}, ta2.n_frames)
+    meshes = frame_meshes.FrameMeshes(quick_model, {"source": ta2}, ta2.n_frames)
     assert meshes.basis("source").modes_left == 1
     moved = ident + np.linspace(0, 1e-3, len(ident))[:, None]
-    assert (rw._constant_if_nearly(moved) == moved).all()
-    assert (rw._constant_if_nearly(nudged) == ident[0]).all()
+    assert (frame_meshes.constant_if_nearly(moved) == moved).all()
+    assert (frame_meshes.constant_if_nearly(nudged) == ident[0]).all()
 
 
 def test_erode_equals_scipy_binary_erosion():

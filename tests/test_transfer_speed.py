@@ -13,6 +13,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+from facetransfer import frame_meshes
 from facetransfer import rewrite as rw  # noqa: E402
 from facetransfer.texture import face as ftex  # noqa: E402
 from facetransfer.track import obtain  # noqa: E402
@@ -180,8 +181,8 @@ def test_crop_of_and_paste_round_trip(synthetic):
     np.testing.assert_array_equal(rw._paste(T, None).image, T)
 
 
-def test_frame_meshes_are_the_clip_meshes_a_chunk_at_a_time(quick_model):
-    """_FrameMeshes serves every frame of a track as model.synthesize of that frame, C-contiguous,
+def test_frame_meshes_are_the_frame_meshes_a_chunk_at_a_time(quick_model):
+    """FrameMeshes serves every frame of a track as model.synthesize of that frame, C-contiguous,
     across chunks, on another thread, and for a track whose identity changes (synthesised
     whole); it never holds a clip-sized array for a track with one identity."""
     import threading
@@ -189,14 +190,14 @@ def test_frame_meshes_are_the_clip_meshes_a_chunk_at_a_time(quick_model):
 
     rng = np.random.default_rng(3)
     m = quick_model
-    F = 2 * rw._MESH_CHUNK + 3  # the last chunk partial
+    F = 2 * frame_meshes.MESH_CHUNK + 3  # the last chunk partial
     ident = np.tile(rng.normal(size=m.ranks[0]), (F, 1))
     expr = rng.normal(size=(F, m.ranks[1]))
     moving = ident + 0.1 * rng.normal(size=ident.shape)
     tracks = {kind: SimpleNamespace(weights={"identity": w, "expression": expr},
                                     mode_names=m.mode_names)
               for kind, w in (("new", ident), ("target", moving))}
-    fm = rw._FrameMeshes(m, tracks, F)
+    fm = frame_meshes.FrameMeshes(m, tracks, F)
     for kind, w in (("new", ident), ("target", moving)):
         for i in list(range(F)) + [0, F - 1, 5]:
             V = fm.frame(kind, i)

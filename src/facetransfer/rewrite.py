@@ -44,10 +44,10 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
-import threading
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
+import cv2
 import numpy as np
 
 from .arkit import expression_rig, is_arkit_model
@@ -55,7 +55,8 @@ from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
 from .eyeballs import track_gaze
 from .region_views import blend_renders, eye_texture_by_view, jaw_texture_by_view, views_at
-from .rim import frame_shift, inward_rim
+from .frame_meshes import FrameMeshes
+from .rim import drawn_inside, lifted_positions
 from .eyes import EyeTexture, _paint_eyes, eye_flags
 from .jaw import JawTexture, _paint_jaw, jaw_flags
 from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights, tint_mouth
@@ -180,10 +181,10 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     cam = camera if box == (0, 0, W, H) else _shift_camera(camera, x0, y0)
     if mouth_texture is not None and mouth_ring is None:
         mouth_ring = mouth_ring_faces(topo)
-    shift = frame_shift(V, camera, face_texture, target_frame)  # None: not the frame's own
+    lifted = lifted_positions(face_texture, target_frame)  # None: not the frame's own
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
                         feather, erode, mouth_feather, color_match, eye_texture, jaw_texture,
-                        mouth_ring, lip_tint, shift)
+                        mouth_ring, lip_tint, None if lifted is None else lifted - (x0, y0))
     return _paste(T, (box, res))
 
 
@@ -255,13 +256,19 @@ def _shift_camera(camera, x0: int, y0: int):
 
 def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
                   mouth_feather, color_match, eye_texture=None, jaw_texture=None,
-                  mouth_ring=None, lip_tint=None, shift=None) -> RewriteFrame:
-    """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop."""
+                  mouth_ring=None, lip_tint=None, lifted=None) -> RewriteFrame:
+    """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop;
+    ``lifted``: where the per-frame face texture lifted the vertices, in the crop's pixels
+    (:func:`facetransfer.rim.lifted_positions`), or None."""
     from .render import rasterize
 
     raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
+    # not the target's own outline drawn inside its face: the target's pixels there instead
+    own = None if lifted is None else \
+        (T, drawn_inside(raster.mask, raster, topo.faces, lifted, camera.project(V)))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(
-        raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring)
+        raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring,
+        own)
     fan = inside_mouth(raster.tri_id, topo) if mouth_img is not None else None
     if lip_tint is not None and mouth_img is not None:  # the target's lip colour, not inside
         tint_mouth(mouth_img, raster, topo.faces, lip_tint,
@@ -273,8 +280,6 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     # (the Dirichlet boundary of the Poisson problem) lies on the target's own face, which
     # covers the same silhouette up to the change of expression, not on the background.
     region = _erode(face_mask, int(erode)) if erode > 0 else face_mask
-    if shift is not None:  # not the target's own outline drawn inside a narrower face
-        region &= ~inward_rim(face_mask, raster, topo.faces, shift)
     if not region.any():
         region = face_mask
     if blend == "none":
@@ -311,11 +316,14 @@ _RIM, _JAW_REGION, _JAW_RING, _MOUTH_RING = 16, 32, 64, 128
 
 def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTexture,
                  mouth_texture: FaceTexture | None, eye_texture: EyeTexture | None,
-                 jaw_texture: JawTexture | None, mouth_ring: np.ndarray | None = None):
+                 jaw_texture: JawTexture | None, mouth_ring: np.ndarray | None = None,
+                 own: tuple[np.ndarray, np.ndarray] | None = None):
     """The new face textured at one frame (§6): every texture it takes sampled in one pass
     over the raster (:func:`facetransfer.render.shade_layers`), then the eye and jaw regions
     pasted into the face (:func:`facetransfer.eyes.paint_eyes`,
-    :func:`facetransfer.jaw.paint_jaw`).
+    :func:`facetransfer.jaw.paint_jaw`). ``own = (frame, where)``: the face texture replaced
+    by the (cropped) target frame's own pixels ``where`` (:func:`facetransfer.rim.
+    drawn_inside`), under the regions.
 
     Returns
     -------
@@ -347,6 +355,11 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTe
     (face_img, eye_img, jaw_img, mouth_img), labels = shade_layers(raster, topo.faces, layers,
                                                                    flags)
     face_mask = labels != 0  # every covered pixel has the face's bit
+    if own is not None:
+        x, y, w, h = cv2.boundingRect(own[1].view(np.uint8))
+        if w:
+            box = (slice(y, y + h), slice(x, x + w))
+            np.copyto(face_img[box], own[0][box], where=own[1][box][..., None])
     if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
         face_img = _paint_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture, eye_img,
                                labels, (_EYES, _RIM))
@@ -515,70 +528,6 @@ def _clip_mouth_function(model, topo: MeshTopology, new_track, target_frames, ta
     return mouth_function
 
 
-#: Frames of a clip's meshes synthesised together (:class:`_FrameMeshes`).
-_MESH_CHUNK = 16
-
-
-class _FrameMeshes:
-    """A clip's meshes (Eq. 5) frame by frame, synthesised a few frames at a time.
-
-    Each kind (``"new"``, ``"target"``, ``"source"``: a track) gets its
-    :meth:`~facetransfer.model.MultilinearModel.clip_basis` once, on the first thread that
-    asks (the core contracted with the track's identity, 0.1 s for the default model); then
-    :data:`_MESH_CHUNK` consecutive frames are one product, made by the thread that renders
-    them and kept per thread and kind until it asks for another chunk of the kind; a frame's
-    mesh is a view of that chunk's array (a new array per chunk: a view stays valid). Nothing
-    the size of the clip is held: the clip's meshes up front cost
-    the render's set-up 0.6 s on one core and 200 MB of fresh memory (BENCHMARKS.md,
-    "Fourteenth session"). A track whose identity changes over the clip (more than one mode
-    left) is synthesised whole, once per thread.
-    """
-
-    def __init__(self, model, tracks: dict, n: int) -> None:
-        self.model, self.tracks, self.n = model, tracks, n
-        self._bases: dict = {}
-        self._lock = threading.Lock()
-        self._local = threading.local()
-
-    def __contains__(self, kind: str) -> bool:
-        return kind in self.tracks
-
-    def basis(self, kind: str):
-        """The kind's :class:`~facetransfer.model.ClipBasis` over the first ``n`` frames."""
-        with self._lock:
-            basis = self._bases.get(kind)
-            if basis is None:
-                tr = self.tracks[kind]
-                names = self.model.mode_names if kind == "new" else tr.mode_names
-                basis = self._bases[kind] = self.model.clip_basis(
-                    {m: _constant_if_nearly(tr.weights[m][:self.n]) for m in names})
-        return basis
-
-    def frame(self, kind: str, i: int) -> np.ndarray:
-        """The mesh ``(n_vertices, 3)`` float64 of frame ``i`` of ``kind`` (C-contiguous)."""
-        chunks = self._local.__dict__.setdefault("chunks", {})
-        held = chunks.get(kind)
-        if held is None or not held[0] <= i < held[0] + len(held[1]):
-            basis = self.basis(kind)
-            k = _MESH_CHUNK if basis.modes_left <= 1 else self.n
-            i0 = i - i % k
-            chunks[kind] = held = (i0, basis.meshes(np.arange(i0, min(i0 + k, self.n))))
-        return held[1][i - held[0]]
-
-
-def _constant_if_nearly(w: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
-    """A mode's weights ``(F, r)``, their first row repeated when every row is within ``rtol``
-    of it (relative to its largest entry): an identity a few ulps apart over the clip (from a
-    track resampled or filtered elsewhere) is contracted once (:meth:`facetransfer.model.
-    MultilinearModel.clip_basis`), not carried through every frame's product (~300 times the
-    cost, and the clip's meshes made whole)."""
-    w = np.asarray(w)
-    if w.ndim != 2 or len(w) < 2:
-        return w
-    tol = rtol * max(1.0, float(np.abs(w[0]).max()))
-    return np.broadcast_to(w[0], w.shape) if float(np.abs(w - w[0]).max()) <= tol else w
-
-
 def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: int,
                      opts: RewriteOptions, per_frame: bool):
     """``(topo, eye texture, jaw texture)`` of a clip: the eye holes closed and the eye region
@@ -616,7 +565,7 @@ class _ClipRenderer:
         The eye region's texture (``eyes="model"``; ``topo`` then has its eye holes closed).
     jaw_tex : JawTexture or None
         The jaw region's texture (``jaw="closed"`` with the per-frame face texture).
-    meshes : _FrameMeshes
+    meshes : FrameMeshes
         ``"new"``, ``"target"``, ``"source"`` meshes, a few frames at a time; missing kinds
         are synthesised per frame.
     lips : LipResidual or None
@@ -649,7 +598,7 @@ class _ClipRenderer:
     const_tex: FaceTexture | None
     mouth_function: MouthFunction | None
     with_mouth: bool
-    meshes: "_FrameMeshes"
+    meshes: "FrameMeshes"
     eye_tex: EyeTexture | None = None
     jaw_tex: JawTexture | None = None
     lips: LipResidual | None = None
@@ -693,7 +642,7 @@ class _ClipRenderer:
         mono = is_monochrome(target_frames, n)
         renderer = cls(target_frames, target_track, new_track, model, opts, topo, first,
                        source_frames, source_track, sidx, const_tex, fn, with_mouth,
-                       _FrameMeshes(model, kinds, n), eye_tex, jaw_tex, lips,
+                       FrameMeshes(model, kinds, n), eye_tex, jaw_tex, lips,
                        mouth_ring_faces(topo) if with_mouth else None, mono=mono)
         if opts.lip_colour == "target" and with_mouth and model.landmarks is not None:
             tint = renderer.clip_lip_tint()

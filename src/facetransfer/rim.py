@@ -1,16 +1,21 @@
-"""The rendered face's outer band where its outline moved inside the target's (issue 13, "the
-result looks like footage").
+"""The rendered face's outer band where it would draw the target's outline inside the target's
+face (issue 13, "the result looks like footage").
 
 A frame's face texture is the target frame itself, looked up through the target's tracked mesh
 (:func:`facetransfer.texture.face.frame_uvs`). The tracked outline lies a few pixels off the
 real one, so the texture's outermost band holds the target's own outline: the dark edge of the
-hair or background beside the cheek and jaw. Where the new face keeps the target's outline that
-band lands where the target has it; where the new face is narrower (a pucker, the source's
-narrower jaw) the band is drawn inside the face, a dark line along the jaw with the target's
-own skin edge outside it (``make demo`` frames 40 and 84). There the target's own pixels are
-kept instead (:func:`inward_rim`): the edge of the target's face, which the narrower new face
-would have covered anyway; only where the outline moved in by at most the band's width
-(:data:`REACH`): farther in, the target's pixels are what its own expression moved there.
+hair or background beside the cheek and jaw, or a strand of hair that hangs over the jaw line.
+Where the new face keeps the target's outline that band lands where the target has it. Where
+the new face is narrower (a pucker, the source's narrower jaw) the band is drawn inside the
+target's face, a dark line along the jaw with the target's own skin edge outside it (``make
+demo`` frames 40 and 84); where the new jaw moves along its outline (lower, wider), the strand
+at the target's jaw line is drawn a few pixels off it, a dark stroke inside the new face
+(``make demo`` frame 52). In both, a pixel near the new outline shows texture lifted from the
+target's outer band (:data:`RIM` of its size) while it lies deeper inside the target's
+silhouette than that texture did. There the target's own pixels are kept instead
+(:func:`drawn_inside`): the target's face, which the new face covers there anyway; only where
+the pixel lies at most the band's width deeper (:data:`REACH`): deeper, the target's pixels
+are what its own expression moved there.
 """
 
 from __future__ import annotations
@@ -18,31 +23,28 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .composite import _erode
+from .render.raster import coverage
 
-__all__ = ["RIM", "MOVED", "REACH", "outward_shift", "texture_positions", "frame_shift",
-           "inward_rim"]
+__all__ = ["RIM", "MOVED", "REACH", "texture_positions", "lifted_positions", "lifted_depth",
+           "drawn_inside"]
 
 #: The band's width, a fraction of the face's size (the square root of its pixel area; ~250
 #: pixels for ``make demo``'s faces: 6 pixels, the width of the dark line it showed).
 RIM = 0.025
-#: Pixels by which a band pixel's texture must lie farther out from the face's centre than the
-#: pixel itself for the target's own pixel to be kept there.
+#: Pixels by which a pixel must lie deeper inside the target's silhouette than the texture it
+#: shows (lifted from the target's outer band) for the target's own pixel to be kept there.
 MOVED = 1.5
-#: ... and at most this many band widths: farther in, the target's pixels under the band are no
-#: longer the edge of its face but what its own expression moved there (the lower lip and the
-#: shadow under it where the target's jaw is open and the new one closed).
-REACH = 1.0
-
-
-def outward_shift(P: np.ndarray, Q: np.ndarray, centre: np.ndarray | None = None) -> np.ndarray:
-    """``(n,) float32``: per vertex, how much farther from the ``centre`` (2,) (default: that
-    of ``P``) its texture position ``Q`` lies than its own position ``P`` (both (n, 2)
-    pixels): positive where the new outline lies inside the one the texture was lifted
-    through."""
-    c = P.mean(axis=0) if centre is None else centre
-    return (np.hypot(Q[:, 0] - c[0], Q[:, 1] - c[1])
-            - np.hypot(P[:, 0] - c[0], P[:, 1] - c[1])).astype(np.float32)
+#: ... and at most this many band widths: deeper, the target's pixels under it are no longer
+#: the edge of its face but what its own expression moved there (the lower lip and the shadow
+#: under it where the target's jaw is open and the new one closed).
+REACH = 1.5
+#: The new face's pixels deeper than this many band widths are taken to lie inside the target's
+#: silhouette too (:func:`lifted_depth`'s ``core``: its triangles there are not drawn), well
+#: beyond :data:`REACH` (how far in the rule looks).
+CORE = 4
+#: :func:`lifted_depth`'s grid: pixels per side of one of its cells (a coarser map costs less;
+#: the rule compares depths a few pixels apart, read from the same map).
+STEP = 2
 
 
 def texture_positions(uvs: np.ndarray, size: tuple[int, int]) -> np.ndarray:
@@ -52,46 +54,94 @@ def texture_positions(uvs: np.ndarray, size: tuple[int, int]) -> np.ndarray:
     return np.stack([uvs[:, 0] * max(W - 1, 1), (1.0 - uvs[:, 1]) * max(H - 1, 1)], axis=1)
 
 
-def frame_shift(V: np.ndarray, camera, face_texture, frame: np.ndarray):
-    """:func:`outward_shift` of a new face ``V`` (n_closed, 3) seen by ``camera`` against its
-    ``face_texture`` when that texture is the ``frame`` itself (a per-frame texture, its uvs
-    the frame's pixels: :func:`facetransfer.texture.face.frame_uvs`), as a function of vertex
-    indices ``(m,) -> (m,) float32`` (the outer band needs a few thousand of the mesh's
-    vertices); None for another texture (a clip's, whose uvs are no frame's pixels)."""
+def lifted_positions(face_texture, frame: np.ndarray) -> np.ndarray | None:
+    """The pixels ``(n, 2)`` of ``frame`` where ``face_texture`` lifted its vertices, when that
+    texture is the frame itself (a per-frame texture, its uvs the frame's pixels:
+    :func:`facetransfer.texture.face.frame_uvs`); None for another texture (a clip's, whose
+    uvs are no frame's pixels)."""
     if face_texture.image is not frame:
         return None
-    H, W = frame.shape[:2]
-    c = camera.project(V[::16]).mean(axis=0)      # the face's centre (a sixteenth of it will do)
-
-    def shift(idx: np.ndarray) -> np.ndarray:
-        return outward_shift(camera.project(V[idx]),
-                             texture_positions(face_texture.uvs[idx], (W, H)), c)
-
-    return shift
+    return texture_positions(face_texture.uvs, (frame.shape[1], frame.shape[0]))
 
 
-def inward_rim(face_mask: np.ndarray, raster, faces: np.ndarray, shift) -> np.ndarray:
-    """``(H, W) bool``: the pixels of the rendered face's outer band (:data:`RIM` of its size)
-    whose texture lies more than :data:`MOVED` pixels, and at most :data:`REACH` band widths,
-    farther out than they do (``shift``: :func:`frame_shift`'s function of vertex indices,
-    asked for the band's vertices and interpolated over the raster of ``faces``)."""
-    out = np.zeros(face_mask.shape, bool)
+def lifted_depth(positions: np.ndarray, faces: np.ndarray, shape: tuple[int, int], *,
+                 core: np.ndarray | None = None) -> np.ndarray:
+    """How deep each pixel lies inside the silhouette of the mesh ``faces`` drawn at the
+    lifted ``positions`` (n, 2) (its triangles that face the camera cover it): the distance
+    to the nearest pixel outside it, in pixels, 0 outside; ``(ceil(H / s), ceil(W / s))``
+    float32 for ``shape = (H, W)``, on a grid :data:`STEP` = ``s`` times coarser (its pixel
+    ``(i, j)`` is the full-resolution point ``(s j + (s - 1) / 2, s i + (s - 1) / 2)``).
+
+    ``core`` (that grid, bool): pixels known to lie inside the silhouette; the triangles
+    whose corners all lie in it are not drawn (most of the face's, away from its outline)."""
+    H, W = shape
+    grid = (np.asarray(positions, np.float64) - (STEP - 1) / 2.0) / STEP
+    mask = coverage(grid, faces, (-(-W // STEP), -(-H // STEP)), front=True, known=core)
+    return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 3) * np.float32(STEP)
+
+
+def _depth_at(depth: np.ndarray, xy: np.ndarray) -> np.ndarray:
+    """:func:`lifted_depth`'s map read (bilinear) at full-resolution points ``xy`` (m, 2)."""
+    m = ((np.asarray(xy, np.float32) - (STEP - 1) / 2.0) / STEP)[None]          # (1, m, 2)
+    return cv2.remap(depth, m[..., 0], m[..., 1], cv2.INTER_LINEAR,
+                     borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
+
+
+def drawn_inside(face_mask: np.ndarray, raster, faces: np.ndarray, lifted: np.ndarray,
+                 drawn: np.ndarray) -> np.ndarray:
+    """``(H, W) bool``: the pixels of the rendered face whose texture was lifted from the
+    target's outer band (the band :data:`RIM` of the face's size) while they lie more than
+    :data:`MOVED` pixels, and at most :data:`REACH` band widths, deeper inside the target's
+    silhouette than it did.
+
+    Judged per triangle, by the means over its corners of each vertex's depths in
+    :func:`lifted_depth`'s map of the target's silhouette, at ``lifted`` and at ``drawn``
+    (triangles span a few pixels). ``raster``: the face's, of ``faces``; ``lifted`` (n, 2):
+    where the target's texture lifted the vertices (:func:`lifted_positions`); ``drawn`` (n,
+    2): where the new face draws them; both in the raster's pixels."""
     k = max(2, int(round(RIM * np.sqrt(np.count_nonzero(face_mask)))))
-    band = face_mask & ~_erode(face_mask, k)
-    pts = cv2.findNonZero(band.view(np.uint8))                     # (m, 1, 2) x, y; or None
-    if pts is None:
+    F = np.asarray(faces, np.int64)
+    tri_id = np.asarray(raster.tri_id)
+    out = np.zeros(tri_id.shape, bool)
+    depth = lifted_depth(lifted, F, face_mask.shape, core=_core(face_mask, CORE * k))
+    at_texture = _depth_at(depth, lifted)                                        # (n,)
+    band = at_texture < k
+    cand = np.flatnonzero(band[F[:, 0]] | band[F[:, 1]] | band[F[:, 2]])
+    if cand.size == 0:
         return out
-    flat = pts[:, 0, 1].astype(np.int64) * band.shape[1] + pts[:, 0, 0]
-    tri = np.asarray(raster.tri_id).ravel()[flat]
-    flat, tri = flat[tri >= 0], tri[tri >= 0]
-    if tri.size == 0:
+    corners = F[cand]                                                            # (c, 3)
+    xy = np.asarray(drawn)[corners.ravel()]
+    tq = at_texture[corners]
+    tp = _depth_at(depth, xy).reshape(-1, 3)
+    q = (tq[:, 0] + tq[:, 1] + tq[:, 2]) / 3.0         # the corners' means (a reduction over
+    d = (tp[:, 0] + tp[:, 1] + tp[:, 2]) / 3.0 - q     # a last axis of 3 is many times slower)
+    flag = (q < k) & (d > MOVED) & (d <= REACH * k)
+    if not flag.any():
         return out
-    corners = np.asarray(faces, np.int64)[tri]                                  # (m, 3)
-    need = np.zeros(int(corners.max()) + 1, bool)
-    need[corners] = True
-    idx = np.flatnonzero(need)
-    full = np.empty(need.size, np.float32)
-    full[idx] = shift(idx)
-    d = np.einsum("mk,mk->m", np.asarray(raster.bary).reshape(-1, 3)[flat], full[corners])
-    out.ravel()[flat] = (d > MOVED) & (d <= REACH * k)
+    # the triangles' pixels, looked up on the box their corners span only
+    per_tri = np.zeros(len(F) + 1, bool)
+    per_tri[cand[flag] + 1] = True
+    x0, y0, x1, y1 = _box(xy.reshape(-1, 3, 2)[flag].reshape(-1, 2), tri_id.shape)
+    kept = per_tri[tri_id[y0:y1, x0:x1] + 1].view(np.uint8)
+    # the triangles' sawtooth outline smoothed (5 x 5 median), on the face only
+    out[y0:y1, x0:x1] = cv2.medianBlur(kept, 5).view(bool) & (tri_id[y0:y1, x0:x1] >= 0)
     return out
+
+
+def _core(face_mask: np.ndarray, margin: int) -> np.ndarray:
+    """The rendered face's pixels deeper than ``margin`` pixels, on :func:`lifted_depth`'s grid
+    (a cell by its top-left pixel): inside the target's silhouette too, whose outline lies
+    within a few band widths of the new face's (:data:`CORE`)."""
+    coarse = np.ascontiguousarray(face_mask[::STEP, ::STEP]).view(np.uint8)
+    r = max(int(margin) // STEP, 1)
+    return cv2.erode(coarse, np.ones((2 * r + 1, 2 * r + 1), np.uint8),
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0).view(bool)
+
+
+def _box(xy: np.ndarray, shape: tuple[int, int]) -> tuple[int, int, int, int]:
+    """``(x0, y0, x1, y1)`` (end exclusive) of the pixels points ``xy`` (m, 2) span, a pixel
+    beyond, clipped to ``shape = (H, W)``."""
+    H, W = shape
+    lo = np.floor(xy.min(axis=0)).astype(np.int64) - 1
+    hi = np.ceil(xy.max(axis=0)).astype(np.int64) + 2
+    return max(int(lo[0]), 0), max(int(lo[1]), 0), min(int(hi[0]), W), min(int(hi[1]), H)

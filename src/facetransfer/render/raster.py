@@ -30,7 +30,7 @@ except ImportError:  # pragma: no cover
     numba = None
     _HAVE_NUMBA = False
 
-__all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference"]
+__all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference", "coverage"]
 
 
 def _maybe_njit(fn, *, inline: bool = False):
@@ -456,6 +456,86 @@ def rasterize(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, 
     V, F = _check_mesh(vertices, faces)
     W, H = _as_size(size)
     return _rasterize_checked(V, F, camera, W, H, cull_backfaces)
+
+
+def _covered_py(mask, x, y):  # pragma: no cover (numba, inlined)
+    """Whether the pixel nearest the point ``(x, y)`` is set in ``mask`` (False off it)."""
+    ix, iy = int(np.floor(x + 0.5)), int(np.floor(y + 0.5))
+    return 0 <= iy < mask.shape[0] and 0 <= ix < mask.shape[1] and mask[iy, ix] != 0
+
+
+_covered = _maybe_njit(_covered_py, inline=True)
+
+
+def _coverage_kernel_py(xy, F, W, H, front, skip, mask):  # pragma: no cover (numba)
+    """``mask[iy, ix] = 1`` at every pixel inside a non-degenerate triangle of ``F`` drawn at
+    the pixel positions ``xy`` (n, 2), by :func:`rasterize`'s inside rule (``front``: only
+    triangles that face the camera, as its ``cull_backfaces`` keeps); no depth, no
+    barycentrics, a pixel already covered is not tested again (the silhouettes of meshes whose
+    triangles span a pixel or two, a loop over each triangle's box is cheaper than tiles).
+    A triangle whose three corners fall on pixels set in ``skip`` (H, W) uint8 is not drawn
+    (``mask`` holds its pixels already)."""
+    for f in range(F.shape[0]):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        x0, y0, x1, y1, x2, y2 = xy[i0, 0], xy[i0, 1], xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]
+        area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
+        if area == 0 or not np.isfinite(area) or (front and area > 0):
+            continue
+        if _covered(skip, x0, y0) and _covered(skip, x1, y1) and _covered(skip, x2, y2):
+            continue
+        xmin = max(np.ceil(min(x0, x1, x2)), 0.0)
+        xmax = min(np.floor(max(x0, x1, x2)), W - 1.0)
+        ymin = max(np.ceil(min(y0, y1, y2)), 0.0)
+        ymax = min(np.floor(max(y0, y1, y2)), H - 1.0)
+        if xmin > xmax or ymin > ymax:
+            continue
+        pos = area > 0
+        for iy in range(int(ymin), int(ymax) + 1):
+            for ix in range(int(xmin), int(xmax) + 1):
+                if mask[iy, ix]:
+                    continue
+                w0, w1, w2 = _edges(x0, y0, x1, y1, x2, y2, float(ix), float(iy))
+                if pos:
+                    inside = not ((w0 < 0) | (w1 < 0) | (w2 < 0))
+                else:
+                    inside = not ((w0 > 0) | (w1 > 0) | (w2 > 0))
+                if inside:
+                    mask[iy, ix] = 1
+
+
+_coverage_kernel = _maybe_njit(_coverage_kernel_py)
+
+
+def coverage(points: np.ndarray, faces: np.ndarray, size: tuple[int, int], *,
+             front: bool = False, known: np.ndarray | None = None) -> np.ndarray:
+    """The pixels a 2D triangle mesh covers: ``(H, W) bool``, what :func:`rasterize`'s ``mask``
+    is for a mesh drawn at the pixel positions ``points`` (n, 2) (its inside rule; degenerate
+    triangles and ones out of the image cover nothing; ``front``: only the triangles its
+    ``cull_backfaces`` keeps), without depths or barycentrics.
+
+    ``known`` (H, W) bool: pixels known to be covered, set in the result; a triangle whose
+    three corners lie two pixels inside them (their 5 x 5 erosion, nearest pixel) is not drawn
+    (its pixels are taken to be among them: ``known`` should hold no hole a triangle could
+    span)."""
+    xy = np.ascontiguousarray(points, np.float64)
+    F = np.ascontiguousarray(faces, np.int64)
+    if xy.ndim != 2 or xy.shape[1] != 2:
+        raise ShapeError(f"points must be (n, 2), got {xy.shape}")
+    if F.ndim != 2 or F.shape[1] != 3 or (F.size and (F.min() < 0 or F.max() >= len(xy))):
+        raise ShapeError(f"faces must be (F, 3) indices of the {len(xy)} points")
+    W, H = _as_size(size)
+    if known is None:
+        mask, skip = np.zeros((H, W), np.uint8), np.zeros((0, 0), np.uint8)
+    else:
+        if np.shape(known) != (H, W):
+            raise ShapeError(f"known must be ({H}, {W}) bool, got {np.shape(known)}")
+        import cv2
+
+        mask = np.array(known, bool).view(np.uint8)
+        skip = cv2.erode(mask, np.ones((5, 5), np.uint8), borderType=cv2.BORDER_CONSTANT,
+                         borderValue=0)
+    _coverage_kernel(xy, F, W, H, bool(front), skip, mask)
+    return mask.view(bool)
 
 
 def _rasterize_checked(V, F, camera, W, H, cull) -> Raster:

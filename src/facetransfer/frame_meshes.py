@@ -1,0 +1,74 @@
+"""A clip's meshes frame by frame (Eq. 5), synthesised a few frames at a time for the renderer
+(:func:`facetransfer.rewrite.rewrite_frames`), on whichever of its threads asks.
+"""
+
+from __future__ import annotations
+
+import threading
+
+import numpy as np
+
+__all__ = ["MESH_CHUNK", "FrameMeshes", "constant_if_nearly"]
+
+#: Frames of a clip's meshes synthesised together (:class:`FrameMeshes`).
+MESH_CHUNK = 16
+
+
+class FrameMeshes:
+    """A clip's meshes (Eq. 5) frame by frame, synthesised a few frames at a time.
+
+    Each kind (``"new"``, ``"target"``, ``"source"``: a track) gets its
+    :meth:`~facetransfer.model.MultilinearModel.clip_basis` once, on the first thread that
+    asks (the core contracted with the track's identity, 0.1 s for the default model); then
+    :data:`MESH_CHUNK` consecutive frames are one product, made by the thread that renders
+    them and kept per thread and kind until it asks for another chunk of the kind; a frame's
+    mesh is a view of that chunk's array (a new array per chunk: a view stays valid). Nothing
+    the size of the clip is held: the clip's meshes up front cost
+    the render's set-up 0.6 s on one core and 200 MB of fresh memory (BENCHMARKS.md,
+    "Fourteenth session"). A track whose identity changes over the clip (more than one mode
+    left) is synthesised whole, once per thread.
+    """
+
+    def __init__(self, model, tracks: dict, n: int) -> None:
+        self.model, self.tracks, self.n = model, tracks, n
+        self._bases: dict = {}
+        self._lock = threading.Lock()
+        self._local = threading.local()
+
+    def __contains__(self, kind: str) -> bool:
+        return kind in self.tracks
+
+    def basis(self, kind: str):
+        """The kind's :class:`~facetransfer.model.ClipBasis` over the first ``n`` frames."""
+        with self._lock:
+            basis = self._bases.get(kind)
+            if basis is None:
+                tr = self.tracks[kind]
+                names = self.model.mode_names if kind == "new" else tr.mode_names
+                basis = self._bases[kind] = self.model.clip_basis(
+                    {m: constant_if_nearly(tr.weights[m][:self.n]) for m in names})
+        return basis
+
+    def frame(self, kind: str, i: int) -> np.ndarray:
+        """The mesh ``(n_vertices, 3)`` float64 of frame ``i`` of ``kind`` (C-contiguous)."""
+        chunks = self._local.__dict__.setdefault("chunks", {})
+        held = chunks.get(kind)
+        if held is None or not held[0] <= i < held[0] + len(held[1]):
+            basis = self.basis(kind)
+            k = MESH_CHUNK if basis.modes_left <= 1 else self.n
+            i0 = i - i % k
+            chunks[kind] = held = (i0, basis.meshes(np.arange(i0, min(i0 + k, self.n))))
+        return held[1][i - held[0]]
+
+
+def constant_if_nearly(w: np.ndarray, rtol: float = 1e-9) -> np.ndarray:
+    """A mode's weights ``(F, r)``, their first row repeated when every row is within ``rtol``
+    of it (relative to its largest entry): an identity a few ulps apart over the clip (from a
+    track resampled or filtered elsewhere) is contracted once (:meth:`facetransfer.model.
+    MultilinearModel.clip_basis`), not carried through every frame's product (~300 times the
+    cost, and the clip's meshes made whole)."""
+    w = np.asarray(w)
+    if w.ndim != 2 or len(w) < 2:
+        return w
+    tol = rtol * max(1.0, float(np.abs(w[0]).max()))
+    return np.broadcast_to(w[0], w.shape) if float(np.abs(w - w[0]).max()) <= tol else w
