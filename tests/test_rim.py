@@ -155,3 +155,20 @@ def test_the_same_outline_keeps_its_band(narrower):
     band = r.mask & ~_erode(r.mask, k)
     assert kept.sum() > 0.5 * band.sum()
     assert not (kept & _erode(r.mask, 3 * k)).any()       # only near the outline
+    # drawn beyond the frame's edge (the raster as before): nothing to keep, no error
+    assert not rim.drawn_inside(r.mask, r, topo.faces, lifted, inward + [SIZE, 0]).any()
+
+
+def test_triangles_judged_beyond_the_crops_edge_keep_nothing(narrower, monkeypatch):
+    """The triangles the rule picks may all lie past the crop's edge (a face cut by the frame's
+    bottom: ``bench_inputs.py``'s transposed source, where OpenCV's median raised on the empty
+    box): nothing is kept, and no error."""
+    model, topo, new, frame, tex, Vc = narrower
+    target = mean_person_track(model, np.zeros((1, 52), np.float32), size=SIZE, scale=25.0)
+    r = rasterize(Vc, topo.faces, target.camera(0), (SIZE, SIZE))
+    lifted = rim.lifted_positions(tex, frame)
+    c = lifted.mean(axis=0)
+    inward = lifted - 4.0 * (lifted - c) / np.linalg.norm(lifted - c, axis=1, keepdims=True)
+    assert rim.drawn_inside(r.mask, r, topo.faces, lifted, inward).any()
+    monkeypatch.setattr(rim, "_box", lambda xy, shape: (0, shape[0], shape[1], shape[0]))
+    assert not rim.drawn_inside(r.mask, r, topo.faces, lifted, inward).any()

@@ -122,6 +122,8 @@ def drawn_inside(face_mask: np.ndarray, raster, faces: np.ndarray, lifted: np.nd
     per_tri = np.zeros(len(F) + 1, bool)
     per_tri[cand[flag] + 1] = True
     x0, y0, x1, y1 = _box(xy.reshape(-1, 3, 2)[flag].reshape(-1, 2), tri_id.shape)
+    if x1 <= x0 or y1 <= y0:  # all past the crop's edge (a face cut by the frame)
+        return out
     kept = per_tri[tri_id[y0:y1, x0:x1] + 1].view(np.uint8)
     # the triangles' sawtooth outline smoothed (5 x 5 median), on the face only
     out[y0:y1, x0:x1] = cv2.medianBlur(kept, 5).view(bool) & (tri_id[y0:y1, x0:x1] >= 0)
