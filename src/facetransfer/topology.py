@@ -35,8 +35,10 @@ def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
     F = np.asarray(faces, dtype=np.int64)
     E = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])  # directed half-edges
     key = np.sort(E, axis=1)
-    _, inv, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    bnd = E[cnt[inv.ravel()] == 1]  # directed boundary half-edges (a -> b)
+    # an undirected edge as one integer (unique over rows sorts structured rows: 10x slower)
+    code = key[:, 0] * (int(F.max(initial=-1)) + 1) + key[:, 1]
+    _, inv, cnt = np.unique(code, return_inverse=True, return_counts=True)
+    bnd = E[cnt[inv] == 1]  # directed boundary half-edges (a -> b)
     nxt: dict[int, int] = {}
     for a, b in bnd:
         nxt.setdefault(int(a), int(b))
