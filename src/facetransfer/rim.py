@@ -28,8 +28,8 @@ from .render.raster import coverage
 __all__ = ["RIM", "MOVED", "REACH", "texture_positions", "lifted_positions", "lifted_depth",
            "drawn_inside"]
 
-#: The band's width, a fraction of the face's size (the square root of its pixel area; ~250
-#: pixels for ``make demo``'s faces: 6 pixels, the width of the dark line it showed).
+#: The band's width, a fraction of the face's size (the square root of its pixel area; 250-320
+#: pixels for ``make demo``'s faces: 6-8 pixels, the width of the dark line it showed).
 RIM = 0.025
 #: Pixels by which a pixel must lie deeper inside the target's silhouette than the texture it
 #: shows (lifted from the target's outer band) for the target's own pixel to be kept there.
@@ -73,7 +73,8 @@ def lifted_depth(positions: np.ndarray, faces: np.ndarray, shape: tuple[int, int
     ``(i, j)`` is the full-resolution point ``(s j + (s - 1) / 2, s i + (s - 1) / 2)``).
 
     ``core`` (that grid, bool): pixels known to lie inside the silhouette; the triangles
-    whose corners all lie in it are not drawn (most of the face's, away from its outline)."""
+    whose corners all lie two cells inside it are not drawn (most of the face's, away from its
+    outline: :func:`facetransfer.render.raster.coverage`'s ``known``)."""
     H, W = shape
     grid = (np.asarray(positions, np.float64) - (STEP - 1) / 2.0) / STEP
     mask = coverage(grid, faces, (-(-W // STEP), -(-H // STEP)), front=True, known=core)
