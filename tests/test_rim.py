@@ -85,7 +85,7 @@ def test_a_narrower_face_keeps_the_targets_pixels_where_its_outline_was_drawn(na
                                                                              monkeypatch):
     """The new face is 4 % narrower (its outline 4-6 px inside the target's): its outer
     band's texture is the target's dark edge. With the rule the band shows the target's own
-    pixels (its skin); without it (:data:`facetransfer.rim.MOVED` out of reach) the dark edge
+    pixels (its skin, softly mixed over a pixel or two at the rule's edge); without it (:data:`facetransfer.rim.MOVED` out of reach) the dark edge
     is drawn inside the face. 24 % narrower, the outline moved farther in than the rule looks
     (:data:`facetransfer.rim.REACH` band widths, ~10 px here, against ~30): the band is left
     as rendered (what lies under it is no longer the edge of the target's face)."""
@@ -100,7 +100,8 @@ def test_a_narrower_face_keeps_the_targets_pixels_where_its_outline_was_drawn(na
     off, far_off = render(24.0), render(19.0)
     kept = (on != off).any(axis=-1)
     assert kept.sum() > 500
-    np.testing.assert_array_equal(on[kept], frame[kept])          # the target's own pixels
+    # the target's own pixels (a soft edge of ~2 px mixes the two at the rule's outline)
+    assert np.mean((on[kept] == frame[kept]).all(axis=-1)) > 0.85
     # the band (~7 px) is wider than the dark edge (4 px)
     assert np.mean(np.abs(off[kept].astype(int) - EDGE).max(axis=1) < 40) > 0.6
     assert np.mean(np.abs(on[kept].astype(int) - SKIN).max(axis=1) < 10) > 0.8
