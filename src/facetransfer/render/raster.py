@@ -340,6 +340,20 @@ def _tile_mask_py(x0, y0, x1, y1, x2, y2, pos, tx, ty, hi, yhi):  # pragma: no c
 _tile_mask = _maybe_njit(_tile_mask_py, inline=True)
 
 
+def _pixel_box_py(x0, y0, x1, y1, x2, y2, W, H):  # pragma: no cover (numba, inlined)
+    """The pixel centres a triangle's bounding box holds, clipped to a ``W`` x ``H`` image:
+    ``(xmin, xmax, ymin, ymax)`` float, inclusive (empty: ``xmin > xmax`` or ``ymin > ymax``;
+    convert to int only then: a far vertex's coordinate need not fit one)."""
+    xmin = max(np.ceil(min(x0, x1, x2)), 0.0)
+    xmax = min(np.floor(max(x0, x1, x2)), W - 1.0)
+    ymin = max(np.ceil(min(y0, y1, y2)), 0.0)
+    ymax = min(np.floor(max(y0, y1, y2)), H - 1.0)
+    return xmin, xmax, ymin, ymax
+
+
+_pixel_box = _maybe_njit(_pixel_box_py, inline=True)
+
+
 def _draw_pixel_py(tri, f, area, perspective, iy, ix, zbuf, tid, bary):  # pragma: no cover
     """The z-buffer test and write of pixel ``(ix, iy)`` inside triangle ``f``, whose screen
     coordinates, depths and perspective weights are ``tri = (x0, y0, x1, y1, x2, y2, z0, z1,
@@ -395,10 +409,7 @@ def _raster_kernel_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary):  #
             continue
         if cull and area > 0:
             continue
-        xmin = max(np.ceil(min(x0, x1, x2)), 0.0)
-        xmax = min(np.floor(max(x0, x1, x2)), W - 1.0)
-        ymin = max(np.ceil(min(y0, y1, y2)), 0.0)
-        ymax = min(np.floor(max(y0, y1, y2)), H - 1.0)
+        xmin, xmax, ymin, ymax = _pixel_box(x0, y0, x1, y1, x2, y2, W, H)
         if xmin > xmax or ymin > ymax:
             continue
         tri = (x0, y0, x1, y1, x2, y2, z[i0], z[i1], z[i2], q0, q1, q2)
@@ -483,10 +494,7 @@ def _coverage_kernel_py(xy, F, W, H, front, skip, mask):  # pragma: no cover (nu
             continue
         if _covered(skip, x0, y0) and _covered(skip, x1, y1) and _covered(skip, x2, y2):
             continue
-        xmin = max(np.ceil(min(x0, x1, x2)), 0.0)
-        xmax = min(np.floor(max(x0, x1, x2)), W - 1.0)
-        ymin = max(np.ceil(min(y0, y1, y2)), 0.0)
-        ymax = min(np.floor(max(y0, y1, y2)), H - 1.0)
+        xmin, xmax, ymin, ymax = _pixel_box(x0, y0, x1, y1, x2, y2, W, H)
         if xmin > xmax or ymin > ymax:
             continue
         pos = area > 0
