@@ -3,10 +3,15 @@
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from facetransfer import rim
+from facetransfer.errors import MeshError
 from facetransfer.render import WeakPerspective, rasterize
 from facetransfer.rewrite import rewrite_frame
 from facetransfer.texture.face import FaceTexture, frame_uvs
@@ -173,3 +178,33 @@ def test_triangles_judged_beyond_the_crops_edge_keep_nothing(narrower, monkeypat
     assert rim.drawn_inside(r.mask, r, topo.faces, lifted, inward).any()
     monkeypatch.setattr(rim, "_box", lambda xy, shape: (0, shape[0], shape[1], shape[0]))
     assert not rim.drawn_inside(r.mask, r, topo.faces, lifted, inward).any()
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.floats(-80, 80), st.floats(-80, 80), st.floats(0.5, 2.0), st.floats(-60, 60),
+       st.floats(-60, 60), st.integers(8, 90), st.integers(8, 90))
+def test_the_rule_never_fails_on_a_face_anywhere(dx, dy, scale, lx, ly, W, H):
+    """A grid face drawn anywhere (partly or wholly past a crop of any size, shrunk or grown)
+    against its texture's positions anywhere: the rule gives a mask of the crop's shape, only
+    on the face's pixels, and no error or warning (``bench_inputs.py`` found a face cut by the
+    frame's edge that failed; a face over the whole crop overflowed the depth)."""
+    n = 9
+    g = np.stack(np.meshgrid(np.linspace(0, 40, n), np.linspace(0, 40, n)), -1).reshape(-1, 2)
+    i = np.arange(n - 1)
+    a = (i[:, None] * n + i[None, :]).ravel()
+    faces = np.concatenate([np.c_[a, a + n, a + 1], np.c_[a + 1, a + n, a + n + 1]])
+    e1, e2 = g[faces[:, 1]] - g[faces[:, 0]], g[faces[:, 2]] - g[faces[:, 0]]
+    flip = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] > 0
+    faces[flip] = faces[flip][:, ::-1]                    # all facing the camera
+    drawn = g * scale + [dx, dy]
+    lifted = g + [lx, ly]
+    pixels = WeakPerspective(1.0, np.diag([1.0, -1.0, -1.0]), np.zeros(2))
+    try:
+        r = rasterize(np.c_[drawn, np.zeros(len(g))], faces, pixels, (W, H))
+    except MeshError:  # nothing of it in the crop
+        return
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no overflow where the face covers the whole crop
+        kept = rim.drawn_inside(r.mask, r, faces, lifted, drawn)
+    assert kept.shape == (H, W) and kept.dtype == bool
+    assert not (kept & ~r.mask).any()

@@ -78,7 +78,12 @@ def lifted_depth(positions: np.ndarray, faces: np.ndarray, shape: tuple[int, int
     H, W = shape
     grid = (np.asarray(positions, np.float64) - (STEP - 1) / 2.0) / STEP
     mask = coverage(grid, faces, (-(-W // STEP), -(-H // STEP)), front=True, known=core)
-    return cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 3) * np.float32(STEP)
+    depth = cv2.distanceTransform(mask.view(np.uint8), cv2.DIST_L2, 3)
+    # with no pixel outside (a face over the whole crop) OpenCV's distance is the float's
+    # largest: held finite, so that differences of depths are numbers
+    np.minimum(depth, np.float32(1e6), out=depth)
+    depth *= np.float32(STEP)
+    return depth
 
 
 def _depth_at(depth: np.ndarray, xy: np.ndarray) -> np.ndarray:
