@@ -374,10 +374,6 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTe
     return face_img, face_mask, mouth_img, mouth_mask, ring
 
 
-# ---------------------------------------------------------------------------------------------
-# a clip
-# ---------------------------------------------------------------------------------------------
-
 def _keep_own(face_img: np.ndarray, face_mask: np.ndarray, frame: np.ndarray,
               where: np.ndarray) -> None:
     """``face_img`` (H, W, 3) uint8 made ``frame``'s own pixels ``where`` (H, W) bool, in place,
@@ -395,6 +391,10 @@ def _keep_own(face_img: np.ndarray, face_mask: np.ndarray, frame: np.ndarray,
     t = frame[box][ys, xs].astype(np.float32)
     face_img[box][ys, xs] = np.rint(f + a[ys, xs][:, None] * (t - f)).astype(np.uint8)
 
+
+# ---------------------------------------------------------------------------------------------
+# a clip
+# ---------------------------------------------------------------------------------------------
 
 def rewrite_frames(target_frames, target_track, new_track, model, *, source_frames=None,
                    source_track=None, source_index: np.ndarray | None = None,
