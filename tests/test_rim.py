@@ -34,18 +34,24 @@ def test_texture_positions_invert_frame_uvs():
     assert rim.lifted_positions(FaceTexture(frame.copy(), uv, 0), frame) is None
 
 
-def test_lifted_depth_is_the_distance_to_the_silhouettes_outline():
-    """A square of side 60 px drawn as a grid of small triangles: at its centre the depth is
-    half the side, at a point 5 px inside its edge 5 px (to the half-resolution map's ~1 px),
-    outside it 0; with its middle given as ``core`` the map is the same."""
-    n = 31
-    g = np.stack(np.meshgrid(np.linspace(20, 80, n), np.linspace(10, 70, n)), -1).reshape(-1, 2)
+def _grid(n: int, xs: tuple[float, float], ys: tuple[float, float]):
+    """``(points (n², 2), faces)``: an ``n`` x ``n`` grid of points over the rectangle ``xs`` x
+    ``ys`` (pixels), cut into triangles that all face the camera (rasterize's sense)."""
+    g = np.stack(np.meshgrid(np.linspace(*xs, n), np.linspace(*ys, n)), -1).reshape(-1, 2)
     i = np.arange(n - 1)
     a = (i[:, None] * n + i[None, :]).ravel()
     faces = np.concatenate([np.c_[a, a + n, a + 1], np.c_[a + 1, a + n, a + n + 1]])
     e1, e2 = g[faces[:, 1]] - g[faces[:, 0]], g[faces[:, 2]] - g[faces[:, 0]]
-    area = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0]
-    faces[area > 0] = faces[area > 0][:, ::-1]     # all facing the camera (rasterize's sense)
+    flip = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] > 0
+    faces[flip] = faces[flip][:, ::-1]
+    return g, faces
+
+
+def test_lifted_depth_is_the_distance_to_the_silhouettes_outline():
+    """A square of side 60 px drawn as a grid of small triangles: at its centre the depth is
+    half the side, at a point 5 px inside its edge 5 px (to the half-resolution map's ~1 px),
+    outside it 0; with its middle given as ``core`` the map is the same."""
+    g, faces = _grid(31, (20, 80), (10, 70))
     depth = rim.lifted_depth(g, faces, (90, 100))
     assert depth.shape == (45, 50)
     at = rim._depth_at(depth, np.array([[50.0, 40.0], [25.0, 40.0], [10.0, 40.0]]))
@@ -188,14 +194,7 @@ def test_the_rule_never_fails_on_a_face_anywhere(dx, dy, scale, lx, ly, W, H):
     against its texture's positions anywhere: the rule gives a mask of the crop's shape, only
     on the face's pixels, and no error or warning (``bench_inputs.py`` found a face cut by the
     frame's edge that failed; a face over the whole crop overflowed the depth)."""
-    n = 9
-    g = np.stack(np.meshgrid(np.linspace(0, 40, n), np.linspace(0, 40, n)), -1).reshape(-1, 2)
-    i = np.arange(n - 1)
-    a = (i[:, None] * n + i[None, :]).ravel()
-    faces = np.concatenate([np.c_[a, a + n, a + 1], np.c_[a + 1, a + n, a + n + 1]])
-    e1, e2 = g[faces[:, 1]] - g[faces[:, 0]], g[faces[:, 2]] - g[faces[:, 0]]
-    flip = e1[:, 0] * e2[:, 1] - e1[:, 1] * e2[:, 0] > 0
-    faces[flip] = faces[flip][:, ::-1]                    # all facing the camera
+    g, faces = _grid(9, (0, 40), (0, 40))
     drawn = g * scale + [dx, dy]
     lifted = g + [lx, ly]
     pixels = WeakPerspective(1.0, np.diag([1.0, -1.0, -1.0]), np.zeros(2))
