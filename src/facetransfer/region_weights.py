@@ -159,8 +159,8 @@ def usual_weights_of(frames, track, model, verts: np.ndarray, rows, n_frames: in
         k = test[lo:lo + 512]
         diff = _vertex_colours(frames, track, model, verts, rows[k]) - med
         a = np.abs(diff - np.median(diff, axis=1, keepdims=True))
-        d = np.maximum(np.maximum(a[..., 0], a[..., 1]), a[..., 2])  # (a max over an axis of
-        # 3 reduces many times slower)
+        # the largest channel (NumPy's max over a last axis of 3 is many times slower)
+        d = np.maximum(np.maximum(a[..., 0], a[..., 1]), a[..., 2])
         out[k] = 1.0 - smoothstep(d, ramp)
     return out
 
