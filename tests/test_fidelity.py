@@ -25,6 +25,28 @@ def test_a_result_equal_to_the_source_follows_it_exactly(data_dir):
     assert abs(fid.with_source["browInnerUp"] - 1.0) < 1e-6 and "brows +1.00 / " in line
 
 
+def test_the_panels_judged_side_by_side_score_as_one_after_the_other(data_dir):
+    """judge_frames scores its three sequences on threads: exactly the figures of scoring them
+    one after the other (each its own landmarker in video mode; a second aspect too)."""
+    from facetransfer.fidelity import fidelity_of, judge_frames, panel_scores
+    from facetransfer.io.video import read_video
+
+    src, fps = read_video(data_dir / "video" / "driving_d6.mp4", max_frames=60)
+    tgt, _ = read_video(data_dir / "video" / "WDA_KatieHill_000.mp4", max_frames=60)
+    src, tgt = src[:, ::2, ::2], tgt[:, ::2, ::2]
+    res = np.ascontiguousarray(src[:, :, ::-1])       # a mirrored source: another result
+    aspects = (1.0, 1.0, 1.1)
+    fid = judge_frames(src, tgt, res, fps=fps, aspects=aspects)
+    one_by_one = fidelity_of(*(panel_scores(x, fps, a) for x, a in zip((src, tgt, res),
+                                                                      aspects)))
+    for got, want in ((fid.with_source, one_by_one.with_source),
+                      (fid.with_target, one_by_one.with_target)):
+        assert got.keys() == want.keys()
+        np.testing.assert_array_equal(list(got.values()), list(want.values()))
+    r = fid.with_source["mouthOpening"]         # judged, and not the source itself
+    assert np.isfinite(r) and r < 0.999
+
+
 def test_a_frozen_result_has_no_correlation(data_dir):
     from facetransfer.fidelity import judge_frames
     from facetransfer.io.video import read_video
