@@ -22,7 +22,8 @@ from ..errors import ShapeError
 from .init import MediaPipeDetector, create_landmarker, import_tasks_api
 from .landmarks import mediapipe_to_ibug
 
-__all__ = ["ClipDetections", "VideoLandmarker", "detect_clip", "point_flow", "picture_change",
+__all__ = ["FLOW_SLACK", "FLOW_CROP_SHARE", "THUMB_BLOCKS", "ClipDetections", "VideoLandmarker",
+           "detect_clip", "point_flow", "picture_change",
            "preload_mediapipe"]
 
 
@@ -160,18 +161,33 @@ def preload_mediapipe() -> Callable[[], None]:
     return thread.join
 
 
+#: :func:`point_flow` works on the points' box grown by the window's half plus
+#: ``FLOW_SLACK`` pixels of the top pyramid level (the motion between frames and the pyramid's
+#: own border: 64 pixels of the frame at the default window and 2 levels) when that box is at
+#: most ``FLOW_CROP_SHARE`` of the frame. A 1080p frame's pyramids are most of the flow's cost:
+#: with a face 400 pixels tall 4.7 -> 1.4 ms a frame, the displacements within 0.02 px of the
+#: whole frame's (Lucas-Kanade's own stopping tolerance here is 0.03; BENCHMARKS.md,
+#: "Thirty-fourth session").
+FLOW_SLACK, FLOW_CROP_SHARE = 6, 0.25
+
+
 def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
                window: int = 21, levels: int = 2, max_fb: float = 1.0) -> np.ndarray:
     """Lucas-Kanade displacement of points from one frame into the next, (n, 2), NaN on failure.
 
     A point fails when OpenCV loses it or when tracking it back lands more than ``max_fb``
-    pixels from where it started (forward-backward check).
+    pixels from where it started (forward-backward check). The flow is computed on the
+    points' box when that is small (:data:`FLOW_SLACK`, :data:`FLOW_CROP_SHARE`).
     """
     ok = np.all(np.isfinite(pts), axis=1)
     out = np.full(pts.shape, np.nan)
     if not ok.any():
         return out
-    p0 = pts[ok].astype(np.float32).reshape(-1, 1, 2)
+    box = _flow_box(pts[ok], prev_gray.shape[:2], window, levels)
+    x0, y0 = (0, 0) if box is None else (box[1].start, box[0].start)
+    if box is not None:
+        prev_gray, gray = prev_gray[box], gray[box]
+    p0 = (pts[ok] - (x0, y0)).astype(np.float32).reshape(-1, 1, 2)
     crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03)
     p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, p0, None, winSize=(window, window),
                                           maxLevel=levels, criteria=crit)
@@ -185,8 +201,43 @@ def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
     return out
 
 
+def _flow_box(pts: np.ndarray, shape: tuple[int, int], window: int, levels: int
+              ) -> tuple[slice, slice] | None:
+    """The rows and columns :func:`point_flow` works on: the box of ``pts`` (n, 2) grown by
+    ``(window // 2 + 6) * 2**levels`` pixels, its corner on the top pyramid level's grid (so
+    the crop's pyramid samples the frame's), clipped to the frame ``shape`` (H, W); None when
+    that box is more than :data:`FLOW_CROP_SHARE` of the frame."""
+    H, W = shape
+    step = 2 ** int(levels)
+    m = (int(window) // 2 + FLOW_SLACK) * step
+    lo = np.floor(pts.min(axis=0)).astype(np.int64) - m
+    hi = np.ceil(pts.max(axis=0)).astype(np.int64) + m + 1
+    x0, y0 = max(int(lo[0]), 0) // step * step, max(int(lo[1]), 0) // step * step
+    x1, y1 = min(int(hi[0]), W), min(int(hi[1]), H)
+    if x1 <= x0 or y1 <= y0 or (x1 - x0) * (y1 - y0) > FLOW_CROP_SHARE * H * W:
+        return None
+    return slice(y0, y1), slice(x0, x1)
+
+
+#: :func:`thumbnail`: frames whose shorter side is at least twice this are first averaged over
+#: whole blocks of ``shorter side // THUMB_BLOCKS`` pixels.
+THUMB_BLOCKS = 256
+
+
 def thumbnail(gray: np.ndarray) -> np.ndarray:
-    """A grey frame's 32x32 thumbnail, float32 (:func:`picture_change`)."""
+    """A grey frame's 32x32 thumbnail, float32 (:func:`picture_change`): its area average.
+
+    A large frame (shorter side >= 2 :data:`THUMB_BLOCKS`) is averaged over k x k blocks
+    first (k = shorter side // :data:`THUMB_BLOCKS`; the last rows and columns that fill no
+    block are left out): OpenCV's area resampling by a whole factor is its fast one, by
+    33.75 (1080 rows to 32) its slow one (5.8 -> 1.2 ms a 1080p frame; the thumbnail within a
+    level of the direct one, a picture change within 1 %: 0.02 levels on real footage, whose
+    cuts change by 36-72, :mod:`facetransfer.track.shots`)."""
+    H, W = gray.shape[:2]
+    k = min(H, W) // THUMB_BLOCKS
+    if k >= 2:
+        h, w = H - H % k, W - W % k
+        gray = cv2.resize(gray[:h, :w], (w // k, h // k), interpolation=cv2.INTER_AREA)
     return cv2.resize(gray, (32, 32), interpolation=cv2.INTER_AREA).astype(np.float32)
 
 

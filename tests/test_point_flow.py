@@ -1,0 +1,76 @@
+"""The capture's point flow and picture change on large frames (facetransfer.track.detect):
+worked on the face's box and on whole blocks, as the whole frame gives them."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from facetransfer.track import detect
+from facetransfer.track.detect import picture_change, point_flow, thumbnail
+
+
+def _texture(shape, seed=0):
+    """A smooth random grey texture (Lucas-Kanade needs gradients everywhere)."""
+    rng = np.random.default_rng(seed)
+    small = rng.uniform(0, 255, (shape[0] // 8 + 2, shape[1] // 8 + 2)).astype(np.float32)
+    big = cv2.resize(small, (shape[1] + 16, shape[0] + 16), interpolation=cv2.INTER_CUBIC)
+    return big
+
+
+def _shifted(tex, shape, dx, dy):
+    """``shape`` of ``tex`` seen moved by (dx, dy) pixels (bilinear), uint8."""
+    H, W = shape
+    M = np.float32([[1, 0, dx - 8], [0, 1, dy - 8]])
+    return np.clip(cv2.warpAffine(tex, M, (W, H), flags=cv2.INTER_LINEAR), 0, 255).astype(
+        np.uint8)
+
+
+@pytest.mark.parametrize("shift", [(2.5, -1.25), (-7.0, 4.5)])
+def test_the_flow_on_the_faces_box_of_a_1080p_frame_is_the_whole_frames(shift, monkeypatch):
+    shape = (1080, 1920)
+    tex = _texture(shape)
+    a, b = _shifted(tex, shape, 0.0, 0.0), _shifted(tex, shape, *shift)
+    rng = np.random.default_rng(1)
+    pts = np.array([900.0, 400.0]) + rng.uniform(0, 350, (68, 2))   # a face 350 px across
+    pts[5] = np.nan                                                   # an unknown point
+    assert detect._flow_box(pts[np.isfinite(pts).all(1)], shape, 21, 2) is not None
+    crop = point_flow(a, b, pts)
+    monkeypatch.setattr(detect, "FLOW_CROP_SHARE", 0.0)               # never cropped
+    whole = point_flow(a, b, pts)
+    assert np.isnan(crop[5]).all() and np.isnan(whole[5]).all()
+    ok = np.isfinite(whole).all(1)
+    assert ok.sum() >= 60 and np.array_equal(ok, np.isfinite(crop).all(1))
+    np.testing.assert_allclose(crop[ok], whole[ok], atol=0.03)       # LK's own tolerance
+    np.testing.assert_allclose(np.median(crop[ok], axis=0), shift, atol=0.05)
+
+
+def test_the_flows_box_sits_on_the_top_levels_grid_and_only_when_small():
+    pts = np.array([[1001.3, 533.7], [1200.9, 790.2]])
+    rows, cols = detect._flow_box(pts, (1080, 1920), 21, 2)
+    m = (21 // 2 + detect.FLOW_SLACK) * 4
+    assert cols.start % 4 == 0 and rows.start % 4 == 0
+    assert cols.start <= 1001.3 - m and cols.stop >= 1200.9 + m
+    assert rows.start <= 533.7 - m and rows.stop >= 790.2 + m
+    # the same face in a 512x480 frame covers most of it: the whole frame
+    assert detect._flow_box(pts - (900, 450), (480, 512), 21, 2) is None
+    # a box reaching past the frame is clipped to it
+    rows, cols = detect._flow_box(np.array([[5.0, 3.0], [300.0, 200.0]]), (1080, 1920), 21, 2)
+    assert rows.start == 0 and cols.start == 0
+
+
+def test_the_thumbnail_of_a_large_frame_by_whole_blocks_is_the_area_average():
+    tex = _texture((1080, 1920), seed=3)
+    a, b = _shifted(tex, (1080, 1920), 0, 0), _shifted(tex, (1080, 1920), 40.0, 0.0)
+    direct = cv2.resize(a, (32, 32), interpolation=cv2.INTER_AREA).astype(np.float32)
+    t = thumbnail(a)
+    assert t.shape == (32, 32) and t.dtype == np.float32
+    assert np.abs(t - direct).max() <= 1.0
+    change = np.abs(cv2.resize(a, (32, 32), interpolation=cv2.INTER_AREA).astype(np.float32)
+                    - cv2.resize(b, (32, 32), interpolation=cv2.INTER_AREA)).mean()
+    assert change > 1.0 and picture_change(a, b) == pytest.approx(change, rel=0.02)
+    # a small frame: exactly OpenCV's area average, as before
+    small = a[:480, :512]
+    np.testing.assert_array_equal(
+        thumbnail(small), cv2.resize(small, (32, 32), interpolation=cv2.INTER_AREA))
