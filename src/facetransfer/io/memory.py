@@ -210,8 +210,8 @@ def frame_array(n: int, shape: tuple, *, what: str, budget: int | None = None) -
 
 
 def _anonymous(shape: tuple) -> np.ndarray:
-    """An uninitialised ``shape`` uint8 array in an anonymous mapping of its own, in ordinary
-    pages (freed with the last view of it).
+    """An uninitialised ``shape`` uint8 array in a private anonymous mapping of its own, in
+    ordinary pages (freed with the last view of it).
 
     NumPy asks the kernel to back arrays of 4 MB and more with huge pages (``madvise``
     ``MADV_HUGEPAGE``); where the kernel then compacts memory at the first touch of each 2 MB
@@ -219,11 +219,18 @@ def _anonymous(shape: tuple) -> np.ndarray:
     the kernel writing a clip's decoded frames: 2.0 s of system time for 560 MB of 1080p
     frames, against 0.3 s in ordinary pages (0.1 s when huge pages happen to be free). A
     10-second 512² transfer spent 1.5 CPU-s less (BENCHMARKS.md, "Twenty-fourth session").
-    Frames are read a frame at a time, contiguously: huge pages gain them nothing."""
+    Frames are read a frame at a time, contiguously: huge pages gain them nothing.
+
+    Private, not shared (Python's default for a map): a shared anonymous map is the kernel's
+    shared memory, whose first touch of each page costs more, the more so with two clips
+    decoded side by side (two 1080p clips of 300 frames: 2.4-3.0 -> 1.0-1.4 s of system time,
+    3.3-3.5 -> 2.7-3.0 s; BENCHMARKS.md, "Thirty-fourth session"). A forked tracker only reads
+    the frames, so it shares their pages all the same."""
     import mmap
 
     n = int(np.prod(shape))
-    return np.frombuffer(mmap.mmap(-1, max(n, 1)), np.uint8, count=n).reshape(shape)
+    flags = mmap.MAP_PRIVATE | mmap.MAP_ANONYMOUS
+    return np.frombuffer(mmap.mmap(-1, max(n, 1), flags=flags), np.uint8, count=n).reshape(shape)
 
 
 def grow_frames(frames: np.ndarray | None, n: int, size: int, shape: tuple, *, what: str,
