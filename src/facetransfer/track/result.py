@@ -47,6 +47,17 @@ __all__ = ["Track", "TRACK_FORMAT_VERSION"]
 TRACK_FORMAT_VERSION = 1
 
 
+def _track_array(name: str, val, shape: tuple, dtype=np.float64) -> np.ndarray:
+    """``val`` as an array of ``shape`` and ``dtype``, finite where it is float; a
+    :class:`TrackError` naming the field otherwise."""
+    a = np.asarray(val, dtype=dtype)
+    if a.shape != shape:
+        raise TrackError(f"track {name} must have shape {shape}, got {a.shape}")
+    if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
+        raise TrackError(f"track {name} has non-finite values")
+    return a
+
+
 @dataclass(frozen=True, eq=False)
 class Track:
     """Per-frame pose and model weights of a tracked face (Vlasic et al. 2005, §5.1, Eq. (7)).
@@ -120,31 +131,40 @@ class Track:
         F = R.shape[0]
         if F < 1:
             raise TrackError("a track needs at least one frame")
+        self._check_pose(R, F)
+        self._check_weights(F)
+        self._check_clip(F)
+        self._check_blendshapes(F)
+        if self.detections2d is not None:
+            D = np.asarray(self.detections2d, dtype=np.float64)
+            if D.shape != (F, 68, 2):
+                raise TrackError(f"track detections2d must have shape {(F, 68, 2)}, got {D.shape}")
+            if np.isinf(D).any():
+                raise TrackError("track detections2d must be finite or NaN (no face)")
+            object.__setattr__(self, "detections2d", D)
 
-        def arr(name, val, shape, dtype=np.float64):
-            a = np.asarray(val, dtype=dtype)
-            if a.shape != shape:
-                raise TrackError(f"track {name} must have shape {shape}, got {a.shape}")
-            if a.dtype.kind == "f" and not np.all(np.isfinite(a)):
-                raise TrackError(f"track {name} has non-finite values")
-            return a
-
+    def _check_pose(self, R: np.ndarray, F: int) -> None:
+        """The per-frame pose, points, confidence and lost flags, checked and stored as arrays
+        of ``F`` frames."""
         set_ = object.__setattr__
-        set_(self, "rotation", arr("rotation", R, (F, 3, 3)))
-        set_(self, "scale", arr("scale", self.scale, (F,)))
+        set_(self, "rotation", _track_array("rotation", R, (F, 3, 3)))
+        set_(self, "scale", _track_array("scale", self.scale, (F,)))
         if np.any(self.scale <= 0):
             raise TrackError("track scale must be > 0 on every frame")
-        set_(self, "translation", arr("translation", self.translation, (F, 2)))
-        set_(self, "landmarks2d", arr("landmarks2d", self.landmarks2d, (F, 68, 2)))
-        conf = arr("confidence", self.confidence, (F,))
+        set_(self, "translation", _track_array("translation", self.translation, (F, 2)))
+        set_(self, "landmarks2d", _track_array("landmarks2d", self.landmarks2d, (F, 68, 2)))
+        conf = _track_array("confidence", self.confidence, (F,))
         if np.any((conf < 0) | (conf > 1)):
             raise TrackError("track confidence must lie in [0, 1]")
         set_(self, "confidence", conf)
-        set_(self, "lost", arr("lost", self.lost, (F,), bool))
+        set_(self, "lost", _track_array("lost", self.lost, (F,), bool))
+
+    def _check_weights(self, F: int) -> None:
+        """The mode names and each mode's weights ``(F, r)``, finite."""
         names = tuple(str(n) for n in self.mode_names)
         if not names:
             raise TrackError("a track needs at least one mode name")
-        set_(self, "mode_names", names)
+        object.__setattr__(self, "mode_names", names)
         if set(self.weights) != set(names):
             raise TrackError(f"track weights are given for modes {sorted(self.weights)}, "
                              f"expected {list(names)}")
@@ -156,7 +176,12 @@ class Track:
             if not np.all(np.isfinite(a)):
                 raise TrackError(f"track weights of mode {n!r} have non-finite values")
             w[n] = a
-        set_(self, "weights", w)
+        object.__setattr__(self, "weights", w)
+
+    def _check_clip(self, F: int) -> None:
+        """What the track says of its clip: frame size, rate, pixel aspect, shots, model and
+        source."""
+        set_ = object.__setattr__
         size = tuple(int(v) for v in np.asarray(self.frame_size).ravel())
         if len(size) != 2 or min(size) <= 0:
             raise TrackError(f"track frame_size must be (W, H) > 0, got {self.frame_size}")
@@ -176,14 +201,6 @@ class Track:
         set_(self, "shot_starts", starts)
         set_(self, "model_hash", str(self.model_hash))
         set_(self, "source", str(self.source))
-        self._check_blendshapes(F)
-        if self.detections2d is not None:
-            D = np.asarray(self.detections2d, dtype=np.float64)
-            if D.shape != (F, 68, 2):
-                raise TrackError(f"track detections2d must have shape {(F, 68, 2)}, got {D.shape}")
-            if np.isinf(D).any():
-                raise TrackError("track detections2d must be finite or NaN (no face)")
-            set_(self, "detections2d", D)
 
     def _check_blendshapes(self, F: int) -> None:
         if self.blendshapes is None:
