@@ -6,6 +6,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from facetransfer.track import detect
 from facetransfer.track.detect import picture_change, point_flow, thumbnail
@@ -74,3 +76,25 @@ def test_the_thumbnail_of_a_large_frame_by_whole_blocks_is_the_area_average():
     small = a[:480, :512]
     np.testing.assert_array_equal(
         thumbnail(small), cv2.resize(small, (32, 32), interpolation=cv2.INTER_AREA))
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(st.integers(16, 4000), st.integers(16, 3000), st.integers(1, 68),
+       st.floats(-500, 4500), st.floats(-500, 3500), st.floats(0, 900), st.integers(0, 3))
+def test_the_flows_box_lies_in_the_frame_and_holds_the_points_grown(W, H, n, x, y, spread,
+                                                                    levels):
+    """Points anywhere (in, across or out of frames of any size): a box, when one is taken,
+    lies inside the frame, starts on the top level's grid, holds every point's neighbourhood
+    that lies in the frame, and is at most the share of the frame; no box otherwise."""
+    rng = np.random.default_rng(n)
+    pts = np.array([x, y]) + rng.uniform(0, spread, (n, 2))
+    box = detect._flow_box(pts, (H, W), 21, levels)
+    if box is None:
+        return
+    rows, cols = box
+    step, m = 2 ** levels, (21 // 2 + detect.FLOW_SLACK) * 2 ** levels
+    assert 0 <= cols.start < cols.stop <= W and 0 <= rows.start < rows.stop <= H
+    assert cols.start % step == 0 and rows.start % step == 0
+    assert (cols.stop - cols.start) * (rows.stop - rows.start) <= detect.FLOW_CROP_SHARE * H * W
+    assert cols.start <= max(pts[:, 0].min() - m, 0) and rows.start <= max(pts[:, 1].min() - m, 0)
+    assert cols.stop >= min(pts[:, 0].max() + m, W) and rows.stop >= min(pts[:, 1].max() + m, H)
