@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Fidelity", "judge_frames", "fidelity_of", "panel_scores", "landmarker_scores", "correlation",
-           "gaze"]
+__all__ = ["Fidelity", "judge_frames", "fidelity_of", "panel_scores", "landmarker_scores",
+           "correlation", "gaze"]
 
 #: MediaPipe blendshape names reported (its order: :data:`facetransfer.arkit.MEDIAPIPE_NAMES`).
 JUDGED = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "browInnerUp", "mouthPucker")

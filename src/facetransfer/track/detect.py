@@ -204,9 +204,9 @@ def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
 def _flow_box(pts: np.ndarray, shape: tuple[int, int], window: int, levels: int
               ) -> tuple[slice, slice] | None:
     """The rows and columns :func:`point_flow` works on: the box of ``pts`` (n, 2) grown by
-    ``(window // 2 + 6) * 2**levels`` pixels, its corner on the top pyramid level's grid (so
-    the crop's pyramid samples the frame's), clipped to the frame ``shape`` (H, W); None when
-    that box is more than :data:`FLOW_CROP_SHARE` of the frame."""
+    ``(window // 2 + FLOW_SLACK) * 2**levels`` pixels, its corner on the top pyramid level's
+    grid (so the crop's pyramid samples the frame's), clipped to the frame ``shape`` (H, W);
+    None when that box is more than :data:`FLOW_CROP_SHARE` of the frame."""
     H, W = shape
     step = 2 ** int(levels)
     m = (int(window) // 2 + FLOW_SLACK) * step
