@@ -539,3 +539,24 @@ def test_an_interlaced_target_gives_an_interlaced_result(clips, quick_model_path
         results.append(read_video(out)[0].astype(int))
     assert results[0].shape == results[1].shape and results[0].mean() > 50
     assert np.abs(results[0] - results[1]).mean() < 1.0
+
+
+def test_the_inputs_are_probed_at_once_and_kept(clips, tmp_path, monkeypatch):
+    """_probe_at_once asks every input's video_info on threads: afterwards each is kept (no
+    process runs when asked again), and a missing input is left for the checks' own error."""
+    import subprocess
+
+    from facetransfer.cli.transfer import _probe_at_once
+    from facetransfer.io.video import video_info
+
+    a, b = tmp_path / "a.mp4", tmp_path / "b.mp4"
+    a.write_bytes(clips["target"].read_bytes())
+    b.write_bytes(clips["source"].read_bytes())
+    _probe_at_once([str(a), str(b), str(tmp_path / "missing.mp4")])
+
+    def no_process(*args, **kwargs):
+        raise AssertionError("a probe ran again")
+
+    monkeypatch.setattr(subprocess, "run", no_process)
+    monkeypatch.setattr(subprocess, "Popen", no_process)
+    assert video_info(a).n_frames == video_info(b).n_frames > 0
