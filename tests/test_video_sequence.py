@@ -89,7 +89,7 @@ def test_what_a_sequence_cannot_be(frames, tmp_path, monkeypatch):
         tmp_path / "none" / "x_%04d.png": "folder " + str(tmp_path / "none") + " does not exist",
         tmp_path / "broken" / "sh010.####.png": "cannot read frame file",
         tmp_path / "empty" / "a%03d_%03d.png": "exactly one frame-number field",
-        tmp_path / "empty" / "plate.####.dpx": ".dpx frames are not read",
+        tmp_path / "empty" / "plate.####.cin": ".cin frames are not read",
     }
     for pattern, said in cases.items():
         with pytest.raises(VideoError, match="image sequence") as err:

@@ -1,7 +1,8 @@
 """One frame file of an image sequence as the tools see it, ``(H, W, 3) uint8`` RGB, whatever
 its kind: 8 or 16 bits (16 seen as ``round(v / 257)``), grey or colour, with or without alpha
 (the colour as stored: an RGBA TIFF of straight alpha through Pillow, since OpenCV's reader
-premultiplies it), OpenEXR through the sRGB curve (:mod:`facetransfer.io.exr`). Used by
+premultiplies it), OpenEXR through the sRGB curve (:mod:`facetransfer.io.exr`), DPX by its
+transfer characteristic (:mod:`facetransfer.io.dpx`). Used by
 :mod:`facetransfer.io.video_sequence`; what a file holds beyond that (its bit depth, how its
 alpha is stored) is read here for :mod:`facetransfer.io.plate_depth` and
 :mod:`facetransfer.io.plate_alpha`.
@@ -23,13 +24,18 @@ def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
     """One frame file as ``(H, W, 3) uint8`` RGB (16 bits rounded to 8, :func:`shown_16`; grey
     expanded, alpha dropped with the colour as stored, a JPEG's EXIF orientation applied;
     OpenEXR's linear floats shown through the sRGB curve,
-    :func:`facetransfer.io.exr.shown_frame`)."""
+    :func:`facetransfer.io.exr.shown_frame`; DPX's codes by their transfer,
+    :func:`facetransfer.io.dpx.shown_dpx`)."""
     import cv2
 
     if file.suffix.lower() == ".exr":
         from .exr import read_exr_image, shown_frame
 
         return shown_frame(read_exr_image(file))
+    if file.suffix.lower() == ".dpx":
+        from .dpx import read_dpx_image, shown_dpx
+
+        return shown_dpx(read_dpx_image(file))
     is_tiff = file.suffix.lower() in (".tif", ".tiff")
     tiff = _tiff_header(file) if is_tiff else None   # one look for both questions below
     if _alpha_kind(tiff) == "straight":
@@ -69,9 +75,16 @@ def read_unchanged(file) -> np.ndarray | None:
 
 
 def bit_depth(file: Path) -> int | None:
-    """Bits a sample of a PNG or TIFF frame file (from its header: PNG's IHDR, TIFF's
-    BitsPerSample); None for other files or an unreadable header."""
+    """Bits a sample of a PNG, TIFF or DPX frame file (from its header: PNG's IHDR, TIFF's
+    BitsPerSample, DPX's bit size); None for other files or an unreadable header."""
     suffix = file.suffix.lower()
+    if suffix == ".dpx":
+        from .dpx import dpx_header
+
+        try:
+            return dpx_header(file)[0]
+        except VideoError:
+            return None
     if suffix in (".tif", ".tiff"):
         tiff = _tiff_header(file)
         return None if tiff is None else tiff[0]

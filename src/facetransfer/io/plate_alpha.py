@@ -40,10 +40,10 @@ def _has_alpha(img: np.ndarray | None) -> bool:
 
 def sequence_has_alpha(seq) -> bool:
     """Whether an image sequence's first frame has an alpha channel (grey + alpha or RGBA, of
-    a PNG or TIFF; not looked for in OpenEXR frames, whose channels
-    :mod:`facetransfer.io.exr_plate` keeps)."""
+    a PNG or TIFF; not looked for in OpenEXR and DPX frames, whose channels
+    :mod:`facetransfer.io.exr_plate` and :mod:`facetransfer.io.dpx` keep)."""
     f = seq.file(0)
-    return f.suffix.lower() != ".exr" and _has_alpha(read_unchanged(f))
+    return f.suffix.lower() not in (".exr", ".dpx") and _has_alpha(read_unchanged(f))
 
 
 #: ffmpeg's pixel formats that carry an alpha plane (ProRes 4444, PNG, QuickTime RLE, VP9).

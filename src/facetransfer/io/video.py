@@ -146,7 +146,8 @@ def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
     PNG or TIFF), to ``path`` in the file type of ``suffix`` (default: ``path``'s own; one of
     :data:`IMAGE_SUFFIXES`); a PNG or TIFF frame may also be uint16, grey ``(H, W)``, RGB or
     RGBA (:mod:`facetransfer.io.plate_depth`), an OpenEXR frame linear float RGB or an
-    :class:`~facetransfer.io.exr.ExrImage` (:func:`facetransfer.io.exr.write_exr`)."""
+    :class:`~facetransfer.io.exr.ExrImage` (:func:`facetransfer.io.exr.write_exr`), a DPX
+    frame a :class:`~facetransfer.io.dpx.DpxImage` (:func:`facetransfer.io.dpx.write_dpx`)."""
     from PIL import Image
 
     suffix = (suffix or Path(path).suffix).lower()
@@ -154,6 +155,11 @@ def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
         from .exr import write_exr
 
         write_exr(path, rgb)
+        return
+    if suffix == ".dpx":
+        from .dpx import write_dpx
+
+        write_dpx(path, rgb)
         return
     if rgb.dtype == np.uint16:
         _save_deep(rgb, path, suffix)

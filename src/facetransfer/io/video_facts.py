@@ -108,7 +108,8 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
         seq = open_sequence(path)
         return VideoFacts(str(path), "image sequence", (W, H), (W, H), (1, 1), float(info.fps),
                           int(info.n_frames), False, float(info.n_frames / info.fps), None,
-                          "OpenCV", True, ColourTags(), None, seq.first,
+                          "OpenImageIO" if str(path).lower().endswith(".dpx") else "OpenCV", True,
+                          ColourTags(), None, seq.first,
                           alpha=sequence_has_alpha(seq), bits=bit_depth(seq.file(0)) or 8)
     return VideoFacts(str(path), container(path), (W, H), (shown_width(W, info.sar), H),
                       info.sar, float(info.fps),
@@ -156,6 +157,7 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 ("  OpenEXR, scene-linear: shown through the sRGB curve (above 1 as white) "
                  "to be tracked; a rewrite written as .exr keeps every float it does not "
                  "change; no audio" if str(f.path).lower().endswith(".exr") else
+                 f"  {_dpx_kind(f)}" if str(f.path).lower().endswith(".dpx") else
                  f"  {_image_kind(f)}; no audio")]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}" + (
@@ -167,6 +169,13 @@ def fact_lines(f: VideoFacts) -> list[str]:
                  "or TIFF sequence"] if f.bits > 8 else []) + (
                 ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG or "
                  "TIFF sequence"] if f.alpha else [])
+
+
+def _dpx_kind(f: VideoFacts) -> str:
+    """What a DPX plate's frames hold (:func:`facetransfer.io.dpx.dpx_summary`)."""
+    from .dpx import dpx_summary
+
+    return dpx_summary(open_sequence(f.path).file(0))
 
 
 def _image_kind(f: VideoFacts) -> str:

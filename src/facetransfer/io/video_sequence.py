@@ -4,7 +4,8 @@
 A sequence starts at its lowest frame number present (0, 1, 1001, ...) and runs without a gap;
 its frames are PNG, JPEG, TIFF or BMP files (8 or 16 bits a channel, grey or colour; an alpha
 channel is set aside), given as ``(H, W, 3) uint8`` RGB (:mod:`facetransfer.io.frame_file`), or
-OpenEXR files of scene-linear floats, shown through the sRGB curve (:mod:`facetransfer.io.exr`).
+OpenEXR files of scene-linear floats, shown through the sRGB curve (:mod:`facetransfer.io.exr`),
+or DPX files of log, linear or video code values (:mod:`facetransfer.io.dpx`).
 A sequence
 stores no frame rate: it is read at :data:`DEFAULT_SEQUENCE_FPS` unless
 ``FACETRANSFER_SEQUENCE_FPS`` (the commands' ``--sequence-fps``) gives another. It has no audio,
@@ -35,10 +36,10 @@ __all__ = ["IMAGE_SUFFIXES", "FRAME_FIELD", "DEFAULT_SEQUENCE_FPS", "SEQUENCE_FP
            "same_sequence_files"]
 
 #: Image formats of a frame sequence, read and written (``frames/%05d.png``).
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr")
-#: Image formats of plates that a sequence refuses by name: their pixels are log or of
-#: unknown scale (Cineon/DPX, Radiance) and need the user's colour pipeline to become video RGB.
-_SCENE_SUFFIXES = (".dpx", ".cin", ".hdr")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp", ".exr", ".dpx")
+#: Image formats of plates that a sequence refuses by name: Cineon's own files (their header
+#: is not DPX's) and Radiance's, whose pixels need the user's colour pipeline to become RGB.
+_SCENE_SUFFIXES = (".cin", ".hdr")
 #: A frame-number field: printf's ``%d``/``%05d``, or a run of ``#`` (one digit each).
 FRAME_FIELD = re.compile(r"%0?\d*d|#+")
 #: The frame rate of a sequence when none is given: film's and the compositing packages'.
@@ -172,10 +173,9 @@ def open_sequence(path) -> Sequence:
     """
     p = Path(path)
     if p.suffix.lower() in _SCENE_SUFFIXES:
-        raise VideoError(f"image sequence {p}: {p.suffix} frames are not read (their pixels "
-                         "are log or of unknown scale); write the plate as OpenEXR (scene-"
-                         "linear), or as PNG or TIFF (8 or 16 bits, display-referred sRGB / "
-                         "Rec.709) first")
+        raise VideoError(f"image sequence {p}: {p.suffix} frames are not read; write the "
+                         "plate as DPX (log or video), OpenEXR (scene-linear), or PNG or "
+                         "TIFF (8 or 16 bits, display-referred sRGB / Rec.709) first")
     return _opened(str(p), sequence_stamp(p))
 
 
