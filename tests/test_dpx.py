@@ -150,6 +150,18 @@ def test_the_header_and_alpha_are_kept_and_8_bit_frames_written_as_video(tmp_pat
     assert (video.bits, video.transfer) == (10, "ITU-R 709-4")
     assert np.array_equal(video.codes, np.rint(eight / 255 * 1023).astype(np.uint16))
     assert np.array_equal(shown_dpx(video), eight)
+    rgba = rng.integers(0, 256, (12, 16, 4), dtype=np.uint8)   # a plate's alpha beside it
+    write_dpx(tmp_path / "d.dpx", rgba)
+    assert np.array_equal(read_dpx_image(tmp_path / "d.dpx").codes,
+                          np.rint(rgba / 255 * 1023).astype(np.uint16))
+    for deep in (rng.integers(0, 65536, (12, 16), dtype=np.uint16),     # a 16-bit plate's
+                 rng.integers(0, 65536, (12, 16, 4), dtype=np.uint16)):
+        write_dpx(tmp_path / "e.dpx", deep)
+        got = read_dpx_image(tmp_path / "e.dpx")
+        assert (got.bits, got.transfer) == (16, "ITU-R 709-4")
+        assert np.array_equal(got.codes.reshape(deep.shape), deep)
+    with pytest.raises(ValueError, match=r"a DPX frame is .* not \(12, 16\) float32"):
+        write_dpx(tmp_path / "f.dpx", np.zeros((12, 16), np.float32))
 
 
 def test_a_file_that_is_not_dpx_is_one_error_naming_it(tmp_path):

@@ -62,10 +62,12 @@ def test_what_keeps_alpha_and_which_plates_have_it(tmp_path):
     assert sequence_has_alpha(open_sequence(plate))
     assert not sequence_has_alpha(open_sequence(opaque / "o.%04d.png"))
     for out, keeps in (("o/%04d.png", True), ("o/f.%05d.PNG", True), ("o/%04d.tif", True),
-                       ("o/%04d.TIFF", True), ("o/%04d.jpg", False), ("o/%04d.exr", False),
+                       ("o/%04d.TIFF", True), ("o/%04d.dpx", True), ("o/%04d.jpg", False),
+                       ("o/%04d.exr", False),
                        ("o.mov", False), ("o.png", False)):
         assert keeps_alpha(out) is keeps, out
     assert isinstance(plate_alpha(tmp_path / "r.%04d.png", plate), PlateAlpha)
+    assert isinstance(plate_alpha(tmp_path / "r.%04d.dpx", plate), PlateAlpha)
     assert plate_alpha(tmp_path / "r.%04d.jpg", plate) is None
     assert plate_alpha(tmp_path / "r.mp4", plate) is None
     assert plate_alpha(tmp_path / "r.%04d.png", opaque / "o.%04d.png") is None
@@ -204,7 +206,7 @@ def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, 
         assert "alpha" not in out.out
     said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
     assert said == [f"{plate} has an alpha channel; the result is written without one (colour "
-                    "only; transfer keeps a target's in ProRes 4444 and PNG or TIFF "
+                    "only; transfer keeps a target's in ProRes 4444 and PNG, TIFF or DPX "
                     "sequences, an OpenEXR plate's in OpenEXR)"]
     changed = 0
     for i in range(len(frames)):

@@ -31,6 +31,12 @@ def _write16(path: Path, img: np.ndarray) -> None:
 def _read16(path: Path) -> np.ndarray:
     import cv2
 
+    if path.suffix == ".dpx":   # 16-bit codes of a video transfer (facetransfer.io.dpx)
+        from facetransfer.io.dpx import read_dpx_image
+
+        got = read_dpx_image(path)
+        assert (got.bits, got.transfer) == (16, "ITU-R 709-4"), path
+        return got.codes[..., 0] if got.codes.shape[2] == 1 else got.codes
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     assert img is not None and img.dtype == np.uint16, path
     if img.ndim == 3:
@@ -86,6 +92,8 @@ def test_which_plates_and_outputs_stay_16_bit(tmp_path):
     assert isinstance(plate_depth(tmp_path / "o.%04d.tif", pat["grey"]), PlateDepth)
     assert isinstance(plate_depth(tmp_path / "o.%04d.png", pat["rgba"]), PlateDepth)
     assert plate_depth(tmp_path / "o.%04d.tif", pat["rgba"]) is None     # 8-bit RGBA TIFF
+    assert isinstance(plate_depth(tmp_path / "o.%04d.dpx", pat["rgba"]), PlateDepth)
+    assert isinstance(plate_depth(tmp_path / "o.%04d.dpx", pat["rgb"]), PlateDepth)
     assert plate_depth(tmp_path / "o.%04d.png", pat["rgba_t"]) is None
     assert plate_depth(tmp_path / "o.%04d.png", pat["eight"]) is None
     assert plate_depth(tmp_path / "o.%04d.jpg", pat["rgb"]) is None
@@ -96,15 +104,17 @@ def test_which_plates_and_outputs_stay_16_bit(tmp_path):
         PlateDepth(pat["rgb"])(1, np.zeros((6, 8, 3), np.uint8), np.zeros((6, 8, 3), np.uint8))
 
 
-@pytest.mark.parametrize("kind,suffix", [("rgb", ".png"), ("rgb", ".tif"), ("grey", ".tif"),
-                                         ("rgba", ".png")])
+@pytest.mark.parametrize("kind,suffix,out_suffix", [
+    ("rgb", ".png", ".png"), ("rgb", ".tif", ".tif"), ("grey", ".tif", ".tif"),
+    ("rgba", ".png", ".png"), ("rgba", ".png", ".dpx"), ("grey", ".tif", ".dpx")])
 def test_a_transfer_onto_a_16_bit_plate_keeps_its_values(clips, quick_model_path, tmp_path,
-                                                         capsys, monkeypatch, kind, suffix):
+                                                         capsys, monkeypatch, kind, suffix,
+                                                         out_suffix):
     """Onto a 16-bit plate (the synthetic target's frames over low bytes of noise), written as
-    a 16-bit sequence of the same kind: every pixel the 8-bit rewrite of the same frames left
-    unchanged is the plate's value to the bit (before: 8 bits, every pixel's low byte lost),
-    every changed one the 8-bit rewrite over the plate's low byte; grey stays grey, a PNG's
-    16-bit alpha as it was."""
+    a 16-bit sequence of the same kind or as DPX: every pixel the 8-bit rewrite of the same
+    frames left unchanged is the plate's value to the bit (before: 8 bits, every pixel's low
+    byte lost), every changed one the 8-bit rewrite over the plate's low byte; grey stays grey,
+    a PNG's 16-bit alpha as it was."""
     from facetransfer.cli.main import main
 
     monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
@@ -135,7 +145,7 @@ def test_a_transfer_onto_a_16_bit_plate_keeps_its_values(clips, quick_model_path
               "--no-progress", "--sequence-fps", "25"]
     (tmp_path / "out").mkdir()
     assert main(["transfer", "--target", str(plate), *map(str, common),
-                 "--out", str(tmp_path / "out" / f"ft.%04d{suffix}")]) == 0, \
+                 "--out", str(tmp_path / "out" / f"ft.%04d{out_suffix}")]) == 0, \
         capsys.readouterr().err
     said = capsys.readouterr().out   # the summary line says what was kept
     assert ", in the plate's 16 bits" + (", with its alpha" if kind == "rgba" else "") + \
@@ -144,7 +154,7 @@ def test_a_transfer_onto_a_16_bit_plate_keeps_its_values(clips, quick_model_path
                  str(tmp_path / "eight" / "ft.%04d.jpg")]) == 0   # 8 bits: the same rewrite
     changed_any = 0
     for i in range(len(frames)):
-        got = _read16(tmp_path / "out" / f"ft.{1001 + i:04d}{suffix}")
+        got = _read16(tmp_path / "out" / f"ft.{1001 + i:04d}{out_suffix}")
         assert got.shape == plates[i].shape
         colour, plate_colour = (got, plates[i]) if got.ndim == 2 else (got[..., :3],
                                                                        plates[i][..., :3])
@@ -177,9 +187,9 @@ def test_probe_says_what_a_rewrite_keeps_of_a_plate(tmp_path, monkeypatch):
             cv2.imwrite(str(tmp_path / name / f"p.{k:04d}.png"), img)
     deep = video_facts(tmp_path / "deep" / "p.%04d.png")
     assert (deep.bits, deep.alpha) == (16, True)
-    assert fact_lines(deep)[-1] == ("  RGB images, 16 bits, seen in 8 (a PNG or TIFF sequence "
-                                    "written from it stays 16-bit); alpha: kept by transfer in "
-                                    "a PNG or TIFF sequence; no audio")
+    assert fact_lines(deep)[-1] == ("  RGB images, 16 bits, seen in 8 (a PNG, TIFF or DPX "
+                                    "sequence written from it stays 16-bit); alpha: kept by "
+                                    "transfer in a PNG, TIFF or DPX sequence; no audio")
     flat = video_facts(tmp_path / "flat" / "p.%04d.png")
     assert (flat.bits, flat.alpha) == (8, False)
     assert fact_lines(flat)[-1] == "  RGB images, 8 bits; no audio"
@@ -188,8 +198,8 @@ def test_probe_says_what_a_rewrite_keeps_of_a_plate(tmp_path, monkeypatch):
 
     mov = _prores_4444(tmp_path / "a.mov", rgba)
     assert video_facts(mov).alpha and fact_lines(video_facts(mov))[-1] == (
-        "  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG or TIFF "
-        "sequence")
+        "  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG, TIFF or "
+        "DPX sequence")
     plain = write_video(tmp_path / "o.mp4", rgba[..., :3], 25.0)
     assert not video_facts(plain).alpha
     assert not any("alpha" in ln for ln in fact_lines(video_facts(plain)))

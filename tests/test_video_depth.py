@@ -131,7 +131,7 @@ def test_a_deep_target_written_in_8_bits_is_warned_of_once(tmp_path, caplog):
             like_video(None, ten, tmp_path / out)
     said = [r.getMessage() for r in caplog.records]
     assert said == [f"{ten} has 10 bits a sample; the result is written in 8 (--codec prores "
-                    "or h265, or a 16-bit PNG or TIFF sequence, keeps them)"]
+                    "or h265, or a 16-bit PNG, TIFF or DPX sequence, keeps them)"]
 
 
 def test_a_deep_sdr_target_written_in_8_bits_keeps_its_colour_names(tmp_path, caplog):
@@ -162,7 +162,7 @@ def test_a_deep_sdr_target_written_in_8_bits_keeps_its_colour_names(tmp_path, ca
         like_video(None, mov, tmp_path / "tif" / "%04d.tif")    # alpha kept, in 8 bits
     assert [r.getMessage() for r in caplog.records] == [
         f"{mov} has 12 bits a sample; the result is written in 8 (--codec prores or h265, or "
-        "a 16-bit PNG or TIFF sequence, keeps them)"]
+        "a 16-bit PNG, TIFF or DPX sequence, keeps them)"]
     assert video_depth(tmp_path / "tif" / "%04d.tif", mov) is None
 
 
@@ -188,7 +188,7 @@ def test_which_targets_and_outputs_are_written_deep(tmp_path):
     assert isinstance(video_depth(tmp_path / "r.mov", ten, deep), VideoDepth)
     assert video_depth(tmp_path / "r.mov", ten, prores) is None
     assert video_depth(tmp_path / "r.mp4", ten, None) is None
-    for seq in ("s/%04d.png", "s/%04d.tif"):
+    for seq in ("s/%04d.png", "s/%04d.tif", "s/%04d.dpx"):
         made = video_depth(tmp_path / seq, ten)
         assert isinstance(made, VideoDepth) and made.kept == "in the target's 10 bits"
     assert video_depth(tmp_path / "s/%04d.jpg", ten) is None
@@ -197,7 +197,7 @@ def test_which_targets_and_outputs_are_written_deep(tmp_path):
 
     assert fact_lines(video_facts(ten))[-1] == (
         "  10 bits a sample, seen in 8: kept by transfer in ProRes or H.265 (--codec prores or "
-        "h265: 10 bits, an HDR video's colour too) or a 16-bit PNG or TIFF sequence")
+        "h265: 10 bits, an HDR video's colour too) or a 16-bit PNG, TIFF or DPX sequence")
     assert video_facts(h264).bits == 8 and not any("bits" in ln
                                                    for ln in fact_lines(video_facts(h264)))
 

@@ -428,7 +428,7 @@ def test_a_plate_with_alpha_is_said_to_lose_it(tmp_path, caplog):
             like_video(None, v)
     said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
     why = ("has an alpha channel; the result is written without one (colour only; transfer "
-           "keeps a target's in ProRes 4444 and PNG or TIFF sequences, an OpenEXR plate's in "
+           "keeps a target's in ProRes 4444 and PNG, TIFF or DPX sequences, an OpenEXR plate's in "
            "OpenEXR)")
     assert said == [f"{alpha} {why}", f"{plate / 'p.%04d.png'} {why}"]
 

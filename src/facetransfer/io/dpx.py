@@ -23,9 +23,10 @@ kept among the codes shown as the rewritten level, or where a channel lies beyon
 shown (a log plate above white or below black) the code of the rewritten level alone
 (:func:`graded_codes`); in the plate's bit depth, with its header
 (timecode, transfer, film and television fields) and its alpha as they were. Of any other
-target, a DPX frame holds the rewritten 8-bit RGB as 10-bit code values of a video transfer
-(ITU-R 709). The plate's frames are graded by :mod:`facetransfer.io.dpx_plate`. Files are
-read and written by OpenImageIO (the Academy Software Foundation's
+target, a DPX frame holds the rewritten 8-bit RGB (or RGBA) as 10-bit code values of a video
+transfer (ITU-R 709); a deep target's values (:mod:`facetransfer.io.plate_depth`), 16-bit.
+The plate's frames are graded by :mod:`facetransfer.io.dpx_plate`. Files are read and written
+by OpenImageIO (the Academy Software Foundation's
 image library): RGB, RGBA or luma, 8, 10, 12 or 16 bits, the first image element.
 """
 
@@ -313,8 +314,10 @@ def graded_codes(image: DpxImage, shown: np.ndarray, rewritten: np.ndarray) -> n
 
 
 def write_dpx(path, frame) -> None:
-    """Write a DPX file: a :class:`DpxImage` with its header, or ``(H, W, 3)`` uint8 RGB as
-    10-bit codes of a video transfer (ITU-R 709).
+    """Write a DPX file: a :class:`DpxImage` with its header, or an array as codes of a video
+    transfer (ITU-R 709): ``(H, W, 3)`` RGB or ``(H, W, 4)`` RGBA uint8 in 10 bits, or
+    uint16 grey ``(H, W)``, RGB or RGBA in 16 (a deep target's values,
+    :mod:`facetransfer.io.plate_depth`).
 
     Raises
     ------
@@ -324,9 +327,7 @@ def write_dpx(path, frame) -> None:
     import OpenImageIO as oiio
 
     if not isinstance(frame, DpxImage):
-        rgb = np.asarray(frame, np.uint8)[..., :3]
-        codes = ((rgb.astype(np.uint32) * 1023 * 2 + 255) // 510).astype(np.uint16)
-        frame = DpxImage(codes, 10, "ITU-R 709-4")
+        frame = _video_codes(np.asarray(frame))
     eight = frame.bits <= 8
     spec = _new_spec(frame) if frame.spec is None else oiio.ImageSpec(frame.spec)
     spec.set_format(oiio.TypeDesc("uint8" if eight else "uint16"))
@@ -340,6 +341,17 @@ def write_dpx(path, frame) -> None:
         out.close()
     if not ok:
         raise ValueError(f"cannot write the DPX file {path} ({_why(why)})")
+
+
+def _video_codes(img: np.ndarray) -> DpxImage:
+    """An array (module :func:`write_dpx`) as a :class:`DpxImage` of ITU-R 709 codes."""
+    if img.dtype == np.uint16:
+        return DpxImage(img[..., None] if img.ndim == 2 else img, 16, "ITU-R 709-4")
+    if img.dtype != np.uint8 or img.ndim != 3 or img.shape[2] not in (3, 4):
+        raise ValueError(f"a DPX frame is (H, W, 3|4) uint8 or uint16, not {img.shape} "
+                         f"{img.dtype}")
+    codes = ((img.astype(np.uint32) * 1023 * 2 + 255) // 510).astype(np.uint16)
+    return DpxImage(codes, 10, "ITU-R 709-4")
 
 
 def _new_spec(frame: DpxImage):

@@ -29,9 +29,9 @@ from .video_sequence import is_sequence, open_sequence
 __all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
            "sequence_alpha_kept", "sequence_has_alpha", "video_has_alpha"]
 
-#: Image-sequence outputs whose frames hold an alpha channel (8-bit RGBA, straight) and plates
-#: whose alpha is carried into them.
-ALPHA_SUFFIXES = (".png", ".tif", ".tiff")
+#: Image-sequence outputs whose frames hold an alpha channel (RGBA, straight) and plates whose
+#: alpha is carried into them (a DPX plate's: into DPX, by :mod:`facetransfer.io.dpx_plate`).
+ALPHA_SUFFIXES = (".png", ".tif", ".tiff", ".dpx")
 
 
 def _has_alpha(img: np.ndarray | None) -> bool:

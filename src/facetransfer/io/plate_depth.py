@@ -25,10 +25,13 @@ from ..errors import VideoError
 from .frame_file import read_unchanged
 from .video_sequence import is_sequence, open_sequence
 
-__all__ = ["DEPTH_SUFFIXES", "PlateDepth", "plate_depth", "deep_frame"]
+__all__ = ["DEPTH_SUFFIXES", "DEPTH_OUTPUTS", "PlateDepth", "plate_depth", "deep_frame"]
 
 #: Image-sequence plates and outputs kept in 16 bits.
 DEPTH_SUFFIXES = (".png", ".tif", ".tiff")
+#: Image-sequence outputs written in 16 bits from a deep target: those, and DPX (16-bit codes
+#: of a video transfer, :func:`facetransfer.io.dpx.write_dpx`).
+DEPTH_OUTPUTS = DEPTH_SUFFIXES + (".dpx",)
 
 
 def deep_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
@@ -107,18 +110,19 @@ def _rgb_order(img: np.ndarray) -> np.ndarray:
 
 
 def plate_depth(out, target) -> PlateDepth | None:
-    """The 16-bit grading of the plate ``target`` rewritten as ``out``: a PNG or TIFF sequence
-    of a PNG or TIFF plate whose first frame is 16 bits (a TIFF one without alpha); else
-    None."""
+    """The 16-bit grading of the plate ``target`` rewritten as ``out``: a PNG, TIFF or DPX
+    sequence of a PNG or TIFF plate whose first frame is 16 bits (a TIFF one without alpha, and
+    only a PNG or DPX one of an RGBA plate); else None."""
     if target is None or not is_sequence(target):
         return None
     p, o = Path(target), Path(out)
-    if "%" not in o.name or o.suffix.lower() not in DEPTH_SUFFIXES \
+    if "%" not in o.name or o.suffix.lower() not in DEPTH_OUTPUTS \
             or p.suffix.lower() not in DEPTH_SUFFIXES:
         return None
     first = read_unchanged(open_sequence(target).file(0))
     if first is None or first.dtype != np.uint16 or _channels(first) not in (1, 3, 4):
         return None   # 8 bits, or grey + alpha: written in 8 bits
-    if _channels(first) == 4 and (o.suffix.lower() != ".png" or p.suffix.lower() != ".png"):
+    if _channels(first) == 4 and (o.suffix.lower() not in (".png", ".dpx")
+                                  or p.suffix.lower() != ".png"):
         return None   # written in 8 bits with its alpha (OpenCV writes no TIFF alpha tag)
     return PlateDepth(target, alpha=_channels(first) == 4)

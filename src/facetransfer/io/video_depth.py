@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import VideoError
 from .plate_alpha import video_has_alpha
-from .plate_depth import DEPTH_SUFFIXES, deep_frame
+from .plate_depth import DEPTH_OUTPUTS, deep_frame
 from .video_options import DEEP_CODECS
 from .video_planes import DecodedPlanes, stored_pixel_format
 from .video_sequence import is_sequence
@@ -118,14 +118,14 @@ def _alpha_for(a: np.ndarray, bits: int, written: int) -> np.ndarray:
 def keeps_depth(out, video, codec: str) -> bool:
     """Whether the output ``out`` (a video written with ``codec``) of the video target
     ``video`` holds its samples beyond 8 bits: ProRes or H.265
-    (:data:`~facetransfer.io.video_options.DEEP_CODECS`), a PNG or TIFF sequence (a PNG one
-    only for a video with alpha: OpenCV writes no TIFF alpha tag)."""
+    (:data:`~facetransfer.io.video_options.DEEP_CODECS`), a PNG, TIFF or DPX sequence (a PNG
+    or DPX one only for a video with alpha: OpenCV writes no TIFF alpha tag)."""
     o = Path(out)
     if "%" not in o.name:
         return codec in DEEP_CODECS
-    if o.suffix.lower() not in DEPTH_SUFFIXES:
+    if o.suffix.lower() not in DEPTH_OUTPUTS:
         return False
-    return o.suffix.lower() == ".png" or not video_has_alpha(video)
+    return o.suffix.lower() in (".png", ".dpx") or not video_has_alpha(video)
 
 
 def video_depth(out, target, options=None, start: int = 0) -> VideoDepth | None:

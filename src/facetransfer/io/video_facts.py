@@ -165,10 +165,10 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 f"; timecode {f.timecode} (the results start at it)"),
             f"  container {f.container or '?'}; {reading}"] + (
                 [f"  {f.bits} bits a sample, seen in 8: kept by transfer in ProRes or H.265 "
-                 "(--codec prores or h265: 10 bits, an HDR video's colour too) or a 16-bit PNG "
-                 "or TIFF sequence"] if f.bits > 8 else []) + (
-                ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG or "
-                 "TIFF sequence"] if f.alpha else [])
+                 "(--codec prores or h265: 10 bits, an HDR video's colour too) or a 16-bit PNG, "
+                 "TIFF or DPX sequence"] if f.bits > 8 else []) + (
+                ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG, "
+                 "TIFF or DPX sequence"] if f.alpha else [])
 
 
 def _dpx_kind(f: VideoFacts) -> str:
@@ -180,7 +180,7 @@ def _dpx_kind(f: VideoFacts) -> str:
 
 def _image_kind(f: VideoFacts) -> str:
     """What an image sequence's frames hold and what a rewrite keeps of it."""
-    depth = "16 bits, seen in 8 (a PNG or TIFF sequence written from it stays 16-bit)" \
+    depth = "16 bits, seen in 8 (a PNG, TIFF or DPX sequence written from it stays 16-bit)" \
         if f.bits == 16 else f"{f.bits} bits"
-    alpha = ("; alpha: kept by transfer in a PNG or TIFF sequence" if f.alpha else "")
+    alpha = ("; alpha: kept by transfer in a PNG, TIFF or DPX sequence" if f.alpha else "")
     return f"RGB images, {depth}{alpha}"

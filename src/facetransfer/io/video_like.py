@@ -95,7 +95,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
 def _warn_alpha(video: str) -> None:
     """Say once that ``video``'s alpha is not carried into the rewrite."""
     log.warning("%s has an alpha channel; the result is written without one (colour only; "
-                "transfer keeps a target's in ProRes 4444 and PNG or TIFF sequences, an "
+                "transfer keeps a target's in ProRes 4444 and PNG, TIFF or DPX sequences, an "
                 "OpenEXR plate's in OpenEXR)", video)
 
 
@@ -111,7 +111,7 @@ def _warn_progressive(video: str) -> None:
 def _warn_depth(video: str, bits: int) -> None:
     """Say once that ``video``'s samples below 8 bits are not carried into the rewrite."""
     log.warning("%s has %d bits a sample; the result is written in 8 (--codec prores or "
-                "h265, or a 16-bit PNG or TIFF sequence, keeps them)", video, bits)
+                "h265, or a 16-bit PNG, TIFF or DPX sequence, keeps them)", video, bits)
 
 
 @functools.lru_cache(maxsize=16)
