@@ -214,7 +214,8 @@ def test_a_log_plate_is_rewritten_in_its_own_codes(clips, target, quick_model_pa
     """Onto a 10-bit log plate, the rewrite written as DPX: numbered as the plate, 10-bit log,
     every pixel the rewrite did not change the plate's codes (highlights above white
     included), every changed one shown as the 8-bit rewrite of the same frames (a PNG
-    sequence of the video); the plate's alpha and timecodes kept."""
+    sequence of the video); the plate's alpha and timecodes kept; written as PNG, the same
+    colour with the plate's alpha in 8 bits."""
     from facetransfer.cli.main import main
 
     monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
@@ -232,8 +233,15 @@ def test_a_log_plate_is_rewritten_in_its_own_codes(clips, target, quick_model_pa
     code = main(["transfer", "--target", str(lossless), *map(str, common),
                  "--out", str(tmp_path / "png_%03d.png")])
     assert code == 0, capsys.readouterr().err
+    code = main(["transfer", "--target", str(plate), *map(str, common),   # its alpha in PNG
+                 "--out", str(tmp_path / "rgba" / "ft.%04d.png")])
+    assert code == 0 and "with the plate's alpha" in capsys.readouterr().out
     changed_any = 0
     for i in range(len(frames)):
+        rgba = _png(tmp_path / "rgba" / f"ft.{1001 + i:04d}.png", alpha=True)
+        assert np.array_equal(rgba[6:, :, :3], _png(tmp_path / f"png_{i:03d}.png")[6:])
+        assert np.all(rgba[:6, :, :3] == 255)                 # above white: shown white
+        assert np.all(rgba[..., 3] == round((100 + i) * 255 / 1023))
         got = read_dpx_image(tmp_path / "out" / f"ft.{1001 + i:04d}.dpx")
         src = read_dpx_image(tmp_path / "plate" / f"sh010.{1001 + i:04d}.dpx")
         rewritten = _png(tmp_path / f"png_{i:03d}.png")
@@ -248,9 +256,11 @@ def test_a_log_plate_is_rewritten_in_its_own_codes(clips, target, quick_model_pa
     assert changed_any > 1000
 
 
-def _png(path: Path) -> np.ndarray:
+def _png(path: Path, alpha: bool = False) -> np.ndarray:
     import cv2
 
+    if alpha:
+        return cv2.cvtColor(cv2.imread(str(path), cv2.IMREAD_UNCHANGED), cv2.COLOR_BGRA2RGBA)
     return cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
 
 

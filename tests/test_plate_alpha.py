@@ -68,6 +68,8 @@ def test_what_keeps_alpha_and_which_plates_have_it(tmp_path):
         assert keeps_alpha(out) is keeps, out
     assert isinstance(plate_alpha(tmp_path / "r.%04d.png", plate), PlateAlpha)
     assert isinstance(plate_alpha(tmp_path / "r.%04d.dpx", plate), PlateAlpha)
+    hashes = Path(str(plate).replace("%04d", "####"))     # a plate named as packages name it
+    assert isinstance(plate_alpha(tmp_path / "r.%04d.png", hashes), PlateAlpha)
     assert plate_alpha(tmp_path / "r.%04d.jpg", plate) is None
     assert plate_alpha(tmp_path / "r.mp4", plate) is None
     assert plate_alpha(tmp_path / "r.%04d.png", opaque / "o.%04d.png") is None

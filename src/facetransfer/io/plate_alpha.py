@@ -1,15 +1,16 @@
-"""The alpha channel of a target carried into its rewrite: an RGBA PNG or TIFF plate (as a
-compositing package or a keyer writes one) written as a PNG or TIFF sequence, and a video with
-alpha (ProRes 4444, QuickTime PNG or Animation) written as ProRes 4444 (``--codec prores``) or
-as a PNG or TIFF sequence. Each output frame is the rewritten colour with the target frame's
-own alpha, unchanged (rounded to 8 bits).
+"""The alpha channel of a target carried into its rewrite: an RGBA PNG, TIFF or DPX plate (as
+a compositing package or a keyer writes one) written as a PNG, TIFF or DPX sequence, and a
+video with alpha (ProRes 4444, QuickTime PNG or Animation) written as ProRes 4444 (``--codec
+prores``) or as a PNG, TIFF or DPX sequence. Each output frame is the rewritten colour with
+the target frame's own alpha, unchanged (rounded to 8 bits).
 
 The colour goes back as it was read: straight, beside the same alpha. A PNG's colour is
 straight by its specification; a TIFF's is when its alpha is unassociated (what Pillow and
 most tools write; :func:`facetransfer.io.frame_file.tiff_alpha_kind`), read as stored
 (not through OpenCV, which premultiplies it); a video's colour is decoded apart from its alpha
 plane. A TIFF with associated alpha (its colour stored premultiplied) keeps only its colour.
-An OpenEXR plate keeps its alpha by :mod:`facetransfer.io.exr_plate`. Every other output
+An OpenEXR plate keeps its alpha by :mod:`facetransfer.io.exr_plate`, a DPX plate written
+as DPX by :mod:`facetransfer.io.dpx_plate`. Every other output
 (H.264, H.265, JPEG) is written colour only (:func:`facetransfer.io.video_like.like_video`
 says so).
 """
@@ -22,6 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import VideoError
+from .dpx import dpx_header, read_dpx_image
 from .frame_file import eight_bits, read_unchanged, tiff_alpha_kind
 from .video_planes import DecodedPlanes, stored_pixel_format
 from .video_sequence import is_sequence, open_sequence
@@ -40,10 +42,12 @@ def _has_alpha(img: np.ndarray | None) -> bool:
 
 def sequence_has_alpha(seq) -> bool:
     """Whether an image sequence's first frame has an alpha channel (grey + alpha or RGBA, of
-    a PNG or TIFF; not looked for in OpenEXR and DPX frames, whose channels
-    :mod:`facetransfer.io.exr_plate` and :mod:`facetransfer.io.dpx` keep)."""
+    a PNG or TIFF; RGBA of a DPX; not looked for in OpenEXR frames, whose channels
+    :mod:`facetransfer.io.exr_plate` keeps)."""
     f = seq.file(0)
-    return f.suffix.lower() not in (".exr", ".dpx") and _has_alpha(read_unchanged(f))
+    if f.suffix.lower() == ".dpx":
+        return dpx_header(f)[2] == 4
+    return f.suffix.lower() != ".exr" and _has_alpha(read_unchanged(f))
 
 
 #: ffmpeg's pixel formats that carry an alpha plane (ProRes 4444, PNG, QuickTime RLE, VP9).
@@ -81,8 +85,16 @@ class PlateAlpha:
         self.sequence = open_sequence(plate)
 
     def alpha(self, i: int) -> np.ndarray:
-        """``(H, W) uint8``: the alpha of the plate's frame ``i``."""
+        """``(H, W) uint8``: the alpha of the plate's frame ``i`` (a DPX one's codes scaled to
+        8 bits, rounded)."""
         f = self.sequence.file(i)
+        if f.suffix.lower() == ".dpx":
+            dpx = read_dpx_image(f)
+            if dpx.codes.shape[2] != 4:
+                return np.full(dpx.codes.shape[:2], 255, np.uint8)
+            top = (1 << dpx.bits) - 1
+            return ((dpx.codes[..., 3].astype(np.uint32) * 510 + top) // (2 * top)).astype(
+                np.uint8)
         img = read_unchanged(f)
         if img is None:
             raise VideoError(f"cannot read frame {f} of the plate {self.sequence.pattern}")
@@ -146,8 +158,10 @@ def sequence_alpha_kept(out, plate) -> bool:
     """Whether the alpha of the image-sequence plate ``plate`` is carried into the output
     ``out``: both hold alpha (:func:`keeps_alpha`), and a TIFF plate's is straight (an
     associated one, whose colour is stored premultiplied, would not match the straight alpha
-    the output is written with: :func:`facetransfer.io.frame_file.tiff_alpha_kind`)."""
-    if not (keeps_alpha(out) and keeps_alpha(plate)):
+    the output is written with: :func:`facetransfer.io.frame_file.tiff_alpha_kind`). The plate
+    may be named either way (``%04d`` or ``####``)."""
+    if not (keeps_alpha(out) and is_sequence(plate)
+            and Path(plate).suffix.lower() in ALPHA_SUFFIXES):
         return False
     return tiff_alpha_kind(open_sequence(plate).file(0)) != "premultiplied"
 
