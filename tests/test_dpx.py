@@ -264,26 +264,40 @@ def _png(path: Path, alpha: bool = False) -> np.ndarray:
     return cv2.cvtColor(cv2.imread(str(path)), cv2.COLOR_BGR2RGB)
 
 
-def test_a_plate_written_by_ffmpeg_reads_as_ffmpeg_decodes_it(tmp_path):
-    """Another writer's DPX (ffmpeg's, 10-bit video codes): the codes ffmpeg itself decodes."""
+@pytest.mark.parametrize("pix_fmt", ["gray", "rgb24", "rgba", "gray16le", "rgb48be",
+                                     "rgba64le", "gbrp10le", "gbrp10be", "gbrp12le"])
+def test_a_plate_written_by_ffmpeg_reads_as_ffmpeg_decodes_it(pix_fmt, tmp_path):
+    """Another writer's DPX (ffmpeg's: 8, 10, 12 or 16 bits, luma, RGB or RGBA, either byte
+    order; its 8 and 16-bit lines padded to a 32-bit word, which OpenImageIO itself does not
+    read): the codes ffmpeg decodes, in widths whose lines need padding (30, 34) or not (32);
+    an 8-bit one's frames the PNG it was made from."""
     import subprocess
+
+    import cv2
 
     from facetransfer.io.ffmpeg import ffmpeg_exe
 
     rng = np.random.default_rng(6)
-    rgb = rng.integers(0, 256, (2, 24, 30, 3), dtype=np.uint8)
-    write_video(tmp_path / "c.mkv", rgb, 25.0, options=VideoOptions(crf=0))
-    subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(tmp_path / "c.mkv"), "-pix_fmt",
-                    "gbrp10le", str(tmp_path / "f.%04d.dpx")], check=True)
-    raw = subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(tmp_path / "f.0001.dpx"),
-                          "-f", "rawvideo", "-pix_fmt", "rgb48le", "-"], check=True,
-                         capture_output=True).stdout
-    want = np.frombuffer(raw, np.uint16).reshape(24, 30, 3) >> 6
-    got = read_dpx_image(tmp_path / "f.0001.dpx")
-    assert got.bits == 10 and got.kind == "video"   # ffmpeg names the clip's transfer or none
-    assert np.array_equal(got.codes, want)
-    frames, _ = read_video(tmp_path / "f.%04d.dpx")
-    assert np.array_equal(frames[0], shown_dpx(got))
+    grey = pix_fmt.startswith("gray")
+    channels = 1 if grey else 4 if pix_fmt.startswith("rgba") else 3
+    for w in (30, 32, 34):
+        rgb = rng.integers(0, 256, (24, w, 1 if grey else 3), dtype=np.uint8)
+        cv2.imwrite(str(tmp_path / f"c{w}.png"), rgb if grey else rgb[..., ::-1])
+        dpx = tmp_path / f"f{w}.0001.dpx"
+        subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(tmp_path / f"c{w}.png"),
+                        "-pix_fmt", pix_fmt, str(dpx)], check=True)
+        got = read_dpx_image(dpx)
+        assert got.kind == "video" and got.codes.shape == (24, w, channels)
+        deep = got.bits > 8
+        raw = subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(dpx), "-f", "rawvideo",
+                              "-pix_fmt", ({1: "gray16le", 3: "rgb48le", 4: "rgba64le"} if deep
+                                           else {1: "gray", 3: "rgb24", 4: "rgba"})[channels],
+                              "-"], check=True, capture_output=True).stdout
+        want = np.frombuffer(raw, np.uint16 if deep else np.uint8).reshape(24, w, channels)
+        assert np.array_equal(got.codes, want >> (16 - got.bits) if deep else want), w
+        if not deep:
+            frames, _ = read_video(tmp_path / f"f{w}.%04d.dpx")
+            assert np.array_equal(frames[0], np.repeat(rgb, 3, axis=2) if grey else rgb)
 
 
 def test_a_damaged_dpx_frame_is_one_line_naming_it(tmp_path):

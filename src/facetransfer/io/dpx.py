@@ -155,7 +155,29 @@ def read_dpx_image(path) -> DpxImage:
     if bits == 10 and (spec.width * spec.nchannels) % 3 and \
             spec.get_string_attribute("dpx:Packing", "").startswith("Filled, method A"):
         codes = _filled_10(path, codes.shape, spec)
+    elif bits in (8, 16) and (spec.width * spec.nchannels * bits // 8) % 4:
+        codes = _word_lines(path, codes, bits)
     return DpxImage(codes, bits, spec.get_string_attribute("dpx:Transfer", ""), spec)
+
+
+def _word_lines(path, codes: np.ndarray, bits: int) -> np.ndarray:
+    """The codes of an 8 or 16-bit file whose lines end on a 32-bit word (as ffmpeg writes
+    them, and as the file's size then says): read from the file itself, since OpenImageIO 3.2
+    reads such lines as if they ended on the last sample (its own files' lines do); ``codes``
+    (OpenImageIO's) where the size says the lines are not padded."""
+    h, w, c = codes.shape
+    raw = Path(path).read_bytes()
+    order = "<" if raw[:4] == b"XPDS" else ">"
+    offset = int(np.frombuffer(raw, order + "u4", count=1, offset=4)[0])
+    line = w * c * bits // 8
+    stride = (line + 3) // 4 * 4
+    if not 0 < offset <= len(raw) or len(raw) - offset < stride * h:
+        return codes
+    rows = np.frombuffer(raw, np.uint8, count=stride * h, offset=offset).reshape(h, stride)
+    rows = rows[:, :line]
+    if bits == 16:
+        rows = np.ascontiguousarray(rows).view(order + "u2")
+    return rows.astype(np.uint16).reshape(h, w, c)
 
 
 def _filled_10(path, shape: tuple[int, int, int], spec) -> np.ndarray:
