@@ -88,6 +88,32 @@ def test_codes_are_shown_by_their_transfer():
     assert luma.shape == (1, 2, 3) and np.array_equal(luma[..., 2], video[..., 0])
 
 
+def test_a_plate_of_video_levels_is_shown_between_its_reference_codes(tmp_path):
+    """A 10-bit plate whose header says black is code 64 and white 940 (video levels): shown
+    between them (beyond, as black and white), rewritten within them, probed so."""
+    from facetransfer.io.dpx import dpx_summary
+
+    spec = _spec(8, 2, 3, 10, "ITU-R 709-4")
+    spec.attribute("dpx:LowData", 64)
+    spec.attribute("dpx:HighData", 940)
+    codes = np.array([0, 64, 502, 940, 1023, 300, 700, 64], np.uint16)
+    codes = np.repeat(np.stack([codes, codes])[..., None], 3, axis=2)
+    write_dpx(tmp_path / "v.dpx", DpxImage(codes, 10, "ITU-R 709-4", spec))
+    plate = read_dpx_image(tmp_path / "v.dpx")
+    assert plate.coding == ("video", 10, 64, 940)
+    shown = shown_dpx(plate)
+    want = np.rint(np.clip((codes.astype(float) - 64) / 876, 0, 1) * 255).astype(np.uint8)
+    assert np.array_equal(shown, want) and shown[0, :5, 0].tolist() == [0, 0, 128, 255, 255]
+    rewritten = shown.copy()
+    rewritten[1] = np.array([0, 255, 10, 20, 30, 40, 50, 60], np.uint8)[:, None]
+    out = graded_codes(plate, shown, rewritten)
+    assert out[1, 0, 0] == 0 and out[1, 1:].min() >= 64 and out[1, 1:].max() <= 940
+    assert np.array_equal(shown_dpx(DpxImage(out, 10, "ITU-R 709-4", plate.spec)), rewritten)
+    assert np.array_equal(out[0], codes[0])
+    assert "shown as they are between codes 64 (black) and 940 (white)" in \
+        dpx_summary(tmp_path / "v.dpx")
+
+
 def test_every_8_bit_level_made_log_is_shown_as_itself():
     levels = np.arange(256, dtype=np.uint8).reshape(16, 16, 1).repeat(3, axis=2)
     assert np.array_equal(shown_dpx(DpxImage(_log_codes(levels), 10, "Logarithmic")), levels)

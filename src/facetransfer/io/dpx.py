@@ -12,8 +12,10 @@ characteristic*:
   subtracted, through the sRGB curve (:func:`facetransfer.io.exr.srgb_encode`; above white as
   white);
 - **linear**: the code over its maximum is linear light, shown through the sRGB curve;
-- any other (the video ones, ITU-R 709, SMPTE 274M, user-defined, unspecified): the code over
-  its maximum is the display value itself (full range).
+- any other (the video ones, ITU-R 709, SMPTE 274M, user-defined, unspecified): the code's
+  place between black and white is the display value itself: full range, or between the
+  header's reference low and high data codes where it gives them (video levels: 64 and 940 in
+  10 bits; beyond them, as black and as white).
 
 A rewrite written as DPX (``--out out/sh010_ft.%04d.dpx``) of a DPX plate goes back to the
 plate's code values as :mod:`facetransfer.io.exr` goes back to an OpenEXR plate's floats: a
@@ -101,6 +103,21 @@ class DpxImage:
     def kind(self) -> str:
         """:func:`transfer_kind` of :attr:`transfer`."""
         return transfer_kind(self.transfer)
+
+    @property
+    def coding(self) -> tuple[str, int, int, int]:
+        """``(kind, bits, low, high)``: how a code is shown; ``low`` and ``high`` the codes of
+        black and white of a video transfer (the header's reference low and high data codes
+        where it gives a range within the bits, e.g. 64 and 940 of a 10-bit plate of video
+        levels; else 0 and the largest code)."""
+        top = (1 << self.bits) - 1
+        low = high = None
+        if self.spec is not None and self.kind == "video":
+            low = self.spec.getattribute("dpx:LowData")
+            high = self.spec.getattribute("dpx:HighData")
+        if not (isinstance(low, int) and isinstance(high, int) and 0 <= low < high <= top):
+            low, high = 0, top
+        return self.kind, self.bits, low, high
 
     def rgb(self) -> np.ndarray:
         """``(H, W, 3)`` uint16 codes of the colour (luma repeated, alpha left out)."""
@@ -227,11 +244,16 @@ def dpx_header(path) -> tuple[int, str, int]:
 
 def dpx_summary(path) -> str:
     """One line of what a DPX plate's frames hold and how they are seen (``probe``)."""
-    bits, transfer, channels = dpx_header(path)
+    image = read_dpx_image(path)
+    bits, transfer, channels = image.bits, image.transfer, image.codes.shape[2]
+    _, _, low, high = image.coding
+    full = (low, high) == (0, (1 << bits) - 1)
     how = {"log": "Cineon log (black 95, white 685): shown as light through the sRGB curve, "
                   "above white as white",
            "linear": "linear light: shown through the sRGB curve",
-           "video": "display values: shown as they are"}[transfer_kind(transfer)]
+           "video": "display values: shown as they are" + (
+               "" if full else f" between codes {low} (black) and {high} (white)")}[
+        transfer_kind(transfer)]
     layout = {1: "luma", 3: "RGB", 4: "RGBA"}.get(channels, f"{channels} channels")
     return (f"DPX, {layout}, {bits} bits, transfer {transfer or 'not named'}: {how}; a "
             "rewrite written as .dpx keeps every code value it does not change; no audio")
@@ -266,37 +288,42 @@ def _log_light(c10: np.ndarray) -> np.ndarray:
 
 
 @functools.lru_cache(maxsize=8)
-def _levels_table(kind: str, bits: int) -> tuple[np.ndarray, np.ndarray]:
+def _levels_table(coding: tuple) -> tuple[np.ndarray, np.ndarray]:
     """``(levels, shown)``: every code's display level (float64, 0 to 255, not rounded) and
-    whether it lies within what is shown (not clipped), by code."""
+    whether it lies within what is shown (not clipped), by code, for a
+    :attr:`DpxImage.coding`."""
+    kind, bits, low, high = coding
     top = (1 << bits) - 1
-    x = np.arange(top + 1, dtype=np.float64) / top
+    code = np.arange(top + 1, dtype=np.float64)
     if kind == "video":
-        return 255.0 * x, np.ones(top + 1, bool)
+        return 255.0 * np.clip((code - low) / (high - low), 0.0, 1.0), \
+            (code >= low) & (code <= high)
+    x = code / top
     light = x if kind == "linear" else _log_light(x * 1023.0)
     inside = (light >= 0.0) & (light <= 1.0)
     return _curve(light).astype(np.float64), inside
 
 
-def _codes_of(levels: np.ndarray, kind: str, bits: int) -> np.ndarray:
+def _codes_of(levels: np.ndarray, coding: tuple) -> np.ndarray:
     """The codes (uint16, rounded, within range) of display levels (float, 0 to 255): the
     inverse of :func:`_levels_table`'s levels, between two codes linear (a code's step is at
     most ~3 levels: within a thousandth of a code of the curve's own inverse)."""
-    top = (1 << bits) - 1
+    kind, _, low, high = coding
     if kind == "video":
-        return np.rint(np.clip(levels, 0.0, 255.0) * (top / 255.0)).astype(np.uint16)
-    table, inside = _levels_table(kind, bits)
+        return np.rint(low + np.clip(levels, 0.0, 255.0) * ((high - low) / 255.0)).astype(
+            np.uint16)
+    table, inside = _levels_table(coding)
     codes = np.flatnonzero(inside)
     x = np.interp(levels, table[codes], codes.astype(np.float64))
     return np.rint(x).astype(np.uint16)
 
 
 @functools.lru_cache(maxsize=8)
-def _shown_table(kind: str, bits: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _shown_table(coding: tuple) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(shown, first, last)``: every code's 8-bit level, and for each level the first and
     last code shown as it (``first > last`` where no code is: the darkest levels of a 10-bit
     linear plate)."""
-    levels, _ = _levels_table(kind, bits)
+    levels, _ = _levels_table(coding)
     table = np.clip(np.rint(levels), 0, 255).astype(np.uint8)    # never decreasing
     every = np.arange(256)
     return (table, np.searchsorted(table, every, "left"),
@@ -306,7 +333,7 @@ def _shown_table(kind: str, bits: int) -> tuple[np.ndarray, np.ndarray, np.ndarr
 def shown_dpx(image: DpxImage) -> np.ndarray:
     """``(H, W, 3)`` uint8 RGB: a DPX frame as the tracker and the rewrite see it (module
     notes), by a table of its every code."""
-    return _shown_table(image.kind, image.bits)[0][image.rgb()]
+    return _shown_table(image.coding)[0][image.rgb()]
 
 
 def graded_codes(image: DpxImage, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
@@ -325,10 +352,10 @@ def graded_codes(image: DpxImage, shown: np.ndarray, rewritten: np.ndarray) -> n
     moved = rewritten != shown
     changed = moved[..., 0] | moved[..., 1] | moved[..., 2]    # a fifth of np.any's time
     p, r = out[changed], rewritten[changed]
-    levels, inside = _levels_table(image.kind, image.bits)
+    levels, inside = _levels_table(image.coding)
     detail = np.where(inside[p], levels[p] - shown[changed], 0.0)
-    codes = _codes_of(r + detail, image.kind, image.bits)
-    _, first, last = _shown_table(image.kind, image.bits)
+    codes = _codes_of(r + detail, image.coding)
+    _, first, last = _shown_table(image.coding)
     some = first[r] <= last[r]
     out[changed] = np.where(some, np.clip(codes, first[r], np.maximum(last[r], first[r])),
                             codes)
