@@ -2,9 +2,9 @@
 
 The first three seconds of ``driving_d6`` (the expressions of ``WDA_KatieHill_000``) as the
 plates a film scan and a grade hand over: 10-bit DPX of Cineon log (printing density) and of
-video codes (ITU-R 709), each frame's levels encoded with a smooth detail below an 8-bit level
-of its own (a blurred noise field of up to 2 codes), RGBA, a timecode per frame, written by
-OpenImageIO; and the 10-bit video plate as ffmpeg writes it (another writer's header). Each is
+video codes (ITU-R 709; full range, and video levels: black 64, white 940), each frame's
+levels encoded with a smooth detail below an 8-bit level of its own (a blurred noise field of
+up to 2 codes), RGBA, a timecode per frame, written by OpenImageIO; and the 10-bit video plate as ffmpeg writes it (another writer's header). Each is
 rewritten as a DPX sequence and as a PNG sequence in a fresh process. Judged against the
 plate: the share of all pixels whose codes are the plate's to the bit (alpha included), the
 largest difference in codes outside the rewritten face (the pixels whose shown level the
@@ -58,18 +58,22 @@ def make_plates(data: Path, folder: Path) -> tuple[dict, list]:
     frames = read_video(clip)[0]
     rng = np.random.default_rng(0)
     paths = {}
-    for kind, transfer in (("log", "Printing density"), ("video", "ITU-R 709-4")):
-        d = folder / f"plate_{kind}"
+    for kind, transfer in (("log", "Printing density"), ("video", "ITU-R 709-4"),
+                           ("video levels", "ITU-R 709-4")):
+        d = folder / f"plate_{kind.replace(' ', '_')}"
         d.mkdir()
         for i, rgb in enumerate(frames):
             fine = cv2.GaussianBlur(rng.normal(0, 1, rgb.shape).astype(np.float32), (0, 0), 4)
             fine = fine / (np.abs(fine).max() + 1e-9) * 2.0
             c = _log_codes(srgb_decode(rgb).astype(np.float64)) if kind == "log" \
-                else rgb / 255.0 * 1023
+                else rgb / 255.0 * 876 + 64 if kind == "video levels" else rgb / 255.0 * 1023
             codes = np.clip(np.rint(c + fine), 0, 1023).astype(np.uint16)
             alpha = np.full(rgb.shape[:2] + (1,), 1023 - i, np.uint16)
             spec = oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 4, "uint16")
             spec.attribute("dpx:Transfer", transfer)
+            if kind == "video levels":       # black at code 64, white at 940
+                spec.attribute("dpx:LowData", 64)
+                spec.attribute("dpx:HighData", 940)
             spec.attribute("smpte:TimeCode", oiio.TypeDesc("timecode"),
                            np.array([0x01000000 + _bcd(i), 0], np.uint32))
             write_dpx(d / f"p.{1001 + i:04d}.dpx",
@@ -167,7 +171,7 @@ def main() -> int:
             rows.append(row)
             print(row, flush=True)
     dpx = [r for r in rows if "pixels_exact_share" in r]
-    ok = len(dpx) == 3 and all(r["largest_code_difference_outside_face"] == 0 and
+    ok = len(dpx) == 4 and all(r["largest_code_difference_outside_face"] == 0 and
                                r["header_kept"] for r in dpx)
     save_json({"benchmark": "a DPX plate through transfer", "seconds_of_clip": SECONDS,
                "rows": rows, "all_ok": ok}, out / "dpx.json")
