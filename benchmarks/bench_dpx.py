@@ -2,15 +2,15 @@
 
 The first three seconds of ``driving_d6`` (the expressions of ``WDA_KatieHill_000``) as the
 plates a film scan and a grade hand over: 10-bit DPX of Cineon log (printing density) and of
-video codes (ITU-R 709; full range, and video levels: black 64, white 940), each frame's
-levels encoded with a smooth detail below an 8-bit level of its own (a blurred noise field of
-up to 2 codes), RGBA, a timecode per frame, written by OpenImageIO; and the 10-bit video
-plate as ffmpeg writes it (another writer's header). Each is rewritten as a DPX sequence and as a PNG sequence in a fresh process. Judged against the
-plate: the share of all pixels whose codes are the plate's to the bit (alpha included), the
-largest difference in codes outside the rewritten face (the pixels whose shown level the
-rewrite left as it was), how far the changed pixels are shown from the 8-bit rewrite (the PNG
-sequence), whether the timecode and transfer are the plate's; with the command's seconds, and
-the same clip as a PNG plate for the speed.
+video codes (ITU-R 709; full range, and video levels: black 64, white 940), each frame's levels
+encoded with a smooth detail below an 8-bit level of its own (a blurred noise field of up to 2
+codes), RGBA, a timecode per frame, written by OpenImageIO; and the 10-bit video plate as
+ffmpeg writes it (another writer's header). Each is rewritten as a DPX sequence and as a PNG
+sequence in a fresh process. Judged against the plate: the share of all pixels whose codes are
+the plate's to the bit (alpha included), the largest difference in codes outside the rewritten
+face (the pixels whose shown level the rewrite left as it was), how far the changed pixels are
+shown from the 8-bit rewrite (the PNG sequence), whether the timecode and transfer are the
+plate's; with the command's seconds, and the same clip as a PNG plate for the speed.
 
     FACETRANSFER_DATA_DIR=... python benchmarks/bench_dpx.py --out out/benchmarks
 
