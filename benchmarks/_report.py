@@ -81,3 +81,17 @@ def children_cpu() -> float:
     """CPU seconds (user + system) of every finished child process and its own children."""
     r = resource.getrusage(resource.RUSAGE_CHILDREN)
     return r.ru_utime + r.ru_stime
+
+
+def clip_start(video: Path, seconds: float, folder: Path):
+    """``(path, frames)``: the first ``seconds`` of ``video`` copied losslessly in RGB (FFV1) to
+    ``folder``, and that copy's frames as the tools read them (the truth a plate is made of)."""
+    import subprocess
+
+    from facetransfer.io.ffmpeg import ffmpeg_exe
+    from facetransfer.io.video import read_video
+
+    clip = Path(folder) / "clip.mkv"
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-i", str(video), "-t", str(seconds),
+                    "-c:v", "ffv1", "-pix_fmt", "rgb24", str(clip)], check=True)
+    return clip, read_video(clip)[0]

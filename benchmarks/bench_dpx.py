@@ -30,7 +30,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _report import facetransfer_exe, out_and_data, save_json, save_plot  # noqa: E402
+from _report import (clip_start, facetransfer_exe, out_and_data, save_json,  # noqa: E402
+                     save_plot)
 
 SECONDS = 3
 BLACK, WHITE = 95, 685   # Kodak's Cineon conventions (10-bit codes)
@@ -49,13 +50,8 @@ def make_plates(data: Path, folder: Path) -> tuple[dict, list]:
     from facetransfer.io.dpx import DpxImage, write_dpx
     from facetransfer.io.exr import srgb_decode
     from facetransfer.io.ffmpeg import ffmpeg_exe
-    from facetransfer.io.video import read_video
 
-    clip = folder / "clip.mkv"
-    subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-i",
-                    str(data / "video" / "driving_d6.mp4"), "-t", str(SECONDS), "-c:v",
-                    "ffv1", "-pix_fmt", "rgb24", str(clip)], check=True)
-    frames = read_video(clip)[0]
+    clip, frames = clip_start(data / "video" / "driving_d6.mp4", SECONDS, folder)
     rng = np.random.default_rng(0)
     paths = {}
     for kind, transfer in (("log", "Printing density"), ("video", "ITU-R 709-4"),

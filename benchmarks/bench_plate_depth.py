@@ -27,7 +27,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _report import facetransfer_exe, out_and_data, save_json, save_plot  # noqa: E402
+from _report import (clip_start, facetransfer_exe, out_and_data, save_json,  # noqa: E402
+                     save_plot)
 
 SECONDS = 3
 
@@ -36,14 +37,7 @@ def make_plates(data: Path, folder: Path) -> tuple[dict, list]:
     """16-bit TIFF and PNG plates of the clip's frames (module notes)."""
     import cv2
 
-    from facetransfer.io.ffmpeg import ffmpeg_exe
-    from facetransfer.io.video import read_video
-
-    clip = folder / "clip.mp4"
-    subprocess.run([ffmpeg_exe(), "-v", "error", "-y", "-i",
-                    str(data / "video" / "driving_d6.mp4"), "-t", str(SECONDS), "-c:v",
-                    "libx264", "-crf", "0", str(clip)], check=True)
-    frames = read_video(clip)[0]
+    _, frames = clip_start(data / "video" / "driving_d6.mp4", SECONDS, folder)
     rng = np.random.default_rng(0)
     plates, paths = [], {}
     for rgb in frames:

@@ -18,7 +18,7 @@ from facetransfer.io.dpx import (DpxImage, dpx_header, graded_codes, read_dpx_im
                                  shown_dpx, write_dpx)
 from facetransfer.io.exr import srgb_decode  # noqa: E402
 from facetransfer.io.video import VideoOptions, read_video, write_video  # noqa: E402
-from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
+from test_transfer_cli import clips, plate_transfer_args  # noqa: E402,F401 (the fixture)
 
 #: Kodak's Cineon conventions, written out here from their definition (not the module's)
 BLACK, WHITE = 95, 685
@@ -247,9 +247,7 @@ def test_a_log_plate_is_rewritten_in_its_own_codes(clips, target, quick_model_pa
     monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
     lossless, frames = target
     plate = _log_plate(tmp_path / "plate", frames, bright_rows=6)
-    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
-              "--source-track", clips["source_track"], "--model", quick_model_path,
-              "--no-progress", "--sequence-fps", "25"]
+    common = plate_transfer_args(clips, quick_model_path)
     (tmp_path / "out").mkdir()
     code = main(["transfer", "--target", str(plate), *map(str, common),
                  "--out", str(tmp_path / "out" / "ft.%04d.dpx")])

@@ -17,7 +17,7 @@ from facetransfer.io.exr import (ExrImage, exr_pixel_type, graded_frame, read_ex
                                  read_exr_image, shown_frame, srgb_decode, srgb_encode,
                                  write_exr)
 from facetransfer.io.video import VideoOptions, read_video, write_video  # noqa: E402
-from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
+from test_transfer_cli import clips, plate_transfer_args  # noqa: E402,F401 (the fixture)
 
 
 def test_the_srgb_curve_is_iec_61966_2_1_and_inverts_on_every_level():
@@ -128,9 +128,7 @@ def test_an_exr_plate_is_rewritten_in_its_own_floats(clips, target, quick_model_
     monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
     lossless, frames = target
     plate = _exr_plate(tmp_path / "plate", frames, bright_rows=6)
-    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
-              "--source-track", clips["source_track"], "--model", quick_model_path,
-              "--no-progress", "--sequence-fps", "25"]
+    common = plate_transfer_args(clips, quick_model_path)
     (tmp_path / "out").mkdir()
     code = main(["transfer", "--target", str(plate), *map(str, common),
                  "--out", str(tmp_path / "out" / "ft.%04d.exr")])

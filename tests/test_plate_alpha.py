@@ -20,7 +20,7 @@ from facetransfer.io.plate_alpha import (PlateAlpha, keeps_alpha, plate_alpha,  
                                          sequence_has_alpha, video_has_alpha)
 from facetransfer.io.video import VideoOptions, VideoWriter, read_video, write_video  # noqa: E402
 from facetransfer.io.video_sequence import open_sequence  # noqa: E402
-from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
+from test_transfer_cli import clips, plate_transfer_args  # noqa: E402,F401 (the fixture)
 
 
 def _imwrite_rgba(path: Path, rgb: np.ndarray, alpha: np.ndarray) -> None:
@@ -187,9 +187,7 @@ def test_a_transfer_onto_an_rgba_plate_keeps_its_alpha(clips, quick_model_path, 
     frames = read_video(lossless)[0]
     plate = _rgba_plate(tmp_path / "plate", frames, suffix=suffix)
     assert np.array_equal(read_video(plate)[0], frames)  # the colour read as stored
-    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
-              "--source-track", clips["source_track"], "--model", quick_model_path,
-              "--no-progress", "--sequence-fps", "25"]
+    common = plate_transfer_args(clips, quick_model_path)
     (tmp_path / "out").mkdir()
     with caplog.at_level(logging.WARNING, logger="facetransfer"):
         code = main(["transfer", "--target", str(plate), *map(str, common),

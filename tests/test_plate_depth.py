@@ -16,7 +16,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from facetransfer.errors import VideoError  # noqa: E402
 from facetransfer.io.plate_depth import PlateDepth, deep_frame, plate_depth  # noqa: E402
 from facetransfer.io.video import VideoOptions, read_video, write_video  # noqa: E402
-from test_transfer_cli import clips  # noqa: E402,F401 (the fixture: synthetic clips, tracks)
+from test_transfer_cli import clips, plate_transfer_args  # noqa: E402,F401 (the fixture)
 
 
 def _write16(path: Path, img: np.ndarray) -> None:
@@ -140,9 +140,7 @@ def test_a_transfer_onto_a_16_bit_plate_keeps_its_values(clips, quick_model_path
     shown = read_video(plate)[0]
     if kind != "grey":
         assert np.array_equal(shown, frames)   # the plate's high bytes, as the tool sees it
-    common = ["--target-track", clips["target_track"], "--expression-from", clips["source"],
-              "--source-track", clips["source_track"], "--model", quick_model_path,
-              "--no-progress", "--sequence-fps", "25"]
+    common = plate_transfer_args(clips, quick_model_path)
     (tmp_path / "out").mkdir()
     assert main(["transfer", "--target", str(plate), *map(str, common),
                  "--out", str(tmp_path / "out" / f"ft.%04d{out_suffix}")]) == 0, \
