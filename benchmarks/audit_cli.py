@@ -188,8 +188,8 @@ def _png(cd, fx):
 
 def _plate(gap: bool = False, suffix: str = ".png"):
     """A plate of clip.mp4's first 5 frames, plate/f.0001.png ... (frame 3 missing: ``gap``;
-    another ``suffix``: files of four bytes, an OpenEXR file's magic number: damaged OpenEXR
-    frames, or a format refused by name)."""
+    another ``suffix``: files of four bytes, an OpenEXR file's magic number: damaged OpenEXR or
+    DPX frames, or a format refused by name)."""
     def setup(cd, fx):
         import cv2
 
@@ -318,8 +318,10 @@ def cases(fx: Path) -> list[Case]:
              setup=_plate(gap=True), names="f.0003.png"),
         Case("a damaged OpenEXR plate", ["probe", "plate/f.%04d.exr"],
              setup=_plate(suffix=".exr"), names="plate/f.0001.exr"),
-        Case("a DPX plate", ["probe", "plate/f.%04d.dpx"], setup=_plate(suffix=".dpx"),
-             names="plate/f.%04d.dpx"),
+        Case("a damaged DPX plate", ["probe", "plate/f.%04d.dpx"], setup=_plate(suffix=".dpx"),
+             names="plate/f.0001.dpx"),
+        Case("a Cineon plate", ["probe", "plate/f.%04d.cin"], setup=_plate(suffix=".cin"),
+             names="plate/f.%04d.cin"),
         Case("an overlay written over the plate it tracks",
              ["track", "plate/f.####.png", "--model", M, "--out", "t.npz", "--overlay",
               "plate/f.%04d.png", "--overwrite"], setup=_both(_copy(M), _plate()),
