@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import importlib.util
+
 import sys
 from pathlib import Path
 
@@ -277,6 +279,32 @@ def test_a_take_is_placed_by_the_targets_timecode(arkit_clip, arkit_model, make_
         np.testing.assert_allclose(got, a[first:first + 10], atol=1e-6)
 
 
+def _glb_and_usd_record_the_timecode(base: list, tmp_path: Path, capsys) -> None:
+    """``export --format glb|usd`` of the timecoded plate's track (``base``: the livelink
+    export's arguments): the plate's start timecode in the file's metadata (the glTF's
+    ``extras``, the USD root layer's ``customLayerData``), said on the summary line; none
+    with ``--timecode none``."""
+    from pygltflib import GLTF2
+
+    from facetransfer.cli.main import main
+
+    glb = [str(x) for x in base[:2] + ["--format", "glb"] + base[4:] + [tmp_path / "t.glb"]]
+    assert main(glb) == 0
+    assert "the start timecode 00:00:02:00 of " in capsys.readouterr().out
+    assert GLTF2().load(str(tmp_path / "t.glb")).extras["timecode"] == "00:00:02:00"
+    assert main(glb + ["--timecode", "none"]) == 0
+    assert "timecode" not in GLTF2().load(str(tmp_path / "t.glb")).extras
+    if importlib.util.find_spec("pxr") is None:
+        return
+    from pxr import Usd
+
+    assert main([str(x) for x in base[:2] + ["--format", "usd"] + base[4:]
+                 + [tmp_path / "t.usda"]]) == 0
+    stage = Usd.Stage.Open(str(tmp_path / "t.usda"))      # kept: its layer lives with it
+    assert stage.GetRootLayer().customLayerData["timecode"] == "00:00:02:00"
+    capsys.readouterr()
+
+
 def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_clip, arkit_model,
                                                                        tmp_path, capsys):
     """``export --format livelink`` of a plate's track: the take's first row is the plate's
@@ -329,6 +357,7 @@ def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_cli
                                       d / "arkit.npz", "--workers", "1"]]) == 0
     assert read_livelink(tmp_path / "b" / "plate.csv").timecodes[0] == "00:00:02:00.000"
     capsys.readouterr()
+    _glb_and_usd_record_the_timecode(base, tmp_path, capsys)
     for extra in (["--timecode", "1:00"], ["--timecode", "01:00:00:00", "--format", "json"]):
         code = main([str(x) for x in base + [tmp_path / "t2.csv"] + extra])
         err = capsys.readouterr().err

@@ -49,7 +49,8 @@ def register(sub) -> None:
                    "it), a timecode (';' before the frames of a drop-frame one), or none "
                    "(00:00:00:00). usd: source (the default) starts the time codes at the "
                    "first frame number of the image sequence tracked (a plate numbered from "
-                   "1001: 1001), none at 0")
+                   "1001: 1001), none at 0. usd and glb: source also records the tracked "
+                   "video's start timecode in the file's metadata (customLayerData, extras)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
 
@@ -127,8 +128,8 @@ def run(args: argparse.Namespace) -> int:
     if args.timecode not in ("source", "none") and args.format != "livelink":
         raise FaceTransferError(f"--timecode: only livelink takes carry one, not {args.format}")
     timecode, said = _start_timecode(args, track)
-    if args.format == "usd" and args.timecode == "source":
-        timecode, said = "source", _first_frame_said(track)
+    if args.format in ("usd", "glb") and args.timecode == "source":
+        timecode, said = "source", _source_said(track, args.format)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
                         texture=texture, timecode=timecode)
     neutral = track.info.get("neutral_frame") if args.neutral is not None else None
@@ -139,10 +140,14 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _first_frame_said(track) -> str:
-    """What the USD's time codes start from, where not 0 (:func:`facetransfer.export.usd.
-    source_first_frame`)."""
+def _source_said(track, fmt: str) -> str:
+    """What a USD's time codes start from, where not 0 (:func:`facetransfer.export.usd.
+    source_first_frame`), and the tracked video's start timecode the file records, if any."""
+    from ..export.livelink import source_timecode
     from ..export.usd import source_first_frame
 
-    first = source_first_frame(track)
-    return f"time codes from {first}, the first frame of {track.source}" if first else ""
+    first = source_first_frame(track) if fmt == "usd" else 0
+    tc = source_timecode(track)
+    said = [f"time codes from {first}, the first frame of {track.source}"] if first else []
+    return ", ".join(said + ([f"the start timecode {tc} of {track.source} in its metadata"]
+                             if tc else []))

@@ -56,8 +56,11 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
         it has one (:func:`facetransfer.export.livelink.source_timecode`); None:
         ``00:00:00:00``. ``usd``: ``"source"`` (default) starts the time codes at the first
         frame number of the image sequence the track was made from (1001 for a plate numbered
-        from 1001; :func:`facetransfer.export.usd.source_first_frame`), None at 0. Other
-        formats carry none.
+        from 1001; :func:`facetransfer.export.usd.source_first_frame`), None at 0. ``usd`` and
+        ``glb``: ``"source"`` also records the video's start timecode, where it has one, in the
+        file's metadata (the root layer's ``customLayerData["timecode"]``, the glTF's
+        ``extras["timecode"]``: neither format has a field of its own for it). ``json``
+        carries none.
 
     Raises
     ------
@@ -95,11 +98,16 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
             track.check_model(model)
         return write_mediapipe_json(track, out, overwrite=overwrite)
     model = resolve_model(track, model)
+    from .livelink import source_timecode
+
+    start = source_timecode(track) if timecode == "source" else None
     if fmt == "glb":
         from .gltf import write_glb
 
-        return write_glb(track, model, out, overwrite=overwrite, texture=texture)
+        return write_glb(track, model, out, overwrite=overwrite, texture=texture,
+                         timecode=start)
     from .usd import source_first_frame, write_usd
 
     return write_usd(track, model, out, overwrite=overwrite,
-                     first_frame=source_first_frame(track) if timecode == "source" else 0)
+                     first_frame=source_first_frame(track) if timecode == "source" else 0,
+                     timecode=start)

@@ -182,7 +182,7 @@ def _animation(gltf, blob: _Blob, track, activations: np.ndarray, unit: float) -
 
 
 def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, texture=None,
-              metres_per_unit: float = METRES_PER_UNIT) -> Path:
+              metres_per_unit: float = METRES_PER_UNIT, timecode: str | None = None) -> Path:
     """Write the track as a glTF 2.0 binary with ARKit morph targets and return the path.
 
     Parameters
@@ -195,6 +195,8 @@ def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, 
         Base colour in the template's UV layout (e.g. lifted from the video).
     metres_per_unit : float
         Model units to metres.
+    timecode : str, optional
+        The first frame's SMPTE timecode (``HH:MM:SS:FF``), in the file's ``extras``.
     """
     from pygltflib import GLTF2, Asset, Buffer, Node, Scene
 
@@ -215,7 +217,8 @@ def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, 
     data = blob.buf.getvalue()
     gltf.buffers.append(Buffer(byteLength=len(data)))
     gltf.set_binary_blob(data)
-    gltf.extras = {"source": track.source, "fps": track.fps}
+    gltf.extras = {"source": track.source, "fps": track.fps} | (
+        {} if timecode is None else {"timecode": str(timecode)})
     with atomic_path(out, overwrite=overwrite) as tmp:
         gltf.save_binary(str(tmp))
     return Path(out)

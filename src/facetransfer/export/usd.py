@@ -115,9 +115,10 @@ def _animation(stage, track, activations, pxr, first: int = 0):
 
 
 def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
-              first_frame: int = 0) -> Path:
+              first_frame: int = 0, timecode: str | None = None) -> Path:
     """Write the track as USD (``.usd``/``.usdc`` binary, ``.usda`` text) and return the path;
-    frame k at time code ``first_frame + k``."""
+    frame k at time code ``first_frame + k``; ``timecode``, the first frame's SMPTE timecode
+    (``HH:MM:SS:FF``), in the root layer's ``customLayerData``."""
     pxr = _pxr()
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     if Path(out).suffix.lower() not in USD_SUFFIXES:
@@ -148,7 +149,9 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
     binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
     binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig, pxr))
-    stage.GetRootLayer().customLayerData = {"source": track.source, "generator": "facetransfer"}
+    meta = {"source": track.source, "generator": "facetransfer"}
+    stage.GetRootLayer().customLayerData = meta if timecode is None else \
+        {**meta, "timecode": str(timecode)}
     with atomic_path(out, overwrite=overwrite) as tmp:
         if not stage.GetRootLayer().Export(str(tmp)):
             raise ExportError(f"USD could not write {out}")
