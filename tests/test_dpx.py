@@ -191,6 +191,15 @@ def test_the_header_and_alpha_are_kept_and_8_bit_frames_written_as_video(tmp_pat
 
 
 def test_a_file_that_is_not_dpx_is_one_error_naming_it(tmp_path):
+    import OpenImageIO as oiio
+
+    spec = oiio.ImageSpec(6, 4, 3, "float")          # 32-bit float samples: not codes
+    out = oiio.ImageOutput.create("dpx")
+    assert out.open(str(tmp_path / "f.dpx"), spec)
+    assert out.write_image(np.zeros((4, 6, 3), np.float32))
+    out.close()
+    with pytest.raises(VideoError, match=r"f.dpx \(32-bit samples: 8, 10, 12 and 16-bit"):
+        read_dpx_image(tmp_path / "f.dpx")
     (tmp_path / "x.dpx").write_bytes(b"PNG?" + bytes(100))
     with pytest.raises(VideoError, match=r"x.dpx is not a DPX file"):
         read_dpx_image(tmp_path / "x.dpx")

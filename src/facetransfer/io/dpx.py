@@ -168,6 +168,9 @@ def read_dpx_image(path) -> DpxImage:
             f"damaged: {_why(why)})" if why else
             f"{spec.nchannels} channels; luma, RGB or RGBA is read)"))
     bits = int(spec.get_int_attribute("oiio:BitsPerSample", 16)) or 16
+    if bits not in (8, 10, 12, 16):
+        raise VideoError(f"cannot read the DPX frame {path} ({bits}-bit samples: 8, 10, 12 "
+                         "and 16-bit codes are read; write the plate as 16-bit DPX or OpenEXR)")
     codes = _to_codes(px.reshape(spec.height, spec.width, spec.nchannels), bits)
     if bits == 10 and (spec.width * spec.nchannels) % 3 and \
             spec.get_string_attribute("dpx:Packing", "").startswith("Filled, method A"):
