@@ -186,9 +186,7 @@ def _word_lines(path, codes: np.ndarray, bits: int) -> np.ndarray:
     reads such lines as if they ended on the last sample (its own files' lines do); ``codes``
     (OpenImageIO's) where the size says the lines are not padded."""
     h, w, c = codes.shape
-    raw = Path(path).read_bytes()
-    order = "<" if raw[:4] == b"XPDS" else ">"
-    offset = int(np.frombuffer(raw, order + "u4", count=1, offset=4)[0])
+    raw, order, offset = _file_pixels(path)
     line = w * c * bits // 8
     stride = (line + 3) // 4 * 4
     if not 0 < offset <= len(raw) or len(raw) - offset < stride * h:
@@ -198,6 +196,14 @@ def _word_lines(path, codes: np.ndarray, bits: int) -> np.ndarray:
     if bits == 16:
         rows = np.ascontiguousarray(rows).view(order + "u2")
     return rows.astype(np.uint16).reshape(h, w, c)
+
+
+def _file_pixels(path) -> tuple[bytes, str, int]:
+    """``(bytes, byte order, offset of the pixels)`` of a DPX file: its bytes, ``"<"`` or
+    ``">"`` by its magic number, and the header's offset to the image data."""
+    raw = Path(path).read_bytes()
+    order = "<" if raw[:4] == b"XPDS" else ">"
+    return raw, order, int(np.frombuffer(raw, order + "u4", count=1, offset=4)[0])
 
 
 def _filled_10(path, shape: tuple[int, int, int], spec) -> np.ndarray:
@@ -211,9 +217,7 @@ def _filled_10(path, shape: tuple[int, int, int], spec) -> np.ndarray:
     (H, W, C) uint16
     """
     h, w, c = shape
-    raw = Path(path).read_bytes()
-    order = "<" if raw[:4] == b"XPDS" else ">"
-    offset = int(np.frombuffer(raw, order + "u4", count=1, offset=4)[0])
+    raw, order, offset = _file_pixels(path)
     words = (w * c + 2) // 3
     pad = int(spec.get_int_attribute("dpx:EndOfLinePadding", 0))
     stride = words + (pad // 4 if 0 < pad < 1 << 20 else 0)    # all ones: not given
