@@ -216,3 +216,23 @@ def test_a_folder_given_as_a_video_names_its_sequence(frames, tmp_path):
     cv2.imwrite(str(tmp_path / "still7.png"), frames[0])
     with pytest.raises(VideoError, match=r"is a folder, not a video file$"):
         video_info(tmp_path)
+
+
+def test_one_frame_of_a_plate_given_as_a_video_names_its_sequence(frames, tmp_path, caplog):
+    """One numbered frame of a plate given where a video goes: read as a still of one frame,
+    and a warning names the plate's pattern (the frame's own run of digits, beside another
+    sequence in the same folder); a numbered still alone, or an unnumbered image: no word."""
+    _plate(tmp_path / "plate", frames[:3])
+    _plate(tmp_path / "plate", frames[:2], first=1, name="aa_{:03d}.png")   # another before it
+    cv2.imwrite(str(tmp_path / "still7.png"), frames[0])
+    cv2.imwrite(str(tmp_path / "poster.png"), frames[0])
+    with caplog.at_level("WARNING", logger="facetransfer.io.video_read"):
+        got, _ = read_video(tmp_path / "plate" / "sh010.1002.png")
+        for still in ("still7.png", "poster.png"):
+            read_video(tmp_path / still)
+    assert got.shape[0] == 1
+    said = [r.getMessage() for r in caplog.records if "one frame of" in r.getMessage()]
+    assert said == [f"{tmp_path / 'plate' / 'sh010.1002.png'} is one frame of the image "
+                    f"sequence {tmp_path / 'plate' / 'sh010.%04d.png'} (3 files) and is read "
+                    f"as a still of one frame; give {tmp_path / 'plate' / 'sh010.%04d.png'} "
+                    "to read the sequence"]

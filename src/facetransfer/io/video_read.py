@@ -21,8 +21,8 @@ from ..errors import VideoError
 from .verified import file_stamp
 from .video_display import exact_seek, first_field, pixel_aspect  # noqa: F401 (pixel_aspect: API)
 from .video_pipe import piped_frames
-from .video_sequence import (is_sequence, open_sequence, sequence_frames, sequence_stamp,
-                             suggested_pattern)
+from .video_sequence import (IMAGE_SUFFIXES, is_sequence, open_sequence, pattern_of_file,
+                             sequence_files, sequence_frames, sequence_stamp, suggested_pattern)
 from .video_timeline import timeline
 
 log = logging.getLogger(__name__)
@@ -72,6 +72,22 @@ class VideoInfo:
     turn: int = 0
 
 
+def _warn_frame_of_sequence(p: Path) -> None:
+    """Say that the image file ``p``, read as a still (a video of one frame), is a frame of an
+    image sequence beside it (``plate/sh010.1001.dpx`` of ``plate/sh010.%04d.dpx``), naming
+    the pattern that reads the sequence (as itself: a DPX or OpenEXR plate's frames by their
+    transfer, :mod:`facetransfer.io.video_sequence`); once a file."""
+    pattern = pattern_of_file(p) if p.suffix.lower() in IMAGE_SUFFIXES else None
+    if pattern is not None:
+        _warn_once(str(p), str(pattern), len(sequence_files(pattern)))
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_once(path: str, pattern: str, n: int) -> None:
+    log.warning("%s is one frame of the image sequence %s (%d files) and is read as a still of "
+                "one frame; give %s to read the sequence", path, pattern, n, pattern)
+
+
 def _open(path: str | os.PathLike):
     import cv2
 
@@ -117,6 +133,7 @@ def _video_info(path) -> VideoInfo:
         seq = open_sequence(path)
         return VideoInfo(Path(path), seq.fps, seq.n_frames, seq.size)
     cap = _open(path)
+    _warn_frame_of_sequence(Path(path))
     try:
         fps = float(cap.get(cv2.CAP_PROP_FPS)) or 25.0
         n = max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)  # a still gives -2**63: none

@@ -33,6 +33,7 @@ log = logging.getLogger(__name__)
 __all__ = ["IMAGE_SUFFIXES", "FRAME_FIELD", "DEFAULT_SEQUENCE_FPS", "SEQUENCE_FPS_VARIABLE",
            "Sequence", "is_sequence", "percent_pattern", "sequence_fps", "sequence_stamp",
            "sequence_files", "open_sequence", "sequence_frames", "suggested_pattern",
+           "pattern_of_file",
            "same_sequence_files"]
 
 #: Image formats of a frame sequence, read and written (``frames/%05d.png``).
@@ -254,14 +255,21 @@ def suggested_pattern(folder) -> Path | None:
                        if q.suffix.lower() in IMAGE_SUFFIXES)
     except OSError:
         return None
-    for name in names:
-        runs = list(re.finditer(r"\d+", Path(name).stem))
-        if runs:
-            m = runs[-1]
-            pattern = Path(folder) / f"{name[:m.start()]}%0{len(m.group(0))}d{name[m.end():]}"
-            if len(sequence_files(pattern)) > 1:      # a sequence, not a numbered still
-                return pattern
-    return None
+    return next((pattern for pattern in map(pattern_of_file, (Path(folder) / n for n in names))
+                 if pattern is not None), None)
+
+
+def pattern_of_file(path) -> Path | None:
+    """The pattern of the image sequence whose frame the file ``path`` is (the last run of
+    digits of its name, e.g. ``plate/sh010.%04d.dpx`` of ``plate/sh010.1001.dpx``), where other
+    files share it; None for a numbered still or a name without digits."""
+    p = Path(path)
+    runs = list(re.finditer(r"\d+", p.stem))
+    if not runs:
+        return None
+    m = runs[-1]
+    pattern = p.with_name(f"{p.name[:m.start()]}%0{len(m.group(0))}d{p.name[m.end():]}")
+    return pattern if len(sequence_files(pattern)) > 1 else None   # not a numbered still
 
 
 def same_sequence_files(a, b) -> bool:
