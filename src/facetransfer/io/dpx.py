@@ -136,12 +136,14 @@ class DpxImage:
 
 
 def read_dpx_image(path) -> DpxImage:
-    """A DPX file as :class:`DpxImage`.
+    """A DPX file as :class:`DpxImage`: its pixels as OpenImageIO reads them, or, where it
+    reads a layout wrong (:func:`_unpacked_here`), from the file's bytes here.
 
     Raises
     ------
     VideoError
-        Not a DPX file, damaged, or of another layout than luma, RGB or RGBA (naming the file).
+        Not a DPX file, damaged, of samples other than 8, 10, 12 or 16 bits, or of another
+        layout than luma, RGB or RGBA (naming the file).
     """
     import OpenImageIO as oiio
 
@@ -158,39 +160,55 @@ def read_dpx_image(path) -> DpxImage:
         raise VideoError(f"cannot read the DPX frame {path} ({_why(oiio.geterror())})")
     try:
         spec = oiio.ImageSpec(inp.spec())
-        px = inp.read_image(0, 0, 0, spec.nchannels, "uint16") \
-            if spec.nchannels in (1, 3, 4) else None
+        bits = int(spec.get_int_attribute("oiio:BitsPerSample", 16)) or 16
+        own = _unpacked_here(path, spec, bits)
+        px = None if own is not None or bits not in (8, 10, 12, 16) or \
+            spec.nchannels not in (1, 3, 4) else inp.read_image(0, 0, 0, spec.nchannels, "uint16")
         why = inp.geterror()
     finally:
         inp.close()
-    if not isinstance(px, np.ndarray):
-        raise VideoError(f"cannot read the DPX frame {path} (" + (
-            f"damaged: {_why(why)})" if why else
-            f"{spec.nchannels} channels; luma, RGB or RGBA is read)"))
-    bits = int(spec.get_int_attribute("oiio:BitsPerSample", 16)) or 16
     if bits not in (8, 10, 12, 16):
         raise VideoError(f"cannot read the DPX frame {path} ({bits}-bit samples: 8, 10, 12 "
                          "and 16-bit codes are read; write the plate as 16-bit DPX or OpenEXR)")
-    codes = _to_codes(px.reshape(spec.height, spec.width, spec.nchannels), bits)
-    if bits == 10 and (spec.width * spec.nchannels) % 3 and \
-            spec.get_string_attribute("dpx:Packing", "").startswith("Filled, method A"):
-        codes = _filled_10(path, codes.shape, spec)
-    elif bits in (8, 16) and (spec.width * spec.nchannels * bits // 8) % 4:
-        codes = _word_lines(path, codes, bits)
+    if own is None and not isinstance(px, np.ndarray):
+        raise VideoError(f"cannot read the DPX frame {path} (" + (
+            f"damaged: {_why(why)})" if why else
+            f"{spec.nchannels} channels; luma, RGB or RGBA is read)"))
+    codes = own() if own is not None else \
+        _to_codes(px.reshape(spec.height, spec.width, spec.nchannels), bits)
     return DpxImage(codes, bits, spec.get_string_attribute("dpx:Transfer", ""), spec)
 
 
-def _word_lines(path, codes: np.ndarray, bits: int) -> np.ndarray:
-    """The codes of an 8 or 16-bit file whose lines end on a 32-bit word (as ffmpeg writes
-    them, and as the file's size then says): read from the file itself, since OpenImageIO 3.2
-    reads such lines as if they ended on the last sample (its own files' lines do); ``codes``
-    (OpenImageIO's) where the size says the lines are not padded."""
-    h, w, c = codes.shape
-    raw, order, offset = _file_pixels(path)
+def _unpacked_here(path, spec, bits: int):
+    """The reader of the codes of a layout OpenImageIO 3.2 reads wrong, ``() -> (H, W, C)
+    uint16``, or None: 10-bit samples filled three to a word (method A) in rows of a number of
+    samples not divisible by three (an RGBA frame of even width: its last sample of a row
+    misread), and 8 or 16-bit lines that end on a 32-bit word (as ffmpeg writes them, and as
+    the file's size then says; OpenImageIO's own files' lines end on their last sample)."""
+    shape = (spec.height, spec.width, spec.nchannels)
+    if spec.nchannels not in (1, 3, 4):
+        return None
+    if bits == 10 and (spec.width * spec.nchannels) % 3 and \
+            spec.get_string_attribute("dpx:Packing", "").startswith("Filled, method A"):
+        return lambda: _filled_10(path, shape, spec)
+    line = spec.width * spec.nchannels * bits // 8
+    if bits not in (8, 16) or line % 4 == 0:
+        return None
+    _, offset = _pixel_offset(path)
+    size = Path(path).stat().st_size
+    if not 0 < offset <= size or size - offset < (line + 3) // 4 * 4 * spec.height:
+        return None
+    return lambda: _word_lines(path, shape, bits)
+
+
+def _word_lines(path, shape: tuple[int, int, int], bits: int) -> np.ndarray:
+    """The ``shape`` (H, W, C) codes of an 8 or 16-bit file whose lines end on a 32-bit word,
+    from its bytes."""
+    h, w, c = shape
+    raw = Path(path).read_bytes()
+    order, offset = _pixel_offset(path, raw[:8])
     line = w * c * bits // 8
     stride = (line + 3) // 4 * 4
-    if not 0 < offset <= len(raw) or len(raw) - offset < stride * h:
-        return codes
     rows = np.frombuffer(raw, np.uint8, count=stride * h, offset=offset).reshape(h, stride)
     rows = rows[:, :line]
     if bits == 16:
@@ -198,12 +216,15 @@ def _word_lines(path, codes: np.ndarray, bits: int) -> np.ndarray:
     return rows.astype(np.uint16).reshape(h, w, c)
 
 
-def _file_pixels(path) -> tuple[bytes, str, int]:
-    """``(bytes, byte order, offset of the pixels)`` of a DPX file: its bytes, ``"<"`` or
-    ``">"`` by its magic number, and the header's offset to the image data."""
-    raw = Path(path).read_bytes()
-    order = "<" if raw[:4] == b"XPDS" else ">"
-    return raw, order, int(np.frombuffer(raw, order + "u4", count=1, offset=4)[0])
+def _pixel_offset(path, head: bytes | None = None) -> tuple[str, int]:
+    """``(byte order, offset of the pixels)`` of a DPX file from its first 8 bytes (``head``,
+    else read): ``"<"`` or ``">"`` by its magic number, and the header's offset to the image
+    data."""
+    if head is None:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    order = "<" if head[:4] == b"XPDS" else ">"
+    return order, int(np.frombuffer(head, order + "u4", count=1, offset=4)[0])
 
 
 def _filled_10(path, shape: tuple[int, int, int], spec) -> np.ndarray:
@@ -217,7 +238,8 @@ def _filled_10(path, shape: tuple[int, int, int], spec) -> np.ndarray:
     (H, W, C) uint16
     """
     h, w, c = shape
-    raw, order, offset = _file_pixels(path)
+    raw = Path(path).read_bytes()
+    order, offset = _pixel_offset(path, raw[:8])
     words = (w * c + 2) // 3
     pad = int(spec.get_int_attribute("dpx:EndOfLinePadding", 0))
     stride = words + (pad // 4 if 0 < pad < 1 << 20 else 0)    # all ones: not given
