@@ -39,12 +39,14 @@ def clips(quick_model, tmp_path_factory):
     return paths
 
 
-def plate_transfer_args(clips, model_path, fps: str = "25") -> list[str]:
+def plate_transfer_args(clips, model_path, fps: str | None = "25") -> list[str]:
     """The arguments of a ``transfer`` onto a plate made from ``clips``' target: the clips'
-    tracks (no capture), the source's expressions, ``model_path``, no bars, the plate's rate."""
+    tracks (no capture), the source's expressions, ``model_path``, no bars, the plate's rate
+    (None: none given, the plate's header's)."""
     return [str(a) for a in ("--target-track", clips["target_track"], "--expression-from",
                              clips["source"], "--source-track", clips["source_track"],
-                             "--model", model_path, "--no-progress", "--sequence-fps", fps)]
+                             "--model", model_path, "--no-progress")] + (
+        [] if fps is None else ["--sequence-fps", fps])
 
 
 def run(argv, capsys):

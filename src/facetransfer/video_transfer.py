@@ -325,10 +325,12 @@ def _take_as_performance(sources: TransferSources, align, model) -> TransferSour
         if given:
             raise RewriteError(f"a Live Link Face take ({path}) drives the target's expression "
                                f"alone; it cannot be combined with {what}")
-    start = None
-    if sources.take_sync == "timecode" and Path(sources.target.video).is_file():
-        from .io.video_display import timecode_of
+    from .io.video_display import timecode_of
+    from .io.video_sequence import is_sequence
 
+    start = None
+    if sources.take_sync == "timecode" and (Path(sources.target.video).is_file()
+                                            or is_sequence(sources.target.video)):
         start = timecode_of(sources.target.video)
     return dataclasses.replace(sources, expression=None,
                                performance=Take(Path(path), align, start))

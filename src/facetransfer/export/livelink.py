@@ -220,11 +220,13 @@ def read_livelink(path: str | os.PathLike, *, lenient: bool = False) -> LiveLink
 def source_timecode(track) -> str | None:
     """The start timecode of the video a track was made from
     (:func:`facetransfer.io.video_display.timecode_of`), where its ``source`` names a video
-    file that has one; else None. A take exported with it lines up with that video."""
+    file or a plate (a DPX or OpenEXR sequence's first frame) that has one; else None. A take
+    exported with it lines up with that video."""
     from ..io.video_display import timecode_of
+    from ..io.video_sequence import is_sequence
 
     src = Path(track.source) if track.source else None
-    if src is None or not src.is_file():
+    if src is None or not (src.is_file() or is_sequence(src)):
         return None
     try:
         return timecode_of(src)

@@ -237,11 +237,12 @@ def exr_pixel_type(path) -> str:
     return {np.dtype(np.float16): "half", np.dtype(np.float32): "float"}.get(kind, "uint")
 
 
-def write_exr(path, rgb) -> None:
+def write_exr(path, rgb, time=None) -> None:
     """Write an OpenEXR file: an :class:`ExrImage` with its header and other channels, or
     ``(H, W, 3)`` linear RGB, PIZ-compressed: float32 as single floats, float16 as half floats,
     uint8 (sRGB) decoded (:func:`srgb_decode`) to half floats (which hold each of its 256
-    levels exactly enough to encode back to it).
+    levels exactly enough to encode back to it), with ``time`` (the frame's
+    :class:`~facetransfer.io.plate_time.FrameTime`) as ``framesPerSecond`` and ``timeCode``.
 
     Raises
     ------
@@ -256,13 +257,34 @@ def write_exr(path, rgb) -> None:
     else:
         lin = srgb_decode(rgb).astype(np.float16) if rgb.dtype == np.uint8 else \
             np.ascontiguousarray(rgb, np.float16 if rgb.dtype == np.float16 else np.float32)
-        header = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage}
+        header = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage,
+                  **_time_attributes(time)}
         channels = {"RGB": lin}
     try:
         with OpenEXR.File(header, channels) as f:
             f.write(str(path))
     except Exception as exc:  # noqa: BLE001 (the bindings raise several kinds)
         raise ValueError(f"cannot write the OpenEXR file {path} ({exc})") from None
+
+
+def _time_attributes(time) -> dict:
+    """OpenEXR's ``framesPerSecond`` and ``timeCode`` of a
+    :class:`~facetransfer.io.plate_time.FrameTime` (those it gives)."""
+    import OpenEXR
+
+    from .plate_time import rate_fraction
+
+    out = {}
+    if time is not None and time.fps is not None:
+        out["framesPerSecond"] = rate_fraction(time.fps)
+    if time is not None and time.timecode is not None:
+        tc = OpenEXR.TimeCode()
+        hh, mm, rest = time.timecode.split(":", 2)
+        ss, ff = rest.replace(";", ":").split(":")
+        tc.hours, tc.minutes, tc.seconds, tc.frame = int(hh), int(mm), int(ss), int(ff)
+        tc.dropFrame = ";" in time.timecode
+        out["timeCode"] = tc
+    return out
 
 
 def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:

@@ -185,8 +185,14 @@ _TIMECODE = re.compile(r"\d{2}:[0-5]\d:[0-5]\d[:;.]\d{2,3}")
 
 def timecode_of(path: str | os.PathLike) -> str | None:
     """A video's start timecode (the first it names in :func:`described_input`: a QuickTime /
-    MP4 ``tmcd`` track's, a Matroska or MXF tag's), e.g. ``"01:00:00:00"``; None without one
-    (or without ffmpeg). A camera's or an editor's: what a conform matches shots by."""
+    MP4 ``tmcd`` track's, a Matroska or MXF tag's), e.g. ``"01:00:00:00"``; an image
+    sequence's, its first frame's header's (DPX, OpenEXR:
+    :attr:`facetransfer.io.video_sequence.Sequence.timecode`); None without one (or without
+    ffmpeg). A camera's or an editor's: what a conform matches shots by."""
+    if is_sequence(path):
+        from .video_sequence import open_sequence
+
+        return open_sequence(path).timecode
     found = re.search(r"^\s*timecode\s*:\s*(\S+)\s*$", described_input(path),
                       re.MULTILINE | re.IGNORECASE)
     if found is None or not _TIMECODE.fullmatch(found.group(1)):

@@ -72,6 +72,9 @@ class VideoFacts:
         Its bits a sample: an image sequence's (16: kept in a PNG or TIFF sequence,
         :mod:`facetransfer.io.plate_depth`), a video's as ffmpeg decodes it (more than 8: kept
         in ProRes or a PNG or TIFF sequence, :mod:`facetransfer.io.video_depth`).
+    rate_from : str or None
+        Where an image sequence's rate came from (``"said"``, ``"header"``, ``"default"``:
+        :attr:`facetransfer.io.video_sequence.Sequence.rate_from`); None for a video file.
     """
 
     path: str
@@ -93,6 +96,7 @@ class VideoFacts:
     timecode: str | None = None
     alpha: bool = False
     bits: int = 8
+    rate_from: str | None = None
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -109,8 +113,9 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
         return VideoFacts(str(path), "image sequence", (W, H), (W, H), (1, 1), float(info.fps),
                           int(info.n_frames), False, float(info.n_frames / info.fps), None,
                           "OpenImageIO" if str(path).lower().endswith(".dpx") else "OpenCV", True,
-                          ColourTags(), None, seq.first,
-                          alpha=sequence_has_alpha(seq), bits=bit_depth(seq.file(0)) or 8)
+                          ColourTags(), None, seq.first, timecode=seq.timecode,
+                          alpha=sequence_has_alpha(seq), bits=bit_depth(seq.file(0)) or 8,
+                          rate_from=seq.rate_from)
     return VideoFacts(str(path), container(path), (W, H), (shown_width(W, info.sar), H),
                       info.sar, float(info.fps),
                       int(info.n_frames), info.steps is not None,
@@ -152,8 +157,10 @@ def fact_lines(f: VideoFacts) -> list[str]:
     if f.first_number is not None:
         last = f.first_number + f.n_frames - 1
         return [f"{f.path}: {size}",
-                f"  image sequence, frames {f.first_number}-{last}; read at {timing} (it "
-                "stores no rate: --sequence-fps gives it)",
+                f"  image sequence, frames {f.first_number}-{last}; read at {timing} "
+                f"({_RATE_FROM[f.rate_from or 'default']})" + (
+                    "" if f.timecode is None else
+                    f"; timecode {f.timecode} (the results start at it)"),
                 ("  OpenEXR, scene-linear: shown through the sRGB curve (above 1 as white) "
                  "to be tracked; a rewrite written as .exr keeps every float it does not "
                  "change; no audio" if str(f.path).lower().endswith(".exr") else
@@ -169,6 +176,12 @@ def fact_lines(f: VideoFacts) -> list[str]:
                  "TIFF or DPX sequence"] if f.bits > 8 else []) + (
                 ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG, "
                  "TIFF or DPX sequence"] if f.alpha else [])
+
+
+#: How ``probe`` says where an image sequence's rate came from.
+_RATE_FROM = {"said": "as --sequence-fps says",
+              "header": "its frames' headers' rate; --sequence-fps gives another",
+              "default": "it stores no rate: --sequence-fps gives it"}
 
 
 def _dpx_kind(f: VideoFacts) -> str:

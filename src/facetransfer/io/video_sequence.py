@@ -6,10 +6,10 @@ its frames are PNG, JPEG, TIFF or BMP files (8 or 16 bits a channel, grey or col
 channel is set aside), given as ``(H, W, 3) uint8`` RGB (:mod:`facetransfer.io.frame_file`), or
 OpenEXR files of scene-linear floats, shown through the sRGB curve (:mod:`facetransfer.io.exr`),
 or DPX files of log, linear or video code values (:mod:`facetransfer.io.dpx`).
-A sequence
-stores no frame rate: it is read at :data:`DEFAULT_SEQUENCE_FPS` unless
-``FACETRANSFER_SEQUENCE_FPS`` (the commands' ``--sequence-fps``) gives another. It has no audio,
-no fields and square pixels.
+A sequence is read at the rate ``FACETRANSFER_SEQUENCE_FPS`` (the commands' ``--sequence-fps``)
+gives, else at the one its first frame's header names (DPX, OpenEXR:
+:mod:`facetransfer.io.plate_time`, which also gives its start timecode), else at
+:data:`DEFAULT_SEQUENCE_FPS`. It has no audio, no fields and square pixels.
 """
 
 from __future__ import annotations
@@ -63,7 +63,13 @@ class Sequence:
     size : (int, int)
         ``(width, height)`` of its first frame.
     fps : float
-        The rate it is read at (:func:`sequence_fps`).
+        The rate it is read at: ``--sequence-fps`` (:func:`sequence_fps`) where given, else
+        its first frame's header's (a DPX or OpenEXR frame's:
+        :func:`facetransfer.io.plate_time.header_time`), else :data:`DEFAULT_SEQUENCE_FPS`.
+    timecode : str or None
+        Its first frame's SMPTE timecode, where its header has one (DPX, OpenEXR).
+    rate_from : str
+        Where :attr:`fps` came from: ``"said"``, ``"header"`` or ``"default"``.
     """
 
     pattern: Path
@@ -71,6 +77,8 @@ class Sequence:
     n_frames: int
     size: tuple[int, int]
     fps: float
+    timecode: str | None = None
+    rate_from: str = "default"
 
     def file(self, i: int) -> Path:
         """The file of frame ``i`` (0-based: the sequence's ``first + i``)."""
@@ -152,14 +160,16 @@ def sequence_files(pattern) -> dict[int, Path]:
 
 def sequence_stamp(path) -> str:
     """An image sequence's identity on disk and its rate: its folder, and every frame file's
-    name, size and modification time (a frame replaced, added or removed changes it)."""
+    name, size and modification time (a frame replaced, added or removed changes it), and
+    the rate said (``?`` where none is: its frames' headers' rate, or the default)."""
     h = hashlib.sha256()
     files = sequence_files(Path(path))
     for k in sorted(files):
         st = files[k].stat()
         h.update(f"{files[k].name}|{st.st_size}|{st.st_mtime_ns};".encode())
     folder = percent_pattern(path).parent.resolve()
-    return f"{folder}/{Path(path).name}|{len(files)}|{h.hexdigest()[:24]}|{sequence_fps()}"
+    said = "" if os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip() else "?"  # else the header's
+    return f"{folder}/{Path(path).name}|{len(files)}|{h.hexdigest()[:24]}|{sequence_fps()}{said}"
 
 
 def open_sequence(path) -> Sequence:
@@ -200,11 +210,29 @@ def _opened(path: str, stamp: str) -> Sequence:
                          f"({_numbered(p, first + n).name}): frames {_span(first, first + n - 1)}"
                          f" and {_span(after, end)} are present; a sequence runs without gaps")
     image = read_frame_file(files[first], p)
+    fps, rate_from, timecode = _rate_and_timecode(p, files[first])
+    return Sequence(p, first, n, (image.shape[1], image.shape[0]), fps, timecode, rate_from)
+
+
+def _rate_and_timecode(pattern: Path, first: Path) -> tuple[float, str, str | None]:
+    """The rate a sequence is read at, where that rate came from (:attr:`Sequence.rate_from`),
+    and its start timecode: what ``--sequence-fps`` says, else what its first frame's header
+    says (:func:`facetransfer.io.plate_time.header_time`), else the default, said once."""
+    from .plate_time import header_time
+
+    said = bool(os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip())
     fps = sequence_fps()
-    if not os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip():
-        log.warning("%s: an image sequence stores no frame rate; read at %g fps "
-                    "(--sequence-fps to give its own)", p, fps)
-    return Sequence(p, first, n, (image.shape[1], image.shape[0]), fps)
+    header = header_time(first)
+    if said and header.fps is not None and abs(header.fps - fps) > 1e-3:
+        log.warning("%s: its frames' headers say %g fps; read at %g fps as --sequence-fps "
+                    "says", pattern, header.fps, fps)
+    if said:
+        return fps, "said", header.timecode
+    if header.fps is not None:
+        return header.fps, "header", header.timecode
+    log.warning("%s: an image sequence stores no frame rate; read at %g fps "
+                "(--sequence-fps to give its own)", pattern, fps)
+    return fps, "default", header.timecode
 
 
 def _span(a: int, b: int) -> str:

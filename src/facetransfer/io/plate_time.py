@@ -1,0 +1,215 @@
+"""What a plate's frame files say of time: the frame rate and SMPTE timecode in the header of a
+DPX or OpenEXR frame, read where a plate is opened and written where a sequence is made.
+
+A film scan, a conform or a compositing package stores in each DPX frame the frame rate (the
+film header's "frame rate of original", else the television header's temporal sampling rate:
+SMPTE 268M) and the frame's SMPTE 12M timecode; in each OpenEXR frame the ``framesPerSecond``
+and ``timeCode`` attributes. A sequence of such frames is read at its header's rate, not at
+the default for sequences that store none (:mod:`facetransfer.io.video_sequence`), and starts
+at its first frame's timecode, which results and exports carry as they carry a video's
+(:func:`facetransfer.io.video_display.timecode_of`). A DPX or OpenEXR sequence written from
+another target gets the rate and each frame's timecode (:func:`frame_time`).
+
+A timecode is written as ffmpeg writes one: ``HH:MM:SS:FF``, or ``HH:MM:SS;FF`` when it counts
+drop-frame (at 29.97 and 59.94 frames a second two or four frame numbers are skipped at the
+start of each minute but every tenth, so that the count keeps to the clock). The header holds
+it packed as SMPTE 12M's 32-bit word: binary-coded decimal digits, frames in the low byte, the
+drop-frame flag in bit 6.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from dataclasses import dataclass
+from fractions import Fraction
+from pathlib import Path
+
+__all__ = ["FrameTime", "header_time", "timecode_text", "timecode_word", "timecode_after",
+           "frame_time", "rate_fraction", "usable_rate"]
+
+_TIMECODE = re.compile(r"(\d{2}):(\d{2}):(\d{2})([:;])(\d{2})")
+#: The digit fields of SMPTE 12M's time word: (shift, mask) of hours, minutes, seconds, frames
+#: (each byte's tens in its upper bits: 2, 3, 3 and 2 of them).
+_FIELDS = ((24, 0x3F), (16, 0x7F), (8, 0x7F), (0, 0x3F))
+_DROP_BIT = 1 << 6
+
+
+@dataclass(frozen=True)
+class FrameTime:
+    """A frame's rate and timecode as its file's header says them.
+
+    Attributes
+    ----------
+    fps : float or None
+        Frames a second (None: the header names none, or not a usable one).
+    timecode : str or None
+        The frame's ``HH:MM:SS:FF`` (``;`` before the frames of a drop-frame count).
+    """
+
+    fps: float | None = None
+    timecode: str | None = None
+
+
+def usable_rate(value) -> float | None:
+    """``value`` as frames a second where it is one a header means (finite, in (0, 1000]);
+    else None (an unset DPX field reads as NaN or as all bits set)."""
+    try:
+        fps = float(value)
+    except (TypeError, ValueError):
+        return None
+    return fps if math.isfinite(fps) and 0 < fps <= 1000 else None
+
+
+def timecode_text(word: int) -> str | None:
+    """The ``HH:MM:SS:FF`` (``;FF`` of a drop-frame count) of SMPTE 12M's packed time word
+    (binary-coded decimal, as DPX and OpenEXR store it); None where a digit or a field is out
+    of range (an unset field: all bits set)."""
+    word = int(word) & 0xFFFFFFFF
+    values = []
+    for shift, mask in _FIELDS:
+        byte = (word >> shift) & mask
+        tens, units = byte >> 4, byte & 0xF
+        if units > 9:
+            return None
+        values.append(tens * 10 + units)
+    hh, mm, ss, ff = values
+    if hh > 23 or mm > 59 or ss > 59 or ff > 59:
+        return None
+    return f"{hh:02d}:{mm:02d}:{ss:02d}{';' if word & _DROP_BIT else ':'}{ff:02d}"
+
+
+def timecode_word(timecode: str) -> int:
+    """SMPTE 12M's packed time word of ``HH:MM:SS:FF`` (``;`` sets the drop-frame flag);
+    the inverse of :func:`timecode_text`.
+
+    Raises
+    ------
+    ValueError
+        Not such a timecode (naming it).
+    """
+    m = _TIMECODE.fullmatch(str(timecode).strip())
+    if m is None:
+        raise ValueError(f"timecode {timecode!r} is not HH:MM:SS:FF")
+    hh, mm, ss, sep, ff = m.groups()
+    word = 0
+    for (shift, _), digits in zip(_FIELDS, (hh, mm, ss, ff)):
+        word |= ((int(digits[0]) << 4) | int(digits[1])) << shift
+    return word | (_DROP_BIT if sep == ";" else 0)
+
+
+def _nominal(fps: float) -> int:
+    return max(1, int(round(float(fps))))
+
+
+def _skip(rate: int) -> int:
+    """Frame numbers a drop-frame count skips a minute at the nominal ``rate`` (29.97: 2,
+    59.94: 4; none at any other)."""
+    return {30: 2, 60: 4}.get(rate, 0)
+
+
+def _frames(timecode: str, fps: float) -> tuple[int, bool]:
+    """Frames since midnight that ``timecode`` counts at ``fps``, and whether it drops."""
+    m = _TIMECODE.fullmatch(str(timecode).strip())
+    if m is None:
+        raise ValueError(f"timecode {timecode!r} is not HH:MM:SS:FF")
+    hh, mm, ss, sep, ff = m.groups()
+    rate = _nominal(fps)
+    minutes = int(hh) * 60 + int(mm)
+    count = (minutes * 60 + int(ss)) * rate + int(ff)
+    drop = sep == ";" and _skip(rate) > 0
+    if drop:
+        count -= _skip(rate) * (minutes - minutes // 10)
+    return count, drop
+
+
+def _timecode(count: int, fps: float, drop: bool) -> str:
+    """The timecode of frame ``count`` since midnight (the inverse of :func:`_frames`),
+    wrapping at 24 hours."""
+    rate = _nominal(fps)
+    if drop:
+        skip = _skip(rate)
+        per_ten = 600 * rate - 9 * skip               # frames of ten minutes
+        per_minute = 60 * rate - skip                 # of a minute that drops
+        tens, rest = divmod(count, per_ten)
+        extra = 0 if rest < skip else skip * ((rest - skip) // per_minute)
+        count += skip * 9 * tens + extra
+    day = 24 * 3600 * rate
+    secs, ff = divmod(count % day, rate)
+    mins, ss = divmod(secs, 60)
+    hh, mm = divmod(mins, 60)
+    return f"{hh:02d}:{mm:02d}:{ss:02d}{';' if drop else ':'}{ff:02d}"
+
+
+def timecode_after(timecode: str, frames: int, fps: float) -> str:
+    """The timecode ``frames`` frames after ``timecode`` at ``fps``, counted as it counts
+    (drop-frame at 29.97 and 59.94 where it says so), wrapping at midnight."""
+    count, drop = _frames(timecode, fps)
+    return _timecode(count + int(frames), fps, drop)
+
+
+def frame_time(fps: float | None, start: str | None, index: int) -> FrameTime:
+    """Frame ``index``'s :class:`FrameTime` of a sequence written at ``fps`` that starts at the
+    timecode ``start`` (None: no timecode)."""
+    if start is None or fps is None:
+        return FrameTime(usable_rate(fps), None)
+    return FrameTime(usable_rate(fps), timecode_after(start, index, fps))
+
+
+def rate_fraction(fps: float) -> Fraction:
+    """``fps`` as OpenEXR's rational ``framesPerSecond``: the NTSC rates as n * 1000 / 1001
+    (23.976 -> 24000/1001), any other as the nearest fraction of denominator at most 1001."""
+    for nominal in (24, 30, 48, 60, 120):
+        if abs(fps - nominal * 1000 / 1001) < 5e-4:
+            return Fraction(nominal * 1000, 1001)
+    return Fraction(float(fps)).limit_denominator(1001)
+
+
+def header_time(path) -> FrameTime:
+    """The :class:`FrameTime` a frame file's header says (a DPX or OpenEXR frame's; of any
+    other kind of file, or one whose header cannot be read, none)."""
+    suffix = Path(path).suffix.lower()
+    try:
+        if suffix == ".dpx":
+            return _dpx_time(path)
+        if suffix == ".exr":
+            return _exr_time(path)
+    except (OSError, ValueError, TypeError, AttributeError):
+        return FrameTime()
+    return FrameTime()
+
+
+def _dpx_time(path) -> FrameTime:
+    """A DPX header's rate (the film header's, else the television header's: ffmpeg's order)
+    and timecode, as OpenImageIO reads them."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        oiio.geterror()
+        return FrameTime()
+    try:
+        spec = inp.spec()
+        fps = usable_rate(spec.getattribute("dpx:FrameRate")) or \
+            usable_rate(spec.getattribute("dpx:TemporalFrameRate"))
+        word = spec.getattribute("smpte:TimeCode")
+    finally:
+        inp.close()
+    return FrameTime(fps, None if word is None else timecode_text(int(word[0])))
+
+
+def _exr_time(path) -> FrameTime:
+    """An OpenEXR header's ``framesPerSecond`` and ``timeCode`` (its first part)."""
+    import OpenEXR
+
+    with OpenEXR.File(str(path), header_only=True) as f:   # read before it closes
+        header = f.header()
+        rate, tc = header.get("framesPerSecond"), header.get("timeCode")
+        fields = None if tc is None else (tc.hours, tc.minutes, tc.seconds, tc.frame,
+                                          bool(tc.dropFrame))
+    fps = usable_rate(float(rate)) if rate is not None else None
+    if fields is None or not all(0 <= v < 100 for v in fields[:4]):
+        return FrameTime(fps, None)
+    text = "{:02d}:{:02d}:{:02d}{}{:02d}".format(*fields[:3], ";" if fields[4] else ":",
+                                                fields[3])
+    return FrameTime(fps, timecode_text(timecode_word(text)))
