@@ -2,13 +2,16 @@
 
 :func:`extract_src` writes a git revision's ``src`` folder to a temporary folder (``git
 archive``); a benchmark then runs its worker in a fresh process with that folder first on
-``PYTHONPATH`` (``bench_rewrite_frame.py``, ``bench_jaw_seam.py``).
+``PYTHONPATH`` (``bench_rewrite_frame.py``, ``bench_jaw_seam.py``), or the command itself
+(:func:`run_command`: ``bench_plate_header.py``, ``bench_primaries.py``).
 """
 
 from __future__ import annotations
 
 import io
+import os
 import subprocess
+import sys
 import tarfile
 import tempfile
 from pathlib import Path
@@ -24,3 +27,17 @@ def extract_src(rev: str, prefix: str = "bench_") -> Path:
     with tarfile.open(fileobj=io.BytesIO(tar)) as t:
         t.extractall(tmp, filter="data")
     return tmp / "src"
+
+
+def run_command(args: list, src: Path | None = None) -> tuple[int, str]:
+    """``facetransfer ARGS --no-progress`` in a fresh process, by this environment's tree or
+    by the tree ``src`` (:func:`extract_src`); its exit status and its error output's end."""
+    env = dict(os.environ)
+    cmd = [str(Path(sys.executable).parent / "facetransfer")]
+    if src is not None:
+        env["PYTHONPATH"] = str(src)
+        cmd = [sys.executable, "-c", "import sys; from facetransfer.cli.main import main; "
+               "sys.exit(main())"]
+    run = subprocess.run(cmd + [str(a) for a in args] + ["--no-progress"], capture_output=True,
+                         text=True, env=env)
+    return run.returncode, run.stderr.strip()[-300:]

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -152,6 +153,34 @@ def test_a_squeezed_clip_is_captured_as_the_square_one(arkit_model, data_dir, tm
     d = tr.landmarks2d - np.stack([to_stored_x(ref.landmarks2d[..., 0], 1.25),
                                    ref.landmarks2d[..., 1]], axis=-1)
     assert np.median(np.abs(d)) < 0.3
+    # the same squeezed frames as a DPX plate whose header says the pixels' 5:4 (an
+    # anamorphic scan's): captured as the video that says it
+    plate = _squeezed_plate(squeezed, tmp_path / "plate", 1.25)
+    on_plate = capture_video(plate, arkit_model)
+    assert on_plate.pixel_aspect == 1.25 and on_plate.frame_size == (384, 480)
+    np.testing.assert_allclose(on_plate.blendshapes, tr.blendshapes, atol=1e-6)
+
+
+def _squeezed_plate(video: Path, folder: Path, aspect: float) -> Path:
+    """``video``'s frames as 10-bit DPX files of ITU-R 709 codes (read back as the same
+    levels), the header's pixel aspect ratio ``aspect`` (OpenImageIO's attribute) and rate
+    the video's 30 fps."""
+    import OpenImageIO as oiio
+
+    from facetransfer.io.dpx import DpxImage, write_dpx
+    from facetransfer.io.video import read_video
+
+    folder.mkdir()
+    frames = read_video(video)[0]
+    for i, rgb in enumerate(frames):
+        spec = oiio.ImageSpec(rgb.shape[1], rgb.shape[0], 3, "uint16")
+        spec.attribute("dpx:Transfer", "ITU-R 709-4")
+        spec.attribute("PixelAspectRatio", aspect)
+        spec.attribute("dpx:FrameRate", 30.0)                          # the video's
+        codes = ((rgb.astype(np.uint32) * 1023 * 2 + 255) // 510).astype(np.uint16)
+        write_dpx(folder / f"p.{i:04d}.dpx", DpxImage(codes, 10, "ITU-R 709-4", spec))
+    assert np.array_equal(read_video(folder / "p.%04d.dpx")[0], frames)
+    return folder / "p.%04d.dpx"
 
 
 def test_the_fidelity_judge_sees_a_squeezed_clip_at_its_shape(data_dir, tmp_path):

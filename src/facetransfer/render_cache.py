@@ -181,7 +181,8 @@ def parts_writer(key: str | None, out, fps: float, size: tuple[int, int], n_fram
             first = getattr(video_options, "first_number", None) or 0
             writer = SequenceWriter(parts_folder(key), out, size, n_frames=n_frames,
                                     overwrite=overwrite, first_number=first, fps=fps,
-                                    timecode=getattr(video_options, "timecode", None))
+                                    timecode=getattr(video_options, "timecode", None),
+                                    sar=getattr(video_options, "sar", None))
         else:
             writer = PartsWriter(parts_folder(key), out, fps, size, n_frames=n_frames,
                                  options=video_options, audio_from=audio_from,

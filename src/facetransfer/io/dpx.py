@@ -391,13 +391,14 @@ def graded_codes(image: DpxImage, shown: np.ndarray, rewritten: np.ndarray) -> n
     return out
 
 
-def write_dpx(path, frame, time=None) -> None:
+def write_dpx(path, frame, header=None) -> None:
     """Write a DPX file: a :class:`DpxImage` with its header, or an array as codes of a video
     transfer (ITU-R 709): ``(H, W, 3)`` RGB or ``(H, W, 4)`` RGBA uint8 in 10 bits, or
     uint16 grey ``(H, W)``, RGB or RGBA in 16 (a deep target's values,
-    :mod:`facetransfer.io.plate_depth`). ``time``: the frame's
-    :class:`~facetransfer.io.plate_time.FrameTime`, recorded in a header made here (the film
-    and television headers' frame rates, the timecode); a header given is kept as it is.
+    :mod:`facetransfer.io.plate_depth`). ``header``: the frame's
+    :class:`~facetransfer.io.plate_header.FrameHeader`, recorded in a header made here (the
+    film and television headers' frame rates, the timecode, the pixel aspect); the header of a
+    :class:`DpxImage` is kept as it is.
 
     Raises
     ------
@@ -409,7 +410,7 @@ def write_dpx(path, frame, time=None) -> None:
     if not isinstance(frame, DpxImage):
         frame = _video_codes(np.asarray(frame))
     eight = frame.bits <= 8
-    spec = _new_spec(frame, time) if frame.spec is None else oiio.ImageSpec(frame.spec)
+    spec = _new_spec(frame, header) if frame.spec is None else oiio.ImageSpec(frame.spec)
     spec.set_format(oiio.TypeDesc("uint8" if eight else "uint16"))
     spec.attribute("oiio:BitsPerSample", int(frame.bits))
     data = frame.codes.astype(np.uint8) if eight else _to_16(frame.codes, frame.bits)
@@ -434,23 +435,26 @@ def _video_codes(img: np.ndarray) -> DpxImage:
     return DpxImage(codes, 10, "ITU-R 709-4")
 
 
-def _new_spec(frame: DpxImage, time=None):
+def _new_spec(frame: DpxImage, header=None):
     """The OpenImageIO description of a DPX frame made here: its size, channels, bits and
-    transfer characteristic (the colorimetric one the same), and where ``time`` gives them
-    its frame rate (in the film and the television header) and SMPTE timecode."""
+    transfer characteristic (the colorimetric one the same), and where ``header`` gives them
+    its frame rate (in the film and the television header), SMPTE timecode and pixel
+    aspect."""
     import OpenImageIO as oiio
 
-    from .plate_time import timecode_word
+    from .plate_header import timecode_word
 
     h, w, c = frame.codes.shape
     spec = oiio.ImageSpec(w, h, c, "uint16")
     if frame.transfer:
         spec.attribute("dpx:Transfer", frame.transfer)
         spec.attribute("dpx:Colorimetric", frame.transfer)
-    if time is not None and time.fps is not None:
-        spec.attribute("dpx:FrameRate", float(time.fps))
-        spec.attribute("dpx:TemporalFrameRate", float(time.fps))
-    if time is not None and time.timecode is not None:
+    if header is not None and header.fps is not None:
+        spec.attribute("dpx:FrameRate", float(header.fps))
+        spec.attribute("dpx:TemporalFrameRate", float(header.fps))
+    if header is not None and header.timecode is not None:
         spec.attribute("smpte:TimeCode", oiio.TypeDesc("timecode"),
-                       np.array([timecode_word(time.timecode), 0], np.uint32))
+                       np.array([timecode_word(header.timecode), 0], np.uint32))
+    if header is not None and header.sar is not None:
+        spec.attribute("PixelAspectRatio", header.sar[0] / header.sar[1])
     return spec

@@ -6,7 +6,10 @@ in half or single floats. The tracker, the texture and the rewrite work on displ
 8-bit RGB, so an EXR frame is *shown* through the sRGB transfer curve (IEC 61966-2-1; the
 linear values clipped to [0, 1]: highlights above 1 read as white) to become the frame every
 other module sees (:func:`srgb_encode`); a frame is its display window, a data window cropped
-to the content placed in it on black (:func:`read_exr`).
+to the content placed in it on black (:func:`read_exr`). A plate whose header names other
+primaries than Rec.709's (ACES2065-1 or ACEScg: ``chromaticities``, ``colorInteropID``) is
+brought to Rec.709's by a 3x3 matrix before the curve (:mod:`facetransfer.io.primaries`), so
+that a face is seen, and drawn, in its own colours.
 
 A rewrite written as EXR (``--out out/sh010.%04d.exr``) goes back to linear light. Of an EXR
 plate, a pixel the rewrite left unchanged (``R == T``, ``R`` the rewritten and ``T`` the shown
@@ -14,13 +17,14 @@ pixel: everything outside the face) is the plate's float ``P``, bit for bit, val
 [0, 1] and NaN included; a changed one is ``dec(R + (enc(P) - T))``, ``enc`` the curve before
 rounding and ``dec`` its inverse: the rewrite with the plate's detail finer than an 8-bit level
 kept, or where a channel of ``P`` lies outside [0, 1] (clipped when shown) the rewrite's own
-``dec(R)``, so that a face drawn over a highlight does not glow with it
-(:func:`graded_frame`), in the plate's own pixel type, with its header (timecode,
-chromaticities, compression, every other attribute) and its other channels (alpha, depth) as
-they were (:class:`ExrImage`, :mod:`facetransfer.io.exr_plate`). Of any other target, an EXR
-frame is the rewritten 8-bit frame decoded to half floats, PIZ-compressed (lossless). OpenEXR
-files are read and written by the OpenEXR project's own Python bindings (``OpenEXR``): RGB or
-grey channels, scanline or tiled, the first part of a multi-part file.
+``dec(R)``, so that a face drawn over a highlight does not glow with it (of other primaries,
+all of it in Rec.709's, the changed pixel then brought back: :func:`graded_frame`), in the
+plate's own pixel type, with its header (timecode, chromaticities, compression, every other
+attribute) and its other channels (alpha, depth) as they were (:class:`ExrImage`,
+:mod:`facetransfer.io.exr_plate`). Of any other target, an EXR frame is the rewritten 8-bit
+frame decoded to half floats, PIZ-compressed (lossless). OpenEXR files are read and written by
+the OpenEXR project's own Python bindings (``OpenEXR``): RGB or grey channels, scanline or
+tiled, the first part of a multi-part file.
 """
 
 from __future__ import annotations
@@ -74,8 +78,12 @@ def _half_table() -> np.ndarray:
 
 def shown_frame(image: "ExrImage") -> np.ndarray:
     """``(H, W, 3)`` uint8 RGB: an EXR frame's display window shown through the sRGB curve
-    (:func:`srgb_encode` of :meth:`ExrImage.displayed`; of half floats by a table of every
-    half value, the same levels a fifth of the time)."""
+    (:func:`srgb_encode` of :meth:`ExrImage.displayed`, brought to Rec.709's primaries first
+    where its header names others: :attr:`ExrImage.to_rec709`; of half floats in Rec.709 by a
+    table of every half value, the same levels a fifth of the time)."""
+    matrix = image.to_rec709
+    if matrix is not None:
+        return srgb_encode(image.displayed() @ matrix.T.astype(np.float32))
     if image.rgb.dtype != np.float16:
         return srgb_encode(image.displayed())
     return image.placed(_half_table()[image.rgb.view(np.uint16)])
@@ -122,6 +130,15 @@ class ExrImage:
     @property
     def dtype(self) -> np.dtype:
         return self.rgb.dtype
+
+    @property
+    def to_rec709(self) -> np.ndarray | None:
+        """``(3, 3)``: its RGB to linear Rec.709 where its header names other primaries
+        (``chromaticities``, ``colorInteropID``: ACES2065-1, ACEScg, ...); None where it is
+        Rec.709's own (:func:`facetransfer.io.primaries.to_rec709`)."""
+        from .primaries import named_chromaticities, to_rec709
+
+        return to_rec709(named_chromaticities(self.header))
 
     def displayed(self) -> np.ndarray:
         """``(H, W, 3)`` float32 RGB of the display window: the data window placed in it, on
@@ -237,12 +254,13 @@ def exr_pixel_type(path) -> str:
     return {np.dtype(np.float16): "half", np.dtype(np.float32): "float"}.get(kind, "uint")
 
 
-def write_exr(path, rgb, time=None) -> None:
+def write_exr(path, rgb, header=None) -> None:
     """Write an OpenEXR file: an :class:`ExrImage` with its header and other channels, or
     ``(H, W, 3)`` linear RGB, PIZ-compressed: float32 as single floats, float16 as half floats,
     uint8 (sRGB) decoded (:func:`srgb_decode`) to half floats (which hold each of its 256
-    levels exactly enough to encode back to it), with ``time`` (the frame's
-    :class:`~facetransfer.io.plate_time.FrameTime`) as ``framesPerSecond`` and ``timeCode``.
+    levels exactly enough to encode back to it), with ``header`` (the frame's
+    :class:`~facetransfer.io.plate_header.FrameHeader`) as ``framesPerSecond``, ``timeCode``
+    and ``pixelAspectRatio``.
 
     Raises
     ------
@@ -252,48 +270,54 @@ def write_exr(path, rgb, time=None) -> None:
     import OpenEXR
 
     if isinstance(rgb, ExrImage):
-        header = {k: v for k, v in rgb.header.items() if k not in _DERIVED}
+        attributes = {k: v for k, v in rgb.header.items() if k not in _DERIVED}
         channels = {"RGB": np.ascontiguousarray(rgb.rgb), **rgb.other}
     else:
         lin = srgb_decode(rgb).astype(np.float16) if rgb.dtype == np.uint8 else \
             np.ascontiguousarray(rgb, np.float16 if rgb.dtype == np.float16 else np.float32)
-        header = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage,
-                  **_time_attributes(time)}
+        attributes = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage,
+                      **_header_attributes(header)}
         channels = {"RGB": lin}
     try:
-        with OpenEXR.File(header, channels) as f:
+        with OpenEXR.File(attributes, channels) as f:
             f.write(str(path))
     except Exception as exc:  # noqa: BLE001 (the bindings raise several kinds)
         raise ValueError(f"cannot write the OpenEXR file {path} ({exc})") from None
 
 
-def _time_attributes(time) -> dict:
-    """OpenEXR's ``framesPerSecond`` and ``timeCode`` of a
-    :class:`~facetransfer.io.plate_time.FrameTime` (those it gives)."""
+def _header_attributes(said) -> dict:
+    """OpenEXR's ``framesPerSecond``, ``timeCode`` and ``pixelAspectRatio`` of a
+    :class:`~facetransfer.io.plate_header.FrameHeader` (those it gives)."""
     import OpenEXR
 
-    from .plate_time import rate_fraction
+    from .plate_header import rate_fraction
 
     out = {}
-    if time is not None and time.fps is not None:
-        out["framesPerSecond"] = rate_fraction(time.fps)
-    if time is not None and time.timecode is not None:
+    if said is None:
+        return out
+    if said.fps is not None:
+        out["framesPerSecond"] = rate_fraction(said.fps)
+    if said.timecode is not None:
         tc = OpenEXR.TimeCode()
-        hh, mm, rest = time.timecode.split(":", 2)
-        ss, ff = rest.replace(";", ":").split(":")
-        tc.hours, tc.minutes, tc.seconds, tc.frame = int(hh), int(mm), int(ss), int(ff)
-        tc.dropFrame = ";" in time.timecode
+        hh, mm, ss, ff = (int(v) for v in said.timecode.replace(";", ":").split(":"))
+        tc.hours, tc.minutes, tc.seconds, tc.frame = hh, mm, ss, ff
+        tc.dropFrame = ";" in said.timecode
         out["timeCode"] = tc
+    if said.sar is not None:
+        out["pixelAspectRatio"] = said.sar[0] / said.sar[1]
     return out
 
 
-def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
+def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray,
+                 to_rec709: np.ndarray | None = None) -> np.ndarray:
     """The rewritten frame in the plate's linear light: ``plate`` (H, W, 3) float32 where
     ``rewritten`` equals ``shown`` (both (H, W, 3) uint8, the plate shown through
     :func:`srgb_encode` and its rewrite), else the rewritten level plus the plate's part
     below a level (its unrounded level less ``shown``, at most half a level), decoded; in a
     channel whose plate value lies outside [0, 1], ``rewritten`` decoded
-    (:func:`srgb_decode`).
+    (:func:`srgb_decode`). A plate of other primaries (``to_rec709``, its RGB to Rec.709's:
+    :attr:`ExrImage.to_rec709`) is graded in Rec.709 and its changed pixels brought back by
+    the inverse matrix.
 
     Returns
     -------
@@ -302,7 +326,12 @@ def graded_frame(plate: np.ndarray, shown: np.ndarray, rewritten: np.ndarray) ->
     out = np.array(plate, np.float32, copy=True)
     changed = np.any(rewritten != shown, axis=2)
     p = out[changed]
+    if to_rec709 is not None:
+        p = p @ to_rec709.T.astype(np.float32)
     detail = np.where((p >= 0.0) & (p <= 1.0), _curve(p) - shown[changed], 0.0)
-    out[changed] = _uncurve(rewritten[changed] + detail)
+    new = _uncurve(rewritten[changed] + detail)
+    if to_rec709 is not None:
+        new = new @ np.linalg.inv(to_rec709).T.astype(np.float32)
+    out[changed] = new
     return out
 

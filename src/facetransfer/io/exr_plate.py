@@ -32,7 +32,8 @@ class PlateGrading:
         """The plate's frame ``i`` with its RGB graded, in its pixel type, with its header
         and its other channels (alpha ...) as they were."""
         plate = read_exr_image(self.sequence.file(i))
-        return plate.with_rgb(graded_frame(plate.displayed(), shown, rewritten))
+        return plate.with_rgb(graded_frame(plate.displayed(), shown, rewritten,
+                                           plate.to_rec709))
 
 
 def plate_grading(out, target) -> PlateGrading | None:

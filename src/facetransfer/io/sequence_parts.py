@@ -27,7 +27,7 @@ import numpy as np
 
 from ..errors import OutputError, VideoError
 from .atomic import write_bytes_atomic, write_text_atomic
-from .plate_time import frame_time
+from .plate_header import written_header
 from .video import (WrittenVideo, check_video_output, fits_output, place_sequence,
                     save_frame_image)
 from .video_parts import _LOCK, PartsBusy, _lock
@@ -100,18 +100,18 @@ class SequenceWriter:
     overwrite : bool
     first_number : int
         Number of its first frame beside the pattern (in the folder they count from 0).
-    fps, timecode : float and str, optional
-        Its rate and first frame's timecode, recorded in each DPX or OpenEXR frame made here
-        (:func:`facetransfer.io.plate_time.frame_time`).
+    fps, timecode, sar : float, str and (int, int), optional
+        Its rate, first frame's timecode and pixel aspect, recorded in each DPX or OpenEXR
+        frame made here (:func:`facetransfer.io.plate_header.written_header`).
     """
 
     def __init__(self, folder: str | os.PathLike, out: str | os.PathLike,
                  size: tuple[int, int], *, n_frames: int, overwrite: bool = False,
                  first_number: int = 0, fps: float | None = None,
-                 timecode: str | None = None) -> None:
+                 timecode: str | None = None, sar: tuple[int, int] | None = None) -> None:
         self.output = check_video_output(out, None, overwrite=overwrite)
         self.first_number = int(first_number)
-        self.fps, self.timecode = fps, timecode
+        self.fps, self.timecode, self.sar = fps, timecode, sar
         if self.output.kind != "images":
             raise VideoError(f"{out}: not an image sequence (a video is written in parts by "
                              "facetransfer.io.video_parts)")
@@ -147,7 +147,7 @@ class SequenceWriter:
         tmp = self.folder / f".{name}.tmp"
         try:
             save_frame_image(frame, tmp, suffix=Path(name).suffix,
-                             time=frame_time(self.fps, self.timecode, i))
+                             header=written_header(self.fps, self.timecode, i, self.sar))
             os.replace(tmp, self.folder / name)
             with open(self.folder / MARKS, "ab") as fh:  # after the frame: it counts from now
                 fh.write(b"1" if marked else b"0")

@@ -141,27 +141,28 @@ _FRAME_SAVE = {".png": {"compress_level": 1}, ".jpg": {"quality": 95},
 
 
 def save_frame_image(rgb: np.ndarray, path: str | os.PathLike, *,
-                     suffix: str | None = None, time=None) -> None:
+                     suffix: str | None = None, header=None) -> None:
     """Write one frame of an image sequence, ``(H, W, 3) uint8`` RGB (or ``(H, W, 4)`` RGBA of a
     PNG or TIFF), to ``path`` in the file type of ``suffix`` (default: ``path``'s own; one of
     :data:`IMAGE_SUFFIXES`); a PNG or TIFF frame may also be uint16, grey ``(H, W)``, RGB or
     RGBA (:mod:`facetransfer.io.plate_depth`), an OpenEXR frame linear float RGB or an
     :class:`~facetransfer.io.exr.ExrImage` (:func:`facetransfer.io.exr.write_exr`), a DPX
     frame a :class:`~facetransfer.io.dpx.DpxImage` (:func:`facetransfer.io.dpx.write_dpx`).
-    ``time``: the frame's :class:`~facetransfer.io.plate_time.FrameTime`, recorded in a DPX
-    or OpenEXR frame made here (a plate's frame keeps its own header)."""
+    ``header``: the frame's :class:`~facetransfer.io.plate_header.FrameHeader` (rate,
+    timecode, pixel aspect), recorded in a DPX or OpenEXR frame made here (a plate's frame
+    keeps its own header)."""
     from PIL import Image
 
     suffix = (suffix or Path(path).suffix).lower()
     if suffix == ".exr":
         from .exr import write_exr
 
-        write_exr(path, rgb, time)
+        write_exr(path, rgb, header)
         return
     if suffix == ".dpx":
         from .dpx import write_dpx
 
-        write_dpx(path, rgb, time)
+        write_dpx(path, rgb, header)
         return
     if rgb.dtype == np.uint16:
         _save_deep(rgb, path, suffix)
@@ -583,12 +584,12 @@ class VideoWriter:
         self.n_frames += 1
 
     def _write_image(self, img: np.ndarray) -> None:
-        from .plate_time import frame_time
+        from .plate_header import written_header
 
         f = self._tmpdir / (self.path.name % self.n_frames)
         try:
-            save_frame_image(img, f, time=frame_time(self.fps, self.options.timecode,
-                                                     self.n_frames))
+            save_frame_image(img, f, header=written_header(
+                self.fps, self.options.timecode, self.n_frames, self.options.sar))
         except (OSError, ValueError) as exc:  # full disk, unwritable folder, unknown format
             raise VideoError(f"cannot write frame {f.name} of {self.path}: {exc}") from None
 

@@ -110,7 +110,8 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
     W, H = info.size
     if is_sequence(path):
         seq = open_sequence(path)
-        return VideoFacts(str(path), "image sequence", (W, H), (W, H), (1, 1), float(info.fps),
+        return VideoFacts(str(path), "image sequence", (W, H), (shown_width(W, info.sar), H),
+                          info.sar, float(info.fps),
                           int(info.n_frames), False, float(info.n_frames / info.fps), None,
                           "OpenImageIO" if str(path).lower().endswith(".dpx") else "OpenCV", True,
                           ColourTags(), None, seq.first, timecode=seq.timecode,
@@ -161,9 +162,7 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 f"({_RATE_FROM[f.rate_from or 'default']})" + (
                     "" if f.timecode is None else
                     f"; timecode {f.timecode} (the results start at it)"),
-                ("  OpenEXR, scene-linear: shown through the sRGB curve (above 1 as white) "
-                 "to be tracked; a rewrite written as .exr keeps every float it does not "
-                 "change; no audio" if str(f.path).lower().endswith(".exr") else
+                (f"  {_exr_kind(f)}" if str(f.path).lower().endswith(".exr") else
                  f"  {_dpx_kind(f)}" if str(f.path).lower().endswith(".dpx") else
                  f"  {_image_kind(f)}; no audio")]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
@@ -182,6 +181,26 @@ def fact_lines(f: VideoFacts) -> list[str]:
 _RATE_FROM = {"said": "as --sequence-fps says",
               "header": "its frames' headers' rate; --sequence-fps gives another",
               "default": "it stores no rate: --sequence-fps gives it"}
+
+
+def _exr_kind(f: VideoFacts) -> str:
+    """What an OpenEXR plate's frames hold: their primaries where not Rec.709's
+    (:mod:`facetransfer.io.primaries`), and what a rewrite keeps."""
+    from .exr import read_exr_image
+    from .primaries import named_chromaticities
+
+    image = read_exr_image(open_sequence(f.path).file(0))
+    primaries = ""
+    if image.to_rec709 is not None:
+        import OpenEXR
+
+        chroma = named_chromaticities(image.header)
+        name = getattr(OpenEXR, "chromaticitiesToColorInteropID", lambda _: None)(chroma)
+        primaries = (f" in the primaries {name or 'its header names'} (brought to Rec.709's "
+                     "first)")
+    return (f"OpenEXR, scene-linear{primaries}: shown through the sRGB curve (above 1 as "
+            "white) to be tracked; a rewrite written as .exr keeps every float it does not "
+            "change; no audio")
 
 
 def _dpx_kind(f: VideoFacts) -> str:

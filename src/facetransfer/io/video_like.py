@@ -31,7 +31,8 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     BT.2020-tagged frames by other coefficients); and of an interlaced video the field shown
     first (H.264 and ProRes; warned of once for H.265, which writes progressive frames). Of an
     image sequence (:mod:`facetransfer.io.video_sequence`) its first frame number, for an
-    output sequence numbered as it is, and its first frame's header's timecode; of a video with a start timecode (a camera's, an
+    output sequence numbered as it is, and its first frame's header's timecode and pixel aspect
+    ratio; of a video with a start timecode (a camera's, an
     editor's), that timecode, where ``options`` give none (:attr:`VideoOptions.timecode`: the
     rewrite starts at its first frame). None or not a video: ``options`` as they are. A
     ``video`` with an alpha channel is warned of once unless the output ``out`` (given by a
@@ -55,6 +56,8 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
             options = replace(options, first_number=seq.first)
         if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
             options = replace(options, timecode=seq.timecode)
+        if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
+            options = replace(options, sar=seq.sar)
         return options
     if video is None or not Path(video).is_file():
         return options

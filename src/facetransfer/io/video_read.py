@@ -131,7 +131,7 @@ def _video_info(path) -> VideoInfo:
 
     if is_sequence(path):
         seq = open_sequence(path)
-        return VideoInfo(Path(path), seq.fps, seq.n_frames, seq.size)
+        return VideoInfo(Path(path), seq.fps, seq.n_frames, seq.size, seq.sar)
     cap = _open(path)
     _warn_frame_of_sequence(Path(path))
     try:

@@ -8,8 +8,9 @@ OpenEXR files of scene-linear floats, shown through the sRGB curve (:mod:`facetr
 or DPX files of log, linear or video code values (:mod:`facetransfer.io.dpx`).
 A sequence is read at the rate ``FACETRANSFER_SEQUENCE_FPS`` (the commands' ``--sequence-fps``)
 gives, else at the one its first frame's header names (DPX, OpenEXR:
-:mod:`facetransfer.io.plate_time`, which also gives its start timecode), else at
-:data:`DEFAULT_SEQUENCE_FPS`. It has no audio, no fields and square pixels.
+:mod:`facetransfer.io.plate_header`, which also gives its start timecode and its pixels'
+aspect ratio: an anamorphic plate's), else at :data:`DEFAULT_SEQUENCE_FPS`. It has no audio
+and no fields; its pixels are square unless its header says otherwise.
 """
 
 from __future__ import annotations
@@ -65,11 +66,14 @@ class Sequence:
     fps : float
         The rate it is read at: ``--sequence-fps`` (:func:`sequence_fps`) where given, else
         its first frame's header's (a DPX or OpenEXR frame's:
-        :func:`facetransfer.io.plate_time.header_time`), else :data:`DEFAULT_SEQUENCE_FPS`.
+        :func:`facetransfer.io.plate_header.frame_header`), else :data:`DEFAULT_SEQUENCE_FPS`.
     timecode : str or None
         Its first frame's SMPTE timecode, where its header has one (DPX, OpenEXR).
     rate_from : str
         Where :attr:`fps` came from: ``"said"``, ``"header"`` or ``"default"``.
+    sar : (int, int)
+        Its pixels' aspect ratio, as its first frame's header says it (an anamorphic plate's
+        2:1; square where none is said).
     """
 
     pattern: Path
@@ -79,6 +83,7 @@ class Sequence:
     fps: float
     timecode: str | None = None
     rate_from: str = "default"
+    sar: tuple[int, int] = (1, 1)
 
     def file(self, i: int) -> Path:
         """The file of frame ``i`` (0-based: the sequence's ``first + i``)."""
@@ -209,30 +214,31 @@ def _opened(path: str, stamp: str) -> Sequence:
         raise VideoError(f"image sequence {p}: frame {first + n} is missing "
                          f"({_numbered(p, first + n).name}): frames {_span(first, first + n - 1)}"
                          f" and {_span(after, end)} are present; a sequence runs without gaps")
+    from .plate_header import frame_header
+
     image = read_frame_file(files[first], p)
-    fps, rate_from, timecode = _rate_and_timecode(p, files[first])
-    return Sequence(p, first, n, (image.shape[1], image.shape[0]), fps, timecode, rate_from)
+    header = frame_header(files[first])
+    fps, rate_from = _rate(p, header)
+    return Sequence(p, first, n, (image.shape[1], image.shape[0]), fps, header.timecode,
+                    rate_from, header.sar or (1, 1))
 
 
-def _rate_and_timecode(pattern: Path, first: Path) -> tuple[float, str, str | None]:
-    """The rate a sequence is read at, where that rate came from (:attr:`Sequence.rate_from`),
-    and its start timecode: what ``--sequence-fps`` says, else what its first frame's header
-    says (:func:`facetransfer.io.plate_time.header_time`), else the default, said once."""
-    from .plate_time import header_time
-
+def _rate(pattern: Path, header) -> tuple[float, str]:
+    """The rate a sequence is read at and where it came from (:attr:`Sequence.rate_from`):
+    what ``--sequence-fps`` says, else what its first frame's ``header`` says
+    (:class:`facetransfer.io.plate_header.FrameHeader`), else the default, said once."""
     said = bool(os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip())
     fps = sequence_fps()
-    header = header_time(first)
     if said and header.fps is not None and abs(header.fps - fps) > 1e-3:
         log.warning("%s: its frames' headers say %g fps; read at %g fps as --sequence-fps "
                     "says", pattern, header.fps, fps)
     if said:
-        return fps, "said", header.timecode
+        return fps, "said"
     if header.fps is not None:
-        return header.fps, "header", header.timecode
+        return header.fps, "header"
     log.warning("%s: an image sequence stores no frame rate; read at %g fps "
                 "(--sequence-fps to give its own)", pattern, fps)
-    return fps, "default", header.timecode
+    return fps, "default"
 
 
 def _span(a: int, b: int) -> str:

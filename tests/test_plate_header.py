@@ -1,4 +1,4 @@
-"""A plate's time (facetransfer.io.plate_time): the frame rate and SMPTE timecode in a DPX or
+"""A plate's time (facetransfer.io.plate_header): the frame rate and SMPTE timecode in a DPX or
 OpenEXR frame's header, read where the plate is opened (its rate, its start timecode carried
 by the results and the exports) and written into the DPX and OpenEXR frames of a sequence made
 from another target (its rate, each frame's timecode from the target's start on)."""
@@ -16,7 +16,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from facetransfer.io.plate_time import (FrameTime, frame_time, header_time,  # noqa: E402
+from facetransfer.io.plate_header import (FrameHeader, written_header, frame_header,  # noqa: E402
                                         rate_fraction, timecode_after, timecode_text,
                                         timecode_word)
 from facetransfer.io.video_display import timecode_seconds  # noqa: E402
@@ -27,9 +27,13 @@ TIMECODES = ["00:00:00:00", "01:00:00:07", "10:59:59:24", "23:59:59:29", "13:45:
              "00:01:00;02"]
 
 
-def _exr(path: Path, timecode: str | None = None, fps: Fraction | None = None) -> None:
-    """A 4x4 OpenEXR frame whose header holds ``timecode`` (written field by field through
-    OpenEXR's own ``TimeCode``) and ``fps``."""
+def _exr(path: Path, timecode: str | None = None, fps: Fraction | None = None,
+         aspect: float | None = None, rgb: np.ndarray | None = None) -> None:
+    """An OpenEXR frame (4x4 black, or the sRGB frame ``rgb`` in linear half floats) whose
+    header holds ``timecode`` (written field by field through OpenEXR's own ``TimeCode``),
+    ``fps`` and the pixel aspect ratio ``aspect``."""
+    from facetransfer.io.exr import srgb_decode
+
     import OpenEXR
 
     header = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage}
@@ -41,14 +45,19 @@ def _exr(path: Path, timecode: str | None = None, fps: Fraction | None = None) -
         header["timeCode"] = tc
     if fps is not None:
         header["framesPerSecond"] = fps
-    with OpenEXR.File(header, {"RGB": np.zeros((4, 4, 3), np.float16)}) as f:
+    if aspect is not None:
+        header["pixelAspectRatio"] = float(aspect)
+    pixels = np.zeros((4, 4, 3), np.float16) if rgb is None else \
+        srgb_decode(rgb).astype(np.float16)
+    with OpenEXR.File(header, {"RGB": pixels}) as f:
         f.write(str(path))
 
 
 def _dpx(path: Path, rgb: np.ndarray | None = None, *, word: int | None = None,
-         film: float | None = None, tv: float | None = None) -> None:
-    """A 10-bit DPX frame written by OpenImageIO with the timecode ``word`` and the film and
-    television headers' frame rates given."""
+         film: float | None = None, tv: float | None = None, aspect: float | None = None
+         ) -> None:
+    """A 10-bit DPX frame written by OpenImageIO with the timecode ``word``, the film and
+    television headers' frame rates and the pixel aspect ratio given."""
     import OpenImageIO as oiio
 
     rgb = np.zeros((8, 8, 3), np.uint8) if rgb is None else rgb
@@ -58,9 +67,10 @@ def _dpx(path: Path, rgb: np.ndarray | None = None, *, word: int | None = None,
     if word is not None:
         spec.attribute("smpte:TimeCode", oiio.TypeDesc("timecode"),
                        np.array([word, 0], np.uint32))
-    for name, fps in (("dpx:FrameRate", film), ("dpx:TemporalFrameRate", tv)):
-        if fps is not None:
-            spec.attribute(name, float(fps))
+    for name, value in (("dpx:FrameRate", film), ("dpx:TemporalFrameRate", tv),
+                        ("PixelAspectRatio", aspect)):
+        if value is not None:
+            spec.attribute(name, float(value))
     out = oiio.ImageOutput.create(str(path))
     assert out.open(str(path), spec)
     assert out.write_image((rgb.astype(np.uint16) * 257).astype(np.uint16))
@@ -86,13 +96,13 @@ def test_timecode_words_are_packed_as_openexr_and_openimageio_pack_them(tc, tmp_
     _exr(tmp_path / "t.exr", tc)
     assert _oiio_word(tmp_path / "t.exr") == timecode_word(tc)
     assert timecode_text(timecode_word(tc)) == tc
-    assert header_time(tmp_path / "t.exr") == FrameTime(None, tc)
+    assert frame_header(tmp_path / "t.exr") == FrameHeader(None, tc)
     if ";" not in tc:
         _dpx(tmp_path / "t.dpx", word=timecode_word(tc))
         inp = oiio.ImageInput.open(str(tmp_path / "t.dpx"))
         assert inp.spec().get_string_attribute("dpx:TimeCode") == tc
         inp.close()
-        assert header_time(tmp_path / "t.dpx").timecode == tc
+        assert frame_header(tmp_path / "t.dpx").timecode == tc
 
 
 def test_words_that_are_not_timecodes_read_as_none():
@@ -133,13 +143,18 @@ def test_rates_are_written_as_fractions_and_read_from_either_header(tmp_path):
     _dpx(tmp_path / "f.dpx", film=24.0, tv=25.0)              # ffmpeg's order: film first
     _dpx(tmp_path / "t.dpx", tv=50.0)
     _dpx(tmp_path / "n.dpx", film=0.0)
-    assert [header_time(tmp_path / f"{n}.dpx").fps for n in "ftn"] == [24.0, 50.0, None]
+    assert [frame_header(tmp_path / f"{n}.dpx").fps for n in "ftn"] == [24.0, 50.0, None]
     _exr(tmp_path / "e.exr", fps=Fraction(30000, 1001))
-    assert header_time(tmp_path / "e.exr").fps == pytest.approx(30000 / 1001)
+    assert frame_header(tmp_path / "e.exr").fps == pytest.approx(30000 / 1001)
     (tmp_path / "x.dpx").write_bytes(b"SDPX" + b"\0" * 40)       # damaged: nothing said
-    assert header_time(tmp_path / "x.dpx") == FrameTime()
-    assert frame_time(25.0, "00:00:59:24", 1) == FrameTime(25.0, "00:01:00:00")
-    assert frame_time(25.0, None, 3) == FrameTime(25.0, None)
+    assert frame_header(tmp_path / "x.dpx") == FrameHeader()
+    _dpx(tmp_path / "a.dpx", aspect=2.0)                      # an anamorphic scan's 2x
+    _dpx(tmp_path / "s.dpx", aspect=1.0)
+    _exr(tmp_path / "d.exr", aspect=10 / 11)                  # DV's
+    assert [frame_header(tmp_path / n).sar for n in ("a.dpx", "s.dpx", "d.exr", "f.dpx")] == \
+        [(2, 1), None, (10, 11), None]
+    assert written_header(25.0, "00:00:59:24", 1) == FrameHeader(25.0, "00:01:00:00")
+    assert written_header(25.0, None, 3) == FrameHeader(25.0, None)
 
 
 def _dpx_plate(folder: Path, frames, fps: float, start: str) -> Path:
@@ -185,8 +200,10 @@ def test_a_plate_is_read_at_its_headers_rate_from_its_timecode(target, tmp_path,
 def test_a_plates_rate_and_timecode_carry_into_a_video_and_a_video_s_into_frames(
         clips, target, quick_model_path, tmp_path, capsys, monkeypatch):
     """Onto a 25 fps DPX plate starting at 10:00:00:00, the rewrite written as MP4 plays at
-    25 fps and starts at 10:00:00:00; onto a video that starts at 01:00:59:20, the rewrite
-    written as DPX or OpenEXR frames records 25 fps and each frame's timecode on from it."""
+    25 fps and starts at 10:00:00:00; onto an OpenEXR plate of pixels 8:9, the MP4 is shown
+    at that shape; onto a video that starts at 01:00:59:20 and has pixels 8:9, the rewrite
+    written as DPX or OpenEXR frames records 25 fps, each frame's timecode on from it and the
+    pixels' aspect."""
     from facetransfer.cli.main import main
     from facetransfer.io.video import VideoOptions, read_video, write_video
     from facetransfer.io.video_display import timecode_of
@@ -201,15 +218,25 @@ def test_a_plates_rate_and_timecode_carry_into_a_video_and_a_video_s_into_frames
     assert code == 0, capsys.readouterr().err
     assert video_info(tmp_path / "r.mp4").fps == pytest.approx(25.0)
     assert timecode_of(tmp_path / "r.mp4") == "10:00:00:00"
+    exr = tmp_path / "exr_plate"
+    exr.mkdir()
+    for i, rgb in enumerate(frames):
+        _exr(exr / f"p.{i:04d}.exr", fps=Fraction(25), aspect=8 / 9, rgb=rgb)
+    code = main(["transfer", "--target", str(exr / "p.%04d.exr"), *args,
+                 "--out", str(tmp_path / "x.mp4")])
+    assert code == 0, capsys.readouterr().err
+    assert video_info(tmp_path / "x.mp4").sar == (8, 9)
+    assert video_info(tmp_path / "x.mp4").fps == pytest.approx(25.0)
     video = tmp_path / "t.mkv"
     write_video(video, read_video(lossless)[0], 25.0,
-                options=VideoOptions(crf=0, timecode="01:00:59:20"))
+                options=VideoOptions(crf=0, timecode="01:00:59:20", sar=(8, 9)))
     for suffix in ("dpx", "exr"):
         code = main(["transfer", "--target", str(video), *args,
                      "--out", str(tmp_path / suffix / f"ft.%04d.{suffix}")])
         assert code == 0, capsys.readouterr().err
         for i in range(len(frames)):
-            got = header_time(tmp_path / suffix / f"ft.{i:04d}.{suffix}")
+            got = frame_header(tmp_path / suffix / f"ft.{i:04d}.{suffix}")
             assert got.fps == pytest.approx(25.0)
             assert got.timecode == timecode_after("01:00:59:20", i, 25.0)
-    assert header_time(tmp_path / "dpx" / "ft.0005.dpx").timecode == "01:01:00:00"
+            assert got.sar == (8, 9)
+    assert frame_header(tmp_path / "dpx" / "ft.0005.dpx").timecode == "01:01:00:00"

@@ -1,5 +1,6 @@
-"""What a plate's frame files say of time: the frame rate and SMPTE timecode in the header of a
-DPX or OpenEXR frame, read where a plate is opened and written where a sequence is made.
+"""What a plate's frame headers say of its time and its pixels' shape: the frame rate, the SMPTE
+timecode and the pixel aspect ratio of a DPX or OpenEXR frame, read where a plate is opened and
+written where a sequence is made.
 
 A film scan, a conform or a compositing package stores in each DPX frame the frame rate (the
 film header's "frame rate of original", else the television header's temporal sampling rate:
@@ -8,7 +9,14 @@ and ``timeCode`` attributes. A sequence of such frames is read at its header's r
 the default for sequences that store none (:mod:`facetransfer.io.video_sequence`), and starts
 at its first frame's timecode, which results and exports carry as they carry a video's
 (:func:`facetransfer.io.video_display.timecode_of`). A DPX or OpenEXR sequence written from
-another target gets the rate and each frame's timecode (:func:`frame_time`).
+another target gets the rate and each frame's timecode (:func:`written_header`).
+
+A plate shot with an anamorphic lens is stored squeezed: its header's pixel aspect ratio (DPX's
+orientation header, OpenEXR's ``pixelAspectRatio``) says how much wider than tall a pixel is
+shown (2 for a 2x squeeze). The plate is then read as a video of that sample aspect ratio: the
+capture sees the face unsqueezed (:mod:`facetransfer.track.aspect`), the rewrite is drawn in
+the stored pixels, and a video written from it says the ratio, as DPX and OpenEXR frames
+written from a target of non-square pixels do.
 
 A timecode is written as ffmpeg writes one: ``HH:MM:SS:FF``, or ``HH:MM:SS;FF`` when it counts
 drop-frame (at 29.97 and 59.94 frames a second two or four frame numbers are skipped at the
@@ -25,8 +33,8 @@ from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
-__all__ = ["FrameTime", "header_time", "timecode_text", "timecode_word", "timecode_after",
-           "frame_time", "rate_fraction", "usable_rate"]
+__all__ = ["FrameHeader", "frame_header", "timecode_text", "timecode_word", "timecode_after",
+           "written_header", "rate_fraction", "usable_rate", "usable_aspect"]
 
 _TIMECODE = re.compile(r"(\d{2}):(\d{2}):(\d{2})([:;])(\d{2})")
 #: The digit fields of SMPTE 12M's time word: (shift, mask) of hours, minutes, seconds, frames
@@ -36,7 +44,7 @@ _DROP_BIT = 1 << 6
 
 
 @dataclass(frozen=True)
-class FrameTime:
+class FrameHeader:
     """A frame's rate and timecode as its file's header says them.
 
     Attributes
@@ -45,10 +53,13 @@ class FrameTime:
         Frames a second (None: the header names none, or not a usable one).
     timecode : str or None
         The frame's ``HH:MM:SS:FF`` (``;`` before the frames of a drop-frame count).
+    sar : (int, int) or None
+        The pixels' aspect ratio, width to height, in lowest terms (None: not said, or square).
     """
 
     fps: float | None = None
     timecode: str | None = None
+    sar: tuple[int, int] | None = None
 
 
 def usable_rate(value) -> float | None:
@@ -59,6 +70,20 @@ def usable_rate(value) -> float | None:
     except (TypeError, ValueError):
         return None
     return fps if math.isfinite(fps) and 0 < fps <= 1000 else None
+
+
+def usable_aspect(value) -> tuple[int, int] | None:
+    """A header's pixel aspect ratio (a float) as a ratio of integers in lowest terms, the
+    nearest of denominator at most 1000 (10:11, 40:33, 2:1, 4:3); None where it is square,
+    unset, or beyond 1:4 to 4:1 (no lens or format squeezes more)."""
+    try:
+        ratio = float(value)
+    except (TypeError, ValueError):
+        return None
+    if not math.isfinite(ratio) or not 0.25 <= ratio <= 4.0:
+        return None
+    f = Fraction(ratio).limit_denominator(1000)
+    return None if f == 1 else (f.numerator, f.denominator)
 
 
 def timecode_text(word: int) -> str | None:
@@ -148,12 +173,14 @@ def timecode_after(timecode: str, frames: int, fps: float) -> str:
     return _timecode(count + int(frames), fps, drop)
 
 
-def frame_time(fps: float | None, start: str | None, index: int) -> FrameTime:
-    """Frame ``index``'s :class:`FrameTime` of a sequence written at ``fps`` that starts at the
-    timecode ``start`` (None: no timecode)."""
+def written_header(fps: float | None, start: str | None, index: int,
+                   sar: tuple[int, int] | None = None) -> FrameHeader:
+    """Frame ``index``'s :class:`FrameHeader` of a sequence written at ``fps`` that starts at the
+    timecode ``start`` (None: no timecode), of pixels of aspect ``sar`` (None: square)."""
+    sar = None if sar is None or tuple(sar) == (1, 1) else (int(sar[0]), int(sar[1]))
     if start is None or fps is None:
-        return FrameTime(usable_rate(fps), None)
-    return FrameTime(usable_rate(fps), timecode_after(start, index, fps))
+        return FrameHeader(usable_rate(fps), None, sar)
+    return FrameHeader(usable_rate(fps), timecode_after(start, index, fps), sar)
 
 
 def rate_fraction(fps: float) -> Fraction:
@@ -165,21 +192,21 @@ def rate_fraction(fps: float) -> Fraction:
     return Fraction(float(fps)).limit_denominator(1001)
 
 
-def header_time(path) -> FrameTime:
-    """The :class:`FrameTime` a frame file's header says (a DPX or OpenEXR frame's; of any
-    other kind of file, or one whose header cannot be read, none)."""
+def frame_header(path) -> FrameHeader:
+    """The :class:`FrameHeader` a frame file's header says (a DPX or OpenEXR frame's; of any
+    other kind of file, or one whose header cannot be read, nothing)."""
     suffix = Path(path).suffix.lower()
     try:
         if suffix == ".dpx":
-            return _dpx_time(path)
+            return _dpx_header(path)
         if suffix == ".exr":
-            return _exr_time(path)
+            return _exr_header(path)
     except (OSError, ValueError, TypeError, AttributeError):
-        return FrameTime()
-    return FrameTime()
+        return FrameHeader()
+    return FrameHeader()
 
 
-def _dpx_time(path) -> FrameTime:
+def _dpx_header(path) -> FrameHeader:
     """A DPX header's rate (the film header's, else the television header's: ffmpeg's order)
     and timecode, as OpenImageIO reads them."""
     import OpenImageIO as oiio
@@ -187,29 +214,31 @@ def _dpx_time(path) -> FrameTime:
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
         oiio.geterror()
-        return FrameTime()
+        return FrameHeader()
     try:
         spec = inp.spec()
         fps = usable_rate(spec.getattribute("dpx:FrameRate")) or \
             usable_rate(spec.getattribute("dpx:TemporalFrameRate"))
         word = spec.getattribute("smpte:TimeCode")
+        sar = usable_aspect(spec.getattribute("PixelAspectRatio"))
     finally:
         inp.close()
-    return FrameTime(fps, None if word is None else timecode_text(int(word[0])))
+    return FrameHeader(fps, None if word is None else timecode_text(int(word[0])), sar)
 
 
-def _exr_time(path) -> FrameTime:
+def _exr_header(path) -> FrameHeader:
     """An OpenEXR header's ``framesPerSecond`` and ``timeCode`` (its first part)."""
     import OpenEXR
 
     with OpenEXR.File(str(path), header_only=True) as f:   # read before it closes
         header = f.header()
         rate, tc = header.get("framesPerSecond"), header.get("timeCode")
+        sar = usable_aspect(header.get("pixelAspectRatio"))
         fields = None if tc is None else (tc.hours, tc.minutes, tc.seconds, tc.frame,
                                           bool(tc.dropFrame))
     fps = usable_rate(float(rate)) if rate is not None else None
     if fields is None or not all(0 <= v < 100 for v in fields[:4]):
-        return FrameTime(fps, None)
+        return FrameHeader(fps, None, sar)
     text = "{:02d}:{:02d}:{:02d}{}{:02d}".format(*fields[:3], ";" if fields[4] else ":",
                                                 fields[3])
-    return FrameTime(fps, timecode_text(timecode_word(text)))
+    return FrameHeader(fps, timecode_text(timecode_word(text)), sar)
