@@ -41,3 +41,17 @@ def run_command(args: list, src: Path | None = None) -> tuple[int, str]:
     run = subprocess.run(cmd + [str(a) for a in args] + ["--no-progress"], capture_output=True,
                          text=True, env=env)
     return run.returncode, run.stderr.strip()[-300:]
+
+
+def now_and_before(doc: str, before: str) -> tuple[Path, dict, str]:
+    """The command line of a benchmark that runs this tree and the revision ``--before``
+    (default ``before``) in turn: ``(--out, created; {"now": None, "before": its src};
+    the revision)``, its description the first line of ``doc``."""
+    from _report import arguments
+
+    ap = arguments(doc)
+    ap.add_argument("--before", default=before, help="the revision run beside this tree")
+    args = ap.parse_args()
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    return out, {"now": None, "before": extract_src(args.before)}, args.before

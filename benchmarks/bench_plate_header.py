@@ -37,8 +37,8 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _report import arguments, save_json, save_plot  # noqa: E402
-from _revision import extract_src, run_command  # noqa: E402
+from _report import save_json, save_plot  # noqa: E402
+from _revision import now_and_before, run_command  # noqa: E402
 
 SECONDS = 4
 FPS = 25.0
@@ -180,7 +180,7 @@ def plot(report: dict, path: Path) -> None:
     c.bar_label(c.bar([f"anamorphic\n{k}" for k in ana],
                       [v["activation_mae_vs_video"] for v in ana.values()]), fmt="%.3f",
                 fontsize=7)
-    c.set_ylabel("capture vs the unsqueezed video's, MAE")
+    c.set_ylabel("capture vs unsqueezed, MAE")
     for ax in (a, b, c):
         ax.tick_params(labelsize=7)
     save_plot(fig, path)
@@ -234,15 +234,10 @@ def main() -> int:
     from facetransfer.assets import data_dir
     from facetransfer.track import Track
 
-    ap = arguments(__doc__)
-    ap.add_argument("--before", default="a1daf76")
-    args = ap.parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out, trees, before = now_and_before(__doc__, "a1daf76")
     data = data_dir()
     source = data / "video" / "driving_d6.mp4"
-    trees = {"now": None, "before": extract_src(args.before)}
-    report = {"benchmark": "a plate's rate, timecode and pixel aspect", "before": args.before}
+    report = {"benchmark": "a plate's rate, timecode and pixel aspect", "before": before}
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
         paths = make_plates(data / "video" / "WDA_KatieHill_000.mp4", folder)

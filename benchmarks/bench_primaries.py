@@ -3,7 +3,9 @@
 The first four seconds of ``WDA_KatieHill_000`` (25 fps) as the OpenEXR plates an ACES pipeline
 hands over: half floats in ACEScg (AP1, named by ``colorInteropID``) and in ACES2065-1 (AP0,
 named by ``chromaticities``), their values OpenColorIO's (OpenImageIO's built-in ACES
-configuration) of the frames' linear Rec.709; and the frames as a lossless video, the reference.
+configuration) of the frames' linear Rec.709; the frames as a lossless video, the reference;
+and as half floats in linear Rec.709 (no primaries named), the floor: what half floats alone
+cost against the video.
 Run by this tree and by the revision before (``--before``, default ``a1daf76``: every plate
 taken as Rec.709), in fresh processes:
 
@@ -31,13 +33,14 @@ import numpy as np
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from _report import arguments, save_json, save_plot  # noqa: E402
-from _revision import extract_src, run_command  # noqa: E402
+from _report import save_json, save_plot  # noqa: E402
+from _revision import now_and_before, run_command  # noqa: E402
 
 SECONDS = 4
 FPS = 25.0
 PLATES = {"ACEScg": ("colorInteropID", "lin_ap1_scene"),
-          "ACES2065-1": ("chromaticities", "lin_ap0_scene")}
+          "ACES2065-1": ("chromaticities", "lin_ap0_scene"),
+          "Linear Rec.709 (sRGB)": (None, None)}     # the floor: half floats, no primaries
 
 
 def _ocio(rgb: np.ndarray, source: str, target: str) -> np.ndarray:
@@ -60,11 +63,12 @@ def make_plates(clip: Path, folder: Path) -> tuple[dict, np.ndarray]:
     paths = {"video": folder / "target.mkv"}
     write_video(paths["video"], frames, FPS, options=VideoOptions(crf=0))
     for name, (how, interop) in PLATES.items():
-        d = folder / name
+        d = folder / name.split()[-1].strip("()")
         d.mkdir()
         header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
-        header[how] = interop if how == "colorInteropID" else \
-            OpenEXR.colorInteropIDToChromaticities(interop)
+        if how is not None:
+            header[how] = interop if how == "colorInteropID" else \
+                OpenEXR.colorInteropIDToChromaticities(interop)
         for i, rgb in enumerate(frames):
             aces = _ocio(srgb_decode(rgb), "Linear Rec.709 (sRGB)", name)
             with OpenEXR.File(header, {"RGB": aces.astype(np.float16)}) as f:
@@ -105,7 +109,7 @@ def transfer_row(name: str, plate: Path, source: Path, png: Path, frames, src,
                                "--out", out, "--sequence-fps", FPS], src)
     if status:
         return {"error": err}
-    changed, whole, exact, total = [], [], 0, 0
+    changed, whole, errors, exact, total = [], [], [], 0, 0
     for i in range(len(frames)):
         got = read_exr(str(out) % (1001 + i))
         shown = srgb_encode(_ocio(got, name, "Linear Rec.709 (sRGB)"))
@@ -113,10 +117,14 @@ def transfer_row(name: str, plate: Path, source: Path, png: Path, frames, src,
         moved = np.any(want != frames[i], axis=2)
         changed.append(_psnr(shown[moved], want[moved]))
         whole.append(_psnr(shown, want))
+        errors.append(np.abs(shown[moved].astype(int) - want[moved]).max(axis=1))
         exact += int(np.all(got == read_exr(str(plate) % (1001 + i)), axis=2).sum())
         total += moved.size
+    errors = np.concatenate(errors)
     return {"changed_psnr_db": round(float(np.median(changed)), 2),
             "frame_psnr_db": round(float(np.median(whole)), 2),
+            "changed_p99_levels": int(np.percentile(errors, 99)),
+            "changed_over_4_levels_share": round(float(np.mean(errors > 4)), 4),
             "pixels_plates_floats_share": round(exact / total, 4)}
 
 
@@ -124,13 +132,14 @@ def plot(report: dict, path: Path) -> None:
     import matplotlib.pyplot as plt
 
     rows = [r for r in report["rows"] if "changed_psnr_db" in r]
-    fig, (a, b) = plt.subplots(1, 2, figsize=(7.4, 2.9))
-    names = [f"{r['plate']}\n{r['tree']}" for r in rows]
-    a.bar_label(a.bar(names, [r["activation_mae_vs_video"] for r in rows]), fmt="%.3f",
+    short = {"ACEScg": "AP1", "ACES2065-1": "AP0", "Linear Rec.709 (sRGB)": "Rec.709"}
+    fig, (a, b) = plt.subplots(1, 2, figsize=(8.4, 2.9))
+    names = [f"{short.get(r['plate'], r['plate'])}\n{r['tree']}" for r in rows]
+    a.bar_label(a.bar(names, [r["activation_mae_vs_video"] for r in rows]), fmt="%.4f",
                 fontsize=7)
-    a.set_ylabel("capture vs the video's, MAE")
+    a.set_ylabel("capture vs the video's: MAE", fontsize=8)
     b.bar_label(b.bar(names, [r["changed_psnr_db"] for r in rows]), fmt="%.1f", fontsize=7)
-    b.set_ylabel("changed pixels vs the video's result, dB")
+    b.set_ylabel("changed pixels vs video's: dB", fontsize=8)
     for ax in (a, b):
         ax.tick_params(labelsize=7)
     save_plot(fig, path)
@@ -140,13 +149,8 @@ def main() -> int:
     from facetransfer.assets import data_dir
     from facetransfer.track import Track
 
-    ap = arguments(__doc__)
-    ap.add_argument("--before", default="a1daf76")
-    args = ap.parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    out, trees, before = now_and_before(__doc__, "a1daf76")
     source = data_dir() / "video" / "driving_d6.mp4"
-    trees = {"now": None, "before": extract_src(args.before)}
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp)
@@ -160,7 +164,7 @@ def main() -> int:
             assert status == 0, err
         reference = Track.load(folder / "ref.npz")
         for name in PLATES:
-            for tree, src in trees.items():
+            for tree, src in trees.items() if PLATES[name][0] else [("now", None)]:
                 work = folder / f"{name}_{tree}"
                 work.mkdir()
                 row = {"plate": name, "tree": tree,
@@ -168,7 +172,7 @@ def main() -> int:
                        **transfer_row(name, paths[name], source, png, frames, src, work)}
                 rows.append(row)
                 print(row, flush=True)
-    save_json({"benchmark": "OpenEXR plates in ACES primaries", "before": args.before,
+    save_json({"benchmark": "OpenEXR plates in ACES primaries", "before": before,
                "rows": rows}, out / "primaries.json")
     plot({"rows": rows}, out / "primaries.png")
     print(f"wrote {out / 'primaries.json'} and {out / 'primaries.png'}")

@@ -13,6 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).parent))
 
@@ -103,6 +105,29 @@ def test_timecode_words_are_packed_as_openexr_and_openimageio_pack_them(tc, tmp_
         assert inp.spec().get_string_attribute("dpx:TimeCode") == tc
         inp.close()
         assert frame_header(tmp_path / "t.dpx").timecode == tc
+
+
+@settings(max_examples=300, deadline=None, derandomize=True)
+@given(st.integers(0, 0xFFFFFFFF))
+def test_any_header_word_reads_as_a_timecode_that_packs_back_or_as_none(word):
+    """A header's 32 bits, whatever they hold (flags, user bits, garbage): a timecode whose
+    digits and drop-frame flag pack back to the same digit fields, or None; never an error."""
+    text = timecode_text(word)
+    if text is not None:
+        mask = 0x3F7F7F3F | (1 << 6)                 # the digits and the drop-frame flag
+        assert timecode_word(text) == word & mask
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(st.sampled_from([24.0, 25.0, 30000 / 1001, 60000 / 1001, 50.0]),
+       st.integers(0, 24 * 3600 * 60 - 1), st.integers(0, 5000))
+def test_counting_on_is_adding(fps, start, k):
+    """``timecode_after(timecode_after(t, a), b) == timecode_after(t, a + b)`` from any frame
+    of the day, drop-frame at 29.97 and 59.94."""
+    drop = round(fps) in (30, 60) and fps != round(fps)
+    t0 = timecode_after("00:00:00;00" if drop else "00:00:00:00", start, fps)
+    a = k // 2
+    assert timecode_after(timecode_after(t0, a, fps), k - a, fps) == timecode_after(t0, k, fps)
 
 
 def test_words_that_are_not_timecodes_read_as_none():
