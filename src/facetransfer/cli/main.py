@@ -48,7 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
         if leaf.prog.split(" ", 1)[-1] in READING_COMMANDS:
             leaf.add_argument("--sequence-fps", type=_rate, metavar="FPS",
                               help="frame rate of image-sequence inputs (plate/%%04d.png, "
-                              "plate/####.png), which store none (default 24)")
+                              "plate/####.dpx); default: the rate a DPX or OpenEXR plate's "
+                              "headers give, else 24; given, it overrides the headers")
     return parser
 
 
