@@ -18,7 +18,8 @@ from facetransfer.io.dpx import (DpxImage, dpx_header, graded_codes, read_dpx_im
                                  shown_dpx, write_dpx)
 from facetransfer.io.exr import srgb_decode  # noqa: E402
 from facetransfer.io.video import VideoOptions, read_video, write_video  # noqa: E402
-from test_transfer_cli import clips, plate_transfer_args  # noqa: E402,F401 (the fixture)
+from test_transfer_cli import (clips, plate_and_video_rewrites,  # noqa: E402,F401 (fixture)
+                               plate_transfer_args)
 
 #: Kodak's Cineon conventions, written out here from their definition (not the module's)
 BLACK, WHITE = 95, 685
@@ -257,15 +258,8 @@ def test_a_log_plate_is_rewritten_in_its_own_codes(clips, target, quick_model_pa
     lossless, frames = target
     plate = _log_plate(tmp_path / "plate", frames, bright_rows=6)
     common = plate_transfer_args(clips, quick_model_path)
-    (tmp_path / "out").mkdir()
-    code = main(["transfer", "--target", str(plate), *map(str, common),
-                 "--out", str(tmp_path / "out" / "ft.%04d.dpx")])
-    out = capsys.readouterr()
-    assert code == 0, out.err
-    assert ", in the plate's code values, with its header and alpha, no audio" in out.out
-    code = main(["transfer", "--target", str(lossless), *map(str, common),
-                 "--out", str(tmp_path / "png_%03d.png")])
-    assert code == 0, capsys.readouterr().err
+    said = plate_and_video_rewrites(plate, lossless, common, tmp_path, "dpx", capsys)
+    assert ", in the plate's code values, with its header and alpha, no audio" in said
     code = main(["transfer", "--target", str(plate), *map(str, common),   # its alpha in PNG
                  "--out", str(tmp_path / "rgba" / "ft.%04d.png")])
     assert code == 0 and "with the plate's alpha" in capsys.readouterr().out

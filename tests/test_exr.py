@@ -17,7 +17,8 @@ from facetransfer.io.exr import (ExrImage, exr_pixel_type, graded_frame, read_ex
                                  read_exr_image, shown_frame, srgb_decode, srgb_encode,
                                  write_exr)
 from facetransfer.io.video import VideoOptions, read_video, write_video  # noqa: E402
-from test_transfer_cli import clips, plate_transfer_args  # noqa: E402,F401 (the fixture)
+from test_transfer_cli import (clips, plate_and_video_rewrites,  # noqa: E402,F401 (fixture)
+                               plate_transfer_args)
 
 
 def test_the_srgb_curve_is_iec_61966_2_1_and_inverts_on_every_level():
@@ -123,21 +124,12 @@ def test_an_exr_plate_is_rewritten_in_its_own_floats(clips, target, quick_model_
     floats, every pixel the rewrite did not change the plate's float (highlights above 1
     included), every changed one the 8-bit rewrite of the same frames (a PNG sequence of the
     video) shown through the curve."""
-    from facetransfer.cli.main import main
-
     monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
     lossless, frames = target
     plate = _exr_plate(tmp_path / "plate", frames, bright_rows=6)
     common = plate_transfer_args(clips, quick_model_path)
-    (tmp_path / "out").mkdir()
-    code = main(["transfer", "--target", str(plate), *map(str, common),
-                 "--out", str(tmp_path / "out" / "ft.%04d.exr")])
-    out = capsys.readouterr()
-    assert code == 0, out.err
-    assert ", in the plate's floats, with its other channels, no audio" in out.out
-    code = main(["transfer", "--target", str(lossless), *map(str, common),
-                 "--out", str(tmp_path / "png_%03d.png")])
-    assert code == 0, capsys.readouterr().err
+    said = plate_and_video_rewrites(plate, lossless, common, tmp_path, "exr", capsys)
+    assert ", in the plate's floats, with its other channels, no audio" in said
     changed_any = 0
     for i in range(len(frames)):
         out = tmp_path / "out" / f"ft.{1001 + i:04d}.exr"

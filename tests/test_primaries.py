@@ -17,7 +17,8 @@ from facetransfer.io.exr import (graded_frame, read_exr, read_exr_image,  # noqa
                                  srgb_decode, srgb_encode)
 from facetransfer.io.primaries import REC709, named_chromaticities, to_rec709  # noqa: E402
 from test_exr import target  # noqa: E402,F401 (the fixture)
-from test_transfer_cli import clips, plate_transfer_args  # noqa: E402,F401 (the fixture)
+from test_transfer_cli import (clips, plate_and_video_rewrites,  # noqa: E402,F401 (fixture)
+                               plate_transfer_args)
 
 #: OpenEXR's linear colour interop IDs and OpenColorIO's ACES configuration's names of them.
 SPACES = {"lin_ap0_scene": "ACES2065-1", "lin_ap1_scene": "ACEScg",
@@ -112,17 +113,11 @@ def test_an_acescg_plate_is_rewritten_in_its_primaries(clips, target, quick_mode
     """Onto an ACEScg plate, the rewrite written as OpenEXR: every pixel the rewrite did not
     change the plate's float, every changed one in ACEScg showing as the 8-bit rewrite of
     the same frames (a PNG sequence of the video); the header's primaries kept."""
-    from facetransfer.cli.main import main
-
     monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")
     lossless, frames = target
     plate, to_709 = _plate(tmp_path / "plate", frames, "colorInteropID")
-    common = plate_transfer_args(clips, quick_model_path)
-    for tgt, out in ((plate, tmp_path / "out" / "ft.%04d.exr"), (lossless,
-                                                                  tmp_path / "png_%03d.png")):
-        out.parent.mkdir(exist_ok=True)
-        assert main(["transfer", "--target", str(tgt), *common, "--out", str(out)]) == 0, \
-            capsys.readouterr().err
+    plate_and_video_rewrites(plate, lossless, plate_transfer_args(clips, quick_model_path),
+                             tmp_path, "exr", capsys)
     changed = 0
     for i in range(len(frames)):
         got = read_exr_image(tmp_path / "out" / f"ft.{1001 + i:04d}.exr")

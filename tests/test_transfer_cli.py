@@ -49,6 +49,22 @@ def plate_transfer_args(clips, model_path, fps: str | None = "25") -> list[str]:
         [] if fps is None else ["--sequence-fps", fps])
 
 
+def plate_and_video_rewrites(plate, video, args, tmp_path, suffix: str, capsys) -> str:
+    """``transfer`` with ``args`` (:func:`plate_transfer_args`) onto ``plate``, written as
+    ``tmp_path/out/ft.%04d.SUFFIX`` (numbered as the plate), and onto ``video`` (the plate's
+    frames as a lossless video), written as ``tmp_path/png_%03d.png``: the truth a plate's
+    rewrite is judged by. Returns what the plate's run printed."""
+    (tmp_path / "out").mkdir(exist_ok=True)
+    code = main(["transfer", "--target", str(plate), *map(str, args),
+                 "--out", str(tmp_path / "out" / f"ft.%04d.{suffix}")])
+    said = capsys.readouterr()
+    assert code == 0, said.err
+    code = main(["transfer", "--target", str(video), *map(str, args),
+                 "--out", str(tmp_path / "png_%03d.png")])
+    assert code == 0, capsys.readouterr().err
+    return said.out
+
+
 def run(argv, capsys):
     code = main([str(a) for a in argv])
     out = capsys.readouterr()
