@@ -18,9 +18,9 @@ from hypothesis import strategies as st
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from facetransfer.io.plate_header import (FrameHeader, written_header, frame_header,  # noqa: E402
-                                        rate_fraction, timecode_after, timecode_text,
-                                        timecode_word)
+from facetransfer.io.plate_header import (FrameHeader, frame_header,  # noqa: E402
+                                          rate_fraction, timecode_after, timecode_text,
+                                          timecode_word, usable_rate, written_header)
 from facetransfer.io.video_display import timecode_seconds  # noqa: E402
 from test_dpx import target  # noqa: E402,F401 (the fixture)
 from test_transfer_cli import clips, plate_transfer_args  # noqa: E402,F401 (the fixture)
@@ -165,6 +165,8 @@ def test_rates_are_written_as_fractions_and_read_from_either_header(tmp_path):
     assert rate_fraction(24000 / 1001) == Fraction(24000, 1001)
     assert rate_fraction(29.97) == Fraction(30000, 1001)
     assert rate_fraction(25.0) == 25 and rate_fraction(12.5) == Fraction(25, 2)
+    assert usable_rate(23.976) == 24000 / 1001 and usable_rate(float("nan")) is None
+    assert usable_rate(25.0) == 25.0 and usable_rate(0xFFFFFFFF) is None
     _dpx(tmp_path / "f.dpx", film=24.0, tv=25.0)              # ffmpeg's order: film first
     _dpx(tmp_path / "t.dpx", tv=50.0)
     _dpx(tmp_path / "n.dpx", film=0.0)

@@ -62,14 +62,32 @@ class FrameHeader:
     sar: tuple[int, int] | None = None
 
 
+#: The NTSC-family rates' nominal integers: a rate within :data:`_NTSC_WITHIN` of
+#: ``n * 1000 / 1001`` is that rate (23.976 written as a header's float is 24000/1001).
+_NTSC = (24, 30, 48, 60, 120)
+_NTSC_WITHIN = 5e-4
+
+
+def _ntsc(fps: float) -> Fraction | None:
+    """``n * 1000 / 1001`` where ``fps`` is that NTSC-family rate to :data:`_NTSC_WITHIN`."""
+    for nominal in _NTSC:
+        if abs(fps - nominal * 1000 / 1001) < _NTSC_WITHIN:
+            return Fraction(nominal * 1000, 1001)
+    return None
+
+
 def usable_rate(value) -> float | None:
-    """``value`` as frames a second where it is one a header means (finite, in (0, 1000]);
+    """``value`` as frames a second where it is one a header means (finite, in (0, 1000]; an
+    NTSC-family rate written rounded, 23.976 or 29.97, as the exact ``n * 1000 / 1001``);
     else None (an unset DPX field reads as NaN or as all bits set)."""
     try:
         fps = float(value)
     except (TypeError, ValueError):
         return None
-    return fps if math.isfinite(fps) and 0 < fps <= 1000 else None
+    if not (math.isfinite(fps) and 0 < fps <= 1000):
+        return None
+    exact = _ntsc(fps)
+    return fps if exact is None else float(exact)
 
 
 def usable_aspect(value) -> tuple[int, int] | None:
@@ -186,10 +204,7 @@ def written_header(fps: float | None, start: str | None, index: int,
 def rate_fraction(fps: float) -> Fraction:
     """``fps`` as OpenEXR's rational ``framesPerSecond``: the NTSC rates as n * 1000 / 1001
     (23.976 -> 24000/1001), any other as the nearest fraction of denominator at most 1001."""
-    for nominal in (24, 30, 48, 60, 120):
-        if abs(fps - nominal * 1000 / 1001) < 5e-4:
-            return Fraction(nominal * 1000, 1001)
-    return Fraction(float(fps)).limit_denominator(1001)
+    return _ntsc(fps) or Fraction(float(fps)).limit_denominator(1001)
 
 
 def frame_header(path) -> FrameHeader:
