@@ -266,4 +266,8 @@ def test_a_plates_rate_and_timecode_carry_into_a_video_and_a_video_s_into_frames
             assert got.fps == pytest.approx(25.0)
             assert got.timecode == timecode_after("01:00:59:20", i, 25.0)
             assert got.sar == (8, 9)
+    from facetransfer.io.exr import read_exr_image
+
+    assert read_exr_image(tmp_path / "exr" / "ft.0000.exr").header["colorInteropID"] == \
+        "lin_rec709_scene"                           # what its floats are, said
     assert frame_header(tmp_path / "dpx" / "ft.0005.dpx").timecode == "01:01:00:00"

@@ -258,9 +258,10 @@ def write_exr(path, rgb, header=None) -> None:
     """Write an OpenEXR file: an :class:`ExrImage` with its header and other channels, or
     ``(H, W, 3)`` linear RGB, PIZ-compressed: float32 as single floats, float16 as half floats,
     uint8 (sRGB) decoded (:func:`srgb_decode`) to half floats (which hold each of its 256
-    levels exactly enough to encode back to it), with ``header`` (the frame's
-    :class:`~facetransfer.io.plate_header.FrameHeader`) as ``framesPerSecond``, ``timeCode``
-    and ``pixelAspectRatio``.
+    levels exactly enough to encode back to it), named linear Rec.709 (``colorInteropID``
+    ``lin_rec709_scene``: a pipeline that works in ACEScg reads it as what it is), with
+    ``header`` (the frame's :class:`~facetransfer.io.plate_header.FrameHeader`) as
+    ``framesPerSecond``, ``timeCode`` and ``pixelAspectRatio``.
 
     Raises
     ------
@@ -276,7 +277,7 @@ def write_exr(path, rgb, header=None) -> None:
         lin = srgb_decode(rgb).astype(np.float16) if rgb.dtype == np.uint8 else \
             np.ascontiguousarray(rgb, np.float16 if rgb.dtype == np.float16 else np.float32)
         attributes = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage,
-                      **_header_attributes(header)}
+                      "colorInteropID": "lin_rec709_scene", **_header_attributes(header)}
         channels = {"RGB": lin}
     try:
         with OpenEXR.File(attributes, channels) as f:
