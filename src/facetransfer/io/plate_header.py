@@ -12,11 +12,12 @@ at its first frame's timecode, which results and exports carry as they carry a v
 another target gets the rate and each frame's timecode (:func:`written_header`).
 
 A plate shot with an anamorphic lens is stored squeezed: its header's pixel aspect ratio (DPX's
-orientation header, OpenEXR's ``pixelAspectRatio``) says how much wider than tall a pixel is
-shown (2 for a 2x squeeze). The plate is then read as a video of that sample aspect ratio: the
-capture sees the face unsqueezed (:mod:`facetransfer.track.aspect`), the rewrite is drawn in
-the stored pixels, and a video written from it says the ratio, as DPX and OpenEXR frames
-written from a target of non-square pixels do.
+orientation header, as OpenImageIO's ``PixelAspectRatio``; OpenEXR's ``pixelAspectRatio``) says
+how much wider than tall a pixel is shown (2 for a 2x squeeze). The plate is then read as a
+video of that sample aspect ratio: the capture sees the face unsqueezed
+(:mod:`facetransfer.track.aspect`), the rewrite is drawn in the stored pixels, and a video
+written from it says the ratio, as DPX and OpenEXR frames written from a target of non-square
+pixels do.
 
 A timecode is written as ffmpeg writes one: ``HH:MM:SS:FF``, or ``HH:MM:SS;FF`` when it counts
 drop-frame (at 29.97 and 59.94 frames a second two or four frame numbers are skipped at the
@@ -45,7 +46,7 @@ _DROP_BIT = 1 << 6
 
 @dataclass(frozen=True)
 class FrameHeader:
-    """A frame's rate and timecode as its file's header says them.
+    """A frame's rate, timecode and pixel aspect as its file's header says them.
 
     Attributes
     ----------
