@@ -34,10 +34,13 @@ from dataclasses import dataclass
 from fractions import Fraction
 from pathlib import Path
 
-__all__ = ["FrameHeader", "frame_header", "timecode_text", "timecode_word", "timecode_after",
-           "written_header", "rate_fraction", "usable_rate", "usable_aspect"]
+__all__ = ["FrameHeader", "frame_header", "timecode_text", "timecode_word", "timecode_count",
+           "timecode_after", "written_header", "rate_fraction", "usable_rate", "usable_aspect"]
 
 _TIMECODE = re.compile(r"(\d{2}):(\d{2}):(\d{2})([:;])(\d{2})")
+#: A timecode as counted (:func:`timecode_count`): ``.`` too before a drop-frame count's frames
+#: (as ffmpeg may write it), and three digits of frames at rates above 99.
+_COUNTED = re.compile(r"(\d{2}):(\d{2}):(\d{2})([:;.])(\d{2,3})")
 #: The digit fields of SMPTE 12M's time word: (shift, mask) of hours, minutes, seconds, frames
 #: (each byte's tens in its upper bits: 2, 3, 3 and 2 of them).
 _FIELDS = ((24, 0x3F), (16, 0x7F), (8, 0x7F), (0, 0x3F))
@@ -148,27 +151,36 @@ def _nominal(fps: float) -> int:
 
 def _skip(rate: int) -> int:
     """Frame numbers a drop-frame count skips a minute at the nominal ``rate`` (29.97: 2,
-    59.94: 4; none at any other)."""
-    return {30: 2, 60: 4}.get(rate, 0)
+    59.94: 4, 119.88: 8; none at any other)."""
+    return {30: 2, 60: 4, 120: 8}.get(rate, 0)
 
 
-def _frames(timecode: str, fps: float) -> tuple[int, bool]:
-    """Frames since midnight that ``timecode`` counts at ``fps``, and whether it drops."""
-    m = _TIMECODE.fullmatch(str(timecode).strip())
+def timecode_count(timecode: str, fps: float) -> tuple[int, bool]:
+    """Frames since midnight that ``timecode`` (``HH:MM:SS:FF``; ``;`` or ``.`` before the
+    frames of a drop-frame one) counts at ``fps``, and whether it counts drop-frame: ``FF``
+    counts frames of the nominal rate ``round(fps)``; a drop-frame count (29.97, 59.94,
+    119.88) skips 2 (4, 8) frame numbers each minute but every tenth, so those are taken off.
+
+    Raises
+    ------
+    ValueError
+        Not such a timecode (naming it).
+    """
+    m = _COUNTED.fullmatch(str(timecode).strip())
     if m is None:
         raise ValueError(f"timecode {timecode!r} is not HH:MM:SS:FF")
     hh, mm, ss, sep, ff = m.groups()
     rate = _nominal(fps)
     minutes = int(hh) * 60 + int(mm)
     count = (minutes * 60 + int(ss)) * rate + int(ff)
-    drop = sep == ";" and _skip(rate) > 0
+    drop = sep != ":" and _skip(rate) > 0
     if drop:
         count -= _skip(rate) * (minutes - minutes // 10)
     return count, drop
 
 
 def _timecode(count: int, fps: float, drop: bool) -> str:
-    """The timecode of frame ``count`` since midnight (the inverse of :func:`_frames`),
+    """The timecode of frame ``count`` since midnight (the inverse of :func:`timecode_count`),
     wrapping at 24 hours."""
     rate = _nominal(fps)
     if drop:
@@ -188,7 +200,7 @@ def _timecode(count: int, fps: float, drop: bool) -> str:
 def timecode_after(timecode: str, frames: int, fps: float) -> str:
     """The timecode ``frames`` frames after ``timecode`` at ``fps``, counted as it counts
     (drop-frame at 29.97 and 59.94 where it says so), wrapping at midnight."""
-    count, drop = _frames(timecode, fps)
+    count, drop = timecode_count(timecode, fps)
     return _timecode(count + int(frames), fps, drop)
 
 

@@ -219,20 +219,18 @@ def timecode_args(timecode: str | None, suffix: str) -> list[str]:
 
 def timecode_seconds(timecode: str, fps: float) -> float:
     """A video's timecode (``HH:MM:SS:FF``; ``;`` before the frames of a drop-frame one) as
-    seconds since midnight at its frame rate ``fps``: ``FF`` counts frames of the nominal rate
-    ``round(fps)``; a drop-frame timecode (29.97 or 59.94 fps) skips 2 (4) frame numbers each
-    minute but every tenth, so its frames are counted back and divided by the true rate."""
-    m = re.fullmatch(r"(\d{2}):(\d{2}):(\d{2})([:;.])(\d{2,3})", str(timecode).strip())
-    if m is None:
-        raise VideoError(f"timecode {timecode!r} is not HH:MM:SS:FF")
-    hh, mm, ss, sep, ff = m.groups()
+    seconds since midnight at its frame rate ``fps``: its frames counted
+    (:func:`facetransfer.io.plate_header.timecode_count`: a drop-frame count's skipped frame
+    numbers taken off) over the nominal rate ``round(fps)``, or over the true rate
+    ``round(fps) * 1000 / 1001`` of a drop-frame one."""
+    from .plate_header import timecode_count
+
+    try:
+        frames, drop = timecode_count(timecode, fps)
+    except ValueError as exc:
+        raise VideoError(str(exc)) from None
     rate = max(1, int(round(float(fps))))
-    if sep == ":":
-        return int(hh) * 3600 + int(mm) * 60 + int(ss) + int(ff) / rate
-    drop = 2 * rate // 30                             # 2 at 29.97, 4 at 59.94
-    minutes = int(hh) * 60 + int(mm)
-    frame = (minutes * 60 + int(ss)) * rate + int(ff) - drop * (minutes - minutes // 10)
-    return frame / (rate * 1000.0 / 1001.0)
+    return frames / (rate * 1000.0 / 1001.0 if drop else rate)
 
 
 def container(path: str | os.PathLike) -> str | None:
