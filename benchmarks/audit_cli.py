@@ -345,6 +345,10 @@ def cases(fx: Path) -> list[Case]:
         Case("export --timecode not a timecode", ["export", T, "--format", "livelink",
                                                   "--timecode", "10:00", "--out", "t.csv"],
              setup=_copy(T), forbid=("Traceback",)),
+        Case("a required option missing (transfer without --target)",
+             ["transfer", "--expression-from", C, "--out", "o.mp4"], setup=_copy(C)),
+        Case("an option's value not among its choices (--codec vp9)",
+             ["transfer", "--target", C, "--out", "o.mp4", "--codec", "vp9"], setup=_copy(C)),
         Case("third-party log lines before the tool's line (no face)",
              ["track", "blank.mp4", "--model", M, "--out", "t.npz"], setup=_copy(M, "blank.mp4")),
         # 8. raw scans

@@ -93,6 +93,30 @@ def test_error_line_for_os_errors():
     assert "out of memory" in error_line("x", MemoryError())
 
 
+@pytest.mark.parametrize("argv, says", [
+    (["transfer", "--out", "r.mp4"], "facetransfer transfer: error: the following arguments "
+     "are required: --target (options: facetransfer transfer --help)"),
+    (["transfer", "--target", "t.mp4", "--out", "r.mp4", "--codec", "vp9"],
+     "facetransfer transfer: error: argument --codec: invalid choice: 'vp9' (choose from "
+     "'h264', 'h265', 'prores') (options: facetransfer transfer --help)"),
+    (["model", "build", "--out", "m.npz"], "facetransfer model build: error: the following "
+     "arguments are required: --dataset (options: facetransfer model build --help)"),
+    (["track", "v.mp4", "--sequence-fps", "0"], "facetransfer track: error: argument "
+     "--sequence-fps: expected a frame rate in (0, 1000], got '0' (options: facetransfer "
+     "track --help)"),
+    (["track", "v.mp4", "--bogus"], "facetransfer: error: unrecognized arguments: --bogus "
+     "(options: facetransfer --help)"),
+])
+def test_usage_errors_are_one_line(argv, says, capsys):
+    """A usage error is the one line that says what is wrong, not the command's whole usage
+    (25 lines for transfer) with the line at its end; exit status 2."""
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    captured = capsys.readouterr()
+    assert captured.err.splitlines() == [says] and captured.out == ""
+
+
 # ------------------------------------------------------------------------------ native logs
 def test_native_log_lines_are_filtered_from_stderr():
     """C libraries write straight to descriptor 2, often in pieces; only they are dropped."""

@@ -23,8 +23,21 @@ SUBCOMMAND_MODULES = ("model", "impute", "scan", "render", "texture", "track", "
                       "export", "view", "batch", "probe")
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """An argument parser whose usage errors are one line, as every other bad input's.
+
+    argparse's own error prints the command's whole usage first (25 lines for ``transfer``),
+    so the one line that says what is wrong scrolls away among them; here it is the line, with
+    where the options are listed, and exit status 2. Subcommands' parsers are of this class too
+    (``add_subparsers`` makes its parsers of the parent's class).
+    """
+
+    def error(self, message: str):
+        self.exit(2, f"{self.prog}: error: {message} (options: {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = OneLineParser(
         prog="facetransfer",
         description="Face Transfer with Multilinear Models (Vlasic et al. 2005): build multilinear "
         "face models, track faces in video, and transfer performances between videos.",
