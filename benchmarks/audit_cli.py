@@ -349,6 +349,11 @@ def cases(fx: Path) -> list[Case]:
              ["transfer", "--expression-from", C, "--out", "o.mp4"], setup=_copy(C)),
         Case("an option's value not among its choices (--codec vp9)",
              ["transfer", "--target", C, "--out", "o.mp4", "--codec", "vp9"], setup=_copy(C)),
+        Case("a track named as a video (track --out t.mp4)",
+             ["track", C, "--model", M, "--out", "t.mp4"], setup=_copy(M, C),
+             names="t.mp4"),
+        Case("a glb export named .usd", ["export", T, "--format", "glb", "--out", "f.usd"],
+             setup=_copy(T), names="f.usd"),
         Case("third-party log lines before the tool's line (no face)",
              ["track", "blank.mp4", "--model", M, "--out", "t.npz"], setup=_copy(M, "blank.mp4")),
         # 8. raw scans

@@ -117,6 +117,58 @@ def test_usage_errors_are_one_line(argv, says, capsys):
     assert captured.err.splitlines() == [says] and captured.out == ""
 
 
+@pytest.mark.parametrize("argv, says", [
+    (["track", "clip.mp4", "--out", "t.mp4"], "--out t.mp4: a track is written as .npz, not "
+     ".mp4; name it t.npz (--overlay writes a video of the fitted mesh over the clip)"),
+    (["edit", "t.npz", "--scale", "jawOpen=2", "--out", "e"], "--out e: a track is written "
+     "as .npz, and the name has no extension; name it e.npz"),
+    (["model", "build", "--dataset", "ict-bilinear", "--out", "m.obj"], "--out m.obj: a model "
+     "is written as .npz, not .obj; name it m.npz"),
+    (["view", "t.npz", "--out", "page.npz"], "--out page.npz: the dial editor's page is "
+     "written as .html or .htm, not .npz; name it page.html"),
+    (["export", "t.npz", "--format", "glb", "--out", "face.usd"], "output face.usd: a glb "
+     "export is written as .glb, not .usd; name it face.glb (or --format usd)"),
+    (["export", "t.npz", "--format", "livelink", "--out", "take.glb"], "output take.glb: a "
+     "livelink export is written as .csv, not .glb; name it take.csv (or --format glb)"),
+    (["export", "t.npz", "--out", "face.fbx"], "cannot tell the export format of face.fbx from "
+     "its extension: name it .csv (livelink), .glb (glb), .usd, .usda or .usdc (usd), .json "
+     "(json), or give --format"),
+    (["scan", "features", "s.obj", "--out", "f.png"], "--out f.png: a feature-point file is "
+     "written as .json, not .png; name it f.json"),
+])
+def test_an_output_named_for_another_format_is_refused_before_any_work(argv, says, tmp_path,
+                                                                      monkeypatch, capsys):
+    """A track named .mp4 (a zip archive a player refuses), a glb named .usd (a file USD
+    cannot open), a page named .npz: refused by name, in one line, before any input is read
+    (none of them exists here) and with nothing written."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = _err(capsys)
+    assert len(err) == 1 and err[0].endswith(": error: " + says), err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_an_export_takes_its_format_from_the_outputs_extension(tmp_path):
+    from facetransfer.export import ExportError, format_of
+
+    assert [format_of(tmp_path / n) for n in ("t.csv", "f.GLB", "f.usda", "f.usdc", "b.json")] \
+        == ["livelink", "glb", "usd", "usd", "json"]
+    assert format_of("f.usdc", "usd") == "usd"
+    with pytest.raises(ExportError, match="unknown export format 'fbx'"):
+        format_of("f.fbx", "fbx")
+    with pytest.raises(ValueError, match="a usd export is written as .usd, .usda or .usdc"):
+        format_of("f.glb", "usd")
+
+
+def test_a_transfers_saved_track_is_named_as_a_track(data_dir, tmp_path, capsys):
+    clip = str(data_dir / "video" / "face_2.mp4")
+    assert main(["transfer", "--target", clip, "--expression-from", clip, "--out",
+                 str(tmp_path / "r.mp4"), "--save-track", str(tmp_path / "r.mov")]) == 2
+    assert _err(capsys) == [f"facetransfer transfer: error: --save-track {tmp_path / 'r.mov'}: "
+                            "a track is written as .npz, not .mov; name it r.npz"]
+    assert list(tmp_path.iterdir()) == []
+
+
 # ------------------------------------------------------------------------------ native logs
 def test_native_log_lines_are_filtered_from_stderr():
     """C libraries write straight to descriptor 2, often in pieces; only they are dropped."""

@@ -358,7 +358,8 @@ def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_cli
     assert read_livelink(tmp_path / "b" / "plate.csv").timecodes[0] == "00:00:02:00.000"
     capsys.readouterr()
     _glb_and_usd_record_the_timecode(base, tmp_path, capsys)
-    for extra in (["--timecode", "1:00"], ["--timecode", "01:00:00:00", "--format", "json"]):
-        code = main([str(x) for x in base + [tmp_path / "t2.csv"] + extra])
+    for name, extra in (("t2.csv", ["--timecode", "1:00"]),
+                        ("t2.json", ["--timecode", "01:00:00:00", "--format", "json"])):
+        code = main([str(x) for x in base + [tmp_path / name] + extra])
         err = capsys.readouterr().err
         assert code == 2 and "timecode" in err and len(err.strip().splitlines()) == 1, err

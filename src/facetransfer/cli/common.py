@@ -10,8 +10,10 @@ from __future__ import annotations
 
 import argparse
 import sys
+from pathlib import Path
 
-from ..io.video import CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_PRESET, PRESETS
+from ..io.video import (CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_PRESET, PRESETS,
+                        VIDEO_SUFFIXES)
 
 MODEL_HELP = ("multilinear model (.npz); default: the default model (ict-arkit, ARKit "
               "blendshapes), built once into the user cache on first use")
@@ -147,3 +149,15 @@ def resolve_model(path, *, progress: bool = True):
         return load_default_model(progress=on_progress, announce=announce)
     finally:
         close()
+
+
+def check_track_name(path, flag: str = "--out", *, overlay: bool = False) -> None:
+    """A track file's name ends in .npz (:func:`facetransfer.io.output_names.
+    check_output_suffix`); with ``overlay`` (``track``), a video's name is pointed to
+    ``--overlay``."""
+    from ..io.output_names import check_output_suffix
+
+    video = overlay and Path(path).suffix.lower() in VIDEO_SUFFIXES
+    check_output_suffix(path, (".npz",), "a track", flag=flag,
+                        hint=" (--overlay writes a video of the fitted mesh over the clip)"
+                        if video else "")

@@ -5,14 +5,14 @@
     facetransfer export TRACK.npz --format usd --out face.usd [--model M.npz]
     facetransfer export TRACK.npz --format json --out blendshapes.json    # MediaPipe layout
     facetransfer export TRACK.npz --format livelink --out take.csv --neutral auto  # calibrated
+    facetransfer export TRACK.npz --out take.csv      # the format from the extension
 """
 
 from __future__ import annotations
 
 import argparse
-import sys
 
-from ..export import FORMATS
+from ..export import FORMAT_SUFFIXES, FORMATS
 from .common import frame_count, progress_disabled
 
 
@@ -25,8 +25,10 @@ def register(sub) -> None:
         "CSV), glb (glTF 2.0 with 52 morph targets and the animation), usd (UsdSkel), json "
         "(MediaPipe's blendshape layout).")
     p.add_argument("track", metavar="TRACK.npz")
-    p.add_argument("--format", required=True, metavar="FMT",
-                   help=f"one of {', '.join(FORMATS)}")
+    p.add_argument("--format", metavar="FMT",
+                   help=f"one of {', '.join(FORMATS)} (default: the one --out's extension "
+                   "names: " + ", ".join(f"{s[0]} {f}" for f, s in FORMAT_SUFFIXES.items())
+                   + ")")
     p.add_argument("--out", required=True, metavar="FILE", help="file to write")
     p.add_argument("--model", metavar="M.npz",
                    help="the model the track was made with (default: the default model, if the "
@@ -95,13 +97,14 @@ def _lift(track, model, args):
 
 def run(args: argparse.Namespace) -> int:
     from ..errors import FaceTransferError
-    from ..export import export_track
+    from ..export import export_track, format_of
     from ..io.atomic import check_output_path
     from ..track import Track
 
-    if args.format not in FORMATS:
+    if args.format is not None and args.format not in FORMATS:
         raise FaceTransferError(f"--format: unknown format {args.format!r}; choose one of "
                                 f"{', '.join(FORMATS)}")
+    args.format = format_of(args.out, args.format)
     check_output_path(args.out, overwrite=args.overwrite)
     if args.texture and args.texture_from:
         raise FaceTransferError("give --texture or --texture-from, not both")

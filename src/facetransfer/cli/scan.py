@@ -123,10 +123,12 @@ def _embedded_texture(path):
 def _features(args) -> int:
     from ..correspond.detect import INNER_FEATURES
     from ..io.atomic import check_output_path
+    from ..io.output_names import check_output_suffix
 
     out = Path(args.out)
     picture = Path(args.picture) if args.picture else out.with_suffix(".png")
     inputs = [args.scan, args.texture]
+    check_output_suffix(out, (".json",), "a feature-point file")
     check_output_path(out, overwrite=args.overwrite, inputs=inputs)
     check_output_path(picture, overwrite=args.overwrite, inputs=inputs + [out])
     ids = tuple(range(68)) if args.with_jaw else INNER_FEATURES

@@ -20,8 +20,8 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
-from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, frame_count,
-                     progress_disabled, resolve_model, video_options, video_out)
+from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, check_track_name,
+                     frame_count, progress_disabled, resolve_model, video_options, video_out)
 
 
 #: What the capture tracker does, for the help of every ``--tracker`` option.
@@ -166,6 +166,8 @@ def _check_outputs(args):
     if args.overlay:
         check_video_output(args.overlay, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.out:
+        check_not_input(args.out, inputs)      # said first: it would destroy the video
+        check_track_name(args.out, overlay=True)
         check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
         if args.overlay:
             check_not_input(args.overlay, [args.out, partial_path(args.out)])

@@ -24,8 +24,8 @@ from ..transfer import ALIGN_MODES
 from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES, JAW_MODES,
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
-from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, frame_count,
-                     progress_disabled, resolve_model, video_options, video_out)
+from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, check_track_name,
+                     frame_count, progress_disabled, resolve_model, video_options, video_out)
 from .track import CAPTURE_HELP
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
@@ -408,6 +408,7 @@ def _check_transfer_args(args):
     vopt = video_options(args)
     check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
+        check_track_name(args.save_track, "--save-track")
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
 
     if is_take(args.expression_from):
@@ -553,6 +554,7 @@ def run_edit(args) -> int:
         if not abs(a.amount) <= MAX_EDIT_FACTOR:
             raise FaceTransferError(f"--add {text}: the amount must lie in "
                                     f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}]")
+    check_track_name(args.out)
     check_output_path(args.out, overwrite=args.overwrite, inputs=[args.track, args.model])
     track = Track.load(args.track)
     model = _model_for_track(track, args.model)

@@ -66,8 +66,10 @@ def _take_page(args: argparse.Namespace):
 def run(args: argparse.Namespace) -> int:
     from ..export.viewer import write_viewer
     from ..io.atomic import check_output_path
+    from ..io.output_names import check_output_suffix
     from ..take import is_take
 
+    check_output_suffix(args.out, (".html", ".htm"), "the dial editor's page")
     check_output_path(args.out, overwrite=args.overwrite)
     if is_take(args.source):
         path = _take_page(args)

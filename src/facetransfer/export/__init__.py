@@ -25,10 +25,45 @@ from ..io.atomic import check_output_path
 from .common import ExportError, require_activations, resolve_model
 from .neutral import with_neutral
 
-__all__ = ["FORMATS", "ExportError", "export_track"]
+__all__ = ["FORMATS", "FORMAT_SUFFIXES", "ExportError", "export_track", "format_of"]
 
 #: Format name -> usual file suffix.
 FORMATS: dict[str, str] = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "json": ".json"}
+#: Format name -> the file suffixes it is written under (the first: :data:`FORMATS`'); a
+#: glb is binary glTF, never ``.gltf`` (JSON with its buffers beside it).
+FORMAT_SUFFIXES: dict[str, tuple[str, ...]] = {
+    "livelink": (".csv",), "glb": (".glb",), "usd": (".usd", ".usda", ".usdc"),
+    "json": (".json",)}
+
+
+def format_of(out: str | os.PathLike, fmt: str | None = None) -> str:
+    """The export format of the file ``out``: ``fmt`` when given (its name must end as that
+    format's files do, :data:`FORMAT_SUFFIXES`), else the one its extension names.
+
+    Raises
+    ------
+    ExportError
+        An unknown ``fmt``; no ``fmt`` and an extension no format has.
+    OutputError
+        ``out`` named for another format than ``fmt`` (a glb named ``face.usd`` is a file
+        that USD cannot open).
+    """
+    from ..io.output_names import check_output_suffix, suffix_list
+
+    if fmt is not None and fmt not in FORMATS:
+        raise ExportError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    suffix = Path(out).suffix.lower()
+    named = next((f for f, s in FORMAT_SUFFIXES.items() if suffix in s), None)
+    if fmt is None:
+        if named is None:
+            raise ExportError(
+                f"cannot tell the export format of {out} from its extension: name it "
+                + ", ".join(f"{suffix_list(s)} ({f})" for f, s in FORMAT_SUFFIXES.items())
+                + ", or give --format")
+        return named
+    check_output_suffix(out, FORMAT_SUFFIXES[fmt], f"a {fmt} export", flag="output",
+                        hint=f" (or --format {named})" if named else "")
+    return fmt
 
 
 def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwrite: bool = False,
@@ -70,8 +105,7 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     VideoError
         A ``timecode`` that is not one.
     """
-    if fmt not in FORMATS:
-        raise ExportError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    format_of(out, fmt)
     check_output_path(out, overwrite=overwrite)
     if texture is not None and fmt != "glb":
         raise ExportError(f"a texture is written only into glb files, not {fmt}")

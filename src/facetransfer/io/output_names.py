@@ -1,0 +1,62 @@
+"""An output's name says what it holds: its extension is checked before any work.
+
+A track written under ``take.mp4`` is a zip archive that a player refuses and a file manager
+shows as a video; a glb written under ``face.usd`` is a file USD cannot open; a page written
+under ``page.npz`` is found by nothing. Each command that writes one kind of file checks the
+name it is given (:func:`check_output_suffix`) before it reads or computes anything, in one
+line naming the output, what it holds and the name it could have. (The commands that draw an
+image check their own names, ``.png`` or ``.jpg``; a video's is
+:func:`facetransfer.io.video.check_video_output`'s.)
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from ..errors import OutputError
+
+__all__ = ["check_output_suffix", "suffix_list"]
+
+
+def suffix_list(suffixes) -> str:
+    """``(".usd", ".usda", ".usdc")`` -> ``".usd, .usda or .usdc"``."""
+    s = list(suffixes)
+    return s[0] if len(s) == 1 else f"{', '.join(s[:-1])} or {s[-1]}"
+
+
+def check_output_suffix(path: str | os.PathLike, suffixes, what: str, *, flag: str = "--out",
+                        hint: str = "") -> Path:
+    """Refuse an output whose extension is not one of ``suffixes``.
+
+    Parameters
+    ----------
+    path : path-like
+        The output.
+    suffixes : sequence of str
+        Accepted extensions, with the dot, lower case; the first is the one suggested.
+    what : str
+        What the file holds ("a track").
+    flag : str
+        The option that named it, for the message.
+    hint : str
+        Appended to the message (another option that writes what the name asks for).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    OutputError
+        ``"--out take.mp4: a track is written as .npz, not .mp4; name it take.npz"``.
+    """
+    p = Path(path)
+    suffix = p.suffix.lower()
+    if suffix in suffixes:
+        return p
+    said = f"not {p.suffix}" if p.suffix else "and the name has no extension"
+    name = p.with_suffix(suffixes[0]).name if p.name not in ("", ".", "..") else None
+    raise OutputError(f"{flag} {p}: {what} is written as {suffix_list(suffixes)}, {said}"
+                      + (f"; name it {name}" if name else "") + hint)
+
