@@ -167,6 +167,42 @@ def test_default_model_when_model_is_absent(clip_and_track, quick_model, tmp_pat
         assert decoded_frame_count(tmp_path / name) == 6
 
 
+def test_every_model_command_takes_the_default_model_without_model(quick_model, arkit_model,
+                                                                   make_arkit_track, tmp_path,
+                                                                   monkeypatch, capsys):
+    """No plumbing: ``model info|synth|sheet|dials``, ``render``, ``synth-video`` and ``texture
+    default|lift`` use the default model when no model is named (before, ``texture lift``,
+    ``texture default`` and ``synth-video`` required ``--model``, the others a MODEL). The
+    lift takes it only for a track made with it (else it asks for --model)."""
+    import dataclasses
+
+    import facetransfer.default_model as dm
+
+    monkeypatch.setattr(dm, "load_default_model", lambda **kw: quick_model)
+    monkeypatch.chdir(tmp_path)
+    for argv in (["model", "info"], ["model", "synth", "--out", "f.obj"],
+                 ["model", "sheet", "--out", "s.png", "--max-identities", "1"],
+                 ["model", "dials", "--out", "d.png"], ["render", "--out", "r.png"],
+                 ["synth-video", "--random", "--frames", "4", "--size", "128x96", "--out",
+                  "c.mp4"],
+                 ["texture", "default", "--source", "procedural", "--size", "64", "--out",
+                  "t.png"]):
+        assert main(argv) == 0, argv
+    out = capsys.readouterr().out
+    assert f"{quick_model.n_vertices} vertices" in out and "wrote c.mp4 (4 frames" in out
+    for name in ("f.obj", "s.png", "d.png", "r.png", "c.mp4", "c.truth.npz", "t.png"):
+        assert (tmp_path / name).stat().st_size > 0, name
+    assert main(["texture", "lift", "c.mp4", "--track", "c.truth.npz", "--size", "64",
+                 "--out", "lift.png"]) == 0
+    assert (tmp_path / "lift.png").stat().st_size > 0
+    track, _, _ = make_arkit_track(arkit_model, 4)       # a track of another model
+    dataclasses.replace(track, model_hash="0" * 16).save(tmp_path / "other.npz")
+    assert main(["texture", "lift", "c.mp4", "--track", "other.npz", "--out", "o.png"]) == 2
+    assert "pass the model it was tracked with (--model M.npz)" in capsys.readouterr().err
+    assert not (tmp_path / "o.png").exists()
+    capsys.readouterr()
+
+
 @pytest.mark.slow
 def test_no_third_party_lines_unless_verbose(data_dir, quick_model_path, tmp_path):
     """``track`` with MediaPipe's initialisation on real footage, in a fresh process: its

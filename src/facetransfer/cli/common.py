@@ -17,6 +17,9 @@ from ..io.video import (CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF, DEFAULT_P
 
 MODEL_HELP = ("multilinear model (.npz); default: the default model (ict-arkit, ARKit "
               "blendshapes), built once into the user cache on first use")
+#: The help of the model commands' optional MODEL argument (``model info``, ``render``, ...).
+MODEL_ARG_HELP = ("model file (.npz); default: the default model (ict-arkit), built once into "
+                  "the user cache on first use")
 
 
 #: ``--no-progress`` (every command takes it): progress bars off even on a terminal.
@@ -161,3 +164,15 @@ def check_track_name(path, flag: str = "--out", *, overlay: bool = False) -> Non
     check_output_suffix(path, (".npz",), "a track", flag=flag,
                         hint=" (--overlay writes a video of the fitted mesh over the clip)"
                         if video else "")
+
+
+def default_model_for(track):
+    """The default model for a track given without ``--model`` (built once with a progress bar;
+    an error asking for ``--model`` if the track was made with another model)."""
+    from ..export.common import resolve_model as of_track
+
+    progress, close = tqdm_progress("default model", unit="identity")
+    try:
+        return of_track(track, progress=progress, announce=announce)
+    finally:
+        close()

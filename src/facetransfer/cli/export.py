@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 
 from ..export import FORMAT_SUFFIXES, FORMATS
-from .common import frame_count, progress_disabled
+from .common import default_model_for, frame_count, progress_disabled
 
 
 def register(sub) -> None:
@@ -69,19 +69,6 @@ def _start_timecode(args, track) -> tuple[str | None, str]:
         return checked_timecode(args.timecode), "--timecode"
     tc = source_timecode(track)
     return tc, (f"the start timecode of {track.source}" if tc else "")
-
-
-def default_model_for(track):
-    """The default model for a track given without ``--model`` (built once with a progress bar;
-    an error asking for ``--model`` if the track was made with another model)."""
-    from ..export.common import resolve_model
-    from .common import announce, tqdm_progress
-
-    progress, close = tqdm_progress("default model", unit="identity")
-    try:
-        return resolve_model(track, progress=progress, announce=announce)
-    finally:
-        close()
 
 
 def _lift(track, model, args):

@@ -22,7 +22,7 @@ from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
 from ..io.memory import available_memory  # a name of this module: tests replace it
 from ..io.output_names import check_output_suffix
-from .common import progress_shown, tqdm_progress
+from .common import MODEL_ARG_HELP, progress_shown, resolve_model, tqdm_progress
 
 log = logging.getLogger(__name__)
 
@@ -190,11 +190,9 @@ def explained_variance(model) -> dict[str, list[float]]:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    from ..model import load_model
-
-    m = load_model(args.model)
+    m = resolve_model(args.model, progress=progress_shown())
     ev = explained_variance(m)
-    lines = [f"model {args.model}", f"  vertices: {m.n_vertices}, triangles: {len(m.faces)}, "
+    lines = [f"model {args.model or 'ict-arkit (the default model)'}", f"  vertices: {m.n_vertices}, triangles: {len(m.faces)}, "
              f"landmarks: {'yes' if m.landmarks is not None else 'no'}, "
              f"uvs: {'yes' if m.uvs is not None else 'no'}"]
     for name, d, r, labs in zip(m.mode_names, m.shape, m.ranks, m.labels):
@@ -229,7 +227,6 @@ def synth_weights(model, weights: dict[str, np.ndarray] | None = None,
 
 def cmd_synth(args: argparse.Namespace) -> int:
     from ..io.mesh import write_mesh
-    from ..model import load_model
 
     out = Path(args.out)
     if out.suffix.lower() not in (".obj", ".ply"):
@@ -237,7 +234,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     check_output_path(out, overwrite=args.overwrite, inputs=[args.model])
     if args.weights and args.like:
         raise FaceTransferError("give --weights or --like, not both")
-    m = load_model(args.model)
+    m = resolve_model(args.model, progress=progress_shown())
     w = synth_weights(m, parse_weights(args.weights) if args.weights else None,
                       parse_like(args.like) if args.like else None)
     v = m.synthesize(w)
@@ -371,8 +368,6 @@ def model_sheets(model, *, max_identities: int = 8, dial_components: int = 3,
 
 
 def cmd_sheet(args: argparse.Namespace) -> int:
-    from ..model import load_model
-
     out = Path(args.out)
     if out.suffix.lower() != ".png":
         raise FaceTransferError(f"--out must end in .png, got {out}")
@@ -381,7 +376,7 @@ def cmd_sheet(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--max-identities must be >= 1, got {args.max_identities}")
     for o in (out, dials_out):
         check_output_path(o, overwrite=args.overwrite, inputs=[args.model])
-    m = load_model(args.model)
+    m = resolve_model(args.model, progress=progress_shown())
     sheet, dials = model_sheets(m, max_identities=args.max_identities)
     with atomic_path(out, overwrite=args.overwrite) as tmp, \
             atomic_path(dials_out, overwrite=args.overwrite) as tmp2:
@@ -394,15 +389,14 @@ def cmd_sheet(args: argparse.Namespace) -> int:
 # --------------------------------------------------------------------------------- dials
 def cmd_dials(args: argparse.Namespace) -> int:
     from ..dials import dial_sheet, learn_dials
-    from ..model import load_model
 
     if args.out:
         if Path(args.out).suffix.lower() != ".png":
             raise FaceTransferError(f"--out must end in .png, got {args.out}")
         check_output_path(args.out, overwrite=args.overwrite)
-    m = load_model(args.model)
+    m = resolve_model(args.model, progress=progress_shown())
     dials = learn_dials(m)
-    lines = [f"identity dials of {args.model} (learnt from {m.shape[0]} identities; one unit = "
+    lines = [f"identity dials of {args.model or 'the default model'} (learnt from {m.shape[0]} identities; one unit = "
              f"one standard deviation of the measurement; {dials.unit})",
              f"  {'dial':14s} {'R2':>6s} {'LOO R2':>7s} {'sd':>8s} {'+1 unit':>9s}  measures"]
     for d in dials.dials:
@@ -450,11 +444,11 @@ def register(sub) -> None:
     b.set_defaults(func=cmd_build)
 
     i = msub.add_parser("info", help="show a model's modes, ranks, variance and provenance")
-    i.add_argument("model")
+    i.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     i.set_defaults(func=cmd_info)
 
     s = msub.add_parser("synth", help="write one face of the model as a mesh")
-    s.add_argument("model")
+    s.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     s.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...' "
                    "(modes not given: their mean)")
     s.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=smile")
@@ -463,7 +457,7 @@ def register(sub) -> None:
     s.set_defaults(func=cmd_synth)
 
     h = msub.add_parser("sheet", help="picture sheets: identities x expressions, and dials")
-    h.add_argument("model")
+    h.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     h.add_argument("--out", required=True, help="SHEET.png (also writes SHEET_dials.png)")
     h.add_argument("--max-identities", type=int, default=8, help="rows of the first sheet")
     _overwrite_option(h)
@@ -471,7 +465,7 @@ def register(sub) -> None:
 
     dl = msub.add_parser("dials", help="semantic identity dials (face width, nose length, ...) "
                          "with R², and a picture sheet")
-    dl.add_argument("model")
+    dl.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     dl.add_argument("--out", metavar="DIALS.png", help="also draw the dials (mean face at -2, 0, "
                     "+2 units)")
     dl.add_argument("--overwrite", action="store_true", help="replace an existing picture")

@@ -18,7 +18,8 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import add_video_options, frame_count, progress_disabled, video_options, video_out
+from .common import (MODEL_ARG_HELP, add_video_options, frame_count, progress_disabled,
+                     progress_shown, resolve_model, video_options, video_out)
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
 
@@ -79,10 +80,10 @@ def parse_identity(text: str):
         return parts[0]
 
 
-def _load_model(path: str):
-    from ..model import load_model
-
-    return load_model(path)   # names a missing file, a folder or a damaged file
+def _load_model(path: str | None):
+    """The model file (a missing, foreign or damaged one named in the error), or the default
+    model when ``path`` is None."""
+    return resolve_model(path, progress=progress_shown())
 
 
 def _model_weights(model, args) -> dict[str, np.ndarray]:
@@ -190,7 +191,7 @@ def register(sub) -> None:
     """Add ``render`` and ``synth-video`` to the facetransfer parser."""
     r = sub.add_parser("render", help="render a Lambert-shaded preview of a model face",
                        description="Render a model face (Eq. (5)) with a weak-perspective camera.")
-    r.add_argument("model", help="model file (.npz)")
+    r.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     r.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...'"
                    " (modes not given take their mean)")
     r.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=smile")
@@ -205,7 +206,7 @@ def register(sub) -> None:
                        description="Render a textured model face over a background with head "
                        "motion and expression/viseme tracks; writes CLIP.mp4 and "
                        "CLIP.truth.npz.")
-    s.add_argument("--model", required=True, help="model file (.npz)")
+    s.add_argument("--model", help=MODEL_ARG_HELP)
     s.add_argument("--identity", help="identity label or comma-separated weights")
     s.add_argument("--performance", help="performance spec (JSON, see facetransfer.synth)")
     s.add_argument("--random", action="store_true", help="a seeded random performance")

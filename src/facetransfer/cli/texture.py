@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import progress_disabled
+from .common import default_model_for, progress_disabled, progress_shown, resolve_model
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -55,10 +55,10 @@ def _read_mask(path: str, shape: tuple[int, int]) -> np.ndarray:
     return m > 127
 
 
-def _load_model(path: str):
-    from ..model import load_model
-
-    return load_model(path)   # names a missing file, a folder or a damaged file
+def _load_model(path: str | None):
+    """The model file (a missing, foreign or damaged one named in the error), or the default
+    model when ``path`` is None."""
+    return resolve_model(path, progress=progress_shown())
 
 
 def _load_track(path: str):
@@ -115,7 +115,10 @@ def cmd_lift(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--size must be in 8..4096, got {args.size}")
     info = video_info(args.video)       # a file or an image sequence, checked
     track = _load_track(args.track)
-    model = _load_model(args.model)
+    # without --model: the default model, checked against a tracker's track (a synth-video
+    # truth file names no model)
+    model = default_model_for(track) if args.model is None and hasattr(track, "model_hash") \
+        else _load_model(args.model)
     if tuple(track.frame_size) != tuple(info.size):
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
                                 f"{track.frame_size[1]} frames, the video is "
@@ -165,7 +168,8 @@ def register(sub) -> None:
     t.set_defaults(func=lambda a: (t.print_help(), 2)[1])
 
     d = tsub.add_parser("default", help="write the default procedural skin texture for a model's UVs")
-    d.add_argument("--model", required=True, help="model file (.npz) with UVs")
+    d.add_argument("--model", help="model file (.npz) with UVs; default: the default model "
+                   "(ict-arkit)")
     d.add_argument("--size", type=int, default=512, help="texture width and height (default 512)")
     d.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
     d.add_argument("--source", choices=("procedural", "lee-perry-smith", "auto"),
@@ -182,7 +186,8 @@ def register(sub) -> None:
                          "visibility and obliqueness, merge, fill holes.")
     lf.add_argument("video", help="the video the track belongs to")
     lf.add_argument("--track", required=True, help="TRACK.npz or CLIP.truth.npz")
-    lf.add_argument("--model", required=True, help="model file (.npz) used for the track")
+    lf.add_argument("--model", help="model file (.npz) used for the track; default: the "
+                    "default model, if the track was made with it")
     lf.add_argument("--size", type=int, default=512, help="texture size (default 512)")
     lf.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
     lf.add_argument("--function", help="also write the performance-driven texture function (.npz)")

@@ -82,7 +82,7 @@ def run(args: argparse.Namespace) -> int:
         model = load_model(args.model)
     elif _is_track(args.source):
         from ..track import Track
-        from .export import default_model_for
+        from .common import default_model_for
 
         model = default_model_for(Track.load(args.source))
     path = write_viewer(args.source, args.out, model=model, overwrite=args.overwrite,
