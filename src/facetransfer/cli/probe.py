@@ -1,6 +1,7 @@
-"""``facetransfer probe``: what facetransfer sees of video files, and what it will do with them.
+"""``facetransfer probe``: what facetransfer sees of video files, and what it will do with them;
+what a track file or a Live Link Face take holds.
 
-    facetransfer probe VIDEO [VIDEO ...] [--json]
+    facetransfer probe VIDEO|TRACK.npz|take.csv [...] [--json]
 """
 
 from __future__ import annotations
@@ -9,25 +10,44 @@ from __future__ import annotations
 def register(sub) -> None:
     """Add ``facetransfer probe``."""
     p = sub.add_parser(
-        "probe", help="say how videos are read: size and pixel shape, rate, fields, colour, "
-        "audio, decoder",
+        "probe", help="say how videos are read (size and pixel shape, rate, fields, colour, "
+        "audio, decoder) and what a track or a Live Link Face take holds",
         description="For each video: its stored and shown size, frame rate and frames (a "
         "variable rate's constant-rate timeline), interlacing, colour, audio, container and "
-        "decoder, and what the commands do about each (facetransfer.io.video_facts).")
-    p.add_argument("videos", nargs="+", metavar="VIDEO")
-    p.add_argument("--json", action="store_true", help="one JSON object per video, a list")
+        "decoder, and what the commands do about each (facetransfer.io.video_facts). For a "
+        "track (TRACK.npz): its frames, rate, video, model, activations and lost frames; for "
+        "a take (take.csv): its rows, timecode rate and span, shapes and rotations "
+        "(facetransfer.file_facts).")
+    p.add_argument("videos", nargs="+", metavar="FILE")
+    p.add_argument("--json", action="store_true", help="one JSON object per file, a list")
     p.set_defaults(func=run)
+
+
+def _facts(path):
+    """``(facts, lines)`` of one file, by its kind."""
+    from ..file_facts import file_fact_lines, file_kind, take_facts, track_facts
+    from ..io.video_facts import fact_lines, video_facts
+
+    kind = file_kind(path)
+    if kind == "model":
+        from ..errors import FaceTransferError
+
+        raise FaceTransferError(f"{path} is a model file, not a video: `facetransfer model info "
+                                f"{path}` describes it")
+    if kind == "video":
+        f = video_facts(path)
+        return f.as_dict(), fact_lines(f)
+    f = track_facts(path) if kind == "track" else take_facts(path)
+    return f, file_fact_lines(f)
 
 
 def run(args) -> int:
     import json
 
-    from ..io.video_facts import fact_lines, video_facts
-
-    facts = [video_facts(v) for v in args.videos]     # every file checked before any output
+    facts = [_facts(v) for v in args.videos]     # every file checked before any output
     if args.json:
-        print(json.dumps([f.as_dict() for f in facts], indent=1))
+        print(json.dumps([f for f, _ in facts], indent=1))
         return 0
-    for f in facts:
-        print("\n".join(fact_lines(f)))
+    for _, lines in facts:
+        print("\n".join(lines))
     return 0

@@ -1,0 +1,158 @@
+"""What a track file or a Live Link Face take holds, for ``facetransfer probe``.
+
+``probe`` says how a video is read (:mod:`facetransfer.io.video_facts`); handed a track
+(``TRACK.npz``, from ``track``, ``edit`` or ``transfer --save-track``) or a take (``take.csv``,
+from the Live Link Face app or ``export --format livelink``), it says what an animator asks of
+them before using one: how many frames, at what rate and from what timecode; for a track, the
+video and model it was made from, whether it carries ARKit activations, where the face was
+lost; for a take, which of the 52 shapes and the head's and eyes' rotations it has.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["file_kind", "track_facts", "take_facts", "file_fact_lines"]
+
+#: Keys every track file holds (:meth:`facetransfer.track.result.Track.save`).
+_TRACK_KEYS = frozenset({"fps", "frame_size", "rotation", "model_hash", "mode_names"})
+
+
+def file_kind(path: str | os.PathLike) -> str:
+    """``"take"`` (a ``.csv``), ``"track"`` (an ``.npz`` with a track's arrays), ``"model"``
+    (an ``.npz`` with a model's) or ``"video"`` (anything else: a video or an image sequence,
+    for :mod:`facetransfer.io.video_facts`)."""
+    from .take import is_take
+
+    p = Path(path)
+    if is_take(p):
+        return "take"
+    if p.suffix.lower() == ".npz" and p.is_file():
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                if _TRACK_KEYS <= set(z.files):
+                    return "track"
+                if {"core", "metadata"} <= set(z.files):
+                    return "model"
+        except (OSError, ValueError, EOFError):
+            pass            # not an archive: the video reader names what it is
+    return "video"
+
+
+def _ranges(mask: np.ndarray, limit: int = 4) -> str:
+    """``"3-7, 12, 40-41"``: the runs of True in ``mask`` (the first ``limit``)."""
+    idx = np.flatnonzero(mask)
+    if not idx.size:
+        return ""
+    starts = np.r_[idx[0], idx[1:][np.diff(idx) > 1]]
+    ends = np.r_[idx[:-1][np.diff(idx) > 1], idx[-1]]
+    runs = [f"{a}" if a == b else f"{a}-{b}" for a, b in zip(starts, ends)]
+    return ", ".join(runs[:limit]) + (f", ... ({len(runs)} runs)" if len(runs) > limit else "")
+
+
+def _default_model_hash() -> str | None:
+    """The content hash of the default model if it is built (read from its file's metadata,
+    not by loading it), else None."""
+    import json
+
+    from .default_model import default_model_path
+
+    p = default_model_path()
+    if not p.is_file():
+        return None
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            return json.loads(str(z["metadata"])).get("sha256")
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+
+
+def track_facts(path: str | os.PathLike) -> dict:
+    """What the track file ``path`` holds, as a JSON-ready dict (TrackError for a file that is
+    not one)."""
+    from .export.livelink import source_timecode
+    from .track.result import Track
+
+    t = Track.load(path)
+    n = t.n_frames
+    default = _default_model_hash()
+    return {
+        "kind": "track", "path": str(path), "frames": n, "fps": float(t.fps),
+        "seconds": n / float(t.fps) if t.fps else 0.0, "frame_size": list(t.frame_size),
+        "pixel_aspect": float(t.pixel_aspect), "source": t.source or None,
+        "source_timecode": source_timecode(t), "model_hash": t.model_hash,
+        "default_model": None if default is None else t.model_hash == default,
+        "modes": list(t.mode_names),
+        "activations": None if t.blendshapes is None else len(t.blendshape_names or ()),
+        "lost_frames": int(np.count_nonzero(t.lost)), "lost": _ranges(np.asarray(t.lost)),
+        "mean_confidence": float(np.mean(t.confidence)) if n else 0.0,
+        "shots": [0, *t.shot_starts] if t.shot_starts else [0],
+        "neutral_frame": t.info.get("neutral_frame")}
+
+
+def take_facts(path: str | os.PathLike) -> dict:
+    """What the Live Link Face take ``path`` holds, as a JSON-ready dict (ExportError or
+    TransferError for a file that is not one)."""
+    from .export.livelink import LIVELINK_NAMES, POSE_COLUMNS, read_livelink
+    from .take import take_rate, take_seconds
+
+    take = read_livelink(path, lenient=True)
+    tc = take.timecodes
+    seconds = take_seconds(tc) if tc else np.zeros(0)
+    shapes = [n for n in LIVELINK_NAMES if n not in take.missing]
+    head = [n for n in POSE_COLUMNS if n.startswith("Head")]
+    eyes = [n for n in POSE_COLUMNS if not n.startswith("Head")]
+    return {
+        "kind": "take", "path": str(path), "rows": len(tc),
+        "timecode_rate": take_rate(tc) if tc else None,
+        "seconds": float(seconds[-1] - seconds[0]) if len(seconds) else 0.0,
+        "first_timecode": tc[0] if tc else None, "last_timecode": tc[-1] if tc else None,
+        "shapes": len(shapes), "missing_shapes": [n for n in LIVELINK_NAMES if n not in shapes],
+        "head_rotation": not any(n in take.missing for n in head),
+        "eye_rotation": [n for n in eyes if n not in take.missing]}
+
+
+def _track_lines(f: dict) -> list[str]:
+    w, h = f["frame_size"]
+    model = {True: "the default model (ict-arkit)", False: "another model than the default",
+             None: "a model"}[f["default_model"]]
+    lines = [f"{f['path']}: a track of {f['frames']} frames at {f['fps']:g} fps "
+             f"({f['seconds']:.2f} s), {w}x{h}"
+             + (f" (pixel aspect {f['pixel_aspect']:g})" if f["pixel_aspect"] != 1 else ""),
+             f"  made from: {f['source'] or 'an unnamed video'}"
+             + (f", start timecode {f['source_timecode']}" if f["source_timecode"] else "")
+             + f"; with {model}, hash {f['model_hash'][:12]}... (modes "
+             f"{', '.join(f['modes'])})",
+             "  ARKit activations: " + (f"{f['activations']} (exports and takes use them)"
+                                        if f["activations"] else
+                                        "none (the model's expressions are not ARKit-named: "
+                                        "nothing to export)"),
+             f"  face lost in {f['lost_frames']} of {f['frames']} frames"
+             + (f" ({f['lost']})" if f["lost"] else "")
+             + f"; mean confidence {f['mean_confidence']:.2f}"]
+    if len(f["shots"]) > 1:
+        lines.append(f"  {len(f['shots'])} shots, from frames {', '.join(map(str, f['shots']))}")
+    if f["neutral_frame"] is not None:
+        lines.append(f"  activations measured from the neutral frame {f['neutral_frame']}")
+    return lines
+
+
+def _take_lines(f: dict) -> list[str]:
+    rate = f"{f['timecode_rate']} fps timecode" if f["timecode_rate"] else "no rows"
+    lines = [f"{f['path']}: a Live Link Face take of {f['rows']} rows ({rate})"
+             + (f", from {f['first_timecode']} to {f['last_timecode']} ({f['seconds']:.2f} s "
+                "apart)" if f["first_timecode"] else ""),
+             f"  shapes: {f['shapes']} of 52"
+             + (f" (missing, read as 0: {', '.join(f['missing_shapes'])})"
+                if f["missing_shapes"] else ""),
+             "  head rotation: " + ("yes" if f["head_rotation"] else "no")
+             + "; eye rotation: " + (", ".join(f["eye_rotation"]) or "none")]
+    return lines
+
+
+def file_fact_lines(f: dict) -> list[str]:
+    """:func:`track_facts` or :func:`take_facts` as a few lines for a person."""
+    return _track_lines(f) if f["kind"] == "track" else _take_lines(f)

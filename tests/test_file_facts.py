@@ -1,0 +1,91 @@
+"""``facetransfer probe`` on a track file and a Live Link Face take (facetransfer.file_facts)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from facetransfer.cli.main import main
+from facetransfer.file_facts import _ranges, file_kind, take_facts, track_facts
+
+
+def test_runs_of_lost_frames():
+    m = np.zeros(20, bool)
+    assert _ranges(m) == ""
+    m[[3, 4, 5, 9, 12, 13, 15, 18]] = True
+    assert _ranges(m) == "3-5, 9, 12-13, 15, ... (5 runs)"
+    assert _ranges(m, limit=5) == "3-5, 9, 12-13, 15, 18"
+
+
+def test_a_track_is_described(arkit_model, make_arkit_track, tmp_path, monkeypatch, capsys):
+    """Frames, rate, size, video, model (the default one, by its file's recorded hash),
+    activations, lost frames: the values the track holds, as lines and as JSON."""
+    import facetransfer.default_model as dm
+
+    track, _, _ = make_arkit_track(arkit_model, 30, fps=25.0)
+    lost = np.zeros(30, bool)
+    lost[[3, 4, 5, 20]] = True
+    track = dataclasses.replace(track, lost=lost, source="clip.mp4",
+                                confidence=np.where(lost, 0.0, 0.9))
+    track.save(tmp_path / "t.npz")
+    assert file_kind(tmp_path / "t.npz") == "track"
+    monkeypatch.setattr(dm, "default_model_path", lambda: tmp_path / "none.npz")
+    f = track_facts(tmp_path / "t.npz")
+    assert (f["frames"], f["fps"], f["seconds"], f["activations"]) == (30, 25.0, 1.2, 52)
+    assert (f["lost_frames"], f["lost"], f["default_model"]) == (4, "3-5, 20", None)
+    assert f["mean_confidence"] == pytest.approx(0.9 * 26 / 30)
+    arkit_model.save(tmp_path / "default.npz")                   # the default model, built
+    monkeypatch.setattr(dm, "default_model_path", lambda: tmp_path / "default.npz")
+    assert main(["probe", str(tmp_path / "t.npz")]) == 0
+    out = capsys.readouterr().out.splitlines()
+    W, H = track.frame_size
+    assert out[0] == f"{tmp_path / 't.npz'}: a track of 30 frames at 25 fps (1.20 s), {W}x{H}"
+    assert out[1].startswith("  made from: clip.mp4; with the default model (ict-arkit), hash "
+                             f"{arkit_model.content_hash[:12]}...")
+    assert out[2] == "  ARKit activations: 52 (exports and takes use them)"
+    assert out[3] == "  face lost in 4 of 30 frames (3-5, 20); mean confidence 0.78"
+    dataclasses.replace(track, model_hash="0" * 64).save(tmp_path / "o.npz")
+    assert main(["probe", str(tmp_path / "o.npz"), "--json"]) == 0
+    (g,) = json.loads(capsys.readouterr().out)
+    assert g["default_model"] is False and g["kind"] == "track" and g["frames"] == 30
+
+
+def test_a_take_is_described(arkit_model, make_arkit_track, tmp_path, capsys):
+    """The exporter's take (every column, 25 fps) and another tool's (camelCase names, 60
+    rows a second, no TongueOut, no rotations)."""
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.export.livelink import write_livelink
+
+    track, _, _ = make_arkit_track(arkit_model, 30, fps=25.0)
+    write_livelink(track, tmp_path / "take.csv", start=36000.0)     # 10:00:00:00
+    f = take_facts(tmp_path / "take.csv")
+    assert (f["rows"], f["timecode_rate"], f["shapes"], f["missing_shapes"]) == (30, 25, 52, [])
+    assert f["first_timecode"] == "10:00:00:00.000" and f["last_timecode"] == "10:00:01:04.000"
+    assert f["head_rotation"] and len(f["eye_rotation"]) == 6
+    assert f["seconds"] == pytest.approx(29 / 25)
+    names = [n for n in ARKIT_NAMES if n != "tongueOut"]
+    rows = ["Timecode,BlendShapeCount," + ",".join(names)]
+    rows += [f"00:00:0{k // 60}:{k % 60:02d},{len(names)}," + ",".join(["0.1"] * len(names))
+             for k in range(90)]
+    (tmp_path / "other.csv").write_text("\n".join(rows) + "\n")
+    assert main(["probe", str(tmp_path / "other.csv")]) == 0
+    assert capsys.readouterr().out.splitlines() == [
+        f"{tmp_path / 'other.csv'}: a Live Link Face take of 90 rows (60 fps timecode), from "
+        "00:00:00:00 to 00:00:01:29 (1.48 s apart)",
+        "  shapes: 51 of 52 (missing, read as 0: TongueOut)",
+        "  head rotation: no; eye rotation: none"]
+
+
+def test_a_model_or_a_foreign_archive_given_to_probe(arkit_model, tmp_path, capsys):
+    arkit_model.save(tmp_path / "m.npz")
+    assert main(["probe", str(tmp_path / "m.npz")]) == 2
+    assert capsys.readouterr().err.strip() == (
+        f"facetransfer probe: error: {tmp_path / 'm.npz'} is a model file, not a video: "
+        f"`facetransfer model info {tmp_path / 'm.npz'}` describes it")
+    np.savez(tmp_path / "x.npz", a=np.zeros(3))
+    assert file_kind(tmp_path / "x.npz") == "video"    # the video reader names what it is
+    assert main(["probe", str(tmp_path / "x.npz")]) == 2
+    assert "x.npz" in capsys.readouterr().err
