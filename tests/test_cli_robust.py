@@ -291,6 +291,27 @@ def test_every_command_takes_no_progress_and_it_silences_the_bars(monkeypatch):
         common.set_progress(True)
 
 
+def test_every_bar_is_drawn_on_a_terminal_only():
+    """tqdm draws into a pipe or a log file unless told otherwise (``batch``'s bar filled the
+    log of ``facetransfer batch track ... 2>log``): every bar the package makes passes
+    ``disable=`` (:func:`facetransfer.cli.common.progress_disabled`: a terminal only, and
+    not after ``--no-progress``; None, tqdm's own rule, for a download)."""
+    import ast
+
+    import facetransfer
+
+    root = Path(facetransfer.__file__).parent
+    bars, missing = 0, []
+    for f in sorted(root.rglob("*.py")):
+        for node in ast.walk(ast.parse(f.read_text(), str(f))):
+            if isinstance(node, ast.Call) and \
+                    getattr(node.func, "id", getattr(node.func, "attr", None)) == "tqdm":
+                bars += 1
+                if not any(k.arg == "disable" for k in node.keywords):
+                    missing.append(f"{f.relative_to(root)}:{node.lineno}")
+    assert bars >= 10 and missing == []
+
+
 # ------------------------------------------------------------------------------ a closed pipe
 def test_output_read_by_a_reader_that_stops_ends_quietly(data_dir):
     """``facetransfer probe V | head -1``: the command's output goes to a pipe whose reader

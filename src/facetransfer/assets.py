@@ -307,8 +307,8 @@ def fetch(url: str, dest: str | os.PathLike, sha256: str, *, name: str = "",
             if progress is True:
                 from tqdm import tqdm
 
-                bar = tqdm(total=total or None, unit="B", unit_scale=True,
-                           desc=f"{label}: {dest.name}", leave=False)
+                bar = tqdm(total=total or None, unit="B", unit_scale=True,  # a terminal's only
+                           desc=f"{label}: {dest.name}", leave=False, disable=None)
             done = 0
             while True:
                 b = resp.read(1 << 16)

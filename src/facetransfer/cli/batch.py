@@ -16,7 +16,8 @@ from __future__ import annotations
 import sys
 
 from ..errors import FaceTransferError
-from .common import FACE_WHERE, add_video_options, resolve_model, video_options
+from .common import (FACE_WHERE, add_video_options, progress_disabled, resolve_model,
+                     video_options)
 
 
 def _cluster_options(p) -> None:
@@ -121,7 +122,8 @@ def _run(args, what: str, n_jobs: int, call) -> int:
     if args.workers is not None and args.workers < 1:
         raise FaceTransferError(f"--workers must be >= 1, got {args.workers}")
     bar = None if args.no_progress else tqdm(total=n_jobs, desc=what, unit="clip",
-                                             dynamic_ncols=True, file=sys.stderr)
+                                             dynamic_ncols=True, file=sys.stderr,
+                                             disable=progress_disabled())
     failed = 0
 
     def progress(row) -> None:

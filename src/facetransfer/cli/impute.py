@@ -62,6 +62,7 @@ def _eval(args) -> int:
 
     from ..datasets import load_dataset
     from ..impute import EVAL_VARIANTS, METHODS, evaluate_imputation
+    from .common import progress_disabled
 
     fractions = _floats(args.missing, "--missing")
     for f in fractions:
@@ -79,7 +80,8 @@ def _eval(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a folder")
-    with tqdm(desc="loading data set", unit="mesh", leave=False) as lbar:
+    with tqdm(desc="loading data set", unit="mesh", leave=False,
+              disable=progress_disabled()) as lbar:
         def loaded(done: int, total: int) -> None:
             lbar.total = total
             lbar.n = done
@@ -87,7 +89,8 @@ def _eval(args) -> int:
 
         ds = load_dataset(args.dataset, progress=loaded)
     total = len(fractions) * args.trials * len(methods)
-    bar = tqdm(total=total, desc="impute eval", unit="run", leave=False)
+    bar = tqdm(total=total, desc="impute eval", unit="run", leave=False,
+               disable=progress_disabled())
 
     def progress(msg: str) -> None:
         bar.update(1)

@@ -289,7 +289,10 @@ class _StageBar:
         if enabled:
             from tqdm import tqdm
 
-            self.bar = tqdm(total=1, desc="fitting", unit="stage", leave=False)
+            from .common import progress_disabled
+
+            self.bar = tqdm(total=1, desc="fitting", unit="stage", leave=False,
+                            disable=progress_disabled())
 
     def __call__(self, i: int, n: int, name: str) -> None:
         if self.bar is not None:
