@@ -284,9 +284,15 @@ class FollowingLandmarker:
         return q, scores
 
     def _searched(self, frame: np.ndarray):
-        """The face in the first tile that shows one (a search in one frame of
-        :data:`SEARCH_EVERY` without a face); its crop then followed; none where it is another
-        person's, the subject hidden (:meth:`_other_person`)."""
+        """The face in the first tile that shows one which its crop confirms (a search in one
+        frame of :data:`SEARCH_EVERY` without a face); its crop then followed; none where it is
+        another person's, the subject hidden (:meth:`_other_person`).
+
+        A tile's detector also finds faces that are none (an animal painted on the wall behind
+        the speaker of ``stills/einstein.jpg``, 43 pixels); the landmark model in the crop
+        about it then finds nothing, and the search goes on to the next tiles (it stopped
+        there: the speaker's face was never searched for, in that frame nor in any later one).
+        """
         H, W = frame.shape[:2]
         tiles = search_tiles((W, H))
         every = SEARCH_EVERY * (1 if self._missed < SEARCH_SLOWER else 5)
@@ -301,7 +307,9 @@ class FollowingLandmarker:
                         self._other_person(frame):
                     return None, None                  # the subject hidden
                 self.crop = crop_about(box, (W, H))
-                return self._in_crop(frame)
+                found = self._in_crop(frame)
+                if found[0] is not None:
+                    return found
         return None, None
 
     def _crop_landmarker(self) -> VideoLandmarker:
