@@ -200,6 +200,22 @@ def test_bad_outputs(tmp_path, out, match):
         check_video_output(tmp_path / out)
 
 
+def test_a_video_named_with_a_percent_sign_is_a_video(tmp_path):
+    """``take 100% final.mp4`` is a video (before: taken for a frame pattern and refused,
+    "a frame pattern needs an image extension"); written and read back under its name. An
+    image's name with a ``%`` but no field is still asked for one; ``%d`` in a video's name is
+    still a pattern without an image extension."""
+    out = tmp_path / "take 100% final.mp4"
+    assert check_video_output(out).kind == "video"
+    encode_video(out, smooth_frames(n=3), 25)
+    assert decoded_frame_count(out) == 3
+    with pytest.raises(VideoError, match="exactly one frame number field"):
+        check_video_output(tmp_path / "fr 5%.png")
+    with pytest.raises(VideoError, match="needs an image extension"):
+        check_video_output(tmp_path / "shot_%03d.mp4")
+    assert check_video_output(tmp_path / "f_%03d.png").kind == "images"
+
+
 def test_preset_reaches_x264(tmp_path):
     # x264 writes its settings into the stream: subme 7 is medium's, 4 faster's (the
     # default), 2 veryfast's

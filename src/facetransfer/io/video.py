@@ -213,8 +213,13 @@ def fits_output(shape: tuple, size: tuple[int, int], path: str | os.PathLike,
 
 
 def is_image_pattern(path: str | os.PathLike) -> bool:
-    """Whether ``path`` names an image sequence (``frames/%05d.png``)."""
-    return "%" in Path(path).name
+    """Whether ``path`` names an image sequence to write: a printf frame field in its name
+    (``frames/%05d.png``), or an image's name with any ``%`` (whose field
+    :func:`check_video_output` then asks for). A video's name may hold a ``%`` of its own
+    (``take 100% final.mp4``)."""
+    p = Path(path)
+    return bool(_PATTERN.search(p.name)) or \
+        ("%" in p.name and p.suffix.lower() in IMAGE_SUFFIXES)
 
 
 def frame_path(pattern: str | os.PathLike, i: int) -> Path:

@@ -28,6 +28,7 @@ import numpy as np
 from ..errors import VideoError
 from .plate_alpha import video_has_alpha
 from .plate_depth import DEPTH_OUTPUTS, deep_frame
+from .video import is_image_pattern
 from .video_options import DEEP_CODECS
 from .video_planes import DecodedPlanes, stored_pixel_format
 from .video_sequence import is_sequence
@@ -138,7 +139,7 @@ def video_depth(out, target, options=None, start: int = 0) -> VideoDepth | None:
     :mod:`facetransfer.io.plate_alpha` in 8 bits with its alpha)."""
     if target is None or is_sequence(target) or not Path(target).is_file():
         return None
-    if "%" in Path(out).name:
+    if is_image_pattern(out):
         bits = video_bits(target)
         if bits <= 8 or not keeps_depth(out, target, ""):
             return None
