@@ -68,3 +68,24 @@ def test_demo_with_the_mouth_texture_function(data_dir, quick_model, tmp_path):
     assert np.percentile(np.linalg.norm(changed[:, [2, 1]] - mouth, axis=1), 95) < 80
     with pytest.raises(ValueError, match="mouth"):
         run_demo(tmp_path / "c", frames=4, model=quick_model, mouth="lips")
+
+
+@pytest.mark.slow
+def test_demo_with_a_take_shows_the_take_on_the_model(data_dir, arkit_model, make_arkit_track,
+                                                      tmp_path):
+    """A Live Link Face take as the demo's source: it has no pictures, so its panel is the take
+    performed by the model's mean face in the target's pose (before: the target's own frames,
+    labelled the source, which the judge then compared the result with)."""
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.io.video import VideoOptions, read_video
+
+    track, _, _ = make_arkit_track(arkit_model, 12, fps=25.0)
+    write_livelink(track, tmp_path / "take.csv")
+    res = run_demo(tmp_path / "out", frames=6, model=arkit_model, source=tmp_path / "take.csv",
+                   target=data_dir / "video" / "WDA_KatieHill_000.mp4", judge=False,
+                   video_options=VideoOptions(crf=0))
+    frames, _ = read_video(res.video)
+    src, tgt = frames[:, :, :512].astype(int), frames[:, :, 512:1024].astype(int)
+    assert np.abs(src - tgt).mean() > 40                # not the target's frames
+    corner = src[:, 480:, :40].reshape(-1, 3)           # the puppet's plain background
+    assert np.abs(corner - (40, 40, 48)).max() <= 2

@@ -69,3 +69,19 @@ def test_gaze_is_toward_the_subjects_left_and_up():
     S[2, MEDIAPIPE_NAMES.index("eyeLookDownLeft")] = 0.2   # down
     S[2, MEDIAPIPE_NAMES.index("eyeLookDownRight")] = 0.4
     np.testing.assert_allclose(gaze(S), [[0.5, 0.0], [-0.5, 0.0], [0.0, -0.3]])
+
+
+def test_a_measure_that_does_not_move_is_said_so_not_printed_as_nan():
+    """NaN (a score that does not move, a clip without a face) was printed as "+nan" in the
+    demo's line; it is "–", explained once."""
+    from facetransfer.fidelity import Fidelity
+
+    names = ("jawOpen", "eyeBlinkLeft", "eyeBlinkRight", "browInnerUp", "mouthPucker",
+             "mouthOpening", "gazeHorizontal", "gazeVertical")
+    s = {n: 0.5 for n in names} | {"browInnerUp": float("nan")}
+    t = {n: -0.25 for n in names}
+    line = Fidelity(s, t).line()
+    assert "nan" not in line and "brows – / -0.25" in line and "jawOpen r=+0.50" in line
+    assert line.endswith("(–: a measure that does not move in one of the clips, or a clip "
+                         "without a face)")
+    assert "(–" not in Fidelity(t, t).line()

@@ -135,14 +135,14 @@ def _fit_height(img: np.ndarray, H: int, W: int) -> np.ndarray:
 
 
 def side_by_side(source: np.ndarray, target: np.ndarray, result: np.ndarray, *,
-                 labels: bool = True) -> np.ndarray:
+                 labels: bool = True, source_label: str = "source (expressions)") -> np.ndarray:
     """One demo frame: source | target | result at the target's size, (H, 3 W, 3) uint8."""
     import cv2
 
     H, W = target.shape[:2]
     tiles = [_fit_height(source, H, W), target.copy(), result.copy()]
     if labels:
-        for t, text in zip(tiles, ("source (expressions)", "target", "result")):
+        for t, text in zip(tiles, (source_label, "target", "result")):
             cv2.putText(t, text, (10, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (0, 0, 0), 4,
                         cv2.LINE_AA)
             cv2.putText(t, text, (10, 28), cv2.FONT_HERSHEY_SIMPLEX, 0.8, (255, 255, 255), 2,
@@ -239,7 +239,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     source, target, tracks = _demo_inputs(source, target, model, Path(out_dir), frames)
     plan, opts = _plan_with_fallback(target, source, model, opts, frames, tracks,
                                      progress_factory)
-    sheet = _DemoFrames(plan, judge)
+    sheet = _DemoFrames(plan, judge, _take_panels(source, plan, model))
     rendered = render_plan(plan, model, video_path, options=opts, audio_from=target,
                            overwrite=overwrite, progress_factory=progress_factory,
                            compose=sheet.compose, video_options=video_options)
@@ -309,21 +309,40 @@ def _plan_with_fallback(target, source, model, opts: RewriteOptions, frames: int
         return plan(opts.track_method), opts
 
 
+def _take_panels(source, plan, model):
+    """For a Live Link Face take as the source (it has no pictures; the plan's mouth frames
+    are the target's own): the take's performance on the model's mean face, in the target's
+    pose and frame (:func:`facetransfer.transfer.puppet_frames` of the new track), the
+    source panel that the judge compares the result with; None for a video source."""
+    from .take import is_take
+
+    if not is_take(source):
+        return None
+    from .transfer import puppet_frames
+
+    return puppet_frames(plan.new_track, model, model.weight_mean("identity"),
+                         size=tuple(plan.target_frames.shape[2:0:-1]))
+
+
 class _DemoFrames:
     """The demo's frame composer (source | target | result): keeps six frames for the contact
-    sheet and, for the judge, the three panels at half size."""
+    sheet and, for the judge, the three panels at half size. ``take``: the source panels of a
+    take (:func:`_take_panels`, one per frame in order), else the plan's mouth frames."""
 
-    def __init__(self, plan, judge: bool) -> None:
+    def __init__(self, plan, judge: bool, take=None) -> None:
         n = plan.n_frames
-        self.plan, self.judge = plan, judge
+        self.plan, self.judge, self.take = plan, judge, take
         self.pick = set(np.linspace(0, n - 1, 6).round().astype(int).tolist())
         self.sheet_frames: list[np.ndarray] = []
         self.panels: list[list[np.ndarray]] = [[], [], []]
 
     def compose(self, i: int, r) -> np.ndarray:
         plan = self.plan
-        trio = (plan.mouth_frames[plan.mouth_index[i]], plan.target_frames[i], r.image)
-        frame = side_by_side(*trio)
+        source = plan.mouth_frames[plan.mouth_index[i]] if self.take is None else \
+            next(self.take)
+        trio = (source, plan.target_frames[i], r.image)
+        frame = side_by_side(*trio, source_label="source (expressions)" if self.take is None
+                             else "source (the take on the model)")
         if i in self.pick:
             self.sheet_frames.append(frame)
         if self.judge:

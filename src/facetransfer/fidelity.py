@@ -41,11 +41,14 @@ class Fidelity:
         s, t = self.with_source, self.with_target
         blink_s = _mean(s["eyeBlinkLeft"], s["eyeBlinkRight"])
         blink_t = _mean(t["eyeBlinkLeft"], t["eyeBlinkRight"])
-        return (f"fidelity (MediaPipe on the result): jawOpen r={s['jawOpen']:+.2f} with the "
-                f"source, {t['jawOpen']:+.2f} with the target; mouth opening "
-                f"{s['mouthOpening']:+.2f} / {t['mouthOpening']:+.2f}; blinks {blink_s:+.2f} / "
-                f"{blink_t:+.2f}; brows {s['browInnerUp']:+.2f} / {t['browInnerUp']:+.2f}; "
-                f"gaze {s['gazeHorizontal']:+.2f} / {t['gazeHorizontal']:+.2f}")
+        r = [s["jawOpen"], t["jawOpen"], s["mouthOpening"], t["mouthOpening"], blink_s, blink_t,
+             s["browInnerUp"], t["browInnerUp"], s["gazeHorizontal"], t["gazeHorizontal"]]
+        v = [f"{x:+.2f}" if np.isfinite(x) else "–" for x in r]
+        return (f"fidelity (MediaPipe on the result): jawOpen r={v[0]} with the source, {v[1]} "
+                f"with the target; mouth opening {v[2]} / {v[3]}; blinks {v[4]} / {v[5]}; "
+                f"brows {v[6]} / {v[7]}; gaze {v[8]} / {v[9]}"
+                + ("" if all(np.isfinite(r)) else " (–: a measure that does not move in one "
+                   "of the clips, or a clip without a face)"))
 
 
 def _mean(*values: float) -> float:
