@@ -151,10 +151,40 @@ def test_recombine_rejects_incompatible_tracks():
         recombine(tgt, expression=make_track(4, seed=2, model_hash="other"))
     with pytest.raises(TransferError, match="viseme"):
         recombine(tgt, viseme=make_track(4, seed=2))
-    with pytest.raises(TransferError, match="frame size"):
-        recombine(tgt, pose=make_track(4, seed=2, size=(32, 32)))
     with pytest.raises(TransferError, match="weights"):
         recombine(tgt, expression=make_track(4, seed=2, r=(3, 5)))
+
+
+@pytest.mark.parametrize("size, aspect", [((32, 32), 1.0), ((64, 48), 1.25), ((200, 90), 0.8)])
+def test_a_pose_of_another_frame_moves_the_targets_head(size, aspect):
+    """A pose track of another frame size or pixel shape (before: refused) drives the target's
+    head: every projected model point, in shown pixels, moves about the target head's usual
+    place as it moves about the pose source head's, scaled by the heads' sizes; the rotation
+    is the source's. A track moved onto itself is unchanged."""
+    import dataclasses
+
+    from facetransfer.transfer import _placement, pose_about
+
+    rng = np.random.default_rng(3)
+    tgt = dataclasses.replace(make_track(4, seed=1), pixel_aspect=1.1)     # 64x48, a = 1.1
+    src = dataclasses.replace(make_track(4, seed=2, size=size), pixel_aspect=aspect,
+                              lost=np.array([False, False, True, False]))
+    R = np.stack([np.linalg.qr(rng.normal(size=(3, 3)))[0] for _ in range(4)])
+    src = dataclasses.replace(src, rotation=R * np.sign(np.linalg.det(R))[:, None, None])
+    new = recombine(tgt, pose=src)
+    assert new.frame_size == tgt.frame_size and new.pixel_aspect == 1.1
+    (tp, sp), (tt, st) = _placement(src), _placement(tgt)
+    assert sp == np.median(src.scale[[0, 1, 3]])                 # the lost frame left out
+    X = rng.normal(size=(20, 3))
+    for i in range(4):
+        def shown(track):
+            return track.camera(i).project(X)[:, :2] * (track.pixel_aspect, 1.0)
+        np.testing.assert_allclose(shown(new) - tt, st / sp * (shown(src) - tp), atol=1e-9)
+        np.testing.assert_allclose(new.rotation[i], src.rotation[i], atol=1e-12)
+    same = pose_about(tgt, tgt)
+    np.testing.assert_allclose(same.translation, tgt.translation, atol=1e-12)
+    np.testing.assert_allclose(same.landmarks2d, tgt.landmarks2d, atol=1e-12)
+    np.testing.assert_allclose(same.scale, tgt.scale, atol=1e-12)
 
 
 def test_recombine_viseme_from_trilinear_tracks():

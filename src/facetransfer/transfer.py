@@ -264,6 +264,49 @@ def _check_compatible(target, other, what: str) -> None:
                             f"(model hashes differ)")
 
 
+def _placement(track) -> tuple[np.ndarray, float]:
+    """The head's usual place and size in a track: the median translation in shown (square)
+    pixels and the median scale, over the frames not lost (all frames if every one is)."""
+    ok = ~np.asarray(track.lost, bool)
+    ok = ok if ok.any() else np.ones_like(ok)
+    t = np.asarray(track.translation, np.float64)[ok] * (float(track.pixel_aspect), 1.0)
+    return np.median(t, axis=0), float(np.median(np.asarray(track.scale)[ok]))
+
+
+def pose_about(pose, target):
+    """The pose track ``pose`` of frames framed otherwise than the ``target``'s (another size
+    or pixel shape), moved onto the target's head: its rotation, and its head's motion about
+    its usual place (:func:`_placement`) scaled by the two heads' sizes, about the target's
+    head's usual place.
+
+    A weak-perspective camera (Eq. (7)) maps a model point ``X`` to the stored pixel
+    ``x = s (R X)_x / a + t_x``, ``y = s (R X)_y + t_y`` (``a``: the pixels' aspect). With
+    ``k = S_t / S_p`` (the heads' median scales) and ``T_p``, ``T_t`` their median places in
+    shown pixels: ``s' = k s`` and ``t'`` (shown) ``= T_t + k (t a - T_p)``; the landmarks move
+    alike. The rewrite draws the new face over the target's own head (§6), so the pose moves
+    the face about where that head is, at its size: a close-up's pose drives a medium shot
+    (before, a pose source of another frame size was refused; copied as it is, a close-up's
+    head would be drawn filling the medium shot).
+
+    Returns
+    -------
+    Track
+        ``pose`` with the target's ``frame_size`` and ``pixel_aspect``; ``detections2d``
+        dropped (pixels of the other frame).
+    """
+    (tp, sp), (tt, st) = _placement(pose), _placement(target)
+    k = st / sp
+    a0, a1 = float(pose.pixel_aspect), float(target.pixel_aspect)
+
+    def moved(p: np.ndarray) -> np.ndarray:
+        return (tt + k * (np.asarray(p, np.float64) * (a0, 1.0) - tp)) / (a1, 1.0)
+
+    return dataclasses.replace(
+        pose, frame_size=tuple(target.frame_size), pixel_aspect=a1, scale=pose.scale * k,
+        translation=moved(pose.translation), landmarks2d=moved(pose.landmarks2d),
+        detections2d=None)
+
+
 def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
               align: str | None = None, identity_mode: str = "identity",
               expression_mode: str = "expression", viseme_mode: str = "viseme"):
@@ -284,8 +327,9 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
     identity : Track or (r,) array, optional
         A track (its identity: the mean over frames not lost) or identity weights.
     pose : Track, optional
-        Source of the per-frame rotation, scale and translation (default: the target). Must
-        have the target's frame size.
+        Source of the per-frame rotation, scale and translation (default: the target); of
+        another frame size or pixel shape, its head's motion moved onto the target's head
+        (:func:`pose_about`).
     align : {"trim", "loop", "hold"} or None
         See :func:`time_map`. With ``trim`` the result is shortened to the shortest source.
 
@@ -304,14 +348,12 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
     if viseme is not None and viseme_mode not in target.mode_names:
         raise TransferError(f"--viseme-from needs a model with a {viseme_mode!r} mode; this one "
                             f"has {', '.join(target.mode_names)}")
-    if pose is not None and tuple(pose.frame_size) != tuple(target.frame_size):
-        raise TransferError(f"pose source frames are {pose.frame_size[0]}x{pose.frame_size[1]}, "
-                            f"the target's {target.frame_size[0]}x{target.frame_size[1]}: the "
-                            f"pose source must have the target's frame size")
-    if pose is not None and pose.pixel_aspect != target.pixel_aspect:
-        raise TransferError(f"pose source pixels are {pose.pixel_aspect:.4g} times as wide as "
-                            f"tall, the target's {target.pixel_aspect:.4g}: the pose source "
-                            f"must have the target's pixel shape")
+    if pose is not None and (tuple(pose.frame_size) != tuple(target.frame_size)
+                             or pose.pixel_aspect != target.pixel_aspect):
+        log.info("the pose source's %dx%d frames are framed otherwise than the target's "
+                 "%dx%d: its head's motion moves the target's head", *pose.frame_size,
+                 *target.frame_size)
+        sources["pose"] = pose_about(pose, target)
     base, resampled = _on_timeline(target, sources, align)
     n_out = base.n_frames
     posed = resampled.get("pose", base)

@@ -445,13 +445,13 @@ class _Planner:
         if tr is None:                       # tracked here, after the target: nothing beside it
             tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True,
                             face=src.face)
-        inputs.tracks[kind], inputs.source_frames[kind] = _checked_source(
-            kind, src, fr, tr, inputs.size)
+        inputs.tracks[kind], inputs.source_frames[kind] = _checked_source(kind, src, fr, tr)
 
 
-def _checked_source(kind: str, src: Source, fr, tr, size: tuple[int, int]):
+def _checked_source(kind: str, src: Source, fr, tr):
     """``(track, frames)`` of a source: a track file of another frame size refused, the
-    frames cut to the track, a face somewhere; a pose source of the target's frame size."""
+    frames cut to the track, a face somewhere (a pose source of another frame size is moved
+    into the target's by :func:`facetransfer.transfer.recombine`)."""
     if src.track is not None and tuple(tr.frame_size) != (fr.shape[2], fr.shape[1]):
         raise RewriteError(f"{kind} track {src.track} is for {tr.frame_size[0]}x"
                            f"{tr.frame_size[1]} frames but {src.video} is "
@@ -463,9 +463,6 @@ def _checked_source(kind: str, src: Source, fr, tr, size: tuple[int, int]):
     if tr.lost.any():
         log.info("%s source %s: face lost in %d frames (those keep the original frame)",
                  kind, src.video, int(tr.lost.sum()))
-    if kind == "pose" and tuple(tr.frame_size) != tuple(size):
-        raise RewriteError(f"pose source {src.video} is {tr.frame_size[0]}x{tr.frame_size[1]}"
-                           f", the target {size[0]}x{size[1]}: frame sizes must match")
     return tr, fr
 
 
