@@ -241,3 +241,17 @@ def test_console_script_freezes_the_collector_and_a_caller_keeps_it(model_path, 
     finally:
         gc.unfreeze()
     assert capsys.readouterr().out == out + out
+
+
+def test_model_info_is_read_by_a_person_and_whole_as_json(quick_model, quick_model_path, capsys):
+    """Every line short (before, the provenance was one line of 2,000 characters of JSON, cut
+    mid-value, and the per-component variances one of 600); ``--json`` holds it all."""
+    import json
+
+    code, out, _ = run(capsys, "model", "info", quick_model_path)
+    assert code == 0 and max(len(line) for line in out.splitlines()) <= 110
+    assert "  provenance (--json: all of it):" in out
+    code, out, _ = run(capsys, "model", "info", quick_model_path, "--json")
+    d = json.loads(out)
+    assert d["ranks"] == list(quick_model.ranks) and d["mode_names"] == ["identity", "expression"]
+    assert d["provenance"]["dataset"] == quick_model.provenance["dataset"]

@@ -189,22 +189,46 @@ def explained_variance(model) -> dict[str, list[float]]:
     return out
 
 
+def _short(value, width: int = 88) -> str:
+    """A provenance value in at most about ``width`` characters: a long list as its first
+    items and its length, a dict as its keys, text cut with an ellipsis."""
+    if isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+        return f"{len(value)} rows of {len(value[0])} values"
+    if isinstance(value, list) and len(json.dumps(value, default=str)) > width:
+        head = json.dumps(value[:4], default=str)[:-1]
+        return f"{head}, ... ({len(value)} items)]"
+    if isinstance(value, dict) and len(json.dumps(value, default=str)) > width:
+        keys = list(value)
+        return "{" + ", ".join(keys[:8]) + (f", ... ({len(keys)} keys)" if len(keys) > 8
+                                            else "") + "}"
+    text = value if isinstance(value, str) else json.dumps(value, default=str)
+    return text if len(text) <= width else text[:width - 3] + "..."
+
+
 def cmd_info(args: argparse.Namespace) -> int:
     m = resolve_model(args.model, progress=progress_shown())
+    if args.json:
+        print(json.dumps({"mode_names": list(m.mode_names), "shape": list(m.shape),
+                          "ranks": list(m.ranks), "labels": [list(x) for x in m.labels],
+                          "explained_variance": explained_variance(m),
+                          "provenance": m.provenance}, indent=1, default=str))
+        return 0
     ev = explained_variance(m)
-    lines = [f"model {args.model or 'ict-arkit (the default model)'}", f"  vertices: {m.n_vertices}, triangles: {len(m.faces)}, "
+    lines = [f"model {args.model or 'ict-arkit (the default model)'}",
+             f"  vertices: {m.n_vertices}, triangles: {len(m.faces)}, "
              f"landmarks: {'yes' if m.landmarks is not None else 'no'}, "
              f"uvs: {'yes' if m.uvs is not None else 'no'}"]
     for name, d, r, labs in zip(m.mode_names, m.shape, m.ranks, m.labels):
-        cum = float(np.sum(ev[name]))
-        per = ", ".join(f"{x:.3g}" for x in ev[name])
+        per = ", ".join(f"{x:.3g}" for x in ev[name][:4]) + (", ..." if r > 4 else "")
         lines.append(f"  mode {name}: {d} training entries, rank {r}, explained variance "
-                     f"{cum:.6f} (per component: {per})")
-        lines.append(f"    labels: {', '.join(labs[:12])}{' ...' if len(labs) > 12 else ''}")
+                     f"{float(np.sum(ev[name])):.6f}")
+        lines.append(f"    per component: {per}")
+        lines.append(f"    labels: {_short(', '.join(labs))}" + (f" ({len(labs)})"
+                                                                   if len(labs) > 12 else ""))
     if m.imputed is not None and np.any(m.imputed):
         lines.append(f"  imputed cells: {int(np.sum(m.imputed))}")
-    prov = {k: v for k, v in m.provenance.items() if k not in ("identity_weights",)}
-    lines.append("  provenance: " + json.dumps(prov, sort_keys=True, default=str)[:2000])
+    lines.append("  provenance (--json: all of it):")
+    lines += [f"    {k}: {_short(v)}" for k, v in sorted(m.provenance.items())]
     print("\n".join(lines))
     return 0
 
@@ -445,6 +469,7 @@ def register(sub) -> None:
 
     i = msub.add_parser("info", help="show a model's modes, ranks, variance and provenance")
     i.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
+    i.add_argument("--json", action="store_true", help="everything, provenance whole, as JSON")
     i.set_defaults(func=cmd_info)
 
     s = msub.add_parser("synth", help="write one face of the model as a mesh")
