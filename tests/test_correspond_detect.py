@@ -109,9 +109,9 @@ def test_cli_features_then_fit(data_dir, tmp_path, capsys):
                  "--no-progress"]) == 0
     rep = json.loads((tmp_path / "fit.report.json").read_text())
     assert rep["surface_distance"]["mean"] < 0.01                   # scan units: measured 0.0056 (0.3 mm)
-    # the same in one step: --features auto (the points are kept next to the fit)
+    # the same in one step: --features auto, the default (the points kept next to the fit)
     fit2 = tmp_path / "fit2.obj"
-    assert main(["scan", "fit", str(scan), "--features", "auto", "--texture",
+    assert main(["scan", "fit", str(scan), "--texture",
                  str(root / "Map-COL.jpg"), "--flip-v", "--out", str(fit2), "--no-progress"]) == 0
     g = read_features(tmp_path / "fit2.features.json")
     np.testing.assert_array_equal(g.indices, f.indices)

@@ -59,10 +59,10 @@ def register(sub) -> None:
 
     ft = ssub.add_parser("fit", help="fit the template to a scan; writes OUT, OUT.report.json, OUT.png")
     ft.add_argument("scan", help="scan mesh (any units and pose)")
-    ft.add_argument("--features", required=True,
+    ft.add_argument("--features", default="auto",
                     help='JSON {"points": {"36": [x, y, z], ...}} of iBUG-68 points on the scan '
-                    '(>= 8), or "auto": found as by "scan features" (written to OUT with suffix '
-                    '.features.json)')
+                    '(>= 8), or "auto" (the default): found as by "scan features" (written to '
+                    'OUT with suffix .features.json)')
     _add_texture_options(ft, prefix="with --features auto: ")
     ft.add_argument("--template", default="ict",
                     help="'ict' (ICT-FaceKit face area, default), a model .npz, or a mesh "
