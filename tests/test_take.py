@@ -239,6 +239,12 @@ def test_a_take_seen_on_a_face_has_its_curves_and_its_heads_rotation(arkit_model
                                   "--model", model, "--out", tmp_path / "o.mp4", "--face",
                                   "left"]])
     assert code == 2 and "--face is for a video" in capsys.readouterr().err
+    # no --identity: the model's mean face (before: a usage error)
+    code = main([str(x) for x in ["puppet", take, "--model", model, "--out",
+                                  tmp_path / "mean.mp4", "--max-frames", 4, "--no-progress"]])
+    out_text = capsys.readouterr().out
+    assert code == 0 and "4 frames of the mean face performing the take" in out_text
+    assert read_video(tmp_path / "mean.mp4")[0].shape == (4, 512, 512, 3)
 
 
 def test_a_take_is_placed_by_the_targets_timecode(arkit_clip, arkit_model, make_arkit_track,

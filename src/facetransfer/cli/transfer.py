@@ -237,7 +237,8 @@ def _register_puppet(sub) -> None:
         "head's rotation (a preview of the take).")
     q.add_argument("video", metavar="VIDEO")
     q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
-    q.add_argument("--identity", required=True, metavar="LABEL", help="training identity label")
+    q.add_argument("--identity", metavar="LABEL", help="training identity label (default: the "
+                   "model's mean face)")
     q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused)")
     q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
     q.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
@@ -569,12 +570,19 @@ def run_edit(args) -> int:
     return 0
 
 
+def _puppet_identity(model, label: str | None):
+    """The puppet's identity weights ``(r,)``: the training identity ``label``, or the model's
+    mean face where none is named."""
+    from ..transfer import identity_from_label
+
+    return model.weight_mean("identity") if label is None else identity_from_label(model, label)
+
+
 def run_puppet(args) -> int:
     from ..io.video import check_video_output, read_video, video_info
     from ..io.video_like import like_video
     from ..track.obtain import obtain_track
     from ..track.video_detect import default_workers
-    from ..transfer import identity_from_label
     from ..video_transfer import puppet_video
 
     from ..take import is_take
@@ -591,7 +599,7 @@ def run_puppet(args) -> int:
         check_face(args.face, args.video, tracker=args.tracker)
     model = _load_model_and_mediapipe(args.model,
                                       not args.track and args.tracker != "landmarks")
-    wid = identity_from_label(model, args.identity)
+    wid = _puppet_identity(model, args.identity)
     frames, fps = read_video(args.video, max_frames=args.max_frames)
     track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
                          max_frames=len(frames), method=args.tracker,
@@ -609,7 +617,8 @@ def run_puppet(args) -> int:
                                   progress_factory=_bar_factory())
     if resumed:
         print(f"continued an interrupted render from frame {resumed}")
-    print(f"wrote {args.out}: {frame_count(track.n_frames)} of {args.identity}"
+    print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
+          f"{args.identity or 'the mean face'}"
           + (", with the video's audio" if audio else ""))
     return 0
 
@@ -618,7 +627,6 @@ def _puppet_take(args, vopt) -> int:
     """``puppet take.csv``: the identity performing a Live Link Face take, with its head's
     rotation (:func:`facetransfer.take.take_track`), on a plain background."""
     from ..take import PREVIEW_SIZE, take_track
-    from ..transfer import identity_from_label
     from ..video_transfer import puppet_video
 
     for flag, given in (("--track", args.track), ("--face", args.face)):
@@ -628,13 +636,14 @@ def _puppet_take(args, vopt) -> int:
     if not Path(args.video).is_file():
         raise FaceTransferError(f"take {args.video} does not exist")
     model = resolve_model(args.model, progress=not args.no_progress)
-    wid = identity_from_label(model, args.identity)
+    wid = _puppet_identity(model, args.identity)
     track = take_track(args.video, model, wid, max_frames=args.max_frames)
     _, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
                               overwrite=args.overwrite, progress_factory=_bar_factory())
     if resumed:
         print(f"continued an interrupted render from frame {resumed}")
-    print(f"wrote {args.out}: {frame_count(track.n_frames)} of {args.identity} performing the "
+    print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
+          f"{args.identity or 'the mean face'} performing the "
           f"take {args.video} ({track.fps:g} fps, {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]})")
     return 0
 
