@@ -313,3 +313,32 @@ def test_puppet_meshes_are_eq5_per_frame(quick_model, quick_track, monkeypatch):
         ref = tl.multi_mode_dot(quick_model.core, [None] + [w[m] for m in quick_model.mode_names])
         closed = close_mouth(ref.reshape(-1, 3), topo)
         np.testing.assert_allclose(seen[i][:len(closed)], closed, atol=1e-9)
+
+
+def test_edits_of_an_arkit_track_act_on_its_activations(arkit_model, make_arkit_track):
+    """With the default kind of model (ARKit expressions), ``jawOpen=2`` doubles the jawOpen
+    curve (clipped to 1) and leaves the 51 others to float precision (before: the projection
+    on the weights counted the other shapes' part along jawOpen's direction, and the curve
+    grew about six times); ``smile`` and ``frown`` name both sides; an unknown name lists the
+    words too."""
+    from facetransfer.arkit import ARKIT_NAMES as N
+    from facetransfer.transfer import EditAdd, EditScale, edit_track
+
+    track, a, _ = make_arkit_track(arkit_model, 40, seed=4)
+    new = edit_track(track, arkit_model, scale=[EditScale("jawOpen", 2.0),
+                                                EditScale("smile", 0.5)],
+                     add=[EditAdd("frown", 10, 30, 0.25)], ramp=0)
+    b, before = new.blendshapes.astype(np.float64), track.blendshapes.astype(np.float64)
+    j = N.index("jawOpen")
+    np.testing.assert_allclose(b[:, j], np.minimum(2 * before[:, j], 1.0), atol=1e-5)
+    for side in ("Left", "Right"):
+        k, f = N.index("mouthSmile" + side), N.index("mouthFrown" + side)
+        np.testing.assert_allclose(b[:, k], 0.5 * before[:, k], atol=1e-5)
+        np.testing.assert_allclose(b[10:31, f], np.minimum(before[10:31, f] + 0.25, 1.0),
+                                   atol=1e-5)
+        np.testing.assert_allclose(b[:10, f], before[:10, f], atol=1e-5)
+    rest = [i for i, n in enumerate(N) if n not in ("jawOpen",) and "Smile" not in n
+            and "Frown" not in n]
+    np.testing.assert_allclose(b[:, rest], before[:, rest], atol=1e-5)
+    with pytest.raises(TransferError, match="smile, frown, blink"):
+        edit_track(track, arkit_model, scale=[EditScale("grin", 2.0)])

@@ -34,7 +34,7 @@ from typing import Iterator, Sequence
 
 import numpy as np
 
-from .arkit import attach_activations
+from .arkit import attach_activations, is_arkit_model
 from .errors import FaceTransferError, RewriteError
 from .topology import close_mouth, mesh_topology
 from .track.project import project_landmarks, take_frames
@@ -511,6 +511,12 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
     * ``EditAdd(label, a, b, amount)``: ``w += amount · e(t) · d`` with ``e`` the envelope of
       :func:`ramp_envelope` (1 on ``a..b`` with smooth ramps of ``ramp`` frames at the ends).
 
+    For a model of ARKit expressions (:func:`facetransfer.arkit.is_arkit_model`) the same
+    edits act on the activations the weights convert to exactly, clipped to [0, 1]
+    (:func:`_edit_activations`): ``jawOpen=2`` doubles the jawOpen curve and leaves the others.
+    A label the model lacks whose two sides it has names both (``mouthSmile``, or ``smile``:
+    :data:`SIDE_WORDS`).
+
     Parameters
     ----------
     track : Track
@@ -539,8 +545,70 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
     if int(ramp) < 0:
         raise TransferError(f"ramp must be >= 0 frames, got {ramp}")
     n = track.n_frames
-    w = track.weights[mode].copy()  # (F, r)
+    for a in add:
+        if a.start < 0 or a.stop > n - 1:
+            raise TransferError(f"--add {a.label}@{a.start}-{a.stop}: frames outside the clip "
+                                f"(0-{n - 1})")
     k = model.mode_index(mode)
+    scale = [dataclasses.replace(s, label=x) for s in scale
+             for x in _edited_labels(model.labels[k], s.label)]
+    add = [dataclasses.replace(a, label=x) for a in add
+           for x in _edited_labels(model.labels[k], a.label)]
+    if mode == "expression" and is_arkit_model(model):
+        w = _edit_activations(track.weights[mode], model, scale, add, int(ramp))
+    else:
+        w = _edit_weights(track.weights[mode], model, k, scale, add, int(ramp), mode, neutral)
+    weights = dict(track.weights)
+    weights[mode] = w
+    return attach_activations(dataclasses.replace(track, weights=weights, info={}), model)
+
+
+#: Words for an ARKit shape on both sides of the face: ``--scale smile=1.5`` is both
+#: ``mouthSmileLeft`` and ``mouthSmileRight``.
+SIDE_WORDS = {"smile": "mouthSmile", "frown": "mouthFrown", "blink": "eyeBlink",
+              "squint": "eyeSquint", "sneer": "noseSneer", "dimple": "mouthDimple"}
+
+
+def _edited_labels(labels, label: str) -> list[str]:
+    """The training labels an edit's ``label`` names: itself where the model has it, else
+    both sides of it (``mouthSmile``, or a word of :data:`SIDE_WORDS`: ``smile``) where the
+    model has ``...Left`` and ``...Right``; else itself (unknown: refused by the edit)."""
+    if label in labels:
+        return [label]
+    stem = SIDE_WORDS.get(label, label)
+    sides = [f"{stem}Left", f"{stem}Right"]
+    return sides if all(s in labels for s in sides) else [label]
+
+
+def _edit_activations(w: np.ndarray, model, scale, add, ramp: int) -> np.ndarray:
+    """:func:`edit_track` of an ARKit model's expression weights ``(F, r)``, on the
+    activations they convert to exactly (Eq. (A)): ``EditScale`` multiplies the shape's
+    activation, ``EditAdd`` adds ``amount`` times the envelope to it; each activation then
+    clipped to ARKit's [0, 1]. (A projection on the weights would also count the other
+    shapes' part along the shape's direction: ``jawOpen=2`` made jawOpen 6 times as large.)"""
+    from .arkit import ARKIT_NAMES, activations_to_weights, weights_to_activations
+
+    act = weights_to_activations(model, w, clip=False)
+    for s in scale:
+        act[:, _arkit_index(s.label, ARKIT_NAMES)] *= s.factor
+    for a in add:
+        e = ramp_envelope(len(act), a.start, a.stop, ramp)
+        act[:, _arkit_index(a.label, ARKIT_NAMES)] += a.amount * e
+    return activations_to_weights(model, np.clip(act, 0.0, 1.0))
+
+
+def _arkit_index(label: str, names) -> int:
+    if label not in names:
+        raise TransferError(f"unknown expression {label!r}; the model knows: "
+                            f"{', '.join(names)}, and {', '.join(SIDE_WORDS)} (both sides)")
+    return names.index(label)
+
+
+def _edit_weights(w: np.ndarray, model, k: int, scale, add, ramp: int, mode: str,
+                  neutral: str) -> np.ndarray:
+    """:func:`edit_track` on the weights ``(F, r)`` of mode ``k`` (the module's equations)."""
+    w = np.array(w, dtype=np.float64)
+    n = len(w)
     w0 = model.training_weights(k, neutral) if neutral in model.labels[k] else None
     for s in scale:
         d = _expression_direction(model, s.label, mode, neutral)
@@ -550,15 +618,10 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
         c = (w - w0) @ d / dd  # (F,) component along d
         w = w + (s.factor - 1.0) * c[:, None] * d[None, :]
     for a in add:
-        if a.start < 0 or a.stop > n - 1:
-            raise TransferError(f"--add {a.label}@{a.start}-{a.stop}: frames outside the clip "
-                                f"(0-{n - 1})")
         d = _expression_direction(model, a.label, mode, neutral)
-        e = ramp_envelope(n, a.start, a.stop, int(ramp))
+        e = ramp_envelope(n, a.start, a.stop, ramp)
         w = w + a.amount * e[:, None] * d[None, :]
-    weights = dict(track.weights)
-    weights[mode] = w
-    return attach_activations(dataclasses.replace(track, weights=weights, info={}), model)
+    return w
 
 
 # ---------------------------------------------------------------------------------------------
