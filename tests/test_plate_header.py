@@ -271,3 +271,23 @@ def test_a_plates_rate_and_timecode_carry_into_a_video_and_a_video_s_into_frames
     assert read_exr_image(tmp_path / "exr" / "ft.0000.exr").header["colorInteropID"] == \
         "lin_rec709_scene"                           # what its floats are, said
     assert frame_header(tmp_path / "dpx" / "ft.0005.dpx").timecode == "01:01:00:00"
+
+
+@pytest.mark.parametrize("tc, fps, ok", [
+    ("01:00:00:24", 25.0, True), ("01:00:00:25", 25.0, False), ("01:00:00:30", 25.0, False),
+    ("23:59:59:24", 25.0, True), ("24:00:00:00", 25.0, False), ("00:61:00:00", 25.0, False),
+    ("00:00:10;05", 25.0, False),                     # no drop-frame count at 25 fps
+    ("00:01:00;02", 30000 / 1001, True), ("00:01:00;00", 30000 / 1001, False),
+    ("00:01:00;01", 30000 / 1001, False), ("00:10:00;00", 30000 / 1001, True),
+    ("00:01:00:00", 30000 / 1001, True),              # a non-drop count at 29.97
+    ("00:00:00:23", 24000 / 1001, True), ("00:00:00:24", 24000 / 1001, False),
+    ("00:00:01:119", 120.0, True), ("00:00:01:05", 120.0, True),
+])
+def test_a_typed_timecode_must_name_a_frame(tc, fps, ok):
+    from facetransfer.io.plate_header import exact_timecode
+
+    if ok:
+        assert exact_timecode(f" {tc} ", fps) == tc
+    else:
+        with pytest.raises(ValueError, match="names no frame|is not HH:MM:SS:FF"):
+            exact_timecode(tc, fps)

@@ -365,6 +365,8 @@ def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_cli
     capsys.readouterr()
     _glb_and_usd_record_the_timecode(base, tmp_path, capsys)
     for name, extra in (("t2.csv", ["--timecode", "1:00"]),
+                        ("t3.csv", ["--timecode", "01:00:00:99"]),     # no frame 99
+                        ("t4.csv", ["--timecode", "24:00:00:00"]),
                         ("t2.json", ["--timecode", "01:00:00:00", "--format", "json"])):
         code = main([str(x) for x in base + [tmp_path / name] + extra])
         err = capsys.readouterr().err

@@ -66,7 +66,13 @@ def _start_timecode(args, track) -> tuple[str | None, str]:
     if args.format != "livelink" or args.timecode == "none":
         return None, ""
     if args.timecode != "source":
-        return checked_timecode(args.timecode), "--timecode"
+        from ..errors import FaceTransferError
+        from ..io.plate_header import exact_timecode
+
+        try:
+            return exact_timecode(checked_timecode(args.timecode), track.fps), "--timecode"
+        except ValueError as exc:
+            raise FaceTransferError(f"--timecode: {exc}") from None
     tc = source_timecode(track)
     return tc, (f"the start timecode of {track.source}" if tc else "")
 

@@ -35,7 +35,8 @@ from fractions import Fraction
 from pathlib import Path
 
 __all__ = ["FrameHeader", "frame_header", "timecode_text", "timecode_word", "timecode_count",
-           "timecode_after", "written_header", "rate_fraction", "usable_rate", "usable_aspect"]
+           "timecode_after", "exact_timecode", "written_header", "rate_fraction", "usable_rate",
+           "usable_aspect"]
 
 _TIMECODE = re.compile(r"(\d{2}):(\d{2}):(\d{2})([:;])(\d{2})")
 #: A timecode as counted (:func:`timecode_count`): ``.`` too before a drop-frame count's frames
@@ -177,6 +178,25 @@ def timecode_count(timecode: str, fps: float) -> tuple[int, bool]:
     if drop:
         count -= _skip(rate) * (minutes - minutes // 10)
     return count, drop
+
+
+def exact_timecode(timecode: str, fps: float) -> str:
+    """``timecode`` (stripped) where it names a frame at ``fps``; ValueError otherwise: hours
+    past 23, frames at or past the nominal rate (``01:00:00:30`` at 25 fps), a drop-frame
+    separator where the rate has no drop-frame count (only 29.97, 59.94, 119.88 do), or a
+    frame number a drop-frame count skips (``00:01:00;00``). Said of a timecode a person
+    types (``export --timecode``); one read from a file is taken as it is."""
+    t = str(timecode).strip()
+    count, drop = timecode_count(t, fps)
+    typed, named = _COUNTED.fullmatch(t), _COUNTED.fullmatch(_timecode(count, fps, drop))
+    if [int(typed.group(k)) for k in (1, 2, 3, 5)] == [int(named.group(k)) for k in (1, 2, 3, 5)] \
+            and (typed.group(4) != ":") == drop:
+        return t
+    rate = _nominal(fps)
+    raise ValueError(f"timecode {t!r} names no frame at {fps:g} fps (hours 00-23, frames "
+                     f"00-{rate - 1:02d}"
+                     + (", ';' with the frame numbers a drop-frame count skips taken out)"
+                        if _skip(rate) else "; no drop-frame count ';' at this rate)"))
 
 
 def _timecode(count: int, fps: float, drop: bool) -> str:
