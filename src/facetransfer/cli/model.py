@@ -420,8 +420,9 @@ def cmd_dials(args: argparse.Namespace) -> int:
         check_output_path(args.out, overwrite=args.overwrite)
     m = resolve_model(args.model, progress=progress_shown())
     dials = learn_dials(m)
-    lines = [f"identity dials of {args.model or 'the default model'} (learnt from {m.shape[0]} identities; one unit = "
-             f"one standard deviation of the measurement; {dials.unit})",
+    lines = [f"identity dials of {args.model or 'the default model'} (learnt from "
+             f"{m.shape[0]} identities; one unit = one standard deviation of the measurement; "
+             f"{dials.unit})",
              f"  {'dial':14s} {'R2':>6s} {'LOO R2':>7s} {'sd':>8s} {'+1 unit':>9s}  measures"]
     for d in dials.dials:
         lines.append(f"  {d.name:14s} {d.r2:6.3f} {d.r2_loo:7.3f} {d.sigma:8.3f} "
