@@ -45,6 +45,7 @@ def check_output_suffix(path: str | os.PathLike, suffixes, what: str, *, flag: s
     Returns
     -------
     Path
+        ``path``, whose extension is one of ``suffixes``.
 
     Raises
     ------
