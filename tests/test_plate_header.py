@@ -291,3 +291,23 @@ def test_a_typed_timecode_must_name_a_frame(tc, fps, ok):
     else:
         with pytest.raises(ValueError, match="names no frame|is not HH:MM:SS:FF"):
             exact_timecode(tc, fps)
+
+
+@settings(max_examples=200, deadline=None, derandomize=True)
+@given(st.sampled_from([24.0, 25.0, 30000 / 1001, 60000 / 1001, 50.0, 120.0]),
+       st.integers(0, 24 * 3600 * 60 - 1))
+def test_every_timecode_of_the_day_is_exact_and_counts_back(fps, frame):
+    """Every frame of the day's timecode (:func:`timecode_after` from midnight, drop-frame at
+    29.97 and 59.94) is accepted by :func:`exact_timecode` and counts back to its frame; the
+    next frame number past the rate is not a timecode there."""
+    from facetransfer.io.plate_header import exact_timecode, timecode_count
+
+    drop = round(fps) in (30, 60) and fps != round(fps)
+    rate = round(fps)
+    frame %= 24 * 3600 * rate - (2 * (round(fps) // 30) * 9 * 144 if drop else 0)
+    tc = timecode_after("00:00:00;00" if drop else "00:00:00:00", frame, fps)
+    assert exact_timecode(tc, fps) == tc
+    assert timecode_count(tc, fps)[0] == frame
+    past = f"{tc[:9]}{rate:0{len(tc) - 9}d}"                   # frames = the rate
+    with pytest.raises(ValueError, match="names no frame"):
+        exact_timecode(past, fps)
