@@ -177,3 +177,29 @@ def test_cli_continues_an_interrupted_run(small_clip, quick_model_path, tmp_path
     assert "pass --overwrite" in capsys.readouterr().err and partial.is_file()
     assert main(["track", *map(str, args), "--restart", "--overwrite"]) == 0
     assert "continued" not in capsys.readouterr().out and not partial.exists()
+
+
+def test_the_overlay_draws_the_landmarks_as_contours():
+    """The 68 points drawn as the lines of the jaw, brows, nose, eyes and lips
+    (:data:`facetransfer.track.overlay.IBUG_CONTOURS`): a segment between two points of one
+    contour is drawn (48-49, the outer lips), none between two contours (30-31, the nose's
+    bridge and base); a contour with an unknown point is left out."""
+    import numpy as np
+
+    from facetransfer.track.overlay import IBUG_CONTOURS, draw_overlay
+
+    assert [b - a for a, b, _ in IBUG_CONTOURS] == [17, 5, 5, 4, 5, 6, 6, 12, 8]
+    L = np.full((68, 2), 5.0)                              # every point in the corner ...
+    L[48], L[49] = (50, 100), (150, 100)                   # ... but these
+    L[30], L[31] = (20, 150), (180, 150)
+    frame = np.zeros((200, 200, 3), np.uint8)
+    no_mesh = (np.zeros((0, 2)), np.zeros((0, 2), np.int64))
+
+    def red(img, x, y):
+        return int(img[y - 1:y + 2, x - 1:x + 2, 0].max())
+
+    img = draw_overlay(frame, *no_mesh, L)
+    assert red(img, 100, 100) > 150                        # on the lips' line
+    assert red(img, 100, 150) == 0                         # between the nose's two lines
+    L[50] = np.nan
+    assert red(draw_overlay(frame, *no_mesh, L), 100, 100) == 0
