@@ -206,7 +206,7 @@ def _short(value, width: int = 88) -> str:
 
 
 def cmd_info(args: argparse.Namespace) -> int:
-    m = resolve_model(args.model, progress=progress_shown())
+    m = resolve_model(args.model)
     if args.json:
         print(json.dumps({"mode_names": list(m.mode_names), "shape": list(m.shape),
                           "ranks": list(m.ranks), "labels": [list(x) for x in m.labels],
@@ -258,7 +258,7 @@ def cmd_synth(args: argparse.Namespace) -> int:
     check_output_path(out, overwrite=args.overwrite, inputs=[args.model])
     if args.weights and args.like:
         raise FaceTransferError("give --weights or --like, not both")
-    m = resolve_model(args.model, progress=progress_shown())
+    m = resolve_model(args.model)
     w = synth_weights(m, parse_weights(args.weights) if args.weights else None,
                       parse_like(args.like) if args.like else None)
     v = m.synthesize(w)
@@ -400,7 +400,7 @@ def cmd_sheet(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--max-identities must be >= 1, got {args.max_identities}")
     for o in (out, dials_out):
         check_output_path(o, overwrite=args.overwrite, inputs=[args.model])
-    m = resolve_model(args.model, progress=progress_shown())
+    m = resolve_model(args.model)
     sheet, dials = model_sheets(m, max_identities=args.max_identities)
     with atomic_path(out, overwrite=args.overwrite) as tmp, \
             atomic_path(dials_out, overwrite=args.overwrite) as tmp2:
@@ -418,7 +418,7 @@ def cmd_dials(args: argparse.Namespace) -> int:
         if Path(args.out).suffix.lower() != ".png":
             raise FaceTransferError(f"--out must end in .png, got {args.out}")
         check_output_path(args.out, overwrite=args.overwrite)
-    m = resolve_model(args.model, progress=progress_shown())
+    m = resolve_model(args.model)
     dials = learn_dials(m)
     lines = [f"identity dials of {args.model or 'the default model'} (learnt from "
              f"{m.shape[0]} identities; one unit = one standard deviation of the measurement; "

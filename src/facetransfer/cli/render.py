@@ -19,7 +19,7 @@ import numpy as np
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
 from .common import (MODEL_ARG_HELP, add_video_options, frame_count, progress_disabled,
-                     progress_shown, resolve_model, video_options, video_out)
+                     resolve_model, video_options, video_out)
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
 
@@ -80,12 +80,6 @@ def parse_identity(text: str):
         return parts[0]
 
 
-def _load_model(path: str | None):
-    """The model file (a missing, foreign or damaged one named in the error), or the default
-    model when ``path`` is None."""
-    return resolve_model(path, progress=progress_shown())
-
-
 def _model_weights(model, args) -> dict[str, np.ndarray]:
     from .model import parse_like, parse_weights, synth_weights
 
@@ -103,7 +97,7 @@ def cmd_render(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--out {out}: expected a .png or .jpg image")
     size = parse_size(args.size)
     pose = parse_pose(args.pose)
-    model = _load_model(args.model)
+    model = resolve_model(args.model)
     weights = _model_weights(model, args)
     res = render_model(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
                        pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
@@ -158,7 +152,7 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--frames must be >= 1, got {args.frames}")
     size = parse_size(args.size) if args.size else None
     identity = parse_identity(args.identity) if args.identity else None
-    model = _load_model(args.model)
+    model = resolve_model(args.model)
     texture = _texture(args.texture, model, args.seed)
     if args.random:
         perf = random_performance(model, args.frames or 100, seed=args.seed,

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import default_model_for, progress_disabled, progress_shown, resolve_model
+from .common import default_model_for, progress_disabled, resolve_model
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -55,12 +55,6 @@ def _read_mask(path: str, shape: tuple[int, int]) -> np.ndarray:
     return m > 127
 
 
-def _load_model(path: str | None):
-    """The model file (a missing, foreign or damaged one named in the error), or the default
-    model when ``path`` is None."""
-    return resolve_model(path, progress=progress_shown())
-
-
 def _load_track(path: str):
     """A tracker ``TRACK.npz`` or a ``synth-video`` ``CLIP.truth.npz``."""
     p = Path(path)
@@ -84,7 +78,7 @@ def cmd_default(args: argparse.Namespace) -> int:
     out = _image_out(args.out, args, [args.model])
     if not 8 <= args.size <= 8192:
         raise FaceTransferError(f"--size must be in 8..8192, got {args.size}")
-    model = _load_model(args.model)
+    model = resolve_model(args.model)
     procedural = default_face_texture(model, size=args.size, seed=args.seed)
     tex = procedural if args.source == "procedural" else \
         default_face_texture(model, size=args.size, seed=args.seed, source=args.source)
@@ -118,7 +112,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
     # without --model: the default model, checked against a tracker's track (a synth-video
     # truth file names no model)
     model = default_model_for(track) if args.model is None and hasattr(track, "model_hash") \
-        else _load_model(args.model)
+        else resolve_model(args.model)
     if tuple(track.frame_size) != tuple(info.size):
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
                                 f"{track.frame_size[1]} frames, the video is "

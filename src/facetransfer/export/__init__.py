@@ -24,6 +24,7 @@ from pathlib import Path
 from ..io.atomic import check_output_path
 from .common import ExportError, require_activations, resolve_model
 from .neutral import with_neutral
+from .usd import USD_SUFFIXES
 
 __all__ = ["FORMATS", "FORMAT_SUFFIXES", "ExportError", "export_track", "format_of"]
 
@@ -32,8 +33,7 @@ FORMATS: dict[str, str] = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "js
 #: Format name -> the file suffixes it is written under (the first: :data:`FORMATS`'); a
 #: glb is binary glTF, never ``.gltf`` (JSON with its buffers beside it).
 FORMAT_SUFFIXES: dict[str, tuple[str, ...]] = {
-    "livelink": (".csv",), "glb": (".glb",), "usd": (".usd", ".usda", ".usdc"),
-    "json": (".json",)}
+    "livelink": (".csv",), "glb": (".glb",), "usd": USD_SUFFIXES, "json": (".json",)}
 
 
 def format_of(out: str | os.PathLike, fmt: str | None = None) -> str:

@@ -127,6 +127,16 @@ def timecode_text(word: int) -> str | None:
     return f"{hh:02d}:{mm:02d}:{ss:02d}{';' if word & _DROP_BIT else ':'}{ff:02d}"
 
 
+def _fields(timecode: str, pattern: re.Pattern = _COUNTED) -> tuple[int, int, int, str, int]:
+    """``(hh, mm, ss, separator, ff)`` of ``timecode`` as ``pattern`` reads it; ValueError
+    naming it where it is not such a timecode."""
+    m = pattern.fullmatch(str(timecode).strip())
+    if m is None:
+        raise ValueError(f"timecode {timecode!r} is not HH:MM:SS:FF")
+    hh, mm, ss, sep, ff = m.groups()
+    return int(hh), int(mm), int(ss), sep, int(ff)
+
+
 def timecode_word(timecode: str) -> int:
     """SMPTE 12M's packed time word of ``HH:MM:SS:FF`` (``;`` sets the drop-frame flag);
     the inverse of :func:`timecode_text`.
@@ -136,13 +146,10 @@ def timecode_word(timecode: str) -> int:
     ValueError
         Not such a timecode (naming it).
     """
-    m = _TIMECODE.fullmatch(str(timecode).strip())
-    if m is None:
-        raise ValueError(f"timecode {timecode!r} is not HH:MM:SS:FF")
-    hh, mm, ss, sep, ff = m.groups()
+    hh, mm, ss, sep, ff = _fields(timecode, _TIMECODE)
     word = 0
-    for (shift, _), digits in zip(_FIELDS, (hh, mm, ss, ff)):
-        word |= ((int(digits[0]) << 4) | int(digits[1])) << shift
+    for (shift, _), value in zip(_FIELDS, (hh, mm, ss, ff)):
+        word |= (((value // 10) << 4) | (value % 10)) << shift
     return word | (_DROP_BIT if sep == ";" else 0)
 
 
@@ -167,13 +174,10 @@ def timecode_count(timecode: str, fps: float) -> tuple[int, bool]:
     ValueError
         Not such a timecode (naming it).
     """
-    m = _COUNTED.fullmatch(str(timecode).strip())
-    if m is None:
-        raise ValueError(f"timecode {timecode!r} is not HH:MM:SS:FF")
-    hh, mm, ss, sep, ff = m.groups()
+    hh, mm, ss, sep, ff = _fields(timecode)
     rate = _nominal(fps)
-    minutes = int(hh) * 60 + int(mm)
-    count = (minutes * 60 + int(ss)) * rate + int(ff)
+    minutes = hh * 60 + mm
+    count = (minutes * 60 + ss) * rate + ff
     drop = sep != ":" and _skip(rate) > 0
     if drop:
         count -= _skip(rate) * (minutes - minutes // 10)
@@ -188,9 +192,8 @@ def exact_timecode(timecode: str, fps: float) -> str:
     types (``export --timecode``); one read from a file is taken as it is."""
     t = str(timecode).strip()
     count, drop = timecode_count(t, fps)
-    typed, named = _COUNTED.fullmatch(t), _COUNTED.fullmatch(_timecode(count, fps, drop))
-    if [int(typed.group(k)) for k in (1, 2, 3, 5)] == [int(named.group(k)) for k in (1, 2, 3, 5)] \
-            and (typed.group(4) != ":") == drop:
+    typed, named = _fields(t), _fields(_timecode(count, fps, drop))
+    if typed[:3] + typed[4:] == named[:3] + named[4:] and (typed[3] != ":") == drop:
         return t
     rate = _nominal(fps)
     raise ValueError(f"timecode {t!r} names no frame at {fps:g} fps (hours 00-23, frames "

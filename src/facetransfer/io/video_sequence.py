@@ -112,6 +112,11 @@ def _numbered(pattern: Path, k: int) -> Path:
     return p.with_name(p.name % k)
 
 
+def _rate_said() -> str:
+    """What ``FACETRANSFER_SEQUENCE_FPS`` (``--sequence-fps``) says, ``""`` where nothing."""
+    return os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip()
+
+
 def sequence_fps() -> float:
     """The rate image sequences are read at: ``FACETRANSFER_SEQUENCE_FPS``, else
     :data:`DEFAULT_SEQUENCE_FPS`.
@@ -121,7 +126,7 @@ def sequence_fps() -> float:
     VideoError
         The variable is not a number of frames a second in (0, 1000].
     """
-    said = os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip()
+    said = _rate_said()
     if not said:
         return DEFAULT_SEQUENCE_FPS
     try:
@@ -173,7 +178,7 @@ def sequence_stamp(path) -> str:
         st = files[k].stat()
         h.update(f"{files[k].name}|{st.st_size}|{st.st_mtime_ns};".encode())
     folder = percent_pattern(path).parent.resolve()
-    said = "" if os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip() else "?"  # else the header's
+    said = "" if _rate_said() else "?"          # else the header's rate, or the default
     return f"{folder}/{Path(path).name}|{len(files)}|{h.hexdigest()[:24]}|{sequence_fps()}{said}"
 
 
@@ -227,7 +232,7 @@ def _rate(pattern: Path, header) -> tuple[float, str]:
     """The rate a sequence is read at and where it came from (:attr:`Sequence.rate_from`):
     what ``--sequence-fps`` says, else what its first frame's ``header`` says
     (:class:`facetransfer.io.plate_header.FrameHeader`), else the default, said once."""
-    said = bool(os.environ.get(SEQUENCE_FPS_VARIABLE, "").strip())
+    said = bool(_rate_said())
     fps = sequence_fps()
     if said and header.fps is not None and abs(header.fps - fps) > 1e-3:
         log.warning("%s: its frames' headers say %g fps; read at %g fps as --sequence-fps "
