@@ -90,8 +90,9 @@ def test_synth_bad_input(model_path, tmp_path, capsys):
         code, _, err = run(capsys, "model", "synth", model_path, *extra, "--out", out)
         assert code == 2 and msg in err and err.count("\n") == 1, err
         assert not out.exists()
-    code, _, err = run(capsys, "model", "synth", model_path, "--out", tmp_path / "x.stl")
-    assert code == 2 and ".obj or .ply" in err
+    code, _, err = run(capsys, "model", "synth", model_path, "--out", tmp_path / "x.csv")
+    assert code == 2 and ".obj, .ply, .stl, .off or .glb, not .csv; name it x.obj" in err
+    assert not (tmp_path / "x.csv").exists()
 
 
 def test_build_bad_input_leaves_no_file(manifest, tmp_path, capsys):

@@ -104,8 +104,12 @@ def test_error_line_for_os_errors():
     (["track", "v.mp4", "--sequence-fps", "0"], "facetransfer track: error: argument "
      "--sequence-fps: expected a frame rate in (0, 1000], got '0' (options: facetransfer "
      "track --help)"),
-    (["track", "v.mp4", "--bogus"], "facetransfer: error: unrecognized arguments: --bogus "
-     "(options: facetransfer --help)"),
+    (["track", "v.mp4", "--bogus"], "facetransfer track: error: unrecognized arguments: "
+     "--bogus (options: facetransfer track --help)"),
+    (["-v", "model", "synth", "--out", "a.obj", "--zz"], "facetransfer model synth: "
+     "error: unrecognized arguments: --zz (options: facetransfer model synth --help)"),
+    (["--bogus"], "facetransfer: error: unrecognized arguments: --bogus (options: "
+     "facetransfer --help)"),
 ])
 def test_usage_errors_are_one_line(argv, says, capsys):
     """A usage error is the one line that says what is wrong, not the command's whole usage
@@ -135,6 +139,14 @@ def test_usage_errors_are_one_line(argv, says, capsys):
      "(json), or give --format"),
     (["scan", "features", "s.obj", "--out", "f.png"], "--out f.png: a feature-point file is "
      "written as .json, not .png; name it f.json"),
+    (["scan", "features", "s.obj", "--out", "f.json", "--picture", "h.txt"], "--picture "
+     "h.txt: the picture of the points is written as .png, .jpg or .jpeg, not .txt; name it "
+     "h.png"),
+    (["scan", "smooth", "s.ply", "--out", "s.csv"], "--out s.csv: a mesh is written as .obj, "
+     ".ply, .stl, .off or .glb, not .csv; name it s.obj"),
+    (["scan", "fit", "s.ply", "--features", "f.json", "--out", "fit"], "--out fit: a mesh is "
+     "written as .obj, .ply, .stl, .off or .glb, and the name has no extension; name it "
+     "fit.obj"),
 ])
 def test_an_output_named_for_another_format_is_refused_before_any_work(argv, says, tmp_path,
                                                                       monkeypatch, capsys):
@@ -146,6 +158,20 @@ def test_an_output_named_for_another_format_is_refused_before_any_work(argv, say
     err = _err(capsys)
     assert len(err) == 1 and err[0].endswith(": error: " + says), err
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_take_given_to_export_is_named_as_a_take(tmp_path, capsys):
+    """A Live Link Face take where export wants a track: said so, with what to run (before:
+    "truncated or not a track file" about a valid take)."""
+    take = tmp_path / "take.csv"
+    take.write_text("Timecode,BlendShapeCount\n")
+    assert main(["export", str(take), "--out", str(tmp_path / "x.glb")]) == 2
+    err = _err(capsys)
+    assert len(err) == 1 and err[0].endswith(f"{take} is a Live Link Face take, not a track: "
+                                             "export writes a track file's activations "
+                                             "(`facetransfer track VIDEO --out T.npz`); "
+                                             f"`facetransfer probe {take}` describes the take")
+    assert not (tmp_path / "x.glb").exists()
 
 
 def test_an_export_takes_its_format_from_the_outputs_extension(tmp_path):

@@ -82,6 +82,31 @@ def test_untextured_scan_is_shaded_and_still_found(lps):
     assert err.mean() < 6.0                              # measured 3.1 mm
 
 
+def test_the_models_own_face_with_its_mouth_gap_is_found_in_any_view(quick_model):
+    """The model's mean face (as ``model synth`` writes it: a mesh with a gap between the
+    lips) found by the automatic search, as from the front: the inner lips' points fall into
+    the gap, and the face's orientation is taken from the lip points on the surface (before:
+    none of the 24 views was kept, "no face found")."""
+    from facetransfer.correspond.detect import _frontal
+
+    P = np.zeros((68, 3))
+    P[36], P[45] = (-1.0, 0.0, 0.0), (1.0, 0.0, 0.0)
+    P[48:60] = np.c_[np.linspace(-0.6, 0.6, 12), np.full(12, -1.5), np.zeros(12)]
+    P[60:68] = np.nan                                  # the inner lips, over the hole
+    forward, up = _frontal(P)
+    np.testing.assert_allclose(forward, (0.0, 0.0, 1.0), atol=1e-12)
+    assert up[1] > 0
+    P[48:56] = np.nan                                   # fewer than MOUTH_POINTS left
+    assert _frontal(P) is None
+    V = quick_model.synthesize(quick_model.default_weights())
+    auto = detect_scan_features(V, quick_model.faces)
+    front = detect_scan_features(V, quick_model.faces, view="front")
+    a, b, ids = _common(front.features, auto.features)
+    assert len(ids) >= 40
+    iod = np.linalg.norm(V[quick_model.landmarks[45]] - V[quick_model.landmarks[36]])
+    assert np.linalg.norm(a - b, axis=1).mean() < 0.05 * iod
+
+
 def test_no_face_is_one_clear_error(data_dir):
     import trimesh
 

@@ -352,7 +352,13 @@ def test_glb_texture_lifted_from_the_video(case, tmp_path, capsys):
     short = write_video(tmp_path / "short.mp4", [np.tile(colour, (H, W, 1))] * 3, track.fps)
     assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
                  str(short), "--out", str(tmp_path / "y.glb")]) == 2
-    assert "frames" in capsys.readouterr().err
+    assert capsys.readouterr().err.strip().endswith(
+        f"track {tp} has {track.n_frames} frames, but video {short} has 3")
+    # a track of the video's first frames (track --max-frames) lifts from those
+    longer = write_video(tmp_path / "longer.mp4", [np.tile(colour, (H, W, 1))]
+                         * (track.n_frames + 5) + [np.zeros((H, W, 3), np.uint8)] * 5, track.fps)
+    assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
+                 str(longer), "--texture-step", "4", "--out", str(tmp_path / "z.glb")]) == 0
 
 
 # ------------------------------------------------------------------------------ neutral pose

@@ -89,3 +89,20 @@ def test_a_model_or_a_foreign_archive_given_to_probe(arkit_model, tmp_path, caps
     assert file_kind(tmp_path / "x.npz") == "video"    # the video reader names what it is
     assert main(["probe", str(tmp_path / "x.npz")]) == 2
     assert "x.npz" in capsys.readouterr().err
+
+
+def test_a_damaged_archive_given_to_probe_is_named(tmp_path, capsys):
+    """A truncated track (the zip's end cut off) and a file that is no archive at all: the
+    one line names the file and says what is wrong with it (before: "an input file is
+    truncated or damaged" without a name, or numpy's advice on pickles)."""
+    good = tmp_path / "t.npz"
+    np.savez(good, fps=np.float64(30.0), frame_size=np.array([64, 64]))
+    cut = tmp_path / "cut.npz"
+    cut.write_bytes(good.read_bytes()[:-40])
+    text = tmp_path / "text.npz"
+    text.write_text("hello")
+    for path, why in ((cut, "BadZipFile"), (text, "not an .npz archive of arrays")):
+        assert main(["probe", str(path)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"facetransfer probe: error: {path} is truncated or not an .npz archive "
+                       f"({why})"], err

@@ -71,6 +71,24 @@ def test_eval_writes_report_and_figures(tmp_path, capsys):
     assert "ppca" in capsys.readouterr().out
 
 
+def test_eval_keeps_an_earlier_runs_results_unless_overwrite(tmp_path, capsys):
+    """A second run into the same folder is refused before any work, naming the result it
+    would replace, and the first run's files are left as they were; --overwrite replaces."""
+    csv = write_manifest(tmp_path)
+    out = tmp_path / "eval"
+    argv = ["impute", "eval", "--dataset", str(csv), "--missing", "0.2", "--trials", "1",
+            "--methods", "average", "--out", str(out), "--no-figures"]
+    assert main(argv) == 0
+    before = (out / "report.json").read_bytes()
+    capsys.readouterr()
+    assert main(argv[:-1] + ["--seed", "5", "--no-figures"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "report.json" in err[0] and "--overwrite" in err[0], err
+    assert (out / "report.json").read_bytes() == before
+    assert main(argv + ["--seed", "5", "--overwrite"]) == 0
+    assert json.loads((out / "report.json").read_text())["seed"] == 5
+
+
 def test_eval_on_a_manifest_with_missing_cells(tmp_path):
     csv = write_manifest(tmp_path, skip={(1, 2), (3, 1)})
     out = tmp_path / "eval"

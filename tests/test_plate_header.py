@@ -282,6 +282,7 @@ def test_a_plates_rate_and_timecode_carry_into_a_video_and_a_video_s_into_frames
     ("00:01:00:00", 30000 / 1001, True),              # a non-drop count at 29.97
     ("00:00:00:23", 24000 / 1001, True), ("00:00:00:24", 24000 / 1001, False),
     ("00:00:01:119", 120.0, True), ("00:00:01:05", 120.0, True),
+    ("01:02:03;04", 30.0, False), ("00:00:00;10", 60.0, False),   # integer rates: no drop
 ])
 def test_a_typed_timecode_must_name_a_frame(tc, fps, ok):
     from facetransfer.io.plate_header import exact_timecode

@@ -97,3 +97,43 @@ def test_errors_are_one_line(run, tmp_path, model_path, capsys):
         assert run(*argv) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("facetransfer texture: error:") and "\n" not in err
+
+
+def test_lift_a_track_of_the_clips_first_frames(run, tmp_path, model_path, capsys):
+    """A track of a clip's first frames only (``track --max-frames``) lifts from those frames
+    (before: "the clip has more frames than the track"); a bad --k is refused before anything
+    is written; a track of another model is named with its file and the cause."""
+    from facetransfer.model import load_model
+    from facetransfer.synth import load_truth
+    from facetransfer.track import Track
+
+    model = load_model(model_path)
+    clip = make_clip(model, random_performance(model, 6, seed=1, size=(160, 128)))
+    write_clip(clip, tmp_path / "c.mp4")
+    t = load_truth(tmp_path / "c.truth.npz")
+    k = 4
+
+    def first(weights):
+        return Track(fps=t.fps, frame_size=t.frame_size, rotation=t.rotation[:k],
+                     scale=t.scale[:k], translation=t.translation[:k], weights=weights,
+                     landmarks2d=np.zeros((k, 68, 2)), confidence=np.ones(k),
+                     lost=np.zeros(k, bool), model_hash=model.content_hash,
+                     mode_names=model.mode_names, source=str(tmp_path / "c.mp4"))
+
+    first({m: w[:k] for m, w in t.weights.items()}).save(tmp_path / "t4.npz")
+    argv = ("texture", "lift", tmp_path / "c.mp4", "--track", tmp_path / "t4.npz", "--model",
+            model_path, "--size", 32, "--step", 1)
+    assert run(*argv, "--function", tmp_path / "f.npz", "--k", 0,
+               "--out", tmp_path / "bad.png") == 2
+    assert "--k must be >= 1" in capsys.readouterr().err
+    assert not (tmp_path / "bad.png").exists() and not (tmp_path / "f.npz").exists()
+    assert run(*argv, "--out", tmp_path / "l.png") == 0
+    assert "merged from 4 frames" in capsys.readouterr().out
+    other = {m: np.zeros((k, r + 1)) for m, r in zip(model.mode_names, model.ranks)}
+    other_track = first(other)
+    object.__setattr__(other_track, "model_hash", "0" * 16)
+    other_track.save(tmp_path / "other.npz")
+    assert run(*argv[:4], tmp_path / "other.npz", *argv[5:], "--out", tmp_path / "o.png") == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"facetransfer texture: error: track {tmp_path / 'other.npz'} was "
+                          "made with another model") and "--model" in err, err

@@ -27,6 +27,11 @@ def file_kind(path: str | os.PathLike) -> str:
     for :mod:`facetransfer.io.video_facts`)."""
     from .take import is_take
 
+    import zipfile
+
+    from .errors import FaceTransferError
+    from .io.npz import reason
+
     p = Path(path)
     if is_take(p):
         return "take"
@@ -37,8 +42,9 @@ def file_kind(path: str | os.PathLike) -> str:
                     return "track"
                 if {"core", "metadata"} <= set(z.files):
                     return "model"
-        except (OSError, ValueError, EOFError):
-            pass            # not an archive: the video reader names what it is
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            raise FaceTransferError(f"{p} is truncated or not an .npz archive "
+                                    f"({reason(exc)})") from None
     return "video"
 
 
@@ -107,7 +113,7 @@ def take_facts(path: str | os.PathLike) -> dict:
     eyes = [n for n in POSE_COLUMNS if not n.startswith("Head")]
     return {
         "kind": "take", "path": str(path), "rows": len(tc),
-        "timecode_rate": take_rate(tc) if tc else None,
+        "timecode_rate": take_rate(tc, warn=False) if tc else None,  # said once, above
         "seconds": float(seconds[-1] - seconds[0]) if len(seconds) else 0.0,
         "first_timecode": tc[0] if tc else None, "last_timecode": tc[-1] if tc else None,
         "shapes": len(shapes), "missing_shapes": [n for n in LIVELINK_NAMES if n not in shapes],

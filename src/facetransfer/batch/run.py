@@ -24,8 +24,8 @@ from .summary import Row, write_summary
 
 log = logging.getLogger(__name__)
 
-__all__ = ["BatchResult", "prepare_out_dir", "batch_track", "batch_transfer", "batch_export",
-           "SUMMARY_NAME", "DEFAULT_OVERLAP"]
+__all__ = ["BatchResult", "check_out_dir", "prepare_out_dir", "batch_track", "batch_transfer",
+           "batch_export", "SUMMARY_NAME", "DEFAULT_OVERLAP"]
 
 SUMMARY_NAME = "summary.csv"
 #: Frames shared by neighbouring chunks (1.2 s at 25 fps).
@@ -51,8 +51,9 @@ class BatchResult:
         return sum(r.status == status for r in self.rows)
 
 
-def prepare_out_dir(out_dir) -> Path:
-    """The output folder, created if needed (its parent must exist).
+def check_out_dir(out_dir) -> Path:
+    """The output folder checked, not made (a run that fails before its first clip, e.g. on a
+    scheduler it cannot reach, leaves no empty folder behind).
 
     Raises
     ------
@@ -62,9 +63,21 @@ def prepare_out_dir(out_dir) -> Path:
     p = Path(out_dir)
     if p.exists() and not p.is_dir():
         raise BatchError(f"output folder {p} is a file")
+    if not p.is_dir() and not (p.parent if str(p.parent) else Path(".")).is_dir():
+        raise BatchError(f"the folder {p.parent} of output folder {p} does not exist")
+    return p
+
+
+def prepare_out_dir(out_dir) -> Path:
+    """The output folder (:func:`check_out_dir`), created if needed.
+
+    Raises
+    ------
+    BatchError
+        The path is a file, or its parent folder does not exist.
+    """
+    p = check_out_dir(out_dir)
     if not p.is_dir():
-        if not (p.parent if str(p.parent) else Path(".")).is_dir():
-            raise BatchError(f"the folder {p.parent} of output folder {p} does not exist")
         p.mkdir()
     return p
 

@@ -91,7 +91,7 @@ def register(sub) -> None:
     r.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
     r.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
     add_rewrite_options(r)
-    add_video_options(r, what="each result (ProRes: DIR/NAME.mov)")
+    add_video_options(r, what="each result (ProRes: DIR/NAME.mov)", sequences=False)
     _cluster_options(r)
     r.set_defaults(func=run_transfer)
 
@@ -220,7 +220,7 @@ def run_export(args) -> int:
 
 def _check_cluster_args(args) -> None:
     """Bad cluster or output arguments fail before a model is loaded."""
-    from ..batch.run import prepare_out_dir
+    from ..batch.run import check_out_dir
 
     if args.workers is not None and args.workers < 1:
         raise FaceTransferError(f"--workers must be >= 1, got {args.workers}")
@@ -229,4 +229,4 @@ def _check_cluster_args(args) -> None:
                                 "--scheduler are the ones started with `dask worker`")
     if not args.timeout > 0:
         raise FaceTransferError(f"--timeout must be > 0, got {args.timeout}")
-    prepare_out_dir(args.out)
+    check_out_dir(args.out)

@@ -43,14 +43,17 @@ def progress_shown() -> bool:
     return not _PROGRESS_OFF and sys.stderr.isatty()
 
 
-def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video") -> None:
+def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
+                      sequences: bool = True) -> None:
     """Add ``--codec``, ``--crf`` and ``--preset`` (one definition for every command that
-    writes video)."""
+    writes video); ``sequences``: the command also writes image sequences, which the codec
+    options do not apply to."""
     p.add_argument("--codec", choices=tuple(CODECS), default=DEFAULT_CODEC,
                    help=f"codec of {what}: h264 (libx264, yuv420p: plays in browsers), h265 "
                    "(libx265) or prores (ProRes 422 HQ, .mov/.mkv; 4444 keeping a target's "
-                   "alpha); h265 and prores keep a 10-bit or HDR target's depth and colour; "
-                   "ignored for an image sequence (--out frames/%%05d.png)")
+                   "alpha); h265 and prores keep a 10-bit or HDR target's depth and colour"
+                   + ("; ignored for an image sequence (--out frames/%%05d.png)"
+                      if sequences else ""))
     p.add_argument("--crf", type=int, default=None,
                    help=f"constant rate factor of h264/h265, {CRF_RANGE[0]} (best) to "
                    f"{CRF_RANGE[1]}; default {DEFAULT_CRF}")

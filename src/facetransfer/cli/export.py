@@ -27,7 +27,7 @@ def register(sub) -> None:
     p.add_argument("track", metavar="TRACK.npz")
     p.add_argument("--format", metavar="FMT",
                    help=f"one of {', '.join(FORMATS)} (default: the one --out's extension "
-                   "names: " + ", ".join(f"{s[0]} {f}" for f, s in FORMAT_SUFFIXES.items())
+                   "names: " + ", ".join(f"{'/'.join(s)} {f}" for f, s in FORMAT_SUFFIXES.items())
                    + ")")
     p.add_argument("--out", required=True, metavar="FILE", help="file to write")
     p.add_argument("--model", metavar="M.npz",
@@ -106,6 +106,13 @@ def run(args: argparse.Namespace) -> int:
                                 f"not {args.format}")
     if args.texture_step < 1:
         raise FaceTransferError(f"--texture-step must be >= 1, got {args.texture_step}")
+    from ..take import is_take
+
+    if is_take(args.track):  # a Live Link file already: what it holds is said by probe
+        raise FaceTransferError(f"{args.track} is a Live Link Face take, not a track: export "
+                                f"writes a track file's activations (`facetransfer track "
+                                f"VIDEO --out T.npz`); `facetransfer probe {args.track}` "
+                                "describes the take")
     track = Track.load(args.track)
     model = None
     if args.model:

@@ -43,6 +43,8 @@ def register(sub) -> None:
                    "ppca-regions8 (8 soft face regions)")
     e.add_argument("--out", required=True, help="output folder (created if needed)")
     e.add_argument("--no-figures", action="store_true", help="write report.json only")
+    e.add_argument("--overwrite", action="store_true",
+                   help="replace the results of an earlier run in DIR")
     e.set_defaults(func=_eval)
     p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
@@ -57,12 +59,11 @@ def _floats(text: str, what: str) -> list[float]:
     return vals
 
 
-def _eval(args) -> int:
-    from tqdm import tqdm
-
-    from ..datasets import load_dataset
-    from ..impute import EVAL_VARIANTS, METHODS, evaluate_imputation
-    from .common import progress_disabled
+def _eval_inputs(args) -> tuple[list[float], list[str], Path]:
+    """``impute eval``'s fractions, methods and output folder, checked before any work: an
+    earlier run's results in the folder are replaced only with ``--overwrite``."""
+    from ..impute import EVAL_VARIANTS, METHODS
+    from ..io.atomic import check_output_path
 
     fractions = _floats(args.missing, "--missing")
     for f in fractions:
@@ -80,6 +81,20 @@ def _eval(args) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a folder")
+    names = ("report.json",) + (() if args.no_figures else ("error_vs_missing.png", "fig4.png"))
+    for name in names if out.is_dir() else ():     # a new folder is made after the work
+        check_output_path(out / name, overwrite=args.overwrite)
+    return fractions, methods, out
+
+
+def _eval(args) -> int:
+    from tqdm import tqdm
+
+    from ..datasets import load_dataset
+    from ..impute import evaluate_imputation
+    from .common import progress_disabled
+
+    fractions, methods, out = _eval_inputs(args)
     with tqdm(desc="loading data set", unit="mesh", leave=False,
               disable=progress_disabled()) as lbar:
         def loaded(done: int, total: int) -> None:

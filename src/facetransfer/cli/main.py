@@ -93,6 +93,19 @@ def use_sequence_rate(args, environ=os.environ) -> None:
         environ[SEQUENCE_FPS_VARIABLE] = repr(fps)
 
 
+def command_parser(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.ArgumentParser:
+    """The parser of the (sub)command ``argv`` runs (``edit``, ``model build``): the leaf
+    whose command words begin ``argv``'s words that are not options, the longest such; the
+    top parser when none does."""
+    words = [a for a in argv if not a.startswith("-")]
+    best, size = parser, 0
+    for leaf in _leaf_parsers(parser):
+        names = leaf.prog.split()[1:]
+        if size < len(names) and words[:len(names)] == names:
+            best, size = leaf, len(names)
+    return best
+
+
 def _leaf_parsers(parser: argparse.ArgumentParser):
     """The parsers of every command and subcommand (``model build``, ...) that has no
     subcommands of its own."""
@@ -186,7 +199,10 @@ def main(argv: list[str] | None = None) -> int:
     if argv is None:
         serial_blas(sys.argv[1:])
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args, extra = parser.parse_known_args(argv)
+    if extra:  # said by the command's own parser: its --help lists what it takes
+        command_parser(parser, sys.argv[1:] if argv is None else [str(a) for a in argv]) \
+            .error(f"unrecognized arguments: {' '.join(extra)}")
     configure_logging(args.verbose)
     use_sequence_rate(args)
     from .common import set_progress

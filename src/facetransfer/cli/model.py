@@ -2,7 +2,7 @@
 
     facetransfer model build --dataset ict-bilinear --out bilinear.npz
     facetransfer model info bilinear.npz
-    facetransfer model synth bilinear.npz --like identity=id03,expression=smile --out face.obj
+    facetransfer model synth bilinear.npz --like identity=id03,expression=jawOpen --out face.obj
     facetransfer model sheet bilinear.npz --out sheet.png        # also writes sheet_dials.png
     facetransfer model dials bilinear.npz [--out dials.png]      # semantic identity dials
 """
@@ -69,7 +69,7 @@ def parse_weights(text: str) -> dict[str, np.ndarray]:
 
 
 def parse_like(text: str) -> dict[str, str]:
-    """``"identity=id03,expression=smile"`` -> ``{"identity": "id03", "expression": "smile"}``."""
+    """``"identity=id03,expression=jawOpen"`` -> ``{"identity": "id03", "expression": "smile"}``."""
     out: dict[str, str] = {}
     for part in text.split(","):
         name, sep, lab = part.partition("=")
@@ -250,11 +250,9 @@ def synth_weights(model, weights: dict[str, np.ndarray] | None = None,
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
-    from ..io.mesh import write_mesh
+    from ..io.mesh import check_mesh_output, write_mesh
 
-    out = Path(args.out)
-    if out.suffix.lower() not in (".obj", ".ply"):
-        raise FaceTransferError(f"--out must end in .obj or .ply, got {out}")
+    out = check_mesh_output(args.out)
     check_output_path(out, overwrite=args.overwrite, inputs=[args.model])
     if args.weights and args.like:
         raise FaceTransferError("give --weights or --like, not both")
@@ -477,8 +475,10 @@ def register(sub) -> None:
     s.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     s.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...' "
                    "(modes not given: their mean)")
-    s.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=smile")
-    s.add_argument("--out", required=True, help="FACE.obj or FACE.ply")
+    s.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
+    s.add_argument("--out", required=True,
+                   help="the mesh to write: FACE.obj (with the model's uvs), .ply, .stl, .off "
+                   "or .glb")
     _overwrite_option(s)
     s.set_defaults(func=cmd_synth)
 

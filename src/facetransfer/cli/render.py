@@ -1,6 +1,6 @@
 """``facetransfer render`` and ``facetransfer synth-video``: previews and synthetic footage (§6).
 
-    facetransfer render MODEL.npz --like identity=id03,expression=smile --pose yaw=20 --out face.png
+    facetransfer render --like identity=id03,expression=jawOpen --pose yaw=20 --out face.png
     facetransfer render MODEL.npz --weights 'identity=0.1,0.2,...;expression=...' --out face.png
     facetransfer synth-video --model MODEL.npz --random --frames 100 --seed 1 --out clip.mp4
     facetransfer synth-video --model MODEL.npz --performance perf.json --identity id02 --out clip.mp4
@@ -188,7 +188,7 @@ def register(sub) -> None:
     r.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     r.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...'"
                    " (modes not given take their mean)")
-    r.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=smile")
+    r.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
     r.add_argument("--pose", help="head pose, e.g. yaw=20,pitch=-5,roll=0,scale=1.2 (degrees)")
     r.add_argument("--size", default="640x480", help="image WIDTHxHEIGHT (default 640x480)")
     r.add_argument("--background", default="255,255,255", help="R,G,B (default white)")
@@ -216,5 +216,5 @@ def register(sub) -> None:
     s.add_argument("--out", required=True, type=video_out, help="CLIP.mp4")
     s.add_argument("--overwrite", action="store_true",
                    help="replace existing outputs (CLIP.mp4 and CLIP.truth.npz)")
-    add_video_options(s)
+    add_video_options(s, sequences=False)  # a video beside its truth file
     s.set_defaults(func=cmd_synth_video)

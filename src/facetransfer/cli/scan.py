@@ -34,7 +34,8 @@ def register(sub) -> None:
 
     sm = ssub.add_parser("smooth", help="bilateral (Jones et al. 2003) smoothing of a scan")
     sm.add_argument("scan", help="scan mesh (OBJ, PLY, STL, GLB …)")
-    sm.add_argument("--out", required=True, help="output mesh (duplicate vertices merged)")
+    sm.add_argument("--out", required=True, help="output mesh, .obj, .ply, .stl, .off or .glb "
+                    "(duplicate vertices merged)")
     sm.add_argument("--sigma-c", type=float, default=None,
                     help="spatial sigma, scan units (default: 2 x mean edge length)")
     sm.add_argument("--sigma-s", type=float, default=None,
@@ -83,7 +84,8 @@ def register(sub) -> None:
                          "template alone. Not used with --reference")
     ft.add_argument("--protocol", choices=("neutral", "closed-mouth", "viseme"), default=None,
                     help="use only that marking protocol's feature points (42, 21 or 18)")
-    ft.add_argument("--out", required=True, help="fitted mesh (template topology, scan coordinates)")
+    ft.add_argument("--out", required=True, help="fitted mesh, .obj, .ply, .stl, .off or .glb "
+                    "(template topology, scan coordinates)")
     ft.add_argument("--no-progress", action="store_true", help="no progress bar")
     ft.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     ft.set_defaults(func=_fit)
@@ -92,8 +94,9 @@ def register(sub) -> None:
 def _smooth(args) -> int:
     from ..correspond import bilateral_smooth, load_scan
     from ..io.atomic import check_output_path
-    from ..io.mesh import write_mesh
+    from ..io.mesh import check_mesh_output, write_mesh
 
+    check_mesh_output(args.out)
     check_output_path(args.out, overwrite=args.overwrite, inputs=[args.scan])
     for name in ("sigma_c", "sigma_s"):
         val = getattr(args, name)
@@ -129,6 +132,8 @@ def _features(args) -> int:
     picture = Path(args.picture) if args.picture else out.with_suffix(".png")
     inputs = [args.scan, args.texture]
     check_output_suffix(out, (".json",), "a feature-point file")
+    check_output_suffix(picture, (".png", ".jpg", ".jpeg"), "the picture of the points",
+                        flag="--picture")
     check_output_path(out, overwrite=args.overwrite, inputs=inputs)
     check_output_path(picture, overwrite=args.overwrite, inputs=inputs + [out])
     ids = tuple(range(68)) if args.with_jaw else INNER_FEATURES
@@ -189,9 +194,9 @@ def _fit(args) -> int:
 
     from ..correspond import fit_template, load_scan, load_template
     from ..correspond.report import plot_fit, write_fit_report
-    from ..io.mesh import write_mesh
+    from ..io.mesh import check_mesh_output, write_mesh
 
-    out = Path(args.out)
+    out = check_mesh_output(args.out)
     stem = out.with_suffix("")
     report_path, png_path = Path(f"{stem}.report.json"), Path(f"{stem}.png")
     inputs = _check_fit_outputs(args, (out, report_path, png_path))

@@ -92,6 +92,8 @@ def cmd_default(args: argparse.Namespace) -> int:
 
 
 def cmd_lift(args: argparse.Namespace) -> int:
+    import itertools
+
     from tqdm import tqdm
 
     from ..io.video import iter_frames, video_info
@@ -107,12 +109,17 @@ def cmd_lift(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--step must be >= 1, got {args.step}")
     if not 8 <= args.size <= 4096:
         raise FaceTransferError(f"--size must be in 8..4096, got {args.size}")
+    if args.k < 1:
+        raise FaceTransferError(f"--k must be >= 1 (neighbours of the texture function), "
+                                f"got {args.k}")
     info = video_info(args.video)       # a file or an image sequence, checked
     track = _load_track(args.track)
     # without --model: the default model, checked against a tracker's track (a synth-video
     # truth file names no model)
     model = default_model_for(track) if args.model is None and hasattr(track, "model_hash") \
         else resolve_model(args.model)
+    if hasattr(track, "check_model"):
+        track.check_model(model)
     if tuple(track.frame_size) != tuple(info.size):
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
                                 f"{track.frame_size[1]} frames, the video is "
@@ -120,8 +127,9 @@ def cmd_lift(args: argparse.Namespace) -> int:
     n = int(track.scale.shape[0])
     with tqdm(total=(n + args.step - 1) // args.step, desc="texture lift", unit="frame",
               disable=progress_disabled()) as bar:
-        lt = lift_track(model, iter_frames(args.video), track, tex_size=args.size,
-                        step=args.step, progress=bar.update)
+        # a track of the clip's first n frames (``track --max-frames``) lifts those
+        lt = lift_track(model, itertools.islice(iter_frames(args.video), n), track,
+                        tex_size=args.size, step=args.step, progress=bar.update)
     merged = merge_textures(lt.lifted)
     write_image(out, texture_to_uint8(merged.texture), overwrite=args.overwrite)
     seen = float((merged.weight > 1e-6).mean())
@@ -185,7 +193,8 @@ def register(sub) -> None:
     lf.add_argument("--size", type=int, default=512, help="texture size (default 512)")
     lf.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
     lf.add_argument("--function", help="also write the performance-driven texture function (.npz)")
-    lf.add_argument("--k", type=int, default=4, help="neighbours of the texture function (default 4)")
+    lf.add_argument("--k", type=int, default=4,
+                    help="neighbours of the texture function (with --function; default 4)")
     lf.add_argument("--out", required=True, help="TEX.png (merged texture)")
     lf.add_argument("--overwrite", action="store_true", help="replace existing outputs")
     lf.set_defaults(func=cmd_lift)

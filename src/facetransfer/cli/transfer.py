@@ -265,7 +265,7 @@ def _register_demo(sub) -> None:
     d.add_argument("--overwrite", action="store_true",
                    help="replace the outputs of an earlier run in the folder")
     add_rewrite_options(d)
-    add_video_options(d, what="OUT/demo.mp4 (demo.mov for prores)")
+    add_video_options(d, what="OUT/demo.mp4 (demo.mov for prores)", sequences=False)
     d.set_defaults(func=run_demo)
 
 

@@ -152,14 +152,21 @@ def lift_points(points2d: np.ndarray, vertices: np.ndarray, faces: np.ndarray, c
     return ok, np.einsum("mk,mkc->mc", b, vertices[Ft])
 
 
+#: Mouth points (of iBUG 48-67) on the surface that :func:`_frontal` needs: the outer lips'
+#: (48-59) of a face whose inner lips lie over its mouth's hole.
+MOUTH_POINTS = 8
+
+
 def _frontal(P68: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
     """Forward and up directions of a face from its 3D iBUG points (outer eye corners 36, 45
-    and the mouth 48-67), or None if they are missing."""
-    need = [36, 45] + list(range(48, 68))
-    if not np.all(np.isfinite(P68[need])):
+    and the mouth 48-67: those of them on the surface, at least :data:`MOUTH_POINTS`; the
+    inner lips of an open mouth, or of a mesh with a mouth gap, fall into the hole), or None
+    if they are missing."""
+    mouth = P68[48:68][np.isfinite(P68[48:68]).all(axis=1)]
+    if not np.all(np.isfinite(P68[[36, 45]])) or len(mouth) < MOUTH_POINTS:
         return None
     x = P68[45] - P68[36]                       # subject's right -> left: image right
-    up = 0.5 * (P68[36] + P68[45]) - P68[48:68].mean(axis=0)
+    up = 0.5 * (P68[36] + P68[45]) - mouth.mean(axis=0)
     f = np.cross(x, up)
     if np.linalg.norm(f) < 1e-12:
         return None

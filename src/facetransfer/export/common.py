@@ -49,7 +49,7 @@ def require_activations(track, *, what: str = "track") -> np.ndarray:
         If the track has none, naming the model that gives them.
     """
     if track.blendshapes is None:
-        src = f" {track.source}" if track.source else ""
+        src = f" {track.label}" if track.label else ""
         raise ExportError(f"{what}{src} {_NO_ACTIVATIONS}")
     names = tuple(track.blendshape_names)
     if names == ARKIT_NAMES:

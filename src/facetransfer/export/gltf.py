@@ -100,18 +100,23 @@ def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 1
     """The face's texture lifted from its video (§6, Eq. (1) weights), merged over every
     ``step``-th frame and hole-filled, in the template's UV layout.
 
+    A track of the video's first frames only (``track --max-frames``) lifts from those.
+
     Returns
     -------
     (tex_size, tex_size, 3) uint8
         Row 0 is ``v = 1`` (glTF's top-left origin after the exporter's ``1 - v``).
     """
+    import itertools
+
     from ..io.video import iter_frames, video_info
     from ..texture import lift_track, merge_textures, texture_to_uint8
 
     info = video_info(video)
-    track.check_video(info.n_frames, info.size, what=f"video {video}")
-    lt = lift_track(model, iter_frames(video), track, tex_size=tex_size, step=step,
-                    progress=progress)
+    track.check_video(min(info.n_frames, track.n_frames) if info.n_frames else info.n_frames,
+                      info.size, what=f"video {video}")
+    lt = lift_track(model, itertools.islice(iter_frames(video), track.n_frames), track,
+                    tex_size=tex_size, step=step, progress=progress)
     return texture_to_uint8(merge_textures(lt.lifted).texture)
 
 

@@ -67,8 +67,8 @@ def check_output_path(path: str | os.PathLike, *, overwrite: bool = True,
     Raises
     ------
     OutputError
-        The parent folder does not exist or is not a folder, ``path`` is a folder, ``path`` exists
-        and ``overwrite`` is False, or ``path`` is also an input.
+        The parent folder does not exist, is not a folder or cannot be written, ``path`` is
+        a folder, ``path`` exists and ``overwrite`` is False, or ``path`` is also an input.
     """
     p = Path(path)
     parent = p.parent if str(p.parent) else Path(".")
@@ -81,7 +81,20 @@ def check_output_path(path: str | os.PathLike, *, overwrite: bool = True,
     check_not_input(p, inputs)
     if not overwrite and (p.exists() or p.is_symlink()):
         raise OutputError(f"output {p} exists; pass --overwrite to replace it")
+    probe_folder(p)
     return p
+
+
+def probe_folder(p: Path) -> None:
+    """Create and remove a temporary file beside the output ``p`` (:func:`_make_temp`), or in
+    the folder above when ``p``'s own is yet to be made: a folder that cannot be written
+    (read-only, ``/sys``, ``/proc``; root ignores permission bits, so only trying tells) is
+    refused before a long job, not at its end (OutputError naming ``p``)."""
+    p = Path(p)
+    fd, tmp = _make_temp(p if p.parent.is_dir() else p.parent)
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(tmp)
 
 
 def check_not_input(output: str | os.PathLike,

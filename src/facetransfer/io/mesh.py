@@ -203,6 +203,19 @@ def read_mesh(path: str | os.PathLike) -> Mesh:
     return Mesh(v, f, uv)
 
 
+#: The mesh files :func:`write_mesh` writes (OBJ itself, the others through trimesh's
+#: exporters), the first the one suggested for a misnamed output.
+MESH_SUFFIXES = (".obj", ".ply", ".stl", ".off", ".glb")
+
+
+def check_mesh_output(path: str | os.PathLike, *, flag: str = "--out") -> Path:
+    """Refuse, before any work, a mesh output whose extension is not one of
+    :data:`MESH_SUFFIXES` (:func:`facetransfer.io.output_names.check_output_suffix`)."""
+    from .output_names import check_output_suffix
+
+    return check_output_suffix(path, MESH_SUFFIXES, "a mesh", flag=flag)
+
+
 def write_mesh(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray, *,
                uvs: np.ndarray | None = None, colors: np.ndarray | None = None,
                overwrite: bool = True) -> Path:
@@ -218,7 +231,7 @@ def write_mesh(path: str | os.PathLike, vertices: np.ndarray, faces: np.ndarray,
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     _check_vertices(v, path)
-    p = Path(path)
+    p = check_mesh_output(path, flag="mesh")
     with atomic_path(p, overwrite=overwrite) as tmp:
         if p.suffix.lower() == ".obj":
             with open(tmp, "w") as fh:

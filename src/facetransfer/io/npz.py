@@ -68,7 +68,7 @@ def read_npz(path: str | os.PathLike, what: str,
     except MemoryError:
         raise
     except Exception as exc:  # zipfile.BadZipFile, EOFError, OSError, ValueError (pickle)…
-        raise error(f"{what} {p} is truncated or not a {what} ({_reason(exc)})") from None
+        raise error(f"{what} {p} is truncated or not a {what} ({reason(exc)})") from None
     if not isinstance(z, np.lib.npyio.NpzFile):
         raise error(f"{what} {p} is not a {what} (a single .npy array, not an .npz archive)")
     try:
@@ -78,7 +78,7 @@ def read_npz(path: str | os.PathLike, what: str,
     except MemoryError:
         raise
     except Exception as exc:  # a damaged member: bad CRC, zlib.error, EOFError, pickle…
-        raise error(f"{what} {p} is truncated or not a {what} ({_reason(exc)})") from None
+        raise error(f"{what} {p} is truncated or not a {what} ({reason(exc)})") from None
 
 
 def mapped_members(path: Path, z: "np.lib.npyio.NpzFile", min_bytes: int
@@ -120,7 +120,7 @@ def mapped_members(path: Path, z: "np.lib.npyio.NpzFile", min_bytes: int
     return out
 
 
-def _reason(exc: Exception) -> str:
+def reason(exc: Exception) -> str:
     """A short cause without numpy's advice (its ``allow_pickle`` hint misleads here)."""
     if isinstance(exc, ValueError) and "pickle" in str(exc):
         return "not an .npz archive of arrays"

@@ -163,6 +163,13 @@ def _skip(rate: int) -> int:
     return {30: 2, 60: 4, 120: 8}.get(rate, 0)
 
 
+def _drops(fps: float) -> bool:
+    """Whether ``fps`` has a drop-frame count: an NTSC rate (N * 1000/1001: 29.97, 59.94,
+    119.88), not the integer rate of the same nominal (30 fps counts every frame number)."""
+    ntsc = float(fps) * 1001.0 / 1000.0
+    return _skip(_nominal(fps)) > 0 and abs(ntsc - round(ntsc)) < 1e-3
+
+
 def timecode_count(timecode: str, fps: float) -> tuple[int, bool]:
     """Frames since midnight that ``timecode`` (``HH:MM:SS:FF``; ``;`` or ``.`` before the
     frames of a drop-frame one) counts at ``fps``, and whether it counts drop-frame: ``FF``
@@ -178,7 +185,7 @@ def timecode_count(timecode: str, fps: float) -> tuple[int, bool]:
     rate = _nominal(fps)
     minutes = hh * 60 + mm
     count = (minutes * 60 + ss) * rate + ff
-    drop = sep != ":" and _skip(rate) > 0
+    drop = sep != ":" and _drops(fps)
     if drop:
         count -= _skip(rate) * (minutes - minutes // 10)
     return count, drop
@@ -199,7 +206,7 @@ def exact_timecode(timecode: str, fps: float) -> str:
     raise ValueError(f"timecode {t!r} names no frame at {fps:g} fps (hours 00-23, frames "
                      f"00-{rate - 1:02d}"
                      + (", ';' with the frame numbers a drop-frame count skips taken out)"
-                        if _skip(rate) else "; no drop-frame count ';' at this rate)"))
+                        if _drops(fps) else "; no drop-frame count ';' at this rate)"))
 
 
 def _timecode(count: int, fps: float, drop: bool) -> str:

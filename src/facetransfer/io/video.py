@@ -31,7 +31,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from ..errors import VideoError
-from .atomic import atomic_path, check_output_path
+from .atomic import atomic_path, check_output_path, probe_folder
 from .ffmpeg import ffmpeg_error, ffmpeg_exe
 from .video_audio import (COPIED_AUDIO, audio_codec, audio_codecs, audio_input_args,  # noqa: F401
                           has_audio, mux_audio)
@@ -290,6 +290,7 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
         if not overwrite and _pattern_files(p):
             raise VideoError(f"output frames {p} exist ({len(_pattern_files(p))} files); pass "
                              "--overwrite to replace them")
+        probe_folder(p)
         return VideoOutput(p, "images", opt)
     if suffix in IMAGE_SUFFIXES and "#" in p.name:
         raise VideoError(f"output {p}: write an output sequence's frame number as "

@@ -29,7 +29,7 @@ def take_frames(track, idx: np.ndarray):
         translation=track.translation[idx],
         weights={n: w[idx] for n, w in track.weights.items()},
         landmarks2d=track.landmarks2d[idx], confidence=track.confidence[idx],
-        lost=track.lost[idx], info={},
+        lost=track.lost[idx], info={"file": track.info["file"]} if track.info.get("file") else {},
         blendshapes=None if track.blendshapes is None else track.blendshapes[idx],
         detections2d=None if track.detections2d is None else track.detections2d[idx])
 

@@ -241,27 +241,39 @@ class Track:
         i = self._check_frame(i)
         return {n: self.weights[n][i].copy() for n in self.mode_names}
 
+    @property
+    def label(self) -> str:
+        """How a message names this track: the file it was read from (:meth:`load`), else
+        the video it was tracked from ("of clip.mp4"), else nothing."""
+        if self.info.get("file"):
+            return str(self.info["file"])
+        return f"of {self.source}" if self.source else ""
+
     def check_video(self, n_frames: int, size: tuple[int, int], *, what: str = "video") -> None:
         """Raise :class:`TrackError` unless the track matches a video's frame count and size."""
         size = (int(size[0]), int(size[1]))
         if size != self.frame_size:
-            raise TrackError(f"track {self.source or ''} is for frames of "
+            raise TrackError(f"track {self.label} is for frames of "
                              f"{self.frame_size[0]}x{self.frame_size[1]}, but {what} is "
                              f"{size[0]}x{size[1]}")
         if int(n_frames) != self.n_frames:
-            raise TrackError(f"track {self.source or ''} has {self.n_frames} frames, but {what} "
+            raise TrackError(f"track {self.label} has {self.n_frames} frames, but {what} "
                              f"has {n_frames}")
 
     def check_model(self, model) -> None:
         """Raise :class:`TrackError` unless ``model`` is the model this track was made with."""
+        other = " (give the model it was tracked with as --model)"
         if tuple(model.mode_names) != self.mode_names:
-            raise TrackError(f"track has modes {self.mode_names}, the model {model.mode_names}")
+            raise TrackError(f"track {self.label} has modes {self.mode_names}, the model "
+                             f"{model.mode_names}{other}")
         for n, r in zip(model.mode_names, model.ranks):
             if self.weights[n].shape[1] != r:
-                raise TrackError(f"track weights of mode {n!r} have {self.weights[n].shape[1]} "
-                                 f"components, the model has {r}")
+                raise TrackError(f"track {self.label} was made with another model: its weights "
+                                 f"of mode {n!r} have {self.weights[n].shape[1]} components, "
+                                 f"the model's {r}{other}")
         if self.model_hash and self.model_hash != model.content_hash:
-            raise TrackError("track was made with a different model (model hash differs)")
+            raise TrackError(f"track {self.label} was made with a different model (model hash "
+                             f"differs){other}")
 
     # ------------------------------------------------------------------ file i/o
     def save(self, path: str | os.PathLike, *, overwrite: bool = True) -> Path:
@@ -341,6 +353,7 @@ class Track:
                        detections2d=data.get("detections2d"),
                        pixel_aspect=(scalar(data, "pixel_aspect", float, p, "track file",
                                             TrackError) if "pixel_aspect" in data else 1.0),
-                       shot_starts=tuple(np.asarray(data.get("shot_starts", ())).ravel()))
+                       shot_starts=tuple(np.asarray(data.get("shot_starts", ())).ravel()),
+                       info={"file": str(p)})
         except (TrackError, ValueError, TypeError, OverflowError) as exc:
             raise TrackError(f"track file {p} is invalid: {exc}") from None
