@@ -63,6 +63,9 @@ def test_dial_track_and_values(arkit_model, dials, make_arkit_track):
     with pytest.raises(DialError, match="unknown identity dial 'wdth'.*width"):
         dial_track(track, arkit_model, {"wdth": 1.0}, dials=dials)
     assert parse_dial_values("width=+1.5, jaw_width=-2") == {"width": 1.5, "jaw_width": -2.0}
+    with pytest.raises(DialError, match=r"width=1e9 is beyond the dials' range of -5 to \+5"):
+        parse_dial_values("jaw_width=-5,width=1e9")
+    assert parse_dial_values("width=-5") == {"width": -5.0}
     for bad in ("width", "width=abc", "=1", ""):
         with pytest.raises(DialError):
             parse_dial_values(bad)

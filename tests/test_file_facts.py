@@ -106,3 +106,36 @@ def test_a_damaged_archive_given_to_probe_is_named(tmp_path, capsys):
         err = capsys.readouterr().err.strip().splitlines()
         assert err == [f"facetransfer probe: error: {path} is truncated or not an .npz archive "
                        f"({why})"], err
+
+
+def test_a_still_image_is_described_as_one(tmp_path, capsys):
+    """A photo given to probe is said to be a still image (tracked as a clip of one frame), not
+    a 25 fps video of one frame whose seeks are not exact."""
+    import cv2
+
+    photo = tmp_path / "face.jpg"
+    cv2.imwrite(str(photo), np.full((48, 64, 3), 128, np.uint8))
+    assert main(["probe", str(photo)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[:2] == [f"{photo}: 64x48", "  a still image: tracked and transferred as a clip "
+                       "of one frame"], out
+    assert "fps" not in " ".join(out) and "seeks" not in " ".join(out)
+
+
+def test_a_track_of_an_image_sequence_is_described_without_the_rate_warning(
+        arkit_model, make_arkit_track, tmp_path, caplog):
+    """The track's own rate is what probe says; looking up its source sequence's timecode
+    (a PNG sequence has none) no longer warns that the sequence stores no frame rate."""
+    import logging
+
+    import cv2
+
+    for i in range(3):
+        cv2.imwrite(str(tmp_path / f"sh.{i + 1:04d}.png"), np.zeros((8, 8, 3), np.uint8))
+    track, _, _ = make_arkit_track(arkit_model, 3, fps=25.0)
+    track = dataclasses.replace(track, source=str(tmp_path / "sh.####.png"))
+    track.save(tmp_path / "t.npz")
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        f = track_facts(tmp_path / "t.npz")
+    assert f["fps"] == 25.0 and f["source_timecode"] is None
+    assert not [r for r in caplog.records if "stores no frame rate" in r.getMessage()]

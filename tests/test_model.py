@@ -151,6 +151,26 @@ def test_batch_with_one_identity_shares_the_single_frames_contraction():
     np.testing.assert_array_equal(batch, want)
 
 
+def test_a_large_core_contracted_in_halves_is_one_einsum_bit_for_bit(monkeypatch):
+    """A core past ``_SPLIT_BYTES`` is contracted as two halves of its rows at once: every
+    element is the sum one einsum computes (the same order), over any inner axis, for an odd
+    number of rows too; the last axis and small cores take the single product."""
+    from facetransfer import model as model_module
+
+    rng = np.random.default_rng(13)
+    monkeypatch.setattr(model_module, "_SPLIT_BYTES", 0)
+    monkeypatch.setattr(model_module.os, "cpu_count", lambda: 2)
+    for shape, axis in (((101, 7, 5), 1), ((64, 3, 4, 6), 2), ((9, 8, 3), 1)):
+        T = rng.normal(size=shape)
+        w = rng.normal(size=shape[axis])
+        keep = [d for d in range(T.ndim) if d != axis]
+        want = np.einsum(T, list(range(T.ndim)), w, [axis], keep)
+        np.testing.assert_array_equal(model_module._contract_axis(T, axis, w), want)
+    T = rng.normal(size=(11, 4, 3))
+    np.testing.assert_allclose(model_module._contract_axis(T, 2, np.ones(3)), T.sum(2),
+                               rtol=1e-12, atol=1e-12)
+
+
 @pytest.mark.parametrize("mode", ["identity", "expression", "viseme"])
 def test_mode_basis_is_eq9(mode):
     ds = random_dataset(seed=3)

@@ -342,3 +342,5 @@ def test_edits_of_an_arkit_track_act_on_its_activations(arkit_model, make_arkit_
     np.testing.assert_allclose(b[:, rest], before[:, rest], atol=1e-5)
     with pytest.raises(TransferError, match="smile, frown, blink"):
         edit_track(track, arkit_model, scale=[EditScale("grin", 2.0)])
+    with pytest.raises(TransferError, match="jawOpen=-2: an ARKit activation lies in 0..1"):
+        edit_track(track, arkit_model, scale=[EditScale("jawOpen", -2.0)])

@@ -99,7 +99,10 @@ def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
     assert main(["view", str(tp), "--model", str(mp), "--out", str(tmp_path / "p.html")]) == 0
     assert "wrote" in capsys.readouterr().out
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
+    (tmp_path / "zero.npz").write_bytes(b"")
     for src, msg in ((tmp_path / "none.npz", "does not exist"),
+                     (tmp_path / "zero.npz", f"model or track file {tmp_path / 'zero.npz'} is "
+                                             "empty"),
                      (tmp_path / "junk.npz", "neither a model nor a track")):
         assert main(["view", str(src), "--out", str(tmp_path / "q.html")]) == 2
         err = capsys.readouterr().err

@@ -232,8 +232,15 @@ def learn_dials(model, *, mode: str = "identity") -> DialSet:
     return DialSet(tuple(dials), mode, unit)
 
 
+#: The farthest a dial is turned, in its units (standard deviations of its measurement over
+#: the training identities): beyond, the face leaves the space the model was learned on
+#: (``model dials`` draws -2 to +2).
+DIAL_LIMIT = 5.0
+
+
 def parse_dial_values(text: str, *, what: str = "--identity-dials") -> dict[str, float]:
-    """``"width=+1.5,nose_length=-1"`` -> ``{"width": 1.5, "nose_length": -1.0}``."""
+    """``"width=+1.5,nose_length=-1"`` -> ``{"width": 1.5, "nose_length": -1.0}``; a value
+    beyond :data:`DIAL_LIMIT` is refused (DialError naming it)."""
     out: dict[str, float] = {}
     for part in str(text).split(","):
         if not part.strip():
@@ -245,6 +252,10 @@ def parse_dial_values(text: str, *, what: str = "--identity-dials") -> dict[str,
             v = float("nan")
         if not sep or not name.strip() or not np.isfinite(v):
             raise DialError(f"{what}: expected NAME=NUMBER[,...], got {part!r}")
+        if abs(v) > DIAL_LIMIT:
+            raise DialError(f"{what}: {part.strip()} is beyond the dials' range of "
+                            f"-{DIAL_LIMIT:g} to +{DIAL_LIMIT:g} (standard deviations over the "
+                            "training faces)")
         out[name.strip()] = v
     if not out:
         raise DialError(f"{what} is empty")

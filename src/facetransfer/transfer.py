@@ -590,6 +590,10 @@ def _edit_activations(w: np.ndarray, model, scale, add, ramp: int) -> np.ndarray
 
     act = weights_to_activations(model, w, clip=False)
     for s in scale:
+        if s.factor < 0:  # clipped to [0, 1], the shape would be gone: not what was asked
+            raise TransferError(f"--scale {s.label}={s.factor:g}: an ARKit activation lies in "
+                                "0..1, so a negative factor would only remove the shape; give "
+                                f"{s.label}=0 to remove it")
         act[:, _arkit_index(s.label, ARKIT_NAMES)] *= s.factor
     for a in add:
         e = ramp_envelope(len(act), a.start, a.stop, ramp)

@@ -143,14 +143,15 @@ def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=Non
     from ..track import Track
     from .common import resolve_model
 
-    src = Path(source)
-    if not src.is_file():
-        raise ExportError(f"{src} does not exist")
+    from ..io.npz import check_input_file, reason
+
+    src = check_input_file(source, "model or track file", ExportError)
     try:
         with np.load(src, allow_pickle=False) as z:
             is_track = "rotation" in z.files and "mode_names" in z.files
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile):
-        raise ExportError(f"{src} is neither a model nor a track file (not an .npz)") from None
+    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        raise ExportError(f"{src} is neither a model nor a track file (truncated or not an "
+                          f".npz archive: {reason(exc)})") from None
     if neutral is not None and not is_track:
         raise ExportError(f"--neutral is for a track; {src} is a model")
     if is_track:

@@ -190,9 +190,9 @@ def timecode_of(path: str | os.PathLike) -> str | None:
     :attr:`facetransfer.io.video_sequence.Sequence.timecode`); None without one (or without
     ffmpeg). A camera's or an editor's: what a conform matches shots by."""
     if is_sequence(path):
-        from .video_sequence import open_sequence
+        from .video_sequence import sequence_timecode
 
-        return open_sequence(path).timecode
+        return sequence_timecode(path)
     found = re.search(r"^\s*timecode\s*:\s*(\S+)\s*$", described_input(path),
                       re.MULTILINE | re.IGNORECASE)
     if found is None or not _TIMECODE.fullmatch(found.group(1)):

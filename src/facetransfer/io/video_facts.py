@@ -22,7 +22,7 @@ from .plate_alpha import sequence_has_alpha, video_has_alpha
 from .video_depth import video_bits
 from .video_read import video_info
 from .frame_file import bit_depth
-from .video_sequence import is_sequence, open_sequence
+from .video_sequence import IMAGE_SUFFIXES, is_sequence, open_sequence
 
 __all__ = ["VideoFacts", "video_facts", "fact_lines"]
 
@@ -165,6 +165,10 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 (f"  {_exr_kind(f)}" if str(f.path).lower().endswith(".exr") else
                  f"  {_dpx_kind(f)}" if str(f.path).lower().endswith(".dpx") else
                  f"  {_image_kind(f)}; no audio")]
+    if f.n_frames <= 1 and os.path.splitext(str(f.path))[1].lower() in IMAGE_SUFFIXES + (
+            ".ppm", ".webp"):
+        return [f"{f.path}: {size}", "  a still image: tracked and transferred as a clip of "
+                "one frame", f"  {colour}; {_image_kind(f) if f.bits > 8 else 'no audio'}"]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}" + (
                 "" if f.timecode is None else

@@ -182,6 +182,16 @@ def sequence_stamp(path) -> str:
     return f"{folder}/{Path(path).name}|{len(files)}|{h.hexdigest()[:24]}|{sequence_fps()}{said}"
 
 
+def sequence_timecode(path) -> str | None:
+    """The start timecode in the header of an image sequence's first frame (DPX, OpenEXR),
+    None without one or without frames: read without :func:`open_sequence`'s checks and its
+    word on the rate (a track's or an export's look-up of its source's timecode)."""
+    from .plate_header import frame_header
+
+    files = sequence_files(Path(path))
+    return frame_header(files[min(files)]).timecode if files else None
+
+
 def open_sequence(path) -> Sequence:
     """The image sequence ``path`` names, checked: files present from its first number on
     without a gap, the first frame readable.
