@@ -51,14 +51,18 @@ class Case:
 def build_fixtures(d: Path) -> None:
     """model.npz (small bilinear ICT model), clip.mp4 + clip.truth.npz, track.npz, other.mp4."""
     d.mkdir(parents=True, exist_ok=True)
-    if not (d / "model.npz").is_file():
-        sys.path.insert(0, str(HERE.parent / "tests"))
-        from conftest import QUICK_EXPRESSIONS, _quick_ict_dataset
+    # model.npz, and other.npz of other ranks (a track of model.npz given to it)
+    for name, ranks in (("model.npz", {"identity": 3, "expression": 5}),
+                        ("other.npz", {"identity": 2, "expression": 5})):
+        if not (d / name).is_file():
+            sys.path.insert(0, str(HERE.parent / "tests"))
+            from conftest import QUICK_EXPRESSIONS, _quick_ict_dataset
 
-        from facetransfer.model import build_model
+            from facetransfer.model import build_model
 
-        ds = _quick_ict_dataset(Path(os.environ["FACETRANSFER_DATA_DIR"]), 4, QUICK_EXPRESSIONS)
-        build_model(ds, {"identity": 3, "expression": 5}).save(d / "model.npz")
+            ds = _quick_ict_dataset(Path(os.environ["FACETRANSFER_DATA_DIR"]), 4,
+                                    QUICK_EXPRESSIONS)
+            build_model(ds, ranks).save(d / name)
     cli = [sys.executable, "-m", "facetransfer.cli.main"]
     if not (d / "clip.mp4").is_file():
         subprocess.run(cli + ["synth-video", "--model", "model.npz", "--random", "--frames", "12",
@@ -313,7 +317,8 @@ def cases(fx: Path) -> list[Case]:
              forbid=("allow_pickle", "pickle"), names="face.png"),
         Case("a folder passed as a model", ["model", "info", "."], forbid=("does not exist",)),
         Case("a folder passed as a video", ["probe", "."], forbid=("does not exist",)),
-        Case("a track passed as a video", ["probe", T], setup=_copy(T), names=T),
+        Case("a track passed as a video", ["track", T, "--model", M, "--out", "t2.npz"],
+             setup=_copy(M, T), names=T, forbid=("OpenCV",)),
         Case("a plate with a missing frame", ["probe", "plate/f.####.png"],
              setup=_plate(gap=True), names="f.0003.png"),
         Case("a damaged OpenEXR plate", ["probe", "plate/f.%04d.exr"],
@@ -354,6 +359,21 @@ def cases(fx: Path) -> list[Case]:
              names="t.mp4"),
         Case("a glb export named .usd", ["export", T, "--format", "glb", "--out", "f.usd"],
              setup=_copy(T), names="f.usd"),
+        # the thirty-eighth session's walk
+        Case("a fitted mesh named .csv (scan fit --out fit.csv)",
+             ["scan", "fit", "bad.obj", "--features", "f.json", "--out", "fit.csv"],
+             setup=_both(_bad_obj, _ragged_features), names="fit.csv",
+             forbid=("exporter not available",)),
+        Case("an option the command does not take (edit --bogus)",
+             ["edit", T, "--model", M, "--bogus", "1", "--out", "e.npz"], setup=_copy(M, T),
+             names="facetransfer edit --help"),
+        Case("a track of another model (export --model)",
+             ["export", T, "--model", "other.npz", "--out", "t.csv"],
+             setup=_copy(T, "other.npz"),
+             names=T, forbid=("must end in",)),
+        Case("puppet, read-only folder (refused before the render)",
+             ["puppet", C, "--model", M, "--max-frames", "3", "--out", "mnt/p.mp4"],
+             setup=_copy(M, C), mount="ro"),
         Case("third-party log lines before the tool's line (no face)",
              ["track", "blank.mp4", "--model", M, "--out", "t.npz"], setup=_copy(M, "blank.mp4")),
         # 8. raw scans

@@ -379,6 +379,7 @@ def test_a_transfers_track_is_kept_continued_and_reused_in_the_cache(clip, quick
     tr = obtain_track(video, quick_model, frames=frames, fps=fps)
     assert fakes.made[-1].calls == F - 25 + FakeDetector.warmup_frames
     np.testing.assert_allclose(tr.landmarks2d, ref.landmarks2d, atol=1e-9)
+    assert tr.info["resumed"] == {"frame": 25} and "resumed" not in ref.info  # said by transfer
     assert [p.name.endswith(".partial.npz") for p in tracks.iterdir()] == [False]
     made = len(fakes.made)
     _same_track(obtain_track(video, quick_model, frames=frames, fps=fps), tr)

@@ -195,6 +195,69 @@ def test_a_transfers_saved_track_is_named_as_a_track(data_dir, tmp_path, capsys)
     assert list(tmp_path.iterdir()) == []
 
 
+def test_meshes_naming_a_file_is_refused_before_any_work(data_dir, tmp_path, capsys):
+    """``--meshes`` names a folder: a file there was found only after the whole render (a raw
+    "File exists", and the video written); now refused first, nothing written."""
+    clip = str(data_dir / "video" / "face_2.mp4")
+    (tmp_path / "t1.mp4").write_bytes(b"x")
+    assert main(["transfer", "--target", clip, "--expression-from", clip, "--out",
+                 str(tmp_path / "r.mp4"), "--meshes", str(tmp_path / "t1.mp4")]) == 2
+    assert _err(capsys) == [f"facetransfer transfer: error: --meshes {tmp_path / 't1.mp4'} is "
+                            "a file; it names a folder for the meshes (frame_00000.obj, ...)"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t1.mp4"]
+
+
+def test_a_face_to_track_and_a_track_given_for_it_are_refused_together(data_dir, tmp_path,
+                                                                       capsys):
+    """``--target-face left`` with a ``--target-track`` (of the right person) rewrote the
+    track's face and said nothing; the two contradict each other. A take with
+    ``--source-face`` the same."""
+    clip = str(data_dir / "video" / "face_2.mp4")
+    assert main(["transfer", "--target", clip, "--target-track", str(tmp_path / "t.npz"),
+                 "--target-face", "left", "--expression-from", clip,
+                 "--out", str(tmp_path / "r.mp4")]) == 2
+    assert _err(capsys) == [f"facetransfer transfer: error: --target-face chooses the face to "
+                            f"track, but --target-track {tmp_path / 't.npz'} is tracked already "
+                            "(its face is the one rewritten): give one of them"]
+    take = tmp_path / "take.csv"
+    take.write_text("Timecode,BlendShapeCount\n")
+    assert main(["transfer", "--target", clip, "--expression-from", str(take), "--source-face",
+                 "right", "--out", str(tmp_path / "r.mp4")]) == 2
+    assert _err(capsys)[0].endswith("which drives the target alone: --source-face cannot be "
+                                    "added")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["take.csv"]
+
+
+@pytest.mark.parametrize("extra, says", [
+    (["--gaze", "target", "--eyes", "target"], "--gaze target acts with --eyes model, not "
+     "--eyes target: give one of them"),
+    (["--lip-colour", "source", "--mouth", "function"], "--lip-colour source acts with "
+     "--mouth frame, not --mouth function: give one of them"),
+])
+def test_an_option_that_would_be_ignored_is_refused(extra, says, data_dir, tmp_path, capsys):
+    """An option that acts only with another's value, given with another (it was ignored in
+    silence): one line, nothing written."""
+    clip = str(data_dir / "video" / "face_2.mp4")
+    assert main(["transfer", "--target", clip, "--expression-from", clip,
+                 "--out", str(tmp_path / "r.mp4"), *extra]) == 2
+    assert _err(capsys) == [f"facetransfer transfer: error: {says}"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_track_run_stopped_before_its_overlay_is_pointed_to_from_track(data_dir, tmp_path,
+                                                                          capsys):
+    """``track --out T --overlay O`` stopped after writing T: the same command again said only
+    "T exists; pass --overwrite" (tracking again); it now says how to draw just the overlay."""
+    clip = str(data_dir / "video" / "face_2.mp4")
+    t, o = tmp_path / "t.npz", tmp_path / "o.mp4"
+    t.write_bytes(b"an earlier run's track")
+    assert main(["track", clip, "--out", str(t), "--overlay", str(o)]) == 2
+    assert _err(capsys) == [f"facetransfer track: error: output {t} exists (an earlier run's "
+                            f"track?): `--from-track {t} --overlay {o}` draws the overlay from "
+                            "it; --overwrite tracks again"]
+    assert t.read_bytes() == b"an earlier run's track" and not o.exists()
+
+
 # ------------------------------------------------------------------------------ native logs
 def test_native_log_lines_are_filtered_from_stderr():
     """C libraries write straight to descriptor 2, often in pieces; only they are dropped."""

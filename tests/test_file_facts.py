@@ -139,3 +139,25 @@ def test_a_track_of_an_image_sequence_is_described_without_the_rate_warning(
         f = track_facts(tmp_path / "t.npz")
     assert f["fps"] == 25.0 and f["source_timecode"] is None
     assert not [r for r in caplog.records if "stores no frame rate" in r.getMessage()]
+
+
+def test_probe_of_several_files_describes_the_good_ones_and_names_the_bad(
+        arkit_model, make_arkit_track, tmp_path, capsys):
+    """One damaged file among several: the others are still described (before: nothing was
+    printed but the one error), the damaged one named on stderr, exit status 2; with --json
+    it is an entry with its error."""
+    track, _, _ = make_arkit_track(arkit_model, 5)
+    track.save(tmp_path / "t.npz")
+    good = (tmp_path / "t.npz").read_bytes()
+    (tmp_path / "cut.npz").write_bytes(good[:len(good) // 2])
+    argv = ["probe", str(tmp_path / "cut.npz"), str(tmp_path / "t.npz")]
+    assert main(argv) == 2
+    out, err = capsys.readouterr()
+    assert out.startswith(f"{tmp_path / 't.npz'}: a track of 5 frames")
+    assert err.strip().splitlines() == [f"facetransfer probe: error: {tmp_path / 'cut.npz'} is "
+                                        "truncated or not an .npz archive (BadZipFile)"]
+    assert main(argv + ["--json"]) == 2
+    listed = json.loads(capsys.readouterr().out)
+    assert listed[0] == {"path": str(tmp_path / "cut.npz"), "error": f"{tmp_path / 'cut.npz'} "
+                         "is truncated or not an .npz archive (BadZipFile)"}
+    assert listed[1]["frames"] == 5

@@ -371,3 +371,40 @@ def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_cli
         code = main([str(x) for x in base + [tmp_path / name] + extra])
         err = capsys.readouterr().err
         assert code == 2 and "timecode" in err and len(err.strip().splitlines()) == 1, err
+
+
+def test_a_damaged_take_is_named_by_line_and_column(arkit_model, make_arkit_track, tmp_path):
+    """A row cut short, a value that is no number, a timecode that is none and an activation
+    outside 0..1: each named by the file, its line and column (before: Python's own words,
+    "list index out of range", and a timecode error without a file; 7.5 taken as it was)."""
+    from facetransfer.export.common import ExportError
+    from facetransfer.export.livelink import read_livelink, write_livelink
+
+    track, _, _ = make_arkit_track(arkit_model, 6)
+    good = write_livelink(track, tmp_path / "take.csv").read_text().splitlines()
+    header = good[0].split(",")
+    jaw = header.index("JawOpen")
+
+    def damaged(line: int, edit) -> Path:
+        rows = [r.split(",") for r in good]
+        rows[line - 1] = edit(rows[line - 1])
+        p = tmp_path / f"bad{line}.csv"
+        p.write_text("\n".join(",".join(r) for r in rows) + "\n")
+        return p
+
+    def at(col, value):
+        def edit(r):
+            r[col] = value
+            return r
+        return edit
+
+    cases = ((damaged(3, lambda r: r[:10]), f"line 3 has 10 fields, its header {len(header)}"),
+             (damaged(4, at(jaw, "abc")), "line 4, column JawOpen: 'abc' is not a finite number"),
+             (damaged(5, at(jaw, "nan")), "line 5, column JawOpen: 'nan' is not a finite number"),
+             (damaged(2, at(0, "xx:yy")), "line 2: timecode 'xx:yy' is not HH:MM:SS:FF.mmm"),
+             (damaged(6, at(jaw, "7.5")), "line 6, column JawOpen: 7.5 is outside 0..1"))
+    for path, said in cases:
+        with pytest.raises(ExportError) as exc:
+            read_livelink(path, lenient=True)
+        assert str(exc.value).startswith(f"{path} {said}"), str(exc.value)
+    assert len(read_livelink(tmp_path / "take.csv").timecodes) == 6

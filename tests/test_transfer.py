@@ -277,6 +277,8 @@ def test_parse_edit_arguments():
     np.testing.assert_array_equal(parse_weights("1,2,3", 3), [1, 2, 3])
     with pytest.raises(TransferError, match="expected 3"):
         parse_weights("1,2", 3)
+    with pytest.raises(TransferError, match="^--identity-weights missing.npy: no such file$"):
+        parse_weights("missing.npy", 3)
 
 
 def test_project_landmarks_matches_camera(quick_model, quick_track):
@@ -344,3 +346,20 @@ def test_edits_of_an_arkit_track_act_on_its_activations(arkit_model, make_arkit_
         edit_track(track, arkit_model, scale=[EditScale("grin", 2.0)])
     with pytest.raises(TransferError, match="jawOpen=-2: an ARKit activation lies in 0..1"):
         edit_track(track, arkit_model, scale=[EditScale("jawOpen", -2.0)])
+
+
+def test_identity_weights_outside_the_models_identity_space_are_refused(arkit_model):
+    """``--identity-weights`` are coordinates in the identity space: every training row and
+    a blend of two pass; the zero vector, a one-hot vector and uniform weights (a face blown
+    past the frame, or a traceback from the renderer, before) are refused naming the
+    component."""
+    from facetransfer.transfer import IDENTITY_LIMIT, check_identity_weights
+
+    U = arkit_model.factors[arkit_model.mode_index("identity")]
+    for w in list(U) + [0.5 * (U[0] + U[1])]:
+        check_identity_weights(arkit_model, w)
+    r = U.shape[1]
+    for w in (np.zeros(r), np.eye(r)[0], np.full(r, 1.0 / r)):
+        with pytest.raises(TransferError, match=r"--identity-weights: component \d+ .* "
+                           rf"standard deviations .* \(at most {IDENTITY_LIMIT:g}\)"):
+            check_identity_weights(arkit_model, w)

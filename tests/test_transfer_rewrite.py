@@ -340,3 +340,26 @@ def test_erode_equals_scipy_binary_erosion():
         m[0, :] = True  # the image border counts as outside
         m[:, -1] = True
         np.testing.assert_array_equal(composite._erode(m, k), ndi.binary_erosion(m, iterations=k))
+
+
+def test_a_target_track_of_another_clip_is_said(quick_model, caplog):
+    """A ``--target-track`` made from a video of another name than the target: one warning
+    naming both (another clip of the same size drove the wrong face silently); a track of the
+    same name, or of a renamed path in another folder, says nothing."""
+    import logging
+
+    n = 2
+    tr = Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
+               scale=np.ones(n), translation=np.zeros((n, 2)),
+               weights={m: np.zeros((n, r)) for m, r in zip(quick_model.mode_names,
+                                                             quick_model.ranks)},
+               landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n), lost=np.zeros(n, bool),
+               model_hash=quick_model.content_hash, mode_names=quick_model.mode_names,
+               source="/clips/katie.mp4")
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        vt._warn_other_source(tr, "/elsewhere/katie.mp4", "target")
+        assert not caplog.records
+        vt._warn_other_source(tr, "d6.mp4", "target")
+    assert [r.getMessage() for r in caplog.records] == [
+        "target track of /clips/katie.mp4 was made from katie.mp4, not d6.mp4: if that is "
+        "another clip, its motion drives the wrong face"]

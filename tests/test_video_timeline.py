@@ -131,3 +131,19 @@ def test_times_beyond_a_floats_range_are_no_times():
     assert vt._framecrc_times("#tb 0: " + "9" * 400 + "/1\n" + line.format(5)) is None
     assert vt._framecrc_times("#tb 0: " + "9" * 300 + "/1\n" + line.format("9" * 300)) is None
     np.testing.assert_allclose(vt._framecrc_times("#tb 0: 1/30\n" + line.format(6)), [0.2])
+
+
+def test_a_matroska_files_frames_are_its_packets(tmp_path, data_dir):
+    """A Matroska file stores no frame count: OpenCV's is its duration times its rate, and
+    with a target's audio (AAC's last packet runs past the video) 20 H.265 frames at 25 fps
+    said 22 (OpenCV 4.x); its video packets are counted instead; every frame decoded is one
+    of them."""
+    rng = np.random.default_rng(3)
+    frames = [rng.integers(0, 255, (64, 64, 3), dtype=np.uint8) for _ in range(20)]
+    out = encode_video(tmp_path / "c.mkv", frames, 25,
+                       options=VideoOptions(codec="h265", crf=28, preset="veryfast"),
+                       audio_from=data_dir / "video" / "WDA_KatieHill_000.mp4").path
+    info = video_info(out)
+    assert info.n_frames == 20
+    assert len(read_video(out)[0]) == 20
+    assert vt.packet_count(out) == 20

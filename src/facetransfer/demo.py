@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import AssetError
+from .errors import AssetError, VideoError
 from .texture.face import resolve_mouth_mode
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .video_transfer import plan_transfer, render_plan
@@ -230,6 +230,19 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
                           lip_colour=lip_colour, gaze=gaze)
     if model is not None:  # an unusable mouth mode fails before any work
         resolve_mouth_mode(opts.mouth, model)
+    made = not Path(out_dir).exists()
+    try:
+        return _demo(out_dir, opts, model, frames, source, target, progress_factory,
+                     overwrite, video_options, judge)
+    except BaseException:
+        if made and Path(out_dir).is_dir() and not any(Path(out_dir).iterdir()):
+            Path(out_dir).rmdir()  # a failed first run leaves no empty folder
+        raise
+
+
+def _demo(out_dir, opts: RewriteOptions, model, frames: int, source, target, progress_factory,
+          overwrite: bool, video_options, judge: bool) -> DemoResult:
+    """:func:`run_demo` once its options are checked."""
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     video_path, sheet_path, track_path = _demo_paths(out_dir, video_options, overwrite)
@@ -298,8 +311,8 @@ def _plan_with_fallback(target, source, model, opts: RewriteOptions, frames: int
 
     try:
         return plan(opts.track_method), opts
-    except (KeyboardInterrupt, MemoryError):
-        raise
+    except (KeyboardInterrupt, MemoryError, VideoError):
+        raise       # a clip without a face, or one that cannot be read: no fit would help
     except Exception as exc:  # noqa: BLE001 - the demo degrades instead of failing
         if opts.track_method != "auto":
             raise

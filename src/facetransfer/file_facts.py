@@ -121,11 +121,16 @@ def take_facts(path: str | os.PathLike) -> dict:
         "eye_rotation": [n for n in eyes if n not in take.missing]}
 
 
+def _count(n: int, word: str) -> str:
+    """``"1 frame"``, ``"30 frames"``."""
+    return f"{n} {word}" + ("" if n == 1 else "s")
+
+
 def _track_lines(f: dict) -> list[str]:
     w, h = f["frame_size"]
     model = {True: "the default model (ict-arkit)", False: "another model than the default",
              None: "a model"}[f["default_model"]]
-    lines = [f"{f['path']}: a track of {f['frames']} frames at {f['fps']:g} fps "
+    lines = [f"{f['path']}: a track of {_count(f['frames'], 'frame')} at {f['fps']:g} fps "
              f"({f['seconds']:.2f} s), {w}x{h}"
              + (f" (pixel aspect {f['pixel_aspect']:g})" if f["pixel_aspect"] != 1 else ""),
              f"  made from: {f['source'] or 'an unnamed video'}"
@@ -148,7 +153,7 @@ def _track_lines(f: dict) -> list[str]:
 
 def _take_lines(f: dict) -> list[str]:
     rate = f"{f['timecode_rate']} fps timecode" if f["timecode_rate"] else "no rows"
-    lines = [f"{f['path']}: a Live Link Face take of {f['rows']} rows ({rate})"
+    lines = [f"{f['path']}: a Live Link Face take of {_count(f['rows'], 'row')} ({rate})"
              + (f", from {f['first_timecode']} to {f['last_timecode']} ({f['seconds']:.2f} s "
                 "apart)" if f["first_timecode"] else ""),
              f"  shapes: {f['shapes']} of 52"

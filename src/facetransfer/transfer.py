@@ -715,6 +715,9 @@ def parse_weights(text: str, r: int, *, what: str = "--identity-weights") -> np.
     from pathlib import Path
 
     p = Path(text)
+    if p.suffix.lower() in (".npy", ".txt", ".csv") and not p.is_file():
+        raise TransferError(f"{what} {text}: " + ("a folder, not a file" if p.is_dir() else
+                                                  "no such file"))
     try:
         if p.suffix in (".npy", ".txt", ".csv") and p.is_file():
             vals = np.load(p) if p.suffix == ".npy" else np.loadtxt(p, delimiter=",")
@@ -727,6 +730,31 @@ def parse_weights(text: str, r: int, *, what: str = "--identity-weights") -> np.
     if vals.shape != (r,) or not np.all(np.isfinite(vals)):
         raise TransferError(f"{what}: expected {r} finite numbers, got {vals.size}")
     return vals
+
+
+#: How far (standard deviations of the training identities' weights, per component) given
+#: identity weights may lie: the training identities lie within 3.4 of their mean in the
+#: default model, a tracked identity within 1; the zero vector lies 53 away (a face blown up
+#: past the frame, measured).
+IDENTITY_LIMIT = 6.0
+
+
+def check_identity_weights(model, w: np.ndarray, *, what: str = "--identity-weights") -> None:
+    """Refuse identity weights ``w`` (r,) outside the space the model's identities span: a
+    component farther than :data:`IDENTITY_LIMIT` standard deviations from the training
+    identities' mean (TransferError naming it and where such weights come from)."""
+    k = model.mode_index("identity") if "identity" in model.mode_names else 0
+    U = np.asarray(model.factors[k], np.float64)
+    if len(U) < 2:
+        return
+    z = np.abs(np.asarray(w, np.float64) - U.mean(0)) / np.maximum(U.std(0), 1e-12)
+    j = int(np.argmax(z))
+    if z[j] > IDENTITY_LIMIT:
+        raise TransferError(f"{what}: component {j} ({w[j]:.4g}) lies {z[j]:.0f} standard "
+                            f"deviations from the training identities' (at most "
+                            f"{IDENTITY_LIMIT:g}): identity weights are coordinates in the "
+                            "model's identity space, e.g. a training row (--identity-label; "
+                            "`facetransfer model info` lists them) or a track's identity")
 
 
 def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None

@@ -418,9 +418,11 @@ class _Planner:
         if target.track is not None:
             tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H),
                            what=f"target {target.video}")
+            _warn_other_source(tt, target.video, "target")
             if tt.n_frames < n:
                 raise RewriteError(f"target track {target.track} has {tt.n_frames} frames, the "
-                                   f"target video {n}")
+                                   f"target video {n}: give --max-frames {tt.n_frames} to "
+                                   "rewrite the frames it covers")
         if tt.lost.all():
             raise VideoError(f"no face found in the target {target.video}")
         return tt
@@ -773,6 +775,15 @@ def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
             lift_bar.close()
 
 
+def _warn_other_source(track, video, role: str) -> None:
+    """Say so when a given track was made from a video of another name than ``video`` (a
+    renamed copy is fine; another clip of the same size would drive the wrong face)."""
+    made = Path(str(track.source)).name if track.source else ""
+    if made and made != Path(str(video)).name:
+        log.warning("%s track %s was made from %s, not %s: if that is another clip, its motion "
+                    "drives the wrong face", role, track.label, made, Path(str(video)).name)
+
+
 def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: bool) -> None:
     """The outputs of :func:`transfer_video` can be written (before any work)."""
     from .io.atomic import check_output_path
@@ -785,6 +796,9 @@ def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: boo
         md = Path(meshes_dir)
         if not md.parent.is_dir():
             raise RewriteError(f"folder {md.parent} for --meshes does not exist")
+        if md.exists() and not md.is_dir():
+            raise RewriteError(f"--meshes {md} is a file; it names a folder for the meshes "
+                               "(frame_00000.obj, ...)")
         if not overwrite and md.is_dir() and any(md.glob("frame_*.obj")):
             raise RewriteError(f"{md} already holds meshes; pass --overwrite to replace them")
 

@@ -47,9 +47,10 @@ def _track_options(p) -> None:
 def register(sub) -> None:
     """Add ``batch track``, ``batch transfer`` and ``batch export`` to the parser."""
     from ..batch.run import DEFAULT_OVERLAP
-    from .transfer import ALIGN_HELP, _DefaultsFormatter, add_rewrite_options
+    from .common import DefaultsFormatter
+    from .transfer import ALIGN_HELP, add_rewrite_options
 
-    fmt = _DefaultsFormatter
+    fmt = DefaultsFormatter
     b = sub.add_parser("batch", help="many clips at once on Dask distributed (track, transfer, "
                        "export)", description="Run track, transfer or export over many clips on "
                        "an embedded Dask cluster or a real one; one output per clip and "

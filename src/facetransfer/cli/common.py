@@ -43,6 +43,17 @@ def progress_shown() -> bool:
     return not _PROGRESS_OFF and sys.stderr.isatty()
 
 
+class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
+    """``(default: X)`` after an option's help only where it has a default its help does not
+    state already (no "(default: None)", no "default 18 (default: None)")."""
+
+    def _get_help_string(self, action):
+        if action.default is None or action.default is False or \
+                "default" in (action.help or "").lower():
+            return action.help
+        return super()._get_help_string(action)
+
+
 def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
                       sequences: bool = True) -> None:
     """Add ``--codec``, ``--crf`` and ``--preset`` (one definition for every command that

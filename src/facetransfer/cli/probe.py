@@ -42,12 +42,27 @@ def _facts(path):
 
 
 def run(args) -> int:
+    """Each file's facts (``--json``: a list; a file that cannot be read is an entry with its
+    ``error``); then a line on stderr for each such file, the last raised (exit status 2)."""
     import json
+    import sys
 
-    facts = [_facts(v) for v in args.videos]     # every file checked before any output
+    facts, errors = [], []
+    for v in args.videos:
+        try:
+            facts.append(_facts(v))
+        except (ValueError, OSError) as exc:  # said below: the other files are still described
+            facts.append(({"path": str(v), "error": str(exc)}, None))
+            errors.append(exc)
     if args.json:
         print(json.dumps([f for f, _ in facts], indent=1))
-        return 0
-    for _, lines in facts:
-        print("\n".join(lines))
+    else:
+        for _, lines in facts:
+            if lines is not None:
+                print("\n".join(lines))
+    sys.stdout.flush()
+    for exc in errors[:-1]:
+        print(f"facetransfer probe: error: {exc}", file=sys.stderr)
+    if errors:
+        raise errors[-1]
     return 0

@@ -20,8 +20,9 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
-from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, check_track_name,
-                     frame_count, progress_disabled, resolve_model, video_options, video_out)
+from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
+                     check_track_name, frame_count, progress_disabled, resolve_model,
+                     video_options, video_out)
 
 
 #: What the capture tracker does, for the help of every ``--tracker`` option.
@@ -85,10 +86,11 @@ def register(sub) -> None:
         "track", help="track a face in a video: pose and model weights per frame (§5)",
         description="Track a face through a video with a multilinear model (Vlasic et al. "
         "2005, §5.1-5.2): per frame the head pose and the weights of every mode, the identity "
-        "once for the clip.", formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+        "once for the clip.", formatter_class=DefaultsFormatter)
     p.add_argument("video", metavar="VIDEO", help="input video")
     p.add_argument("--model", help=MODEL_HELP + " (with landmarks)")
-    p.add_argument("--out", help="track file to write (.npz)")
+    p.add_argument("--out", help="track file to write (.npz); needed unless --from-track "
+                   "names the track an --overlay is drawn from")
     add_track_options(p)
     p.add_argument("--max-frames", type=int, default=None, help="track only the first N frames")
     p.add_argument("--workers", type=int, default=None,
@@ -168,6 +170,11 @@ def _check_outputs(args):
     if args.out:
         check_not_input(args.out, inputs)      # said first: it would destroy the video
         check_track_name(args.out, overlay=True)
+        if args.overlay and not args.overwrite and Path(args.out).is_file() and \
+                not Path(args.overlay).exists():   # a run stopped between the two
+            raise FaceTransferError(f"output {args.out} exists (an earlier run's track?): "
+                                    f"`--from-track {args.out} --overlay {args.overlay}` "
+                                    "draws the overlay from it; --overwrite tracks again")
         check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
         if args.overlay:
             check_not_input(args.overlay, [args.out, partial_path(args.out)])
@@ -334,5 +341,6 @@ def _track_klt(args, model, opt, progress, bars):
             detector.close()
     if track.info and track.info.get("resumed"):
         r = track.info["resumed"]
-        print(f"continued an interrupted run from pass {r['pass']}, frame {r['frame']}")
+        print("continued an interrupted run from " + (f"pass {r['pass']}, " if "pass" in r
+                                                      else "") + f"frame {r['frame']}")
     return track

@@ -24,8 +24,9 @@ from ..transfer import ALIGN_MODES
 from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES, JAW_MODES,
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
-from .common import (FACE_WHERE, MODEL_HELP, add_video_options, check_face, check_track_name,
-                     frame_count, progress_disabled, resolve_model, video_options, video_out)
+from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
+                     check_track_name, frame_count, progress_disabled, resolve_model,
+                     video_options, video_out)
 from .track import CAPTURE_HELP
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
@@ -46,15 +47,6 @@ def _bar_factory():
                     file=sys.stderr, disable=progress_disabled())
 
     return make
-
-
-class _DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Show ``(default: X)`` only for options that have a default."""
-
-    def _get_help_string(self, action):
-        if action.default is None or action.default is False:
-            return action.help
-        return super()._get_help_string(action)
 
 
 def add_rewrite_options(p: argparse.ArgumentParser) -> None:
@@ -93,7 +85,8 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
                    help="tracking when no track file is given: auto or capture ("
                    + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
-                   "landmarks")
+                   "landmarks (fitted to the clip's NAME.mediapipe478.npz points where it has "
+                   "them, else to Face Landmarker's, detected frame by frame)")
     p.add_argument("--speed", choices=SPEED_PRESETS, default=DEFAULT_SPEED,
                    help="tracking preset when no track file is given: fast (one pass, two "
                    "pyramid levels; as accurate as balanced on the footage measured, about 4x "
@@ -123,7 +116,7 @@ def rewrite_options(args) -> RewriteOptions:
 
 def _parser(sub, name: str, help: str, description: str):
     """A subcommand's parser with the defaults shown in its help."""
-    return sub.add_parser(name, formatter_class=_DefaultsFormatter, help=help,
+    return sub.add_parser(name, formatter_class=DefaultsFormatter, help=help,
                           description=description)
 
 
@@ -191,7 +184,9 @@ def _add_sources(p) -> None:
     g = p.add_mutually_exclusive_group()
     g.add_argument("--identity-from", metavar="V.mp4", help="video whose identity to use")
     g.add_argument("--identity-weights", metavar="W",
-                   help="identity weights: comma-separated numbers or a .npy file")
+                   help="identity weights, comma-separated numbers or a .npy file: "
+                   "coordinates in the model's identity space (a training identity's row, a "
+                   "track's identity), within 6 standard deviations of the training ones'")
     g.add_argument("--identity-label", metavar="L", help="a training identity of the model")
     p.add_argument("--identity-track", metavar="V.npz", help="track file of --identity-from")
     p.add_argument("--identity-dials", metavar="NAME=UNITS,...",
@@ -199,7 +194,8 @@ def _add_sources(p) -> None:
                    "e.g. width=+1.5,nose_length=-1; needs --identity-label, --identity-weights or "
                    "--target-track")
     p.add_argument("--pose-from", metavar="P.mp4",
-                   help="video whose head pose to use (same frame size as the target)")
+                   help="video whose head pose to use (of another frame size or pixel "
+                   "shape: its motion about the head's usual place, scaled by the heads' sizes)")
     p.add_argument("--pose-track", metavar="P.npz", help="track file of --pose-from")
     p.add_argument("--performance", metavar="NEW.npz",
                    help="render a ready performance on the target's timeline (e.g. the output "
@@ -364,6 +360,10 @@ def run_transfer(args) -> int:
         progress_factory=_bar_factory(), video_options=vopt,
         align=args.align, max_frames=args.max_frames, reader=prefetch.read_video)
     kept = res.n_frames - res.n_rewritten
+    for tr in res.plan.source_tracks.values():
+        if tr is not None and tr.info.get("resumed"):
+            print(f"continued an interrupted tracking of {tr.source} from frame "
+                  f"{tr.info['resumed']['frame']}")
     if res.resumed:
         print(f"continued an interrupted render from frame {res.resumed}")
     print(f"wrote {res.path}: {frame_count(res.n_frames)}" + _numbered(args.out, args.target,
@@ -376,6 +376,19 @@ def run_transfer(args) -> int:
     if args.meshes:
         print(f"wrote {res.n_frames} meshes to {args.meshes}")
     return 0
+
+
+def _check_option_pairs(args) -> None:
+    """Options that act only with another's value, given with another: ``--gaze target`` with
+    the target's own eyes, ``--lip-colour source`` with the mouth's texture function (each
+    would be ignored in silence)."""
+    for flag, value, default, need, said in (
+            ("--gaze", args.gaze, "performance", "--eyes", "model"),
+            ("--lip-colour", args.lip_colour, "target", "--mouth", "frame")):
+        other = getattr(args, need[2:])
+        if value != default and other not in (None, said):
+            raise FaceTransferError(f"{flag} {value} acts with {need} {said}, not {need} "
+                                    f"{other}: give one of them")
 
 
 def _check_transfer_args(args):
@@ -404,10 +417,10 @@ def _check_transfer_args(args):
               args.identity_weights.endswith(".npy") else None]
     from ..take import is_take
 
+    vopt = video_options(args)   # the outputs first: a bad one is the only line said
+    check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
     _probe_at_once([v for v in (args.target, args.expression_from, args.viseme_from,
                                 args.identity_from, args.pose_from) if v and not is_take(v)])
-    vopt = video_options(args)
-    check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.save_track:
         check_track_name(args.save_track, "--save-track")
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
@@ -415,6 +428,11 @@ def _check_transfer_args(args):
     if is_take(args.expression_from):
         _check_take(args)
     to_track = 0
+    _check_option_pairs(args)
+    if args.target_face and args.target_track:
+        raise FaceTransferError(f"--target-face chooses the face to track, but --target-track "
+                                f"{args.target_track} is tracked already (its face is the one "
+                                "rewritten): give one of them")
     for k, (v, tr) in enumerate(((args.target, args.target_track),
                                  (args.expression_from, args.source_track),
                                  (args.viseme_from, args.viseme_track),
@@ -464,7 +482,8 @@ def _check_take(args) -> None:
                         ("--performance", args.performance),
                         ("--identity-weights", args.identity_weights),
                         ("--identity-label", args.identity_label),
-                        ("--identity-dials", args.identity_dials)):
+                        ("--identity-dials", args.identity_dials),
+                        ("--source-face", args.source_face)):
         if given:
             raise FaceTransferError(f"--expression-from {path} is a Live Link Face take, which "
                                     f"drives the target alone: {flag} cannot be added")
@@ -482,7 +501,7 @@ def _check_take(args) -> None:
 def _chosen_identity(model, args):
     """The identity weights of ``--identity-label`` / ``--identity-weights``, with
     ``--identity-dials`` applied; None: from the tracks."""
-    from ..transfer import identity_from_label, parse_weights
+    from ..transfer import check_identity_weights, identity_from_label, parse_weights
 
     identity = None
     if args.identity_label:
@@ -490,6 +509,7 @@ def _chosen_identity(model, args):
     elif args.identity_weights:
         idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
         identity = parse_weights(args.identity_weights, model.ranks[model.mode_index(idm)])
+        check_identity_weights(model, identity)
     if args.identity_dials:
         identity = _dialled_identity(model, identity, args)
     return identity

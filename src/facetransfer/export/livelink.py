@@ -200,21 +200,52 @@ def read_livelink(path: str | os.PathLike, *, lenient: bool = False) -> LiveLink
     missing = [n for n in LIVELINK_NAMES + POSE_COLUMNS if key(n) not in col]
     if missing and (not lenient or all(n in missing for n in LIVELINK_NAMES)):
         raise ExportError(f"{p} lacks the columns {missing[:5]}")
-    body = [r for r in rows[1:] if r]
-
-    def values(names):
-        return np.array([[float(r[col[key(n)]]) if key(n) in col else 0.0 for n in names]
-                         for r in body]).reshape(-1, len(names))
-
-    try:
-        a, pose = values(LIVELINK_NAMES), values(POSE_COLUMNS)
-    except (ValueError, IndexError) as exc:
-        raise ExportError(f"{p} has a malformed row ({exc})") from None
+    body = [(line, r) for line, r in enumerate(rows[1:], start=2) if r]
+    for line, r in body:
+        if len(r) < len(rows[0]):
+            raise ExportError(f"{p} line {line} has {len(r)} fields, its header {len(rows[0])}")
+        if _TC.match(r[0].strip()) is None:
+            raise ExportError(f"{p} line {line}: timecode {r[0]!r} is not HH:MM:SS:FF.mmm")
+    a = _take_values(p, rows[0], body, [col.get(key(n)) for n in LIVELINK_NAMES])
+    pose = _take_values(p, rows[0], body, [col.get(key(n)) for n in POSE_COLUMNS])
+    _check_unit(p, rows[0], body, a, [col.get(key(n)) for n in LIVELINK_NAMES])
     act = np.zeros_like(a)
     act[:, _TO_ARKIT] = a
-    if not np.all(np.isfinite(act)) or not np.all(np.isfinite(pose)):
-        raise ExportError(f"{p} has non-finite values")
-    return LiveLinkTake(tuple(r[0].strip() for r in body), act, pose, tuple(missing))
+    return LiveLinkTake(tuple(r[0].strip() for _, r in body), act, pose, tuple(missing))
+
+
+def _take_values(p: Path, header: list, body: list, cols: list) -> np.ndarray:
+    """``(rows, len(cols))`` float64 of the fields ``cols`` (None: a missing column, 0) of
+    each ``(line, fields)`` of ``body``; ExportError naming the file, line and column of a
+    field that is not a finite number."""
+    try:
+        out = np.array([[float(r[c]) if c is not None else 0.0 for c in cols] for _, r in body],
+                       np.float64).reshape(-1, len(cols))
+    except ValueError:
+        out = None
+    for i, (line, r) in enumerate(body):
+        for j, c in enumerate(cols):
+            if c is None:
+                continue
+            try:
+                ok = np.isfinite(float(r[c])) if out is None else np.isfinite(out[i, j])
+            except ValueError:
+                ok = False
+            if not ok:
+                raise ExportError(f"{p} line {line}, column {header[c].strip()}: {r[c]!r} is "
+                                  "not a finite number")
+    return out
+
+
+def _check_unit(p: Path, header: list, body: list, a: np.ndarray, cols: list) -> None:
+    """ExportError naming the first blendshape value of ``a`` (rows, 52) outside 0..1 (a
+    thousandth of slack): Live Link Face's are activations."""
+    bad = np.argwhere((a < -1e-3) | (a > 1.0 + 1e-3))
+    if bad.size:
+        i, j = bad[0]
+        line, r = body[i]
+        raise ExportError(f"{p} line {line}, column {header[cols[j]].strip()}: "
+                          f"{r[cols[j]]} is outside 0..1 (a blendshape's activation)")
 
 
 def source_timecode(track) -> str | None:

@@ -139,7 +139,8 @@ def fact_lines(f: VideoFacts) -> list[str]:
                  "results written with the same ratio)").format(
                      " stored" if f.turn == 0 else "", *f.shown_size, *f.sar)
     rate = f"{f.fps:.3f}".rstrip("0").rstrip(".")
-    timing = f"{rate} fps, {f.n_frames} frames, {f.seconds:.1f} s" if f.n_frames > 0 else \
+    timing = f"{rate} fps, {f.n_frames} frame{'s' if f.n_frames != 1 else ''}, " \
+        f"{f.seconds:.1f} s" if f.n_frames > 0 else \
         f"{rate} fps, its frame count not in its header (a still image?)"
     if f.variable_rate:
         timing += " (variable frame rate: read on this constant-rate timeline)"

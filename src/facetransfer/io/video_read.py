@@ -102,6 +102,9 @@ def _open(path: str | os.PathLike):
         raise VideoError(f"video {p} is empty")
     cap = cv2.VideoCapture(str(p))
     if not cap.isOpened():
+        if p.suffix.lower() == ".npz":   # a track or a model where a video belongs
+            raise VideoError(f"{p} is an .npz file (a track or a model), not a video; "
+                             f"`facetransfer probe {p}` says what it holds")
         raise VideoError(f"cannot read video {p}: not a video OpenCV can decode")
     return cap
 
@@ -150,10 +153,31 @@ def _video_info(path) -> VideoInfo:
     if piped:
         log.info("%s: interlaced; decoded by ffmpeg (OpenCV's frames would be black or "
                  "garbage)", path)
+    n = _counted(path, n)
     even = timeline(path, n)
     if even is None:
         return VideoInfo(Path(path), fps, n, size, sar, piped=piped, turn=turn)
     return VideoInfo(Path(path), even[0], len(even[1]), size, sar, even[1], piped, turn)
+
+
+#: Containers that store no frame count: OpenCV's is its duration times its rate (a
+#: Matroska file of 20 frames said 22), so the stream's packets are counted instead.
+UNCOUNTED = ("matroska,webm",)
+
+
+def _counted(path, n: int) -> int:
+    """The frames of a video whose container stores no count (:data:`UNCOUNTED`): its video
+    packets (:func:`facetransfer.io.video_timeline.packet_count`); else ``n``, OpenCV's."""
+    from .video_display import container
+    from .video_timeline import packet_count
+
+    if container(path) not in UNCOUNTED:
+        return n
+    m = packet_count(path)
+    if m and m != n:
+        log.info("%s: %d frames (its packets; the container's duration said %d)", path, m, n)
+        return m
+    return n
 
 
 def display_turn(cap) -> int:

@@ -79,8 +79,24 @@ def _framecrc_times(text: str) -> np.ndarray | None:
 
 
 @functools.lru_cache(maxsize=32)
+def _cached_times(path: str, stamp: str) -> np.ndarray | None:
+    return packet_times(path)
+
+
+@functools.lru_cache(maxsize=32)
 def _cached_timeline(path: str, stamp: str, n_frames: int):
-    return _timeline(packet_times(path), n_frames, path)
+    return _timeline(_cached_times(path, stamp), n_frames, path)
+
+
+def packet_count(path: str | os.PathLike) -> int | None:
+    """How many packets the first video stream stores (:func:`packet_times`, kept per file
+    with the timeline's); None where they cannot be read."""
+    try:
+        stamp = file_stamp(path)
+    except OSError:
+        return None
+    times = _cached_times(str(path), stamp)
+    return None if times is None else int(len(times))
 
 
 def timeline(path: str | os.PathLike, n_frames: int) -> tuple[float, tuple[int, ...]] | None:

@@ -230,11 +230,15 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
                            resume=None if saved is None else saved.detections,
                            workers=workers, view=view, subject=subject)[0]
     try:
-        return capture_video(clip, model, options=options, detections=det, source=source,
-                             fixed=fixed, checkpoint=ck, progress=progress)
+        tr = capture_video(clip, model, options=options, detections=det, source=source,
+                           fixed=fixed, checkpoint=ck, progress=progress)
     except KeyboardInterrupt:
         ck.save(det, complete=True)                       # with the fit so far, if it began
         raise
+    if saved is None:
+        return tr        # said by the commands (info["resumed"]): the run lost nothing
+    return dataclasses.replace(tr, info={**tr.info,
+                                         "resumed": {"frame": saved.detections.n_frames}})
 
 
 def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
