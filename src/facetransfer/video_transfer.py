@@ -793,14 +793,9 @@ def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: boo
     if save_track is not None:
         check_output_path(save_track, overwrite=overwrite)
     if meshes_dir is not None:
-        md = Path(meshes_dir)
-        if not md.parent.is_dir():
-            raise RewriteError(f"folder {md.parent} for --meshes does not exist")
-        if md.exists() and not md.is_dir():
-            raise RewriteError(f"--meshes {md} is a file; it names a folder for the meshes "
-                               "(frame_00000.obj, ...)")
-        if not overwrite and md.is_dir() and any(md.glob("frame_*.obj")):
-            raise RewriteError(f"{md} already holds meshes; pass --overwrite to replace them")
+        from .io.output_names import check_meshes_folder
+
+        check_meshes_folder(meshes_dir, overwrite=overwrite)
 
 
 def transfer_video(sources: TransferSources, out, model, *,

@@ -419,11 +419,15 @@ def _check_transfer_args(args):
 
     vopt = video_options(args)   # the outputs first: a bad one is the only line said
     check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
-    _probe_at_once([v for v in (args.target, args.expression_from, args.viseme_from,
-                                args.identity_from, args.pose_from) if v and not is_take(v)])
+    if args.meshes:
+        from ..io.output_names import check_meshes_folder
+
+        check_meshes_folder(args.meshes, overwrite=args.overwrite)
     if args.save_track:
         check_track_name(args.save_track, "--save-track")
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
+    _probe_at_once([v for v in (args.target, args.expression_from, args.viseme_from,
+                                args.identity_from, args.pose_from) if v and not is_take(v)])
 
     if is_take(args.expression_from):
         _check_take(args)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ..errors import OutputError
 
-__all__ = ["check_output_suffix", "suffix_list"]
+__all__ = ["check_meshes_folder", "check_output_suffix", "suffix_list"]
 
 
 def suffix_list(suffixes) -> str:
@@ -61,3 +61,22 @@ def check_output_suffix(path: str | os.PathLike, suffixes, what: str, *, flag: s
     raise OutputError(f"{flag} {p}: {what} is written as {suffix_list(suffixes)}, {said}"
                       + (f"; name it {name}" if name else "") + hint)
 
+
+
+def check_meshes_folder(path: str | os.PathLike, *, overwrite: bool) -> Path:
+    """``--meshes``: a folder for ``frame_00000.obj``, ... whose parent exists, not a file, and
+    without an earlier run's meshes unless ``overwrite`` (OutputError naming it).
+
+    Returns
+    -------
+    Path
+    """
+    md = Path(path)
+    if not md.parent.is_dir():
+        raise OutputError(f"folder {md.parent} for --meshes does not exist")
+    if md.exists() and not md.is_dir():
+        raise OutputError(f"--meshes {md} is a file; it names a folder for the meshes "
+                          "(frame_00000.obj, ...)")
+    if not overwrite and md.is_dir() and any(md.glob("frame_*.obj")):
+        raise OutputError(f"{md} already holds meshes; pass --overwrite to replace them")
+    return md
