@@ -704,11 +704,20 @@ def _contract_halves(T: np.ndarray, axis: int, w: np.ndarray, keep: list) -> np.
     out = np.empty(tuple(T.shape[d] for d in keep), np.result_type(T, w))
     h = T.shape[0] // 2
     spec = (list(range(T.ndim)), [axis], keep)
-    first = threading.Thread(target=np.einsum, args=(T[:h], spec[0], w, spec[1], spec[2]),
-                             kwargs={"out": out[:h]}, name="contract-half", daemon=True)
+    failed: list = []
+
+    def first_half() -> None:
+        try:
+            np.einsum(T[:h], spec[0], w, spec[1], spec[2], out=out[:h])
+        except BaseException as exc:  # noqa: BLE001 - raised again below, by the caller
+            failed.append(exc)
+
+    first = threading.Thread(target=first_half, name="contract-half", daemon=True)
     first.start()
     try:
         np.einsum(T[h:], spec[0], w, spec[1], spec[2], out=out[h:])
     finally:
         first.join()
+    if failed:
+        raise failed[0]
     return out
