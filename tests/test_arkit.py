@@ -109,3 +109,22 @@ def test_recipe_file_lists_arkit_dataset():
     assert spec["n_identities"] >= 50
     raw = json.loads(resources.files("facetransfer.data").joinpath("ict_recipes.json").read_text())
     assert raw["datasets"]["ict-arkit"]["default_ranks"]["expression"] == 52
+
+
+def test_why_a_model_gives_no_activations(arkit_model, quick_model):
+    """An ict-arkit model whose expression rank is truncated carries the ARKit names but no
+    activations: said as such (before: "its expressions are not ARKit blendshapes", which
+    they are); a model of other expressions is said to be one; the default kind, nothing."""
+    from facetransfer.arkit import arkit_shortfall
+    from facetransfer.model import build_model
+
+    assert arkit_shortfall(arkit_model) is None
+    assert arkit_shortfall(quick_model).startswith("its expressions are not ARKit blendshapes")
+    from facetransfer.datasets.ict import build_ict_dataset
+
+    ds = build_ict_dataset("ict-arkit", n_identities=6, use_cache=True)
+    short = build_model(ds, {"identity": 3, "expression": 20}, refine=False)
+    n = len(short.labels[short.mode_index("expression")])     # neutral and the shapes
+    assert arkit_shortfall(short) == (f"its expression mode keeps 20 of its {n} components "
+                                      f"(the ARKit activations need at least {n - 1}: build it "
+                                      "without truncating the expression rank)")

@@ -5,6 +5,7 @@ scattered once, chunked tracking at the seams, and the issue's bad input."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import functools
 import json
 import socket
@@ -388,3 +389,35 @@ def test_a_scheduler_that_does_not_answer(clips, quick_model_path, tmp_path, cap
     code, _, lines = _cli(capsys, "batch", "track", clips["a"][0], "--model", quick_model_path,
                           "--out", tmp_path / "o", "--scheduler", "nonsense:addr:1")
     assert code == 2 and "is not an address like tcp://HOST:8786" in lines[0]
+
+
+def test_an_output_that_is_not_this_clips_track_is_kept_unless_overwrite(quick_model, tmp_path):
+    """What a rerun finds at DIR/NAME.npz: this clip's track (skipped), nothing (tracked), or
+    something else, which was replaced with a warning before (a user's file, another clip's
+    track, another model's): now the clip's row fails naming it and --overwrite."""
+    from facetransfer.batch.manifest import ClipJob
+
+    n = 3
+    tr = Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
+               scale=np.ones(n), translation=np.zeros((n, 2)),
+               weights={m: np.zeros((n, r)) for m, r in zip(quick_model.mode_names,
+                                                             quick_model.ranks)},
+               landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n), lost=np.zeros(n, bool),
+               model_hash=quick_model.content_hash, mode_names=quick_model.mode_names,
+               source="clips/face_2.mp4")
+    job = ClipJob("face_2", "elsewhere/face_2.mp4", "auto")
+    out = tmp_path / "face_2.npz"
+    assert batch_run._done_track(out, job, quick_model.content_hash) is None
+    tr.save(out)
+    assert batch_run._done_track(out, job, quick_model.content_hash).status == "skipped"
+    for why, make in (("holds a track made with another model", lambda: None),
+                      ("holds a track of katie.mp4, not of face_2.mp4",
+                       lambda: Track.save(dataclasses.replace(tr, source="katie.mp4"), out,
+                                          overwrite=True)),
+                      ("is not a track", lambda: out.write_text("my precious notes"))):
+        make()
+        row = batch_run._done_track(out, job, "another" if "model" in why
+                                    else quick_model.content_hash)
+        assert row.status == "failed" and row.error.startswith(f"{out} {why}"), row
+        assert row.error.endswith("; --overwrite replaces it")
+    assert out.read_text() == "my precious notes"

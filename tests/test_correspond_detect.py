@@ -134,6 +134,11 @@ def test_cli_features_then_fit(data_dir, tmp_path, capsys):
                  "--no-progress"]) == 0
     rep = json.loads((tmp_path / "fit.report.json").read_text())
     assert rep["surface_distance"]["mean"] < 0.01                   # scan units: measured 0.0056 (0.3 mm)
+    last = capsys.readouterr().out.strip().splitlines()[-1]       # the prior and both residuals
+    cands = rep["prior"]["candidates"]
+    assert last == f"shape prior: {rep['prior']['name']} (chosen automatically, the lower " \
+        "residual of " + ", ".join(f"{c['name']} {c['residual']:.4g}" for c in cands) + ")"
+    assert len(cands) == 2
     # the same in one step: --features auto, the default (the points kept next to the fit)
     fit2 = tmp_path / "fit2.obj"
     assert main(["scan", "fit", str(scan), "--texture",

@@ -409,3 +409,21 @@ def test_export_cli_neutral(case, tmp_path, capsys):
                      "--neutral", bad]) == 2
         err = capsys.readouterr().err
         assert msg in err and len(err.strip().splitlines()) == 1
+
+
+def test_a_drop_frame_start_is_said_with_the_rows_clock_time(arkit_model, make_arkit_track,
+                                                               tmp_path, capsys):
+    """A take's rows count clock time (Live Link Face's CSV has no drop-frame): a drop-frame
+    start timecode of a 29.97 fps track is written as the clock time it names, and the line
+    says both (before: "from timecode 01:00:00;00" over a first row of 00:59:59:29.892)."""
+    track, _, _ = make_arkit_track(arkit_model, 6, fps=30000 / 1001)
+    track.save(tmp_path / "t.npz")
+    arkit_model.save(tmp_path / "m.npz")
+    out = tmp_path / "t.csv"
+    assert main(["export", str(tmp_path / "t.npz"), "--model", str(tmp_path / "m.npz"),
+                 "--timecode", "01:00:00;00", "--out", str(out)]) == 0
+    first = out.read_text().splitlines()[1].split(",")[0]
+    assert first == "00:59:59:29.892"
+    assert capsys.readouterr().out.strip().endswith(
+        f"from timecode 01:00:00;00 (--timecode; drop-frame: the rows count clock time, from "
+        f"{first})")

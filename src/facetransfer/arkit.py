@@ -104,6 +104,21 @@ def is_arkit_model(model) -> bool:
     return model.ranks[k] >= len(labels) - 1
 
 
+def arkit_shortfall(model) -> str | None:
+    """Why a model's tracks carry no ARKit activations (None: they do,
+    :func:`is_arkit_model`): its expressions are not ARKit-named, or they are but the
+    expression mode is truncated (the activations convert from all of its components)."""
+    if is_arkit_model(model):
+        return None
+    k = _expression_mode(model)
+    labels = () if k is None else model.labels[k]
+    if len(labels) >= 2 and labels[0] == _NEUTRAL and set(labels[1:]) <= set(ARKIT_NAMES):
+        return (f"its expression mode keeps {model.ranks[k]} of its {len(labels)} components "
+                f"(the ARKit activations need at least {len(labels) - 1}: build it without "
+                "truncating the expression rank)")
+    return "its expressions are not ARKit blendshapes (the default model's, ict-arkit, are)"
+
+
 def arkit_rows(model) -> np.ndarray:
     """For each of the 52 :data:`ARKIT_NAMES`, its training row in the expression factor.
 

@@ -139,10 +139,30 @@ def _local_cluster(n: int, processes: bool, verbose: bool):
                                     ("OPENCV_LOG_LEVEL", "SILENT"))
         kw["env"] = {k: os.environ.get(k, v)
                      for k, v in (("OPENCV_FOR_THREADS_NUM", "1"), *quiet)}
-    # workers that may start processes of their own (the renderer forks for long clips)
-    with config.set({"distributed.worker.daemon": False}):
+    # workers that may start processes of their own (the renderer forks for long clips);
+    # started with Ctrl-C ignored, which they inherit: a terminal's Ctrl-C reaches every
+    # process of the group, and only this one (the client) is to act on it (cancel, summary,
+    # one line), not each worker with a traceback
+    with config.set({"distributed.worker.daemon": False}), _ctrl_c_ignored(processes):
         return LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
                             dashboard_address=None, silence_logs=level, **kw)
+
+
+@contextlib.contextmanager
+def _ctrl_c_ignored(active: bool):
+    """SIGINT ignored while the block runs (in the main thread, where signals can be set),
+    then the handler before it again."""
+    import signal
+    import threading
+
+    if not active or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, before)
 
 
 def scatter_model(client, model):

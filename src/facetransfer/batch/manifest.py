@@ -138,6 +138,8 @@ def read_manifest(path: str | os.PathLike, *, required: tuple[str, ...],
         Missing file, no header, unknown or missing columns, an empty required cell, no rows.
     """
     p = Path(path)
+    if p.is_dir():
+        raise BatchError(f"manifest {p} is a folder, not a CSV file")
     if not p.is_file():
         raise BatchError(f"manifest {p} does not exist")
     try:
@@ -287,5 +289,6 @@ def check_unique_names(jobs) -> None:
         if key in seen:
             a, b = seen[key].inputs[0], job.inputs[0]
             raise BatchError(f"two clips have the name {job.name!r} ({a} and {b}); give them "
-                             "distinct names (a 'name' column in the manifest)")
+                             "distinct names (a manifest's 'name' column, or files of "
+                             "distinct names)")
         seen[key] = job

@@ -78,7 +78,11 @@ def prepare_out_dir(out_dir) -> Path:
     """
     p = check_out_dir(out_dir)
     if not p.is_dir():
-        p.mkdir()
+        try:
+            p.mkdir()
+        except OSError as exc:     # /sys, /proc, a read-only disk: said of the --out folder
+            raise BatchError(f"cannot make the output folder {p}: "
+                             f"{exc.strerror or exc}") from None
     return p
 
 
@@ -173,22 +177,32 @@ def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, m
     return col, todo, (_model_future(client, model) if todo else None)
 
 
-def _done_track(out: Path, name: str, model_hash: str) -> Row | None:
-    """The row of an output an earlier run finished (complete, valid, same model), else None."""
+def _done_track(out: Path, job, model_hash: str) -> Row | None:
+    """The row of an output an earlier run finished (a track of this clip's video with this
+    model: skipped), None where there is none (tracked now), or a failed row where ``out``
+    holds something else: a file that is not a track, another video's track or another
+    model's (replaced only with ``--overwrite``; atomic writes leave no half track, so such a
+    file is not this run's)."""
     from ..errors import TrackError
     from ..track.result import Track
 
     if not out.is_file():
         return None
+    why = None
     try:
         t = Track.load(out)
     except TrackError as exc:
-        log.warning("%s is not a complete track (%s); tracking %s again", out, exc, name)
-        return None
-    if t.model_hash != model_hash:
-        log.warning("%s was made with another model; tracking %s again", out, name)
-        return None
-    return J.track_row(name, t, out, 0.0, status="skipped")
+        why = f"is not a track ({exc})"
+    else:
+        made, video = Path(str(t.source)).name, Path(str(job.video)).name
+        if t.source and made != video:
+            why = f"holds a track of {made}, not of {video}"
+        elif t.model_hash != model_hash:
+            why = "holds a track made with another model"
+    if why is not None:
+        return Row(job.name, "failed", error=f"{out} {why}; --overwrite replaces it",
+                   output=str(out))
+    return J.track_row(job.name, t, out, 0.0, status="skipped")
 
 
 def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
@@ -232,7 +246,7 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     outs = _outputs(jobs, out_dir, ".npz")
     mhash = model.content_hash
     done = {} if overwrite else {j.name: r for j in jobs
-                                 if (r := _done_track(outs[j.name], j.name, mhash)) is not None}
+                                 if (r := _done_track(outs[j.name], j, mhash)) is not None}
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model)
     run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap)
     for job in todo:

@@ -14,6 +14,7 @@ is done; Ctrl-C cancels what is pending and keeps what finished. Exit status 1 i
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from ..errors import FaceTransferError
 from .common import (FACE_WHERE, add_video_options, progress_disabled, resolve_model,
@@ -142,8 +143,11 @@ def _run(args, what: str, n_jobs: int, call) -> int:
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
-        print(f"stopped: finished outputs are kept in {args.out} (see {args.out}/summary.csv); "
-              "run the same command again to continue", file=sys.stderr)
+        summary = Path(args.out) / "summary.csv"
+        print(f"stopped: finished outputs are kept in {args.out}"
+              + (f" (see {summary})" if summary.is_file() else "")
+              + "; run the same command again to continue (a clip being tracked continues "
+              "from its progress file)", file=sys.stderr)
         raise
     finally:
         if bar is not None:

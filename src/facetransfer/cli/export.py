@@ -136,11 +136,20 @@ def run(args: argparse.Namespace) -> int:
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
                         texture=texture, timecode=timecode)
     neutral = track.info.get("neutral_frame") if args.neutral is not None else None
+    if timecode and ";" in str(timecode) and args.format == "livelink":
+        said += f"; drop-frame: the rows count clock time, from {_first_row(path)}"
     print(f"wrote {path}: {frame_count(track.n_frames)} ({args.format})"
           + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
           + (f", from timecode {timecode} ({said})" if timecode and timecode != "source"
              else (f", {said}" if said else "")))
     return 0
+
+
+def _first_row(path) -> str:
+    """The timecode of a written take's first row (as an editor will read it)."""
+    with open(path, encoding="utf-8") as fh:
+        fh.readline()
+        return fh.readline().split(",", 1)[0].strip()
 
 
 def _source_said(track, fmt: str) -> str:

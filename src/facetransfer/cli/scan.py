@@ -317,8 +317,10 @@ def _print_fit_summary(paths, s: dict, notes) -> None:
     print(f"wrote {out}, {report_path}, {png_path}: surface distance mean {s['mean']:.4g}, "
           f"median {s['median']:.4g}, p95 {s['p95']:.4g}, max {s['max']:.4g} (scan units), "
           f"{s['seconds']:.1f} s")
-    if s.get("prior"):
-        print(f"shape prior: {s['prior']['name']}"
-              + (" (chosen automatically: lower residual)" if "candidates" in s["prior"] else ""))
     if notes:
         print("scan repaired: " + "; ".join(notes))
+    if s.get("prior"):   # last, as the README says: the prior and each candidate's residual
+        cands = s["prior"].get("candidates") or []
+        print(f"shape prior: {s['prior']['name']}" + (
+            " (chosen automatically, the lower residual of " + ", ".join(
+                f"{c['name']} {c['residual']:.4g}" for c in cands) + ")" if cands else ""))

@@ -221,8 +221,10 @@ def _track_and_save(args, model, settings, tracker: str):
           f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
           + (f", {n_lost} lost" if n_lost else ""))
     if track.blendshapes is None:
-        print("note: the model's expressions are not ARKit blendshapes, so the track has no "
-              "blendshape activations (the default model, ict-arkit, gives them)")
+        from ..arkit import arkit_shortfall
+
+        print(f"note: the track has no ARKit blendshape activations: the model "
+              f"{arkit_shortfall(model) or 'gives none'}")
     return track, model
 
 

@@ -37,7 +37,8 @@ class ExportError(FaceTransferError):
 
 _NO_ACTIVATIONS = ("has no ARKit blendshape activations; track the video with the default "
                    "model (ict-arkit: `facetransfer track` without --model) or with a model built "
-                   "from the ict-arkit data set, whose expressions are the 52 ARKit blendshapes")
+                   "from the ict-arkit data set with its expression rank untruncated (the 52 "
+                   "ARKit blendshapes)")
 
 
 def require_activations(track, *, what: str = "track") -> np.ndarray:

@@ -113,7 +113,11 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
                          f"{track.fps:g} fps" if track is not None else "the model's mean identity"))}
     if track is not None:
         if len(names) != 52:
-            raise ExportError("a track's timeline needs a model with ARKit blendshapes")
+            from ..arkit import arkit_shortfall
+
+            raise ExportError(f"track {track.label}: its timeline plays ARKit activations, and "
+                              f"the model {arkit_shortfall(model) or 'has none'} (`view` of the "
+                              "model itself has a slider per training expression)")
         data.update(n_frames=track.n_frames, fps=track.fps,
                     activations=_b64(require_activations(track).astype(np.float32)),
                     quaternions=_b64(head_quaternions(track.rotation).astype(np.float32)))
