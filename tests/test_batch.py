@@ -421,3 +421,38 @@ def test_an_output_that_is_not_this_clips_track_is_kept_unless_overwrite(quick_m
         assert row.status == "failed" and row.error.startswith(f"{out} {why}"), row
         assert row.error.endswith("; --overwrite replaces it")
     assert out.read_text() == "my precious notes"
+
+
+def test_a_rerun_knows_an_output_of_other_inputs_from_its_own(arkit_model, make_arkit_track,
+                                                              inproc, tmp_path, capsys):
+    """``batch export`` records what made each output (the summary's ``job``): the same
+    command again skips it; after the track changed, the old export is not reported as this
+    track's (before: "skipped", the stale file kept as the result) but a failed row naming
+    --overwrite, the file kept; --overwrite redoes it."""
+    import os
+
+    track, _, _ = make_arkit_track(arkit_model, 6, seed=1)
+    t, m, out = tmp_path / "t.npz", tmp_path / "m.npz", tmp_path / "exp"
+    track.save(t)
+    arkit_model.save(m)
+    argv = ("batch", "export", t, "--format", "livelink", "--out", out, "--model", m)
+    assert _cli(capsys, *argv)[0] == 0
+    first = _summary(out / "summary.csv")["t"]
+    kept = (out / "t.csv").read_bytes()
+    assert first["status"] == "done" and len(first["job"]) == 16
+    assert _cli(capsys, *argv)[0] == 0
+    assert _summary(out / "summary.csv")["t"]["status"] == "skipped"
+    make_arkit_track(arkit_model, 6, seed=2)[0].save(t, overwrite=True)
+    st = os.stat(t)
+    os.utime(t, ns=(st.st_atime_ns, st.st_mtime_ns + 10 ** 9))
+    assert _cli(capsys, *argv)[0] == 1
+    row = _summary(out / "summary.csv")["t"]
+    assert row["status"] == "failed" and row["error"] == (
+        f"{out / 't.csv'} was made from other inputs or options than t's now; --overwrite "
+        "redoes it")
+    assert (out / "t.csv").read_bytes() == kept
+    assert _cli(capsys, *argv)[0] == 1                            # and the next run too
+    assert _summary(out / "summary.csv")["t"]["status"] == "failed"
+    assert _cli(capsys, *argv, "--overwrite")[0] == 0
+    assert _summary(out / "summary.csv")["t"]["status"] == "done"
+    assert (out / "t.csv").read_bytes() != kept

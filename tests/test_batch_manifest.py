@@ -111,14 +111,14 @@ def test_bad_pairs(tmp_path, rows, message):
 
 
 def test_summary_round_trip_and_one_line_errors(tmp_path):
-    rows = [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz"),
+    rows = [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz", job="1f2e3d"),
             Row("b", "failed", error="video /x/b.mp4 does not exist\n  (details)"),
             Row("c", "cancelled")]
     p = write_summary(tmp_path / "summary.csv", rows)
     assert p.read_text().splitlines()[0] == \
-        "clip,frames,fps,seconds,mean_confidence,status,error,output"
+        "clip,frames,fps,seconds,mean_confidence,status,error,output,job"
     back = read_summary(p)
-    assert back == [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz"),
+    assert back == [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz", job="1f2e3d"),
                     Row("b", "failed", error="video /x/b.mp4 does not exist (details)"),
                     Row("c", "cancelled")]
     with pytest.raises(ValueError, match="status must be one of"):

@@ -10,6 +10,7 @@ is interrupted: pending tasks are cancelled, finished outputs stay). A failed cl
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import os
 import time
@@ -300,6 +301,54 @@ class _TrackSubmit:
             self.col.finish(job, res)
 
 
+def job_key(job, what: str) -> str:
+    """A digest of what makes ``job``'s output: the job (its inputs' paths, names, labels),
+    each input file as it is on disk (:func:`facetransfer.io.verified.file_stamp`) and
+    ``what`` (the run's options and model); recorded in the summary's ``job`` column."""
+    import hashlib
+
+    from ..io.verified import file_stamp
+
+    h = hashlib.sha256(repr(job).encode())
+    for p in job.inputs:
+        try:
+            h.update(file_stamp(p).encode())
+        except OSError:
+            h.update(b"missing")
+    h.update(what.encode())
+    return h.hexdigest()[:16]
+
+
+def _earlier(out_dir: Path) -> dict[str, str]:
+    """``{clip: job digest}`` of the outputs an earlier run of ``out_dir`` made, kept or
+    refused (a failed row of a task has none)."""
+    from .summary import read_summary
+
+    try:
+        rows = read_summary(out_dir / SUMMARY_NAME)
+    except BatchError:                           # none, or not one: nothing is known
+        return {}
+    return {r.clip: r.job for r in rows if r.job}
+
+
+def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found) -> dict[str, Row]:
+    """The rows of the outputs a rerun keeps: ``found(out, name)`` (a skipped row, or None),
+    with this run's job digest; an output the summary says another job made (its inputs or
+    options changed since) is a failed row naming ``--overwrite``, not this job's result."""
+    earlier, done = _earlier(out_dir), {}
+    for j in jobs:
+        r = found(outs[j.name], j.name)
+        if r is None:
+            continue
+        if earlier.get(j.name, keys[j.name]) != keys[j.name]:
+            r = Row(j.name, "failed", output=str(outs[j.name]), error=(
+                f"{outs[j.name]} was made from other inputs or options than {j.name}'s now; "
+                "--overwrite redoes it"))
+        # a refused output keeps its maker's digest: a later run still knows it
+        done[j.name] = dataclasses.replace(r, job=keys[j.name] if r.ok else earlier[j.name])
+    return done
+
+
 def _done_video(out: Path, name: str) -> Row | None:
     from ..errors import VideoError
     from ..io.video import video_info
@@ -337,11 +386,12 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     out_dir = prepare_out_dir(out_dir)
     prores = getattr(settings.get("video"), "codec", None) == "prores"
     outs = _outputs(jobs, out_dir, ".mov" if prores else ".mp4")
-    done = {} if overwrite else {j.name: r for j in jobs
-                                 if (r := _done_video(outs[j.name], j.name)) is not None}
+    what = f"transfer {sorted((k, repr(v)) for k, v in settings.items())} {model.content_hash}"
+    keys = {j.name: job_key(j, what) for j in jobs}
+    done = {} if overwrite else _kept(jobs, outs, out_dir, keys, _done_video)
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.transfer_pair, job, str(outs[job.name]), mf,
-                                                 dict(settings), pure=False), model)
+                                                 dict(settings), pure=False), model, keys)
 
 
 def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
@@ -373,22 +423,26 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         raise BatchError(f"--format must be one of {sorted(J.EXPORT_EXTENSIONS)}, got {fmt!r}")
     out_dir = prepare_out_dir(out_dir)
     outs = _outputs(jobs, out_dir, J.EXPORT_EXTENSIONS[fmt])
-    done = {} if overwrite else {j.name: Row(j.name, "skipped", output=str(outs[j.name]))
-                                 for j in jobs if outs[j.name].is_file()}
+    what = (f"export {fmt} {repr(texture)} {neutral!r} "
+            f"{'default' if model is None else model.content_hash}")
+    keys = {j.name: job_key(j, what) for j in jobs}
+    done = {} if overwrite else _kept(
+        jobs, outs, out_dir, keys,
+        lambda out, name: Row(name, "skipped", output=str(out)) if out.is_file() else None)
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
-                                                 texture, neutral, pure=False), model)
+                                                 texture, neutral, pure=False), model, keys)
 
 
-def _simple(client, jobs, out_dir, outs, done, progress, submit, model) -> BatchResult:
-    """A run of one independent task per job."""
+def _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys) -> BatchResult:
+    """A run of one independent task per job; each row done records its job digest."""
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model)
     for job in todo:
         col.add(submit(job, mf), "clip", job)
 
     def on_done(kind, job, fut) -> None:
         try:
-            col.finish(job, fut.result())
+            col.finish(job, dataclasses.replace(fut.result(), job=keys[job.name]))
         except Exception as exc:  # noqa: BLE001
             col.fail(job, exc, outs[job.name])
 

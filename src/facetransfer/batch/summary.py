@@ -12,6 +12,9 @@ column              meaning
                     ``cancelled`` (the run was stopped before it finished)
 ``error``           one line: why it failed
 ``output``          the output's path
+``job``             a digest of what made the output (the job's inputs as they were on
+                    disk, its options, the model): a rerun that finds another one there
+                    has not made that output (``batch transfer`` and ``export``)
 ==================  ======================================================================
 """
 
@@ -29,7 +32,7 @@ from .manifest import BatchError
 __all__ = ["Row", "SUMMARY_COLUMNS", "STATUSES", "write_summary", "read_summary"]
 
 SUMMARY_COLUMNS = ("clip", "frames", "fps", "seconds", "mean_confidence", "status", "error",
-                   "output")
+                   "output", "job")
 STATUSES = ("done", "skipped", "failed", "cancelled")
 
 
@@ -45,6 +48,7 @@ class Row:
     mean_confidence: float | None = None
     error: str = ""
     output: str = ""
+    job: str = ""
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -89,7 +93,8 @@ def read_summary(path: str | os.PathLike) -> list[Row]:
             return [Row(clip=r["clip"], status=r["status"], frames=num(r["frames"], int),
                         fps=num(r["fps"], float), seconds=float(r["seconds"] or 0),
                         mean_confidence=num(r["mean_confidence"], float), error=r["error"],
-                        output=r.get("output") or "") for r in csv.DictReader(fh)]
+                        output=r.get("output") or "", job=r.get("job") or "")
+                    for r in csv.DictReader(fh)]
     except OSError as exc:
         raise BatchError(f"cannot read the batch summary {path} ({exc.strerror})") from None
     except (KeyError, TypeError, ValueError, csv.Error) as exc:
