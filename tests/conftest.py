@@ -180,3 +180,16 @@ def make_jaw_open_track():
 def make_arkit_track():
     """:func:`synthetic_arkit_track` as a fixture."""
     return synthetic_arkit_track
+
+
+def still_track(model, n: int, *, source: str = ""):
+    """A track of ``n`` frames of ``model`` at rest (no rotation, zero weights, all found):
+    for tests of what is said or kept of a track, not of its values."""
+    from facetransfer.track import Track
+
+    return Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
+                 scale=np.ones(n), translation=np.zeros((n, 2)),
+                 weights={m: np.zeros((n, r)) for m, r in zip(model.mode_names, model.ranks)},
+                 landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),
+                 lost=np.zeros(n, bool), model_hash=model.content_hash,
+                 mode_names=model.mode_names, source=source)

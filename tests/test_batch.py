@@ -397,14 +397,9 @@ def test_an_output_that_is_not_this_clips_track_is_kept_unless_overwrite(quick_m
     track, another model's): now the clip's row fails naming it and --overwrite."""
     from facetransfer.batch.manifest import ClipJob
 
-    n = 3
-    tr = Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
-               scale=np.ones(n), translation=np.zeros((n, 2)),
-               weights={m: np.zeros((n, r)) for m, r in zip(quick_model.mode_names,
-                                                             quick_model.ranks)},
-               landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n), lost=np.zeros(n, bool),
-               model_hash=quick_model.content_hash, mode_names=quick_model.mode_names,
-               source="clips/face_2.mp4")
+    from conftest import still_track
+
+    tr = still_track(quick_model, 3, source="clips/face_2.mp4")
     job = ClipJob("face_2", "elsewhere/face_2.mp4", "auto")
     out = tmp_path / "face_2.npz"
     assert batch_run._done_track(out, job, quick_model.content_hash) is None

@@ -348,14 +348,9 @@ def test_a_target_track_of_another_clip_is_said(quick_model, caplog):
     same name, or of a renamed path in another folder, says nothing."""
     import logging
 
-    n = 2
-    tr = Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
-               scale=np.ones(n), translation=np.zeros((n, 2)),
-               weights={m: np.zeros((n, r)) for m, r in zip(quick_model.mode_names,
-                                                             quick_model.ranks)},
-               landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n), lost=np.zeros(n, bool),
-               model_hash=quick_model.content_hash, mode_names=quick_model.mode_names,
-               source="/clips/katie.mp4")
+    from conftest import still_track
+
+    tr = still_track(quick_model, 2, source="/clips/katie.mp4")
     with caplog.at_level(logging.WARNING, logger="facetransfer"):
         vt._warn_other_source(tr, "/elsewhere/katie.mp4", "target")
         assert not caplog.records

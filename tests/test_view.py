@@ -187,16 +187,9 @@ def test_a_track_of_a_model_without_arkit_activations_is_refused_naming_it(quick
                                                                              tmp_path, capsys):
     """The track page's timeline plays ARKit activations: a track of another kind of model is
     refused naming the track file and why (before: no file, no reason)."""
-    from facetransfer.track import Track
+    from conftest import still_track
 
-    n = 3
-    Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
-          scale=np.ones(n), translation=np.zeros((n, 2)),
-          weights={m: np.zeros((n, r)) for m, r in zip(quick_model.mode_names,
-                                                        quick_model.ranks)},
-          landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n), lost=np.zeros(n, bool),
-          model_hash=quick_model.content_hash, mode_names=quick_model.mode_names,
-          source="clip.mp4").save(tmp_path / "t.npz")
+    still_track(quick_model, 3, source="clip.mp4").save(tmp_path / "t.npz")
     quick_model.save(tmp_path / "m.npz")
     assert main(["view", str(tmp_path / "t.npz"), "--model", str(tmp_path / "m.npz"),
                  "--out", str(tmp_path / "p.html")]) == 2
