@@ -408,3 +408,17 @@ def test_a_damaged_take_is_named_by_line_and_column(arkit_model, make_arkit_trac
             read_livelink(path, lenient=True)
         assert str(exc.value).startswith(f"{path} {said}"), str(exc.value)
     assert len(read_livelink(tmp_path / "take.csv").timecodes) == 6
+
+
+def test_a_short_takes_rate_guess_names_the_take(caplog):
+    """A take within one second of timecode: its rate is a guess, said once naming the take
+    (a batch worker's line named nothing)."""
+    import logging
+
+    tc = [f"00:00:00:{i:02d}.000" for i in range(20)]
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        t = take_seconds(tc, name="take clips/short.csv")
+    np.testing.assert_allclose(t[1], 1 / 24)
+    assert [r.getMessage() for r in caplog.records] == [
+        "take clips/short.csv lies within one second of timecode: its frames are taken at 24 "
+        "a second (the smallest timecode rate above its frame numbers)"]

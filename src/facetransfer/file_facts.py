@@ -107,7 +107,7 @@ def take_facts(path: str | os.PathLike) -> dict:
 
     take = read_livelink(path, lenient=True)
     tc = take.timecodes
-    seconds = take_seconds(tc) if tc else np.zeros(0)
+    seconds = take_seconds(tc, name=f"take {path}") if tc else np.zeros(0)
     shapes = [n for n in LIVELINK_NAMES if n not in take.missing]
     head = [n for n in POSE_COLUMNS if n.startswith("Head")]
     eyes = [n for n in POSE_COLUMNS if not n.startswith("Head")]

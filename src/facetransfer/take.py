@@ -97,34 +97,36 @@ def take_rate(timecodes, *, warn: bool = True) -> int:
     return _rate(_fields(timecodes), warn)
 
 
-def _rate(f: np.ndarray, warn: bool) -> int:
-    """:func:`take_rate` of parsed timecode fields ``f`` (F, 5)."""
+def _rate(f: np.ndarray, warn: bool, name: str = "the take") -> int:
+    """:func:`take_rate` of parsed timecode fields ``f`` (F, 5); ``name``: the take, as its
+    guess is said (a batch worker's line names it)."""
     top = int(f[:, 3].max(initial=0))
     seconds = f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]
     wrapped = bool(seconds.size) and seconds.max() > seconds.min()
     for rate in TIMECODE_RATES:
         if rate > top:
             if warn and not wrapped:
-                log.warning("the take lies within one second of timecode: its frames are taken "
-                            "at %d a second (the smallest timecode rate above its frame "
-                            "numbers)", rate)
+                log.warning("%s lies within one second of timecode: its frames are taken at "
+                            "%d a second (the smallest timecode rate above its frame numbers)",
+                            name, rate)
             return rate
     raise TransferError(f"timecode frame {top} is beyond every timecode rate "
                         f"({TIMECODE_RATES[-1]} fps)")
 
 
-def take_seconds(timecodes, *, warn: bool = True) -> np.ndarray:
+def take_seconds(timecodes, *, warn: bool = True, name: str = "the take") -> np.ndarray:
     """``(F,)`` seconds of each row after the take's first, from its timecodes at
     :func:`take_rate` (``warn``: its guess said; TransferError if they go back in time)."""
-    t = _clock(timecodes, warn)
+    t = _clock(timecodes, warn, name)
     return t - (t[0] if t.size else 0.0)
 
 
-def _clock(timecodes, warn: bool) -> np.ndarray:
+def _clock(timecodes, warn: bool, name: str = "the take") -> np.ndarray:
     """``(F,)`` seconds since midnight of each row's timecode, counted at :func:`take_rate`;
     TransferError where they go back in time."""
     f = _fields(timecodes)
-    t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / _rate(f, warn)
+    t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / \
+        _rate(f, warn, name)
     if t.size and np.any(np.diff(t) < 0):
         k = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
         raise TransferError(f"the take's timecodes go back in time at row {k + 1} "
@@ -196,7 +198,7 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     from .track.project import project_landmarks, take_frames
 
     take = _read(path, model)
-    clock = _clock(take.timecodes, True)
+    clock = _clock(take.timecodes, True, f"take {path}")
     t = clock - clock[0]
     start = _synced_start(take.timecodes, clock, start_timecode, target_track.fps, path)
     a = take_on_timeline(t, take.activations, target_track.n_frames, target_track.fps,
@@ -273,7 +275,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     from .track.result import Track
 
     take = _read(path, model)
-    t = take_seconds(take.timecodes)
+    t = take_seconds(take.timecodes, name=f"take {path}")
     step = float(np.median(np.diff(t))) if t.size > 1 else 1.0 / TIMECODE_RATES[2]
     fps = float(min(TIMECODE_RATES, key=lambda r: abs(1.0 / r - step)))
     n = int(np.floor(t[-1] * fps + 1e-6)) + 1
