@@ -104,15 +104,24 @@ def is_arkit_model(model) -> bool:
     return model.ranks[k] >= len(labels) - 1
 
 
+def arkit_truncated(model) -> bool:
+    """Whether the model's expressions are ARKit-named but its expression mode is truncated
+    (so that they convert to no activations, :func:`is_arkit_model`)."""
+    k = _expression_mode(model)
+    labels = () if k is None else model.labels[k]
+    return (len(labels) >= 2 and labels[0] == _NEUTRAL and set(labels[1:]) <= set(ARKIT_NAMES)
+            and model.ranks[k] < len(labels) - 1)
+
+
 def arkit_shortfall(model) -> str | None:
     """Why a model's tracks carry no ARKit activations (None: they do,
     :func:`is_arkit_model`): its expressions are not ARKit-named, or they are but the
     expression mode is truncated (the activations convert from all of its components)."""
     if is_arkit_model(model):
         return None
-    k = _expression_mode(model)
-    labels = () if k is None else model.labels[k]
-    if len(labels) >= 2 and labels[0] == _NEUTRAL and set(labels[1:]) <= set(ARKIT_NAMES):
+    if arkit_truncated(model):
+        k = _expression_mode(model)
+        labels = model.labels[k]
         return (f"its expression mode keeps {model.ranks[k]} of its {len(labels)} components "
                 f"(the ARKit activations need at least {len(labels) - 1}: build it without "
                 "truncating the expression rank)")

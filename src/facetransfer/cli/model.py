@@ -175,11 +175,11 @@ def cmd_build(args: argparse.Namespace) -> int:
     err = model.provenance.get("relative_errors", [float("nan")])[-1]
     print(f"wrote {args.out}: modes {', '.join(f'{n}={d}->{r}' for n, d, r in zip(model.mode_names, model.shape, model.ranks))}, "
           f"{model.n_vertices} vertices, relative error {err:.4f}")
-    from ..arkit import arkit_shortfall
+    from ..arkit import arkit_shortfall, arkit_truncated
 
-    why = arkit_shortfall(model)
-    if why is not None and "keeps" in why:   # ARKit-named, truncated: said before it is used
-        print(f"note: its tracks will carry no ARKit activations (no exports): {why}")
+    if arkit_truncated(model):     # ARKit-named, truncated: said before the model is used
+        print(f"note: its tracks will carry no ARKit activations (no exports): "
+              f"{arkit_shortfall(model)}")
     return 0
 
 

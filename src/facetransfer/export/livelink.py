@@ -221,20 +221,20 @@ def _take_values(p: Path, header: list, body: list, cols: list) -> np.ndarray:
     try:
         out = np.array([[float(r[c]) if c is not None else 0.0 for c in cols] for _, r in body],
                        np.float64).reshape(-1, len(cols))
+        if np.isfinite(out).all():
+            return out
     except ValueError:
-        out = None
-    for i, (line, r) in enumerate(body):
-        for j, c in enumerate(cols):
-            if c is None:
-                continue
+        pass
+    for line, r in body:      # the first field that is no finite number, named
+        for c in cols:
             try:
-                ok = np.isfinite(float(r[c])) if out is None else np.isfinite(out[i, j])
+                ok = c is None or bool(np.isfinite(float(r[c])))
             except ValueError:
                 ok = False
             if not ok:
                 raise ExportError(f"{p} line {line}, column {header[c].strip()}: {r[c]!r} is "
                                   "not a finite number")
-    return out
+    raise AssertionError("unreachable: a field failed, then none did")  # pragma: no cover
 
 
 def _check_unit(p: Path, header: list, body: list, a: np.ndarray, cols: list) -> None:

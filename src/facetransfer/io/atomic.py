@@ -70,6 +70,14 @@ def check_output_path(path: str | os.PathLike, *, overwrite: bool = True,
         The parent folder does not exist, is not a folder or cannot be written, ``path`` is
         a folder, ``path`` exists and ``overwrite`` is False, or ``path`` is also an input.
     """
+    p = _checked_output(path, overwrite, inputs)
+    probe_folder(p)
+    return p
+
+
+def _checked_output(path, overwrite: bool, inputs) -> Path:
+    """:func:`check_output_path` but for trying the folder (:func:`atomic_path`'s own
+    temporary file does that)."""
     p = Path(path)
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.exists():
@@ -81,7 +89,6 @@ def check_output_path(path: str | os.PathLike, *, overwrite: bool = True,
     check_not_input(p, inputs)
     if not overwrite and (p.exists() or p.is_symlink()):
         raise OutputError(f"output {p} exists; pass --overwrite to replace it")
-    probe_folder(p)
     return p
 
 
@@ -269,7 +276,7 @@ def atomic_path(path: str | os.PathLike, *, overwrite: bool = True,
     >>> with atomic_path("out/model.npz") as tmp:    # doctest: +SKIP
     ...     np.savez(tmp, a=1)
     """
-    p = check_output_path(path, overwrite=overwrite, inputs=inputs)
+    p = _checked_output(path, overwrite, inputs)  # its temporary file tries the folder
     remove_stale_temps(p)
     fd, tmp = _make_temp(p)
     try:
