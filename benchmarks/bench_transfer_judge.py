@@ -149,13 +149,15 @@ def judge_video(video: Path) -> dict:
     return compare(S, T, R)
 
 
-def _track(clip: str, model, cache: Path, data: Path) -> Path:
-    """The cached track file of ``clip`` (its first 150 frames, the capture tracker)."""
+def _track(clip: str, model, cache: Path, data: Path, every: int = 1) -> Path:
+    """The cached track file of ``clip`` (its first 150 frames, the capture tracker, its
+    detector shown one frame of ``every``; made afresh, not taken from the track cache)."""
     from facetransfer.track.obtain import obtain_track
 
-    p = cache / f"{clip}.track.npz"
+    p = cache / (f"{clip}.track.npz" if every == 1 else f"{clip}.every{every}.track.npz")
     if not p.exists():
-        tr = obtain_track(data / f"{clip}.mp4", model, max_frames=150)
+        tr = obtain_track(data / f"{clip}.mp4", model, max_frames=150, cache=False,
+                          detect_every=every)
         tr.save(p, overwrite=True)
     return p
 
@@ -175,21 +177,27 @@ def _brows(brows: bool):
         ev.eye_texture = original
 
 
-def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES) -> dict:
-    """Render one pair before and after and judge both."""
+def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
+               target_every: int | None = None) -> dict:
+    """Render one pair before and after and judge both; the target tracked as the transfer
+    tracks it (its detector shown one frame of ``target_every``, default the default speed
+    preset's: :data:`facetransfer.track.presets.TARGET_DETECT_EVERY`)."""
     import tempfile
 
     from facetransfer import video_transfer as vt
     from facetransfer.export.common import head_euler
     from facetransfer.io.video import video_info
     from facetransfer.rewrite_options import RewriteOptions
+    from facetransfer.track.presets import DEFAULT_SPEED, TARGET_DETECT_EVERY
 
+    every = TARGET_DETECT_EVERY[DEFAULT_SPEED] if target_every is None else int(target_every)
     src, tgt = PAIRS[name]
     cache = out / "judge_pairs"
     cache.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     plan = vt.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
-                            max_frames=frames, target_track=_track(tgt, model, cache, data),
+                            max_frames=frames,
+                            target_track=_track(tgt, model, cache, data, every),
                             expression_track=_track(src, model, cache, data))
     n = plan.n_frames
     source = [plan.mouth_frames[plan.mouth_index[i]] for i in range(n)]
@@ -295,6 +303,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks")
     ap.add_argument("--video", help="judge the panels of a source | target | result video")
+    ap.add_argument("--target-every", type=int, default=None,
+                    help="the target's detector shown one frame of N (default: as the "
+                    "default transfer, TARGET_DETECT_EVERY of the default speed)")
     add_pair_options(ap)
     args = ap.parse_args()
     out = Path(args.out)
@@ -316,7 +327,7 @@ def main() -> int:
     model = load_default_model()
     res = {}
     for name in args.pairs.split(","):
-        res[name] = judge_pair(name, model, out, data, args.frames)
+        res[name] = judge_pair(name, model, out, data, args.frames, args.target_every)
         for kind in ("before", "after", "eyes_only"):
             line = "  ".join(f"{n} {r['result_source']:+.2f}/{r['result_target']:+.2f}"
                              for n, r in res[name][kind].items())

@@ -144,7 +144,7 @@ def test_a_turned_clip_is_rendered_with_the_reference_of_each_frames_view(turned
 
     def render(weights):
         views = dataclasses.replace(tex, weights=weights)
-        monkeypatch.setattr(rw, "eye_texture_by_view", lambda *a, **k: (closed, views))
+        monkeypatch.setattr(region_views, "eye_texture_by_view", lambda *a, **k: (closed, views))
         return [r.image for r in rw.rewrite_frames(frames, tr, tr, model, workers=1,
                                                    processes=False)]
 
@@ -157,3 +157,53 @@ def test_a_turned_clip_is_rendered_with_the_reference_of_each_frames_view(turned
         mix = w[i, 0] * alone[0][i].astype(float) + w[i, 1] * alone[1][i]
         assert np.abs(out[i] - mix).max() <= 1.0 + 1e-6        # two roundings
         assert np.abs(alone[0][i].astype(int) - alone[1][i]).max() > 10  # the two differ
+
+
+def test_region_textures_made_ahead_are_taken_by_the_renderer_of_their_clip(turned_clip,
+                                                                              monkeypatch):
+    """The region textures made before the render (a transfer makes them while the source is
+    tracked) are the renderer's own: the same frames rendered with them or without them are
+    equal, and they are not made again; for another track or other modes they are made anew."""
+    import dataclasses
+
+    import facetransfer.rewrite as rw
+    from facetransfer.rewrite_options import RewriteOptions
+
+    model, tr, topo, frames, _, _ = turned_clip
+    opts = RewriteOptions()
+    ahead = region_views.region_textures(frames, tr, model, opts, len(frames))
+    assert ahead.open_topo is not ahead.topo and isinstance(ahead.eye_tex, RegionViews)
+    assert ahead.fits(tr, 12, region_views.region_modes(opts))
+    assert not ahead.fits(dataclasses.replace(tr), 12, region_views.region_modes(opts))
+    assert not ahead.fits(tr, 11, region_views.region_modes(opts))
+    plain = [r.image for r in rw.rewrite_frames(frames, tr, tr, model, workers=1)]
+    made = []
+    real = region_views.region_textures
+
+    def counted(*a, **k):
+        made.append(1)
+        return real(*a, **k)
+
+    monkeypatch.setattr(rw, "region_textures", counted)
+    taken = [r.image for r in rw.rewrite_frames(frames, tr, tr, model, workers=1,
+                                                regions=ahead)]
+    assert made == []
+    for a, b in zip(plain, taken):
+        np.testing.assert_array_equal(a, b)
+    list(rw.rewrite_frames(frames, tr, tr, model, workers=1, eyes="target", regions=ahead))
+    other = dataclasses.replace(tr)
+    list(rw.rewrite_frames(frames, other, other, model, workers=1, regions=ahead))
+    assert made == [1, 1]
+
+
+def test_region_textures_of_a_lost_clip_or_without_regions_are_none(turned_clip):
+    import dataclasses
+
+    from facetransfer.rewrite_options import RewriteOptions
+
+    model, tr, topo, frames, _, _ = turned_clip
+    lost = dataclasses.replace(tr, lost=np.ones(12, bool))
+    for track, opts in ((lost, RewriteOptions()), (tr, RewriteOptions(eyes="target",
+                                                                      jaw="frame"))):
+        got = region_views.region_textures(frames, track, model, opts, 12, topo=topo)
+        assert got.topo is topo and got.eye_tex is None and got.jaw_tex is None

@@ -131,3 +131,37 @@ def test_a_landmark_fits_key_follows_its_points_file(on, tmp_path):
     again = cache.track_key(on, 10, "landmarks", _depends("landmarks", on, None), _Model("m"))
     assert first is not None and again is not None and first != again
     assert _depends("flow", on, ("opts",)) == ("opts",) and _depends("capture", on, 1) is None
+
+
+def test_a_track_detected_every_other_frame_is_kept_apart_and_a_full_one_preferred(
+        on, tmp_path, monkeypatch):
+    """A capture track whose detector saw one frame of two (a transfer's target) has a key of
+    its own; asked for one, the cache gives a track of the same clip detected on every frame
+    where it holds one (the better), never the other way round."""
+    import dataclasses
+
+    from facetransfer.io.video import write_video
+    from facetransfer.track import obtain
+
+    video = tmp_path / "clip.mp4"
+    frames = np.zeros((4, 48, 64, 3), np.uint8)
+    write_video(video, list(frames), 25.0)
+    monkeypatch.setattr(type(_track()), "check_model", lambda self, m: None)
+    made = []
+
+    def capture(video, model, frames, fps, max_frames, factory, workers=1, partial=None,
+                subject=None, every=1):
+        made.append(every)
+        return dataclasses.replace(_track(4), translation=np.full((4, 2), float(every)))
+
+    monkeypatch.setattr(obtain, "_capture", capture)
+
+    def get(every):
+        return obtain.obtain_track(video, _Model("m"), frames=frames, fps=25.0,
+                                   detect_every=every).translation[0, 0]
+
+    assert get(2) == 2 and get(2) == 2 and made == [2]
+    assert get(1) == 1 and made == [2, 1]                  # the every-other track not taken
+    assert get(2) == 1 and get(1) == 1 and made == [2, 1]  # the full one preferred
+    assert obtain._depends("capture", video, None, "left", 2) == "face=left,every=2"
+    assert obtain._depends("auto", video, None) is None

@@ -124,6 +124,34 @@ def test_background_tracking_equals_sequential(clips, quick_model, monkeypatch, 
         vt.plan_transfer(clips["target"], quick_model, expression_from=broken, parallel=True)
 
 
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
+                    reason="needs fork")
+def test_fast_detects_the_target_every_other_frame_and_makes_its_regions_ahead(
+        clips, quick_model, monkeypatch):
+    """With ``speed="fast"`` the target's detector sees every other frame (the sources every
+    frame); while the source is tracked in the background the target's region textures are
+    made, for the render of this plan's target track."""
+    fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
+    calls = []
+
+    def recorded(video, model, **kw):
+        calls.append((Path(video).stem, kw.get("detect_every", 1)))
+        return fake(video, model, **kw)
+
+    monkeypatch.setattr(obtain, "obtain_track", recorded)
+    for speed, every in (("fast", 2), ("balanced", 1), ("quality", 1)):
+        calls.clear()
+        plan = vt.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+                                parallel=True, speed=speed)
+        assert calls == [("target", every)]          # the source: in the forked child
+        assert plan.regions is not None and plan.regions.target_track is plan.target_track
+        assert plan.regions.n_frames == plan.n_frames and "regions" in plan.timings
+    calls.clear()
+    plan = vt.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+                            parallel=False)
+    assert calls == [("target", 2), ("source", 1)] and plan.regions is None
+
+
 def test_cli_speed_option(clips, quick_model_path, tmp_path, capsys):
     out = tmp_path / "fast.mp4"
     code, stdout, err = run(["transfer", "--target", clips["target"], "--target-track",

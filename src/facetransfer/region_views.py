@@ -35,8 +35,9 @@ from .jaw import jaw_texture, mouth_closure
 log = logging.getLogger(__name__)
 
 __all__ = ["VIEW_SPLIT", "MAX_VIEWS", "HYSTERESIS", "FADE_SECONDS", "RegionViews",
-           "view_angles", "view_references", "pick_views", "fade_weights", "views_at",
-           "blend_renders", "eye_texture_by_view", "jaw_texture_by_view"]
+           "RegionTextures", "region_textures", "view_angles", "view_references", "pick_views",
+           "fade_weights", "views_at", "blend_renders", "eye_texture_by_view",
+           "jaw_texture_by_view"]
 
 #: Degrees: a frame whose head rotation is farther than this from every reference frame's
 #: calls for another reference (when a candidate brings it nearer).
@@ -235,3 +236,72 @@ def fade_weights(pick: np.ndarray, k: int, fade: int) -> np.ndarray:
     w = uniform_filter1d(onehot, size=int(fade), axis=0, mode="nearest")
     w[w < 1e-6] = 0.0
     return (w / w.sum(axis=1, keepdims=True)).astype(np.float32)
+
+
+@dataclass(frozen=True)
+class RegionTextures:
+    """The eye and jaw regions' textures of a target clip (:func:`region_textures`): made by
+    the renderer, or ahead of it while a source is still tracked
+    (:func:`facetransfer.video_transfer.plan_sources`), then taken by the renderer when they
+    are of its clip (:meth:`fits`).
+
+    Attributes
+    ----------
+    target_track : Track
+        The track they were lifted through (the renderer's must be this object).
+    n_frames : int
+        The frames of the clip they were chosen among.
+    modes : (bool, bool, bool)
+        ``(eyes, jaw, per_frame)``: the eye region from the model, the jaw region closed, the
+        face textured from each frame (:class:`facetransfer.rewrite_options.RewriteOptions`).
+    open_topo : MeshTopology
+        :func:`facetransfer.topology.mesh_topology` of the model.
+    topo : MeshTopology
+        ``open_topo`` with the eye holes closed where the eye region is the model's.
+    eye_tex, jaw_tex : EyeTexture, JawTexture, RegionViews or None
+    """
+
+    target_track: object
+    n_frames: int
+    modes: tuple
+    open_topo: object
+    topo: object
+    eye_tex: object = None
+    jaw_tex: object = None
+
+    def fits(self, target_track, n_frames: int, modes: tuple) -> bool:
+        """Whether these are the textures of ``target_track``'s first ``n_frames`` frames
+        rendered with ``modes``."""
+        return (self.target_track is target_track and self.n_frames == int(n_frames)
+                and self.modes == tuple(modes))
+
+
+def region_modes(opts, per_frame: bool = True) -> tuple:
+    """``(eyes, jaw, per_frame)`` of :class:`RegionTextures` for rewrite options ``opts``."""
+    return opts.eyes == "model", opts.jaw == "closed" and per_frame, bool(per_frame)
+
+
+def region_textures(target_frames, target_track, model, opts, n: int, *, topo=None,
+                    per_frame: bool = True) -> RegionTextures:
+    """The eye and jaw regions of a clip (:class:`RegionTextures`): the eye holes closed and the
+    eye region lifted (``opts.eyes == "model"``, :func:`eye_texture_by_view`), the jaw region
+    lifted for the final topology (``opts.jaw == "closed"`` with the per-frame face texture,
+    :func:`jaw_texture_by_view`); one expression rig for both. ``topo``: the model's
+    :func:`facetransfer.topology.mesh_topology`, if at hand; ``n``: the frames rendered."""
+    from .arkit import expression_rig, is_arkit_model
+    from .topology import mesh_topology
+
+    modes = region_modes(opts, per_frame)
+    open_topo = mesh_topology(model) if topo is None else topo
+    out = RegionTextures(target_track, int(n), modes, open_topo, open_topo)
+    eyes, jaw, _ = modes
+    if target_track.lost[:n].all() or not (eyes or jaw):
+        return out
+    rig = expression_rig(model, model.default_weights()) if is_arkit_model(model) else None
+    closed, eye_tex = open_topo, None
+    if eyes:
+        closed, eye_tex = eye_texture_by_view(target_frames, target_track, model, open_topo,
+                                              n_frames=n, rig=rig)
+    jaw_tex = jaw_texture_by_view(target_frames, target_track, model, closed, n_frames=n,
+                                  rig=rig) if jaw else None
+    return dataclasses.replace(out, topo=closed, eye_tex=eye_tex, jaw_tex=jaw_tex)

@@ -50,11 +50,10 @@ from typing import Callable, Iterator
 import cv2
 import numpy as np
 
-from .arkit import expression_rig, is_arkit_model
 from .composite import _erode, _extend, composite_face, membrane_blend, over
 from .errors import RewriteError, ShapeError
 from .eyeballs import track_gaze
-from .region_views import blend_renders, eye_texture_by_view, jaw_texture_by_view, views_at
+from .region_views import RegionTextures, blend_renders, region_modes, region_textures, views_at
 from .frame_meshes import FrameMeshes
 from .rim import drawn_inside, lifted_positions
 from .eyes import EyeTexture, _paint_eyes, eye_flags
@@ -403,7 +402,8 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
                    mouth: str | None = None, mouth_function: MouthFunction | None = None,
                    topo: MeshTopology | None = None, workers: int | None = None,
                    processes: bool | None = None, progress: Callable[[int], None] | None = None,
-                   eyes: str | None = None, start: int = 0) -> Iterator[RewriteFrame]:
+                   eyes: str | None = None, start: int = 0,
+                   regions: RegionTextures | None = None) -> Iterator[RewriteFrame]:
     """Rewrite every target frame with the new performance (§6, Fig. 7); each shot of an
     edited target (``target_track.shot_starts``) as a clip of its own.
 
@@ -427,35 +427,34 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         keywords ``texture``, ``blend``, ``feather``, ``mouth`` replace single attributes.
     texture : {"frame", "constant"}
         The target's face texture: the current frame's (default: it keeps the frame's own
-        lighting and measured better on synthetic footage with ground truth, see
-        ``benchmarks/bench_transfer.py``) or one for the whole clip (the paper's choice).
+        lighting; better on synthetic truth, ``benchmarks/bench_transfer.py``) or one for the
+        whole clip (the paper's choice).
     blend, feather
         See :func:`rewrite_frame`.
     mouth : {"frame", "function"}
-        The mouth's texture (lips and the closed gap); default ``"frame"``. ``"frame"``: the
-        source frame shown at this time (``source_index``) warped through the source's own
-        geometry (the performance-driven texture with one neighbour, the source's own frame; no
-        mouth texture without a source). ``"function"``: the performance-driven texture
-        function of §6 (:func:`facetransfer.texture.face.mouth_texture_function`) queried with
-        the *new* performance's attribute vector at every frame; needs model UVs.
+        The mouth's texture (lips and the closed gap); default ``"frame"``: the source frame
+        shown at this time (``source_index``) warped through the source's own geometry (none
+        without a source). ``"function"``: the texture function of §6
+        (:func:`facetransfer.texture.face.mouth_texture_function`) queried with the *new*
+        performance's attribute vector at every frame; needs model UVs.
     mouth_function : MouthFunction, optional
-        With ``mouth="function"``: the texture function to query. Default: lifted here from
-        the source frames (at most :data:`facetransfer.texture.face.MOUTH_MAX_FRAMES`), or
-        from the target's own frames when no source is given.
+        With ``mouth="function"``: the texture function to query (default: lifted here from
+        the source frames, else the target's).
     workers : int, optional
         Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU);
-        the output order and values do not depend on it.
+        the output does not depend on it.
     processes : bool, optional
-        With ``workers > 1``: render in forked processes (where the platform can fork), not
-        threads (the default: a little faster on 2 cores; the kernels release the GIL).
+        With ``workers > 1``: in forked processes where the platform can, not threads (the
+        default: a little faster on 2 cores; the kernels release the GIL).
     progress : callable(int), optional
         Called with 1 after each frame.
     eyes : {"model", "target"}, optional
         Replaces ``options.eyes``: the new performance's lids over an open-eyed target frame
         (:mod:`facetransfer.eyes`, the default) or the target's own eyes through the holes.
     start : int
-        The first frame to yield (a render continued after an interruption): frames are
-        independent, so frame ``i`` is the same whatever ``start``.
+        The first frame to yield (a render continued): frame ``i`` is the same whatever it.
+    regions : RegionTextures, optional
+        The region textures made ahead, if of the clip (:class:`RegionTextures`).
 
     Yields
     ------
@@ -472,7 +471,7 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
     for a, b, (frames, tt, new, st, si) in shots_from(start, n, target_frames, target_track,
                                                       new_track, source_track, source_index):
         one = _ClipRenderer.build(frames, tt, new, model, opts, source_frames=source_frames,
-                                  source_track=st, source_index=si,
+                                  source_track=st, source_index=si, regions=regions,
                                   mouth_function=mouth_function, topo=topo)
         yield from _render(one, frames, range(max(start, a) - a, b - a), workers, processes,
                            progress)
@@ -543,27 +542,6 @@ def _clip_mouth_function(model, topo: MeshTopology, new_track, target_frames, ta
     return mouth_function
 
 
-def _region_textures(target_frames, target_track, model, topo: MeshTopology, n: int,
-                     opts: RewriteOptions, per_frame: bool):
-    """``(topo, eye texture, jaw texture)`` of a clip: the eye holes closed and the eye region
-    lifted (``eyes="model"``, :func:`facetransfer.eyes.eye_texture`), the jaw region lifted for
-    the final topology (``jaw="closed"`` with the per-frame face texture,
-    :func:`facetransfer.jaw.jaw_texture`); one expression rig for both."""
-    if target_track.lost[:n].all():
-        return topo, None, None
-    eyes, jaw = opts.eyes == "model", opts.jaw == "closed" and per_frame
-    rig = expression_rig(model, model.default_weights()) \
-        if is_arkit_model(model) and (eyes or jaw) else None
-    eye_tex = jaw_tex = None
-    if eyes:
-        topo, eye_tex = eye_texture_by_view(target_frames, target_track, model, topo,
-                                            n_frames=n, rig=rig)
-    if jaw:
-        jaw_tex = jaw_texture_by_view(target_frames, target_track, model, topo, n_frames=n,
-                                      rig=rig)
-    return topo, eye_tex, jaw_tex
-
-
 @dataclass(frozen=True)
 class _ClipRenderer:
     """The per-frame work of :func:`rewrite_frames`: ``renderer(i) -> RewriteFrame``.
@@ -624,15 +602,17 @@ class _ClipRenderer:
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
-              source_frames, source_track, source_index, mouth_function, topo
-              ) -> "_ClipRenderer":
-        """Check the clip, lift the textures and synthesise the meshes once."""
+              source_frames, source_track, source_index, mouth_function, topo,
+              regions: RegionTextures | None = None) -> "_ClipRenderer":
+        """Check the clip, lift the textures (the region textures ``regions`` made ahead, if
+        they are this clip's) and synthesise the meshes once."""
         mouth = resolve_mouth_mode(opts.mouth or "frame", model)
         n = new_track.n_frames
         with_mouth = source_frames is not None and source_track is not None
         first = _check_clip(target_frames, target_track, new_track, source_track, with_mouth)
         sidx = np.arange(n) if source_index is None else np.asarray(source_index, np.int64)
-        topo = mesh_topology(model) if topo is None else topo
+        if topo is None:
+            topo = regions.open_topo if regions is not None else mesh_topology(model)
         fn = None
         if mouth == "function":
             fn = _clip_mouth_function(model, topo, new_track, target_frames, target_track,
@@ -645,8 +625,12 @@ class _ClipRenderer:
                 if model.uvs is not None else constant_face_texture(target_frames, target_track,
                                                                    model, topo)
         # after the mouth function, which keeps the open topology (issue 13)
-        topo, eye_tex, jaw_tex = _region_textures(target_frames, target_track, model, topo, n,
-                                                  opts, const_tex is None)
+        modes = region_modes(opts, const_tex is None)
+        if regions is None or regions.open_topo is not topo or \
+                not regions.fits(target_track, n, modes):
+            regions = region_textures(target_frames, target_track, model, opts, n, topo=topo,
+                                      per_frame=const_tex is None)
+        topo, eye_tex, jaw_tex = regions.topo, regions.eye_tex, regions.jaw_tex
         kinds = {"new": new_track}
         if const_tex is None:
             kinds["target"] = target_track

@@ -9,12 +9,10 @@ footage and write it with the target's audio.
   a ready performance;
 * :func:`render_plan`: the frames rewritten (:func:`facetransfer.rewrite.rewrite_frames`) and
   written (:func:`facetransfer.io.video.write_video_with_audio`);
-* :func:`transfer_video`: both, with the outputs checked before any work;
-* :func:`puppet_video`: a model identity driven by a track, written as a video (Fig. 1's
-  puppetry).
+* :func:`transfer_video`: both, with the outputs checked before any work.
 
-Both writers go through the render cache (:mod:`facetransfer.render_cache`): an interrupted
-render continues where it stopped.
+The writer goes through the render cache (:mod:`facetransfer.render_cache`): an interrupted
+render continues where it stopped (as the puppet's of :mod:`facetransfer.puppet_video`).
 """
 
 from __future__ import annotations
@@ -40,7 +38,7 @@ from .rewrite import rewrite_frames
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .topology import MeshTopology
 from .track import obtain
-from .track.presets import track_options
+from .track.presets import TARGET_DETECT_EVERY, track_options
 from .track.video_detect import default_workers
 from .track.project import project_landmarks, take_frames
 from .transfer import constant_weights, nearest_frames, recombine, resample_track, time_map
@@ -58,7 +56,6 @@ __all__ = [
     "RenderResult",
     "render_plan",
     "transfer_video",
-    "puppet_video",
     "write_mesh_sequence",
 ]
 
@@ -161,6 +158,9 @@ class TransferPlan:
         Its own track (one row per frame of ``texture_frames``, not resampled).
     performance : bool
         Whether the new track is a ready (edited) performance rather than a recombination.
+    regions : RegionTextures or None
+        The target's eye and jaw regions, made while the expression source was still tracked
+        (:func:`facetransfer.region_views.region_textures`; the renderer makes them otherwise).
     """
 
     target_frames: np.ndarray
@@ -175,6 +175,7 @@ class TransferPlan:
     texture_frames: np.ndarray | None = None
     texture_track: object = None
     performance: bool = False
+    regions: object = None
 
     def mouth_function(self, model, topo: MeshTopology | None = None, *,
                        progress: Callable[[int], None] | None = None, **kwargs) -> MouthFunction:
@@ -276,7 +277,8 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     sources = _take_as_performance(sources, align, model)
     options = RewriteOptions() if options is None else options
     planner = _Planner(model, options.track_method, track_options(options.speed),
-                       progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video)
+                       progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video,
+                       TARGET_DETECT_EVERY[options.speed])
     frames, fps, pre_read = planner.read_target(sources, max_frames)
     # the expression source is tracked in a second (forked) process while this one tracks the
     # target; the child inherits the decoded frames (no second decoding, nothing pickled)
@@ -288,11 +290,13 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
             face=sources.expression.face)
     try:
         tt = planner.target_track(sources.target, frames, fps, alone=early is None)
+        regions = _regions_ahead(frames, tt, model, options, planner.timings) \
+            if early is not None else None
     except BaseException:
         if early is not None:
             early.cancel()
         raise
-    inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings)
+    inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings, regions)
     for kind in ("expression", "viseme", "pose", "identity"):
         src = getattr(sources, kind)
         if src is not None:
@@ -301,6 +305,22 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     if sources.performance is not None:
         return _performance_plan(inputs, sources, model)
     return _recombined_plan(inputs, sources, model, align)
+
+
+def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings: dict):
+    """The target's eye and jaw region textures for the render with ``options``
+    (:func:`facetransfer.region_views.region_textures`), made here while the expression
+    source is tracked in the forked process, which finishes later (this one would wait for
+    it, a core idle; issue 13's 10 s). None for a target cut into shots (each its own)."""
+    from .region_views import region_textures
+
+    if len(target_track.shot_starts):
+        return None
+    t = time.perf_counter()
+    regions = region_textures(frames, target_track, model, options, len(frames),
+                              per_frame=options.texture != "constant")
+    timings["regions"] = time.perf_counter() - t
+    return regions
 
 
 def _take_as_performance(sources: TransferSources, align, model) -> TransferSources:
@@ -347,6 +367,7 @@ class _Inputs:
     tracks: dict
     source_frames: dict
     timings: dict
+    regions: object = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -356,7 +377,8 @@ class _Inputs:
 @dataclass(frozen=True)
 class _Planner:
     """The reading and tracking steps of :func:`plan_sources`; ``timings`` accumulates the
-    seconds spent reading and tracking."""
+    seconds spent reading and tracking; ``target_every``: the target's detector is shown one
+    frame of it (:data:`facetransfer.track.presets.TARGET_DETECT_EVERY`)."""
 
     model: object
     track_method: str
@@ -364,6 +386,7 @@ class _Planner:
     progress_factory: object
     timings: dict
     reader: Callable
+    target_every: int = 1
 
     def read_target(self, sources: TransferSources, max_frames):
         """``(frames, fps, pre_read)``: the target's frames and, with an expression source,
@@ -396,17 +419,19 @@ class _Planner:
         return frames, fps, (sfr[:need], sfps)
 
     def track(self, video, track_file, frames, fps, limit, *, alone: bool = False,
-              face: str | None = None):
+              face: str | None = None, every: int = 1):
         """The track of ``video`` (:func:`facetransfer.track.obtain.obtain_track`, of several
-        people the ``face``), timed; ``alone``: nothing else is tracked meanwhile, so its
-        detection may take two processes (:func:`facetransfer.track.video_detect.detect_video`)."""
+        people the ``face``, its detector shown one frame of ``every``), timed; ``alone``:
+        nothing else is tracked meanwhile, so its detection may take two processes
+        (:func:`facetransfer.track.video_detect.detect_video`)."""
         t = time.perf_counter()
         workers = default_workers() if alone else 1
         tr = obtain.obtain_track(video, self.model, frames=frames, fps=fps,
                                  track_file=track_file, max_frames=limit,
                                  method=self.track_method,
                                  progress_factory=self.progress_factory,
-                                 options=self.track_options, workers=workers, face=face)
+                                 options=self.track_options, workers=workers, face=face,
+                                 detect_every=every)
         self.timings["track"] += time.perf_counter() - t
         return tr
 
@@ -414,7 +439,7 @@ class _Planner:
         """The target's track, checked against its frames (a face somewhere)."""
         n, H, W = frames.shape[:3]
         tt = self.track(target.video, target.track, frames, fps, n, alone=alone,
-                        face=target.face)
+                        face=target.face, every=self.target_every)
         if target.track is not None:
             tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H),
                            what=f"target {target.video}")
@@ -533,7 +558,8 @@ def _recombined_plan(inputs: _Inputs, sources: TransferSources, model, align) ->
         tex_frames, tex_track = mouth_frames, ms
     return TransferPlan(frames, fps, tt, new, mouth_frames, mouth_track,
                         np.asarray(mouth_index, np.int64), tracks, inputs.timings,
-                        texture_frames=tex_frames, texture_track=tex_track)
+                        texture_frames=tex_frames, texture_track=tex_track,
+                        regions=inputs.regions)
 
 
 @dataclass(frozen=True)
@@ -716,7 +742,8 @@ class _Frames:
                             source_frames=p.mouth_frames, source_track=p.mouth_track,
                             source_index=p.mouth_index, options=self.options,
                             mouth_function=self.mouth_fn, start=self.start,
-                            progress=self.bar.update if self.bar is not None else None)
+                            progress=self.bar.update if self.bar is not None else None,
+                            regions=p.regions)
         if self.grading is None:
             frames = ((frame, face) for _, frame, face in self._composed(it))
         else:                          # graded on threads, a few frames ahead of the writer
@@ -837,52 +864,3 @@ def transfer_video(sources: TransferSources, out, model, *,
         write_mesh_sequence(meshes_dir, plan.new_track, model)
     return TransferResult(Path(out), plan.n_frames, rendered.n_rewritten, rendered.audio, plan,
                           rendered.timings, rendered.resumed, rendered.kept)
-
-
-def puppet_video(track, model, identity: np.ndarray, out, *, video_options=None,
-                 audio_from=None, overwrite: bool = False,
-                 progress_factory=None) -> tuple[bool, int]:
-    """Write the puppet video (or image sequence) ``out`` of ``track`` driving the identity
-    weights ``identity`` of ``model`` (:func:`facetransfer.transfer.puppet_frames`, Fig. 1's
-    puppetry) with the audio of ``audio_from``, through the render cache
-    (:func:`facetransfer.render_cache.parts_writer`): an interrupted run keeps the frames
-    written, and the same call renders only the rest.
-
-    Returns
-    -------
-    (bool, int)
-        Whether the audio was muxed in, and the frame an interrupted render continued from
-        (0: rendered whole).
-    """
-    from .io.video import is_image_pattern, write_video_with_audio
-    from .render_cache import parts_writer, puppet_key
-    from .transfer import puppet_frames
-
-    n = track.n_frames
-    key = puppet_key(track, model, identity, video_options, images=is_image_pattern(out))
-    writer = parts_writer(key, out, track.fps, tuple(track.frame_size), n,
-                          video_options=video_options, audio_from=audio_from,
-                          overwrite=overwrite)
-    start = 0 if writer is None else writer.done
-    frames = puppet_frames(track, model, identity, start=start)
-    bar = progress_factory("render", n) if progress_factory else None
-    with contextlib.ExitStack() as stack:
-        if bar is not None:
-            stack.callback(bar.close)
-            bar.update(start)
-        if writer is None:
-            return write_video_with_audio(out, _counted(frames, bar), track.fps,
-                                          audio_from=audio_from, overwrite=overwrite,
-                                          options=video_options, n_frames=n), 0
-        with writer:  # parts kept on an error or interrupt, joined on success
-            for f in _counted(frames, bar):
-                writer.write(f, marked=True)
-    return writer.result.audio, start
-
-
-def _counted(frames, bar):
-    """Yield ``frames``, counting each on ``bar`` (a progress bar, or None) once taken."""
-    for f in frames:
-        yield f
-        if bar is not None:
-            bar.update(1)

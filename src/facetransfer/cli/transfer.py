@@ -88,10 +88,11 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "landmarks (fitted to the clip's NAME.mediapipe478.npz points where it has "
                    "them, else to Face Landmarker's, detected frame by frame)")
     p.add_argument("--speed", choices=SPEED_PRESETS, default=DEFAULT_SPEED,
-                   help="tracking preset when no track file is given: fast (one pass, two "
-                   "pyramid levels; as accurate as balanced on the footage measured, about 4x "
-                   "faster), balanced (the tracker's defaults: two passes, three levels) or "
-                   "quality (three passes) for hard footage")
+                   help="tracking preset when no track file is given: fast (the capture "
+                   "tracker's detector shown every other frame of the target, every frame of "
+                   "the sources; with --tracker flow one pass, two pyramid levels), balanced "
+                   "(the detector on every frame; the flow tracker's defaults: two passes, "
+                   "three levels) or quality (three passes) for hard footage")
 
 
 def _numbered(out, target, n: int) -> str:
@@ -607,7 +608,7 @@ def run_puppet(args) -> int:
     from ..io.video_like import like_video
     from ..track.obtain import obtain_track
     from ..track.video_detect import default_workers
-    from ..video_transfer import puppet_video
+    from ..puppet_video import puppet_video
 
     from ..take import is_take
 
@@ -651,7 +652,7 @@ def _puppet_take(args, vopt) -> int:
     """``puppet take.csv``: the identity performing a Live Link Face take, with its head's
     rotation (:func:`facetransfer.take.take_track`), on a plain background."""
     from ..take import PREVIEW_SIZE, take_track
-    from ..video_transfer import puppet_video
+    from ..puppet_video import puppet_video
 
     for flag, given in (("--track", args.track), ("--face", args.face)):
         if given:

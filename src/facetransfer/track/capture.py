@@ -87,6 +87,10 @@ CORNER_WEIGHT = 3.0
 #: same fit to the true points, the capture's pitch 0.82 against its pitch on the true points;
 #: this gain gives the smallest sum of the 7- and 51-point NME there, flat over 0.88-0.92).
 DETECTOR_PITCH_GAIN = 0.92
+#: The confidence of a frame the detector was not shown (its measurements interpolated,
+#: :attr:`~facetransfer.track.detect.ClipDetections.shown`), times the fit's own: a texture's
+#: reference frame (:func:`facetransfer.eyes.reference_frame`) is then one the detector saw.
+UNSEEN_CONFIDENCE = 0.5
 
 
 def capture_point_weights() -> np.ndarray:
@@ -564,6 +568,9 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
         save(due_only=False)
         raise
     track = _assemble(model, run.shape, run.states, fps, frame_size, source, opt)
+    if det.shown is not None:      # a frame the detector did not see: half as sure
+        track = replace(track, confidence=np.where(det.shown, 1.0, UNSEEN_CONFIDENCE)
+                        * track.confidence)
     info = {"start_frame": run.start, "identity_frames": [int(i) for i in run.frames],
             "seconds_identity": t_id, "seconds_total": time.perf_counter() - t0,
             "tracker": "capture", "score_shapes": run.score_shapes()}
@@ -818,7 +825,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
                   detections: ClipDetections | None = None, max_frames: int | None = None,
                   fixed: dict | None = None, progress: Progress | None = None,
                   source: str | None = None, checkpoint=None, workers: int = 1,
-                  view=None, subject=None) -> Track:
+                  view=None, subject=None, every: int = 1) -> Track:
     """Capture a face's performance from a video (module notes): the default tracker.
 
     Parameters
@@ -843,6 +850,9 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
     subject : (x, y, 0), optional
         Of several people, follow the face nearest this point
         (:func:`facetransfer.track.face_crop.subject_point`).
+    every : int
+        Show the default detector one frame of ``every``, the frames between interpolated
+        (:func:`facetransfer.track.detect.detect_clip`; a transfer's target, issue 13).
 
     Returns
     -------
@@ -853,7 +863,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         detections, fps, size, src = detect_video(video, detector=detector,
                                                   max_frames=max_frames, progress=progress,
                                                   source=source, workers=workers,
-                                                  view=view, subject=subject)
+                                                  view=view, subject=subject, every=every)
     else:
         fps, size, src, _, n, _ = _open(video, max_frames, source)
         if n is not None and detections.n_frames != n:

@@ -54,6 +54,10 @@ class ClipDetections:
         difference of their 32x32 grey thumbnails, in levels (NaN for a first frame); where it
         jumps, the clip cuts to another shot (:mod:`facetransfer.track.shots`). None: not
         measured (detections without the flow).
+    shown : (F,) bool or None
+        The frames shown to the detector (:func:`detect_clip`'s ``every``); the others' points,
+        raw points and scores are interpolated from those (:func:`between_detections`).
+        None: every frame was shown.
     """
 
     points: np.ndarray
@@ -62,6 +66,7 @@ class ClipDetections:
     scores: np.ndarray | None = None
     pixel_aspect: float = 1.0
     change: np.ndarray | None = None
+    shown: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         P = np.asarray(self.points, dtype=np.float64)
@@ -82,6 +87,11 @@ class ClipDetections:
             if C.shape != (P.shape[0],):
                 raise ShapeError(f"change must be ({P.shape[0]},), got {C.shape}")
             object.__setattr__(self, "change", C)
+        if self.shown is not None:
+            V = np.asarray(self.shown, dtype=bool)
+            if V.shape != (P.shape[0],):
+                raise ShapeError(f"shown must be ({P.shape[0]},), got {V.shape}")
+            object.__setattr__(self, "shown", None if V.all() else V)
         a = float(self.pixel_aspect)
         if not np.isfinite(a) or a <= 0:
             raise ShapeError(f"pixel_aspect must be > 0, got {self.pixel_aspect}")
@@ -136,6 +146,10 @@ class VideoLandmarker(MediaPipeDetector):
         frame of a clip: its timestamps must still increase)."""
         self._i = max(self._i, int(frame))
         return self
+
+    def skip(self, frame: np.ndarray) -> None:
+        """A frame not shown (:func:`detect_clip`'s ``every``): the clock moves on."""
+        self._i += 1
 
 
 def _import_mediapipe() -> None:
@@ -264,6 +278,7 @@ class _Found:
             list(resume.change) if resume.change is not None else [np.nan] * resume.n_frames)
         self.raw: list = []
         self.scores: list = []
+        self.skipped: list = [] if resume is None else [False] * resume.n_frames
         if keep478 and resume is not None:
             if resume.points478 is None:
                 raise ShapeError("resuming with keep478 needs the saved detections' points478")
@@ -273,8 +288,10 @@ class _Found:
                            else [_NAN52] * resume.n_frames)
 
     def add(self, pts: np.ndarray, flow, q: np.ndarray | None,
-            scores: np.ndarray | None = None, change: float = np.nan) -> None:
+            scores: np.ndarray | None = None, change: float = np.nan,
+            skipped: bool = False) -> None:
         self.change.append(change)
+        self.skipped.append(skipped)
         if self.keep478:
             self.raw.append(np.full((478, 2), np.nan, np.float32) if q is None else
                             np.asarray(q[:478], np.float32))
@@ -291,10 +308,43 @@ class _Found:
                    for f in self.Fl]
         S = np.stack(self.scores[:n])
         C = np.asarray(self.change[:n], np.float32)
-        return ClipDetections(np.stack(self.P[:n]), np.stack(self.Fl),
-                              np.stack(self.raw[:n]) if self.keep478 else None,
-                              None if np.isnan(S).all() else S, self.aspect,
-                              None if np.isnan(C).all() else C)
+        P, Fl = np.stack(self.P[:n]), np.stack(self.Fl)
+        raw = np.stack(self.raw[:n]) if self.keep478 else None
+        skipped = np.asarray(self.skipped[:n], bool)
+        if skipped.any():
+            P, raw, S = between_detections(P, Fl, raw, S, skipped)
+        return ClipDetections(P, Fl, raw, None if np.isnan(S).all() else S,
+                              self.aspect, None if np.isnan(C).all() else C, ~skipped)
+
+
+def between_detections(P: np.ndarray, flow: np.ndarray, raw: np.ndarray | None,
+                       S: np.ndarray, skipped: np.ndarray):
+    """``(P, raw, S)`` with the frames ``skipped`` (F,) (not shown to the detector,
+    :func:`detect_clip`'s ``every``) interpolated linearly in time between the shown frames on
+    either side: the 68 points ``P`` (F, 68, 2), the 478 ``raw`` (F, 478, 2) or None and the
+    scores ``S`` (F, 52). Skipped frames after the last shown one take its scores and its points
+    moved by the point ``flow`` (F, 68, 2) (held where it failed; the 478 by the 68's mean
+    displacement). Frames between shots are never skipped (a skip follows a found face)."""
+    P, S = P.copy(), S.copy()
+    raw = None if raw is None else raw.copy()
+    shown = np.flatnonzero(~skipped)
+    for i in np.flatnonzero(skipped):
+        k = np.searchsorted(shown, i)
+        a = int(shown[k - 1])                    # a skip follows a shown frame with a face
+        if k < shown.size and np.isfinite(P[shown[k]]).all():
+            b = int(shown[k])
+            t = (i - a) / (b - a)
+            P[i] = (1 - t) * P[a] + t * P[b]
+            S[i] = (1 - t) * S[a] + t * S[b]
+            if raw is not None:
+                raw[i] = (1 - t) * raw[a] + t * raw[b]
+            continue
+        step = np.where(np.isfinite(flow[i]), flow[i], 0.0)
+        P[i] = P[i - 1] + step
+        S[i] = S[a]
+        if raw is not None:
+            raw[i] = raw[i - 1] + step.mean(axis=0).astype(raw.dtype)
+    return P, raw, S
 
 
 _NAN68 = np.full((68, 2), np.nan)
@@ -330,10 +380,46 @@ def _detect_one(detector, fr: np.ndarray
     return (_NAN68 if d is None else np.asarray(d, dtype=np.float64)), None, None
 
 
+def _skips(detector, found: _Found, every: int) -> bool:
+    """Whether the next frame is not shown to the detector (``every`` > 1): fewer than
+    ``every`` frames since the last one shown, which found a face, and a detector that can
+    ``skip`` (it is then told)."""
+    if every <= 1 or not found.P or not hasattr(detector, "skip"):
+        return False
+    since = next((j for j, s in enumerate(reversed(found.skipped)) if not s), len(found.P))
+    last = len(found.P) - 1 - since
+    return since + 1 < every and last >= 0 and bool(np.isfinite(found.P[last]).all())
+
+
+def _add_frame(found: _Found, detector, fr: np.ndarray, prev, pool, every: int):
+    """Detect (or skip: :func:`_skips`) one frame into ``found``, with the flow of the
+    previous frame's points on ``pool`` (None: no flow) from ``prev``, the previous frame's
+    grey image and thumbnail; returns this frame's."""
+    if pool is not None:
+        grey = pool.submit(_grey, fr)
+    skip = _skips(detector, found, every)
+    if skip:                      # held for now, interpolated in found.result()
+        detector.skip(fr)
+        pts, q, scores = found.P[-1], None, None
+    else:
+        pts, q, scores = _detect_one(detector, fr)
+    f, change = None, np.nan
+    if pool is not None:
+        gray, thumb = grey.result()
+        if prev is not None:
+            if found.P:
+                f = pool.submit(point_flow, prev[0], gray, found.P[-1])
+            change = float(np.abs(thumb - prev[1]).mean())   # picture_change
+        prev = gray, thumb
+    found.add(pts, f, q, scores, change, skip)
+    return prev
+
+
 def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None = None,
                 flow: bool = True, progress: Callable[[int, int], None] | None = None,
                 keep478: bool = False, resume: ClipDetections | None = None,
-                checkpoint=None, start: int = 0, pixel_aspect: float = 1.0) -> ClipDetections:
+                checkpoint=None, start: int = 0, pixel_aspect: float = 1.0,
+                every: int = 1) -> ClipDetections:
     """Detect the face in every frame and the point flow between neighbouring frames.
 
     Parameters
@@ -364,6 +450,11 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
         it decoded, the last ``warmup_frames`` of them shown to the detector); the result then
         holds frames ``start ..`` only, and its first frame has no flow (no points before it).
         Used by :mod:`facetransfer.track.video_detect` for a clip's later part.
+    every : int
+        Show the detector one frame of ``every`` after a frame where it found a face (a
+        detector that can ``skip``): the frames between are given the detections on either
+        side interpolated (:func:`between_detections`); their flow is measured as for any
+        other frame, from the last points held.
     pixel_aspect : float
         The frames are a video's resampled by it to square pixels (:mod:`.aspect`): the result
         says so (:attr:`ClipDetections.pixel_aspect`), and ``resume`` must.
@@ -390,18 +481,7 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                     prev = _skipped(detector, fr, i >= warm, flow and i == k - 1, prev)
                     tick(i + 1, n_frames or 0)
                     continue
-                if flow:
-                    grey = pool.submit(_grey, fr)
-                pts, q, scores = _detect_one(detector, fr)
-                f, change = None, np.nan
-                if flow:
-                    gray, thumb = grey.result()
-                    if prev is not None:
-                        if found.P:
-                            f = pool.submit(point_flow, prev[0], gray, found.P[-1])
-                        change = float(np.abs(thumb - prev[1]).mean())   # picture_change
-                    prev = gray, thumb
-                found.add(pts, f, q, scores, change)
+                prev = _add_frame(found, detector, fr, prev, pool if flow else None, every)
                 if checkpoint is not None and checkpoint.due():
                     checkpoint.save(found.result())
                 tick(i + 1, n_frames or 0)

@@ -164,10 +164,13 @@ class DetectionCheckpoint(ProgressFile):
         change = d["change"] if "change" in d and d["change"].size else None
         if change is not None and change.shape != (k,):
             raise ValueError("inconsistent arrays")
+        shown = d["shown"] if "shown" in d and d["shown"].size else None
+        if shown is not None and shown.shape != (k,):
+            raise ValueError("inconsistent arrays")
         det = ClipDetections(P.astype(np.float64), d["flow"].astype(np.float64),
                              None if raw is None else raw.astype(np.float32),
                              None if scores is None else scores.astype(np.float32),
-                             float(d["pixel_aspect"]), change)
+                             float(d["pixel_aspect"]), change, shown)
         return SavedDetections(det, bool(d["complete"]))
 
     def save(self, det: ClipDetections, *, complete: bool = False) -> None:
@@ -184,7 +187,9 @@ class DetectionCheckpoint(ProgressFile):
                              else np.asarray(det.scores, np.float32)),
                   "pixel_aspect": np.float64(det.pixel_aspect),
                   "change": (np.zeros(0, np.float32) if det.change is None
-                             else np.asarray(det.change, np.float32))}
+                             else np.asarray(det.change, np.float32)),
+                  "shown": (np.zeros(0, bool) if det.shown is None
+                            else np.asarray(det.shown, bool))}
         if complete and self._fit is not None:
             arrays.update(pack_fit(self._fit[1], self._fit[0]))
         self._write(arrays)

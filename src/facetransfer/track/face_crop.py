@@ -229,6 +229,13 @@ class FollowingLandmarker:
         self._prev = frame
         return found
 
+    def skip(self, frame: np.ndarray) -> None:
+        """A frame not shown (:func:`facetransfer.track.detect.detect_clip`'s ``every``): the
+        clocks move on; a search counts it as a frame without a face only when the last frame
+        had none (the caller skips only after a face)."""
+        self._frame += 1
+        self._prev = frame
+
     def _subject(self, frame: np.ndarray, found):
         """``found`` (the whole frame's face) where it is the only face or the subject
         (:func:`choose_subject`), else the subject followed in a crop; none where the one face

@@ -156,10 +156,11 @@ class _StageBars:
 
 
 def _capture(video, model, frames, fps, max_frames, progress_factory, workers: int = 1,
-             partial: Path | None = None, subject=None):
+             partial: Path | None = None, subject=None, every: int = 1):
     """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames; with
     ``partial``, its progress saved there and continued from there (:func:`capture_resuming`);
-    ``subject``: of several people, the face nearest this point."""
+    ``subject``: of several people, the face nearest this point; ``every``: the detector
+    shown one frame of ``every``."""
     from .aspect import View
     from .capture import capture_video
 
@@ -167,21 +168,23 @@ def _capture(video, model, frames, fps, max_frames, progress_factory, workers: i
         if partial is None:
             tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
                                source=str(video), workers=workers, view=View.of(video),
-                               subject=subject)
+                               subject=subject, every=every)
         else:
             tr = capture_resuming(video, model, partial, frames=frames[:max_frames],
                                   source=str(video), progress=stage_progress, workers=workers,
                                   best_effort=True,  # the track cache's: never fails the job
-                                  subject=subject)
+                                  subject=subject, detect_every=every)
     return dataclasses.replace(tr, fps=float(fps))
 
 
-def _depends(method: str, video, options, face=None):
+def _depends(method: str, video, options, face=None, every: int = 1):
     """What a track of ``method`` depends on beyond the video, frames and model (its cache
     key): the flow tracker's options, the landmark fit's precomputed points file, the capture
-    tracker's ``face`` (of several people, which)."""
+    tracker's ``face`` (of several people, which) and detector rate (``every``)."""
     if method in ("auto", "capture"):
-        return None if face is None else f"face={face}"
+        parts = ([] if face is None else [f"face={face}"]) + \
+            ([] if every == 1 else [f"every={int(every)}"])
+        return ",".join(parts) or None
     if method == "flow":
         return options
     if method == "landmarks":
@@ -202,7 +205,8 @@ def _partial(key: str | None) -> Path | None:
 
 def capture_resuming(video, model, partial, *, frames=None, options=None, source=None,
                      fixed=None, progress=None, workers: int = 1, best_effort: bool = False,
-                     subject=None, detector_id: str | None = None, every: float | None = None):
+                     subject=None, detector_id: str | None = None, every: float | None = None,
+                     detect_every: int = 1):
     """The capture tracker on the file ``video`` (or its decoded ``frames``) with its progress
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
     fit), continued from there when it holds this run's: an interrupted run loses nothing.
@@ -211,7 +215,8 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     by it: its path, or ``detector_id``, the key's detector part,
     :func:`facetransfer.track.detect_checkpoint.face_detector_id`); ``every``: seconds between
     the progress file's periodic saves (default the checkpoint's: where a run can be stopped
-    only by killing it, e.g. a batch worker, a shorter period loses less)."""
+    only by killing it, e.g. a batch worker, a shorter period loses less); ``detect_every``:
+    the detector shown one frame of it (the caller keys ``partial`` by it)."""
     from .aspect import View
     from .capture import capture_video
     from .detect_checkpoint import DetectionCheckpoint
@@ -231,7 +236,8 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     else:
         det = detect_video(clip, source=source, checkpoint=ck, progress=progress,
                            resume=None if saved is None else saved.detections,
-                           workers=workers, view=view, subject=subject)[0]
+                           workers=workers, view=view, subject=subject,
+                           every=detect_every)[0]
     try:
         tr = capture_video(clip, model, options=options, detections=det, source=source,
                            fixed=fixed, checkpoint=ck, progress=progress)
@@ -247,7 +253,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
 def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
                  track_file: str | os.PathLike | None = None, max_frames: int | None = None,
                  method: str = "auto", progress_factory=None, options=None, workers: int = 1,
-                 cache: bool = True, face: str | None = None):
+                 cache: bool = True, face: str | None = None, detect_every: int = 1):
     """The track of a video: read from ``track_file``, or from the track cache, or tracked now.
 
     ``method``: ``"auto"`` or ``"capture"`` use the capture tracker
@@ -263,7 +269,10 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     one kept there (:mod:`facetransfer.track.cache`; the capture tracker's progress is saved
     there too and continued by the next run). ``face``: of several people, the one the capture
     tracker follows (``"left"``, ``"right"``, ``"centre"`` or ``"X,Y"``,
-    :func:`facetransfer.track.face_crop.subject_point`).
+    :func:`facetransfer.track.face_crop.subject_point`). ``detect_every``: the capture
+    tracker's detector is shown one frame of it, the frames between interpolated
+    (:func:`facetransfer.track.detect.detect_clip`); a track of the same clip made showing it
+    every frame, if the cache holds one, is taken instead.
 
     Returns
     -------
@@ -287,9 +296,14 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         frames, fps = read_video(video, max_frames=max_frames)
     fps = info.fps if fps is None else fps
     n = len(frames) if max_frames is None else min(len(frames), int(max_frames))
-    key = track_key(video, n, method, _depends(method, video, options, face), model) \
+    every = int(detect_every) if method in ("auto", "capture") else 1
+    key = track_key(video, n, method, _depends(method, video, options, face, every), model) \
         if cache else None
-    tr = cached_track(key, model)
+    tr = None
+    if key is not None and every > 1:          # the better track, where one was made
+        tr = cached_track(track_key(video, n, method, _depends(method, video, options, face),
+                                    model), model)
+    tr = tr if tr is not None else cached_track(key, model)
     if tr is not None:
         log.info("%s: the track of %d frames from the cache", video, n)
         bar = _bar(progress_factory, f"track {Path(video).name} (from the cache)", n)
@@ -302,7 +316,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
 
         subject = None if face is None else subject_point(face, info.size)
         tr = _capture(video, model, frames, fps, max_frames, progress_factory, workers,
-                      _partial(key), subject)
+                      _partial(key), subject, every)
     elif method == "flow":
         warn_stored_fit(video, "optical-flow tracker")
         tr = _flow(video, model, frames, fps, max_frames, progress_factory, options)

@@ -108,7 +108,7 @@ def shot_detections(det, start: int, stop: int):
     return replace(det, points=det.points[start:stop], flow=flow,
                    points478=None if det.points478 is None else det.points478[start:stop],
                    scores=None if det.scores is None else det.scores[start:stop],
-                   change=change)
+                   change=change, shown=None if det.shown is None else det.shown[start:stop])
 
 
 def joined_shots(tracks: list, spans: list[tuple[int, int]]):

@@ -87,7 +87,9 @@ def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetect
                           np.concatenate([first.flow, second.flow]),
                           cat(first.points478, second.points478),
                           _nan_filled((first, second), "scores"), first.pixel_aspect,
-                          _nan_filled((first, second), "change"))
+                          _nan_filled((first, second), "change"),
+                          np.concatenate([np.ones(d.n_frames, bool) if d.shown is None
+                                          else d.shown for d in (first, second)]))
 
 
 def _nan_filled(parts, name: str):
@@ -101,13 +103,14 @@ def _nan_filled(parts, name: str):
                            if a is None else a for d, a in zip(parts, arrays)])
 
 
-#: (video, start, stop, fps, counter, View, subject) handed to the forked child (not pickled)
+#: (video, start, stop, fps, counter, View, subject, every) handed to the forked child (not
+#: pickled)
 _JOB: tuple | None = None
 
 
 def _child_job() -> ClipDetections:
     """In the child: detect frames ``start .. stop`` (or the clip's end) of the video."""
-    video, start, stop, fps, counter, view, subject = _JOB
+    video, start, stop, fps, counter, view, subject, every = _JOB
     if isinstance(video, np.ndarray):
         frames = iter(video[:stop])
     else:
@@ -121,8 +124,8 @@ def _child_job() -> ClipDetections:
         counter.value = max(0, done - start)
 
     try:
-        return detect_clip(view.frames(frames), detector, n_frames=stop,
-                           keep478=True, start=start, progress=progress, pixel_aspect=view.aspect)
+        return detect_clip(view.frames(frames), detector, n_frames=stop, keep478=True,
+                           start=start, progress=progress, pixel_aspect=view.aspect, every=every)
     except ShapeError:          # the clip ends at ``start``: no frames left for this part
         return None
     finally:
@@ -151,7 +154,7 @@ class SplitDetection:
 
     @classmethod
     def start(cls, video, start: int, stop: int | None, fps: float, view: View = View(),
-              subject=None) -> "SplitDetection | None":
+              subject=None, every: int = 1) -> "SplitDetection | None":
         """Fork the child that detects frames ``start .. stop`` of ``video`` (a path or an
         (F, H, W, 3) array), as ``view`` shows them (:class:`facetransfer.track.aspect.View`);
         None where the platform cannot fork. Call it before this process creates its own
@@ -169,7 +172,7 @@ class SplitDetection:
         _import_mediapipe()
         ctx = mp.get_context("fork")
         counter = ctx.Value("i", 0, lock=False)
-        _JOB = (video, int(start), stop, float(fps), counter, view, subject)
+        _JOB = (video, int(start), stop, float(fps), counter, view, subject, int(every))
         try:
             pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
             fut = pool.submit(_child_job)           # forks now: the child sees _JOB
@@ -275,7 +278,7 @@ def other_face(first: ClipDetections, rest: ClipDetections) -> bool:
 def detect_video(video, *, detector=None, max_frames: int | None = None,
                  progress: Progress | None = None, source: str | None = None,
                  resume: ClipDetections | None = None, checkpoint=None, workers: int = 1,
-                 view: View | None = None, subject=None
+                 view: View | None = None, subject=None, every: int = 1
                  ) -> tuple[ClipDetections, float, tuple[int, int], str]:
     """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
 
@@ -288,7 +291,8 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     their pixels' aspect (:attr:`~facetransfer.track.detect.ClipDetections.pixel_aspect`). The
     size returned is the stored frames'. ``subject``: of several faces, follow the one nearest
     this point ``(x, y, 0)`` in the stored pixels
-    (:func:`facetransfer.track.face_crop.subject_point`).
+    (:func:`facetransfer.track.face_crop.subject_point`). ``every``: the detector is shown
+    one frame of ``every`` (:func:`facetransfer.track.detect.detect_clip`).
     """
     prog = progress or (lambda stage, done, total: None)
     fps, size, src, frames, n, total = _open(video, max_frames, source)
@@ -297,7 +301,8 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
         subject = (float(to_shown_x(subject[0], view.aspect)), subject[1], 0.0)
     done = 0 if resume is None else resume.n_frames
     m = split_frame(done, total, workers) if detector is None else None
-    child = None if m is None else SplitDetection.start(video, m, n, fps, view, subject)
+    child = None if m is None else SplitDetection.start(video, m, n, fps, view, subject,
+                                                        every)
     own = None
     if detector is None:
         detector = own = FollowingLandmarker(fps=fps, blendshapes=True, subject=subject)
@@ -313,12 +318,14 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
         again = view.frames(_open(video, max_frames, source)[3])
         return detect_clip(again, detector, n_frames=n, keep478=True,
                            progress=lambda d, t: prog("detect", d, max(total, d)),
-                           resume=first, checkpoint=checkpoint, pixel_aspect=view.aspect)
+                           resume=first, checkpoint=checkpoint, pixel_aspect=view.aspect,
+                           every=every)
 
     try:
         det = detect_clip(view.frames(frames), detector,
                           n_frames=n if child is None else m, keep478=True, progress=report,
-                          resume=resume, checkpoint=checkpoint, pixel_aspect=view.aspect)
+                          resume=resume, checkpoint=checkpoint, pixel_aspect=view.aspect,
+                          every=every)
         if child is not None:
             det = finish_split(det, child, m, redetect, report_child, checkpoint)
     except BaseException:
