@@ -169,3 +169,26 @@ def test_a_frame_the_detector_did_not_see_is_half_as_sure(arkit_model):
     np.testing.assert_array_equal(a.blendshapes, b.blendshapes)
     assert a.confidence.min() > 0
     np.testing.assert_allclose(b.confidence, a.confidence * np.where(half.shown, 1.0, 0.5))
+
+
+def test_a_join_interpolates_across_it_and_a_resumed_run_across_its_start(tmp_path):
+    """A part ending on a skipped frame (moved by the flow) is interpolated with the next
+    part's first frame once joined; a run resumed after such a frame does the same."""
+    from facetransfer.track.video_detect import join_detections
+
+    frames = _frames()
+    first = detect_clip(frames[:6], LinearDetector(), keep478=True, every=2)   # 5 skipped
+    assert not first.shown[5]
+    det = LinearDetector()
+    det.i = 6
+    second = detect_clip(frames[6:], det, keep478=True, every=2)
+    joined = join_detections(first, second)
+    whole = detect_clip(frames, LinearDetector(), keep478=True, every=2)
+    np.testing.assert_allclose(joined.points[5], _ibug(_truth(5)[0]), atol=1e-4)
+    np.testing.assert_allclose(joined.points, whole.points, atol=1e-4)
+    np.testing.assert_array_equal(joined.shown, whole.shown)
+    det = LinearDetector()
+    det.i = 6
+    resumed = detect_clip(frames, det, keep478=True, every=2, resume=first)
+    np.testing.assert_allclose(resumed.points, whole.points, atol=1e-4)
+    np.testing.assert_array_equal(resumed.shown, whole.shown)

@@ -278,7 +278,8 @@ class _Found:
             list(resume.change) if resume.change is not None else [np.nan] * resume.n_frames)
         self.raw: list = []
         self.scores: list = []
-        self.skipped: list = [] if resume is None else [False] * resume.n_frames
+        self.skipped: list = [] if resume is None else (
+            [False] * resume.n_frames if resume.shown is None else list(~resume.shown))
         if keep478 and resume is not None:
             if resume.points478 is None:
                 raise ShapeError("resuming with keep478 needs the saved detections' points478")

@@ -33,7 +33,7 @@ import numpy as np
 
 from ..errors import ShapeError, VideoError
 from .aspect import View, to_shown_x
-from .detect import ClipDetections, VideoLandmarker, detect_clip
+from .detect import ClipDetections, VideoLandmarker, between_detections, detect_clip
 from .face_crop import FollowingLandmarker, face_box, moved_away
 from .options import Progress
 
@@ -72,7 +72,8 @@ def split_frame(done: int, total: int, workers: int) -> int | None:
 
 
 def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetections:
-    """The detections of two consecutive parts of a clip as one, in order."""
+    """The detections of two consecutive parts of a clip as one, in order (frames the detector
+    was not shown interpolated again across the join: :func:`~.detect.between_detections`)."""
     def cat(a, b):
         if a is None and b is None:
             return None
@@ -83,13 +84,17 @@ def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetect
     if first.pixel_aspect != second.pixel_aspect:
         raise ValueError(f"join_detections: parts of pixel aspect {first.pixel_aspect} and "
                          f"{second.pixel_aspect}")
-    return ClipDetections(np.concatenate([first.points, second.points]),
-                          np.concatenate([first.flow, second.flow]),
-                          cat(first.points478, second.points478),
-                          _nan_filled((first, second), "scores"), first.pixel_aspect,
-                          _nan_filled((first, second), "change"),
-                          np.concatenate([np.ones(d.n_frames, bool) if d.shown is None
-                                          else d.shown for d in (first, second)]))
+    P, flow = np.concatenate([first.points, second.points]), \
+        np.concatenate([first.flow, second.flow])
+    raw, S = cat(first.points478, second.points478), _nan_filled((first, second), "scores")
+    shown = np.concatenate([np.ones(d.n_frames, bool) if d.shown is None else d.shown
+                            for d in (first, second)])
+    if not shown.all():
+        P, raw, S = between_detections(P, flow, raw, np.full((len(P), 52), np.nan, np.float32)
+                                       if S is None else S, ~shown)
+        S = None if np.isnan(S).all() else S
+    return ClipDetections(P, flow, raw, S, first.pixel_aspect,
+                          _nan_filled((first, second), "change"), shown)
 
 
 def _nan_filled(parts, name: str):
