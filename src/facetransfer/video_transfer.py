@@ -472,6 +472,8 @@ class _Planner:
         if tr is None:                       # tracked here, after the target: nothing beside it
             tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True,
                             face=src.face)
+        if src.track is not None:
+            _warn_other_source(tr, src.video, kind)
         inputs.tracks[kind], inputs.source_frames[kind] = _checked_source(kind, src, fr, tr)
 
 
@@ -523,6 +525,12 @@ def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> Trans
                            f"frames, the target {sources.target.video} is {W}x{H}")
     if new.n_frames > n:
         new = take_frames(new, np.arange(n))
+    elif new.n_frames < n and not isinstance(perf, Take):   # as a short --target-track
+        raise RewriteError(f"performance {new.label} has {new.n_frames} frames, the target "
+                           f"video {sources.target.video} {n}: give --max-frames "
+                           f"{new.n_frames} to rewrite the frames it covers")
+    if not isinstance(perf, Take):
+        _warn_other_source(new, sources.target.video, "performance")
     varying = [m for m in model.mode_names if m != "identity"] or list(model.mode_names)
     q = np.concatenate([new.weights[m] for m in varying], axis=1)
     b = np.concatenate([tt.weights[m] for m in varying], axis=1)
@@ -651,9 +659,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     out : path-like
         The video to write (atomically).
     options : RewriteOptions, optional
-        Texture, mouth, blend, feather, erode; a mouth of None is
-        :func:`facetransfer.texture.face.default_mouth_mode` (the texture function for a ready
-        performance, the source frame for a transfer).
+        A mouth of None is :func:`facetransfer.texture.face.default_mouth_mode`'s.
     audio_from : path-like, optional
         The target video: its audio is kept, and (without ``compose``) its pixel aspect ratio
         and colour matrix (:func:`facetransfer.io.video_like.like_video`); an OpenEXR plate's
@@ -701,11 +707,12 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
         if writer is None:
             from .io.video import write_video_with_audio
 
-            audio = write_video_with_audio(out, render(), plan.fps, audio_from=audio_from,
+            frames = stack.enter_context(contextlib.closing(render()))
+            audio = write_video_with_audio(out, frames, plan.fps, audio_from=audio_from,
                                            overwrite=overwrite, options=video_options,
                                            n_frames=n)
-        else:
-            for frame, face in render.with_faces():
+        else:     # closed here on an error (its render threads joined), not by the collector
+            for frame, face in stack.enter_context(contextlib.closing(render.with_faces())):
                 writer.write(frame, marked=face)
     if writer is not None:
         audio, render.rewritten = writer.result.audio, writer.marked
@@ -754,6 +761,9 @@ class _Frames:
                 yield frame, face
         finally:                       # a video's alpha decoder (io.plate_alpha.VideoAlpha)
             getattr(self.grading, "close", lambda: None)()
+            # the render threads joined here, not when the collector finds the generator
+            # (a Ctrl-C while they end would be "Exception ignored in ...", a traceback)
+            it.close()
 
     def _composed(self, it):
         """``(i, frame, face)`` of each output frame, the rendering timed."""
@@ -769,8 +779,9 @@ class _Frames:
 
     def __call__(self):
         """Yield the frames."""
-        for frame, _ in self.with_faces():
-            yield frame
+        with contextlib.closing(self.with_faces()) as frames:
+            for frame, _ in frames:
+                yield frame
 
 
 def _parts_writer(plan: TransferPlan, model, out, options, video_options, audio_from,
@@ -805,10 +816,12 @@ def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
 def _warn_other_source(track, video, role: str) -> None:
     """Say so when a given track was made from a video of another name than ``video`` (a
     renamed copy is fine; another clip of the same size would drive the wrong face)."""
-    made = Path(str(track.source)).name if track.source else ""
-    if made and made != Path(str(video)).name:
-        log.warning("%s track %s was made from %s, not %s: if that is another clip, its motion "
-                    "drives the wrong face", role, track.label, made, Path(str(video)).name)
+    made = track.other_video(video)
+    if made:
+        log.warning("%s track %s was made from %s, not %s: if that is another clip, %s", role,
+                    track.label, made, Path(str(video)).name,
+                    "its motion drives the wrong face" if role in ("target", "performance")
+                    else "it does not follow that video's frames")
 
 
 def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: bool) -> None:

@@ -137,6 +137,25 @@ def tqdm_progress(desc: str, *, unit: str = "item", enabled: bool = True):
     return callback, close
 
 
+def number_in(lo: float, hi: float, *, integer: bool = False):
+    """An argparse ``type`` taking a number in ``[lo, hi]`` (an integer with ``integer``);
+    argparse names the option in its one line ("argument --smooth: expected ...")."""
+    kind = "an integer" if integer else "a number"
+
+    def parse(text: str):
+        try:
+            v = int(text) if integer else float(text)
+        except ValueError:
+            v = None
+        if v is None or not lo <= v <= hi:
+            shown = [f"{int(b)}" if integer else f"{b:g}" for b in (lo, hi)]
+            raise argparse.ArgumentTypeError(f"expected {kind} in [{shown[0]}, {shown[1]}], "
+                                             f"got {text!r}")
+        return v
+
+    return parse
+
+
 def frame_count(n: int) -> str:
     """``"1 frame"``, ``"N frames"``: the count of a command's summary line."""
     return f"{n} frame" if n == 1 else f"{n} frames"

@@ -21,7 +21,7 @@ from pathlib import Path
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
 from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
-                     check_track_name, frame_count, progress_disabled, resolve_model,
+                     check_track_name, frame_count, number_in, progress_disabled, resolve_model,
                      video_options, video_out)
 
 
@@ -49,16 +49,17 @@ def add_track_options(p) -> None:
     p.add_argument("--init", default="auto",
                    help='[klt] first-frame feature points: "auto" (MediaPipe) or a JSON file '
                    '{"points": {"36": [x, y], ...}} keyed by iBUG-68 number')
-    p.add_argument("--passes", type=int, default=d.passes, help="[klt] passes through the video")
+    p.add_argument("--passes", type=number_in(1, 100, integer=True), default=d.passes,
+                   help="[klt] passes through the video")
     p.add_argument("--anchor", action="store_true",
                    help="[klt] add detected landmarks of every frame as an extra term (less "
                    "drift)")
-    p.add_argument("--keyframe", type=float, default=d.keyframe,
+    p.add_argument("--keyframe", type=number_in(0, 1e6), default=d.keyframe,
                    help="[klt] weight of the KLT term against the first frame (less drift; 0 = "
                    "the paper's frame-to-frame tracking only)")
-    p.add_argument("--smooth", type=float, default=d.smooth,
+    p.add_argument("--smooth", type=number_in(0, 1000), default=d.smooth,
                    help="zero-phase smoothing of pose and weights, sigma in frames (0 = off)")
-    p.add_argument("--points", type=int, default=d.n_points,
+    p.add_argument("--points", type=number_in(1, 1_000_000, integer=True), default=d.n_points,
                    help="[klt] tracked vertices per frame")
     p.add_argument("--scores", action=argparse.BooleanOptionalAction, default=True,
                    help="[capture] a second pass that reads Face Landmarker's own blendshape "
@@ -172,8 +173,9 @@ def _check_outputs(args):
         check_track_name(args.out, overlay=True)
         if args.overlay and not args.overwrite and Path(args.out).is_file() and \
                 not Path(args.overlay).exists():   # a run stopped between the two
+            limit = f" --max-frames {args.max_frames}" if args.max_frames else ""
             raise FaceTransferError(f"output {args.out} exists (an earlier run's track?): "
-                                    f"`--from-track {args.out} --overlay {args.overlay}` "
+                                    f"`--from-track {args.out} --overlay {args.overlay}{limit}` "
                                     "draws the overlay from it; --overwrite tracks again")
         check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
         if args.overlay:

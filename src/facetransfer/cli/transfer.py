@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import sys
 from pathlib import Path
 
@@ -33,6 +34,8 @@ ALIGN_HELP = ("how to fit a source of another length: trim (stop where the short
               "(repeat the source), hold (hold the source's last frame); default: trim when the "
               "source is at least as long as the target, hold when it is shorter (the output "
               "always has the target's frame rate)")
+
+log = logging.getLogger(__name__)
 
 
 def _bar_factory():
@@ -92,7 +95,8 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "tracker's detector shown every other frame of the target, every frame of "
                    "the sources; with --tracker flow one pass, two pyramid levels), balanced "
                    "(the detector on every frame; the flow tracker's defaults: two passes, "
-                   "three levels) or quality (three passes) for hard footage")
+                   "three levels) or quality (the capture tracker as balanced; the flow "
+                   "tracker's three passes, for hard footage)")
 
 
 def _numbered(out, target, n: int) -> str:
@@ -432,6 +436,10 @@ def _check_transfer_args(args):
 
     if is_take(args.expression_from):
         _check_take(args)
+    if args.performance and is_take(args.performance):
+        raise FaceTransferError(f"--performance {args.performance} is a Live Link Face take: "
+                                f"give it as --expression-from {args.performance} (a "
+                                "performance is a track file, TRACK.npz)")
     to_track = 0
     _check_option_pairs(args)
     if args.target_face and args.target_track:
@@ -575,7 +583,8 @@ def run_edit(args) -> int:
     for s, text in zip(scales, args.scale):
         if not abs(s.factor) <= MAX_EDIT_FACTOR:
             raise FaceTransferError(f"--scale {text}: the factor must lie in "
-                                    f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}]")
+                                    f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}] (for an "
+                                    f"ARKit model's activations [0, {MAX_EDIT_FACTOR:g}])")
     for a, text in zip(adds, args.add):
         if not abs(a.amount) <= MAX_EDIT_FACTOR:
             raise FaceTransferError(f"--add {text}: the amount must lie in "
@@ -633,6 +642,10 @@ def run_puppet(args) -> int:
     if args.track:   # a track of another video would drive the face with the wrong motion
         track.check_video(len(frames), (frames.shape[2], frames.shape[1]),
                           what=f"video {args.video}")
+        if track.other_video(args.video):
+            log.warning("track %s was made from %s, not %s: if that is another clip, the "
+                        "puppet does not move with this video's audio", args.track,
+                        track.other_video(args.video), Path(args.video).name)
     if track.lost.all():
         raise FaceTransferError(f"no face found in {args.video}")
     frames = None

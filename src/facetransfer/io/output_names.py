@@ -79,4 +79,10 @@ def check_meshes_folder(path: str | os.PathLike, *, overwrite: bool) -> Path:
                           "(frame_00000.obj, ...)")
     if not overwrite and md.is_dir() and any(md.glob("frame_*.obj")):
         raise OutputError(f"{md} already holds meshes; pass --overwrite to replace them")
+    from .atomic import probe_folder
+
+    try:            # a folder that cannot be written (read-only, /sys): refused before work
+        probe_folder(md / "frame_00000.obj")
+    except OutputError as exc:
+        raise OutputError(f"--meshes {md}: {exc}") from None
     return md

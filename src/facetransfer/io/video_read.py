@@ -280,7 +280,15 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
         n += 1
     if n == 0:
         raise VideoError(f"video {path} has no frames (from frame {start})")
+    if expect - n >= max(TRUNCATED_FRAMES, 0.02 * expect):
+        log.warning("video %s ends after frame %d of the %d its header counts (truncated?): "
+                    "its %d frames are used", path, start + n - 1, int(info.n_frames), n)
     return out[:n], info.fps
+
+
+#: :func:`read_video` says a video ends early when it decodes at least this many frames (and
+#: 2 % of them) fewer than its header counts (a header's count may be a frame or two off).
+TRUNCATED_FRAMES = 3
 
 
 def _at(cap, path, start: int, seek: bool) -> bool:

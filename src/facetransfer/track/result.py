@@ -249,6 +249,15 @@ class Track:
             return str(self.info["file"])
         return f"of {self.source}" if self.source else ""
 
+    def other_video(self, video) -> str | None:
+        """The name of the video this track was made from where it is not ``video``'s (a
+        renamed copy passes; another clip of the same size would be followed with the wrong
+        motion), else None."""
+        from pathlib import Path
+
+        made = Path(str(self.source)).name if self.source else ""
+        return made if made and made != Path(str(video)).name else None
+
     def check_video(self, n_frames: int, size: tuple[int, int], *, what: str = "video") -> None:
         """Raise :class:`TrackError` unless the track matches a video's frame count and size."""
         size = (int(size[0]), int(size[1]))

@@ -1,0 +1,109 @@
+"""What a new user's walk found (thirty-ninth session): a mesh folder that cannot be written,
+a truncated video, a short or foreign performance, a take given as a performance, a source
+track of another clip, option values out of range."""
+
+from __future__ import annotations
+
+import logging
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer.cli.main import main  # noqa: E402
+from test_transfer_cli import clips, run  # noqa: E402,F401 (fixture)
+
+
+def test_a_meshes_folder_that_cannot_be_written_is_refused_before_any_work(tmp_path):
+    from facetransfer.errors import OutputError
+    from facetransfer.io.output_names import check_meshes_folder
+
+    with pytest.raises(OutputError, match=r"--meshes /proc/mm"):
+        check_meshes_folder("/proc/mm", overwrite=False)
+    assert check_meshes_folder(tmp_path / "m", overwrite=False) == tmp_path / "m"
+    assert not (tmp_path / "m").exists() and not list(tmp_path.iterdir())  # nothing left
+
+
+def test_a_truncated_video_is_said_to_end_early(tmp_path, caplog):
+    """A file cut after its first frames (its index at the front, so what is left decodes):
+    its frames are read, and a warning says it ends before the frames its header counts."""
+    import imageio_ffmpeg
+
+    from facetransfer.io.video import read_video, write_video
+
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 255, (64, 64, 3), np.uint8) for _ in range(60)]
+    write_video(tmp_path / "a.mp4", frames, 25.0)
+    subprocess.run([imageio_ffmpeg.get_ffmpeg_exe(), "-loglevel", "error", "-i",
+                    str(tmp_path / "a.mp4"), "-c", "copy", "-movflags", "+faststart",
+                    str(tmp_path / "f.mp4")], check=True)
+    data = (tmp_path / "f.mp4").read_bytes()
+    (tmp_path / "t.mp4").write_bytes(data[:len(data) // 3])
+    with caplog.at_level(logging.WARNING):
+        whole, _ = read_video(tmp_path / "f.mp4")
+        assert not caplog.records
+        cut, _ = read_video(tmp_path / "t.mp4")
+    assert len(whole) == 60 and 3 <= len(cut) <= 40
+    assert f"ends after frame {len(cut) - 1} of the 60 its header counts" in caplog.text
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        read_video(tmp_path / "t.mp4", max_frames=2)    # fewer asked than it holds
+    assert not caplog.records
+
+
+def test_a_performance_shorter_than_the_target_is_refused_with_the_frames_to_give(
+        clips, quick_model, tmp_path):
+    from facetransfer import video_transfer as vt
+    from facetransfer.errors import RewriteError
+    from facetransfer.track import Track
+    from facetransfer.track.project import take_frames
+
+    short = tmp_path / "short.npz"
+    take_frames(Track.load(clips["target_track"]), np.arange(3)).save(short)
+    with pytest.raises(RewriteError, match=r"performance .*short.npz has 3 frames, the target "
+                                           r"video .*target.mp4 6: give --max-frames 3"):
+        vt.plan_transfer(clips["target"], quick_model, target_track=clips["target_track"],
+                         performance=short)
+    plan = vt.plan_transfer(clips["target"], quick_model, target_track=clips["target_track"],
+                            performance=short, max_frames=3)
+    assert plan.n_frames == 3
+
+
+def test_tracks_of_another_clip_are_said(clips, quick_model_path, tmp_path, capsys, caplog):
+    """A source track or a performance made from another clip is named in a warning (as a
+    target track is); a take given as --performance is pointed to --expression-from."""
+    import shutil
+
+    other = tmp_path / "other.mp4"
+    shutil.copy(clips["source"], other)
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        clips["target_track"], "--expression-from", other, "--source-track",
+                        clips["source_track"], "--model", quick_model_path, "--out",
+                        tmp_path / "o.mp4", "--no-progress"], capsys)
+    assert code == 0, err
+    said = [r.getMessage() for r in caplog.records if "expression track" in r.getMessage()]
+    assert len(said) == 1 and "was made from synthetic, not other.mp4" in said[0]
+    take = tmp_path / "take.csv"
+    take.write_text("Timecode,BlendShapeCount,EyeBlinkLeft\n00:00:00:00.000,1,0.5\n")
+    code, _, err = run(["transfer", "--target", clips["target"], "--performance", take,
+                        "--model", quick_model_path, "--out", tmp_path / "p.mp4"], capsys)
+    assert code == 2 and err.strip().splitlines() == [
+        f"facetransfer transfer: error: --performance {take} is a Live Link Face take: give "
+        f"it as --expression-from {take} (a performance is a track file, TRACK.npz)"]
+
+
+@pytest.mark.parametrize("option, value, said", [
+    ("--smooth", "1e9", "argument --smooth: expected a number in [0, 1000], got '1e9'"),
+    ("--points", "-5", "argument --points: expected an integer in [1, 1000000], got '-5'"),
+    ("--passes", "0", "argument --passes: expected an integer in [1, 100], got '0'"),
+    ("--keyframe", "x", "argument --keyframe: expected a number in [0, 1e+06], got 'x'")])
+def test_tracking_options_out_of_range_name_the_option(option, value, said, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["track", str(tmp_path / "v.mp4"), "--out", str(tmp_path / "t.npz"), option,
+              value])
+    assert exc.value.code == 2
+    assert said in capsys.readouterr().err
