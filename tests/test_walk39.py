@@ -107,3 +107,16 @@ def test_tracking_options_out_of_range_name_the_option(option, value, said, tmp_
               value])
     assert exc.value.code == 2
     assert said in capsys.readouterr().err
+
+
+def test_a_crf_for_an_image_sequence_and_hevc_in_avi_are_refused(tmp_path):
+    from facetransfer.errors import VideoError
+    from facetransfer.io.video import VideoOptions, check_video_output
+
+    with pytest.raises(VideoError, match=r"--crf sets a video's H.264/H.265 quality; an image "
+                                         r"sequence's frames are written as .png files"):
+        check_video_output(tmp_path / "f_%05d.png", VideoOptions(crf=10))
+    assert check_video_output(tmp_path / "f_%05d.png", VideoOptions()).kind == "images"
+    with pytest.raises(VideoError, match=r"H.265 goes in a .mp4, .mov or .mkv file, not .avi"):
+        check_video_output(tmp_path / "v.avi", VideoOptions(codec="h265"))
+    assert check_video_output(tmp_path / "v.avi", VideoOptions(codec="h264")).kind == "video"

@@ -267,8 +267,9 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
     Raises
     ------
     VideoError
-        Any other extension, an image name without ``%d``, ProRes outside ``.mov``/``.mkv``, an
-        encoder the ffmpeg binary lacks, or an existing output without ``overwrite``.
+        Any other extension, an image name without ``%d``, a CRF for an image sequence, ProRes
+        outside ``.mov``/``.mkv``, H.265 in ``.avi``, an encoder the ffmpeg binary lacks, or an
+        existing output without ``overwrite``.
     """
     opt = options or VideoOptions()
     p = Path(path)
@@ -281,6 +282,9 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
         if len(fields) != 1 or p.name.count("%") != 1:
             raise VideoError(f"output {p}: an image-sequence pattern needs exactly one frame "
                              "number field like %05d (e.g. frames/%05d.png)")
+        if opt.crf is not None:
+            raise VideoError(f"output {p}: --crf sets a video's H.264/H.265 quality; an image "
+                             f"sequence's frames are written as {suffix} files without it")
         same = next((q for q in inputs if is_sequence(q) and same_sequence_files(p, q)), None)
         if same is not None:
             raise VideoError(f"output {p} would write over the frames of the input {same}; "
@@ -305,6 +309,8 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
                          "(e.g. frames/%05d.png)")
     if opt.codec == "prores" and suffix not in (".mov", ".mkv"):
         raise VideoError(f"output {p}: ProRes goes in a .mov or .mkv file, not {suffix}")
+    if opt.codec == "h265" and suffix == ".avi":   # AVI has no standard HEVC tag: few play it
+        raise VideoError(f"output {p}: H.265 goes in a .mp4, .mov or .mkv file, not .avi")
     require_encoder(opt.codec)
     check_output_path(p, overwrite=overwrite, inputs=inputs)
     return VideoOutput(p, "video", opt)
