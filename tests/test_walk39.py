@@ -53,6 +53,13 @@ def test_a_truncated_video_is_said_to_end_early(tmp_path, caplog):
     with caplog.at_level(logging.WARNING):
         read_video(tmp_path / "t.mp4", max_frames=2)    # fewer asked than it holds
     assert not caplog.records
+    from facetransfer.io.video_facts import fact_lines, video_facts
+
+    facts = video_facts(tmp_path / "t.mp4")
+    assert facts.n_frames == 60 and facts.stored_frames < 60
+    assert f"the file holds {facts.stored_frames} of them (cut short?)" in fact_lines(facts)[1]
+    whole = video_facts(tmp_path / "f.mp4")
+    assert whole.stored_frames == 60 and "cut short" not in " ".join(fact_lines(whole))
 
 
 def test_a_performance_shorter_than_the_target_is_refused_with_the_frames_to_give(

@@ -20,7 +20,7 @@ from .video_display import (ColourTags, container, exact_seek, first_field, show
                             timecode_of, video_colour)
 from .plate_alpha import sequence_has_alpha, video_has_alpha
 from .video_depth import video_bits
-from .video_read import video_info
+from .video_read import TRUNCATED_FRAMES, video_info
 from .frame_file import bit_depth
 from .video_sequence import IMAGE_SUFFIXES, is_sequence, open_sequence
 
@@ -75,6 +75,10 @@ class VideoFacts:
     rate_from : str or None
         Where an image sequence's rate came from (``"said"``, ``"header"``, ``"default"``:
         :attr:`facetransfer.io.video_sequence.Sequence.rate_from`); None for a video file.
+    stored_frames : int or None
+        A video file's frames as its packets count them (ffmpeg, stream copy): fewer than
+        ``n_frames`` in a file cut short (said, as :func:`facetransfer.io.video.read_video`
+        says it); None where not counted.
     """
 
     path: str
@@ -97,6 +101,7 @@ class VideoFacts:
     alpha: bool = False
     bits: int = 8
     rate_from: str | None = None
+    stored_frames: int | None = None
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -124,7 +129,18 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
                       video_colour(path), ", ".join(audio_codecs(path)) or None, turn=info.turn,
                       timecode=timecode_of(path), alpha=video_has_alpha(path),
-                      bits=video_bits(path))
+                      bits=video_bits(path), stored_frames=_stored(path))
+
+
+def _stored(path) -> int | None:
+    """The packets of a video file's first video stream, or None where ffmpeg cannot say."""
+    from ..errors import VideoError
+    from .video import stored_frame_count
+
+    try:
+        return stored_frame_count(path)
+    except (VideoError, OSError):
+        return None
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
@@ -144,6 +160,9 @@ def fact_lines(f: VideoFacts) -> list[str]:
         f"{rate} fps, its frame count not in its header (a still image?)"
     if f.variable_rate:
         timing += " (variable frame rate: read on this constant-rate timeline)"
+    if f.stored_frames is not None and f.n_frames - f.stored_frames >= max(
+            TRUNCATED_FRAMES, 0.02 * f.n_frames):
+        timing += f"; the file holds {f.stored_frames} of them (cut short?)"
     fields = "progressive" if f.field is None else \
         (f"interlaced, {f.field} field first (decoded by {f.decoder}, tracked on that field, "
          "results written interlaced)")
