@@ -192,3 +192,63 @@ def test_a_join_interpolates_across_it_and_a_resumed_run_across_its_start(tmp_pa
     resumed = detect_clip(frames, det, keep478=True, every=2, resume=first)
     np.testing.assert_allclose(resumed.points, whole.points, atol=1e-4)
     np.testing.assert_array_equal(resumed.shown, whole.shown)
+
+
+def _cut_frames(cut: int, n: int = 30) -> list[np.ndarray]:
+    """A drifting texture, then from frame ``cut`` another one (a cut to another shot)."""
+    rng = np.random.default_rng(9)
+    a, b = (np.kron(rng.uniform(0, 255, (SIZE // 8, 2 * SIZE // 8 + 8, 3)), np.ones((8, 8, 1)))
+            for _ in range(2))
+    return [(a if t < cut else b)[:, t: t + SIZE].astype(np.uint8) for t in range(n)]
+
+
+class CutDetector(LinearDetector):
+    """:class:`LinearDetector`'s face moved 60 px down from frame ``cut`` on (another shot),
+    or none there (``face=False``)."""
+
+    def __init__(self, cut: int, face: bool = True) -> None:
+        super().__init__()
+        self.cut, self.face = cut, face
+
+    def detect_scored(self, frame):
+        i = self.i
+        q, s = super().detect_scored(frame)
+        if i >= self.cut:
+            return (q + (0.0, 60.0), s) if self.face else (None, None)
+        return q, s
+
+
+@pytest.mark.parametrize("cut", [21, 22])
+def test_no_frame_is_interpolated_across_a_cut(cut):
+    """A frame whose picture changed as at a cut is shown (21); a skipped frame before a cut
+    (21, the cut at 22) is the old shot's last frame moved by the flow, not half-way to the
+    new shot's face."""
+    det = CutDetector(cut)
+    got = detect_clip(_cut_frames(cut), det, keep478=True, every=2)
+    assert cut in det.shown and got.shown[cut]
+    np.testing.assert_allclose(got.points[cut], _ibug(_truth(cut)[0] + (0.0, 60.0)), atol=1e-4)
+    before = got.points[cut - 1] - _ibug(_truth(cut - 1)[0])   # the old face, not moved down
+    assert np.abs(np.median(before, axis=0)).max() < 2.5
+
+
+def test_a_cut_to_a_shot_without_a_face_leaves_no_face_held():
+    det = CutDetector(21, face=False)
+    got = detect_clip(_cut_frames(21), det, keep478=True, every=2)
+    assert got.found[:21].all() and not got.found[21:].any()
+
+
+def test_a_skipped_frame_whose_flow_failed_is_lost_and_partial_failures_take_the_median():
+    P = np.zeros((3, 68, 2))
+    P[0] = np.arange(68)[:, None]
+    P[1] = P[0]
+    flow = np.full((3, 68, 2), np.nan)
+    S = np.zeros((3, 52), np.float32)
+    raw = np.zeros((3, 478, 2), np.float32)
+    skipped = np.array([False, True, False])
+    P[2] = np.nan                                        # the next shown frame: no face
+    lost, _, _ = between_detections(P, flow, raw, S, skipped)
+    assert np.isnan(lost[1]).all()
+    flow[1, :60] = (2.0, 1.0)                            # 8 points failed: the median step
+    moved, raw2, _ = between_detections(P, flow, raw, S, skipped)
+    np.testing.assert_allclose(moved[1] - P[0], np.tile((2.0, 1.0), (68, 1)))
+    np.testing.assert_allclose(raw2[1], np.tile((2.0, 1.0), (478, 1)))

@@ -759,11 +759,14 @@ class _Frames:
             for frame, face in frames:
                 self.rewritten += face
                 yield frame, face
-        finally:                       # a video's alpha decoder (io.plate_alpha.VideoAlpha)
-            getattr(self.grading, "close", lambda: None)()
-            # the render threads joined here, not when the collector finds the generator
-            # (a Ctrl-C while they end would be "Exception ignored in ...", a traceback)
-            it.close()
+        finally:
+            # the render and grading threads joined here, not when the collector finds the
+            # generators (a Ctrl-C while they end would be "Exception ignored in ...")
+            try:
+                frames.close()
+                it.close()
+            finally:                   # a video's alpha decoder (io.plate_alpha.VideoAlpha)
+                getattr(self.grading, "close", lambda: None)()
 
     def _composed(self, it):
         """``(i, frame, face)`` of each output frame, the rendering timed."""
@@ -821,6 +824,7 @@ def _warn_other_source(track, video, role: str) -> None:
         log.warning("%s track %s was made from %s, not %s: if that is another clip, %s", role,
                     track.label, made, Path(str(video)).name,
                     "its motion drives the wrong face" if role in ("target", "performance")
+                    else "it drives the wrong head pose" if role == "pose"
                     else "it does not follow that video's frames")
 
 
@@ -877,3 +881,6 @@ def transfer_video(sources: TransferSources, out, model, *,
         write_mesh_sequence(meshes_dir, plan.new_track, model)
     return TransferResult(Path(out), plan.n_frames, rendered.n_rewritten, rendered.audio, plan,
                           rendered.timings, rendered.resumed, rendered.kept)
+
+
+from .puppet_video import puppet_video  # noqa: E402,F401 (its home before the thirty-ninth session)

@@ -160,8 +160,9 @@ def fact_lines(f: VideoFacts) -> list[str]:
         f"{rate} fps, its frame count not in its header (a still image?)"
     if f.variable_rate:
         timing += " (variable frame rate: read on this constant-rate timeline)"
-    if f.stored_frames is not None and f.n_frames - f.stored_frames >= max(
-            TRUNCATED_FRAMES, 0.02 * f.n_frames):
+    short = None if f.variable_rate or f.stored_frames is None else \
+        f.n_frames - f.stored_frames        # a variable rate's timeline repeats frames
+    if short is not None and short >= max(TRUNCATED_FRAMES, 0.02 * f.n_frames):
         timing += f"; the file holds {f.stored_frames} of them (cut short?)"
     fields = "progressive" if f.field is None else \
         (f"interlaced, {f.field} field first (decoded by {f.decoder}, tracked on that field, "

@@ -21,6 +21,7 @@ import numpy as np
 from ..errors import ShapeError
 from .init import MediaPipeDetector, create_landmarker, import_tasks_api
 from .landmarks import mediapipe_to_ibug
+from .shots import CUT_FLOW_FAILED, CUT_LEVELS
 
 __all__ = ["FLOW_SLACK", "FLOW_CROP_SHARE", "THUMB_BLOCKS", "ClipDetections", "VideoLandmarker",
            "detect_clip", "point_flow", "picture_change",
@@ -313,26 +314,32 @@ class _Found:
         raw = np.stack(self.raw[:n]) if self.keep478 else None
         skipped = np.asarray(self.skipped[:n], bool)
         if skipped.any():
-            P, raw, S = between_detections(P, Fl, raw, S, skipped)
+            P, raw, S = between_detections(P, Fl, raw, S, skipped, C)
         return ClipDetections(P, Fl, raw, None if np.isnan(S).all() else S,
                               self.aspect, None if np.isnan(C).all() else C, ~skipped)
 
 
 def between_detections(P: np.ndarray, flow: np.ndarray, raw: np.ndarray | None,
-                       S: np.ndarray, skipped: np.ndarray):
+                       S: np.ndarray, skipped: np.ndarray, change: np.ndarray | None = None):
     """``(P, raw, S)`` with the frames ``skipped`` (F,) (not shown to the detector,
     :func:`detect_clip`'s ``every``) interpolated linearly in time between the shown frames on
     either side: the 68 points ``P`` (F, 68, 2), the 478 ``raw`` (F, 478, 2) or None and the
-    scores ``S`` (F, 52). Skipped frames after the last shown one take its scores and its points
-    moved by the point ``flow`` (F, 68, 2) (held where it failed; the 478 by the 68's mean
-    displacement). Frames between shots are never skipped (a skip follows a found face)."""
+    scores ``S`` (F, 52). Where no shown frame with a face follows, or the one that follows
+    starts another shot (its picture ``change`` (F,) at least
+    :data:`facetransfer.track.shots.CUT_LEVELS`), a skipped frame (never the first of a shot:
+    :func:`_add_frame`) takes the last shown frame's scores and its points moved by the point
+    ``flow`` (F, 68, 2) (the points whose flow failed by the others' median step, the 478 by
+    it too), or no face where the flow failed for :data:`~facetransfer.track.shots.
+    CUT_FLOW_FAILED` of them."""
     P, S = P.copy(), S.copy()
     raw = None if raw is None else raw.copy()
+    cut = np.zeros(len(P), bool) if change is None else \
+        np.nan_to_num(np.asarray(change, np.float64)) >= CUT_LEVELS
     shown = np.flatnonzero(~skipped)
     for i in np.flatnonzero(skipped):
         k = np.searchsorted(shown, i)
         a = int(shown[k - 1])                    # a skip follows a shown frame with a face
-        if k < shown.size and np.isfinite(P[shown[k]]).all():
+        if k < shown.size and np.isfinite(P[shown[k]]).all() and not cut[shown[k]]:
             b = int(shown[k])
             t = (i - a) / (b - a)
             P[i] = (1 - t) * P[a] + t * P[b]
@@ -340,12 +347,26 @@ def between_detections(P: np.ndarray, flow: np.ndarray, raw: np.ndarray | None,
             if raw is not None:
                 raw[i] = (1 - t) * raw[a] + t * raw[b]
             continue
-        step = np.where(np.isfinite(flow[i]), flow[i], 0.0)
-        P[i] = P[i - 1] + step
-        S[i] = S[a]
-        if raw is not None:
-            raw[i] = raw[i - 1] + step.mean(axis=0).astype(raw.dtype)
+        _moved_on(P, raw, S, flow, i, a)
     return P, raw, S
+
+
+def _moved_on(P: np.ndarray, raw, S: np.ndarray, flow: np.ndarray, i: int, a: int) -> None:
+    """Frame ``i`` (skipped, after the last shown frame ``a`` of its shot) in place: frame
+    ``i - 1``'s points moved by the point flow, the failed ones by the others' median step;
+    no face where it failed for :data:`~facetransfer.track.shots.CUT_FLOW_FAILED` of them (the
+    face gone) or frame ``i - 1`` has none."""
+    ok = np.isfinite(flow[i]).all(axis=1) & np.isfinite(P[i - 1]).all(axis=1)
+    if ok.mean() <= 1.0 - CUT_FLOW_FAILED:
+        P[i], S[i] = np.nan, np.nan
+        if raw is not None:
+            raw[i] = np.nan
+        return
+    step = np.median(flow[i][ok], axis=0)
+    P[i] = P[i - 1] + np.where(ok[:, None], flow[i], step)
+    S[i] = S[a]
+    if raw is not None:
+        raw[i] = raw[i - 1] + step.astype(raw.dtype)
 
 
 _NAN68 = np.full((68, 2), np.nan)
@@ -382,9 +403,10 @@ def _detect_one(detector, fr: np.ndarray
 
 
 def _skips(detector, found: _Found, every: int) -> bool:
-    """Whether the next frame is not shown to the detector (``every`` > 1): fewer than
+    """Whether the next frame may be not shown to the detector (``every`` > 1): fewer than
     ``every`` frames since the last one shown, which found a face, and a detector that can
-    ``skip`` (it is then told)."""
+    ``skip`` (:func:`_add_frame` then shows it anyway where the picture changed as at a cut,
+    :data:`facetransfer.track.shots.CUT_LEVELS`)."""
     if every <= 1 or not found.P or not hasattr(detector, "skip"):
         return False
     since = next((j for j, s in enumerate(reversed(found.skipped)) if not s), len(found.P))
@@ -398,7 +420,9 @@ def _add_frame(found: _Found, detector, fr: np.ndarray, prev, pool, every: int):
     grey image and thumbnail; returns this frame's."""
     if pool is not None:
         grey = pool.submit(_grey, fr)
-    skip = _skips(detector, found, every)
+    skip = pool is not None and prev is not None and _skips(detector, found, every)
+    if skip:                      # a picture that changed as at a cut is always shown
+        skip = float(np.abs(grey.result()[1] - prev[1]).mean()) < CUT_LEVELS
     if skip:                      # held for now, interpolated in found.result()
         detector.skip(fr)
         pts, q, scores = found.P[-1], None, None

@@ -89,12 +89,12 @@ def join_detections(first: ClipDetections, second: ClipDetections) -> ClipDetect
     raw, S = cat(first.points478, second.points478), _nan_filled((first, second), "scores")
     shown = np.concatenate([np.ones(d.n_frames, bool) if d.shown is None else d.shown
                             for d in (first, second)])
+    change = _nan_filled((first, second), "change")
     if not shown.all():
         P, raw, S = between_detections(P, flow, raw, np.full((len(P), 52), np.nan, np.float32)
-                                       if S is None else S, ~shown)
+                                       if S is None else S, ~shown, change)
         S = None if np.isnan(S).all() else S
-    return ClipDetections(P, flow, raw, S, first.pixel_aspect,
-                          _nan_filled((first, second), "change"), shown)
+    return ClipDetections(P, flow, raw, S, first.pixel_aspect, change, shown)
 
 
 def _nan_filled(parts, name: str):
