@@ -127,3 +127,26 @@ def test_a_crf_for_an_image_sequence_and_hevc_in_avi_are_refused(tmp_path):
     with pytest.raises(VideoError, match=r"H.265 goes in a .mp4, .mov or .mkv file, not .avi"):
         check_video_output(tmp_path / "v.avi", VideoOptions(codec="h265"))
     assert check_video_output(tmp_path / "v.avi", VideoOptions(codec="h264")).kind == "video"
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["transfer", "--target", "t.mp4", "--expression-from", "s.mp4", "--output", "x.mp4"],
+     "facetransfer transfer: error: unrecognized arguments: --output"),
+    (["track", "v.mp4", "--ouut", "t.npz"], "facetransfer track: error: unrecognized arguments: "
+     "--ouut")])
+def test_a_misspelt_option_is_said_before_a_missing_required_one(argv, said, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2 and capsys.readouterr().err.startswith(said)
+
+
+def test_values_that_look_like_options_are_not_taken_for_unknown_ones():
+    from facetransfer.cli.main import build_parser, command_parser, unknown_options
+
+    parser = build_parser()
+    for argv in (["track", "v.mp4", "--crf", "-1", "--out", "t.npz", "-v"],
+                 ["edit", "t.npz", "--scale", "jawOpen=-2", "--ou", "e.npz"],
+                 ["-v", "probe", "a.mp4", "--json"], ["transfer", "--", "--odd"]):
+        assert unknown_options(command_parser(parser, argv), argv) == [], argv
+    argv = ["export", "t.npz", "--format", "glb", "--texure", "x.png", "--out", "t.glb"]
+    assert unknown_options(command_parser(parser, argv), argv) == ["--texure"]

@@ -13,6 +13,7 @@ import functools
 import importlib
 import logging
 import os
+import re
 import sys
 import zipfile
 
@@ -104,6 +105,38 @@ def command_parser(parser: argparse.ArgumentParser, argv: list[str]) -> argparse
         if size < len(names) and words[:len(names)] == names:
             best, size = leaf, len(names)
     return best
+
+
+_NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
+
+
+def unknown_options(leaf: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """The options among ``argv``'s words after its command words that the command's parser
+    ``leaf`` does not take (nor abbreviates, nor combines as short flags like ``-vv``);
+    negative numbers and the words after ``--`` are values. None for the top parser."""
+    names = leaf.prog.split()[1:]
+    if not names:
+        return []
+    rest, k = list(argv), 0
+    try:
+        for name in names:                  # past the command words, in order
+            k = rest.index(name, k) + 1
+    except ValueError:                      # not typed as its parser names it: argparse's
+        return []
+    known = leaf._option_string_actions
+    out = []
+    for word in rest[k:]:
+        if word == "--":
+            break
+        if not word.startswith("-") or word == "-" or _NUMBER.match(word):
+            continue
+        name = word.split("=", 1)[0]
+        if name in known or (name.startswith("--") and any(o.startswith(name) for o in known)):
+            continue
+        if not name.startswith("--") and all(f"-{c}" in known for c in name[1:]):
+            continue
+        out.append(word)
+    return out
 
 
 def _leaf_parsers(parser: argparse.ArgumentParser):
@@ -199,10 +232,14 @@ def main(argv: list[str] | None = None) -> int:
     if argv is None:
         serial_blas(sys.argv[1:])
     parser = build_parser()
+    words = sys.argv[1:] if argv is None else [str(a) for a in argv]
+    leaf = command_parser(parser, words)
+    unknown = unknown_options(leaf, words)
+    if unknown:  # before argparse's own checks: a misspelt --out is said, not "--out required"
+        leaf.error(f"unrecognized arguments: {' '.join(unknown)}")
     args, extra = parser.parse_known_args(argv)
     if extra:  # said by the command's own parser: its --help lists what it takes
-        command_parser(parser, sys.argv[1:] if argv is None else [str(a) for a in argv]) \
-            .error(f"unrecognized arguments: {' '.join(extra)}")
+        leaf.error(f"unrecognized arguments: {' '.join(extra)}")
     configure_logging(args.verbose)
     use_sequence_rate(args)
     from .common import set_progress
