@@ -819,13 +819,9 @@ def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
 def _warn_other_source(track, video, role: str) -> None:
     """Say so when a given track was made from a video of another name than ``video`` (a
     renamed copy is fine; another clip of the same size would drive the wrong face)."""
-    made = track.other_video(video)
-    if made:
-        log.warning("%s track %s was made from %s, not %s: if that is another clip, %s", role,
-                    track.label, made, Path(str(video)).name,
-                    "its motion drives the wrong face" if role in ("target", "performance")
-                    else "it drives the wrong head pose" if role == "pose"
-                    else "it does not follow that video's frames")
+    track.warn_other_video(video, "its motion drives the wrong face" if role in (
+        "target", "performance") else "it drives the wrong head pose" if role == "pose"
+        else "it does not follow that video's frames", role)
 
 
 def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: bool) -> None:

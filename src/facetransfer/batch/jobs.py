@@ -74,7 +74,7 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
 
             return capture_resuming(video, model, checkpoint, options=settings.capture,
                                     source=source, fixed=fixed, subject=subject,
-                                    detector_id=face_detector_id(face), every=SAVE_EVERY)
+                                    detector_id=face_detector_id(face), save_every=SAVE_EVERY)
         return capture_video(video, model, options=settings.capture, source=source,
                              fixed=fixed, view=view, subject=subject)
     if face is not None:

@@ -11,13 +11,9 @@
 from __future__ import annotations
 
 import argparse
-import logging
-from pathlib import Path
 
 from ..export import FORMAT_SUFFIXES, FORMATS
 from .common import default_model_for, frame_count, progress_disabled
-
-log = logging.getLogger(__name__)
 
 
 def register(sub) -> None:
@@ -131,10 +127,8 @@ def run(args: argparse.Namespace) -> int:
         track = with_neutral(track, args.neutral)     # checked before a texture is lifted
     texture = args.texture
     if args.texture_from:
-        if track.other_video(args.texture_from):
-            log.warning("track %s was made from %s, not %s: if that is another clip, the "
-                        "texture is lifted through another face's motion", args.track,
-                        track.other_video(args.texture_from), Path(args.texture_from).name)
+        track.warn_other_video(args.texture_from,
+                               "the texture is lifted through another face's motion")
         texture = _lift(track, model, args)
     if args.timecode not in ("source", "none") and args.format != "livelink":
         raise FaceTransferError(f"--timecode: only livelink takes carry one, not {args.format}")

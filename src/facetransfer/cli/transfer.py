@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import logging
 import sys
 from pathlib import Path
 
@@ -34,8 +33,6 @@ ALIGN_HELP = ("how to fit a source of another length: trim (stop where the short
               "(repeat the source), hold (hold the source's last frame); default: trim when the "
               "source is at least as long as the target, hold when it is shorter (the output "
               "always has the target's frame rate)")
-
-log = logging.getLogger(__name__)
 
 
 def _bar_factory():
@@ -642,10 +639,7 @@ def run_puppet(args) -> int:
     if args.track:   # a track of another video would drive the face with the wrong motion
         track.check_video(len(frames), (frames.shape[2], frames.shape[1]),
                           what=f"video {args.video}")
-        if track.other_video(args.video):
-            log.warning("track %s was made from %s, not %s: if that is another clip, the "
-                        "puppet does not move with this video's audio", args.track,
-                        track.other_video(args.video), Path(args.video).name)
+        track.warn_other_video(args.video, "the puppet does not move with this video's audio")
     if track.lost.all():
         raise FaceTransferError(f"no face found in {args.video}")
     frames = None

@@ -205,18 +205,18 @@ def _partial(key: str | None) -> Path | None:
 
 def capture_resuming(video, model, partial, *, frames=None, options=None, source=None,
                      fixed=None, progress=None, workers: int = 1, best_effort: bool = False,
-                     subject=None, detector_id: str | None = None, every: float | None = None,
-                     detect_every: int = 1):
+                     subject=None, detector_id: str | None = None,
+                     save_every: float | None = None, detect_every: int = 1):
     """The capture tracker on the file ``video`` (or its decoded ``frames``) with its progress
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
     fit), continued from there when it holds this run's: an interrupted run loses nothing.
     ``best_effort``: a progress file that cannot be written is a warning, not an error;
     ``subject``: of several people, the face nearest this point (the caller keys ``partial``
     by it: its path, or ``detector_id``, the key's detector part,
-    :func:`facetransfer.track.detect_checkpoint.face_detector_id`); ``every``: seconds between
-    the progress file's periodic saves (default the checkpoint's: where a run can be stopped
-    only by killing it, e.g. a batch worker, a shorter period loses less); ``detect_every``:
-    the detector shown one frame of it (the caller keys ``partial`` by it)."""
+    :func:`facetransfer.track.detect_checkpoint.face_detector_id`); ``save_every``: seconds
+    between the progress file's periodic saves (default the checkpoint's: where a run can be
+    stopped only by killing it, e.g. a batch worker, a shorter period loses less);
+    ``detect_every``: the detector shown one frame of it (the caller keys ``partial`` by it)."""
     from .aspect import View
     from .capture import capture_video
     from .detect_checkpoint import DetectionCheckpoint
@@ -225,7 +225,8 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     clip = video if frames is None else frames
     ck = DetectionCheckpoint.for_video(partial, video, None if frames is None else len(frames),
                                        detector_id, best_effort=best_effort,
-                                       **({} if every is None else {"every": float(every)}))
+                                       **({} if save_every is None
+                                          else {"every": float(save_every)}))
     view = View.of(video)
     saved = ck.load()
     if saved is not None:

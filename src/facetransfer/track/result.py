@@ -32,6 +32,8 @@ key                 shape / dtype        meaning
 
 from __future__ import annotations
 
+import logging
+
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -257,6 +259,18 @@ class Track:
 
         made = Path(str(self.source)).name if self.source else ""
         return made if made and made != Path(str(video)).name else None
+
+    def warn_other_video(self, video, consequence: str, role: str = "") -> None:
+        """A warning where :meth:`other_video`: "ROLE track LABEL was made from X, not Y: if
+        that is another clip, CONSEQUENCE"."""
+        made = self.other_video(video)
+        if made:
+            from pathlib import Path
+
+            logging.getLogger(__name__).warning(
+                "%strack %s was made from %s, not %s: if that is another clip, %s",
+                f"{role} " if role else "", self.label, made, Path(str(video)).name,
+                consequence)
 
     def check_video(self, n_frames: int, size: tuple[int, int], *, what: str = "video") -> None:
         """Raise :class:`TrackError` unless the track matches a video's frame count and size."""
