@@ -195,9 +195,9 @@ def _done_track(out: Path, job, model_hash: str) -> Row | None:
     except TrackError as exc:
         why = f"is not a track ({exc})"
     else:
-        made, video = Path(str(t.source)).name, Path(str(job.video)).name
-        if t.source and made != video:
-            why = f"holds a track of {made}, not of {video}"
+        made = t.other_video(job.video)
+        if made:
+            why = f"holds a track of {made}, not of {Path(str(job.video)).name}"
         elif t.model_hash != model_hash:
             why = "holds a track made with another model"
     if why is not None:

@@ -21,6 +21,7 @@ from .video_display import (ColourTags, container, exact_seek, first_field, show
 from .plate_alpha import sequence_has_alpha, video_has_alpha
 from .video_depth import video_bits
 from .video_read import TRUNCATED_FRAMES, video_info
+from .video_timeline import packet_count
 from .frame_file import bit_depth
 from .video_sequence import IMAGE_SUFFIXES, is_sequence, open_sequence
 
@@ -76,7 +77,8 @@ class VideoFacts:
         Where an image sequence's rate came from (``"said"``, ``"header"``, ``"default"``:
         :attr:`facetransfer.io.video_sequence.Sequence.rate_from`); None for a video file.
     stored_frames : int or None
-        A video file's frames as its packets count them (ffmpeg, stream copy): fewer than
+        A video file's frames as its packets count them (:func:`facetransfer.io.
+        video_timeline.packet_count`, read once with its timeline): fewer than
         ``n_frames`` in a file cut short (said, as :func:`facetransfer.io.video.read_video`
         says it); None where not counted.
     """
@@ -129,18 +131,7 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
                       video_colour(path), ", ".join(audio_codecs(path)) or None, turn=info.turn,
                       timecode=timecode_of(path), alpha=video_has_alpha(path),
-                      bits=video_bits(path), stored_frames=_stored(path))
-
-
-def _stored(path) -> int | None:
-    """The packets of a video file's first video stream, or None where ffmpeg cannot say."""
-    from ..errors import VideoError
-    from .video import stored_frame_count
-
-    try:
-        return stored_frame_count(path)
-    except (VideoError, OSError):
-        return None
+                      bits=video_bits(path), stored_frames=packet_count(path))
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
