@@ -188,6 +188,44 @@ def test_rendering_in_processes_equals_one_thread(quick_model, topo, synthetic):
     assert runs[1][1].mouth_mask.any() and runs[1][1].face_mask.sum() > 2000
 
 
+def _blas_threads() -> list[int]:
+    from threadpoolctl import threadpool_info
+
+    return [i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"]
+
+
+def test_the_render_runs_blas_on_one_thread_and_restores_it(quick_model, topo, synthetic,
+                                                            monkeypatch):
+    """BLAS's threads would spin beside the render's own (BENCHMARKS.md, "Fortieth
+    session"): one each while the frames are made (on one thread or two), as many as before
+    once the generator is closed."""
+    from threadpoolctl import threadpool_limits
+
+    fa, ta, fb, tb, truth = synthetic
+    new = recombine(tb, expression=ta)
+    seen = []
+    call = rw._ClipRenderer.__call__
+
+    def spying_call(self, i):
+        seen.append(_blas_threads())
+        return call(self, i)
+
+    monkeypatch.setattr(rw._ClipRenderer, "__call__", spying_call)
+    with threadpool_limits(limits=2, user_api="blas"):
+        before = _blas_threads()
+        if not before or max(before) < 2:
+            pytest.skip("no BLAS library with threads to limit")
+        for workers in (1, 2):
+            seen.clear()
+            it = rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
+                                   source_track=ta, topo=topo, workers=workers)
+            next(it)
+            assert seen and all(s == [1] * len(before) for s in seen)
+            assert _blas_threads() == [1] * len(before)  # while the render is suspended too
+            it.close()
+            assert _blas_threads() == before
+
+
 def test_crop_of_and_paste_round_trip(synthetic):
     fa, ta, fb, tb, truth = synthetic
     T = fb[0]

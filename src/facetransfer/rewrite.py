@@ -441,8 +441,8 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         With ``mouth="function"``: the texture function to query (default: lifted here from
         the source frames, else the target's).
     workers : int, optional
-        Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU);
-        the output does not depend on it.
+        Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU;
+        BLAS on one thread while they run, :func:`_render`); the output does not depend on it.
     processes : bool, optional
         With ``workers > 1``: in forked processes where the platform can, not threads (the
         default: a little faster on 2 cores; the kernels release the GIL).
@@ -480,22 +480,31 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
 def _render(one, target_frames, todo: range, workers: int | None, processes: bool | None,
             progress):
     """Yield ``one(i)`` for i in ``todo`` in order: here, on threads or in forked processes
-    (see :func:`rewrite_frames`' ``workers`` and ``processes``)."""
-    workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
-    if workers == 1 or len(todo) < 2:
-        for i in todo:
-            yield one(i)
-            if progress:
-                progress(1)
-        return
-    import multiprocessing as mp
+    (see :func:`rewrite_frames`' ``workers`` and ``processes``), BLAS on one thread meanwhile.
 
-    if processes is None:
-        processes = _RENDER_IN_PROCESSES and len(todo) >= 16  # worth a fork for long clips only
-    if processes and "fork" in mp.get_all_start_methods():
-        yield from _render_in_processes(one, target_frames, todo, workers, progress)
-    else:
-        yield from _render_in_threads(one, todo, workers, progress)
+    The frames are rendered on threads of their own (two on two cores) beside the encoder, and
+    OpenBLAS's threads on top of them spin between products: the CLI starts its commands with
+    one (:data:`facetransfer.cli.main.SERIAL_POOLS`), a program calling this gets the same
+    while the frames are made (issue 13's 300 frames 5.6 -> 4.85 s; BENCHMARKS.md, "Fortieth
+    session")."""
+    from threadpoolctl import threadpool_limits
+
+    workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
+    with threadpool_limits(limits=1, user_api="blas"):
+        if workers == 1 or len(todo) < 2:
+            for i in todo:
+                yield one(i)
+                if progress:
+                    progress(1)
+            return
+        import multiprocessing as mp
+
+        if processes is None:
+            processes = _RENDER_IN_PROCESSES and len(todo) >= 16  # a fork for long clips only
+        if processes and "fork" in mp.get_all_start_methods():
+            yield from _render_in_processes(one, target_frames, todo, workers, progress)
+        else:
+            yield from _render_in_threads(one, todo, workers, progress)
 
 
 def _check_clip(target_frames, target_track, new_track, source_track, with_mouth: bool
