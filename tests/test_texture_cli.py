@@ -137,3 +137,30 @@ def test_lift_a_track_of_the_clips_first_frames(run, tmp_path, model_path, capsy
     err = capsys.readouterr().err.strip()
     assert err.startswith(f"facetransfer texture: error: track {tmp_path / 'other.npz'} was "
                           "made with another model") and "--model" in err, err
+
+
+def test_lift_function_that_would_not_fit_is_refused_with_the_step_that_fits(
+        run, tmp_path, model_path, capsys, monkeypatch):
+    """``--function`` holds every used frame's texture (twice while the function is made):
+    past the memory available it is refused before any frame is read, naming the --step that
+    fits; the merged texture alone is made in one texture's memory and is not refused."""
+    from facetransfer.io import memory
+    from facetransfer.model import load_model
+
+    model = load_model(model_path)
+    clip = make_clip(model, random_performance(model, 6, seed=2, size=(160, 128)))
+    write_clip(clip, tmp_path / "c.mp4")
+    # 6 frames of 64² textures (64 KB each, 128 KB while the function is made): room for 2
+    monkeypatch.setattr(memory, "available_memory", lambda: 2 * 2 * 64 * 64 * 16)
+    argv = ("texture", "lift", tmp_path / "c.mp4", "--track", tmp_path / "c.truth.npz",
+            "--model", model_path, "--size", 64)
+    capsys.readouterr()
+    assert run(*argv, "--function", tmp_path / "f.npz", "--out", tmp_path / "l.png") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--function keeps the texture of each of the 6 frames" in err[0]
+    assert "give --step 3 or more" in err[0]
+    assert not (tmp_path / "l.png").exists() and not (tmp_path / "f.npz").exists()
+    assert run(*argv, "--step", 3, "--function", tmp_path / "f.npz",
+               "--out", tmp_path / "l.png") == 0
+    assert run(*argv, "--out", tmp_path / "m.png") == 0      # no function: merged as it goes
+    assert "merged from 6 frames" in capsys.readouterr().out

@@ -87,3 +87,47 @@ def test_lift_track_rejects_mismatched_clip(clip_and_model):
         lift_track(model, iter(clip.frames), clip.truth, tex_size=32, step=0)
     with pytest.raises(TextureError):
         attribute_vector(model, {"identity": np.zeros(3)})
+
+
+def test_lift_merged_is_the_merge_of_lift_track_in_one_textures_memory(clip_and_model):
+    """The merge taken as the frames come (lift_merged, TextureSum) is merge_textures of every
+    lifted frame (float64 sums against float32 ones: within 1e-3 of a level), and its peak
+    memory does not grow with the frames lifted, where lift_track's does."""
+    import tracemalloc
+
+    from facetransfer.texture import TextureSum, lift_merged
+
+    model, clip, _ = clip_and_model
+    lt = lift_track(model, iter(clip.frames), clip.truth, tex_size=128, step=2)
+    held = merge_textures(lt.lifted)
+    merged, used = lift_merged(model, iter(clip.frames), clip.truth, tex_size=128, step=2)
+    assert used == len(lt.lifted) == 5
+    np.testing.assert_allclose(merged.weight, held.weight, rtol=1e-5, atol=1e-5)
+    assert np.abs(merged.texture - held.texture).max() < 1e-3
+    sums = TextureSum()
+    with pytest.raises(TextureError, match="at least one"):
+        sums.merged()
+
+    def peak(fn, n):
+        frames = np.concatenate([clip.frames] * n)
+        truth = _repeated(clip.truth, n)
+        tracemalloc.start()
+        fn(model, iter(frames), truth, tex_size=128, step=1)
+        top = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        return top
+
+    one_texture = 128 * 128 * 16
+    assert peak(lift_merged, 3) - peak(lift_merged, 1) < 2 * one_texture   # 20 more frames
+    assert peak(lift_track, 3) - peak(lift_track, 1) > 15 * one_texture
+
+
+def _repeated(truth, n: int):
+    """``truth``'s frames ``n`` times over (as a track of a clip played ``n`` times)."""
+    import dataclasses
+
+    return dataclasses.replace(
+        truth, rotation=np.concatenate([truth.rotation] * n),
+        scale=np.concatenate([truth.scale] * n),
+        translation=np.concatenate([truth.translation] * n),
+        weights={m: np.concatenate([w] * n) for m, w in truth.weights.items()})

@@ -97,7 +97,8 @@ def cmd_lift(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from ..io.video import iter_frames, video_info
-    from ..texture import TextureFunction, lift_track, merge_textures, texture_to_uint8
+    from ..texture import (TextureFunction, lift_merged, lift_track, merge_textures,
+                           texture_to_uint8)
 
     inputs = [args.video, args.track, args.model]
     out = _image_out(args.out, args, inputs)
@@ -125,20 +126,43 @@ def cmd_lift(args: argparse.Namespace) -> int:
                                 f"{track.frame_size[1]} frames, the video is "
                                 f"{info.size[0]}x{info.size[1]}")
     n = int(track.scale.shape[0])
-    with tqdm(total=(n + args.step - 1) // args.step, desc="texture lift", unit="frame",
+    used = (n + args.step - 1) // args.step
+    if fn_out is not None:
+        _check_function_memory(used, args.size, args.step)
+    with tqdm(total=used, desc="texture lift", unit="frame",
               disable=progress_disabled()) as bar:
         # a track of the clip's first n frames (``track --max-frames``) lifts those
-        lt = lift_track(model, itertools.islice(iter_frames(args.video), n), track,
-                        tex_size=args.size, step=args.step, progress=bar.update)
-    merged = merge_textures(lt.lifted)
+        frames = itertools.islice(iter_frames(args.video), n)
+        if fn_out is None:            # merged as they come: one texture's memory
+            merged, used = lift_merged(model, frames, track, tex_size=args.size,
+                                       step=args.step, progress=bar.update)
+        else:                         # the texture function holds every frame's
+            lt = lift_track(model, frames, track, tex_size=args.size, step=args.step,
+                            progress=bar.update)
+            merged = merge_textures(lt.lifted)
     write_image(out, texture_to_uint8(merged.texture), overwrite=args.overwrite)
     seen = float((merged.weight > 1e-6).mean())
-    msg = f"wrote {out} (merged from {len(lt.lifted)} frames, {100 * seen:.0f}% of texels seen)"
+    msg = f"wrote {out} (merged from {used} frames, {100 * seen:.0f}% of texels seen)"
     if fn_out is not None:
         TextureFunction.from_lifted(lt.lifted, lt.attributes, k=args.k).save(fn_out)
         msg += f" and {fn_out} (texture function, k={args.k})"
     print(msg)
     return 0
+
+
+def _check_function_memory(used: int, size: int, step: int) -> None:
+    """Refuse a ``--function`` whose frames' textures would not fit in memory: each is held
+    (``size² x 16`` bytes: RGB and weight in float32), twice while the function is made."""
+    from ..io.memory import available_memory
+
+    need = 2 * used * size * size * 16
+    have = available_memory()
+    if need > have:
+        fit = max(int(have // (2 * size * size * 16)), 1)
+        raise FaceTransferError(
+            f"--function keeps the texture of each of the {used} frames used: "
+            f"{need / 2**30:.1f} GB, more than the {have / 2**30:.1f} GB available; give "
+            f"--step {-(-used * step // fit)} or more, or a smaller --size")
 
 
 def cmd_blend(args: argparse.Namespace) -> int:

@@ -110,14 +110,14 @@ def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 1
     import itertools
 
     from ..io.video import iter_frames, video_info
-    from ..texture import lift_track, merge_textures, texture_to_uint8
+    from ..texture import lift_merged, texture_to_uint8
 
     info = video_info(video)
     track.check_video(min(info.n_frames, track.n_frames) if info.n_frames else info.n_frames,
                       info.size, what=f"video {video}")
-    lt = lift_track(model, itertools.islice(iter_frames(video), track.n_frames), track,
-                    tex_size=tex_size, step=step, progress=progress)
-    return texture_to_uint8(merge_textures(lt.lifted).texture)
+    merged, _ = lift_merged(model, itertools.islice(iter_frames(video), track.n_frames), track,
+                            tex_size=tex_size, step=step, progress=progress)
+    return texture_to_uint8(merged.texture)
 
 
 def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:

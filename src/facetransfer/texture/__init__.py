@@ -14,10 +14,11 @@ Pipeline, per tracked frame (pose and mesh known), one module per stage:
    where ``n_c`` is the unit surface normal in camera coordinates, ``d`` the unit direction from
    the surface towards the camera (``(0, 0, 1)`` for the weak-perspective camera of §5.1, Eq. (7))
    and ``visible`` the z-buffer test of :mod:`facetransfer.render`. Samples seen obliquely (near
-   the silhouette) or hidden get little or no weight. :func:`lift_track` runs it over a clip.
+   the silhouette) or hidden get little or no weight. :func:`lift_track` runs it over a clip
+   (:func:`lift_merged`: merged as the frames come, in the memory of one texture).
    Texels map to surface points through a :class:`UVAtlas` (:mod:`.atlas`).
-2. :mod:`.merge` — :func:`merge_textures`: the weight-normalised mean over frames; texels never
-   seen are filled by push-pull interpolation (:func:`fill_holes`).
+2. :mod:`.merge` — :func:`merge_textures`: the weight-normalised mean over frames (its sums
+   taken one texture at a time, :class:`TextureSum`); texels never seen are filled by push-pull interpolation (:func:`fill_holes`).
 3. :mod:`.function` — :class:`TextureFunction`: the texture for an attribute vector (e.g.
    expression and viseme weights concatenated, :func:`attribute_vector`) is the weighted sum of
    the lifted textures of the ``k`` training frames nearest in attribute space, each texel weighted
@@ -47,9 +48,9 @@ from .default import default_face_texture
 from .function import TextureFunction, attribute_vector
 from .lee_perry_smith import (LEE_PERRY_SMITH_CREDIT, lee_perry_smith_template_texture,
                               lee_perry_smith_texture, load_lee_perry_smith)
-from .lifting import (LiftedTexture, LiftedTrack, LiftedUVTexture, lift_track, lift_uv_texture,
-                      lift_vertex_colors, obliqueness_weight)
-from .merge import MergedTexture, fill_holes, fill_vertex_colors, merge_textures
+from .lifting import (LiftedTexture, LiftedTrack, LiftedUVTexture, lift_merged, lift_track,
+                      lift_uv_texture, lift_vertex_colors, obliqueness_weight)
+from .merge import MergedTexture, TextureSum, fill_holes, fill_vertex_colors, merge_textures
 
 __all__ = [
     "TextureError",
@@ -62,11 +63,13 @@ __all__ = [
     "lift_vertex_colors",
     "lift_uv_texture",
     "merge_textures",
+    "TextureSum",
     "fill_holes",
     "fill_vertex_colors",
     "TextureFunction",
     "LiftedTrack",
     "lift_track",
+    "lift_merged",
     "attribute_vector",
     "default_face_texture",
     "bake_texture",

@@ -10,7 +10,8 @@ where ``n_c`` is the unit surface normal in camera coordinates, ``d`` the unit d
 surface towards the camera (``(0, 0, 1)`` for the weak-perspective camera of §5.1, Eq. (7)) and
 ``visible`` the z-buffer test of :mod:`facetransfer.render`. Eq. (1) and the sampling are written
 once (:func:`_weighted_samples`) for both :func:`lift_vertex_colors` and :func:`lift_uv_texture`;
-:func:`lift_track` runs the UV lifting over a tracked (or synthetic) clip.
+:func:`lift_track` runs the UV lifting over a tracked (or synthetic) clip, keeping every
+frame's texture (for the texture function); :func:`lift_merged` merges them as they come.
 """
 
 from __future__ import annotations
@@ -25,11 +26,12 @@ from ..render import rasterize, vertex_normals, vertex_visibility
 from .atlas import UVAtlas, uv_atlas
 from .base import TextureError, check_frame, check_raster, check_uvs, check_vertices, default_tol
 from .function import attribute_vector
+from .merge import MergedTexture, TextureSum
 
 log = logging.getLogger(__name__)
 
 __all__ = ["LiftedTexture", "LiftedUVTexture", "LiftedTrack", "obliqueness_weight",
-           "lift_vertex_colors", "lift_uv_texture", "lift_track"]
+           "lift_vertex_colors", "lift_uv_texture", "lift_track", "lift_merged"]
 
 
 class LiftedTexture(NamedTuple):
@@ -337,7 +339,43 @@ def lift_track(model, frames, track, *, tex_size: int = 256, step: int = 1, powe
     Returns
     -------
     LiftedTrack
+        Every used frame's texture, held: ``tex_size² x 16`` bytes each (4 MB at 512);
+        :func:`lift_merged` merges them as they come instead.
     """
+    lifted, attrs, used = [], [], []
+    for i, w, tex in _lifted_frames(model, frames, track, tex_size, step, power, progress):
+        lifted.append(tex)
+        attrs.append(attribute_vector(model, w))
+        used.append(i)
+    return LiftedTrack(lifted, np.asarray(attrs, dtype=np.float64), np.asarray(used, np.int64))
+
+
+def lift_merged(model, frames, track, *, tex_size: int = 256, step: int = 1,
+                power: float = 2.0, progress=None) -> tuple[MergedTexture, int]:
+    """:func:`lift_track` merged (:func:`facetransfer.texture.merge.merge_textures`, holes
+    filled) as the frames come, in the memory of one texture whatever the clip's length.
+
+    Parameters
+    ----------
+    model, frames, track, tex_size, step, power, progress
+        As :func:`lift_track`'s.
+
+    Returns
+    -------
+    merged : MergedTexture
+        ``(tex_size, tex_size, 3)`` and its total weight per texel.
+    n_used : int
+        The frames lifted.
+    """
+    sums = TextureSum()
+    for _, _, tex in _lifted_frames(model, frames, track, tex_size, step, power, progress):
+        sums.add(*tex)
+    return sums.merged(), sums.count
+
+
+def _lifted_frames(model, frames, track, tex_size: int, step: int, power: float, progress):
+    """Yield ``(i, weights (mode -> (r,)), LiftedUVTexture)`` of every ``step``-th frame of
+    the clip; raise :class:`TextureError` unless the clip has the track's frames."""
     if getattr(model, "uvs", None) is None:
         raise TextureError("lifting a UV texture needs a model with texture coordinates")
     if int(step) != step or step < 1:
@@ -345,7 +383,6 @@ def lift_track(model, frames, track, *, tex_size: int = 256, step: int = 1, powe
     n = int(np.asarray(track.scale).shape[0])
     faces = np.asarray(model.faces, dtype=np.int64)
     atlas = uv_atlas(faces, model.uvs, tex_size)
-    lifted, attrs, used = [], [], []
     i = -1
     for i, frame in enumerate(frames):
         if i >= n:
@@ -354,12 +391,9 @@ def lift_track(model, frames, track, *, tex_size: int = 256, step: int = 1, powe
             continue
         w = {m: np.asarray(track.weights[m])[i] for m in model.mode_names}
         V = model.synthesize(w)  # Eq. (5)
-        lifted.append(lift_uv_texture(frame, V, faces, model.uvs, track.camera(i), tex_size,
-                                      atlas=atlas, power=power))
-        attrs.append(attribute_vector(model, w))
-        used.append(i)
+        yield i, w, lift_uv_texture(frame, V, faces, model.uvs, track.camera(i), tex_size,
+                                    atlas=atlas, power=power)
         if progress is not None:
             progress(1)
     if i + 1 != n:
         raise TextureError(f"the clip has {i + 1} frames but the track has {n}")
-    return LiftedTrack(lifted, np.asarray(attrs, dtype=np.float64), np.asarray(used, np.int64))

@@ -13,7 +13,7 @@ S. Gortler, R. Grzeszczuk, R. Szeliski, M. Cohen. The Lumigraph. SIGGRAPH 1996 (
 from __future__ import annotations
 
 import logging
-from collections.abc import Sequence
+from collections.abc import Iterable
 from typing import NamedTuple
 
 import cv2
@@ -25,7 +25,7 @@ from .base import TextureError, texture_to_uint8
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MergedTexture", "merge_textures", "fill_holes", "fill_vertex_colors",
+__all__ = ["MergedTexture", "TextureSum", "merge_textures", "fill_holes", "fill_vertex_colors",
            "push_pull_points"]
 
 
@@ -44,40 +44,91 @@ class MergedTexture(NamedTuple):
     weight: np.ndarray
 
 
+def _checked_pair(item, i: int, shape) -> tuple[np.ndarray, np.ndarray]:
+    """``lifted[i]`` as float32 ``(texture (..., 3), weight (...))``, checked (of ``shape``
+    when given: the first texture's)."""
+    if len(item) != 2:
+        raise TextureError(f"lifted[{i}] must be a (texture, weight) pair")
+    c = np.asarray(item[0], dtype=np.float32)
+    w = np.asarray(item[1], dtype=np.float32)
+    if c.shape[-1:] != (3,) or w.shape != c.shape[:-1]:
+        raise ShapeError(f"lifted[{i}]: texture {c.shape} and weight {w.shape} must be "
+                         "(..., 3) and (...)")
+    if shape is not None and c.shape != shape:
+        raise ShapeError(f"lifted[{i}] has shape {c.shape}, expected {shape} like lifted[0]")
+    if not (np.all(np.isfinite(w)) and np.all(w >= 0)):
+        raise TextureError(f"lifted[{i}] weights must be finite and >= 0")
+    return c, w
+
+
 def stack_lifted(lifted) -> tuple[np.ndarray, np.ndarray]:
     """Validate (texture (..., 3), weight (...)) pairs of one shape and stack them: (F, ..., 3), (F, ...)."""
     if len(lifted) == 0:
         raise TextureError("need at least one lifted texture")
     cols, ws = [], []
-    shape = None
     for i, item in enumerate(lifted):
-        if len(item) != 2:
-            raise TextureError(f"lifted[{i}] must be a (texture, weight) pair")
-        c = np.asarray(item[0], dtype=np.float32)
-        w = np.asarray(item[1], dtype=np.float32)
-        if c.shape[-1:] != (3,) or w.shape != c.shape[:-1]:
-            raise ShapeError(f"lifted[{i}]: texture {c.shape} and weight {w.shape} must be "
-                             "(..., 3) and (...)")
-        if shape is None:
-            shape = c.shape
-        elif c.shape != shape:
-            raise ShapeError(f"lifted[{i}] has shape {c.shape}, expected {shape} like lifted[0]")
-        if not (np.all(np.isfinite(w)) and np.all(w >= 0)):
-            raise TextureError(f"lifted[{i}] weights must be finite and >= 0")
+        c, w = _checked_pair(item, i, cols[0].shape if cols else None)
         cols.append(c)
         ws.append(w)
     return np.stack(cols), np.stack(ws)
 
 
-def merge_textures(lifted: Sequence, *, fill: str = "auto", min_weight: float = 1e-6) -> MergedTexture:
+class TextureSum:
+    """The sums of :func:`merge_textures`, ``Σ_f w_f tex_f`` and ``Σ_f w_f`` (float64), taken
+    one lifted texture at a time: a clip's merge in the memory of one texture instead of all
+    of them (a 512² texture lifted from each of 587 frames held 5.6 GB; BENCHMARKS.md,
+    "Fortieth session")."""
+
+    def __init__(self) -> None:
+        self.num: np.ndarray | None = None      # (..., 3) float64
+        self.total: np.ndarray | None = None    # (...,) float64
+        self.count = 0
+
+    def add(self, texture, weight) -> None:
+        """Add one frame's ``texture`` (..., 3) with its ``weight`` (...)."""
+        c, w = _checked_pair((texture, weight), self.count,
+                             None if self.num is None else self.num.shape)
+        if self.num is None:
+            self.num = np.zeros(c.shape, np.float64)
+            self.total = np.zeros(w.shape, np.float64)
+        self.num += w[..., None] * c
+        self.total += w
+        self.count += 1
+
+    def merged(self, *, fill: str = "auto", min_weight: float = 1e-6) -> MergedTexture:
+        """:func:`merge_textures` of the textures added."""
+        _check_fill(fill)
+        if self.count == 0:
+            raise TextureError("need at least one lifted texture")
+        known = self.total > min_weight
+        tex = np.zeros_like(self.num)
+        tex[known] = self.num[known] / self.total[known][:, None]
+        is_image = tex.ndim == 3
+        if fill == "auto":
+            fill = "pushpull" if is_image else "none"
+        if fill != "none":
+            if not is_image:
+                raise TextureError(f"fill={fill!r} needs (T, T, 3) textures, got {tex.shape}; "
+                                   "use fill_vertex_colors for per-vertex colours")
+            tex = fill_holes(tex, known, method=fill)
+        return MergedTexture(tex.astype(np.float32), self.total.astype(np.float32))
+
+
+def _check_fill(fill: str) -> None:
+    if fill not in ("auto", "pushpull", "inpaint", "none"):
+        raise TextureError(f"fill must be 'auto', 'pushpull', 'inpaint' or 'none', got {fill!r}")
+
+
+def merge_textures(lifted: Iterable, *, fill: str = "auto", min_weight: float = 1e-6) -> MergedTexture:
     """Weighted mean of lifted textures over frames, with holes filled.
 
     ``texture = Σ_f w_f tex_f / Σ_f w_f`` per texel (or vertex).
 
     Parameters
     ----------
-    lifted : sequence of (texture (..., 3), weight (...)) pairs
-        E.g. :class:`LiftedUVTexture` or :class:`LiftedTexture` results of several frames.
+    lifted : iterable of (texture (..., 3), weight (...)) pairs
+        E.g. :class:`LiftedUVTexture` or :class:`LiftedTexture` results of several frames
+        (summed one at a time: :class:`TextureSum`).
     fill : {"auto", "pushpull", "inpaint", "none"}, keyword-only
         How to fill texels whose total weight is below ``min_weight``: ``"auto"`` is push-pull
         for (T, T, 3) images and nothing for per-vertex colours (use :func:`fill_vertex_colors`).
@@ -87,23 +138,13 @@ def merge_textures(lifted: Sequence, *, fill: str = "auto", min_weight: float = 
     -------
     MergedTexture
     """
-    if fill not in ("auto", "pushpull", "inpaint", "none"):
-        raise TextureError(f"fill must be 'auto', 'pushpull', 'inpaint' or 'none', got {fill!r}")
-    C, Wt = stack_lifted(lifted)
-    total = Wt.sum(axis=0)
-    num = np.einsum("f...,f...c->...c", Wt, C)
-    known = total > min_weight
-    tex = np.zeros_like(num)
-    tex[known] = num[known] / total[known][:, None]
-    is_image = tex.ndim == 3
-    if fill == "auto":
-        fill = "pushpull" if is_image else "none"
-    if fill != "none":
-        if not is_image:
-            raise TextureError(f"fill={fill!r} needs (T, T, 3) textures, got {tex.shape}; use "
-                               "fill_vertex_colors for per-vertex colours")
-        tex = fill_holes(tex, known, method=fill)
-    return MergedTexture(tex.astype(np.float32), total.astype(np.float32))
+    _check_fill(fill)
+    sums = TextureSum()
+    for item in lifted:
+        if len(item) != 2:
+            raise TextureError(f"lifted[{sums.count}] must be a (texture, weight) pair")
+        sums.add(*item)
+    return sums.merged(fill=fill, min_weight=min_weight)
 
 
 def fill_holes(texture, known, *, method: str = "pushpull") -> np.ndarray:
