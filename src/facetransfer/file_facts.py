@@ -59,6 +59,13 @@ def _ranges(mask: np.ndarray, limit: int = 4) -> str:
     return ", ".join(runs[:limit]) + (f", ... ({len(runs)} runs)" if len(runs) > limit else "")
 
 
+def _no_activations(f: dict) -> str:
+    """Why a track (its :func:`track_facts` ``f``) holds no activations."""
+    if f["default_model"]:      # an optical-flow track written before they were attached
+        return "none (written by an older version: track the video again to export it)"
+    return "none (the model's expressions are not ARKit-named: nothing to export)"
+
+
 def _default_model_hash() -> str | None:
     """The content hash of the default model if it is built (read from its file's metadata,
     not by loading it), else None."""
@@ -138,9 +145,7 @@ def _track_lines(f: dict) -> list[str]:
              + f"; with {model}, hash {f['model_hash'][:12]}... (modes "
              f"{', '.join(f['modes'])})",
              "  ARKit activations: " + (f"{f['activations']} (exports and takes use them)"
-                                        if f["activations"] else
-                                        "none (the model's expressions are not ARKit-named: "
-                                        "nothing to export)"),
+                                        if f["activations"] else _no_activations(f)),
              f"  face lost in {f['lost_frames']} of {f['frames']} frames"
              + (f" ({f['lost']})" if f["lost"] else "")
              + f"; mean confidence {f['mean_confidence']:.2f}"]

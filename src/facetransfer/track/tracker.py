@@ -537,6 +537,12 @@ def _assemble(model, states, conf, lost, fps, size, src, opt: TrackOptions) -> T
     Y = np.einsum("fij,fnj->fni", R[:, :2], X) * s[:, None, None]
     Y[..., 1] *= -1
     L = Y + t[:, None, :]
-    return Track(fps=fps, frame_size=size, rotation=R, scale=s, translation=t, weights=w,
-                 landmarks2d=L, confidence=np.clip(conf, 0, 1), lost=lost,
-                 model_hash=model.content_hash, mode_names=tuple(model.mode_names), source=src)
+    from ..arkit import attach_activations
+
+    # an ARKit model's expression weights as the 52 activations (Eq. (A) inverted, clipped to
+    # [0, 1]): what export, view and edit read
+    return attach_activations(
+        Track(fps=fps, frame_size=size, rotation=R, scale=s, translation=t, weights=w,
+              landmarks2d=L, confidence=np.clip(conf, 0, 1), lost=lost,
+              model_hash=model.content_hash, mode_names=tuple(model.mode_names), source=src),
+        model)
