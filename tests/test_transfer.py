@@ -346,6 +346,12 @@ def test_edits_of_an_arkit_track_act_on_its_activations(arkit_model, make_arkit_
         edit_track(track, arkit_model, scale=[EditScale("grin", 2.0)])
     with pytest.raises(TransferError, match="jawOpen=-2: an ARKit activation lies in 0..1"):
         edit_track(track, arkit_model, scale=[EditScale("jawOpen", -2.0)])
+    # a shape the model lacks (the FaceKit has no tongue) was "added" and nothing changed
+    with pytest.raises(TransferError, match="the model has no tongueOut shape"):
+        edit_track(track, arkit_model, add=[EditAdd("tongueOut", 1, 3)])
+    with pytest.raises(TransferError, match="did you mean jawOpen") as err:
+        edit_track(track, arkit_model, scale=[EditScale("JawOpen", 2.0)])
+    assert "tongueOut" not in str(err.value)                 # the list: the model's shapes
 
 
 def test_identity_weights_outside_the_models_identity_space_are_refused(arkit_model):

@@ -586,26 +586,37 @@ def _edit_activations(w: np.ndarray, model, scale, add, ramp: int) -> np.ndarray
     activation, ``EditAdd`` adds ``amount`` times the envelope to it; each activation then
     clipped to ARKit's [0, 1]. (A projection on the weights would also count the other
     shapes' part along the shape's direction: ``jawOpen=2`` made jawOpen 6 times as large.)"""
-    from .arkit import ARKIT_NAMES, activations_to_weights, weights_to_activations
+    from .arkit import activations_to_weights, arkit_rows, weights_to_activations
 
     act = weights_to_activations(model, w, clip=False)
+    has = arkit_rows(model) >= 0
     for s in scale:
         if s.factor < 0:  # clipped to [0, 1], the shape would be gone: not what was asked
             raise TransferError(f"--scale {s.label}={s.factor:g}: an ARKit activation lies in "
                                 "0..1, so a negative factor would only remove the shape; give "
                                 f"{s.label}=0 to remove it")
-        act[:, _arkit_index(s.label, ARKIT_NAMES)] *= s.factor
+        act[:, _arkit_index(s.label, has)] *= s.factor
     for a in add:
         e = ramp_envelope(len(act), a.start, a.stop, ramp)
-        act[:, _arkit_index(a.label, ARKIT_NAMES)] += a.amount * e
+        act[:, _arkit_index(a.label, has)] += a.amount * e
     return activations_to_weights(model, np.clip(act, 0.0, 1.0))
 
 
-def _arkit_index(label: str, names) -> int:
-    if label not in names:
-        raise TransferError(f"unknown expression {label!r}; the model knows: "
-                            f"{', '.join(names)}, and {', '.join(SIDE_WORDS)} (both sides)")
-    return names.index(label)
+def _arkit_index(label: str, has: np.ndarray) -> int:
+    """The ARKit index of ``label``, a shape the model has (``has`` (52,) bool); else a
+    :class:`TransferError` naming those it has (an edit of a shape it lacks changes nothing)."""
+    from .arkit import ARKIT_NAMES
+
+    known = [n for n, h in zip(ARKIT_NAMES, has) if h]
+    if label in ARKIT_NAMES and label not in known:
+        raise TransferError(f"the model has no {label} shape (its data set has none): an edit "
+                            "of it would change nothing")
+    if label not in known:
+        close = [n for n in known if n.lower() == label.lower()]
+        hint = f" (did you mean {close[0]}?)" if close else ""
+        raise TransferError(f"unknown expression {label!r}{hint}; the model knows: "
+                            f"{', '.join(known)}, and {', '.join(SIDE_WORDS)} (both sides)")
+    return ARKIT_NAMES.index(label)
 
 
 def _edit_weights(w: np.ndarray, model, k: int, scale, add, ramp: int, mode: str,
