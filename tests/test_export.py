@@ -78,11 +78,17 @@ def test_timecodes():
     assert format_timecode(0, 25) == "00:00:00:00.000"
     assert format_timecode(26, 25) == "00:00:01:01.000"
     assert format_timecode(25 * 3600 + 25 * 61 + 7, 25) == "01:01:01:07.000"
-    assert format_timecode(1, 59.94) == "00:00:00:01.001"  # the app's 59.94 fps sub-frames
-    assert format_timecode(2, 59.94) == "00:00:00:02.002"
+    # a row per frame, labelled as its plate's timecode counts the frames: at 23.976 fps the
+    # frames of 24 a second (before: the clock, k x 1.001 frames, one frame off every 42 s)
+    assert format_timecode(1, 59.94) == "00:00:00:01.000"
+    assert format_timecode(1000, 23.976, "01:00:00:00") == "01:00:41:16.000"
+    assert format_timecode(1007, 23.976, "01:00:00:00") == "01:00:41:23.000"
+    # after a drop-frame start (the CSV has no ';'), the rows count clock time
+    assert format_timecode(0, 29.97, "01:00:00;00") == "00:59:59:29.892"
+    assert format_timecode(1, 30000 / 1001, "01:00:00;00") == "01:00:00:00.893"
     for fps in (24, 25, 29.97, 30, 59.94, 60):
         for k in (0, 1, 17, 1000, 123457):
-            assert parse_timecode(format_timecode(k, fps), fps) == pytest.approx(k, abs=6e-4)
+            assert parse_timecode(format_timecode(k, fps), fps) == k
     with pytest.raises(ExportError, match="HH:MM:SS:FF.mmm"):
         parse_timecode("00:00:01", 25)
 

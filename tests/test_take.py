@@ -323,11 +323,10 @@ def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_cli
     from facetransfer.cli.main import main
     from facetransfer.export.livelink import format_timecode, read_livelink
     from facetransfer.io.video import VideoOptions, read_video, write_video
-    from facetransfer.io.video_display import timecode_seconds
     from facetransfer.track import Track
 
-    assert format_timecode(0, 25.0, 3600.0) == "01:00:00:00.000"
-    assert format_timecode(3, 25.0, timecode_seconds("01:00:00:10", 25.0)) == "01:00:00:13.000"
+    assert format_timecode(0, 25.0, "01:00:00:00") == "01:00:00:00.000"
+    assert format_timecode(3, 25.0, "01:00:00:10") == "01:00:00:13.000"
     d = arkit_clip
     plate = tmp_path / "plate.mov"
     write_video(plate, read_video(d / "target.mp4")[0], 25.0,
@@ -422,3 +421,24 @@ def test_a_short_takes_rate_guess_names_the_take(caplog):
     assert [r.getMessage() for r in caplog.records] == [
         "take clips/short.csv lies within one second of timecode: its frames are taken at 24 "
         "a second (the smallest timecode rate above its frame numbers)"]
+
+
+def test_a_take_at_the_plates_own_rate_counts_its_frames():
+    """A take exported from a 23.976 fps plate (rows labelled as the plate's timecode counts
+    its frames, 24 a second) is read back frame for frame: row k at k / 23.976 s from the
+    plate's start (read as clock time, row 1000 would fall a frame late); a take of another
+    rate (60 on a 29.97 plate) or beside a drop-frame start is read as clock time."""
+    from facetransfer import take as tk
+    from facetransfer.export.livelink import format_timecode
+
+    fps = 24000 / 1001
+    codes = [format_timecode(k, fps, "01:00:00:00") for k in range(1100)]
+    assert codes[1000] == "01:00:41:16.000"
+    clock, first = tk._take_clock(codes, fps, "01:00:00:00", "t")
+    np.testing.assert_allclose(clock - first, np.arange(1100) / fps, atol=1e-9)
+    sixty = [f"00:00:{k // 60:02d}:{k % 60:02d}.000" for k in range(120)]
+    clock, first = tk._take_clock(sixty, 30000 / 1001, "00:00:00:00", "t")
+    np.testing.assert_allclose(clock, np.arange(120) / 60.0, atol=1e-9)
+    drop = [format_timecode(k, 30000 / 1001, "01:00:00;00") for k in range(40)]
+    clock, first = tk._take_clock(drop, 30000 / 1001, "01:00:00;00", "t")
+    np.testing.assert_allclose(clock - first, np.arange(40) / (30000 / 1001), atol=2e-5)

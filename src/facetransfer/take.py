@@ -127,10 +127,7 @@ def _clock(timecodes, warn: bool, name: str = "the take") -> np.ndarray:
     f = _fields(timecodes)
     t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / \
         _rate(f, warn, name)
-    if t.size and np.any(np.diff(t) < 0):
-        k = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
-        raise TransferError(f"the take's timecodes go back in time at row {k + 1} "
-                            f"({timecodes[k]} after {timecodes[k - 1]})")
+    _forward(t, timecodes)
     return t
 
 
@@ -198,9 +195,10 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     from .track.project import project_landmarks, take_frames
 
     take = _read(path, model)
-    clock = _clock(take.timecodes, True, f"take {path}")
+    clock, first = _take_clock(take.timecodes, target_track.fps, start_timecode,
+                               f"take {path}")
     t = clock - clock[0]
-    start = _synced_start(take.timecodes, clock, start_timecode, target_track.fps, path)
+    start = _synced_start(take.timecodes, clock, start_timecode, first, path)
     a = take_on_timeline(t, take.activations, target_track.n_frames, target_track.fps,
                          align=align, start=start)
     new = take_frames(target_track, np.arange(len(a)))
@@ -210,14 +208,44 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     return attach_activations(project_landmarks(new, model), model)
 
 
-def _synced_start(timecodes, clock: np.ndarray, start_timecode: str | None, fps: float,
-                  path) -> float:
-    """Seconds into the take (rows at ``clock``, seconds since midnight) at the target's first
-    frame: where its timecodes span the target's ``start_timecode``, that moment (said in the
-    log); else 0."""
-    if start_timecode is None:
+def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
+                ) -> tuple[np.ndarray, float | None]:
+    """``(F,)`` seconds of each row of a take on the target's clock, and the target's first
+    frame's (None without ``start_timecode``). A take at the target's own timecode rate
+    (``round(fps)``: one exported from it, or recorded beside the camera with its timecode)
+    counts its frames: a row's time is the frames its timecode counts over ``fps`` (a 23.976
+    fps plate's frame 1000 after 01:00:00:00 is 01:00:41:16, at 41.708 s); a take at another
+    rate, or beside a drop-frame start, counts clock time (:func:`_clock`)."""
+    from .io.plate_header import timecode_count
+
+    f = _fields(timecodes)
+    rate = _rate(f, True, name)
+    count, drop = (0, False) if start_timecode is None else timecode_count(start_timecode, fps)
+    if rate != round(float(fps)) or drop:   # (after a drop-frame start a take counts clock
+        clock = _clock(timecodes, False, name)   # time: export.livelink.format_timecode)
+        return clock, (None if start_timecode is None
+                       else timecode_seconds(start_timecode, fps))
+    frames = ((f[:, 0] * 60 + f[:, 1]) * 60 + f[:, 2]) * rate + f[:, 3] + f[:, 4] / 1000.0
+    _forward(frames, timecodes)
+    return frames / float(fps), (None if start_timecode is None else count / float(fps))
+
+
+def _forward(t: np.ndarray, timecodes) -> None:
+    """TransferError where a take's row times ``t`` go back in time."""
+    if t.size and np.any(np.diff(t) < 0):
+        k = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
+        raise TransferError(f"the take's timecodes go back in time at row {k + 1} "
+                            f"({timecodes[k]} after {timecodes[k - 1]})")
+
+
+def _synced_start(timecodes, clock: np.ndarray, start_timecode: str | None,
+                  first: float | None, path) -> float:
+    """Seconds into the take (rows at ``clock``) at the target's first frame (``first`` on the
+    same clock, its timecode ``start_timecode``): where the take's rows span it, that moment
+    (said in the log); else 0."""
+    if start_timecode is None or first is None:
         return 0.0
-    offset = timecode_seconds(start_timecode, fps) - float(clock[0])
+    offset = first - float(clock[0])
     if 0.0 <= offset <= float(clock[-1] - clock[0]):
         log.warning("the take %s is placed by timecode: the target's first frame "
                     "(%s) is %.3f s into it (--take-sync start: from its first row)", path,

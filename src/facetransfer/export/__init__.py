@@ -118,13 +118,11 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
 
         if model is not None:
             track.check_model(model)
-        from ..io.video_display import timecode_seconds
         from .livelink import source_timecode
 
         if timecode == "source":
             timecode = source_timecode(track)
-        start = 0.0 if timecode is None else timecode_seconds(timecode, track.fps)
-        return write_livelink(track, out, overwrite=overwrite, start=start)
+        return write_livelink(track, out, overwrite=overwrite, start=timecode)
     if fmt == "json":
         from .mpjson import write_mediapipe_json
 

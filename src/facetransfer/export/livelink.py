@@ -7,8 +7,10 @@ its columns by position, so the layout is the app's exactly:
   (:data:`LIVELINK_NAMES`: eyes left, eyes right, jaw, mouth, brows, cheeks, nose, tongue; note
   ``JawRight`` before ``JawLeft`` and ``MouthRight`` before ``MouthLeft``), then the 9 rotation
   columns :data:`POSE_COLUMNS`;
-* one row per frame: timecode ``HH:MM:SS:FF.mmm`` (frame ``FF`` at the clip's nominal integer
-  rate, ``.mmm`` the sub-frame in thousandths, as the app writes for 59.94 fps takes), the count
+* one row per frame: timecode ``HH:MM:SS:FF.mmm``, the frame's own timecode (its clip's start
+  timecode and the frames after it counted as the clip's timecode counts them, ``FF`` at the
+  nominal integer rate, ``.000``; after a drop-frame start, which the CSV cannot say, clock
+  time, ``.mmm`` the thousandths of a frame: :func:`format_timecode`), the count
   ``61`` (52 + 9 values), the activations in [0, 1], then head yaw, pitch and roll in **radians**
   (:func:`facetransfer.export.common.head_euler`) and the six eye angles in radians, read back
   from the eyeLook* activations (:func:`facetransfer.track.gaze.activation_gaze`: 35° per unit
@@ -75,20 +77,34 @@ def _nominal_rate(fps: float) -> int:
     return max(1, int(round(float(fps))))
 
 
-def format_timecode(frame: int, fps: float, start: float = 0.0) -> str:
-    """``HH:MM:SS:FF.mmm`` of a frame index at ``fps`` (frame 0 is ``00:00:00:00.000``, or the
-    time of day ``start`` seconds).
+def format_timecode(frame: int, fps: float, start: str | None = None) -> str:
+    """``HH:MM:SS:FF.mmm`` of frame ``frame`` of a clip at ``fps`` whose first frame is
+    ``start`` (``HH:MM:SS:FF``, ``;`` before the frames of a drop-frame one; default
+    ``00:00:00:00``).
 
-    Time ``start + k / fps`` is counted in frames of the nominal rate ``round(fps)``: ``FF`` is
-    the frame within the second, ``mmm`` the thousandths of a frame (0 for integer rates).
+    Counted as the clip's timecode counts its frames (:func:`facetransfer.io.plate_header.
+    timecode_after`, at the nominal rate ``round(fps)``; ``.000``): the take lines up with its
+    plate frame for frame (a 23.976 fps plate's frame 1000 after ``01:00:00:00`` is
+    ``01:00:41:16``). The CSV has no drop-frame notation, so after a drop-frame start the rows
+    count clock time instead: ``start``'s moment plus ``frame / fps`` seconds in frames of the
+    nominal rate, ``.mmm`` the thousandths of a frame (``01:00:00;00`` at 29.97 fps is
+    ``00:59:59:29.892``).
     """
+    from ..io.plate_header import timecode_after, timecode_count
+
+    start = start or "00:00:00:00"
+    count, drop = timecode_count(start, fps)
+    if not drop:
+        label = timecode_after(start, int(frame), fps)
+        return label[:8] + ":" + label[9:] + ".000"
     rate = _nominal_rate(fps)
-    units = round(int(frame) * rate / float(fps) * 1000 + float(start) * rate * 1000)
+    true_rate = rate * 1000.0 / 1001.0
+    units = round((count / true_rate + int(frame) / float(fps)) * rate * 1000)
     whole, milli = divmod(units, 1000)
     secs, ff = divmod(whole, rate)
     mins, ss = divmod(secs, 60)
     hh, mm = divmod(mins, 60)
-    return f"{hh:02d}:{mm:02d}:{ss:02d}:{ff:02d}.{milli:03d}"
+    return f"{hh % 24:02d}:{mm:02d}:{ss:02d}:{ff:02d}.{milli:03d}"
 
 
 def timecode_fields(timecodes) -> np.ndarray:
@@ -105,17 +121,17 @@ def timecode_fields(timecodes) -> np.ndarray:
 
 
 def parse_timecode(text: str, fps: float) -> float:
-    """Frame index (float) of a ``HH:MM:SS:FF.mmm`` timecode at ``fps``; inverse of
-    :func:`format_timecode`."""
+    """Frames since ``00:00:00:00`` of a ``HH:MM:SS:FF.mmm`` timecode counted at the nominal
+    rate ``round(fps)`` (thousandths: a fraction of a frame); the inverse of
+    :func:`format_timecode` from ``00:00:00:00``."""
     hh, mm, ss, ff, milli = (int(v) for v in timecode_fields([text])[0])
     rate = _nominal_rate(fps)
-    nominal = ((hh * 60 + mm) * 60 + ss) * rate + ff + milli / 1000.0
-    return nominal * float(fps) / rate
+    return ((hh * 60 + mm) * 60 + ss) * rate + ff + milli / 1000.0
 
 
-def livelink_rows(track, start: float = 0.0) -> list[list[str]]:
-    """The CSV as rows of strings (header first); ``start``: the first row's time of day in
-    seconds (:func:`format_timecode`)."""
+def livelink_rows(track, start: str | None = None) -> list[list[str]]:
+    """The CSV as rows of strings (header first); ``start``: the first row's timecode
+    (:func:`format_timecode`)."""
     acts = require_activations(track)             # (F, 52) in ARKIT_NAMES order
     a = acts[:, _TO_ARKIT]                        # in the app's order
     ypr = head_euler(track.rotation)  # (F, 3) radians
@@ -144,10 +160,11 @@ def eye_angles(activations: np.ndarray) -> np.ndarray:
 
 
 def write_livelink(track, out: str | os.PathLike, *, overwrite: bool = False,
-                   start: float = 0.0) -> Path:
+                   start: str | None = None) -> Path:
     """Write the track as a Live Link Face CSV take (atomically) and return the path;
-    ``start``: its first row's time of day in seconds (its video's start timecode,
-    :func:`facetransfer.io.video_display.timecode_seconds`)."""
+    ``start``: its first row's timecode, ``HH:MM:SS:FF`` (its video's start timecode; default
+    ``00:00:00:00``), each row after it a frame later as the video's timecode counts
+    (:func:`format_timecode`)."""
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerows(livelink_rows(track, start))
     return write_text_atomic(out, buf.getvalue(), overwrite=overwrite)
