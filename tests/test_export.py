@@ -433,3 +433,23 @@ def test_a_drop_frame_start_is_said_with_the_rows_clock_time(arkit_model, make_a
     assert capsys.readouterr().out.strip().endswith(
         f"from timecode 01:00:00;00 (--timecode; drop-frame: the rows count clock time, from "
         f"{first})")
+
+
+def test_exports_record_the_source_videos_name_not_its_folder(case, tmp_path):
+    """A file handed on does not carry the home folder's layout: glb ``extras.source``, the
+    JSON's ``source`` and the dial page's line name the tracked video by its file name (before:
+    its absolute path)."""
+    import dataclasses
+
+    import pygltflib
+
+    from facetransfer.export.viewer import viewer_page
+
+    model, track, _, _ = case
+    tr = dataclasses.replace(track, source="/home/someone/clients/acme/take 1.mp4")
+    doc = json.loads(export_track(tr, "json", tmp_path / "bs.json").read_text())
+    assert doc["source"] == "take 1.mp4"
+    g = pygltflib.GLTF2().load(str(export_track(tr, "glb", tmp_path / "f.glb", model=model)))
+    assert g.extras["source"] == "take 1.mp4"
+    page = viewer_page(model, track=tr)
+    assert "take 1.mp4" in page and "/home/someone" not in page

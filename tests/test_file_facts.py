@@ -85,10 +85,18 @@ def test_a_model_or_a_foreign_archive_given_to_probe(arkit_model, tmp_path, caps
     assert capsys.readouterr().err.strip() == (
         f"facetransfer probe: error: {tmp_path / 'm.npz'} is a model file, not a video: "
         f"`facetransfer model info {tmp_path / 'm.npz'}` describes it")
+    # an archive of something else: what it holds, not "a track or a model ... `facetransfer
+    # probe x.npz` says what it holds" (the advice to run the command that said it)
     np.savez(tmp_path / "x.npz", a=np.zeros(3))
-    assert file_kind(tmp_path / "x.npz") == "video"    # the video reader names what it is
-    assert main(["probe", str(tmp_path / "x.npz")]) == 2
-    assert "x.npz" in capsys.readouterr().err
+    np.savez(tmp_path / "c.truth.npz", meta=np.zeros(1), scale=np.ones(3))
+    for name, what in (("x.npz", "arrays a"),
+                       ("c.truth.npz", "a synthetic clip's ground truth")):
+        assert main(["probe", str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"facetransfer probe: error: {tmp_path / name} is an .npz archive of "
+                       f"{what}" + (" (synth-video's CLIP.truth.npz)" if "truth" in name else "")
+                       + ", not a track or a model: probe describes videos, image sequences, "
+                       "tracks, models and Live Link Face takes"], err
 
 
 def test_a_damaged_archive_given_to_probe_is_named(tmp_path, capsys):

@@ -38,14 +38,29 @@ def file_kind(path: str | os.PathLike) -> str:
     if p.suffix.lower() == ".npz" and p.is_file():
         try:
             with np.load(p, allow_pickle=False) as z:
-                if _TRACK_KEYS <= set(z.files):
-                    return "track"
-                if {"core", "metadata"} <= set(z.files):
-                    return "model"
+                names = set(z.files)
         except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
             raise FaceTransferError(f"{p} is truncated or not an .npz archive "
                                     f"({reason(exc)})") from None
+        if _TRACK_KEYS <= names:
+            return "track"
+        if {"core", "metadata"} <= names:
+            return "model"
+        raise FaceTransferError(f"{p} is an .npz archive of {_other_npz(p, names)}, not a track "
+                                "or a model: probe describes videos, image sequences, tracks, "
+                                "models and Live Link Face takes")
     return "video"
+
+
+def _other_npz(p: Path, names: set) -> str:
+    """What the .npz archive ``p`` of array ``names``, no track or model, holds."""
+    if "meta" in names:
+        return "a synthetic clip's ground truth (synth-video's CLIP.truth.npz)"
+    if p.name.endswith(".mediapipe478.npz") or names == {"landmarks", "note"}:
+        return "MediaPipe's 478 landmarks of a clip (the data folder's reference)"
+    shown = sorted(names)
+    return "arrays " + ", ".join(shown[:6]) + (", ..." if len(shown) > 6 else "") \
+        if shown else "no arrays"
 
 
 def _ranges(mask: np.ndarray, limit: int = 4) -> str:

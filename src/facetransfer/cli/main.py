@@ -68,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 #: Commands that read videos, and so image sequences, whose rate ``--sequence-fps`` gives.
-READING_COMMANDS = frozenset({"track", "transfer", "edit", "puppet", "demo", "export", "probe",
+READING_COMMANDS = frozenset({"track", "transfer", "puppet", "demo", "export", "probe",
                               "texture lift", "batch track", "batch transfer"})
 
 

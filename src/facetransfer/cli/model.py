@@ -447,7 +447,8 @@ def _overwrite_option(p) -> None:
 
 def register(sub) -> None:
     """Add ``facetransfer model {build,info,synth,sheet,dials}``."""
-    p = sub.add_parser("model", help="build, inspect and sample multilinear face models (§4)",
+    p = sub.add_parser("model", help="build multilinear face models (§4), describe them "
+                       "(info), write faces (synth), picture sheets and identity dials",
                        description="Multilinear face models (Vlasic et al. 2005, §4).")
     msub = p.add_subparsers(dest="model_command", metavar="ACTION")
     p.set_defaults(func=lambda a: (p.print_help(), 2)[1])

@@ -145,7 +145,8 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--out {out}: expected a video ({', '.join(VIDEO_SUFFIXES)})")
     check_video_output(out, vopt, overwrite=args.overwrite)
     if bool(args.performance) == bool(args.random):
-        raise FaceTransferError("give either --performance SPEC.json or --random")
+        raise FaceTransferError("give --performance SPEC.json or --random, not both" if
+                                args.random else "give --performance SPEC.json or --random")
     if args.fps is not None and not 0 < args.fps <= 1000:
         raise FaceTransferError(f"--fps must be in (0, 1000], got {args.fps}")
     if args.frames is not None and args.frames < 1:

@@ -193,7 +193,8 @@ def register(sub) -> None:
     tsub = t.add_subparsers(dest="texture_command", metavar="ACTION")
     t.set_defaults(func=lambda a: (t.print_help(), 2)[1])
 
-    d = tsub.add_parser("default", help="write the default procedural skin texture for a model's UVs")
+    d = tsub.add_parser("default", help="write the default face texture for a model's UVs (the "
+                        "Lee Perry-Smith scan where it fits, else procedural skin)")
     d.add_argument("--model", help="model file (.npz) with UVs; default: the default model "
                    "(ict-arkit)")
     d.add_argument("--size", type=int, default=512, help="texture width and height (default 512)")

@@ -28,7 +28,7 @@ from ..errors import FaceTransferError
 log = logging.getLogger(__name__)
 
 __all__ = ["ExportError", "require_activations", "resolve_model", "head_euler",
-           "head_quaternions", "head_translation"]
+           "head_quaternions", "head_translation", "source_name"]
 
 
 class ExportError(FaceTransferError):
@@ -138,3 +138,11 @@ def identity_rig(track, model):
         raise ExportError("the model's expressions are not ARKit blendshapes; morph targets need "
                           "a model built from the ict-arkit data set (the default model)")
     return expression_rig(model, track.weights_at(0))
+
+
+def source_name(source: str | None) -> str:
+    """The file name of the video a track was made from, as an exported file records it: not
+    its folder (a file handed on would carry the home folder's layout)."""
+    from pathlib import PurePath
+
+    return PurePath(source).name if source else ""

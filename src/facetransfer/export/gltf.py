@@ -29,7 +29,7 @@ import numpy as np
 from ..arkit import ARKIT_NAMES
 from ..io.atomic import atomic_path
 from .common import (ExportError, head_quaternions, head_translation, identity_rig,
-                     require_activations)
+                     require_activations, source_name)
 
 __all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture"]
 
@@ -222,7 +222,7 @@ def write_glb(track, model, out: str | os.PathLike, *, overwrite: bool = False, 
     data = blob.buf.getvalue()
     gltf.buffers.append(Buffer(byteLength=len(data)))
     gltf.set_binary_blob(data)
-    gltf.extras = {"source": track.source, "fps": track.fps} | (
+    gltf.extras = {"source": source_name(track.source), "fps": track.fps} | (
         {} if timecode is None else {"timecode": str(timecode)})
     with atomic_path(out, overwrite=overwrite) as tmp:
         gltf.save_binary(str(tmp))

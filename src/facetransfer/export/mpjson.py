@@ -37,7 +37,7 @@ import numpy as np
 
 from ..arkit import ARKIT_NAMES, MEDIAPIPE_NAMES
 from ..io.atomic import write_text_atomic
-from .common import ExportError, require_activations
+from .common import ExportError, require_activations, source_name
 
 __all__ = ["CATEGORY_NAMES", "mediapipe_document", "write_mediapipe_json", "read_mediapipe_json"]
 
@@ -60,7 +60,7 @@ def mediapipe_document(track) -> dict:
         frames.append({"frameIndex": k, "timestampMs": round(1000.0 * k / track.fps, 3),
                        "faceBlendshapes": faces})
     return {"format": "facetransfer-mediapipe-blendshapes", "version": 1, "fps": track.fps,
-            "frameSize": list(track.frame_size), "source": track.source, "frames": frames}
+            "frameSize": list(track.frame_size), "source": source_name(track.source), "frames": frames}
 
 
 def write_mediapipe_json(track, out: str | os.PathLike, *, overwrite: bool = False) -> Path:

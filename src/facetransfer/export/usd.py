@@ -30,7 +30,7 @@ import numpy as np
 from ..arkit import ARKIT_NAMES
 from ..io.atomic import atomic_path
 from .common import ExportError, head_quaternions, head_translation, identity_rig, \
-    require_activations
+    require_activations, source_name
 
 __all__ = ["write_usd", "source_first_frame", "USD_SUFFIXES"]
 
@@ -149,7 +149,7 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     binding.CreateGeomBindTransformAttr(Gf.Matrix4d(1))
     binding.CreateBlendShapesAttr(list(ARKIT_NAMES))
     binding.CreateBlendShapeTargetsRel().SetTargets(_blend_shapes(stage, mesh, rig, pxr))
-    meta = {"source": track.source, "generator": "facetransfer"}
+    meta = {"source": source_name(track.source), "generator": "facetransfer"}
     stage.GetRootLayer().customLayerData = meta if timecode is None else \
         {**meta, "timecode": str(timecode)}
     with atomic_path(out, overwrite=overwrite) as tmp:

@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
-from .common import ExportError, head_quaternions, require_activations
+from .common import ExportError, head_quaternions, require_activations, source_name
 
 log = logging.getLogger(__name__)
 
@@ -109,7 +109,7 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
                           for d in dials.dials] if dials is not None else [],
             "n_frames": 0, "fps": 25.0,
             "about": (f"{model.n_vertices} vertices; three.js {THREE_VERSION}; "
-                      + (f"track of {track.source or 'a clip'}, {track.n_frames} frames at "
+                      + (f"track of {source_name(track.source) or 'a clip'}, {track.n_frames} frames at "
                          f"{track.fps:g} fps" if track is not None else "the model's mean identity"))}
     if track is not None:
         if len(names) != 52:

@@ -103,7 +103,7 @@ def _open(path: str | os.PathLike):
     cap = cv2.VideoCapture(str(p))
     if not cap.isOpened():
         if p.suffix.lower() == ".npz":   # a track or a model where a video belongs
-            raise VideoError(f"{p} is an .npz file (a track or a model), not a video; "
+            raise VideoError(f"{p} is an .npz archive, not a video; "
                              f"`facetransfer probe {p}` says what it holds")
         raise VideoError(f"cannot read video {p}: not a video OpenCV can decode")
     return cap
