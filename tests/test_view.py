@@ -111,6 +111,13 @@ def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
     assert "--overwrite" in capsys.readouterr().err
     page = viewer_page(arkit_model)
     assert '"n_frames": 0' in page
+    # no input: the default model's page (before: "model or track file default does not
+    # exist" to `view default`, and the input was required); --model's model, given one
+    assert main(["view", "--model", str(mp), "--out", str(tmp_path / "d.html")]) == 0
+    assert (tmp_path / "d.html").read_text(encoding="utf-8").count('"n_frames": 0') == 1
+    assert main(["view", "--model", str(mp), "--neutral", "3",
+                 "--out", str(tmp_path / "e.html")]) == 2
+    assert "--neutral is for a track" in capsys.readouterr().err
 
 
 def test_view_neutral_pose(arkit_model, pages, tmp_path, capsys):

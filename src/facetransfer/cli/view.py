@@ -1,6 +1,6 @@
 """``facetransfer view``: a self-contained HTML dial editor for a model or a track.
 
-    facetransfer view MODEL.npz --out page.html
+    facetransfer view [MODEL.npz] --out page.html                 # default: the default model
     facetransfer view TRACK.npz --out page.html [--model M.npz] [--neutral auto]
     facetransfer view TAKE.csv --out page.html [--model M.npz]     # a Live Link Face take
 """
@@ -17,9 +17,9 @@ def register(sub) -> None:
         "dials and head pose (and a timeline for a track)",
         description="One HTML file, no network needed: three.js inlined, a slider per "
         "blendshape and per identity dial, head pose, and for a track a timeline.")
-    p.add_argument("source", metavar="MODEL.npz|TRACK.npz|TAKE.csv",
+    p.add_argument("source", metavar="MODEL.npz|TRACK.npz|TAKE.csv", nargs="?",
                    help="a model, a track, or a Live Link Face take (its curves and head "
-                   "rotation on the model's mean person)")
+                   "rotation on the model's mean person); default: the default model")
     p.add_argument("--out", required=True, metavar="PAGE.html")
     p.add_argument("--model", metavar="M.npz", help="for a track: its model (default: the "
                    "default model, if the track was made with it)")
@@ -63,6 +63,20 @@ def _take_page(args: argparse.Namespace):
     return write_text_atomic(args.out, page, overwrite=args.overwrite)
 
 
+def _default_model_page(args: argparse.Namespace):
+    """The page of the default model (``--model``'s, given one): no file to name."""
+    from ..errors import FaceTransferError
+    from ..export.viewer import viewer_page
+    from ..io.atomic import write_text_atomic
+    from .common import resolve_model
+
+    if args.neutral is not None:
+        raise FaceTransferError("--neutral is for a track; give the track to view")
+    page = viewer_page(resolve_model(args.model), title="facetransfer: the default model"
+                       if args.model is None else args.model)
+    return write_text_atomic(args.out, page, overwrite=args.overwrite)
+
+
 def run(args: argparse.Namespace) -> int:
     from ..export.viewer import write_viewer
     from ..io.atomic import check_output_path
@@ -71,6 +85,10 @@ def run(args: argparse.Namespace) -> int:
 
     check_output_suffix(args.out, (".html", ".htm"), "the dial editor's page")
     check_output_path(args.out, overwrite=args.overwrite)
+    if args.source is None:
+        path = _default_model_page(args)
+        print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
+        return 0
     if is_take(args.source):
         path = _take_page(args)
         print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
