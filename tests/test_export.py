@@ -365,6 +365,12 @@ def test_glb_texture_lifted_from_the_video(case, tmp_path, capsys):
                          * (track.n_frames + 5) + [np.zeros((H, W, 3), np.uint8)] * 5, track.fps)
     assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
                  str(longer), "--texture-step", "4", "--out", str(tmp_path / "z.glb")]) == 0
+    # a track given as --texture-from: its one line, no warning of "another face's motion"
+    capsys.readouterr()
+    assert main(["export", str(tp), "--format", "glb", "--model", str(mp), "--texture-from",
+                 str(tp), "--out", str(tmp_path / "w.glb")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "is an .npz archive, not a video" in err[0], err
 
 
 # ------------------------------------------------------------------------------ neutral pose
@@ -453,3 +459,26 @@ def test_exports_record_the_source_videos_name_not_its_folder(case, tmp_path):
     assert g.extras["source"] == "take 1.mp4"
     page = viewer_page(model, track=tr)
     assert "take 1.mp4" in page and "/home/someone" not in page
+
+
+def test_an_export_says_which_frames_were_lost(case, tmp_path, capsys):
+    """A track with lost frames: the rows of a take hold the nearest tracked frame's values,
+    a JSON's frames are empty; the export says so, naming the frames (before: nothing)."""
+    import dataclasses
+
+    model, track, _, _ = case
+    lost = track.lost.copy()
+    lost[[2, 3, 5]] = True
+    tp = tmp_path / "t.npz"
+    dataclasses.replace(track, lost=lost).save(tp)
+    model.save(tmp_path / "m.npz")
+    for out, what in (("a.csv", "they hold the nearest tracked frame's values"),
+                      ("a.json", "their frames are left empty")):
+        assert main(["export", str(tp), "--model", str(tmp_path / "m.npz"),
+                     "--out", str(tmp_path / out)]) == 0
+        said = capsys.readouterr().out.strip().splitlines()
+        assert said[-1] == f"note: the face is lost in frames 2-3, 5: {what}", said
+    track.save(tmp_path / "t0.npz")                          # nothing lost: nothing said
+    assert main(["export", str(tmp_path / "t0.npz"), "--model", str(tmp_path / "m.npz"),
+                 "--out", str(tmp_path / "b.csv")]) == 0
+    assert "note:" not in capsys.readouterr().out

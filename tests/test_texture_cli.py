@@ -164,3 +164,6 @@ def test_lift_function_that_would_not_fit_is_refused_with_the_step_that_fits(
                "--out", tmp_path / "l.png") == 0
     assert run(*argv, "--out", tmp_path / "m.png") == 0      # no function: merged as it goes
     assert "merged from 6 frames" in capsys.readouterr().out
+    # the function named as the texture: said as such (before: "is also an input")
+    assert run(*argv, "--function", tmp_path / "n.png", "--out", tmp_path / "n.png") == 2
+    assert "is --out's file" in capsys.readouterr().err

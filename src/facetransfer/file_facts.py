@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["file_kind", "track_facts", "take_facts", "file_fact_lines"]
+__all__ = ["file_kind", "track_facts", "take_facts", "file_fact_lines", "lost_runs"]
 
 #: Keys every track file holds (:meth:`facetransfer.track.result.Track.save`).
 _TRACK_KEYS = frozenset({"fps", "frame_size", "rotation", "model_hash", "mode_names"})
@@ -61,6 +61,11 @@ def _other_npz(p: Path, names: set) -> str:
     shown = sorted(names)
     return "arrays " + ", ".join(shown[:6]) + (", ..." if len(shown) > 6 else "") \
         if shown else "no arrays"
+
+
+def lost_runs(lost: np.ndarray) -> str:
+    """``"3-7, 12"``: a track's lost frames as runs (the first four)."""
+    return _ranges(np.asarray(lost, bool))
 
 
 def _ranges(mask: np.ndarray, limit: int = 4) -> str:

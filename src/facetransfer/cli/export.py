@@ -127,6 +127,9 @@ def run(args: argparse.Namespace) -> int:
         track = with_neutral(track, args.neutral)     # checked before a texture is lifted
     texture = args.texture
     if args.texture_from:
+        from ..io.video import video_info
+
+        video_info(args.texture_from)   # a video (else its one line, before any warning)
         track.warn_other_video(args.texture_from,
                                "the texture is lifted through another face's motion")
         texture = _lift(track, model, args)
@@ -144,6 +147,12 @@ def run(args: argparse.Namespace) -> int:
           + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
           + (f", from timecode {timecode} ({said})" if timecode and timecode != "source"
              else (f", {said}" if said else "")))
+    if track.lost.any():
+        from ..file_facts import lost_runs
+
+        print(f"note: the face is lost in frames {lost_runs(track.lost)}: "
+              + ("their frames are left empty" if args.format == "json" else
+                 "they hold the nearest tracked frame's values"))
     return 0
 
 

@@ -102,6 +102,9 @@ def cmd_lift(args: argparse.Namespace) -> int:
 
     inputs = [args.video, args.track, args.model]
     out = _image_out(args.out, args, inputs)
+    if args.function and Path(args.function).resolve() == Path(out).resolve():
+        raise FaceTransferError(f"--function {args.function} is --out's file: give the texture "
+                                "function a name of its own (.npz)")
     fn_out = check_output_path(args.function, overwrite=args.overwrite, inputs=inputs + [out]) \
         if args.function else None
     if fn_out is not None and fn_out.suffix.lower() != ".npz":
