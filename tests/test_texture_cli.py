@@ -97,6 +97,14 @@ def test_errors_are_one_line(run, tmp_path, model_path, capsys):
         assert run(*argv) == 2
         err = capsys.readouterr().err.strip()
         assert err.startswith("facetransfer texture: error:") and "\n" not in err
+    # a mask of 0 and 1 (white is 255): nothing would be pasted; said, not a copy of the target
+    _write(tmp_path / "one.png", np.ones((20, 20, 3), np.uint8))
+    assert run("texture", "blend", "--source", tmp_path / "a.png", "--target", tmp_path / "a.png",
+               "--mask", tmp_path / "one.png", "--out", tmp_path / "o.png") == 2
+    assert capsys.readouterr().err.strip().endswith(
+        "has no white pixel (above 127; its brightest is 1): nothing to paste (a mask of 0 and "
+        "1? white is 255)")
+    assert not (tmp_path / "o.png").exists()
 
 
 def test_lift_a_track_of_the_clips_first_frames(run, tmp_path, model_path, capsys):

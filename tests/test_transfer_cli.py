@@ -242,6 +242,20 @@ def test_puppet_cli(clips, quick_model_path, tmp_path, capsys):
     # a plain background around the rendered face
     assert np.abs(frames[0, :8, :8].astype(int) - np.array([40, 40, 48])).max() <= 6
     assert frames[0, 50:80, 50:80].mean() > 90
+    # a track of the video's first frames: the --max-frames that drives the puppet for those
+    from facetransfer.track.project import take_frames
+
+    short = tmp_path / "short.npz"
+    take_frames(Track.load(clips["source_track"]), np.arange(4)).save(short)
+    code, _, err = run(["puppet", clips["source"], "--model", quick_model_path, "--identity",
+                        "id04", "--track", short, "--out", tmp_path / "p2.mp4"], capsys)
+    assert code == 2 and err.strip().endswith(
+        f"track {short} has 4 frames, the video {clips['source']} 6: give --max-frames 4 to "
+        "drive the puppet for those"), err
+    code, _, err = run(["puppet", clips["source"], "--model", quick_model_path, "--identity",
+                        "id04", "--track", short, "--max-frames", "4",
+                        "--out", tmp_path / "p2.mp4"], capsys)
+    assert code == 0, err
 
 
 def test_edit_then_render_performance(clips, quick_model_path, tmp_path, capsys):

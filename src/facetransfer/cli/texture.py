@@ -52,6 +52,11 @@ def _read_mask(path: str, shape: tuple[int, int]) -> np.ndarray:
     if m.shape != shape:
         raise FaceTransferError(f"mask {p} is {m.shape[1]}x{m.shape[0]}, the target is "
                                 f"{shape[1]}x{shape[0]}")
+    if not (m > 127).any():
+        top = int(m.max(initial=0))
+        raise FaceTransferError(f"mask {p} has no white pixel (above 127; its brightest is "
+                                f"{top}): nothing to paste"
+                                + (" (a mask of 0 and 1? white is 255)" if top == 1 else ""))
     return m > 127
 
 

@@ -637,6 +637,10 @@ def run_puppet(args) -> int:
                          progress_factory=_bar_factory(), workers=default_workers(),
                          face=args.face)
     if args.track:   # a track of another video would drive the face with the wrong motion
+        if track.n_frames < len(frames) and tuple(track.frame_size) == frames.shape[2:0:-1]:
+            raise FaceTransferError(f"track {args.track} has {track.n_frames} frames, the "
+                                    f"video {args.video} {len(frames)}: give --max-frames "
+                                    f"{track.n_frames} to drive the puppet for those")
         track.check_video(len(frames), (frames.shape[2], frames.shape[1]),
                           what=f"video {args.video}")
         track.warn_other_video(args.video, "the puppet does not move with this video's audio")
