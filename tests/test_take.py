@@ -427,7 +427,8 @@ def test_a_take_at_the_plates_own_rate_counts_its_frames():
     """A take exported from a 23.976 fps plate (rows labelled as the plate's timecode counts
     its frames, 24 a second) is read back frame for frame: row k at k / 23.976 s from the
     plate's start (read as clock time, row 1000 would fall a frame late); a take of another
-    rate (60 on a 29.97 plate) or beside a drop-frame start is read as clock time."""
+    rate (60 on a 29.97 plate), with the app's sub-frames, or beside a drop-frame start is
+    read as clock time."""
     from facetransfer import take as tk
     from facetransfer.export.livelink import format_timecode
 
@@ -439,6 +440,10 @@ def test_a_take_at_the_plates_own_rate_counts_its_frames():
     sixty = [f"00:00:{k // 60:02d}:{k % 60:02d}.000" for k in range(120)]
     clock, first = tk._take_clock(sixty, 30000 / 1001, "00:00:00:00", "t")
     np.testing.assert_allclose(clock, np.arange(120) / 60.0, atol=1e-9)
+    app = [f"00:00:{k // 60:02d}:{k % 60:02d}.{(k * 7) % 1000:03d}" for k in range(120)]
+    clock, first = tk._take_clock(app, 60000 / 1001, "00:00:00:00", "t")   # the app's clock
+    np.testing.assert_allclose(clock, np.arange(120) / 60.0 + (np.arange(120) * 7 % 1000)
+                               / 60000.0, atol=1e-9)
     drop = [format_timecode(k, 30000 / 1001, "01:00:00;00") for k in range(40)]
     clock, first = tk._take_clock(drop, 30000 / 1001, "01:00:00;00", "t")
     np.testing.assert_allclose(clock - first, np.arange(40) / (30000 / 1001), atol=2e-5)

@@ -211,18 +211,20 @@ def take_performance(path, target_track, model, *, align: str | None = None,
 def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
                 ) -> tuple[np.ndarray, float | None]:
     """``(F,)`` seconds of each row of a take on the target's clock, and the target's first
-    frame's (None without ``start_timecode``). A take at the target's own timecode rate
-    (``round(fps)``: one exported from it, or recorded beside the camera with its timecode)
-    counts its frames: a row's time is the frames its timecode counts over ``fps`` (a 23.976
-    fps plate's frame 1000 after 01:00:00:00 is 01:00:41:16, at 41.708 s); a take at another
-    rate, or beside a drop-frame start, counts clock time (:func:`_clock`)."""
+    frame's (None without ``start_timecode``). A take of whole frames at the target's own
+    timecode rate (``round(fps)``: one exported from it) counts its frames: a row's time is
+    the frames its timecode counts over ``fps`` (a 23.976 fps plate's frame 1000 after
+    01:00:00:00 is 01:00:41:16, at 41.708 s); a take at another rate, with sub-frames (the
+    app's), or beside a drop-frame start, counts clock time (:func:`_clock`)."""
     from .io.plate_header import timecode_count
 
     f = _fields(timecodes)
     rate = _rate(f, True, name)
     count, drop = (0, False) if start_timecode is None else timecode_count(start_timecode, fps)
-    if rate != round(float(fps)) or drop:   # (after a drop-frame start a take counts clock
-        clock = _clock(timecodes, False, name)   # time: export.livelink.format_timecode)
+    # rows of whole frames (an export's; the app's carry thousandths, its clock's time), not
+    # after a drop-frame start (then an export counts clock time, export.livelink)
+    if rate != round(float(fps)) or drop or f[:, 4].any():
+        clock = _clock(timecodes, False, name)
         return clock, (None if start_timecode is None
                        else timecode_seconds(start_timecode, fps))
     frames = ((f[:, 0] * 60 + f[:, 1]) * 60 + f[:, 2]) * rate + f[:, 3] + f[:, 4] / 1000.0
