@@ -92,8 +92,8 @@ def test_synth_video_spec_with_overrides(model_path, tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv, match", [
-    ([], "either --performance"),
-    (["--random", "--performance", "p.json"], "either --performance"),
+    ([], "give --performance SPEC.json or --random"),
+    (["--random", "--performance", "p.json"], "--random, not both"),
     (["--random", "--frames", "0"], "--frames"),
     (["--random", "--fps", "-3"], "--fps"),
     (["--random", "--identity", "1,2"], "identity"),
