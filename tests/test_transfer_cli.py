@@ -600,3 +600,23 @@ def test_the_inputs_are_probed_at_once_and_kept(clips, tmp_path, monkeypatch):
     monkeypatch.setattr(subprocess, "run", no_process)
     monkeypatch.setattr(subprocess, "Popen", no_process)
     assert video_info(a).n_frames == video_info(b).n_frames > 0
+
+
+def test_a_source_track_of_other_frames_is_one_line(clips, quick_model_path, tmp_path, capsys,
+                                                    caplog):
+    """A --source-track of another clip with frames of another size: its error alone (before:
+    the error, then a warning that the track was made from another video)."""
+    import dataclasses
+
+    tr = Track.load(clips["source_track"])
+    other = tmp_path / "other.npz"
+    dataclasses.replace(tr, frame_size=(tr.frame_size[0] + 2, tr.frame_size[1]),
+                        source=str(tmp_path / "elsewhere.mp4")).save(other)
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        clips["target_track"], "--expression-from", clips["source"],
+                        "--source-track", other, "--model", quick_model_path,
+                        "--out", tmp_path / "o.mp4", "--no-progress"], capsys)
+    lines = err.strip().splitlines()
+    assert code == 2 and len(lines) == 1 and "expression track" in lines[0] \
+        and "frames but" in lines[0], lines
+    assert not [r.getMessage() for r in caplog.records if "expression track" in r.getMessage()]

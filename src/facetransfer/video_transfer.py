@@ -478,9 +478,10 @@ class _Planner:
         if tr is None:                       # tracked here, after the target: nothing beside it
             tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True,
                             face=src.face)
+        checked = _checked_source(kind, src, fr, tr)     # a track of other frames: its error
         if src.track is not None:
             _warn_other_source(tr, src.video, kind)
-        inputs.tracks[kind], inputs.source_frames[kind] = _checked_source(kind, src, fr, tr)
+        inputs.tracks[kind], inputs.source_frames[kind] = checked
 
 
 def _checked_source(kind: str, src: Source, fr, tr):
