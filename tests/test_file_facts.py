@@ -88,7 +88,8 @@ def test_a_model_or_a_foreign_archive_given_to_probe(arkit_model, tmp_path, caps
     # an archive of something else: what it holds, not "a track or a model ... `facetransfer
     # probe x.npz` says what it holds" (the advice to run the command that said it)
     np.savez(tmp_path / "x.npz", a=np.zeros(3))
-    np.savez(tmp_path / "c.truth.npz", meta=np.zeros(1), scale=np.ones(3))
+    np.savez(tmp_path / "c.truth.npz", meta=np.zeros(1), vertices2d=np.zeros((1, 3, 2)),
+             landmark_indices=np.arange(3))
     for name, what in (("x.npz", "arrays a"),
                        ("c.truth.npz", "a synthetic clip's ground truth")):
         assert main(["probe", str(tmp_path / name)]) == 2

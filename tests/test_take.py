@@ -447,3 +447,23 @@ def test_a_take_at_the_plates_own_rate_counts_its_frames():
     drop = [format_timecode(k, 30000 / 1001, "01:00:00;00") for k in range(40)]
     clock, first = tk._take_clock(drop, 30000 / 1001, "01:00:00;00", "t")
     np.testing.assert_allclose(clock - first, np.arange(40) / (30000 / 1001), atol=2e-5)
+
+
+def test_a_take_past_midnight_and_a_short_one_are_read_frame_for_frame():
+    """An export from 23:59:50:00 runs past midnight (its rows start again at 00:00:00:00):
+    read on, not "go back in time" (both readers), and placed by a target start after
+    midnight; a take of whole frames within one second is read at the target's rate (before:
+    a guessed 24, 3.8 frames off after 20 frames of a 30 fps clip)."""
+    from facetransfer import take as tk
+    from facetransfer.export.livelink import format_timecode
+
+    codes = [format_timecode(k, 25.0, "23:59:50:00") for k in range(400)]
+    assert codes[250] == "00:00:00:00.000"
+    clock, first = tk._take_clock(codes, 25.0, "00:00:02:00", "t")
+    np.testing.assert_allclose(clock - clock[0], np.arange(400) / 25.0, atol=1e-9)
+    assert first - clock[0] == pytest.approx(12.0)                 # 10 s to midnight + 2
+    np.testing.assert_allclose(tk.take_seconds(codes, warn=False), np.arange(400) / 25.0,
+                               atol=1e-9)
+    short = [format_timecode(k, 30.0, "01:00:00:00") for k in range(20)]
+    clock, _ = tk._take_clock(short, 30.0, None, "t")
+    np.testing.assert_allclose(clock - clock[0], np.arange(20) / 30.0, atol=1e-9)

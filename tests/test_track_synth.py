@@ -212,12 +212,10 @@ def test_the_flow_tracker_gives_an_arkit_models_activations(arkit_model, quick_m
     activations of its expression weights (export, view and edit read them; before, a KLT
     track of the default model was refused by export, "track with the default model"); with
     another model, none."""
-    from facetransfer.arkit import ARKIT_NAMES, weights_to_activations
-    from facetransfer.export.common import require_activations
-
     import dataclasses
 
-    from facetransfer.arkit import activations_to_weights
+    from facetransfer.arkit import ARKIT_NAMES, activations_to_weights, weights_to_activations
+    from facetransfer.export.common import require_activations
 
     perf = random_performance(arkit_model, 6, seed=4, size=(320, 240), fps=25, fill=0.8)
     a = np.zeros((6, 52))                                    # the jaw opens, then a blink

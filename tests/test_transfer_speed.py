@@ -224,6 +224,18 @@ def test_the_render_runs_blas_on_one_thread_and_restores_it(quick_model, topo, s
             assert _blas_threads() == [1] * len(before)  # while the render is suspended too
             it.close()
             assert _blas_threads() == before
+        # two renders at once, the first made closed first: one thread until the last ends,
+        # then as before (a limit per render restored the threads under the second and left
+        # one thread after both)
+        a, b = (rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
+                                  topo=topo, workers=1) for _ in range(2))
+        next(a), next(b)
+        a.close()
+        assert _blas_threads() == [1] * len(before)
+        next(b)
+        assert seen[-1] == [1] * len(before)
+        b.close()
+        assert _blas_threads() == before
 
 
 def test_crop_of_and_paste_round_trip(synthetic):

@@ -54,7 +54,7 @@ def file_kind(path: str | os.PathLike) -> str:
 
 def _other_npz(p: Path, names: set) -> str:
     """What the .npz archive ``p`` of array ``names``, no track or model, holds."""
-    if "meta" in names:
+    if {"meta", "vertices2d", "landmark_indices"} <= names:
         return "a synthetic clip's ground truth (synth-video's CLIP.truth.npz)"
     if p.name.endswith(".mediapipe478.npz") or names == {"landmarks", "note"}:
         return "MediaPipe's 478 landmarks of a clip (the data folder's reference)"
@@ -83,7 +83,8 @@ def _no_activations(f: dict) -> str:
     """Why a track (its :func:`track_facts` ``f``) holds no activations."""
     if f["default_model"]:      # an optical-flow track written before they were attached
         return "none (written by an older version: track the video again to export it)"
-    return "none (the model's expressions are not ARKit-named: nothing to export)"
+    return ("none (the model's expressions are not ARKit-named, or an optical-flow track "
+            "written by an older version: nothing to export)")
 
 
 def _default_model_hash() -> str | None:

@@ -482,15 +482,11 @@ def _render(one, target_frames, todo: range, workers: int | None, processes: boo
     """Yield ``one(i)`` for i in ``todo`` in order: here, on threads or in forked processes
     (see :func:`rewrite_frames`' ``workers`` and ``processes``), BLAS on one thread meanwhile.
 
-    The frames are rendered on threads of their own (two on two cores) beside the encoder, and
-    OpenBLAS's threads on top of them spin between products: the CLI starts its commands with
-    one (:data:`facetransfer.cli.main.SERIAL_POOLS`), a program calling this gets the same
-    while the frames are made (issue 13's 300 frames 5.6 -> 4.85 s; BENCHMARKS.md, "Fortieth
-    session")."""
-    from threadpoolctl import threadpool_limits
+    BLAS's own threads would spin beside the render's (:mod:`facetransfer.threads`)."""
+    from .threads import one_blas_thread
 
     workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         if workers == 1 or len(todo) < 2:
             for i in todo:
                 yield one(i)

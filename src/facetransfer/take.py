@@ -127,6 +127,7 @@ def _clock(timecodes, warn: bool, name: str = "the take") -> np.ndarray:
     f = _fields(timecodes)
     t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / \
         _rate(f, warn, name)
+    t = _past_midnight(t, 86400.0)
     _forward(t, timecodes)
     return t
 
@@ -219,17 +220,40 @@ def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
     from .io.plate_header import timecode_count
 
     f = _fields(timecodes)
-    rate = _rate(f, True, name)
+    nominal, whole = round(float(fps)), not f[:, 4].any()
+    secs = f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]
+    short = not (secs.size and secs.max() > secs.min())       # within one second: no rate shown
+    # a short take of whole frames is taken at the target's rate (else the guess is said)
+    rate = nominal if whole and short and f[:, 3].max(initial=0) < nominal \
+        else _rate(f, True, name)
     count, drop = (0, False) if start_timecode is None else timecode_count(start_timecode, fps)
     # rows of whole frames (an export's; the app's carry thousandths, its clock's time), not
     # after a drop-frame start (then an export counts clock time, export.livelink)
-    if rate != round(float(fps)) or drop or f[:, 4].any():
+    if rate != nominal or drop or not whole:
         clock = _clock(timecodes, False, name)
-        return clock, (None if start_timecode is None
-                       else timecode_seconds(start_timecode, fps))
-    frames = ((f[:, 0] * 60 + f[:, 1]) * 60 + f[:, 2]) * rate + f[:, 3] + f[:, 4] / 1000.0
+        first = None if start_timecode is None else timecode_seconds(start_timecode, fps)
+        return clock, _same_day(first, clock, 86400.0)
+    frames = _past_midnight(secs * rate + f[:, 3], 86400 * rate)
     _forward(frames, timecodes)
-    return frames / float(fps), (None if start_timecode is None else count / float(fps))
+    first = None if start_timecode is None else count / float(fps)
+    return frames / float(fps), _same_day(first, frames / float(fps), 86400.0 * rate / fps)
+
+
+def _past_midnight(t: np.ndarray, day: float) -> np.ndarray:
+    """Row times ``t`` with a ``day`` added after each step back of more than half of one: a
+    take past midnight, whose timecodes start again at ``00:00:00:00``."""
+    if t.size < 2:
+        return t
+    back = np.diff(t) < -day / 2
+    return t + day * np.concatenate([[0], np.cumsum(back)])
+
+
+def _same_day(first: float | None, clock: np.ndarray, day: float) -> float | None:
+    """The target's first frame ``first`` a ``day`` later where the take's rows (``clock``)
+    pass midnight before it."""
+    if first is not None and clock.size and first < clock[0] <= first + day <= clock[-1]:
+        return first + day
+    return first
 
 
 def _forward(t: np.ndarray, timecodes) -> None:

@@ -312,9 +312,8 @@ def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings
     (:func:`facetransfer.region_views.region_textures`), made here while the expression
     source is tracked in the forked process, which finishes later (this one would wait for
     it, a core idle; issue 13's 10 s). None for a target cut into shots (each its own)."""
-    from threadpoolctl import threadpool_limits
-
     from .region_views import region_textures
+    from .threads import one_blas_thread
 
     if len(target_track.shot_starts):
         return None
@@ -322,7 +321,7 @@ def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings
     # one BLAS thread (as the CLI's commands have from their start, cli.main.SERIAL_POOLS):
     # the other core is the forked process's (0.56 CPU-s instead of 0.9 in the same time;
     # BENCHMARKS.md, "Fortieth session")
-    with threadpool_limits(limits=1, user_api="blas"):
+    with one_blas_thread():
         regions = region_textures(frames, target_track, model, options, len(frames),
                                   per_frame=options.texture != "constant")
     timings["regions"] = time.perf_counter() - t

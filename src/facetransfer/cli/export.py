@@ -140,8 +140,15 @@ def run(args: argparse.Namespace) -> int:
         timecode, said = "source", _source_said(track, args.format)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
                         texture=texture, timecode=timecode)
+    _say_written(args, track, path, timecode, said)
+    return 0
+
+
+def _say_written(args, track, path, timecode, said: str) -> None:
+    """The line of a written export (and a note of its lost frames)."""
     neutral = track.info.get("neutral_frame") if args.neutral is not None else None
-    if timecode and ";" in str(timecode) and args.format == "livelink":
+    if timecode and timecode != "source" and args.format == "livelink" \
+            and _drop_frame(timecode, track.fps):
         said += f"; drop-frame: the rows count clock time, from {_first_row(path)}"
     print(f"wrote {path}: {frame_count(track.n_frames)} ({args.format})"
           + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
@@ -153,7 +160,16 @@ def run(args: argparse.Namespace) -> int:
         print(f"note: the face is lost in frames {lost_runs(track.lost)}: "
               + ("their frames are left empty" if args.format == "json" else
                  "they hold the nearest tracked frame's values"))
-    return 0
+
+
+def _drop_frame(timecode: str, fps: float) -> bool:
+    """Whether ``timecode`` counts drop-frame at ``fps`` (``;`` or ``.`` at 29.97, 59.94)."""
+    from ..io.plate_header import timecode_count
+
+    try:
+        return timecode_count(timecode, fps)[1]
+    except ValueError:
+        return False
 
 
 def _first_row(path) -> str:

@@ -82,8 +82,9 @@ def format_timecode(frame: int, fps: float, start: str | None = None) -> str:
     ``start`` (``HH:MM:SS:FF``, ``;`` before the frames of a drop-frame one; default
     ``00:00:00:00``).
 
-    Counted as the clip's timecode counts its frames (:func:`facetransfer.io.plate_header.
-    timecode_after`, at the nominal rate ``round(fps)``; ``.000``): the take lines up with its
+    Counted as the clip's timecode counts its frames
+    (:func:`facetransfer.io.plate_header.timecode_after`, at the nominal rate ``round(fps)``;
+    ``.000``): the take lines up with its
     plate frame for frame (a 23.976 fps plate's frame 1000 after ``01:00:00:00`` is
     ``01:00:41:16``). The CSV has no drop-frame notation, so after a drop-frame start the rows
     count clock time instead: ``start``'s moment plus ``frame / fps`` seconds in frames of the
@@ -93,7 +94,10 @@ def format_timecode(frame: int, fps: float, start: str | None = None) -> str:
     from ..io.plate_header import timecode_after, timecode_count
 
     start = start or "00:00:00:00"
-    count, drop = timecode_count(start, fps)
+    try:
+        count, drop = timecode_count(start, fps)
+    except ValueError as exc:
+        raise ExportError(f"start timecode: {exc}") from None
     if not drop:
         label = timecode_after(start, int(frame), fps)
         return label[:8] + ":" + label[9:] + ".000"
@@ -191,7 +195,9 @@ class LiveLinkTake:
     missing: tuple[str, ...] = ()
 
     def frames(self, fps: float) -> np.ndarray:
-        """Frame index of every row at ``fps``, ``(F,) float64``."""
+        """Every row's timecode as frames since ``00:00:00:00`` at the nominal rate
+        ``round(fps)`` (:func:`parse_timecode`; a row of an export of a clip at ``fps`` is its
+        frame's count), ``(F,) float64``."""
         return np.array([parse_timecode(t, fps) for t in self.timecodes])
 
 

@@ -60,7 +60,8 @@ def mediapipe_document(track) -> dict:
         frames.append({"frameIndex": k, "timestampMs": round(1000.0 * k / track.fps, 3),
                        "faceBlendshapes": faces})
     return {"format": "facetransfer-mediapipe-blendshapes", "version": 1, "fps": track.fps,
-            "frameSize": list(track.frame_size), "source": source_name(track.source), "frames": frames}
+            "frameSize": list(track.frame_size), "source": source_name(track.source),
+            "frames": frames}
 
 
 def write_mediapipe_json(track, out: str | os.PathLike, *, overwrite: bool = False) -> Path:

@@ -109,8 +109,9 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
                           for d in dials.dials] if dials is not None else [],
             "n_frames": 0, "fps": 25.0,
             "about": (f"{model.n_vertices} vertices; three.js {THREE_VERSION}; "
-                      + (f"track of {source_name(track.source) or 'a clip'}, {track.n_frames} frames at "
-                         f"{track.fps:g} fps" if track is not None else "the model's mean identity"))}
+                      + (f"track of {source_name(track.source) or 'a clip'}, "
+                         f"{track.n_frames} frames at {track.fps:g} fps" if track is not None
+                         else "the model's mean identity"))}
     if track is not None:
         if len(names) != 52:
             from ..arkit import arkit_shortfall

@@ -18,7 +18,8 @@ Pipeline, per tracked frame (pose and mesh known), one module per stage:
    (:func:`lift_merged`: merged as the frames come, in the memory of one texture).
    Texels map to surface points through a :class:`UVAtlas` (:mod:`.atlas`).
 2. :mod:`.merge` — :func:`merge_textures`: the weight-normalised mean over frames (its sums
-   taken one texture at a time, :class:`TextureSum`); texels never seen are filled by push-pull interpolation (:func:`fill_holes`).
+   taken one texture at a time, :class:`TextureSum`); texels never seen are filled by push-pull
+   interpolation (:func:`fill_holes`).
 3. :mod:`.function` — :class:`TextureFunction`: the texture for an attribute vector (e.g.
    expression and viseme weights concatenated, :func:`attribute_vector`) is the weighted sum of
    the lifted textures of the ``k`` training frames nearest in attribute space, each texel weighted

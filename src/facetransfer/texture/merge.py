@@ -77,7 +77,17 @@ class TextureSum:
     """The sums of :func:`merge_textures`, ``Σ_f w_f tex_f`` and ``Σ_f w_f`` (float64), taken
     one lifted texture at a time: a clip's merge in the memory of one texture instead of all
     of them (a 512² texture lifted from each of 587 frames held 5.6 GB; BENCHMARKS.md,
-    "Fortieth session")."""
+    "Fortieth session").
+
+    Attributes
+    ----------
+    num : (..., 3) float64 or None
+        ``Σ_f w_f tex_f`` (None before the first :meth:`add`).
+    total : (...,) float64 or None
+        ``Σ_f w_f``.
+    count : int
+        The textures added.
+    """
 
     def __init__(self) -> None:
         self.num: np.ndarray | None = None      # (..., 3) float64
