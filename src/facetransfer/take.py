@@ -115,8 +115,10 @@ def _rate(f: np.ndarray, warn: bool, name: str = "the take") -> int:
 
 
 def take_seconds(timecodes, *, warn: bool = True, name: str = "the take") -> np.ndarray:
-    """``(F,)`` seconds of each row after the take's first, from its timecodes at
-    :func:`take_rate` (``warn``: its guess said; TransferError if they go back in time)."""
+    """``(F,)`` seconds of each row after the take's first on its timecodes' clock (frames of
+    the nominal :func:`take_rate` a second: a 23.976 fps plate's export spans 0.1 % less than
+    its frames; ``warn``: the rate's guess said; TransferError if they go back in time, a day
+    added past midnight)."""
     t = _clock(timecodes, warn, name)
     return t - (t[0] if t.size else 0.0)
 
