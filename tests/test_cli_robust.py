@@ -294,6 +294,30 @@ def test_native_log_lines_are_filtered_from_stderr():
     assert "a fatal native error" in err and err.endswith("after\n")
 
 
+def test_the_filters_end_does_not_wait_for_a_child_holding_the_pipe():
+    """A process that inherited the filtered descriptor 2 (a Dask worker shutting down) keeps
+    the pump reading: the block's end waits DRAIN_SECONDS, not until the child exits (it waited
+    2 s after every batch run, and a Ctrl-C then printed a traceback), and leaves descriptor 2's
+    copy open while the pump may still write to it; closes it once the pump has ended."""
+    import os
+    import threading
+
+    from facetransfer.cli import stderr as fs
+
+    assert fs.DRAIN_SECONDS <= 0.5
+    go = threading.Event()
+    pump = threading.Thread(target=go.wait, daemon=True)
+    pump.start()
+    fd = os.dup(2)
+    fs._drained(pump, fd)
+    os.fstat(fd)                                  # still open: the pump may write to it
+    go.set()
+    pump.join()
+    fs._drained(pump, fd)
+    with pytest.raises(OSError):
+        os.fstat(fd)                              # closed once the pump has ended
+
+
 # ------------------------------------------------------------------------------ native threads
 def test_serial_blas_only_for_the_commands_that_run_their_own_parallel_work():
     from facetransfer.cli.main import SERIAL_BLAS_COMMANDS, serial_blas

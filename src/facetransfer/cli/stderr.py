@@ -109,5 +109,21 @@ def filtered_stderr() -> Iterator[None]:
             sys.stderr.close()
         sys.stderr = old
         os.dup2(saved, 2)   # closes the pipe's last write end: the pump drains and stops
-        t.join(timeout=2)
+        _drained(t, saved)
+
+
+#: Seconds :func:`filtered_stderr` waits at its end for the pump to forward what is left. A
+#: process that inherited the pipe (a Dask worker being shut down) keeps it open after the
+#: command's work: the command then ends without waiting for it (it waited 2 s, and a Ctrl-C
+#: in that wait printed a traceback).
+DRAIN_SECONDS = 0.25
+
+
+def _drained(pump: threading.Thread, saved: int) -> None:
+    """Wait :data:`DRAIN_SECONDS` for the ``pump`` to end, then close ``saved`` (descriptor 2
+    as it was) unless the pump still writes to it (then it is left open: closed, its number
+    could be another file's by the pump's next write). A Ctrl-C in the wait ends it."""
+    with contextlib.suppress(KeyboardInterrupt):
+        pump.join(timeout=DRAIN_SECONDS)
+    if not pump.is_alive():
         os.close(saved)
