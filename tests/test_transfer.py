@@ -51,6 +51,11 @@ def test_time_map_trim_loop_hold_exact():
                                   [0, 1, 2, 3, 0, 1, 2, 3, 0, 1])
     np.testing.assert_array_equal(time_map(4, 25, 6, 25, align="hold").source_time,
                                   [0, 1, 2, 3, 3, 3])
+    # trim keeps the source's last frame for its own duration: 20 frames at 25 fps (0.8 s) on
+    # a 30 fps target are 24 frames, as loop and hold play before they repeat (before: 23)
+    trim = time_map(20, 25, 30, 30, align="trim").source_time
+    assert len(trim) == 24 and trim[-1] == 19
+    np.testing.assert_allclose(trim[:23], np.arange(23) * 25 / 30)
 
 
 def test_time_map_resamples_frame_rate():

@@ -620,3 +620,20 @@ def test_a_source_track_of_other_frames_is_one_line(clips, quick_model_path, tmp
     assert code == 2 and len(lines) == 1 and "expression track" in lines[0] \
         and "frames but" in lines[0], lines
     assert not [r.getMessage() for r in caplog.records if "expression track" in r.getMessage()]
+
+
+def test_one_path_for_two_outputs_is_refused_before_any_work(clips, quick_model_path, tmp_path,
+                                                              capsys):
+    """--meshes named as --out (or as --save-track) was found only after the render, as "File
+    exists", the video written and no meshes: refused first."""
+    base = ["transfer", "--target", clips["target"], "--target-track", clips["target_track"],
+            "--expression-from", clips["source"], "--source-track", clips["source_track"],
+            "--model", quick_model_path, "--no-progress"]
+    for extra, said in ((["--out", tmp_path / "o.mp4", "--meshes", tmp_path / "o.mp4"],
+                         f"--meshes {tmp_path / 'o.mp4'} is also --out"),
+                        (["--out", tmp_path / "o.mp4", "--save-track", tmp_path / "t.npz",
+                          "--meshes", tmp_path / "t.npz"],
+                         f"--meshes {tmp_path / 't.npz'} is also --save-track")):
+        code, _, err = run(base + extra, capsys)
+        assert code == 2 and err.strip().endswith(said + ": give each output its own name"), err
+    assert not any(tmp_path.iterdir())

@@ -107,7 +107,8 @@ def time_map(n_source: int, fps_source: float, n_target: int, fps_target: float,
     Output frame ``j`` (time ``j / fps_target``) reads the source at frame
     ``j * fps_source / fps_target``. When that runs past the source's last frame:
 
-    * ``"trim"``: the output stops there (``n_out`` = frames of the target that the source covers);
+    * ``"trim"``: the output stops there (``n_out`` = frames of the target that the source covers,
+      its last frame for its own duration: a 0.8 s source of 20 frames gives 24 at 30 fps);
     * ``"loop"``: the source restarts from its first frame;
     * ``"hold"``: the source's last frame is held.
 
@@ -142,8 +143,8 @@ def time_map(n_source: int, fps_source: float, n_target: int, fps_target: float,
         align = "trim" if t[-1] <= last + 1e-9 else "hold"
     if align not in ALIGN_MODES:
         raise TransferError(f"align must be one of {', '.join(ALIGN_MODES)}, got {align!r}")
-    if align == "trim":
-        t = t[t <= last + 1e-9]
+    if align == "trim":   # to the end of the source's last frame (it lasts 1 / fps_source)
+        t = t[t < n_source - 1e-9]
         t = np.minimum(t, last)
     elif align == "loop":
         t = np.mod(t, n_source)

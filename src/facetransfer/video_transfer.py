@@ -835,6 +835,12 @@ def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: boo
     from .io.atomic import check_output_path
     from .io.video import check_video_output
 
+    named = [(n, Path(p).resolve()) for n, p in (("--out", out), ("--save-track", save_track),
+                                                  ("--meshes", meshes_dir)) if p is not None]
+    for i, (a, pa) in enumerate(named):   # one path for two outputs: found before any work
+        for b, pb in named[i + 1:]:
+            if pa == pb:
+                raise RewriteError(f"{b} {pb} is also {a}: give each output its own name")
     check_video_output(out, video_options, overwrite=overwrite)
     if save_track is not None:
         check_output_path(save_track, overwrite=overwrite)
