@@ -451,3 +451,28 @@ def test_a_rerun_knows_an_output_of_other_inputs_from_its_own(arkit_model, make_
     assert _cli(capsys, *argv, "--overwrite")[0] == 0
     assert _summary(out / "summary.csv")["t"]["status"] == "done"
     assert (out / "t.csv").read_bytes() != kept
+
+
+def test_the_embedded_cluster_has_no_more_workers_than_clips(clips, quick_model_path, inproc,
+                                                            tmp_path, capsys, monkeypatch):
+    """--workers 100 for one clip on this machine's cores started 100 worker processes (no
+    clip finished in 2 minutes on 2 cores): the cluster has at most one worker per clip, and
+    more workers than cores are said; the summary's count is singular for one clip."""
+    asked = []
+    orig = batch_cluster.open_client
+
+    def spy(**kw):
+        asked.append(kw["workers"])
+        return orig(**kw)
+
+    monkeypatch.setattr(batch_cluster, "open_client", spy)
+    t1 = tmp_path / "one.npz"
+    (va, pa, _) = clips["a"]
+    assert _cli(capsys, "track", va, "--model", quick_model_path, "--out", t1, "--init", pa,
+                "--passes", "1")[0] == 0
+    main(["batch", "export", str(t1), "--format", "json", "--out", str(tmp_path / "exp"),
+          "--model", str(quick_model_path), "--workers", "100"])
+    said = capsys.readouterr()
+    assert asked == [1]
+    assert f"note: --workers 100 on {batch_cluster.default_workers()} cores" in said.err
+    assert "export: 1 clip (1 failed)" in said.out
