@@ -136,8 +136,12 @@ def test_cli_features_then_fit(data_dir, tmp_path, capsys):
     assert rep["surface_distance"]["mean"] < 0.01                   # scan units: measured 0.0056 (0.3 mm)
     last = capsys.readouterr().out.strip().splitlines()[-1]       # the prior and both residuals
     cands = rep["prior"]["candidates"]
-    assert last == f"shape prior: {rep['prior']['name']} (chosen automatically, the lower " \
-        "residual of " + ", ".join(f"{c['name']} {c['residual']:.4g}" for c in cands) + ")"
+    # the rule the report gives (before: "the lower residual of", also where a later
+    # candidate's lower residual was not 10 % lower, and the first kept)
+    assert last == f"shape prior: {rep['prior']['name']} (chosen automatically by " \
+        f"{rep['prior']['chosen_by']}: " + ", ".join(f"{c['name']} {c['residual']:.4g}"
+                                                   for c in cands) + ")"
+    assert "10% lower" in rep["prior"]["chosen_by"]
     assert len(cands) == 2
     # the same in one step: --features auto, the default (the points kept next to the fit)
     fit2 = tmp_path / "fit2.obj"

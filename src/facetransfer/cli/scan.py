@@ -321,6 +321,7 @@ def _print_fit_summary(paths, s: dict, notes) -> None:
         print("scan repaired: " + "; ".join(notes))
     if s.get("prior"):   # last, as the README says: the prior and each candidate's residual
         cands = s["prior"].get("candidates") or []
+        rule = s["prior"].get("chosen_by", "the lowest residual")
         print(f"shape prior: {s['prior']['name']}" + (
-            " (chosen automatically, the lower residual of " + ", ".join(
+            f" (chosen automatically by {rule}: " + ", ".join(
                 f"{c['name']} {c['residual']:.4g}" for c in cands) + ")" if cands else ""))
