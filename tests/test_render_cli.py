@@ -128,3 +128,12 @@ def test_synth_video_texture_file(model_path, tmp_path, capsys):
     xy = np.rint(tr.vertices2d[0][tr.visible[0]]).astype(int)
     px = bgr[xy[:, 1], xy[:, 0]].astype(int)  # BGR at visible vertices: shaded green
     assert np.median(px[:, 1]) > 100 and np.median(px[:, 0]) < 40 and np.median(px[:, 2]) < 40
+
+
+def test_synth_video_to_an_image_sequence_says_it_writes_a_video(model_path, tmp_path, capsys):
+    """An image-sequence --out in a folder not made yet: said to need a video (before: "output
+    folder ... does not exist", and once made, "expected a video")."""
+    rc = main(["synth-video", "--model", str(model_path), "--random", "--frames", "2",
+               "--out", str(tmp_path / "sv" / "%04d.png")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and err.endswith("synth-video writes no image sequence)") and "\n" not in err

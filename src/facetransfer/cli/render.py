@@ -139,10 +139,12 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
     vopt = video_options(args)
     inputs = [args.model, args.performance,
               args.texture if args.texture not in ("procedural", "default") else None]
+    if Path(args.out).suffix.lower() not in VIDEO_SUFFIXES:  # its truth goes beside one file
+        raise FaceTransferError(f"--out {args.out}: expected a video "
+                                f"({', '.join(VIDEO_SUFFIXES)}; synth-video writes no image "
+                                "sequence)")
     out = check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
     check_output_path(_truth_path(out), overwrite=args.overwrite, inputs=inputs)
-    if out.suffix.lower() not in VIDEO_SUFFIXES:  # the truth file goes beside one video file
-        raise FaceTransferError(f"--out {out}: expected a video ({', '.join(VIDEO_SUFFIXES)})")
     check_video_output(out, vopt, overwrite=args.overwrite)
     if bool(args.performance) == bool(args.random):
         raise FaceTransferError("give --performance SPEC.json or --random, not both" if
