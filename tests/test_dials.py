@@ -118,3 +118,23 @@ def test_transfer_dials_need_an_identity(arkit_model, data_dir, tmp_path, capsys
     assert main(["transfer", "--target", str(clip), "--model", str(mp), "--identity-label",
                  "id01", "--identity-dials", "nope=1", "--out", str(tmp_path / "o.mp4")]) == 2
     assert "unknown identity dial" in capsys.readouterr().err
+
+
+def test_dials_that_predict_nothing_are_said(arkit_model, dials, tmp_path, capsys, monkeypatch):
+    """A dial whose leave-one-out R2 is at most 0 (a model of too few identities: ict-trilinear's
+    16 gave -0.138 on every dial, exactly the mean's score) is said by `model dials` and warned
+    of when `transfer --identity-dials` uses it; dials that predict are not."""
+    import dataclasses
+
+    from facetransfer import dials as dials_module
+    assert dials.unreliable() == [d.name for d in dials.dials if not d.r2_loo > 0]
+    first = dials.dials[0]
+    poor = dataclasses.replace(dials, dials=(dataclasses.replace(first, r2_loo=-0.138),)
+                               + dials.dials[1:])
+    assert poor.unreliable() == [first.name] and poor.unreliable(["nothing"]) == []
+    mp = tmp_path / "m.npz"
+    arkit_model.save(mp)
+    monkeypatch.setattr(dials_module, "learn_dials", lambda m: poor)
+    assert main(["model", "dials", str(mp)]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert out[-1].startswith(f"note: {first.name}: leave-one-out R2 <= 0")

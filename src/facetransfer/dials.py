@@ -127,6 +127,13 @@ class DialSet:
                 return d
         raise DialError(f"unknown identity dial {name!r}; known dials: {', '.join(self.names)}")
 
+    def unreliable(self, names=None) -> list[str]:
+        """The dials (of ``names``, default all) that predict an identity left out of their fit
+        no better than the mean does (leave-one-out R² <= 0): a model of too few identities,
+        whose dials move the face along directions that mean nothing of what they name."""
+        return [d.name for d in self.dials
+                if (names is None or d.name in names) and not d.r2_loo > 0.0]
+
     def apply(self, weights: np.ndarray, values: Mapping[str, float]) -> np.ndarray:
         """Identity weights ``(..., r)`` moved by ``values`` (dial name -> units), Eq. (D2)."""
         w = np.array(weights, dtype=np.float64)

@@ -431,6 +431,11 @@ def cmd_dials(args: argparse.Namespace) -> int:
         lines.append(f"  {d.name:14s} {d.r2:6.3f} {d.r2_loo:7.3f} {d.sigma:8.3f} "
                      f"{d.effect:+9.3f}  {d.description}")
     print("\n".join(lines))
+    bad = dials.unreliable()
+    if bad:
+        print(f"note: {', '.join(bad)}: leave-one-out R2 <= 0, no better than the mean for an "
+              f"identity left out: {m.shape[0]} identities are too few for "
+              + ("them" if len(bad) > 1 else "it") + " to mean what the name says")
     if args.out:
         img = dial_sheet(m, dials)
         with atomic_path(args.out, overwrite=args.overwrite) as tmp:

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import logging
 import sys
 from pathlib import Path
 
@@ -28,6 +29,8 @@ from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_option
                      check_track_name, frame_count, progress_disabled, resolve_model,
                      video_options, video_out)
 from .track import CAPTURE_HELP
+
+log = logging.getLogger(__name__)
 
 ALIGN_HELP = ("how to fit a source of another length: trim (stop where the shorter ends), loop "
               "(repeat the source), hold (hold the source's last frame); default: trim when the "
@@ -535,6 +538,11 @@ def _dialled_identity(model, identity, args):
     dials = learn_dials(model)
     for name in values:
         dials.get(name)
+    bad = dials.unreliable(values)
+    if bad:
+        log.warning("--identity-dials %s: leave-one-out R2 <= 0 on this model (too few "
+                    "identities): the face moves along a direction that does not measure what "
+                    "the name says", ", ".join(bad))
     if identity is None:
         if not args.target_track or args.identity_from:
             raise FaceTransferError("--identity-dials needs the identity to move: "
