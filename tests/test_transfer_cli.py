@@ -637,3 +637,15 @@ def test_one_path_for_two_outputs_is_refused_before_any_work(clips, quick_model_
         code, _, err = run(base + extra, capsys)
         assert code == 2 and err.strip().endswith(said + ": give each output its own name"), err
     assert not any(tmp_path.iterdir())
+
+
+def test_a_face_to_track_beside_its_track_is_refused(clips, quick_model_path, tmp_path, capsys):
+    """--source-face with --source-track was taken and ignored (nothing is tracked): refused,
+    as --target-face with --target-track is."""
+    code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
+                        clips["target_track"], "--expression-from", clips["source"],
+                        "--source-track", clips["source_track"], "--source-face", "left",
+                        "--model", quick_model_path, "--out", tmp_path / "o.mp4"], capsys)
+    assert code == 2 and err.strip().endswith(
+        f"--source-face chooses the face to track, but --source-track {clips['source_track']} "
+        "is tracked already (its face is the one used): give one of them"), err

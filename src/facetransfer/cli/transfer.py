@@ -442,10 +442,14 @@ def _check_transfer_args(args):
                                 "performance is a track file, TRACK.npz)")
     to_track = 0
     _check_option_pairs(args)
-    if args.target_face and args.target_track:
-        raise FaceTransferError(f"--target-face chooses the face to track, but --target-track "
-                                f"{args.target_track} is tracked already (its face is the one "
-                                "rewritten): give one of them")
+    for face, flag, track, tflag in ((args.target_face, "--target-face", args.target_track,
+                                      "--target-track"),
+                                     (args.source_face, "--source-face", args.source_track,
+                                      "--source-track")):
+        if face and track:
+            raise FaceTransferError(f"{flag} chooses the face to track, but {tflag} {track} is "
+                                    "tracked already (its face is the one used): give one of "
+                                    "them")
     for k, (v, tr) in enumerate(((args.target, args.target_track),
                                  (args.expression_from, args.source_track),
                                  (args.viseme_from, args.viseme_track),
