@@ -442,14 +442,13 @@ def _check_transfer_args(args):
                                 "performance is a track file, TRACK.npz)")
     to_track = 0
     _check_option_pairs(args)
-    for face, flag, track, tflag in ((args.target_face, "--target-face", args.target_track,
-                                      "--target-track"),
-                                     (args.source_face, "--source-face", args.source_track,
-                                      "--source-track")):
+    for face, flag, track, tflag, role in (
+            (args.target_face, "--target-face", args.target_track, "--target-track", "rewritten"),
+            (args.source_face, "--source-face", args.source_track, "--source-track", "used")):
         if face and track:
             raise FaceTransferError(f"{flag} chooses the face to track, but {tflag} {track} is "
-                                    "tracked already (its face is the one used): give one of "
-                                    "them")
+                                    f"tracked already (its face is the one {role}): give one "
+                                    "of them")
     for k, (v, tr) in enumerate(((args.target, args.target_track),
                                  (args.expression_from, args.source_track),
                                  (args.viseme_from, args.viseme_track),
