@@ -98,6 +98,17 @@ def test_cli_bad_input_is_one_line_exit_2(small_clip, quick_model_path, quick_mo
     code, lines = _run(capsys, video, "--model", quick_model_path, "--from-track", wrong)
     assert code == 2 and "--overlay" in lines[0]
     assert not out.exists()
+    # a track of the clip's first frames (track --max-frames): the --max-frames that draws them
+    short, k = tmp_path / "short.npz", 4
+    Track(25.0, (320, 240), np.tile(np.eye(3), (k, 1, 1)), np.ones(k), np.zeros((k, 2)),
+          {"identity": np.zeros((k, 5)), "expression": np.zeros((k, 5))},
+          np.zeros((k, 68, 2)), np.ones(k), np.zeros(k, bool), quick_model.content_hash,
+          ("identity", "expression")).save(short)
+    code, lines = _run(capsys, video, "--model", quick_model_path, "--from-track", short,
+                       "--overlay", tmp_path / "o.mp4")
+    assert code == 2 and lines[0].endswith(
+        f"track {short} has 4 frames, the video {video} 8: give --max-frames 4 to draw the "
+        "frames it covers"), lines
 
 
 def test_cli_video_without_a_face(quick_model_path, tmp_path, capsys):

@@ -141,6 +141,10 @@ def run(args) -> int:
     if args.from_track is not None:
         track = Track.load(args.from_track)
         frames = frame_source(args.video, args.max_frames)
+        if track.n_frames < frames.n and tuple(track.frame_size) == tuple(frames.size):
+            raise FaceTransferError(f"track {args.from_track} has {track.n_frames} frames, the "
+                                    f"video {args.video} {frames.n}: give --max-frames "
+                                    f"{track.n_frames} to draw the frames it covers")
         track.check_video(frames.n, frames.size, what=f"video {args.video}")
         track.check_model(model)
     else:
