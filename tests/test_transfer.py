@@ -286,6 +286,15 @@ def test_parse_edit_arguments():
         parse_weights("missing.npy", 3)
 
 
+def test_a_npy_that_is_text_is_said_as_such(tmp_path):
+    """A .npy of text: "not a NumPy array file" (before: numpy's advice on pickled data)."""
+    (tmp_path / "w.npy").write_text("1 2 3")
+    with pytest.raises(TransferError, match=r"not a NumPy array file \(np.save writes one\)\)$"):
+        parse_weights(str(tmp_path / "w.npy"), 3)
+    with pytest.raises(TransferError, match="could not convert string to float: 'x'"):
+        parse_weights("1,x,3", 3)
+
+
 def test_project_landmarks_matches_camera(quick_model, quick_track):
     tr = project_landmarks(quick_track, quick_model)
     i = 7

@@ -732,11 +732,13 @@ def parse_weights(text: str, r: int, *, what: str = "--identity-weights") -> np.
                                                   "no such file"))
     try:
         if p.suffix in (".npy", ".txt", ".csv") and p.is_file():
-            vals = np.load(p) if p.suffix == ".npy" else np.loadtxt(p, delimiter=",")
+            vals = np.load(p, allow_pickle=False) if p.suffix == ".npy" \
+                else np.loadtxt(p, delimiter=",")
         else:
             vals = np.array([float(v) for v in str(text).replace(" ", ",").split(",") if v])
-    except (ValueError, OSError) as exc:
-        raise TransferError(f"{what} {text!r}: not a list of numbers or a .npy file ({exc})") \
+    except (ValueError, OSError, EOFError) as exc:
+        why = "not a NumPy array file (np.save writes one)" if p.suffix == ".npy" else exc
+        raise TransferError(f"{what} {text!r}: not a list of numbers or a .npy file ({why})") \
             from None
     vals = np.asarray(vals, dtype=np.float64).ravel()
     if vals.shape != (r,) or not np.all(np.isfinite(vals)):
