@@ -85,6 +85,21 @@ def test_atlas_texel_uv_convention_matches_render():
     np.testing.assert_allclose(a.texel_bary.sum(-1), 1, atol=1e-6)
 
 
+def test_atlas_interpolation_is_each_texels_barycentric_sum():
+    """The interpolation (a sparse matrix made once per atlas) is, texel by texel, its
+    triangle's corners weighted by its barycentric coordinates, for any values, twice."""
+    V, F, UV = grid(6)
+    a = UVAtlas(F, UV, 33)
+    rng = np.random.default_rng(4)
+    for X in (rng.normal(size=(len(UV), 3)), rng.normal(size=(len(UV), 5))):
+        tri = a.texel_triangles
+        bary = a.texel_bary.reshape(-1, 3)[a.mask.ravel()].astype(np.float64)
+        want = sum(bary[:, k, None] * X[F[tri, k]] for k in range(3))
+        np.testing.assert_allclose(a.interpolate(X), want, rtol=1e-12, atol=1e-12)
+    with pytest.raises(ShapeError):
+        a.interpolate(np.zeros((len(UV) + 1, 3)))
+
+
 def test_atlas_partial_coverage_and_overlap_rule():
     V, F, UV = grid(2, uv_box=(0.0, 0.0, 0.5, 0.5))  # only the lower-left quarter of the atlas
     a = UVAtlas(F, UV, 33)
