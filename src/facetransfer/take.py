@@ -127,8 +127,13 @@ def _clock(timecodes, warn: bool, name: str = "the take") -> np.ndarray:
     """``(F,)`` seconds since midnight of each row's timecode, counted at :func:`take_rate`;
     TransferError where they go back in time."""
     f = _fields(timecodes)
-    t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / \
-        _rate(f, warn, name)
+    return _seconds(f, _rate(f, warn, name), timecodes)
+
+
+def _seconds(f: np.ndarray, rate: int, timecodes) -> np.ndarray:
+    """``(F,)`` seconds since midnight of parsed timecode fields ``f`` (F, 5) counted at
+    ``rate`` (a day added past midnight); TransferError where they go back in time."""
+    t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / rate
     t = _past_midnight(t, 86400.0)
     _forward(t, timecodes)
     return t
@@ -218,7 +223,7 @@ def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
     timecode rate (``round(fps)``: one exported from it) counts its frames: a row's time is
     the frames its timecode counts over ``fps`` (a 23.976 fps plate's frame 1000 after
     01:00:00:00 is 01:00:41:16, at 41.708 s); a take at another rate, with sub-frames (the
-    app's), or beside a drop-frame start, counts clock time (:func:`_clock`)."""
+    app's), or beside a drop-frame start, counts clock time (:func:`_seconds`)."""
     from .io.plate_header import timecode_count
 
     f = _fields(timecodes)
@@ -232,13 +237,14 @@ def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
     # rows of whole frames (an export's; the app's carry thousandths, its clock's time), not
     # after a drop-frame start (then an export counts clock time, export.livelink)
     if rate != nominal or drop or not whole:
-        clock = _clock(timecodes, False, name)
+        clock = _seconds(f, rate, timecodes)
         first = None if start_timecode is None else timecode_seconds(start_timecode, fps)
         return clock, _same_day(first, clock, 86400.0)
     frames = _past_midnight(secs * rate + f[:, 3], 86400 * rate)
     _forward(frames, timecodes)
     first = None if start_timecode is None else count / float(fps)
-    return frames / float(fps), _same_day(first, frames / float(fps), 86400.0 * rate / fps)
+    clock = frames / float(fps)
+    return clock, _same_day(first, clock, 86400.0 * rate / fps)
 
 
 def _past_midnight(t: np.ndarray, day: float) -> np.ndarray:

@@ -187,6 +187,19 @@ def resolve_model(path, *, progress: bool = True):
         close()
 
 
+def check_track_of(track, path, video, n_frames: int, size, purpose: str) -> None:
+    """``track`` (read from ``path``) checked against ``video``'s ``n_frames`` frames of
+    ``size`` (:meth:`facetransfer.track.result.Track.check_video`); a track of its first frames
+    (its size, fewer frames: ``track --max-frames``) is said with the ``--max-frames`` that
+    ``purpose`` (e.g. "to draw the frames it covers") needs."""
+    from ..errors import FaceTransferError
+
+    if track.n_frames < n_frames and tuple(track.frame_size) == tuple(int(v) for v in size):
+        raise FaceTransferError(f"track {path} has {track.n_frames} frames, the video {video} "
+                                f"{n_frames}: give --max-frames {track.n_frames} {purpose}")
+    track.check_video(n_frames, size, what=f"video {video}")
+
+
 def check_track_name(path, flag: str = "--out", *, overlay: bool = False) -> None:
     """A track file's name ends in .npz (:func:`facetransfer.io.output_names.
     check_output_suffix`); with ``overlay`` (``track``), a video's name is pointed to

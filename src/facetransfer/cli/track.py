@@ -21,8 +21,8 @@ from pathlib import Path
 from ..errors import FaceTransferError
 from ..io.atomic import check_not_input, check_output_path
 from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
-                     check_track_name, frame_count, number_in, progress_disabled, resolve_model,
-                     video_options, video_out)
+                     check_track_name, check_track_of, frame_count, number_in,
+                     progress_disabled, resolve_model, video_options, video_out)
 
 
 #: What the capture tracker does, for the help of every ``--tracker`` option.
@@ -141,11 +141,8 @@ def run(args) -> int:
     if args.from_track is not None:
         track = Track.load(args.from_track)
         frames = frame_source(args.video, args.max_frames)
-        if track.n_frames < frames.n and tuple(track.frame_size) == tuple(frames.size):
-            raise FaceTransferError(f"track {args.from_track} has {track.n_frames} frames, the "
-                                    f"video {args.video} {frames.n}: give --max-frames "
-                                    f"{track.n_frames} to draw the frames it covers")
-        track.check_video(frames.n, frames.size, what=f"video {args.video}")
+        check_track_of(track, args.from_track, args.video, frames.n, frames.size,
+                       "to draw the frames it covers")
         track.check_model(model)
     else:
         track, model = _track_and_save(args, model, settings, tracker)

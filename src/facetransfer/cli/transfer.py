@@ -26,8 +26,8 @@ from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
-                     check_track_name, frame_count, progress_disabled, resolve_model,
-                     video_options, video_out)
+                     check_track_name, check_track_of, frame_count, progress_disabled,
+                     resolve_model, video_options, video_out)
 from .track import CAPTURE_HELP
 
 log = logging.getLogger(__name__)
@@ -648,12 +648,8 @@ def run_puppet(args) -> int:
                          progress_factory=_bar_factory(), workers=default_workers(),
                          face=args.face)
     if args.track:   # a track of another video would drive the face with the wrong motion
-        if track.n_frames < len(frames) and tuple(track.frame_size) == frames.shape[2:0:-1]:
-            raise FaceTransferError(f"track {args.track} has {track.n_frames} frames, the "
-                                    f"video {args.video} {len(frames)}: give --max-frames "
-                                    f"{track.n_frames} to drive the puppet for those")
-        track.check_video(len(frames), (frames.shape[2], frames.shape[1]),
-                          what=f"video {args.video}")
+        check_track_of(track, args.track, args.video, len(frames),
+                       (frames.shape[2], frames.shape[1]), "to drive the puppet for those")
         track.warn_other_video(args.video, "the puppet does not move with this video's audio")
     if track.lost.all():
         raise FaceTransferError(f"no face found in {args.video}")

@@ -67,6 +67,7 @@ class UVAtlas:
         self._flat = flat
         self._tri = self.texel_tri.ravel()[flat].astype(np.int64)
         self._bary = self.texel_bary.reshape(-1, 3)[flat].astype(np.float64)
+        self._matrix = None   # the interpolation's sparse matrix, made on first use
 
     @property
     def n_texels(self) -> int:
@@ -90,7 +91,7 @@ class UVAtlas:
         """The interpolation as a sparse ``(m, n)`` matrix, three barycentric weights a row,
         made on first use and kept (a texture lifted from every frame of a clip interpolates
         twice a frame: 15.6 ms with the texels' corners gathered, 1.6 ms this way at 512²)."""
-        if getattr(self, "_matrix", None) is None:
+        if self._matrix is None:
             from scipy.sparse import csr_matrix
 
             m = self._tri.size

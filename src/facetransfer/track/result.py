@@ -33,7 +33,6 @@ key                 shape / dtype        meaning
 from __future__ import annotations
 
 import logging
-
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -255,8 +254,6 @@ class Track:
         """The name of the video this track was made from where it is not ``video``'s (a
         renamed copy passes; another clip of the same size would be followed with the wrong
         motion), else None."""
-        from pathlib import Path
-
         made = Path(str(self.source)).name if self.source else ""
         return made if made and made != Path(str(video)).name else None
 
@@ -265,8 +262,6 @@ class Track:
         that is another clip, CONSEQUENCE"."""
         made = self.other_video(video)
         if made:
-            from pathlib import Path
-
             logging.getLogger(__name__).warning(
                 "%strack %s was made from %s, not %s: if that is another clip, %s",
                 f"{role} " if role else "", self.label, made, Path(str(video)).name,
