@@ -482,3 +482,78 @@ def test_an_export_says_which_frames_were_lost(case, tmp_path, capsys):
     assert main(["export", str(tmp_path / "t0.npz"), "--model", str(tmp_path / "m.npz"),
                  "--out", str(tmp_path / "b.csv")]) == 0
     assert "note:" not in capsys.readouterr().out
+
+
+def test_an_animators_slips_are_said_as_such(case, quick_model, tmp_path, capsys):
+    """A walk of a new user's export path: an output that links to the input is refused
+    (export and view wrote through it); a track without activations is told so before any
+    --model advice; a folder as --out, a .gltf, a take or an export given as a track, a take
+    with its name said twice, an empty take: each one line naming what it is."""
+    import dataclasses
+
+    from facetransfer.track import Track
+
+    model, track, _, _ = case
+    tp = tmp_path / "t.npz"
+    track.save(tp)
+    link = tmp_path / "link.json"
+    link.symlink_to(tp)
+    before = tp.read_bytes()
+
+    def said(argv) -> str:
+        assert main([str(a) for a in argv]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1, err
+        return err[0]
+
+    assert "is also an input" in said(["export", tp, "--out", link, "--overwrite"])
+    page = tmp_path / "page.html"
+    page.symlink_to(tp)
+    assert "is also an input" in said(["view", tp, "--out", page, "--overwrite"])
+    assert tp.read_bytes() == before and link.is_symlink() and page.is_symlink()
+    bare = tmp_path / "bare.npz"
+    dataclasses.replace(track, blendshapes=None, blendshape_names=None,
+                        model_hash=quick_model.content_hash).save(bare)
+    assert "has no ARKit blendshape activations" in said(["export", bare, "--out",
+                                                          tmp_path / "b.glb"])
+    assert "is a folder" in said(["export", tp, "--out", tmp_path, "--format", "livelink"])
+    assert "name it t.glb" in said(["export", tp, "--out", tmp_path / "t.gltf"])
+    glb = tmp_path / "ok.glb"
+    model.save(tmp_path / "m.npz")
+    assert main(["export", str(tp), "--model", str(tmp_path / "m.npz"), "--out", str(glb)]) == 0
+    capsys.readouterr()
+    assert said(["edit", glb, "--scale", "jawOpen=2", "--out", tmp_path / "e.npz"]).endswith(
+        f"{glb} is not a track file: it is a glTF binary (a .glb, as `facetransfer export` "
+        "writes)")
+    assert said(["probe", glb]).endswith(f"{glb} is a glTF binary (a .glb, as `facetransfer "
+                                         "export` writes): probe describes videos, image "
+                                         "sequences, tracks, models and Live Link Face takes")
+    junk = tmp_path / "junk.csv"
+    junk.write_text("hello,world\n1,2\n")
+    msg = said(["puppet", junk, "--model", tmp_path / "m.npz", "--out", tmp_path / "p.mp4"])
+    assert msg.count(str(junk)) == 1 and "is not a Live Link Face CSV" in msg
+    junk.write_text("")
+    assert "is empty, not a Live Link Face CSV" in said(["puppet", junk, "--model",
+                                                         tmp_path / "m.npz", "--out",
+                                                         tmp_path / "p.mp4"])
+    assert Track.load(tp).n_frames == track.n_frames
+
+
+def test_the_mediapipe_json_records_the_videos_start_timecode(case, tmp_path, capsys):
+    """As the glb's and USD's metadata do (before: the JSON alone left it out)."""
+    import dataclasses
+
+    from facetransfer.io.video import VideoOptions, write_video
+
+    model, track, _, _ = case
+    video = tmp_path / "clip.mov"
+    write_video(video, np.zeros((track.n_frames, 64, 64, 3), np.uint8), track.fps,
+                options=VideoOptions(crf=0, timecode="10:00:00:00"))
+    tp = tmp_path / "t.npz"
+    dataclasses.replace(track, source=str(video)).save(tp)
+    assert main(["export", str(tp), "--out", str(tmp_path / "a.json")]) == 0
+    assert "the start timecode 10:00:00:00" in capsys.readouterr().out
+    assert json.loads((tmp_path / "a.json").read_text())["timecode"] == "10:00:00:00"
+    assert main(["export", str(tp), "--out", str(tmp_path / "b.json"), "--timecode",
+                 "none"]) == 0
+    assert "timecode" not in json.loads((tmp_path / "b.json").read_text())

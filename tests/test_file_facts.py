@@ -64,7 +64,7 @@ def test_a_take_is_described(arkit_model, make_arkit_track, tmp_path, capsys):
     f = take_facts(tmp_path / "take.csv")
     assert (f["rows"], f["timecode_rate"], f["shapes"], f["missing_shapes"]) == (30, 25, 52, [])
     assert f["first_timecode"] == "10:00:00:00.000" and f["last_timecode"] == "10:00:01:04.000"
-    assert f["head_rotation"] and len(f["eye_rotation"]) == 6
+    assert len(f["head_rotation"]) == 3 and len(f["eye_rotation"]) == 6
     assert f["seconds"] == pytest.approx(29 / 25)
     names = [n for n in ARKIT_NAMES if n != "tongueOut"]
     rows = ["Timecode,BlendShapeCount," + ",".join(names)]
@@ -76,7 +76,15 @@ def test_a_take_is_described(arkit_model, make_arkit_track, tmp_path, capsys):
         f"{tmp_path / 'other.csv'}: a Live Link Face take of 90 rows (60 fps timecode), from "
         "00:00:00:00 to 00:00:01:29 (1.48 s apart)",
         "  shapes: 51 of 52 (missing, read as 0: TongueOut)",
-        "  head rotation: no; eye rotation: none"]
+        "  head rotation: none; eye rotation: none"]
+    # one head column left out: the two used said, the third read as 0 (before: "no")
+    cols = ["Timecode", "BlendShapeCount", *names, "HeadYaw", "HeadPitch"]
+    rows = [",".join(cols)] + [f"00:00:00:{k:02d},{len(names)}," + ",".join(
+        ["0.1"] * (len(names) + 2)) for k in range(20)]
+    (tmp_path / "yawpitch.csv").write_text("\n".join(rows) + "\n")
+    assert main(["probe", str(tmp_path / "yawpitch.csv")]) == 0
+    assert capsys.readouterr().out.splitlines()[-1] == (
+        "  head rotation: HeadYaw, HeadPitch (HeadRoll read as 0); eye rotation: none")
 
 
 def test_a_model_or_a_foreign_archive_given_to_probe(arkit_model, tmp_path, capsys):

@@ -179,3 +179,24 @@ def test_a_chunk_after_a_cut_it_cannot_see_gets_its_own_identity(edited, arkit_m
     alone = capture_video(read_video(path, start=50, stop=80)[0], arkit_model, workers=1)
     assert np.abs(other.weights["identity"][0] - w).max() > 0.1
     assert np.allclose(other.weights["identity"], alone.weights["identity"])
+
+
+def test_one_persons_shots_share_an_identity_and_a_gap_holds_its_nearest_frames(
+        edited, arkit_model, caplog):
+    """The same person before and after 12 black frames (a cut to black and back): one
+    identity through the clip, the first shot's (before: each shot its own, 0.1 apart, and the
+    exports carry the first only); the gap is lost, its first half holding the last frame
+    before it and its second half the first after it (before: all of it the shot before's,
+    the head snapping at the gap's end). Another person's shot keeps its own (above)."""
+    from facetransfer.track.capture import capture_video
+
+    a = edited[0]
+    clip = np.concatenate([a[:24], np.zeros_like(a[:12]), a[16:40]])
+    with caplog.at_level("WARNING"):
+        tr = capture_video(clip, arkit_model, workers=1)
+    assert tr.shot_starts and tr.lost[24:36].all() and not tr.lost[:24].any()
+    ident = tr.weights["identity"]
+    np.testing.assert_array_equal(ident, np.tile(ident[0], (len(clip), 1)))
+    np.testing.assert_array_equal(tr.rotation[24:30], np.tile(tr.rotation[23], (6, 1, 1)))
+    np.testing.assert_array_equal(tr.rotation[30:36], np.tile(tr.rotation[36], (6, 1, 1)))
+    np.testing.assert_array_equal(tr.blendshapes[30:36], np.tile(tr.blendshapes[36], (6, 1)))

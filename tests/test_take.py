@@ -467,3 +467,60 @@ def test_a_take_past_midnight_and_a_short_one_are_read_frame_for_frame():
     short = [format_timecode(k, 30.0, "01:00:00:00") for k in range(20)]
     clock, _ = tk._take_clock(short, 30.0, None, "t")
     np.testing.assert_allclose(clock - clock[0], np.arange(20) / 30.0, atol=1e-9)
+
+
+def test_a_short_take_says_where_it_is_held_and_an_aligned_one_says_nothing(
+        arkit_model, make_arkit_track, tmp_path, caplog):
+    """A take that ends before the target does holds its last row on the rest, said with the
+    frames (before: the performance stood still without a word); a take whose first row is
+    the target's start timecode is placed there without a warning (before: one, for the
+    right case)."""
+    from facetransfer.export.livelink import write_livelink
+
+    track, a, _ = make_arkit_track(arkit_model, 20, fps=25.0)
+    take = write_livelink(track, tmp_path / "take.csv", start="10:00:00:00")
+    target, _, _ = make_arkit_track(arkit_model, 30, seed=5, identity=2, fps=25.0)
+    with caplog.at_level("WARNING", logger="facetransfer.take"):
+        held = take_performance(take, target, arkit_model)
+    np.testing.assert_allclose(held.blendshapes[19:], np.tile(a[19], (11, 1)), atol=1e-6)
+    assert "ends at the target's frame 19: its last row is held on frames 20-29" in caplog.text
+    caplog.clear()
+    with caplog.at_level("INFO", logger="facetransfer.take"):
+        at = take_performance(take, target, arkit_model, start_timecode="10:00:00:00",
+                              align="trim")
+    assert at.n_frames == 20 and not [r for r in caplog.records if r.levelname == "WARNING"]
+    assert "0.000 s into it" in caplog.text                           # said, as information
+
+
+def test_a_takes_preview_runs_at_its_rows_ntsc_rate_from_its_start_timecode(
+        arkit_model, make_arkit_track, tmp_path):
+    """The app's takes carry clock time: a 29.97 fps take's rows lie 1001 / 30000 s apart.
+    Its preview (``take_track``, ``puppet``, ``view``) runs at 29.97 (before: 30, 0.6 s adrift
+    in ten minutes); whole-frame rows count frames at their nominal rate; the preview's start
+    timecode is the take's first row's (before: none)."""
+    from facetransfer.take import take_start_timecode, take_track
+
+    from facetransfer.export.livelink import HEADER, LIVELINK_NAMES
+
+    cols = ",".join(HEADER)
+    rows = []
+    for j in range(120):                    # 4 s at 29.97 fps, clock time at 30 nominal
+        t = 59 + 20 / 30 + j * 1001 / 30000
+        s, f = int(t), (t - int(t)) * 30
+        ff, milli = int(f), int(round((f - int(f)) * 1000))
+        if milli == 1000:
+            ff, milli = ff + 1, 0
+        tc = f"00:00:{s:02d}:{ff:02d}.{milli:03d}"
+        rows.append(",".join([tc, "61"] + ["0.5" if n == "JawOpen" else "0"
+                                           for n in LIVELINK_NAMES] + ["0"] * 9))
+    take = tmp_path / "ntsc.csv"
+    take.write_text(cols + "\n" + "\n".join(rows) + "\n")
+    got = take_track(take, arkit_model, arkit_model.factors[0][0])
+    assert got.fps == pytest.approx(30000 / 1001) and got.n_frames == 120
+    assert take_start_timecode(take) == "00:00:59:20"
+    whole = tmp_path / "whole.csv"
+    whole.write_text(cols + "\n" + "\n".join(
+        ",".join([f"10:00:0{j // 30}:{j % 30:02d}.000", "61"] + ["0"] * 61) for j in range(60))
+        + "\n")
+    assert take_track(whole, arkit_model, arkit_model.factors[0][0]).fps == 30.0
+    assert take_start_timecode(whole) == "10:00:00:00"

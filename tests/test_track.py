@@ -287,8 +287,18 @@ def test_track_validation_and_bad_files(tmp_path):
         _track(landmarks2d=np.zeros((4, 5, 2)))
     bad = tmp_path / "bad.npz"
     bad.write_bytes(b"not a zip")
+    with pytest.raises(TrackError, match=r"bad.npz is not a track file \(not an .npz archive\)"):
+        Track.load(bad)
+    bad.write_bytes(b"PK\x03\x04 cut short")                 # a zip's start: damaged
     with pytest.raises(TrackError, match="truncated or not a track file"):
         Track.load(bad)
+    # another kind of file, from this tool or beside its tracks: named (before: "truncated")
+    for head, kind in ((b"Timecode,BlendShapeCount,EyeBlinkLeft\n", "a Live Link Face take"),
+                       (b"glTF\x02\x00\x00\x00", "a glTF binary"),
+                       (b"\x00\x00\x00\x20ftypisom", "a video")):
+        bad.write_bytes(head + bytes(64))
+        with pytest.raises(TrackError, match=f"is not a track file: it is {kind}"):
+            Track.load(bad)
     np.savez(tmp_path / "other.npz", a=np.zeros(3))
     with pytest.raises(TrackError, match="not a track file"):
         Track.load(tmp_path / "other.npz")

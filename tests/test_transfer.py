@@ -210,12 +210,19 @@ def test_constant_weights_all_lost_raises():
 
 # ------------------------------------------------------------------------------ edits
 def test_ramp_envelope_shape():
+    """Full strength on START..END, both included; eased in and out over ``ramp`` frames
+    outside it (before: ramps inside, so frames 5 and 15 took nothing and a 3-frame range
+    reached 0.5 on one frame)."""
     e = ramp_envelope(20, 5, 15, 3)
-    assert e[:5].sum() == 0 and e[16:].sum() == 0
-    assert e[5] == 0 and e[15] == 0
-    np.testing.assert_array_equal(e[8:13], 1.0)
-    assert 0 < e[6] < e[7] < 1
+    np.testing.assert_array_equal(e[5:16], 1.0)
+    assert e[:2].sum() == 0 and e[19:].sum() == 0
+    assert 0 < e[2] < e[3] < e[4] < 1 and 0 < e[18] < e[17] < e[16] < 1
+    np.testing.assert_allclose(e[4], e[16])                  # symmetric about the range
+    x = 1 - 1 / 4                                            # one frame outside, ramp 3
+    np.testing.assert_allclose(e[4], x * x * (3 - 2 * x))
     np.testing.assert_array_equal(ramp_envelope(6, 1, 3, 0), [0, 1, 1, 1, 0, 0])
+    np.testing.assert_array_equal(ramp_envelope(8, 3, 3, 2)[3], 1.0)   # a one-frame range
+    np.testing.assert_array_equal(ramp_envelope(5, 0, 4, 8), 1.0)      # cut by the clip
 
 
 @pytest.fixture(scope="module")
@@ -239,8 +246,8 @@ def test_edit_add_is_exact_on_weights(quick_model, quick_track):
     diff = new.weights["expression"] - quick_track.weights["expression"]
     e = ramp_envelope(30, 10, 20, 3)
     np.testing.assert_allclose(diff, e[:, None] * d[None, :], atol=1e-12)
-    np.testing.assert_allclose(diff[15], d, atol=1e-12)  # full frown mid-range
-    np.testing.assert_array_equal(diff[:10], 0.0)
+    np.testing.assert_allclose(diff[10:21], np.tile(d, (11, 1)), atol=1e-12)  # the range: full
+    np.testing.assert_array_equal(diff[:6], 0.0)
     np.testing.assert_array_equal(new.weights["identity"], quick_track.weights["identity"])
 
 

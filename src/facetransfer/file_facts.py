@@ -24,13 +24,14 @@ _TRACK_KEYS = frozenset({"fps", "frame_size", "rotation", "model_hash", "mode_na
 def file_kind(path: str | os.PathLike) -> str:
     """``"take"`` (a ``.csv``), ``"track"`` (an ``.npz`` with a track's arrays), ``"model"``
     (an ``.npz`` with a model's) or ``"video"`` (anything else: a video or an image sequence,
-    for :mod:`facetransfer.io.video_facts`)."""
+    for :mod:`facetransfer.io.video_facts`); FaceTransferError for another archive, or for one
+    of the tool's exports (glb, USD, JSON, a page), named."""
     from .take import is_take
 
     import zipfile
 
     from .errors import FaceTransferError
-    from .io.npz import reason
+    from .io.npz import content_kind, reason
 
     p = Path(path)
     if is_take(p):
@@ -49,6 +50,11 @@ def file_kind(path: str | os.PathLike) -> str:
         raise FaceTransferError(f"{p} is an .npz archive of {_other_npz(p, names)}, not a track "
                                 "or a model: probe describes videos, image sequences, tracks, "
                                 "models and Live Link Face takes")
+    kind = content_kind(p) if p.is_file() else None
+    if kind is not None and kind.startswith(("a glTF", "a USD", "a JSON", "an HTML")):
+        # one of the tool's own exports (before: "not a video OpenCV can decode")
+        raise FaceTransferError(f"{p} is {kind}: probe describes videos, image sequences, "
+                                "tracks, models and Live Link Face takes")
     return "video"
 
 
@@ -145,8 +151,23 @@ def take_facts(path: str | os.PathLike) -> dict:
         "seconds": float(seconds[-1] - seconds[0]) if len(seconds) else 0.0,
         "first_timecode": tc[0] if tc else None, "last_timecode": tc[-1] if tc else None,
         "shapes": len(shapes), "missing_shapes": [n for n in LIVELINK_NAMES if n not in shapes],
-        "head_rotation": not any(n in take.missing for n in head),
+        "head_rotation": [n for n in head if n not in take.missing],
         "eye_rotation": [n for n in eyes if n not in take.missing]}
+
+
+def _columns(present: list, prefix: str) -> str:
+    """``"yes"`` where a take holds every rotation column of ``prefix``, ``"none"`` where it
+    holds none, else the ones it holds and those read as 0 (``"HeadYaw, HeadPitch (HeadRoll
+    read as 0)"``: before, "no" where one was missing and the others were used)."""
+    from .export.livelink import POSE_COLUMNS
+
+    every = [n for n in POSE_COLUMNS if n.startswith(prefix)]
+    if len(present) == len(every):
+        return "yes"
+    if not present:
+        return "none"
+    return (", ".join(present) + " (" + ", ".join(n for n in every if n not in present)
+            + " read as 0)")
 
 
 def _count(n: int, word: str) -> str:
@@ -185,7 +206,7 @@ def _take_lines(f: dict) -> list[str]:
              f"  shapes: {f['shapes']} of 52"
              + (f" (missing, read as 0: {', '.join(f['missing_shapes'])})"
                 if f["missing_shapes"] else ""),
-             "  head rotation: " + ("yes" if f["head_rotation"] else "no")
+             "  head rotation: " + _columns(f["head_rotation"], "Head")
              + "; eye rotation: " + (", ".join(f["eye_rotation"]) or "none")]
     return lines
 

@@ -209,11 +209,25 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     start = _synced_start(take.timecodes, clock, start_timecode, first, path)
     a = take_on_timeline(t, take.activations, target_track.n_frames, target_track.fps,
                          align=align, start=start)
+    _say_held(path, float(t[-1]) - start, len(a), target_track.fps, align)
     new = take_frames(target_track, np.arange(len(a)))
     weights = dict(new.weights)
     weights["expression"] = activations_to_weights(model, np.clip(a, 0.0, 1.0))
     new = dataclasses.replace(new, weights=weights)
     return attach_activations(project_landmarks(new, model), model)
+
+
+def _say_held(path, left: float, n: int, fps: float, align: str | None) -> None:
+    """Warn where a take that ends ``left`` seconds after the target's first frame leaves
+    the last of its ``n`` frames (at ``fps``) holding its last row (``align`` None or
+    "hold"): the performance stands still there (before: without a word)."""
+    if align not in (None, "hold") or n < 1:
+        return
+    k = int(np.floor(left * fps + 0.5)) + 1     # the frames the take's rows reach
+    if k < n:
+        log.warning("the take %s ends at the target's frame %d: its last row is held on "
+                    "frames %d-%d (--align trim stops the result there, loop repeats the "
+                    "take)", path, max(k - 1, 0), max(k, 0), n - 1)
 
 
 def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
@@ -281,9 +295,11 @@ def _synced_start(timecodes, clock: np.ndarray, start_timecode: str | None,
         return 0.0
     offset = first - float(clock[0])
     if 0.0 <= offset <= float(clock[-1] - clock[0]):
-        log.warning("the take %s is placed by timecode: the target's first frame "
-                    "(%s) is %.3f s into it (--take-sync start: from its first row)", path,
-                    start_timecode, offset)
+        # at its first row: the take and the target start together, nothing to say
+        say = log.info if offset < 1e-6 else log.warning
+        say("the take %s is placed by timecode: the target's first frame (%s) is %.3f s into "
+            "it (--take-sync start would place it from its first row)", path, start_timecode,
+            offset)
         return offset
     log.warning("the take %s (timecodes %s to %s) does not span the target's start timecode "
                 "%s: placed from its first row", path, timecodes[0], timecodes[-1],
@@ -305,13 +321,50 @@ def _read(path, model):
     try:
         take = read_livelink(path, lenient=True)
     except (ExportError, OSError, UnicodeDecodeError) as exc:
-        raise TransferError(f"{path}: {exc}") from None
+        said = str(exc)    # the reader's messages name the file already: not twice
+        raise TransferError(said if str(path) in said else f"{path}: {said}") from None
     if not len(take.timecodes):
         raise TransferError(f"the take {path} has no rows")
     shapes = [n for n in take.missing if n not in POSE_COLUMNS]
+    head = [n for n in POSE_COLUMNS if n.startswith("Head")]
+    if any(n not in take.missing for n in head):   # a head's rotation, in part: said too
+        shapes += [n for n in head if n in take.missing]
     if shapes:
         log.warning("the take %s has no column %s: taken as 0", path, ", ".join(shapes))
     return take
+
+
+def take_start_timecode(path) -> str | None:
+    """The take's first row's timecode as a video's start timecode (``HH:MM:SS:FF``, its
+    thousandths of a frame dropped): what a preview of the take (``puppet take.csv``) carries,
+    so that it lines up with the plate in an editor; None for a take without rows."""
+    from .export.common import ExportError
+    from .export.livelink import read_livelink
+
+    try:
+        timecodes = read_livelink(path, lenient=True).timecodes
+    except (ExportError, TransferError, OSError):   # read already where a preview is made
+        return None
+    if not len(timecodes):
+        return None
+    h, m, sec, ff = (int(v) for v in _fields(timecodes[:1])[0, :4])
+    return f"{h:02d}:{m:02d}:{sec:02d}:{ff:02d}"
+
+
+def _rows_rate(t: np.ndarray, f: np.ndarray) -> float:
+    """The frame rate of a take's rows at ``t`` (F,) seconds (parsed timecodes ``f`` (F, 5)):
+    the timecode rate whose frame is nearest their median step; of rows in clock time (the
+    app's, with sub-frames) at an NTSC rate's true one (``r * 1000 / 1001``) where their span
+    says so (a 29.97 fps take's rows lie 1001 / 30000 s apart: at 30 fps its preview drifted
+    0.6 s in ten minutes)."""
+    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0 / TIMECODE_RATES[2]
+    fps = float(min(TIMECODE_RATES, key=lambda r: abs(1.0 / r - step)))
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    if not f[:, 4].any() or span <= 0:   # whole frames count frames: the nominal rate
+        return fps
+    period = span / max(round(span * fps), 1)   # the rows' frame, dropped rows counted
+    ntsc = fps * 1000.0 / 1001.0
+    return ntsc if abs(period - 1.0 / ntsc) < abs(period - 1.0 / fps) else fps
 
 
 def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PREVIEW_SIZE,
@@ -338,8 +391,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
 
     take = _read(path, model)
     t = take_seconds(take.timecodes, name=f"take {path}")
-    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0 / TIMECODE_RATES[2]
-    fps = float(min(TIMECODE_RATES, key=lambda r: abs(1.0 / r - step)))
+    fps = _rows_rate(t, _fields(take.timecodes))
     n = int(np.floor(t[-1] * fps + 1e-6)) + 1
     n = n if max_frames is None else min(n, int(max_frames))
     rows = take_on_timeline(t, np.hstack([take.activations, take.pose[:, :3]]), n, fps,

@@ -481,23 +481,19 @@ def _expression_direction(model, label: str, mode: str, neutral: str) -> np.ndar
 
 
 def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int) -> np.ndarray:
-    """(n_frames,) weights: 0 outside ``start..stop``, 1 inside, smoothstep ramps at both ends.
+    """(n_frames,) weights: 1 on ``start..stop`` (both included), smoothstep ramps outside.
 
-    The ramps take ``ramp`` frames each (shortened to half the range when it is shorter), so
-    the envelope rises from 0 at ``start`` and falls back to 0 at ``stop``; with ``ramp=0`` it
-    is a box 1 on ``start..stop``.
+    The edit holds at full strength on every frame of its range, as ``--add EXPR@START-END``
+    says; it eases in over the ``ramp`` frames before ``start`` and out over the ``ramp``
+    frames after ``stop`` (a frame ``d`` frames outside the range weighs
+    ``smoothstep(1 - d / (ramp + 1))``), cut where the clip ends; 0 beyond. With ``ramp=0``
+    it is a box 1 on ``start..stop``. (Before, the ramps lay inside the range, so its end
+    frames took nothing and a range shorter than two ramps never reached full strength.)
     """
     t = np.arange(n_frames, dtype=np.float64)
-    inside = (t >= start) & (t <= stop)
-    r = min(float(ramp), (stop - start) / 2.0)
-    if r <= 0:
-        return inside.astype(np.float64)
-
-    def smooth(x):
-        x = np.clip(x, 0.0, 1.0)
-        return x * x * (3.0 - 2.0 * x)
-
-    return np.where(inside, smooth((t - start) / r) * smooth((stop - t) / r), 0.0)
+    d = np.maximum(np.maximum(start - t, t - stop), 0.0)     # frames outside the range
+    x = np.clip(1.0 - d / (max(int(ramp), 0) + 1.0), 0.0, 1.0)
+    return x * x * (3.0 - 2.0 * x)
 
 
 def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[EditScale] = (),
@@ -510,7 +506,7 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
       frame's ``w`` becomes ``w + (f − 1) ((w − w(neutral)) · d / d · d) d``: the component of
       the expression (relative to neutral) along ``d`` is multiplied by ``f``, the rest is kept.
     * ``EditAdd(label, a, b, amount)``: ``w += amount · e(t) · d`` with ``e`` the envelope of
-      :func:`ramp_envelope` (1 on ``a..b`` with smooth ramps of ``ramp`` frames at the ends).
+      :func:`ramp_envelope` (1 on ``a..b``, smooth ramps of ``ramp`` frames outside it).
 
     For a model of ARKit expressions (:func:`facetransfer.arkit.is_arkit_model`) the same
     edits act on the activations the weights convert to exactly, clipped to [0, 1]

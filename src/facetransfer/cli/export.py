@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from ..export import FORMAT_SUFFIXES, FORMATS
 from .common import default_model_for, frame_count, progress_disabled
@@ -51,8 +52,8 @@ def register(sub) -> None:
                    "it), a timecode (';' before the frames of a drop-frame one), or none "
                    "(00:00:00:00). usd: source (the default) starts the time codes at the "
                    "first frame number of the image sequence tracked (a plate numbered from "
-                   "1001: 1001), none at 0. usd and glb: source also records the tracked "
-                   "video's start timecode in the file's metadata (customLayerData, extras)")
+                   "1001: 1001), none at 0. usd, glb and json: source also records the tracked "
+                   "video's start timecode in the file (customLayerData, extras, timecode)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
 
@@ -91,14 +92,18 @@ def _lift(track, model, args):
 def run(args: argparse.Namespace) -> int:
     from ..errors import FaceTransferError
     from ..export import export_track, format_of
+    from ..export.common import require_activations
     from ..io.atomic import check_output_path
     from ..track import Track
 
     if args.format is not None and args.format not in FORMATS:
         raise FaceTransferError(f"--format: unknown format {args.format!r}; choose one of "
                                 f"{', '.join(FORMATS)}")
+    if Path(args.out).is_dir():   # said as a folder, not as a name without an extension
+        check_output_path(args.out)
     args.format = format_of(args.out, args.format)
-    check_output_path(args.out, overwrite=args.overwrite)
+    check_output_path(args.out, overwrite=args.overwrite,
+                      inputs=(args.track, args.model, args.texture, args.texture_from))
     if args.texture and args.texture_from:
         raise FaceTransferError("give --texture or --texture-from, not both")
     if (args.texture or args.texture_from) and args.format != "glb":
@@ -114,6 +119,7 @@ def run(args: argparse.Namespace) -> int:
                                 f"VIDEO --out T.npz`); `facetransfer probe {args.track}` "
                                 "describes the take")
     track = Track.load(args.track)
+    require_activations(track)   # said first: no --model would give a track activations
     model = None
     if args.model:
         from ..model import load_model
@@ -129,14 +135,16 @@ def run(args: argparse.Namespace) -> int:
     if args.texture_from:
         from ..io.video import video_info
 
-        video_info(args.texture_from)   # a video (else its one line, before any warning)
+        info = video_info(args.texture_from)   # a video (else its one line, before a warning)
+        track.check_video(min(info.n_frames, track.n_frames) if info.n_frames else
+                          info.n_frames, info.size, what=f"video {args.texture_from}")
         track.warn_other_video(args.texture_from,
                                "the texture is lifted through another face's motion")
         texture = _lift(track, model, args)
     if args.timecode not in ("source", "none") and args.format != "livelink":
         raise FaceTransferError(f"--timecode: only livelink takes carry one, not {args.format}")
     timecode, said = _start_timecode(args, track)
-    if args.format in ("usd", "glb") and args.timecode == "source":
+    if args.format in ("usd", "glb", "json") and args.timecode == "source":
         timecode, said = "source", _source_said(track, args.format)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
                         texture=texture, timecode=timecode)

@@ -420,7 +420,7 @@ def cmd_dials(args: argparse.Namespace) -> int:
     if args.out:
         if Path(args.out).suffix.lower() != ".png":
             raise FaceTransferError(f"--out must end in .png, got {args.out}")
-        check_output_path(args.out, overwrite=args.overwrite)
+        check_output_path(args.out, overwrite=args.overwrite, inputs=(args.model,))
     m = resolve_model(args.model)
     dials = learn_dials(m)
     lines = [f"identity dials of {args.model or 'the default model'} (learnt from "

@@ -223,7 +223,9 @@ def _register_edit(sub) -> None:
                    "(inclusive, 0-based); EXPR*0.5@... for half; repeatable")
     e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
                    help="scale the component of the expression along EXPR - neutral; repeatable")
-    e.add_argument("--ramp", type=int, default=8, help="ramp length in frames at range ends")
+    e.add_argument("--ramp", type=int, default=8,
+                   help="frames over which an --add eases in before START and out after END "
+                   "(0: none; the range itself is at full strength)")
     e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
                    help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1")
     _add_output(e, run_edit, metavar="TRACK2.npz")
@@ -669,8 +671,8 @@ def run_puppet(args) -> int:
 def _puppet_take(args, vopt) -> int:
     """``puppet take.csv``: the identity performing a Live Link Face take, with its head's
     rotation (:func:`facetransfer.take.take_track`), on a plain background."""
-    from ..take import PREVIEW_SIZE, take_track
     from ..puppet_video import puppet_video
+    from ..take import PREVIEW_SIZE, take_start_timecode, take_track
 
     for flag, given in (("--track", args.track), ("--face", args.face)):
         if given:
@@ -681,6 +683,10 @@ def _puppet_take(args, vopt) -> int:
     model = resolve_model(args.model, progress=not args.no_progress)
     wid = _puppet_identity(model, args.identity)
     track = take_track(args.video, model, wid, max_frames=args.max_frames)
+    if vopt.timecode is None:   # the take's own start, as a video's result keeps its
+        import dataclasses
+
+        vopt = dataclasses.replace(vopt, timecode=take_start_timecode(args.video))
     _, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
                               overwrite=args.overwrite, progress_factory=_bar_factory())
     if resumed:

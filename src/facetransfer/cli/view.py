@@ -84,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from ..take import is_take
 
     check_output_suffix(args.out, (".html", ".htm"), "the dial editor's page")
-    check_output_path(args.out, overwrite=args.overwrite)
+    check_output_path(args.out, overwrite=args.overwrite, inputs=(args.source, args.model))
     if args.source is None:
         path = _default_model_page(args)
         print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")

@@ -54,6 +54,9 @@ def format_of(out: str | os.PathLike, fmt: str | None = None) -> str:
         raise ExportError(f"unknown export format {fmt!r}; choose one of {', '.join(FORMATS)}")
     suffix = Path(out).suffix.lower()
     named = next((f for f, s in FORMAT_SUFFIXES.items() if suffix in s), None)
+    if suffix == ".gltf" and fmt in (None, "glb"):   # the text form, with its files beside
+        raise ExportError(f"{out}: glTF is written as one binary file, a .glb (its mesh, "
+                          f"animation and texture inside); name it {Path(out).stem}.glb")
     if fmt is None:
         if named is None:
             raise ExportError(
@@ -94,8 +97,8 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
         from 1001; :func:`facetransfer.export.usd.source_first_frame`), None at 0. ``usd`` and
         ``glb``: ``"source"`` also records the video's start timecode, where it has one, in the
         file's metadata (the root layer's ``customLayerData["timecode"]``, the glTF's
-        ``extras["timecode"]``: neither format has a field of its own for it). ``json``
-        carries none.
+        ``extras["timecode"]``: neither format has a field of its own for it); ``json`` too
+        (a top-level ``"timecode"``).
 
     Raises
     ------
@@ -128,7 +131,10 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
 
         if model is not None:
             track.check_model(model)
-        return write_mediapipe_json(track, out, overwrite=overwrite)
+        from .livelink import source_timecode
+
+        return write_mediapipe_json(track, out, overwrite=overwrite, timecode=(
+            source_timecode(track) if timecode == "source" else None))
     model = resolve_model(track, model)
     from .livelink import source_timecode
 

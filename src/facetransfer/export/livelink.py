@@ -215,7 +215,10 @@ def read_livelink(path: str | os.PathLike, *, lenient: bool = False) -> LiveLink
             rows = list(csv.reader(fh))
     except (UnicodeDecodeError, csv.Error) as exc:
         raise ExportError(f"{p} is not a Live Link Face CSV (not UTF-8 text: {exc})") from None
-    if not rows or [c.strip().lower() for c in rows[0][:2]] != ["timecode", "blendshapecount"]:
+    if not rows:
+        raise ExportError(f"{p} is empty, not a Live Link Face CSV (its header starts "
+                          "'Timecode,BlendShapeCount')")
+    if [c.strip().lower() for c in rows[0][:2]] != ["timecode", "blendshapecount"]:
         raise ExportError(f"{p} is not a Live Link Face CSV (header must start "
                           f"'Timecode,BlendShapeCount')")
     key = (lambda n: n.strip().lower()) if lenient else (lambda n: n)

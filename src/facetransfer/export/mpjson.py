@@ -9,7 +9,7 @@ then the 51 ARKit names of :data:`facetransfer.arkit.MEDIAPIPE_NAMES` (indices 1
 The file written here::
 
     {"format": "facetransfer-mediapipe-blendshapes", "version": 1, "fps": 25.0,
-     "frameSize": [W, H], "source": "clip.mp4",
+     "frameSize": [W, H], "source": "clip.mp4", "timecode": "10:00:00:00",
      "frames": [{"frameIndex": 0, "timestampMs": 0.0,
                  "faceBlendshapes": [{"headIndex": -1, "headName": "",
                                       "categories": [{"index": 0, "score": 0.0,
@@ -19,7 +19,8 @@ The file written here::
 Categories 0-51 carry MediaPipe's indices and names; ``tongueOut`` (which MediaPipe does not
 report) follows as index 52. ``_neutral`` has score 0 (facetransfer has no such score). A frame
 where the tracker lost the face has an empty ``faceBlendshapes`` list, as MediaPipe gives for a
-frame without a face.
+frame without a face. ``timecode`` (the tracked video's start timecode, as the glb's and
+USD's metadata record it) is there only where the video has one.
 
 References
 ----------
@@ -46,8 +47,9 @@ CATEGORY_NAMES: tuple[str, ...] = ("_neutral",) + MEDIAPIPE_NAMES + ("tongueOut"
 _SRC = np.array([-1] + [ARKIT_NAMES.index(n) for n in CATEGORY_NAMES[1:]])
 
 
-def mediapipe_document(track) -> dict:
-    """The JSON document (a dict) for ``track``."""
+def mediapipe_document(track, *, timecode: str | None = None) -> dict:
+    """The JSON document (a dict) for ``track``; ``timecode``: the first frame's (the tracked
+    video's start timecode), a top-level ``"timecode"`` where given."""
     a = require_activations(track).astype(np.float64)
     frames = []
     for k in range(track.n_frames):
@@ -59,14 +61,18 @@ def mediapipe_document(track) -> dict:
             faces.append({"headIndex": -1, "headName": "", "categories": cats})
         frames.append({"frameIndex": k, "timestampMs": round(1000.0 * k / track.fps, 3),
                        "faceBlendshapes": faces})
-    return {"format": "facetransfer-mediapipe-blendshapes", "version": 1, "fps": track.fps,
-            "frameSize": list(track.frame_size), "source": source_name(track.source),
-            "frames": frames}
+    doc = {"format": "facetransfer-mediapipe-blendshapes", "version": 1, "fps": track.fps,
+           "frameSize": list(track.frame_size), "source": source_name(track.source)}
+    if timecode is not None:
+        doc["timecode"] = str(timecode)
+    return {**doc, "frames": frames}
 
 
-def write_mediapipe_json(track, out: str | os.PathLike, *, overwrite: bool = False) -> Path:
-    """Write the MediaPipe-layout JSON (atomically) and return the path."""
-    text = json.dumps(mediapipe_document(track), separators=(",", ":"))
+def write_mediapipe_json(track, out: str | os.PathLike, *, overwrite: bool = False,
+                         timecode: str | None = None) -> Path:
+    """Write the MediaPipe-layout JSON (atomically) and return the path (``timecode``: see
+    :func:`mediapipe_document`)."""
+    text = json.dumps(mediapipe_document(track, timecode=timecode), separators=(",", ":"))
     return write_text_atomic(out, text + "\n", overwrite=overwrite)
 
 

@@ -35,6 +35,38 @@ def check_input_file(path: str | os.PathLike, what: str,
     return p
 
 
+NOT_NPZ = "not an .npz archive"
+#: Leading bytes of files a user may hand where an ``.npz`` is expected, and what they are.
+_MAGIC = ((b"glTF", "a glTF binary (a .glb, as `facetransfer export` writes)"),
+          (b"PXR-USDC", "a USD file (as `facetransfer export` writes)"),
+          (b"#usda", "a USD file (as `facetransfer export` writes)"),
+          (b"Timecode,", "a Live Link Face take (CSV)"),
+          (b"\x93NUMPY", "a single .npy array, not an .npz archive"),
+          (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"),
+          (b"<!DOCTYPE html", "an HTML page (as `facetransfer view` writes)"),
+          (b"{", "a JSON file"))
+
+
+def content_kind(path: str | os.PathLike) -> str | None:
+    """What the file ``path`` is by its first bytes, where it is not a zip archive (an
+    ``.npz`` is one): one of :data:`_MAGIC`'s, a video (an ISO media ``ftyp`` box, Matroska,
+    AVI), or ``"not an .npz archive"``; None for a zip archive (a damaged one too) or a file
+    that cannot be read."""
+    try:
+        with open(path, "rb") as f:
+            head = f.read(16)
+    except OSError:
+        return None
+    if head.startswith(b"PK"):
+        return None
+    for magic, kind in _MAGIC:
+        if head.lstrip(b"\xef\xbb\xbf").startswith(magic):
+            return kind
+    if head[4:8] == b"ftyp" or head.startswith((b"\x1a\x45\xdf\xa3", b"RIFF")):
+        return "a video"
+    return NOT_NPZ
+
+
 def read_npz(path: str | os.PathLike, what: str,
              error: type[FaceTransferError] = FaceTransferError, *,
              mmap_min_bytes: int | None = None) -> dict[str, np.ndarray]:
@@ -68,6 +100,11 @@ def read_npz(path: str | os.PathLike, what: str,
     except MemoryError:
         raise
     except Exception as exc:  # zipfile.BadZipFile, EOFError, OSError, ValueError (pickle)…
+        kind = content_kind(p)
+        if kind == NOT_NPZ:
+            raise error(f"{what} {p} is not a {what} ({kind})") from None
+        if kind is not None:             # another kind of file altogether: said as such
+            raise error(f"{what} {p} is not a {what}: it is {kind}") from None
         raise error(f"{what} {p} is truncated or not a {what} ({reason(exc)})") from None
     if not isinstance(z, np.lib.npyio.NpzFile):
         raise error(f"{what} {p} is not a {what} (a single .npy array, not an .npz archive)")

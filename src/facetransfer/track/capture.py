@@ -514,15 +514,34 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
     subs = [shot_detections(det, a, b) for a, b in spans]
     faced = [a for (a, _), sub in zip(spans, subs) if sub.found.any()]
     if len(faced) > 1:  # a shot without a face (a clip that opens on black) is only lost
-        log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own, "
-                    "with its own identity", source or "the video", "s" if len(faced) > 2
-                    else "", ", ".join(str(a) for a in faced[1:]))
+        log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own "
+                    "(the first one's person's shots with its identity)", source or "the video",
+                    "s" if len(faced) > 2 else "", ", ".join(str(a) for a in faced[1:]))
     tracks = [_capture_detections(sub, model, options, fps, frame_size,
                                   fixed if a == faced[0] else None, progress, source)
               if sub.found.any() else None for (a, _), sub in zip(spans, subs)]
     if all(t is None for t in tracks):
         raise _no_face(source, det.n_frames)
-    return joined_shots(tracks, spans)
+    return joined_shots(_one_identity(tracks, subs, model, options, fps, frame_size, progress,
+                                      source), spans)
+
+
+def _one_identity(tracks: list, subs: list, model, options, fps, frame_size, progress,
+                  source) -> list:
+    """The shots' tracks (None: no face), a later shot of the first faced one's person (its
+    own identity :func:`facetransfer.track.shots.same_face` of that one's) captured again with
+    that identity held: one person, one identity through the clip's cuts (a fade to black and
+    back, another angle of the same interview; before, each shot its own: 0.1 apart), the
+    exports' single identity is then every shot's. Another person's shot keeps its own."""
+    from .shots import same_face
+
+    first = next(t for t in tracks if t is not None)
+    if "identity" not in first.weights:
+        return tracks
+    w = first.weights["identity"][0]
+    return [t if t is None or t is first or not same_face(model, t.weights["identity"][0], w)
+            else _capture_detections(sub, model, options, fps, frame_size, {"identity": w},
+                                     progress, source) for t, sub in zip(tracks, subs)]
 
 
 def _no_face(source, n_frames: int) -> VideoError:
