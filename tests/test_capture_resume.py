@@ -240,6 +240,9 @@ def test_cli_capture_continues_an_interrupted_run(clip, quick_model_path, tmp_pa
     args = ["track", str(video), "--model", str(quick_model_path), "--out", str(out)]
     assert main(args[:-1] + [str(ref)]) == 0 and not (tmp_path / "ref.partial.npz").exists()
     capsys.readouterr()
+    fakes.stop_at = 0                 # before the first frame: nothing saved, none promised
+    assert main(args) == 130 and not partial.exists()
+    assert "interrupted before any progress was saved" in capsys.readouterr().err
     fakes.stop_at = 20                                       # interrupted in frame 20
     assert main(args) == 130
     err = capsys.readouterr().err
@@ -516,3 +519,60 @@ def test_fit_interrupted_in_the_second_pass_continues_exactly(clip, arkit_model,
     out = capture.capture_detections(det, arkit_model, checkpoint=ck)
     assert calls == {"identity": 0, "frames": F - 1 - stop + lost}
     _same_track(out, ref)
+
+
+def _wrapped_stop_at(k: int, stop: type = KeyboardInterrupt):
+    """:func:`_stop_tracking_at` as a signal arriving inside a numba-compiled kernel comes
+    back: a ``SystemError`` ("returned a result with an exception set") caused by the
+    interrupt."""
+    def prog(stage, done, total):
+        if stage == "track" and done == k:
+            try:
+                raise stop
+            except stop as exc:
+                raise SystemError("CPUDispatcher(<function _pose_step>) returned a result "
+                                  "with an exception set") from exc
+    return prog
+
+
+def test_an_interrupt_inside_a_compiled_kernel_keeps_the_fit_and_says_one_line(
+        clip, arkit_model, tmp_path, capsys, monkeypatch):
+    """A SIGTERM or Ctrl-C in the fit's numba kernels came back as a SystemError: a
+    traceback, exit 1, the fit's progress not saved (a new user's walk). Now the interrupt
+    itself: the progress saved, then continued bit for bit; the CLI's one line, 130 / 143."""
+    from facetransfer.cli import main as cli_main
+    from facetransfer.track import capture
+    from facetransfer.track.fit_checkpoint import fit_key
+
+    video, _, _ = clip
+    det = detect_clip(iter_frames(video), FakeDetector(clip), n_frames=F, keep478=True)
+    path = tmp_path / "t.partial.npz"
+    with pytest.raises(KeyboardInterrupt):
+        capture.capture_detections(det, arkit_model, checkpoint=DetectionCheckpoint(
+            path, "k", every=1e9), progress=_wrapped_stop_at(5))
+    ck = DetectionCheckpoint(path, "k", every=0.0)
+    assert ck.load().complete
+    key = fit_key(arkit_model.content_hash, capture.CaptureOptions(), None)
+    assert ck.saved_fit(key).valid.sum() >= 4
+    _same_track(capture.capture_detections(det, arkit_model, checkpoint=ck),
+                capture.capture_detections(det, arkit_model))
+    for stop, status, what in ((KeyboardInterrupt, 130, "interrupted"),
+                               (cli_main.Terminated, 143, "terminated")):
+        def command(args, stop=stop):
+            try:
+                raise stop
+            except stop as exc:
+                raise SystemError("returned a result with an exception set") from exc
+
+        args = cli_main.build_parser().parse_args(["probe", str(video)])
+        monkeypatch.setattr(args, "func", command, raising=False)
+        assert cli_main._run(args) == status
+        assert capsys.readouterr().err.strip() == f"facetransfer probe: {what}"
+    args = cli_main.build_parser().parse_args(["probe", str(video)])
+
+    def broken(args):
+        raise SystemError("a real fault, no interrupt")
+
+    monkeypatch.setattr(args, "func", broken, raising=False)
+    with pytest.raises(SystemError, match="a real fault"):
+        cli_main._run(args)

@@ -341,3 +341,18 @@ def test_output_that_is_a_symlink_to_an_input_is_refused(scene, tmp_path):
         check_output_path(link, inputs=[target])
     with pytest.raises(OutputError, match="also an input"):
         check_output_path(target.parent / "." / "result.npz", inputs=[str(target)])
+
+
+def test_an_output_named_as_a_folder_is_refused(tmp_path):
+    """``--out sub.npz/`` wrote a file ``sub.npz`` (the slash dropped): refused, nothing
+    written."""
+    from facetransfer.io.atomic import atomic_path, check_output_path
+
+    for out in (f"{tmp_path}/sub.npz/", f"{tmp_path}/new/"):
+        with pytest.raises(OutputError, match="ends in '/', a folder's name; give a file name"):
+            check_output_path(out)
+        with pytest.raises(OutputError, match="a folder's name"):
+            with atomic_path(out):
+                pass
+    assert list(tmp_path.iterdir()) == []
+    assert check_output_path(tmp_path / "ok.npz") == tmp_path / "ok.npz"

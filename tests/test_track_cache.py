@@ -82,6 +82,23 @@ def test_a_cache_that_cannot_be_written_does_not_fail_the_job(on, tmp_path, monk
     assert "could not keep the track in the cache" in caplog.text
 
 
+def test_a_cache_folder_that_is_a_file_does_not_fail_the_job(on, tmp_path, caplog):
+    """The cache's ``tracks`` a file: a capture's progress file there is looked up, removed
+    and written as warnings at most (before: "Not a directory" failed transfer and puppet,
+    and demo fell back to a landmark-only fit)."""
+    from facetransfer.track.detect_checkpoint import DetectionCheckpoint
+
+    cache.track_dir().parent.mkdir(parents=True, exist_ok=True)
+    cache.track_dir().write_text("x")
+    ck = DetectionCheckpoint(cache.partial_path("k"), "key", every=0.0, best_effort=True)
+    with caplog.at_level(logging.WARNING):
+        assert ck.load() is None
+        ck.remove()
+        ck._write({"a": np.zeros(3)})
+    assert "could not save the progress" in caplog.text and not ck.due()
+    assert cache.track_dir().read_text() == "x"
+
+
 def test_a_full_cache_disk_does_not_fail_the_job(on, tmp_path, monkeypatch, caplog):
     """A full disk is an OutputError (io.atomic), not an OSError: the cached track and the
     capture's progress file of the cache are warnings; a progress file elsewhere (`track`'s,

@@ -143,6 +143,32 @@ def test_an_interrupted_transfer_says_what_it_kept(clips, quick_model_path, tmp_
         assert err.startswith("facetransfer transfer: interrupted" + said)
 
 
+def test_an_interrupt_after_some_outputs_names_them_and_the_overwrite(
+        clips, quick_model_path, tmp_path, capsys, monkeypatch):
+    """Interrupted after the video and the track were written, before the meshes: the line
+    names them and says the next run needs --overwrite (before: "the same command
+    continues", which then refused the video as existing)."""
+    import facetransfer.video_transfer as vt
+
+    def half_done(sources, out, model, *, save_track=None, **k):
+        with open(out, "wb") as f, open(save_track, "wb") as g:
+            f.write(b"video")
+            g.write(b"track")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(vt, "transfer_video", half_done)
+    monkeypatch.setenv("FACETRANSFER_TRACK_CACHE", "on")
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
+    out, st = tmp_path / "o.mp4", tmp_path / "s.npz"
+    code, _, err = run(["transfer", "--target", clips["target"], "--expression-from",
+                        clips["source"], "--model", quick_model_path, "--out", out,
+                        "--save-track", st, "--no-progress"], capsys)
+    assert code == 130 and err.strip() == (
+        "facetransfer transfer: interrupted; the tracking and the frames rendered so far are "
+        "kept in the cache: the same command with --overwrite continues from them; it had "
+        f"written {out}, {st}")
+
+
 def test_transfer_refuses_existing_output(clips, quick_model_path, tmp_path, capsys):
     out = tmp_path / "exists.mp4"
     out.write_bytes(b"keep me")

@@ -232,3 +232,33 @@ def test_a_rewrite_takes_its_videos_timecode_and_probe_says_it(tmp_path):
     assert like_video(None, plain).timecode is None
     assert "; timecode 01:00:10:05 (the results start at it)" in fact_lines(video_facts(plate))[2]
     assert "timecode" not in " ".join(fact_lines(video_facts(plain)))
+
+
+def test_a_join_that_fails_says_how_ffmpeg_ended(small_parts, tmp_path, monkeypatch):
+    """A join stopped by a file size limit (``ulimit -f``: SIGXFSZ, nothing on stderr) said
+    only "ffmpeg failed"; now how it ended. The output is left as it was (none)."""
+    import signal
+    import subprocess
+
+    from facetransfer.io.ffmpeg import exit_cause
+
+    assert exit_cause(1) == "exit status 1"
+    if hasattr(signal, "SIGXFSZ"):
+        assert exit_cause(-signal.SIGXFSZ) == (f"killed by signal {int(signal.SIGXFSZ)}: file "
+                                               "size limit exceeded")
+    frames = _frames()
+    folder, out = tmp_path / "parts", tmp_path / "out.mp4"
+    with pytest.raises(KeyboardInterrupt):
+        _write(folder, out, frames, stop=12)
+    real = subprocess.run
+
+    def limited(cmd, *a, **k):
+        if "concat" in cmd:
+            return subprocess.CompletedProcess(cmd, -9, "", "")
+        return real(cmd, *a, **k)
+
+    monkeypatch.setattr(vp.subprocess, "run", limited)
+    with pytest.raises(VideoError, match=r"cannot join the parts of .*out.mp4 \(ffmpeg killed "
+                       r"by signal 9\)$"):
+        _write(folder, out, frames)
+    assert not out.exists()

@@ -53,6 +53,16 @@ def test_a_truncated_video_is_said_to_end_early(tmp_path, caplog):
     with caplog.at_level(logging.WARNING):
         read_video(tmp_path / "t.mp4", max_frames=2)    # fewer asked than it holds
     assert not caplog.records
+    from facetransfer.io.video import iter_frames
+
+    caplog.clear()
+    (tmp_path / "t2.mp4").write_bytes(data[:len(data) // 3])
+    with caplog.at_level(logging.WARNING):    # frame by frame, as a track reads (before: no
+        streamed = list(iter_frames(tmp_path / "t2.mp4"))  # word, a shorter clip tracked)
+        assert len(list(iter_frames(tmp_path / "t2.mp4", stop=2))) == 2
+        read_video(tmp_path / "t2.mp4")                     # said once a file
+    assert len(streamed) == len(cut)
+    assert caplog.text.count(f"ends after frame {len(cut) - 1} of the 60") == 1
     from facetransfer.io.video_facts import fact_lines, video_facts
 
     facts = video_facts(tmp_path / "t.mp4")

@@ -43,3 +43,34 @@ class OutputError(FaceTransferError):
 
 class RewriteError(FaceTransferError):
     """Frames, tracks or a model that cannot be rendered back into footage."""
+
+
+def interrupt_of(exc: BaseException) -> KeyboardInterrupt | None:
+    """The Ctrl-C (or SIGTERM routed as one) behind ``exc``, or None.
+
+    A signal whose handler raises while a numba-compiled function runs comes back as a
+    ``SystemError`` ("returned a result with an exception set") caused by the interrupt:
+    without this, an interrupt in the fit printed a traceback, exited 1 and lost the fit's
+    progress."""
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        if isinstance(exc, KeyboardInterrupt):
+            return exc
+        seen.add(id(exc))
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
+class plain_interrupts:
+    """Context manager: an interrupt wrapped in a ``SystemError`` (:func:`interrupt_of`)
+    raised as the interrupt itself, so that whatever keeps progress on Ctrl-C keeps it."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, tb):
+        if kind is not None and issubclass(kind, SystemError):
+            stop = interrupt_of(exc)
+            if stop is not None:
+                raise stop from None
+        return False

@@ -18,6 +18,7 @@ import sys
 import zipfile
 
 from .. import __version__
+from ..errors import interrupt_of
 
 #: Subcommand modules, in help order. Each defines ``register(subparsers)``.
 SUBCOMMAND_MODULES = ("model", "impute", "scan", "render", "texture", "track", "transfer",
@@ -319,6 +320,7 @@ def _run(args) -> int:
     import signal
 
     previous = _catching_sigterm()
+    before = {p for p in _outputs(args) if p.exists()}
     try:
         status = int(args.func(args) or 0)
         sys.stdout.flush()      # what the command said, while a closed pipe can be caught here
@@ -331,10 +333,15 @@ def _run(args) -> int:
             logging.getLogger("facetransfer").exception("details")
         print(error_line(args.command, exc), file=sys.stderr)
         return 2
-    except KeyboardInterrupt as exc:
-        what, status = ("terminated", 143) if isinstance(exc, Terminated) else \
+    except (KeyboardInterrupt, SystemError) as exc:
+        stop = interrupt_of(exc)     # a compiled kernel's SystemError caused by the interrupt
+        if stop is None:
+            raise
+        what, status = ("terminated", 143) if isinstance(stop, Terminated) else \
             ("interrupted", 130)
-        print(f"facetransfer {args.command}: {what}{_kept(args.command)}", file=sys.stderr)
+        written = [str(p) for p in _outputs(args) if p.exists() and p not in before]
+        print(f"facetransfer {args.command}: {what}{_kept(args.command, written)}",
+              file=sys.stderr)
         return status
     finally:
         if previous is not None:
@@ -369,24 +376,50 @@ CACHED_TRACKING = ("transfer", "puppet", "demo")
 CACHED_RENDERING = ("transfer", "puppet")
 
 
-def _kept(command: str) -> str:
+#: Arguments naming a command's outputs, and ``demo``'s files in its folder.
+_OUTPUT_ARGS = ("out", "save_track", "meshes", "function")
+_DEMO_FILES = ("demo.mp4", "demo.mov", "demo.png", "demo_track.npz")
+
+
+def _outputs(args) -> list:
+    """The files (and folders) a command writes, as its arguments name them (a pattern of an
+    image sequence and a batch's folder are not among them: they are kept frame by frame,
+    clip by clip)."""
+    from pathlib import Path
+
+    if args.command == "batch":
+        return []
+    if args.command == "demo":
+        return [Path(args.out) / name for name in _DEMO_FILES]
+    return [Path(v) for v in (getattr(args, n, None) for n in _OUTPUT_ARGS)
+            if isinstance(v, (str, os.PathLike)) and "%" not in str(v)]
+
+
+def _kept(command: str, written: list | None = None) -> str:
     """What an interrupted ``command`` keeps for the next run (the track cache's progress, the
-    render cache's parts)."""
+    render cache's parts), and the outputs it had ``written`` before it stopped: the next run
+    replaces them only with ``--overwrite`` (before, "the same command continues", which then
+    refused them)."""
     from ..render_cache import cache_enabled as rendering
     from ..track.cache import cache_enabled as tracking
 
     track = command in CACHED_TRACKING and tracking()
     render = command in CACHED_RENDERING and rendering()
+    again = "the same command with --overwrite" if written else "the same command"
+    said = ""
     if track and render:
-        return ("; the tracking and the frames rendered so far are kept in the cache: the same "
-                "command continues from them")
-    if track:
-        return ("; the tracking done so far is kept in the track cache: the same command "
-                "continues from it")
-    if render:
-        return ("; the frames rendered so far are kept in the render cache: the same command "
+        said = (f"; the tracking and the frames rendered so far are kept in the cache: {again} "
                 "continues from them")
-    return ""
+    elif track:
+        said = (f"; the tracking done so far is kept in the track cache: {again} continues "
+                "from it")
+    elif render:
+        said = (f"; the frames rendered so far are kept in the render cache: {again} "
+                "continues from them")
+    if written:
+        said += (f"; it had written {', '.join(written)}"
+                 + ("" if said else ": run it again with --overwrite to replace them"))
+    return said
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -152,7 +152,8 @@ def cmd_lift(args: argparse.Namespace) -> int:
     seen = float((merged.weight > 1e-6).mean())
     msg = f"wrote {out} (merged from {used} frames, {100 * seen:.0f}% of texels seen)"
     if fn_out is not None:
-        TextureFunction.from_lifted(lt.lifted, lt.attributes, k=args.k).save(fn_out)
+        TextureFunction.from_lifted(lt.lifted, lt.attributes, k=args.k).save(
+            fn_out, overwrite=args.overwrite)
         msg += f" and {fn_out} (texture function, k={args.k})"
     print(msg)
     return 0

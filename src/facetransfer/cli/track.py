@@ -291,12 +291,22 @@ def _capture(args, model, options, progress, bars):
     except KeyboardInterrupt:
         for b in bars.values():
             b.close()                                     # the message on a line of its own
-        print(f"interrupted; the progress is in {partial}: run the same command again to "
-              "continue", file=sys.stderr)
+        _say_progress(partial)
         raise
     finally:
         for b in bars.values():
             b.close()
+
+
+def _say_progress(partial) -> None:
+    """The line of an interrupted ``track``: where its progress is, where any was saved
+    (before, said of a file an interrupt before the first save had not written)."""
+    if partial.exists():
+        print(f"interrupted; the progress is in {partial}: run the same command again to "
+              "continue", file=sys.stderr)
+    else:
+        print("interrupted before any progress was saved: the same command starts again",
+              file=sys.stderr)
 
 
 def _capture_detect(args, saved, ck, progress):
@@ -336,8 +346,7 @@ def _track_klt(args, model, opt, progress, bars):
                             max_frames=args.max_frames, progress=progress,
                             source=str(args.video), detector=detector, checkpoint=partial)
     except KeyboardInterrupt:
-        print(f"interrupted; the progress is in {partial}: run the same command again to "
-              "continue", file=sys.stderr)
+        _say_progress(partial)
         raise
     finally:
         for b in bars.values():

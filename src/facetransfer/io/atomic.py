@@ -79,6 +79,9 @@ def _checked_output(path, overwrite: bool, inputs) -> Path:
     """:func:`check_output_path` but for trying the folder (:func:`atomic_path`'s own
     temporary file does that)."""
     p = Path(path)
+    if str(path).endswith(("/", os.sep)) and str(path).strip("/" + os.sep):
+        # a folder's name: Path() drops the slash, and a file "sub.npz" was written
+        raise OutputError(f"output {path} ends in '/', a folder's name; give a file name")
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.exists():
         raise OutputError(f"output folder {parent} does not exist (for {p})")

@@ -8,7 +8,7 @@ import shutil
 
 from ..errors import VideoError
 
-__all__ = ["ffmpeg_error", "ffmpeg_exe"]
+__all__ = ["ffmpeg_error", "ffmpeg_exe", "exit_cause"]
 
 
 def ffmpeg_exe() -> str | None:
@@ -36,3 +36,15 @@ def ffmpeg_error(stderr: bytes | str, what: str) -> VideoError:
     # the cause (a full disk...) may come before ffmpeg's closing remarks: prefer it
     cause = [ln for ln in lines if any(k in ln for k in _CAUSES)]
     return VideoError(f"{what}: {(cause or lines or ['ffmpeg failed'])[-1]}")
+
+
+def exit_cause(returncode: int) -> str:
+    """How an ffmpeg process ended, for a message: ``"exit status 1"``, ``"killed by signal
+    25: file size limit exceeded"`` (SIGXFSZ: a file size limit, ``ulimit -f``)."""
+    import signal
+
+    rc = int(returncode)
+    why = f"exit status {rc}" if rc >= 0 else f"killed by signal {-rc}"
+    if -rc == getattr(signal, "SIGXFSZ", -1):
+        why += ": file size limit exceeded"
+    return why

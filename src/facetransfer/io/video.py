@@ -20,7 +20,6 @@ import logging
 import os
 import re
 import shutil
-import signal
 import subprocess
 import tempfile
 from dataclasses import dataclass
@@ -32,7 +31,7 @@ import numpy as np
 
 from ..errors import VideoError
 from .atomic import atomic_path, check_output_path, probe_folder
-from .ffmpeg import ffmpeg_error, ffmpeg_exe
+from .ffmpeg import exit_cause, ffmpeg_error, ffmpeg_exe
 from .video_audio import (COPIED_AUDIO, audio_codec, audio_codecs, audio_input_args,  # noqa: F401
                           has_audio, mux_audio)
 from .video_display import (COLOUR_TAGS, checked_timecode, colour_matrix,  # noqa: F401
@@ -612,10 +611,7 @@ class VideoWriter:
         rc = proc.wait()
         self._stderr.seek(0)
         err = self._stderr.read().decode("utf-8", "replace")
-        why = f"exit status {rc}" if rc >= 0 else f"killed by signal {-rc}"
-        if -rc == getattr(signal, "SIGXFSZ", -1):
-            why += ": file size limit exceeded"
-        what = f"cannot write video {self.path} (ffmpeg {why})"
+        what = f"cannot write video {self.path} (ffmpeg {exit_cause(rc)})"
         return ffmpeg_error(err, what) if err.strip() else VideoError(what)
 
     def close(self, *, commit: bool = True, prefix: bool = False) -> WrittenVideo | None:

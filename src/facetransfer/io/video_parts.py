@@ -32,7 +32,7 @@ import numpy as np
 
 from ..errors import OutputError, VideoError
 from .atomic import atomic_path, locked_elsewhere, write_text_atomic
-from .ffmpeg import ffmpeg_error
+from .ffmpeg import exit_cause, ffmpeg_error
 from .video import (VideoOptions, VideoWriter, WrittenVideo, _container_args, _fps_arg,
                     _require_ffmpeg, _stored_size, check_video_output, stored_frame_count,
                     warn_if_grown)
@@ -337,8 +337,9 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
                               "-y", "-f", "concat", "-safe", "0", "-i", str(listing), *audio,
                               "-c:v", "copy", *extra, "-f", fmt, str(tmp)],
                              capture_output=True, text=True)
-        if res.returncode != 0:
-            raise ffmpeg_error(res.stderr, f"cannot join the parts of {out}")
+        if res.returncode != 0:   # how it ended said too (a file size limit says nothing)
+            what = f"cannot join the parts of {out} (ffmpeg {exit_cause(res.returncode)})"
+            raise ffmpeg_error(res.stderr, what) if res.stderr.strip() else VideoError(what)
         stored = stored_frame_count(tmp)
         if stored != n:
             raise VideoError(f"cannot write video {out}: its parts hold {n} frames, the joined "

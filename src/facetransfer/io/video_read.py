@@ -232,8 +232,23 @@ def _stored_frames(path, *, start: int, stop: int | None, seek: bool) -> Iterato
     if info.piped:
         yield from piped_frames(path, info.size, start=start, stop=stop)
         return
+    n = 0
     for bgr in _decoded(path, start, stop, seek):
         yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        n += 1
+    expect = max(int(info.n_frames) - start, 0)
+    expect = expect if stop is None else min(expect, max(stop - start, 0))
+    if n and expect - n >= max(TRUNCATED_FRAMES, 0.02 * expect):
+        _say_truncated(str(path), start + n - 1, int(info.n_frames))
+
+
+@functools.lru_cache(maxsize=16)
+def _say_truncated(path: str, last: int, counted: int) -> None:
+    """:func:`read_video`'s warning of a video that ends early, for frames read one by one
+    (a track's; before, a file cut short was tracked as a shorter clip without a word); once
+    a file."""
+    log.warning("video %s ends after frame %d of the %d its header counts (truncated?): "
+                "its frames to there are used", path, last, counted)
 
 
 def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = None,
@@ -281,8 +296,7 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     if n == 0:
         raise VideoError(f"video {path} has no frames (from frame {start})")
     if expect - n >= max(TRUNCATED_FRAMES, 0.02 * expect):
-        log.warning("video %s ends after frame %d of the %d its header counts (truncated?): "
-                    "its %d frames are used", path, start + n - 1, int(info.n_frames), n)
+        _say_truncated(str(path), start + n - 1, int(info.n_frames))
     return out[:n], info.fps
 
 

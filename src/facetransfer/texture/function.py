@@ -144,9 +144,10 @@ class TextureFunction:
         out = np.divide(num, den, out=fb.astype(np.float64), where=den > 0)
         return out.astype(np.float32)
 
-    def save(self, path) -> None:
-        """Write to an ``.npz`` file (atomically)."""
-        with atomic_path(path) as tmp:
+    def save(self, path, *, overwrite: bool = True) -> None:
+        """Write to an ``.npz`` file (atomically; ``overwrite=False``: an existing one, also
+        one another writer made meanwhile, is refused)."""
+        with atomic_path(path, overwrite=overwrite) as tmp:
             np.savez_compressed(tmp, textures=self.textures, weights=self.weights,
                                 attributes=self.attributes, k=self.k, kernel=self.kernel,
                                 bandwidth=self.bandwidth, prior=self.prior)

@@ -50,7 +50,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..arkit import ARKIT_NAMES, is_arkit_model
-from ..errors import TrackError, VideoError
+from ..errors import TrackError, VideoError, plain_interrupts
 from .aspect import stored_pixels
 from .camera import Pose, fit_affine_pose
 from . import capture_points
@@ -496,7 +496,8 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
     """
     from threadpoolctl import threadpool_limits
 
-    with threadpool_limits(limits=1, user_api="blas"):  # small products: threads only cost
+    # small products: threads only cost; an interrupt in a compiled kernel as an interrupt
+    with threadpool_limits(limits=1, user_api="blas"), plain_interrupts():
         spans = shot_spans(shot_starts(det), det.n_frames)
         if len(spans) == 1:
             return _capture_detections(det, model, options, fps, frame_size, fixed, progress,
@@ -582,7 +583,8 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
             checkpoint.save_fit(det, key, run.saved())
 
     try:
-        _track_passes(run, det, weights, opt, prog, lambda: save(due_only=True))
+        with plain_interrupts():     # the interrupt itself, where a compiled kernel wrapped it
+            _track_passes(run, det, weights, opt, prog, lambda: save(due_only=True))
     except KeyboardInterrupt:
         save(due_only=False)
         raise

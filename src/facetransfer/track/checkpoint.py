@@ -187,11 +187,20 @@ class ProgressFile:
         self.saves += 1
 
     def remove(self) -> None:
-        """Delete the file (the run is complete)."""
+        """Delete the file (the run is complete, or the file unreadable). Nothing there (its
+        folder a file, too) is nothing to delete; a best-effort file that cannot be deleted
+        is a warning (a cache's must never fail the job: before, a track cache whose folder
+        was a file failed ``transfer`` with "Not a directory")."""
         try:
             self.path.unlink()
-        except FileNotFoundError:
+        except (FileNotFoundError, NotADirectoryError):
             pass
+        except OSError as exc:
+            if not self.best_effort:
+                raise
+            self._broken = True
+            log.warning("could not remove the progress file %s (%s); going on without it",
+                        self.path, exc)
 
 
 class Checkpoint(ProgressFile):

@@ -450,13 +450,21 @@ def start_background_track(video, model, max_frames: int, *, method: str, option
         parallel = (os.cpu_count() or 1) >= 2
     if not parallel or "fork" not in mp.get_all_start_methods():
         return None
+    from ..signals import deferred_signals
+
     _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames, face)
+    fut = None
     try:
         pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))
-        fut = pool.submit(_background_track_job)  # forks now: the child sees _BACKGROUND_JOB
+        with deferred_signals():    # a Ctrl-C in the fork: raised below, not lost in it
+            fut = pool.submit(_background_track_job)  # forks now: the child sees the job
     except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. in a daemon process)
         log.info("no background tracking (%s)", exc)
         return None
+    except BaseException:           # interrupted as it forked: the child stopped, not awaited
+        if fut is not None:
+            _BackgroundTrack(pool, fut).cancel()
+        raise
     finally:
         _BACKGROUND_JOB = None
     return _BackgroundTrack(pool, fut)
