@@ -525,6 +525,9 @@ def test_an_animators_slips_are_said_as_such(case, quick_model, tmp_path, capsys
     assert said(["edit", glb, "--scale", "jawOpen=2", "--out", tmp_path / "e.npz"]).endswith(
         f"{glb} is not a track file: it is a glTF binary (a .glb, as `facetransfer export` "
         "writes)")
+    assert said(["view", glb, "--out", tmp_path / "v.html"]).endswith(
+        f"{glb} is neither a model nor a track file: it is a glTF binary (a .glb, as "
+        "`facetransfer export` writes)")
     assert said(["probe", glb]).endswith(f"{glb} is a glTF binary (a .glb, as `facetransfer "
                                          "export` writes): probe describes videos, image "
                                          "sequences, tracks, models and Live Link Face takes")

@@ -148,15 +148,17 @@ def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=Non
     from ..track import Track
     from .common import resolve_model
 
-    from ..io.npz import check_input_file, reason
+    from ..io.npz import NOT_NPZ, check_input_file, content_kind, reason
 
     src = check_input_file(source, "model or track file", ExportError)
     try:
         with np.load(src, allow_pickle=False) as z:
             is_track = "rotation" in z.files and "mode_names" in z.files
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
-        raise ExportError(f"{src} is neither a model nor a track file (truncated or not an "
-                          f".npz archive: {reason(exc)})") from None
+        kind = content_kind(src)        # another kind of file: named (a .glb, a take, ...)
+        raise ExportError(f"{src} is neither a model nor a track file" + (
+            f": it is {kind}" if kind not in (None, NOT_NPZ) else
+            f" (truncated or not an .npz archive: {reason(exc)})")) from None
     if neutral is not None and not is_track:
         raise ExportError(f"--neutral is for a track; {src} is a model")
     if is_track:
