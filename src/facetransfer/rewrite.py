@@ -113,7 +113,8 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
                   jaw_texture: JawTexture | None = None,
                   mouth_ring: np.ndarray | None = None,
                   lip_tint: LipTint | None = None) -> RewriteFrame:
-    """Render the new face into one target frame (§6).
+    """Render the new face into one target frame (§6): :func:`rewrite_frame_part` pasted
+    into the frame.
 
     Parameters
     ----------
@@ -160,6 +161,24 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     -------
     RewriteFrame
     """
+    return _paste(np.asarray(target_frame), rewrite_frame_part(
+        target_frame, vertices, camera, topo, face_texture, mouth_texture=mouth_texture,
+        blend=blend, feather=feather, erode=erode, mouth_feather=mouth_feather,
+        color_match=color_match, eye_texture=eye_texture, jaw_texture=jaw_texture,
+        mouth_ring=mouth_ring, lip_tint=lip_tint))
+
+
+def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
+                       topo: MeshTopology, face_texture: FaceTexture, *,
+                       mouth_texture: FaceTexture | None = None, blend: str = "fast",
+                       feather: float = 2.0, erode: int = 2, mouth_feather: float = 3.0,
+                       color_match: bool = False, eye_texture: EyeTexture | None = None,
+                       jaw_texture: JawTexture | None = None,
+                       mouth_ring: np.ndarray | None = None, lip_tint: LipTint | None = None):
+    """:func:`rewrite_frame`'s work, on the face's box only: ``(box, RewriteFrame of the
+    box)`` with ``box = (x0, y0, x1, y1)`` (end exclusive) in the frame, or None where the face
+    is not in the frame; :func:`_paste` makes the whole frame of it (a render in processes
+    sends back this much, not a frame)."""
     T = np.asarray(target_frame)
     if T.ndim != 3 or T.shape[2] != 3 or T.dtype != np.uint8:
         raise ShapeError(f"target frame must be (H, W, 3) uint8, got {T.shape} {T.dtype}")
@@ -175,7 +194,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     # filter below: erosion, outline ring, membrane margin, feathering); the rest is T
     box = _face_box(V, camera, (W, H), margin=int(erode) + int(np.ceil(feather)) + 16)
     if box is None:  # nothing of the face in the frame
-        return _paste(T, None)
+        return None
     x0, y0, x1, y1 = box
     cam = camera if box == (0, 0, W, H) else _shift_camera(camera, x0, y0)
     if mouth_texture is not None and mouth_ring is None:
@@ -184,7 +203,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
                         feather, erode, mouth_feather, color_match, eye_texture, jaw_texture,
                         mouth_ring, lip_tint, None if lifted is None else lifted - (x0, y0))
-    return _paste(T, (box, res))
+    return box, res
 
 
 def _paste(T: np.ndarray, part) -> RewriteFrame:
@@ -736,22 +755,34 @@ class _ClipRenderer:
                              mouth_width_ratio(V, Vs, self.lips.warp))
 
     def __call__(self, i: int) -> RewriteFrame:
+        """Frame ``i`` rewritten (:meth:`part` pasted into it)."""
+        return _paste(np.asarray(self.target_frames[i]), self.part(i))
+
+    def part(self, i: int):
+        """Frame ``i``'s rewrite on the face's box: ``(box, RewriteFrame)`` or None
+        (:func:`rewrite_frame_part`); the renders of its region views mixed there."""
         frame = np.asarray(self.target_frames[i])
         if frame.shape != self.first.shape:
             raise RewriteError(f"target frame {i} is {frame.shape}, frame 0 {self.first.shape}")
         if self.new_track.lost[i] or self.target_track.lost[i]:
-            return _paste(frame, None)
+            return None
         o, V, tex, mouth = self.options, self.new_mesh(i), self.face_texture(frame, i), \
             self.mouth_texture(i)
-        res = blend_renders([(rewrite_frame(
+        parts = [(rewrite_frame_part(
             frame, V, self.new_track.camera(i), self.topo, tex, mouth_texture=mouth,
             blend=o.blend, feather=o.feather, erode=o.erode, eye_texture=eye, jaw_texture=jaw,
             mouth_ring=self.ring, lip_tint=self.lip_tint), we * wj)
             for eye, we in views_at(self.eye_tex, i, None if self.gaze is None else self.gaze[i])
-            for jaw, wj in views_at(self.jaw_tex, i)])
+            for jaw, wj in views_at(self.jaw_tex, i)]
+        if parts[0][0] is None:       # the face outside the frame (the same box every view)
+            return None
+        box = parts[0][0][0]
+        res = blend_renders([(part[1], w) for part, w in parts])
         if self.mono:
-            res = dataclasses.replace(res, image=monochrome_changes(res.image, frame))
-        return res
+            x0, y0, x1, y1 = box
+            res = dataclasses.replace(res, image=monochrome_changes(res.image,
+                                                                    frame[y0:y1, x0:x1]))
+        return box, res
 
 
 def _render_in_threads(one, todo: range, workers: int, progress):
@@ -789,8 +820,12 @@ _RENDER_JOB: Callable | None = None
 
 
 def _render_job(i: int):
-    frame = _RENDER_JOB(i)
-    return _crop_of(np.asarray(_RENDER_FRAMES[i]), frame)
+    """Frame ``i`` rendered in a worker process: its box only (the renderer's :meth:`part`,
+    else the changed crop of the whole frame, :func:`_crop_of`)."""
+    part = getattr(_RENDER_JOB, "part", None)
+    if part is not None:
+        return part(i)
+    return _crop_of(np.asarray(_RENDER_FRAMES[i]), _RENDER_JOB(i))
 
 
 _RENDER_FRAMES = None
