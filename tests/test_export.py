@@ -560,3 +560,23 @@ def test_the_mediapipe_json_records_the_videos_start_timecode(case, tmp_path, ca
     assert main(["export", str(tp), "--out", str(tmp_path / "b.json"), "--timecode",
                  "none"]) == 0
     assert "timecode" not in json.loads((tmp_path / "b.json").read_text())
+
+
+def test_a_glb_of_a_two_person_track_says_whose_mesh_it_carries(case, tmp_path, capsys):
+    """A clip edited between two people's shots: each shot keeps its own identity, the glb's
+    mesh is the first one's (before: without a word)."""
+    import dataclasses
+
+    model, track, _, _ = case
+    w = np.array(track.weights["identity"], copy=True)
+    w[len(w) // 2:] += 0.1                           # the second shot: another person
+    tp = tmp_path / "two.npz"
+    dataclasses.replace(track, weights={**track.weights, "identity": w}).save(tp)
+    model.save(tmp_path / "m.npz")
+    assert main(["export", str(tp), "--model", str(tmp_path / "m.npz"), "--out",
+                 str(tmp_path / "two.glb")]) == 0
+    assert "note: the track's shots hold 2 people" in capsys.readouterr().out
+    track.save(tmp_path / "one.npz")
+    assert main(["export", str(tmp_path / "one.npz"), "--model", str(tmp_path / "m.npz"),
+                 "--out", str(tmp_path / "one.glb")]) == 0
+    assert "people" not in capsys.readouterr().out

@@ -162,6 +162,9 @@ def _say_written(args, track, path, timecode, said: str) -> None:
           + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
           + (f", from timecode {timecode} ({said})" if timecode and timecode != "source"
              else (f", {said}" if said else "")))
+    if args.format in ("glb", "usd") and _identities(track) > 1:
+        print(f"note: the track's shots hold {_identities(track)} people (a clip cut between "
+              "them); the mesh is the first one's, the curves every shot's")
     if track.lost.any():
         from ..file_facts import lost_runs
 
@@ -198,3 +201,12 @@ def _source_said(track, fmt: str) -> str:
     said = [f"time codes from {first}, the first frame of {track.source}"] if first else []
     return ", ".join(said + ([f"the start timecode {tc} of {track.source} in its metadata"]
                              if tc else []))
+
+
+def _identities(track) -> int:
+    """How many identities a track's frames hold (one, save a clip edited from several
+    people's shots: :mod:`facetransfer.track.shots`)."""
+    import numpy as np
+
+    w = track.weights.get("identity")
+    return 1 if w is None or not len(w) else len(np.unique(np.asarray(w), axis=0))
