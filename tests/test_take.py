@@ -524,3 +524,6 @@ def test_a_takes_preview_runs_at_its_rows_ntsc_rate_from_its_start_timecode(
         + "\n")
     assert take_track(whole, arkit_model, arkit_model.factors[0][0]).fps == 30.0
     assert take_start_timecode(whole) == "10:00:00:00"
+    one = tmp_path / "one.csv"       # one row: at the rate it is said to be read at (before:
+    one.write_text(cols + "\n" + ",".join(["10:00:00:05.000", "61"] + ["0"] * 61) + "\n")
+    assert take_track(one, arkit_model, arkit_model.factors[0][0]).fps == 24.0  # said 24, 30

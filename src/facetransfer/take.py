@@ -357,7 +357,9 @@ def _rows_rate(t: np.ndarray, f: np.ndarray) -> float:
     app's, with sub-frames) at an NTSC rate's true one (``r * 1000 / 1001``) where their span
     says so (a 29.97 fps take's rows lie 1001 / 30000 s apart: at 30 fps its preview drifted
     0.6 s in ten minutes)."""
-    step = float(np.median(np.diff(t))) if t.size > 1 else 1.0 / TIMECODE_RATES[2]
+    if t.size < 2:         # one row: the rate its timecode was read at (said, a guess)
+        return float(_rate(f, False))
+    step = float(np.median(np.diff(t)))
     fps = float(min(TIMECODE_RATES, key=lambda r: abs(1.0 / r - step)))
     span = float(t[-1] - t[0]) if t.size > 1 else 0.0
     if not f[:, 4].any() or span <= 0:   # whole frames count frames: the nominal rate
