@@ -446,3 +446,19 @@ def test_output_read_by_a_reader_that_stops_ends_quietly(data_dir):
     res = subprocess.run([sys.executable, "-m", "facetransfer.cli.main", "probe", clip + ".no"],
                          capture_output=True, text=True, timeout=120, env=env)
     assert res.returncode == 2 and "does not exist" in res.stderr
+
+
+def test_the_paper_tracker_answers_to_both_its_names():
+    """``track`` called the optical-flow tracker ``klt``, ``transfer`` and ``puppet`` called
+    it ``flow``: each command takes both (a newcomer's reading of the code)."""
+    from facetransfer.cli.main import build_parser
+
+    p = build_parser()
+    assert p.parse_args(["track", "v.mp4", "--out", "t.npz", "--tracker", "flow"]).tracker == \
+        "klt"
+    assert p.parse_args(["track", "v.mp4", "--out", "t.npz", "--tracker", "klt"]).tracker == \
+        "klt"
+    for argv in (["transfer", "--target", "t.mp4", "--expression-from", "s.mp4", "--out",
+                  "o.mp4"], ["puppet", "v.mp4", "--out", "o.mp4"]):
+        assert p.parse_args(argv + ["--tracker", "klt"]).tracker == "flow"
+        assert p.parse_args(argv + ["--tracker", "flow"]).tracker == "flow"

@@ -582,3 +582,26 @@ def test_usual_weights_of_a_frame_whose_mesh_leaves_the_image(setup):
     w = region_weights.usual_weights_of(frames, dataclasses.replace(track, translation=t),
                                         model, verts, [3], against=0)
     np.testing.assert_array_equal(w, 1.0)
+
+
+def test_paint_eyes_alone_is_what_the_rewrite_paints(setup):
+    """The public :func:`facetransfer.eyes.paint_eyes` (one region on its own, its own shading
+    pass) gives the pixels the rewrite's one-pass shading gives (``rewrite._shade_frame``
+    with the eye texture only)."""
+    from facetransfer.rewrite import _shade_frame
+    from facetransfer.render import shade_layers
+
+    model, topo, closed, fill = setup
+    ref = _track(model, _acts(1, 0.0))
+    hole = _eye_pixels(model, closed, fill, ref)
+    ref_img, target = _frame(hole, REF_EYE), _frame(hole, TARGET_EYE)
+    _, tex = eyes.eye_texture([ref_img], ref, model, topo)
+    Vt = close_mouth(model.synthesize(ref.weights_at(0)), topo)
+    face_tex = FaceTexture(target, frame_uvs(Vt, ref.camera(0), (SIZE, SIZE)), 0)
+    V = close_mouth(model.synthesize(_track(model, _acts(1, 0.6)).weights_at(0)), closed)
+    r = rasterize(V, closed.faces, ref.camera(0), (SIZE, SIZE))
+    (face_img,), labels = shade_layers(r, closed.faces, [(face_tex.uvs, face_tex.image)],
+                                       np.ones(len(closed.faces), np.uint8))
+    alone = eyes.paint_eyes(r, closed.faces, V, face_img, labels != 0, tex)
+    together = _shade_frame(r, V, closed, face_tex, None, tex, None)[0]
+    assert np.array_equal(alone, together) and not np.array_equal(alone, face_img)

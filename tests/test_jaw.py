@@ -316,3 +316,28 @@ def test_only_the_skin_that_moved_takes_the_reference_frame(setup):
     # the checker (std 15 levels per channel) gone: what is left is the gain's smooth plane
     g_before, g_after = before.image[..., 1][moved], after.image[..., 1][moved]
     assert np.std(g_before) > 12 and np.std(g_after) < 0.25 * np.std(g_before)
+
+
+def test_paint_jaw_alone_is_what_the_rewrite_paints(setup):
+    """The public :func:`facetransfer.jaw.paint_jaw` (the region on its own, its own shading
+    pass) gives the pixels the rewrite's one-pass shading gives (``rewrite._shade_frame`` with
+    the jaw texture only)."""
+    from facetransfer.render import shade_layers
+    from facetransfer.rewrite import _shade_frame
+
+    model, topo = setup
+    target = _track(model, [0.0, 1.0])
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8),
+              np.full((SIZE, SIZE, 3), SKIN_LIT, np.uint8)]
+    frames[1][SIZE // 2:] = SHADOW
+    tex = jaw.jaw_texture(frames, target, model, topo).at(1)
+    cam = target.camera(1)
+    face_tex = FaceTexture(frames[1], frame_uvs(close_mouth(model.synthesize(
+        target.weights_at(1)), topo), cam, (SIZE, SIZE)), 1)
+    V = close_mouth(model.synthesize(_track(model, [0.2]).weights_at(0)), topo)
+    r = rasterize(V, topo.faces, cam, (SIZE, SIZE))
+    (face_img,), labels = shade_layers(r, topo.faces, [(face_tex.uvs, face_tex.image)],
+                                       np.ones(len(topo.faces), np.uint8))
+    alone = jaw.paint_jaw(r, topo.faces, face_img, labels != 0, tex)
+    together = _shade_frame(r, V, topo, face_tex, None, None, tex)[0]
+    assert np.array_equal(alone, together) and not np.array_equal(alone, face_img)

@@ -1,6 +1,6 @@
 """Eyes and brows that transfer: eyelids rendered from the model over an open-eyed target eye.
 
-The model mesh has holes where the eyes are (:attr:`facetransfer.rewrite.MeshTopology.eye_loops`).
+The model mesh has holes where the eyes are (:attr:`facetransfer.topology.MeshTopology.eye_loops`).
 Left open, the target's own eyes show through them, and so do the target's own blinks (issue 13).
 Here, instead (Vlasic et al. 2005, §6: the face texture "from the target video (constant throughout
 the sequence)", applied to the eyes):

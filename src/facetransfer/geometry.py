@@ -1,7 +1,7 @@
 """Small pure geometry shared across stages: barycentric coordinates in image or UV space.
 
 Arrays in, arrays out, no dependence on the rest of the package, so that :mod:`facetransfer.texture`
-(texel points, the z-buffer test of Eq. (1)) and :mod:`facetransfer.correspond.detect` (image
+(texel points, the z-buffer test of Eq. (L1)) and :mod:`facetransfer.correspond.detect` (image
 points lifted onto a scan) share one formula without importing each other.
 """
 

@@ -289,10 +289,12 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     (H, W, 3) uint8
         ``face_image`` with the jaw region replaced (shifted to its colours).
     """
-    flags = jaw_flags(texture, shaded=1, region=2, ring=4)
+    # labels in the high bits (4-7): the low ones select layers (before: 2 and 4, a layer not
+    # given, so this entry point raised ShapeError on every call)
+    flags = jaw_flags(texture, shaded=1, region=16, ring=32)
     (img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
-    return _paint_jaw(np.array(face_image, copy=True), face_mask, texture, img, labels, (2, 4),
-                      raster, faces, feather=feather)
+    return _paint_jaw(np.array(face_image, copy=True), face_mask, texture, img, labels,
+                      (16, 32), raster, faces, feather=feather)
 
 
 def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np.ndarray:

@@ -512,15 +512,6 @@ def _check_model_arrays(p: Path, data: dict, n_modes: int, *, finite: bool = Tru
             raise ModelFileError(f"model file {p}: eigenvalues_{k} must be 1-D, got {ev.shape}")
 
 
-def file_hash(path: str | Path) -> str:
-    """sha256 (hex) of a file's bytes."""
-    h = hashlib.sha256()
-    with open(path, "rb") as fh:
-        for chunk in iter(lambda: fh.read(1 << 20), b""):
-            h.update(chunk)
-    return h.hexdigest()
-
-
 def build_model(dataset: FaceDataset, ranks: Mapping[str, int] | None = None, *,
                 refine: bool = True, variance: float | None = None, max_iter: int = 50,
                 imputed: np.ndarray | None = None) -> MultilinearModel:

@@ -1,6 +1,6 @@
-"""Puppetry (Vlasic et al. 2005, Fig. 1): a model identity driven by a track, written as a
-video or an image sequence through the render cache (:mod:`facetransfer.render_cache`), so an
-interrupted render continues where it stopped."""
+"""Puppetry (Vlasic et al. 2005, the abstract and §8: "performance animation (puppetry)"): a
+model identity driven by a track, written as a video or an image sequence through the render
+cache (:mod:`facetransfer.render_cache`), so an interrupted render continues where it stopped."""
 
 from __future__ import annotations
 
@@ -15,7 +15,7 @@ def puppet_video(track, model, identity: np.ndarray, out, *, video_options=None,
                  audio_from=None, overwrite: bool = False,
                  progress_factory=None) -> tuple[bool, int]:
     """Write the puppet video (or image sequence) ``out`` of ``track`` driving the identity
-    weights ``identity`` of ``model`` (:func:`facetransfer.transfer.puppet_frames`, Fig. 1's
+    weights ``identity`` of ``model`` (:func:`facetransfer.transfer.puppet_frames`, the paper's
     puppetry) with the audio of ``audio_from``, through the render cache
     (:func:`facetransfer.render_cache.parts_writer`): an interrupted run keeps the frames
     written, and the same call renders only the rest.

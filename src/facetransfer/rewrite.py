@@ -463,8 +463,8 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU;
         BLAS on one thread while they run, :func:`_render`); the output does not depend on it.
     processes : bool, optional
-        With ``workers > 1``: in forked processes where the platform can, not threads (the
-        default: a little faster on 2 cores; the kernels release the GIL).
+        With ``workers > 1``: in forked processes where the platform can (each sends back
+        the face's box), not threads; default threads (as fast on 2 cores: BENCHMARKS.md).
     progress : callable(int), optional
         Called with 1 after each frame.
     eyes : {"model", "target"}, optional
@@ -514,8 +514,6 @@ def _render(one, target_frames, todo: range, workers: int | None, processes: boo
             return
         import multiprocessing as mp
 
-        if processes is None:
-            processes = _RENDER_IN_PROCESSES and len(todo) >= 16  # a fork for long clips only
         if processes and "fork" in mp.get_all_start_methods():
             yield from _render_in_processes(one, target_frames, todo, workers, progress)
         else:
@@ -812,9 +810,6 @@ def _render_in_threads(one, todo: range, workers: int, progress):
                 progress(1)
 
 
-#: default of ``rewrite_frames(processes=None)`` for clips of 16 frames or more
-_RENDER_IN_PROCESSES = False
-
 #: the per-frame function of :func:`rewrite_frames` handed to forked workers (not pickled)
 _RENDER_JOB: Callable | None = None
 
@@ -834,8 +829,9 @@ _RENDER_FRAMES = None
 def _render_in_processes(one, target_frames, todo: range, workers: int, progress):
     """Yield ``one(i)`` for i in ``todo``, computed in ``workers`` forked processes, in order.
 
-    Workers send back only the changed crop of each frame (:func:`_crop_of`); if the pool
-    breaks, the remaining frames are rendered here."""
+    Workers send back only the face's box of each frame (the renderer's ``part``, else the
+    changed crop, :func:`_crop_of`); if the pool breaks, the remaining frames are rendered
+    here."""
     global _RENDER_JOB, _RENDER_FRAMES
     import multiprocessing as mp
     from collections import deque

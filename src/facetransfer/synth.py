@@ -516,8 +516,9 @@ def procedural_skin_texture(uvs: np.ndarray | None = None, landmarks_uv: np.ndar
                             *, size: int = 512, seed: int = 0) -> np.ndarray:
     """A plain skin-tone UV texture with smooth blotches, and darker brows, eyes and lips.
 
-    Stand-in for the default face texture until the Lee Perry-Smith texture is carried onto the
-    template (issue 5). The noise is band-limited (Gaussian-blurred, sigma >= 2 texels) so that
+    The default face texture's ``source="procedural"`` (:func:`facetransfer.texture.default.
+    default_face_texture`; the default is the Lee Perry-Smith head's, :mod:`facetransfer.texture.
+    lee_perry_smith`) and synthetic footage's skin. The noise is band-limited (Gaussian-blurred, sigma >= 2 texels) so that
     a tracker's KLT features find corners without aliasing: on a 30-frame random performance of
     the ICT face at 640x480, pyramidal KLT (15x15, 3 levels) follows visible vertices with a
     median error of 0.05 px (90 %: 0.18 px), against 0.08 px (0.26 px) with the more natural

@@ -8,7 +8,8 @@ footage and write it with the target's audio.
   while the target is tracked here), recombining (:func:`facetransfer.transfer.recombine`) or
   a ready performance;
 * :func:`render_plan`: the frames rewritten (:func:`facetransfer.rewrite.rewrite_frames`) and
-  written (:func:`facetransfer.io.video.write_video_with_audio`);
+  written (through the render cache's parts, :func:`facetransfer.render_cache.parts_writer`,
+  or :func:`facetransfer.io.video.write_video_with_audio`);
 * :func:`transfer_video`: both, with the outputs checked before any work.
 
 The writer goes through the render cache (:mod:`facetransfer.render_cache`): an interrupted

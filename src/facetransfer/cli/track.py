@@ -42,10 +42,12 @@ def add_track_options(p) -> None:
 
     d = TrackOptions()
     p.add_argument("--tracker", choices=("capture", "klt"), default=None,
+                   type=lambda v: {"flow": "klt"}.get(v, v),   # transfer's name for it
                    help="default capture (klt when --init gives points): capture: "
                    + CAPTURE_HELP + ", identity from the whole clip, ARKit activations "
-                   "(facetransfer.track.capture); klt: the paper's model-based optical-flow "
-                   "tracker from the first frame (the options marked [klt])")
+                   "(facetransfer.track.capture); klt (or flow, as transfer calls it): the "
+                   "paper's model-based optical-flow tracker from the first frame (the options "
+                   "marked [klt])")
     p.add_argument("--init", default="auto",
                    help='[klt] first-frame feature points: "auto" (MediaPipe) or a JSON file '
                    '{"points": {"36": [x, y], ...}} keyed by iBUG-68 number')

@@ -85,9 +85,10 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    help="performance: the eyes look where the new performance looks (its "
                    "eyeLook* activations); target: where the target looks in each of its own "
                    "frames (with --eyes model)")
-    p.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
+    p.add_argument("--tracker", choices=TRACK_METHODS, default="auto", type=_tracker_name,
                    help="tracking when no track file is given: auto or capture ("
-                   + CAPTURE_HELP + "), flow (the optical-flow tracker of §5, with --speed) or "
+                   + CAPTURE_HELP + "), flow (or klt, as track calls it: the optical-flow "
+                   "tracker of §5, with --speed) or "
                    "landmarks (fitted to the clip's NAME.mediapipe478.npz points where it has "
                    "them, else to Face Landmarker's, detected frame by frame)")
     p.add_argument("--speed", choices=SPEED_PRESETS, default=DEFAULT_SPEED,
@@ -244,8 +245,9 @@ def _register_puppet(sub) -> None:
                    "model's mean face)")
     q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused)")
     q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
-    q.add_argument("--tracker", choices=TRACK_METHODS, default="auto",
-                   help="tracking when no track file is given")
+    q.add_argument("--tracker", choices=TRACK_METHODS, default="auto", type=_tracker_name,
+                   help="tracking when no track file is given (flow or klt: the optical-flow "
+                   "tracker)")
     q.add_argument("--face", metavar="WHERE",
                    help=f"with several people, the one whose performance drives the puppet: "
                    f"{FACE_WHERE}")
@@ -270,6 +272,12 @@ def _register_demo(sub) -> None:
     add_rewrite_options(d)
     add_video_options(d, what="OUT/demo.mp4 (demo.mov for prores)", sequences=False)
     d.set_defaults(func=run_demo)
+
+
+def _tracker_name(value: str) -> str:
+    """``--tracker``: ``klt`` (what ``track`` calls the paper's optical-flow tracker) is
+    ``flow`` here."""
+    return {"klt": "flow"}.get(value, value)
 
 
 #: largest |factor| of ``edit --scale`` and |amount| of ``edit --add``: beyond it a face leaves

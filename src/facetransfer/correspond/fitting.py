@@ -3,7 +3,7 @@
 Following Allen, Curless & Popović 2003 and Sumner & Popović 2004, with the deformation written as
 per-vertex displacements ``d = x − x₀`` of the template ``x₀`` and, per stage, the energy
 
-    E(x) = w_s ‖L (x − x₀)‖² + w_f Σ_l ‖x_{v(l)} − f_l‖² + w_c Σ_{i ∈ V} ‖x_i − c_i‖²     (1)
+    E(x) = w_s ‖L (x − x₀)‖² + w_f Σ_l ‖x_{v(l)} − f_l‖² + w_c Σ_{i ∈ V} ‖x_i − c_i‖²    (F1)
 
 * ``L``: the row-normalised cotangent Laplacian of the template, so the smoothness term
   penalises bending of the displacement field (affine changes are nearly free; the small
@@ -13,7 +13,7 @@ per-vertex displacements ``d = x − x₀`` of the template ``x₀`` and, per st
   point is on a boundary (a hole or the cropped rim), further than ``max_distance``, or when the
   normals differ by more than ``max_angle`` degrees.
 
-Eq. (1) is quadratic with a diagonal data part, so each iteration solves one sparse symmetric
+Eq. (F1) is quadratic with a diagonal data part, so each iteration solves one sparse symmetric
 positive definite system ``(w_s LᵀL + W) D = W (C − X₀)`` for all three coordinates (normal
 equations, sparse LU). The closest points are recomputed a few times per stage. The schedule
 first weighs the features heavily, then proximity, while the stiffness ``w_s`` is lowered
@@ -21,7 +21,7 @@ first weighs the features heavily, then proximity, while the stiffness ``w_s`` i
 
 Before fitting, the template is aligned to the scan by a similarity from the feature points
 (Procrustes, §4.2). With a shape prior (:mod:`.prior`; by default ICT-FaceKit's identity space for
-the ICT template) the face space's coefficients and the pose are fitted next, and Eq. (1) then
+the ICT template) the face space's coefficients and the pose are fitted next, and Eq. (F1) then
 deforms that face (``x₀`` := the prior's best face) with :data:`PRIOR_SCHEDULE`. This goes beyond
 the paper, which deforms the generic template: the smoothness energy alone lets the
 correspondence slide along smooth regions (the jaw) by about a millimetre (BENCHMARKS.md).
@@ -69,7 +69,7 @@ class FitDivergedError(FaceTransferError):
 
 @dataclass(frozen=True)
 class FitStage:
-    """One stage of the schedule of Eq. (1).
+    """One stage of the schedule of Eq. (F1).
 
     Attributes
     ----------
@@ -531,7 +531,7 @@ def _fit_priors(work: _WorkFrame, candidates: list, x0: np.ndarray, scale: float
 
 
 def _data_terms(work: _WorkFrame, x: np.ndarray, lmv: np.ndarray, st: FitStage):
-    """The diagonal data part of Eq. (1) at the current fit ``x`` (n, 3).
+    """The diagonal data part of Eq. (F1) at the current fit ``x`` (n, 3).
 
     Returns ``(weights (n,), weighted targets (n, 3), accepted pairs, their mean distance)``:
     closest points with ``w_c`` and feature points with ``w_f``.
@@ -554,7 +554,7 @@ def _data_terms(work: _WorkFrame, x: np.ndarray, lmv: np.ndarray, st: FitStage):
 
 def _deform(work: _WorkFrame, x0: np.ndarray, lmv: np.ndarray, schedule: Sequence[FitStage],
             progress, first: int, n_stages: int) -> tuple[np.ndarray, list]:
-    """Minimise Eq. (1) stage by stage: per solve, closest points, then one sparse SPD system.
+    """Minimise Eq. (F1) stage by stage: per solve, closest points, then one sparse SPD system.
 
     ``progress`` is called before each stage (numbered from ``first``) and once with ``"done"``.
     Returns the fit ``x`` (n, 3) (work frame) and the per-solve history.
@@ -572,7 +572,7 @@ def _deform(work: _WorkFrame, x0: np.ndarray, lmv: np.ndarray, schedule: Sequenc
         for it in range(max(1, st.iterations)):
             wdiag, target, n_ok, mean_d = _data_terms(work, x, lmv, st)
             a = (st.w_smooth * ltl + sp.diags(wdiag) + (st.w_rest + 1e-9) * eye).tocsc()
-            rhs = target - wdiag[:, None] * x0                 # normal equations of Eq. (1) in d
+            rhs = target - wdiag[:, None] * x0                 # normal equations of Eq. (F1) in d
             d, lu = _solve(a, rhs, lu, x - x0)  # the stage's factorisation, once made
             x = x0 + d
             history.append({"stage": st.name, "iteration": it, "pairs": n_ok, "mean_distance": mean_d})
@@ -652,7 +652,7 @@ class _Alignment:
 
 def _place_face(al: _Alignment, work: _WorkFrame, x0: np.ndarray, candidates: list,
                 template: Template, reference, progress, n_stages: int, **prior_options):
-    """Before Eq. (1): the shape prior's best face (:func:`_fit_priors`), or the reference
+    """Before Eq. (F1): the shape prior's best face (:func:`_fit_priors`), or the reference
     aligned rigidly on the upper face (the cascade); the scan moves, not ``x0``.
 
     Returns ``(x0, work, history, stats["prior"])``.

@@ -5,7 +5,7 @@ in a face space instead of from the generic template.
 (cheeks, jaw) that energy cannot tell where along the surface a template vertex belongs, so the
 correspondence slides tangentially. A face space learned from corresponded faces (here
 ICT-FaceKit's identity principal components) knows how faces vary: fitting its coefficients first
-puts every vertex close to its place, and the smooth deformation of Eq. (1) then only has to
+puts every vertex close to its place, and the smooth deformation of :mod:`.fitting`'s Eq. (F1) then only has to
 explain what the face space misses (the morphable model of Blanz & Vetter 1999; model-based
 registration such as FLAME's, Li et al. 2017, regularises with the model in the same spirit).
 

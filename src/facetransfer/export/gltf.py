@@ -97,7 +97,7 @@ def texture_png(texture) -> bytes:
 
 def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 10,
                       progress=None) -> np.ndarray:
-    """The face's texture lifted from its video (§6, Eq. (1) weights), merged over every
+    """The face's texture lifted from its video (§6, Eq. (L1) weights), merged over every
     ``step``-th frame and hole-filled, in the template's UV layout.
 
     A track of the video's first frames only (``track --max-frames``) lifts from those.

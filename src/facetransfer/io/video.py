@@ -50,7 +50,7 @@ __all__ = ["VideoInfo", "video_info", "pixel_aspect", "iter_frames", "read_video
            "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS", "DEFAULT_PRESET",
            "VIDEO_SUFFIXES", "IMAGE_SUFFIXES", "VideoOptions", "VideoOutput", "WrittenVideo",
            "colour_matrix", "video_colour", "ffmpeg_exe", "ffmpeg_encoders",
-           "require_encoder", "is_image_pattern", "frame_path", "save_frame_image",
+           "require_encoder", "is_image_pattern", "save_frame_image",
            "place_sequence", "check_video_output", "decoded_frame_count", "stored_frame_count",
            "has_audio", "audio_codec", "audio_codecs", "mux_audio", "warn_if_grown",
            "VideoWriter", "encode_video", "write_video", "write_video_with_audio"]
@@ -219,12 +219,6 @@ def is_image_pattern(path: str | os.PathLike) -> bool:
     p = Path(path)
     return bool(_PATTERN.search(p.name)) or \
         ("%" in p.name and p.suffix.lower() in IMAGE_SUFFIXES)
-
-
-def frame_path(pattern: str | os.PathLike, i: int) -> Path:
-    """File of frame ``i`` (0-based) of an image-sequence pattern."""
-    p = Path(pattern)
-    return p.with_name(p.name % i)
 
 
 def _pattern_files(pattern: Path) -> list[Path]:

@@ -220,7 +220,7 @@ class MouthFunction:
         return int(self.function.attributes.shape[1])
 
     def texture(self, attributes: np.ndarray) -> np.ndarray:
-        """The mouth texture for one attribute vector (r,): Eq. (2) of
+        """The mouth texture for one attribute vector (r,): Eq. (T1) of
         :class:`~facetransfer.texture.TextureFunction`, ``(T, T, 3) uint8``."""
 
         a = np.asarray(attributes, np.float64)

@@ -26,10 +26,10 @@ class TextureFunction:
     frames (e.g. expression and viseme weights concatenated). For a query attribute vector
     ``a`` with nearest training frames ``i = 1..k`` at distances ``d_i``, every texel is
 
-        tex(a) = (Σ_i κ_i w_i tex_i + λ tex_all) / (Σ_i κ_i w_i + λ)                   (2)
+        tex(a) = (Σ_i κ_i w_i tex_i + λ tex_all) / (Σ_i κ_i w_i + λ)                  (T1)
 
     with kernel weights ``κ_i`` (normalised to sum 1), the per-texel confidences ``w_i`` of
-    Eq. (1), and ``tex_all`` the merged texture of all frames (weight ``λ = prior * min_i κ_i``),
+    Eq. (L1), and ``tex_all`` the merged texture of all frames (weight ``λ = prior * min_i κ_i``),
     which fills texels none of the neighbours saw. A query equal to a training vector returns that
     frame's texture wherever the frame saw it (the other neighbours fill the rest).
 
@@ -38,7 +38,7 @@ class TextureFunction:
     textures : (F, ..., 3) float
         Lifted textures (images (F, T, T, 3) or per-vertex colours (F, n, 3)), 0..255.
     weights : (F, ...) float
-        Their confidences (Eq. (1)).
+        Their confidences (Eq. (L1)).
     attributes : (F, r) float
         Attribute vector of every frame.
     k : int
@@ -49,7 +49,7 @@ class TextureFunction:
         ``h`` of the Gaussian kernel; default the median distance from each training vector to
         its nearest other one (1 with a single frame).
     prior : float
-        ``λ / min_i κ_i`` of Eq. (2), > 0.
+        ``λ / min_i κ_i`` of Eq. (T1), > 0.
     faces : (F, 3) int64, optional
         For per-vertex colours: fill vertices no frame saw in ``tex_all`` by harmonic
         interpolation over the mesh (:func:`fill_vertex_colors`); otherwise they stay 0.
@@ -134,10 +134,10 @@ class TextureFunction:
         return idx, kappa / kappa.sum()
 
     def __call__(self, attributes) -> np.ndarray:
-        """Texture for one attribute vector (r,): Eq. (2); shape like one training texture."""
+        """Texture for one attribute vector (r,): Eq. (T1); shape like one training texture."""
         idx, kappa = self.neighbours(attributes)
         w = kappa.reshape((-1,) + (1,) * (self.weights.ndim - 1)) * self.weights[idx]  # (k, ...)
-        lam = self.prior * float(kappa.min())  # λ of Eq. (2), below every neighbour's kernel weight
+        lam = self.prior * float(kappa.min())  # λ of Eq. (T1), below every neighbour's kernel weight
         fb = self.merged.texture
         num = np.einsum("k...,k...c->...c", w, self.textures[idx]) + lam * fb
         den = (w.sum(axis=0) + lam)[..., None]

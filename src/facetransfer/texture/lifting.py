@@ -1,14 +1,14 @@
-"""Lifting the texture from video (§6, Eq. (1)): frame colours onto mesh vertices or texels.
+"""Lifting the texture from video (§6, Eq. (L1)): frame colours onto mesh vertices or texels.
 
 "Once we obtain the 3D geometry, we can lift the texture from the video by assigning pixel colors
 to the corresponding mesh vertices." Every sample (a vertex, or a texel's surface point) takes the
 frame's colour where it projects, with the confidence weight
 
-    weight = visible * max(0, n_c . d)^p                                              (1)
+    weight = visible * max(0, n_c . d)^p                                             (L1)
 
 where ``n_c`` is the unit surface normal in camera coordinates, ``d`` the unit direction from the
 surface towards the camera (``(0, 0, 1)`` for the weak-perspective camera of §5.1, Eq. (7)) and
-``visible`` the z-buffer test of :mod:`facetransfer.render`. Eq. (1) and the sampling are written
+``visible`` the z-buffer test of :mod:`facetransfer.render`. Eq. (L1) and the sampling are written
 once (:func:`_weighted_samples`) for both :func:`lift_vertex_colors` and :func:`lift_uv_texture`;
 :func:`lift_track` runs the UV lifting over a tracked (or synthetic) clip, keeping every
 frame's texture (for the texture function); :func:`lift_merged` merges them as they come.
@@ -42,7 +42,7 @@ class LiftedTexture(NamedTuple):
     colors : (n_vertices, 3) float32
         RGB on the 0..255 scale; 0 where the weight is 0.
     weights : (n_vertices,) float32
-        Confidence (1): visibility times obliqueness, in [0, 1].
+        Confidence (L1): visibility times obliqueness, in [0, 1].
     """
 
     colors: np.ndarray
@@ -57,7 +57,7 @@ class LiftedUVTexture(NamedTuple):
     texture : (T, T, 3) float32
         RGB on the 0..255 scale; 0 where the weight is 0.
     weight : (T, T) float32
-        Confidence (1) per texel, in [0, 1]; 0 outside the UV charts.
+        Confidence (L1) per texel, in [0, 1]; 0 outside the UV charts.
     """
 
     texture: np.ndarray
@@ -89,7 +89,7 @@ def _bilinear(frame: np.ndarray, xy: np.ndarray) -> np.ndarray:
 
 
 def obliqueness_weight(normals, points, camera, *, power: float = 2.0) -> np.ndarray:
-    """``max(0, n_c . d)^p`` of Eq. (1): how squarely the surface faces the camera.
+    """``max(0, n_c . d)^p`` of Eq. (L1): how squarely the surface faces the camera.
 
     Parameters
     ----------
@@ -122,7 +122,7 @@ def obliqueness_weight(normals, points, camera, *, power: float = 2.0) -> np.nda
 def _weighted_samples(frame: np.ndarray, points: np.ndarray, normals: np.ndarray,
                       visible: np.ndarray, camera, power: float, what: str
                       ) -> tuple[np.ndarray, np.ndarray]:
-    """The weights (1) of surface samples and the frame's colours where they project.
+    """The weights (L1) of surface samples and the frame's colours where they project.
 
     Parameters
     ----------
@@ -135,7 +135,7 @@ def _weighted_samples(frame: np.ndarray, points: np.ndarray, normals: np.ndarray
         The z-buffer test of every point.
     camera : WeakPerspective or Pinhole
     power : float
-        ``p`` of Eq. (1).
+        ``p`` of Eq. (L1).
     what : str
         Start of the warning logged when nothing is visible (e.g. ``"lift_uv_texture: no texel"``).
 
@@ -144,9 +144,9 @@ def _weighted_samples(frame: np.ndarray, points: np.ndarray, normals: np.ndarray
     colors : (m, 3) float32
         Bilinear samples, 0 where the weight is 0.
     weights : (m,) float64
-        Eq. (1), in [0, 1].
+        Eq. (L1), in [0, 1].
     """
-    w = obliqueness_weight(normals, points, camera, power=power) * visible  # Eq. (1)
+    w = obliqueness_weight(normals, points, camera, power=power) * visible  # Eq. (L1)
     colors = np.zeros((points.shape[0], 3), np.float32)
     idx = np.flatnonzero(w > 0)
     if idx.size:
@@ -207,7 +207,7 @@ def _checked_inputs(frame, vertices, faces, raster, tol):
 
 def lift_vertex_colors(frame, vertices, faces, camera, *, raster=None, power: float = 2.0,
                        tol: float | None = None) -> LiftedTexture:
-    """Assign each mesh vertex the frame's colour where it projects (§6), with weight (1).
+    """Assign each mesh vertex the frame's colour where it projects (§6), with weight (L1).
 
     Parameters
     ----------
@@ -220,7 +220,7 @@ def lift_vertex_colors(frame, vertices, faces, camera, *, raster=None, power: fl
     raster : Raster, optional, keyword-only
         The z-buffer of this mesh in this frame, if already computed.
     power : float, keyword-only
-        Obliqueness exponent ``p`` of Eq. (1).
+        Obliqueness exponent ``p`` of Eq. (L1).
     tol : float, optional, keyword-only
         Depth tolerance of the visibility test (model units); default 1% of the mesh diagonal.
 
@@ -247,7 +247,7 @@ def lift_uv_texture(frame, vertices, faces, uvs, camera, tex_size: int = 512, *,
     """Lift a UV texture from one frame: every covered texel samples the frame (§6).
 
     Each texel's surface point (barycentric in its UV triangle) is projected into the frame and
-    sampled bilinearly; its weight is Eq. (1) with the interpolated normal and a z-buffer
+    sampled bilinearly; its weight is Eq. (L1) with the interpolated normal and a z-buffer
     visibility test of the point.
 
     Parameters
@@ -264,7 +264,7 @@ def lift_uv_texture(frame, vertices, faces, uvs, camera, tex_size: int = 512, *,
     atlas : UVAtlas, optional, keyword-only
         Precomputed atlas for these faces, uvs and size (otherwise :func:`uv_atlas`, cached).
     power : float, keyword-only
-        Obliqueness exponent ``p`` of Eq. (1).
+        Obliqueness exponent ``p`` of Eq. (L1).
     tol : float, optional, keyword-only
         Depth tolerance in model units (default 1% of the mesh diagonal).
 
@@ -332,7 +332,7 @@ def lift_track(model, frames, track, *, tex_size: int = 256, step: int = 1, powe
     step : int, keyword-only
         Use frames 0, step, 2 step, ...
     power : float, keyword-only
-        Obliqueness exponent of Eq. (1).
+        Obliqueness exponent of Eq. (L1).
     progress : callable(int), optional, keyword-only
         Called with 1 after each used frame.
 

@@ -1,19 +1,32 @@
 """Face tracking in monocular video (Vlasic et al. 2005, §5.1 tracking, §5.2 initialisation).
 
-Modules: :mod:`.result` (the :class:`Track` result and its file), :mod:`.camera` (weak-perspective
-pose, Eq. (7)), :mod:`.klt` (symmetric KLT terms, Eq. (6)), :mod:`.solver` (Eq. (8), (9)),
-:mod:`.landmarks` (MediaPipe-478 to iBUG-68), :mod:`.init` (§5.2), :mod:`.pair` (one frame pair,
-Eq. (6)-(9)), :mod:`.tracker` (initialisation, snap and passes), :mod:`.options` (its options),
-:mod:`.frames` (video frames), :mod:`.smooth` (temporal smoothing), :mod:`.overlay` (drawing the
-fit on frames).
+Two trackers write the same :class:`Track` (:mod:`.result`, its file):
+
+* the capture tracker, the default of every command (:mod:`.capture`): Face Landmarker's
+  points detected through the whole clip (:mod:`.detect`, :mod:`.video_detect` on two
+  processes, :mod:`.face_crop` for small faces, :mod:`.shots` for an edited clip's cuts), the
+  identity fitted over frames spread through it, then every frame's pose and ARKit
+  activations fitted to the points and the flow (:mod:`.capture_points`, :mod:`.fit2d`,
+  :mod:`.gaze`, :mod:`.scores`); its progress kept (:mod:`.detect_checkpoint`,
+  :mod:`.fit_checkpoint`);
+* the paper's KLT tracker (``--tracker klt``; ``flow`` in ``transfer``, ``puppet`` and
+  ``demo``): :mod:`.camera` (weak-perspective pose, Eq. (7)), :mod:`.klt` (symmetric KLT
+  terms, Eq. (6)), :mod:`.solver` (Eq. (8), (9)), :mod:`.pair` (one frame pair, Eq.
+  (6)-(9)), :mod:`.init` (§5.2), :mod:`.tracker` (initialisation, snap and passes),
+  :mod:`.options` (its options), :mod:`.checkpoint`.
+
+Around them: :mod:`.obtain` (a track for a video: a file given, the cache, or tracked; in a
+forked process beside another), :mod:`.cache` (the track cache), :mod:`.presets` and
+:mod:`.settings` (the commands' tracker options), :mod:`.landmarks` (MediaPipe-478 to iBUG-68),
+:mod:`.aspect` (the frames as the tracker sees them), :mod:`.project` (a track's landmarks
+and frames), :mod:`.smooth`, :mod:`.overlay` (drawing the fit on frames).
 
 Typical use::
 
-    from facetransfer.model import load_model
-    from facetransfer.track import TrackOptions, track_video
+    from facetransfer.default_model import load_default_model
+    from facetransfer.track.capture import capture_video
 
-    track = track_video("clip.mp4", load_model("bilinear.npz"), init="auto",
-                        options=TrackOptions(passes=2, anchor=True))
+    track = capture_video("clip.mp4", load_default_model())   # as `facetransfer track`
     track.save("clip.track.npz")
 """
 

@@ -12,8 +12,9 @@ whose Gauss-Newton normal equations, with the pose linearised around the current
 (p_i - p0_i))`` for the unknowns ``δ = (ω, σ, τ, Δw_m)`` — the rigid pose and the mode's weights
 solved together (Bascle & Blake 1998; Brand & Bhotika 2001). A landmark target is the same
 constraint with ``Z = I`` and ``e`` the displacement to the target. Weights are regularised toward
-the training distribution with the Tikhonov term ``λ (w - μ)ᵀ Σ⁻¹ (w - μ)`` (``μ``, ``Σ`` from
-:meth:`MultilinearModel.weight_mean`, :meth:`~MultilinearModel.weight_cov`).
+the training distribution with the Tikhonov term ``λ (w - μ)ᵀ Σ⁻¹ (w - μ)`` (:meth:`Prior.
+from_model`: ``μ`` the mode's training row labelled "neutral" where it has one, else the rows'
+mean; ``Σ`` the rows' covariance in the gauge hyperplane below, with a small ridge).
 
 The clip-constant mode (identity) is not solved per frame: each frame pair's system is reduced
 to the identity block by the Schur complement over that frame's pose (:func:`schur_reduce`),
