@@ -52,7 +52,7 @@ def test_the_face_to_track_per_clip_and_per_pair(tmp_path):
                                          "got 'upstairs'"):
         clip_jobs(["d.mp4"], face="upstairs")
     man.write_text("video,face\na.mp4,right\nb.mp4,middle\n")
-    with pytest.raises(BatchError, match=r"clips.csv row 2: face must be left, right, centre "
+    with pytest.raises(BatchError, match=r"clips.csv line 3: face must be left, right, centre "
                                          r"or pixels X,Y, got 'middle'"):
         clip_jobs(manifest=man)
     pairs = tmp_path / "pairs.csv"
@@ -60,7 +60,7 @@ def test_the_face_to_track_per_clip_and_per_pair(tmp_path):
     assert pair_jobs(pairs)[0].sources == {"expression_from": str(tmp_path / "s.mp4"),
                                            "target_face": "right", "source_face": "left"}
     pairs.write_text('target,expression_from,source_face\nt.mp4,s.mp4,"-3,4"\n')
-    with pytest.raises(BatchError, match="pairs.csv row 1: source_face must be left"):
+    with pytest.raises(BatchError, match="pairs.csv line 2: source_face must be left"):
         pair_jobs(pairs)
 
 
@@ -123,3 +123,91 @@ def test_summary_round_trip_and_one_line_errors(tmp_path):
                     Row("c", "cancelled")]
     with pytest.raises(ValueError, match="status must be one of"):
         Row("d", "ok")
+
+
+def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch):
+    """A walk with Dask: paths absolute before they reach a worker (a real scheduler's runs in
+    its own folder: a relative clip "does not exist" there, and a rerun from another folder
+    took every output for another job's); a column given twice and a row of more cells than
+    its header refused (before: the last column won, the extra cell dropped); an export named
+    like the summary refused; a chunk of a few frames refused; --timeout inf refused."""
+    import os
+
+    from facetransfer.batch.manifest import export_jobs
+    from facetransfer.batch.run import _outputs
+
+    monkeypatch.chdir(tmp_path)
+    (tmp_path / "m").mkdir()
+    man = tmp_path / "m" / "clips.csv"
+    man.write_text("video,name\n../clips/a.mp4,x\n")
+    assert clip_jobs(["b.mp4"], man)[0].video == str(tmp_path / "b.mp4")
+    assert clip_jobs(manifest=man)[0].video == os.path.normpath(tmp_path / "clips" / "a.mp4")
+    assert export_jobs(["t.npz"])[0].track == tmp_path / "t.npz"
+    man.write_text("video,video\na.mp4,b.mp4\n")
+    with pytest.raises(BatchError, match=r"has the column\(s\) \['video'\] more than once"):
+        clip_jobs(manifest=man)
+    man.write_text("video,name\n\na.mp4,x,extra\n")
+    with pytest.raises(BatchError, match="clips.csv line 3 has 3 cells, its header 2"):
+        clip_jobs(manifest=man)
+    with pytest.raises(BatchError, match="is the batch's summary.csv"):
+        _outputs(export_jobs(["a/summary.npz"]), tmp_path, ".csv")
+    with pytest.raises(BatchError, match=r"distinct names \(files of distinct names\)"):
+        export_jobs(["a/t.npz", "b/t.npz"])
+    from facetransfer.batch.run import batch_track
+
+    with pytest.raises(BatchError, match="--chunk must be 0 .* or at least 10 frames"):
+        batch_track([], tmp_path / "out", None, client=None, chunk=2)
+    from facetransfer.cli.main import main
+
+    assert main(["batch", "track", "a.mp4", "--out", str(tmp_path / "o"), "--timeout",
+                 "inf"]) == 2
+
+
+def test_a_clip_replaced_since_its_track_is_not_skipped(quick_model, tmp_path):
+    """``batch track`` again after the clip under the same name was replaced by another (of
+    another size and rate): its track is a failed row naming --overwrite (before: "skipped",
+    the stale track kept as this run's)."""
+    import numpy as np
+
+    from conftest import still_track
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.batch.run import _done_track
+    from facetransfer.io.video import write_video
+
+    video = tmp_path / "shot.mp4"
+    write_video(video, np.zeros((5, 64, 64, 3), np.uint8), 25.0)
+    out = tmp_path / "shot.npz"
+    still_track(quick_model, 5, source=str(video)).save(out)
+    job = ClipJob("shot", str(video), "auto", None)
+    assert _done_track(out, job, quick_model.content_hash).status == "skipped"
+    write_video(video, np.zeros((5, 48, 80, 3), np.uint8), 30.0)
+    row = _done_track(out, job, quick_model.content_hash)
+    assert row.status == "failed" and "64x64 frames at 25 fps" in row.error
+    assert "80x48 at 30 fps" in row.error and "--overwrite" in row.error
+
+
+def test_a_lost_scheduler_and_a_dead_worker_are_said_as_such():
+    """Dask's cancellations were reported as "FutureCancelledError: track_clip-923c...
+    cancelled for reason: scheduler-connection-lost." on every row; the scheduler's logger's
+    tracebacks printed without -v."""
+    import logging
+
+    from facetransfer.batch.cluster import quiet_dask
+    from facetransfer.batch.run import _error_line
+
+    class FutureCancelledError(Exception):
+        pass
+
+    assert _error_line(FutureCancelledError(
+        "track_clip-923c cancelled for reason: scheduler-connection-lost.")).startswith(
+        "the scheduler was lost")
+    assert _error_line(FutureCancelledError("x cancelled for reason: already forgotten.")) \
+        .startswith("its worker died")
+    assert _error_line(ValueError("video a.mp4 does not exist")) == "video a.mp4 does not exist"
+    import distributed  # noqa: F401 (its configuration sets its loggers' levels)
+
+    quiet_dask(False)
+    assert logging.getLogger("distributed.client").level == logging.CRITICAL
+    quiet_dask(True)
+    assert logging.getLogger("distributed.client").level == logging.INFO
+    quiet_dask(False)

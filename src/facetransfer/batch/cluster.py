@@ -28,8 +28,13 @@ CONNECT_TIMEOUT = 10.0
 def quiet_dask(verbose: bool = False) -> None:
     """Keep Dask's own log lines (worker start, "Compute Failed"...) out of the way unless
     ``verbose``: a failed task is reported as its clip's row."""
-    for name in DASK_LOGGERS:
-        logging.getLogger(name).setLevel(logging.INFO if verbose else logging.CRITICAL)
+    level = logging.INFO if verbose else logging.CRITICAL
+    # Dask's configuration gives some children levels of their own (``distributed.client``:
+    # WARNING, which printed a lost scheduler's tracebacks without -v): every one set
+    known = [n for n in logging.root.manager.loggerDict
+             if any(n == p or n.startswith(p + ".") for p in DASK_LOGGERS)]
+    for name in (*DASK_LOGGERS, *known):
+        logging.getLogger(name).setLevel(level)
 
 
 def default_workers() -> int:
@@ -122,6 +127,8 @@ def _remote_client(scheduler: str, timeout: float):
     except (OSError, TimeoutError) as exc:
         raise BatchError(f"scheduler {scheduler} did not answer within {timeout:g} s "
                          f"({exc})") from None
+    except (TypeError, ValueError) as exc:  # tls:// without certificates, a bad address
+        raise BatchError(f"cannot connect to scheduler {scheduler}: {exc}") from None
 
 
 def _local_cluster(n: int, processes: bool, verbose: bool):

@@ -114,13 +114,26 @@ class ExportJob:
 
 
 def _resolve(value: str, base: Path) -> str:
+    """A manifest's path, absolute: against the manifest's folder, then the current one (a
+    worker of a real scheduler runs in its own folder: before, a relative path was looked up
+    there, and a rerun from another folder took every output for another job's)."""
     p = Path(os.path.expanduser(value))
-    return str(p if p.is_absolute() else base / p)
+    return os.path.abspath(p if p.is_absolute() else base / p)
+
+
+def absolute(value) -> str:
+    """A path given on the command line, absolute (:func:`_resolve`'s reason)."""
+    return os.path.abspath(os.path.expanduser(str(value)))
+
+
+#: The key of each row's line in the file (:func:`read_manifest`), for messages.
+LINE = "__line__"
 
 
 def read_manifest(path: str | os.PathLike, *, required: tuple[str, ...],
                   allowed: tuple[str, ...], paths: tuple[str, ...]) -> list[dict[str, str]]:
-    """Read a CSV manifest into one dict per row (empty cells dropped, paths resolved).
+    """Read a CSV manifest into one dict per row (empty cells dropped, paths resolved and
+    absolute, the row's line in the file under :data:`LINE`).
 
     Parameters
     ----------
@@ -146,11 +159,17 @@ def read_manifest(path: str | os.PathLike, *, required: tuple[str, ...],
         with open(p, newline="", encoding="utf-8-sig") as fh:
             reader = csv.DictReader(fh)
             header = [h.strip() for h in (reader.fieldnames or [])]
-            raw = list(reader)
+            raw, lines = [], []
+            for row in reader:               # each row's line in the file (for messages)
+                raw.append(row)
+                lines.append(reader.line_num)
     except (UnicodeDecodeError, csv.Error) as exc:
         raise BatchError(f"manifest {p} is not a CSV file ({exc})") from None
     if not header:
         raise BatchError(f"manifest {p} is empty (expected a header row with {required[0]!r})")
+    twice = sorted({h for h in header if header.count(h) > 1})
+    if twice:                      # before: the last one's cells silently won
+        raise BatchError(f"manifest {p} has the column(s) {twice} more than once")
     unknown = [h for h in header if h not in allowed]
     if unknown:
         raise BatchError(f"manifest {p} has unknown column(s) {unknown}; expected some of "
@@ -159,15 +178,18 @@ def read_manifest(path: str | os.PathLike, *, required: tuple[str, ...],
     if missing:
         raise BatchError(f"manifest {p} lacks the column(s) {missing} (header: {header})")
     rows = []
-    for line, row in enumerate(raw, start=2):
+    for line, row in zip(lines, raw):
+        if row.get(None):           # more cells than the header (before: dropped silently)
+            raise BatchError(f"manifest {p} line {line} has {len(header) + len(row[None])} "
+                             f"cells, its header {len(header)}")
         cells = {(k or "").strip(): (v or "").strip() for k, v in row.items() if k is not None}
         if not any(cells.values()):
             continue  # blank line
         for c in required:
             if not cells.get(c):
                 raise BatchError(f"manifest {p} line {line}: column {c!r} is empty")
-        rows.append({k: (_resolve(v, p.parent) if k in paths else v)
-                     for k, v in cells.items() if v})
+        rows.append({LINE: str(line), **{k: (_resolve(v, p.parent) if k in paths else v)
+                                         for k, v in cells.items() if v}})
     if not rows:
         raise BatchError(f"manifest {p} has no rows")
     return rows
@@ -219,11 +241,12 @@ def clip_jobs(videos=(), manifest: str | os.PathLike | None = None, *,
         same name.
     """
     _check_face(face, "--face")
-    jobs = [ClipJob(_name(None, v, f"video {v}"), str(v), str(init), face) for v in videos]
+    jobs = [ClipJob(_name(None, v, f"video {v}"), absolute(v),
+                    str(init) if init == "auto" else absolute(init), face) for v in videos]
     if manifest is not None:
-        for i, row in enumerate(read_manifest(manifest, required=("video",),
-                                              allowed=CLIP_COLUMNS, paths=("video", "init"))):
-            where = f"manifest {manifest} row {i + 1}"
+        for row in read_manifest(manifest, required=("video",), allowed=CLIP_COLUMNS,
+                                 paths=("video", "init")):
+            where = f"manifest {manifest} line {row[LINE]}"
             _check_face(row.get("face"), f"{where}: face")
             jobs.append(ClipJob(_name(row.get("name"), row["video"], where), row["video"],
                                 row.get("init", "auto"), row.get("face", face)))
@@ -245,8 +268,8 @@ def pair_jobs(manifest: str | os.PathLike) -> list[PairJob]:
     rows = read_manifest(manifest, required=("target",),
                          allowed=PAIR_PATH_COLUMNS + PAIR_VALUE_COLUMNS, paths=PAIR_PATH_COLUMNS)
     jobs = []
-    for i, row in enumerate(rows):
-        where = f"manifest {manifest} row {i + 1}"
+    for row in rows:
+        where = f"manifest {manifest} line {row.pop(LINE)}"
         for track, video in (("source_track", "expression_from"), ("viseme_track", "viseme_from"),
                              ("identity_track", "identity_from"), ("pose_track", "pose_from")):
             if row.get(track) and not row.get(video):
@@ -267,14 +290,15 @@ def pair_jobs(manifest: str | os.PathLike) -> list[PairJob]:
 
 def export_jobs(tracks) -> list[ExportJob]:
     """The track files of ``batch export``, named by their stems."""
-    jobs = [ExportJob(_name(None, t, f"track {t}"), Path(t)) for t in tracks]
+    jobs = [ExportJob(_name(None, t, f"track {t}"), Path(absolute(t))) for t in tracks]
     if not jobs:
         raise BatchError("no track files given")
-    check_unique_names(jobs)
+    check_unique_names(jobs, hint="files of distinct names")
     return jobs
 
 
-def check_unique_names(jobs) -> None:
+def check_unique_names(jobs, *, hint: str = "a manifest's 'name' column, or files of distinct "
+                       "names") -> None:
     """Refuse two jobs whose outputs would have the same name (also differing only in case,
     which is one file on macOS and Windows).
 
@@ -289,6 +313,5 @@ def check_unique_names(jobs) -> None:
         if key in seen:
             a, b = seen[key].inputs[0], job.inputs[0]
             raise BatchError(f"two clips have the name {job.name!r} ({a} and {b}); give them "
-                             "distinct names (a manifest's 'name' column, or files of "
-                             "distinct names)")
+                             f"distinct names ({hint})")
         seen[key] = job

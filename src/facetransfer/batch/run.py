@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Callable
 
 from . import jobs as J
-from .chunks import plan_chunks
+from .chunks import MIN_CHUNK, plan_chunks
 from .manifest import BatchError
 from .summary import Row, write_summary
 
@@ -98,6 +98,9 @@ def _outputs(jobs, out_dir: Path, ext: str) -> dict[str, Path]:
     outs = {}
     for job in jobs:
         out = out_dir / f"{job.name}{ext}"
+        if out.name.casefold() == SUMMARY_NAME:   # the run's own table (before: overwritten)
+            raise BatchError(f"output {out} of {job.name!r} is the batch's {SUMMARY_NAME}; "
+                             "give the clip another name")
         for p in job.inputs:
             if _same(Path(p), out):
                 raise BatchError(f"output {out} of {job.name!r} is also one of its inputs")
@@ -105,8 +108,19 @@ def _outputs(jobs, out_dir: Path, ext: str) -> dict[str, Path]:
     return outs
 
 
+#: What Dask's cancellation reasons mean for a clip (a task's key is no help to a user).
+_CANCELLED = (("scheduler-connection-lost", "the scheduler was lost (stopped, or its machine "
+               "gone); run the same command again when it is back"),
+              ("already forgotten", "its worker died, more than once (out of memory, or a "
+               "crash?): the clip was given up"))
+
+
 def _error_line(exc: BaseException) -> str:
     msg = str(exc).strip()
+    if type(exc).__name__ in ("FutureCancelledError", "CancelledError"):
+        for reason, said in _CANCELLED:
+            if reason in msg:
+                return said
     if isinstance(exc, ValueError) and msg:
         return msg.splitlines()[0]
     return f"{type(exc).__name__}: {msg.splitlines()[0]}" if msg else type(exc).__name__
@@ -200,10 +214,29 @@ def _done_track(out: Path, job, model_hash: str) -> Row | None:
             why = f"holds a track of {made}, not of {Path(str(job.video)).name}"
         elif t.model_hash != model_hash:
             why = "holds a track made with another model"
+        else:
+            why = _other_frames(t, job.video)
     if why is not None:
         return Row(job.name, "failed", error=f"{out} {why}; --overwrite replaces it",
                    output=str(out))
     return J.track_row(job.name, t, out, 0.0, status="skipped")
+
+
+def _other_frames(track, video) -> str | None:
+    """Why ``track`` is not of the frames ``video`` holds now (a clip replaced under the same
+    name since: before, its track was kept as this run's), or None; a video that cannot be
+    read now is the task's to say."""
+    from ..io.video import video_info
+
+    try:
+        info = video_info(video)
+    except (ValueError, OSError):
+        return None
+    size = (int(info.size[0]), int(info.size[1]))
+    if tuple(track.frame_size) != size or abs(float(track.fps) - float(info.fps)) > 1e-3:
+        return (f"holds a track of {track.frame_size[0]}x{track.frame_size[1]} frames at "
+                f"{track.fps:g} fps; {video} is now {size[0]}x{size[1]} at {info.fps:g} fps")
+    return None
 
 
 def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
@@ -239,8 +272,9 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
 
     if not isinstance(options, TrackerSettings):
         options = TrackerSettings(klt=options or TrackOptions())
-    if chunk < 0:
-        raise BatchError(f"--chunk must be >= 0 (0 = never split), got {chunk}")
+    if chunk < 0 or 0 < chunk < MIN_CHUNK:
+        raise BatchError(f"--chunk must be 0 (never split) or at least {MIN_CHUNK} frames (a "
+                         f"chunk is captured as a clip of its own), got {chunk}")
     if chunk:
         plan_chunks(chunk + 1, chunk, overlap)  # a bad overlap fails before anything runs
     out_dir = prepare_out_dir(out_dir)

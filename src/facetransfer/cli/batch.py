@@ -147,8 +147,12 @@ def _run(args, what: str, n_jobs: int, call) -> int:
         summary = Path(args.out) / "summary.csv"
         print(f"stopped: finished outputs are kept in {args.out}"
               + (f" (see {summary})" if summary.is_file() else "")
-              + "; run the same command again to continue (a clip being tracked continues "
-              "from its progress file)", file=sys.stderr)
+              + "; run the same command again to continue"
+              # only a clip tracked whole keeps a progress file (not a transfer, an export or
+              # a chunk)
+              + (" (a clip being tracked continues from its progress file)"
+                 if what == "track" and not getattr(args, "chunk", 0) else ""),
+              file=sys.stderr)
         raise
     finally:
         if bar is not None:
@@ -247,6 +251,7 @@ def _check_cluster_args(args) -> None:
     if args.workers is not None and args.scheduler:
         raise FaceTransferError("--workers sizes the embedded cluster; the workers of "
                                 "--scheduler are the ones started with `dask worker`")
-    if not args.timeout > 0:
-        raise FaceTransferError(f"--timeout must be > 0, got {args.timeout}")
+    if not 0 < args.timeout < float("inf"):    # inf: a socket's deadline overflowed
+        raise FaceTransferError(f"--timeout must be a number of seconds > 0, got "
+                                f"{args.timeout}")
     check_out_dir(args.out)
