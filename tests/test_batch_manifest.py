@@ -146,6 +146,8 @@ def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch):
     man.write_text("video,video\na.mp4,b.mp4\n")
     with pytest.raises(BatchError, match=r"has the column\(s\) \['video'\] more than once"):
         clip_jobs(manifest=man)
+    man.write_text("video,name\na.mp4,x,,\n")       # a spreadsheet's trailing commas: taken
+    assert clip_jobs(manifest=man)[0].name == "x"
     man.write_text("video,name\n\na.mp4,x,extra\n")
     with pytest.raises(BatchError, match="clips.csv line 3 has 3 cells, its header 2"):
         clip_jobs(manifest=man)

@@ -354,5 +354,9 @@ def test_an_output_named_as_a_folder_is_refused(tmp_path):
         with pytest.raises(OutputError, match="a folder's name"):
             with atomic_path(out):
                 pass
+    from facetransfer.io.video import check_video_output
+
+    with pytest.raises(OutputError, match="a folder's name"):  # a Path made of it dropped it
+        check_video_output(f"{tmp_path}/result.mp4/")
     assert list(tmp_path.iterdir()) == []
     assert check_output_path(tmp_path / "ok.npz") == tmp_path / "ok.npz"

@@ -34,3 +34,29 @@ def test_a_signal_in_the_block_is_raised_on_leaving_it_and_a_child_keeps_the_han
     with deferred_signals():               # nothing noted: nothing raised
         pass
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_child_forked_in_the_block_dies_of_sigterm_and_defers_again():
+    """A review: the CLI's SIGTERM handler was put back in a child forked inside the block (the
+    CLI's own at-fork reset ran first), so a worker stopped with ``terminate()`` raised
+    instead of dying; the child may defer signals itself."""
+    def terminated(signum, frame):
+        raise KeyboardInterrupt
+
+    old = signal.signal(signal.SIGTERM, terminated)
+    try:
+        with deferred_signals():
+            r, w = os.pipe()
+            pid = os.fork()
+            if pid == 0:
+                ok = signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+                with deferred_signals():
+                    ok = ok and callable(signal.getsignal(signal.SIGINT)) and \
+                        signal.getsignal(signal.SIGINT) is not signal.default_int_handler
+                os.write(w, b"1" if ok else b"0")
+                os._exit(0)
+            os.waitpid(pid, 0)
+            assert os.read(r, 1) == b"1"
+        assert signal.getsignal(signal.SIGTERM) is terminated
+    finally:
+        signal.signal(signal.SIGTERM, old)

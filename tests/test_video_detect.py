@@ -31,6 +31,8 @@ def test_split_frame_halves_what_is_left_of_a_long_enough_clip():
     # frames detected as then); resumed in the child's part: the rest halved
     assert split_frame(100, 400, 2) == 200 and split_frame(199, 400, 2) == 200
     assert split_frame(350, 600, 2) == 475 and split_frame(250, 300, 2) is None
+    # the first half done, the child's lost: continued here from where the child started
+    assert split_frame(200, 400, 2) is None
     assert split_frame(0, 354, 1) is None                      # one worker
     short = video_detect.SPLIT_MIN_FRAMES - 1
     assert split_frame(0, short, 2) is None                    # not worth a second process

@@ -57,7 +57,8 @@ def interrupt_of(exc: BaseException) -> KeyboardInterrupt | None:
         if isinstance(exc, KeyboardInterrupt):
             return exc
         seen.add(id(exc))
-        exc = exc.__cause__ or exc.__context__
+        exc = exc.__cause__   # the kernel's SystemError is *caused* by it; one raised while
+        # an interrupt was being handled (its context only) is a fault of its own
     return None
 
 

@@ -6,7 +6,8 @@ and goes on: a Ctrl-C at that moment was lost with a traceback, and the command 
 end (a new user's walk, ``track`` of a 200-frame clip interrupted 0.7 s in). Inside
 :func:`deferred_signals` the handlers only note the signal; on leaving, the first noted is
 handed to its own handler there, in ordinary code, so the interrupt is raised where the
-caller can stop what it started. A forked child starts with the handlers the parent had.
+caller can stop what it started. A forked child starts with the parent's Ctrl-C handler and
+SIGTERM's default (a forked worker dies of it).
 """
 
 from __future__ import annotations
@@ -24,10 +25,14 @@ _HOOKED = False
 
 
 def _restore_in_child() -> None:
-    """A forked child's handlers back to the parent's own (not the noting ones)."""
-    if _SAVED is not None and threading.current_thread() is threading.main_thread():
-        for signum, handler in _SAVED.items():
-            signal.signal(signum, handler)
+    """A forked child's handlers back to the parent's own (not the noting ones), but SIGTERM
+    to its default: a forked worker dies of it, as its parent stops it so
+    (``Process.terminate``; :mod:`facetransfer.cli.main` does the same for every fork)."""
+    global _SAVED
+    saved, _SAVED = _SAVED, None
+    if saved is not None and threading.current_thread() is threading.main_thread():
+        for signum, handler in saved.items():
+            signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM else handler)
 
 
 @contextlib.contextmanager
@@ -46,10 +51,10 @@ def deferred_signals(signums=(signal.SIGINT, signal.SIGTERM)):
         _HOOKED = True
     noted: list[int] = []
     saved = {s: signal.getsignal(s) for s in signums if callable(signal.getsignal(s))}
-    for s in saved:
-        signal.signal(s, lambda signum, frame: noted.append(signum))
     _SAVED = saved
     try:
+        for s in saved:      # inside the try: a signal between two of these is restored too
+            signal.signal(s, lambda signum, frame: noted.append(signum))
         yield
     finally:
         _SAVED = None

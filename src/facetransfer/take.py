@@ -361,12 +361,19 @@ def _rows_rate(t: np.ndarray, f: np.ndarray) -> float:
         return float(_rate(f, False))
     step = float(np.median(np.diff(t)))
     fps = float(min(TIMECODE_RATES, key=lambda r: abs(1.0 / r - step)))
-    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
-    if not f[:, 4].any() or span <= 0:   # whole frames count frames: the nominal rate
+    if not f[:, 4].any():        # whole frames count frames: the nominal rate
         return fps
-    period = span / max(round(span * fps), 1)   # the rows' frame, dropped rows counted
     ntsc = fps * 1000.0 / 1001.0
-    return ntsc if abs(period - 1.0 / ntsc) < abs(period - 1.0 / fps) else fps
+    d = t - t[0]                 # the rate whose frames the rows fall on (a dropped row too)
+    return ntsc if _phase(d, ntsc) < _phase(d, fps) else fps
+
+
+def _phase(d: np.ndarray, rate: float) -> float:
+    """The mean distance (in frames) of times ``d`` (seconds) from the frames of ``rate``: ~0
+    at the rows' own rate, growing along a take at another (1/1000 of a frame a frame between
+    30 and 29.97: the span's frame count alone missed it beyond ~500 rows)."""
+    x = d * rate
+    return float(np.mean(np.abs(x - np.round(x))))
 
 
 def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PREVIEW_SIZE,

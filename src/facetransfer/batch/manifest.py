@@ -179,7 +179,8 @@ def read_manifest(path: str | os.PathLike, *, required: tuple[str, ...],
         raise BatchError(f"manifest {p} lacks the column(s) {missing} (header: {header})")
     rows = []
     for line, row in zip(lines, raw):
-        if row.get(None):           # more cells than the header (before: dropped silently)
+        if any((c or "").strip() for c in row.get(None) or ()):  # more cells than the header
+            # (before: dropped silently; empty ones, a spreadsheet's trailing commas, pass)
             raise BatchError(f"manifest {p} line {line} has {len(header) + len(row[None])} "
                              f"cells, its header {len(header)}")
         cells = {(k or "").strip(): (v or "").strip() for k, v in row.items() if k is not None}

@@ -320,7 +320,7 @@ def _run(args) -> int:
     import signal
 
     previous = _catching_sigterm()
-    before = {p for p in _outputs(args) if p.exists()}
+    before = {p for p in _outputs(args) if _is_file(p)}
     try:
         status = int(args.func(args) or 0)
         sys.stdout.flush()      # what the command said, while a closed pipe can be caught here
@@ -339,7 +339,7 @@ def _run(args) -> int:
             raise
         what, status = ("terminated", 143) if isinstance(stop, Terminated) else \
             ("interrupted", 130)
-        written = [str(p) for p in _outputs(args) if p.exists() and p not in before]
+        written = [str(p) for p in _outputs(args) if _is_file(p) and p not in before]
         print(f"facetransfer {args.command}: {what}{_kept(args.command, written)}",
               file=sys.stderr)
         return status
@@ -393,6 +393,15 @@ def _outputs(args) -> list:
         return [Path(args.out) / name for name in _DEMO_FILES]
     return [Path(v) for v in (getattr(args, n, None) for n in _OUTPUT_ARGS)
             if isinstance(v, (str, os.PathLike)) and "%" not in str(v)]
+
+
+def _is_file(p) -> bool:
+    """Whether ``p`` is a file now (a folder, a name too long or a path that cannot be looked
+    at: not one, so never a traceback of its own)."""
+    try:
+        return p.is_file()
+    except (OSError, ValueError):
+        return False
 
 
 def _kept(command: str, written: list | None = None) -> str:

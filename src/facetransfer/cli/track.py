@@ -332,6 +332,7 @@ def _capture_detect(args, saved, ck, progress):
 
 
 def _track_klt(args, model, opt, progress, bars):
+    from ..errors import plain_interrupts
     from ..track.aspect import warn_stored_fit
     from ..track.init import LazyDetector
     from ..track.tracker import track_video
@@ -344,9 +345,10 @@ def _track_klt(args, model, opt, progress, bars):
     if args.restart and partial.exists():
         partial.unlink()
     try:
-        track = track_video(args.video, model, init=args.init, options=opt,
-                            max_frames=args.max_frames, progress=progress,
-                            source=str(args.video), detector=detector, checkpoint=partial)
+        with plain_interrupts():    # the interrupt itself, where a compiled kernel wrapped it
+            track = track_video(args.video, model, init=args.init, options=opt,
+                                max_frames=args.max_frames, progress=progress,
+                                source=str(args.video), detector=detector, checkpoint=partial)
     except KeyboardInterrupt:
         _say_progress(partial)
         raise

@@ -75,13 +75,20 @@ def check_output_path(path: str | os.PathLike, *, overwrite: bool = True,
     return p
 
 
+def check_not_folder_name(path) -> None:
+    """OutputError where an output's name, as given, ends in ``/`` (a folder's name): a
+    ``Path`` drops the slash, and ``--out sub.npz/`` wrote a file ``sub.npz``. Callers check
+    the argument before making a Path of it."""
+    text = os.fspath(path) if isinstance(path, os.PathLike) else str(path)
+    if text.endswith(("/", os.sep)) and text.strip("/" + os.sep):
+        raise OutputError(f"output {text} ends in '/', a folder's name; give a file name")
+
+
 def _checked_output(path, overwrite: bool, inputs) -> Path:
     """:func:`check_output_path` but for trying the folder (:func:`atomic_path`'s own
     temporary file does that)."""
+    check_not_folder_name(path)
     p = Path(path)
-    if str(path).endswith(("/", os.sep)) and str(path).strip("/" + os.sep):
-        # a folder's name: Path() drops the slash, and a file "sub.npz" was written
-        raise OutputError(f"output {path} ends in '/', a folder's name; give a file name")
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.exists():
         raise OutputError(f"output folder {parent} does not exist (for {p})")

@@ -30,7 +30,7 @@ from typing import Callable, Iterable
 import numpy as np
 
 from ..errors import VideoError
-from .atomic import atomic_path, check_output_path, probe_folder
+from .atomic import atomic_path, check_not_folder_name, check_output_path, probe_folder
 from .ffmpeg import exit_cause, ffmpeg_error, ffmpeg_exe
 from .video_audio import (COPIED_AUDIO, audio_codec, audio_codecs, audio_input_args,  # noqa: F401
                           has_audio, mux_audio)
@@ -265,6 +265,7 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
         existing output without ``overwrite``.
     """
     opt = options or VideoOptions()
+    check_not_folder_name(path)        # before Path() drops the slash
     p = Path(path)
     suffix = p.suffix.lower()
     if is_image_pattern(p):

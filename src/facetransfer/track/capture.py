@@ -509,7 +509,8 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
 def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
                    source) -> Track:
     """A clip edited from several shots (:mod:`facetransfer.track.shots`), each captured on its
-    own (its own identity; no flow or smoothing across a cut), joined; a ``fixed`` identity is
+    own (its own identity, save the first one's person's later shots: :func:`_one_identity`;
+    no flow or smoothing across a cut), joined; a ``fixed`` identity is
     the first shot's with a face (the face the clip starts with, after any black opening); the
     fit's progress is not kept for such a clip."""
     subs = [shot_detections(det, a, b) for a, b in spans]

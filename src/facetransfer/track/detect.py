@@ -125,7 +125,8 @@ class VideoLandmarker(MediaPipeDetector):
     :attr:`warmup_frames` frames before its start. Measured on face_2 and driving_d9 (resumed at
     frame 60): the iBUG points of the first resumed frame then differ from an uninterrupted
     run's by 0.05 px on average (0.2 px at most; 1.6-2.2 px on average without the warm-up),
-    later frames by 0.02-0.09 px (MediaPipe's own state never becomes identical).
+    later frames by 0.02-0.09 px (MediaPipe's own state never becomes identical); on a longer
+    clip (``driving_d6``, 1,008 frames) 0.1-0.5 px over the next ~150 frames, 1.3 px at most.
     """
 
     #: frames shown to the detector before a resumed run's first frame (see the class notes)

@@ -102,8 +102,9 @@ class Track:
         ``landmarks2d``, ``detections2d``) is in the stored pixels. 1 for square pixels.
     shot_starts : tuple of int
         Frames where a new shot starts in a clip edited from several
-        (:mod:`facetransfer.track.shots`: each captured on its own, its own identity; the
-        rewrite chooses its reference frames within each); empty for one shot.
+        (:mod:`facetransfer.track.shots`: each captured on its own, with its own identity save
+        a later shot of the first one's person, with that one's; the rewrite chooses its
+        reference frames within each); empty for one shot.
     """
 
     fps: float

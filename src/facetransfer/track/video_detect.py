@@ -14,8 +14,9 @@ The child starts its own landmarker at frame ``m`` exactly as a resumed run does
 ``m`` (no container seek: OpenCV's is not exact) and shows the last
 :attr:`~facetransfer.track.detect.VideoLandmarker.warmup_frames` of them to the detector, so the
 points of frame ``m`` and after differ from one process's by about as little as a resumed run's
-(the class notes measure 0.05 px on average). Frame ``m`` has no flow term: its flow would move
-the parent's points of frame ``m - 1``, which the child does not have.
+(the class notes measure 0.05 px on average; up to ~1 px on a long clip). Frame ``m`` has no
+flow term: its flow would move the parent's points of frame ``m - 1``, which the child does not
+have.
 
 When the child cannot run or fails, the parent detects the rest itself (resuming from its own
 part), so the result never depends on the fork. An interrupted run keeps only the parent's
@@ -74,6 +75,10 @@ def split_frame(done: int, total: int, workers: int) -> int | None:
         # frames from the same one (before, the rest halved: the frames between the two
         # splits seen with another tracking history, up to 1.1 px off on an 800-frame clip)
         return first
+    if total >= SPLIT_MIN_FRAMES and done == first:
+        # the first half done, the child's lost: this process continues as the child did (from
+        # the same frame, the same warm-up), so those frames come out as they would have
+        return None
     left = total - done
     return None if left < SPLIT_MIN_FRAMES else done + left // 2
 
