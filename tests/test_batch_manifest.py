@@ -213,3 +213,29 @@ def test_a_lost_scheduler_and_a_dead_worker_are_said_as_such():
     quiet_dask(True)
     assert logging.getLogger("distributed.client").level == logging.INFO
     quiet_dask(False)
+
+
+def test_the_summary_keeps_other_clips_and_an_unrecorded_output_is_not_adopted(tmp_path):
+    """A run of some of the clips wrote a summary of those only, so a later run of them all
+    took another clip's stale output for its own; an output that finished after a Ctrl-C (its
+    row cancelled, no digest) was adopted by the next run whatever its options (a walk)."""
+    from facetransfer.batch.manifest import ExportJob
+    from facetransfer.batch.run import UNKNOWN_JOB, _Collector, _earlier, _earlier_rows, _kept
+    from facetransfer.batch.summary import Row, write_summary
+
+    write_summary(tmp_path / "summary.csv", [Row("A", "done", job="ka"),
+                                             Row("B", "done", job="kb"),
+                                             Row("C", "cancelled")])
+    col = _Collector.__new__(_Collector)          # only what write() reads
+    col.names, col.rows, col.summary = ["A"], {"A": Row("A", "skipped", job="ka")}, \
+        tmp_path / "summary.csv"
+    col.others = [r for r in _earlier_rows(tmp_path) if r.clip not in col.names]
+    col.write()
+    assert _earlier(tmp_path) == {"A": "ka", "B": "kb", "C": UNKNOWN_JOB}
+    jobs = [ExportJob(n, tmp_path / f"{n}.npz") for n in "ABC"]
+    outs = {n: tmp_path / f"{n}.json" for n in "ABC"}
+    kept = _kept(jobs, outs, tmp_path, {"A": "ka", "B": "kb2", "C": "kc"},
+                 lambda out, name: Row(name, "skipped"))
+    assert kept["A"].status == "skipped"
+    assert kept["B"].status == "failed" and "other inputs or options" in kept["B"].error
+    assert kept["C"].status == "failed" and "after an interrupt" in kept["C"].error

@@ -134,6 +134,10 @@ class _Collector:
 
         self.client, self.names, self.rows = client, list(names), dict(rows)
         self.summary = out_dir / SUMMARY_NAME
+        # the earlier rows of clips this run does not have: kept in the summary, so that their
+        # outputs' digests are not forgotten by a run of some of the clips (before, a later run
+        # of them all took a stale output for its own)
+        self.others = [r for r in _earlier_rows(out_dir) if r.clip not in set(self.names)]
         self.progress = progress
         self.ac = as_completed(loop=client.loop)
         self.what: dict = {}       # future -> (kind, job)
@@ -157,7 +161,7 @@ class _Collector:
         self.finish(job, Row(job.name, "failed", error=_error_line(exc), output=str(out)))
 
     def write(self) -> Path:
-        rows = [self.rows.get(n) or Row(n, "cancelled") for n in self.names]
+        rows = [self.rows.get(n) or Row(n, "cancelled") for n in self.names] + self.others
         self.last_write = time.monotonic()
         return write_summary(self.summary, rows)
 
@@ -353,16 +357,29 @@ def job_key(job, what: str) -> str:
     return h.hexdigest()[:16]
 
 
-def _earlier(out_dir: Path) -> dict[str, str]:
-    """``{clip: job digest}`` of the outputs an earlier run of ``out_dir`` made, kept or
-    refused (a failed row of a task has none)."""
+def _earlier_rows(out_dir: Path) -> list[Row]:
+    """The rows of the summary an earlier run of ``out_dir`` wrote (none where there is none,
+    or it is not one)."""
     from .summary import read_summary
 
     try:
-        rows = read_summary(out_dir / SUMMARY_NAME)
+        return read_summary(out_dir / SUMMARY_NAME)
     except BatchError:                           # none, or not one: nothing is known
-        return {}
-    return {r.clip: r.job for r in rows if r.job}
+        return []
+
+
+#: A digest standing for "made by a run whose options nobody recorded": an output that
+#: finished after a Ctrl-C had cancelled its task (its row says cancelled, with no digest).
+UNKNOWN_JOB = "unknown"
+
+
+def _earlier(out_dir: Path) -> dict[str, str]:
+    """``{clip: job digest}`` of the outputs an earlier run of ``out_dir`` made, kept or
+    refused (a failed row of a task has none; a cancelled one :data:`UNKNOWN_JOB`: its
+    output, if it appeared after all, was made with options nobody recorded, and is not taken
+    as the next run's: before, it was, whatever that run's options)."""
+    return {r.clip: r.job or (UNKNOWN_JOB if r.status == "cancelled" else "")
+            for r in _earlier_rows(out_dir) if r.job or r.status == "cancelled"}
 
 
 def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found) -> dict[str, Row]:
@@ -374,8 +391,11 @@ def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found) -> dict[str, Row]:
         r = found(outs[j.name], j.name)
         if r is None:
             continue
-        if earlier.get(j.name, keys[j.name]) != keys[j.name]:
+        made = earlier.get(j.name, keys[j.name])
+        if made != keys[j.name]:
             r = Row(j.name, "failed", output=str(outs[j.name]), error=(
+                f"{outs[j.name]} was finished after an interrupt, with options not recorded; "
+                "--overwrite redoes it" if made == UNKNOWN_JOB else
                 f"{outs[j.name]} was made from other inputs or options than {j.name}'s now; "
                 "--overwrite redoes it"))
         # a refused output keeps its maker's digest: a later run still knows it
