@@ -342,9 +342,13 @@ def take_start_timecode(path) -> str | None:
     from .export.livelink import read_livelink
 
     try:
-        timecodes = read_livelink(path, lenient=True).timecodes
+        return _first_timecode(read_livelink(path, lenient=True).timecodes)
     except (ExportError, TransferError, OSError):   # read already where a preview is made
         return None
+
+
+def _first_timecode(timecodes) -> str | None:
+    """:func:`take_start_timecode` of a take's rows' timecodes."""
     if not len(timecodes):
         return None
     h, m, sec, ff = (int(v) for v in _fields(timecodes[:1])[0, :4])
@@ -354,9 +358,9 @@ def take_start_timecode(path) -> str | None:
 def _rows_rate(t: np.ndarray, f: np.ndarray) -> float:
     """The frame rate of a take's rows at ``t`` (F,) seconds (parsed timecodes ``f`` (F, 5)):
     the timecode rate whose frame is nearest their median step; of rows in clock time (the
-    app's, with sub-frames) at an NTSC rate's true one (``r * 1000 / 1001``) where their span
-    says so (a 29.97 fps take's rows lie 1001 / 30000 s apart: at 30 fps its preview drifted
-    0.6 s in ten minutes)."""
+    app's, with sub-frames) at an NTSC rate's true one (``r * 1000 / 1001``) where the rows
+    fall on its frames (:func:`_phase`; a 29.97 fps take's rows lie 1001 / 30000 s apart: at
+    30 fps its preview drifted 0.6 s in ten minutes)."""
     if t.size < 2:         # one row: the rate its timecode was read at (said, a guess)
         return float(_rate(f, False))
     step = float(np.median(np.diff(t)))
@@ -418,4 +422,6 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
                   lost=np.zeros(n, bool), model_hash=model.content_hash,
                   mode_names=model.mode_names, source=str(path),
                   blendshapes=a.astype(np.float32), blendshape_names=ARKIT_NAMES)
-    return project_landmarks(track, model)
+    # the take's start timecode, for its preview (read here: the take is not read again)
+    return dataclasses.replace(project_landmarks(track, model),
+                               info={"start_timecode": _first_timecode(take.timecodes)})

@@ -137,7 +137,8 @@ class _Collector:
         # the earlier rows of clips this run does not have: kept in the summary, so that their
         # outputs' digests are not forgotten by a run of some of the clips (before, a later run
         # of them all took a stale output for its own)
-        self.others = [r for r in _earlier_rows(out_dir) if r.clip not in set(self.names)]
+        mine = set(self.names)
+        self.others = [r for r in _earlier_rows(out_dir) if r.clip not in mine]
         self.progress = progress
         self.ac = as_completed(loop=client.loop)
         self.what: dict = {}       # future -> (kind, job)

@@ -133,11 +133,9 @@ def run(args: argparse.Namespace) -> int:
         track = with_neutral(track, args.neutral)     # checked before a texture is lifted
     texture = args.texture
     if args.texture_from:
-        from ..io.video import video_info
+        from ..export.gltf import check_texture_video
 
-        info = video_info(args.texture_from)   # a video (else its one line, before a warning)
-        track.check_video(min(info.n_frames, track.n_frames) if info.n_frames else
-                          info.n_frames, info.size, what=f"video {args.texture_from}")
+        check_texture_video(track, args.texture_from)   # its one line, before any warning
         track.warn_other_video(args.texture_from,
                                "the texture is lifted through another face's motion")
         texture = _lift(track, model, args)
@@ -162,9 +160,10 @@ def _say_written(args, track, path, timecode, said: str) -> None:
           + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
           + (f", from timecode {timecode} ({said})" if timecode and timecode != "source"
              else (f", {said}" if said else "")))
-    if args.format in ("glb", "usd") and _identities(track) > 1:
-        print(f"note: the track's shots hold {_identities(track)} people (a clip cut between "
-              "them); the mesh is the first one's, the curves every shot's")
+    people = _identities(track) if args.format in ("glb", "usd") else 1
+    if people > 1:
+        print(f"note: the track's shots hold {people} people (a clip cut between them); the "
+              "mesh is the first one's, the curves every shot's")
     if track.lost.any():
         from ..file_facts import lost_runs
 

@@ -332,7 +332,6 @@ def _capture_detect(args, saved, ck, progress):
 
 
 def _track_klt(args, model, opt, progress, bars):
-    from ..errors import plain_interrupts
     from ..track.aspect import warn_stored_fit
     from ..track.init import LazyDetector
     from ..track.tracker import track_video
@@ -345,10 +344,9 @@ def _track_klt(args, model, opt, progress, bars):
     if args.restart and partial.exists():
         partial.unlink()
     try:
-        with plain_interrupts():    # the interrupt itself, where a compiled kernel wrapped it
-            track = track_video(args.video, model, init=args.init, options=opt,
-                                max_frames=args.max_frames, progress=progress,
-                                source=str(args.video), detector=detector, checkpoint=partial)
+        track = track_video(args.video, model, init=args.init, options=opt,
+                            max_frames=args.max_frames, progress=progress,
+                            source=str(args.video), detector=detector, checkpoint=partial)
     except KeyboardInterrupt:
         _say_progress(partial)
         raise

@@ -680,7 +680,7 @@ def _puppet_take(args, vopt) -> int:
     """``puppet take.csv``: the identity performing a Live Link Face take, with its head's
     rotation (:func:`facetransfer.take.take_track`), on a plain background."""
     from ..puppet_video import puppet_video
-    from ..take import PREVIEW_SIZE, take_start_timecode, take_track
+    from ..take import PREVIEW_SIZE, take_track
 
     for flag, given in (("--track", args.track), ("--face", args.face)):
         if given:
@@ -694,7 +694,7 @@ def _puppet_take(args, vopt) -> int:
     if vopt.timecode is None:   # the take's own start, as a video's result keeps its
         import dataclasses
 
-        vopt = dataclasses.replace(vopt, timecode=take_start_timecode(args.video))
+        vopt = dataclasses.replace(vopt, timecode=track.info.get("start_timecode"))
     _, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
                               overwrite=args.overwrite, progress_factory=_bar_factory())
     if resumed:

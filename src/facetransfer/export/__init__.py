@@ -116,34 +116,32 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
         raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
     require_activations(track)
     track = with_neutral(track, neutral)
-    if fmt == "livelink":
-        from .livelink import write_livelink
-
-        if model is not None:
-            track.check_model(model)
-        from .livelink import source_timecode
-
-        if timecode == "source":
-            timecode = source_timecode(track)
-        return write_livelink(track, out, overwrite=overwrite, start=timecode)
-    if fmt == "json":
-        from .mpjson import write_mediapipe_json
-
-        if model is not None:
-            track.check_model(model)
-        from .livelink import source_timecode
-
-        return write_mediapipe_json(track, out, overwrite=overwrite, timecode=(
-            source_timecode(track) if timecode == "source" else None))
-    model = resolve_model(track, model)
     from .livelink import source_timecode
 
-    start = source_timecode(track) if timecode == "source" else None
+    # the first frame's timecode, every format's (livelink's rows start at it, the others
+    # record it); "source" also starts a USD's time codes at the plate's first frame number
+    start = source_timecode(track) if timecode == "source" else timecode
+    if fmt in ("livelink", "json"):
+        if model is not None:
+            track.check_model(model)
+        if fmt == "livelink":
+            from .livelink import write_livelink
+
+            return write_livelink(track, out, overwrite=overwrite, start=start)
+        from .mpjson import write_mediapipe_json
+
+        return write_mediapipe_json(track, out, overwrite=overwrite, timecode=start)
+    model = resolve_model(track, model)
     if fmt == "glb":
         from .gltf import write_glb
 
         return write_glb(track, model, out, overwrite=overwrite, texture=texture,
                          timecode=start)
+    from .usd import source_first_frame, write_usd
+
+    return write_usd(track, model, out, overwrite=overwrite,
+                     first_frame=source_first_frame(track) if timecode == "source" else 0,
+                     timecode=start)
     from .usd import source_first_frame, write_usd
 
     return write_usd(track, model, out, overwrite=overwrite,

@@ -31,7 +31,7 @@ from ..io.atomic import atomic_path
 from .common import (ExportError, head_quaternions, head_translation, identity_rig,
                      require_activations, source_name)
 
-__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture"]
+__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture", "check_texture_video"]
 
 #: Model units to metres (the ICT-FaceKit is in centimetres).
 METRES_PER_UNIT = 0.01
@@ -95,6 +95,17 @@ def texture_png(texture) -> bytes:
     return out.getvalue()
 
 
+def check_texture_video(track, video) -> None:
+    """TrackError (VideoError: not a video) unless ``video`` is one ``track`` can lift a
+    texture from: its frame size, and at least the track's frames (a track of its first
+    frames lifts from those)."""
+    from ..io.video import video_info
+
+    info = video_info(video)
+    track.check_video(min(info.n_frames, track.n_frames) if info.n_frames else info.n_frames,
+                      info.size, what=f"video {video}")
+
+
 def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 10,
                       progress=None) -> np.ndarray:
     """The face's texture lifted from its video (§6, Eq. (L1) weights), merged over every
@@ -109,12 +120,10 @@ def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 1
     """
     import itertools
 
-    from ..io.video import iter_frames, video_info
+    from ..io.video import iter_frames
     from ..texture import lift_merged, texture_to_uint8
 
-    info = video_info(video)
-    track.check_video(min(info.n_frames, track.n_frames) if info.n_frames else info.n_frames,
-                      info.size, what=f"video {video}")
+    check_texture_video(track, video)
     merged, _ = lift_merged(model, itertools.islice(iter_frames(video), track.n_frames), track,
                             tex_size=tex_size, step=step, progress=progress)
     return texture_to_uint8(merged.texture)

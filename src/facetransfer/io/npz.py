@@ -41,7 +41,6 @@ _MAGIC = ((b"glTF", "a glTF binary (a .glb, as `facetransfer export` writes)"),
           (b"PXR-USDC", "a USD file (as `facetransfer export` writes)"),
           (b"#usda", "a USD file (as `facetransfer export` writes)"),
           (b"Timecode,", "a Live Link Face take (CSV)"),
-          (b"\x93NUMPY", "a single .npy array, not an .npz archive"),
           (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"),
           (b"<!DOCTYPE html", "an HTML page (as `facetransfer view` writes)"),
           (b"{", "a JSON file"))

@@ -509,41 +509,46 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
 def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
                    source) -> Track:
     """A clip edited from several shots (:mod:`facetransfer.track.shots`), each captured on its
-    own (its own identity, save the first one's person's later shots: :func:`_one_identity`;
-    no flow or smoothing across a cut), joined; a ``fixed`` identity is
-    the first shot's with a face (the face the clip starts with, after any black opening); the
-    fit's progress is not kept for such a clip."""
+    own (its own identity, save the first one's person's later shots: :func:`_held_identity`;
+    no flow or smoothing across a cut), joined; a ``fixed`` identity is the first shot's with a
+    face (the face the clip starts with, after any black opening); the fit's progress is not
+    kept for such a clip."""
     subs = [shot_detections(det, a, b) for a, b in spans]
     faced = [a for (a, _), sub in zip(spans, subs) if sub.found.any()]
     if len(faced) > 1:  # a shot without a face (a clip that opens on black) is only lost
         log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own "
                     "(the first one's person's shots with its identity)", source or "the video",
                     "s" if len(faced) > 2 else "", ", ".join(str(a) for a in faced[1:]))
-    tracks = [_capture_detections(sub, model, options, fps, frame_size,
-                                  fixed if a == faced[0] else None, progress, source)
-              if sub.found.any() else None for (a, _), sub in zip(spans, subs)]
-    if all(t is None for t in tracks):
+    if not faced:
         raise _no_face(source, det.n_frames)
-    return joined_shots(_one_identity(tracks, subs, model, options, fps, frame_size, progress,
-                                      source), spans)
+    tracks, first = [], None     # first: the identity of the first shot with a face
+    for sub in subs:
+        if not sub.found.any():
+            tracks.append(None)
+            continue
+        seen = any(t is not None for t in tracks)
+        held = _held_identity(sub, model, options, first) if seen else fixed
+        t = _capture_detections(sub, model, options, fps, frame_size, held, progress, source)
+        if not seen and "identity" in t.weights:
+            first = t.weights["identity"][0]
+        tracks.append(t)
+    return joined_shots(tracks, spans)
 
 
-def _one_identity(tracks: list, subs: list, model, options, fps, frame_size, progress,
-                  source) -> list:
-    """The shots' tracks (None: no face), a later shot of the first faced one's person (its
-    own identity :func:`facetransfer.track.shots.same_face` of that one's) captured again with
-    that identity held: one person, one identity through the clip's cuts (a fade to black and
-    back, another angle of the same interview; before, each shot its own: 0.1 apart), the
-    exports' single identity is then every shot's. Another person's shot keeps its own."""
+def _held_identity(sub, model, options, first: np.ndarray | None) -> dict | None:
+    """A later shot's fixed identity: the first shot's where the shot's own (the identity
+    phase alone, :func:`_clip_identity`) is that person's (:func:`facetransfer.track.shots.
+    same_face`): one identity through a clip's cuts between one person's shots (before, each
+    its own, 0.1 apart); another person's shot: None, its own identity solved."""
     from .shots import same_face
 
-    first = next(t for t in tracks if t is not None)
-    if "identity" not in first.weights:
-        return tracks
-    w = first.weights["identity"][0]
-    return [t if t is None or t is first or not same_face(model, t.weights["identity"][0], w)
-            else _capture_detections(sub, model, options, fps, frame_size, {"identity": w},
-                                     progress, source) for t, sub in zip(tracks, subs)]
+    if first is None:
+        return None
+    opt = options or CaptureOptions()
+    weights, sampler = _point_weights(sub, model, opt)
+    shape, _, _ = _clip_identity(model, sub, sampler, weights, opt, {},
+                                 lambda stage, done, total: None)
+    return {"identity": first} if same_face(model, shape.identity, first) else None
 
 
 def _no_face(source, n_frames: int) -> VideoError:

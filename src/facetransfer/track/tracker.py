@@ -32,7 +32,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..errors import TrackError, VideoError
+from ..errors import TrackError, VideoError, plain_interrupts
 from .camera import Pose, fit_affine_pose, orthonormalize, project
 from .frames import FrameSource, frame_source
 from .init import check_init_points, fit_landmarks, points_to_array, require_landmarks
@@ -110,7 +110,8 @@ def track_video(video, model, *, init="auto", options: TrackOptions | None = Non
     ck = (None if checkpoint is None else
           _open_checkpoint(checkpoint, frames, model, opt, init, fixed, checkpoint_every))
     try:
-        track = _run(frames, model, init, opt, detector, progress, src, fixed, ck)
+        with plain_interrupts():    # an interrupt a compiled kernel wrapped: the interrupt
+            track = _run(frames, model, init, opt, detector, progress, src, fixed, ck)
         if ck is not None:
             ck.remove()
         return track
