@@ -136,6 +136,24 @@ def test_join_cross_fades_a_disagreement_and_skips_lost_frames(quick_model):
     assert np.ptp(joined.weights["identity"], axis=0).max() == 0
 
 
+def test_join_keeps_the_chunks_own_landmarks(quick_model):
+    """A capture's landmarks carry its clip's offset from the model's landmark vertices (the
+    flow and the detections, not the weights alone): the join cross-fades the chunks' own
+    landmarks as it does the pose, and does not re-project them from the joined weights (which
+    lost the offset: 2 px of a 154 px eye distance on a real clip)."""
+    whole = _truth_track(quick_model, 60)
+    cs = plan_chunks(60, 35, 10)                       # (0, 35), (25, 60)
+    off = [np.array([1.5, -0.5]), np.array([1.0, 0.5])]  # each chunk's own clip offset
+    pieces = [_piece(whole, c, landmarks2d=whole.landmarks2d[c.start:c.stop] + o)
+              for c, o in zip(cs, off)]
+    joined = join_tracks(pieces, cs, quick_model)
+    alpha = crossfade(10)[:, None, None]
+    want = whole.landmarks2d + np.concatenate(
+        [np.tile(off[0], (25, 68, 1)), np.tile((1 - alpha) * off[0] + alpha * off[1], (1, 68, 1)),
+         np.tile(off[1], (25, 68, 1))])
+    np.testing.assert_allclose(joined.landmarks2d, want, atol=1e-9)
+
+
 def test_join_refuses_mismatched_pieces(quick_model):
     whole = _truth_track(quick_model, 60)
     cs = plan_chunks(60, 35, 10)

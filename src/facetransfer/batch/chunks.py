@@ -15,7 +15,6 @@ Beyond the paper: Vlasic et al. track a clip in one sequence of passes.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -121,6 +120,7 @@ def _blend(A: dict, B: dict, alpha: np.ndarray, constant: tuple[str, ...]) -> di
     out = {"rotation": slerp_rotations(A["rotation"], B["rotation"], a),
            "scale": np.exp(lin(np.log(A["scale"]), np.log(B["scale"]))),
            "translation": lin(A["translation"], B["translation"]),
+           "landmarks2d": lin(A["landmarks2d"], B["landmarks2d"]),
            "confidence": lin(A["confidence"], B["confidence"]),
            "lost": la & lb,
            "weights": {m: (A["weights"][m] if m in constant else
@@ -130,12 +130,13 @@ def _blend(A: dict, B: dict, alpha: np.ndarray, constant: tuple[str, ...]) -> di
 
 def _fields(track, sl=slice(None)) -> dict:
     return {"rotation": track.rotation[sl], "scale": track.scale[sl],
-            "translation": track.translation[sl], "confidence": track.confidence[sl],
-            "lost": track.lost[sl], "weights": {m: w[sl] for m, w in track.weights.items()}}
+            "translation": track.translation[sl], "landmarks2d": track.landmarks2d[sl],
+            "confidence": track.confidence[sl], "lost": track.lost[sl],
+            "weights": {m: w[sl] for m, w in track.weights.items()}}
 
 
 def _put(full: dict, part: dict, sl: slice) -> None:
-    for k in ("rotation", "scale", "translation", "confidence", "lost"):
+    for k in ("rotation", "scale", "translation", "landmarks2d", "confidence", "lost"):
         full[k][sl] = part[k]
     for m, w in part["weights"].items():
         full["weights"][m][sl] = w
@@ -162,8 +163,10 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
     -------
     Track
         ``sum(chunk lengths) - overlaps`` frames; fps, size, source and model hash of the first
-        track; landmarks and ARKit activations recomputed
-        (:func:`facetransfer.transfer.project_landmarks`); the detections joined
+        track; the chunks' landmarks cross-faded as the pose is (not re-projected from the
+        joined weights: a capture's landmarks carry its clip's offset from the model,
+        :mod:`facetransfer.track.capture`), ARKit activations recomputed from the joined
+        expression weights (:func:`facetransfer.arkit.attach_activations`); the detections joined
         (:func:`join_detections`), so that a transfer from the joined track still carries the
         source's lips (:mod:`facetransfer.lips`).
 
@@ -172,8 +175,8 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
     BatchError
         Mismatched counts, lengths, frame sizes or models.
     """
+    from ..arkit import attach_activations
     from ..track.result import Track
-    from ..track.project import project_landmarks
     from ..track.shots import shot_spans
 
     tracks, chunks = list(tracks), list(chunks)
@@ -200,12 +203,12 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
                 full["weights"][m][a:b] = tracks[k].weights[m][a - c.start]
     joined = Track(fps=t0.fps, frame_size=t0.frame_size, rotation=full["rotation"],
                    scale=full["scale"], translation=full["translation"],
-                   weights=full["weights"], landmarks2d=np.zeros((F, 68, 2)),
+                   weights=full["weights"], landmarks2d=full["landmarks2d"],
                    confidence=np.clip(full["confidence"], 0, 1), lost=full["lost"],
                    model_hash=t0.model_hash, mode_names=t0.mode_names, source=t0.source,
                    detections2d=join_detections(tracks, chunks), pixel_aspect=t0.pixel_aspect,
                    shot_starts=starts)
-    return dataclasses.replace(project_landmarks(joined, model), source=t0.source)
+    return attach_activations(joined, model)
 
 
 def _shot_starts(tracks, chunks) -> tuple[int, ...]:

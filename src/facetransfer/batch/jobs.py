@@ -182,24 +182,23 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
 
 def _chunk_capture(frames, model, options, job, chunk, identity):
     """A later chunk's capture: with the first chunk's ``identity`` held fixed where the
-    chunk begins on that person (:func:`facetransfer.track.shots.same_face` of the chunk's own
-    identity), else with its own (the clip cut to another person in an earlier chunk, which
-    this chunk cannot see)."""
+    chunk's own identity, from its identity phase alone, is that person's
+    (:func:`facetransfer.track.capture.held_identity`), else with its own (the clip cut to
+    another person in an earlier chunk, which this chunk cannot see)."""
     from ..track.aspect import View
-    from ..track.capture import capture_detections
-    from ..track.shots import same_face
+    from ..track.capture import capture_detections, held_identity
     from ..track.video_detect import detect_video
 
     source = str(job.video)
     det, fps, size, src = detect_video(frames, source=source, view=View.of(job.video),
                                        subject=_subject(job.face, frames, source))
-    kw = dict(options=options.capture, fps=fps, frame_size=size, source=src)
-    own = capture_detections(det, model, **kw)
-    if same_face(model, own.weights["identity"][0], identity):
-        return capture_detections(det, model, fixed={"identity": identity}, **kw)
-    log.warning("%s: frames %d-%d begin on another face than the clip's first (a cut before "
-                "them): captured with their own identity", source, chunk.start, chunk.stop - 1)
-    return own
+    held = held_identity(det, model, options.capture, identity)
+    if held is None:
+        log.warning("%s: frames %d-%d begin on another face than the clip's first (a cut "
+                    "before them): captured with their own identity", source, chunk.start,
+                    chunk.stop - 1)
+    return capture_detections(det, model, options=options.capture, fps=fps, frame_size=size,
+                              source=src, fixed=held)
 
 
 def join_clip(job, out: str, model, chunks, results) -> Row:

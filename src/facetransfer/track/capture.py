@@ -509,7 +509,7 @@ def capture_detections(det: ClipDetections, model, *, options: CaptureOptions | 
 def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
                    source) -> Track:
     """A clip edited from several shots (:mod:`facetransfer.track.shots`), each captured on its
-    own (its own identity, save the first one's person's later shots: :func:`_held_identity`;
+    own (its own identity, save the first one's person's later shots: :func:`held_identity`;
     no flow or smoothing across a cut), joined; a ``fixed`` identity is the first shot's with a
     face (the face the clip starts with, after any black opening); the fit's progress is not
     kept for such a clip."""
@@ -527,7 +527,7 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
             tracks.append(None)
             continue
         seen = any(t is not None for t in tracks)
-        held = _held_identity(sub, model, options, first) if seen else fixed
+        held = held_identity(sub, model, options, first) if seen else fixed
         t = _capture_detections(sub, model, options, fps, frame_size, held, progress, source)
         if not seen and "identity" in t.weights:
             first = t.weights["identity"][0]
@@ -535,11 +535,11 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
     return joined_shots(tracks, spans)
 
 
-def _held_identity(sub, model, options, first: np.ndarray | None) -> dict | None:
-    """A later shot's fixed identity: the first shot's where the shot's own (the identity
-    phase alone, :func:`_clip_identity`) is that person's (:func:`facetransfer.track.shots.
-    same_face`): one identity through a clip's cuts between one person's shots (before, each
-    its own, 0.1 apart); another person's shot: None, its own identity solved."""
+def held_identity(sub, model, options, first: np.ndarray | None) -> dict | None:
+    """A later shot's (or a batch chunk's) fixed identity: ``{"identity": first}`` where the
+    identity of ``sub`` from the identity phase alone (:func:`_clip_identity`) is that person's
+    (:func:`facetransfer.track.shots.same_face`), so one person keeps one identity through a
+    clip's cuts and chunks; another person's, or no ``first``: None (its own is solved)."""
     from .shots import same_face
 
     if first is None:
