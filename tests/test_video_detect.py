@@ -159,6 +159,30 @@ def test_a_failed_child_leaves_the_rest_to_this_process(one_process, monkeypatch
     np.testing.assert_array_equal(split.flow[m], one.flow[m])   # resumed here: flow is exact
 
 
+def test_an_interrupt_while_this_process_loads_its_landmarker_stops_the_child(
+        data_dir, monkeypatch):
+    """A Ctrl-C in the second or so MediaPipe takes to load this process's landmarker, after
+    the child was forked: the child is cancelled (before, it was not: the interpreter's exit
+    then waited for it to detect its half of the clip)."""
+    children = []
+
+    class _Started(_Child):
+        @classmethod
+        def start(cls, *args):
+            children.append(cls(None))
+            return children[-1]
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(video_detect, "SPLIT_MIN_FRAMES", 20)
+    monkeypatch.setattr(video_detect, "SplitDetection", _Started)
+    monkeypatch.setattr(video_detect, "FollowingLandmarker", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        detect_video(data_dir / "video" / "driving_d9.mp4", max_frames=N, workers=2)
+    assert len(children) == 1 and children[0].cancelled
+
+
 def test_cli_rejects_workers_below_one(tmp_path, capsys, data_dir):
     code = main(["track", str(data_dir / "video" / "driving_d9.mp4"), "--out",
                  str(tmp_path / "t.npz"), "--workers", "0"])

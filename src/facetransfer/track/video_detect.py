@@ -328,8 +328,6 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     child = None if m is None else SplitDetection.start(video, m, n, fps, view, subject,
                                                         every)
     own = None
-    if detector is None:
-        detector = own = FollowingLandmarker(fps=fps, blendshapes=True, subject=subject)
 
     def report(d, t):                      # this process's frames, and the child's so far
         d += child.done if child is not None else 0
@@ -345,7 +343,9 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
                            resume=first, checkpoint=checkpoint, pixel_aspect=view.aspect,
                            every=every)
 
-    try:
+    try:    # the child cancelled on any interrupt from here, its landmarker's loading too
+        if detector is None:
+            detector = own = FollowingLandmarker(fps=fps, blendshapes=True, subject=subject)
         det = detect_clip(view.frames(frames), detector,
                           n_frames=n if child is None else m, keep478=True, progress=report,
                           resume=resume, checkpoint=checkpoint, pixel_aspect=view.aspect,
