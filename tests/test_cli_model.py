@@ -84,7 +84,7 @@ def test_synth_bad_input(model_path, tmp_path, capsys):
         (["--weights", "identity=1,2"], "identity has 2 values; the model's identity rank is 3"),
         (["--like", "identity=nobody"], "unknown identity 'nobody'"),
         (["--like", "mood=happy"], "unknown mode 'mood'"),
-        (["--like", "identity=id1", "--weights", "identity=1,2,3"], "not both"),
+        (["--like", "identity=id1", "--weights", "identity=1,2,3"], "not --weights and --like"),
     ]
     for extra, msg in cases:
         code, _, err = run(capsys, "model", "synth", model_path, *extra, "--out", out)

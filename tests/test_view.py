@@ -90,6 +90,51 @@ def test_face_is_drawn_and_dials_move_it(pages, tmp_path):
     assert (np.abs(f5 - f0).sum(axis=2) > 30).mean() > 0.005  # the timeline drives the face
 
 
+def _saved_face(page: Path, fragment: str, out: Path) -> Path:
+    """What the page's Save face would download, read from its text box in headless Chromium's
+    DOM after the page applied ``fragment``."""
+    import html
+
+    exe = _chromium()
+    with tempfile.TemporaryDirectory() as profile:
+        res = subprocess.run(
+            [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+             "--disable-background-networking", "--disable-component-update",
+             f"--user-data-dir={profile}", "--dump-dom", f"{page.resolve().as_uri()}#{fragment}"],
+            capture_output=True, text=True, timeout=180)
+    m = re.search(r'<textarea id="face"[^>]*>(.*?)</textarea>', res.stdout, re.S)
+    assert m and m.group(1).strip(), res.stderr[-2000:]
+    out.write_text(html.unescape(m.group(1)), encoding="utf-8")
+    return out
+
+
+@pytest.mark.slow
+def test_a_saved_face_is_the_pages_face(arkit_model, pages, tmp_path):
+    """The dial editor's Save face holds what the page shows: a track's frame (its activations
+    and head rotation to float32's precision) with a dial moved, and a model's sliders; the
+    model's weights made of it (facetransfer.face_file) are that frame's identity moved by the
+    dial and its expression."""
+    from facetransfer.arkit import weights_to_activations
+    from facetransfer.dials import learn_dials
+    from facetransfer.face_file import face_rotation, face_weights, read_face
+
+    model_page, track_page, track, a = pages
+    face = read_face(_saved_face(track_page, "frame=3&width=1.5", tmp_path / "t.json"))
+    assert face.frame == 3 and face.identity_dials == {"width": 1.5}
+    w = face_weights(face, arkit_model)
+    want = learn_dials(arkit_model).apply(track.weights["identity"][3], {"width": 1.5})
+    np.testing.assert_allclose(w["identity"], want, atol=1e-12)
+    np.testing.assert_allclose(weights_to_activations(arkit_model, w["expression"][None])[0],
+                               a[3], atol=2e-6)
+    np.testing.assert_allclose(face_rotation(face), track.rotation[3], atol=1e-5)
+    face = read_face(_saved_face(model_page, "jawOpen=0.5&yaw=20&pitch=-10&roll=5",
+                                 tmp_path / "m.json"))
+    assert face.frame is None and face.shapes == {"jawOpen": 0.5} and not face.identity_dials
+    np.testing.assert_allclose(face.head, (20, -10, 5), atol=1e-9)
+    np.testing.assert_allclose(face_weights(face, arkit_model)["identity"],
+                               arkit_model.weight_mean("identity"), atol=1e-12)
+
+
 def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
     _, _, track, _ = pages
     mp = tmp_path / "m.npz"

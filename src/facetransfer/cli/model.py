@@ -254,17 +254,29 @@ def synth_weights(model, weights: dict[str, np.ndarray] | None = None,
     return w
 
 
+def face_or_weights(model, args) -> dict[str, np.ndarray]:
+    """The weights of ``--face`` (a face saved by the dial editor: :mod:`facetransfer.face_file`)
+    or of ``--weights`` / ``--like`` (:func:`synth_weights`); at most one of them."""
+    given = [o for o, v in (("--face", getattr(args, "face", None)), ("--weights", args.weights),
+                            ("--like", args.like)) if v]
+    if len(given) > 1:
+        raise FaceTransferError("give one of --face, --weights and --like, not "
+                                + " and ".join(given))
+    if given == ["--face"]:
+        from ..face_file import face_weights, read_face
+
+        return face_weights(read_face(args.face), model)
+    return synth_weights(model, parse_weights(args.weights) if args.weights else None,
+                         parse_like(args.like) if args.like else None)
+
+
 def cmd_synth(args: argparse.Namespace) -> int:
     from ..io.mesh import check_mesh_output, write_mesh
 
     out = check_mesh_output(args.out)
     check_output_path(out, overwrite=args.overwrite, inputs=[args.model])
-    if args.weights and args.like:
-        raise FaceTransferError("give --weights or --like, not both")
     m = resolve_model(args.model)
-    w = synth_weights(m, parse_weights(args.weights) if args.weights else None,
-                      parse_like(args.like) if args.like else None)
-    v = m.synthesize(w)
+    v = m.synthesize(face_or_weights(m, args))
     write_mesh(out, v, m.faces, uvs=m.uvs if out.suffix.lower() == ".obj" else None,
                overwrite=args.overwrite)
     print(f"wrote {out} ({m.n_vertices} vertices)")
@@ -487,6 +499,8 @@ def register(sub) -> None:
     s.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...' "
                    "(modes not given: their mean)")
     s.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
+    s.add_argument("--face", metavar="FACE.json", help="a face saved by the dial editor "
+                   "(`facetransfer view`'s Save face) of this model")
     s.add_argument("--out", required=True,
                    help="the mesh to write: FACE.obj (with the model's uvs), .ply, .stl, .off "
                    "or .glb")

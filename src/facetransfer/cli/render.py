@@ -80,25 +80,34 @@ def parse_identity(text: str):
         return parts[0]
 
 
-def _model_weights(model, args) -> dict[str, np.ndarray]:
-    from .model import parse_like, parse_weights, synth_weights
+def _face_pose(face: str | None, pose: dict[str, float]) -> dict[str, float]:
+    """``--pose`` with a ``--face`` file's head rotation (the page's ``Ry Rx Rz``) in the
+    renderer's angles (:func:`facetransfer.render.cameras.euler_from_rotation`); ``--pose``
+    may give the scale only."""
+    if face is None:
+        return pose
+    from ..face_file import face_rotation, read_face
+    from ..render.cameras import euler_from_rotation
 
-    if args.weights and args.like:
-        raise FaceTransferError("give either --weights or --like, not both")
-    return synth_weights(model, parse_weights(args.weights) if args.weights else None,
-                         parse_like(args.like) if args.like else None)
+    turned = sorted(set(pose) - {"scale"})
+    if turned:
+        raise FaceTransferError(f"--pose {','.join(turned)}: the --face file gives the head's "
+                                "rotation (--pose may give the scale)")
+    yaw, pitch, roll = euler_from_rotation(face_rotation(read_face(face)))
+    return {**pose, "yaw": yaw, "pitch": pitch, "roll": roll}
 
 
 def cmd_render(args: argparse.Namespace) -> int:
     from ..render import render_model
+    from .model import face_or_weights
 
     out = check_output_path(args.out, overwrite=args.overwrite, inputs=[args.model])
     if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise FaceTransferError(f"--out {out}: expected a .png or .jpg image")
     size = parse_size(args.size)
-    pose = parse_pose(args.pose)
+    pose = _face_pose(args.face, parse_pose(args.pose))
     model = resolve_model(args.model)
-    weights = _model_weights(model, args)
+    weights = face_or_weights(model, args)
     res = render_model(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
                        pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
                        scale=pose.get("scale", 1.0), background=parse_colour(args.background))
@@ -192,6 +201,8 @@ def register(sub) -> None:
     r.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...'"
                    " (modes not given take their mean)")
     r.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
+    r.add_argument("--face", metavar="FACE.json", help="a face saved by the dial editor "
+                   "(`facetransfer view`'s Save face) of this model: its weights and head pose")
     r.add_argument("--pose", help="head pose, e.g. yaw=20,pitch=-5,roll=0,scale=1.2 (degrees)")
     r.add_argument("--size", default="640x480", help="image WIDTHxHEIGHT (default 640x480)")
     r.add_argument("--background", default="255,255,255", help="R,G,B (default white)")

@@ -66,7 +66,7 @@ def view_rig(model, identity: np.ndarray, dials=None):
         neutral, shapes, names, title = rig.neutral, rig.deltas, list(ARKIT_NAMES), \
             "ARKit blendshapes"
     else:
-        k = model.mode_index("expression") if "expression" in model.mode_names else 1
+        k = model.mode_index(_shape_kind(model))
         rest = neutral_weights(model, mode)
         neutral = model.synthesize({**rest, mode: identity})
         labs = [lab for lab in model.labels[k] if lab != "neutral"]
@@ -82,6 +82,16 @@ def view_rig(model, identity: np.ndarray, dials=None):
                                   mode: identity + np.stack([d.direction for d in dials.dials])})
         dial_off = moved - base
     return neutral, shapes, names, title, dial_off
+
+
+def _shape_kind(model) -> str:
+    """What the page's expression sliders are: ``"arkit"``, or the mode of the training
+    expressions :func:`view_rig` gives a slider each."""
+    from ..arkit import is_arkit_model
+
+    if is_arkit_model(model):
+        return "arkit"
+    return "expression" if "expression" in model.mode_names else model.mode_names[1]
 
 
 def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
@@ -108,6 +118,9 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
             "dial_info": [f"{d.effect:+.2f} {dials.unit}/unit, R2 {d.r2_loo:.2f}"
                           for d in dials.dials] if dials is not None else [],
             "n_frames": 0, "fps": 25.0,
+            # what the page's "Save face" writes besides the sliders (facetransfer.face_file)
+            "model_hash": model.content_hash, "identity": [float(v) for v in identity],
+            "shape_kind": _shape_kind(model), "source": title,
             "about": (f"{model.n_vertices} vertices; three.js {THREE_VERSION}; "
                       + (f"track of {source_name(track.source) or 'a clip'}, "
                          f"{track.n_frames} frames at {track.fps:g} fps" if track is not None

@@ -1,0 +1,108 @@
+"""A face saved by the dial editor, made with the model (facetransfer.face_file; `render --face`,
+`model synth --face`). The page's own file is checked in tests/test_view.py."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from facetransfer.cli.main import main
+from facetransfer.face_file import FaceFileError, face_rotation, face_weights, read_face
+
+
+def _face(path, model, **changes):
+    d = {"format": "facetransfer-face", "version": 1, "model": model.content_hash,
+         "source": "m.npz", "frame": None,
+         "identity": [float(v) for v in model.weight_mean("identity")],
+         "identity_dials": {}, "shape_kind": "arkit", "shapes": {},
+         "head": {"yaw": 0.0, "pitch": 0.0, "roll": 0.0}}
+    d.update(changes)
+    path.write_text(json.dumps(d), encoding="utf-8")
+    return path
+
+
+def test_the_pages_rotation_is_ry_rx_rz():
+    """The page's angles (three.js Euler order YXZ): R = Ry(yaw) Rx(pitch) Rz(roll)."""
+    from facetransfer.face_file import DialledFace
+
+    f = DialledFace(None, "", np.zeros(1), {}, "arkit", {}, (20.0, -10.0, 5.0))
+    y, p, r = np.deg2rad([20.0, -10.0, 5.0])
+    R = (Rotation.from_rotvec([0, y, 0]) * Rotation.from_rotvec([p, 0, 0])
+         * Rotation.from_rotvec([0, 0, r])).as_matrix()
+    np.testing.assert_allclose(face_rotation(f), R, atol=1e-12)
+
+
+def test_training_expression_sliders_add_their_offsets(quick_model, tmp_path):
+    """A model without ARKit shapes: a slider at v adds v times its training expression's
+    offset from the neutral, as the page draws it (exact: the mesh is linear in a mode)."""
+    labs = [lab for lab in quick_model.labels[1] if lab != "neutral"][:2]
+    face = read_face(_face(tmp_path / "f.json", quick_model, shape_kind="expression",
+                           shapes={labs[0]: 0.5, labs[1]: 0.25}))
+    w = face_weights(face, quick_model)
+    rest = {"identity": quick_model.weight_mean("identity"),
+            "expression": quick_model.training_weights("expression", "neutral")}
+    neutral = quick_model.synthesize(rest)
+    want = neutral + sum(v * (quick_model.synthesize({**rest, "expression": quick_model.
+                                                      training_weights("expression", lab)})
+                              - neutral) for lab, v in ((labs[0], 0.5), (labs[1], 0.25)))
+    np.testing.assert_allclose(quick_model.synthesize(w), want, atol=1e-9)
+
+
+def test_render_and_synth_make_the_saved_face(arkit_model, tmp_path, capsys):
+    mp = tmp_path / "m.npz"
+    arkit_model.save(mp)
+    face = _face(tmp_path / "f.json", arkit_model, shapes={"jawOpen": 1.0},
+                 head={"yaw": 20.0, "pitch": 0.0, "roll": 0.0})
+    assert main(["model", "synth", str(mp), "--face", str(face),
+                 "--out", str(tmp_path / "f.obj")]) == 0
+    assert main(["model", "synth", str(mp), "--out", str(tmp_path / "n.obj")]) == 0
+    import trimesh
+
+    a = trimesh.load(tmp_path / "f.obj", process=False).vertices
+    b = trimesh.load(tmp_path / "n.obj", process=False).vertices
+    assert np.abs(a - b).max() > 0.5          # the jaw dropped (model units: cm)
+    assert main(["render", str(mp), "--face", str(face), "--size", "160x120",
+                 "--out", str(tmp_path / "f.png")]) == 0
+    assert main(["render", str(mp), "--like", "expression=jawOpen", "--pose", "yaw=20",
+                 "--size", "160x120", "--out", str(tmp_path / "g.png")]) == 0
+    capsys.readouterr()
+    from PIL import Image
+
+    f, g = (np.asarray(Image.open(tmp_path / n)).astype(int) for n in ("f.png", "g.png"))
+    assert np.abs(f - g).max() <= 1            # the same face, turned as the page turned it
+
+
+def test_bad_face_files_are_one_line(arkit_model, quick_model, tmp_path, capsys):
+    mp = tmp_path / "m.npz"
+    arkit_model.save(mp)
+    (tmp_path / "text.json").write_text("not json")
+    (tmp_path / "other.json").write_text(json.dumps({"format": "gltf"}))
+    cases = [
+        ("text.json", "is not a face file (not JSON"),
+        ("other.json", 'expected "format": "facetransfer-face"'),
+        (_face(tmp_path / "q.json", quick_model).name, "was dialled on another model"),
+        (_face(tmp_path / "s.json", arkit_model, shapes={"jawOpenn": 1}).name,
+         "unknown ARKit blendshape(s) jawOpenn"),
+        (_face(tmp_path / "d.json", arkit_model, identity_dials={"widht": 1}).name,
+         "unknown identity dial 'widht'"),
+        (_face(tmp_path / "n.json", arkit_model, shapes={"jawOpen": "x"}).name,
+         "'shapes' must map names to numbers"),
+        ("missing.json", "does not exist"),
+    ]
+    for name, msg in cases:
+        assert main(["model", "synth", str(mp), "--face", str(tmp_path / name),
+                     "--out", str(tmp_path / "o.obj")]) == 2, name
+        err = capsys.readouterr().err
+        assert msg in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    good = _face(tmp_path / "g.json", arkit_model)
+    assert main(["model", "synth", str(mp), "--face", str(good), "--like", "expression=jawOpen",
+                 "--out", str(tmp_path / "o.obj")]) == 2
+    assert "not --face and --like" in capsys.readouterr().err
+    assert main(["render", str(mp), "--face", str(good), "--pose", "yaw=3",
+                 "--out", str(tmp_path / "o.png")]) == 2
+    assert "the --face file gives the head's rotation" in capsys.readouterr().err
+    with pytest.raises(FaceFileError, match="version 2"):
+        read_face(_face(tmp_path / "v.json", arkit_model, version=2))
