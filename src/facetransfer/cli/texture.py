@@ -123,12 +123,9 @@ def cmd_lift(args: argparse.Namespace) -> int:
                                 f"got {args.k}")
     info = video_info(args.video)       # a file or an image sequence, checked
     track = _load_track(args.track)
-    # without --model: the default model, checked against a tracker's track (a synth-video
-    # truth file names no model)
-    model = default_model_for(track) if args.model is None and hasattr(track, "model_hash") \
-        else resolve_model(args.model)
-    if hasattr(track, "check_model"):
-        track.check_model(model)
+    # without --model: the default model, if the track (or synth-video's truth) was made with it
+    model = default_model_for(track) if args.model is None else resolve_model(args.model)
+    track.check_model(model)
     if tuple(track.frame_size) != tuple(info.size):
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
                                 f"{track.frame_size[1]} frames, the video is "
