@@ -197,3 +197,23 @@ def test_lift_from_a_truth_of_another_model_is_one_line(run, tmp_path, model_pat
                    "3}, the model's {'identity': 2, 'expression': 3}): give the model "
                    "synth-video used as --model"], err
     assert not (tmp_path / "l.png").exists()
+
+
+def test_blend_with_opencv_where_it_cannot_is_said_in_the_options_words(run, tmp_path, capsys):
+    """``--method opencv`` with a mask touching the border (or with --feather): one line in
+    the command's words (before: "method='opencv' needs ...; use method='solver'")."""
+    img = np.full((40, 50, 3), 90, np.uint8)
+    _write(tmp_path / "a.png", img)
+    m = np.zeros((40, 50), np.uint8)
+    m[10:30, :20] = 255                          # reaches the left border
+    _write(tmp_path / "m.png", np.dstack([m] * 3))
+    for extra in ([], ["--feather", "2"]):
+        capsys.readouterr()
+        assert run("texture", "blend", "--source", tmp_path / "a.png", "--target",
+                   tmp_path / "a.png", "--mask", tmp_path / "m.png", "--method", "opencv",
+                   *extra, "--out", tmp_path / "o.png") == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"facetransfer texture: error: --method opencv needs a mask "
+                       f"({tmp_path / 'm.png'}) of one connected region at least 2 pixels from "
+                       "the image border, and no --feather; give --method solver or auto"], err
+    assert not (tmp_path / "o.png").exists()

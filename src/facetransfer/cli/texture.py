@@ -172,7 +172,7 @@ def _check_function_memory(used: int, size: int, step: int) -> None:
 
 
 def cmd_blend(args: argparse.Namespace) -> int:
-    from ..composite import feather_mask, poisson_blend
+    from ..composite import feather_mask, opencv_serves, poisson_blend
 
     out = _image_out(args.out, args, [args.source, args.target, args.mask])
     src = _read_image(args.source, "source image")
@@ -185,6 +185,10 @@ def cmd_blend(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--feather must be >= 0, got {args.feather}")
     m = feather_mask(mask, args.feather) if args.feather > 0 else mask
     method = args.method if args.feather == 0 else ("solver" if args.method == "auto" else args.method)
+    if method == "opencv" and not opencv_serves(m):   # before: said as the library's keyword
+        raise FaceTransferError(f"--method opencv needs a mask ({args.mask}) of one connected "
+                                "region at least 2 pixels from the image border, and no "
+                                "--feather; give --method solver or auto")
     res = poisson_blend(src, dst, m, method=method, mixed=args.mixed)
     write_image(out, res, overwrite=args.overwrite)
     print(f"wrote {out} ({int(mask.sum())} masked pixels)")
