@@ -119,12 +119,14 @@ def test_why_a_model_gives_no_activations(arkit_model, quick_model):
     from facetransfer.model import build_model
 
     assert arkit_shortfall(arkit_model) is None
-    assert arkit_shortfall(quick_model).startswith("its expressions are not ARKit blendshapes")
+    assert arkit_shortfall(quick_model).startswith("the model's expressions are not ARKit "
+                                                   "blendshapes")
     from facetransfer.datasets.ict import build_ict_dataset
 
     ds = build_ict_dataset("ict-arkit", n_identities=6, use_cache=True)
     short = build_model(ds, {"identity": 3, "expression": 20}, refine=False)
     n = len(short.labels[short.mode_index("expression")])     # neutral and the shapes
-    assert arkit_shortfall(short) == (f"its expression mode keeps 20 of its {n} components "
+    assert arkit_shortfall(short) == (f"the model's expression mode keeps 20 of its {n} "
+                                      "components "
                                       f"(the ARKit activations need at least {n - 1}: build it "
                                       "without truncating the expression rank)")

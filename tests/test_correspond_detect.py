@@ -140,7 +140,9 @@ def test_cli_features_then_fit(data_dir, tmp_path, capsys):
     # candidate's lower residual was not 10 % lower, and the first kept)
     assert last == f"shape prior: {rep['prior']['name']} (chosen automatically by " \
         f"{rep['prior']['chosen_by']}: " + ", ".join(f"{c['name']} {c['residual']:.4g}"
-                                                   for c in cands) + ")"
+                                                   for c in cands) \
+        + "; template units (cm for ICT-FaceKit): the work frame, the template's landmarks " \
+        "scaled to an RMS spread of 5.94)"      # before: no unit, beside the scan's units
     assert "10% lower" in rep["prior"]["chosen_by"]
     assert len(cands) == 2
     # the same in one step: --features auto, the default (the points kept next to the fit)

@@ -125,6 +125,20 @@ def test_a_damaged_archive_given_to_probe_is_named(tmp_path, capsys):
                        f"({why})"], err
 
 
+def test_a_missing_track_or_take_given_to_probe_is_named_as_one(tmp_path, capsys):
+    """A track, model or take that is not there (or a folder, or empty) is named as what its
+    name says it is (before: "video t.npz does not exist", "No such file or directory")."""
+    (tmp_path / "d.npz").mkdir()
+    (tmp_path / "e.npz").write_bytes(b"")
+    for name, said in (("t.npz", "track or model file {} does not exist"),
+                       ("take.csv", "take {} does not exist"),
+                       ("d.npz", "track or model file {} is a folder, not a file"),
+                       ("e.npz", "track or model file {} is empty")):
+        assert main(["probe", str(tmp_path / name)]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == ["facetransfer probe: error: " + said.format(tmp_path / name)], err
+
+
 def test_a_still_image_is_described_as_one(tmp_path, capsys):
     """A photo given to probe is said to be a still image (tracked as a clip of one frame), not
     a 25 fps video of one frame whose seeks are not exact."""

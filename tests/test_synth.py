@@ -279,3 +279,43 @@ def test_real_face_model_frontal_landmarks_visible(quick_model):
     vis = make_clip(quick_model, side).truth.visible[0, quick_model.landmarks]
     assert vis[0:7].all() and vis[27:31].all()
     assert not vis[12:17].any() and not vis[35]
+
+
+def test_truth_file_keys_are_a_tracks_and_older_files_still_read(tiny_model, tmp_path):
+    """The truth names its weights as a track file does (``weights_<mode>``: before
+    ``weights__<mode>``, so ``truth["weights_expression"]`` was a KeyError); a file written
+    the old way still loads."""
+    perf = random_performance(tiny_model, 3, seed=0, size=(48, 40))
+    clip = make_clip(tiny_model, perf)
+    _, tpath = write_clip(clip, tmp_path / "clip.mp4")
+    with np.load(tpath) as z:
+        keys = set(z.files)
+        old = {(k.replace("weights_", "weights__") if k.startswith("weights_") else k): z[k]
+               for k in z.files}
+    assert {"weights_identity", "weights_expression"} <= keys
+    np.savez(tmp_path / "old.truth.npz", **old)
+    for p in (tpath, tmp_path / "old.truth.npz"):
+        tr = load_truth(p)
+        assert list(tr.weights) == ["identity", "expression"] and tr.path == str(p)
+        np.testing.assert_array_equal(tr.weights["expression"], clip.truth.weights["expression"])
+
+
+def test_truth_checks_the_model_it_is_used_with(tiny_model, tmp_path):
+    """A truth file used with another model (modes, ranks, or the content hash) is refused
+    naming the file (before: ``texture lift --track CLIP.truth.npz`` with such a model ended
+    in a KeyError traceback or a shape error about weights)."""
+    from facetransfer.errors import TrackError
+
+    _, tpath = write_clip(make_clip(tiny_model, random_performance(tiny_model, 2, seed=0,
+                                                                   size=(48, 40))),
+                          tmp_path / "clip.mp4")
+    tr = load_truth(tpath)
+    tr.check_model(tiny_model)
+    fewer = build_model(tiny_dataset(), {"identity": 2, "expression": 4})
+    with pytest.raises(TrackError, match=rf"ground truth {tpath} was rendered with another "
+                                         r"model \(modes and ranks \{'identity': 3"):
+        tr.check_model(fewer)
+    unrefined = build_model(tiny_dataset(), {"identity": 3, "expression": 4}, refine=False)
+    assert unrefined.content_hash != tiny_model.content_hash
+    with pytest.raises(TrackError, match="the same but another content hash"):
+        tr.check_model(unrefined)

@@ -175,3 +175,45 @@ def test_lift_function_that_would_not_fit_is_refused_with_the_step_that_fits(
     # the function named as the texture: said as such (before: "is also an input")
     assert run(*argv, "--function", tmp_path / "n.png", "--out", tmp_path / "n.png") == 2
     assert "is --out's file" in capsys.readouterr().err
+
+
+def test_lift_from_a_truth_of_another_model_is_one_line(run, tmp_path, model_path, capsys):
+    """``--track CLIP.truth.npz`` with a model of other modes or ranks than the clip's: one
+    line naming the truth file (before: a KeyError traceback, exit 1, for a model with a mode
+    the clip has not; a shape error about weights for other ranks)."""
+    from facetransfer.model import load_model
+
+    model = load_model(model_path)
+    write_clip(make_clip(model, random_performance(model, 3, seed=0, size=(96, 80))),
+               tmp_path / "c.mp4")
+    three = tmp_path / "three.npz"
+    build_model(_cap_dataset(), {"identity": 2, "expression": 3}).save(three)
+    capsys.readouterr()
+    assert run("texture", "lift", tmp_path / "c.mp4", "--track", tmp_path / "c.truth.npz",
+               "--model", three, "--size", 32, "--out", tmp_path / "l.png") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"facetransfer texture: error: ground truth {tmp_path / 'c.truth.npz'} was "
+                   "rendered with another model (modes and ranks {'identity': 3, 'expression': "
+                   "3}, the model's {'identity': 2, 'expression': 3}): give the model "
+                   "synth-video used as --model"], err
+    assert not (tmp_path / "l.png").exists()
+
+
+def test_blend_with_opencv_where_it_cannot_is_said_in_the_options_words(run, tmp_path, capsys):
+    """``--method opencv`` with a mask touching the border (or with --feather): one line in
+    the command's words (before: "method='opencv' needs ...; use method='solver'")."""
+    img = np.full((40, 50, 3), 90, np.uint8)
+    _write(tmp_path / "a.png", img)
+    m = np.zeros((40, 50), np.uint8)
+    m[10:30, :20] = 255                          # reaches the left border
+    _write(tmp_path / "m.png", np.dstack([m] * 3))
+    for extra in ([], ["--feather", "2"]):
+        capsys.readouterr()
+        assert run("texture", "blend", "--source", tmp_path / "a.png", "--target",
+                   tmp_path / "a.png", "--mask", tmp_path / "m.png", "--method", "opencv",
+                   *extra, "--out", tmp_path / "o.png") == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err == [f"facetransfer texture: error: --method opencv needs a mask "
+                       f"({tmp_path / 'm.png'}) of one connected region at least 2 pixels from "
+                       "the image border, and no --feather; give --method solver or auto"], err
+    assert not (tmp_path / "o.png").exists()

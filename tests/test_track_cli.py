@@ -41,9 +41,13 @@ def test_cli_tracks_and_writes_track_and_overlay(small_clip, quick_model_path, q
                                                  tmp_path, capsys):
     video, pts, clip = small_clip
     out, ov = tmp_path / "t.npz", tmp_path / "ov.mp4"
-    code, _ = _run(capsys, video, "--model", quick_model_path, "--out", out, "--init", pts,
-                   "--passes", "1", "--overlay", ov)
+    code = main(["track", *map(str, (video, "--model", quick_model_path, "--out", out, "--init",
+                                     pts, "--passes", "1", "--overlay", ov))])
     assert code == 0
+    # a model of other expressions: said in a sentence (before: "the model its expressions")
+    assert ("note: the track has no ARKit blendshape activations: the model's expressions are "
+            "not ARKit blendshapes (the default model's, ict-arkit, are)"
+            in capsys.readouterr().out.splitlines())
     tr = Track.load(out)
     assert tr.n_frames == 8 and tr.frame_size == (320, 240) and tr.fps == 25
     assert tr.model_hash == quick_model.content_hash

@@ -247,7 +247,7 @@ def test_a_track_of_a_model_without_arkit_activations_is_refused_naming_it(quick
                  "--out", str(tmp_path / "p.html")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert err == [f"facetransfer view: error: track {tmp_path / 't.npz'}: its timeline plays "
-                   "ARKit activations, and the model its expressions are not ARKit blendshapes "
+                   "ARKit activations, and the model's expressions are not ARKit blendshapes "
                    "(the default model's, ict-arkit, are) (`view` of the model itself has a "
                    "slider per training expression)"], err
     assert not (tmp_path / "p.html").exists()

@@ -116,16 +116,18 @@ def arkit_truncated(model) -> bool:
 def arkit_shortfall(model) -> str | None:
     """Why a model's tracks carry no ARKit activations (None: they do,
     :func:`is_arkit_model`): its expressions are not ARKit-named, or they are but the
-    expression mode is truncated (the activations convert from all of its components)."""
+    expression mode is truncated (the activations convert from all of its components). A
+    clause that names the model itself ("the model's expressions ..."), to follow a colon."""
     if is_arkit_model(model):
         return None
     if arkit_truncated(model):
         k = _expression_mode(model)
         labels = model.labels[k]
-        return (f"its expression mode keeps {model.ranks[k]} of its {len(labels)} components "
+        return (f"the model's expression mode keeps {model.ranks[k]} of its {len(labels)} components "
                 f"(the ARKit activations need at least {len(labels) - 1}: build it without "
                 "truncating the expression rank)")
-    return "its expressions are not ARKit blendshapes (the default model's, ict-arkit, are)"
+    return ("the model's expressions are not ARKit blendshapes (the default model's, ict-arkit, "
+            "are)")
 
 
 def arkit_rows(model) -> np.ndarray:

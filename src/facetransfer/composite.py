@@ -41,6 +41,7 @@ log = logging.getLogger(__name__)
 __all__ = [
     "CompositeError",
     "poisson_blend",
+    "opencv_serves",
     "poisson_blend_multi",
     "feather_mask",
     "match_color",
@@ -271,8 +272,9 @@ def poisson_blend_multi(target, sources: Sequence[tuple[np.ndarray, np.ndarray]]
     return res
 
 
-def _opencv_serves(mask: np.ndarray) -> bool:
-    """OpenCV's seamlessClone handles one hard-edged region that keeps off the image border."""
+def opencv_serves(mask: np.ndarray) -> bool:
+    """Whether OpenCV's seamlessClone can take ``mask`` ``(H, W)`` (bool, or 0/1): one
+    hard-edged connected region that keeps 2 pixels off the image border."""
     if not np.all((mask == 0) | (mask == 1)):
         return False
     m = mask > 0
@@ -317,9 +319,9 @@ def poisson_blend(source, target, mask, *, method: str = "auto", mixed: bool = F
     m = _check_mask(mask, "mask", t.shape[:2])
     if not (m > 0).any():
         return _to_uint8(t.astype(np.float64))
-    use_cv = method == "opencv" or (method == "auto" and _opencv_serves(m))
+    use_cv = method == "opencv" or (method == "auto" and opencv_serves(m))
     if use_cv:
-        if not _opencv_serves(m):
+        if not opencv_serves(m):
             raise CompositeError("method='opencv' needs one hard-edged (bool) connected mask "
                                  "region at least 2 pixels from the image border; use "
                                  "method='solver'")

@@ -31,9 +31,11 @@ def file_kind(path: str | os.PathLike) -> str:
     import zipfile
 
     from .errors import FaceTransferError
-    from .io.npz import content_kind, reason
+    from .io.npz import check_input_file, content_kind, reason
 
     p = Path(path)
+    if p.suffix.lower() in (".npz", ".csv"):    # before: "video X.npz does not exist"
+        check_input_file(p, "take" if is_take(p) else "track or model file")
     if is_take(p):
         return "take"
     if p.suffix.lower() == ".npz" and p.is_file():

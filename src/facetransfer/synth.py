@@ -64,7 +64,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from .background import background_image
-from .errors import AssetError, FaceTransferError, VideoError
+from .errors import AssetError, FaceTransferError, TrackError, VideoError
 from .io.atomic import atomic_path, check_output_path
 from .io.npz import read_npz
 from .render import WeakPerspective, render, rotation_from_euler
@@ -677,6 +677,8 @@ class SyntheticTruth(_Posed):
     landmark_indices : (68,) int64 or (0,)
     meta : dict
         Model hash, performance spec, seed.
+    path : str
+        The file it was read from ('' if made in memory; not saved).
     """
 
     fps: float
@@ -690,6 +692,23 @@ class SyntheticTruth(_Posed):
     visible: np.ndarray
     landmark_indices: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
     meta: dict = field(default_factory=dict)
+    path: str = ""
+
+    @property
+    def model_hash(self) -> str:
+        """Content hash of the model the clip was rendered with ('' if not recorded)."""
+        return str(self.meta.get("model_hash") or "")
+
+    def check_model(self, model) -> None:
+        """Raise :class:`TrackError` unless ``model`` is the one the clip was rendered with:
+        the same modes and ranks, and the content hash where the truth records it."""
+        ours = {m: int(w.shape[1]) for m, w in self.weights.items()}
+        theirs = dict(zip(model.mode_names, (int(r) for r in model.ranks)))
+        if ours != theirs or self.model_hash not in ("", model.content_hash):
+            raise TrackError(f"ground truth {self.path or '(in memory)'} was rendered with "
+                             f"another model (modes and ranks {ours}, the model's {theirs}"
+                             + (", the same but another content hash" if ours == theirs else "")
+                             + "): give the model synth-video used as --model")
 
 
 @dataclass(frozen=True, eq=False)
@@ -796,7 +815,7 @@ def _save_truth(truth: SyntheticTruth, path: Path) -> None:
               "visible": truth.visible, "landmark_indices": truth.landmark_indices,
               "meta": np.array(json.dumps(truth.meta, default=str))}
     for mode, w in truth.weights.items():
-        arrays[f"weights__{mode}"] = w
+        arrays[f"weights_{mode}"] = w      # a track's layout (files before: weights__<mode>)
     np.savez_compressed(path, **arrays)
 
 
@@ -808,13 +827,13 @@ def load_truth(path: str | os.PathLike) -> SyntheticTruth:
     z = read_npz(p, "ground-truth file", VideoError)
     try:
         meta = json.loads(str(z["meta"]))
-        weights = {k[len("weights__"):]: z[k] for k in z if k.startswith("weights__")}
+        weights = {k[len("weights_"):].lstrip("_"): z[k] for k in z if k.startswith("weights_")}
         order = meta.get("mode_names", list(weights))
         weights = {m: weights[m] for m in order if m in weights}
         return SyntheticTruth(float(z["fps"]), tuple(int(v) for v in z["frame_size"]),
                               z["rotation"], z["scale"], z["translation"], weights,
                               z["landmarks2d"], z["vertices2d"], z["visible"],
-                              z["landmark_indices"], meta)
+                              z["landmark_indices"], meta, str(p))
     except (KeyError, ValueError, OSError) as exc:
         raise VideoError(f"ground-truth file {p} is not a facetransfer truth file: {exc}") from None
 

@@ -324,4 +324,5 @@ def _print_fit_summary(paths, s: dict, notes) -> None:
         rule = s["prior"].get("chosen_by", "the lowest residual")
         print(f"shape prior: {s['prior']['name']}" + (
             f" (chosen automatically by {rule}: " + ", ".join(
-                f"{c['name']} {c['residual']:.4g}" for c in cands) + ")" if cands else ""))
+                f"{c['name']} {c['residual']:.4g}" for c in cands)
+            + f"; {s['prior'].get('residual_units', 'work units')})" if cands else ""))

@@ -123,12 +123,9 @@ def cmd_lift(args: argparse.Namespace) -> int:
                                 f"got {args.k}")
     info = video_info(args.video)       # a file or an image sequence, checked
     track = _load_track(args.track)
-    # without --model: the default model, checked against a tracker's track (a synth-video
-    # truth file names no model)
-    model = default_model_for(track) if args.model is None and hasattr(track, "model_hash") \
-        else resolve_model(args.model)
-    if hasattr(track, "check_model"):
-        track.check_model(model)
+    # without --model: the default model, if the track (or synth-video's truth) was made with it
+    model = default_model_for(track) if args.model is None else resolve_model(args.model)
+    track.check_model(model)
     if tuple(track.frame_size) != tuple(info.size):
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
                                 f"{track.frame_size[1]} frames, the video is "
@@ -175,7 +172,7 @@ def _check_function_memory(used: int, size: int, step: int) -> None:
 
 
 def cmd_blend(args: argparse.Namespace) -> int:
-    from ..composite import feather_mask, poisson_blend
+    from ..composite import feather_mask, opencv_serves, poisson_blend
 
     out = _image_out(args.out, args, [args.source, args.target, args.mask])
     src = _read_image(args.source, "source image")
@@ -188,6 +185,10 @@ def cmd_blend(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--feather must be >= 0, got {args.feather}")
     m = feather_mask(mask, args.feather) if args.feather > 0 else mask
     method = args.method if args.feather == 0 else ("solver" if args.method == "auto" else args.method)
+    if method == "opencv" and not opencv_serves(m):   # before: said as the library's keyword
+        raise FaceTransferError(f"--method opencv needs a mask ({args.mask}) of one connected "
+                                "region at least 2 pixels from the image border, and no "
+                                "--feather; give --method solver or auto")
     res = poisson_blend(src, dst, m, method=method, mixed=args.mixed)
     write_image(out, res, overwrite=args.overwrite)
     print(f"wrote {out} ({int(mask.sum())} masked pixels)")

@@ -228,8 +228,8 @@ def _track_and_save(args, model, settings, tracker: str):
     if track.blendshapes is None:
         from ..arkit import arkit_shortfall
 
-        print(f"note: the track has no ARKit blendshape activations: the model "
-              f"{arkit_shortfall(model) or 'gives none'}")
+        print(f"note: the track has no ARKit blendshape activations: "
+              f"{arkit_shortfall(model) or 'the model gives none'}")
     return track, model
 
 

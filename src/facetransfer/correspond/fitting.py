@@ -493,7 +493,10 @@ def _prior_info(candidates: list, residuals: list, pick: int, pf, margin: float)
     info = {"name": prior.name, "n_components": prior.n_components,
             "coefficient_norm": float(np.linalg.norm(pf.coefficients)),
             "coefficients": [round(float(c), 6) for c in pf.coefficients],
-            "residual": residuals[pick]}
+            "residual": residuals[pick],
+            # not the scan's units, in which the report's surface distances are
+            "residual_units": "template units (cm for ICT-FaceKit): the work frame, the "
+                              f"template's landmarks scaled to an RMS spread of {REFERENCE_SPREAD}"}
     if len(candidates) > 1:
         info["candidates"] = [{"name": c.name, "residual": r}
                               for c, r in zip(candidates, residuals)]

@@ -130,7 +130,7 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
             from ..arkit import arkit_shortfall
 
             raise ExportError(f"track {track.label}: its timeline plays ARKit activations, and "
-                              f"the model {arkit_shortfall(model) or 'has none'} (`view` of the "
+                              f"{arkit_shortfall(model) or 'the model has none'} (`view` of the "
                               "model itself has a slider per training expression)")
         data.update(n_frames=track.n_frames, fps=track.fps,
                     activations=_b64(require_activations(track).astype(np.float32)),
