@@ -607,6 +607,8 @@ def run_edit(args) -> int:
         if not abs(a.amount) <= MAX_EDIT_FACTOR:
             raise FaceTransferError(f"--add {text}: the amount must lie in "
                                     f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}]")
+    if args.ramp < 0:
+        raise FaceTransferError(f"--ramp must be >= 0 frames, got {args.ramp}")
     check_track_name(args.out)
     check_output_path(args.out, overwrite=args.overwrite, inputs=[args.track, args.model])
     track = Track.load(args.track)
