@@ -355,7 +355,7 @@ def test_bad_cluster_and_output_arguments(clips, quick_model_path, tmp_path, cap
     afile = tmp_path / "file"
     afile.write_text("x")
     code, _, lines = _cli(capsys, "batch", "track", va, *m, "--out", afile)
-    assert code == 2 and lines == [f"facetransfer batch: error: output folder {afile} is a file"]
+    assert code == 2 and lines == [f"facetransfer batch track: error: output folder {afile} is a file"]
     code, _, lines = _cli(capsys, "batch", "track", va, *m, "--out", tmp_path / "o",
                           "--workers", 0)
     assert code == 2 and "--workers must be >= 1, got 0" in lines[0]

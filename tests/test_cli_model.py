@@ -108,7 +108,7 @@ def test_build_bad_input_leaves_no_file(manifest, tmp_path, capsys):
     trunc = tmp_path / "trunc.npz"
     trunc.write_bytes(b"PK\x03\x04 truncated")
     code, _, err = run(capsys, "model", "info", trunc)
-    assert code == 2 and err.startswith("facetransfer model: error:") and err.count("\n") == 1
+    assert code == 2 and err.startswith("facetransfer model ") and err.count("\n") == 1
 
 
 def test_missing_cells_error_lists_them(tmp_path, capsys):

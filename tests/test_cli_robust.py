@@ -41,7 +41,7 @@ def test_existing_output_needs_overwrite(tiny_model, tmp_path, capsys):
     out = tmp_path / "face.obj"
     out.write_text("old\n")
     assert main(["model", "synth", str(tiny_model), "--out", str(out)]) == 2
-    assert _err(capsys) == [f"facetransfer model: error: output {out} exists; pass --overwrite "
+    assert _err(capsys) == [f"facetransfer model synth: error: output {out} exists; pass --overwrite "
                             "to replace it"]
     assert out.read_text() == "old\n"
     assert main(["model", "synth", str(tiny_model), "--out", str(out), "--overwrite"]) == 0
@@ -56,7 +56,7 @@ def test_output_that_is_an_input_is_refused(tmp_path, capsys):
     link.symlink_to(mesh)
     for out in (mesh, link):   # the same path, or the same file through a link
         assert main(["scan", "smooth", str(mesh), "--out", str(out), "--overwrite"]) == 2
-        assert _err(capsys) == [f"facetransfer scan: error: output {out} is also an input "
+        assert _err(capsys) == [f"facetransfer scan smooth: error: output {out} is also an input "
                                 f"({mesh}); choose another output name"]
     assert mesh.read_bytes() == before and link.is_symlink()
 

@@ -258,7 +258,7 @@ def test_cli_bad_input_exit_2_and_no_output(data_dir, tmp_path, capsys, quick_mo
         rc = main(["scan", "fit", *args, "--out", str(out_dir / "fit.obj"), "--no-progress"])
         err = capsys.readouterr().err.strip().splitlines()
         assert rc == 2, args
-        assert len(err) == 1 and err[0].startswith("facetransfer scan: error:"), err
+        assert len(err) == 1 and err[0].startswith("facetransfer scan fit: error:"), err
         assert msg in err[0], (msg, err[0])
         assert list(out_dir.iterdir()) == [], args
     rc = main(["scan", "fit", str(data_dir / "lee-perry-smith" / "LeePerrySmith.glb"), "--features",

@@ -105,7 +105,7 @@ def test_read_only_folder_cli_is_one_line(scene, monkeypatch, capsys, tmp_path):
     monkeypatch.setattr(atomic.tempfile, "mkstemp", refuse)
     assert main(["scan", "smooth", str(mesh), "--out", str(out), "--overwrite"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"facetransfer scan: error: cannot write {out}: permission denied (is the "
+    assert err == [f"facetransfer scan smooth: error: cannot write {out}: permission denied (is the "
                    "folder read-only?)"]
     assert_untouched(before, out)
 
@@ -195,7 +195,7 @@ def test_full_disk_real_tmpfs_cli(tmpfs, tmp_path, capsys):
     before = snapshot(d)
     assert main(["model", "synth", str(model), "--out", str(target), "--overwrite"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"facetransfer model: error: cannot write {target}: no space left on the "
+    assert err == [f"facetransfer model synth: error: cannot write {target}: no space left on the "
                    "device"]
     assert_untouched(before, target)
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import cv2
 import numpy as np
 import pytest
@@ -96,7 +98,7 @@ def test_errors_are_one_line(run, tmp_path, model_path, capsys):
         capsys.readouterr()
         assert run(*argv) == 2
         err = capsys.readouterr().err.strip()
-        assert err.startswith("facetransfer texture: error:") and "\n" not in err
+        assert re.match(r"facetransfer texture \w+: error:", err) and "\n" not in err
     # a mask of 0 and 1 (white is 255): nothing would be pasted; said, not a copy of the target
     _write(tmp_path / "one.png", np.ones((20, 20, 3), np.uint8))
     assert run("texture", "blend", "--source", tmp_path / "a.png", "--target", tmp_path / "a.png",
@@ -143,7 +145,7 @@ def test_lift_a_track_of_the_clips_first_frames(run, tmp_path, model_path, capsy
     other_track.save(tmp_path / "other.npz")
     assert run(*argv[:4], tmp_path / "other.npz", *argv[5:], "--out", tmp_path / "o.png") == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"facetransfer texture: error: track {tmp_path / 'other.npz'} was "
+    assert err.startswith(f"facetransfer texture lift: error: track {tmp_path / 'other.npz'} was "
                           "made with another model") and "--model" in err, err
 
 
@@ -192,7 +194,7 @@ def test_lift_from_a_truth_of_another_model_is_one_line(run, tmp_path, model_pat
     assert run("texture", "lift", tmp_path / "c.mp4", "--track", tmp_path / "c.truth.npz",
                "--model", three, "--size", 32, "--out", tmp_path / "l.png") == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == [f"facetransfer texture: error: ground truth {tmp_path / 'c.truth.npz'} was "
+    assert err == [f"facetransfer texture lift: error: ground truth {tmp_path / 'c.truth.npz'} was "
                    "rendered with another model (modes and ranks {'identity': 3, 'expression': "
                    "3}, the model's {'identity': 2, 'expression': 3}): give the model "
                    "synth-video used as --model"], err
@@ -213,7 +215,7 @@ def test_blend_with_opencv_where_it_cannot_is_said_in_the_options_words(run, tmp
                    tmp_path / "a.png", "--mask", tmp_path / "m.png", "--method", "opencv",
                    *extra, "--out", tmp_path / "o.png") == 2
         err = capsys.readouterr().err.strip().splitlines()
-        assert err == [f"facetransfer texture: error: --method opencv needs a mask "
+        assert err == [f"facetransfer texture blend: error: --method opencv needs a mask "
                        f"({tmp_path / 'm.png'}) of one connected region at least 2 pixels from "
                        "the image border, and no --feather; give --method solver or auto"], err
     assert not (tmp_path / "o.png").exists()

@@ -205,6 +205,13 @@ def serial_blas(argv: list[str], environ=os.environ) -> bool:
     return True
 
 
+def command_name(args) -> str:
+    """The command as typed, with its action where it has some: ``model build``, ``batch
+    track`` (the name usage errors give it too)."""
+    action = getattr(args, f"{args.command}_command", None)
+    return f"{args.command} {action}" if action else str(args.command)
+
+
 def error_line(command: str, exc: BaseException) -> str:
     """The one line a failed command prints (no traceback)."""
     if isinstance(exc, ValueError):  # every project error subclasses ValueError
@@ -331,7 +338,7 @@ def _run(args) -> int:
             return 141        # read by ``| head``, which stopped reading: nothing to say
         if args.verbose:
             logging.getLogger("facetransfer").exception("details")
-        print(error_line(args.command, exc), file=sys.stderr)
+        print(error_line(command_name(args), exc), file=sys.stderr)
         return 2
     except (KeyboardInterrupt, SystemError) as exc:
         stop = interrupt_of(exc)     # a compiled kernel's SystemError caused by the interrupt
