@@ -136,7 +136,7 @@ class EyeTexture:
     image : (Ht, Wt, 3) uint8
         The open-eyed target frame.
     uvs : (n_closed, 2) float64
-        Texture coordinates (v up, :func:`facetransfer.rewrite.frame_uvs`) of the closed mesh's
+        Texture coordinates (v up, :func:`facetransfer.texture.face.frame_uvs`) of the closed mesh's
         vertices in that frame.
     select : (F',) bool
         The triangles of the eye-closed topology textured from ``image``.
@@ -304,7 +304,7 @@ def close_eyes(topo, vertices: np.ndarray):
     Parameters
     ----------
     topo : MeshTopology
-        Of :func:`facetransfer.rewrite.mesh_topology`.
+        Of :func:`facetransfer.topology.mesh_topology`.
     vertices : (n_vertices, 3)
         The neutral face (orders the fill's chains).
 
@@ -564,7 +564,7 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         The target's own track.
     model : MultilinearModel
     topo : MeshTopology
-        Of :func:`facetransfer.rewrite.mesh_topology` (eyes open).
+        Of :func:`facetransfer.topology.mesh_topology` (eyes open).
     brows : bool
         The brows too (:data:`BROW_SHAPES`): textured from the same frame, they move with the new
         performance only (issue 13, the brows).

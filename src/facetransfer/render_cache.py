@@ -94,7 +94,7 @@ def _update_track(h, track) -> None:
 
 
 def render_key(plan, model, options, video_options, *, images: bool = False) -> str | None:
-    """The key of rendering ``plan`` (a :class:`~facetransfer.video_transfer.TransferPlan`)
+    """The key of rendering ``plan`` (a :class:`~facetransfer.transfer_plan.TransferPlan`)
     with ``model``, ``options`` (:class:`~facetransfer.rewrite_options.RewriteOptions`) and
     ``video_options`` (:class:`~facetransfer.io.video.VideoOptions` or None) into a video, or
     (``images``) into an image sequence (:mod:`facetransfer.io.sequence_parts`); None when

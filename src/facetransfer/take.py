@@ -58,7 +58,7 @@ TAKE_SYNCS = ("timecode", "start")
 @dataclass(frozen=True)
 class Take:
     """A take standing for the new performance of a transfer until the target is tracked
-    (:func:`facetransfer.video_transfer.plan_sources`): its file, time alignment, and the
+    (:func:`facetransfer.transfer_plan.plan_sources`): its file, time alignment, and the
     target's start timecode at its frame rate (None: placed at the take's first row)."""
 
     path: Path

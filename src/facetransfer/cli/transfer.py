@@ -356,7 +356,8 @@ def run_transfer(args) -> int:
     prefetch = _prefetch_inputs(args)
     loads = _start_tracker_loads(to_track > 0 and args.tracker != "landmarks")
     try:
-        from ..video_transfer import TransferSources, transfer_video
+        from ..transfer_plan import TransferSources
+        from ..video_transfer import transfer_video
 
         model = resolve_model(args.model, progress=not args.no_progress)
     finally:

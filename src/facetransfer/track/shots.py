@@ -185,7 +185,7 @@ def shot_inputs(start: int, stop: int, n: int, target_frames, target_track, new_
                 source_track, source_index):
     """``(target frames, target track, new track, source track, source index)`` of frames
     ``start .. stop - 1`` of a rewrite of ``n`` frames (all of them for the whole clip): a shot
-    rewritten as a clip of its own (:func:`facetransfer.rewrite.rewrite_frames`), so that its
+    rewritten as a clip of its own (:func:`facetransfer.rewrite_clip.rewrite_frames`), so that its
     reference frames (the eyes', the jaw's, the lips' colour) are its own."""
     if (start, stop) == (0, n):
         return target_frames, target_track, new_track, source_track, source_index
