@@ -753,7 +753,7 @@ def check_identity_weights(model, w: np.ndarray, *, what: str = "--identity-weig
     """Refuse identity weights ``w`` (r,) outside the space the model's identities span: a
     component farther than :data:`IDENTITY_LIMIT` standard deviations from the training
     identities' mean (TransferError naming it and where such weights come from)."""
-    k = model.mode_index("identity") if "identity" in model.mode_names else 0
+    k = model.mode_index(model.identity_mode)
     U = np.asarray(model.factors[k], np.float64)
     if len(U) < 2:
         return

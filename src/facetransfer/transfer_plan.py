@@ -505,8 +505,7 @@ def _identity_weights(inputs: _Inputs, sources: TransferSources, model):
     None (the target's)."""
     if "identity" not in inputs.tracks:
         return sources.identity_weights
-    idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
-    return constant_weights(inputs.tracks["identity"], idm)
+    return constant_weights(inputs.tracks["identity"], model.identity_mode)
 
 
 def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> TransferPlan:
