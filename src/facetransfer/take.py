@@ -386,8 +386,9 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     with the take's head rotation, framed in ``size`` (the model's mean face filling 0.6 of
     it), at the timecode rate nearest the take's rows (``max_frames``: the first ones).
 
-    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``
-    (radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)``: the inverse of
+    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``:
+    head angles in radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (yaw > 0 turns the face toward
+    the image's right, pitch > 0 looks down, roll > 0 counter-clockwise; the inverse of
     :func:`facetransfer.export.common.head_euler`). What ``facetransfer puppet take.csv``
     renders: the take seen on a face before it goes into a scene.
 
