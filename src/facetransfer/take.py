@@ -220,7 +220,7 @@ def take_performance(path, target_track, model, *, align: str | None = None,
 def _say_held(path, left: float, n: int, fps: float, align: str | None) -> None:
     """Warn where a take that ends ``left`` seconds after the target's first frame leaves
     the last of its ``n`` frames (at ``fps``) holding its last row (``align`` None or
-    "hold"): the performance stands still there (before: without a word)."""
+    "hold"): the performance stands still there, which the user would not see coming."""
     if align not in (None, "hold") or n < 1:
         return
     k = int(np.floor(left * fps + 0.5)) + 1     # the frames the take's rows reach

@@ -359,4 +359,4 @@ def transfer_video(sources: TransferSources, out, model, *,
                           rendered.timings, rendered.resumed, rendered.kept)
 
 
-from .puppet_video import puppet_video  # noqa: E402,F401 (its home before the thirty-ninth session)
+from .puppet_video import puppet_video  # noqa: E402,F401 (its former home: still importable here)

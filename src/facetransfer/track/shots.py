@@ -125,8 +125,8 @@ def joined_shots(tracks: list, spans: list[tuple[int, int]]):
 def _held(tracks: list, spans: list, done: list, k: int):
     """Shot ``k`` without a face, marked lost: each frame holds the nearest tracked frame of
     the shots beside it (the last of the one before, the first of the one after, the earlier
-    on a tie; before, the nearer shot's for every frame: a head held 10 frames at its pose
-    before a black gap snapped at its end)."""
+    on a tie), not the nearer shot's for every frame, which would make a head held 10 frames at
+    its pose before a black gap snap at its end."""
     from dataclasses import replace
 
     from .project import take_frames
