@@ -47,7 +47,10 @@ def worker(tracks: Path, save: Path) -> None:
     """Render the demo pair here (the tree on ``sys.path``), saving the result frames."""
     from facetransfer.default_model import load_default_model
     from facetransfer.demo import default_inputs
-    from facetransfer.rewrite import rewrite_frames
+    try:  # this tree; a revision before rewrite_clip.py had it in rewrite.py
+        from facetransfer.rewrite_clip import rewrite_frames
+    except ImportError:
+        from facetransfer.rewrite import rewrite_frames
     from facetransfer.rewrite_options import RewriteOptions
     from facetransfer.texture.face import resolve_mouth_mode
     from facetransfer.video_transfer import plan_transfer

@@ -86,13 +86,14 @@ def _stats(x: np.ndarray) -> dict:
 
 def run_pair(name: str, model, out: Path, data: Path, frames: int) -> tuple[dict, dict]:
     """Render one pair in both modes and judge the lips; ``(figures, panels for the picture)``."""
+    from facetransfer import transfer_plan as tp
     from facetransfer import video_transfer as vt
     from facetransfer.rewrite_options import RewriteOptions
 
     src, tgt = PAIRS[name]
     cache = out / "judge_pairs"
     cache.mkdir(parents=True, exist_ok=True)
-    plan = vt.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
+    plan = tp.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
                             max_frames=frames, target_track=_track(tgt, model, cache, data),
                             expression_track=_track(src, model, cache, data))
     n = plan.n_frames

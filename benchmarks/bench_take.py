@@ -62,7 +62,7 @@ def _render(plan, model, mouth: str | None = None) -> tuple[list, float]:
 
 def take_pair(name: str, model, out: Path, data: Path, n: int = judge.FRAMES) -> dict:
     """One pair rendered from its source video and from its take, both judged."""
-    from facetransfer import video_transfer as vt
+    from facetransfer import transfer_plan as tp
     from facetransfer.export.common import head_euler
     from facetransfer.export.livelink import write_livelink
     from facetransfer.io.video import video_info
@@ -74,9 +74,9 @@ def take_pair(name: str, model, out: Path, data: Path, n: int = judge.FRAMES) ->
     tt, st = (judge._track(c, model, cache, data) for c in (tgt, src))
     take = write_livelink(Track.load(st), cache / f"{src}.take.csv", overwrite=True)
     common = dict(max_frames=n, target_track=tt)
-    video = vt.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
+    video = tp.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
                              expression_track=st, **common)
-    taken = vt.plan_transfer(data / f"{tgt}.mp4", model, expression_from=take, **common)
+    taken = tp.plan_transfer(data / f"{tgt}.mp4", model, expression_from=take, **common)
     m = min(video.n_frames, taken.n_frames)
     results, seconds = {}, {}
     for kind, plan, mouth in (("video", video, None), ("take", taken, None),

@@ -145,12 +145,12 @@ def eye_region_masks(model, topo, perf_t, frames_b, truth_b, size) -> list[np.nd
 # ------------------------------------------------------------------------------------ (a)-(c)
 def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=print,
                       speeds=("balanced",)) -> dict:
-    from facetransfer import rewrite as rw
+    from facetransfer import rewrite_clip as rc
     from facetransfer.texture import face as ftex
     from facetransfer import topology
-    from facetransfer import video_transfer as vt
     from facetransfer.synth import make_clip, random_performance
-    from facetransfer.transfer import constant_weights, project_landmarks, recombine
+    from facetransfer.transfer import (constant_weights, nearest_frames, project_landmarks,
+                                       recombine)
 
     idm = model.mode_names[0]
     labels = model.labels[0]
@@ -199,15 +199,15 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
         src = dict(source_frames=clip_a.frames, source_track=ta)
         if mouth_from == "target":
             names = model.mode_names[1:]
-            j = vt.nearest_frames(np.concatenate([new.weights[m] for m in names], axis=1),
-                                  np.concatenate([tb.weights[m] for m in names], axis=1),
-                                  ~tb.lost)
+            j = nearest_frames(np.concatenate([new.weights[m] for m in names], axis=1),
+                               np.concatenate([tb.weights[m] for m in names], axis=1),
+                               ~tb.lost)
             src = dict(source_frames=clip_b.frames, source_track=take_frames(tb, j),
                        source_index=j)
             if mouth == "function":
                 src["mouth_function"] = ftex.mouth_texture_function(model, clip_b.frames, tb,
                                                                   topo)
-        outs = list(rw.rewrite_frames(clip_b.frames, tb, new, model, texture=texture,
+        outs = list(rc.rewrite_frames(clip_b.frames, tb, new, model, texture=texture,
                                       blend=blend, topo=topo, mouth=mouth, eyes=eyes, **src))
         return new, outs
 
@@ -311,7 +311,8 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
 def speed(model, *, seconds: float, size: int, log=print, tmpdir: Path,
           presets=("fast",)) -> dict:
     from facetransfer.rewrite_options import RewriteOptions
-    from facetransfer.video_transfer import TransferSources, transfer_video
+    from facetransfer.transfer_plan import TransferSources
+    from facetransfer.video_transfer import transfer_video
     from facetransfer.synth import make_clip, random_performance
     from facetransfer.io.video import write_video
 

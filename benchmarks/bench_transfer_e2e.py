@@ -148,6 +148,7 @@ def staged(source: Path, target: Path, frames: int, out: Path):
     threads and the ffmpeg encoder), rewritten frames, face masks."""
     import cv2
 
+    from facetransfer import transfer_plan as tp
     from facetransfer import video_transfer as vt
     from facetransfer.default_model import load_default_model
 
@@ -155,7 +156,7 @@ def staged(source: Path, target: Path, frames: int, out: Path):
     model = load_default_model()
     timings = {"model": time.perf_counter() - t}
     c0 = _cpu()
-    plan = vt.plan_transfer(target, model, expression_from=source, max_frames=frames)
+    plan = tp.plan_transfer(target, model, expression_from=source, max_frames=frames)
     c1 = _cpu()
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * DILATE + 1, 2 * DILATE + 1))
     imgs, masks = [], []

@@ -179,12 +179,12 @@ def _clip(clip: str, out: Path, data: Path) -> tuple[Path, str]:
 def _plan(name: str, model, out: Path, data: Path, frames: int):
     from bench_transfer_judge import _track
 
-    from facetransfer import video_transfer as vt
+    from facetransfer import transfer_plan as tp
 
     cache = out / "judge_pairs"
     cache.mkdir(parents=True, exist_ok=True)
     (src, sname), (tgt, tname) = (_clip(c, out, data) for c in PAIRS[name])
-    return vt.plan_transfer(tgt, model, expression_from=src, max_frames=frames,
+    return tp.plan_transfer(tgt, model, expression_from=src, max_frames=frames,
                             target_track=_track(tname, model, cache, tgt.parent),
                             expression_track=_track(sname, model, cache, src.parent))
 
@@ -192,7 +192,7 @@ def _plan(name: str, model, out: Path, data: Path, frames: int):
 def render(plan, model, variant: str, mp_source: np.ndarray | None = None) -> list[np.ndarray]:
     """The result frames of one variant (:data:`VARIANTS`), before encoding (``mp_source``:
     MediaPipe's ``(n, 51)`` scores of the time-matched source, for ``mp_mouth``)."""
-    from facetransfer.rewrite import rewrite_frames
+    from facetransfer.rewrite_clip import rewrite_frames
     from facetransfer.rewrite_options import RewriteOptions
 
     kw, with_mouth = VARIANTS[variant]

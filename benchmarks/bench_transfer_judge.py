@@ -184,6 +184,7 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
     preset's: :data:`facetransfer.track.presets.TARGET_DETECT_EVERY`)."""
     import tempfile
 
+    from facetransfer import transfer_plan as tp
     from facetransfer import video_transfer as vt
     from facetransfer.export.common import head_euler
     from facetransfer.io.video import video_info
@@ -195,7 +196,7 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
     cache = out / "judge_pairs"
     cache.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    plan = vt.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
+    plan = tp.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
                             max_frames=frames,
                             target_track=_track(tgt, model, cache, data, every),
                             expression_track=_track(src, model, cache, data))

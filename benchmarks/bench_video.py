@@ -91,15 +91,15 @@ def rewrite_pair(source: Path, target: Path, model, n_frames: int, tmp: Path):
     """Target frames, rewritten frames and face masks (dilated) of one transfer."""
     import cv2
 
-    from facetransfer import rewrite as rw
-    from facetransfer import video_transfer as vt
+    from facetransfer import rewrite_clip as rc
+    from facetransfer import transfer_plan as tp
 
     tt, st = landmark_tracks(source, target, model, n_frames, tmp)
-    plan = vt.plan_transfer(target, model, target_track=tt, expression_from=source,
+    plan = tp.plan_transfer(target, model, target_track=tt, expression_from=source,
                             expression_track=st, max_frames=n_frames, parallel=False)
     frames, masks = [], []
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * DILATE + 1, 2 * DILATE + 1))
-    for r in rw.rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
+    for r in rc.rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
                                source_frames=plan.mouth_frames, source_track=plan.mouth_track,
                                source_index=plan.mouth_index, texture="frame", blend="fast",
                                mouth="frame"):

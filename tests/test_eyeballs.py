@@ -10,7 +10,7 @@ import pytest
 from facetransfer import eyeballs, eyes
 from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.render import rasterize
-from facetransfer.rewrite import rewrite_frames
+from facetransfer.rewrite_clip import rewrite_frames
 from facetransfer.topology import close_mouth, mesh_topology
 from facetransfer.track.gaze import activation_gaze, eye_model, project_iris
 from test_eyes import SIZE, _acts, _track

@@ -354,7 +354,7 @@ def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference
     where the target's forehead is where the reference frame has it: they show that skin
     already (``make demo``'s bright forehead blob); where the target raised its brows, the
     reference frame's rim is pasted. The lids and eyes are always the reference frame's."""
-    from facetransfer.rewrite import rewrite_frames
+    from facetransfer.rewrite_clip import rewrite_frames
 
     model, topo, closed, fill = setup
     target, new, hole, V, tid, tex = _brows_up_clip(setup)
@@ -392,7 +392,7 @@ def test_a_strand_over_the_brows_of_the_reference_frame_only_is_not_pasted(setup
     keep the current frame, in frames where the target is still and where it raised its brows.
     The eyes are still the reference frame's. (Before the rule the strand was pasted into every
     frame: the region away from the rim was always the reference frame's.)"""
-    from facetransfer.rewrite import rewrite_frames
+    from facetransfer.rewrite_clip import rewrite_frames
 
     model, topo, closed, fill = setup
     target, new, hole, V, tid, tex = _brows_up_clip(setup)
@@ -435,7 +435,7 @@ def test_a_strand_of_the_current_frame_only_is_not_painted_over(setup, monkeypat
     fringe lies over a brow's tail): with :data:`facetransfer.eyes.FRAME_RULE` the frame keeps
     its own strand; without it the reference frame's skin is painted over the strand. Frame 6
     (raised too, no strand) shows skin either way."""
-    from facetransfer.rewrite import rewrite_frames
+    from facetransfer.rewrite_clip import rewrite_frames
 
     monkeypatch.setattr(eyes, "FRAME_RULE", rule)
     model, topo, closed, fill = setup

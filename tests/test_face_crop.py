@@ -209,7 +209,7 @@ def test_a_transfer_tracks_the_faces_it_is_told(two_faces, arkit_model, tmp_path
     of each face of a two-shot, kept apart in the track cache)."""
     from facetransfer.io.video import VideoOptions, write_video
     from facetransfer.track.obtain import obtain_track
-    from facetransfer.video_transfer import TransferSources
+    from facetransfer.transfer_plan import TransferSources
 
     sources = TransferSources.of("t.mp4", expression_from="s.mp4", viseme_from="v.mp4",
                                  target_face="right", source_face="left")

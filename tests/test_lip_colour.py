@@ -17,7 +17,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import lip_colour as lc  # noqa: E402
-from facetransfer import rewrite as rw  # noqa: E402
+from facetransfer import rewrite_clip as rc  # noqa: E402
 from facetransfer import topology  # noqa: E402
 from facetransfer.render import (WeakPerspective, interpolate_vertex_values,  # noqa: E402
                                  rasterize)
@@ -122,7 +122,7 @@ def test_tint_mouth_scales_the_masked_pixels_by_their_weight():
 def _rewrite(scene_model, clips, weights, lip_colour):
     target, source, track = clips
     topo = weights[0]
-    return list(rw.rewrite_frames(target, track, track, scene_model, source_frames=source,
+    return list(rc.rewrite_frames(target, track, track, scene_model, source_frames=source,
                                   source_track=track, mouth="frame", topo=topo,
                                   options=RewriteOptions(lip_colour=lip_colour, lips="model",
                                                          eyes="target", jaw="frame"),
@@ -156,7 +156,7 @@ def test_the_clip_tint_recovers_the_paint_and_is_one_for_the_same_texture(quick_
     target, source, track = clips
     topo = weights[0]
     for src, expect, tol in ((source, PAINT, 0.04), (target, np.ones(3), 1e-9)):
-        r = rw._ClipRenderer.build(target, track, track, quick_model,
+        r = rc._ClipRenderer.build(target, track, track, quick_model,
                                    RewriteOptions(lips="model", eyes="target", jaw="frame"),
                                    source_frames=src, source_track=track, source_index=None,
                                    mouth_function=None, topo=topo)

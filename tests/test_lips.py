@@ -9,7 +9,7 @@ import pytest
 
 from facetransfer import lips
 from facetransfer.errors import ShapeError, TrackError
-from facetransfer.rewrite import _ClipRenderer
+from facetransfer.rewrite_clip import _ClipRenderer
 from facetransfer.rewrite_options import RewriteOptions
 from facetransfer.texture.face import frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology

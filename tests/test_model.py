@@ -206,6 +206,17 @@ def test_weight_statistics():
     assert C.shape == (4, 4) and np.all(np.linalg.eigvalsh(C) > 0)
 
 
+def test_the_identity_mode_is_the_one_so_named_else_the_first():
+    import dataclasses
+
+    m = build_model(random_dataset(seed=5), refine=False)
+    assert m.identity_mode == "identity"
+    moved = dataclasses.replace(m, mode_names=("expression", "identity", "viseme"))
+    assert moved.identity_mode == "identity"
+    unnamed = dataclasses.replace(m, mode_names=("person", "expression", "viseme"))
+    assert unnamed.identity_mode == "person"
+
+
 def test_save_load_round_trip(tmp_path):
     m = build_model(random_dataset(seed=6), {"identity": 3})
     p = m.save(tmp_path / "m.npz")

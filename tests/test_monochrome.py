@@ -15,7 +15,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import lip_colour as lc  # noqa: E402
-from facetransfer import rewrite as rw  # noqa: E402
+from facetransfer import rewrite_clip as rc  # noqa: E402
 from facetransfer.monochrome import MONO_LEVELS, is_monochrome, monochrome_changes  # noqa: E402
 from facetransfer.rewrite_options import RewriteOptions  # noqa: E402
 
@@ -68,11 +68,11 @@ def test_a_grey_target_gets_a_grey_face_with_its_own_lip_tone(quick_model, clips
     target, source, track = clips
     grey = _grey(target)
     topo = weights[0]
-    outs = list(rw.rewrite_frames(grey, track, track, quick_model, source_frames=source,
+    outs = list(rc.rewrite_frames(grey, track, track, quick_model, source_frames=source,
                                   source_track=track, mouth="frame", topo=topo,
                                   options=RewriteOptions(lips="model", eyes="target",
                                                          jaw="frame"), blend="none"))
-    r = rw._ClipRenderer.build(grey, track, track, quick_model,
+    r = rc._ClipRenderer.build(grey, track, track, quick_model,
                                RewriteOptions(lips="model", eyes="target", jaw="frame"),
                                source_frames=source, source_track=track, source_index=None,
                                mouth_function=None, topo=topo)

@@ -133,7 +133,7 @@ def test_a_turned_clip_is_rendered_with_the_reference_of_each_frames_view(turned
     of its renders with each."""
     import dataclasses
 
-    import facetransfer.rewrite as rw
+    import facetransfer.rewrite_clip as rc
 
     model, tr, topo, frames, closed, tex = turned_clip
     assert isinstance(tex, RegionViews) and tex.frames[0] < 6 <= tex.frames[1]
@@ -145,7 +145,7 @@ def test_a_turned_clip_is_rendered_with_the_reference_of_each_frames_view(turned
     def render(weights):
         views = dataclasses.replace(tex, weights=weights)
         monkeypatch.setattr(region_views, "eye_texture_by_view", lambda *a, **k: (closed, views))
-        return [r.image for r in rw.rewrite_frames(frames, tr, tr, model, workers=1,
+        return [r.image for r in rc.rewrite_frames(frames, tr, tr, model, workers=1,
                                                    processes=False)]
 
     out = render(w)
@@ -166,7 +166,7 @@ def test_region_textures_made_ahead_are_taken_by_the_renderer_of_their_clip(turn
     equal, and they are not made again; for another track or other modes they are made anew."""
     import dataclasses
 
-    import facetransfer.rewrite as rw
+    import facetransfer.rewrite_clip as rc
     from facetransfer.rewrite_options import RewriteOptions
 
     model, tr, topo, frames, _, _ = turned_clip
@@ -176,7 +176,7 @@ def test_region_textures_made_ahead_are_taken_by_the_renderer_of_their_clip(turn
     assert ahead.fits(tr, 12, region_views.region_modes(opts))
     assert not ahead.fits(dataclasses.replace(tr), 12, region_views.region_modes(opts))
     assert not ahead.fits(tr, 11, region_views.region_modes(opts))
-    plain = [r.image for r in rw.rewrite_frames(frames, tr, tr, model, workers=1)]
+    plain = [r.image for r in rc.rewrite_frames(frames, tr, tr, model, workers=1)]
     made = []
     real = region_views.region_textures
 
@@ -184,15 +184,15 @@ def test_region_textures_made_ahead_are_taken_by_the_renderer_of_their_clip(turn
         made.append(1)
         return real(*a, **k)
 
-    monkeypatch.setattr(rw, "region_textures", counted)
-    taken = [r.image for r in rw.rewrite_frames(frames, tr, tr, model, workers=1,
+    monkeypatch.setattr(rc, "region_textures", counted)
+    taken = [r.image for r in rc.rewrite_frames(frames, tr, tr, model, workers=1,
                                                 regions=ahead)]
     assert made == []
     for a, b in zip(plain, taken):
         np.testing.assert_array_equal(a, b)
-    list(rw.rewrite_frames(frames, tr, tr, model, workers=1, eyes="target", regions=ahead))
+    list(rc.rewrite_frames(frames, tr, tr, model, workers=1, eyes="target", regions=ahead))
     other = dataclasses.replace(tr)
-    list(rw.rewrite_frames(frames, other, other, model, workers=1, regions=ahead))
+    list(rc.rewrite_frames(frames, other, other, model, workers=1, regions=ahead))
     assert made == [1, 1]
 
 

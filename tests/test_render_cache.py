@@ -12,7 +12,7 @@ from facetransfer.io import video_parts
 from facetransfer.io.video import VideoOptions
 from facetransfer.rewrite_options import RewriteOptions
 from facetransfer.track.result import Track
-from facetransfer.video_transfer import TransferPlan
+from facetransfer.transfer_plan import TransferPlan
 
 
 class _Model:

@@ -107,7 +107,7 @@ def test_a_two_shot_target_is_rewritten_as_its_shots_alone(quick_model, tmp_path
     sys.path.insert(0, str(Path(__file__).parent))
     from test_transfer_rewrite import render_clip
 
-    from facetransfer.rewrite import rewrite_frames
+    from facetransfer.rewrite_clip import rewrite_frames
     from facetransfer.texture import default_face_texture
     from facetransfer.topology import mesh_topology
     from facetransfer.track import Track

@@ -15,7 +15,7 @@ from facetransfer.track.init import check_init_points, fit_landmarks, load_init_
 from facetransfer.track.klt import (build_pyramid, klt_terms, klt_terms_at, sample_windows,
                                     solve_flow, window_offsets)
 from facetransfer.track.landmarks import (IBUG_WEIGHTS, MP_TO_IBUG, REQUIRED_IBUG,
-                                          mediapipe_to_ibug, table_matrix)
+                                          eye_distance, mediapipe_to_ibug, table_matrix)
 from facetransfer.track.solver import (FrameState, Prior, fit_points, full_jacobian,
                                        normal_equations, project_to_gauge, schur_reduce)
 
@@ -239,6 +239,15 @@ def test_mediapipe_to_ibug_table():
     assert mediapipe_to_ibug(np.full((3, 478, 3), np.nan)).shape == (3, 68, 3)
     with pytest.raises(ValueError, match="478"):
         mediapipe_to_ibug(np.zeros((68, 2)))
+
+
+def test_eye_distance_is_the_outer_corners_else_half_the_points_extent():
+    L = np.full((68, 2), np.nan)
+    assert eye_distance(L) == 1.0                      # no point at all
+    L[36], L[45] = (10.0, 20.0), (13.0, 24.0)
+    assert eye_distance(L) == 5.0                      # |p_36 - p_45|
+    L[45], L[30] = np.nan, (10.0, 60.0)
+    assert eye_distance(L) == 20.0                     # a corner missing: box 0 x 40, half
 
 
 # ------------------------------------------------------------------------------------ Track

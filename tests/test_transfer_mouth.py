@@ -17,11 +17,11 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-from facetransfer import rewrite as rw  # noqa: E402
+from facetransfer import rewrite_clip as rc  # noqa: E402
 from facetransfer.texture import face as ftex  # noqa: E402
 from facetransfer import rewrite_options as rwo  # noqa: E402
 from facetransfer import topology  # noqa: E402
-from facetransfer import video_transfer as vt  # noqa: E402
+from facetransfer.transfer import nearest_frames  # noqa: E402
 from facetransfer.render import (WeakPerspective, look_at_weak_perspective, render,  # noqa: E402
                                  rotation_from_euler)
 from facetransfer.track import Track  # noqa: E402
@@ -110,8 +110,8 @@ def bank(scene):
 def _render(scene, target, target_track, new, bank_frames, bank_track, mouth, fn=None,
             **kwargs):
     """Rewrite with the mouth from the bank: its nearest frame ("frame") or the function."""
-    j = vt.nearest_frames(new.weights["expression"], bank_track.weights["expression"])
-    return list(rw.rewrite_frames(target, target_track, new, scene.model,
+    j = nearest_frames(new.weights["expression"], bank_track.weights["expression"])
+    return list(rc.rewrite_frames(target, target_track, new, scene.model,
                                   source_frames=bank_frames,
                                   source_track=take_frames(bank_track, j), source_index=j, mouth=mouth, mouth_function=fn,
                                   topo=scene.topo, **kwargs))
@@ -205,14 +205,14 @@ def test_function_built_inside_rewrite_frames_and_workers(scene, bank):
     e = scene.en + 0.5 * (scene.eo - scene.en)
     target, target_track = scene.clip([scene.en] * 3, [0, 3, -3])
     _, new = scene.clip([e] * 3, [0, 3, -3])
-    runs = [[o.image for o in rw.rewrite_frames(target, target_track, new, scene.model,
+    runs = [[o.image for o in rc.rewrite_frames(target, target_track, new, scene.model,
                                                 source_frames=frames, source_track=track,
                                                 mouth="function", topo=scene.topo, workers=w)]
             for w in (1, 2)]
     for a, b in zip(*runs):
         np.testing.assert_array_equal(a, b)
     # the same frames given explicitly: the same output
-    ref = [o.image for o in rw.rewrite_frames(target, target_track, new, scene.model,
+    ref = [o.image for o in rc.rewrite_frames(target, target_track, new, scene.model,
                                               mouth="function", topo=scene.topo, workers=1,
                                               mouth_function=ftex.mouth_texture_function(
                                                   scene.model, frames,
@@ -264,13 +264,13 @@ def test_mouth_bad_input(scene, bank, quick_model):
     with pytest.raises(rwo.RewriteError, match="needs a model with texture coordinates"):
         ftex.mouth_texture_function(no_uvs, frames, track, scene.topo)
     with pytest.raises(rwo.RewriteError, match="texture coordinates"):
-        list(rw.rewrite_frames(frames, track, track, no_uvs, mouth="function", topo=scene.topo))
+        list(rc.rewrite_frames(frames, track, track, no_uvs, mouth="function", topo=scene.topo))
     with pytest.raises(rwo.RewriteError, match="texture coordinates"):
         ftex.resolve_mouth_mode("function", no_uvs)
     assert ftex.resolve_mouth_mode(None, no_uvs, performance=True) == "frame"
     assert ftex.resolve_mouth_mode(None, m, performance=True) == "function"
     with pytest.raises(rwo.RewriteError, match="mouth must be one of frame, function"):
-        list(rw.rewrite_frames(frames, track, track, m, mouth="teeth", topo=scene.topo))
+        list(rc.rewrite_frames(frames, track, track, m, mouth="teeth", topo=scene.topo))
     with pytest.raises(rwo.RewriteError, match="mouth must be one of"):
         ftex.resolve_mouth_mode("nearest", m)
     with pytest.raises(rwo.RewriteError, match="max_frames must be an integer >= 1"):
@@ -291,7 +291,7 @@ def test_mouth_bad_input(scene, bank, quick_model):
     # a function of another model layout
     small = ftex.MouthFunction(fn.function, fn.uvs[:10], fn.frames)
     with pytest.raises(rwo.RewriteError, match="texture function is for"):
-        list(rw.rewrite_frames(frames, track, track, m, mouth="function", mouth_function=small,
+        list(rc.rewrite_frames(frames, track, track, m, mouth="function", mouth_function=small,
                                topo=scene.topo))
 
 

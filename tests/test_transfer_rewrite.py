@@ -9,16 +9,17 @@ import pytest
 
 from facetransfer import frame_meshes
 from facetransfer import rewrite as rw
+from facetransfer import rewrite_clip as rc
 from facetransfer import composite
 from facetransfer import mouth
 from facetransfer.texture import face as ftex
 from facetransfer.track import obtain
 from facetransfer import rewrite_options as rwo
 from facetransfer import topology
-from facetransfer import video_transfer as vt
+from facetransfer import transfer_plan as tp
 from facetransfer.render import WeakPerspective, look_at_weak_perspective, render, rotation_from_euler
 from facetransfer.track import Track
-from facetransfer.transfer import project_landmarks, recombine
+from facetransfer.transfer import nearest_frames, project_landmarks, recombine
 
 SIZE = (128, 128)
 
@@ -188,7 +189,7 @@ def test_synthetic_transfer_matches_truth(quick_model, topo, synthetic, blend, t
     target; thresholds leave >= 1.6 dB margin."""
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
-    outs = list(rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
+    outs = list(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
                                   texture=texture, blend=blend, topo=topo))
     assert len(outs) == len(fb)
     for i, o in enumerate(outs):
@@ -208,7 +209,7 @@ def test_synthetic_transfer_matches_truth(quick_model, topo, synthetic, blend, t
 def test_eye_holes_show_the_target(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
-    o = next(rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
+    o = next(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
                                blend="none", topo=topo, eyes="target"))
     # pixels inside the face's outline but not covered by the mesh: the eye holes
     import scipy.ndimage as ndi
@@ -217,7 +218,7 @@ def test_eye_holes_show_the_target(quick_model, topo, synthetic):
     assert holes.sum() > 10
     np.testing.assert_array_equal(o.image[holes], fb[0][holes])
     # with the eyes of the new performance (the default, facetransfer.eyes) they are rendered
-    e = next(rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
+    e = next(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
                                blend="none", topo=topo))
     assert e.face_mask[holes].all()
 
@@ -226,7 +227,7 @@ def test_lost_frames_keep_the_original(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     ta_lost = dataclasses.replace(ta, lost=np.array([False, True, False, False, True]))
     new = recombine(tb, expression=ta_lost)
-    outs = list(rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
+    outs = list(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
                                   source_track=ta_lost, topo=topo))
     for i in (1, 4):
         np.testing.assert_array_equal(outs[i].image, fb[i])
@@ -238,11 +239,11 @@ def test_rewrite_bad_input(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
     with pytest.raises(rwo.RewriteError, match="texture"):
-        list(rw.rewrite_frames(fb, tb, new, quick_model, texture="bogus"))
+        list(rc.rewrite_frames(fb, tb, new, quick_model, texture="bogus"))
     with pytest.raises(rwo.RewriteError, match="only 2"):
-        list(rw.rewrite_frames(fb[:2], tb, new, quick_model))
+        list(rc.rewrite_frames(fb[:2], tb, new, quick_model))
     with pytest.raises(rwo.RewriteError, match="64x64"):
-        list(rw.rewrite_frames(fb[:, :64, :64], tb, new, quick_model))
+        list(rc.rewrite_frames(fb[:, :64, :64], tb, new, quick_model))
     with pytest.raises(rwo.RewriteError, match="blend"):
         rw.rewrite_frame(fb[0], quick_model.synthesize(tb.weights_at(0)), tb.camera(0), topo,
                          ftex.FaceTexture(fb[0], np.zeros((topo.n_closed, 2))), blend="magic")
@@ -274,17 +275,17 @@ def test_landmark_track_recovers_pose_and_marks_lost(quick_model):
 def test_nearest_frames_picks_closest_valid_row():
     bank = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [5.0, 5.0]])
     q = np.array([[0.9, 0.1], [0.1, 0.8], [4.0, 4.0]])
-    np.testing.assert_array_equal(vt.nearest_frames(q, bank), [1, 2, 3])
+    np.testing.assert_array_equal(nearest_frames(q, bank), [1, 2, 3])
     valid = np.array([True, True, True, False])
-    np.testing.assert_array_equal(vt.nearest_frames(q, bank, valid), [1, 2, 1])
+    np.testing.assert_array_equal(nearest_frames(q, bank, valid), [1, 2, 1])
     with pytest.raises(rwo.RewriteError, match="all lost"):
-        vt.nearest_frames(q, bank, np.zeros(4, bool))
+        nearest_frames(q, bank, np.zeros(4, bool))
 
 
 def test_parallel_rendering_is_deterministic(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
-    runs = [[o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
+    runs = [[o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
                                                 source_track=ta, topo=topo, workers=w)]
             for w in (1, 2)]
     for a, b in zip(*runs):
@@ -299,14 +300,14 @@ def test_a_render_started_later_gives_the_same_frames(quick_model, topo, synthet
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
     kw = dict(source_frames=fa, source_track=ta, topo=topo)
-    whole = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, workers=1, **kw)]
-    later = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, workers=workers,
+    whole = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, workers=1, **kw)]
+    later = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, workers=workers,
                                                 processes=processes, start=2, **kw)]
     assert len(later) == len(whole) - 2
     for a, b in zip(later, whole[2:]):
         np.testing.assert_array_equal(a, b)
     with pytest.raises(rwo.RewriteError, match="outside"):
-        next(rw.rewrite_frames(fb, tb, new, quick_model, start=len(whole) + 1, **kw))
+        next(rc.rewrite_frames(fb, tb, new, quick_model, start=len(whole) + 1, **kw))
 
 
 def test_an_identity_ulps_apart_is_contracted_once(quick_model, topo, synthetic):
@@ -320,8 +321,8 @@ def test_an_identity_ulps_apart_is_contracted_once(quick_model, topo, synthetic)
     assert (nudged != ident[0]).any()
     ta2 = dataclasses.replace(ta, weights=dict(ta.weights, identity=nudged))
     kw = dict(source_frames=fa, topo=topo, workers=1)
-    exact = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, source_track=ta, **kw)]
-    near = [o.image for o in rw.rewrite_frames(fb, tb, new, quick_model, source_track=ta2, **kw)]
+    exact = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, source_track=ta, **kw)]
+    near = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, source_track=ta2, **kw)]
     for a, b in zip(exact, near):
         np.testing.assert_array_equal(a, b)
     meshes = frame_meshes.FrameMeshes(quick_model, {"source": ta2}, ta2.n_frames)
@@ -352,9 +353,9 @@ def test_a_target_track_of_another_clip_is_said(quick_model, caplog):
 
     tr = still_track(quick_model, 2, source="/clips/katie.mp4")
     with caplog.at_level(logging.WARNING, logger="facetransfer"):
-        vt._warn_other_source(tr, "/elsewhere/katie.mp4", "target")
+        tp._warn_other_source(tr, "/elsewhere/katie.mp4", "target")
         assert not caplog.records
-        vt._warn_other_source(tr, "d6.mp4", "target")
+        tp._warn_other_source(tr, "d6.mp4", "target")
     assert [r.getMessage() for r in caplog.records] == [
         "target track of /clips/katie.mp4 was made from katie.mp4, not d6.mp4: if that is "
         "another clip, its motion drives the wrong face"]

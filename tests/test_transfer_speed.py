@@ -15,12 +15,13 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import frame_meshes
 from facetransfer import rewrite as rw  # noqa: E402
+from facetransfer import rewrite_clip as rc  # noqa: E402
 from facetransfer.texture import face as ftex  # noqa: E402
 from facetransfer.track import obtain  # noqa: E402
 from facetransfer.track import presets  # noqa: E402
 from facetransfer import rewrite_options as rwo  # noqa: E402
 from facetransfer import topology  # noqa: E402
-from facetransfer import video_transfer as vt  # noqa: E402
+from facetransfer import transfer_plan as tp  # noqa: E402
 from facetransfer.errors import VideoError  # noqa: E402
 from facetransfer.track import Track  # noqa: E402
 from facetransfer.track.tracker import TrackOptions  # noqa: E402
@@ -44,7 +45,7 @@ def test_track_options_presets():
 def test_plan_rejects_unknown_speed_before_any_work(quick_model, tmp_path):
     # the target does not exist: the preset is checked first
     with pytest.raises(rwo.RewriteError, match="speed"):
-        vt.plan_transfer(tmp_path / "missing.mp4", quick_model, speed="ludicrous")
+        tp.plan_transfer(tmp_path / "missing.mp4", quick_model, speed="ludicrous")
 
 
 @pytest.mark.parametrize("blend", ["fast", "poisson", "none"])
@@ -104,7 +105,7 @@ def _fake_obtain_track(tracks):
 def test_background_tracking_equals_sequential(clips, quick_model, monkeypatch, tmp_path):
     fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
     monkeypatch.setattr(obtain, "obtain_track", fake)
-    plans = {par: vt.plan_transfer(clips["target"], quick_model,
+    plans = {par: tp.plan_transfer(clips["target"], quick_model,
                                    expression_from=clips["source"], parallel=par)
              for par in (False, True)}
     me = str(os.getpid())
@@ -121,7 +122,7 @@ def test_background_tracking_equals_sequential(clips, quick_model, monkeypatch, 
     broken = tmp_path / "broken.mp4"
     shutil.copy(clips["source"], broken)
     with pytest.raises(VideoError, match="no face found"):
-        vt.plan_transfer(clips["target"], quick_model, expression_from=broken, parallel=True)
+        tp.plan_transfer(clips["target"], quick_model, expression_from=broken, parallel=True)
 
 
 @pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
@@ -141,13 +142,13 @@ def test_fast_detects_the_target_every_other_frame_and_makes_its_regions_ahead(
     monkeypatch.setattr(obtain, "obtain_track", recorded)
     for speed, every in (("fast", 2), ("balanced", 1), ("quality", 1)):
         calls.clear()
-        plan = vt.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+        plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
                                 parallel=True, speed=speed)
         assert calls == [("target", every)]          # the source: in the forked child
         assert plan.regions is not None and plan.regions.target_track is plan.target_track
         assert plan.regions.n_frames == plan.n_frames and "regions" in plan.timings
     calls.clear()
-    plan = vt.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+    plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
                             parallel=False)
     assert calls == [("target", 2), ("source", 1)] and plan.regions is None
 
@@ -178,7 +179,7 @@ def test_rendering_in_processes_equals_one_thread(quick_model, topo, synthetic):
     lost = new.lost.copy()
     lost[2] = True  # a lost frame keeps the original in both
     new = dataclasses.replace(new, lost=lost)
-    runs = [list(rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
+    runs = [list(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
                                    topo=topo, workers=w, processes=p))
             for w, p in ((1, False), (2, True))]
     for a, b in zip(*runs):
@@ -204,20 +205,20 @@ def test_the_render_runs_blas_on_one_thread_and_restores_it(quick_model, topo, s
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
     seen = []
-    call = rw._ClipRenderer.__call__
+    call = rc._ClipRenderer.__call__
 
     def spying_call(self, i):
         seen.append(_blas_threads())
         return call(self, i)
 
-    monkeypatch.setattr(rw._ClipRenderer, "__call__", spying_call)
+    monkeypatch.setattr(rc._ClipRenderer, "__call__", spying_call)
     with threadpool_limits(limits=2, user_api="blas"):
         before = _blas_threads()
         if not before or max(before) < 2:
             pytest.skip("no BLAS library with threads to limit")
         for workers in (1, 2):
             seen.clear()
-            it = rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
+            it = rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
                                    source_track=ta, topo=topo, workers=workers)
             next(it)
             assert seen and all(s == [1] * len(before) for s in seen)
@@ -227,7 +228,7 @@ def test_the_render_runs_blas_on_one_thread_and_restores_it(quick_model, topo, s
         # two renders at once, the first made closed first: one thread until the last ends,
         # then as before (a limit per render restored the threads under the second and left
         # one thread after both)
-        a, b = (rw.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
+        a, b = (rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
                                   topo=topo, workers=1) for _ in range(2))
         next(a), next(b)
         a.close()
@@ -248,14 +249,14 @@ def test_crop_of_and_paste_round_trip(synthetic):
     rend = np.zeros_like(T)
     rend[face] = 200
     frame = rw.RewriteFrame(img, rend, face, np.zeros_like(face))
-    part = rw._crop_of(T, frame)
+    part = rc._crop_of(T, frame)
     assert part[0] == (50, 30, 70, 40)
     back = rw._paste(T, part)
     for x, y in zip(dataclasses.astuple(frame), dataclasses.astuple(back)):
         np.testing.assert_array_equal(x, y)
     unchanged = rw.RewriteFrame(T.copy(), np.zeros_like(T), np.zeros_like(face),
                                 np.zeros_like(face))
-    assert rw._crop_of(T, unchanged) is None
+    assert rc._crop_of(T, unchanged) is None
     np.testing.assert_array_equal(rw._paste(T, None).image, T)
 
 
@@ -301,4 +302,4 @@ def test_defaults_agree():
     from facetransfer import demo
 
     assert inspect.signature(demo.run_demo).parameters["speed"].default == presets.DEFAULT_SPEED
-    assert inspect.signature(vt.plan_transfer).parameters["speed"].default == presets.DEFAULT_SPEED
+    assert inspect.signature(tp.plan_transfer).parameters["speed"].default == presets.DEFAULT_SPEED

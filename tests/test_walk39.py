@@ -74,7 +74,7 @@ def test_a_truncated_video_is_said_to_end_early(tmp_path, caplog):
 
 def test_a_performance_shorter_than_the_target_is_refused_with_the_frames_to_give(
         clips, quick_model, tmp_path):
-    from facetransfer import video_transfer as vt
+    from facetransfer import transfer_plan as tp
     from facetransfer.errors import RewriteError
     from facetransfer.track import Track
     from facetransfer.track.project import take_frames
@@ -83,9 +83,9 @@ def test_a_performance_shorter_than_the_target_is_refused_with_the_frames_to_giv
     take_frames(Track.load(clips["target_track"]), np.arange(3)).save(short)
     with pytest.raises(RewriteError, match=r"performance .*short.npz has 3 frames, the target "
                                            r"video .*target.mp4 6: give --max-frames 3"):
-        vt.plan_transfer(clips["target"], quick_model, target_track=clips["target_track"],
+        tp.plan_transfer(clips["target"], quick_model, target_track=clips["target_track"],
                          performance=short)
-    plan = vt.plan_transfer(clips["target"], quick_model, target_track=clips["target_track"],
+    plan = tp.plan_transfer(clips["target"], quick_model, target_track=clips["target_track"],
                             performance=short, max_frames=3)
     assert plan.n_frames == 3
 

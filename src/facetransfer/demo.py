@@ -26,7 +26,8 @@ import numpy as np
 from .errors import AssetError, VideoError
 from .texture.face import resolve_mouth_mode
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
-from .video_transfer import plan_transfer, render_plan
+from .transfer_plan import plan_transfer
+from .video_transfer import render_plan
 
 log = logging.getLogger(__name__)
 
@@ -301,7 +302,7 @@ def _demo_inputs(source, target, model, out: Path, frames: int):
 
 def _plan_with_fallback(target, source, model, opts: RewriteOptions, frames: int, tracks: dict,
                         progress_factory):
-    """``(plan, options)``: :func:`facetransfer.video_transfer.plan_transfer` with the chosen
+    """``(plan, options)``: :func:`facetransfer.transfer_plan.plan_transfer` with the chosen
     tracker; with ``"auto"``, a landmark-only fit when tracking fails (the demo degrades
     instead of failing)."""
     def plan(method):

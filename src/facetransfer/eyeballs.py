@@ -44,7 +44,8 @@ class Eyeballs:
     eyes : EyeModel
         The target's eyeballs in the reference frame (model units).
     angles : (2, 2) float64
-        The reference frame's gaze, ``[eye (right, left), (yaw, pitch)]`` (radians).
+        The reference frame's gaze, ``[eye (right, left), (yaw, pitch)]`` (radians; yaw > 0
+        toward the subject's left, pitch > 0 up: :mod:`facetransfer.track.gaze`).
     pose : tuple
         ``(R (3, 3), s, t (2,), pixel aspect)``, the reference frame's weak-perspective pose.
     limit : (2,) float64

@@ -21,16 +21,16 @@ the sequence)", applied to the eyes):
 5. the region's rim (forehead, temples, the cheek below the eyes, away from the lids and brows:
    :data:`RIM_DISTANCE`) is pasted only where the target's own expression moved it from where
    the reference frame has it (:func:`eye_strengths`, per vertex, like the jaw's): elsewhere the
-   current frame shows the same skin already, lit as it is now (a bright blob on the forehead
-   of ``make demo``'s turned frames was the reference frame's highlight);
+   current frame shows the same skin already, lit as it is now (pasted there, the reference
+   frame's highlight shows as a bright blob on the forehead of ``make demo``'s turned frames);
 6. away from the lids (:data:`LID_DISTANCE`), a vertex where the reference frame shows what
    the clip usually does not (:func:`facetransfer.region_weights.usual_weights`: its colour
    against the median of 24 frames; most often a strand of the fringe over the brow's tail)
-   keeps the current frame's texture: ``make demo``'s forehead carried frame 3's fringe into
-   every frame; and so does a vertex where the current frame shows something else than the
-   reference frame (:data:`FRAME_RULE`: its own strand of the fringe, over a brow's tail in
-   ``make demo``'s turned frames), near the brows only where the target's expression did not
-   move it (:data:`BROW_KEEP`);
+   keeps the current frame's texture (pasted, frame 3's fringe would show on ``make demo``'s
+   forehead in every frame); and so does a vertex where the current frame shows something
+   else than the reference frame (:data:`FRAME_RULE`: its own strand of the fringe, over a
+   brow's tail in ``make demo``'s turned frames), near the brows only where the target's
+   expression did not move it (:data:`BROW_KEEP`);
 7. each eye's eyeball is turned to the new performance's gaze (its eyeLook* activations:
    :mod:`facetransfer.eyeballs`), where the target's track has eyeLook* activations too.
 
@@ -136,7 +136,7 @@ class EyeTexture:
     image : (Ht, Wt, 3) uint8
         The open-eyed target frame.
     uvs : (n_closed, 2) float64
-        Texture coordinates (v up, :func:`facetransfer.rewrite.frame_uvs`) of the closed mesh's
+        Texture coordinates (v up, :func:`facetransfer.texture.face.frame_uvs`) of the closed mesh's
         vertices in that frame.
     select : (F',) bool
         The triangles of the eye-closed topology textured from ``image``.
@@ -304,7 +304,7 @@ def close_eyes(topo, vertices: np.ndarray):
     Parameters
     ----------
     topo : MeshTopology
-        Of :func:`facetransfer.rewrite.mesh_topology`.
+        Of :func:`facetransfer.topology.mesh_topology`.
     vertices : (n_vertices, 3)
         The neutral face (orders the fill's chains).
 
@@ -564,7 +564,7 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         The target's own track.
     model : MultilinearModel
     topo : MeshTopology
-        Of :func:`facetransfer.rewrite.mesh_topology` (eyes open).
+        Of :func:`facetransfer.topology.mesh_topology` (eyes open).
     brows : bool
         The brows too (:data:`BROW_SHAPES`): textured from the same frame, they move with the new
         performance only (issue 13, the brows).

@@ -54,7 +54,7 @@ def file_kind(path: str | os.PathLike) -> str:
                                 "models and Live Link Face takes")
     kind = content_kind(p) if p.is_file() else None
     if kind is not None and kind.startswith(("a glTF", "a USD", "a JSON", "an HTML")):
-        # one of the tool's own exports (before: "not a video OpenCV can decode")
+        # one of the tool's own exports: said so, not "not a video OpenCV can decode"
         raise FaceTransferError(f"{p} is {kind}: probe describes videos, image sequences, "
                                 "tracks, models and Live Link Face takes")
     return "video"
@@ -160,7 +160,7 @@ def take_facts(path: str | os.PathLike) -> dict:
 def _columns(present: list, prefix: str) -> str:
     """``"yes"`` where a take holds every rotation column of ``prefix``, ``"none"`` where it
     holds none, else the ones it holds and those read as 0 (``"HeadYaw, HeadPitch (HeadRoll
-    read as 0)"``: before, "no" where one was missing and the others were used)."""
+    read as 0)"``: the ones it holds are used, so "no" would not be true)."""
     from .export.livelink import POSE_COLUMNS
 
     every = [n for n in POSE_COLUMNS if n.startswith(prefix)]

@@ -1,5 +1,5 @@
 """A clip's meshes frame by frame (Eq. 5), synthesised a few frames at a time for the renderer
-(:func:`facetransfer.rewrite.rewrite_frames`), on whichever of its threads asks.
+(:func:`facetransfer.rewrite_clip.rewrite_frames`), on whichever of its threads asks.
 """
 
 from __future__ import annotations

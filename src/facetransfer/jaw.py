@@ -24,8 +24,8 @@ sequence)", applied to the jaw only):
    differ), compared over a ring of triangles around the region (:data:`RING`), which the
    jaw does not move: inside the region the target's own opening would bias the ratio. One
    gain for the three channels (the geometric mean of the ring's, as the mouth's inside in
-   :mod:`facetransfer.mouth`): per channel a smile's blush, the lips or hair in the ring
-   tinted the region (a green chin in ``make demo``'s smiling frames). The hue is then the
+   :mod:`facetransfer.mouth`): per channel, a smile's blush, the lips or hair in the ring
+   would tint the region (a green chin in ``make demo``'s smiling frames). The hue is then the
    current frame's, smooth (:data:`JAW_HUE_SIGMA`), compared over the region and its ring
    where both show like skin: the same skin under another head pose and light has another
    hue (an orange cheek in the demo's turned open-mouth frame);
@@ -140,8 +140,9 @@ def jaw_region(model, topo, *, threshold: float = JAW_THRESHOLD, rig=None) -> np
     The triangles whose vertices the :data:`JAW_SHAPES` move (of the model's mean person; small
     holes closed), without ``topo.mouth_faces``. It reaches along the jaw line and under the
     chin, where the surface is seen nearly edge-on: the target's own chin outline and the
-    shadow below it are what moved with the target's opening (keeping only the triangles that
-    face the camera undid the fix on the open-mouth pair: ``BENCHMARKS.md``).
+    shadow below it are what moved with the target's opening (with only the triangles that
+    face the camera, the target's opening shows again on the open-mouth pair:
+    ``BENCHMARKS.md``).
     """
     if not is_arkit_model(model):
         return None
@@ -289,8 +290,8 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     (H, W, 3) uint8
         ``face_image`` with the jaw region replaced (shifted to its colours).
     """
-    # labels in the high bits (4-7): the low ones select layers (before: 2 and 4, a layer not
-    # given, so this entry point raised ShapeError on every call)
+    # labels in the high bits (4-7): the low ones (2 and 4) would select layers this call does
+    # not give, which shade_layers refuses
     flags = jaw_flags(texture, shaded=1, region=16, ring=32)
     (img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
     return _paint_jaw(np.array(face_image, copy=True), face_mask, texture, img, labels,

@@ -132,6 +132,12 @@ class MultilinearModel:
         """Training cells per mode ``(d_1, ..., d_K)``."""
         return tuple(U.shape[0] for U in self.factors)
 
+    @property
+    def identity_mode(self) -> str:
+        """The name of the mode that holds the person: ``"identity"``, or the first mode of a
+        model without one (the first mode of the data sets' Cartesian products)."""
+        return "identity" if "identity" in self.mode_names else self.mode_names[0]
+
     def mode_index(self, mode: str | int) -> int:
         """Index of a mode given by name or index."""
         if isinstance(mode, (int, np.integer)):

@@ -242,7 +242,7 @@ def fade_weights(pick: np.ndarray, k: int, fade: int) -> np.ndarray:
 class RegionTextures:
     """The eye and jaw regions' textures of a target clip (:func:`region_textures`): made by
     the renderer, or ahead of it while a source is still tracked
-    (:func:`facetransfer.video_transfer.plan_sources`), then taken by the renderer when they
+    (:func:`facetransfer.transfer_plan.plan_sources`), then taken by the renderer when they
     are of its clip (:meth:`fits`).
 
     Attributes

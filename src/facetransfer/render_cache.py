@@ -1,9 +1,9 @@
 """Frames a transfer rendered, kept until its video is written: an interrupted ``transfer``
 (or ``puppet``) continues its render where it stopped.
 
-The tracks of a transfer are kept by :mod:`facetransfer.track.cache`; its render, the longer
-step at high resolution (a minute of 1080p is about ten minutes of rendering on two cores), was
-lost to a Ctrl-C. Now :func:`facetransfer.video_transfer.render_plan` encodes the frames into
+The tracks of a transfer are kept by :mod:`facetransfer.track.cache`; its render is the longer
+step at high resolution (a minute of 1080p is about ten minutes of rendering on two cores), so
+it is kept too: :func:`facetransfer.video_transfer.render_plan` encodes the frames into
 parts (:mod:`facetransfer.io.video_parts`), or writes an image sequence's files
 (:mod:`facetransfer.io.sequence_parts`), in a folder of
 ``$XDG_CACHE_HOME/facetransfer/renders`` named by a key of everything the frames depend on
@@ -94,7 +94,7 @@ def _update_track(h, track) -> None:
 
 
 def render_key(plan, model, options, video_options, *, images: bool = False) -> str | None:
-    """The key of rendering ``plan`` (a :class:`~facetransfer.video_transfer.TransferPlan`)
+    """The key of rendering ``plan`` (a :class:`~facetransfer.transfer_plan.TransferPlan`)
     with ``model``, ``options`` (:class:`~facetransfer.rewrite_options.RewriteOptions`) and
     ``video_options`` (:class:`~facetransfer.io.video.VideoOptions` or None) into a video, or
     (``images``) into an image sequence (:mod:`facetransfer.io.sequence_parts`); None when

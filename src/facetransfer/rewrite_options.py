@@ -2,7 +2,7 @@
 
 The mode strings of the rewrite (face texture, mouth texture, blend, tracking preset and
 tracker) are defined here, and :class:`RewriteOptions` checks them when it is made, so that
-:func:`facetransfer.rewrite.rewrite_frames`, :func:`facetransfer.video_transfer.render_plan`,
+:func:`facetransfer.rewrite_clip.rewrite_frames`, :func:`facetransfer.video_transfer.render_plan`,
 :func:`facetransfer.video_transfer.transfer_video`, the demo and ``facetransfer transfer`` share
 one definition of what is allowed (and one error message for each).
 """
@@ -76,7 +76,7 @@ class RewriteOptions:
     ----------
     texture : {"frame", "constant"}
         The target's face texture: the current frame's or one for the clip
-        (:func:`facetransfer.rewrite.rewrite_frames`).
+        (:func:`facetransfer.rewrite_clip.rewrite_frames`).
     mouth : {"frame", "function"} or None
         The mouth texture; None: the job's default
         (:func:`facetransfer.texture.face.default_mouth_mode`).

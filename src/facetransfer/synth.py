@@ -23,7 +23,7 @@ Performance spec (JSON)
         "viseme": [[0, "rest"], [10, "aa"]]
       },
       "pose": {                         # smooth oscillation of the head ...
-        "yaw_deg": 10, "pitch_deg": 5, "roll_deg": 3,   # amplitudes in degrees
+        "yaw_deg": 10, "pitch_deg": 5, "roll_deg": 3,   # amplitudes in degrees (render angles)
         "translate_px": 8,              # amplitude of the image drift in pixels
         "scale": 0.05,                  # relative amplitude of the scale change
         "period_s": 4.0,                # period of the yaw oscillation (others detuned)
@@ -235,7 +235,11 @@ def _frame_camera_params(model, identity_w: np.ndarray, size, fill: float):
 
 
 def _pose_arrays(yaw, pitch, roll, tx, ty, rel_scale, s0, centre, size):
-    """Rotation, scale and translation arrays from per-frame pose parameters."""
+    """Rotation, scale and translation arrays from per-frame pose parameters: ``yaw``,
+    ``pitch``, ``roll`` (n,) render angles in degrees (:func:`facetransfer.render.
+    rotation_from_euler`, ``R = Rz(roll) Ry(yaw) Rx(pitch)``; yaw > 0 turns the face toward the
+    image's right, pitch > 0 looks down, roll > 0 counter-clockwise), ``tx``, ``ty`` (n,) pixels
+    of drift, ``rel_scale`` (n,) times ``s0``."""
     n = len(yaw)
     R = np.stack([rotation_from_euler(yaw[i], pitch[i], roll[i]) for i in range(n)])
     s = s0 * np.asarray(rel_scale, dtype=np.float64)
@@ -377,7 +381,8 @@ def _mode_weights(model, identity: np.ndarray, parsed: dict, n_frames: int
 
 
 def _keyed_pose(pose: dict, n_frames: int) -> np.ndarray:
-    """Keyframed pose: (6, n_frames) yaw, pitch, roll (degrees), tx, ty (pixels), relative scale.
+    """Keyframed pose: (6, n_frames) yaw, pitch, roll (render angles in degrees, as
+    :func:`_pose_arrays` takes them), tx, ty (pixels), relative scale.
 
     ``pose`` holds ``keys`` and nothing else (``fill`` already taken out).
     """
@@ -395,8 +400,9 @@ def _keyed_pose(pose: dict, n_frames: int) -> np.ndarray:
 
 
 def _oscillating_pose(pose: Mapping, t: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Smooth head oscillation at times ``t`` (n,) seconds: yaw, pitch, roll (degrees), tx, ty
-    (pixels) and relative scale, each (n,); the periods are detuned from ``period_s``."""
+    """Smooth head oscillation at times ``t`` (n,) seconds: yaw, pitch, roll (render angles in
+    degrees, as :func:`_pose_arrays` takes them), tx, ty (pixels) and relative scale, each (n,);
+    the periods are detuned from ``period_s``."""
     names = {"yaw_deg", "pitch_deg", "roll_deg", "translate_px", "scale", "period_s"}
     if set(pose) - names:
         raise SpecError(f"unknown pose key(s) {sorted(set(pose) - names)}; known: "
@@ -452,7 +458,9 @@ def random_performance(model, n_frames: int = 100, *, seed: int = 0,
     Every non-identity mode gets a keyframe about every ``key_every`` seconds (jittered): a
     random training row at a random amount (0.4 to 1) from the mode's base, eased in between.
     The identity is a random blend of two training identities unless given (label, weights
-    or blend, as in a spec). The head sways by a few degrees and drifts by a few pixels.
+    or blend, as in a spec). The head sways by a few degrees and drifts by a few pixels:
+    ``yaw_deg``, ``pitch_deg``, ``roll_deg`` are the amplitudes of its render angles in degrees
+    (:func:`facetransfer.render.rotation_from_euler`).
 
     Returns
     -------

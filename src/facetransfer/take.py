@@ -58,7 +58,7 @@ TAKE_SYNCS = ("timecode", "start")
 @dataclass(frozen=True)
 class Take:
     """A take standing for the new performance of a transfer until the target is tracked
-    (:func:`facetransfer.video_transfer.plan_sources`): its file, time alignment, and the
+    (:func:`facetransfer.transfer_plan.plan_sources`): its file, time alignment, and the
     target's start timecode at its frame rate (None: placed at the take's first row)."""
 
     path: Path
@@ -220,7 +220,7 @@ def take_performance(path, target_track, model, *, align: str | None = None,
 def _say_held(path, left: float, n: int, fps: float, align: str | None) -> None:
     """Warn where a take that ends ``left`` seconds after the target's first frame leaves
     the last of its ``n`` frames (at ``fps``) holding its last row (``align`` None or
-    "hold"): the performance stands still there (before: without a word)."""
+    "hold"): the performance stands still there, which the user would not see coming."""
     if align not in (None, "hold") or n < 1:
         return
     k = int(np.floor(left * fps + 0.5)) + 1     # the frames the take's rows reach
@@ -386,8 +386,9 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     with the take's head rotation, framed in ``size`` (the model's mean face filling 0.6 of
     it), at the timecode rate nearest the take's rows (``max_frames``: the first ones).
 
-    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``
-    (radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)``: the inverse of
+    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``:
+    head angles in radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (yaw > 0 turns the face toward
+    the image's right, pitch > 0 looks down, roll > 0 counter-clockwise; the inverse of
     :func:`facetransfer.export.common.head_euler`). What ``facetransfer puppet take.csv``
     renders: the take seen on a face before it goes into a scene.
 

@@ -1,6 +1,6 @@
 """One BLAS thread while the project's own threads or processes share the cores.
 
-The render (:func:`facetransfer.rewrite.rewrite_frames`) runs its frames on threads of its
+The render (:func:`facetransfer.rewrite_clip.rewrite_frames`) runs its frames on threads of its
 own beside the encoder, and a transfer tracks its two clips in two processes; OpenBLAS's
 threads on top of them spin between products (issue 13's 300 frames rendered in 5.6 s with
 them, 4.85 s without: BENCHMARKS.md, "Fortieth session"). The CLI gives OpenBLAS one thread

@@ -286,8 +286,7 @@ def pose_about(pose, target):
     shown pixels: ``s' = k s`` and ``t'`` (shown) ``= T_t + k (t a - T_p)``; the landmarks move
     alike. The rewrite draws the new face over the target's own head (§6), so the pose moves
     the face about where that head is, at its size: a close-up's pose drives a medium shot
-    (before, a pose source of another frame size was refused; copied as it is, a close-up's
-    head would be drawn filling the medium shot).
+    (copied as it is, a close-up's head would be drawn filling the medium shot).
 
     Returns
     -------
@@ -487,8 +486,8 @@ def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int) -> np.ndarray
     says; it eases in over the ``ramp`` frames before ``start`` and out over the ``ramp``
     frames after ``stop`` (a frame ``d`` frames outside the range weighs
     ``smoothstep(1 - d / (ramp + 1))``), cut where the clip ends; 0 beyond. With ``ramp=0``
-    it is a box 1 on ``start..stop``. (Before, the ramps lay inside the range, so its end
-    frames took nothing and a range shorter than two ramps never reached full strength.)
+    it is a box 1 on ``start..stop``. (Ramps inside the range would give its end frames
+    nothing, and a range shorter than two ramps would never reach full strength.)
     """
     t = np.arange(n_frames, dtype=np.float64)
     d = np.maximum(np.maximum(start - t, t - stop), 0.0)     # frames outside the range
@@ -753,7 +752,7 @@ def check_identity_weights(model, w: np.ndarray, *, what: str = "--identity-weig
     """Refuse identity weights ``w`` (r,) outside the space the model's identities span: a
     component farther than :data:`IDENTITY_LIMIT` standard deviations from the training
     identities' mean (TransferError naming it and where such weights come from)."""
-    k = model.mode_index("identity") if "identity" in model.mode_names else 0
+    k = model.mode_index(model.identity_mode)
     U = np.asarray(model.factors[k], np.float64)
     if len(U) < 2:
         return

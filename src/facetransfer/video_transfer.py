@@ -1,16 +1,17 @@
-"""The video transfer job (Vlasic et al. 2005, §5, §6, Fig. 1, Fig. 7): read and track the
-inputs (or reuse their track files), recombine the performance, render it back into the target
-footage and write it with the target's audio.
+"""The video transfer job (Vlasic et al. 2005, §6, Fig. 7): a planned transfer rendered back
+into the target footage and written with the target's audio.
 
-* :func:`plan_transfer` -> :class:`TransferPlan`: reading
-  (:func:`facetransfer.io.video.read_video`), tracking
-  (:func:`facetransfer.track.obtain.obtain_track`, the expression source in a forked process
-  while the target is tracked here), recombining (:func:`facetransfer.transfer.recombine`) or
-  a ready performance;
-* :func:`render_plan`: the frames rewritten (:func:`facetransfer.rewrite.rewrite_frames`) and
-  written (through the render cache's parts, :func:`facetransfer.render_cache.parts_writer`,
-  or :func:`facetransfer.io.video.write_video_with_audio`);
-* :func:`transfer_video`: both, with the outputs checked before any work.
+* :func:`render_plan`: the frames of a :class:`~facetransfer.transfer_plan.TransferPlan`
+  rewritten (:func:`facetransfer.rewrite_clip.rewrite_frames`) and written (through the render
+  cache's parts, :func:`facetransfer.render_cache.parts_writer`, or
+  :func:`facetransfer.io.video.write_video_with_audio`);
+* :func:`transfer_video`: the outputs checked before any work, the plan made
+  (:func:`facetransfer.transfer_plan.plan_sources`), rendered and written, and optionally the
+  new track and its meshes saved.
+
+The plan (reading, tracking, recombining) is :mod:`facetransfer.transfer_plan`;
+:func:`~facetransfer.transfer_plan.plan_transfer`, :class:`~facetransfer.transfer_plan.TransferPlan`
+and :class:`~facetransfer.transfer_plan.TransferSources` are importable from here too.
 
 The writer goes through the render cache (:mod:`facetransfer.render_cache`): an interrupted
 render continues where it stopped (as the puppet's of :mod:`facetransfer.puppet_video`).
@@ -19,7 +20,6 @@ render continues where it stopped (as the puppet's of :mod:`facetransfer.puppet_
 from __future__ import annotations
 
 import contextlib
-import dataclasses
 import logging
 import os
 import time
@@ -29,552 +29,27 @@ from typing import Callable
 
 import numpy as np
 
-from .errors import RewriteError, VideoError
+from .errors import RewriteError
 from .io.ahead import ordered_ahead
 from .io.plate_output import plate_output
 from .io.video_like import like_video
-from .texture.face import (MOUTH_MAX_FRAMES, MouthFunction, mouth_texture_function,
-                           resolve_mouth_mode, timeline_mouth_function)
-from .rewrite import rewrite_frames
-from .rewrite_options import DEFAULT_SPEED, RewriteOptions
-from .topology import MeshTopology
-from .track import obtain
-from .track.presets import TARGET_DETECT_EVERY, track_options
-from .track.video_detect import default_workers
-from .track.project import project_landmarks, take_frames
-from .transfer import constant_weights, nearest_frames, recombine, resample_track, time_map
+from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
+from .rewrite_clip import rewrite_frames
+from .rewrite_options import RewriteOptions
+from .transfer_plan import TransferPlan, TransferSources, plan_sources, plan_transfer  # noqa: F401
 
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "Source",
     "TransferSources",
     "TransferPlan",
-    "nearest_frames",
     "plan_transfer",
-    "plan_sources",
     "TransferResult",
     "RenderResult",
     "render_plan",
     "transfer_video",
     "write_mesh_sequence",
 ]
-
-
-# ---------------------------------------------------------------------------------------------
-# the inputs: one video (and optionally its track file) per attribute
-# ---------------------------------------------------------------------------------------------
-
-@dataclass(frozen=True)
-class Source:
-    """One input video of a transfer and, optionally, its track file (reused, not tracked) and
-    the face to track of several (``"left"``, ``"right"``, ``"centre"``, ``"X,Y"``;
-    :func:`facetransfer.track.face_crop.subject_point`)."""
-
-    video: object
-    track: object = None
-    face: str | None = None
-
-
-@dataclass(frozen=True)
-class TransferSources:
-    """Where each attribute of the new performance comes from (§6, Fig. 1).
-
-    Attributes
-    ----------
-    target : Source
-        The footage rendered into (pose and identity by default).
-    expression, viseme, identity, pose : Source or None
-        Videos whose expression / viseme / identity / pose replace the target's.
-    identity_weights : (r,) array or None
-        Identity weights (instead of an identity video).
-    performance : Track or path-like or None
-        A ready new performance on the target's timeline instead of recombining.
-    take_sync : {"timecode", "start"}
-        Where an expression source that is a Live Link Face take starts on the target's
-        timeline (:data:`facetransfer.take.TAKE_SYNCS`).
-    """
-
-    target: Source
-    expression: Source | None = None
-    viseme: Source | None = None
-    identity: Source | None = None
-    pose: Source | None = None
-    identity_weights: object = None
-    performance: object = None
-    take_sync: str = "timecode"
-
-    @classmethod
-    def of(cls, target, *, target_track=None, expression_from=None, expression_track=None,
-           viseme_from=None, viseme_track=None, identity=None, identity_from=None,
-           identity_track=None, pose_from=None, pose_track=None, performance=None,
-           target_face=None, source_face=None, take_sync: str = "timecode"
-           ) -> "TransferSources":
-        """The sources from the keywords of :func:`plan_transfer` (a track file without its
-        video is ignored; ``source_face``: the face to track in every source video)."""
-        if identity is not None and identity_from is not None:
-            raise RewriteError("give the identity either as weights or as a video, not both")
-
-        def src(video, track):
-            return None if video is None else Source(video, track, source_face)
-
-        from .take import TAKE_SYNCS
-
-        if take_sync not in TAKE_SYNCS:
-            raise RewriteError(f"take_sync must be one of {', '.join(TAKE_SYNCS)}, got "
-                               f"{take_sync!r}")
-        return cls(Source(target, target_track, target_face),
-                   src(expression_from, expression_track),
-                   src(viseme_from, viseme_track), src(identity_from, identity_track),
-                   src(pose_from, pose_track), identity, performance, take_sync)
-
-
-@dataclass(frozen=True)
-class TransferPlan:
-    """Everything needed to render a transfer (built by :func:`plan_transfer`).
-
-    Attributes
-    ----------
-    target_frames : (F, H, W, 3) uint8
-    fps : float
-        The target's frame rate (the output's).
-    target_track : Track
-    new_track : Track
-        The recombined performance on the target's timeline (``n_frames`` <= F).
-    mouth_frames : (Fs, Hs, Ws, 3) uint8
-        Frames the mouth texture comes from (the expression/viseme source, else the target).
-    mouth_track : Track
-        Their track resampled to the new timeline.
-    mouth_index : (n_frames,) int64
-        The mouth frame shown at each output frame.
-    source_tracks : dict
-        The tracks of the inputs as tracked (``"target"``, ``"expression"``, ...).
-    timings : dict
-        Seconds spent reading and tracking.
-    texture_frames : (Fm, Hm, Wm, 3) uint8 or None
-        The clip the mouth texture function (``mouth="function"``) is lifted from: the
-        viseme source, else the expression source, else the target; the target for a ready
-        performance. None: ``mouth_frames``.
-    texture_track : Track or None
-        Its own track (one row per frame of ``texture_frames``, not resampled).
-    performance : bool
-        Whether the new track is a ready (edited) performance rather than a recombination.
-    regions : RegionTextures or None
-        The target's eye and jaw regions, made while the expression source was still tracked
-        (:func:`facetransfer.region_views.region_textures`; the renderer makes them otherwise).
-    """
-
-    target_frames: np.ndarray
-    fps: float
-    target_track: object
-    new_track: object
-    mouth_frames: np.ndarray
-    mouth_track: object
-    mouth_index: np.ndarray
-    source_tracks: dict
-    timings: dict
-    texture_frames: np.ndarray | None = None
-    texture_track: object = None
-    performance: bool = False
-    regions: object = None
-
-    def mouth_function(self, model, topo: MeshTopology | None = None, *,
-                       progress: Callable[[int], None] | None = None, **kwargs) -> MouthFunction:
-        """The mouth texture function lifted from :attr:`texture_frames`
-        (:func:`facetransfer.texture.face.mouth_texture_function`; ``kwargs``: ``tex_size``,
-        ``step``, ``max_frames``, ``k``)."""
-        if self.texture_frames is None or self.texture_track is None:
-            return timeline_mouth_function(model, self.mouth_frames, self.mouth_track,
-                                           self.mouth_index, self.n_frames, topo,
-                                           progress=progress, **kwargs)
-        m = min(len(self.texture_frames), self.texture_track.n_frames)
-        tr = self.texture_track
-        if tr.n_frames > m:
-            tr = take_frames(tr, np.arange(m))
-        return mouth_texture_function(model, self.texture_frames, tr, topo, progress=progress,
-                                      **kwargs)
-
-    @property
-    def n_frames(self) -> int:
-        return int(self.new_track.n_frames)
-
-
-def plan_transfer(target, model, *, target_track=None, expression_from=None,
-                  expression_track=None, viseme_from=None, viseme_track=None, identity=None,
-                  identity_from=None, identity_track=None, pose_from=None, pose_track=None,
-                  performance=None, align: str | None = None, max_frames: int | None = None,
-                  track_method: str = "auto", speed: str = DEFAULT_SPEED,
-                  parallel: bool | None = None, progress_factory=None,
-                  reader=None) -> TransferPlan:
-    """Read and track the inputs and recombine the performance (§5, §6, Fig. 1, Fig. 7).
-
-    The keywords make the :class:`TransferSources` and the tracking part of the
-    :class:`~facetransfer.rewrite_options.RewriteOptions` of :func:`plan_sources`.
-
-    Parameters
-    ----------
-    target : path-like
-        The footage rendered into (pose and identity by default).
-    model : MultilinearModel
-    target_track, expression_track, viseme_track, identity_track, pose_track : path-like, optional
-        Track files to reuse instead of tracking the corresponding video.
-    expression_from, viseme_from, identity_from, pose_from : path-like, optional
-        Videos whose expression / viseme / identity / pose replace the target's.
-    identity : (r,) array, optional
-        Identity weights (instead of ``identity_from``).
-    performance : Track or path-like, optional
-        A ready new performance on the target's timeline (e.g. from ``facetransfer edit``,
-        Fig. 7E) instead of recombining; the mouth texture then comes from the target:
-        its frame whose expression is nearest (:func:`nearest_frames`, ``mouth="frame"``) or
-        the texture function lifted from its frames (``mouth="function"``).
-    align : {"trim", "loop", "hold"} or None
-        Time alignment of the sources (:func:`facetransfer.transfer.time_map`).
-    max_frames : int, optional
-        Use only the first N target frames.
-    track_method : {"auto", "capture", "flow", "landmarks"}
-        See :func:`facetransfer.track.obtain.obtain_track`.
-    speed : {"fast", "balanced", "quality"}
-        Tracking preset (:func:`facetransfer.track.presets.track_options`) for the videos
-        tracked now.
-    parallel : bool, optional
-        Track the expression source in a second (forked) process while the target is tracked
-        here. Default: when the machine has two or more CPUs and the platform can fork. The
-        tracks do not depend on it.
-    reader : callable(path, max_frames=...) -> (frames, fps), optional
-        How videos are decoded: :func:`facetransfer.io.video.read_video` (default) or the
-        :meth:`~facetransfer.io.prefetch.Prefetch.read_video` of reads started earlier.
-
-    Raises
-    ------
-    VideoError
-        No face in the target (or in a whole source); unreadable videos.
-    TrackError, TransferError
-        Mismatched frame sizes, track files of another model or video.
-    """
-    sources = TransferSources.of(
-        target, target_track=target_track, expression_from=expression_from,
-        expression_track=expression_track, viseme_from=viseme_from, viseme_track=viseme_track,
-        identity=identity, identity_from=identity_from, identity_track=identity_track,
-        pose_from=pose_from, pose_track=pose_track, performance=performance)
-    options = RewriteOptions(speed=speed, track_method=track_method)  # before any work
-    return plan_sources(sources, model, options=options, align=align, max_frames=max_frames,
-                        parallel=parallel, progress_factory=progress_factory, reader=reader)
-
-
-def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | None = None,
-                 align: str | None = None, max_frames: int | None = None,
-                 parallel: bool | None = None, progress_factory=None,
-                 reader=None) -> TransferPlan:
-    """:func:`plan_transfer` for :class:`TransferSources`: read, track, recombine.
-
-    ``options``: its ``speed`` and ``track_method`` shape the tracking of the videos tracked
-    now (default :class:`~facetransfer.rewrite_options.RewriteOptions`); ``reader``: see
-    :func:`plan_transfer`.
-    """
-    from .io.video import read_video
-
-    if max_frames is not None and int(max_frames) < 1:
-        raise RewriteError(f"max_frames must be >= 1, got {max_frames}")
-    sources = _take_as_performance(sources, align, model)
-    options = RewriteOptions() if options is None else options
-    planner = _Planner(model, options.track_method, track_options(options.speed),
-                       progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video,
-                       TARGET_DETECT_EVERY[options.speed])
-    frames, fps, pre_read = planner.read_target(sources, max_frames)
-    # the expression source is tracked in a second (forked) process while this one tracks the
-    # target; the child inherits the decoded frames (no second decoding, nothing pickled)
-    early = None
-    if pre_read is not None and sources.expression.track is None:
-        early = obtain.start_background_track(
-            sources.expression.video, model, len(pre_read[0]), frames=pre_read,
-            method=options.track_method, options=planner.track_options, parallel=parallel,
-            face=sources.expression.face)
-    try:
-        tt = planner.target_track(sources.target, frames, fps, alone=early is None)
-        regions = _regions_ahead(frames, tt, model, options, planner.timings) \
-            if early is not None else None
-    except BaseException:
-        if early is not None:
-            early.cancel()
-        raise
-    inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings, regions)
-    for kind in ("expression", "viseme", "pose", "identity"):
-        src = getattr(sources, kind)
-        if src is not None:
-            planner.read_source(inputs, kind, src, pre_read if kind == "expression" else None,
-                                early if kind == "expression" else None)
-    if sources.performance is not None:
-        return _performance_plan(inputs, sources, model)
-    return _recombined_plan(inputs, sources, model, align)
-
-
-def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings: dict):
-    """The target's eye and jaw region textures for the render with ``options``
-    (:func:`facetransfer.region_views.region_textures`), made here while the expression
-    source is tracked in the forked process, which finishes later (this one would wait for
-    it, a core idle; issue 13's 10 s). None for a target cut into shots (each its own)."""
-    from .region_views import region_textures
-    from .threads import one_blas_thread
-
-    if len(target_track.shot_starts):
-        return None
-    t = time.perf_counter()
-    # one BLAS thread (as the CLI's commands have from their start, cli.main.SERIAL_POOLS):
-    # the other core is the forked process's (0.56 CPU-s instead of 0.9 in the same time;
-    # BENCHMARKS.md, "Fortieth session")
-    with one_blas_thread():
-        regions = region_textures(frames, target_track, model, options, len(frames),
-                                  per_frame=options.texture != "constant")
-    timings["regions"] = time.perf_counter() - t
-    return regions
-
-
-def _take_as_performance(sources: TransferSources, align, model) -> TransferSources:
-    """``sources`` with an expression source that is a Live Link Face take
-    (:mod:`facetransfer.take`) as the ready performance it makes once the target is tracked;
-    a take drives the target alone, a model of ARKit expressions (checked before any work)."""
-    from .arkit import is_arkit_model
-    from .take import Take, is_take
-
-    if sources.expression is None or not is_take(sources.expression.video):
-        return sources
-    path = sources.expression.video
-    if not is_arkit_model(model):
-        raise RewriteError(f"a Live Link Face take ({path}) drives a model whose expressions "
-                           "are ARKit blendshapes (the default model, 'ict-arkit')")
-    beside = {"a viseme source": sources.viseme is not None,
-              "an identity": sources.identity is not None or sources.identity_weights is not None,
-              "a pose source": sources.pose is not None,
-              "a ready performance": sources.performance is not None,
-              "a source track": sources.expression.track is not None}
-    for what, given in beside.items():
-        if given:
-            raise RewriteError(f"a Live Link Face take ({path}) drives the target's expression "
-                               f"alone; it cannot be combined with {what}")
-    from .io.video_display import timecode_of
-    from .io.video_sequence import is_sequence
-
-    start = None
-    if sources.take_sync == "timecode" and (Path(sources.target.video).is_file()
-                                            or is_sequence(sources.target.video)):
-        start = timecode_of(sources.target.video)
-    return dataclasses.replace(sources, expression=None,
-                               performance=Take(Path(path), align, start))
-
-
-@dataclass(frozen=True)
-class _Inputs:
-    """The decoded inputs of a plan: the target's frames and frame rate, and per kind
-    (``"target"``, ``"expression"``, ...) the track and (sources) the frames; the seconds
-    spent reading and tracking."""
-
-    frames: np.ndarray
-    fps: float
-    tracks: dict
-    source_frames: dict
-    timings: dict
-    regions: object = None
-
-    @property
-    def size(self) -> tuple[int, int]:
-        return self.frames.shape[2], self.frames.shape[1]
-
-
-@dataclass(frozen=True)
-class _Planner:
-    """The reading and tracking steps of :func:`plan_sources`; ``timings`` accumulates the
-    seconds spent reading and tracking; ``target_every``: the target's detector is shown one
-    frame of it (:data:`facetransfer.track.presets.TARGET_DETECT_EVERY`)."""
-
-    model: object
-    track_method: str
-    track_options: object
-    progress_factory: object
-    timings: dict
-    reader: Callable
-    target_every: int = 1
-
-    def read_target(self, sources: TransferSources, max_frames):
-        """``(frames, fps, pre_read)``: the target's frames and, with an expression source,
-        that source's ``(frames, fps)`` decoded at the same time on a second thread and cut to
-        the frames the target's timeline needs (else None)."""
-        from .io.prefetch import frames_covering, frames_to_cover
-        from .io.video import video_info
-
-        read_video = self.reader
-        t0 = time.perf_counter()
-        target = sources.target.video
-        if sources.expression is None:
-            frames, fps = read_video(target, max_frames=max_frames)
-            self.timings["read"] += time.perf_counter() - t0
-            return frames, fps, None
-        from concurrent.futures import ThreadPoolExecutor
-
-        expression_from = sources.expression.video
-        with ThreadPoolExecutor(max_workers=2) as pool:
-            ft = pool.submit(read_video, target, max_frames=max_frames)
-            fs = pool.submit(read_video, expression_from,
-                             max_frames=frames_to_cover(target, expression_from, max_frames))
-            frames, fps = ft.result()
-            sfr, sfps = fs.result()
-        si = video_info(expression_from)
-        need = frames_covering(len(frames), fps, sfps)
-        if len(sfr) < need and len(sfr) < si.n_frames:  # the containers' counts were short
-            sfr, sfps = read_video(expression_from, max_frames=need)
-        self.timings["read"] += time.perf_counter() - t0
-        return frames, fps, (sfr[:need], sfps)
-
-    def track(self, video, track_file, frames, fps, limit, *, alone: bool = False,
-              face: str | None = None, every: int = 1):
-        """The track of ``video`` (:func:`facetransfer.track.obtain.obtain_track`, of several
-        people the ``face``, its detector shown one frame of ``every``), timed; ``alone``:
-        nothing else is tracked meanwhile, so its detection may take two processes
-        (:func:`facetransfer.track.video_detect.detect_video`)."""
-        t = time.perf_counter()
-        workers = default_workers() if alone else 1
-        tr = obtain.obtain_track(video, self.model, frames=frames, fps=fps,
-                                 track_file=track_file, max_frames=limit,
-                                 method=self.track_method,
-                                 progress_factory=self.progress_factory,
-                                 options=self.track_options, workers=workers, face=face,
-                                 detect_every=every)
-        self.timings["track"] += time.perf_counter() - t
-        return tr
-
-    def target_track(self, target: Source, frames, fps, *, alone: bool = False):
-        """The target's track, checked against its frames (a face somewhere)."""
-        n, H, W = frames.shape[:3]
-        tt = self.track(target.video, target.track, frames, fps, n, alone=alone,
-                        face=target.face, every=self.target_every)
-        if target.track is not None:
-            tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H),
-                           what=f"target {target.video}")
-            _warn_other_source(tt, target.video, "target")
-            if tt.n_frames < n:
-                raise RewriteError(f"target track {target.track} has {tt.n_frames} frames, the "
-                                   f"target video {n}: give --max-frames {tt.n_frames} to "
-                                   "rewrite the frames it covers")
-        if tt.lost.all():
-            raise VideoError(f"no face found in the target {target.video}")
-        return tt
-
-    def read_source(self, inputs: _Inputs, kind: str, src: Source, pre_read, early) -> None:
-        """Read and track a source (``pre_read``: its decoded frames; ``early``: its track
-        from the background process) into ``inputs``."""
-        from .io.prefetch import frames_covering
-        from .io.video import video_info
-
-        need = frames_covering(len(inputs.frames), inputs.fps, video_info(src.video).fps)
-        t = time.perf_counter()
-        fr, sfps = pre_read if pre_read is not None else self.reader(src.video, max_frames=need)
-        self.timings["read"] += time.perf_counter() - t
-        tr = None
-        if early is not None:
-            t = time.perf_counter()
-            tr = early.result()  # None: the background job failed to run; track here
-            self.timings["track"] += time.perf_counter() - t
-            if tr is not None and len(fr) < tr.n_frames:
-                tr = take_frames(tr, np.arange(len(fr)))
-        if tr is None:                       # tracked here, after the target: nothing beside it
-            tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True,
-                            face=src.face)
-        checked = _checked_source(kind, src, fr, tr)     # a track of other frames: its error
-        if src.track is not None:
-            _warn_other_source(tr, src.video, kind)
-        inputs.tracks[kind], inputs.source_frames[kind] = checked
-
-
-def _checked_source(kind: str, src: Source, fr, tr):
-    """``(track, frames)`` of a source: a track file of another frame size refused, the
-    frames cut to the track, a face somewhere (a pose source of another frame size is moved
-    into the target's by :func:`facetransfer.transfer.recombine`)."""
-    if src.track is not None and tuple(tr.frame_size) != (fr.shape[2], fr.shape[1]):
-        raise RewriteError(f"{kind} track {src.track} is for {tr.frame_size[0]}x"
-                           f"{tr.frame_size[1]} frames but {src.video} is "
-                           f"{fr.shape[2]}x{fr.shape[1]}")
-    if tr.n_frames < len(fr):
-        fr = fr[:tr.n_frames]
-    if tr.lost.all():
-        raise VideoError(f"no face found in the {kind} source {src.video}")
-    if tr.lost.any():
-        log.info("%s source %s: face lost in %d frames (those keep the original frame)",
-                 kind, src.video, int(tr.lost.sum()))
-    return tr, fr
-
-
-def _identity_weights(inputs: _Inputs, sources: TransferSources, model):
-    """The new identity: the weights given, the identity source's (mean over its frames), or
-    None (the target's)."""
-    if "identity" not in inputs.tracks:
-        return sources.identity_weights
-    idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
-    return constant_weights(inputs.tracks["identity"], idm)
-
-
-def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> TransferPlan:
-    """The plan of a ready performance: the mouth from the target's frame whose expression is
-    nearest (:func:`nearest_frames`)."""
-    from .take import Take
-    from .track import Track
-
-    if set(inputs.tracks) != {"target"} or sources.identity_weights is not None:
-        raise RewriteError("a ready performance (--performance) excludes the other sources")
-    perf, tt, frames, n = sources.performance, inputs.tracks["target"], inputs.frames, \
-        len(inputs.frames)
-    if isinstance(perf, Take):
-        new = perf.performance(tt, model)
-    else:
-        new = perf if isinstance(perf, Track) else Track.load(perf)
-    new.check_model(model)
-    W, H = inputs.size
-    if tuple(new.frame_size) != (W, H):
-        raise RewriteError(f"performance is for {new.frame_size[0]}x{new.frame_size[1]} "
-                           f"frames, the target {sources.target.video} is {W}x{H}")
-    if new.n_frames > n:
-        new = take_frames(new, np.arange(n))
-    elif new.n_frames < n and not isinstance(perf, Take):   # as a short --target-track
-        raise RewriteError(f"performance {new.label} has {new.n_frames} frames, the target "
-                           f"video {sources.target.video} {n}: give --max-frames "
-                           f"{new.n_frames} to rewrite the frames it covers")
-    if not isinstance(perf, Take):
-        _warn_other_source(new, sources.target.video, "performance")
-    varying = [m for m in model.mode_names if m != "identity"] or list(model.mode_names)
-    q = np.concatenate([new.weights[m] for m in varying], axis=1)
-    b = np.concatenate([tt.weights[m] for m in varying], axis=1)
-    j = nearest_frames(q, b, ~tt.lost)
-    mt = take_frames(tt, j)
-    # the chosen frames' geometry, seen by their own cameras (texture lookup)
-    return TransferPlan(frames, inputs.fps, tt, new, frames, mt, j, inputs.tracks,
-                        inputs.timings, texture_frames=frames, texture_track=tt, performance=True)
-
-
-def _recombined_plan(inputs: _Inputs, sources: TransferSources, model, align) -> TransferPlan:
-    """The plan of a recombination (:func:`facetransfer.transfer.recombine`, Fig. 1): the
-    mouth texture from the source of the mouth's motion (visemes, else expressions), else the
-    target's own mouth."""
-    tracks, frames, fps, n = inputs.tracks, inputs.frames, inputs.fps, len(inputs.frames)
-    tt = tracks["target"]
-    new = recombine(tt, expression=tracks.get("expression"), viseme=tracks.get("viseme"),
-                    identity=_identity_weights(inputs, sources, model), pose=tracks.get("pose"),
-                    align=align)
-    new = project_landmarks(new, model)
-    mouth_kind = "viseme" if "viseme" in tracks else ("expression" if "expression" in tracks
-                                                      else None)
-    if mouth_kind is None:
-        mouth_frames, mouth_track = frames, take_frames(tt, np.arange(new.n_frames))
-        mouth_index = np.arange(new.n_frames)
-        tex_frames, tex_track = frames, tt
-    else:
-        ms = tracks[mouth_kind]
-        tm = time_map(ms.n_frames, ms.fps, n, fps, align=align)
-        mouth_track = take_frames(resample_track(ms, tm), np.arange(new.n_frames))
-        mouth_frames = inputs.source_frames[mouth_kind]
-        mouth_index = tm.nearest[:new.n_frames]
-        tex_frames, tex_track = mouth_frames, ms
-    return TransferPlan(frames, fps, tt, new, mouth_frames, mouth_track,
-                        np.asarray(mouth_index, np.int64), tracks, inputs.timings,
-                        texture_frames=tex_frames, texture_track=tex_track,
-                        regions=inputs.regions)
 
 
 @dataclass(frozen=True)
@@ -656,7 +131,7 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
 
     Lifts the mouth texture function first when the mouth mode is ``"function"`` (from
     :attr:`TransferPlan.texture_frames`), then rewrites every frame
-    (:func:`facetransfer.rewrite.rewrite_frames`) and writes the video with the audio of
+    (:func:`facetransfer.rewrite_clip.rewrite_frames`) and writes the video with the audio of
     ``audio_from`` as the frames come.
 
     Parameters
@@ -823,14 +298,6 @@ def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
             lift_bar.close()
 
 
-def _warn_other_source(track, video, role: str) -> None:
-    """Say so when a given track was made from a video of another name than ``video`` (a
-    renamed copy is fine; another clip of the same size would drive the wrong face)."""
-    track.warn_other_video(video, "its motion drives the wrong face" if role in (
-        "target", "performance") else "it drives the wrong head pose" if role == "pose"
-        else "it does not follow that video's frames", role)
-
-
 def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: bool) -> None:
     """The outputs of :func:`transfer_video` can be written (before any work)."""
     from .io.atomic import check_output_path
@@ -892,4 +359,4 @@ def transfer_video(sources: TransferSources, out, model, *,
                           rendered.timings, rendered.resumed, rendered.kept)
 
 
-from .puppet_video import puppet_video  # noqa: E402,F401 (its home before the thirty-ninth session)
+from .puppet_video import puppet_video  # noqa: E402,F401 (its former home: still importable here)

@@ -296,8 +296,9 @@ def _terminated(signum, frame):
 
 
 def _default_sigterm_in_child() -> None:
-    """A forked child (a background tracker, a render worker) dies of SIGTERM, as before: its
-    parent stops it so (``Process.terminate``)."""
+    """A forked child (a background tracker, a render worker) dies of SIGTERM (the default
+    handler, not its parent's, which raises :class:`Terminated`): its parent stops it so
+    (``Process.terminate``)."""
     import signal
 
     if signal.getsignal(signal.SIGTERM) is _terminated:
@@ -414,8 +415,8 @@ def _is_file(p) -> bool:
 def _kept(command: str, written: list | None = None) -> str:
     """What an interrupted ``command`` keeps for the next run (the track cache's progress, the
     render cache's parts), and the outputs it had ``written`` before it stopped: the next run
-    replaces them only with ``--overwrite`` (before, "the same command continues", which then
-    refused them)."""
+    replaces them only with ``--overwrite``, so the line says so (the same command alone
+    refuses them as existing)."""
     from ..render_cache import cache_enabled as rendering
     from ..track.cache import cache_enabled as tracking
 

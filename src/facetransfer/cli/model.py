@@ -325,7 +325,9 @@ def _render_tile(vertices: np.ndarray, faces: np.ndarray, camera, size) -> np.nd
 
 
 def _camera(vertices: np.ndarray, size, yaw_deg: float = 15.0):
-    """A weak-perspective camera framing ``vertices`` (render's helper, or the same by hand)."""
+    """A weak-perspective camera framing ``vertices`` (render's helper, or the same by hand),
+    the head turned by ``yaw_deg`` degrees about the model's y axis (positive: toward the
+    image's right; :func:`facetransfer.render.rotation_from_euler` with no pitch or roll)."""
     try:
         from ..render import look_at_weak_perspective, rotation_from_euler
     except ImportError:

@@ -37,7 +37,12 @@ def parse_size(text: str) -> tuple[int, int]:
 
 
 def parse_pose(text: str | None) -> dict[str, float]:
-    """``"yaw=10,pitch=-5,roll=0,scale=1.2"`` -> ``{"yaw": 10.0, ...}`` (missing keys omitted)."""
+    """``"yaw=10,pitch=-5,roll=0,scale=1.2"`` -> ``{"yaw": 10.0, ...}`` (missing keys omitted).
+
+    Yaw, pitch and roll are render angles in degrees
+    (:func:`facetransfer.render.rotation_from_euler`: ``R = Rz(roll) Ry(yaw) Rx(pitch)``; yaw > 0
+    turns the face toward the image's right, pitch > 0 looks down, roll > 0 counter-clockwise).
+    """
     out: dict[str, float] = {}
     for part in (text or "").split(","):
         if not part.strip():

@@ -302,7 +302,7 @@ def _capture(args, model, options, progress, bars):
 
 def _say_progress(partial) -> None:
     """The line of an interrupted ``track``: where its progress is, where any was saved
-    (before, said of a file an interrupt before the first save had not written)."""
+    (no file is named when the interrupt came before the first save wrote one)."""
     if partial.exists():
         print(f"interrupted; the progress is in {partial}: run the same command again to "
               "continue", file=sys.stderr)

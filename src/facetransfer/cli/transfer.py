@@ -356,7 +356,8 @@ def run_transfer(args) -> int:
     prefetch = _prefetch_inputs(args)
     loads = _start_tracker_loads(to_track > 0 and args.tracker != "landmarks")
     try:
-        from ..video_transfer import TransferSources, transfer_video
+        from ..transfer_plan import TransferSources
+        from ..video_transfer import transfer_video
 
         model = resolve_model(args.model, progress=not args.no_progress)
     finally:
@@ -533,8 +534,8 @@ def _chosen_identity(model, args):
     if args.identity_label:
         identity = identity_from_label(model, args.identity_label)
     elif args.identity_weights:
-        idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
-        identity = parse_weights(args.identity_weights, model.ranks[model.mode_index(idm)])
+        identity = parse_weights(args.identity_weights,
+                                 model.ranks[model.mode_index(model.identity_mode)])
         check_identity_weights(model, identity)
     if args.identity_dials:
         identity = _dialled_identity(model, identity, args)

@@ -11,7 +11,9 @@ y up, z towards the viewer):
 * ``R = Ry(yaw) @ Rx(pitch) @ Rz(roll)`` (intrinsic Y-X'-Z''), angles in **radians**;
   positive yaw turns the face towards the image's right (the subject's left), positive pitch
   tips the top of the head towards the camera (looking down), positive roll turns the face
-  counter-clockwise in the image.
+  counter-clockwise in the image. These are the "head angles" of
+  :mod:`facetransfer.render.cameras` (ARKit's order); the previews' and the synthetic
+  footage's "render angles" have the same axes and signs in another order, in degrees.
 * Head translation in model units: ``((t_x - W/2) / s, -(t_y - H/2) / s, 0)``, the model origin's
   offset from the image centre at the face's depth (weak perspective has no depth).
 """
@@ -87,7 +89,7 @@ def resolve_model(track, model=None, *, progress=None, announce=None):
 
 
 def head_euler(rotation: np.ndarray) -> np.ndarray:
-    """Yaw, pitch, roll in radians per frame (see the module's conventions).
+    """Yaw, pitch, roll in radians per frame: the head angles (see the module's conventions).
 
     Parameters
     ----------
@@ -97,7 +99,9 @@ def head_euler(rotation: np.ndarray) -> np.ndarray:
     Returns
     -------
     (F, 3) float64
-        ``[yaw, pitch, roll]`` with ``R = Ry(yaw) Rx(pitch) Rz(roll)``.
+        ``[yaw, pitch, roll]`` in radians with ``R = Ry(yaw) Rx(pitch) Rz(roll)``: yaw about y,
+        positive toward the image's right; pitch about x, positive looking down; roll about
+        z, positive counter-clockwise in the image.
     """
     from scipy.spatial.transform import Rotation
 

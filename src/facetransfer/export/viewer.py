@@ -7,7 +7,8 @@ update it), the face's mesh and morph targets embedded (int16, one scale per tar
 * a slider per expression shape (the 52 ARKit blendshapes for an ARKit model, else one per
   training expression of the model),
 * a slider per semantic identity dial (:mod:`facetransfer.dials`),
-* head yaw, pitch and roll,
+* head yaw, pitch and roll (head angles in degrees: ``R = Ry(yaw) Rx(pitch) Rz(roll)``,
+  three.js's ``"YXZ"`` order, the signs of :func:`facetransfer.export.common.head_euler`),
 * for a track: a timeline with play and pause that drives the shapes and head pose per frame.
 
 Identity dials act on the neutral face (their offsets are exact there); the expression offsets

@@ -215,10 +215,11 @@ def _anonymous(shape: tuple) -> np.ndarray:
 
     NumPy asks the kernel to back arrays of 4 MB and more with huge pages (``madvise``
     ``MADV_HUGEPAGE``); where the kernel then compacts memory at the first touch of each 2 MB
-    (its default ``transparent_hugepage/defrag`` of ``madvise``), a fresh process stalled in
+    (its default ``transparent_hugepage/defrag`` of ``madvise``), a fresh process stalls in
     the kernel writing a clip's decoded frames: 2.0 s of system time for 560 MB of 1080p
-    frames, against 0.3 s in ordinary pages (0.1 s when huge pages happen to be free). A
-    10-second 512² transfer spent 1.5 CPU-s less (BENCHMARKS.md, "Twenty-fourth session").
+    frames, against 0.3 s in ordinary pages (0.1 s when huge pages happen to be free). In
+    ordinary pages a 10-second 512² transfer spends 1.5 CPU-s less (BENCHMARKS.md,
+    "Twenty-fourth session").
     Frames are read a frame at a time, contiguously: huge pages gain them nothing.
 
     Private, not shared (Python's default for a map): a shared anonymous map is the kernel's

@@ -245,8 +245,8 @@ def _stored_frames(path, *, start: int, stop: int | None, seek: bool) -> Iterato
 @functools.lru_cache(maxsize=16)
 def _say_truncated(path: str, last: int, counted: int) -> None:
     """:func:`read_video`'s warning of a video that ends early, for frames read one by one
-    (a track's; before, a file cut short was tracked as a shorter clip without a word); once
-    a file."""
+    (a track's: a file cut short is tracked as a shorter clip, and this says so); once a
+    file."""
     log.warning("video %s ends after frame %d of the %d its header counts (truncated?): "
                 "its frames to there are used", path, last, counted)
 

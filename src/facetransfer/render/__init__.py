@@ -175,7 +175,9 @@ def render_model(model, weights, *, size: tuple[int, int] = (640, 480), yaw_deg:
     weights : mapping mode -> (r_k,)
     size : (W, H)
     yaw_deg, pitch_deg, roll_deg : float
-        Head rotation (:func:`rotation_from_euler`), about the centre of the face's box.
+        Head rotation in degrees, render angles (:func:`rotation_from_euler`: ``R = Rz(roll)
+        Ry(yaw) Rx(pitch)``; yaw > 0 turns the face toward the image's right, pitch > 0 looks
+        down, roll > 0 turns it counter-clockwise), about the centre of the face's box.
     scale : float
         Zoom relative to the framing (1: the rotated face box fills ``fill`` of the image).
     colors, texture : optional

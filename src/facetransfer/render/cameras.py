@@ -3,6 +3,35 @@
 :class:`WeakPerspective` is the tracker's camera (``p = s diag(1, -1) R[:2] X + t``, depth
 ``(R X)[2]``, larger = nearer); :class:`Pinhole` is for previews. Also head rotations from
 Euler angles and a camera that frames a mesh.
+
+Head angles
+-----------
+A head rotation ``R`` (3, 3) maps model coordinates (x toward the subject's left, which is the
+image's right; y up; z toward the camera) to camera coordinates. The package names its yaw,
+pitch and roll in three orders. All three share the axes and the signs, with the right-hand
+rule (``Rx(a) = [[1, 0, 0], [0, cos a, -sin a], [0, sin a, cos a]]``, and so on):
+
+* yaw about y: positive turns the face toward the image's right (the subject's left);
+* pitch about x: positive tips the top of the head toward the camera (the face looks down);
+* roll about z: positive turns the face counter-clockwise in the image.
+
+They differ in the order the three rotations are composed in and in the unit:
+
+* **render angles**, ``R = Rz(roll) Ry(yaw) Rx(pitch)``, **degrees**: :func:`rotation_from_euler`
+  and its inverse :func:`euler_from_rotation`; the previews (``facetransfer render --pose``),
+  the synthetic footage of :mod:`facetransfer.synth`.
+* **head angles**, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (intrinsic Y-X'-Z''), **radians**: ARKit's
+  and Live Link Face's; :func:`facetransfer.export.common.head_euler` and its inverse in
+  :func:`facetransfer.take.take_track`; the viewer's sliders (in degrees there).
+* **capture angles**, ``R = Rx(pitch) Ry(yaw) Rz(roll)``, **radians**: the capture tracker's
+  (:mod:`facetransfer.track.capture`), which reads the sine of the yaw as ``R[0, 2]`` (the
+  tracked points' view-dependent offset, :meth:`facetransfer.track.capture_points.Shape.at_view`)
+  and rescales the pitch about the camera's x axis alone.
+
+A rotation about one axis has the same angle in all three (up to the unit); a combined one does
+not, so an angle moves between them only through the matrix (``head_euler(rotation_from_euler(
+yaw, pitch, roll))``). The eyes' gaze angles (:mod:`facetransfer.track.gaze`) are directions,
+not rotations: yaw with the head's sign, pitch positive *up*.
 """
 
 from __future__ import annotations
@@ -199,10 +228,12 @@ class Pinhole:
 
 def rotation_from_euler(yaw_deg: float = 0.0, pitch_deg: float = 0.0,
                         roll_deg: float = 0.0) -> np.ndarray:
-    """Head rotation from angles in degrees: ``R = Rz(roll) @ Ry(yaw) @ Rx(pitch)``.
+    """Head rotation from render angles in degrees: ``R = Rz(roll) @ Ry(yaw) @ Rx(pitch)``.
 
-    Yaw turns about the model's vertical (y) axis, pitch about x (nodding), roll about the view
-    (z) axis; angles follow the right-hand rule. Returns a (3, 3) float64 rotation.
+    Yaw turns about the model's vertical (y) axis, positive toward the image's right (the
+    subject's left); pitch about x, positive tips the top of the head toward the camera (looks
+    down); roll about the view (z) axis, positive counter-clockwise in the image (the
+    right-hand rule; the module's "Head angles"). Returns a (3, 3) float64 rotation.
     """
     y, p, r = np.deg2rad([yaw_deg, pitch_deg, roll_deg])
     cy, sy, cp, sp, cr, sr = np.cos(y), np.sin(y), np.cos(p), np.sin(p), np.cos(r), np.sin(r)
@@ -213,7 +244,9 @@ def rotation_from_euler(yaw_deg: float = 0.0, pitch_deg: float = 0.0,
 
 
 def euler_from_rotation(R: np.ndarray) -> tuple[float, float, float]:
-    """Inverse of :func:`rotation_from_euler`: ``(yaw_deg, pitch_deg, roll_deg)``."""
+    """Inverse of :func:`rotation_from_euler`: the render angles ``(yaw_deg, pitch_deg,
+    roll_deg)`` of ``R = Rz(roll) Ry(yaw) Rx(pitch)``, in degrees, yaw in [-90, 90] (axes and
+    signs: the module's "Head angles")."""
     R = _as_rotation(R)
     yaw = np.arcsin(np.clip(-R[2, 0], -1.0, 1.0))
     pitch = np.arctan2(R[2, 1], R[2, 2])

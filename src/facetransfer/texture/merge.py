@@ -76,8 +76,8 @@ def stack_lifted(lifted) -> tuple[np.ndarray, np.ndarray]:
 class TextureSum:
     """The sums of :func:`merge_textures`, ``Σ_f w_f tex_f`` and ``Σ_f w_f`` (float64), taken
     one lifted texture at a time: a clip's merge in the memory of one texture instead of all
-    of them (a 512² texture lifted from each of 587 frames held 5.6 GB; BENCHMARKS.md,
-    "Fortieth session").
+    of them (a 512² texture lifted from each of 587 frames, all held, takes 5.6 GB;
+    BENCHMARKS.md, "Fortieth session").
 
     Attributes
     ----------

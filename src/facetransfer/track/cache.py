@@ -2,11 +2,12 @@
 an interrupted one continues its tracking where it stopped.
 
 ``facetransfer track`` writes its track where the user says and resumes from ``OUT.partial.npz``.
-``transfer``, ``puppet`` and ``demo`` track their videos as a step of a longer job and wrote the
-tracks nowhere: a second run with another ``--crf`` or texture option tracked both clips again,
-and an interrupted one lost its tracking. Now :func:`facetransfer.track.obtain.obtain_track`
-keeps each track it makes under ``$XDG_CACHE_HOME/facetransfer/tracks`` (default
-``~/.cache/facetransfer/tracks``) by a key of everything the track depends on
+``transfer``, ``puppet`` and ``demo`` track their videos as a step of a longer job and write the
+tracks nowhere themselves; so that a second run (with another ``--crf`` or texture option, say)
+does not track both clips again and an interrupted one keeps its tracking,
+:func:`facetransfer.track.obtain.obtain_track` keeps each track it makes under
+``$XDG_CACHE_HOME/facetransfer/tracks`` (default ``~/.cache/facetransfer/tracks``) by a key of
+everything the track depends on
 (:func:`track_key`): the video file (resolved path, size, modification time), the frames
 tracked, the tracker and its options, the model's content, and the code, data and libraries
 that make a track (:func:`code_fingerprint`: a changed tracker never reads an old track). The capture

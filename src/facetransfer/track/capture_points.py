@@ -84,6 +84,7 @@ class Shape:
         P = sampler.model.n_vertices
         self.offset = np.zeros((P, 3)) if offset is None else offset        # (P, 3) static
         self.view = view                    # (P, 3): the offset's part times sin(yaw), or None
+        # (the yaw of the capture angles, R = Rx(pitch) Ry(yaw) Rz(roll): sin(yaw) = R[0, 2])
         self.arkit = is_arkit_model(model)
         self.id_name = "identity" if "identity" in model.mode_names else None
         self.per_frame = tuple(m for m in model.mode_names if m != self.id_name)
@@ -117,12 +118,16 @@ class Shape:
             self.x0 = np.concatenate([self.priors[m].mean for m in self.per_frame])
 
     def offset_at(self, sin_yaw: float) -> np.ndarray:
-        """The offset of the tracked points at a head yaw: ``offset + sin_yaw view``, (P, 3)."""
+        """The offset of the tracked points at a head yaw: ``offset + sin_yaw view``, (P, 3).
+
+        ``sin_yaw`` is the sine of the yaw of the capture angles (``R = Rx(pitch) Ry(yaw)
+        Rz(roll)``, so ``R[0, 2]``; :mod:`facetransfer.render.cameras`): about the model's y
+        axis, positive with the face turned toward the image's right; no unit (a sine)."""
         return self.offset if self.view is None else self.offset + float(sin_yaw) * self.view
 
     def at_view(self, sin_yaw: float) -> "Shape":
-        """The same shape with the offset at a head yaw (:meth:`offset_at`): itself without a
-        view-dependent offset."""
+        """The same shape with the offset at a head yaw (:meth:`offset_at`; ``sin_yaw`` as
+        there, ``R[0, 2]``): itself without a view-dependent offset."""
         if self.view is None:
             return self
         other = copy.copy(self)

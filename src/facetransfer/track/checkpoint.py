@@ -189,8 +189,8 @@ class ProgressFile:
     def remove(self) -> None:
         """Delete the file (the run is complete, or the file unreadable). Nothing there (its
         folder a file, too) is nothing to delete; a best-effort file that cannot be deleted
-        is a warning (a cache's must never fail the job: before, a track cache whose folder
-        was a file failed ``transfer`` with "Not a directory")."""
+        is a warning (a cache's must never fail the job, e.g. a track cache whose folder is a
+        file must not fail ``transfer`` with "Not a directory")."""
         try:
             self.path.unlink()
         except (FileNotFoundError, NotADirectoryError):

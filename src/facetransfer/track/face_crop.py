@@ -6,15 +6,15 @@ pixels high in 1080 rows) is never found, and the capture says "no face found". 
 model itself, once given the face's region, reads it from the full-resolution frame.
 
 :class:`FollowingLandmarker` is the detector of the capture's detections
-(:func:`facetransfer.track.detect.detect_clip`): each frame goes to Face Landmarker whole, as
-before, while that finds the face. Where it does not, and the frame is large enough to hold a
+(:func:`facetransfer.track.detect.detect_clip`): each frame goes to Face Landmarker whole
+while that finds the face. Where it does not, and the frame is large enough to hold a
 face too small for the whole-frame search (:func:`search_tiles` gives it tiles), the
 frame is searched tile by tile (overlapping squares of half its shorter side, then a quarter),
 and the face found is then followed in a square crop about it (:func:`crop_about`: three times
 the face's size, moved with it every frame) by a second landmarker in video mode, the points
 shifted back to the frame. When the face grows past :data:`WHOLE_FRAME_SHARE` of the frame, or
 the crop loses it, the whole frame is tried again. Footage whose face the whole-frame detector
-finds is detected exactly as before.
+finds is detected exactly as by that detector alone.
 
 Several faces (an interview, a two-shot): Face Landmarker follows one face, whichever it found
 first, and may take another after a loss, as may the second detection process that starts in

@@ -25,8 +25,10 @@ While the lids close the detector's iris slides down with them: :func:`usable_ir
 those frames (a dip of the lid gap) and bridges the iris over them.
 
 Angles are in radians, ``yaw`` positive toward the subject's left (the model's +x), ``pitch``
-positive up (+y). :func:`gaze_activations` maps them to ARKit's ``eyeLook*`` coefficients
-(``Left`` = the subject's own left eye, ``Out`` = toward that eye's ear).
+positive up (+y): directions in the head's frame, not rotations (the head's own pitch,
+:mod:`facetransfer.render.cameras`, is positive looking *down*; its yaw has this sign).
+:func:`gaze_activations` maps them to ARKit's ``eyeLook*`` coefficients (``Left`` = the
+subject's own left eye, ``Out`` = toward that eye's ear).
 
 References
 ----------
@@ -129,14 +131,16 @@ def eye_model(points68: np.ndarray, *, rest: tuple = IRIS_REST,
 
 def gaze_direction(angles: np.ndarray) -> np.ndarray:
     """Unit gaze directions in the head's frame, ``(..., 2) [yaw, pitch] -> (..., 3)``:
-    ``(sin yaw cos pitch, sin pitch, cos yaw cos pitch)``."""
+    ``(sin yaw cos pitch, sin pitch, cos yaw cos pitch)``; radians, yaw positive toward the
+    subject's left (+x), pitch positive up (+y)."""
     a = np.asarray(angles, np.float64)
     y, p = a[..., 0], a[..., 1]
     return np.stack([np.sin(y) * np.cos(p), np.sin(p), np.cos(y) * np.cos(p)], -1)
 
 
 def _angles(d: np.ndarray) -> np.ndarray:
-    """Inverse of :func:`gaze_direction`, ``(..., 3) -> (..., 2)``."""
+    """Inverse of :func:`gaze_direction`, ``(..., 3) -> (..., 2)`` ``[yaw, pitch]`` in radians
+    (the module's signs)."""
     return np.stack([np.arctan2(d[..., 0], d[..., 2]),
                      np.arctan2(d[..., 1], np.hypot(d[..., 0], d[..., 2]))], -1)
 
@@ -150,7 +154,8 @@ def project_iris(eyes: EyeModel, angles: np.ndarray, R: np.ndarray, s: np.ndarra
     ----------
     eyes : EyeModel
     angles : (F, 2, 2) float
-        ``[frame, eye, (yaw, pitch)]``.
+        ``[frame, eye, (yaw, pitch)]``, radians (yaw > 0 toward the subject's left, pitch > 0
+        up).
     R : (F, 3, 3), s : (F,), t : (F, 2)
         Weak-perspective pose per frame.
 
@@ -185,7 +190,8 @@ def gaze_angles(eyes: EyeModel, iris: np.ndarray, R: np.ndarray, s: np.ndarray,
     Returns
     -------
     (F, 2, 2) float64
-        ``[frame, eye, (yaw, pitch)]`` in radians in the head's frame; NaN where ``iris`` is. An
+        ``[frame, eye, (yaw, pitch)]`` in radians in the head's frame (yaw > 0 toward the
+        subject's left, pitch > 0 up); NaN where ``iris`` is. An
         iris farther from the centre's image than the radius allows is taken on the eyeball's
         silhouette (gaze perpendicular to the view).
     """
@@ -298,7 +304,8 @@ def gaze_activations(angles: np.ndarray, options: GazeOptions | None = None,
     Parameters
     ----------
     angles : (F, 2, 2) float
-        From :func:`gaze_angles` (``[frame, eye (right, left), (yaw, pitch)]``).
+        From :func:`gaze_angles` (``[frame, eye (right, left), (yaw, pitch)]``, radians, yaw
+        > 0 toward the subject's left, pitch > 0 up).
     options : GazeOptions
     closed : (F, 2) bool, optional
         Eyes whose lids are closed (:func:`usable_iris`): their Up/Down are NaN (e.g. for a

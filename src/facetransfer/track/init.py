@@ -20,7 +20,7 @@ import numpy as np
 
 from ..arkit import ARKIT_NAMES
 from ..errors import AssetError, TrackError
-from .landmarks import IBUG_WEIGHTS, REQUIRED_IBUG, ibug_names, mediapipe_to_ibug
+from .landmarks import IBUG_WEIGHTS, REQUIRED_IBUG, eye_distance, ibug_names, mediapipe_to_ibug
 from .solver import FrameState, fit_points
 
 log = logging.getLogger(__name__)
@@ -130,7 +130,7 @@ def fit_landmarks(model, landmarks: np.ndarray, *, state: FrameState | None = No
     if ok.sum() < 4:
         raise TrackError(f"need at least 4 landmarks to fit the pose, got {int(ok.sum())}")
     w = (IBUG_WEIGHTS if weights is None else np.asarray(weights, float))[ok]
-    iod = np.linalg.norm(L[36] - L[45]) if ok[36] and ok[45] else np.ptp(L[ok], axis=0).max() / 2
+    iod = eye_distance(L)
     lam = prior * (max(iod, 1.0) / 50.0) ** 2
     return fit_points(model, vid[ok], L[ok], state=state, point_weights=w, modes=modes,
                       prior=lam, iterations=iterations)

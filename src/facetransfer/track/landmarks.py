@@ -31,8 +31,8 @@ from ..errors import FaceTransferError, ShapeError
 log = logging.getLogger(__name__)
 
 __all__ = ["MP_TO_IBUG", "IBUG_WEIGHTS", "REQUIRED_IBUG", "mediapipe_to_ibug", "ibug_names",
-           "table_matrix", "calibrated_matrix", "mapping_matrix", "read_correspondence",
-           "CALIBRATION_FILE"]
+           "eye_distance", "table_matrix", "calibrated_matrix", "mapping_matrix",
+           "read_correspondence", "CALIBRATION_FILE"]
 
 #: The calibrated correspondence, in the package's data folder.
 CALIBRATION_FILE = "mediapipe_ibug.json"
@@ -65,6 +65,28 @@ IBUG_WEIGHTS = np.array([0.2] * 17 + [0.6] * 10 + [1.0] * 9 + [1.0] * 12 + [1.0]
 
 #: iBUG points a user must give for initialisation: eye corners, nose tip, mouth corners (§5.2).
 REQUIRED_IBUG = (36, 39, 42, 45, 30, 48, 54)
+
+
+def eye_distance(points: np.ndarray) -> float:
+    """The face's size in the image: the distance of the outer eye corners (iBUG 36, 45), the
+    unit the trackers measure residuals and scale priors in.
+
+    Parameters
+    ----------
+    points : (68, 2) float
+        iBUG-68 pixel positions, NaN where a point is missing.
+
+    Returns
+    -------
+    float
+        ``|p_36 - p_45|``; with a corner missing, half the longer side of the bounding box of
+        the points that are there; 1.0 when none is.
+    """
+    L = np.asarray(points, float)
+    if np.all(np.isfinite(L[[36, 45]])):
+        return float(np.linalg.norm(L[36] - L[45]))
+    ok = np.all(np.isfinite(L), axis=1)
+    return float(np.ptp(L[ok], axis=0).max() / 2) if ok.any() else 1.0
 
 
 

@@ -77,7 +77,7 @@ def landmark_track(model, landmarks68: np.ndarray, *, fps: float, size: tuple[in
     found = np.isfinite(L).all(axis=(1, 2))
     if not found.any():
         raise VideoError(f"no face found in any frame of {source or 'the video'}")
-    idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
+    idm = model.identity_mode
     good = np.flatnonzero(found)
     pick = good[np.linspace(0, good.size - 1, min(identity_frames, good.size)).round().astype(int)]
     ids = [fit_landmarks(model, L[i], iterations=12).weights[idm] for i in pick]

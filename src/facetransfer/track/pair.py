@@ -21,7 +21,7 @@ from .camera import N_POSE, Pose, compose, pose_jacobian, project, so3_log
 from .init import require_landmarks
 from .klt import (Pyramid, build_pyramid, klt_terms_at, level_coords, robust_weights,
                   sample_windows, window_confidence, window_offsets)
-from .landmarks import IBUG_WEIGHTS
+from .landmarks import IBUG_WEIGHTS, eye_distance
 from .options import TrackOptions
 from .solver import (BasisCache, FrameState, Prior, flow_normal_equations, normal_equations,
                      point_terms, prior_terms, schur_reduce, solve_step, weight_jacobian)
@@ -377,7 +377,7 @@ class FaceTracker:
         m = self.accumulated[0]
         ok = np.all(np.isfinite(landmarks), axis=1)
         anc = (self.lm_vertices[ok], np.asarray(landmarks, float)[ok], IBUG_WEIGHTS[ok])
-        iod = _iod(landmarks)
+        iod = eye_distance(landmarks)
         Q = self.priors[m].Q
         A, b = self._anchor_system(anc, state.pose, m, state.weights, Q)
         # landmark errors in units of the face size: comparable to the normalised flow term
@@ -421,14 +421,6 @@ def _spread(p: np.ndarray, score: np.ndarray, k: int) -> np.ndarray:
 
 def _now() -> float:
     return time.perf_counter()
-
-
-def _iod(L: np.ndarray) -> float:
-    L = np.asarray(L, float)
-    if np.all(np.isfinite(L[[36, 45]])):
-        return float(np.linalg.norm(L[36] - L[45]))
-    ok = np.all(np.isfinite(L), axis=1)
-    return float(np.ptp(L[ok], axis=0).max() / 2) if ok.any() else 1.0
 
 
 def _clip_step(d: np.ndarray, scale: float, *, max_rot: float = 0.15, max_log_scale: float = 0.1,

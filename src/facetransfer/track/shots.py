@@ -125,8 +125,8 @@ def joined_shots(tracks: list, spans: list[tuple[int, int]]):
 def _held(tracks: list, spans: list, done: list, k: int):
     """Shot ``k`` without a face, marked lost: each frame holds the nearest tracked frame of
     the shots beside it (the last of the one before, the first of the one after, the earlier
-    on a tie; before, the nearer shot's for every frame: a head held 10 frames at its pose
-    before a black gap snapped at its end)."""
+    on a tie), not the nearer shot's for every frame, which would make a head held 10 frames at
+    its pose before a black gap snap at its end."""
     from dataclasses import replace
 
     from .project import take_frames
@@ -185,7 +185,7 @@ def shot_inputs(start: int, stop: int, n: int, target_frames, target_track, new_
                 source_track, source_index):
     """``(target frames, target track, new track, source track, source index)`` of frames
     ``start .. stop - 1`` of a rewrite of ``n`` frames (all of them for the whole clip): a shot
-    rewritten as a clip of its own (:func:`facetransfer.rewrite.rewrite_frames`), so that its
+    rewritten as a clip of its own (:func:`facetransfer.rewrite_clip.rewrite_frames`), so that its
     reference frames (the eyes', the jaw's, the lips' colour) are its own."""
     if (start, stop) == (0, n):
         return target_frames, target_track, new_track, source_track, source_index

@@ -72,8 +72,8 @@ def split_frame(done: int, total: int, workers: int) -> int | None:
     first = total // 2           # where an uninterrupted run splits
     if total >= SPLIT_MIN_FRAMES and done < first:
         # a run resumed in this process's part: the same child as then, detecting the same
-        # frames from the same one (before, the rest halved: the frames between the two
-        # splits seen with another tracking history, up to 1.1 px off on an 800-frame clip)
+        # frames from the same one (halving the rest instead would show the frames between
+        # the two splits with another tracking history, up to 1.1 px off on an 800-frame clip)
         return first
     if total >= SPLIT_MIN_FRAMES and done == first:
         # the first half done, the child's lost: this process continues as the child did (from

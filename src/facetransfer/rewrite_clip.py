@@ -1,0 +1,539 @@
+"""A clip rewritten (Vlasic et al. 2005, §6, Fig. 7): the rewrite of one frame
+(:mod:`facetransfer.rewrite`) run over every frame of a target clip.
+
+:func:`rewrite_frames` checks the clip and, for each shot of the target, builds a
+:class:`_ClipRenderer` that holds what the frames share: the target's face texture for the whole
+clip (``texture="constant"``) or the way to lift each frame's, the mouth's texture (the source's
+frames or the texture function of §6), the eye and jaw regions' reference frames
+(:mod:`facetransfer.region_views`), the meshes of the new performance, the target and the source
+made a few frames at a time (:class:`facetransfer.frame_meshes.FrameMeshes`), the source's lip
+residual (:mod:`facetransfer.lips`), the target's lip colour (:mod:`facetransfer.lip_colour`)
+and the new gaze (:mod:`facetransfer.eyeballs`). The renderer rewrites frame ``i`` with
+:func:`facetransfer.rewrite.rewrite_frame_part`, once per view of the eye and jaw regions, and
+mixes the views. Frames are independent: they are rendered here, on threads or in forked
+processes (each sends back the face's box only), and yielded in order.
+
+The whole job (reading, tracking, recombining, writing) is :mod:`facetransfer.video_transfer`.
+
+References
+----------
+Vlasic, Brand, Pfister, Popović. Face Transfer with Multilinear Models. SIGGRAPH 2005, §6, Fig. 7.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import os
+from dataclasses import dataclass
+from typing import Callable, Iterator
+
+import numpy as np
+
+from .errors import RewriteError
+from .eyeballs import track_gaze
+from .region_views import RegionTextures, blend_renders, region_modes, region_textures, views_at
+from .frame_meshes import FrameMeshes
+from .eyes import EyeTexture
+from .jaw import JawTexture
+from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights
+from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
+from .mouth import mouth_ring_faces
+from .monochrome import is_monochrome, monochrome_changes
+from .texture.function import attribute_vector
+from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
+                           merged_face_texture, mouth_texture_function, resolve_mouth_mode,
+                           timeline_mouth_function)
+from .rewrite import RewriteFrame, _paste, rewrite_frame_part
+from .rewrite_options import RewriteOptions
+from .topology import MeshTopology, close_mouth, mesh_topology
+
+log = logging.getLogger(__name__)
+
+__all__ = ["rewrite_frames"]
+
+
+def rewrite_frames(target_frames, target_track, new_track, model, *, source_frames=None,
+                   source_track=None, source_index: np.ndarray | None = None,
+                   options: RewriteOptions | None = None, texture: str | None = None,
+                   blend: str | None = None, feather: float | None = None,
+                   mouth: str | None = None, mouth_function: MouthFunction | None = None,
+                   topo: MeshTopology | None = None, workers: int | None = None,
+                   processes: bool | None = None, progress: Callable[[int], None] | None = None,
+                   eyes: str | None = None, start: int = 0,
+                   regions: RegionTextures | None = None) -> Iterator[RewriteFrame]:
+    """Rewrite every target frame with the new performance (§6, Fig. 7); each shot of an
+    edited target (``target_track.shot_starts``) as a clip of its own.
+
+    Parameters
+    ----------
+    target_frames : (F, H, W, 3) uint8 or sequence of frames
+    target_track : Track
+        The target's own track (texture lifting).
+    new_track : Track
+        The new performance on the target's timeline (:func:`facetransfer.transfer.recombine`),
+        at most ``F`` frames; its lost frames keep the original frame.
+    model : MultilinearModel
+    source_frames : sequence of (Hs, Ws, 3) uint8, optional
+        The expression source video (mouth texture).
+    source_track : Track, optional
+        The source's track resampled to the new timeline (same frame count as ``new_track``).
+    source_index : (F,) int, optional
+        The source frame shown at each output frame (default ``arange``).
+    options : RewriteOptions, optional
+        Texture, mouth, blend, feather and erode (default :class:`RewriteOptions`); the
+        keywords ``texture``, ``blend``, ``feather``, ``mouth`` replace single attributes.
+    texture : {"frame", "constant"}
+        The target's face texture: the current frame's (default: it keeps the frame's own
+        lighting; better on synthetic truth, ``benchmarks/bench_transfer.py``) or one for the
+        whole clip (the paper's choice).
+    blend, feather
+        See :func:`facetransfer.rewrite.rewrite_frame`.
+    mouth : {"frame", "function"}
+        The mouth's texture (lips and the closed gap); default ``"frame"``: the source frame
+        shown at this time (``source_index``) warped through the source's own geometry (none
+        without a source). ``"function"``: the texture function of §6
+        (:func:`facetransfer.texture.face.mouth_texture_function`) queried with the *new*
+        performance's attribute vector at every frame; needs model UVs.
+    mouth_function : MouthFunction, optional
+        With ``mouth="function"``: the texture function to query (default: lifted here from
+        the source frames, else the target's).
+    workers : int, optional
+        Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU;
+        BLAS on one thread while they run, :func:`_render`); the output does not depend on it.
+    processes : bool, optional
+        With ``workers > 1``: in forked processes where the platform can (each sends back
+        the face's box), not threads; default threads (as fast on 2 cores: BENCHMARKS.md).
+    progress : callable(int), optional
+        Called with 1 after each frame.
+    eyes : {"model", "target"}, optional
+        Replaces ``options.eyes``: the new performance's lids over an open-eyed target frame
+        (:mod:`facetransfer.eyes`, the default) or the target's own eyes through the holes.
+    start : int
+        The first frame to yield (a render continued): frame ``i`` is the same whatever it.
+    regions : RegionTextures, optional
+        The region textures made ahead, if of the clip (:class:`RegionTextures`).
+
+    Yields
+    ------
+    RewriteFrame
+        Frames ``start`` to ``new_track.n_frames - 1``.
+    """
+    opts = (options or RewriteOptions()).with_(texture=texture, blend=blend, feather=feather,
+                                                mouth=mouth, eyes=eyes)
+    n, start = new_track.n_frames, int(start)
+    if not 0 <= start <= n:
+        raise RewriteError(f"start frame {start} is outside the {n} frames")
+    from .track.shots import shots_from
+
+    for a, b, (frames, tt, new, st, si) in shots_from(start, n, target_frames, target_track,
+                                                      new_track, source_track, source_index):
+        one = _ClipRenderer.build(frames, tt, new, model, opts, source_frames=source_frames,
+                                  source_track=st, source_index=si, regions=regions,
+                                  mouth_function=mouth_function, topo=topo)
+        yield from _render(one, frames, range(max(start, a) - a, b - a), workers, processes,
+                           progress)
+
+
+def _render(one, target_frames, todo: range, workers: int | None, processes: bool | None,
+            progress):
+    """Yield ``one(i)`` for i in ``todo`` in order: here, on threads or in forked processes
+    (see :func:`rewrite_frames`' ``workers`` and ``processes``), BLAS on one thread meanwhile.
+
+    BLAS's own threads would spin beside the render's (:mod:`facetransfer.threads`)."""
+    from .threads import one_blas_thread
+
+    workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
+    with one_blas_thread():
+        if workers == 1 or len(todo) < 2:
+            for i in todo:
+                yield one(i)
+                if progress:
+                    progress(1)
+            return
+        import multiprocessing as mp
+
+        if processes and "fork" in mp.get_all_start_methods():
+            yield from _render_in_processes(one, target_frames, todo, workers, progress)
+        else:
+            yield from _render_in_threads(one, todo, workers, progress)
+
+
+def _check_clip(target_frames, target_track, new_track, source_track, with_mouth: bool
+                ) -> np.ndarray:
+    """Frame counts and sizes of a clip to rewrite; returns the first target frame."""
+    n = new_track.n_frames
+    if len(target_frames) < n:
+        raise RewriteError(f"the new performance has {n} frames but the target only "
+                           f"{len(target_frames)}")
+    if target_track.n_frames < n:
+        raise RewriteError(f"the target track has {target_track.n_frames} frames, fewer than the "
+                           f"new performance's {n}")
+    first = np.asarray(target_frames[0])
+    size = (first.shape[1], first.shape[0])
+    for what, tr in (("target", target_track), ("new", new_track)):
+        if tuple(tr.frame_size) != size:
+            raise RewriteError(f"{what} track is for {tr.frame_size[0]}x{tr.frame_size[1]} "
+                               f"frames but the target video is {size[0]}x{size[1]}")
+    if with_mouth and source_track.n_frames < n:
+        raise RewriteError(f"the source track has {source_track.n_frames} frames, fewer than {n}")
+    return first
+
+
+def _clip_mouth_function(model, topo: MeshTopology, new_track, target_frames, target_track,
+                         source_frames, source_track, sidx: np.ndarray, with_mouth: bool,
+                         mouth_function: MouthFunction | None) -> MouthFunction | None:
+    """The texture function of ``mouth="function"``: the given one (checked against the model
+    and the mesh), else lifted from the source frames (or the target's without a source)."""
+    n = new_track.n_frames
+    if mouth_function is None and topo.mouth_faces.size:
+        if with_mouth:
+            mouth_function = timeline_mouth_function(model, source_frames, source_track, sidx,
+                                                     n, topo)
+        else:
+            mouth_function = mouth_texture_function(model, target_frames, target_track, topo)
+    if mouth_function is not None:
+
+        n_attr = attribute_vector(model, new_track.weights_at(0)).shape[-1]
+        if mouth_function.n_attributes != n_attr or \
+                mouth_function.uvs.shape[0] != topo.n_closed:
+            raise RewriteError(f"the mouth texture function is for {mouth_function.n_attributes} "
+                               f"attributes and {mouth_function.uvs.shape[0]} vertices, the model "
+                               f"has {n_attr} and {topo.n_closed}")
+    return mouth_function
+
+
+@dataclass(frozen=True)
+class _ClipRenderer:
+    """The per-frame work of :func:`rewrite_frames`: ``renderer(i) -> RewriteFrame``.
+
+    Attributes
+    ----------
+    const_tex : FaceTexture or None
+        The clip's face texture (``texture="constant"``); None: each frame's own.
+    mouth_function : MouthFunction or None
+        Queried at every frame (``mouth="function"``); None: the source's frame, if any.
+    with_mouth : bool
+        The mouth comes from ``source_frames`` (``mouth="frame"`` with a source).
+    eye_tex : EyeTexture or None
+        The eye region's texture (``eyes="model"``; ``topo`` then has its eye holes closed).
+    jaw_tex : JawTexture or None
+        The jaw region's texture (``jaw="closed"`` with the per-frame face texture).
+    meshes : FrameMeshes
+        ``"new"``, ``"target"``, ``"source"`` meshes, a few frames at a time; missing kinds
+        are synthesised per frame.
+    lips : LipResidual or None
+        The source's residual at the lips (``lips="residual"`` with the source's frames and
+        a track with detections, :mod:`facetransfer.lips`).
+    ring : (F',) bool or None
+        :func:`facetransfer.mouth.mouth_ring_faces` of ``topo``, when the mouth is textured.
+    lip_tint : LipTint or None
+        The target's lip colour for the source's lips (``lip_colour="target"`` with the
+        source's frames as the mouth texture, :mod:`facetransfer.lip_colour`; the §6 texture
+        function's atlas holds no skin around the mouth to compare with).
+    gaze : (F, 2, 2) float64 or None
+        The new performance's gaze per frame (its eyeLook* activations), where the eye region
+        turns the reference frame's eyeballs to it (:mod:`facetransfer.eyeballs`).
+    mono : bool
+        The target is monochrome: the pixels the rewrite changes are brought to grey
+        (:mod:`facetransfer.monochrome`).
+    """
+
+    target_frames: object
+    target_track: object
+    new_track: object
+    model: object
+    options: RewriteOptions
+    topo: MeshTopology
+    first: np.ndarray
+    source_frames: object
+    source_track: object
+    sidx: np.ndarray
+    const_tex: FaceTexture | None
+    mouth_function: MouthFunction | None
+    with_mouth: bool
+    meshes: "FrameMeshes"
+    eye_tex: EyeTexture | None = None
+    jaw_tex: JawTexture | None = None
+    lips: LipResidual | None = None
+    ring: np.ndarray | None = None
+    lip_tint: LipTint | None = None
+    gaze: np.ndarray | None = None
+    mono: bool = False
+
+    @classmethod
+    def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
+              source_frames, source_track, source_index, mouth_function, topo,
+              regions: RegionTextures | None = None) -> "_ClipRenderer":
+        """Check the clip, lift the textures (the region textures ``regions`` made ahead, if
+        they are this clip's) and synthesise the meshes once."""
+        mouth = resolve_mouth_mode(opts.mouth or "frame", model)
+        n = new_track.n_frames
+        with_mouth = source_frames is not None and source_track is not None
+        first = _check_clip(target_frames, target_track, new_track, source_track, with_mouth)
+        sidx = np.arange(n) if source_index is None else np.asarray(source_index, np.int64)
+        if topo is None:
+            topo = regions.open_topo if regions is not None else mesh_topology(model)
+        fn = None
+        if mouth == "function":
+            fn = _clip_mouth_function(model, topo, new_track, target_frames, target_track,
+                                      source_frames, source_track, sidx, with_mouth,
+                                      mouth_function)
+            with_mouth = with_mouth and fn is None  # else the source frames are not looked at
+        const_tex = None
+        if opts.texture == "constant" and not target_track.lost.all():
+            const_tex = merged_face_texture(target_frames, target_track, model, topo) \
+                if model.uvs is not None else constant_face_texture(target_frames, target_track,
+                                                                   model, topo)
+        # after the mouth function, which keeps the open topology (issue 13)
+        modes = region_modes(opts, const_tex is None)
+        if regions is None or regions.open_topo is not topo or \
+                not regions.fits(target_track, n, modes):
+            regions = region_textures(target_frames, target_track, model, opts, n, topo=topo,
+                                      per_frame=const_tex is None)
+        topo, eye_tex, jaw_tex = regions.topo, regions.eye_tex, regions.jaw_tex
+        kinds = {"new": new_track}
+        if const_tex is None:
+            kinds["target"] = target_track
+        if with_mouth:
+            kinds["source"] = source_track
+        lips = clip_lip_residual(model, topo, source_track) \
+            if with_mouth and opts.lips == "residual" else None
+        mono = is_monochrome(target_frames, n)
+        renderer = cls(target_frames, target_track, new_track, model, opts, topo, first,
+                       source_frames, source_track, sidx, const_tex, fn, with_mouth,
+                       FrameMeshes(model, kinds, n), eye_tex, jaw_tex, lips,
+                       mouth_ring_faces(topo) if with_mouth else None, mono=mono)
+        if opts.lip_colour == "target" and with_mouth and model.landmarks is not None:
+            tint = renderer.clip_lip_tint()
+            renderer = dataclasses.replace(renderer, lip_tint=tint.grey() if mono and tint
+                                           else tint)
+        if eye_tex is not None and eye_tex.eyeballs is not None:
+            renderer = dataclasses.replace(renderer, gaze=track_gaze(
+                new_track if opts.gaze == "performance" else target_track))
+        return renderer
+
+    def clip_lip_tint(self) -> LipTint | None:
+        """The target's lip colour over the source's (:mod:`facetransfer.lip_colour`), read
+        from up to :data:`facetransfer.lip_colour.SAMPLES` frames spread through the clip
+        where neither face is lost, through the textures the frames are rendered with."""
+        weights, lips = lip_vertex_weights(self.model, self.topo)
+        skin = np.setdiff1d(np.unique(self.topo.faces[self.ring]), np.flatnonzero(weights > 0))
+        n = self.new_track.n_frames  # the target's track may be longer (align="trim")
+        ok = np.flatnonzero(~(self.new_track.lost | self.target_track.lost[:n]))
+        if ok.size == 0 or lips.size == 0 or skin.size == 0:
+            return None
+        pick = ok[np.unique(np.linspace(0, ok.size - 1, min(LIP_SAMPLES, ok.size)).round()
+                            .astype(np.int64))]
+        Vt = self._meshes_at("target", self.target_track, pick)
+        Vs = self._meshes_at("source", self.source_track, pick)
+        target = (self.face_texture(np.asarray(self.target_frames[i]), int(i), V)
+                  for i, V in zip(pick, Vt))
+        source = (self.mouth_texture(int(i), V) for i, V in zip(pick, Vs))
+        tr = lip_ratio(((t.image, t.uvs) for t in target), lips, skin)
+        sr = lip_ratio(((t.image, t.uvs) for t in source), lips, skin)
+        tint = LipTint.of(weights, tr, sr)
+        log.info("lip colour: the target's lips over the source's %s (RGB)",
+                 np.array2string(tint.tint, precision=2))
+        return tint
+
+    def mesh(self, kind: str, track, i: int) -> np.ndarray:
+        """The mesh (n_vertices, 3) of frame ``i`` of ``track`` (its ``kind`` in :attr:`meshes`)."""
+        if kind in self.meshes:
+            return self.meshes.frame(kind, i)
+        return self.model.synthesize(track.weights_at(i))
+
+    def _meshes_at(self, kind: str, track, frames: np.ndarray) -> np.ndarray:
+        """The meshes ``(len(frames), n_vertices, 3)`` of some frames of ``track``: one
+        product of the kind's clip basis (not a chunk of :attr:`meshes` per frame)."""
+        if kind in self.meshes:
+            return self.meshes.basis(kind).meshes(np.asarray(frames, np.int64))
+        return np.stack([self.model.synthesize(track.weights_at(int(i))) for i in frames])
+
+    def face_texture(self, frame: np.ndarray, i: int, mesh: np.ndarray | None = None
+                     ) -> FaceTexture:
+        """The target's face texture at frame ``i`` (``mesh``: the target's, if at hand)."""
+        if self.const_tex is not None:
+            return self.const_tex
+        if mesh is None:
+            mesh = self.mesh("target", self.target_track, i)
+        Vt = close_mouth(mesh, self.topo)
+        size = (frame.shape[1], frame.shape[0])
+        return FaceTexture(frame, frame_uvs(Vt, self.target_track.camera(i), size), i)
+
+    def mouth_texture(self, i: int, mesh: np.ndarray | None = None) -> FaceTexture | None:
+        """The mouth texture at frame ``i``: the function's, the source frame's (``mesh``:
+        the source's, if at hand), or None."""
+        if self.mouth_function is not None:
+            return self.mouth_function.face_texture(
+                attribute_vector(self.model, self.new_track.weights_at(i)))
+        if not self.with_mouth:
+            return None
+        j = int(self.sidx[i])
+        sf = np.asarray(self.source_frames[j])
+        if mesh is None:
+            mesh = self.mesh("source", self.source_track, i)
+        Vs = close_mouth(mesh, self.topo)
+        size = (sf.shape[1], sf.shape[0])
+        uvs = frame_uvs(Vs, self.source_track.camera(i), size)
+        if self.lips is not None:  # the image's lips onto the mesh's (facetransfer.lips)
+            uvs = warp_uvs(uvs, self.lips.warp, self.lips.texture[i], size)
+        return FaceTexture(sf, uvs, j)
+
+    def new_mesh(self, i: int) -> np.ndarray:
+        """The new face at frame ``i`` (n_vertices, 3), with the source's lip residual added
+        (:func:`facetransfer.lips.displace_lips`) when :attr:`lips` is set."""
+        V = self.mesh("new", self.new_track, i)
+        if self.lips is None:
+            return V
+        Vs = self.mesh("source", self.source_track, i)
+        return displace_lips(V, self.lips.warp, self.lips.shape[i],
+                             self.source_track.rotation[i], self.source_track.scale[i],
+                             mouth_width_ratio(V, Vs, self.lips.warp))
+
+    def __call__(self, i: int) -> RewriteFrame:
+        """Frame ``i`` rewritten (:meth:`part` pasted into it)."""
+        return _paste(np.asarray(self.target_frames[i]), self.part(i))
+
+    def part(self, i: int):
+        """Frame ``i``'s rewrite on the face's box: ``(box, RewriteFrame)`` or None
+        (:func:`facetransfer.rewrite.rewrite_frame_part`); the renders of its region views
+        mixed there."""
+        frame = np.asarray(self.target_frames[i])
+        if frame.shape != self.first.shape:
+            raise RewriteError(f"target frame {i} is {frame.shape}, frame 0 {self.first.shape}")
+        if self.new_track.lost[i] or self.target_track.lost[i]:
+            return None
+        o, V, tex, mouth = self.options, self.new_mesh(i), self.face_texture(frame, i), \
+            self.mouth_texture(i)
+        parts = [(rewrite_frame_part(
+            frame, V, self.new_track.camera(i), self.topo, tex, mouth_texture=mouth,
+            blend=o.blend, feather=o.feather, erode=o.erode, eye_texture=eye, jaw_texture=jaw,
+            mouth_ring=self.ring, lip_tint=self.lip_tint), we * wj)
+            for eye, we in views_at(self.eye_tex, i, None if self.gaze is None else self.gaze[i])
+            for jaw, wj in views_at(self.jaw_tex, i)]
+        if parts[0][0] is None:       # the face outside the frame (the same box every view)
+            return None
+        box = parts[0][0][0]
+        res = blend_renders([(part[1], w) for part, w in parts])
+        if self.mono:
+            x0, y0, x1, y1 = box
+            res = dataclasses.replace(res, image=monochrome_changes(res.image,
+                                                                    frame[y0:y1, x0:x1]))
+        return box, res
+
+
+def _render_in_threads(one, todo: range, workers: int, progress):
+    """Yield ``one(i)`` for i in ``todo``, computed on ``workers`` threads, in order.
+
+    Frames are independent: the rasteriser and most numpy kernels release the GIL; the
+    look-ahead is bounded (twice the workers)."""
+    from collections import deque
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        pending: deque = deque()
+        nxt, n = todo.start, todo.stop
+        while nxt < n or pending:
+            while nxt < n and len(pending) < 2 * workers:
+                pending.append(pool.submit(one, nxt))
+                nxt += 1
+            fut = pending.popleft()
+            try:
+                res = fut.result()
+            except BaseException:
+                for f in pending:
+                    f.cancel()
+                raise
+            yield res
+            if progress:
+                progress(1)
+
+
+def _crop_of(T: np.ndarray, frame: RewriteFrame):
+    """``(box, crop result)`` of a rewritten frame: the inverse of
+    :func:`facetransfer.rewrite._paste`, cropped to the pixels that differ from ``T`` or belong
+    to the face (small to send between processes); None when nothing changed."""
+    changed = frame.face_mask | frame.mouth_mask | (frame.image != T).any(axis=-1)
+    changed |= frame.rendered.any(axis=-1)
+    if not changed.any():
+        return None
+    ys = np.flatnonzero(changed.any(axis=1))
+    xs = np.flatnonzero(changed.any(axis=0))
+    y0, y1, x0, x1 = int(ys[0]), int(ys[-1]) + 1, int(xs[0]), int(xs[-1]) + 1
+    sl = (slice(y0, y1), slice(x0, x1))
+    return (x0, y0, x1, y1), RewriteFrame(frame.image[sl].copy(), frame.rendered[sl].copy(),
+                                          frame.face_mask[sl].copy(),
+                                          frame.mouth_mask[sl].copy())
+
+
+#: the per-frame function of :func:`rewrite_frames` handed to forked workers (not pickled)
+_RENDER_JOB: Callable | None = None
+
+
+def _render_job(i: int):
+    """Frame ``i`` rendered in a worker process: its box only (the renderer's :meth:`part`,
+    else the changed crop of the whole frame, :func:`_crop_of`)."""
+    part = getattr(_RENDER_JOB, "part", None)
+    if part is not None:
+        return part(i)
+    return _crop_of(np.asarray(_RENDER_FRAMES[i]), _RENDER_JOB(i))
+
+
+_RENDER_FRAMES = None
+
+
+def _render_in_processes(one, target_frames, todo: range, workers: int, progress):
+    """Yield ``one(i)`` for i in ``todo``, computed in ``workers`` forked processes, in order.
+
+    Workers send back only the face's box of each frame (the renderer's ``part``, else the
+    changed crop, :func:`_crop_of`); if the pool breaks, the remaining frames are rendered
+    here."""
+    global _RENDER_JOB, _RENDER_FRAMES
+    import multiprocessing as mp
+    from collections import deque
+    from concurrent.futures import ProcessPoolExecutor
+    from concurrent.futures.process import BrokenProcessPool
+
+    _RENDER_JOB, _RENDER_FRAMES = one, target_frames
+    nxt, n = todo.start, todo.stop
+    try:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("fork"))
+        pending: deque = deque()
+        try:
+            pending.append(pool.submit(_render_job, nxt))  # forks the workers now
+            nxt += 1
+        finally:
+            _RENDER_JOB, _RENDER_FRAMES = None, None
+    except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. in a daemon process)
+        log.info("no worker processes (%s): rendering here", exc)
+        for i in todo:
+            yield one(i)
+            if progress:
+                progress(1)
+        return
+    done = todo.start
+    broken = False
+    try:
+        while done < n:
+            if not broken:
+                try:
+                    while nxt < n and len(pending) < 4 * workers:
+                        pending.append(pool.submit(_render_job, nxt))
+                        nxt += 1
+                    part = pending.popleft().result()
+                    res = _paste(np.asarray(target_frames[done]), part)
+                except BrokenProcessPool as exc:
+                    log.warning("render workers failed (%s); rendering here", exc)
+                    broken = True
+            if broken:
+                res = one(done)
+            yield res
+            done += 1
+            if progress:
+                progress(1)
+    finally:
+        for f in pending:
+            f.cancel()
+        pool.shutdown(wait=True, cancel_futures=True)
+
