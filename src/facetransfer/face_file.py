@@ -106,8 +106,7 @@ def _identity(face: DialledFace, model) -> tuple[str, np.ndarray]:
             dials = learn_dials(model)
         except DialError as exc:
             raise FaceFileError(f"{face.path}: the model has no identity dials ({exc})") from None
-    mode = dials.mode if dials is not None else (
-        "identity" if "identity" in model.mode_names else model.mode_names[0])
+    mode = dials.mode if dials is not None else model.identity_mode
     r = model.ranks[model.mode_index(mode)]
     if face.identity.size != r:
         raise FaceFileError(f"{face.path}: its identity has {face.identity.size} weights, the "

@@ -221,7 +221,7 @@ def _identity(job, model):
     if s.get("identity_label"):
         return identity_from_label(model, s["identity_label"])
     if s.get("identity_weights"):
-        idm = "identity" if "identity" in model.mode_names else model.mode_names[0]
+        idm = model.identity_mode
         return parse_weights(s["identity_weights"], model.ranks[model.mode_index(idm)])
     return None
 
