@@ -68,7 +68,11 @@ def test_eval_writes_report_and_figures(tmp_path, capsys):
     for name in ("error_vs_missing.png", "fig4.png"):
         assert (out / name).stat().st_size > 1000
     assert not list(out.glob(".*part*"))  # no temporary files left
-    assert "ppca" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "ppca" in said
+    # every file written is named (before: only report.json)
+    assert said.strip().splitlines()[-1] == (f"wrote {out / 'report.json'}, "
+                                             f"{out / 'error_vs_missing.png'}, {out / 'fig4.png'}")
 
 
 def test_eval_keeps_an_earlier_runs_results_unless_overwrite(tmp_path, capsys):

@@ -121,16 +121,17 @@ def _eval(args) -> int:
     out.mkdir(parents=True, exist_ok=True)
     report = make_report(ev, ds, dataset=str(args.dataset), seed=args.seed, trials=args.trials,
                          seconds=time.perf_counter() - t0)
-    write_report(out / "report.json", report)
+    written = [write_report(out / "report.json", report)]
     if not args.no_figures:
-        plot_error_vs_missing(ev, out / "error_vs_missing.png", title=str(args.dataset))
+        written.append(plot_error_vs_missing(ev, out / "error_vs_missing.png",
+                                             title=str(args.dataset)))
         if ev.examples:
-            plot_fig4(ev.examples, ds.faces, out / "fig4.png")
+            written.append(plot_fig4(ev.examples, ds.faces, out / "fig4.png"))
     for r in ev.results:
         print(f"{r.method:9s} missing {r.missing:.2f}: error {100 * r.error_mean:6.2f} % "
               f"(max {100 * r.error_max:6.2f} %), relative {100 * r.relative_error_mean:6.1f} %, "
               f"{r.seconds:6.2f} s")
-    print(f"wrote {out / 'report.json'}")
+    print(f"wrote {', '.join(str(p) for p in written)}")
     return 0
 
 
@@ -253,7 +254,7 @@ def plot_fig4(examples: dict, faces: np.ndarray, path: Path, *, size: int = 220)
         for r, (m, lab) in enumerate(rows):
             V = examples[m][c]
             err = "" if m == "truth" else (
-                f"\nerr {np.linalg.norm(V - examples['truth'][c]):.3g}")
+                f"\nerror {np.linalg.norm(V - examples['truth'][c]):.3g} (data units)")
             axes[r, c].imshow(_render_face(V, faces, size, cam))
             axes[r, c].set_xticks([])
             axes[r, c].set_yticks([])
