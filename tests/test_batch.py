@@ -4,6 +4,7 @@ scattered once, chunked tracking at the seams, and the issue's bad input."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import functools
@@ -147,6 +148,24 @@ def test_ctrl_c_cancels_the_pending_clips_and_keeps_the_finished(clips, quick_mo
     # b was cancelled while it ran on the worker thread, which may still have finished it
     assert code == 0 and rows["a"]["status"] == "skipped"
     assert rows["b"]["status"] in ("done", "skipped") and Track.load(out / "b.npz").n_frames == 8
+
+
+def test_ctrl_c_before_the_cluster_is_there_says_no_outputs_kept(clips, quick_model_path,
+                                                                tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the cluster starts or the scheduler is asked (a hung one: the only way
+    out): nothing ran, so no "finished outputs are kept in DIR" of a folder never made."""
+    @contextlib.contextmanager
+    def interrupted(**kw):
+        raise KeyboardInterrupt
+        yield
+
+    monkeypatch.setattr(batch_cluster, "open_client", interrupted)
+    out = tmp_path / "out"
+    code = main([str(a) for a in ("batch", "track", clips["a"][0], "--model", quick_model_path,
+                                  "--out", out, "--scheduler", "tcp://127.0.0.1:8786")])
+    err = capsys.readouterr().err
+    assert code == 130 and err.splitlines() == ["facetransfer batch: interrupted"]
+    assert not out.exists()
 
 
 def test_the_model_is_scattered_once_not_sent_with_each_task(quick_model, tmp_path,
@@ -378,17 +397,127 @@ def test_bad_cluster_and_output_arguments(clips, quick_model_path, tmp_path, cap
 
 
 def test_a_scheduler_that_does_not_answer(clips, quick_model_path, tmp_path, capsys):
+    """Nothing listening, an unknown host, not an address: one line each, status 2."""
     with socket.socket() as s:  # a free port, nothing listening once closed
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    addr = f"tcp://127.0.0.1:{port}"
-    code, _, lines = _cli(capsys, "batch", "track", clips["a"][0], "--model", quick_model_path,
-                          "--out", tmp_path / "o", "--scheduler", addr)
-    assert code == 2 and len(lines) == 1
-    assert f"scheduler {addr} does not answer" in lines[0] and "dask scheduler" in lines[0]
-    code, _, lines = _cli(capsys, "batch", "track", clips["a"][0], "--model", quick_model_path,
-                          "--out", tmp_path / "o", "--scheduler", "nonsense:addr:1")
-    assert code == 2 and "is not an address like tcp://HOST:8786" in lines[0]
+    argv = ("batch", "track", clips["a"][0], "--model", quick_model_path, "--out",
+            tmp_path / "o", "--scheduler")
+    for addr, said in ((f"tcp://127.0.0.1:{port}", "Connection refused (start it with `dask "
+                        "scheduler`, or check the address)"),
+                       ("tcp://no-such-host.invalid:8786", "the host 'no-such-host.invalid' "
+                        "is not known")):
+        code, _, lines = _cli(capsys, *argv, addr)
+        assert code == 2 and len(lines) == 1, lines
+        assert lines[0].startswith(f"facetransfer batch: error: no Dask scheduler answered at "
+                                   f"{addr}: {said}")
+    for addr in ("nonsense:addr:1", "tcp://127.0.0.1:99999"):   # 99999: "Connection refused"
+        code, _, lines = _cli(capsys, *argv, addr)
+        assert code == 2 and lines == [f"facetransfer batch: error: --scheduler {addr!r} is "
+                                       "not an address like tcp://HOST:8786"]
+    assert not (tmp_path / "o").exists()
+
+
+@contextlib.contextmanager
+def _not_a_scheduler(kind: str):
+    """A local port where something that is not a Dask scheduler listens: ``"http"`` a web
+    server (it waits for a request), ``"silent"`` a program that accepts and says nothing,
+    ``"close"`` one that closes each connection at once, ``"greet"`` one that says a line
+    first (as an SSH server does: read as Dask's frame count, 3e18 bytes were allocated)."""
+    import http.server
+    import threading
+
+    if kind == "http":
+        srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0),
+                                              http.server.BaseHTTPRequestHandler)
+        th = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.05})
+        th.start()
+        try:
+            yield f"tcp://127.0.0.1:{srv.server_address[1]}"
+        finally:
+            srv.shutdown()
+            srv.server_close()
+            th.join()
+        return
+    srv, kept, stop = socket.create_server(("127.0.0.1", 0)), [], threading.Event()
+    srv.settimeout(0.05)
+
+    def serve():
+        while not stop.is_set():
+            try:
+                conn, _ = srv.accept()
+            except TimeoutError:
+                continue
+            if kind == "close":
+                conn.close()
+                continue
+            if kind == "greet":
+                conn.sendall(b"SSH-2.0-OpenSSH_9.6\r\n")
+            kept.append(conn)
+
+    th = threading.Thread(target=serve)
+    th.start()
+    try:
+        yield f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+    finally:
+        stop.set()
+        th.join()
+        for c in kept:
+            c.close()
+        srv.close()
+
+
+#: The CLI in a child process, which then prints the threads it has left (the test does not
+#: hang if the run does: the child is killed after a generous timeout).
+_CHILD = ("import sys, threading; from facetransfer.cli.main import main; code = main(sys.argv[1:])"
+          "; print('threads', sorted(t.name for t in threading.enumerate())); sys.exit(code)")
+
+
+@pytest.mark.parametrize("kind, said", [
+    ("http", " within 2 s: something there accepts connections but said nothing in Dask's "
+     "protocol"),
+    ("silent", " within 2 s: something there accepts connections but said nothing in Dask's "
+     "protocol"),
+    ("close", ": something there accepts connections but closed them without a Dask answer"),
+    ("greet", ": something there answered, but not in Dask's protocol"),
+])
+def test_a_port_that_answers_but_is_no_dask_scheduler(kind, said, clips, quick_model_path,
+                                                      tmp_path):
+    """``--scheduler`` of a web server's port, of a program that accepts and says nothing (Dask
+    reads the handshake without a deadline: hung for good, 300 s measured), of one that closes
+    at once (a message of a ConnectionResetError) or one that speaks first ("out of memory"):
+    one line within about --timeout, naming the address and what was expected; no traceback,
+    no Dask log line, no thread left."""
+    import subprocess
+
+    with _not_a_scheduler(kind) as addr:
+        r = subprocess.run([sys.executable, "-c", _CHILD, "batch", "track", str(clips["a"][0]),
+                            "--model", str(quick_model_path), "--out", str(tmp_path / "o"),
+                            "--scheduler", addr, "--timeout", "2"],
+                           capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.splitlines() == [
+        f"facetransfer batch: error: no Dask scheduler answered at {addr}{said} (is it the "
+        "scheduler's address? `dask scheduler` prints it, port 8786 by default)"]
+    assert r.stdout.splitlines() == ["threads ['MainThread']"]
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_dask_worker_is_not_taken_for_the_scheduler(tmp_path):
+    """A worker's address (the one a worker's log shows) answers in Dask's protocol: it is said
+    as a worker's, not connected to as a client (a TypeError of its identity handler)."""
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                      dashboard_address=None) as running:
+        worker = next(iter(running.scheduler_info["workers"]))
+        with pytest.raises(batch_run.BatchError, match=f"{worker} is a Dask worker, not a "
+                                                       "scheduler; give the scheduler's"):
+            with batch_cluster.open_client(scheduler=worker, timeout=5):
+                pass
+        with batch_cluster.open_client(scheduler=running.scheduler_address,
+                                       timeout=5) as client:
+            assert client.submit(int, "7").result() == 7
 
 
 def test_an_output_that_is_not_this_clips_track_is_kept_unless_overwrite(quick_model, tmp_path):

@@ -124,10 +124,7 @@ def _run(args, what: str, n_jobs: int, call) -> int:
     if args.workers is not None and args.workers < 1:
         raise FaceTransferError(f"--workers must be >= 1, got {args.workers}")
     workers = args.workers if args.scheduler is not None else _workers(args.workers, n_jobs)
-    bar = None if args.no_progress else tqdm(total=n_jobs, desc=what, unit="clip",
-                                             dynamic_ncols=True, file=sys.stderr,
-                                             disable=progress_disabled())
-    failed = 0
+    bar, started, failed = None, False, 0
 
     def progress(row) -> None:
         nonlocal failed
@@ -140,10 +137,18 @@ def _run(args, what: str, n_jobs: int, call) -> int:
     try:
         with cluster.open_client(workers=workers, scheduler=args.scheduler,
                                  timeout=args.timeout, verbose=args.verbose) as client:
+            # the bar once the cluster is there (before, a scheduler that did not answer left
+            # an empty bar above its one line)
+            started = True
+            bar = None if args.no_progress else tqdm(total=n_jobs, desc=what, unit="clip",
+                                                     dynamic_ncols=True, file=sys.stderr,
+                                                     disable=progress_disabled())
             res = call(client, progress)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
+        if not started:   # while the cluster started or the scheduler was asked: nothing ran
+            raise         # (before: "finished outputs are kept in DIR", of no DIR)
         summary = Path(args.out) / "summary.csv"
         print(f"stopped: finished outputs are kept in {args.out}"
               + (f" (see {summary})" if summary.is_file() else "")
