@@ -220,6 +220,101 @@ def test_chunked_clip_is_one_identity_and_smooth_at_the_seams(quick_model, quick
     assert all(m < w + 1.0 for m, w in zip(rep.motion_px, rep.whole_motion_px))
 
 
+def test_max_frames_tracks_the_first_frames_and_a_rerun_knows_its_limit(
+        clips, quick_model_path, inproc, tmp_path, capsys):
+    """``batch track --max-frames`` as ``track --max-frames``: the same track file; the
+    limit is part of the job's digest, so a rerun with another limit (or other tracker
+    options) does not report the earlier track as "skipped" but a failed row naming
+    --overwrite (before: no --max-frames; the options were not recorded at all); a manifest's
+    max_frames column per clip, an empty cell taking --max-frames."""
+    (va, pa, _), (vb, pb, _) = clips["a"], clips["b"]
+    common = ("--model", quick_model_path, "--passes", "1")
+    ref = tmp_path / "ref.npz"
+    assert _cli(capsys, "track", va, "--init", pa, "--out", ref, "--max-frames", 5,
+                *common)[0] == 0
+    out = tmp_path / "out"
+    argv = ("batch", "track", va, "--init", pa, "--out", out, *common)
+    assert _cli(capsys, *argv, "--max-frames", 5)[0] == 0
+    _assert_same_track_file(out / "a.npz", ref)
+    assert Track.load(out / "a.npz").n_frames == 5
+    row = _summary(out / "summary.csv")["a"]
+    assert row["status"] == "done" and int(row["frames"]) == 5 and len(row["job"]) == 16
+    kept = (out / "a.npz").read_bytes()
+    assert _cli(capsys, *argv, "--max-frames", 5)[0] == 0
+    assert _summary(out / "summary.csv")["a"]["status"] == "skipped"
+    for other in (("--max-frames", 6), ("--max-frames", 5, "--passes", 2), ()):
+        code, stdout, _ = _cli(capsys, *argv, *other)
+        row = _summary(out / "summary.csv")["a"]
+        assert code == 1 and row["status"] == "failed", (other, row)
+        assert row["error"] == (f"{out / 'a.npz'} was made from other inputs or options than "
+                                "a's now; --overwrite redoes it")
+        assert (out / "a.npz").read_bytes() == kept
+    assert _cli(capsys, *argv, "--max-frames", 6, "--overwrite")[0] == 0
+    assert Track.load(out / "a.npz").n_frames == 6
+    assert _cli(capsys, *argv, "--max-frames", 4)[0] == 1   # the track says it, too
+    assert "holds a track of 6 frames, more than max_frames 4" in _summary(
+        out / "summary.csv")["a"]["error"]
+
+    man = tmp_path / "clips.csv"
+    man.write_text(f"video,init,max_frames\n{va},{pa},3\n{vb},{pb},\n")
+    assert _cli(capsys, "batch", "track", "--manifest", man, "--out", tmp_path / "m",
+                "--max-frames", 7, *common)[0] == 0
+    assert [Track.load(tmp_path / "m" / f"{n}.npz").n_frames for n in "ab"] == [3, 7]
+
+
+@pytest.mark.parametrize("value, said", [
+    (0, "--max-frames must be >= 1, got 0"), (-2, "--max-frames must be >= 1, got -2"),
+    ("ten", "argument --max-frames: invalid int value: 'ten'")])
+def test_bad_max_frames_is_one_line(value, said, clips, quick_model_path, tmp_path, capsys):
+    """As ``track --max-frames``: its type and its check."""
+    try:
+        code, _, lines = _cli(capsys, "batch", "track", clips["a"][0], "--model",
+                              quick_model_path, "--out", tmp_path / "o", "--max-frames", value)
+    except SystemExit as e:                          # the parser's error
+        code, lines = e.code, capsys.readouterr().err.splitlines()
+    assert code == 2 and len(lines) == 1 and said in lines[0], lines
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("cell, said", [
+    ("0", "line 3: max_frames must be >= 1, got 0"),
+    ("2.5", "line 3: max_frames must be a whole number of frames >= 1, got '2.5'")])
+def test_a_bad_max_frames_cell_is_one_line(cell, said, clips, quick_model_path, tmp_path,
+                                           capsys):
+    man = tmp_path / "clips.csv"
+    man.write_text(f"video,max_frames\n{clips['a'][0]},4\n{clips['b'][0]},{cell}\n")
+    code, _, lines = _cli(capsys, "batch", "track", "--manifest", man, "--model",
+                          quick_model_path, "--out", tmp_path / "o")
+    assert code == 2 and lines == [f"facetransfer batch: error: manifest {man} {said}"]
+
+
+def test_max_frames_of_a_chunked_clip(quick_model, quick_model_path, inproc, tmp_path, capsys):
+    """``--chunk`` with ``--max-frames``: the chunks cover the first max_frames frames only
+    (counted no further), joined; a limit within one chunk is the clip tracked whole, as
+    ``track --max-frames`` does."""
+    perf = random_performance(quick_model, 20, seed=5, size=(320, 240), fps=25, fill=0.8)
+    clip = make_clip(quick_model, perf, seed=5)
+    video = tmp_path / "long.mp4"
+    write_video(video, clip.frames, 25)
+    L = clip.truth.landmarks2d[0]
+    pts = tmp_path / "p.json"
+    pts.write_text(json.dumps({"points": {str(i): L[i].tolist() for i in range(17, 68)}}))
+    assert batch_jobs.count_frames(str(video), 14) == 14
+    assert batch_jobs.count_frames(str(video)) == 20
+    common = ("--model", quick_model_path, "--init", pts, "--passes", "1")
+    assert _cli(capsys, "batch", "track", video, "--out", tmp_path / "c", "--chunk", 10,
+                "--overlap", 2, "--max-frames", 14, *common)[0] == 0
+    joined = Track.load(tmp_path / "c" / "long.npz")
+    assert joined.n_frames == 14 and np.ptp(joined.weights["identity"], axis=0).max() == 0
+    err = np.linalg.norm(joined.landmarks2d - clip.truth.landmarks2d[:14], axis=2).mean(axis=1)
+    assert err.max() < 2.5
+    assert _cli(capsys, "batch", "track", video, "--out", tmp_path / "w", "--chunk", 10,
+                "--overlap", 2, "--max-frames", 9, *common)[0] == 0
+    assert _cli(capsys, "track", video, "--out", tmp_path / "ref.npz", "--max-frames", 9,
+                *common)[0] == 0
+    _assert_same_track_file(tmp_path / "w" / "long.npz", tmp_path / "ref.npz")
+
+
 def test_batch_transfer_calls_what_transfer_calls(clips, quick_model_path, inproc, tmp_path,
                                                   capsys):
     (va, pa, _), (vb, pb, _) = clips["a"], clips["b"]

@@ -2,7 +2,8 @@
 
     facetransfer batch track VIDEO... | --manifest clips.csv --out DIR [--workers N]
                              [--scheduler tcp://HOST:8786] [--chunk N [--overlap N]]
-                             [--model M.npz] [--face WHERE] [track options] [--overwrite]
+                             [--model M.npz] [--face WHERE] [--max-frames N] [track options]
+                             [--overwrite]
     facetransfer batch transfer --manifest pairs.csv --out DIR [--model M.npz] [transfer options]
     facetransfer batch export TRACK... --format livelink|glb|usd|json --out DIR [--model M.npz]
 
@@ -65,7 +66,8 @@ def register(sub) -> None:
                       "the seams (one identity per clip).")
     t.add_argument("videos", nargs="*", metavar="VIDEO", help="videos to track")
     t.add_argument("--manifest", metavar="clips.csv",
-                   help="CSV with a video column (and name, init, face); paths relative to it")
+                   help="CSV with a video column (and name, init, face, max_frames); paths "
+                   "relative to it")
     t.add_argument("--model", metavar="M.npz", help="model (default: the default model)")
     t.add_argument("--chunk", type=int, default=0,
                    help="split clips longer than this many frames into overlapping chunks "
@@ -76,6 +78,9 @@ def register(sub) -> None:
                    help=f"[capture] with several people in the frame, the one to track in "
                    f"every clip (a manifest's face column gives it per clip): {FACE_WHERE}; "
                    "each chunk of a --chunk clip starts on the face nearest it")
+    t.add_argument("--max-frames", type=int, default=None,
+                   help="track only the first N frames of every clip (a manifest's max_frames "
+                   "column gives it per clip)")
     _track_options(t)
     _cluster_options(t)
     t.set_defaults(func=run_track)
@@ -193,7 +198,8 @@ def run_track(args) -> int:
     if not args.videos and not args.manifest:
         raise FaceTransferError("give VIDEO files or --manifest clips.csv")
     # duplicate names are refused before anything runs
-    jobs = clip_jobs(args.videos, args.manifest, init=args.init, face=args.face)
+    jobs = clip_jobs(args.videos, args.manifest, init=args.init, face=args.face,
+                     max_frames=args.max_frames)
     opt = track_settings(args)  # validates the options
     for job in jobs:
         if job.face is not None and opt.choose(job.init) != "capture":
