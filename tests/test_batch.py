@@ -247,7 +247,8 @@ def test_max_frames_tracks_the_first_frames_and_a_rerun_knows_its_limit(
         row = _summary(out / "summary.csv")["a"]
         assert code == 1 and row["status"] == "failed", (other, row)
         assert row["error"] == (f"{out / 'a.npz'} was made from other inputs or options than "
-                                "a's now; --overwrite redoes it")
+                                "a's now; remove it to redo this clip alone, or --overwrite "
+                                "redoes every clip")
         assert (out / "a.npz").read_bytes() == kept
     assert _cli(capsys, *argv, "--max-frames", 6, "--overwrite")[0] == 0
     assert Track.load(out / "a.npz").n_frames == 6
@@ -667,8 +668,8 @@ def test_a_rerun_knows_an_output_of_other_inputs_from_its_own(arkit_model, make_
     assert _cli(capsys, *argv)[0] == 1
     row = _summary(out / "summary.csv")["t"]
     assert row["status"] == "failed" and row["error"] == (
-        f"{out / 't.csv'} was made from other inputs or options than t's now; --overwrite "
-        "redoes it")
+        f"{out / 't.csv'} was made from other inputs or options than t's now; remove it to "
+        "redo this clip alone, or --overwrite redoes every clip")
     assert (out / "t.csv").read_bytes() == kept
     assert _cli(capsys, *argv)[0] == 1                            # and the next run too
     assert _summary(out / "summary.csv")["t"]["status"] == "failed"

@@ -437,6 +437,11 @@ def _unfinished(jobs, outs: dict, out_dir: Path, keys: dict) -> dict[str, tuple[
                      else ("", earlier.get(j.name, ""))) for j in jobs}
 
 
+#: The end of the line of an output another job made: before, only "--overwrite redoes it",
+#: which redoes every clip of the run (a manifest's one changed row: all its clips again).
+REDO = "remove it to redo this clip alone, or --overwrite redoes every clip"
+
+
 def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found) -> dict[str, Row]:
     """The rows of the outputs a rerun keeps: ``found(out, name)`` (a skipped row, or None),
     with this run's job digest; an output the summary says another job made (its inputs or
@@ -450,9 +455,9 @@ def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found) -> dict[str, Row]:
         if r.ok and made != keys[j.name]:     # (a row failed by ``found`` says its own why)
             r = Row(j.name, "failed", output=str(outs[j.name]), error=(
                 f"{outs[j.name]} was finished after an interrupt, with options not recorded; "
-                "--overwrite redoes it" if made == UNKNOWN_JOB else
+                + REDO if made == UNKNOWN_JOB else
                 f"{outs[j.name]} was made from other inputs or options than {j.name}'s now; "
-                "--overwrite redoes it"))
+                + REDO))
         # a refused output keeps its maker's digest: a later run still knows it
         done[j.name] = dataclasses.replace(r, job=keys[j.name] if r.ok
                                            else earlier.get(j.name, ""))
