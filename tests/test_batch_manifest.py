@@ -125,7 +125,7 @@ def test_summary_round_trip_and_one_line_errors(tmp_path):
         Row("d", "ok")
 
 
-def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch):
+def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch, capsys):
     """A walk with Dask: paths absolute before they reach a worker (a real scheduler's runs in
     its own folder: a relative clip "does not exist" there, and a rerun from another folder
     took every output for another job's); a column given twice and a row of more cells than
@@ -161,8 +161,12 @@ def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch):
         batch_track([], tmp_path / "out", None, client=None, chunk=2)
     from facetransfer.cli.main import main
 
-    assert main(["batch", "track", "a.mp4", "--out", str(tmp_path / "o"), "--timeout",
-                 "inf"]) == 2
+    for t in ("inf", "nan", "0", "1e12"):        # 1e12: a traceback (a socket's deadline)
+        assert main(["batch", "track", "a.mp4", "--out", str(tmp_path / "o"), "--timeout",
+                     t]) == 2
+        assert capsys.readouterr().err.splitlines() == [
+            "facetransfer batch: error: --timeout must be a number of seconds > 0 and at most "
+            f"86400, got {float(t):g}"]
 
 
 def test_a_clip_replaced_since_its_track_is_not_skipped(quick_model, tmp_path):

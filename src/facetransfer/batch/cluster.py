@@ -20,12 +20,16 @@ from .manifest import BatchError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["open_client", "quiet_dask", "default_workers", "scatter_model", "DASK_LOGGERS"]
+__all__ = ["open_client", "quiet_dask", "default_workers", "check_timeout", "scatter_model",
+           "DASK_LOGGERS"]
 
 #: Loggers of Dask and its web stack, silenced unless ``-v``.
 DASK_LOGGERS = ("distributed", "dask", "tornado", "bokeh", "asyncio")
 #: Seconds a scheduler has to answer.
 CONNECT_TIMEOUT = 10.0
+#: The longest wait for a scheduler taken (a day; 1e12 s overflowed a socket's deadline into a
+#: traceback).
+MAX_TIMEOUT = 86400.0
 
 
 def quiet_dask(verbose: bool = False) -> None:
@@ -38,6 +42,15 @@ def quiet_dask(verbose: bool = False) -> None:
              if any(n == p or n.startswith(p + ".") for p in DASK_LOGGERS)]
     for name in (*DASK_LOGGERS, *known):
         logging.getLogger(name).setLevel(level)
+
+
+def check_timeout(timeout: float) -> float:
+    """``timeout`` (seconds a scheduler has to answer) if in ``(0, MAX_TIMEOUT]``, else
+    BatchError."""
+    if not 0 < timeout <= MAX_TIMEOUT:        # also nan
+        raise BatchError(f"--timeout must be a number of seconds > 0 and at most "
+                         f"{MAX_TIMEOUT:g}, got {timeout:g}")
+    return timeout
 
 
 def default_workers() -> int:
@@ -177,7 +190,8 @@ def open_client(*, workers: int | None = None, scheduler: str | None = None,
     Raises
     ------
     BatchError
-        ``workers < 1``, ``workers`` with ``scheduler``, a scheduler that does not answer.
+        ``workers < 1``, ``workers`` with ``scheduler``, a timeout not in (0, MAX_TIMEOUT], a
+        scheduler that does not answer.
     """
     from dask.distributed import Client
 
@@ -186,6 +200,7 @@ def open_client(*, workers: int | None = None, scheduler: str | None = None,
         if workers is not None:
             raise BatchError("--workers sizes the embedded cluster; the workers of --scheduler "
                              "are the ones started with `dask worker`")
+        check_timeout(timeout)
         client = _remote_client(scheduler, timeout)
         try:
             yield client

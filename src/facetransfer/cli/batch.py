@@ -255,6 +255,7 @@ def run_export(args) -> int:
 
 def _check_cluster_args(args) -> None:
     """Bad cluster or output arguments fail before a model is loaded."""
+    from ..batch.cluster import check_timeout
     from ..batch.run import check_out_dir
 
     if args.workers is not None and args.workers < 1:
@@ -262,7 +263,5 @@ def _check_cluster_args(args) -> None:
     if args.workers is not None and args.scheduler:
         raise FaceTransferError("--workers sizes the embedded cluster; the workers of "
                                 "--scheduler are the ones started with `dask worker`")
-    if not 0 < args.timeout < float("inf"):    # inf: a socket's deadline overflowed
-        raise FaceTransferError(f"--timeout must be a number of seconds > 0, got "
-                                f"{args.timeout}")
+    check_timeout(args.timeout)       # inf, 1e12: a socket's deadline overflowed
     check_out_dir(args.out)
