@@ -4,6 +4,7 @@ scattered once, chunked tracking at the seams, and the issue's bad input."""
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import dataclasses
 import functools
@@ -149,6 +150,24 @@ def test_ctrl_c_cancels_the_pending_clips_and_keeps_the_finished(clips, quick_mo
     assert rows["b"]["status"] in ("done", "skipped") and Track.load(out / "b.npz").n_frames == 8
 
 
+def test_ctrl_c_before_the_cluster_is_there_says_no_outputs_kept(clips, quick_model_path,
+                                                                tmp_path, capsys, monkeypatch):
+    """Ctrl-C while the cluster starts or the scheduler is asked (a hung one: the only way
+    out): nothing ran, so no "finished outputs are kept in DIR" of a folder never made."""
+    @contextlib.contextmanager
+    def interrupted(**kw):
+        raise KeyboardInterrupt
+        yield
+
+    monkeypatch.setattr(batch_cluster, "open_client", interrupted)
+    out = tmp_path / "out"
+    code = main([str(a) for a in ("batch", "track", clips["a"][0], "--model", quick_model_path,
+                                  "--out", out, "--scheduler", "tcp://127.0.0.1:8786")])
+    err = capsys.readouterr().err
+    assert code == 130 and err.splitlines() == ["facetransfer batch: interrupted"]
+    assert not out.exists()
+
+
 def test_the_model_is_scattered_once_not_sent_with_each_task(quick_model, tmp_path,
                                                              monkeypatch):
     """Real worker processes: the model is pickled once (the scatter), for four tasks."""
@@ -199,6 +218,102 @@ def test_chunked_clip_is_one_identity_and_smooth_at_the_seams(quick_model, quick
     assert max(rep.seam_px) < 2.0
     # no step at a seam: the motion there is the footage's, as in the whole-clip track
     assert all(m < w + 1.0 for m, w in zip(rep.motion_px, rep.whole_motion_px))
+
+
+def test_max_frames_tracks_the_first_frames_and_a_rerun_knows_its_limit(
+        clips, quick_model_path, inproc, tmp_path, capsys):
+    """``batch track --max-frames`` as ``track --max-frames``: the same track file; the
+    limit is part of the job's digest, so a rerun with another limit (or other tracker
+    options) does not report the earlier track as "skipped" but a failed row naming
+    --overwrite (before: no --max-frames; the options were not recorded at all); a manifest's
+    max_frames column per clip, an empty cell taking --max-frames."""
+    (va, pa, _), (vb, pb, _) = clips["a"], clips["b"]
+    common = ("--model", quick_model_path, "--passes", "1")
+    ref = tmp_path / "ref.npz"
+    assert _cli(capsys, "track", va, "--init", pa, "--out", ref, "--max-frames", 5,
+                *common)[0] == 0
+    out = tmp_path / "out"
+    argv = ("batch", "track", va, "--init", pa, "--out", out, *common)
+    assert _cli(capsys, *argv, "--max-frames", 5)[0] == 0
+    _assert_same_track_file(out / "a.npz", ref)
+    assert Track.load(out / "a.npz").n_frames == 5
+    row = _summary(out / "summary.csv")["a"]
+    assert row["status"] == "done" and int(row["frames"]) == 5 and len(row["job"]) == 16
+    kept = (out / "a.npz").read_bytes()
+    assert _cli(capsys, *argv, "--max-frames", 5)[0] == 0
+    assert _summary(out / "summary.csv")["a"]["status"] == "skipped"
+    for other in (("--max-frames", 6), ("--max-frames", 5, "--passes", 2), ()):
+        code, stdout, _ = _cli(capsys, *argv, *other)
+        row = _summary(out / "summary.csv")["a"]
+        assert code == 1 and row["status"] == "failed", (other, row)
+        assert row["error"] == (f"{out / 'a.npz'} was made from other inputs or options than "
+                                "a's now; remove it to redo this clip alone, or --overwrite "
+                                "redoes every clip")
+        assert (out / "a.npz").read_bytes() == kept
+    assert _cli(capsys, *argv, "--max-frames", 6, "--overwrite")[0] == 0
+    assert Track.load(out / "a.npz").n_frames == 6
+    assert _cli(capsys, *argv, "--max-frames", 4)[0] == 1   # the track says it, too
+    assert "holds a track of 6 frames, more than max_frames 4" in _summary(
+        out / "summary.csv")["a"]["error"]
+
+    man = tmp_path / "clips.csv"
+    man.write_text(f"video,init,max_frames\n{va},{pa},3\n{vb},{pb},\n")
+    assert _cli(capsys, "batch", "track", "--manifest", man, "--out", tmp_path / "m",
+                "--max-frames", 7, *common)[0] == 0
+    assert [Track.load(tmp_path / "m" / f"{n}.npz").n_frames for n in "ab"] == [3, 7]
+
+
+@pytest.mark.parametrize("value, said", [
+    (0, "--max-frames must be >= 1, got 0"), (-2, "--max-frames must be >= 1, got -2"),
+    ("ten", "argument --max-frames: invalid int value: 'ten'")])
+def test_bad_max_frames_is_one_line(value, said, clips, quick_model_path, tmp_path, capsys):
+    """As ``track --max-frames``: its type and its check."""
+    try:
+        code, _, lines = _cli(capsys, "batch", "track", clips["a"][0], "--model",
+                              quick_model_path, "--out", tmp_path / "o", "--max-frames", value)
+    except SystemExit as e:                          # the parser's error
+        code, lines = e.code, capsys.readouterr().err.splitlines()
+    assert code == 2 and len(lines) == 1 and said in lines[0], lines
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("cell, said", [
+    ("0", "line 3: max_frames must be >= 1, got 0"),
+    ("2.5", "line 3: max_frames must be a whole number of frames >= 1, got '2.5'")])
+def test_a_bad_max_frames_cell_is_one_line(cell, said, clips, quick_model_path, tmp_path,
+                                           capsys):
+    man = tmp_path / "clips.csv"
+    man.write_text(f"video,max_frames\n{clips['a'][0]},4\n{clips['b'][0]},{cell}\n")
+    code, _, lines = _cli(capsys, "batch", "track", "--manifest", man, "--model",
+                          quick_model_path, "--out", tmp_path / "o")
+    assert code == 2 and lines == [f"facetransfer batch: error: manifest {man} {said}"]
+
+
+def test_max_frames_of_a_chunked_clip(quick_model, quick_model_path, inproc, tmp_path, capsys):
+    """``--chunk`` with ``--max-frames``: the chunks cover the first max_frames frames only
+    (counted no further), joined; a limit within one chunk is the clip tracked whole, as
+    ``track --max-frames`` does."""
+    perf = random_performance(quick_model, 20, seed=5, size=(320, 240), fps=25, fill=0.8)
+    clip = make_clip(quick_model, perf, seed=5)
+    video = tmp_path / "long.mp4"
+    write_video(video, clip.frames, 25)
+    L = clip.truth.landmarks2d[0]
+    pts = tmp_path / "p.json"
+    pts.write_text(json.dumps({"points": {str(i): L[i].tolist() for i in range(17, 68)}}))
+    assert batch_jobs.count_frames(str(video), 14) == 14
+    assert batch_jobs.count_frames(str(video)) == 20
+    common = ("--model", quick_model_path, "--init", pts, "--passes", "1")
+    assert _cli(capsys, "batch", "track", video, "--out", tmp_path / "c", "--chunk", 10,
+                "--overlap", 2, "--max-frames", 14, *common)[0] == 0
+    joined = Track.load(tmp_path / "c" / "long.npz")
+    assert joined.n_frames == 14 and np.ptp(joined.weights["identity"], axis=0).max() == 0
+    err = np.linalg.norm(joined.landmarks2d - clip.truth.landmarks2d[:14], axis=2).mean(axis=1)
+    assert err.max() < 2.5
+    assert _cli(capsys, "batch", "track", video, "--out", tmp_path / "w", "--chunk", 10,
+                "--overlap", 2, "--max-frames", 9, *common)[0] == 0
+    assert _cli(capsys, "track", video, "--out", tmp_path / "ref.npz", "--max-frames", 9,
+                *common)[0] == 0
+    _assert_same_track_file(tmp_path / "w" / "long.npz", tmp_path / "ref.npz")
 
 
 def test_batch_transfer_calls_what_transfer_calls(clips, quick_model_path, inproc, tmp_path,
@@ -378,17 +493,127 @@ def test_bad_cluster_and_output_arguments(clips, quick_model_path, tmp_path, cap
 
 
 def test_a_scheduler_that_does_not_answer(clips, quick_model_path, tmp_path, capsys):
+    """Nothing listening, an unknown host, not an address: one line each, status 2."""
     with socket.socket() as s:  # a free port, nothing listening once closed
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
-    addr = f"tcp://127.0.0.1:{port}"
-    code, _, lines = _cli(capsys, "batch", "track", clips["a"][0], "--model", quick_model_path,
-                          "--out", tmp_path / "o", "--scheduler", addr)
-    assert code == 2 and len(lines) == 1
-    assert f"scheduler {addr} does not answer" in lines[0] and "dask scheduler" in lines[0]
-    code, _, lines = _cli(capsys, "batch", "track", clips["a"][0], "--model", quick_model_path,
-                          "--out", tmp_path / "o", "--scheduler", "nonsense:addr:1")
-    assert code == 2 and "is not an address like tcp://HOST:8786" in lines[0]
+    argv = ("batch", "track", clips["a"][0], "--model", quick_model_path, "--out",
+            tmp_path / "o", "--scheduler")
+    for addr, said in ((f"tcp://127.0.0.1:{port}", "Connection refused (start it with `dask "
+                        "scheduler`, or check the address)"),
+                       ("tcp://no-such-host.invalid:8786", "the host 'no-such-host.invalid' "
+                        "is not known")):
+        code, _, lines = _cli(capsys, *argv, addr)
+        assert code == 2 and len(lines) == 1, lines
+        assert lines[0].startswith(f"facetransfer batch: error: no Dask scheduler answered at "
+                                   f"{addr}: {said}")
+    for addr in ("nonsense:addr:1", "tcp://127.0.0.1:99999"):   # 99999: "Connection refused"
+        code, _, lines = _cli(capsys, *argv, addr)
+        assert code == 2 and lines == [f"facetransfer batch: error: --scheduler {addr!r} is "
+                                       "not an address like tcp://HOST:8786"]
+    assert not (tmp_path / "o").exists()
+
+
+@contextlib.contextmanager
+def _not_a_scheduler(kind: str):
+    """A local port where something that is not a Dask scheduler listens: ``"http"`` a web
+    server (it waits for a request), ``"silent"`` a program that accepts and says nothing,
+    ``"close"`` one that closes each connection at once, ``"greet"`` one that says a line
+    first (as an SSH server does: read as Dask's frame count, 3e18 bytes were allocated)."""
+    import http.server
+    import threading
+
+    if kind == "http":
+        srv = http.server.ThreadingHTTPServer(("127.0.0.1", 0),
+                                              http.server.BaseHTTPRequestHandler)
+        th = threading.Thread(target=srv.serve_forever, kwargs={"poll_interval": 0.05})
+        th.start()
+        try:
+            yield f"tcp://127.0.0.1:{srv.server_address[1]}"
+        finally:
+            srv.shutdown()
+            srv.server_close()
+            th.join()
+        return
+    srv, kept, stop = socket.create_server(("127.0.0.1", 0)), [], threading.Event()
+    srv.settimeout(0.05)
+
+    def serve():
+        while not stop.is_set():
+            try:
+                conn, _ = srv.accept()
+            except TimeoutError:
+                continue
+            if kind == "close":
+                conn.close()
+                continue
+            if kind == "greet":
+                conn.sendall(b"SSH-2.0-OpenSSH_9.6\r\n")
+            kept.append(conn)
+
+    th = threading.Thread(target=serve)
+    th.start()
+    try:
+        yield f"tcp://127.0.0.1:{srv.getsockname()[1]}"
+    finally:
+        stop.set()
+        th.join()
+        for c in kept:
+            c.close()
+        srv.close()
+
+
+#: The CLI in a child process, which then prints the threads it has left (the test does not
+#: hang if the run does: the child is killed after a generous timeout).
+_CHILD = ("import sys, threading; from facetransfer.cli.main import main; code = main(sys.argv[1:])"
+          "; print('threads', sorted(t.name for t in threading.enumerate())); sys.exit(code)")
+
+
+@pytest.mark.parametrize("kind, said", [
+    ("http", " within 2 s: something there accepts connections but said nothing in Dask's "
+     "protocol"),
+    ("silent", " within 2 s: something there accepts connections but said nothing in Dask's "
+     "protocol"),
+    ("close", ": something there accepts connections but closed them without a Dask answer"),
+    ("greet", ": something there answered, but not in Dask's protocol"),
+])
+def test_a_port_that_answers_but_is_no_dask_scheduler(kind, said, clips, quick_model_path,
+                                                      tmp_path):
+    """``--scheduler`` of a web server's port, of a program that accepts and says nothing (Dask
+    reads the handshake without a deadline: hung for good, 300 s measured), of one that closes
+    at once (a message of a ConnectionResetError) or one that speaks first ("out of memory"):
+    one line within about --timeout, naming the address and what was expected; no traceback,
+    no Dask log line, no thread left."""
+    import subprocess
+
+    with _not_a_scheduler(kind) as addr:
+        r = subprocess.run([sys.executable, "-c", _CHILD, "batch", "track", str(clips["a"][0]),
+                            "--model", str(quick_model_path), "--out", str(tmp_path / "o"),
+                            "--scheduler", addr, "--timeout", "2"],
+                           capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2, r.stderr
+    assert r.stderr.splitlines() == [
+        f"facetransfer batch: error: no Dask scheduler answered at {addr}{said} (is it the "
+        "scheduler's address? `dask scheduler` prints it, port 8786 by default)"]
+    assert r.stdout.splitlines() == ["threads ['MainThread']"]
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_dask_worker_is_not_taken_for_the_scheduler(tmp_path):
+    """A worker's address (the one a worker's log shows) answers in Dask's protocol: it is said
+    as a worker's, not connected to as a client (a TypeError of its identity handler)."""
+    from dask.distributed import LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp",
+                      dashboard_address=None) as running:
+        worker = next(iter(running.scheduler_info["workers"]))
+        with pytest.raises(batch_run.BatchError, match=f"{worker} is a Dask worker, not a "
+                                                       "scheduler; give the scheduler's"):
+            with batch_cluster.open_client(scheduler=worker, timeout=5):
+                pass
+        with batch_cluster.open_client(scheduler=running.scheduler_address,
+                                       timeout=5) as client:
+            assert client.submit(int, "7").result() == 7
 
 
 def test_an_output_that_is_not_this_clips_track_is_kept_unless_overwrite(quick_model, tmp_path):
@@ -443,8 +668,8 @@ def test_a_rerun_knows_an_output_of_other_inputs_from_its_own(arkit_model, make_
     assert _cli(capsys, *argv)[0] == 1
     row = _summary(out / "summary.csv")["t"]
     assert row["status"] == "failed" and row["error"] == (
-        f"{out / 't.csv'} was made from other inputs or options than t's now; --overwrite "
-        "redoes it")
+        f"{out / 't.csv'} was made from other inputs or options than t's now; remove it to "
+        "redo this clip alone, or --overwrite redoes every clip")
     assert (out / "t.csv").read_bytes() == kept
     assert _cli(capsys, *argv)[0] == 1                            # and the next run too
     assert _summary(out / "summary.csv")["t"]["status"] == "failed"

@@ -125,7 +125,7 @@ def test_summary_round_trip_and_one_line_errors(tmp_path):
         Row("d", "ok")
 
 
-def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch):
+def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch, capsys):
     """A walk with Dask: paths absolute before they reach a worker (a real scheduler's runs in
     its own folder: a relative clip "does not exist" there, and a rerun from another folder
     took every output for another job's); a column given twice and a row of more cells than
@@ -161,8 +161,12 @@ def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch):
         batch_track([], tmp_path / "out", None, client=None, chunk=2)
     from facetransfer.cli.main import main
 
-    assert main(["batch", "track", "a.mp4", "--out", str(tmp_path / "o"), "--timeout",
-                 "inf"]) == 2
+    for t in ("inf", "nan", "0", "1e12"):        # 1e12: a traceback (a socket's deadline)
+        assert main(["batch", "track", "a.mp4", "--out", str(tmp_path / "o"), "--timeout",
+                     t]) == 2
+        assert capsys.readouterr().err.splitlines() == [
+            "facetransfer batch: error: --timeout must be a number of seconds > 0 and at most "
+            f"86400, got {float(t):g}"]
 
 
 def test_a_clip_replaced_since_its_track_is_not_skipped(quick_model, tmp_path):
@@ -239,3 +243,55 @@ def test_the_summary_keeps_other_clips_and_an_unrecorded_output_is_not_adopted(t
     assert kept["A"].status == "skipped"
     assert kept["B"].status == "failed" and "other inputs or options" in kept["B"].error
     assert kept["C"].status == "failed" and "after an interrupt" in kept["C"].error
+
+
+def test_an_output_a_stopped_run_leaves_is_known_to_the_next(tmp_path):
+    """The rows a run does not finish record what made their output. A clip cancelled by a
+    Ctrl-C whose worker wrote it afterwards (the README's "then skipped by the next run"):
+    its row had no digest and the next run of the same command refused it ("finished after an
+    interrupt"); a task that failed in an --overwrite run left the earlier run's output, and
+    its row forgot that run's digest, so the run after took that output for its own."""
+    from facetransfer.batch.manifest import ExportJob
+    from facetransfer.batch.run import _Collector, _kept, _unfinished
+
+    write_summary(tmp_path / "summary.csv", [Row("B", "done", job="kb-before")])
+    jobs = [ExportJob(n, tmp_path / f"{n}.npz") for n in "AB"]
+    outs = {n: tmp_path / f"{n}.json" for n in "AB"}
+    outs["B"].write_text("the earlier run's")
+    keys = {"A": "ka", "B": "kb"}
+    col = _Collector.__new__(_Collector)          # only what fail() and write() read
+    col.names, col.rows, col.summary, col.others = ["A", "B"], {}, tmp_path / "summary.csv", []
+    col.progress, col.last_write = None, 0.0
+    col.unfinished = _unfinished(jobs, outs, tmp_path, keys)
+    col.fail(jobs[1], RuntimeError("no face"), outs["B"])    # B failed, A cancelled
+    col.write()
+    outs["A"].write_text("written by A's worker after the Ctrl-C")
+    assert {r.clip: (r.status, r.job) for r in read_summary(tmp_path / "summary.csv")} == {
+        "A": ("cancelled", "ka"), "B": ("failed", "kb-before")}
+    kept = _kept(jobs, outs, tmp_path, keys, lambda out, name: Row(name, "skipped"))
+    assert kept["A"].status == "skipped" and kept["A"].job == "ka"
+    assert kept["B"].status == "failed" and "other inputs or options" in kept["B"].error
+    kept = _kept(jobs, outs, tmp_path, {"A": "ka2", "B": "kb"},
+                 lambda out, name: Row(name, "skipped"))
+    assert kept["A"].status == "failed" and "other inputs or options" in kept["A"].error
+
+
+def test_a_jobs_options_text_names_what_differs_from_the_defaults():
+    """The tracker options in a ``batch track`` digest: what was changed, so that a version
+    adding an option (at its default) does not make every earlier track another job's."""
+    import dataclasses
+
+    from facetransfer.batch.run import options_text
+    from facetransfer.track.options import TrackOptions
+    from facetransfer.track.settings import TrackerSettings
+
+    assert options_text(TrackerSettings()) == "TrackerSettings()"
+    assert options_text(TrackerSettings("klt", TrackOptions(passes=3))) == (
+        "TrackerSettings(tracker='klt', klt=TrackOptions(passes=3))")
+    old = dataclasses.make_dataclass("Opt", [("a", int, dataclasses.field(default=1))],
+                                     frozen=True)
+    new = dataclasses.make_dataclass("Opt", [("a", int, dataclasses.field(default=1)),
+                                             ("b", float, dataclasses.field(default=0.5))],
+                                     frozen=True)
+    assert options_text(old()) == options_text(new()) == "Opt()"
+    assert options_text(new(b=0.25)) == "Opt(b=0.25)"

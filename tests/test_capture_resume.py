@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 
 import numpy as np
@@ -354,6 +355,42 @@ def test_batch_track_clip_continues_an_interrupted_capture(clip, quick_model, tm
     assert row.status == "done" and not partial.exists()
     assert fakes.made[-1].calls == F - 25 + FakeDetector.warmup_frames
     np.testing.assert_allclose(Track.load(out).landmarks2d, ref.landmarks2d, atol=1e-9)
+
+
+def test_batch_track_clip_of_max_frames_as_track_does(clip, quick_model_path, quick_model,
+                                                      tmp_path, capsys, fakes):
+    """A clip's first ``max_frames`` frames with the capture tracker (``batch track
+    --max-frames``): the track ``track --max-frames`` writes, continued from its progress file
+    after an interrupt, and a progress file of another limit not taken for it."""
+    from facetransfer.batch import jobs
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.track.settings import TrackerSettings
+
+    video, n = str(clip[0]), 24
+    ref = tmp_path / "ref.npz"
+    assert main(["track", video, "--model", str(quick_model_path), "--out", str(ref),
+                 "--max-frames", str(n)]) == 0
+    capsys.readouterr()
+    job, settings = ClipJob("c", video, "auto", None, n), TrackerSettings()
+    out = tmp_path / "c.npz"
+    fakes.stop_at = 15
+    with pytest.raises(KeyboardInterrupt):
+        jobs.track_clip(job, str(out), quick_model, settings)
+    assert jobs.partial_path(out).is_file()
+    fakes.stop_at = None
+    row = jobs.track_clip(job, str(out), quick_model, settings)
+    assert row.frames == n and not jobs.partial_path(out).exists()
+    assert fakes.made[-1].calls == n - 15 + FakeDetector.warmup_frames  # frames 15..n only
+    a, b = Track.load(out), Track.load(ref)
+    assert a.n_frames == b.n_frames == n
+    np.testing.assert_allclose(a.landmarks2d, b.landmarks2d, atol=1e-9)
+    fakes.stop_at = 15
+    with pytest.raises(KeyboardInterrupt):
+        jobs.track_clip(job, str(out), quick_model, settings)
+    fakes.stop_at = None          # the same clip, another limit: from its first frame
+    row = jobs.track_clip(dataclasses.replace(job, max_frames=20), str(out), quick_model,
+                          settings)
+    assert row.frames == 20 and fakes.made[-1].calls == 20
 
 
 def test_a_transfers_track_is_kept_continued_and_reused_in_the_cache(clip, quick_model, tmp_path,

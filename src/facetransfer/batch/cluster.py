@@ -2,7 +2,9 @@
 single-threaded worker process per core) or the scheduler of a real cluster.
 
 The workers must see the inputs and the output folder at the same paths as the client (a shared
-file system); the model is scattered to them once (:func:`scatter_model`).
+file system); the model is scattered to them once (:func:`scatter_model`). A scheduler's address
+is asked, within the timeout, whether a Dask scheduler answers there before a client connects
+(:func:`_probe`: Dask's client waits for the handshake of whatever listens without a deadline).
 """
 
 from __future__ import annotations
@@ -11,18 +13,23 @@ import contextlib
 import logging
 import os
 import socket
+import time
 from typing import Iterator
 
 from .manifest import BatchError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["open_client", "quiet_dask", "default_workers", "scatter_model", "DASK_LOGGERS"]
+__all__ = ["open_client", "quiet_dask", "default_workers", "check_timeout", "scatter_model",
+           "DASK_LOGGERS"]
 
 #: Loggers of Dask and its web stack, silenced unless ``-v``.
 DASK_LOGGERS = ("distributed", "dask", "tornado", "bokeh", "asyncio")
 #: Seconds a scheduler has to answer.
 CONNECT_TIMEOUT = 10.0
+#: The longest wait for a scheduler taken (a day; 1e12 s overflowed a socket's deadline into a
+#: traceback).
+MAX_TIMEOUT = 86400.0
 
 
 def quiet_dask(verbose: bool = False) -> None:
@@ -37,6 +44,15 @@ def quiet_dask(verbose: bool = False) -> None:
         logging.getLogger(name).setLevel(level)
 
 
+def check_timeout(timeout: float) -> float:
+    """``timeout`` (seconds a scheduler has to answer) if in ``(0, MAX_TIMEOUT]``, else
+    BatchError."""
+    if not 0 < timeout <= MAX_TIMEOUT:        # also nan
+        raise BatchError(f"--timeout must be a number of seconds > 0 and at most "
+                         f"{MAX_TIMEOUT:g}, got {timeout:g}")
+    return timeout
+
+
 def default_workers() -> int:
     """One worker per core this process may use."""
     try:
@@ -45,24 +61,110 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: The end of the messages of an address where no scheduler answers.
+SCHEDULER_HINT = "is it the scheduler's address? `dask scheduler` prints it, port 8786 by default"
+
+
 def _probe(address: str, timeout: float) -> None:
-    """Raise :class:`BatchError` unless something listens at a ``tcp://HOST:PORT`` address."""
+    """Raise :class:`BatchError` unless a Dask scheduler answers at a ``tcp://HOST:PORT``
+    address within ``timeout`` seconds.
+
+    A plain connection first (nothing listening, an unknown host: said at once), then Dask's
+    own handshake and an ``identity`` request, bounded as a whole: the client's connection
+    reads the handshake without a deadline, so a port where something else listens (a web
+    server, a program that accepts and says nothing) hung the run past ``--timeout``.
+    """
+    where = _host_port(address)
+    if where is None:
+        return  # tls://, ucx://...: left to Dask
+    host, port = where
+    deadline = time.monotonic() + timeout
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except socket.gaierror as exc:
+        raise BatchError(f"no Dask scheduler answered at {address}: the host {host!r} is not "
+                         f"known ({exc.strerror or exc}); check the address") from None
+    except TimeoutError:
+        raise BatchError(f"no Dask scheduler answered at {address} within {timeout:g} s: the "
+                         "connection was not accepted (a machine that is down, a firewall?); "
+                         "check the address") from None
+    except OSError as exc:
+        raise BatchError(f"no Dask scheduler answered at {address}: {exc.strerror or exc} "
+                         "(start it with `dask scheduler`, or check the address)") from None
+    kind = _dask_identity(address, timeout, max(deadline - time.monotonic(), 0.1))
+    if kind in ("Worker", "Nanny"):
+        raise BatchError(f"{address} is a Dask {kind.lower()}, not a scheduler; give the "
+                         "scheduler's address (`dask scheduler` prints it, port 8786 by "
+                         "default)")
+
+
+def _host_port(address: str) -> tuple[str, int] | None:
+    """``(host, port)`` of a ``tcp://`` address, None for another protocol; BatchError where
+    it is not an address."""
     from distributed.comm.addressing import parse_address, parse_host_port
 
     try:
         proto, loc = parse_address(address)
         if proto != "tcp":
-            return  # tls://, ucx://...: left to Dask
+            return None
         host, port = parse_host_port(loc)
     except (ValueError, TypeError):
-        raise BatchError(f"--scheduler {address!r} is not an address like "
-                         "tcp://HOST:8786") from None
+        port = -1
+    if not 0 < port < 65536:     # before, port 99999 was "Connection refused"
+        raise BatchError(f"--scheduler {address!r} is not an address like tcp://HOST:8786")
+    return host, port
+
+
+def _dask_identity(address: str, timeout: float, left: float) -> str:
+    """The type (``"Scheduler"``, ``"Worker"``...) the Dask server at ``address`` says it is,
+    asked within the ``left`` seconds of ``timeout``; BatchError where nothing answers in
+    Dask's protocol."""
+    import asyncio
+
+    from distributed.comm import CommClosedError, connect
+
+    async def ask():
+        # deserialize=False: whatever answers is not trusted with unpickling
+        comm = await connect(address, timeout=left, deserialize=False)
+        try:
+            await comm.write({"op": "identity", "reply": True})
+            return await comm.read()
+        finally:
+            comm.abort()
+
+    said = f"no Dask scheduler answered at {address}"
     try:
-        with socket.create_connection((host, int(port)), timeout=timeout):
-            pass
+        reply = _run_coroutine(asyncio.wait_for(ask(), left))
+    except TimeoutError:
+        raise BatchError(f"{said} within {timeout:g} s: something there accepts connections "
+                         f"but said nothing in Dask's protocol ({SCHEDULER_HINT})") from None
+    except CommClosedError:
+        raise BatchError(f"{said}: something there accepts connections but closed them "
+                         f"without a Dask answer ({SCHEDULER_HINT})") from None
     except OSError as exc:
-        raise BatchError(f"scheduler {address} does not answer ({exc.strerror or exc}); start "
-                         "it with `dask scheduler` and check the address") from None
+        raise BatchError(f"{said} within {timeout:g} s ({exc.strerror or exc})") from None
+    except Exception:  # noqa: BLE001 (bytes that are not Dask's frames: any decoding error)
+        raise BatchError(f"{said}: something there answered, but not in Dask's protocol "
+                         f"({SCHEDULER_HINT})") from None
+    if not isinstance(reply, dict) or not isinstance(reply.get("type"), str):
+        raise BatchError(f"{said}: the server there answered in Dask's protocol but not as a "
+                         f"scheduler ({SCHEDULER_HINT})")
+    return reply["type"]
+
+
+def _run_coroutine(coro):
+    """Run ``coro`` to its end on an event loop of its own (on a thread of its own where this
+    one already runs a loop, e.g. in a notebook); the loop is closed after it."""
+    import asyncio
+    import concurrent.futures
+
+    try:
+        asyncio.get_running_loop()
+    except RuntimeError:
+        return asyncio.run(coro)
+    with concurrent.futures.ThreadPoolExecutor(1) as pool:
+        return pool.submit(asyncio.run, coro).result()
 
 
 @contextlib.contextmanager
@@ -88,7 +190,8 @@ def open_client(*, workers: int | None = None, scheduler: str | None = None,
     Raises
     ------
     BatchError
-        ``workers < 1``, ``workers`` with ``scheduler``, a scheduler that does not answer.
+        ``workers < 1``, ``workers`` with ``scheduler``, a timeout not in (0, MAX_TIMEOUT], a
+        scheduler that does not answer.
     """
     from dask.distributed import Client
 
@@ -97,6 +200,7 @@ def open_client(*, workers: int | None = None, scheduler: str | None = None,
         if workers is not None:
             raise BatchError("--workers sizes the embedded cluster; the workers of --scheduler "
                              "are the ones started with `dask worker`")
+        check_timeout(timeout)
         client = _remote_client(scheduler, timeout)
         try:
             yield client
@@ -125,7 +229,7 @@ def _remote_client(scheduler: str, timeout: float):
     try:
         return Client(scheduler, timeout=timeout, set_as_default=False)
     except (OSError, TimeoutError) as exc:
-        raise BatchError(f"scheduler {scheduler} did not answer within {timeout:g} s "
+        raise BatchError(f"no Dask scheduler answered at {scheduler} within {timeout:g} s "
                          f"({exc})") from None
     except (TypeError, ValueError) as exc:  # tls:// without certificates, a bad address
         raise BatchError(f"cannot connect to scheduler {scheduler}: {exc}") from None

@@ -58,7 +58,8 @@ def _detector_for(init: str, options):
 
 
 def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=None,
-           tracker: str | None = None, view=None, face: str | None = None):
+           tracker: str | None = None, view=None, face: str | None = None,
+           max_frames: int | None = None):
     """As ``facetransfer track``: the tracker ``settings`` choose for ``init`` (or ``tracker``);
     ``view``: how frames given as an array are shown (:class:`facetransfer.track.aspect.View`
     of their video); ``face``: of several people, the one the capture tracker follows."""
@@ -74,9 +75,10 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
 
             return capture_resuming(video, model, checkpoint, options=settings.capture,
                                     source=source, fixed=fixed, subject=subject,
-                                    detector_id=face_detector_id(face), save_every=SAVE_EVERY)
+                                    detector_id=face_detector_id(face), save_every=SAVE_EVERY,
+                                    max_frames=max_frames)
         return capture_video(video, model, options=settings.capture, source=source,
-                             fixed=fixed, view=view, subject=subject)
+                             fixed=fixed, view=view, subject=subject, max_frames=max_frames)
     if face is not None:
         raise BatchError(f"{source}: face {face!r} is for the capture tracker (the clip is "
                          "tracked with the optical-flow tracker, which follows the face found "
@@ -84,7 +86,8 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
     detector = _detector_for(init, settings.klt)
     try:
         return track_video(video, model, init=init, options=settings.klt, source=source,
-                           detector=detector, fixed=fixed, checkpoint=checkpoint)
+                           detector=detector, fixed=fixed, checkpoint=checkpoint,
+                           max_frames=max_frames)
     finally:
         if detector is not None:
             detector.close()
@@ -121,7 +124,7 @@ def track_clip(job, out: str, model, options) -> Row:
     t0 = time.perf_counter()
     video_info(job.video)  # missing / not a video: one line naming the path
     track = _track(str(job.video), model, job.init, options, source=str(job.video),
-                   checkpoint=partial_path(out), face=job.face)
+                   checkpoint=partial_path(out), face=job.face, max_frames=job.max_frames)
     track.save(out, overwrite=True)
     partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
     return track_row(job.name, track, out, time.perf_counter() - t0)
@@ -325,9 +328,9 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None) 
 
 
 
-def count_frames(video) -> int:
+def count_frames(video, max_frames: int | None = None) -> int:
     """Frames of a video, counted by decoding as the tracker does (containers' counts can be
-    approximate).
+    approximate); no more than ``max_frames``.
 
     Raises
     ------
@@ -338,7 +341,7 @@ def count_frames(video) -> int:
     from ..io.video import iter_frames, video_info
 
     video_info(video)
-    n = sum(1 for _ in iter_frames(video))
+    n = sum(1 for _ in iter_frames(video, stop=max_frames))
     if n == 0:
         raise VideoError(f"video {video} has no frames")
     return n

@@ -11,7 +11,9 @@ anything runs.
 manifest            columns
 ==================  =========================================================================
 clips (``track``)   ``video`` (required), ``name``, ``init`` (POINTS.json; default ``auto``),
-                    ``face`` (of several people, the one to track, as ``track --face``)
+                    ``face`` (of several people, the one to track, as ``track --face``),
+                    ``max_frames`` (track only the clip's first N frames, as
+                    ``track --max-frames``)
 pairs (``transfer``) ``target`` (required), ``name``, the sources of ``facetransfer transfer``:
                     ``expression_from``, ``viseme_from``, ``identity_from``, ``pose_from``,
                     ``performance``, their track files ``target_track``, ``source_track``,
@@ -40,7 +42,7 @@ class BatchError(FaceTransferError):
 
 
 #: Columns of a clips manifest (``video`` required).
-CLIP_COLUMNS = ("video", "name", "init", "face")
+CLIP_COLUMNS = ("video", "name", "init", "face", "max_frames")
 #: Columns of a pairs manifest holding paths (``target`` required).
 PAIR_PATH_COLUMNS = ("target", "expression_from", "viseme_from", "identity_from", "pose_from",
                      "performance", "target_track", "source_track", "viseme_track",
@@ -67,12 +69,15 @@ class ClipJob:
     face : str or None
         Of several people, the one to track (``"left"``, ``"right"``, ``"centre"``, ``"X,Y"``:
         :func:`facetransfer.track.face_crop.subject_point`); None: the face found first.
+    max_frames : int or None
+        Track only the clip's first ``max_frames`` frames (``track --max-frames``); None: all.
     """
 
     name: str
     video: str
     init: str = "auto"
     face: str | None = None
+    max_frames: int | None = None
 
     @property
     def inputs(self) -> tuple[Path, ...]:
@@ -210,6 +215,20 @@ def _check_face(text: str | None, what: str) -> None:
         raise BatchError(str(exc)) from None
 
 
+def _max_frames(value, what: str) -> int | None:
+    """A frame limit (``--max-frames``, a ``max_frames`` cell): None, or a whole number >= 1."""
+    if value is None:
+        return None
+    try:
+        n = int(str(value).strip())
+    except ValueError:
+        raise BatchError(f"{what} must be a whole number of frames >= 1, got "
+                         f"{str(value)!r}") from None
+    if n < 1:
+        raise BatchError(f"{what} must be >= 1, got {n}")
+    return n
+
+
 def _name(explicit: str | None, path: str | os.PathLike, where: str) -> str:
     name = explicit or _stem(path)
     if not name or name in (".", "..") or "/" in name or "\\" in name or name.startswith("."):
@@ -230,27 +249,33 @@ def _stem(path: str | os.PathLike) -> str:
 
 
 def clip_jobs(videos=(), manifest: str | os.PathLike | None = None, *,
-              init: str = "auto", face: str | None = None) -> list[ClipJob]:
-    """The clips of ``batch track``: videos given directly (with the initial points ``init``
-    and the person ``face``) and/or the rows of a manifest (with their ``init`` and ``face``
-    columns; an empty ``face`` cell takes ``face``).
+              init: str = "auto", face: str | None = None,
+              max_frames: int | None = None) -> list[ClipJob]:
+    """The clips of ``batch track``: videos given directly (with the initial points ``init``,
+    the person ``face`` and the frame limit ``max_frames``) and/or the rows of a manifest (with
+    their ``init``, ``face`` and ``max_frames`` columns; an empty ``face`` or ``max_frames``
+    cell takes ``face`` or ``max_frames``).
 
     Raises
     ------
     BatchError
-        No clip at all, a bad manifest, a face that names no place, or two clips with the
-        same name.
+        No clip at all, a bad manifest, a face that names no place, a frame limit that is not
+        a whole number >= 1, or two clips with the same name.
     """
     _check_face(face, "--face")
+    max_frames = _max_frames(max_frames, "--max-frames")
     jobs = [ClipJob(_name(None, v, f"video {v}"), absolute(v),
-                    str(init) if init == "auto" else absolute(init), face) for v in videos]
+                    str(init) if init == "auto" else absolute(init), face, max_frames)
+            for v in videos]
     if manifest is not None:
         for row in read_manifest(manifest, required=("video",), allowed=CLIP_COLUMNS,
                                  paths=("video", "init")):
             where = f"manifest {manifest} line {row[LINE]}"
             _check_face(row.get("face"), f"{where}: face")
+            limit = _max_frames(row.get("max_frames"), f"{where}: max_frames")
             jobs.append(ClipJob(_name(row.get("name"), row["video"], where), row["video"],
-                                row.get("init", "auto"), row.get("face", face)))
+                                row.get("init", "auto"), row.get("face", face),
+                                max_frames if limit is None else limit))
     if not jobs:
         raise BatchError("no clips: give VIDEO files or --manifest clips.csv")
     check_unique_names(jobs)

@@ -26,7 +26,7 @@ from .summary import Row, write_summary
 log = logging.getLogger(__name__)
 
 __all__ = ["BatchResult", "check_out_dir", "prepare_out_dir", "batch_track", "batch_transfer",
-           "batch_export", "SUMMARY_NAME", "DEFAULT_OVERLAP"]
+           "batch_export", "job_key", "options_text", "SUMMARY_NAME", "DEFAULT_OVERLAP"]
 
 SUMMARY_NAME = "summary.csv"
 #: Frames shared by neighbouring chunks (1.2 s at 25 fps).
@@ -129,7 +129,8 @@ def _error_line(exc: BaseException) -> str:
 class _Collector:
     """Collects the rows as futures finish; writes the summary; cancels on Ctrl-C."""
 
-    def __init__(self, client, names, out_dir: Path, rows: dict, progress: Progress | None):
+    def __init__(self, client, names, out_dir: Path, rows: dict, progress: Progress | None,
+                 unfinished: dict | None = None):
         from dask.distributed import as_completed
 
         self.client, self.names, self.rows = client, list(names), dict(rows)
@@ -139,6 +140,8 @@ class _Collector:
         # of them all took a stale output for its own)
         mine = set(self.names)
         self.others = [r for r in _earlier_rows(out_dir) if r.clip not in mine]
+        # {clip: (digest of a cancelled row, of a failed row)}: what made its output (_unfinished)
+        self.unfinished = dict(unfinished or {})
         self.progress = progress
         self.ac = as_completed(loop=client.loop)
         self.what: dict = {}       # future -> (kind, job)
@@ -159,10 +162,13 @@ class _Collector:
 
     def fail(self, job, exc: BaseException, out) -> None:
         log.info("%s failed: %s", job.name, exc)
-        self.finish(job, Row(job.name, "failed", error=_error_line(exc), output=str(out)))
+        self.finish(job, Row(job.name, "failed", error=_error_line(exc), output=str(out),
+                             job=self.unfinished.get(job.name, ("", ""))[1]))
 
     def write(self) -> Path:
-        rows = [self.rows.get(n) or Row(n, "cancelled") for n in self.names] + self.others
+        rows = [self.rows.get(n) or Row(n, "cancelled",
+                                        job=self.unfinished.get(n, ("", ""))[0])
+                for n in self.names] + self.others
         self.last_write = time.monotonic()
         return write_summary(self.summary, rows)
 
@@ -186,10 +192,12 @@ def _model_future(client, model):
     return scatter_model(client, model)
 
 
-def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, model):
-    """The run's collector (the rows of ``done`` reported), the jobs left to do and the model
-    scattered to the workers (None when nothing is left)."""
-    col = _Collector(client, [j.name for j in jobs], out_dir, done, progress)
+def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, model,
+           unfinished: dict | None = None):
+    """The run's collector (the rows of ``done`` reported; ``unfinished``: the digests of the
+    others' rows should they not finish, :func:`_unfinished`), the jobs left to do and the
+    model scattered to the workers (None when nothing is left)."""
+    col = _Collector(client, [j.name for j in jobs], out_dir, done, progress, unfinished)
     if progress is not None:
         for r in done.values():
             progress(r)
@@ -219,6 +227,8 @@ def _done_track(out: Path, job, model_hash: str) -> Row | None:
             why = f"holds a track of {made}, not of {Path(str(job.video)).name}"
         elif t.model_hash != model_hash:
             why = "holds a track made with another model"
+        elif job.max_frames is not None and t.n_frames > job.max_frames:
+            why = f"holds a track of {t.n_frames} frames, more than max_frames {job.max_frames}"
         else:
             why = _other_frames(t, job.video)
     if why is not None:
@@ -285,10 +295,17 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     out_dir = prepare_out_dir(out_dir)
     outs = _outputs(jobs, out_dir, ".npz")
     mhash = model.content_hash
-    done = {} if overwrite else {j.name: r for j in jobs
-                                 if (r := _done_track(outs[j.name], j, mhash)) is not None}
-    col, todo, mf = _start(client, jobs, out_dir, done, progress, model)
-    run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap)
+    # a track file does not record its options: the summary's digest of them does (the job
+    # holds the clip's frame limit: before, a rerun with another --max-frames was "skipped")
+    what = (f"track {options_text(options)} chunk={chunk}"
+            + (f" overlap={overlap}" if chunk else "") + f" {mhash}")
+    keys = {j.name: job_key(j, what) for j in jobs}
+    by_name = {j.name: j for j in jobs}
+    done = {} if overwrite else _kept(jobs, outs, out_dir, keys, lambda out, name: _done_track(
+        out, by_name[name], mhash))
+    col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
+                           _unfinished(jobs, outs, out_dir, keys))
+    run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys)
     for job in todo:
         run.submit(job)
     return col.run(run.on_done)
@@ -299,14 +316,14 @@ class _TrackSubmit:
     first, then its chunks tracked in parallel (the first one first) and joined."""
 
     def __init__(self, client, col: _Collector, outs: dict, mf, options, chunk: int,
-                 overlap: int) -> None:
+                 overlap: int, keys: dict) -> None:
         self.client, self.col, self.outs, self.mf = client, col, outs, mf
-        self.options, self.chunk, self.overlap = options, chunk, overlap
+        self.options, self.chunk, self.overlap, self.keys = options, chunk, overlap, keys
 
     def submit(self, job) -> None:
-        if self.chunk:
-            self.col.add(self.client.submit(J.count_frames, str(job.video), pure=False), "count",
-                         job)
+        if self.chunk:   # a clip of more than max_frames: the chunks of its first max_frames
+            self.col.add(self.client.submit(J.count_frames, str(job.video), job.max_frames,
+                                            pure=False), "count", job)
         else:
             self._whole(job)
 
@@ -337,7 +354,7 @@ class _TrackSubmit:
         if kind == "count":
             self._chunks(job, int(res))
         else:
-            self.col.finish(job, res)
+            self.col.finish(job, dataclasses.replace(res, job=self.keys[job.name]))
 
 
 def job_key(job, what: str) -> str:
@@ -358,6 +375,30 @@ def job_key(job, what: str) -> str:
     return h.hexdigest()[:16]
 
 
+def options_text(options) -> str:
+    """The text of a (frozen) dataclass of options in a job's digest: its fields that differ
+    from its class's defaults, nested ones likewise; a version that adds an option (at its
+    default) leaves it as it was, so that it does not make every earlier output another
+    job's."""
+    if not dataclasses.is_dataclass(options) or isinstance(options, type):
+        return repr(options)
+    try:
+        default = type(options)()
+    except TypeError:                           # fields without defaults: all of them
+        return repr(options)
+    changed = [f"{f.name}={options_text(getattr(options, f.name))}"
+               for f in dataclasses.fields(options)
+               if not _equal(getattr(options, f.name), getattr(default, f.name))]
+    return f"{type(options).__name__}({', '.join(changed)})"
+
+
+def _equal(a, b) -> bool:
+    try:
+        return bool(a == b)
+    except (TypeError, ValueError):             # arrays: not said equal
+        return False
+
+
 def _earlier_rows(out_dir: Path) -> list[Row]:
     """The rows of the summary an earlier run of ``out_dir`` wrote (none where there is none,
     or it is not one)."""
@@ -376,11 +417,29 @@ UNKNOWN_JOB = "unknown"
 
 def _earlier(out_dir: Path) -> dict[str, str]:
     """``{clip: job digest}`` of the outputs an earlier run of ``out_dir`` made, kept or
-    refused (a failed row of a task has none; a cancelled one :data:`UNKNOWN_JOB`: its
-    output, if it appeared after all, was made with options nobody recorded, and is not taken
-    as the next run's: before, it was, whatever that run's options)."""
+    refused (:func:`_unfinished`: a failed row has the digest of the output it left, if any;
+    a cancelled one without a digest :data:`UNKNOWN_JOB`: its output, if it appeared after
+    all, was made with options nobody recorded, and is not taken as the next run's: before,
+    it was, whatever that run's options)."""
     return {r.clip: r.job or (UNKNOWN_JOB if r.status == "cancelled" else "")
             for r in _earlier_rows(out_dir) if r.job or r.status == "cancelled"}
+
+
+def _unfinished(jobs, outs: dict, out_dir: Path, keys: dict) -> dict[str, tuple[str, str]]:
+    """``{clip: (digest of its row if cancelled, if failed)}``: of an output absent as the run
+    starts, this run's digest (only this run's task can write it: a worker finishing it after
+    a Ctrl-C or a lost scheduler; before, a cancelled row had none and the next run refused
+    such an output, a clip tracked whole that was finishing as the run stopped); of an output
+    there, none if cancelled (the task may have replaced it) and the earlier run's if failed
+    (the output is that run's still; before, forgotten: the run after took it for its own)."""
+    earlier = _earlier(out_dir)
+    return {j.name: ((keys[j.name], keys[j.name]) if not outs[j.name].exists()
+                     else ("", earlier.get(j.name, ""))) for j in jobs}
+
+
+#: The end of the line of an output another job made: before, only "--overwrite redoes it",
+#: which redoes every clip of the run (a manifest's one changed row: all its clips again).
+REDO = "remove it to redo this clip alone, or --overwrite redoes every clip"
 
 
 def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found) -> dict[str, Row]:
@@ -393,14 +452,15 @@ def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found) -> dict[str, Row]:
         if r is None:
             continue
         made = earlier.get(j.name, keys[j.name])
-        if made != keys[j.name]:
+        if r.ok and made != keys[j.name]:     # (a row failed by ``found`` says its own why)
             r = Row(j.name, "failed", output=str(outs[j.name]), error=(
                 f"{outs[j.name]} was finished after an interrupt, with options not recorded; "
-                "--overwrite redoes it" if made == UNKNOWN_JOB else
+                + REDO if made == UNKNOWN_JOB else
                 f"{outs[j.name]} was made from other inputs or options than {j.name}'s now; "
-                "--overwrite redoes it"))
+                + REDO))
         # a refused output keeps its maker's digest: a later run still knows it
-        done[j.name] = dataclasses.replace(r, job=keys[j.name] if r.ok else earlier[j.name])
+        done[j.name] = dataclasses.replace(r, job=keys[j.name] if r.ok
+                                           else earlier.get(j.name, ""))
     return done
 
 
@@ -490,8 +550,9 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
 
 
 def _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys) -> BatchResult:
-    """A run of one independent task per job; each row done records its job digest."""
-    col, todo, mf = _start(client, jobs, out_dir, done, progress, model)
+    """A run of one independent task per job; each row records its job digest."""
+    col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
+                           _unfinished(jobs, outs, out_dir, keys))
     for job in todo:
         col.add(submit(job, mf), "clip", job)
 

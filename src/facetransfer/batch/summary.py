@@ -14,7 +14,7 @@ column              meaning
 ``output``          the output's path
 ``job``             a digest of what made the output (the job's inputs as they were on
                     disk, its options, the model): a rerun that finds another one there
-                    has not made that output (``batch transfer`` and ``export``)
+                    has not made that output
 ==================  ======================================================================
 """
 

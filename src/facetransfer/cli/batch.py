@@ -2,7 +2,8 @@
 
     facetransfer batch track VIDEO... | --manifest clips.csv --out DIR [--workers N]
                              [--scheduler tcp://HOST:8786] [--chunk N [--overlap N]]
-                             [--model M.npz] [--face WHERE] [track options] [--overwrite]
+                             [--model M.npz] [--face WHERE] [--max-frames N] [track options]
+                             [--overwrite]
     facetransfer batch transfer --manifest pairs.csv --out DIR [--model M.npz] [transfer options]
     facetransfer batch export TRACK... --format livelink|glb|usd|json --out DIR [--model M.npz]
 
@@ -65,7 +66,8 @@ def register(sub) -> None:
                       "the seams (one identity per clip).")
     t.add_argument("videos", nargs="*", metavar="VIDEO", help="videos to track")
     t.add_argument("--manifest", metavar="clips.csv",
-                   help="CSV with a video column (and name, init, face); paths relative to it")
+                   help="CSV with a video column (and name, init, face, max_frames); paths "
+                   "relative to it")
     t.add_argument("--model", metavar="M.npz", help="model (default: the default model)")
     t.add_argument("--chunk", type=int, default=0,
                    help="split clips longer than this many frames into overlapping chunks "
@@ -76,6 +78,9 @@ def register(sub) -> None:
                    help=f"[capture] with several people in the frame, the one to track in "
                    f"every clip (a manifest's face column gives it per clip): {FACE_WHERE}; "
                    "each chunk of a --chunk clip starts on the face nearest it")
+    t.add_argument("--max-frames", type=int, default=None,
+                   help="track only the first N frames of every clip (a manifest's max_frames "
+                   "column gives it per clip)")
     _track_options(t)
     _cluster_options(t)
     t.set_defaults(func=run_track)
@@ -124,10 +129,7 @@ def _run(args, what: str, n_jobs: int, call) -> int:
     if args.workers is not None and args.workers < 1:
         raise FaceTransferError(f"--workers must be >= 1, got {args.workers}")
     workers = args.workers if args.scheduler is not None else _workers(args.workers, n_jobs)
-    bar = None if args.no_progress else tqdm(total=n_jobs, desc=what, unit="clip",
-                                             dynamic_ncols=True, file=sys.stderr,
-                                             disable=progress_disabled())
-    failed = 0
+    bar, started, failed = None, False, 0
 
     def progress(row) -> None:
         nonlocal failed
@@ -140,10 +142,18 @@ def _run(args, what: str, n_jobs: int, call) -> int:
     try:
         with cluster.open_client(workers=workers, scheduler=args.scheduler,
                                  timeout=args.timeout, verbose=args.verbose) as client:
+            # the bar once the cluster is there (before, a scheduler that did not answer left
+            # an empty bar above its one line)
+            started = True
+            bar = None if args.no_progress else tqdm(total=n_jobs, desc=what, unit="clip",
+                                                     dynamic_ncols=True, file=sys.stderr,
+                                                     disable=progress_disabled())
             res = call(client, progress)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()
+        if not started:   # while the cluster started or the scheduler was asked: nothing ran
+            raise         # (before: "finished outputs are kept in DIR", of no DIR)
         summary = Path(args.out) / "summary.csv"
         print(f"stopped: finished outputs are kept in {args.out}"
               + (f" (see {summary})" if summary.is_file() else "")
@@ -188,7 +198,8 @@ def run_track(args) -> int:
     if not args.videos and not args.manifest:
         raise FaceTransferError("give VIDEO files or --manifest clips.csv")
     # duplicate names are refused before anything runs
-    jobs = clip_jobs(args.videos, args.manifest, init=args.init, face=args.face)
+    jobs = clip_jobs(args.videos, args.manifest, init=args.init, face=args.face,
+                     max_frames=args.max_frames)
     opt = track_settings(args)  # validates the options
     for job in jobs:
         if job.face is not None and opt.choose(job.init) != "capture":
@@ -244,6 +255,7 @@ def run_export(args) -> int:
 
 def _check_cluster_args(args) -> None:
     """Bad cluster or output arguments fail before a model is loaded."""
+    from ..batch.cluster import check_timeout
     from ..batch.run import check_out_dir
 
     if args.workers is not None and args.workers < 1:
@@ -251,7 +263,5 @@ def _check_cluster_args(args) -> None:
     if args.workers is not None and args.scheduler:
         raise FaceTransferError("--workers sizes the embedded cluster; the workers of "
                                 "--scheduler are the ones started with `dask worker`")
-    if not 0 < args.timeout < float("inf"):    # inf: a socket's deadline overflowed
-        raise FaceTransferError(f"--timeout must be a number of seconds > 0, got "
-                                f"{args.timeout}")
+    check_timeout(args.timeout)       # inf, 1e12: a socket's deadline overflowed
     check_out_dir(args.out)

@@ -206,7 +206,8 @@ def _partial(key: str | None) -> Path | None:
 def capture_resuming(video, model, partial, *, frames=None, options=None, source=None,
                      fixed=None, progress=None, workers: int = 1, best_effort: bool = False,
                      subject=None, detector_id: str | None = None,
-                     save_every: float | None = None, detect_every: int = 1):
+                     save_every: float | None = None, detect_every: int = 1,
+                     max_frames: int | None = None):
     """The capture tracker on the file ``video`` (or its decoded ``frames``) with its progress
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
     fit), continued from there when it holds this run's: an interrupted run loses nothing.
@@ -216,14 +217,16 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     :func:`facetransfer.track.detect_checkpoint.face_detector_id`); ``save_every``: seconds
     between the progress file's periodic saves (default the checkpoint's: where a run can be
     stopped only by killing it, e.g. a batch worker, a shorter period loses less);
-    ``detect_every``: the detector shown one frame of it (the caller keys ``partial`` by it)."""
+    ``detect_every``: the detector shown one frame of it (the caller keys ``partial`` by it);
+    ``max_frames``: the file's first frames only (``track --max-frames``; keys ``partial``)."""
     from .aspect import View
     from .capture import capture_video
     from .detect_checkpoint import DetectionCheckpoint
     from .video_detect import detect_video
 
     clip = video if frames is None else frames
-    ck = DetectionCheckpoint.for_video(partial, video, None if frames is None else len(frames),
+    limit = max_frames if frames is None else None      # decoded frames: as many as given
+    ck = DetectionCheckpoint.for_video(partial, video, limit if frames is None else len(frames),
                                        detector_id, best_effort=best_effort,
                                        **({} if save_every is None
                                           else {"every": float(save_every)}))
@@ -238,7 +241,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
         det = detect_video(clip, source=source, checkpoint=ck, progress=progress,
                            resume=None if saved is None else saved.detections,
                            workers=workers, view=view, subject=subject,
-                           every=detect_every)[0]
+                           every=detect_every, max_frames=limit)[0]
     try:
         tr = capture_video(clip, model, options=options, detections=det, source=source,
                            fixed=fixed, checkpoint=ck, progress=progress)
