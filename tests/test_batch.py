@@ -701,3 +701,21 @@ def test_the_embedded_cluster_has_no_more_workers_than_clips(clips, quick_model_
     assert asked == [1]
     assert f"note: --workers 100 on {batch_cluster.default_workers()} cores" in said.err
     assert "export: 1 clip (1 failed)" in said.out
+
+
+def test_a_klt_clip_saves_its_progress_as_often_as_a_captured_one(monkeypatch):
+    """A batch worker ends without saving (README: every SAVE_EVERY seconds, with either
+    tracker); the klt tracker was given track_video's own 20 s."""
+    from facetransfer.track import tracker as track_tracker
+    from facetransfer.track.settings import TrackerSettings
+
+    seen = {}
+
+    def fake_track_video(video, model, **kw):
+        seen.update(kw)
+        return "track"
+
+    monkeypatch.setattr(track_tracker, "track_video", fake_track_video)
+    out = batch_jobs._track("clip.mp4", None, "auto", TrackerSettings(tracker="klt"),
+                            source="clip.mp4", checkpoint="clip.progress.npz")
+    assert out == "track" and seen["checkpoint_every"] == batch_jobs.SAVE_EVERY

@@ -87,7 +87,7 @@ def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=
     try:
         return track_video(video, model, init=init, options=settings.klt, source=source,
                            detector=detector, fixed=fixed, checkpoint=checkpoint,
-                           max_frames=max_frames)
+                           checkpoint_every=SAVE_EVERY, max_frames=max_frames)
     finally:
         if detector is not None:
             detector.close()
