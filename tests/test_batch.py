@@ -286,7 +286,7 @@ def test_a_bad_max_frames_cell_is_one_line(cell, said, clips, quick_model_path, 
     man.write_text(f"video,max_frames\n{clips['a'][0]},4\n{clips['b'][0]},{cell}\n")
     code, _, lines = _cli(capsys, "batch", "track", "--manifest", man, "--model",
                           quick_model_path, "--out", tmp_path / "o")
-    assert code == 2 and lines == [f"facetransfer batch: error: manifest {man} {said}"]
+    assert code == 2 and lines == [f"facetransfer batch track: error: manifest {man} {said}"]
 
 
 def test_max_frames_of_a_chunked_clip(quick_model, quick_model_path, inproc, tmp_path, capsys):
@@ -470,7 +470,8 @@ def test_bad_cluster_and_output_arguments(clips, quick_model_path, tmp_path, cap
     afile = tmp_path / "file"
     afile.write_text("x")
     code, _, lines = _cli(capsys, "batch", "track", va, *m, "--out", afile)
-    assert code == 2 and lines == [f"facetransfer batch track: error: output folder {afile} is a file"]
+    assert code == 2 and lines == [f"facetransfer batch track: error: output folder {afile} "
+                                   "is a file"]
     code, _, lines = _cli(capsys, "batch", "track", va, *m, "--out", tmp_path / "o",
                           "--workers", 0)
     assert code == 2 and "--workers must be >= 1, got 0" in lines[0]
@@ -505,11 +506,11 @@ def test_a_scheduler_that_does_not_answer(clips, quick_model_path, tmp_path, cap
                         "is not known")):
         code, _, lines = _cli(capsys, *argv, addr)
         assert code == 2 and len(lines) == 1, lines
-        assert lines[0].startswith(f"facetransfer batch: error: no Dask scheduler answered at "
-                                   f"{addr}: {said}")
+        assert lines[0].startswith("facetransfer batch track: error: no Dask scheduler "
+                                   f"answered at {addr}: {said}")
     for addr in ("nonsense:addr:1", "tcp://127.0.0.1:99999"):   # 99999: "Connection refused"
         code, _, lines = _cli(capsys, *argv, addr)
-        assert code == 2 and lines == [f"facetransfer batch: error: --scheduler {addr!r} is "
+        assert code == 2 and lines == [f"facetransfer batch track: error: --scheduler {addr!r} is "
                                        "not an address like tcp://HOST:8786"]
     assert not (tmp_path / "o").exists()
 
@@ -593,7 +594,7 @@ def test_a_port_that_answers_but_is_no_dask_scheduler(kind, said, clips, quick_m
                            capture_output=True, text=True, timeout=120)
     assert r.returncode == 2, r.stderr
     assert r.stderr.splitlines() == [
-        f"facetransfer batch: error: no Dask scheduler answered at {addr}{said} (is it the "
+        f"facetransfer batch track: error: no Dask scheduler answered at {addr}{said} (is it the "
         "scheduler's address? `dask scheduler` prints it, port 8786 by default)"]
     assert r.stdout.splitlines() == ["threads ['MainThread']"]
     assert not (tmp_path / "o").exists()

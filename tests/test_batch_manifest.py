@@ -165,8 +165,8 @@ def test_a_pipeline_engineers_manifests_and_arguments(tmp_path, monkeypatch, cap
         assert main(["batch", "track", "a.mp4", "--out", str(tmp_path / "o"), "--timeout",
                      t]) == 2
         assert capsys.readouterr().err.splitlines() == [
-            "facetransfer batch: error: --timeout must be a number of seconds > 0 and at most "
-            f"86400, got {float(t):g}"]
+            "facetransfer batch track: error: --timeout must be a number of seconds > 0 and at "
+            f"most 86400, got {float(t):g}"]
 
 
 def test_a_clip_replaced_since_its_track_is_not_skipped(quick_model, tmp_path):
