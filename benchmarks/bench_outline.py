@@ -103,11 +103,25 @@ def _new_faces(model, cam):
     return out
 
 
+def _pasted():
+    """``paste(frame, V, camera, topo, face_texture)``: :func:`facetransfer.rewrite.rewrite_frame`
+    with a hard paste, in the tree on the path (one before ``FrameTextures`` took the face
+    texture bare and the blend as ``blend="none"``)."""
+    from facetransfer.rewrite import rewrite_frame
+    try:
+        from facetransfer.rewrite import FrameTextures
+        from facetransfer.rewrite_options import BlendOptions
+    except ImportError:
+        return lambda frame, V, c, topo, tex: rewrite_frame(frame, V, c, topo, tex, blend="none")
+    return lambda frame, V, c, topo, tex: rewrite_frame(frame, V, c, topo, FrameTextures(tex),
+                                                        blending=BlendOptions("none"))
+
+
 def worker() -> None:
     """Print the synthetic counts of the tree on the path, as JSON."""
     from facetransfer import rim
-    from facetransfer.rewrite import rewrite_frame
 
+    paste = _pasted()
     model, topo, frame, tex, Vc, cam, skin = _scene()
     res = {}
     for label, (V, c) in _new_faces(model, cam).items():
@@ -116,7 +130,7 @@ def worker() -> None:
         for rule, moved in (("on", rim.MOVED), ("off", np.inf)):
             saved, rim.MOVED = rim.MOVED, moved
             try:
-                out = rewrite_frame(frame, V, c, topo, tex, blend="none").image
+                out = paste(frame, V, c, topo, tex).image
             finally:
                 rim.MOVED = saved
             row[rule] = int(((np.abs(out.astype(int) - EDGE).max(axis=-1) < 40) & skin).sum())

@@ -246,7 +246,8 @@ def test_rewrite_bad_input(quick_model, topo, synthetic):
         list(rc.rewrite_frames(fb[:, :64, :64], tb, new, quick_model))
     with pytest.raises(rwo.RewriteError, match="blend"):
         rw.rewrite_frame(fb[0], quick_model.synthesize(tb.weights_at(0)), tb.camera(0), topo,
-                         ftex.FaceTexture(fb[0], np.zeros((topo.n_closed, 2))), blend="magic")
+                         rw.FrameTextures(ftex.FaceTexture(fb[0], np.zeros((topo.n_closed, 2)))),
+                         blending=rwo.BlendOptions("magic"))
 
 
 def test_landmark_track_recovers_pose_and_marks_lost(quick_model):

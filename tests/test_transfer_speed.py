@@ -59,10 +59,11 @@ def test_face_box_crop_matches_the_full_frame(quick_model, topo, synthetic, blen
         Vs = topology.close_mouth(quick_model.synthesize(ta.weights_at(i)), topo)
         tex = ftex.FaceTexture(fb[i], ftex.frame_uvs(Vt, tb.camera(i), (128, 128)), i)
         mouth = ftex.FaceTexture(fa[i], ftex.frame_uvs(Vs, ta.camera(i), (128, 128)), i)
-        cropped = rw.rewrite_frame(fb[i], V, new.camera(i), topo, tex, mouth_texture=mouth,
-                                   blend=blend)
-        full = rw._rewrite_crop(fb[i], V, new.camera(i), topo, tex, mouth, blend, 2.0, 2, 3.0,
-                                False, mouth_ring=rw.mouth_ring_faces(topo))
+        blending = rwo.BlendOptions(blend)
+        cropped = rw.rewrite_frame(fb[i], V, new.camera(i), topo,
+                                   rw.FrameTextures(tex, mouth), blending=blending)
+        full = rw._rewrite_crop(fb[i], V, new.camera(i), topo, rw.FrameTextures(
+            tex, mouth, mouth_ring=rw.mouth_ring_faces(topo)), blending)
         box = rw._face_box(V, new.camera(i), (128, 128), margin=20)
         assert box is not None and box != (0, 0, 128, 128)  # the crop really is smaller
         for a, b in zip(dataclasses.astuple(cropped), dataclasses.astuple(full)):
@@ -77,7 +78,7 @@ def test_face_box_off_screen_keeps_the_frame(quick_model, topo, synthetic):
     assert rw._face_box(topology.close_mouth(V, topo), cam, (128, 128), margin=4) is None
     Vt = topology.close_mouth(V, topo)
     tex = ftex.FaceTexture(fb[0], ftex.frame_uvs(Vt, tb.camera(0), (128, 128)), 0)
-    out = rw.rewrite_frame(fb[0], V, cam, topo, tex)
+    out = rw.rewrite_frame(fb[0], V, cam, topo, rw.FrameTextures(tex))
     np.testing.assert_array_equal(out.image, fb[0])
     assert not out.face_mask.any()
 

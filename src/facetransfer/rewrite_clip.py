@@ -44,7 +44,7 @@ from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
-from .rewrite import RewriteFrame, _paste, rewrite_frame_part
+from .rewrite import FrameTextures, RewriteFrame, _paste, rewrite_frame_part
 from .rewrite_options import RewriteOptions
 from .topology import MeshTopology, close_mouth, mesh_topology
 
@@ -404,12 +404,12 @@ class _ClipRenderer:
             raise RewriteError(f"target frame {i} is {frame.shape}, frame 0 {self.first.shape}")
         if self.new_track.lost[i] or self.target_track.lost[i]:
             return None
-        o, V, tex, mouth = self.options, self.new_mesh(i), self.face_texture(frame, i), \
-            self.mouth_texture(i)
+        V, blending = self.new_mesh(i), self.options.blending
+        textures = FrameTextures(self.face_texture(frame, i), self.mouth_texture(i),
+                                 mouth_ring=self.ring, lip_tint=self.lip_tint)
         parts = [(rewrite_frame_part(
-            frame, V, self.new_track.camera(i), self.topo, tex, mouth_texture=mouth,
-            blend=o.blend, feather=o.feather, erode=o.erode, eye_texture=eye, jaw_texture=jaw,
-            mouth_ring=self.ring, lip_tint=self.lip_tint), we * wj)
+            frame, V, self.new_track.camera(i), self.topo,
+            dataclasses.replace(textures, eyes=eye, jaw=jaw), blending=blending), we * wj)
             for eye, we in views_at(self.eye_tex, i, None if self.gaze is None else self.gaze[i])
             for jaw, wj in views_at(self.jaw_tex, i)]
         if parts[0][0] is None:       # the face outside the frame (the same box every view)
