@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _revision import extract_src  # noqa: E402
+from _revision import extract_src, hard_paste  # noqa: E402
 
 SIZE = 512
 SKIN, EDGE, BACK = (200, 150, 120), (30, 25, 20), (120, 160, 120)
@@ -103,25 +103,11 @@ def _new_faces(model, cam):
     return out
 
 
-def _pasted():
-    """``paste(frame, V, camera, topo, face_texture)``: :func:`facetransfer.rewrite.rewrite_frame`
-    with a hard paste, in the tree on the path (one before ``FrameTextures`` took the face
-    texture bare and the blend as ``blend="none"``)."""
-    from facetransfer.rewrite import rewrite_frame
-    try:
-        from facetransfer.rewrite import FrameTextures
-        from facetransfer.rewrite_options import BlendOptions
-    except ImportError:
-        return lambda frame, V, c, topo, tex: rewrite_frame(frame, V, c, topo, tex, blend="none")
-    return lambda frame, V, c, topo, tex: rewrite_frame(frame, V, c, topo, FrameTextures(tex),
-                                                        blending=BlendOptions("none"))
-
-
 def worker() -> None:
     """Print the synthetic counts of the tree on the path, as JSON."""
     from facetransfer import rim
 
-    paste = _pasted()
+    paste = hard_paste()
     model, topo, frame, tex, Vc, cam, skin = _scene()
     res = {}
     for label, (V, c) in _new_faces(model, cam).items():

@@ -357,7 +357,8 @@ def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference
     where the target's forehead is where the reference frame has it: they show that skin
     already (``make demo``'s bright forehead blob); where the target raised its brows, the
     reference frame's rim is pasted. The lids and eyes are always the reference frame's."""
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
 
     model, topo, closed, fill = setup
     target, new, hole, V, tid, tex = _brows_up_clip(setup)
@@ -368,8 +369,9 @@ def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference
     ref = _frame(hole, REF_EYE)
     ref[blob] = HIGHLIGHT
     frames = [ref] + [_frame(hole, TARGET_EYE)] * 6
-    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
-                                           workers=1)]
+    out = [r.image for r in rewrite_frames(frames, target, new, model,
+                                           options=RewriteOptions(blend="none"),
+                                           run=RenderRun(workers=1))]
 
     def mean(img, where):
         return img[where].astype(float).mean(axis=0)
@@ -395,7 +397,8 @@ def test_a_strand_over_the_brows_of_the_reference_frame_only_is_not_pasted(setup
     keep the current frame, in frames where the target is still and where it raised its brows.
     The eyes are still the reference frame's. (Before the rule the strand was pasted into every
     frame: the region away from the rim was always the reference frame's.)"""
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
 
     model, topo, closed, fill = setup
     target, new, hole, V, tid, tex = _brows_up_clip(setup)
@@ -412,8 +415,9 @@ def test_a_strand_over_the_brows_of_the_reference_frame_only_is_not_pasted(setup
     ref = _frame(hole, REF_EYE)                          # usual colour over most of the region)
     ref[free] = HAIR
     frames = [ref] + [_frame(hole, TARGET_EYE)] * 6
-    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
-                                           workers=1)]
+    out = [r.image for r in rewrite_frames(frames, target, new, model,
+                                           options=RewriteOptions(blend="none"),
+                                           run=RenderRun(workers=1))]
     # the pixels of triangles whose three vertices lie on the strand (a vertex at its edge
     # reads skin there and keeps pasting, fading over its triangles)
     P = np.rint(target.camera(0).project(V)).astype(int).clip(0, SIZE - 1)
@@ -438,7 +442,8 @@ def test_a_strand_of_the_current_frame_only_is_not_painted_over(setup, monkeypat
     fringe lies over a brow's tail): with :data:`facetransfer.eyes.FRAME_RULE` the frame keeps
     its own strand; without it the reference frame's skin is painted over the strand. Frame 6
     (raised too, no strand) shows skin either way."""
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
 
     monkeypatch.setattr(eyes, "FRAME_RULE", rule)
     model, topo, closed, fill = setup
@@ -462,8 +467,9 @@ def test_a_strand_of_the_current_frame_only_is_not_painted_over(setup, monkeypat
     frames = [_frame(hole, REF_EYE)] + [_frame(hole, TARGET_EYE)] * 6
     frames[5] = frames[5].copy()
     frames[5][free] = HAIR
-    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
-                                           workers=1)]
+    out = [r.image for r in rewrite_frames(frames, target, new, model,
+                                           options=RewriteOptions(blend="none"),
+                                           run=RenderRun(workers=1))]
     s = free & np.logical_and.reduce([np.roll(free, k, a) for k in (-2, 2) for a in (0, 1)])
     assert s.sum() > 50
     hair = np.abs(out[5][s].astype(float) - HAIR).max(axis=-1)

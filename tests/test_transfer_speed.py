@@ -180,8 +180,9 @@ def test_rendering_in_processes_equals_one_thread(quick_model, topo, synthetic):
     lost = new.lost.copy()
     lost[2] = True  # a lost frame keeps the original in both
     new = dataclasses.replace(new, lost=lost)
-    runs = [list(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
-                                   topo=topo, workers=w, processes=p))
+    runs = [list(rc.rewrite_frames(fb, tb, new, quick_model,
+                                   mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                   run=rc.RenderRun(workers=w, processes=p)))
             for w, p in ((1, False), (2, True))]
     for a, b in zip(*runs):
         for x, y in zip(dataclasses.astuple(a), dataclasses.astuple(b)):
@@ -219,8 +220,9 @@ def test_the_render_runs_blas_on_one_thread_and_restores_it(quick_model, topo, s
             pytest.skip("no BLAS library with threads to limit")
         for workers in (1, 2):
             seen.clear()
-            it = rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
-                                   source_track=ta, topo=topo, workers=workers)
+            it = rc.rewrite_frames(fb, tb, new, quick_model,
+                                   mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                   run=rc.RenderRun(workers=workers))
             next(it)
             assert seen and all(s == [1] * len(before) for s in seen)
             assert _blas_threads() == [1] * len(before)  # while the render is suspended too
@@ -229,8 +231,9 @@ def test_the_render_runs_blas_on_one_thread_and_restores_it(quick_model, topo, s
         # two renders at once, the first made closed first: one thread until the last ends,
         # then as before (a limit per render restored the threads under the second and left
         # one thread after both)
-        a, b = (rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
-                                  topo=topo, workers=1) for _ in range(2))
+        a, b = (rc.rewrite_frames(fb, tb, new, quick_model,
+                                  mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                  run=rc.RenderRun(workers=1)) for _ in range(2))
         next(a), next(b)
         a.close()
         assert _blas_threads() == [1] * len(before)

@@ -34,7 +34,7 @@ from .io.ahead import ordered_ahead
 from .io.plate_output import plate_output
 from .io.video_like import like_video
 from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
-from .rewrite_clip import rewrite_frames
+from .rewrite_clip import MouthSource, RenderRun, rewrite_frames
 from .rewrite_options import RewriteOptions
 from .transfer_plan import TransferPlan, TransferSources, plan_sources, plan_transfer  # noqa: F401
 
@@ -227,11 +227,11 @@ class _Frames:
         p = self.plan
         if self.start >= p.n_frames:
             return
+        mouth = MouthSource(p.mouth_frames, p.mouth_track, p.mouth_index, self.mouth_fn)
+        run = RenderRun(progress=self.bar.update if self.bar is not None else None,
+                        start=self.start)
         it = rewrite_frames(p.target_frames, p.target_track, p.new_track, self.model,
-                            source_frames=p.mouth_frames, source_track=p.mouth_track,
-                            source_index=p.mouth_index, options=self.options,
-                            mouth_function=self.mouth_fn, start=self.start,
-                            progress=self.bar.update if self.bar is not None else None,
+                            mouth_source=mouth, options=self.options, run=run,
                             regions=p.regions)
         if self.grading is None:
             frames = ((frame, face) for _, frame, face in self._composed(it))
