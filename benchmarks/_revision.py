@@ -3,7 +3,9 @@
 :func:`extract_src` writes a git revision's ``src`` folder to a temporary folder (``git
 archive``); a benchmark then runs its worker in a fresh process with that folder first on
 ``PYTHONPATH`` (``bench_rewrite_frame.py``, ``bench_jaw_seam.py``), or the command itself
-(:func:`run_command`: ``bench_plate_header.py``, ``bench_primaries.py``).
+(:func:`run_command`: ``bench_plate_header.py``, ``bench_primaries.py``). A worker calls the
+library through :func:`rewrite_plan` and :func:`hard_paste`, which call it as the tree on the
+path, older or newer, takes it.
 """
 
 from __future__ import annotations
@@ -27,6 +29,41 @@ def extract_src(rev: str, prefix: str = "bench_") -> Path:
     with tarfile.open(fileobj=io.BytesIO(tar)) as t:
         t.extractall(tmp, filter="data")
     return tmp / "src"
+
+
+def rewrite_plan(plan, model, options, *, workers: int = 1):
+    """The frames of a ``TransferPlan`` rewritten (``rewrite_frames``, its mouth from the plan's
+    mouth source) by the tree on the path: one with ``MouthSource`` and ``RenderRun``, or one
+    before them (the mouth's and the run's keywords loose; ``rewrite_frames`` in
+    ``rewrite.py`` before ``rewrite_clip.py``)."""
+    try:
+        from facetransfer.rewrite_clip import MouthSource, RenderRun, rewrite_frames
+    except ImportError:
+        try:
+            from facetransfer.rewrite_clip import rewrite_frames
+        except ImportError:
+            from facetransfer.rewrite import rewrite_frames
+        return rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
+                              source_frames=plan.mouth_frames, source_track=plan.mouth_track,
+                              source_index=plan.mouth_index, options=options, workers=workers)
+    return rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
+                          mouth_source=MouthSource(plan.mouth_frames, plan.mouth_track,
+                                                   plan.mouth_index),
+                          options=options, run=RenderRun(workers=workers))
+
+
+def hard_paste():
+    """``paste(frame, V, camera, topo, face_texture) -> RewriteFrame``: ``rewrite_frame`` with
+    a hard paste (no blend), by the tree on the path: one with ``FrameTextures`` and
+    ``BlendOptions``, or one before them (the face texture bare, ``blend="none"``)."""
+    from facetransfer.rewrite import rewrite_frame
+    try:
+        from facetransfer.rewrite import FrameTextures
+        from facetransfer.rewrite_options import BlendOptions
+    except ImportError:
+        return lambda frame, V, c, topo, tex: rewrite_frame(frame, V, c, topo, tex, blend="none")
+    return lambda frame, V, c, topo, tex: rewrite_frame(frame, V, c, topo, FrameTextures(tex),
+                                                        blending=BlendOptions("none"))
 
 
 def run_command(args: list, src: Path | None = None) -> tuple[int, str]:

@@ -43,10 +43,10 @@ def patched(module: str, name: str, value):
 
 def self_transfer(frames, track, model) -> list[np.ndarray]:
     """The target's frames rewritten with its own performance (default options)."""
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
 
-    return [r.image for r in rewrite_frames(frames, track, track, model, workers=1,
-                                            processes=False)]
+    return [r.image for r in rewrite_frames(frames, track, track, model,
+                                            run=RenderRun(workers=1, processes=False))]
 
 
 def psnr(a: np.ndarray, b: np.ndarray) -> float:

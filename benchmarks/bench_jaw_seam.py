@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _revision import extract_src  # benchmarks/ is on sys.path
+from _revision import extract_src, rewrite_plan  # benchmarks/ is on sys.path
 
 FRAMES = 120
 BAND = 5
@@ -47,10 +47,6 @@ def worker(tracks: Path, save: Path) -> None:
     """Render the demo pair here (the tree on ``sys.path``), saving the result frames."""
     from facetransfer.default_model import load_default_model
     from facetransfer.demo import default_inputs
-    try:  # this tree; a revision before rewrite_clip.py had it in rewrite.py
-        from facetransfer.rewrite_clip import rewrite_frames
-    except ImportError:
-        from facetransfer.rewrite import rewrite_frames
     from facetransfer.rewrite_options import RewriteOptions
     from facetransfer.texture.face import resolve_mouth_mode
     from facetransfer.video_transfer import plan_transfer
@@ -67,9 +63,7 @@ def worker(tracks: Path, save: Path) -> None:
         plan.source_tracks["expression"].save(et)
     opts = RewriteOptions()
     opts = opts.with_(mouth=resolve_mouth_mode(opts.mouth, model, performance=plan.performance))
-    it = rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
-                        source_frames=plan.mouth_frames, source_track=plan.mouth_track,
-                        source_index=plan.mouth_index, options=opts, workers=1)
+    it = rewrite_plan(plan, model, opts, workers=1)  # this tree's call or an older one's
     np.save(save, np.stack([r.image for r in it]))
 
 

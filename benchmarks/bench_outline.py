@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from _revision import extract_src  # noqa: E402
+from _revision import extract_src, hard_paste  # noqa: E402
 
 SIZE = 512
 SKIN, EDGE, BACK = (200, 150, 120), (30, 25, 20), (120, 160, 120)
@@ -106,8 +106,8 @@ def _new_faces(model, cam):
 def worker() -> None:
     """Print the synthetic counts of the tree on the path, as JSON."""
     from facetransfer import rim
-    from facetransfer.rewrite import rewrite_frame
 
+    paste = hard_paste()
     model, topo, frame, tex, Vc, cam, skin = _scene()
     res = {}
     for label, (V, c) in _new_faces(model, cam).items():
@@ -116,7 +116,7 @@ def worker() -> None:
         for rule, moved in (("on", rim.MOVED), ("off", np.inf)):
             saved, rim.MOVED = rim.MOVED, moved
             try:
-                out = rewrite_frame(frame, V, c, topo, tex, blend="none").image
+                out = paste(frame, V, c, topo, tex).image
             finally:
                 rim.MOVED = saved
             row[rule] = int(((np.abs(out.astype(int) - EDGE).max(axis=-1) < 40) & skin).sum())

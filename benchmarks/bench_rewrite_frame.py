@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _revision import extract_src  # benchmarks/ is on sys.path
+from _revision import extract_src, rewrite_plan  # benchmarks/ is on sys.path
 
 TARGET, SOURCE = "driving_d9.mp4", "driving_d6.mp4"
 #: frames of the target used (10 s at 30 fps, as issue 13's end-to-end goal)
@@ -53,10 +53,6 @@ def worker(tracks: Path, frames: int, parity: int, save: Path) -> dict:
 
     cv2.setNumThreads(1)
     from facetransfer.default_model import load_default_model
-    try:  # this tree; a revision before rewrite_clip.py had it in rewrite.py
-        from facetransfer.rewrite_clip import rewrite_frames
-    except ImportError:
-        from facetransfer.rewrite import rewrite_frames
     from facetransfer.rewrite_options import RewriteOptions
     from facetransfer.texture.face import resolve_mouth_mode
     from facetransfer.video_transfer import plan_transfer
@@ -72,9 +68,7 @@ def worker(tracks: Path, frames: int, parity: int, save: Path) -> dict:
         plan.source_tracks["expression"].save(et)
     opts = RewriteOptions()
     opts = opts.with_(mouth=resolve_mouth_mode(opts.mouth, model, performance=plan.performance))
-    it = rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
-                        source_frames=plan.mouth_frames, source_track=plan.mouth_track,
-                        source_index=plan.mouth_index, options=opts, workers=1)
+    it = rewrite_plan(plan, model, opts, workers=1)  # this tree's call or an older one's
     t0 = time.process_time()
     kept = [next(it) for _ in range(max(parity, 1))]  # the first pays the set-up
     t1 = time.process_time()

@@ -146,6 +146,7 @@ def eye_region_masks(model, topo, perf_t, frames_b, truth_b, size) -> list[np.nd
 def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=print,
                       speeds=("balanced",)) -> dict:
     from facetransfer import rewrite_clip as rc
+    from facetransfer.rewrite_options import RewriteOptions
     from facetransfer.texture import face as ftex
     from facetransfer import topology
     from facetransfer.synth import make_clip, random_performance
@@ -196,19 +197,19 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
         from facetransfer.transfer import take_frames
 
         new = project_landmarks(recombine(tb, expression=ta), model)
-        src = dict(source_frames=clip_a.frames, source_track=ta)
+        src = rc.MouthSource(clip_a.frames, ta)
         if mouth_from == "target":
             names = model.mode_names[1:]
             j = nearest_frames(np.concatenate([new.weights[m] for m in names], axis=1),
                                np.concatenate([tb.weights[m] for m in names], axis=1),
                                ~tb.lost)
-            src = dict(source_frames=clip_b.frames, source_track=take_frames(tb, j),
-                       source_index=j)
+            src = rc.MouthSource(clip_b.frames, take_frames(tb, j), j)
             if mouth == "function":
-                src["mouth_function"] = ftex.mouth_texture_function(model, clip_b.frames, tb,
-                                                                  topo)
-        outs = list(rc.rewrite_frames(clip_b.frames, tb, new, model, texture=texture,
-                                      blend=blend, topo=topo, mouth=mouth, eyes=eyes, **src))
+                src = dataclasses.replace(src, function=ftex.mouth_texture_function(
+                    model, clip_b.frames, tb, topo))
+        opts = RewriteOptions().with_(texture=texture, blend=blend, mouth=mouth, eyes=eyes)
+        outs = list(rc.rewrite_frames(clip_b.frames, tb, new, model, mouth_source=src,
+                                      options=opts, topo=topo))
         return new, outs
 
     import scipy.ndimage as ndi

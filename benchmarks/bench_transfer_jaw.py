@@ -50,6 +50,7 @@ rendered variant in ``OUT/jaw_cache/`` (``--fresh`` recomputes); tracks are shar
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import sys
 import tempfile
@@ -192,20 +193,20 @@ def _plan(name: str, model, out: Path, data: Path, frames: int):
 def render(plan, model, variant: str, mp_source: np.ndarray | None = None) -> list[np.ndarray]:
     """The result frames of one variant (:data:`VARIANTS`), before encoding (``mp_source``:
     MediaPipe's ``(n, 51)`` scores of the time-matched source, for ``mp_mouth``)."""
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import MouthSource, rewrite_frames
     from facetransfer.rewrite_options import RewriteOptions
 
     kw, with_mouth = VARIANTS[variant]
     opts = RewriteOptions(**kw).with_(mouth=kw.get("mouth", "frame"))
-    mouth = ({"source_frames": plan.mouth_frames, "source_track": plan.mouth_track,
-              "source_index": plan.mouth_index} if with_mouth else {})
+    mouth = MouthSource(plan.mouth_frames, plan.mouth_track, plan.mouth_index) \
+        if with_mouth else MouthSource()
     if opts.mouth == "function":
-        mouth["mouth_function"] = plan.mouth_function(model)
+        mouth = dataclasses.replace(mouth, function=plan.mouth_function(model))
     new = {"source_turn": lambda: source_turned(plan),
            "mp_mouth": lambda: mp_mouth(plan, model, mp_source)}.get(variant,
                                                                      lambda: plan.new_track)()
     return [r.image for r in rewrite_frames(plan.target_frames, plan.target_track,
-                                            new, model, options=opts, **mouth)]
+                                            new, model, mouth_source=mouth, options=opts)]
 
 
 def mp_mouth(plan, model, mp_source: np.ndarray):

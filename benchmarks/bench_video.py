@@ -92,6 +92,7 @@ def rewrite_pair(source: Path, target: Path, model, n_frames: int, tmp: Path):
     import cv2
 
     from facetransfer import rewrite_clip as rc
+    from facetransfer.rewrite_options import RewriteOptions
     from facetransfer import transfer_plan as tp
 
     tt, st = landmark_tracks(source, target, model, n_frames, tmp)
@@ -99,10 +100,10 @@ def rewrite_pair(source: Path, target: Path, model, n_frames: int, tmp: Path):
                             expression_track=st, max_frames=n_frames, parallel=False)
     frames, masks = [], []
     kernel = cv2.getStructuringElement(cv2.MORPH_ELLIPSE, (2 * DILATE + 1, 2 * DILATE + 1))
+    source = rc.MouthSource(plan.mouth_frames, plan.mouth_track, plan.mouth_index)
     for r in rc.rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
-                               source_frames=plan.mouth_frames, source_track=plan.mouth_track,
-                               source_index=plan.mouth_index, texture="frame", blend="fast",
-                               mouth="frame"):
+                               mouth_source=source, options=RewriteOptions(
+                                   texture="frame", blend="fast", mouth="frame")):
         frames.append(r.image)
         masks.append(cv2.dilate(r.face_mask.astype(np.uint8), kernel) > 0)
     return np.asarray(plan.target_frames[:len(frames)]), np.stack(frames), np.stack(masks), \

@@ -10,7 +10,8 @@ import pytest
 from facetransfer import eyeballs, eyes
 from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.render import rasterize
-from facetransfer.rewrite_clip import rewrite_frames
+from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+from facetransfer.rewrite_options import RewriteOptions
 from facetransfer.topology import close_mouth, mesh_topology
 from facetransfer.track.gaze import activation_gaze, eye_model, project_iris
 from test_eyes import SIZE, _acts, _track
@@ -97,7 +98,8 @@ def test_a_transfer_turns_the_eyes_to_the_new_gaze(scene):
     look = _look("Left", "Out", 0.5) + _look("Right", "In", 0.5) + _look("Left", "Down", 0.3) \
         + _look("Right", "Down", 0.3)
     new = _track(model, look)
-    out = next(rewrite_frames([img], track, new, model, blend="none", workers=1)).image
+    paste, one = RewriteOptions(blend="none"), RenderRun(workers=1)
+    out = next(rewrite_frames([img], track, new, model, options=paste, run=one)).image
     g = activation_gaze(look)
     want = project_iris(eye_model(V[np.asarray(model.landmarks)]), g, track.rotation[:1],
                         track.scale[:1], track.translation[:1])[0]
@@ -112,7 +114,7 @@ def test_a_transfer_turns_the_eyes_to_the_new_gaze(scene):
         return np.array([xx[m].mean(), yy[m].mean()])
 
     still = dataclasses.replace(new, blendshapes=None, blendshape_names=None)
-    out0 = next(rewrite_frames([img], track, still, model, blend="none", workers=1)).image
+    out0 = next(rewrite_frames([img], track, still, model, options=paste, run=one)).image
     for e in (0, 1):
         move = want[e] - iris[e]
         assert np.linalg.norm(move) > 3.0
@@ -144,10 +146,11 @@ def test_the_target_gaze_keeps_the_targets_own_eye_direction(scene):
     new = _track(model, _look("Left", "Out", 0.6) + _look("Right", "In", 0.6))
     both = {}
     for gaze in ("performance", "target"):
-        both[gaze] = next(rewrite_frames([img], track, new, model, workers=1, blend="none",
-                                         options=RewriteOptions(gaze=gaze))).image
+        both[gaze] = next(rewrite_frames([img], track, new, model, run=RenderRun(workers=1),
+                                         options=RewriteOptions(gaze=gaze, blend="none"))).image
     still = dataclasses.replace(new, blendshapes=None, blendshape_names=None)
-    unturned = next(rewrite_frames([img], track, still, model, workers=1, blend="none")).image
+    unturned = next(rewrite_frames([img], track, still, model, run=RenderRun(workers=1),
+                                   options=RewriteOptions(blend="none"))).image
     # the target looks straight ahead in its frame (the reference frame): no turn at all
     np.testing.assert_array_equal(both["target"], unturned)
     moved = np.abs(both["performance"].astype(int) - unturned).max(axis=-1) > 100

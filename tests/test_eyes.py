@@ -11,7 +11,8 @@ from facetransfer import eyes, patch, region_weights
 from facetransfer.region_weights import vertex_alpha
 from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.render import rasterize
-from facetransfer.rewrite import rewrite_frame
+from facetransfer.rewrite import FrameTextures, rewrite_frame
+from facetransfer.rewrite_options import BlendOptions
 from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import boundary_loops, close_mouth, mesh_topology
 from facetransfer.track.result import Track
@@ -116,8 +117,9 @@ def test_open_lids_show_the_reference_eye_and_a_blink_covers_it(setup):
 
     def result(blink: float, with_eyes: bool = True):
         V = model.synthesize(_track(model, _acts(1, blink)).weights_at(0))
-        return rewrite_frame(target, V, cam, closed if with_eyes else topo, face_tex,
-                             eye_texture=tex if with_eyes else None, blend="none", erode=0)
+        return rewrite_frame(target, V, cam, closed if with_eyes else topo,
+                             FrameTextures(face_tex, eyes=tex if with_eyes else None),
+                             blending=BlendOptions("none", erode=0))
 
     def share(img, colour, where):
         return np.mean(np.all(np.abs(img[where].astype(int) - colour) < 60, axis=-1))
@@ -156,8 +158,8 @@ def test_a_closed_frame_textures_the_blink(setup):
     face_tex = FaceTexture(frames[0], frame_uvs(close_mouth(V[0], topo), cam, (SIZE, SIZE)), 0)
     inner = hole & np.roll(hole, 3, 0) & np.roll(hole, -3, 0)
     for v, colour in ((V[1], lid), (V[0], REF_EYE)):
-        r = rewrite_frame(frames[0], v, cam, closed, face_tex, eye_texture=tex, blend="none",
-                          erode=0)
+        r = rewrite_frame(frames[0], v, cam, closed, FrameTextures(face_tex, eyes=tex),
+                          blending=BlendOptions("none", erode=0))
         near = np.all(np.abs(r.image[inner].astype(int) - colour) < 60, axis=-1)
         assert near.mean() > 0.8
 
@@ -299,8 +301,9 @@ def test_hair_at_the_rim_of_the_reference_frame_is_not_pasted(setup):
     target = _frame(hole, TARGET_EYE)
     Vt = close_mouth(model.synthesize(ref.weights_at(0)), topo)
     face_tex = FaceTexture(target, frame_uvs(Vt, cam, (SIZE, SIZE)), 0)
-    out = rewrite_frame(target, model.synthesize(ref.weights_at(0)), cam, closed, face_tex,
-                        eye_texture=tex, blend="none", erode=0).image
+    out = rewrite_frame(target, model.synthesize(ref.weights_at(0)), cam, closed,
+                        FrameTextures(face_tex, eyes=tex),
+                        blending=BlendOptions("none", erode=0)).image
 
     def inner(m):  # 3 px from the class's edge: away from the feathered seams and blur
         return m & np.logical_and.reduce([np.roll(m, s, a) for s in (-3, 3) for a in (0, 1)])
@@ -354,7 +357,8 @@ def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference
     where the target's forehead is where the reference frame has it: they show that skin
     already (``make demo``'s bright forehead blob); where the target raised its brows, the
     reference frame's rim is pasted. The lids and eyes are always the reference frame's."""
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
 
     model, topo, closed, fill = setup
     target, new, hole, V, tid, tex = _brows_up_clip(setup)
@@ -365,8 +369,9 @@ def test_the_rim_keeps_the_current_frame_where_the_target_is_as_in_the_reference
     ref = _frame(hole, REF_EYE)
     ref[blob] = HIGHLIGHT
     frames = [ref] + [_frame(hole, TARGET_EYE)] * 6
-    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
-                                           workers=1)]
+    out = [r.image for r in rewrite_frames(frames, target, new, model,
+                                           options=RewriteOptions(blend="none"),
+                                           run=RenderRun(workers=1))]
 
     def mean(img, where):
         return img[where].astype(float).mean(axis=0)
@@ -392,7 +397,8 @@ def test_a_strand_over_the_brows_of_the_reference_frame_only_is_not_pasted(setup
     keep the current frame, in frames where the target is still and where it raised its brows.
     The eyes are still the reference frame's. (Before the rule the strand was pasted into every
     frame: the region away from the rim was always the reference frame's.)"""
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
 
     model, topo, closed, fill = setup
     target, new, hole, V, tid, tex = _brows_up_clip(setup)
@@ -409,8 +415,9 @@ def test_a_strand_over_the_brows_of_the_reference_frame_only_is_not_pasted(setup
     ref = _frame(hole, REF_EYE)                          # usual colour over most of the region)
     ref[free] = HAIR
     frames = [ref] + [_frame(hole, TARGET_EYE)] * 6
-    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
-                                           workers=1)]
+    out = [r.image for r in rewrite_frames(frames, target, new, model,
+                                           options=RewriteOptions(blend="none"),
+                                           run=RenderRun(workers=1))]
     # the pixels of triangles whose three vertices lie on the strand (a vertex at its edge
     # reads skin there and keeps pasting, fading over its triangles)
     P = np.rint(target.camera(0).project(V)).astype(int).clip(0, SIZE - 1)
@@ -435,7 +442,8 @@ def test_a_strand_of_the_current_frame_only_is_not_painted_over(setup, monkeypat
     fringe lies over a brow's tail): with :data:`facetransfer.eyes.FRAME_RULE` the frame keeps
     its own strand; without it the reference frame's skin is painted over the strand. Frame 6
     (raised too, no strand) shows skin either way."""
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
 
     monkeypatch.setattr(eyes, "FRAME_RULE", rule)
     model, topo, closed, fill = setup
@@ -459,8 +467,9 @@ def test_a_strand_of_the_current_frame_only_is_not_painted_over(setup, monkeypat
     frames = [_frame(hole, REF_EYE)] + [_frame(hole, TARGET_EYE)] * 6
     frames[5] = frames[5].copy()
     frames[5][free] = HAIR
-    out = [r.image for r in rewrite_frames(frames, target, new, model, blend="none",
-                                           workers=1)]
+    out = [r.image for r in rewrite_frames(frames, target, new, model,
+                                           options=RewriteOptions(blend="none"),
+                                           run=RenderRun(workers=1))]
     s = free & np.logical_and.reduce([np.roll(free, k, a) for k in (-2, 2) for a in (0, 1)])
     assert s.sum() > 50
     hair = np.abs(out[5][s].astype(float) - HAIR).max(axis=-1)
@@ -603,5 +612,5 @@ def test_paint_eyes_alone_is_what_the_rewrite_paints(setup):
     (face_img,), labels = shade_layers(r, closed.faces, [(face_tex.uvs, face_tex.image)],
                                        np.ones(len(closed.faces), np.uint8))
     alone = eyes.paint_eyes(r, closed.faces, V, face_img, labels != 0, tex)
-    together = _shade_frame(r, V, closed, face_tex, None, tex, None)[0]
+    together = _shade_frame(r, V, closed, FrameTextures(face_tex, eyes=tex))[0]
     assert np.array_equal(alone, together) and not np.array_equal(alone, face_img)

@@ -10,8 +10,8 @@ import pytest
 from facetransfer import jaw, region_weights
 from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.render import rasterize
-from facetransfer.rewrite import rewrite_frame
-from facetransfer.rewrite_options import RewriteOptions
+from facetransfer.rewrite import FrameTextures, rewrite_frame
+from facetransfer.rewrite_options import BlendOptions, RewriteOptions
 from facetransfer.errors import RewriteError
 from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology
@@ -118,17 +118,18 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     def share(img, colour):
         return np.mean(np.all(np.abs(img[inner].astype(int) - colour) < 8, axis=-1))
 
-    before = rewrite_frame(frames[1], V, cam, topo, face_tex, blend="none", erode=0)
-    after = rewrite_frame(frames[1], V, cam, topo, face_tex, jaw_texture=tex, blend="none",
-                          erode=0)
+    paste = BlendOptions("none", erode=0)
+    before = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex), blending=paste)
+    after = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex, jaw=tex),
+                          blending=paste)
     assert share(before.image, SHADOW) > 0.15  # the target's shading on the closed jaw
     assert share(after.image, SHADOW) < 0.01  # (the region's feathered outline aside)
     assert share(after.image, SKIN_LIT) > 0.95
     # at half strength on every vertex (JawTexture.at: where the target's own skin moved
     # half-way from the reference frame's) the region is the even mix of the two, to rounding
-    half = rewrite_frame(frames[1], V, cam, topo, face_tex, blend="none", erode=0,
-                         jaw_texture=dataclasses.replace(
-                             tex, alpha=np.full(len(tex.uvs), 0.5, np.float32)))
+    halved = dataclasses.replace(tex, alpha=np.full(len(tex.uvs), 0.5, np.float32))
+    half = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex, jaw=halved),
+                         blending=paste)
     mid = (before.image[inner].astype(float) + after.image[inner]) / 2
     assert np.abs(half.image[inner] - mid).max() <= 1.0
     # only the jaw region changed: elsewhere the same frame
@@ -140,7 +141,8 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     tex_h = jaw.jaw_texture(hair, target, model, topo)
     plain = [np.full((SIZE, SIZE, 3), SKIN_LIT, np.uint8)] * 2
     face_h = FaceTexture(plain[1], face_tex.uvs, 1)
-    out = rewrite_frame(plain[1], V, cam, topo, face_h, jaw_texture=tex_h, blend="none", erode=0)
+    out = rewrite_frame(plain[1], V, cam, topo, FrameTextures(face_h, jaw=tex_h),
+                        blending=BlendOptions("none", erode=0))
     assert share(out.image, HAIR) < 0.01 and share(out.image, SKIN_LIT) > 0.95
     # the hair's soft edge (2 px a quarter hair: 1.3x darker than the skin, not unlike enough
     # by itself) goes with the hair: the current frame's skin, not a grey outline
@@ -150,7 +152,8 @@ def test_the_targets_open_mouth_shading_does_not_show_on_a_closed_jaw(setup):
     soft = tuple(int(0.75 * a + 0.25 * b) for a, b in zip(SKIN_LIT, HAIR))
     hair[0][edge] = soft
     tex_s = jaw.jaw_texture(hair, target, model, topo)
-    out = rewrite_frame(plain[1], V, cam, topo, face_h, jaw_texture=tex_s, blend="none", erode=0)
+    out = rewrite_frame(plain[1], V, cam, topo, FrameTextures(face_h, jaw=tex_s),
+                        blending=BlendOptions("none", erode=0))
     shown = inner & edge
     assert shown.sum() > 20
     assert np.mean(np.all(np.abs(out.image[shown].astype(int) - SKIN_LIT) < 8, axis=-1)) > 0.9
@@ -205,8 +208,9 @@ def _closed_jaw_in(model, topo, frame1: np.ndarray) -> tuple[np.ndarray, np.ndar
     inner = region & np.roll(region, 3, 0) & np.roll(region, -3, 0) & \
         np.roll(region, 3, 1) & np.roll(region, -3, 1)
     assert inner.sum() > 100
-    out = rewrite_frame(frame1, model.synthesize(closed.weights_at(0)), cam, topo, face_tex,
-                        jaw_texture=tex.at(1), blend="none", erode=0)
+    out = rewrite_frame(frame1, model.synthesize(closed.weights_at(0)), cam, topo,
+                        FrameTextures(face_tex, jaw=tex.at(1)),
+                        blending=BlendOptions("none", erode=0))
     return out.image, inner
 
 
@@ -299,9 +303,10 @@ def test_only_the_skin_that_moved_takes_the_reference_frame(setup):
     V = model.synthesize(target.weights_at(1))  # the new face: the target's own, here
     Vc = close_mouth(V, topo)
     face_tex = FaceTexture(frames[1], frame_uvs(Vc, cam, (SIZE, SIZE)), 1)
-    before = rewrite_frame(frames[1], V, cam, topo, face_tex, blend="none", erode=0)
-    after = rewrite_frame(frames[1], V, cam, topo, face_tex, jaw_texture=at, blend="none",
-                          erode=0)
+    paste = BlendOptions("none", erode=0)
+    before = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex), blending=paste)
+    after = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex, jaw=at),
+                          blending=paste)
     r = rasterize(Vc, topo.faces, cam, (SIZE, SIZE))
     alpha = interpolate_vertex_values(r, topo.faces, at.alpha)
     region = _region_pixels(model, topo, target, 1, tex.select)
@@ -339,5 +344,5 @@ def test_paint_jaw_alone_is_what_the_rewrite_paints(setup):
     (face_img,), labels = shade_layers(r, topo.faces, [(face_tex.uvs, face_tex.image)],
                                        np.ones(len(topo.faces), np.uint8))
     alone = jaw.paint_jaw(r, topo.faces, face_img, labels != 0, tex)
-    together = _shade_frame(r, V, topo, face_tex, None, None, tex)[0]
+    together = _shade_frame(r, V, topo, FrameTextures(face_tex, jaw=tex))[0]
     assert np.array_equal(alone, together) and not np.array_equal(alone, face_img)

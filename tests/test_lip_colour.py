@@ -122,11 +122,11 @@ def test_tint_mouth_scales_the_masked_pixels_by_their_weight():
 def _rewrite(scene_model, clips, weights, lip_colour):
     target, source, track = clips
     topo = weights[0]
-    return list(rc.rewrite_frames(target, track, track, scene_model, source_frames=source,
-                                  source_track=track, mouth="frame", topo=topo,
+    return list(rc.rewrite_frames(target, track, track, scene_model,
+                                  mouth_source=rc.MouthSource(source, track), topo=topo,
                                   options=RewriteOptions(lip_colour=lip_colour, lips="model",
-                                                         eyes="target", jaw="frame"),
-                                  blend="none"))
+                                                         eyes="target", jaw="frame",
+                                                         mouth="frame", blend="none")))
 
 
 def test_the_result_takes_the_targets_lipstick(quick_model, clips, weights):
@@ -158,8 +158,7 @@ def test_the_clip_tint_recovers_the_paint_and_is_one_for_the_same_texture(quick_
     for src, expect, tol in ((source, PAINT, 0.04), (target, np.ones(3), 1e-9)):
         r = rc._ClipRenderer.build(target, track, track, quick_model,
                                    RewriteOptions(lips="model", eyes="target", jaw="frame"),
-                                   source_frames=src, source_track=track, source_index=None,
-                                   mouth_function=None, topo=topo)
+                                   mouth_source=rc.MouthSource(src, track), topo=topo)
         np.testing.assert_allclose(r.lip_tint.tint, expect, atol=tol)
 
 

@@ -9,7 +9,7 @@ import pytest
 
 from facetransfer import lips
 from facetransfer.errors import ShapeError, TrackError
-from facetransfer.rewrite_clip import _ClipRenderer
+from facetransfer.rewrite_clip import MouthSource, _ClipRenderer
 from facetransfer.rewrite_options import RewriteOptions
 from facetransfer.texture.face import frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology
@@ -182,8 +182,7 @@ def _renderer(model, source, *, lips_mode="residual"):
     target = _track(model, [0.0] * n)
     new = dataclasses.replace(target, weights=source.weights)
     return _ClipRenderer.build(frames, target, new, model, RewriteOptions(lips=lips_mode),
-                               source_frames=frames, source_track=source, source_index=None,
-                               mouth_function=None, topo=None)
+                               mouth_source=MouthSource(frames, source), topo=None)
 
 
 def test_the_new_lips_close_where_the_sources_detected_lips_close(setup):

@@ -68,14 +68,14 @@ def test_a_grey_target_gets_a_grey_face_with_its_own_lip_tone(quick_model, clips
     target, source, track = clips
     grey = _grey(target)
     topo = weights[0]
-    outs = list(rc.rewrite_frames(grey, track, track, quick_model, source_frames=source,
-                                  source_track=track, mouth="frame", topo=topo,
+    outs = list(rc.rewrite_frames(grey, track, track, quick_model,
+                                  mouth_source=rc.MouthSource(source, track), topo=topo,
                                   options=RewriteOptions(lips="model", eyes="target",
-                                                         jaw="frame"), blend="none"))
+                                                         jaw="frame", mouth="frame",
+                                                         blend="none")))
     r = rc._ClipRenderer.build(grey, track, track, quick_model,
                                RewriteOptions(lips="model", eyes="target", jaw="frame"),
-                               source_frames=source, source_track=track, source_index=None,
-                               mouth_function=None, topo=topo)
+                               mouth_source=rc.MouthSource(source, track), topo=topo)
     assert r.mono and np.ptp(r.lip_tint.tint) == 0
     for o, g in zip(outs, grey):
         img = o.image.astype(int)

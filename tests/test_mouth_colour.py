@@ -10,7 +10,8 @@ import pytest
 from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.render import rasterize
 from facetransfer.mouth import mouth_ring_faces
-from facetransfer.rewrite import rewrite_frame
+from facetransfer.rewrite import FrameTextures, rewrite_frame
+from facetransfer.rewrite_options import BlendOptions
 from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology
 from facetransfer.render.cameras import WeakPerspective
@@ -54,8 +55,9 @@ def test_teeth_keep_their_hue_and_lips_take_the_skins_gain(scene):
     target = np.empty((SIZE, SIZE, 3), np.uint8)
     target[:] = SKIN_TARGET.astype(np.uint8)
     uvs = frame_uvs(V, cam, (SIZE, SIZE))
-    out = rewrite_frame(target, V, cam, topo, FaceTexture(target, uvs),
-                        mouth_texture=FaceTexture(src, uvs), blend="fast")
+    out = rewrite_frame(target, V, cam, topo,
+                        FrameTextures(FaceTexture(target, uvs), mouth=FaceTexture(src, uvs)),
+                        blending=BlendOptions("fast"))
     r = rasterize(V, topo.faces, cam, (SIZE, SIZE))
     inside = cv2.erode((r.tri_id >= nF).astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
     assert inside.sum() > 30

@@ -145,8 +145,8 @@ def test_a_turned_clip_is_rendered_with_the_reference_of_each_frames_view(turned
     def render(weights):
         views = dataclasses.replace(tex, weights=weights)
         monkeypatch.setattr(region_views, "eye_texture_by_view", lambda *a, **k: (closed, views))
-        return [r.image for r in rc.rewrite_frames(frames, tr, tr, model, workers=1,
-                                                   processes=False)]
+        return [r.image for r in rc.rewrite_frames(
+            frames, tr, tr, model, run=rc.RenderRun(workers=1, processes=False))]
 
     out = render(w)
     alone = [render(np.tile(np.eye(2, dtype=np.float32)[k], (12, 1))) for k in (0, 1)]
@@ -176,7 +176,8 @@ def test_region_textures_made_ahead_are_taken_by_the_renderer_of_their_clip(turn
     assert ahead.fits(tr, 12, region_views.region_modes(opts))
     assert not ahead.fits(dataclasses.replace(tr), 12, region_views.region_modes(opts))
     assert not ahead.fits(tr, 11, region_views.region_modes(opts))
-    plain = [r.image for r in rc.rewrite_frames(frames, tr, tr, model, workers=1)]
+    one = rc.RenderRun(workers=1)
+    plain = [r.image for r in rc.rewrite_frames(frames, tr, tr, model, run=one)]
     made = []
     real = region_views.region_textures
 
@@ -185,14 +186,15 @@ def test_region_textures_made_ahead_are_taken_by_the_renderer_of_their_clip(turn
         return real(*a, **k)
 
     monkeypatch.setattr(rc, "region_textures", counted)
-    taken = [r.image for r in rc.rewrite_frames(frames, tr, tr, model, workers=1,
+    taken = [r.image for r in rc.rewrite_frames(frames, tr, tr, model, run=one,
                                                 regions=ahead)]
     assert made == []
     for a, b in zip(plain, taken):
         np.testing.assert_array_equal(a, b)
-    list(rc.rewrite_frames(frames, tr, tr, model, workers=1, eyes="target", regions=ahead))
+    list(rc.rewrite_frames(frames, tr, tr, model, run=one, options=RewriteOptions(eyes="target"),
+                           regions=ahead))
     other = dataclasses.replace(tr)
-    list(rc.rewrite_frames(frames, other, other, model, workers=1, regions=ahead))
+    list(rc.rewrite_frames(frames, other, other, model, run=one, regions=ahead))
     assert made == [1, 1]
 
 

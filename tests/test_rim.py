@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from facetransfer import rim
 from facetransfer.errors import MeshError
 from facetransfer.render import WeakPerspective, rasterize
-from facetransfer.rewrite import rewrite_frame
+from facetransfer.rewrite import FrameTextures, rewrite_frame
+from facetransfer.rewrite_options import BlendOptions
 from facetransfer.texture.face import FaceTexture, frame_uvs
 from facetransfer.topology import close_mouth, mesh_topology
 
@@ -104,7 +105,8 @@ def test_a_narrower_face_keeps_the_targets_pixels_where_its_outline_was_drawn(na
 
     def render(scale):
         V = model.synthesize(new[scale].weights_at(0))
-        return rewrite_frame(frame, V, new[scale].camera(0), topo, tex, blend="none").image
+        return rewrite_frame(frame, V, new[scale].camera(0), topo, FrameTextures(tex),
+                             blending=BlendOptions("none")).image
 
     on, far = render(24.0), render(19.0)
     monkeypatch.setattr(rim, "MOVED", np.inf)
@@ -137,7 +139,8 @@ def test_an_outline_sliding_along_itself_keeps_the_targets_pixels(narrower, monk
     skin[:16] = skin[-16:] = False  # the head and the neck cut by the frame: no outline there
 
     def dark_on_skin():
-        out = rewrite_frame(frame, Vc, turned, topo, tex, blend="none").image
+        out = rewrite_frame(frame, Vc, turned, topo, FrameTextures(tex),
+                            blending=BlendOptions("none")).image
         return int(((np.abs(out.astype(int) - EDGE).max(axis=-1) < 40) & skin).sum())
 
     on = dark_on_skin()

@@ -107,7 +107,7 @@ def test_a_two_shot_target_is_rewritten_as_its_shots_alone(quick_model, tmp_path
     sys.path.insert(0, str(Path(__file__).parent))
     from test_transfer_rewrite import render_clip
 
-    from facetransfer.rewrite_clip import rewrite_frames
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
     from facetransfer.texture import default_face_texture
     from facetransfer.topology import mesh_topology
     from facetransfer.track import Track
@@ -128,12 +128,13 @@ def test_a_two_shot_target_is_rewritten_as_its_shots_alone(quick_model, tmp_path
     assert take_frames(both, np.array([0, 5])).shot_starts == ()
     frames = np.concatenate([fa, fb])
     new = both                                     # the clip's own performance
-    joined = [r.image for r in rewrite_frames(frames, both, new, m, topo=topo, workers=1)]
+    one = RenderRun(workers=1)
+    joined = [r.image for r in rewrite_frames(frames, both, new, m, topo=topo, run=one)]
     alone = [r.image for f, t in ((fa, ta), (fb, tb))
-             for r in rewrite_frames(f, t, t, m, topo=topo, workers=1)]
+             for r in rewrite_frames(f, t, t, m, topo=topo, run=one)]
     assert all(np.array_equal(a, b) for a, b in zip(joined, alone))
-    later = [r.image for r in rewrite_frames(frames, both, new, m, topo=topo, workers=1,
-                                             start=5)]
+    later = [r.image for r in rewrite_frames(frames, both, new, m, topo=topo,
+                                             run=RenderRun(workers=1, start=5))]
     assert all(np.array_equal(a, b) for a, b in zip(later, alone[5:]))
 
 

@@ -108,13 +108,13 @@ def bank(scene):
 
 
 def _render(scene, target, target_track, new, bank_frames, bank_track, mouth, fn=None,
-            **kwargs):
+            blend="fast"):
     """Rewrite with the mouth from the bank: its nearest frame ("frame") or the function."""
     j = nearest_frames(new.weights["expression"], bank_track.weights["expression"])
-    return list(rc.rewrite_frames(target, target_track, new, scene.model,
-                                  source_frames=bank_frames,
-                                  source_track=take_frames(bank_track, j), source_index=j, mouth=mouth, mouth_function=fn,
-                                  topo=scene.topo, **kwargs))
+    source = rc.MouthSource(bank_frames, take_frames(bank_track, j), j, fn)
+    return list(rc.rewrite_frames(target, target_track, new, scene.model, mouth_source=source,
+                                  options=rwo.RewriteOptions(mouth=mouth, blend=blend),
+                                  topo=scene.topo))
 
 
 # ------------------------------------------------------------------------------- the function
@@ -205,18 +205,20 @@ def test_function_built_inside_rewrite_frames_and_workers(scene, bank):
     e = scene.en + 0.5 * (scene.eo - scene.en)
     target, target_track = scene.clip([scene.en] * 3, [0, 3, -3])
     _, new = scene.clip([e] * 3, [0, 3, -3])
+    function = rwo.RewriteOptions(mouth="function")
     runs = [[o.image for o in rc.rewrite_frames(target, target_track, new, scene.model,
-                                                source_frames=frames, source_track=track,
-                                                mouth="function", topo=scene.topo, workers=w)]
+                                                mouth_source=rc.MouthSource(frames, track),
+                                                options=function, topo=scene.topo,
+                                                run=rc.RenderRun(workers=w))]
             for w in (1, 2)]
     for a, b in zip(*runs):
         np.testing.assert_array_equal(a, b)
     # the same frames given explicitly: the same output
+    given = rc.MouthSource(function=ftex.mouth_texture_function(
+        scene.model, frames, take_frames(track, np.arange(3)), scene.topo))
     ref = [o.image for o in rc.rewrite_frames(target, target_track, new, scene.model,
-                                              mouth="function", topo=scene.topo, workers=1,
-                                              mouth_function=ftex.mouth_texture_function(
-                                                  scene.model, frames,
-                                                  take_frames(track, np.arange(3)), scene.topo))]
+                                              mouth_source=given, options=function,
+                                              topo=scene.topo, run=rc.RenderRun(workers=1))]
     for a, b in zip(runs[0], ref):
         np.testing.assert_array_equal(a, b)
 
@@ -264,13 +266,15 @@ def test_mouth_bad_input(scene, bank, quick_model):
     with pytest.raises(rwo.RewriteError, match="needs a model with texture coordinates"):
         ftex.mouth_texture_function(no_uvs, frames, track, scene.topo)
     with pytest.raises(rwo.RewriteError, match="texture coordinates"):
-        list(rc.rewrite_frames(frames, track, track, no_uvs, mouth="function", topo=scene.topo))
+        list(rc.rewrite_frames(frames, track, track, no_uvs,
+                               options=rwo.RewriteOptions(mouth="function"), topo=scene.topo))
     with pytest.raises(rwo.RewriteError, match="texture coordinates"):
         ftex.resolve_mouth_mode("function", no_uvs)
     assert ftex.resolve_mouth_mode(None, no_uvs, performance=True) == "frame"
     assert ftex.resolve_mouth_mode(None, m, performance=True) == "function"
     with pytest.raises(rwo.RewriteError, match="mouth must be one of frame, function"):
-        list(rc.rewrite_frames(frames, track, track, m, mouth="teeth", topo=scene.topo))
+        list(rc.rewrite_frames(frames, track, track, m,
+                               options=rwo.RewriteOptions(mouth="teeth"), topo=scene.topo))
     with pytest.raises(rwo.RewriteError, match="mouth must be one of"):
         ftex.resolve_mouth_mode("nearest", m)
     with pytest.raises(rwo.RewriteError, match="max_frames must be an integer >= 1"):
@@ -291,8 +295,9 @@ def test_mouth_bad_input(scene, bank, quick_model):
     # a function of another model layout
     small = ftex.MouthFunction(fn.function, fn.uvs[:10], fn.frames)
     with pytest.raises(rwo.RewriteError, match="texture function is for"):
-        list(rc.rewrite_frames(frames, track, track, m, mouth="function", mouth_function=small,
-                               topo=scene.topo))
+        list(rc.rewrite_frames(frames, track, track, m,
+                               options=rwo.RewriteOptions(mouth="function"),
+                               mouth_source=rc.MouthSource(function=small), topo=scene.topo))
 
 
 # ------------------------------------------------------------------------------- CLI

@@ -189,8 +189,9 @@ def test_synthetic_transfer_matches_truth(quick_model, topo, synthetic, blend, t
     target; thresholds leave >= 1.6 dB margin."""
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
-    outs = list(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
-                                  texture=texture, blend=blend, topo=topo))
+    outs = list(rc.rewrite_frames(fb, tb, new, quick_model,
+                                  mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                  options=rwo.RewriteOptions(texture=texture, blend=blend)))
     assert len(outs) == len(fb)
     for i, o in enumerate(outs):
         assert o.face_mask.sum() > 2000
@@ -209,8 +210,9 @@ def test_synthetic_transfer_matches_truth(quick_model, topo, synthetic, blend, t
 def test_eye_holes_show_the_target(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
-    o = next(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
-                               blend="none", topo=topo, eyes="target"))
+    o = next(rc.rewrite_frames(fb, tb, new, quick_model, mouth_source=rc.MouthSource(fa, ta),
+                               options=rwo.RewriteOptions(blend="none", eyes="target"),
+                               topo=topo))
     # pixels inside the face's outline but not covered by the mesh: the eye holes
     import scipy.ndimage as ndi
 
@@ -218,8 +220,8 @@ def test_eye_holes_show_the_target(quick_model, topo, synthetic):
     assert holes.sum() > 10
     np.testing.assert_array_equal(o.image[holes], fb[0][holes])
     # with the eyes of the new performance (the default, facetransfer.eyes) they are rendered
-    e = next(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
-                               blend="none", topo=topo))
+    e = next(rc.rewrite_frames(fb, tb, new, quick_model, mouth_source=rc.MouthSource(fa, ta),
+                               options=rwo.RewriteOptions(blend="none"), topo=topo))
     assert e.face_mask[holes].all()
 
 
@@ -227,8 +229,8 @@ def test_lost_frames_keep_the_original(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     ta_lost = dataclasses.replace(ta, lost=np.array([False, True, False, False, True]))
     new = recombine(tb, expression=ta_lost)
-    outs = list(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
-                                  source_track=ta_lost, topo=topo))
+    outs = list(rc.rewrite_frames(fb, tb, new, quick_model,
+                                  mouth_source=rc.MouthSource(fa, ta_lost), topo=topo))
     for i in (1, 4):
         np.testing.assert_array_equal(outs[i].image, fb[i])
         assert not outs[i].face_mask.any()
@@ -239,14 +241,16 @@ def test_rewrite_bad_input(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
     with pytest.raises(rwo.RewriteError, match="texture"):
-        list(rc.rewrite_frames(fb, tb, new, quick_model, texture="bogus"))
+        list(rc.rewrite_frames(fb, tb, new, quick_model,
+                               options=rwo.RewriteOptions(texture="bogus")))
     with pytest.raises(rwo.RewriteError, match="only 2"):
         list(rc.rewrite_frames(fb[:2], tb, new, quick_model))
     with pytest.raises(rwo.RewriteError, match="64x64"):
         list(rc.rewrite_frames(fb[:, :64, :64], tb, new, quick_model))
     with pytest.raises(rwo.RewriteError, match="blend"):
         rw.rewrite_frame(fb[0], quick_model.synthesize(tb.weights_at(0)), tb.camera(0), topo,
-                         ftex.FaceTexture(fb[0], np.zeros((topo.n_closed, 2))), blend="magic")
+                         rw.FrameTextures(ftex.FaceTexture(fb[0], np.zeros((topo.n_closed, 2)))),
+                         blending=rwo.BlendOptions("magic"))
 
 
 def test_landmark_track_recovers_pose_and_marks_lost(quick_model):
@@ -285,8 +289,9 @@ def test_nearest_frames_picks_closest_valid_row():
 def test_parallel_rendering_is_deterministic(quick_model, topo, synthetic):
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
-    runs = [[o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
-                                                source_track=ta, topo=topo, workers=w)]
+    runs = [[o.image for o in rc.rewrite_frames(fb, tb, new, quick_model,
+                                                mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                                run=rc.RenderRun(workers=w))]
             for w in (1, 2)]
     for a, b in zip(*runs):
         np.testing.assert_array_equal(a, b)
@@ -295,19 +300,21 @@ def test_parallel_rendering_is_deterministic(quick_model, topo, synthetic):
 @pytest.mark.parametrize("workers, processes", [(1, False), (2, False), (2, True)])
 def test_a_render_started_later_gives_the_same_frames(quick_model, topo, synthetic, workers,
                                                       processes):
-    """``rewrite_frames(start=k)``: frames k.. equal those of a whole render, here, on threads
-    and in forked processes (a render continued after an interruption)."""
+    """``rewrite_frames(run=RenderRun(start=k))``: frames k.. equal those of a whole render,
+    here, on threads and in forked processes (a render continued after an interruption)."""
     fa, ta, fb, tb, truth = synthetic
     new = recombine(tb, expression=ta)
-    kw = dict(source_frames=fa, source_track=ta, topo=topo)
-    whole = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, workers=1, **kw)]
-    later = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, workers=workers,
-                                                processes=processes, start=2, **kw)]
+    kw = dict(mouth_source=rc.MouthSource(fa, ta), topo=topo)
+    whole = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model,
+                                                run=rc.RenderRun(workers=1), **kw)]
+    later = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, run=rc.RenderRun(
+        workers=workers, processes=processes, start=2), **kw)]
     assert len(later) == len(whole) - 2
     for a, b in zip(later, whole[2:]):
         np.testing.assert_array_equal(a, b)
     with pytest.raises(rwo.RewriteError, match="outside"):
-        next(rc.rewrite_frames(fb, tb, new, quick_model, start=len(whole) + 1, **kw))
+        next(rc.rewrite_frames(fb, tb, new, quick_model,
+                               run=rc.RenderRun(start=len(whole) + 1), **kw))
 
 
 def test_an_identity_ulps_apart_is_contracted_once(quick_model, topo, synthetic):
@@ -320,9 +327,11 @@ def test_an_identity_ulps_apart_is_contracted_once(quick_model, topo, synthetic)
     nudged = ident * (1 + np.arange(len(ident))[:, None] * 2e-16)
     assert (nudged != ident[0]).any()
     ta2 = dataclasses.replace(ta, weights=dict(ta.weights, identity=nudged))
-    kw = dict(source_frames=fa, topo=topo, workers=1)
-    exact = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, source_track=ta, **kw)]
-    near = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model, source_track=ta2, **kw)]
+    kw = dict(topo=topo, run=rc.RenderRun(workers=1))
+    exact = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model,
+                                                mouth_source=rc.MouthSource(fa, ta), **kw)]
+    near = [o.image for o in rc.rewrite_frames(fb, tb, new, quick_model,
+                                               mouth_source=rc.MouthSource(fa, ta2), **kw)]
     for a, b in zip(exact, near):
         np.testing.assert_array_equal(a, b)
     meshes = frame_meshes.FrameMeshes(quick_model, {"source": ta2}, ta2.n_frames)

@@ -59,10 +59,11 @@ def test_face_box_crop_matches_the_full_frame(quick_model, topo, synthetic, blen
         Vs = topology.close_mouth(quick_model.synthesize(ta.weights_at(i)), topo)
         tex = ftex.FaceTexture(fb[i], ftex.frame_uvs(Vt, tb.camera(i), (128, 128)), i)
         mouth = ftex.FaceTexture(fa[i], ftex.frame_uvs(Vs, ta.camera(i), (128, 128)), i)
-        cropped = rw.rewrite_frame(fb[i], V, new.camera(i), topo, tex, mouth_texture=mouth,
-                                   blend=blend)
-        full = rw._rewrite_crop(fb[i], V, new.camera(i), topo, tex, mouth, blend, 2.0, 2, 3.0,
-                                False, mouth_ring=rw.mouth_ring_faces(topo))
+        blending = rwo.BlendOptions(blend)
+        cropped = rw.rewrite_frame(fb[i], V, new.camera(i), topo,
+                                   rw.FrameTextures(tex, mouth), blending=blending)
+        full = rw._rewrite_crop(fb[i], V, new.camera(i), topo, rw.FrameTextures(
+            tex, mouth, mouth_ring=rw.mouth_ring_faces(topo)), blending)
         box = rw._face_box(V, new.camera(i), (128, 128), margin=20)
         assert box is not None and box != (0, 0, 128, 128)  # the crop really is smaller
         for a, b in zip(dataclasses.astuple(cropped), dataclasses.astuple(full)):
@@ -77,7 +78,7 @@ def test_face_box_off_screen_keeps_the_frame(quick_model, topo, synthetic):
     assert rw._face_box(topology.close_mouth(V, topo), cam, (128, 128), margin=4) is None
     Vt = topology.close_mouth(V, topo)
     tex = ftex.FaceTexture(fb[0], ftex.frame_uvs(Vt, tb.camera(0), (128, 128)), 0)
-    out = rw.rewrite_frame(fb[0], V, cam, topo, tex)
+    out = rw.rewrite_frame(fb[0], V, cam, topo, rw.FrameTextures(tex))
     np.testing.assert_array_equal(out.image, fb[0])
     assert not out.face_mask.any()
 
@@ -179,8 +180,9 @@ def test_rendering_in_processes_equals_one_thread(quick_model, topo, synthetic):
     lost = new.lost.copy()
     lost[2] = True  # a lost frame keeps the original in both
     new = dataclasses.replace(new, lost=lost)
-    runs = [list(rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
-                                   topo=topo, workers=w, processes=p))
+    runs = [list(rc.rewrite_frames(fb, tb, new, quick_model,
+                                   mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                   run=rc.RenderRun(workers=w, processes=p)))
             for w, p in ((1, False), (2, True))]
     for a, b in zip(*runs):
         for x, y in zip(dataclasses.astuple(a), dataclasses.astuple(b)):
@@ -218,8 +220,9 @@ def test_the_render_runs_blas_on_one_thread_and_restores_it(quick_model, topo, s
             pytest.skip("no BLAS library with threads to limit")
         for workers in (1, 2):
             seen.clear()
-            it = rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa,
-                                   source_track=ta, topo=topo, workers=workers)
+            it = rc.rewrite_frames(fb, tb, new, quick_model,
+                                   mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                   run=rc.RenderRun(workers=workers))
             next(it)
             assert seen and all(s == [1] * len(before) for s in seen)
             assert _blas_threads() == [1] * len(before)  # while the render is suspended too
@@ -228,8 +231,9 @@ def test_the_render_runs_blas_on_one_thread_and_restores_it(quick_model, topo, s
         # two renders at once, the first made closed first: one thread until the last ends,
         # then as before (a limit per render restored the threads under the second and left
         # one thread after both)
-        a, b = (rc.rewrite_frames(fb, tb, new, quick_model, source_frames=fa, source_track=ta,
-                                  topo=topo, workers=1) for _ in range(2))
+        a, b = (rc.rewrite_frames(fb, tb, new, quick_model,
+                                  mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                  run=rc.RenderRun(workers=1)) for _ in range(2))
         next(a), next(b)
         a.close()
         assert _blas_threads() == [1] * len(before)

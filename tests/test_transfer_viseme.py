@@ -15,6 +15,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import rewrite_clip as rc  # noqa: E402
+from facetransfer.rewrite_options import RewriteOptions  # noqa: E402
 from facetransfer import topology  # noqa: E402
 from facetransfer.render import (WeakPerspective, look_at_weak_perspective, render,  # noqa: E402
                                  rotation_from_euler)
@@ -186,8 +187,8 @@ def test_viseme_transfer_matches_truth(tri_model, tri_topo, clips, mouth):
     (fa, ta), (_, tc), (fb, tb) = clips["A"], clips["C"], clips["B"]
     truth, _ = clips["truth"]
     new = recombine(tb, expression=tc, viseme=ta)
-    outs = list(rc.rewrite_frames(fb, tb, new, tri_model, source_frames=fa, source_track=ta,
-                                  mouth=mouth, topo=tri_topo))
+    outs = list(rc.rewrite_frames(fb, tb, new, tri_model, mouth_source=rc.MouthSource(fa, ta),
+                                  options=RewriteOptions(mouth=mouth), topo=tri_topo))
     ours = [psnr(o.image, truth[i], o.face_mask) for i, o in enumerate(outs)]
     base = [psnr(fb[i], truth[i], o.face_mask) for i, o in enumerate(outs)]
     assert min(ours) > 27.5, (ours, base)

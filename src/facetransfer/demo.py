@@ -27,7 +27,7 @@ from .errors import AssetError, VideoError
 from .texture.face import resolve_mouth_mode
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .transfer_plan import plan_transfer
-from .video_transfer import render_plan
+from .video_transfer import VideoOutput, render_plan
 
 log = logging.getLogger(__name__)
 
@@ -254,9 +254,9 @@ def _demo(out_dir, opts: RewriteOptions, model, frames: int, source, target, pro
     plan, opts = _plan_with_fallback(target, source, model, opts, frames, tracks,
                                      progress_factory)
     sheet = _DemoFrames(plan, judge, _take_panels(source, plan, model))
-    rendered = render_plan(plan, model, video_path, options=opts, audio_from=target,
-                           overwrite=overwrite, progress_factory=progress_factory,
-                           compose=sheet.compose, video_options=video_options)
+    output = VideoOutput(video_path, target, video_options, overwrite)
+    rendered = render_plan(plan, model, output, options=opts, progress_factory=progress_factory,
+                           compose=sheet.compose)
     timings.update(rendered.timings)
     fid = _judge(sheet.panels, plan.fps, _aspects(plan)) if judge else None
     timings["judge"] = time.perf_counter() - t0 - sum(timings.values())

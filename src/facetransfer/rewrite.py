@@ -44,6 +44,7 @@ Pérez, Gangnet, Blake. Poisson image editing. SIGGRAPH 2003.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from dataclasses import dataclass
 
@@ -59,14 +60,16 @@ from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.face import FaceTexture
 from .render import shade_layers
-from .rewrite_options import BLEND_MODES, check_mode
+from .rewrite_options import BlendOptions
 from .topology import MeshTopology, close_mouth
 
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "FrameTextures",
     "RewriteFrame",
     "rewrite_frame",
+    "rewrite_frame_part",
 ]
 
 
@@ -92,14 +95,45 @@ class RewriteFrame:
     mouth_mask: np.ndarray
 
 
+@dataclass(frozen=True)
+class FrameTextures:
+    """What the new face is painted with at one frame (§6): the target's face texture and the
+    textures laid over it.
+
+    Attributes
+    ----------
+    face : FaceTexture
+        The target's face texture (uvs for the closed mesh).
+    mouth : FaceTexture, optional
+        The source's mouth for this frame; without it the face texture covers the mouth.
+    eyes : EyeTexture, optional
+        The eye region's texture (the topology then has its eye holes closed:
+        :func:`facetransfer.eyes.eye_texture`); without it the target's eyes show through.
+    jaw : JawTexture, optional
+        The jaw region's texture from a closed-mouth target frame
+        (:func:`facetransfer.jaw.jaw_texture`, for the topology), pasted with its per-vertex
+        ``alpha`` (:meth:`facetransfer.jaw.JawTexture.at` gives a frame's); without it the jaw
+        is textured from ``face`` like the rest of the face.
+    mouth_ring : (F',) bool, optional
+        The triangles around the mouth whose colours in the source's frame and in the face
+        set the mouth's gain; default :func:`facetransfer.mouth.mouth_ring_faces` of the
+        topology.
+    lip_tint : LipTint, optional
+        The target's lip colour for the source's lips (:mod:`facetransfer.lip_colour`);
+        without it the lips keep the source's colour against the skin.
+    """
+
+    face: FaceTexture
+    mouth: FaceTexture | None = None
+    eyes: EyeTexture | None = None
+    jaw: JawTexture | None = None
+    mouth_ring: np.ndarray | None = None
+    lip_tint: LipTint | None = None
+
+
 def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: MeshTopology,
-                  face_texture: FaceTexture, *, mouth_texture: FaceTexture | None = None,
-                  blend: str = "fast", feather: float = 2.0, erode: int = 2,
-                  mouth_feather: float = 3.0, color_match: bool = False,
-                  eye_texture: EyeTexture | None = None,
-                  jaw_texture: JawTexture | None = None,
-                  mouth_ring: np.ndarray | None = None,
-                  lip_tint: LipTint | None = None) -> RewriteFrame:
+                  textures: FrameTextures, *, blending: BlendOptions | None = None
+                  ) -> RewriteFrame:
     """Render the new face into one target frame (§6): :func:`rewrite_frame_part` pasted
     into the frame.
 
@@ -111,57 +145,23 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     camera : WeakPerspective
         The target's pose at this frame (Eq. (7)).
     topo : MeshTopology
-    face_texture : FaceTexture
-        The target's face texture (uvs for the closed mesh).
-    mouth_texture : FaceTexture, optional
-        The source's mouth for this frame; without it the face texture covers the mouth.
-    blend : {"fast", "poisson", "none"}
-        :func:`~facetransfer.composite.membrane_blend` (fast), Poisson blending
-        (:func:`facetransfer.composite.composite_face`, exact sparse solve) or a hard paste.
-    feather : float
-        Soft-edge radius of the blend in pixels.
-    erode : int
-        The blend region is the rendered face mask eroded by this many pixels.
-    mouth_feather : float
-        Soft-edge width in pixels of the source's mouth inside the face (``blend="fast"``).
-        There the mouth takes the face's colours by a smooth gain fitted on the skin around it
-        (``mouth_ring``; :func:`facetransfer.mouth.blend_mouth`: per channel on the lips, one
-        gain for the three channels on the mouth's inside).
-    color_match : bool
-        Match the rendered face's colour statistics to the target's before the Poisson blend.
-    eye_texture : EyeTexture, optional
-        The eye region's texture (``topo`` then has its eye holes closed:
-        :func:`facetransfer.eyes.eye_texture`); without it the target's eyes show through.
-    jaw_texture : JawTexture, optional
-        The jaw region's texture from a closed-mouth target frame
-        (:func:`facetransfer.jaw.jaw_texture`, for ``topo``), pasted with its per-vertex
-        ``alpha`` (:meth:`facetransfer.jaw.JawTexture.at` gives a frame's); without it the jaw
-        is textured from ``face_texture`` like the rest of the face.
-    mouth_ring : (F',) bool, optional
-        The triangles around the mouth whose colours in the source's frame and in the face
-        set the mouth's gain; default :func:`facetransfer.mouth.mouth_ring_faces` of ``topo``.
-    lip_tint : LipTint, optional
-        The target's lip colour for the source's lips (:mod:`facetransfer.lip_colour`);
-        without it the lips keep the source's colour against the skin.
+    textures : FrameTextures
+        The target's face texture and the mouth, eye and jaw textures over it.
+    blending : BlendOptions, optional
+        How the rendered face goes into the frame (default :class:`BlendOptions`: the
+        membrane blend, ``"fast"``).
 
     Returns
     -------
     RewriteFrame
     """
     return _paste(np.asarray(target_frame), rewrite_frame_part(
-        target_frame, vertices, camera, topo, face_texture, mouth_texture=mouth_texture,
-        blend=blend, feather=feather, erode=erode, mouth_feather=mouth_feather,
-        color_match=color_match, eye_texture=eye_texture, jaw_texture=jaw_texture,
-        mouth_ring=mouth_ring, lip_tint=lip_tint))
+        target_frame, vertices, camera, topo, textures, blending=blending))
 
 
 def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
-                       topo: MeshTopology, face_texture: FaceTexture, *,
-                       mouth_texture: FaceTexture | None = None, blend: str = "fast",
-                       feather: float = 2.0, erode: int = 2, mouth_feather: float = 3.0,
-                       color_match: bool = False, eye_texture: EyeTexture | None = None,
-                       jaw_texture: JawTexture | None = None,
-                       mouth_ring: np.ndarray | None = None, lip_tint: LipTint | None = None):
+                       topo: MeshTopology, textures: FrameTextures, *,
+                       blending: BlendOptions | None = None):
     """:func:`rewrite_frame`'s work, on the face's box only: ``(box, RewriteFrame of the
     box)`` with ``box = (x0, y0, x1, y1)`` (end exclusive) in the frame, or None where the face
     is not in the frame; :func:`_paste` makes the whole frame of it (a render in processes
@@ -169,7 +169,7 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
     T = np.asarray(target_frame)
     if T.ndim != 3 or T.shape[2] != 3 or T.dtype != np.uint8:
         raise ShapeError(f"target frame must be (H, W, 3) uint8, got {T.shape} {T.dtype}")
-    check_mode("blend", blend, BLEND_MODES)
+    blending = BlendOptions() if blending is None else blending
     H, W = T.shape[:2]
     V = np.asarray(vertices, dtype=np.float64)
     if V.shape[0] == topo.n_vertices:
@@ -179,17 +179,17 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
                          f"got {V.shape}")
     # all per-frame work happens in the face's bounding box (plus a margin wider than any
     # filter below: erosion, outline ring, membrane margin, feathering); the rest is T
-    box = _face_box(V, camera, (W, H), margin=int(erode) + int(np.ceil(feather)) + 16)
+    box = _face_box(V, camera, (W, H),
+                    margin=int(blending.erode) + int(np.ceil(blending.feather)) + 16)
     if box is None:  # nothing of the face in the frame
         return None
     x0, y0, x1, y1 = box
     cam = camera if box == (0, 0, W, H) else _shift_camera(camera, x0, y0)
-    if mouth_texture is not None and mouth_ring is None:
-        mouth_ring = mouth_ring_faces(topo)
-    lifted = lifted_positions(face_texture, target_frame)  # None: not the frame's own
-    res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, face_texture, mouth_texture, blend,
-                        feather, erode, mouth_feather, color_match, eye_texture, jaw_texture,
-                        mouth_ring, lip_tint, None if lifted is None else lifted - (x0, y0))
+    if textures.mouth is not None and textures.mouth_ring is None:
+        textures = dataclasses.replace(textures, mouth_ring=mouth_ring_faces(topo))
+    lifted = lifted_positions(textures.face, target_frame)  # None: not the frame's own
+    res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, textures, blending,
+                        None if lifted is None else lifted - (x0, y0))
     return box, res
 
 
@@ -242,9 +242,8 @@ def _shift_camera(camera, x0: int, y0: int):
     return camera.shifted(float(x0), float(y0))
 
 
-def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feather, erode,
-                  mouth_feather, color_match, eye_texture=None, jaw_texture=None,
-                  mouth_ring=None, lip_tint=None, lifted=None) -> RewriteFrame:
+def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOptions,
+                  lifted=None) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop;
     ``lifted``: where the per-frame face texture lifted the vertices, in the crop's pixels
     (:func:`facetransfer.rim.lifted_positions`), or None."""
@@ -254,9 +253,9 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     # not the target's own outline drawn inside its face: the target's pixels there instead
     own = None if lifted is None else \
         (T, drawn_inside(raster.mask, raster, topo.faces, lifted, camera.project(V)))
-    face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(
-        raster, V, topo, face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring,
-        own)
+    face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(raster, V, topo, textures,
+                                                                    own)
+    lip_tint, erode, feather = textures.lip_tint, blending.erode, blending.feather
     fan = inside_mouth(raster.tri_id, topo) if mouth_img is not None else None
     if lip_tint is not None and mouth_img is not None:  # the target's lip colour, not inside
         tint_mouth(mouth_img, raster, topo.faces, lip_tint,
@@ -270,14 +269,14 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
     region = _erode(face_mask, int(erode)) if erode > 0 else face_mask
     if not region.any():
         region = face_mask
-    if blend == "none":
+    if blending.mode == "none":
         out = over(T, rendered, region)
-    elif blend == "fast":
+    elif blending.mode == "fast":
         face = rendered
         if mouth_img is not None and mouth_mask.any():
             # the source's mouth first takes the colours of the face around it (a gain)
             face = blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region, ring,
-                               mouth_feather, fan)
+                               blending.mouth_feather, fan)
         out = membrane_blend(T, face, region, feather=feather)
     else:
         # The guidance field on the region's outline is the source's difference across it, so
@@ -286,10 +285,10 @@ def _rewrite_crop(T, V, camera, topo, face_texture, mouth_texture, blend, feathe
         if mouth_img is not None and (mouth_mask & region).any():
             mouth_src = _extend(mouth_img, mouth_mask)
             out = composite_face(T, face_src, region, mouth_source=mouth_src,
-                                 mouth_mask=mouth_mask & region, color_match=color_match,
-                                 feather=feather)
+                                 mouth_mask=mouth_mask & region,
+                                 color_match=blending.color_match, feather=feather)
         else:
-            out = composite_face(T, face_src, region, color_match=color_match,
+            out = composite_face(T, face_src, region, color_match=blending.color_match,
                                  feather=feather)
     return RewriteFrame(np.ascontiguousarray(out, dtype=np.uint8), rendered, face_mask,
                         mouth_mask)
@@ -302,9 +301,7 @@ _FACE, _EYES, _JAW, _MOUTH = 1, 2, 4, 8
 _RIM, _JAW_REGION, _JAW_RING, _MOUTH_RING = 16, 32, 64, 128
 
 
-def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTexture,
-                 mouth_texture: FaceTexture | None, eye_texture: EyeTexture | None,
-                 jaw_texture: JawTexture | None, mouth_ring: np.ndarray | None = None,
+def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextures,
                  own: tuple[np.ndarray, np.ndarray] | None = None):
     """The new face textured at one frame (§6): every texture it takes sampled in one pass
     over the raster (:func:`facetransfer.render.shade_layers`), then the eye and jaw regions
@@ -323,9 +320,11 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, face_texture: FaceTe
         The source's mouth on the mouth's triangles; None without a mouth texture.
     mouth_mask : (H, W) bool
     ring : (H, W) bool or None
-        The pixels of ``mouth_ring``'s triangles, where ``mouth_img`` holds the source's frame
-        too (to compare with the face); None without a mouth texture or a ring.
+        The pixels of ``textures.mouth_ring``'s triangles, where ``mouth_img`` holds the
+        source's frame too (to compare with the face); None without a mouth texture or a ring.
     """
+    face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring = (
+        textures.face, textures.mouth, textures.eyes, textures.jaw, textures.mouth_ring)
     flags = np.full(topo.faces.shape[0], _FACE, np.uint8)
     layers = [(face_texture.uvs, np.asarray(face_texture.image, np.uint8)), None, None, None]
     if eye_texture is not None:

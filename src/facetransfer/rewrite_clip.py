@@ -44,23 +44,68 @@ from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
-from .rewrite import RewriteFrame, _paste, rewrite_frame_part
+from .rewrite import FrameTextures, RewriteFrame, _paste, rewrite_frame_part
 from .rewrite_options import RewriteOptions
 from .topology import MeshTopology, close_mouth, mesh_topology
 
 log = logging.getLogger(__name__)
 
-__all__ = ["rewrite_frames"]
+__all__ = ["MouthSource", "RenderRun", "rewrite_frames"]
 
 
-def rewrite_frames(target_frames, target_track, new_track, model, *, source_frames=None,
-                   source_track=None, source_index: np.ndarray | None = None,
-                   options: RewriteOptions | None = None, texture: str | None = None,
-                   blend: str | None = None, feather: float | None = None,
-                   mouth: str | None = None, mouth_function: MouthFunction | None = None,
-                   topo: MeshTopology | None = None, workers: int | None = None,
-                   processes: bool | None = None, progress: Callable[[int], None] | None = None,
-                   eyes: str | None = None, start: int = 0,
+@dataclass(frozen=True)
+class MouthSource:
+    """Where the mouth of a rewritten clip is textured from (§6): the frames of the source of
+    the mouth's motion seen through its own track, or the texture function of §6.
+
+    Attributes
+    ----------
+    frames : sequence of (Hs, Ws, 3) uint8, optional
+        The source's frames (the viseme source, else the expression source); without them (or
+        without ``track``) the mouth is the target's unless the texture function is queried.
+    track : Track, optional
+        The source's track resampled to the new timeline (the new performance's frame count).
+    index : (F,) int, optional
+        The source frame shown at each output frame (default ``arange``).
+    function : MouthFunction, optional
+        With ``mouth="function"``: the texture function to query (default: lifted from
+        ``frames``, else from the target's).
+    """
+
+    frames: object = None
+    track: object = None
+    index: np.ndarray | None = None
+    function: MouthFunction | None = None
+
+
+@dataclass(frozen=True)
+class RenderRun:
+    """How the frames of a clip are rendered: which frames, on how many workers, reported how;
+    frame ``i`` is the same whatever these are.
+
+    Attributes
+    ----------
+    workers : int, optional
+        Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU;
+        BLAS on one thread while they run, :func:`_render`).
+    processes : bool, optional
+        With ``workers > 1``: in forked processes where the platform can (each sends back
+        the face's box), not threads; default threads (as fast on 2 cores: BENCHMARKS.md).
+    progress : callable(int), optional
+        Called with 1 after each frame.
+    start : int
+        The first frame to yield (a render continued).
+    """
+
+    workers: int | None = None
+    processes: bool | None = None
+    progress: Callable[[int], None] | None = None
+    start: int = 0
+
+
+def rewrite_frames(target_frames, target_track, new_track, model, *,
+                   mouth_source: MouthSource | None = None, options: RewriteOptions | None = None,
+                   topo: MeshTopology | None = None, run: RenderRun | None = None,
                    regions: RegionTextures | None = None) -> Iterator[RewriteFrame]:
     """Rewrite every target frame with the new performance (§6, Fig. 7); each shot of an
     edited target (``target_track.shot_starts``) as a clip of its own.
@@ -74,75 +119,58 @@ def rewrite_frames(target_frames, target_track, new_track, model, *, source_fram
         The new performance on the target's timeline (:func:`facetransfer.transfer.recombine`),
         at most ``F`` frames; its lost frames keep the original frame.
     model : MultilinearModel
-    source_frames : sequence of (Hs, Ws, 3) uint8, optional
-        The expression source video (mouth texture).
-    source_track : Track, optional
-        The source's track resampled to the new timeline (same frame count as ``new_track``).
-    source_index : (F,) int, optional
-        The source frame shown at each output frame (default ``arange``).
+    mouth_source : MouthSource, optional
+        Where the mouth is textured from (default: no source, the target's own mouth or, with
+        ``mouth="function"``, the texture function lifted from the target).
     options : RewriteOptions, optional
-        Texture, mouth, blend, feather and erode (default :class:`RewriteOptions`); the
-        keywords ``texture``, ``blend``, ``feather``, ``mouth`` replace single attributes.
-    texture : {"frame", "constant"}
-        The target's face texture: the current frame's (default: it keeps the frame's own
-        lighting; better on synthetic truth, ``benchmarks/bench_transfer.py``) or one for the
-        whole clip (the paper's choice).
-    blend, feather
-        See :func:`facetransfer.rewrite.rewrite_frame`.
-    mouth : {"frame", "function"}
-        The mouth's texture (lips and the closed gap); default ``"frame"``: the source frame
-        shown at this time (``source_index``) warped through the source's own geometry (none
-        without a source). ``"function"``: the texture function of §6
-        (:func:`facetransfer.texture.face.mouth_texture_function`) queried with the *new*
-        performance's attribute vector at every frame; needs model UVs.
-    mouth_function : MouthFunction, optional
-        With ``mouth="function"``: the texture function to query (default: lifted here from
-        the source frames, else the target's).
-    workers : int, optional
-        Threads or processes rendering frames in parallel (default: 2, or 1 on a single CPU;
-        BLAS on one thread while they run, :func:`_render`); the output does not depend on it.
-    processes : bool, optional
-        With ``workers > 1``: in forked processes where the platform can (each sends back
-        the face's box), not threads; default threads (as fast on 2 cores: BENCHMARKS.md).
-    progress : callable(int), optional
-        Called with 1 after each frame.
-    eyes : {"model", "target"}, optional
-        Replaces ``options.eyes``: the new performance's lids over an open-eyed target frame
-        (:mod:`facetransfer.eyes`, the default) or the target's own eyes through the holes.
-    start : int
-        The first frame to yield (a render continued): frame ``i`` is the same whatever it.
+        Default :class:`RewriteOptions`. Its ``texture``: the target's face texture, the
+        current frame's (default: it keeps the frame's own lighting; better on synthetic
+        truth, ``benchmarks/bench_transfer.py``) or one for the whole clip (the paper's
+        choice). Its ``mouth``: the mouth's texture (lips and the closed gap); None or
+        ``"frame"``: the source frame shown at this time (``mouth_source.index``) warped
+        through the source's own geometry (none without a source); ``"function"``: the
+        texture function of §6 (:func:`facetransfer.texture.face.mouth_texture_function`)
+        queried with the *new* performance's attribute vector at every frame; needs model UVs.
+        Its ``blend``, ``feather``, ``erode``: :class:`~facetransfer.rewrite_options.
+        BlendOptions` of :func:`facetransfer.rewrite.rewrite_frame`.
+    topo : MeshTopology, optional
+        The model's (default :func:`facetransfer.topology.mesh_topology`).
+    run : RenderRun, optional
+        The frames to yield and the workers that render them (default :class:`RenderRun`:
+        every frame, two threads where there are two CPUs); the output does not depend on it.
     regions : RegionTextures, optional
         The region textures made ahead, if of the clip (:class:`RegionTextures`).
 
     Yields
     ------
     RewriteFrame
-        Frames ``start`` to ``new_track.n_frames - 1``.
+        Frames ``run.start`` to ``new_track.n_frames - 1``.
     """
-    opts = (options or RewriteOptions()).with_(texture=texture, blend=blend, feather=feather,
-                                                mouth=mouth, eyes=eyes)
-    n, start = new_track.n_frames, int(start)
+    opts = options or RewriteOptions()
+    mouth_source = MouthSource() if mouth_source is None else mouth_source
+    run = RenderRun() if run is None else run
+    n, start = new_track.n_frames, int(run.start)
     if not 0 <= start <= n:
         raise RewriteError(f"start frame {start} is outside the {n} frames")
     from .track.shots import shots_from
 
     for a, b, (frames, tt, new, st, si) in shots_from(start, n, target_frames, target_track,
-                                                      new_track, source_track, source_index):
-        one = _ClipRenderer.build(frames, tt, new, model, opts, source_frames=source_frames,
-                                  source_track=st, source_index=si, regions=regions,
-                                  mouth_function=mouth_function, topo=topo)
-        yield from _render(one, frames, range(max(start, a) - a, b - a), workers, processes,
-                           progress)
+                                                      new_track, mouth_source.track,
+                                                      mouth_source.index):
+        shot_mouth = dataclasses.replace(mouth_source, track=st, index=si)
+        one = _ClipRenderer.build(frames, tt, new, model, opts, mouth_source=shot_mouth,
+                                  regions=regions, topo=topo)
+        yield from _render(one, frames, range(max(start, a) - a, b - a), run)
 
 
-def _render(one, target_frames, todo: range, workers: int | None, processes: bool | None,
-            progress):
+def _render(one, target_frames, todo: range, run: RenderRun):
     """Yield ``one(i)`` for i in ``todo`` in order: here, on threads or in forked processes
-    (see :func:`rewrite_frames`' ``workers`` and ``processes``), BLAS on one thread meanwhile.
+    (:class:`RenderRun`'s ``workers`` and ``processes``), BLAS on one thread meanwhile.
 
     BLAS's own threads would spin beside the render's (:mod:`facetransfer.threads`)."""
     from .threads import one_blas_thread
 
+    workers, progress = run.workers, run.progress
     workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
     with one_blas_thread():
         if workers == 1 or len(todo) < 2:
@@ -153,7 +181,7 @@ def _render(one, target_frames, todo: range, workers: int | None, processes: boo
             return
         import multiprocessing as mp
 
-        if processes and "fork" in mp.get_all_start_methods():
+        if run.processes and "fork" in mp.get_all_start_methods():
             yield from _render_in_processes(one, target_frames, todo, workers, progress)
         else:
             yield from _render_in_threads(one, todo, workers, progress)
@@ -263,10 +291,12 @@ class _ClipRenderer:
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
-              source_frames, source_track, source_index, mouth_function, topo,
-              regions: RegionTextures | None = None) -> "_ClipRenderer":
+              mouth_source: MouthSource, topo, regions: RegionTextures | None = None
+              ) -> "_ClipRenderer":
         """Check the clip, lift the textures (the region textures ``regions`` made ahead, if
         they are this clip's) and synthesise the meshes once."""
+        source_frames, source_track, source_index, mouth_function = (
+            mouth_source.frames, mouth_source.track, mouth_source.index, mouth_source.function)
         mouth = resolve_mouth_mode(opts.mouth or "frame", model)
         n = new_track.n_frames
         with_mouth = source_frames is not None and source_track is not None
@@ -404,12 +434,12 @@ class _ClipRenderer:
             raise RewriteError(f"target frame {i} is {frame.shape}, frame 0 {self.first.shape}")
         if self.new_track.lost[i] or self.target_track.lost[i]:
             return None
-        o, V, tex, mouth = self.options, self.new_mesh(i), self.face_texture(frame, i), \
-            self.mouth_texture(i)
+        V, blending = self.new_mesh(i), self.options.blending
+        textures = FrameTextures(self.face_texture(frame, i), self.mouth_texture(i),
+                                 mouth_ring=self.ring, lip_tint=self.lip_tint)
         parts = [(rewrite_frame_part(
-            frame, V, self.new_track.camera(i), self.topo, tex, mouth_texture=mouth,
-            blend=o.blend, feather=o.feather, erode=o.erode, eye_texture=eye, jaw_texture=jaw,
-            mouth_ring=self.ring, lip_tint=self.lip_tint), we * wj)
+            frame, V, self.new_track.camera(i), self.topo,
+            dataclasses.replace(textures, eyes=eye, jaw=jaw), blending=blending), we * wj)
             for eye, we in views_at(self.eye_tex, i, None if self.gaze is None else self.gaze[i])
             for jaw, wj in views_at(self.jaw_tex, i)]
         if parts[0][0] is None:       # the face outside the frame (the same box every view)

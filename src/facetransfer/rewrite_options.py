@@ -28,6 +28,7 @@ __all__ = [
     "DEFAULT_SPEED",
     "TRACK_METHODS",
     "RewriteOptions",
+    "BlendOptions",
     "check_mode",
     "check_track_method",
 ]
@@ -66,6 +67,44 @@ def check_mode(name: str, value, modes: tuple[str, ...], *, sep: str = ", ") -> 
     if value not in modes:
         allowed = repr(modes) if sep is None else sep.join(modes)
         raise RewriteError(f"{name} must be one of {allowed}, got {value!r}")
+
+
+@dataclass(frozen=True)
+class BlendOptions:
+    """How one rendered face goes into its target frame (§6, Fig. 7D-E; Pérez et al. 2003):
+    the blend of :func:`facetransfer.rewrite.rewrite_frame`, checked when made.
+
+    Attributes
+    ----------
+    mode : {"fast", "poisson", "none"}
+        :func:`facetransfer.composite.membrane_blend` (fast), Poisson blending
+        (:func:`facetransfer.composite.composite_face`, exact sparse solve) or a hard paste.
+    feather : float
+        Soft-edge radius of the blend in pixels.
+    erode : int
+        The blend region is the rendered face mask eroded by this many pixels.
+    mouth_feather : float
+        Soft-edge width in pixels of the source's mouth inside the face (``mode="fast"``).
+        There the mouth takes the face's colours by a smooth gain fitted on the skin around it
+        (:func:`facetransfer.mouth.blend_mouth`: per channel on the lips, one gain for the three
+        channels on the mouth's inside).
+    color_match : bool
+        Match the rendered face's colour statistics to the target's before the Poisson blend.
+
+    Raises
+    ------
+    RewriteError
+        An unknown ``mode``.
+    """
+
+    mode: str = "fast"
+    feather: float = 2.0
+    erode: int = 2
+    mouth_feather: float = 3.0
+    color_match: bool = False
+
+    def __post_init__(self) -> None:
+        check_mode("blend", self.mode, BLEND_MODES)
 
 
 @dataclass(frozen=True)
@@ -152,6 +191,11 @@ class RewriteOptions:
             raise RewriteError(f"feather must be >= 0 pixels, got {self.feather!r}")
         if int(self.erode) != self.erode or self.erode < 0:
             raise RewriteError(f"erode must be an integer >= 0, got {self.erode!r}")
+
+    @property
+    def blending(self) -> BlendOptions:
+        """The blend of each frame (:attr:`blend`, :attr:`feather`, :attr:`erode`)."""
+        return BlendOptions(self.blend, self.feather, self.erode)
 
     def with_(self, **changes) -> "RewriteOptions":
         """These options with the given attributes replaced (None values are ignored);

@@ -34,7 +34,7 @@ from .io.ahead import ordered_ahead
 from .io.plate_output import plate_output
 from .io.video_like import like_video
 from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
-from .rewrite_clip import rewrite_frames
+from .rewrite_clip import MouthSource, RenderRun, rewrite_frames
 from .rewrite_options import RewriteOptions
 from .transfer_plan import TransferPlan, TransferSources, plan_sources, plan_transfer  # noqa: F401
 
@@ -46,6 +46,7 @@ __all__ = [
     "plan_transfer",
     "TransferResult",
     "RenderResult",
+    "VideoOutput",
     "render_plan",
     "transfer_video",
     "write_mesh_sequence",
@@ -99,6 +100,32 @@ def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: b
 
 
 @dataclass(frozen=True)
+class VideoOutput:
+    """The video a render writes (:func:`render_plan`): where, encoded how, and what it keeps
+    of its target.
+
+    Attributes
+    ----------
+    path : path-like
+        The video or image sequence (``frames/%05d.png``) to write, atomically.
+    audio_from : path-like, optional
+        The target video: its audio is kept, and (without a ``compose`` of the render) its
+        pixel aspect ratio and colour matrix (:func:`facetransfer.io.video_like.like_video`); an
+        OpenEXR plate's floats, a 16-bit plate's values, its alpha
+        (:mod:`facetransfer.io.plate_output`).
+    video_options : VideoOptions, optional
+        Codec and CRF (:class:`facetransfer.io.video.VideoOptions`; default H.264, CRF 18).
+    overwrite : bool
+        Replace an existing ``path``.
+    """
+
+    path: object
+    audio_from: object = None
+    video_options: object = None
+    overwrite: bool = False
+
+
+@dataclass(frozen=True)
 class RenderResult:
     """What :func:`render_plan` wrote.
 
@@ -123,33 +150,26 @@ class RenderResult:
     kept: str | None = None
 
 
-def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | None = None,
-                audio_from=None, overwrite: bool = False, progress_factory=None,
-                compose: Callable | None = None, video_options=None,
-                resume: bool = False) -> RenderResult:
-    """Render a planned transfer into the video ``out`` (§6), timing each stage.
+def render_plan(plan: TransferPlan, model, output: VideoOutput, *,
+                options: RewriteOptions | None = None, progress_factory=None,
+                compose: Callable | None = None, resume: bool = False) -> RenderResult:
+    """Render a planned transfer into the video ``output`` (§6), timing each stage.
 
     Lifts the mouth texture function first when the mouth mode is ``"function"`` (from
     :attr:`TransferPlan.texture_frames`), then rewrites every frame
     (:func:`facetransfer.rewrite_clip.rewrite_frames`) and writes the video with the audio of
-    ``audio_from`` as the frames come.
+    ``output.audio_from`` as the frames come.
 
     Parameters
     ----------
     plan : TransferPlan
     model : MultilinearModel
-    out : path-like
-        The video to write (atomically).
+    output : VideoOutput
+        The video to write (atomically), its codec and its target.
     options : RewriteOptions, optional
         A mouth of None is :func:`facetransfer.texture.face.default_mouth_mode`'s.
-    audio_from : path-like, optional
-        The target video: its audio is kept, and (without ``compose``) its pixel aspect ratio
-        and colour matrix (:func:`facetransfer.io.video_like.like_video`); an OpenEXR plate's
-        floats, a 16-bit plate's values, its alpha (:mod:`facetransfer.io.plate_output`).
     compose : callable(i, RewriteFrame) -> (H', W', 3) uint8, optional
         The frame to write for output frame ``i`` (default: the rewritten image).
-    video_options : VideoOptions, optional
-        Codec and CRF (:class:`facetransfer.io.video.VideoOptions`; default H.264, CRF 18).
     resume : bool
         Write the output (no ``compose``) through the render cache
         (:mod:`facetransfer.render_cache`) until it is complete: a video in parts, an image
@@ -163,6 +183,8 @@ def render_plan(plan: TransferPlan, model, out, *, options: RewriteOptions | Non
     options = RewriteOptions() if options is None else options
     options = options.with_(mouth=resolve_mouth_mode(options.mouth, model,
                                                      performance=plan.performance))
+    out, audio_from, overwrite = output.path, output.audio_from, output.overwrite
+    video_options = output.video_options
     if compose is None:
         video_options = like_video(video_options, audio_from, out)
     timings = dict(plan.timings)
@@ -227,11 +249,11 @@ class _Frames:
         p = self.plan
         if self.start >= p.n_frames:
             return
+        mouth = MouthSource(p.mouth_frames, p.mouth_track, p.mouth_index, self.mouth_fn)
+        run = RenderRun(progress=self.bar.update if self.bar is not None else None,
+                        start=self.start)
         it = rewrite_frames(p.target_frames, p.target_track, p.new_track, self.model,
-                            source_frames=p.mouth_frames, source_track=p.mouth_track,
-                            source_index=p.mouth_index, options=self.options,
-                            mouth_function=self.mouth_fn, start=self.start,
-                            progress=self.bar.update if self.bar is not None else None,
+                            mouth_source=mouth, options=self.options, run=run,
                             regions=p.regions)
         if self.grading is None:
             frames = ((frame, face) for _, frame, face in self._composed(it))
@@ -348,9 +370,9 @@ def transfer_video(sources: TransferSources, out, model, *,
     resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
     plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
                         parallel=parallel, progress_factory=progress_factory, reader=reader)
-    rendered = render_plan(plan, model, out, options=opts, audio_from=sources.target.video,
-                           overwrite=overwrite, progress_factory=progress_factory,
-                           video_options=video_options, resume=True)
+    output = VideoOutput(out, sources.target.video, video_options, overwrite)
+    rendered = render_plan(plan, model, output, options=opts,
+                           progress_factory=progress_factory, resume=True)
     if save_track is not None:
         plan.new_track.save(save_track, overwrite=overwrite)
     if meshes_dir is not None:
