@@ -102,7 +102,7 @@ def run_pair(name: str, model, out: Path, data: Path, frames: int) -> tuple[dict
     for mode in MODES:
         imgs: list[np.ndarray] = []
         with tempfile.TemporaryDirectory() as tmp:
-            vt.render_plan(plan, model, vt.VideoOutput(Path(tmp) / "r.mp4", overwrite=True),
+            vt.render_plan(plan, model, vt.RenderTarget(Path(tmp) / "r.mp4", overwrite=True),
                            options=RewriteOptions(lip_colour=mode),
                            compose=lambda i, r: imgs.append(r.image) or r.image)
         panels[f"result_{mode}"] = imgs

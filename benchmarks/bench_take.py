@@ -54,7 +54,7 @@ def _render(plan, model, mouth: str | None = None) -> tuple[list, float]:
     frames: list[np.ndarray] = []
     t = time.perf_counter()
     with tempfile.TemporaryDirectory() as tmp:
-        vt.render_plan(plan, model, vt.VideoOutput(Path(tmp) / "r.mp4", overwrite=True),
+        vt.render_plan(plan, model, vt.RenderTarget(Path(tmp) / "r.mp4", overwrite=True),
                        options=RewriteOptions(mouth=mouth),
                        compose=lambda i, r: frames.append(r.image) or r.image)
     return frames, time.perf_counter() - t

@@ -166,7 +166,7 @@ def staged(source: Path, target: Path, frames: int, out: Path):
         masks.append(cv2.dilate(r.face_mask.astype(np.uint8), kernel) > 0)
         return r.image
 
-    done = vt.render_plan(plan, model, vt.VideoOutput(out, overwrite=True), compose=keep)
+    done = vt.render_plan(plan, model, vt.RenderTarget(out, overwrite=True), compose=keep)
     c2 = _cpu()
     timings.update(done.timings)
     cpu = {"plan": {"this_process": c1[0] - c0[0], "children": c1[1] - c0[1]},

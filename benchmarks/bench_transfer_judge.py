@@ -209,7 +209,7 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
         frames: list[np.ndarray] = []
         t = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp, _brows(brows):
-            vt.render_plan(plan, model, vt.VideoOutput(Path(tmp) / "r.mp4", overwrite=True),
+            vt.render_plan(plan, model, vt.RenderTarget(Path(tmp) / "r.mp4", overwrite=True),
                            options=RewriteOptions(eyes=eyes),
                            compose=lambda i, r: frames.append(r.image) or r.image)
         seconds[kind] = time.perf_counter() - t

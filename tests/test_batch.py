@@ -164,7 +164,7 @@ def test_ctrl_c_before_the_cluster_is_there_says_no_outputs_kept(clips, quick_mo
     code = main([str(a) for a in ("batch", "track", clips["a"][0], "--model", quick_model_path,
                                   "--out", out, "--scheduler", "tcp://127.0.0.1:8786")])
     err = capsys.readouterr().err
-    assert code == 130 and err.splitlines() == ["facetransfer batch: interrupted"]
+    assert code == 130 and err.splitlines() == ["facetransfer batch track: interrupted"]
     assert not out.exists()
 
 
@@ -720,3 +720,26 @@ def test_a_klt_clip_saves_its_progress_as_often_as_a_captured_one(monkeypatch):
     out = batch_jobs._track("clip.mp4", None, "auto", TrackerSettings(tracker="klt"),
                             source="clip.mp4", checkpoint="clip.progress.npz")
     assert out == "track" and seen["checkpoint_every"] == batch_jobs.SAVE_EVERY
+
+
+def test_a_later_chunk_without_a_face_says_so(quick_model, monkeypatch):
+    """A later chunk in which no face is found: its capture's "no face found" (before: numpy's
+    "need at least one array to stack" from the identity phase of no frames)."""
+    from facetransfer.batch.chunks import Chunk
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.errors import VideoError
+    from facetransfer.track import aspect, video_detect
+    from facetransfer.track.detect import ClipDetections
+    from facetransfer.track.settings import TrackerSettings
+
+    n = 12
+    det = ClipDetections(np.full((n, 68, 2), np.nan), np.full((n, 68, 2), np.nan),
+                         np.full((n, 478, 2), np.nan, np.float32), None)
+    monkeypatch.setattr(video_detect, "detect_video",
+                        lambda frames, **kw: (det, 25.0, (64, 64), "v.mp4"))
+    monkeypatch.setattr(aspect.View, "of", classmethod(lambda cls, video: cls()))
+    assert batch_jobs._held_for_chunk(det, quick_model, None, np.zeros(5)) is None
+    with pytest.raises(VideoError, match="no face found in v.mp4"):
+        batch_jobs._chunk_capture(np.zeros((n, 64, 64, 3), np.uint8), quick_model,
+                                  TrackerSettings(), ClipJob("v", "v.mp4"), Chunk(1, 10, 22),
+                                  np.zeros(5))

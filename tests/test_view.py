@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import re
 import shutil
@@ -133,6 +134,19 @@ def test_a_saved_face_is_the_pages_face(arkit_model, pages, tmp_path):
     np.testing.assert_allclose(face.head, (20, -10, 5), atol=1e-9)
     np.testing.assert_allclose(face_weights(face, arkit_model)["identity"],
                                arkit_model.weight_mean("identity"), atol=1e-12)
+    # a track cut to another person at frame 4: a frame after the cut keeps that person
+    other = arkit_model.training_weights("identity", arkit_model.labels[0][3])
+    assert np.abs(other - track.weights["identity"][0]).max() > 0.1
+    ident = track.weights["identity"].copy()
+    ident[4:] = other
+    cut = dataclasses.replace(track, weights={**track.weights, "identity": ident},
+                              shot_starts=(4,))
+    tp = tmp_path / "cut.npz"
+    cut.save(tp)
+    page = write_viewer(tp, tmp_path / "cut.html", model=arkit_model)
+    for frame, want in ((6, other), (2, track.weights["identity"][0])):
+        face = read_face(_saved_face(page, f"frame={frame}", tmp_path / f"c{frame}.json"))
+        np.testing.assert_array_equal(face.identity, want)
 
 
 def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):

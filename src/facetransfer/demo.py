@@ -27,7 +27,7 @@ from .errors import AssetError, VideoError
 from .texture.face import resolve_mouth_mode
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .transfer_plan import plan_transfer
-from .video_transfer import VideoOutput, render_plan
+from .video_transfer import RenderTarget, render_plan
 
 log = logging.getLogger(__name__)
 
@@ -254,7 +254,7 @@ def _demo(out_dir, opts: RewriteOptions, model, frames: int, source, target, pro
     plan, opts = _plan_with_fallback(target, source, model, opts, frames, tracks,
                                      progress_factory)
     sheet = _DemoFrames(plan, judge, _take_panels(source, plan, model))
-    output = VideoOutput(video_path, target, video_options, overwrite)
+    output = RenderTarget(video_path, target, video_options, overwrite)
     rendered = render_plan(plan, model, output, options=opts, progress_factory=progress_factory,
                            compose=sheet.compose)
     timings.update(rendered.timings)

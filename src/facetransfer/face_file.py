@@ -5,7 +5,7 @@ as a small JSON file (:data:`FORMAT`)::
 
     {"format": "facetransfer-face", "version": 1, "model": "<content hash>",
      "source": "take.npz", "frame": 40,
-     "identity": [...],                      # the page's identity: the track's, or the mean
+     "identity": [...],                      # the shown frame's person, or the mean
      "identity_dials": {"width": 1.5},       # units of facetransfer.dials, added to it
      "shape_kind": "arkit",                  # or a mode name: the training expressions
      "shapes": {"jawOpen": 0.5},             # slider values in [0, 1]

@@ -46,7 +46,7 @@ __all__ = [
     "plan_transfer",
     "TransferResult",
     "RenderResult",
-    "VideoOutput",
+    "RenderTarget",
     "render_plan",
     "transfer_video",
     "write_mesh_sequence",
@@ -100,7 +100,7 @@ def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: b
 
 
 @dataclass(frozen=True)
-class VideoOutput:
+class RenderTarget:
     """The video a render writes (:func:`render_plan`): where, encoded how, and what it keeps
     of its target.
 
@@ -150,7 +150,7 @@ class RenderResult:
     kept: str | None = None
 
 
-def render_plan(plan: TransferPlan, model, output: VideoOutput, *,
+def render_plan(plan: TransferPlan, model, output: RenderTarget, *,
                 options: RewriteOptions | None = None, progress_factory=None,
                 compose: Callable | None = None, resume: bool = False) -> RenderResult:
     """Render a planned transfer into the video ``output`` (§6), timing each stage.
@@ -164,7 +164,7 @@ def render_plan(plan: TransferPlan, model, output: VideoOutput, *,
     ----------
     plan : TransferPlan
     model : MultilinearModel
-    output : VideoOutput
+    output : RenderTarget
         The video to write (atomically), its codec and its target.
     options : RewriteOptions, optional
         A mouth of None is :func:`facetransfer.texture.face.default_mouth_mode`'s.
@@ -370,7 +370,7 @@ def transfer_video(sources: TransferSources, out, model, *,
     resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
     plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
                         parallel=parallel, progress_factory=progress_factory, reader=reader)
-    output = VideoOutput(out, sources.target.video, video_options, overwrite)
+    output = RenderTarget(out, sources.target.video, video_options, overwrite)
     rendered = render_plan(plan, model, output, options=opts,
                            progress_factory=progress_factory, resume=True)
     if save_track is not None:

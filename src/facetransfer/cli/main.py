@@ -348,7 +348,7 @@ def _run(args) -> int:
         what, status = ("terminated", 143) if isinstance(stop, Terminated) else \
             ("interrupted", 130)
         written = [str(p) for p in _outputs(args) if _is_file(p) and p not in before]
-        print(f"facetransfer {args.command}: {what}{_kept(args.command, written)}",
+        print(f"facetransfer {command_name(args)}: {what}{_kept(args.command, written)}",
               file=sys.stderr)
         return status
     finally:

@@ -95,6 +95,17 @@ def _shape_kind(model) -> str:
     return "expression" if "expression" in model.mode_names else model.mode_names[1]
 
 
+def _save_data(model, track, mode: str, identity: np.ndarray, title: str) -> dict:
+    """What the page's "Save face" writes besides its sliders (:mod:`facetransfer.face_file`):
+    the model's hash, the identity of each shot (``shot_starts``; one for a model's page: the
+    mean), what the expression sliders are, and the page's source."""
+    starts = [0] + ([int(a) for a in track.shot_starts] if track is not None else [])
+    ids = [identity] if track is None else [track.weights[mode][a] for a in starts]
+    return {"model_hash": model.content_hash, "shot_starts": starts,
+            "identities": [[float(v) for v in w] for w in ids],
+            "shape_kind": _shape_kind(model), "source": title}
+
+
 def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
     """The HTML page (a str) for ``model``, or for ``track`` of that model."""
     from ..dials import DialError, learn_dials
@@ -119,13 +130,14 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
             "dial_info": [f"{d.effect:+.2f} {dials.unit}/unit, R2 {d.r2_loo:.2f}"
                           for d in dials.dials] if dials is not None else [],
             "n_frames": 0, "fps": 25.0,
-            # what the page's "Save face" writes besides the sliders (facetransfer.face_file)
-            "model_hash": model.content_hash, "identity": [float(v) for v in identity],
-            "shape_kind": _shape_kind(model), "source": title,
+            **_save_data(model, track, model.mode_names[k], identity, title),
             "about": (f"{model.n_vertices} vertices; three.js {THREE_VERSION}; "
                       + (f"track of {source_name(track.source) or 'a clip'}, "
                          f"{track.n_frames} frames at {track.fps:g} fps" if track is not None
-                         else "the model's mean identity"))}
+                         else "the model's mean identity")
+                      + (f"; {len(track.shot_starts) + 1} shots: the face drawn is the first "
+                         "one's person, Save face keeps the shown frame's"
+                         if track is not None and len(track.shot_starts) else ""))}
     if track is not None:
         if len(names) != 52:
             from ..arkit import arkit_shortfall
