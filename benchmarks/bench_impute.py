@@ -171,7 +171,8 @@ def main(argv=None) -> int:
     all_results = {}
     for name in args.datasets.split(","):
         ds = load_dataset(name)
-        bar = tqdm(total=len(fractions) * args.trials * len(methods), desc=name, unit="run")
+        bar = tqdm(total=len(fractions) * args.trials * len(methods), desc=name, unit="run",
+                   disable=not sys.stderr.isatty())  # no bar drawn into a log file
         t0 = time.perf_counter()
         ev = evaluate_imputation(ds, fractions, trials=args.trials, seed=args.seed,
                                  methods=methods, progress=lambda m: bar.update(1))

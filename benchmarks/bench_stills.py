@@ -29,6 +29,7 @@ import numpy as np
 
 os.environ.setdefault("FACETRANSFER_TRACK_CACHE", "off")      # every photo captured afresh
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from _mp_video import filtered_stderr  # noqa: E402
 from _report import out_and_data, save_json, save_plot  # noqa: E402
 
 PHOTOS = ("einstein.jpg", "breakingbad.jpg", "takeo.ppm")
@@ -52,7 +53,8 @@ def ours(photo: Path, model) -> np.ndarray | None:
     from facetransfer.errors import VideoError
     from facetransfer.track.capture import capture_detections, detect_video
 
-    det, fps, size, src = detect_video(photo, workers=1)
+    with filtered_stderr():                    # MediaPipe's native log lines
+        det, fps, size, src = detect_video(photo, workers=1)
     try:
         track = capture_detections(det, model, fps=fps, frame_size=size, source=src)
     except VideoError:                                     # no face found
@@ -66,7 +68,7 @@ def face_landmarker(photo: Path) -> np.ndarray | None:
     from facetransfer.track.landmarks import mediapipe_to_ibug
 
     frame = read_video(photo)[0][0]
-    with MediaPipeDetector(None) as d:
+    with filtered_stderr(), MediaPipeDetector(None) as d:
         q = d.detect478(frame)
     return None if q is None else mediapipe_to_ibug(q)
 
