@@ -447,10 +447,10 @@ def _count_fits(monkeypatch) -> dict:
     from facetransfer.track import capture
 
     calls = {"identity": 0, "frames": 0}
-    real_id, real_fit = capture._clip_identity, capture._fit_frame
+    real_id, real_fit = capture._clip_identity, capture.fit_frame
     monkeypatch.setattr(capture, "_clip_identity",
                         lambda *a, **k: calls.__setitem__("identity", 1) or real_id(*a, **k))
-    monkeypatch.setattr(capture, "_fit_frame",
+    monkeypatch.setattr(capture, "fit_frame",
                         lambda *a, **k: calls.__setitem__("frames", calls["frames"] + 1)
                         or real_fit(*a, **k))
     return calls

@@ -218,7 +218,7 @@ def test_usable_iris_bridges_closed_eyes():
 def test_a_closing_eye_leaves_its_lids_to_the_blink(arkit_model):
     """The fit holds a closed eye's vertical gaze at 0 and writes its bridged value after."""
     from facetransfer.track.camera import Pose
-    from facetransfer.track.capture import _gaze_fixed
+    from facetransfer.track.capture_frame import gaze_fixed
     from facetransfer.track.capture_points import Sampler, Shape
 
     m = arkit_model
@@ -228,7 +228,7 @@ def test_a_closing_eye_leaves_its_lids_to_the_blink(arkit_model):
     pose = Pose(rotation_from_euler(20, 5, 0), 9.0, np.array([256.0, 240.0]))
     ang = np.deg2rad([[[10.0, -14.0], [10.0, -14.0]]])                 # left and down
     iris = project_iris(eyes, ang, pose.rotation[None], np.array([9.0]), pose.translation[None])
-    held, after = _gaze_fixed(shape, pose, x, (iris[0], np.array([True, False])))
+    held, after = gaze_fixed(shape, pose, x, (iris[0], np.array([True, False])))
     want = gaze_activations(ang)
     for n, k in zip(GAZE_NAMES, shape.gaze_k):
         assert after[k] == pytest.approx(want[n][0], abs=1e-9), n

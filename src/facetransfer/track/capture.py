@@ -28,8 +28,10 @@ frame and the drifting flow by measurements taken on every frame:
    at that pose, and it keeps the detections it was fitted to (``Track.detections2d``: their
    difference at the lips is what :mod:`facetransfer.lips` carries into a transfer).
 
-The model at the tracked points, and one frame's solve at a fixed pose, are
-:mod:`facetransfer.track.capture_points`; the small solvers are :mod:`facetransfer.track.fit2d`.
+One frame's fit (its state, its points' weights and targets, pose and expression
+alternated) is :mod:`facetransfer.track.capture_frame`; the model at the tracked points, and
+one frame's solve at a fixed pose, are :mod:`facetransfer.track.capture_points`; the small
+solvers are :mod:`facetransfer.track.fit2d`.
 
 An interrupted fit resumes (:mod:`facetransfer.track.fit_checkpoint`): with a ``checkpoint``,
 :func:`capture_detections` saves the identity phase and the frames fitted so far every few
@@ -52,8 +54,10 @@ import numpy as np
 from ..arkit import ARKIT_NAMES, is_arkit_model
 from ..errors import TrackError, VideoError, plain_interrupts
 from .aspect import stored_pixels
-from .camera import Pose, fit_affine_pose
+from .camera import Pose
 from . import capture_points
+from .capture_frame import (FrameState, PointWeights, detection_targets, eye_scale, fit_frame,
+                            iris_of, sin_yaw)
 from .capture_points import Sampler, Shape
 from .detect import ClipDetections
 from .fit_checkpoint import SavedFit, fit_key
@@ -205,78 +209,6 @@ class CaptureOptions:
             raise TrackError(f"point_weights must have 68 entries, got {len(self.point_weights)}")
 
 
-@dataclass(frozen=True)
-class _State:
-    """One frame's fit: pose and the per-frame parameters (activations or mode weights)."""
-
-    pose: Pose
-    x: np.ndarray          # ARKit: (K,) activations; generic: concatenated per-frame weights
-    residual: float        # weighted rms of the detection term, in eye distances
-
-
-def _sin_yaw(pose: Pose) -> float:
-    """Sine of the yaw ``b`` of ``R = Rx(a) Ry(b) Rz(c)``: ``R[0, 2]``."""
-    return float(np.clip(pose.rotation[0, 2], -1.0, 1.0))
-
-
-def _iod(points: np.ndarray) -> float:
-    d = float(np.linalg.norm(points[36] - points[45]))
-    return d if np.isfinite(d) and d > 1.0 else float(np.nanmax(np.ptp(points, axis=0)) / 2)
-
-
-def _residual(X: np.ndarray, st_pose: Pose, p: np.ndarray, w: np.ndarray, iod: float) -> float:
-    """Weighted rms distance (eye distances) of the points ``X`` (P, 3) at ``st_pose`` from
-    ``p`` (P, 2; weights ``w`` 0 where unknown)."""
-    r2 = np.sum((st_pose.project(X) - p) ** 2, axis=1)
-    return float(np.sqrt(np.dot(w, r2) / max(np.sum(w), 1e-12)) / iod)
-
-
-def _gaze_fixed(shape: Shape, pose: Pose, x: np.ndarray, gaze: tuple,
-                X: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """The eyeLook* activations from ``gaze`` = (iris centres (2, 2), closed (2,)) at ``pose``
-    and the frame's eye corners (:mod:`.gaze`): ``(held in the fit, written after it)``, (K,)
-    each, NaN for every other shape. A closed eye's vertical gaze is 0 in the fit (its lids
-    are the blink's: eyeLookDown's lid drop would take half the blink) and its bridged value
-    after. ``X`` (P, 3): ``shape.points(x)`` when known."""
-    iris, closed = gaze
-    X = shape.points(x) if X is None else X
-    after_, held_ = frame_gaze_activations(X[:68], iris, closed, pose.rotation, pose.scale,
-                                           pose.translation)                 # (8,) each
-    held, after = np.full(shape.size, np.nan), np.full(shape.size, np.nan)
-    k = shape.gaze_k >= 0
-    after[shape.gaze_k[k]] = after_[k]
-    held[shape.gaze_k[k]] = np.where(np.isfinite(held_[k]), held_[k], after_[k] * 0.0)
-    return held, after
-
-
-def _fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x: np.ndarray,
-               prev: np.ndarray | None, iterations: int, gaze: tuple | None = None,
-               anchor: np.ndarray | None = None) -> _State:
-    """Alternate pose (Gauss-Newton, Eq. (7)) and expression (bounded or prior-weighted LS,
-    Eq. (9)) for one frame (``targets``: the detections first); with ``gaze`` (:func:`_iris`;
-    ARKit models) the eyeLook* activations follow the iris at each pose."""
-    p, w = targets.p[0], targets.w[0]
-    base = shape
-    if pose is None:
-        X = shape.points(x)                                                 # (P, 3)
-        ok = w > 0
-        pose = fit_affine_pose(X[ok], p[ok])
-    shape = base.at_view(_sin_yaw(pose))                 # the offset at the head's yaw
-    X = shape.points(x)
-    after = None
-    for _ in range(iterations):
-        pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
-        shape = base.at_view(_sin_yaw(pose))
-        held, after = (None, None) if gaze is None else _gaze_fixed(shape, pose, x, gaze, X)
-        x = shape.solve(pose, targets, iod, x, prev, held, anchor)
-        X = shape.points(x)
-    if after is not None:
-        x = np.where(np.isfinite(after), after, x)
-        X = shape.points(x)
-    pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
-    return _State(pose, x, _residual(X, pose, p, w, iod))
-
-
 def _solve_identity(model, shape: Shape, frames: list, states: list, det: ClipDetections,
                     weights: np.ndarray, opt: CaptureOptions) -> np.ndarray:
     """One identity for the sampled frames (Eq. (9), identity mode free, training prior)."""
@@ -286,45 +218,15 @@ def _solve_identity(model, shape: Shape, frames: list, states: list, det: ClipDe
     h = np.zeros(r)
     bases = shape.identity_bases(np.stack([st.x for st in states]), prior.mean)  # (F, r, P, 3)
     for i, st, B in zip(frames, states, bases):
-        p, w = _detection(det, i, weights)
+        p, w = detection_targets(det, i, weights)
         Y = project_basis(B, st.pose)                                        # (r, P, 2)
-        g_, h_ = targets_normal(Y, st.pose.project(shape.offset_at(_sin_yaw(st.pose))),
-                                [(p, w)], _iod(p))
+        g_, h_ = targets_normal(Y, st.pose.project(shape.offset_at(sin_yaw(st.pose))),
+                                [(p, w)], eye_scale(p))
         G += g_
         h += h_
     P = prior.Q @ prior.inv_cov @ prior.Q.T
     lam = opt.identity_prior * len(frames)
     return np.linalg.solve(G + lam * P + 1e-9 * np.eye(r), h + lam * P @ prior.mean)
-
-
-@dataclass(frozen=True)
-class _PointWeights:
-    """Reliability of every tracked point: iBUG-68, then the dense points (MediaPipe indices)."""
-
-    w: np.ndarray
-    mp_index: np.ndarray | None = None
-    iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
-    closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
-    anchors: np.ndarray | None = None  # (F, K) mapped detector scores (NaN: none)
-
-    def flow_nominal(self, flow: float) -> np.ndarray:
-        """Summed weights (P,) of the detection and flow terms with every point known (the
-        flow moves the 68 iBUG points only)."""
-        wf = flow * self.w
-        wf[68:] = 0.0
-        return self.w + wf
-
-    def anchor(self, i: int) -> np.ndarray | None:
-        """Frame ``i``'s mapped scores (K,) for the fit, or None."""
-        return None if self.anchors is None else self.anchors[i]
-
-
-def _detection(det: ClipDetections, i: int, pw: _PointWeights) -> tuple[np.ndarray, np.ndarray]:
-    """Frame ``i``'s targets for the tracked points and their weights (0 where unknown)."""
-    p = det.points[i]
-    if pw.mp_index is not None and len(pw.mp_index):
-        p = np.concatenate([p, np.asarray(det.points478[i, pw.mp_index], np.float64)])
-    return p, np.where(np.isfinite(p).all(1), pw.w, 0.0)
 
 
 def _solve_offset(shape: "Shape", frames, states: list, det: ClipDetections, weights,
@@ -340,27 +242,19 @@ def _solve_offset(shape: "Shape", frames, states: list, det: ClipDetections, wei
     A = np.zeros((P, k, k))
     b = np.zeros((P, k))
     for i, st in zip(frames, states):
-        p, w = _detection(det, i, weights)
-        iod = _iod(det.points[i])
+        p, w = detection_targets(det, i, weights)
+        iod = eye_scale(det.points[i])
         q = st.pose.project(shape.points(st.x) - shape.offset)
         r = np.nan_to_num(p - q) / iod
         M = st.pose.scale / iod * st.pose.rotation[:2].copy()               # (2, 3)
         M[1] *= -1.0
         if k == 6:
-            M = np.concatenate([M, _sin_yaw(st.pose) * M], axis=1)            # (2, 6)
+            M = np.concatenate([M, sin_yaw(st.pose) * M], axis=1)            # (2, 6)
         A += w[:, None, None] * (M.T @ M)[None]
         b += w[:, None] * (r @ M)
     ridge = np.repeat([opt.offset_prior, opt.view_offset_prior], 3)[:k] * len(frames)
     u = np.linalg.solve(A + np.diag(ridge)[None], b[..., None])[..., 0]
     return u[:, :3], (u[:, 3:] if k == 6 else None)
-
-
-def _iris(weights: _PointWeights, i: int) -> tuple | None:
-    """Frame ``i``'s two iris centres (2, 2) the gaze follows (NaN rows: that eye's free) and
-    which eyes are closed (2,), or None."""
-    if weights.iris is None or not np.isfinite(weights.iris[i]).any():
-        return None
-    return weights.iris[i], weights.closed[i]
 
 
 def _sample_frames(found: np.ndarray, n: int) -> np.ndarray:
@@ -404,19 +298,19 @@ def _fit_sample(shape: Shape, det: ClipDetections, frames, weights, opt, states)
     shape = shape.with_options(opt)
     out = []
     for j, i in enumerate(frames):
-        p, w = _detection(det, i, weights)
+        p, w = detection_targets(det, i, weights)
         st = None if states is None else states[j]
-        out.append(_fit_frame(shape, Targets.stack([(p, w)], weights.w), _iod(p),
+        out.append(fit_frame(shape, Targets.stack([(p, w)], weights.w), eye_scale(p),
                               None if st is None else st.pose,
                               shape.x0 if st is None else st.x, None, int(opt.iterations) + 1,
-                              _iris(weights, i)))
+                              iris_of(weights, i)))
     return out
 
 
 def _targets(det: ClipDetections, i: int, j: int, prev_q: np.ndarray | None, weights, opt,
              forward: bool) -> Targets:
     """Detection term of frame ``i`` and, from its tracked neighbour ``j``, the flow term."""
-    p, w = _detection(det, i, weights)
+    p, w = detection_targets(det, i, weights)
     if opt.flow > 0 and prev_q is not None:
         q = prev_q[:68] + (det.flow[i] if forward else -det.flow[j])  # flow[t]: t-1 into t
         ok = np.isfinite(q).all(1)
@@ -430,13 +324,13 @@ def _targets(det: ClipDetections, i: int, j: int, prev_q: np.ndarray | None, wei
     return Targets.stack([(p, w)], weights.w)
 
 
-def _track_run(shape: Shape, det: ClipDetections, order: list, seed: _State | None, weights,
+def _track_run(shape: Shape, det: ClipDetections, order: list, seed: FrameState | None, weights,
                opt: CaptureOptions, states: list, prog, done0: int, seed_index: int | None = None,
                on_frame=None) -> int:
     """Track frames in ``order`` (consecutive, one direction) from the ``seed`` state (of the
     neighbouring frame ``seed_index``, when it was tracked in this run: then its flow and
     temporal terms apply too); ``on_frame(i)`` after each frame."""
-    prev: _State | None = seed
+    prev: FrameState | None = seed
     prev_i = seed_index if seed is not None else None
     done = done0
     found = det.found
@@ -449,13 +343,13 @@ def _track_run(shape: Shape, det: ClipDetections, order: list, seed: _State | No
             continue
         q = None
         if prev is not None and prev_i is not None and abs(prev_i - i) == 1:
-            q = prev.pose.project(shape.at_view(_sin_yaw(prev.pose)).points(prev.x))
+            q = prev.pose.project(shape.at_view(sin_yaw(prev.pose)).points(prev.x))
         forward = prev_i is not None and i > prev_i
         tg = _targets(det, i, prev_i if prev_i is not None else i, q, weights, opt, forward)
-        st = _fit_frame(shape, tg, _iod(det.points[i]), None if prev is None else prev.pose,
+        st = fit_frame(shape, tg, eye_scale(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
                         None if prev is None or prev_i is None else prev.x, int(opt.iterations),
-                        _iris(weights, i), weights.anchor(i))
+                        iris_of(weights, i), weights.anchor(i))
         states[i] = st
         prev, prev_i = st, i
         done += 1
@@ -607,7 +501,7 @@ def _capture_detections(det, model, options, fps, frame_size, fixed, progress, s
 
 
 def _point_weights(det: ClipDetections, model, opt: CaptureOptions
-                   ) -> tuple[_PointWeights, Sampler]:
+                   ) -> tuple[PointWeights, Sampler]:
     """The tracked points (iBUG-68, then MediaPipe's dense points with ``opt.dense``), their
     reliabilities and the iris centres the gaze follows."""
     weights = np.asarray(opt.point_weights if opt.point_weights is not None
@@ -623,10 +517,10 @@ def _point_weights(det: ClipDetections, model, opt: CaptureOptions
     if opt.gaze and is_arkit_model(model) and det.points478 is not None \
             and det.points478.shape[1] > max(IRIS_INDEX):
         iris, closed = usable_iris(det.points478)
-    return _PointWeights(weights, sampler.mp_index, iris, closed), sampler
+    return PointWeights(weights, sampler.mp_index, iris, closed), sampler
 
 
-def _track_passes(run: "_FitRun", det: ClipDetections, weights: _PointWeights,
+def _track_passes(run: "_FitRun", det: ClipDetections, weights: PointWeights,
                   opt: CaptureOptions, prog, maybe_save) -> None:
     """Track the clip both ways (continuing ``run``); for an ARKit model with the detector's
     scores and ``opt.scores > 0`` then once more with each frame pulled toward its mapped
@@ -658,7 +552,7 @@ class _FitRun:
     shape: Shape
     frames: np.ndarray
     start: int
-    seed: _State
+    seed: FrameState
     states: list
     forward_next: int
     backward_next: int
@@ -701,11 +595,11 @@ class _FitRun:
         shape = Shape(model, fit.identity, sampler, opt, o[:, :3],
                       o[:, 3:] if o.shape[1] == 6 else None)
         R, sc, t, x, r = fit.seed
-        states = [_State(Pose(fit.rotation[i], float(fit.scale[i]), fit.translation[i]),
+        states = [FrameState(Pose(fit.rotation[i], float(fit.scale[i]), fit.translation[i]),
                          fit.x[i], float(fit.residual[i])) if fit.valid[i] else None
                   for i in range(len(fit.valid))]
         lines = None if fit.lines is None else ScoreLine(fit.lines[0], fit.lines[1])
-        return cls(shape, fit.frames, fit.start, _State(Pose(R, sc, t), x, r), states,
+        return cls(shape, fit.frames, fit.start, FrameState(Pose(R, sc, t), x, r), states,
                    fit.forward_next, fit.backward_next, lines)
 
 

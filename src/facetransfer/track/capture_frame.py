@@ -1,0 +1,134 @@
+"""One frame of the performance capture's fit (:mod:`facetransfer.track.capture`, step 3).
+
+A frame's state (pose and expression), the reliabilities of the points it is fitted to and
+their targets in the frame's detections, and the fit itself: the weak-perspective pose (Eq. (7),
+Gauss-Newton) alternated with the expression (Eq. (9): bounded least squares for ARKit
+activations, the training prior for other modes), the eyeLook* activations following the iris
+centres at each pose (:mod:`facetransfer.track.gaze`). The capture's yaw is that of ``R = Rx(a)
+Ry(b) Rz(c)`` (:func:`sin_yaw`; :mod:`facetransfer.render.cameras` names the conventions).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .camera import Pose, fit_affine_pose
+from .capture_points import Shape
+from .detect import ClipDetections
+from .fit2d import Targets, pose_gauss_newton
+from .gaze import frame_gaze_activations
+
+__all__ = ["FrameState", "PointWeights", "sin_yaw", "eye_scale", "residual_rms", "gaze_fixed",
+           "fit_frame", "detection_targets", "iris_of"]
+
+
+@dataclass(frozen=True)
+class FrameState:
+    """One frame's fit: pose and the per-frame parameters (activations or mode weights)."""
+
+    pose: Pose
+    x: np.ndarray          # ARKit: (K,) activations; generic: concatenated per-frame weights
+    residual: float        # weighted rms of the detection term, in eye distances
+
+
+def sin_yaw(pose: Pose) -> float:
+    """Sine of the yaw ``b`` of ``R = Rx(a) Ry(b) Rz(c)``: ``R[0, 2]``."""
+    return float(np.clip(pose.rotation[0, 2], -1.0, 1.0))
+
+
+def eye_scale(points: np.ndarray) -> float:
+    d = float(np.linalg.norm(points[36] - points[45]))
+    return d if np.isfinite(d) and d > 1.0 else float(np.nanmax(np.ptp(points, axis=0)) / 2)
+
+
+def residual_rms(X: np.ndarray, st_pose: Pose, p: np.ndarray, w: np.ndarray, iod: float) -> float:
+    """Weighted rms distance (eye distances) of the points ``X`` (P, 3) at ``st_pose`` from
+    ``p`` (P, 2; weights ``w`` 0 where unknown)."""
+    r2 = np.sum((st_pose.project(X) - p) ** 2, axis=1)
+    return float(np.sqrt(np.dot(w, r2) / max(np.sum(w), 1e-12)) / iod)
+
+
+def gaze_fixed(shape: Shape, pose: Pose, x: np.ndarray, gaze: tuple,
+                X: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The eyeLook* activations from ``gaze`` = (iris centres (2, 2), closed (2,)) at ``pose``
+    and the frame's eye corners (:mod:`.gaze`): ``(held in the fit, written after it)``, (K,)
+    each, NaN for every other shape. A closed eye's vertical gaze is 0 in the fit (its lids
+    are the blink's: eyeLookDown's lid drop would take half the blink) and its bridged value
+    after. ``X`` (P, 3): ``shape.points(x)`` when known."""
+    iris, closed = gaze
+    X = shape.points(x) if X is None else X
+    after_, held_ = frame_gaze_activations(X[:68], iris, closed, pose.rotation, pose.scale,
+                                           pose.translation)                 # (8,) each
+    held, after = np.full(shape.size, np.nan), np.full(shape.size, np.nan)
+    k = shape.gaze_k >= 0
+    after[shape.gaze_k[k]] = after_[k]
+    held[shape.gaze_k[k]] = np.where(np.isfinite(held_[k]), held_[k], after_[k] * 0.0)
+    return held, after
+
+
+def fit_frame(shape: Shape, targets: Targets, iod: float, pose: Pose | None, x: np.ndarray,
+               prev: np.ndarray | None, iterations: int, gaze: tuple | None = None,
+               anchor: np.ndarray | None = None) -> FrameState:
+    """Alternate pose (Gauss-Newton, Eq. (7)) and expression (bounded or prior-weighted LS,
+    Eq. (9)) for one frame (``targets``: the detections first); with ``gaze`` (:func:`iris_of`;
+    ARKit models) the eyeLook* activations follow the iris at each pose."""
+    p, w = targets.p[0], targets.w[0]
+    base = shape
+    if pose is None:
+        X = shape.points(x)                                                 # (P, 3)
+        ok = w > 0
+        pose = fit_affine_pose(X[ok], p[ok])
+    shape = base.at_view(sin_yaw(pose))                 # the offset at the head's yaw
+    X = shape.points(x)
+    after = None
+    for _ in range(iterations):
+        pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
+        shape = base.at_view(sin_yaw(pose))
+        held, after = (None, None) if gaze is None else gaze_fixed(shape, pose, x, gaze, X)
+        x = shape.solve(pose, targets, iod, x, prev, held, anchor)
+        X = shape.points(x)
+    if after is not None:
+        x = np.where(np.isfinite(after), after, x)
+        X = shape.points(x)
+    pose = pose_gauss_newton(X, targets, pose, iod, iterations=1)
+    return FrameState(pose, x, residual_rms(X, pose, p, w, iod))
+
+
+@dataclass(frozen=True)
+class PointWeights:
+    """Reliability of every tracked point: iBUG-68, then the dense points (MediaPipe indices)."""
+
+    w: np.ndarray
+    mp_index: np.ndarray | None = None
+    iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
+    closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
+    anchors: np.ndarray | None = None  # (F, K) mapped detector scores (NaN: none)
+
+    def flow_nominal(self, flow: float) -> np.ndarray:
+        """Summed weights (P,) of the detection and flow terms with every point known (the
+        flow moves the 68 iBUG points only)."""
+        wf = flow * self.w
+        wf[68:] = 0.0
+        return self.w + wf
+
+    def anchor(self, i: int) -> np.ndarray | None:
+        """Frame ``i``'s mapped scores (K,) for the fit, or None."""
+        return None if self.anchors is None else self.anchors[i]
+
+
+def detection_targets(det: ClipDetections, i: int, pw: PointWeights) -> tuple[np.ndarray, np.ndarray]:
+    """Frame ``i``'s targets for the tracked points and their weights (0 where unknown)."""
+    p = det.points[i]
+    if pw.mp_index is not None and len(pw.mp_index):
+        p = np.concatenate([p, np.asarray(det.points478[i, pw.mp_index], np.float64)])
+    return p, np.where(np.isfinite(p).all(1), pw.w, 0.0)
+
+
+def iris_of(weights: PointWeights, i: int) -> tuple | None:
+    """Frame ``i``'s two iris centres (2, 2) the gaze follows (NaN rows: that eye's free) and
+    which eyes are closed (2,), or None."""
+    if weights.iris is None or not np.isfinite(weights.iris[i]).any():
+        return None
+    return weights.iris[i], weights.closed[i]
