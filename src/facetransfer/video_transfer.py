@@ -379,6 +379,3 @@ def transfer_video(sources: TransferSources, out, model, *,
         write_mesh_sequence(meshes_dir, plan.new_track, model)
     return TransferResult(Path(out), plan.n_frames, rendered.n_rewritten, rendered.audio, plan,
                           rendered.timings, rendered.resumed, rendered.kept)
-
-
-from .puppet_video import puppet_video  # noqa: E402,F401 (its former home: still importable here)
