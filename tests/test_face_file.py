@@ -91,6 +91,13 @@ def test_bad_face_files_are_one_line(arkit_model, quick_model, tmp_path, capsys)
         (_face(tmp_path / "n.json", arkit_model, shapes={"jawOpen": "x"}).name,
          "'shapes' must map names to numbers"),
         ("missing.json", "does not exist"),
+        # edited by hand beyond what the page makes: refused, not drawn torn apart
+        (_face(tmp_path / "b.json", arkit_model, shapes={"jawOpen": 5}).name,
+         "shape jawOpen=5 is outside 0 to 1"),
+        (_face(tmp_path / "w.json", arkit_model, identity_dials={"width": 50}).name,
+         "identity dial width=50 is outside -5 to 5"),
+        (_face(tmp_path / "h.json", arkit_model, head={"yaw": 0, "tilt": 9}).name,
+         "'head' has 'tilt'; expected 'yaw', 'pitch' and 'roll'"),
     ]
     for name, msg in cases:
         assert main(["model", "synth", str(mp), "--face", str(tmp_path / name),
