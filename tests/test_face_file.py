@@ -91,6 +91,7 @@ def test_bad_face_files_are_one_line(arkit_model, quick_model, tmp_path, capsys)
         (_face(tmp_path / "n.json", arkit_model, shapes={"jawOpen": "x"}).name,
          "'shapes' must map names to numbers"),
         ("missing.json", "does not exist"),
+        ("m.npz", "m.npz is not a face file (it is a model file; the dial editor's Save face"),
         # edited by hand beyond what the page makes: refused, not drawn torn apart
         (_face(tmp_path / "b.json", arkit_model, shapes={"jawOpen": 5}).name,
          "shape jawOpen=5 is outside 0 to 1"),

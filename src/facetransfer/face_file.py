@@ -80,6 +80,24 @@ def _within(path: Path, values: dict, what: str, lo: float, hi: float, why: str)
     return values
 
 
+def _what_else(p: Path, exc: Exception) -> str:
+    """What a file that is no JSON is, for the message: a track, a model, a take, ..."""
+    import zipfile
+
+    from .io.npz import NOT_NPZ, content_kind
+
+    kind = content_kind(p)
+    if kind is None:            # a zip archive: an .npz, perhaps the model or track itself
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                names = set(z.files)
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+            names = set()
+        kind = ("a track file" if "rotation" in names else "a model file" if "core" in names
+                else "a zip archive")
+    return f"not JSON: {exc}" if kind == NOT_NPZ else f"it is {kind}"
+
+
 def read_face(path: str | os.PathLike) -> DialledFace:
     """Read a face file (the module notes); FaceFileError naming the file if it is not one."""
     p = Path(path)
@@ -89,7 +107,8 @@ def read_face(path: str | os.PathLike) -> DialledFace:
     try:
         d = json.loads(p.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FaceFileError(f"{p} is not a face file (not JSON: {exc})") from None
+        raise FaceFileError(f"{p} is not a face file ({_what_else(p, exc)}; the dial editor's "
+                            "Save face writes one)") from None
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise FaceFileError(f"{p} is not a face file (expected \"format\": \"{FORMAT}\", as "
                             "the dial editor's Save face writes)")
