@@ -167,7 +167,11 @@ def test_load_dataset_dispatch(tmp_path):
     with pytest.raises(DatasetError, match="manifest .* does not exist"):
         load_dataset(tmp_path / "nothere.csv")
     (tmp_path / "plain").mkdir()
-    with pytest.raises(DatasetError, match="not in the FaceWarehouse layout"):
+    with pytest.raises(DatasetError, match=r"not in the FaceWarehouse layout .*other meshes "
+                       r"are listed in a manifest \.csv \(columns path, identity, expression"):
+        load_dataset(tmp_path / "plain")
+    (tmp_path / "plain" / "scans.csv").write_text("path,identity,expression\n")
+    with pytest.raises(DatasetError, match="viseme]\\): it holds scans.csv$"):
         load_dataset(tmp_path / "plain")
     with pytest.raises(DatasetError, match="unknown data set 'ict-bogus'"):
         load_dataset("ict-bogus")

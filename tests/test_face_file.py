@@ -58,6 +58,8 @@ def test_render_and_synth_make_the_saved_face(arkit_model, tmp_path, capsys):
                  head={"yaw": 20.0, "pitch": 0.0, "roll": 0.0})
     assert main(["model", "synth", str(mp), "--face", str(face),
                  "--out", str(tmp_path / "f.obj")]) == 0
+    # the mesh is the model's frame: its line says the file's head turn is left to render
+    assert "without the face file's head turn (yaw 20, pitch 0, roll 0" in capsys.readouterr().out
     assert main(["model", "synth", str(mp), "--out", str(tmp_path / "n.obj")]) == 0
     import trimesh
 
@@ -91,6 +93,14 @@ def test_bad_face_files_are_one_line(arkit_model, quick_model, tmp_path, capsys)
         (_face(tmp_path / "n.json", arkit_model, shapes={"jawOpen": "x"}).name,
          "'shapes' must map names to numbers"),
         ("missing.json", "does not exist"),
+        ("m.npz", "m.npz is not a face file (it is a model file; the dial editor's Save face"),
+        # edited by hand beyond what the page makes: refused, not drawn torn apart
+        (_face(tmp_path / "b.json", arkit_model, shapes={"jawOpen": 5}).name,
+         "shape jawOpen=5 is outside 0 to 1"),
+        (_face(tmp_path / "w.json", arkit_model, identity_dials={"width": 50}).name,
+         "identity dial width=50 is outside -5 to 5"),
+        (_face(tmp_path / "h.json", arkit_model, head={"yaw": 0, "tilt": 9}).name,
+         "'head' has 'tilt'; expected 'yaw', 'pitch' and 'roll'"),
     ]
     for name, msg in cases:
         assert main(["model", "synth", str(mp), "--face", str(tmp_path / name),
@@ -104,5 +114,13 @@ def test_bad_face_files_are_one_line(arkit_model, quick_model, tmp_path, capsys)
     assert main(["render", str(mp), "--face", str(good), "--pose", "yaw=3",
                  "--out", str(tmp_path / "o.png")]) == 2
     assert "the --face file gives the head's rotation" in capsys.readouterr().err
+    # the face file is an input: never written over, whatever its name
+    for cmd, name in ((["model", "synth"], "face.obj"), (["render"], "face.png")):
+        named = tmp_path / name
+        named.write_bytes(good.read_bytes())
+        assert main(cmd + [str(mp), "--face", str(named), "--out", str(named),
+                           "--overwrite"]) == 2
+        assert "is also an input" in capsys.readouterr().err
+        assert named.read_bytes() == good.read_bytes()
     with pytest.raises(FaceFileError, match="version 2"):
         read_face(_face(tmp_path / "v.json", arkit_model, version=2))

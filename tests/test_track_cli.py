@@ -89,6 +89,7 @@ def test_cli_bad_input_is_one_line_exit_2(small_clip, quick_model_path, quick_mo
     dataclasses.replace(quick_model, landmarks=None).save(nolm)
     code, lines = _run(capsys, video, "--model", nolm, "--out", out, "--init", pts)
     assert code == 2 and "no landmark vertices" in lines[0]
+    assert "models built from ict-arkit, ict-bilinear or ict-trilinear have them" in lines[0]
 
     wrong = tmp_path / "wrong.npz"
     F = 8

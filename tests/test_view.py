@@ -149,6 +149,19 @@ def test_a_saved_face_is_the_pages_face(arkit_model, pages, tmp_path):
         np.testing.assert_array_equal(face.identity, want)
 
 
+@pytest.mark.slow
+def test_an_address_outside_the_sliders_is_held_to_them(pages, tmp_path):
+    """A typed or shared address beyond a slider's range draws (and saves) the slider's end, and
+    a value that is no number leaves its slider alone (before: jawOpen=5 drew and saved a face
+    torn five times open, jawOpen=abc a face of NaN that vanished); the head keeps its angle."""
+    from facetransfer.face_file import read_face
+
+    face = read_face(_saved_face(pages[0], "jawOpen=5&width=-9&yaw=60&mouthClose=abc",
+                                 tmp_path / "f.json"))
+    assert face.shapes == {"jawOpen": 1} and face.identity_dials == {"width": -3}
+    assert face.head == (60, 0, 0)
+
+
 def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
     _, _, track, _ = pages
     mp = tmp_path / "m.npz"

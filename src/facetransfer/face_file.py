@@ -6,7 +6,8 @@ as a small JSON file (:data:`FORMAT`)::
     {"format": "facetransfer-face", "version": 1, "model": "<content hash>",
      "source": "take.npz", "frame": 40,
      "identity": [...],                      # the shown frame's person, or the mean
-     "identity_dials": {"width": 1.5},       # units of facetransfer.dials, added to it
+     "identity_dials": {"width": 1.5},       # units of facetransfer.dials (at most 5 either
+                                             # way, DIAL_LIMIT), added to it
      "shape_kind": "arkit",                  # or a mode name: the training expressions
      "shapes": {"jawOpen": 0.5},             # slider values in [0, 1]
      "head": {"yaw": 20.0, "pitch": -5.0, "roll": 0.0}}   # degrees
@@ -18,7 +19,9 @@ the model's identity-expression cross term), the expression from the ARKit activ
 or from the training expressions' weights (the mesh is linear in a mode's weights, so a slider
 at ``v`` adds ``v`` times that expression's offset, as the page does). The head angles are the
 page's (three.js's Euler order ``YXZ``): ``R = Ry(yaw) Rx(pitch) Rz(roll)`` in camera axes (x
-right, y up, z toward the viewer), the rotation of the track's frame it shows.
+right, y up, z toward the viewer), the rotation of the track's frame it shows. A file edited by
+hand is held to the same ranges: a shape outside [0, 1], a dial beyond its limit or a head angle
+by another name is refused, naming the file and the value.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .dials import DIAL_LIMIT
 from .errors import FaceTransferError
 
 __all__ = ["FORMAT", "FaceFileError", "DialledFace", "read_face", "face_weights",
@@ -67,6 +71,33 @@ def _numbers(path: Path, d: dict, key: str) -> dict:
     return {k: float(x) for k, x in v.items()}
 
 
+def _within(path: Path, values: dict, what: str, lo: float, hi: float, why: str) -> dict:
+    """``values`` unchanged, or FaceFileError naming the first value outside ``[lo, hi]``."""
+    for name, x in values.items():
+        if not lo <= x <= hi:
+            raise FaceFileError(f"{path}: {what} {name}={x:g} is outside {lo:g} to {hi:g} "
+                                f"({why})")
+    return values
+
+
+def _what_else(p: Path, exc: Exception) -> str:
+    """What a file that is no JSON is, for the message: a track, a model, a take, ..."""
+    import zipfile
+
+    from .io.npz import NOT_NPZ, content_kind
+
+    kind = content_kind(p)
+    if kind is None:            # a zip archive: an .npz, perhaps the model or track itself
+        try:
+            with np.load(p, allow_pickle=False) as z:
+                names = set(z.files)
+        except (OSError, ValueError, EOFError, zipfile.BadZipFile):
+            names = set()
+        kind = ("a track file" if "rotation" in names else "a model file" if "core" in names
+                else "a zip archive")
+    return f"not JSON: {exc}" if kind == NOT_NPZ else f"it is {kind}"
+
+
 def read_face(path: str | os.PathLike) -> DialledFace:
     """Read a face file (the module notes); FaceFileError naming the file if it is not one."""
     p = Path(path)
@@ -76,7 +107,8 @@ def read_face(path: str | os.PathLike) -> DialledFace:
     try:
         d = json.loads(p.read_text(encoding="utf-8"))
     except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FaceFileError(f"{p} is not a face file (not JSON: {exc})") from None
+        raise FaceFileError(f"{p} is not a face file ({_what_else(p, exc)}; the dial editor's "
+                            "Save face writes one)") from None
     if not isinstance(d, dict) or d.get("format") != FORMAT:
         raise FaceFileError(f"{p} is not a face file (expected \"format\": \"{FORMAT}\", as "
                             "the dial editor's Save face writes)")
@@ -88,11 +120,17 @@ def read_face(path: str | os.PathLike) -> DialledFace:
     if ident.ndim != 1 or not ident.size or not all(
             isinstance(x, (int, float)) and np.isfinite(x) for x in ident):
         raise FaceFileError(f"{p}: 'identity' must be a list of numbers")
+    unknown = sorted(set(head) - {"yaw", "pitch", "roll"})
+    if unknown:
+        raise FaceFileError(f"{p}: 'head' has {', '.join(map(repr, unknown))}; expected "
+                            "'yaw', 'pitch' and 'roll' (degrees)")
+    dials = _within(p, _numbers(p, d, "identity_dials"), "identity dial", -DIAL_LIMIT,
+                    DIAL_LIMIT, "the dials' range, standard deviations over the training faces")
+    shapes = _within(p, _numbers(p, d, "shapes"), "shape", 0.0, 1.0, "the page's sliders")
     frame = d.get("frame")
-    return DialledFace(p, str(d.get("model", "")), ident.astype(np.float64),
-                       _numbers(p, d, "identity_dials"), str(d.get("shape_kind", "arkit")),
-                       _numbers(p, d, "shapes"), tuple(head.get(k, 0.0) for k in
-                                                       ("yaw", "pitch", "roll")),
+    return DialledFace(p, str(d.get("model", "")), ident.astype(np.float64), dials,
+                       str(d.get("shape_kind", "arkit")), shapes,
+                       tuple(head.get(k, 0.0) for k in ("yaw", "pitch", "roll")),
                        int(frame) if isinstance(frame, int) else None, str(d.get("source", "")))
 
 

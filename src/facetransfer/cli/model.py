@@ -270,16 +270,29 @@ def face_or_weights(model, args) -> dict[str, np.ndarray]:
                          parse_like(args.like) if args.like else None)
 
 
+def _unturned(face) -> str:
+    """What ``synth``'s line adds for a ``--face`` whose head is turned: the mesh is not."""
+    if not face:
+        return ""
+    from ..face_file import read_face
+
+    head = read_face(face).head
+    if not any(head):
+        return ""
+    return ("; in the model's frame, without the face file's head turn (yaw {:.3g}, pitch {:.3g}, "
+            "roll {:.3g}; `render --face` shows it)".format(*head))
+
+
 def cmd_synth(args: argparse.Namespace) -> int:
     from ..io.mesh import check_mesh_output, write_mesh
 
     out = check_mesh_output(args.out)
-    check_output_path(out, overwrite=args.overwrite, inputs=[args.model])
+    check_output_path(out, overwrite=args.overwrite, inputs=[args.model, args.face])
     m = resolve_model(args.model)
     v = m.synthesize(face_or_weights(m, args))
     write_mesh(out, v, m.faces, uvs=m.uvs if out.suffix.lower() == ".obj" else None,
                overwrite=args.overwrite)
-    print(f"wrote {out} ({m.n_vertices} vertices)")
+    print(f"wrote {out} ({m.n_vertices} vertices)" + _unturned(args.face))
     return 0
 
 

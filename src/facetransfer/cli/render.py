@@ -106,7 +106,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     from ..render import render_model
     from .model import face_or_weights
 
-    out = check_output_path(args.out, overwrite=args.overwrite, inputs=[args.model])
+    out = check_output_path(args.out, overwrite=args.overwrite, inputs=[args.model, args.face])
     if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise FaceTransferError(f"--out {out}: expected a .png or .jpg image")
     size = parse_size(args.size)

@@ -87,6 +87,10 @@ def load_dataset(spec: str | os.PathLike, *, seed: int = 0, n_identities: int | 
     if p.is_dir():
         if is_facewarehouse_dir(p):
             return read_facewarehouse(p, progress=progress)
-        raise DatasetError(f"folder {p} is not in the FaceWarehouse layout (Tester_N/Blendshape/shape_K.obj)")
+        csvs = sorted(c.name for c in p.glob("*.csv"))
+        held = f": it holds {', '.join(csvs[:3])}" + (", ..." if len(csvs) > 3 else "")
+        raise DatasetError(f"folder {p} is not in the FaceWarehouse layout (Tester_N/Blendshape/"
+                           "shape_K.obj); other meshes are listed in a manifest .csv (columns "
+                           "path, identity, expression[, viseme])" + (held if csvs else ""))
     raise DatasetError(f"unknown data set {s!r}: expected {' or '.join(ICT_DATASETS)}, a manifest "
                        ".csv, or a FaceWarehouse folder")

@@ -5,7 +5,8 @@ build inlined (package data ``data/vendor/three/``, see its README for the versi
 update it), the face's mesh and morph targets embedded (int16, one scale per target), and
 
 * a slider per expression shape (the 52 ARKit blendshapes for an ARKit model, else one per
-  training expression of the model),
+  training expression of the model; any other mode, such as a trilinear model's visemes, stays
+  at :func:`facetransfer.dials.neutral_weights`'s),
 * a slider per semantic identity dial (:mod:`facetransfer.dials`),
 * head yaw, pitch and roll (head angles in degrees: ``R = Ry(yaw) Rx(pitch) Rz(roll)``,
   three.js's ``"YXZ"`` order, the signs of :func:`facetransfer.export.common.head_euler`),

@@ -34,8 +34,12 @@ def require_landmarks(model) -> np.ndarray:
     """The model's 68 landmark vertices, or :class:`TrackError` if it has none."""
     lm = getattr(model, "landmarks", None)
     if lm is None or np.asarray(lm).shape != (68,):
-        raise TrackError("the model has no landmark vertices (68 iBUG-68 points are needed to "
-                         "initialise tracking); build it from a data set with landmarks")
+        prov = getattr(model, "provenance", None) or {}
+        src = prov.get("source") or prov.get("dataset")
+        raise TrackError("the model" + (f" (built from {src})" if src else "") + " has no "
+                         "landmark vertices (68 iBUG-68 points are needed to initialise "
+                         "tracking): models built from ict-arkit, ict-bilinear or ict-trilinear "
+                         "have them, a manifest's or a FaceWarehouse folder's do not")
     return np.asarray(lm, dtype=np.int64)
 
 
