@@ -278,3 +278,17 @@ def test_a_track_of_a_model_without_arkit_activations_is_refused_naming_it(quick
                    "(the default model's, ict-arkit, are) (`view` of the model itself has a "
                    "slider per training expression)"], err
     assert not (tmp_path / "p.html").exists()
+
+
+def test_a_track_of_another_model_is_named_when_its_model_is_missing(quick_model, data_dir,
+                                                                     tmp_path, capsys):
+    """`view T.npz` (and `export`) without --model, of a track made with another model than the
+    default one: the line names the track (before: "the track was not made with ...")."""
+    from conftest import still_track
+
+    tp = tmp_path / "other.npz"
+    still_track(quick_model, 3).save(tp)
+    assert main(["view", str(tp), "--out", str(tmp_path / "p.html")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"facetransfer view: error: track {tp} was not made with the default model "
+                   "(ict-arkit); pass the model it was tracked with (--model M.npz)"]

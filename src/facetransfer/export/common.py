@@ -82,7 +82,8 @@ def resolve_model(track, model=None, *, progress=None, announce=None):
 
         model = load_default_model(progress=progress, announce=announce)
         if track.model_hash and track.model_hash != model.content_hash:
-            raise ExportError("the track was not made with the default model (ict-arkit); pass "
+            name = f"track {track.label}" if track.label else "the track"
+            raise ExportError(f"{name} was not made with the default model (ict-arkit); pass "
                               "the model it was tracked with (--model M.npz)")
     track.check_model(model)
     return model
