@@ -182,6 +182,24 @@ def make_arkit_track():
     return synthetic_arkit_track
 
 
+def clip_with_points(model, n: int, seed: int, folder, *, video: str = "clip.mp4",
+                     points: str = "points.json"):
+    """An ``n``-frame synthetic clip ``folder/video`` of ``model`` (320x240, 25 fps) and a
+    POINTS.json of its first frame's landmarks 17-67 (what ``--init`` reads); returns
+    (video path, points path, the clip with its truth)."""
+    from facetransfer.io.video import write_video
+    from facetransfer.synth import make_clip, random_performance
+
+    perf = random_performance(model, n, seed=seed, size=(320, 240), fps=25, fill=0.8)
+    clip = make_clip(model, perf, seed=seed)
+    v = Path(folder) / video
+    write_video(v, clip.frames, 25)
+    L = clip.truth.landmarks2d[0]
+    pts = Path(folder) / points
+    pts.write_text(json.dumps({"points": {str(i): L[i].tolist() for i in range(17, 68)}}))
+    return v, pts, clip
+
+
 def still_track(model, n: int, *, source: str = ""):
     """A track of ``n`` frames of ``model`` at rest (no rotation, zero weights, all found):
     for tests of what is said or kept of a track, not of its values."""

@@ -20,9 +20,10 @@ from facetransfer.batch import cluster as batch_cluster
 from facetransfer.batch import jobs as batch_jobs
 from facetransfer.batch import run as batch_run
 from facetransfer.cli.main import main
-from facetransfer.io.video import read_video, write_video
-from facetransfer.synth import make_clip, random_performance
+from facetransfer.io.video import read_video
 from facetransfer.track import Track
+
+from conftest import clip_with_points
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -39,17 +40,9 @@ def inproc(monkeypatch):
 def clips(quick_model, tmp_path_factory):
     """Two 8-frame synthetic clips (different faces and motion) and their first-frame points."""
     d = tmp_path_factory.mktemp("batchclips")
-    out = {}
-    for name, seed in (("a", 3), ("b", 4)):
-        perf = random_performance(quick_model, 8, seed=seed, size=(320, 240), fps=25, fill=0.8)
-        clip = make_clip(quick_model, perf, seed=seed)
-        video = d / f"{name}.mp4"
-        write_video(video, clip.frames, 25)
-        L = clip.truth.landmarks2d[0]
-        pts = d / f"{name}.json"
-        pts.write_text(json.dumps({"points": {str(i): L[i].tolist() for i in range(17, 68)}}))
-        out[name] = (video, pts, clip)
-    return out
+    return {name: clip_with_points(quick_model, 8, seed, d, video=f"{name}.mp4",
+                                   points=f"{name}.json")
+            for name, seed in (("a", 3), ("b", 4))}
 
 
 def _cli(capsys, *argv):
@@ -188,19 +181,6 @@ def test_the_model_is_scattered_once_not_sent_with_each_task(quick_model, tmp_pa
     assert all(f"missing{i}.mp4" in r.error for i, r in enumerate(res.rows))
 
 
-def _long_clip(model, n: int, seed: int, folder):
-    """An ``n``-frame synthetic clip ``folder/long.mp4`` and a POINTS.json of its first frame's
-    landmarks; returns (video, points, clip)."""
-    perf = random_performance(model, n, seed=seed, size=(320, 240), fps=25, fill=0.8)
-    clip = make_clip(model, perf, seed=seed)
-    video = folder / "long.mp4"
-    write_video(video, clip.frames, 25)
-    L = clip.truth.landmarks2d[0]
-    pts = folder / "p.json"
-    pts.write_text(json.dumps({"points": {str(i): L[i].tolist() for i in range(17, 68)}}))
-    return video, pts, clip
-
-
 @pytest.mark.slow
 def test_chunked_clip_is_one_identity_and_smooth_at_the_seams(quick_model, quick_model_path,
                                                               inproc, tmp_path, capsys):
@@ -208,7 +188,8 @@ def test_chunked_clip_is_one_identity_and_smooth_at_the_seams(quick_model, quick
     on the ground truth at the seams as elsewhere, close to the clip tracked whole."""
     from facetransfer.batch import plan_chunks, seam_difference
 
-    video, pts, clip = _long_clip(quick_model, 30, 7, tmp_path)
+    video, pts, clip = clip_with_points(quick_model, 30, 7, tmp_path, video="long.mp4",
+                                        points="p.json")
     common = ("--model", quick_model_path, "--init", pts, "--passes", "1")
     assert _cli(capsys, "track", video, "--out", tmp_path / "whole.npz", *common)[0] == 0
     assert _cli(capsys, "batch", "track", video, "--out", tmp_path / "out", "--chunk", 14,
@@ -300,7 +281,8 @@ def test_max_frames_of_a_chunked_clip(quick_model, quick_model_path, inproc, tmp
     """``--chunk`` with ``--max-frames``: the chunks cover the first max_frames frames only
     (counted no further), joined; a limit within one chunk is the clip tracked whole, as
     ``track --max-frames`` does."""
-    video, pts, clip = _long_clip(quick_model, 20, 5, tmp_path)
+    video, pts, clip = clip_with_points(quick_model, 20, 5, tmp_path, video="long.mp4",
+                                        points="p.json")
     assert batch_jobs.count_frames(str(video), 14) == 14
     assert batch_jobs.count_frames(str(video)) == 20
     common = ("--model", quick_model_path, "--init", pts, "--passes", "1")

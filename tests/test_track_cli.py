@@ -10,9 +10,10 @@ import pytest
 
 from facetransfer.cli.main import main
 from facetransfer.io.video import read_video, write_video
-from facetransfer.synth import make_clip, random_performance
 from facetransfer.track import Track
 from facetransfer.track.landmarks import REQUIRED_IBUG, mediapipe_to_ibug
+
+from conftest import clip_with_points
 
 KEY = list(REQUIRED_IBUG)  # eye corners, nose tip, mouth corners
 
@@ -20,15 +21,7 @@ KEY = list(REQUIRED_IBUG)  # eye corners, nose tip, mouth corners
 @pytest.fixture(scope="module")
 def small_clip(quick_model, tmp_path_factory):
     """An 8-frame synthetic clip on disk and a POINTS.json of its first frame's landmarks."""
-    d = tmp_path_factory.mktemp("trackcli")
-    perf = random_performance(quick_model, 8, seed=5, size=(320, 240), fps=25, fill=0.8)
-    clip = make_clip(quick_model, perf, seed=5)
-    video = d / "clip.mp4"
-    write_video(video, clip.frames, 25)
-    L = clip.truth.landmarks2d[0]
-    pts = d / "points.json"
-    pts.write_text(json.dumps({"points": {str(i): L[i].tolist() for i in range(17, 68)}}))
-    return video, pts, clip
+    return clip_with_points(quick_model, 8, 5, tmp_path_factory.mktemp("trackcli"))
 
 
 def _run(capsys, *argv):
