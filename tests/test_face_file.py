@@ -124,3 +124,33 @@ def test_bad_face_files_are_one_line(arkit_model, quick_model, tmp_path, capsys)
         assert named.read_bytes() == good.read_bytes()
     with pytest.raises(FaceFileError, match="version 2"):
         read_face(_face(tmp_path / "v.json", arkit_model, version=2))
+
+
+def test_a_trilinear_models_visemes_have_sliders_and_are_kept(data_dir, tmp_path):
+    """The paper's trilinear model: the page has a slider per viseme as per expression (named
+    ``viseme:LABEL``), and a saved face's visemes become the viseme mode's weights (before:
+    no viseme slider, the visemes held at their mean)."""
+    import re
+
+    from facetransfer.export.viewer import viewer_page
+    from facetransfer.model import build_model
+
+    from test_transfer_viseme import _trilinear_dataset
+
+    tri = build_model(_trilinear_dataset(data_dir), {"identity": 4, "expression": 4,
+                                                     "viseme": 5})
+    names = json.loads(re.search(r'<script id="ft-data" type="application/json">(.*?)</script>',
+                                 viewer_page(tri), re.S).group(1))["target_names"]
+    assert {"smile", "browsup", "viseme:AA", "viseme:OO", "viseme:rest"} <= set(names)
+    face = read_face(_face(tmp_path / "t.json", tri, shape_kind="expression",
+                           shapes={"smile": 0.5, "viseme:AA": 1.0}))
+    w = face_weights(face, tri)
+    rest = {m: tri.weight_mean(m) for m in ("identity", "viseme")}
+    rest["expression"] = tri.training_weights("expression", "neutral")
+    np.testing.assert_allclose(w["expression"], rest["expression"] + 0.5 * (
+        tri.training_weights("expression", "smile") - rest["expression"]), atol=1e-12)
+    np.testing.assert_allclose(w["viseme"], tri.training_weights("viseme", "AA"), atol=1e-12)
+    for bad in ("viseme:ZZ", "identity:id01", "pose:AA"):
+        with pytest.raises(FaceFileError, match=f"unknown shape '{bad}'"):
+            face_weights(read_face(_face(tmp_path / "b.json", tri, shape_kind="expression",
+                                         shapes={bad: 1.0})), tri)

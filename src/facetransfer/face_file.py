@@ -9,7 +9,8 @@ as a small JSON file (:data:`FORMAT`)::
      "identity_dials": {"width": 1.5},       # units of facetransfer.dials (at most 5 either
                                              # way, DIAL_LIMIT), added to it
      "shape_kind": "arkit",                  # or a mode name: the training expressions
-     "shapes": {"jawOpen": 0.5},             # slider values in [0, 1]
+     "shapes": {"jawOpen": 0.5},             # slider values in [0, 1] (another mode's rows
+                                             # named MODE:LABEL, e.g. "viseme:eel")
      "head": {"yaw": 20.0, "pitch": -5.0, "roll": 0.0}}   # degrees
 
 ``render --face`` and ``model synth --face`` make that face with the model itself: the identity
@@ -157,9 +158,9 @@ def _identity(face: DialledFace, model) -> tuple[str, np.ndarray]:
         raise FaceFileError(f"{face.path}: {exc}") from None
 
 
-def _expression(face: DialledFace, model, rest: dict) -> tuple[str, np.ndarray] | None:
-    """The expression mode's name and weights of the face's shape sliders (None: no sliders
-    and no expression mode)."""
+def _expression(face: DialledFace, model, rest: dict) -> dict[str, np.ndarray]:
+    """The weights of the modes the face's shape sliders move (``rest``: every mode's at rest;
+    the identity's is not moved)."""
     from .arkit import ARKIT_NAMES, activations_to_weights, is_arkit_model
 
     if face.shape_kind == "arkit":
@@ -170,19 +171,21 @@ def _expression(face: DialledFace, model, rest: dict) -> tuple[str, np.ndarray] 
         if unknown:
             raise FaceFileError(f"{face.path}: unknown ARKit blendshape(s) {', '.join(unknown)}")
         a = np.array([[face.shapes.get(n, 0.0) for n in ARKIT_NAMES]])
-        return "expression", activations_to_weights(model, a)[0]
+        return {"expression": activations_to_weights(model, a)[0]}
     if face.shape_kind not in model.mode_names:
         raise FaceFileError(f"{face.path}: its sliders are of a mode {face.shape_kind!r} the "
                             f"model does not have ({', '.join(model.mode_names)})")
-    k = model.mode_index(face.shape_kind)
-    unknown = sorted(set(face.shapes) - set(model.labels[k]))
-    if unknown:
-        raise FaceFileError(f"{face.path}: unknown {face.shape_kind} shape(s) "
-                            f"{', '.join(unknown)}")
-    base = rest[face.shape_kind]
-    w = base + sum((v * (model.training_weights(k, n) - base) for n, v in face.shapes.items()),
-                   np.zeros_like(base))
-    return face.shape_kind, w
+    out: dict[str, np.ndarray] = {}
+    for name, v in face.shapes.items():           # LABEL of the main mode, or MODE:LABEL
+        mode, _, label = name.rpartition(":")
+        mode = mode or face.shape_kind
+        if mode not in rest or mode == model.identity_mode \
+                or label not in model.labels[model.mode_index(mode)]:
+            raise FaceFileError(f"{face.path}: unknown shape {name!r} (a row of the model's "
+                                f"{', '.join(m for m in rest if m != model.identity_mode)})")
+        base = rest[mode]
+        out[mode] = out.get(mode, base) + v * (model.training_weights(mode, label) - base)
+    return out
 
 
 def face_weights(face: DialledFace, model) -> dict[str, np.ndarray]:
@@ -199,10 +202,7 @@ def face_weights(face: DialledFace, model) -> dict[str, np.ndarray]:
                             "the model its page was written from")
     mode, identity = _identity(face, model)
     weights = {**neutral_weights(model, mode), mode: identity}
-    expr = _expression(face, model, weights)
-    if expr is not None:
-        weights[expr[0]] = expr[1]
-    return weights
+    return {**weights, **_expression(face, model, weights)}
 
 
 def face_rotation(face: DialledFace) -> np.ndarray:

@@ -5,8 +5,7 @@ build inlined (package data ``data/vendor/three/``, see its README for the versi
 update it), the face's mesh and morph targets embedded (int16, one scale per target), and
 
 * a slider per expression shape (the 52 ARKit blendshapes for an ARKit model, else one per
-  training expression of the model; any other mode, such as a trilinear model's visemes, stays
-  at :func:`facetransfer.dials.neutral_weights`'s),
+  training row of each mode but the identity: a trilinear model's expressions and visemes),
 * a slider per semantic identity dial (:mod:`facetransfer.dials`),
 * head yaw, pitch and roll (head angles in degrees: ``R = Ry(yaw) Rx(pitch) Rz(roll)``,
   three.js's ``"YXZ"`` order, the signs of :func:`facetransfer.export.common.head_euler`),
@@ -56,6 +55,32 @@ def _quantize(targets: np.ndarray) -> tuple[np.ndarray, list[float]]:
     return q, [float(s) for s in scale]
 
 
+def _training_shapes(model, identity: np.ndarray, mode: str):
+    """A model without ARKit shapes: its neutral face (every other mode at
+    :func:`facetransfer.dials.neutral_weights`'s) and a slider per training row of every mode
+    but the identity (but a ``neutral`` row): the offset of that row's face. The expression
+    mode's (:func:`_shape_kind`) are named by their labels, another mode's ``MODE:LABEL``
+    (a trilinear model's visemes: ``viseme:eel``), as :mod:`facetransfer.face_file` reads
+    them."""
+    from ..dials import neutral_weights
+
+    main = _shape_kind(model)
+    rest = neutral_weights(model, mode)
+    neutral = model.synthesize({**rest, mode: identity})
+    names, offsets = [], []
+    for k, name in enumerate(model.mode_names):
+        if name == mode:
+            continue
+        for lab in (lab for lab in model.labels[k] if lab != "neutral"):
+            offsets.append(model.synthesize({**rest, mode: identity,
+                                             name: model.training_weights(k, lab)}) - neutral)
+            names.append(lab if name == main else f"{name}:{lab}")
+    modes = [n for n in model.mode_names if n != mode]
+    title = f"{' and '.join(modes)} (training shapes)"
+    return (neutral, np.stack(offsets) if offsets else np.zeros((0,) + neutral.shape), names,
+            title)
+
+
 def view_rig(model, identity: np.ndarray, dials=None):
     """Neutral ``(n, 3)``, shape offsets ``(S, n, 3)`` with their names and title, and identity
     dial offsets of the neutral ``(K, n, 3)`` for the page."""
@@ -68,14 +93,7 @@ def view_rig(model, identity: np.ndarray, dials=None):
         neutral, shapes, names, title = rig.neutral, rig.deltas, list(ARKIT_NAMES), \
             "ARKit blendshapes"
     else:
-        k = model.mode_index(_shape_kind(model))
-        rest = neutral_weights(model, mode)
-        neutral = model.synthesize({**rest, mode: identity})
-        labs = [lab for lab in model.labels[k] if lab != "neutral"]
-        shapes = np.stack([model.synthesize({**rest, mode: identity,
-                                             model.mode_names[k]: model.training_weights(k, lab)})
-                           - neutral for lab in labs]) if labs else np.zeros((0,) + neutral.shape)
-        names, title = labs, f"{model.mode_names[k]} (training shapes)"
+        neutral, shapes, names, title = _training_shapes(model, identity, mode)
     dial_off = np.zeros((0,) + neutral.shape)
     if dials is not None and dials.dials:
         rest = neutral_weights(model, mode)
