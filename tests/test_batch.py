@@ -721,7 +721,9 @@ def test_a_later_chunk_without_a_face_says_so(quick_model, monkeypatch):
     monkeypatch.setattr(video_detect, "detect_video",
                         lambda frames, **kw: (det, 25.0, (64, 64), "v.mp4"))
     monkeypatch.setattr(aspect.View, "of", classmethod(lambda cls, video: cls()))
-    assert batch_jobs._held_for_chunk(det, quick_model, None, np.zeros(5)) is None
+    from facetransfer.track.capture import held_identity
+
+    assert held_identity(det, quick_model, None, np.zeros(5)) is None
     with pytest.raises(VideoError, match="no face found in v.mp4"):
         batch_jobs._chunk_capture(np.zeros((n, 64, 64, 3), np.uint8), quick_model,
                                   TrackerSettings(), ClipJob("v", "v.mp4"), Chunk(1, 10, 22),

@@ -185,38 +185,24 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
 
 def _chunk_capture(frames, model, options, job, chunk, identity):
     """A later chunk's capture: with the first chunk's ``identity`` held fixed where the
-    chunk's first shot with a face is that person's (its identity phase alone,
-    :func:`facetransfer.track.capture.held_identity`; a cut inside the chunk: its later shots
+    chunk's first shot with a face is that person's
+    (:func:`facetransfer.track.capture.held_identity`; a cut inside the chunk: its later shots
     are compared in the capture, :mod:`facetransfer.track.shots`), else with its own (the clip
     cut to another person in an earlier chunk, which this chunk cannot see)."""
     from ..track.aspect import View
-    from ..track.capture import capture_detections
+    from ..track.capture import capture_detections, held_identity
     from ..track.video_detect import detect_video
 
     source = str(job.video)
     det, fps, size, src = detect_video(frames, source=source, view=View.of(job.video),
                                        subject=_subject(job.face, frames, source))
-    held = _held_for_chunk(det, model, options.capture, identity)
+    held = held_identity(det, model, options.capture, identity)
     if held is None and det.found.any():
         log.warning("%s: frames %d-%d begin on another face than the clip's first (a cut "
                     "before them): captured with their own identity", source, chunk.start,
                     chunk.stop - 1)
     return capture_detections(det, model, options=options.capture, fps=fps, frame_size=size,
                               source=src, fixed=held)
-
-
-def _held_for_chunk(det, model, options, identity) -> dict | None:
-    """The identity to hold for a chunk's detections: ``identity`` where the chunk's first shot
-    with a face is that person's, else None (also for a chunk without a face: its capture
-    then says so)."""
-    from ..track.capture import held_identity
-    from ..track.shots import shot_detections, shot_spans, shot_starts
-
-    for a, b in shot_spans(shot_starts(det), det.n_frames):
-        sub = shot_detections(det, a, b)
-        if sub.found.any():
-            return held_identity(sub, model, options, identity)
-    return None
 
 
 def join_clip(job, out: str, model, chunks, results) -> Row:

@@ -429,14 +429,20 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
     return joined_shots(tracks, spans)
 
 
-def held_identity(sub, model, options, first: np.ndarray | None) -> dict | None:
-    """A later shot's (or a batch chunk's) fixed identity: ``{"identity": first}`` where the
-    identity of ``sub`` from the identity phase alone (:func:`_clip_identity`) is that person's
+def held_identity(det, model, options, first: np.ndarray | None) -> dict | None:
+    """The identity to hold fixed for the detections ``det`` of a later shot or a batch chunk:
+    ``{"identity": first}`` where the identity of ``det``'s first shot with a face, from the
+    identity phase alone (:func:`_clip_identity`), is that person's
     (:func:`facetransfer.track.shots.same_face`), so one person keeps one identity through a
-    clip's cuts and chunks; another person's, or no ``first``: None (its own is solved)."""
+    clip's cuts and chunks; another person's, no face, or no ``first``: None (its own is
+    solved, or its capture says no face was found)."""
     from .shots import same_face
 
     if first is None:
+        return None
+    sub = next((s for s in (shot_detections(det, a, b) for a, b in
+                            shot_spans(shot_starts(det), det.n_frames)) if s.found.any()), None)
+    if sub is None:
         return None
     opt = options or CaptureOptions()
     weights, sampler = _point_weights(sub, model, opt)
