@@ -83,19 +83,16 @@ def _within(path: Path, values: dict, what: str, lo: float, hi: float, why: str)
 
 def _what_else(p: Path, exc: Exception) -> str:
     """What a file that is no JSON is, for the message: a track, a model, a take, ..."""
-    import zipfile
-
+    from .file_facts import file_kind
     from .io.npz import NOT_NPZ, content_kind
 
     kind = content_kind(p)
     if kind is None:            # a zip archive: an .npz, perhaps the model or track itself
         try:
-            with np.load(p, allow_pickle=False) as z:
-                names = set(z.files)
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile):
-            names = set()
-        kind = ("a track file" if "rotation" in names else "a model file" if "core" in names
-                else "a zip archive")
+            kind = {"track": "a track file", "model": "a model file"}.get(file_kind(p),
+                                                                          "a zip archive")
+        except FaceTransferError:
+            kind = "a zip archive"
     return f"not JSON: {exc}" if kind == NOT_NPZ else f"it is {kind}"
 
 

@@ -254,33 +254,38 @@ def synth_weights(model, weights: dict[str, np.ndarray] | None = None,
     return w
 
 
-def face_or_weights(model, args) -> dict[str, np.ndarray]:
-    """The weights of ``--face`` (a face saved by the dial editor: :mod:`facetransfer.face_file`)
-    or of ``--weights`` / ``--like`` (:func:`synth_weights`); at most one of them."""
+def face_arg(args):
+    """The ``--face`` file read (:func:`facetransfer.face_file.read_face`; None without one),
+    once ``--face``, ``--weights`` and ``--like`` are known to be given one at most."""
     given = [o for o, v in (("--face", getattr(args, "face", None)), ("--weights", args.weights),
                             ("--like", args.like)) if v]
     if len(given) > 1:
         raise FaceTransferError("give one of --face, --weights and --like, not "
                                 + " and ".join(given))
-    if given == ["--face"]:
-        from ..face_file import face_weights, read_face
+    if given != ["--face"]:
+        return None
+    from ..face_file import read_face
 
-        return face_weights(read_face(args.face), model)
+    return read_face(args.face)
+
+
+def face_or_weights(model, args, face) -> dict[str, np.ndarray]:
+    """The weights of ``face`` (a face saved by the dial editor, :func:`face_arg`), else of
+    ``--weights`` / ``--like`` (:func:`synth_weights`)."""
+    if face is not None:
+        from ..face_file import face_weights
+
+        return face_weights(face, model)
     return synth_weights(model, parse_weights(args.weights) if args.weights else None,
                          parse_like(args.like) if args.like else None)
 
 
 def _unturned(face) -> str:
     """What ``synth``'s line adds for a ``--face`` whose head is turned: the mesh is not."""
-    if not face:
-        return ""
-    from ..face_file import read_face
-
-    head = read_face(face).head
-    if not any(head):
+    if face is None or not any(face.head):
         return ""
     return ("; in the model's frame, without the face file's head turn (yaw {:.3g}, pitch {:.3g}, "
-            "roll {:.3g}; `render --face` shows it)".format(*head))
+            "roll {:.3g}; `render --face` shows it)".format(*face.head))
 
 
 def cmd_synth(args: argparse.Namespace) -> int:
@@ -288,11 +293,12 @@ def cmd_synth(args: argparse.Namespace) -> int:
 
     out = check_mesh_output(args.out)
     check_output_path(out, overwrite=args.overwrite, inputs=[args.model, args.face])
+    face = face_arg(args)
     m = resolve_model(args.model)
-    v = m.synthesize(face_or_weights(m, args))
+    v = m.synthesize(face_or_weights(m, args, face))
     write_mesh(out, v, m.faces, uvs=m.uvs if out.suffix.lower() == ".obj" else None,
                overwrite=args.overwrite)
-    print(f"wrote {out} ({m.n_vertices} vertices)" + _unturned(args.face))
+    print(f"wrote {out} ({m.n_vertices} vertices)" + _unturned(face))
     return 0
 
 

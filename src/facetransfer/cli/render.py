@@ -85,34 +85,36 @@ def parse_identity(text: str):
         return parts[0]
 
 
-def _face_pose(face: str | None, pose: dict[str, float]) -> dict[str, float]:
-    """``--pose`` with a ``--face`` file's head rotation (the page's ``Ry Rx Rz``) in the
-    renderer's angles (:func:`facetransfer.render.cameras.euler_from_rotation`); ``--pose``
-    may give the scale only."""
+def _face_pose(face, pose: dict[str, float]) -> dict[str, float]:
+    """``--pose`` with a ``--face`` file's head rotation (``face``: read, or None; the page's
+    ``Ry Rx Rz``) in the renderer's angles
+    (:func:`facetransfer.render.cameras.euler_from_rotation`); ``--pose`` may give the scale
+    only."""
     if face is None:
         return pose
-    from ..face_file import face_rotation, read_face
+    from ..face_file import face_rotation
     from ..render.cameras import euler_from_rotation
 
     turned = sorted(set(pose) - {"scale"})
     if turned:
         raise FaceTransferError(f"--pose {','.join(turned)}: the --face file gives the head's "
                                 "rotation (--pose may give the scale)")
-    yaw, pitch, roll = euler_from_rotation(face_rotation(read_face(face)))
+    yaw, pitch, roll = euler_from_rotation(face_rotation(face))
     return {**pose, "yaw": yaw, "pitch": pitch, "roll": roll}
 
 
 def cmd_render(args: argparse.Namespace) -> int:
     from ..render import render_model
-    from .model import face_or_weights
+    from .model import face_arg, face_or_weights
 
     out = check_output_path(args.out, overwrite=args.overwrite, inputs=[args.model, args.face])
     if out.suffix.lower() not in (".png", ".jpg", ".jpeg"):
         raise FaceTransferError(f"--out {out}: expected a .png or .jpg image")
     size = parse_size(args.size)
-    pose = _face_pose(args.face, parse_pose(args.pose))
+    face = face_arg(args)
+    pose = _face_pose(face, parse_pose(args.pose))
     model = resolve_model(args.model)
-    weights = face_or_weights(model, args)
+    weights = face_or_weights(model, args, face)
     res = render_model(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
                        pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
                        scale=pose.get("scale", 1.0), background=parse_colour(args.background))
