@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from facetransfer.demo import run_demo, side_by_side
+from facetransfer.rewrite_options import RewriteOptions
 
 
 def test_side_by_side_layout():
@@ -50,8 +51,8 @@ def test_demo_with_the_mouth_texture_function(data_dir, quick_model, tmp_path):
     # others, so the panels compare exactly
     lossless = VideoOptions(crf=0)
     a = run_demo(tmp_path / "a", frames=4, model=quick_model, video_options=lossless)
-    b = run_demo(tmp_path / "b", frames=4, model=quick_model, mouth="function",
-                 video_options=lossless)
+    b = run_demo(tmp_path / "b", frames=4, model=quick_model,
+                 options=RewriteOptions(mouth="function"), video_options=lossless)
     fa, _ = read_video(a.video)
     fb, _ = read_video(b.video)
     ra, rb = fa[:, :, 1024:].astype(int), fb[:, :, 1024:].astype(int)
@@ -67,7 +68,8 @@ def test_demo_with_the_mouth_texture_function(data_dir, quick_model, tmp_path):
     assert np.linalg.norm(changed[:, [2, 1]].mean(axis=0) - mouth) < 30
     assert np.percentile(np.linalg.norm(changed[:, [2, 1]] - mouth, axis=1), 95) < 80
     with pytest.raises(ValueError, match="mouth"):
-        run_demo(tmp_path / "c", frames=4, model=quick_model, mouth="lips")
+        run_demo(tmp_path / "c", frames=4, model=quick_model,
+                 options=RewriteOptions(mouth="lips"))
 
 
 @pytest.mark.slow

@@ -288,10 +288,8 @@ def test_mouth_bad_input(scene, bank, quick_model):
     all_lost = dataclasses.replace(track, lost=np.ones(track.n_frames, bool))
     with pytest.raises(rwo.RewriteError, match="lost in every frame"):
         ftex.mouth_texture_function(m, frames, all_lost, scene.topo)
-    from facetransfer.demo import run_demo
-
     with pytest.raises(rwo.RewriteError, match="mouth must be one of"):  # before any work
-        run_demo(Path("/nonexistent/demo-out"), model=m, mouth="teeth")
+        rwo.RewriteOptions(mouth="teeth")
     # a function of another model layout
     small = ftex.MouthFunction(fn.function, fn.uvs[:10], fn.frames)
     with pytest.raises(rwo.RewriteError, match="texture function is for"):

@@ -25,7 +25,7 @@ import numpy as np
 
 from .errors import AssetError, VideoError
 from .texture.face import resolve_mouth_mode
-from .rewrite_options import DEFAULT_SPEED, RewriteOptions
+from .rewrite_options import RewriteOptions
 from .transfer_plan import plan_transfer
 from .video_transfer import RenderTarget, render_plan
 
@@ -197,11 +197,8 @@ class DemoResult:
 
 
 def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None,
-             texture: str = "frame", blend: str = "fast", track_method: str = "auto",
-             speed: str = DEFAULT_SPEED, progress_factory=None, mouth: str | None = None,
-             overwrite: bool = True, video_options=None, judge: bool = True,
-             eyes: str = "model", jaw: str = "closed", lips: str = "residual",
-             lip_colour: str = "target", gaze: str = "performance") -> DemoResult:
+             options: RewriteOptions | None = None, progress_factory=None,
+             overwrite: bool = True, video_options=None, judge: bool = True) -> DemoResult:
     """Transfer the expressions of the source clip onto the target clip (§6, Fig. 7C).
 
     Parameters
@@ -215,10 +212,11 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
         Default: :func:`default_inputs`.
     model : MultilinearModel, optional
         Default: :func:`ensure_default_model`.
-    texture, blend, mouth, track_method, speed, eyes, jaw, lips, lip_colour, gaze : str
-        The :class:`facetransfer.rewrite_options.RewriteOptions` of the transfer (checked
-        before any work). ``track_method="auto"`` falls back to a landmark-only fit if tracking
-        fails; a mouth of None is :func:`facetransfer.texture.face.default_mouth_mode`.
+    options : RewriteOptions, optional
+        How the clips are tracked and the face rendered (default: ``RewriteOptions()``;
+        checked when made, before any work). ``track_method="auto"`` falls back to a
+        landmark-only fit if tracking fails; a mouth of None is
+        :func:`facetransfer.texture.face.default_mouth_mode`.
     video_options : VideoOptions, optional
         Codec and CRF of the video (:class:`facetransfer.io.video.VideoOptions`).
 
@@ -226,9 +224,7 @@ def run_demo(out_dir, *, frames: int = 120, source=None, target=None, model=None
     -------
     DemoResult
     """
-    opts = RewriteOptions(texture=texture, mouth=mouth, blend=blend, speed=speed,
-                          track_method=track_method, eyes=eyes, jaw=jaw, lips=lips,
-                          lip_colour=lip_colour, gaze=gaze)
+    opts = RewriteOptions() if options is None else options
     if model is not None:  # an unusable mouth mode fails before any work
         resolve_mouth_mode(opts.mouth, model)
     made = not Path(out_dir).exists()

@@ -717,13 +717,10 @@ def run_demo(args) -> int:
     if out.exists() and not out.is_dir():
         raise FaceTransferError(f"--out {out} is a file; demo writes into a folder (give a "
                                 "folder name)")
-    vopt = video_options(args)
+    vopt, opts = video_options(args), rewrite_options(args)  # checked before any work
     model = _load_model_and_mediapipe(args.model, args.tracker != "landmarks")
     res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
-               model=model, texture=args.texture, blend=args.blend, mouth=args.mouth,
-               track_method=args.tracker, speed=args.speed, eyes=args.eyes, jaw=args.jaw,
-               lips=args.lips, lip_colour=args.lip_colour, gaze=args.gaze,
-               overwrite=args.overwrite,
+               model=model, options=opts, overwrite=args.overwrite,
                progress_factory=_bar_factory(), video_options=vopt)
     t = res.timings
     print(f"wrote {res.video} ({frame_count(res.n_frames)}: source | target | result), "
