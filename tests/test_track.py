@@ -248,6 +248,10 @@ def test_eye_distance_is_the_outer_corners_else_half_the_points_extent():
     assert eye_distance(L) == 5.0                      # |p_36 - p_45|
     L[45], L[30] = np.nan, (10.0, 60.0)
     assert eye_distance(L) == 20.0                     # a corner missing: box 0 x 40, half
+    L[45] = (10.2, 20.0)
+    assert eye_distance(L) == 20.0                     # corners a pixel apart: degenerate, box
+    L[:] = (5.0, 5.0)
+    assert eye_distance(L) == 1.0                      # every point at one place
 
 
 # ------------------------------------------------------------------------------------ Track

@@ -56,7 +56,7 @@ from ..errors import TrackError, VideoError, plain_interrupts
 from .aspect import stored_pixels
 from .camera import Pose
 from . import capture_points
-from .capture_frame import (FrameState, PointWeights, detection_targets, eye_scale, fit_frame,
+from .capture_frame import (FrameState, PointWeights, detection_targets, fit_frame,
                             iris_of, sin_yaw)
 from .capture_points import Sampler, Shape
 from .detect import ClipDetections
@@ -65,7 +65,7 @@ from .fit2d import (Targets, box_qp, gram_blocks, pose_gauss_newton, project_bas
                     targets_normal)
 from .gaze import IRIS_INDEX, frame_gaze_activations, usable_iris
 from .init import require_landmarks
-from .landmarks import IBUG_WEIGHTS
+from .landmarks import IBUG_WEIGHTS, eye_distance
 from .options import Progress
 from .result import Track
 from .scores import ScoreLine, fit_score_lines, score_targets
@@ -221,7 +221,7 @@ def _solve_identity(model, shape: Shape, frames: list, states: list, det: ClipDe
         p, w = detection_targets(det, i, weights)
         Y = project_basis(B, st.pose)                                        # (r, P, 2)
         g_, h_ = targets_normal(Y, st.pose.project(shape.offset_at(sin_yaw(st.pose))),
-                                [(p, w)], eye_scale(p))
+                                [(p, w)], eye_distance(p))
         G += g_
         h += h_
     P = prior.Q @ prior.inv_cov @ prior.Q.T
@@ -243,7 +243,7 @@ def _solve_offset(shape: "Shape", frames, states: list, det: ClipDetections, wei
     b = np.zeros((P, k))
     for i, st in zip(frames, states):
         p, w = detection_targets(det, i, weights)
-        iod = eye_scale(det.points[i])
+        iod = eye_distance(det.points[i])
         q = st.pose.project(shape.points(st.x) - shape.offset)
         r = np.nan_to_num(p - q) / iod
         M = st.pose.scale / iod * st.pose.rotation[:2].copy()               # (2, 3)
@@ -300,7 +300,7 @@ def _fit_sample(shape: Shape, det: ClipDetections, frames, weights, opt, states)
     for j, i in enumerate(frames):
         p, w = detection_targets(det, i, weights)
         st = None if states is None else states[j]
-        out.append(fit_frame(shape, Targets.stack([(p, w)], weights.w), eye_scale(p),
+        out.append(fit_frame(shape, Targets.stack([(p, w)], weights.w), eye_distance(p),
                               None if st is None else st.pose,
                               shape.x0 if st is None else st.x, None, int(opt.iterations) + 1,
                               iris_of(weights, i)))
@@ -346,7 +346,7 @@ def _track_run(shape: Shape, det: ClipDetections, order: list, seed: FrameState 
             q = prev.pose.project(shape.at_view(sin_yaw(prev.pose)).points(prev.x))
         forward = prev_i is not None and i > prev_i
         tg = _targets(det, i, prev_i if prev_i is not None else i, q, weights, opt, forward)
-        st = fit_frame(shape, tg, eye_scale(det.points[i]), None if prev is None else prev.pose,
+        st = fit_frame(shape, tg, eye_distance(det.points[i]), None if prev is None else prev.pose,
                         shape.x0 if prev is None else prev.x,
                         None if prev is None or prev_i is None else prev.x, int(opt.iterations),
                         iris_of(weights, i), weights.anchor(i))

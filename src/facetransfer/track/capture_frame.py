@@ -20,7 +20,7 @@ from .detect import ClipDetections
 from .fit2d import Targets, pose_gauss_newton
 from .gaze import frame_gaze_activations
 
-__all__ = ["FrameState", "PointWeights", "sin_yaw", "eye_scale", "residual_rms", "gaze_fixed",
+__all__ = ["FrameState", "PointWeights", "sin_yaw", "residual_rms", "gaze_fixed",
            "fit_frame", "detection_targets", "iris_of"]
 
 
@@ -36,11 +36,6 @@ class FrameState:
 def sin_yaw(pose: Pose) -> float:
     """Sine of the yaw ``b`` of ``R = Rx(a) Ry(b) Rz(c)``: ``R[0, 2]``."""
     return float(np.clip(pose.rotation[0, 2], -1.0, 1.0))
-
-
-def eye_scale(points: np.ndarray) -> float:
-    d = float(np.linalg.norm(points[36] - points[45]))
-    return d if np.isfinite(d) and d > 1.0 else float(np.nanmax(np.ptp(points, axis=0)) / 2)
 
 
 def residual_rms(X: np.ndarray, st_pose: Pose, p: np.ndarray, w: np.ndarray, iod: float) -> float:

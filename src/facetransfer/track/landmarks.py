@@ -79,14 +79,18 @@ def eye_distance(points: np.ndarray) -> float:
     Returns
     -------
     float
-        ``|p_36 - p_45|``; with a corner missing, half the longer side of the bounding box of
-        the points that are there; 1.0 when none is.
+        ``|p_36 - p_45|``; with a corner missing, or the corners within a pixel of each other
+        (a degenerate detection), half the longer side of the bounding box of the points that
+        are there; 1.0 when that is not more than a pixel either (or no point is there).
     """
     L = np.asarray(points, float)
     if np.all(np.isfinite(L[[36, 45]])):
-        return float(np.linalg.norm(L[36] - L[45]))
+        d = float(np.linalg.norm(L[36] - L[45]))
+        if d > 1.0:
+            return d
     ok = np.all(np.isfinite(L), axis=1)
-    return float(np.ptp(L[ok], axis=0).max() / 2) if ok.any() else 1.0
+    half_box = float(np.ptp(L[ok], axis=0).max() / 2) if ok.any() else 0.0
+    return half_box if half_box > 1.0 else 1.0
 
 
 
