@@ -112,9 +112,21 @@ for (const t of args.times) {
   }
   frames.push({ t, influences: Array.from(mesh.morphTargetInfluences), positions: pos });
 }
+// the triangles three draws front side out: counter-clockwise, the way the normals point
+const idx = mesh.geometry.index, nrm = mesh.geometry.attributes.normal, tri = new THREE.Triangle();
+const fn = new THREE.Vector3(), vn = new THREE.Vector3(), a = new THREE.Vector3();
+let outward = 0;
+for (let f = 0; f < idx.count; f += 3) {
+  const i = idx.getX(f), j = idx.getX(f + 1), k = idx.getX(f + 2);
+  tri.setFromAttributeAndIndices(mesh.geometry.attributes.position, i, j, k).getNormal(fn);
+  vn.fromBufferAttribute(nrm, i).add(a.fromBufferAttribute(nrm, j)).add(a.fromBufferAttribute(nrm, k));
+  if (fn.dot(vn) > 0) outward++;
+}
 const dict = mesh.morphTargetDictionary || {};
 const out = { revision: THREE.REVISION, duration: clip.duration, frames,
   local: Array.from(mesh.geometry.attributes.position.array),
+  side: mesh.material.side === THREE.FrontSide ? 'front' : 'other',
+  outward: outward / (idx.count / 3),
   targetNames: Object.keys(dict).sort((a, b) => dict[a] - dict[b]) };
 
 const map = mesh.material.map;
@@ -212,8 +224,8 @@ def test_three_plays_the_tracked_face(case, tmp_path):
 
 def test_three_sees_glTFs_axes_and_metres(case, tmp_path):
     """The rest mesh in glTF's frame: +Y up, the face's front +Z, its left +X (glTF 2.0,
-    Coordinate system and units), a head's size in metres; and the head's place in the world
-    on the side of the image the track saw it."""
+    Coordinate system and units), a head's size in metres, its front faces outward; and the
+    head's place in the world on the side of the image the track saw it."""
     model, track, _, glb = case
     shown = _play(glb, [0.0], tmp_path)
     V = np.reshape(shown["local"], (-1, 3))
@@ -225,6 +237,9 @@ def test_three_sees_glTFs_axes_and_metres(case, tmp_path):
     assert brows[1] - chin[1] > 0.08  # up is +Y, ~10-13 cm from chin to brows
     assert brows[1] - chin[1] < 0.2
     assert nose_tip[2] > (left_eye[2] + right_eye[2]) / 2 + 0.01  # the nose points to +Z
+    # three culls back faces of a single-sided material: the triangles wind counter-clockwise
+    # seen from outside (glTF's front face), the way the normals point
+    assert shown["side"] == "front" and shown["outward"] > 0.99
     # the head where the image shows it: right of the frame's centre is +X, above it is +Y
     world = np.reshape(shown["frames"][0]["positions"], (-1, 3))
     centre = world[np.asarray(model.landmarks)].mean(axis=0)
