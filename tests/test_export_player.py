@@ -119,7 +119,8 @@ let outward = 0;
 for (let f = 0; f < idx.count; f += 3) {
   const i = idx.getX(f), j = idx.getX(f + 1), k = idx.getX(f + 2);
   tri.setFromAttributeAndIndices(mesh.geometry.attributes.position, i, j, k).getNormal(fn);
-  vn.fromBufferAttribute(nrm, i).add(a.fromBufferAttribute(nrm, j)).add(a.fromBufferAttribute(nrm, k));
+  vn.fromBufferAttribute(nrm, i).add(a.fromBufferAttribute(nrm, j))
+    .add(a.fromBufferAttribute(nrm, k));
   if (fn.dot(vn) > 0) outward++;
 }
 const dict = mesh.morphTargetDictionary || {};
@@ -170,7 +171,7 @@ def _play(glb: Path, times, tmp_path: Path, uv_vertices=None) -> dict:
     return out
 
 
-def _face(model, track, weights, rotation, translation_units) -> np.ndarray:
+def _face(model, weights, rotation, translation_units) -> np.ndarray:
     """The face as the project says it is: the model's mesh of ``weights`` in metres, turned by
     the head's model-to-camera ``rotation`` and moved by its translation (export/common.py)."""
     V = model.synthesize(weights).reshape(-1, 3) * METRES_PER_UNIT
@@ -203,21 +204,21 @@ def test_three_plays_the_tracked_face(case, tmp_path):
     for k, fr in zip(keys, shown["frames"]):
         influence_err[k] = float(np.abs(np.subtract(fr["influences"], a[k])).max())
         got = np.reshape(fr["positions"], (-1, 3))
-        want = _face(model, track, track.weights_at(k), track.rotation[k], T[k])
+        want = _face(model, track.weights_at(k), track.rotation[k], T[k])
         err[k] = float(np.abs(got - want).max())
     # half-way: LINEAR is a lerp of the weights (the face is linear in them) and translation,
     # a slerp of the rotation (glTF 2.0, Animations: interpolation)
     w = {n: (track.weights[n][mid] + track.weights[n][mid + 1]) / 2 for n in track.mode_names}
     R = Slerp([0.0, 1.0], Rotation.from_matrix(track.rotation[mid:mid + 2]))(0.5).as_matrix()
     got = np.reshape(shown["frames"][-1]["positions"], (-1, 3))
-    err[mid + 0.5] = float(np.abs(got - _face(model, track, w, R, (T[mid] + T[mid + 1]) / 2))
+    err[mid + 0.5] = float(np.abs(got - _face(model, w, R, (T[mid] + T[mid + 1]) / 2))
                            .max())
     print("three vs the project, max vertex error (m) at frame:", err)
     assert max(err.values()) < 1e-5, err
     assert max(influence_err.values()) < 1e-6, influence_err  # key k is frame k's activations
     # the frames differ by far more than that (the comparison can fail)
-    apart = np.abs(_face(model, track, track.weights_at(mid), track.rotation[mid], T[mid])
-                   - _face(model, track, track.weights_at(mid + 1), track.rotation[mid + 1],
+    apart = np.abs(_face(model, track.weights_at(mid), track.rotation[mid], T[mid])
+                   - _face(model, track.weights_at(mid + 1), track.rotation[mid + 1],
                            T[mid + 1])).max()
     assert apart > 1e-3
 
