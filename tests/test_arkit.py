@@ -84,6 +84,14 @@ def test_rig_reproduces_the_training_meshes(arkit_model_full):
                                atol=1e-8)
 
 
+def test_rig_refuses_activations_of_another_length(arkit_model):
+    """ExpressionRig.shape of 51 activations raised numpy's "shape-mismatch for sum"."""
+    rig = expression_rig(arkit_model, arkit_model.default_weights())
+    with pytest.raises(ShapeError, match=r"activations must be \(\.\.\., 52\).*got \(4, 51\)"):
+        rig.shape(np.zeros((4, 51)))
+    assert rig.shape(np.zeros((4, 52))).shape == (4,) + rig.neutral.shape
+
+
 def test_eye_blink_left_closes_the_eye_on_the_image_right(arkit_model):
     """ARKit and MediaPipe mean the subject's own left: in a frontal picture, the image's right."""
     from facetransfer.render import render_model

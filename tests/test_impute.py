@@ -394,3 +394,19 @@ def test_additive_ict_faces_are_recovered(quick_ict_dataset):
         res = im.impute_dataset(inc, method=method)
         err = np.linalg.norm(res.dataset.vertices[held] - truth) / disp
         assert err < 1e-6, method
+
+
+def test_an_init_of_another_shape_is_named():
+    """An init of the wrong size failed in numpy's reshape ("cannot reshape array of size 9"),
+    and one of the right size but another layout (P, d_1 d_2) was read as if it were right."""
+    from facetransfer.errors import ShapeError
+
+    T = low_rank_tensor(shape=(6, 5), ranks=(2, 2), P=30)
+    mask = np.ones((6, 5), bool)
+    mask[0, 1] = mask[2, 3] = False
+    with pytest.raises(ShapeError, match=r"shape \(30, 6, 5\), got \(3, 3\)"):
+        im.impute_tensor(hide(T, mask), mask, init=np.zeros((3, 3)))
+    with pytest.raises(ShapeError, match=r"shape \(30, 6, 5\), got \(30, 30\)"):
+        im.impute_tensor(hide(T, mask), mask, init=T.reshape(30, 30))
+    done = im.impute_tensor(hide(T, mask), mask, init=T, tol=1e-12, max_iter=300)
+    np.testing.assert_allclose(done.tensor, T, atol=1e-6)

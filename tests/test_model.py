@@ -347,6 +347,35 @@ def test_weight_validation():
         m.synthesize({"identity": np.zeros(5)})
 
 
+def test_vertices_must_be_integer_indices():
+    """A float selection was truncated (1.7 read as vertex 1) and a boolean mask read as the
+    indices 0 and 1: synthesize returned the wrong vertices without a word."""
+    m = build_model(random_dataset(seed=11))
+    w = m.default_weights()
+    with pytest.raises(ShapeError, match="integer vertex indices, got dtype float64"):
+        m.synthesize(w, vertices=np.array([1.7, 2.2]))
+    mask = np.zeros(m.n_vertices, bool)
+    mask[[3, 7]] = True
+    with pytest.raises(ShapeError, match=r"np.flatnonzero\(mask\)"):
+        m.synthesize(w, vertices=mask)
+    with pytest.raises(ShapeError, match="integer vertex indices"):
+        m.mode_basis("expression", w, vertices=mask)
+    sel = m.synthesize(w, vertices=np.flatnonzero(mask))
+    np.testing.assert_allclose(sel, m.synthesize(w)[[3, 7]], atol=1e-12)
+    assert m.synthesize(w, vertices=np.array([], np.int64)).shape == (0, 3)
+
+
+def test_batch_shapes_that_do_not_broadcast_name_the_modes():
+    """Weights of 3 and of 4 frames raised numpy's broadcast ValueError (arg 0, arg 1), not a
+    ShapeError naming the modes."""
+    m = build_model(random_dataset(seed=12))
+    W = {"identity": np.zeros((3, 5)), "expression": np.zeros((4, 4)), "viseme": np.zeros(3)}
+    with pytest.raises(ShapeError, match=r"identity \(3, 5\), expression \(4, 4\)"):
+        m.synthesize(W)
+    with pytest.raises(ShapeError, match="do not broadcast"):
+        m.clip_basis(W)
+
+
 def test_quick_ict_model_separates_identity_and_expression(quick_model, quick_ict_dataset):
     # Real face data: the truncated model still reproduces training faces to sub-millimetre
     m, ds = quick_model, quick_ict_dataset

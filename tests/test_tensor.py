@@ -170,3 +170,55 @@ def test_hooi_through_attribute_gram_equals_direct_sweeps(monkeypatch):
     G, active = tl.attribute_gram(T, {0})
     assert active == (1, 2, 3)
     assert np.allclose(np.einsum("abcdbc->ad", G), tl.mode_gram(T, 1))
+
+
+def test_tensor_shape_error_is_the_library_shape_error():
+    """A researcher catching the project's ShapeError caught no mis-shaped mode product: the
+    tensor module's error subclassed ValueError alone."""
+    from facetransfer.errors import ShapeError
+
+    T = np.zeros((2, 3, 4))
+    with pytest.raises(ShapeError, match=r"\(2, 3, 4\) and \(5, 7\)"):
+        tl.mode_dot(T, np.zeros((5, 7)), 1)
+
+
+def test_modes_out_of_range_are_refused_not_wrapped():
+    """fold's mode and nmode_svd's / hooi's skip wrapped around (mode 5 of a 3-way tensor was
+    mode 2; skip=(3,) skipped mode 0) and returned a result for another mode."""
+    T = np.random.default_rng(3).normal(size=(6, 4, 5))
+    with pytest.raises(tl.TensorShapeError, match=r"mode 5 out of range.*\(6, 4, 5\)"):
+        tl.fold(tl.unfold(T, 2), 5, T.shape)
+    with pytest.raises(tl.TensorShapeError, match=r"mode 3 out of range.*\(6, 4, 5\)"):
+        tl.nmode_svd(T, skip=(3,))
+    with pytest.raises(tl.TensorShapeError, match=r"mode -4 out of range"):
+        tl.hooi(T, [None, 2, 2], skip=(-4,))
+    # negative modes in range still count from the end
+    assert tl.nmode_svd(T, [2, 2, None], skip=(-1,)).ranks == (2, 2, 5)
+
+
+def test_hooi_refuses_ranks_that_disagree_with_its_init():
+    """hooi(T, ranks, init=d) silently kept init's ranks: asked for (2, 2, 2) from a (3, 2, 2)
+    start it returned a (3, 2, 2) core."""
+    T = np.random.default_rng(4).normal(size=(6, 4, 5))
+    start = tl.nmode_svd(T, [3, 2, 2])
+    with pytest.raises(tl.TensorShapeError, match="rank 2 asked for mode 0.*rank 3"):
+        tl.hooi(T, [2, 2, 2], init=start)
+    with pytest.raises(tl.TensorShapeError, match=r"factor of mode 1 has shape \(4, 2\), "
+                                                   r"expected \(3, r\)"):
+        tl.hooi(T[:, :3], init=start)
+    refined = tl.hooi(T, [3, None, 2], init=start)      # agreeing (or open) ranks: as before
+    assert refined.ranks == (3, 2, 2) and refined.errors[-1] <= start.errors[-1]
+
+
+@pytest.mark.parametrize("bad", [np.nan, np.inf])
+def test_non_finite_tensor_is_named(bad):
+    """A NaN in the data made nmode_svd raise numpy's LinAlgError "Eigenvalues did not
+    converge", naming neither the tensor nor the cause."""
+    from facetransfer.errors import FaceTransferError
+
+    T = np.ones((3, 3, 3))
+    T[1, 2, 0] = bad
+    with pytest.raises(FaceTransferError, match=r"shape \(3, 3, 3\) holds NaN or infinite"):
+        tl.nmode_svd(T)
+    with pytest.raises(FaceTransferError, match="NaN or infinite"):
+        tl.hooi(T, [2, 2, 2], skip=(0,))

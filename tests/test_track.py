@@ -287,6 +287,22 @@ def test_track_save_load_round_trip(tmp_path):
         u.camera(7)
 
 
+def test_every_key_a_track_file_holds_is_in_its_documented_layout(tmp_path):
+    """The file-format table of facetransfer.track.result (the TRACK.npz layout a researcher
+    reads) lacked ``shot_starts``, which save writes for a clip of several shots."""
+    import re
+
+    from facetransfer.track import result
+
+    names = tuple(f"s{i}" for i in range(52))
+    t = _track(F=4, shot_starts=(2,), blendshapes=np.zeros((4, 52), np.float32),
+               blendshape_names=names, detections2d=np.zeros((4, 68, 2)))
+    with np.load(t.save(tmp_path / "t.npz")) as z:
+        keys = {re.sub(r"^weights_.*", "weights_<mode>", k) for k in z.files}
+    documented = set(re.findall(r"^``([a-z0-9_<>]+)``", result.__doc__, re.M))
+    assert "shot_starts" in keys and keys <= documented, keys - documented
+
+
 def test_track_validation_and_bad_files(tmp_path):
     with pytest.raises(TrackError, match="rotation"):
         _track(rotation=np.zeros((4, 2, 3)))

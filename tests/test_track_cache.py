@@ -182,3 +182,17 @@ def test_a_track_detected_every_other_frame_is_kept_apart_and_a_full_one_preferr
     assert get(2) == 1 and get(1) == 1 and made == [2, 1]  # the full one preferred
     assert obtain._depends("capture", video, None, "left", 2) == "face=left,every=2"
     assert obtain._depends("auto", video, None) is None
+
+
+@pytest.mark.parametrize("kw, said", [({"max_frames": 0}, "max_frames must be >= 1"),
+                                      ({"max_frames": -3}, "max_frames must be >= 1"),
+                                      ({"detect_every": 0}, "detect_every must be >= 1"),
+                                      ({"method": "klt"}, "'flow' here")])
+def test_obtain_track_names_a_bad_count_or_method(tmp_path, kw, said):
+    """max_frames=0 was said as "video ... has no frames (from frame 0)", detect_every=0 was
+    taken for 1, and method="klt" (the track command's name) did not say the library's."""
+    from facetransfer.errors import FaceTransferError
+    from facetransfer.track import obtain
+
+    with pytest.raises(FaceTransferError, match=said):
+        obtain.obtain_track(tmp_path / "none.mp4", _Model("m"), **kw)

@@ -276,6 +276,45 @@ def test_edit_bad_input(quick_model, quick_track):
         edit_track(make_track(5), quick_model, add=[EditAdd("frown", 0, 2)])
 
 
+def test_edits_made_in_python_are_checked_like_parsed_ones(quick_model, quick_track):
+    """An EditAdd built directly with its range reversed was accepted (the envelope then never
+    reached 1: 0.26 at most, the edit silently weak), and a NaN amount or factor surfaced as
+    "track weights ... have non-finite values"."""
+    m, tr = quick_model, quick_track
+    with pytest.raises(TransferError, match=r"frown@20-10: the range ends \(10\) before"):
+        edit_track(tr, m, add=[EditAdd("frown", 20, 10)])
+    with pytest.raises(TransferError, match="frown@1-4: the amount must be finite"):
+        edit_track(tr, m, add=[EditAdd("frown", 1, 4, float("nan"))])
+    with pytest.raises(TransferError, match="smile=nan: the factor must be finite"):
+        edit_track(tr, m, scale=[EditScale("smile", float("nan"))])
+
+
+def test_edit_track_takes_one_edit_or_its_text(quick_model, quick_track):
+    """add=EditAdd(...) (not in a list) raised TypeError "'EditAdd' object is not iterable";
+    add=["frown@10-20"] raised AttributeError "'str' object has no attribute 'start'"."""
+    m, tr = quick_model, quick_track
+    want = edit_track(tr, m, add=[EditAdd("frown", 10, 20)], scale=[EditScale("smile", 1.5)])
+    for add, scale in ((EditAdd("frown", 10, 20), EditScale("smile", 1.5)),
+                       ("frown@10-20", "smile=1.5"), (["frown@10-20"], ("smile=1.5",))):
+        got = edit_track(tr, m, add=add, scale=scale)
+        np.testing.assert_array_equal(got.weights["expression"], want.weights["expression"])
+    with pytest.raises(TransferError, match="an edit must be an EditAdd or its text, got int 3"):
+        edit_track(tr, m, add=[3])
+
+
+def test_nearest_frames_refuses_rows_of_another_length():
+    """Query and bank rows of different lengths raised numpy's broadcast error."""
+    from facetransfer.errors import ShapeError
+    from facetransfer.transfer import nearest_frames
+
+    with pytest.raises(ShapeError, match=r"got \(3, 4\) and \(5, 6\)"):
+        nearest_frames(np.zeros((3, 4)), np.zeros((5, 6)))
+    with pytest.raises(ShapeError, match=r"valid must be \(5,\)"):
+        nearest_frames(np.zeros((3, 4)), np.zeros((5, 4)), np.ones(4, bool))
+    bank = np.arange(10.0).reshape(5, 2)
+    np.testing.assert_array_equal(nearest_frames(bank[[4, 0]] + 0.1, bank), [4, 0])
+
+
 def test_parse_edit_arguments():
     assert parse_add("frown@120-180") == EditAdd("frown", 120, 180, 1.0)
     assert parse_add("jaw_open*0.5@3-9") == EditAdd("jaw_open", 3, 9, 0.5)

@@ -368,3 +368,14 @@ def test_a_target_track_of_another_clip_is_said(quick_model, caplog):
     assert [r.getMessage() for r in caplog.records] == [
         "target track of /clips/katie.mp4 was made from katie.mp4, not d6.mp4: if that is "
         "another clip, its motion drives the wrong face"]
+
+
+def test_transfer_video_of_a_path_says_what_it_takes(tmp_path):
+    """transfer_video("target.mp4", ...) failed with AttributeError "'str' object has no
+    attribute 'performance'"."""
+    from facetransfer.errors import RewriteError
+    from facetransfer.video_transfer import transfer_video
+
+    with pytest.raises(RewriteError, match=r"takes a TransferSources.*got str 't.mp4'.*"
+                                           r"TransferSources.of\(target"):
+        transfer_video("t.mp4", tmp_path / "out.mp4", object())

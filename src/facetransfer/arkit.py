@@ -230,6 +230,9 @@ class ExpressionRig:
     def shape(self, activations: np.ndarray) -> np.ndarray:
         """Vertices ``(..., n, 3)`` for activations ``(..., 52)``."""
         a = np.asarray(activations, dtype=np.float64)
+        if a.shape[-1:] != self.deltas.shape[:1]:
+            raise ShapeError(f"activations must be (..., {self.deltas.shape[0]}) (one per name "
+                             f"of {len(self.names)}), got {a.shape}")
         return self.neutral + np.tensordot(a, self.deltas, axes=([-1], [0]))
 
 

@@ -214,6 +214,16 @@ class MultilinearModel:
                 raise ShapeError(f"weights of mode {name!r} must end in {r}, got shape {w.shape}")
         return ws
 
+    def _batch_shape(self, ws: list[np.ndarray]) -> tuple[int, ...]:
+        """The leading (batch) dimensions the modes' weights broadcast to; ShapeError naming
+        each mode's shape where they do not (numpy's own error names neither)."""
+        try:
+            return np.broadcast_shapes(*[w.shape[:-1] for w in ws])
+        except ValueError:
+            shapes = ", ".join(f"{n} {w.shape}" for n, w in zip(self.mode_names, ws))
+            raise ShapeError(f"the weights' leading (batch) dimensions do not broadcast: "
+                             f"{shapes}") from None
+
     def synthesize(self, weights: Weights, *, vertices: np.ndarray | None = None) -> np.ndarray:
         """Faces from attribute weights, Eq. (5): ``f = M ×_2 w_2ᵀ ×_3 w_3ᵀ ... ×_N w_Nᵀ``.
 
@@ -229,7 +239,9 @@ class MultilinearModel:
         (..., n_vertices or m, 3) float64
         """
         ws = self._weights_list(weights)
-        batch = np.broadcast_shapes(*[w.shape[:-1] for w in ws])
+        batch = self._batch_shape(ws)
+        if vertices is not None and np.size(vertices) == 0:   # an empty selection
+            return np.zeros(batch + (0, 3))
         if vertices is not None and len(ws) > 1 and self._first_mode_worth(ws[0], vertices):
             # one identity over the batch, already contracted or wanted for many vertices:
             # its rows of the contracted core (the core's rows alone copy r_1 times more)
@@ -262,7 +274,7 @@ class MultilinearModel:
         ClipBasis
         """
         ws = self._weights_list(weights)
-        n = np.broadcast_shapes(*[w.shape[:-1] for w in ws])
+        n = self._batch_shape(ws)
         if len(n) != 1:
             raise ShapeError(f"a clip's weights must be (F, r_k), got batch shape {n}")
         ws = [np.broadcast_to(w, n + w.shape[-1:]) for w in ws]
@@ -312,8 +324,14 @@ class MultilinearModel:
             return key in _FIRST_MODE.get(self, {})
 
     def _rows(self, vertices: np.ndarray) -> np.ndarray:
-        """The core's rows ``(3m,)`` of ``vertices`` (x, y, z of each), checked."""
-        v = np.asarray(vertices, dtype=np.int64).ravel()
+        """The core's rows ``(3m,)`` of ``vertices`` (x, y, z of each), checked: integer
+        indices (floats were truncated, a boolean mask read as indices 0 and 1)."""
+        a = np.asarray(vertices)
+        if a.size and a.dtype.kind not in "iu":
+            raise ShapeError(f"vertices must be integer vertex indices, got dtype {a.dtype}"
+                             + (" (for a boolean mask give np.flatnonzero(mask))"
+                                if a.dtype.kind == "b" else ""))
+        v = a.astype(np.int64, copy=False).ravel()
         if v.size and (v.min() < 0 or v.max() >= self.n_vertices):
             raise ShapeError(f"vertex indices outside 0..{self.n_vertices - 1}")
         return (3 * v[:, None] + np.arange(3)).ravel()

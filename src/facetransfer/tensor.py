@@ -25,6 +25,8 @@ from typing import Sequence
 
 import numpy as np
 
+from .errors import FaceTransferError, ShapeError
+
 log = logging.getLogger(__name__)
 
 __all__ = [
@@ -44,8 +46,11 @@ __all__ = [
 ]
 
 
-class TensorShapeError(ValueError):
-    """Shapes of a tensor and a matrix (or a rank list) do not agree."""
+class TensorShapeError(ShapeError):
+    """Shapes of a tensor and a matrix (or a rank list) do not agree.
+
+    A :class:`facetransfer.errors.ShapeError` (so a ``ValueError``), as every other shape error
+    of the library."""
 
 
 def _check_mode(tensor: np.ndarray, mode: int) -> int:
@@ -85,6 +90,8 @@ def fold(matrix: np.ndarray, mode: int, shape: Sequence[int]) -> np.ndarray:
         Shape of the tensor to rebuild.
     """
     shape = tuple(int(s) for s in shape)
+    if not -len(shape) <= mode < len(shape):
+        raise TensorShapeError(f"mode {mode} out of range for a tensor of shape {shape}")
     mode = mode % len(shape)
     matrix = np.asarray(matrix)
     rest = [s for i, s in enumerate(shape) if i != mode]
@@ -314,9 +321,9 @@ def nmode_svd(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
     ----------
     Vlasic et al. 2005, §3, Eq. (1)–(3) and §4.3, Eq. (4).
     """
-    T = np.asarray(tensor, dtype=np.float64)
+    T, norm2 = _finite_data(tensor)
     N = T.ndim
-    skip = {s % N for s in skip}
+    skip = _skipped(T, skip)
     if ranks is not None and len(ranks) != N:
         raise TensorShapeError(f"{len(ranks)} ranks given for a tensor of shape {T.shape}")
     active = [n for n in range(N) if n not in skip]
@@ -333,8 +340,26 @@ def nmode_svd(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
         core = _kron_core(T, skip, active, [factors[n] for n in active])  # Eq. (1) / (4)
     else:
         core = multi_mode_dot(T, list(factors), transpose=True)  # Eq. (1)
-    err = _rel_error(float(np.vdot(T, T)), core)
+    err = _rel_error(norm2, core)
     return Tucker(core, factors, tuple(eig), (err,))
+
+
+def _finite_data(tensor: np.ndarray) -> tuple[np.ndarray, float]:
+    """The tensor as float64 and its squared norm, refused (FaceTransferError naming its shape)
+    when it holds NaN or infinities: the eigensolver would fail on them with LinAlgError
+    ("Eigenvalues did not converge"), which names neither the tensor nor the cause."""
+    T = np.asarray(tensor, dtype=np.float64)
+    norm2 = float(np.vdot(T, T))    # NaN or inf iff an entry is (or it overflows)
+    if not np.isfinite(norm2):
+        raise FaceTransferError(f"tensor of shape {T.shape} holds NaN or infinite values (or "
+                               "values too large to square)")
+    return T, norm2
+
+
+def _skipped(T: np.ndarray, skip: Sequence[int]) -> set[int]:
+    """The modes ``skip`` (negative: from the end) as 0-based mode numbers, each checked to be
+    a mode of ``T``: one out of range would otherwise wrap onto another mode."""
+    return {_check_mode(T, int(s)) for s in skip}
 
 
 _LETTERS = "abcdefghijklmnopqrstuvwxyz"
@@ -390,14 +415,13 @@ def _gram_contract(G: np.ndarray, projections: Sequence[np.ndarray | None], keep
 
 
 def _hooi_gram(T: np.ndarray, skip: set, ranks, variance, init: "Tucker | None", max_iter: int,
-               tol: float) -> "Tucker":
+               tol: float, norm2: float) -> "Tucker":
     """HOOI over the attribute modes through their joint Gram matrix (see :func:`hooi`).
 
     The initial N-mode SVD (unless ``init`` is given) comes from the same Gram: the mode-n Gram
     of the data is its partial trace over the other attribute modes.
     """
     G, active = attribute_gram(T, skip)
-    norm2 = float(np.vdot(T, T))
     if ranks is not None and len(ranks) != T.ndim:
         raise TensorShapeError(f"{len(ranks)} ranks given for a tensor of shape {T.shape}")
     if init is None:
@@ -470,18 +494,21 @@ def hooi(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
     Tucker
         ``errors`` holds the error of the initial guess and of every sweep.
     """
-    T = np.asarray(tensor, dtype=np.float64)
+    T, norm2 = _finite_data(tensor)
     N = T.ndim
-    skip = {s % N for s in skip}
+    skip = _skipped(T, skip)
     active = [n for n in range(N) if n not in skip]
+    if ranks is not None and len(ranks) != N:
+        raise TensorShapeError(f"{len(ranks)} ranks given for a tensor of shape {T.shape}")
+    if init is not None:
+        _check_init(init, T.shape, active, ranks)
     if skip and _prod(T.shape[n] for n in active) <= GRAM_LIMIT:
         # The skipped (vertex) mode is never factored, so the data enter every sweep only through
         # the small joint Gram of the attribute modes: one pass over the big tensor, then sweeps
         # of cost O(D² r) with D = d_1 ... d_K, and one final projection for the core.
-        return _hooi_gram(T, skip, ranks, variance, init, max_iter, tol)
+        return _hooi_gram(T, skip, ranks, variance, init, max_iter, tol, norm2)
     start = init if init is not None else nmode_svd(T, ranks, skip=sorted(skip), variance=variance)
     factors = list(start.factors)
-    norm2 = float(np.vdot(T, T))
     errors = [start.errors[-1] if start.errors else _rel_error(norm2, start.core)]
     core = start.core
     for it in range(max_iter):
@@ -497,3 +524,23 @@ def hooi(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
         if errors[-2] - errors[-1] <= tol * max(errors[-2], 1e-300):
             break
     return Tucker(core, tuple(factors), start.eigenvalues, tuple(errors))
+
+
+def _check_init(init: Tucker, shape: tuple, active: list[int], ranks) -> None:
+    """:func:`hooi`'s ``init``: a factor ``(d_n, r_n)`` for every factored mode of a tensor of
+    ``shape``, of the rank ``ranks`` asks where it asks one (the ranks are the init's: a rank
+    given besides it would otherwise be ignored without a word)."""
+    if len(init.factors) != len(shape):
+        raise TensorShapeError(f"init has {len(init.factors)} factors for a tensor of shape "
+                               f"{shape}")
+    for n in active:
+        U = init.factors[n]
+        if U is None or U.ndim != 2 or U.shape[0] != shape[n]:
+            raise TensorShapeError(f"init's factor of mode {n} has shape "
+                                   f"{None if U is None else U.shape}, expected ({shape[n]}, r) "
+                                   f"for a tensor of shape {shape}")
+        r = None if ranks is None else ranks[n]
+        if r is not None and int(r) != U.shape[1]:
+            raise TensorShapeError(f"rank {r} asked for mode {n}, but init's factor has rank "
+                                   f"{U.shape[1]}: the ranks come from init (give one or the "
+                                   "other)")

@@ -35,7 +35,7 @@ from typing import Iterator, Sequence
 import numpy as np
 
 from .arkit import attach_activations, is_arkit_model
-from .errors import FaceTransferError, RewriteError
+from .errors import FaceTransferError, RewriteError, ShapeError
 from .topology import close_mouth, mesh_topology
 from .track.project import project_landmarks, take_frames
 
@@ -338,7 +338,9 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
     Track
         Target's fps, frame size and source path; ``lost`` where the target or any source used
         for the frame is lost (those frames keep the original footage when rendered);
-        ``landmarks2d`` copied from the pose track (recompute with :func:`project_landmarks`).
+        ``landmarks2d`` copied from the pose track and ``blendshapes`` None (new weights:
+        :func:`project_landmarks` with the model recomputes both, and the exports of
+        :mod:`facetransfer.export` need the blendshapes); ``detections2d`` None.
     """
     sources = {}
     for what, tr in (("expression", expression), ("viseme", viseme), ("pose", pose)):
@@ -518,7 +520,9 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
     track : Track
     model : MultilinearModel
         The model the track was made with (its training weights define the expressions).
-    add, scale : sequences of EditAdd / EditScale, keyword-only
+    add, scale : EditAdd / EditScale, their text, or sequences of them, keyword-only
+        An edit, or its text as the CLI takes it (``"frown@120-180"``, ``"smile=1.5"``:
+        :func:`parse_add`, :func:`parse_scale`).
     ramp : int
         Ramp length in frames at each end of an added range.
     mode, neutral : str
@@ -531,8 +535,11 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
     Raises
     ------
     TransferError
-        Unknown expression, a frame range outside the clip, a track of another model.
+        Unknown expression, a frame range outside the clip or ending before it starts, an
+        amount or factor that is not finite, a track of another model.
     """
+    add = _edits(add, EditAdd, parse_add)
+    scale = _edits(scale, EditScale, parse_scale)
     if mode not in track.weights:
         raise TransferError(f"the track has no {mode!r} mode (modes: {', '.join(track.mode_names)})")
     if tuple(model.mode_names) != tuple(track.mode_names) or \
@@ -540,11 +547,7 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
         raise TransferError("the track was made with another model (modes or ranks differ)")
     if int(ramp) < 0:
         raise TransferError(f"ramp must be >= 0 frames, got {ramp}")
-    n = track.n_frames
-    for a in add:
-        if a.start < 0 or a.stop > n - 1:
-            raise TransferError(f"--add {a.label}@{a.start}-{a.stop}: frames outside the clip "
-                                f"(0-{n - 1})")
+    _check_edits(add, scale, track.n_frames)
     k = model.mode_index(mode)
     scale = [dataclasses.replace(s, label=x) for s in scale
              for x in _edited_labels(model.labels[k], s.label)]
@@ -557,6 +560,36 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
     weights = dict(track.weights)
     weights[mode] = w
     return attach_activations(dataclasses.replace(track, weights=weights, info={}), model)
+
+
+def _edits(edits, kind: type, parse) -> list:
+    """:func:`edit_track`'s ``add`` or ``scale`` as a list of ``kind``: one edit or a sequence,
+    each an edit or its text (``parse``); anything else a TransferError naming it."""
+    items = [edits] if isinstance(edits, (str, kind)) else list(edits)
+    out = [parse(e) if isinstance(e, str) else e for e in items]
+    for e in out:
+        if not isinstance(e, kind):
+            raise TransferError(f"an edit must be an {kind.__name__} or its text, got "
+                                f"{type(e).__name__} {e!r}")
+    return out
+
+
+def _check_edits(add: list, scale: list, n: int) -> None:
+    """The edits' frame ranges lie in the clip of ``n`` frames and run forwards, and their
+    amounts and factors are finite (a NaN reached the track as non-finite weights; a range
+    ending before its start weighed every frame less than 1 and edited nothing fully)."""
+    for a in add:
+        where = f"--add {a.label}@{a.start}-{a.stop}"
+        if a.start < 0 or a.stop > n - 1:
+            raise TransferError(f"{where}: frames outside the clip (0-{n - 1})")
+        if a.stop < a.start:
+            raise TransferError(f"{where}: the range ends ({a.stop}) before it starts "
+                                f"({a.start})")
+        if not np.isfinite(a.amount):
+            raise TransferError(f"{where}: the amount must be finite, got {a.amount}")
+    for sc in scale:
+        if not np.isfinite(sc.factor):
+            raise TransferError(f"--scale {sc.label}={sc.factor}: the factor must be finite")
 
 
 #: Words for an ARKit shape on both sides of the face: ``--scale smile=1.5`` is both
@@ -785,7 +818,13 @@ def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None
     """
     Q = np.asarray(query, np.float64)
     B = np.asarray(bank, np.float64)
+    if Q.ndim != 2 or B.ndim != 2 or Q.shape[1] != B.shape[1]:
+        raise ShapeError(f"query and bank must be (n, r) and (m, r), got {Q.shape} and "
+                         f"{B.shape}")
     ok = np.ones(B.shape[0], bool) if valid is None else np.asarray(valid, bool)
+    if ok.shape != B.shape[:1]:
+        raise ShapeError(f"valid must be ({B.shape[0]},) for a bank of {B.shape}, got "
+                         f"{ok.shape}")
     if not ok.any():
         raise RewriteError("no frame to take a texture from (all lost)")
     idx = np.flatnonzero(ok)

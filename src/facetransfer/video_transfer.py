@@ -364,6 +364,11 @@ def transfer_video(sources: TransferSources, out, model, *,
     -------
     TransferResult
     """
+    if not isinstance(sources, TransferSources):   # a path here failed as an AttributeError
+        raise RewriteError(f"transfer_video takes a TransferSources as its sources, got "
+                           f"{type(sources).__name__} {sources!r}: give "
+                           "TransferSources.of(target, expression_from=...), or call "
+                           "plan_transfer(target, model, ...) and render_plan")
     _check_outputs(out, video_options=video_options, save_track=save_track,
                    meshes_dir=meshes_dir, overwrite=overwrite)  # before any work
     opts = RewriteOptions() if options is None else options

@@ -448,8 +448,12 @@ def _guess_precisions(prob: _Problem, Y: np.ndarray, offset: np.ndarray, w: np.n
                       init: np.ndarray) -> list[np.ndarray]:
     """PPCA precisions ``(d_j, d_j)`` of every mode of a complete first guess ``init``."""
     P = Y.shape[0]
-    Z = np.asarray(init, dtype=np.float64).reshape(P, -1) - offset
-    if Z.shape != Y.shape or not np.isfinite(Z[:, prob.missing]).all():
+    Z = np.asarray(init, dtype=np.float64)
+    if Z.shape != (P,) + prob.shape:   # a wrong size failed in the reshape, naming no shape
+        raise ShapeError(f"init must be a finite tensor of shape {(P,) + prob.shape}, got "
+                         f"{Z.shape}")
+    Z = Z.reshape(P, -1) - offset
+    if not np.isfinite(Z[:, prob.missing]).all():
         raise ShapeError(f"init must be a finite tensor of shape {(P,) + prob.shape}")
     Zf = Y.copy() - offset
     Zf[:, prob.missing] = Z[:, prob.missing]

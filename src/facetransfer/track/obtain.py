@@ -284,6 +284,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         Of at most ``max_frames`` frames (a longer track file is cut).
     """
     check_track_method(method)
+    _check_counts(max_frames, detect_every)
     if face is not None and method not in ("auto", "capture"):
         raise TrackError(f"a face to follow ({face!r}) is for the capture tracker, not the "
                          f"{method} tracker, which follows the face found first")
@@ -330,6 +331,17 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         tr = _landmarks(video, model, frames, fps, size, progress_factory)
     store_track(key, tr)
     return tr
+
+
+def _check_counts(max_frames, detect_every) -> None:
+    """:func:`obtain_track`'s ``max_frames`` (None or >= 1) and ``detect_every`` (>= 1): a
+    ``max_frames`` of 0 was said as "video ... has no frames", a ``detect_every`` of 0 taken
+    for 1."""
+    if max_frames is not None and int(max_frames) < 1:
+        raise TrackError(f"max_frames must be >= 1 (or None: every frame), got {max_frames}")
+    if int(detect_every) < 1:
+        raise TrackError(f"detect_every must be >= 1 (1: the detector sees every frame), got "
+                         f"{detect_every}")
 
 
 def _flow(video, model, frames, fps, max_frames, progress_factory, options):

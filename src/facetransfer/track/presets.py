@@ -26,8 +26,10 @@ TRACK_METHODS = ("auto", "capture", "flow", "landmarks")
 def check_track_method(method) -> None:
     """Raise :class:`RewriteError` unless ``method`` is one of :data:`TRACK_METHODS`."""
     if method not in TRACK_METHODS:
+        hint = " (the optical-flow tracker that `facetransfer track --tracker` calls klt is " \
+            "'flow' here)" if method == "klt" else ""
         raise RewriteError(f"tracking method must be auto, capture, flow or landmarks, got "
-                           f"{method!r}")
+                           f"{method!r}{hint}")
 
 
 def track_options(speed: str = DEFAULT_SPEED):

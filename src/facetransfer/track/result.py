@@ -26,6 +26,7 @@ key                 shape / dtype        meaning
 ``blendshape_names``(52,) str            their names, :data:`facetransfer.arkit.ARKIT_NAMES`
 ``detections2d``    (F, 68, 2) float64   the detector's points the fit took (a capture track)
 ``pixel_aspect``    () float64           a pixel's width over its height (absent: 1)
+``shot_starts``     (S,) int64           first frames of the shots after the first (absent: one)
 ``format_version``  () int64             version of this layout
 ==================  ===================  ===========================================================
 """
