@@ -269,10 +269,22 @@ def test_export_errors(case, tmp_path, monkeypatch):
 
     import facetransfer.default_model as dm
 
-    model, track, _, _ = case
+    from facetransfer.export.livelink import read_livelink
+
+    model, track, a, _ = case
+    monkeypatch.setattr(dm, "load_default_model", lambda **kw: model)
+    # a track without activations (one recombined in Python) has them from its weights...
     bare = dataclasses.replace(track, blendshapes=None, blendshape_names=None)
+    np.testing.assert_allclose(
+        read_livelink(export_track(bare, "livelink", tmp_path / "r.csv")).activations, a,
+        atol=1e-6)
+    # ... where its model is known (given, or the default model's track)
     with pytest.raises(ExportError, match="ict-arkit"):
-        export_track(bare, "livelink", tmp_path / "a.csv")
+        export_track(dataclasses.replace(bare, model_hash="0" * 16), "livelink",
+                     tmp_path / "a.csv")
+    # no format: the one the name says (a .json was written as USD, refused as such)
+    out = export_track(track, None, tmp_path / "named.json")
+    assert json.loads(out.read_text())
     with pytest.raises(ExportError, match="unknown export format"):
         export_track(track, "fbx", tmp_path / "a.fbx")
     with pytest.raises(ValueError, match="does not exist"):
@@ -287,7 +299,6 @@ def test_export_errors(case, tmp_path, monkeypatch):
         export_track(track, "glb", tmp_path / "t.glb", model=model, texture=tmp_path / "no.png")
     assert not (tmp_path / "t.glb").exists()
     # model=None: the default model if the track was made with it, else ask for --model
-    monkeypatch.setattr(dm, "load_default_model", lambda **kw: model)
     assert export_track(track, "glb", tmp_path / "d.glb").is_file()
     other = dataclasses.replace(track, model_hash="0" * 16)
     with pytest.raises(ExportError, match="--model"):

@@ -69,7 +69,8 @@ def format_of(out: str | os.PathLike, fmt: str | None = None) -> str:
     return fmt
 
 
-def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwrite: bool = False,
+def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
+                 overwrite: bool = False,
                  texture=None, neutral=None, timecode: str | None = "source") -> Path:
     """Write ``track`` in format ``fmt`` to ``out`` and return the path.
 
@@ -77,7 +78,8 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     ----------
     track : facetransfer.track.Track
         With ARKit activations (``blendshapes``).
-    fmt : {"livelink", "glb", "usd", "json"}
+    fmt : {"livelink", "glb", "usd", "json"} or None
+        None: the format ``out``'s extension names (:func:`format_of`).
     out : path-like
         Its folder must exist; an existing file is replaced only with ``overwrite``.
     model : MultilinearModel, optional
@@ -104,16 +106,16 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     ------
     ExportError
         Unknown format, no activations, a model that does not match, a texture for a format
-        without one, a neutral frame outside the track.
-    VideoError
-        A ``timecode`` that is not one.
+        without one, a neutral frame outside the track, a ``timecode`` that is not one.
     """
-    format_of(out, fmt)
+    fmt = format_of(out, fmt)
     check_output_path(out, overwrite=overwrite)
     if texture is not None and fmt != "glb":
         raise ExportError(f"a texture is written only into glb files, not {fmt}")
     if timecode not in (None, "source") and fmt != "livelink":
         raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
+    if track.blendshapes is None:
+        track = _activations_from_weights(track, model)
     require_activations(track)
     track = with_neutral(track, neutral)
     from .livelink import source_timecode
@@ -142,8 +144,19 @@ def export_track(track, fmt: str, out: str | os.PathLike, *, model=None, overwri
     return write_usd(track, model, out, overwrite=overwrite,
                      first_frame=source_first_frame(track) if timecode == "source" else 0,
                      timecode=start)
-    from .usd import source_first_frame, write_usd
 
-    return write_usd(track, model, out, overwrite=overwrite,
-                     first_frame=source_first_frame(track) if timecode == "source" else 0,
-                     timecode=start)
+
+def _activations_from_weights(track, model):
+    """A track without activations (e.g. one recombined in Python, Fig. 1) with them made from
+    its expression weights (:func:`facetransfer.arkit.attach_activations`) where its model
+    (``model``, else the default model if the track is of it) has ARKit expressions; else
+    the track as it is (:func:`require_activations` then says what is missing)."""
+    from ..arkit import attach_activations
+
+    if "expression" not in track.weights:
+        return track
+    try:
+        model = resolve_model(track, model)
+    except ExportError:            # not the default model's, and none given
+        return track
+    return attach_activations(track, model)
