@@ -201,6 +201,35 @@ def test_lift_from_a_truth_of_another_model_is_one_line(run, tmp_path, model_pat
     assert not (tmp_path / "l.png").exists()
 
 
+def test_lift_from_a_truth_of_another_model_without_model_is_one_line(run, tmp_path, model_path,
+                                                                    capsys, monkeypatch):
+    """``--track CLIP.truth.npz`` without ``--model`` (README: the default model, for a truth it
+    rendered; another is refused, naming the file), of a clip another model rendered: one line
+    naming the truth file and asking for --model (before: an AttributeError traceback, exit 1,
+    from the track-only path that names a track by its ``label``)."""
+    import facetransfer.default_model as default_model
+    from facetransfer.model import load_model
+
+    model = load_model(model_path)
+    write_clip(make_clip(model, random_performance(model, 3, seed=0, size=(96, 80))),
+               tmp_path / "c.mp4")
+    other = build_model(_cap_dataset(), {"identity": 2, "expression": 3})
+    monkeypatch.setattr(default_model, "load_default_model", lambda **kw: other)
+    capsys.readouterr()
+    assert run("texture", "lift", tmp_path / "c.mp4", "--track", tmp_path / "c.truth.npz",
+               "--size", 32, "--out", tmp_path / "l.png") == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == (f"facetransfer texture lift: error: ground truth "
+                       f"{tmp_path / 'c.truth.npz'} was rendered with another model (modes and "
+                       "ranks {'identity': 3, 'expression': 3}, the model's {'identity': 2, "
+                       "'expression': 3}): give the model synth-video used as --model"), err
+    assert not (tmp_path / "l.png").exists()
+    monkeypatch.setattr(default_model, "load_default_model", lambda **kw: model)
+    assert run("texture", "lift", tmp_path / "c.mp4", "--track", tmp_path / "c.truth.npz",
+               "--size", 32, "--out", tmp_path / "l.png") == 0    # the model that rendered it
+    assert (tmp_path / "l.png").is_file()
+
+
 def test_blend_with_opencv_where_it_cannot_is_said_in_the_options_words(run, tmp_path, capsys):
     """``--method opencv`` with a mask touching the border (or with --feather): one line in
     the command's words (before: "method='opencv' needs ...; use method='solver'")."""

@@ -77,6 +77,17 @@ def _load_track(path: str):
     return Track.load(p)
 
 
+def _lift_model(track, model_path):
+    """``--model``, else the default model for a track made with it (else an error asking for
+    ``--model``); synth-video's truth takes the default model and checks it itself, naming its
+    file and the model that rendered it (before: an AttributeError's traceback)."""
+    from ..synth import SyntheticTruth
+
+    if model_path is not None or isinstance(track, SyntheticTruth):
+        return resolve_model(model_path)
+    return default_model_for(track)
+
+
 def cmd_default(args: argparse.Namespace) -> int:
     from ..texture import LEE_PERRY_SMITH_CREDIT, default_face_texture
 
@@ -123,8 +134,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
                                 f"got {args.k}")
     info = video_info(args.video)       # a file or an image sequence, checked
     track = _load_track(args.track)
-    # without --model: the default model, if the track (or synth-video's truth) was made with it
-    model = default_model_for(track) if args.model is None else resolve_model(args.model)
+    model = _lift_model(track, args.model)
     track.check_model(model)
     if tuple(track.frame_size) != tuple(info.size):
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
