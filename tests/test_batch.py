@@ -226,7 +226,8 @@ def test_max_frames_tracks_the_first_frames_and_a_rerun_knows_its_limit(
     _assert_same_track_file(out / "a.npz", ref)
     assert Track.load(out / "a.npz").n_frames == 5
     row = _summary(out / "summary.csv")["a"]
-    assert row["status"] == "done" and int(row["frames"]) == 5 and len(row["job"]) == 16
+    assert row["status"] == "done" and int(row["frames"]) == 5
+    assert row["job"].startswith("v2:") and len(row["job"]) == 19
     kept = (out / "a.npz").read_bytes()
     assert _cli(capsys, *argv, "--max-frames", 5)[0] == 0
     assert _summary(out / "summary.csv")["a"]["status"] == "skipped"
@@ -643,7 +644,7 @@ def test_a_rerun_knows_an_output_of_other_inputs_from_its_own(arkit_model, make_
     assert _cli(capsys, *argv)[0] == 0
     first = _summary(out / "summary.csv")["t"]
     kept = (out / "t.csv").read_bytes()
-    assert first["status"] == "done" and len(first["job"]) == 16
+    assert first["status"] == "done" and first["job"].startswith("v2:")
     assert _cli(capsys, *argv)[0] == 0
     assert _summary(out / "summary.csv")["t"]["status"] == "skipped"
     make_arkit_track(arkit_model, 6, seed=2)[0].save(t, overwrite=True)
@@ -728,3 +729,86 @@ def test_a_later_chunk_without_a_face_says_so(quick_model, monkeypatch):
         batch_jobs._chunk_capture(np.zeros((n, 64, 64, 3), np.uint8), quick_model,
                                   TrackerSettings(), ClipJob("v", "v.mp4"), Chunk(1, 10, 22),
                                   np.zeros(5))
+
+
+def test_a_moved_or_copied_project_keeps_its_outputs(clips, quick_model_path, inproc, tmp_path,
+                                                     capsys, monkeypatch):
+    """The same command in a project (clips, manifest, output folder) moved or copied to
+    another disk: the job digest held the inputs' paths and inodes, so every output was "made
+    from other inputs or options" (3 of 3 clips refused, measured); now it holds their content:
+    every clip is skipped with the digest it had, its track untouched. A clip replaced by
+    another file under its name is still told apart."""
+    import os
+    import shutil
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    proj = tmp_path / "proj"
+    (proj / "clips").mkdir(parents=True)
+    for n in "ab":
+        shutil.copy2(clips[n][0], proj / "clips" / f"{n}.mp4")
+        shutil.copy2(clips[n][1], proj / "clips" / f"{n}.json")
+    (proj / "clips.csv").write_text("video,init\nclips/a.mp4,clips/a.json\n"
+                                    "clips/b.mp4,clips/b.json\n")
+
+    def run(root):
+        return _cli(capsys, "batch", "track", "--manifest", root / "clips.csv", "--model",
+                    quick_model_path, "--out", root / "tracks", "--passes", "1", "--no-progress")
+
+    assert run(proj)[0] == 0
+    made = {n: (proj / "tracks" / f"{n}.npz").read_bytes() for n in "ab"}
+    keys = {n: r["job"] for n, r in _summary(proj / "tracks" / "summary.csv").items()}
+    copy, moved = tmp_path / "disk2" / "proj", tmp_path / "moved"
+    shutil.copytree(proj, copy)                  # times kept, other inodes
+    os.rename(proj, moved)
+    for root in (copy, moved):
+        code, out, _ = run(root)
+        assert code == 0 and "(2 skipped)" in out, out
+        assert {n: (r["status"], r["job"]) for n, r in _summary(
+            root / "tracks" / "summary.csv").items()} == {n: ("skipped", keys[n]) for n in "ab"}
+        assert {n: (root / "tracks" / f"{n}.npz").read_bytes() for n in "ab"} == made
+    shutil.copy2(clips["b"][0], copy / "clips" / "a.mp4")      # b's frames under a's name
+    assert run(copy)[0] == 1
+    rows = _summary(copy / "tracks" / "summary.csv")
+    assert rows["b"]["status"] == "skipped" and rows["a"]["status"] == "failed"
+    assert rows["a"]["error"] == (f"{copy / 'tracks' / 'a.npz'} was made from other inputs or "
+                                  "options than a's now; remove it to redo this clip alone, or "
+                                  "--overwrite redoes every clip")
+    assert (copy / "tracks" / "a.npz").read_bytes() == made["a"]
+
+
+def test_a_summary_of_the_format_before_still_keeps_its_outputs(arkit_model, make_arkit_track,
+                                                                inproc, tmp_path, capsys,
+                                                                monkeypatch):
+    """A summary an older version wrote (digests of 16 hex digits, of the inputs' paths,
+    inodes and times): the rerun after the upgrade skips what it finished (its digest computed
+    the old way matches) and records the new digest; an output whose input changed since is
+    still refused, its line saying that an older summary also counted where files lay."""
+    import re
+
+    from facetransfer.batch import digest
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    m, out = tmp_path / "m.npz", tmp_path / "exp"
+    arkit_model.save(m)
+    tracks = [tmp_path / f"{n}.npz" for n in "tu"]
+    for i, t in enumerate(tracks):
+        make_arkit_track(arkit_model, 5, seed=i)[0].save(t)
+    argv = ("batch", "export", *tracks, "--format", "json", "--out", out, "--model", m,
+            "--no-progress")
+    new_keys = batch_run.job_keys
+    monkeypatch.setattr(batch_run, "job_keys", lambda jobs, what: {   # the version before
+        j.name: digest.legacy_job_key(j, what) for j in jobs})
+    assert _cli(capsys, *argv)[0] == 0
+    old = {n: r["job"] for n, r in _summary(out / "summary.csv").items()}
+    assert all(re.fullmatch("[0-9a-f]{16}", k) for k in old.values()), old
+    monkeypatch.setattr(batch_run, "job_keys", new_keys)
+    make_arkit_track(arkit_model, 5, seed=7)[0].save(tracks[1], overwrite=True)
+    for _ in range(2):                          # the upgraded summary reads alike
+        assert _cli(capsys, *argv)[0] == 1
+        rows = _summary(out / "summary.csv")
+        assert rows["t"]["status"] == "skipped" and rows["t"]["job"].startswith("v2:")
+        assert rows["u"]["status"] == "failed" and rows["u"]["job"] == old["u"]
+        assert rows["u"]["error"] == (
+            f"{out / 'u.json'} was made from other inputs or options than u's now (or its "
+            "files were moved or copied since: an older version's summary recorded where they "
+            "lay); remove it to redo this clip alone, or --overwrite redoes every clip")

@@ -3,8 +3,10 @@ single-threaded worker process per core) or the scheduler of a real cluster.
 
 The workers must see the inputs and the output folder at the same paths as the client (a shared
 file system); the model is scattered to them once (:func:`scatter_model`). A scheduler's address
-is asked, within the timeout, whether a Dask scheduler answers there before a client connects
-(:func:`_probe`: Dask's client waits for the handshake of whatever listens without a deadline).
+(``tcp://`` or ``tls://``) is asked, within the timeout, whether a Dask scheduler answers there
+before a client connects (:func:`_probe`: its host looked up on a thread, Dask's client waits
+for the handshake of whatever listens, and for a name server, without a deadline); ``tls://``
+takes the client's certificates from Dask's configuration, and is refused at once without them.
 """
 
 from __future__ import annotations
@@ -65,68 +67,138 @@ def default_workers() -> int:
 SCHEDULER_HINT = "is it the scheduler's address? `dask scheduler` prints it, port 8786 by default"
 
 
-def _probe(address: str, timeout: float) -> None:
-    """Raise :class:`BatchError` unless a Dask scheduler answers at a ``tcp://HOST:PORT``
-    address within ``timeout`` seconds.
+def _probe(address: str, timeout: float) -> str:
+    """The address to connect to (its host resolved) where a Dask scheduler answers at a
+    ``tcp://`` or ``tls://`` ``HOST:PORT`` within ``timeout`` seconds, else
+    :class:`BatchError`; another protocol's address is left to Dask.
 
-    A plain connection first (nothing listening, an unknown host: said at once), then Dask's
-    own handshake and an ``identity`` request, bounded as a whole: the client's connection
+    Each step is bounded by the one deadline: the host's lookup (on a thread: a DNS server
+    that does not answer held the run for as long as the system's resolver waits), a plain
+    connection (nothing listening, an unknown host: said at once), then Dask's own handshake
+    (with TLS, its TLS handshake too) and an ``identity`` request: the client's connection
     reads the handshake without a deadline, so a port where something else listens (a web
-    server, a program that accepts and says nothing) hung the run past ``--timeout``.
+    server, a program that accepts and says nothing) hung the run past ``--timeout``. The
+    address returned names the host by the IP address that answered, so that the client does
+    not look it up again without a deadline.
     """
-    where = _host_port(address)
+    from distributed.comm.addressing import unparse_host_port
+
+    where = _where(address)
     if where is None:
-        return  # tls://, ucx://...: left to Dask
-    host, port = where
+        return address  # ucx://, inproc://...: left to Dask
+    proto, host, port = where
     deadline = time.monotonic() + timeout
-    try:
-        with socket.create_connection((host, port), timeout=timeout):
-            pass
-    except socket.gaierror as exc:
-        raise BatchError(f"no Dask scheduler answered at {address}: the host {host!r} is not "
-                         f"known ({exc.strerror or exc}); check the address") from None
-    except TimeoutError:
-        raise BatchError(f"no Dask scheduler answered at {address} within {timeout:g} s: the "
-                         "connection was not accepted (a machine that is down, a firewall?); "
-                         "check the address") from None
-    except OSError as exc:
-        raise BatchError(f"no Dask scheduler answered at {address}: {exc.strerror or exc} "
-                         "(start it with `dask scheduler`, or check the address)") from None
-    kind = _dask_identity(address, timeout, max(deadline - time.monotonic(), 0.1))
+    args = _tls_args(address) if proto == "tls" else {}      # said before any wait
+    ips = _resolve(address, host, port, timeout)
+    ip = _connect(address, ips, port, timeout, deadline)
+    target = f"{proto}://{unparse_host_port(ip, port)}"
+    kind = _dask_identity(target, address, timeout, max(deadline - time.monotonic(), 0.1), args)
     if kind in ("Worker", "Nanny"):
         raise BatchError(f"{address} is a Dask {kind.lower()}, not a scheduler; give the "
                          "scheduler's address (`dask scheduler` prints it, port 8786 by "
                          "default)")
+    return target
 
 
-def _host_port(address: str) -> tuple[str, int] | None:
-    """``(host, port)`` of a ``tcp://`` address, None for another protocol; BatchError where
-    it is not an address."""
+def _where(address: str) -> tuple[str, str, int] | None:
+    """``(protocol, host, port)`` of a ``tcp://`` or ``tls://`` address, None for another
+    protocol; BatchError where it is not an address."""
     from distributed.comm.addressing import parse_address, parse_host_port
 
     try:
         proto, loc = parse_address(address)
-        if proto != "tcp":
+        if proto not in ("tcp", "tls"):
             return None
         host, port = parse_host_port(loc)
     except (ValueError, TypeError):
-        port = -1
+        proto, host, port = "", "", -1
     if not 0 < port < 65536:     # before, port 99999 was "Connection refused"
         raise BatchError(f"--scheduler {address!r} is not an address like tcp://HOST:8786")
-    return host, port
+    return proto, host, port
 
 
-def _dask_identity(address: str, timeout: float, left: float) -> str:
-    """The type (``"Scheduler"``, ``"Worker"``...) the Dask server at ``address`` says it is,
-    asked within the ``left`` seconds of ``timeout``; BatchError where nothing answers in
-    Dask's protocol."""
+def _tls_args(address: str) -> dict:
+    """The client's TLS connection arguments of Dask's configuration
+    (``distributed.comm.tls.*``, as :class:`distributed.Client` takes them); BatchError,
+    before anything waits, where it names no certificates or ones that cannot be read."""
+    import ssl
+
+    from distributed.security import Security
+
+    try:
+        args = Security().get_connection_args("client")
+    except (OSError, ValueError, ssl.SSLError) as exc:
+        raise BatchError(f"--scheduler {address}: the TLS certificates of Dask's "
+                         f"configuration cannot be used ({exc})") from None
+    if args.get("ssl_context") is None:
+        raise BatchError(f"--scheduler {address}: tls:// needs this client's certificates in "
+                         "Dask's configuration (distributed.comm.tls.ca-file, .client.cert and "
+                         ".client.key, e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=...), and "
+                         "none are set; give them, or the scheduler's tcp:// address")
+    return args
+
+
+def _resolve(address: str, host: str, port: int, timeout: float) -> list[str]:
+    """The IP addresses of ``host``, looked up on a daemon thread within ``timeout`` (a lookup
+    that hangs is left behind: it cannot be stopped, nor hold the process at its exit)."""
+    import threading
+
+    found: dict = {}
+
+    def look() -> None:
+        try:
+            found["infos"] = socket.getaddrinfo(host, port, type=socket.SOCK_STREAM)
+        except OSError as exc:
+            found["error"] = exc
+
+    th = threading.Thread(target=look, name="facetransfer-resolve", daemon=True)
+    th.start()
+    th.join(timeout)
+    said = f"no Dask scheduler answered at {address}"
+    if th.is_alive():
+        raise BatchError(f"{said}: the host {host!r} was not found within {timeout:g} s (a name "
+                         "server that does not answer?); check the address, or give the "
+                         "scheduler's IP address")
+    exc = found.get("error")
+    if exc is not None:
+        raise BatchError(f"{said}: the host {host!r} is not known ({exc.strerror or exc}); "
+                         "check the address") from None
+    return list(dict.fromkeys(info[4][0] for info in found["infos"]))
+
+
+def _connect(address: str, ips: list[str], port: int, timeout: float, deadline: float) -> str:
+    """The first of ``ips`` that accepts a connection at ``port`` before ``deadline``;
+    BatchError naming ``address`` where none does."""
+    said = f"no Dask scheduler answered at {address}"
+    err: OSError = TimeoutError()
+    for ip in ips:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            break
+        try:
+            with socket.create_connection((ip, port), timeout=left):
+                return ip
+        except OSError as exc:
+            err = exc
+    if isinstance(err, TimeoutError):
+        raise BatchError(f"{said} within {timeout:g} s: the connection was not accepted (a "
+                         "machine that is down, a firewall?); check the address")
+    raise BatchError(f"{said}: {err.strerror or err} (start it with `dask scheduler`, or check "
+                     "the address)")
+
+
+def _dask_identity(target: str, address: str, timeout: float, left: float,
+                   args: dict) -> str:
+    """The type (``"Scheduler"``, ``"Worker"``...) the Dask server at ``target`` (``address``
+    resolved) says it is, asked within the ``left`` seconds of ``timeout`` (``args``: the TLS
+    connection's); BatchError naming ``address`` where nothing answers in Dask's protocol."""
     import asyncio
 
     from distributed.comm import CommClosedError, connect
 
     async def ask():
         # deserialize=False: whatever answers is not trusted with unpickling
-        comm = await connect(address, timeout=left, deserialize=False)
+        comm = await connect(target, timeout=left, deserialize=False, **args)
         try:
             await comm.write({"op": "identity", "reply": True})
             return await comm.read()
@@ -179,9 +251,10 @@ def open_client(*, workers: int | None = None, scheduler: str | None = None,
         Worker processes of the embedded cluster (default: one per core). Not with
         ``scheduler``.
     scheduler : str, optional
-        Address of a running scheduler (``tcp://HOST:8786``) instead of an embedded cluster.
+        Address of a running scheduler (``tcp://HOST:8786``; ``tls://HOST:8786`` with the
+        certificates of Dask's configuration) instead of an embedded cluster.
     timeout : float
-        Seconds the scheduler has to answer.
+        Seconds the scheduler has to answer (its host's lookup included).
     processes : bool
         Embedded workers as processes (the default) or threads of this process (tests).
     verbose : bool
@@ -225,9 +298,9 @@ def _remote_client(scheduler: str, timeout: float):
     """A client of the running scheduler at ``scheduler`` (BatchError if it does not answer)."""
     from dask.distributed import Client
 
-    _probe(scheduler, timeout)
+    target = _probe(scheduler, timeout)
     try:
-        return Client(scheduler, timeout=timeout, set_as_default=False)
+        return Client(target, timeout=timeout, set_as_default=False)
     except (OSError, TimeoutError) as exc:
         raise BatchError(f"no Dask scheduler answered at {scheduler} within {timeout:g} s "
                          f"({exc})") from None

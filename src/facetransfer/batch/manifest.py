@@ -80,8 +80,19 @@ class ClipJob:
     max_frames: int | None = None
 
     @property
+    def roles(self) -> tuple[tuple[str, Path], ...]:
+        """The input files by what they are to the job (``video``, ``init``)."""
+        return (("video", Path(self.video)),) + (() if self.init == "auto"
+                                                 else (("init", Path(self.init)),))
+
+    @property
+    def labels(self) -> tuple[tuple[str, object], ...]:
+        """What else makes the job's output: its name, face and frame limit."""
+        return (("name", self.name), ("face", self.face), ("max_frames", self.max_frames))
+
+    @property
     def inputs(self) -> tuple[Path, ...]:
-        return (Path(self.video),) + (() if self.init == "auto" else (Path(self.init),))
+        return tuple(p for _, p in self.roles)
 
 
 @dataclass(frozen=True)
@@ -101,9 +112,20 @@ class PairJob:
     sources: dict = field(default_factory=dict)
 
     @property
+    def roles(self) -> tuple[tuple[str, Path], ...]:
+        """The input files by their columns (``target``, ``expression_from``...)."""
+        return (("target", Path(self.target)),) + tuple(
+            (k, Path(v)) for k, v in self.sources.items() if k in PAIR_PATH_COLUMNS)
+
+    @property
+    def labels(self) -> tuple[tuple[str, object], ...]:
+        """What else makes the job's output: its name and value columns, in column order."""
+        return (("name", self.name),) + tuple(
+            (k, self.sources[k]) for k in PAIR_VALUE_COLUMNS if k in self.sources)
+
+    @property
     def inputs(self) -> tuple[Path, ...]:
-        return (self.target,) + tuple(Path(v) for k, v in self.sources.items()
-                                      if k in PAIR_PATH_COLUMNS)
+        return tuple(p for _, p in self.roles)
 
 
 @dataclass(frozen=True)
@@ -112,6 +134,15 @@ class ExportJob:
 
     name: str
     track: Path
+
+    @property
+    def roles(self) -> tuple[tuple[str, Path], ...]:
+        """The input file: ``track``."""
+        return (("track", Path(self.track)),)
+
+    @property
+    def labels(self) -> tuple[tuple[str, object], ...]:
+        return (("name", self.name),)
 
     @property
     def inputs(self) -> tuple[Path, ...]:

@@ -20,6 +20,8 @@ from typing import Callable
 
 from . import jobs as J
 from .chunks import MIN_CHUNK, plan_chunks
+from .digest import (is_legacy, job_key, job_keys, legacy_job_key, options_text, same_job,
+                     value_text)
 from .manifest import BatchError
 from .summary import Row, write_summary
 
@@ -299,10 +301,10 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     # holds the clip's frame limit: before, a rerun with another --max-frames was "skipped")
     what = (f"track {options_text(options)} chunk={chunk}"
             + (f" overlap={overlap}" if chunk else "") + f" {mhash}")
-    keys = {j.name: job_key(j, what) for j in jobs}
+    keys = job_keys(jobs, what)
     by_name = {j.name: j for j in jobs}
     done = {} if overwrite else _kept(jobs, outs, out_dir, keys, lambda out, name: _done_track(
-        out, by_name[name], mhash))
+        out, by_name[name], mhash), lambda job: legacy_job_key(job, what))
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
     run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys)
@@ -357,48 +359,6 @@ class _TrackSubmit:
             self.col.finish(job, dataclasses.replace(res, job=self.keys[job.name]))
 
 
-def job_key(job, what: str) -> str:
-    """A digest of what makes ``job``'s output: the job (its inputs' paths, names, labels),
-    each input file as it is on disk (:func:`facetransfer.io.verified.file_stamp`) and
-    ``what`` (the run's options and model); recorded in the summary's ``job`` column."""
-    import hashlib
-
-    from ..io.verified import file_stamp
-
-    h = hashlib.sha256(repr(job).encode())
-    for p in job.inputs:
-        try:
-            h.update(file_stamp(p).encode())
-        except OSError:
-            h.update(b"missing")
-    h.update(what.encode())
-    return h.hexdigest()[:16]
-
-
-def options_text(options) -> str:
-    """The text of a (frozen) dataclass of options in a job's digest: its fields that differ
-    from its class's defaults, nested ones likewise; a version that adds an option (at its
-    default) leaves it as it was, so that it does not make every earlier output another
-    job's."""
-    if not dataclasses.is_dataclass(options) or isinstance(options, type):
-        return repr(options)
-    try:
-        default = type(options)()
-    except TypeError:                           # fields without defaults: all of them
-        return repr(options)
-    changed = [f"{f.name}={options_text(getattr(options, f.name))}"
-               for f in dataclasses.fields(options)
-               if not _equal(getattr(options, f.name), getattr(default, f.name))]
-    return f"{type(options).__name__}({', '.join(changed)})"
-
-
-def _equal(a, b) -> bool:
-    try:
-        return bool(a == b)
-    except (TypeError, ValueError):             # arrays: not said equal
-        return False
-
-
 def _earlier_rows(out_dir: Path) -> list[Row]:
     """The rows of the summary an earlier run of ``out_dir`` wrote (none where there is none,
     or it is not one)."""
@@ -442,26 +402,38 @@ def _unfinished(jobs, outs: dict, out_dir: Path, keys: dict) -> dict[str, tuple[
 REDO = "remove it to redo this clip alone, or --overwrite redoes every clip"
 
 
-def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found) -> dict[str, Row]:
+def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found,
+          legacy: Callable | None = None) -> dict[str, Row]:
     """The rows of the outputs a rerun keeps: ``found(out, name)`` (a skipped row, or None),
     with this run's job digest; an output the summary says another job made (its inputs or
-    options changed since) is a failed row naming ``--overwrite``, not this job's result."""
+    options changed since) is a failed row naming ``--overwrite``, not this job's result.
+    ``legacy(job)``: the job's digest of the format before (:func:`.digest.same_job`: a summary
+    an older version wrote still keeps what it finished; the row then gets the new digest)."""
     earlier, done = _earlier(out_dir), {}
     for j in jobs:
         r = found(outs[j.name], j.name)
         if r is None:
             continue
         made = earlier.get(j.name, keys[j.name])
-        if r.ok and made != keys[j.name]:     # (a row failed by ``found`` says its own why)
-            r = Row(j.name, "failed", output=str(outs[j.name]), error=(
-                f"{outs[j.name]} was finished after an interrupt, with options not recorded; "
-                + REDO if made == UNKNOWN_JOB else
-                f"{outs[j.name]} was made from other inputs or options than {j.name}'s now; "
-                + REDO))
+        old = None if legacy is None else (lambda job=j: legacy(job))
+        if r.ok and not same_job(made, keys[j.name], old):  # (a failed row says its own why)
+            r = _refused(j.name, outs[j.name], made)
         # a refused output keeps its maker's digest: a later run still knows it
         done[j.name] = dataclasses.replace(r, job=keys[j.name] if r.ok
                                            else earlier.get(j.name, ""))
     return done
+
+
+def _refused(name: str, out: Path, made: str) -> Row:
+    """The failed row of an output that job ``made`` made, not this run's job ``name``."""
+    if made == UNKNOWN_JOB:
+        why = "was finished after an interrupt, with options not recorded"
+    else:
+        why = f"was made from other inputs or options than {name}'s now"
+        if is_legacy(made):   # (before this format, a moved folder was "other inputs" too)
+            why += (" (or its files were moved or copied since: an older version's summary "
+                    "recorded where they lay)")
+    return Row(name, "failed", output=str(out), error=f"{out} {why}; {REDO}")
 
 
 def _done_video(out: Path, name: str) -> Row | None:
@@ -502,8 +474,9 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     prores = getattr(settings.get("video"), "codec", None) == "prores"
     outs = _outputs(jobs, out_dir, ".mov" if prores else ".mp4")
     what = f"transfer {sorted((k, repr(v)) for k, v in settings.items())} {model.content_hash}"
-    keys = {j.name: job_key(j, what) for j in jobs}
-    done = {} if overwrite else _kept(jobs, outs, out_dir, keys, _done_video)
+    keys = job_keys(jobs, what)
+    done = {} if overwrite else _kept(jobs, outs, out_dir, keys, _done_video,
+                                      lambda job: legacy_job_key(job, what))
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.transfer_pair, job, str(outs[job.name]), mf,
                                                  dict(settings), pure=False), model, keys)
@@ -538,15 +511,21 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         raise BatchError(f"--format must be one of {sorted(J.EXPORT_EXTENSIONS)}, got {fmt!r}")
     out_dir = prepare_out_dir(out_dir)
     outs = _outputs(jobs, out_dir, J.EXPORT_EXTENSIONS[fmt])
-    what = (f"export {fmt} {repr(texture)} {neutral!r} "
-            f"{'default' if model is None else model.content_hash}")
-    keys = {j.name: job_key(j, what) for j in jobs}
+    keys = job_keys(jobs, _export_what(fmt, value_text(texture), neutral, model))
     done = {} if overwrite else _kept(
         jobs, outs, out_dir, keys,
-        lambda out, name: Row(name, "skipped", output=str(out)) if out.is_file() else None)
+        lambda out, name: Row(name, "skipped", output=str(out)) if out.is_file() else None,
+        lambda job: legacy_job_key(job, _export_what(fmt, repr(texture), neutral, model)))
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
                                                  texture, neutral, pure=False), model, keys)
+
+
+def _export_what(fmt: str, texture: str, neutral, model) -> str:
+    """The options and model of a ``batch export`` in its digests (``texture``: as text, of the
+    file's content, :func:`.digest.value_text`; in the format before, its ``repr``)."""
+    return f"export {fmt} {texture} {neutral!r} " + (
+        "default" if model is None else model.content_hash)
 
 
 def _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys) -> BatchResult:

@@ -12,9 +12,11 @@ column              meaning
                     ``cancelled`` (the run was stopped before it finished)
 ``error``           one line: why it failed
 ``output``          the output's path
-``job``             a digest of what made the output (the job's inputs as they were on
-                    disk, its options, the model): a rerun that finds another one there
-                    has not made that output
+``job``             a digest of what made the output (the job's input files by their
+                    content, its labels and options, the model: ``v2:`` and 16 hex
+                    digits, :mod:`facetransfer.batch.digest`; 16 hex digits alone: an
+                    older version's, of the files' paths and times): a rerun that finds
+                    another one there has not made that output
 ==================  ======================================================================
 """
 

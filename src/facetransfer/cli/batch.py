@@ -32,7 +32,7 @@ def _cluster_options(p) -> None:
                    "scheduler` and `dask worker`; they must see the inputs and DIR at the same "
                    "paths)")
     g.add_argument("--timeout", type=float, default=10.0,
-                   help="seconds the scheduler has to answer")
+                   help="seconds the scheduler has to answer (its host's lookup included)")
     g.add_argument("--overwrite", action="store_true",
                    help="redo every clip (default: skip clips whose output is complete)")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")

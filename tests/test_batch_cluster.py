@@ -1,0 +1,119 @@
+"""``batch --scheduler ADDRESS --timeout S`` over tcp:// and tls://
+(:mod:`facetransfer.batch.cluster`): a host whose lookup hangs, one that cannot be resolved, an unroutable one, tls:// without
+certificates, each one line within the timeout; a TLS scheduler reached by its host name."""
+
+from __future__ import annotations
+
+import sys
+
+import pytest
+
+from facetransfer.batch import cluster as batch_cluster
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+#: The CLI in a child process, which then prints the threads it has left (the test does not
+#: hang if the run does: the child is killed after the test's bound).
+_CHILD = ("import sys, threading; from facetransfer.cli.main import main; code = main(sys.argv[1:])"
+          "; print('threads', sorted(t.name for t in threading.enumerate())); sys.exit(code)")
+
+
+@pytest.fixture(scope="module")
+def tls_files(tmp_path_factory):
+    """A certificate authority and one certificate of it for every role (``openssl``)."""
+    import shutil
+    import subprocess
+
+    if shutil.which("openssl") is None:
+        pytest.skip("openssl is not installed")
+    d = tmp_path_factory.mktemp("tls")
+    for argv in (["req", "-x509", "-newkey", "rsa:2048", "-nodes", "-keyout", "ca.key", "-out",
+                  "ca.pem", "-days", "2", "-subj", "/CN=test-ca"],
+                 ["req", "-newkey", "rsa:2048", "-nodes", "-keyout", "k.key", "-out", "k.csr",
+                  "-subj", "/CN=localhost"],
+                 ["x509", "-req", "-in", "k.csr", "-CA", "ca.pem", "-CAkey", "ca.key",
+                  "-CAcreateserial", "-out", "k.pem", "-days", "2"]):
+        subprocess.run(["openssl", *argv], cwd=d, check=True, capture_output=True, timeout=60)
+    return {"ca-file": str(d / "ca.pem"), "client.cert": str(d / "k.pem"),
+            "client.key": str(d / "k.key")}
+
+
+#: :data:`_CHILD` with a name server that never answers for ``dns-hangs.example``.
+_CHILD_DNS = ("import socket, threading; real = socket.getaddrinfo; socket.getaddrinfo = "
+              "lambda host, *a, **k: threading.Event().wait() if host == 'dns-hangs.example' "
+              "else real(host, *a, **k)\n" + _CHILD)
+
+
+def _child_run(tmp_path, argv, env=None):
+    """The CLI in a child process with a name server that hangs for one name; its result."""
+    import os
+    import subprocess
+
+    base = {k: v for k, v in os.environ.items() if not k.startswith("DASK_")}
+    return subprocess.run([sys.executable, "-c", _CHILD_DNS, *map(str, argv)],
+                          capture_output=True, text=True, timeout=60,
+                          env={**base, "DASK_CONFIG": str(tmp_path / "no-dask-config"),
+                               **(env or {})})
+
+
+@pytest.mark.parametrize("proto", ["tcp", "tls"])
+@pytest.mark.parametrize("host, said", [
+    ("dns-hangs.example", ": the host 'dns-hangs.example' was not found within 2 s (a name "
+     "server that does not answer?); check the address, or give the scheduler's IP address"),
+    ("no-such-host.invalid", ": the host 'no-such-host.invalid' "),
+    ("10.255.255.1", ""),
+])
+def test_an_address_that_does_not_answer_is_one_line_within_the_timeout(
+        proto, host, said, tls_files, tmp_path):
+    """A host whose lookup hangs (the name server does not answer: the run waited for as long
+    as the lookup, 40 s measured of one that takes 40 s, for ever of one that never ends),
+    one that cannot be resolved, an unroutable one; over tcp:// and tls:// (with this
+    client's certificates in Dask's configuration: without them, the next test): one line
+    naming the address, exit status 2, before the test's bound of 60 s."""
+    addr = f"{proto}://{host}:8786"
+    env = {f"DASK_DISTRIBUTED__COMM__TLS__{k.upper().replace('.', '__').replace('-', '_')}": v
+           for k, v in tls_files.items()}
+    r = _child_run(tmp_path, ["batch", "export", tmp_path / "t.npz", "--format", "json",
+                              "--out", tmp_path / "o", "--scheduler", addr, "--timeout", "2"],
+                   env)
+    assert r.returncode == 2, r.stderr
+    lines = r.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith(
+        f"facetransfer batch export: error: no Dask scheduler answered at {addr}{said}"), lines
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_tls_address_without_certificates_is_said_before_any_wait(tmp_path):
+    """tls:// without the client's certificates in Dask's configuration: said at once, before
+    the host is looked up (before: Dask's "TLS expects a `ssl_context` argument of type
+    ssl.SSLContext ... Instead got None")."""
+    addr = "tls://dns-hangs.example:8786"
+    r = _child_run(tmp_path, ["batch", "export", tmp_path / "t.npz", "--format", "json",
+                              "--out", tmp_path / "o", "--scheduler", addr, "--timeout", "30"])
+    assert r.returncode == 2 and r.stderr.splitlines() == [
+        f"facetransfer batch export: error: --scheduler {addr}: tls:// needs this client's "
+        "certificates in Dask's configuration (distributed.comm.tls.ca-file, .client.cert and "
+        ".client.key, e.g. DASK_DISTRIBUTED__COMM__TLS__CA_FILE=...), and none are set; give "
+        "them, or the scheduler's tcp:// address"]
+    assert r.stdout.splitlines() == ["threads ['MainThread']"]   # nothing was looked up
+
+
+def test_a_tls_scheduler_is_reached_by_its_host_name(tls_files):
+    """A scheduler over TLS, given by a host name: asked (its TLS handshake within the
+    timeout) and connected to at the IP address the name resolved to."""
+    import dask
+    from dask.distributed import LocalCluster
+    from distributed.security import Security
+
+    cert, key = tls_files["client.cert"], tls_files["client.key"]
+    sec = Security(tls_ca_file=tls_files["ca-file"], tls_scheduler_cert=cert,
+                   tls_scheduler_key=key, tls_worker_cert=cert, tls_worker_key=key,
+                   tls_client_cert=cert, tls_client_key=key, require_encryption=True)
+    config = {f"distributed.comm.tls.{k}": v for k, v in tls_files.items()}
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tls",
+                      security=sec, dashboard_address=None) as running, dask.config.set(config):
+        port = running.scheduler_address.rsplit(":", 1)[1]
+        by_name = f"tls://localhost:{port}"
+        assert batch_cluster._probe(by_name, 5).startswith("tls://")
+        with batch_cluster.open_client(scheduler=by_name, timeout=5) as client:
+            assert client.submit(int, "7").result() == 7
