@@ -68,10 +68,12 @@ def test_time_map_resamples_frame_rate():
 
 
 @pytest.mark.parametrize("args,kw", [((0, 25, 5, 25), {}), ((5, 0, 5, 25), {}),
-                                     ((5, 25, 5, -1), {}), ((5, 25, 5, 25), {"align": "stretch"})])
+                                     ((5, 25, 5, -1), {}), ((5, 25, 5, 25), {"align": "stretch"}),
+                                     ((40.7, 25, 5, 25), {}), ((5, 25, True, 25), {})])
 def test_time_map_bad_input(args, kw):
     with pytest.raises(TransferError):
         time_map(*args, **kw)
+    assert time_map(5.0, 25, np.int64(5), 25).n_frames == 5   # whole numbers of any type
 
 
 def test_resample_track_interpolates_and_propagates_lost():

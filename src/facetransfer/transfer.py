@@ -130,6 +130,9 @@ def time_map(n_source: int, fps_source: float, n_target: int, fps_target: float,
         ``source_time`` of length ``n_target`` (``loop``, ``hold``) or at most ``n_target``
         (``trim``).
     """
+    for what, n in (("source", n_source), ("target", n_target)):
+        if isinstance(n, bool) or not float(n).is_integer():  # 40.7 was taken as 40
+            raise TransferError(f"frame counts are whole numbers, got {what} {n!r}")
     if int(n_source) < 1 or int(n_target) < 1:
         raise TransferError(f"frame counts must be >= 1, got source {n_source}, target {n_target}")
     if not (fps_source > 0 and fps_target > 0 and np.isfinite(fps_source * fps_target)):

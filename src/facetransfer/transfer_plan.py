@@ -234,6 +234,13 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         How videos are decoded: :func:`facetransfer.io.video.read_video` (default) or the
         :meth:`~facetransfer.io.prefetch.Prefetch.read_video` of reads started earlier.
 
+    Returns
+    -------
+    TransferPlan
+        The target's frames and track, the new performance on its timeline, where the mouth
+        comes from, and the seconds spent reading and tracking; rendered and written by
+        :func:`facetransfer.video_transfer.render_plan`.
+
     Raises
     ------
     VideoError
