@@ -304,6 +304,9 @@ def test_defaults_agree():
     import inspect
 
     from facetransfer import demo
+    from facetransfer.rewrite_options import RewriteOptions
 
-    assert inspect.signature(demo.run_demo).parameters["speed"].default == presets.DEFAULT_SPEED
+    # the demo's options default to RewriteOptions()'s
+    assert inspect.signature(demo.run_demo).parameters["options"].default is None
+    assert RewriteOptions().speed == presets.DEFAULT_SPEED
     assert inspect.signature(tp.plan_transfer).parameters["speed"].default == presets.DEFAULT_SPEED
