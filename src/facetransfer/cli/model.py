@@ -22,7 +22,8 @@ from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
 from ..io.memory import available_memory  # a name of this module: tests replace it
 from ..io.output_names import check_output_suffix
-from .common import MODEL_ARG_HELP, progress_shown, resolve_model, tqdm_progress
+from .common import (MODEL_ARG_HELP, add_command_group, progress_shown, resolve_model,
+                     tqdm_progress)
 
 log = logging.getLogger(__name__)
 
@@ -485,11 +486,10 @@ def _overwrite_option(p) -> None:
 
 def register(sub) -> None:
     """Add ``facetransfer model {build,info,synth,sheet,dials}``."""
-    p = sub.add_parser("model", help="build multilinear face models (§4), describe them "
-                       "(info), write faces (synth), picture sheets and identity dials",
-                       description="Multilinear face models (Vlasic et al. 2005, §4).")
-    msub = p.add_subparsers(dest="model_command", metavar="ACTION")
-    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+    msub = add_command_group(sub, "model", dest="model_command",
+                             help="build multilinear face models (§4), describe them (info), "
+                             "write faces (synth), picture sheets and identity dials",
+                             description="Multilinear face models (Vlasic et al. 2005, §4).")
 
     b = msub.add_parser("build", help="build a model from a data set")
     b.add_argument("--dataset", required=True,
