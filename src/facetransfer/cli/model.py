@@ -255,6 +255,18 @@ def synth_weights(model, weights: dict[str, np.ndarray] | None = None,
     return w
 
 
+def add_face_options(p, *, face_takes: str = "") -> None:
+    """Add ``--weights``, ``--like`` and ``--face``: the three ways to name one face of the
+    model (one definition; read back by :func:`face_arg` and :func:`face_or_weights`).
+    ``face_takes``: what the command takes of a ``--face`` file besides its weights, said
+    after its help (``": its weights and head pose"``)."""
+    p.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...' "
+                   "(modes not given: their mean)")
+    p.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
+    p.add_argument("--face", metavar="FACE.json", help="a face saved by the dial editor "
+                   "(`facetransfer view`'s Save face) of this model" + face_takes)
+
+
 def face_arg(args):
     """The ``--face`` file read (:func:`facetransfer.face_file.read_face`; None without one),
     once ``--face``, ``--weights`` and ``--like`` are known to be given one at most."""
@@ -517,11 +529,7 @@ def register(sub) -> None:
 
     s = msub.add_parser("synth", help="write one face of the model as a mesh")
     s.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
-    s.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...' "
-                   "(modes not given: their mean)")
-    s.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
-    s.add_argument("--face", metavar="FACE.json", help="a face saved by the dial editor "
-                   "(`facetransfer view`'s Save face) of this model")
+    add_face_options(s)
     s.add_argument("--out", required=True,
                    help="the mesh to write: FACE.obj (with the model's uvs), .ply, .stl, .off "
                    "or .glb")
