@@ -162,18 +162,9 @@ def make_report(ev, ds, **meta) -> dict:
 
 def write_report(path: Path, report: dict) -> Path:
     from ..io.atomic import write_text_atomic
+    from ..model import json_default
 
-    return write_text_atomic(path, json.dumps(report, indent=2, default=_json_default) + "\n")
-
-
-def _json_default(o):
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o).__name__)
+    return write_text_atomic(path, json.dumps(report, indent=2, default=json_default) + "\n")
 
 
 def plot_error_vs_missing(ev, path: Path, *, title: str = "") -> Path:
