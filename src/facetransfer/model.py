@@ -409,11 +409,13 @@ class MultilinearModel:
         meta["sha256"] = _content_hash(arrays, self._metadata())
         with atomic_path(path, overwrite=overwrite) as tmp:
             with open(tmp, "wb") as fh:
-                np.savez(fh, metadata=np.array(json.dumps(meta, default=_json_default)), **arrays)
+                np.savez(fh, metadata=np.array(json.dumps(meta, default=json_default)), **arrays)
         return Path(path)
 
 
-def _json_default(o):
+def json_default(o):
+    """``json.dumps``' ``default``: numpy arrays as lists, numpy numbers as Python's, paths as
+    text; TypeError for anything else."""
     if isinstance(o, np.ndarray):
         return o.tolist()
     if isinstance(o, (np.integer,)):
@@ -433,7 +435,7 @@ def _content_hash(arrays: Mapping[str, np.ndarray], meta: dict) -> str:
         h.update(str(a.dtype).encode())
         h.update(str(a.shape).encode())
         h.update(a.reshape(-1).view(np.uint8))  # the bytes of tobytes(), without a copy
-    h.update(json.dumps(meta, sort_keys=True, default=_json_default).encode())
+    h.update(json.dumps(meta, sort_keys=True, default=json_default).encode())
     return h.hexdigest()
 
 

@@ -55,8 +55,18 @@ PAIR_SOURCES = ("expression_from", "viseme_from", "identity_from", "pose_from", 
                 "identity_label", "identity_weights")
 
 
+class _Job:
+    """What every job (:class:`ClipJob`, :class:`PairJob`, :class:`ExportJob`) derives from its
+    ``roles``, the input files by what they are to it."""
+
+    @property
+    def inputs(self) -> tuple[Path, ...]:
+        """The input files: the paths of ``roles``, in their order."""
+        return tuple(p for _, p in self.roles)
+
+
 @dataclass(frozen=True)
-class ClipJob:
+class ClipJob(_Job):
     """One clip to track: ``DIR/NAME.npz`` from ``video``.
 
     Attributes
@@ -90,13 +100,9 @@ class ClipJob:
         """What else makes the job's output: its name, face and frame limit."""
         return (("name", self.name), ("face", self.face), ("max_frames", self.max_frames))
 
-    @property
-    def inputs(self) -> tuple[Path, ...]:
-        return tuple(p for _, p in self.roles)
-
 
 @dataclass(frozen=True)
-class PairJob:
+class PairJob(_Job):
     """One transfer: ``DIR/NAME.mp4`` rewritten from ``target`` and its sources.
 
     Attributes
@@ -123,13 +129,9 @@ class PairJob:
         return (("name", self.name),) + tuple(
             (k, self.sources[k]) for k in PAIR_VALUE_COLUMNS if k in self.sources)
 
-    @property
-    def inputs(self) -> tuple[Path, ...]:
-        return tuple(p for _, p in self.roles)
-
 
 @dataclass(frozen=True)
-class ExportJob:
+class ExportJob(_Job):
     """One track file to export as ``DIR/NAME.<ext>``."""
 
     name: str
@@ -143,10 +145,6 @@ class ExportJob:
     @property
     def labels(self) -> tuple[tuple[str, object], ...]:
         return (("name", self.name),)
-
-    @property
-    def inputs(self) -> tuple[Path, ...]:
-        return (self.track,)
 
 
 def _resolve(value: str, base: Path) -> str:

@@ -12,12 +12,12 @@ from __future__ import annotations
 
 import dataclasses
 import logging
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
 
+from ..io.atomic import same_file
 from . import jobs as J
 from .chunks import MIN_CHUNK, plan_chunks
 from .digest import (is_legacy, job_key, job_keys, legacy_job_key, options_text, same_job,
@@ -89,13 +89,6 @@ def prepare_out_dir(out_dir) -> Path:
     return p
 
 
-def _same(a: Path, b: Path) -> bool:
-    try:
-        return os.path.samefile(a, b)
-    except OSError:
-        return os.path.abspath(a) == os.path.abspath(b)
-
-
 def _outputs(jobs, out_dir: Path, ext: str) -> dict[str, Path]:
     outs = {}
     for job in jobs:
@@ -104,7 +97,7 @@ def _outputs(jobs, out_dir: Path, ext: str) -> dict[str, Path]:
             raise BatchError(f"output {out} of {job.name!r} is the batch's {SUMMARY_NAME}; "
                              "give the clip another name")
         for p in job.inputs:
-            if _same(Path(p), out):
+            if same_file(Path(p), out):
                 raise BatchError(f"output {out} of {job.name!r} is also one of its inputs")
         outs[job.name] = out
     return outs

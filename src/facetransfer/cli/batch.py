@@ -49,16 +49,15 @@ def _track_options(p) -> None:
 def register(sub) -> None:
     """Add ``batch track``, ``batch transfer`` and ``batch export`` to the parser."""
     from ..batch.run import DEFAULT_OVERLAP
-    from .common import DefaultsFormatter
+    from .common import DefaultsFormatter, add_command_group
     from .transfer import ALIGN_HELP, add_rewrite_options
 
     fmt = DefaultsFormatter
-    b = sub.add_parser("batch", help="many clips at once on Dask distributed (track, transfer, "
-                       "export)", description="Run track, transfer or export over many clips on "
-                       "an embedded Dask cluster or a real one; one output per clip and "
-                       "DIR/summary.csv.")
-    bs = b.add_subparsers(dest="batch_command", metavar="COMMAND")
-    b.set_defaults(func=lambda args: _usage(b))
+    bs = add_command_group(sub, "batch", dest="batch_command", metavar="COMMAND",
+                           help="many clips at once on Dask distributed (track, transfer, "
+                           "export)", description="Run track, transfer or export over many "
+                           "clips on an embedded Dask cluster or a real one; one output per "
+                           "clip and DIR/summary.csv.")
 
     t = bs.add_parser("track", formatter_class=fmt, help="track many clips: DIR/NAME.npz each",
                       description="Track every clip as `facetransfer track` does, one task per "
@@ -113,11 +112,6 @@ def register(sub) -> None:
                    "export --neutral` (default: as tracked)")
     _cluster_options(e)
     e.set_defaults(func=run_export)
-
-
-def _usage(parser) -> int:
-    parser.print_help()
-    return 2
 
 
 def _run(args, what: str, n_jobs: int, call) -> int:

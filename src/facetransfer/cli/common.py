@@ -54,6 +54,39 @@ class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
         return super()._get_help_string(action)
 
 
+def add_command_group(sub, name: str, *, dest: str, metavar: str = "ACTION", **kwargs):
+    """Add ``facetransfer NAME ACTION``: a command made of actions, which without one prints
+    its help (exit status 2).
+
+    Parameters
+    ----------
+    sub : argparse subparsers
+        Where the command is added.
+    name : str
+    dest : str
+        The namespace attribute that names the action given (``model_command``).
+    metavar : str
+        The actions' name in the usage line.
+    **kwargs
+        Passed to ``sub.add_parser`` (``help``, ``description``, ``formatter_class``).
+
+    Returns
+    -------
+    argparse subparsers
+        Where the command's actions are added.
+    """
+    p = sub.add_parser(name, **kwargs)
+    actions = p.add_subparsers(dest=dest, metavar=metavar)
+    p.set_defaults(func=lambda args: _usage(p))
+    return actions
+
+
+def _usage(parser: argparse.ArgumentParser) -> int:
+    """A command group given no action: its help, exit status 2."""
+    parser.print_help()
+    return 2
+
+
 def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
                       sequences: bool = True) -> None:
     """Add ``--codec``, ``--crf`` and ``--preset`` (one definition for every command that

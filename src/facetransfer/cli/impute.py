@@ -24,9 +24,12 @@ DEFAULT_METHODS = "ppca,average,naive,tensorly"
 
 def register(sub) -> None:
     """Add ``impute eval`` to the facetransfer parser."""
-    p = sub.add_parser("impute", help="missing-data imputation (§4.4)",
-                       description="Fill missing cells of incomplete face data sets (§4.4).")
-    isub = p.add_subparsers(dest="impute_command", metavar="ACTION")
+    from .common import add_command_group
+
+    isub = add_command_group(sub, "impute", dest="impute_command",
+                             help="missing-data imputation (§4.4)",
+                             description="Fill missing cells of incomplete face data sets "
+                             "(§4.4).")
     e = isub.add_parser("eval", help="hold out random cells and measure every imputation method",
                         description="Hide a fraction of the cells at random (never a whole slice), "
                         "predict them with every method and write DIR/report.json, "
@@ -46,7 +49,6 @@ def register(sub) -> None:
     e.add_argument("--overwrite", action="store_true",
                    help="replace the results of an earlier run in DIR")
     e.set_defaults(func=_eval)
-    p.set_defaults(func=lambda args: (p.print_help(), 2)[1])
 
 
 def _floats(text: str, what: str) -> list[float]:
@@ -160,18 +162,9 @@ def make_report(ev, ds, **meta) -> dict:
 
 def write_report(path: Path, report: dict) -> Path:
     from ..io.atomic import write_text_atomic
+    from ..model import json_default
 
-    return write_text_atomic(path, json.dumps(report, indent=2, default=_json_default) + "\n")
-
-
-def _json_default(o):
-    if isinstance(o, (np.integer,)):
-        return int(o)
-    if isinstance(o, (np.floating,)):
-        return float(o)
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    raise TypeError(type(o).__name__)
+    return write_text_atomic(path, json.dumps(report, indent=2, default=json_default) + "\n")
 
 
 def plot_error_vs_missing(ev, path: Path, *, title: str = "") -> Path:

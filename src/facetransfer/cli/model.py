@@ -22,7 +22,8 @@ from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
 from ..io.memory import available_memory  # a name of this module: tests replace it
 from ..io.output_names import check_output_suffix
-from .common import MODEL_ARG_HELP, progress_shown, resolve_model, tqdm_progress
+from .common import (MODEL_ARG_HELP, add_command_group, progress_shown, resolve_model,
+                     tqdm_progress)
 
 log = logging.getLogger(__name__)
 
@@ -252,6 +253,18 @@ def synth_weights(model, weights: dict[str, np.ndarray] | None = None,
                              f"{model.ranks[k]}")
         w[model.mode_names[k]] = vec
     return w
+
+
+def add_face_options(p, *, face_takes: str = "") -> None:
+    """Add ``--weights``, ``--like`` and ``--face``: the three ways to name one face of the
+    model (one definition; read back by :func:`face_arg` and :func:`face_or_weights`).
+    ``face_takes``: what the command takes of a ``--face`` file besides its weights, said
+    after its help (``": its weights and head pose"``)."""
+    p.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...' "
+                   "(modes not given: their mean)")
+    p.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
+    p.add_argument("--face", metavar="FACE.json", help="a face saved by the dial editor "
+                   "(`facetransfer view`'s Save face) of this model" + face_takes)
 
 
 def face_arg(args):
@@ -485,11 +498,10 @@ def _overwrite_option(p) -> None:
 
 def register(sub) -> None:
     """Add ``facetransfer model {build,info,synth,sheet,dials}``."""
-    p = sub.add_parser("model", help="build multilinear face models (§4), describe them "
-                       "(info), write faces (synth), picture sheets and identity dials",
-                       description="Multilinear face models (Vlasic et al. 2005, §4).")
-    msub = p.add_subparsers(dest="model_command", metavar="ACTION")
-    p.set_defaults(func=lambda a: (p.print_help(), 2)[1])
+    msub = add_command_group(sub, "model", dest="model_command",
+                             help="build multilinear face models (§4), describe them (info), "
+                             "write faces (synth), picture sheets and identity dials",
+                             description="Multilinear face models (Vlasic et al. 2005, §4).")
 
     b = msub.add_parser("build", help="build a model from a data set")
     b.add_argument("--dataset", required=True,
@@ -517,11 +529,7 @@ def register(sub) -> None:
 
     s = msub.add_parser("synth", help="write one face of the model as a mesh")
     s.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
-    s.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...' "
-                   "(modes not given: their mean)")
-    s.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
-    s.add_argument("--face", metavar="FACE.json", help="a face saved by the dial editor "
-                   "(`facetransfer view`'s Save face) of this model")
+    add_face_options(s)
     s.add_argument("--out", required=True,
                    help="the mesh to write: FACE.obj (with the model's uvs), .ply, .stl, .off "
                    "or .glb")

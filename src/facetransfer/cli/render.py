@@ -202,14 +202,12 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
 
 def register(sub) -> None:
     """Add ``render`` and ``synth-video`` to the facetransfer parser."""
+    from .model import add_face_options
+
     r = sub.add_parser("render", help="render a Lambert-shaded preview of a model face",
                        description="Render a model face (Eq. (5)) with a weak-perspective camera.")
     r.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
-    r.add_argument("--weights", help="per-mode weights, e.g. 'identity=0.1,0.2,...;expression=...'"
-                   " (modes not given take their mean)")
-    r.add_argument("--like", help="training rows by label, e.g. identity=id03,expression=jawOpen")
-    r.add_argument("--face", metavar="FACE.json", help="a face saved by the dial editor "
-                   "(`facetransfer view`'s Save face) of this model: its weights and head pose")
+    add_face_options(r, face_takes=": its weights and head pose")
     r.add_argument("--pose", help="head pose, e.g. yaw=20,pitch=-5,roll=0,scale=1.2 (degrees)")
     r.add_argument("--size", default="640x480", help="image WIDTHxHEIGHT (default 640x480)")
     r.add_argument("--background", default="255,255,255", help="R,G,B (default white)")

@@ -20,7 +20,7 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import default_model_for, progress_disabled, resolve_model
+from .common import add_command_group, default_model_for, progress_disabled, resolve_model
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -207,11 +207,10 @@ def cmd_blend(args: argparse.Namespace) -> int:
 
 def register(sub) -> None:
     """Add ``texture default|lift|blend`` to the facetransfer parser."""
-    t = sub.add_parser("texture", help="face textures: default texture, lift from video, "
-                       "Poisson blending (§6)",
-                       description="Texture tools of Vlasic et al. 2005, §6.")
-    tsub = t.add_subparsers(dest="texture_command", metavar="ACTION")
-    t.set_defaults(func=lambda a: (t.print_help(), 2)[1])
+    tsub = add_command_group(sub, "texture", dest="texture_command",
+                             help="face textures: default texture, lift from video, Poisson "
+                             "blending (§6)",
+                             description="Texture tools of Vlasic et al. 2005, §6.")
 
     d = tsub.add_parser("default", help="write the default face texture for a model's UVs (the "
                         "Lee Perry-Smith scan where it fits, else procedural skin)")

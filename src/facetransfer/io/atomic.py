@@ -40,7 +40,9 @@ _WRITE_ERRNOS = {errno.ENOSPC: "no space left on the device",
                  errno.EIO: "input/output error"}
 
 
-def _same_file(a: Path, b: Path) -> bool:
+def same_file(a: Path, b: Path) -> bool:
+    """Whether ``a`` and ``b`` are one file (:func:`os.path.samefile`); where either cannot be
+    looked at (not there yet), whether their absolute paths are the same."""
     try:
         return os.path.samefile(a, b)
     except OSError:
@@ -128,7 +130,7 @@ def check_not_input(output: str | os.PathLike,
         if inp is None or str(inp) == "":
             continue
         q = Path(inp)
-        if (p.exists() and q.exists() and _same_file(p, q)) or \
+        if (p.exists() and q.exists() and same_file(p, q)) or \
                 os.path.abspath(p) == os.path.abspath(q):
             raise OutputError(f"output {p} is also an input ({q}); choose another output name")
 

@@ -90,6 +90,14 @@ def _as_vector(x, n: int, what: str) -> np.ndarray:
     return a
 
 
+def _as_positive(x, what: str) -> float:
+    """``x`` as a finite float > 0; ShapeError naming ``what`` otherwise."""
+    v = float(x)
+    if not np.isfinite(v) or v <= 0:
+        raise ShapeError(f"{what} must be a finite number > 0, got {x}")
+    return v
+
+
 def _as_points(X) -> np.ndarray:
     X = np.asarray(X, dtype=np.float64)
     if X.ndim != 2 or X.shape[1] != 3:
@@ -125,14 +133,9 @@ class WeakPerspective:
     perspective = False
 
     def __post_init__(self) -> None:
-        s = float(self.scale)
-        if not np.isfinite(s) or s <= 0:
-            raise ShapeError(f"camera scale must be a finite number > 0, got {self.scale}")
+        s = _as_positive(self.scale, "camera scale")
         t = _as_vector(self.translation, 2, "weak-perspective translation")
-        a = float(self.pixel_aspect)
-        if not np.isfinite(a) or a <= 0:
-            raise ShapeError(f"camera pixel aspect must be a finite number > 0, got "
-                             f"{self.pixel_aspect}")
+        a = _as_positive(self.pixel_aspect, "camera pixel aspect")
         object.__setattr__(self, "pixel_aspect", a)
         object.__setattr__(self, "scale", s)
         object.__setattr__(self, "rotation", _as_rotation(self.rotation))
