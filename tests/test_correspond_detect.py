@@ -40,7 +40,7 @@ def test_view_rotations():
     np.testing.assert_array_equal(views[0], np.eye(3))     # the usual scan pose first
     assert all(abs(np.linalg.det(v) - 1) < 1e-12 for v in views)
     assert len({tuple(np.round(v, 6).ravel()) for v in views}) == 24
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match="up must not be parallel to forward"):
         view_rotation([0, 0, 1], [0, 0, 2])
 
 

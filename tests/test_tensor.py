@@ -123,7 +123,7 @@ def test_variance_truncation():
     assert dec.ranks[1] == 2
     assert tl.ranks_for_variance(np.array([3.0, 1.0, 0.0]), 0.75) == 1
     assert tl.ranks_for_variance(np.array([3.0, 1.0, 0.0]), 0.76) == 2
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"retained variance must be in \(0, 1\], got 1.5"):
         tl.ranks_for_variance(np.array([1.0]), 1.5)
 
 

@@ -225,7 +225,7 @@ def test_merge_textures_weighted_mean_exact():
     # per-vertex colours: no fill by default
     mv = merge_textures([(a[0], wa[0]), (b[0], wb[0])])
     assert mv.texture.shape == (4, 3) and np.all(mv.texture[0] == 0)
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"fill='pushpull' needs \(T, T, 3\) textures, got \(4, 3\)"):
         merge_textures([(a[0], wa[0])], fill="pushpull")
 
 
@@ -237,7 +237,10 @@ def test_fill_holes_keeps_known_and_interpolates(method):
     known[20:30, 30:40] = False
     out = fill_holes(np.where(known[..., None], tex, 0), known, method=method)
     np.testing.assert_array_equal(out[known], tex[known])
-    assert np.abs(out[~known] - tex[~known]).mean() < 6.0  # smooth fill of a ramp
+    # smooth fill of a ramp: measured mean error 0.67 (pushpull) and 2.6 (inpaint) on values
+    # 60..117 (the known texels' mean would be 10.6 off)
+    limit = {"pushpull": 2.0, "inpaint": 5.0}[method]
+    assert np.abs(out[~known] - tex[~known]).mean() < limit
 
 
 def test_fill_vertex_colors_harmonic_reproduces_linear():
@@ -295,7 +298,9 @@ def test_texture_function_respects_per_texel_visibility():
     out = tf(np.array([0.0]))  # exact match of frame 0
     np.testing.assert_allclose(out[0, 1], 10.0, atol=1e-3)
     np.testing.assert_allclose(out[0, 0], 50.0, atol=1e-3)  # only frame 1 among the 2 nearest
-    assert np.all(np.isfinite(out[1, 1]))
+    # the merged texture fills it from the texels seen: (0, 1) and (1, 0) merge all three
+    # frames (260 / 3), (0, 0) frames 1 and 2 (125); their mean 99.44 (measured 99.444)
+    np.testing.assert_allclose(out[1, 1], (2 * 260 / 3 + 125) / 3, atol=1e-3)
     idx, kappa = tf.neighbours(np.array([0.25]))
     assert list(idx) == [0, 1] and np.isclose(kappa.sum(), 1) and kappa[0] > kappa[1]
     np.testing.assert_allclose(kappa, np.array([1 / 0.25**2, 1 / 0.75**2]) / (16 + 1 / 0.5625))
@@ -354,42 +359,42 @@ def test_bad_inputs():
     V, F, UV = grid(2)
     cam = WeakPerspective(10.0, np.eye(3), np.array([20.0, 20.0]))
     frame = np.zeros((40, 40, 3), np.uint8)
-    with pytest.raises(ShapeError):
+    with pytest.raises(ShapeError, match=r"frame must be an \(H, W, 3\) uint8 RGB image, got \(40, 40\) uint8"):
         lift_vertex_colors(frame[..., 0], V, F, cam)
-    with pytest.raises(ShapeError):
+    with pytest.raises(ShapeError, match=r"frame must be an \(H, W, 3\) uint8 RGB image, got \(40, 40, 3\) float64"):
         lift_vertex_colors(frame.astype(float), V, F, cam)
-    with pytest.raises(ShapeError):
+    with pytest.raises(ShapeError, match=r"vertices must be \(n, 3\).*got \(9, 2\)"):
         lift_vertex_colors(frame, V[:, :2], F, cam)
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"faces index vertices 100\.\.108 but there are 9"):
         lift_vertex_colors(frame, V, F + 100, cam)
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"no texture coordinates \(uvs is None\)"):
         lift_uv_texture(frame, V, F, None, cam, 16)
-    with pytest.raises(ShapeError):
+    with pytest.raises(ShapeError, match=r"uvs must be \(n_vertices, 2\) = \(9, 2\), got \(3, 2\)"):
         lift_uv_texture(frame, V, F, UV[:3], cam, 16)
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"atlas was built for other faces, uvs or tex_size"):
         lift_uv_texture(frame, V, F, UV, cam, 16, atlas=UVAtlas(F, UV, 32))
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"tex_size must be an integer in 2\.\.16384, got 1"):
         UVAtlas(F, UV, 1)
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"power must be a finite number >= 0, got -1"):
         obliqueness_weight(V, V, cam, power=-1)
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"need at least one lifted texture"):
         merge_textures([])
-    with pytest.raises(ShapeError):
+    with pytest.raises(ShapeError, match=r"lifted\[1\] has shape \(5, 5, 3\), expected \(4, 4, 3\) like lifted\[0\]"):
         merge_textures([(np.zeros((4, 4, 3)), np.zeros((4, 4))), (np.zeros((5, 5, 3)), np.zeros((5, 5)))])
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"lifted\[0\] weights must be finite and >= 0"):
         merge_textures([(np.zeros((4, 4, 3)), -np.ones((4, 4)))])
-    with pytest.raises(ShapeError):
+    with pytest.raises(ShapeError, match=r"F = 2 expected, got \(3, 4, 3\) and \(3, 4\)"):
         TextureFunction(np.zeros((3, 4, 3)), np.ones((3, 4)), np.zeros((2, 2)))
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"k must be an integer >= 1, got 0"):
         TextureFunction(np.zeros((3, 4, 3)), np.ones((3, 4)), np.zeros((3, 2)), k=0)
     tf = TextureFunction(np.zeros((3, 4, 3)), np.ones((3, 4)), np.eye(3))
-    with pytest.raises(ShapeError):
+    with pytest.raises(ShapeError, match=r"attributes must be a finite \(3,\) vector, got shape \(2,\)"):
         tf(np.zeros(2))
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"size must be an integer in 8\.\.8192, got 4"):
         default_face_texture(np.zeros((5, 2)), size=4)
-    with pytest.raises(TextureError):
+    with pytest.raises(TextureError, match=r"needs texture coordinates; the model has none"):
         default_face_texture(object())
-    with pytest.raises(ValueError):
+    with pytest.raises(ValueError, match=r"known \(H, W\) bool expected, got \(4, 4, 3\) and \(4, 4\) float64"):
         fill_holes(np.zeros((4, 4, 3)), np.ones((4, 4)), method="pushpull")
 
 

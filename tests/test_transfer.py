@@ -67,11 +67,15 @@ def test_time_map_resamples_frame_rate():
     np.testing.assert_allclose(time_map(3, 12.5, 5, 25).source_time, [0, 0.5, 1, 1.5, 2])
 
 
-@pytest.mark.parametrize("args,kw", [((0, 25, 5, 25), {}), ((5, 0, 5, 25), {}),
-                                     ((5, 25, 5, -1), {}), ((5, 25, 5, 25), {"align": "stretch"}),
-                                     ((40.7, 25, 5, 25), {}), ((5, 25, True, 25), {})])
-def test_time_map_bad_input(args, kw):
-    with pytest.raises(TransferError):
+@pytest.mark.parametrize("args,kw,message", [
+    ((0, 25, 5, 25), {}, r"frame counts must be >= 1, got source 0, target 5"),
+    ((5, 0, 5, 25), {}, r"frame rates must be > 0, got source 0, target 25"),
+    ((5, 25, 5, -1), {}, r"frame rates must be > 0, got source 25, target -1"),
+    ((5, 25, 5, 25), {"align": "stretch"}, r"align must be one of trim, loop, hold, got 'stretch'"),
+    ((40.7, 25, 5, 25), {}, r"frame counts are whole numbers, got source 40.7"),
+    ((5, 25, True, 25), {}, r"frame counts are whole numbers, got target True")])
+def test_time_map_bad_input(args, kw, message):
+    with pytest.raises(TransferError, match=f"^{message}$"):
         time_map(*args, **kw)
     assert time_map(5.0, 25, np.int64(5), 25).n_frames == 5   # whole numbers of any type
 
@@ -321,11 +325,16 @@ def test_parse_edit_arguments():
     assert parse_add("frown@120-180") == EditAdd("frown", 120, 180, 1.0)
     assert parse_add("jaw_open*0.5@3-9") == EditAdd("jaw_open", 3, 9, 0.5)
     assert parse_scale("smile=1.5") == EditScale("smile", 1.5)
-    for bad in ("frown", "frown@9-3", "frown@a-b"):
-        with pytest.raises(TransferError):
+    for bad in ("frown", "frown@a-b"):
+        with pytest.raises(TransferError, match=rf"^--add '{bad}': expected EXPRESSION@START-STOP, "
+                                                r"e\.g\. frown@120-180$"):
             parse_add(bad)
+    with pytest.raises(TransferError, match=r"^--add 'frown@9-3': the range ends \(3\) before it "
+                                            r"starts \(9\)$"):
+        parse_add("frown@9-3")
     for bad in ("smile", "smile=x", "smile=inf"):
-        with pytest.raises(TransferError):
+        with pytest.raises(TransferError, match=rf"^--scale '{bad}': expected EXPRESSION=FACTOR, "
+                                                r"e\.g\. smile=1\.5$"):
             parse_scale(bad)
     np.testing.assert_array_equal(parse_weights("1,2,3", 3), [1, 2, 3])
     with pytest.raises(TransferError, match="expected 3"):
