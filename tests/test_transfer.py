@@ -332,10 +332,16 @@ def test_parse_edit_arguments():
     with pytest.raises(TransferError, match=r"^--add 'frown@9-3': the range ends \(3\) before it "
                                             r"starts \(9\)$"):
         parse_add("frown@9-3")
-    for bad in ("smile", "smile=x", "smile=inf"):
+    for bad in ("smile", "=2", "smile=", "smile=1 x"):
         with pytest.raises(TransferError, match=rf"^--scale '{bad}': expected EXPRESSION=FACTOR, "
                                                 r"e\.g\. smile=1\.5$"):
             parse_scale(bad)
+    with pytest.raises(TransferError, match=r"^--scale 'smile=x': 'x' is not a number$"):
+        parse_scale("smile=x")
+    for bad in ("smile=inf", "smile=nan", "smile=1e999"):
+        with pytest.raises(TransferError, match=rf"^--scale '{bad}': the factor must be finite$"):
+            parse_scale(bad)
+    assert parse_scale(" smile=+1.5e0 ") == EditScale("smile", 1.5)
     np.testing.assert_array_equal(parse_weights("1,2,3", 3), [1, 2, 3])
     with pytest.raises(TransferError, match="expected 3"):
         parse_weights("1,2", 3)

@@ -440,7 +440,7 @@ class EditScale:
 
 
 _ADD_RE = re.compile(r"^\s*([A-Za-z0-9_.\-]+?)(?:\*([-+0-9.eE]+))?@(\d+)-(\d+)\s*$")
-_SCALE_RE = re.compile(r"^\s*([A-Za-z0-9_.\-]+)=([-+0-9.eE]+)\s*$")
+_SCALE_RE = re.compile(r"^\s*([A-Za-z0-9_.\-]+)=(\S+)\s*$")
 
 
 def parse_add(text: str) -> EditAdd:
