@@ -80,7 +80,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     if options.colour_tags and tags.matrix is None:
         options = replace(options, colour_tags=False)
     if bits > 8 and not deep and not tags.beyond_sdr:
-        _warn_depth(str(video), bits)
+        _warn_depth(str(video), bits, _tiff_with_alpha(out, video))
     if tags.beyond_sdr and not deep:   # a command that carries depth could have kept it
         _warn_hdr(str(video), tags, bits > 8)
     elif options.primaries is None and options.transfer is None:
@@ -113,10 +113,19 @@ def _warn_progressive(video: str) -> None:
 
 
 @functools.lru_cache(maxsize=16)
-def _warn_depth(video: str, bits: int) -> None:
-    """Say once that ``video``'s samples below 8 bits are not carried into the rewrite."""
-    log.warning("%s has %d bits a sample; the result is written in 8 (--codec prores or "
-                "h265, or a 16-bit PNG, TIFF or DPX sequence, keeps them)", video, bits)
+def _warn_depth(video: str, bits: int, tiff_alpha: bool = False) -> None:
+    """Say once that ``video``'s samples below 8 bits are not carried into the rewrite (a
+    TIFF sequence of a video with alpha, ``tiff_alpha``, is what was asked: say why)."""
+    log.warning("%s has %d bits a sample; the result is written in 8 (%s)", video, bits,
+                "a TIFF sequence with alpha is written in 8 bits; --codec prores, or a PNG or "
+                "DPX sequence, keeps them and the alpha" if tiff_alpha else "--codec prores "
+                "or h265, or a 16-bit PNG, TIFF or DPX sequence, keeps them")
+
+
+def _tiff_with_alpha(out, video) -> bool:
+    """Whether ``out`` is a TIFF sequence and ``video`` has alpha (written in 8 bits)."""
+    return (out is not None and is_image_pattern(out)
+            and Path(out).suffix.lower() in (".tif", ".tiff") and video_has_alpha(video))
 
 
 @functools.lru_cache(maxsize=16)
