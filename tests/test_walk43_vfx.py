@@ -41,3 +41,29 @@ def test_a_deep_video_with_alpha_written_as_tiff_is_said_why_it_is_8_bits(tmp_pa
     said = [r.getMessage() for r in caplog.records if "bits a sample" in r.getMessage()]
     assert len(said) == 1 and "a TIFF sequence with alpha is written in 8 bits" in said[0]
     assert "PNG or DPX sequence, keeps them" in said[0]
+
+
+def test_a_png_sequence_of_non_square_pixels_is_warned_of(tmp_path, caplog):
+    """A target of pixels 15:16 written as a PNG sequence: the frames are as stored and PNG
+    has no field for the ratio; this was silent (a video, DPX or OpenEXR output records it)."""
+    import logging
+    import subprocess
+
+    from facetransfer.io.ffmpeg import ffmpeg_exe
+    from facetransfer.io.video_like import like_video
+
+    mp4 = tmp_path / "sar.mp4"
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "testsrc=size=64x60:rate=25:duration=0.2", "-vf", "setsar=15/16",
+                    "-pix_fmt", "yuv420p", str(mp4)], check=True)
+
+    def said(out):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="facetransfer"):
+            opts = like_video(None, mp4, out)
+        assert opts.sar == (15, 16)
+        return [r.getMessage() for r in caplog.records if "pixel aspect" in r.getMessage()]
+
+    png = said(tmp_path / "o" / "x.%04d.png")
+    assert len(png) == 1 and "has pixels 15:16" in png[0] and ".png files store no" in png[0]
+    assert said(tmp_path / "o" / "x.%04d.exr") == [] and said(tmp_path / "o.mov") == []

@@ -58,6 +58,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
             options = replace(options, timecode=seq.timecode)
         if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
             options = replace(options, sar=seq.sar)
+            _warn_square(str(video), seq.sar, out)
         return options
     if video is None or not Path(video).is_file():
         return options
@@ -77,6 +78,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         options = replace(options, deep=True, matrix=tags.matrix or options.matrix)
     if options.sar is None and sar != (1, 1):
         options = replace(options, sar=sar)
+        _warn_square(str(video), sar, out)
     if options.colour_tags and tags.matrix is None:
         options = replace(options, colour_tags=False)
     if bits > 8 and not deep and not tags.beyond_sdr:
@@ -102,6 +104,22 @@ def _warn_alpha(video: str) -> None:
     log.warning("%s has an alpha channel; the result is written without one (colour only; "
                 "transfer keeps a target's in ProRes 4444 and PNG, TIFF or DPX sequences, an "
                 "OpenEXR plate's in OpenEXR)", video)
+
+
+def _warn_square(video: str, sar, out) -> None:
+    """Say once that an image sequence ``out`` that stores no pixel aspect ratio (PNG, TIFF,
+    JPEG, BMP: not DPX or OpenEXR) holds ``video``'s non-square pixels as square ones."""
+    if out is None or not is_image_pattern(out) \
+            or Path(out).suffix.lower() in (".dpx", ".exr"):
+        return
+    _warn_square_once(video, f"{sar[0]}:{sar[1]}", Path(out).suffix.lower())
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_square_once(video: str, sar: str, suffix: str) -> None:
+    log.warning("%s has pixels %s (not square); %s files store no pixel aspect ratio, so the "
+                "frames are written as stored and show stretched unless it is set where they "
+                "are read (a .dpx or .exr sequence, or a video, records it)", video, sar, suffix)
 
 
 @functools.lru_cache(maxsize=16)
