@@ -67,3 +67,29 @@ def test_a_png_sequence_of_non_square_pixels_is_warned_of(tmp_path, caplog):
     png = said(tmp_path / "o" / "x.%04d.png")
     assert len(png) == 1 and "has pixels 15:16" in png[0] and ".png files store no" in png[0]
     assert said(tmp_path / "o" / "x.%04d.exr") == [] and said(tmp_path / "o.mov") == []
+
+
+def test_an_output_that_cannot_hold_the_start_timecode_is_warned_of(tmp_path, caplog):
+    """A 23.976 fps plate starting at 01:00:00:00 written as a PNG sequence (numbered from 0)
+    or an AVI: the timecode was dropped silently; a .mov keeps it, and says nothing."""
+    import logging
+    import subprocess
+
+    from facetransfer.io.ffmpeg import ffmpeg_exe
+    from facetransfer.io.video_like import like_video
+
+    mov = tmp_path / "tc.mov"
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "testsrc=size=64x64:rate=24000/1001:duration=0.2", "-timecode",
+                    "01:00:00:00", "-pix_fmt", "yuv420p", str(mov)], check=True)
+
+    def said(out):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="facetransfer"):
+            assert like_video(None, mov, out).timecode == "01:00:00:00"
+        return [r.getMessage() for r in caplog.records if "timecode" in r.getMessage()]
+
+    png = said(tmp_path / "o" / "x.%04d.png")
+    assert len(png) == 1 and "starts at timecode 01:00:00:00; .png files hold none" in png[0]
+    assert len(said(tmp_path / "o.avi")) == 1
+    assert said(tmp_path / "o.mov") == [] and said(tmp_path / "e" / "x.%04d.exr") == []

@@ -56,6 +56,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
             options = replace(options, first_number=seq.first)
         if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
             options = replace(options, timecode=seq.timecode)
+            _warn_timecode(str(video), seq.timecode, out)
         if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
             options = replace(options, sar=seq.sar)
             _warn_square(str(video), seq.sar, out)
@@ -89,6 +90,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
     if options.timecode is None:
         options = replace(options, timecode=timecode_of(video))
+        _warn_timecode(str(video), options.timecode, out)
     field = first_field(video)
     if field is not None and options.field is None:
         if options.codec == "h265":
@@ -104,6 +106,23 @@ def _warn_alpha(video: str) -> None:
     log.warning("%s has an alpha channel; the result is written without one (colour only; "
                 "transfer keeps a target's in ProRes 4444 and PNG, TIFF or DPX sequences, an "
                 "OpenEXR plate's in OpenEXR)", video)
+
+
+def _warn_timecode(video: str, timecode, out) -> None:
+    """Say once that the output ``out`` holds no start timecode where ``video`` has one: an
+    AVI file, a PNG, TIFF, JPEG or BMP sequence (not DPX or OpenEXR)."""
+    suffix = "" if out is None else Path(out).suffix.lower()
+    if not timecode or not (suffix == ".avi" or is_image_pattern(out)
+                            and suffix not in (".dpx", ".exr")):
+        return
+    _warn_timecode_once(video, str(timecode), suffix)
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_timecode_once(video: str, timecode: str, suffix: str) -> None:
+    log.warning("%s starts at timecode %s; %s files hold none, so the result does not say "
+                "where it sits (a .mov, .mp4 or .mkv video, or a .dpx or .exr sequence, "
+                "records it)", video, timecode, suffix)
 
 
 def _warn_square(video: str, sar, out) -> None:
