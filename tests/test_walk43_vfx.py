@@ -93,3 +93,26 @@ def test_an_output_that_cannot_hold_the_start_timecode_is_warned_of(tmp_path, ca
     assert len(png) == 1 and "starts at timecode 01:00:00:00; .png files hold none" in png[0]
     assert len(said(tmp_path / "o.avi")) == 1
     assert said(tmp_path / "o.mov") == [] and said(tmp_path / "e" / "x.%04d.exr") == []
+
+
+def test_a_timecode_given_to_a_usd_export_is_refused_saying_what_usd_takes(
+        arkit_model, make_arkit_track, tmp_path, capsys):
+    """``export T.npz --out take.usda --timecode 02:00:00:00``: it said "only livelink takes
+    carry one, not usd", though a USD export records the plate's start timecode; now it says
+    what usd takes (source or none), and before the model is loaded or a texture lifted."""
+    from facetransfer.cli.main import main
+
+    track, _, _ = make_arkit_track(arkit_model, 4)
+    track.save(tmp_path / "t.npz")
+    arkit_model.save(tmp_path / "m.npz")
+    for fmt in ("usda", "glb"):
+        code = main([str(x) for x in ["export", tmp_path / "t.npz", "--model", tmp_path / "m.npz",
+                                      "--out", tmp_path / f"t.{fmt}", "--timecode",
+                                      "02:00:00:00"]])
+        err = capsys.readouterr().err.strip().splitlines()
+        assert code == 2 and len(err) == 1, err
+        fmt = "usd" if fmt == "usda" else fmt
+        assert err[-1].endswith(f"--timecode 02:00:00:00: a timecode of your own is written "
+                                f"into livelink takes only; {fmt} takes source (the tracked "
+                                "video's start timecode, recorded in the file) or none"), err
+        assert not (tmp_path / f"t.{fmt}").exists()
