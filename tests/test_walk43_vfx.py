@@ -116,3 +116,27 @@ def test_a_timecode_given_to_a_usd_export_is_refused_saying_what_usd_takes(
                                 f"into livelink takes only; {fmt} takes source (the tracked "
                                 "video's start timecode, recorded in the file) or none"), err
         assert not (tmp_path / f"t.{fmt}").exists()
+
+
+def test_an_rgba_plate_written_as_prores_is_not_told_prores_keeps_it(tmp_path, caplog):
+    """An RGBA PNG plate (a keyer's) written with ``--codec prores``: its alpha is dropped
+    (a plate's alpha goes to image sequences only), and the warning said "transfer keeps a
+    target's in ProRes 4444", the output just asked for."""
+    import logging
+
+    import cv2
+    import numpy as np
+
+    from facetransfer.io.video import VideoOptions
+    from facetransfer.io.video_like import like_video
+
+    (tmp_path / "p").mkdir()
+    for k in (1001, 1002):
+        cv2.imwrite(str(tmp_path / "p" / f"k.{k}.png"), np.full((16, 16, 4), 200, np.uint8))
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        opts = like_video(VideoOptions("prores"), tmp_path / "p" / "k.####.png",
+                          tmp_path / "o.mov")
+    said = [r.getMessage() for r in caplog.records if "alpha" in r.getMessage()]
+    assert not opts.alpha and len(said) == 1
+    assert "keeps a plate's in a PNG, TIFF or DPX sequence, not in a video" in said[0]
+    assert "ProRes 4444" not in said[0]

@@ -51,7 +51,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         seq = open_sequence(video)
         if sequence_has_alpha(seq) and not (out is not None
                                             and sequence_alpha_kept(out, video)):
-            _warn_alpha(str(video))
+            _warn_alpha(str(video), plate=True)
         if options.first_number is None:
             options = replace(options, first_number=seq.first)
         if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
@@ -101,11 +101,13 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
 
 
 @functools.lru_cache(maxsize=16)
-def _warn_alpha(video: str) -> None:
-    """Say once that ``video``'s alpha is not carried into the rewrite."""
+def _warn_alpha(video: str, plate: bool = False) -> None:
+    """Say once that ``video``'s alpha is not carried into the rewrite, and which outputs
+    carry it: a ``plate``'s (an image sequence's) only in image sequences."""
     log.warning("%s has an alpha channel; the result is written without one (colour only; "
-                "transfer keeps a target's in ProRes 4444 and PNG, TIFF or DPX sequences, an "
-                "OpenEXR plate's in OpenEXR)", video)
+                "transfer keeps %s)", video,
+                "a plate's in a PNG, TIFF or DPX sequence, not in a video" if plate else
+                "a video's in ProRes 4444, --codec prores, and in PNG, TIFF or DPX sequences")
 
 
 def _warn_timecode(video: str, timecode, out) -> None:
