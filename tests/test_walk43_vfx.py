@@ -140,3 +140,28 @@ def test_an_rgba_plate_written_as_prores_is_not_told_prores_keeps_it(tmp_path, c
     assert not opts.alpha and len(said) == 1
     assert "keeps a plate's in a PNG, TIFF or DPX sequence, not in a video" in said[0]
     assert "ProRes 4444" not in said[0]
+
+
+def test_probe_says_which_sequences_keep_a_16_bit_rgba_plate_deep(tmp_path):
+    """probe said of a 16-bit RGBA PNG plate (and of a deep video with alpha) that a TIFF
+    sequence written from it stays 16-bit; transfer writes that TIFF in 8 bits."""
+    import cv2
+    import numpy as np
+
+    from facetransfer.io.plate_depth import plate_depth
+    from facetransfer.io.video_facts import fact_lines, video_facts
+
+    for name, img in (("rgba", np.full((8, 8, 4), 40000, np.uint16)),
+                      ("rgb", np.full((8, 8, 3), 40000, np.uint16))):
+        (tmp_path / name).mkdir()
+        for k in (1001, 1002):
+            cv2.imwrite(str(tmp_path / name / f"p.{k}.png"), img)
+    rgba, rgb = tmp_path / "rgba" / "p.####.png", tmp_path / "rgb" / "p.####.png"
+    assert plate_depth(tmp_path / "o" / "x.%04d.tif", rgba) is None         # 8 bits
+    assert plate_depth(tmp_path / "o" / "x.%04d.png", rgba) is not None     # 16 bits
+    assert plate_depth(tmp_path / "o" / "x.%04d.tif", rgb) is not None
+    said = fact_lines(video_facts(rgba))[-1]
+    assert "(a PNG or DPX sequence written from it stays 16-bit, with its alpha; a TIFF one " \
+           "is 8-bit)" in said
+    assert "(a PNG, TIFF or DPX sequence written from it stays 16-bit)" in \
+        fact_lines(video_facts(rgb))[-1]
