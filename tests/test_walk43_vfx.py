@@ -165,3 +165,36 @@ def test_probe_says_which_sequences_keep_a_16_bit_rgba_plate_deep(tmp_path):
            "is 8-bit)" in said
     assert "(a PNG, TIFF or DPX sequence written from it stays 16-bit)" in \
         fact_lines(video_facts(rgb))[-1]
+
+
+def test_an_exr_plate_s_alpha_dropped_by_another_output_is_said(tmp_path, caplog):
+    """An OpenEXR plate with an A channel written as PNG or ProRes lost it silently, and
+    probe did not say the plate has it; an .exr output keeps it and says nothing."""
+    import logging
+
+    import numpy as np
+    import OpenEXR
+
+    from facetransfer.io.video import VideoOptions
+    from facetransfer.io.video_facts import fact_lines, video_facts
+    from facetransfer.io.video_like import like_video
+
+    (tmp_path / "p").mkdir()
+    for k in (1001, 1002):
+        px = np.full((8, 8, 4), 0.5, np.float16)
+        OpenEXR.File({"type": OpenEXR.scanlineimage}, {"RGBA": px}).write(
+            str(tmp_path / "p" / f"e.{k}.exr"))
+    plate = tmp_path / "p" / "e.####.exr"
+
+    def said(out, options=None):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="facetransfer"):
+            like_video(options, plate, out)
+        return [r.getMessage() for r in caplog.records if "beyond its colour" in r.getMessage()]
+
+    png = said(tmp_path / "o" / "x.%04d.png")
+    assert len(png) == 1 and "(A); a .png result holds the colour only" in png[0]
+    assert len(said(tmp_path / "o.mov", VideoOptions("prores"))) == 1
+    assert said(tmp_path / "e" / "x.%04d.exr") == []
+    assert "its other channels (A; only an .exr output holds them)" in \
+        fact_lines(video_facts(plate))[-1]

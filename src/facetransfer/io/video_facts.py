@@ -215,9 +215,11 @@ def _exr_kind(f: VideoFacts) -> str:
         name = getattr(OpenEXR, "chromaticitiesToColorInteropID", lambda _: None)(chroma)
         primaries = (f" in the primaries {name or 'its header names'} (brought to Rec.709's "
                      "first)")
+    other = (f" and its other channels ({', '.join(sorted(image.other))}; only an .exr "
+             "output holds them)" if image.other else "")
     return (f"OpenEXR, scene-linear{primaries}: shown through the sRGB curve (above 1 as "
             "white) to be tracked; a rewrite written as .exr keeps every float it does not "
-            "change; no audio")
+            f"change{other}; no audio")
 
 
 def _dpx_kind(f: VideoFacts) -> str:

@@ -52,6 +52,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         if sequence_has_alpha(seq) and not (out is not None
                                             and sequence_alpha_kept(out, video)):
             _warn_alpha(str(video), plate=True)
+        _warn_exr_channels(seq.file(0), video, out)
         if options.first_number is None:
             options = replace(options, first_number=seq.first)
         if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
@@ -108,6 +109,24 @@ def _warn_alpha(video: str, plate: bool = False) -> None:
                 "transfer keeps %s)", video,
                 "a plate's in a PNG, TIFF or DPX sequence, not in a video" if plate else
                 "a video's in ProRes 4444, --codec prores, and in PNG, TIFF or DPX sequences")
+
+
+def _warn_exr_channels(first: Path, video, out) -> None:
+    """Say once that an OpenEXR plate's channels beyond its colour (alpha, depth: its first
+    frame ``first``'s) are not in an output other than OpenEXR."""
+    if out is None or first.suffix.lower() != ".exr" or Path(out).suffix.lower() == ".exr":
+        return
+    from .exr import read_exr_image
+
+    other = tuple(sorted(read_exr_image(first).other))
+    if other:
+        _warn_exr_channels_once(str(video), ", ".join(other), Path(out).suffix.lower())
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_exr_channels_once(video: str, channels: str, suffix: str) -> None:
+    log.warning("%s has channels beyond its colour (%s); a %s result holds the colour only (an "
+                ".exr sequence keeps them)", video, channels, suffix)
 
 
 def _warn_timecode(video: str, timecode, out) -> None:
