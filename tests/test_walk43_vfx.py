@@ -198,3 +198,31 @@ def test_an_exr_plate_s_alpha_dropped_by_another_output_is_said(tmp_path, caplog
     assert said(tmp_path / "e" / "x.%04d.exr") == []
     assert "its other channels (A; only an .exr output holds them)" in \
         fact_lines(video_facts(plate))[-1]
+
+
+def test_an_export_names_lost_frames_by_the_plate_s_numbers(arkit_model, make_arkit_track,
+                                                             tmp_path, capsys):
+    """The track of a plate numbered from 1001 whose first frames have no face: the USD's
+    time codes start at 1001, and the note said "lost in frames 0-1" only; now it adds the
+    plate's numbers, 1001-1002."""
+    import cv2
+    import numpy as np
+
+    from facetransfer.cli.main import main
+
+    (tmp_path / "plate").mkdir()
+    for k in range(1001, 1005):
+        cv2.imwrite(str(tmp_path / "plate" / f"sh.{k}.png"), np.zeros((8, 8, 3), np.uint8))
+    track, _, _ = make_arkit_track(arkit_model, 4)
+    from dataclasses import replace
+
+    lost = np.zeros(4, bool)
+    lost[:2] = True
+    track = replace(track, source=str(tmp_path / "plate" / "sh.####.png"), lost=lost)
+    track.save(tmp_path / "t.npz")
+    arkit_model.save(tmp_path / "m.npz")
+    assert main([str(x) for x in ["export", tmp_path / "t.npz", "--model", tmp_path / "m.npz",
+                                  "--out", tmp_path / "t.csv"]]) == 0
+    out = capsys.readouterr().out.strip().splitlines()
+    assert out[-1] == ("note: the face is lost in frames 0-1 (the plate's 1001-1002): they "
+                       "hold the nearest tracked frame's values"), out

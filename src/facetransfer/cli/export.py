@@ -168,9 +168,12 @@ def _say_written(args, track, path, timecode, said: str) -> None:
         print(f"note: the track's shots hold {people} people (a clip cut between them); the "
               "mesh is the first one's, the curves every shot's")
     if track.lost.any():
+        from ..export.usd import source_first_frame
         from ..file_facts import lost_runs
 
-        print(f"note: the face is lost in frames {lost_runs(track.lost)}: "
+        first = source_first_frame(track)   # a plate's own numbers: 1001-1010, not 0-9
+        plate = f" (the plate's {lost_runs(track.lost, first)})" if first else ""
+        print(f"note: the face is lost in frames {lost_runs(track.lost)}{plate}: "
               + ("their frames are left empty" if args.format == "json" else
                  "they hold the nearest tracked frame's values"))
 
