@@ -93,6 +93,7 @@ def test_an_output_that_cannot_hold_the_start_timecode_is_warned_of(tmp_path, ca
     assert len(png) == 1 and "starts at timecode 01:00:00:00; .png files hold none" in png[0]
     assert len(said(tmp_path / "o.avi")) == 1
     assert said(tmp_path / "o.mov") == [] and said(tmp_path / "e" / "x.%04d.exr") == []
+    assert said(None) == []      # no output: a track's reading
 
 
 def test_a_timecode_given_to_a_usd_export_is_refused_saying_what_usd_takes(

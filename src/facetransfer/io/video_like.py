@@ -132,9 +132,10 @@ def _warn_exr_channels_once(video: str, channels: str, suffix: str) -> None:
 def _warn_timecode(video: str, timecode, out) -> None:
     """Say once that the output ``out`` holds no start timecode where ``video`` has one: an
     AVI file, a PNG, TIFF, JPEG or BMP sequence (not DPX or OpenEXR)."""
-    suffix = "" if out is None else Path(out).suffix.lower()
-    if not timecode or not (suffix == ".avi" or is_image_pattern(out)
-                            and suffix not in (".dpx", ".exr")):
+    if out is None or not timecode:
+        return
+    suffix = Path(out).suffix.lower()
+    if not (suffix == ".avi" or is_image_pattern(out) and suffix not in (".dpx", ".exr")):
         return
     _warn_timecode_once(video, str(timecode), suffix)
 
