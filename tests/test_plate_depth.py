@@ -185,9 +185,10 @@ def test_probe_says_what_a_rewrite_keeps_of_a_plate(tmp_path, monkeypatch):
             cv2.imwrite(str(tmp_path / name / f"p.{k:04d}.png"), img)
     deep = video_facts(tmp_path / "deep" / "p.%04d.png")
     assert (deep.bits, deep.alpha) == (16, True)
-    assert fact_lines(deep)[-1] == ("  RGB images, 16 bits, seen in 8 (a PNG, TIFF or DPX "
-                                    "sequence written from it stays 16-bit); alpha: kept by "
-                                    "transfer in a PNG, TIFF or DPX sequence; no audio")
+    assert fact_lines(deep)[-1] == ("  RGB images, 16 bits, seen in 8 (a PNG or DPX sequence "
+                                    "written from it stays 16-bit, with its alpha; a TIFF one "
+                                    "is 8-bit); alpha: kept by transfer in a PNG, TIFF or DPX "
+                                    "sequence; no audio")
     flat = video_facts(tmp_path / "flat" / "p.%04d.png")
     assert (flat.bits, flat.alpha) == (8, False)
     assert fact_lines(flat)[-1] == "  RGB images, 8 bits; no audio"

@@ -161,8 +161,9 @@ def test_a_deep_sdr_target_written_in_8_bits_keeps_its_colour_names(tmp_path, ca
         assert not caplog.records
         like_video(None, mov, tmp_path / "tif" / "%04d.tif")    # alpha kept, in 8 bits
     assert [r.getMessage() for r in caplog.records] == [
-        f"{mov} has 12 bits a sample; the result is written in 8 (--codec prores or h265, or "
-        "a 16-bit PNG, TIFF or DPX sequence, keeps them)"]
+        f"{mov} has 12 bits a sample; the result is written in 8 (a TIFF sequence with alpha "
+        "is written in 8 bits; --codec prores, or a PNG or DPX sequence, keeps them and the "
+        "alpha)"]
     assert video_depth(tmp_path / "tif" / "%04d.tif", mov) is None
 
 

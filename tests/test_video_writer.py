@@ -443,10 +443,11 @@ def test_a_plate_with_alpha_is_said_to_lose_it(tmp_path, caplog):
         for v in (alpha, opaque, plate / "p.%04d.png", plate / "q.%04d.png"):
             like_video(None, v)
     said = [r.getMessage() for r in caplog.records if "has an alpha" in r.getMessage()]
-    why = ("has an alpha channel; the result is written without one (colour only; transfer "
-           "keeps a target's in ProRes 4444 and PNG, TIFF or DPX sequences, an OpenEXR plate's in "
-           "OpenEXR)")
-    assert said == [f"{alpha} {why}", f"{plate / 'p.%04d.png'} {why}"]
+    why = "has an alpha channel; the result is written without one (colour only; transfer keeps "
+    assert said == [f"{alpha} {why}a video's in ProRes 4444, --codec prores, and in PNG, TIFF "
+                    "or DPX sequences)",
+                    f"{plate / 'p.%04d.png'} {why}a plate's in a PNG, TIFF or DPX sequence, not "
+                    "in a video)"]
 
 
 def test_like_video_takes_the_inputs_aspect_unless_given(tmp_path):

@@ -71,14 +71,16 @@ def _other_npz(p: Path, names: set) -> str:
         if shown else "no arrays"
 
 
-def lost_runs(lost: np.ndarray) -> str:
-    """``"3-7, 12"``: a track's lost frames as runs (the first four)."""
-    return _ranges(np.asarray(lost, bool))
+def lost_runs(lost: np.ndarray, first: int = 0) -> str:
+    """``"3-7, 12"``: a track's lost frames as runs (the first four), counted from ``first``
+    (a plate's first frame number)."""
+    return _ranges(np.asarray(lost, bool), first=first)
 
 
-def _ranges(mask: np.ndarray, limit: int = 4) -> str:
-    """``"3-7, 12, 40-41"``: the runs of True in ``mask`` (the first ``limit``)."""
-    idx = np.flatnonzero(mask)
+def _ranges(mask: np.ndarray, limit: int = 4, first: int = 0) -> str:
+    """``"3-7, 12, 40-41"``: the runs of True in ``mask`` (the first ``limit``), numbered from
+    ``first``."""
+    idx = np.flatnonzero(mask) + int(first)
     if not idx.size:
         return ""
     starts = np.r_[idx[0], idx[1:][np.diff(idx) > 1]]

@@ -109,6 +109,11 @@ def run(args: argparse.Namespace) -> int:
     if (args.texture or args.texture_from) and args.format != "glb":
         raise FaceTransferError(f"--texture/--texture-from: only glb files carry a texture, "
                                 f"not {args.format}")
+    if args.timecode not in ("source", "none") and args.format != "livelink":
+        raise FaceTransferError(
+            f"--timecode {args.timecode}: a timecode of your own is written into livelink "
+            f"takes only; {args.format} takes source (the tracked video's start timecode, "
+            "recorded in the file) or none")
     if args.texture_step < 1:
         raise FaceTransferError(f"--texture-step must be >= 1, got {args.texture_step}")
     from ..take import is_take
@@ -139,8 +144,6 @@ def run(args: argparse.Namespace) -> int:
         track.warn_other_video(args.texture_from,
                                "the texture is lifted through another face's motion")
         texture = _lift(track, model, args)
-    if args.timecode not in ("source", "none") and args.format != "livelink":
-        raise FaceTransferError(f"--timecode: only livelink takes carry one, not {args.format}")
     timecode, said = _start_timecode(args, track)
     if args.format in ("usd", "glb", "json") and args.timecode == "source":
         timecode, said = "source", _source_said(track, args.format)
@@ -165,9 +168,12 @@ def _say_written(args, track, path, timecode, said: str) -> None:
         print(f"note: the track's shots hold {people} people (a clip cut between them); the "
               "mesh is the first one's, the curves every shot's")
     if track.lost.any():
+        from ..export.usd import source_first_frame
         from ..file_facts import lost_runs
 
-        print(f"note: the face is lost in frames {lost_runs(track.lost)}: "
+        first = source_first_frame(track)   # a plate's own numbers: 1001-1010, not 0-9
+        plate = f" (the plate's {lost_runs(track.lost, first)})" if first else ""
+        print(f"note: the face is lost in frames {lost_runs(track.lost)}{plate}: "
               + ("their frames are left empty" if args.format == "json" else
                  "they hold the nearest tracked frame's values"))
 

@@ -283,6 +283,9 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
         if same is not None:
             raise VideoError(f"output {p} would write over the frames of the input {same}; "
                              "choose another name or folder")
+        file = next((q for q in (p.parent, p.parent.parent) if q.is_file()), None)
+        if file is not None:   # else mkdir at the writer's start: "File exists"
+            raise VideoError(f"output folder {file} is a file, not a folder (for {p})")
         if not p.parent.parent.is_dir() and not p.parent.is_dir():
             raise VideoError(f"output folder {p.parent} does not exist (for {p})")
         if not overwrite and _pattern_files(p):

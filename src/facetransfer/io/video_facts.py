@@ -187,8 +187,9 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 f"; timecode {f.timecode} (the results start at it)"),
             f"  container {f.container or '?'}; {reading}"] + (
                 [f"  {f.bits} bits a sample, seen in 8: kept by transfer in ProRes or H.265 "
-                 "(--codec prores or h265: 10 bits, an HDR video's colour too) or a 16-bit PNG, "
-                 "TIFF or DPX sequence"] if f.bits > 8 else []) + (
+                 "(--codec prores or h265: 10 bits, an HDR video's colour too) or a 16-bit "
+                 + ("PNG or DPX sequence (a TIFF one is 8-bit, with the alpha)" if f.alpha else
+                    "PNG, TIFF or DPX sequence")] if f.bits > 8 else []) + (
                 ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG, "
                  "TIFF or DPX sequence"] if f.alpha else [])
 
@@ -214,9 +215,11 @@ def _exr_kind(f: VideoFacts) -> str:
         name = getattr(OpenEXR, "chromaticitiesToColorInteropID", lambda _: None)(chroma)
         primaries = (f" in the primaries {name or 'its header names'} (brought to Rec.709's "
                      "first)")
+    other = (f" and its other channels ({', '.join(sorted(image.other))}; only an .exr "
+             "output holds them)" if image.other else "")
     return (f"OpenEXR, scene-linear{primaries}: shown through the sRGB curve (above 1 as "
             "white) to be tracked; a rewrite written as .exr keeps every float it does not "
-            "change; no audio")
+            f"change{other}; no audio")
 
 
 def _dpx_kind(f: VideoFacts) -> str:
@@ -228,7 +231,17 @@ def _dpx_kind(f: VideoFacts) -> str:
 
 def _image_kind(f: VideoFacts) -> str:
     """What an image sequence's frames hold and what a rewrite keeps of it."""
-    depth = "16 bits, seen in 8 (a PNG, TIFF or DPX sequence written from it stays 16-bit)" \
-        if f.bits == 16 else f"{f.bits} bits"
+    depth = f"16 bits, seen in 8 ({_deep_kept(f)})" if f.bits == 16 else f"{f.bits} bits"
     alpha = ("; alpha: kept by transfer in a PNG, TIFF or DPX sequence" if f.alpha else "")
     return f"RGB images, {depth}{alpha}"
+
+
+def _deep_kept(f: VideoFacts) -> str:
+    """Which sequences written from a 16-bit plate stay 16-bit (:func:`facetransfer.io.
+    plate_depth.plate_depth`): with alpha, a PNG plate's PNG or DPX ones, else none."""
+    if not f.alpha:
+        return "a PNG, TIFF or DPX sequence written from it stays 16-bit"
+    if str(f.path).lower().endswith(".png"):
+        return "a PNG or DPX sequence written from it stays 16-bit, with its alpha; a TIFF one " \
+               "is 8-bit"
+    return "a sequence written from it is 8-bit, with its alpha"

@@ -51,13 +51,16 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         seq = open_sequence(video)
         if sequence_has_alpha(seq) and not (out is not None
                                             and sequence_alpha_kept(out, video)):
-            _warn_alpha(str(video))
+            _warn_alpha(str(video), plate=True)
+        _warn_exr_channels(seq.file(0), video, out)
         if options.first_number is None:
             options = replace(options, first_number=seq.first)
         if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
             options = replace(options, timecode=seq.timecode)
+            _warn_timecode(str(video), seq.timecode, out)
         if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
             options = replace(options, sar=seq.sar)
+            _warn_square(str(video), seq.sar, out)
         return options
     if video is None or not Path(video).is_file():
         return options
@@ -77,16 +80,18 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         options = replace(options, deep=True, matrix=tags.matrix or options.matrix)
     if options.sar is None and sar != (1, 1):
         options = replace(options, sar=sar)
+        _warn_square(str(video), sar, out)
     if options.colour_tags and tags.matrix is None:
         options = replace(options, colour_tags=False)
     if bits > 8 and not deep and not tags.beyond_sdr:
-        _warn_depth(str(video), bits)
+        _warn_depth(str(video), bits, _tiff_with_alpha(out, video))
     if tags.beyond_sdr and not deep:   # a command that carries depth could have kept it
         _warn_hdr(str(video), tags, bits > 8)
     elif options.primaries is None and options.transfer is None:
         options = replace(options, primaries=tags.primaries, transfer=tags.transfer)
     if options.timecode is None:
         options = replace(options, timecode=timecode_of(video))
+        _warn_timecode(str(video), options.timecode, out)
     field = first_field(video)
     if field is not None and options.field is None:
         if options.codec == "h265":
@@ -97,11 +102,65 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
 
 
 @functools.lru_cache(maxsize=16)
-def _warn_alpha(video: str) -> None:
-    """Say once that ``video``'s alpha is not carried into the rewrite."""
+def _warn_alpha(video: str, plate: bool = False) -> None:
+    """Say once that ``video``'s alpha is not carried into the rewrite, and which outputs
+    carry it: a ``plate``'s (an image sequence's) only in image sequences."""
     log.warning("%s has an alpha channel; the result is written without one (colour only; "
-                "transfer keeps a target's in ProRes 4444 and PNG, TIFF or DPX sequences, an "
-                "OpenEXR plate's in OpenEXR)", video)
+                "transfer keeps %s)", video,
+                "a plate's in a PNG, TIFF or DPX sequence, not in a video" if plate else
+                "a video's in ProRes 4444, --codec prores, and in PNG, TIFF or DPX sequences")
+
+
+def _warn_exr_channels(first: Path, video, out) -> None:
+    """Say once that an OpenEXR plate's channels beyond its colour (alpha, depth: its first
+    frame ``first``'s) are not in an output other than OpenEXR."""
+    if out is None or first.suffix.lower() != ".exr" or Path(out).suffix.lower() == ".exr":
+        return
+    from .exr import read_exr_image
+
+    other = tuple(sorted(read_exr_image(first).other))
+    if other:
+        _warn_exr_channels_once(str(video), ", ".join(other), Path(out).suffix.lower())
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_exr_channels_once(video: str, channels: str, suffix: str) -> None:
+    log.warning("%s has channels beyond its colour (%s); a %s result holds the colour only (an "
+                ".exr sequence keeps them)", video, channels, suffix)
+
+
+def _warn_timecode(video: str, timecode, out) -> None:
+    """Say once that the output ``out`` holds no start timecode where ``video`` has one: an
+    AVI file, a PNG, TIFF, JPEG or BMP sequence (not DPX or OpenEXR)."""
+    if out is None or not timecode:
+        return
+    suffix = Path(out).suffix.lower()
+    if not (suffix == ".avi" or is_image_pattern(out) and suffix not in (".dpx", ".exr")):
+        return
+    _warn_timecode_once(video, str(timecode), suffix)
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_timecode_once(video: str, timecode: str, suffix: str) -> None:
+    log.warning("%s starts at timecode %s; %s files hold none, so the result does not say "
+                "where it sits (a .mov, .mp4 or .mkv video, or a .dpx or .exr sequence, "
+                "records it)", video, timecode, suffix)
+
+
+def _warn_square(video: str, sar, out) -> None:
+    """Say once that an image sequence ``out`` that stores no pixel aspect ratio (PNG, TIFF,
+    JPEG, BMP: not DPX or OpenEXR) holds ``video``'s non-square pixels as square ones."""
+    if out is None or not is_image_pattern(out) \
+            or Path(out).suffix.lower() in (".dpx", ".exr"):
+        return
+    _warn_square_once(video, f"{sar[0]}:{sar[1]}", Path(out).suffix.lower())
+
+
+@functools.lru_cache(maxsize=16)
+def _warn_square_once(video: str, sar: str, suffix: str) -> None:
+    log.warning("%s has pixels %s (not square); %s files store no pixel aspect ratio, so the "
+                "frames are written as stored and show stretched unless it is set where they "
+                "are read (a .dpx or .exr sequence, or a video, records it)", video, sar, suffix)
 
 
 @functools.lru_cache(maxsize=16)
@@ -113,10 +172,19 @@ def _warn_progressive(video: str) -> None:
 
 
 @functools.lru_cache(maxsize=16)
-def _warn_depth(video: str, bits: int) -> None:
-    """Say once that ``video``'s samples below 8 bits are not carried into the rewrite."""
-    log.warning("%s has %d bits a sample; the result is written in 8 (--codec prores or "
-                "h265, or a 16-bit PNG, TIFF or DPX sequence, keeps them)", video, bits)
+def _warn_depth(video: str, bits: int, tiff_alpha: bool = False) -> None:
+    """Say once that ``video``'s samples below 8 bits are not carried into the rewrite (a
+    TIFF sequence of a video with alpha, ``tiff_alpha``, is what was asked: say why)."""
+    log.warning("%s has %d bits a sample; the result is written in 8 (%s)", video, bits,
+                "a TIFF sequence with alpha is written in 8 bits; --codec prores, or a PNG or "
+                "DPX sequence, keeps them and the alpha" if tiff_alpha else "--codec prores "
+                "or h265, or a 16-bit PNG, TIFF or DPX sequence, keeps them")
+
+
+def _tiff_with_alpha(out, video) -> bool:
+    """Whether ``out`` is a TIFF sequence and ``video`` has alpha (written in 8 bits)."""
+    return (out is not None and is_image_pattern(out)
+            and Path(out).suffix.lower() in (".tif", ".tiff") and video_has_alpha(video))
 
 
 @functools.lru_cache(maxsize=16)
