@@ -16,7 +16,7 @@ from .video_sequence import is_sequence, open_sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["like_video"]
+__all__ = ["like_video", "plate_colour"]
 
 
 def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
@@ -61,6 +61,9 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
             options = replace(options, sar=seq.sar)
             _warn_square(str(video), seq.sar, out)
+        if options.primaries is None and options.transfer is None:
+            primaries, transfer = plate_colour(seq.file(0))
+            options = replace(options, primaries=primaries, transfer=transfer)
         return options
     if video is None or not Path(video).is_file():
         return options
@@ -99,6 +102,35 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         else:
             options = replace(options, field=field)
     return options
+
+
+#: DPX transfer characteristics (OpenImageIO's names) of Rec.709 video codes.
+_DPX_REC709 = ("itu-r 709-4", "smpte 274m")
+
+
+def plate_colour(first) -> tuple[str | None, str | None]:
+    """The primaries and transfer (ffmpeg's names) of the frames read from a plate whose first
+    frame is ``first``, for a video written from them to name: an OpenEXR plate's and a DPX
+    plate's of log or linear light are shown through the sRGB curve in Rec.709's primaries
+    (:mod:`facetransfer.io.exr`, :mod:`facetransfer.io.dpx`; an OpenEXR plate of other
+    primaries is brought to them, :mod:`facetransfer.io.primaries`): ``("bt709",
+    "iec61966-2-1")``; a DPX plate of Rec.709 video codes is shown as they are: ``("bt709",
+    "bt709")``. Any other plate (PNG, TIFF, a DPX of another or no named transfer): nothing
+    said, ``(None, None)``."""
+    suffix = Path(first).suffix.lower()
+    if suffix == ".exr":
+        return "bt709", "iec61966-2-1"
+    if suffix != ".dpx":
+        return None, None
+    from .dpx import dpx_header, transfer_kind
+
+    try:
+        transfer = dpx_header(first)[1] or ""
+    except (OSError, ValueError):
+        return None, None
+    if transfer_kind(transfer) != "video":
+        return "bt709", "iec61966-2-1"
+    return ("bt709", "bt709") if transfer.strip().lower() in _DPX_REC709 else (None, None)
 
 
 @functools.lru_cache(maxsize=16)
