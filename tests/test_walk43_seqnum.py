@@ -36,7 +36,7 @@ def _names(folder: Path) -> list[str]:
 
 def test_start_number_numbers_the_frames_and_changes_nothing_else(clips, target,
                                                                   quick_model_path, tmp_path,
-                                                                  capsys):
+                                                                  capsys, monkeypatch):
     """A plate numbered from 1001 written with ``--start-number 1``: its frames are named from
     1, hold what a run without it writes (named 1001 on), and the saved track is the same
     track (its exports number and time it as without it)."""
@@ -44,6 +44,7 @@ def test_start_number_numbers_the_frames_and_changes_nothing_else(clips, target,
     from facetransfer.export.usd import source_first_frame
     from facetransfer.track.result import Track
 
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
     _, frames = target
     _plate(tmp_path / "plate", frames)
     common = plate_transfer_args(clips, quick_model_path)
@@ -148,13 +149,14 @@ def _described(path: Path) -> str:
 
 
 def test_an_exr_plate_written_as_a_video_names_srgb_rec709(clips, target, quick_model_path,
-                                                          tmp_path, capsys):
+                                                          tmp_path, capsys, monkeypatch):
     """An OpenEXR plate (scene-linear, shown through the sRGB curve) rewritten as a ``.mov``:
     its header names Rec.709 primaries and the sRGB transfer (was: unknown), and the matrix
     its values were converted by (BT.601); a PNG plate's names none, as before."""
     from facetransfer.io.video_display import video_colour
     from test_exr import _exr_plate
 
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")  # undone after (the CLI sets it)
     _, frames = target
     plate = _exr_plate(tmp_path / "plate", frames)
     common = plate_transfer_args(clips, quick_model_path)

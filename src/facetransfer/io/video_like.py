@@ -31,8 +31,8 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     BT.2020-tagged frames by other coefficients); and of an interlaced video the field shown
     first (H.264 and ProRes; warned of once for H.265, which writes progressive frames). Of an
     image sequence (:mod:`facetransfer.io.video_sequence`) its first frame number, for an
-    output sequence numbered as it is, and its first frame's header's timecode and pixel aspect
-    ratio; of a video with a start timecode (a camera's, an
+    output sequence numbered as it is, its first frame's header's timecode and pixel aspect
+    ratio, and the colour its frames are shown in (:func:`plate_colour`); of a video with a start timecode (a camera's, an
     editor's), that timecode, where ``options`` give none (:attr:`VideoOptions.timecode`: the
     rewrite starts at its first frame). None or not a video: ``options`` as they are. A
     ``video`` with an alpha channel is warned of once unless the output ``out`` (given by a
@@ -48,23 +48,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
 
     options = VideoOptions() if options is None else options
     if video is not None and is_sequence(video):
-        seq = open_sequence(video)
-        if sequence_has_alpha(seq) and not (out is not None
-                                            and sequence_alpha_kept(out, video)):
-            _warn_alpha(str(video), plate=True)
-        _warn_exr_channels(seq.file(0), video, out)
-        if options.first_number is None:
-            options = replace(options, first_number=seq.first)
-        if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
-            options = replace(options, timecode=seq.timecode)
-            _warn_timecode(str(video), seq.timecode, out)
-        if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
-            options = replace(options, sar=seq.sar)
-            _warn_square(str(video), seq.sar, out)
-        if options.primaries is None and options.transfer is None:
-            primaries, transfer = plate_colour(seq.file(0))
-            options = replace(options, primaries=primaries, transfer=transfer)
-        return options
+        return _like_sequence(options, video, out)
     if video is None or not Path(video).is_file():
         return options
     try:
@@ -101,6 +85,29 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
             _warn_progressive(str(video))
         else:
             options = replace(options, field=field)
+    return options
+
+
+def _like_sequence(options: VideoOptions, video, out) -> VideoOptions:
+    """:func:`like_video` of an image sequence ``video``: its first number, timecode, pixel
+    aspect ratio and colour (:func:`plate_colour`) where ``options`` give none."""
+    from dataclasses import replace
+
+    seq = open_sequence(video)
+    if sequence_has_alpha(seq) and not (out is not None and sequence_alpha_kept(out, video)):
+        _warn_alpha(str(video), plate=True)
+    _warn_exr_channels(seq.file(0), video, out)
+    if options.first_number is None:
+        options = replace(options, first_number=seq.first)
+    if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
+        options = replace(options, timecode=seq.timecode)
+        _warn_timecode(str(video), seq.timecode, out)
+    if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
+        options = replace(options, sar=seq.sar)
+        _warn_square(str(video), seq.sar, out)
+    if options.primaries is None and options.transfer is None:
+        primaries, transfer = plate_colour(seq.file(0))
+        options = replace(options, primaries=primaries, transfer=transfer)
     return options
 
 
