@@ -136,11 +136,22 @@ def _keyed(model, video_options, fps: float, images: bool, **what):
     from .io.video_parts import PART_FRAMES
 
     what.update(layout=LAYOUT, version=__version__, code=code_fingerprint(),
-                model=str(model.content_hash), video=repr(video_options), fps=float(fps),
+                model=str(model.content_hash), video=repr(_unnumbered(video_options)),
+                fps=float(fps),
                 parts=PART_FRAMES, images=bool(images))
     h = hashlib.sha256()
     h.update(json.dumps(what, sort_keys=True).encode())
     return h
+
+
+def _unnumbered(video_options):
+    """``video_options`` without an image sequence's first number: the frames rendered into
+    the parts folder count from 0 whatever it is (it names them only when they are placed,
+    :class:`~facetransfer.io.sequence_parts.SequenceWriter`), so an interrupted render is
+    continued under another ``--start-number``."""
+    if getattr(video_options, "first_number", None) is None:
+        return video_options
+    return dataclasses.replace(video_options, first_number=None)
 
 
 @functools.lru_cache(maxsize=1)

@@ -91,7 +91,7 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
                       sequences: bool = True) -> None:
     """Add ``--codec``, ``--crf`` and ``--preset`` (one definition for every command that
     writes video); ``sequences``: the command also writes image sequences, which the codec
-    options do not apply to."""
+    options do not apply to, and takes ``--start-number`` for them."""
     p.add_argument("--codec", choices=tuple(CODECS), default=DEFAULT_CODEC,
                    help=f"codec of {what}: h264 (libx264, yuv420p: plays in browsers), h265 "
                    "(libx265) or prores (ProRes 422 HQ, .mov/.mkv; 4444 keeping a target's "
@@ -105,6 +105,11 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
                    help=f"x264/x265 speed preset, ultrafast ... veryslow (default "
                    f"{DEFAULT_PRESET}): slower ones cost more CPU for slightly better quality "
                    "at the same CRF (medium: 1.6x the CPU, +0.07 dB)")
+    if sequences:
+        p.add_argument("--start-number", type=_start_number, default=None, metavar="N",
+                       help="number of an image sequence's first frame (--out "
+                       "shot/%%04d.exr --start-number 1001); default: a plate target's own "
+                       "first number, else 0")
 
 
 #: What ``--face`` / ``--target-face`` / ``--source-face`` take
@@ -140,11 +145,32 @@ def video_out(text: str) -> str:
     return str(percent_pattern(text)) if "#" in text and is_sequence(text) else text
 
 
-def video_options(args):
-    """The :class:`~facetransfer.io.video.VideoOptions` of parsed arguments (validated)."""
-    from ..io.video import VideoOptions
+def _start_number(text: str) -> int:
+    """``--start-number``'s value: an integer >= 0 (argparse names the option)."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = -1
+    if n < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return n
 
-    return VideoOptions(codec=args.codec, crf=args.crf, preset=args.preset)
+
+def video_options(args, out=None):
+    """The :class:`~facetransfer.io.video.VideoOptions` of parsed arguments (validated);
+    ``out``: the command's video output, which ``--start-number`` must name an image
+    sequence (else a :class:`~facetransfer.errors.FaceTransferError`)."""
+    from ..io.video import VideoOptions, is_image_pattern
+
+    first = getattr(args, "start_number", None)
+    if first is not None and (out is None or not is_image_pattern(out)):
+        from ..errors import FaceTransferError
+
+        raise FaceTransferError(f"--start-number numbers image sequences only (e.g. "
+                                f"shot/%04d.exr), not the video {out}" if out is not None else
+                                "--start-number numbers image sequences only, and none is "
+                                "written here")
+    return VideoOptions(codec=args.codec, crf=args.crf, preset=args.preset, first_number=first)
 
 
 def tqdm_progress(desc: str, *, unit: str = "item", enabled: bool = True):

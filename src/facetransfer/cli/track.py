@@ -168,7 +168,7 @@ def _check_outputs(args):
         raise FaceTransferError(f"--workers must be >= 1, got {args.workers}")
     inputs = (args.video, args.model, args.from_track,
               None if args.init == "auto" else args.init)
-    vopt = video_options(args)
+    vopt = video_options(args, args.overlay)
     if args.overlay:
         check_video_output(args.overlay, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.out:

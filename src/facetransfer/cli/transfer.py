@@ -100,14 +100,15 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "tracker's three passes, for hard footage)")
 
 
-def _numbered(out, target, n: int) -> str:
-    """How an output sequence rewriting a plate is numbered (as the plate), else ""."""
+def _numbered(out, target, n: int, first: int | None = None) -> str:
+    """How an output sequence is numbered: from ``first`` (``--start-number``), else a plate's
+    rewrite as the plate; else ""."""
     from ..io.video import is_image_pattern
     from ..io.video_sequence import is_sequence, open_sequence
 
-    if not (is_image_pattern(out) and is_sequence(target)):
+    if not is_image_pattern(out) or first is None and not is_sequence(target):
         return ""
-    first = open_sequence(target).first
+    first = open_sequence(target).first if first is None else first
     return f" numbered {first}-{first + n - 1}"
 
 
@@ -383,7 +384,7 @@ def run_transfer(args) -> int:
     if res.resumed:
         print(f"continued an interrupted render from frame {res.resumed}")
     print(f"wrote {res.path}: {frame_count(res.n_frames)}" + _numbered(args.out, args.target,
-                                                              res.n_frames)
+                                                              res.n_frames, args.start_number)
           + (f" ({kept} kept original: face lost)" if kept else "")
           + (f", {res.kept}" if res.kept else "")
           + (", with the target's audio" if res.audio else ", no audio"))
@@ -433,7 +434,8 @@ def _check_transfer_args(args):
               args.identity_weights.endswith(".npy") else None]
     from ..take import is_take
 
-    vopt = video_options(args)   # the outputs first: a bad one is the only line said
+    # the outputs first: a bad one is the only line said
+    vopt = video_options(args, args.out)
     check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.meshes:
         from ..io.output_names import check_meshes_folder
@@ -643,7 +645,7 @@ def run_puppet(args) -> int:
     from ..take import is_take
 
     _positive(args.max_frames, "--max-frames")
-    vopt = video_options(args)
+    vopt = video_options(args, args.out)
     check_video_output(args.out, vopt, overwrite=args.overwrite,
                        inputs=[args.video, args.model, args.track])
     if is_take(args.video):

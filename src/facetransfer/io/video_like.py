@@ -16,7 +16,7 @@ from .video_sequence import is_sequence, open_sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["like_video"]
+__all__ = ["like_video", "plate_colour"]
 
 
 def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
@@ -31,8 +31,8 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     BT.2020-tagged frames by other coefficients); and of an interlaced video the field shown
     first (H.264 and ProRes; warned of once for H.265, which writes progressive frames). Of an
     image sequence (:mod:`facetransfer.io.video_sequence`) its first frame number, for an
-    output sequence numbered as it is, and its first frame's header's timecode and pixel aspect
-    ratio; of a video with a start timecode (a camera's, an
+    output sequence numbered as it is, its first frame's header's timecode and pixel aspect
+    ratio, and the colour its frames are shown in (:func:`plate_colour`); of a video with a start timecode (a camera's, an
     editor's), that timecode, where ``options`` give none (:attr:`VideoOptions.timecode`: the
     rewrite starts at its first frame). None or not a video: ``options`` as they are. A
     ``video`` with an alpha channel is warned of once unless the output ``out`` (given by a
@@ -48,20 +48,7 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
 
     options = VideoOptions() if options is None else options
     if video is not None and is_sequence(video):
-        seq = open_sequence(video)
-        if sequence_has_alpha(seq) and not (out is not None
-                                            and sequence_alpha_kept(out, video)):
-            _warn_alpha(str(video), plate=True)
-        _warn_exr_channels(seq.file(0), video, out)
-        if options.first_number is None:
-            options = replace(options, first_number=seq.first)
-        if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
-            options = replace(options, timecode=seq.timecode)
-            _warn_timecode(str(video), seq.timecode, out)
-        if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
-            options = replace(options, sar=seq.sar)
-            _warn_square(str(video), seq.sar, out)
-        return options
+        return _like_sequence(options, video, out)
     if video is None or not Path(video).is_file():
         return options
     try:
@@ -99,6 +86,58 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
         else:
             options = replace(options, field=field)
     return options
+
+
+def _like_sequence(options: VideoOptions, video, out) -> VideoOptions:
+    """:func:`like_video` of an image sequence ``video``: its first number, timecode, pixel
+    aspect ratio and colour (:func:`plate_colour`) where ``options`` give none."""
+    from dataclasses import replace
+
+    seq = open_sequence(video)
+    if sequence_has_alpha(seq) and not (out is not None and sequence_alpha_kept(out, video)):
+        _warn_alpha(str(video), plate=True)
+    _warn_exr_channels(seq.file(0), video, out)
+    if options.first_number is None:
+        options = replace(options, first_number=seq.first)
+    if options.timecode is None:          # its first frame's header's (DPX, OpenEXR)
+        options = replace(options, timecode=seq.timecode)
+        _warn_timecode(str(video), seq.timecode, out)
+    if options.sar is None and seq.sar != (1, 1):   # an anamorphic plate's
+        options = replace(options, sar=seq.sar)
+        _warn_square(str(video), seq.sar, out)
+    if options.primaries is None and options.transfer is None:
+        primaries, transfer = plate_colour(seq.file(0))
+        options = replace(options, primaries=primaries, transfer=transfer)
+    return options
+
+
+#: DPX transfer characteristics (OpenImageIO's names) of Rec.709 video codes.
+_DPX_REC709 = ("itu-r 709-4", "smpte 274m")
+
+
+def plate_colour(first) -> tuple[str | None, str | None]:
+    """The primaries and transfer (ffmpeg's names) of the frames read from a plate whose first
+    frame is ``first``, for a video written from them to name: an OpenEXR plate's and a DPX
+    plate's of log or linear light are shown through the sRGB curve in Rec.709's primaries
+    (:mod:`facetransfer.io.exr`, :mod:`facetransfer.io.dpx`; an OpenEXR plate of other
+    primaries is brought to them, :mod:`facetransfer.io.primaries`): ``("bt709",
+    "iec61966-2-1")``; a DPX plate of Rec.709 video codes is shown as they are: ``("bt709",
+    "bt709")``. Any other plate (PNG, TIFF, a DPX of another or no named transfer): nothing
+    said, ``(None, None)``."""
+    suffix = Path(first).suffix.lower()
+    if suffix == ".exr":
+        return "bt709", "iec61966-2-1"
+    if suffix != ".dpx":
+        return None, None
+    from .dpx import dpx_header, transfer_kind
+
+    try:
+        transfer = dpx_header(first)[1] or ""
+    except (OSError, ValueError):
+        return None, None
+    if transfer_kind(transfer) != "video":
+        return "bt709", "iec61966-2-1"
+    return ("bt709", "bt709") if transfer.strip().lower() in _DPX_REC709 else (None, None)
 
 
 @functools.lru_cache(maxsize=16)
