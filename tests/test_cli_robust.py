@@ -464,3 +464,19 @@ def test_the_paper_tracker_answers_to_both_its_names():
                   "o.mp4"], ["puppet", "v.mp4", "--out", "o.mp4"]):
         assert p.parse_args(argv + ["--tracker", "klt"]).tracker == "flow"
         assert p.parse_args(argv + ["--tracker", "flow"]).tracker == "flow"
+
+
+def test_a_commands_sequence_rate_ends_with_it(monkeypatch, capsys):
+    """``--sequence-fps`` reaches a command's readers and children through the environment;
+    a command run in this process (``main(argv)``) leaves it as it was, so that the next
+    command reads image sequences at its own rate (before, at the previous command's)."""
+    from facetransfer.cli.main import main
+    from facetransfer.io.video_sequence import SEQUENCE_FPS_VARIABLE
+
+    monkeypatch.delenv(SEQUENCE_FPS_VARIABLE, raising=False)
+    assert main(["probe", "/nonexistent/plate.%04d.png", "--sequence-fps", "25"]) == 2
+    assert SEQUENCE_FPS_VARIABLE not in os.environ
+    monkeypatch.setenv(SEQUENCE_FPS_VARIABLE, "30.0")
+    assert main(["probe", "/nonexistent/plate.%04d.png", "--sequence-fps", "25"]) == 2
+    assert os.environ[SEQUENCE_FPS_VARIABLE] == "30.0"
+    capsys.readouterr()

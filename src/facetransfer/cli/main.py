@@ -8,6 +8,7 @@ parser(s) and sets ``func`` to a handler ``handler(args) -> int``. Bad input rai
 from __future__ import annotations
 
 import argparse
+import contextlib
 import errno
 import functools
 import importlib
@@ -249,7 +250,6 @@ def main(argv: list[str] | None = None) -> int:
     if extra:  # said by the command's own parser: its --help lists what it takes
         leaf.error(f"unrecognized arguments: {' '.join(extra)}")
     configure_logging(args.verbose)
-    use_sequence_rate(args)
     from .common import set_progress
 
     set_progress(not getattr(args, "no_progress", False))
@@ -257,13 +257,33 @@ def main(argv: list[str] | None = None) -> int:
         parser.print_help()
         return 2
     if argv is None:
+        use_sequence_rate(args)
         if args.verbose:
             return _exiting(_run(args))
         from .stderr import filtered_stderr
 
         with filtered_stderr():
             return _exiting(_run(args))
-    return _run(args)
+    with _sequence_rate_kept():  # a caller's process goes on: the next command's rate is its own
+        use_sequence_rate(args)
+        return _run(args)
+
+
+@contextlib.contextmanager
+def _sequence_rate_kept():
+    """The process's ``--sequence-fps`` variable as it was once the block ends (a command
+    called in process, :func:`main` with ``argv``, gives its rate to its readers and children
+    only; before, the next command in the process read image sequences at it)."""
+    from ..io.video_sequence import SEQUENCE_FPS_VARIABLE
+
+    before = os.environ.get(SEQUENCE_FPS_VARIABLE)
+    try:
+        yield
+    finally:
+        if before is None:
+            os.environ.pop(SEQUENCE_FPS_VARIABLE, None)
+        else:
+            os.environ[SEQUENCE_FPS_VARIABLE] = before
 
 
 def _exiting(status: int) -> int:
