@@ -117,3 +117,20 @@ def test_a_tls_scheduler_is_reached_by_its_host_name(tls_files):
         assert batch_cluster._probe(by_name, 5).startswith("tls://")
         with batch_cluster.open_client(scheduler=by_name, timeout=5) as client:
             assert client.submit(int, "7").result() == 7
+
+
+def test_a_tls_address_of_a_plain_scheduler_is_said_as_a_refusal_not_a_wait(tls_files):
+    """tls:// of a scheduler that speaks plain TCP: said as the connection it closed, at once,
+    not as a wait for an answer ("... within 5 s")."""
+    import dask
+    from dask.distributed import LocalCluster
+
+    config = {f"distributed.comm.tls.{k}": v for k, v in tls_files.items()}
+    with LocalCluster(n_workers=0, processes=False, protocol="tcp", dashboard_address=None,
+                      host="127.0.0.1") as running, dask.config.set(config):
+        port = running.scheduler_address.rsplit(":", 1)[1]
+        with pytest.raises(batch_cluster.BatchError) as err:
+            batch_cluster._probe(f"tls://127.0.0.1:{port}", 5)
+    assert str(err.value).startswith(
+        f"no Dask scheduler answered at tls://127.0.0.1:{port}: something there accepts "
+        "connections but closed them without a Dask answer"), str(err.value)

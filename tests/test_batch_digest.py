@@ -180,3 +180,20 @@ def test_an_option_that_is_a_file_is_its_content(tmp_path, cache):
     a = np.arange(6, dtype=np.uint8).reshape(2, 3)
     assert digest.value_text(a) == digest.value_text(a.copy()) != digest.value_text(a + 1)
     assert digest.value_text(None) == "None" and digest.value_text(3) == "3"
+
+
+def test_a_clips_precomputed_points_are_part_of_its_key(tmp_path, cache):
+    """``NAME.mediapipe478.npz`` beside a clip (what ``--tracker landmarks`` fits to): added,
+    changed or removed, another key (before, a rerun kept the track fitted to the old points)."""
+    a = _project(tmp_path / "a")
+    key = digest.job_key(_clip(a), "track landmarks model")
+    side = a / "clips" / "a.mediapipe478.npz"
+    side.write_bytes(b"points one")
+    _old(side)
+    with_side = digest.job_key(_clip(a), "track landmarks model")
+    side.write_bytes(b"points two")
+    _old(side, 30.0)
+    changed = digest.job_key(_clip(a), "track landmarks model")
+    side.unlink()
+    assert len({key, with_side, changed}) == 3
+    assert digest.job_key(_clip(a), "track landmarks model") == key

@@ -193,6 +193,7 @@ def _dask_identity(target: str, address: str, timeout: float, left: float,
     resolved) says it is, asked within the ``left`` seconds of ``timeout`` (``args``: the TLS
     connection's); BatchError naming ``address`` where nothing answers in Dask's protocol."""
     import asyncio
+    import ssl
 
     from distributed.comm import CommClosedError, connect
 
@@ -214,6 +215,10 @@ def _dask_identity(target: str, address: str, timeout: float, left: float,
     except CommClosedError:
         raise BatchError(f"{said}: something there accepts connections but closed them "
                          f"without a Dask answer ({SCHEDULER_HINT})") from None
+    except ssl.SSLError as exc:   # a refusal, not a wait: a plain-TCP server, a bad certificate
+        raise BatchError(f"{said}: the TLS handshake failed ({exc.reason or exc}; a tls:// "
+                         "address must be a scheduler started with TLS, whose certificate "
+                         "Dask's configured CA verifies)") from None
     except OSError as exc:
         raise BatchError(f"{said} within {timeout:g} s ({exc.strerror or exc})") from None
     except Exception:  # noqa: BLE001 (bytes that are not Dask's frames: any decoding error)

@@ -66,10 +66,15 @@ def job_key(job, what: str, memo: dict | None = None) -> str:
     str
         :data:`KEY_FORMAT` and 16 hex digits.
     """
+    from ..track.obtain import landmarks_file
+
     h = hashlib.sha256(KEY_FORMAT.encode())
     h.update(f"{type(job).__name__}{tuple(job.labels)!r}".encode())
     for role, path in sorted(job.roles):        # (a manifest's columns in any order)
         h.update(f"|{role}={input_digest(path, memo)}".encode())
+        side = landmarks_file(path)   # the precomputed points --tracker landmarks fits to
+        if side is not None:
+            h.update(f"|{role}.landmarks={input_digest(side, memo)}".encode())
     h.update(f"|{what}".encode())
     return KEY_FORMAT + h.hexdigest()[:16]
 
