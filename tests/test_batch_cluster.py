@@ -131,6 +131,8 @@ def test_a_tls_address_of_a_plain_scheduler_is_said_as_a_refusal_not_a_wait(tls_
         port = running.scheduler_address.rsplit(":", 1)[1]
         with pytest.raises(batch_cluster.BatchError) as err:
             batch_cluster._probe(f"tls://127.0.0.1:{port}", 5)
-    assert str(err.value).startswith(
-        f"no Dask scheduler answered at tls://127.0.0.1:{port}: something there accepts "
-        "connections but closed them without a Dask answer"), str(err.value)
+    said = str(err.value)   # the server closes the connection, or its bytes are not TLS's
+    assert said.startswith(f"no Dask scheduler answered at tls://127.0.0.1:{port}: something "
+                           "there "), said
+    assert "within" not in said, said
+    assert "not in Dask's protocol" in said or "closed them" in said, said
