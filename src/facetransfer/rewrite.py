@@ -59,8 +59,7 @@ from .jaw import JawTexture, _paint_jaw, jaw_flags
 from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.face import FaceTexture
-from .render import WeakPerspective, rasterize, shade_layers
-from .render.raster import rasterize_projected
+from .render import shade_layers
 from .rewrite_options import BlendOptions
 from .topology import MeshTopology, close_mouth
 
@@ -179,11 +178,9 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
         raise ShapeError(f"vertices must be ({topo.n_vertices} or {topo.n_closed}, 3), "
                          f"got {V.shape}")
     # all per-frame work happens in the face's bounding box (plus a margin wider than any
-    # filter below: erosion, outline ring, membrane margin, feathering); the rest is T. The
-    # rotated vertices serve the frame's camera and the crop's (one product, not three)
-    Y = camera.rotated_xy(V) if isinstance(camera, WeakPerspective) else None
+    # filter below: erosion, outline ring, membrane margin, feathering); the rest is T
     box = _face_box(V, camera, (W, H),
-                    margin=int(blending.erode) + int(np.ceil(blending.feather)) + 16, rotated=Y)
+                    margin=int(blending.erode) + int(np.ceil(blending.feather)) + 16)
     if box is None:  # nothing of the face in the frame
         return None
     x0, y0, x1, y1 = box
@@ -192,8 +189,7 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
         textures = dataclasses.replace(textures, mouth_ring=mouth_ring_faces(topo))
     lifted = lifted_positions(textures.face, target_frame)  # None: not the frame's own
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, textures, blending,
-                        None if lifted is None else lifted - (x0, y0),
-                        None if Y is None else cam.project_rotated(Y))
+                        None if lifted is None else lifted - (x0, y0))
     return box, res
 
 
@@ -216,16 +212,17 @@ def _paste(T: np.ndarray, part) -> RewriteFrame:
                         paste(res.mouth_mask, np.zeros((H, W), bool)))
 
 
-def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int,
-              rotated: np.ndarray | None = None) -> tuple[int, int, int, int] | None:
+def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int
+              ) -> tuple[int, int, int, int] | None:
     """``(x0, y0, x1, y1)`` (end exclusive) of the mesh's projection grown by ``margin``
     pixels and clipped to the frame; the whole frame for cameras other than weak perspective;
-    None when the projection misses the frame. ``rotated``: ``camera.rotated_xy(V)``, if at
-    hand."""
+    None when the projection misses the frame."""
+    from .render import WeakPerspective
+
     W, H = size
     if not isinstance(camera, WeakPerspective):
         return 0, 0, W, H
-    p = camera.project(V) if rotated is None else camera.project_rotated(rotated)
+    p = camera.project(V)
     if not np.isfinite(p).all():  # (one flat pass; the rows' test only when needed)
         p = p[np.isfinite(p).all(axis=1)]
     if p.size == 0:
@@ -246,20 +243,16 @@ def _shift_camera(camera, x0: int, y0: int):
 
 
 def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOptions,
-                  lifted=None, xy=None) -> RewriteFrame:
+                  lifted=None) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop;
     ``lifted``: where the per-frame face texture lifted the vertices, in the crop's pixels
-    (:func:`facetransfer.rim.lifted_positions`), or None; ``xy``: ``camera.project(V)`` (a
-    weak-perspective camera's), if at hand."""
-    size = (T.shape[1], T.shape[0])
-    if xy is None:
-        raster = rasterize(V, topo.faces, camera, size)
-    else:
-        raster = rasterize_projected(V, topo.faces, camera, size, xy)
+    (:func:`facetransfer.rim.lifted_positions`), or None."""
+    from .render import rasterize
+
+    raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
     # not the target's own outline drawn inside its face: the target's pixels there instead
     own = None if lifted is None else \
-        (T, drawn_inside(raster.mask, raster, topo.faces, lifted,
-                         camera.project(V) if xy is None else xy))
+        (T, drawn_inside(raster.mask, raster, topo.faces, lifted, camera.project(V)))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(raster, V, topo, textures,
                                                                     own)
     lip_tint, erode, feather = textures.lip_tint, blending.erode, blending.feather

@@ -159,17 +159,7 @@ class WeakPerspective:
     def project(self, X: np.ndarray) -> np.ndarray:
         """Pixels ``s * diag(1 / a, -1) @ R[:2] @ X + t`` (Eq. (7); ``a`` the pixel aspect,
         1 for square pixels), (n, 3) -> (n, 2)."""
-        return self.project_rotated(self.rotated_xy(X))
-
-    def rotated_xy(self, X: np.ndarray) -> np.ndarray:
-        """``R[:2] @ X`` per point, (n, 3) -> (n, 2): :meth:`project` before its scale and
-        translation (shared by the cameras of one pose, e.g. a frame's and its crop's:
-        :meth:`shifted`)."""
-        return _as_points(X) @ self.rotation[:2].T
-
-    def project_rotated(self, Y: np.ndarray) -> np.ndarray:
-        """:meth:`project` of points whose :meth:`rotated_xy` is ``Y`` (n, 2) (the same
-        pixels, bit for bit)."""
+        Y = _as_points(X) @ self.rotation[:2].T  # (n, 2)
         out = np.empty_like(Y)
         out[:, 0] = (self.scale / self.pixel_aspect) * Y[:, 0] + self.translation[0]
         out[:, 1] = -self.scale * Y[:, 1] + self.translation[1]

@@ -149,13 +149,11 @@ _bbox_diagonal = _maybe_njit(_bbox_diagonal_py)
 # Rasterisation: shared setup
 # --------------------------------------------------------------------------------------------
 
-def _screen(V: np.ndarray, camera, xy: np.ndarray | None = None
-            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def _screen(V: np.ndarray, camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Pixel positions (n, 2), depths (n,) and perspective weights q = 1/w (n,) of vertices.
 
-    For the weak-perspective camera q = 1 (``xy``: its ``project(V)``, if at hand). For the
-    pinhole camera q = 1 / (-Xc_z); vertices nearer than ``camera.near`` get q = 0, which
-    marks their triangles as not drawable.
+    For the weak-perspective camera q = 1. For the pinhole camera q = 1 / (-Xc_z); vertices
+    nearer than ``camera.near`` get q = 0, which marks their triangles as not drawable.
     """
     if not isinstance(camera, (WeakPerspective, Pinhole)) and not (
             hasattr(camera, "project") and hasattr(camera, "depth")
@@ -173,7 +171,7 @@ def _screen(V: np.ndarray, camera, xy: np.ndarray | None = None
         xy[~ok] = 0.0
         z = np.where(ok, Xc[:, 2], 0.0)
     else:
-        xy = camera.project(V) if xy is None else xy
+        xy = camera.project(V)
         z = camera.depth(V)
         q = np.ones(V.shape[0])
     return np.ascontiguousarray(xy), np.ascontiguousarray(z), np.ascontiguousarray(q)
@@ -548,20 +546,8 @@ def coverage(points: np.ndarray, faces: np.ndarray, size: tuple[int, int], *,
     return mask.view(bool)
 
 
-def rasterize_projected(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int],
-                        xy: np.ndarray) -> Raster:
-    """:func:`rasterize` with a weak-perspective ``camera`` whose ``project(vertices)`` the
-    caller has at hand already: ``xy`` (n, 2) (not projected again)."""
-    V, F = _check_mesh(vertices, faces)
-    W, H = _as_size(size)
-    if getattr(camera, "perspective", False) or np.shape(xy) != (V.shape[0], 2):
-        raise ShapeError(f"xy must be the ({V.shape[0]}, 2) weak-perspective projection of the "
-                         f"vertices, got {np.shape(xy)}")
-    return _rasterize_checked(V, F, camera, W, H, False, xy)
-
-
-def _rasterize_checked(V, F, camera, W, H, cull, xy=None) -> Raster:
-    xy, z, q = _screen(V, camera, xy)
+def _rasterize_checked(V, F, camera, W, H, cull) -> Raster:
+    xy, z, q = _screen(V, camera)
     perspective = bool(getattr(camera, "perspective", False))
     zbuf = np.full((H, W), -np.inf, np.float32)
     tid = np.full((H, W), -1, np.int32)
