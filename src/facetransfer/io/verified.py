@@ -63,8 +63,7 @@ def file_stamp(path: str | os.PathLike) -> str:
     key of what is read from a file once per process, e.g.
     :func:`facetransfer.io.video_read.video_info`). OSError when it cannot be read."""
     p = Path(path).resolve()
-    st = p.stat()
-    return f"{p}|{st.st_dev}|{st.st_ino}|{st.st_size}|{st.st_mtime_ns}"
+    return f"{p}|{file_identity(p)}"
 
 
 def _read(name: str = RECORD) -> dict[str, str]:

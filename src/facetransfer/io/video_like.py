@@ -174,9 +174,8 @@ def _warn_timecode(video: str, timecode, out) -> None:
     if out is None or not timecode:
         return
     suffix = Path(out).suffix.lower()
-    if not (suffix == ".avi" or is_image_pattern(out) and suffix not in (".dpx", ".exr")):
-        return
-    _warn_timecode_once(video, str(timecode), suffix)
+    if suffix == ".avi" or _plain_sequence(out):
+        _warn_timecode_once(video, str(timecode), suffix)
 
 
 @functools.lru_cache(maxsize=16)
@@ -189,10 +188,14 @@ def _warn_timecode_once(video: str, timecode: str, suffix: str) -> None:
 def _warn_square(video: str, sar, out) -> None:
     """Say once that an image sequence ``out`` that stores no pixel aspect ratio (PNG, TIFF,
     JPEG, BMP: not DPX or OpenEXR) holds ``video``'s non-square pixels as square ones."""
-    if out is None or not is_image_pattern(out) \
-            or Path(out).suffix.lower() in (".dpx", ".exr"):
-        return
-    _warn_square_once(video, f"{sar[0]}:{sar[1]}", Path(out).suffix.lower())
+    if out is not None and _plain_sequence(out):
+        _warn_square_once(video, f"{sar[0]}:{sar[1]}", Path(out).suffix.lower())
+
+
+def _plain_sequence(out) -> bool:
+    """Whether ``out`` is an image sequence of files without a plate's header (PNG, TIFF,
+    JPEG, BMP: no timecode, no pixel aspect ratio; DPX and OpenEXR have them)."""
+    return is_image_pattern(out) and Path(out).suffix.lower() not in (".dpx", ".exr")
 
 
 @functools.lru_cache(maxsize=16)
