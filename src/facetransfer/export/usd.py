@@ -2,12 +2,14 @@
 
 Layout (``usd-core``, the optional extra ``facetransfer[usd]``)::
 
-    /Face                 SkelRoot (default prim); stage Y up, metersPerUnit 0.01 (model units)
+    /Face                 SkelRoot (default prim); stage Y up, metersPerUnit 0.01 (model units);
+                          extent per time code: the posed face's box (:func:`posed_extents`)
       /Face/Skel          Skeleton, one joint "head"; skel:animationSource -> Anim
         /Face/Skel/Anim   SkelAnimation: blendShapes (52 ARKit names), blendShapeWeights,
                           translations / rotations / scales of "head": one time sample per frame
-      /Face/Mesh          Mesh (neutral face, primvars:st), SkelBindingAPI: skel:skeleton,
-                          skel:blendShapes + skel:blendShapeTargets, every vertex on "head"
+      /Face/Mesh          Mesh (neutral face and its extent, primvars:st), SkelBindingAPI:
+                          skel:skeleton, skel:blendShapes + skel:blendShapeTargets, every
+                          vertex on "head"
         /Face/Mesh/<name> BlendShape: offsets f_j - f_0 (pointIndices when sparse)
 
 Time codes are frame numbers (``timeCodesPerSecond`` = the clip's fps): from 0, or, for a
@@ -32,7 +34,7 @@ from ..io.atomic import atomic_path
 from .common import ExportError, head_quaternions, head_translation, identity_rig, \
     require_activations, source_name
 
-__all__ = ["write_usd", "source_first_frame", "USD_SUFFIXES"]
+__all__ = ["write_usd", "source_first_frame", "posed_extents", "USD_SUFFIXES"]
 
 USD_SUFFIXES = (".usd", ".usda", ".usdc")
 
@@ -49,7 +51,9 @@ def _mesh(stage, rig, model, pxr):
     Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
     mesh = UsdGeom.Mesh.Define(stage, "/Face/Mesh")
     faces = np.asarray(model.faces, np.int32)
-    mesh.CreatePointsAttr(Vt.Vec3fArray.FromNumpy(rig.neutral.astype(np.float32)))
+    points = Vt.Vec3fArray.FromNumpy(rig.neutral.astype(np.float32))
+    mesh.CreatePointsAttr(points)
+    mesh.CreateExtentAttr(UsdGeom.Mesh.ComputeExtent(points))  # the rest pose's box
     mesh.CreateFaceVertexCountsAttr(Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)))
     mesh.CreateFaceVertexIndicesAttr(Vt.IntArray.FromNumpy(faces.ravel()))
     mesh.CreateOrientationAttr(UsdGeom.Tokens.rightHanded)
@@ -92,6 +96,47 @@ def source_first_frame(track) -> int:
     except (FaceTransferError, OSError):
         return 0
     return int(min(files)) if files else 0
+
+
+def posed_extents(rig, activations, rotation, translation, *, chunk: int = 64) -> np.ndarray:
+    """Per frame, the box of the face as posed: the points ``(f_0 + sum_j a_j (f_j - f_0)) R^T
+    + T`` (the skinned result of the exported rig and animation), their min and max corners.
+
+    Parameters
+    ----------
+    rig : facetransfer.arkit.ExpressionRig
+    activations : (F, 52) float
+    rotation : (F, 3, 3) float
+        Model-to-camera rotations.
+    translation : (F, 3) float
+        Model units (:func:`facetransfer.export.common.head_translation`).
+
+    Returns
+    -------
+    (F, 2, 3) float64
+        ``[min, max]`` corners per frame, model units.
+    """
+    D = rig.deltas.reshape(len(rig.deltas), -1)  # (52, 3n)
+    out = np.empty((len(activations), 2, 3))
+    for s in range(0, len(activations), chunk):
+        a = np.asarray(activations[s:s + chunk], np.float64)
+        P = (rig.neutral.ravel() + a @ D).reshape(len(a), -1, 3)  # (f, n, 3)
+        P = P @ np.swapaxes(rotation[s:s + chunk], 1, 2) + translation[s:s + chunk, None, :]
+        out[s:s + chunk, 0], out[s:s + chunk, 1] = P.min(axis=1), P.max(axis=1)
+    return out
+
+
+def _root_extents(root, track, activations, rig, pxr, first: int) -> None:
+    """The SkelRoot's ``extent`` at every time code: the posed face's box. UsdGeomBoundable: an
+    authored extent stands for the prim's children in bounding-box computations; without one,
+    UsdSkel estimates a SkelRoot's from its joints padded by the skinned meshes' authored rest
+    extents, which neither follows the blend shapes nor, with no mesh extent, has any size."""
+    Gf, Sdf, Usd, UsdGeom, UsdSkel, Vt = pxr
+    box = posed_extents(rig, activations, np.asarray(track.rotation, np.float64),
+                        head_translation(track)).astype(np.float32)
+    attr = root.CreateExtentAttr()
+    for k in range(track.n_frames):
+        attr.Set(Vt.Vec3fArray.FromNumpy(box[k]), Usd.TimeCode(first + k))
 
 
 def _animation(stage, track, activations, pxr, first: int = 0):
@@ -142,6 +187,7 @@ def write_usd(track, model, out: str | os.PathLike, *, overwrite: bool = False,
     UsdSkel.BindingAPI.Apply(skel.GetPrim()).CreateAnimationSourceRel().SetTargets(
         [anim.GetPath()])
     mesh = _mesh(stage, rig, model, pxr)
+    _root_extents(root, track, a, rig, pxr, int(first_frame))
     binding = UsdSkel.BindingAPI.Apply(mesh.GetPrim())
     binding.CreateSkeletonRel().SetTargets([skel.GetPath()])
     binding.CreateJointIndicesPrimvar(True, 1).Set(Vt.IntArray([0]))
