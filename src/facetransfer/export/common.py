@@ -201,7 +201,6 @@ def clip_facts(track):
     (SourceFacts, str)
     """
     from ..io.source_facts import SourceFacts, read_source_facts
-    from ..io.video_sequence import is_sequence
 
     recorded = getattr(track, "source_facts", None)
     if recorded is not None:
@@ -211,9 +210,7 @@ def clip_facts(track):
         return SourceFacts(), ""
     older = "the track records no first frame number or start timecode (made before tracks " \
             "recorded them)"
-    from pathlib import Path
-
-    if not (Path(src).is_file() or is_sequence(src)):
+    if not _there(src):
         return SourceFacts(), f"{older} and its clip {src} is not there: numbered from 0, " \
             "no timecode"
     other = _other_clip(track, src)
@@ -224,6 +221,20 @@ def clip_facts(track):
     except (OSError, ValueError) as exc:
         return SourceFacts(), f"{older} and its clip {src} cannot be read ({exc})"
     return facts, f"{older}: read from its clip {src}"
+
+
+def _there(src: str) -> bool:
+    """Whether a clip is at ``src``: a file, or an image sequence with a frame."""
+    from pathlib import Path
+
+    from ..io.video_sequence import is_sequence, sequence_files
+
+    if not is_sequence(src):
+        return Path(src).is_file()
+    try:
+        return bool(sequence_files(src))
+    except (OSError, ValueError):     # its folder gone
+        return False
 
 
 def _other_clip(track, src: str) -> str:
