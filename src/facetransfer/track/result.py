@@ -7,30 +7,30 @@ attribute constant over the clip) is the same on every frame.
 
 File format (``numpy.savez``, written atomically), one key per field:
 
-==================  ===================  ===========================================================
-key                 shape / dtype        meaning
-==================  ===================  ===========================================================
-``fps``             () float64           frame rate of the source video
-``frame_size``      (2,) int64           ``(W, H)`` of the source video in pixels
-``rotation``        (F, 3, 3) float64    model-to-camera rotation per frame
-``scale``           (F,) float64         pixels per model unit per frame
-``translation``     (F, 2) float64       pixel position of the model origin per frame
-``weights_<mode>``  (F, r_mode) float64  attribute weights of each mode per frame
-``landmarks2d``     (F, 68, 2) float64   pixel positions of the 68 tracked landmarks
-``confidence``      (F,) float64         tracking confidence in [0, 1]
-``lost``            (F,) bool            frames where the face was lost (pose held/re-initialised)
-``model_hash``      () str               :attr:`MultilinearModel.content_hash` of the model used
-``mode_names``      (K,) str             the model's modes, in order
-``source``          () str               the tracked video's path
-``blendshapes``     (F, 52) float32      ARKit activations in [0, 1] (only for an ARKit model)
-``blendshape_names``(52,) str            their names, :data:`facetransfer.arkit.ARKIT_NAMES`
-``detections2d``    (F, 68, 2) float64   the detector's points the fit took (a capture track)
-``pixel_aspect``    () float64           a pixel's width over its height (absent: 1)
-``shot_starts``     (S,) int64           first frames of the shots after the first (absent: one)
-``source_first_frame`` () int64          the clip's first frame number (absent: not recorded)
-``source_timecode`` () str               the clip's start timecode ("" none; with the above)
-``format_version``  () int64             version of this layout
-==================  ===================  ===========================================================
+======================  ===================  =======================================================
+key                     shape / dtype        meaning
+======================  ===================  =======================================================
+``fps``                 () float64           frame rate of the source video
+``frame_size``          (2,) int64           ``(W, H)`` of the source video in pixels
+``rotation``            (F, 3, 3) float64    model-to-camera rotation per frame
+``scale``               (F,) float64         pixels per model unit per frame
+``translation``         (F, 2) float64       pixel position of the model origin per frame
+``weights_<mode>``      (F, r_mode) float64  attribute weights of each mode per frame
+``landmarks2d``         (F, 68, 2) float64   pixel positions of the 68 tracked landmarks
+``confidence``          (F,) float64         tracking confidence in [0, 1]
+``lost``                (F,) bool            frames where the face was lost (pose held, re-found)
+``model_hash``          () str               :attr:`MultilinearModel.content_hash` of the model used
+``mode_names``          (K,) str             the model's modes, in order
+``source``              () str               the tracked video's path
+``blendshapes``         (F, 52) float32      ARKit activations in [0, 1] (only for an ARKit model)
+``blendshape_names``    (52,) str            their names, :data:`facetransfer.arkit.ARKIT_NAMES`
+``detections2d``        (F, 68, 2) float64   the detector's points the fit took (a capture track)
+``pixel_aspect``        () float64           a pixel's width over its height (absent: 1)
+``shot_starts``         (S,) int64           first frames of the later shots (absent: one shot)
+``source_first_frame``  () int64             the clip's first frame number (absent: not recorded)
+``source_timecode``     () str               the clip's start timecode ("" none; with the above)
+``format_version``      () int64             version of this layout
+======================  ===================  =======================================================
 """
 
 from __future__ import annotations
