@@ -251,3 +251,42 @@ def test_export_refuses_a_track_whose_activations_cannot_be_made(bare, arkit_mod
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and said in err[0] and "Traceback" not in err[0], err
         assert not out.exists()
+
+
+def test_a_batch_project_moved_exports_its_plate_as_before(clip, arkit_path, tmp_path, capsys,
+                                                           monkeypatch):
+    """``batch track`` of a plate numbered from 1001, the project (plate, manifest, tracks)
+    moved to another folder, the plate's old path gone: ``batch export`` of the kept track
+    writes the USD it wrote before the move, its time codes from 1001 (before: from 0)."""
+    pytest.importorskip("pxr", reason="usd-core is not installed (extra [usd])")
+    import functools
+
+    from facetransfer.batch import cluster as batch_cluster
+
+    monkeypatch.setattr(batch_cluster, "open_client",        # worker threads, no network
+                        functools.partial(batch_cluster.open_client, processes=False))
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    _, points, synth = clip
+    proj = tmp_path / "proj"
+    _clip_at("plate", proj / "plate", synth.frames)
+    shutil.copy2(points, proj / "points.json")
+    (proj / "clips.csv").write_text("video,init,name\nplate/sh010.####.png,points.json,sh010\n")
+
+    def export(root):
+        code = main(["batch", "export", str(root / "tracks" / "sh010.npz"), "--format", "usd",
+                     "--model", str(arkit_path), "--out", str(root / "usd"), "--no-progress"])
+        assert code == 0, capsys.readouterr().err
+        return (root / "usd" / "sh010.usd").read_bytes()
+
+    assert main(["batch", "track", "--manifest", str(proj / "clips.csv"), "--model",
+                 str(arkit_path), "--out", str(proj / "tracks"), "--tracker", "klt",
+                 "--passes", "1", "--no-progress"]) == 0
+    assert Track.load(proj / "tracks" / "sh010.npz").source_facts == SourceFacts(1001, None)
+    before = export(proj)
+    shutil.move(proj, tmp_path / "moved")
+    assert export(tmp_path / "moved") == before
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(tmp_path / "moved" / "usd" / "sh010.usd"))
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (1001, 1004)
