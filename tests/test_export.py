@@ -243,8 +243,9 @@ def test_usd_of_a_plate_numbered_from_1001_lies_on_its_frames(case, tmp_path):
     model, track, a, _ = case
     plate = tmp_path / "plate"
     plate.mkdir()
+    W, H = track.frame_size        # the track's clip (an older track: read from its path)
     for n in (1001, 1002, 1003):
-        cv2.imwrite(str(plate / f"f.{n:04d}.png"), np.full((8, 8, 3), 90, np.uint8))
+        cv2.imwrite(str(plate / f"f.{n:04d}.png"), np.full((H, W, 3), 90, np.uint8))
     on_plate = dataclasses.replace(track, source=str(plate / "f.%04d.png"))
 
     def weights_at(path, t):
@@ -489,7 +490,10 @@ def test_an_export_says_which_frames_were_lost(case, tmp_path, capsys):
                      "--out", str(tmp_path / out)]) == 0
         said = capsys.readouterr().out.strip().splitlines()
         assert said[-1] == f"note: the face is lost in frames 2-3, 5: {what}", said
-    track.save(tmp_path / "t0.npz")                          # nothing lost: nothing said
+    from facetransfer.io.source_facts import SourceFacts
+
+    # nothing lost: nothing said (its clip's numbering recorded, as a track made now does)
+    dataclasses.replace(track, source_facts=SourceFacts()).save(tmp_path / "t0.npz")
     assert main(["export", str(tmp_path / "t0.npz"), "--model", str(tmp_path / "m.npz"),
                  "--out", str(tmp_path / "b.csv")]) == 0
     assert "note:" not in capsys.readouterr().out
@@ -564,7 +568,7 @@ def test_the_mediapipe_json_records_the_videos_start_timecode(case, tmp_path, ca
     write_video(video, np.zeros((track.n_frames, 64, 64, 3), np.uint8), track.fps,
                 options=VideoOptions(crf=0, timecode="10:00:00:00"))
     tp = tmp_path / "t.npz"
-    dataclasses.replace(track, source=str(video)).save(tp)
+    dataclasses.replace(track, source=str(video)).with_source_facts().save(tp)  # as tracked
     assert main(["export", str(tp), "--out", str(tmp_path / "a.json")]) == 0
     assert "the start timecode 10:00:00:00" in capsys.readouterr().out
     assert json.loads((tmp_path / "a.json").read_text())["timecode"] == "10:00:00:00"

@@ -137,8 +137,9 @@ def _track_table_keys() -> set[str]:
 
 def _full_track(n: int = 4):
     """A track with every optional part (ARKit activations, detections, two shots, non-square
-    pixels), as a capture of an edited anamorphic clip makes it."""
+    pixels, the clip's numbering), as a capture of an edited anamorphic clip makes it."""
     from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.io.source_facts import SourceFacts
     from facetransfer.track.result import Track
 
     return Track(fps=25.0, frame_size=(64, 48), rotation=np.tile(np.eye(3), (n, 1, 1)),
@@ -148,7 +149,8 @@ def _full_track(n: int = 4):
                  lost=np.zeros(n, bool), model_hash="0" * 64,
                  mode_names=("identity", "expression"), source="clip.mp4",
                  blendshapes=np.zeros((n, 52), np.float32), blendshape_names=ARKIT_NAMES,
-                 detections2d=np.zeros((n, 68, 2)), pixel_aspect=0.9375, shot_starts=(2,))
+                 detections2d=np.zeros((n, 68, 2)), pixel_aspect=0.9375, shot_starts=(2,),
+                 source_facts=SourceFacts(1001, "01:00:00:00"))
 
 
 def test_the_track_file_table_lists_exactly_the_keys_a_track_writes(tmp_path):

@@ -220,7 +220,7 @@ def test_an_export_names_lost_frames_by_the_plate_s_numbers(arkit_model, make_ar
     lost = np.zeros(4, bool)
     lost[:2] = True
     track = replace(track, source=str(tmp_path / "plate" / "sh.####.png"), lost=lost)
-    track.save(tmp_path / "t.npz")
+    track.with_source_facts().save(tmp_path / "t.npz")    # as tracking the plate records it
     arkit_model.save(tmp_path / "m.npz")
     assert main([str(x) for x in ["export", tmp_path / "t.npz", "--model", tmp_path / "m.npz",
                                   "--out", tmp_path / "t.csv"]]) == 0

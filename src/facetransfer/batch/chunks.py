@@ -207,7 +207,7 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
                    confidence=np.clip(full["confidence"], 0, 1), lost=full["lost"],
                    model_hash=t0.model_hash, mode_names=t0.mode_names, source=t0.source,
                    detections2d=join_detections(tracks, chunks), pixel_aspect=t0.pixel_aspect,
-                   shot_starts=starts)
+                   shot_starts=starts, source_facts=t0.source_facts)
     return attach_activations(joined, model)
 
 

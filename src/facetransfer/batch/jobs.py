@@ -125,6 +125,7 @@ def track_clip(job, out: str, model, options) -> Row:
     video_info(job.video)  # missing / not a video: one line naming the path
     track = _track(str(job.video), model, job.init, options, source=str(job.video),
                    checkpoint=partial_path(out), face=job.face, max_frames=job.max_frames)
+    track = track.with_source_facts(job.video)   # the clip's numbering, before it can move
     track.save(out, overwrite=True)
     partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
     return track_row(job.name, track, out, time.perf_counter() - t0)
@@ -211,7 +212,7 @@ def join_clip(job, out: str, model, chunks, results) -> Row:
     from .chunks import join_tracks
 
     t0 = time.perf_counter()
-    track = join_tracks([r.track for r in results], chunks, model)
+    track = join_tracks([r.track for r in results], chunks, model).with_source_facts(job.video)
     track.save(out, overwrite=True)
     return track_row(job.name, track, out,
                      sum(r.seconds for r in results) + time.perf_counter() - t0)

@@ -33,7 +33,8 @@ def register(sub) -> None:
     p.add_argument("--out", required=True, metavar="FILE", help="file to write")
     p.add_argument("--model", metavar="M.npz",
                    help="the model the track was made with (default: the default model, if the "
-                   "track was made with it)")
+                   "track was made with it); a track without ARKit activations (one recombined "
+                   "in Python) has them made from its expression weights with it")
     p.add_argument("--texture", metavar="TEX.png",
                    help="base-colour texture in the template's UV layout (glb only)")
     p.add_argument("--texture-from", metavar="VIDEO.mp4",
@@ -53,7 +54,9 @@ def register(sub) -> None:
                    "(00:00:00:00). usd: source (the default) starts the time codes at the "
                    "first frame number of the image sequence tracked (a plate numbered from "
                    "1001: 1001), none at 0. usd, glb and json: source also records the tracked "
-                   "video's start timecode in the file (customLayerData, extras, timecode)")
+                   "video's start timecode in the file (customLayerData, extras, timecode). "
+                   "source: as the track recorded them when it was tracked (a track made "
+                   "before tracks recorded them: read from its clip, if still there)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
 
@@ -124,14 +127,18 @@ def run(args: argparse.Namespace) -> int:
                                 f"VIDEO --out T.npz`); `facetransfer probe {args.track}` "
                                 "describes the take")
     track = Track.load(args.track)
-    require_activations(track)   # said first: no --model would give a track activations
     model = None
     if args.model:
         from ..model import load_model
 
         model = load_model(args.model)
-    elif args.format in ("glb", "usd"):
+    if track.blendshapes is None:
+        track, model = _activations(track, model, args)
+    require_activations(track)
+    if model is None and args.format in ("glb", "usd"):
         model = default_model_for(track)
+    if args.timecode == "source" or track.lost.any():   # what the lines below say
+        track = _clip_facts(track)
     if args.neutral is not None:
         from ..export.neutral import with_neutral
 
@@ -151,6 +158,40 @@ def run(args: argparse.Namespace) -> int:
                         texture=texture, timecode=timecode)
     _say_written(args, track, path, timecode, said)
     return 0
+
+
+def _activations(track, model, args):
+    """``(track, model)``: a track without ARKit activations with them made from its
+    expression weights (:func:`facetransfer.export.common.activations_from_weights`) with
+    ``--model`` or the default model, and one line saying so; one line and exit status 2
+    where they cannot be made."""
+    from ..export.common import ExportError, activations_from_weights
+
+    name = f"track {track.label}"
+    if "expression" in track.weights and model is None:
+        try:
+            model = default_model_for(track)
+        except ExportError:          # another model's track
+            raise ExportError(f"{name} has no ARKit blendshape activations and was not made "
+                              "with the default model (ict-arkit): give the model it was "
+                              "tracked with (--model M.npz) to make them from its expression "
+                              "weights") from None
+    track = activations_from_weights(track, model)
+    print(f"note: {name} holds no ARKit activations: made from its expression weights with "
+          + (f"the model {args.model}" if args.model else "the default model (ict-arkit)"))
+    return track, model
+
+
+def _clip_facts(track):
+    """The track with its clip's first frame number and start timecode, as it records them;
+    an older track's read from its clip, if there, with a line saying where
+    (:func:`facetransfer.export.common.with_clip_facts`)."""
+    from ..export.common import with_clip_facts
+
+    track, note = with_clip_facts(track)
+    if note:
+        print(f"note: {note}")
+    return track
 
 
 def _say_written(args, track, path, timecode, said: str) -> None:

@@ -219,6 +219,7 @@ def _track_and_save(args, model, settings, tracker: str):
         track, model = _capture(args, model, settings.capture, progress, bars)
     else:
         track = _track_klt(args, model, settings.klt, progress, bars)
+    track = track.with_source_facts(args.video)   # the clip's numbering, before it can move
     track.save(args.out, overwrite=args.overwrite)
     partial_path(args.out).unlink(missing_ok=True)   # the progress of the run, if any
     n_lost = int(track.lost.sum())

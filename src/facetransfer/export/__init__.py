@@ -18,15 +18,19 @@ The browser dial editor is :mod:`facetransfer.export.viewer`; a neutral pose for
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
 from ..io.atomic import check_output_path
-from .common import ExportError, require_activations, resolve_model
+from .common import (ExportError, activations_from_weights, require_activations, resolve_model,
+                     with_clip_facts)
 from .neutral import with_neutral
 from .usd import USD_SUFFIXES
 
 __all__ = ["FORMATS", "FORMAT_SUFFIXES", "ExportError", "export_track", "format_of"]
+
+log = logging.getLogger(__name__)
 
 #: Format name -> usual file suffix.
 FORMATS: dict[str, str] = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "json": ".json"}
@@ -77,7 +81,9 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
     Parameters
     ----------
     track : facetransfer.track.Track
-        With ARKit activations (``blendshapes``).
+        With ARKit activations (``blendshapes``), or with expression weights of a model whose
+        expressions are ARKit blendshapes (``model``, else the default model if the track is
+        of it): the activations are made from them.
     fmt : {"livelink", "glb", "usd", "json"} or None
         None: the format ``out``'s extension names (:func:`format_of`).
     out : path-like
@@ -96,7 +102,10 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
         it has one (:func:`facetransfer.export.livelink.source_timecode`); None:
         ``00:00:00:00``. ``usd``: ``"source"`` (default) starts the time codes at the first
         frame number of the image sequence the track was made from (1001 for a plate numbered
-        from 1001; :func:`facetransfer.export.usd.source_first_frame`), None at 0. ``usd`` and
+        from 1001; :func:`facetransfer.export.usd.source_first_frame`), None at 0. Both as the
+        track records them (read when it was tracked: the clip may have moved since); a track
+        made before tracks recorded them reads them from its clip if it is still there
+        (:func:`facetransfer.export.common.clip_facts`). ``usd`` and
         ``glb``: ``"source"`` also records the video's start timecode, where it has one, in the
         file's metadata (the root layer's ``customLayerData["timecode"]``, the glTF's
         ``extras["timecode"]``: neither format has a field of its own for it); ``json`` too
@@ -117,12 +126,7 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
     if track.blendshapes is None:
         track = _activations_from_weights(track, model)
     require_activations(track)
-    track = with_neutral(track, neutral)
-    from .livelink import source_timecode
-
-    # the first frame's timecode, every format's (livelink's rows start at it, the others
-    # record it); "source" also starts a USD's time codes at the plate's first frame number
-    start = source_timecode(track) if timecode == "source" else timecode
+    track, start = _start(with_neutral(track, neutral), timecode)
     if fmt in ("livelink", "json"):
         if model is not None:
             track.check_model(model)
@@ -139,24 +143,34 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
 
         return write_glb(track, model, out, overwrite=overwrite, texture=texture,
                          timecode=start)
-    from .usd import source_first_frame, write_usd
+    from .usd import write_usd
 
     return write_usd(track, model, out, overwrite=overwrite,
-                     first_frame=source_first_frame(track) if timecode == "source" else 0,
+                     first_frame=track.source_facts.first_frame if timecode == "source" else 0,
                      timecode=start)
+
+
+def _start(track, timecode):
+    """``(track, start)``: the first frame's timecode, every format's (livelink's rows start
+    at it, the others record it), and with ``"source"`` the track with its clip's numbering
+    (:func:`with_clip_facts`: a USD's time codes then start at the plate's first number)."""
+    if timecode != "source":
+        return track, timecode
+    track, note = with_clip_facts(track)
+    if note:                       # an older track: from its clip's path, if at all
+        log.warning("%s", note)
+    return track, track.source_facts.timecode
 
 
 def _activations_from_weights(track, model):
     """A track without activations (e.g. one recombined in Python, Fig. 1) with them made from
-    its expression weights (:func:`facetransfer.arkit.attach_activations`) where its model
-    (``model``, else the default model if the track is of it) has ARKit expressions; else
-    the track as it is (:func:`require_activations` then says what is missing)."""
-    from ..arkit import attach_activations
-
+    its expression weights (:func:`activations_from_weights`) with its model (``model``, else
+    the default model if the track is of it); else the track as it is
+    (:func:`require_activations` then says what is missing)."""
     if "expression" not in track.weights:
         return track
     try:
         model = resolve_model(track, model)
     except ExportError:            # not the default model's, and none given
         return track
-    return attach_activations(track, model)
+    return activations_from_weights(track, model)

@@ -276,16 +276,10 @@ def _check_unit(p: Path, header: list, body: list, a: np.ndarray, cols: list) ->
 
 def source_timecode(track) -> str | None:
     """The start timecode of the video a track was made from
-    (:func:`facetransfer.io.video_display.timecode_of`), where its ``source`` names a video
-    file or a plate (a DPX or OpenEXR sequence's first frame) that has one; else None. A take
-    exported with it lines up with that video."""
-    from ..io.video_display import timecode_of
-    from ..io.video_sequence import is_sequence
+    (:func:`facetransfer.io.video_display.timecode_of`: a video file's, a DPX or OpenEXR
+    plate's first frame's), as the track records it, else (an older track) read from its
+    ``source`` where that is still its clip (:func:`facetransfer.export.common.clip_facts`);
+    None without one. A take exported with it lines up with that video."""
+    from .common import clip_facts
 
-    src = Path(track.source) if track.source else None
-    if src is None or not (src.is_file() or is_sequence(src)):
-        return None
-    try:
-        return timecode_of(src)
-    except ValueError:          # not a media file ffmpeg reads
-        return None
+    return clip_facts(track)[0].timecode

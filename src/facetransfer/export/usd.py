@@ -84,18 +84,11 @@ def _blend_shapes(stage, mesh, rig, pxr):
 
 def source_first_frame(track) -> int:
     """The first frame number of the image sequence a track was made from (1001 for a plate
-    numbered from 1001), where ``track.source`` names one that can be read; else 0 (a video,
-    or a source no longer there)."""
-    from ..errors import FaceTransferError
-    from ..io.video_sequence import is_sequence, sequence_files
+    numbered from 1001), as the track records it, else (an older track) read from its
+    ``source`` (:func:`facetransfer.export.common.clip_facts`); 0 for a video."""
+    from .common import clip_facts
 
-    if not is_sequence(track.source):
-        return 0
-    try:
-        files = sequence_files(track.source)
-    except (FaceTransferError, OSError):
-        return 0
-    return int(min(files)) if files else 0
+    return clip_facts(track)[0].first_frame
 
 
 def posed_extents(rig, activations, rotation, translation, *, chunk: int = 64) -> np.ndarray:

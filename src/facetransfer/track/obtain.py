@@ -315,7 +315,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         if bar is not None:
             bar.update(n)
         _close(bar)
-        return dataclasses.replace(tr, fps=float(fps))
+        return dataclasses.replace(tr, fps=float(fps)).with_source_facts(video)
     if method in ("auto", "capture"):
         from .face_crop import subject_point
 
@@ -329,6 +329,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
         warn_stored_fit(video, "landmark fit")
         size = (frames.shape[2], frames.shape[1]) if hasattr(frames, "shape") else info.size
         tr = _landmarks(video, model, frames, fps, size, progress_factory)
+    tr = tr.with_source_facts(video)   # the clip's numbering, kept if the clip moves
     store_track(key, tr)
     return tr
 

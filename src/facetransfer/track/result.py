@@ -7,28 +7,30 @@ attribute constant over the clip) is the same on every frame.
 
 File format (``numpy.savez``, written atomically), one key per field:
 
-==================  ===================  ===========================================================
-key                 shape / dtype        meaning
-==================  ===================  ===========================================================
-``fps``             () float64           frame rate of the source video
-``frame_size``      (2,) int64           ``(W, H)`` of the source video in pixels
-``rotation``        (F, 3, 3) float64    model-to-camera rotation per frame
-``scale``           (F,) float64         pixels per model unit per frame
-``translation``     (F, 2) float64       pixel position of the model origin per frame
-``weights_<mode>``  (F, r_mode) float64  attribute weights of each mode per frame
-``landmarks2d``     (F, 68, 2) float64   pixel positions of the 68 tracked landmarks
-``confidence``      (F,) float64         tracking confidence in [0, 1]
-``lost``            (F,) bool            frames where the face was lost (pose held/re-initialised)
-``model_hash``      () str               :attr:`MultilinearModel.content_hash` of the model used
-``mode_names``      (K,) str             the model's modes, in order
-``source``          () str               the tracked video's path
-``blendshapes``     (F, 52) float32      ARKit activations in [0, 1] (only for an ARKit model)
-``blendshape_names``(52,) str            their names, :data:`facetransfer.arkit.ARKIT_NAMES`
-``detections2d``    (F, 68, 2) float64   the detector's points the fit took (a capture track)
-``pixel_aspect``    () float64           a pixel's width over its height (absent: 1)
-``shot_starts``     (S,) int64           first frames of the shots after the first (absent: one)
-``format_version``  () int64             version of this layout
-==================  ===================  ===========================================================
+======================  ===================  =======================================================
+key                     shape / dtype        meaning
+======================  ===================  =======================================================
+``fps``                 () float64           frame rate of the source video
+``frame_size``          (2,) int64           ``(W, H)`` of the source video in pixels
+``rotation``            (F, 3, 3) float64    model-to-camera rotation per frame
+``scale``               (F,) float64         pixels per model unit per frame
+``translation``         (F, 2) float64       pixel position of the model origin per frame
+``weights_<mode>``      (F, r_mode) float64  attribute weights of each mode per frame
+``landmarks2d``         (F, 68, 2) float64   pixel positions of the 68 tracked landmarks
+``confidence``          (F,) float64         tracking confidence in [0, 1]
+``lost``                (F,) bool            frames where the face was lost (pose held, re-found)
+``model_hash``          () str               :attr:`MultilinearModel.content_hash` of the model used
+``mode_names``          (K,) str             the model's modes, in order
+``source``              () str               the tracked video's path
+``blendshapes``         (F, 52) float32      ARKit activations in [0, 1] (only for an ARKit model)
+``blendshape_names``    (52,) str            their names, :data:`facetransfer.arkit.ARKIT_NAMES`
+``detections2d``        (F, 68, 2) float64   the detector's points the fit took (a capture track)
+``pixel_aspect``        () float64           a pixel's width over its height (absent: 1)
+``shot_starts``         (S,) int64           first frames of the later shots (absent: one shot)
+``source_first_frame``  () int64             the clip's first frame number (absent: not recorded)
+``source_timecode``     () str               the clip's start timecode ("" none; with the above)
+``format_version``      () int64             version of this layout
+======================  ===================  =======================================================
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ import numpy as np
 
 from ..errors import TrackError
 from ..io.atomic import atomic_path
+from ..io.source_facts import SourceFacts
 
 __all__ = ["Track", "TRACK_FORMAT_VERSION"]
 
@@ -106,6 +109,11 @@ class Track:
         (:mod:`facetransfer.track.shots`: each captured on its own, with its own identity save
         a later shot of the first one's person, with that one's; the rewrite chooses its
         reference frames within each); empty for one shot.
+    source_facts : SourceFacts or None
+        The tracked clip's first frame number and start timecode as read when it was tracked
+        (:func:`facetransfer.io.source_facts.read_source_facts`), what the exports number
+        and time the frames by; None: not recorded (a track made before they were, or not
+        from a clip: an export then reads them from ``source`` if it is still there).
     """
 
     fps: float
@@ -126,6 +134,7 @@ class Track:
     detections2d: np.ndarray | None = None
     pixel_aspect: float = 1.0
     shot_starts: tuple[int, ...] = ()
+    source_facts: SourceFacts | None = None
 
     def __post_init__(self) -> None:
         R = np.asarray(self.rotation, dtype=np.float64)
@@ -204,6 +213,9 @@ class Track:
         set_(self, "shot_starts", starts)
         set_(self, "model_hash", str(self.model_hash))
         set_(self, "source", str(self.source))
+        if self.source_facts is not None and not isinstance(self.source_facts, SourceFacts):
+            raise TrackError(f"track source_facts must be a SourceFacts, got "
+                             f"{type(self.source_facts).__name__}")
 
     def _check_blendshapes(self, F: int) -> None:
         if self.blendshapes is None:
@@ -295,6 +307,20 @@ class Track:
             raise TrackError(f"track {self.label} was made with a different model (model hash "
                              f"differs){other}")
 
+    def with_source_facts(self, clip=None) -> "Track":
+        """This track with the first frame number and start timecode of ``clip`` (default:
+        ``source``), the clip it was tracked from, recorded (:attr:`source_facts`; a track
+        that records them already is returned as it is). Called where a track is made from a
+        clip, before the clip can move."""
+        if self.source_facts is not None:
+            return self
+        from dataclasses import replace
+
+        from ..io.source_facts import read_source_facts
+
+        return replace(self, source_facts=read_source_facts(self.source if clip is None
+                                                            else clip))
+
     # ------------------------------------------------------------------ file i/o
     def save(self, path: str | os.PathLike, *, overwrite: bool = True) -> Path:
         """Write the track to ``path`` (``.npz``) atomically and return the path."""
@@ -316,6 +342,9 @@ class Track:
             arrays["detections2d"] = self.detections2d
         if self.shot_starts:
             arrays["shot_starts"] = np.asarray(self.shot_starts, np.int64)
+        if self.source_facts is not None:
+            arrays["source_first_frame"] = np.int64(self.source_facts.first_frame)
+            arrays["source_timecode"] = np.array(self.source_facts.timecode or "")
         with atomic_path(path, overwrite=overwrite) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, **arrays)
@@ -352,7 +381,8 @@ class Track:
         if absent:
             raise TrackError(f"track file {p} lacks weights of mode(s) {absent}")
         for k, a in data.items():
-            if k not in ("mode_names", "blendshape_names", "model_hash", "source") and \
+            if k not in ("mode_names", "blendshape_names", "model_hash", "source",
+                         "source_timecode") and \
                     a.dtype.kind not in "biuf":
                 raise TrackError(f"track file {p}: {k!r} must hold numbers, got {a.dtype}")
         try:
@@ -374,6 +404,24 @@ class Track:
                        pixel_aspect=(scalar(data, "pixel_aspect", float, p, "track file",
                                             TrackError) if "pixel_aspect" in data else 1.0),
                        shot_starts=tuple(np.asarray(data.get("shot_starts", ())).ravel()),
-                       info={"file": str(p)})
+                       source_facts=_source_facts(data, p), info={"file": str(p)})
         except (TrackError, ValueError, TypeError, OverflowError) as exc:
             raise TrackError(f"track file {p} is invalid: {exc}") from None
+
+
+def _source_facts(data: dict, p: Path) -> SourceFacts | None:
+    """The clip's numbering a track file records (keys ``source_first_frame`` and
+    ``source_timecode``), None where it records none (written before they were)."""
+    from ..io.npz import scalar
+
+    if "source_first_frame" not in data:
+        return None
+    if "source_timecode" in data and data["source_timecode"].dtype.kind not in "US":
+        raise TrackError(f"track file {p}: 'source_timecode' must hold text, got "
+                         f"{data['source_timecode'].dtype}")
+    first = scalar(data, "source_first_frame", int, p, "track file", TrackError)
+    timecode = str(data["source_timecode"]) if "source_timecode" in data else ""
+    try:
+        return SourceFacts(first, timecode or None)
+    except ValueError as exc:
+        raise TrackError(f"track file {p}: source_first_frame/source_timecode: {exc}") from None
