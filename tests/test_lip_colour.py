@@ -119,6 +119,68 @@ def test_tint_mouth_scales_the_masked_pixels_by_their_weight():
     assert np.abs(img2[cov].astype(float) - expect[cov]).max() <= 1
 
 
+#: A red lipstick's mouth against its skin, and pale lips against theirs (RGB levels).
+LIPSTICK, HIGHLIGHT, SKIN = (152, 56, 60), (235, 215, 210), (200, 140, 130)
+PALE_LIPS, PALE_SKIN = (158, 96, 98), (200, 150, 140)
+
+
+def _lipstick_mouth():
+    """``(raster, faces, image, parts)``: two triangles of weight-1 lips covering a 34x34
+    image (v up: rows 3-33, columns 1-31) whose left 20 columns are lipstick, then 6 of a
+    white highlight, then 8 of skin (the lips' band reaching past the lipstick); ``parts``:
+    the three column slices."""
+    V = np.array([[0, 0, 0], [30, 0, 0], [0, 30, 0], [30, 30, 0]], float)
+    F = np.array([[0, 1, 2], [1, 3, 2]])
+    raster = rasterize(V, F, WeakPerspective(1.0, np.eye(3), np.array([1.0, 33.0])), (34, 34))
+    img = np.empty((34, 34, 3), np.uint8)
+    parts = (slice(0, 20), slice(20, 26), slice(26, 34))
+    for sl, c in zip(parts, (LIPSTICK, HIGHLIGHT, SKIN)):
+        img[:, sl] = c
+    return raster, F, img, parts
+
+
+def test_a_lipstick_onto_pale_lips_tints_the_lips_and_leaves_highlight_and_skin():
+    """A red lipstick's mouth onto pale lips: tint (1.04, 1.59, 1.51), as from
+    ``WDA_KatieHill_000`` onto ``driving_d6`` (1.03, 1.60, 1.51). The lipstick takes the whole
+    tint; its white highlight and the skin the lips' band covers keep their colour (the whole
+    tint, the rule before, turned the highlight (244, 255, 255) and the skin (208, 222, 196):
+    G and B above R, cyan-white); the tint each takes, :func:`tint_reach`, is 1, 0 and 0."""
+    raster, F, img, (lip, hi, skin) = _lipstick_mouth()
+    tint = lc.LipTint.of(np.ones(4), np.add(PALE_LIPS, 1) / np.add(PALE_SKIN, 1),
+                         np.add(LIPSTICK, 1) / np.add(SKIN, 1))
+    np.testing.assert_allclose(tint.tint, [1.04, 1.59, 1.51], atol=0.005)
+    mask = raster.tri_id >= 0
+    assert mask[3:, 1:32].all() and mask.sum() == 31 * 31
+    out = img.copy()
+    lc.tint_mouth(out, raster, F, tint, mask)
+    c = out[mask].astype(int)
+    assert (c[:, 0] >= c[:, 1]).all() and (c[:, 0] >= c[:, 2]).all()  # no channel crosses R
+    np.testing.assert_array_equal(out[:, hi][mask[:, hi]], np.tile(HIGHLIGHT, (31 * 6, 1)))
+    np.testing.assert_array_equal(out[:, skin][mask[:, skin]], img[:, skin][mask[:, skin]])
+    body = np.clip(np.rint(np.multiply(LIPSTICK, tint.tint)), 0, 255)
+    assert np.abs(out[:, lip][mask[:, lip]] - body).max() <= 1
+    phi = lc.tint_reach(img, tint, mask)
+    np.testing.assert_allclose(phi[:, lip], 1.0)
+    np.testing.assert_allclose(phi[:, hi], 0.0)
+    np.testing.assert_allclose(phi[:, skin], 0.0, atol=1e-5)  # the skin's place: s exactly
+
+
+def test_onto_redder_lips_the_whole_tint_as_before():
+    """The other way (pale lips onto a lipstick, the skin behind the source's lips along the
+    tint's hue): every pixel takes the whole tint, ``1 + w (tint - 1)``, to the level."""
+    raster, F, img, _ = _lipstick_mouth()
+    for c, sl in ((PALE_LIPS, slice(0, 20)), (PALE_SKIN, slice(26, 34))):
+        img[:, sl] = c
+    tint = lc.LipTint.of(np.ones(4), np.add(LIPSTICK, 1) / np.add(SKIN, 1),
+                         np.add(PALE_LIPS, 1) / np.add(PALE_SKIN, 1))
+    mask = raster.tri_id >= 0
+    np.testing.assert_array_equal(lc.tint_reach(img, tint, mask), 1.0)
+    out = img.copy()
+    lc.tint_mouth(out, raster, F, tint, mask)
+    expect = np.clip(img * tint.tint.astype(np.float32) + 0.5, 0, 255).astype(np.uint8)
+    np.testing.assert_array_equal(out[mask], expect[mask])
+
+
 def _rewrite(scene_model, clips, weights, lip_colour):
     target, source, track = clips
     topo = weights[0]

@@ -17,7 +17,10 @@ expression. So, per clip:
    ratio, the median over frames, is the clip's lip tint (:func:`lip_ratio`);
 3. the source's mouth texture is multiplied, per channel and weighted by the lips' weight at
    each pixel, by the target's tint over the source's (:func:`tint_mouth`), before the gain
-   to the face's colours. The skin, the teeth and the mouth's inside are not touched.
+   to the face's colours; onto paler lips each pixel only as far as the source's skin
+   colour along the tint's hue (:func:`tint_reach`: a red lipstick's highlights and the
+   skin the lips' band covers keep their colour). The skin, the teeth and the mouth's
+   inside are not touched.
 
 The same person's clip on both sides gives a tint of 1 up to noise.
 """
@@ -34,7 +37,7 @@ from .render import interpolate_vertex_values, sample_texture
 from .topology import MeshTopology, _face_size, inside_polygon
 
 __all__ = ["LIP_LEVELS", "TINT_RANGE", "LipTint", "lip_vertex_weights", "lip_ratio",
-           "tint_mouth"]
+           "tint_mouth", "tint_reach"]
 
 #: The outer lip contour's scales about its centre at which a vertex's weight steps down:
 #: inside the first scale 1, beyond the last 0 (the mouth's region reaches 1.1).
@@ -154,7 +157,18 @@ def lip_ratio(samples, lips: np.ndarray, skin: np.ndarray) -> np.ndarray | None:
 
 def tint_mouth(mouth_img: np.ndarray, raster, faces: np.ndarray, tint: LipTint,
                mask: np.ndarray) -> None:
-    """Multiply the source's lips by the tint, in place.
+    """Multiply the source's lips by the tint, in place, no pixel past the source's skin.
+
+    Each pixel is multiplied per channel by ``1 + w * phi * (tint - 1)``: ``w`` the lips'
+    weight there, ``phi`` (:func:`tint_reach`) 1 at the source's lip colour, less for a pixel
+    already nearer the target's lip colour than the source's lips are, so that none is moved
+    past the source's skin colour along the tint's hue. Onto lips paler than the source's (a
+    red lipstick onto pale lips, tint (1.03, 1.60, 1.51)) the whole tint turned what the
+    lipstick's band also holds (its white highlights, bared teeth, the skin beyond the
+    lipstick where the lips' band reaches over it) cyan-white: G and B above R before the
+    mouth's gain (:func:`facetransfer.mouth.blend_mouth`); those now keep their colour and
+    take the gain as the skin does. Onto lips redder than the source's, ``phi`` is 1: the
+    tint as it was.
 
     Parameters
     ----------
@@ -172,6 +186,62 @@ def tint_mouth(mouth_img: np.ndarray, raster, faces: np.ndarray, tint: LipTint,
         return
     w = interpolate_vertex_values(raster, faces, tint.weights, box)
     w *= mask[box]
-    gain = 1.0 + w[..., None] * (tint.tint.astype(np.float32) - 1.0)
     sub = mouth_img[box]
+    w *= tint_reach(sub, tint, w >= 0.999)
+    gain = 1.0 + w[..., None] * (tint.tint.astype(np.float32) - 1.0)
     sub[...] = np.clip(sub * gain + 0.5, 0, 255).astype(np.uint8)
+
+
+#: Pixels of weight 1 needed to read the source's lip colour in a frame (fewer: the whole tint).
+MIN_LIP_PIXELS = 8
+#: ``log(c + 1)`` of the 256 levels.
+_LOG_LEVELS = np.log1p(np.arange(256, dtype=np.float32))
+
+
+def tint_reach(image: np.ndarray, tint: LipTint, lips: np.ndarray) -> np.ndarray:
+    """The share of the tint each pixel takes: all of it at the source's lip colour and
+    beyond, none at the source's skin colour and beyond, along the tint's hue.
+
+    In log RGB (``log(c + 1)``) the tint moves a colour by ``log(tint)``; its hue part ``d =
+    log(tint) - mean(log(tint))`` runs from the source's lip colour to the target's (each
+    relative to its skin). A pixel's place along it is ``p = <log(c + 1) - m, d> / |d|^2``,
+    ``m`` the median log colour of the ``lips`` pixels (shading, the same added to every
+    channel, does not change ``p``): 0 at the source's lip colour, 1 at the target's, ``s =
+    -<u, d> / |d|^2`` at the source's skin (``u`` the hue part of ``log(source_ratio)``).
+
+    When the skin lies ahead (``s > 0``: the target's lips paler than the source's, nearer
+    the skin's hue) the pixel takes ``phi = clip(1 - p / max(s, 1), 0, 1)``: the whole tint at
+    the source's lip colour and deeper, none at the skin's hue (``s``, or the target's lip
+    colour if that lies beyond it) or paler, linearly between, so no pixel goes past it
+    (``p + phi <= max(s, 1)``). A red lipstick's white highlight, bared teeth and the skin
+    the lips' band reaches over lie there: multiplied by the whole tint they crossed to cyan.
+    Otherwise (``s <= 0``: the target's lips redder), for a tint without a hue (a grey one) or
+    with fewer than :data:`MIN_LIP_PIXELS` pixels of ``lips``: 1 everywhere, the whole tint.
+
+    Parameters
+    ----------
+    image : (h, w, 3) uint8
+        The source's mouth (RGB).
+    tint : LipTint
+        Its ``tint`` and ``source_ratio`` (3,) are read.
+    lips : (h, w) bool
+        The pixels that give the source's lip colour in this image.
+
+    Returns
+    -------
+    (h, w) float32
+        ``phi`` in [0, 1].
+    """
+    d = np.log(np.asarray(tint.tint, np.float64).reshape(3))
+    d -= d.mean()
+    dd = float(d @ d)
+    u = np.log(np.asarray(tint.source_ratio, np.float64).reshape(3))
+    s = -float((u - u.mean()) @ d) / dd if dd > 1e-8 else 0.0
+    if s <= 0.0 or np.count_nonzero(lips) < MIN_LIP_PIXELS:
+        return np.ones(image.shape[:2], np.float32)
+    k = (d / (dd * max(s, 1.0))).astype(np.float32)  # p / max(s, 1) = (q - median) per pixel
+    q = _LOG_LEVELS[image[..., 0]] * k[0]
+    q += _LOG_LEVELS[image[..., 1]] * k[1]
+    q += _LOG_LEVELS[image[..., 2]] * k[2]
+    q -= np.median(q[lips])
+    return np.clip(1.0 - q, 0.0, 1.0, out=q)
