@@ -289,3 +289,21 @@ def test_an_interrupted_transfer_finishes_its_output_and_its_matte(clips, quick_
     ma, mb = _pngs(tmp_path / "m"), _pngs(tmp_path / "once")
     assert len(ma) == len(mb) == 6
     assert all(np.array_equal(x, y) and x.any() for x, y in zip(ma, mb))
+
+
+def test_transfer_video_refuses_a_bad_matte_before_any_work(tmp_path):
+    """The library's call: a matte named as the output, as an input, or of another kind is a
+    ValueError naming it, raised before the model is looked at (None here)."""
+    from facetransfer.transfer_plan import TransferSources
+    from facetransfer.video_transfer import transfer_video
+
+    target = tmp_path / "t.mp4"
+    write_video(target, np.zeros((2, 16, 16, 3), np.uint8), 25.0)
+    sources = TransferSources.of(target, expression_from=target)
+    out = tmp_path / "o.mp4"
+    for matte, said in ((out, "is also --out"), (target, "is also an input"),
+                        (tmp_path / "m.%03d.jpg", "not .jpg")):
+        with pytest.raises(ValueError) as e:
+            transfer_video(sources, out, None, matte=matte)
+        assert said in str(e.value) and str(matte) in str(e.value)
+    assert not out.exists()
