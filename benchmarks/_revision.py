@@ -31,11 +31,11 @@ def extract_src(rev: str, prefix: str = "bench_") -> Path:
     return tmp / "src"
 
 
-def rewrite_plan(plan, model, options, *, workers: int = 1):
+def rewrite_plan(plan, model, options, *, workers: int = 1, **more):
     """The frames of a ``TransferPlan`` rewritten (``rewrite_frames``, its mouth from the plan's
     mouth source) by the tree on the path: one with ``MouthSource`` and ``RenderRun``, or one
     before them (the mouth's and the run's keywords loose; ``rewrite_frames`` in
-    ``rewrite.py`` before ``rewrite_clip.py``)."""
+    ``rewrite.py`` before ``rewrite_clip.py``); ``more``: keywords of this tree's (``matte``)."""
     try:
         from facetransfer.rewrite_clip import MouthSource, RenderRun, rewrite_frames
     except ImportError:
@@ -49,7 +49,7 @@ def rewrite_plan(plan, model, options, *, workers: int = 1):
     return rewrite_frames(plan.target_frames, plan.target_track, plan.new_track, model,
                           mouth_source=MouthSource(plan.mouth_frames, plan.mouth_track,
                                                    plan.mouth_index),
-                          options=options, run=RenderRun(workers=workers))
+                          options=options, run=RenderRun(workers=workers), **more)
 
 
 def hard_paste():

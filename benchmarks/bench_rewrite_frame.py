@@ -11,8 +11,12 @@ times (the machine is shared: the spread between runs is the noise), and the fir
 ``--parity-frames`` rewritten frames of the two are compared: PSNR over the face mask (the
 pixels either face covers) and over the whole frame, and the count of pixels that differ
 outside the face mask (0: the outside is bit-identical). Without a base only this tree runs.
+With ``--matte`` this tree also computes each frame's matte (``transfer --matte``:
+``rewrite_frames(..., matte=True)``); against ``--base src`` (this tree's own) the difference
+is the matte's cost per frame, and the parity says that the frames are the same with it.
 
     python benchmarks/bench_rewrite_frame.py --out out/benchmarks [--base-rev main | --base SRC]
+        [--matte]
 
 Writes ``OUT/rewrite_frame.json`` and ``OUT/rewrite_frame.png``; the two clips' tracks are kept
 in ``OUT/rewrite_frame_tracks/`` for later runs.
@@ -47,8 +51,9 @@ def _video(name: str) -> Path:
     return Path(root) / "video" / name
 
 
-def worker(tracks: Path, frames: int, parity: int, save: Path) -> dict:
-    """Render ``frames`` frames here (the tree on ``sys.path``); saves the first ``parity``."""
+def worker(tracks: Path, frames: int, parity: int, save: Path, matte: bool = False) -> dict:
+    """Render ``frames`` frames here (the tree on ``sys.path``; ``matte``: with their mattes);
+    saves the first ``parity``."""
     import cv2
 
     cv2.setNumThreads(1)
@@ -68,7 +73,8 @@ def worker(tracks: Path, frames: int, parity: int, save: Path) -> dict:
         plan.source_tracks["expression"].save(et)
     opts = RewriteOptions()
     opts = opts.with_(mouth=resolve_mouth_mode(opts.mouth, model, performance=plan.performance))
-    it = rewrite_plan(plan, model, opts, workers=1)  # this tree's call or an older one's
+    # this tree's call or an older one's
+    it = rewrite_plan(plan, model, opts, workers=1, **({"matte": True} if matte else {}))
     t0 = time.process_time()
     kept = [next(it) for _ in range(max(parity, 1))]  # the first pays the set-up
     t1 = time.process_time()
@@ -80,13 +86,15 @@ def worker(tracks: Path, frames: int, parity: int, save: Path) -> dict:
     return {"first_frames_s": t1 - t0, "per_frame_ms": (t2 - t1) / max(frames, 1) * 1e3}
 
 
-def run(src: Path, tracks: Path, frames: int, parity: int, save: Path) -> dict:
+def run(src: Path, tracks: Path, frames: int, parity: int, save: Path,
+        matte: bool = False) -> dict:
     """:func:`worker` in a fresh process with ``src`` first on its path."""
     # OpenBLAS on one thread, as the commands that render run it (facetransfer.cli.main.serial_blas)
     env = dict(os.environ, PYTHONPATH=str(src), OPENBLAS_NUM_THREADS="1")
     out = subprocess.run([sys.executable, __file__, "--worker", "--tracks", str(tracks),
                           "--frames", str(frames), "--parity-frames", str(parity),
-                          "--save", str(save)], env=env, check=True, capture_output=True,
+                          "--save", str(save), *(["--matte"] if matte else [])], env=env,
+                         check=True, capture_output=True,
                          text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
@@ -146,6 +154,8 @@ def main(argv=None) -> int:
     ap.add_argument("--frames", type=int, default=100, help="frames timed per run")
     ap.add_argument("--parity-frames", type=int, default=60, help="frames compared")
     ap.add_argument("--pairs", type=int, default=3, help="runs of each tree, in turn")
+    ap.add_argument("--matte", action="store_true",
+                    help="this tree computes each frame's matte too (transfer --matte)")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--tracks", help=argparse.SUPPRESS)
     ap.add_argument("--save", help=argparse.SUPPRESS)
@@ -154,7 +164,7 @@ def main(argv=None) -> int:
         ap.error(f"--frames and --parity-frames must be >= 1 and add up to at most {CLIP}")
     if args.worker:
         print(json.dumps(worker(Path(args.tracks), args.frames, args.parity_frames,
-                                Path(args.save))))
+                                Path(args.save), args.matte)))
         return 0
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -167,10 +177,12 @@ def main(argv=None) -> int:
     for _ in range(args.pairs):
         for name, src in trees.items():
             r = run(src, tracks, args.frames, args.parity_frames,
-                    out / f"rewrite_frame_{name.replace(' ', '_')}.npz")
+                    out / f"rewrite_frame_{name.replace(' ', '_')}.npz",
+                    matte=args.matte and name == "this tree")
             runs[name].append(r["per_frame_ms"])
             print(f"{name}: {r['per_frame_ms']:.1f} ms per frame", flush=True)
     res = {"frames": args.frames, "runs": runs, "load_average": os.getloadavg(),
+           "matte": bool(args.matte),
            "median_ms": {k: float(np.median(v)) for k, v in runs.items()}}
     if base:
         res["base"] = str(args.base or args.base_rev)

@@ -46,7 +46,9 @@ __all__ = [
     "feather_mask",
     "match_color",
     "composite_face",
+    "composite_alpha",
     "membrane_blend",
+    "membrane_alpha",
     "membrane_crop",
     "mask_box",
     "over",
@@ -477,12 +479,48 @@ def composite_face(target_frame, rendered_face, face_mask, *, mouth_source=None,
         mm = np.asarray(mouth_mask)
         if mm.shape != t.shape[:2] or mm.dtype != bool:
             raise ShapeError(f"mouth_mask must be (H, W) = {t.shape[:2]} bool, got {mm.shape} {mm.dtype}")
-        a_mouth = feather_mask(mm, feather)
-        a_face = feather_mask(fm & ~mm, feather) * (1.0 - a_mouth)
+        a_face, a_mouth = _face_alphas(fm, mm, feather)
         pairs = [(face, a_face, fm), (ms_img, a_mouth)]
     else:
-        pairs = [(face, feather_mask(fm, feather), fm)]
+        pairs = [(face, _face_alphas(fm, None, feather)[0], fm)]
     return poisson_blend_multi(t, pairs, mixed=mixed)
+
+
+def _face_alphas(fm: np.ndarray, mm: np.ndarray | None, feather: float):
+    """The feathered masks of :func:`composite_face`: ``(face, mouth)`` (H, W) float32, the
+    face's less where the mouth's is (mouth None without ``mm``)."""
+    if mm is None:
+        return feather_mask(fm, feather), None
+    a_mouth = feather_mask(mm, feather)
+    return feather_mask(fm & ~mm, feather) * (1.0 - a_mouth), a_mouth
+
+
+def composite_alpha(face_mask, *, mouth_mask=None, feather: float = 3.0) -> np.ndarray:
+    """How much of each pixel :func:`composite_face` takes from its sources: the sum of its
+    feathered masks (:func:`feather_mask`: the face's, less where the mouth's is, and the
+    mouth's), in [0, 1]. Where it is 0 the result is the target frame's pixel exactly; where
+    it is above 0 the pixel is solved for (Pérez et al. 2003, Eq. (7)) and may differ.
+
+    Parameters
+    ----------
+    face_mask : (H, W) bool
+    mouth_mask : (H, W) bool, optional
+        As given to :func:`composite_face` with a mouth source.
+    feather : float
+        As given to :func:`composite_face`.
+
+    Returns
+    -------
+    (H, W) float32
+    """
+    fm = np.asarray(face_mask)
+    if fm.ndim != 2 or fm.dtype != bool:
+        raise ShapeError(f"face_mask must be an (H, W) bool array, got {fm.shape} {fm.dtype}")
+    if not fm.any():   # composite_face returns the target frame
+        return np.zeros(fm.shape, np.float32)
+    a_face, a_mouth = _face_alphas(fm, None if mouth_mask is None else
+                                   np.asarray(mouth_mask, bool), feather)
+    return a_face if a_mouth is None else (a_face + a_mouth).astype(np.float32)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -591,12 +629,42 @@ def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
     t = np.ascontiguousarray(T[box])
     s = np.ascontiguousarray(np.asarray(source)[box])
     h = _membrane(m, t, s, outlier, int(smooth_iterations))
-    # the seam's fade: the distance to the nearest pixel outside the region over ``feather``
-    # (the crop's margin is outside; pixels beyond the image are not)
-    a = _feather_alpha(m, feather, edge_outside=False) if feather > 0 else \
-        m.astype(np.float32)
+    a = _seam_alpha(m, feather)
     crop = out[box]
     _blend_paste(m, t, h, a, crop, s=s)  # in place: the region's pixels of ``out``
+    return out
+
+
+def _seam_alpha(m: np.ndarray, feather: float) -> np.ndarray:
+    """The seam's fade of :func:`membrane_blend` over its crop's region ``m`` (h, w) bool:
+    the distance to the nearest pixel outside the region over ``feather`` (the crop's margin
+    is outside; pixels beyond the image are not), (h, w) float32, 0 outside ``m``."""
+    return _feather_alpha(m, feather, edge_outside=False) if feather > 0 else \
+        m.astype(np.float32)
+
+
+def membrane_alpha(mask: np.ndarray, *, feather: float = 2.0,
+                   margin: int = MEMBRANE_MARGIN) -> np.ndarray:
+    """How much of each pixel :func:`membrane_blend` (with the same ``mask``, ``feather`` and
+    ``margin``) takes from its source and membrane: its result is ``rint(target + alpha
+    (source + h - target))`` inside ``mask``, ``target`` exactly where ``alpha`` is 0 (outside
+    ``mask``). Inside ``mask`` it is at least ``1 / feather`` (1 without feathering).
+
+    Parameters
+    ----------
+    mask : (H, W) bool
+    feather : float
+    margin : int
+
+    Returns
+    -------
+    (H, W) float32 in [0, 1]
+    """
+    mask = np.asarray(mask, bool)
+    out = np.zeros(mask.shape, np.float32)
+    box = membrane_crop(mask, margin)
+    if box is not None:
+        out[box] = _seam_alpha(np.ascontiguousarray(mask[box]), feather)
     return out
 
 

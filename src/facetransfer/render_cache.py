@@ -34,7 +34,7 @@ import numpy as np
 log = logging.getLogger(__name__)
 
 __all__ = ["LAYOUT", "KEEP", "ROW_STEP", "cache_enabled", "render_dir", "render_key",
-           "puppet_key", "code_fingerprint", "parts_writer", "parts_folder"]
+           "matte_key", "puppet_key", "code_fingerprint", "parts_writer", "parts_folder"]
 
 #: The cache's layout: a change of what a key means changes it.
 LAYOUT = "renders-1"
@@ -114,6 +114,17 @@ def render_key(plan, model, options, video_options, *, images: bool = False) -> 
         _update_track(h, tr)
     _update_value(h, np.asarray(plan.mouth_index))
     return h.hexdigest()[:32]
+
+
+def matte_key(key: str | None, video_options, *, images: bool = False) -> str | None:
+    """The key of the matte (``transfer --matte``, :mod:`facetransfer.io.matte`) of the
+    render of ``key`` (:func:`render_key`), written with ``video_options`` into a video or
+    (``images``) an image sequence: its own parts folder, continued as the output's is; None
+    without ``key``."""
+    if key is None:
+        return None
+    what = {"render": key, "matte": repr(_unnumbered(video_options)), "images": bool(images)}
+    return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:32]
 
 
 def puppet_key(track, model, identity, video_options, *, images: bool = False) -> str | None:

@@ -51,7 +51,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .composite import _erode, _extend, composite_face, membrane_blend, over
+from .composite import (_erode, _extend, composite_alpha, composite_face, membrane_alpha,
+                        membrane_blend, over)
 from .errors import ShapeError
 from .rim import drawn_inside, lifted_positions
 from .eyes import EyeTexture, _paint_eyes, eye_flags
@@ -87,12 +88,19 @@ class RewriteFrame:
         Pixels covered by the closed new mesh (eye holes excluded).
     mouth_mask : (H, W) bool
         Pixels textured from the source's mouth.
+    matte : (H, W) float32 in [0, 1], optional
+        Asked for (``matte=True``): the fraction of each pixel the blend took from the new
+        face, the alpha with which ``image`` departs from the target frame: 0 where ``image``
+        is the frame's own pixel exactly, 1 where it was wholly replaced, between on the
+        feathered seam (:func:`_blend_matte`); all 0 in a frame without a face. None when not
+        asked for.
     """
 
     image: np.ndarray
     rendered: np.ndarray
     face_mask: np.ndarray
     mouth_mask: np.ndarray
+    matte: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -132,8 +140,8 @@ class FrameTextures:
 
 
 def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: MeshTopology,
-                  textures: FrameTextures, *, blending: BlendOptions | None = None
-                  ) -> RewriteFrame:
+                  textures: FrameTextures, *, blending: BlendOptions | None = None,
+                  matte: bool = False) -> RewriteFrame:
     """Render the new face into one target frame (§6): :func:`rewrite_frame_part` pasted
     into the frame.
 
@@ -150,18 +158,21 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     blending : BlendOptions, optional
         How the rendered face goes into the frame (default :class:`BlendOptions`: the
         membrane blend, ``"fast"``).
+    matte : bool
+        Also give :attr:`RewriteFrame.matte` (computed only when asked).
 
     Returns
     -------
     RewriteFrame
     """
     return _paste(np.asarray(target_frame), rewrite_frame_part(
-        target_frame, vertices, camera, topo, textures, blending=blending))
+        target_frame, vertices, camera, topo, textures, blending=blending, matte=matte),
+        matte=matte)
 
 
 def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
                        topo: MeshTopology, textures: FrameTextures, *,
-                       blending: BlendOptions | None = None):
+                       blending: BlendOptions | None = None, matte: bool = False):
     """:func:`rewrite_frame`'s work, on the face's box only: ``(box, RewriteFrame of the
     box)`` with ``box = (x0, y0, x1, y1)`` (end exclusive) in the frame, or None where the face
     is not in the frame; :func:`_paste` makes the whole frame of it (a render in processes
@@ -189,16 +200,18 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
         textures = dataclasses.replace(textures, mouth_ring=mouth_ring_faces(topo))
     lifted = lifted_positions(textures.face, target_frame)  # None: not the frame's own
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, textures, blending,
-                        None if lifted is None else lifted - (x0, y0))
+                        None if lifted is None else lifted - (x0, y0), matte=matte)
     return box, res
 
 
-def _paste(T: np.ndarray, part) -> RewriteFrame:
-    """The full frame from ``(box, crop result)``; ``None``: the frame unchanged, no face."""
+def _paste(T: np.ndarray, part, *, matte: bool = False) -> RewriteFrame:
+    """The full frame from ``(box, crop result)``; ``None``: the frame unchanged, no face
+    (``matte``: with an all-zero matte)."""
     H, W = T.shape[:2]
     if part is None:
         empty = np.zeros((H, W), bool)
-        return RewriteFrame(T.copy(), np.zeros_like(T), empty, empty.copy())
+        return RewriteFrame(T.copy(), np.zeros_like(T), empty, empty.copy(),
+                            np.zeros((H, W), np.float32) if matte else None)
     (x0, y0, x1, y1), res = part
     if (x0, y0, x1, y1) == (0, 0, W, H):
         return res
@@ -209,7 +222,9 @@ def _paste(T: np.ndarray, part) -> RewriteFrame:
 
     return RewriteFrame(paste(res.image, T.copy()), paste(res.rendered, np.zeros_like(T)),
                         paste(res.face_mask, np.zeros((H, W), bool)),
-                        paste(res.mouth_mask, np.zeros((H, W), bool)))
+                        paste(res.mouth_mask, np.zeros((H, W), bool)),
+                        None if res.matte is None else
+                        paste(res.matte, np.zeros((H, W), np.float32)))
 
 
 def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int
@@ -243,10 +258,11 @@ def _shift_camera(camera, x0: int, y0: int):
 
 
 def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOptions,
-                  lifted=None) -> RewriteFrame:
+                  lifted=None, *, matte: bool = False) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop;
     ``lifted``: where the per-frame face texture lifted the vertices, in the crop's pixels
-    (:func:`facetransfer.rim.lifted_positions`), or None."""
+    (:func:`facetransfer.rim.lifted_positions`), or None; ``matte``: with its matte
+    (:func:`_blend_matte`)."""
     from .render import rasterize
 
     raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
@@ -262,7 +278,8 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
                    mouth_mask if fan is None else mouth_mask & ~fan)
     rendered = face_img if mouth_img is None else over(face_img, mouth_img, mouth_mask)
     if not face_mask.any():
-        return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask)
+        return RewriteFrame(T.copy(), rendered, face_mask, mouth_mask,
+                            np.zeros(face_mask.shape, np.float32) if matte else None)
     # The blend region stays ``erode`` pixels inside the rendered silhouette, so its outline
     # (the Dirichlet boundary of the Poisson problem) lies on the target's own face, which
     # covers the same silhouette up to the change of expression, not on the background.
@@ -291,7 +308,32 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
             out = composite_face(T, face_src, region, color_match=blending.color_match,
                                  feather=feather)
     return RewriteFrame(np.ascontiguousarray(out, dtype=np.uint8), rendered, face_mask,
-                        mouth_mask)
+                        mouth_mask, _blend_matte(region, mouth_mask if mouth_img is not None
+                                                 else None, blending) if matte else None)
+
+
+def _blend_matte(region: np.ndarray, mouth_mask: np.ndarray | None,
+                 blending: BlendOptions) -> np.ndarray:
+    """The matte of one crop's blend (:attr:`RewriteFrame.matte`), (h, w) float32: the alpha
+    with which the blend of ``blending.mode`` departs from the target over ``region`` (h, w)
+    bool (the eroded face mask) and, with a source's mouth, ``mouth_mask`` (h, w) bool (its
+    pixels): ``"none"`` the region (pasted over), ``"fast"`` the membrane blend's seam fade
+    (:func:`facetransfer.composite.membrane_alpha`), ``"poisson"`` the solve's feathered masks
+    (:func:`facetransfer.composite.composite_alpha`, which reach ``feather`` pixels beyond the
+    region). Outside it the output is the target's pixel to the bit; inside it may equal it.
+
+    The pixels kept as the target's own (its outline drawn inside the face, ``_keep_own``)
+    count as the new face's: they are blended like the rest (the membrane's correction added,
+    or solved for), so the output there is not the target's pixel to the bit, and a compositor
+    who keeps the plate where the matte is 0 must take them from the rewrite."""
+    if blending.mode == "none":
+        return region.astype(np.float32)
+    if blending.mode == "fast":
+        return membrane_alpha(region, feather=blending.feather)
+    mouth = None if mouth_mask is None else mouth_mask & region
+    if mouth is not None and not mouth.any():
+        mouth = None
+    return composite_alpha(region, mouth_mask=mouth, feather=blending.feather)
 
 
 #: The layers of one frame's shading (bits of :func:`facetransfer.render.shade_layers`' flags):

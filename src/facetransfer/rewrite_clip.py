@@ -106,7 +106,8 @@ class RenderRun:
 def rewrite_frames(target_frames, target_track, new_track, model, *,
                    mouth_source: MouthSource | None = None, options: RewriteOptions | None = None,
                    topo: MeshTopology | None = None, run: RenderRun | None = None,
-                   regions: RegionTextures | None = None) -> Iterator[RewriteFrame]:
+                   regions: RegionTextures | None = None, matte: bool = False
+                   ) -> Iterator[RewriteFrame]:
     """Rewrite every target frame with the new performance (§6, Fig. 7); each shot of an
     edited target (``target_track.shot_starts``) as a clip of its own.
 
@@ -140,6 +141,9 @@ def rewrite_frames(target_frames, target_track, new_track, model, *,
         every frame, two threads where there are two CPUs); the output does not depend on it.
     regions : RegionTextures, optional
         The region textures made ahead, if of the clip (:class:`RegionTextures`).
+    matte : bool
+        Give each frame's :attr:`~facetransfer.rewrite.RewriteFrame.matte` too (computed only
+        when asked; all 0 where the face is lost).
 
     Yields
     ------
@@ -160,6 +164,8 @@ def rewrite_frames(target_frames, target_track, new_track, model, *,
         shot_mouth = dataclasses.replace(mouth_source, track=st, index=si)
         one = _ClipRenderer.build(frames, tt, new, model, opts, mouth_source=shot_mouth,
                                   regions=regions, topo=topo)
+        if matte:
+            one = dataclasses.replace(one, matte=True)
         yield from _render(one, frames, range(max(start, a) - a, b - a), run)
 
 
@@ -265,6 +271,8 @@ class _ClipRenderer:
     mono : bool
         The target is monochrome: the pixels the rewrite changes are brought to grey
         (:mod:`facetransfer.monochrome`).
+    matte : bool
+        Each frame with its matte (:attr:`facetransfer.rewrite.RewriteFrame.matte`).
     """
 
     target_frames: object
@@ -288,6 +296,7 @@ class _ClipRenderer:
     lip_tint: LipTint | None = None
     gaze: np.ndarray | None = None
     mono: bool = False
+    matte: bool = False
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
@@ -423,7 +432,7 @@ class _ClipRenderer:
 
     def __call__(self, i: int) -> RewriteFrame:
         """Frame ``i`` rewritten (:meth:`part` pasted into it)."""
-        return _paste(np.asarray(self.target_frames[i]), self.part(i))
+        return _paste(np.asarray(self.target_frames[i]), self.part(i), matte=self.matte)
 
     def part(self, i: int):
         """Frame ``i``'s rewrite on the face's box: ``(box, RewriteFrame)`` or None
@@ -439,7 +448,8 @@ class _ClipRenderer:
                                  mouth_ring=self.ring, lip_tint=self.lip_tint)
         parts = [(rewrite_frame_part(
             frame, V, self.new_track.camera(i), self.topo,
-            dataclasses.replace(textures, eyes=eye, jaw=jaw), blending=blending), we * wj)
+            dataclasses.replace(textures, eyes=eye, jaw=jaw), blending=blending,
+            matte=self.matte), we * wj)
             for eye, we in views_at(self.eye_tex, i, None if self.gaze is None else self.gaze[i])
             for jaw, wj in views_at(self.jaw_tex, i)]
         if parts[0][0] is None:       # the face outside the frame (the same box every view)
@@ -486,6 +496,8 @@ def _crop_of(T: np.ndarray, frame: RewriteFrame):
     to the face (small to send between processes); None when nothing changed."""
     changed = frame.face_mask | frame.mouth_mask | (frame.image != T).any(axis=-1)
     changed |= frame.rendered.any(axis=-1)
+    if frame.matte is not None:
+        changed |= frame.matte > 0
     if not changed.any():
         return None
     ys = np.flatnonzero(changed.any(axis=1))
@@ -494,7 +506,9 @@ def _crop_of(T: np.ndarray, frame: RewriteFrame):
     sl = (slice(y0, y1), slice(x0, x1))
     return (x0, y0, x1, y1), RewriteFrame(frame.image[sl].copy(), frame.rendered[sl].copy(),
                                           frame.face_mask[sl].copy(),
-                                          frame.mouth_mask[sl].copy())
+                                          frame.mouth_mask[sl].copy(),
+                                          None if frame.matte is None else
+                                          frame.matte[sl].copy())
 
 
 #: the per-frame function of :func:`rewrite_frames` handed to forked workers (not pickled)
@@ -552,7 +566,8 @@ def _render_in_processes(one, target_frames, todo: range, workers: int, progress
                         pending.append(pool.submit(_render_job, nxt))
                         nxt += 1
                     part = pending.popleft().result()
-                    res = _paste(np.asarray(target_frames[done]), part)
+                    res = _paste(np.asarray(target_frames[done]), part,
+                                 matte=getattr(one, "matte", False))
                 except BrokenProcessPool as exc:
                     log.warning("render workers failed (%s); rendering here", exc)
                     broken = True

@@ -7,7 +7,8 @@ into the target footage and written with the target's audio.
   :func:`facetransfer.io.video.write_video_with_audio`);
 * :func:`transfer_video`: the outputs checked before any work, the plan made
   (:func:`facetransfer.transfer_plan.plan_sources`), rendered and written, and optionally the
-  new track and its meshes saved.
+  new track and its meshes saved, and the matte of the pixels the rewrite changed
+  (:mod:`facetransfer.io.matte`) written beside the output.
 
 The plan (reading, tracking, recombining) is :mod:`facetransfer.transfer_plan`;
 :func:`~facetransfer.transfer_plan.plan_transfer`, :class:`~facetransfer.transfer_plan.TransferPlan`
@@ -74,6 +75,8 @@ class TransferResult:
         What the output kept of its target beyond the colour, as the summary line says it
         (``"with the plate's alpha"``, ...: :mod:`facetransfer.io.plate_output`); None: the
         colour alone.
+    matte : Path or None
+        The matte written (``matte``), or None.
     """
 
     path: Path
@@ -84,6 +87,7 @@ class TransferResult:
     timings: dict
     resumed: int = 0
     kept: str | None = None
+    matte: Path | None = None
 
 
 def write_mesh_sequence(folder: str | os.PathLike, track, model, *, overwrite: bool = True) -> int:
@@ -116,13 +120,19 @@ class RenderTarget:
     video_options : VideoOptions, optional
         Codec and CRF (:class:`facetransfer.io.video.VideoOptions`; default H.264, CRF 18).
     overwrite : bool
-        Replace an existing ``path``.
+        Replace an existing ``path`` (and ``matte``).
+    matte : path-like, optional
+        Also write the matte of the pixels the rewrite changed, frame by frame, as an image
+        sequence (``matte/%05d.png``, ``.tif``, ``.exr``) or a video (``.mp4``, ``.mov``,
+        ``.mkv``), numbered and timed as ``path`` (:mod:`facetransfer.io.matte`); the frames
+        are rendered with it only when asked.
     """
 
     path: object
     audio_from: object = None
     video_options: object = None
     overwrite: bool = False
+    matte: object = None
 
 
 @dataclass(frozen=True)
@@ -174,12 +184,16 @@ def render_plan(plan: TransferPlan, model, output: RenderTarget, *,
         Write the output (no ``compose``) through the render cache
         (:mod:`facetransfer.render_cache`) until it is complete: a video in parts, an image
         sequence frame by frame. A run interrupted here leaves them, and the same render run
-        again continues after the last frame they hold.
+        again continues after the last frame they hold (the output's or ``output.matte``'s,
+        whichever holds fewer: each writes the frames it lacks).
 
     Returns
     -------
     RenderResult
     """
+    if compose is not None and output.matte is not None:
+        raise RewriteError(f"the matte {output.matte} is of a transfer's own frames: not "
+                           "written with composed ones")
     options = RewriteOptions() if options is None else options
     options = options.with_(mouth=resolve_mouth_mode(options.mouth, model,
                                                      performance=plan.performance))
@@ -189,12 +203,18 @@ def render_plan(plan: TransferPlan, model, output: RenderTarget, *,
         video_options = like_video(video_options, audio_from, out)
     timings = dict(plan.timings)
     n = plan.n_frames
-    writer = _parts_writer(plan, model, out, options, video_options, audio_from, overwrite) \
+    key = _render_key(plan, model, out, options, video_options) \
         if resume and compose is None else None
-    start = 0 if writer is None else writer.done
+    writer = _parts_writer(key, plan, out, video_options, audio_from, overwrite)
+    start = skip = 0 if writer is None else writer.done
     with contextlib.ExitStack() as stack:
         if writer is not None:  # parts kept on an error or interrupt, joined on success
             stack.enter_context(writer)
+        matte = None            # committed before the output (the stack's order)
+        if output.matte is not None:
+            matte = stack.enter_context(_matte_writer(key, plan, output.matte, video_options,
+                                                      overwrite))
+            start = min(start, matte.done)
         mouth_fn = None
         if options.mouth == "function" and start < n:
             t = time.perf_counter()
@@ -206,18 +226,9 @@ def render_plan(plan: TransferPlan, model, output: RenderTarget, *,
             bar.update(start)
         render = _Frames(plan, model, options, mouth_fn, compose, bar, start,
                          None if compose is not None else
-                         plate_output(out, audio_from, video_options, start))
+                         plate_output(out, audio_from, video_options, start), matte)
         t0 = time.perf_counter()
-        if writer is None:
-            from .io.video import write_video_with_audio
-
-            frames = stack.enter_context(contextlib.closing(render()))
-            audio = write_video_with_audio(out, frames, plan.fps, audio_from=audio_from,
-                                           overwrite=overwrite, options=video_options,
-                                           n_frames=n)
-        else:     # closed here on an error (its render threads joined), not by the collector
-            for frame, face in stack.enter_context(contextlib.closing(render.with_faces())):
-                writer.write(frame, marked=face)
+        audio = _write_frames(stack, render, writer, skip, output, video_options)
     if writer is not None:
         audio, render.rewritten = writer.result.audio, writer.marked
     timings["render"] = render.seconds
@@ -226,12 +237,34 @@ def render_plan(plan: TransferPlan, model, output: RenderTarget, *,
                         getattr(render.grading, "kept", None))
 
 
+def _write_frames(stack: contextlib.ExitStack, render: "_Frames", writer, skip: int,
+                  output: RenderTarget, video_options) -> bool | None:
+    """Write the frames of ``render`` into ``output.path``: through ``writer`` (the render
+    cache's) from frame ``skip`` on (a render continued from an earlier frame for the matte
+    writes each frame once), else in one piece with the audio. Returns whether audio was
+    muxed in (None: ``writer``'s, said when it is closed)."""
+    if writer is None:
+        from .io.video import write_video_with_audio
+
+        frames = stack.enter_context(contextlib.closing(render()))
+        return write_video_with_audio(output.path, frames, render.plan.fps,
+                                      audio_from=output.audio_from, overwrite=output.overwrite,
+                                      options=video_options, n_frames=render.plan.n_frames)
+    # closed here on an error (its render threads joined), not by the collector
+    frames = stack.enter_context(contextlib.closing(render.with_faces()))
+    for i, (frame, face) in enumerate(frames, render.start):
+        if i >= skip:
+            writer.write(frame, marked=face)
+    return None
+
+
 @dataclass
 class _Frames:
     """The rewritten frames of a plan from ``start`` on (:func:`rewrite_frames`), timed and
     counted: ``seconds`` spent rendering, ``rewritten`` frames that show a face; with what
     each output frame keeps of its target beyond the colour (``grading``:
-    :func:`facetransfer.io.plate_output.plate_output`)."""
+    :func:`facetransfer.io.plate_output.plate_output`); each frame's matte written by
+    ``matte`` (:class:`facetransfer.io.matte.MatteWriter`), if given."""
 
     plan: TransferPlan
     model: object
@@ -241,6 +274,7 @@ class _Frames:
     bar: object
     start: int
     grading: object = None    # facetransfer.io.plate_output.plate_output's
+    matte: object = None
     seconds: float = 0.0
     rewritten: int = 0
 
@@ -254,7 +288,7 @@ class _Frames:
                         start=self.start)
         it = rewrite_frames(p.target_frames, p.target_track, p.new_track, self.model,
                             mouth_source=mouth, options=self.options, run=run,
-                            regions=p.regions)
+                            regions=p.regions, matte=self.matte is not None)
         if self.grading is None:
             frames = ((frame, face) for _, frame, face in self._composed(it))
         else:                          # graded on threads, a few frames ahead of the writer
@@ -279,6 +313,8 @@ class _Frames:
             r = next(it)
             frame = r.image if self.compose is None else self.compose(i, r)
             self.seconds += time.perf_counter() - t
+            if self.matte is not None:
+                self.matte.write(i, r.matte)
             yield i, frame, bool(r.face_mask.any())
 
     def _graded(self, i: int, frame, face: bool):
@@ -291,20 +327,49 @@ class _Frames:
                 yield frame
 
 
-def _parts_writer(plan: TransferPlan, model, out, options, video_options, audio_from,
-                  overwrite: bool):
-    """A writer for ``out`` in the render cache's folder of this render that keeps what it
-    wrote when interrupted (:func:`facetransfer.render_cache.parts_writer`); None: the cache
-    is off, or another process renders the same frames now."""
+def _render_key(plan: TransferPlan, model, out, options, video_options) -> str | None:
+    """The render cache's key of rendering ``plan`` into ``out``
+    (:func:`facetransfer.render_cache.render_key`); None: the cache is off."""
     from .io.video import is_image_pattern
-    from .render_cache import parts_writer, render_key
+    from .render_cache import render_key
 
-    images = is_image_pattern(out)
-    key = render_key(plan, model, options, video_options, images=images)
+    return render_key(plan, model, options, video_options, images=is_image_pattern(out))
+
+
+def _frame_size(plan: TransferPlan) -> tuple[int, int]:
     first = np.asarray(plan.target_frames[0])
-    return parts_writer(key, out, plan.fps, (first.shape[1], first.shape[0]), plan.n_frames,
+    return first.shape[1], first.shape[0]
+
+
+def _parts_writer(key: str | None, plan: TransferPlan, out, video_options, audio_from,
+                  overwrite: bool):
+    """A writer for ``out`` in the render cache's folder of ``key`` that keeps what it
+    wrote when interrupted (:func:`facetransfer.render_cache.parts_writer`); None: no key
+    (the cache is off), or another process renders the same frames now."""
+    from .render_cache import parts_writer
+
+    return parts_writer(key, out, plan.fps, _frame_size(plan), plan.n_frames,
                         video_options=video_options, audio_from=audio_from,
                         overwrite=overwrite)
+
+
+def _matte_writer(key: str | None, plan: TransferPlan, matte, video_options, overwrite: bool):
+    """The :class:`~facetransfer.io.matte.MatteWriter` of ``matte``, the matte of the output
+    written with ``video_options``: through the render cache's folder of its own
+    (:func:`facetransfer.render_cache.matte_key`) beside the output's of ``key``, else in one
+    piece."""
+    from .io.matte import MatteWriter, matte_options
+    from .io.video import VideoWriter, is_image_pattern
+    from .render_cache import matte_key, parts_writer
+
+    opts, size = matte_options(video_options, matte), _frame_size(plan)
+    writer = parts_writer(matte_key(key, opts, images=is_image_pattern(matte)), matte,
+                          plan.fps, size, plan.n_frames, video_options=opts,
+                          overwrite=overwrite)
+    if writer is None:
+        writer = VideoWriter(matte, plan.fps, size, options=opts, overwrite=overwrite,
+                             n_frames=plan.n_frames)
+    return MatteWriter(writer, matte, size)
 
 
 def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
@@ -320,13 +385,15 @@ def _lift_mouth(plan: TransferPlan, model, progress_factory) -> MouthFunction:
             lift_bar.close()
 
 
-def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: bool) -> None:
+def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: bool,
+                   matte=None, inputs=()) -> None:
     """The outputs of :func:`transfer_video` can be written (before any work)."""
     from .io.atomic import check_output_path
     from .io.video import check_video_output
 
     named = [(n, Path(p).resolve()) for n, p in (("--out", out), ("--save-track", save_track),
-                                                  ("--meshes", meshes_dir)) if p is not None]
+                                                  ("--meshes", meshes_dir), ("--matte", matte))
+             if p is not None]
     for i, (a, pa) in enumerate(named):   # one path for two outputs: found before any work
         for b, pb in named[i + 1:]:
             if pa == pb:
@@ -338,13 +405,28 @@ def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: boo
         from .io.output_names import check_meshes_folder
 
         check_meshes_folder(meshes_dir, overwrite=overwrite)
+    if matte is not None:
+        from .io.matte import check_matte_output
+
+        check_matte_output(matte, out=out, options=video_options, overwrite=overwrite,
+                           inputs=inputs)
+
+
+def _source_files(sources: TransferSources) -> list:
+    """The files a transfer reads (videos, tracks, a performance's file)."""
+    files = [sources.performance] if isinstance(sources.performance, (str, os.PathLike)) else []
+    for s in (sources.target, sources.expression, sources.viseme, sources.identity,
+              sources.pose):
+        if s is not None:
+            files += [p for p in (s.video, s.track) if isinstance(p, (str, os.PathLike))]
+    return files
 
 
 def transfer_video(sources: TransferSources, out, model, *,
                    options: RewriteOptions | None = None, overwrite: bool = False,
                    meshes_dir=None, save_track=None, progress_factory=None, video_options=None,
                    align: str | None = None, max_frames: int | None = None,
-                   parallel: bool | None = None, reader=None) -> TransferResult:
+                   parallel: bool | None = None, reader=None, matte=None) -> TransferResult:
     """The whole video rewrite (§6): plan (read, track, recombine), render, write with audio.
 
     The inputs are ``sources`` (:class:`TransferSources`, e.g.
@@ -358,7 +440,8 @@ def transfer_video(sources: TransferSources, out, model, *,
     ``out`` (:class:`facetransfer.io.video.VideoOptions`); ``out`` may be an image sequence
     (``frames/%05d.png``). A video file is rendered in parts kept in the render cache
     (:mod:`facetransfer.render_cache`): an interrupted transfer run again renders only the
-    frames it had not.
+    frames it had not. ``matte``: also write the matte of the pixels the rewrite changed
+    (:attr:`RenderTarget.matte`), numbered, timed and continued as ``out``.
 
     Returns
     -------
@@ -370,12 +453,13 @@ def transfer_video(sources: TransferSources, out, model, *,
                            "TransferSources.of(target, expression_from=...), or call "
                            "plan_transfer(target, model, ...) and render_plan")
     _check_outputs(out, video_options=video_options, save_track=save_track,
-                   meshes_dir=meshes_dir, overwrite=overwrite)  # before any work
+                   meshes_dir=meshes_dir, overwrite=overwrite, matte=matte,
+                   inputs=_source_files(sources))  # before any work
     opts = RewriteOptions() if options is None else options
     resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
     plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
                         parallel=parallel, progress_factory=progress_factory, reader=reader)
-    output = RenderTarget(out, sources.target.video, video_options, overwrite)
+    output = RenderTarget(out, sources.target.video, video_options, overwrite, matte)
     rendered = render_plan(plan, model, output, options=opts,
                            progress_factory=progress_factory, resume=True)
     if save_track is not None:
@@ -383,4 +467,5 @@ def transfer_video(sources: TransferSources, out, model, *,
     if meshes_dir is not None:
         write_mesh_sequence(meshes_dir, plan.new_track, model)
     return TransferResult(Path(out), plan.n_frames, rendered.n_rewritten, rendered.audio, plan,
-                          rendered.timings, rendered.resumed, rendered.kept)
+                          rendered.timings, rendered.resumed, rendered.kept,
+                          None if matte is None else Path(matte))

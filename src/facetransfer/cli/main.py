@@ -405,7 +405,7 @@ CACHED_RENDERING = ("transfer", "puppet")
 
 
 #: Arguments naming a command's outputs, and ``demo``'s files in its folder.
-_OUTPUT_ARGS = ("out", "save_track", "meshes", "function")
+_OUTPUT_ARGS = ("out", "matte", "save_track", "meshes", "function")
 _DEMO_FILES = ("demo.mp4", "demo.mov", "demo.png", "demo_track.npz")
 
 

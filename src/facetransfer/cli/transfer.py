@@ -5,7 +5,8 @@
          | --identity-from V.mp4 | --identity-weights W | --identity-label L)
         [--pose-from P.mp4] [--model M.npz] [--align trim|loop|hold] [--max-frames N]
         [--mouth frame|function] [--codec h264|h265|prores] [--crf 18]
-        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png [--overwrite]
+        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png
+        [--matte matte/%05d.png|M.exr...] [--overwrite]
     facetransfer edit TRACK.npz [--model M.npz] --add frown@120-180 --scale smile=1.5 --out T2.npz
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
     facetransfer puppet VIDEO [--model M.npz] --identity LABEL --out OUT.mp4
@@ -173,6 +174,13 @@ def _register_transfer(sub) -> None:
     _add_output(p, run_transfer, metavar="OUT.mp4", video=True,
                 help="video to write (.mp4, .mov, .mkv...) or image sequence (frames/%%05d.png)",
                 overwrite_help="replace existing outputs")
+    p.add_argument("--matte", metavar="MATTE", type=video_out,
+                   help="also write the matte of the pixels the transfer changed, one grey "
+                   "frame per output frame (0: the plate's own pixel, to the bit; 1: wholly "
+                   "the new face; between on the feathered seam), numbered and timed as "
+                   "--out: an image sequence, matte/%%05d.png or .tif (16-bit) or .exr "
+                   "(float), or a video (.mp4, .mov, .mkv: 8 bits, and H.264 is lossy: a "
+                   "sequence is the exact matte)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
@@ -375,7 +383,8 @@ def run_transfer(args) -> int:
         sources, args.out, model, options=rewrite_options(args),
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
         progress_factory=_bar_factory(), video_options=vopt,
-        align=args.align, max_frames=args.max_frames, reader=prefetch.read_video)
+        align=args.align, max_frames=args.max_frames, reader=prefetch.read_video,
+        matte=args.matte)
     kept = res.n_frames - res.n_rewritten
     for tr in res.plan.source_tracks.values():
         if tr is not None and tr.info.get("resumed"):
@@ -388,6 +397,9 @@ def run_transfer(args) -> int:
           + (f" ({kept} kept original: face lost)" if kept else "")
           + (f", {res.kept}" if res.kept else "")
           + (", with the target's audio" if res.audio else ", no audio"))
+    if args.matte:
+        print(f"wrote the matte {args.matte}"
+              + _numbered(args.matte, args.target, res.n_frames, args.start_number))
     if args.save_track:
         print(f"wrote {args.save_track}")
     if args.meshes:
@@ -412,7 +424,7 @@ def _check_transfer_args(args):
     """The arguments' one-line errors, the outputs and every input video checked before any
     work; ``(video options, how many videos are to be tracked)``."""
     from ..io.atomic import check_output_path
-    from ..io.video import check_video_output, video_info
+    from ..io.video import check_video_output, is_image_pattern, video_info
 
     _positive(args.max_frames, "--max-frames")
     if not (args.expression_from or args.viseme_from or args.identity_from
@@ -434,9 +446,15 @@ def _check_transfer_args(args):
               args.identity_weights.endswith(".npy") else None]
     from ..take import is_take
 
-    # the outputs first: a bad one is the only line said
-    vopt = video_options(args, args.out)
+    # the outputs first: a bad one is the only line said (--start-number: of either sequence)
+    vopt = video_options(args, next((o for o in (args.out, args.matte)
+                                     if o and is_image_pattern(o)), args.out))
     check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
+    if args.matte:
+        from ..io.matte import check_matte_output
+
+        check_matte_output(args.matte, out=args.out, options=vopt, overwrite=args.overwrite,
+                           inputs=inputs + [args.save_track, args.meshes])
     if args.meshes:
         from ..io.output_names import check_meshes_folder
 

@@ -199,15 +199,17 @@ def fits_output(shape: tuple, size: tuple[int, int], path: str | os.PathLike,
                 alpha: bool = False) -> bool:
     """Whether a frame of ``shape`` can be written into the output ``path`` of ``size``
     (W, H): ``(H, W, 3)`` colour, or ``(H, W, 4)`` RGBA (and ``(H, W)`` grey) into a PNG or TIFF
-    sequence (:func:`facetransfer.io.plate_alpha.keeps_alpha`); a video written with an alpha
-    plane (``alpha``: :attr:`VideoOptions.alpha`) takes RGBA only."""
+    sequence (:func:`facetransfer.io.plate_alpha.keeps_alpha`), ``(H, W)`` grey into an OpenEXR
+    one (a matte, :mod:`facetransfer.io.matte`); a video written with an alpha plane
+    (``alpha``: :attr:`VideoOptions.alpha`) takes RGBA only."""
     from .plate_alpha import keeps_alpha
 
     H, W = size[1], size[0]
     if alpha and not is_image_pattern(path):
         return tuple(shape) == (H, W, 4)
     if tuple(shape) == (H, W):   # a 16-bit grey plate's frame (facetransfer.io.plate_depth)
-        return keeps_alpha(path)
+        return keeps_alpha(path) or (is_image_pattern(path)
+                                     and Path(path).suffix.lower() == ".exr")
     return tuple(shape) == (H, W, 3) or (tuple(shape) == (H, W, 4) and keeps_alpha(path))
 
 

@@ -1,0 +1,143 @@
+"""The matte of a rewrite (``facetransfer transfer --matte``): for every output frame, one grey
+image of the fraction of each pixel the rewrite took from the new face
+(:attr:`facetransfer.rewrite.RewriteFrame.matte`): 0 where the output is the plate's own pixel
+to the bit, 1 where the plate's pixel was wholly replaced, between on the feathered seam.
+
+Written as an image sequence of one channel, numbered as the output (``matte/%05d.png`` or
+``.tif``/``.tiff``: 16-bit grey; ``.exr``: float32, one channel ``Y``, with the frame's rate,
+timecode and pixel aspect in its header), or as a video (``.mp4``, ``.mov``, ``.mkv``: the
+grey in all three channels, 8 bits, encoded as the output is where its codec fits the
+container, else H.264: lossy, so a sequence is the matte a compositor keys on). A pixel the
+rewrite touched is never 0 in the file: a fraction below the file's first level is written as
+that level, so that the matte's zeros are exactly the plate's pixels. The frames go through the
+writers every output goes through (:class:`~facetransfer.io.video.VideoWriter`, the render
+cache's :mod:`facetransfer.io.sequence_parts` and :mod:`facetransfer.io.video_parts`), written
+atomically; the output's audio is not put into it.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import OutputError
+from .output_names import suffix_list
+from .video import VideoOptions, VideoOutput, check_video_output, is_image_pattern
+from .video_sequence import same_sequence_files
+
+__all__ = ["MATTE_SEQUENCE_SUFFIXES", "MATTE_VIDEO_SUFFIXES", "MatteError", "MatteWriter",
+           "check_matte_output", "matte_frame", "matte_options"]
+
+#: Frame files of a matte sequence: 16-bit grey PNG or TIFF, float OpenEXR.
+MATTE_SEQUENCE_SUFFIXES = (".png", ".tif", ".tiff", ".exr")
+#: Video files of a matte (8 bits, lossy with H.264 and H.265).
+MATTE_VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
+
+
+class MatteError(OutputError):
+    """A matte that cannot be written where asked (its kind, its name); names the path."""
+
+
+def check_matte_output(matte: str | os.PathLike, *, out, options: VideoOptions | None = None,
+                       overwrite: bool = False, inputs=()) -> VideoOutput:
+    """Check the matte ``matte`` of the output ``out`` before any work: a sequence of
+    :data:`MATTE_SEQUENCE_SUFFIXES` or a video of :data:`MATTE_VIDEO_SUFFIXES`, not ``out``
+    itself (nor its frames), not one of ``inputs``, not existing unless ``overwrite``
+    (:func:`facetransfer.io.video.check_video_output` with :func:`matte_options` of the
+    output's ``options``).
+
+    Raises
+    ------
+    MatteError
+        Another kind of file, or ``out``'s name.
+    VideoError, OutputError
+        As :func:`~facetransfer.io.video.check_video_output` says (exists, an input, no such
+        folder).
+    """
+    p = Path(matte)
+    suffix = p.suffix.lower()
+    if is_image_pattern(p):
+        if suffix not in MATTE_SEQUENCE_SUFFIXES:
+            raise MatteError(f"--matte {p}: a matte sequence is written as "
+                             f"{suffix_list(MATTE_SEQUENCE_SUFFIXES)} frames (16-bit grey or "
+                             f"float), not {suffix or 'a name without extension'}")
+    elif suffix not in MATTE_VIDEO_SUFFIXES:
+        raise MatteError(f"--matte {p}: a matte is an image sequence (e.g. matte/%05d.png, "
+                         f"16-bit) or a video ({suffix_list(MATTE_VIDEO_SUFFIXES)}), not "
+                         f"{suffix or 'a name without extension'}")
+    o = Path(out)
+    if os.path.abspath(p) == os.path.abspath(o) or (
+            is_image_pattern(p) and is_image_pattern(o) and same_sequence_files(p, o)):
+        raise MatteError(f"--matte {p} is also --out: give the matte its own name")
+    return check_video_output(p, matte_options(options, p), overwrite=overwrite,
+                              inputs=[q for q in inputs if q is not None])
+
+
+def matte_options(options: VideoOptions | None, matte) -> VideoOptions:
+    """The :class:`VideoOptions` of the matte ``matte`` of an output written with
+    ``options``: its first number, timecode and pixel aspect; for a video also its codec (where
+    the matte's container holds it, else H.264), quality, preset and fields. No colour
+    beyond grey, no alpha, no 16 bits."""
+    opt = VideoOptions() if options is None else options
+    kept = VideoOptions(first_number=opt.first_number, timecode=opt.timecode, sar=opt.sar)
+    if is_image_pattern(matte):
+        return kept
+    codec = opt.codec
+    if codec == "prores" and Path(matte).suffix.lower() not in (".mov", ".mkv"):
+        codec = "h264"
+    return replace(kept, codec=codec, crf=None if codec == "prores" else opt.crf,
+                   preset=opt.preset, field=None if codec == "h265" else opt.field)
+
+
+def matte_frame(matte: np.ndarray | None, size: tuple[int, int], path) -> np.ndarray:
+    """The frame the matte file ``path`` holds for ``matte`` (H, W) float in [0, 1] (None: a
+    frame without a face, all 0) of ``size`` (W, H): ``(H, W)`` float32 of an OpenEXR
+    sequence, ``(H, W)`` uint16 of a PNG or TIFF one, ``(H, W, 3)`` uint8 grey of a video;
+    a fraction above 0 is at least the file's first level above 0."""
+    W, H = int(size[0]), int(size[1])
+    a = np.zeros((H, W), np.float32) if matte is None else \
+        np.clip(np.asarray(matte, np.float32), 0.0, 1.0)
+    if a.shape != (H, W):
+        raise MatteError(f"matte of shape {a.shape} does not match the size {W}x{H} of {path}")
+    if Path(path).suffix.lower() == ".exr":
+        return a
+    deep = is_image_pattern(path)
+    top = 65535.0 if deep else 255.0
+    v = np.rint(a * np.float32(top)).astype(np.uint16 if deep else np.uint8)
+    v[(v == 0) & (a > 0)] = 1       # touched: never the plate's 0
+    return v if deep else np.repeat(v[..., None], 3, axis=2)
+
+
+class MatteWriter:
+    """Write the matte frames of an output through ``writer`` (a render cache's parts writer,
+    which may hold the frames an interrupted run wrote, or a
+    :class:`~facetransfer.io.video.VideoWriter`): frame ``i`` is written only from the
+    frames the writer already holds on (:attr:`done`), so a render continued from an earlier
+    frame for the output writes each matte frame once. A context manager: committed when the
+    block ends without error, else kept (parts) or discarded (a writer in one piece).
+
+    Parameters
+    ----------
+    writer : PartsWriter, SequenceWriter or VideoWriter
+    path : path-like
+        The matte (:func:`check_matte_output`).
+    size : (width, height)
+    """
+
+    def __init__(self, writer, path, size: tuple[int, int]) -> None:
+        self.writer, self.path, self.size = writer, Path(path), tuple(size)
+        self.done = int(getattr(writer, "done", 0))
+
+    def write(self, i: int, matte: np.ndarray | None) -> None:
+        """Frame ``i``'s matte ((H, W) float in [0, 1], or None: all 0), in order."""
+        if i >= self.done:
+            self.writer.write(matte_frame(matte, self.size, self.path))
+
+    def __enter__(self) -> "MatteWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        self.writer.close(commit=exc_type is None)

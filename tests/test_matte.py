@@ -1,0 +1,309 @@
+"""The matte of a transfer (``transfer --matte``, facetransfer.io.matte): 0 exactly where the
+output is the plate's pixel to the bit, above 0 wherever the output differs from the plate;
+written as 16-bit grey PNG / TIFF, float OpenEXR or a grey video, continued after an
+interruption as the output is."""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer import rewrite_clip as rc  # noqa: E402
+from facetransfer import rewrite_options as rwo  # noqa: E402
+from facetransfer.io.matte import (MatteError, MatteWriter, check_matte_output,  # noqa: E402
+                                   matte_frame, matte_options)
+from facetransfer.io.video import (VideoOptions, VideoWriter, read_video,  # noqa: E402
+                                   write_video)
+from facetransfer.transfer import recombine  # noqa: E402
+import test_transfer_cli  # noqa: E402
+import test_transfer_rewrite  # noqa: E402
+
+run = test_transfer_cli.run
+# the fixtures of the synthetic clips, shared
+clips = test_transfer_cli.clips
+topo, face_texture = test_transfer_rewrite.topo, test_transfer_rewrite.face_texture
+synthetic = test_transfer_rewrite.synthetic
+
+MODES = ("fast", "poisson", "none")
+
+
+def _check_invariant(image, plate, matte) -> None:
+    """Where ``matte`` is 0 the image is the plate's to the bit; where it differs, the matte
+    is above 0 (``matte`` float or integer levels)."""
+    changed = np.any(image != plate, axis=-1)
+    assert changed.any()                        # the face was rewritten
+    assert not (changed & (matte == 0)).any()   # every changed pixel is in the matte
+    zero = matte == 0
+    np.testing.assert_array_equal(image[zero], plate[zero])
+
+
+@pytest.mark.parametrize("blend", MODES)
+def test_the_matte_is_the_blend_s_alpha_and_changes_no_pixel(quick_model, topo, synthetic,
+                                                             blend):
+    """Each blend: the frames rendered with a matte are those rendered without (to the bit);
+    the matte is 0 where the frame is the target's, > 0 where it differs, 1 deep inside the
+    face; fractions only on the seam of the feathered blends; on forked workers the same."""
+    fa, ta, fb, tb, _ = synthetic
+    new = recombine(tb, expression=ta)
+    kw = dict(mouth_source=rc.MouthSource(fa, ta), topo=topo,
+              options=rwo.RewriteOptions(blend=blend))
+    plain = list(rc.rewrite_frames(fb, tb, new, quick_model, **kw))
+    matted = list(rc.rewrite_frames(fb, tb, new, quick_model, matte=True, **kw))
+    forked = list(rc.rewrite_frames(fb, tb, new, quick_model, matte=True,
+                                    run=rc.RenderRun(workers=2, processes=True, start=1), **kw))
+    assert all(p.matte is None for p in plain)
+    for i, (p, m) in enumerate(zip(plain, matted)):
+        np.testing.assert_array_equal(p.image, m.image)
+        a = m.matte
+        assert a.shape == fb[i].shape[:2] and a.dtype == np.float32
+        assert a.min() >= 0 and a.max() == 1.0
+        _check_invariant(m.image, fb[i], a)
+        between = ((a > 0) & (a < 1)).sum()
+        assert (between == 0) if blend == "none" else (between > 50)
+        if blend != "poisson":   # the region: the face mask eroded (Poisson's feather reaches out)
+            assert not (a > 0)[~m.face_mask].any()
+        if blend == "none":      # pasted: the rendered face, wholly
+            np.testing.assert_array_equal(m.image[a == 1], m.rendered[a == 1])
+        assert (a == 1).sum() > 1000
+    for f, m in zip(forked, matted[1:]):
+        np.testing.assert_array_equal(f.matte, m.matte)
+        np.testing.assert_array_equal(f.image, m.image)
+
+
+def test_a_frame_without_a_face_has_an_all_zero_matte(quick_model, topo, synthetic):
+    fa, ta, fb, tb, _ = synthetic
+    lost = dataclasses.replace(ta, lost=np.array([False, True, False, False, False]))
+    new = recombine(tb, expression=lost)
+    outs = list(rc.rewrite_frames(fb, tb, new, quick_model, topo=topo, matte=True,
+                                  mouth_source=rc.MouthSource(fa, lost)))
+    assert outs[1].matte.dtype == np.float32 and not outs[1].matte.any()
+    assert outs[0].matte.any()
+
+
+# ------------------------------------------------------------------------------ file formats
+def test_matte_frames_in_each_format(tmp_path):
+    """16-bit grey PNG and TIFF, float OpenEXR (channel Y), grey 8-bit video: what the file
+    holds is the matte (to a 16-bit level, exactly, to an 8-bit level); a fraction too small
+    for the file's first level is that level, never 0; no face: all 0."""
+    import OpenEXR
+
+    a = np.zeros((24, 32), np.float32)
+    a[4:20, 6:26] = np.linspace(0, 1, 16 * 20, dtype=np.float32).reshape(16, 20)
+    a[2, 2] = 1e-7                                        # touched, below every level
+    for pattern in ("m.%03d.png", "m.%03d.tif", "m.%03d.exr"):
+        path = tmp_path / pattern
+        with MatteWriter(VideoWriter(path, 25.0, (32, 24), n_frames=2), path, (32, 24)) as w:
+            w.write(0, a)
+            w.write(1, None)
+        f0, f1 = (tmp_path / (pattern % i) for i in (0, 1))
+        if pattern.endswith(".exr"):
+            with OpenEXR.File(str(f0)) as f:
+                ch = f.channels()
+                assert list(ch) == ["Y"]
+                got = np.asarray(ch["Y"].pixels)
+            assert got.dtype == np.float32 and np.array_equal(got, a)
+            with OpenEXR.File(str(f1)) as f:
+                assert not np.asarray(f.channels()["Y"].pixels).any()
+            continue
+        got = cv2.imread(str(f0), cv2.IMREAD_UNCHANGED)
+        assert got.dtype == np.uint16 and got.shape == (24, 32)
+        want = np.rint(a * 65535).astype(np.uint16)
+        want[2, 2] = 1
+        np.testing.assert_array_equal(got, want)
+        assert not cv2.imread(str(f1), cv2.IMREAD_UNCHANGED).any()
+    v = matte_frame(a, (32, 24), tmp_path / "m.mp4")
+    assert v.shape == (24, 32, 3) and v.dtype == np.uint8 and v[2, 2, 0] == 1
+    assert np.array_equal(v[..., 0], v[..., 2]) and v.max() == 255
+
+
+def test_matte_options_follow_the_output():
+    """A matte sequence is numbered, timed and shaped as the output; a matte video takes the
+    output's codec where its container holds it (ProRes in .mp4: H.264), never alpha or
+    16 bits."""
+    out = VideoOptions(codec="prores", first_number=1001, timecode="01:00:00:00", sar=(2, 1),
+                       alpha=True, deep=True)
+    seq = matte_options(out, "m/%04d.exr")
+    assert (seq.first_number, seq.timecode, seq.sar, seq.crf) == (1001, "01:00:00:00", (2, 1),
+                                                                  None)
+    assert matte_options(out, "m.mov").codec == "prores"
+    mp4 = matte_options(out, "m.mp4")
+    assert mp4.codec == "h264" and not mp4.alpha and not mp4.deep and mp4.sar == (2, 1)
+    assert matte_options(VideoOptions(crf=0), "m.mkv").crf == 0
+
+
+@pytest.mark.parametrize("matte, said", [
+    ("m.%03d.jpg", "a matte sequence is written as .png, .tif, .tiff or .exr frames"),
+    ("m.avi", "a matte is an image sequence (e.g. matte/%05d.png, 16-bit) or a video "
+              "(.mp4, .mov or .mkv), not .avi"),
+    ("m.png", "not .png"),
+    ("o.%03d.png", "is also --out: give the matte its own name"),
+])
+def test_a_bad_matte_is_refused_naming_it(matte, said, tmp_path):
+    with pytest.raises(MatteError, match=None) as e:
+        check_matte_output(tmp_path / matte, out=tmp_path / "o.%03d.png")
+    assert said in str(e.value) and str(tmp_path / matte) in str(e.value)
+    assert isinstance(e.value, ValueError)
+
+
+# --------------------------------------------------------------------------------- the CLI
+def _lossless_target(clips, tmp_path) -> tuple[Path, np.ndarray]:
+    """The synthetic target as a lossless video, and its frames as decoded."""
+    p = tmp_path / "target.mkv"
+    write_video(p, read_video(clips["target"])[0], 25.0, options=VideoOptions(crf=0))
+    return p, read_video(p)[0]
+
+
+def _args(clips, target, model_path) -> list:
+    return ["transfer", "--target", target, "--target-track", clips["target_track"],
+            "--expression-from", clips["source"], "--source-track", clips["source_track"],
+            "--model", model_path, "--no-progress"]
+
+
+def _pngs(folder: Path, flags=cv2.IMREAD_UNCHANGED) -> list[np.ndarray]:
+    return [cv2.imread(str(f), flags) for f in sorted(folder.iterdir())]
+
+
+@pytest.mark.parametrize("blend", MODES)
+def test_the_written_matte_holds_the_invariant(blend, clips, quick_model_path, tmp_path,
+                                               capsys):
+    """``transfer --out out/%03d.png --matte matte/%03d.png --blend B``: one 16-bit grey
+    frame per output frame, of the same names; where it is 0 the written output is the
+    plate's pixel to the bit, and every pixel the output changed is above 0 in it."""
+    target, plate = _lossless_target(clips, tmp_path)
+    code, out, err = run(_args(clips, target, quick_model_path)
+                         + ["--blend", blend, "--out", tmp_path / "out" / "%03d.png",
+                            "--matte", tmp_path / "matte" / "%03d.png"], capsys)
+    assert code == 0, err
+    assert f"wrote the matte {tmp_path / 'matte' / '%03d.png'}" in out
+    names = sorted(q.name for q in (tmp_path / "out").iterdir())
+    assert names == sorted(q.name for q in (tmp_path / "matte").iterdir()) and len(names) == 6
+    images = [cv2.cvtColor(f, cv2.COLOR_BGR2RGB) for f in _pngs(tmp_path / "out",
+                                                                 cv2.IMREAD_COLOR)]
+    for image, p, m in zip(images, plate, _pngs(tmp_path / "matte")):
+        assert m.dtype == np.uint16 and m.shape == p.shape[:2] and m.max() == 65535
+        _check_invariant(image, p, m)
+
+
+def test_a_video_matte_and_a_float_matte(clips, quick_model_path, tmp_path, capsys):
+    """``--matte m.mkv`` with a video output: grey frames, as many and at the rate of the
+    output, near the exact matte (8 bits, lossy); ``--matte m/%03d.exr`` with ``--start-number``:
+    numbered as the output sequence, the floats of the 16-bit PNG matte to its level."""
+    target, plate = _lossless_target(clips, tmp_path)
+    base = _args(clips, target, quick_model_path)
+    code, _, err = run(base + ["--out", tmp_path / "o.mkv", "--matte", tmp_path / "m.mkv"],
+                       capsys)
+    assert code == 0, err
+    video, fps = read_video(tmp_path / "m.mkv")
+    assert video.shape == plate.shape and fps == read_video(tmp_path / "o.mkv")[1] == 25.0
+    assert np.abs(video.astype(int) - video[..., :1]).max() <= 2     # grey
+    code, _, err = run(base + ["--out", tmp_path / "s" / "%03d.png", "--matte",
+                               tmp_path / "e" / "%03d.exr", "--start-number", "7"], capsys)
+    assert code == 0, err
+    assert sorted(q.name for q in (tmp_path / "e").iterdir()) == \
+        [f"{7 + i:03d}.exr" for i in range(6)]
+    code, _, err = run(base + ["--out", tmp_path / "p.mkv", "--matte",
+                               tmp_path / "pm" / "%03d.png"], capsys)
+    assert code == 0, err
+    import OpenEXR
+
+    for i, m16 in enumerate(_pngs(tmp_path / "pm")):
+        with OpenEXR.File(str(tmp_path / "e" / f"{7 + i:03d}.exr")) as f:
+            a = np.asarray(f.channels()["Y"].pixels)
+        assert np.array_equal(a == 0, m16 == 0)
+        assert np.abs(a * 65535 - m16).max() <= 0.5 + 1e-3
+        assert np.abs(video[i, ..., 0].astype(float) - m16 / 257.0).mean() < 2.0
+
+
+def test_a_bad_matte_is_one_line_before_any_work(clips, quick_model_path, tmp_path, capsys,
+                                                monkeypatch):
+    """An existing matte without --overwrite, the output's or an input's name, a format a
+    matte is not written in: one line, exit 2, before the model is even loaded."""
+    import facetransfer.cli.transfer as ct
+
+    def no_work(*a, **k):
+        raise AssertionError("work began")
+
+    monkeypatch.setattr(ct, "resolve_model", no_work)
+    (tmp_path / "old.mkv").write_bytes(b"x")
+    base = _args(clips, clips["target"], quick_model_path) + ["--out", tmp_path / "o.mp4"]
+    for matte, said in ((tmp_path / "old.mkv", "exists; pass --overwrite to replace it"),
+                        (tmp_path / "o.mp4", "is also --out"),
+                        (clips["target"], "is also an input"),
+                        (tmp_path / "m.gif", "not .gif"),
+                        (tmp_path / "m.%03d.bmp", "not .bmp")):
+        code, _, err = run(base + ["--matte", matte], capsys)
+        lines = err.strip().splitlines()
+        assert code == 2 and len(lines) == 1 and said in lines[0] and str(matte) in lines[0]
+    assert (tmp_path / "old.mkv").read_bytes() == b"x" and not (tmp_path / "o.mp4").exists()
+
+
+def test_an_interrupted_transfer_finishes_its_output_and_its_matte(clips, quick_model_path,
+                                                                  tmp_path, capsys,
+                                                                  monkeypatch):
+    """A transfer interrupted without a matte (2 frames kept), then with one (interrupted at
+    frame 4: the matte renders from 0, the output writes only the frames it lacks), then
+    run to the end: only frames 4 and 5 are rendered, and the output and the matte equal
+    those of a run at once without the render cache."""
+    from facetransfer.io import video_parts
+
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(video_parts, "PART_FRAMES", 2)
+    real, calls, stop = rc._ClipRenderer.__call__, [], [2]
+
+    def counted(self, i):
+        if stop[0] is not None and i >= stop[0]:
+            raise KeyboardInterrupt
+        calls.append(i)
+        return real(self, i)
+
+    monkeypatch.setattr(rc._ClipRenderer, "__call__", counted)
+    base = _args(clips, clips["target"], quick_model_path) + ["--crf", "0", "--out",
+                                                              tmp_path / "o.mp4"]
+    matte = ["--matte", tmp_path / "m" / "%03d.png"]
+    code, _, err = run(base, capsys)
+    assert code == 130 and calls == [0, 1]
+    stop[0], calls[:] = 4, []
+    code, _, err = run(base + matte, capsys)
+    assert code == 130 and sorted(calls) == [0, 1, 2, 3]
+    assert not (tmp_path / "o.mp4").exists() and not (tmp_path / "m").exists()
+    stop[0], calls[:] = None, []
+    code, out, err = run(base + matte, capsys)
+    assert code == 0, err
+    assert sorted(calls) == [4, 5] and "continued an interrupted render from frame 4" in out
+    assert not list((tmp_path / "cache" / "facetransfer" / "renders").iterdir())
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "off")
+    code, _, err = run(_args(clips, clips["target"], quick_model_path)
+                       + ["--crf", "0", "--out", tmp_path / "once.mp4", "--matte",
+                          tmp_path / "once" / "%03d.png"], capsys)
+    assert code == 0, err
+    a, b = read_video(tmp_path / "o.mp4")[0], read_video(tmp_path / "once.mp4")[0]
+    assert a.shape == b.shape == (6, *a.shape[1:]) and np.array_equal(a, b)
+    ma, mb = _pngs(tmp_path / "m"), _pngs(tmp_path / "once")
+    assert len(ma) == len(mb) == 6
+    assert all(np.array_equal(x, y) and x.any() for x, y in zip(ma, mb))
+
+
+def test_transfer_video_refuses_a_bad_matte_before_any_work(tmp_path):
+    """The library's call: a matte named as the output, as an input, or of another kind is a
+    ValueError naming it, raised before the model is looked at (None here)."""
+    from facetransfer.transfer_plan import TransferSources
+    from facetransfer.video_transfer import transfer_video
+
+    target = tmp_path / "t.mp4"
+    write_video(target, np.zeros((2, 16, 16, 3), np.uint8), 25.0)
+    sources = TransferSources.of(target, expression_from=target)
+    out = tmp_path / "o.mp4"
+    for matte, said in ((out, "is also --out"), (target, "is also an input"),
+                        (tmp_path / "m.%03d.jpg", "not .jpg")):
+        with pytest.raises(ValueError) as e:
+            transfer_video(sources, out, None, matte=matte)
+        assert said in str(e.value) and str(matte) in str(e.value)
+    assert not out.exists()
