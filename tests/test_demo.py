@@ -91,3 +91,16 @@ def test_demo_with_a_take_shows_the_take_on_the_model(data_dir, arkit_model, mak
     assert np.abs(src - tgt).mean() > 40                # not the target's frames
     corner = src[:, 480:, :40].reshape(-1, 3)           # the puppet's plain background
     assert np.abs(corner - (40, 40, 48)).max() <= 2
+
+
+def test_the_synthetic_inputs_tracks_record_their_clips_numbering(quick_model, tmp_path):
+    """The true tracks of the demo's synthetic clips record their clips' first frame number
+    and timecode as tracking does (before: none, and an export of one said it was a track
+    made before tracks recorded them)."""
+    from facetransfer.demo import synthetic_inputs
+    from facetransfer.io.source_facts import SourceFacts
+    from facetransfer.track import Track
+
+    _, _, ts, tt = synthetic_inputs(tmp_path, quick_model, n_frames=3, size=64)
+    for p in (ts, tt):
+        assert Track.load(p).source_facts == SourceFacts(0, None)

@@ -229,6 +229,32 @@ def test_usd_blend_shapes_and_animation(case, tmp_path):
     assert pxr is not None
 
 
+def test_usd_posed_extents_are_each_frames_box(case):
+    """posed_extents (the SkelRoot's extent per time code) against the rig's own faces
+    (ExpressionRig.shape) rotated one frame at a time, at turned heads and full activations;
+    every chunk boundary crossed (chunk 4 of 11 frames)."""
+    from scipy.spatial.transform import Rotation
+
+    from facetransfer.arkit import expression_rig
+    from facetransfer.export.usd import posed_extents
+
+    model = case[0]
+    rig = expression_rig(model, model.default_weights())
+    rng = np.random.default_rng(7)
+    F = 11
+    a = rng.uniform(0.0, 1.0, (F, 52)) ** 2
+    a[3] = 1.0
+    R = Rotation.from_euler("YXZ", rng.uniform(-0.8, 0.8, (F, 3))).as_matrix()
+    T = rng.normal(0.0, 10.0, (F, 3))
+    box = posed_extents(rig, a, R, T, chunk=4)
+    for k in range(F):
+        P = rig.shape(a[k]) @ R[k].T + T[k]     # (n, 3): the posed face of frame k
+        np.testing.assert_allclose(box[k], [P.min(axis=0), P.max(axis=0)], rtol=0,
+                                   atol=1e-9)
+    # the boxes move with the face (a test that could pass on one frame's box)
+    assert np.ptp(box[:, 1, 0]) > 1.0
+
+
 def test_usd_of_a_plate_numbered_from_1001_lies_on_its_frames(case, tmp_path):
     """A track of an image sequence numbered from 1001 (a VFX plate) exports time codes
     1001...: frame k's weights at 1001 + k; with ``timecode=None``, and for a video's track,

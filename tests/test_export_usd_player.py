@@ -235,7 +235,10 @@ def test_usd_of_a_plate_lies_on_its_frames(case, tmp_path):
     model, track, _ = case
     for n in (1001, 1002, 1003):
         cv2.imwrite(str(tmp_path / f"f.{n:04d}.png"), np.full((8, 8, 3), 90, np.uint8))
-    on_plate = dataclasses.replace(track, source=str(tmp_path / "f.%04d.png"))
+    # the plate's numbering recorded as tracking records it (its 8x8 frames are not the
+    # track's size: read at export, as an older track's, they would be taken for another clip)
+    on_plate = dataclasses.replace(track, source=str(tmp_path / "f.%04d.png")).with_source_facts()
+    assert on_plate.source_facts.first_frame == 1001
     out = export_track(on_plate, "usd", tmp_path / "plate.usd", model=model)
     times = (0, 4, 4.5)
     shown = _usd_shows(out, times, first=1001)

@@ -535,3 +535,29 @@ def test_a_takes_preview_runs_at_its_rows_ntsc_rate_from_its_start_timecode(
     one = tmp_path / "one.csv"       # one row: at the rate it is said to be read at (before:
     one.write_text(cols + "\n" + ",".join(["10:00:00:05.000", "61"] + ["0"] * 61) + "\n")
     assert take_track(one, arkit_model, arkit_model.factors[0][0]).fps == 24.0  # said 24, 30
+
+
+def test_a_takes_track_records_the_takes_start_and_exports_from_it(arkit_model,
+                                                                   make_arkit_track,
+                                                                   tmp_path, capsys):
+    """A take seen as a track (``take_track``) records its first row's timecode as its clip's
+    start (first frame 0): saved and exported, its take starts where the take did, with no
+    note of an older track's clip read (before: the CSV was "read as its clip", giving no
+    timecode, and the rows started at 00:00:00:00)."""
+    from facetransfer.cli.main import main
+    from facetransfer.export.livelink import read_livelink, write_livelink
+    from facetransfer.io.source_facts import SourceFacts
+    from facetransfer.take import take_track
+
+    track, _, _ = make_arkit_track(arkit_model, 30, fps=25.0)
+    take = write_livelink(track, tmp_path / "take.csv", start="01:02:03:04")
+    got = take_track(take, arkit_model, arkit_model.factors[0][0])
+    assert got.source_facts == SourceFacts(0, "01:02:03:04")
+    saved = got.save(tmp_path / "take_track.npz")
+    model = tmp_path / "arkit.npz"
+    arkit_model.save(model)
+    code = main([str(x) for x in ["export", saved, "--model", model, "--out",
+                                  tmp_path / "again.csv"]])
+    out = capsys.readouterr().out
+    assert code == 0 and "note:" not in out, out
+    assert read_livelink(tmp_path / "again.csv").timecodes[0].startswith("01:02:03:04")

@@ -114,7 +114,7 @@ def synthetic_inputs(folder, model, *, n_frames: int = 120, size: int = 512
               translation=t.translation, weights=t.weights, landmarks2d=t.landmarks2d,
               confidence=np.ones(t.n_frames), lost=np.zeros(t.n_frames, bool),
               model_hash=model.content_hash, mode_names=model.mode_names,
-              source=str(p)).save(d / f"{name}.npz")
+              source=str(p)).with_source_facts().save(d / f"{name}.npz")
         paths.append(p)
     return paths[0], paths[1], d / "source.npz", d / "target.npz"
 

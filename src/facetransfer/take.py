@@ -395,10 +395,13 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     Returns
     -------
     Track
+        Its ``source`` the take, its ``source_facts`` first frame 0 and the take's first row's
+        timecode (what an export of it starts from), ``info["start_timecode"]`` the same.
     """
     from scipy.spatial.transform import Rotation
 
     from .arkit import ARKIT_NAMES, activations_to_weights
+    from .io.source_facts import SourceFacts
     from .render import look_at_weak_perspective
     from .track.project import project_landmarks
     from .track.result import Track
@@ -406,6 +409,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     take = _read(path, model)
     t = take_seconds(take.timecodes, name=f"take {path}")
     fps = _rows_rate(t, _fields(take.timecodes))
+    start = _first_timecode(take.timecodes)
     n = int(np.floor(t[-1] * fps + 1e-6)) + 1
     n = n if max_frames is None else min(n, int(max_frames))
     rows = take_on_timeline(t, np.hstack([take.activations, take.pose[:, :3]]), n, fps,
@@ -422,7 +426,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
                   landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),
                   lost=np.zeros(n, bool), model_hash=model.content_hash,
                   mode_names=model.mode_names, source=str(path),
-                  blendshapes=a.astype(np.float32), blendshape_names=ARKIT_NAMES)
+                  blendshapes=a.astype(np.float32), blendshape_names=ARKIT_NAMES,
+                  source_facts=SourceFacts(0, start))   # its clip's start: the take's
     # the take's start timecode, for its preview (read here: the take is not read again)
-    return dataclasses.replace(project_landmarks(track, model),
-                               info={"start_timecode": _first_timecode(take.timecodes)})
+    return dataclasses.replace(project_landmarks(track, model), info={"start_timecode": start})

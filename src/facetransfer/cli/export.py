@@ -95,7 +95,6 @@ def _lift(track, model, args):
 def run(args: argparse.Namespace) -> int:
     from ..errors import FaceTransferError
     from ..export import export_track, format_of
-    from ..export.common import require_activations
     from ..io.atomic import check_output_path
     from ..track import Track
 
@@ -126,17 +125,7 @@ def run(args: argparse.Namespace) -> int:
                                 f"writes a track file's activations (`facetransfer track "
                                 f"VIDEO --out T.npz`); `facetransfer probe {args.track}` "
                                 "describes the take")
-    track = Track.load(args.track)
-    model = None
-    if args.model:
-        from ..model import load_model
-
-        model = load_model(args.model)
-    if track.blendshapes is None:
-        track, model = _activations(track, model, args)
-    require_activations(track)
-    if model is None and args.format in ("glb", "usd"):
-        model = default_model_for(track)
+    track, model = _track_and_model(Track.load(args.track), args)
     if args.timecode == "source" or track.lost.any():   # what the lines below say
         track = _clip_facts(track)
     if args.neutral is not None:
@@ -158,6 +147,25 @@ def run(args: argparse.Namespace) -> int:
                         texture=texture, timecode=timecode)
     _say_written(args, track, path, timecode, said)
     return 0
+
+
+def _track_and_model(track, args):
+    """``(track, model)``: the track with its activations (:func:`_activations` where it
+    holds none) and ``--model``'s model, else the default model where the format needs the
+    geometry (glb, usd), else None."""
+    from ..export.common import require_activations
+
+    model = None
+    if args.model:
+        from ..model import load_model
+
+        model = load_model(args.model)
+    if track.blendshapes is None:
+        track, model = _activations(track, model, args)
+    require_activations(track)
+    if model is None and args.format in ("glb", "usd"):
+        model = default_model_for(track)
+    return track, model
 
 
 def _activations(track, model, args):

@@ -114,8 +114,11 @@ def posed_extents(rig, activations, rotation, translation, *, chunk: int = 64) -
     for s in range(0, len(activations), chunk):
         a = np.asarray(activations[s:s + chunk], np.float64)
         P = (rig.neutral.ravel() + a @ D).reshape(len(a), -1, 3)  # (f, n, 3)
-        P = P @ np.swapaxes(rotation[s:s + chunk], 1, 2) + translation[s:s + chunk, None, :]
-        out[s:s + chunk, 0], out[s:s + chunk, 1] = P.min(axis=1), P.max(axis=1)
+        # R P^T, (f, 3, n): each axis's n values contiguous, so the min and max below run
+        # along memory (over the middle axis of (f, n, 3) they took 4 times as long)
+        Q = np.asarray(rotation[s:s + chunk], np.float64) @ np.swapaxes(P, 1, 2)
+        T = np.asarray(translation[s:s + chunk], np.float64)
+        out[s:s + chunk, 0], out[s:s + chunk, 1] = Q.min(axis=2) + T, Q.max(axis=2) + T
     return out
 
 
