@@ -123,6 +123,31 @@ def test_matte_frames_in_each_format(tmp_path):
     assert np.array_equal(v[..., 0], v[..., 2]) and v.max() == 255
 
 
+
+def test_an_exr_matte_is_tagged_as_data_not_colour(tmp_path):
+    """An OpenEXR matte is data: ``colorInteropID`` ``data`` (the Color Interop Forum's name
+    for channels no colour transform may touch), not the ``lin_rec709_scene`` of the colour
+    frames (a colour-managed Read converted it to its working space as if it were a colour),
+    with the output's rate, timecode and pixel aspect; the colour frames keep theirs."""
+    import OpenEXR
+
+    from facetransfer.io.video import VideoOptions
+
+    opts = VideoOptions(timecode="01:00:00:00", sar=(2, 1))
+    path = tmp_path / "m.%04d.exr"
+    with MatteWriter(VideoWriter(path, 25.0, (8, 6), n_frames=1,
+                                 options=matte_options(opts, path)), path, (8, 6)) as w:
+        w.write(0, np.full((6, 8), 0.5, np.float32))
+    with OpenEXR.File(str(tmp_path / "m.0000.exr")) as f:
+        h = f.header()
+        assert h["colorInteropID"] == "data" and list(f.channels()) == ["Y"]
+        assert h["pixelAspectRatio"] == 2.0 and h["timeCode"].hours == 1
+    rgb = tmp_path / "c.%04d.exr"
+    with VideoWriter(rgb, 25.0, (8, 6), n_frames=1) as w:
+        w.write(np.zeros((6, 8, 3), np.uint8))
+    with OpenEXR.File(str(tmp_path / "c.0000.exr")) as f:
+        assert f.header()["colorInteropID"] == "lin_rec709_scene"
+
 def test_matte_options_follow_the_output():
     """A matte sequence is numbered, timed and shaped as the output; a matte video takes the
     output's codec where its container holds it (ProRes in .mp4: H.264), never alpha or

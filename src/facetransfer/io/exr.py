@@ -256,10 +256,13 @@ def exr_pixel_type(path) -> str:
 
 def write_exr(path, rgb, header=None) -> None:
     """Write an OpenEXR file: an :class:`ExrImage` with its header and other channels, or
-    ``(H, W, 3)`` linear RGB (``(H, W)``: one grey channel ``Y``), PIZ-compressed: float32 as single floats, float16 as half floats,
+    ``(H, W, 3)`` linear RGB, PIZ-compressed: float32 as single floats, float16 as half floats,
     uint8 (sRGB) decoded (:func:`srgb_decode`) to half floats (which hold each of its 256
     levels exactly enough to encode back to it), named linear Rec.709 (``colorInteropID``
-    ``lin_rec709_scene``: a pipeline that works in ACEScg reads it as what it is), with
+    ``lin_rec709_scene``: a pipeline that works in ACEScg reads it as what it is); or
+    ``(H, W)`` float, one channel ``Y`` of data, not colour (a matte,
+    :mod:`facetransfer.io.matte`: ``colorInteropID`` ``data``, as the Color Interop Forum
+    names channels no colour transform may touch); with
     ``header`` (the frame's :class:`~facetransfer.io.plate_header.FrameHeader`) as
     ``framesPerSecond``, ``timeCode`` and ``pixelAspectRatio``.
 
@@ -277,7 +280,8 @@ def write_exr(path, rgb, header=None) -> None:
         lin = srgb_decode(rgb).astype(np.float16) if rgb.dtype == np.uint8 else \
             np.ascontiguousarray(rgb, np.float16 if rgb.dtype == np.float16 else np.float32)
         attributes = {"compression": OpenEXR.PIZ_COMPRESSION, "type": OpenEXR.scanlineimage,
-                      "colorInteropID": "lin_rec709_scene", **_header_attributes(header)}
+                      "colorInteropID": "data" if lin.ndim == 2 else "lin_rec709_scene",
+                      **_header_attributes(header)}
         channels = {"Y" if lin.ndim == 2 else "RGB": lin}
     try:
         with OpenEXR.File(attributes, channels) as f:

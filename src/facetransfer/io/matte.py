@@ -4,8 +4,9 @@ image of the fraction of each pixel the rewrite took from the new face
 to the bit, 1 where the plate's pixel was wholly replaced, between on the feathered seam.
 
 Written as an image sequence of one channel, numbered as the output (``matte/%05d.png`` or
-``.tif``/``.tiff``: 16-bit grey; ``.exr``: float32, one channel ``Y``, with the frame's rate,
-timecode and pixel aspect in its header), or as a video (``.mp4``, ``.mov``, ``.mkv``: the
+``.tif``/``.tiff``: 16-bit grey; ``.exr``: float32, one channel ``Y`` tagged as data, not
+colour (``colorInteropID`` ``data``), with the frame's rate, timecode and pixel aspect in its
+header), or as a video (``.mp4``, ``.mov``, ``.mkv``: the
 grey in all three channels, 8 bits, encoded as the output is where its codec fits the
 container, else H.264: lossy, so a sequence is the matte a compositor keys on). A pixel the
 rewrite touched is never 0 in the file: a fraction below the file's first level is written as
