@@ -8,11 +8,13 @@ Written as an image sequence of one channel, numbered as the output (``matte/%05
 colour (``colorInteropID`` ``data``), with the frame's rate, timecode and pixel aspect in its
 header), or as a video (``.mp4``, ``.mov``, ``.mkv``: the
 grey in all three channels, 8 bits, encoded as the output is where its codec fits the
-container, else H.264: lossy, so a sequence is the matte a compositor keys on). A pixel the
-rewrite touched is never 0 in the file: a fraction below the file's first level is written as
-that level, so that the matte's zeros are exactly the plate's pixels. The frames go through the
-writers every output goes through (:class:`~facetransfer.io.video.VideoWriter`, the render
-cache's :mod:`facetransfer.io.sequence_parts` and :mod:`facetransfer.io.video_parts`), written
+container, else H.264: H.264 and ProRes are lossy, so a sequence is the matte a compositor keys
+on). A pixel the rewrite touched is never 0 in a sequence's file: a fraction below the file's
+first level is written as that level, so that the matte's zeros are exactly the plate's pixels
+(a lossy video's levels move: a 1 may decode as 0, a 0 above it). The output is not
+premultiplied by the matte: ``out - plate * (1 - m)`` is the premultiplied foreground. The
+frames go through the writers every output goes through
+(:class:`~facetransfer.io.video.VideoWriter`, the render cache's :mod:`facetransfer.io.sequence_parts` and :mod:`facetransfer.io.video_parts`), written
 atomically; the output's audio is not put into it.
 """
 
