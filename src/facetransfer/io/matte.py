@@ -14,7 +14,8 @@ first level is written as that level, so that the matte's zeros are exactly the 
 (a lossy video's levels move: a 1 may decode as 0, a 0 above it). The output is not
 premultiplied by the matte: ``out - plate * (1 - m)`` is the premultiplied foreground. The
 frames go through the writers every output goes through
-(:class:`~facetransfer.io.video.VideoWriter`, the render cache's :mod:`facetransfer.io.sequence_parts` and :mod:`facetransfer.io.video_parts`), written
+(:class:`~facetransfer.io.video.VideoWriter`, the render cache's
+:mod:`facetransfer.io.sequence_parts` and :mod:`facetransfer.io.video_parts`), written
 atomically; the output's audio is not put into it.
 """
 
