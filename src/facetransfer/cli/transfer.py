@@ -420,11 +420,35 @@ def _check_option_pairs(args) -> None:
                                     f"{other}: give one of them")
 
 
+
+def _check_transfer_outputs(args, inputs: list):
+    """The outputs of ``transfer`` checked (``--out``, ``--matte``, ``--meshes``,
+    ``--save-track``), none of them one of ``inputs``; the output's video options
+    (``--start-number``: of whichever of ``--out`` and ``--matte`` is a sequence)."""
+    from ..io.atomic import check_output_path
+    from ..io.video import check_video_output, is_image_pattern
+
+    vopt = video_options(args, next((o for o in (args.out, args.matte)
+                                     if o and is_image_pattern(o)), args.out))
+    check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
+    if args.matte:
+        from ..io.matte import check_matte_output
+
+        check_matte_output(args.matte, out=args.out, options=vopt, overwrite=args.overwrite,
+                           inputs=inputs + [args.save_track, args.meshes])
+    if args.meshes:
+        from ..io.output_names import check_meshes_folder
+
+        check_meshes_folder(args.meshes, overwrite=args.overwrite)
+    if args.save_track:
+        check_track_name(args.save_track, "--save-track")
+        check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
+    return vopt
+
 def _check_transfer_args(args):
     """The arguments' one-line errors, the outputs and every input video checked before any
     work; ``(video options, how many videos are to be tracked)``."""
-    from ..io.atomic import check_output_path
-    from ..io.video import check_video_output, is_image_pattern, video_info
+    from ..io.video import video_info
 
     _positive(args.max_frames, "--max-frames")
     if not (args.expression_from or args.viseme_from or args.identity_from
@@ -446,22 +470,7 @@ def _check_transfer_args(args):
               args.identity_weights.endswith(".npy") else None]
     from ..take import is_take
 
-    # the outputs first: a bad one is the only line said (--start-number: of either sequence)
-    vopt = video_options(args, next((o for o in (args.out, args.matte)
-                                     if o and is_image_pattern(o)), args.out))
-    check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
-    if args.matte:
-        from ..io.matte import check_matte_output
-
-        check_matte_output(args.matte, out=args.out, options=vopt, overwrite=args.overwrite,
-                           inputs=inputs + [args.save_track, args.meshes])
-    if args.meshes:
-        from ..io.output_names import check_meshes_folder
-
-        check_meshes_folder(args.meshes, overwrite=args.overwrite)
-    if args.save_track:
-        check_track_name(args.save_track, "--save-track")
-        check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
+    vopt = _check_transfer_outputs(args, inputs)   # first: a bad one is the only line said
     _probe_at_once([v for v in (args.target, args.expression_from, args.viseme_from,
                                 args.identity_from, args.pose_from) if v and not is_take(v)])
 
