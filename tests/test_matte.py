@@ -15,6 +15,7 @@ import pytest
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+from _writing import interrupt_renders  # noqa: E402
 from facetransfer import rewrite_clip as rc  # noqa: E402
 from facetransfer import rewrite_options as rwo  # noqa: E402
 from facetransfer.io.matte import (MatteError, MatteWriter, check_matte_output,  # noqa: E402
@@ -281,15 +282,8 @@ def test_an_interrupted_transfer_finishes_its_output_and_its_matte(clips, quick_
     monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     monkeypatch.setattr(video_parts, "PART_FRAMES", 2)
-    real, calls, stop = rc._ClipRenderer.__call__, [], [2]
-
-    def counted(self, i):
-        if stop[0] is not None and i >= stop[0]:
-            raise KeyboardInterrupt
-        calls.append(i)
-        return real(self, i)
-
-    monkeypatch.setattr(rc._ClipRenderer, "__call__", counted)
+    stop = [2]
+    calls = interrupt_renders(monkeypatch, stop)
     base = _args(clips, clips["target"], quick_model_path) + ["--crf", "0", "--out",
                                                               tmp_path / "o.mp4"]
     matte = ["--matte", tmp_path / "m" / "%03d.png"]

@@ -9,6 +9,7 @@ import pytest
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 
+from _writing import interrupt_renders  # noqa: E402
 from facetransfer.cli.main import main  # noqa: E402
 from facetransfer.io.video import read_video, write_video  # noqa: E402
 from facetransfer.track import Track  # noqa: E402
@@ -365,21 +366,13 @@ def test_an_interrupted_transfer_renders_only_the_frames_it_had_not(clips, quick
                                                                    monkeypatch):
     """Ctrl-C in the render, then the same command: only the frames no kept part holds are
     rendered, and the video equals one rendered at once (lossless: the parts do not show)."""
-    import facetransfer.rewrite_clip as rc
     from facetransfer.io import video_parts
 
     monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
     monkeypatch.setattr(video_parts, "PART_FRAMES", 2)
-    real, calls, stop = rc._ClipRenderer.__call__, [], [3]
-
-    def counted(self, i):  # frame 3 interrupted, whichever thread renders what when
-        if stop[0] is not None and i >= stop[0]:
-            raise KeyboardInterrupt
-        calls.append(i)
-        return real(self, i)
-
-    monkeypatch.setattr(rc._ClipRenderer, "__call__", counted)
+    stop = [3]  # frame 3 interrupted, whichever thread renders what when
+    calls = interrupt_renders(monkeypatch, stop)
     argv = ["transfer", "--target", clips["target"], "--target-track", clips["target_track"],
             "--expression-from", clips["source"], "--source-track", clips["source_track"],
             "--model", quick_model_path, "--crf", "0", "--no-progress", "--out"]
@@ -406,20 +399,12 @@ def test_an_interrupted_image_sequence_continues(clips, quick_model_path, tmp_pa
     """``--out frames/%03d.png``: Ctrl-C in the render keeps the frames written (none of them
     beside the pattern yet, an older sequence untouched); the same command renders only the
     rest, and the frames equal those of a sequence written at once."""
-    import facetransfer.rewrite_clip as rc
     from facetransfer.io import sequence_parts
 
     monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
-    real, calls, stop = rc._ClipRenderer.__call__, [], [4]
-
-    def counted(self, i):
-        if stop[0] is not None and i >= stop[0]:
-            raise KeyboardInterrupt
-        calls.append(i)
-        return real(self, i)
-
-    monkeypatch.setattr(rc._ClipRenderer, "__call__", counted)
+    stop = [4]
+    calls = interrupt_renders(monkeypatch, stop)
     out = tmp_path / "seq"
     out.mkdir()
     for i in range(9):  # an older, longer sequence of the same pattern
