@@ -102,6 +102,14 @@ def arkit_model(data_dir):
 
 
 @pytest.fixture(scope="session")
+def arkit_model_path(arkit_model, tmp_path_factory) -> Path:
+    """:func:`arkit_model` saved as a model file (``--model``)."""
+    p = tmp_path_factory.mktemp("models") / "arkit.npz"
+    arkit_model.save(p)
+    return p
+
+
+@pytest.fixture(scope="session")
 def arkit_model_full(data_dir):
     """:func:`arkit_model`'s data set with every identity kept (training meshes reproduce)."""
     from facetransfer.datasets.ict import build_ict_dataset

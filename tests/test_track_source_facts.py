@@ -23,13 +23,6 @@ from facetransfer.track import Track  # noqa: E402
 
 
 @pytest.fixture(scope="module")
-def arkit_path(arkit_model, tmp_path_factory) -> Path:
-    p = tmp_path_factory.mktemp("arkit") / "arkit.npz"
-    arkit_model.save(p)
-    return p
-
-
-@pytest.fixture(scope="module")
 def clip(arkit_model, tmp_path_factory):
     """A 4-frame synthetic clip of the ARKit model and the POINTS.json of its first frame
     (the optical-flow tracker from them: no detector needed)."""
@@ -67,7 +60,7 @@ def _exports(track_file: Path, model: Path, out: Path, capsys) -> dict[str, byte
     ("plate", SourceFacts(1001, None), "00:00:00:00.000", 1001),
     ("video", SourceFacts(0, "01:00:00:00"), "01:00:00:00.000", 0)])
 def test_a_tracks_exports_are_the_same_after_its_clip_moved(kind, facts, first_row, start, clip,
-                                                            arkit_model, arkit_path, tmp_path,
+                                                            arkit_model, arkit_model_path, tmp_path,
                                                             capsys, monkeypatch):
     """Tracked, exported, the clip moved away, exported again, another clip put at the old
     path (another numbering, another timecode), exported again: the same take and USD each
@@ -80,7 +73,7 @@ def test_a_tracks_exports_are_the_same_after_its_clip_moved(kind, facts, first_r
     video, points, synth = clip
     src = _clip_at(kind, tmp_path / "shot", synth.frames)
     tp = tmp_path / "t.npz"
-    assert main(["track", str(src), "--model", str(arkit_path), "--tracker", "klt", "--init",
+    assert main(["track", str(src), "--model", str(arkit_model_path), "--tracker", "klt", "--init",
                  str(points), "--passes", "1", "--no-progress", "--out", str(tp)]) == 0
     capsys.readouterr()
     track = Track.load(tp)
@@ -88,15 +81,15 @@ def test_a_tracks_exports_are_the_same_after_its_clip_moved(kind, facts, first_r
     with np.load(tp) as z:
         assert int(z["source_first_frame"]) == facts.first_frame
         assert str(z["source_timecode"]) == (facts.timecode or "")
-    before, said = _exports(tp, arkit_path, tmp_path / "before", capsys)
+    before, said = _exports(tp, arkit_model_path, tmp_path / "before", capsys)
     take = read_livelink(tmp_path / "before" / "take.csv")
     assert take.timecodes[0] == first_row and not any("note:" in s for s in said)
     assert f"startTimeCode = {start}\n" in before["face.usda"].decode()
 
     shutil.move(tmp_path / "shot", tmp_path / "elsewhere")        # the project moved
-    assert _exports(tp, arkit_path, tmp_path / "moved", capsys) == (before, said)
+    assert _exports(tp, arkit_model_path, tmp_path / "moved", capsys) == (before, said)
     _clip_at(kind, tmp_path / "shot", synth.frames[::-1], first=1, timecode="02:00:00:00")
-    assert _exports(tp, arkit_path, tmp_path / "other", capsys) == (before, said)
+    assert _exports(tp, arkit_model_path, tmp_path / "other", capsys) == (before, said)
 
 
 def test_an_older_track_reads_its_clip_and_says_where(arkit_model, make_arkit_track, tmp_path,
@@ -185,7 +178,7 @@ def bare(arkit_model, make_arkit_track, tmp_path):
     return tp, a
 
 
-def test_export_makes_the_activations_of_a_track_without_them(bare, arkit_model, arkit_path,
+def test_export_makes_the_activations_of_a_track_without_them(bare, arkit_model, arkit_model_path,
                                                               tmp_path, capsys, monkeypatch):
     """With --model, or with the default model for a track of it: the take holds the
     activations its weights were made from, and one line says how they were made (before:
@@ -194,11 +187,11 @@ def test_export_makes_the_activations_of_a_track_without_them(bare, arkit_model,
     from facetransfer.export.livelink import read_livelink
 
     tp, a = bare
-    assert main(["export", str(tp), "--model", str(arkit_path), "--out",
+    assert main(["export", str(tp), "--model", str(arkit_model_path), "--out",
                  str(tmp_path / "m.csv")]) == 0
     said = capsys.readouterr().out.splitlines()
     assert said[0] == (f"note: track {tp} holds no ARKit activations: made from its expression "
-                       f"weights with the model {arkit_path}")
+                       f"weights with the model {arkit_model_path}")
     assert said[1].startswith(f"wrote {tmp_path / 'm.csv'}: 5 frames (livelink)")
     np.testing.assert_allclose(read_livelink(tmp_path / "m.csv").activations, a, atol=1e-5)
     monkeypatch.setattr(dm, "load_default_model", lambda **kw: arkit_model)
@@ -209,7 +202,7 @@ def test_export_makes_the_activations_of_a_track_without_them(bare, arkit_model,
 
 
 def test_export_refuses_a_track_whose_activations_cannot_be_made(bare, arkit_model, quick_model,
-                                                                 arkit_path, tmp_path, capsys,
+                                                                 arkit_model_path, tmp_path, capsys,
                                                                  monkeypatch):
     """One line, exit status 2, nothing written: a model whose expressions are not ARKit's, a
     track of another model than the default one without --model, weights of other shapes
@@ -242,7 +235,7 @@ def test_export_refuses_a_track_whose_activations_cannot_be_made(bare, arkit_mod
             ([of_quick], f"track {of_quick} has no ARKit blendshape activations and was not "
              "made with the default model (ict-arkit): give the model it was tracked with "
              "(--model M.npz)"),
-            ([short, "--model", arkit_path],
+            ([short, "--model", arkit_model_path],
              f"track {short} was made with another model: its weights of mode 'expression' "
              f"have 10 components, the model's {arkit_model.ranks[1]}"),
             ([posed], f"track {posed} has no ARKit blendshape activations and no expression "
@@ -253,7 +246,7 @@ def test_export_refuses_a_track_whose_activations_cannot_be_made(bare, arkit_mod
         assert not out.exists()
 
 
-def test_a_batch_project_moved_exports_its_plate_as_before(clip, arkit_path, tmp_path, capsys,
+def test_a_batch_project_moved_exports_its_plate_as_before(clip, arkit_model_path, tmp_path, capsys,
                                                            monkeypatch):
     """``batch track`` of a plate numbered from 1001, the project (plate, manifest, tracks)
     moved to another folder, the plate's old path gone: ``batch export`` of the kept track
@@ -275,12 +268,12 @@ def test_a_batch_project_moved_exports_its_plate_as_before(clip, arkit_path, tmp
 
     def export(root):
         code = main(["batch", "export", str(root / "tracks" / "sh010.npz"), "--format", "usd",
-                     "--model", str(arkit_path), "--out", str(root / "usd"), "--no-progress"])
+                     "--model", str(arkit_model_path), "--out", str(root / "usd"), "--no-progress"])
         assert code == 0, capsys.readouterr().err
         return (root / "usd" / "sh010.usd").read_bytes()
 
     assert main(["batch", "track", "--manifest", str(proj / "clips.csv"), "--model",
-                 str(arkit_path), "--out", str(proj / "tracks"), "--tracker", "klt",
+                 str(arkit_model_path), "--out", str(proj / "tracks"), "--tracker", "klt",
                  "--passes", "1", "--no-progress"]) == 0
     assert Track.load(proj / "tracks" / "sh010.npz").source_facts == SourceFacts(1001, None)
     before = export(proj)
