@@ -111,16 +111,23 @@ def test_bad_pairs(tmp_path, rows, message):
 
 
 def test_summary_round_trip_and_one_line_errors(tmp_path):
-    rows = [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz", job="1f2e3d"),
+    rows = [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz", job="1f2e3d",
+                matte="/o/a.matte/a.%05d.png"),
             Row("b", "failed", error="video /x/b.mp4 does not exist\n  (details)"),
             Row("c", "cancelled")]
     p = write_summary(tmp_path / "summary.csv", rows)
     assert p.read_text().splitlines()[0] == \
-        "clip,frames,fps,seconds,mean_confidence,status,error,output,job"
+        "clip,frames,fps,seconds,mean_confidence,status,error,output,job,matte"
     back = read_summary(p)
-    assert back == [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz", job="1f2e3d"),
+    assert back == [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz", job="1f2e3d",
+                        matte="/o/a.matte/a.%05d.png"),
                     Row("b", "failed", error="video /x/b.mp4 does not exist (details)"),
                     Row("c", "cancelled")]
+    # a summary written before the matte column: read with none
+    p.write_text("clip,frames,fps,seconds,mean_confidence,status,error,output,job\n"
+                 "a,120,25,3.5,0.93,done,,/o/a.mp4,v2:1f2e3d\n")
+    assert read_summary(p) == [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.mp4",
+                                   job="v2:1f2e3d")]
     with pytest.raises(ValueError, match="status must be one of"):
         Row("d", "ok")
 

@@ -231,9 +231,9 @@ def _identity(job, model):
     return None
 
 
-def transfer_pair(job, out: str, model, settings: dict) -> Row:
+def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None) -> Row:
     """Rewrite one target as ``facetransfer transfer`` does
-    (:func:`facetransfer.video_transfer.transfer_video`) and write ``out``.
+    (:func:`facetransfer.video_transfer.transfer_video`) and write ``out`` (and ``matte``).
 
     Parameters
     ----------
@@ -246,6 +246,10 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
         ``speed``, ``eyes``, ``jaw``, ``lips``, ``lip_colour``, ``gaze`` as the ``transfer``
         options, and ``video``, its :class:`~facetransfer.io.video_options.VideoOptions`
         (absent: H.264, CRF 18).
+    matte : str, optional
+        Also write the matte of the pixels the rewrite changed, an image sequence
+        (``DIR/NAME.matte/NAME.%05d.png``, as ``transfer --matte``), rendered and continued
+        after an interrupt with ``out``.
 
     Returns
     -------
@@ -274,11 +278,11 @@ def transfer_pair(job, out: str, model, settings: dict) -> Row:
     res = transfer_video(sources, out, model, overwrite=True, options=options,
                          progress_factory=None, align=settings["align"],
                          max_frames=settings["max_frames"], parallel=False,
-                         video_options=settings.get("video"))
+                         video_options=settings.get("video"), matte=matte)
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
-               output=str(out))
+               output=str(out), matte="" if res.matte is None else str(res.matte))
 
 
 def rewrite_options(settings: dict):

@@ -28,13 +28,17 @@ from .summary import Row, write_summary
 log = logging.getLogger(__name__)
 
 __all__ = ["BatchResult", "check_out_dir", "prepare_out_dir", "batch_track", "batch_transfer",
-           "batch_export", "job_key", "options_text", "SUMMARY_NAME", "DEFAULT_OVERLAP"]
+           "batch_export", "job_key", "options_text", "SUMMARY_NAME", "DEFAULT_OVERLAP",
+           "MATTE_FORMATS", "matte_pattern"]
 
 SUMMARY_NAME = "summary.csv"
 #: Frames shared by neighbouring chunks (1.2 s at 25 fps).
 DEFAULT_OVERLAP = 30
 #: Seconds between rewrites of the summary while a run goes on.
 SUMMARY_EVERY = 5.0
+#: The frame file of each ``batch transfer --matte`` format (sequences only: a video matte is
+#: lossy, :mod:`facetransfer.io.matte`).
+MATTE_FORMATS = {"png": ".png", "tiff": ".tif", "exr": ".exr"}
 
 Progress = Callable[[Row], None]
 
@@ -442,8 +446,52 @@ def _done_video(out: Path, name: str) -> Row | None:
     return Row(name, "skipped", frames=info.n_frames, fps=info.fps, output=str(out))
 
 
+def matte_pattern(out_dir, name: str, suffix: str) -> Path:
+    """Where ``batch transfer --matte`` writes the matte of the job ``name``: a folder of its
+    own beside the result, its frames named as the job, ``DIR/NAME.matte/NAME.%05d.png``
+    (``suffix``: ``.png``, ``.tif`` or ``.exr``, :data:`MATTE_FORMATS`). No result
+    (``DIR/NAME.mp4``) nor another job's matte can be one of its files."""
+    return Path(out_dir) / f"{name}.matte" / f"{name}.%05d{suffix}"
+
+
+def _whole_matte(pattern: Path, n_frames: int | None) -> bool:
+    """Whether the matte sequence ``pattern`` holds ``n_frames`` frames, numbered one after
+    the other (written by :mod:`facetransfer.io.sequence_parts`: all of them or none, each
+    file whole)."""
+    from ..io.video_sequence import sequence_files
+
+    try:
+        numbers = sorted(sequence_files(pattern))
+    except (OSError, ValueError):           # no folder, or not one
+        return False
+    return bool(n_frames) and len(numbers) == n_frames and \
+        numbers[-1] - numbers[0] == n_frames - 1
+
+
+class _TransferOutputs:
+    """The ``found`` of :func:`_kept` for ``batch transfer``: a result that decodes
+    (:func:`_done_video`), its row naming the matte the earlier row named (the matte made by
+    the job of that row's digest, which :func:`_kept` compares) where it is whole, and is the
+    one asked for (``mattes``, ``{name: pattern}``; none asked: any)."""
+
+    def __init__(self, out_dir: Path, mattes: dict) -> None:
+        self.out_dir, self.mattes = out_dir, mattes
+        self.earlier = {r.clip: r.matte for r in _earlier_rows(out_dir) if r.matte}
+
+    def __call__(self, out: Path, name: str) -> Row | None:
+        r = _done_video(out, name)
+        if r is None or name not in self.earlier:
+            return r
+        said = Path(self.earlier[name])    # where the project lies now (it may have moved)
+        m = matte_pattern(self.out_dir, name, said.suffix)
+        if said.parent.name != m.parent.name or said.name != m.name or \
+                self.mattes.get(name, m) != m or not _whole_matte(m, r.frames):
+            return r
+        return dataclasses.replace(r, matte=str(m))
+
+
 def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: bool = False,
-                   progress: Progress | None = None) -> BatchResult:
+                   progress: Progress | None = None, matte: str | None = None) -> BatchResult:
     """Rewrite many targets as ``facetransfer transfer`` does: ``DIR/NAME.mp4`` per pair
     (``DIR/NAME.mov`` when ``settings["video"]`` writes ProRes).
 
@@ -456,23 +504,41 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     settings : dict
         See :func:`facetransfer.batch.jobs.transfer_pair`.
     overwrite : bool
-        Redo every pair (default: skip pairs whose video exists and decodes).
+        Redo every pair (default: skip pairs whose video exists and decodes, and whose
+        matte, if asked, is whole and named by the earlier row of the same job digest).
     progress : callable(Row), optional
+    matte : {"png", "tiff", "exr"}, optional
+        Also write each pair's matte (:func:`matte_pattern`, numbered as the result's frames
+        from 0; :mod:`facetransfer.io.matte`). Not in the job digest (the result is the same
+        with it or without): a pair whose result is kept but whose matte is not there is
+        done again, result and matte.
 
     Returns
     -------
     BatchResult
     """
+    if matte is not None and matte not in MATTE_FORMATS:
+        raise BatchError(f"--matte must be one of {', '.join(MATTE_FORMATS)} (an image "
+                         f"sequence; a video matte is lossy), got {matte!r}")
     out_dir = prepare_out_dir(out_dir)
     prores = getattr(settings.get("video"), "codec", None) == "prores"
     outs = _outputs(jobs, out_dir, ".mov" if prores else ".mp4")
+    mattes = {} if matte is None else {
+        j.name: matte_pattern(out_dir, j.name, MATTE_FORMATS[matte]) for j in jobs}
     what = f"transfer {sorted((k, repr(v)) for k, v in settings.items())} {model.content_hash}"
     keys = job_keys(jobs, what)
-    done = {} if overwrite else _kept(jobs, outs, out_dir, keys, _done_video,
+    done = {} if overwrite else _kept(jobs, outs, out_dir, keys,
+                                      _TransferOutputs(out_dir, mattes),
                                       lambda job: legacy_job_key(job, what))
-    return _simple(client, jobs, out_dir, outs, done, progress,
-                   lambda job, mf: client.submit(J.transfer_pair, job, str(outs[job.name]), mf,
-                                                 dict(settings), pure=False), model, keys)
+    # a result kept without the matte asked for: the pair done again (its render gives both)
+    done = {n: r for n, r in done.items() if not (r.ok and n in mattes and not r.matte)}
+
+    def submit(job, mf):
+        m = mattes.get(job.name)
+        return client.submit(J.transfer_pair, job, str(outs[job.name]), mf, dict(settings),
+                             None if m is None else str(m), pure=False)
+
+    return _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys)
 
 
 def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,

@@ -17,6 +17,10 @@ column              meaning
                     digits, :mod:`facetransfer.batch.digest`; 16 hex digits alone: an
                     older version's, of the files' paths and times): a rerun that finds
                     another one there has not made that output
+``matte``           the matte the job made with its output (``batch transfer --matte``:
+                    ``DIR/NAME.matte/NAME.%05d.png``), empty where it made none; a rerun
+                    asking for a matte takes the one there as the job's only where the
+                    row names it
 ==================  ======================================================================
 """
 
@@ -34,7 +38,7 @@ from .manifest import BatchError
 __all__ = ["Row", "SUMMARY_COLUMNS", "STATUSES", "write_summary", "read_summary"]
 
 SUMMARY_COLUMNS = ("clip", "frames", "fps", "seconds", "mean_confidence", "status", "error",
-                   "output", "job")
+                   "output", "job", "matte")
 STATUSES = ("done", "skipped", "failed", "cancelled")
 
 
@@ -51,6 +55,7 @@ class Row:
     error: str = ""
     output: str = ""
     job: str = ""
+    matte: str = ""
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
@@ -95,7 +100,8 @@ def read_summary(path: str | os.PathLike) -> list[Row]:
             return [Row(clip=r["clip"], status=r["status"], frames=num(r["frames"], int),
                         fps=num(r["fps"], float), seconds=float(r["seconds"] or 0),
                         mean_confidence=num(r["mean_confidence"], float), error=r["error"],
-                        output=r.get("output") or "", job=r.get("job") or "")
+                        output=r.get("output") or "", job=r.get("job") or "",
+                        matte=r.get("matte") or "")
                     for r in csv.DictReader(fh)]
     except OSError as exc:
         raise BatchError(f"cannot read the batch summary {path} ({exc.strerror})") from None

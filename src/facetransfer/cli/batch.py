@@ -4,7 +4,8 @@
                              [--scheduler tcp://HOST:8786] [--chunk N [--overlap N]]
                              [--model M.npz] [--face WHERE] [--max-frames N] [track options]
                              [--overwrite]
-    facetransfer batch transfer --manifest pairs.csv --out DIR [--model M.npz] [transfer options]
+    facetransfer batch transfer --manifest pairs.csv --out DIR [--model M.npz]
+                                [--matte png|tiff|exr] [transfer options]
     facetransfer batch export TRACK... --format livelink|glb|usd|json --out DIR [--model M.npz]
 
 One task per clip on an embedded ``LocalCluster`` (one single-threaded worker process per core)
@@ -98,6 +99,14 @@ def register(sub) -> None:
     r.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
     add_rewrite_options(r)
     add_video_options(r, what="each result (ProRes: DIR/NAME.mov)", sequences=False)
+    r.add_argument("--matte", type=_matte_format, default=None, metavar="png|tiff|exr",
+                   help="also write each result's matte of the pixels the rewrite changed "
+                   "(as `transfer --matte`: 0 where the result is the target's pixel) as "
+                   "DIR/NAME.matte/NAME.%%05d.png, numbered from 0 (of a plate target: from "
+                   "its first number, as `transfer --matte`): png and tiff (.tif) 16-bit "
+                   "grey, exr float; sequences only, a video matte "
+                   "being lossy (`transfer --matte M.mov` writes one). A rerun adding it does "
+                   "the pairs without a matte again")
     _cluster_options(r)
     r.set_defaults(func=run_transfer)
 
@@ -112,6 +121,19 @@ def register(sub) -> None:
                    "export --neutral` (default: as tracked)")
     _cluster_options(e)
     e.set_defaults(func=run_export)
+
+
+def _matte_format(text: str) -> str:
+    """``batch transfer --matte``'s value: a sequence's format (argparse names the option)."""
+    import argparse
+
+    from ..batch.run import MATTE_FORMATS
+
+    if text not in MATTE_FORMATS:
+        raise argparse.ArgumentTypeError(
+            f"expected {', '.join(MATTE_FORMATS)} (an image sequence: a video matte is lossy; "
+            f"`transfer --matte M.mov` writes one), got {text!r}")
+    return text
 
 
 def _run(args, what: str, n_jobs: int, call) -> int:
@@ -228,7 +250,7 @@ def run_transfer(args) -> int:
     model = resolve_model(args.model)
     return _run(args, "transfer", len(jobs), lambda client, progress: batch_transfer(
         jobs, args.out, model, client=client, settings=settings, overwrite=args.overwrite,
-        progress=progress))
+        progress=progress, matte=args.matte))
 
 
 def run_export(args) -> int:

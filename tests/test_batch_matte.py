@@ -1,0 +1,159 @@
+"""``facetransfer batch transfer --matte png|tiff|exr`` on an in-process Dask LocalCluster: each
+pair's matte beside its result (``DIR/NAME.matte/NAME.%05d.png``), the matte ``transfer
+--matte`` writes; the summary's ``matte`` column; reruns that skip what is whole and redo a
+pair whose matte is not there (added by the rerun, or deleted)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer.io.video import read_video  # noqa: E402
+
+from test_batch import _cli, _summary, clips, inproc  # noqa: E402,F401 - fixtures
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+
+@pytest.fixture(scope="module")
+def pairs(clips, quick_model_path, tmp_path_factory):
+    """A pairs manifest of two pairs (a's target with b's expressions, b's with a's), tracked
+    once."""
+    from facetransfer.cli.main import main
+
+    d = tmp_path_factory.mktemp("mattepairs")
+    tracks = {}
+    for n in "ab":
+        v, p, _ = clips[n]
+        tracks[n] = d / f"{n}.npz"
+        assert main([str(a) for a in ("track", v, "--model", quick_model_path, "--out",
+                                      tracks[n], "--init", p, "--passes", "1",
+                                      "--no-progress")]) == 0
+    man = d / "pairs.csv"
+    man.write_text("name,target,target_track,expression_from,source_track\n"
+                   + "".join(f"{t}{s},{clips[t][0]},{tracks[t]},{clips[s][0]},{tracks[s]}\n"
+                             for t, s in ("ab", "ba")))
+    return man, tracks
+
+
+def _pngs(folder: Path) -> dict[str, np.ndarray]:
+    return {f.name: cv2.imread(str(f), cv2.IMREAD_UNCHANGED) for f in sorted(folder.iterdir())}
+
+
+def _stamps(folder: Path) -> dict[str, int]:
+    return {f.name: f.stat().st_mtime_ns for f in folder.iterdir()}
+
+
+def test_batch_mattes_are_transfer_s_and_reruns_do_only_what_lacks_one(
+        pairs, clips, quick_model_path, inproc, tmp_path, capsys):
+    """A batch run without ``--matte``, then with it: both pairs are done again (their results
+    were kept, their mattes were not there) and each writes the matte ``transfer --matte``
+    writes, bit for bit, 16-bit, one frame per result frame numbered from 0, 0 far from the
+    face; the summary names it. The same command again skips both, touching nothing; after
+    one matte folder is deleted, that pair alone is done again, its matte as it was."""
+    man, tracks = pairs
+    out = tmp_path / "out"
+
+    def batch(*more):
+        return _cli(capsys, "batch", "transfer", "--manifest", man, "--model", quick_model_path,
+                    "--out", out, "--workers", "1", "--no-progress", "--crf", "0", *more)
+
+    code, said, err = batch()
+    assert code == 0 and "(2 done)" in said, (said, err)
+    assert {n: r["matte"] for n, r in _summary(out / "summary.csv").items()} == \
+        {"ab": "", "ba": ""}
+    assert sorted(p.name for p in out.iterdir()) == ["ab.mp4", "ba.mp4", "summary.csv"]
+    code, said, err = batch("--matte", "png")
+    assert code == 0 and "(2 done)" in said, (said, err)
+    rows = _summary(out / "summary.csv")
+    for n in ("ab", "ba"):
+        assert rows[n]["status"] == "done"
+        assert rows[n]["matte"] == str(out / f"{n}.matte" / f"{n}.%05d.png")
+    mattes = {n: _pngs(out / f"{n}.matte") for n in ("ab", "ba")}
+    for n, m in mattes.items():
+        assert list(m) == [f"{n}.{i:05d}.png" for i in range(8)]
+        result, _ = read_video(out / f"{n}.mp4")
+        for frame in m.values():
+            assert frame.dtype == np.uint16 and frame.shape == result.shape[1:3]
+            assert frame.max() == 65535 and frame[:8, :8].max() == 0 == frame[-8:, -8:].max()
+
+    # the matte `transfer --matte` writes for pair ab, with a lossless output: the invariant
+    ref = tmp_path / "ref"
+    (ref / "out").mkdir(parents=True)
+    code, _, err = _cli(capsys, "transfer", "--target", clips["a"][0], "--target-track",
+                        tracks["a"], "--expression-from", clips["b"][0], "--source-track",
+                        tracks["b"], "--model", quick_model_path, "--no-progress", "--out",
+                        ref / "out" / "%05d.png", "--matte", ref / "matte" / "%05d.png")
+    assert code == 0, err
+    plate, _ = read_video(clips["a"][0])
+    want = list(_pngs(ref / "matte").values())
+    for image, p, m in zip(_pngs(ref / "out").values(), plate, want):
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+        changed = np.any(image != p, axis=-1)
+        assert changed.any() and not (changed & (m == 0)).any()
+        np.testing.assert_array_equal(image[m == 0], p[m == 0])
+    assert len(want) == 8
+    for got, m in zip(mattes["ab"].values(), want):
+        np.testing.assert_array_equal(got, m)
+
+    before = {n: _stamps(out / f"{n}.matte") for n in ("ab", "ba")}
+    results = {n: (out / f"{n}.mp4").stat().st_mtime_ns for n in ("ab", "ba")}
+    code, said, err = batch("--matte", "png")
+    assert code == 0 and "(2 skipped)" in said, (said, err)
+    assert {n: _stamps(out / f"{n}.matte") for n in ("ab", "ba")} == before
+    assert {n: (out / f"{n}.mp4").stat().st_mtime_ns for n in ("ab", "ba")} == results
+    assert {n: r["matte"] for n, r in _summary(out / "summary.csv").items()} == \
+        {n: str(out / f"{n}.matte" / f"{n}.%05d.png") for n in ("ab", "ba")}
+
+    import shutil
+
+    shutil.rmtree(out / "ba.matte")
+    code, said, err = batch("--matte", "png")
+    assert code == 0 and "(1 done, 1 skipped)" in said, (said, err)
+    rows = _summary(out / "summary.csv")
+    assert (rows["ab"]["status"], rows["ba"]["status"]) == ("skipped", "done")
+    assert _stamps(out / "ab.matte") == before["ab"]
+    again = _pngs(out / "ba.matte")
+    assert list(again) == list(mattes["ba"])
+    for name, m in again.items():
+        np.testing.assert_array_equal(m, mattes["ba"][name])
+
+    (out / "ab.matte" / "ab.00007.png").unlink()          # a matte short of a frame
+    code, said, err = batch("--matte", "png")
+    assert code == 0 and "(1 done, 1 skipped)" in said, (said, err)
+    assert _summary(out / "summary.csv")["ab"]["status"] == "done"
+    assert list(_pngs(out / "ab.matte")) == list(mattes["ab"])
+    # a run without --matte skips both, and its summary still names the mattes they have
+    code, said, err = batch()
+    assert code == 0 and "(2 skipped)" in said, (said, err)
+    assert {n: r["matte"] for n, r in _summary(out / "summary.csv").items()} == \
+        {n: str(out / f"{n}.matte" / f"{n}.%05d.png") for n in ("ab", "ba")}
+
+
+def test_a_video_matte_is_refused_before_any_work(pairs, quick_model_path, tmp_path, capsys):
+    """``--matte mov`` (a lossy video): one line, exit 2, no output folder."""
+    man, _ = pairs
+    with pytest.raises(SystemExit) as e:                 # the parser's error
+        _cli(capsys, "batch", "transfer", "--manifest", man, "--model", quick_model_path,
+             "--out", tmp_path / "out", "--matte", "mov")
+    err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("facetransfer")]
+    assert e.value.code == 2 and len(err) == 1, err
+    assert "--matte: expected png, tiff, exr (an image sequence: a video matte is lossy" in err[0]
+    assert not (tmp_path / "out").exists()
+
+
+def test_each_job_s_matte_has_a_folder_of_its_own():
+    """The layout: beside the result, named as the job, one folder per job (no file of one
+    job's matte is another's, nor a result)."""
+    from facetransfer.batch.run import MATTE_FORMATS, matte_pattern
+
+    assert matte_pattern(Path("D"), "sh010", ".png") == Path("D/sh010.matte/sh010.%05d.png")
+    assert [matte_pattern("D", "a", s).name for s in MATTE_FORMATS.values()] == \
+        ["a.%05d.png", "a.%05d.tif", "a.%05d.exr"]
+    assert matte_pattern("D", "a", ".png").parent != matte_pattern("D", "a.matte", ".png").parent
