@@ -16,7 +16,11 @@ sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer.io.video import read_video  # noqa: E402
 
-from test_batch import _cli, _summary, clips, inproc  # noqa: E402,F401 - fixtures
+import test_batch  # noqa: E402
+
+# the batch tests' synthetic clips, in-process cluster and helpers, shared
+clips, inproc = test_batch.clips, test_batch.inproc
+_cli, _summary = test_batch._cli, test_batch._summary
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 
@@ -157,3 +161,41 @@ def test_each_job_s_matte_has_a_folder_of_its_own():
     assert [matte_pattern("D", "a", s).name for s in MATTE_FORMATS.values()] == \
         ["a.%05d.png", "a.%05d.tif", "a.%05d.exr"]
     assert matte_pattern("D", "a", ".png").parent != matte_pattern("D", "a.matte", ".png").parent
+
+
+def test_a_pair_stopped_mid_render_continues_its_result_and_its_matte(
+        pairs, quick_model_path, inproc, tmp_path, capsys, monkeypatch):
+    """A pair whose render failed at frame 4 (a worker's error: the render cache keeps what
+    was written) is continued by the rerun from frame 4, result and matte, both whole."""
+    import facetransfer.rewrite_clip as rc
+    from facetransfer.io import video_parts
+
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(video_parts, "PART_FRAMES", 2)
+    real, calls, stop = rc._ClipRenderer.__call__, [], [4]
+
+    def counted(self, i):
+        if stop[0] is not None and i >= stop[0]:
+            raise RuntimeError("the worker stopped")
+        calls.append(i)
+        return real(self, i)
+
+    monkeypatch.setattr(rc._ClipRenderer, "__call__", counted)
+    man = tmp_path / "one.csv"
+    man.write_text("".join(pairs[0].read_text().splitlines(keepends=True)[:2]))   # ab
+    out = tmp_path / "out"
+    argv = ("batch", "transfer", "--manifest", man, "--model", quick_model_path, "--out", out,
+            "--workers", "1", "--no-progress", "--matte", "tiff")
+    code, said, _ = _cli(capsys, *argv)
+    assert code == 1 and "(1 failed)" in said and sorted(calls) == [0, 1, 2, 3]
+    assert sorted(p.name for p in out.iterdir()) == ["summary.csv"]
+    stop[0], calls[:] = None, []
+    code, said, err = _cli(capsys, *argv)
+    assert code == 0 and "(1 done)" in said, (said, err)
+    assert sorted(calls) == [4, 5, 6, 7]
+    assert len(read_video(out / "ab.mp4")[0]) == 8
+    tifs = sorted((out / "ab.matte").iterdir())
+    assert [p.name for p in tifs] == [f"ab.{i:05d}.tif" for i in range(8)]
+    assert all(cv2.imread(str(p), cv2.IMREAD_UNCHANGED).dtype == np.uint16 for p in tifs)
+    assert _summary(out / "summary.csv")["ab"]["matte"] == str(out / "ab.matte" / "ab.%05d.tif")
