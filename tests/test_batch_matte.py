@@ -5,6 +5,7 @@ pair whose matte is not there (added by the rerun, or deleted)."""
 
 from __future__ import annotations
 
+import re
 import sys
 from pathlib import Path
 
@@ -161,6 +162,20 @@ def test_each_job_s_matte_has_a_folder_of_its_own():
     assert [matte_pattern("D", "a", s).name for s in MATTE_FORMATS.values()] == \
         ["a.%05d.png", "a.%05d.tif", "a.%05d.exr"]
     assert matte_pattern("D", "a", ".png").parent != matte_pattern("D", "a.matte", ".png").parent
+
+
+@pytest.mark.parametrize("matte, name, said", [
+    ("mov", "a", "--matte must be one of png, tiff, exr (an image sequence; a video matte is "
+     "lossy), got 'mov'"),
+    ("png", "sh%03", "'sh%03' cannot name the frames of its matte"),
+    ("exr", "take#2", "'take#2' cannot name the frames of its matte")])
+def test_the_library_refuses_a_bad_matte_before_any_folder(matte, name, said, tmp_path):
+    from facetransfer.batch import BatchError, PairJob, batch_transfer
+
+    job = PairJob(name=name, target=tmp_path / "t.mp4", sources={})
+    with pytest.raises(BatchError, match=re.escape(said)):
+        batch_transfer([job], tmp_path / "out", None, client=None, settings={}, matte=matte)
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_pair_stopped_mid_render_continues_its_result_and_its_matte(

@@ -29,7 +29,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["BatchResult", "check_out_dir", "prepare_out_dir", "batch_track", "batch_transfer",
            "batch_export", "job_key", "options_text", "SUMMARY_NAME", "DEFAULT_OVERLAP",
-           "MATTE_FORMATS", "matte_pattern"]
+           "MATTE_FORMATS", "matte_pattern", "matte_patterns"]
 
 SUMMARY_NAME = "summary.csv"
 #: Frames shared by neighbouring chunks (1.2 s at 25 fps).
@@ -454,6 +454,27 @@ def matte_pattern(out_dir, name: str, suffix: str) -> Path:
     return Path(out_dir) / f"{name}.matte" / f"{name}.%05d{suffix}"
 
 
+def matte_patterns(jobs, out_dir: Path, matte: str | None) -> dict[str, Path]:
+    """``{name: matte_pattern}`` of the jobs (none without ``matte``).
+
+    Raises
+    ------
+    BatchError
+        ``matte`` is not one of :data:`MATTE_FORMATS`, or a job's name holds ``%`` or ``#``
+        (read as the frame number of its matte's files)."""
+    if matte is None:
+        return {}
+    if matte not in MATTE_FORMATS:
+        raise BatchError(f"--matte must be one of {', '.join(MATTE_FORMATS)} (an image "
+                         f"sequence; a video matte is lossy), got {matte!r}")
+    for j in jobs:
+        if "%" in j.name or "#" in j.name:
+            raise BatchError(f"{j.name!r} cannot name the frames of its matte (% and # are "
+                             "a frame number's): give the pair another name (the manifest's "
+                             "name column)")
+    return {j.name: matte_pattern(out_dir, j.name, MATTE_FORMATS[matte]) for j in jobs}
+
+
 def _whole_matte(pattern: Path, n_frames: int | None) -> bool:
     """Whether the matte sequence ``pattern`` holds ``n_frames`` frames, numbered one after
     the other (written by :mod:`facetransfer.io.sequence_parts`: all of them or none, each
@@ -517,14 +538,11 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     -------
     BatchResult
     """
-    if matte is not None and matte not in MATTE_FORMATS:
-        raise BatchError(f"--matte must be one of {', '.join(MATTE_FORMATS)} (an image "
-                         f"sequence; a video matte is lossy), got {matte!r}")
+    matte_patterns(jobs, Path(out_dir), matte)      # a bad format or name: before any folder
     out_dir = prepare_out_dir(out_dir)
     prores = getattr(settings.get("video"), "codec", None) == "prores"
     outs = _outputs(jobs, out_dir, ".mov" if prores else ".mp4")
-    mattes = {} if matte is None else {
-        j.name: matte_pattern(out_dir, j.name, MATTE_FORMATS[matte]) for j in jobs}
+    mattes = matte_patterns(jobs, out_dir, matte)
     what = f"transfer {sorted((k, repr(v)) for k, v in settings.items())} {model.content_hash}"
     keys = job_keys(jobs, what)
     done = {} if overwrite else _kept(jobs, outs, out_dir, keys,

@@ -246,6 +246,10 @@ def run_transfer(args) -> int:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
     settings = transfer_settings(args)   # a bad --crf fails before any work
     jobs = pair_jobs(args.manifest)
+    if args.matte is not None:   # a name that cannot name its matte's frames: before any work
+        from ..batch.run import matte_patterns
+
+        matte_patterns(jobs, Path(args.out), args.matte)
     _check_cluster_args(args)
     model = resolve_model(args.model)
     return _run(args, "transfer", len(jobs), lambda client, progress: batch_transfer(
