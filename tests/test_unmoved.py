@@ -37,7 +37,7 @@ def _render(noisy, shift, *, rule=True, monkeypatch=None, mouth=None):
     topo, Vc, cam, frame, tex = noisy
     moved = WeakPerspective(cam.scale, cam.rotation, cam.translation + np.asarray(shift))
     if not rule:
-        monkeypatch.setattr(rewrite, "unmoved_weight", lambda *a, **k: None)
+        monkeypatch.setattr(rewrite, "vertex_weights", lambda *a, **k: None)
     r = rewrite_frame(frame, Vc, moved, topo, FrameTextures(tex, mouth=mouth),
                       blending=BlendOptions("none"))
     if not rule:
@@ -90,7 +90,8 @@ def test_the_soft_band_mixes_the_two_by_the_distance(noisy, monkeypatch):
 def test_the_weight_follows_each_pixels_displacement():
     """A strip of triangles whose vertices moved 0 px on the left and 2 px on the right,
     linearly: the weight is 1 up to the column that moved D0, 0 from the column that moved D1,
-    linear between; 0 off the mesh; None when no vertex moved less than D1."""
+    linear between; 0 off the mesh; None when no vertex moved less than D1; and
+    :func:`keep_unmoved` mixes two images by it."""
     n = 21
     x = np.linspace(10, 90, n)
     P = np.concatenate([np.c_[x, np.full(n, 10.0)], np.c_[x, np.full(n, 30.0)]])
@@ -102,7 +103,8 @@ def test_the_weight_follows_each_pixels_displacement():
     drawn = cam.project(V)
     moved = 2.0 * (drawn[:, 0] - 10) / 80
     lifted = drawn + np.c_[moved, np.zeros(2 * n)]
-    w = unmoved.unmoved_weight(r, faces, lifted, drawn)
+    values = unmoved.vertex_weights(lifted, drawn)
+    w = unmoved.unmoved_weight(r, faces, values)
     row = w[20]
     cols = np.arange(100)
     d = 2.0 * (cols - 10) / 80
@@ -110,9 +112,22 @@ def test_the_weight_follows_each_pixels_displacement():
     expect = np.clip((unmoved.D1 - d) / (unmoved.D1 - unmoved.D0), 0, 1)
     np.testing.assert_allclose(row[inside], expect[inside], atol=1e-5)
     assert (row[~inside] == 0).all() and (w[~r.mask] == 0).all()
-    assert unmoved.unmoved_weight(r, faces, drawn + [1.5, 0.0], drawn) is None
+    assert unmoved.vertex_weights(drawn + [1.5, 0.0], drawn) is None
     with pytest.raises(ValueError):
-        unmoved.unmoved_weight(r, faces, lifted, drawn, d0=1.0, d1=0.5)
+        unmoved.vertex_weights(lifted, drawn, d0=1.0, d1=0.5)
+    with pytest.raises(ValueError):
+        unmoved.vertex_weights(lifted, drawn[:5])
+    # the mix itself, in one pass, is this map's
+    rng = np.random.default_rng(3)
+    face, frame = (rng.integers(0, 256, (40, 100, 3), dtype=np.uint8) for _ in range(2))
+    mixed = face.copy()
+    unmoved.keep_unmoved(mixed, frame, r, faces, values)
+    expect = face + w[..., None] * (frame.astype(np.float64) - face)
+    assert np.abs(mixed - expect).max() <= 0.5 + 1e-3
+    np.testing.assert_array_equal(mixed[w >= 1], frame[w >= 1])
+    np.testing.assert_array_equal(mixed[w == 0], face[w == 0])
+    with pytest.raises(ValueError):
+        unmoved.keep_unmoved(mixed, frame[:20], r, faces, values)
 
 
 def test_the_sources_mouth_is_still_painted_over(noisy):

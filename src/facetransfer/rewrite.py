@@ -55,7 +55,7 @@ from .composite import (_erode, _extend, composite_alpha, composite_face, membra
                         membrane_blend, over)
 from .errors import ShapeError
 from .rim import drawn_inside, lifted_positions
-from .unmoved import keep_unmoved, unmoved_weight
+from .unmoved import keep_unmoved, vertex_weights
 from .eyes import EyeTexture, _paint_eyes, eye_flags
 from .jaw import JawTexture, _paint_jaw, jaw_flags
 from .lip_colour import LipTint, tint_mouth
@@ -272,8 +272,9 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
         drawn = camera.project(V)
         # not the target's own outline drawn inside its face, nor its pixels resampled where
         # the new face did not move: the target's pixels there instead
+        kept = vertex_weights(lifted, drawn)
         own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn),
-               unmoved_weight(raster, topo.faces, lifted, drawn))
+               None if kept is None else (raster, topo.faces, kept))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(raster, V, topo, textures,
                                                                     own)
     lip_tint, erode, feather = textures.lip_tint, blending.erode, blending.feather
@@ -356,8 +357,8 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
     :func:`facetransfer.jaw.paint_jaw`). ``own = (frame, where)``: the face texture replaced
     by the (cropped) target frame's own pixels ``where`` (:func:`facetransfer.rim.
     drawn_inside`), under the regions; ``own = (frame, where, unmoved)``: and mixed towards
-    them by the weight ``unmoved`` (:func:`facetransfer.unmoved.unmoved_weight`), under the
-    regions too.
+    them where the new face did not move (``unmoved = (raster, faces, values)``:
+    :func:`facetransfer.unmoved.keep_unmoved`; or None), under the regions too.
 
     Returns
     -------
@@ -411,14 +412,14 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
 
 
 def _keep_own(face_img: np.ndarray, face_mask: np.ndarray, frame: np.ndarray,
-              where: np.ndarray, unmoved: np.ndarray | None = None) -> None:
+              where: np.ndarray, unmoved: tuple | None = None) -> None:
     """``face_img`` (H, W, 3) uint8 made ``frame``'s own pixels ``where`` (H, W) bool, in place,
     with a soft edge (a Gaussian of 1.5 px) on ``face_mask``: the face texture's shading meets
-    the frame's without a step; then mixed towards them by ``unmoved`` (H, W) float32, the
-    weight of the frame's own pixel where the new face did not move
-    (:func:`facetransfer.unmoved.unmoved_weight`; None: nowhere)."""
+    the frame's without a step; first mixed towards them where the new face did not move:
+    ``unmoved = (raster, faces, values)`` (:func:`facetransfer.unmoved.keep_unmoved`; None:
+    nowhere)."""
     if unmoved is not None:
-        keep_unmoved(face_img, frame, unmoved)
+        keep_unmoved(face_img, frame, *unmoved)
     x, y, w, h = cv2.boundingRect(where.view(np.uint8))
     if not w:
         return
