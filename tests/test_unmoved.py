@@ -46,18 +46,19 @@ def _render(noisy, shift, *, rule=True, monkeypatch=None, mouth=None):
 
 
 def test_the_targets_own_mesh_shows_the_frame_to_the_bit(noisy, monkeypatch):
-    """Drawn where it was lifted (a self-transfer) or a fifth of a pixel off (below
+    """Drawn where it was lifted (a self-transfer) or 0.4 px off (below
     :data:`facetransfer.unmoved.D0`), every pixel of the face is the frame's own, to the bit;
-    without the rule the fifth of a pixel resamples them (a bilinear mix of neighbours, which
-    noise shows at once)."""
+    without the rule the 0.4 px resamples them (a bilinear mix of neighbours, which noise
+    shows at once)."""
     frame = noisy[3]
-    for shift in ((0.0, 0.0), (0.2, -0.1)):
+    assert np.hypot(0.3, -0.25) < unmoved.D0
+    for shift in ((0.0, 0.0), (0.3, -0.25)):
         r = _render(noisy, shift)
         m = r.face_mask
         assert m.sum() > 20000
         np.testing.assert_array_equal(r.rendered[m], frame[m])
         np.testing.assert_array_equal(r.image[m], frame[m])
-    off = _render(noisy, (0.2, -0.1), rule=False, monkeypatch=monkeypatch)
+    off = _render(noisy, (0.3, -0.25), rule=False, monkeypatch=monkeypatch)
     m = off.face_mask
     assert np.mean((off.rendered[m] != frame[m]).any(axis=-1)) > 0.5
 
@@ -73,14 +74,15 @@ def test_a_face_moved_three_pixels_keeps_nothing(noisy, monkeypatch):
 
 
 def test_the_soft_band_mixes_the_two_by_the_distance(noisy, monkeypatch):
-    """Moved 0.6 px (between :data:`D0` and :data:`D1`): each pixel is the resampled texture's
-    mixed towards the frame's by ``(D1 - 0.6) / (D1 - D0)``, to a level's rounding."""
+    """Moved 0.8 px (between :data:`D0` and :data:`D1`): each pixel is the resampled texture's
+    mixed towards the frame's by ``(D1 - 0.8) / (D1 - D0)``, to a level's rounding."""
     frame = noisy[3]
-    shift = (0.6, 0.0)
+    shift = (0.8, 0.0)
+    assert unmoved.D0 < 0.8 < unmoved.D1
     on = _render(noisy, shift)
     off = _render(noisy, shift, rule=False, monkeypatch=monkeypatch)
     m = on.face_mask
-    w = (unmoved.D1 - 0.6) / (unmoved.D1 - unmoved.D0)
+    w = (unmoved.D1 - 0.8) / (unmoved.D1 - unmoved.D0)
     expect = off.rendered[m] + w * (frame[m].astype(np.float64) - off.rendered[m])
     assert np.abs(on.rendered[m] - expect).max() <= 1.0
     assert np.mean(on.rendered[m] != off.rendered[m]) > 0.5
@@ -112,7 +114,7 @@ def test_the_weight_follows_each_pixels_displacement():
     expect = np.clip((unmoved.D1 - d) / (unmoved.D1 - unmoved.D0), 0, 1)
     np.testing.assert_allclose(row[inside], expect[inside], atol=1e-5)
     assert (row[~inside] == 0).all() and (w[~r.mask] == 0).all()
-    assert unmoved.vertex_weights(drawn + [1.5, 0.0], drawn) is None
+    assert unmoved.vertex_weights(drawn + [unmoved.D1, 0.0], drawn) is None
     with pytest.raises(ValueError):
         unmoved.vertex_weights(lifted, drawn, d0=1.0, d1=0.5)
     with pytest.raises(ValueError):

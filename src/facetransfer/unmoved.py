@@ -6,21 +6,25 @@ through the target's tracked mesh (:func:`facetransfer.texture.face.frame_uvs`).
 of the new face shows the frame's bilinear sample at ``p + delta(p)``, ``delta`` the
 barycentric interpolation of each vertex's displacement from where the new face draws it
 (``camera.project(V)``) to where the texture lifted it
-(:func:`facetransfer.rim.lifted_positions`). Where the new face lies where the target's did
-(the forehead, the nose, the cheeks the expression did not move; a self-transfer), ``delta`` is
-a fraction of a pixel: the sample mixes the frame's neighbouring pixels (at half a pixel, two
-of them equally) and the finest detail (pores, lashes, strands of hair over the cheek) is
-softened, though nothing moved. There the frame's own pixel is kept instead
-(:func:`unmoved_weight`, :func:`keep_unmoved`), with a weight falling from 1 where the vertices
-moved at most :data:`D0` pixels to 0 where they moved :data:`D1` or more, interpolated over each
-triangle from its corners. A kept pixel is what the texture showed there, shifted by less than
-:data:`D0` (between :data:`D0` and :data:`D1`, mixed with it): never the target's own expression,
-which moved the skin farther than that wherever it differs from the new one's.
+(:func:`facetransfer.rim.lifted_positions`). At ``delta = 0`` (a self-transfer) that sample is
+the frame's pixel already; but where the new face lies a fraction of a pixel off (the
+forehead, the nose, the cheeks the new expression barely moves), the sample mixes the frame's
+neighbouring pixels (at half a pixel, two of them equally): the finest detail (pores, lashes,
+strands of hair over the face) is softened though nothing visibly moved, in bands that follow
+the fraction across the face. There the frame's own pixel is kept instead
+(:func:`keep_unmoved`), with a weight falling from 1 where the vertices moved at most
+:data:`D0` pixels to 0 where they moved :data:`D1` or more (:func:`vertex_weights`),
+interpolated over each triangle from its corners (:func:`unmoved_weight` draws it). A kept
+pixel is the content the texture showed there shifted by less than :data:`D0` (between
+:data:`D0` and :data:`D1`, mixed with it): never the target's own expression, which moved the
+skin farther than that wherever it differs from the new one's.
 
-It applies to the face texture only: the eye and jaw regions' textures and the source's mouth
-are painted over it afterwards (:func:`facetransfer.rewrite._shade_frame`), and the blend adds
-its smooth correction to the kept pixels as to the rest (the output there is the frame's
-pixel plus the membrane's offset, which is 0 only where the blend's outline matches).
+It applies to the face texture only, under what is painted over it afterwards
+(:func:`facetransfer.rewrite._shade_frame`: the eye and jaw regions' textures, the source's
+mouth). The blend adds its smooth correction to the kept pixels as to the rest: the output
+there is the frame's pixel plus the membrane's offset (small, not 0, where the blend's
+outline differs from the frame: BENCHMARKS.md, "Forty-fourth session: the target's own pixels
+where the new face did not move").
 """
 
 from __future__ import annotations
@@ -33,14 +37,17 @@ from .render.raster import _maybe_njit
 
 __all__ = ["D0", "D1", "vertex_weights", "unmoved_weight", "keep_unmoved"]
 
-#: Pixels a vertex may have moved for the frame's own pixel to be kept wholly: a quarter of a
-#: pixel, the shift below which a bilinear sample is mostly one pixel (3/4 of it) and a shifted
-#: edge is not seen (BENCHMARKS.md, "Forty-fourth session: the target's own pixels where the
-#: new face did not move": the sharpness and error it gains, the judge unmoved).
-D0 = 0.25
-#: ... and from which on it is not kept at all: a pixel's shift, beyond which the kept pixel
-#: would be another pixel's content (between, the two are mixed linearly in the distance).
-D1 = 1.0
+#: Pixels a vertex may have moved for the frame's own pixel to be kept wholly: half a pixel, the
+#: error of a nearest-pixel lookup. Kept, a pixel's content lies at most ``max_d w(d) d`` from
+#: where the new face has it: 0.56 px with :data:`D1` (0.33 px for 0.25 and 1 px, which kept
+#: 17 % of ``make demo``'s face texture wholly, not 37 %, and left its hair visibly softer:
+#: BENCHMARKS.md, "Forty-fourth session: the target's own pixels where the new face did not
+#: move"). The new expression's motions below half a pixel are not drawn there.
+D0 = 0.5
+#: ... and from which on it is not kept at all (between, the frame's pixel and the texture's
+#: are mixed linearly in the distance: two copies of the detail at most 1.5 px apart, as soft
+#: as the bilinear sample itself).
+D1 = 1.5
 
 
 def vertex_weights(lifted: np.ndarray, drawn: np.ndarray, *, d0: float = D0,
