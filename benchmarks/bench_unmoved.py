@@ -32,6 +32,6 @@ from _self_transfer import switch_main  # noqa: E402
 
 if __name__ == "__main__":
     sys.exit(switch_main(
-        __doc__, "resampled", "facetransfer.rewrite", "vertex_weights",
+        __doc__, "resampled", "facetransfer.rewrite", "unmoved_uvs",
         lambda *args, **kwargs: None, "own pixels", "unmoved",
         "self-transfer: the pixels the target's own pixels change"))

@@ -37,7 +37,7 @@ def _render(noisy, shift, *, rule=True, monkeypatch=None, mouth=None):
     topo, Vc, cam, frame, tex = noisy
     moved = WeakPerspective(cam.scale, cam.rotation, cam.translation + np.asarray(shift))
     if not rule:
-        monkeypatch.setattr(rewrite, "vertex_weights", lambda *a, **k: None)
+        monkeypatch.setattr(rewrite, "unmoved_uvs", lambda *a, **k: None)
     r = rewrite_frame(frame, Vc, moved, topo, FrameTextures(tex, mouth=mouth),
                       blending=BlendOptions("none"))
     if not rule:
@@ -73,27 +73,64 @@ def test_a_face_moved_three_pixels_keeps_nothing(noisy, monkeypatch):
     assert np.mean((on.rendered[m] != noisy[3][m]).any(axis=-1)) > 0.9
 
 
-def test_the_soft_band_mixes_the_two_by_the_distance(noisy, monkeypatch):
-    """Moved 0.8 px (between :data:`D0` and :data:`D1`): each pixel is the resampled texture's
-    mixed towards the frame's by ``(D1 - 0.8) / (D1 - D0)``, to a level's rounding."""
+def test_the_soft_band_shrinks_the_displacement(noisy, monkeypatch):
+    """Moved 0.8 px (between :data:`D0` and :data:`D1`): each vertex's texture position moves
+    towards where it is drawn by ``w = (D1 - 0.8) / (D1 - D0)``, so each pixel is the frame's
+    bilinear sample ``0.8 (1 - w)`` px off its own (a warp, not a mix of two copies), to a
+    level's rounding: neither the frame's own pixel nor the old lookup's."""
     frame = noisy[3]
-    shift = (0.8, 0.0)
-    assert unmoved.D0 < 0.8 < unmoved.D1
-    on = _render(noisy, shift)
-    off = _render(noisy, shift, rule=False, monkeypatch=monkeypatch)
-    m = on.face_mask
-    w = (unmoved.D1 - 0.8) / (unmoved.D1 - unmoved.D0)
-    expect = off.rendered[m] + w * (frame[m].astype(np.float64) - off.rendered[m])
-    assert np.abs(on.rendered[m] - expect).max() <= 1.0
-    assert np.mean(on.rendered[m] != off.rendered[m]) > 0.5
-    assert np.mean(on.rendered[m] != frame[m]) > 0.5
+    shift = 0.8
+    assert unmoved.D0 < shift < unmoved.D1
+    on = _render(noisy, (shift, 0.0))
+    off = _render(noisy, (shift, 0.0), rule=False, monkeypatch=monkeypatch)
+    m = on.face_mask.copy()
+    m[:, :8] = False  # where the frame's edge cuts the face, its outline rule keeps a few
+    ys, xs = np.nonzero(m)
+    left = shift * (1 - (unmoved.D1 - shift) / (unmoved.D1 - unmoved.D0))  # px still moved
+    f = frame.astype(np.float64)
+    expect = (1 - left) * f[ys, xs] + left * f[ys, xs - 1]  # sampled at x - left
+    assert np.abs(on.rendered[ys, xs] - expect).max() <= 1.0
+    assert np.mean((on.rendered[m] != off.rendered[m]).any(axis=-1)) > 0.5
+    assert np.mean((on.rendered[m] != frame[m]).any(axis=-1)) > 0.5
 
 
-def test_the_weight_follows_each_pixels_displacement():
-    """A strip of triangles whose vertices moved 0 px on the left and 2 px on the right,
-    linearly: the weight is 1 up to the column that moved D0, 0 from the column that moved D1,
-    linear between; 0 off the mesh; None when no vertex moved less than D1; and
-    :func:`keep_unmoved` mixes two images by it."""
+def test_the_weights_and_the_texture_positions():
+    """Vertices moved 0 to 2 px: the weight is 1 up to D0, 0 from D1, linear between (0 where
+    the displacement is not a number); the new texture positions are ``lifted + w (drawn -
+    lifted)`` (the vertices of weight 0 keep their coordinates bit for bit); nothing to change
+    (None) where no vertex moved less than D1; bad input refused."""
+    n = 41
+    lifted = np.c_[np.linspace(10, 90, n), np.full(n, 20.0)]
+    d = np.linspace(0.0, 2.0, n)
+    drawn = lifted + np.c_[d * 0.6, -d * 0.8]
+    w = unmoved.vertex_weights(lifted, drawn)
+    np.testing.assert_allclose(w, np.clip((unmoved.D1 - d) / (unmoved.D1 - unmoved.D0), 0, 1),
+                               atol=1e-12)
+    bad = drawn.copy()
+    bad[3] = np.nan
+    assert unmoved.vertex_weights(lifted, bad)[3] == 0.0
+    size = (101, 41)
+    cam = _Identity()
+    uvs = frame_uvs(np.c_[lifted, np.zeros(n)], cam, size)
+    new = unmoved.unmoved_uvs(uvs, size, lifted, drawn)
+    from facetransfer.rim import texture_positions
+
+    np.testing.assert_allclose(texture_positions(new, size), lifted + w[:, None] * (drawn - lifted),
+                               atol=1e-9)
+    np.testing.assert_array_equal(new[w == 0], uvs[w == 0])
+    assert unmoved.unmoved_uvs(uvs, size, lifted, lifted + [unmoved.D1, 0.0]) is None
+    with pytest.raises(ValueError):
+        unmoved.vertex_weights(lifted, drawn, d0=1.0, d1=0.5)
+    with pytest.raises(ValueError):
+        unmoved.vertex_weights(lifted, drawn[:5])
+    with pytest.raises(ValueError):
+        unmoved.unmoved_uvs(uvs[:5], size, lifted, drawn)
+
+
+def test_the_weight_at_each_pixel_is_interpolated_from_the_corners():
+    """A strip of triangles moved 0 px on the left to 2 px on the right: the per-pixel weight
+    (for pictures) is 1 where the corners moved at most D0, 0 where they moved D1 or more, and
+    0 off the mesh."""
     n = 21
     x = np.linspace(10, 90, n)
     P = np.concatenate([np.c_[x, np.full(n, 10.0)], np.c_[x, np.full(n, 30.0)]])
@@ -103,33 +140,25 @@ def test_the_weight_follows_each_pixels_displacement():
     V = np.c_[P, np.zeros(2 * n)]
     r = rasterize(V, faces, cam, (100, 40))
     drawn = cam.project(V)
-    moved = 2.0 * (drawn[:, 0] - 10) / 80
-    lifted = drawn + np.c_[moved, np.zeros(2 * n)]
-    values = unmoved.vertex_weights(lifted, drawn)
-    w = unmoved.unmoved_weight(r, faces, values)
-    row = w[20]
+    lifted = drawn + np.c_[2.0 * (drawn[:, 0] - 10) / 80, np.zeros(2 * n)]
+    wmap = unmoved.unmoved_weight(r, faces, unmoved.vertex_weights(lifted, drawn))
+    row = wmap[20]
     cols = np.arange(100)
     d = 2.0 * (cols - 10) / 80
-    inside = (cols >= 10) & (cols <= 90)
-    expect = np.clip((unmoved.D1 - d) / (unmoved.D1 - unmoved.D0), 0, 1)
-    np.testing.assert_allclose(row[inside], expect[inside], atol=1e-5)
-    assert (row[~inside] == 0).all() and (w[~r.mask] == 0).all()
-    assert unmoved.vertex_weights(drawn + [unmoved.D1, 0.0], drawn) is None
-    with pytest.raises(ValueError):
-        unmoved.vertex_weights(lifted, drawn, d0=1.0, d1=0.5)
-    with pytest.raises(ValueError):
-        unmoved.vertex_weights(lifted, drawn[:5])
-    # the mix itself, in one pass, is this map's
-    rng = np.random.default_rng(3)
-    face, frame = (rng.integers(0, 256, (40, 100, 3), dtype=np.uint8) for _ in range(2))
-    mixed = face.copy()
-    unmoved.keep_unmoved(mixed, frame, r, faces, values)
-    expect = face + w[..., None] * (frame.astype(np.float64) - face)
-    assert np.abs(mixed - expect).max() <= 0.5 + 1e-3
-    np.testing.assert_array_equal(mixed[w >= 1], frame[w >= 1])
-    np.testing.assert_array_equal(mixed[w == 0], face[w == 0])
-    with pytest.raises(ValueError):
-        unmoved.keep_unmoved(mixed, frame[:20], r, faces, values)
+    assert (row[(cols >= 10) & (d <= unmoved.D0 - 0.1)] == 1).all()
+    assert (row[(cols <= 90) & (d >= unmoved.D1 + 0.1)] == 0).all()
+    mid = (d > unmoved.D0 + 0.1) & (d < unmoved.D1 - 0.1)
+    np.testing.assert_allclose(row[mid], (unmoved.D1 - d[mid]) / (unmoved.D1 - unmoved.D0),
+                               atol=0.02)
+    assert (wmap[~r.mask] == 0).all()
+
+
+class _Identity:
+    """A camera that projects (x, y, z) to (x, y)."""
+
+    @staticmethod
+    def project(V):
+        return np.array(V[:, :2], np.float64)
 
 
 def test_the_sources_mouth_is_still_painted_over(noisy):

@@ -57,7 +57,7 @@ from .composite import (_erode, _extend, composite_alpha, composite_face, membra
                         membrane_blend, over)
 from .errors import ShapeError
 from .rim import drawn_inside, lifted_positions
-from .unmoved import keep_unmoved, vertex_weights
+from .unmoved import unmoved_uvs
 from .eyes import EyeTexture, _paint_eyes, eye_flags
 from .jaw import JawTexture, _paint_jaw, jaw_flags
 from .lip_colour import LipTint, tint_mouth
@@ -272,11 +272,13 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
     own = None
     if lifted is not None:
         drawn = camera.project(V)
-        # not the target's own outline drawn inside its face, nor its pixels resampled where
-        # the new face did not move: the target's pixels there instead
-        kept = vertex_weights(lifted, drawn)
-        own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn),
-               None if kept is None else (raster, topo.faces, kept))
+        # not the target's own outline drawn inside its face: the target's pixels there instead
+        own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn))
+        # nor its pixels resampled where the new face did not move: looked up where drawn
+        face = textures.face
+        uvs = unmoved_uvs(face.uvs, (face.image.shape[1], face.image.shape[0]), lifted, drawn)
+        if uvs is not None:
+            textures = dataclasses.replace(textures, face=dataclasses.replace(face, uvs=uvs))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(raster, V, topo, textures,
                                                                     own)
     lip_tint, erode, feather = textures.lip_tint, blending.erode, blending.feather
@@ -358,9 +360,7 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
     pasted into the face (:func:`facetransfer.eyes.paint_eyes`,
     :func:`facetransfer.jaw.paint_jaw`). ``own = (frame, where)``: the face texture replaced
     by the (cropped) target frame's own pixels ``where`` (:func:`facetransfer.rim.
-    drawn_inside`), under the regions; ``own = (frame, where, unmoved)``: and mixed towards
-    them where the new face did not move (``unmoved = (raster, faces, values)``:
-    :func:`facetransfer.unmoved.keep_unmoved`; or None), under the regions too.
+    drawn_inside`), under the regions.
 
     Returns
     -------
@@ -414,14 +414,10 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
 
 
 def _keep_own(face_img: np.ndarray, face_mask: np.ndarray, frame: np.ndarray,
-              where: np.ndarray, unmoved: tuple | None = None) -> None:
+              where: np.ndarray) -> None:
     """``face_img`` (H, W, 3) uint8 made ``frame``'s own pixels ``where`` (H, W) bool, in place,
     with a soft edge (a Gaussian of 1.5 px) on ``face_mask``: the face texture's shading meets
-    the frame's without a step; first mixed towards them where the new face did not move:
-    ``unmoved = (raster, faces, values)`` (:func:`facetransfer.unmoved.keep_unmoved`; None:
-    nowhere)."""
-    if unmoved is not None:
-        keep_unmoved(face_img, frame, *unmoved)
+    the frame's without a step."""
     x, y, w, h = cv2.boundingRect(where.view(np.uint8))
     if not w:
         return
