@@ -12,8 +12,8 @@ For a frame of the target video (§6, Fig. 7C–7E):
 3. the face is textured with the target's face texture (``texture="constant"``: lifted from the
    target video, one texture for the whole clip, as in the paper; ``"frame"``, the default:
    lifted from the current target frame, which keeps that frame's lighting; where the new face
-   lies within a pixel of where that frame's track has it, the frame's own pixels are kept,
-   not resampled: :mod:`facetransfer.unmoved`), the mouth (lips and
+   lies within half a pixel of where that frame's track has it, the frame's own pixels, not
+   resampled: :mod:`facetransfer.unmoved`), the mouth (lips and
    the closed gap) with the *source* performance's mouth (the source frame warped through the
    source's own tracked geometry: the performance-driven texture of §6 with the nearest
    neighbour being the source's own frame, read where the source's lips were detected and the

@@ -46,7 +46,7 @@ __all__ = ["D0", "D1", "vertex_weights", "unmoved_uvs", "unmoved_weight"]
 #: Pixels a vertex may have moved for the frame's own pixels to be kept wholly around it: half
 #: a pixel, the error of a nearest-pixel lookup. The content then lies at most ``max_d w(d) d``
 #: from where the new face has it (0.56 px with :data:`D1`; 0.33 px for 0.25 and 1 px, which
-#: kept 17 % of ``make demo``'s face texture outside its regions wholly, not 37 %, and left its
+#: kept 13 % of ``make demo``'s face texture outside its regions wholly, not 32 %, and left its
 #: hair visibly softer: BENCHMARKS.md, "Forty-fourth session: the target's own pixels where
 #: the new face did not move"). The new expression's motions below half a pixel are not drawn
 #: there.

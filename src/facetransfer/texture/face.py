@@ -59,7 +59,8 @@ def frame_uvs(vertices: np.ndarray, camera, size: tuple[int, int]) -> np.ndarray
     :func:`facetransfer.render.sample_texture` with the frame as texture returns the frame's
     pixel under the vertex. A mesh drawn a fraction of a pixel off those positions samples
     between the frame's pixels (a bilinear mix, which softens its finest detail); the rewrite
-    keeps the frame's own pixels there (:mod:`facetransfer.unmoved`).
+    moves those coordinates to where the mesh is drawn (:func:`facetransfer.unmoved.
+    unmoved_uvs`), so that the frame's own pixels show there.
 
     Parameters
     ----------
