@@ -78,7 +78,8 @@ def _variant(d, capture: list):
         return out
 
     def uvs(u, size, lifted, drawn):
-        cur["weights"] = unmoved.vertex_weights(lifted, drawn)
+        cur["weights"] = unmoved.vertex_weights(lifted, drawn, **({} if d is None else
+                                                                  {"d0": d[0], "d1": d[1]}))
         return None if d is None else uvs_of(u, size, lifted, drawn, d0=d[0], d1=d[1])
 
     def shaded(raster, V, topo, textures, own=None):
