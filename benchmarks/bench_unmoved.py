@@ -13,7 +13,9 @@ its cached tracks in ``OUT/judge_pairs/``), 120 frames, each rendered without th
 pixels kept wholly (every corner of their triangle within ``d0``) and in part, and, against the
 target frame on the face texture's own pixels (the face eroded by 6 px, outside the eye, jaw
 and mouth regions and their rims, which are painted over it), the PSNR and the sharpness (the
-variance of the Laplacian, the result's over the target's, per frame). ``--judge``: Face
+variance of the Laplacian, the result's over the target's, per frame), and how far the result's
+change from the frame before departs from the target's there (mean absolute levels, per frame:
+a pixel that pops in and out of the kept set would raise it). ``--judge``: Face
 Landmarker on source, target and each result (``bench_transfer_judge.compare``).
 
 ``--self``: a **self-transfer** (``benchmarks/_self_transfer.py``) of the judge's three target
@@ -160,18 +162,27 @@ def measure_pair(name: str, model, out: Path, data: Path, judge: bool) -> dict:
     res, images = {}, {}
     for v, d in variants.items():
         images[v], crops = _render(plan, model, d)
-        rows = []
+        rows, before = [], None
         for i, t in enumerate(targets):
             if i not in crops:
+                before = None
                 continue
             face, own, w = _masks(crops[i], t.shape[:2])
             w = w if d is not None else np.zeros_like(w)
-            rows.append((np.mean(w[face] >= 1), np.mean(w[face] > 0), np.mean(w[own] >= 1),
+            rows.append([np.mean(w[face] >= 1), np.mean(w[face] > 0), np.mean(w[own] >= 1),
                          np.mean(w[own] > 0), _psnr(images[v][i], t, own),
-                         _laplacian_var(images[v][i], own) / _laplacian_var(t, own)))
-        m = np.mean(rows, axis=0)
+                         _laplacian_var(images[v][i], own) / _laplacian_var(t, own), np.nan])
+            if before is not None:  # the result's change from the last frame against the plate's
+                m = own & before
+                r, r0, t0 = images[v][i][m], images[v][i - 1][m], targets[i - 1][m]
+                rows[-1][6] = np.abs((r.astype(np.float64) - r0) - (t[m].astype(np.float64) - t0)
+                                     ).mean()
+            before = own
+        m = np.nanmean(rows, axis=0)
         res[v] = {"kept_face": m[0], "in_part_face": m[1], "kept_texture": m[2],
-                  "in_part_texture": m[3], "psnr_texture_db": m[4], "sharpness_ratio": m[5]}
+                  "in_part_texture": m[3], "psnr_texture_db": m[4], "sharpness_ratio": m[5],
+                  "temporal_levels": m[6],
+                  "temporal_levels_max": float(np.nanmax(np.asarray(rows)[:, 6]))}
         print(f"{name} {v}: " + ", ".join(f"{k} {x:.3f}" for k, x in res[v].items()),
               flush=True)
     if judge:
