@@ -30,7 +30,8 @@ It changes the face texture's coordinates only, under what is painted over it af
 mouth). The blend adds its smooth correction to the kept pixels as to the rest: the output
 there is the frame's pixel plus the membrane's offset (0 to a level where the blend's outline
 is kept too: BENCHMARKS.md, "Forty-fourth session: the target's own pixels where the new face
-did not move").
+did not move"). Like :mod:`facetransfer.rim`, a rule of the rewrite's texturing (its
+``_rewrite_crop`` calls it per crop) in a module of its own.
 """
 
 from __future__ import annotations
