@@ -11,7 +11,9 @@ For a frame of the target video (§6, Fig. 7C–7E):
    :func:`facetransfer.topology.close_mouth`);
 3. the face is textured with the target's face texture (``texture="constant"``: lifted from the
    target video, one texture for the whole clip, as in the paper; ``"frame"``, the default:
-   lifted from the current target frame, which keeps that frame's lighting), the mouth (lips and
+   lifted from the current target frame, which keeps that frame's lighting; where the new face
+   lies within half a pixel of where that frame's track has it, the frame's own pixels, not
+   resampled: :mod:`facetransfer.unmoved`), the mouth (lips and
    the closed gap) with the *source* performance's mouth (the source frame warped through the
    source's own tracked geometry: the performance-driven texture of §6 with the nearest
    neighbour being the source's own frame, read where the source's lips were detected and the
@@ -55,6 +57,7 @@ from .composite import (_erode, _extend, composite_alpha, composite_face, membra
                         membrane_blend, over)
 from .errors import ShapeError
 from .rim import drawn_inside, lifted_positions
+from .unmoved import unmoved_uvs
 from .eyes import EyeTexture, _paint_eyes, eye_flags
 from .jaw import JawTexture, _paint_jaw, jaw_flags
 from .lip_colour import LipTint, tint_mouth
@@ -266,9 +269,16 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
     from .render import rasterize
 
     raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
-    # not the target's own outline drawn inside its face: the target's pixels there instead
-    own = None if lifted is None else \
-        (T, drawn_inside(raster.mask, raster, topo.faces, lifted, camera.project(V)))
+    own = None
+    if lifted is not None:
+        drawn = camera.project(V)
+        # not the target's own outline drawn inside its face: the target's pixels there instead
+        own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn))
+        # nor its pixels resampled where the new face did not move: looked up where drawn
+        face = textures.face
+        uvs = unmoved_uvs(face.uvs, (face.image.shape[1], face.image.shape[0]), lifted, drawn)
+        if uvs is not None:
+            textures = dataclasses.replace(textures, face=dataclasses.replace(face, uvs=uvs))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(raster, V, topo, textures,
                                                                     own)
     lip_tint, erode, feather = textures.lip_tint, blending.erode, blending.feather

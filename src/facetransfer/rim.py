@@ -15,7 +15,9 @@ target's outer band (:data:`RIM` of its size) while it lies deeper inside the ta
 silhouette than that texture did. There the target's own pixels are kept instead
 (:func:`drawn_inside`): the target's face, which the new face covers there anyway; only where
 the pixel lies at most the band's width deeper (:data:`REACH`): deeper, the target's pixels
-are what its own expression moved there.
+are what its own expression moved there. (Where the new face lies within half a pixel of where
+the texture lifted it, anywhere on the face, the target's own pixels are shown too:
+:mod:`facetransfer.unmoved`.)
 """
 
 from __future__ import annotations

@@ -57,7 +57,10 @@ def frame_uvs(vertices: np.ndarray, camera, size: tuple[int, int]) -> np.ndarray
 
     ``uv = (x / (W - 1), 1 - y / (H - 1))`` of each vertex's projection (Eq. (7)), so that
     :func:`facetransfer.render.sample_texture` with the frame as texture returns the frame's
-    pixel under the vertex.
+    pixel under the vertex. A mesh drawn a fraction of a pixel off those positions samples
+    between the frame's pixels (a bilinear mix, which softens its finest detail); the rewrite
+    moves those coordinates to where the mesh is drawn (:func:`facetransfer.unmoved.
+    unmoved_uvs`), so that the frame's own pixels show there.
 
     Parameters
     ----------
