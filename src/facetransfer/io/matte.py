@@ -6,12 +6,12 @@ to the bit, 1 where the plate's pixel was wholly replaced, between on the feathe
 Written as an image sequence of one channel, numbered as the output (``matte/%05d.png`` or
 ``.tif``/``.tiff``: 16-bit grey; ``.exr``: float32, one channel ``Y`` tagged as data, not
 colour (``colorInteropID`` ``data``), with the frame's rate, timecode and pixel aspect in its
-header), or as a video (``.mp4``, ``.mov``, ``.mkv``: the
-grey in all three channels, 8 bits, encoded as the output is where its codec fits the
-container, else H.264: H.264 and ProRes are lossy, so a sequence is the matte a compositor keys
-on). A pixel the rewrite touched is never 0 in a sequence's file: a fraction below the file's
-first level is written as that level, so that the matte's zeros are exactly the plate's pixels
-(a lossy video's levels move: a 1 may decode as 0, a 0 above it). The output is not
+header), or as a video: ``.mov`` and ``.mkv`` lossless, one grey channel of 16 bits, the
+sequence's levels exactly (:data:`LOSSLESS_MATTE_CODECS`); ``.mp4`` lossy, the grey in three
+channels of 8 bits encoded as the output is (H.264 where the output is ProRes), said in a
+warning. A pixel the rewrite touched is never 0 in the file: a fraction below the file's first
+level is written as that level, so that the matte's zeros are exactly the plate's pixels (an
+``.mp4`` matte's levels move: a 1 may decode as 0, a 0 above it). The output is not
 premultiplied by the matte: ``out - plate * (1 - m)`` is the premultiplied foreground. The
 frames go through the writers every output goes through
 (:class:`~facetransfer.io.video.VideoWriter`, the render cache's
@@ -21,6 +21,7 @@ atomically; the output's audio is not put into it.
 
 from __future__ import annotations
 
+import logging
 import os
 from dataclasses import replace
 from pathlib import Path
@@ -32,13 +33,34 @@ from .output_names import suffix_list
 from .video import VideoOptions, VideoOutput, check_video_output, is_image_pattern
 from .video_sequence import same_sequence_files
 
-__all__ = ["MATTE_SEQUENCE_SUFFIXES", "MATTE_VIDEO_SUFFIXES", "MatteError", "MatteWriter",
+log = logging.getLogger(__name__)
+
+__all__ = ["MATTE_SEQUENCE_SUFFIXES", "MATTE_VIDEO_SUFFIXES", "LOSSLESS_MATTE_CODECS",
+           "MatteError", "MatteWriter",
            "check_matte_output", "matte_frame", "matte_options"]
 
 #: Frame files of a matte sequence: 16-bit grey PNG or TIFF, float OpenEXR.
 MATTE_SEQUENCE_SUFFIXES = (".png", ".tif", ".tiff", ".exr")
-#: Video files of a matte (8 bits, lossy with H.264 and H.265).
+#: Video files of a matte (``.mov``, ``.mkv``: 16-bit lossless; ``.mp4``: 8 bits, lossy).
 MATTE_VIDEO_SUFFIXES = (".mp4", ".mov", ".mkv")
+#: The lossless codec of a video matte per container, 16-bit grey (``gray16``), exact to the
+#: level: decoded back, 0 is 0 and 65535 is 65535, as in a 16-bit PNG sequence.
+#:
+#: - ``.mov``: QuickTime PNG (sample entry ``png ``; ffmpeg's png encoder, ``gray16be``), one
+#:   PNG image a frame, each a key frame: a codec of Apple's QuickTime, decoded by FFmpeg's
+#:   libavcodec, which Nuke's ``mov64`` Read is built on (Foundry, Nuke supported file
+#:   formats). Not QuickTime Animation (``qtrle``): ffmpeg writes its grey in 8 bits (a ramp
+#:   decoded back off by up to 368 of 65535, measured); not FFV1, which Apple's QuickTime
+#:   framework does not decode. Not verified here in Nuke or Resolve themselves.
+#: - ``.mkv``: FFV1 level 3 (ffmpeg's ffv1 encoder, ``gray16le``; intra only, ``-g 1``, so
+#:   every frame decodes alone; a CRC per slice), the lossless codec Matroska archives hold
+#:   (IETF CELLAR: RFC 9043 for versions 0 to 2, version 3 a draft): a third smaller than
+#:   PNG and faster to write (512x480: 43 against 66 kB and 3 against 5 ms a frame).
+#:
+#: ``.mp4`` has none that players and compositors read (H.264 lossless is the High 4:4:4
+#: Predictive profile, which Apple's decoders refuse): written lossy, as the output, with a
+#: warning naming ``.mov``, ``.mkv`` and sequences.
+LOSSLESS_MATTE_CODECS = {".mov": "png", ".mkv": "ffv1"}
 
 
 class MatteError(OutputError):
@@ -82,13 +104,17 @@ def check_matte_output(matte: str | os.PathLike, *, out, options: VideoOptions |
 
 def matte_options(options: VideoOptions | None, matte) -> VideoOptions:
     """The :class:`VideoOptions` of the matte ``matte`` of an output written with
-    ``options``: its first number, timecode and pixel aspect; for a video also its codec (where
-    the matte's container holds it, else H.264), quality, preset and fields. No colour
-    beyond grey, no alpha, no 16 bits."""
+    ``options``: its first number, timecode and pixel aspect; for a ``.mov`` or ``.mkv``
+    video the lossless grey codec of its container (:data:`LOSSLESS_MATTE_CODECS`); for an
+    ``.mp4`` the output's codec (ProRes: H.264), quality, preset and fields. No colour beyond
+    grey, no alpha; 16 bits in sequences and lossless videos."""
     opt = VideoOptions() if options is None else options
     kept = VideoOptions(first_number=opt.first_number, timecode=opt.timecode, sar=opt.sar)
     if is_image_pattern(matte):
         return kept
+    lossless = LOSSLESS_MATTE_CODECS.get(Path(matte).suffix.lower())
+    if lossless is not None:   # fields: each frame's matte is whole, as the sequence's
+        return replace(kept, codec=lossless, colour_tags=False)
     codec = opt.codec
     if codec == "prores" and Path(matte).suffix.lower() not in (".mov", ".mkv"):
         codec = "h264"
@@ -99,8 +125,9 @@ def matte_options(options: VideoOptions | None, matte) -> VideoOptions:
 def matte_frame(matte: np.ndarray | None, size: tuple[int, int], path) -> np.ndarray:
     """The frame the matte file ``path`` holds for ``matte`` (H, W) float in [0, 1] (None: a
     frame without a face, all 0) of ``size`` (W, H): ``(H, W)`` float32 of an OpenEXR
-    sequence, ``(H, W)`` uint16 of a PNG or TIFF one, ``(H, W, 3)`` uint8 grey of a video;
-    a fraction above 0 is at least the file's first level above 0."""
+    sequence, ``(H, W)`` uint16 of a PNG or TIFF one or of a lossless video (``.mov``,
+    ``.mkv``), ``(H, W, 3)`` uint8 grey of an ``.mp4``; a fraction above 0 is at least the
+    file's first level above 0."""
     W, H = int(size[0]), int(size[1])
     a = np.zeros((H, W), np.float32) if matte is None else \
         np.clip(np.asarray(matte, np.float32), 0.0, 1.0)
@@ -108,7 +135,7 @@ def matte_frame(matte: np.ndarray | None, size: tuple[int, int], path) -> np.nda
         raise MatteError(f"matte of shape {a.shape} does not match the size {W}x{H} of {path}")
     if Path(path).suffix.lower() == ".exr":
         return a
-    deep = is_image_pattern(path)
+    deep = is_image_pattern(path) or Path(path).suffix.lower() in LOSSLESS_MATTE_CODECS
     top = 65535.0 if deep else 255.0
     v = np.rint(a * np.float32(top)).astype(np.uint16 if deep else np.uint8)
     v[(v == 0) & (a > 0)] = 1       # touched: never the plate's 0
@@ -134,6 +161,12 @@ class MatteWriter:
     def __init__(self, writer, path, size: tuple[int, int]) -> None:
         self.writer, self.path, self.size = writer, Path(path), tuple(size)
         self.done = int(getattr(writer, "done", 0))
+        if not is_image_pattern(self.path) and \
+                self.path.suffix.lower() not in LOSSLESS_MATTE_CODECS:
+            log.warning("%s: an %s matte is lossy, 8 bits (its 0 may decode above 0, its 1 "
+                        "below): for a matte to key on write a .mov or .mkv (16-bit lossless) "
+                        "or a sequence (matte/%%05d.png, .tif, .exr)", self.path,
+                        self.path.suffix.lower())
 
     def write(self, i: int, matte: np.ndarray | None) -> None:
         """Frame ``i``'s matte ((H, W) float in [0, 1], or None: all 0), in order."""

@@ -38,7 +38,8 @@ from .video_display import (COLOUR_TAGS, checked_timecode, colour_matrix,  # noq
                             described, described_input, frame_args, timecode_args,
                             video_colour)
 from .video_options import (CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF,  # noqa: F401 (API)
-                            DEFAULT_PRESET, PRESETS, VIDEO_SUFFIXES, VideoOptions)
+                            DEFAULT_PRESET, ENCODERS, GREY_CODECS, PRESETS, VIDEO_SUFFIXES,
+                            VideoOptions)
 from .video_read import (VideoInfo, iter_frames, pixel_aspect, read_video,  # noqa: F401 (API)
                          video_info)
 from .video_sequence import (IMAGE_SUFFIXES, is_sequence, percent_pattern, same_sequence_files,
@@ -125,7 +126,7 @@ def require_encoder(codec: str) -> str:
         No ffmpeg, or one without that encoder (named).
     """
     exe = _require_ffmpeg()
-    enc = CODECS[codec]
+    enc = ENCODERS[codec]
     if enc not in ffmpeg_encoders(exe):
         raise VideoError(f"the ffmpeg binary {exe} lacks the {enc} encoder needed for "
                          f"--codec {codec}; choose another --codec or install an ffmpeg with it")
@@ -310,6 +311,9 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
         raise VideoError(f"output {p}: ProRes goes in a .mov or .mkv file, not {suffix}")
     if opt.codec == "h265" and suffix == ".avi":   # AVI has no standard HEVC tag: few play it
         raise VideoError(f"output {p}: H.265 goes in a .mp4, .mov or .mkv file, not .avi")
+    if opt.grey and suffix not in (".mov", ".mkv"):
+        raise VideoError(f"output {p}: {opt.codec} grey frames go in a .mov or .mkv file, "
+                         f"not {suffix}")
     require_encoder(opt.codec)
     check_output_path(p, overwrite=overwrite, inputs=inputs)
     return VideoOutput(p, "video", opt)
@@ -318,7 +322,11 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
 def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     """ffmpeg output arguments of a codec (libx264/libx265 4:2:0, ProRes 422 HQ or 4444 with
     alpha)."""
-    enc = CODECS[opt.codec]
+    enc = ENCODERS[opt.codec]
+    if opt.grey:   # one channel of 16 bits, lossless; data, so no colour tags
+        fmt = ["-pix_fmt", "gray16be"] if opt.codec == "png" else \
+            ["-level", "3", "-g", "1", "-slicecrc", "1", "-pix_fmt", "gray16le"]  # intra only
+        return ["-c:v", enc, *fmt] + _container_args(opt, suffix)
     tags = ["-colorspace", opt.matrix, "-color_range", "tv"] if opt.colour_tags else []
     if opt.codec == "prores":  # 422 HQ, or 4444 with its alpha plane (stored in 16 bits)
         fmt = ["-profile:v", "4", "-pix_fmt", "yuva444p10le", "-alpha_bits", "16"] \
@@ -346,8 +354,10 @@ def _container_args(opt: VideoOptions, suffix: str) -> list[str]:
 
 def _stored_size(size: tuple[int, int], codec: str) -> tuple[int, int]:
     """``(width, height)`` as a codec stores frames of ``size``: 4:2:0 rounds both up to even,
-    ProRes 4:2:2 the width only (edge pixels repeated)."""
+    ProRes 4:2:2 the width only (edge pixels repeated), the grey codecs neither."""
     w, h = int(size[0]), int(size[1])
+    if codec in GREY_CODECS:
+        return w, h
     return w + w % 2, h + (h % 2 if codec != "prores" else 0)
 
 
@@ -526,7 +536,7 @@ class VideoWriter:
         # no scaler in ffmpeg (BENCHMARKS.md, "End to end")
         deep = self.options.deep                 # 16 bits a sample (io.video_depth)
         self._pipe_format = ("rgba64le" if deep else "rgba") if self.options.alpha else \
-            "rgb48le" if deep else "rgb24" if self.options.codec == "prores" else "yuv420p"
+            "gray16le" if self.options.grey else "rgb48le" if deep else "rgb24" if self.options.codec == "prores" else "yuv420p"
         self.stored_size = _stored_size(self.size, self.options.codec)
         if not self._detached:   # a part of a longer video: the parts' writer warns, once
             warn_if_grown(self.path, self.size, self.options.codec)
@@ -568,9 +578,13 @@ class VideoWriter:
         sequence, ``(H, W, 4)`` RGBA and uint16 too; of a video written with alpha, RGBA; of one
         written in 16 bits (:attr:`VideoOptions.deep`), uint16 too; of an OpenEXR sequence,
         float16 or float32 linear RGB, or an :class:`~facetransfer.io.exr.ExrImage`:
-        :func:`facetransfer.io.exr.write_exr`)."""
+        :func:`facetransfer.io.exr.write_exr`; of a video of a grey codec,
+        :attr:`VideoOptions.grey`, ``(H, W) uint16`` only)."""
         if self.result is not None or (self._proc is None and self._tmpdir is None):
             raise VideoError(f"video {self.path} is already closed")
+        if self.options.grey:
+            self._write_grey(frame)
+            return
         if not fits_output(frame.shape, self.size, self.path, self.options.alpha):
             raise VideoError(f"frame of shape {frame.shape} does not match video size "
                              f"{self.size[0]}x{self.size[1]} of {self.path}")
@@ -590,6 +604,18 @@ class VideoWriter:
             img = _yuv420p(img)
         try:
             self._proc.stdin.write(memoryview(img).cast("B"))
+        except OSError:  # ffmpeg stopped (full disk, killed...): report why
+            raise self._ffmpeg_failed() from None
+        self.n_frames += 1
+
+    def _write_grey(self, frame: np.ndarray) -> None:
+        """Append one ``(H, W) uint16`` grey frame to a video of a grey codec."""
+        if tuple(frame.shape) != (self.size[1], self.size[0]) or frame.dtype != np.uint16:
+            raise VideoError(f"{self.path}: {self.options.codec} takes (H, W) uint16 grey "
+                             f"frames of {self.size[0]}x{self.size[1]}, got {frame.shape} "
+                             f"{frame.dtype}")
+        try:
+            self._proc.stdin.write(memoryview(np.ascontiguousarray(frame, "<u2")).cast("B"))
         except OSError:  # ffmpeg stopped (full disk, killed...): report why
             raise self._ffmpeg_failed() from None
         self.n_frames += 1

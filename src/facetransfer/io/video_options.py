@@ -9,7 +9,7 @@ from dataclasses import dataclass
 from ..errors import VideoError
 from .video_display import checked_aspect, checked_colour_name, checked_timecode
 
-__all__ = ["CODECS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS",
+__all__ = ["CODECS", "GREY_CODECS", "ENCODERS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS",
            "DEFAULT_PRESET", "VIDEO_SUFFIXES", "VideoOptions"]
 
 #: Video containers by extension (the ffmpeg muxer of each).
@@ -17,6 +17,11 @@ VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska
                   ".avi": "avi"}
 #: Codec names of ``--codec`` and the ffmpeg encoder each needs.
 CODECS = {"h264": "libx264", "h265": "libx265", "prores": "prores_ks"}
+#: Lossless codecs of one 16-bit grey channel, a video matte's (:mod:`facetransfer.io.matte`;
+#: not ``--codec`` choices): PNG (QuickTime's ``png `` in ``.mov``), FFV1 (``.mkv``).
+GREY_CODECS = {"png": "png", "ffv1": "ffv1"}
+#: The ffmpeg encoder of every codec.
+ENCODERS = {**CODECS, **GREY_CODECS}
 DEFAULT_CODEC = "h264"
 #: Constant rate factor of H.264 / H.265 when none is given (x264: 18 is "visually lossless").
 DEFAULT_CRF = 18
@@ -37,10 +42,12 @@ class VideoOptions:
 
     Attributes
     ----------
-    codec : {"h264", "h265", "prores"}
+    codec : {"h264", "h265", "prores", "png", "ffv1"}
         H.264 (libx264) and H.265 (libx265) are written as 8-bit 4:2:0 (``yuv420p``), what
         browsers and phones play; ProRes 422 HQ (prores_ks, 10-bit 4:2:2) for editing, in
-        ``.mov`` or ``.mkv``.
+        ``.mov`` or ``.mkv``. PNG and FFV1 (:data:`GREY_CODECS`, :attr:`grey`): one grey
+        channel of 16 bits, lossless (frames ``(H, W) uint16``), a matte's, in ``.mov`` or
+        ``.mkv``; no CRF, fields, alpha, colour tags.
     crf : int, optional
         Constant rate factor of H.264 / H.265, 0 (lossless in YUV) to 51; lower is better and
         bigger. Default :data:`DEFAULT_CRF`. ProRes has none.
@@ -107,8 +114,11 @@ class VideoOptions:
     matrix: str = "smpte170m"
 
     def __post_init__(self) -> None:
-        if self.codec not in CODECS:
-            raise VideoError(f"codec must be one of {', '.join(CODECS)}, got {self.codec!r}")
+        if self.codec not in ENCODERS:
+            raise VideoError(f"codec must be one of {', '.join(ENCODERS)}, got {self.codec!r}")
+        if self.grey and (self.crf is not None or self.field or self.alpha or self.deep):
+            raise VideoError(f"{self.codec} writes lossless grey frames: no CRF, fields, "
+                             "alpha or deep colour")
         if self.preset not in PRESETS:
             raise VideoError(f"preset must be one of {', '.join(PRESETS)}, got {self.preset!r}")
         if self.crf is not None:
@@ -144,7 +154,12 @@ class VideoOptions:
                              f"got {n!r}")
 
     @property
+    def grey(self) -> bool:
+        """Whether frames are one lossless 16-bit grey channel (:data:`GREY_CODECS`)."""
+        return self.codec in GREY_CODECS
+
+    @property
     def effective_crf(self) -> int | None:
-        """The CRF used (None for ProRes)."""
-        return None if self.codec == "prores" else int(DEFAULT_CRF if self.crf is None
-                                                       else self.crf)
+        """The CRF used (None for ProRes and the lossless grey codecs)."""
+        return None if self.codec == "prores" or self.grey else \
+            int(DEFAULT_CRF if self.crf is None else self.crf)
