@@ -150,18 +150,85 @@ def test_an_exr_matte_is_tagged_as_data_not_colour(tmp_path):
         assert f.header()["colorInteropID"] == "lin_rec709_scene"
 
 def test_matte_options_follow_the_output():
-    """A matte sequence is numbered, timed and shaped as the output; a matte video takes the
-    output's codec where its container holds it (ProRes in .mp4: H.264), never alpha or
-    16 bits."""
+    """A matte sequence is numbered, timed and shaped as the output; a .mov or .mkv matte is
+    lossless 16-bit grey (PNG, FFV1) whatever the output's codec; an .mp4 matte takes the
+    output's codec (ProRes: H.264), never alpha or 16 bits."""
     out = VideoOptions(codec="prores", first_number=1001, timecode="01:00:00:00", sar=(2, 1),
                        alpha=True, deep=True)
     seq = matte_options(out, "m/%04d.exr")
     assert (seq.first_number, seq.timecode, seq.sar, seq.crf) == (1001, "01:00:00:00", (2, 1),
                                                                   None)
-    assert matte_options(out, "m.mov").codec == "prores"
+    for name, codec in (("m.mov", "png"), ("m.mkv", "ffv1")):
+        o = matte_options(out, name)
+        assert (o.codec, o.grey, o.crf, o.field, o.alpha) == (codec, True, None, None, False)
+        assert (o.timecode, o.sar) == ("01:00:00:00", (2, 1))
+        assert matte_options(VideoOptions(crf=0, field="top"), name).codec == codec
     mp4 = matte_options(out, "m.mp4")
     assert mp4.codec == "h264" and not mp4.alpha and not mp4.deep and mp4.sar == (2, 1)
-    assert matte_options(VideoOptions(crf=0), "m.mkv").crf == 0
+    assert matte_options(VideoOptions(crf=0), "m.mp4").crf == 0
+
+
+def _decoded16(path) -> np.ndarray:
+    """A video's frames as ffmpeg decodes them into 16-bit grey, ``(n, H, W) uint16``."""
+    import subprocess
+
+    from facetransfer.io.video import ffmpeg_exe, video_info
+
+    info = video_info(path)
+    res = subprocess.run([ffmpeg_exe(), "-v", "error", "-i", str(path), "-f", "rawvideo",
+                          "-pix_fmt", "gray16le", "-"], capture_output=True, check=True)
+    W, H = info.size
+    return np.frombuffer(res.stdout, "<u2").reshape(-1, H, W)
+
+
+def _probe(path) -> str:
+    import subprocess
+
+    from facetransfer.io.video import ffmpeg_exe
+
+    return subprocess.run([ffmpeg_exe(), "-hide_banner", "-i", str(path)],
+                          capture_output=True, text=True).stderr
+
+
+@pytest.mark.parametrize("name, codec", [("m.mov", "png"), ("m.mkv", "ffv1")])
+def test_a_mov_or_mkv_matte_is_lossless_16_bit(name, codec, tmp_path, caplog):
+    """A .mov (QuickTime PNG) or .mkv (FFV1) matte decodes back to the 16-bit PNG
+    sequence's levels exactly: 0 stays 0, 1 is 65535, a ramp every level, a touched pixel
+    below the first level is 1; a frame without a face all 0; the output's rate, timecode and
+    pixel aspect; no warning. (The old 8-bit H.264 / ProRes mattes failed every one.)"""
+    a = np.zeros((24, 32), np.float32)
+    a[4:20, 6:26] = np.linspace(0, 1, 16 * 20, dtype=np.float32).reshape(16, 20)
+    a[2, 2] = 1e-7
+    a[0, :] = 1.0
+    path = tmp_path / name
+    opts = matte_options(VideoOptions(codec="prores", timecode="01:00:00:00", sar=(2, 1)), path)
+    with MatteWriter(VideoWriter(path, 24.0, (32, 24), options=opts), path, (32, 24)) as w:
+        w.write(0, a)
+        w.write(1, None)
+        w.write(2, a)
+    assert not caplog.records
+    got = _decoded16(path)
+    want = matte_frame(a, (32, 24), tmp_path / "m.%03d.png")
+    assert got.shape == (3, 24, 32) and want[2, 2] == 1 and want[0].min() == 65535
+    np.testing.assert_array_equal(got[0], want)
+    np.testing.assert_array_equal(got[2], want)
+    assert not got[1].any()
+    said = _probe(path)
+    assert f"Video: {codec}" in said and "gray16" in said and "SAR 2:1" in said
+    assert "24 fps" in said and "01:00:00:00" in said
+    if name.endswith(".mov"):
+        assert "tmcd" in said
+
+
+def test_an_mp4_matte_is_lossy_and_says_so(tmp_path, caplog):
+    """.mp4 holds no lossless codec players read: the matte is 8-bit H.264 as before, and one
+    warning names the lossless choices."""
+    path = tmp_path / "m.mp4"
+    with MatteWriter(VideoWriter(path, 25.0, (32, 24), options=matte_options(None, path)),
+                     path, (32, 24)) as w:
+        w.write(0, np.full((24, 32), 0.5, np.float32))
+    warned = [r.getMessage() for r in caplog.records if r.levelname == "WARNING"]
+    assert len(warned) == 1 and "lossy" in warned[0] and ".mov or .mkv" in warned[0]
 
 
 @pytest.mark.parametrize("matte, said", [
@@ -326,3 +393,59 @@ def test_transfer_video_refuses_a_bad_matte_before_any_work(tmp_path):
             transfer_video(sources, out, None, matte=matte)
         assert said in str(e.value) and str(matte) in str(e.value)
     assert not out.exists()
+
+
+@pytest.mark.parametrize("name", ["m.mov", "m.mkv"])
+def test_a_mov_or_mkv_matte_holds_the_invariant(name, clips, quick_model_path, tmp_path,
+                                               capsys):
+    """``transfer --out out/%03d.png --matte m.mov`` (or ``.mkv``): decoded in 16 bits, the
+    video matte is the 16-bit PNG sequence matte of the same transfer exactly, one frame per
+    output frame at its rate; where it is 0 the output is the plate's pixel to the bit and
+    every pixel the output changed is above 0 in it."""
+    target, plate = _lossless_target(clips, tmp_path)
+    base = _args(clips, target, quick_model_path)
+    code, _, err = run(base + ["--out", tmp_path / "out" / "%03d.png", "--matte",
+                               tmp_path / name], capsys)
+    assert code == 0 and "lossy" not in err, err
+    code, _, err = run(base + ["--out", tmp_path / "o2" / "%03d.png", "--matte",
+                               tmp_path / "seq" / "%03d.png"], capsys)
+    assert code == 0, err
+    mattes = _decoded16(tmp_path / name)
+    assert mattes.shape == (6, *plate.shape[1:3]) and "25 fps" in _probe(tmp_path / name)
+    images = [cv2.cvtColor(f, cv2.COLOR_BGR2RGB) for f in _pngs(tmp_path / "out",
+                                                                 cv2.IMREAD_COLOR)]
+    for image, p, m, s in zip(images, plate, mattes, _pngs(tmp_path / "seq")):
+        np.testing.assert_array_equal(m, s)
+        assert m.max() == 65535
+        _check_invariant(image, p, m)
+
+
+def test_an_interrupted_transfer_continues_its_mov_matte(clips, quick_model_path, tmp_path,
+                                                        capsys, monkeypatch):
+    """A transfer with ``--matte m.mov`` interrupted at frame 4 (parts of 2 frames), then
+    run to the end: the lossless parts are joined by stream copy into a matte equal, decoded
+    in 16 bits, to that of a run at once without the render cache; still QuickTime PNG."""
+    from facetransfer.io import video_parts
+
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "on")
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(video_parts, "PART_FRAMES", 2)
+    stop = [4]
+    calls = interrupt_renders(monkeypatch, stop)
+    base = _args(clips, clips["target"], quick_model_path)
+    args = base + ["--out", tmp_path / "o.mov", "--matte", tmp_path / "m.mov"]
+    code, _, err = run(args, capsys)
+    assert code == 130 and sorted(calls) == [0, 1, 2, 3]
+    assert not (tmp_path / "m.mov").exists()
+    stop[0], calls[:] = None, []
+    code, out, err = run(args, capsys)
+    assert code == 0, err
+    assert sorted(calls) == [4, 5] and "continued an interrupted render from frame 4" in out
+    monkeypatch.setenv("FACETRANSFER_RENDER_CACHE", "off")
+    code, _, err = run(base + ["--out", tmp_path / "once.mov", "--matte",
+                               tmp_path / "once_m.mov"], capsys)
+    assert code == 0, err
+    a, b = _decoded16(tmp_path / "m.mov"), _decoded16(tmp_path / "once_m.mov")
+    assert a.shape[0] == 6 and a.max() == 65535 and np.array_equal(a, b)
+    said = _probe(tmp_path / "m.mov")
+    assert "Video: png" in said and "gray16be" in said
