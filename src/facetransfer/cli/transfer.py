@@ -179,8 +179,8 @@ def _register_transfer(sub) -> None:
                    "frame per output frame (0: the plate's own pixel, to the bit; 1: wholly "
                    "the new face; between on the feathered seam), numbered and timed as "
                    "--out: an image sequence, matte/%%05d.png or .tif (16-bit) or .exr "
-                   "(float), or a video (.mp4, .mov, .mkv: 8 bits, and H.264 is lossy: a "
-                   "sequence is the exact matte)")
+                   "(float), or a video: .mov (PNG) or .mkv (FFV1), 16-bit grey, lossless; "
+                   ".mp4: 8 bits in the output's codec, lossy (warned)")
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
