@@ -449,3 +449,21 @@ def test_an_interrupted_transfer_continues_its_mov_matte(clips, quick_model_path
     assert a.shape[0] == 6 and a.max() == 65535 and np.array_equal(a, b)
     said = _probe(tmp_path / "m.mov")
     assert "Video: png" in said and "gray16be" in said
+
+
+def test_the_grey_codecs_refuse_what_they_cannot_write(tmp_path):
+    """PNG / FFV1 grey: no CRF, fields or alpha; only in .mov / .mkv; (H, W) uint16 frames
+    only, each refusal a VideoError naming the file or option."""
+    from facetransfer.errors import VideoError
+    from facetransfer.io.video import check_video_output
+
+    for bad in (dict(crf=0), dict(field="top"), dict(alpha=True)):
+        with pytest.raises(VideoError, match="lossless grey"):
+            VideoOptions(codec="png", **bad)
+    with pytest.raises(VideoError, match=r"go in a \.mov or \.mkv file, not \.mp4"):
+        check_video_output(tmp_path / "m.mp4", VideoOptions(codec="ffv1"))
+    with VideoWriter(tmp_path / "m.mkv", 25.0, (8, 6), options=VideoOptions(codec="ffv1")) as w:
+        for frame in (np.zeros((6, 8, 3), np.uint8), np.zeros((6, 8), np.uint8)):
+            with pytest.raises(VideoError, match=r"takes \(H, W\) uint16 grey frames of 8x6"):
+                w.write(frame)
+        w.write(np.zeros((6, 8), np.uint16))
