@@ -214,3 +214,32 @@ def test_a_pair_stopped_mid_render_continues_its_result_and_its_matte(
     assert [p.name for p in tifs] == [f"ab.{i:05d}.tif" for i in range(8)]
     assert all(cv2.imread(str(p), cv2.IMREAD_UNCHANGED).dtype == np.uint16 for p in tifs)
     assert _summary(out / "summary.csv")["ab"]["matte"] == str(out / "ab.matte" / "ab.%05d.tif")
+
+
+def test_a_pair_done_again_leaves_no_other_matte_in_its_folder(
+        pairs, quick_model_path, inproc, tmp_path, capsys):
+    """``NAME.matte/`` holds the matte of ``NAME``'s result and nothing else: a rerun in
+    another format removes the earlier format's frames (a compositor pointing a reader at
+    the folder would otherwise find two sequences, ``ab.00000.png`` beside ``ab.00000.exr``),
+    and a pair done again without ``--matte`` (``--overwrite``) removes the matte it no
+    longer made, which its row does not name."""
+    man = tmp_path / "one.csv"
+    man.write_text("".join(pairs[0].read_text().splitlines(keepends=True)[:2]))   # ab
+    out = tmp_path / "out"
+
+    def batch(*more):
+        return _cli(capsys, "batch", "transfer", "--manifest", man, "--model", quick_model_path,
+                    "--out", out, "--workers", "1", "--no-progress", *more)
+
+    code, said, err = batch("--matte", "png")
+    assert code == 0 and "(1 done)" in said, (said, err)
+    code, said, err = batch("--matte", "exr")
+    assert code == 0 and "(1 done)" in said, (said, err)
+    assert sorted(p.name for p in (out / "ab.matte").iterdir()) == \
+        [f"ab.{i:05d}.exr" for i in range(8)]
+    assert _summary(out / "summary.csv")["ab"]["matte"] == str(out / "ab.matte" / "ab.%05d.exr")
+    (out / "ab.matte" / "notes.txt").write_text("mine")      # not a matte's frame: kept
+    code, said, err = batch("--overwrite")
+    assert code == 0 and "(1 done)" in said, (said, err)
+    assert _summary(out / "summary.csv")["ab"]["matte"] == ""
+    assert sorted(p.name for p in (out / "ab.matte").iterdir()) == ["notes.txt"]

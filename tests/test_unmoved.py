@@ -170,3 +170,17 @@ def test_the_sources_mouth_is_still_painted_over(noisy):
     mm = r.mouth_mask
     assert mm.sum() > 200
     np.testing.assert_array_equal(r.rendered[mm], other[mm])
+
+
+def test_a_texture_that_is_not_the_frame_is_looked_up_as_before(noisy, monkeypatch):
+    """A guard: a face texture whose image is not the frame being rewritten (``texture=
+    "constant"``, or another frame's: here the frame's copy, equal in every pixel) gives no
+    lifted positions (:func:`facetransfer.rim.lifted_positions`), and the rule leaves its
+    coordinates alone: the face 0.3 px off is resampled, bit for bit as without the rule."""
+    topo, Vc, cam, frame, tex = noisy
+    other = (topo, Vc, cam, frame, FaceTexture(frame.copy(), tex.uvs, 0))
+    on = _render(other, (0.3, -0.25))
+    off = _render(other, (0.3, -0.25), rule=False, monkeypatch=monkeypatch)
+    np.testing.assert_array_equal(on.rendered, off.rendered)
+    m = on.face_mask
+    assert np.mean((on.rendered[m] != frame[m]).any(axis=-1)) > 0.5

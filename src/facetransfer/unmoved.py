@@ -112,6 +112,12 @@ def unmoved_uvs(uvs: np.ndarray, size: tuple[int, int], lifted: np.ndarray,
     (n, 2) float64 or None
         New coordinates (the vertices of weight 0 keep theirs exactly); None where no vertex
         moved less than ``d1`` (nothing to keep).
+
+    References
+    ----------
+    Vlasic et al. 2005, §6 (the face textured from the target video) and Eq. (7) (the
+    weak-perspective projection giving ``lifted`` and ``drawn``, in the stored pixels of an
+    anamorphic plate too: the texture is looked up in those).
     """
     if not 0.0 <= d0 < d1:
         raise ValueError(f"the weight's distances must satisfy 0 <= d0 < d1, got {d0}, {d1}")

@@ -25,7 +25,12 @@ from .summary import Row
 log = logging.getLogger(__name__)
 
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
-           "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS"]
+           "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
+           "MATTE_FORMATS", "matte_pattern"]
+
+#: The frame file of each ``batch transfer --matte`` format (sequences only: a video matte is
+#: lossy, :mod:`facetransfer.io.matte`).
+MATTE_FORMATS = {"png": ".png", "tiff": ".tif", "exr": ".exr"}
 
 #: Seconds between the saves of a clip's tracking progress (``NAME.partial.npz``): a batch
 #: stopped with Ctrl-C ends its workers, which cannot save on the way out, so a run continued
@@ -231,6 +236,14 @@ def _identity(job, model):
     return None
 
 
+def matte_pattern(out_dir, name: str, suffix: str) -> Path:
+    """Where ``batch transfer --matte`` writes the matte of the job ``name``: a folder of its
+    own beside the result, its frames named as the job, ``DIR/NAME.matte/NAME.%05d.png``
+    (``suffix``: ``.png``, ``.tif`` or ``.exr``, :data:`MATTE_FORMATS`). No result
+    (``DIR/NAME.mp4``) nor another job's matte can be one of its files."""
+    return Path(out_dir) / f"{name}.matte" / f"{name}.%05d{suffix}"
+
+
 def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None) -> Row:
     """Rewrite one target as ``facetransfer transfer`` does
     (:func:`facetransfer.video_transfer.transfer_video`) and write ``out`` (and ``matte``).
@@ -249,7 +262,9 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
     matte : str, optional
         Also write the matte of the pixels the rewrite changed, an image sequence
         (``DIR/NAME.matte/NAME.%05d.png``, as ``transfer --matte``), rendered and continued
-        after an interrupt with ``out``.
+        after an interrupt with ``out``. Once written, that folder's frames of an earlier
+        render in another format (all of them, without ``matte``) are removed
+        (:func:`_remove_other_mattes`).
 
     Returns
     -------
@@ -279,10 +294,36 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
                          progress_factory=None, align=settings["align"],
                          max_frames=settings["max_frames"], parallel=False,
                          video_options=settings.get("video"), matte=matte)
+    _remove_other_mattes(Path(out).parent, job.name, matte)
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
                output=str(out), matte="" if res.matte is None else str(res.matte))
+
+
+def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:
+    """Once pair ``name`` is rendered again: the frames in its matte folder
+    (:func:`facetransfer.batch.run.matte_pattern`) of the formats it did not write now (all of
+    them without ``matte``), an earlier render's, which its row no longer names; the folder
+    itself if that empties it. A compositor reading ``DIR/NAME.matte/`` then finds the matte of
+    ``DIR/NAME.mp4`` or none, never two sequences (``NAME.00000.png`` beside
+    ``NAME.00000.exr``) nor one of other options (after ``--overwrite``). Other files stay."""
+    import re
+
+    folder = matte_pattern(out_dir, name, "").parent
+    if not folder.is_dir():
+        return
+    keep = None if matte is None else Path(matte).suffix
+    stale = [s for s in MATTE_FORMATS.values() if s != keep]
+    rx = re.compile(re.escape(name) + r"\.\d{5,}(" + "|".join(map(re.escape, stale)) + r")\Z")
+    for f in folder.iterdir():
+        if rx.match(f.name) and f.is_file():
+            f.unlink(missing_ok=True)
+    if matte is None:
+        try:
+            folder.rmdir()                # only if nothing else is in it
+        except OSError:
+            pass
 
 
 def rewrite_options(settings: dict):

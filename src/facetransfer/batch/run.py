@@ -20,6 +20,7 @@ from typing import Callable
 from ..io.atomic import same_file
 from . import jobs as J
 from .chunks import MIN_CHUNK, plan_chunks
+from .jobs import MATTE_FORMATS, matte_pattern
 from .digest import (is_legacy, job_key, job_keys, legacy_job_key, options_text, same_job,
                      value_text)
 from .manifest import BatchError
@@ -36,9 +37,6 @@ SUMMARY_NAME = "summary.csv"
 DEFAULT_OVERLAP = 30
 #: Seconds between rewrites of the summary while a run goes on.
 SUMMARY_EVERY = 5.0
-#: The frame file of each ``batch transfer --matte`` format (sequences only: a video matte is
-#: lossy, :mod:`facetransfer.io.matte`).
-MATTE_FORMATS = {"png": ".png", "tiff": ".tif", "exr": ".exr"}
 
 Progress = Callable[[Row], None]
 
@@ -444,14 +442,6 @@ def _done_video(out: Path, name: str) -> Row | None:
     except VideoError:
         return None
     return Row(name, "skipped", frames=info.n_frames, fps=info.fps, output=str(out))
-
-
-def matte_pattern(out_dir, name: str, suffix: str) -> Path:
-    """Where ``batch transfer --matte`` writes the matte of the job ``name``: a folder of its
-    own beside the result, its frames named as the job, ``DIR/NAME.matte/NAME.%05d.png``
-    (``suffix``: ``.png``, ``.tif`` or ``.exr``, :data:`MATTE_FORMATS`). No result
-    (``DIR/NAME.mp4``) nor another job's matte can be one of its files."""
-    return Path(out_dir) / f"{name}.matte" / f"{name}.%05d{suffix}"
 
 
 def matte_patterns(jobs, out_dir: Path, matte: str | None) -> dict[str, Path]:
