@@ -149,7 +149,8 @@ def test_a_video_matte_is_refused_before_any_work(pairs, quick_model_path, tmp_p
              "--out", tmp_path / "out", "--matte", "mov")
     err = [ln for ln in capsys.readouterr().err.splitlines() if ln.startswith("facetransfer")]
     assert e.value.code == 2 and len(err) == 1, err
-    assert "--matte: expected png, tiff, exr (an image sequence: a video matte is lossy" in err[0]
+    assert "--matte: expected png, tiff, exr (an image sequence; `transfer --matte M.mov` " \
+        "writes a lossless video matte of one transfer), got 'mov'" in err[0]
     assert not (tmp_path / "out").exists()
 
 

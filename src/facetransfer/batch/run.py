@@ -456,7 +456,7 @@ def matte_patterns(jobs, out_dir: Path, matte: str | None) -> dict[str, Path]:
         return {}
     if matte not in MATTE_FORMATS:
         raise BatchError(f"--matte must be one of {', '.join(MATTE_FORMATS)} (an image "
-                         f"sequence; a video matte is lossy), got {matte!r}")
+                         f"sequence), got {matte!r}")
     for j in jobs:
         if "%" in j.name or "#" in j.name:
             raise BatchError(f"{j.name!r} cannot name the frames of its matte (% and # are "

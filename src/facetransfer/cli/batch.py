@@ -104,8 +104,8 @@ def register(sub) -> None:
                    "(as `transfer --matte`: 0 where the result is the target's pixel) as "
                    "DIR/NAME.matte/NAME.%%05d.png, numbered from 0 (of a plate target: from "
                    "its first number, as `transfer --matte`): png and tiff (.tif) 16-bit "
-                   "grey, exr float; sequences only, a video matte "
-                   "being lossy (`transfer --matte M.mov` writes one). A rerun adding it does "
+                   "grey, exr float; sequences only (`transfer --matte M.mov` writes a "
+                   "lossless video matte of one transfer). A rerun adding it does "
                    "the pairs without a matte again")
     _cluster_options(r)
     r.set_defaults(func=run_transfer)
@@ -131,8 +131,8 @@ def _matte_format(text: str) -> str:
 
     if text not in MATTE_FORMATS:
         raise argparse.ArgumentTypeError(
-            f"expected {', '.join(MATTE_FORMATS)} (an image sequence: a video matte is lossy; "
-            f"`transfer --matte M.mov` writes one), got {text!r}")
+            f"expected {', '.join(MATTE_FORMATS)} (an image sequence; `transfer --matte "
+            f"M.mov` writes a lossless video matte of one transfer), got {text!r}")
     return text
 
 
