@@ -142,7 +142,7 @@ def test_batch_mattes_are_transfer_s_and_reruns_do_only_what_lacks_one(
 
 
 def test_a_video_matte_is_refused_before_any_work(pairs, quick_model_path, tmp_path, capsys):
-    """``--matte mov`` (a lossy video): one line, exit 2, no output folder."""
+    """``--matte mov`` (a video, not a sequence): one line, exit 2, no output folder."""
     man, _ = pairs
     with pytest.raises(SystemExit) as e:                 # the parser's error
         _cli(capsys, "batch", "transfer", "--manifest", man, "--model", quick_model_path,
@@ -166,8 +166,7 @@ def test_each_job_s_matte_has_a_folder_of_its_own():
 
 
 @pytest.mark.parametrize("matte, name, said", [
-    ("mov", "a", "--matte must be one of png, tiff, exr (an image sequence; a video matte is "
-     "lossy), got 'mov'"),
+    ("mov", "a", "--matte must be one of png, tiff, exr (an image sequence), got 'mov'"),
     ("png", "sh%03", "'sh%03' cannot name the frames of its matte"),
     ("exr", "take#2", "'take#2' cannot name the frames of its matte")])
 def test_the_library_refuses_a_bad_matte_before_any_folder(matte, name, said, tmp_path):
