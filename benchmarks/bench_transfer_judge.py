@@ -48,6 +48,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import _mp_points as mp  # noqa: E402
+from _mp_video import filtered_stderr  # noqa: E402
 
 SHAPES = ("jawOpen", "mouthPucker", "mouthSmileLeft", "mouthSmileRight", "browInnerUp",
           "eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight", "eyeSquintLeft",
@@ -76,7 +77,8 @@ def scores(frames, fps: float, sar: tuple[int, int] = (1, 1)):
     older tree's results alike)."""
     from facetransfer.fidelity import landmarker_scores
 
-    shapes, P = landmarker_scores(_shown(frames, sar), fps)
+    with filtered_stderr():                    # MediaPipe's native log lines
+        shapes, P = landmarker_scores(_shown(frames, sar), fps)
     return shapes, {name: mp.measure(P, pairs) for name, pairs in GEOMETRY.items()}
 
 
@@ -196,10 +198,11 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
     cache = out / "judge_pairs"
     cache.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    plan = tp.plan_transfer(data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4",
-                            max_frames=frames,
-                            target_track=_track(tgt, model, cache, data, every),
-                            expression_track=_track(src, model, cache, data))
+    with filtered_stderr():                    # MediaPipe's native log lines
+        plan = tp.plan_transfer(data / f"{tgt}.mp4", model,
+                                expression_from=data / f"{src}.mp4", max_frames=frames,
+                                target_track=_track(tgt, model, cache, data, every),
+                                expression_track=_track(src, model, cache, data))
     n = plan.n_frames
     source = [plan.mouth_frames[plan.mouth_index[i]] for i in range(n)]
     target = [plan.target_frames[i] for i in range(n)]
