@@ -566,8 +566,7 @@ def _render_in_processes(one, target_frames, todo: range, workers: int, progress
                         pending.append(pool.submit(_render_job, nxt))
                         nxt += 1
                     part = pending.popleft().result()
-                    res = _paste(np.asarray(target_frames[done]), part,
-                                 matte=getattr(one, "matte", False))
+                    res = _paste(np.asarray(target_frames[done]), part, matte=one.matte)
                 except BrokenProcessPool as exc:
                     log.warning("render workers failed (%s); rendering here", exc)
                     broken = True

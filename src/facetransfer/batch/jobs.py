@@ -28,8 +28,8 @@ __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chun
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
            "MATTE_FORMATS", "matte_pattern"]
 
-#: The frame file of each ``batch transfer --matte`` format (sequences only: a video matte is
-#: lossy, :mod:`facetransfer.io.matte`).
+#: The frame file of each ``batch transfer --matte`` format (image sequences only, one file a
+#: frame: :mod:`facetransfer.io.matte`).
 MATTE_FORMATS = {"png": ".png", "tiff": ".tif", "exr": ".exr"}
 
 #: Seconds between the saves of a clip's tracking progress (``NAME.partial.npz``): a batch

@@ -528,11 +528,10 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     -------
     BatchResult
     """
-    matte_patterns(jobs, Path(out_dir), matte)      # a bad format or name: before any folder
+    mattes = matte_patterns(jobs, Path(out_dir), matte)   # a bad one: before any folder
     out_dir = prepare_out_dir(out_dir)
     prores = getattr(settings.get("video"), "codec", None) == "prores"
     outs = _outputs(jobs, out_dir, ".mov" if prores else ".mp4")
-    mattes = matte_patterns(jobs, out_dir, matte)
     what = f"transfer {sorted((k, repr(v)) for k, v in settings.items())} {model.content_hash}"
     keys = job_keys(jobs, what)
     done = {} if overwrite else _kept(jobs, outs, out_dir, keys,

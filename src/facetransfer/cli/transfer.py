@@ -420,7 +420,6 @@ def _check_option_pairs(args) -> None:
                                     f"{other}: give one of them")
 
 
-
 def _check_transfer_outputs(args, inputs: list):
     """The outputs of ``transfer`` checked (``--out``, ``--matte``, ``--meshes``,
     ``--save-track``), none of them one of ``inputs``; the output's video options
@@ -444,6 +443,7 @@ def _check_transfer_outputs(args, inputs: list):
         check_track_name(args.save_track, "--save-track")
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
     return vopt
+
 
 def _check_transfer_args(args):
     """The arguments' one-line errors, the outputs and every input video checked before any

@@ -115,11 +115,9 @@ def matte_options(options: VideoOptions | None, matte) -> VideoOptions:
     lossless = LOSSLESS_MATTE_CODECS.get(Path(matte).suffix.lower())
     if lossless is not None:   # fields: each frame's matte is whole, as the sequence's
         return replace(kept, codec=lossless, colour_tags=False)
-    codec = opt.codec
-    if codec == "prores" and Path(matte).suffix.lower() not in (".mov", ".mkv"):
-        codec = "h264"
-    return replace(kept, codec=codec, crf=None if codec == "prores" else opt.crf,
-                   preset=opt.preset, field=None if codec == "h265" else opt.field)
+    codec = "h264" if opt.codec == "prores" else opt.codec   # (ProRes: .mov and .mkv only)
+    return replace(kept, codec=codec, crf=opt.crf, preset=opt.preset,
+                   field=None if codec == "h265" else opt.field)
 
 
 def matte_frame(matte: np.ndarray | None, size: tuple[int, int], path) -> np.ndarray:

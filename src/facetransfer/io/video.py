@@ -536,7 +536,8 @@ class VideoWriter:
         # no scaler in ffmpeg (BENCHMARKS.md, "End to end")
         deep = self.options.deep                 # 16 bits a sample (io.video_depth)
         self._pipe_format = ("rgba64le" if deep else "rgba") if self.options.alpha else \
-            "gray16le" if self.options.grey else "rgb48le" if deep else "rgb24" if self.options.codec == "prores" else "yuv420p"
+            "gray16le" if self.options.grey else "rgb48le" if deep else \
+            "rgb24" if self.options.codec == "prores" else "yuv420p"
         self.stored_size = _stored_size(self.size, self.options.codec)
         if not self._detached:   # a part of a longer video: the parts' writer warns, once
             warn_if_grown(self.path, self.size, self.options.codec)

@@ -32,9 +32,10 @@ def like_video(options: VideoOptions | None, video, out=None) -> VideoOptions:
     first (H.264 and ProRes; warned of once for H.265, which writes progressive frames). Of an
     image sequence (:mod:`facetransfer.io.video_sequence`) its first frame number, for an
     output sequence numbered as it is, its first frame's header's timecode and pixel aspect
-    ratio, and the colour its frames are shown in (:func:`plate_colour`); of a video with a start timecode (a camera's, an
-    editor's), that timecode, where ``options`` give none (:attr:`VideoOptions.timecode`: the
-    rewrite starts at its first frame). None or not a video: ``options`` as they are. A
+    ratio, and the colour its frames are shown in (:func:`plate_colour`); of a video with a
+    start timecode (a camera's, an editor's), that timecode, where ``options`` give none
+    (:attr:`VideoOptions.timecode`: the rewrite starts at its first frame). None or not a
+    video: ``options`` as they are. A
     ``video`` with an alpha channel is warned of once unless the output ``out`` (given by a
     command that carries alpha) keeps it (:mod:`facetransfer.io.plate_alpha`): an RGBA PNG
     or TIFF plate or a video written as a PNG or TIFF sequence, a video written as ProRes

@@ -9,8 +9,8 @@ from dataclasses import dataclass
 from ..errors import VideoError
 from .video_display import checked_aspect, checked_colour_name, checked_timecode
 
-__all__ = ["CODECS", "GREY_CODECS", "ENCODERS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF", "CRF_RANGE", "PRESETS",
-           "DEFAULT_PRESET", "VIDEO_SUFFIXES", "VideoOptions"]
+__all__ = ["CODECS", "GREY_CODECS", "ENCODERS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF",
+           "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "VideoOptions"]
 
 #: Video containers by extension (the ffmpeg muxer of each).
 VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska",
