@@ -166,6 +166,45 @@ def test_the_recorded_numbering_is_checked_when_a_track_is_read(arkit_model, mak
         dataclasses.replace(track, source_facts=(1001, None))
 
 
+
+@pytest.mark.parametrize("kind, timecode, facts", [
+    ("plate", None, SourceFacts(1001, None)),
+    ("video", "01:00:00:00", SourceFacts(0, "01:00:00:00")),
+    ("video", None, SourceFacts(0, None))])
+def test_a_chunked_batch_track_records_its_clips_numbering(kind, timecode, facts, arkit_model,
+                                                           make_arkit_track, tmp_path):
+    """``batch track --chunk``: each chunk is tracked from decoded frames, which know no first
+    frame number nor timecode (their tracks record none); the joined track records the clip's
+    (a plate's first number, a video's start timecode, or none), as a clip tracked whole does,
+    and its file keeps them. Before this test nothing checked it: a join keeping its first
+    chunk's ``None`` would have left its exports to read the clip again (from 0 once it moved)."""
+    from facetransfer.batch.chunks import plan_chunks
+    from facetransfer.batch.jobs import ChunkResult, join_clip
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.track.project import take_frames
+
+    track, _, _ = make_arkit_track(arkit_model, 9)
+    frames = np.full((9, 24, 32, 3), 90, np.uint8)
+    if kind == "plate":
+        src = _clip_at("plate", tmp_path / "shot", frames)
+    else:
+        from facetransfer.io.video import VideoOptions, write_video
+
+        src = tmp_path / "clip.mov"
+        write_video(src, frames, 25.0, options=VideoOptions(crf=0, timecode=timecode))
+    chunks = plan_chunks(9, 5, 2)
+    assert len(chunks) == 3
+    results = [ChunkResult(dataclasses.replace(
+        take_frames(track, np.arange(c.start, c.stop)), source=str(src), source_facts=None), 1.0)
+        for c in chunks]
+    out = tmp_path / "joined.npz"
+    join_clip(ClipJob("sh010", str(src)), str(out), arkit_model, chunks, results)
+    joined = Track.load(out)
+    assert joined.n_frames == 9 and joined.source_facts == facts
+    with np.load(out) as z:
+        assert int(z["source_first_frame"]) == facts.first_frame
+        assert str(z["source_timecode"]) == (facts.timecode or "")
+
 # ------------------------------------------------------------------ activations (CLI)
 @pytest.fixture()
 def bare(arkit_model, make_arkit_track, tmp_path):

@@ -303,8 +303,8 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
 
 def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:
     """Once pair ``name`` is rendered again: the frames in its matte folder
-    (:func:`facetransfer.batch.run.matte_pattern`) of the formats it did not write now (all of
-    them without ``matte``), an earlier render's, which its row no longer names; the folder
+    (:func:`matte_pattern`) of the formats it did not write now (all of them without
+    ``matte``), an earlier render's, which its row no longer names; the folder
     itself if that empties it. A compositor reading ``DIR/NAME.matte/`` then finds the matte of
     ``DIR/NAME.mp4`` or none, never two sequences (``NAME.00000.png`` beside
     ``NAME.00000.exr``) nor one of other options (after ``--overwrite``). Other files stay."""

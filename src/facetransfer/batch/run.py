@@ -520,9 +520,9 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     progress : callable(Row), optional
     matte : {"png", "tiff", "exr"}, optional
         Also write each pair's matte (:func:`matte_pattern`, numbered as the result's frames
-        from 0; :mod:`facetransfer.io.matte`). Not in the job digest (the result is the same
-        with it or without): a pair whose result is kept but whose matte is not there is
-        done again, result and matte.
+        from 0, a plate target's from its first number; :mod:`facetransfer.io.matte`). Not in
+        the job digest (the result is the same with it or without): a pair whose result is
+        kept but whose matte is not whole there is done again, result and matte.
 
     Returns
     -------

@@ -6,7 +6,7 @@
         [--pose-from P.mp4] [--model M.npz] [--align trim|loop|hold] [--max-frames N]
         [--mouth frame|function] [--codec h264|h265|prores] [--crf 18]
         [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png
-        [--matte matte/%05d.png|M.exr...] [--overwrite]
+        [--matte matte/%05d.png|matte/%05d.exr|M.mov|M.mkv...] [--overwrite]
     facetransfer edit TRACK.npz [--model M.npz] --add frown@120-180 --scale smile=1.5 --out T2.npz
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
     facetransfer puppet VIDEO [--model M.npz] --identity LABEL --out OUT.mp4

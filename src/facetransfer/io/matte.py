@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import OutputError
+from ..errors import FaceTransferError, OutputError
 from .output_names import suffix_list
 from .video import VideoOptions, VideoOutput, check_video_output, is_image_pattern
 from .video_sequence import same_sequence_files
@@ -78,10 +78,9 @@ def check_matte_output(matte: str | os.PathLike, *, out, options: VideoOptions |
     Raises
     ------
     MatteError
-        Another kind of file, or ``out``'s name.
-    VideoError, OutputError
-        As :func:`~facetransfer.io.video.check_video_output` says (exists, an input, no such
-        folder).
+        Another kind of file, or ``out``'s name; or what
+        :func:`~facetransfer.io.video.check_video_output` refuses (exists, an input, no such
+        folder), its words after ``--matte:`` (the option named, as the CLI's one line).
     """
     p = Path(matte)
     suffix = p.suffix.lower()
@@ -98,8 +97,11 @@ def check_matte_output(matte: str | os.PathLike, *, out, options: VideoOptions |
     if os.path.abspath(p) == os.path.abspath(o) or (
             is_image_pattern(p) and is_image_pattern(o) and same_sequence_files(p, o)):
         raise MatteError(f"--matte {p} is also --out: give the matte its own name")
-    return check_video_output(p, matte_options(options, p), overwrite=overwrite,
-                              inputs=[q for q in inputs if q is not None])
+    try:
+        return check_video_output(p, matte_options(options, p), overwrite=overwrite,
+                                  inputs=[q for q in inputs if q is not None])
+    except FaceTransferError as exc:   # "output X exists": which of the outputs, said
+        raise MatteError(f"--matte: {exc}") from exc
 
 
 def matte_options(options: VideoOptions | None, matte) -> VideoOptions:
