@@ -155,14 +155,27 @@ def test_a_video_matte_is_refused_before_any_work(pairs, quick_model_path, tmp_p
 
 
 def test_each_job_s_matte_has_a_folder_of_its_own():
-    """The layout: beside the result, named as the job, one folder per job (no file of one
-    job's matte is another's, nor a result)."""
+    """The layout: beside the result, named as the job, one folder per job, holding that job's
+    frames only: no file of one job's matte nor a result lies in another job's matte folder,
+    even of names made to collide (``a`` beside ``a.matte``, ``a.00000``). (Before, the last
+    check compared ``D/a.matte`` with ``D/a.matte.matte``, which no layout could fail.)"""
     from facetransfer.batch.run import MATTE_FORMATS, matte_pattern
 
     assert matte_pattern(Path("D"), "sh010", ".png") == Path("D/sh010.matte/sh010.%05d.png")
     assert [matte_pattern("D", "a", s).name for s in MATTE_FORMATS.values()] == \
         ["a.%05d.png", "a.%05d.tif", "a.%05d.exr"]
-    assert matte_pattern("D", "a", ".png").parent != matte_pattern("D", "a.matte", ".png").parent
+    names = ["a", "a.matte", "a.00000", "a.matte.matte", "b"]
+    folders = {n: matte_pattern("D", n, ".png").parent for n in names}
+    assert len(set(folders.values())) == len(names)
+    frames = {n: {Path(str(matte_pattern("D", n, s)) % i) for s in MATTE_FORMATS.values()
+                  for i in (0, 1, 1001)} for n in names}
+    results = {n: {Path("D") / f"{n}{e}" for e in (".mp4", ".mov")} for n in names}
+    for n in names:
+        assert all(f.parent == folders[n] for f in frames[n])
+        for other in names:
+            if other != n:
+                assert not any(f.is_relative_to(folders[n])
+                               for f in frames[other] | results[other]), (n, other)
 
 
 @pytest.mark.parametrize("matte, name, said", [

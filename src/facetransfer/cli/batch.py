@@ -49,16 +49,21 @@ def _track_options(p) -> None:
 
 def register(sub) -> None:
     """Add ``batch track``, ``batch transfer`` and ``batch export`` to the parser."""
-    from ..batch.run import DEFAULT_OVERLAP
     from .common import DefaultsFormatter, add_command_group
-    from .transfer import ALIGN_HELP, add_rewrite_options
 
-    fmt = DefaultsFormatter
     bs = add_command_group(sub, "batch", dest="batch_command", metavar="COMMAND",
                            help="many clips at once on Dask distributed (track, transfer, "
                            "export)", description="Run track, transfer or export over many "
                            "clips on an embedded Dask cluster or a real one; one output per "
                            "clip and DIR/summary.csv.")
+    _register_track(bs, DefaultsFormatter)
+    _register_transfer(bs, DefaultsFormatter)
+    _register_export(bs, DefaultsFormatter)
+
+
+def _register_track(bs, fmt) -> None:
+    """``batch track``'s parser."""
+    from ..batch.run import DEFAULT_OVERLAP
 
     t = bs.add_parser("track", formatter_class=fmt, help="track many clips: DIR/NAME.npz each",
                       description="Track every clip as `facetransfer track` does, one task per "
@@ -85,6 +90,11 @@ def register(sub) -> None:
     _cluster_options(t)
     t.set_defaults(func=run_track)
 
+
+def _register_transfer(bs, fmt) -> None:
+    """``batch transfer``'s parser: ``transfer``'s rewrite and video options, ``--matte``."""
+    from .transfer import ALIGN_HELP, add_rewrite_options
+
     r = bs.add_parser("transfer", formatter_class=fmt,
                       help="many transfers: DIR/NAME.mp4 each (.mov as ProRes)",
                       description="Run `facetransfer transfer` for every row of a pairs "
@@ -105,11 +115,14 @@ def register(sub) -> None:
                    "DIR/NAME.matte/NAME.%%05d.png, numbered from 0 (of a plate target: from "
                    "its first number, as `transfer --matte`): png and tiff (.tif) 16-bit "
                    "grey, exr float; sequences only (`transfer --matte M.mov` writes a "
-                   "lossless video matte of one transfer). A rerun adding it does "
-                   "the pairs without a matte again")
+                   "lossless video matte of one transfer). A rerun with it does again "
+                   "the pairs whose matte is not there whole in that format")
     _cluster_options(r)
     r.set_defaults(func=run_transfer)
 
+
+def _register_export(bs, fmt) -> None:
+    """``batch export``'s parser."""
     e = bs.add_parser("export", formatter_class=fmt, help="export many tracks: DIR/NAME.<ext>",
                       description="Run `facetransfer export` for every track file.")
     e.add_argument("tracks", nargs="+", metavar="TRACK.npz")
