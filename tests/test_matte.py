@@ -477,3 +477,38 @@ def test_the_grey_codecs_refuse_what_they_cannot_write(tmp_path):
             with pytest.raises(VideoError, match=r"takes \(H, W\) uint16 grey frames of 8x6"):
                 w.write(frame)
         w.write(np.zeros((6, 8), np.uint16))
+
+
+def test_a_plate_targets_matte_is_numbered_as_the_plate(clips, quick_model_path, tmp_path,
+                                                        capsys, monkeypatch):
+    """A PNG plate numbered from 1001 as the target, ``--out o.mp4 --matte m/sh010.%04d.exr``:
+    the matte's frames numbered 1001-1006 as the plate (``--start-number``'s default, which
+    README and ``--help`` promise; no test held it), said so, each the PNG matte of the same
+    transfer to its level; with ``--start-number 7`` from 7. A video target's matte is numbered
+    from 0 (the other tests)."""
+    import OpenEXR
+
+    from test_video_sequence import _plate
+    from test_transfer_cli import plate_transfer_args
+
+    monkeypatch.setenv("FACETRANSFER_SEQUENCE_FPS", "25")   # undone after (the CLI sets it)
+    _plate(tmp_path / "plate", read_video(clips["target"])[0])
+    base = ["transfer", "--target", tmp_path / "plate" / "sh010.####.png",
+            *plate_transfer_args(clips, quick_model_path)]
+    code, out, err = run(base + ["--out", tmp_path / "o.mp4", "--matte",
+                                 tmp_path / "m" / "sh010.%04d.exr"], capsys)
+    assert code == 0, err
+    assert f"wrote the matte {tmp_path / 'm' / 'sh010.%04d.exr'} numbered 1001-1006" in out
+    assert sorted(q.name for q in (tmp_path / "m").iterdir()) == \
+        [f"sh010.{1001 + i:04d}.exr" for i in range(6)]
+    code, _, err = run(base + ["--out", tmp_path / "p.mp4", "--matte",
+                               tmp_path / "pm" / "%03d.png", "--start-number", "7"], capsys)
+    assert code == 0, err
+    pngs = sorted((tmp_path / "pm").iterdir())
+    assert [q.name for q in pngs] == [f"{7 + i:03d}.png" for i in range(6)]
+    for i, q in enumerate(pngs):
+        m16 = cv2.imread(str(q), cv2.IMREAD_UNCHANGED)
+        with OpenEXR.File(str(tmp_path / "m" / f"sh010.{1001 + i:04d}.exr")) as f:
+            a = np.asarray(f.channels()["Y"].pixels)
+        assert m16.max() == 65535 and np.array_equal(a == 0, m16 == 0)
+        assert np.abs(a * 65535 - m16).max() <= 0.5 + 1e-3

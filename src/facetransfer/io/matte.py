@@ -135,11 +135,17 @@ def matte_frame(matte: np.ndarray | None, size: tuple[int, int], path) -> np.nda
         raise MatteError(f"matte of shape {a.shape} does not match the size {W}x{H} of {path}")
     if Path(path).suffix.lower() == ".exr":
         return a
-    deep = is_image_pattern(path) or Path(path).suffix.lower() in LOSSLESS_MATTE_CODECS
+    deep = not _lossy(path)
     top = 65535.0 if deep else 255.0
     v = np.rint(a * np.float32(top)).astype(np.uint16 if deep else np.uint8)
     v[(v == 0) & (a > 0)] = 1       # touched: never the plate's 0
     return v if deep else np.repeat(v[..., None], 3, axis=2)
+
+
+def _lossy(path) -> bool:
+    """Whether the matte ``path`` is a video of 8 lossy bits (an ``.mp4``), not a sequence nor
+    a lossless video (:data:`LOSSLESS_MATTE_CODECS`)."""
+    return not is_image_pattern(path) and Path(path).suffix.lower() not in LOSSLESS_MATTE_CODECS
 
 
 class MatteWriter:
@@ -161,8 +167,7 @@ class MatteWriter:
     def __init__(self, writer, path, size: tuple[int, int]) -> None:
         self.writer, self.path, self.size = writer, Path(path), tuple(size)
         self.done = int(getattr(writer, "done", 0))
-        if not is_image_pattern(self.path) and \
-                self.path.suffix.lower() not in LOSSLESS_MATTE_CODECS:
+        if _lossy(self.path):
             log.warning("%s: an %s matte is lossy, 8 bits (its 0 may decode above 0, its 1 "
                         "below): for a matte to key on write a .mov or .mkv (16-bit lossless) "
                         "or a sequence (matte/%%05d.png, .tif, .exr)", self.path,
