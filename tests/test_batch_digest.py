@@ -172,6 +172,50 @@ def test_the_key_of_the_format_before_is_the_one_it_wrote(tmp_path):
     assert not digest.same_job("c1a2914ef075a7cb", "v2:00", legacy)
 
 
+def test_a_key_of_options_worded_as_before_is_asked_only_for_this_format():
+    """``before()`` (this job's key with its options as a version before wrote them) is
+    compared with a ``v2:`` key that differs from this run's only, never with a key of the
+    format before (``legacy``'s) nor with one of no format."""
+    asked = []
+
+    def before():
+        asked.append(1)
+        return "v2:01"
+
+    assert digest.same_job("v2:00", "v2:00", None, before) and not asked
+    assert not digest.same_job("c1a2914ef075a7ca", "v2:00", None, before) and not asked
+    assert not digest.same_job("unknown", "v2:00", None, before) and not asked
+    assert digest.same_job("v2:01", "v2:00", None, before) and asked == [1]
+    assert not digest.same_job("v2:02", "v2:00", None, before) and asked == [1, 1]
+
+
+def test_a_batch_transfers_options_leave_their_defaults_out():
+    """``batch transfer``'s options in its digests: an option added at its default (a setting
+    of None, as ``--align`` unset) leaves them as they were, so that a version adding one keeps
+    every earlier output (before: every setting's ``repr``, which any added key changed); an
+    option changed, the video's included, changes them."""
+    import types
+
+    from facetransfer.batch.run import _transfer_what_before, transfer_what
+    from facetransfer.io.video_options import VideoOptions
+
+    model = types.SimpleNamespace(content_hash="abc")
+    settings = {"texture": "frame", "blend": "fast", "mouth": None, "align": None,
+                "max_frames": None, "track_method": "auto", "speed": "fast", "eyes": "model",
+                "jaw": "closed", "lips": "residual", "lip_colour": "target",
+                "gaze": "performance", "video": VideoOptions()}
+    what = transfer_what(settings, model)
+    assert what == "transfer RewriteOptions() video=VideoOptions() abc"
+    assert transfer_what({**settings, "new_option": None}, model) == what
+    assert _transfer_what_before({**settings, "new_option": None}, model) != \
+        _transfer_what_before(settings, model)
+    changed = {transfer_what({**settings, **more}, model) for more in (
+        {"blend": "poisson"}, {"max_frames": 30}, {"align": "loop"},
+        {"video": VideoOptions(crf=0)}, {"video": None})}
+    assert len(changed) == 5 and what not in changed
+    assert transfer_what(settings, types.SimpleNamespace(content_hash="abd")) != what
+
+
 def test_an_option_that_is_a_file_is_its_content(tmp_path, cache):
     tex = tmp_path / "tex.png"
     tex.write_bytes(b"texture")

@@ -286,3 +286,35 @@ def test_a_plate_targets_matte_is_numbered_as_the_plate_and_kept(pairs, clips, q
     assert _stamps(out / "sh010.matte") == before
     assert _summary(out / "summary.csv")["sh010"]["matte"] == \
         str(out / "sh010.matte" / "sh010.%05d.png")
+
+
+def test_a_summary_written_before_the_options_left_their_defaults_out_keeps_its_results(
+        pairs, quick_model_path, inproc, tmp_path, capsys, monkeypatch):
+    """A ``batch transfer`` summary whose digests hold every setting's ``repr`` (the version
+    before :func:`facetransfer.batch.run.transfer_what`): the same command now skips both
+    pairs, their results untouched, and records the digests of the words now; a changed
+    option still refuses them (a failed row, the result kept)."""
+    from facetransfer.batch import run as batch_run
+
+    man, _ = pairs
+    out = tmp_path / "out"
+
+    def batch(*more):
+        return _cli(capsys, "batch", "transfer", "--manifest", man, "--model", quick_model_path,
+                    "--out", out, "--workers", "1", "--no-progress", *more)
+
+    now = batch_run.transfer_what
+    monkeypatch.setattr(batch_run, "transfer_what", batch_run._transfer_what_before)
+    code, said, err = batch()
+    assert code == 0 and "(2 done)" in said, (said, err)
+    old = {n: r["job"] for n, r in _summary(out / "summary.csv").items()}
+    made = {n: (out / f"{n}.mp4").stat().st_mtime_ns for n in ("ab", "ba")}
+    monkeypatch.setattr(batch_run, "transfer_what", now)
+    code, said, err = batch()
+    assert code == 0 and "(2 skipped)" in said, (said, err)
+    rows = _summary(out / "summary.csv")
+    assert all(rows[n]["job"].startswith("v2:") and rows[n]["job"] != old[n] for n in made)
+    assert {n: (out / f"{n}.mp4").stat().st_mtime_ns for n in made} == made
+    code, said, err = batch("--blend", "none")
+    assert code == 1 and "(2 failed)" in said, (said, err)
+    assert {n: (out / f"{n}.mp4").stat().st_mtime_ns for n in made} == made

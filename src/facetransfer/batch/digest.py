@@ -149,13 +149,18 @@ def is_legacy(key: str) -> bool:
     return bool(_LEGACY.fullmatch(key or ""))
 
 
-def same_job(made: str, key: str, legacy: Callable[[], str] | None = None) -> bool:
+def same_job(made: str, key: str, legacy: Callable[[], str] | None = None,
+             before: Callable[[], str] | None = None) -> bool:
     """Whether an output recorded as made by the job ``made`` is the output of the job of
-    ``key``: the same key, or a key of the format before equal to ``legacy()`` (this job's key
-    computed that way; asked only then)."""
+    ``key``: the same key; a key of the format before equal to ``legacy()`` (this job's key
+    computed that way); or a key of this format equal to ``before()`` (this job's key with its
+    options in the words a version before wrote them: ``batch transfer``'s, which held every
+    setting's ``repr``). Each is asked only then."""
     if made == key:
         return True
-    return legacy is not None and is_legacy(made) and made == legacy()
+    if is_legacy(made):
+        return legacy is not None and made == legacy()
+    return before is not None and made.startswith(KEY_FORMAT) and made == before()
 
 
 def options_text(options) -> str:

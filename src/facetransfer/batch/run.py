@@ -30,7 +30,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["BatchResult", "check_out_dir", "prepare_out_dir", "batch_track", "batch_transfer",
            "batch_export", "job_key", "options_text", "SUMMARY_NAME", "DEFAULT_OVERLAP",
-           "MATTE_FORMATS", "matte_pattern", "matte_patterns"]
+           "MATTE_FORMATS", "matte_pattern", "matte_patterns", "transfer_what"]
 
 SUMMARY_NAME = "summary.csv"
 #: Frames shared by neighbouring chunks (1.2 s at 25 fps).
@@ -398,12 +398,13 @@ REDO = "remove it to redo this clip alone, or --overwrite redoes every clip"
 
 
 def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found,
-          legacy: Callable | None = None) -> dict[str, Row]:
+          legacy: Callable | None = None, before: Callable | None = None) -> dict[str, Row]:
     """The rows of the outputs a rerun keeps: ``found(out, name)`` (a skipped row, or None),
     with this run's job digest; an output the summary says another job made (its inputs or
     options changed since) is a failed row naming ``--overwrite``, not this job's result.
-    ``legacy(job)``: the job's digest of the format before (:func:`.digest.same_job`: a summary
-    an older version wrote still keeps what it finished; the row then gets the new digest)."""
+    ``legacy(job)``: the job's digest of the format before; ``before(job)``: of this format
+    with the options as a version before wrote them (:func:`.digest.same_job`: a summary an
+    older version wrote still keeps what it finished; the row then gets the new digest)."""
     earlier, done = _earlier(out_dir), {}
     for j in jobs:
         r = found(outs[j.name], j.name)
@@ -411,7 +412,8 @@ def _kept(jobs, outs: dict, out_dir: Path, keys: dict, found,
             continue
         made = earlier.get(j.name, keys[j.name])
         old = None if legacy is None else (lambda job=j: legacy(job))
-        if r.ok and not same_job(made, keys[j.name], old):  # (a failed row says its own why)
+        worded = None if before is None else (lambda job=j: before(job))
+        if r.ok and not same_job(made, keys[j.name], old, worded):  # (a failed row: its why)
             r = _refused(j.name, outs[j.name], made)
         # a refused output keeps its maker's digest: a later run still knows it
         done[j.name] = dataclasses.replace(r, job=keys[j.name] if r.ok
@@ -532,11 +534,12 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     out_dir = prepare_out_dir(out_dir)
     prores = getattr(settings.get("video"), "codec", None) == "prores"
     outs = _outputs(jobs, out_dir, ".mov" if prores else ".mp4")
-    what = f"transfer {sorted((k, repr(v)) for k, v in settings.items())} {model.content_hash}"
+    what, worded = transfer_what(settings, model), _transfer_what_before(settings, model)
     keys = job_keys(jobs, what)
     done = {} if overwrite else _kept(jobs, outs, out_dir, keys,
                                       _TransferOutputs(out_dir, mattes),
-                                      lambda job: legacy_job_key(job, what))
+                                      lambda job: legacy_job_key(job, worded),
+                                      lambda job: job_keys([job], worded)[job.name])
     # a result kept without the matte asked for: the pair done again (its render gives both)
     done = {n: r for n, r in done.items() if not (r.ok and n in mattes and not r.matte)}
 
@@ -546,6 +549,34 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
                              None if m is None else str(m), pure=False)
 
     return _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys)
+
+
+def transfer_what(settings: dict, model) -> str:
+    """The options and model of a ``batch transfer`` in its job digests: the rewrite's
+    (:class:`~facetransfer.rewrite_options.RewriteOptions`) and every other setting but those
+    that are None by :func:`.digest.options_text` (a dataclass's fields at their defaults left
+    out, the video's :class:`~facetransfer.io.video_options.VideoOptions` too). A version that
+    adds an option at its default thus leaves every earlier output this job's, as ``batch
+    track``'s digest does; before, each setting's ``repr`` was in it
+    (:func:`_transfer_what_before`): any option added made every output "made from other inputs
+    or options", to be rendered again."""
+    from dataclasses import fields
+
+    from ..rewrite_options import RewriteOptions
+    from .jobs import rewrite_options
+
+    own = {f.name for f in fields(RewriteOptions)}
+    rest = sorted(f"{k}={options_text(v)}" for k, v in settings.items()
+                  if k not in own and v is not None)
+    return (f"transfer {options_text(rewrite_options(settings))} {' '.join(rest)} "
+            f"{model.content_hash}")
+
+
+def _transfer_what_before(settings: dict, model) -> str:
+    """:func:`transfer_what` as facetransfer wrote it before (the ``repr`` of every setting):
+    the words of the digests in the summaries it wrote (:func:`.digest.same_job`). Kept as it
+    was: do not change it."""
+    return f"transfer {sorted((k, repr(v)) for k, v in settings.items())} {model.content_hash}"
 
 
 def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
