@@ -111,6 +111,10 @@ def test_an_image_sequences_key_is_of_its_frames(tmp_path, cache, monkeypatch):
     write_image(plate / "kh.1004.png", np.zeros((4, 6, 3), np.uint8))
     assert digest.job_key(job, "w") != key
     (plate / "kh.1004.png").unlink()
+    assert digest.job_key(job, "w") == key
+    os.rename(plate / "kh.1003.png", plate / "kh.1005.png")   # renumbered (the docstring's)
+    assert digest.job_key(job, "w") != key
+    os.rename(plate / "kh.1005.png", plate / "kh.1003.png")
     write_image(plate / "kh.1002.png", np.zeros((4, 6, 3), np.uint8), overwrite=True)
     assert digest.job_key(job, "w") != key
 
