@@ -512,3 +512,32 @@ def test_a_plate_targets_matte_is_numbered_as_the_plate(clips, quick_model_path,
             a = np.asarray(f.channels()["Y"].pixels)
         assert m16.max() == 65535 and np.array_equal(a == 0, m16 == 0)
         assert np.abs(a * 65535 - m16).max() <= 0.5 + 1e-3
+
+
+def test_a_matte_overwritten_by_a_shorter_one_keeps_no_frame_of_the_old(clips, quick_model_path,
+                                                                       tmp_path, capsys):
+    """``--overwrite`` over a matte sequence of 6 frames with a transfer of 3 (``--max-frames
+    3``): the folder holds the 3 new frames only (a compositor reading it would otherwise take
+    the old frames 3-5 for this output's), each as a transfer of 3 frames writes it; without
+    ``--overwrite`` the old matte is refused, untouched."""
+    base = _args(clips, clips["target"], quick_model_path)
+    matte = tmp_path / "m" / "%03d.png"
+    code, _, err = run(base + ["--out", tmp_path / "o.mp4", "--matte", matte], capsys)
+    assert code == 0, err
+    old = _pngs(tmp_path / "m")
+    assert len(old) == 6
+    code, _, err = run(base + ["--out", tmp_path / "o2.mp4", "--matte", matte,
+                               "--max-frames", "3"], capsys)
+    assert code == 2 and "--matte: output frames" in err and "exist (6 files)" in err
+    assert len(_pngs(tmp_path / "m")) == 6
+    code, _, err = run(base + ["--out", tmp_path / "o.mp4", "--matte", matte, "--max-frames",
+                               "3", "--overwrite"], capsys)
+    assert code == 0, err
+    assert sorted(q.name for q in (tmp_path / "m").iterdir()) == ["000.png", "001.png",
+                                                                  "002.png"]
+    code, _, err = run(base + ["--out", tmp_path / "o3.mp4", "--matte",
+                               tmp_path / "m3" / "%03d.png", "--max-frames", "3"], capsys)
+    assert code == 0, err
+    fresh = _pngs(tmp_path / "m3")
+    assert len(fresh) == 3 and all(np.array_equal(a, b) and a.any()
+                                   for a, b in zip(_pngs(tmp_path / "m"), fresh))
