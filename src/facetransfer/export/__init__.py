@@ -125,13 +125,7 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
     """
     fmt = format_of(out, fmt)
     check_output_path(out, overwrite=overwrite)
-    if texture is not None and fmt != "glb":
-        raise ExportError(f"a texture is written only into glb files, not {fmt}")
-    if timecode not in (None, "source") and fmt != "livelink":
-        raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
-    if labels != "clip" and fmt != "livelink":
-        raise ExportError(f"timecode labels {labels!r} are written only into livelink takes, "
-                          f"not {fmt}")
+    _check_options(fmt, texture, timecode, labels)
     if track.blendshapes is None:
         track = _activations_from_weights(track, model)
     require_activations(track)
@@ -157,6 +151,17 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
     return write_usd(track, model, out, overwrite=overwrite,
                      first_frame=track.source_facts.first_frame if timecode == "source" else 0,
                      timecode=start)
+
+
+def _check_options(fmt: str, texture, timecode, labels: str) -> None:
+    """ExportError for an option that format ``fmt`` does not write."""
+    if texture is not None and fmt != "glb":
+        raise ExportError(f"a texture is written only into glb files, not {fmt}")
+    if timecode not in (None, "source") and fmt != "livelink":
+        raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
+    if labels != "clip" and fmt != "livelink":
+        raise ExportError(f"timecode labels {labels!r} are written only into livelink takes, "
+                          f"not {fmt}")
 
 
 def _start(track, timecode):
