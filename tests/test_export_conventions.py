@@ -81,7 +81,8 @@ def test_the_apps_labels_are_its_rates_and_its_format():
 def test_a_take_with_the_apps_labels_is_read_back_frame_for_frame(arkit_model,
                                                                     make_arkit_track, tmp_path):
     """The project's own reader places an app-labelled take's rows at ``k / fps``, as the
-    clip's frames (``transfer --expression-from``, ``puppet``, ``view``)."""
+    clip's frames (``transfer --expression-from``, ``puppet``, ``view``), and by the plate's
+    start timecode where it is on one."""
     from facetransfer.take import take_seconds
 
     track, a, _ = make_arkit_track(arkit_model, 40, fps=25.0)
@@ -92,6 +93,13 @@ def test_a_take_with_the_apps_labels_is_read_back_frame_for_frame(arkit_model,
     np.testing.assert_allclose(take.activations, a, atol=1e-6)
     with pytest.raises(ExportError, match="only into livelink"):
         export_track(track, "json", tmp_path / "t.json", labels="app")
+    from facetransfer import take as tk
+
+    for fps, start in ((25.0, "00:00:02:00"), (24000 / 1001, "01:00:00:00"), (50.0, "10:00:00:00")):
+        codes = [format_timecode(k, fps, start, labels="app") for k in range(300)]
+        clock, first = tk._take_clock(codes, fps, start, "t")   # transfer's placement by timecode
+        assert clock[0] == first
+        np.testing.assert_allclose(clock - first, np.arange(300) / fps, atol=2e-5)
 
 
 def test_export_take_rate_on_the_command_line(arkit_model, make_arkit_track, tmp_path, capsys):
