@@ -193,3 +193,20 @@ def test_a_head_turned_and_eyes_looking_to_the_subjects_left_in_every_export(ark
     r = anim.GetRotationsAttr().Get(1)[0]
     xyzw = [*r.GetImaginary(), r.GetReal()]
     np.testing.assert_allclose(Rotation.from_quat(xyzw).apply(nose), want, atol=1e-6)
+
+
+def test_a_video_given_as_the_texture_is_said_as_such(arkit_model, make_arkit_track, tmp_path,
+                                                      capsys):
+    """``--texture clip.mp4`` (a video where an image is wanted): one line naming
+    ``--texture-from``, exit status 2, nothing written (before: PIL's "cannot identify image
+    file")."""
+    m = tmp_path / "m.npz"
+    arkit_model.save(m)
+    track, _, _ = make_arkit_track(arkit_model, 4)
+    track.save(tmp_path / "t.npz")
+    (tmp_path / "clip.mp4").write_bytes(b"\x00\x00\x00\x18ftypmp42")
+    assert main(["export", str(tmp_path / "t.npz"), "--model", str(m), "--out",
+                 str(tmp_path / "f.glb"), "--texture", str(tmp_path / "clip.mp4")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.endswith(f"--texture-from {tmp_path / 'clip.mp4'}")
+    assert not (tmp_path / "f.glb").exists()

@@ -80,7 +80,13 @@ def texture_png(texture) -> bytes:
     from PIL import Image
 
     if isinstance(texture, (str, os.PathLike)):
+        from ..io.video_options import VIDEO_SUFFIXES
+
         p = Path(texture)
+        if p.suffix.lower() in VIDEO_SUFFIXES:
+            raise ExportError(f"texture image {p} is a video: a texture is an image in the "
+                              f"template's UV layout; to lift one from the video, give "
+                              f"--texture-from {p}")
         try:
             img = Image.open(p).convert("RGB")
         except (OSError, ValueError) as exc:
