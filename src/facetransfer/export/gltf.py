@@ -31,7 +31,8 @@ from ..io.atomic import atomic_path
 from .common import (ExportError, head_quaternions, head_translation, identity_rig,
                      require_activations, source_name)
 
-__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture", "check_texture_video"]
+__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture",
+           "check_texture_video"]
 
 #: Model units to metres (the ICT-FaceKit is in centimetres).
 METRES_PER_UNIT = 0.01
