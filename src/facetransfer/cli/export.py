@@ -250,7 +250,7 @@ def _rows_said(args, track) -> str:
     rate = app_rate(track.fps)
     if args.take_rate == "app":
         return f"rows counted at {rate} frames a second, as the Live Link Face app counts them"
-    if round(float(track.fps)) == rate:
+    if round(float(track.fps)) == rate or track.n_frames < 2:    # one row: at its time
         return ""
     return (f"rows counted at the clip's {round(float(track.fps))} frames a second (Unreal's "
             f"Live Link Face importer counts 30 or 60 and would misplace them: for Unreal, "
