@@ -1,7 +1,7 @@
 """``facetransfer export``: a track's ARKit curves and head pose for animation tools.
 
     facetransfer export TRACK.npz --format livelink --out take.csv        # Live Link Face CSV
-    facetransfer export TRACK.npz --format glb --out face.glb [--texture T.png | --texture-from V.mp4]
+    facetransfer export TRACK.npz --format glb --out face.glb [--texture T.png|--texture-from V.mp4]
     facetransfer export TRACK.npz --format usd --out face.usd [--model M.npz]
     facetransfer export TRACK.npz --format json --out blendshapes.json    # MediaPipe layout
     facetransfer export TRACK.npz --format livelink --out take.csv --neutral auto  # calibrated
