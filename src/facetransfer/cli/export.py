@@ -50,7 +50,8 @@ def register(sub) -> None:
     p.add_argument("--timecode", default="source", metavar="HH:MM:SS:FF|source|none",
                    help="livelink: the first row's timecode: the tracked video's start timecode "
                    "where it has one (source, the default: a take then lines up with the plate "
-                   "in an editor or Unreal, and `transfer --expression-from` places it back by "
+                   "in an editor or Unreal (at 24, 25 or 50 fps with --take-rate app), and "
+                   "`transfer --expression-from` places it back by "
                    "it), a timecode (';' before the frames of a drop-frame one), or none "
                    "(00:00:00:00). usd: source (the default) starts the time codes at the "
                    "first frame number of the image sequence tracked (a plate numbered from "
