@@ -27,6 +27,7 @@ from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.cli.main import main
 from facetransfer.export import ExportError, export_track
 from facetransfer.export.livelink import app_rate, eye_angles, format_timecode, read_livelink
+from test_export import _validate
 
 RATES = (24000 / 1001, 24.0, 25.0, 30000 / 1001, 30.0, 48.0, 50.0, 60000 / 1001, 60.0)
 
@@ -145,17 +146,53 @@ def test_eye_angles_agree_with_the_apps_in_sign_and_size():
     assert np.all((np.abs(ours) > np.abs(app) / 1.5) & (np.abs(ours) < np.abs(app) * 1.5))
 
 
-def _glb_rotations(path) -> np.ndarray:
-    """The head node's animated rotations ``(F, 4)`` (x, y, z, w) of a glb."""
+def _glb(path) -> tuple[dict, bytes, int]:
+    """A glb's JSON chunk, its bytes and where its binary chunk's data starts."""
     b = path.read_bytes()
     n = struct.unpack("<I", b[12:16])[0]
-    g = json.loads(b[20:20 + n])
+    return json.loads(b[20:20 + n]), b, 20 + n + 8
+
+
+def _accessor(g: dict, b: bytes, start: int, i: int) -> np.ndarray:
+    """Float accessor ``i`` of a glb read by :func:`_glb`, ``(count, components)``."""
+    acc = g["accessors"][i]
+    view = g["bufferViews"][acc["bufferView"]]
+    k = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}[acc["type"]]
+    at = start + view.get("byteOffset", 0) + acc.get("byteOffset", 0)
+    return np.frombuffer(b, np.float32, acc["count"] * k, at).reshape(-1, k)
+
+
+def _glb_rotations(path) -> np.ndarray:
+    """The head node's animated rotations ``(F, 4)`` (x, y, z, w) of a glb."""
+    g, b, start = _glb(path)
     anim = g["animations"][0]
     ch = next(c for c in anim["channels"] if c["target"]["path"] == "rotation")
-    acc = g["accessors"][anim["samplers"][ch["sampler"]]["output"]]
-    view = g["bufferViews"][acc["bufferView"]]
-    start = 20 + n + 8 + view.get("byteOffset", 0) + acc.get("byteOffset", 0)
-    return np.frombuffer(b, np.float32, acc["count"] * 4, start).reshape(-1, 4)
+    return _accessor(g, b, start, anim["samplers"][ch["sampler"]]["output"])
+
+
+def test_glb_morph_targets_carry_the_shapes_normals(arkit_model, make_arkit_track, tmp_path):
+    """Every morph target holds ``NORMAL`` deltas: the rest's normals plus a target's are its
+    shape's own normals (read back from the file), and they matter: a full jawOpen turns many
+    normals by over 10 degrees, which a player that keeps the rest's normals (three.js,
+    glTFast, Godot) would shade as the closed face (before: ``POSITION`` deltas only)."""
+    from facetransfer.export.gltf import _normals
+
+    track, _, _ = make_arkit_track(arkit_model, 3)
+    g, b, start = _glb(export_track(track, "glb", tmp_path / "f.glb", model=arkit_model))
+    prim = g["meshes"][0]["primitives"][0]
+    V = _accessor(g, b, start, prim["attributes"]["POSITION"])
+    N = _accessor(g, b, start, prim["attributes"]["NORMAL"])
+    faces = np.asarray(arkit_model.faces)
+    assert len(prim["targets"]) == 52 and all("NORMAL" in t for t in prim["targets"])
+    for name in ("mouthSmileRight", "eyeBlinkLeft", "jawOpen"):
+        t = prim["targets"][ARKIT_NAMES.index(name)]
+        D = _accessor(g, b, start, t["POSITION"])
+        n = N + _accessor(g, b, start, t["NORMAL"])
+        np.testing.assert_allclose(n, _normals(V + D, faces), atol=2e-6)
+    turned = np.degrees(np.arccos(np.clip((N * n).sum(axis=1), -1, 1)))    # jawOpen's
+    assert (turned > 10).sum() > 500
+    issues = _validate(tmp_path / "f.glb")
+    assert issues["numErrors"] == 0 and issues["numWarnings"] == 0, issues["messages"]
 
 
 def test_a_head_turned_and_eyes_looking_to_the_subjects_left_in_every_export(arkit_model,
