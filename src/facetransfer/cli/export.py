@@ -1,11 +1,12 @@
 """``facetransfer export``: a track's ARKit curves and head pose for animation tools.
 
     facetransfer export TRACK.npz --format livelink --out take.csv        # Live Link Face CSV
-    facetransfer export TRACK.npz --format glb --out face.glb [--texture TEX.png | --texture-from V.mp4]
+    facetransfer export TRACK.npz --format glb --out face.glb [--texture T.png|--texture-from V.mp4]
     facetransfer export TRACK.npz --format usd --out face.usd [--model M.npz]
     facetransfer export TRACK.npz --format json --out blendshapes.json    # MediaPipe layout
     facetransfer export TRACK.npz --format livelink --out take.csv --neutral auto  # calibrated
     facetransfer export TRACK.npz --out take.csv      # the format from the extension
+    facetransfer export TRACK.npz --out take.csv --take-rate app  # Unreal, a 24/25/50 fps clip
 """
 
 from __future__ import annotations
@@ -49,7 +50,8 @@ def register(sub) -> None:
     p.add_argument("--timecode", default="source", metavar="HH:MM:SS:FF|source|none",
                    help="livelink: the first row's timecode: the tracked video's start timecode "
                    "where it has one (source, the default: a take then lines up with the plate "
-                   "in an editor or Unreal, and `transfer --expression-from` places it back by "
+                   "in an editor or Unreal (at 24, 25 or 50 fps with --take-rate app), and "
+                   "`transfer --expression-from` places it back by "
                    "it), a timecode (';' before the frames of a drop-frame one), or none "
                    "(00:00:00:00). usd: source (the default) starts the time codes at the "
                    "first frame number of the image sequence tracked (a plate numbered from "
@@ -57,6 +59,13 @@ def register(sub) -> None:
                    "video's start timecode in the file (customLayerData, extras, timecode). "
                    "source: as the track recorded them when it was tracked (a track made "
                    "before tracks recorded them: read from its clip, if still there)")
+    p.add_argument("--take-rate", choices=("clip", "app"), default="clip",
+                   help="livelink: what the rows' timecodes count: clip (default), the clip's "
+                   "own frames (a 25 fps clip's frame 1 is 00:00:00:01.000: frame for frame in "
+                   "an editor and `transfer --expression-from`); app, frames of 30 or 60 a "
+                   "second with thousandths as the Live Link Face app writes them (frame 1 of "
+                   "25 fps is 00:00:00:01.200): what Unreal's Live Link Face importer needs for "
+                   "a clip at another rate than 30 or 60 (it reads every take at 30 or 60 fps)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
 
@@ -116,6 +125,9 @@ def run(args: argparse.Namespace) -> int:
             f"--timecode {args.timecode}: a timecode of your own is written into livelink "
             f"takes only; {args.format} takes source (the tracked video's start timecode, "
             "recorded in the file) or none")
+    if args.take_rate != "clip" and args.format != "livelink":
+        raise FaceTransferError(f"--take-rate {args.take_rate}: only livelink takes count "
+                                f"their rows in timecodes, not {args.format}")
     if args.texture_step < 1:
         raise FaceTransferError(f"--texture-step must be >= 1, got {args.texture_step}")
     from ..take import is_take
@@ -144,7 +156,7 @@ def run(args: argparse.Namespace) -> int:
     if args.format in ("usd", "glb", "json") and args.timecode == "source":
         timecode, said = "source", _source_said(track, args.format)
     path = export_track(track, args.format, args.out, model=model, overwrite=args.overwrite,
-                        texture=texture, timecode=timecode)
+                        texture=texture, timecode=timecode, labels=args.take_rate)
     _say_written(args, track, path, timecode, said)
     return 0
 
@@ -208,10 +220,12 @@ def _say_written(args, track, path, timecode, said: str) -> None:
     if timecode and timecode != "source" and args.format == "livelink" \
             and _drop_frame(timecode, track.fps):
         said += f"; drop-frame: the rows count clock time, from {_first_row(path)}"
+    rows = _rows_said(args, track)
     print(f"wrote {path}: {frame_count(track.n_frames)} ({args.format})"
           + (f", measured from the neutral frame {neutral}" if neutral is not None else "")
           + (f", from timecode {timecode} ({said})" if timecode and timecode != "source"
-             else (f", {said}" if said else "")))
+             else (f", {said}" if said else ""))
+          + (f"; {rows}" if rows else ""))
     people = _identities(track) if args.format in ("glb", "usd") else 1
     if people > 1:
         print(f"note: the track's shots hold {people} people (a clip cut between them); the "
@@ -225,6 +239,24 @@ def _say_written(args, track, path, timecode, said: str) -> None:
         print(f"note: the face is lost in frames {lost_runs(track.lost)}{plate}: "
               + ("their frames are left empty" if args.format == "json" else
                  "they hold the nearest tracked frame's values"))
+
+
+def _rows_said(args, track) -> str:
+    """What a livelink take's rows count, where Unreal's Live Link Face importer (which reads
+    every take's frames at 30 or 60 a second) cares: the app's count asked for, or a clip's
+    own at another rate ("" at 30 and 60 fps, and for other formats)."""
+    from ..export.livelink import app_rate
+
+    if args.format != "livelink":
+        return ""
+    rate = app_rate(track.fps)
+    if args.take_rate == "app":
+        return f"rows counted at {rate} frames a second, as the Live Link Face app counts them"
+    if round(float(track.fps)) == rate or track.n_frames < 2:    # one row: at its time
+        return ""
+    return (f"rows counted at the clip's {round(float(track.fps))} frames a second (Unreal's "
+            f"Live Link Face importer counts 30 or 60 and would misplace them: for Unreal, "
+            f"--take-rate app)")
 
 
 def _drop_frame(timecode: str, fps: float) -> bool:

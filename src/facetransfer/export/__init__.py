@@ -75,7 +75,8 @@ def format_of(out: str | os.PathLike, fmt: str | None = None) -> str:
 
 def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
                  overwrite: bool = False,
-                 texture=None, neutral=None, timecode: str | None = "source") -> Path:
+                 texture=None, neutral=None, timecode: str | None = "source",
+                 labels: str = "clip") -> Path:
     """Write ``track`` in format ``fmt`` to ``out`` and return the path.
 
     Parameters
@@ -110,6 +111,11 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
         file's metadata (the root layer's ``customLayerData["timecode"]``, the glTF's
         ``extras["timecode"]``: neither format has a field of its own for it); ``json`` too
         (a top-level ``"timecode"``).
+    labels : {"clip", "app"}
+        ``livelink`` only: the rows' timecodes counted as the clip's timecode counts its frames
+        (``"clip"``), or as the Live Link Face app counts them, in frames of 30 or 60 a second
+        with thousandths (``"app"``: what Unreal's Live Link Face importer reads right at any
+        clip rate; :func:`facetransfer.export.livelink.format_timecode`).
 
     Raises
     ------
@@ -119,10 +125,7 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
     """
     fmt = format_of(out, fmt)
     check_output_path(out, overwrite=overwrite)
-    if texture is not None and fmt != "glb":
-        raise ExportError(f"a texture is written only into glb files, not {fmt}")
-    if timecode not in (None, "source") and fmt != "livelink":
-        raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
+    _check_options(fmt, texture, timecode, labels)
     if track.blendshapes is None:
         track = _activations_from_weights(track, model)
     require_activations(track)
@@ -133,7 +136,7 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
         if fmt == "livelink":
             from .livelink import write_livelink
 
-            return write_livelink(track, out, overwrite=overwrite, start=start)
+            return write_livelink(track, out, overwrite=overwrite, start=start, labels=labels)
         from .mpjson import write_mediapipe_json
 
         return write_mediapipe_json(track, out, overwrite=overwrite, timecode=start)
@@ -148,6 +151,17 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
     return write_usd(track, model, out, overwrite=overwrite,
                      first_frame=track.source_facts.first_frame if timecode == "source" else 0,
                      timecode=start)
+
+
+def _check_options(fmt: str, texture, timecode, labels: str) -> None:
+    """ExportError for an option that format ``fmt`` does not write."""
+    if texture is not None and fmt != "glb":
+        raise ExportError(f"a texture is written only into glb files, not {fmt}")
+    if timecode not in (None, "source") and fmt != "livelink":
+        raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
+    if labels != "clip" and fmt != "livelink":
+        raise ExportError(f"timecode labels {labels!r} are written only into livelink takes, "
+                          f"not {fmt}")
 
 
 def _start(track, timecode):

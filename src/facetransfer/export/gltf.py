@@ -3,7 +3,9 @@
 The file holds one node ``face`` with one mesh: the person's neutral face (the track's identity,
 Eq. (9)) with the template's UVs (v flipped: glTF's origin is the image's top left), vertex
 normals, optionally the texture lifted from the video as its base colour, and 52 morph targets
-(``POSITION`` deltas ``f_j - f_0``, :func:`facetransfer.arkit.expression_rig`) named in
+(``POSITION`` deltas ``f_j - f_0``, :func:`facetransfer.arkit.expression_rig`, and ``NORMAL``
+deltas, the shape's vertex normals minus the rest's, so that a player which does not recompute
+normals shades an open jaw as open) named in
 ``mesh.extras.targetNames`` in :data:`facetransfer.arkit.ARKIT_NAMES` order (the convention
 three.js, Blender and Babylon read). One animation ``performance`` has a ``weights`` channel with
 one key per frame (time ``k / fps``, LINEAR) whose values are the track's activations, and the
@@ -31,7 +33,8 @@ from ..io.atomic import atomic_path
 from .common import (ExportError, head_quaternions, head_translation, identity_rig,
                      require_activations, source_name)
 
-__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture", "check_texture_video"]
+__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture",
+           "check_texture_video"]
 
 #: Model units to metres (the ICT-FaceKit is in centimetres).
 METRES_PER_UNIT = 0.01
@@ -80,7 +83,13 @@ def texture_png(texture) -> bytes:
     from PIL import Image
 
     if isinstance(texture, (str, os.PathLike)):
+        from ..io.video_options import VIDEO_SUFFIXES
+
         p = Path(texture)
+        if p.suffix.lower() in VIDEO_SUFFIXES:
+            raise ExportError(f"texture image {p} is a video: a texture is an image in the "
+                              f"template's UV layout; to lift one from the video, give "
+                              f"--texture-from {p}")
         try:
             img = Image.open(p).convert("RGB")
         except (OSError, ValueError) as exc:
@@ -163,14 +172,18 @@ def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
 
     V = (rig.neutral * unit).astype(np.float32)
     faces = np.asarray(model.faces, np.int64)
+    N = _normals(V, faces)
     attrs = Attributes(POSITION=blob.accessor(V, "VEC3", bounds=True),
-                       NORMAL=blob.accessor(_normals(V, faces), "VEC3"))
+                       NORMAL=blob.accessor(N, "VEC3"))
     if model.uvs is not None:
         uv = np.asarray(model.uvs, np.float64).copy()
         uv[:, 1] = 1.0 - uv[:, 1]  # glTF's texture origin is top left
         attrs.TEXCOORD_0 = blob.accessor(uv.astype(np.float32), "VEC2")
-    targets = [Attributes(POSITION=blob.accessor((d * unit).astype(np.float32), "VEC3",
-                                                 bounds=True)) for d in rig.deltas]
+    targets = []
+    for d in rig.deltas:     # a shape's normals too: players that keep the rest's (three.js,
+        D = (d * unit).astype(np.float32)          # glTFast, Godot) shade it as the rest
+        targets.append(Attributes(POSITION=blob.accessor(D, "VEC3", bounds=True),
+                                  NORMAL=blob.accessor(_normals(V + D, faces) - N, "VEC3")))
     idx = faces.astype(np.uint32).reshape(-1, 1)
     prim = Primitive(attributes=attrs, indices=blob.accessor(idx, "SCALAR", target=_ELEMENTS),
                      material=material, targets=targets)

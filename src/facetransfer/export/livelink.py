@@ -10,7 +10,9 @@ its columns by position, so the layout is the app's exactly:
 * one row per frame: timecode ``HH:MM:SS:FF.mmm``, the frame's own timecode (its clip's start
   timecode and the frames after it counted as the clip's timecode counts them, ``FF`` at the
   nominal integer rate, ``.000``; after a drop-frame start, which the CSV cannot say, clock
-  time, ``.mmm`` the thousandths of a frame: :func:`format_timecode`), the count
+  time, ``.mmm`` the thousandths of a frame: :func:`format_timecode`; or, for Unreal's Live
+  Link Face importer, which reads every take's frames at 30 or 60 a second, as the app counts
+  them, ``labels="app"``: frames of :func:`app_rate` with thousandths), the count
   ``61`` (52 + 9 values), the activations in [0, 1], then head yaw, pitch and roll in **radians**
   (:func:`facetransfer.export.common.head_euler`) and the six eye angles in radians, read back
   from the eyeLook* activations (:func:`facetransfer.track.gaze.activation_gaze`: 35° per unit
@@ -19,10 +21,14 @@ its columns by position, so the layout is the app's exactly:
 
 References
 ----------
-Header row of the app's CSV takes as reproduced byte for byte by open importers:
-nmfisher/blender_livelinkface (``bpylivelinkface.py``, ``LIVE_LINK_FACE_HEADER``),
-alexdjulin/LiveLinkFace-CSV-Retarget-For-Motionbuilder; radians for the head angles as in
-JimWest/MeFaMo (Euler angles of the pose matrix sent as ``HeadYaw``/``HeadPitch``/``HeadRoll``).
+Epic's Live Link Face importer for Unreal (``LiveLinkFaceImporterFactory``): the header's
+first two names, the rate inferred as 60 where a frame number passes 30 (else 30), a row at
+``HH:MM:SS`` plus ``FF.mmm`` over that rate. Header row of the app's CSV takes as reproduced
+byte for byte by open importers: nmfisher/blender_livelinkface (``bpylivelinkface.py``,
+``LIVE_LINK_FACE_HEADER``), alexdjulin/LiveLinkFace-CSV-Retarget-For-Motionbuilder; radians
+for the head angles as in JimWest/MeFaMo (Euler angles of the pose matrix sent as
+``HeadYaw``/``HeadPitch``/``HeadRoll``); the eye angles' units and signs as in a take the
+app wrote (its eyeLook* and ``LeftEyeYaw``... of one row: ``tests/test_export_conventions.py``).
 """
 
 from __future__ import annotations
@@ -40,7 +46,8 @@ from ..arkit import ARKIT_NAMES
 from ..io.atomic import write_text_atomic
 from .common import ExportError, head_euler, require_activations
 
-__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "format_timecode", "parse_timecode",
+__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "LABELS", "app_rate", "format_timecode",
+           "parse_timecode",
            "timecode_fields", "source_timecode",
            "livelink_rows", "eye_angles", "write_livelink", "read_livelink", "LiveLinkTake"]
 
@@ -73,16 +80,31 @@ if sorted(_TO_ARKIT.tolist()) != list(range(len(ARKIT_NAMES))):  # a packaging e
 _TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2})[:;](\d{2,3})(?:\.(\d{1,3}))?$")
 
 
+#: How a take's rows are labelled (:func:`format_timecode`): ``clip``, the clip's own timecode;
+#: ``app``, the Live Link Face app's frames of 30 or 60 a second (Unreal's importer).
+LABELS: tuple[str, ...] = ("clip", "app")
+
+
 def _nominal_rate(fps: float) -> int:
     return max(1, int(round(float(fps))))
 
 
-def format_timecode(frame: int, fps: float, start: str | None = None) -> str:
+def app_rate(fps: float) -> int:
+    """The frames a second the Live Link Face app counts its timecodes in, and so the only ones
+    Unreal's Live Link Face importer reads a take's ``FF.mmm`` at: 30 for a clip of up to 30
+    frames a second (nominal, ``round(fps)``), else 60. The importer takes 60 where a row's
+    frame number passes 30, else 30; a row's time is then ``HH:MM:SS`` plus ``FF.mmm`` over
+    that rate."""
+    return 30 if _nominal_rate(fps) <= 30 else 60
+
+
+def format_timecode(frame: int, fps: float, start: str | None = None, *,
+                    labels: str = "clip") -> str:
     """``HH:MM:SS:FF.mmm`` of frame ``frame`` of a clip at ``fps`` whose first frame is
     ``start`` (``HH:MM:SS:FF``, ``;`` before the frames of a drop-frame one; default
     ``00:00:00:00``).
 
-    Counted as the clip's timecode counts its frames
+    ``labels="clip"`` (default): counted as the clip's timecode counts its frames
     (:func:`facetransfer.io.plate_header.timecode_after`, at the nominal rate ``round(fps)``;
     ``.000``): the take lines up with its
     plate frame for frame (a 23.976 fps plate's frame 1000 after ``01:00:00:00`` is
@@ -90,22 +112,31 @@ def format_timecode(frame: int, fps: float, start: str | None = None) -> str:
     count clock time instead: ``start``'s moment plus ``frame / fps`` seconds in frames of the
     nominal rate, ``.mmm`` the thousandths of a frame (``01:00:00;00`` at 29.97 fps is
     ``00:59:59:29.892``).
+
+    ``labels="app"``: as the Live Link Face app writes them, in frames of :func:`app_rate` (30
+    or 60) a second with thousandths: ``start``'s moment plus ``frame / fps`` seconds (frame 1
+    of a 25 fps clip is ``00:00:00:01.200``), which Unreal's Live Link Face importer places at
+    ``frame / fps`` seconds whatever the clip's rate. A clip at 30 or 60 (or 29.97, 59.94)
+    frames a second has the same labels either way.
     """
     from ..io.plate_header import timecode_after, timecode_count
 
+    if labels not in LABELS:
+        raise ExportError(f"labels must be one of {', '.join(LABELS)}, got {labels!r}")
     start = start or "00:00:00:00"
     try:
         count, drop = timecode_count(start, fps)
     except ValueError as exc:
         raise ExportError(f"start timecode: {exc}") from None
-    if not drop:
+    rate = _nominal_rate(fps)
+    if not drop and (labels == "clip" or rate == app_rate(fps)):
         label = timecode_after(start, int(frame), fps)
         return label[:8] + ":" + label[9:] + ".000"
-    rate = _nominal_rate(fps)
-    true_rate = rate * 1000.0 / 1001.0
-    units = round((count / true_rate + int(frame) / float(fps)) * rate * 1000)
+    moment = count / (rate * 1000.0 / 1001.0 if drop else rate)   # the start's, seconds
+    per = rate if labels == "clip" else app_rate(fps)              # the labels' frames a second
+    units = round((moment + int(frame) / float(fps)) * per * 1000)
     whole, milli = divmod(units, 1000)
-    secs, ff = divmod(whole, rate)
+    secs, ff = divmod(whole, per)
     mins, ss = divmod(secs, 60)
     hh, mm = divmod(mins, 60)
     return f"{hh % 24:02d}:{mm:02d}:{ss:02d}:{ff:02d}.{milli:03d}"
@@ -133,9 +164,9 @@ def parse_timecode(text: str, fps: float) -> float:
     return ((hh * 60 + mm) * 60 + ss) * rate + ff + milli / 1000.0
 
 
-def livelink_rows(track, start: str | None = None) -> list[list[str]]:
-    """The CSV as rows of strings (header first); ``start``: the first row's timecode
-    (:func:`format_timecode`)."""
+def livelink_rows(track, start: str | None = None, *, labels: str = "clip") -> list[list[str]]:
+    """The CSV as rows of strings (header first); ``start``: the first row's timecode,
+    ``labels``: how the rows' timecodes count (:func:`format_timecode`)."""
     acts = require_activations(track)             # (F, 52) in ARKIT_NAMES order
     a = acts[:, _TO_ARKIT]                        # in the app's order
     ypr = head_euler(track.rotation)  # (F, 3) radians
@@ -145,7 +176,7 @@ def livelink_rows(track, start: str | None = None) -> list[list[str]]:
     count = str(len(LIVELINK_NAMES) + len(POSE_COLUMNS))
     rows = [list(HEADER)]
     for k in range(track.n_frames):
-        rows.append([format_timecode(k, track.fps, start), count]
+        rows.append([format_timecode(k, track.fps, start, labels=labels), count]
                     + [f"{v:.8f}" for v in a[k]] + [f"{v:.8f}" for v in pose[k]])
     return rows
 
@@ -164,13 +195,14 @@ def eye_angles(activations: np.ndarray) -> np.ndarray:
 
 
 def write_livelink(track, out: str | os.PathLike, *, overwrite: bool = False,
-                   start: str | None = None) -> Path:
+                   start: str | None = None, labels: str = "clip") -> Path:
     """Write the track as a Live Link Face CSV take (atomically) and return the path;
     ``start``: its first row's timecode, ``HH:MM:SS:FF`` (its video's start timecode; default
     ``00:00:00:00``), each row after it a frame later as the video's timecode counts
-    (:func:`format_timecode`)."""
+    (``labels="clip"``) or as the app counts (``"app"``, for Unreal's importer:
+    :func:`format_timecode`)."""
     buf = io.StringIO()
-    csv.writer(buf, lineterminator="\n").writerows(livelink_rows(track, start))
+    csv.writer(buf, lineterminator="\n").writerows(livelink_rows(track, start, labels=labels))
     return write_text_atomic(out, buf.getvalue(), overwrite=overwrite)
 
 
