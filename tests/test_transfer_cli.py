@@ -660,3 +660,54 @@ def test_a_face_to_track_beside_its_track_is_refused(clips, quick_model_path, tm
     assert code == 2 and err.strip().endswith(
         f"--source-face chooses the face to track, but --source-track {clips['source_track']} "
         "is tracked already (its face is the one used): give one of them"), err
+
+
+def test_puppet_of_a_track_file_alone_is_the_puppet_of_its_video(clips, quick_model_path,
+                                                                   tmp_path, capsys):
+    """``puppet TRACK.npz``: the frames ``puppet VIDEO --track TRACK.npz`` renders, with no video
+    needed (a track whose clip is gone renders the same); the clip's timecode recorded in the
+    track is the output's; ``--max-frames`` takes the first frames; a flag for a video is
+    refused."""
+    import dataclasses
+
+    from facetransfer.io.source_facts import SourceFacts
+    from facetransfer.io.video_display import timecode_of
+
+    with_video = tmp_path / "with_video.mp4"
+    code, _, err = run(["puppet", clips["source"], "--model", quick_model_path, "--identity",
+                        "id04", "--track", clips["source_track"], "--out", with_video], capsys)
+    assert code == 0, err
+    track = Track.load(clips["source_track"])
+    gone = dataclasses.replace(track, source=str(tmp_path / "moved_away.mp4"),
+                               source_facts=SourceFacts(0, "01:02:03:04"))
+    alone_track = tmp_path / "alone.npz"
+    gone.save(alone_track)
+    alone = tmp_path / "alone.mp4"
+    code, out, err = run(["puppet", alone_track, "--model", quick_model_path, "--identity",
+                          "id04", "--out", alone], capsys)
+    assert code == 0, err
+    assert "6 frames" in out and "audio" not in out
+    a, fps_a = read_video(with_video)
+    b, fps_b = read_video(alone)
+    assert fps_a == fps_b == 25.0
+    np.testing.assert_array_equal(a, b)
+    assert timecode_of(alone) == "01:02:03:04"
+    short = tmp_path / "short.mp4"
+    code, out, err = run(["puppet", alone_track, "--model", quick_model_path, "--identity",
+                          "id04", "--max-frames", "4", "--out", short], capsys)
+    assert code == 0, err
+    from facetransfer.track.project import take_frames
+
+    first4 = tmp_path / "first4.npz"
+    take_frames(track, np.arange(4)).save(first4)
+    code, _, err = run(["puppet", clips["source"], "--model", quick_model_path, "--identity",
+                        "id04", "--track", first4, "--max-frames", "4",
+                        "--out", tmp_path / "short_video.mp4"], capsys)
+    assert code == 0, err
+    np.testing.assert_array_equal(read_video(short)[0],
+                                  read_video(tmp_path / "short_video.mp4")[0])
+    code, _, err = run(["puppet", alone_track, "--model", quick_model_path, "--track",
+                        alone_track, "--out", tmp_path / "x.mp4"], capsys)
+    assert code == 2 and err.strip().endswith(
+        f"{alone_track} is a track file: --track is for a video"), err
+    assert not (tmp_path / "x.mp4").exists()

@@ -27,8 +27,8 @@ from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES
                                LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
-                     check_track_name, check_track_of, frame_count, progress_disabled,
-                     resolve_model, video_options, video_out)
+                     check_track_name, check_track_of, default_model_for, frame_count,
+                     progress_disabled, resolve_model, video_options, video_out)
 from .track import CAPTURE_HELP
 
 log = logging.getLogger(__name__)
@@ -247,12 +247,14 @@ def _register_puppet(sub) -> None:
         "Track a video (or reuse its track) and render an identity of the model performing "
         "it, alone on a plain background (Vlasic et al. 2005, §5). A Live Link Face take "
         "(TAKE.csv) instead of a video: the identity performs its ARKit curves with its "
-        "head's rotation (a preview of the take).")
+        "head's rotation (a preview of the take). A track file (TRACK.npz) instead: its "
+        "performance, at its clip's size and rate, with that clip's audio if it is there.")
     q.add_argument("video", metavar="VIDEO")
     q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     q.add_argument("--identity", metavar="LABEL", help="training identity label (default: the "
                    "model's mean face)")
-    q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused)")
+    q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused); a track "
+                   "file alone as VIDEO is rendered at its frame size and rate")
     q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
     q.add_argument("--tracker", choices=TRACK_METHODS, default="auto", type=_tracker_name,
                    help="tracking when no track file is given (flow or klt: the optical-flow "
@@ -677,6 +679,8 @@ def run_puppet(args) -> int:
                        inputs=[args.video, args.model, args.track])
     if is_take(args.video):
         return _puppet_take(args, vopt)
+    if Path(args.video).suffix.lower() == ".npz":
+        return _puppet_track(args, vopt)
     video_info(args.video)
     if not args.track:
         _check_landmarks_file(args.video, args.tracker)
@@ -706,6 +710,62 @@ def run_puppet(args) -> int:
           f"{args.identity or 'the mean face'}"
           + (", with the video's audio" if audio else ""))
     return 0
+
+
+def _puppet_track(args, vopt) -> int:
+    """``puppet TRACK.npz``: the identity performing a track file with no video beside it, at
+    the track's frame size and rate (its pixels' aspect and its clip's start timecode kept);
+    with the audio of the clip it was tracked from where that file is still there."""
+    import numpy as np
+
+    from ..puppet_video import puppet_video
+    from ..track.project import take_frames
+    from ..track.result import Track
+
+    for flag, given in (("--track", args.track), ("--face", args.face)):
+        if given:
+            raise FaceTransferError(f"{args.video} is a track file: {flag} is for a video")
+    if not Path(args.video).is_file():
+        raise FaceTransferError(f"track {args.video} does not exist")
+    track = Track.load(args.video)
+    model = (resolve_model(args.model, progress=not args.no_progress) if args.model
+             else default_model_for(track))
+    track.check_model(model)
+    if args.max_frames is not None and args.max_frames < track.n_frames:
+        track = take_frames(track, np.arange(args.max_frames))
+    if track.lost.all():
+        raise FaceTransferError(f"track {args.video} has no frame with a face")
+    vopt = _track_video_options(vopt, track)
+    source = Path(track.source) if track.source else None
+    audio_from = source if source is not None and source.is_file() else None
+    wid = _puppet_identity(model, args.identity)
+    audio, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
+                                  audio_from=audio_from, overwrite=args.overwrite,
+                                  progress_factory=_bar_factory())
+    if resumed:
+        print(f"continued an interrupted render from frame {resumed}")
+    print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
+          f"{args.identity or 'the mean face'} performing the track {args.video}"
+          + (f", with the audio of {source.name}" if audio else ""))
+    return 0
+
+
+def _track_video_options(vopt, track):
+    """``vopt`` for a puppet of ``track`` alone: its pixels' aspect and its clip's start
+    timecode and first frame number (:attr:`Track.source_facts`) where ``vopt`` gives none."""
+    import dataclasses
+    from fractions import Fraction
+
+    changes = {}
+    if vopt.sar is None and abs(track.pixel_aspect - 1.0) > 1e-6:
+        f = Fraction(track.pixel_aspect).limit_denominator(1000)
+        changes["sar"] = (f.numerator, f.denominator)
+    facts = track.source_facts
+    if facts is not None and vopt.timecode is None and facts.timecode:
+        changes["timecode"] = facts.timecode
+    if facts is not None and vopt.first_number is None and facts.first_frame:
+        changes["first_number"] = facts.first_frame
+    return dataclasses.replace(vopt, **changes) if changes else vopt
 
 
 def _puppet_take(args, vopt) -> int:
