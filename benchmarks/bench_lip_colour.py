@@ -1,23 +1,29 @@
 """The lips' colour of a transfer, judged by an independent detector (issue 13: identity).
 
 The result's lips should carry the source's movement in the target's colour (a target's
-lipstick is not an expression). On the three real pairs of ``bench_transfer_judge.py`` (120
-target frames each, the same cached tracks in ``OUT/judge_pairs/``) the default transfer is
-rendered twice, ``--lip-colour source`` (the source's lips against its skin, as §6 pastes them)
-and ``--lip-colour target`` (:mod:`facetransfer.lip_colour`). MediaPipe Face Landmarker finds
-the lips in the source (the frame matched by time), the target and both results: the pixels
-between its outer and inner lip contours, eroded by one pixel. Their median colour in CIELAB
-(OpenCV's conversion of the 8-bit RGB frame scaled to 0..1, L 0..100) is compared frame by
-frame:
+lipstick is not an expression). On the three real pairs of ``bench_transfer_judge.py`` and a
+fourth, ``pale`` (``face_2`` -> ``driving_d6``; 120 target frames each, the same cached tracks
+in ``OUT/judge_pairs/``) the default transfer is rendered twice, ``--lip-colour source`` (the
+source's lips against its skin, as §6 pastes them) and ``--lip-colour target``
+(:mod:`facetransfer.lip_colour`). MediaPipe Face Landmarker finds the lips in the source (the
+frame matched by time), the target and both results: the pixels between its outer and inner
+lip contours, eroded by one pixel, and apart the upper and the lower lip (the contours split
+at the mouth's corners). Their median colour in CIELAB (OpenCV's conversion of the 8-bit RGB
+frame scaled to 0..1, L 0..100) is compared frame by frame:
 
-- ``de_target``: CIE76 ΔE between the result's lips and the target's in the same frame;
+- ``de_target``: CIE76 ΔE between the result's lips and the target's in the same frame
+  (``de_target_upper``, ``de_target_lower``: each lip's);
 - ``de_source``: between the result's lips and the source's;
 - the floor: the target's lips in a frame against their median over the clip (the target's own
-  variation: expression, light, the detector's contour).
+  variation: expression, light, the detector's contour);
+- ``counts``: cyan pixels (G and B both over R by more than 20 levels) on the lips and around
+  them (the outer contour grown by :data:`AROUND` pixels, the opening left out), and whitish
+  ones around them (chroma < 12, L > 55): what a tint too strong for a lipstick made.
 
 Usage::
 
-    python benchmarks/bench_lip_colour.py --out out/benchmarks [--pairs demo,fps,open]
+    python benchmarks/bench_lip_colour.py --out out/benchmarks [--pairs demo,fps,open,pale]
+        [--modes source,target]
 
 Writes ``OUT/lip_colour.json``, ``OUT/lip_colour.png`` (ΔE per pair) and
 ``OUT/lip_colour_PAIR.png`` (source | target | source colour | target colour, lips enlarged).
