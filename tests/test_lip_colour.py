@@ -152,6 +152,30 @@ def test_the_lab_target_and_keep_from_the_two_clips():
     np.testing.assert_array_equal(lc.LipTint.of(np.ones(4), source, narrow).keep, 1.0)
     g = t.grey()  # a monochrome target: the tint alone, one factor (test_monochrome)
     assert g.target_lab is None and g.keep is None and np.ptp(g.tint) == 0
+    assert t.recolours() and not lc.LipTint.of(np.ones(4), source, narrow).recolours()
+
+
+def test_lips_of_a_like_spread_are_not_recoloured():
+    """A target's lips whose spread is a little narrower than the source's (the spreads'
+    ratio squared between :data:`KEEP_SAME` and 1, as one clip read through the two textures
+    gives; the tint about 1, its hue towards the skin): ``keep`` is 1 and :func:`tint_mouth`
+    the tint alone, to the level (the recolouring's round trip through CIELAB changed a
+    mouth rewritten with its own frames, ``test_transfer_mouth``)."""
+    dark, light = np.array((110, 28, 36)), np.array(LIPSTICK)
+    source = _colour(SKIN, [dark, dark, light, light])
+    near = np.rint(light + 0.97 * (dark - light))
+    target = _colour(SKIN, [light, light, near, near])  # L's spread ratio squared 0.944
+    ratio2 = (lc.lab_spread(target, SKIN) / lc.lab_spread(source, SKIN)) ** 2
+    assert ((ratio2 > lc.KEEP_SAME) & (ratio2 < 1.0)).any(), ratio2
+    t = lc.LipTint.of(np.ones(4), target, source)
+    assert lc.skin_ahead(t) > 0 and not t.recolours()
+    np.testing.assert_array_equal(t.keep[ratio2 > lc.KEEP_SAME], 1.0)
+    raster, F, img, _ = _two_lips_mouth()
+    mask = raster.tri_id >= 0
+    out, alone = img.copy(), img.copy()
+    lc.tint_mouth(out, raster, F, t, mask)
+    lc.tint_mouth(alone, raster, F, dataclasses.replace(t, target_lab=None, keep=None), mask)
+    np.testing.assert_array_equal(out, alone)
 
 
 def test_tint_mouth_scales_the_masked_pixels_by_their_weight():

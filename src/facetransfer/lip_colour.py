@@ -40,9 +40,9 @@ from .errors import ShapeError
 from .render import interpolate_vertex_values, sample_texture
 from .topology import MeshTopology, _face_size, inside_polygon
 
-__all__ = ["LIP_LEVELS", "TINT_RANGE", "KEEP_MIN", "CHROMA_RAMP", "LipColour", "LipTint",
-           "lip_vertex_weights", "lip_ratio", "lab_spread", "tint_mouth", "tint_reach",
-           "recolour_lips", "rgb_to_lab", "skin_ahead"]
+__all__ = ["LIP_LEVELS", "TINT_RANGE", "KEEP_MIN", "KEEP_SAME", "CHROMA_RAMP", "LipColour",
+           "LipTint", "lip_vertex_weights", "lip_ratio", "lab_spread", "tint_mouth",
+           "tint_reach", "recolour_lips", "rgb_to_lab", "skin_ahead"]
 
 #: The outer lip contour's scales about its centre at which a vertex's weight steps down:
 #: inside the first scale 1, beyond the last 0 (the mouth's region reaches 1.1).
@@ -60,6 +60,10 @@ KEEP_MIN = 0.1
 #: A pixel's CIELAB chroma over which :func:`recolour_lips` ramps its move in: none below the
 #: first, all above the second (the mouth's dark inside, grey, stays).
 CHROMA_RAMP = (8.0, 20.0)
+#: A ``keep`` above this is taken as 1 (the lips' spreads alike): one clip read as the target
+#: and as the source, through the two textures, gave (1, 0.987, 0.933), and ``driving_d9``
+#: onto ``face_2`` (1, 0.93, 1).
+KEEP_SAME = 0.85
 
 
 @dataclass(frozen=True)
@@ -103,8 +107,8 @@ class LipTint:
     keep : (3,) float64 or None
         The share of ``L, a, b``'s distance from ``target_lab`` a lip pixel keeps: the target's
         lips' spread over the source's (:func:`lab_spread`, both on the source's skin),
-        squared, in ``[KEEP_MIN, 1]``. None (and ``target_lab`` None) without the clips'
-        samples: the tint alone.
+        squared, in ``[KEEP_MIN, 1]``, 1 above :data:`KEEP_SAME`. None (and ``target_lab``
+        None) without the clips' samples: the tint alone.
     """
 
     weights: np.ndarray
@@ -126,9 +130,17 @@ class LipTint:
             st, ss = (lab_spread(c, source.skin) for c in (target, source))
             if st is not None and ss is not None:
                 keep = np.clip((st / np.maximum(ss, 1e-6)) ** 2, KEEP_MIN, 1.0)
+                keep[keep > KEEP_SAME] = 1.0
                 lab = rgb_to_lab(tr * (source.skin + 1.0) - 1.0)
                 return cls(np.asarray(weights, np.float32), tint, tr, sr, lab, keep)
         return cls(np.asarray(weights, np.float32), tint, tr, sr)
+
+    def recolours(self) -> bool:
+        """Whether :func:`tint_mouth` brings the lips to ``target_lab``: with the clips'
+        samples, a ``keep`` below 1 and the target's lips paler than the source's
+        (:func:`skin_ahead` > 0)."""
+        return self.target_lab is not None and bool((self.keep < 1.0).any()) \
+            and skin_ahead(self) > 0.0
 
     def grey(self) -> "LipTint":
         """The tint for a monochrome target (:mod:`facetransfer.monochrome`): one factor for
@@ -253,8 +265,7 @@ def tint_mouth(mouth_img: np.ndarray, raster, faces: np.ndarray, tint: LipTint,
     w *= tint_reach(sub, tint, core)
     gain = 1.0 + w[..., None] * (tint.tint.astype(np.float32) - 1.0)
     sub[...] = np.clip(sub * gain + 0.5, 0, 255).astype(np.uint8)
-    if tint.target_lab is not None and skin_ahead(tint) > 0.0 \
-            and np.count_nonzero(core) >= MIN_LIP_PIXELS:  # else tint_reach gave all the tint
+    if tint.recolours() and np.count_nonzero(core) >= MIN_LIP_PIXELS:  # else the whole tint
         recolour_lips(sub, w, tint.target_lab, tint.keep)
 
 
