@@ -19,8 +19,12 @@ expression. So, per clip:
    each pixel, by the target's tint over the source's (:func:`tint_mouth`), before the gain
    to the face's colours; onto paler lips each pixel only as far as the source's skin
    colour along the tint's hue (:func:`tint_reach`: a red lipstick's highlights and the
-   skin the lips' band covers keep their colour). The skin, the teeth and the mouth's
-   inside are not touched.
+   skin the lips' band covers keep their colour); there, too, the tinted lips are brought to
+   the target's lip colour in CIELAB (:func:`recolour_lips`): a deep lipstick's colour is
+   not a hue a per-channel factor can reach (the upper lip stayed red), so each pixel's
+   ``L, a, b`` keep only a share of their distance from the target's lip colour, the
+   target's lips' spread over the source's, squared (:func:`lab_spread`). The skin, the
+   teeth and the mouth's inside are not touched.
 
 The same person's clip on both sides gives a tint of 1 up to noise.
 """
@@ -36,8 +40,9 @@ from .errors import ShapeError
 from .render import interpolate_vertex_values, sample_texture
 from .topology import MeshTopology, _face_size, inside_polygon
 
-__all__ = ["LIP_LEVELS", "TINT_RANGE", "LipTint", "lip_vertex_weights", "lip_ratio",
-           "tint_mouth", "tint_reach"]
+__all__ = ["LIP_LEVELS", "TINT_RANGE", "KEEP_MIN", "KEEP_SAME", "CHROMA_RAMP", "LipColour",
+           "LipTint", "lip_vertex_weights", "lip_ratio", "lab_spread", "tint_mouth",
+           "tint_reach", "recolour_lips", "rgb_to_lab", "skin_ahead"]
 
 #: The outer lip contour's scales about its centre at which a vertex's weight steps down:
 #: inside the first scale 1, beyond the last 0 (the mouth's region reaches 1.1).
@@ -49,6 +54,38 @@ INNER_GROWTH = 1.35
 TINT_RANGE = (0.5, 2.0)
 #: Frames read per clip for its lips' colour.
 SAMPLES = 24
+#: The least share of its CIELAB distance from the target's lip colour a lip pixel keeps
+#: (:func:`recolour_lips`; the share is the target's lips' spread over the source's, squared).
+KEEP_MIN = 0.1
+#: A pixel's CIELAB chroma over which :func:`recolour_lips` ramps its move in: none below the
+#: first, all above the second (the mouth's dark inside, grey, stays).
+CHROMA_RAMP = (8.0, 20.0)
+#: A ``keep`` above this is taken as 1 (the lips' spreads alike): one clip read as the target
+#: and as the source, through the two textures, gave (1, 0.987, 0.933), and ``driving_d9``
+#: onto ``face_2`` (1, 0.93, 1).
+KEEP_SAME = 0.85
+
+
+@dataclass(frozen=True)
+class LipColour:
+    """A clip's lips against its skin (:func:`lip_ratio`).
+
+    Attributes
+    ----------
+    ratio : (3,) float64
+        The lips' colour over the skin's (RGB, ``c + 1``), the median over the frames read.
+    skin : (3,) float64
+        The skin's colour (RGB levels), the median over the frames read.
+    samples : (k, 3) float32
+        Each lip vertex's colour over its frame's skin (``c + 1``), all frames' pooled.
+    frame : (k,) int64
+        The frame (0, 1, ...) of each sample.
+    """
+
+    ratio: np.ndarray
+    skin: np.ndarray
+    samples: np.ndarray
+    frame: np.ndarray
 
 
 @dataclass(frozen=True)
@@ -64,19 +101,46 @@ class LipTint:
         Multiplies the source's lips (RGB): the target's lip-to-skin ratio over the source's.
     target_ratio, source_ratio : (3,) float64
         Each clip's lip-to-skin ratio (:func:`lip_ratio`).
+    target_lab : (3,) float64 or None
+        The target's lip colour on the source's skin in CIELAB (OpenCV, L 0..100): the
+        target's ``ratio`` times the source's skin (:func:`recolour_lips`).
+    keep : (3,) float64 or None
+        The share of ``L, a, b``'s distance from ``target_lab`` a lip pixel keeps: the target's
+        lips' spread over the source's (:func:`lab_spread`, both on the source's skin),
+        squared, in ``[KEEP_MIN, 1]``, 1 above :data:`KEEP_SAME`. None (and ``target_lab``
+        None) without the clips' samples: the tint alone.
     """
 
     weights: np.ndarray
     tint: np.ndarray
     target_ratio: np.ndarray
     source_ratio: np.ndarray
+    target_lab: np.ndarray | None = None
+    keep: np.ndarray | None = None
 
     @classmethod
-    def of(cls, weights: np.ndarray, target_ratio: np.ndarray, source_ratio: np.ndarray
-           ) -> "LipTint":
-        """From the two clips' :func:`lip_ratio`, clipped to :data:`TINT_RANGE`."""
-        tr, sr = (np.asarray(r, np.float64).reshape(3) for r in (target_ratio, source_ratio))
-        return cls(np.asarray(weights, np.float32), np.clip(tr / sr, *TINT_RANGE), tr, sr)
+    def of(cls, weights: np.ndarray, target: "LipColour | np.ndarray",
+           source: "LipColour | np.ndarray") -> "LipTint":
+        """From the two clips' :func:`lip_ratio` (or their ratios (3,) alone: the tint
+        alone), the tint clipped to :data:`TINT_RANGE`."""
+        tr, sr = (np.asarray(getattr(r, "ratio", r), np.float64).reshape(3)
+                  for r in (target, source))
+        tint = np.clip(tr / sr, *TINT_RANGE)
+        if isinstance(target, LipColour) and isinstance(source, LipColour):
+            st, ss = (lab_spread(c, source.skin) for c in (target, source))
+            if st is not None and ss is not None:
+                keep = np.clip((st / np.maximum(ss, 1e-6)) ** 2, KEEP_MIN, 1.0)
+                keep[keep > KEEP_SAME] = 1.0
+                lab = rgb_to_lab(tr * (source.skin + 1.0) - 1.0)
+                return cls(np.asarray(weights, np.float32), tint, tr, sr, lab, keep)
+        return cls(np.asarray(weights, np.float32), tint, tr, sr)
+
+    def recolours(self) -> bool:
+        """Whether :func:`tint_mouth` brings the lips to ``target_lab``: with the clips'
+        samples, a ``keep`` below 1 and the target's lips paler than the source's
+        (:func:`skin_ahead` > 0)."""
+        return self.target_lab is not None and bool((self.keep < 1.0).any()) \
+            and skin_ahead(self) > 0.0
 
     def grey(self) -> "LipTint":
         """The tint for a monochrome target (:mod:`facetransfer.monochrome`): one factor for
@@ -131,7 +195,7 @@ def lip_vertex_weights(model, topo: MeshTopology) -> tuple[np.ndarray, np.ndarra
     return w, np.flatnonzero(read)
 
 
-def lip_ratio(samples, lips: np.ndarray, skin: np.ndarray) -> np.ndarray | None:
+def lip_ratio(samples, lips: np.ndarray, skin: np.ndarray) -> "LipColour | None":
     """A clip's lips over its skin, per channel.
 
     Parameters
@@ -143,16 +207,24 @@ def lip_ratio(samples, lips: np.ndarray, skin: np.ndarray) -> np.ndarray | None:
 
     Returns
     -------
-    (3,) float64 or None
-        The median over frames of the ratio of the median colours (RGB); None without a frame.
+    LipColour or None
+        Its ``ratio`` (3,) the median over frames of the ratio of the median colours (RGB,
+        ``c + 1``), its ``skin`` the median over frames of the skin's; None without a frame.
     """
-    ratios = []
+    ratios, skins, pooled = [], [], []
     both = np.concatenate([lips, skin])
     for image, uvs in samples:  # one look-up per frame (it converts the image once)
         c = sample_texture(image, np.asarray(uvs, np.float64)[both])
         a, b = np.median(c[:len(lips)], axis=0), np.median(c[len(lips):], axis=0)
         ratios.append((a + 1.0) / (b + 1.0))
-    return np.median(np.asarray(ratios), axis=0) if ratios else None
+        skins.append(b)
+        pooled.append(((c[:len(lips)] + 1.0) / (b + 1.0)).astype(np.float32))
+    if not ratios:
+        return None
+    frame = np.repeat(np.arange(len(pooled)), [len(p) for p in pooled])
+    return LipColour(np.median(np.asarray(ratios), axis=0),
+                     np.median(np.asarray(skins, np.float64), axis=0),
+                     np.concatenate(pooled), frame)
 
 
 def tint_mouth(mouth_img: np.ndarray, raster, faces: np.ndarray, tint: LipTint,
@@ -167,8 +239,10 @@ def tint_mouth(mouth_img: np.ndarray, raster, faces: np.ndarray, tint: LipTint,
     lipstick's band also holds (its white highlights, bared teeth, the skin beyond the
     lipstick where the lips' band reaches over it) cyan-white: G and B above R before the
     mouth's gain (:func:`facetransfer.mouth.blend_mouth`); those now keep their colour and
-    take the gain as the skin does. Onto lips redder than the source's, ``phi`` is 1: the
-    tint as it was.
+    take the gain as the skin does. Then, onto paler lips and with the clips' samples
+    (``tint.target_lab``), the tinted pixels are brought to the target's lip colour in
+    CIELAB by :func:`recolour_lips`, as far as ``w * phi``. Onto lips redder than the
+    source's, ``phi`` is 1 and there is no recolouring: the tint as it was.
 
     Parameters
     ----------
@@ -187,9 +261,105 @@ def tint_mouth(mouth_img: np.ndarray, raster, faces: np.ndarray, tint: LipTint,
     w = interpolate_vertex_values(raster, faces, tint.weights, box)
     w *= mask[box]
     sub = mouth_img[box]
-    w *= tint_reach(sub, tint, w >= 0.999)
+    core = w >= 0.999
+    w *= tint_reach(sub, tint, core)
     gain = 1.0 + w[..., None] * (tint.tint.astype(np.float32) - 1.0)
     sub[...] = np.clip(sub * gain + 0.5, 0, 255).astype(np.uint8)
+    if tint.recolours() and np.count_nonzero(core) >= MIN_LIP_PIXELS:  # else the whole tint
+        recolour_lips(sub, w, tint.target_lab, tint.keep)
+
+
+def lab_spread(colour: LipColour, skin: np.ndarray) -> np.ndarray | None:
+    """The spread of a clip's lips in CIELAB on a given skin colour.
+
+    Each sample (a lip vertex over its frame's skin) times ``skin + 1``, minus 1, is taken to
+    CIELAB (:func:`rgb_to_lab`); per frame the spread of ``L, a, b`` over its samples is their
+    interquartile range over 1.349 (the standard deviation of a normal distribution, robust
+    to a few vertices on the teeth or the skin); the result is its median over frames. Both
+    clips put on one (the source's) skin compare lips, not light.
+
+    Parameters
+    ----------
+    colour : LipColour
+    skin : (3,) float
+        RGB levels.
+
+    Returns
+    -------
+    (3,) float64 or None
+        None without a frame of 4 samples.
+    """
+    rgb = colour.samples * (np.asarray(skin, np.float32) + 1.0) - 1.0
+    lab = rgb_to_lab(rgb)
+    per = []
+    for f in np.unique(colour.frame):
+        x = lab[colour.frame == f]
+        if len(x) >= 4:
+            q = np.percentile(x, [25, 75], axis=0)
+            per.append((q[1] - q[0]) / 1.349)
+    return np.median(np.asarray(per, np.float64), axis=0) if per else None
+
+
+def rgb_to_lab(rgb: np.ndarray) -> np.ndarray:
+    """CIELAB (OpenCV's conversion, L 0..100) of RGB levels (..., 3), clipped to 0..255."""
+    import cv2
+
+    x = np.clip(np.asarray(rgb, np.float32), 0, 255) / 255.0
+    return cv2.cvtColor(x.reshape(-1, 1, 3), cv2.COLOR_RGB2LAB).reshape(x.shape).astype(
+        np.float64)
+
+
+def recolour_lips(image: np.ndarray, w: np.ndarray, target_lab: np.ndarray,
+                  keep: np.ndarray) -> None:
+    """Bring the tinted lips to the target's lip colour in CIELAB, in place.
+
+    A pixel's ``L, a, b`` become ``target_lab + keep (lab - target_lab)`` where it takes the
+    whole move: ``w`` times the ramp of its chroma over :data:`CHROMA_RAMP`, so that the
+    mouth's dark inside (and whatever is grey) stays; pixels of ``w`` 0 (a lipstick's
+    highlights, teeth, skin: :func:`tint_reach`) are not touched.
+
+    Parameters
+    ----------
+    image : (h, w, 3) uint8
+        The tinted mouth (RGB).
+    w : (h, w) float32
+        The share of the tint each pixel took (the lips' weight times :func:`tint_reach`).
+    target_lab : (3,) float
+        :attr:`LipTint.target_lab`.
+    keep : (3,) float
+        :attr:`LipTint.keep`.
+    """
+    import cv2
+
+    moved = w > 0.0
+    if not moved.any():
+        return
+    lab = cv2.cvtColor(image.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+    x = lab[moved]
+    ww = w[moved][:, None]
+    c0, c1 = CHROMA_RAMP
+    ww *= np.clip((np.hypot(x[:, 1:2], x[:, 2:3]) - c0) / (c1 - c0), 0.0, 1.0)
+    t = np.asarray(target_lab, np.float32)
+    x += ww * (1.0 - np.asarray(keep, np.float32)) * (t - x)
+    lab[moved] = x
+    rgb = cv2.cvtColor(lab, cv2.COLOR_LAB2RGB)
+    image[moved] = np.clip(rgb[moved] * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+def _hue_axis(tint: LipTint) -> tuple[np.ndarray, float, float]:
+    """``(d, |d|^2, s)`` of :func:`tint_reach`: the tint's hue in log RGB, its squared length
+    and the source's skin's place along it (0 without a hue)."""
+    d = np.log(np.asarray(tint.tint, np.float64).reshape(3))
+    d -= d.mean()
+    dd = float(d @ d)
+    u = np.log(np.asarray(tint.source_ratio, np.float64).reshape(3))
+    return d, dd, (-float((u - u.mean()) @ d) / dd if dd > 1e-8 else 0.0)
+
+
+def skin_ahead(tint: LipTint) -> float:
+    """The source's skin's place along the tint's hue (:func:`tint_reach`'s ``s``): > 0 when
+    the target's lips are paler than the source's, nearer the skin's hue."""
+    return _hue_axis(tint)[2]
 
 
 #: Pixels of weight 1 needed to read the source's lip colour in a frame (fewer: the whole tint).
@@ -232,11 +402,7 @@ def tint_reach(image: np.ndarray, tint: LipTint, lips: np.ndarray) -> np.ndarray
     (h, w) float32
         ``phi`` in [0, 1].
     """
-    d = np.log(np.asarray(tint.tint, np.float64).reshape(3))
-    d -= d.mean()
-    dd = float(d @ d)
-    u = np.log(np.asarray(tint.source_ratio, np.float64).reshape(3))
-    s = -float((u - u.mean()) @ d) / dd if dd > 1e-8 else 0.0
+    d, dd, s = _hue_axis(tint)
     if s <= 0.0 or np.count_nonzero(lips) < MIN_LIP_PIXELS:
         return np.ones(image.shape[:2], np.float32)
     k = (d / (dd * max(s, 1.0))).astype(np.float32)  # p / max(s, 1) = (q - median) per pixel
