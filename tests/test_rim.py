@@ -297,3 +297,23 @@ def test_the_rules_kernels_equal_it_on_a_face_anywhere(dx, dy, scale, lx, ly, W,
         return
     np.testing.assert_array_equal(rim.drawn_inside(r.mask, r, faces, lifted, drawn),
                                   _drawn_inside_numpy(r.mask, r, faces, lifted, drawn))
+
+
+def test_a_face_mostly_past_the_frames_edge_renders(narrower):
+    """The target's face and the new one four fifths past the frame's right edge, the texture
+    the frame's own: the vertices past the crop lie in the band (their depth reads 0), more
+    than 10,922 triangles (32,767 corners, one ``cv2.remap``'s most, which raised before
+    :data:`facetransfer.rim.REMAP_CHUNK`): the frame is rewritten, the same where no face
+    is."""
+    model, topo, new, frame, tex, Vc = narrower
+    target = mean_person_track(model, np.zeros((1, 52), np.float32), size=SIZE, scale=25.0)
+    cam = target.camera(0)
+    far = WeakPerspective(cam.scale, cam.rotation, cam.translation + [0.8 * SIZE, 0.0])
+    edge = FaceTexture(frame, frame_uvs(Vc, far, (SIZE, SIZE)), 0)
+    lifted = rim.lifted_positions(edge, frame)
+    grid = (lifted - (rim.STEP - 1) / 2.0) / rim.STEP
+    assert (grid[:, 0] > SIZE / rim.STEP).mean() > 0.6
+    out = rewrite_frame(frame, Vc * [1.0, 0.97, 1.0], far, topo, FrameTextures(edge),
+                        blending=BlendOptions("none"))
+    assert out.face_mask.any() and not out.face_mask[:, :SIZE // 2].any()
+    np.testing.assert_array_equal(out.image[~out.face_mask], frame[~out.face_mask])
