@@ -399,3 +399,52 @@ def test_interpolate_vertex_values_is_the_barycentric_mix():
     np.testing.assert_array_equal(interpolate_vertex_values(r, F, vals, box=box), got[box])
     with pytest.raises(ValueError, match="values"):
         interpolate_vertex_values(r, F, vals[:3])
+
+
+def _gain_factors_numpy(face, part, where, box, max_samples=4096):
+    """:func:`facetransfer.patch._gain_factors` with its tail as the numpy expressions it was
+    before the forty-fifth session (the columns' and rows' coordinates, held within the
+    samples' middle by ``np.partition``, times the plane's coefficients, then ``np.exp``)."""
+    pts = cv2.findNonZero(where.view(np.uint8))
+    n = pts.shape[0]
+    k = -(-n // max(1, -(-n // int(max_samples))))
+    u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
+    patch._gain_samples(pts.reshape(n, 2), 0, 0, 0, 0, face, part, int(max_samples),
+                        patch._LOG1P_U8, u, v, r, centre)
+    cx, cy, scale = centre
+    coef = np.empty((3, 3))
+    patch._plane_l1_kernel(u, v, r, patch.GAIN_ITERATIONS, coef)
+
+    def middle(a):
+        b = a[::max(1, a.size // 1024)]
+        lo = int(round(patch.GAIN_SUPPORT * (b.size - 1)))
+        part_ = np.partition(b, (lo, b.size - 1 - lo))
+        return float(part_[lo]), float(part_[b.size - 1 - lo])
+
+    x0, y0, x1, y1 = box
+    xs, ys = (np.arange(x0, x1) - cx) / scale, (np.arange(y0, y1) - cy) / scale
+    if patch.GAIN_SUPPORT > 0:
+        np.clip(xs, *middle(u), out=xs)
+        np.clip(ys, *middle(v), out=ys)
+    return np.exp(coef[0] + ys[:, None] * coef[2]), np.exp(xs[:, None] * coef[1])
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("support", [0.0, 0.1, 0.3])
+def test_gain_factors_exponents_equal_the_numpy_expressions(seed, support, monkeypatch):
+    """The separable gains' kernel (the middle by ``np.partition`` in numba, the exponents in
+    float64 in numpy's order) against the numpy expressions it replaced, bit for bit: masks
+    of a few pixels to 20,000 (more than the 4096 samples, more than 1024 of them strided),
+    boxes inside and beyond the mask's, and no holding (``GAIN_SUPPORT`` 0)."""
+    monkeypatch.setattr(patch, "GAIN_SUPPORT", support)
+    rng = np.random.default_rng(seed)
+    H, W = (12, 15) if seed == 0 else (int(rng.integers(60, 200)), int(rng.integers(60, 200)))
+    face = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    part = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    where = _blobs(rng, (H, W), smooth=2.0 + seed, level=0.5)
+    where[H // 2, W // 3:W // 3 + 3] = True
+    for box in ((0, 0, W, H), (3, 2, W - 5, H - 1), (-4, -6, W + 7, H + 3)):
+        gy, gx = patch._gain_factors(face, part, where, patch.GAIN_ITERATIONS, box, 4096)
+        ry, rx = _gain_factors_numpy(face, part, where, box)
+        np.testing.assert_array_equal(gy, ry)
+        np.testing.assert_array_equal(gx, rx)

@@ -460,24 +460,41 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
     _plane_l1_kernel(u, v, r, int(iterations), coef)
     x0, y0, x1, y1 = box
     # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns,
-    # each coordinate held within the samples' middle (GAIN_SUPPORT; 0: extrapolated)
-    xs, ys = (np.arange(x0, x1) - cx) / scale, (np.arange(y0, y1) - cy) / scale
-    if GAIN_SUPPORT > 0:
-        np.clip(xs, *_middle(u, GAIN_SUPPORT), out=xs)
-        np.clip(ys, *_middle(v, GAIN_SUPPORT), out=ys)
-    gx = np.exp(xs[:, None] * coef[1])                                      # (w, c)
-    gy = np.exp(coef[0] + ys[:, None] * coef[2])                            # (h, c)
-    return gy, gx
+    # each coordinate held within the samples' middle (GAIN_SUPPORT; 0: extrapolated): the
+    # exponents in one kernel (_exponents), their exp numpy's
+    step = max(1, k // 1024)     # at most ~1024 of the samples give the middle's ends
+    lo = int(round(GAIN_SUPPORT * (len(range(0, k, step)) - 1)))
+    gx, gy = np.empty((x1 - x0, 3)), np.empty((y1 - y0, 3))
+    _exponents(u, v, step, lo, GAIN_SUPPORT > 0, int(x0), int(y0), cx, cy, scale, coef, gx, gy)
+    return np.exp(gy, out=gy), np.exp(gx, out=gx)
 
 
-def _middle(a: np.ndarray, fraction: float, most: int = 1024) -> tuple[float, float]:
-    """The order statistics of ``a`` (k,) that leave ``fraction`` of it on either side, read
-    on at most ``most`` of its values (evenly strided): ``(low, high)``."""
-    b = a[::max(1, a.size // most)]
-    lo = int(round(fraction * (b.size - 1)))
-    hi = b.size - 1 - lo
-    part = np.partition(b, (lo, hi))
-    return float(part[lo]), float(part[hi])
+def _exponents_py(u, v, step, lo, held, x0, y0, cx, cy, scale, coef, ex,
+                  ey):  # pragma: no cover (numba)
+    """The exponents of :func:`_gain_factors`' separable gains: ``ex`` (w, 3) = ``xs coef[1]``
+    and ``ey`` (h, 3) = ``coef[0] + ys coef[2]`` (per channel) with ``xs = (x - cx) / scale``
+    over the columns ``x0 .. x0 + w - 1`` and ``ys`` the rows' likewise, each clipped, when
+    ``held``, to the middle of ``u`` (``v``): the ``lo``-th and ``(m - 1 - lo)``-th
+    smallest of its ``m`` samples of stride ``step``; float64, numpy's operations in order."""
+    xlo = xhi = ylo = yhi = 0.0
+    if held:
+        b = u[::step].copy()
+        m = b.shape[0]
+        xlo, xhi = np.partition(b, lo)[lo], np.partition(b, m - 1 - lo)[m - 1 - lo]
+        b = v[::step].copy()
+        ylo, yhi = np.partition(b, lo)[lo], np.partition(b, m - 1 - lo)[m - 1 - lo]
+    for i in range(ex.shape[0]):
+        x = (np.float64(x0 + i) - cx) / scale
+        if held:
+            x = min(max(x, xlo), xhi)
+        for c in range(3):
+            ex[i, c] = x * coef[1, c]
+    for i in range(ey.shape[0]):
+        y = (np.float64(y0 + i) - cy) / scale
+        if held:
+            y = min(max(y, ylo), yhi)
+        for c in range(3):
+            ey[i, c] = coef[0, c] + y * coef[2, c]
 
 
 def _gain_samples_py(pts, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v, r,
@@ -611,3 +628,4 @@ _gain_rows = _maybe_njit(_gain_rows_py)
 _gain_samples = _maybe_njit(_gain_samples_py)
 _reject_fade = _maybe_njit(_reject_fade_py)
 _plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)
+_exponents = _maybe_njit(_exponents_py)
