@@ -448,3 +448,52 @@ def test_gain_factors_exponents_equal_the_numpy_expressions(seed, support, monke
         ry, rx = _gain_factors_numpy(face, part, where, box)
         np.testing.assert_array_equal(gy, ry)
         np.testing.assert_array_equal(gx, rx)
+
+
+def _feather_alpha_before(m, feather, edge_outside):
+    """:func:`facetransfer.composite._feather_alpha` as it was before the forty-fifth session
+    (the band by ``cv2.subtract`` and ``cv2.findNonZero``, searched pixel by pixel; here in
+    Python): the reference its one-pass kernel must equal bit for bit."""
+    r = max(int(np.ceil(feather)), 1)
+    m8 = m.view(np.uint8)
+    deep = cv2.erode(m8, np.ones((2 * r + 1, 2 * r + 1), np.uint8),
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0 if edge_outside else 1)
+    a = deep.astype(np.float32)
+    band = cv2.findNonZero(cv2.subtract(m8, deep))
+    if band is None:
+        return a
+    k = 2 * r + 1
+    d2 = np.array([(i // k - r) ** 2 + (i % k - r) ** 2 for i in range(k * k)])
+    order = np.argsort(d2, kind="mergesort")
+    h, w = m.shape
+    for x, y in band.reshape(-1, 2):
+        best = 2 * (r + 1) * (r + 1)
+        for i in order:
+            yy, xx = y + i // k - r, x + i % k - r
+            if not (0 <= yy < h and 0 <= xx < w):
+                if edge_outside:
+                    best = d2[i]
+                    break
+            elif m8[yy, xx] == 0:
+                best = d2[i]
+                break
+        a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(max(feather, 1e-6)),
+                      np.float32(1.0))
+    return a
+
+
+@pytest.mark.parametrize("feather", [0.5, 1.0, 2.0, 2.5, 3.0, 4.0])
+@pytest.mark.parametrize("edge_outside", [False, True])
+def test_feather_alpha_kernel_equals_the_band_search_before(feather, edge_outside):
+    """The one-pass kernel (1 in the erosion, 0 outside, the search between) against the
+    band search it replaced, bit for bit: blobs touching the crop's edges, a hole, an all-set
+    and an empty crop, a one-pixel-wide line."""
+    rng = np.random.default_rng(int(feather * 10) + 3 * edge_outside)
+    m = _blobs(rng, (47, 59), level=0.5)
+    m[:, :3] = True
+    m[10:12, 20:22] = False
+    line = np.zeros((9, 30), bool)
+    line[4, 2:28] = True
+    for mask in (m, np.ones((12, 9), bool), np.zeros((6, 8), bool), line):
+        np.testing.assert_array_equal(_feather_alpha(mask, feather, edge_outside=edge_outside),
+                                      _feather_alpha_before(mask, feather, edge_outside))

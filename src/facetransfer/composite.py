@@ -681,20 +681,31 @@ def _feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.n
     """
     r = max(int(np.ceil(feather)), 1)
     m8 = m.view(np.uint8)
-    deep = cv2.erode(m8, np.ones((2 * r + 1, 2 * r + 1), np.uint8),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0 if edge_outside else 1)
-    a = deep.astype(np.float32)  # deep lies in m (each window holds its own pixel)
-    band = cv2.findNonZero(cv2.subtract(m8, deep))  # (k, 1, 2): (x, y)
-    if band is not None:
-        _alpha_kernel(m8, band.reshape(-1, 2), r, float(max(feather, 1e-6)),
-                      bool(edge_outside), a)
+    deep = cv2.erode(m8, _square(2 * r + 1), borderType=cv2.BORDER_CONSTANT,
+                     borderValue=0 if edge_outside else 1)
+    a = np.empty(m.shape, np.float32)
+    # deep lies in m (each window holds its own pixel): 1 there, 0 outside m, searched between
+    _alpha_kernel(m8, deep, r, float(max(feather, 1e-6)), bool(edge_outside), a)
     return a
 
 
-def _alpha_kernel_py(m, band, r, feather, edge_outside, a):  # pragma: no cover (numba)
-    """The window search of :func:`_feather_alpha` at the pixels ``band`` (k, 2) int32
-    ``(x, y)`` of ``m`` (h, w) uint8, writing ``a`` (h, w) float32 there: the window's offsets
-    in order of distance, up to the first outside pixel."""
+def _square(k: int) -> np.ndarray:
+    """The ``k`` x ``k`` square structuring element (uint8 ones), made once per size."""
+    sq = _SQUARES.get(k)
+    if sq is None:
+        sq = _SQUARES[k] = np.ones((k, k), np.uint8)
+        sq.flags.writeable = False
+    return sq
+
+
+_SQUARES: dict = {}
+
+
+def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover (numba)
+    """:func:`_feather_alpha` into ``a`` (h, w) float32 from ``m`` (h, w) uint8 and its
+    square erosion ``deep``: 1 where ``deep``, 0 outside ``m``, and at the rest of ``m`` (its
+    band along the outline) the window search: the window's offsets in order of distance, up
+    to the first outside pixel."""
     h, w = m.shape
     k = 2 * r + 1
     d2 = np.empty(k * k, np.int64)
@@ -702,19 +713,34 @@ def _alpha_kernel_py(m, band, r, feather, edge_outside, a):  # pragma: no cover 
         d2[i] = (i // k - r) ** 2 + (i % k - r) ** 2
     order = np.argsort(d2, kind="mergesort")
     oy, ox, od = order // k - r, order % k - r, d2[order]
-    for j in range(band.shape[0]):
-        x, y = band[j, 0], band[j, 1]
-        best = 2 * (r + 1) * (r + 1)
-        for i in range(k * k):
-            yy, xx = y + oy[i], x + ox[i]
-            if yy < 0 or yy >= h or xx < 0 or xx >= w:
-                if edge_outside:
-                    best = od[i]
-                    break
-            elif m[yy, xx] == 0:
+    for y in range(h):
+        for x in range(w):
+            if deep[y, x] or not m[y, x]:
+                a[y, x] = np.float32(1.0) if deep[y, x] else np.float32(0.0)
+            else:
+                a[y, x] = _window_alpha(m, x, y, oy, ox, od, r, feather, edge_outside)
+
+
+def _window_alpha_py(m, x, y, oy, ox, od, r, feather, edge_outside):  # pragma: no cover
+    """The window search of :func:`_alpha_kernel` at pixel ``(x, y)`` of ``m``: the squared
+    distance ``od`` of the first offset ``(ox, oy)`` (in order of distance) that lies outside
+    (``edge_outside``: beyond the crop too), ``2 (r + 1)²`` if none, as ``min(sqrt /
+    feather, 1)`` in float32 (numba, inlined)."""
+    h, w = m.shape
+    best = 2 * (r + 1) * (r + 1)
+    for i in range(od.shape[0]):
+        yy, xx = y + oy[i], x + ox[i]
+        if yy < 0 or yy >= h or xx < 0 or xx >= w:
+            if edge_outside:
                 best = od[i]
                 break
-        a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
+        elif m[yy, xx] == 0:
+            best = od[i]
+            break
+    return min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
+
+
+_window_alpha = _maybe_njit(_window_alpha_py, inline=True)
 
 
 def _blend_value_py(b, ay, f):  # pragma: no cover (numba, inlined)
