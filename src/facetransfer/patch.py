@@ -479,23 +479,24 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
     x0, y0, x1, y1 = box
     # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns,
     # each coordinate held within the samples' middle (GAIN_SUPPORT; 0: extrapolated): the
-    # samples, the plane and its exponents in one kernel (_gain_fit), their exp numpy's
+    # plane and its exponents in one kernel (_gain_fit), their exp numpy's
     step = max(1, k // 1024)     # at most ~1024 of the samples give the middle's ends
     lo = int(round(GAIN_SUPPORT * (len(range(0, k, step)) - 1)))
+    u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
+    _gain_samples(pts.reshape(n, 2), int(origin[0]), int(origin[1]), int(shift[0]),
+                  int(shift[1]), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
     gx, gy = np.empty((x1 - x0, 3)), np.empty((y1 - y0, 3))
-    _gain_fit(pts.reshape(n, 2), int(origin[0]), int(origin[1]), int(shift[0]), int(shift[1]),
-              face, part, int(max_samples), _LOG1P_U8, k, int(iterations), step, lo,
-              GAIN_SUPPORT > 0, int(x0), int(y0), gx, gy)
+    _gain_fit(u, v, r, centre, int(iterations), step, lo, GAIN_SUPPORT > 0, int(x0), int(y0),
+              gx, gy)
     return np.exp(gy, out=gy), np.exp(gx, out=gx)
 
 
-def _gain_fit_py(pts, ox, oy, sx0, sy0, face, part, max_samples, lut, k, iterations, step,
-                 lo, held, x0, y0, ex, ey):  # pragma: no cover (numba)
-    """:func:`_gain_factors`' kernels in one call: its ``k`` samples (:func:`_gain_samples`),
-    their plane (:func:`_plane_l1_kernel`, ``iterations`` steps) and its exponents over the
-    box (:func:`_exponents` into ``ex`` (w, 3), ``ey`` (h, 3))."""
-    u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
-    _gain_samples(pts, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v, r, centre)
+def _gain_fit_py(u, v, r, centre, iterations, step, lo, held, x0, y0, ex,
+                 ey):  # pragma: no cover (numba)
+    """:func:`_gain_factors`' plane of the samples ``u``, ``v``, ``r`` (:func:`_gain_samples`,
+    centred on ``centre``; :func:`_plane_l1_kernel`, ``iterations`` steps) and its exponents
+    over the box (:func:`_exponents` into ``ex`` (w, 3), ``ey`` (h, 3)) in one call (its
+    arrays C-contiguous always: one compiled kernel)."""
     coef = np.empty((3, 3))
     _plane_l1_kernel(u, v, r, iterations, coef)
     _exponents(u, v, step, lo, held, x0, y0, centre[0], centre[1], centre[2], coef, ex, ey)

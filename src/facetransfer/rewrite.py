@@ -426,20 +426,22 @@ def _keep_own(face_img: np.ndarray, face_mask: np.ndarray, frame: np.ndarray,
     box = (slice(y, y + h + 8), slice(x, x + w + 8))
     wb = np.ascontiguousarray(where[box])
     blur = cv2.GaussianBlur(wb.view(np.uint8).astype(np.float32), (0, 0), 1.5)
-    _keep_own_kernel(blur, wb, face_mask[box], frame[box], face_img[box],
-                     np.float32(0.5 / 255))
+    _keep_own_kernel(blur, wb, face_mask, frame, face_img, x, y, np.float32(0.5 / 255))
 
 
-def _keep_own_kernel_py(blur, where, face_mask, frame, face_img, least):  # pragma: no cover
-    """:func:`_keep_own`'s mix on its box, in place (numba): per pixel ``a = max(blur,
-    where) * face_mask`` (float32) and, where ``a > least``, ``face_img = rint(f + a (t - f))``
-    with ``f``, ``t`` the face's and the frame's channel values in float32 (the numpy
-    expressions' operations, in their order)."""
-    for y in range(blur.shape[0]):
-        for x in range(blur.shape[1]):
+def _keep_own_kernel_py(blur, where, face_mask, frame, face_img, x0, y0,
+                        least):  # pragma: no cover (numba)
+    """:func:`_keep_own`'s mix on its box (``blur``'s shape at ``(x0, y0)`` of the whole
+    arrays: one layout, one compiled kernel), in place: per pixel ``a = max(blur, where) *
+    face_mask`` (float32) and, where ``a > least``, ``face_img = rint(f + a (t - f))`` with
+    ``f``, ``t`` the face's and the frame's channel values in float32 (the numpy expressions'
+    operations, in their order)."""
+    for by in range(blur.shape[0]):
+        for bx in range(blur.shape[1]):
+            y, x = y0 + by, x0 + bx
             if not face_mask[y, x]:
                 continue
-            a = max(blur[y, x], np.float32(1.0) if where[y, x] else np.float32(0.0))
+            a = max(blur[by, bx], np.float32(1.0) if where[by, bx] else np.float32(0.0))
             if not a > least:
                 continue
             for c in range(3):

@@ -154,7 +154,7 @@ def drawn_inside(face_mask: np.ndarray, raster, faces: np.ndarray, lifted: np.nd
     kept = np.empty(tb.shape, np.uint8)
     _lookup_kernel(per_tri, tb, kept)
     # the triangles' sawtooth outline smoothed (5 x 5 median), on the face only
-    _on_face_kernel(cv2.medianBlur(kept, 5), tb, out[y0:y1, x0:x1])
+    _on_face_kernel(cv2.medianBlur(kept, 5), tb, out, x0, y0)
     return out
 
 
@@ -205,11 +205,12 @@ def _lookup_kernel_py(per_tri, tri_id, kept):  # pragma: no cover (numba)
             kept[y, x] = np.uint8(per_tri[tri_id[y, x] + 1])
 
 
-def _on_face_kernel_py(med, tri_id, out):  # pragma: no cover (numba)
-    """``out = (med != 0) & (tri_id >= 0)`` (``out`` (h, w) bool, a view, in place)."""
+def _on_face_kernel_py(med, tri_id, out, x0, y0):  # pragma: no cover (numba)
+    """``out[y0:, x0:]`` (its box of ``tri_id``'s (h, w) shape) ``= (med != 0) & (tri_id >=
+    0)``, in place (the whole ``out`` passed: one layout, one compiled kernel)."""
     for y in range(tri_id.shape[0]):
         for x in range(tri_id.shape[1]):
-            out[y, x] = med[y, x] != 0 and tri_id[y, x] >= 0
+            out[y0 + y, x0 + x] = med[y, x] != 0 and tri_id[y, x] >= 0
 
 
 _band_kernel = _maybe_njit(_band_kernel_py)
