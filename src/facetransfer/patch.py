@@ -320,8 +320,30 @@ def _hue_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray, sigma: flo
 
 def _grey(g: np.ndarray) -> np.ndarray:
     """Per-channel gain factors (n, 3) as one factor for all three: the geometric mean of each
-    row, so the gain's product over rows and columns is the mean of the channels' log gains."""
-    return np.repeat(np.exp(np.log(g).mean(axis=1, keepdims=True)), 3, axis=1)
+    row, so the gain's product over rows and columns is the mean of the channels' log gains.
+    (numpy's log and exp; the mean, ``((a + b) + c) / 3`` as numpy's sums a row of three, and
+    the repeat in a kernel.)"""
+    m = np.empty(g.shape[0])
+    _row_means(np.log(g), m)
+    return _repeat3(np.exp(m, out=m))
+
+
+def _row_means_py(lg, m):  # pragma: no cover (numba)
+    """``m = ((lg[:, 0] + lg[:, 1]) + lg[:, 2]) / 3`` (``lg`` (n, 3), ``m`` (n,) float64)."""
+    for i in range(lg.shape[0]):
+        m[i] = ((lg[i, 0] + lg[i, 1]) + lg[i, 2]) / 3.0
+
+
+def _repeat3_py(m):  # pragma: no cover (numba)
+    """``m`` (n,) repeated for three channels, a new (n, 3) array."""
+    out = np.empty((m.shape[0], 3))
+    for i in range(m.shape[0]):
+        out[i, 0] = out[i, 1] = out[i, 2] = m[i]
+    return out
+
+
+_row_means = _maybe_njit(_row_means_py)
+_repeat3 = _maybe_njit(_repeat3_py)
 
 
 def _ring(compare: np.ndarray, face_mask: np.ndarray):
