@@ -164,3 +164,55 @@ def test_the_target_gaze_keeps_the_targets_own_eye_direction(scene):
     batch = ["batch", "transfer", "--manifest", "pairs.csv", "--out", "d", "--gaze", "target"]
     assert job_options(transfer_settings(p.parse_args(batch))).gaze == "target"
     assert p.parse_args(["demo", "--out", "o", "--gaze", "target"]).gaze == "target"
+
+
+def _shift_eyeballs_numpy(eye_img, tri_id, bary, faces, uvs, balls, shift) -> None:
+    """:func:`facetransfer.eyeballs.shift_eyeballs` as numpy expressions (before its kernels,
+    the forty-fifth session): the reference they must equal bit for bit."""
+    import cv2
+
+    eye = balls.lookup.take(tri_id + 1)
+    flat = np.flatnonzero(eye >= 0)
+    if flat.size == 0:
+        return
+    ys, xs = np.divmod(flat, tri_id.shape[1])
+    tri = tri_id[ys, xs]
+    uv = np.einsum("nk,nkc->nc", bary[ys, xs].astype(np.float64), uvs[faces[tri]])
+    H, W = balls.image.shape[:2]
+    d = shift[eye.ravel()[flat]]
+    mx = (uv[:, 0] * (W - 1) - d[:, 0]).astype(np.float32)[None]
+    my = ((1.0 - uv[:, 1]) * (H - 1) - d[:, 1]).astype(np.float32)[None]
+    eye_img[ys, xs] = cv2.remap(balls.image, mx, my, cv2.INTER_LINEAR,
+                                borderMode=cv2.BORDER_REPLICATE)[0]
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_shift_eyeballs_kernels_equal_their_numpy_expressions(seed):
+    """Random rasters (a fifth background), barycentrics, uvs (float64 and float32, some a
+    little past the image), fill triangles of either eye or none, shifts of up to 20 px and a
+    crop of a larger raster (the region's box): the same bytes as the numpy expressions; and
+    with no fill pixel, nothing changes."""
+    rng = np.random.default_rng(seed)
+    F, n, H, W = 400, 250, int(rng.integers(30, 90)), int(rng.integers(30, 90))
+    faces = rng.integers(0, n, (F, 3))
+    uvs = rng.uniform(-0.05, 1.05, (n, 2))
+    if seed % 2:
+        uvs = uvs.astype(np.float32)
+    lookup = np.concatenate([[-1], rng.integers(-1, 2, F)]).astype(np.int8)
+    image = rng.integers(0, 256, (70, 80, 3), dtype=np.uint8)
+    balls = eyeballs.Eyeballs(image, None, np.zeros((2, 2)), None, np.ones(2), lookup,
+                              np.zeros((2, 2)))
+    tid = rng.integers(-1, F, (H + 6, W + 4)).astype(np.int32)
+    tid[rng.random(tid.shape) < 0.2] = -1
+    bary = rng.dirichlet(np.ones(3), tid.shape).astype(np.float32)
+    shift = rng.uniform(-20, 20, (2, 2))
+    img = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    got, want = img.copy(), img.copy()
+    sl = (slice(3, 3 + H), slice(2, 2 + W))
+    eyeballs.shift_eyeballs(got, tid[sl], bary[sl], faces, uvs, balls, shift)
+    _shift_eyeballs_numpy(want, tid[sl], bary[sl], faces, uvs, balls, shift)
+    np.testing.assert_array_equal(got, want)
+    assert (got != img).any()
+    none = dataclasses.replace(balls, lookup=np.full(F + 1, -1, np.int8))
+    eyeballs.shift_eyeballs(got, tid[sl], bary[sl], faces, uvs, none, shift)
+    np.testing.assert_array_equal(got, want)

@@ -96,3 +96,74 @@ def test_the_hue_field_carries_the_hue_and_leaves_the_brightness():
         np.testing.assert_allclose(np.log(g).sum(axis=2), 0, atol=1e-4)
     # nothing to compare: no field
     assert patch._hue_field(part, face, np.zeros((H, W), bool), 10.0) is None
+
+
+def _shading_field_numpy(part, face, valid, sigma=patch.SHADING_SIGMA):
+    """:func:`facetransfer.patch._shading_field` with its masking and holding as the numpy
+    expressions they were before the forty-fifth session (the reference of its kernels)."""
+    import cv2
+
+    grid = patch._coarse(part, face, valid)
+    if grid is None:
+        return None
+    f1, p1, m = grid
+    lim = float(np.exp(patch.SHADING_LIMIT))
+    ok = cv2.inRange(cv2.divide(f1, p1), (1.0 / lim,) * 3, (lim,) * 3) > 0
+    m[~ok | (m < 0.5)] = 0.0
+    if not m.any():
+        return None
+    num, den, wt = patch._weighted_sums(f1, p1, m, sigma)
+    g = cv2.divide(num, np.maximum(den, 1e-6))
+    np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])
+    np.clip(g, *patch.SHADING_RANGE, out=g)
+    return cv2.resize(g, (valid.shape[1], valid.shape[0]), interpolation=cv2.INTER_LINEAR)
+
+
+def _hue_field_numpy(part, face, valid, sigma):
+    """:func:`facetransfer.patch._hue_field` likewise (the reference of its kernels)."""
+    import cv2
+
+    grid = patch._coarse(part, face, valid)
+    if grid is None:
+        return None
+    f1, p1, m = grid
+    lr = cv2.subtract(cv2.log(f1), cv2.log(p1))
+    grey = cv2.transform(lr, patch._THIRDS)
+    lim = patch.HUE_LIMITS
+    ok = cv2.inRange(cv2.subtract(lr, cv2.merge([grey, grey, grey])), (-lim[1],) * 3,
+                     (lim[1],) * 3) > 0
+    ok &= cv2.inRange(grey, -lim[0], lim[0]) > 0
+    m[~ok | (m < 0.5)] = 0.0
+    if not m.any():
+        return None
+    num, den, wt = patch._weighted_sums(f1, p1, m, sigma)
+    lg = cv2.subtract(cv2.log(cv2.max(num, 1e-6)), cv2.log(cv2.max(den, 1e-6)))
+    mean = cv2.transform(lg, patch._THIRDS)
+    g = cv2.exp(cv2.subtract(lg, cv2.merge([mean, mean, mean])))
+    np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])
+    np.clip(g, *patch.HUE_RANGE, out=g)
+    return cv2.resize(g, (valid.shape[1], valid.shape[0]), interpolation=cv2.INTER_LINEAR)
+
+
+def test_the_fields_kernels_equal_their_numpy_expressions():
+    """The shading and hue fields (their blocks' masking and the held, clipped gain as
+    kernels) against the numpy expressions, bit for bit: a shaded, tinted skin with unlike
+    patches (some blocks refused, some clipped, thin neighbourhoods held at 1), sparse and
+    absent compared pixels (None), and a box smaller than a block."""
+    rng = np.random.default_rng(45)
+    skin = _skin()
+    face = np.clip(skin * _shading() * np.array([1.3, 1.0, 0.8], np.float32), 0, 255)
+    face = face.astype(np.uint8)
+    face[30:50, 20:60] = (20, 20, 20)             # hair: refused blocks
+    part = skin.copy()
+    part[80:100, 100:140] *= 0.6                  # a darker patch: clipped gains
+    for valid in (np.ones((H, W), bool), rng.random((H, W)) < 0.6,
+                  rng.random((H, W)) < 0.02, np.zeros((H, W), bool)):
+        for ours, ref, args in ((patch._shading_field, _shading_field_numpy, ()),
+                                (patch._hue_field, _hue_field_numpy, (8.0,))):
+            got, want = ours(part, face, valid, *args), ref(part, face, valid, *args)
+            assert (got is None) == (want is None)
+            if want is not None:
+                np.testing.assert_array_equal(got, want)
+    small = np.ones((2, 5), bool)
+    assert patch._shading_field(part[:2, :5], face[:2, :5], small) is None

@@ -399,3 +399,114 @@ def test_interpolate_vertex_values_is_the_barycentric_mix():
     np.testing.assert_array_equal(interpolate_vertex_values(r, F, vals, box=box), got[box])
     with pytest.raises(ValueError, match="values"):
         interpolate_vertex_values(r, F, vals[:3])
+
+
+def _gain_factors_numpy(face, part, where, box, max_samples=4096):
+    """:func:`facetransfer.patch._gain_factors` with its tail as the numpy expressions it was
+    before the forty-fifth session (the columns' and rows' coordinates, held within the
+    samples' middle by ``np.partition``, times the plane's coefficients, then ``np.exp``)."""
+    pts = cv2.findNonZero(where.view(np.uint8))
+    n = pts.shape[0]
+    k = -(-n // max(1, -(-n // int(max_samples))))
+    u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
+    patch._gain_samples(pts.reshape(n, 2), 0, 0, 0, 0, face, part, int(max_samples),
+                        patch._LOG1P_U8, u, v, r, centre)
+    cx, cy, scale = centre
+    coef = np.empty((3, 3))
+    patch._plane_l1_kernel(u, v, r, patch.GAIN_ITERATIONS, coef)
+
+    def middle(a):
+        b = a[::max(1, a.size // 1024)]
+        lo = int(round(patch.GAIN_SUPPORT * (b.size - 1)))
+        part_ = np.partition(b, (lo, b.size - 1 - lo))
+        return float(part_[lo]), float(part_[b.size - 1 - lo])
+
+    x0, y0, x1, y1 = box
+    xs, ys = (np.arange(x0, x1) - cx) / scale, (np.arange(y0, y1) - cy) / scale
+    if patch.GAIN_SUPPORT > 0:
+        np.clip(xs, *middle(u), out=xs)
+        np.clip(ys, *middle(v), out=ys)
+    return np.exp(coef[0] + ys[:, None] * coef[2]), np.exp(xs[:, None] * coef[1])
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("support", [0.0, 0.1, 0.3])
+def test_gain_factors_exponents_equal_the_numpy_expressions(seed, support, monkeypatch):
+    """The separable gains' kernel (the middle by ``np.partition`` in numba, the exponents in
+    float64 in numpy's order) against the numpy expressions it replaced, bit for bit: masks
+    of a few pixels to 20,000 (more than the 4096 samples, more than 1024 of them strided),
+    boxes inside and beyond the mask's, and no holding (``GAIN_SUPPORT`` 0)."""
+    monkeypatch.setattr(patch, "GAIN_SUPPORT", support)
+    rng = np.random.default_rng(seed)
+    H, W = (12, 15) if seed == 0 else (int(rng.integers(60, 200)), int(rng.integers(60, 200)))
+    face = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    part = rng.integers(0, 256, (H, W, 3), dtype=np.uint8)
+    where = _blobs(rng, (H, W), smooth=2.0 + seed, level=0.5)
+    where[H // 2, W // 3:W // 3 + 3] = True
+    for box in ((0, 0, W, H), (3, 2, W - 5, H - 1), (-4, -6, W + 7, H + 3)):
+        gy, gx = patch._gain_factors(face, part, where, patch.GAIN_ITERATIONS, box, 4096)
+        ry, rx = _gain_factors_numpy(face, part, where, box)
+        np.testing.assert_array_equal(gy, ry)
+        np.testing.assert_array_equal(gx, rx)
+
+
+def _feather_alpha_before(m, feather, edge_outside):
+    """:func:`facetransfer.composite._feather_alpha` as it was before the forty-fifth session
+    (the band by ``cv2.subtract`` and ``cv2.findNonZero``, searched pixel by pixel; here in
+    Python): the reference its one-pass kernel must equal bit for bit."""
+    r = max(int(np.ceil(feather)), 1)
+    m8 = m.view(np.uint8)
+    deep = cv2.erode(m8, np.ones((2 * r + 1, 2 * r + 1), np.uint8),
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0 if edge_outside else 1)
+    a = deep.astype(np.float32)
+    band = cv2.findNonZero(cv2.subtract(m8, deep))
+    if band is None:
+        return a
+    k = 2 * r + 1
+    d2 = np.array([(i // k - r) ** 2 + (i % k - r) ** 2 for i in range(k * k)])
+    order = np.argsort(d2, kind="mergesort")
+    h, w = m.shape
+    for x, y in band.reshape(-1, 2):
+        best = 2 * (r + 1) * (r + 1)
+        for i in order:
+            yy, xx = y + i // k - r, x + i % k - r
+            if not (0 <= yy < h and 0 <= xx < w):
+                if edge_outside:
+                    best = d2[i]
+                    break
+            elif m8[yy, xx] == 0:
+                best = d2[i]
+                break
+        a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(max(feather, 1e-6)),
+                      np.float32(1.0))
+    return a
+
+
+@pytest.mark.parametrize("feather", [0.5, 1.0, 2.0, 2.5, 3.0, 4.0])
+@pytest.mark.parametrize("edge_outside", [False, True])
+def test_feather_alpha_kernel_equals_the_band_search_before(feather, edge_outside):
+    """The one-pass kernel (1 in the erosion, 0 outside, the search between) against the
+    band search it replaced, bit for bit: blobs touching the crop's edges, a hole, an all-set
+    and an empty crop, a one-pixel-wide line."""
+    rng = np.random.default_rng(int(feather * 10) + 3 * edge_outside)
+    m = _blobs(rng, (47, 59), level=0.5)
+    m[:, :3] = True
+    m[10:12, 20:22] = False
+    line = np.zeros((9, 30), bool)
+    line[4, 2:28] = True
+    for mask in (m, np.ones((12, 9), bool), np.zeros((6, 8), bool), line):
+        np.testing.assert_array_equal(_feather_alpha(mask, feather, edge_outside=edge_outside),
+                                      _feather_alpha_before(mask, feather, edge_outside))
+
+
+def test_grey_equals_the_numpy_geometric_mean():
+    """The gains' grey (one factor per row, the geometric mean of its three) against numpy's
+    ``repeat(exp(log(g).mean(axis=1, keepdims=True)), 3, axis=1)``, bit for bit: gains
+    around 1, spread over two orders, a single row and none."""
+    rng = np.random.default_rng(31)
+    for g in (rng.uniform(0.7, 1.4, (257, 3)), np.exp(rng.normal(0, 2, (1000, 3))),
+              np.array([[0.5, 1.0, 2.0]]), np.empty((0, 3))):
+        want = np.repeat(np.exp(np.log(g).mean(axis=1, keepdims=True)), 3, axis=1)
+        got = patch._grey(g)
+        assert got.shape == g.shape and got.dtype == np.float64
+        np.testing.assert_array_equal(got, want)

@@ -210,3 +210,110 @@ def test_the_rule_never_fails_on_a_face_anywhere(dx, dy, scale, lx, ly, W, H):
         kept = rim.drawn_inside(r.mask, r, faces, lifted, drawn)
     assert kept.shape == (H, W) and kept.dtype == bool
     assert not (kept & ~r.mask).any()
+
+
+def _drawn_inside_numpy(face_mask, raster, faces, lifted, drawn):
+    """:func:`facetransfer.rim.drawn_inside` as numpy expressions (before its kernels, the
+    forty-fifth session): the reference its kernels must equal bit for bit."""
+    import cv2
+
+    k = max(2, int(round(rim.RIM * np.sqrt(np.count_nonzero(face_mask)))))
+    F = np.asarray(faces, np.int64)
+    tri_id = np.asarray(raster.tri_id)
+    out = np.zeros(tri_id.shape, bool)
+    depth = rim.lifted_depth(lifted, F, face_mask.shape, core=rim._core(face_mask, rim.CORE * k))
+    at_texture = rim._depth_at(depth, lifted)
+    band = at_texture < k
+    cand = np.flatnonzero(band[F[:, 0]] | band[F[:, 1]] | band[F[:, 2]])
+    if cand.size == 0:
+        return out
+    corners = F[cand]
+    xy = np.asarray(drawn)[corners.ravel()]
+    tq = at_texture[corners]
+    tp = rim._depth_at(depth, xy).reshape(-1, 3)
+    q = (tq[:, 0] + tq[:, 1] + tq[:, 2]) / 3.0
+    d = (tp[:, 0] + tp[:, 1] + tp[:, 2]) / 3.0 - q
+    flag = (q < k) & (d > rim.MOVED) & (d <= rim.REACH * k)
+    if not flag.any():
+        return out
+    per_tri = np.zeros(len(F) + 1, bool)
+    per_tri[cand[flag] + 1] = True
+    x0, y0, x1, y1 = rim._box(xy.reshape(-1, 3, 2)[flag].reshape(-1, 2), tri_id.shape)
+    if x1 <= x0 or y1 <= y0:
+        return out
+    kept = per_tri[tri_id[y0:y1, x0:x1] + 1].view(np.uint8)
+    out[y0:y1, x0:x1] = cv2.medianBlur(kept, 5).view(bool) & (tri_id[y0:y1, x0:x1] >= 0)
+    return out
+
+
+def test_the_rules_kernels_equal_its_numpy_expressions(narrower):
+    """:func:`facetransfer.rim.drawn_inside` (numba kernels) against the numpy expressions it
+    replaced, pixel for pixel: the mean face drawn where lifted, shrunk towards its centre by
+    0 to 8 px and jittered at random (a third of its vertices 0-3 px), and cut by a crop
+    (whose vertices past its edge all lie in the band: ~35,000 corners, more than one
+    ``cv2.remap`` reads, which raised before :data:`facetransfer.rim.REMAP_CHUNK`)."""
+    model, topo, new, frame, tex, Vc = narrower
+    target = mean_person_track(model, np.zeros((1, 52), np.float32), size=SIZE, scale=25.0)
+    r = rasterize(Vc, topo.faces, target.camera(0), (SIZE, SIZE))
+    lifted = rim.lifted_positions(tex, frame)
+    c = lifted.mean(axis=0)
+    unit = (lifted - c) / np.linalg.norm(lifted - c, axis=1, keepdims=True)
+    rng = np.random.default_rng(45)
+    some = 0
+    for step in (0.0, 2.0, 4.0, 8.0):
+        drawn = lifted - step * unit
+        drawn[rng.random(len(drawn)) < 0.33] += rng.uniform(-3, 3, (1, 2))
+        for where in (r, _crop(r, 150, 300)):
+            dr = drawn - ((150, 0) if where is not r else (0, 0))
+            li = lifted - ((150, 0) if where is not r else (0, 0))
+            want = _drawn_inside_numpy(where.mask, where, topo.faces, li, dr)
+            np.testing.assert_array_equal(
+                rim.drawn_inside(where.mask, where, topo.faces, li, dr), want)
+            some += int(want.sum())
+    assert some > 1000
+
+
+def _crop(r, x0: int, x1: int):
+    """The raster ``r``'s columns ``x0:x1``."""
+    from facetransfer.render import Raster
+
+    return Raster(*(np.ascontiguousarray(a[:, x0:x1]) for a in (r.depth, r.tri_id, r.bary,
+                                                                   r.mask)))
+
+
+@settings(max_examples=40, deadline=None, derandomize=True)
+@given(st.floats(-80, 80), st.floats(-80, 80), st.floats(0.5, 2.0), st.floats(-60, 60),
+       st.floats(-60, 60), st.integers(8, 90), st.integers(8, 90))
+def test_the_rules_kernels_equal_it_on_a_face_anywhere(dx, dy, scale, lx, ly, W, H):
+    """The same as :func:`test_the_rules_kernels_equal_its_numpy_expressions` on
+    :func:`test_the_rule_never_fails_on_a_face_anywhere`'s grid faces anywhere."""
+    g, faces = _grid(9, (0, 40), (0, 40))
+    drawn = g * scale + [dx, dy]
+    lifted = g + [lx, ly]
+    pixels = WeakPerspective(1.0, np.diag([1.0, -1.0, -1.0]), np.zeros(2))
+    try:
+        r = rasterize(np.c_[drawn, np.zeros(len(g))], faces, pixels, (W, H))
+    except MeshError:
+        return
+    np.testing.assert_array_equal(rim.drawn_inside(r.mask, r, faces, lifted, drawn),
+                                  _drawn_inside_numpy(r.mask, r, faces, lifted, drawn))
+
+
+def test_a_face_mostly_past_the_frames_edge_renders(narrower):
+    """The target's face and the new one four fifths past the frame's right edge, the texture
+    the frame's own: the vertices past the crop lie in the band (their depth reads 0), more
+    than 10,922 triangles (32,767 corners, one ``cv2.remap``'s most, which raised before
+    :data:`facetransfer.rim.REMAP_CHUNK`): the frame is rewritten, the same where no face
+    is."""
+    model, topo, new, frame, tex, Vc = narrower
+    target = mean_person_track(model, np.zeros((1, 52), np.float32), size=SIZE, scale=25.0)
+    cam = target.camera(0)
+    far = WeakPerspective(cam.scale, cam.rotation, cam.translation + [0.8 * SIZE, 0.0])
+    edge = FaceTexture(frame, frame_uvs(Vc, far, (SIZE, SIZE)), 0)
+    lifted = rim.lifted_positions(edge, frame)
+    grid = (lifted - (rim.STEP - 1) / 2.0) / rim.STEP
+    assert (grid[:, 0] > SIZE / rim.STEP).mean() > 0.6
+    out = rewrite_frame(frame, Vc * [1.0, 0.97, 1.0], far, topo, FrameTextures(edge),
+                        blending=BlendOptions("none"))
+    assert out.face_mask.any() and not out.face_mask[:, :SIZE // 2].any()
+    np.testing.assert_array_equal(out.image[~out.face_mask], frame[~out.face_mask])

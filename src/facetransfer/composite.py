@@ -26,6 +26,7 @@ doi:10.1145/882262.882269
 
 from __future__ import annotations
 
+import functools
 import logging
 from collections.abc import Sequence
 
@@ -681,20 +682,23 @@ def _feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.n
     """
     r = max(int(np.ceil(feather)), 1)
     m8 = m.view(np.uint8)
-    deep = cv2.erode(m8, np.ones((2 * r + 1, 2 * r + 1), np.uint8),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0 if edge_outside else 1)
-    a = deep.astype(np.float32)  # deep lies in m (each window holds its own pixel)
-    band = cv2.findNonZero(cv2.subtract(m8, deep))  # (k, 1, 2): (x, y)
-    if band is not None:
-        _alpha_kernel(m8, band.reshape(-1, 2), r, float(max(feather, 1e-6)),
-                      bool(edge_outside), a)
+    deep = cv2.erode(m8, _square(2 * r + 1), borderType=cv2.BORDER_CONSTANT,
+                     borderValue=0 if edge_outside else 1)
+    a = np.empty(m.shape, np.float32)
+    # deep lies in m (each window holds its own pixel): 1 there, 0 outside m, searched between
+    _alpha_kernel(m8, deep, r, float(max(feather, 1e-6)), bool(edge_outside), a)
     return a
 
 
-def _alpha_kernel_py(m, band, r, feather, edge_outside, a):  # pragma: no cover (numba)
-    """The window search of :func:`_feather_alpha` at the pixels ``band`` (k, 2) int32
-    ``(x, y)`` of ``m`` (h, w) uint8, writing ``a`` (h, w) float32 there: the window's offsets
-    in order of distance, up to the first outside pixel."""
+@functools.lru_cache(maxsize=None)
+def _square(k: int) -> np.ndarray:
+    """The ``k`` x ``k`` square structuring element (uint8 ones), made once per size."""
+    return np.ones((k, k), np.uint8)
+
+
+def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover (numba)
+    """:func:`_feather_alpha` into ``a`` (h, w) float32 from ``m`` (h, w) uint8 and its square
+    erosion ``deep``: 1 in ``deep``, 0 outside ``m``, the window search between (the band)."""
     h, w = m.shape
     k = 2 * r + 1
     d2 = np.empty(k * k, np.int64)
@@ -702,19 +706,32 @@ def _alpha_kernel_py(m, band, r, feather, edge_outside, a):  # pragma: no cover 
         d2[i] = (i // k - r) ** 2 + (i % k - r) ** 2
     order = np.argsort(d2, kind="mergesort")
     oy, ox, od = order // k - r, order % k - r, d2[order]
-    for j in range(band.shape[0]):
-        x, y = band[j, 0], band[j, 1]
-        best = 2 * (r + 1) * (r + 1)
-        for i in range(k * k):
-            yy, xx = y + oy[i], x + ox[i]
-            if yy < 0 or yy >= h or xx < 0 or xx >= w:
-                if edge_outside:
-                    best = od[i]
-                    break
-            elif m[yy, xx] == 0:
+    for y in range(h):
+        for x in range(w):
+            if deep[y, x] or not m[y, x]:
+                a[y, x] = np.float32(1.0) if deep[y, x] else np.float32(0.0)
+            else:
+                a[y, x] = _window_alpha(m, x, y, oy, ox, od, r, feather, edge_outside)
+
+
+def _window_alpha_py(m, x, y, oy, ox, od, r, feather, edge_outside):  # pragma: no cover
+    """:func:`_alpha_kernel`'s search at ``(x, y)``: the first offset ``(ox, oy)`` outside,
+    its squared distance ``od`` as ``min(sqrt / feather, 1)`` in float32 (numba, inlined)."""
+    h, w = m.shape
+    best = 2 * (r + 1) * (r + 1)
+    for i in range(od.shape[0]):
+        yy, xx = y + oy[i], x + ox[i]
+        if yy < 0 or yy >= h or xx < 0 or xx >= w:
+            if edge_outside:
                 best = od[i]
                 break
-        a[y, x] = min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
+        elif m[yy, xx] == 0:
+            best = od[i]
+            break
+    return min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
+
+
+_window_alpha = _maybe_njit(_window_alpha_py, inline=True)
 
 
 def _blend_value_py(b, ay, f):  # pragma: no cover (numba, inlined)
@@ -736,19 +753,16 @@ def _blend_paste(m: np.ndarray, base: np.ndarray, f: np.ndarray, a: np.ndarray,
     :func:`membrane_blend` (``f`` = membrane, ``s`` = source, ``base`` = target) and of
     :func:`facetransfer.patch.match_outline`.
 
-    The kernels run over rows of per-channel values, ``m`` and ``a`` repeated per channel:
-    without a branch per pixel they are vectorised (4x faster than per pixel)."""
-    m3 = _per_channel(m.view(np.uint8))
-    a3 = _per_channel(np.ascontiguousarray(a, np.float32))
+    The kernels run over rows of per-channel values, a row of ``m`` and ``a`` repeated per
+    channel into scratch rows first: without a branch per pixel they are vectorised (4x faster
+    than per pixel)."""
+    w = m.shape[1]
+    args = (m.view(np.uint8), np.ascontiguousarray(a, np.float32), np.empty(3 * w, np.uint8),
+            np.empty(3 * w, np.float32))
     if s is None:
-        _blend_rows(m3, _rows(base), _rows(f), a3, _rows(out))
+        _blend_rows(_rows(base), _rows(f), _rows(out), *args)
     else:
-        _blend_rows_sum(m3, _rows(base), _rows(f), _rows(s), a3, _rows(out))
-
-
-def _per_channel(x: np.ndarray) -> np.ndarray:
-    """``x`` (h, w) repeated for three channels, as rows ``(h, 3 w)`` (a new array)."""
-    return cv2.merge([x, x, x]).reshape(x.shape[0], -1)
+        _blend_rows_sum(_rows(base), _rows(f), _rows(s), _rows(out), *args)
 
 
 def _rows(x: np.ndarray) -> np.ndarray:
@@ -760,23 +774,37 @@ def _rows(x: np.ndarray) -> np.ndarray:
     return v
 
 
-def _blend_rows_py(m3, base, f, a3, out):  # pragma: no cover (numba)
+def _spread_py(m, a, y, m3, a3):  # pragma: no cover (numba, inlined)
+    """Row ``y`` of ``m`` (h, w) uint8 and ``a`` (h, w) float32 repeated per channel into
+    ``m3``, ``a3`` (3 w,)."""
+    for x in range(m.shape[1]):
+        for c in range(3):
+            m3[3 * x + c] = m[y, x]
+            a3[3 * x + c] = a[y, x]
+
+
+_spread = _maybe_njit(_spread_py, inline=True)
+
+
+def _blend_rows_py(base, f, out, m, a, m3, a3):  # pragma: no cover (numba)
     """:func:`_blend_paste` on rows ``(h, 3 w)`` of channel values: ``out = _blend_value(base,
-    a3, f)`` where ``m3`` (uint8), else ``out`` as it is."""
+    a, f)`` where ``m``, else ``out`` as it is (``m3``, ``a3``: a row's scratch)."""
     H, L = out.shape
     for y in range(H):
+        _spread(m, a, y, m3, a3)
         for j in range(L):
-            v = _blend_value(base[y, j], a3[y, j], f[y, j])
-            out[y, j] = v if m3[y, j] else out[y, j]
+            v = _blend_value(base[y, j], a3[j], f[y, j])
+            out[y, j] = v if m3[j] else out[y, j]
 
 
-def _blend_rows_sum_py(m3, base, h, s, a3, out):  # pragma: no cover (numba)
+def _blend_rows_sum_py(base, h, s, out, m, a, m3, a3):  # pragma: no cover (numba)
     """:func:`_blend_rows` with ``f = h + s`` (``s`` uint8, added in float32)."""
     H, L = out.shape
     for y in range(H):
+        _spread(m, a, y, m3, a3)
         for j in range(L):
-            v = _blend_value(base[y, j], a3[y, j], h[y, j] + np.float32(s[y, j]))
-            out[y, j] = v if m3[y, j] else out[y, j]
+            v = _blend_value(base[y, j], a3[j], h[y, j] + np.float32(s[y, j]))
+            out[y, j] = v if m3[j] else out[y, j]
 
 
 def _ring_differences_py(ry, rx, t, s, dr):  # pragma: no cover (numba)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .render.raster import _maybe_njit
 from .track.gaze import activation_gaze, eye_model, project_iris
 
 __all__ = ["GROW", "LIMIT", "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs",
@@ -169,21 +170,67 @@ def shift_eyeballs(eye_img: np.ndarray, tri_id: np.ndarray, bary: np.ndarray, fa
     :attr:`Eyeballs.image` moved by ``shift`` (2, 2) pixels per eye (:meth:`Eyeballs.shift`):
     a pixel whose surface point the reference frame sees at ``q`` shows what it has at
     ``q - shift``. ``uvs`` (n, 2): the reference frame's texture coordinates
-    (:func:`facetransfer.texture.face.frame_uvs`)."""
+    (:func:`facetransfer.texture.face.frame_uvs`). The fill's pixels and where they read are
+    found in one pass over the region's box (:func:`_fill_kernel`), the reads are OpenCV's
+    bilinear ``remap`` (at most :data:`REMAP_CHUNK` at a time)."""
     import cv2
 
-    # the fill's pixels through a lookup table of tri_id + 1 (-1, the background, is entry 0):
-    # three passes over the region's box, which holds the brows and cheeks too
-    eye = eyeballs.lookup.take(tri_id + 1)
-    flat = np.flatnonzero(eye >= 0)
-    if flat.size == 0:
-        return
-    ys, xs = np.divmod(flat, tri_id.shape[1])
-    tri = tri_id[ys, xs]
-    uv = np.einsum("nk,nkc->nc", bary[ys, xs].astype(np.float64), uvs[faces[tri]])
+    h, w = tri_id.shape
+    ys, xs = np.empty(h * w, np.int64), np.empty(h * w, np.int64)
+    mx, my = np.empty(h * w, np.float32), np.empty(h * w, np.float32)
     H, W = eyeballs.image.shape[:2]
-    d = shift[eye.ravel()[flat]]
-    mx = (uv[:, 0] * (W - 1) - d[:, 0]).astype(np.float32)[None]
-    my = ((1.0 - uv[:, 1]) * (H - 1) - d[:, 1]).astype(np.float32)[None]
-    eye_img[ys, xs] = cv2.remap(eyeballs.image, mx, my, cv2.INTER_LINEAR,
-                                borderMode=cv2.BORDER_REPLICATE)[0]
+    n = _fill_kernel(eyeballs.lookup, tri_id, bary, np.asarray(faces, np.int64),
+                     np.ascontiguousarray(uvs, np.float64),
+                     np.ascontiguousarray(shift, np.float64), float(W - 1), float(H - 1),
+                     ys, xs, mx, my)
+    if n == 0:
+        return
+    vals = np.empty((n, 3), np.uint8)
+    for i in range(0, n, REMAP_CHUNK):
+        j = min(i + REMAP_CHUNK, n)
+        vals[i:j] = cv2.remap(eyeballs.image, mx[None, i:j], my[None, i:j], cv2.INTER_LINEAR,
+                              borderMode=cv2.BORDER_REPLICATE)[0]
+    _scatter_kernel(ys[:n], xs[:n], vals, eye_img)
+
+
+#: The most pixels :func:`shift_eyeballs` reads in one ``cv2.remap`` (whose maps must have
+#: fewer than ``SHRT_MAX`` = 32767 columns).
+REMAP_CHUNK = 32000
+
+
+def _fill_kernel_py(lookup, tri_id, bary, faces, uvs, shift, wm1, hm1, ys, xs, mx,
+                    my):  # pragma: no cover (numba)
+    """The pixels of ``tri_id`` (h, w) whose triangle closes an eye (``lookup[tri_id + 1] >=
+    0``), in row-major order, into ``ys``, ``xs``; where each reads the reference image
+    (:func:`shift_eyeballs`): its surface point's uv (the ``bary``-weighted sum of its
+    corners' ``uvs``, in float64 and in order, as ``numpy.einsum`` sums it) less its eye's
+    ``shift``, in pixels ``(u wm1 - dx, (1 - v) hm1 - dy)`` cast to float32, into ``mx``,
+    ``my``. Returns how many."""
+    n = 0
+    for y in range(tri_id.shape[0]):
+        for x in range(tri_id.shape[1]):
+            t = tri_id[y, x]
+            e = lookup[t + 1]
+            if e < 0:
+                continue
+            u = v = 0.0
+            for k in range(3):
+                b = np.float64(bary[y, x, k])
+                u += b * uvs[faces[t, k], 0]
+                v += b * uvs[faces[t, k], 1]
+            ys[n], xs[n] = y, x
+            mx[n] = np.float32(u * wm1 - shift[e, 0])
+            my[n] = np.float32((1.0 - v) * hm1 - shift[e, 1])
+            n += 1
+    return n
+
+
+def _scatter_kernel_py(ys, xs, vals, img):  # pragma: no cover (numba)
+    """``img[ys, xs] = vals`` (``vals`` (n, 3) uint8; ``img`` (h, w, 3), in place)."""
+    for i in range(ys.shape[0]):
+        for c in range(3):
+            img[ys[i], xs[i], c] = vals[i, c]
+
+
+_fill_kernel = _maybe_njit(_fill_kernel_py)
+_scatter_kernel = _maybe_njit(_scatter_kernel_py)

@@ -229,16 +229,44 @@ def _shading_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray,
     lim = float(np.exp(SHADING_LIMIT))
     # every channel's ratio within the limit (cv2.inRange: one pass; numpy's reductions over
     # a last axis of 3 took 40 times longer), on blocks mostly of compared pixels
-    ok = cv2.inRange(cv2.divide(f1, p1), (1.0 / lim,) * 3, (lim,) * 3) > 0
-    m[~ok | (m < 0.5)] = 0.0
-    if not m.any():
+    ok = cv2.inRange(cv2.divide(f1, p1), (1.0 / lim,) * 3, (lim,) * 3)
+    if not _keep_blocks(m, ok, ok):
         return None
     num, den, wt = _weighted_sums(f1, p1, m, sigma)
     g = cv2.divide(num, np.maximum(den, 1e-6))
-    np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])  # a full neighbourhood sums to 1
-    np.clip(g, *SHADING_RANGE, out=g)
+    _held_gain(g, wt, *(np.float32(b) for b in (0.05, *SHADING_RANGE)))  # full: weights sum 1
     h, w = valid.shape
     return cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def _keep_blocks_py(m, ok, ok2):  # pragma: no cover (numba)
+    """``m`` (h, w) float32 set to 0, in place, at the blocks that do not compare: where
+    ``ok`` or ``ok2`` (h, w) uint8 (``cv2.inRange``'s) is 0 or ``m`` is below 0.5 (numpy's
+    ``m[~ok | (m < 0.5)] = 0``); whether a block is left (``m.any()``)."""
+    left = False
+    for y in range(m.shape[0]):
+        for x in range(m.shape[1]):
+            if ok[y, x] == 0 or ok2[y, x] == 0 or m[y, x] < np.float32(0.5):
+                m[y, x] = np.float32(0.0)
+            elif m[y, x] != 0:
+                left = True
+    return left
+
+
+def _held_gain_py(g, wt, least, lo, hi):  # pragma: no cover (numba)
+    """``g`` (h, w, 3) float32 made 1 where the weights ``wt`` (h, w) float32 sum to ``least``
+    or less, then clipped to ``lo .. hi`` (all float32), in place: numpy's ``copyto(g, 1,
+    where=wt <= least)`` and ``clip(g, lo, hi)``."""
+    for y in range(g.shape[0]):
+        for x in range(g.shape[1]):
+            unit = wt[y, x] <= least
+            for c in range(3):
+                v = np.float32(1.0) if unit else g[y, x, c]
+                g[y, x, c] = min(max(v, lo), hi)
+
+
+_keep_blocks = _maybe_njit(_keep_blocks_py)
+_held_gain = _maybe_njit(_held_gain_py)
 
 
 def _or_box(valid: np.ndarray, ring: np.ndarray, rbox: tuple[int, int],
@@ -278,25 +306,44 @@ def _hue_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray, sigma: flo
     lr = cv2.subtract(cv2.log(f1), cv2.log(p1))
     grey = cv2.transform(lr, _THIRDS)
     ok = cv2.inRange(cv2.subtract(lr, cv2.merge([grey, grey, grey])), (-HUE_LIMITS[1],) * 3,
-                     (HUE_LIMITS[1],) * 3) > 0
-    ok &= cv2.inRange(grey, -HUE_LIMITS[0], HUE_LIMITS[0]) > 0
-    m[~ok | (m < 0.5)] = 0.0
-    if not m.any():
+                     (HUE_LIMITS[1],) * 3)
+    if not _keep_blocks(m, ok, cv2.inRange(grey, -HUE_LIMITS[0], HUE_LIMITS[0])):
         return None
     num, den, wt = _weighted_sums(f1, p1, m, sigma)
     lg = cv2.subtract(cv2.log(cv2.max(num, 1e-6)), cv2.log(cv2.max(den, 1e-6)))
     mean = cv2.transform(lg, _THIRDS)
     g = cv2.exp(cv2.subtract(lg, cv2.merge([mean, mean, mean])))
-    np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])
-    np.clip(g, *HUE_RANGE, out=g)
+    _held_gain(g, wt, *(np.float32(b) for b in (0.05, *HUE_RANGE)))
     h, w = valid.shape
     return cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
 
 
 def _grey(g: np.ndarray) -> np.ndarray:
     """Per-channel gain factors (n, 3) as one factor for all three: the geometric mean of each
-    row, so the gain's product over rows and columns is the mean of the channels' log gains."""
-    return np.repeat(np.exp(np.log(g).mean(axis=1, keepdims=True)), 3, axis=1)
+    row, so the gain's product over rows and columns is the mean of the channels' log gains.
+    (numpy's log and exp; the mean, ``((a + b) + c) / 3`` as numpy's sums a row of three, and
+    the repeat in a kernel.)"""
+    m = np.empty(g.shape[0])
+    _row_means(np.log(g), m)
+    return _repeat3(np.exp(m, out=m))
+
+
+def _row_means_py(lg, m):  # pragma: no cover (numba)
+    """``m = ((lg[:, 0] + lg[:, 1]) + lg[:, 2]) / 3`` (``lg`` (n, 3), ``m`` (n,) float64)."""
+    for i in range(lg.shape[0]):
+        m[i] = ((lg[i, 0] + lg[i, 1]) + lg[i, 2]) / 3.0
+
+
+def _repeat3_py(m):  # pragma: no cover (numba)
+    """``m`` (n,) repeated for three channels, a new (n, 3) array."""
+    out = np.empty((m.shape[0], 3))
+    for i in range(m.shape[0]):
+        out[i, 0] = out[i, 1] = out[i, 2] = m[i]
+    return out
+
+
+_row_means = _maybe_njit(_row_means_py)
+_repeat3 = _maybe_njit(_repeat3_py)
 
 
 def _ring(compare: np.ndarray, face_mask: np.ndarray):
@@ -451,33 +498,58 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
         raise RewriteError("the gain fit needs at least one pixel, got an empty mask")
     n = pts.shape[0]
     k = -(-n // max(1, -(-n // int(max_samples))))  # the samples: every step-th pixel
-    u, v, r = np.empty(k), np.empty(k), np.empty((k, 3))
-    centre = np.empty(3)
-    _gain_samples(pts.reshape(n, 2), int(origin[0]), int(origin[1]), int(shift[0]),
-                  int(shift[1]), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
-    cx, cy, scale = centre
-    coef = np.empty((3, 3))
-    _plane_l1_kernel(u, v, r, int(iterations), coef)
     x0, y0, x1, y1 = box
     # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns,
-    # each coordinate held within the samples' middle (GAIN_SUPPORT; 0: extrapolated)
-    xs, ys = (np.arange(x0, x1) - cx) / scale, (np.arange(y0, y1) - cy) / scale
-    if GAIN_SUPPORT > 0:
-        np.clip(xs, *_middle(u, GAIN_SUPPORT), out=xs)
-        np.clip(ys, *_middle(v, GAIN_SUPPORT), out=ys)
-    gx = np.exp(xs[:, None] * coef[1])                                      # (w, c)
-    gy = np.exp(coef[0] + ys[:, None] * coef[2])                            # (h, c)
-    return gy, gx
+    # each coordinate held within the samples' middle (GAIN_SUPPORT; 0: extrapolated): the
+    # plane and its exponents in one kernel (_gain_fit), their exp numpy's
+    step = max(1, k // 1024)     # at most ~1024 of the samples give the middle's ends
+    lo = int(round(GAIN_SUPPORT * (len(range(0, k, step)) - 1)))
+    u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
+    _gain_samples(pts.reshape(n, 2), int(origin[0]), int(origin[1]), int(shift[0]),
+                  int(shift[1]), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
+    gx, gy = np.empty((x1 - x0, 3)), np.empty((y1 - y0, 3))
+    _gain_fit(u, v, r, centre, int(iterations), step, lo, GAIN_SUPPORT > 0, int(x0), int(y0),
+              gx, gy)
+    return np.exp(gy, out=gy), np.exp(gx, out=gx)
 
 
-def _middle(a: np.ndarray, fraction: float, most: int = 1024) -> tuple[float, float]:
-    """The order statistics of ``a`` (k,) that leave ``fraction`` of it on either side, read
-    on at most ``most`` of its values (evenly strided): ``(low, high)``."""
-    b = a[::max(1, a.size // most)]
-    lo = int(round(fraction * (b.size - 1)))
-    hi = b.size - 1 - lo
-    part = np.partition(b, (lo, hi))
-    return float(part[lo]), float(part[hi])
+def _gain_fit_py(u, v, r, centre, iterations, step, lo, held, x0, y0, ex,
+                 ey):  # pragma: no cover (numba)
+    """:func:`_gain_factors`' plane of the samples ``u``, ``v``, ``r`` (:func:`_gain_samples`,
+    centred on ``centre``; :func:`_plane_l1_kernel`, ``iterations`` steps) and its exponents
+    over the box (:func:`_exponents` into ``ex`` (w, 3), ``ey`` (h, 3)) in one call (its
+    arrays C-contiguous always: one compiled kernel)."""
+    coef = np.empty((3, 3))
+    _plane_l1_kernel(u, v, r, iterations, coef)
+    _exponents(u, v, step, lo, held, x0, y0, centre[0], centre[1], centre[2], coef, ex, ey)
+
+
+def _exponents_py(u, v, step, lo, held, x0, y0, cx, cy, scale, coef, ex,
+                  ey):  # pragma: no cover (numba)
+    """The exponents of :func:`_gain_factors`' separable gains: ``ex`` (w, 3) = ``xs coef[1]``
+    and ``ey`` (h, 3) = ``coef[0] + ys coef[2]`` (per channel) with ``xs = (x - cx) / scale``
+    over the columns ``x0 .. x0 + w - 1`` and ``ys`` the rows' likewise, each clipped, when
+    ``held``, to the middle of ``u`` (``v``): the ``lo``-th and ``(m - 1 - lo)``-th
+    smallest of its ``m`` samples of stride ``step``; float64, numpy's operations in order."""
+    xlo = xhi = ylo = yhi = 0.0
+    if held:
+        b = u[::step].copy()
+        m = b.shape[0]
+        xlo, xhi = np.partition(b, lo)[lo], np.partition(b, m - 1 - lo)[m - 1 - lo]
+        b = v[::step].copy()
+        ylo, yhi = np.partition(b, lo)[lo], np.partition(b, m - 1 - lo)[m - 1 - lo]
+    for i in range(ex.shape[0]):
+        x = (np.float64(x0 + i) - cx) / scale
+        if held:
+            x = min(max(x, xlo), xhi)
+        for c in range(3):
+            ex[i, c] = x * coef[1, c]
+    for i in range(ey.shape[0]):
+        y = (np.float64(y0 + i) - cy) / scale
+        if held:
+            y = min(max(y, ylo), yhi)
+        for c in range(3):
+            ey[i, c] = coef[0, c] + y * coef[2, c]
 
 
 def _gain_samples_py(pts, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v, r,
@@ -611,3 +683,5 @@ _gain_rows = _maybe_njit(_gain_rows_py)
 _gain_samples = _maybe_njit(_gain_samples_py)
 _reject_fade = _maybe_njit(_reject_fade_py)
 _plane_l1_kernel = _maybe_njit(_plane_l1_kernel_py)
+_exponents = _maybe_njit(_exponents_py)
+_gain_fit = _maybe_njit(_gain_fit_py)

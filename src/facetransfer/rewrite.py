@@ -64,6 +64,7 @@ from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.face import FaceTexture
 from .render import shade_layers
+from .render.raster import _maybe_njit
 from .rewrite_options import BlendOptions
 from .topology import MeshTopology, close_mouth
 
@@ -417,17 +418,36 @@ def _keep_own(face_img: np.ndarray, face_mask: np.ndarray, frame: np.ndarray,
               where: np.ndarray) -> None:
     """``face_img`` (H, W, 3) uint8 made ``frame``'s own pixels ``where`` (H, W) bool, in place,
     with a soft edge (a Gaussian of 1.5 px) on ``face_mask``: the face texture's shading meets
-    the frame's without a step."""
+    the frame's without a step (:func:`_keep_own_kernel`)."""
     x, y, w, h = cv2.boundingRect(where.view(np.uint8))
     if not w:
         return
     x, y = max(x - 4, 0), max(y - 4, 0)
     box = (slice(y, y + h + 8), slice(x, x + w + 8))
-    a = np.maximum(cv2.GaussianBlur(where[box].astype(np.float32), (0, 0), 1.5), where[box])
-    a *= face_mask[box]
-    ys, xs = np.nonzero(a > 0.5 / 255)
-    f = face_img[box][ys, xs].astype(np.float32)
-    t = frame[box][ys, xs].astype(np.float32)
-    face_img[box][ys, xs] = np.rint(f + a[ys, xs][:, None] * (t - f)).astype(np.uint8)
+    wb = np.ascontiguousarray(where[box])
+    blur = cv2.GaussianBlur(wb.view(np.uint8).astype(np.float32), (0, 0), 1.5)
+    _keep_own_kernel(blur, wb, face_mask, frame, face_img, x, y, np.float32(0.5 / 255))
 
 
+def _keep_own_kernel_py(blur, where, face_mask, frame, face_img, x0, y0,
+                        least):  # pragma: no cover (numba)
+    """:func:`_keep_own`'s mix on its box (``blur``'s shape at ``(x0, y0)`` of the whole
+    arrays: one layout, one compiled kernel), in place: per pixel ``a = max(blur, where) *
+    face_mask`` (float32) and, where ``a > least``, ``face_img = rint(f + a (t - f))`` with
+    ``f``, ``t`` the face's and the frame's channel values in float32 (the numpy expressions'
+    operations, in their order)."""
+    for by in range(blur.shape[0]):
+        for bx in range(blur.shape[1]):
+            y, x = y0 + by, x0 + bx
+            if not face_mask[y, x]:
+                continue
+            a = max(blur[by, bx], np.float32(1.0) if where[by, bx] else np.float32(0.0))
+            if not a > least:
+                continue
+            for c in range(3):
+                f = np.float32(face_img[y, x, c])
+                t = np.float32(frame[y, x, c])
+                face_img[y, x, c] = np.uint8(np.rint(f + a * (t - f)))
+
+
+_keep_own_kernel = _maybe_njit(_keep_own_kernel_py)

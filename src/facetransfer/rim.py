@@ -25,7 +25,7 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .render.raster import coverage
+from .render.raster import _maybe_njit, coverage
 
 __all__ = ["RIM", "MOVED", "REACH", "texture_positions", "lifted_positions", "lifted_depth",
            "drawn_inside"]
@@ -90,9 +90,26 @@ def lifted_depth(positions: np.ndarray, faces: np.ndarray, shape: tuple[int, int
 
 def _depth_at(depth: np.ndarray, xy: np.ndarray) -> np.ndarray:
     """:func:`lifted_depth`'s map read (bilinear) at full-resolution points ``xy`` (m, 2)."""
-    m = ((np.asarray(xy, np.float32) - (STEP - 1) / 2.0) / STEP)[None]          # (1, m, 2)
-    return cv2.remap(depth, m[..., 0], m[..., 1], cv2.INTER_LINEAR,
-                     borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
+    m = (np.asarray(xy, np.float32) - (STEP - 1) / 2.0) / STEP                 # (m, 2)
+    return _remap_points(depth, np.ascontiguousarray(m[:, 0]), np.ascontiguousarray(m[:, 1]))
+
+
+#: The most points :func:`_remap_points` reads in one ``cv2.remap`` (whose maps must have
+#: fewer than ``SHRT_MAX`` = 32767 columns: a face more than half past the crop's edge put
+#: its ~11,000 band triangles' 33,000 corners in one row, and OpenCV refused it).
+REMAP_CHUNK = 32000
+
+
+def _remap_points(depth: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarray:
+    """``depth`` (h, w) float32 read (bilinear, 0 beyond it) at the points ``(mx, my)`` (m,)
+    float32 of its own grid: ``(m,)`` float32, by ``cv2.remap`` over at most
+    :data:`REMAP_CHUNK` points at a time."""
+    out = np.empty(mx.shape[0], np.float32)
+    for i in range(0, mx.shape[0], REMAP_CHUNK):
+        j = min(i + REMAP_CHUNK, mx.shape[0])
+        out[i:j] = cv2.remap(depth, mx[None, i:j], my[None, i:j], cv2.INTER_LINEAR,
+                             borderMode=cv2.BORDER_CONSTANT, borderValue=0)[0]
+    return out
 
 
 def drawn_inside(face_mask: np.ndarray, raster, faces: np.ndarray, lifted: np.ndarray,
@@ -106,36 +123,100 @@ def drawn_inside(face_mask: np.ndarray, raster, faces: np.ndarray, lifted: np.nd
     :func:`lifted_depth`'s map of the target's silhouette, at ``lifted`` and at ``drawn``
     (triangles span a few pixels). ``raster``: the face's, of ``faces``; ``lifted`` (n, 2):
     where the target's texture lifted the vertices (:func:`lifted_positions`); ``drawn`` (n,
-    2): where the new face draws them; both in the raster's pixels."""
+    2): where the new face draws them; both in the raster's pixels. (The per-triangle steps
+    are numba kernels, the float32 arithmetic of the numpy expressions they replaced:
+    :func:`_band_kernel`, :func:`_flag_kernel`.)"""
     k = max(2, int(round(RIM * np.sqrt(np.count_nonzero(face_mask)))))
-    F = np.asarray(faces, np.int64)
+    F = np.ascontiguousarray(faces, np.int64)
     tri_id = np.asarray(raster.tri_id)
     out = np.zeros(tri_id.shape, bool)
     depth = lifted_depth(lifted, F, face_mask.shape, core=_core(face_mask, CORE * k))
-    at_texture = _depth_at(depth, lifted)                                        # (n,)
-    band = at_texture < k
-    cand = np.flatnonzero(band[F[:, 0]] | band[F[:, 1]] | band[F[:, 2]])
-    if cand.size == 0:
+    at_texture = np.ascontiguousarray(_depth_at(depth, lifted))                 # (n,)
+    P = np.ascontiguousarray(drawn, np.float64)
+    # the triangles with a corner in the band, and their corners' places on the depth map
+    cand, grid = np.empty(len(F), np.int64), np.empty((2, 3 * len(F)), np.float32)
+    c = _band_kernel(at_texture, F, np.float32(k), P, np.float32((STEP - 1) / 2.0),
+                     np.float32(STEP), cand, grid)
+    if c == 0:
         return out
-    corners = F[cand]                                                            # (c, 3)
-    xy = np.asarray(drawn)[corners.ravel()]
-    tq = at_texture[corners]
-    tp = _depth_at(depth, xy).reshape(-1, 3)
-    q = (tq[:, 0] + tq[:, 1] + tq[:, 2]) / 3.0         # the corners' means (a reduction over
-    d = (tp[:, 0] + tp[:, 1] + tp[:, 2]) / 3.0 - q     # a last axis of 3 is many times slower)
-    flag = (q < k) & (d > MOVED) & (d <= REACH * k)
-    if not flag.any():
+    tp = _remap_points(depth, grid[0, :3 * c], grid[1, :3 * c])                # (3 c,)
+    per_tri = np.zeros(len(F) + 1, bool)
+    xy = np.empty((3 * c, 2), np.float64)
+    m = _flag_kernel(at_texture, F, cand[:c], tp, np.float32(k),
+                     np.float32(MOVED), np.float32(REACH * k), P, per_tri, xy)
+    if m == 0:
         return out
     # the triangles' pixels, looked up on the box their corners span only
-    per_tri = np.zeros(len(F) + 1, bool)
-    per_tri[cand[flag] + 1] = True
-    x0, y0, x1, y1 = _box(xy.reshape(-1, 3, 2)[flag].reshape(-1, 2), tri_id.shape)
+    x0, y0, x1, y1 = _box(xy[:3 * m], tri_id.shape)
     if x1 <= x0 or y1 <= y0:  # all past the crop's edge (a face cut by the frame)
         return out
-    kept = per_tri[tri_id[y0:y1, x0:x1] + 1].view(np.uint8)
+    tb = np.ascontiguousarray(tri_id[y0:y1, x0:x1])
+    kept = np.empty(tb.shape, np.uint8)
+    _lookup_kernel(per_tri, tb, kept)
     # the triangles' sawtooth outline smoothed (5 x 5 median), on the face only
-    out[y0:y1, x0:x1] = cv2.medianBlur(kept, 5).view(bool) & (tri_id[y0:y1, x0:x1] >= 0)
+    _on_face_kernel(cv2.medianBlur(kept, 5), tb, out, x0, y0)
     return out
+
+
+def _band_kernel_py(at, F, k, P, half, step, cand, grid):  # pragma: no cover (numba)
+    """The triangles of ``F`` (f, 3) with a corner whose depth ``at`` (n,) float32 is below
+    ``k`` (the band), in order, into ``cand`` (f,); their corners' drawn places ``P`` (n, 2)
+    on the depth map (``(p - half) / step`` in float32, as :func:`_depth_at` has them) into
+    ``grid`` (2, 3 f) float32 (x, y; three per triangle). Returns how many."""
+    c = 0
+    for f in range(F.shape[0]):
+        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+        if not (at[i0] < k or at[i1] < k or at[i2] < k):
+            continue
+        cand[c] = f
+        for j in range(3):
+            i = F[f, j]
+            grid[0, 3 * c + j] = (np.float32(P[i, 0]) - half) / step
+            grid[1, 3 * c + j] = (np.float32(P[i, 1]) - half) / step
+        c += 1
+    return c
+
+
+def _flag_kernel_py(at, F, cand, tp, k, moved, reach, P, per_tri, xy):  # pragma: no cover
+    """:func:`drawn_inside`'s judgement of the band's triangles ``cand`` (c,): the means of
+    their corners' depths at the texture (``at`` (n,)) and where drawn (``tp`` (3 c,)), all
+    float32 (``q = (a + b + c) / 3``, ``d = (a' + b' + c') / 3 - q``); a triangle is kept
+    where ``q < k``, ``d > moved`` and ``d <= reach``: ``per_tri[f + 1] = True`` and its
+    corners' drawn places ``P`` into ``xy`` (3 m, 2), in order. Returns m (numba)."""
+    three = np.float32(3.0)
+    m = 0
+    for j in range(cand.shape[0]):
+        f = cand[j]
+        q = (at[F[f, 0]] + at[F[f, 1]] + at[F[f, 2]]) / three
+        d = (tp[3 * j] + tp[3 * j + 1] + tp[3 * j + 2]) / three - q
+        if q < k and d > moved and d <= reach:
+            per_tri[f + 1] = True
+            for i in range(3):
+                xy[3 * m + i, 0] = P[F[f, i], 0]
+                xy[3 * m + i, 1] = P[F[f, i], 1]
+            m += 1
+    return m
+
+
+def _lookup_kernel_py(per_tri, tri_id, kept):  # pragma: no cover (numba)
+    """``kept = per_tri[tri_id + 1]`` as uint8 (0/1), ``tri_id`` (h, w) int32."""
+    for y in range(tri_id.shape[0]):
+        for x in range(tri_id.shape[1]):
+            kept[y, x] = np.uint8(per_tri[tri_id[y, x] + 1])
+
+
+def _on_face_kernel_py(med, tri_id, out, x0, y0):  # pragma: no cover (numba)
+    """``out[y0:, x0:]`` (its box of ``tri_id``'s (h, w) shape) ``= (med != 0) & (tri_id >=
+    0)``, in place (the whole ``out`` passed: one layout, one compiled kernel)."""
+    for y in range(tri_id.shape[0]):
+        for x in range(tri_id.shape[1]):
+            out[y0 + y, x0 + x] = med[y, x] != 0 and tri_id[y, x] >= 0
+
+
+_band_kernel = _maybe_njit(_band_kernel_py)
+_flag_kernel = _maybe_njit(_flag_kernel_py)
+_lookup_kernel = _maybe_njit(_lookup_kernel_py)
+_on_face_kernel = _maybe_njit(_on_face_kernel_py)
 
 
 def _core(face_mask: np.ndarray, margin: int) -> np.ndarray:
