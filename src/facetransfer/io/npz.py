@@ -110,11 +110,16 @@ def read_npz(path: str | os.PathLike, what: str,
     try:
         with z:
             mapped = {} if mmap_min_bytes is None else mapped_members(p, z, mmap_min_bytes)
-            return {k: mapped[k] if k in mapped else z[k] for k in z.files}
+            arrays = {k: mapped[k] if k in mapped else z[k] for k in z.files}
     except MemoryError:
         raise
     except Exception as exc:  # a damaged member: bad CRC, zlib.error, EOFError, pickle…
         raise error(f"{what} {p} is truncated or not a {what} ({reason(exc)})") from None
+    raw = sorted(k for k, a in arrays.items() if not isinstance(a, np.ndarray))
+    if raw:   # numpy hands a member without the .npy header over as its bytes, unread
+        raise error(f"{what} {p} is damaged or not a {what}: member(s) {', '.join(raw)} "
+                    "are not .npy arrays")
+    return arrays
 
 
 def mapped_members(path: Path, z: "np.lib.npyio.NpzFile", min_bytes: int
