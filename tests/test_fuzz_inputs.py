@@ -319,3 +319,38 @@ def test_probe_of_an_unreadable_video_is_one_line(tmp_path, capsys, data_dir, na
     assert status == 2 and len(err) == 1 and name in err[0], err
     assert "not a video OpenCV can decode" not in err[0]
 
+
+
+# ------------------------------------------------------------------------------ plates
+def test_a_truncated_exr_frame_prints_nothing_to_stdout(tmp_path, capfd):
+    """Before: OpenEXR's bindings printed "Warning: Exception raised reading pixel data for
+    part 0 - ..." to standard output (before the tool's error; into ``probe --json``'s)."""
+    from facetransfer.io.exr import read_exr_image, write_exr
+
+    p = tmp_path / "f.0001.exr"
+    write_exr(p, np.random.default_rng(0).random((48, 64, 3)).astype(np.float32))
+    p.write_bytes(p.read_bytes()[:-500])
+    capfd.readouterr()
+    with pytest.raises(VideoError, match="f.0001.exr"):
+        read_exr_image(p)
+    assert capfd.readouterr().out == ""
+
+
+def test_what_else_reaches_stdout_meanwhile_is_kept(capsys):
+    """The filter drops the library's note only (written in pieces, as the bindings do): a
+    line printed meanwhile comes out as it was, in order; nested uses are one filter."""
+    import sys
+
+    from facetransfer.io.native_stdout import native_stdout_kept
+
+    print("before")
+    with native_stdout_kept():
+        print("one")
+        with native_stdout_kept():
+            sys.stdout.write("Warning: Exception raised ")
+            sys.stdout.write("reading pixel data for part 0 - x")
+            sys.stdout.write("\n")
+            sys.stdout.write("Warning: something else\n")
+        print("two", end="")
+    print(" after")
+    assert capsys.readouterr().out == "before\none\nWarning: something else\ntwo after\n"
