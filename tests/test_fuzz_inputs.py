@@ -354,3 +354,13 @@ def test_what_else_reaches_stdout_meanwhile_is_kept(capsys):
         print("two", end="")
     print(" after")
     assert capsys.readouterr().out == "before\none\nWarning: something else\ntwo after\n"
+
+
+@pytest.mark.parametrize("name,head", [("still.png", b"\x89PNG\r\n\x1a\n"),
+                                       ("still.jpg", b"\xff\xd8\xff")])
+def test_a_damaged_still_is_said_to_be_a_damaged_image(tmp_path, name, head):
+    """An image of a real header and nothing after it. Before: "video still.png has no
+    frames"."""
+    p = tmp_path / name
+    p.write_bytes(head + b"\0" * 32)
+    assert "cannot read the image" in _info_error(p)

@@ -180,6 +180,9 @@ def _video_info(path) -> VideoInfo:
     finally:
         cap.release()
     if size[0] <= 0 or size[1] <= 0:
+        if Path(path).suffix.lower() in IMAGE_SUFFIXES:   # before: "video X.png has no frames"
+            raise VideoError(f"cannot read the image {path} (damaged, or not an image OpenCV "
+                             "decodes)")
         raise VideoError(f"video {path} has no frames")
     if turn in (90, 270):      # the stream's ratio is of its stored pixels, turned with them
         sar = (sar[1], sar[0])
