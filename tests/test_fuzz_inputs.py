@@ -364,3 +364,27 @@ def test_a_damaged_still_is_said_to_be_a_damaged_image(tmp_path, name, head):
     p = tmp_path / name
     p.write_bytes(head + b"\0" * 32)
     assert "cannot read the image" in _info_error(p)
+
+
+# ------------------------------------------------------------------------------ weights files
+@pytest.mark.parametrize("kind,says", [("archive", "an .npz archive, not a single .npy array"),
+                                       ("text", "holds <U1 values, not real numbers"),
+                                       ("complex", "holds complex128 values"),
+                                       ("nan", "got NaN or infinity")])
+def test_identity_weights_files_that_are_not_numbers_are_said_so(tmp_path, kind, says):
+    """``--identity-weights W.npy``. Before: an archive named .npy had its key names read as
+    numbers ("could not convert string to float: 'a'", naming no file), text the same,
+    complex numbers lost their imaginary part (a ComplexWarning), NaN was "expected 3 finite
+    numbers, got 3"."""
+    from facetransfer.transfer import parse_weights
+
+    p = tmp_path / "w.npy"
+    if kind == "archive":
+        with open(p, "wb") as fh:
+            np.savez(fh, a=np.zeros(3))
+    else:
+        np.save(p, {"text": np.array(["a", "b", "c"]), "complex": np.array([1 + 2j, 0, 0]),
+                    "nan": np.array([np.nan, 0, 0])}[kind])
+    with pytest.raises(TransferError, match=says) as e:
+        parse_weights(str(p), 3)
+    assert kind == "nan" or "w.npy" in str(e.value)
