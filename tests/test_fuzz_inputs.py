@@ -388,3 +388,13 @@ def test_identity_weights_files_that_are_not_numbers_are_said_so(tmp_path, kind,
     with pytest.raises(TransferError, match=says) as e:
         parse_weights(str(p), 3)
     assert kind == "nan" or "w.npy" in str(e.value)
+
+
+@pytest.mark.parametrize("tc", ["99:02:03:00.000", "01:60:00:00.000"])
+def test_a_take_timecode_that_is_no_time_of_day_is_refused(tc):
+    """Before: ``99:02:03:00`` was read as four days after midnight (a take's frames then
+    placed there), minutes past 59 as the next hour."""
+    from facetransfer.take import take_seconds
+
+    with pytest.raises(TransferError, match=f"take t.csv's timecode {tc} at row 2 is not a time"):
+        take_seconds(["01:00:00:00.000", tc], name="take t.csv")

@@ -82,16 +82,25 @@ def is_take(path) -> bool:
     return path is not None and Path(os.fspath(path)).suffix.lower() == ".csv"
 
 
-def _fields(timecodes) -> np.ndarray:
+def _fields(timecodes, name: str = "the take") -> np.ndarray:
     """:func:`facetransfer.export.livelink.timecode_fields` (hours, minutes, seconds, frame,
-    thousandths), a timecode that is not one a TransferError."""
+    thousandths), a timecode that is not one, or of hours or minutes past a day's, a
+    TransferError (before, ``99:02:03:00`` was read as 4 days on; ``name``: the take, as said).
+    Seconds past 59 are read on into the next minute (written so by a clock that counts
+    them)."""
     from .export.common import ExportError
     from .export.livelink import timecode_fields
 
     try:
-        return timecode_fields(timecodes)
+        f = timecode_fields(timecodes)
     except ExportError as exc:
         raise TransferError(str(exc)) from None
+    odd = (f[:, 0] > 23) | (f[:, 1] > 59)
+    if odd.any():
+        k = int(np.flatnonzero(odd)[0])
+        raise TransferError(f"{name}'s timecode {timecodes[k]} at row {k + 1} is not a time of "
+                            "day (hours 00-23, minutes 00-59)")
+    return f
 
 
 def take_rate(timecodes, *, warn: bool = True) -> int:
@@ -131,7 +140,7 @@ def take_seconds(timecodes, *, warn: bool = True, name: str = "the take") -> np.
 def _clock(timecodes, warn: bool, name: str = "the take") -> np.ndarray:
     """``(F,)`` seconds since midnight of each row's timecode, counted at :func:`take_rate`;
     TransferError where they go back in time."""
-    f = _fields(timecodes)
+    f = _fields(timecodes, name)
     t = _seconds(f, _rate(f, False, name), timecodes, name)
     _rate(f, warn, name)    # its guess said once the take is known to be readable
     return t
@@ -248,7 +257,7 @@ def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
     app's), or beside a drop-frame start, counts clock time (:func:`_seconds`)."""
     from .io.plate_header import timecode_count
 
-    f = _fields(timecodes)
+    f = _fields(timecodes, name)
     nominal, whole = round(float(fps)), not f[:, 4].any()
     secs = f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]
     short = not (secs.size and secs.max() > secs.min())       # within one second: no rate shown
