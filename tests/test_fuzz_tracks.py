@@ -205,3 +205,24 @@ def test_commands_given_a_bad_track_say_one_line(tmp_path, capsys, bad_tracks, q
     status, err = _cli(argv, capsys)
     assert status == 2 and len(err) == 1, err
     assert err[0].startswith(f"facetransfer {command}: error: ") and t.name in err[0], err
+
+
+def test_a_member_declaring_more_data_than_it_holds_is_damage_not_memory(tmp_path, arrays):
+    """A header flipped to claim 10^11 numbers (745 GiB) in a file of kilobytes. Before:
+    MemoryError, which the commands say as "out of memory (the job is too large for this
+    machine)"."""
+    from facetransfer.errors import ModelFileError
+    from facetransfer.model import load_model
+
+    head = io.BytesIO()
+    np.lib.format.write_array_header_1_0(head, {"descr": "<f8", "fortran_order": False,
+                                               "shape": (10**11,)})
+    p = tmp_path / "claims.npz"
+    with zipfile.ZipFile(p, "w") as zf:
+        for k, v in arrays.items():
+            b = io.BytesIO()
+            np.save(b, v)
+            zf.writestr(k + ".npy", b.getvalue() if k != "scale" else head.getvalue() + b"\0" * 64)
+    _refused(p, "member(s) scale declare more data than they hold")
+    with pytest.raises(ModelFileError, match="claims.npz is damaged"):
+        load_model(p)
