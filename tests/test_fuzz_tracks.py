@@ -226,3 +226,18 @@ def test_a_member_declaring_more_data_than_it_holds_is_damage_not_memory(tmp_pat
     _refused(p, "member(s) scale declare more data than they hold")
     with pytest.raises(ModelFileError, match="claims.npz is damaged"):
         load_model(p)
+
+
+def test_blendshapes_beyond_float32_are_refused_without_a_warning(tmp_path, arrays):
+    """Before: cast to float32 first, 1e300 gave numpy's "overflow encountered in cast"
+    (a warning line before the error) and then the error."""
+    import warnings
+
+    from facetransfer.arkit import ARKIT_NAMES
+
+    bs = np.full((F, len(ARKIT_NAMES)), 1e300)
+    p = _write(tmp_path / "bs.npz", {**arrays, "blendshapes": bs,
+                                     "blendshape_names": np.array(ARKIT_NAMES)})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        _refused(p, "blendshapes must be finite and lie in [0, 1]")

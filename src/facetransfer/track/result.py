@@ -237,14 +237,16 @@ class Track:
             if self.blendshape_names is not None:
                 raise TrackError("track has blendshape names but no blendshapes")
             return
-        a = np.asarray(self.blendshapes, dtype=np.float32)
+        a = np.asarray(self.blendshapes)   # checked before the cast to float32 (1e300 made
+        # numpy's overflow warning, a line before the error)
         names = tuple(str(n) for n in (self.blendshape_names or ()))
         if a.ndim != 2 or a.shape[0] != F or a.shape[1] != len(names):
             raise TrackError(f"track blendshapes must be ({F}, {len(names)}) for its "
                              f"{len(names)} names, got {a.shape}")
-        if not np.all(np.isfinite(a)) or a.size and (a.min() < 0 or a.max() > 1):
+        a64 = a.astype(np.float64)
+        if not np.all(np.isfinite(a64)) or a64.size and (a64.min() < 0 or a64.max() > 1):
             raise TrackError("track blendshapes must be finite and lie in [0, 1]")
-        object.__setattr__(self, "blendshapes", a)
+        object.__setattr__(self, "blendshapes", np.asarray(a, np.float32))
         object.__setattr__(self, "blendshape_names", names)
 
     # ------------------------------------------------------------------ access
