@@ -272,6 +272,15 @@ def test_sound_alone_is_said_to_have_no_video_stream(tmp_path):
     assert "sound and no video stream" in _info_error(p)
 
 
+def test_a_recording_of_no_frames_is_said_to_hold_no_stream(tmp_path):
+    """An MP4 written with no frame (a recording stopped at once). Before: "not a video OpenCV
+    can decode"."""
+    p = tmp_path / "none.mp4"
+    _ffmpeg("-f", "lavfi", "-i", "color=c=gray:s=64x48:r=25", "-frames:v", "0", "-c:v",
+            "libx264", str(p))
+    assert "no stream at all" in _info_error(p)
+
+
 def test_a_text_file_named_mp4_is_said_to_be_text(tmp_path):
     p = tmp_path / "notes.mp4"
     p.write_text("not a video\n" * 10)

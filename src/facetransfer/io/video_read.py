@@ -112,7 +112,8 @@ def _open(path: str | os.PathLike):
 def why_not_video(p: Path) -> str:
     """Why OpenCV cannot open the file ``p`` as a video, as far as its bytes and ffmpeg say:
     an MP4/MOV cut short (no ``moov`` index: a recording or copy that did not finish), a file
-    with sound and no pictures, a text file; else that it is not a video OpenCV can decode.
+    with sound and no pictures, or no stream at all, a text file; else that it is not a video
+    OpenCV can decode.
     (Before, all of these were "not a video OpenCV can decode".)"""
     import subprocess
 
@@ -137,6 +138,8 @@ def why_not_video(p: Path) -> str:
                 "or a copy that did not finish leaves")
     if " Audio: " in said and " Video: " not in said:
         return "it has sound and no video stream"
+    if "Input #0" in said and "Stream #" not in said:
+        return "it holds no stream at all (an empty recording)"
     if head and all(b in b"\t\n\r" or 32 <= b < 127 for b in head.lstrip(b"\xef\xbb\xbf")):
         return "it is a text file, not a video"
     return "not a video OpenCV can decode"
