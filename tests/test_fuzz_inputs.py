@@ -407,3 +407,43 @@ def test_a_take_timecode_that_is_no_time_of_day_is_refused(tc):
 
     with pytest.raises(TransferError, match=f"take t.csv's timecode {tc} at row 2 is not a time"):
         take_seconds(["01:00:00:00.000", tc], name="take t.csv")
+
+
+# ------------------------------------------------------------------------------ truth files
+def _truth_arrays(tmp_path) -> dict:
+    """The arrays of a small ground-truth file as :func:`facetransfer.synth.write_clip`
+    writes them (3 frames, 10 vertices)."""
+    from facetransfer.synth import SyntheticTruth, _save_truth
+
+    F, n = 3, 10
+    t = SyntheticTruth(25.0, (64, 48), np.tile(np.eye(3), (F, 1, 1)), np.ones(F),
+                       np.zeros((F, 2)), {"identity": np.ones((F, 2)),
+                                          "expression": np.zeros((F, 3))},
+                       np.zeros((F, 68, 2)), np.zeros((F, n, 2)), np.ones((F, n), bool),
+                       np.arange(68) % n, {"model_hash": "abc"})
+    _save_truth(t, tmp_path / "good.truth.npz")
+    with np.load(tmp_path / "good.truth.npz") as z:
+        return {k: z[k] for k in z.files}
+
+
+@pytest.mark.parametrize("key,value,says", [
+    ("fps", np.float64("nan"), "fps"),
+    ("rotation", np.zeros((0, 3, 3)), "at least one frame"),
+    ("frame_size", np.float64(64), "frame_size"),
+    ("meta", np.array("[1, 2]"), "meta is a JSON list"),
+    ("visible", np.zeros((3, 10)), "visible must be"),
+    ("landmark_indices", np.arange(68) + 100, "landmark_indices"),
+])
+def test_a_damaged_truth_file_is_one_error_naming_it(tmp_path, key, value, says):
+    """``texture lift --track CLIP.truth.npz`` reads synth-video's ground truth. Before: an
+    fps of NaN and float flags were read, an empty rotation was an IndexError in the lift, a
+    frame size of one number a TypeError, a meta that is a JSON list an AttributeError."""
+    from facetransfer.synth import load_truth
+
+    arrays = _truth_arrays(tmp_path)
+    p = tmp_path / "bad.truth.npz"
+    np.savez(p, **{**arrays, key: value})
+    with pytest.raises(VideoError, match="bad.truth.npz is not a facetransfer truth file") as e:
+        load_truth(p)
+    assert says in str(e.value)
+    assert load_truth(tmp_path / "good.truth.npz").fps == 25.0
