@@ -447,3 +447,22 @@ def test_a_damaged_truth_file_is_one_error_naming_it(tmp_path, key, value, says)
         load_truth(p)
     assert says in str(e.value)
     assert load_truth(tmp_path / "good.truth.npz").fps == 25.0
+
+
+def test_a_damaged_texture_function_file_is_one_error_naming_it(tmp_path):
+    """:meth:`TextureFunction.load` of a file cut short and of an ``.npy`` named ``.npz``.
+    Before: BadZipFile and TypeError (the loader caught OSError, KeyError, ValueError only)."""
+    from facetransfer.texture import TextureFunction
+    from facetransfer.texture.base import TextureError
+
+    rng = np.random.default_rng(0)
+    good = tmp_path / "tf.npz"
+    TextureFunction(rng.random((3, 4, 4, 3)), np.ones((3, 4, 4)), rng.random((3, 2))).save(good)
+    cut, npy = tmp_path / "cut.npz", tmp_path / "array.npz"
+    cut.write_bytes(good.read_bytes()[:200])
+    with open(npy, "wb") as fh:
+        np.save(fh, np.zeros(3))
+    for p in (cut, npy):
+        with pytest.raises(TextureError, match=p.name):
+            TextureFunction.load(p)
+    assert TextureFunction.load(good).k == 3
