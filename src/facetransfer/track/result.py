@@ -58,8 +58,8 @@ FPS_RANGE = (1e-2, 1e4)
 #: The largest frame side a track may name (pixels): a video or plate is far smaller.
 MAX_FRAME_SIDE = 1 << 16
 
-#: How far a track file's rotations may stray from rotations, ``max |R Rᵀ - I|`` (the saved
-#: tracks' are ~1e-15 off).
+#: How far a track file's rotations may stray from rotations, ``max |R Rᵀ - I|`` (the 64
+#: tracks of a development machine's track cache: at most 9e-16).
 ROTATION_TOLERANCE = 1e-4
 
 
