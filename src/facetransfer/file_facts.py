@@ -40,11 +40,16 @@ def file_kind(path: str | os.PathLike) -> str:
         return "take"
     if p.suffix.lower() == ".npz" and p.is_file():
         try:
-            with np.load(p, allow_pickle=False) as z:
-                names = set(z.files)
+            z = np.load(p, allow_pickle=False)
         except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
             raise FaceTransferError(f"{p} is truncated or not an .npz archive "
                                     f"({reason(exc)})") from None
+        if not isinstance(z, np.lib.npyio.NpzFile):   # an .npy named .npz (was TypeError)
+            raise FaceTransferError(f"{p} is a single .npy array, not an .npz archive: probe "
+                                    "describes videos, image sequences, tracks, models and "
+                                    "Live Link Face takes")
+        with z:
+            names = set(z.files)
         if _TRACK_KEYS <= names:
             return "track"
         if {"core", "metadata"} <= names:

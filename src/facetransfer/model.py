@@ -460,7 +460,9 @@ def load_model(path: str | Path) -> MultilinearModel:
     # the core is mapped, not read (hundreds of MB; its sha256 is verified below)
     data = read_npz(p, "model file", ModelFileError, mmap_min_bytes=1 << 24)
     if "metadata" not in data:
-        raise ModelFileError(f"{p} is not a facetransfer model file (no metadata)")
+        what = "it is a track file (as `facetransfer track` writes)" \
+            if {"rotation", "mode_names"} <= set(data) else "it has no metadata"
+        raise ModelFileError(f"{p} is not a facetransfer model file: {what}")
     try:
         meta = json.loads(str(data.pop("metadata")))
     except (json.JSONDecodeError, ValueError):

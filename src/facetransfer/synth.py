@@ -832,17 +832,20 @@ def load_truth(path: str | os.PathLike) -> SyntheticTruth:
     p = Path(path)
     if p.suffix.lower() != ".npz":
         p = truth_path(p)
+    from .truth_check import check_truth
+
     z = read_npz(p, "ground-truth file", VideoError)
     try:
         meta = json.loads(str(z["meta"]))
         weights = {k[len("weights_"):].lstrip("_"): z[k] for k in z if k.startswith("weights_")}
-        order = meta.get("mode_names", list(weights))
+        order = meta["mode_names"] if "mode_names" in meta else list(weights)
         weights = {m: weights[m] for m in order if m in weights}
-        return SyntheticTruth(float(z["fps"]), tuple(int(v) for v in z["frame_size"]),
-                              z["rotation"], z["scale"], z["translation"], weights,
-                              z["landmarks2d"], z["vertices2d"], z["visible"],
-                              z["landmark_indices"], meta, str(p))
-    except (KeyError, ValueError, OSError) as exc:
+        size = tuple(int(v) for v in np.ravel(z["frame_size"]))
+        return check_truth(SyntheticTruth(float(z["fps"]), size,
+                                          z["rotation"], z["scale"], z["translation"], weights,
+                                          z["landmarks2d"], z["vertices2d"], z["visible"],
+                                          z["landmark_indices"], meta, str(p)))
+    except (KeyError, ValueError, OSError, TypeError, OverflowError) as exc:
         raise VideoError(f"ground-truth file {p} is not a facetransfer truth file: {exc}") from None
 
 

@@ -54,6 +54,11 @@ TIMECODE_RATES = (24, 25, 30, 48, 50, 60, 100, 120)
 #: first row at the target's first frame.
 TAKE_SYNCS = ("timecode", "start")
 
+#: The longest a take's consecutive rows may lie apart (seconds): the app writes a row every
+#: frame; a longer gap is two recordings in one file or a damaged timecode (rows 23 hours
+#: apart made ``view`` and ``puppet`` fill two million frames, holding the first row).
+MAX_ROW_GAP = 60.0
+
 
 @dataclass(frozen=True)
 class Take:
@@ -77,16 +82,25 @@ def is_take(path) -> bool:
     return path is not None and Path(os.fspath(path)).suffix.lower() == ".csv"
 
 
-def _fields(timecodes) -> np.ndarray:
+def _fields(timecodes, name: str = "the take") -> np.ndarray:
     """:func:`facetransfer.export.livelink.timecode_fields` (hours, minutes, seconds, frame,
-    thousandths), a timecode that is not one a TransferError."""
+    thousandths), a timecode that is not one, or of hours or minutes past a day's, a
+    TransferError (before, ``99:02:03:00`` was read as 4 days on; ``name``: the take, as said).
+    Seconds past 59 are read on into the next minute (written so by a clock that counts
+    them)."""
     from .export.common import ExportError
     from .export.livelink import timecode_fields
 
     try:
-        return timecode_fields(timecodes)
+        f = timecode_fields(timecodes)
     except ExportError as exc:
         raise TransferError(str(exc)) from None
+    odd = (f[:, 0] > 23) | (f[:, 1] > 59)
+    if odd.any():
+        k = int(np.flatnonzero(odd)[0])
+        raise TransferError(f"{name}'s timecode {timecodes[k]} at row {k + 1} is not a time of "
+                            "day (hours 00-23, minutes 00-59)")
+    return f
 
 
 def take_rate(timecodes, *, warn: bool = True) -> int:
@@ -110,7 +124,7 @@ def _rate(f: np.ndarray, warn: bool, name: str = "the take") -> int:
                             "%d a second (the smallest timecode rate above its frame numbers)",
                             name, rate)
             return rate
-    raise TransferError(f"timecode frame {top} is beyond every timecode rate "
+    raise TransferError(f"timecode frame {top} of {name} is beyond every timecode rate "
                         f"({TIMECODE_RATES[-1]} fps)")
 
 
@@ -126,16 +140,19 @@ def take_seconds(timecodes, *, warn: bool = True, name: str = "the take") -> np.
 def _clock(timecodes, warn: bool, name: str = "the take") -> np.ndarray:
     """``(F,)`` seconds since midnight of each row's timecode, counted at :func:`take_rate`;
     TransferError where they go back in time."""
-    f = _fields(timecodes)
-    return _seconds(f, _rate(f, warn, name), timecodes)
+    f = _fields(timecodes, name)
+    t = _seconds(f, _rate(f, False, name), timecodes, name)
+    _rate(f, warn, name)    # its guess said once the take is known to be readable
+    return t
 
 
-def _seconds(f: np.ndarray, rate: int, timecodes) -> np.ndarray:
+def _seconds(f: np.ndarray, rate: int, timecodes, name: str = "the take") -> np.ndarray:
     """``(F,)`` seconds since midnight of parsed timecode fields ``f`` (F, 5) counted at
-    ``rate`` (a day added past midnight); TransferError where they go back in time."""
+    ``rate`` (a day added past midnight); TransferError where they go back in time or
+    repeat (``name``: the take, as said)."""
     t = (f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]) + (f[:, 3] + f[:, 4] / 1000.0) / rate
     t = _past_midnight(t, 86400.0)
-    _forward(t, timecodes)
+    _forward(t, timecodes, name)
     return t
 
 
@@ -240,7 +257,7 @@ def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
     app's), or beside a drop-frame start, counts clock time (:func:`_seconds`)."""
     from .io.plate_header import timecode_count
 
-    f = _fields(timecodes)
+    f = _fields(timecodes, name)
     nominal, whole = round(float(fps)), not f[:, 4].any()
     secs = f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]
     short = not (secs.size and secs.max() > secs.min())       # within one second: no rate shown
@@ -251,11 +268,11 @@ def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
     # rows of whole frames (an export's; the app's carry thousandths, its clock's time), not
     # after a drop-frame start (then an export counts clock time, export.livelink)
     if rate != nominal or drop or not whole:
-        clock = _seconds(f, rate, timecodes)
+        clock = _seconds(f, rate, timecodes, name)
         first = None if start_timecode is None else timecode_seconds(start_timecode, fps)
         return clock, _same_day(first, clock, 86400.0)
     frames = _past_midnight(secs * rate + f[:, 3], 86400 * rate)
-    _forward(frames, timecodes)
+    _forward(frames, timecodes, name, rate)
     first = None if start_timecode is None else count / float(fps)
     clock = frames / float(fps)
     return clock, _same_day(first, clock, 86400.0 * rate / fps)
@@ -278,12 +295,22 @@ def _same_day(first: float | None, clock: np.ndarray, day: float) -> float | Non
     return first
 
 
-def _forward(t: np.ndarray, timecodes) -> None:
-    """TransferError where a take's row times ``t`` go back in time."""
-    if t.size and np.any(np.diff(t) < 0):
-        k = int(np.flatnonzero(np.diff(t) < 0)[0]) + 1
-        raise TransferError(f"the take's timecodes go back in time at row {k + 1} "
-                            f"({timecodes[k]} after {timecodes[k - 1]})")
+def _forward(t: np.ndarray, timecodes, name: str = "the take", per_second: float = 1.0
+             ) -> None:
+    """TransferError where a take's row times ``t`` (``per_second`` units a second) go back
+    in time, stand still (two rows of one timecode: which to show is unknown; before, ten rows
+    of one timecode made a take of one frame, said nowhere) or leap more than
+    :data:`MAX_ROW_GAP`; ``name``: the take, as said."""
+    step = np.diff(t) / per_second
+    odd = (step <= 0) | (step > MAX_ROW_GAP)
+    if not odd.any():
+        return
+    k = int(np.flatnonzero(odd)[0]) + 1
+    how = "go back in time" if step[k - 1] < 0 else "repeat" if step[k - 1] == 0 else \
+        f"leap {step[k - 1]:.0f} s"
+    tail = f": rows at most {MAX_ROW_GAP:.0f} s apart are read" if step[k - 1] > 0 else ""
+    raise TransferError(f"{name}'s timecodes {how} at row {k + 1} "
+                        f"({timecodes[k]} after {timecodes[k - 1]}){tail}")
 
 
 def _synced_start(timecodes, clock: np.ndarray, start_timecode: str | None,

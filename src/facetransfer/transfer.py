@@ -771,9 +771,17 @@ def parse_weights(text: str, r: int, *, what: str = "--identity-weights") -> np.
         why = "not a NumPy array file (np.save writes one)" if p.suffix == ".npy" else exc
         raise TransferError(f"{what} {text!r}: not a list of numbers or a .npy file ({why})") \
             from None
+    if isinstance(vals, np.lib.npyio.NpzFile):   # before: its key names read as numbers
+        vals.close()
+        raise TransferError(f"{what} {text}: an .npz archive, not a single .npy array")
+    if np.asarray(vals).dtype.kind not in "biuf":   # text; complex (its imaginary part lost)
+        raise TransferError(f"{what} {text}: holds {np.asarray(vals).dtype} values, not real "
+                            "numbers")
     vals = np.asarray(vals, dtype=np.float64).ravel()
-    if vals.shape != (r,) or not np.all(np.isfinite(vals)):
+    if vals.shape != (r,):
         raise TransferError(f"{what}: expected {r} finite numbers, got {vals.size}")
+    if not np.all(np.isfinite(vals)):   # before: "expected 3 finite numbers, got 3"
+        raise TransferError(f"{what}: expected {r} finite numbers, got NaN or infinity")
     return vals
 
 

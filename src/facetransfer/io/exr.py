@@ -203,8 +203,10 @@ def read_exr_image(path) -> ExrImage:
     if magic != _MAGIC:
         raise VideoError(f"cannot read the OpenEXR frame {path} ({Path(path).name} is not an "
                          "OpenEXR file)")
-    try:
-        with OpenEXR.File(str(path)) as f:
+    from .native_stdout import native_stdout_kept
+
+    try:   # the bindings' note of a damaged file to stdout: not shown (the error says it)
+        with native_stdout_kept(), OpenEXR.File(str(path)) as f:
             header = dict(f.header())
             channels = {k: np.asarray(c.pixels) for k, c in f.channels().items()}
     except Exception:  # noqa: BLE001 (the bindings raise several kinds)

@@ -15,6 +15,10 @@ from .npz import read_npz
 
 WHAT = "MediaPipe landmarks file"
 
+#: The farthest a landmark's pixel position may lie from the origin (a frame is at most 65536
+#: pixels a side; a face may leave it).
+MAX_PIXEL = 1e6
+
 
 def read_mediapipe_landmarks(path: str | os.PathLike, n_frames: int | None = None) -> np.ndarray:
     """Read and validate ``NAME.mediapipe478.npz``.
@@ -49,4 +53,8 @@ def read_mediapipe_landmarks(path: str | os.PathLike, n_frames: int | None = Non
         a = np.concatenate([a, np.zeros(a.shape[:2] + (1,))], axis=2)
     if np.isinf(a).any():
         raise VideoError(f"{WHAT} {path} has infinite coordinates")
+    if np.nanmax(np.abs(a[..., :2]), initial=0.0) > MAX_PIXEL:
+        # not pixel positions (1e300 overflowed the fit's arithmetic: a traceback)
+        raise VideoError(f"{WHAT} {path} has coordinates beyond {MAX_PIXEL:g} pixels: not "
+                         "pixel positions")
     return a

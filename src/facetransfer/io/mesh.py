@@ -64,14 +64,12 @@ def read_obj_vertices(path: str | os.PathLike) -> np.ndarray:
             data = fh.read()
     except OSError as exc:
         raise MeshError(f"cannot read mesh {path}: {exc.strerror or exc}") from None
-    lines = [ln[2:] for ln in data.split(b"\n") if ln.startswith(b"v ")]
+    # a byte-order mark hid the first vertex; lines of two numbers were read three at a time
+    lines = [ln[2:].decode("utf-8", "replace") for ln in data.removeprefix(BOM).split(b"\n")
+             if ln.startswith(b"v ")]
     if not lines:
         raise MeshError(f"mesh {path} has no vertices")
-    try:
-        v = np.array([ln.split()[:3] for ln in lines], dtype=np.float64)
-    except ValueError:
-        raise MeshError(f"mesh {path} has malformed vertex lines") from None
-    return _check_vertices(v.reshape(-1, 3), path)
+    return _check_vertices(_floats(lines, 3, path, "vertex"), path)
 
 
 def _floats(rows: list[str], k: int, path, what: str) -> np.ndarray:
@@ -88,12 +86,22 @@ def _floats(rows: list[str], k: int, path, what: str) -> np.ndarray:
                            else "") + ")") from None
 
 
+#: A UTF-8 byte-order mark, which some editors put before an OBJ's first line.
+BOM = b"\xef\xbb\xbf"
+
+#: Face indices beyond this are out of every mesh's range (and of int64's: OverflowError).
+_INDEX_LIMIT = 1 << 40
+
+
 def _face_index(token: str, path) -> int:
     try:
-        return int(token)
+        i = int(token)
     except ValueError:
         raise MeshError(f"mesh {path} has a malformed face index {token!r} (expected an "
                         "integer)") from None
+    if abs(i) > _INDEX_LIMIT:
+        raise MeshError(f"mesh {path} has a face index {token} outside every mesh's range")
+    return i
 
 
 def _obj_index(f: np.ndarray, n: int) -> np.ndarray:
@@ -118,7 +126,7 @@ def read_obj(path: str | os.PathLike) -> Mesh:
     """
     try:
         with open(path, "rb") as fh:
-            data = fh.read().decode("utf-8", errors="replace")
+            data = fh.read().removeprefix(BOM).decode("utf-8", errors="replace")
     except OSError as exc:
         raise MeshError(f"cannot read mesh {path}: {exc.strerror or exc}") from None
     verts: list[str] = []
@@ -196,11 +204,43 @@ def read_mesh(path: str | os.PathLike) -> Mesh:
     f = f.reshape(-1, 3) if f.size else np.zeros((0, 3), np.int64)
     if f.size and (f.min() < 0 or f.max() >= len(v)):
         raise MeshError(f"mesh {p} has face indices outside 0..{len(v) - 1}")
+    if p.suffix.lower() == ".ply":
+        _check_ply_counts(p, len(v), len(f))
     uv = None
     visual = getattr(loaded, "visual", None)
     if visual is not None and getattr(visual, "uv", None) is not None and len(visual.uv) == len(v):
         uv = np.asarray(visual.uv, dtype=np.float64)
     return Mesh(v, f, uv)
+
+
+def _ply_counts(path: Path) -> dict[str, int]:
+    """The element counts a PLY file's header declares (``{"vertex": n, "face": m}``); empty
+    where the header cannot be read."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(1 << 16)
+    except OSError:
+        return {}
+    end = head.find(b"end_header")
+    counts = {}
+    for line in head[:end if end >= 0 else 0].decode("latin-1").splitlines():
+        words = line.split()
+        if len(words) == 3 and words[0] == "element" and words[1].isidentifier() and \
+                words[2].isdigit():
+            counts[words[1]] = int(words[2])
+    return counts
+
+
+def _check_ply_counts(path: Path, n_vertices: int, n_triangles: int) -> None:
+    """MeshError where a PLY file holds fewer vertices or faces than its header declares: an
+    ASCII file cut short was read as the vertices before the cut and no faces, said nowhere
+    (each face is one triangle or more)."""
+    counts = _ply_counts(path)
+    if counts.get("vertex", n_vertices) != n_vertices or \
+            counts.get("face", 0) > n_triangles:
+        raise MeshError(f"mesh {path} is truncated: its header declares "
+                        f"{counts.get('vertex', 0)} vertices and {counts.get('face', 0)} faces, "
+                        f"it holds {n_vertices} and {n_triangles} triangles")
 
 
 #: The mesh files :func:`write_mesh` writes (OBJ itself, the others through trimesh's

@@ -110,11 +110,42 @@ def read_npz(path: str | os.PathLike, what: str,
     try:
         with z:
             mapped = {} if mmap_min_bytes is None else mapped_members(p, z, mmap_min_bytes)
-            return {k: mapped[k] if k in mapped else z[k] for k in z.files}
+            arrays = {k: mapped[k] if k in mapped else z[k] for k in z.files}
     except MemoryError:
+        # a damaged header's shape (745 GiB of a 1 kB file) was said as "out of memory"
+        over = oversized_members(p)
+        if over:
+            raise error(f"{what} {p} is damaged: member(s) {', '.join(over)} declare more data "
+                        "than they hold") from None
         raise
     except Exception as exc:  # a damaged member: bad CRC, zlib.error, EOFError, pickle…
         raise error(f"{what} {p} is truncated or not a {what} ({reason(exc)})") from None
+    raw = sorted(k for k, a in arrays.items() if not isinstance(a, np.ndarray))
+    if raw:   # numpy hands a member without the .npy header over as its bytes, unread
+        raise error(f"{what} {p} is damaged or not a {what}: member(s) {', '.join(raw)} "
+                    "are not .npy arrays")
+    return arrays
+
+
+def oversized_members(path: Path) -> list[str]:
+    """The members of the ``.npz`` archive at ``path`` whose ``.npy`` header declares more
+    bytes of data than the member holds (a damaged header), by name."""
+    import zipfile
+
+    over = []
+    try:
+        with zipfile.ZipFile(path) as zf:
+            for info in zf.infolist():
+                with zf.open(info) as fh:
+                    version = np.lib.format.read_magic(fh)
+                    read = (np.lib.format.read_array_header_1_0 if version == (1, 0)
+                            else np.lib.format.read_array_header_2_0)
+                    shape, _, dtype = read(fh)
+                if int(np.prod(shape, dtype=object)) * dtype.itemsize > info.file_size:
+                    over.append(info.filename.removesuffix(".npy"))
+    except Exception:  # noqa: BLE001 - a member past reading: the caller's error stands
+        return over
+    return over
 
 
 def mapped_members(path: Path, z: "np.lib.npyio.NpzFile", min_bytes: int

@@ -105,8 +105,44 @@ def _open(path: str | os.PathLike):
         if p.suffix.lower() == ".npz":   # a track or a model where a video belongs
             raise VideoError(f"{p} is an .npz archive, not a video; "
                              f"`facetransfer probe {p}` says what it holds")
-        raise VideoError(f"cannot read video {p}: not a video OpenCV can decode")
+        raise VideoError(f"cannot read video {p}: {why_not_video(p)}")
     return cap
+
+
+def why_not_video(p: Path) -> str:
+    """Why OpenCV cannot open the file ``p`` as a video, as far as its bytes and ffmpeg say:
+    an MP4/MOV cut short (no ``moov`` index: a recording or copy that did not finish), a file
+    with sound and no pictures, or no stream at all, a text file; else that it is not a video
+    OpenCV can decode.
+    (Before, all of these were "not a video OpenCV can decode".)"""
+    import subprocess
+
+    from .ffmpeg import ffmpeg_exe
+
+    try:
+        with open(p, "rb") as fh:
+            head = fh.read(512)
+    except OSError:
+        head = b""
+    said = ""
+    exe = ffmpeg_exe()
+    if exe is not None:
+        try:
+            said = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(p)],
+                                  capture_output=True, timeout=30).stderr.decode("utf-8",
+                                                                                 "replace")
+        except (OSError, subprocess.SubprocessError):
+            said = ""
+    if head[4:8] == b"ftyp" and "moov atom not found" in said:
+        return ("it is cut short: an MP4/MOV without its index (the moov box), as a recording "
+                "or a copy that did not finish leaves")
+    if " Audio: " in said and " Video: " not in said:
+        return "it has sound and no video stream"
+    if "Input #0" in said and "Stream #" not in said:
+        return "it holds no stream at all (an empty recording)"
+    if head and all(b in b"\t\n\r" or 32 <= b < 127 for b in head.lstrip(b"\xef\xbb\xbf")):
+        return "it is a text file, not a video"
+    return "not a video OpenCV can decode"
 
 
 def video_info(path: str | os.PathLike) -> VideoInfo:
@@ -147,6 +183,9 @@ def _video_info(path) -> VideoInfo:
     finally:
         cap.release()
     if size[0] <= 0 or size[1] <= 0:
+        if Path(path).suffix.lower() in IMAGE_SUFFIXES:   # before: "video X.png has no frames"
+            raise VideoError(f"cannot read the image {path} (damaged, or not an image OpenCV "
+                             "decodes)")
         raise VideoError(f"video {path} has no frames")
     if turn in (90, 270):      # the stream's ratio is of its stored pixels, turned with them
         sar = (sar[1], sar[0])
@@ -238,8 +277,19 @@ def _stored_frames(path, *, start: int, stop: int | None, seek: bool) -> Iterato
         n += 1
     expect = max(int(info.n_frames) - start, 0)
     expect = expect if stop is None else min(expect, max(stop - start, 0))
+    # none decoded where the header counts some (a count a frame or two high aside): before,
+    # "the clip has no frames", naming no file
+    if n == 0 and expect > 0 and (start == 0 or expect >= TRUNCATED_FRAMES):
+        raise _undecoded(path, start, int(info.n_frames))
     if n and expect - n >= max(TRUNCATED_FRAMES, 0.02 * expect):
         _say_truncated(str(path), start + n - 1, int(info.n_frames))
+
+
+def _undecoded(path, start: int, counted: int) -> VideoError:
+    """The error of a video of which no frame from ``start`` decodes though its header counts
+    ``counted``: damaged or cut short (an MP4 whose index comes first, copied in part)."""
+    return VideoError(f"video {path}: no frame from frame {start} on decodes, though its "
+                      f"header counts {counted} (damaged, or cut short)")
 
 
 @functools.lru_cache(maxsize=16)
@@ -265,8 +315,6 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     VideoError
         Missing, unreadable or empty video.
     """
-    import cv2
-
     from .memory import first_frame_count, frame_budget, grow_frames
 
     info = video_info(path)
@@ -294,6 +342,8 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
         put(out[n], frame)
         n += 1
     if n == 0:
+        if expect > 0:
+            raise _undecoded(path, start, int(info.n_frames))
         raise VideoError(f"video {path} has no frames (from frame {start})")
     if expect - n >= max(TRUNCATED_FRAMES, 0.02 * expect):
         _say_truncated(str(path), start + n - 1, int(info.n_frames))

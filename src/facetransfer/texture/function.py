@@ -154,13 +154,16 @@ class TextureFunction:
 
     @classmethod
     def load(cls, path) -> "TextureFunction":
-        """Read a file written by :meth:`save`."""
+        """Read a file written by :meth:`save` (any damage one TextureError naming it: before,
+        a truncated file was BadZipFile, an ``.npy`` a TypeError)."""
+        from ..io.npz import read_npz
+
+        z = read_npz(path, "texture function", TextureError)
         try:
-            with np.load(path, allow_pickle=False) as z:
-                return cls(z["textures"], z["weights"], z["attributes"], k=int(z["k"]),
-                           kernel=str(z["kernel"]), bandwidth=float(z["bandwidth"]),
-                           prior=float(z["prior"]))
-        except (OSError, KeyError, ValueError) as exc:
+            return cls(z["textures"], z["weights"], z["attributes"], k=int(z["k"]),
+                       kernel=str(z["kernel"]), bandwidth=float(z["bandwidth"]),
+                       prior=float(z["prior"]))
+        except (OSError, KeyError, ValueError, TypeError, OverflowError) as exc:
             if isinstance(exc, FaceTransferError):
                 raise
             raise TextureError(f"cannot read texture function {path}: {exc}") from None

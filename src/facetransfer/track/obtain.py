@@ -381,6 +381,7 @@ def _landmarks(video, model, frames, fps, size, progress_factory):
         from .landmarks import mediapipe_to_ibug
 
         P = read_mediapipe_landmarks(lmf, n)
+        _check_landmarks_fit(lmf, P, n, size)
         L = mediapipe_to_ibug(P[..., :2])
         if L.shape[0] < n:
             L = np.concatenate([L, np.full((n - L.shape[0], 68, 2), np.nan)])
@@ -394,6 +395,23 @@ def _landmarks(video, model, frames, fps, size, progress_factory):
                               progress=cb.update if cb is not None else None)
     finally:
         _close(cb)
+
+
+def _check_landmarks_fit(path: Path, P: np.ndarray, n: int, size) -> None:
+    """VideoError where the precomputed landmarks ``P`` (F, 478, 3) at ``path`` lie off the
+    video's ``size`` ``(W, H)`` frames (by more than half a frame: another clip's, or not
+    pixels; before, they were fitted into a wrong track, said nowhere); a warning where they
+    cover fewer than the ``n`` frames read (the rest are taken as frames without a face)."""
+    W, H = (float(v) for v in size)
+    xy = P[..., :2][np.isfinite(P[..., :2]).all(axis=-1)]
+    if xy.size and ((xy < [-0.5 * W, -0.5 * H]) | (xy > [1.5 * W, 1.5 * H])).any():
+        raise VideoError(f"MediaPipe landmarks file {path} has points off the video's "
+                         f"{W:.0f}x{H:.0f} frames (from x {xy[:, 0].min():.0f} to "
+                         f"{xy[:, 0].max():.0f}, y {xy[:, 1].min():.0f} to "
+                         f"{xy[:, 1].max():.0f}): made for another clip?")
+    if len(P) < n:
+        log.warning("MediaPipe landmarks file %s has %d frames of the %d read: the rest are "
+                    "taken as frames without a face", path, len(P), n)
 
 
 # ---------------------------------------------------------------------------------------------

@@ -51,6 +51,17 @@ __all__ = ["Track", "TRACK_FORMAT_VERSION"]
 #: Version of the track file layout written by :meth:`Track.save`.
 TRACK_FORMAT_VERSION = 1
 
+#: The frame rates a track may have (frames per second): beyond them the video writer fails
+#: with a message about itself, not the track (1e-300 and 1e300 were read).
+FPS_RANGE = (1e-2, 1e4)
+
+#: The largest frame side a track may name (pixels): a video or plate is far smaller.
+MAX_FRAME_SIDE = 1 << 16
+
+#: How far a track file's rotations may stray from rotations, ``max |R Rᵀ - I|`` (the 64
+#: tracks of a development machine's track cache: at most 9e-16).
+ROTATION_TOLERANCE = 1e-4
+
 
 def _track_array(name: str, val, shape: tuple, dtype=np.float64) -> np.ndarray:
     """``val`` as an array of ``shape`` and ``dtype``, finite where it is float; a
@@ -176,6 +187,8 @@ class Track:
         names = tuple(str(n) for n in self.mode_names)
         if not names:
             raise TrackError("a track needs at least one mode name")
+        if len(set(names)) != len(names):
+            raise TrackError(f"track mode names {list(names)} repeat a name")
         object.__setattr__(self, "mode_names", names)
         if set(self.weights) != set(names):
             raise TrackError(f"track weights are given for modes {sorted(self.weights)}, "
@@ -195,12 +208,14 @@ class Track:
         source."""
         set_ = object.__setattr__
         size = tuple(int(v) for v in np.asarray(self.frame_size).ravel())
-        if len(size) != 2 or min(size) <= 0:
-            raise TrackError(f"track frame_size must be (W, H) > 0, got {self.frame_size}")
+        if len(size) != 2 or min(size) <= 0 or max(size) > MAX_FRAME_SIDE:
+            raise TrackError(f"track frame_size must be (W, H) in 1..{MAX_FRAME_SIDE}, got "
+                             f"{list(size)}")
         set_(self, "frame_size", size)
         fps = float(self.fps)
-        if not np.isfinite(fps) or fps <= 0:
-            raise TrackError(f"track fps must be > 0, got {self.fps}")
+        if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:    # NaN too
+            raise TrackError(f"track fps must lie in [{FPS_RANGE[0]:g}, {FPS_RANGE[1]:g}], "
+                             f"got {self.fps}")
         set_(self, "fps", fps)
         aspect = float(self.pixel_aspect)
         if not np.isfinite(aspect) or aspect <= 0:
@@ -222,14 +237,16 @@ class Track:
             if self.blendshape_names is not None:
                 raise TrackError("track has blendshape names but no blendshapes")
             return
-        a = np.asarray(self.blendshapes, dtype=np.float32)
+        a = np.asarray(self.blendshapes)   # checked before the cast to float32 (1e300 made
+        # numpy's overflow warning, a line before the error)
         names = tuple(str(n) for n in (self.blendshape_names or ()))
         if a.ndim != 2 or a.shape[0] != F or a.shape[1] != len(names):
             raise TrackError(f"track blendshapes must be ({F}, {len(names)}) for its "
                              f"{len(names)} names, got {a.shape}")
-        if not np.all(np.isfinite(a)) or a.size and (a.min() < 0 or a.max() > 1):
+        a64 = a.astype(np.float64)
+        if not np.all(np.isfinite(a64)) or a64.size and (a64.min() < 0 or a64.max() > 1):
             raise TrackError("track blendshapes must be finite and lie in [0, 1]")
-        object.__setattr__(self, "blendshapes", a)
+        object.__setattr__(self, "blendshapes", np.asarray(a, np.float32))
         object.__setattr__(self, "blendshape_names", names)
 
     # ------------------------------------------------------------------ access
@@ -368,23 +385,13 @@ class Track:
         missing = [k for k in required if k not in data]
         if missing:
             raise TrackError(f"{p} is not a track file (missing {', '.join(missing)})")
-        version = scalar(data, "format_version", int, p, "track file", TrackError) \
-            if "format_version" in data else 1
-        if version > TRACK_FORMAT_VERSION:
-            raise TrackError(f"track file {p} has format version {version}, newer than this "
-                             f"facetransfer reads ({TRACK_FORMAT_VERSION})")
-        for k in ("mode_names", "blendshape_names"):
-            if k in data and data[k].dtype.kind not in "US":
-                raise TrackError(f"track file {p}: {k!r} must hold text, got {data[k].dtype}")
+        _check_version(data, p)
+        _check_kinds(data, p)
         names = tuple(str(n) for n in np.atleast_1d(data["mode_names"]))
         absent = [n for n in names if f"weights_{n}" not in data]
         if absent:
             raise TrackError(f"track file {p} lacks weights of mode(s) {absent}")
-        for k, a in data.items():
-            if k not in ("mode_names", "blendshape_names", "model_hash", "source",
-                         "source_timecode") and \
-                    a.dtype.kind not in "biuf":
-                raise TrackError(f"track file {p}: {k!r} must hold numbers, got {a.dtype}")
+        _check_rotations(data["rotation"], p)
         try:
             return cls(fps=scalar(data, "fps", float, p, "track file", TrackError),
                        frame_size=tuple(np.asarray(data["frame_size"]).ravel()),
@@ -406,7 +413,61 @@ class Track:
                        shot_starts=tuple(np.asarray(data.get("shot_starts", ())).ravel()),
                        source_facts=_source_facts(data, p), info={"file": str(p)})
         except (TrackError, ValueError, TypeError, OverflowError) as exc:
+            if str(p) in str(exc):   # said of the file already: not twice
+                raise TrackError(str(exc)) from None
             raise TrackError(f"track file {p} is invalid: {exc}") from None
+
+
+#: Track file keys that hold text; every other key holds numbers.
+_TEXT_KEYS = ("mode_names", "blendshape_names", "model_hash", "source", "source_timecode")
+
+
+def _check_version(data: dict, p: Path) -> None:
+    """TrackError unless the file's ``format_version`` (absent: 1) is one this reads."""
+    from ..io.npz import scalar
+
+    version = scalar(data, "format_version", int, p, "track file", TrackError) \
+        if "format_version" in data else 1
+    if version > TRACK_FORMAT_VERSION:
+        raise TrackError(f"track file {p} has format version {version}, newer than this "
+                         f"facetransfer reads ({TRACK_FORMAT_VERSION})")
+    if version < 1:    # no version was ever 0 or negative: not written by save
+        raise TrackError(f"track file {p} has format version {version}; versions start at 1")
+
+
+def _check_kinds(data: dict, p: Path) -> None:
+    """TrackError where an array of a track file holds the wrong kind of value: text where
+    numbers belong or numbers where text does, flags other than 0/1 in ``lost``, fractions in
+    ``shot_starts`` (before: ``lost`` of 0.5 read as True, ``shot_starts`` 1.5 as frame 1)."""
+    for k, a in data.items():
+        if k in _TEXT_KEYS and a.dtype.kind not in "US":
+            raise TrackError(f"track file {p}: {k!r} must hold text, got {a.dtype}")
+        if k not in _TEXT_KEYS and a.dtype.kind not in "biuf":
+            raise TrackError(f"track file {p}: {k!r} must hold numbers, got {a.dtype}")
+    lost = data["lost"]
+    if lost.dtype.kind != "b" and not np.isin(lost, (0, 1)).all():
+        raise TrackError(f"track file {p}: 'lost' must hold flags (True/False or 0/1)")
+    starts = data.get("shot_starts")
+    if starts is not None and starts.dtype.kind == "f" and \
+            not np.array_equal(starts, np.round(starts)):
+        raise TrackError(f"track file {p}: 'shot_starts' must hold whole frame numbers")
+
+
+def _check_rotations(rotation: np.ndarray, p: Path) -> None:
+    """TrackError naming the first frame whose ``rotation`` (F, 3, 3) is not a rotation
+    (orthonormal, determinant +1, to :data:`ROTATION_TOLERANCE`): the renderer refused it
+    without naming the track, the exports read a head's angles from it (scaled or zero
+    matrices were read)."""
+    R = np.asarray(rotation, dtype=np.float64)
+    if R.ndim != 3 or R.shape[1:] != (3, 3) or not np.isfinite(R).all():
+        return   # said by the track's own checks
+    with np.errstate(all="ignore"):
+        off = np.abs(R @ R.transpose(0, 2, 1) - np.eye(3)).max(axis=(1, 2))
+        bad = (off > ROTATION_TOLERANCE) | (np.linalg.det(R) < 0)
+    if bad.any():
+        k = int(np.flatnonzero(bad)[0])
+        raise TrackError(f"track file {p}: rotation of frame {k} is not a rotation matrix "
+                         f"(R Rᵀ = I, det R = +1)")
 
 
 def _source_facts(data: dict, p: Path) -> SourceFacts | None:
