@@ -561,3 +561,26 @@ def test_a_takes_track_records_the_takes_start_and_exports_from_it(arkit_model,
     out = capsys.readouterr().out
     assert code == 0 and "note:" not in out, out
     assert read_livelink(tmp_path / "again.csv").timecodes[0].startswith("01:02:03:04")
+
+
+def test_a_short_take_of_the_apps_labels_is_read_at_unreals_rate(caplog):
+    """A take within one second whose labels carry thousandths of a frame (the app's, and
+    ``export --take-rate app``) counts frames of 30 a second (60 where a frame number passes
+    29), as Unreal's importer reads it, without a guess said: 15 frames of a 25 fps clip are
+    read at k / 25 s (before: a guessed 24, the last row 0.12 s early)."""
+    import logging
+
+    from facetransfer.export.livelink import format_timecode
+
+    app = [format_timecode(k, 25.0, labels="app") for k in range(15)]
+    assert app[14] == "00:00:00:16.800"
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        t = take_seconds(app, name="take short_app.csv")
+        assert take_rate(app) == 30
+    np.testing.assert_allclose(t, np.arange(15) / 25.0, atol=1e-9)
+    assert caplog.records == []
+    fifty = [format_timecode(k, 50.0, labels="app") for k in range(40)]   # 0.8 s, 60-based
+    assert take_rate(fifty) == 60
+    np.testing.assert_allclose(take_seconds(fifty), np.arange(40) / 50.0, atol=1e-9)
+    early = [format_timecode(k, 50.0, labels="app") for k in range(20)]   # frames below 30
+    assert take_rate(early) == 30      # as Unreal reads it: no frame number passes 29

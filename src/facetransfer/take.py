@@ -15,8 +15,9 @@ of §6 queried with the new expression, as for a ready performance).
 
 Timecodes are ``HH:MM:SS:FF.mmm``: ``FF`` a frame at the take's nominal rate, ``.mmm`` its
 thousandths. The rate is not written in the file: a take that passes a second shows it (its
-frame numbers wrap after the last, :func:`take_rate`); one within a second is read at the
-smallest usual rate above its frame numbers, with a warning. A take recorded beside the camera
+frame numbers wrap after the last, :func:`take_rate`); one within a second is read at 30 or
+60 a second where its labels have thousandths (the app's, as Unreal's importer reads them),
+else at the smallest usual rate above its frame numbers, with a warning. A take recorded beside the camera
 with synced clocks is placed by the target's start timecode (:data:`TAKE_SYNCS`).
 
 :func:`take_track` makes a take a track of its own (the model's person performing it with the
@@ -106,8 +107,9 @@ def _fields(timecodes, name: str = "the take") -> np.ndarray:
 def take_rate(timecodes, *, warn: bool = True) -> int:
     """The nominal rate of a take's timecodes: the smallest of :data:`TIMECODE_RATES` above
     every frame number ``FF`` it holds. Sure where the take passes a second (its frame numbers
-    wrap after the last one of its rate); a take within one second is said in the log to be a
-    guess. TransferError beyond every rate."""
+    wrap after the last one of its rate); a take within one second whose labels have
+    thousandths of a frame (the app's) is read at 30 or 60 as Unreal's importer reads it, any
+    other is said in the log to be a guess. TransferError beyond every rate."""
     return _rate(_fields(timecodes), warn)
 
 
@@ -117,6 +119,11 @@ def _rate(f: np.ndarray, warn: bool, name: str = "the take") -> int:
     top = int(f[:, 3].max(initial=0))
     seconds = f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]
     wrapped = bool(seconds.size) and seconds.max() > seconds.min()
+    if not wrapped and f[:, 4].any() and top < 60:
+        # thousandths of a frame: the app's labels (and an export's, --take-rate app), counted
+        # at 30 or 60 a second; read as Unreal's importer reads them (60 where a frame number
+        # passes 29, else 30), not guessed
+        return 60 if top >= 30 else 30
     for rate in TIMECODE_RATES:
         if rate > top:
             if warn and not wrapped:
