@@ -718,6 +718,7 @@ def _puppet_track(args, vopt) -> int:
     with the audio of the clip it was tracked from where that file is still there."""
     import numpy as np
 
+    from ..io.video_like import like_video
     from ..puppet_video import puppet_video
     from ..track.project import take_frames
     from ..track.result import Track
@@ -735,8 +736,9 @@ def _puppet_track(args, vopt) -> int:
         track = take_frames(track, np.arange(args.max_frames))
     if track.lost.all():
         raise FaceTransferError(f"track {args.video} has no frame with a face")
-    vopt = _track_video_options(vopt, track)
-    source = Path(track.source) if track.source else None
+    clip = _track_clip(track)
+    vopt = _track_video_options(vopt if clip is None else like_video(vopt, clip), track)
+    source = Path(clip) if clip is not None else None
     audio_from = source if source is not None and source.is_file() else None
     wid = _puppet_identity(model, args.identity)
     audio, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
@@ -748,6 +750,32 @@ def _puppet_track(args, vopt) -> int:
           f"{args.identity or 'the mean face'} performing the track {args.video}"
           + (f", with the audio of {source.name}" if audio else ""))
     return 0
+
+
+def _track_clip(track) -> str | None:
+    """The clip ``track`` was made from (its ``source``: a video file or an image sequence's
+    pattern) where it is still there and is that clip: frames of the track's size and rate, at
+    least as many as the track's (a track of its first frames, ``track --max-frames``); else
+    None, said in the log where a clip of another size, rate or length has taken its place
+    (its audio is not the performance's)."""
+    from ..io.video import VideoError, video_info
+    from ..io.video_sequence import is_sequence
+
+    source = track.source
+    if not source or not (Path(source).is_file() or is_sequence(source)):
+        return None
+    try:
+        info = video_info(source)
+    except (VideoError, OSError, ValueError):
+        return None
+    if tuple(info.size) == tuple(track.frame_size) and abs(info.fps - track.fps) < 1e-3 \
+            and info.n_frames >= track.n_frames:
+        return str(source)
+    log.warning("track %s was made from %s, which is now %d frames of %dx%d at %g fps, the "
+                "track %d of %dx%d at %g fps: another clip; its audio, timecode and pixels' "
+                "aspect are not used", track.label, source, info.n_frames, *info.size, info.fps,
+                track.n_frames, *track.frame_size, track.fps)
+    return None
 
 
 def _track_video_options(vopt, track):
