@@ -759,3 +759,33 @@ def test_puppet_of_a_track_file_takes_its_clip_as_puppet_video_does(clips, quick
     assert "which is now 3 frames of" in caplog.text, caplog.text
     assert not has_audio(tmp_path / "other.mp4")
     assert video_info(tmp_path / "other.mp4").sar == (1, 1)
+
+
+def test_puppet_of_a_plates_track_numbers_its_frames_as_the_plate(clips, quick_model_path,
+                                                                   tmp_path, capsys, caplog):
+    """``puppet TRACK.npz`` of a PNG plate numbered from 1001 that is still there, a track
+    made before tracks recorded their clip's numbering, at 30 fps (a plate's rate is a
+    setting, ``--sequence-fps``, not the files'; the plate read at 24): written from 1001 as
+    the plate is (before: from 0), nothing said of another clip (a check of the rate took the
+    plate for another clip)."""
+    import dataclasses
+    import logging
+
+    from facetransfer.io.video_options import VideoOptions
+
+    (tmp_path / "plate").mkdir()
+    pattern = tmp_path / "plate" / "p.%04d.png"
+    write_video(pattern, read_video(clips["source"])[0], 25.0,
+                options=VideoOptions(first_number=1001))
+    track = dataclasses.replace(Track.load(clips["source_track"]), source=str(pattern),
+                                source_facts=None, fps=30.0)
+    track.save(tmp_path / "plate.npz")
+    (tmp_path / "out").mkdir()
+    with caplog.at_level(logging.WARNING):
+        code, out, err = run(["puppet", tmp_path / "plate.npz", "--model", quick_model_path,
+                              "--no-progress", "--out", tmp_path / "out" / "f.%04d.png"],
+                             capsys)
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == \
+        [f"f.{n}.png" for n in range(1001, 1007)]
+    assert "another clip" not in caplog.text, caplog.text

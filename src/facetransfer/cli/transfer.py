@@ -754,10 +754,11 @@ def _puppet_track(args, vopt) -> int:
 
 def _track_clip(track) -> str | None:
     """The clip ``track`` was made from (its ``source``: a video file or an image sequence's
-    pattern) where it is still there and is that clip: frames of the track's size and rate, at
-    least as many as the track's (a track of its first frames, ``track --max-frames``); else
-    None, said in the log where a clip of another size, rate or length has taken its place
-    (its audio is not the performance's)."""
+    pattern) where it is still there and is that clip: frames of the track's size, at least as
+    many as the track's (a track of its first frames, ``track --max-frames``), a video file's
+    at its rate (a sequence's is a setting, ``--sequence-fps``); else None, said in the log
+    where a clip of another size, rate or length has taken its place (its audio is not the
+    performance's)."""
     from ..io.video import VideoError, video_info
     from ..io.video_sequence import is_sequence
 
@@ -768,8 +769,8 @@ def _track_clip(track) -> str | None:
         info = video_info(source)
     except (VideoError, OSError, ValueError):
         return None
-    if tuple(info.size) == tuple(track.frame_size) and abs(info.fps - track.fps) < 1e-3 \
-            and info.n_frames >= track.n_frames:
+    rate = is_sequence(source) or abs(info.fps - track.fps) < 1e-3
+    if tuple(info.size) == tuple(track.frame_size) and rate and info.n_frames >= track.n_frames:
         return str(source)
     log.warning("track %s was made from %s, which is now %d frames of %dx%d at %g fps, the "
                 "track %d of %dx%d at %g fps: another clip; its audio, timecode and pixels' "
