@@ -248,7 +248,8 @@ def _register_puppet(sub) -> None:
         "it, alone on a plain background (Vlasic et al. 2005, §5). A Live Link Face take "
         "(TAKE.csv) instead of a video: the identity performs its ARKit curves with its "
         "head's rotation (a preview of the take). A track file (TRACK.npz) instead: its "
-        "performance, at its clip's size and rate, with that clip's audio if it is there.")
+        "performance, at its clip's size and rate, with that clip's audio if it is still there "
+        "(and is that clip: of the track's size, at least its frames).")
     q.add_argument("video", metavar="VIDEO")
     q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     q.add_argument("--identity", metavar="LABEL", help="training identity label (default: the "
@@ -715,7 +716,8 @@ def run_puppet(args) -> int:
 def _puppet_track(args, vopt) -> int:
     """``puppet TRACK.npz``: the identity performing a track file with no video beside it, at
     the track's frame size and rate (its pixels' aspect and its clip's start timecode kept);
-    with the audio of the clip it was tracked from where that file is still there."""
+    where the clip it was tracked from is still there (:func:`_track_clip`), as ``puppet
+    VIDEO --track`` writes it: that clip's audio, pixels' aspect, colour and numbering."""
     import numpy as np
 
     from ..io.video_like import like_video
