@@ -749,6 +749,10 @@ def test_puppet_of_a_track_file_takes_its_clip_as_puppet_video_does(clips, quick
         assert has_audio(tmp_path / name), name
     np.testing.assert_array_equal(read_video(tmp_path / "video.mp4")[0],
                                   read_video(tmp_path / "alone.mp4")[0])
+    before = clip.read_bytes()          # its clip is an input: not replaced, even so asked
+    code, _, err = run(["puppet", flow, *common, "--out", clip, "--overwrite"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and str(clip) in err, err
+    assert clip.read_bytes() == before
     write_video(clip, frames[:3], 25.0, options=VideoOptions(crf=0, sar=(8, 9)),
                 audio_from=tone)                 # another clip where the track's was
     with caplog.at_level(logging.WARNING):

@@ -720,6 +720,7 @@ def _puppet_track(args, vopt) -> int:
     VIDEO --track`` writes it: that clip's audio, pixels' aspect, colour and numbering."""
     import numpy as np
 
+    from ..io.video import check_video_output
     from ..io.video_like import like_video
     from ..puppet_video import puppet_video
     from ..track.project import take_frames
@@ -739,6 +740,8 @@ def _puppet_track(args, vopt) -> int:
     if track.lost.all():
         raise FaceTransferError(f"track {args.video} has no frame with a face")
     clip = _track_clip(track)
+    if clip is not None:   # its audio is read: not replaced by the puppet (as puppet VIDEO)
+        check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=[clip])
     vopt = _track_video_options(vopt if clip is None else like_video(vopt, clip), track)
     source = Path(clip) if clip is not None else None
     audio_from = source if source is not None and source.is_file() else None
