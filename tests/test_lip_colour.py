@@ -178,6 +178,41 @@ def test_lips_of_a_like_spread_are_not_recoloured():
     np.testing.assert_array_equal(out, alone)
 
 
+def test_lips_of_one_colour_are_not_recoloured():
+    """A source whose lip vertices are of one colour in every frame (a spread of 0, as a
+    flat-shaded render's): ``keep`` is 1, not 0 over 0 taken as the least (0.1, the lips
+    pulled nine tenths of the way to one colour); nor is a spread that is not a number."""
+    source = _colour(SKIN, [LIPSTICK] * 4, [LIPSTICK] * 4)
+    target = _colour(PALE_SKIN, [PALE_LIPS] * 4, [PALE_LIPS] * 4)
+    np.testing.assert_array_equal(lc.lab_spread(source, SKIN), 0.0)
+    t = lc.LipTint.of(np.ones(4), target, source)
+    assert t.target_lab is not None and lc.skin_ahead(t) > 0  # paler lips: it could recolour
+    np.testing.assert_array_equal(t.keep, 1.0)
+    assert not t.recolours()
+    keep = lc._keep(np.array([0.5, np.nan, 0.0]), np.array([2.0, 1.0, 0.0]))
+    np.testing.assert_array_equal(keep, [lc.KEEP_MIN, 1.0, 1.0])
+
+
+def test_recolour_leaves_the_colours_it_does_not_move_to_the_level():
+    """Pixels of a weight but a chroma under :data:`CHROMA_RAMP`'s first (the mouth's dark
+    inside, grey) keep their levels exactly: CIELAB and back alone changes some colours by a
+    level (found here among 200000 random ones, so the check can fail); the coloured ones
+    move."""
+    import cv2
+
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, (400, 500, 3), dtype=np.uint8)
+    lab = cv2.cvtColor(img.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+    grey = np.hypot(lab[..., 1], lab[..., 2]) < lc.CHROMA_RAMP[0]
+    trip = np.clip(cv2.cvtColor(lab, cv2.COLOR_LAB2RGB) * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    assert (trip[grey] != img[grey]).any()           # the round trip alone moves some
+    out = img.copy()
+    lc.recolour_lips(out, np.ones(img.shape[:2], np.float32), np.array([40.0, 30.0, 15.0]),
+                     np.full(3, lc.KEEP_MIN))
+    np.testing.assert_array_equal(out[grey], img[grey])
+    assert (out[~grey] != img[~grey]).all(axis=-1).mean() > 0.9
+
+
 def test_tint_mouth_scales_the_masked_pixels_by_their_weight():
     V = np.array([[0, 0, 0], [30, 0, 0], [0, 30, 0], [30, 30, 0]], float)
     F = np.array([[0, 1, 2], [1, 3, 2]])

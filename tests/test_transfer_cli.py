@@ -711,3 +711,85 @@ def test_puppet_of_a_track_file_alone_is_the_puppet_of_its_video(clips, quick_mo
     assert code == 2 and err.strip().endswith(
         f"{alone_track} is a track file: --track is for a video"), err
     assert not (tmp_path / "x.mp4").exists()
+
+
+def test_puppet_of_a_track_file_takes_its_clip_as_puppet_video_does(clips, quick_model_path,
+                                                                      tmp_path, capsys, caplog):
+    """``puppet TRACK.npz`` where its clip is still there is ``puppet VIDEO --track``: the
+    clip's pixels' aspect (a track of the optical-flow tracker, ``--tracker klt``, records none:
+    square in the track, 8:9 in the clip), its audio; where another clip of the track's size
+    has taken its place (3 frames, the track 6), neither its audio nor its aspect (before: the
+    puppet said and carried 'the audio of' a clip it never moved with)."""
+    import dataclasses
+    import logging
+    import subprocess
+
+    from facetransfer.io.video import ffmpeg_exe, has_audio, video_info
+    from facetransfer.io.video_options import VideoOptions
+
+    tone = tmp_path / "tone.m4a"
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "sine=frequency=440:duration=1", "-c:a", "aac", str(tone)], check=True)
+    frames = read_video(clips["source"])[0]
+    clip = tmp_path / "narrow.mkv"
+    write_video(clip, frames, 25.0, options=VideoOptions(crf=0, sar=(8, 9)), audio_from=tone)
+    track = Track.load(clips["source_track"])
+    assert track.pixel_aspect == 1.0            # as the optical-flow tracker's
+    flow = tmp_path / "flow.npz"
+    dataclasses.replace(track, source=str(clip), source_facts=None).save(flow)
+    common = ["--model", quick_model_path, "--identity", "id04", "--no-progress"]
+    code, _, err = run(["puppet", clip, "--track", flow, *common, "--out",
+                        tmp_path / "video.mp4"], capsys)
+    assert code == 0, err
+    code, out, err = run(["puppet", flow, *common, "--out", tmp_path / "alone.mp4"], capsys)
+    assert code == 0, err
+    assert out.rstrip().endswith("with the audio of narrow.mkv"), out
+    for name in ("video.mp4", "alone.mp4"):
+        assert video_info(tmp_path / name).sar == (8, 9), name
+        assert has_audio(tmp_path / name), name
+    np.testing.assert_array_equal(read_video(tmp_path / "video.mp4")[0],
+                                  read_video(tmp_path / "alone.mp4")[0])
+    before = clip.read_bytes()          # its clip is an input: not replaced, even so asked
+    code, _, err = run(["puppet", flow, *common, "--out", clip, "--overwrite"], capsys)
+    assert code == 2 and len(err.strip().splitlines()) == 1 and str(clip) in err, err
+    assert clip.read_bytes() == before
+    write_video(clip, frames[:3], 25.0, options=VideoOptions(crf=0, sar=(8, 9)),
+                audio_from=tone)                 # another clip where the track's was
+    with caplog.at_level(logging.WARNING):
+        code, out, err = run(["puppet", flow, *common, "--out", tmp_path / "other.mp4"],
+                             capsys)
+    assert code == 0, err
+    assert "audio" not in out and "6 frames" in out, out
+    assert "which is now 3 frames of" in caplog.text, caplog.text
+    assert not has_audio(tmp_path / "other.mp4")
+    assert video_info(tmp_path / "other.mp4").sar == (1, 1)
+
+
+def test_puppet_of_a_plates_track_numbers_its_frames_as_the_plate(clips, quick_model_path,
+                                                                   tmp_path, capsys, caplog):
+    """``puppet TRACK.npz`` of a PNG plate numbered from 1001 that is still there, a track
+    made before tracks recorded their clip's numbering, at 30 fps (a plate's rate is a
+    setting, ``--sequence-fps``, not the files'; the plate read at 24): written from 1001 as
+    the plate is (before: from 0), nothing said of another clip (a check of the rate took the
+    plate for another clip)."""
+    import dataclasses
+    import logging
+
+    from facetransfer.io.video_options import VideoOptions
+
+    (tmp_path / "plate").mkdir()
+    pattern = tmp_path / "plate" / "p.%04d.png"
+    write_video(pattern, read_video(clips["source"])[0], 25.0,
+                options=VideoOptions(first_number=1001))
+    track = dataclasses.replace(Track.load(clips["source_track"]), source=str(pattern),
+                                source_facts=None, fps=30.0)
+    track.save(tmp_path / "plate.npz")
+    (tmp_path / "out").mkdir()
+    with caplog.at_level(logging.WARNING):
+        code, out, err = run(["puppet", tmp_path / "plate.npz", "--model", quick_model_path,
+                              "--no-progress", "--out", tmp_path / "out" / "f.%04d.png"],
+                             capsys)
+    assert code == 0, err
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == \
+        [f"f.{n}.png" for n in range(1001, 1007)]
+    assert "another clip" not in caplog.text, caplog.text

@@ -40,7 +40,7 @@ from .errors import ShapeError
 from .render import interpolate_vertex_values, sample_texture
 from .topology import MeshTopology, _face_size, inside_polygon
 
-__all__ = ["LIP_LEVELS", "TINT_RANGE", "KEEP_MIN", "KEEP_SAME", "CHROMA_RAMP", "LipColour",
+__all__ = ["LIP_LEVELS", "TINT_RANGE", "KEEP_MIN", "KEEP_SAME", "FLAT", "CHROMA_RAMP", "LipColour",
            "LipTint", "lip_vertex_weights", "lip_ratio", "lab_spread", "tint_mouth",
            "tint_reach", "recolour_lips", "rgb_to_lab", "skin_ahead"]
 
@@ -64,6 +64,8 @@ CHROMA_RAMP = (8.0, 20.0)
 #: and as the source, through the two textures, gave (1, 0.987, 0.933), and ``driving_d9``
 #: onto ``face_2`` (1, 0.93, 1).
 KEEP_SAME = 0.85
+#: A source's lips' spread (CIELAB) under which they are of one colour: ``keep`` 1 there.
+FLAT = 0.01
 
 
 @dataclass(frozen=True)
@@ -107,8 +109,8 @@ class LipTint:
     keep : (3,) float64 or None
         The share of ``L, a, b``'s distance from ``target_lab`` a lip pixel keeps: the target's
         lips' spread over the source's (:func:`lab_spread`, both on the source's skin),
-        squared, in ``[KEEP_MIN, 1]``, 1 above :data:`KEEP_SAME`. None (and ``target_lab``
-        None) without the clips' samples: the tint alone.
+        squared, in ``[KEEP_MIN, 1]``, 1 above :data:`KEEP_SAME` (:func:`_keep`). None (and
+        ``target_lab`` None) without the clips' samples: the tint alone.
     """
 
     weights: np.ndarray
@@ -128,11 +130,9 @@ class LipTint:
         tint = np.clip(tr / sr, *TINT_RANGE)
         if isinstance(target, LipColour) and isinstance(source, LipColour):
             st, ss = (lab_spread(c, source.skin) for c in (target, source))
-            if st is not None and ss is not None:
-                keep = np.clip((st / np.maximum(ss, 1e-6)) ** 2, KEEP_MIN, 1.0)
-                keep[keep > KEEP_SAME] = 1.0
-                lab = rgb_to_lab(tr * (source.skin + 1.0) - 1.0)
-                return cls(np.asarray(weights, np.float32), tint, tr, sr, lab, keep)
+            lab = rgb_to_lab(tr * (source.skin + 1.0) - 1.0)
+            if st is not None and ss is not None and np.isfinite(lab).all():
+                return cls(np.asarray(weights, np.float32), tint, tr, sr, lab, _keep(st, ss))
         return cls(np.asarray(weights, np.float32), tint, tr, sr)
 
     def recolours(self) -> bool:
@@ -150,6 +150,17 @@ class LipTint:
         luma = np.array([0.299, 0.587, 0.114])
         t = float(np.clip((luma @ self.target_ratio) / (luma @ self.source_ratio), *TINT_RANGE))
         return LipTint(self.weights, np.full(3, t), self.target_ratio, self.source_ratio)
+
+
+def _keep(target: np.ndarray, source: np.ndarray) -> np.ndarray:
+    """:attr:`LipTint.keep` of the two clips' :func:`lab_spread` (3,): their ratio squared in
+    ``[KEEP_MIN, 1]``, 1 above :data:`KEEP_SAME`, and 1 where the source's lips are of one
+    colour (a spread under :data:`FLAT`: nothing to narrow, and 0 over 0 is no ratio) or a
+    spread is not a number."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        keep = np.clip((target / source) ** 2, KEEP_MIN, 1.0)
+    keep[(keep > KEEP_SAME) | ~(source >= FLAT) | ~np.isfinite(keep)] = 1.0
+    return keep
 
 
 def _mean_face_landmarks(model) -> tuple[np.ndarray, np.ndarray]:
@@ -316,7 +327,8 @@ def recolour_lips(image: np.ndarray, w: np.ndarray, target_lab: np.ndarray,
     A pixel's ``L, a, b`` become ``target_lab + keep (lab - target_lab)`` where it takes the
     whole move: ``w`` times the ramp of its chroma over :data:`CHROMA_RAMP`, so that the
     mouth's dark inside (and whatever is grey) stays; pixels of ``w`` 0 (a lipstick's
-    highlights, teeth, skin: :func:`tint_reach`) are not touched.
+    highlights, teeth, skin: :func:`tint_reach`) are not touched, nor are those the ramp
+    leaves where they are (their levels as they were, not through CIELAB and back).
 
     Parameters
     ----------
@@ -336,13 +348,14 @@ def recolour_lips(image: np.ndarray, w: np.ndarray, target_lab: np.ndarray,
         return
     lab = cv2.cvtColor(image.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
     x = lab[moved]
-    ww = w[moved][:, None]
     c0, c1 = CHROMA_RAMP
-    ww *= np.clip((np.hypot(x[:, 1:2], x[:, 2:3]) - c0) / (c1 - c0), 0.0, 1.0)
-    t = np.asarray(target_lab, np.float32)
-    x += ww * (1.0 - np.asarray(keep, np.float32)) * (t - x)
+    ww = w[moved] * np.clip((np.hypot(x[:, 1], x[:, 2]) - c0) / (c1 - c0), 0.0, 1.0)
+    go = ww > 0.0     # the others as they are: the round trip alone moves 2 % of colours a level
+    x += ww[:, None] * (1.0 - np.asarray(keep, np.float32)) * (
+        np.asarray(target_lab, np.float32) - x)
     lab[moved] = x
     rgb = cv2.cvtColor(lab, cv2.COLOR_LAB2RGB)
+    moved[moved] = go
     image[moved] = np.clip(rgb[moved] * 255.0 + 0.5, 0, 255).astype(np.uint8)
 
 

@@ -248,7 +248,8 @@ def _register_puppet(sub) -> None:
         "it, alone on a plain background (Vlasic et al. 2005, §5). A Live Link Face take "
         "(TAKE.csv) instead of a video: the identity performs its ARKit curves with its "
         "head's rotation (a preview of the take). A track file (TRACK.npz) instead: its "
-        "performance, at its clip's size and rate, with that clip's audio if it is there.")
+        "performance, at its clip's size and rate, with that clip's audio if it is still there "
+        "(and is that clip: of the track's size, at least its frames).")
     q.add_argument("video", metavar="VIDEO")
     q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     q.add_argument("--identity", metavar="LABEL", help="training identity label (default: the "
@@ -715,9 +716,12 @@ def run_puppet(args) -> int:
 def _puppet_track(args, vopt) -> int:
     """``puppet TRACK.npz``: the identity performing a track file with no video beside it, at
     the track's frame size and rate (its pixels' aspect and its clip's start timecode kept);
-    with the audio of the clip it was tracked from where that file is still there."""
+    where the clip it was tracked from is still there (:func:`_track_clip`), as ``puppet
+    VIDEO --track`` writes it: that clip's audio, pixels' aspect, colour and numbering."""
     import numpy as np
 
+    from ..io.video import check_video_output
+    from ..io.video_like import like_video
     from ..puppet_video import puppet_video
     from ..track.project import take_frames
     from ..track.result import Track
@@ -735,8 +739,11 @@ def _puppet_track(args, vopt) -> int:
         track = take_frames(track, np.arange(args.max_frames))
     if track.lost.all():
         raise FaceTransferError(f"track {args.video} has no frame with a face")
-    vopt = _track_video_options(vopt, track)
-    source = Path(track.source) if track.source else None
+    clip = _track_clip(track)
+    if clip is not None:   # its audio is read: not replaced by the puppet (as puppet VIDEO)
+        check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=[clip])
+    vopt = _track_video_options(vopt if clip is None else like_video(vopt, clip), track)
+    source = Path(clip) if clip is not None else None
     audio_from = source if source is not None and source.is_file() else None
     wid = _puppet_identity(model, args.identity)
     audio, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
@@ -748,6 +755,33 @@ def _puppet_track(args, vopt) -> int:
           f"{args.identity or 'the mean face'} performing the track {args.video}"
           + (f", with the audio of {source.name}" if audio else ""))
     return 0
+
+
+def _track_clip(track) -> str | None:
+    """The clip ``track`` was made from (its ``source``: a video file or an image sequence's
+    pattern) where it is still there and is that clip: frames of the track's size, at least as
+    many as the track's (a track of its first frames, ``track --max-frames``), a video file's
+    at its rate (a sequence's is a setting, ``--sequence-fps``); else None, said in the log
+    where a clip of another size, rate or length has taken its place (its audio is not the
+    performance's)."""
+    from ..io.video import VideoError, video_info
+    from ..io.video_sequence import is_sequence
+
+    source = track.source
+    if not source or not (Path(source).is_file() or is_sequence(source)):
+        return None
+    try:
+        info = video_info(source)
+    except (VideoError, OSError, ValueError):
+        return None
+    rate = is_sequence(source) or abs(info.fps - track.fps) < 1e-3
+    if tuple(info.size) == tuple(track.frame_size) and rate and info.n_frames >= track.n_frames:
+        return str(source)
+    log.warning("track %s was made from %s, which is now %d frames of %dx%d at %g fps, the "
+                "track %d of %dx%d at %g fps: another clip; its audio, timecode and pixels' "
+                "aspect are not used", track.label, source, info.n_frames, *info.size, info.fps,
+                track.n_frames, *track.frame_size, track.fps)
+    return None
 
 
 def _track_video_options(vopt, track):
