@@ -47,7 +47,7 @@ def test_livelink_header_and_rows(case, tmp_path):
     from facetransfer.export.livelink import read_livelink
 
     model, track, a, ang = case
-    out = export_track(track, "livelink", tmp_path / "take.csv")
+    out = export_track(track, "livelink", tmp_path / "take.csv", labels="clip")
     lines = out.read_text().splitlines()
     assert lines[0] == APP_HEADER
     assert len(lines) == track.n_frames + 1

@@ -104,29 +104,33 @@ def test_a_take_with_the_apps_labels_is_read_back_frame_for_frame(arkit_model,
 
 
 def test_export_take_rate_on_the_command_line(arkit_model, make_arkit_track, tmp_path, capsys):
-    """``--take-rate app`` writes the app's labels and says so; the default at 25 fps says that
-    Unreal would misplace its rows, and at 30 fps (or for a single row) says nothing of it; for
-    a glb, one line and exit status 2."""
+    """The app's labels by default (``--take-rate app``: the same rows), said at 25 fps with
+    the option for the clip's own count; ``--take-rate clip`` says that Unreal would misplace
+    its rows; at 30 fps (or for a single row) nothing is said of it; for a glb, one line and
+    exit status 2."""
     m = tmp_path / "m.npz"
     arkit_model.save(m)
     for fps, n in ((25.0, 30), (30.0, 30), (24.0, 1)):
         track, _, _ = make_arkit_track(arkit_model, n, fps=fps)
         track.save(tmp_path / f"t{fps:g}.npz")
     base = ["export", str(tmp_path / "t25.npz"), "--model", str(m), "--out"]
-    assert main(base + [str(tmp_path / "a.csv"), "--take-rate", "app"]) == 0
+    assert main(base + [str(tmp_path / "d.csv")]) == 0
     out = capsys.readouterr().out
-    assert "rows counted at 30 frames a second" in out and "--take-rate app" not in out
+    assert "rows counted at 30 frames a second" in out and "--take-rate clip" in out
+    assert main(base + [str(tmp_path / "a.csv"), "--take-rate", "app"]) == 0
+    capsys.readouterr()
+    assert (tmp_path / "a.csv").read_bytes() == (tmp_path / "d.csv").read_bytes()
     assert read_livelink(tmp_path / "a.csv").timecodes[1] == "00:00:00:01.200"
-    assert main(base + [str(tmp_path / "c.csv")]) == 0
+    assert main(base + [str(tmp_path / "c.csv"), "--take-rate", "clip"]) == 0
     wrote = [x for x in capsys.readouterr().out.splitlines() if "Unreal" in x]
     assert len(wrote) == 1 and wrote[0].startswith(f"wrote {tmp_path / 'c.csv'}: 30 frames")
     assert "rows counted at the clip's 25 frames a second" in wrote[0]
-    assert wrote[0].endswith("for Unreal, --take-rate app)")
+    assert wrote[0].endswith("for Unreal, the default --take-rate app)")
     assert read_livelink(tmp_path / "c.csv").timecodes[1] == "00:00:00:01.000"
     for one in ("t30", "t24"):                     # 30 fps; a single row, at its time anyway
         assert main(["export", str(tmp_path / f"{one}.npz"), "--model", str(m), "--out",
                      str(tmp_path / f"{one}.csv")]) == 0
-        assert "Unreal" not in capsys.readouterr().out
+        assert "rows counted" not in capsys.readouterr().out
     assert main(base + [str(tmp_path / "a.glb"), "--take-rate", "app"]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "--take-rate app" in err and "glb" in err

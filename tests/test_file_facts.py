@@ -60,7 +60,7 @@ def test_a_take_is_described(arkit_model, make_arkit_track, tmp_path, capsys):
     from facetransfer.export.livelink import write_livelink
 
     track, _, _ = make_arkit_track(arkit_model, 30, fps=25.0)
-    write_livelink(track, tmp_path / "take.csv", start="10:00:00:00")
+    write_livelink(track, tmp_path / "take.csv", start="10:00:00:00", labels="clip")
     f = take_facts(tmp_path / "take.csv")
     assert (f["rows"], f["timecode_rate"], f["shapes"], f["missing_shapes"]) == (30, 25, 52, [])
     assert f["first_timecode"] == "10:00:00:00.000" and f["last_timecode"] == "10:00:01:04.000"

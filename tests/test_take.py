@@ -336,8 +336,12 @@ def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_cli
     tr.save(tmp_path / "plate.npz")
     base = ["export", tmp_path / "plate.npz", "--format", "livelink", "--model",
             d / "arkit.npz", "--overwrite", "--out"]
+    # the app's rows (the default) count 30 a second: 01:00:00:05 of a 25 fps plate is 0.2 s
+    # past the second, 01:00:00:06.000; the clip's own count writes it as the plate does
     for extra, first in (([], "00:00:02:00.000"), (["--timecode", "none"], "00:00:00:00.000"),
-                         (["--timecode", "01:00:00:05"], "01:00:00:05.000")):
+                         (["--timecode", "01:00:00:05"], "01:00:00:06.000"),
+                         (["--timecode", "01:00:00:05", "--take-rate", "clip"],
+                          "01:00:00:05.000")):
         assert main([str(x) for x in base + [tmp_path / "take.csv"] + extra]) == 0
         assert read_livelink(tmp_path / "take.csv").timecodes[0] == first
     assert "from timecode 01:00:00:05 (--timecode)" in capsys.readouterr().out

@@ -6,7 +6,7 @@
     facetransfer export TRACK.npz --format json --out blendshapes.json    # MediaPipe layout
     facetransfer export TRACK.npz --format livelink --out take.csv --neutral auto  # calibrated
     facetransfer export TRACK.npz --out take.csv      # the format from the extension
-    facetransfer export TRACK.npz --out take.csv --take-rate app  # Unreal, a 24/25/50 fps clip
+    facetransfer export TRACK.npz --out take.csv --take-rate clip  # rows of a 25 fps clip's frames
 """
 
 from __future__ import annotations
@@ -50,7 +50,7 @@ def register(sub) -> None:
     p.add_argument("--timecode", default="source", metavar="HH:MM:SS:FF|source|none",
                    help="livelink: the first row's timecode: the tracked video's start timecode "
                    "where it has one (source, the default: a take then lines up with the plate "
-                   "in an editor or Unreal (at 24, 25 or 50 fps with --take-rate app), and "
+                   "in Unreal (or an editor, with --take-rate clip), and "
                    "`transfer --expression-from` places it back by "
                    "it), a timecode (';' before the frames of a drop-frame one), or none "
                    "(00:00:00:00). usd: source (the default) starts the time codes at the "
@@ -59,13 +59,15 @@ def register(sub) -> None:
                    "video's start timecode in the file (customLayerData, extras, timecode). "
                    "source: as the track recorded them when it was tracked (a track made "
                    "before tracks recorded them: read from its clip, if still there)")
-    p.add_argument("--take-rate", choices=("clip", "app"), default="clip",
-                   help="livelink: what the rows' timecodes count: clip (default), the clip's "
-                   "own frames (a 25 fps clip's frame 1 is 00:00:00:01.000: frame for frame in "
-                   "an editor and `transfer --expression-from`); app, frames of 30 or 60 a "
-                   "second with thousandths as the Live Link Face app writes them (frame 1 of "
-                   "25 fps is 00:00:00:01.200): what Unreal's Live Link Face importer needs for "
-                   "a clip at another rate than 30 or 60 (it reads every take at 30 or 60 fps)")
+    p.add_argument("--take-rate", choices=("app", "clip"), default=None,
+                   help="livelink: what the rows' timecodes count: app (default), frames of 30 "
+                   "or 60 a second with thousandths, as the Live Link Face app writes them "
+                   "(frame 1 of a 25 fps clip is 00:00:00:01.200): what Unreal's Live Link Face "
+                   "importer reads right at every clip rate (it reads every take at 30 or 60 "
+                   "fps); clip, the clip's own frames (a 25 fps clip's frame 1 is "
+                   "00:00:00:01.000: frame for frame with a 24, 25 or 50 fps plate's timecode "
+                   "in an editor). The same rows at 30 and 60 fps; `transfer --expression-from` "
+                   "reads both")
     p.add_argument("--overwrite", action="store_true", help="replace an existing output")
     p.set_defaults(func=run)
 
@@ -125,7 +127,7 @@ def run(args: argparse.Namespace) -> int:
             f"--timecode {args.timecode}: a timecode of your own is written into livelink "
             f"takes only; {args.format} takes source (the tracked video's start timecode, "
             "recorded in the file) or none")
-    if args.take_rate != "clip" and args.format != "livelink":
+    if args.take_rate is not None and args.format != "livelink":
         raise FaceTransferError(f"--take-rate {args.take_rate}: only livelink takes count "
                                 f"their rows in timecodes, not {args.format}")
     if args.texture_step < 1:
@@ -242,20 +244,22 @@ def _say_written(args, track, path, timecode, said: str) -> None:
 
 
 def _rows_said(args, track) -> str:
-    """What a livelink take's rows count, where Unreal's Live Link Face importer (which reads
-    every take's frames at 30 or 60 a second) cares: the app's count asked for, or a clip's
-    own at another rate ("" at 30 and 60 fps, and for other formats)."""
+    """What a livelink take's rows count, where it differs from the clip's own frames (a clip
+    at another rate than 30 or 60): the app's count (the default, what Unreal's Live Link Face
+    importer reads right), or the clip's asked for, which that importer would misplace ("" at
+    30 and 60 fps, for one row, and for other formats)."""
     from ..export.livelink import app_rate
 
     if args.format != "livelink":
         return ""
-    rate = app_rate(track.fps)
-    if args.take_rate == "app":
-        return f"rows counted at {rate} frames a second, as the Live Link Face app counts them"
-    if round(float(track.fps)) == rate or track.n_frames < 2:    # one row: at its time
+    rate, own = app_rate(track.fps), round(float(track.fps))
+    if own == rate or track.n_frames < 2:    # the same rows either way; one row: at its time
         return ""
-    return (f"rows counted at the clip's {round(float(track.fps))} frames a second (Unreal's "
-            f"Live Link Face importer counts 30 or 60 and would misplace them: for Unreal, "
+    if args.take_rate != "clip":
+        return (f"rows counted at {rate} frames a second, as the Live Link Face app counts "
+                f"them (--take-rate clip: the clip's own {own})")
+    return (f"rows counted at the clip's {own} frames a second (Unreal's Live Link Face "
+            f"importer counts 30 or 60 and would misplace them: for Unreal, the default "
             f"--take-rate app)")
 
 

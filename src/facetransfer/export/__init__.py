@@ -76,7 +76,7 @@ def format_of(out: str | os.PathLike, fmt: str | None = None) -> str:
 def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
                  overwrite: bool = False,
                  texture=None, neutral=None, timecode: str | None = "source",
-                 labels: str = "clip") -> Path:
+                 labels: str | None = None) -> Path:
     """Write ``track`` in format ``fmt`` to ``out`` and return the path.
 
     Parameters
@@ -111,11 +111,12 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
         file's metadata (the root layer's ``customLayerData["timecode"]``, the glTF's
         ``extras["timecode"]``: neither format has a field of its own for it); ``json`` too
         (a top-level ``"timecode"``).
-    labels : {"clip", "app"}
-        ``livelink`` only: the rows' timecodes counted as the clip's timecode counts its frames
-        (``"clip"``), or as the Live Link Face app counts them, in frames of 30 or 60 a second
-        with thousandths (``"app"``: what Unreal's Live Link Face importer reads right at any
-        clip rate; :func:`facetransfer.export.livelink.format_timecode`).
+    labels : {"app", "clip"}, optional
+        ``livelink`` only: the rows' timecodes counted as the Live Link Face app counts them,
+        in frames of 30 or 60 a second with thousandths (``"app"``, None's: what Unreal's Live
+        Link Face importer reads right at any clip rate), or as the clip's timecode counts its
+        frames (``"clip"``: frame for frame with a 24, 25 or 50 fps plate's timecode in an
+        editor; :func:`facetransfer.export.livelink.format_timecode`).
 
     Raises
     ------
@@ -136,7 +137,8 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
         if fmt == "livelink":
             from .livelink import write_livelink
 
-            return write_livelink(track, out, overwrite=overwrite, start=start, labels=labels)
+            return write_livelink(track, out, overwrite=overwrite, start=start,
+                                  labels=labels or "app")
         from .mpjson import write_mediapipe_json
 
         return write_mediapipe_json(track, out, overwrite=overwrite, timecode=start)
@@ -159,7 +161,7 @@ def _check_options(fmt: str, texture, timecode, labels: str) -> None:
         raise ExportError(f"a texture is written only into glb files, not {fmt}")
     if timecode not in (None, "source") and fmt != "livelink":
         raise ExportError(f"a start timecode is written only into livelink takes, not {fmt}")
-    if labels != "clip" and fmt != "livelink":
+    if labels is not None and fmt != "livelink":
         raise ExportError(f"timecode labels {labels!r} are written only into livelink takes, "
                           f"not {fmt}")
 

@@ -7,12 +7,13 @@ its columns by position, so the layout is the app's exactly:
   (:data:`LIVELINK_NAMES`: eyes left, eyes right, jaw, mouth, brows, cheeks, nose, tongue; note
   ``JawRight`` before ``JawLeft`` and ``MouthRight`` before ``MouthLeft``), then the 9 rotation
   columns :data:`POSE_COLUMNS`;
-* one row per frame: timecode ``HH:MM:SS:FF.mmm``, the frame's own timecode (its clip's start
-  timecode and the frames after it counted as the clip's timecode counts them, ``FF`` at the
-  nominal integer rate, ``.000``; after a drop-frame start, which the CSV cannot say, clock
-  time, ``.mmm`` the thousandths of a frame: :func:`format_timecode`; or, for Unreal's Live
-  Link Face importer, which reads every take's frames at 30 or 60 a second, as the app counts
-  them, ``labels="app"``: frames of :func:`app_rate` with thousandths), the count
+* one row per frame: timecode ``HH:MM:SS:FF.mmm``, the frame's time after its clip's start
+  timecode, labelled as the app labels its rows (``labels="app"``, the default of the writers:
+  frames of :func:`app_rate`, 30 or 60 a second, with thousandths, which Unreal's Live Link
+  Face importer reads right at every clip rate), or as the clip's timecode counts its frames
+  (``labels="clip"``: ``FF`` at the nominal integer rate, ``.000``; after a drop-frame start,
+  which the CSV cannot say, clock time, ``.mmm`` the thousandths of a frame:
+  :func:`format_timecode`), the count
   ``61`` (52 + 9 values), the activations in [0, 1], then head yaw, pitch and roll in **radians**
   (:func:`facetransfer.export.common.head_euler`) and the six eye angles in radians, read back
   from the eyeLook* activations (:func:`facetransfer.track.gaze.activation_gaze`: 35° per unit
@@ -164,7 +165,7 @@ def parse_timecode(text: str, fps: float) -> float:
     return ((hh * 60 + mm) * 60 + ss) * rate + ff + milli / 1000.0
 
 
-def livelink_rows(track, start: str | None = None, *, labels: str = "clip") -> list[list[str]]:
+def livelink_rows(track, start: str | None = None, *, labels: str = "app") -> list[list[str]]:
     """The CSV as rows of strings (header first); ``start``: the first row's timecode,
     ``labels``: how the rows' timecodes count (:func:`format_timecode`)."""
     acts = require_activations(track)             # (F, 52) in ARKIT_NAMES order
@@ -195,12 +196,12 @@ def eye_angles(activations: np.ndarray) -> np.ndarray:
 
 
 def write_livelink(track, out: str | os.PathLike, *, overwrite: bool = False,
-                   start: str | None = None, labels: str = "clip") -> Path:
+                   start: str | None = None, labels: str = "app") -> Path:
     """Write the track as a Live Link Face CSV take (atomically) and return the path;
     ``start``: its first row's timecode, ``HH:MM:SS:FF`` (its video's start timecode; default
-    ``00:00:00:00``), each row after it a frame later as the video's timecode counts
-    (``labels="clip"``) or as the app counts (``"app"``, for Unreal's importer:
-    :func:`format_timecode`)."""
+    ``00:00:00:00``), each row after it a frame later as the app counts (``labels="app"``,
+    the default: what Unreal's importer reads right) or as the video's timecode counts
+    (``"clip"``; :func:`format_timecode`)."""
     buf = io.StringIO()
     csv.writer(buf, lineterminator="\n").writerows(livelink_rows(track, start, labels=labels))
     return write_text_atomic(out, buf.getvalue(), overwrite=overwrite)
