@@ -101,6 +101,11 @@ def test_bad_face_files_are_one_line(arkit_model, quick_model, tmp_path, capsys)
          "identity dial width=50 is outside -5 to 5"),
         (_face(tmp_path / "h.json", arkit_model, head={"yaw": 0, "tilt": 9}).name,
          "'head' has 'tilt'; expected 'yaw', 'pitch' and 'roll'"),
+        # JSON integers beyond a float's range (numpy's isfinite raised TypeError: a traceback)
+        (_face(tmp_path / "i.json", arkit_model, identity_dials={"width": 10 ** 400}).name,
+         "'identity_dials' must map names to numbers"),
+        (_face(tmp_path / "j.json", arkit_model, identity=[10 ** 400] * 3).name,
+         "'identity' must be a list of numbers"),
     ]
     for name, msg in cases:
         assert main(["model", "synth", str(mp), "--face", str(tmp_path / name),

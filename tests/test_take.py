@@ -129,8 +129,12 @@ def test_transfer_from_a_take_on_the_command_line(arkit_clip, arkit_model, make_
     assert read_video(tmp_path / "out.mp4")[0].shape == read_video(d / "target.mp4")[0].shape
     capsys.readouterr()
     (tmp_path / "bad.csv").write_text("Timecode,BlendShapeCount\n00:00:00:00.000,61\n")
+    lines = take.read_text().splitlines()      # a row repeated: the take is named (was not)
+    (tmp_path / "rep.csv").write_text("\n".join(lines[:3] + lines[2:]) + "\n")
     for extra, said in (([take, "--pose-from", d / "target.mp4"], "--pose-from cannot be added"),
                         ([tmp_path / "bad.csv"], "lacks the columns"),
+                        ([tmp_path / "rep.csv"], f"take {tmp_path / 'rep.csv'}'s timecodes "
+                                                 "repeat at row 3"),
                         ([tmp_path / "none.csv"], "does not exist")):
         code = main([str(x) for x in base + extra + ["--out", tmp_path / "o2.mp4"]])
         err = capsys.readouterr().err

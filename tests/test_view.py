@@ -172,7 +172,10 @@ def test_view_cli_and_bad_input(arkit_model, pages, tmp_path, capsys):
     assert "wrote" in capsys.readouterr().out
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     (tmp_path / "zero.npz").write_bytes(b"")
+    with open(tmp_path / "array.npz", "wb") as fh:    # an .npy named .npz: was a TypeError
+        np.save(fh, np.zeros(3))
     for src, msg in ((tmp_path / "none.npz", "does not exist"),
+                     (tmp_path / "array.npz", "it is an .npy array, not an .npz archive"),
                      (tmp_path / "zero.npz", f"model or track file {tmp_path / 'zero.npz'} is "
                                              "empty"),
                      (tmp_path / "junk.npz", "neither a model nor a track")):

@@ -28,6 +28,7 @@ by another name is refused, naming the file and the value.
 from __future__ import annotations
 
 import json
+import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
@@ -63,10 +64,20 @@ class DialledFace:
     source: str = ""
 
 
+def _finite(x) -> bool:
+    """Whether a JSON value is a finite number (not a bool; an integer too large for a float,
+    as JSON allows, is not one)."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)):
+        return False
+    try:
+        return math.isfinite(float(x))
+    except OverflowError:
+        return False
+
+
 def _numbers(path: Path, d: dict, key: str) -> dict:
     v = d.get(key, {})
-    if not isinstance(v, dict) or not all(isinstance(k, str) and isinstance(x, (int, float))
-                                          and not isinstance(x, bool) and np.isfinite(x)
+    if not isinstance(v, dict) or not all(isinstance(k, str) and _finite(x)
                                           for k, x in v.items()):
         raise FaceFileError(f"{path}: {key!r} must map names to numbers")
     return {k: float(x) for k, x in v.items()}
@@ -115,8 +126,7 @@ def read_face(path: str | os.PathLike) -> DialledFace:
                             f"reads version {VERSION}")
     ident = np.asarray(d.get("identity", []), dtype=object)
     head = _numbers(p, d, "head")
-    if ident.ndim != 1 or not ident.size or not all(
-            isinstance(x, (int, float)) and np.isfinite(x) for x in ident):
+    if ident.ndim != 1 or not ident.size or not all(_finite(x) for x in ident):
         raise FaceFileError(f"{p}: 'identity' must be a list of numbers")
     unknown = sorted(set(head) - {"yaw", "pitch", "roll"})
     if unknown:

@@ -554,7 +554,7 @@ def _check_take(args) -> None:
         raise FaceTransferError(f"--expression-from {path}: {exc}") from None
     if not take.timecodes:
         raise FaceTransferError(f"--expression-from {path}: the take has no rows")
-    take_seconds(take.timecodes, warn=False)
+    take_seconds(take.timecodes, warn=False, name=f"take {path}")
 
 
 def _chosen_identity(model, args):

@@ -36,7 +36,10 @@ def _is_track(path) -> bool:
     import numpy as np
 
     try:
-        with np.load(path, allow_pickle=False) as z:
+        z = np.load(path, allow_pickle=False)
+        if not isinstance(z, np.lib.npyio.NpzFile):    # an .npy array: write_viewer says so
+            return False
+        with z:
             return "rotation" in z.files and "mode_names" in z.files
     except (OSError, ValueError, zipfile.BadZipFile, EOFError):
         return False  # write_viewer reports it

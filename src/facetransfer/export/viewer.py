@@ -197,13 +197,17 @@ def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=Non
 
     src = check_input_file(source, "model or track file", ExportError)
     try:
-        with np.load(src, allow_pickle=False) as z:
-            is_track = "rotation" in z.files and "mode_names" in z.files
+        z = np.load(src, allow_pickle=False)
     except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
         kind = content_kind(src)        # another kind of file: named (a .glb, a take, ...)
         raise ExportError(f"{src} is neither a model nor a track file" + (
             f": it is {kind}" if kind not in (None, NOT_NPZ) else
             f" (truncated or not an .npz archive: {reason(exc)})")) from None
+    if not isinstance(z, np.lib.npyio.NpzFile):    # an .npy array named .npz
+        raise ExportError(f"{src} is neither a model nor a track file: it is an .npy array, "
+                          "not an .npz archive")
+    with z:
+        is_track = "rotation" in z.files and "mode_names" in z.files
     if neutral is not None and not is_track:
         raise ExportError(f"--neutral is for a track; {src} is a model")
     if is_track:
