@@ -409,7 +409,9 @@ def test_a_damaged_take_is_named_by_line_and_column(arkit_model, make_arkit_trac
              (damaged(4, at(jaw, "abc")), "line 4, column JawOpen: 'abc' is not a finite number"),
              (damaged(5, at(jaw, "nan")), "line 5, column JawOpen: 'nan' is not a finite number"),
              (damaged(2, at(0, "xx:yy")), "line 2: timecode 'xx:yy' is not HH:MM:SS:FF.mmm"),
-             (damaged(6, at(jaw, "7.5")), "line 6, column JawOpen: 7.5 is outside 0..1"))
+             (damaged(6, at(jaw, "7.5")), "line 6, column JawOpen: 7.5 is outside 0..1"),
+             # a column named twice: one of the two silently won (before)
+             (damaged(1, at(jaw + 1, "jawOpen")), "names the column JawOpen twice"))
     for path, said in cases:
         with pytest.raises(ExportError) as exc:
             read_livelink(path, lenient=True)

@@ -127,6 +127,13 @@ def run(args: argparse.Namespace) -> int:
             f"--timecode {args.timecode}: a timecode of your own is written into livelink "
             f"takes only; {args.format} takes source (the tracked video's start timecode, "
             "recorded in the file) or none")
+    if args.timecode not in ("source", "none"):     # its form, before the track is read
+        from ..io.video_display import checked_timecode
+
+        try:
+            checked_timecode(args.timecode)
+        except ValueError as exc:
+            raise FaceTransferError(f"--timecode: {exc}") from None
     if args.take_rate is not None and args.format != "livelink":
         raise FaceTransferError(f"--take-rate {args.take_rate}: only livelink takes count "
                                 f"their rows in timecodes, not {args.format}")

@@ -256,6 +256,12 @@ def read_livelink(path: str | os.PathLike, *, lenient: bool = False) -> LiveLink
                           f"'Timecode,BlendShapeCount')")
     key = (lambda n: n.strip().lower()) if lenient else (lambda n: n)
     col = {key(n): i for i, n in enumerate(rows[0])}
+    names = [key(n) for n in rows[0]]
+    twice = sorted(n for n in {key(m) for m in LIVELINK_NAMES + POSE_COLUMNS}
+                   if names.count(n) > 1)
+    if twice:       # which of the two is meant cannot be told: one would silently win
+        raise ExportError(f"{p} names the column {rows[0][names.index(twice[0])].strip()} "
+                          "twice")
     missing = [n for n in LIVELINK_NAMES + POSE_COLUMNS if key(n) not in col]
     if missing and (not lenient or all(n in missing for n in LIVELINK_NAMES)):
         raise ExportError(f"{p} lacks the columns {missing[:5]}")
