@@ -252,3 +252,28 @@ def test_a_video_given_as_the_texture_is_said_as_such(arkit_model, make_arkit_tr
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and err.endswith(f"--texture-from {tmp_path / 'clip.mp4'}")
     assert not (tmp_path / "f.glb").exists()
+
+
+def test_a_clips_start_timecode_that_names_no_frame_is_said(arkit_model, make_arkit_track,
+                                                             tmp_path, caplog):
+    """A clip's recorded start timecode of frame 29 at 25 fps (no such frame: a camera or an
+    editor's fault) is counted on from, frame 29 being a second and 4 frames, and said once
+    (before: nothing said; a typed --timecode like it is refused)."""
+    import dataclasses
+    import logging
+
+    from facetransfer.io.source_facts import SourceFacts
+
+    track, _, _ = make_arkit_track(arkit_model, 3, fps=25.0)
+    odd = dataclasses.replace(track, source_facts=SourceFacts(0, "01:00:00:29"))
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        out = export_track(odd, "livelink", tmp_path / "t.csv", labels="clip")
+    assert read_livelink(out).timecodes[0] == "01:00:01:04.000"
+    said = [r.getMessage() for r in caplog.records]
+    assert len(said) == 1 and said[0].startswith(
+        "the clip's start timecode '01:00:00:29' names no frame at 25 fps"), said
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="facetransfer"):
+        export_track(dataclasses.replace(track, source_facts=SourceFacts(0, "01:00:00:24")),
+                     "livelink", tmp_path / "u.csv")
+    assert caplog.records == []

@@ -175,7 +175,16 @@ def _start(track, timecode):
     track, note = with_clip_facts(track)
     if note:                       # an older track: from its clip's path, if at all
         log.warning("%s", note)
-    return track, track.source_facts.timecode
+    start = track.source_facts.timecode
+    if start is not None:          # a clip's own, taken as it is, but not without a word
+        from ..io.plate_header import exact_timecode
+
+        try:
+            exact_timecode(start, track.fps)
+        except ValueError as exc:
+            log.warning("the clip's start %s: the export counts on from it as if it did "
+                        "(frames past the last of a second carried into the next)", exc)
+    return track, start
 
 
 def _activations_from_weights(track, model):
