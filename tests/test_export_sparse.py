@@ -27,7 +27,7 @@ from facetransfer.export.common import identity_rig
 TOOLS = Path(os.environ.get("FACETRANSFER_TEST_TOOLS",
                             Path.home() / ".cache" / "facetransfer-test-tools"))
 
-# glTF 2.0 §3.6.2.2: componentType -> numpy dtype (little endian); type -> components
+# glTF 2.0, Accessor Data Types: componentType -> numpy dtype (little endian); type -> components
 COMPONENTS = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
 WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4}
 
@@ -141,7 +141,7 @@ def test_sparse_targets_decode_to_the_dense_deltas_exactly(case):
                 assert a.bufferView is None and a.sparse.indices.componentType == 5123
                 assert a.sparse.count == np.count_nonzero((want != 0).any(axis=1))
                 for v in (a.sparse.indices.bufferView, a.sparse.values.bufferView):
-                    assert g.bufferViews[v].target is None  # §3.6.2.3: no target
+                    assert g.bufferViews[v].target is None  # Sparse Accessors: a view without target
         # POSITION's bounds over every vertex, the implied zeros too
         a = g.accessors[t["POSITION"]]
         assert a.min == P[j].min(axis=0).tolist() and a.max == P[j].max(axis=0).tolist()
