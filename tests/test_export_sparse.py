@@ -141,7 +141,7 @@ def test_sparse_targets_decode_to_the_dense_deltas_exactly(case):
                 assert a.bufferView is None and a.sparse.indices.componentType == 5123
                 assert a.sparse.count == np.count_nonzero((want != 0).any(axis=1))
                 for v in (a.sparse.indices.bufferView, a.sparse.values.bufferView):
-                    assert g.bufferViews[v].target is None  # Sparse Accessors: a view without target
+                    assert g.bufferViews[v].target is None  # Sparse Accessors: no target
         # POSITION's bounds over every vertex, the implied zeros too
         a = g.accessors[t["POSITION"]]
         assert a.min == P[j].min(axis=0).tolist() and a.max == P[j].max(axis=0).tolist()
