@@ -265,3 +265,42 @@ def test_three_shows_the_texture_the_right_way_up(case, tmp_path):
     assert np.ptp(want[:, 0]) > 150 and np.ptp(want[:, 1]) > 150  # a flip would show
     # the project's texel centres are corner-aligned, WebGL's at half texels: within 2 levels
     np.testing.assert_allclose(got, want, atol=2.0)
+
+
+def test_three_plays_sparse_morph_targets(case, tmp_path, monkeypatch):
+    """A rig whose targets move a part of the face each (the 5 % of the vertices a target moves
+    most; target 0 none) is written as sparse accessors (and one without data), and three
+    plays it as that rig's face: the neutral plus the weighted deltas, posed."""
+    import dataclasses
+
+    import pygltflib
+
+    from facetransfer.export import gltf
+    from facetransfer.export.common import identity_rig
+
+    model, track, a, _ = case
+    rig = identity_rig(track, model)
+    deltas = np.array(rig.deltas, copy=True)
+    for j, d in enumerate(deltas):
+        size = np.linalg.norm(d, axis=1)
+        d[size < (np.inf if j == 0 else np.quantile(size, 0.95))] = 0.0
+    local = dataclasses.replace(rig, deltas=deltas)
+    monkeypatch.setattr(gltf, "identity_rig", lambda tr, m: local)
+    glb = export_track(track, "glb", tmp_path / "sparse.glb", model=model)
+    g = pygltflib.GLTF2().load(str(glb))
+    kinds = [g.accessors[t[k]] for t in g.meshes[0].primitives[0].targets
+             for k in ("POSITION", "NORMAL")]
+    assert all(x.bufferView is None for x in kinds)
+    assert sum(x.sparse is not None for x in kinds) >= 100  # targets 1-50 (51 has no deltas)
+    k = 4
+    shown = _play(glb, [k / track.fps], tmp_path)
+    got = np.reshape(shown["frames"][0]["positions"], (-1, 3))
+    T = head_translation(track)
+    face = (local.neutral + np.tensordot(a[k].astype(np.float64), deltas, 1)) * METRES_PER_UNIT
+    want = face @ track.rotation[k].T + T[k] * METRES_PER_UNIT
+    err = float(np.abs(got - want).max())
+    print("three vs the sparse rig's face, max vertex error (m):", err)
+    assert err < 1e-5
+    # a player that read the sparse targets as zeros would show the neutral: far off
+    rest = (local.neutral * METRES_PER_UNIT) @ track.rotation[k].T + T[k] * METRES_PER_UNIT
+    assert np.abs(rest - want).max() > 1e-3

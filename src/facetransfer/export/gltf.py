@@ -13,11 +13,20 @@ head pose as the node's ``rotation`` and ``translation`` channels (same keys). P
 metres (glTF's unit): model units times ``metres_per_unit`` (0.01 for the ICT-FaceKit's
 centimetres).
 
+Each target's ``POSITION`` and ``NORMAL`` accessor is stored the smallest exact way
+(:func:`morph_encoding`): as an accessor without data when every delta is zero (read as
+zeros), as a sparse accessor of the vertices that move when that is smaller, else densely; no
+delta is rounded or dropped. The default model's targets move every vertex (a person's shapes
+are made by deformation transfer, a global solve, through the model's truncated identity mode;
+the FaceKit's own ``eyeBlink_L`` moves 57 % of its head's vertices): only the all-zero
+``tongueOut`` saves its bytes there (BENCHMARKS.md, forty-fifth session, helper glb).
+
 Written with pygltflib; every file the tests write passes the Khronos glTF validator.
 
 References
 ----------
-Khronos glTF 2.0 specification, §3.7.2.2 Morph Targets, §3.11 Animations.
+Khronos glTF 2.0 specification, §3.6.2 Accessors (an undefined ``bufferView`` is zeros;
+Sparse Accessors), §3.7.2.2 Morph Targets, §3.11 Animations.
 """
 
 from __future__ import annotations
@@ -34,13 +43,35 @@ from .common import (ExportError, head_quaternions, head_translation, identity_r
                      require_activations, source_name)
 
 __all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture",
-           "check_texture_video"]
+           "check_texture_video", "morph_encoding"]
 
 #: Model units to metres (the ICT-FaceKit is in centimetres).
 METRES_PER_UNIT = 0.01
 
 _ARRAY, _ELEMENTS = 34962, 34963
-_FLOAT, _UINT = 5126, 5125
+_FLOAT, _UINT, _USHORT = 5126, 5125, 5123
+
+
+def morph_encoding(a: np.ndarray) -> str:
+    """How a morph target's deltas ``a`` ``(n, 3) float32`` are stored, the smallest exact way.
+
+    Returns
+    -------
+    str
+        ``"zeros"`` (every delta 0: an accessor without ``bufferView``, which glTF 2.0 defines
+        as zeros), ``"sparse"`` (glTF 2.0 §3.6.2, Sparse Accessors: the rows with a nonzero
+        component, each an index of 2 bytes up to 65536 vertices, else 4, and 12 bytes of
+        values) when that is fewer bytes than ``"dense"`` (12 bytes a row). No delta is rounded
+        or dropped: a row is left out only when its three components are 0.0 or -0.0 (read
+        back as 0.0).
+    """
+    moved = int(np.count_nonzero((a != 0).any(axis=1)))
+    if moved == 0:
+        return "zeros"
+    index = 2 if len(a) - 1 <= 0xFFFF else 4
+    dense = a.shape[1] * 4 * len(a)
+    sparse = moved * (index + a.shape[1] * 4) + (-moved * index) % 4
+    return "sparse" if sparse < dense else "dense"
 
 
 class _Blob:
@@ -74,6 +105,31 @@ class _Blob:
             acc.max = [float(x) for x in flat.max(axis=0)]
             if comp == _UINT:
                 acc.min, acc.max = [int(x) for x in acc.min], [int(x) for x in acc.max]
+        self.gltf.accessors.append(acc)
+        return len(self.gltf.accessors) - 1
+
+    def morph_accessor(self, a: np.ndarray, *, bounds: bool = False) -> int:
+        """A morph target's ``(n, 3) float32`` deltas as :func:`morph_encoding` says; ``min``
+        and ``max`` (``bounds``) are over all ``n`` rows, the implied zeros too."""
+        from pygltflib import Accessor, AccessorSparseIndices, AccessorSparseValues, Sparse
+
+        how = morph_encoding(a)
+        if how == "dense":
+            return self.accessor(a, "VEC3", bounds=bounds)
+        acc = Accessor(byteOffset=None, componentType=_FLOAT, count=int(len(a)), type="VEC3")
+        if how == "sparse":
+            rows = np.flatnonzero((a != 0).any(axis=1))
+            idx = rows.astype(np.uint16 if len(a) - 1 <= 0xFFFF else np.uint32)
+            acc.sparse = Sparse(
+                count=int(len(rows)),
+                indices=AccessorSparseIndices(bufferView=self.view(idx.tobytes()),
+                                              componentType=_USHORT if idx.dtype == np.uint16
+                                              else _UINT),
+                values=AccessorSparseValues(
+                    bufferView=self.view(np.ascontiguousarray(a[rows], np.float32).tobytes())))
+        if bounds:
+            acc.min = [float(x) for x in a.min(axis=0)]
+            acc.max = [float(x) for x in a.max(axis=0)]
         self.gltf.accessors.append(acc)
         return len(self.gltf.accessors) - 1
 
@@ -182,8 +238,8 @@ def _mesh(gltf, blob: _Blob, rig, model, unit: float, material: int) -> None:
     targets = []
     for d in rig.deltas:     # a shape's normals too: players that keep the rest's (three.js,
         D = (d * unit).astype(np.float32)          # glTFast, Godot) shade it as the rest
-        targets.append(Attributes(POSITION=blob.accessor(D, "VEC3", bounds=True),
-                                  NORMAL=blob.accessor(_normals(V + D, faces) - N, "VEC3")))
+        targets.append(Attributes(POSITION=blob.morph_accessor(D, bounds=True),
+                                  NORMAL=blob.morph_accessor(_normals(V + D, faces) - N)))
     idx = faces.astype(np.uint32).reshape(-1, 1)
     prim = Primitive(attributes=attrs, indices=blob.accessor(idx, "SCALAR", target=_ELEMENTS),
                      material=material, targets=targets)
