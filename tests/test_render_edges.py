@@ -549,3 +549,45 @@ def test_rewrite_frame_with_a_face_at_the_edges_equals_before(arkit_model, befor
     changed = {k[0]: v[0][2] for k, v in runs.items()}
     assert changed["half past the left"] > 1000 and changed["past a corner"] > 100
     assert changed["wholly outside"] == 0 and changed["grey, past the left"] > 1000
+
+
+def test_the_held_gain_and_block_masking_with_nan_equal_the_numpy_expressions():
+    """The fields' kernels on NaN, inf and edge values (gains of NaN, +-inf, at the clip's
+    ends; weights of NaN, exactly 0.05, its float32 neighbours; block shares of NaN, 0.5 and
+    just below; no block left): the numpy expressions they replaced (the code before
+    ``patch._held_gain`` and ``patch._keep_blocks``), bit for bit."""
+    lo, hi = patch.SHADING_RANGE
+    least = np.float32(0.05)
+    g = np.array([np.nan, np.inf, -np.inf, lo, hi, np.nextafter(np.float32(hi), 2), 0.0, 1.1,
+                  -0.0] * 4, np.float32).reshape(3, 4, 3)
+    wt = np.array([np.nan, least, np.nextafter(least, 1), np.nextafter(least, 0), 0, 1,
+                   np.inf, -np.inf, 0.3, np.nan, 0.05, 0.06], np.float32).reshape(3, 4)
+    want, got = g.copy(), g.copy()
+    np.copyto(want, 1.0, where=(wt <= 0.05)[..., None])
+    np.clip(want, lo, hi, out=want)
+    patch._held_gain(got, wt, least, np.float32(lo), np.float32(hi))
+    np.testing.assert_array_equal(got, want)
+    assert np.isnan(got).any() and (got == 1).sum() > 3 and (got == np.float32(lo)).any()
+    rng = np.random.default_rng(1)
+    for m0 in (np.array([[np.nan, 0.5, np.nextafter(np.float32(0.5), 0)], [0, 1, np.inf]],
+                        np.float32), np.zeros((2, 3), np.float32),
+               np.full((2, 3), 0.4, np.float32)):
+        for _ in range(4):
+            ok, ok2 = (rng.integers(0, 2, m0.shape).astype(np.uint8) * 255 for _ in range(2))
+            want, got = m0.copy(), m0.copy()
+            want[~((ok > 0) & (ok2 > 0)) | (want < 0.5)] = 0.0
+            assert patch._keep_blocks(got, ok, ok2) == bool(want.any())
+            np.testing.assert_array_equal(got, want)
+
+
+def test_grey_gains_of_edge_values_equal_before(before):
+    """:func:`facetransfer.patch._grey` on float64 gains (what the gain fit gives) with NaN, 0,
+    inf, negative and huge and tiny values, and none: the same factors as before."""
+    old = before("patch")
+    g = np.array([[1.1, 0.9, 1.3], [2.0, 0.5, 1.0], [np.nan, 1.0, 1.0], [0.0, 1.0, 1.0],
+                  [np.inf, 1.0, 1.0], [-1.0, 1.0, 1.0], [1e300, 1e300, 1e-300],
+                  [5e-324, 1.0, 1.0], [0.0, np.inf, 1.0]])
+    with np.errstate(all="ignore"):
+        _same(old._grey(g), patch._grey(g), "edge gains")
+        _same(old._grey(g[:0]), patch._grey(g[:0]), "no rows")
+        _same(old._grey(g[::2]), patch._grey(g[::2]), "strided rows")
