@@ -11,11 +11,6 @@ artist's rig does, so that all three forms (zeros, sparse, dense) are in one fil
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
-import shutil
-import subprocess
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,9 +18,7 @@ import pytest
 from facetransfer.export import export_track
 from facetransfer.export import gltf as glb
 from facetransfer.export.common import identity_rig
-
-TOOLS = Path(os.environ.get("FACETRANSFER_TEST_TOOLS",
-                            Path.home() / ".cache" / "facetransfer-test-tools"))
+from test_export import _validate
 
 # glTF 2.0, Accessor Data Types: componentType -> numpy dtype (little endian); type -> components
 COMPONENTS = {5120: "<i1", 5121: "<u1", 5122: "<i2", 5123: "<u2", 5125: "<u4", 5126: "<f4"}
@@ -193,18 +186,3 @@ def test_more_than_65536_vertices_take_4_byte_indices(tmp_path):
     assert acc.sparse.indices.componentType == 5125 and acc.sparse.count == 5
     np.testing.assert_array_equal(decode(h, i), a)
     assert acc.min == [-7.5, -6.5, -5.5] and acc.max == [4.5, 5.5, 6.5]
-
-
-def _validate(path: Path) -> dict:
-    node = shutil.which("node")
-    mod = TOOLS / "node_modules" / "gltf-validator"
-    if node is None or not mod.is_dir():
-        pytest.skip(f"node or the npm package gltf-validator (in {TOOLS}) is not installed")
-    js = ("const v=require(process.argv[1]);const fs=require('fs');"
-          "v.validateBytes(new Uint8Array(fs.readFileSync(process.argv[2])),{maxIssues:100})"
-          ".then(r=>console.log(JSON.stringify(r.issues)))"
-          ".catch(e=>{console.error(String(e));process.exit(3)});")
-    res = subprocess.run([node, "-e", js, str(mod), str(path)], capture_output=True, text=True,
-                         timeout=120)
-    assert res.returncode == 0, res.stderr
-    return json.loads(res.stdout)

@@ -189,6 +189,21 @@ def test_triangles_judged_beyond_the_crops_edge_keep_nothing(narrower, monkeypat
     assert not rim.drawn_inside(r.mask, r, topo.faces, lifted, inward).any()
 
 
+def _grid_face_anywhere(dx, dy, scale, lx, ly, W, H):
+    """A 9x9 grid face drawn at ``scale`` and offset ``(dx, dy)`` into a crop of ``(W, H)``,
+    its texture's positions offset ``(lx, ly)``: ``(raster, faces, lifted, drawn)``, None
+    where nothing of it lies in the crop."""
+    g, faces = _grid(9, (0, 40), (0, 40))
+    drawn = g * scale + [dx, dy]
+    lifted = g + [lx, ly]
+    pixels = WeakPerspective(1.0, np.diag([1.0, -1.0, -1.0]), np.zeros(2))
+    try:
+        r = rasterize(np.c_[drawn, np.zeros(len(g))], faces, pixels, (W, H))
+    except MeshError:
+        return None
+    return r, faces, lifted, drawn
+
+
 @settings(max_examples=40, deadline=None, derandomize=True)
 @given(st.floats(-80, 80), st.floats(-80, 80), st.floats(0.5, 2.0), st.floats(-60, 60),
        st.floats(-60, 60), st.integers(8, 90), st.integers(8, 90))
@@ -197,14 +212,10 @@ def test_the_rule_never_fails_on_a_face_anywhere(dx, dy, scale, lx, ly, W, H):
     against its texture's positions anywhere: the rule gives a mask of the crop's shape, only
     on the face's pixels, and no error or warning (``bench_inputs.py`` found a face cut by the
     frame's edge that failed; a face over the whole crop overflowed the depth)."""
-    g, faces = _grid(9, (0, 40), (0, 40))
-    drawn = g * scale + [dx, dy]
-    lifted = g + [lx, ly]
-    pixels = WeakPerspective(1.0, np.diag([1.0, -1.0, -1.0]), np.zeros(2))
-    try:
-        r = rasterize(np.c_[drawn, np.zeros(len(g))], faces, pixels, (W, H))
-    except MeshError:  # nothing of it in the crop
+    case = _grid_face_anywhere(dx, dy, scale, lx, ly, W, H)
+    if case is None:  # nothing of it in the crop
         return
+    r, faces, lifted, drawn = case
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no overflow where the face covers the whole crop
         kept = rim.drawn_inside(r.mask, r, faces, lifted, drawn)
@@ -287,14 +298,10 @@ def _crop(r, x0: int, x1: int):
 def test_the_rules_kernels_equal_it_on_a_face_anywhere(dx, dy, scale, lx, ly, W, H):
     """The same as :func:`test_the_rules_kernels_equal_its_numpy_expressions` on
     :func:`test_the_rule_never_fails_on_a_face_anywhere`'s grid faces anywhere."""
-    g, faces = _grid(9, (0, 40), (0, 40))
-    drawn = g * scale + [dx, dy]
-    lifted = g + [lx, ly]
-    pixels = WeakPerspective(1.0, np.diag([1.0, -1.0, -1.0]), np.zeros(2))
-    try:
-        r = rasterize(np.c_[drawn, np.zeros(len(g))], faces, pixels, (W, H))
-    except MeshError:
+    case = _grid_face_anywhere(dx, dy, scale, lx, ly, W, H)
+    if case is None:
         return
+    r, faces, lifted, drawn = case
     np.testing.assert_array_equal(rim.drawn_inside(r.mask, r, faces, lifted, drawn),
                                   _drawn_inside_numpy(r.mask, r, faces, lifted, drawn))
 
