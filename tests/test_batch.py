@@ -374,8 +374,8 @@ def _stub_export(monkeypatch, calls):
     mod.FORMATS = real.FORMATS
 
     def export_track(track, fmt, out, *, model=None, overwrite=False, texture=None,
-                     neutral=None):
-        calls.append((track.n_frames, fmt, model is not None, neutral))
+                     neutral=None, labels=None):
+        calls.append((track.n_frames, fmt, model is not None, neutral, labels))
         with open(out, "w") as fh:
             json.dump({"frames": track.n_frames, "format": fmt}, fh)
         return out
@@ -402,8 +402,9 @@ def test_batch_export_on_a_running_scheduler(clips, quick_model_path, tmp_path, 
                       dashboard_address=None) as running:
         code, _, _ = _cli(capsys, "batch", "export", t1, t2, "--format", "livelink", "--out",
                           out, "--model", quick_model_path, "--scheduler",
-                          running.scheduler_address, "--neutral", "auto")
-    assert code == 1 and calls == [(8, "livelink", True, "auto")]
+                          running.scheduler_address, "--neutral", "auto", "--take-rate",
+                          "clip")
+    assert code == 1 and calls == [(8, "livelink", True, "auto", "clip")]
     assert json.loads((out / "one.csv").read_text()) == {"frames": 8, "format": "livelink"}
     rows = _summary(out / "summary.csv")
     assert rows["one"]["status"] == "done" and rows["two"]["status"] == "failed"

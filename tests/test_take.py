@@ -362,13 +362,25 @@ def test_a_take_exported_from_a_timecoded_plate_starts_at_its_timecode(arkit_cli
 
     from facetransfer.batch import cluster
 
+    batch = ["batch", "export", tmp_path / "plate.npz", "--format", "livelink", "--out",
+             tmp_path / "b", "--model", d / "arkit.npz", "--workers", "1"]
     with pytest.MonkeyPatch.context() as mp:     # batch export: the same first timecode
         mp.setattr(cluster, "open_client", functools.partial(cluster.open_client,
                                                              processes=False))
-        assert main([str(x) for x in ["batch", "export", tmp_path / "plate.npz", "--format",
-                                      "livelink", "--out", tmp_path / "b", "--model",
-                                      d / "arkit.npz", "--workers", "1"]]) == 0
+        assert main([str(x) for x in batch]) == 0
+        default = (tmp_path / "b" / "plate.csv").read_bytes()
+        # --take-rate clip: the command's own rows; the earlier output (the app's) is of other
+        # options (a failed row, kept) until --overwrite
+        assert main([str(x) for x in base + [tmp_path / "clip.csv", "--take-rate", "clip"]]) == 0
+        assert main([str(x) for x in batch + ["--take-rate", "clip"]]) == 1
+        assert (tmp_path / "b" / "plate.csv").read_bytes() == default
+        assert main([str(x) for x in batch + ["--take-rate", "clip", "--overwrite"]]) == 0
+        assert main([str(x) for x in batch + ["--take-rate", "clip", "--format", "glb"]]) == 2
+    assert default == (tmp_path / "take.csv").read_bytes()      # the command's default rows
+    assert (tmp_path / "b" / "plate.csv").read_bytes() == (tmp_path / "clip.csv").read_bytes()
     assert read_livelink(tmp_path / "b" / "plate.csv").timecodes[0] == "00:00:02:00.000"
+    assert read_livelink(tmp_path / "b" / "plate.csv").timecodes[1] == "00:00:02:01.000"
+    assert read_livelink(tmp_path / "take.csv").timecodes[1] == "00:00:02:01.200"
     capsys.readouterr()
     _glb_and_usd_record_the_timecode(base, tmp_path, capsys)
     for name, extra in (("t2.csv", ["--timecode", "1:00"]),

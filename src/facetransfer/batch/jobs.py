@@ -349,9 +349,11 @@ def _default_model():
     return model, model.content_hash
 
 
-def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None) -> Row:
+def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
+               labels=None) -> Row:
     """Export one track file with :func:`facetransfer.export.export_track` to ``out``
-    (``neutral``: its neutral frame, :mod:`facetransfer.export.neutral`).
+    (``neutral``: its neutral frame, :mod:`facetransfer.export.neutral`; ``labels``: a
+    livelink take's timecode labels, None the default).
 
     Without ``model``, a track made with the default model gets the worker's cached copy of
     it; any other track is left to ``export_track``'s own check (``model=None``).
@@ -368,7 +370,7 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None) 
             default, h = _default_model()
             model = default if track.model_hash == h else None
     path = export_track(track, fmt, out, model=model, overwrite=True, texture=texture,
-                        neutral=neutral)
+                        neutral=neutral, labels=labels)
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
                seconds=time.perf_counter() - t0,
                mean_confidence=float(np.mean(track.confidence)), output=str(path))

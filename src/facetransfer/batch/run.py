@@ -581,7 +581,7 @@ def _transfer_what_before(settings: dict, model) -> str:
 
 def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
                  overwrite: bool = False, progress: Progress | None = None,
-                 neutral=None) -> BatchResult:
+                 neutral=None, labels: str | None = None) -> BatchResult:
     """Export many track files with :func:`facetransfer.export.export_track`:
     ``DIR/NAME.<ext>`` per track (:data:`~facetransfer.batch.jobs.EXPORT_EXTENSIONS`).
 
@@ -599,6 +599,8 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         Redo every export (default: skip existing outputs).
     neutral : int or "auto", optional
         Each track's activations measured from this frame's (``export_track``).
+    labels : {"app", "clip"}, optional
+        A livelink take's timecode labels (``export_track``); None: the default, the app's.
 
     Returns
     -------
@@ -608,21 +610,26 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         raise BatchError(f"--format must be one of {sorted(J.EXPORT_EXTENSIONS)}, got {fmt!r}")
     out_dir = prepare_out_dir(out_dir)
     outs = _outputs(jobs, out_dir, J.EXPORT_EXTENSIONS[fmt])
-    keys = job_keys(jobs, _export_what(fmt, value_text(texture), neutral, model))
+    keys = job_keys(jobs, _export_what(fmt, value_text(texture), neutral, model, labels))
     done = {} if overwrite else _kept(
         jobs, outs, out_dir, keys,
         lambda out, name: Row(name, "skipped", output=str(out)) if out.is_file() else None,
-        lambda job: legacy_job_key(job, _export_what(fmt, repr(texture), neutral, model)))
+        lambda job: legacy_job_key(job, _export_what(fmt, repr(texture), neutral, model,
+                                                     labels)))
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
-                                                 texture, neutral, pure=False), model, keys)
+                                                 texture, neutral, labels, pure=False),
+                   model, keys)
 
 
-def _export_what(fmt: str, texture: str, neutral, model) -> str:
+def _export_what(fmt: str, texture: str, neutral, model, labels: str | None = None) -> str:
     """The options and model of a ``batch export`` in its digests (``texture``: as text, of the
-    file's content, :func:`.digest.value_text`; in the format before, its ``repr``)."""
+    file's content, :func:`.digest.value_text`; in the format before, its ``repr``; a take's
+    ``labels`` only where other than the default's, so that the digests made before the
+    option keep their words)."""
     return f"export {fmt} {texture} {neutral!r} " + (
-        "default" if model is None else model.content_hash)
+        "default" if model is None else model.content_hash) + (
+        f" labels {labels}" if labels not in (None, "app") else "")
 
 
 def _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys) -> BatchResult:

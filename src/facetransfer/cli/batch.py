@@ -132,6 +132,10 @@ def _register_export(bs, fmt) -> None:
     e.add_argument("--neutral", metavar="FRAME|auto",
                    help="measure each track's activations from this frame's, as `facetransfer "
                    "export --neutral` (default: as tracked)")
+    e.add_argument("--take-rate", choices=("app", "clip"), default=None,
+                   help="livelink: the rows' timecodes as the Live Link Face app counts them "
+                   "(app, the default: what Unreal reads right) or as the clip's timecode "
+                   "counts its frames (clip), as `facetransfer export --take-rate`")
     _cluster_options(e)
     e.set_defaults(func=run_export)
 
@@ -276,6 +280,9 @@ def run_export(args) -> int:
 
     jobs = export_jobs(args.tracks)
     _check_cluster_args(args)
+    if args.take_rate is not None and args.format != "livelink":
+        raise FaceTransferError(f"--take-rate {args.take_rate}: only livelink takes count "
+                                f"their rows in timecodes, not {args.format}")
     if args.neutral is not None:  # checked before any clip runs
         from ..export.neutral import neutral_arg
 
@@ -283,7 +290,7 @@ def run_export(args) -> int:
     model = load_model(args.model) if args.model else None  # None: export_track's default
     return _run(args, "export", len(jobs), lambda client, progress: batch_export(
         jobs, args.out, args.format, client=client, model=model, overwrite=args.overwrite,
-        progress=progress, neutral=args.neutral))
+        progress=progress, neutral=args.neutral, labels=args.take_rate))
 
 
 def _check_cluster_args(args) -> None:
