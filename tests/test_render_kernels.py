@@ -569,13 +569,13 @@ def test_push_pull_points_read_no_texel_of_the_buffers_before_writing_it():
     known.flat[3] = True
     ry, rx = np.nonzero(known)
     vals = rng.normal(0, 40, (ry.size, 3)).astype(np.float32)
-    col, wgt, rows, shapes = merge._pyramid(*shape)
+    col, wgt, offsets, shapes = merge._pyramid(*shape)
     col.fill(np.nan)
     wgt.fill(np.nan)
     merge._pull_from_points(ry.astype(np.int64), rx.astype(np.int64), vals, col, wgt,
-                            *merge._as_arrays(rows, shapes))
+                            *merge._as_arrays(offsets, shapes))
     out = np.empty(shape + (3,), np.float32)
-    merge._points_over(merge._push_levels(col, wgt, rows, shapes), ry.astype(np.int64),
+    merge._points_over(merge._push_levels(col, wgt, offsets, shapes), ry.astype(np.int64),
                        rx.astype(np.int64), vals, out)
     assert np.isfinite(out).all()
     np.testing.assert_array_equal(out, merge.push_pull_points(shape, ry, rx, vals))

@@ -217,44 +217,44 @@ def _push_pull(tex: np.ndarray, known: np.ndarray) -> np.ndarray:
     if H * W <= 1:
         return t.copy()
     w = known.astype(np.float32)
-    col, wgt, rows, shapes = _pyramid(H, W)
-    _pull_image(t, w, col, wgt, *_as_arrays(rows, shapes))
+    col, wgt, offsets, shapes = _pyramid(H, W)
+    _pull_image(t, w, col, wgt, *_as_arrays(offsets, shapes))
     out = np.empty((H, W, 3), np.float32)
-    _known_or_up(_push_levels(col, wgt, rows, shapes), t, w, out)
+    _known_or_up(_push_levels(col, wgt, offsets, shapes), t, w, out)
     return out
 
 
 def _pyramid(H: int, W: int) -> tuple[np.ndarray, np.ndarray, list, list]:
     """The pulled levels of an (H, W) image (H W > 1) down to 1x1 (each ``((h + 1) // 2,
     (w + 1) // 2)`` of the one before: level ``i`` is ``H`` and ``W`` over ``2^(i + 1)``,
-    rounded up), stacked by rows in two buffers (not cleared): texels (R, W1, 3) and
-    weights (R, W1) float32 (``W1`` the first level's width); level ``i`` is ``[rows[i]:
-    rows[i] + h, :w]`` with ``(h, w) = shapes[i]``."""
+    rounded up), one after the other in two flat buffers (not cleared): texels (3 N,) and
+    weights (N,) float32; level ``i``, of shape ``(h, w) = shapes[i]``, starts at pixel
+    ``offsets[i]`` (row-major, C-contiguous: :func:`_level`)."""
     shapes = [(((H - 1) >> i) + 1, ((W - 1) >> i) + 1)
               for i in range(1, max(H - 1, W - 1).bit_length() + 1)]
-    rows = [0, *itertools.accumulate(h for h, _ in shapes)]
-    R, W1 = rows.pop(), shapes[0][1]
-    return np.empty((R, W1, 3), np.float32), np.empty((R, W1), np.float32), rows, shapes
+    offsets = [0, *itertools.accumulate(h * w for h, w in shapes)]
+    N = offsets.pop()
+    return np.empty(3 * N, np.float32), np.empty(N, np.float32), offsets, shapes
 
 
-def _as_arrays(rows: list, shapes: list) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`_pyramid`'s layout as the kernels take it: rows (L,), shapes (L, 2) int64."""
-    return np.array(rows, np.int64), np.array(shapes, np.int64)
+def _as_arrays(offsets: list, shapes: list) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_pyramid`'s layout as the kernels take it: offsets (L,), shapes (L, 2) int64."""
+    return np.array(offsets, np.int64), np.array(shapes, np.int64)
 
 
-def _push_levels(col: np.ndarray, wgt: np.ndarray, rows: list, shapes: list) -> np.ndarray:
-    """The push of :func:`_pyramid`'s pulled levels: from the coarsest up, each level's
+def _push_levels(col: np.ndarray, wgt: np.ndarray, offsets: list, shapes: list) -> np.ndarray:
+    """The push of :func:`_pyramid`'s pulled levels: from the coarsest (1x1) up, each level's
     unknown texels (weight 0) replaced by the bilinear 2x upsampling of the filled coarser
     level (``cv2.resize``, INTER_LINEAR, cut to the level's shape; :func:`_known_over`, in
     place); returns the upsampling of the filled first level, (2 h, 2 w, 3) float32, uncut:
     the finest level's to fill."""
-    r, (h, w) = rows[-1], shapes[-1]
-    filled = col[r:r + h, :w]
-    for i in range(len(rows) - 2, -1, -1):
+    o = 3 * offsets[-1]
+    filled = col[o:o + 3].reshape(1, 1, 3)
+    for i in range(len(offsets) - 2, -1, -1):
         up = cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
                         interpolation=cv2.INTER_LINEAR)
         h, w = shapes[i]
-        _known_over(up, col, wgt, rows[i], h, w)
+        _known_over(up, col, wgt, offsets[i], h, w)
         filled = up[:h, :w]
     return cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
                       interpolation=cv2.INTER_LINEAR)
@@ -290,10 +290,10 @@ def push_pull_points(shape: tuple[int, int], ry: np.ndarray, rx: np.ndarray,
         return fill_holes(d, known)
     # (contiguous: one compiled layout of the kernels, whether the points are a view or not)
     ry, rx = np.ascontiguousarray(ry, np.int64), np.ascontiguousarray(rx, np.int64)
-    col, wgt, rows, shapes = _pyramid(H, W)
-    _pull_from_points(ry, rx, vals, col, wgt, *_as_arrays(rows, shapes))
+    col, wgt, offsets, shapes = _pyramid(H, W)
+    _pull_from_points(ry, rx, vals, col, wgt, *_as_arrays(offsets, shapes))
     out = np.empty((H, W, 3), np.float32)
-    _points_over(_push_levels(col, wgt, rows, shapes), ry, rx, vals, out)
+    _points_over(_push_levels(col, wgt, offsets, shapes), ry, rx, vals, out)
     return out
 
 
@@ -354,49 +354,59 @@ _pull_kernel = _maybe_njit(_pull_kernel_py)
 _pull_points = _maybe_njit(_pull_points_py)
 
 
-def _pull_rest_py(col, wgt, rows, shapes):  # pragma: no cover (numba)
+def _level_py(col, wgt, o, h, w):  # pragma: no cover (numba, inlined)
+    """Level ``(h, w)`` at pixel ``o`` of :func:`_pyramid`'s buffers as C-contiguous views:
+    texels (h, w, 3), weights (h, w)."""
+    return (col[3 * o:3 * (o + h * w)].reshape((h, w, 3)),
+            wgt[o:o + h * w].reshape((h, w)))
+
+
+_level = _maybe_njit(_level_py, inline=True)
+
+
+def _pull_rest_py(col, wgt, offsets, shapes):  # pragma: no cover (numba)
     """The pulls (:func:`_pull_kernel`) of :func:`_pyramid`'s levels after the first, each
-    from the one before, in the buffers ``col`` (R, W1, 3) and ``wgt`` (R, W1); ``rows`` (L,)
+    from the one before, in the buffers ``col`` (3 N,) and ``wgt`` (N,); ``offsets`` (L,)
     and ``shapes`` (L, 2) int64 their layout."""
-    for i in range(1, rows.shape[0]):
-        a, h, w = rows[i - 1], shapes[i - 1, 0], shapes[i - 1, 1]
-        b, hc, wc = rows[i], shapes[i, 0], shapes[i, 1]
-        _pull_kernel(col[a:a + h, :w], wgt[a:a + h, :w], col[b:b + hc, :wc],
-                     wgt[b:b + hc, :wc])
+    for i in range(1, offsets.shape[0]):
+        c, w = _level(col, wgt, offsets[i - 1], shapes[i - 1, 0], shapes[i - 1, 1])
+        cc, wc = _level(col, wgt, offsets[i], shapes[i, 0], shapes[i, 1])
+        _pull_kernel(c, w, cc, wc)
 
 
 _pull_rest = _maybe_njit(_pull_rest_py)
 
 
-def _pull_image_py(tex, w, col, wgt, rows, shapes):  # pragma: no cover (numba)
+def _pull_image_py(tex, w, col, wgt, offsets, shapes):  # pragma: no cover (numba)
     """Every pull of :func:`_push_pull` in one call: the first level from ``tex`` (H, W, 3)
     with weights ``w`` (H, W) float32 (:func:`_pull_kernel`), then the rest
     (:func:`_pull_rest`)."""
-    h, ww = shapes[0, 0], shapes[0, 1]
-    _pull_kernel(tex, w, col[:h, :ww], wgt[:h, :ww])
-    _pull_rest(col, wgt, rows, shapes)
+    cc, wc = _level(col, wgt, offsets[0], shapes[0, 0], shapes[0, 1])
+    _pull_kernel(tex, w, cc, wc)
+    _pull_rest(col, wgt, offsets, shapes)
 
 
-def _pull_from_points_py(ry, rx, vals, col, wgt, rows, shapes):  # pragma: no cover (numba)
+def _pull_from_points_py(ry, rx, vals, col, wgt, offsets, shapes):  # pragma: no cover (numba)
     """Every pull of :func:`push_pull_points` in one call: the first level from the points
     (:func:`_pull_points`, on the level cleared first), then the rest (:func:`_pull_rest`)."""
-    h, ww = shapes[0, 0], shapes[0, 1]
-    col[:h, :ww] = 0.0
-    wgt[:h, :ww] = 0.0
-    _pull_points(ry, rx, vals, col[:h, :ww], wgt[:h, :ww])
-    _pull_rest(col, wgt, rows, shapes)
+    cc, wc = _level(col, wgt, offsets[0], shapes[0, 0], shapes[0, 1])
+    cc[:] = 0.0
+    wc[:] = 0.0
+    _pull_points(ry, rx, vals, cc, wc)
+    _pull_rest(col, wgt, offsets, shapes)
 
 
-def _known_over_py(up, col, wgt, r, h, w):  # pragma: no cover (numba)
+def _known_over_py(up, col, wgt, o, h, w):  # pragma: no cover (numba)
     """One push step in place: ``up[:h, :w]`` (the upsampled coarser level) takes the known
-    texels (weight > 0) of the level ``col[r:r + h, :w]``, ``wgt[r:r + h, :w]`` (the
-    ``cv2.copyTo`` of the known texels over the cut upsampling)."""
+    texels (weight > 0) of the level ``(h, w)`` at pixel ``o`` of :func:`_pyramid`'s buffers
+    (the ``cv2.copyTo`` of the known texels over the cut upsampling)."""
     for y in range(h):
         for x in range(w):
-            if wgt[r + y, x] > 0:
-                up[y, x, 0] = col[r + y, x, 0]
-                up[y, x, 1] = col[r + y, x, 1]
-                up[y, x, 2] = col[r + y, x, 2]
+            i = o + y * w + x
+            if wgt[i] > 0:
+                up[y, x, 0] = col[3 * i]
+                up[y, x, 1] = col[3 * i + 1]
+                up[y, x, 2] = col[3 * i + 2]
 
 
 def _known_or_up_py(up, tex, w, out):  # pragma: no cover (numba)
@@ -414,13 +424,15 @@ def _known_or_up_py(up, tex, w, out):  # pragma: no cover (numba)
 
 def _points_over_py(up, ry, rx, vals, out):  # pragma: no cover (numba)
     """The finest push step of :func:`push_pull_points`: ``out`` (H, W, 3) the upsampling
-    ``up`` cut to its shape, then ``vals`` (k, 3) at the points ``(ry, rx)``."""
+    ``up`` (C-contiguous) cut to its shape (row by row on unsigned flat indices: a copy the
+    compiler vectorises), then ``vals`` (k, 3) at the points ``(ry, rx)``."""
     H, W = out.shape[0], out.shape[1]
+    uf, of = up.reshape(up.size), out.reshape(out.size)
     for y in range(H):
-        for x in range(W):
-            out[y, x, 0] = up[y, x, 0]
-            out[y, x, 1] = up[y, x, 1]
-            out[y, x, 2] = up[y, x, 2]
+        u, o = np.uint64(3 * up.shape[1] * y), np.uint64(3 * W * y)
+        for i in range(3 * W):
+            j = np.uint64(i)
+            of[o + j] = uf[u + j]
     for i in range(ry.shape[0]):
         out[ry[i], rx[i], 0] = vals[i, 0]
         out[ry[i], rx[i], 1] = vals[i, 1]
