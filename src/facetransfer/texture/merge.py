@@ -232,7 +232,7 @@ def _pyramid(H: int, W: int) -> tuple[np.ndarray, np.ndarray, list, list]:
     ``offsets[i]`` (row-major, C-contiguous: :func:`_level`)."""
     shapes = [(((H - 1) >> i) + 1, ((W - 1) >> i) + 1)
               for i in range(1, max(H - 1, W - 1).bit_length() + 1)]
-    offsets = [0, *itertools.accumulate(h * w for h, w in shapes)]
+    offsets = [0, *itertools.accumulate([h * w for h, w in shapes])]
     N = offsets.pop()
     return np.empty(3 * N, np.float32), np.empty(N, np.float32), offsets, shapes
 
