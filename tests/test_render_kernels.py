@@ -53,6 +53,10 @@ def test_nonzero_equals_numpy():
         np.testing.assert_array_equal(rx, ex)
 
 
+#: the mean of the 4 neighbours: the membrane's Jacobi sweep as a 3x3 filter
+_FOUR_NEIGHBOURS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.float32)
+
+
 def _push_pull_reference(tex: np.ndarray, w: np.ndarray) -> np.ndarray:
     """The numpy push-pull that the kernels replaced (2x2 block means by INTER_AREA, bilinear
     push by INTER_LINEAR, blended by the weight)."""
@@ -276,7 +280,7 @@ def test_membrane_sweeps_on_the_interior_box_equal_the_whole_crop():
     d[ry, rx] = dr
     h = fill_holes(d, ring)
     for _ in range(6):
-        sweep = cv2.filter2D(h, -1, composite._FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE)
+        sweep = cv2.filter2D(h, -1, _FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE)
         h = np.where(interior[..., None], sweep, h)
     np.testing.assert_array_equal(composite._membrane(m, t, s, None, 6), h)
 
@@ -510,3 +514,68 @@ def test_grey_equals_the_numpy_geometric_mean():
         got = patch._grey(g)
         assert got.shape == g.shape and got.dtype == np.float64
         np.testing.assert_array_equal(got, want)
+
+
+def _push_pull_before(tex: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """The push-pull as the per-level calls made it before its kernels took every pull in one
+    call and each push step's overlay (a pull kernel per level; per push step a resize, a
+    contiguous cut and a masked copy of the known texels)."""
+    from facetransfer.texture import merge
+
+    levels = [(np.ascontiguousarray(tex, np.float32), known.astype(np.float32))]
+    while levels[-1][1].shape[0] > 1 or levels[-1][1].shape[1] > 1:
+        c, wl = levels[-1]
+        hc, wc = (wl.shape[0] + 1) // 2, (wl.shape[1] + 1) // 2
+        cc, ww = np.empty((hc, wc, 3), np.float32), np.empty((hc, wc), np.float32)
+        merge._pull_kernel(c, wl, cc, ww)
+        levels.append((cc, ww))
+    filled = levels[-1][0]
+    for c, wl in reversed(levels[:-1]):
+        up = cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
+                        interpolation=cv2.INTER_LINEAR)
+        filled = np.ascontiguousarray(up[:wl.shape[0], :wl.shape[1]])
+        cv2.copyTo(c, (wl > 0).view(np.uint8), filled)
+    return filled
+
+
+@pytest.mark.parametrize("shape", [(2, 1), (1, 2), (3, 3), (1, 9), (13, 9), (64, 33),
+                                   (101, 150), (255, 7)])
+@pytest.mark.parametrize("density", [0.002, 0.1, 0.6])
+def test_push_pull_levels_equal_the_per_level_calls(shape, density):
+    """Every pull in one kernel and each push step's overlay in one: the texels of the
+    per-level calls, to the bit; the input is left as it was."""
+    rng = np.random.default_rng(shape[0] * 31 + shape[1] + int(density * 1000))
+    known = rng.random(shape) < density
+    known.flat[0] = False  # an unknown texel, and a known one
+    known.flat[rng.integers(1, known.size)] = True
+    tex = (rng.normal(0, 60, shape + (3,)) / rng.integers(1, 8, shape + (3,))).astype(np.float32)
+    tex[0, 0] = -0.0
+    before = tex.copy()
+    out = fill_holes(tex, known)
+    np.testing.assert_array_equal(tex, before)
+    ref = _push_pull_before(tex, known)
+    assert out.dtype == np.float32 and out.shape == tex.shape and out.flags.c_contiguous
+    np.testing.assert_array_equal(out.view(np.uint32), ref.view(np.uint32))
+
+
+def test_push_pull_points_read_no_texel_of_the_buffers_before_writing_it():
+    """The pyramid's buffers are not cleared (but the first level, by the kernel): filled with
+    NaN first, the points' push-pull is the same to the bit."""
+    from facetransfer.texture import merge
+
+    rng = np.random.default_rng(5)
+    shape = (37, 20)
+    known = rng.random(shape) < 0.05
+    known.flat[3] = True
+    ry, rx = np.nonzero(known)
+    vals = rng.normal(0, 40, (ry.size, 3)).astype(np.float32)
+    col, wgt, offsets, shapes = merge._pyramid(*shape)
+    col.fill(np.nan)
+    wgt.fill(np.nan)
+    merge._pull_from_points(ry.astype(np.int64), rx.astype(np.int64), vals, col, wgt,
+                            *merge._as_arrays(offsets, shapes))
+    out = np.empty(shape + (3,), np.float32)
+    merge._points_over(merge._push_levels(col, wgt, offsets, shapes), ry.astype(np.int64),
+                       rx.astype(np.int64), vals, out)
+    assert np.isfinite(out).all()
+    np.testing.assert_array_equal(out, merge.push_pull_points(shape, ry, rx, vals))

@@ -35,6 +35,7 @@ import numpy as np
 import scipy.ndimage as ndi
 
 from .errors import ShapeError, FaceTransferError
+from .jacobi import jacobi_sweeps
 from .render.raster import _maybe_njit
 
 log = logging.getLogger(__name__)
@@ -548,10 +549,6 @@ def _erode(mask: np.ndarray, iterations: int) -> np.ndarray:
                      borderValue=0).view(bool)
 
 
-#: the mean of the 4 neighbours (a Jacobi sweep of Laplace's equation)
-_FOUR_NEIGHBOURS = np.array([[0, 0.25, 0], [0.25, 0, 0.25], [0, 0.25, 0]], np.float32)
-
-
 #: Pixels around the region's bounding box in :func:`membrane_blend`'s working crop.
 MEMBRANE_MARGIN = 8
 
@@ -882,17 +879,13 @@ def _membrane(m: np.ndarray, t: np.ndarray, s: np.ndarray, outlier: float | None
     ring, interior, ry, rx, dr = _outline(m, t, s, outlier)
     # (h, w, 3): the membrane, = target - source on the outline (fill_holes of the outline)
     h = push_pull_points(m.shape, ry, rx, dr)
-    # Jacobi sweeps of Laplace's equation (the mean of the 4 neighbours, one 3x3 filter per
-    # sweep) smooth the push-pull result towards harmonic; the outline keeps its values
+    # Jacobi sweeps of Laplace's equation (the mean of the 4 neighbours; all in one kernel)
+    # smooth the push-pull result towards harmonic; the outline keeps its values
     h = np.ascontiguousarray(h, dtype=np.float32)
     # the sweeps work on the interior's box grown by the pixel its neighbours reach (the same
     # values as over the whole crop: an interior pixel's 4 neighbours lie in the region)
     box = mask_box(interior, 1)
     if box is None or smooth_iterations <= 0:
         return h
-    hb = h[box]
-    inner = np.ascontiguousarray(interior[box]).view(np.uint8)
-    for _ in range(int(smooth_iterations)):
-        sweep = cv2.filter2D(hb, -1, _FOUR_NEIGHBOURS, borderType=cv2.BORDER_REPLICATE)
-        cv2.copyTo(sweep, inner, hb)  # in place, the interior only
+    jacobi_sweeps(h, interior[box], (box[0].start, box[1].start), int(smooth_iterations))
     return h

@@ -12,6 +12,7 @@ S. Gortler, R. Grzeszczuk, R. Szeliski, M. Cohen. The Lumigraph. SIGGRAPH 1996 (
 
 from __future__ import annotations
 
+import itertools
 import logging
 from collections.abc import Iterable
 from typing import NamedTuple
@@ -196,9 +197,10 @@ def _push_pull(tex: np.ndarray, known: np.ndarray) -> np.ndarray:
     """Push-pull: average known values down a pyramid, then fill holes from coarser levels.
 
     Pull: each level halves the previous one (odd sizes padded by an unknown row or column), a
-    texel the mean of its known 2x2 children, known if one of them is (a numba kernel). Push:
-    from the coarsest level up, the unknown texels take the bilinear 2x upsampling of the
-    filled coarser level (``cv2.resize``, INTER_LINEAR), the known ones keep their value.
+    texel the mean of its known 2x2 children, known if one of them is (numba kernels, every
+    level in one call). Push: from the coarsest level up, the unknown texels take the bilinear
+    2x upsampling of the filled coarser level (``cv2.resize``, INTER_LINEAR), the known ones
+    keep their value.
 
     Parameters
     ----------
@@ -210,33 +212,52 @@ def _push_pull(tex: np.ndarray, known: np.ndarray) -> np.ndarray:
     (H, W, 3) float32
         Equal to ``tex`` where ``known``.
     """
-    return _push_pull_levels([(np.ascontiguousarray(tex, np.float32), known.astype(np.float32))])
+    H, W = known.shape
+    t = np.ascontiguousarray(tex, np.float32)
+    if H * W <= 1:
+        return t.copy()
+    w = known.astype(np.float32)
+    col, wgt, offsets, shapes = _pyramid(H, W)
+    _pull_image(t, w, col, wgt, *_as_arrays(offsets, shapes))
+    out = np.empty((H, W, 3), np.float32)
+    _known_or_up(_push_levels(col, wgt, offsets, shapes), t, w, out)
+    return out
 
 
-def _push_pull_levels(levels: list) -> np.ndarray:
-    """:func:`_push_pull` from its finest level ``levels[0] = (texels (H, W, 3), weights (H, W))``
-    float32 (0/1 weights): the pyramid pulled to 1x1 and pushed back; the filled finest level."""
-    while levels[-1][1].shape[0] > 1 or levels[-1][1].shape[1] > 1:
-        c, wl = levels[-1]
-        Hc, Wc = (wl.shape[0] + 1) // 2, (wl.shape[1] + 1) // 2
-        cc, wc = np.empty((Hc, Wc, 3), np.float32), np.empty((Hc, Wc), np.float32)
-        _pull_kernel(c, wl, cc, wc)
-        levels.append((cc, wc))
-    filled = levels[-1][0]
-    for c, wl in reversed(levels[:-1]):
-        filled = _push(filled, wl.shape)
-        cv2.copyTo(c, (wl > 0).view(np.uint8), filled)  # the known texels over it
-    return filled
+def _pyramid(H: int, W: int) -> tuple[np.ndarray, np.ndarray, list, list]:
+    """The pulled levels of an (H, W) image (H W > 1) down to 1x1 (each ``((h + 1) // 2,
+    (w + 1) // 2)`` of the one before: level ``i`` is ``H`` and ``W`` over ``2^(i + 1)``,
+    rounded up), one after the other in two flat buffers (not cleared): texels (3 N,) and
+    weights (N,) float32; level ``i``, of shape ``(h, w) = shapes[i]``, starts at pixel
+    ``offsets[i]`` (row-major, C-contiguous: :func:`_level`)."""
+    shapes = [(((H - 1) >> i) + 1, ((W - 1) >> i) + 1)
+              for i in range(1, max(H - 1, W - 1).bit_length() + 1)]
+    offsets = [0, *itertools.accumulate([h * w for h, w in shapes])]
+    N = offsets.pop()
+    return np.empty(3 * N, np.float32), np.empty(N, np.float32), offsets, shapes
 
 
-def _push(coarse: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
-    """The bilinear 2x upsampling (``cv2.resize``, INTER_LINEAR) of a filled level
-    ``coarse`` (h, w, 3), cut to the finer level's ``shape = (H, W)``: a new C-contiguous
-    (H, W, 3) float32 array."""
-    H, W = shape
-    up = cv2.resize(coarse, (2 * coarse.shape[1], 2 * coarse.shape[0]),
-                    interpolation=cv2.INTER_LINEAR)
-    return np.ascontiguousarray(up[:H, :W])
+def _as_arrays(offsets: list, shapes: list) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_pyramid`'s layout as the kernels take it: offsets (L,), shapes (L, 2) int64."""
+    return np.array(offsets, np.int64), np.array(shapes, np.int64)
+
+
+def _push_levels(col: np.ndarray, wgt: np.ndarray, offsets: list, shapes: list) -> np.ndarray:
+    """The push of :func:`_pyramid`'s pulled levels: from the coarsest (1x1) up, each level's
+    unknown texels (weight 0) replaced by the bilinear 2x upsampling of the filled coarser
+    level (``cv2.resize``, INTER_LINEAR, cut to the level's shape; :func:`_known_over`, in
+    place); returns the upsampling of the filled first level, (2 h, 2 w, 3) float32, uncut:
+    the finest level's to fill."""
+    o = 3 * offsets[-1]
+    filled = col[o:o + 3].reshape(1, 1, 3)
+    for i in range(len(offsets) - 2, -1, -1):
+        up = cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
+                        interpolation=cv2.INTER_LINEAR)
+        h, w = shapes[i]
+        _known_over(up, col, wgt, offsets[i], h, w)
+        filled = up[:h, :w]
+    return cv2.resize(filled, (2 * filled.shape[1], 2 * filled.shape[0]),
+                      interpolation=cv2.INTER_LINEAR)
 
 
 def push_pull_points(shape: tuple[int, int], ry: np.ndarray, rx: np.ndarray,
@@ -267,12 +288,13 @@ def push_pull_points(shape: tuple[int, int], ry: np.ndarray, rx: np.ndarray,
         known = np.zeros((H, W), bool)
         known[ry, rx] = True
         return fill_holes(d, known)
-    Hc, Wc = (H + 1) // 2, (W + 1) // 2
-    cc, wc = np.zeros((Hc, Wc, 3), np.float32), np.zeros((Hc, Wc), np.float32)
-    _pull_points(np.asarray(ry, np.int64), np.asarray(rx, np.int64), vals, cc, wc)
-    filled = _push(_push_pull_levels([(cc, wc)]), (H, W))
-    filled[ry, rx] = vals
-    return filled
+    # (contiguous: one compiled layout of the kernels, whether the points are a view or not)
+    ry, rx = np.ascontiguousarray(ry, np.int64), np.ascontiguousarray(rx, np.int64)
+    col, wgt, offsets, shapes = _pyramid(H, W)
+    _pull_from_points(ry, rx, vals, col, wgt, *_as_arrays(offsets, shapes))
+    out = np.empty((H, W, 3), np.float32)
+    _points_over(_push_levels(col, wgt, offsets, shapes), ry, rx, vals, out)
+    return out
 
 
 def _pull_points_py(ry, rx, vals, coarse, wc):  # pragma: no cover (numba)
@@ -330,6 +352,98 @@ def _pull_kernel_py(tex, w, coarse, wc):  # pragma: no cover (numba)
 
 _pull_kernel = _maybe_njit(_pull_kernel_py)
 _pull_points = _maybe_njit(_pull_points_py)
+
+
+def _level_py(col, wgt, o, h, w):  # pragma: no cover (numba, inlined)
+    """Level ``(h, w)`` at pixel ``o`` of :func:`_pyramid`'s buffers as C-contiguous views:
+    texels (h, w, 3), weights (h, w)."""
+    return (col[3 * o:3 * (o + h * w)].reshape((h, w, 3)),
+            wgt[o:o + h * w].reshape((h, w)))
+
+
+_level = _maybe_njit(_level_py, inline=True)
+
+
+def _pull_rest_py(col, wgt, offsets, shapes):  # pragma: no cover (numba)
+    """The pulls (:func:`_pull_kernel`) of :func:`_pyramid`'s levels after the first, each
+    from the one before, in the buffers ``col`` (3 N,) and ``wgt`` (N,); ``offsets`` (L,)
+    and ``shapes`` (L, 2) int64 their layout."""
+    for i in range(1, offsets.shape[0]):
+        c, w = _level(col, wgt, offsets[i - 1], shapes[i - 1, 0], shapes[i - 1, 1])
+        cc, wc = _level(col, wgt, offsets[i], shapes[i, 0], shapes[i, 1])
+        _pull_kernel(c, w, cc, wc)
+
+
+_pull_rest = _maybe_njit(_pull_rest_py)
+
+
+def _pull_image_py(tex, w, col, wgt, offsets, shapes):  # pragma: no cover (numba)
+    """Every pull of :func:`_push_pull` in one call: the first level from ``tex`` (H, W, 3)
+    with weights ``w`` (H, W) float32 (:func:`_pull_kernel`), then the rest
+    (:func:`_pull_rest`)."""
+    cc, wc = _level(col, wgt, offsets[0], shapes[0, 0], shapes[0, 1])
+    _pull_kernel(tex, w, cc, wc)
+    _pull_rest(col, wgt, offsets, shapes)
+
+
+def _pull_from_points_py(ry, rx, vals, col, wgt, offsets, shapes):  # pragma: no cover (numba)
+    """Every pull of :func:`push_pull_points` in one call: the first level from the points
+    (:func:`_pull_points`, on the level cleared first), then the rest (:func:`_pull_rest`)."""
+    cc, wc = _level(col, wgt, offsets[0], shapes[0, 0], shapes[0, 1])
+    cc[:] = 0.0
+    wc[:] = 0.0
+    _pull_points(ry, rx, vals, cc, wc)
+    _pull_rest(col, wgt, offsets, shapes)
+
+
+def _known_over_py(up, col, wgt, o, h, w):  # pragma: no cover (numba)
+    """One push step in place: ``up[:h, :w]`` (the upsampled coarser level) takes the known
+    texels (weight > 0) of the level ``(h, w)`` at pixel ``o`` of :func:`_pyramid`'s buffers
+    (the ``cv2.copyTo`` of the known texels over the cut upsampling)."""
+    for y in range(h):
+        for x in range(w):
+            i = o + y * w + x
+            if wgt[i] > 0:
+                up[y, x, 0] = col[3 * i]
+                up[y, x, 1] = col[3 * i + 1]
+                up[y, x, 2] = col[3 * i + 2]
+
+
+def _known_or_up_py(up, tex, w, out):  # pragma: no cover (numba)
+    """The finest push step of :func:`_push_pull`: ``out`` (H, W, 3) is ``tex`` where the
+    weight ``w`` (H, W) is > 0, the upsampling ``up`` (its first H rows and W columns)
+    elsewhere."""
+    H, W = w.shape
+    for y in range(H):
+        for x in range(W):
+            src = tex if w[y, x] > 0 else up
+            out[y, x, 0] = src[y, x, 0]
+            out[y, x, 1] = src[y, x, 1]
+            out[y, x, 2] = src[y, x, 2]
+
+
+def _points_over_py(up, ry, rx, vals, out):  # pragma: no cover (numba)
+    """The finest push step of :func:`push_pull_points`: ``out`` (H, W, 3) the upsampling
+    ``up`` (C-contiguous) cut to its shape (row by row on unsigned flat indices: a copy the
+    compiler vectorises), then ``vals`` (k, 3) at the points ``(ry, rx)``."""
+    H, W = out.shape[0], out.shape[1]
+    uf, of = up.reshape(up.size), out.reshape(out.size)
+    for y in range(H):
+        u, o = np.uint64(3 * up.shape[1] * y), np.uint64(3 * W * y)
+        for i in range(3 * W):
+            j = np.uint64(i)
+            of[o + j] = uf[u + j]
+    for i in range(ry.shape[0]):
+        out[ry[i], rx[i], 0] = vals[i, 0]
+        out[ry[i], rx[i], 1] = vals[i, 1]
+        out[ry[i], rx[i], 2] = vals[i, 2]
+
+
+_pull_image = _maybe_njit(_pull_image_py)
+_pull_from_points = _maybe_njit(_pull_from_points_py)
+_known_over = _maybe_njit(_known_over_py)
+_known_or_up = _maybe_njit(_known_or_up_py)
+_points_over = _maybe_njit(_points_over_py)
 
 
 def fill_vertex_colors(colors, known, faces) -> np.ndarray:
