@@ -437,13 +437,11 @@ def test_gain_field_at_the_edges_equals_before(before, what):
                                                 max_samples=500)), f"{what} {box}")
 
 
-@pytest.mark.xfail(strict=True, reason="patch._gain_factors sizes its exponents by np.empty"
-                   "((x1 - x0, 3)): a box whose end comes before its start raises numpy's "
-                   "'negative dimensions are not allowed' (before: an empty field)")
 def test_gain_field_of_an_inverted_box_is_empty_or_names_the_box(before):
-    """A box ``(x0, y0, x1, y1)`` with ``x1 < x0``: before, an empty field of ``y1 - y0`` rows
-    (no columns); now a ValueError that does not say which argument (the project's errors name
-    the argument). Either the field as before or an error that names the box passes."""
+    """A box ``(x0, y0, x1, y1)`` with ``x1 < x0``: before the kernels, an empty field of
+    ``y1 - y0`` rows (no columns); with them, numpy's "negative dimensions are not allowed",
+    which names no argument; now an error that names the box (the field as before would pass
+    too)."""
     old = before("patch")
     rng = np.random.default_rng(0)
     face, part = (rng.integers(0, 256, (40, 50, 3), np.uint8) for _ in range(2))

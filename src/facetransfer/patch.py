@@ -477,6 +477,9 @@ def gain_field(face: np.ndarray, part: np.ndarray, where: np.ndarray, *,
     (y1 - y0, x1 - x0, 3) float32
     """
     x0, y0, x1, y1 = (0, 0, where.shape[1], where.shape[0]) if box is None else box
+    if x1 < x0 or y1 < y0:
+        raise RewriteError(f"gain_field: box {tuple(box)} ends before it starts "
+                           "(x0, y0, x1, y1 with x1 >= x0 and y1 >= y0)")
     gy, gx = _gain_factors(face, part, where, iterations, (x0, y0, x1, y1), max_samples)
     return np.clip(gy[:, None, :] * gx[None, :, :], *GAIN_RANGE).astype(np.float32)
 
