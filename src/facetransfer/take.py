@@ -17,8 +17,9 @@ Timecodes are ``HH:MM:SS:FF.mmm``: ``FF`` a frame at the take's nominal rate, ``
 thousandths. The rate is not written in the file: a take that passes a second shows it (its
 frame numbers wrap after the last, :func:`take_rate`); one within a second is read at 30 or
 60 a second where its labels have thousandths (the app's, as Unreal's importer reads them),
-else at the smallest usual rate above its frame numbers, with a warning. A take recorded beside the camera
-with synced clocks is placed by the target's start timecode (:data:`TAKE_SYNCS`).
+else at the smallest usual rate above its frame numbers, with a warning. A take recorded
+beside the camera with synced clocks is placed by the target's start timecode
+(:data:`TAKE_SYNCS`).
 
 :func:`take_track` makes a take a track of its own (the model's person performing it with the
 take's head rotation): what ``facetransfer puppet take.csv`` renders and ``facetransfer view
