@@ -28,10 +28,8 @@ def file_kind(path: str | os.PathLike) -> str:
     of the tool's exports (glb, USD, JSON, a page), named."""
     from .take import is_take
 
-    import zipfile
-
     from .errors import FaceTransferError
-    from .io.npz import check_input_file, content_kind, reason
+    from .io.npz import NOT_ARCHIVE_ERRORS, archive_names, check_input_file, content_kind, reason
 
     p = Path(path)
     if p.suffix.lower() in (".npz", ".csv"):    # before: "video X.npz does not exist"
@@ -40,16 +38,14 @@ def file_kind(path: str | os.PathLike) -> str:
         return "take"
     if p.suffix.lower() == ".npz" and p.is_file():
         try:
-            z = np.load(p, allow_pickle=False)
-        except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+            names = archive_names(p)
+        except NOT_ARCHIVE_ERRORS as exc:
             raise FaceTransferError(f"{p} is truncated or not an .npz archive "
                                     f"({reason(exc)})") from None
-        if not isinstance(z, np.lib.npyio.NpzFile):   # an .npy named .npz (was TypeError)
+        if names is None:   # an .npy named .npz (was TypeError)
             raise FaceTransferError(f"{p} is a single .npy array, not an .npz archive: probe "
                                     "describes videos, image sequences, tracks, models and "
                                     "Live Link Face takes")
-        with z:
-            names = set(z.files)
         if _TRACK_KEYS <= names:
             return "track"
         if {"core", "metadata"} <= names:

@@ -31,18 +31,13 @@ def register(sub) -> None:
 
 
 def _is_track(path) -> bool:
-    import zipfile
-
-    import numpy as np
+    from ..io.npz import NOT_ARCHIVE_ERRORS, archive_names
 
     try:
-        z = np.load(path, allow_pickle=False)
-        if not isinstance(z, np.lib.npyio.NpzFile):    # an .npy array: write_viewer says so
-            return False
-        with z:
-            return "rotation" in z.files and "mode_names" in z.files
-    except (OSError, ValueError, zipfile.BadZipFile, EOFError):
+        names = archive_names(path)
+    except NOT_ARCHIVE_ERRORS:
         return False  # write_viewer reports it
+    return names is not None and {"rotation", "mode_names"} <= names   # an .npy: said there
 
 
 def _take_page(args: argparse.Namespace):

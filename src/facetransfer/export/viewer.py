@@ -25,7 +25,6 @@ import html
 import json
 import logging
 import os
-import zipfile
 from importlib import resources
 from pathlib import Path
 
@@ -193,21 +192,21 @@ def write_viewer(source: str | os.PathLike, out: str | os.PathLike, *, model=Non
     from ..track import Track
     from .common import resolve_model
 
-    from ..io.npz import NOT_NPZ, check_input_file, content_kind, reason
+    from ..io.npz import (NOT_ARCHIVE_ERRORS, NOT_NPZ, archive_names, check_input_file,
+                          content_kind, reason)
 
     src = check_input_file(source, "model or track file", ExportError)
     try:
-        z = np.load(src, allow_pickle=False)
-    except (OSError, ValueError, EOFError, zipfile.BadZipFile) as exc:
+        names = archive_names(src)
+    except NOT_ARCHIVE_ERRORS as exc:
         kind = content_kind(src)        # another kind of file: named (a .glb, a take, ...)
         raise ExportError(f"{src} is neither a model nor a track file" + (
             f": it is {kind}" if kind not in (None, NOT_NPZ) else
             f" (truncated or not an .npz archive: {reason(exc)})")) from None
-    if not isinstance(z, np.lib.npyio.NpzFile):    # an .npy array named .npz
+    if names is None:    # an .npy array named .npz
         raise ExportError(f"{src} is neither a model nor a track file: it is an .npy array, "
                           "not an .npz archive")
-    with z:
-        is_track = "rotation" in z.files and "mode_names" in z.files
+    is_track = {"rotation", "mode_names"} <= names
     if neutral is not None and not is_track:
         raise ExportError(f"--neutral is for a track; {src} is a model")
     if is_track:

@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 import os
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -64,6 +65,23 @@ def content_kind(path: str | os.PathLike) -> str | None:
     if head[4:8] == b"ftyp" or head.startswith((b"\x1a\x45\xdf\xa3", b"RIFF")):
         return "a video"
     return NOT_NPZ
+
+
+#: What :func:`archive_names` raises for a file that is no ``.npz`` archive nor ``.npy`` array
+#: (``numpy.load``'s kinds of error: damaged, truncated, foreign).
+NOT_ARCHIVE_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile)
+
+
+def archive_names(path: str | os.PathLike) -> set[str] | None:
+    """The member names of the ``.npz`` archive at ``path`` (as ``numpy.load`` names them,
+    from the archive's directory: no array is read); None where the file is a single ``.npy``
+    array (``numpy.load``'s other kind; mapped, not read). One of :data:`NOT_ARCHIVE_ERRORS`
+    for a file of neither kind."""
+    z = np.load(path, mmap_mode="r", allow_pickle=False)
+    if not isinstance(z, np.lib.npyio.NpzFile):
+        return None
+    with z:
+        return set(z.files)
 
 
 def read_npz(path: str | os.PathLike, what: str,
