@@ -743,8 +743,7 @@ def _puppet_track(args, vopt) -> int:
     if clip is not None:   # its audio is read: not replaced by the puppet (as puppet VIDEO)
         check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=[clip])
     vopt = _track_video_options(vopt if clip is None else like_video(vopt, clip), track)
-    source = Path(clip) if clip is not None else None
-    audio_from = source if source is not None and source.is_file() else None
+    audio_from = Path(clip) if clip is not None and Path(clip).is_file() else None  # no sequence
     wid = _puppet_identity(model, args.identity)
     audio, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
                                   audio_from=audio_from, overwrite=args.overwrite,
@@ -753,7 +752,7 @@ def _puppet_track(args, vopt) -> int:
         print(f"continued an interrupted render from frame {resumed}")
     print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
           f"{args.identity or 'the mean face'} performing the track {args.video}"
-          + (f", with the audio of {source.name}" if audio else ""))
+          + (f", with the audio of {audio_from.name}" if audio else ""))
     return 0
 
 
@@ -788,12 +787,13 @@ def _track_video_options(vopt, track):
     """``vopt`` for a puppet of ``track`` alone: its pixels' aspect and its clip's start
     timecode and first frame number (:attr:`Track.source_facts`) where ``vopt`` gives none."""
     import dataclasses
-    from fractions import Fraction
+
+    from ..io.plate_header import usable_aspect
 
     changes = {}
-    if vopt.sar is None and abs(track.pixel_aspect - 1.0) > 1e-6:
-        f = Fraction(track.pixel_aspect).limit_denominator(1000)
-        changes["sar"] = (f.numerator, f.denominator)
+    sar = usable_aspect(track.pixel_aspect)     # None where square
+    if vopt.sar is None and sar is not None:
+        changes["sar"] = sar
     facts = track.source_facts
     if facts is not None and vopt.timecode is None and facts.timecode:
         changes["timecode"] = facts.timecode
