@@ -115,24 +115,14 @@ def why_not_video(p: Path) -> str:
     with sound and no pictures, or no stream at all, a text file; else that it is not a video
     OpenCV can decode.
     (Before, all of these were "not a video OpenCV can decode".)"""
-    import subprocess
-
-    from .ffmpeg import ffmpeg_exe
+    from .video_display import described_input
 
     try:
         with open(p, "rb") as fh:
             head = fh.read(512)
     except OSError:
         head = b""
-    said = ""
-    exe = ffmpeg_exe()
-    if exe is not None:
-        try:
-            said = subprocess.run([exe, "-hide_banner", "-nostdin", "-i", str(p)],
-                                  capture_output=True, timeout=30).stderr.decode("utf-8",
-                                                                                 "replace")
-        except (OSError, subprocess.SubprocessError):
-            said = ""
+    said = described_input(p)     # ffmpeg's words of the file ("" without ffmpeg)
     if head[4:8] == b"ftyp" and "moov atom not found" in said:
         return ("it is cut short: an MP4/MOV without its index (the moov box), as a recording "
                 "or a copy that did not finish leaves")
