@@ -39,6 +39,21 @@ def save_json(report: dict, path: Path) -> None:
     write_text_atomic(path, json.dumps(report, indent=1))
 
 
+def save_sheet(rows: list, labels: list, path: Path) -> None:
+    """Write ``rows`` (each ``(h, W, 3)`` uint8 RGB, all of one width) one under another as an
+    image at ``path`` (atomically), each with its text of ``labels`` at its top left (drawn on
+    the rows)."""
+    import cv2
+    import numpy as np
+
+    from facetransfer.io.atomic import atomic_path
+
+    for row, text in zip(rows, labels):
+        cv2.putText(row, text, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 0), 1)
+    with atomic_path(path, overwrite=True) as tmp:
+        cv2.imwrite(str(tmp), cv2.cvtColor(np.concatenate(rows), cv2.COLOR_RGB2BGR))
+
+
 def save_plot(fig, path: Path) -> None:
     """Lay ``fig`` out, write it to ``path`` atomically and close it."""
     import matplotlib.pyplot as plt

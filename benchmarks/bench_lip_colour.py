@@ -189,10 +189,10 @@ def picture(name: str, panels: dict, boxes: np.ndarray, path: Path) -> None:
     lips (the same box in every panel but the source's, which has its own size)."""
     import cv2
 
-    from facetransfer.io.atomic import atomic_path
+    from _report import save_sheet
 
     n = len(panels["target"])
-    rows = []
+    rows, labels = [], []
     for i in np.linspace(0, n - 1, 4).round().astype(int):
         x0, y0, x1, y1 = boxes[i]
         if x1 <= x0:
@@ -204,12 +204,9 @@ def picture(name: str, panels: dict, boxes: np.ndarray, path: Path) -> None:
                   for k in ("target", "result_source", "result_target") if k in panels]
         tiles = [cv2.resize(np.asarray(t), (240, 180), interpolation=cv2.INTER_CUBIC)
                  for t in tiles]
-        row = np.concatenate(tiles, axis=1)
-        cv2.putText(row, f"{name} {i}: source | target | --lip-colour source | target", (6, 16),
-                    cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 0), 1)
-        rows.append(row)
-    with atomic_path(path, overwrite=True) as tmp:
-        cv2.imwrite(str(tmp), cv2.cvtColor(np.concatenate(rows), cv2.COLOR_RGB2BGR))
+        rows.append(np.concatenate(tiles, axis=1))
+        labels.append(f"{name} {i}: source | target | --lip-colour source | target")
+    save_sheet(rows, labels, path)
 
 
 def plot(res: dict, path: Path) -> None:

@@ -210,9 +210,9 @@ def _picture(name: str, targets, images, path: Path) -> None:
     """target | resampled | default, 3x (nearest), the forehead's hair of frames 10, 40, 84."""
     import cv2
 
-    from facetransfer.io.atomic import atomic_path
+    from _report import save_sheet
 
-    rows = []
+    rows, labels = [], []
     for i in (10, 40, 84):
         if i >= len(targets):
             continue
@@ -221,12 +221,9 @@ def _picture(name: str, targets, images, path: Path) -> None:
         tiles = [cv2.resize(im[y0:y0 + H // 6, x0:x0 + W // 5], None, fx=3, fy=3,
                             interpolation=cv2.INTER_NEAREST)
                  for im in (targets[i], images["resampled"][i], images["default"][i])]
-        row = np.concatenate(tiles, axis=1)
-        cv2.putText(row, f"{name} {i}: target | resampled | own pixels", (6, 18),
-                    cv2.FONT_HERSHEY_SIMPLEX, 0.5, (255, 255, 0), 1)
-        rows.append(row)
-    with atomic_path(path, overwrite=True) as tmp:
-        cv2.imwrite(str(tmp), cv2.cvtColor(np.concatenate(rows), cv2.COLOR_RGB2BGR))
+        rows.append(np.concatenate(tiles, axis=1))
+        labels.append(f"{name} {i}: target | resampled | own pixels")
+    save_sheet(rows, labels, path)
 
 
 def main() -> int:
