@@ -151,15 +151,18 @@ def judge_video(video: Path) -> dict:
     return compare(S, T, R)
 
 
-def _track(clip: str, model, cache: Path, data: Path, every: int = 1) -> Path:
+def _track(clip: str, model, cache: Path, data: Path, every: int = 1, eyes: bool = False
+           ) -> Path:
     """The cached track file of ``clip`` (its first 150 frames, the capture tracker, its
-    detector shown one frame of ``every``; made afresh, not taken from the track cache)."""
+    detector shown one frame of ``every``, with ``eyes`` the frames where the eyes move too,
+    :mod:`facetransfer.track.skip_rule`; made afresh, not taken from the track cache)."""
     from facetransfer.track.obtain import obtain_track
 
-    p = cache / (f"{clip}.track.npz" if every == 1 else f"{clip}.every{every}.track.npz")
+    name = "" if every == 1 else f".every{every}" + ("eyes" if eyes else "")
+    p = cache / f"{clip}{name}.track.npz"
     if not p.exists():
         tr = obtain_track(data / f"{clip}.mp4", model, max_frames=150, cache=False,
-                          detect_every=every)
+                          detect_every=every, detect_eyes=eyes)
         tr.save(p, overwrite=True)
     return p
 
@@ -180,10 +183,11 @@ def _brows(brows: bool):
 
 
 def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
-               target_every: int | None = None) -> dict:
-    """Render one pair before and after and judge both; the target tracked as the transfer
-    tracks it (its detector shown one frame of ``target_every``, default the default speed
-    preset's: :data:`facetransfer.track.presets.TARGET_DETECT_EVERY`)."""
+               every: int | None = None) -> dict:
+    """Render one pair before and after and judge both; the clips tracked as the transfer
+    tracks them (the detector shown one frame of ``every``, default the default speed
+    preset's, :data:`facetransfer.track.presets.DETECT_EVERY`; the source's also where the
+    eyes move)."""
     import tempfile
 
     from facetransfer import transfer_plan as tp
@@ -191,9 +195,9 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
     from facetransfer.export.common import head_euler
     from facetransfer.io.video import video_info
     from facetransfer.rewrite_options import RewriteOptions
-    from facetransfer.track.presets import DEFAULT_SPEED, TARGET_DETECT_EVERY
+    from facetransfer.track.presets import DEFAULT_SPEED, DETECT_EVERY
 
-    every = TARGET_DETECT_EVERY[DEFAULT_SPEED] if target_every is None else int(target_every)
+    every = DETECT_EVERY[DEFAULT_SPEED] if every is None else int(every)
     src, tgt = PAIRS[name]
     cache = out / "judge_pairs"
     cache.mkdir(parents=True, exist_ok=True)
@@ -202,7 +206,7 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
         plan = tp.plan_transfer(data / f"{tgt}.mp4", model,
                                 expression_from=data / f"{src}.mp4", max_frames=frames,
                                 target_track=_track(tgt, model, cache, data, every),
-                                expression_track=_track(src, model, cache, data))
+                                expression_track=_track(src, model, cache, data, every, True))
     n = plan.n_frames
     source = [plan.mouth_frames[plan.mouth_index[i]] for i in range(n)]
     target = [plan.target_frames[i] for i in range(n)]
@@ -307,9 +311,9 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks")
     ap.add_argument("--video", help="judge the panels of a source | target | result video")
-    ap.add_argument("--target-every", type=int, default=None,
-                    help="the target's detector shown one frame of N (default: as the "
-                    "default transfer, TARGET_DETECT_EVERY of the default speed)")
+    ap.add_argument("--every", type=int, default=None,
+                    help="the clips' detector shown one frame of N (default: as the "
+                    "default transfer, DETECT_EVERY of the default speed)")
     add_pair_options(ap)
     args = ap.parse_args()
     out = Path(args.out)
@@ -331,7 +335,7 @@ def main() -> int:
     model = load_default_model()
     res = {}
     for name in args.pairs.split(","):
-        res[name] = judge_pair(name, model, out, data, args.frames, args.target_every)
+        res[name] = judge_pair(name, model, out, data, args.frames, args.every)
         for kind in ("before", "after", "eyes_only"):
             line = "  ".join(f"{n} {r['result_source']:+.2f}/{r['result_target']:+.2f}"
                              for n, r in res[name][kind].items())

@@ -147,15 +147,16 @@ def measure_pair(name: str, model, out: Path, data: Path, judge: bool) -> dict:
     """:func:`_render` of each variant on pair ``name``, measured (module docstring)."""
     from facetransfer import transfer_plan as tp
     from facetransfer import unmoved
-    from facetransfer.track.presets import DEFAULT_SPEED, TARGET_DETECT_EVERY
+    from facetransfer.track.presets import DEFAULT_SPEED, DETECT_EVERY
 
     src, tgt = bj.PAIRS[name]
     cache = out / "judge_pairs"
     cache.mkdir(parents=True, exist_ok=True)
     plan = tp.plan_transfer(
         data / f"{tgt}.mp4", model, expression_from=data / f"{src}.mp4", max_frames=FRAMES,
-        target_track=bj._track(tgt, model, cache, data, TARGET_DETECT_EVERY[DEFAULT_SPEED]),
-        expression_track=bj._track(src, model, cache, data))
+        target_track=bj._track(tgt, model, cache, data, DETECT_EVERY[DEFAULT_SPEED]),
+        expression_track=bj._track(src, model, cache, data, DETECT_EVERY[DEFAULT_SPEED],
+                                    True))
     targets = [np.asarray(plan.target_frames[i]) for i in range(plan.n_frames)]
     variants = {"resampled": None, "0.25-1 px": (0.25, 1.0),
                 "default": (unmoved.D0, unmoved.D1)}

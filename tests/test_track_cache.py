@@ -167,7 +167,7 @@ def test_a_track_detected_every_other_frame_is_kept_apart_and_a_full_one_preferr
     made = []
 
     def capture(video, model, frames, fps, max_frames, factory, workers=1, partial=None,
-                subject=None, every=1):
+                subject=None, every=1, eyes=False):
         made.append(every)
         return dataclasses.replace(_track(4), translation=np.full((4, 2), float(every)))
 
@@ -181,6 +181,7 @@ def test_a_track_detected_every_other_frame_is_kept_apart_and_a_full_one_preferr
     assert get(1) == 1 and made == [2, 1]                  # the every-other track not taken
     assert get(2) == 1 and get(1) == 1 and made == [2, 1]  # the full one preferred
     assert obtain._depends("capture", video, None, "left", 2) == "face=left,every=2"
+    assert obtain._depends("capture", video, None, None, 2, True) == "every=2,eyes"
     assert obtain._depends("auto", video, None) is None
 
 

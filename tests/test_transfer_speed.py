@@ -128,30 +128,39 @@ def test_background_tracking_equals_sequential(clips, quick_model, monkeypatch, 
 
 @pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
                     reason="needs fork")
-def test_fast_detects_the_target_every_other_frame_and_makes_its_regions_ahead(
+def test_fast_detects_both_clips_every_other_frame_and_makes_the_regions_ahead(
         clips, quick_model, monkeypatch):
-    """With ``speed="fast"`` the target's detector sees every other frame (the sources every
-    frame); while the source is tracked in the background the target's region textures are
-    made, for the render of this plan's target track."""
+    """With ``speed="fast"`` the detector sees every other frame of the target and of the
+    source (the source's also where the eyes move, :mod:`facetransfer.track.skip_rule`), in
+    the forked child too; while the source is tracked in the background the
+    target's region textures are made, for the render of this plan's target track."""
     fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
-    calls = []
+    calls, forked = [], []
 
     def recorded(video, model, **kw):
-        calls.append((Path(video).stem, kw.get("detect_every", 1)))
+        calls.append((Path(video).stem, kw.get("detect_every", 1), kw.get("detect_eyes")))
         return fake(video, model, **kw)
 
+    start = obtain.start_background_track
+
+    def started(video, model, max_frames, **kw):
+        forked.append((Path(video).stem, kw.get("detect_every", 1), kw.get("detect_eyes")))
+        return start(video, model, max_frames, **kw)
+
     monkeypatch.setattr(obtain, "obtain_track", recorded)
+    monkeypatch.setattr(obtain, "start_background_track", started)
     for speed, every in (("fast", 2), ("balanced", 1), ("quality", 1)):
-        calls.clear()
+        calls.clear(), forked.clear()
         plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
                                 parallel=True, speed=speed)
-        assert calls == [("target", every)]          # the source: in the forked child
+        assert calls == [("target", every, False)]   # the source: in the forked child
+        assert forked == [("source", every, True)]
         assert plan.regions is not None and plan.regions.target_track is plan.target_track
         assert plan.regions.n_frames == plan.n_frames and "regions" in plan.timings
     calls.clear()
     plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
                             parallel=False)
-    assert calls == [("target", 2), ("source", 1)] and plan.regions is None
+    assert calls == [("target", 2, False), ("source", 2, True)] and plan.regions is None
 
 
 def test_cli_speed_option(clips, quick_model_path, tmp_path, capsys):

@@ -35,7 +35,7 @@ from .texture.face import MouthFunction, mouth_texture_function, timeline_mouth_
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .topology import MeshTopology
 from .track import obtain
-from .track.presets import TARGET_DETECT_EVERY, track_options
+from .track.presets import DETECT_EVERY, track_options
 from .track.video_detect import default_workers
 from .track.project import project_landmarks, take_frames
 from .transfer import constant_weights, nearest_frames, recombine, resample_track, time_map
@@ -276,7 +276,7 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     options = RewriteOptions() if options is None else options
     planner = _Planner(model, options.track_method, track_options(options.speed),
                        progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video,
-                       TARGET_DETECT_EVERY[options.speed])
+                       DETECT_EVERY[options.speed])
     frames, fps, pre_read = planner.read_target(sources, max_frames)
     # the expression source is tracked in a second (forked) process while this one tracks the
     # target; the child inherits the decoded frames (no second decoding, nothing pickled)
@@ -285,7 +285,7 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
         early = obtain.start_background_track(
             sources.expression.video, model, len(pre_read[0]), frames=pre_read,
             method=options.track_method, options=planner.track_options, parallel=parallel,
-            face=sources.expression.face)
+            face=sources.expression.face, detect_every=planner.every, detect_eyes=True)
     try:
         tt = planner.target_track(sources.target, frames, fps, alone=early is None)
         regions = _regions_ahead(frames, tt, model, options, planner.timings) \
@@ -380,8 +380,9 @@ class _Inputs:
 @dataclass(frozen=True)
 class _Planner:
     """The reading and tracking steps of :func:`plan_sources`; ``timings`` accumulates the
-    seconds spent reading and tracking; ``target_every``: the target's detector is shown one
-    frame of it (:data:`facetransfer.track.presets.TARGET_DETECT_EVERY`)."""
+    seconds spent reading and tracking; ``every``: the clips' detector is shown one frame of
+    it (:data:`facetransfer.track.presets.DETECT_EVERY`), a source's also every frame where
+    the eyes move (its blinks are the performance's)."""
 
     model: object
     track_method: str
@@ -389,7 +390,7 @@ class _Planner:
     progress_factory: object
     timings: dict
     reader: Callable
-    target_every: int = 1
+    every: int = 1
 
     def read_target(self, sources: TransferSources, max_frames):
         """``(frames, fps, pre_read)``: the target's frames and, with an expression source,
@@ -422,11 +423,12 @@ class _Planner:
         return frames, fps, (sfr[:need], sfps)
 
     def track(self, video, track_file, frames, fps, limit, *, alone: bool = False,
-              face: str | None = None, every: int = 1):
+              face: str | None = None, every: int = 1, eyes: bool = False):
         """The track of ``video`` (:func:`facetransfer.track.obtain.obtain_track`, of several
-        people the ``face``, its detector shown one frame of ``every``), timed; ``alone``:
-        nothing else is tracked meanwhile, so its detection may take two processes
-        (:func:`facetransfer.track.video_detect.detect_video`)."""
+        people the ``face``, its detector shown one frame of ``every`` and with ``eyes`` every
+        frame where the eyes move), timed; ``alone``: nothing else is tracked meanwhile, so its
+        detection may take two processes (:func:`facetransfer.track.video_detect.
+        detect_video`)."""
         t = time.perf_counter()
         workers = default_workers() if alone else 1
         tr = obtain.obtain_track(video, self.model, frames=frames, fps=fps,
@@ -434,7 +436,7 @@ class _Planner:
                                  method=self.track_method,
                                  progress_factory=self.progress_factory,
                                  options=self.track_options, workers=workers, face=face,
-                                 detect_every=every)
+                                 detect_every=every, detect_eyes=eyes)
         self.timings["track"] += time.perf_counter() - t
         return tr
 
@@ -442,7 +444,7 @@ class _Planner:
         """The target's track, checked against its frames (a face somewhere)."""
         n, H, W = frames.shape[:3]
         tt = self.track(target.video, target.track, frames, fps, n, alone=alone,
-                        face=target.face, every=self.target_every)
+                        face=target.face, every=self.every)
         if target.track is not None:
             tt.check_video(n if tt.n_frames >= n else tt.n_frames, (W, H),
                            what=f"target {target.video}")
@@ -474,7 +476,7 @@ class _Planner:
                 tr = take_frames(tr, np.arange(len(fr)))
         if tr is None:                       # tracked here, after the target: nothing beside it
             tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True,
-                            face=src.face)
+                            face=src.face, every=self.every, eyes=True)
         checked = _checked_source(kind, src, fr, tr)     # a track of other frames: its error
         if src.track is not None:
             _warn_other_source(tr, src.video, kind)

@@ -752,7 +752,7 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
                   detections: ClipDetections | None = None, max_frames: int | None = None,
                   fixed: dict | None = None, progress: Progress | None = None,
                   source: str | None = None, checkpoint=None, workers: int = 1,
-                  view=None, subject=None, every: int = 1) -> Track:
+                  view=None, subject=None, every: int = 1, eyes: bool = False) -> Track:
     """Capture a face's performance from a video (module notes): the default tracker.
 
     Parameters
@@ -779,7 +779,10 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         (:func:`facetransfer.track.face_crop.subject_point`).
     every : int
         Show the default detector one frame of ``every``, the frames between interpolated
-        (:func:`facetransfer.track.detect.detect_clip`; a transfer's target, issue 13).
+        (:func:`facetransfer.track.detect.detect_clip`; a transfer's clips, issue 13).
+    eyes : bool
+        With ``every`` > 1, show it every frame where the eyes move too
+        (:mod:`facetransfer.track.skip_rule`; a transfer's expression source).
 
     Returns
     -------
@@ -790,7 +793,8 @@ def capture_video(video, model, *, options: CaptureOptions | None = None, detect
         detections, fps, size, src = detect_video(video, detector=detector,
                                                   max_frames=max_frames, progress=progress,
                                                   source=source, workers=workers,
-                                                  view=view, subject=subject, every=every)
+                                                  view=view, subject=subject, every=every,
+                                                  eyes=eyes)
     else:
         fps, size, src, _, n, _ = _open(video, max_frames, source)
         if n is not None and detections.n_frames != n:

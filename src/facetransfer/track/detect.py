@@ -22,6 +22,7 @@ from ..errors import ShapeError
 from .init import MediaPipeDetector, create_landmarker, import_tasks_api
 from .landmarks import mediapipe_to_ibug
 from .shots import CUT_FLOW_FAILED, CUT_LEVELS
+from .skip_rule import eye_scores_moving, eyes_changed
 
 __all__ = ["FLOW_SLACK", "FLOW_CROP_SHARE", "THUMB_BLOCKS", "ClipDetections", "VideoLandmarker",
            "detect_clip", "point_flow", "picture_change",
@@ -403,27 +404,33 @@ def _detect_one(detector, fr: np.ndarray
     return (_NAN68 if d is None else np.asarray(d, dtype=np.float64)), None, None
 
 
-def _skips(detector, found: _Found, every: int) -> bool:
+def _skips(detector, found: _Found, every: int, eyes: bool = False) -> bool:
     """Whether the next frame may be not shown to the detector (``every`` > 1): fewer than
     ``every`` frames since the last one shown, which found a face, and a detector that can
     ``skip`` (:func:`_add_frame` then shows it anyway where the picture changed as at a cut,
-    :data:`facetransfer.track.shots.CUT_LEVELS`)."""
+    :data:`facetransfer.track.shots.CUT_LEVELS`); with ``eyes``, not after eye scores that
+    moved (:func:`facetransfer.track.skip_rule.eye_scores_moving`) nor where the picture about
+    the eyes changed (:func:`~facetransfer.track.skip_rule.eyes_changed`)."""
     if every <= 1 or not found.P or not hasattr(detector, "skip"):
         return False
     since = next((j for j, s in enumerate(reversed(found.skipped)) if not s), len(found.P))
     last = len(found.P) - 1 - since
-    return since + 1 < every and last >= 0 and bool(np.isfinite(found.P[last]).all())
+    return (since + 1 < every and last >= 0 and bool(np.isfinite(found.P[last]).all())
+            and not (eyes and eye_scores_moving(found.scores, found.skipped)))
 
 
-def _add_frame(found: _Found, detector, fr: np.ndarray, prev, pool, every: int):
+def _add_frame(found: _Found, detector, fr: np.ndarray, prev, pool, every: int,
+               eyes: bool = False):
     """Detect (or skip: :func:`_skips`) one frame into ``found``, with the flow of the
     previous frame's points on ``pool`` (None: no flow) from ``prev``, the previous frame's
     grey image and thumbnail; returns this frame's."""
     if pool is not None:
         grey = pool.submit(_grey, fr)
-    skip = pool is not None and prev is not None and _skips(detector, found, every)
-    if skip:                      # a picture that changed as at a cut is always shown
-        skip = float(np.abs(grey.result()[1] - prev[1]).mean()) < CUT_LEVELS
+    skip = pool is not None and prev is not None and _skips(detector, found, every, eyes)
+    if skip:                      # a picture that changed as at a cut, or at the eyes, is shown
+        gray, thumb = grey.result()
+        skip = (float(np.abs(thumb - prev[1]).mean()) < CUT_LEVELS
+                and not (eyes and eyes_changed(gray, prev[0], found.P[-1])))
     if skip:                      # held for now, interpolated in found.result()
         detector.skip(fr)
         pts, q, scores = found.P[-1], None, None
@@ -445,7 +452,7 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                 flow: bool = True, progress: Callable[[int, int], None] | None = None,
                 keep478: bool = False, resume: ClipDetections | None = None,
                 checkpoint=None, start: int = 0, pixel_aspect: float = 1.0,
-                every: int = 1) -> ClipDetections:
+                every: int = 1, eyes: bool = False) -> ClipDetections:
     """Detect the face in every frame and the point flow between neighbouring frames.
 
     Parameters
@@ -481,6 +488,10 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
         detector that can ``skip``): the frames between are given the detections on either
         side interpolated (:func:`between_detections`); their flow is measured as for any
         other frame, from the last points held.
+    eyes : bool
+        With ``every`` > 1, also show every frame where the eyes move
+        (:mod:`facetransfer.track.skip_rule`: a blink is too fast to be interpolated; an
+        expression source's).
     pixel_aspect : float
         The frames are a video's resampled by it to square pixels (:mod:`.aspect`): the result
         says so (:attr:`ClipDetections.pixel_aspect`), and ``resume`` must.
@@ -507,7 +518,8 @@ def detect_clip(frames: Iterable[np.ndarray], detector, *, n_frames: int | None 
                     prev = _skipped(detector, fr, i >= warm, flow and i == k - 1, prev)
                     tick(i + 1, n_frames or 0)
                     continue
-                prev = _add_frame(found, detector, fr, prev, pool if flow else None, every)
+                prev = _add_frame(found, detector, fr, prev, pool if flow else None, every,
+                                  eyes)
                 if checkpoint is not None and checkpoint.due():
                     checkpoint.save(found.result())
                 tick(i + 1, n_frames or 0)

@@ -156,11 +156,11 @@ class _StageBars:
 
 
 def _capture(video, model, frames, fps, max_frames, progress_factory, workers: int = 1,
-             partial: Path | None = None, subject=None, every: int = 1):
+             partial: Path | None = None, subject=None, every: int = 1, eyes: bool = False):
     """The capture tracker (:mod:`facetransfer.track.capture`) on decoded frames; with
     ``partial``, its progress saved there and continued from there (:func:`capture_resuming`);
     ``subject``: of several people, the face nearest this point; ``every``: the detector
-    shown one frame of ``every``."""
+    shown one frame of ``every`` (and with ``eyes`` every frame where the eyes move)."""
     from .aspect import View
     from .capture import capture_video
 
@@ -168,22 +168,23 @@ def _capture(video, model, frames, fps, max_frames, progress_factory, workers: i
         if partial is None:
             tr = capture_video(frames, model, max_frames=max_frames, progress=stage_progress,
                                source=str(video), workers=workers, view=View.of(video),
-                               subject=subject, every=every)
+                               subject=subject, every=every, eyes=eyes)
         else:
             tr = capture_resuming(video, model, partial, frames=frames[:max_frames],
                                   source=str(video), progress=stage_progress, workers=workers,
                                   best_effort=True,  # the track cache's: never fails the job
-                                  subject=subject, detect_every=every)
+                                  subject=subject, detect_every=every, detect_eyes=eyes)
     return dataclasses.replace(tr, fps=float(fps))
 
 
-def _depends(method: str, video, options, face=None, every: int = 1):
+def _depends(method: str, video, options, face=None, every: int = 1, eyes: bool = False):
     """What a track of ``method`` depends on beyond the video, frames and model (its cache
     key): the flow tracker's options, the landmark fit's precomputed points file, the capture
-    tracker's ``face`` (of several people, which) and detector rate (``every``)."""
+    tracker's ``face`` (of several people, which) and detector rate (``every``, and ``eyes``: the frames where the eyes move shown too,
+    :mod:`facetransfer.track.skip_rule`)."""
     if method in ("auto", "capture"):
         parts = ([] if face is None else [f"face={face}"]) + \
-            ([] if every == 1 else [f"every={int(every)}"])
+            ([] if every == 1 else [f"every={int(every)}" + (",eyes" if eyes else "")])
         return ",".join(parts) or None
     if method == "flow":
         return options
@@ -207,6 +208,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
                      fixed=None, progress=None, workers: int = 1, best_effort: bool = False,
                      subject=None, detector_id: str | None = None,
                      save_every: float | None = None, detect_every: int = 1,
+                     detect_eyes: bool = False,
                      max_frames: int | None = None):
     """The capture tracker on the file ``video`` (or its decoded ``frames``) with its progress
     kept in ``partial`` (:mod:`facetransfer.track.detect_checkpoint`: the detections, then the
@@ -217,7 +219,8 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     :func:`facetransfer.track.detect_checkpoint.face_detector_id`); ``save_every``: seconds
     between the progress file's periodic saves (default the checkpoint's: where a run can be
     stopped only by killing it, e.g. a batch worker, a shorter period loses less);
-    ``detect_every``: the detector shown one frame of it (the caller keys ``partial`` by it);
+    ``detect_every``: the detector shown one frame of it, and with ``detect_eyes`` every
+    frame where the eyes move (the caller keys ``partial`` by both);
     ``max_frames``: the file's first frames only (``track --max-frames``; keys ``partial``)."""
     from .aspect import View
     from .capture import capture_video
@@ -241,7 +244,7 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
         det = detect_video(clip, source=source, checkpoint=ck, progress=progress,
                            resume=None if saved is None else saved.detections,
                            workers=workers, view=view, subject=subject,
-                           every=detect_every, max_frames=limit)[0]
+                           every=detect_every, eyes=detect_eyes, max_frames=limit)[0]
     try:
         tr = capture_video(clip, model, options=options, detections=det, source=source,
                            fixed=fixed, checkpoint=ck, progress=progress)
@@ -257,7 +260,8 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
 def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | None = None,
                  track_file: str | os.PathLike | None = None, max_frames: int | None = None,
                  method: str = "auto", progress_factory=None, options=None, workers: int = 1,
-                 cache: bool = True, face: str | None = None, detect_every: int = 1):
+                 cache: bool = True, face: str | None = None, detect_every: int = 1,
+                 detect_eyes: bool = False):
     """The track of a video: read from ``track_file``, or from the track cache, or tracked now.
 
     ``method``: ``"auto"`` or ``"capture"`` use the capture tracker
@@ -275,8 +279,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     tracker follows (``"left"``, ``"right"``, ``"centre"`` or ``"X,Y"``,
     :func:`facetransfer.track.face_crop.subject_point`). ``detect_every``: the capture
     tracker's detector is shown one frame of it, the frames between interpolated
-    (:func:`facetransfer.track.detect.detect_clip`); a track of the same clip made showing it
-    every frame, if the cache holds one, is taken instead.
+    (:func:`facetransfer.track.detect.detect_clip`), and with ``detect_eyes`` every frame where
+    the eyes move (:mod:`facetransfer.track.skip_rule`); a track of the same clip made showing
+    it every frame, if the cache holds one, is taken instead.
 
     Returns
     -------
@@ -302,13 +307,9 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     fps = info.fps if fps is None else fps
     n = len(frames) if max_frames is None else min(len(frames), int(max_frames))
     every = int(detect_every) if method in ("auto", "capture") else 1
-    key = track_key(video, n, method, _depends(method, video, options, face, every), model) \
-        if cache else None
-    tr = None
-    if key is not None and every > 1:          # the better track, where one was made
-        tr = cached_track(track_key(video, n, method, _depends(method, video, options, face),
-                                    model), model)
-    tr = tr if tr is not None else cached_track(key, model)
+    eyes = bool(detect_eyes) and every > 1
+    key, tr = _kept(video, n, method, (options, face, every, eyes), model) if cache \
+        else (None, None)
     if tr is not None:
         log.info("%s: the track of %d frames from the cache", video, n)
         bar = _bar(progress_factory, f"track {Path(video).name} (from the cache)", n)
@@ -321,7 +322,7 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
 
         subject = None if face is None else subject_point(face, info.size)
         tr = _capture(video, model, frames, fps, max_frames, progress_factory, workers,
-                      _partial(key), subject, every)
+                      _partial(key), subject, every, eyes)
     elif method == "flow":
         warn_stored_fit(video, "optical-flow tracker")
         tr = _flow(video, model, frames, fps, max_frames, progress_factory, options)
@@ -332,6 +333,20 @@ def obtain_track(video: str | os.PathLike, model, *, frames=None, fps: float | N
     tr = tr.with_source_facts(video)   # the clip's numbering, kept if the clip moves
     store_track(key, tr)
     return tr
+
+
+def _kept(video, n: int, method: str, depends: tuple, model):
+    """``(key, track)``: the track cache's key of a track of ``video``'s first ``n`` frames
+    by ``method`` with :func:`_depends`'s ``(options, face, every, eyes)``, and the track kept
+    under it or, for a detector shown fewer frames (``every`` > 1), the better track made
+    showing it every frame where one was; None where none is kept."""
+    options, face, every, eyes = depends
+    key = track_key(video, n, method, _depends(method, video, options, face, every, eyes), model)
+    tr = None
+    if every > 1:
+        tr = cached_track(track_key(video, n, method, _depends(method, video, options, face),
+                                    model), model)
+    return key, (tr if tr is not None else cached_track(key, model))
 
 
 def _check_counts(max_frames, detect_every) -> None:
@@ -461,19 +476,21 @@ _BACKGROUND_JOB: tuple | None = None
 def _background_track_job():
     from ..io.video import read_video
 
-    model, video, max_frames, method, options, decoded, face = _BACKGROUND_JOB
+    model, video, max_frames, method, options, decoded, face, every, eyes = _BACKGROUND_JOB
     frames, fps = decoded if decoded is not None else read_video(video, max_frames=max_frames)
     return obtain_track(video, model, frames=frames, fps=fps, max_frames=len(frames),
-                        method=method, options=options, face=face)
+                        method=method, options=options, face=face, detect_every=every,
+                        detect_eyes=eyes)
 
 
 def start_background_track(video, model, max_frames: int, *, method: str, options,
                             parallel: bool | None, frames=None,
-                            face: str | None = None) -> _BackgroundTrack | None:
+                            face: str | None = None, detect_every: int = 1,
+                            detect_eyes: bool = False) -> _BackgroundTrack | None:
     """Track ``video`` in a forked child process; None when not worth it or not possible.
 
     ``frames``: its decoded ``(frames, fps)``, inherited by the child (else it decodes them);
-    ``face``: as :func:`obtain_track`'s."""
+    ``face``, ``detect_every`` and ``detect_eyes``: as :func:`obtain_track`'s."""
     import multiprocessing as mp
     from concurrent.futures import ProcessPoolExecutor
 
@@ -486,7 +503,8 @@ def start_background_track(video, model, max_frames: int, *, method: str, option
         return None
     from ..signals import deferred_signals
 
-    _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames, face)
+    _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames, face,
+                       int(detect_every), bool(detect_eyes))
     fut = None
     try:
         pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from ..errors import RewriteError
 
-__all__ = ["SPEED_PRESETS", "DEFAULT_SPEED", "TRACK_METHODS", "TARGET_DETECT_EVERY",
+__all__ = ["SPEED_PRESETS", "DEFAULT_SPEED", "TRACK_METHODS", "DETECT_EVERY",
            "track_options", "check_track_method"]
 
 #: Tracking presets of a transfer (:func:`track_options`), fastest first.
@@ -12,13 +12,15 @@ SPEED_PRESETS = ("fast", "balanced", "quality")
 #: The preset of the transfer and the CLI: as accurate as "balanced" on the synthetic footage
 #: and the real clips measured (see :func:`track_options`), a third of its time.
 DEFAULT_SPEED = "fast"
-#: Per preset, the transfer's target is shown to the capture tracker's detector one frame of
-#: this many (:func:`facetransfer.track.detect.detect_clip`'s ``every``; the frames between
-#: interpolated). The target gives the face its place, identity and texture, the source the
-#: expression (detected every frame): on issue 13's pair with ``"fast"`` the target's
-#: detection takes 2.0 instead of 3.3 CPU-s, its activations correlate 0.98-1.00 with those of
-#: a detection of every frame (BENCHMARKS.md, "Thirty-ninth session").
-TARGET_DETECT_EVERY = {"fast": 2, "balanced": 1, "quality": 1}
+#: Per preset, the transfer's clips (its target and its sources) are shown to the capture
+#: tracker's detector one frame of this many (:func:`facetransfer.track.detect.detect_clip`'s
+#: ``every``; the frames between interpolated), a source's also every frame where the eyes
+#: move (its ``eyes``, :mod:`facetransfer.track.skip_rule`: its blinks are the performance's).
+#: With ``"fast"``, on issue 13's pair the target's detection takes 2.0 instead of 3.3 CPU-s,
+#: its activations correlate 0.98-1.00 with those of a detection of every frame (BENCHMARKS.md,
+#: "Thirty-ninth session"); the source's blinks keep their peaks (r 0.96-1.00 against every
+#: frame's, "Forty-sixth session").
+DETECT_EVERY = {"fast": 2, "balanced": 1, "quality": 1}
 #: Trackers of :func:`facetransfer.track.obtain.obtain_track`.
 TRACK_METHODS = ("auto", "capture", "flow", "landmarks")
 

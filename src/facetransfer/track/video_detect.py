@@ -120,14 +120,14 @@ def _nan_filled(parts, name: str):
                            if a is None else a for d, a in zip(parts, arrays)])
 
 
-#: (video, start, stop, fps, counter, View, subject, every) handed to the forked child (not
+#: (video, start, stop, fps, counter, View, subject, every, eyes) handed to the forked child (not
 #: pickled)
 _JOB: tuple | None = None
 
 
 def _child_job() -> ClipDetections:
     """In the child: detect frames ``start .. stop`` (or the clip's end) of the video."""
-    video, start, stop, fps, counter, view, subject, every = _JOB
+    video, start, stop, fps, counter, view, subject, every, eyes = _JOB
     if isinstance(video, np.ndarray):
         frames = iter(video[:stop])
     else:
@@ -142,7 +142,8 @@ def _child_job() -> ClipDetections:
 
     try:
         return detect_clip(view.frames(frames), detector, n_frames=stop, keep478=True,
-                           start=start, progress=progress, pixel_aspect=view.aspect, every=every)
+                           start=start, progress=progress, pixel_aspect=view.aspect, every=every,
+                           eyes=eyes)
     except ShapeError:          # the clip ends at ``start``: no frames left for this part
         return None
     finally:
@@ -171,7 +172,7 @@ class SplitDetection:
 
     @classmethod
     def start(cls, video, start: int, stop: int | None, fps: float, view: View = View(),
-              subject=None, every: int = 1) -> "SplitDetection | None":
+              subject=None, every: int = 1, eyes: bool = False) -> "SplitDetection | None":
         """Fork the child that detects frames ``start .. stop`` of ``video`` (a path or an
         (F, H, W, 3) array), as ``view`` shows them (:class:`facetransfer.track.aspect.View`);
         None where the platform cannot fork. Call it before this process creates its own
@@ -190,7 +191,8 @@ class SplitDetection:
         _import_mediapipe()
         ctx = mp.get_context("fork")
         counter = ctx.Value("i", 0, lock=False)
-        _JOB = (video, int(start), stop, float(fps), counter, view, subject, int(every))
+        _JOB = (video, int(start), stop, float(fps), counter, view, subject, int(every),
+                bool(eyes))
         pool = fut = None
         try:
             pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
@@ -302,7 +304,7 @@ def other_face(first: ClipDetections, rest: ClipDetections) -> bool:
 def detect_video(video, *, detector=None, max_frames: int | None = None,
                  progress: Progress | None = None, source: str | None = None,
                  resume: ClipDetections | None = None, checkpoint=None, workers: int = 1,
-                 view: View | None = None, subject=None, every: int = 1
+                 view: View | None = None, subject=None, every: int = 1, eyes: bool = False
                  ) -> tuple[ClipDetections, float, tuple[int, int], str]:
     """Step 1 of the module notes on a video: its detections, frame rate, size and source name.
 
@@ -316,7 +318,8 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     size returned is the stored frames'. ``subject``: of several faces, follow the one nearest
     this point ``(x, y, 0)`` in the stored pixels
     (:func:`facetransfer.track.face_crop.subject_point`). ``every``: the detector is shown
-    one frame of ``every`` (:func:`facetransfer.track.detect.detect_clip`).
+    one frame of ``every``, and with ``eyes`` every frame where the eyes move
+    (:func:`facetransfer.track.detect.detect_clip`).
     """
     prog = progress or (lambda stage, done, total: None)
     fps, size, src, frames, n, total = _open(video, max_frames, source)
@@ -326,7 +329,7 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     done = 0 if resume is None else resume.n_frames
     m = split_frame(done, total, workers) if detector is None else None
     child = None if m is None else SplitDetection.start(video, m, n, fps, view, subject,
-                                                        every)
+                                                        every, eyes)
     own = None
 
     def report(d, t):                      # this process's frames, and the child's so far
@@ -341,7 +344,7 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
         return detect_clip(again, detector, n_frames=n, keep478=True,
                            progress=lambda d, t: prog("detect", d, max(total, d)),
                            resume=first, checkpoint=checkpoint, pixel_aspect=view.aspect,
-                           every=every)
+                           every=every, eyes=eyes)
 
     try:    # the child cancelled on any interrupt from here, its landmarker's loading too
         if detector is None:
@@ -349,7 +352,7 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
         det = detect_clip(view.frames(frames), detector,
                           n_frames=n if child is None else m, keep478=True, progress=report,
                           resume=resume, checkpoint=checkpoint, pixel_aspect=view.aspect,
-                          every=every)
+                          every=every, eyes=eyes)
         if child is not None:
             det = finish_split(det, child, m, redetect, report_child, checkpoint)
     except BaseException:
