@@ -215,6 +215,22 @@ def number_in(lo: float, hi: float, *, integer: bool = False):
     return parse
 
 
+def integer_from(lo: int):
+    """An argparse ``type`` taking an integer >= ``lo`` (a seed, a count of frames: argparse
+    names the option in its one line; before, a seed of -1 was numpy's "expected non-negative
+    integer", naming nothing, or taken)."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            v = None
+        if v is None or v < lo:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {lo}, got {text!r}")
+        return v
+
+    return parse
+
+
 def frame_count(n: int) -> str:
     """``"1 frame"``, ``"N frames"``: the count of a command's summary line."""
     return f"{n} frame" if n == 1 else f"{n} frames"

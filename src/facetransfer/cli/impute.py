@@ -24,7 +24,7 @@ DEFAULT_METHODS = "ppca,average,naive,tensorly"
 
 def register(sub) -> None:
     """Add ``impute eval`` to the facetransfer parser."""
-    from .common import add_command_group
+    from .common import add_command_group, integer_from
 
     isub = add_command_group(sub, "impute", dest="impute_command",
                              help="missing-data imputation (§4.4)",
@@ -39,7 +39,8 @@ def register(sub) -> None:
     e.add_argument("--missing", default=DEFAULT_FRACTIONS,
                    help=f"comma-separated fractions of cells to hide (default {DEFAULT_FRACTIONS})")
     e.add_argument("--trials", type=int, default=5, help="random trials per fraction (default 5)")
-    e.add_argument("--seed", type=int, default=0, help="seed of the held-out cells (default 0)")
+    e.add_argument("--seed", type=integer_from(0), default=0,
+                   help="seed of the held-out cells (default 0)")
     e.add_argument("--methods", default=DEFAULT_METHODS,
                    help=f"comma-separated methods (default {DEFAULT_METHODS}); also "
                    "ppca-mouth (§4.4's mouth emphasis: own covariances for the mouth region) and "
