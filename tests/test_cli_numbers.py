@@ -116,6 +116,18 @@ def test_a_negative_seed_names_the_option(argv, tmp_path, capsys, monkeypatch):
     _says(argv, capsys, "argument --seed: expected an integer >= 0, got '-1'")
 
 
+@pytest.mark.parametrize("argv", [["puppet", "c.mp4", "--out", "x/%04d.png"],
+                                  ["track", "c.mp4", "--out", "t.npz", "--overlay", "x/%04d.png"]],
+                         ids=["puppet", "track"])
+def test_a_start_number_beyond_32_bits(argv, tmp_path, capsys, monkeypatch):
+    """Before: ``--start-number 10**30`` wrote frames named with 31 digits."""
+    monkeypatch.chdir(tmp_path)
+    _says(argv + ["--start-number", 10 ** 30], capsys,
+          f"argument --start-number: expected a frame number of at most 2147483647 (32 bits), "
+          f"got '{10 ** 30}'")
+    assert not (tmp_path / "x").exists()
+
+
 def test_batch_tracks_overlap_is_checked_without_chunk(tmp_path, capsys, monkeypatch):
     """Before: ``--overlap -1`` (and 0) taken when no ``--chunk`` was given."""
     monkeypatch.chdir(tmp_path)

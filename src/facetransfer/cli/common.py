@@ -145,14 +145,23 @@ def video_out(text: str) -> str:
     return str(percent_pattern(text)) if "#" in text and is_sequence(text) else text
 
 
+#: The largest ``--start-number``: a frame number of 32 bits (a DPX header's, ffmpeg's
+#: image-sequence reader's); 10**30 was taken, its frames named with 31 digits.
+MAX_START_NUMBER = 2 ** 31 - 1
+
+
 def _start_number(text: str) -> int:
-    """``--start-number``'s value: an integer >= 0 (argparse names the option)."""
+    """``--start-number``'s value: an integer from 0 to :data:`MAX_START_NUMBER` (argparse
+    names the option)."""
     try:
         n = int(text)
     except ValueError:
         n = -1
     if n < 0:
         raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    if n > MAX_START_NUMBER:
+        raise argparse.ArgumentTypeError(f"expected a frame number of at most "
+                                         f"{MAX_START_NUMBER} (32 bits), got {text!r}")
     return n
 
 
