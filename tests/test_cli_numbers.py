@@ -182,9 +182,8 @@ def test_texture_blend_feather_must_be_a_finite_radius(value, tmp_path, capsys):
     assert not (tmp_path / "o.png").exists()
 
 
-def test_a_missing_fraction_that_hides_no_cell(tmp_path, capsys):
-    """``impute eval --missing 0.1`` of a data set of 4 cells hides none. Before: numpy's
-    "need at least one array to stack"."""
+def _four_cells(tmp_path):
+    """A data set of 2 identities x 2 expressions of a tetrahedron (4 cells): its manifest."""
     rows = ["path,identity,expression"]
     for i in range(2):
         for e in range(2):
@@ -194,6 +193,26 @@ def test_a_missing_fraction_that_hides_no_cell(tmp_path, capsys):
                 "".join(f"v {a} {b} {c}\n" for a, b, c in v) + "f 1 2 3\nf 1 2 4\n")
             rows.append(f"f{i}{e}.obj,id{i},e{e}")
     (tmp_path / "m.csv").write_text("\n".join(rows) + "\n")
-    _says(["impute", "eval", "--dataset", tmp_path / "m.csv", "--missing", "0.1,0.5",
+    return tmp_path / "m.csv"
+
+
+def test_a_missing_fraction_that_hides_no_cell(tmp_path, capsys):
+    """``impute eval --missing 0.1`` of a data set of 4 cells hides none. Before: numpy's
+    "need at least one array to stack"."""
+    _says(["impute", "eval", "--dataset", _four_cells(tmp_path), "--missing", "0.1,0.5",
            "--trials", 1, "--methods", "average", "--out", tmp_path / "d"], capsys,
           "missing fraction 0.1 hides no cell of the data set's 4 (give more than 0.125)")
+
+
+def test_impute_trials_beyond_any_evaluation(tmp_path, capsys, monkeypatch):
+    """Before: ``--trials 10**30`` ran until interrupted (the evaluation, stood in for here,
+    was reached)."""
+    import facetransfer.impute
+
+    def reached(*a, **k):
+        raise AssertionError("the evaluation was started")
+
+    monkeypatch.setattr(facetransfer.impute, "evaluate_imputation", reached)
+    _says(["impute", "eval", "--dataset", _four_cells(tmp_path), "--missing", "0.5",
+           "--trials", 10 ** 30, "--methods", "average", "--out", tmp_path / "d"], capsys,
+          f"--trials must be at most 1000 (per fraction), got {10 ** 30}")

@@ -20,6 +20,8 @@ log = logging.getLogger(__name__)
 
 DEFAULT_FRACTIONS = "0.1,0.2,0.3,0.4,0.5"
 DEFAULT_METHODS = "ppca,average,naive,tensorly"
+#: The most ``--trials`` per fraction (the paper's figures average a few).
+MAX_TRIALS = 1000
 
 
 def register(sub) -> None:
@@ -81,6 +83,9 @@ def _eval_inputs(args) -> tuple[list[float], list[str], Path]:
         raise ValueError("--methods is empty")
     if args.trials < 1:
         raise ValueError(f"--trials must be at least 1, got {args.trials}")
+    if args.trials > MAX_TRIALS:      # 10**30 ran on until interrupted
+        raise ValueError(f"--trials must be at most {MAX_TRIALS} (per fraction), got "
+                         f"{args.trials}")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a folder")
