@@ -363,7 +363,7 @@ def test_batch_transfer_writes_the_codec_asked_for(clips, quick_model_path, inpr
     assert "hevc" in described_input(out / "ab.mp4") and len(read_video(out / "ab.mp4")[0]) == 8
     code, _, err = _cli(capsys, "batch", "transfer", "--manifest", man, "--model",
                         quick_model_path, "--out", out, "--crf", "60")
-    assert code == 2 and len(err) == 1 and "CRF must be an integer from 0 to 51" in err[0]
+    assert code == 2 and len(err) == 1 and "--crf must be an integer from 0 to 51" in err[0]
 
 
 def _stub_export(monkeypatch, calls):

@@ -137,6 +137,17 @@ def test_batch_tracks_overlap_is_checked_without_chunk(tmp_path, capsys, monkeyp
 
 
 # ------------------------------------------------------------------------------ commands
+@pytest.mark.parametrize("argv", [
+    ["transfer", "--target", "t.mp4", "--expression-from", "s.mp4", "--out", "o.mp4"],
+    ["batch", "transfer", "--manifest", "pairs.csv", "--out", "d"]], ids=["transfer", "batch"])
+@pytest.mark.parametrize("crf", ["-1", "52", str(10 ** 30)])
+def test_a_crf_out_of_range_names_the_option(argv, crf, tmp_path, capsys, monkeypatch):
+    """Before: "CRF must be an integer from 0 to 51", not the option's name."""
+    monkeypatch.chdir(tmp_path)
+    _says(argv + ["--crf", crf], capsys, f"--crf must be an integer from 0 to 51 (the constant "
+          f"rate factor: lower is better; default 18), got {crf}")
+
+
 def test_synth_video_frames_beyond_any_clip(quick_model_path, tmp_path, capsys):
     """Before: ``--frames 10**30`` was numpy's OverflowError traceback."""
     _says(["synth-video", "--model", quick_model_path, "--random", "--frames", 10 ** 30,
