@@ -363,12 +363,15 @@ def test_batch_transfer_writes_the_codec_asked_for(clips, quick_model_path, inpr
     assert "hevc" in described_input(out / "ab.mp4") and len(read_video(out / "ab.mp4")[0]) == 8
     code, _, err = _cli(capsys, "batch", "transfer", "--manifest", man, "--model",
                         quick_model_path, "--out", out, "--crf", "60")
-    assert code == 2 and len(err) == 1 and "CRF must be an integer from 0 to 51" in err[0]
+    assert code == 2 and len(err) == 1 and "--crf must be an integer from 0 to 51" in err[0]
 
 
 def _stub_export(monkeypatch, calls):
+    import importlib
+
     import facetransfer.cli.export  # noqa: F401 - the CLI's own import, before the stand-in
     import facetransfer.export as real
+    importlib.import_module("facetransfer.export.livelink")   # the job digest's take labels
 
     mod = types.ModuleType("facetransfer.export")
     mod.FORMATS = real.FORMATS
@@ -813,3 +816,50 @@ def test_a_summary_of_the_format_before_still_keeps_its_outputs(arkit_model, mak
             f"{out / 'u.json'} was made from other inputs or options than u's now (or its "
             "files were moved or copied since: an older version's summary recorded where they "
             "lay); remove it to redo this clip alone, or --overwrite redoes every clip")
+
+
+def _old_export_words(fmt, texture, neutral, model, labels=None):
+    """``batch export``'s options in its digests as a version before ``--take-rate`` wrote
+    them (its takes labelled in the clip's frames)."""
+    return f"export {fmt} {texture} {neutral!r} " + (
+        "default" if model is None else model.content_hash)
+
+
+@pytest.mark.parametrize("form", ["v2", "legacy"])
+def test_a_take_an_earlier_version_wrote_is_exported_again(form, arkit_model, make_arkit_track,
+                                                            inproc, tmp_path, capsys,
+                                                            monkeypatch):
+    """A livelink take written by a version whose digest did not name its labels (rows in the
+    clip's frames, the old default): a rerun exports it again with the labels asked for
+    (before: skipped as the new default's, the take Unreal misplaces kept); the take so
+    written is skipped by the next rerun; a json export of those words is skipped as before."""
+    from facetransfer.batch import digest
+    from facetransfer.export.livelink import read_livelink
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    t, m, out = tmp_path / "t.npz", tmp_path / "m.npz", tmp_path / "exp"
+    make_arkit_track(arkit_model, 6, seed=1)[0].save(t)               # 25 fps
+    arkit_model.save(m)
+    take = ("batch", "export", t, "--format", "livelink", "--out", out, "--model", m,
+            "--no-progress")
+    data = ("batch", "export", t, "--format", "json", "--out", tmp_path / "js", "--model", m,
+            "--no-progress")
+    new_words, new_keys = batch_run._export_what, batch_run.job_keys
+    monkeypatch.setattr(batch_run, "_export_what", _old_export_words)   # the version before
+    if form == "legacy":
+        monkeypatch.setattr(batch_run, "job_keys", lambda jobs, what: {
+            j.name: digest.legacy_job_key(j, what) for j in jobs})
+    assert _cli(capsys, *take, "--take-rate", "clip")[0] == 0 and _cli(capsys, *data)[0] == 0
+    assert read_livelink(out / "t.csv").timecodes[1] == "00:00:00:01.000"
+    monkeypatch.setattr(batch_run, "_export_what", new_words)
+    monkeypatch.setattr(batch_run, "job_keys", new_keys)
+    assert _cli(capsys, *data)[0] == 0
+    assert _summary(tmp_path / "js" / "summary.csv")["t"]["status"] == "skipped"
+    assert _cli(capsys, *take)[0] == 0
+    row = _summary(out / "summary.csv")["t"]
+    assert row["status"] == "done" and row["job"].startswith("v2:"), row
+    assert read_livelink(out / "t.csv").timecodes[1] == "00:00:00:01.200"  # the app's labels
+    assert _cli(capsys, *take)[0] == 0
+    assert _summary(out / "summary.csv")["t"]["status"] == "skipped"
+    assert _cli(capsys, *take, "--take-rate", "clip")[0] == 1        # of other options now
+    assert read_livelink(out / "t.csv").timecodes[1] == "00:00:00:01.200"

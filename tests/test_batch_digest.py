@@ -220,6 +220,23 @@ def test_a_batch_transfers_options_leave_their_defaults_out():
     assert transfer_what(settings, types.SimpleNamespace(content_hash="abd")) != what
 
 
+def test_a_takes_labels_are_always_named_in_its_digest(monkeypatch):
+    """``batch export``'s options in its digests: a livelink take's labels named whether said
+    or the default (before: the default left out, so a take of the old default, the clip's
+    frames, had the digest of the new one's); a later default is another digest; the other
+    formats' words are those they had (the legacy key's test above)."""
+    from facetransfer.batch.run import _export_what
+    from facetransfer.export import livelink
+
+    assert _export_what("livelink", "None", None, None) == \
+        "export livelink None None default labels app"
+    assert _export_what("livelink", "None", 3, None, "clip") == \
+        "export livelink None 3 default labels clip"
+    assert _export_what("json", "None", None, None) == "export json None None default"
+    monkeypatch.setattr(livelink, "DEFAULT_LABELS", "clip")
+    assert _export_what("livelink", "None", None, None).endswith(" labels clip")
+
+
 def test_an_option_that_is_a_file_is_its_content(tmp_path, cache):
     tex = tmp_path / "tex.png"
     tex.write_bytes(b"texture")

@@ -184,10 +184,13 @@ def bad_tracks(tmp_path_factory, arrays) -> dict:
             zf.writestr(k + ".npy", b.getvalue() if k != "scale" else b"not an array")
     np.save(d / "array.npy", np.zeros(3))
     (d / "array.npy").rename(out["npy"])
+    far = arrays["scale"].copy()
+    far[2] = 1e300
+    out["far"] = _write(d / "far.npz", {**arrays, "scale": far})
     return out
 
 
-@pytest.mark.parametrize("bad", ["raw", "npy"])
+@pytest.mark.parametrize("bad", ["raw", "npy", "far"])
 @pytest.mark.parametrize("command", ["export", "edit", "probe", "puppet", "transfer"])
 def test_commands_given_a_bad_track_say_one_line(tmp_path, capsys, bad_tracks, quick_model_path,
                                                  data_dir, command, bad):
@@ -205,6 +208,8 @@ def test_commands_given_a_bad_track_say_one_line(tmp_path, capsys, bad_tracks, q
     status, err = _cli(argv, capsys)
     assert status == 2 and len(err) == 1, err
     assert err[0].startswith(f"facetransfer {command}: error: ") and t.name in err[0], err
+    if bad == "far":      # before: rendered (puppet: an empty frame), or refused for its length
+        assert "scale of frame 2 is 1e+300, outside [6.4e-05, 64000]" in err[0], err
 
 
 def test_a_member_declaring_more_data_than_it_holds_is_damage_not_memory(tmp_path, arrays):
@@ -241,3 +246,49 @@ def test_blendshapes_beyond_float32_are_refused_without_a_warning(tmp_path, arra
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         _refused(p, "blendshapes must be finite and lie in [0, 1]")
+
+
+#: (key, frame 2's value, words of the message): a value no tracked face holds, or not a
+#: number. Before, each loaded (1e300, 1e-300: an empty frame rendered; weights of 1e300:
+#: "all triangles are degenerate") or was refused without its frame ("has non-finite values").
+FAR = [("scale", 1e300, "scale of frame 2 is 1e+300, outside [6.4e-05, 64000]"),
+       ("scale", 1e-300, "scale of frame 2 is 1e-300, outside"),
+       ("scale", np.nan, "scale of frame 2 is nan, not a number"),
+       ("translation", -1e300, "translation of frame 2 is -1e+300, outside [-6400, 6400]"),
+       ("translation", np.nan, "translation of frame 2 is nan, not a number"),
+       ("translation", np.inf, "translation of frame 2 is inf, outside"),
+       ("landmarks2d", 1e300, "landmarks2d of frame 2 is 1e+300, outside"),
+       ("weights_expression", 1e300, "weights_expression of frame 2 is 1e+300, outside "
+        "[-1e+06, 1e+06]"),
+       ("detections2d", np.inf, "detections2d of frame 2 is inf, outside")]
+
+
+@pytest.mark.parametrize("key,value,says", FAR, ids=[f"{k} {v}" for k, v, _ in FAR])
+def test_a_pose_no_tracked_face_holds_is_refused_naming_key_and_frame(tmp_path, arrays, key,
+                                                                       value, says):
+    """Bounds from the tracker's own tracks (``SCALE_SIDES``, ``PIXEL_SIDES``,
+    ``WEIGHT_LIMIT``: 0.025-0.040 sides of scale, positions within 1.04 sides, weights within
+    12, on the data folder's clips), the key and the frame named."""
+    a = dict(arrays)
+    if key == "detections2d":
+        a[key] = np.full_like(arrays["landmarks2d"], np.nan)        # no face found: allowed
+        assert Track.load(_write(tmp_path / "nan.npz", a)).detections2d is not None
+    v = a[key].copy()
+    v[2] = value
+    msg = _refused(_write(tmp_path / "far.npz", {**a, key: v}), says)
+    assert "is invalid" not in msg
+
+
+def test_poses_within_the_bounds_still_load(tmp_path, arrays):
+    """A face far off the frame (99 sides), a tiny or huge scale (1e-5, 900 sides), weights of
+    9e5, a lost frame: read as they are."""
+    scale, tr, w = arrays["scale"].copy(), arrays["translation"].copy(), \
+        arrays["weights_expression"].copy()
+    scale[1:3] = 64e-5, 64 * 900
+    tr[3] = -99 * 64
+    w[0, 0] = 9e5
+    t = Track.load(_write(tmp_path / "near.npz", {**arrays, "scale": scale, "translation": tr,
+                                                  "weights_expression": w,
+                                                  "lost": np.array([0, 0, 1, 0])}))
+    assert t.scale.tolist() == scale.tolist() and t.translation[3].tolist() == tr[3].tolist()
+    assert t.weights["expression"][0, 0] == 9e5

@@ -601,6 +601,8 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         Each track's activations measured from this frame's (``export_track``).
     labels : {"app", "clip"}, optional
         A livelink take's timecode labels (``export_track``); None: the default, the app's.
+        A take an earlier version wrote, whose digest did not name its labels, is exported
+        again (:func:`_without_unnamed_labels`).
 
     Returns
     -------
@@ -616,6 +618,10 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         lambda out, name: Row(name, "skipped", output=str(out)) if out.is_file() else None,
         lambda job: legacy_job_key(job, _export_what(fmt, repr(texture), neutral, model,
                                                      labels)))
+    if fmt == "livelink":      # a take whose labels its digest does not name: written again
+        done = _without_unnamed_labels(done, jobs, out_dir, (
+            _export_what_before(fmt, value_text(texture), neutral, model),
+            _export_what_before(fmt, repr(texture), neutral, model)))
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
                                                  texture, neutral, labels, pure=False),
@@ -624,12 +630,41 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
 
 def _export_what(fmt: str, texture: str, neutral, model, labels: str | None = None) -> str:
     """The options and model of a ``batch export`` in its digests (``texture``: as text, of the
-    file's content, :func:`.digest.value_text`; in the format before, its ``repr``; a take's
-    ``labels`` only where other than the default's, so that the digests made before the
-    option keep their words)."""
+    file's content, :func:`.digest.value_text`; in the format before, its ``repr``); a take's
+    labels always, the default's named (:data:`~facetransfer.export.livelink.DEFAULT_LABELS`):
+    a later change of the default is a change of the digest, not a take kept labelled as it
+    was. The other formats' digests keep the words they had (:func:`_export_what_before`)."""
+    if fmt != "livelink":
+        return _export_what_before(fmt, texture, neutral, model)
+    from ..export.livelink import DEFAULT_LABELS
+
+    return (f"{_export_what_before(fmt, texture, neutral, model)} "
+            f"labels {labels or DEFAULT_LABELS}")
+
+
+def _export_what_before(fmt: str, texture: str, neutral, model) -> str:
+    """:func:`_export_what` as facetransfer wrote it before a take's labels were named in it
+    (takes counted in the clip's frames; for one version, the app's, unless ``clip`` was said,
+    then named). Kept as it was: do not change it."""
     return f"export {fmt} {texture} {neutral!r} " + (
-        "default" if model is None else model.content_hash) + (
-        f" labels {labels}" if labels not in (None, "app") else "")
+        "default" if model is None else model.content_hash)
+
+
+def _without_unnamed_labels(done: dict, jobs, out_dir: Path, words: tuple[str, str]) -> dict:
+    """``done`` without the refused rows of takes this job wrote in a version whose digest did
+    not name their labels (``words``: this job's options so worded, in the format of
+    :data:`.digest.KEY_FORMAT` and in the one before it): such a take is exported again, with
+    the labels asked for. Before, the old default's take (the clip's frames, which Unreal's
+    importer misplaces) was skipped as the new default's; whether such a take is of the
+    clip's labels or the app's cannot be told from its digest, so it is not kept."""
+    earlier, stale = _earlier(out_dir), set()
+    for j in jobs:
+        r, made = done.get(j.name), earlier.get(j.name, "")
+        if r is not None and not r.ok and made and same_job(
+                made, "", lambda job=j: legacy_job_key(job, words[1]),
+                lambda job=j: job_keys([job], words[0])[job.name]):
+            stale.add(j.name)
+    return {n: r for n, r in done.items() if n not in stale}
 
 
 def _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys) -> BatchResult:

@@ -19,8 +19,8 @@ import sys
 from pathlib import Path
 
 from ..errors import FaceTransferError
-from .common import (FACE_WHERE, add_video_options, progress_disabled, resolve_model,
-                     video_options)
+from .common import (FACE_WHERE, add_video_options, integer_from, progress_disabled,
+                     resolve_model, video_options)
 
 
 def _cluster_options(p) -> None:
@@ -77,7 +77,7 @@ def _register_track(bs, fmt) -> None:
     t.add_argument("--chunk", type=int, default=0,
                    help="split clips longer than this many frames into overlapping chunks "
                    "tracked in parallel (0 = never)")
-    t.add_argument("--overlap", type=int, default=DEFAULT_OVERLAP,
+    t.add_argument("--overlap", type=integer_from(1), default=DEFAULT_OVERLAP,
                    help="frames shared by neighbouring chunks (cross-faded)")
     t.add_argument("--face", metavar="WHERE",
                    help=f"[capture] with several people in the frame, the one to track in "

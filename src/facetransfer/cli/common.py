@@ -145,14 +145,23 @@ def video_out(text: str) -> str:
     return str(percent_pattern(text)) if "#" in text and is_sequence(text) else text
 
 
+#: The largest ``--start-number``: a frame number of 32 bits (a DPX header's, ffmpeg's
+#: image-sequence reader's); 10**30 was taken, its frames named with 31 digits.
+MAX_START_NUMBER = 2 ** 31 - 1
+
+
 def _start_number(text: str) -> int:
-    """``--start-number``'s value: an integer >= 0 (argparse names the option)."""
+    """``--start-number``'s value: an integer from 0 to :data:`MAX_START_NUMBER` (argparse
+    names the option)."""
     try:
         n = int(text)
     except ValueError:
         n = -1
     if n < 0:
         raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    if n > MAX_START_NUMBER:
+        raise argparse.ArgumentTypeError(f"expected a frame number of at most "
+                                         f"{MAX_START_NUMBER} (32 bits), got {text!r}")
     return n
 
 
@@ -210,6 +219,22 @@ def number_in(lo: float, hi: float, *, integer: bool = False):
             shown = [f"{int(b)}" if integer else f"{b:g}" for b in (lo, hi)]
             raise argparse.ArgumentTypeError(f"expected {kind} in [{shown[0]}, {shown[1]}], "
                                              f"got {text!r}")
+        return v
+
+    return parse
+
+
+def integer_from(lo: int):
+    """An argparse ``type`` taking an integer >= ``lo`` (a seed, a count of frames: argparse
+    names the option in its one line; before, a seed of -1 was numpy's "expected non-negative
+    integer", naming nothing, or taken)."""
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            v = None
+        if v is None or v < lo:
+            raise argparse.ArgumentTypeError(f"expected an integer >= {lo}, got {text!r}")
         return v
 
     return parse

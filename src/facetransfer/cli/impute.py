@@ -20,11 +20,13 @@ log = logging.getLogger(__name__)
 
 DEFAULT_FRACTIONS = "0.1,0.2,0.3,0.4,0.5"
 DEFAULT_METHODS = "ppca,average,naive,tensorly"
+#: The most ``--trials`` per fraction (the paper's figures average a few).
+MAX_TRIALS = 1000
 
 
 def register(sub) -> None:
     """Add ``impute eval`` to the facetransfer parser."""
-    from .common import add_command_group
+    from .common import add_command_group, integer_from
 
     isub = add_command_group(sub, "impute", dest="impute_command",
                              help="missing-data imputation (§4.4)",
@@ -39,7 +41,8 @@ def register(sub) -> None:
     e.add_argument("--missing", default=DEFAULT_FRACTIONS,
                    help=f"comma-separated fractions of cells to hide (default {DEFAULT_FRACTIONS})")
     e.add_argument("--trials", type=int, default=5, help="random trials per fraction (default 5)")
-    e.add_argument("--seed", type=int, default=0, help="seed of the held-out cells (default 0)")
+    e.add_argument("--seed", type=integer_from(0), default=0,
+                   help="seed of the held-out cells (default 0)")
     e.add_argument("--methods", default=DEFAULT_METHODS,
                    help=f"comma-separated methods (default {DEFAULT_METHODS}); also "
                    "ppca-mouth (§4.4's mouth emphasis: own covariances for the mouth region) and "
@@ -80,6 +83,9 @@ def _eval_inputs(args) -> tuple[list[float], list[str], Path]:
         raise ValueError("--methods is empty")
     if args.trials < 1:
         raise ValueError(f"--trials must be at least 1, got {args.trials}")
+    if args.trials > MAX_TRIALS:      # 10**30 ran on until interrupted
+        raise ValueError(f"--trials must be at most {MAX_TRIALS} (per fraction), got "
+                         f"{args.trials}")
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"--out {out} exists and is not a folder")

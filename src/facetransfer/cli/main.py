@@ -111,6 +111,50 @@ def command_parser(parser: argparse.ArgumentParser, argv: list[str]) -> argparse
 
 _NUMBER = re.compile(r"^-(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?$")
 
+#: A word that begins with a minus sign and is a value, not an option: a number argparse does
+#: not take for one (``-1e5``, ``-inf``, ``-nan``), a list or a size that begins with one
+#: (``-0.5,0.2``, ``-1x48``).
+_DASHED_VALUE = re.compile(r"^-(\d|\.\d|inf|nan)", re.IGNORECASE)
+
+
+def attached_values(leaf: argparse.ArgumentParser, words: list[str]) -> list[str]:
+    """``words`` with each value that begins with a minus sign (:data:`_DASHED_VALUE`) joined
+    to the option before it that takes one value: ``--identity-weights -0.5,0.2`` as
+    ``--identity-weights=-0.5,0.2``. Argparse takes such a word for an option: before, negative
+    identity coordinates were "unrecognized arguments: -0.5,0.2", ``--smooth -1e5`` "expected
+    one argument", ``--crf -inf`` "unrecognized arguments", none naming what the option
+    expects. The words after ``--`` are left as they are."""
+    known, out, k = leaf._option_string_actions, [], 0
+    while k < len(words):
+        word = words[k]
+        if word == "--":
+            return out + words[k:]
+        action = known.get(word)
+        if action is not None and action.nargs is None and k + 1 < len(words) and \
+                _DASHED_VALUE.match(words[k + 1]) and words[k + 1] not in known:
+            out.append(f"{word}={words[k + 1]}")
+            k += 2
+            continue
+        out.append(word)
+        k += 1
+    return out
+
+
+def empty_option(leaf: argparse.ArgumentParser, args) -> str | None:
+    """The first option of ``leaf`` given an empty value (``--identity-weights ''``), or None:
+    the commands took an empty text for the option not given (the target's own identity, the
+    model's mean face) without a word."""
+    for action in leaf._actions:
+        if not action.option_strings or action.nargs is not None:
+            continue
+        value = getattr(args, action.dest, None)
+        if value == action.default:
+            continue
+        if any(isinstance(v, str) and not v.strip()
+               for v in (value if isinstance(value, list) else [value])):
+            return action.option_strings[-1]
+    return None
+
 
 def unknown_options(leaf: argparse.ArgumentParser, argv: list[str]) -> list[str]:
     """The options among ``argv``'s words after its command words that the command's parser
@@ -243,12 +287,16 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     words = sys.argv[1:] if argv is None else [str(a) for a in argv]
     leaf = command_parser(parser, words)
+    words = attached_values(leaf, words)
     unknown = unknown_options(leaf, words)
     if unknown:  # before argparse's own checks: a misspelt --out is said, not "--out required"
         leaf.error(f"unrecognized arguments: {' '.join(unknown)}")
-    args, extra = parser.parse_known_args(argv)
+    args, extra = parser.parse_known_args(words)
     if extra:  # said by the command's own parser: its --help lists what it takes
         leaf.error(f"unrecognized arguments: {' '.join(extra)}")
+    empty = empty_option(leaf, args)
+    if empty:
+        leaf.error(f"argument {empty}: expected a value, got ''")
     configure_logging(args.verbose)
     from .common import set_progress
 

@@ -22,8 +22,8 @@ from ..errors import DatasetError, FaceTransferError, ShapeError
 from ..io.atomic import atomic_path, check_output_path
 from ..io.memory import available_memory  # a name of this module: tests replace it
 from ..io.output_names import check_output_suffix
-from .common import (MODEL_ARG_HELP, add_command_group, progress_shown, resolve_model,
-                     tqdm_progress)
+from .common import (MODEL_ARG_HELP, add_command_group, integer_from, progress_shown,
+                     resolve_model, tqdm_progress)
 
 log = logging.getLogger(__name__)
 
@@ -514,7 +514,8 @@ def register(sub) -> None:
                    help="refine the N-mode SVD by alternating least squares (default on)")
     b.add_argument("--impute", choices=("ppca", "average", "none"), default="ppca",
                    help="how to fill missing cells (default ppca; none: missing cells are an error)")
-    b.add_argument("--seed", type=int, default=0, help="seed of ICT identities and imputation")
+    b.add_argument("--seed", type=integer_from(0), default=0,
+                   help="seed of ICT identities and imputation")
     b.add_argument("--identities", type=int, default=None,
                    help="number of identities (ICT data sets only; default 50 ict-arkit, 15 "
                    "ict-bilinear, 16 ict-trilinear)")

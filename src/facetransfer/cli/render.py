@@ -18,10 +18,15 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import (MODEL_ARG_HELP, add_video_options, frame_count, progress_disabled,
-                     resolve_model, video_options, video_out)
+from .common import (MODEL_ARG_HELP, add_video_options, frame_count, integer_from,
+                     progress_disabled, resolve_model, video_options, video_out)
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
+#: The most frames ``synth-video --frames`` writes (11 hours at 25 fps; 10**30 was numpy's
+#: OverflowError traceback).
+MAX_SYNTH_FRAMES = 1_000_000
+#: The largest ``--pose`` angle, in degrees (a turn either way; 1e300 was taken) and scale.
+MAX_POSE_ANGLE, MAX_POSE_SCALE = 360.0, 1000.0
 
 
 def parse_size(text: str) -> tuple[int, int]:
@@ -57,8 +62,14 @@ def parse_pose(text: str | None) -> dict[str, float]:
             raise FaceTransferError(f"--pose: expected KEY=NUMBER with KEY in "
                                     f"{', '.join(POSE_KEYS)}, got {part!r}")
         out[name] = v
-    if out.get("scale", 1.0) <= 0:
-        raise FaceTransferError(f"--pose: scale must be > 0, got {out['scale']}")
+    if not 0 < out.get("scale", 1.0) <= MAX_POSE_SCALE:
+        raise FaceTransferError(f"--pose: scale must be in (0, {MAX_POSE_SCALE:g}], got "
+                                f"{out['scale']:g}")
+    turned = {k: v for k, v in out.items() if k != "scale" and abs(v) > MAX_POSE_ANGLE}
+    if turned:
+        k = next(iter(turned))
+        raise FaceTransferError(f"--pose: {k} must be in [-{MAX_POSE_ANGLE:g}, "
+                                f"{MAX_POSE_ANGLE:g}] degrees, got {turned[k]:g}")
     return out
 
 
@@ -167,8 +178,9 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
                                 args.random else "give --performance SPEC.json or --random")
     if args.fps is not None and not 0 < args.fps <= 1000:
         raise FaceTransferError(f"--fps must be in (0, 1000], got {args.fps}")
-    if args.frames is not None and args.frames < 1:
-        raise FaceTransferError(f"--frames must be >= 1, got {args.frames}")
+    if args.frames is not None and not 1 <= args.frames <= MAX_SYNTH_FRAMES:
+        raise FaceTransferError(f"--frames must be from 1 to {MAX_SYNTH_FRAMES}, got "
+                                f"{args.frames}")
     size = parse_size(args.size) if args.size else None
     identity = parse_identity(args.identity) if args.identity else None
     model = resolve_model(args.model)
@@ -225,8 +237,8 @@ def register(sub) -> None:
     s.add_argument("--random", action="store_true", help="a seeded random performance")
     s.add_argument("--frames", type=int, default=None,
                    help="number of frames (default 100 for --random; overrides the spec)")
-    s.add_argument("--seed", type=int, default=0, help="seed of the random performance, "
-                   "texture and background")
+    s.add_argument("--seed", type=integer_from(0), default=0,
+                   help="seed of the random performance, texture and background")
     s.add_argument("--size", default=None, help="WIDTHxHEIGHT (default 640x480 or the spec's)")
     s.add_argument("--fps", type=float, default=None, help="frame rate (default 25 or the spec's)")
     s.add_argument("--texture", default="procedural",

@@ -100,8 +100,9 @@ def _smooth(args) -> int:
     check_output_path(args.out, overwrite=args.overwrite, inputs=[args.scan])
     for name in ("sigma_c", "sigma_s"):
         val = getattr(args, name)
-        if val is not None and not val > 0:
-            raise ValueError(f"--{name.replace('_', '-')} must be positive, got {val}")
+        if val is not None and not 0 < val < float("inf"):   # inf and NaN were taken
+            raise ValueError(f"--{name.replace('_', '-')} must be a positive finite number "
+                             f"(scan units), got {val}")
     scan = load_scan(args.scan)
     v = bilateral_smooth(scan.vertices, scan.faces, sigma_c=args.sigma_c, sigma_s=args.sigma_s)
     write_mesh(args.out, v, scan.faces, overwrite=args.overwrite)

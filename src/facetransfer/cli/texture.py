@@ -20,7 +20,8 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import add_command_group, default_model_for, progress_disabled, resolve_model
+from .common import (add_command_group, default_model_for, integer_from, progress_disabled,
+                     resolve_model)
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -191,8 +192,9 @@ def cmd_blend(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"source {args.source} is {src.shape[1]}x{src.shape[0]}, target "
                                 f"{args.target} is {dst.shape[1]}x{dst.shape[0]}: sizes must match")
     mask = _read_mask(args.mask, dst.shape[:2])
-    if args.feather < 0:
-        raise FaceTransferError(f"--feather must be >= 0, got {args.feather}")
+    if not 0 <= args.feather < float("inf"):      # NaN was taken for none
+        raise FaceTransferError(f"--feather must be a finite number >= 0 (pixels), got "
+                                f"{args.feather}")
     m = feather_mask(mask, args.feather) if args.feather > 0 else mask
     method = args.method if args.feather == 0 else ("solver" if args.method == "auto" else args.method)
     if method == "opencv" and not opencv_serves(m):   # before: said as the library's keyword
@@ -217,7 +219,7 @@ def register(sub) -> None:
     d.add_argument("--model", help="model file (.npz) with UVs; default: the default model "
                    "(ict-arkit)")
     d.add_argument("--size", type=int, default=512, help="texture width and height (default 512)")
-    d.add_argument("--seed", type=int, default=0, help="noise seed (default 0)")
+    d.add_argument("--seed", type=integer_from(0), default=0, help="noise seed (default 0)")
     d.add_argument("--source", choices=("procedural", "lee-perry-smith", "auto"),
                    default="auto",
                    help="auto (default): the Lee Perry-Smith scan fitted onto the ICT-FaceKit UVs "

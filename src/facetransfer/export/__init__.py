@@ -135,10 +135,10 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
         if model is not None:
             track.check_model(model)
         if fmt == "livelink":
-            from .livelink import write_livelink
+            from .livelink import DEFAULT_LABELS, write_livelink
 
             return write_livelink(track, out, overwrite=overwrite, start=start,
-                                  labels=labels or "app")
+                                  labels=labels or DEFAULT_LABELS)
         from .mpjson import write_mediapipe_json
 
         return write_mediapipe_json(track, out, overwrite=overwrite, timecode=start)

@@ -47,8 +47,8 @@ from ..arkit import ARKIT_NAMES
 from ..io.atomic import write_text_atomic
 from .common import ExportError, head_euler, require_activations
 
-__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "LABELS", "app_rate", "format_timecode",
-           "parse_timecode",
+__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "LABELS", "DEFAULT_LABELS", "app_rate",
+           "format_timecode", "parse_timecode",
            "timecode_fields", "source_timecode",
            "livelink_rows", "eye_angles", "write_livelink", "read_livelink", "LiveLinkTake"]
 
@@ -84,6 +84,9 @@ _TC = re.compile(r"^(\d{2,}):(\d{2}):(\d{2})[:;](\d{2,3})(?:\.(\d{1,3}))?$")
 #: How a take's rows are labelled (:func:`format_timecode`): ``clip``, the clip's own timecode;
 #: ``app``, the Live Link Face app's frames of 30 or 60 a second (Unreal's importer).
 LABELS: tuple[str, ...] = ("clip", "app")
+#: The labels of a take written without ``labels`` said (``export --take-rate``'s default;
+#: before, ``clip``). ``batch export``'s job digest names the labels a take is written with.
+DEFAULT_LABELS = "app"
 
 
 def _nominal_rate(fps: float) -> int:

@@ -154,6 +154,7 @@ def evaluate_imputation(dataset: FaceDataset, fractions: Sequence[float], *, tri
                            for m in methods if m in EVAL_VARIANTS}
     fractions = _check_fractions(fractions, trials)
     data = _EvalData.of(dataset)
+    _check_hides_cells(fractions, data.base.size)
     if example_fraction is None:
         example_fraction = min(fractions, key=lambda f: abs(f - 0.15))
     acc: dict[tuple[str, float], list[tuple[float, float, float]]] = {}
@@ -194,6 +195,15 @@ def _check_fractions(fractions: Sequence[float], trials: int) -> list[float]:
         if not 0 < f < 1:
             raise ValueError(f"missing fractions must be in (0, 1), got {f}")
     return fractions
+
+
+def _check_hides_cells(fractions: Sequence[float], n_cells: int) -> None:
+    """DatasetError for a fraction that hides no cell of a data set of ``n_cells`` (rounded to
+    none; before: numpy's "need at least one array to stack", naming nothing)."""
+    for f in fractions:
+        if round(f * n_cells) < 1:
+            raise DatasetError(f"missing fraction {f:g} hides no cell of the data set's "
+                               f"{n_cells} (give more than {0.5 / n_cells:.3g})")
 
 
 @dataclass(frozen=True)

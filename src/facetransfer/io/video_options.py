@@ -127,8 +127,9 @@ class VideoOptions:
                                  "(profile HQ)")
             lo, hi = CRF_RANGE
             if isinstance(self.crf, bool) or int(self.crf) != self.crf or not lo <= self.crf <= hi:
-                raise VideoError(f"CRF must be an integer from {lo} to {hi} (lower is better; "
-                                 f"default {DEFAULT_CRF}), got {self.crf}")
+                raise VideoError(f"--crf must be an integer from {lo} to {hi} (the constant rate "
+                                 f"factor: lower is better; default {DEFAULT_CRF}), got "
+                                 f"{self.crf}")
         if self.sar is not None:
             object.__setattr__(self, "sar", checked_aspect(self.sar))
         checked_colour_name(self.primaries, "primaries")

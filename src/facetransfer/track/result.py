@@ -62,6 +62,17 @@ MAX_FRAME_SIDE = 1 << 16
 #: tracks of a development machine's track cache: at most 9e-16).
 ROTATION_TOLERANCE = 1e-4
 
+#: The values a track file's pose and points may hold, in sides of its frame (the longer of
+#: ``frame_size``): ``scale`` (pixels per model unit) within ``SCALE_SIDES``, the pixel
+#: positions (``translation``, ``landmarks2d``, ``detections2d``) within ``PIXEL_SIDES`` of the
+#: frame's corner, and every weight within ``WEIGHT_LIMIT``. The tracker's tracks of the data
+#: folder's clips (driving_d6, face_2, WDA_KatieHill_000, forty-sixth session) hold scales of
+#: 0.025-0.040 sides, positions of 0.17-1.04 sides and weights within 12: the bounds leave
+#: four to five orders of magnitude; beyond them a frame rendered empty (1e300, 1e-300).
+SCALE_SIDES = (1e-6, 1e3)
+PIXEL_SIDES = 100.0
+WEIGHT_LIMIT = 1e6
+
 
 def _track_array(name: str, val, shape: tuple, dtype=np.float64) -> np.ndarray:
     """``val`` as an array of ``shape`` and ``dtype``, finite where it is float; a
@@ -392,6 +403,7 @@ class Track:
         if absent:
             raise TrackError(f"track file {p} lacks weights of mode(s) {absent}")
         _check_rotations(data["rotation"], p)
+        _check_ranges(data, names, p)
         try:
             return cls(fps=scalar(data, "fps", float, p, "track file", TrackError),
                        frame_size=tuple(np.asarray(data["frame_size"]).ravel()),
@@ -468,6 +480,44 @@ def _check_rotations(rotation: np.ndarray, p: Path) -> None:
         k = int(np.flatnonzero(bad)[0])
         raise TrackError(f"track file {p}: rotation of frame {k} is not a rotation matrix "
                          f"(R Rᵀ = I, det R = +1)")
+
+
+def _value_ranges(data: dict, names: tuple) -> dict[str, tuple[float, float]]:
+    """``{key: (low, high)}``: the values a track file's numbers may hold (:data:`SCALE_SIDES`,
+    :data:`PIXEL_SIDES`, :data:`WEIGHT_LIMIT`); none where its ``frame_size`` is not one (the
+    track's own checks say so)."""
+    size = np.asarray(data["frame_size"], dtype=np.float64).ravel()
+    if size.size != 2 or not np.isfinite(size).all() or size.min() <= 0:
+        return {}
+    side = float(size.max())
+    pixels = (-PIXEL_SIDES * side, PIXEL_SIDES * side)
+    return {"scale": (SCALE_SIDES[0] * side, SCALE_SIDES[1] * side), "translation": pixels,
+            "landmarks2d": pixels, "detections2d": pixels,
+            **{f"weights_{n}": (-WEIGHT_LIMIT, WEIGHT_LIMIT) for n in names}}
+
+
+def _check_ranges(data: dict, names: tuple, p: Path) -> None:
+    """TrackError naming the key and the first frame of a value that is not a number or that
+    no tracked face holds (:func:`_value_ranges`; ``detections2d`` NaN where the detector found
+    no face): before, a scale or translation of 1e300 or 1e-300 rendered an empty frame with a
+    warning of the renderer's, weights of 1e300 "all triangles are degenerate", naming neither
+    the track nor the frame, and a NaN was "non-finite values" without its frame."""
+    for key, (lo, hi) in _value_ranges(data, names).items():
+        a = np.asarray(data[key], dtype=np.float64) if key in data else np.empty(0)
+        if a.ndim == 0 or a.size == 0:
+            continue                      # absent, or a shape the track's own checks say
+        v = a.reshape(len(a), -1)
+        with np.errstate(invalid="ignore"):
+            bad = ~((v >= lo) & (v <= hi))
+        if key == "detections2d":
+            bad &= ~np.isnan(v)
+        if bad.any():
+            k = int(np.flatnonzero(bad.any(axis=1))[0])
+            x = float(v[k][bad[k]][0])
+            w, h = (int(n) for n in np.asarray(data["frame_size"]).ravel())
+            what = "not a number" if np.isnan(x) else (
+                f"outside [{lo:g}, {hi:g}], what a face tracked in {w}x{h} frames holds")
+            raise TrackError(f"track file {p}: {key} of frame {k} is {x:g}, {what}")
 
 
 def _source_facts(data: dict, p: Path) -> SourceFacts | None:
