@@ -103,7 +103,7 @@ def register(sub) -> None:
     p.add_argument("--overlay", type=video_out,
                    help="also write a video with the fitted mesh drawn (.mp4, or an image "
                    "sequence frames/%%05d.png or frames/#####.png)")
-    add_video_options(p, what="--overlay")
+    add_video_options(p, what="--overlay", flag="--overlay", carries_target=False)
     p.add_argument("--face", metavar="WHERE",
                    help="[capture] with several people in the frame, the one to track: "
                    + FACE_WHERE)

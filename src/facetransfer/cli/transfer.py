@@ -129,13 +129,15 @@ def _parser(sub, name: str, help: str, description: str):
 
 
 def _add_output(p, func, *, metavar: str, help: str | None = None, video: bool = False,
-                overwrite_help: str = "replace an existing output") -> None:
-    """``--out`` (with the video options when ``video``), ``--overwrite`` and the function
-    that runs the subcommand."""
+                overwrite_help: str = "replace an existing output",
+                carries_target: bool = True) -> None:
+    """``--out`` (with the video options when ``video``, ``carries_target`` as
+    :func:`~.common.add_video_options`), ``--overwrite`` and the function that runs the
+    subcommand."""
     p.add_argument("--out", required=True, metavar=metavar, help=help,
                    type=video_out if video else str)
     if video:
-        add_video_options(p)
+        add_video_options(p, carries_target=carries_target)
     p.add_argument("--overwrite", action="store_true", help=overwrite_help)
     p.set_defaults(func=func)
 
@@ -263,7 +265,7 @@ def _register_puppet(sub) -> None:
     q.add_argument("--face", metavar="WHERE",
                    help=f"with several people, the one whose performance drives the puppet: "
                    f"{FACE_WHERE}")
-    _add_output(q, run_puppet, metavar="OUT.mp4", video=True,
+    _add_output(q, run_puppet, metavar="OUT.mp4", video=True, carries_target=False,
                 help="video (.mp4...) or image sequence (frames/%%05d.png)")
 
 

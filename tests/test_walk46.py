@@ -1,0 +1,35 @@
+"""What a new user's walk through the README and the less-used commands found (forty-sixth
+session, helper walk)."""
+
+from __future__ import annotations
+
+
+def _option_help(words: list[str], flag: str) -> str:
+    """The help text of ``flag`` in the subcommand ``words`` (e.g. ``["puppet"]``)."""
+    from facetransfer.cli.main import build_parser
+
+    parser = build_parser()
+    for w in words:
+        sub = next(a for a in parser._actions if a.__class__.__name__ == "_SubParsersAction")
+        parser = sub.choices[w]
+    action = next(a for a in parser._actions if flag in a.option_strings)
+    return action.help % {"prog": parser.prog, "default": action.default} \
+        if "%(" in action.help else action.help.replace("%%", "%")
+
+
+def test_codec_help_promises_a_targets_depth_only_where_a_target_is_rewritten():
+    """``puppet``, ``track --overlay`` and ``synth-video`` write 8-bit renders of their own
+    (no target's frames: ``like_video`` is not given their output), yet their ``--codec`` help
+    said ProRes kept "a target's alpha" and H.265 "a 10-bit or HDR target's depth"; and
+    ``track``'s said an image sequence was ``--out frames/%05d.png`` (its ``--out`` is the
+    track file: the sequence is ``--overlay``)."""
+    for words in (["puppet"], ["track"], ["synth-video"]):
+        text = _option_help(words, "--codec")
+        assert "target" not in text, (words, text)
+        assert "ProRes 422 HQ" in text
+    assert "ignored for an image sequence (--overlay frames/%05d.png)" in \
+        _option_help(["track"], "--codec")
+    assert "(--overlay shot/%04d.exr" in _option_help(["track"], "--start-number")
+    for words in (["transfer"], ["demo"]):
+        assert "10-bit or HDR target's depth" in _option_help(words, "--codec")
+    assert "(--out frames/%05d.png)" in _option_help(["transfer"], "--codec")
