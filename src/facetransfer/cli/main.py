@@ -162,8 +162,11 @@ QUIET_NATIVE_LOGS = {"GLOG_minloglevel": "2", "TF_CPP_MIN_LOG_LEVEL": "3",
 
 def configure_logging(verbose: bool) -> None:
     """facetransfer's own warnings always; third-party log lines and warnings only with -v."""
+    from .stderr import CurrentStderrHandler
+
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+                        format="%(levelname)s %(name)s: %(message)s",
+                        handlers=[CurrentStderrHandler()])
     logging.getLogger("facetransfer").setLevel(logging.INFO if verbose else logging.WARNING)
     if verbose:
         return
