@@ -66,3 +66,23 @@ def test_the_tools_own_warning_comes_before_its_error_line():
     assert r.stderr == ("WARNING facetransfer.datasets: 1 of 9 cells missing\n"
                         "facetransfer model build: error: 1 missing cells\n")
     assert r.stdout == repr("WARNING facetransfer.x: said now\n") + "\n"
+
+
+def test_probe_does_not_say_it_describes_models(tmp_path, capsys):
+    """Handed another project file, ``probe`` said it "describes videos, image sequences,
+    tracks, models and Live Link Face takes"; handed a model, it refuses it and points to
+    ``model info``. Its refusals now say so."""
+    import numpy as np
+
+    from facetransfer.cli.main import main
+
+    model, other = tmp_path / "m.npz", tmp_path / "fn.npz"
+    np.savez(model, core=np.zeros(3), metadata=np.array("{}"))
+    np.savez(other, textures=np.zeros(3), k=np.array(4))
+    assert main(["probe", str(model), str(other)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"facetransfer probe: error: {model} is a model file, not a video: "
+                   f"`facetransfer model info {model}` describes it",
+                   f"facetransfer probe: error: {other} is an .npz archive of arrays k, "
+                   "textures, not a track or a model: probe describes videos, image sequences, "
+                   "tracks and Live Link Face takes (a model: `facetransfer model info`)"]
