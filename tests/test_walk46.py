@@ -86,3 +86,33 @@ def test_probe_does_not_say_it_describes_models(tmp_path, capsys):
                    f"facetransfer probe: error: {other} is an .npz archive of arrays k, "
                    "textures, not a track or a model: probe describes videos, image sequences, "
                    "tracks and Live Link Face takes (a model: `facetransfer model info`)"]
+
+
+def test_an_option_for_another_option_is_refused_without_it(tmp_path, capsys):
+    """``texture lift --k`` (the texture function's neighbours) without ``--function``,
+    ``export --texture-step`` without ``--texture-from`` and ``edit --ramp`` without ``--add``
+    were ignored in silence (the run ended as if they were not given): one line now, nothing
+    written. With the option they act with, they act as before."""
+    from facetransfer.cli.main import main
+
+    t, v = str(tmp_path / "t.npz"), str(tmp_path / "v.mp4")
+    cases = [(["texture", "lift", v, "--track", t, "--k", "3", "--out", str(tmp_path / "x.png")],
+              "texture lift", "--k", "--function"),
+             (["export", t, "--texture-step", "3", "--out", str(tmp_path / "x.glb")],
+              "export", "--texture-step", "--texture-from"),
+             (["edit", t, "--scale", "smile=1.2", "--ramp", "3", "--out", str(tmp_path / "x.npz")],
+              "edit", "--ramp", "--add")]
+    for argv, command, flag, needed in cases:
+        assert main(argv) == 2, argv
+        assert capsys.readouterr().err.strip().splitlines() == [
+            f"facetransfer {command}: error: {flag} acts only with {needed}, which is not "
+            f"given: give {needed} or leave {flag} out"]
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_option_with_gives_the_default_where_not_given():
+    from facetransfer.cli.common import option_with
+
+    assert option_with(None, 8, "--ramp", [], "--add") == 8
+    assert option_with(3, 8, "--ramp", ["smile@1-2"], "--add") == 3
+    assert option_with(None, 4, "--k", "tf.npz", "--function") == 4

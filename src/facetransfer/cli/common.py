@@ -118,6 +118,18 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
                        "else 0")
 
 
+def option_with(value, default, flag: str, given_with, with_flag: str):
+    """``flag``'s ``value``, or ``default`` where it was not given (None); refused, naming
+    both, where it is given without ``with_flag`` (``given_with`` false), the only option it
+    acts with (``texture lift --k`` without ``--function``: it was ignored in silence)."""
+    if value is not None and not given_with:
+        from ..errors import FaceTransferError
+
+        raise FaceTransferError(f"{flag} acts only with {with_flag}, which is not given: give "
+                                f"{with_flag} or leave {flag} out")
+    return default if value is None else value
+
+
 #: What ``--face`` / ``--target-face`` / ``--source-face`` take
 #: (:func:`facetransfer.track.face_crop.subject_point`).
 FACE_WHERE = ("left, right, centre, or pixels X,Y near the face (default: the face found "

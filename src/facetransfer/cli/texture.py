@@ -20,7 +20,8 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import add_command_group, default_model_for, progress_disabled, resolve_model
+from .common import (add_command_group, default_model_for, option_with, progress_disabled,
+                     resolve_model)
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -116,6 +117,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
     from ..texture import (TextureFunction, lift_merged, lift_track, merge_textures,
                            texture_to_uint8)
 
+    args.k = option_with(args.k, 4, "--k", args.function, "--function")
     inputs = [args.video, args.track, args.model]
     out = _image_out(args.out, args, inputs)
     if args.function and Path(args.function).resolve() == Path(out).resolve():
@@ -237,7 +239,7 @@ def register(sub) -> None:
     lf.add_argument("--size", type=int, default=512, help="texture size (default 512)")
     lf.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
     lf.add_argument("--function", help="also write the performance-driven texture function (.npz)")
-    lf.add_argument("--k", type=int, default=4,
+    lf.add_argument("--k", type=int, default=None,
                     help="neighbours of the texture function (with --function; default 4)")
     lf.add_argument("--out", required=True, help="TEX.png (merged texture)")
     lf.add_argument("--overwrite", action="store_true", help="replace existing outputs")

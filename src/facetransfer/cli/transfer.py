@@ -28,7 +28,7 @@ from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
                      check_track_name, check_track_of, default_model_for, frame_count,
-                     progress_disabled, resolve_model, video_options, video_out)
+                     option_with, progress_disabled, resolve_model, video_options, video_out)
 from .track import CAPTURE_HELP
 
 log = logging.getLogger(__name__)
@@ -235,9 +235,9 @@ def _register_edit(sub) -> None:
                    "(inclusive, 0-based); EXPR*0.5@... for half; repeatable")
     e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
                    help="scale the component of the expression along EXPR - neutral; repeatable")
-    e.add_argument("--ramp", type=int, default=8,
+    e.add_argument("--ramp", type=int, default=None,
                    help="frames over which an --add eases in before START and out after END "
-                   "(0: none; the range itself is at full strength)")
+                   "(0: none; the range itself is at full strength; default 8)")
     e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
                    help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1")
     _add_output(e, run_edit, metavar="TRACK2.npz")
@@ -642,6 +642,7 @@ def run_edit(args) -> int:
         if not abs(a.amount) <= MAX_EDIT_FACTOR:
             raise FaceTransferError(f"--add {text}: the amount must lie in "
                                     f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}]")
+    args.ramp = option_with(args.ramp, 8, "--ramp", args.add, "--add")
     if args.ramp < 0:
         raise FaceTransferError(f"--ramp must be >= 0 frames, got {args.ramp}")
     check_track_name(args.out)
