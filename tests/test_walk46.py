@@ -116,3 +116,41 @@ def test_option_with_gives_the_default_where_not_given():
     assert option_with(None, 8, "--ramp", [], "--add") == 8
     assert option_with(3, 8, "--ramp", ["smile@1-2"], "--add") == 3
     assert option_with(None, 4, "--k", "tf.npz", "--function") == 4
+
+
+def test_texture_lift_warns_of_a_video_the_track_was_not_made_from(tmp_path, caplog):
+    """``texture lift OTHER.mp4 --track T.npz`` (T made from another clip of the same size)
+    lifted another face's pixels through the track's motion in silence; ``export
+    --texture-from`` warned of the same. Now lift does too; of the track's own clip, nothing."""
+    import logging
+    import sys
+    from pathlib import Path
+
+    import numpy as np
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from conftest import still_track
+    from test_texture_track import _cap_dataset
+
+    from facetransfer.cli.main import main
+    from facetransfer.io.video import write_video
+    from facetransfer.model import build_model
+
+    model = build_model(_cap_dataset(), {"identity": 3, "expression": 3})
+    model.save(tmp_path / "m.npz")
+    still_track(model, 3, source=str(tmp_path / "shot.mp4")).save(tmp_path / "t.npz")
+    frames = np.full((3, 64, 64, 3), 128, np.uint8)
+    for name in ("shot.mp4", "other.mp4"):
+        write_video(tmp_path / name, frames, 25)
+    said = []
+    for name in ("shot.mp4", "other.mp4"):
+        caplog.clear()
+        with caplog.at_level(logging.WARNING, logger="facetransfer"):
+            assert main(["texture", "lift", str(tmp_path / name), "--track",
+                         str(tmp_path / "t.npz"), "--model", str(tmp_path / "m.npz"),
+                         "--size", "16", "--out", str(tmp_path / f"{name}.png")]) == 0
+        said.append([r.getMessage() for r in caplog.records if "was made from" in
+                     r.getMessage()])
+    assert said[0] == []
+    assert said[1] == [f"track {tmp_path / 't.npz'} was made from shot.mp4, not other.mp4: if "
+                       "that is another clip, the texture is lifted through another face's motion"]

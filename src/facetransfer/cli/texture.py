@@ -142,6 +142,9 @@ def cmd_lift(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
                                 f"{track.frame_size[1]} frames, the video is "
                                 f"{info.size[0]}x{info.size[1]}")
+    if hasattr(track, "warn_other_video"):    # a tracker's track (a truth file names none)
+        track.warn_other_video(args.video, "the texture is lifted through another face's "
+                               "motion")
     n = int(track.scale.shape[0])
     used = (n + args.step - 1) // args.step
     if fn_out is not None:
