@@ -154,3 +154,26 @@ def test_texture_lift_warns_of_a_video_the_track_was_not_made_from(tmp_path, cap
     assert said[0] == []
     assert said[1] == [f"track {tmp_path / 't.npz'} was made from shot.mp4, not other.mp4: if "
                        "that is another clip, the texture is lifted through another face's motion"]
+
+
+def test_the_demo_sheets_caption_draws_a_dash_not_question_marks(tmp_path):
+    """``facetransfer demo``'s fidelity line says "–" for a measure that does not move; drawn
+    under the contact sheet by OpenCV's Hershey font it read "jawOpen r=??? with the source,
+    ??? with the target" (three "?" for the dash's three UTF-8 bytes)."""
+    import numpy as np
+    from PIL import Image
+
+    from facetransfer.demo import contact_sheet
+
+    frames = [np.full((60, 400, 3), 90, np.uint8)] * 2
+    drawn = {}
+    for name, caption in (("dash", "jawOpen r=\u2013 with the source"),
+                          ("ascii", "jawOpen r=- with the source"),
+                          ("asked", "jawOpen r=??? with the source")):
+        contact_sheet(frames, tmp_path / f"{name}.png", caption=caption, scale=1.0)
+        drawn[name] = np.asarray(Image.open(tmp_path / f"{name}.png"))
+    assert np.array_equal(drawn["dash"], drawn["ascii"])
+    assert not np.array_equal(drawn["dash"], drawn["asked"])
+    from facetransfer.demo import drawable_caption
+
+    assert drawable_caption("r=\u2013, 3\u00d74, caf\u00e9") == "r=-, 3x4, caf?"
