@@ -118,7 +118,7 @@ def test_option_with_gives_the_default_where_not_given():
     assert option_with(None, 4, "--k", "tf.npz", "--function") == 4
 
 
-def test_texture_lift_warns_of_a_video_the_track_was_not_made_from(tmp_path, caplog):
+def test_texture_lift_warns_of_a_video_the_track_was_not_made_from(tmp_path, caplog, capsys):
     """``texture lift OTHER.mp4 --track T.npz`` (T made from another clip of the same size)
     lifted another face's pixels through the track's motion in silence; ``export
     --texture-from`` warned of the same. Now lift does too; of the track's own clip, nothing."""
@@ -151,6 +151,11 @@ def test_texture_lift_warns_of_a_video_the_track_was_not_made_from(tmp_path, cap
                          "--size", "16", "--out", str(tmp_path / f"{name}.png")]) == 0
         said.append([r.getMessage() for r in caplog.records if "was made from" in
                      r.getMessage()])
+    assert "merged from 3 frames," in capsys.readouterr().out
+    assert main(["texture", "lift", str(tmp_path / "shot.mp4"), "--track", str(tmp_path / "t.npz"),
+                 "--model", str(tmp_path / "m.npz"), "--size", "16", "--step", "5",
+                 "--out", str(tmp_path / "one.png")]) == 0
+    assert "(merged from 1 frame, " in capsys.readouterr().out     # was "from 1 frames"
     assert said[0] == []
     assert said[1] == [f"track {tmp_path / 't.npz'} was made from shot.mp4, not other.mp4: if "
                        "that is another clip, the texture is lifted through another face's motion"]

@@ -20,8 +20,8 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import (add_command_group, default_model_for, option_with, progress_disabled,
-                     resolve_model)
+from .common import (add_command_group, default_model_for, frame_count, option_with,
+                     progress_disabled, resolve_model)
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -162,7 +162,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
             merged = merge_textures(lt.lifted)
     write_image(out, texture_to_uint8(merged.texture), overwrite=args.overwrite)
     seen = float((merged.weight > 1e-6).mean())
-    msg = f"wrote {out} (merged from {used} frames, {100 * seen:.0f}% of texels seen)"
+    msg = f"wrote {out} (merged from {frame_count(used)}, {100 * seen:.0f}% of texels seen)"
     if fn_out is not None:
         TextureFunction.from_lifted(lt.lifted, lt.attributes, k=args.k).save(
             fn_out, overwrite=args.overwrite)
