@@ -182,3 +182,21 @@ def test_the_demo_sheets_caption_draws_a_dash_not_question_marks(tmp_path):
     from facetransfer.demo import drawable_caption
 
     assert drawable_caption("r=\u2013, 3\u00d74, caf\u00e9") == "r=-, 3x4, caf?"
+
+
+def test_a_take_given_as_a_manifest_is_named_so(tmp_path):
+    """``model build --dataset take.csv`` (or ``impute eval``) listed the take's 63 columns
+    in lower case as unknown; it now says the file is a take."""
+    import pytest
+
+    from facetransfer.datasets.manifest import read_manifest
+    from facetransfer.errors import DatasetError
+
+    take = tmp_path / "take.csv"
+    take.write_text("Timecode,BlendShapeCount,EyeBlinkLeft,JawOpen\n"
+                    "00:00:00:00.000,61,0.1,0.2\n")
+    with pytest.raises(DatasetError) as info:
+        read_manifest(take)
+    assert str(info.value) == (f"{take} is a Live Link Face take (its header starts Timecode,"
+                               "BlendShapeCount), not a manifest of meshes: expected the columns "
+                               "path, identity, expression[, viseme]")
