@@ -200,3 +200,19 @@ def test_a_take_given_as_a_manifest_is_named_so(tmp_path):
     assert str(info.value) == (f"{take} is a Live Link Face take (its header starts Timecode,"
                                "BlendShapeCount), not a manifest of meshes: expected the columns "
                                "path, identity, expression[, viseme]")
+
+
+def test_track_refuses_overlay_encoding_options_without_an_overlay(tmp_path, capsys):
+    """``track V --out T.npz --codec prores`` (or ``--crf``, ``--preset``) wrote the track and
+    ignored the option, which sets only the ``--overlay`` video; ``--start-number`` was already
+    refused there ("none is written here")."""
+    from facetransfer.cli.main import main
+
+    t = tmp_path / "t.npz"
+    for extra, flag in ((["--codec", "prores"], "--codec"), (["--crf", "30"], "--crf"),
+                        (["--preset", "slow"], "--preset")):
+        assert main(["track", str(tmp_path / "v.mp4"), "--out", str(t), *extra]) == 2
+        assert capsys.readouterr().err.strip().splitlines() == [
+            f"facetransfer track: error: {flag} sets the --overlay video's encoding, and none is "
+            f"written here: give --overlay OVERLAY.mp4 or leave {flag} out"]
+    assert not t.exists()
