@@ -216,3 +216,26 @@ def test_track_refuses_overlay_encoding_options_without_an_overlay(tmp_path, cap
             f"facetransfer track: error: {flag} sets the --overlay video's encoding, and none is "
             f"written here: give --overlay OVERLAY.mp4 or leave {flag} out"]
     assert not t.exists()
+
+
+def test_scan_fit_refuses_options_it_would_not_use(tmp_path, capsys):
+    """``scan fit`` took ``--texture`` / ``--flip-v`` with a feature file (they act only on the
+    automatic search), ``--template-landmarks`` with the ICT template (even a file that did
+    not exist) and ``--prior identity+expression`` with ``--reference``, and ignored them."""
+    from facetransfer.cli.main import main
+
+    scan, out = str(tmp_path / "s.ply"), str(tmp_path / "fit.obj")
+    cases = [(["--features", "f.json", "--texture", "t.png"],
+              "--texture acts only with --features auto (the points found on the scan's "
+              "rendering)"),
+             (["--features", "f.json", "--flip-v"], "--flip-v acts only with --features auto "
+              "(the points found on the scan's rendering)"),
+             (["--template-landmarks", "x.json"], "--template-landmarks is for a mesh template; "
+              "the ict template has its own landmarks"),
+             (["--reference", "n.obj", "--prior", "identity+expression"],
+              "--prior is not used with --reference (the reference fit is deformed)")]
+    for extra, why in cases:
+        assert main(["scan", "fit", scan, *extra, "--out", out]) == 2
+        assert capsys.readouterr().err.strip().splitlines() == [
+            f"facetransfer scan fit: error: {why}: leave it out"]
+    assert list(tmp_path.iterdir()) == []
