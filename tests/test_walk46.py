@@ -239,3 +239,26 @@ def test_scan_fit_refuses_options_it_would_not_use(tmp_path, capsys):
         assert capsys.readouterr().err.strip().splitlines() == [
             f"facetransfer scan fit: error: {why}: leave it out"]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_view_of_a_model_refuses_another_model(tmp_path, capsys):
+    """``view M.npz --model OTHER.npz`` wrote M's page and ignored ``--model`` (which names a
+    track's or a take's model)."""
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from test_texture_track import _cap_dataset
+
+    from facetransfer.cli.main import main
+    from facetransfer.model import build_model
+
+    m, other = tmp_path / "m.npz", tmp_path / "other.npz"
+    build_model(_cap_dataset(), {"identity": 3, "expression": 3}).save(m)
+    other.write_bytes(m.read_bytes())
+    out = tmp_path / "page.html"
+    assert main(["view", str(m), "--model", str(other), "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"facetransfer view: error: --model is a track's or a take's model; {m} is a model "
+        "itself: view it without --model"]
+    assert not out.exists()
