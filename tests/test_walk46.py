@@ -262,3 +262,25 @@ def test_view_of_a_model_refuses_another_model(tmp_path, capsys):
         f"facetransfer view: error: --model is a track's or a take's model; {m} is a model "
         "itself: view it without --model"]
     assert not out.exists()
+
+
+def test_puppet_refuses_a_tracker_where_nothing_is_tracked(tmp_path, data_dir, capsys):
+    """``puppet TRACK.npz --tracker flow``, ``puppet take.csv --tracker landmarks`` and
+    ``puppet VIDEO --track T.npz --tracker flow`` rendered and ignored ``--tracker`` (nothing
+    is tracked there); ``--track`` and ``--face`` were already refused with a track or take."""
+    from facetransfer.cli.main import main
+
+    clip = str(data_dir / "video" / "face_2.mp4")
+    t, take, out = tmp_path / "t.npz", tmp_path / "take.csv", str(tmp_path / "p.mp4")
+    t.write_bytes(b"x")
+    take.write_text("Timecode,BlendShapeCount,JawOpen\n00:00:00:00.000,1,0.5\n")
+    cases = [([str(t), "--tracker", "flow"], f"{t} is a track file: --tracker is for a video"),
+             ([str(take), "--tracker", "landmarks"],
+              f"{take} is a Live Link Face take: --tracker is for a video"),
+             ([clip, "--track", str(t), "--tracker", "klt"], f"--tracker flow chooses how VIDEO "
+              f"is tracked, but --track {t} is tracked already: give one of them")]
+    for argv, says in cases:
+        assert main(["puppet", *argv, "--out", out]) == 2
+        assert capsys.readouterr().err.strip().splitlines() == [
+            f"facetransfer puppet: error: {says}"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["t.npz", "take.csv"]

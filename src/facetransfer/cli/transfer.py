@@ -686,6 +686,9 @@ def run_puppet(args) -> int:
     if Path(args.video).suffix.lower() == ".npz":
         return _puppet_track(args, vopt)
     video_info(args.video)
+    if args.track and args.tracker != "auto":   # it was ignored
+        raise FaceTransferError(f"--tracker {args.tracker} chooses how VIDEO is tracked, but "
+                                f"--track {args.track} is tracked already: give one of them")
     if not args.track:
         _check_landmarks_file(args.video, args.tracker)
         check_face(args.face, args.video, tracker=args.tracker)
@@ -729,7 +732,8 @@ def _puppet_track(args, vopt) -> int:
     from ..track.project import take_frames
     from ..track.result import Track
 
-    for flag, given in (("--track", args.track), ("--face", args.face)):
+    for flag, given in (("--track", args.track), ("--face", args.face),
+                        ("--tracker", args.tracker != "auto")):
         if given:
             raise FaceTransferError(f"{args.video} is a track file: {flag} is for a video")
     if not Path(args.video).is_file():
@@ -811,7 +815,8 @@ def _puppet_take(args, vopt) -> int:
     from ..puppet_video import puppet_video
     from ..take import PREVIEW_SIZE, take_track
 
-    for flag, given in (("--track", args.track), ("--face", args.face)):
+    for flag, given in (("--track", args.track), ("--face", args.face),
+                        ("--tracker", args.tracker != "auto")):
         if given:
             raise FaceTransferError(f"{args.video} is a Live Link Face take: {flag} is for a "
                                     "video")
