@@ -284,3 +284,34 @@ def test_puppet_refuses_a_tracker_where_nothing_is_tracked(tmp_path, data_dir, c
         assert capsys.readouterr().err.strip().splitlines() == [
             f"facetransfer puppet: error: {says}"]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["t.npz", "take.csv"]
+
+
+def test_edit_builds_the_default_model_as_the_other_commands_do(tmp_path, monkeypatch, capsys):
+    """``edit T.npz`` without ``--model`` where the default model is not built yet (a track
+    from another machine, a cleared cache) said "no default model cached yet (run `facetransfer
+    demo` ...)"; ``export``, ``view`` and ``puppet`` build it on first use, and so does edit
+    now. Its help said "the demo's default model"."""
+    import sys
+    from pathlib import Path
+
+    import numpy as np
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from conftest import still_track
+    from test_texture_track import _cap_dataset
+
+    import facetransfer.default_model as dm
+    from facetransfer.cli.main import main
+    from facetransfer.model import build_model
+
+    model = build_model(_cap_dataset(), {"identity": 3, "expression": 3})
+    still_track(model, 4, source="shot.mp4").save(tmp_path / "t.npz")
+    built = []
+    monkeypatch.setattr(dm, "default_model_path", lambda: tmp_path / "not-built.npz")
+    monkeypatch.setattr(dm, "load_default_model",
+                        lambda **kw: built.append(1) or model)
+    label = model.labels[model.mode_index("expression")][1]
+    assert main(["edit", str(tmp_path / "t.npz"), "--add", f"{label}@1-2", "--ramp", "0",
+                 "--out", str(tmp_path / "e.npz")]) == 0, capsys.readouterr().err
+    assert built == [1] and np.load(tmp_path / "e.npz")["fps"] == 25.0
+    assert "if the track was made with it" in _option_help(["edit"], "--model")

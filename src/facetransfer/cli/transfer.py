@@ -229,7 +229,8 @@ def _register_edit(sub) -> None:
         "expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E).")
     e.add_argument("track", metavar="TRACK.npz")
     e.add_argument("--model", metavar="M.npz",
-                   help="the model the track was made with (default: the demo's default model)")
+                   help="the model the track was made with (default: the default model, if the "
+                   "track was made with it)")
     e.add_argument("--add", action="append", default=[], metavar="EXPR@START-END",
                    help="add EXPR (training weights minus neutral) on frames START..END "
                    "(inclusive, 0-based); EXPR*0.5@... for half; repeatable")
@@ -603,16 +604,12 @@ def _dialled_identity(model, identity, args):
 
 
 def _model_for_track(track, model_path):
-    from ..default_model import default_model_path
-    from ..errors import TrackError
+    """``--model`` checked against the track, or without it the default model, built on first
+    use as every other command builds it (before, edit asked to run `facetransfer demo`)."""
     from ..model import load_model
 
     if model_path is None:
-        p = default_model_path()
-        if not p.is_file():
-            raise TrackError("no --model given and no default model cached yet (run "
-                             "`facetransfer demo` or pass --model)")
-        model_path = p
+        return default_model_for(track)
     model = load_model(model_path)
     track.check_model(model)
     return model
