@@ -315,3 +315,29 @@ def test_edit_builds_the_default_model_as_the_other_commands_do(tmp_path, monkey
                  "--out", str(tmp_path / "e.npz")]) == 0, capsys.readouterr().err
     assert built == [1] and np.load(tmp_path / "e.npz")["fps"] == 25.0
     assert "if the track was made with it" in _option_help(["edit"], "--model")
+
+
+def test_a_folder_given_for_a_video_proposes_its_largest_sequence(tmp_path):
+    """A plate folder given where a video is expected names the sequence to give; with two
+    stray numbered stills sorted first (``notes1.png``, ``notes2.png``) it proposed those
+    instead of the plate's frames."""
+    import cv2
+    import numpy as np
+
+    from facetransfer.io.video import VideoError
+    from facetransfer.io.video_read import video_info
+    from facetransfer.io.video_sequence import suggested_pattern
+
+    img = np.zeros((8, 8, 3), np.uint8)
+    for name in ["notes1.png", "notes2.png"] + [f"sh010.{k}.png" for k in range(1001, 1006)]:
+        cv2.imwrite(str(tmp_path / name), img)
+    assert suggested_pattern(tmp_path) == tmp_path / "sh010.%04d.png"
+    try:
+        video_info(tmp_path)
+    except VideoError as exc:
+        assert str(exc).endswith(f"(its image sequence: give {tmp_path / 'sh010.%04d.png'})")
+    else:
+        raise AssertionError("a folder was read as a video")
+    (tmp_path / "alone").mkdir()
+    cv2.imwrite(str(tmp_path / "alone" / "still7.png"), img)
+    assert suggested_pattern(tmp_path / "alone") is None
