@@ -341,3 +341,26 @@ def test_a_folder_given_for_a_video_proposes_its_largest_sequence(tmp_path):
     (tmp_path / "alone").mkdir()
     cv2.imwrite(str(tmp_path / "alone" / "still7.png"), img)
     assert suggested_pattern(tmp_path / "alone") is None
+
+
+def test_every_subcommands_help_says_what_it_does():
+    """``facetransfer model build --help`` (and ``model info|synth|sheet|dials``, ``scan
+    smooth|features|fit``, ``texture default``) printed only the usage and the options: the
+    one line its group's help gives it was not its description."""
+    import argparse
+
+    from facetransfer.cli.main import build_parser
+
+    def leaves(parser, path):
+        subs = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+        if not subs:
+            yield " ".join(path), parser
+        for action in subs:
+            for name, child in action.choices.items():
+                yield from leaves(child, path + [name])
+
+    undescribed = [name for name, p in leaves(build_parser(), []) if not p.description]
+    assert undescribed == []
+    described = dict(leaves(build_parser(), []))
+    assert described["model build"].description == "Build a model from a data set."
+    assert described["scan fit"].format_help().count("Fit the template to a scan") == 1
