@@ -364,3 +364,33 @@ def test_every_subcommands_help_says_what_it_does():
     described = dict(leaves(build_parser(), []))
     assert described["model build"].description == "Build a model from a data set."
     assert described["scan fit"].format_help().count("Fit the template to a scan") == 1
+
+
+def test_a_takes_page_says_take_not_track(tmp_path, arkit_model):
+    """``view take.csv``'s page said "track of take.csv"; a track's page still says "track of"
+    its clip."""
+    import json
+    import re
+    import sys
+    from pathlib import Path
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from conftest import synthetic_arkit_track
+
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.export.viewer import viewer_page
+    from facetransfer.take import take_track
+
+    def about(page):
+        data = re.search(r'<script id="ft-data" type="application/json">(.*?)</script>', page,
+                         re.S).group(1)
+        return json.loads(data)["about"]
+
+    track, _, _ = synthetic_arkit_track(arkit_model, 6)
+    write_livelink(track, tmp_path / "take.csv")
+    k = arkit_model.mode_index("identity")
+    take = take_track(tmp_path / "take.csv", arkit_model, arkit_model.weight_mean(k))
+    said = about(viewer_page(arkit_model, track=take, title="take.csv"))
+    assert said.endswith(f"take take.csv, {take.n_frames} frames at {take.fps:g} fps"), said
+    said = about(viewer_page(arkit_model, track=track, title="t.npz"))
+    assert said.endswith("track of synthetic.mp4, 6 frames at 25 fps"), said
