@@ -394,3 +394,24 @@ def test_a_takes_page_says_take_not_track(tmp_path, arkit_model):
     assert said.endswith(f"take take.csv, {take.n_frames} frames at {take.fps:g} fps"), said
     said = about(viewer_page(arkit_model, track=track, title="t.npz"))
     assert said.endswith("track of synthetic.mp4, 6 frames at 25 fps"), said
+
+
+def test_a_track_or_a_video_given_as_a_mesh_is_named(tmp_path):
+    """``scan smooth T.npz`` (or a video) said trimesh's "cannot read mesh T.npz: file_type
+    'npz' not supported"; it now says what the file is and which files are meshes."""
+    import numpy as np
+    import pytest
+
+    from facetransfer.errors import MeshError
+    from facetransfer.io.mesh import read_mesh
+    from facetransfer.io.video import write_video
+
+    np.savez(tmp_path / "t.npz", rotation=np.eye(3))
+    with pytest.raises(MeshError) as info:
+        read_mesh(tmp_path / "t.npz")
+    assert str(info.value) == (f"mesh file {tmp_path / 't.npz'} is an .npz archive (a track, "
+                               "a model, a ground truth), not a mesh: give one of .obj, .ply, "
+                               ".stl, .off, .glb")
+    write_video(tmp_path / "v.mp4", np.zeros((2, 16, 16, 3), np.uint8), 25)
+    with pytest.raises(MeshError, match="is a video, not a mesh"):
+        read_mesh(tmp_path / "v.mp4")
