@@ -126,7 +126,7 @@ def test_usage_errors_are_one_line(argv, says, capsys):
      ".mp4; name it t.npz (--overlay writes a video of the fitted mesh over the clip)"),
     (["edit", "t.npz", "--scale", "jawOpen=2", "--out", "e"], "--out e: a track is written "
      "as .npz, and the name has no extension; name it e.npz"),
-    (["edit", "t.npz", "--scale", "jawOpen=2", "--ramp", "-3", "--out", "e.npz"],
+    (["edit", "t.npz", "--add", "jawOpen@1-2", "--ramp", "-3", "--out", "e.npz"],
      "--ramp must be >= 0 frames, got -3"),
     (["model", "build", "--dataset", "ict-bilinear", "--out", "m.obj"], "--out m.obj: a model "
      "is written as .npz, not .obj; name it m.npz"),

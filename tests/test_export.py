@@ -583,7 +583,8 @@ def test_an_animators_slips_are_said_as_such(case, quick_model, tmp_path, capsys
         "`facetransfer export` writes)")
     assert said(["probe", glb]).endswith(f"{glb} is a glTF binary (a .glb, as `facetransfer "
                                          "export` writes): probe describes videos, image "
-                                         "sequences, tracks, models and Live Link Face takes")
+                                         "sequences, tracks and Live Link Face takes (a model: "
+                                         "`facetransfer model info`)")
     junk = tmp_path / "junk.csv"
     junk.write_text("hello,world\n1,2\n")
     msg = said(["puppet", junk, "--model", tmp_path / "m.npz", "--out", tmp_path / "p.mp4"])

@@ -105,7 +105,7 @@ def test_a_model_or_a_foreign_archive_given_to_probe(arkit_model, tmp_path, caps
         assert err == [f"facetransfer probe: error: {tmp_path / name} is an .npz archive of "
                        f"{what}" + (" (synth-video's CLIP.truth.npz)" if "truth" in name else "")
                        + ", not a track or a model: probe describes videos, image sequences, "
-                       "tracks, models and Live Link Face takes"], err
+                       "tracks and Live Link Face takes (a model: `facetransfer model info`)"], err
 
 
 def test_a_damaged_archive_given_to_probe_is_named(tmp_path, capsys):

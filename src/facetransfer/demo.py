@@ -153,6 +153,19 @@ def side_by_side(source: np.ndarray, target: np.ndarray, result: np.ndarray, *,
     return np.ascontiguousarray(np.hstack([t[:H2, :W2] for t in tiles]))
 
 
+#: Characters of the tool's lines that OpenCV's Hershey font cannot draw (it draws "?" for
+#: each byte of a character beyond ASCII: the sheet's "r=–" read "r=???"), drawn as these.
+_DRAWN_AS = {"\u2013": "-", "\u2014": "-", "\u2212": "-", "\u00d7": "x", "\u2019": "'",
+             "\u2026": "...", "\u00b2": "^2", "\u00b0": " deg"}
+
+
+def drawable_caption(text: str) -> str:
+    """``text`` as the contact sheet can draw it: typographic dashes, times, degrees and the
+    like as ASCII, any other character beyond ASCII as "?" (one, not one per byte)."""
+    text = "".join(_DRAWN_AS.get(c, c) for c in text)
+    return text.encode("ascii", "replace").decode("ascii")
+
+
 def contact_sheet(frames: list[np.ndarray], path, *, columns: int = 2, scale: float = 0.5,
                   overwrite: bool = True, caption: str | None = None) -> Path:
     """Write a grid of side-by-side frames to ``path`` (PNG), atomically, with an optional
@@ -172,6 +185,7 @@ def contact_sheet(frames: list[np.ndarray], path, *, columns: int = 2, scale: fl
         rows.append(np.hstack(row))
     sheet = np.vstack(rows)
     if caption:  # at 0.5 of the font's height, smaller if it would not fit the width
+        caption = drawable_caption(caption)
         (w, _), _ = cv2.getTextSize(caption, cv2.FONT_HERSHEY_SIMPLEX, 0.5, 1)
         size = min(0.5, 0.5 * (sheet.shape[1] - 16) / max(w, 1))
         band = np.full((28, sheet.shape[1], 3), 255, np.uint8)

@@ -17,6 +17,11 @@ import numpy as np
 
 __all__ = ["file_kind", "track_facts", "take_facts", "file_fact_lines", "lost_runs"]
 
+#: What ``probe`` describes, said when it is handed something else (a model is not described:
+#: ``probe M.npz`` points to ``model info``; this said "tracks, models and ...").
+PROBE_DESCRIBES = ("probe describes videos, image sequences, tracks and Live Link Face takes "
+                   "(a model: `facetransfer model info`)")
+
 #: Keys every track file holds (:meth:`facetransfer.track.result.Track.save`).
 _TRACK_KEYS = frozenset({"fps", "frame_size", "rotation", "model_hash", "mode_names"})
 
@@ -43,21 +48,18 @@ def file_kind(path: str | os.PathLike) -> str:
             raise FaceTransferError(f"{p} is truncated or not an .npz archive "
                                     f"({reason(exc)})") from None
         if names is None:   # an .npy named .npz (was TypeError)
-            raise FaceTransferError(f"{p} is a single .npy array, not an .npz archive: probe "
-                                    "describes videos, image sequences, tracks, models and "
-                                    "Live Link Face takes")
+            raise FaceTransferError(f"{p} is a single .npy array, not an .npz archive: "
+                                    + PROBE_DESCRIBES)
         if _TRACK_KEYS <= names:
             return "track"
         if {"core", "metadata"} <= names:
             return "model"
         raise FaceTransferError(f"{p} is an .npz archive of {_other_npz(p, names)}, not a track "
-                                "or a model: probe describes videos, image sequences, tracks, "
-                                "models and Live Link Face takes")
+                                "or a model: " + PROBE_DESCRIBES)
     kind = content_kind(p) if p.is_file() else None
     if kind is not None and kind.startswith(("a glTF", "a USD", "a JSON", "an HTML")):
         # one of the tool's own exports: said so, not "not a video OpenCV can decode"
-        raise FaceTransferError(f"{p} is {kind}: probe describes videos, image sequences, "
-                                "tracks, models and Live Link Face takes")
+        raise FaceTransferError(f"{p} is {kind}: " + PROBE_DESCRIBES)
     return "video"
 
 

@@ -88,15 +88,20 @@ def _usage(parser: argparse.ArgumentParser) -> int:
 
 
 def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
-                      sequences: bool = True) -> None:
+                      sequences: bool = True, flag: str = "--out",
+                      carries_target: bool = True) -> None:
     """Add ``--codec``, ``--crf`` and ``--preset`` (one definition for every command that
     writes video); ``sequences``: the command also writes image sequences, which the codec
-    options do not apply to, and takes ``--start-number`` for them."""
+    options do not apply to, and takes ``--start-number`` for them; ``flag``: the option that
+    names the video or sequence (``track``'s ``--overlay``); ``carries_target``: the command
+    rewrites a target's own frames, so its depth, colour and alpha can be kept (``transfer``;
+    not a rendered puppet, an overlay or a synthetic clip, written in 8 bits)."""
     p.add_argument("--codec", choices=tuple(CODECS), default=DEFAULT_CODEC,
                    help=f"codec of {what}: h264 (libx264, yuv420p: plays in browsers), h265 "
-                   "(libx265) or prores (ProRes 422 HQ, .mov/.mkv; 4444 keeping a target's "
-                   "alpha); h265 and prores keep a 10-bit or HDR target's depth and colour"
-                   + ("; ignored for an image sequence (--out frames/%%05d.png)"
+                   "(libx265) or prores (ProRes 422 HQ, .mov/.mkv"
+                   + ("; 4444 keeping a target's alpha); h265 and prores keep a 10-bit or HDR "
+                      "target's depth and colour" if carries_target else ")")
+                   + (f"; ignored for an image sequence ({flag} frames/%%05d.png)"
                       if sequences else ""))
     p.add_argument("--crf", type=int, default=None,
                    help=f"constant rate factor of h264/h265, {CRF_RANGE[0]} (best) to "
@@ -107,9 +112,22 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
                    "at the same CRF (medium: 1.6x the CPU, +0.07 dB)")
     if sequences:
         p.add_argument("--start-number", type=_start_number, default=None, metavar="N",
-                       help="number of an image sequence's first frame (--out "
-                       "shot/%%04d.exr --start-number 1001); default: a plate target's own "
-                       "first number, else 0")
+                       help=f"number of an image sequence's first frame ({flag} "
+                       "shot/%%04d.exr --start-number 1001); default: a plate "
+                       + ("target" if carries_target else "input") + "'s own first number, "
+                       "else 0")
+
+
+def option_with(value, default, flag: str, given_with, with_flag: str):
+    """``flag``'s ``value``, or ``default`` where it was not given (None); refused, naming
+    both, where it is given without ``with_flag`` (``given_with`` false), the only option it
+    acts with (``texture lift --k`` without ``--function``: it was ignored in silence)."""
+    if value is not None and not given_with:
+        from ..errors import FaceTransferError
+
+        raise FaceTransferError(f"{flag} acts only with {with_flag}, which is not given: give "
+                                f"{with_flag} or leave {flag} out")
+    return default if value is None else value
 
 
 #: What ``--face`` / ``--target-face`` / ``--source-face`` take

@@ -15,7 +15,7 @@ import argparse
 from pathlib import Path
 
 from ..export import FORMAT_SUFFIXES, FORMATS
-from .common import default_model_for, frame_count, progress_disabled
+from .common import default_model_for, frame_count, option_with, progress_disabled
 
 
 def register(sub) -> None:
@@ -40,7 +40,7 @@ def register(sub) -> None:
                    help="base-colour texture in the template's UV layout (glb only)")
     p.add_argument("--texture-from", metavar="VIDEO.mp4",
                    help="lift the texture from the tracked video instead (glb only)")
-    p.add_argument("--texture-step", type=int, default=10, metavar="N",
+    p.add_argument("--texture-step", type=int, default=None, metavar="N",
                    help="with --texture-from: use every N-th frame (default 10)")
     p.add_argument("--neutral", metavar="FRAME|auto",
                    help="measure every activation from this frame's, as Live Link Face's "
@@ -137,6 +137,8 @@ def run(args: argparse.Namespace) -> int:
     if args.take_rate is not None and args.format != "livelink":
         raise FaceTransferError(f"--take-rate {args.take_rate}: only livelink takes count "
                                 f"their rows in timecodes, not {args.format}")
+    args.texture_step = option_with(args.texture_step, 10, "--texture-step",
+                                    args.texture_from, "--texture-from")
     if args.texture_step < 1:
         raise FaceTransferError(f"--texture-step must be >= 1, got {args.texture_step}")
     from ..take import is_take

@@ -53,6 +53,7 @@ def build_parser() -> argparse.ArgumentParser:
     for name in SUBCOMMAND_MODULES:
         module = importlib.import_module(f"{__package__}.{name}")
         module.register(sub)
+    _describe_subcommands(parser)
     for leaf in _leaf_parsers(parser):
         if "--no-progress" not in leaf._option_string_actions:
             leaf.add_argument("--no-progress", action="store_true",
@@ -185,6 +186,21 @@ def unknown_options(leaf: argparse.ArgumentParser, argv: list[str]) -> list[str]
     return out
 
 
+def _describe_subcommands(parser: argparse.ArgumentParser) -> None:
+    """Give every subcommand without a description its one-line help as one, so that its own
+    ``--help`` says what it does (``model build --help``, ``scan fit --help`` and seven
+    others showed only their usage and options)."""
+    for action in parser._actions:
+        if not isinstance(action, argparse._SubParsersAction):
+            continue
+        for choice in action._choices_actions:
+            child = action.choices[choice.dest]
+            if not child.description and choice.help:
+                text = choice.help[0].upper() + choice.help[1:]
+                child.description = text if text.endswith(".") else text + "."
+            _describe_subcommands(child)
+
+
 def _leaf_parsers(parser: argparse.ArgumentParser):
     """The parsers of every command and subcommand (``model build``, ...) that has no
     subcommands of its own."""
@@ -206,8 +222,11 @@ QUIET_NATIVE_LOGS = {"GLOG_minloglevel": "2", "TF_CPP_MIN_LOG_LEVEL": "3",
 
 def configure_logging(verbose: bool) -> None:
     """facetransfer's own warnings always; third-party log lines and warnings only with -v."""
+    from .stderr import CurrentStderrHandler
+
     logging.basicConfig(level=logging.INFO if verbose else logging.WARNING,
-                        format="%(levelname)s %(name)s: %(message)s")
+                        format="%(levelname)s %(name)s: %(message)s",
+                        handlers=[CurrentStderrHandler()])
     logging.getLogger("facetransfer").setLevel(logging.INFO if verbose else logging.WARNING)
     if verbose:
         return

@@ -247,5 +247,5 @@ def register(sub) -> None:
     s.add_argument("--out", required=True, type=video_out, help="CLIP.mp4")
     s.add_argument("--overwrite", action="store_true",
                    help="replace existing outputs (CLIP.mp4 and CLIP.truth.npz)")
-    add_video_options(s, sequences=False)  # a video beside its truth file
+    add_video_options(s, sequences=False, carries_target=False)  # beside its truth
     s.set_defaults(func=cmd_synth_video)

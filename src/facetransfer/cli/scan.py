@@ -197,6 +197,7 @@ def _fit(args) -> int:
     from ..correspond.report import plot_fit, write_fit_report
     from ..io.mesh import check_mesh_output, write_mesh
 
+    _check_fit_options(args)
     out = check_mesh_output(args.out)
     stem = out.with_suffix("")
     report_path, png_path = Path(f"{stem}.report.json"), Path(f"{stem}.png")
@@ -219,6 +220,33 @@ def _fit(args) -> int:
     write_mesh(out, result.vertices, result.faces)
     _print_fit_summary((out, report_path, png_path), result.stats, scan.notes)
     return 0 if np.isfinite(result.stats["mean"]) else 1
+
+
+def _unused_fit_option(args) -> str | None:
+    """The first ``scan fit`` option given where it does nothing (it was ignored in silence),
+    with why; None if every one given acts."""
+    found_here = "with --features auto (the points found on the scan's rendering)"
+    if args.features != "auto":
+        if args.texture is not None:
+            return f"--texture acts only {found_here}"
+        if args.flip_v:
+            return f"--flip-v acts only {found_here}"
+    if args.template_landmarks is not None and (args.template == "ict" or
+                                                str(args.template).endswith(".npz")):
+        return (f"--template-landmarks is for a mesh template; the {args.template} template "
+                "has its own landmarks")
+    if args.reference and args.prior == "identity+expression":
+        return "--prior is not used with --reference (the reference fit is deformed)"
+    return None
+
+
+def _check_fit_options(args) -> None:
+    """Refuse, in one line, an option that would be ignored (:func:`_unused_fit_option`)."""
+    from ..errors import FaceTransferError
+
+    why = _unused_fit_option(args)
+    if why is not None:
+        raise FaceTransferError(f"{why}: leave it out")
 
 
 def _check_fit_outputs(args, outputs) -> list:

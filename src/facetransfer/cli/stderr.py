@@ -11,6 +11,7 @@ descriptor, so progress bars still see the terminal (``isatty``).
 from __future__ import annotations
 
 import contextlib
+import logging
 import os
 import re
 import threading
@@ -58,6 +59,27 @@ def filter_native(data: bytes) -> tuple[bytes, bytes]:
         if not NATIVE_LOG.match(ln):
             out.append(ln)
     return b"".join(out), rest
+
+
+class CurrentStderrHandler(logging.StreamHandler):
+    """A logging handler that writes to ``sys.stderr`` as it is when a record comes, not as it
+    was when logging was configured: inside :func:`filtered_stderr` that is the copy of the
+    original descriptor, so the tool's own warnings reach the terminal in order with its error
+    line and progress bars (bound to descriptor 2, they went through the filter's pipe and
+    thread, and a warning said before an error was often printed after it)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+
+    @property
+    def stream(self):
+        import sys
+
+        return sys.stderr
+
+    @stream.setter
+    def stream(self, value) -> None:   # StreamHandler's own assignments: always sys.stderr
+        pass
 
 
 @contextlib.contextmanager

@@ -20,8 +20,8 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from .common import (add_command_group, default_model_for, integer_from, progress_disabled,
-                     resolve_model)
+from .common import (add_command_group, default_model_for, frame_count, integer_from,
+                     option_with, progress_disabled, resolve_model)
 
 _IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
@@ -117,6 +117,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
     from ..texture import (TextureFunction, lift_merged, lift_track, merge_textures,
                            texture_to_uint8)
 
+    args.k = option_with(args.k, 4, "--k", args.function, "--function")
     inputs = [args.video, args.track, args.model]
     out = _image_out(args.out, args, inputs)
     if args.function and Path(args.function).resolve() == Path(out).resolve():
@@ -141,6 +142,9 @@ def cmd_lift(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
                                 f"{track.frame_size[1]} frames, the video is "
                                 f"{info.size[0]}x{info.size[1]}")
+    if hasattr(track, "warn_other_video"):    # a tracker's track (a truth file names none)
+        track.warn_other_video(args.video, "the texture is lifted through another face's "
+                               "motion")
     n = int(track.scale.shape[0])
     used = (n + args.step - 1) // args.step
     if fn_out is not None:
@@ -158,7 +162,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
             merged = merge_textures(lt.lifted)
     write_image(out, texture_to_uint8(merged.texture), overwrite=args.overwrite)
     seen = float((merged.weight > 1e-6).mean())
-    msg = f"wrote {out} (merged from {used} frames, {100 * seen:.0f}% of texels seen)"
+    msg = f"wrote {out} (merged from {frame_count(used)}, {100 * seen:.0f}% of texels seen)"
     if fn_out is not None:
         TextureFunction.from_lifted(lt.lifted, lt.attributes, k=args.k).save(
             fn_out, overwrite=args.overwrite)
@@ -239,7 +243,7 @@ def register(sub) -> None:
     lf.add_argument("--size", type=int, default=512, help="texture size (default 512)")
     lf.add_argument("--step", type=int, default=1, help="use every STEP-th frame (default 1)")
     lf.add_argument("--function", help="also write the performance-driven texture function (.npz)")
-    lf.add_argument("--k", type=int, default=4,
+    lf.add_argument("--k", type=int, default=None,
                     help="neighbours of the texture function (with --function; default 4)")
     lf.add_argument("--out", required=True, help="TEX.png (merged texture)")
     lf.add_argument("--overwrite", action="store_true", help="replace existing outputs")

@@ -103,7 +103,7 @@ def register(sub) -> None:
     p.add_argument("--overlay", type=video_out,
                    help="also write a video with the fitted mesh drawn (.mp4, or an image "
                    "sequence frames/%%05d.png or frames/#####.png)")
-    add_video_options(p, what="--overlay")
+    add_video_options(p, what="--overlay", flag="--overlay", carries_target=False)
     p.add_argument("--face", metavar="WHERE",
                    help="[capture] with several people in the frame, the one to track: "
                    + FACE_WHERE)
@@ -169,6 +169,7 @@ def _check_outputs(args):
     inputs = (args.video, args.model, args.from_track,
               None if args.init == "auto" else args.init)
     vopt = video_options(args, args.overlay)
+    _check_codec_for_overlay(args)
     if args.overlay:
         check_video_output(args.overlay, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.out:
@@ -185,6 +186,22 @@ def _check_outputs(args):
             check_not_input(args.overlay, [args.out, partial_path(args.out)])
         check_not_input(partial_path(args.out), inputs)
     return vopt
+
+
+def _check_codec_for_overlay(args) -> None:
+    """``--codec``, ``--crf`` or ``--preset`` (the ``--overlay`` video's) given without
+    ``--overlay``: refused, as ``--start-number`` is (they were ignored in silence)."""
+    from ..io.video import DEFAULT_CODEC, DEFAULT_PRESET
+
+    if args.overlay:
+        return
+    given = [flag for flag, set_ in (("--codec", args.codec != DEFAULT_CODEC),
+                                     ("--crf", args.crf is not None),
+                                     ("--preset", args.preset != DEFAULT_PRESET)) if set_]
+    if given:
+        raise FaceTransferError(f"{given[0]} sets the --overlay video's encoding, and none is "
+                                f"written here: give --overlay OVERLAY.mp4 or leave {given[0]} "
+                                "out")
 
 
 def _model_meanwhile(args, tracker: str):

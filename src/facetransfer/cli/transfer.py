@@ -28,7 +28,7 @@ from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
                      check_track_name, check_track_of, default_model_for, frame_count,
-                     progress_disabled, resolve_model, video_options, video_out)
+                     option_with, progress_disabled, resolve_model, video_options, video_out)
 from .track import CAPTURE_HELP
 
 log = logging.getLogger(__name__)
@@ -129,13 +129,15 @@ def _parser(sub, name: str, help: str, description: str):
 
 
 def _add_output(p, func, *, metavar: str, help: str | None = None, video: bool = False,
-                overwrite_help: str = "replace an existing output") -> None:
-    """``--out`` (with the video options when ``video``), ``--overwrite`` and the function
-    that runs the subcommand."""
+                overwrite_help: str = "replace an existing output",
+                carries_target: bool = True) -> None:
+    """``--out`` (with the video options when ``video``, ``carries_target`` as
+    :func:`~.common.add_video_options`), ``--overwrite`` and the function that runs the
+    subcommand."""
     p.add_argument("--out", required=True, metavar=metavar, help=help,
                    type=video_out if video else str)
     if video:
-        add_video_options(p)
+        add_video_options(p, carries_target=carries_target)
     p.add_argument("--overwrite", action="store_true", help=overwrite_help)
     p.set_defaults(func=func)
 
@@ -227,15 +229,16 @@ def _register_edit(sub) -> None:
         "expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E).")
     e.add_argument("track", metavar="TRACK.npz")
     e.add_argument("--model", metavar="M.npz",
-                   help="the model the track was made with (default: the demo's default model)")
+                   help="the model the track was made with (default: the default model, if the "
+                   "track was made with it)")
     e.add_argument("--add", action="append", default=[], metavar="EXPR@START-END",
                    help="add EXPR (training weights minus neutral) on frames START..END "
                    "(inclusive, 0-based); EXPR*0.5@... for half; repeatable")
     e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
                    help="scale the component of the expression along EXPR - neutral; repeatable")
-    e.add_argument("--ramp", type=int, default=8,
+    e.add_argument("--ramp", type=int, default=None,
                    help="frames over which an --add eases in before START and out after END "
-                   "(0: none; the range itself is at full strength)")
+                   "(0: none; the range itself is at full strength; default 8)")
     e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
                    help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1")
     _add_output(e, run_edit, metavar="TRACK2.npz")
@@ -263,7 +266,7 @@ def _register_puppet(sub) -> None:
     q.add_argument("--face", metavar="WHERE",
                    help=f"with several people, the one whose performance drives the puppet: "
                    f"{FACE_WHERE}")
-    _add_output(q, run_puppet, metavar="OUT.mp4", video=True,
+    _add_output(q, run_puppet, metavar="OUT.mp4", video=True, carries_target=False,
                 help="video (.mp4...) or image sequence (frames/%%05d.png)")
 
 
@@ -601,16 +604,12 @@ def _dialled_identity(model, identity, args):
 
 
 def _model_for_track(track, model_path):
-    from ..default_model import default_model_path
-    from ..errors import TrackError
+    """``--model`` checked against the track, or without it the default model, built on first
+    use as every other command builds it (before, edit asked to run `facetransfer demo`)."""
     from ..model import load_model
 
     if model_path is None:
-        p = default_model_path()
-        if not p.is_file():
-            raise TrackError("no --model given and no default model cached yet (run "
-                             "`facetransfer demo` or pass --model)")
-        model_path = p
+        return default_model_for(track)
     model = load_model(model_path)
     track.check_model(model)
     return model
@@ -640,6 +639,7 @@ def run_edit(args) -> int:
         if not abs(a.amount) <= MAX_EDIT_FACTOR:
             raise FaceTransferError(f"--add {text}: the amount must lie in "
                                     f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}]")
+    args.ramp = option_with(args.ramp, 8, "--ramp", args.add, "--add")
     if args.ramp < 0:
         raise FaceTransferError(f"--ramp must be >= 0 frames, got {args.ramp}")
     check_track_name(args.out)
@@ -683,6 +683,9 @@ def run_puppet(args) -> int:
     if Path(args.video).suffix.lower() == ".npz":
         return _puppet_track(args, vopt)
     video_info(args.video)
+    if args.track and args.tracker != "auto":   # it was ignored
+        raise FaceTransferError(f"--tracker {args.tracker} chooses how VIDEO is tracked, but "
+                                f"--track {args.track} is tracked already: give one of them")
     if not args.track:
         _check_landmarks_file(args.video, args.tracker)
         check_face(args.face, args.video, tracker=args.tracker)
@@ -726,7 +729,8 @@ def _puppet_track(args, vopt) -> int:
     from ..track.project import take_frames
     from ..track.result import Track
 
-    for flag, given in (("--track", args.track), ("--face", args.face)):
+    for flag, given in (("--track", args.track), ("--face", args.face),
+                        ("--tracker", args.tracker != "auto")):
         if given:
             raise FaceTransferError(f"{args.video} is a track file: {flag} is for a video")
     if not Path(args.video).is_file():
@@ -808,7 +812,8 @@ def _puppet_take(args, vopt) -> int:
     from ..puppet_video import puppet_video
     from ..take import PREVIEW_SIZE, take_track
 
-    for flag, given in (("--track", args.track), ("--face", args.face)):
+    for flag, given in (("--track", args.track), ("--face", args.face),
+                        ("--tracker", args.tracker != "auto")):
         if given:
             raise FaceTransferError(f"{args.video} is a Live Link Face take: {flag} is for a "
                                     "video")

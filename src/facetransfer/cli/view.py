@@ -30,14 +30,20 @@ def register(sub) -> None:
     p.set_defaults(func=run)
 
 
-def _is_track(path) -> bool:
+def _has_arrays(path, names: set) -> bool:
+    """Whether ``path`` is an .npz archive holding the arrays ``names`` (else write_viewer
+    says what it is)."""
     from ..io.npz import NOT_ARCHIVE_ERRORS, archive_names
 
     try:
-        names = archive_names(path)
+        held = archive_names(path)
     except NOT_ARCHIVE_ERRORS:
         return False  # write_viewer reports it
-    return names is not None and {"rotation", "mode_names"} <= names   # an .npy: said there
+    return held is not None and names <= held   # an .npy: said there
+
+
+def _is_track(path) -> bool:
+    return _has_arrays(path, {"rotation", "mode_names"})
 
 
 def _take_page(args: argparse.Namespace):
@@ -76,6 +82,7 @@ def _default_model_page(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
+    from ..errors import FaceTransferError
     from ..export.viewer import write_viewer
     from ..io.atomic import check_output_path
     from ..io.output_names import check_output_suffix
@@ -92,6 +99,9 @@ def run(args: argparse.Namespace) -> int:
         print(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB)")
         return 0
     model = None
+    if args.model and _has_arrays(args.source, {"core", "metadata"}):   # was ignored
+        raise FaceTransferError(f"--model is a track's or a take's model; {args.source} is a "
+                                "model itself: view it without --model")
     if args.model:
         from ..model import load_model
 

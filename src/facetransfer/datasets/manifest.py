@@ -72,6 +72,10 @@ def read_manifest(path: str | os.PathLike, *,
     if not rows:
         raise DatasetError(f"manifest {p} is empty")
     header = [h.strip().lower() for h in rows[0]]
+    if header[:2] == ["timecode", "blendshapecount"]:   # before: its 63 columns listed
+        raise DatasetError(f"{p} is a Live Link Face take (its header starts Timecode,"
+                           "BlendShapeCount), not a manifest of meshes: expected the columns "
+                           "path, identity, expression[, viseme]")
     unknown = [h for h in header if h not in ("path",) + MANIFEST_MODES]
     if unknown:
         raise DatasetError(f"manifest {p}: unknown column(s) {unknown}; expected "

@@ -124,6 +124,19 @@ def _save_data(model, track, mode: str, identity: np.ndarray, title: str) -> dic
             "shape_kind": _shape_kind(model), "source": title}
 
 
+def _about(model, track) -> str:
+    """The page's line on what it shows: the model's mean person, a track of its clip, or a
+    Live Link Face take (its source a ``.csv``; it said "track of take.csv")."""
+    if track is None:
+        return f"{model.n_vertices} vertices; three.js {THREE_VERSION}; the model's mean identity"
+    name = source_name(track.source)
+    shown = f"take {name}" if name.lower().endswith(".csv") else f"track of {name or 'a clip'}"
+    shots = (f"; {len(track.shot_starts) + 1} shots: the face drawn is the first one's person, "
+             "Save face keeps the shown frame's" if len(track.shot_starts) else "")
+    return (f"{model.n_vertices} vertices; three.js {THREE_VERSION}; {shown}, "
+            f"{track.n_frames} frames at {track.fps:g} fps{shots}")
+
+
 def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
     """The HTML page (a str) for ``model``, or for ``track`` of that model."""
     from ..dials import DialError, learn_dials
@@ -149,13 +162,7 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
                           for d in dials.dials] if dials is not None else [],
             "n_frames": 0, "fps": 25.0,
             **_save_data(model, track, model.mode_names[k], identity, title),
-            "about": (f"{model.n_vertices} vertices; three.js {THREE_VERSION}; "
-                      + (f"track of {source_name(track.source) or 'a clip'}, "
-                         f"{track.n_frames} frames at {track.fps:g} fps" if track is not None
-                         else "the model's mean identity")
-                      + (f"; {len(track.shot_starts) + 1} shots: the face drawn is the first "
-                         "one's person, Save face keeps the shown frame's"
-                         if track is not None and len(track.shot_starts) else ""))}
+            "about": _about(model, track)}
     if track is not None:
         if len(names) != 52:
             from ..arkit import arkit_shortfall

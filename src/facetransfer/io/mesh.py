@@ -172,6 +172,20 @@ def read_obj(path: str | os.PathLike) -> Mesh:
     return Mesh(v, f, uv)
 
 
+def _unread_mesh(p: Path, exc: Exception) -> str:
+    """Why the file ``p`` trimesh could not read is no mesh: a track, model or truth archive or
+    a video named as such (it said trimesh's "file_type 'npz' not supported"), else trimesh's
+    first line."""
+    from .npz import content_kind
+
+    what = "an .npz archive (a track, a model, a ground truth)" if p.suffix.lower() == ".npz" \
+        else "a video" if content_kind(p) == "a video" else None
+    if what is not None:
+        return f"mesh file {p} is {what}, not a mesh: give one of {', '.join(MESH_SUFFIXES)}"
+    msg = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
+    return f"cannot read mesh {p}: {msg}"
+
+
 def read_mesh(path: str | os.PathLike) -> Mesh:
     """Read any mesh trimesh can read (OBJ, PLY, STL, OFF, GLB …) without reordering vertices.
 
@@ -198,8 +212,7 @@ def read_mesh(path: str | os.PathLike) -> Mesh:
             v = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))), dtype=np.float64)
             f = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))), dtype=np.int64)
     except Exception as exc:  # trimesh raises many kinds
-        msg = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__
-        raise MeshError(f"cannot read mesh {p}: {msg}") from None
+        raise MeshError(_unread_mesh(p, exc)) from None
     _check_vertices(v, p)
     f = f.reshape(-1, 3) if f.size else np.zeros((0, 3), np.int64)
     if f.size and (f.min() < 0 or f.max() >= len(v)):

@@ -296,16 +296,32 @@ def _decoded_ahead(seq: Sequence, frames: range) -> Iterator[tuple[int, np.ndarr
 
 
 def suggested_pattern(folder) -> Path | None:
-    """The pattern of the numbered images in ``folder`` (the last run of digits of the first
-    image's name that others share, e.g. ``folder/sh010.%04d.png``), for a folder given where a
-    video was expected; None when it holds no two images so numbered."""
+    """The pattern of the numbered images in ``folder`` (the last run of digits of an image's
+    name that others share, e.g. ``folder/sh010.%04d.png``), for a folder given where a video
+    was expected: of the patterns the most files share (before, the first name's: two stray
+    ``notes1.png``, ``notes2.png`` beside a plate's 100 frames were proposed as the sequence);
+    None when it holds no two images so numbered."""
+    from collections import Counter
+
     try:
         names = sorted(q.name for q in Path(folder).iterdir()
                        if q.suffix.lower() in IMAGE_SUFFIXES)
     except OSError:
         return None
-    return next((pattern for pattern in map(pattern_of_file, (Path(folder) / n for n in names))
-                 if pattern is not None), None)
+    shared = Counter(filter(None, map(_numbered_as, names)))
+    ranked = sorted(shared, key=lambda name: -shared[name])    # stable: ties by name
+    return next((Path(folder) / name for name in ranked if shared[name] > 1
+                 and len(sequence_files(Path(folder) / name)) > 1), None)
+
+
+def _numbered_as(name: str) -> str | None:
+    """The pattern name of a file name's last run of digits (``sh010.%04d.png`` of
+    ``sh010.1001.png``), None for a name without digits."""
+    runs = list(re.finditer(r"\d+", Path(name).stem))
+    if not runs:
+        return None
+    m = runs[-1]
+    return f"{name[:m.start()]}%0{len(m.group(0))}d{name[m.end():]}"
 
 
 def pattern_of_file(path) -> Path | None:
