@@ -373,14 +373,27 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
     part, hue = img[sl], JAW_HUE_SIGMA
     if texture.look_alpha is not None and hue > 0:
         look = interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl)
-        part = _hue_matched(face_image[sl], part, mask if compare is None else mask | compare,
-                            look, hue)
+        part = _hue_matched(face_image[sl], part, _hue_valid(mask, compare, fm), look, hue)
         hue = 0.0   # done: the paste's own hue match off
     _match_outline_into(face_image[sl], part, mask, fm, face_image[sl], feather=feather,
                         compare=compare, reject=REJECT, reject_where=None,
                         origin=(sl[1].start, sl[0].start), opacity=opacity,
                         grey_where=True, hue=hue)
     return face_image
+
+
+def _hue_valid(mask: np.ndarray, compare: np.ndarray | None, fm: np.ndarray) -> np.ndarray:
+    """The pixels :func:`facetransfer.patch._match_outline_into`'s hue match compares over:
+    the region ``mask`` and the ring ``compare`` (h, w) bool where at least 2 pixels inside
+    the face ``fm`` (its 5 x 5 erosion; the box reaches 2 pixels beyond the ring): beyond the
+    outline the ring shows hair or the background."""
+    if compare is None:
+        return mask
+    import cv2
+
+    deep = cv2.erode(fm.view(np.uint8), np.ones((5, 5), np.uint8),
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0) != 0
+    return mask | (compare & deep)
 
 
 def _hue_matched(face: np.ndarray, part: np.ndarray, valid: np.ndarray, look: np.ndarray,
