@@ -36,7 +36,12 @@ sequence)", applied to the jaw only):
    green or orange patches on the cheeks of ``make demo``'s turned and smiling frames:
    BENCHMARKS.md, "Fourteenth session", "Fifteenth session"); the skin that moved fades it
    in, the rest of the region keeps its own frame's; so does the skin that the reference frame
-   sees edge-on (:func:`facetransfer.region_weights.facing_weights`: the jaw line, under the chin).
+   sees edge-on (:func:`facetransfer.region_weights.facing_weights`: the jaw line, under the chin);
+5. and, near the mouth, where the current frame's colour departs from the reference frame's
+   in a way lighting does not explain (:data:`JAW_LOOK`, :mod:`facetransfer.jaw_look`): a
+   tongue, the teeth, the mouth's gap, which the model does not explain and the tracked
+   geometry does not move for. Those pixels do not set the region's hue either
+   (:func:`paint_jaw`): the hue match spread a tongue's red over the new chin.
 """
 
 from __future__ import annotations
@@ -50,7 +55,8 @@ from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
 from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
 from .region_weights import facing_weights, model_vertices, moved_strengths, vertex_alpha
-from .patch import REJECT, _match_outline_into
+from .jaw_look import LOOK_RAMP, look_strengths, mouth_reach
+from .patch import REJECT, _hue_field, _match_outline_into
 from .render import interpolate_vertex_values, shade_layers
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -79,6 +85,18 @@ JAW_BLEND = (0.05, 0.15)
 #: cheek of ``make demo``'s turned open-mouth frame, where the frame shows it pale); its
 #: brightness stays the gain's, so the target's own shadows do not come back.
 JAW_HUE_SIGMA = 10.0
+#: :func:`facetransfer.jaw_look.look_strengths`' ramp (the hue step of the current frame's
+#: colour from the reference frame's, near the mouth): the region also takes the reference
+#: frame where the target's mouth shows what the model does not explain; None: the
+#: geometric rule only.
+JAW_LOOK: tuple[float, float] | None = LOOK_RAMP
+#: A pixel whose appearance strength (interpolated) exceeds this does not set the region's hue
+#: (:func:`paint_jaw`).
+LOOK_HUE = 0.5
+#: Pixels by which those pixels grow (two blocks of the hue field's grid,
+#: :data:`facetransfer.patch.SHADING_STEP`: a block's mean counts all its pixels).
+LOOK_GROW = 6
+_GROW = np.ones((2 * LOOK_GROW + 1,) * 2, np.uint8)
 # Where the closed frame's texture (matched) and the current frame's differ by more than
 # facetransfer.patch.REJECT, a pixel fades back to the current frame (paint_jaw): what the closed
 # frame shows at the jaw line of a turned head is often hair or the gap under it (a black
@@ -111,6 +129,12 @@ class JawTexture:
     alpha : (n,) float32 or None
         This frame's (:meth:`at`), per vertex of the topology: the opacity of the region's
         paste, interpolated over its pixels; None: fully opaque.
+    look : (F, m) float32 or None
+        Per target frame and vertex of :attr:`verts`, the appearance rule's strength
+        (:mod:`facetransfer.jaw_look`); None: no rule.
+    look_alpha : (n,) float32 or None
+        This frame's :attr:`look` per vertex of the topology (0 off the region's vertices);
+        None where no vertex has any.
     """
 
     image: np.ndarray
@@ -121,6 +145,8 @@ class JawTexture:
     verts: np.ndarray | None = None
     strengths: np.ndarray | None = None
     alpha: np.ndarray | None = None
+    look: np.ndarray | None = None
+    look_alpha: np.ndarray | None = None
 
     def at(self, i: int) -> "JawTexture | None":
         """The texture for target frame ``i`` with its per-vertex :attr:`alpha`; None where
@@ -130,7 +156,10 @@ class JawTexture:
         s = self.strengths[i]
         if not s.size or float(s.max()) <= 0.0:
             return None
-        return replace(self, alpha=vertex_alpha(len(self.uvs), self.verts, s))
+        look = None
+        if self.look is not None and float(self.look[i].max(initial=0.0)) > LOOK_HUE:
+            look = vertex_alpha(len(self.uvs), self.verts, self.look[i], rest=0.0)
+        return replace(self, alpha=vertex_alpha(len(self.uvs), self.verts, s), look_alpha=look)
 
 
 def jaw_region(model, topo, *, threshold: float = JAW_THRESHOLD, rig=None) -> np.ndarray | None:
@@ -223,11 +252,16 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
     ring = faces_around(topo.faces, select, rings=RING)
     ring[np.asarray(topo.mouth_faces, np.int64)] = False
     verts, strengths = jaw_strengths(model, track, topo, select, i, rig=rig)
+    look = None
+    if JAW_LOOK is not None:
+        look = look_strengths(frames, track, model, verts, i, mouth_reach(model, topo, verts),
+                              m, ramp=JAW_LOOK)
+        np.maximum(strengths, look, out=strengths)
     strengths *= facing_weights(Vi, topo.faces, track.rotation[i], verts)
     shown = strengths.max(axis=1) > 0 if verts.size else np.zeros(len(strengths), bool)
     log.info("jaw: textured from target frame %d, %d triangles, in %d of %d frames", i,
              int(select.sum()), int(np.count_nonzero(shown)), len(strengths))
-    return JawTexture(img, uvs, select, i, ring, verts, strengths)
+    return JawTexture(img, uvs, select, i, ring, verts, strengths, look=look)
 
 
 def jaw_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig=None,
@@ -336,8 +370,47 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
             compare = None
     opacity = 1.0 if texture.alpha is None else \
         interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
-    _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
+    part, hue = img[sl], JAW_HUE_SIGMA
+    if texture.look_alpha is not None and hue > 0:
+        look = interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl)
+        part = _hue_matched(face_image[sl], part, _hue_valid(mask, compare, fm), look, hue)
+        hue = 0.0   # done: the paste's own hue match off
+    _match_outline_into(face_image[sl], part, mask, fm, face_image[sl], feather=feather,
                         compare=compare, reject=REJECT, reject_where=None,
                         origin=(sl[1].start, sl[0].start), opacity=opacity,
-                        grey_where=True, hue=JAW_HUE_SIGMA)
+                        grey_where=True, hue=hue)
     return face_image
+
+
+def _hue_valid(mask: np.ndarray, compare: np.ndarray | None, fm: np.ndarray) -> np.ndarray:
+    """The pixels :func:`facetransfer.patch._match_outline_into`'s hue match compares over:
+    the region ``mask`` and the ring ``compare`` (h, w) bool where at least 2 pixels inside
+    the face ``fm`` (its 5 x 5 erosion; the box reaches 2 pixels beyond the ring): beyond the
+    outline the ring shows hair or the background."""
+    if compare is None:
+        return mask
+    import cv2
+
+    deep = cv2.erode(fm.view(np.uint8), np.ones((5, 5), np.uint8),
+                     borderType=cv2.BORDER_CONSTANT, borderValue=0) != 0
+    return mask | (compare & deep)
+
+
+def _hue_matched(face: np.ndarray, part: np.ndarray, valid: np.ndarray, look: np.ndarray,
+                 sigma: float) -> np.ndarray:
+    """``part`` (h, w, 3) uint8 brought to the smooth hue of ``face`` (h, w, 3) uint8 at the
+    scale ``sigma`` (:func:`facetransfer.patch._hue_field`, its brightness kept), compared over
+    the ``valid`` (h, w) bool pixels (the region and its ring) whose appearance strength
+    ``look`` (h, w) float32 is at most :data:`LOOK_HUE` (the others grown by
+    :data:`LOOK_GROW`): a tongue's or the lips' red where the
+    reference frame shows skin does not tint the pasted skin. ``part`` as it is where no
+    pixel compares."""
+    import cv2
+
+    # grown by two of the hue field's blocks: a block partly of the tongue still carries its red
+    far = cv2.dilate((look > LOOK_HUE).view(np.uint8), _GROW) == 0
+    ok = valid & far
+    g = _hue_field(part.astype(np.float32), face, ok, sigma) if ok.any() else None
+    if g is None:
+        return part
+    return np.clip(np.rint(part * g), 0, 255).astype(np.uint8)

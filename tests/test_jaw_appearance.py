@@ -1,0 +1,118 @@
+"""The jaw region's appearance rule (issue 13): a tongue the model does not explain."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facetransfer import jaw, jaw_look
+from facetransfer.rewrite import FrameTextures, rewrite_frame
+from facetransfer.rewrite_options import BlendOptions
+from facetransfer.texture.face import FaceTexture, frame_uvs
+from facetransfer.topology import close_mouth, mesh_topology
+
+from conftest import jaw_open_track
+
+SIZE = 256
+SKIN = (200, 150, 120)
+TONGUE = (215, 105, 100)  # a tongue's red-pink: another hue than the skin, not another light
+
+
+@pytest.fixture(scope="module")
+def setup(arkit_model):
+    return arkit_model, mesh_topology(arkit_model)
+
+
+def _chin_patch(model, topo, track, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The jaw region's vertices, those of them near the mouth that lie under it (the chin
+    just below the lower lip, where a tongue stuck out lies) and the pixels around their
+    projections in frame ``i``: ``(verts, under (m,) bool, patch (H, W) bool)``."""
+    import cv2
+
+    tex_verts = jaw.jaw_strengths(model, track, topo, jaw.jaw_region(model, topo), 0)[0]
+    reach = jaw_look.mouth_reach(model, topo, tex_verts)
+    V = model.synthesize(track.weights_at(i))
+    P = track.camera(i).project(V[tex_verts])
+    mouth = track.camera(i).project(V[np.asarray(model.landmarks)[[57, 8]]])
+    mid_y = mouth[:, 1].mean()
+    under = (reach == 1) & (P[:, 1] > mouth[0, 1]) & (P[:, 1] < mid_y) & \
+        (np.abs(P[:, 0] - mouth[0, 0]) < 0.6 * (mid_y - mouth[0, 1]) + 2)
+    patch = np.zeros((SIZE, SIZE), np.uint8)
+    for x, y in P[under]:
+        cv2.circle(patch, (int(round(x)), int(round(y))), 3, 1, -1)
+    return tex_verts, under, patch > 0
+
+
+def test_a_tongue_without_motion_takes_the_reference_frame_a_brightness_change_does_not(setup):
+    """Synthetic truth: the target does not move (jawOpen 0 in every frame, so the geometric
+    rule gives 0 everywhere); frame 1 shows a red patch (a tongue) on the chin under the lip,
+    frames 2 and 3 the same skin 15 % brighter and 30 % darker all over (another exposure,
+    another light). The patch's vertices take the reference frame (frame 0) in frame 1; no
+    vertex does in frames 2 and 3, nor the vertices far from the mouth in any frame. Before
+    the rule every frame kept its own texture (``JawTexture.at`` None)."""
+    model, topo = setup
+    track = jaw_open_track(model, [0.0] * 4, size=SIZE)
+    verts, under, patch = _chin_patch(model, topo, track, 1)
+    assert under.sum() >= 10 and patch.sum() > 60
+    skin = np.array(SKIN, np.float64)
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8) for _ in range(2)]
+    frames[1][patch] = TONGUE
+    frames += [np.full((SIZE, SIZE, 3), np.rint(skin * k), np.uint8) for k in (1.15, 0.7)]
+    tex = jaw.jaw_texture(frames, track, model, topo)
+    assert tex.frame == 0
+    np.testing.assert_array_equal(tex.verts, verts)
+    s = tex.strengths
+    assert np.median(s[1, under]) > 0.9          # the tongue: the closed frame's chin
+    assert s[2].max() == 0 and s[3].max() == 0   # exposure or light: the frame's own
+    assert tex.at(2) is None and tex.at(3) is None
+    far = jaw_look.mouth_reach(model, topo, verts) == 0
+    assert far.sum() > 100 and s[1, far].max() == 0
+    at = tex.at(1)
+    assert at is not None and at.look_alpha is not None
+    assert np.all(at.look_alpha[verts[under]] > jaw.LOOK_HUE)
+
+
+def test_the_tongue_neither_shows_nor_tints_the_pasted_chin(setup):
+    """Rendered: a closed new jaw in frame 1 of the clip above shows the reference frame's
+    skin where the tongue was, in the skin's hue (the region's hue match leaves the tongue's
+    pixels out: it spread their red over the chin around them)."""
+    model, topo = setup
+    track = jaw_open_track(model, [0.0, 0.0], size=SIZE)
+    _, _, patch = _chin_patch(model, topo, track, 1)
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8) for _ in range(2)]
+    frames[1][patch] = TONGUE
+    tex = jaw.jaw_texture(frames, track, model, topo)
+    cam = track.camera(1)
+    V = model.synthesize(track.weights_at(1))
+    face_tex = FaceTexture(frames[1], frame_uvs(close_mouth(V, topo), cam, (SIZE, SIZE)), 1)
+    paste = BlendOptions("none", erode=0)
+    before = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex), blending=paste)
+    after = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex, jaw=tex.at(1)),
+                          blending=paste)
+    import cv2
+
+    core = cv2.erode(patch.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert core.sum() > 20
+
+    def redness(img, where):  # R over G, the tongue's 2.05 against the skin's 1.33
+        px = img[where].astype(float)
+        return float(np.median(px[:, 0] / px[:, 1]))
+
+    assert redness(before.image, core) > 1.8   # the frame's own texture: the tongue
+    np.testing.assert_allclose(redness(after.image, core), SKIN[0] / SKIN[1], atol=0.04)
+    around = (cv2.dilate(patch.astype(np.uint8), np.ones((15, 15), np.uint8)) > 0) & ~patch
+    np.testing.assert_allclose(redness(after.image, around), SKIN[0] / SKIN[1], atol=0.04)
+
+
+def test_hue_steps_see_a_hue_not_a_light():
+    """hue_steps: a brightness scale of every channel or a tint of the whole region is no step;
+    a vertex of another hue is, by its log-chromaticity's distance."""
+    rng = np.random.default_rng(0)
+    ref = np.log(rng.uniform(120, 200, (50, 3)) + 8.0)
+    cur = np.stack([ref + np.log(0.6), ref + np.log([1.1, 1.0, 0.9])])
+    np.testing.assert_allclose(jaw_look.hue_steps(cur, ref), 0.0, atol=1e-6)
+    red = cur.copy()
+    red[:, 7] += (0.3, -0.15, -0.15)
+    steps = jaw_look.hue_steps(red, ref)
+    np.testing.assert_allclose(steps[:, 7], np.sqrt(0.3 ** 2 + 2 * 0.15 ** 2), rtol=1e-5)
+    assert np.delete(steps, 7, axis=1).max() < 1e-6
