@@ -232,6 +232,9 @@ def test_scan_fit_refuses_options_it_would_not_use(tmp_path, capsys):
               "(the points found on the scan's rendering)"),
              (["--template-landmarks", "x.json"], "--template-landmarks is for a mesh template; "
               "the ict template has its own landmarks"),
+             (["--template", "M.NPZ", "--template-landmarks", "x.json"],   # as load_template
+              "--template-landmarks is for a mesh template; the M.NPZ template has its own "
+              "landmarks"),                                                # reads it: a model
              (["--reference", "n.obj", "--prior", "identity+expression"],
               "--prior is not used with --reference (the reference fit is deformed)")]
     for extra, why in cases:
