@@ -317,12 +317,13 @@ def _frames_read(fields: list) -> dict[tuple, int]:
     names (:func:`_numbered_as`, one a file): a field ``width`` wide reads the numbers of so
     many digits or more (:func:`sequence_files`), so an unpadded numbering's ``frame%01d.png``
     reads ``frame1 .. frame30``, where ``frame%02d.png``, of the most names, left 1-9 out."""
-    from collections import Counter
+    from collections import Counter, defaultdict
 
-    count = Counter(fields)
-    return {(a, w, b): sum(c for (a2, w2, b2), c in count.items()
-                           if (a2, b2) == (a, b) and w2 >= w)
-            for a, w, b in count}
+    widths: dict = defaultdict(Counter)      # by the text around the field: linear in files
+    for a, w, b in fields:
+        widths[(a, b)][w] += 1
+    return {(a, w, b): sum(c for w2, c in count.items() if w2 >= w)
+            for (a, b), count in widths.items() for w in count}
 
 
 def _numbered_as(name: str) -> tuple[str, int, str] | None:
