@@ -91,6 +91,26 @@ def test_every_option_of_one_value_takes_a_value_with_a_minus_sign():
     assert n > 150
 
 
+def test_an_abbreviated_option_takes_a_value_with_a_minus_sign(tmp_path, capsys):
+    """argparse takes ``--backgr`` for ``--background`` (and the CLI's own check of unknown
+    options does too), but ``--backgr -1,2,3`` was "unrecognized arguments: -1,2,3": the
+    word after an abbreviation was not joined to it. An abbreviation of several options is
+    left to argparse's "ambiguous option"."""
+    from facetransfer.cli.main import attached_values, command_parser
+
+    parser = build_parser()
+    render = command_parser(parser, ["render"])
+    assert attached_values(render, ["--backgr", "-1,2,3"]) == ["--backgr=-1,2,3"]
+    assert attached_values(render, ["--backgr=-1,2", "-5"]) == ["--backgr=-1,2", "-5"]
+    transfer = command_parser(parser, ["transfer"])
+    assert attached_values(transfer, ["--identity-w", "-0.5,0.2"]) == \
+        ["--identity-w=-0.5,0.2"]
+    assert attached_values(transfer, ["--identity", "-0.5"]) == ["--identity", "-0.5"]
+    assert main(["render", "--backgr", "-1,2,3", "--out", str(tmp_path / "r.png")]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "facetransfer render: error: --background: expected R,G,B in 0..255, got '-1,2,3'"]
+
+
 @pytest.mark.parametrize("argv,option", [
     (["transfer", "--target", "t.mp4", "--identity-weights", "", "--out", "o.mp4"],
      "--identity-weights"),

@@ -232,6 +232,9 @@ def test_scan_fit_refuses_options_it_would_not_use(tmp_path, capsys):
               "(the points found on the scan's rendering)"),
              (["--template-landmarks", "x.json"], "--template-landmarks is for a mesh template; "
               "the ict template has its own landmarks"),
+             (["--template", "M.NPZ", "--template-landmarks", "x.json"],   # as load_template
+              "--template-landmarks is for a mesh template; the M.NPZ template has its own "
+              "landmarks"),                                                # reads it: a model
              (["--reference", "n.obj", "--prior", "identity+expression"],
               "--prior is not used with --reference (the reference fit is deformed)")]
     for extra, why in cases:
@@ -341,6 +344,27 @@ def test_a_folder_given_for_a_video_proposes_its_largest_sequence(tmp_path):
     (tmp_path / "alone").mkdir()
     cv2.imwrite(str(tmp_path / "alone" / "still7.png"), img)
     assert suggested_pattern(tmp_path / "alone") is None
+
+
+def test_a_folder_of_an_unpadded_numbering_proposes_the_pattern_that_reads_every_frame(
+        tmp_path):
+    """Frames numbered without padding (``frame1.png`` .. ``frame30.png``): ``frame%01d.png``
+    reads all 30; the pattern of the most names of one width, ``frame%02d.png``, proposed
+    before, reads 10 .. 30 and left frames 1-9 out. The plate beside stray stills still
+    wins."""
+    import cv2
+    import numpy as np
+
+    from facetransfer.io.video_sequence import sequence_files, suggested_pattern
+
+    img = np.zeros((8, 8, 3), np.uint8)
+    for k in range(1, 31):
+        cv2.imwrite(str(tmp_path / f"frame{k}.png"), img)
+    for name in ("notes1.png", "notes2.png", "notes3.png"):
+        cv2.imwrite(str(tmp_path / name), img)
+    got = suggested_pattern(tmp_path)
+    assert got == tmp_path / "frame%01d.png"
+    assert sorted(sequence_files(got)) == list(range(1, 31))
 
 
 def test_every_subcommands_help_says_what_it_does():

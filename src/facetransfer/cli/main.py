@@ -130,7 +130,7 @@ def attached_values(leaf: argparse.ArgumentParser, words: list[str]) -> list[str
         word = words[k]
         if word == "--":
             return out + words[k:]
-        action = known.get(word)
+        action = _option_named(known, word)
         if action is not None and action.nargs is None and k + 1 < len(words) and \
                 _DASHED_VALUE.match(words[k + 1]) and words[k + 1] not in known:
             out.append(f"{word}={words[k + 1]}")
@@ -139,6 +139,16 @@ def attached_values(leaf: argparse.ArgumentParser, words: list[str]) -> list[str
         out.append(word)
         k += 1
     return out
+
+
+def _option_named(known: dict, word: str):
+    """The action of the option ``word`` names: its own, or of the one long option it
+    abbreviates (as argparse takes ``--backgr`` for ``--background``; before, ``--backgr
+    -1,2,3`` was "unrecognized arguments: -1,2,3"); None for none or several."""
+    if word in known or not word.startswith("--") or "=" in word:
+        return known.get(word)
+    named = {known[o] for o in known if o.startswith(word)}
+    return next(iter(named)) if len(named) == 1 else None
 
 
 def empty_option(leaf: argparse.ArgumentParser, args) -> str | None:

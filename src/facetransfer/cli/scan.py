@@ -231,8 +231,8 @@ def _unused_fit_option(args) -> str | None:
             return f"--texture acts only {found_here}"
         if args.flip_v:
             return f"--flip-v acts only {found_here}"
-    if args.template_landmarks is not None and (args.template == "ict" or
-                                                str(args.template).endswith(".npz")):
+    if args.template_landmarks is not None and (   # as correspond.load_template tells them
+            args.template == "ict" or Path(args.template).suffix.lower() == ".npz"):
         return (f"--template-landmarks is for a mesh template; the {args.template} template "
                 "has its own landmarks")
     if args.reference and args.prior == "identity+expression":

@@ -298,30 +298,43 @@ def _decoded_ahead(seq: Sequence, frames: range) -> Iterator[tuple[int, np.ndarr
 def suggested_pattern(folder) -> Path | None:
     """The pattern of the numbered images in ``folder`` (the last run of digits of an image's
     name that others share, e.g. ``folder/sh010.%04d.png``), for a folder given where a video
-    was expected: of the patterns the most files share (before, the first name's: two stray
-    ``notes1.png``, ``notes2.png`` beside a plate's 100 frames were proposed as the sequence);
-    None when it holds no two images so numbered."""
-    from collections import Counter
-
+    was expected: of the patterns, the one that reads the most files (before, the first name's:
+    two stray ``notes1.png``, ``notes2.png`` beside a plate's 100 frames were proposed as the
+    sequence); None when it holds no two images so numbered."""
     try:
         names = sorted(q.name for q in Path(folder).iterdir()
-                       if q.suffix.lower() in IMAGE_SUFFIXES)
+                       if q.suffix.lower() in IMAGE_SUFFIXES and "%" not in q.name)
     except OSError:
         return None
-    shared = Counter(filter(None, map(_numbered_as, names)))
-    ranked = sorted(shared, key=lambda name: -shared[name])    # stable: ties by name
-    return next((Path(folder) / name for name in ranked if shared[name] > 1
-                 and len(sequence_files(Path(folder) / name)) > 1), None)
+    reads = _frames_read([f for f in map(_numbered_as, names) if f is not None])
+    ranked = sorted(reads, key=lambda f: (-reads[f], f))
+    return next((Path(folder) / f"{a}%0{w}d{b}" for a, w, b in ranked if reads[(a, w, b)] > 1
+                 and len(sequence_files(Path(folder) / f"{a}%0{w}d{b}")) > 1), None)
 
 
-def _numbered_as(name: str) -> str | None:
-    """The pattern name of a file name's last run of digits (``sh010.%04d.png`` of
-    ``sh010.1001.png``), None for a name without digits."""
+def _frames_read(fields: list) -> dict[tuple, int]:
+    """``{(before, width, after): files it reads}`` of the frame-number fields of a folder's
+    names (:func:`_numbered_as`, one a file): a field ``width`` wide reads the numbers of so
+    many digits or more (:func:`sequence_files`), so an unpadded numbering's ``frame%01d.png``
+    reads ``frame1 .. frame30``, where ``frame%02d.png``, of the most names, left 1-9 out."""
+    from collections import Counter, defaultdict
+
+    widths: dict = defaultdict(Counter)      # by the text around the field: linear in files
+    for a, w, b in fields:
+        widths[(a, b)][w] += 1
+    return {(a, w, b): sum(c for w2, c in count.items() if w2 >= w)
+            for (a, b), count in widths.items() for w in count}
+
+
+def _numbered_as(name: str) -> tuple[str, int, str] | None:
+    """A file name's last run of digits as a frame-number field: the text before it, its
+    width and the text after (``("sh010.", 4, ".png")`` of ``sh010.1001.png``), None for a
+    name without digits."""
     runs = list(re.finditer(r"\d+", Path(name).stem))
     if not runs:
         return None
     m = runs[-1]
-    return f"{name[:m.start()]}%0{len(m.group(0))}d{name[m.end():]}"
+    return name[:m.start()], len(m.group(0)), name[m.end():]
 
 
 def pattern_of_file(path) -> Path | None:

@@ -180,8 +180,8 @@ def _capture(video, model, frames, fps, max_frames, progress_factory, workers: i
 def _depends(method: str, video, options, face=None, every: int = 1, eyes: bool = False):
     """What a track of ``method`` depends on beyond the video, frames and model (its cache
     key): the flow tracker's options, the landmark fit's precomputed points file, the capture
-    tracker's ``face`` (of several people, which) and detector rate (``every``, and ``eyes``: the frames where the eyes move shown too,
-    :mod:`facetransfer.track.skip_rule`)."""
+    tracker's ``face`` (of several people, which) and detector rate (``every``, and ``eyes``:
+    the frames where the eyes move shown too, :mod:`facetransfer.track.skip_rule`)."""
     if method in ("auto", "capture"):
         parts = ([] if face is None else [f"face={face}"]) + \
             ([] if every == 1 else [f"every={int(every)}" + (",eyes" if eyes else "")])

@@ -20,6 +20,8 @@ both cues show 51-76 % of the frames and keep the blink scores within 0.07 of ev
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 
 from ..arkit import ARKIT_NAMES
@@ -52,7 +54,10 @@ def eye_scores_moving(scores: list, skipped: list) -> bool:
     skipped : list of bool
         Each frame's: not shown to the detector.
     """
-    shown = [i for i in range(len(skipped) - 1, -1, -1) if not skipped[i]][:2]
+    # from the end, the two last only: asked before every frame, a scan of the whole list
+    # made the clip's detection quadratic in its length
+    shown = list(itertools.islice((i for i in range(len(skipped) - 1, -1, -1)
+                                   if not skipped[i]), 2))
     if len(shown) < 2:
         return False
     a, b = shown
