@@ -58,8 +58,9 @@ from .composite import (_erode, _extend, composite_alpha, composite_face, membra
 from .errors import ShapeError
 from .rim import drawn_inside, lifted_positions
 from .unmoved import unmoved_uvs
-from .eyes import EyeTexture, _paint_eyes, eye_flags
-from .jaw import JawTexture, _paint_jaw, jaw_flags
+from .eyes import EyeTexture, _paint_eyes
+from .jaw import JawTexture, _paint_jaw
+from .layer_flags import layer_flags
 from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.face import FaceTexture
@@ -378,20 +379,21 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
     """
     face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring = (
         textures.face, textures.mouth, textures.eyes, textures.jaw, textures.mouth_ring)
-    flags = np.full(topo.faces.shape[0], _FACE, np.uint8)
+    # the triangles' flags in one kernel (what eyes.eye_flags and jaw.jaw_flags give, or-ed)
+    masks = []
     layers = [(face_texture.uvs, np.asarray(face_texture.image, np.uint8)), None, None, None]
     if eye_texture is not None:
-        flags |= eye_flags(eye_texture, shown=_EYES, rim=_RIM)
+        masks += [(eye_texture.select, _EYES), (eye_texture.rim, _RIM)]
         layers[1] = (eye_texture.uvs, eye_texture.image)
     if jaw_texture is not None:
-        flags |= jaw_flags(jaw_texture, shaded=_JAW, region=_JAW_REGION, ring=_JAW_RING)
+        masks += [(jaw_texture.select, _JAW | _JAW_REGION), (jaw_texture.ring, _JAW | _JAW_RING)]
         layers[2] = (jaw_texture.uvs, jaw_texture.image)
     with_mouth = mouth_texture is not None and topo.mouth_faces.size > 0
     if with_mouth:
-        flags[topo.mouth_faces] |= _MOUTH
-        if mouth_ring is not None:
-            flags[np.asarray(mouth_ring, bool)] |= _MOUTH | _MOUTH_RING
+        masks.append((mouth_ring, _MOUTH | _MOUTH_RING))
         layers[3] = (mouth_texture.uvs, np.asarray(mouth_texture.image, np.uint8))
+    flags = layer_flags(topo.faces.shape[0], _FACE, masks,
+                        topo.mouth_faces if with_mouth else None, _MOUTH)
     (face_img, eye_img, jaw_img, mouth_img), labels = shade_layers(raster, topo.faces, layers,
                                                                    flags)
     face_mask = labels != 0  # every covered pixel has the face's bit
