@@ -159,10 +159,13 @@ class WeakPerspective:
     def project(self, X: np.ndarray) -> np.ndarray:
         """Pixels ``s * diag(1 / a, -1) @ R[:2] @ X + t`` (Eq. (7); ``a`` the pixel aspect,
         1 for square pixels), (n, 3) -> (n, 2)."""
-        Y = _as_points(X) @ self.rotation[:2].T  # (n, 2)
+        from .raster import _pixels  # (numba's kernels live there; it imports this module)
+
+        Y = _as_points(X) @ self.rotation[:2].T  # (n, 2), C-contiguous: one compiled kernel
         out = np.empty_like(Y)
-        out[:, 0] = (self.scale / self.pixel_aspect) * Y[:, 0] + self.translation[0]
-        out[:, 1] = -self.scale * Y[:, 1] + self.translation[1]
+        # (s / a) Y_x + t_x and (-s) Y_y + t_y, the numpy expressions' operations in one call
+        _pixels(Y, float(self.scale / self.pixel_aspect), float(self.translation[0]),
+                float(-self.scale), float(self.translation[1]), out)
         return out
 
     def depth(self, X: np.ndarray) -> np.ndarray:

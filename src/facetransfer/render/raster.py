@@ -145,6 +145,18 @@ def _bbox_diagonal_py(V):  # pragma: no cover
 _bbox_diagonal = _maybe_njit(_bbox_diagonal_py)
 
 
+def _pixels_py(Y, sx, tx, sy, ty, out):  # pragma: no cover (numba)
+    """``out[:, 0] = sx * Y[:, 0] + tx`` and ``out[:, 1] = sy * Y[:, 1] + ty`` (``Y``, ``out``
+    (n, 2) float64): :meth:`WeakPerspective.project`'s pixels from the rotated points, the
+    numpy expressions' two roundings each, in one call (it projects 5 times a frame)."""
+    for i in range(Y.shape[0]):
+        out[i, 0] = sx * Y[i, 0] + tx
+        out[i, 1] = sy * Y[i, 1] + ty
+
+
+_pixels = _maybe_njit(_pixels_py)
+
+
 # --------------------------------------------------------------------------------------------
 # Rasterisation: shared setup
 # --------------------------------------------------------------------------------------------
@@ -437,6 +449,25 @@ _raster_kernel = _maybe_njit(_raster_kernel_py)
 _any_nondegenerate = _maybe_njit(_any_nondegenerate_py)
 
 
+def _raster_fresh_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary,
+                     mask):  # pragma: no cover (numba)
+    """:func:`_raster_kernel` into new (unset) buffers, set first to the background (``zbuf``
+    -inf, ``tid`` -1, ``bary`` 0), and ``mask`` (H, W) bool ``tid >= 0`` after: numpy's
+    ``full``, ``zeros`` and comparison of :func:`_rasterize_checked` in the same call."""
+    for y in range(H):
+        for x in range(W):
+            zbuf[y, x] = -np.inf
+            tid[y, x] = -1
+            bary[y, x, 0] = bary[y, x, 1] = bary[y, x, 2] = 0.0
+    _raster_kernel(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary)
+    for y in range(H):
+        for x in range(W):
+            mask[y, x] = tid[y, x] >= 0
+
+
+_raster_fresh = _maybe_njit(_raster_fresh_py)
+
+
 def rasterize(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int], *,
               cull_backfaces: bool = False) -> Raster:
     """Z-buffer rasterisation of a triangle mesh (numba kernel).
@@ -549,11 +580,10 @@ def coverage(points: np.ndarray, faces: np.ndarray, size: tuple[int, int], *,
 def _rasterize_checked(V, F, camera, W, H, cull) -> Raster:
     xy, z, q = _screen(V, camera)
     perspective = bool(getattr(camera, "perspective", False))
-    zbuf = np.full((H, W), -np.inf, np.float32)
-    tid = np.full((H, W), -1, np.int32)
-    bary = np.zeros((H, W, 3), np.float32)
-    _raster_kernel(xy, z, q, F, W, H, bool(cull), perspective, zbuf, tid, bary)
-    return Raster(zbuf, tid, bary, tid >= 0)
+    zbuf, tid = np.empty((H, W), np.float32), np.empty((H, W), np.int32)
+    bary, mask = np.empty((H, W, 3), np.float32), np.empty((H, W), bool)
+    _raster_fresh(xy, z, q, F, W, H, bool(cull), perspective, zbuf, tid, bary, mask)
+    return Raster(zbuf, tid, bary, mask)
 
 
 class Rasterizer:
