@@ -1,6 +1,6 @@
 """Two of the render's kernels of the forty-sixth session against the numpy expressions they
 replaced (commit ``c1ab903``): ``WeakPerspective.project``'s pixels from the rotated points
-(``render.raster._pixels``): the same bits on random cameras and points, pixel aspects other
+(``render.cameras._pixels``): the same bits on random cameras and points, pixel aspects other
 than 1, and the edges (no points, one, NaN and infinities, a view of a larger array, float32
 points); and ``rasterize``'s buffers set and its mask made in the raster kernel's call
 (``render.raster._raster_fresh``): the same rasters for meshes in, across and out of the
@@ -13,7 +13,8 @@ import pytest
 
 from facetransfer.render import (Pinhole, WeakPerspective, look_at_weak_perspective, rasterize,
                                  rotation_from_euler)
-from facetransfer.render.raster import _check_mesh, _pixels, _raster_kernel, _screen
+from facetransfer.render.cameras import _pixels
+from facetransfer.render.raster import _check_mesh, _raster_kernel, _screen
 
 
 def _before(cam: WeakPerspective, X) -> np.ndarray:

@@ -21,27 +21,9 @@ import numpy as np
 
 from ..errors import MeshError, ShapeError
 from .cameras import Pinhole, WeakPerspective, _as_size
-
-try:  # numba is a hard dependency; the fallback keeps the module importable without it
-    import numba
-
-    _HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    numba = None
-    _HAVE_NUMBA = False
+from .jit import _HAVE_NUMBA, _maybe_njit  # noqa: F401 (the kernels import it from here)
 
 __all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference", "coverage"]
-
-
-def _maybe_njit(fn, *, inline: bool = False):
-    """``fn`` compiled by numba (cached, no GIL, numpy's error model). ``inline``: inlined
-    into the kernels that call it, at numba's IR level (a cached kernel is its own LLVM
-    module, so LLVM does not inline across kernels: a small helper called per pixel would
-    otherwise cost a call with every array argument spilled to the stack)."""
-    if not _HAVE_NUMBA:
-        return fn
-    return numba.njit(cache=True, nogil=True, error_model="numpy",
-                      inline="always" if inline else "never")(fn)
 
 
 class RenderError(MeshError):
@@ -143,18 +125,6 @@ def _bbox_diagonal_py(V):  # pragma: no cover
 
 
 _bbox_diagonal = _maybe_njit(_bbox_diagonal_py)
-
-
-def _pixels_py(Y, sx, tx, sy, ty, out):  # pragma: no cover (numba)
-    """``out[:, 0] = sx * Y[:, 0] + tx`` and ``out[:, 1] = sy * Y[:, 1] + ty`` (``Y``, ``out``
-    (n, 2) float64): :meth:`WeakPerspective.project`'s pixels from the rotated points, the
-    numpy expressions' two roundings each, in one call (it projects 5 times a frame)."""
-    for i in range(Y.shape[0]):
-        out[i, 0] = sx * Y[i, 0] + tx
-        out[i, 1] = sy * Y[i, 1] + ty
-
-
-_pixels = _maybe_njit(_pixels_py)
 
 
 # --------------------------------------------------------------------------------------------
