@@ -60,6 +60,7 @@ from .rim import drawn_inside, lifted_positions
 from .unmoved import unmoved_uvs
 from .eyes import EyeTexture, _paint_eyes
 from .jaw import JawTexture, _paint_jaw
+from .label_masks import frame_masks
 from .layer_flags import layer_flags
 from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
@@ -396,7 +397,10 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
                         topo.mouth_faces if with_mouth else None, _MOUTH)
     (face_img, eye_img, jaw_img, mouth_img), labels = shade_layers(raster, topo.faces, layers,
                                                                    flags)
-    face_mask = labels != 0  # every covered pixel has the face's bit
+    # every covered pixel has the face's bit; the mouth's pixels outside its ring (one kernel)
+    face_mask, mouth_mask, ring = frame_masks(
+        labels, _MOUTH if with_mouth else 0,
+        _MOUTH_RING if with_mouth and mouth_ring is not None else 0)
     if own is not None:
         _keep_own(face_img, face_mask, *own)
     if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
@@ -405,14 +409,8 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
     if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
         face_img = _paint_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
                               (_JAW_REGION, _JAW_RING), raster, topo.faces)
-    ring = None
-    if with_mouth:
-        mouth_mask = np.bitwise_and(labels, _MOUTH) != 0
-        if mouth_ring is not None:
-            ring = np.bitwise_and(labels, _MOUTH_RING) != 0
-            mouth_mask &= ~ring
-    else:
-        mouth_mask = np.zeros(labels.shape, bool)
+    if not with_mouth or mouth_ring is None:
+        ring = None
     return face_img, face_mask, mouth_img, mouth_mask, ring
 
 
