@@ -52,7 +52,7 @@ from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
 from .errors import RewriteError
 from .eye_lids import lid_shares, mix_lids
-from .label_masks import bits_box, bits_mask
+from .label_masks import bits_box
 from .eyeballs import Eyeballs, eyeballs_of, shift_eyeballs
 from .patch import REJECT, SHADING_SIGMA, _match_outline_into
 from .region_weights import model_vertices, moved_strengths, usual_weights_of, vertex_alpha
@@ -799,17 +799,19 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     :func:`eye_flags`), painting ``face_image`` in place and returning it."""
     import cv2
 
-    # the box of _region_box, the masks of the labels' bits: label_masks' kernels
+    # the box of _region_box (of np.bitwise_and(labels, bits[0])) in one kernel
     sl = bits_box(labels, bits[0], int(np.ceil(4 * LID_SOFTNESS)) + 2)
     if sl is None:
         return face_image
     box = (sl[1].start, sl[0].start, sl[1].stop, sl[0].stop)
+    lab = labels[sl]
     whole, eye_img = eye_img, eye_img[sl]
     if texture.gaze_shift is not None:  # the eyeballs turned to the new gaze (in place)
         shift_eyeballs(eye_img, raster.tri_id[sl], raster.bary[sl], faces, texture.uvs,
                        texture.eyeballs, texture.gaze_shift)
-    eye_mask, shown = bits_mask(labels, face_mask, sl, bits[0])  # shown pixels of the face
-    if not shown:
+    eye_mask = (lab & bits[0]).view(bool) if bits[0] == 1 else (lab & bits[0]) != 0
+    eye_mask &= face_mask[sl]
+    if not eye_mask.any():
         return face_image
     a = texture.closing(vertices)
     opacity = 1.0 if texture.alpha is None else \
@@ -817,7 +819,7 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     if a.max() > 0:  # the closed frame's texture mixed in, on the box (eye_lids' kernels)
         closed_img, _ = shade_texture(raster, faces, texture.closed_uvs, texture.closed_image,
                                       texture.select, box=sl)
-        w = lid_shares(raster.tri_id, (box[1], box[0], *eye_mask.shape), texture.side, a)
+        w = lid_shares(raster.tri_id, (box[1], box[0], *lab.shape), texture.side, a)
         # soft where the lids meet the rest of the region (no step along triangle edges)
         w = cv2.GaussianBlur(w, (0, 0), LID_SOFTNESS)
         mix_lids(w, closed_img, whole, (box[1], box[0]))  # into eye_img, a view of whole
@@ -825,7 +827,7 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
             opacity = np.maximum(opacity, w)
     rim = None
     if texture.rim is not None and texture.rim.any():
-        rim = bits_mask(labels, face_mask, sl, bits[0], bits[1])[0]  # shown, on the rim
+        rim = eye_mask & ((lab & bits[1]) != 0)  # eye_mask: shown pixels
     # the region's own shading brought to the frame's (patch._shading_field): textured from
     # one frame under another head pose, its cheeks and temples showed patches with seams
     _match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],

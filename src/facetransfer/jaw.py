@@ -47,7 +47,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
-from .label_masks import bits_box, bits_mask
+from .label_masks import bits_box
 from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
 from .region_weights import facing_weights, model_vertices, moved_strengths, vertex_alpha
 from .patch import REJECT, _match_outline_into
@@ -320,18 +320,19 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
     painting ``face_image`` in place and returning it."""
     # the work on the box of the region and its ring, grown by the 2 px the ring's erosion
     # reaches (patch._ring); the gain fit keeps the frame's coordinates (origin)
-    # (mask_box of the labels' bits, and the masks in the face: label_masks' kernels)
-    sl = bits_box(labels, bits[0] | bits[1], 2)
+    sl = bits_box(labels, bits[0] | bits[1], 2)  # mask_box of the bits, in one kernel
     if sl is None:
         return face_image
-    fm = face_mask[sl]
-    mask, n = bits_mask(labels, face_mask, sl, bits[0])
-    if n == 0:
+    lab, fm = labels[sl], face_mask[sl]
+    mask = np.bitwise_and(lab, bits[0]) != 0
+    mask &= fm
+    if np.count_nonzero(mask) == 0:
         return face_image
     compare = None
     if texture.ring is not None:
-        compare, n = bits_mask(labels, face_mask, sl, bits[1])
-        if n < 8:
+        compare = np.bitwise_and(lab, bits[1]) != 0
+        compare &= fm
+        if np.count_nonzero(compare) < 8:
             compare = None
     opacity = 1.0 if texture.alpha is None else \
         interpolate_vertex_values(raster, faces, texture.alpha, box=sl)

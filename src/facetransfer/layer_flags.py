@@ -27,8 +27,7 @@ def _or_mask_py(out, m, bit):  # pragma: no cover (numba, inlined)
     """``out[m] |= bit`` (``m`` (n,) bool, or empty: nothing)."""
     if m.shape[0]:
         for f in range(out.shape[0]):
-            if m[f]:
-                out[f] |= bit
+            out[f] |= np.uint8(m[f]) * bit  # (no branch: vectorised)
 
 
 _or_mask = _maybe_njit(_or_mask_py, inline=True)

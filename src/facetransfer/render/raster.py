@@ -421,14 +421,14 @@ _any_nondegenerate = _maybe_njit(_any_nondegenerate_py)
 
 def _raster_fresh_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary,
                      mask):  # pragma: no cover (numba)
-    """:func:`_raster_kernel` into new (unset) buffers, set first to the background (``zbuf``
-    -inf, ``tid`` -1, ``bary`` 0), and ``mask`` (H, W) bool ``tid >= 0`` after: numpy's
-    ``full``, ``zeros`` and comparison of :func:`_rasterize_checked` in the same call."""
+    """:func:`_raster_kernel` into new buffers, ``zbuf`` and ``tid`` (H, W) unset and set
+    first to the background (-inf, -1), ``bary`` zeros (numpy's, whose pages the OS gives
+    zeroed: only the drawn pixels' are touched), and ``mask`` (H, W) bool ``tid >= 0`` after:
+    numpy's ``full`` and comparison of :func:`_rasterize_checked` in the same call."""
     for y in range(H):
         for x in range(W):
             zbuf[y, x] = -np.inf
             tid[y, x] = -1
-            bary[y, x, 0] = bary[y, x, 1] = bary[y, x, 2] = 0.0
     _raster_kernel(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary)
     for y in range(H):
         for x in range(W):
@@ -551,7 +551,7 @@ def _rasterize_checked(V, F, camera, W, H, cull) -> Raster:
     xy, z, q = _screen(V, camera)
     perspective = bool(getattr(camera, "perspective", False))
     zbuf, tid = np.empty((H, W), np.float32), np.empty((H, W), np.int32)
-    bary, mask = np.empty((H, W, 3), np.float32), np.empty((H, W), bool)
+    bary, mask = np.zeros((H, W, 3), np.float32), np.empty((H, W), bool)
     _raster_fresh(xy, z, q, F, W, H, bool(cull), perspective, zbuf, tid, bary, mask)
     return Raster(zbuf, tid, bary, mask)
 
