@@ -243,19 +243,40 @@ def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int
     W, H = size
     if not isinstance(camera, WeakPerspective):
         return 0, 0, W, H
-    p = camera.project(V)
-    if not np.isfinite(p).all():  # (one flat pass; the rows' test only when needed)
-        p = p[np.isfinite(p).all(axis=1)]
-    if p.size == 0:
+    ext = np.empty(4, np.int64)  # the finite points' box grown by margin (one kernel)
+    if not _extent_kernel(camera.project(V), int(margin), ext):
         return None
-    x, y = p[:, 0], p[:, 1]  # the columns' extremes (faster than reducing (n, 2) over axis 0)
-    lo = np.floor([x.min(), y.min()]).astype(np.int64) - margin
-    hi = np.ceil([x.max(), y.max()]).astype(np.int64) + margin + 1
-    x0, y0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
-    x1, y1 = min(int(hi[0]), W), min(int(hi[1]), H)
+    x0, y0, x1, y1 = ext.tolist()
+    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)
     if x1 <= x0 or y1 <= y0:
         return None
     return x0, y0, x1, y1
+
+
+def _extent_kernel_py(p, margin, ext):  # pragma: no cover (numba)
+    """``ext`` (4,) int64 = ``floor`` of the least x and y less ``margin`` and ``ceil`` of the
+    largest plus ``margin + 1``, of the points ``p`` (n, 2) float64 whose coordinates are both
+    finite (int64 as numpy casts and adds); whether there is one. (:func:`_face_box`'s numpy
+    steps, the rows with a non-finite coordinate dropped, the extremes, floor and ceil and
+    the margin, in one pass.)"""
+    found = False
+    xlo = ylo = np.inf
+    xhi = yhi = -np.inf
+    for i in range(p.shape[0]):
+        x, y = p[i, 0], p[i, 1]
+        if not (np.isfinite(x) and np.isfinite(y)):
+            continue
+        found = True
+        xlo, xhi = min(xlo, x), max(xhi, x)
+        ylo, yhi = min(ylo, y), max(yhi, y)
+    if found:
+        ext[0], ext[1] = np.int64(np.floor(xlo)) - margin, np.int64(np.floor(ylo)) - margin
+        ext[2] = np.int64(np.ceil(xhi)) + margin + 1
+        ext[3] = np.int64(np.ceil(yhi)) + margin + 1
+    return found
+
+
+_extent_kernel = _maybe_njit(_extent_kernel_py)
 
 
 def _shift_camera(camera, x0: int, y0: int):
