@@ -26,7 +26,7 @@ def _lid_shares_py(tid, y0, x0, side, a, w):  # pragma: no cover (numba)
     eye's lids (``side[f] >= 0``: the eye), 0 elsewhere and on the background."""
     for iy in range(w.shape[0]):
         for ix in range(w.shape[1]):
-            f = tid[y0 + iy, x0 + ix]
+            f = tid[np.uint64(y0 + iy), np.uint64(x0 + ix)]
             s = side[f] if f >= 0 else -1
             w[iy, ix] = np.float32(a[s]) if s >= 0 else np.float32(0.0)
 
@@ -40,10 +40,11 @@ def _mix_lids_py(w, closed, img, y0, x0):  # pragma: no cover (numba)
         for ix in range(w.shape[1]):
             a = w[iy, ix]
             b = one - a
+            y, x = np.uint64(y0 + iy), np.uint64(x0 + ix)
             for c in range(3):
-                o = np.float32(img[y0 + iy, x0 + ix, c])
+                o = np.float32(img[y, x, c])
                 v = b * o + a * np.float32(closed[iy, ix, c])
-                img[y0 + iy, x0 + ix, c] = np.uint8(np.rint(v))
+                img[y, x, c] = np.uint8(np.rint(v))
 
 
 _lid_shares = _maybe_njit(_lid_shares_py)

@@ -189,8 +189,10 @@ def _shade_layers_kernel_py(tid, bary, y0, x0, F, flags, uv0, tex0, img0, uv1, t
     H, W = labels.shape
     n = F.shape[0]
     for iy in range(H):
+        by = np.uint64(y0 + iy)  # unsigned: no negative-index wrapping per read
         for ix in range(W):
-            f = tid[y0 + iy, x0 + ix]
+            bx = np.uint64(x0 + ix)
+            f = tid[by, bx]
             if f >= n:
                 return False
             fl = np.uint8(0)
@@ -201,7 +203,6 @@ def _shade_layers_kernel_py(tid, bary, y0, x0, F, flags, uv0, tex0, img0, uv1, t
             if (fl & 15) == 0:
                 continue
             i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-            by, bx = y0 + iy, x0 + ix
             b0, b1, b2 = float(bary[by, bx, 0]), float(bary[by, bx, 1]), float(bary[by, bx, 2])
             if fl & 1:
                 _footprint(tex0, uv0, i0, i1, i2, b0, b1, b2, rows, weights, ix, 0)
@@ -355,8 +356,9 @@ def _interpolate_kernel_py(tid, bary, y0, x0, F, values, out):  # pragma: no cov
     H, W = out.shape
     n = F.shape[0]
     for iy in range(H):
+        y = np.uint64(y0 + iy)  # unsigned: no negative-index wrapping per read
         for ix in range(W):
-            y, x = y0 + iy, x0 + ix
+            x = np.uint64(x0 + ix)
             f = tid[y, x]
             if f < 0:
                 continue
