@@ -101,3 +101,20 @@ def test_rasterize_equals_numpy_buffers_then_the_kernel(size, offset, cull):
         for a, b in zip((got.depth, got.tri_id, got.bary, got.mask), want, strict=True):
             assert a.dtype == b.dtype and a.shape == b.shape
             np.testing.assert_array_equal(a, b)
+
+
+def test_rasterize_drawn_is_rasterize_and_the_projection():
+    # the frame's render takes the raster and camera.project(V) from one projection
+    from facetransfer.render.raster import rasterize_drawn
+
+    rng = np.random.default_rng(11)
+    P, F = _grid_mesh(20, rng)
+    for offset in ((0.0, 0.0), (-40.0, 25.0)):
+        cam = look_at_weak_perspective(P, (90, 70), fill=1.1, offset=offset,
+                                       rotation=rotation_from_euler(-15.0, 30.0, 4.0))
+        r, xy = rasterize_drawn(P, F, cam, (90, 70))
+        want = rasterize(P, F, cam, (90, 70))
+        for a, b in zip((r.depth, r.tri_id, r.bary, r.mask),
+                        (want.depth, want.tri_id, want.bary, want.mask)):
+            np.testing.assert_array_equal(a, b)
+        np.testing.assert_array_equal(_bits(xy), _bits(cam.project(P)))

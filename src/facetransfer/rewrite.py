@@ -290,12 +290,18 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
     ``lifted``: where the per-frame face texture lifted the vertices, in the crop's pixels
     (:func:`facetransfer.rim.lifted_positions`), or None; ``matte``: with its matte
     (:func:`_blend_matte`)."""
-    from .render import rasterize
+    from .render import WeakPerspective
+    from .render.raster import rasterize_drawn
 
-    raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
+    # the raster and where it drew the vertices (camera.project(V), one projection for both)
+    raster, drawn = rasterize_drawn(V, topo.faces, camera, (T.shape[1], T.shape[0]))
     own = None
     if lifted is not None:
-        drawn = camera.project(V)
+        # (a pinhole draws by its own formula; the raster's projection is of V made
+        # C-contiguous float64, which a product of another layout might round otherwise)
+        if not isinstance(camera, WeakPerspective) or not (
+                V.dtype == np.float64 and V.flags.c_contiguous):
+            drawn = camera.project(V)
         # not the target's own outline drawn inside its face: the target's pixels there instead
         own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn))
         # nor its pixels resampled where the new face did not move: looked up where drawn

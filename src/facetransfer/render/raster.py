@@ -548,7 +548,24 @@ def coverage(points: np.ndarray, faces: np.ndarray, size: tuple[int, int], *,
 
 
 def _rasterize_checked(V, F, camera, W, H, cull) -> Raster:
-    xy, z, q = _screen(V, camera)
+    return _raster_of(_screen(V, camera), F, camera, W, H, cull)
+
+
+def rasterize_drawn(vertices: np.ndarray, faces: np.ndarray, camera,
+                    size: tuple[int, int]) -> tuple[Raster, np.ndarray]:
+    """:func:`rasterize` (no culling) and the pixel positions (n, 2) float64 it drew the
+    vertices at: for a :class:`WeakPerspective` camera its ``project(vertices)`` (the render
+    of a frame needs both; one projection instead of two)."""
+    V, F = _check_mesh(vertices, faces)
+    W, H = _as_size(size)
+    screen = _screen(V, camera)
+    return _raster_of(screen, F, camera, W, H, False), screen[0]
+
+
+def _raster_of(screen, F, camera, W, H, cull) -> Raster:
+    """The raster of the checked faces ``F`` drawn at ``screen = (xy, z, q)``
+    (:func:`_screen`)."""
+    xy, z, q = screen
     perspective = bool(getattr(camera, "perspective", False))
     zbuf, tid = np.empty((H, W), np.float32), np.empty((H, W), np.int32)
     bary, mask = np.zeros((H, W, 3), np.float32), np.empty((H, W), bool)
