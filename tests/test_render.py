@@ -574,19 +574,25 @@ def test_shade_layers_kernel_equals_its_python_twin():
     flags = rng.integers(0, 256, len(F)).astype(np.uint8)
     layers = [(rng.random((len(P), 2)), rng.integers(0, 256, (9 + k, 13, 3), dtype=np.uint8))
               for k in range(4)]
-    out = []
-    for kernel in (_shade_layers_kernel, _shade_layers_kernel_py):
-        args = []
-        for uv, tex in layers:
-            args += [uv, tex, np.zeros((24, 30, 3), np.uint8)]
-        labels = np.zeros((24, 30), np.uint8)
-        ok = kernel(r.tri_id, r.bary, F.astype(np.int64), flags, *args, labels,
-                    np.empty((30, 4, 4), np.int64), np.empty((30, 4, 2)), np.empty(30, np.uint8))
-        out.append([ok, labels] + args[2::3])
-    assert out[0][0] and out[1][0]
-    assert (out[0][2] > 0).any(axis=-1).sum() > 100
-    for a, b in zip(out[0][1:], out[1][1:]):
-        np.testing.assert_array_equal(a, b)
+    got = {}
+    for y0, x0, h, w in ((0, 0, 24, 30), (3, 5, 15, 20)):  # the whole raster and a box of it
+        out = []
+        for kernel in (_shade_layers_kernel, _shade_layers_kernel_py):
+            args = []
+            for uv, tex in layers:
+                args += [uv, tex, np.zeros((h, w, 3), np.uint8)]
+            labels = np.zeros((h, w), np.uint8)
+            ok = kernel(r.tri_id, r.bary, y0, x0, F.astype(np.int64), flags, *args, labels,
+                        np.empty((w, 4, 4), np.int64), np.empty((w, 4, 2)),
+                        np.empty(w, np.uint8))
+            out.append([ok, labels] + args[2::3])
+        assert out[0][0] and out[1][0]
+        for a, b in zip(out[0][1:], out[1][1:]):
+            np.testing.assert_array_equal(a, b)
+        got[y0] = out[0][1:]
+    assert (got[0][1] > 0).any(axis=-1).sum() > 100
+    for whole, box in zip(got[0], got[3]):  # the box's pixels are the whole raster's
+        np.testing.assert_array_equal(box, whole[3:18, 5:25])
 
 
 def test_shade_layers_equal_one_pass_per_layer_and_label_pixels():

@@ -51,10 +51,12 @@ import numpy as np
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .composite import mask_box
 from .errors import RewriteError
+from .eye_lids import lid_shares, mix_lids
+from .label_masks import bits_box
 from .eyeballs import Eyeballs, eyeballs_of, shift_eyeballs
 from .patch import REJECT, SHADING_SIGMA, _match_outline_into
 from .region_weights import model_vertices, moved_strengths, usual_weights_of, vertex_alpha
-from .render import Raster, interpolate_vertex_values, shade_layers, shade_texture
+from .render import interpolate_vertex_values, shade_layers, shade_texture
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -797,12 +799,13 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     :func:`eye_flags`), painting ``face_image`` in place and returning it."""
     import cv2
 
-    box = _region_box(np.bitwise_and(labels, bits[0]), margin=int(np.ceil(4 * LID_SOFTNESS)) + 2)
-    if box is None:
+    # the box of _region_box (of np.bitwise_and(labels, bits[0])) in one kernel
+    sl = bits_box(labels, bits[0], int(np.ceil(4 * LID_SOFTNESS)) + 2)
+    if sl is None:
         return face_image
-    sl = (slice(box[1], box[3]), slice(box[0], box[2]))
+    box = (sl[1].start, sl[0].start, sl[1].stop, sl[0].stop)
     lab = labels[sl]
-    eye_img = eye_img[sl]
+    whole, eye_img = eye_img, eye_img[sl]
     if texture.gaze_shift is not None:  # the eyeballs turned to the new gaze (in place)
         shift_eyeballs(eye_img, raster.tri_id[sl], raster.bary[sl], faces, texture.uvs,
                        texture.eyeballs, texture.gaze_shift)
@@ -813,16 +816,13 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
     a = texture.closing(vertices)
     opacity = 1.0 if texture.alpha is None else \
         interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
-    if a.max() > 0:
-        crop = Raster(raster.depth[sl], raster.tri_id[sl], raster.bary[sl], raster.mask[sl])
-        closed_img, _ = shade_texture(crop, faces, texture.closed_uvs, texture.closed_image,
-                                      texture.select)
-        t = np.where(crop.tri_id >= 0, texture.side[np.maximum(crop.tri_id, 0)], -1)
-        w = np.where(t >= 0, a[np.maximum(t, 0)], 0.0).astype(np.float32)
+    if a.max() > 0:  # the closed frame's texture mixed in, on the box (eye_lids' kernels)
+        closed_img, _ = shade_texture(raster, faces, texture.closed_uvs, texture.closed_image,
+                                      texture.select, box=sl)
+        w = lid_shares(raster.tri_id, (box[1], box[0], *lab.shape), texture.side, a)
         # soft where the lids meet the rest of the region (no step along triangle edges)
         w = cv2.GaussianBlur(w, (0, 0), LID_SOFTNESS)
-        eye_img = np.rint((1 - w[..., None]) * eye_img + w[..., None] * closed_img
-                          ).astype(np.uint8)
+        mix_lids(w, closed_img, whole, (box[1], box[0]))  # into eye_img, a view of whole
         if texture.alpha is not None:  # closing lids show the closed frame's, at least
             opacity = np.maximum(opacity, w)
     rim = None

@@ -52,7 +52,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
-from .composite import mask_box
+from .label_masks import bits_box
 from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
 from .region_weights import facing_weights, model_vertices, moved_strengths, vertex_alpha
 from .jaw_look import LOOK_RAMP, look_strengths, mouth_reach
@@ -354,7 +354,7 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
     painting ``face_image`` in place and returning it."""
     # the work on the box of the region and its ring, grown by the 2 px the ring's erosion
     # reaches (patch._ring); the gain fit keeps the frame's coordinates (origin)
-    sl = mask_box(np.bitwise_and(labels, np.uint8(bits[0] | bits[1])), 2)
+    sl = bits_box(labels, bits[0] | bits[1], 2)  # mask_box of the bits, in one kernel
     if sl is None:
         return face_image
     lab, fm = labels[sl], face_mask[sl]

@@ -58,8 +58,10 @@ from .composite import (_erode, _extend, composite_alpha, composite_face, membra
 from .errors import ShapeError
 from .rim import drawn_inside, lifted_positions
 from .unmoved import unmoved_uvs
-from .eyes import EyeTexture, _paint_eyes, eye_flags
-from .jaw import JawTexture, _paint_jaw, jaw_flags
+from .eyes import EyeTexture, _paint_eyes
+from .jaw import JawTexture, _paint_jaw
+from .label_masks import frame_masks
+from .layer_flags import layer_flags
 from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.face import FaceTexture
@@ -241,19 +243,40 @@ def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int
     W, H = size
     if not isinstance(camera, WeakPerspective):
         return 0, 0, W, H
-    p = camera.project(V)
-    if not np.isfinite(p).all():  # (one flat pass; the rows' test only when needed)
-        p = p[np.isfinite(p).all(axis=1)]
-    if p.size == 0:
+    ext = np.empty(4, np.int64)  # the finite points' box grown by margin (one kernel)
+    if not _extent_kernel(camera.project(V), int(margin), ext):
         return None
-    x, y = p[:, 0], p[:, 1]  # the columns' extremes (faster than reducing (n, 2) over axis 0)
-    lo = np.floor([x.min(), y.min()]).astype(np.int64) - margin
-    hi = np.ceil([x.max(), y.max()]).astype(np.int64) + margin + 1
-    x0, y0 = max(int(lo[0]), 0), max(int(lo[1]), 0)
-    x1, y1 = min(int(hi[0]), W), min(int(hi[1]), H)
+    x0, y0, x1, y1 = ext.tolist()
+    x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, W), min(y1, H)
     if x1 <= x0 or y1 <= y0:
         return None
     return x0, y0, x1, y1
+
+
+def _extent_kernel_py(p, margin, ext):  # pragma: no cover (numba)
+    """``ext`` (4,) int64 = ``floor`` of the least x and y less ``margin`` and ``ceil`` of the
+    largest plus ``margin + 1``, of the points ``p`` (n, 2) float64 whose coordinates are both
+    finite (int64 as numpy casts and adds); whether there is one. (:func:`_face_box`'s numpy
+    steps, the rows with a non-finite coordinate dropped, the extremes, floor and ceil and
+    the margin, in one pass.)"""
+    found = False
+    xlo = ylo = np.inf
+    xhi = yhi = -np.inf
+    for i in range(p.shape[0]):
+        x, y = p[i, 0], p[i, 1]
+        if not (np.isfinite(x) and np.isfinite(y)):
+            continue
+        found = True
+        xlo, xhi = min(xlo, x), max(xhi, x)
+        ylo, yhi = min(ylo, y), max(yhi, y)
+    if found:
+        ext[0], ext[1] = np.int64(np.floor(xlo)) - margin, np.int64(np.floor(ylo)) - margin
+        ext[2] = np.int64(np.ceil(xhi)) + margin + 1
+        ext[3] = np.int64(np.ceil(yhi)) + margin + 1
+    return found
+
+
+_extent_kernel = _maybe_njit(_extent_kernel_py)
 
 
 def _shift_camera(camera, x0: int, y0: int):
@@ -267,12 +290,18 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
     ``lifted``: where the per-frame face texture lifted the vertices, in the crop's pixels
     (:func:`facetransfer.rim.lifted_positions`), or None; ``matte``: with its matte
     (:func:`_blend_matte`)."""
-    from .render import rasterize
+    from .render import WeakPerspective
+    from .render.raster import rasterize_drawn
 
-    raster = rasterize(V, topo.faces, camera, (T.shape[1], T.shape[0]))
+    # the raster and where it drew the vertices (camera.project(V), one projection for both)
+    raster, drawn = rasterize_drawn(V, topo.faces, camera, (T.shape[1], T.shape[0]))
     own = None
     if lifted is not None:
-        drawn = camera.project(V)
+        # (a pinhole draws by its own formula; the raster's projection is of V made
+        # C-contiguous float64, which a product of another layout might round otherwise)
+        if not isinstance(camera, WeakPerspective) or not (
+                V.dtype == np.float64 and V.flags.c_contiguous):
+            drawn = camera.project(V)
         # not the target's own outline drawn inside its face: the target's pixels there instead
         own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn))
         # nor its pixels resampled where the new face did not move: looked up where drawn
@@ -378,23 +407,27 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
     """
     face_texture, mouth_texture, eye_texture, jaw_texture, mouth_ring = (
         textures.face, textures.mouth, textures.eyes, textures.jaw, textures.mouth_ring)
-    flags = np.full(topo.faces.shape[0], _FACE, np.uint8)
+    # the triangles' flags in one kernel (what eyes.eye_flags and jaw.jaw_flags give, or-ed)
+    masks = []
     layers = [(face_texture.uvs, np.asarray(face_texture.image, np.uint8)), None, None, None]
     if eye_texture is not None:
-        flags |= eye_flags(eye_texture, shown=_EYES, rim=_RIM)
+        masks += [(eye_texture.select, _EYES), (eye_texture.rim, _RIM)]
         layers[1] = (eye_texture.uvs, eye_texture.image)
     if jaw_texture is not None:
-        flags |= jaw_flags(jaw_texture, shaded=_JAW, region=_JAW_REGION, ring=_JAW_RING)
+        masks += [(jaw_texture.select, _JAW | _JAW_REGION), (jaw_texture.ring, _JAW | _JAW_RING)]
         layers[2] = (jaw_texture.uvs, jaw_texture.image)
     with_mouth = mouth_texture is not None and topo.mouth_faces.size > 0
     if with_mouth:
-        flags[topo.mouth_faces] |= _MOUTH
-        if mouth_ring is not None:
-            flags[np.asarray(mouth_ring, bool)] |= _MOUTH | _MOUTH_RING
+        masks.append((mouth_ring, _MOUTH | _MOUTH_RING))
         layers[3] = (mouth_texture.uvs, np.asarray(mouth_texture.image, np.uint8))
+    flags = layer_flags(topo.faces.shape[0], _FACE, masks,
+                        topo.mouth_faces if with_mouth else None, _MOUTH)
     (face_img, eye_img, jaw_img, mouth_img), labels = shade_layers(raster, topo.faces, layers,
                                                                    flags)
-    face_mask = labels != 0  # every covered pixel has the face's bit
+    # every covered pixel has the face's bit; the mouth's pixels outside its ring (one kernel)
+    face_mask, mouth_mask, ring = frame_masks(
+        labels, _MOUTH if with_mouth else 0,
+        _MOUTH_RING if with_mouth and mouth_ring is not None else 0)
     if own is not None:
         _keep_own(face_img, face_mask, *own)
     if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
@@ -403,14 +436,8 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
     if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
         face_img = _paint_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
                               (_JAW_REGION, _JAW_RING), raster, topo.faces)
-    ring = None
-    if with_mouth:
-        mouth_mask = np.bitwise_and(labels, _MOUTH) != 0
-        if mouth_ring is not None:
-            ring = np.bitwise_and(labels, _MOUTH_RING) != 0
-            mouth_mask &= ~ring
-    else:
-        mouth_mask = np.zeros(labels.shape, bool)
+    if not with_mouth or mouth_ring is None:
+        ring = None
     return face_img, face_mask, mouth_img, mouth_mask, ring
 
 

@@ -42,6 +42,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import ShapeError
+from .jit import _maybe_njit
 
 __all__ = ["Camera", "WeakPerspective", "Pinhole", "rotation_from_euler", "euler_from_rotation",
            "look_at_weak_perspective"]
@@ -105,6 +106,18 @@ def _as_points(X) -> np.ndarray:
     return X
 
 
+def _pixels_py(Y, sx, tx, sy, ty, out):  # pragma: no cover (numba)
+    """``out[:, 0] = sx * Y[:, 0] + tx`` and ``out[:, 1] = sy * Y[:, 1] + ty`` (``Y``, ``out``
+    (n, 2) float64): :meth:`WeakPerspective.project`'s pixels from the rotated points, the
+    numpy expressions' two roundings each, in one call (it projects 5 times a frame)."""
+    for i in range(Y.shape[0]):
+        out[i, 0] = sx * Y[i, 0] + tx
+        out[i, 1] = sy * Y[i, 1] + ty
+
+
+_pixels = _maybe_njit(_pixels_py)
+
+
 @dataclass(frozen=True, eq=False)
 class WeakPerspective:
     """The tracker's weak-perspective camera (Vlasic et al. 2005, §5.1, Eq. (7)).
@@ -159,10 +172,11 @@ class WeakPerspective:
     def project(self, X: np.ndarray) -> np.ndarray:
         """Pixels ``s * diag(1 / a, -1) @ R[:2] @ X + t`` (Eq. (7); ``a`` the pixel aspect,
         1 for square pixels), (n, 3) -> (n, 2)."""
-        Y = _as_points(X) @ self.rotation[:2].T  # (n, 2)
+        Y = _as_points(X) @ self.rotation[:2].T  # (n, 2), C-contiguous: one compiled kernel
         out = np.empty_like(Y)
-        out[:, 0] = (self.scale / self.pixel_aspect) * Y[:, 0] + self.translation[0]
-        out[:, 1] = -self.scale * Y[:, 1] + self.translation[1]
+        # (s / a) Y_x + t_x and (-s) Y_y + t_y, the numpy expressions' operations in one call
+        _pixels(Y, float(self.scale / self.pixel_aspect), float(self.translation[0]),
+                float(-self.scale), float(self.translation[1]), out)
         return out
 
     def depth(self, X: np.ndarray) -> np.ndarray:

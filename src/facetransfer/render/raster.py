@@ -21,27 +21,9 @@ import numpy as np
 
 from ..errors import MeshError, ShapeError
 from .cameras import Pinhole, WeakPerspective, _as_size
-
-try:  # numba is a hard dependency; the fallback keeps the module importable without it
-    import numba
-
-    _HAVE_NUMBA = True
-except ImportError:  # pragma: no cover
-    numba = None
-    _HAVE_NUMBA = False
+from .jit import _HAVE_NUMBA, _maybe_njit  # noqa: F401 (the kernels import it from here)
 
 __all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference", "coverage"]
-
-
-def _maybe_njit(fn, *, inline: bool = False):
-    """``fn`` compiled by numba (cached, no GIL, numpy's error model). ``inline``: inlined
-    into the kernels that call it, at numba's IR level (a cached kernel is its own LLVM
-    module, so LLVM does not inline across kernels: a small helper called per pixel would
-    otherwise cost a call with every array argument spilled to the stack)."""
-    if not _HAVE_NUMBA:
-        return fn
-    return numba.njit(cache=True, nogil=True, error_model="numpy",
-                      inline="always" if inline else "never")(fn)
 
 
 class RenderError(MeshError):
@@ -437,6 +419,25 @@ _raster_kernel = _maybe_njit(_raster_kernel_py)
 _any_nondegenerate = _maybe_njit(_any_nondegenerate_py)
 
 
+def _raster_fresh_py(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary,
+                     mask):  # pragma: no cover (numba)
+    """:func:`_raster_kernel` into new buffers, ``zbuf`` and ``tid`` (H, W) unset and set
+    first to the background (-inf, -1), ``bary`` zeros (numpy's, whose pages the OS gives
+    zeroed: only the drawn pixels' are touched), and ``mask`` (H, W) bool ``tid >= 0`` after:
+    numpy's ``full`` and comparison of :func:`_rasterize_checked` in the same call."""
+    for y in range(H):
+        for x in range(W):
+            zbuf[y, x] = -np.inf
+            tid[y, x] = -1
+    _raster_kernel(xy, z, q, F, W, H, cull, perspective, zbuf, tid, bary)
+    for y in range(H):
+        for x in range(W):
+            mask[y, x] = tid[y, x] >= 0
+
+
+_raster_fresh = _maybe_njit(_raster_fresh_py)
+
+
 def rasterize(vertices: np.ndarray, faces: np.ndarray, camera, size: tuple[int, int], *,
               cull_backfaces: bool = False) -> Raster:
     """Z-buffer rasterisation of a triangle mesh (numba kernel).
@@ -547,13 +548,29 @@ def coverage(points: np.ndarray, faces: np.ndarray, size: tuple[int, int], *,
 
 
 def _rasterize_checked(V, F, camera, W, H, cull) -> Raster:
-    xy, z, q = _screen(V, camera)
+    return _raster_of(_screen(V, camera), F, camera, W, H, cull)
+
+
+def rasterize_drawn(vertices: np.ndarray, faces: np.ndarray, camera,
+                    size: tuple[int, int]) -> tuple[Raster, np.ndarray]:
+    """:func:`rasterize` (no culling) and the pixel positions (n, 2) float64 it drew the
+    vertices at: for a :class:`WeakPerspective` camera its ``project(vertices)`` (the render
+    of a frame needs both; one projection instead of two)."""
+    V, F = _check_mesh(vertices, faces)
+    W, H = _as_size(size)
+    screen = _screen(V, camera)
+    return _raster_of(screen, F, camera, W, H, False), screen[0]
+
+
+def _raster_of(screen, F, camera, W, H, cull) -> Raster:
+    """The raster of the checked faces ``F`` drawn at ``screen = (xy, z, q)``
+    (:func:`_screen`)."""
+    xy, z, q = screen
     perspective = bool(getattr(camera, "perspective", False))
-    zbuf = np.full((H, W), -np.inf, np.float32)
-    tid = np.full((H, W), -1, np.int32)
-    bary = np.zeros((H, W, 3), np.float32)
-    _raster_kernel(xy, z, q, F, W, H, bool(cull), perspective, zbuf, tid, bary)
-    return Raster(zbuf, tid, bary, tid >= 0)
+    zbuf, tid = np.empty((H, W), np.float32), np.empty((H, W), np.int32)
+    bary, mask = np.zeros((H, W, 3), np.float32), np.empty((H, W), bool)
+    _raster_fresh(xy, z, q, F, W, H, bool(cull), perspective, zbuf, tid, bary, mask)
+    return Raster(zbuf, tid, bary, mask)
 
 
 class Rasterizer:

@@ -170,12 +170,14 @@ def _sample_py(tex, rows, weights, x, k, image, iy):  # pragma: no cover (numba,
 _sample = _maybe_njit(_sample_py, inline=True)
 
 
-def _shade_layers_kernel_py(tid, bary, F, flags, uv0, tex0, img0, uv1, tex1, img1, uv2, tex2,
-                            img2, uv3, tex3, img3, labels, rows, weights, row_flags
+def _shade_layers_kernel_py(tid, bary, y0, x0, F, flags, uv0, tex0, img0, uv1, tex1, img1,
+                            uv2, tex2, img2, uv3, tex3, img3, labels, rows, weights, row_flags
                             ):  # pragma: no cover (numba)
-    """Unlit texture shading of up to four layers in one pass over a raster.
+    """Unlit texture shading of up to four layers in one pass over a raster's box.
 
-    At a pixel covered by triangle ``f``: ``labels[iy, ix] = flags[f]``, and layer ``k``'s
+    The box is ``labels``' shape at ``(x0, y0)`` of the whole raster ``tid``, ``bary`` (one
+    layout, one compiled kernel). At its pixel ``(iy, ix)``, covered by triangle ``f``:
+    ``labels[iy, ix] = flags[f]``, and layer ``k``'s
     image ``img<k>`` takes the bilinear sample of ``tex<k>`` at the barycentric interpolation
     of ``uv<k>`` where bit ``1 << k`` of ``flags[f]`` is set (layers are separate arguments: a
     tuple indexed per pixel is several times slower in numba). Row by row, in two passes: the
@@ -184,11 +186,13 @@ def _shade_layers_kernel_py(tid, bary, F, flags, uv0, tex0, img0, uv1, tex1, img
     (:func:`_sample`): each pass's chain of dependent loads (triangle, vertices, uvs; texels,
     table) is short enough for the processor to overlap several pixels' (15 % faster than one
     pass). Returns False (and stops) at a triangle index beyond ``F``."""
-    H, W = tid.shape
+    H, W = labels.shape
     n = F.shape[0]
     for iy in range(H):
+        by = np.uint64(y0 + iy)  # unsigned: no negative-index wrapping per read
         for ix in range(W):
-            f = tid[iy, ix]
+            bx = np.uint64(x0 + ix)
+            f = tid[by, bx]
             if f >= n:
                 return False
             fl = np.uint8(0)
@@ -199,7 +203,7 @@ def _shade_layers_kernel_py(tid, bary, F, flags, uv0, tex0, img0, uv1, tex1, img
             if (fl & 15) == 0:
                 continue
             i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-            b0, b1, b2 = float(bary[iy, ix, 0]), float(bary[iy, ix, 1]), float(bary[iy, ix, 2])
+            b0, b1, b2 = float(bary[by, bx, 0]), float(bary[by, bx, 1]), float(bary[by, bx, 2])
             if fl & 1:
                 _footprint(tex0, uv0, i0, i1, i2, b0, b1, b2, rows, weights, ix, 0)
             if fl & 2:
@@ -227,8 +231,8 @@ _shade_layers_kernel = _maybe_njit(_shade_layers_kernel_py)
 MAX_LAYERS = 4
 
 
-def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray
-                 ) -> tuple[list[np.ndarray], np.ndarray]:
+def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray,
+                 box: tuple[slice, slice] | None = None) -> tuple[list[np.ndarray], np.ndarray]:
     """Texture the pixels of a raster with several textures in one pass (numba), unlit.
 
     Layer ``k`` is shaded at the pixels whose triangle has bit ``1 << k`` of ``flags`` set:
@@ -248,12 +252,15 @@ def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray
         not used (no flag may select it).
     flags : (F,) uint8
         Per triangle: the layers that shade it (bits 0-3) and labels (bits 4-7).
+    box : (slice, slice), optional
+        ``(rows, columns)`` of the raster to shade (default: all of it), with unit steps.
 
     Returns
     -------
-    images : list of (H, W, 3) uint8 or None
-        One per layer, black where the layer is not shaded (None for an unused slot).
-    labels : (H, W) uint8
+    images : list of (h, w, 3) uint8 or None
+        One per layer, black where the layer is not shaded (None for an unused slot); ``(h,
+        w)`` the box's size.
+    labels : (h, w) uint8
     """
     Fa = np.ascontiguousarray(faces, dtype=np.int64)
     fl = np.ascontiguousarray(flags, dtype=np.uint8)
@@ -266,7 +273,8 @@ def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray
     unused = sum(1 << k for k, layer in enumerate(layers) if layer is None)
     if fl.size and int(np.bitwise_or.reduce(fl)) & unused:
         raise ShapeError("flags select a layer that is not given")
-    H, W = raster.tri_id.shape
+    tid, bary = _whole(raster)
+    y0, x0, H, W = _box_of(box, tid.shape)
     n_vertices = int(Fa.max()) + 1 if Fa.size else 0
     args, images = [], []
     for layer in layers:
@@ -278,14 +286,35 @@ def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray
         args += [_check_uvs(layer[0], n_vertices),
                  np.ascontiguousarray(_check_texture(layer[1])), images[-1]]
     labels = np.zeros((H, W), np.uint8)
-    # the raster as it is (a box of a larger one is not copied: numba reads strided arrays)
     scratch = (np.empty((W, MAX_LAYERS, 4), np.int64), np.empty((W, MAX_LAYERS, 2)),
                np.empty(W, np.uint8))  # a row's texel footprints
-    if not _shade_layers_kernel(np.asarray(raster.tri_id, np.int32),
-                                np.asarray(raster.bary, np.float32), Fa, fl, *args, labels,
-                                *scratch):
+    if not _shade_layers_kernel(tid, bary, y0, x0, Fa, fl, *args, labels, *scratch):
         raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
     return images[:n_given], labels
+
+
+def _whole(raster: Raster) -> tuple[np.ndarray, np.ndarray]:
+    """The raster's ``tri_id`` (H, W) int32 and ``bary`` (H, W, 3) float32, C-contiguous (a
+    raster's own arrays as they are; a view of another's copied): the kernels take whole
+    arrays and a box's offset, one layout, so one compiled kernel each (a second layout is
+    loaded from numba's cache mid-clip, ~10 ms with the interpreter held)."""
+    return (np.ascontiguousarray(raster.tri_id, np.int32),
+            np.ascontiguousarray(raster.bary, np.float32))
+
+
+def _box_of(box: tuple[slice, slice] | None, shape: tuple[int, ...]
+            ) -> tuple[int, int, int, int]:
+    """``(y0, x0, h, w)`` of the box ``(rows, columns)`` (unit steps) of an array of
+    ``shape`` (H, W, ...), as numpy slices it (clipped to the array); the whole array for
+    None."""
+    H, W = shape[:2]
+    if box is None:
+        return 0, 0, H, W
+    rows, cols = box
+    (y0, y1, sy), (x0, x1, sx) = rows.indices(H), cols.indices(W)
+    if sy != 1 or sx != 1:
+        raise ShapeError(f"box must have unit steps, got {box}")
+    return y0, x0, max(y1 - y0, 0), max(x1 - x0, 0)
 
 
 def interpolate_vertex_values(raster: Raster, faces: np.ndarray, values: np.ndarray,
@@ -312,29 +341,31 @@ def interpolate_vertex_values(raster: Raster, faces: np.ndarray, values: np.ndar
     v = np.ascontiguousarray(values, dtype=np.float32)
     if v.ndim != 1 or (Fa.size and v.shape[0] <= int(Fa.max())):
         raise ShapeError(f"values must be (n,) covering the faces' vertices, got {v.shape}")
-    tid, bary = np.asarray(raster.tri_id, np.int32), np.asarray(raster.bary, np.float32)
-    if box is not None:
-        tid, bary = tid[box], bary[box]
-    out = np.zeros(tid.shape, np.float32)
-    if not _interpolate_kernel(tid, bary, Fa, v, out):
+    tid, bary = _whole(raster)
+    y0, x0, h, w = _box_of(box, tid.shape)
+    out = np.zeros((h, w), np.float32)
+    if not _interpolate_kernel(tid, bary, y0, x0, Fa, v, out):
         raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
     return out
 
 
-def _interpolate_kernel_py(tid, bary, F, values, out):  # pragma: no cover (numba)
-    """:func:`interpolate_vertex_values` into ``out`` (H, W) float32; False (and stops) at a
-    triangle index beyond ``F``."""
-    H, W = tid.shape
+def _interpolate_kernel_py(tid, bary, y0, x0, F, values, out):  # pragma: no cover (numba)
+    """:func:`interpolate_vertex_values` into ``out`` (h, w) float32, the box of that shape
+    at ``(x0, y0)`` of the whole raster ``tid``, ``bary``; False (and stops) at a triangle
+    index beyond ``F``."""
+    H, W = out.shape
     n = F.shape[0]
     for iy in range(H):
+        y = np.uint64(y0 + iy)  # unsigned: no negative-index wrapping per read
         for ix in range(W):
-            f = tid[iy, ix]
+            x = np.uint64(x0 + ix)
+            f = tid[y, x]
             if f < 0:
                 continue
             if f >= n:
                 return False
-            out[iy, ix] = (bary[iy, ix, 0] * values[F[f, 0]] + bary[iy, ix, 1] * values[F[f, 1]]
-                           + bary[iy, ix, 2] * values[F[f, 2]])
+            out[iy, ix] = (bary[y, x, 0] * values[F[f, 0]] + bary[y, x, 1] * values[F[f, 1]]
+                           + bary[y, x, 2] * values[F[f, 2]])
     return True
 
 
@@ -351,7 +382,8 @@ def _check_uvs(uvs, n_vertices: int) -> np.ndarray:
 
 
 def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: np.ndarray,
-                  select: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  select: np.ndarray | None = None, box: tuple[slice, slice] | None = None
+                  ) -> tuple[np.ndarray, np.ndarray]:
     """Texture the pixels of a raster without lighting, in one pass (numba).
 
     Every pixel covered by a (selected) triangle takes the bilinear texture sample
@@ -368,12 +400,14 @@ def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: n
     texture : (Ht, Wt, 3) uint8
     select : (F,) bool, optional
         Shade only these triangles (the others stay black and outside the mask).
+    box : (slice, slice), optional
+        ``(rows, columns)`` of the raster to shade (default: all of it), with unit steps.
 
     Returns
     -------
-    image : (H, W, 3) uint8
-        Black where nothing is shaded.
-    mask : (H, W) bool
+    image : (h, w, 3) uint8
+        Black where nothing is shaded; ``(h, w)`` the box's size.
+    mask : (h, w) bool
         The shaded pixels.
     """
     n = len(faces)
@@ -381,7 +415,7 @@ def shade_texture(raster: Raster, faces: np.ndarray, uvs: np.ndarray, texture: n
         np.ascontiguousarray(select, dtype=bool).view(np.uint8)
     if sel.shape != (n,):
         raise ShapeError(f"select must be ({n},) bool, got {sel.shape}")
-    (image,), labels = shade_layers(raster, faces, [(uvs, texture)], sel)
+    (image,), labels = shade_layers(raster, faces, [(uvs, texture)], sel, box)
     return image, labels.view(bool)
 
 
