@@ -278,5 +278,5 @@ def test_cli_smooth(tmp_path, capsys):
     sm = read_obj(out)
     assert sm.vertices.shape == v.shape and sm.faces.shape == f.shape
     assert main(["scan", "smooth", str(src), "--out", str(tmp_path / "x.obj"), "--sigma-s", "-1"]) == 2
-    assert "--sigma-s must be positive" in capsys.readouterr().err
+    assert "--sigma-s must be a positive finite number" in capsys.readouterr().err
     assert not (tmp_path / "x.obj").exists()
