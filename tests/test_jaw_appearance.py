@@ -116,3 +116,35 @@ def test_hue_steps_see_a_hue_not_a_light():
     steps = jaw_look.hue_steps(red, ref)
     np.testing.assert_allclose(steps[:, 7], np.sqrt(0.3 ** 2 + 2 * 0.15 ** 2), rtol=1e-5)
     assert np.delete(steps, 7, axis=1).max() < 1e-6
+
+
+def test_the_chin_takes_a_darker_frames_hue_with_the_tongue_left_out(setup):
+    """The frame with the tongue is 37 % darker than the reference frame and warmer (its skin's
+    red up 8 %, blue down 8 %): the reference frame's skin pasted where the tongue was takes
+    that frame's hue, as the paste's own hue match gives it where the rule does not fire (R
+    over G 1.42; 1.42 too at 95 % of the reference's brightness). Before, the rule's hue
+    match compared the reference frame's pixels before their gain: every block was darker
+    than :data:`facetransfer.patch.HUE_LIMITS` allows, none compared, and the chin kept the
+    reference frame's hue (R over G 1.33, the frame's 1.44)."""
+    model, topo = setup
+    track = jaw_open_track(model, [0.0, 0.0], size=SIZE)
+    _, _, patch = _chin_patch(model, topo, track, 1)
+    warm = np.rint(np.array(SKIN) * 0.63 * (1.08, 1.0, 0.92))
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8), np.full((SIZE, SIZE, 3), warm, np.uint8)]
+    frames[1][patch] = TONGUE
+    tex = jaw.jaw_texture(frames, track, model, topo)
+    at = tex.at(1)
+    assert at is not None and at.look_alpha is not None      # the rule fires on the tongue
+    cam = track.camera(1)
+    V = model.synthesize(track.weights_at(1))
+    face_tex = FaceTexture(frames[1], frame_uvs(close_mouth(V, topo), cam, (SIZE, SIZE)), 1)
+    out = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex, jaw=at),
+                        blending=BlendOptions("none", erode=0)).image
+    import cv2
+
+    core = cv2.erode(patch.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert core.sum() > 20
+    px = out[core].astype(float)   # the reference frame's skin where the tongue was
+    np.testing.assert_allclose(np.median(px[:, 0] / px[:, 1]), warm[0] / warm[1], atol=0.04)
+
+
