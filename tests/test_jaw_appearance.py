@@ -148,3 +148,25 @@ def test_the_chin_takes_a_darker_frames_hue_with_the_tongue_left_out(setup):
     np.testing.assert_allclose(np.median(px[:, 0] / px[:, 1]), warm[0] / warm[1], atol=0.04)
 
 
+
+
+def test_the_noise_of_a_dark_frame_is_no_hue_step_a_dim_tongue_is(setup):
+    """A very dark clip (the skin at 8 %: 16, 12, 10) whose frames differ by a pixel level of
+    noise, no tongue: the log-chromaticity of ``log(c + 8)`` steps by up to ~0.1 there, past
+    the ramp; before, 74 of the 928 vertices near the mouth took the reference frame
+    (``driving_d6`` at 15 % of its brightness: 87 a frame, 18 at its own brightness); now at
+    most a few. A tongue at 35 % of the skin's brightness still takes it."""
+    model, topo = setup
+    track = jaw_open_track(model, [0.0] * 3, size=SIZE)
+    verts, under, patch = _chin_patch(model, topo, track, 2)
+    rng = np.random.default_rng(1)
+    dark = np.rint(np.array(SKIN) * 0.08)
+    frames = [np.clip(dark + rng.integers(-1, 2, (SIZE, SIZE, 3)), 0, 255).astype(np.uint8)
+              for _ in range(2)]
+    frames.append(np.full((SIZE, SIZE, 3), np.rint(np.array(SKIN) * 0.35), np.uint8))
+    frames[2][patch] = np.rint(np.array(TONGUE) * 0.35)
+    reach = jaw_look.mouth_reach(model, topo, verts)
+    look = jaw_look.look_strengths(frames, track, model, verts, 0, reach)
+    assert (reach > 0).sum() > 900
+    assert (look[1] > 0.5).sum() <= 5            # noise, not a tongue
+    assert np.median(look[2, under]) > 0.9       # a dim tongue: the reference frame
