@@ -170,3 +170,30 @@ def test_the_noise_of_a_dark_frame_is_no_hue_step_a_dim_tongue_is(setup):
     assert (reach > 0).sum() > 900
     assert (look[1] > 0.5).sum() <= 5            # noise, not a tongue
     assert np.median(look[2, under]) > 0.9       # a dim tongue: the reference frame
+
+
+def test_look_strengths_read_a_subset_as_the_whole_region_would(setup):
+    """:func:`look_strengths` reads only the vertices near the mouth and every
+    :data:`MEDIAN_STRIDE`-th of the region (``read``, ``near``, ``cols``): on frames of
+    uneven colour it gives, vertex for vertex, what the hue step of the whole region read
+    gives with that sample's median; the others 0. (The tests of flat colours above pass with
+    any sample: their median step is 0 over any of the region's vertices.)"""
+    import cv2
+
+    from facetransfer.region_weights import _vertex_colours, smoothstep
+
+    model, topo = setup
+    track = jaw_open_track(model, [0.0] * 3, size=SIZE)
+    verts = jaw.jaw_strengths(model, track, topo, jaw.jaw_region(model, topo), 0)[0]
+    reach = jaw_look.mouth_reach(model, topo, verts)
+    rng = np.random.default_rng(3)
+    frames = [cv2.resize(rng.uniform(40, 230, (12, 12, 3)).astype(np.float32), (SIZE, SIZE))
+              .astype(np.uint8) for _ in range(3)]
+    look = jaw_look.look_strengths(frames, track, model, verts, 0, reach, chunk=1)
+    logc = _vertex_colours(frames, track, model, verts, np.arange(3))
+    sample = np.flatnonzero(np.arange(verts.size) % jaw_look.MEDIAN_STRIDE == 0)
+    steps = jaw_look.hue_steps(logc, logc[0], sample) * jaw_look.dark_scale(logc, logc[0])
+    want = smoothstep(steps, jaw_look.LOOK_RAMP) * reach
+    assert 0.1 < np.mean(want[1:, reach > 0] > 0.5) < 0.9    # uneven: some vertices, not all
+    np.testing.assert_allclose(look, want, atol=1e-5)
+    assert look[0].max() == 0 and look[:, reach == 0].max() == 0
