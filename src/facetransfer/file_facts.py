@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["file_kind", "known_npz", "track_facts", "take_facts", "file_fact_lines", "lost_runs"]
+__all__ = ["file_kind", "track_facts", "take_facts", "file_fact_lines", "lost_runs"]
 
 #: What ``probe`` describes, said when it is handed something else (a model is not described:
 #: ``probe M.npz`` points to ``model info``; this said "tracks, models and ...").
@@ -63,20 +63,10 @@ def file_kind(path: str | os.PathLike) -> str:
     return "video"
 
 
-def known_npz(p: Path, names) -> str | None:
-    """What the .npz archive ``p`` of array ``names`` is when it is one of the other archives
-    facetransfer or its data folder hold (synth-video's ground truth, MediaPipe's landmarks of
-    a clip), else None."""
-    names = set(names)
-    if {"meta", "vertices2d", "landmark_indices"} <= names:
-        return "a synthetic clip's ground truth (synth-video's CLIP.truth.npz)"
-    if Path(p).name.endswith(".mediapipe478.npz") or names == {"landmarks", "note"}:
-        return "MediaPipe's 478 landmarks of a clip (the data folder's reference)"
-    return None
-
-
 def _other_npz(p: Path, names: set) -> str:
     """What the .npz archive ``p`` of array ``names``, no track or model, holds."""
+    from .io.npz import known_npz
+
     known = known_npz(p, names)
     if known is not None:
         return known

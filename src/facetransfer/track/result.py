@@ -395,7 +395,7 @@ class Track:
                     "confidence", "lost", "model_hash", "mode_names")
         missing = [k for k in required if k not in data]
         if missing:
-            from ..file_facts import known_npz
+            from ..io.npz import known_npz
 
             kind = known_npz(p, data)   # as probe names it (synth-video's truth, ...)
             raise TrackError(f"{p} is not a track file (missing {', '.join(missing)})"
