@@ -159,3 +159,30 @@ def test_a_trilinear_models_visemes_have_sliders_and_are_kept(data_dir, tmp_path
         with pytest.raises(FaceFileError, match=f"unknown shape '{bad}'"):
             face_weights(read_face(_face(tmp_path / "b.json", tri, shape_kind="expression",
                                          shapes={bad: 1.0})), tri)
+
+
+def test_an_identity_beyond_the_models_is_refused_as_identity_weights_are(arkit_model,
+                                                                          tmp_path, capsys):
+    """A hand-edited identity (all zeros, a one-hot, a far-off value) is refused naming the
+    file, as the same weights given to ``transfer --identity-weights`` are
+    (:func:`facetransfer.transfer.check_identity_weights`); before, ``render --face`` drew the
+    zero identity blown past its frame. A training identity's row is taken."""
+    mp = tmp_path / "m.npz"
+    arkit_model.save(mp)
+    U = arkit_model.factors[arkit_model.mode_index("identity")]
+    r = U.shape[1]
+    for name, w in (("z.json", np.zeros(r)), ("o.json", np.eye(r)[0]),
+                    ("f.json", U[1] + 40 * U.std(0))):
+        path = _face(tmp_path / name, arkit_model, identity=[float(v) for v in w])
+        assert main(["render", str(mp), "--face", str(path), "--size", "160x120",
+                     "--out", str(tmp_path / "o.png")]) == 2, name
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and "Traceback" not in err
+        assert f"{path}: its identity: component " in err
+        assert "standard deviations from the training identities'" in err
+        assert "the dial editor saves" in err
+        assert not (tmp_path / "o.png").exists()
+        with pytest.raises(FaceFileError, match="standard deviations"):
+            face_weights(read_face(path), arkit_model)
+    row = _face(tmp_path / "t.json", arkit_model, identity=[float(v) for v in U[2]])
+    np.testing.assert_array_equal(face_weights(read_face(row), arkit_model)["identity"], U[2])

@@ -116,3 +116,84 @@ def test_hue_steps_see_a_hue_not_a_light():
     steps = jaw_look.hue_steps(red, ref)
     np.testing.assert_allclose(steps[:, 7], np.sqrt(0.3 ** 2 + 2 * 0.15 ** 2), rtol=1e-5)
     assert np.delete(steps, 7, axis=1).max() < 1e-6
+
+
+def test_the_chin_takes_a_darker_frames_hue_with_the_tongue_left_out(setup):
+    """The frame with the tongue is 37 % darker than the reference frame and warmer (its skin's
+    red up 8 %, blue down 8 %): the reference frame's skin pasted where the tongue was takes
+    that frame's hue, as the paste's own hue match gives it where the rule does not fire (R
+    over G 1.42; 1.42 too at 95 % of the reference's brightness). Before, the rule's hue
+    match compared the reference frame's pixels before their gain: every block was darker
+    than :data:`facetransfer.patch.HUE_LIMITS` allows, none compared, and the chin kept the
+    reference frame's hue (R over G 1.33, the frame's 1.44)."""
+    model, topo = setup
+    track = jaw_open_track(model, [0.0, 0.0], size=SIZE)
+    _, _, patch = _chin_patch(model, topo, track, 1)
+    warm = np.rint(np.array(SKIN) * 0.63 * (1.08, 1.0, 0.92))
+    frames = [np.full((SIZE, SIZE, 3), SKIN, np.uint8), np.full((SIZE, SIZE, 3), warm, np.uint8)]
+    frames[1][patch] = TONGUE
+    tex = jaw.jaw_texture(frames, track, model, topo)
+    at = tex.at(1)
+    assert at is not None and at.look_alpha is not None      # the rule fires on the tongue
+    cam = track.camera(1)
+    V = model.synthesize(track.weights_at(1))
+    face_tex = FaceTexture(frames[1], frame_uvs(close_mouth(V, topo), cam, (SIZE, SIZE)), 1)
+    out = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex, jaw=at),
+                        blending=BlendOptions("none", erode=0)).image
+    import cv2
+
+    core = cv2.erode(patch.astype(np.uint8), np.ones((5, 5), np.uint8)) > 0
+    assert core.sum() > 20
+    px = out[core].astype(float)   # the reference frame's skin where the tongue was
+    np.testing.assert_allclose(np.median(px[:, 0] / px[:, 1]), warm[0] / warm[1], atol=0.04)
+
+
+
+
+def test_the_noise_of_a_dark_frame_is_no_hue_step_a_dim_tongue_is(setup):
+    """A very dark clip (the skin at 8 %: 16, 12, 10) whose frames differ by a pixel level of
+    noise, no tongue: the log-chromaticity of ``log(c + 8)`` steps by up to ~0.1 there, past
+    the ramp; before, 74 of the 928 vertices near the mouth took the reference frame
+    (``driving_d6`` at 15 % of its brightness: 87 a frame, 18 at its own brightness); now at
+    most a few. A tongue at 35 % of the skin's brightness still takes it."""
+    model, topo = setup
+    track = jaw_open_track(model, [0.0] * 3, size=SIZE)
+    verts, under, patch = _chin_patch(model, topo, track, 2)
+    rng = np.random.default_rng(1)
+    dark = np.rint(np.array(SKIN) * 0.08)
+    frames = [np.clip(dark + rng.integers(-1, 2, (SIZE, SIZE, 3)), 0, 255).astype(np.uint8)
+              for _ in range(2)]
+    frames.append(np.full((SIZE, SIZE, 3), np.rint(np.array(SKIN) * 0.35), np.uint8))
+    frames[2][patch] = np.rint(np.array(TONGUE) * 0.35)
+    reach = jaw_look.mouth_reach(model, topo, verts)
+    look = jaw_look.look_strengths(frames, track, model, verts, 0, reach)
+    assert (reach > 0).sum() > 900
+    assert (look[1] > 0.5).sum() <= 5            # noise, not a tongue
+    assert np.median(look[2, under]) > 0.9       # a dim tongue: the reference frame
+
+
+def test_look_strengths_read_a_subset_as_the_whole_region_would(setup):
+    """:func:`look_strengths` reads only the vertices near the mouth and every
+    :data:`MEDIAN_STRIDE`-th of the region (``read``, ``near``, ``cols``): on frames of
+    uneven colour it gives, vertex for vertex, what the hue step of the whole region read
+    gives with that sample's median; the others 0. (The tests of flat colours above pass with
+    any sample: their median step is 0 over any of the region's vertices.)"""
+    import cv2
+
+    from facetransfer.region_weights import _vertex_colours, smoothstep
+
+    model, topo = setup
+    track = jaw_open_track(model, [0.0] * 3, size=SIZE)
+    verts = jaw.jaw_strengths(model, track, topo, jaw.jaw_region(model, topo), 0)[0]
+    reach = jaw_look.mouth_reach(model, topo, verts)
+    rng = np.random.default_rng(3)
+    frames = [cv2.resize(rng.uniform(40, 230, (12, 12, 3)).astype(np.float32), (SIZE, SIZE))
+              .astype(np.uint8) for _ in range(3)]
+    look = jaw_look.look_strengths(frames, track, model, verts, 0, reach, chunk=1)
+    logc = _vertex_colours(frames, track, model, verts, np.arange(3))
+    sample = np.flatnonzero(np.arange(verts.size) % jaw_look.MEDIAN_STRIDE == 0)
+    steps = jaw_look.hue_steps(logc, logc[0], sample) * jaw_look.dark_scale(logc, logc[0])
+    want = smoothstep(steps, jaw_look.LOOK_RAMP) * reach
+    assert 0.1 < np.mean(want[1:, reach > 0] > 0.5) < 0.9    # uneven: some vertices, not all
+    np.testing.assert_allclose(look, want, atol=1e-5)
+    assert look[0].max() == 0 and look[:, reach == 0].max() == 0

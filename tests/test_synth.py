@@ -319,3 +319,30 @@ def test_truth_checks_the_model_it_is_used_with(tiny_model, tmp_path):
     assert unrefined.content_hash != tiny_model.content_hash
     with pytest.raises(TrackError, match="the same but another content hash"):
         tr.check_model(unrefined)
+
+
+def test_the_truth_given_for_a_track_is_named_as_probe_names_it(tiny_model, tmp_path, capsys):
+    """synth-video's ``CLIP.truth.npz`` given to ``edit``, ``export`` or ``puppet`` (which take
+    a track): one line saying it is synth-video's ground truth and to give a track of the clip
+    from ``facetransfer track`` (before: "not a track file (missing confidence, lost, ...)",
+    the arrays a track has and it lacks)."""
+    from facetransfer.cli.main import main
+    from facetransfer.track.result import Track, TrackError
+
+    perf = random_performance(tiny_model, 3, seed=0, size=(64, 48), fps=10)
+    _, tpath = write_clip(make_clip(tiny_model, perf), tmp_path / "clip.mp4")
+    said = (f"{tpath} is a synthetic clip's ground truth (synth-video's CLIP.truth.npz), not a "
+            "track: give a track of the clip (`facetransfer track`)")
+    with pytest.raises(TrackError) as err:
+        Track.load(tpath)
+    assert str(err.value) == said
+    for args in (["edit", str(tpath), "--scale", "jawOpen=2", "--out", str(tmp_path / "e.npz")],
+                 ["export", str(tpath), "--out", str(tmp_path / "e.glb")],
+                 ["puppet", str(tpath), "--out", str(tmp_path / "p.mp4")]):
+        assert main(args) == 2, args
+        lines = capsys.readouterr().err.strip().splitlines()
+        assert lines == [f"facetransfer {args[0]}: error: {said}"], lines
+    # another archive still says what a track file lacks
+    np.savez(tmp_path / "x.npz", a=np.zeros(3))
+    with pytest.raises(TrackError, match=r"x.npz is not a track file \(missing fps, "):
+        Track.load(tmp_path / "x.npz")

@@ -21,8 +21,9 @@ or from the training expressions' weights (the mesh is linear in a mode's weight
 at ``v`` adds ``v`` times that expression's offset, as the page does). The head angles are the
 page's (three.js's Euler order ``YXZ``): ``R = Ry(yaw) Rx(pitch) Rz(roll)`` in camera axes (x
 right, y up, z toward the viewer), the rotation of the track's frame it shows. A file edited by
-hand is held to the same ranges: a shape outside [0, 1], a dial beyond its limit or a head angle
-by another name is refused, naming the file and the value.
+hand is held to the same ranges: a shape outside [0, 1], a dial beyond its limit, an identity
+beyond the model's (as ``transfer --identity-weights``) or a head angle by another name is
+refused, naming the file and the value.
 """
 
 from __future__ import annotations
@@ -157,12 +158,27 @@ def _identity(face: DialledFace, model) -> tuple[str, np.ndarray]:
     if face.identity.size != r:
         raise FaceFileError(f"{face.path}: its identity has {face.identity.size} weights, the "
                             f"model's {mode} mode {r}")
+    if mode == model.identity_mode:   # as --identity-weights: a hand-edited file's zeros
+        _plausible(face, model)         # drew a face blown past its frame
     if dials is None:
         return mode, face.identity
     try:
         return mode, dials.apply(face.identity, face.identity_dials)
     except DialError as exc:
         raise FaceFileError(f"{face.path}: {exc}") from None
+
+
+def _plausible(face: DialledFace, model) -> None:
+    """FaceFileError naming the file where its identity lies beyond the model's identities,
+    as :func:`facetransfer.transfer.check_identity_weights` refuses ``--identity-weights``."""
+    from .transfer import TransferError, check_identity_weights
+
+    try:
+        check_identity_weights(model, face.identity, what=f"{face.path}: its identity",
+                               hint="the dial editor saves the shown frame's person or the "
+                               "mean; move it with 'identity_dials'")
+    except TransferError as exc:
+        raise FaceFileError(str(exc)) from None
 
 
 def _expression(face: DialledFace, model, rest: dict) -> dict[str, np.ndarray]:

@@ -65,10 +65,11 @@ def file_kind(path: str | os.PathLike) -> str:
 
 def _other_npz(p: Path, names: set) -> str:
     """What the .npz archive ``p`` of array ``names``, no track or model, holds."""
-    if {"meta", "vertices2d", "landmark_indices"} <= names:
-        return "a synthetic clip's ground truth (synth-video's CLIP.truth.npz)"
-    if p.name.endswith(".mediapipe478.npz") or names == {"landmarks", "note"}:
-        return "MediaPipe's 478 landmarks of a clip (the data folder's reference)"
+    from .io.npz import known_npz
+
+    known = known_npz(p, names)
+    if known is not None:
+        return known
     shown = sorted(names)
     return "arrays " + ", ".join(shown[:6]) + (", ..." if len(shown) > 6 else "") \
         if shown else "no arrays"

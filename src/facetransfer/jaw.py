@@ -56,7 +56,7 @@ from .label_masks import bits_box
 from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
 from .region_weights import facing_weights, model_vertices, moved_strengths, vertex_alpha
 from .jaw_look import LOOK_RAMP, look_strengths, mouth_reach
-from .patch import REJECT, _hue_field, _match_outline_into
+from .patch import GAIN_RANGE, REJECT, _hue_field, _match_outline_into
 from .render import interpolate_vertex_values, shade_layers
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -410,7 +410,20 @@ def _hue_matched(face: np.ndarray, part: np.ndarray, valid: np.ndarray, look: np
     # grown by two of the hue field's blocks: a block partly of the tongue still carries its red
     far = cv2.dilate((look > LOOK_HUE).view(np.uint8), _GROW) == 0
     ok = valid & far
-    g = _hue_field(part.astype(np.float32), face, ok, sigma) if ok.any() else None
+    if not ok.any():
+        return part
+    # at the frame's exposure first, as the paste's gain brings it (the field compares blocks
+    # of like brightness, HUE_LIMITS; its gain, of product 1, is the same for any scale)
+    p = part.astype(np.float32)
+    g = _hue_field(p * _exposure(face[ok], p[ok]), face, ok, sigma)
     if g is None:
         return part
     return np.clip(np.rint(part * g), 0, 255).astype(np.uint8)
+
+
+def _exposure(face: np.ndarray, part: np.ndarray) -> np.float32:
+    """One gain for the three channels bringing the colours ``part`` (n, 3) to ``face``'s
+    (n, 3): the geometric mean over the channels of the ratio of their means (each plus 1),
+    clipped to :data:`facetransfer.patch.GAIN_RANGE`, the paste's own."""
+    lr = np.log(face.mean(axis=0, dtype=np.float64) + 1) - np.log(part.mean(axis=0) + 1)
+    return np.float32(np.clip(np.exp(lr.mean()), *GAIN_RANGE))

@@ -24,6 +24,9 @@ way lighting does not explain (:func:`look_strengths`):
   leaves to the frame reach 0.28 (log) in the 99.9th percentile of ``driving_d6``'s frames
   without any tongue (shadows), and the dark gaps of ``WDA_KatieHill_000``'s talking mouth
   step in hue too;
+- in pixels dark in both frames the step is scaled down (:func:`dark_scale`,
+  :data:`LOOK_DARK`): a level of noise moves the log-chromaticity by ~1/(c + 8), past the
+  ramp in a clip at a sixth of the usual brightness;
 - only near the mouth (:func:`mouth_reach`, :data:`LOOK_REACH`): at the region's outer edge
   (the jaw line, under the ears) the current frame's steps are hair, an ear-ring or the
   background beyond the outline, which the current frame must keep.
@@ -40,8 +43,8 @@ import numpy as np
 
 from .region_weights import _vertex_colours, smoothstep
 
-__all__ = ["LOOK_RAMP", "LOOK_REACH", "MEDIAN_STRIDE", "mouth_reach", "hue_steps",
-           "look_strengths"]
+__all__ = ["LOOK_RAMP", "LOOK_REACH", "LOOK_DARK", "MEDIAN_STRIDE", "mouth_reach",
+           "hue_steps", "dark_scale", "look_strengths"]
 
 #: :func:`look_strengths`' ramp on the hue step (the log-chromaticity distance, less the
 #: region's median): a vertex starts to take the reference frame at the first value and takes
@@ -58,6 +61,13 @@ LOOK_RAMP = (0.05, 0.12)
 #: skin under the ears lie 5-13 cm from the mouth (of the default model's 2,238 vertices of
 #: the region, 730 take the rule fully, 1,339 not at all).
 LOOK_REACH = (3.0, 4.5)
+#: :func:`look_strengths`' darkness (pixel levels): where both frames' colour at a vertex is
+#: darker than this (the geometric mean of its channels), its hue step is scaled by
+#: ``(c + 8) / (LOOK_DARK + 8)``. A level of noise moves the log-chromaticity by ~1/(c + 8):
+#: on ``driving_d6`` at 15 % of its brightness (the skin near the mouth at 16) 87 of its 899
+#: vertices near the mouth took the reference frame in a frame without a tongue (18 at its own
+#: brightness, 18 at 35 %), 24 with the scale; the tongue's frames 64 (65 at its own).
+LOOK_DARK = 24.0
 #: :func:`look_strengths` reads the region's median step (its colour match) from every this
 #: many of its vertices (and the rule's own, near the mouth, all): on issue 13's 300-frame
 #: target the rule took 0.15 s of the region textures' 0.53, made while the forked source is
@@ -100,6 +110,15 @@ def hue_steps(logc: np.ndarray, ref: np.ndarray, sample: np.ndarray | None = Non
     return np.sqrt((d * d).sum(-1)).astype(np.float32)
 
 
+def dark_scale(logc: np.ndarray, ref: np.ndarray, dark: float = LOOK_DARK) -> np.ndarray:
+    """``(k, m) float32`` in (0, 1]: per frame and vertex, ``(c + 8) / (dark + 8)`` of the
+    brighter of ``logc`` (k, m, 3) and ``ref`` (m, 3), the colours' ``log(c + 8)`` (``c + 8``
+    the geometric mean of the channels'), 1 from ``dark`` up: what a hue step is worth over
+    the pixels' noise (:data:`LOOK_DARK`)."""
+    top = np.maximum(logc.mean(axis=-1), ref.mean(axis=-1)[None])
+    return np.minimum(np.exp(top) / (float(dark) + 8.0), 1.0).astype(np.float32)
+
+
 def look_strengths(frames, track, model, verts: np.ndarray, reference: int,
                    reach: np.ndarray, n_frames: int | None = None, *,
                    ramp: tuple[float, float] = LOOK_RAMP, chunk: int = 256) -> np.ndarray:
@@ -108,8 +127,8 @@ def look_strengths(frames, track, model, verts: np.ndarray, reference: int,
 
     The smoothstep over ``ramp`` of :func:`hue_steps` of the colours under each vertex
     ``verts`` (m,) of the target's tracked mesh in each frame (of the first ``n_frames``, not
-    lost; 0 in the others) against the ``reference`` frame's, times ``reach`` (m,)
-    (:func:`mouth_reach`).
+    lost; 0 in the others) against the ``reference`` frame's, in dark pixels scaled by
+    :func:`dark_scale`, times ``reach`` (m,) (:func:`mouth_reach`).
 
     Parameters
     ----------
@@ -148,6 +167,7 @@ def look_strengths(frames, track, model, verts: np.ndarray, reference: int,
     ref = _vertex_colours(frames, track, model, verts[read], np.array([int(reference)]))[0]
     for lo in range(0, rows.size, chunk):
         k = rows[lo:lo + chunk]
-        steps = hue_steps(_vertex_colours(frames, track, model, verts[read], k), ref, cols)
+        logc = _vertex_colours(frames, track, model, verts[read], k)
+        steps = hue_steps(logc, ref, cols) * dark_scale(logc, ref)
         out[np.ix_(k, read[near])] = smoothstep(steps[:, near], ramp) * reach[read[near]]
     return out

@@ -792,10 +792,18 @@ def parse_weights(text: str, r: int, *, what: str = "--identity-weights") -> np.
 IDENTITY_LIMIT = 6.0
 
 
-def check_identity_weights(model, w: np.ndarray, *, what: str = "--identity-weights") -> None:
+#: :func:`check_identity_weights`' word on where identity weights come from.
+IDENTITY_SOURCES = ("identity weights are coordinates in the model's identity space, e.g. a "
+                    "training row (--identity-label; `facetransfer model info` lists them) or "
+                    "a track's identity")
+
+
+def check_identity_weights(model, w: np.ndarray, *, what: str = "--identity-weights",
+                           hint: str = IDENTITY_SOURCES) -> None:
     """Refuse identity weights ``w`` (r,) outside the space the model's identities span: a
     component farther than :data:`IDENTITY_LIMIT` standard deviations from the training
-    identities' mean (TransferError naming it and where such weights come from)."""
+    identities' mean (TransferError naming ``what``, the component and, ``hint``, where such
+    weights come from)."""
     k = model.mode_index(model.identity_mode)
     U = np.asarray(model.factors[k], np.float64)
     if len(U) < 2:
@@ -805,9 +813,7 @@ def check_identity_weights(model, w: np.ndarray, *, what: str = "--identity-weig
     if z[j] > IDENTITY_LIMIT:
         raise TransferError(f"{what}: component {j} ({w[j]:.4g}) lies {z[j]:.0f} standard "
                             f"deviations from the training identities' (at most "
-                            f"{IDENTITY_LIMIT:g}): identity weights are coordinates in the "
-                            "model's identity space, e.g. a training row (--identity-label; "
-                            "`facetransfer model info` lists them) or a track's identity")
+                            f"{IDENTITY_LIMIT:g}): {hint}")
 
 
 def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None

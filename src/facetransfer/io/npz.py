@@ -67,6 +67,18 @@ def content_kind(path: str | os.PathLike) -> str | None:
     return NOT_NPZ
 
 
+def known_npz(p: Path, names) -> str | None:
+    """What the .npz archive ``p`` of array ``names`` is when it is one of the other archives
+    facetransfer or its data folder hold (synth-video's ground truth, MediaPipe's landmarks of
+    a clip), else None."""
+    names = set(names)
+    if {"meta", "vertices2d", "landmark_indices"} <= names:
+        return "a synthetic clip's ground truth (synth-video's CLIP.truth.npz)"
+    if Path(p).name.endswith(".mediapipe478.npz") or names == {"landmarks", "note"}:
+        return "MediaPipe's 478 landmarks of a clip (the data folder's reference)"
+    return None
+
+
 #: What :func:`archive_names` raises for a file that is no ``.npz`` archive nor ``.npy`` array
 #: (``numpy.load``'s kinds of error: damaged, truncated, foreign).
 NOT_ARCHIVE_ERRORS = (OSError, ValueError, EOFError, zipfile.BadZipFile)

@@ -395,7 +395,12 @@ class Track:
                     "confidence", "lost", "model_hash", "mode_names")
         missing = [k for k in required if k not in data]
         if missing:
-            raise TrackError(f"{p} is not a track file (missing {', '.join(missing)})")
+            from ..io.npz import known_npz
+
+            kind = known_npz(p, data)   # as probe names it (synth-video's truth, ...)
+            raise TrackError(f"{p} is not a track file (missing {', '.join(missing)})"
+                             if kind is None else f"{p} is {kind}, not a track: give a track "
+                             "of the clip (`facetransfer track`)")
         _check_version(data, p)
         _check_kinds(data, p)
         names = tuple(str(n) for n in np.atleast_1d(data["mode_names"]))
