@@ -56,7 +56,7 @@ from .label_masks import bits_box
 from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
 from .region_weights import facing_weights, model_vertices, moved_strengths, vertex_alpha
 from .jaw_look import LOOK_RAMP, look_strengths, mouth_reach
-from .patch import GAIN_RANGE, REJECT, _hue_field, _match_outline_into
+from .patch import REJECT, _match_outline_into
 from .render import interpolate_vertex_values, shade_layers
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -370,60 +370,24 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
             compare = None
     opacity = 1.0 if texture.alpha is None else \
         interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
-    part, hue = img[sl], JAW_HUE_SIGMA
-    if texture.look_alpha is not None and hue > 0:
+    hue_where = None
+    if texture.look_alpha is not None and JAW_HUE_SIGMA > 0:
         look = interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl)
-        part = _hue_matched(face_image[sl], part, _hue_valid(mask, compare, fm), look, hue)
-        hue = 0.0   # done: the paste's own hue match off
-    _match_outline_into(face_image[sl], part, mask, fm, face_image[sl], feather=feather,
+        hue_where = _hue_far(look)
+    _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
                         compare=compare, reject=REJECT, reject_where=None,
                         origin=(sl[1].start, sl[0].start), opacity=opacity,
-                        grey_where=True, hue=hue)
+                        grey_where=True, hue=JAW_HUE_SIGMA, hue_where=hue_where)
     return face_image
 
 
-def _hue_valid(mask: np.ndarray, compare: np.ndarray | None, fm: np.ndarray) -> np.ndarray:
-    """The pixels :func:`facetransfer.patch._match_outline_into`'s hue match compares over:
-    the region ``mask`` and the ring ``compare`` (h, w) bool where at least 2 pixels inside
-    the face ``fm`` (its 5 x 5 erosion; the box reaches 2 pixels beyond the ring): beyond the
-    outline the ring shows hair or the background."""
-    if compare is None:
-        return mask
+def _hue_far(look: np.ndarray) -> np.ndarray:
+    """``(h, w) bool``: the pixels the paste's hue match may compare, those whose appearance
+    strength ``look`` (h, w) float32 is at most :data:`LOOK_HUE`, away from the others by
+    more than :data:`LOOK_GROW` pixels (two of the hue field's blocks: a block partly of the
+    tongue still carries its red): a tongue's or the lips' red where the reference frame
+    shows skin does not tint the pasted skin. The match itself comes after the paste's gain,
+    at the frame's exposure."""
     import cv2
 
-    deep = cv2.erode(fm.view(np.uint8), np.ones((5, 5), np.uint8),
-                     borderType=cv2.BORDER_CONSTANT, borderValue=0) != 0
-    return mask | (compare & deep)
-
-
-def _hue_matched(face: np.ndarray, part: np.ndarray, valid: np.ndarray, look: np.ndarray,
-                 sigma: float) -> np.ndarray:
-    """``part`` (h, w, 3) uint8 brought to the smooth hue of ``face`` (h, w, 3) uint8 at the
-    scale ``sigma`` (:func:`facetransfer.patch._hue_field`, its brightness kept), compared over
-    the ``valid`` (h, w) bool pixels (the region and its ring) whose appearance strength
-    ``look`` (h, w) float32 is at most :data:`LOOK_HUE` (the others grown by
-    :data:`LOOK_GROW`): a tongue's or the lips' red where the
-    reference frame shows skin does not tint the pasted skin. ``part`` as it is where no
-    pixel compares."""
-    import cv2
-
-    # grown by two of the hue field's blocks: a block partly of the tongue still carries its red
-    far = cv2.dilate((look > LOOK_HUE).view(np.uint8), _GROW) == 0
-    ok = valid & far
-    if not ok.any():
-        return part
-    # at the frame's exposure first, as the paste's gain brings it (the field compares blocks
-    # of like brightness, HUE_LIMITS; its gain, of product 1, is the same for any scale)
-    p = part.astype(np.float32)
-    g = _hue_field(p * _exposure(face[ok], p[ok]), face, ok, sigma)
-    if g is None:
-        return part
-    return np.clip(np.rint(part * g), 0, 255).astype(np.uint8)
-
-
-def _exposure(face: np.ndarray, part: np.ndarray) -> np.float32:
-    """One gain for the three channels bringing the colours ``part`` (n, 3) to ``face``'s
-    (n, 3): the geometric mean over the channels of the ratio of their means (each plus 1),
-    clipped to :data:`facetransfer.patch.GAIN_RANGE`, the paste's own."""
-    lr = np.log(face.mean(axis=0, dtype=np.float64) + 1) - np.log(part.mean(axis=0) + 1)
-    return np.float32(np.clip(np.exp(lr.mean()), *GAIN_RANGE))
+    return cv2.dilate((look > LOOK_HUE).view(np.uint8), _GROW) == 0

@@ -93,7 +93,7 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
                         gain_range: tuple[float, float] = GAIN_RANGE,
                         grey_where: np.ndarray | bool | None = None,
                         opacity: float | np.ndarray = 1.0, shading: float = 0.0,
-                        hue: float = 0.0) -> None:
+                        hue: float = 0.0, hue_where: np.ndarray | None = None) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
     the region's pixels are written; ``gain_range``: the gains' clip (default
@@ -107,7 +107,8 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     shading at that scale (:func:`_shading_field`, its Gaussian's standard deviation in
     pixels), compared where the gain is. ``hue`` > 0: then to the face's smooth hue at that
     scale, its brightness kept (:func:`_hue_field`), compared over the region and where the
-    gain is."""
+    gain is, of those only at the pixels ``hue_where`` (H, W) bool where given (e.g. not
+    where the jaw region shows a tongue, :mod:`facetransfer.jaw_look`)."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
@@ -135,7 +136,9 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
         valid = np.array(mask[box], copy=True)
         if ring is not None:
             _or_box(valid, ring, rbox, (x, y, w, h))
-        g = _hue_field(f, face[box], valid, hue)
+        if hue_where is not None:
+            valid &= hue_where[box]
+        g = _hue_field(f, face[box], valid, hue) if valid.any() else None
         if g is not None:
             cv2.multiply(f, g, dst=f)
     # the distance to the nearest pixel outside the region (the box's edge counts as outside:
