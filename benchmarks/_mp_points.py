@@ -28,3 +28,24 @@ def measure(P: np.ndarray, pairs) -> np.ndarray:
     a, b = EYE_CORNERS
     eye = np.linalg.norm(P[:, a] - P[:, b], axis=-1)
     return np.mean([np.linalg.norm(P[:, i] - P[:, j], axis=-1) for i, j in pairs], axis=0) / eye
+
+
+def faces_in_pixels(frames, fps: float):
+    """``(i, frame, xy)`` for each frame of ``frames`` (a clip at ``fps``) where Face
+    Landmarker (video mode, :func:`facetransfer.fidelity.landmarker_scores`) finds a face:
+    ``xy`` (478, 2) its points in the frame's pixels."""
+    from facetransfer.fidelity import landmarker_scores
+
+    _, P = landmarker_scores(frames, fps)
+    for i, f in enumerate(frames):
+        if np.isfinite(P[i]).all():
+            H, W = f.shape[:2]
+            yield i, f, P[i, :, :2] * (W, H)
+
+
+def frame_lab(frame: np.ndarray) -> np.ndarray:
+    """``(H, W, 3)`` float32: an 8-bit RGB frame in CIELAB (OpenCV's conversion of it scaled
+    to 0..1: L 0..100), the colour space the lips' and the chin's benchmarks judge in."""
+    import cv2
+
+    return cv2.cvtColor(np.asarray(frame, np.float32) / 255.0, cv2.COLOR_RGB2LAB)

@@ -66,22 +66,14 @@ def band_mask(xy: np.ndarray, shape) -> np.ndarray:
 def band_lab(frames, fps: float) -> tuple[np.ndarray, np.ndarray]:
     """Per frame the band's median CIELAB (F, 3) (NaN where no face or under 20 pixels) and
     the mouth-and-chin crop box (F, 4) ``x0, y0, x1, y1``."""
-    import cv2
+    from _mp_points import faces_in_pixels, frame_lab
 
-    from facetransfer.fidelity import landmarker_scores
-
-    _, P = landmarker_scores(frames, fps)
     lab = np.full((len(frames), 3), np.nan)
     boxes = np.zeros((len(frames), 4), np.int64)
-    for i, f in enumerate(frames):
-        if not np.isfinite(P[i]).all():
-            continue
-        H, W = f.shape[:2]
-        xy = P[i, :, :2] * (W, H)
-        m = band_mask(xy, (H, W))
+    for i, f, xy in faces_in_pixels(frames, fps):
+        m = band_mask(xy, f.shape[:2])
         if m.sum() >= 20:
-            L = cv2.cvtColor(np.asarray(f, np.float32) / 255.0, cv2.COLOR_RGB2LAB)
-            lab[i] = np.median(L[m], axis=0)
+            lab[i] = np.median(frame_lab(f)[m], axis=0)
         eye = float(np.linalg.norm(xy[33] - xy[263]))
         cx, cy = xy[[61, 291, 17]].mean(0)
         boxes[i] = (int(cx - 0.8 * eye), int(cy - 0.5 * eye), int(cx + 0.8 * eye),

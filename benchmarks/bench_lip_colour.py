@@ -104,22 +104,15 @@ def lip_lab(frames, fps: float) -> dict:
     colour of each part (NaN where MediaPipe finds no face or fewer than 20 pixels of it);
     ``boxes`` (F, 4) the lips' box ``x0, y0, x1, y1``; ``counts`` (F, 3) of
     :func:`cyan_whitish`."""
-    import cv2
+    from _mp_points import faces_in_pixels, frame_lab
 
-    from facetransfer.fidelity import landmarker_scores
-
-    _, P = landmarker_scores(frames, fps)
     n = len(frames)
     res = {k: np.full((n, 3), np.nan) for k in PARTS}
     res["boxes"] = np.zeros((n, 4), np.int64)
     res["counts"] = np.zeros((n, 3), np.int64)
-    for i, f in enumerate(frames):
-        if not np.isfinite(P[i]).all():
-            continue
-        H, W = f.shape[:2]
-        xy = P[i, :, :2] * (W, H)
-        m = lip_masks(xy, (H, W))
-        L = cv2.cvtColor(np.asarray(f, np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+    for i, f, xy in faces_in_pixels(frames, fps):
+        m = lip_masks(xy, f.shape[:2])
+        L = frame_lab(f)
         for k in PARTS:
             if m[k].sum() >= 20:
                 res[k][i] = np.median(L[m[k]], axis=0)
