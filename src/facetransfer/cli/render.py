@@ -124,11 +124,12 @@ def cmd_render(args: argparse.Namespace) -> int:
     size = parse_size(args.size)
     face = face_arg(args)
     pose = _face_pose(face, parse_pose(args.pose))
+    background = parse_colour(args.background)   # before the model, which may be built first
     model = resolve_model(args.model)
     weights = face_or_weights(model, args, face)
     res = render_model(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
                        pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
-                       scale=pose.get("scale", 1.0), background=parse_colour(args.background))
+                       scale=pose.get("scale", 1.0), background=background)
     write_image(out, res.image, overwrite=args.overwrite)
     print(f"wrote {out} ({size[0]}x{size[1]}, {int(res.visible.sum())} of "
           f"{res.visible.size} vertices visible)")
