@@ -137,3 +137,23 @@ def test_synth_video_to_an_image_sequence_says_it_writes_a_video(model_path, tmp
                "--out", str(tmp_path / "sv" / "%04d.png")])
     err = capsys.readouterr().err.strip()
     assert rc == 2 and err.endswith("synth-video writes no image sequence)") and "\n" not in err
+
+
+def test_a_wrong_colour_or_a_missing_spec_is_said_before_the_model(tmp_path, capsys, monkeypatch):
+    """``render --background`` and ``synth-video --performance`` are checked before the model
+    is resolved: on a first run that builds the default model (a minute), a wrong colour or a
+    missing spec file was said after it (and its "building" line came first)."""
+    import facetransfer.cli.render as cli_render
+
+    def no_model(path):
+        raise AssertionError("the model was resolved before the arguments were checked")
+
+    monkeypatch.setattr(cli_render, "resolve_model", no_model)
+    assert main(["render", "--background", "300,0,0", "--out", str(tmp_path / "r.png")]) == 2
+    assert "--background" in capsys.readouterr().err
+    assert main(["synth-video", "--performance", str(tmp_path / "missing.json"),
+                 "--out", str(tmp_path / "s.mp4")]) == 2
+    err = capsys.readouterr().err
+    assert err.strip().splitlines() == [
+        f"facetransfer synth-video: error: performance spec {tmp_path / 'missing.json'} "
+        "does not exist"]

@@ -182,6 +182,8 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
     if args.frames is not None and not 1 <= args.frames <= MAX_SYNTH_FRAMES:
         raise FaceTransferError(f"--frames must be from 1 to {MAX_SYNTH_FRAMES}, got "
                                 f"{args.frames}")
+    if args.performance and not Path(args.performance).is_file():   # before the model's build
+        raise FaceTransferError(f"performance spec {args.performance} does not exist")
     size = parse_size(args.size) if args.size else None
     identity = parse_identity(args.identity) if args.identity else None
     model = resolve_model(args.model)
