@@ -223,9 +223,10 @@ def tqdm_progress(desc: str, *, unit: str = "item", enabled: bool = True):
     return callback, close
 
 
-def number_in(lo: float, hi: float, *, integer: bool = False):
-    """An argparse ``type`` taking a number in ``[lo, hi]`` (an integer with ``integer``);
-    argparse names the option in its one line ("argument --smooth: expected ...")."""
+def number_in(lo: float, hi: float | None, *, integer: bool = False):
+    """An argparse ``type`` taking a number in ``[lo, hi]`` (an integer with ``integer``; no
+    upper bound where ``hi`` is None); argparse names the option in its one line ("argument
+    --smooth: expected ...")."""
     kind = "an integer" if integer else "a number"
 
     def parse(text: str):
@@ -233,29 +234,20 @@ def number_in(lo: float, hi: float, *, integer: bool = False):
             v = int(text) if integer else float(text)
         except ValueError:
             v = None
-        if v is None or not lo <= v <= hi:
-            shown = [f"{int(b)}" if integer else f"{b:g}" for b in (lo, hi)]
-            raise argparse.ArgumentTypeError(f"expected {kind} in [{shown[0]}, {shown[1]}], "
-                                             f"got {text!r}")
+        if v is None or not lo <= v <= (float("inf") if hi is None else hi):
+            shown = [f"{int(b)}" if integer else f"{b:g}" for b in (lo, hi or 0)]
+            within = f">= {shown[0]}" if hi is None else f"in [{shown[0]}, {shown[1]}]"
+            raise argparse.ArgumentTypeError(f"expected {kind} {within}, got {text!r}")
         return v
 
     return parse
 
 
 def integer_from(lo: int):
-    """An argparse ``type`` taking an integer >= ``lo`` (a seed, a count of frames: argparse
-    names the option in its one line; before, a seed of -1 was numpy's "expected non-negative
+    """An argparse ``type`` taking an integer >= ``lo`` (:func:`number_in` without an upper
+    bound: a seed, a count of frames; before, a seed of -1 was numpy's "expected non-negative
     integer", naming nothing, or taken)."""
-    def parse(text: str) -> int:
-        try:
-            v = int(text)
-        except ValueError:
-            v = None
-        if v is None or v < lo:
-            raise argparse.ArgumentTypeError(f"expected an integer >= {lo}, got {text!r}")
-        return v
-
-    return parse
+    return number_in(lo, None, integer=True)
 
 
 def frame_count(n: int) -> str:
