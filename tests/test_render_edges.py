@@ -26,6 +26,7 @@ import pytest
 from facetransfer import composite, eyeballs, patch, rewrite, rim
 from facetransfer.errors import MeshError
 from facetransfer.render import Raster, WeakPerspective, rasterize
+from test_rewrite_kernels import _blobs as _discs
 
 #: The commit before the render's kernels.
 BEFORE = "aec34b2"
@@ -112,12 +113,9 @@ def _grid(n: int, side: float):
 
 
 def _blobs(rng, shape, n: int) -> np.ndarray:
-    """``n`` random discs (radius 2-14 px) on a ``shape`` (H, W) bool mask."""
-    m = np.zeros(shape, np.uint8)
-    for _ in range(n):
-        cv2.circle(m, (int(rng.integers(0, shape[1])), int(rng.integers(0, shape[0]))),
-                   int(rng.integers(2, 15)), 1, -1)
-    return m.view(bool)
+    """``n`` random discs (radius 2-14 px) on a ``shape`` (H, W) bool mask
+    (:func:`test_rewrite_kernels._blobs`'s)."""
+    return _discs(rng, shape, n, (2, 15))
 
 
 def _view(a: np.ndarray) -> np.ndarray:

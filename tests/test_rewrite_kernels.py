@@ -25,12 +25,13 @@ def _keep_own_numpy(face_img, face_mask, frame, where) -> None:
     face_img[box][ys, xs] = np.rint(f + a[ys, xs][:, None] * (t - f)).astype(np.uint8)
 
 
-def _blobs(rng, shape, n: int) -> np.ndarray:
-    """``n`` random discs (radius 1-12 px) on an ``shape`` (H, W) bool mask."""
+def _blobs(rng, shape, n: int, radii: tuple[int, int] = (1, 13)) -> np.ndarray:
+    """``n`` random discs (radius ``radii[0]`` to ``radii[1] - 1`` px, 1-12 by default) on a
+    ``shape`` (H, W) bool mask."""
     m = np.zeros(shape, np.uint8)
     for _ in range(n):
         cv2.circle(m, (int(rng.integers(0, shape[1])), int(rng.integers(0, shape[0]))),
-                   int(rng.integers(1, 13)), 1, -1)
+                   int(rng.integers(*radii)), 1, -1)
     return m.view(bool)
 
 
