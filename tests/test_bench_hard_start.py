@@ -73,3 +73,13 @@ def test_hard_starts_find_each_hard_frame_and_keep_a_cut_long_enough():
     assert hs.hard_starts(late)["mouth"]["frame"] != 65
     early = np.concatenate([ref[20:21], ref])                        # the turn on frame 0 too
     assert hs.hard_starts(early)["yaw"]["frame"] == 21
+
+
+def test_canonical_face_is_in_the_axes_of_mediapipes_points():
+    """As the references' points (pixels, y down; z smaller nearer the camera): the forehead
+    (10) above the chin (152), the nose tip (4) nearer than the outer eye corner (33), the
+    subject's right eye corner (33) left of the left one (263)."""
+    C = _canonical()
+    assert C[10, 1] < C[152, 1] - 10.0
+    assert C[4, 2] < C[33, 2] - 3.0
+    assert C[33, 0] < C[263, 0] - 8.0
