@@ -34,3 +34,37 @@ def test_a_take_or_a_table_given_as_a_mesh_names_the_mesh_formats(tmp_path, caps
     err = capsys.readouterr().err.strip()
     assert err == f"facetransfer scan smooth: error: mesh {broken} has no vertices", err
     assert not (tmp_path / "s.obj").exists()
+
+
+def test_synth_video_performance_help_names_the_spec_keys(arkit_model, arkit_model_path,
+                                                          tmp_path, capsys):
+    """``synth-video --performance`` said only "performance spec (JSON, see
+    facetransfer.synth)": its help now names every key of the spec (``n_frames``, not
+    ``frames``) and the pose's, and its example is a spec that resolves; a wrong key is one
+    line naming it and the known ones."""
+    import json
+    import re
+
+    from facetransfer.cli.render import PERFORMANCE_HELP
+    from facetransfer.synth import performance_from_spec
+
+    from test_walk46 import _option_help
+
+    text = _option_help(["synth-video"], "--performance")
+    assert text == PERFORMANCE_HELP
+    for key in ("n_frames", "fps", "size", "identity", "tracks", "pose", "yaw_deg",
+                "pitch_deg", "roll_deg", "translate_px", "scale", "period_s", "fill", "keys",
+                "tx", "ty"):
+        assert re.search(rf"\b{key}\b", text), key
+    example = json.loads(text[text.index("E.g. ") + 5:text.index("}}. ") + 2])
+    perf = performance_from_spec(arkit_model, example)
+    assert perf.n_frames == 50 and perf.size == (640, 480)
+    spec = tmp_path / "p.json"
+    spec.write_text('{"frames": 10}')
+    capsys.readouterr()
+    assert main(["synth-video", "--model", str(arkit_model_path), "--performance", str(spec),
+                 "--out", str(tmp_path / "c.mp4")]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"facetransfer synth-video: error: {spec}: unknown performance spec key(s) ['frames']; "
+        "known: ['fps', 'identity', 'n_frames', 'pose', 'size', 'tracks']"]
+    assert not (tmp_path / "c.mp4").exists()
