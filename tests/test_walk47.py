@@ -68,3 +68,49 @@ def test_synth_video_performance_help_names_the_spec_keys(arkit_model, arkit_mod
         f"facetransfer synth-video: error: {spec}: unknown performance spec key(s) ['frames']; "
         "known: ['fps', 'identity', 'n_frames', 'pose', 'size', 'tracks']"]
     assert not (tmp_path / "c.mp4").exists()
+
+
+def test_a_stopped_track_run_is_pointed_to_the_tracks_own_frame_count(quick_model,
+                                                                       quick_model_path,
+                                                                       data_dir, tmp_path,
+                                                                       capsys):
+    """``track V --out T --overlay O --max-frames 5`` where T is an earlier run's track of 30
+    frames suggested ``--from-track T --overlay O --max-frames 5``, which then failed (the
+    track has 30); the hint now gives the track's own count (none for a track of the whole
+    clip), and the command it gives draws the overlay; a track of another clip's size is only
+    said to be there."""
+    import dataclasses
+
+    from conftest import still_track
+
+    clip = str(data_dir / "video" / "face_2.mp4")          # 125 frames, 844x844
+    t, o = tmp_path / "t.npz", tmp_path / "o.mp4"
+    model = ["--model", str(quick_model_path)]
+
+    def track_of(n, size=(844, 844)):
+        still = still_track(quick_model, n, source=clip)
+        return dataclasses.replace(still, frame_size=size, scale=np.full(n, 2.0),
+                                   translation=np.tile((422.0, 422.0), (n, 1)))
+
+    track_of(30).save(t)
+    capsys.readouterr()
+    assert main(["track", clip, *model, "--out", str(t), "--overlay", str(o),
+                 "--max-frames", "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    hint = f"--from-track {t} --overlay {o} --max-frames 30"
+    assert err == [f"facetransfer track: error: output {t} exists (an earlier run's track of "
+                   f"30 frames?): `{hint}` draws the overlay from it; for 5 frames, "
+                   "--overwrite tracks again"], err
+    assert main(["track", clip, *model, *hint.split(), "--no-progress"]) == 0
+    assert o.is_file()
+    o.unlink()
+    track_of(125).save(t, overwrite=True)
+    assert main(["track", clip, *model, "--out", str(t), "--overlay", str(o)]) == 2
+    assert f"(an earlier run's track of 125 frames?): `--from-track {t} --overlay {o}` draws" \
+        in capsys.readouterr().err
+    track_of(30, (640, 480)).save(t, overwrite=True)
+    assert main(["track", clip, *model, "--out", str(t), "--overlay", str(o)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"facetransfer track: error: output {t} exists, a track of another clip (30 frames of "
+        "640x480; the video is 844x844): --overwrite replaces it"]
+    assert not o.exists()
