@@ -45,8 +45,8 @@ def register(sub) -> None:
                    help=f"comma-separated fractions of cells to hide (default {DEFAULT_FRACTIONS})")
     e.add_argument("--trials", type=int, default=5,
                    help="random trials per fraction (default 5); the runs are trials x fractions "
-                   "x methods, each from a fraction of a second (average) to a few seconds "
-                   "(ppca, tensorly) on the ICT sets, and each keeps ~0.5 kB of results: the "
+                   "x methods, each from under a second (average) to tens of seconds (ppca, "
+                   "naive, tensorly on ict-trilinear), and each keeps ~0.5 kB of results: the "
                    "most trials are those whose runs fit in the memory available")
     e.add_argument("--seed", type=integer_from(0), default=0,
                    help="seed of the held-out cells (default 0)")
