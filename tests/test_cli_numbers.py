@@ -237,13 +237,34 @@ def test_a_missing_fraction_that_hides_no_cell(tmp_path, capsys):
 
 def test_impute_trials_beyond_any_evaluation(tmp_path, capsys, monkeypatch):
     """Before: ``--trials 10**30`` ran until interrupted (the evaluation, stood in for here,
-    was reached)."""
+    was reached); then at most 1000 trials, whatever the fractions and methods. The most is
+    now the trials whose runs' results (512 bytes each) fit in the memory available (1 GB
+    here): 2**30 / 512 runs, halved by a second method."""
     import facetransfer.impute
+    import facetransfer.io.memory
+
+    started = []
 
     def reached(*a, **k):
+        started.append(k["trials"])
         raise AssertionError("the evaluation was started")
 
     monkeypatch.setattr(facetransfer.impute, "evaluate_imputation", reached)
-    _says(["impute", "eval", "--dataset", _four_cells(tmp_path), "--missing", "0.5",
-           "--trials", 10 ** 30, "--methods", "average", "--out", tmp_path / "d"], capsys,
-          f"--trials must be at most 1000 (per fraction), got {10 ** 30}")
+    monkeypatch.setattr(facetransfer.io.memory, "available_memory", lambda: 2 ** 30)
+    cells = _four_cells(tmp_path)
+    base = ["impute", "eval", "--dataset", cells, "--missing", "0.5", "--out", tmp_path / "d"]
+    assert _says(base + ["--trials", 10 ** 30, "--methods", "average"], capsys,
+                 f"--trials {10 ** 30}: ") == (
+        f"facetransfer impute eval: error: --trials {10 ** 30}: {10 ** 30} runs (trials x "
+        "fractions x methods) keep ~512 bytes of results each, more than the 1.0 GB "
+        "available; give --trials 2097152 or fewer")
+    _says(base + ["--trials", 2 ** 21 + 1, "--methods", "average"], capsys,
+          "give --trials 2097152 or fewer")
+    _says(base + ["--trials", 2 ** 20 + 1, "--methods", "average,naive"], capsys,
+          f"{2 ** 21 + 2} runs (trials x fractions x methods) keep ~512 bytes of results "
+          "each, more than the 1.0 GB available; give --trials 1048576 or fewer")
+    assert started == []
+    with pytest.raises(AssertionError, match="the evaluation was started"):
+        main([str(a) for a in base + ["--trials", 2000,
+                                       "--methods", "average"]])
+    assert started == [2000]                  # beyond the old cap of 1000: evaluated

@@ -334,7 +334,7 @@ def test_export_errors(case, tmp_path, monkeypatch):
     assert (tmp_path / "x.csv").read_text() == "keep"
     with pytest.raises(ExportError, match="only into glb"):
         export_track(track, "usd", tmp_path / "t.usd", model=model, texture=tmp_path / "t.png")
-    with pytest.raises(ExportError, match="cannot read texture image"):
+    with pytest.raises(ExportError, match="texture image .*no.png does not exist"):
         export_track(track, "glb", tmp_path / "t.glb", model=model, texture=tmp_path / "no.png")
     assert not (tmp_path / "t.glb").exists()
     # model=None: the default model if the track was made with it, else ask for --model
@@ -421,6 +421,49 @@ def test_glb_texture_lifted_from_the_video(case, tmp_path, capsys):
                  str(tp), "--out", str(tmp_path / "w.glb")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "is an .npz archive, not a video" in err[0], err
+
+
+
+def test_a_picture_that_is_no_uv_texture_is_refused(case, tmp_path, capsys):
+    """``--texture`` takes a square image, as ``texture default|lift`` write one in the
+    model's UV layout; a contact sheet (7890x1476) or a frame is refused in one line naming
+    it, before the track is read, and nothing is written (before: it became the glb's base
+    colour); a square one is carried at its own size; an array texture is held to the same."""
+    import io
+
+    import cv2
+    import pygltflib
+    from PIL import Image
+
+    model, track, _, _ = case
+    tp, mp = tmp_path / "t.npz", tmp_path / "m.npz"
+    track.save(tp)
+    model.save(mp)
+    sheet, tex = tmp_path / "sheet.png", tmp_path / "tex.png"
+    assert cv2.imwrite(str(sheet), np.full((1476, 7890, 3), 90, np.uint8))
+    assert cv2.imwrite(str(tex), np.full((96, 96, 3), 90, np.uint8))
+    out = tmp_path / "f.glb"
+    capsys.readouterr()
+    assert main(["export", str(tp), "--model", str(mp), "--texture", str(sheet),
+                 "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"facetransfer export: error: texture image {sheet} is 7890x1476: a texture of the "
+        "model's UVs is a square image in their layout (as `facetransfer texture default` or "
+        "`texture lift` writes it, e.g. 512x512)"]
+    assert not out.exists()
+    assert main(["export", str(tmp_path / "none.npz"), "--model", str(mp), "--texture",
+                 str(sheet), "--out", str(out)]) == 2        # the picture said first
+    assert "is 7890x1476" in capsys.readouterr().err
+    assert main(["export", str(tp), "--model", str(mp), "--texture", str(tex),
+                 "--out", str(out)]) == 0
+    g = pygltflib.GLTF2().load(str(out))
+    view = g.bufferViews[g.images[0].bufferView]
+    png = g.binary_blob()[view.byteOffset:view.byteOffset + view.byteLength]
+    assert Image.open(io.BytesIO(png)).size == (96, 96)
+    with pytest.raises(ExportError, match="the texture is 64x32: a texture of the model's UVs"):
+        export_track(track, "glb", tmp_path / "a.glb", model=model,
+                     texture=np.zeros((32, 64, 3), np.uint8))
+    assert not (tmp_path / "a.glb").exists()
 
 
 # ------------------------------------------------------------------------------ neutral pose

@@ -153,6 +153,35 @@ def test_a_still_image_is_described_as_one(tmp_path, capsys):
     assert "fps" not in " ".join(out) and "seeks" not in " ".join(out)
 
 
+def test_a_still_s_colour_is_said_in_words(tmp_path, capsys):
+    """A still's colour line says how its pixels are stored and that it tags no primaries or
+    curve (before: ffmpeg's ``gbr/?/? (matrix/primaries/transfer)``, ``bt470bg/?/?``); tags a
+    still does carry are named; a video's line keeps its wording."""
+    import cv2
+
+    from facetransfer.io.video_display import ColourTags
+    from facetransfer.io.video_facts import fact_lines, video_facts
+
+    cv2.imwrite(str(tmp_path / "a.jpg"), np.full((48, 64, 3), 128, np.uint8))
+    cv2.imwrite(str(tmp_path / "b.png"), np.full((48, 64, 3), 128, np.uint8))
+    untagged = "primaries and curve not tagged (taken as sRGB); no audio"
+    for name, stored in (("a.jpg", "stored as YCbCr (BT.601, as JPEG stores it), read as RGB"),
+                         ("b.png", "RGB")):
+        assert main(["probe", str(tmp_path / name)]) == 0
+        out = capsys.readouterr().out.splitlines()
+        assert out[2] == f"  colour {stored}, {untagged}", out
+    png = video_facts(tmp_path / "b.png")
+    tagged = dataclasses.replace(png, colour=ColourTags("gbr", "bt709", "iec61966-2-1"))
+    assert fact_lines(tagged)[2] == "  colour RGB, primaries Rec.709, curve sRGB; no audio"
+    half = dataclasses.replace(png, colour=ColourTags("gbr", "bt2020", None))
+    assert fact_lines(half)[2] == ("  colour RGB, primaries Rec.2020, curve not tagged (taken "
+                                   "as sRGB's): HDR or wide gamut, seen as 8-bit SDR; no audio")
+    clip = dataclasses.replace(png, n_frames=10, path=str(tmp_path / "c.mp4"),
+                               colour=ColourTags("bt709", "bt709", "bt709"))
+    assert fact_lines(clip)[2].startswith("  colour bt709/bt709/bt709 (matrix/primaries/"
+                                          "transfer); audio none")
+
+
 def test_a_track_of_an_image_sequence_is_described_without_the_rate_warning(
         arkit_model, make_arkit_track, tmp_path, caplog):
     """The track's own rate is what probe says; looking up its source sequence's timecode

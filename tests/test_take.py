@@ -251,6 +251,27 @@ def test_a_take_seen_on_a_face_has_its_curves_and_its_heads_rotation(arkit_model
     assert read_video(tmp_path / "mean.mp4")[0].shape == (4, 512, 512, 3)
 
 
+def test_a_takes_turned_face_is_framed_at_the_centre(arkit_model, make_arkit_track, tmp_path):
+    """``take_track`` (``puppet take.csv``, ``view``) keeps the box of the mean face, turned
+    as the take's head is, at the frame's centre on every frame, at one scale (before: one
+    translation, the unturned face's, for every frame; the model turns about its origin, off
+    the face, and a turned face was drawn up to several pixels off centre)."""
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.take import take_track
+
+    track, _, ang = make_arkit_track(arkit_model, 20, fps=25.0)
+    assert np.abs(ang).max() > 0.3                  # turns a preview shows
+    take = write_livelink(track, tmp_path / "take.csv")
+    got = take_track(take, arkit_model, arkit_model.weight_mean(0))
+    mean = arkit_model.synthesize(arkit_model.default_weights())
+    assert np.ptp(got.scale) == 0
+    for k in range(got.n_frames):
+        p = got.scale[k] * (mean @ got.rotation[k][:2].T) * (1.0, -1.0) + got.translation[k]
+        np.testing.assert_allclose(0.5 * (p.min(axis=0) + p.max(axis=0)), (255.5, 255.5),
+                                   atol=1e-6)
+    assert np.ptp(got.translation, axis=0).max() > 1.0   # it moves as the head turns
+
+
 def test_a_take_is_placed_by_the_targets_timecode(arkit_clip, arkit_model, make_arkit_track,
                                                   tmp_path, capsys, caplog):
     """A take recorded beside the camera, both clocks synced: the target's first frame is the

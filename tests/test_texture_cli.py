@@ -248,3 +248,43 @@ def test_blend_with_opencv_where_it_cannot_is_said_in_the_options_words(run, tmp
                        f"({tmp_path / 'm.png'}) of one connected region at least 2 pixels from "
                        "the image border, and no --feather; give --method solver or auto"], err
     assert not (tmp_path / "o.png").exists()
+
+
+def test_blend_keeps_a_16_bit_target_s_bits(run, tmp_path, caplog, capsys):
+    """A 16-bit PNG target gives a 16-bit PNG whose values off the mask are the target's, and
+    inside a source offset by a constant the target's again (the solver's, in 16 bits; before:
+    an 8-bit file, said nowhere); an 8-bit source is taken as ``x 257``; a .jpg out says in a
+    warning naming the target that it holds 8 bits; --method opencv is refused."""
+    yy, xx = np.mgrid[:60, :70]
+    t = np.stack([1000 + 300 * xx, 2000 + 400 * yy, 40000 + 0 * xx], -1).astype(np.uint16)
+    m = np.zeros((60, 70), np.uint8)
+    m[15:45, 20:50] = 255
+    assert cv2.imwrite(str(tmp_path / "t.png"), t[..., ::-1])
+    assert cv2.imwrite(str(tmp_path / "s.png"), (t[..., ::-1] + 5000).astype(np.uint16))
+    _write(tmp_path / "m.png", np.dstack([m] * 3))
+    flat = np.full((60, 70, 3), 100, np.uint8)
+    _write(tmp_path / "s8.png", flat)
+    common = ("texture", "blend", "--target", tmp_path / "t.png", "--mask", tmp_path / "m.png")
+    assert run(*common, "--source", tmp_path / "s.png", "--out", tmp_path / "o.png") == 0
+    o = cv2.imread(str(tmp_path / "o.png"), cv2.IMREAD_UNCHANGED)[..., ::-1]
+    assert o.dtype == np.uint16
+    assert np.array_equal(o[m == 0], t[m == 0])
+    assert np.abs(o.astype(int) - t).max() <= 2      # an offset source gives the target back
+    assert run(*common, "--source", tmp_path / "s8.png", "--out", tmp_path / "o8.png") == 0
+    o8 = cv2.imread(str(tmp_path / "o8.png"), cv2.IMREAD_UNCHANGED)[..., ::-1]
+    assert o8.dtype == np.uint16 and np.array_equal(o8[m == 0], t[m == 0])
+    inner = o8[25:35, 30:40].astype(int)             # flat source: the membrane of the border
+    assert inner.min() > 255 and np.ptp(inner[..., 2]) == 0 and inner[0, 0, 2] == 40000
+    caplog.clear()
+    assert run(*common, "--source", tmp_path / "s.png", "--out", tmp_path / "o.jpg") == 0
+    assert cv2.imread(str(tmp_path / "o.jpg"), cv2.IMREAD_UNCHANGED).dtype == np.uint8
+    assert [r.getMessage() for r in caplog.records if r.levelname == "WARNING"] == [
+        f"target {tmp_path / 't.png'} is 16-bit; {tmp_path / 'o.jpg'} holds 8 bits: written in "
+        "8 (give a .png to keep 16)"]
+    capsys.readouterr()
+    assert run(*common, "--source", tmp_path / "s.png", "--method", "opencv",
+               "--out", tmp_path / "cv.png") == 2
+    assert capsys.readouterr().err.strip() == (
+        f"facetransfer texture blend: error: --method opencv takes 8-bit images; the target "
+        f"{tmp_path / 't.png'} is 16-bit: give --method solver or auto (16 bits kept)")
+    assert not (tmp_path / "cv.png").exists()

@@ -101,8 +101,9 @@ def _check_mask(mask, name: str, shape: tuple[int, int]) -> np.ndarray:
     return m
 
 
-def _to_uint8(img: np.ndarray) -> np.ndarray:
-    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+def _to_uint8(img: np.ndarray, dtype=np.uint8) -> np.ndarray:
+    """``img`` rounded and clipped to ``dtype``'s range (uint8, or uint16 for a 16-bit target)."""
+    return np.clip(np.rint(img), 0, np.iinfo(dtype).max).astype(dtype)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -222,8 +223,9 @@ def poisson_blend_multi(target, sources: Sequence[tuple[np.ndarray, np.ndarray]]
 
     Parameters
     ----------
-    target : (H, W, 3) uint8 or float
-        Image to paste into (its values on the region's outline are the Dirichlet boundary).
+    target : (H, W, 3) uint8, uint16 or float
+        Image to paste into (its values on the region's outline are the Dirichlet boundary);
+        the sources on its scale (0-65535 for uint16).
     sources : sequence of (source (H, W, 3), mask (H, W) bool or float in [0, 1][, valid (H, W) bool])
         Source images aligned with the target (pixel (x, y) of a source lands on (x, y)).
         Where masks overlap, later sources share the edge with earlier ones in proportion.
@@ -236,7 +238,7 @@ def poisson_blend_multi(target, sources: Sequence[tuple[np.ndarray, np.ndarray]]
 
     Returns
     -------
-    (H, W, 3) uint8
+    (H, W, 3) uint8, or uint16 for a uint16 target
 
     References
     ----------
@@ -263,15 +265,16 @@ def poisson_blend_multi(target, sources: Sequence[tuple[np.ndarray, np.ndarray]]
         valids.append(valid)
     region = np.any([a > 0 for a in alphas], axis=0)
     out = t.astype(np.float64)
+    depth = np.uint16 if t.dtype == np.uint16 else np.uint8
     if not region.any():
         log.info("poisson_blend_multi: empty masks; returning the target")
-        return _to_uint8(out)
+        return _to_uint8(out, depth)
     ys, xs = _bbox(region)
     f = _solve_poisson(out[ys, xs], [s[ys, xs] for s in srcs], [a[ys, xs] for a in alphas],
                        [None if v is None else v[ys, xs] for v in valids], region[ys, xs], mixed)
     out[ys, xs] = f
-    res = _to_uint8(out)
-    if t.dtype == np.uint8:
+    res = _to_uint8(out, depth)
+    if t.dtype == depth:
         res[~region] = t[~region]  # exact copy outside the region
     return res
 
@@ -295,8 +298,8 @@ def poisson_blend(source, target, mask, *, method: str = "auto", mixed: bool = F
     Parameters
     ----------
     source : (H, W, 3) uint8
-        Source image, aligned with the target (no offset).
-    target : (H, W, 3) uint8
+        Source image, aligned with the target (no offset), on the target's scale.
+    target : (H, W, 3) uint8, or uint16 (16-bit values kept: the solver's)
     mask : (H, W) bool, or float in [0, 1] for a feathered edge
     method : {"auto", "opencv", "solver"}, keyword-only
         ``"opencv"``: ``cv2.seamlessClone`` (one hard-edged connected region, at least two pixels
@@ -308,7 +311,7 @@ def poisson_blend(source, target, mask, *, method: str = "auto", mixed: bool = F
 
     Returns
     -------
-    (H, W, 3) uint8
+    (H, W, 3) uint8 (uint16 for a uint16 target)
         Outside the mask equal to ``target`` exactly (solver); OpenCV may change pixels within a
         few pixels of the mask outline, since it solves over the mask's bounding box.
 
@@ -321,14 +324,15 @@ def poisson_blend(source, target, mask, *, method: str = "auto", mixed: bool = F
     t = _check_image(target, "target")
     s = _check_image(source, "source", t.shape[:2])
     m = _check_mask(mask, "mask", t.shape[:2])
+    deep = t.dtype == np.uint16          # seamlessClone takes 8 bits
     if not (m > 0).any():
-        return _to_uint8(t.astype(np.float64))
-    use_cv = method == "opencv" or (method == "auto" and opencv_serves(m))
+        return _to_uint8(t.astype(np.float64), np.uint16 if deep else np.uint8)
+    use_cv = method == "opencv" or (method == "auto" and opencv_serves(m) and not deep)
     if use_cv:
-        if not opencv_serves(m):
-            raise CompositeError("method='opencv' needs one hard-edged (bool) connected mask "
-                                 "region at least 2 pixels from the image border; use "
-                                 "method='solver'")
+        if deep or not opencv_serves(m):
+            raise CompositeError("method='opencv' needs an 8-bit target and one hard-edged "
+                                 "(bool) connected mask region at least 2 pixels from the "
+                                 "image border; use method='solver'")
         return _seamless_clone(_to_uint8(s.astype(np.float64)), _to_uint8(t.astype(np.float64)),
                                m > 0, mixed)
     return poisson_blend_multi(t, [(s, m)], mixed=mixed)

@@ -419,7 +419,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
                max_frames: int | None = None):
     """A take as a track of its own: ``identity`` (the model's identity weights) performing it
     with the take's head rotation, framed in ``size`` (the model's mean face filling 0.6 of
-    it), at the timecode rate nearest the take's rows (``max_frames``: the first ones).
+    it, its box as turned on each frame at the centre: :func:`_centred`), at the timecode rate nearest the take's rows (``max_frames``: the first ones).
 
     The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``:
     head angles in radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (yaw > 0 turns the face toward
@@ -452,10 +452,11 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     a, ypr = np.clip(rows[:, :52], 0.0, 1.0), rows[:, 52:]
     k = model.mode_index("identity")
     wid = np.asarray(identity, np.float64).ravel()
-    cam = look_at_weak_perspective(model.synthesize(model.default_weights()), size, fill=0.6)
-    track = Track(fps=fps, frame_size=tuple(size),
-                  rotation=Rotation.from_euler("YXZ", ypr).as_matrix(),
-                  scale=np.full(n, cam.scale), translation=np.tile(cam.translation, (n, 1)),
+    mean = model.synthesize(model.default_weights())
+    cam = look_at_weak_perspective(mean, size, fill=0.6)
+    R = Rotation.from_euler("YXZ", ypr).as_matrix()
+    track = Track(fps=fps, frame_size=tuple(size), rotation=R, scale=np.full(n, cam.scale),
+                  translation=_centred(mean, R, cam.scale, size),
                   weights={model.mode_names[k]: np.tile(wid, (n, 1)),
                            "expression": activations_to_weights(model, a)},
                   landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),
@@ -465,3 +466,19 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
                   source_facts=SourceFacts(0, start))   # its clip's start: the take's
     # the take's start timecode, for its preview (read here: the take is not read again)
     return dataclasses.replace(project_landmarks(track, model), info={"start_timecode": start})
+
+
+def _centred(vertices: np.ndarray, rotation: np.ndarray, scale: float, size) -> np.ndarray:
+    """``(F, 2)`` translations that put the box of ``vertices`` turned by each ``rotation``
+    ``(F, 3, 3)`` at the centre of a frame of ``size`` (W, H) at ``scale`` (before: one
+    translation, of the unturned face, for every frame: the model turns about its origin, off
+    the face, and a turned face was drawn off centre). The box's extremes are among the
+    vertices of the convex hull: only those are turned."""
+    from scipy.spatial import ConvexHull
+
+    hull = vertices[ConvexHull(vertices).vertices]
+    turned = np.einsum("fij,vj->fvi", rotation[:, :2], hull)
+    centre = 0.5 * (turned.min(axis=1) + turned.max(axis=1))
+    W, H = size
+    return np.stack([(W - 1) / 2 - scale * centre[:, 0], (H - 1) / 2 + scale * centre[:, 1]],
+                    axis=1)

@@ -37,7 +37,8 @@ def register(sub) -> None:
                    "track was made with it); a track without ARKit activations (one recombined "
                    "in Python) has them made from its expression weights with it")
     p.add_argument("--texture", metavar="TEX.png",
-                   help="base-colour texture in the template's UV layout (glb only)")
+                   help="base-colour texture in the template's UV layout: a square image, "
+                   "as `texture default|lift` writes (glb only)")
     p.add_argument("--texture-from", metavar="VIDEO.mp4",
                    help="lift the texture from the tracked video instead (glb only)")
     p.add_argument("--texture-step", type=int, default=None, metavar="N",
@@ -122,6 +123,10 @@ def run(args: argparse.Namespace) -> int:
     if (args.texture or args.texture_from) and args.format != "glb":
         raise FaceTransferError(f"--texture/--texture-from: only glb files carry a texture, "
                                 f"not {args.format}")
+    if args.texture:                 # before the track is read: a square image, not a video
+        from ..export.gltf import texture_image
+
+        texture_image(args.texture).close()
     if args.timecode not in ("source", "none") and args.format != "livelink":
         raise FaceTransferError(
             f"--timecode {args.timecode}: a timecode of your own is written into livelink "

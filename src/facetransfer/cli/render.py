@@ -153,6 +153,19 @@ def _texture(choice: str, model, seed: int):
     return load_texture_image(choice)
 
 
+#: ``synth-video --performance``'s help: the spec's keys (:mod:`facetransfer.synth`).
+PERFORMANCE_HELP = (
+    "performance spec, a JSON object of the keys n_frames (clip length; default the last "
+    "keyframe + 1, else 100), fps (default 25), size ([W, H], default [640, 480]), identity "
+    "(a label such as id03, a weight list or a blend {label: amount}), tracks ({mode: [[frame, "
+    "value], ...]} for each mode but the identity, a value a label, a blend or a weight list), "
+    "pose (an oscillation {yaw_deg, pitch_deg, roll_deg, translate_px, scale, period_s, fill} "
+    "or keyframes {keys: [[frame, {yaw_deg, pitch_deg, roll_deg, tx, ty, scale}], ...], "
+    "fill}); every key optional; --frames, --fps, --size and --identity replace theirs. "
+    'E.g. {"n_frames": 50, "tracks": {"expression": [[0, "neutral"], [25, {"jawOpen": 1}]]}, '
+    '"pose": {"yaw_deg": 10}}. An unknown key is named with the known ones')
+
+
 def cmd_synth_video(args: argparse.Namespace) -> int:
     import json
 
@@ -236,7 +249,7 @@ def register(sub) -> None:
                        "CLIP.truth.npz.")
     s.add_argument("--model", help=MODEL_ARG_HELP)
     s.add_argument("--identity", help="identity label or comma-separated weights")
-    s.add_argument("--performance", help="performance spec (JSON, see facetransfer.synth)")
+    s.add_argument("--performance", metavar="SPEC.json", help=PERFORMANCE_HELP)
     s.add_argument("--random", action="store_true", help="a seeded random performance")
     s.add_argument("--frames", type=int, default=None,
                    help="number of frames (default 100 for --random; overrides the spec)")

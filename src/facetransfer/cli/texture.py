@@ -33,15 +33,18 @@ def _image_out(path: str, args=None, inputs=()) -> Path:
     return out
 
 
-def _read_image(path: str, what: str, *, gray: bool = False) -> np.ndarray:
-    """An RGB image ``(H, W, 3) uint8`` (or grey ``(H, W)``); one clear error if unreadable."""
+def _read_image(path: str, what: str, *, gray: bool = False, deep: bool = False) -> np.ndarray:
+    """An RGB image ``(H, W, 3) uint8`` (or grey ``(H, W)``); one clear error if unreadable.
+    ``deep``: a 16-bit file's RGB stays ``uint16``."""
     import cv2
 
     from ..io.frame_file import read_image
     from ..io.npz import check_input_file
 
     p = check_input_file(path, what)
-    img = read_image(Path(p), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
+    img = read_image(Path(p), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH) if deep else None
+    if img is None or img.dtype not in (np.uint8, np.uint16):   # e.g. a float TIFF: 8 bits
+        img = read_image(Path(p), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
     if img is None:
         raise FaceTransferError(f"{what} {p} is not an image OpenCV can read")
     return img if gray else cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
@@ -190,8 +193,8 @@ def cmd_blend(args: argparse.Namespace) -> int:
     from ..composite import feather_mask, opencv_serves, poisson_blend
 
     out = _image_out(args.out, args, [args.source, args.target, args.mask])
-    src = _read_image(args.source, "source image")
-    dst = _read_image(args.target, "target image")
+    src = _read_image(args.source, "source image", deep=True)
+    dst = _read_image(args.target, "target image", deep=True)
     if src.shape != dst.shape:
         raise FaceTransferError(f"source {args.source} is {src.shape[1]}x{src.shape[0]}, target "
                                 f"{args.target} is {dst.shape[1]}x{dst.shape[0]}: sizes must match")
@@ -201,14 +204,38 @@ def cmd_blend(args: argparse.Namespace) -> int:
                                 f"{args.feather}")
     m = feather_mask(mask, args.feather) if args.feather > 0 else mask
     method = args.method if args.feather == 0 else ("solver" if args.method == "auto" else args.method)
+    src, dst = _same_depth(src, dst, args.target, out)
+    if method == "opencv" and dst.dtype == np.uint16:
+        raise FaceTransferError(f"--method opencv takes 8-bit images; the target {args.target} "
+                                "is 16-bit: give --method solver or auto (16 bits kept)")
     if method == "opencv" and not opencv_serves(m):   # before: said as the library's keyword
         raise FaceTransferError(f"--method opencv needs a mask ({args.mask}) of one connected "
                                 "region at least 2 pixels from the image border, and no "
                                 "--feather; give --method solver or auto")
     res = poisson_blend(src, dst, m, method=method, mixed=args.mixed)
     write_image(out, res, overwrite=args.overwrite)
-    print(f"wrote {out} ({int(mask.sum())} masked pixels)")
+    bits = ", 16-bit" if res.dtype == np.uint16 else ""
+    print(f"wrote {out} ({int(mask.sum())} masked pixels{bits})")
     return 0
+
+
+def _same_depth(src: np.ndarray, dst: np.ndarray, target: str, out: Path):
+    """``src`` and ``dst`` in the target's bits (a 16-bit target's kept, the source's values
+    ``8-bit x 257``), or in 8 where ``out`` is a JPEG (said in a warning naming the target)."""
+    import logging
+
+    from ..io.frame_file import eight_bits
+
+    if dst.dtype == np.uint16 and out.suffix.lower() != ".png":
+        logging.getLogger(__name__).warning(
+            "target %s is 16-bit; %s holds 8 bits: written in 8 (give a .png to keep 16)",
+            target, out)
+        dst = eight_bits(dst)
+    if dst.dtype == np.uint16 and src.dtype == np.uint8:
+        src = src.astype(np.uint16) * np.uint16(257)
+    elif dst.dtype == np.uint8 and src.dtype == np.uint16:
+        src = eight_bits(src)
+    return src, dst
 
 
 def register(sub) -> None:

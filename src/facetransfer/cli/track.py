@@ -177,15 +177,41 @@ def _check_outputs(args):
         check_track_name(args.out, overlay=True)
         if args.overlay and not args.overwrite and Path(args.out).is_file() and \
                 not Path(args.overlay).exists():   # a run stopped between the two
-            limit = f" --max-frames {args.max_frames}" if args.max_frames else ""
-            raise FaceTransferError(f"output {args.out} exists (an earlier run's track?): "
-                                    f"`--from-track {args.out} --overlay {args.overlay}{limit}` "
-                                    "draws the overlay from it; --overwrite tracks again")
+            _earlier_track(args)
         check_output_path(args.out, overwrite=args.overwrite, inputs=inputs)
         if args.overlay:
             check_not_input(args.overlay, [args.out, partial_path(args.out)])
         check_not_input(partial_path(args.out), inputs)
     return vopt
+
+
+def _earlier_track(args) -> None:
+    """The error for an ``--out`` track that exists where ``--overlay`` does not (a run
+    stopped between the two?): the ``--from-track`` command that draws the overlay from it,
+    with the ``--max-frames`` of the track's own frames (before: this run's, which the track
+    did not have); a track of another clip, or none readable, is only said to exist."""
+    from ..io.video import video_info
+    from ..track.result import Track
+
+    out = args.out
+    try:
+        track = Track.load(out)
+    except (ValueError, OSError):
+        return                                  # check_output_path says that it exists
+    info = video_info(args.video)
+    n = track.n_frames
+    if tuple(track.frame_size) != tuple(info.size) or (info.n_frames and n > info.n_frames):
+        raise FaceTransferError(
+            f"output {out} exists, a track of another clip ({frame_count(n)} of "
+            f"{track.frame_size[0]}x{track.frame_size[1]}; the video is {info.size[0]}x"
+            f"{info.size[1]}): --overwrite replaces it")
+    limit = "" if n == info.n_frames else f" --max-frames {n}"
+    other = f"; for {frame_count(args.max_frames)}, --overwrite tracks again" \
+        if args.max_frames is not None and args.max_frames != n else \
+        "; --overwrite tracks again"
+    raise FaceTransferError(f"output {out} exists (an earlier run's track of "
+                            f"{frame_count(n)}?): `--from-track {out} --overlay "
+                            f"{args.overlay}{limit}` draws the overlay from it{other}")
 
 
 def _check_codec_for_overlay(args) -> None:

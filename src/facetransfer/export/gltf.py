@@ -42,8 +42,8 @@ from ..io.atomic import atomic_path
 from .common import (ExportError, head_quaternions, head_translation, identity_rig,
                      require_activations, source_name)
 
-__all__ = ["METRES_PER_UNIT", "write_glb", "texture_png", "lift_clip_texture",
-           "check_texture_video", "morph_encoding"]
+__all__ = ["METRES_PER_UNIT", "write_glb", "texture_image", "texture_png",
+           "lift_clip_texture", "check_texture_video", "morph_encoding"]
 
 #: Model units to metres (the ICT-FaceKit is in centimetres).
 METRES_PER_UNIT = 0.01
@@ -134,26 +134,60 @@ class _Blob:
         return len(self.gltf.accessors) - 1
 
 
+def _square_texture(size, what: str) -> None:
+    """ExportError unless ``size`` ``(W, H)`` is square: the template's UVs are laid out on a
+    square, as ``facetransfer texture default|lift`` write it (a contact sheet, a frame or a
+    photo is no texture of them)."""
+    if size[0] != size[1]:
+        raise ExportError(f"{what} is {size[0]}x{size[1]}: a texture of the model's UVs is a "
+                          "square image in their layout (as `facetransfer texture default` or "
+                          "`texture lift` writes it, e.g. 512x512)")
+
+
+def texture_image(path):
+    """The PIL image (not yet decoded) of a texture file that can be the template's UV
+    texture: an image (not a video), square (:func:`_square_texture`).
+
+    Raises
+    ------
+    ExportError
+        Naming the file: a video, unreadable, or not square.
+    """
+    from PIL import Image
+
+    from ..io.npz import check_input_file
+    from ..io.video_options import VIDEO_SUFFIXES
+
+    p = Path(path)
+    if p.suffix.lower() in VIDEO_SUFFIXES:
+        raise ExportError(f"texture image {p} is a video: a texture is an image in the "
+                          f"template's UV layout; to lift one from the video, give "
+                          f"--texture-from {p}")
+    check_input_file(p, "texture image", ExportError)
+    try:
+        img = Image.open(p)
+    except (OSError, ValueError) as exc:
+        raise ExportError(f"cannot read texture image {p} ({exc})") from None
+    _square_texture(img.size, f"texture image {p}")
+    return img
+
+
 def texture_png(texture) -> bytes:
-    """PNG bytes of a texture given as an image path or an ``(H, W, 3)`` uint8 RGB array."""
+    """PNG bytes of a texture given as an image path or an ``(H, W, 3)`` uint8 RGB array
+    (square: :func:`texture_image`)."""
     from PIL import Image
 
     if isinstance(texture, (str, os.PathLike)):
-        from ..io.video_options import VIDEO_SUFFIXES
-
-        p = Path(texture)
-        if p.suffix.lower() in VIDEO_SUFFIXES:
-            raise ExportError(f"texture image {p} is a video: a texture is an image in the "
-                              f"template's UV layout; to lift one from the video, give "
-                              f"--texture-from {p}")
+        img = texture_image(texture)
         try:
-            img = Image.open(p).convert("RGB")
-        except (OSError, ValueError) as exc:
-            raise ExportError(f"cannot read texture image {p} ({exc})") from None
+            img = img.convert("RGB")
+        except (OSError, ValueError) as exc:       # its pixels: e.g. a file cut short
+            raise ExportError(f"cannot read texture image {texture} ({exc})") from None
     else:
         a = np.asarray(texture)
         if a.ndim != 3 or a.shape[2] != 3:
             raise ExportError(f"texture must be (H, W, 3), got {a.shape}")
+        _square_texture(a.shape[1::-1], "the texture")
         img = Image.fromarray(np.clip(a, 0, 255).astype(np.uint8), "RGB")
     out = io.BytesIO()
     img.save(out, format="PNG")

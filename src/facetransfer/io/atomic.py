@@ -325,7 +325,8 @@ def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = T
 
 
 def write_image(path: str | os.PathLike, rgb, *, overwrite: bool = True) -> Path:
-    """Write an ``(H, W, 3)`` uint8 RGB image atomically (format by extension, OpenCV).
+    """Write an ``(H, W, 3)`` uint8 RGB image atomically (format by extension, OpenCV); a
+    uint16 one keeps its 16 bits (in a format that holds them: PNG, TIFF).
 
     Raises
     ------
@@ -335,7 +336,8 @@ def write_image(path: str | os.PathLike, rgb, *, overwrite: bool = True) -> Path
     import cv2
     import numpy as np
 
-    img = np.ascontiguousarray(rgb, dtype=np.uint8)
+    deep = getattr(rgb, "dtype", None) == np.uint16
+    img = np.ascontiguousarray(rgb, dtype=np.uint16 if deep else np.uint8)
     with atomic_path(path, overwrite=overwrite) as tmp:
         try:
             ok = cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))

@@ -173,13 +173,19 @@ def read_obj(path: str | os.PathLike) -> Mesh:
 
 
 def _unread_mesh(p: Path, exc: Exception) -> str:
-    """Why the file ``p`` trimesh could not read is no mesh: a track, model or truth archive or
-    a video named as such (it said trimesh's "file_type 'npz' not supported"), else trimesh's
-    first line."""
-    from .npz import content_kind
+    """Why the file ``p`` trimesh could not read is no mesh: a track, model or truth archive, a
+    video, a Live Link Face take, an image ... named as such, or a file of a type trimesh reads
+    no mesh from said with the mesh formats (it said trimesh's "file_type 'csv' not
+    supported"); else trimesh's first line."""
+    import trimesh
 
+    from .npz import NOT_NPZ, content_kind
+
+    kind = content_kind(p)
     what = "an .npz archive (a track, a model, a ground truth)" if p.suffix.lower() == ".npz" \
-        else "a video" if content_kind(p) == "a video" else None
+        else kind if kind not in (None, NOT_NPZ) and "glTF" not in kind else None
+    if what is None and p.suffix.lower().lstrip(".") not in trimesh.available_formats():
+        what = f"a file of type {p.suffix or '(no extension)'}"
     if what is not None:
         return f"mesh file {p} is {what}, not a mesh: give one of {', '.join(MESH_SUFFIXES)}"
     msg = str(exc).splitlines()[0] if str(exc) else exc.__class__.__name__

@@ -180,7 +180,8 @@ def fact_lines(f: VideoFacts) -> list[str]:
     if f.n_frames <= 1 and os.path.splitext(str(f.path))[1].lower() in IMAGE_SUFFIXES + (
             ".ppm", ".webp"):
         return [f"{f.path}: {size}", "  a still image: tracked and transferred as a clip of "
-                "one frame", f"  {colour}; {_image_kind(f) if f.bits > 8 else 'no audio'}"]
+                "one frame", f"  {_still_colour(f)}; "
+                f"{_image_kind(f) if f.bits > 8 else 'no audio'}"]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}" + (
                 "" if f.timecode is None else
@@ -192,6 +193,31 @@ def fact_lines(f: VideoFacts) -> list[str]:
                     "PNG, TIFF or DPX sequence")] if f.bits > 8 else []) + (
                 ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG, "
                  "TIFF or DPX sequence"] if f.alpha else [])
+
+
+#: A still's colour tags as ffmpeg names them, in words (:func:`_still_colour`).
+_STILL_MATRIX = {"bt470bg": "BT.601, as JPEG stores it", "smpte170m": "BT.601",
+                 "bt709": "BT.709"}
+_STILL_WORDS = {"bt709": "Rec.709", "iec61966-2-1": "sRGB", "bt2020": "Rec.2020",
+                "smpte432": "Display P3", "arib-std-b67": "HLG", "smpte2084": "PQ"}
+
+
+def _still_colour(f: VideoFacts) -> str:
+    """A still image's colour in words: how its pixels are stored (RGB, or JPEG's YCbCr), and
+    its primaries and curve, or that it tags neither and is taken as sRGB (before: ffmpeg's
+    ``gbr/?/? (matrix/primaries/transfer)``)."""
+    c = f.colour
+    stored = "RGB" if c.matrix in (None, "gbr") else \
+        f"stored as YCbCr ({_STILL_MATRIX.get(c.matrix, c.matrix)}), read as RGB"
+    if c.primaries is None and c.transfer is None:
+        tags = "primaries and curve not tagged (taken as sRGB)"
+    else:
+        untagged = "not tagged (taken as sRGB's)"
+        tags = "primaries {}, curve {}".format(
+            _STILL_WORDS.get(c.primaries, c.primaries) if c.primaries else untagged,
+            _STILL_WORDS.get(c.transfer, c.transfer) if c.transfer else untagged)
+    hdr = ": HDR or wide gamut, seen as 8-bit SDR" if c.beyond_sdr else ""
+    return f"colour {stored}, {tags}{hdr}"
 
 
 #: How ``probe`` says where an image sequence's rate came from.
