@@ -10,9 +10,9 @@ from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
 from facetransfer.errors import TrackError, VideoError
 from facetransfer.render import rotation_from_euler
 from facetransfer.track.camera import Pose, compose, pose_jacobian, project, so3_exp
-from facetransfer.track.capture import (CORNERS, DETECTOR_PITCH_GAIN, CaptureOptions,
-                                        capture_detections, capture_point_weights,
-                                        restore_pitch)
+from facetransfer.track.capture import (CORNERS, DETECTOR_PITCH_GAIN, INNER_LIPS,
+                                        CaptureOptions, capture_detections,
+                                        capture_point_weights, restore_pitch)
 from facetransfer.track.dense import mediapipe_correspondence
 from facetransfer.track.detect import ClipDetections
 from facetransfer.track.fit2d import (Targets, box_qp, gram_blocks, pose_gauss_newton,
@@ -282,7 +282,7 @@ def test_the_track_divides_the_fitted_pitch_by_the_detectors_gain(arkit_model):
     pitch = lambda R: np.arctan2(-R[:, 1, 2], R[:, 2, 2])
     np.testing.assert_allclose(pitch(on.rotation), pitch(off.rotation) / DETECTOR_PITCH_GAIN,
                                atol=1e-9)
-    w = capture_point_weights()
+    w = capture_point_weights(1.0)                      # restore_pitch's rigid pivot
     np.testing.assert_allclose(np.einsum("p,fpk->fk", w, on.landmarks2d),
                                np.einsum("p,fpk->fk", w, off.landmarks2d), atol=1e-6 * w.sum())
     iod = np.linalg.norm(pts[:, 36] - pts[:, 45], axis=1)
@@ -321,7 +321,7 @@ def test_capture_point_weights_weigh_the_corners_up():
     from facetransfer.track.landmarks import IBUG_WEIGHTS
 
     w = capture_point_weights()
-    rest = np.setdiff1d(np.arange(68), CORNERS)
+    rest = np.setdiff1d(np.arange(68), CORNERS + INNER_LIPS)
     np.testing.assert_array_equal(w[rest], IBUG_WEIGHTS[rest])
     np.testing.assert_allclose(w[list(CORNERS)], 3.0 * IBUG_WEIGHTS[list(CORNERS)])
 

@@ -83,6 +83,18 @@ __all__ = ["CaptureOptions", "capture_video", "capture_detections", "detect_vide
 #: any detector places them most consistently, so they weigh :data:`CORNER_WEIGHT` times more.
 CORNERS = (36, 39, 42, 45, 30, 48, 54)
 CORNER_WEIGHT = 3.0
+#: iBUG points of the inner lips (60-67): the only measurement of the lips' contact, which the
+#: outer-lip and the dense lip points hardly constrain. Weighed like them, combinations of the
+#: lip shapes (rolls, presses, shrugs, pucker, jawOpen) wandered the inner-lip gap of a shut
+#: mouth with the outer contour held, the lips passing through each other
+#: (``benchmarks/bench_shut_mouth.py``, ``driving_d9``'s 527 shut frames: gap std 3.5 times the
+#: reference's, on the fitted face 1.0 mm, down to -0.9 mm), so they weigh
+#: :data:`INNER_LIP_WEIGHT` times more in the detection term (§5.1, Eq. (9)): 2.3 times, 0.7
+#: mm, -0.6 mm (``bench_capture.py``: the real clips' mouth std ratio 0.82 -> 0.86, jawOpen's
+#: 1.29 -> 1.21, the synthetic 7-point NME within ±0.03 points; 10 cost the synthetic jawOpen
+#: a tenth of its amplitude).
+INNER_LIPS = tuple(range(60, 68))
+INNER_LIP_WEIGHT = 3.0
 
 
 #: Face Landmarker's head pitch over the true one, as the capture fit reads it
@@ -97,13 +109,15 @@ DETECTOR_PITCH_GAIN = 0.92
 UNSEEN_CONFIDENCE = 0.5
 
 
-def capture_point_weights() -> np.ndarray:
+def capture_point_weights(inner_lips: float | None = None) -> np.ndarray:
     """The default reliability of the 68 iBUG points in the capture fit, (68,): the
     :data:`~facetransfer.track.landmarks.IBUG_WEIGHTS` with :data:`CORNERS` weighted up
     (``bench_capture.py``: 7-point NME 0 to -0.25 points on the synthetic clips, the real
-    clips' correlations unchanged)."""
+    clips' correlations unchanged) and :data:`INNER_LIPS` by ``inner_lips`` (default
+    :data:`INNER_LIP_WEIGHT`; 1: the rigid pivot of :func:`restore_pitch`, as calibrated)."""
     w = np.array(IBUG_WEIGHTS, float)
     w[list(CORNERS)] *= CORNER_WEIGHT
+    w[list(INNER_LIPS)] *= INNER_LIP_WEIGHT if inner_lips is None else float(inner_lips)
     return w
 
 
@@ -669,7 +683,7 @@ def _assemble(model, shape: Shape, states: list, fps, size, src, opt) -> Track:
     Xl = model.synthesize(w, vertices=model.landmarks) + shape.offset[:68]  # (F, 68, 3)
     if shape.view is not None:                          # the offset at each frame's yaw
         Xl = Xl + np.clip(R[:, 0, 2], -1.0, 1.0)[:, None, None] * shape.view[:68]
-    R, t = restore_pitch(R, s, t, Xl, capture_point_weights(), opt.pitch_gain)
+    R, t = restore_pitch(R, s, t, Xl, capture_point_weights(1.0), opt.pitch_gain)
     Y = np.einsum("fij,fnj->fni", R[:, :2], Xl) * s[:, None, None]
     Y[..., 1] *= -1
     L = Y + t[:, None, :]

@@ -29,7 +29,7 @@ import numpy as np
 __all__ = ["FIT_VERSION", "fit_key", "SavedFit", "pack_fit", "unpack_fit"]
 
 #: bumped when the saved fit changes layout or meaning (older fits are then ignored)
-FIT_VERSION = 2  # 2: the second pass (score lines)
+FIT_VERSION = 3  # 2: the second pass (score lines); 3: the inner lips weighed up (INNER_LIPS)
 #: prefix of the fit's entries in the progress file
 PREFIX = "fit_"
 
