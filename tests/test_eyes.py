@@ -593,6 +593,44 @@ def test_usual_weights_of_a_frame_whose_mesh_leaves_the_image(setup):
     np.testing.assert_array_equal(w, 1.0)
 
 
+def test_vertex_colours_see_each_frame_through_its_own_camera(setup):
+    """The colours under the vertices (``region_weights._vertex_colours``) read each frame at
+    the pixels its camera gives: the few products for all the frames are
+    ``track.camera(r).project`` of each, bit for bit (turned, scaled, moved heads, pixels not
+    square, a frame asked twice); the colours are those under the pixels; a camera that is no
+    proper rotation is refused as the camera refuses it."""
+    from scipy.spatial.transform import Rotation
+
+    from facetransfer.errors import ShapeError
+
+    model, topo, closed, fill = setup
+    F, rng = 6, np.random.default_rng(5)
+    R = Rotation.from_euler("xyz", rng.uniform(-20, 20, (F, 3)), degrees=True).as_matrix()
+    track = _track(model, _acts(F, 0.3))
+    track = dataclasses.replace(track, rotation=R, scale=rng.uniform(15, 21, F),
+                                pixel_aspect=0.9,
+                                translation=track.translation + rng.uniform(-8, 8, (F, 2)))
+    verts = region_weights.model_vertices(model, closed, np.ones(len(closed.faces), bool))
+    rows = np.array([5, 0, 3, 3])
+    V = model.synthesize({m: track.weights[m][rows] for m in track.mode_names},
+                         vertices=verts).reshape(len(rows), verts.size, 3)
+    P = region_weights._pixels_of(track, V, rows)
+    assert P.dtype == np.float32 and P.shape == (4, verts.size, 2)
+    for k, r in enumerate(rows):
+        np.testing.assert_array_equal(P[k], track.camera(r).project(V[k]).astype(np.float32))
+    ramp = np.zeros((SIZE, SIZE, 3), np.uint8)            # red = x, green = y
+    ramp[..., 0], ramp[..., 1] = np.arange(SIZE)[None, :], np.arange(SIZE)[:, None]
+    c = region_weights._vertex_colours([ramp] * F, track, model, verts, rows)
+    inside = ((P > 1) & (P < SIZE - 2)).all(axis=2)
+    assert inside.sum() > 1000
+    np.testing.assert_allclose(np.exp(c[..., 0][inside]) - 8, P[..., 0][inside], atol=0.05)
+    np.testing.assert_allclose(np.exp(c[..., 1][inside]) - 8, P[..., 1][inside], atol=0.05)
+    bad = R.copy()
+    bad[3] *= 1.1
+    with pytest.raises(ShapeError, match="proper rotation"):
+        region_weights._pixels_of(dataclasses.replace(track, rotation=bad), V, rows)
+
+
 def test_paint_eyes_alone_is_what_the_rewrite_paints(setup):
     """The public :func:`facetransfer.eyes.paint_eyes` (one region on its own, its own shading
     pass) gives the pixels the rewrite's one-pass shading gives (``rewrite._shade_frame``

@@ -14,6 +14,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer import frame_meshes
+from facetransfer import lip_colour  # noqa: E402
 from facetransfer import rewrite as rw  # noqa: E402
 from facetransfer import rewrite_clip as rc  # noqa: E402
 from facetransfer.texture import face as ftex  # noqa: E402
@@ -161,6 +162,62 @@ def test_fast_detects_both_clips_every_other_frame_and_makes_the_regions_ahead(
     plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
                             parallel=False)
     assert calls == [("target", 2, False), ("source", 2, True)] and plan.regions is None
+
+
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
+                    reason="needs fork")
+def test_the_regions_made_on_their_thread_beside_the_source_basis_and_their_error(
+        clips, quick_model, monkeypatch):
+    """While the forked source is awaited the target's regions are made on a thread of their
+    own and here the source's clip basis, for the render's meshes of it (the same identity
+    rows the render's :class:`~facetransfer.frame_meshes.FrameMeshes` contracts), and a first
+    CIELAB conversion (OpenCV's tables, for the lip colour); an error of the regions' thread
+    reaches the caller."""
+    fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
+    monkeypatch.setattr(obtain, "obtain_track", fake)
+    seen, threads = [], []
+    basis = type(quick_model).clip_basis
+
+    def recorded(model, weights):
+        seen.append({m: np.array(w) for m, w in weights.items()})
+        return basis(model, weights)
+
+    made = tp._region_textures
+
+    def on_thread(*args):
+        import threading
+
+        threads.append(threading.current_thread().name)
+        return made(*args)
+
+    lab = lip_colour.rgb_to_lab
+
+    def converted(rgb):
+        import threading
+
+        threads.append(("lab", threading.current_thread().name))
+        return lab(rgb)
+
+    monkeypatch.setattr(type(quick_model), "clip_basis", recorded)
+    monkeypatch.setattr(tp, "_region_textures", on_thread)
+    monkeypatch.setattr(lip_colour, "rgb_to_lab", converted)
+    plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+                            parallel=True)
+    assert quick_model.landmarks is not None         # the lip colour's tables made here too
+    assert sorted(threads, key=str) == [("lab", "MainThread"), "regions-ahead"]
+    assert plan.regions.target_track is plan.target_track
+    mouth = plan.mouth_track.weights["identity"][:plan.n_frames]
+    assert plan.mouth_frames is not plan.target_frames and len(seen) == 1
+    np.testing.assert_array_equal(seen[0]["identity"], frame_meshes.constant_if_nearly(mouth))
+    assert not np.array_equal(seen[0]["identity"][0], plan.target_track.weights["identity"][0])
+
+    def broken(*args):
+        raise RuntimeError("the regions failed")
+
+    monkeypatch.setattr(tp, "_region_textures", broken)
+    with pytest.raises(RuntimeError, match="the regions failed"):
+        tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+                         parallel=True)
 
 
 def test_cli_speed_option(clips, quick_model_path, tmp_path, capsys):

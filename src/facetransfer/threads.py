@@ -1,4 +1,5 @@
-"""One BLAS thread while the project's own threads or processes share the cores.
+"""One BLAS thread while the project's own threads or processes share the cores; work done
+ahead on a thread of its own (:class:`Ahead`).
 
 The render (:func:`facetransfer.rewrite_clip.rewrite_frames`) runs its frames on threads of its
 own beside the encoder, and a transfer tracks its two clips in two processes; OpenBLAS's
@@ -17,7 +18,7 @@ from __future__ import annotations
 import contextlib
 import threading
 
-__all__ = ["one_blas_thread"]
+__all__ = ["one_blas_thread", "Ahead"]
 
 _lock = threading.Lock()
 _holders = 0
@@ -42,3 +43,35 @@ def one_blas_thread():
             if _holders == 0 and _limiter is not None:
                 _limiter.restore_original_limits()
                 _limiter = None
+
+
+class Ahead:
+    """``fn(*args)`` computed from now on, on a daemon thread of its own, while the caller goes
+    on; :meth:`result` waits for it and gives its value or raises its error.
+
+    A thread per call, not a pool: a forked child inherits no pool's workers, and an
+    interrupted caller does not wait for the work at exit (the thread is a daemon).
+    """
+
+    def __init__(self, fn, *args, name: str = "ahead") -> None:
+        self._value, self._error = None, None
+        self._thread = threading.Thread(target=self._run, args=(fn, args), name=name,
+                                        daemon=True)
+        self._thread.start()
+
+    def _run(self, fn, args) -> None:
+        try:
+            self._value = fn(*args)
+        except BaseException as exc:  # noqa: BLE001 - raised again by result()
+            self._error = exc
+
+    def done(self) -> bool:
+        """Whether the work has ended (its value or its error is there)."""
+        return not self._thread.is_alive()
+
+    def result(self):
+        """The value of ``fn(*args)`` once it is computed (its error raised here)."""
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+        return self._value

@@ -31,7 +31,8 @@ from typing import Callable
 import numpy as np
 
 from .errors import RewriteError, VideoError
-from .texture.face import MouthFunction, mouth_texture_function, timeline_mouth_function
+from .texture.face import (MouthFunction, mouth_texture_function, resolve_mouth_mode,
+                            timeline_mouth_function)
 from .rewrite_options import DEFAULT_SPEED, RewriteOptions
 from .topology import MeshTopology
 from .track import obtain
@@ -294,27 +295,39 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
         if early is not None:
             early.cancel()
         raise
-    inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings, regions)
+    inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings)
     for kind in ("expression", "viseme", "pose", "identity"):
         src = getattr(sources, kind)
         if src is not None:
             planner.read_source(inputs, kind, src, pre_read if kind == "expression" else None,
                                 early if kind == "expression" else None)
-    if sources.performance is not None:
-        return _performance_plan(inputs, sources, model)
-    return _recombined_plan(inputs, sources, model, align)
+    plan = _performance_plan(inputs, sources, model) if sources.performance is not None \
+        else _recombined_plan(inputs, sources, model, align)
+    if regions is None:
+        return plan
+    _render_ahead(plan, model, options)            # while the regions are made
+    return dataclasses.replace(plan, regions=regions.result())
 
 
 def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings: dict):
     """The target's eye and jaw region textures for the render with ``options``
-    (:func:`facetransfer.region_views.region_textures`), made here while the expression
-    source is tracked in the forked process, which finishes later (this one would wait for
-    it, a core idle; issue 13's 10 s). None for a target cut into shots (each its own)."""
-    from .region_views import region_textures
-    from .threads import one_blas_thread
+    (:func:`facetransfer.region_views.region_textures`), made on a thread of their own
+    (:class:`facetransfer.threads.Ahead`) while this one waits for the expression source's
+    track from the forked process and recombines (a core idle otherwise; issue 13's 10 s).
+    None for a target cut into shots (each its own)."""
+    from .threads import Ahead
 
     if len(target_track.shot_starts):
         return None
+    return Ahead(_region_textures, frames, target_track, model, options, timings,
+                 name="regions-ahead")
+
+
+def _region_textures(frames, target_track, model, options: RewriteOptions, timings: dict):
+    """:func:`_regions_ahead`'s work, timed into ``timings["regions"]``."""
+    from .region_views import region_textures
+    from .threads import one_blas_thread
+
     t = time.perf_counter()
     # one BLAS thread (as the CLI's commands have from their start, cli.main.SERIAL_POOLS):
     # the other core is the forked process's (0.56 CPU-s instead of 0.9 in the same time;
@@ -324,6 +337,29 @@ def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings
                                   per_frame=options.texture != "constant")
     timings["regions"] = time.perf_counter() - t
     return regions
+
+
+def _render_ahead(plan: "TransferPlan", model, options: RewriteOptions) -> None:
+    """What the render's set-up would do first on the parent's path, done here while the
+    region textures are made on their thread (:func:`_regions_ahead`), where it leaves the
+    interpreter's lock to them: the model's core contracted with the mouth source's identity
+    for the render's meshes of it (:class:`facetransfer.frame_meshes.FrameMeshes`; kept by the
+    model, 0.1 s for the default model), and OpenCV's tables of the CIELAB conversion that the
+    lip colour reads with (:func:`facetransfer.lip_colour.rgb_to_lab`; made on a process's
+    first conversion, 0.05-0.09 s). Neither changes a value the render computes."""
+    from .frame_meshes import FrameMeshes
+
+    try:
+        mouth = resolve_mouth_mode(options.mouth, model, performance=plan.performance)
+    except RewriteError:                    # the render's to say, as before
+        return
+    if mouth != "frame" or plan.mouth_frames is plan.target_frames:
+        return
+    FrameMeshes(model, {"source": plan.mouth_track}, plan.n_frames).basis("source")
+    if options.lip_colour == "target" and model.landmarks is not None:
+        from .lip_colour import rgb_to_lab
+
+        rgb_to_lab(np.zeros((1, 3)))
 
 
 def _take_as_performance(sources: TransferSources, align, model) -> TransferSources:
@@ -370,7 +406,6 @@ class _Inputs:
     tracks: dict
     source_frames: dict
     timings: dict
-    regions: object = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -579,5 +614,4 @@ def _recombined_plan(inputs: _Inputs, sources: TransferSources, model, align) ->
         tex_frames, tex_track = mouth_frames, ms
     return TransferPlan(frames, fps, tt, new, mouth_frames, mouth_track,
                         np.asarray(mouth_index, np.int64), tracks, inputs.timings,
-                        texture_frames=tex_frames, texture_track=tex_track,
-                        regions=inputs.regions)
+                        texture_frames=tex_frames, texture_track=tex_track)
