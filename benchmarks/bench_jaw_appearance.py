@@ -15,7 +15,10 @@ rendered with the rule off (``geometry``) and on (``appearance``). MediaPipe Fac
 finds the result's lower lip in each frame; the **band** is its outer contour (corner to
 corner) moved down by :data:`BAND` of the outer eye corners' distance: the chin just under the
 new lip. Its median CIELAB colour is compared (CIE76 ΔE) with the target's skin in the same
-band of the jaw region's reference frame (MediaPipe on that target frame).
+band of the jaw region's reference frame (MediaPipe on that target frame); so is the
+:data:`TAIL`-th percentile of the band's pixels' ΔE (a stripe over a tenth of the band, which
+the median does not see: the target's lower lip pressed out dark red under the new lip's
+corner, frame 79, which the paste's rejection gave back).
 
 Usage::
 
@@ -47,6 +50,8 @@ LOWER_OUTER = (61, 146, 91, 181, 84, 17, 314, 405, 321, 375, 291)
 #: below the contour.
 BAND = (0.03, 0.12)
 SHEET = (0, 40, 79, 100, 119)
+#: The percentile of the band's pixels' ΔE reported beside its median's (:func:`tail_de`).
+TAIL = 95
 VARIANTS = ("geometry", "appearance")
 
 
@@ -63,22 +68,33 @@ def band_mask(xy: np.ndarray, shape) -> np.ndarray:
     return m > 0
 
 
-def band_lab(frames, fps: float) -> tuple[np.ndarray, np.ndarray]:
-    """Per frame the band's median CIELAB (F, 3) (NaN where no face or under 20 pixels) and
-    the mouth-and-chin crop box (F, 4) ``x0, y0, x1, y1``."""
+def band_lab(frames, fps: float) -> tuple[np.ndarray, np.ndarray, list]:
+    """Per frame the band's median CIELAB (F, 3) (NaN where no face or under 20 pixels), the
+    mouth-and-chin crop box (F, 4) ``x0, y0, x1, y1`` and the band's pixels' CIELAB (a list
+    of (n_i, 3), empty where no median)."""
     from _mp_points import faces_in_pixels, frame_lab
 
     lab = np.full((len(frames), 3), np.nan)
     boxes = np.zeros((len(frames), 4), np.int64)
+    pixels = [np.zeros((0, 3))] * len(frames)
     for i, f, xy in faces_in_pixels(frames, fps):
         m = band_mask(xy, f.shape[:2])
         if m.sum() >= 20:
-            lab[i] = np.median(frame_lab(f)[m], axis=0)
+            pixels[i] = frame_lab(f)[m]
+            lab[i] = np.median(pixels[i], axis=0)
         eye = float(np.linalg.norm(xy[33] - xy[263]))
         cx, cy = xy[[61, 291, 17]].mean(0)
         boxes[i] = (int(cx - 0.8 * eye), int(cy - 0.5 * eye), int(cx + 0.8 * eye),
                     int(cy + 0.7 * eye))
-    return lab, boxes
+    return lab, boxes, pixels
+
+
+def tail_de(pixels: list, skin: np.ndarray, q: float = TAIL) -> np.ndarray:
+    """Per frame the ``q``-th percentile (F,) of the band's pixels' CIE76 ΔE from ``skin`` (3,)
+    (NaN where the band has none): a stripe over a tenth of the band, which its median does
+    not see."""
+    return np.array([np.percentile(np.linalg.norm(p - skin, axis=1), q) if len(p) else np.nan
+                     for p in pixels])
 
 
 def render(plan, model, variant: str) -> list:
@@ -127,12 +143,17 @@ def run(out: Path, data: Path, n: int) -> tuple[dict, dict]:
     labs = {k: band_lab(p, plan.fps) for k, p in panels.items()}
     skin = labs["target"][0][ref]
     de = {k: np.linalg.norm(labs[k][0] - skin, axis=1) for k in panels}
+    tail = {k: tail_de(labs[k][2], skin) for k in panels}
     res = {"pair": "open", "source": src, "target": tgt, "frames": n, "reference": ref,
            "reference_lab": skin.round(2).tolist(),
            "de_band": {k: _stats(v) for k, v in de.items()},
            "de_band_frames": {k: np.round(v, 2).tolist() for k, v in de.items()},
            "de_band_sheet": {k: {int(i): float(round(v[i], 2)) for i in SHEET if i < n}
-                             for k, v in de.items()}}
+                             for k, v in de.items()},
+           f"de_band_p{TAIL}": {k: _stats(v) for k, v in tail.items()},
+           f"de_band_p{TAIL}_frames": {k: np.round(v, 2).tolist() for k, v in tail.items()},
+           f"de_band_p{TAIL}_sheet": {k: {int(i): float(round(v[i], 2)) for i in SHEET
+                                          if i < n} for k, v in tail.items()}}
     return res, {"panels": panels, "boxes": labs["target"][1]}
 
 
@@ -184,6 +205,10 @@ def main() -> int:
     print("; ".join(f"{k}: ΔE median {v['median']:.2f}, p90 {v['p90']:.2f}, max {v['max']:.2f}"
                     for k, v in res["de_band"].items()))
     print("sheet frames:", res["de_band_sheet"])
+    print(f"band pixels' p{TAIL} ΔE: " + "; ".join(
+        f"{k}: median {v['median']:.2f}, p90 {v['p90']:.2f}, max {v['max']:.2f}"
+        for k, v in res[f"de_band_p{TAIL}"].items()))
+    print("sheet frames:", res[f"de_band_p{TAIL}_sheet"])
     return 0
 
 

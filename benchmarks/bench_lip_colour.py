@@ -16,6 +16,9 @@ frame scaled to 0..1, L 0..100) is compared frame by frame:
 - ``de_source``: between the result's lips and the source's;
 - the floor: the target's lips in a frame against their median over the clip (the target's own
   variation: expression, light, the detector's contour);
+- ``pressed``: in the frames where the source's lips are pressed shut (:data:`PRESSED_GAP`),
+  ``de_target`` and ``de_ab`` (the a*, b* distance alone: a lipstick's red left, not the
+  lips' shading), and ``de_ab_other`` in the other frames;
 - ``counts``: cyan pixels (G and B both over R by more than 20 levels) on the lips and around
   them (the outer contour grown by :data:`AROUND` pixels, the opening left out), and whitish
   ones around them (chroma < 12, L > 55): what a tint too strong for a lipstick made.
@@ -63,6 +66,10 @@ LOWER = (61, 146, 91, 181, 84, 17, 314, 405, 321, 375, 291, 308, 324, 318, 402, 
 #: by this many pixels (a square), the mouth's opening left out.
 AROUND = 13
 PARTS = ("lips", "upper", "lower")
+#: The source's lips are pressed shut where MediaPipe's inner-lip gap (points 13-14) is under
+#: this fraction of its outer eye corners' distance (33-263): ``WDA_KatieHill_000``'s pressed
+#: lips read 0.005-0.01 (BENCHMARKS.md, "the lips the model cannot fit").
+PRESSED_GAP = 0.012
 
 
 def _fill(shape, xy: np.ndarray, idx) -> np.ndarray:
@@ -103,13 +110,15 @@ def lip_lab(frames, fps: float) -> dict:
     """The lips judged in each frame: ``lips``, ``upper``, ``lower`` (F, 3), the median CIELAB
     colour of each part (NaN where MediaPipe finds no face or fewer than 20 pixels of it);
     ``boxes`` (F, 4) the lips' box ``x0, y0, x1, y1``; ``counts`` (F, 3) of
-    :func:`cyan_whitish`."""
+    :func:`cyan_whitish`; ``gap`` (F,) the inner-lip gap over the eye corners' distance (NaN
+    without a face)."""
     from _mp_points import faces_in_pixels, frame_lab
 
     n = len(frames)
     res = {k: np.full((n, 3), np.nan) for k in PARTS}
     res["boxes"] = np.zeros((n, 4), np.int64)
     res["counts"] = np.zeros((n, 3), np.int64)
+    res["gap"] = np.full(n, np.nan)
     for i, f, xy in faces_in_pixels(frames, fps):
         m = lip_masks(xy, f.shape[:2])
         L = frame_lab(f)
@@ -117,6 +126,7 @@ def lip_lab(frames, fps: float) -> dict:
             if m[k].sum() >= 20:
                 res[k][i] = np.median(L[m[k]], axis=0)
         res["counts"][i] = cyan_whitish(f, L, m)
+        res["gap"][i] = np.linalg.norm(xy[13] - xy[14]) / np.linalg.norm(xy[33] - xy[263])
         o = xy[list(OUTER)]
         res["boxes"][i] = (*np.floor(o.min(0)).astype(int), *np.ceil(o.max(0)).astype(int))
     return res
@@ -163,9 +173,17 @@ def run_pair(name: str, model, out: Path, data: Path, frames: int, modes=MODES
            "source_vs_target": _stats(delta_e(S, T)),
            "lab": {k: np.nanmedian(v["lips"], axis=0).round(2).tolist() for k, v in lab.items()},
            "target_counts": lab["target"]["counts"].sum(0).tolist()}
+    gap = lab["source"]["gap"]
+    pressed, other = gap < PRESSED_GAP, gap >= PRESSED_GAP
+    res["pressed_frames"] = np.flatnonzero(pressed).tolist()
     for mode in modes:
         R = lab[f"result_{mode}"]
+        de_ab = delta_e(R["lips"][:, 1:], T[:, 1:])
         res[f"lip_colour_{mode}"] = {
+            "pressed": {"de_target": _stats(delta_e(R["lips"], T)[pressed]),
+                        "de_ab": _stats(de_ab[pressed]), "de_ab_other": _stats(de_ab[other]),
+                        "lab": np.nanmedian(R["lips"][pressed], axis=0).round(2).tolist()
+                        if pressed.any() else None},
             "de_target": _stats(delta_e(R["lips"], T)), "de_source": _stats(delta_e(R["lips"], S)),
             **{f"de_target_{k}": _stats(delta_e(R[k], lab["target"][k]))
                for k in ("upper", "lower")},
@@ -248,10 +266,13 @@ def _line(name: str, r: dict) -> str:
         if f"lip_colour_{m}" in r:
             q = r[f"lip_colour_{m}"]
             c = q["counts"]
+            p = q["pressed"]
             parts.append(f"--lip-colour {m}: ~target {med(q['de_target'])}, upper "
                          f"{med(q['de_target_upper'])}, lower {med(q['de_target_lower'])}, "
                          f"~source {q['de_source']['median']:.2f}; cyan {c['cyan_lips']} / "
-                         f"{c['cyan_around']}, whitish {c['whitish_around']}")
+                         f"{c['cyan_around']}, whitish {c['whitish_around']}; pressed "
+                         f"({p['de_ab']['frames']} frames) ~target {med(p['de_target'])}, "
+                         f"a*b* {med(p['de_ab'])} (other frames {med(p['de_ab_other'])})")
     return "; ".join(parts)
 
 

@@ -92,10 +92,32 @@ def test_the_hue_field_carries_the_hue_and_leaves_the_brightness():
         assert g.shape == (H, W, 3) and g.dtype == np.float32
         inner = (slice(12, H - 12), slice(45, W - 12))
         np.testing.assert_allclose(g[inner], _hue()[inner], atol=0.015)
-        # of product 1: the brightness is left to the gain
-        np.testing.assert_allclose(np.log(g).sum(axis=2), 0, atol=1e-4)
+        # of product 1: the brightness is left to the gain (to the second order of the step
+        # between neighbouring blocks, which the field's linear interpolation averages: the
+        # held blocks under the hair take the region's hue, 5 % from the field's beside them)
+        np.testing.assert_allclose(np.log(g).sum(axis=2), 0, atol=5e-4)
     # nothing to compare: no field
     assert patch._hue_field(part, face, np.zeros((H, W), bool), 10.0) is None
+
+
+def test_a_wide_hole_of_the_compared_pixels_takes_the_regions_hue():
+    """A hole of the compared pixels wider than the field's reach (where the jaw's appearance
+    rule took the reference frame: a tongue, a lip pressed out) takes the hue of all the
+    compared blocks, here the face's warm tint (R over G 1.08), not the part's own (1: before,
+    the field was held at 1 there, and the reference frame's skin pasted where a tongue was
+    kept its hue in a warmer frame)."""
+    part = _skin()
+    tint = np.array([1.08, 1.0, 0.92], np.float32)
+    face = np.clip(np.rint(part * tint * 0.8), 0, 255).astype(np.uint8)
+    valid = np.ones((H, W), bool)
+    valid[10:90, 40:120] = False                          # 80 px: beyond ~1.6 sigma inside
+    g = patch._hue_field(part, face, valid, 10.0)
+    want = tint / np.exp(np.log(tint).mean())
+    np.testing.assert_allclose(g[45:55, 75:85].reshape(-1, 3), np.tile(want, (100, 1)),
+                               atol=0.01)
+    np.testing.assert_allclose(g[valid].reshape(-1, 3).mean(0), want, atol=0.01)
+    part[20, 20, 0] = np.nan                  # a NaN compared: the hole is held at 1
+    np.testing.assert_array_equal(patch._hue_field(part, face, valid, 10.0)[50, 80], 1.0)
 
 
 def _shading_field_numpy(part, face, valid, sigma=patch.SHADING_SIGMA):
@@ -140,7 +162,11 @@ def _hue_field_numpy(part, face, valid, sigma):
     lg = cv2.subtract(cv2.log(cv2.max(num, 1e-6)), cv2.log(cv2.max(den, 1e-6)))
     mean = cv2.transform(lg, patch._THIRDS)
     g = cv2.exp(cv2.subtract(lg, cv2.merge([mean, mean, mean])))
-    np.copyto(g, 1.0, where=(wt <= 0.05)[..., None])
+    # held: the hue of all compared blocks (the ratio of their sums, of product 1)
+    ratio = np.log((f1 * m[..., None]).sum(axis=(0, 1), dtype=np.float64)) - \
+        np.log((p1 * m[..., None]).sum(axis=(0, 1), dtype=np.float64))
+    held = np.exp(ratio - ratio.mean()).astype(np.float32)
+    np.copyto(g, held, where=(wt <= 0.05)[..., None])
     np.clip(g, *patch.HUE_RANGE, out=g)
     return cv2.resize(g, (valid.shape[1], valid.shape[0]), interpolation=cv2.INTER_LINEAR)
 

@@ -381,11 +381,14 @@ def test_match_outline_at_the_edges_equals_before(before):
     assert changed > 10000
 
 
-def test_the_fields_with_nan_and_zero_parts_equal_before(before):
+def test_the_fields_with_nan_and_zero_parts_equal_before(before, monkeypatch):
     """:func:`facetransfer.patch._shading_field` and :func:`facetransfer.patch._hue_field`
     on boxes of 1 to 39 px a side, a NaN in the part, an all-black part, no compared pixel:
-    the same field (NaN where NaN, or None) as before."""
+    the same field (NaN where NaN, or None) as before. (The hue field's thin neighbourhoods
+    now take the region's hue, :func:`facetransfer.patch._region_hue`, where they were held
+    at 1: held at 1 here, that is tested in ``test_patch_shading.py``.)"""
     old = before("patch")
+    monkeypatch.setattr(patch, "_region_hue", lambda f1, p1, m: np.ones(3, np.float32))
     rng = np.random.default_rng(17)
     fields = 0
     for trial in range(30):

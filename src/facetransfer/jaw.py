@@ -40,8 +40,10 @@ sequence)", applied to the jaw only):
 5. and, near the mouth, where the current frame's colour departs from the reference frame's
    in a way lighting does not explain (:data:`JAW_LOOK`, :mod:`facetransfer.jaw_look`): a
    tongue, the teeth, the mouth's gap, which the model does not explain and the tracked
-   geometry does not move for. Those pixels do not set the region's hue either
-   (:func:`paint_jaw`): the hue match spread a tongue's red over the new chin.
+   geometry does not move for. Those pixels neither set the region's hue (:func:`paint_jaw`:
+   the hue match spread a tongue's red over the new chin) nor fade back to the current frame
+   where it is most unlike the reference frame (the paste's rejection gave the darkest red
+   back: a stripe under the new lip's corner).
 """
 
 from __future__ import annotations
@@ -90,8 +92,8 @@ JAW_HUE_SIGMA = 10.0
 #: frame where the target's mouth shows what the model does not explain; None: the
 #: geometric rule only.
 JAW_LOOK: tuple[float, float] | None = LOOK_RAMP
-#: A pixel whose appearance strength (interpolated) exceeds this does not set the region's hue
-#: (:func:`paint_jaw`).
+#: A pixel whose appearance strength (interpolated) exceeds this neither sets the region's hue
+#: nor is rejected by the paste (:func:`paint_jaw`, :func:`_look_far`).
 LOOK_HUE = 0.5
 #: Pixels by which those pixels grow (two blocks of the hue field's grid,
 #: :data:`facetransfer.patch.SHADING_STEP`: a block's mean counts all its pixels).
@@ -370,24 +372,32 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
             compare = None
     opacity = 1.0 if texture.alpha is None else \
         interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
-    hue_where = None
-    if texture.look_alpha is not None and JAW_HUE_SIGMA > 0:
-        look = interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl)
-        hue_where = _hue_far(look)
+    far = None
+    if texture.look_alpha is not None:
+        far = _look_far(interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl))
     _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
-                        compare=compare, reject=REJECT, reject_where=None,
-                        origin=(sl[1].start, sl[0].start), opacity=opacity,
-                        grey_where=True, hue=JAW_HUE_SIGMA, hue_where=hue_where)
+                        compare=compare, reject=REJECT, reject_where=far,
+                        origin=(sl[1].start, sl[0].start), opacity=opacity, grey_where=True,
+                        hue=JAW_HUE_SIGMA, hue_where=far if JAW_HUE_SIGMA > 0 else None)
     return face_image
 
 
-def _hue_far(look: np.ndarray) -> np.ndarray:
-    """``(h, w) bool``: the pixels the paste's hue match may compare, those whose appearance
-    strength ``look`` (h, w) float32 is at most :data:`LOOK_HUE`, away from the others by
-    more than :data:`LOOK_GROW` pixels (two of the hue field's blocks: a block partly of the
-    tongue still carries its red): a tongue's or the lips' red where the reference frame
-    shows skin does not tint the pasted skin. The match itself comes after the paste's gain,
-    at the frame's exposure."""
+def _look_far(look: np.ndarray) -> np.ndarray:
+    """``(h, w) bool``: the pixels away from where the appearance rule took the reference
+    frame, those whose appearance strength ``look`` (h, w) float32 is at most
+    :data:`LOOK_HUE`, away from the others by more than :data:`LOOK_GROW` pixels (two of the
+    hue field's blocks: a block partly of the tongue still carries its red). Only these
+
+    - set the paste's hue match: a tongue's or the lips' red where the reference frame shows
+      skin does not tint the pasted skin (the match itself comes after the paste's gain, at
+      the frame's exposure);
+    - may be rejected by the paste (:data:`facetransfer.patch.REJECT`, back to the current
+      frame where the two frames' colours differ by a factor over 1.65): the rule took the
+      reference frame there *because* the current frame shows another thing than skin; the
+      rejection, meant for hair or the gap under a turned jaw in the reference frame, gave
+      the current frame's darkest red back (a dark-red stripe under the new lip's corner on
+      the judge's ``open`` pair, frame 79: the target's lower lip pressed out by its tongue,
+      ``benchmarks/bench_jaw_appearance.py``)."""
     import cv2
 
     return cv2.dilate((look > LOOK_HUE).view(np.uint8), _GROW) == 0

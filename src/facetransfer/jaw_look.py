@@ -34,7 +34,9 @@ way lighting does not explain (:func:`look_strengths`):
 :func:`facetransfer.jaw.jaw_texture` takes the larger of the two rules' strengths at each
 vertex; :func:`facetransfer.jaw.paint_jaw` does not take the region's hue from the pixels of
 this rule (the hue match spreading the tongue's red over the pasted chin was most of the
-glow: with the hue match off, the glow was gone).
+glow: with the hue match off, the glow was gone), nor lets the paste's rejection give them
+back to the current frame (a lip pressed out dark red, unlike the reference's skin by more than
+:data:`facetransfer.patch.REJECT`, came back as a stripe under the new lip's corner).
 """
 
 from __future__ import annotations

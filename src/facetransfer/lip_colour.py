@@ -24,7 +24,9 @@ expression. So, per clip:
    not a hue a per-channel factor can reach (the upper lip stayed red), so each pixel's
    ``L, a, b`` keep only a share of their distance from the target's lip colour, the
    target's lips' spread over the source's, squared (:func:`lab_spread`). The skin, the
-   teeth and the mouth's inside are not touched.
+   teeth and the mouth's inside are not touched. How far each pixel takes the tint is
+   measured from the source's lip colour of the clip, not of the frame: lips pressed shut,
+   deeper than the clip's, left a third of their lipstick untinted, red.
 
 The same person's clip on both sides gives a tint of 1 up to noise.
 """
@@ -111,6 +113,10 @@ class LipTint:
         lips' spread over the source's (:func:`lab_spread`, both on the source's skin),
         squared, in ``[KEEP_MIN, 1]``, 1 above :data:`KEEP_SAME` (:func:`_keep`). None (and
         ``target_lab`` None) without the clips' samples: the tint alone.
+    source_lips : (3,) float64 or None
+        The source's lip colour, ``log(c + 1)`` of its ``ratio`` times its skin (the clip's):
+        where :func:`tint_reach` places the source's lip colour; None (the tint from the
+        ratios alone): each frame's lips' median.
     """
 
     weights: np.ndarray
@@ -119,6 +125,7 @@ class LipTint:
     source_ratio: np.ndarray
     target_lab: np.ndarray | None = None
     keep: np.ndarray | None = None
+    source_lips: np.ndarray | None = None
 
     @classmethod
     def of(cls, weights: np.ndarray, target: "LipColour | np.ndarray",
@@ -128,12 +135,16 @@ class LipTint:
         tr, sr = (np.asarray(getattr(r, "ratio", r), np.float64).reshape(3)
                   for r in (target, source))
         tint = np.clip(tr / sr, *TINT_RANGE)
+        w = np.asarray(weights, np.float32)
         if isinstance(target, LipColour) and isinstance(source, LipColour):
+            lips = np.log(sr * (np.asarray(source.skin, np.float64) + 1.0))
+            lips = lips if np.isfinite(lips).all() else None
             st, ss = (lab_spread(c, source.skin) for c in (target, source))
             lab = rgb_to_lab(tr * (source.skin + 1.0) - 1.0)
             if st is not None and ss is not None and np.isfinite(lab).all():
-                return cls(np.asarray(weights, np.float32), tint, tr, sr, lab, _keep(st, ss))
-        return cls(np.asarray(weights, np.float32), tint, tr, sr)
+                return cls(w, tint, tr, sr, lab, _keep(st, ss), lips)
+            return cls(w, tint, tr, sr, source_lips=lips)
+        return cls(w, tint, tr, sr)
 
     def recolours(self) -> bool:
         """Whether :func:`tint_mouth` brings the lips to ``target_lab``: with the clips'
@@ -388,9 +399,13 @@ def tint_reach(image: np.ndarray, tint: LipTint, lips: np.ndarray) -> np.ndarray
     In log RGB (``log(c + 1)``) the tint moves a colour by ``log(tint)``; its hue part ``d =
     log(tint) - mean(log(tint))`` runs from the source's lip colour to the target's (each
     relative to its skin). A pixel's place along it is ``p = <log(c + 1) - m, d> / |d|^2``,
-    ``m`` the median log colour of the ``lips`` pixels (shading, the same added to every
-    channel, does not change ``p``): 0 at the source's lip colour, 1 at the target's, ``s =
-    -<u, d> / |d|^2`` at the source's skin (``u`` the hue part of ``log(source_ratio)``).
+    ``m`` the source's lip colour (``tint.source_lips``, the clip's; without it the median log
+    colour of the ``lips`` pixels; shading, the same added to every channel, does not change
+    ``p``): 0 at the source's lip colour, 1 at the target's, ``s = -<u, d> / |d|^2`` at the
+    source's skin (``u`` the hue part of ``log(source_ratio)``). A frame's own median put the
+    lips' colour of a frame whose lips are deeper than the clip's (pressed shut:
+    ``WDA_KatieHill_000``'s frames 87-90, 0.9 of ``|d|`` deeper) at 0: a third of the lips,
+    the clip's lipstick, then lay towards the skin, took under half of the tint and stayed red.
 
     When the skin lies ahead (``s > 0``: the target's lips paler than the source's, nearer
     the skin's hue) the pixel takes ``phi = clip(1 - p / max(s, 1), 0, 1)``: the whole tint at
@@ -422,5 +437,6 @@ def tint_reach(image: np.ndarray, tint: LipTint, lips: np.ndarray) -> np.ndarray
     q = _LOG_LEVELS[image[..., 0]] * k[0]
     q += _LOG_LEVELS[image[..., 1]] * k[1]
     q += _LOG_LEVELS[image[..., 2]] * k[2]
-    q -= np.median(q[lips])
+    q -= np.median(q[lips]) if tint.source_lips is None else \
+        np.float32(np.asarray(tint.source_lips, np.float64) @ k)
     return np.clip(1.0 - q, 0.0, 1.0, out=q)

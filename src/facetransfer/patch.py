@@ -299,7 +299,11 @@ def _hue_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray, sigma: flo
     Gaussian-weighted sums over the ``valid`` blocks, divided by its geometric mean over the
     channels, on blocks whose brightness ratio lies within ``exp(±HUE_LIMITS[0])`` and whose
     channels' hue ratios lie within ``exp(±HUE_LIMITS[1])`` (hair, teeth, lips: another
-    thing); None where no block compares."""
+    thing); None where no block compares. Where the weights sum to 5 % of a full
+    neighbourhood or less (:func:`_shading_field`), the field is the hue of all the compared
+    blocks (:func:`_region_hue`), not 1: a hole of the compared pixels wider than ~1.6
+    ``sigma`` (where :mod:`facetransfer.jaw_look` took the reference frame: a tongue, a lip
+    pressed out) takes the region's hue, not the reference frame's own."""
     grid = _coarse(part, face, valid)
     if grid is None:
         return None
@@ -316,9 +320,23 @@ def _hue_field(part: np.ndarray, face: np.ndarray, valid: np.ndarray, sigma: flo
     lg = cv2.subtract(cv2.log(cv2.max(num, 1e-6)), cv2.log(cv2.max(den, 1e-6)))
     mean = cv2.transform(lg, _THIRDS)
     g = cv2.exp(cv2.subtract(lg, cv2.merge([mean, mean, mean])))
-    _held_gain(g, wt, *(np.float32(b) for b in (0.05, *HUE_RANGE)))
+    held = wt <= np.float32(0.05)
+    if held.any():
+        g[held] = _region_hue(f1, p1, m)
+    np.clip(g, np.float32(HUE_RANGE[0]), np.float32(HUE_RANGE[1]), out=g)
     h, w = valid.shape
     return cv2.resize(g, (w, h), interpolation=cv2.INTER_LINEAR)
+
+
+def _region_hue(f1: np.ndarray, p1: np.ndarray, m: np.ndarray) -> np.ndarray:
+    """``(3,) float32`` of product 1: the hue ratio of the coarse images ``f1`` and ``p1``
+    (h, w, 3) float32 over all their blocks of weight ``m`` (h, w) float32 (not all 0), the
+    ratio of the weighted sums divided by its geometric mean over the channels; 1 where that
+    is not finite (a NaN in the part)."""
+    lg = np.log(np.einsum("hwc,hw->c", f1, m, dtype=np.float64)) - \
+        np.log(np.einsum("hwc,hw->c", p1, m, dtype=np.float64))
+    g = np.exp(lg - lg.mean())
+    return (g if np.isfinite(g).all() else np.ones(3)).astype(np.float32)
 
 
 def _grey(g: np.ndarray) -> np.ndarray:
