@@ -219,9 +219,6 @@ def _nonmanifold(cd, fx):
     clustered_smile_scan(cd / "smile_scan.ply", cd / "smile_features.json")
 
 
-CLI = ["facetransfer"]
-
-
 def cases(fx: Path) -> list[Case]:
     M, C, T = "model.npz", "clip.mp4", "track.npz"
     c = [

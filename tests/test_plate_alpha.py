@@ -252,12 +252,6 @@ def _video_alpha16(path: Path, size: tuple[int, int]) -> np.ndarray:
     return np.frombuffer(raw, "<u2").reshape(-1, H, W)
 
 
-def _video_alpha(path: Path, size: tuple[int, int]) -> np.ndarray:
-    """Every frame's alpha plane of a video, (F, H, W) uint8 (16 bits rounded)."""
-    a16 = _video_alpha16(path, size).astype(np.uint32)
-    return ((a16 + 128) // 257).astype(np.uint8)
-
-
 def test_video_alpha_reads_each_frames_alpha_in_any_order_a_few_ahead(tmp_path):
     from facetransfer.io.plate_alpha import VideoAlpha
 

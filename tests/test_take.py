@@ -541,7 +541,7 @@ def test_a_takes_preview_runs_at_its_rows_ntsc_rate_from_its_start_timecode(
     Its preview (``take_track``, ``puppet``, ``view``) runs at 29.97 (before: 30, 0.6 s adrift
     in ten minutes); whole-frame rows count frames at their nominal rate; the preview's start
     timecode is the take's first row's (before: none)."""
-    from facetransfer.take import take_start_timecode, take_track
+    from facetransfer.take import take_track
 
     from facetransfer.export.livelink import HEADER, LIVELINK_NAMES
 
@@ -568,13 +568,13 @@ def test_a_takes_preview_runs_at_its_rows_ntsc_rate_from_its_start_timecode(
               f"{min(int(round(((x % 1) * 30 % 1) * 1000)), 999):03d}" for x in t]
         assert _rows_rate(take_seconds(tc, warn=False), _fields(tc)) == \
             pytest.approx(30000 / 1001), n
-    assert take_start_timecode(take) == "00:00:59:20"
+    assert got.info["start_timecode"] == "00:00:59:20"
     whole = tmp_path / "whole.csv"
     whole.write_text(cols + "\n" + "\n".join(
         ",".join([f"10:00:0{j // 30}:{j % 30:02d}.000", "61"] + ["0"] * 61) for j in range(60))
         + "\n")
-    assert take_track(whole, arkit_model, arkit_model.factors[0][0]).fps == 30.0
-    assert take_start_timecode(whole) == "10:00:00:00"
+    got = take_track(whole, arkit_model, arkit_model.factors[0][0])
+    assert got.fps == 30.0 and got.info["start_timecode"] == "10:00:00:00"
     one = tmp_path / "one.csv"       # one row: at the rate it is said to be read at (before:
     one.write_text(cols + "\n" + ",".join(["10:00:00:05.000", "61"] + ["0"] * 61) + "\n")
     assert take_track(one, arkit_model, arkit_model.factors[0][0]).fps == 24.0  # said 24, 30

@@ -31,7 +31,7 @@ import threading
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Mapping
 
 from .errors import AssetError
 from .io.atomic import atomic_path
@@ -44,7 +44,6 @@ __all__ = [
     "REGISTRY",
     "asset_path",
     "asset_file",
-    "asset_files",
     "cache_dir",
     "data_dir",
     "fetch",
@@ -414,14 +413,6 @@ def asset_file(name: str, relpath: str | None = None, *, download: bool = True,
     else:
         f = asset.file(relpath)
     return _resolve_file(asset, f, download=download, progress=progress)
-
-
-def asset_files(name: str, relpaths: Iterable[str] | None = None, *, download: bool = True,
-                progress: bool | Callable[[int, int], None] | None = None) -> dict[str, Path]:
-    """Verified paths of several files of an asset (all of them by default)."""
-    asset = _get(name)
-    rels = [f.relpath for f in asset.files] if relpaths is None else list(relpaths)
-    return {r: asset_file(name, r, download=download, progress=progress) for r in rels}
 
 
 def asset_path(name: str, *, download: bool = True,

@@ -1,7 +1,8 @@
 """The default model: built once from the ``ict-arkit`` data set into the user cache, on first use.
 
-Every command that needs a model and gets no ``--model`` uses it (``track``, ``transfer``,
-``puppet``, ``demo``, ``export``, ``batch``). Its expressions are the ARKit blendshapes
+Every command that needs a model and is given none uses it (``track``, ``transfer``, ``edit``,
+``puppet``, ``demo``, ``export``, ``view``, ``batch``, ``synth-video``, ``texture default`` and
+``lift``, ``render``, ``model info``, ``synth``, ``sheet`` and ``dials``). Its expressions are the ARKit blendshapes
 (:mod:`facetransfer.arkit`), its identities are drawn from the ICT-FaceKit's 100-component
 identity space (§4.1). The file lives at :func:`default_model_path`; a damaged file is rebuilt.
 

@@ -369,21 +369,10 @@ def _read(path, model):
     return take
 
 
-def take_start_timecode(path) -> str | None:
-    """The take's first row's timecode as a video's start timecode (``HH:MM:SS:FF``, its
+def _first_timecode(timecodes) -> str | None:
+    """The first of a take's rows' timecodes as a video's start timecode (``HH:MM:SS:FF``, its
     thousandths of a frame dropped): what a preview of the take (``puppet take.csv``) carries,
     so that it lines up with the plate in an editor; None for a take without rows."""
-    from .export.common import ExportError
-    from .export.livelink import read_livelink
-
-    try:
-        return _first_timecode(read_livelink(path, lenient=True).timecodes)
-    except (ExportError, TransferError, OSError):   # read already where a preview is made
-        return None
-
-
-def _first_timecode(timecodes) -> str | None:
-    """:func:`take_start_timecode` of a take's rows' timecodes."""
     if not len(timecodes):
         return None
     h, m, sec, ff = (int(v) for v in _fields(timecodes[:1])[0, :4])

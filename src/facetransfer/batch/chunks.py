@@ -3,12 +3,13 @@
 A clip of ``F`` frames longer than ``chunk`` is cut into ``K`` chunks of at most ``chunk`` frames,
 each overlapping the next by ``overlap`` frames. The identity is one for the whole clip: the
 first chunk is tracked as a clip of its own (its identity is solved, §5.1), the others with that
-identity held fixed (``track_video(..., fixed={"identity": w})``), in parallel. The tracks are
+identity held fixed (the tracker's ``fixed={"identity": w}``), in parallel. The tracks are
 joined by a linear cross-fade over each overlap: the later chunk's weight rises from ``1/(O+1)``
 to ``O/(O+1)`` over the ``O`` shared frames. Rotations are interpolated on the sphere (slerp,
 ``R_a exp(a log(R_a^T R_b))``), scales in log space, translations and per-frame weights linearly;
-a frame lost in one chunk takes the other's state. The landmarks (and ARKit activations) are then
-recomputed from the blended pose and weights (Eq. (5), (7)).
+a frame lost in one chunk takes the other's state. The landmarks are cross-faded as the pose is
+(a capture's landmarks carry its clip's offset from the model); the ARKit activations are then
+recomputed from the blended expression weights (Eq. (A) of :mod:`facetransfer.arkit`).
 
 Beyond the paper: Vlasic et al. track a clip in one sequence of passes.
 """
@@ -153,7 +154,7 @@ def join_tracks(tracks, chunks, model, *, constant: tuple[str, ...] = ("identity
     chunks : sequence of Chunk
         From :func:`plan_chunks`.
     model : MultilinearModel
-        The model of the tracks (landmarks are recomputed with it).
+        The model of the tracks (the ARKit activations are recomputed with it).
     constant : tuple of str
         Modes constant over the clip (taken from the first chunk, not blended); over each
         shot of a clip edited from several (the chunks' ``shot_starts``: taken from the chunk

@@ -29,7 +29,7 @@ from __future__ import annotations
 import csv
 import io
 import os
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 from ..io.atomic import write_text_atomic
@@ -66,9 +66,6 @@ class Row:
     @property
     def ok(self) -> bool:
         return self.status in ("done", "skipped")
-
-    def with_seconds(self, seconds: float) -> "Row":
-        return replace(self, seconds=float(seconds))
 
 
 def _cell(v) -> str:

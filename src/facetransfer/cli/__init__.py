@@ -1,1 +1,2 @@
-"""Command-line interface: thin subcommands, one library call each (see :mod:`.main`)."""
+"""Command-line interface: one module per subcommand group registering its parsers, the options
+checked and the library called; errors said in one line (see :mod:`.main`)."""

@@ -1,9 +1,11 @@
-"""What the commands that write video share: ``--codec``/``--crf``/``--preset`` and the model.
+"""What the subcommands share: the video options and the model, progress bars, the parsers of
+numbers and faces, and the checks of a track or an output named on the command line.
 
-Not a subcommand. ``transfer``, ``puppet``, ``track``, ``demo`` and ``synth-video`` take the
-video options (:class:`facetransfer.io.video.VideoOptions`); ``transfer``, ``puppet``, ``track``
-and ``demo`` use the default model (:mod:`facetransfer.default_model`) when ``--model`` is
-absent, building it once with a progress bar and a one-line message.
+Not a subcommand. ``transfer``, ``puppet``, ``track``, ``demo``, ``synth-video`` and ``batch
+transfer`` take the video options ``--codec``/``--crf``/``--preset``...
+(:class:`facetransfer.io.video.VideoOptions`); every command given no model uses the default
+model (:func:`resolve_model`, :mod:`facetransfer.default_model`), building it once with a
+progress bar and a one-line message.
 """
 
 from __future__ import annotations

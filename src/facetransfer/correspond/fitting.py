@@ -3,19 +3,21 @@
 Following Allen, Curless & Popović 2003 and Sumner & Popović 2004, with the deformation written as
 per-vertex displacements ``d = x − x₀`` of the template ``x₀`` and, per stage, the energy
 
-    E(x) = w_s ‖L (x − x₀)‖² + w_f Σ_l ‖x_{v(l)} − f_l‖² + w_c Σ_{i ∈ V} ‖x_i − c_i‖²    (F1)
+    E(x) = w_s ‖L (x − x₀)‖² + w_f Σ_l ‖x_{v(l)} − f_l‖² + w_c Σ_{i ∈ V} ‖x_i − c_i‖²
+           + w_r ‖x − x₀‖²                                                          (F1)
 
 * ``L``: the row-normalised cotangent Laplacian of the template, so the smoothness term
   penalises bending of the displacement field (affine changes are nearly free; the small
-  ``w_r`` term keeps them determined when the features cover only part of the face);
+  ``w_r`` term, :attr:`FitStage.w_rest`, keeps them determined when the features cover only
+  part of the face);
 * ``f_l``: the scan's feature point for iBUG landmark ``l`` and ``v(l)`` its template vertex;
 * ``c_i``: the closest point on the scan to vertex ``i``; pairs are rejected when the closest
   point is on a boundary (a hole or the cropped rim), further than ``max_distance``, or when the
   normals differ by more than ``max_angle`` degrees.
 
 Eq. (F1) is quadratic with a diagonal data part, so each iteration solves one sparse symmetric
-positive definite system ``(w_s LᵀL + W) D = W (C − X₀)`` for all three coordinates (normal
-equations, sparse LU). The closest points are recomputed a few times per stage. The schedule
+positive definite system ``(w_s LᵀL + W + w_r I) D = W (C − X₀)`` for all three coordinates
+(normal equations, sparse LU). The closest points are recomputed a few times per stage. The schedule
 first weighs the features heavily, then proximity, while the stiffness ``w_s`` is lowered
 (the paper's protocol, §4.2; cf. the stiffness annealing of Amberg et al. 2007).
 

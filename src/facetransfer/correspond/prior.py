@@ -58,10 +58,6 @@ class ShapePrior:
     def n_components(self) -> int:
         return int(self.basis.shape[0])
 
-    def truncated(self, k: int) -> "ShapePrior":
-        """The first ``k`` components (the largest, for a PCA ordered by variance)."""
-        return ShapePrior(self.basis[:k], f"{self.name}[:{k}]")
-
 
 @dataclass(frozen=True)
 class PriorFit:

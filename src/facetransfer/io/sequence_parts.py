@@ -30,7 +30,7 @@ from .atomic import write_bytes_atomic, write_text_atomic
 from .plate_header import written_header
 from .video import (WrittenVideo, check_video_output, fits_output, place_sequence,
                     save_frame_image)
-from .video_parts import _LOCK, PartsBusy, _lock
+from .video_parts import _LOCK, _lock
 
 log = logging.getLogger(__name__)
 

@@ -32,11 +32,8 @@ import numpy as np
 from ..errors import VideoError
 from .atomic import atomic_path, check_not_folder_name, check_output_path, probe_folder
 from .ffmpeg import exit_cause, ffmpeg_error, ffmpeg_exe
-from .video_audio import (COPIED_AUDIO, audio_codec, audio_codecs, audio_input_args,  # noqa: F401
-                          has_audio, mux_audio)
-from .video_display import (COLOUR_TAGS, checked_timecode, colour_matrix,  # noqa: F401
-                            described, described_input, frame_args, timecode_args,
-                            video_colour)
+from .video_audio import audio_codec, audio_codecs, audio_input_args, has_audio, mux_audio
+from .video_display import colour_matrix, frame_args, timecode_args, video_colour
 from .video_options import (CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF,  # noqa: F401 (API)
                             DEFAULT_PRESET, ENCODERS, GREY_CODECS, PRESETS, VIDEO_SUFFIXES,
                             VideoOptions)

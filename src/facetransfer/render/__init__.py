@@ -19,7 +19,8 @@ The package turns a mesh and a camera (:mod:`.cameras`) into
 * a colour image (:func:`render`, here; the shading kernels in :mod:`.shading`) from per-vertex
   colours or a UV texture, optionally Lambert-shaded.
 
-Every public name is importable from ``facetransfer.render``.
+Every public name is importable from ``facetransfer.render``, but
+:func:`.raster.coverage` and :data:`.shading.MAX_LAYERS` (from their modules).
 
 Rasterisation rule: a pixel centre ``(px, py)`` belongs to a triangle if it lies inside or on
 the triangle's boundary (edge functions of one sign or zero). Among the triangles covering a
