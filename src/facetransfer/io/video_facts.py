@@ -188,7 +188,7 @@ def fact_lines(f: VideoFacts) -> list[str]:
             ".ppm", ".webp"):
         return [f"{f.path}: {size}", "  a still image: tracked and transferred as a clip of "
                 "one frame", f"  {_still_colour(f)}; "
-                f"{_image_kind(f) if f.bits > 8 else 'no audio'}"]
+                f"{_depth_words(f) if f.bits > 8 else 'no audio'}"]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}" + (
                 "" if f.timecode is None else
@@ -286,9 +286,15 @@ def _dpx_kind(f: VideoFacts) -> str:
 
 def _image_kind(f: VideoFacts) -> str:
     """What an image sequence's frames hold and what a rewrite keeps of it."""
+    return f"RGB images, {_depth_words(f)}"
+
+
+def _depth_words(f: VideoFacts) -> str:
+    """An image's bits and alpha and what a rewrite keeps of them (a still's line says its
+    colour apart, :func:`_still_colour`: not "RGB images" for a grey one)."""
     depth = f"16 bits, seen in 8 ({_deep_kept(f)})" if f.bits == 16 else f"{f.bits} bits"
     alpha = ("; alpha: kept by transfer in a PNG, TIFF or DPX sequence" if f.alpha else "")
-    return f"RGB images, {depth}{alpha}"
+    return f"{depth}{alpha}"
 
 
 def _deep_kept(f: VideoFacts) -> str:
