@@ -81,12 +81,17 @@ def canonical_face() -> np.ndarray:
 def head_angles(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Yaw and pitch (degrees, (F,) each) of the reference's points (F, 478, 3): the rotation
     of the best similarity (Umeyama 1991) taking the canonical face's skull points to the
-    frame's (the reference's z is in the units of x: a relative depth)."""
+    frame's (the reference's z is in the units of x: a relative depth); NaN where a frame has
+    no points (before: SVD did not converge, on a reference with a frame missing)."""
     idx = list(bc._SKULL)
     C = canonical_face()[idx]
     c = C - C.mean(0)
     yaw, pitch = [], []
     for Q in np.asarray(ref, np.float64)[:, idx]:
+        if not np.isfinite(Q).all():
+            yaw.append(np.nan)
+            pitch.append(np.nan)
+            continue
         q = Q - Q.mean(0)
         U, _, Vt = np.linalg.svd(q.T @ c)
         D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
@@ -111,7 +116,8 @@ def hard_starts(ref: np.ndarray, starts=STARTS) -> dict:
     mouth = mp.measure(ref, mp.MOUTH_OPEN)
     cand = np.flatnonzero(ok)
     pick = lambda score: int(cand[np.argmax(score[cand])])  # noqa: E731
-    dev = np.stack([np.abs(v - np.median(v)) / (np.median(np.abs(v - np.median(v))) + 1e-9)
+    dev = np.stack([np.abs(v - np.nanmedian(v)) / (np.nanmedian(np.abs(v - np.nanmedian(v)))
+                                                   + 1e-9)
                     for v in (yaw, pitch, eye, mouth)]).max(axis=0)
     frames = {"yaw": (pick(np.abs(yaw)), yaw), "pitch": (pick(np.abs(pitch)), pitch),
               "blink": (pick(-eye), eye), "mouth": (pick(mouth), mouth),

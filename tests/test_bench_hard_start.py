@@ -73,6 +73,14 @@ def test_hard_starts_find_each_hard_frame_and_keep_a_cut_long_enough():
     assert hs.hard_starts(late)["mouth"]["frame"] != 65
     early = np.concatenate([ref[20:21], ref])                        # the turn on frame 0 too
     assert hs.hard_starts(early)["yaw"]["frame"] == 21
+    gap = ref.copy()
+    gap[40] = np.nan                          # a frame the reference has no face on
+    yaw, _ = hs.head_angles(gap)
+    assert np.isnan(yaw[40]) and np.isfinite(np.delete(yaw, 40)).all()
+    picks = hs.hard_starts(gap)
+    assert {k: v["frame"] for k, v in picks.items() if k != "easy"} == \
+        {"yaw": 20, "pitch": 35, "blink": 50, "mouth": 65}
+    assert picks["easy"]["frame"] not in (20, 35, 40, 50, 65)
 
 
 def test_canonical_face_is_in_the_axes_of_mediapipes_points():

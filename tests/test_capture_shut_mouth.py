@@ -89,3 +89,14 @@ def test_a_shut_mouth_keeps_its_lips_together_under_outer_lip_errors(arkit_model
         err[name] = float(np.sqrt(np.mean((_gap(tr.landmarks2d, iod) - gap) ** 2)))
     assert err["default"] < 0.8 * err["flat"]
     assert err["default"] < 0.002 < err["flat"]
+
+
+def test_a_fit_saved_before_the_inner_lips_weight_is_not_continued(monkeypatch):
+    """A fit interrupted under the older weights (``FIT_VERSION`` 2: the inner lips at 1) has
+    another key and is fitted again, not continued with the new weights on half its frames
+    (the detections are kept)."""
+    from facetransfer.track import fit_checkpoint
+
+    now = fit_checkpoint.fit_key("model", CaptureOptions(), None)
+    monkeypatch.setattr(fit_checkpoint, "FIT_VERSION", 2)
+    assert fit_checkpoint.fit_key("model", CaptureOptions(), None) != now

@@ -466,6 +466,29 @@ def test_a_picture_that_is_no_uv_texture_is_refused(case, tmp_path, capsys):
     assert not (tmp_path / "a.glb").exists()
 
 
+def test_a_16_bit_texture_is_carried_in_8_bits_by_its_values(case, tmp_path):
+    """A 16-bit texture (``texture blend`` into a 16-bit target writes one; a grey one of a
+    user's) is carried as ``round(v / 257)``: a grey 16-bit PNG's ``I;16`` was clipped at 255
+    by PIL's conversion (a mid-grey texture became white)."""
+    import io
+
+    import cv2
+    import pygltflib
+    from PIL import Image
+
+    model, track, _, _ = case
+    v = np.linspace(0, 65535, 64 * 64).reshape(64, 64).astype(np.uint16)
+    for name, img in (("grey16.png", v), ("rgb16.png", np.dstack([v, v, v]))):
+        assert cv2.imwrite(str(tmp_path / name), img)
+        out = export_track(track, "glb", tmp_path / f"{name}.glb", model=model,
+                           texture=tmp_path / name)
+        g = pygltflib.GLTF2().load(str(out))
+        view = g.bufferViews[g.images[0].bufferView]
+        png = g.binary_blob()[view.byteOffset:view.byteOffset + view.byteLength]
+        got = np.asarray(Image.open(io.BytesIO(png)).convert("RGB")).astype(int)
+        assert np.abs(got - (v.astype(int) / 257.0)[..., None]).max() <= 1.0, name
+
+
 # ------------------------------------------------------------------------------ neutral pose
 def test_neutral_calibration_values():
     """``(a - n) / (1 - n)`` clipped, the gaze as tracked; auto takes the least summed frame

@@ -182,6 +182,37 @@ def test_a_still_s_colour_is_said_in_words(tmp_path, capsys):
                                           "transfer); audio none")
 
 
+def test_a_still_s_colour_says_what_its_pixels_are(tmp_path, capsys):
+    """Stills that are not 8-bit RGB or a colour JPEG: a grey PNG or JPEG is grey (before: "RGB",
+    and the grey JPEG "stored as YCbCr"), a palette PNG RGB from a palette, an RGBA PNG RGB
+    with alpha (before: the alpha not said), a CMYK JPEG CMYK (before: "YCbCr"), a lossy WebP
+    YCbCr as WebP stores it (before: "as JPEG stores it"); a 16-bit grey PNG's bits said
+    without "RGB images"."""
+    import cv2
+    from PIL import Image
+
+    rgb = (np.random.default_rng(0).random((32, 40, 3)) * 255).astype(np.uint8)
+    stills = {"grey.png": (Image.fromarray(rgb[..., 0]), "grey, read as RGB"),
+              "grey.jpg": (Image.fromarray(rgb[..., 0]), "grey, read as RGB"),
+              "pal.png": (Image.fromarray(rgb).convert("P"), "RGB from a palette"),
+              "rgba.png": (Image.fromarray(np.dstack([rgb, rgb[..., :1]])), "RGB with alpha"),
+              "cmyk.jpg": (Image.fromarray(rgb).convert("CMYK"),
+                           "stored as CMYK, read as RGB"),
+              "lossy.webp": (Image.fromarray(rgb),
+                             "stored as YCbCr (BT.601, as WebP stores it), read as RGB")}
+    for name, (img, stored) in stills.items():
+        img.save(tmp_path / name)
+        assert main(["probe", str(tmp_path / name)]) == 0
+        out = capsys.readouterr().out.splitlines()
+        assert out[2] == (f"  colour {stored}, primaries and curve not tagged (taken as sRGB); "
+                          "no audio"), (name, out)
+    assert cv2.imwrite(str(tmp_path / "grey16.png"), np.full((32, 40), 30000, np.uint16))
+    assert main(["probe", str(tmp_path / "grey16.png")]) == 0
+    assert capsys.readouterr().out.splitlines()[2] == (
+        "  colour grey, read as RGB, primaries and curve not tagged (taken as sRGB); 16 bits, "
+        "seen in 8 (a PNG, TIFF or DPX sequence written from it stays 16-bit)")
+
+
 def test_a_track_of_an_image_sequence_is_described_without_the_rate_warning(
         arkit_model, make_arkit_track, tmp_path, caplog):
     """The track's own rate is what probe says; looking up its source sequence's timecode

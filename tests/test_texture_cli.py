@@ -288,3 +288,35 @@ def test_blend_keeps_a_16_bit_target_s_bits(run, tmp_path, caplog, capsys):
         f"facetransfer texture blend: error: --method opencv takes 8-bit images; the target "
         f"{tmp_path / 't.png'} is 16-bit: give --method solver or auto (16 bits kept)")
     assert not (tmp_path / "cv.png").exists()
+
+
+def test_blend_scales_an_8_bit_source_to_a_16_bit_target_by_257(run, tmp_path):
+    """An 8-bit source's gradients join a 16-bit target's on its scale, ``x 257`` (255 ->
+    65535), not ``<< 8`` or unscaled: a target that is the source ``x 257`` plus a constant
+    comes back inside the mask within rounding (``<< 8``: off by ~150, unscaled: by
+    thousands; a flat source, the test above, or a ramp cannot tell them). A 16-bit source
+    into an 8-bit target is taken in 8 bits (``round(v / 257)``)."""
+    yy, xx = np.mgrid[:60, :70]
+    bump = 150 * np.exp(-((xx - 35) ** 2 + (yy - 30) ** 2) / 120.0)   # not harmonic: a ramp
+    s8 = np.rint(np.stack([bump + 2 * xx, bump + 40, 3 * yy + 0 * xx], -1)).astype(np.uint8)
+    t16 = s8.astype(np.uint16) * 257 + 1234
+    m = np.zeros((60, 70), np.uint8)
+    m[10:50, 15:55] = 255
+    _write(tmp_path / "s8.png", s8)
+    assert cv2.imwrite(str(tmp_path / "t16.png"), t16[..., ::-1])
+    _write(tmp_path / "m.png", np.dstack([m] * 3))
+    assert run("texture", "blend", "--source", tmp_path / "s8.png", "--target",
+               tmp_path / "t16.png", "--mask", tmp_path / "m.png", "--out",
+               tmp_path / "o.png") == 0
+    o = cv2.imread(str(tmp_path / "o.png"), cv2.IMREAD_UNCHANGED)[..., ::-1]
+    assert o.dtype == np.uint16
+    assert np.abs(o.astype(int) - t16).max() <= 2
+    s16 = s8.astype(np.uint16) * 257 + 257 * 7             # the source, 16-bit, 7 levels up
+    assert cv2.imwrite(str(tmp_path / "s16.png"), s16[..., ::-1])
+    t8 = (s8.astype(int) + 20).astype(np.uint8)
+    _write(tmp_path / "t8.png", t8)
+    assert run("texture", "blend", "--source", tmp_path / "s16.png", "--target",
+               tmp_path / "t8.png", "--mask", tmp_path / "m.png", "--out",
+               tmp_path / "o8.png") == 0
+    o8 = cv2.imread(str(tmp_path / "o8.png"), cv2.IMREAD_UNCHANGED)[..., ::-1]
+    assert o8.dtype == np.uint8 and np.abs(o8.astype(int) - t8).max() <= 1

@@ -408,7 +408,8 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
                max_frames: int | None = None):
     """A take as a track of its own: ``identity`` (the model's identity weights) performing it
     with the take's head rotation, framed in ``size`` (the model's mean face filling 0.6 of
-    it, its box as turned on each frame at the centre: :func:`_centred`), at the timecode rate nearest the take's rows (``max_frames``: the first ones).
+    it, its box as turned on each frame at the centre: :func:`_centred`), at the timecode rate
+    nearest the take's rows (``max_frames``: the first ones).
 
     The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``:
     head angles in radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (yaw > 0 turns the face toward

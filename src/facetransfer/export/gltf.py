@@ -180,7 +180,7 @@ def texture_png(texture) -> bytes:
     if isinstance(texture, (str, os.PathLike)):
         img = texture_image(texture)
         try:
-            img = img.convert("RGB")
+            img = _rgb8(img)
         except (OSError, ValueError) as exc:       # its pixels: e.g. a file cut short
             raise ExportError(f"cannot read texture image {texture} ({exc})") from None
     else:
@@ -192,6 +192,20 @@ def texture_png(texture) -> bytes:
     out = io.BytesIO()
     img.save(out, format="PNG")
     return out.getvalue()
+
+
+def _rgb8(img):
+    """A PIL image as 8-bit RGB: a 16-bit grey one (PIL's ``I;16`` or ``I``) as
+    ``round(v / 257)`` (:func:`facetransfer.io.frame_file.eight_bits`; PIL's own conversion
+    clips it at 255, a white texture); any other by PIL (a 16-bit RGB PNG it reads in 8)."""
+    from PIL import Image
+
+    if img.mode.startswith("I;16") or img.mode == "I":
+        from ..io.frame_file import eight_bits
+
+        grey = eight_bits(np.clip(np.asarray(img), 0, 65535))
+        return Image.fromarray(np.repeat(grey[..., None], 3, axis=2), "RGB")
+    return img.convert("RGB")
 
 
 def check_texture_video(track, video) -> None:

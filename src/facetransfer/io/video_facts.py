@@ -20,6 +20,7 @@ from .video_display import (ColourTags, container, exact_seek, first_field, show
                             timecode_of, video_colour)
 from .plate_alpha import sequence_has_alpha, video_has_alpha
 from .video_depth import video_bits
+from .video_planes import stored_pixel_format
 from .video_read import TRUNCATED_FRAMES, video_info
 from .video_timeline import packet_count
 from .frame_file import bit_depth
@@ -81,6 +82,10 @@ class VideoFacts:
         video_timeline.packet_count`, read once with its timeline): fewer than
         ``n_frames`` in a file cut short (said, as :func:`facetransfer.io.video.read_video`
         says it); None where not counted.
+    pixel_format : str or None
+        A video file's (or still's) pixel format as ffmpeg names it (``"yuvj420p"``,
+        ``"gray"``, ``"pal8"``, ``"rgba"``): what a still's colour line says it stores
+        (:func:`_still_colour`); None for an image sequence or without ffmpeg.
     """
 
     path: str
@@ -104,6 +109,7 @@ class VideoFacts:
     bits: int = 8
     rate_from: str | None = None
     stored_frames: int | None = None
+    pixel_format: str | None = None
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -131,7 +137,8 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
                       video_colour(path), ", ".join(audio_codecs(path)) or None, turn=info.turn,
                       timecode=timecode_of(path), alpha=video_has_alpha(path),
-                      bits=video_bits(path), stored_frames=packet_count(path))
+                      bits=video_bits(path), stored_frames=packet_count(path),
+                      pixel_format=stored_pixel_format(path))
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
@@ -181,7 +188,7 @@ def fact_lines(f: VideoFacts) -> list[str]:
             ".ppm", ".webp"):
         return [f"{f.path}: {size}", "  a still image: tracked and transferred as a clip of "
                 "one frame", f"  {_still_colour(f)}; "
-                f"{_image_kind(f) if f.bits > 8 else 'no audio'}"]
+                f"{_depth_words(f) if f.bits > 8 else 'no audio'}"]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}" + (
                 "" if f.timecode is None else
@@ -196,19 +203,18 @@ def fact_lines(f: VideoFacts) -> list[str]:
 
 
 #: A still's colour tags as ffmpeg names them, in words (:func:`_still_colour`).
-_STILL_MATRIX = {"bt470bg": "BT.601, as JPEG stores it", "smpte170m": "BT.601",
-                 "bt709": "BT.709"}
+_STILL_MATRIX = {"bt470bg": "BT.601", "smpte170m": "BT.601", "bt709": "BT.709"}
 _STILL_WORDS = {"bt709": "Rec.709", "iec61966-2-1": "sRGB", "bt2020": "Rec.2020",
                 "smpte432": "Display P3", "arib-std-b67": "HLG", "smpte2084": "PQ"}
+#: The formats whose stills store YCbCr, by suffix (said as "as JPEG stores it").
+_YCBCR_STILLS = {".jpg": "JPEG", ".jpeg": "JPEG", ".webp": "WebP"}
 
 
 def _still_colour(f: VideoFacts) -> str:
-    """A still image's colour in words: how its pixels are stored (RGB, or JPEG's YCbCr), and
-    its primaries and curve, or that it tags neither and is taken as sRGB (before: ffmpeg's
-    ``gbr/?/? (matrix/primaries/transfer)``)."""
+    """A still image's colour in words: how its pixels are stored (:func:`_still_stored`),
+    and its primaries and curve, or that it tags neither and is taken as sRGB (before:
+    ffmpeg's ``gbr/?/? (matrix/primaries/transfer)``)."""
     c = f.colour
-    stored = "RGB" if c.matrix in (None, "gbr") else \
-        f"stored as YCbCr ({_STILL_MATRIX.get(c.matrix, c.matrix)}), read as RGB"
     if c.primaries is None and c.transfer is None:
         tags = "primaries and curve not tagged (taken as sRGB)"
     else:
@@ -217,7 +223,30 @@ def _still_colour(f: VideoFacts) -> str:
             _STILL_WORDS.get(c.primaries, c.primaries) if c.primaries else untagged,
             _STILL_WORDS.get(c.transfer, c.transfer) if c.transfer else untagged)
     hdr = ": HDR or wide gamut, seen as 8-bit SDR" if c.beyond_sdr else ""
-    return f"colour {stored}, {tags}{hdr}"
+    return f"colour {_still_stored(f)}, {tags}{hdr}"
+
+
+def _still_stored(f: VideoFacts) -> str:
+    """How a still stores its pixels, by its pixel format (``f.pixel_format``; without one,
+    by its matrix tag): grey (a grey JPEG too, which holds no chroma), a palette of RGB, CMYK
+    (a JPEG of four channels, as ffmpeg's ``gbrap``: its fourth is black, not alpha), YCbCr
+    (JPEG's and lossy WebP's BT.601), else RGB, with an alpha plane where it has one."""
+    fmt, c = f.pixel_format or "", f.colour
+    suffix = os.path.splitext(str(f.path))[1].lower()
+    alpha = " with alpha" if f.alpha else ""
+    if fmt.startswith(("gray", "ya", "mono")):
+        return f"grey{alpha}, read as RGB"
+    if fmt == "pal8":
+        return "RGB from a palette"
+    if fmt.startswith(("gbrap", "cmyk")) and suffix in (".jpg", ".jpeg"):
+        return "stored as CMYK, read as RGB"
+    if fmt.startswith("yuv") or (not fmt and c.matrix not in (None, "gbr")):
+        how = _STILL_MATRIX.get(c.matrix, c.matrix or "matrix not tagged")
+        if suffix in _YCBCR_STILLS and c.matrix in ("bt470bg", "smpte170m"):
+            how += f", as {_YCBCR_STILLS[suffix]} stores it"
+        return f"stored as YCbCr{' with alpha' if fmt.startswith('yuva') else ''} ({how}), " \
+               "read as RGB"
+    return f"RGB{alpha}"
 
 
 #: How ``probe`` says where an image sequence's rate came from.
@@ -257,9 +286,15 @@ def _dpx_kind(f: VideoFacts) -> str:
 
 def _image_kind(f: VideoFacts) -> str:
     """What an image sequence's frames hold and what a rewrite keeps of it."""
+    return f"RGB images, {_depth_words(f)}"
+
+
+def _depth_words(f: VideoFacts) -> str:
+    """An image's bits and alpha and what a rewrite keeps of them (a still's line says its
+    colour apart, :func:`_still_colour`: not "RGB images" for a grey one)."""
     depth = f"16 bits, seen in 8 ({_deep_kept(f)})" if f.bits == 16 else f"{f.bits} bits"
     alpha = ("; alpha: kept by transfer in a PNG, TIFF or DPX sequence" if f.alpha else "")
-    return f"RGB images, {depth}{alpha}"
+    return f"{depth}{alpha}"
 
 
 def _deep_kept(f: VideoFacts) -> str:
