@@ -700,3 +700,27 @@ def test_a_glb_of_a_two_person_track_says_whose_mesh_it_carries(case, tmp_path, 
     assert main(["export", str(tmp_path / "one.npz"), "--model", str(tmp_path / "m.npz"),
                  "--out", str(tmp_path / "one.glb")]) == 0
     assert "people" not in capsys.readouterr().out
+
+
+def test_a_texture_too_large_to_read_is_refused_in_one_line(case, tmp_path, capsys,
+                                                           monkeypatch):
+    """A texture past Pillow's limit on pixels read at once (a 16384x16384 one; here the
+    limit lowered to 1,000 for a 48x48 picture) is refused in one line naming the file, exit
+    2, nothing written (before: Pillow's DecompressionBombError as a traceback)."""
+    import cv2
+    from PIL import Image
+
+    model, track, _, _ = case
+    tp, mp, tex = tmp_path / "t.npz", tmp_path / "m.npz", tmp_path / "big.png"
+    track.save(tp)
+    model.save(mp)
+    assert cv2.imwrite(str(tex), np.full((48, 48, 3), 90, np.uint8))
+    monkeypatch.setattr(Image, "MAX_IMAGE_PIXELS", 1000)
+    out = tmp_path / "f.glb"
+    capsys.readouterr()
+    assert main(["export", str(tp), "--model", str(mp), "--texture", str(tex),
+                 "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip().splitlines() == [
+        f"facetransfer export: error: texture image {tex} has more than 2,000 pixels, more "
+        "than the image reader takes: give a smaller texture"]
+    assert not out.exists()

@@ -166,6 +166,10 @@ def texture_image(path):
     check_input_file(p, "texture image", ExportError)
     try:
         img = Image.open(p)
+    except Image.DecompressionBombError:           # Pillow's limit on pixels read at once
+        raise ExportError(f"texture image {p} has more than {2 * Image.MAX_IMAGE_PIXELS:,} "
+                          f"pixels, more than the image reader takes: give a smaller "
+                          f"texture") from None
     except (OSError, ValueError) as exc:
         raise ExportError(f"cannot read texture image {p} ({exc})") from None
     _square_texture(img.size, f"texture image {p}")
