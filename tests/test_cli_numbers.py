@@ -256,13 +256,13 @@ def test_impute_trials_beyond_any_evaluation(tmp_path, capsys, monkeypatch):
     assert _says(base + ["--trials", 10 ** 30, "--methods", "average"], capsys,
                  f"--trials {10 ** 30}: ") == (
         f"facetransfer impute eval: error: --trials {10 ** 30}: {10 ** 30} runs (trials x "
-        "fractions x methods) keep ~512 bytes of results each, more than the 1.0 GB "
+        "fractions x methods) keep ~512 bytes of results each, more than the 1.0 GiB "
         "available; give --trials 2097152 or fewer")
     _says(base + ["--trials", 2 ** 21 + 1, "--methods", "average"], capsys,
           "give --trials 2097152 or fewer")
     _says(base + ["--trials", 2 ** 20 + 1, "--methods", "average,naive"], capsys,
           f"{2 ** 21 + 2} runs (trials x fractions x methods) keep ~512 bytes of results "
-          "each, more than the 1.0 GB available; give --trials 1048576 or fewer")
+          "each, more than the 1.0 GiB available; give --trials 1048576 or fewer")
     assert started == []
     with pytest.raises(AssertionError, match="the evaluation was started"):
         main([str(a) for a in base + ["--trials", 2000,

@@ -111,7 +111,7 @@ def _check_trials_fit(trials: int, per_trial: int) -> None:
         most = max(have // (per_trial * RUN_BYTES), 1)
         raise ValueError(
             f"--trials {trials}: {trials * per_trial} runs (trials x fractions x methods) "
-            f"keep ~{RUN_BYTES} bytes of results each, more than the {have / 2**30:.1f} GB "
+            f"keep ~{RUN_BYTES} bytes of results each, more than the {have / 2**30:.1f} GiB "
             f"available; give --trials {most} or fewer")
 
 

@@ -185,7 +185,7 @@ def _check_function_memory(used: int, size: int, step: int) -> None:
         fit = max(int(have // (2 * size * size * 16)), 1)
         raise FaceTransferError(
             f"--function keeps the texture of each of the {used} frames used: "
-            f"{need / 2**30:.1f} GB, more than the {have / 2**30:.1f} GB available; give "
+            f"{need / 2**30:.1f} GiB, more than the {have / 2**30:.1f} GiB available; give "
             f"--step {-(-used * step // fit)} or more, or a smaller --size")
 
 
