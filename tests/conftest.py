@@ -179,12 +179,6 @@ def jaw_open_track(model, jaw_open, *, size: int = 256, scale: float = 20.0, rot
 
 
 @pytest.fixture(scope="session")
-def make_jaw_open_track():
-    """:func:`jaw_open_track` as a fixture."""
-    return jaw_open_track
-
-
-@pytest.fixture(scope="session")
 def make_arkit_track():
     """:func:`synthetic_arkit_track` as a fixture."""
     return synthetic_arkit_track

@@ -20,7 +20,6 @@ from facetransfer.transfer import resample_track, time_map
 from conftest import jaw_open_track
 
 SIZE = 256
-LIPS = list(lips.LIP_POINTS)
 
 
 @pytest.fixture(scope="module")
