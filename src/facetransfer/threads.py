@@ -69,6 +69,10 @@ class Ahead:
         """Whether the work has ended (its value or its error is there)."""
         return not self._thread.is_alive()
 
+    def wait(self) -> None:
+        """Until the work has ended (its value or its error kept for :meth:`result`)."""
+        self._thread.join()
+
     def result(self):
         """The value of ``fn(*args)`` once it is computed (its error raised here)."""
         self._thread.join()
