@@ -220,6 +220,98 @@ def test_the_regions_made_on_their_thread_beside_the_source_basis_and_their_erro
                          parallel=True)
 
 
+def _regions_alive() -> bool:
+    import threading
+
+    return any(t.name == "regions-ahead" for t in threading.enumerate())
+
+
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
+                    reason="needs fork")
+def test_an_error_beside_the_regions_thread_is_raised_once_it_has_ended(
+        clips, quick_model, monkeypatch, tmp_path):
+    """An error of this thread while the regions' thread runs (the expression source without
+    a face, an interrupt while recombining) is raised once that thread has ended: nothing of
+    the plan goes on behind the caller (its log lines at the interpreter's exit, its process-
+    wide one BLAS thread, its writes into the timings)."""
+    import shutil
+    import threading
+
+    fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
+    monkeypatch.setattr(obtain, "obtain_track", fake)
+    ended = []
+
+    def slow(*args):
+        threading.Event().wait(2.0)         # still at work when this thread's error comes
+        ended.append(threading.current_thread().name)
+
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(tp, "_region_textures", slow)
+    broken = tmp_path / "broken.mp4"
+    shutil.copy(clips["source"], broken)
+    with pytest.raises(VideoError, match="no face found"):
+        tp.plan_transfer(clips["target"], quick_model, expression_from=broken, parallel=True)
+    assert ended == ["regions-ahead"] and not _regions_alive()
+    monkeypatch.setattr(tp, "_recombined_plan", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+                         parallel=True)
+    assert ended == ["regions-ahead"] * 2 and not _regions_alive()
+
+
+@pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
+                    reason="needs fork")
+def test_a_source_tracked_here_waits_for_the_regions_thread(clips, quick_model, monkeypatch,
+                                                            tmp_path):
+    """A source tracked here after the forked one (a pose source; the forked track failed)
+    is tracked with nothing beside it, as ``alone`` says (its detection in two processes,
+    forked: not beside a thread at work), once the regions' thread has ended."""
+    import shutil
+    import threading
+
+    fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"],
+                               "pose": clips["source_track"]})
+    calls = []
+
+    def recorded(video, model, **kw):
+        calls.append((Path(video).stem, kw.get("workers"), _regions_alive()))
+        return fake(video, model, **kw)
+
+    made = tp._region_textures
+
+    def slow(*args):
+        threading.Event().wait(2.0)         # still at work when the pose source is tracked
+        return made(*args)
+
+    monkeypatch.setattr(obtain, "obtain_track", recorded)
+    monkeypatch.setattr(tp, "_region_textures", slow)
+    pose = tmp_path / "pose.mp4"
+    shutil.copy(clips["source"], pose)
+    plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+                            pose_from=pose, parallel=True)
+    alone = tp.default_workers()
+    assert calls == [("target", 1, False), ("pose", alone, False)]
+    assert plan.regions is not None and "pose" in plan.source_tracks
+    calls.clear()                       # the forked track failed: the source tracked here
+    monkeypatch.setattr(obtain, "start_background_track", lambda *a, **k: _Failed())
+    plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+                            parallel=True)
+    assert calls == [("target", 1, False), ("source", alone, False)]
+    assert plan.regions is not None
+
+
+class _Failed:
+    """A background track that failed to run (its ``result`` None: tracked here instead)."""
+
+    def result(self):
+        return None
+
+    def cancel(self):
+        pass
+
+
 def test_cli_speed_option(clips, quick_model_path, tmp_path, capsys):
     out = tmp_path / "fast.mp4"
     code, stdout, err = run(["transfer", "--target", clips["target"], "--target-track",

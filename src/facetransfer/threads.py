@@ -47,10 +47,12 @@ def one_blas_thread():
 
 class Ahead:
     """``fn(*args)`` computed from now on, on a daemon thread of its own, while the caller goes
-    on; :meth:`result` waits for it and gives its value or raises its error.
+    on; :meth:`result` waits for it and gives its value or raises its error, :meth:`wait`
+    only waits (a caller raising an error of its own waits so, not to leave the work going on
+    behind it: its log lines at the interpreter's exit, a process-wide setting it holds).
 
-    A thread per call, not a pool: a forked child inherits no pool's workers, and an
-    interrupted caller does not wait for the work at exit (the thread is a daemon).
+    A thread per call, not a pool: a forked child inherits no pool's workers, and a caller
+    interrupted again while it waits does not wait for the work at exit (a daemon thread).
     """
 
     def __init__(self, fn, *args, name: str = "ahead") -> None:
@@ -68,6 +70,10 @@ class Ahead:
     def done(self) -> bool:
         """Whether the work has ended (its value or its error is there)."""
         return not self._thread.is_alive()
+
+    def wait(self) -> None:
+        """Until the work has ended (its value or its error kept for :meth:`result`)."""
+        self._thread.join()
 
     def result(self):
         """The value of ``fn(*args)`` once it is computed (its error raised here)."""

@@ -296,17 +296,32 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
             early.cancel()
         raise
     inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings)
+    if regions is None:
+        return _planned(planner, inputs, sources, model, align, pre_read, early)
+    try:
+        plan = _planned(planner, inputs, sources, model, align, pre_read, early, regions.wait)
+        _render_ahead(plan, model, options)            # while the regions are made
+        return dataclasses.replace(plan, regions=regions.result())
+    except BaseException:
+        # raised once the regions' thread has ended: nothing of the plan goes on behind the
+        # caller (its log lines at the interpreter's exit, its one BLAS thread, its timings)
+        regions.wait()
+        raise
+
+
+def _planned(planner: "_Planner", inputs: "_Inputs", sources: TransferSources, model, align,
+             pre_read, early, quiet: Callable[[], None] | None = None) -> TransferPlan:
+    """:func:`plan_sources`' sources read and tracked into ``inputs`` (``pre_read``, ``early``:
+    the expression source's frames and forked track) and recombined; ``quiet``: called before
+    a source is tracked here (:meth:`_Planner.read_source`)."""
     for kind in ("expression", "viseme", "pose", "identity"):
         src = getattr(sources, kind)
         if src is not None:
             planner.read_source(inputs, kind, src, pre_read if kind == "expression" else None,
-                                early if kind == "expression" else None)
-    plan = _performance_plan(inputs, sources, model) if sources.performance is not None \
-        else _recombined_plan(inputs, sources, model, align)
-    if regions is None:
-        return plan
-    _render_ahead(plan, model, options)            # while the regions are made
-    return dataclasses.replace(plan, regions=regions.result())
+                                early if kind == "expression" else None, quiet)
+    if sources.performance is not None:
+        return _performance_plan(inputs, sources, model)
+    return _recombined_plan(inputs, sources, model, align)
 
 
 def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings: dict):
@@ -492,9 +507,12 @@ class _Planner:
             raise VideoError(f"no face found in the target {target.video}")
         return tt
 
-    def read_source(self, inputs: _Inputs, kind: str, src: Source, pre_read, early) -> None:
+    def read_source(self, inputs: _Inputs, kind: str, src: Source, pre_read, early,
+                    quiet: Callable[[], None] | None = None) -> None:
         """Read and track a source (``pre_read``: its decoded frames; ``early``: its track
-        from the background process) into ``inputs``."""
+        from the background process) into ``inputs``; ``quiet``: called before the source is
+        tracked here, with nothing beside it (its detection forks a second process): the
+        region textures' thread waited for (:func:`plan_sources`)."""
         from .io.prefetch import frames_covering
         from .io.video import video_info
 
@@ -510,6 +528,8 @@ class _Planner:
             if tr is not None and len(fr) < tr.n_frames:
                 tr = take_frames(tr, np.arange(len(fr)))
         if tr is None:                       # tracked here, after the target: nothing beside it
+            if quiet is not None and src.track is None:     # a track file: read, no fork
+                quiet()
             tr = self.track(src.video, src.track, fr, sfps, len(fr), alone=True,
                             face=src.face, every=self.every, eyes=True)
         checked = _checked_source(kind, src, fr, tr)     # a track of other frames: its error
