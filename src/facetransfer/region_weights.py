@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .render import vertex_normals
+from .render import project_frames, vertex_normals
 
 __all__ = ["FACING", "USUAL", "USUAL_SAMPLES", "facing_weights", "model_vertices",
            "moved_strengths", "usual_weights", "usual_weights_of", "vertex_alpha", "smoothstep"]
@@ -187,38 +187,13 @@ def _vertex_colours(frames, track, model, verts: np.ndarray, rows: np.ndarray) -
 
 def _pixels_of(track, V: np.ndarray, rows: np.ndarray) -> np.ndarray:
     """``(k, m, 2)`` float32: the meshes ``V`` (k, m, 3) of the frames ``rows`` (k,) seen by
-    their cameras, ``track.camera(r).project(V[k])`` of each (Eq. 7) in a few products for
-    the k frames, bit for bit (each frame's rotation product the same BLAS call's; a camera
-    object per frame, checked, cost as much as its projection: ~0.1 ms a frame)."""
+    their cameras, ``track.camera(r).project(V[k])`` of each (Eq. 7), bit for bit, in a few
+    products for the k frames (:func:`facetransfer.render.project_frames`)."""
     rows = np.asarray(rows, np.int64)
-    R = np.asarray(track.rotation, np.float64)[rows]                   # (k, 3, 3)
-    s = np.asarray(track.scale, np.float64)[rows]
-    t = np.asarray(track.translation, np.float64)[rows]
-    if not _proper_cameras(R, s, t):
-        for r in rows.tolist():                 # the camera's own check says what is wrong
-            track.camera(r)
-    Rt = np.ascontiguousarray(R[:, :2].transpose(0, 2, 1))               # (k, 3, 2)
-    Y = np.matmul(np.ascontiguousarray(V, np.float64), Rt)              # (k, m, 2)
-    a = float(track.pixel_aspect)
-    P = np.empty(Y.shape, np.float32)
-    # (s / a) Y_x + t_x and (-s) Y_y + t_y, the camera's roundings, then float32
-    P[..., 0] = (s / a)[:, None] * Y[..., 0] + t[:, 0, None]
-    P[..., 1] = (-s)[:, None] * Y[..., 1] + t[:, 1, None]
-    return P
-
-
-def _proper_cameras(R: np.ndarray, s: np.ndarray, t: np.ndarray) -> bool:
-    """Whether every camera ``(R[k], s[k], t[k])`` passes
-    :class:`~facetransfer.render.WeakPerspective`'s checks: finite, a scale > 0, a proper
-    rotation (``R R^T = I`` within its bound, a determinant > 0)."""
-    from .render.cameras import _ORTHONORMAL_TOL
-
-    if not (np.isfinite(R).all() and np.isfinite(t).all() and np.isfinite(s).all()
-            and (s > 0).all()):
-        return False
-    RRt = np.matmul(R, R.transpose(0, 2, 1))
-    return bool((np.abs(RRt - np.eye(3)) <= _ORTHONORMAL_TOL).all()
-                and (np.linalg.det(R) > 0).all())
+    return project_frames(V, np.asarray(track.rotation, np.float64)[rows],
+                          np.asarray(track.scale, np.float64)[rows],
+                          np.asarray(track.translation, np.float64)[rows],
+                          track.pixel_aspect).astype(np.float32)
 
 
 def _span(x: np.ndarray, n: int) -> tuple[int, int]:

@@ -47,7 +47,7 @@ from ..background import background_image
 from ..errors import ShapeError
 from .cameras import Camera  # noqa: F401 (the camera protocol, importable here as before)
 from .cameras import (Pinhole, WeakPerspective, _as_size, euler_from_rotation,
-                      look_at_weak_perspective, rotation_from_euler)
+                      look_at_weak_perspective, project_frames, rotation_from_euler)
 from .raster import (Raster, Rasterizer, RenderError, _check_mesh, _check_not_all_degenerate,
                      _rasterize_checked, rasterize, rasterize_reference)
 from .shading import (_check_colors, check_shading, check_textured, interpolate_vertex_values,
@@ -71,6 +71,7 @@ __all__ = [
     "rotation_from_euler",
     "euler_from_rotation",
     "look_at_weak_perspective",
+    "project_frames",
     "render_model",
     "sample_texture",
     "shade_texture",
