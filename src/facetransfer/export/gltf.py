@@ -200,15 +200,15 @@ def texture_png(texture) -> bytes:
 
 def _rgb8(img):
     """A PIL image as 8-bit RGB: a 16-bit grey one (PIL's ``I;16`` or ``I``) as
-    ``round(v / 257)`` (:func:`facetransfer.io.frame_file.eight_bits`; PIL's own conversion
-    clips it at 255, a white texture); any other by PIL (a 16-bit RGB PNG it reads in 8)."""
+    ``round(v / 257)`` in each channel (:func:`facetransfer.io.frame_file.shown_16`, as a
+    16-bit plate's frame is seen; PIL's own conversion clips it at 255, a white texture); any
+    other by PIL (a 16-bit RGB PNG it reads in 8)."""
     from PIL import Image
 
     if img.mode.startswith("I;16") or img.mode == "I":
-        from ..io.frame_file import eight_bits
+        from ..io.frame_file import shown_16
 
-        grey = eight_bits(np.clip(np.asarray(img), 0, 65535))
-        return Image.fromarray(np.repeat(grey[..., None], 3, axis=2), "RGB")
+        return Image.fromarray(shown_16(np.clip(np.asarray(img), 0, 65535)), "RGB")
     return img.convert("RGB")
 
 
