@@ -83,19 +83,17 @@ def head_angles(ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     of the best similarity (Umeyama 1991) taking the canonical face's skull points to the
     frame's (the reference's z is in the units of x: a relative depth); NaN where a frame has
     no points (before: SVD did not converge, on a reference with a frame missing)."""
+    from facetransfer.track.dense import umeyama
+
     idx = list(bc._SKULL)
     C = canonical_face()[idx]
-    c = C - C.mean(0)
     yaw, pitch = [], []
     for Q in np.asarray(ref, np.float64)[:, idx]:
         if not np.isfinite(Q).all():
             yaw.append(np.nan)
             pitch.append(np.nan)
             continue
-        q = Q - Q.mean(0)
-        U, _, Vt = np.linalg.svd(q.T @ c)
-        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(U @ Vt))])
-        R = U @ D @ Vt                                   # q ~ s R c
+        R = umeyama(C, Q)[1]                             # Q ~ s R C + t
         yaw.append(np.degrees(np.arcsin(np.clip(R[0, 2], -1, 1))))
         pitch.append(np.degrees(np.arctan2(-R[1, 2], R[2, 2])))
     return np.array(yaw), np.array(pitch)

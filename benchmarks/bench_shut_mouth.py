@@ -123,7 +123,7 @@ def clip_measures(name: str, vdir: Path, cache: Path, model, args) -> dict:
     ref, pts, shapes = ref[:F], np.asarray(pts, float)[:F, :, :2], np.asarray(shapes, float)[:F]
     ro, fo = mp.measure(ref, mp.MOUTH_OPEN), mp.measure(pts, mp.MOUTH_OPEN)
     oo = bc.openings(tr.landmarks2d)["mouth_open"]
-    iod_px = np.linalg.norm(ref[:, 33] - ref[:, 263], axis=1)
+    iod_px = np.linalg.norm(ref[:, mp.EYE_CORNERS[0]] - ref[:, mp.EYE_CORNERS[1]], axis=1)
     gap_mm = model_lip_gap_mm(model, tr)
     segs = shut_segments(ro, args.shut, args.min_frames, args.trim)
     A = np.asarray(tr.blendshapes, float)
