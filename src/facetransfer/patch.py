@@ -332,9 +332,11 @@ def _region_hue(f1: np.ndarray, p1: np.ndarray, m: np.ndarray) -> np.ndarray:
     """``(3,) float32`` of product 1: the hue ratio of the coarse images ``f1`` and ``p1``
     (h, w, 3) float32 over all their blocks of weight ``m`` (h, w) float32 (not all 0), the
     ratio of the weighted sums divided by its geometric mean over the channels; 1 where that
-    is not finite (a NaN in the part)."""
-    lg = np.log(np.einsum("hwc,hw->c", f1, m, dtype=np.float64)) - \
-        np.log(np.einsum("hwc,hw->c", p1, m, dtype=np.float64))
+    is not finite (a NaN in the part). The sums in float64 by one BLAS product each (numpy's
+    ``einsum`` in float64 took five times longer: ~0.15 ms a frame of the jaw)."""
+    w = m.reshape(-1).astype(np.float64)
+    lg = np.log(w @ f1.reshape(-1, 3).astype(np.float64)) - \
+        np.log(w @ p1.reshape(-1, 3).astype(np.float64))
     g = np.exp(lg - lg.mean())
     return (g if np.isfinite(g).all() else np.ones(3)).astype(np.float32)
 
