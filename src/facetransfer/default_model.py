@@ -2,9 +2,10 @@
 
 Every command that needs a model and is given none uses it (``track``, ``transfer``, ``edit``,
 ``puppet``, ``demo``, ``export``, ``view``, ``batch``, ``synth-video``, ``texture default`` and
-``lift``, ``render``, ``model info``, ``synth``, ``sheet`` and ``dials``). Its expressions are the ARKit blendshapes
-(:mod:`facetransfer.arkit`), its identities are drawn from the ICT-FaceKit's 100-component
-identity space (§4.1). The file lives at :func:`default_model_path`; a damaged file is rebuilt.
+``lift``, ``render``, ``model info``, ``synth``, ``sheet`` and ``dials``). Its expressions
+are the ARKit blendshapes (:mod:`facetransfer.arkit`), its identities are drawn from the
+ICT-FaceKit's 100-component identity space (§4.1). The file lives at
+:func:`default_model_path`; a damaged file is rebuilt.
 
 Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datasets` and
 :func:`facetransfer.model.build_model`), below every consumer.
