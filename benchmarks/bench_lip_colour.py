@@ -110,9 +110,9 @@ def lip_lab(frames, fps: float) -> dict:
     """The lips judged in each frame: ``lips``, ``upper``, ``lower`` (F, 3), the median CIELAB
     colour of each part (NaN where MediaPipe finds no face or fewer than 20 pixels of it);
     ``boxes`` (F, 4) the lips' box ``x0, y0, x1, y1``; ``counts`` (F, 3) of
-    :func:`cyan_whitish`; ``gap`` (F,) the inner-lip gap over the eye corners' distance (NaN
-    without a face)."""
-    from _mp_points import faces_in_pixels, frame_lab
+    :func:`cyan_whitish`; ``gap`` (F,) the inner-lip gap over the eye corners' distance
+    (:func:`_mp_points.measure`; NaN without a face)."""
+    from _mp_points import MOUTH_OPEN, faces_in_pixels, frame_lab, measure
 
     n = len(frames)
     res = {k: np.full((n, 3), np.nan) for k in PARTS}
@@ -126,7 +126,7 @@ def lip_lab(frames, fps: float) -> dict:
             if m[k].sum() >= 20:
                 res[k][i] = np.median(L[m[k]], axis=0)
         res["counts"][i] = cyan_whitish(f, L, m)
-        res["gap"][i] = np.linalg.norm(xy[13] - xy[14]) / np.linalg.norm(xy[33] - xy[263])
+        res["gap"][i] = measure(xy[None], MOUTH_OPEN)[0]
         o = xy[list(OUTER)]
         res["boxes"][i] = (*np.floor(o.min(0)).astype(int), *np.ceil(o.max(0)).astype(int))
     return res
