@@ -101,7 +101,7 @@ def _check_mask(mask, name: str, shape: tuple[int, int]) -> np.ndarray:
     return m
 
 
-def _to_uint8(img: np.ndarray, dtype=np.uint8) -> np.ndarray:
+def _rounded(img: np.ndarray, dtype=np.uint8) -> np.ndarray:
     """``img`` rounded and clipped to ``dtype``'s range (uint8, or uint16 for a 16-bit target)."""
     return np.clip(np.rint(img), 0, np.iinfo(dtype).max).astype(dtype)
 
@@ -268,12 +268,12 @@ def poisson_blend_multi(target, sources: Sequence[tuple[np.ndarray, np.ndarray]]
     depth = np.uint16 if t.dtype == np.uint16 else np.uint8
     if not region.any():
         log.info("poisson_blend_multi: empty masks; returning the target")
-        return _to_uint8(out, depth)
+        return _rounded(out, depth)
     ys, xs = _bbox(region)
     f = _solve_poisson(out[ys, xs], [s[ys, xs] for s in srcs], [a[ys, xs] for a in alphas],
                        [None if v is None else v[ys, xs] for v in valids], region[ys, xs], mixed)
     out[ys, xs] = f
-    res = _to_uint8(out, depth)
+    res = _rounded(out, depth)
     if t.dtype == depth:
         res[~region] = t[~region]  # exact copy outside the region
     return res
@@ -326,14 +326,14 @@ def poisson_blend(source, target, mask, *, method: str = "auto", mixed: bool = F
     m = _check_mask(mask, "mask", t.shape[:2])
     deep = t.dtype == np.uint16          # seamlessClone takes 8 bits
     if not (m > 0).any():
-        return _to_uint8(t.astype(np.float64), np.uint16 if deep else np.uint8)
+        return _rounded(t.astype(np.float64), np.uint16 if deep else np.uint8)
     use_cv = method == "opencv" or (method == "auto" and opencv_serves(m) and not deep)
     if use_cv:
         if deep or not opencv_serves(m):
             raise CompositeError("method='opencv' needs an 8-bit target and one hard-edged "
                                  "(bool) connected mask region at least 2 pixels from the "
                                  "image border; use method='solver'")
-        return _seamless_clone(_to_uint8(s.astype(np.float64)), _to_uint8(t.astype(np.float64)),
+        return _seamless_clone(_rounded(s.astype(np.float64)), _rounded(t.astype(np.float64)),
                                m > 0, mixed)
     return poisson_blend_multi(t, [(s, m)], mixed=mixed)
 
@@ -426,7 +426,7 @@ def match_color(source, target, source_mask, target_mask=None) -> np.ndarray:
     mu_t, sd_t = lt[mt].mean(0), lt[mt].std(0)
     gain = np.where(sd_s > 1e-6, sd_t / np.maximum(sd_s, 1e-6), 1.0)
     out = (ls - mu_s) * gain + mu_t
-    return _to_uint8(_lab_to_rgb(out))
+    return _rounded(_lab_to_rgb(out))
 
 
 def composite_face(target_frame, rendered_face, face_mask, *, mouth_source=None, mouth_mask=None,
@@ -474,7 +474,7 @@ def composite_face(target_frame, rendered_face, face_mask, *, mouth_source=None,
     if not fm.any():
         log.warning("composite_face: empty face mask; returning the target frame")
         return t.copy()
-    face = _to_uint8(np.asarray(r, dtype=np.float64))
+    face = _rounded(np.asarray(r, dtype=np.float64))
     if color_match:
         face = match_color(face, t, fm)
     # The rendered image has no face beyond face_mask (background there): edges leaving the
