@@ -68,27 +68,15 @@ from .errors import AssetError, FaceTransferError, TrackError, VideoError
 from .io.atomic import atomic_path, check_output_path
 from .io.npz import read_npz
 from .render import WeakPerspective, render, rotation_from_euler
+from .synth_keys import SPEC_KEYS  # the keys of a spec, read by the parser below
 
 log = logging.getLogger(__name__)
 
-__all__ = [
-    "SpecError",
-    "Performance",
-    "SyntheticTruth",
-    "SyntheticClip",
-    "load_performance",
-    "performance_from_spec",
-    "random_performance",
-    "procedural_skin_texture",
-    "procedural_vertex_colors",
-    "procedural_background",
-    "make_clip",
-    "write_clip",
-    "synthesize_video",
-    "load_truth",
-    "truth_path",
-    "load_texture_image",
-]
+__all__ = ["SpecError", "Performance", "SyntheticTruth", "SyntheticClip", "load_performance",
+           "performance_from_spec", "random_performance", "procedural_skin_texture",
+           "procedural_vertex_colors", "procedural_background", "make_clip",
+           "write_clip", "synthesize_video", "load_truth", "truth_path",
+           "load_texture_image", "SPEC_KEYS"]
 
 DEFAULT_FPS = 25.0
 DEFAULT_SIZE = (640, 480)
@@ -327,11 +315,10 @@ def _check_spec_keys(spec) -> None:
     """SpecError unless ``spec`` is a mapping of the known top-level keys."""
     if not isinstance(spec, Mapping):
         raise SpecError(f"a performance spec must be a JSON object, got {type(spec).__name__}")
-    known = {"fps", "n_frames", "size", "identity", "tracks", "pose"}
-    unknown = set(spec) - known
+    unknown = set(spec) - set(SPEC_KEYS["spec"])
     if unknown:
         raise SpecError(f"unknown performance spec key(s) {sorted(unknown)}; known: "
-                        f"{sorted(known)}")
+                        f"{sorted(SPEC_KEYS['spec'])}")
 
 
 def _spec_tracks(model, spec: Mapping) -> tuple[dict[str, list[tuple[int, np.ndarray]]], int]:
@@ -386,8 +373,7 @@ def _keyed_pose(pose: dict, n_frames: int) -> np.ndarray:
 
     ``pose`` holds ``keys`` and nothing else (``fill`` already taken out).
     """
-    names = ("yaw_deg", "pitch_deg", "roll_deg", "tx", "ty", "scale")
-    keys = []
+    names, keys = SPEC_KEYS["pose.keys"], []
     for f, v in _parse_keys(pose.pop("keys"), "pose.keys"):
         if not isinstance(v, Mapping) or set(v) - set(names):
             raise SpecError(f"pose.keys frame {f}: expected an object with keys from "
@@ -403,10 +389,9 @@ def _oscillating_pose(pose: Mapping, t: np.ndarray) -> tuple[np.ndarray, ...]:
     """Smooth head oscillation at times ``t`` (n,) seconds: yaw, pitch, roll (render angles in
     degrees, as :func:`_pose_arrays` takes them), tx, ty (pixels) and relative scale, each (n,);
     the periods are detuned from ``period_s``."""
-    names = {"yaw_deg", "pitch_deg", "roll_deg", "translate_px", "scale", "period_s"}
-    if set(pose) - names:
-        raise SpecError(f"unknown pose key(s) {sorted(set(pose) - names)}; known: "
-                        f"{sorted(names | {'fill', 'keys'})}")
+    if set(pose) - set(SPEC_KEYS["pose"]):    # fill and keys were taken out
+        raise SpecError(f"unknown pose key(s) {sorted(set(pose) - set(SPEC_KEYS['pose']))}; "
+                        f"known: {sorted(SPEC_KEYS['pose'])}")
     period = _num(pose, "period_s", 4.0, "pose.period_s")
     if not period > 0:
         raise SpecError(f"pose.period_s must be > 0, got {period}")

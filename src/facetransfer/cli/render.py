@@ -149,21 +149,41 @@ def _texture(choice: str, model, seed: int):
         # the project's default face: Lee Perry-Smith on ICT UVs (§6 texture), else procedural
         return default_face_texture(model, seed=seed, source="auto")
     from ..synth import load_texture_image
+    from ..texture.base import check_square_texture
 
-    return load_texture_image(choice)
+    tex = load_texture_image(choice)           # the model's UV texture: square, as export's
+    check_square_texture(tex.shape[1::-1], f"--texture {choice}", FaceTransferError)
+    return tex
+
+
+#: What each key of a performance spec is (:data:`facetransfer.synth.SPEC_KEYS`, in its order;
+#: a key without one stops the import, so the help cannot leave one out).
+_SPEC_KEY_HELP = {
+    "n_frames": "clip length; default the last keyframe + 1, else 100", "fps": "default 25",
+    "size": "[W, H], default [640, 480]",
+    "identity": "a label such as id03, a weight list or a blend {label: amount}",
+    "tracks": "{mode: [[frame, value], ...]} for each mode but the identity, a value a label, "
+              "a blend or a weight list",
+    "pose": "an oscillation {%s} or keyframes {keys: [[frame, {%s}], ...], fill}"}
+
+
+def _performance_help() -> str:
+    """``synth-video --performance``'s help: each key of the spec
+    (:data:`facetransfer.synth.SPEC_KEYS`) with what it is."""
+    from ..synth_keys import SPEC_KEYS    # facetransfer.synth's, without the renderer
+
+    pose = _SPEC_KEY_HELP["pose"] % (", ".join(k for k in SPEC_KEYS["pose"] if k != "keys"),
+                                     ", ".join(SPEC_KEYS["pose.keys"]))
+    keys = ", ".join(f"{k} ({pose if k == 'pose' else _SPEC_KEY_HELP[k]})"
+                     for k in SPEC_KEYS["spec"])
+    return (f"performance spec, a JSON object of the keys {keys}; every key optional; "
+            "--frames, --fps, --size and --identity replace theirs. "
+            'E.g. {"n_frames": 50, "tracks": {"expression": [[0, "neutral"], [25, {"jawOpen": '
+            '1}]]}, "pose": {"yaw_deg": 10}}. An unknown key is named with the known ones')
 
 
 #: ``synth-video --performance``'s help: the spec's keys (:mod:`facetransfer.synth`).
-PERFORMANCE_HELP = (
-    "performance spec, a JSON object of the keys n_frames (clip length; default the last "
-    "keyframe + 1, else 100), fps (default 25), size ([W, H], default [640, 480]), identity "
-    "(a label such as id03, a weight list or a blend {label: amount}), tracks ({mode: [[frame, "
-    "value], ...]} for each mode but the identity, a value a label, a blend or a weight list), "
-    "pose (an oscillation {yaw_deg, pitch_deg, roll_deg, translate_px, scale, period_s, fill} "
-    "or keyframes {keys: [[frame, {yaw_deg, pitch_deg, roll_deg, tx, ty, scale}], ...], "
-    "fill}); every key optional; --frames, --fps, --size and --identity replace theirs. "
-    'E.g. {"n_frames": 50, "tracks": {"expression": [[0, "neutral"], [25, {"jawOpen": 1}]]}, '
-    '"pose": {"yaw_deg": 10}}. An unknown key is named with the known ones')
+PERFORMANCE_HELP = _performance_help()
 
 
 def cmd_synth_video(args: argparse.Namespace) -> int:

@@ -213,10 +213,42 @@ def cmd_blend(args: argparse.Namespace) -> int:
                                 "region at least 2 pixels from the image border, and no "
                                 "--feather; give --method solver or auto")
     res = poisson_blend(src, dst, m, method=method, mixed=args.mixed)
+    res = _with_alpha(res, args.target, out)
     write_image(out, res, overwrite=args.overwrite)
     bits = ", 16-bit" if res.dtype == np.uint16 else ""
-    print(f"wrote {out} ({int(mask.sum())} masked pixels{bits})")
+    kept = ", the target's alpha kept" if res.shape[2] == 4 else ""
+    print(f"wrote {out} ({int(mask.sum())} masked pixels{bits}{kept})")
     return 0
+
+
+def _with_alpha(res: np.ndarray, target: str, out: Path) -> np.ndarray:
+    """The blend ``res`` with the target's alpha beside it (in ``res``'s bits: 8-bit alpha
+    ``x 257``, 16-bit rounded, :func:`~facetransfer.io.frame_file.eight_bits`), where the
+    target has one and ``out`` is a PNG; ``res`` as it is otherwise (a JPEG ``out``, an 8-bit
+    RGBA TIFF target, whose colour OpenCV reads premultiplied, or a float alpha: said in a
+    warning naming the file)."""
+    import logging
+
+    from ..io.frame_file import eight_bits, tiff_alpha_kind
+    from ..io.plate_alpha import image_alpha
+
+    a = image_alpha(target)
+    if a is None:
+        return res
+    why = (f"{out} holds none: written without it (give a .png to keep it)"
+           if out.suffix.lower() != ".png" else
+           "its colour is read premultiplied (a TIFF's): written without it"
+           if tiff_alpha_kind(Path(target)) else
+           f"its samples are {a.dtype}, not 8 or 16 bits: written without it"
+           if a.dtype not in (np.uint8, np.uint16) else None)
+    if why:
+        logging.getLogger(__name__).warning("target %s has alpha; %s", target, why)
+        return res
+    if res.dtype == np.uint16:
+        a = a.astype(np.uint16) * np.uint16(257) if a.dtype == np.uint8 else a
+    elif a.dtype == np.uint16:
+        a = eight_bits(a)
+    return np.dstack([res, a])
 
 
 def _same_depth(src: np.ndarray, dst: np.ndarray, target: str, out: Path):
@@ -279,7 +311,8 @@ def register(sub) -> None:
     b = tsub.add_parser("blend", help="Poisson-blend a source image into a target over a mask",
                         description="Poisson image editing (Pérez et al. 2003).")
     b.add_argument("--source", required=True, help="source image (same size as the target)")
-    b.add_argument("--target", required=True, help="target image")
+    b.add_argument("--target", required=True, help="target image (its alpha, if any, kept in "
+                   "a .png --out)")
     b.add_argument("--mask", required=True, help="mask image (white = paste)")
     b.add_argument("--method", choices=("auto", "opencv", "solver"), default="auto",
                    help="auto (default): OpenCV seamlessClone where it serves, else our solver")

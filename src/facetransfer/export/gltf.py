@@ -135,13 +135,11 @@ class _Blob:
 
 
 def _square_texture(size, what: str) -> None:
-    """ExportError unless ``size`` ``(W, H)`` is square: the template's UVs are laid out on a
-    square, as ``facetransfer texture default|lift`` write it (a contact sheet, a frame or a
-    photo is no texture of them)."""
-    if size[0] != size[1]:
-        raise ExportError(f"{what} is {size[0]}x{size[1]}: a texture of the model's UVs is a "
-                          "square image in their layout (as `facetransfer texture default` or "
-                          "`texture lift` writes it, e.g. 512x512)")
+    """ExportError unless ``size`` ``(W, H)`` is square
+    (:func:`facetransfer.texture.base.check_square_texture`)."""
+    from ..texture.base import check_square_texture
+
+    check_square_texture(size, what, ExportError)
 
 
 def texture_image(path):

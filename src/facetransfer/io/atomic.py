@@ -326,7 +326,8 @@ def write_text_atomic(path: str | os.PathLike, text: str, *, overwrite: bool = T
 
 def write_image(path: str | os.PathLike, rgb, *, overwrite: bool = True) -> Path:
     """Write an ``(H, W, 3)`` uint8 RGB image atomically (format by extension, OpenCV); a
-    uint16 one keeps its 16 bits (in a format that holds them: PNG, TIFF).
+    uint16 one keeps its 16 bits (in a format that holds them: PNG, TIFF); an ``(H, W, 4)``
+    RGBA one its straight alpha (PNG, TIFF).
 
     Raises
     ------
@@ -340,7 +341,8 @@ def write_image(path: str | os.PathLike, rgb, *, overwrite: bool = True) -> Path
     img = np.ascontiguousarray(rgb, dtype=np.uint16 if deep else np.uint8)
     with atomic_path(path, overwrite=overwrite) as tmp:
         try:
-            ok = cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGB2BGR))
+            ok = cv2.imwrite(str(tmp), cv2.cvtColor(img, cv2.COLOR_RGBA2BGRA if img.ndim == 3
+                                                    and img.shape[2] == 4 else cv2.COLOR_RGB2BGR))
         except cv2.error as exc:  # e.g. an extension OpenCV has no writer for
             raise FaceTransferError(f"cannot write image {path}: "
                                     f"{str(exc).strip().splitlines()[-1]}") from None

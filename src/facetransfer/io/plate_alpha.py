@@ -28,8 +28,9 @@ from .frame_file import eight_bits, read_unchanged, tiff_alpha_kind
 from .video_planes import DecodedPlanes, stored_pixel_format
 from .video_sequence import is_sequence, open_sequence
 
-__all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "keeps_alpha", "plate_alpha",
-           "sequence_alpha_kept", "sequence_has_alpha", "video_has_alpha"]
+__all__ = ["ALPHA_SUFFIXES", "PlateAlpha", "VideoAlpha", "cmyk_still", "image_alpha",
+           "keeps_alpha", "plate_alpha", "sequence_alpha_kept", "sequence_has_alpha",
+           "video_has_alpha"]
 
 #: Image-sequence outputs whose frames hold an alpha channel (RGBA, straight) and plates whose
 #: alpha is carried into them (a DPX plate's: into DPX, by :mod:`facetransfer.io.dpx_plate`).
@@ -38,6 +39,13 @@ ALPHA_SUFFIXES = (".png", ".tif", ".tiff", ".dpx")
 
 def _has_alpha(img: np.ndarray | None) -> bool:
     return img is not None and img.ndim == 3 and img.shape[2] in (2, 4)
+
+
+def image_alpha(file) -> np.ndarray | None:
+    """The alpha channel of an image file as stored, ``(H, W)`` uint8 or uint16 (of grey +
+    alpha or RGBA, as OpenCV reads it), or None: the file has none, or OpenCV cannot read it."""
+    img = read_unchanged(file)
+    return img[..., -1] if _has_alpha(img) else None
 
 
 def sequence_has_alpha(seq) -> bool:
@@ -54,11 +62,18 @@ def sequence_has_alpha(seq) -> bool:
 _ALPHA_FORMATS = re.compile(r"(yuva|rgba|bgra|argb|abgr|gbrap|ya8|ya16|rgba64|bgra64)")
 
 
+def cmyk_still(path, fmt: str | None) -> bool:
+    """Whether ``fmt``, the pixel format ffmpeg gives the file ``path``, is that of a CMYK JPEG:
+    ``gbrap`` (or ``cmyk``) of a ``.jpg``/``.jpeg``, whose fourth channel is black, not alpha."""
+    return bool(fmt and fmt.startswith(("gbrap", "cmyk"))
+                and Path(path).suffix.lower() in (".jpg", ".jpeg"))
+
+
 def video_has_alpha(video) -> bool:
     """Whether a video file's first video stream stores an alpha plane (its pixel format as
-    ffmpeg describes it)."""
+    ffmpeg describes it; a CMYK JPEG's fourth channel is black: :func:`cmyk_still`)."""
     fmt = stored_pixel_format(video)
-    return bool(fmt and _ALPHA_FORMATS.match(fmt))
+    return bool(fmt and _ALPHA_FORMATS.match(fmt)) and not cmyk_still(video, fmt)
 
 
 def keeps_alpha(out) -> bool:

@@ -18,7 +18,7 @@ from dataclasses import asdict, dataclass
 from .video_audio import audio_codecs
 from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
                             timecode_of, video_colour)
-from .plate_alpha import sequence_has_alpha, video_has_alpha
+from .plate_alpha import cmyk_still, sequence_has_alpha, video_has_alpha
 from .video_depth import video_bits
 from .video_planes import stored_pixel_format
 from .video_read import TRUNCATED_FRAMES, video_info
@@ -238,7 +238,7 @@ def _still_stored(f: VideoFacts) -> str:
         return f"grey{alpha}, read as RGB"
     if fmt == "pal8":
         return "RGB from a palette"
-    if fmt.startswith(("gbrap", "cmyk")) and suffix in (".jpg", ".jpeg"):
+    if cmyk_still(f.path, fmt):
         return "stored as CMYK, read as RGB"
     if fmt.startswith("yuv") or (not fmt and c.matrix not in (None, "gbr")):
         how = _STILL_MATRIX.get(c.matrix, c.matrix or "matrix not tagged")

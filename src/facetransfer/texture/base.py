@@ -11,7 +11,7 @@ import numpy as np
 
 from ..errors import FaceTransferError, ShapeError
 
-__all__ = ["TextureError", "texture_to_uint8"]
+__all__ = ["TextureError", "check_square_texture", "texture_to_uint8"]
 
 
 class TextureError(FaceTransferError):
@@ -59,6 +59,17 @@ def check_raster(raster, frame: np.ndarray):
     if raster is not None and raster.tri_id.shape != frame.shape[:2]:
         raise ShapeError(f"raster is {raster.tri_id.shape} (H, W) but the frame is {frame.shape[:2]}")
     return raster
+
+
+def check_square_texture(size, what: str, error: type[ValueError] = TextureError) -> None:
+    """Raise ``error`` (a ``ValueError``) naming ``what`` unless ``size`` ``(W, H)`` is square:
+    the model's UVs are laid out on a square, as ``facetransfer texture default|lift`` write
+    it (a contact sheet, a frame or a photo is no texture of them). ``export --texture`` and
+    ``synth-video --texture`` check their image by it."""
+    if size[0] != size[1]:
+        raise error(f"{what} is {size[0]}x{size[1]}: a texture of the model's UVs is a "
+                    "square image in their layout (as `facetransfer texture default` or "
+                    "`texture lift` writes it, e.g. 512x512)")
 
 
 def texture_to_uint8(texture) -> np.ndarray:
