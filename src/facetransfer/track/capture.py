@@ -89,10 +89,10 @@ CORNER_WEIGHT = 3.0
 #: mouth with the outer contour held, the lips passing through each other
 #: (``benchmarks/bench_shut_mouth.py``, ``driving_d9``'s 527 shut frames: gap std 3.5 times the
 #: reference's, on the fitted face 1.0 mm, down to -0.9 mm), so they weigh
-#: :data:`INNER_LIP_WEIGHT` times more in the detection term (§5.1, Eq. (9)): 2.3 times, 0.7
-#: mm, -0.6 mm (``bench_capture.py``: the real clips' mouth std ratio 0.82 -> 0.86, jawOpen's
-#: 1.29 -> 1.21, the synthetic 7-point NME within ±0.03 points; 10 cost the synthetic jawOpen
-#: a tenth of its amplitude).
+#: :data:`INNER_LIP_WEIGHT` times more in the detection term (§5.1, Eq. (9)): 2.8 times, 0.8
+#: mm, -0.6 mm (``bench_capture.py``: the real clips' mouth std ratio 0.82 -> 0.85, jawOpen's
+#: 1.29 -> 1.25, the synthetic 7-point NME within ±0.02 points; 5 failed a synthetic test of
+#: the clip's offset, 10 cost the synthetic jawOpen a tenth of its amplitude).
 INNER_LIPS = tuple(range(60, 68))
 INNER_LIP_WEIGHT = 3.0
 
