@@ -229,7 +229,7 @@ def _with_alpha(res: np.ndarray, target: str, out: Path) -> np.ndarray:
     warning naming the file)."""
     import logging
 
-    from ..io.frame_file import eight_bits, tiff_alpha_kind
+    from ..io.frame_file import eight_bits, sixteen_bits, tiff_alpha_kind
     from ..io.plate_alpha import image_alpha
 
     a = image_alpha(target)
@@ -245,7 +245,7 @@ def _with_alpha(res: np.ndarray, target: str, out: Path) -> np.ndarray:
         logging.getLogger(__name__).warning("target %s has alpha; %s", target, why)
         return res
     if res.dtype == np.uint16:
-        a = a.astype(np.uint16) * np.uint16(257) if a.dtype == np.uint8 else a
+        a = sixteen_bits(a)
     elif a.dtype == np.uint16:
         a = eight_bits(a)
     return np.dstack([res, a])
@@ -256,16 +256,16 @@ def _same_depth(src: np.ndarray, dst: np.ndarray, target: str, out: Path):
     ``8-bit x 257``), or in 8 where ``out`` is a JPEG (said in a warning naming the target)."""
     import logging
 
-    from ..io.frame_file import eight_bits
+    from ..io.frame_file import eight_bits, sixteen_bits
 
     if dst.dtype == np.uint16 and out.suffix.lower() != ".png":
         logging.getLogger(__name__).warning(
             "target %s is 16-bit; %s holds 8 bits: written in 8 (give a .png to keep 16)",
             target, out)
         dst = eight_bits(dst)
-    if dst.dtype == np.uint16 and src.dtype == np.uint8:
-        src = src.astype(np.uint16) * np.uint16(257)
-    elif dst.dtype == np.uint8 and src.dtype == np.uint16:
+    if dst.dtype == np.uint16:
+        src = sixteen_bits(src)
+    elif src.dtype == np.uint16:
         src = eight_bits(src)
     return src, dst
 

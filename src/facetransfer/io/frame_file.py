@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import VideoError
 
 __all__ = ["read_frame_file", "read_image", "read_unchanged", "bit_depth", "eight_bits",
-           "shown_16", "tiff_alpha_kind"]
+           "sixteen_bits", "shown_16", "tiff_alpha_kind"]
 
 
 def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
@@ -116,6 +116,13 @@ def eight_bits(v: np.ndarray) -> np.ndarray:
     """16-bit values as 8-bit ones, ``round(v / 257)`` (65535 -> 255: the inverse of
     ``8-bit * 257``), uint8 of ``v``'s shape."""
     return ((np.asarray(v, np.uint32) * 2 + 257) // 514).astype(np.uint8)
+
+
+def sixteen_bits(v: np.ndarray) -> np.ndarray:
+    """8-bit values as 16-bit ones, ``v * 257`` (255 -> 65535: :func:`eight_bits` gives them
+    back), uint16 of ``v``'s shape; 16-bit ones as they are."""
+    v = np.asarray(v)
+    return v if v.dtype == np.uint16 else v.astype(np.uint16) * np.uint16(257)
 
 
 def shown_16(deep: np.ndarray) -> np.ndarray:

@@ -32,6 +32,7 @@ import numpy as np
 from ..errors import VideoError
 from .atomic import atomic_path, check_not_folder_name, check_output_path, probe_folder
 from .ffmpeg import exit_cause, ffmpeg_error, ffmpeg_exe
+from .frame_file import sixteen_bits
 from .video_audio import audio_codec, audio_codecs, audio_input_args, has_audio, mux_audio
 from .video_display import colour_matrix, frame_args, timecode_args, video_colour
 from .video_options import (CODECS, CRF_RANGE, DEFAULT_CODEC, DEFAULT_CRF,  # noqa: F401 (API)
@@ -446,9 +447,7 @@ def _yuv420p(rgb: np.ndarray) -> np.ndarray:
 def _deep(frame: np.ndarray) -> np.ndarray:
     """A frame as 16-bit samples (8-bit ones as ``v * 257``), little-endian, for ffmpeg's
     ``rgb48le`` / ``rgba64le``."""
-    if frame.dtype == np.uint16:
-        return np.ascontiguousarray(frame, dtype="<u2")
-    return np.ascontiguousarray(frame, dtype=np.uint8).astype("<u2") * np.uint16(257)
+    return np.ascontiguousarray(sixteen_bits(frame), dtype="<u2")
 
 
 class VideoWriter:
