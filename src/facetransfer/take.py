@@ -171,8 +171,11 @@ def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps
 
     ``start``: the take's time (seconds after its first row) at frame 0. ``align`` as
     :func:`facetransfer.transfer.time_map`: ``"trim"`` stops at the take's end,
-    ``"hold"`` holds its last row, ``"loop"`` restarts it; None: ``"trim"`` when the take is
-    at least as long as the ``n_frames``, else ``"hold"``.
+    ``"hold"`` holds its last row, ``"loop"`` restarts it after its last row's own span (the
+    rows' median step: a take of 90 rows at 30 a second repeats every 3 s, as a 90-frame
+    video of 30 fps does; before, the step was the target's frame, and at another rate than
+    the take's each repeat came late, with the take's last row shown in place of its first);
+    None: ``"trim"`` when the take is at least as long as the ``n_frames``, else ``"hold"``.
 
     Returns
     -------
@@ -188,8 +191,8 @@ def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps
         align = "trim" if end >= when[-1] else "hold"
     if align == "trim":
         when = when[when <= end + 0.5 / fps] if end > when[0] else when[:1]
-    elif align == "loop" and end > 0:
-        when = np.mod(when, end + 1.0 / fps)
+    elif align == "loop" and end > 0 and t.size > 1:
+        when = np.mod(when, end + float(np.median(np.diff(t))))
     return np.stack([np.interp(when, t, v[:, c]) for c in range(v.shape[1])], axis=1) \
         if v.shape[1] else np.zeros((when.size, 0))
 
