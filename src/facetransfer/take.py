@@ -42,7 +42,8 @@ from .transfer import TransferError
 log = logging.getLogger(__name__)
 
 __all__ = ["TIMECODE_RATES", "TAKE_SYNCS", "PREVIEW_SIZE", "Take", "is_take", "timecode_seconds",
-           "take_rate", "take_seconds", "take_on_timeline", "take_performance", "take_track"]
+           "take_rate", "take_seconds", "take_row_rate", "take_on_timeline", "take_performance",
+           "take_track"]
 
 #: The frame size of a take shown on a model (:func:`take_track`, ``facetransfer puppet``).
 PREVIEW_SIZE = (512, 512)
@@ -382,6 +383,14 @@ def _first_timecode(timecodes) -> str | None:
     return f"{h:02d}:{m:02d}:{sec:02d}:{ff:02d}"
 
 
+def take_row_rate(timecodes, name: str = "the take") -> float:
+    """The rate of a take's rows, frames a second (:func:`_rows_rate`): what a preview of it
+    plays them at (``puppet take.csv``), and what ``probe`` says beside its timecode rate (a
+    25 fps clip's export counts 30 a second with thousandths, the app's way: its rows are 25
+    a second, which ``probe`` did not say)."""
+    return _rows_rate(take_seconds(timecodes, warn=False, name=name), _fields(timecodes, name))
+
+
 def _rows_rate(t: np.ndarray, f: np.ndarray) -> float:
     """The frame rate of a take's rows at ``t`` (F,) seconds (parsed timecodes ``f`` (F, 5)):
     the timecode rate whose frame is nearest their median step; of rows in clock time (the
@@ -436,7 +445,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
 
     take = _read(path, model)
     t = take_seconds(take.timecodes, name=f"take {path}")
-    fps = _rows_rate(t, _fields(take.timecodes))
+    fps = take_row_rate(take.timecodes, f"take {path}")
     start = _first_timecode(take.timecodes)
     n = int(np.floor(t[-1] * fps + 1e-6)) + 1
     n = n if max_frames is None else min(n, int(max_frames))
