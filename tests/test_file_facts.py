@@ -87,6 +87,28 @@ def test_a_take_is_described(arkit_model, make_arkit_track, tmp_path, capsys):
         "  head rotation: HeadYaw, HeadPitch (HeadRoll read as 0); eye rotation: none")
 
 
+@pytest.mark.parametrize("fps, start, labels, said", [
+    (25.0, None, "app", "(30 fps timecode, rows 25 a second)"),
+    (30000 / 1001, "00:59:59;28", "app", "(30 fps timecode, rows 29.97 a second)"),
+    (50.0, None, "app", "(60 fps timecode, rows 50 a second)"),
+    (25.0, None, "clip", "(25 fps timecode)"), (30.0, None, "app", "(30 fps timecode)")])
+def test_a_take_says_its_rows_rate_beside_its_timecodes(arkit_model, make_arkit_track, tmp_path,
+                                                        capsys, fps, start, labels, said):
+    """An export of a 25 fps clip counts 30 a second with thousandths (the app's way): probe
+    says its rows' own rate too, the rate ``puppet take.csv`` plays them at (the walk of
+    chains, forty-eighth session; a 29.97 fps clip's after a drop-frame start, whose rows count
+    clock time). Before: "(30 fps timecode)" alone, and a 25 fps take looked like a 30 fps
+    one."""
+    from facetransfer.export.livelink import write_livelink
+
+    track, _, _ = make_arkit_track(arkit_model, 40, fps=fps)
+    write_livelink(track, tmp_path / "take.csv", start=start, labels=labels)
+    f = take_facts(tmp_path / "take.csv")
+    assert f["row_rate"] == pytest.approx(fps)
+    assert main(["probe", str(tmp_path / "take.csv")]) == 0
+    assert f"take of 40 rows {said}, from" in capsys.readouterr().out.splitlines()[0]
+
+
 def test_a_model_or_a_foreign_archive_given_to_probe(arkit_model, tmp_path, capsys):
     arkit_model.save(tmp_path / "m.npz")
     assert main(["probe", str(tmp_path / "m.npz")]) == 2

@@ -298,6 +298,28 @@ def _moov_end(data: bytes) -> int:
     raise AssertionError("no moov box")
 
 
+@pytest.mark.parametrize("name, data, said", [
+    ("face.glb", b"glTF\x02\x00\x00\x00" + bytes(64), "a glTF binary"),
+    ("face.usd", b"PXR-USDC\x00\x08" + bytes(64), "a USD file"),
+    ("face.usda", b"#usda 1.0\n(\n)\n", "a USD file"),
+    ("page.html", b"<!DOCTYPE html>\n<html></html>\n", "an HTML page"),
+    ("take.mp4", None, "a Live Link Face take")], ids=["glb", "usdc", "usda", "page", "take"])
+def test_an_export_or_a_take_where_a_video_belongs_is_named(tmp_path, capsys, name, data, said):
+    """One of the tool's own outputs passed on where a video belongs (the walk of chains,
+    forty-eighth session: ``transfer --identity-from face.glb``, ``track take.csv``) is named
+    as ``probe`` names it. Before: "not a video OpenCV can decode" (a glb, a binary USD
+    file), "a text file" (a take, a .usda, a page)."""
+    p = tmp_path / name
+    if data is None:
+        p.write_text(_take_text(["00:00:00:00.000", "00:00:00:01.000"]))
+    else:
+        p.write_bytes(data)
+    msg = _info_error(p)
+    assert f"it is {said}" in msg and "not a video OpenCV" not in msg and "text file" not in msg
+    status, err = _cli(["puppet", p, "--out", tmp_path / "out.mp4", "--no-progress"], capsys)
+    assert status == 2 and len(err) == 1 and name in err[0] and said in err[0], err
+
+
 def test_a_video_whose_frames_are_cut_off_names_it(tmp_path, capsys, quick_model_path):
     """An MP4 with its index first, cut just after the index: its header counts frames, none
     decodes. Before: ``track`` said "the clip has no frames", naming no file."""

@@ -42,11 +42,57 @@ def test_a_take_is_resampled_onto_the_targets_frames():
     np.testing.assert_allclose(got[:, 0], 10 * np.arange(20) / 25.0)
     held = take_on_timeline(t, v, 40, 25.0)          # shorter: its last row held
     assert held.shape == (40, 2) and np.all(held[25:, 0] == 10.0)
-    assert take_on_timeline(t, v, 40, 25.0, align="trim").shape == (26, 2)
+    # trimmed at the end of the last row's 0.1 s (1.1 s), as time_map trims an 11-frame video
+    # of 10 fps: 28 frames (was 26, to half a target frame past the last row)
+    assert take_on_timeline(t, v, 40, 25.0, align="trim").shape == (28, 2)
     looped = take_on_timeline(t, v, 40, 25.0, align="loop")
-    np.testing.assert_allclose(looped[30, 0], 10 * (30 / 25.0 - 1.04))
+    # 11 rows 0.1 s apart last 1.1 s: 1.2 s is 0.1 s into the second time through (was 1.04)
+    np.testing.assert_allclose(looped[30, 0], 10 * (30 / 25.0 - 1.1))
     with pytest.raises(TransferError, match="align"):
         take_on_timeline(t, v, 5, 25.0, align="stretch")
+
+
+@pytest.mark.parametrize("take_fps, target_fps", [(30.0, 60.0), (25.0, 30.0), (24.0, 60.0),
+                                                  (30.0, 25.0), (25.0, 25.0)])
+def test_a_trimmed_take_keeps_the_frames_a_trimmed_video_keeps(take_fps, target_fps):
+    """``--align trim`` with a take keeps the target's frames within its last row's own span,
+    as :func:`facetransfer.transfer.time_map` keeps a video's last frame for its length.
+    Before, half a target frame: a 30 fps take of 90 rows on a 60 fps target gave 179 frames
+    where the same clip as a video gives 180. Rows written with the app's thousandths of a
+    frame (a 23.976 fps clip's, up to 1/60000 s off) do not add a frame."""
+    from facetransfer.transfer import time_map
+
+    rows = 90
+    t = np.arange(rows) / take_fps
+    v = np.arange(rows, dtype=np.float64)[:, None]
+    n = 4 * rows
+    got = take_on_timeline(t, v, n, target_fps, align="trim")[:, 0]
+    video = time_map(rows, take_fps, n, target_fps, align="trim").source_time
+    assert got.shape == video.shape
+    np.testing.assert_allclose(got, video, atol=1e-9)
+    ntsc = 24000 / 1001                                  # rows rounded to 1/30000 s
+    rounded = np.round(np.arange(rows) / ntsc * 30000) / 30000
+    assert take_on_timeline(rounded, v, n, ntsc, align="trim").shape[0] == rows
+
+
+@pytest.mark.parametrize("take_fps, target_fps", [(30.0, 25.0), (25.0, 30.0), (60.0, 24.0),
+                                                  (30.0, 30.0)])
+def test_a_looped_take_repeats_as_a_looped_video_of_its_rate(take_fps, target_fps):
+    """``--align loop`` with a take repeats it where the same frames as a video repeat
+    (:func:`facetransfer.transfer.time_map`): after its last row's own span. Before, the span
+    was the target's frame: a 30 fps take of 90 rows on a 25 fps target came 1/150 s later
+    each time through, and frame 75 (3.0 s, the second time's first row) showed row 89."""
+    from facetransfer.transfer import time_map
+
+    rows = 90
+    t = np.arange(rows) / take_fps
+    v = np.arange(rows, dtype=np.float64)[:, None]        # a row's value is its number
+    n = int(5 * rows * target_fps / take_fps)              # five times through
+    got = take_on_timeline(t, v, n, target_fps, align="loop")[:, 0]
+    video = time_map(rows, take_fps, n, target_fps, align="loop").source_time
+    np.testing.assert_allclose(got, video, atol=1e-9)
+    first = np.flatnonzero(np.isclose(np.arange(n) * take_fps / target_fps % rows, 0))[1:]
+    assert first.size and np.all(np.abs(got[first]) < 1e-9)   # each repeat starts at row 0
 
 
 def test_a_take_written_from_a_track_drives_the_same_expressions(arkit_model, make_arkit_track,

@@ -145,7 +145,7 @@ def take_facts(path: str | os.PathLike) -> dict:
     """What the Live Link Face take ``path`` holds, as a JSON-ready dict (ExportError or
     TransferError for a file that is not one)."""
     from .export.livelink import LIVELINK_NAMES, POSE_COLUMNS, read_livelink
-    from .take import take_rate, take_seconds
+    from .take import take_rate, take_row_rate, take_seconds
 
     take = read_livelink(path, lenient=True)
     tc = take.timecodes
@@ -156,6 +156,7 @@ def take_facts(path: str | os.PathLike) -> dict:
     return {
         "kind": "take", "path": str(path), "rows": len(tc),
         "timecode_rate": take_rate(tc, warn=False) if tc else None,  # said once, above
+        "row_rate": take_row_rate(tc, f"take {path}") if len(tc) > 1 else None,
         "seconds": float(seconds[-1] - seconds[0]) if len(seconds) else 0.0,
         "first_timecode": tc[0] if tc else None, "last_timecode": tc[-1] if tc else None,
         "shapes": len(shapes), "missing_shapes": [n for n in LIVELINK_NAMES if n not in shapes],
@@ -208,6 +209,9 @@ def _track_lines(f: dict) -> list[str]:
 
 def _take_lines(f: dict) -> list[str]:
     rate = f"{f['timecode_rate']} fps timecode" if f["timecode_rate"] else "no rows"
+    rows = f.get("row_rate")
+    if rows and abs(rows - f["timecode_rate"]) > 1e-6:   # an export's at the app's count
+        rate += f", rows {rows:.3f}".rstrip("0").rstrip(".") + " a second"
     lines = [f"{f['path']}: a Live Link Face take of {_count(f['rows'], 'row')} ({rate})"
              + (f", from {f['first_timecode']} to {f['last_timecode']} ({f['seconds']:.2f} s "
                 "apart)" if f["first_timecode"] else ""),

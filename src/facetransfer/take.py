@@ -42,7 +42,8 @@ from .transfer import TransferError
 log = logging.getLogger(__name__)
 
 __all__ = ["TIMECODE_RATES", "TAKE_SYNCS", "PREVIEW_SIZE", "Take", "is_take", "timecode_seconds",
-           "take_rate", "take_seconds", "take_on_timeline", "take_performance", "take_track"]
+           "take_rate", "take_seconds", "take_row_rate", "take_on_timeline", "take_performance",
+           "take_track"]
 
 #: The frame size of a take shown on a model (:func:`take_track`, ``facetransfer puppet``).
 PREVIEW_SIZE = (512, 512)
@@ -170,9 +171,14 @@ def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps
     ``start + j / fps``, linearly between rows.
 
     ``start``: the take's time (seconds after its first row) at frame 0. ``align`` as
-    :func:`facetransfer.transfer.time_map`: ``"trim"`` stops at the take's end,
-    ``"hold"`` holds its last row, ``"loop"`` restarts it; None: ``"trim"`` when the take is
-    at least as long as the ``n_frames``, else ``"hold"``.
+    :func:`facetransfer.transfer.time_map`: ``"trim"`` stops at the end of its last row's own
+    span, ``"hold"`` holds its last row, ``"loop"`` restarts it after that span. A row's span
+    is the rows' median step (:func:`_row_step`): a take of 90 rows at 30 a second lasts 3 s,
+    as a 90-frame video of 30 fps does, on a target of any rate. Before, it was the target's
+    frame (half of one for ``"trim"``): at another rate than the take's each repeat came late,
+    the take's last row shown in place of its first, and a 30 fps take trimmed on a 60 fps
+    target lost the frame its video keeps (179 frames for 180).
+    None: ``"trim"`` when the take is at least as long as the ``n_frames``, else ``"hold"``.
 
     Returns
     -------
@@ -184,12 +190,13 @@ def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps
         raise TransferError(f"align must be trim, hold or loop, got {align!r}")
     end = float(t[-1]) if t.size else 0.0
     when = float(start) + np.arange(int(n_frames)) / float(fps)
+    span = end + _row_step(t, fps)               # the take's end: its last row's span too
     if align is None:
         align = "trim" if end >= when[-1] else "hold"
     if align == "trim":
-        when = when[when <= end + 0.5 / fps] if end > when[0] else when[:1]
+        when = when[when < span - _SLACK / fps] if end > when[0] else when[:1]
     elif align == "loop" and end > 0:
-        when = np.mod(when, end + 1.0 / fps)
+        when = np.mod(when, span)
     return np.stack([np.interp(when, t, v[:, c]) for c in range(v.shape[1])], axis=1) \
         if v.shape[1] else np.zeros((when.size, 0))
 
@@ -234,7 +241,8 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     start = _synced_start(take.timecodes, clock, start_timecode, first, path)
     a = take_on_timeline(t, take.activations, target_track.n_frames, target_track.fps,
                          align=align, start=start)
-    _say_held(path, float(t[-1]) - start, len(a), target_track.fps, align)
+    _say_held(path, float(t[-1]) - start + _row_step(t, target_track.fps), len(a),
+              target_track.fps, align)
     new = take_frames(target_track, np.arange(len(a)))
     weights = dict(new.weights)
     weights["expression"] = activations_to_weights(model, np.clip(a, 0.0, 1.0))
@@ -242,13 +250,25 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     return attach_activations(project_landmarks(new, model), model)
 
 
+#: A target frame this much (of a frame) short of a take's end is past it: the app's
+#: thousandths of a frame place a row up to 1/60000 s off its clip's frame.
+_SLACK = 1e-3
+
+
+def _row_step(t: np.ndarray, fps: float) -> float:
+    """How long one of a take's rows at ``t`` (seconds) lasts: their median step, or one
+    frame of ``fps`` for a take of one row."""
+    return float(np.median(np.diff(t))) if np.size(t) > 1 else 1.0 / float(fps)
+
+
 def _say_held(path, left: float, n: int, fps: float, align: str | None) -> None:
-    """Warn where a take that ends ``left`` seconds after the target's first frame leaves
-    the last of its ``n`` frames (at ``fps``) holding its last row (``align`` None or
-    "hold"): the performance stands still there, which the user would not see coming."""
+    """Warn where a take that ends ``left`` seconds after the target's first frame (its last
+    row's span included) leaves the last of its ``n`` frames (at ``fps``) holding its last
+    row (``align`` None or "hold"): the performance stands still there, which the user would
+    not see coming."""
     if align not in (None, "hold") or n < 1:
         return
-    k = int(np.floor(left * fps + 0.5)) + 1     # the frames the take's rows reach
+    k = max(int(np.ceil(left * fps - _SLACK)), 1)     # the frames the take's rows reach
     if k < n:
         log.warning("the take %s ends at the target's frame %d: its last row is held on "
                     "frames %d-%d (--align trim stops the result there, loop repeats the "
@@ -379,6 +399,14 @@ def _first_timecode(timecodes) -> str | None:
     return f"{h:02d}:{m:02d}:{sec:02d}:{ff:02d}"
 
 
+def take_row_rate(timecodes, name: str = "the take") -> float:
+    """The rate of a take's rows, frames a second (:func:`_rows_rate`): what a preview of it
+    plays them at (``puppet take.csv``), and what ``probe`` says beside its timecode rate (a
+    25 fps clip's export counts 30 a second with thousandths, the app's way: its rows are 25
+    a second, which ``probe`` did not say)."""
+    return _rows_rate(take_seconds(timecodes, warn=False, name=name), _fields(timecodes, name))
+
+
 def _rows_rate(t: np.ndarray, f: np.ndarray) -> float:
     """The frame rate of a take's rows at ``t`` (F,) seconds (parsed timecodes ``f`` (F, 5)):
     the timecode rate whose frame is nearest their median step; of rows in clock time (the
@@ -433,7 +461,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
 
     take = _read(path, model)
     t = take_seconds(take.timecodes, name=f"take {path}")
-    fps = _rows_rate(t, _fields(take.timecodes))
+    fps = take_row_rate(take.timecodes, f"take {path}")
     start = _first_timecode(take.timecodes)
     n = int(np.floor(t[-1] * fps + 1e-6)) + 1
     n = n if max_frames is None else min(n, int(max_frames))

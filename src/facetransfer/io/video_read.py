@@ -109,12 +109,22 @@ def _open(path: str | os.PathLike):
     return cap
 
 
+#: The :func:`facetransfer.io.npz.content_kind` kinds :func:`why_not_video` names.
+_NAMED_KINDS = ("a glTF", "a USD", "a Live Link", "an HTML", "a JSON")
+
+
 def why_not_video(p: Path) -> str:
     """Why OpenCV cannot open the file ``p`` as a video, as far as its bytes and ffmpeg say:
     an MP4/MOV cut short (no ``moov`` index: a recording or copy that did not finish), a file
     with sound and no pictures, or no stream at all, a text file; else that it is not a video
     OpenCV can decode.
+    The tool's own files by their first bytes (a Live Link Face take, a glb, a USD file, a
+    page, a JSON file: :func:`facetransfer.io.npz.content_kind`), named as ``probe`` names
+    them: an export or a take passed on where a video belongs (``track take.csv``,
+    ``transfer --identity-from face.glb``; before, "a text file", or "not a video OpenCV can
+    decode" for a glb or a binary USD file).
     (Before, all of these were "not a video OpenCV can decode".)"""
+    from .npz import content_kind
     from .video_display import described_input
 
     try:
@@ -130,6 +140,9 @@ def why_not_video(p: Path) -> str:
         return "it has sound and no video stream"
     if "Input #0" in said and "Stream #" not in said:
         return "it holds no stream at all (an empty recording)"
+    kind = content_kind(p)
+    if kind is not None and kind.startswith(_NAMED_KINDS):   # one of the tool's own files
+        return f"it is {kind}, not a video"
     if head and all(b in b"\t\n\r" or 32 <= b < 127 for b in head.lstrip(b"\xef\xbb\xbf")):
         return "it is a text file, not a video"
     return "not a video OpenCV can decode"
