@@ -21,6 +21,7 @@ import numpy as np
 from ..errors import ShapeError
 from .init import MediaPipeDetector, create_landmarker, import_tasks_api
 from .landmarks import mediapipe_to_ibug
+from .mp_result import array_reader
 from .shots import CUT_FLOW_FAILED, CUT_LEVELS
 from .skip_rule import eye_scores_moving, eyes_changed
 
@@ -136,13 +137,27 @@ class VideoLandmarker(MediaPipeDetector):
     def __init__(self, model_path: str | os.PathLike | None = None, *, fps: float = 30.0,
                  blendshapes: bool = False) -> None:
         self._lm = create_landmarker(model_path, video=True, blendshapes=blendshapes)
+        self._reader = array_reader(self._lm)       # None: through the API's objects
         self._dt = 1000.0 / max(float(fps), 1e-3)
         self._i = 0
 
-    def _detect(self, image):
+    def _stamp(self) -> int:
+        """The next frame's timestamp (ms); the clock moves on."""
         ts = int(round(self._i * self._dt))
         self._i += 1
-        return self._lm.detect_for_video(image, ts)
+        return ts
+
+    def _detect(self, image):
+        return self._lm.detect_for_video(image, self._stamp())
+
+    def _detect_arrays(self, image):
+        if self._reader is None:
+            return super()._detect_arrays(image)
+        return self._reader.detect_for_video(image, self._stamp())
+
+    def close(self) -> None:
+        self._reader = None
+        super().close()
 
     def at_least(self, frame: int) -> "VideoLandmarker":
         """This landmarker with its clock at frame ``frame`` at least (one not shown every

@@ -179,15 +179,23 @@ class MediaPipeDetector:
         import mediapipe as mp
 
         f = np.ascontiguousarray(frame, dtype=np.uint8)
-        res = self._detect(mp.Image(image_format=mp.ImageFormat.SRGB, data=f))
-        if not res.face_landmarks:
+        pts, scores = self._detect_arrays(mp.Image(image_format=mp.ImageFormat.SRGB, data=f))
+        if pts is None:
             return None, None
         H, W = f.shape[:2]
+        return pts * (W, H) - 0.5, scores  # normalised [0, 1] -> pixel centres at integers
+
+    def _detect_arrays(self, image) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """The first face's landmarks in normalised coordinates (478, 2) float64 and its
+        scores (as :meth:`detect_scored`'s), or ``(None, None)`` without a face."""
+        res = self._detect(image)
+        if not res.face_landmarks:
+            return None, None
         pts = np.array([(q.x, q.y) for q in res.face_landmarks[0]], dtype=np.float64)
         scores = None
         if getattr(res, "face_blendshapes", None):
             scores = blendshape_scores(res.face_blendshapes[0])
-        return pts * (W, H) - 0.5, scores  # normalised [0, 1] -> pixel centres at integers
+        return pts, scores
 
     def _detect(self, image):
         return self._lm.detect(image)

@@ -1,0 +1,121 @@
+"""Face Landmarker's video-mode results read as arrays, without its Python objects.
+
+MediaPipe's Tasks API (``FaceLandmarker.detect_for_video``) turns each C result into Python
+objects before returning it: 478 ``NormalizedLandmark`` dataclasses and 52 ``Category`` ones,
+which the detector (:class:`facetransfer.track.detect.VideoLandmarker`) then reads back into
+arrays. On issue 13's source clip that conversion took 0.09 of the detector's 0.18 CPU-s in
+this process for 218 frames (BENCHMARKS.md, "Forty-eighth session").
+
+:class:`ArrayReader` makes the call that ``detect_for_video`` makes (the same C function,
+through the landmarker's own wrapped library, so its errors are raised as the API raises them)
+and reads the first face's points and blendshape scores from the C result straight into
+arrays: the values are the same floats (``float32`` widened to ``float64``, as the API's
+Python floats are). :func:`array_reader` gives None where MediaPipe's private parts it uses are
+not there (another MediaPipe version): the caller then goes through the API.
+"""
+
+from __future__ import annotations
+
+import ctypes
+
+import numpy as np
+
+from ..arkit import ARKIT_NAMES
+
+__all__ = ["ArrayReader", "array_reader"]
+
+#: Column of each ARKit name in the scores (:func:`facetransfer.track.init.blendshape_scores`).
+_ARKIT_INDEX = {n: k for k, n in enumerate(ARKIT_NAMES)}
+
+
+def _fields(struct, names: tuple, formats: tuple) -> np.dtype:
+    """A numpy record type reading the fields ``names`` of the ctypes ``struct``."""
+    return np.dtype({"names": list(names), "formats": list(formats),
+                     "offsets": [getattr(struct, n).offset for n in names],
+                     "itemsize": ctypes.sizeof(struct)})
+
+
+def _records(pointer, count: int, dtype: np.dtype) -> np.ndarray:
+    """``count`` C structs at ``pointer`` as records of ``dtype`` (a view: copy before the
+    result is closed)."""
+    address = ctypes.cast(pointer, ctypes.c_void_p).value
+    raw = (ctypes.c_char * (count * dtype.itemsize)).from_address(address)
+    return np.frombuffer(raw, dtype, count=count)
+
+
+class ArrayReader:
+    """Reads a video-mode landmarker's results as arrays (see the module notes)."""
+
+    def __init__(self, landmarker, result_type, landmark_type, category_type) -> None:
+        self._lm = landmarker
+        self._result = result_type
+        self._points = _fields(landmark_type, ("x", "y"), ("<f4", "<f4"))
+        self._scores = _fields(category_type, ("index", "score"), ("<i4", "<f4"))
+        self._index = None          # the categories' indices when ``_columns`` was made
+        self._columns = None        # (which categories, their ARKit columns)
+
+    def detect_for_video(self, image, timestamp_ms: int
+                         ) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """``(points, scores)`` of the first face in the MediaPipe ``image``: its landmarks in
+        normalised image coordinates (N, 2) float64 and its blendshape scores (52,) float32 in
+        :data:`facetransfer.arkit.ARKIT_NAMES` order (NaN for a name it did not score), or
+        None where there is no face (scores: no face, or a landmarker without blendshapes)."""
+        lib, res = self._lm._lib, self._result()  # noqa: SLF001 - see the module notes
+        lib.MpFaceLandmarkerDetectForVideo(self._lm._handle, image._image_ptr,  # noqa: SLF001
+                                           None, int(timestamp_ms), ctypes.byref(res))
+        try:
+            if not res.face_landmarks_count:
+                return None, None
+            lms = res.face_landmarks[0]
+            rec = _records(lms.landmarks, int(lms.landmarks_count), self._points)
+            pts = np.empty((len(rec), 2), np.float64)
+            pts[:, 0], pts[:, 1] = rec["x"], rec["y"]
+            scores = None
+            if res.face_blendshapes_count:
+                scores = self._read_scores(res.face_blendshapes[0])
+            return pts, scores
+        finally:
+            lib.MpFaceLandmarkerCloseResult(ctypes.byref(res))
+
+    def _read_scores(self, categories) -> np.ndarray:
+        """One face's categories as :func:`facetransfer.track.init.blendshape_scores` gives
+        them; the columns found by the categories' names once, while their indices stay."""
+        n = int(categories.categories_count)
+        rec = _records(categories.categories, n, self._scores)
+        if self._index is None or not np.array_equal(self._index, rec["index"]):
+            names = [categories.categories[j].category_name for j in range(n)]
+            found = [(j, _ARKIT_INDEX.get(b.decode("utf-8") if b else None))
+                     for j, b in enumerate(names)]
+            found = [(j, k) for j, k in found if k is not None]
+            self._columns = (np.array([j for j, _ in found], np.intp),
+                             np.array([k for _, k in found], np.intp))
+            self._index = rec["index"].copy()
+        out = np.full(len(ARKIT_NAMES), np.nan, np.float32)
+        rows, cols = self._columns
+        out[cols] = rec["score"][rows]
+        return out
+
+
+def array_reader(landmarker) -> ArrayReader | None:
+    """An :class:`ArrayReader` of a ``FaceLandmarker`` in video mode, or None where this
+    MediaPipe lacks what it reads (the caller then uses ``detect_for_video``)."""
+    try:
+        from mediapipe.tasks.python.components.containers import category_c, landmark_c
+        from mediapipe.tasks.python.vision import face_landmarker
+    except ImportError:
+        return None
+    result_type = getattr(face_landmarker, "MpFaceLandmarkerResultC", None)
+    landmark_type = getattr(landmark_c, "MpNormalizedLandmarkC", None)
+    category_type = getattr(category_c, "MpCategoryC", None)
+    lib = getattr(landmarker, "_lib", None)
+    if None in (result_type, landmark_type, category_type, lib) or \
+            getattr(landmarker, "_handle", None) is None or \
+            not hasattr(lib, "MpFaceLandmarkerDetectForVideo") or \
+            not hasattr(lib, "MpFaceLandmarkerCloseResult"):
+        return None
+    want = {"x": ctypes.c_float, "y": ctypes.c_float}
+    if any(dict(landmark_type._fields_).get(k) is not t for k, t in want.items()) or \
+            dict(category_type._fields_).get("score") is not ctypes.c_float or \
+            dict(category_type._fields_).get("index") is not ctypes.c_int:
+        return None
+    return ArrayReader(landmarker, result_type, landmark_type, category_type)

@@ -1,0 +1,69 @@
+"""Face Landmarker's results read as arrays (facetransfer.track.mp_result): the same points and
+scores as through MediaPipe's own Python objects, frame for frame; the API where the reader
+cannot run."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facetransfer.io.video import read_video
+from facetransfer.track.detect import VideoLandmarker, detect_clip
+from facetransfer.track.init import MediaPipeDetector
+from facetransfer.track.mp_result import ArrayReader, array_reader
+
+
+@pytest.fixture(scope="module")
+def frames(data_dir):
+    return read_video(data_dir / "video" / "driving_d6.mp4", max_frames=12)[0]
+
+
+def _through_api(fps: float = 30.0, blendshapes: bool = True) -> VideoLandmarker:
+    """A video landmarker read through MediaPipe's Python objects (no array reader)."""
+    lm = VideoLandmarker(fps=fps, blendshapes=blendshapes)
+    lm._reader = None
+    return lm
+
+
+@pytest.mark.parametrize("blendshapes", [True, False])
+def test_the_arrays_are_the_api_objects_values(frames, blendshapes):
+    with VideoLandmarker(fps=30.0, blendshapes=blendshapes) as fast, \
+            _through_api(blendshapes=blendshapes) as slow:
+        assert isinstance(fast._reader, ArrayReader)
+        for f in frames:
+            (p, s), (q, t) = fast.detect_scored(f), slow.detect_scored(f)
+            assert p is not None and p.shape == (478, 2) and p.dtype == np.float64
+            assert np.array_equal(p, q)
+            if blendshapes:
+                assert s.dtype == np.float32 and s.shape == (52,)
+                assert np.array_equal(s, t, equal_nan=True)
+                assert np.isfinite(s).sum() == 51            # tongueOut is not scored
+            else:
+                assert s is None and t is None
+
+
+def test_a_clip_detected_through_the_reader_or_the_api_is_the_same(frames):
+    with VideoLandmarker(fps=30.0, blendshapes=True) as fast:
+        a = detect_clip(frames, fast, keep478=True, every=2)
+    with _through_api() as slow:
+        b = detect_clip(frames, slow, keep478=True, every=2)
+    for name in ("points", "flow", "points478", "scores", "change"):
+        assert np.array_equal(getattr(a, name), getattr(b, name), equal_nan=True), name
+
+
+def test_no_face_gives_none_and_the_clock_moves_on(frames):
+    grey = np.full_like(frames[0], 118)
+    with VideoLandmarker(fps=30.0, blendshapes=True) as lm:
+        assert lm.detect_scored(grey) == (None, None)
+        assert lm._i == 1
+        p, s = lm.detect_scored(frames[0])
+        assert p is not None and s is not None and lm._i == 2
+
+
+def test_without_the_private_parts_there_is_no_reader():
+    class Landmarker:           # a FaceLandmarker of another MediaPipe: no library handle
+        pass
+
+    assert array_reader(Landmarker()) is None
+    det = MediaPipeDetector.__new__(MediaPipeDetector)
+    assert not hasattr(det, "_reader")           # the image-mode detector reads the API's
