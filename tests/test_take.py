@@ -95,6 +95,31 @@ def test_a_looped_take_repeats_as_a_looped_video_of_its_rate(take_fps, target_fp
     assert first.size and np.all(np.abs(got[first]) < 1e-9)   # each repeat starts at row 0
 
 
+@pytest.mark.parametrize("fps, start", [(60.0, "01:02:03:04"), (25.0, "10:11:12:13"),
+                                        (30.0, "01:02:03:04"), (24.0, None)])
+def test_a_looped_take_of_the_apps_timecodes_repeats_from_its_first_row(fps, start):
+    """A take at the target's own rate, its rows' times read from time-of-day timecodes (as
+    every take the app records has), looped: each repeat's first frame shows row 0, as the
+    looped video does (review48a). Before, the loop's span (last row plus the rows' median
+    step, both differences of ~3723 s) came out an ulp past ``j / fps`` at most wraps: the
+    frame stayed an ulp short of the repeat and showed the last row (a 60 fps take from
+    01:02:03:04 looped at 60 fps: every row count from 62 to 178, the take's end shown for
+    a frame where its start belongs)."""
+    from facetransfer.export.livelink import format_timecode
+    from facetransfer.transfer import time_map
+
+    codes = [format_timecode(k, fps, start, labels="app") for k in range(int(3 * fps))]
+    off = []
+    for rows in range(int(fps) + 2, len(codes), 2):          # each over a second: rate known
+        t = take_seconds(codes[:rows], warn=False)
+        v = np.arange(rows, dtype=np.float64)[:, None]     # a row's value is its number
+        got = take_on_timeline(t, v, 3 * rows, fps, align="loop")[:, 0]
+        video = time_map(rows, fps, 3 * rows, fps, align="loop").source_time
+        if not np.allclose(got, video, atol=1e-6):
+            off.append(rows)
+    assert off == []
+
+
 def test_a_take_written_from_a_track_drives_the_same_expressions(arkit_model, make_arkit_track,
                                                                   tmp_path):
     """The exporter's take of a track, driving that track's own person: its activations come
