@@ -75,6 +75,35 @@ def test_a_trimmed_take_keeps_the_frames_a_trimmed_video_keeps(take_fps, target_
     assert take_on_timeline(rounded, v, n, ntsc, align="trim").shape[0] == rows
 
 
+@pytest.mark.parametrize("take_fps, target_fps, rows", [
+    (25.0, 30000 / 1001, 166), (30.0, 24000 / 1001, 249), (24.0, 60000 / 1001, 400),
+    (50.0, 60000 / 1001, 1167), (24000 / 1001, 24.0, 1001)])
+def test_a_trimmed_take_keeps_a_frame_a_thousandth_of_a_frame_inside_its_end(take_fps,
+                                                                           target_fps, rows):
+    """An NTSC rate beside a whole one puts a target frame 1/1001 of a frame short of a take's
+    end (a 25 fps take of 166 rows ends at 6.64 s, 29.97 fps frame 199 at 6.63997 s): the
+    trimmed video keeps that frame, and so does the take (review48a). Before, the slack for
+    the app's rounded rows was 1/1000 of a frame, more than that: 199 frames for 200. The
+    slack still takes a 23.976 fps take's rows, rounded to 1/30000 s, as ending where its
+    video does (2399 rows from a time-of-day start: 2399 frames)."""
+    from facetransfer.export.livelink import format_timecode
+    from facetransfer.transfer import time_map
+
+    t = np.arange(rows) / take_fps
+    v = np.arange(rows, dtype=np.float64)[:, None]
+    n = int(rows * target_fps / take_fps) + 4
+    video = time_map(rows, take_fps, n, target_fps, align="trim").source_time
+    got = take_on_timeline(t, v, n, target_fps, align="trim")[:, 0]
+    assert got.shape == video.shape
+    np.testing.assert_allclose(got, video, atol=1e-9)
+    ntsc = 24000 / 1001
+    codes = [format_timecode(k, ntsc, "01:02:03:04", labels="app") for k in range(2399)]
+    rounded = take_seconds(codes, warn=False)
+    assert codes[1].endswith(".251")                      # the app's thousandths: rounded
+    assert take_on_timeline(rounded, rounded[:, None], 2500, ntsc, align="trim").shape == \
+        (2399, 1)
+
+
 @pytest.mark.parametrize("take_fps, target_fps", [(30.0, 25.0), (25.0, 30.0), (60.0, 24.0),
                                                   (30.0, 30.0)])
 def test_a_looped_take_repeats_as_a_looped_video_of_its_rate(take_fps, target_fps):

@@ -254,8 +254,10 @@ def take_performance(path, target_track, model, *, align: str | None = None,
 
 
 #: A target frame this much (of a frame) short of a take's end is past it: the app's
-#: thousandths of a frame place a row up to 1/60000 s off its clip's frame.
-_SLACK = 1e-3
+#: thousandths of a frame place a row up to 1/60000 s off its clip's frame (a 23.976 fps
+#: take's end needs 2e-4). Less than 1/1001: an NTSC rate beside a whole one puts a target
+#: frame that much inside a take's end, which the video keeps (1e-3 dropped it).
+_SLACK = 5e-4
 
 
 def _row_step(t: np.ndarray, fps: float) -> float:
