@@ -75,6 +75,35 @@ def test_a_trimmed_take_keeps_the_frames_a_trimmed_video_keeps(take_fps, target_
     assert take_on_timeline(rounded, v, n, ntsc, align="trim").shape[0] == rows
 
 
+@pytest.mark.parametrize("take_fps, target_fps, rows", [
+    (25.0, 30000 / 1001, 166), (30.0, 24000 / 1001, 249), (24.0, 60000 / 1001, 400),
+    (50.0, 60000 / 1001, 1167), (24000 / 1001, 24.0, 1001)])
+def test_a_trimmed_take_keeps_a_frame_a_thousandth_of_a_frame_inside_its_end(take_fps,
+                                                                           target_fps, rows):
+    """An NTSC rate beside a whole one puts a target frame 1/1001 of a frame short of a take's
+    end (a 25 fps take of 166 rows ends at 6.64 s, 29.97 fps frame 199 at 6.63997 s): the
+    trimmed video keeps that frame, and so does the take (review48a). Before, the slack for
+    the app's rounded rows was 1/1000 of a frame, more than that: 199 frames for 200. The
+    slack still takes a 23.976 fps take's rows, rounded to 1/30000 s, as ending where its
+    video does (2399 rows from a time-of-day start: 2399 frames)."""
+    from facetransfer.export.livelink import format_timecode
+    from facetransfer.transfer import time_map
+
+    t = np.arange(rows) / take_fps
+    v = np.arange(rows, dtype=np.float64)[:, None]
+    n = int(rows * target_fps / take_fps) + 4
+    video = time_map(rows, take_fps, n, target_fps, align="trim").source_time
+    got = take_on_timeline(t, v, n, target_fps, align="trim")[:, 0]
+    assert got.shape == video.shape
+    np.testing.assert_allclose(got, video, atol=1e-9)
+    ntsc = 24000 / 1001
+    codes = [format_timecode(k, ntsc, "01:02:03:04", labels="app") for k in range(2399)]
+    rounded = take_seconds(codes, warn=False)
+    assert codes[1].endswith(".251")                      # the app's thousandths: rounded
+    assert take_on_timeline(rounded, rounded[:, None], 2500, ntsc, align="trim").shape == \
+        (2399, 1)
+
+
 @pytest.mark.parametrize("take_fps, target_fps", [(30.0, 25.0), (25.0, 30.0), (60.0, 24.0),
                                                   (30.0, 30.0)])
 def test_a_looped_take_repeats_as_a_looped_video_of_its_rate(take_fps, target_fps):
@@ -93,6 +122,31 @@ def test_a_looped_take_repeats_as_a_looped_video_of_its_rate(take_fps, target_fp
     np.testing.assert_allclose(got, video, atol=1e-9)
     first = np.flatnonzero(np.isclose(np.arange(n) * take_fps / target_fps % rows, 0))[1:]
     assert first.size and np.all(np.abs(got[first]) < 1e-9)   # each repeat starts at row 0
+
+
+@pytest.mark.parametrize("fps, start", [(60.0, "01:02:03:04"), (25.0, "10:11:12:13"),
+                                        (30.0, "01:02:03:04"), (24.0, None)])
+def test_a_looped_take_of_the_apps_timecodes_repeats_from_its_first_row(fps, start):
+    """A take at the target's own rate, its rows' times read from time-of-day timecodes (as
+    every take the app records has), looped: each repeat's first frame shows row 0, as the
+    looped video does (review48a). Before, the loop's span (last row plus the rows' median
+    step, both differences of ~3723 s) came out an ulp past ``j / fps`` at most wraps: the
+    frame stayed an ulp short of the repeat and showed the last row (a 60 fps take from
+    01:02:03:04 looped at 60 fps: every row count from 62 to 178, the take's end shown for
+    a frame where its start belongs)."""
+    from facetransfer.export.livelink import format_timecode
+    from facetransfer.transfer import time_map
+
+    codes = [format_timecode(k, fps, start, labels="app") for k in range(int(3 * fps))]
+    off = []
+    for rows in range(int(fps) + 2, len(codes), 2):          # each over a second: rate known
+        t = take_seconds(codes[:rows], warn=False)
+        v = np.arange(rows, dtype=np.float64)[:, None]     # a row's value is its number
+        got = take_on_timeline(t, v, 3 * rows, fps, align="loop")[:, 0]
+        video = time_map(rows, fps, 3 * rows, fps, align="loop").source_time
+        if not np.allclose(got, video, atol=1e-6):
+            off.append(rows)
+    assert off == []
 
 
 def test_a_take_written_from_a_track_drives_the_same_expressions(arkit_model, make_arkit_track,

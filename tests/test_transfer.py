@@ -58,6 +58,24 @@ def test_time_map_trim_loop_hold_exact():
     np.testing.assert_allclose(trim[:23], np.arange(23) * 25 / 30)
 
 
+def test_time_map_loops_an_ntsc_source_from_its_first_frame():
+    """A looped source at an NTSC rate on a target at another: where a repeat lands on a
+    target frame, that frame reads the source's first frame (review48a). Before, the rates'
+    ratio came out an ulp short (29.97 / 23.976 = 1.2499999999999998): a 5-frame source's
+    repeat read 4.9999999 and showed its last frame; 69 of the 531 cases below."""
+    from fractions import Fraction
+
+    tm = time_map(5, 30000 / 1001, 10, 24000 / 1001, align="loop")
+    np.testing.assert_allclose(tm.source_time, np.tile([0, 1.25, 2.5, 3.75], 3)[:10], atol=1e-9)
+    rates = (Fraction(24000, 1001), Fraction(30000, 1001), Fraction(60000, 1001))
+    for a in rates:
+        for b in rates:
+            for n in range(1, 60):
+                got = time_map(n, float(a), 3 * n, float(b), align="loop").source_time
+                exact = [min(float(j * a / b % n), n - 1) for j in range(3 * n)]
+                np.testing.assert_allclose(got, exact, atol=1e-9, err_msg=f"{a} {b} {n}")
+
+
 def test_time_map_resamples_frame_rate():
     # a 30 fps source on a 25 fps target: target frame j reads source frame 1.2 j
     tm = time_map(100, 30, 6, 25)

@@ -177,7 +177,9 @@ def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps
     as a 90-frame video of 30 fps does, on a target of any rate. Before, it was the target's
     frame (half of one for ``"trim"``): at another rate than the take's each repeat came late,
     the take's last row shown in place of its first, and a 30 fps take trimmed on a 60 fps
-    target lost the frame its video keeps (179 frames for 180).
+    target lost the frame its video keeps (179 frames for 180). A frame within ``_SLACK`` of
+    a target frame short of the span is past it: trimmed, or a repeat's first row (the span
+    from time-of-day timecodes lands an ulp off a target frame).
     None: ``"trim"`` when the take is at least as long as the ``n_frames``, else ``"hold"``.
 
     Returns
@@ -197,6 +199,7 @@ def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps
         when = when[when < span - _SLACK / fps] if end > when[0] else when[:1]
     elif align == "loop" and end > 0:
         when = np.mod(when, span)
+        when[when > span - _SLACK / fps] = 0.0   # a repeat's start, not an ulp short of it
     return np.stack([np.interp(when, t, v[:, c]) for c in range(v.shape[1])], axis=1) \
         if v.shape[1] else np.zeros((when.size, 0))
 
@@ -251,8 +254,10 @@ def take_performance(path, target_track, model, *, align: str | None = None,
 
 
 #: A target frame this much (of a frame) short of a take's end is past it: the app's
-#: thousandths of a frame place a row up to 1/60000 s off its clip's frame.
-_SLACK = 1e-3
+#: thousandths of a frame place a row up to 1/60000 s off its clip's frame (a 23.976 fps
+#: take's end needs 2e-4). Less than 1/1001: an NTSC rate beside a whole one puts a target
+#: frame that much inside a take's end, which the video keeps (1e-3 dropped it).
+_SLACK = 5e-4
 
 
 def _row_step(t: np.ndarray, fps: float) -> float:

@@ -149,8 +149,9 @@ def time_map(n_source: int, fps_source: float, n_target: int, fps_target: float,
     if align == "trim":   # to the end of the source's last frame (it lasts 1 / fps_source)
         t = t[t < n_source - 1e-9]
         t = np.minimum(t, last)
-    elif align == "loop":
+    elif align == "loop":   # a repeat an ulp short (29.97 / 23.976 = 1.2499...8) is one
         t = np.mod(t, n_source)
+        t[t > n_source - 1e-9] = 0.0
         # between the last frame and the wrap, interpolate towards the last frame (no blend with 0)
         t = np.minimum(t, last)
     else:
