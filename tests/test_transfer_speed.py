@@ -445,10 +445,11 @@ def test_frame_meshes_are_the_frame_meshes_a_chunk_at_a_time(quick_model):
             assert V.flags.c_contiguous and V.shape == (m.n_vertices, 3)
             np.testing.assert_allclose(V, m.synthesize({"identity": w[i], "expression": expr[i]}),
                                        rtol=0, atol=1e-12)
-    held = fm._local.chunks
     fm.frame("new", F - 1)
-    assert held["new"][0] == F - 3 and len(held["new"][1]) == 3  # the last chunk, partial
-    assert len(held["target"][1]) == F  # identity moving: the whole clip
+    held = {kind: dict(chunks) for kind, chunks in fm._chunks.items()}
+    assert len(held["new"][F - 3]) == 3  # the last chunk, partial
+    assert len(held["new"]) == frame_meshes.CHUNKS_KEPT  # and one other
+    assert list(held["target"]) == [0] and len(held["target"][0]) == F  # the whole clip
     seen = []
     t = threading.Thread(target=lambda: seen.append(fm.frame("new", F - 2).copy()))
     t.start()
@@ -456,6 +457,46 @@ def test_frame_meshes_are_the_frame_meshes_a_chunk_at_a_time(quick_model):
     np.testing.assert_allclose(seen[0], m.synthesize({"identity": ident[F - 2],
                                                       "expression": expr[F - 2]}), atol=1e-12)
     assert "new" in fm and "source" not in fm
+
+
+def test_frame_meshes_make_each_chunk_once_for_two_threads(quick_model, monkeypatch):
+    """Two threads asking for alternate frames (as the two-thread render does) share each
+    chunk's product: one product per chunk, not one per thread; the meshes are those of one
+    thread alone."""
+    import threading
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(4)
+    m = quick_model
+    F = 3 * frame_meshes.MESH_CHUNK + 6  # even: each thread asks for F / 2 frames
+    ident = np.tile(rng.normal(size=m.ranks[0]), (F, 1))
+    expr = rng.normal(size=(F, m.ranks[1]))
+    track = SimpleNamespace(weights={"identity": ident, "expression": expr},
+                            mode_names=m.mode_names)
+    alone = frame_meshes.FrameMeshes(m, {"new": track}, F)
+    want = [alone.frame("new", i).copy() for i in range(F)]
+    fm = frame_meshes.FrameMeshes(m, {"new": track}, F)
+    basis = fm.basis("new")
+    made = []
+    real = type(basis).meshes
+    monkeypatch.setattr(type(basis), "meshes",
+                        lambda self, frames: made.append(int(frames[0])) or real(self, frames))
+    got, gate = {}, threading.Barrier(2, timeout=60)
+
+    def render(first):
+        for i in range(first, F, 2):
+            gate.wait()            # the two threads a frame apart, as the render's
+            got[i] = fm.frame("new", i).copy()
+
+    threads = [threading.Thread(target=render, args=(k,), daemon=True) for k in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert sorted(got) == list(range(F))
+    assert sorted(made) == list(range(0, F, frame_meshes.MESH_CHUNK))
+    for i in range(F):
+        np.testing.assert_array_equal(got[i], want[i])
 
 
 def test_defaults_agree():
