@@ -509,3 +509,29 @@ def test_defaults_agree():
     assert inspect.signature(demo.run_demo).parameters["options"].default is None
     assert RewriteOptions().speed == presets.DEFAULT_SPEED
     assert inspect.signature(tp.plan_transfer).parameters["speed"].default == presets.DEFAULT_SPEED
+
+
+@pytest.mark.parametrize("workers,processes", [(1, False), (2, False), (2, True)])
+def test_parts_paste_to_the_whole_frames(quick_model, topo, synthetic, workers, processes):
+    """``rewrite_frames(..., parts=True)`` (what ``transfer`` writes from) gives each frame's
+    face box, whose composite pasted by ``rewrite.paste_image`` is the whole frame's image
+    to the bit, with whether a face was rendered; on one thread, two, or forked processes."""
+    fa, ta, fb, tb, truth = synthetic
+    new = recombine(tb, expression=ta)
+    lost = new.lost.copy()
+    lost[1] = True                       # a frame without a face: None, the frame itself
+    new = dataclasses.replace(new, lost=lost)
+
+    def frames(parts):
+        return list(rc.rewrite_frames(fb, tb, new, quick_model,
+                                      mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                      run=rc.RenderRun(workers=workers, processes=processes),
+                                      parts=parts))
+
+    whole, parts = frames(False), frames(True)
+    assert len(parts) == len(whole) == new.n_frames and parts[1] is None
+    assert all(p is not None and len(p[0]) == 4 for i, p in enumerate(parts) if i != 1)
+    for i, (w, p) in enumerate(zip(whole, parts)):
+        image, face = rw.paste_image(np.asarray(fb[i]), p)
+        np.testing.assert_array_equal(image, w.image)
+        assert face == bool(w.face_mask.any()) and face == (i != 1)
