@@ -17,12 +17,13 @@ def write_rest(writer, frames, *, stop=None, marked=lambda i: False) -> int:
 
 
 def interrupt_renders(monkeypatch, stop: list) -> list:
-    """Count the frames a transfer renders (``rewrite_clip._ClipRenderer``, whichever thread
-    renders which) into the list returned, and raise a Ctrl-C at the first frame at or past
-    ``stop[0]`` (None: none); ``stop`` is a one-item list a test changes between its runs."""
+    """Count the frames a transfer renders (``rewrite_clip._ClipRenderer.part``, which a
+    whole frame's render calls too, whichever thread renders which) into the list returned,
+    and raise a Ctrl-C at the first frame at or past ``stop[0]`` (None: none); ``stop`` is a
+    one-item list a test changes between its runs."""
     import facetransfer.rewrite_clip as rc
 
-    real, calls = rc._ClipRenderer.__call__, []
+    real, calls = rc._ClipRenderer.part, []
 
     def counted(self, i):
         if stop[0] is not None and i >= stop[0]:
@@ -30,5 +31,5 @@ def interrupt_renders(monkeypatch, stop: list) -> list:
         calls.append(i)
         return real(self, i)
 
-    monkeypatch.setattr(rc._ClipRenderer, "__call__", counted)
+    monkeypatch.setattr(rc._ClipRenderer, "part", counted)
     return calls

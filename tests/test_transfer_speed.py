@@ -445,10 +445,11 @@ def test_frame_meshes_are_the_frame_meshes_a_chunk_at_a_time(quick_model):
             assert V.flags.c_contiguous and V.shape == (m.n_vertices, 3)
             np.testing.assert_allclose(V, m.synthesize({"identity": w[i], "expression": expr[i]}),
                                        rtol=0, atol=1e-12)
-    held = fm._local.chunks
     fm.frame("new", F - 1)
-    assert held["new"][0] == F - 3 and len(held["new"][1]) == 3  # the last chunk, partial
-    assert len(held["target"][1]) == F  # identity moving: the whole clip
+    held = {kind: dict(chunks) for kind, chunks in fm._chunks.items()}
+    assert len(held["new"][F - 3]) == 3  # the last chunk, partial
+    assert len(held["new"]) == frame_meshes.CHUNKS_KEPT  # and one other
+    assert list(held["target"]) == [0] and len(held["target"][0]) == F  # the whole clip
     seen = []
     t = threading.Thread(target=lambda: seen.append(fm.frame("new", F - 2).copy()))
     t.start()
@@ -456,6 +457,46 @@ def test_frame_meshes_are_the_frame_meshes_a_chunk_at_a_time(quick_model):
     np.testing.assert_allclose(seen[0], m.synthesize({"identity": ident[F - 2],
                                                       "expression": expr[F - 2]}), atol=1e-12)
     assert "new" in fm and "source" not in fm
+
+
+def test_frame_meshes_make_each_chunk_once_for_two_threads(quick_model, monkeypatch):
+    """Two threads asking for alternate frames (as the two-thread render does) share each
+    chunk's product: one product per chunk, not one per thread; the meshes are those of one
+    thread alone."""
+    import threading
+    from types import SimpleNamespace
+
+    rng = np.random.default_rng(4)
+    m = quick_model
+    F = 3 * frame_meshes.MESH_CHUNK + 6  # even: each thread asks for F / 2 frames
+    ident = np.tile(rng.normal(size=m.ranks[0]), (F, 1))
+    expr = rng.normal(size=(F, m.ranks[1]))
+    track = SimpleNamespace(weights={"identity": ident, "expression": expr},
+                            mode_names=m.mode_names)
+    alone = frame_meshes.FrameMeshes(m, {"new": track}, F)
+    want = [alone.frame("new", i).copy() for i in range(F)]
+    fm = frame_meshes.FrameMeshes(m, {"new": track}, F)
+    basis = fm.basis("new")
+    made = []
+    real = type(basis).meshes
+    monkeypatch.setattr(type(basis), "meshes",
+                        lambda self, frames: made.append(int(frames[0])) or real(self, frames))
+    got, gate = {}, threading.Barrier(2, timeout=60)
+
+    def render(first):
+        for i in range(first, F, 2):
+            gate.wait()            # the two threads a frame apart, as the render's
+            got[i] = fm.frame("new", i).copy()
+
+    threads = [threading.Thread(target=render, args=(k,), daemon=True) for k in (0, 1)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    assert sorted(got) == list(range(F))
+    assert sorted(made) == list(range(0, F, frame_meshes.MESH_CHUNK))
+    for i in range(F):
+        np.testing.assert_array_equal(got[i], want[i])
 
 
 def test_defaults_agree():
@@ -468,3 +509,29 @@ def test_defaults_agree():
     assert inspect.signature(demo.run_demo).parameters["options"].default is None
     assert RewriteOptions().speed == presets.DEFAULT_SPEED
     assert inspect.signature(tp.plan_transfer).parameters["speed"].default == presets.DEFAULT_SPEED
+
+
+@pytest.mark.parametrize("workers,processes", [(1, False), (2, False), (2, True)])
+def test_parts_paste_to_the_whole_frames(quick_model, topo, synthetic, workers, processes):
+    """``rewrite_frames(..., parts=True)`` (what ``transfer`` writes from) gives each frame's
+    face box, whose composite pasted by ``rewrite.paste_image`` is the whole frame's image
+    to the bit, with whether a face was rendered; on one thread, two, or forked processes."""
+    fa, ta, fb, tb, truth = synthetic
+    new = recombine(tb, expression=ta)
+    lost = new.lost.copy()
+    lost[1] = True                       # a frame without a face: None, the frame itself
+    new = dataclasses.replace(new, lost=lost)
+
+    def frames(parts):
+        return list(rc.rewrite_frames(fb, tb, new, quick_model,
+                                      mouth_source=rc.MouthSource(fa, ta), topo=topo,
+                                      run=rc.RenderRun(workers=workers, processes=processes),
+                                      parts=parts))
+
+    whole, parts = frames(False), frames(True)
+    assert len(parts) == len(whole) == new.n_frames and parts[1] is None
+    assert all(p is not None and len(p[0]) == 4 for i, p in enumerate(parts) if i != 1)
+    for i, (w, p) in enumerate(zip(whole, parts)):
+        image, face = rw.paste_image(np.asarray(fb[i]), p)
+        np.testing.assert_array_equal(image, w.image)
+        assert face == bool(w.face_mask.any()) and face == (i != 1)

@@ -77,6 +77,7 @@ __all__ = [
     "RewriteFrame",
     "rewrite_frame",
     "rewrite_frame_part",
+    "paste_image",
 ]
 
 
@@ -231,6 +232,19 @@ def _paste(T: np.ndarray, part, *, matte: bool = False) -> RewriteFrame:
                         paste(res.mouth_mask, np.zeros((H, W), bool)),
                         None if res.matte is None else
                         paste(res.matte, np.zeros((H, W), np.float32)))
+
+
+def paste_image(T: np.ndarray, part) -> tuple[np.ndarray, bool]:
+    """The composite of the whole frame from ``(box, crop result)`` (None: the frame
+    unchanged), as :func:`_paste`'s ``image``, and whether a face was rendered (its
+    ``face_mask`` has a pixel): a writer's share of a frame, without the whole frame's rendered
+    face and masks (:func:`facetransfer.rewrite_clip.rewrite_frames`' ``parts``)."""
+    image = T.copy()
+    if part is None:
+        return image, False
+    (x0, y0, x1, y1), res = part
+    image[y0:y1, x0:x1] = res.image
+    return image, bool(res.face_mask.any())
 
 
 def _face_box(V: np.ndarray, camera, size: tuple[int, int], *, margin: int

@@ -106,8 +106,8 @@ class RenderRun:
 def rewrite_frames(target_frames, target_track, new_track, model, *,
                    mouth_source: MouthSource | None = None, options: RewriteOptions | None = None,
                    topo: MeshTopology | None = None, run: RenderRun | None = None,
-                   regions: RegionTextures | None = None, matte: bool = False
-                   ) -> Iterator[RewriteFrame]:
+                   regions: RegionTextures | None = None, matte: bool = False,
+                   parts: bool = False) -> Iterator:
     """Rewrite every target frame with the new performance (§6, Fig. 7); each shot of an
     edited target (``target_track.shot_starts``) as a clip of its own.
 
@@ -144,10 +144,15 @@ def rewrite_frames(target_frames, target_track, new_track, model, *,
     matte : bool
         Give each frame's :attr:`~facetransfer.rewrite.RewriteFrame.matte` too (computed only
         when asked; all 0 where the face is lost).
+    parts : bool
+        Yield each frame's rewrite on the face's box only, ``(box, RewriteFrame)`` or None
+        (the frame unchanged; :meth:`_ClipRenderer.part`), not the whole frame: what a caller
+        that needs the composite alone pastes itself (:func:`facetransfer.rewrite.paste_image`),
+        without the whole frame's rendered face and masks.
 
     Yields
     ------
-    RewriteFrame
+    RewriteFrame, or (box, RewriteFrame) or None with ``parts``
         Frames ``run.start`` to ``new_track.n_frames - 1``.
     """
     opts = options or RewriteOptions()
@@ -166,31 +171,33 @@ def rewrite_frames(target_frames, target_track, new_track, model, *,
                                   regions=regions, topo=topo)
         if matte:
             one = dataclasses.replace(one, matte=True)
-        yield from _render(one, frames, range(max(start, a) - a, b - a), run)
+        yield from _render(one, frames, range(max(start, a) - a, b - a), run, parts)
 
 
-def _render(one, target_frames, todo: range, run: RenderRun):
-    """Yield ``one(i)`` for i in ``todo`` in order: here, on threads or in forked processes
-    (:class:`RenderRun`'s ``workers`` and ``processes``), BLAS on one thread meanwhile.
+def _render(one, target_frames, todo: range, run: RenderRun, parts: bool = False):
+    """Yield ``one(i)`` (``parts``: ``one.part(i)``) for i in ``todo`` in order: here, on
+    threads or in forked processes (:class:`RenderRun`'s ``workers`` and ``processes``), BLAS
+    on one thread meanwhile.
 
     BLAS's own threads would spin beside the render's (:mod:`facetransfer.threads`)."""
     from .threads import one_blas_thread
 
     workers, progress = run.workers, run.progress
     workers = max(1, int(workers if workers is not None else min(2, os.cpu_count() or 1)))
+    job = one.part if parts else one
     with one_blas_thread():
         if workers == 1 or len(todo) < 2:
             for i in todo:
-                yield one(i)
+                yield job(i)
                 if progress:
                     progress(1)
             return
         import multiprocessing as mp
 
         if run.processes and "fork" in mp.get_all_start_methods():
-            yield from _render_in_processes(one, target_frames, todo, workers, progress)
+            yield from _render_in_processes(one, target_frames, todo, workers, progress, parts)
         else:
-            yield from _render_in_threads(one, todo, workers, progress)
+            yield from _render_in_threads(job, todo, workers, progress)
 
 
 def _check_clip(target_frames, target_track, new_track, source_track, with_mouth: bool
@@ -527,8 +534,10 @@ def _render_job(i: int):
 _RENDER_FRAMES = None
 
 
-def _render_in_processes(one, target_frames, todo: range, workers: int, progress):
-    """Yield ``one(i)`` for i in ``todo``, computed in ``workers`` forked processes, in order.
+def _render_in_processes(one, target_frames, todo: range, workers: int, progress,
+                         parts: bool = False):
+    """Yield ``one(i)`` for i in ``todo``, computed in ``workers`` forked processes, in order
+    (``parts``: the face's box of each, as the workers send it).
 
     Workers send back only the face's box of each frame (the renderer's ``part``, else the
     changed crop, :func:`_crop_of`); if the pool breaks, the remaining frames are rendered
@@ -552,7 +561,7 @@ def _render_in_processes(one, target_frames, todo: range, workers: int, progress
     except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. in a daemon process)
         log.info("no worker processes (%s): rendering here", exc)
         for i in todo:
-            yield one(i)
+            yield one.part(i) if parts else one(i)
             if progress:
                 progress(1)
         return
@@ -566,12 +575,13 @@ def _render_in_processes(one, target_frames, todo: range, workers: int, progress
                         pending.append(pool.submit(_render_job, nxt))
                         nxt += 1
                     part = pending.popleft().result()
-                    res = _paste(np.asarray(target_frames[done]), part, matte=one.matte)
+                    res = part if parts else _paste(np.asarray(target_frames[done]), part,
+                                                    matte=one.matte)
                 except BrokenProcessPool as exc:
                     log.warning("render workers failed (%s); rendering here", exc)
                     broken = True
             if broken:
-                res = one(done)
+                res = one.part(done) if parts else one(done)
             yield res
             done += 1
             if progress:

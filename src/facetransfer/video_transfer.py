@@ -35,6 +35,7 @@ from .io.ahead import ordered_ahead
 from .io.plate_output import plate_output
 from .io.video_like import like_video
 from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
+from .rewrite import paste_image
 from .rewrite_clip import MouthSource, RenderRun, rewrite_frames
 from .rewrite_options import RewriteOptions
 from .transfer_plan import TransferPlan, TransferSources, plan_sources, plan_transfer  # noqa: F401
@@ -288,7 +289,8 @@ class _Frames:
                         start=self.start)
         it = rewrite_frames(p.target_frames, p.target_track, p.new_track, self.model,
                             mouth_source=mouth, options=self.options, run=run,
-                            regions=p.regions, matte=self.matte is not None)
+                            regions=p.regions, matte=self.matte is not None,
+                            parts=self._parts)
         if self.grading is None:
             frames = ((frame, face) for _, frame, face in self._composed(it))
         else:                          # graded on threads, a few frames ahead of the writer
@@ -306,11 +308,24 @@ class _Frames:
             finally:                   # a video's alpha decoder (io.plate_alpha.VideoAlpha)
                 getattr(self.grading, "close", lambda: None)()
 
+    @property
+    def _parts(self) -> bool:
+        """Whether the frames are rendered as their face's boxes (``rewrite_frames``'
+        ``parts``) and only the composite is pasted into each: neither a ``compose`` nor the
+        matte looks at the rest of a whole :class:`~facetransfer.rewrite.RewriteFrame`."""
+        return self.compose is None and self.matte is None
+
     def _composed(self, it):
         """``(i, frame, face)`` of each output frame, the rendering timed."""
+        parts = self._parts
         for i in range(self.start, self.plan.n_frames):
             t = time.perf_counter()
             r = next(it)
+            if parts:    # (box, crop) or None: the composite pasted, nothing else
+                frame, face = paste_image(np.asarray(self.plan.target_frames[i]), r)
+                self.seconds += time.perf_counter() - t
+                yield i, frame, face
+                continue
             frame = r.image if self.compose is None else self.compose(i, r)
             self.seconds += time.perf_counter() - t
             if self.matte is not None:
