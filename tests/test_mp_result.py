@@ -4,6 +4,9 @@ cannot run."""
 
 from __future__ import annotations
 
+import ctypes
+from types import SimpleNamespace
+
 import numpy as np
 import pytest
 
@@ -67,3 +70,41 @@ def test_without_the_private_parts_there_is_no_reader():
     assert array_reader(Landmarker()) is None
     det = MediaPipeDetector.__new__(MediaPipeDetector)
     assert not hasattr(det, "_reader")           # the image-mode detector reads the API's
+
+
+def _landmarker():
+    """What :func:`array_reader` reads of a ``FaceLandmarker``: its wrapped library, its
+    handle."""
+    lib = SimpleNamespace(MpFaceLandmarkerDetectForVideo=print, MpFaceLandmarkerCloseResult=print)
+    return SimpleNamespace(_lib=lib, _handle=1)
+
+
+def _struct(fields) -> type:
+    return type("Struct", (ctypes.Structure,), {"_fields_": list(fields)})
+
+
+def test_a_c_result_of_another_layout_gives_no_reader(monkeypatch):
+    """The reader walks the C result through its own fields: a MediaPipe whose result lacks a
+    field the reader reads, or whose landmarks or categories are other structs than the ones
+    it imports, gives no reader (the API then), not an error at every frame."""
+    from mediapipe.tasks.python.vision import face_landmarker as fl
+
+    real = fl.MpFaceLandmarkerResultC
+    assert isinstance(array_reader(_landmarker()), ArrayReader)
+
+    def result(drop=(), **change):
+        return _struct((n, change.get(n, t)) for n, t in real._fields_ if n not in drop)
+
+    count = ctypes.c_uint32
+    double_xy = _struct([("landmarks", ctypes.POINTER(_struct(
+        [("x", ctypes.c_double), ("y", ctypes.c_double)]))), ("landmarks_count", count)])
+    nameless = _struct([("categories", ctypes.POINTER(_struct(
+        [("index", ctypes.c_int), ("score", ctypes.c_float)]))), ("categories_count", count)])
+    for other in (result(drop=("face_blendshapes_count",)),
+                  result(face_landmarks=ctypes.POINTER(double_xy)),
+                  result(face_blendshapes=ctypes.POINTER(nameless)),
+                  result(face_landmarks=ctypes.c_void_p), None):
+        monkeypatch.setattr(fl, "MpFaceLandmarkerResultC", other)
+        assert array_reader(_landmarker()) is None
+    monkeypatch.setattr(fl, "MpFaceLandmarkerResultC", result(face_landmarks_count=ctypes.c_int))
+    assert isinstance(array_reader(_landmarker()), ArrayReader)   # another integer: read
