@@ -499,6 +499,58 @@ def test_frame_meshes_make_each_chunk_once_for_two_threads(quick_model, monkeypa
         np.testing.assert_array_equal(got[i], want[i])
 
 
+def test_frame_meshes_shared_by_many_threads_in_any_order():
+    """Eight threads asking for frames of two kinds in random order across chunk boundaries,
+    some products failing: every mesh is its own frame's (a chunk evicted while a thread
+    holds a view of it included), a failure reaches only the thread whose product failed,
+    and no thread is left waiting."""
+    import random
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    n, lock = 5 * frame_meshes.MESH_CHUNK + 3, threading.Lock()
+
+    class Basis:                # frame i's mesh all i; slow and sometimes failing products
+        modes_left, rng = 1, random.Random(0)
+
+        def meshes(self, rows):
+            with lock:
+                wait, fail = self.rng.random() * 2e-3, self.rng.random() < 0.05
+            time.sleep(wait)
+            if fail:
+                raise MemoryError("a product failed")
+            return np.repeat(np.asarray(rows, float), 12).reshape(len(rows), 4, 3)
+
+    track = SimpleNamespace(weights={"a": np.zeros((n, 1))}, mode_names=("a",))
+    model = SimpleNamespace(mode_names=("a",), clip_basis=lambda weights: Basis())
+    fm = frame_meshes.FrameMeshes(model, {"new": track, "target": track}, n)
+    wrong, failed, done = [], [], []
+
+    def ask(seed):
+        rng, held = random.Random(seed), []
+        for _ in range(150):
+            i, kind = rng.randrange(n), rng.choice(["new", "target"])
+            try:
+                held.append((i, fm.frame(kind, i)))
+            except MemoryError:
+                failed.append(i)
+            except Exception as exc:  # noqa: BLE001 - a wrong chunk's row out of range
+                wrong.append(repr(exc))
+            time.sleep(rng.random() * 1e-4)
+        wrong.extend(i for i, V in held if not (V == i).all())
+        done.append(seed)
+
+    threads = [threading.Thread(target=ask, args=(k,), daemon=True) for k in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert not any(t.is_alive() for t in threads) and sorted(done) == list(range(8))
+    assert wrong == [] and failed
+    assert all((fm.frame("new", i) == i).all() for i in range(n))
+
+
 def test_defaults_agree():
     import inspect
 

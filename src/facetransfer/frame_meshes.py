@@ -31,7 +31,7 @@ class FrameMeshes:
     the size of the clip is held: the clip's meshes up front cost
     the render's set-up 0.6 s on one core and 200 MB of fresh memory (BENCHMARKS.md,
     "Fourteenth session"). A track whose identity changes over the clip (more than one mode
-    left) is synthesised whole, once per thread.
+    left) is synthesised whole, once, as one chunk the threads share.
     """
 
     def __init__(self, model, tracks: dict, n: int) -> None:

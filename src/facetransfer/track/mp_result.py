@@ -98,24 +98,55 @@ class ArrayReader:
 
 def array_reader(landmarker) -> ArrayReader | None:
     """An :class:`ArrayReader` of a ``FaceLandmarker`` in video mode, or None where this
-    MediaPipe lacks what it reads (the caller then uses ``detect_for_video``)."""
+    MediaPipe lacks what it reads (the caller then uses ``detect_for_video``): the library's
+    two functions, or a struct or field of the C result as :func:`_layout` finds them."""
     try:
-        from mediapipe.tasks.python.components.containers import category_c, landmark_c
         from mediapipe.tasks.python.vision import face_landmarker
     except ImportError:
         return None
-    result_type = getattr(face_landmarker, "MpFaceLandmarkerResultC", None)
-    landmark_type = getattr(landmark_c, "MpNormalizedLandmarkC", None)
-    category_type = getattr(category_c, "MpCategoryC", None)
     lib = getattr(landmarker, "_lib", None)
-    if None in (result_type, landmark_type, category_type, lib) or \
-            getattr(landmarker, "_handle", None) is None or \
+    if lib is None or getattr(landmarker, "_handle", None) is None or \
             not hasattr(lib, "MpFaceLandmarkerDetectForVideo") or \
             not hasattr(lib, "MpFaceLandmarkerCloseResult"):
         return None
-    want = {"x": ctypes.c_float, "y": ctypes.c_float}
-    if any(dict(landmark_type._fields_).get(k) is not t for k, t in want.items()) or \
-            dict(category_type._fields_).get("score") is not ctypes.c_float or \
-            dict(category_type._fields_).get("index") is not ctypes.c_int:
-        return None
-    return ArrayReader(landmarker, result_type, landmark_type, category_type)
+    types = _layout(getattr(face_landmarker, "MpFaceLandmarkerResultC", None))
+    return None if types is None else ArrayReader(landmarker, *types)
+
+
+def _layout(result_type) -> tuple | None:
+    """``(result_type, landmark_type, category_type)``: the C result's struct and those of
+    one landmark and one category, found through the result's own pointer fields (the
+    structs its C memory holds), each with every field :class:`ArrayReader` reads, of the
+    type it reads it as (a count: any integer); None where one is missing or differs."""
+    faces, shapes = _pointee(result_type, "face_landmarks"), _pointee(result_type,
+                                                                       "face_blendshapes")
+    landmark, category = _pointee(faces, "landmarks"), _pointee(shapes, "categories")
+    want = ((result_type, {"face_landmarks_count": int, "face_blendshapes_count": int}),
+            (faces, {"landmarks_count": int}), (shapes, {"categories_count": int}),
+            (landmark, {"x": ctypes.c_float, "y": ctypes.c_float}),
+            (category, {"index": ctypes.c_int, "score": ctypes.c_float,
+                        "category_name": ctypes.c_char_p}))
+    for struct, fields in want:
+        types = _field_types(struct)
+        for name, t in fields.items():
+            if not (_is_integer(types.get(name)) if t is int else types.get(name) is t):
+                return None
+    return result_type, landmark, category
+
+
+def _field_types(struct) -> dict:
+    """A ctypes struct's fields, name -> ctypes type ({}: not a struct)."""
+    fields = getattr(struct, "_fields_", None) if isinstance(struct, type) else None
+    return {f[0]: f[1] for f in fields} if isinstance(fields, (list, tuple)) else {}
+
+
+def _pointee(struct, name: str):
+    """The type the pointer field ``name`` of ``struct`` points to, or None."""
+    t = _field_types(struct).get(name)
+    return t._type_ if isinstance(t, type) and issubclass(t, ctypes._Pointer) else None
+
+
+def _is_integer(t) -> bool:
+    """Whether ``t`` is one of ctypes' integer types."""
+    return isinstance(t, type) and issubclass(t, ctypes._SimpleCData) and \
+        t._type_ in "bBhHiIlLqQ"
