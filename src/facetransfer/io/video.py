@@ -430,58 +430,18 @@ def _yuv420p(rgb: np.ndarray) -> np.ndarray:
     """The planar 8-bit 4:2:0 frame (Y, then U, then V; ``(3 H / 2, W)`` uint8) of an
     ``(H, W, 3)`` uint8 RGB frame of even size: ITU-R BT.601 in limited range, what ffmpeg's
     ``rgb24`` to ``yuv420p`` conversion gives (Y to within 1 level); each chroma sample is
-    that of its 2x2 pixels' mean colour (OpenCV's own I420 takes the top-left pixel's).
-
-    Y is OpenCV's; the chroma planes are written over OpenCV's by one kernel
-    (:func:`_chroma_planes_py`) with the arithmetic of the ``INTER_AREA`` halving and
-    ``cv2.transform`` it replaces (the same bytes: ``tests/test_video_yuv420.py``)."""
+    that of its 2x2 pixels' mean colour (OpenCV's own I420 takes the top-left pixel's)."""
     import cv2
 
+    H, W = rgb.shape[:2]
     out = cv2.cvtColor(rgb, cv2.COLOR_RGB2YUV_I420)
-    _chroma_kernel()(np.ascontiguousarray(rgb), _BT601_CHROMA_F32, out.reshape(-1))
-    return out
-
-
-#: :data:`_BT601_CHROMA` as the float32 matrix ``cv2.transform`` computes an 8-bit image with
-_BT601_CHROMA_F32 = _BT601_CHROMA.astype(np.float32)
-
-
-def _chroma_planes_py(rgb, m, planes):  # pragma: no cover (numba)
-    """The U and V planes of :func:`_yuv420p` into ``planes`` (the flat ``3 H W / 2`` frame,
-    after its ``H W`` luma samples): each 2x2 block's mean colour as ``cv2.resize``'s
-    ``INTER_AREA`` halves an 8-bit image (the four values' sum plus 2, shifted right by 2),
-    through ``m`` (2, 4) float32 as ``cv2.transform`` maps it (the offset first, then the
-    products of R, G and B added in float32, rounded half to even and saturated)."""
-    H, W = rgb.shape[0], rgb.shape[1]
-    h, w = H // 2, W // 2
+    mean = cv2.resize(rgb, (W // 2, H // 2), interpolation=cv2.INTER_AREA)
+    uv = cv2.transform(mean, _BT601_CHROMA)            # (H/2, W/2, 2) uint8, rounded
     n = H * W
-    q = n // 4
-    for y in range(h):
-        for x in range(w):
-            y2, x2 = 2 * y, 2 * x
-            r = np.float32((np.int32(rgb[y2, x2, 0]) + np.int32(rgb[y2, x2 + 1, 0])
-                            + np.int32(rgb[y2 + 1, x2, 0]) + np.int32(rgb[y2 + 1, x2 + 1, 0])
-                            + 2) >> 2)
-            g = np.float32((np.int32(rgb[y2, x2, 1]) + np.int32(rgb[y2, x2 + 1, 1])
-                            + np.int32(rgb[y2 + 1, x2, 1]) + np.int32(rgb[y2 + 1, x2 + 1, 1])
-                            + 2) >> 2)
-            b = np.float32((np.int32(rgb[y2, x2, 2]) + np.int32(rgb[y2, x2 + 1, 2])
-                            + np.int32(rgb[y2 + 1, x2, 2]) + np.int32(rgb[y2 + 1, x2 + 1, 2])
-                            + 2) >> 2)
-            o = y * w + x
-            u = ((m[0, 3] + m[0, 0] * r) + m[0, 1] * g) + m[0, 2] * b
-            v = ((m[1, 3] + m[1, 0] * r) + m[1, 1] * g) + m[1, 2] * b
-            planes[n + o] = np.uint8(min(max(np.rint(u), np.float32(0)), np.float32(255)))
-            planes[n + q + o] = np.uint8(min(max(np.rint(v), np.float32(0)), np.float32(255)))
-
-
-@functools.lru_cache(maxsize=1)
-def _chroma_kernel():
-    """:func:`_chroma_planes_py` compiled (numba, loaded on the first frame written: a reader
-    of videos does not import numba)."""
-    from ..render.jit import _maybe_njit
-
-    return _maybe_njit(_chroma_planes_py)
+    planes = out.reshape(-1)
+    planes[n:n + n // 4] = uv[..., 0].reshape(-1)
+    planes[n + n // 4:] = uv[..., 1].reshape(-1)
+    return out
 
 
 def _deep(frame: np.ndarray) -> np.ndarray:
