@@ -31,6 +31,22 @@ def extract_src(rev: str, prefix: str = "bench_") -> Path:
     return tmp / "src"
 
 
+def add_base_options(ap) -> None:
+    """``--base`` (a ``src`` folder) and ``--base-rev`` (a git revision) on the argument parser
+    ``ap``: the tree a benchmark compares this one with (:func:`base_src`)."""
+    ap.add_argument("--base", help="the src folder of the revision to compare with")
+    ap.add_argument("--base-rev", help="or a git revision of this repository (e.g. main), "
+                    "extracted to a temporary folder")
+
+
+def base_src(args, prefix: str) -> Path | None:
+    """The ``src`` folder :func:`add_base_options`' options name (``--base-rev`` extracted by
+    :func:`extract_src` into a folder named from ``prefix``), or None (neither given)."""
+    if args.base:
+        return Path(args.base)
+    return extract_src(args.base_rev, prefix) if args.base_rev else None
+
+
 def rewrite_plan(plan, model, options, *, workers: int = 1, **more):
     """The frames of a ``TransferPlan`` rewritten (``rewrite_frames``, its mouth from the plan's
     mouth source) by the tree on the path: one with ``MouthSource`` and ``RenderRun``, or one

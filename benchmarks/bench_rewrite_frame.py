@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _revision import extract_src, rewrite_plan  # benchmarks/ is on sys.path
+from _revision import add_base_options, base_src, rewrite_plan  # benchmarks/ is on sys.path
 
 TARGET, SOURCE = "driving_d9.mp4", "driving_d6.mp4"
 #: frames of the target used (10 s at 30 fps, as issue 13's end-to-end goal)
@@ -148,9 +148,7 @@ def plot(res: dict, path: Path) -> None:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks", help="output folder")
-    ap.add_argument("--base", help="the src folder of the revision to compare with")
-    ap.add_argument("--base-rev", help="or a git revision of this repository (e.g. main), "
-                    "extracted to a temporary folder")
+    add_base_options(ap)
     ap.add_argument("--frames", type=int, default=100, help="frames timed per run")
     ap.add_argument("--parity-frames", type=int, default=60, help="frames compared")
     ap.add_argument("--pairs", type=int, default=3, help="runs of each tree, in turn")
@@ -170,8 +168,7 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     tracks = out / "rewrite_frame_tracks"
     here = Path(__file__).resolve().parents[1] / "src"
-    base = Path(args.base) if args.base else (
-        extract_src(args.base_rev, "bench_rewrite_frame_") if args.base_rev else None)
+    base = base_src(args, "bench_rewrite_frame_")
     trees = {"this tree": here} | ({"base": base} if base else {})
     runs = {name: [] for name in trees}
     for _ in range(args.pairs):

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from _revision import extract_src  # benchmarks/ is on sys.path
+from _revision import add_base_options, base_src  # benchmarks/ is on sys.path
 
 TARGET, SOURCE, FRAMES = "driving_d9.mp4", "driving_d6.mp4", 300
 
@@ -93,9 +93,7 @@ def same_arrays(a: Path, b: Path) -> list[str]:
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks", help="output folder")
-    ap.add_argument("--base", help="the src folder of the revision to compare with")
-    ap.add_argument("--base-rev", help="or a git revision of this repository (e.g. main), "
-                    "extracted to a temporary folder")
+    add_base_options(ap)
     ap.add_argument("--rounds", type=int, default=4, help="runs of each tree, in turn")
     ap.add_argument("--worker", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--save", help=argparse.SUPPRESS)
@@ -106,8 +104,7 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     here = Path(__file__).resolve().parents[1] / "src"
-    base = Path(args.base) if args.base else (
-        extract_src(args.base_rev, "bench_track_pair_") if args.base_rev else None)
+    base = base_src(args, "bench_track_pair_")
     trees = {"this_tree": here} | ({"base": base} if base else {})
     runs = {name: [] for name in trees}
     for _ in range(args.rounds):
