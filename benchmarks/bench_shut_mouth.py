@@ -15,7 +15,8 @@ For each real clip of ``$FACETRANSFER_DATA_DIR/video/`` and its stored MediaPipe
    - the mouth opening: ours (iBUG 62-66 of the tracked points), the reference's and Face
      Landmarker's (13-14), / the eye-corner distance; ours also in pixels and, on the fitted
      3-D face, in mm (upper minus lower inner-lip vertex along the face's up axis: negative =
-     the lips pass through each other) and its lowest value;
+     the lips pass through each other) and its lowest value, and the frames where the least
+     of the gaps 61-67, 62-66, 63-65 is negative (the whole clip's and the shut ones);
    - the activations :data:`SHAPES`, ours and Face Landmarker's scores;
 4. the whole clip: the correlation and std ratio of our mouth opening with the reference's,
    and of our jawOpen with Face Landmarker's (the open-mouth amplitude must stay).
@@ -90,16 +91,18 @@ def stillness(x: np.ndarray, segments: list) -> dict:
             "mean": float(v.mean()), "min": float(v.min())}
 
 
-def model_lip_gap_mm(model, track) -> np.ndarray:
-    """(F,): the fitted face's inner-lip gap, upper (iBUG 62) minus lower (66) lip vertex along
-    the face's up axis (from the chin 8 to the nose bridge 27), in mm (model units: cm)."""
+def model_lip_gap_mm(model, track) -> tuple[np.ndarray, np.ndarray]:
+    """(F,) twice: the fitted face's inner-lip gap, upper (iBUG 62) minus lower (66) lip vertex
+    along the face's up axis (from the chin 8 to the nose bridge 27), in mm (model units: cm),
+    and the least of the gaps 61-67, 62-66, 63-65 the same way."""
     lm = np.asarray(model.landmarks)
-    out = np.full(track.n_frames, np.nan)
+    out, low = np.full(track.n_frames, np.nan), np.full(track.n_frames, np.nan)
     for i in range(track.n_frames):
         V = model.synthesize(track.weights_at(i))[lm]
         up = V[27] - V[8]
-        out[i] = 10.0 * float(np.dot(V[62] - V[66], up / np.linalg.norm(up)))
-    return out
+        g = 10.0 * (V[[61, 62, 63]] - V[[67, 66, 65]]) @ (up / np.linalg.norm(up))
+        out[i], low[i] = g[1], g.min()
+    return out, low
 
 
 def _ratio(a, b):
@@ -124,7 +127,7 @@ def clip_measures(name: str, vdir: Path, cache: Path, model, args) -> dict:
     ro, fo = mp.measure(ref, mp.MOUTH_OPEN), mp.measure(pts, mp.MOUTH_OPEN)
     oo = bc.openings(tr.landmarks2d)["mouth_open"]
     iod_px = np.linalg.norm(ref[:, mp.EYE_CORNERS[0]] - ref[:, mp.EYE_CORNERS[1]], axis=1)
-    gap_mm = model_lip_gap_mm(model, tr)
+    gap_mm, low_mm = model_lip_gap_mm(model, tr)
     segs = shut_segments(ro, args.shut, args.min_frames, args.trim)
     A = np.asarray(tr.blendshapes, float)
     out = {"frames": F, "seconds": round(sec, 1), "segments": segs,
@@ -133,6 +136,9 @@ def clip_measures(name: str, vdir: Path, cache: Path, model, args) -> dict:
            "mouth": {"reference": stillness(ro, segs), "face_landmarker": stillness(fo, segs),
                      "ours": stillness(oo, segs), "ours_px": stillness(oo * iod_px, segs),
                      "ours_model_mm": stillness(gap_mm, segs)},
+           "crossed_frames": int(np.sum(low_mm < 0)),
+           "crossed_shut_frames": int(sum(np.sum(low_mm[a:b] < 0) for a, b in segs)),
+           "lowest_gap_mm": float(np.nanmin(low_mm)),
            "shapes": {}, "whole": {
                "r_mouth": bc.corr(oo, ro), "sr_mouth": bc.std_ratio(oo, ro),
                "r_jawOpen": bc.corr(A[:, ARKIT_NAMES.index("jawOpen")],
@@ -170,7 +176,9 @@ def print_table(res: dict) -> None:
         print(f"{name}: {len(c['segments'])} segments, {c['shut_frames']} frames, "
               f"whole clip r mouth {_f(c['whole']['r_mouth'], 3)} sr "
               f"{_f(c['whole']['sr_mouth'], 2)}, r jawOpen {_f(c['whole']['r_jawOpen'], 3)} "
-              f"sr {_f(c['whole']['sr_jawOpen'], 2)}")
+              f"sr {_f(c['whole']['sr_jawOpen'], 2)}; lips crossed on {c['crossed_frames']} "
+              f"frames ({c['crossed_shut_frames']} shut), lowest gap "
+              f"{_f(c['lowest_gap_mm'], 2)} mm")
         if not c["segments"]:
             continue
         for label, key in (("mouth ours", "ours"), ("mouth Face Landmarker", "face_landmarker"),

@@ -66,6 +66,7 @@ from .fit2d import (Targets, box_qp, gram_blocks, pose_gauss_newton, project_bas
 from .gaze import IRIS_INDEX, frame_gaze_activations, usable_iris
 from .init import require_landmarks
 from .landmarks import IBUG_WEIGHTS, eye_distance
+from .lip_contact import contact_qp
 from .options import Progress
 from .result import Track
 from .scores import ScoreLine, fit_score_lines, score_targets
@@ -187,6 +188,10 @@ class CaptureOptions:
         Landmarker's points show a head nodding up or down as one nodding less, and the fit,
         which follows them, inherits that; the track's pose has its pitch divided by this
         (:func:`restore_pitch`; the fit itself is unchanged). 1 = off (exact points).
+    lip_contact : bool
+        For an ARKit model: the model's upper inner lip is kept from passing below the lower
+        one (:mod:`facetransfer.track.lip_contact`: the inner-lip gaps, linear in the
+        activations, held >= 0 in each expression step where the box solution crosses them).
     """
 
     identity_frames: int = 24
@@ -207,6 +212,7 @@ class CaptureOptions:
     scores: float = 1.0
     view_offset_prior: float = 1e-4
     pitch_gain: float = DETECTOR_PITCH_GAIN
+    lip_contact: bool = True
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
@@ -739,8 +745,8 @@ def restore_pitch(R: np.ndarray, s: np.ndarray, t: np.ndarray, X: np.ndarray, w:
 
 
 def load_kernels() -> None:
-    """Load the fit's compiled kernels (:mod:`.fit2d`, :func:`.gaze.frame_gaze_activations`)
-    from numba's cache by running each once on a tiny problem.
+    """Load the fit's compiled kernels (:mod:`.fit2d`, :func:`.gaze.frame_gaze_activations`,
+    :func:`.lip_contact.contact_qp`) from numba's cache by running each once on a tiny problem.
 
     numba starts up on the first compiled call of a process (about 0.25 s here). A command
     that tracks a second clip in a forked child
@@ -760,6 +766,8 @@ def load_kernels() -> None:
               hi=np.ones(2))
     frame_gaze_activations(np.zeros((68, 3)) + np.arange(68)[:, None], np.zeros((2, 2)),
                            np.zeros(2, bool), R, 10.0, t)
+    contact_qp(np.eye(2), np.ones(2), np.zeros(2), np.zeros(2), np.ones(2), np.ones((1, 2)),
+               np.array([0.5]))
 
 
 def capture_video(video, model, *, options: CaptureOptions | None = None, detector=None,

@@ -16,8 +16,10 @@ import numpy as np
 from ..arkit import ARKIT_NAMES, activation_basis, activation_prior_scale, expression_rig, \
     is_arkit_model
 from .camera import Pose
-from .fit2d import Targets, gram_blocks, project_basis, rig_solve, targets_normal
+from .fit2d import (Targets, gram_blocks, project_basis, rig_normal, rig_solve,
+                    targets_normal)
 from .gaze import GAZE_NAMES
+from .lip_contact import lip_contact
 from .solver import BasisCache, Prior
 
 __all__ = ["Sampler", "sampler", "Shape", "EYELID"]
@@ -108,6 +110,9 @@ class Shape:
             self._flat = (self.D.reshape(self.size, -1), self.N.ravel())      # (K, 3P), (3P,)
             self._blocks: dict = {}                                            # nominal -> C
             self._zeros, self._ones = np.zeros(self.size), np.ones(self.size)  # the box
+            # the lips' contact: the inner-lip gaps, linear in the activations (lip_contact)
+            self.lips = (lip_contact(rig.neutral, self.D)
+                         if getattr(opt, "lip_contact", False) else None)
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
             self.precision = {m: p.Q @ p.inv_cov @ p.Q.T for m, p in self.priors.items()}
@@ -201,7 +206,9 @@ class Shape:
         """The per-frame parameters best explaining ``targets`` at ``pose`` (ARKit: the
         activations where ``fixed`` (K,) is finite held at its values, and pulled with weight
         ``opt.scores`` toward ``anchor`` (K,) where it is finite: the mapped detector scores of
-        :mod:`facetransfer.track.scores`)."""
+        :mod:`facetransfer.track.scores`; with ``opt.lip_contact``, where the box solution
+        crosses the lips, solved again with the inner-lip gaps held:
+        :mod:`facetransfer.track.lip_contact`)."""
         lam_p, lam_t = self.opt.expression_prior, (self.opt.temporal if prev is not None else 0.0)
         if self.arkit:
             lam_t = (np.where(self.fast, self.opt.temporal, self.opt.slow_temporal)
@@ -217,9 +224,15 @@ class Shape:
             if fixed is not None:
                 ok = np.isfinite(fixed)
                 lo, hi = np.where(ok, fixed, 0.0), np.where(ok, fixed, 1.0)
-            return rig_solve(self.D, self.blocks(targets.nominal), pose, targets,
-                             pose.project(self.N), iod, x, ridge=ridge,
-                             rhs=rhs - self.opt.sparsity, lo=lo, hi=hi, tol=1e-5)   # Eq. (9)
+            blocks, base, rhs = self.blocks(targets.nominal), pose.project(self.N), \
+                rhs - self.opt.sparsity
+            x = rig_solve(self.D, blocks, pose, targets, base, iod, x, ridge=ridge, rhs=rhs,
+                          lo=lo, hi=hi, tol=1e-5)                                 # Eq. (9)
+            if self.lips is not None and self.lips.crossed(x):     # the lips cross: held apart
+                G, h = rig_normal(self.D, blocks, targets.nominal, pose, targets.p, targets.w,
+                                  base, iod)
+                x = self.lips.solve(G + np.diag(ridge), h + rhs, x, lo, hi)
+            return x
         return self._solve_modes(pose, targets, iod, x, prev, lam_p, lam_t)
 
     def _solve_modes(self, pose, targets, iod, x, prev, lam_p, lam_t):

@@ -1,0 +1,173 @@
+"""The lips' contact in the capture fit: a shut mouth's lips touch, they do not cross.
+
+For a fixed identity the face is linear in one frame's ARKit activations ``a`` (the bilinear
+model of Vlasic et al. 2005, Eq. (5), with the identity contracted: ``X(a) = N + Σ_j a_j Δ_j``,
+:class:`~facetransfer.track.capture_points.Shape`), so the gap between an upper and a lower
+inner-lip vertex along the face's up axis ``u`` is linear too::
+
+    gap_i(a) = uᵀ (N_up(i) - N_low(i)) + Σ_j a_j uᵀ (Δ_j,up(i) - Δ_j,low(i)) = g0_i + C_i a
+
+at the inner-lip landmark pairs :data:`LIP_PAIRS` (iBUG 61-67, 62-66, 63-65). Combinations of
+the lip shapes (mouthClose, the rolls, shrugs and presses against jawOpen) hold the lips'
+outline while moving the upper inner lip below the lower one: the model's lips pass through
+each other (``benchmarks/bench_shut_mouth.py``), which no bound on a single activation can
+forbid. The frame's expression step (Eq. (9), a box-constrained quadratic program) therefore
+gets the inequalities ``g0 + C a >= min(margin, g0)`` (an identity whose lips cross at rest,
+as one of the synthetic benchmark's FaceKit faces does, keeps its own contact: the expression
+is not made to part them): where the box solution satisfies them it is kept
+as it is; otherwise :func:`contact_qp` solves the program with them (their Lagrange
+multipliers by a semi-smooth Newton iteration, each step a warm-started box solve).
+
+The gap is measured on the model's mesh (without the clip's offset of the tracked points: the
+lips an animator sees), in model units, along ``u`` = the neutral face's chin (iBUG 8) to nose
+bridge (27) direction.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .fit2d import _box_qp, njit
+
+__all__ = ["LIP_PAIRS", "LipContact", "lip_contact", "contact_qp"]
+
+#: iBUG (upper, lower) inner-lip landmark pairs along the mouth
+LIP_PAIRS = ((61, 67), (62, 66), (63, 65))
+
+
+@dataclass(frozen=True)
+class LipContact:
+    """The inner-lip gaps ``g0 + C a`` of one identity's rig (module notes).
+
+    Attributes
+    ----------
+    g0 : (q,) float64
+        The neutral face's gaps at :data:`LIP_PAIRS` (model units).
+    C : (q, K) float64
+        Each activation's change of them.
+    floor : (q,) float64
+        The least gaps allowed: a margin (0: the lips may touch), or the neutral face's own
+        gap where that is less (an identity whose lips cross at rest: the expression is not
+        made to part them); :func:`lip_contact`.
+    """
+
+    g0: np.ndarray
+    C: np.ndarray
+    floor: np.ndarray
+
+    def gaps(self, a: np.ndarray) -> np.ndarray:
+        """The gaps ``g0 + C a`` (q,) of activations ``a`` (K,)."""
+        return self.g0 + self.C @ a
+
+    def crossed(self, a: np.ndarray) -> bool:
+        """Whether any gap of ``a`` (K,) is below its :attr:`floor`."""
+        return bool(np.min(self.C @ a - (self.floor - self.g0)) < 0.0)
+
+    def solve(self, G: np.ndarray, h: np.ndarray, a: np.ndarray, lo: np.ndarray,
+              hi: np.ndarray) -> np.ndarray:
+        """:func:`contact_qp` with these gaps held at their :attr:`floor`; ``a`` (K,) the box
+        solution, returned as it is where no gap is below it."""
+        if not self.crossed(a):
+            return a
+        return contact_qp(G, h, a, lo, hi, self.C, self.floor - self.g0)
+
+
+def lip_contact(neutral: np.ndarray, deltas: np.ndarray, margin: float = 0.0) -> LipContact:
+    """The :class:`LipContact` of a rig at the tracked points (rows 0-67: the iBUG landmark
+    vertices of the mesh).
+
+    Parameters
+    ----------
+    neutral : (P, 3) float64
+        The rig's neutral face (without the clip's offset), model units.
+    deltas : (K, P, 3) float64
+        Its activations' displacements.
+    margin : float
+        The least gap (model units).
+    """
+    up = neutral[27] - neutral[8]
+    up = up / np.linalg.norm(up)
+    hi, lo = (np.array(i) for i in zip(*LIP_PAIRS))
+    g0 = (neutral[hi] - neutral[lo]) @ up                                   # (q,)
+    C = ((deltas[:, hi] - deltas[:, lo]) @ up).T                            # (q, K)
+    return LipContact(np.ascontiguousarray(g0), np.ascontiguousarray(C),
+                      np.minimum(float(margin), g0))
+
+
+def contact_qp(G: np.ndarray, h: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+               C: np.ndarray, d: np.ndarray, *, iterations: int = 20, tol: float = 1e-5
+               ) -> np.ndarray:
+    """``argmin_a ½ aᵀ G a - hᵀ a`` subject to ``lo <= a <= hi`` and ``C a >= d``.
+
+    The multipliers ``λ >= 0`` of ``C a >= d``: ``a(λ)`` is the box solution of
+    ``(G, h + Cᵀλ)`` (:func:`~.fit2d.box_qp`, warm-started), and ``λ`` takes semi-smooth
+    Newton steps on the dual, ``λ_A += S⁻¹ (d - C a)_A`` over the active constraints ``A``
+    (violated or ``λ > 0``) with ``S = C_AF G_FF⁻¹ C_AFᵀ`` over the activations ``F``
+    strictly inside the box (the dual is piecewise quadratic: exact once the active sets
+    settle), then ``λ = max(λ, 0)``.
+
+    Parameters
+    ----------
+    G : (K, K) float64
+        Symmetric positive definite.
+    h : (K,) float64
+    a : (K,) float64
+        Start (the box solution without the constraints).
+    lo, hi : (K,) float64
+        Bounds.
+    C : (q, K) float64
+    d : (q,) float64
+    iterations : int
+        Newton steps at most.
+    tol : float
+        Allowed violation of ``C a >= d``.
+
+    Returns
+    -------
+    (K,) float64
+    """
+    x = np.asarray(a, np.float64).copy()
+    return _contact_qp(np.ascontiguousarray(G, np.float64), np.asarray(h, np.float64),
+                       x, np.asarray(lo, np.float64), np.asarray(hi, np.float64),
+                       np.ascontiguousarray(C, np.float64), np.asarray(d, np.float64),
+                       int(iterations), float(tol))
+
+
+@njit(cache=True)
+def _contact_qp(G, h, x, lo, hi, C, d, iterations, tol):  # pragma: no cover (compiled)
+    """contact_qp's iteration (``x`` the start, updated in place)."""
+    q, k = C.shape
+    lam = np.zeros(q)
+    for _ in range(iterations):
+        r = d - C @ x                                         # > 0: violated
+        act = np.zeros(q, np.bool_)
+        done = True
+        for i in range(q):
+            act[i] = r[i] > tol or lam[i] > 0.0
+            if r[i] > tol or (lam[i] > 0.0 and abs(r[i]) > tol):
+                done = False
+        if done:
+            break
+        A = np.flatnonzero(act)
+        F = np.flatnonzero((x > lo + 1e-9) & (x < hi - 1e-9))
+        if F.size == 0:                                   # every activation at a bound
+            break
+        Cf = np.empty((A.size, F.size))
+        for i in range(A.size):
+            for j in range(F.size):
+                Cf[i, j] = C[A[i], F[j]]
+        Gf = np.empty((F.size, F.size))
+        for i in range(F.size):
+            for j in range(F.size):
+                Gf[i, j] = G[F[i], F[j]]
+        S = Cf @ np.linalg.solve(Gf, np.ascontiguousarray(Cf.T))   # (|A|, |A|)
+        ridge = 1e-9 * max(np.trace(S), 1e-12)
+        for i in range(A.size):
+            S[i, i] += ridge
+        step = np.linalg.solve(S, r[A])
+        for i in range(A.size):
+            lam[A[i]] = max(lam[A[i]] + step[i], 0.0)
+        x = _box_qp(G, h + C.T @ lam, x, lo, hi, 400, 1e-8)
+    return x
