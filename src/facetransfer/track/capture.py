@@ -745,8 +745,9 @@ def restore_pitch(R: np.ndarray, s: np.ndarray, t: np.ndarray, X: np.ndarray, w:
 
 
 def load_kernels() -> None:
-    """Load the fit's compiled kernels (:mod:`.fit2d`, :func:`.gaze.frame_gaze_activations`,
-    :func:`.lip_contact.contact_qp`) from numba's cache by running each once on a tiny problem.
+    """Load the fit's compiled kernels (:mod:`.fit2d`, :func:`.gaze.frame_gaze_activations`)
+    from numba's cache by running each once on a tiny problem, and SciPy's optimiser that
+    :func:`.lip_contact.contact_qp` calls.
 
     numba starts up on the first compiled call of a process (about 0.25 s here). A command
     that tracks a second clip in a forked child

@@ -30,8 +30,8 @@ __all__ = ["FIT_VERSION", "fit_key", "SavedFit", "pack_fit", "unpack_fit"]
 
 #: bumped when the saved fit changes layout or meaning (older fits are then ignored)
 #: 2: the second pass (score lines); 3: the inner lips weighed up (INNER_LIPS); 4: the lips'
-#: contact held (lip_contact)
-FIT_VERSION = 4
+#: contact held (lip_contact); 5: that contact solved exactly (contact_qp by its dual)
+FIT_VERSION = 5
 #: prefix of the fit's entries in the progress file
 PREFIX = "fit_"
 

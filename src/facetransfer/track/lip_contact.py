@@ -15,8 +15,9 @@ forbid. The frame's expression step (Eq. (9), a box-constrained quadratic progra
 gets the inequalities ``g0 + C a >= min(margin, g0)`` (an identity whose lips cross at rest,
 as one of the synthetic benchmark's FaceKit faces does, keeps its own contact: the expression
 is not made to part them): where the box solution satisfies them it is kept
-as it is; otherwise :func:`contact_qp` solves the program with them (their Lagrange
-multipliers by a semi-smooth Newton iteration, each step a warm-started box solve).
+as it is; otherwise :func:`contact_qp` solves the program with them (their Lagrange multipliers
+maximise the dual: semi-smooth Newton steps where they reach its KKT point, L-BFGS-B where they
+do not; each evaluation a warm-started box solve).
 
 The gap is measured on the model's mesh (without the clip's offset of the tracked points: the
 lips an animator sees), in model units, along ``u`` = the neutral face's chin (iBUG 8) to nose
@@ -97,16 +98,23 @@ def lip_contact(neutral: np.ndarray, deltas: np.ndarray, margin: float = 0.0) ->
 
 
 def contact_qp(G: np.ndarray, h: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-               C: np.ndarray, d: np.ndarray, *, iterations: int = 20, tol: float = 1e-5
+               C: np.ndarray, d: np.ndarray, *, iterations: int = 200, tol: float = 1e-9
                ) -> np.ndarray:
     """``argmin_a ½ aᵀ G a - hᵀ a`` subject to ``lo <= a <= hi`` and ``C a >= d``.
 
-    The multipliers ``λ >= 0`` of ``C a >= d``: ``a(λ)`` is the box solution of
-    ``(G, h + Cᵀλ)`` (:func:`~.fit2d.box_qp`, warm-started), and ``λ`` takes semi-smooth
-    Newton steps on the dual, ``λ_A += S⁻¹ (d - C a)_A`` over the active constraints ``A``
-    (violated or ``λ > 0``) with ``S = C_AF G_FF⁻¹ C_AFᵀ`` over the activations ``F``
-    strictly inside the box (the dual is piecewise quadratic: exact once the active sets
-    settle), then ``λ = max(λ, 0)``.
+    The dual in the multipliers ``λ >= 0`` of ``C a >= d``: ``θ(λ) = min_{lo<=a<=hi} ½ aᵀ G a
+    - hᵀ a - λᵀ (C a - d)``, attained at ``a(λ)`` = the box solution of ``(G, h + Cᵀλ)``
+    (:func:`~.fit2d.box_qp`, warm-started), is concave and differentiable with gradient
+    ``d - C a(λ)``. First semi-smooth Newton steps on it (compiled): ``λ_A += S⁻¹ (d - C a)_A``
+    over the active constraints ``A`` (violated or ``λ > 0``), ``S = C_AF G_FF⁻¹ C_AFᵀ`` over
+    the activations ``F`` strictly inside the box, ``λ = max(λ, 0)``; they are kept where they
+    end at the KKT point (``a = a(λ)``, ``λ >= 0``, every gap held, the ones with ``λ > 0`` at
+    their floor: the minimiser, the problem being convex), the common case. Where they do not
+    (a gap whose free activations cannot move it makes ``S`` singular: the steps stop or
+    cycle), ``θ`` is maximised by L-BFGS-B (a bounded quasi-Newton method, every step raising
+    ``θ``). A gap no ``a`` in the box reaches is held at the most the box gives it (``d_i``
+    lowered to ``max_box C_i a``); where the gaps cannot be met together (``θ`` unbounded)
+    ``λ`` stops at a large cap: ``a(λ)`` stays in the box, finite, never NaN.
 
     Parameters
     ----------
@@ -120,27 +128,52 @@ def contact_qp(G: np.ndarray, h: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: 
     C : (q, K) float64
     d : (q,) float64
     iterations : int
-        Newton steps at most.
+        Quasi-Newton steps at most, after at most 20 Newton steps (at the cap, ``a(λ)`` of
+        the last ``λ`` is returned).
     tol : float
-        Allowed violation of ``C a >= d``.
+        Projected-gradient tolerance of the dual (the violation of ``C a >= d`` at ``λ > 0``).
 
     Returns
     -------
     (K,) float64
+
+    References
+    ----------
+    Nocedal & Wright, Numerical Optimization (2006), §12.9 (duality), §7.2 (L-BFGS-B).
     """
-    x = np.asarray(a, np.float64).copy()
-    return _contact_qp(np.ascontiguousarray(G, np.float64), np.asarray(h, np.float64),
-                       x, np.asarray(lo, np.float64), np.asarray(hi, np.float64),
-                       np.ascontiguousarray(C, np.float64), np.asarray(d, np.float64),
-                       int(iterations), float(tol))
+    from scipy.optimize import minimize
+
+    G = np.ascontiguousarray(G, np.float64)
+    h, C, d = (np.ascontiguousarray(v, np.float64) for v in (h, C, d))
+    lo, hi = np.ascontiguousarray(lo, np.float64), np.ascontiguousarray(hi, np.float64)
+    x = np.minimum(np.maximum(np.asarray(a, np.float64), lo), hi)         # np.clip, new array
+    d = np.minimum(d, np.maximum(C * lo, C * hi).sum(axis=1))     # a gap's most the box reaches
+    x, kkt = _newton(G, h, x, lo, hi, C, d, 20, 1e-7)
+    if kkt:
+        return x
+    scale = 1e6 * (np.abs(G).max() + np.abs(h).max() + 1.0)
+    cap = scale / np.maximum(np.abs(C).max(axis=1), 1e-12)                 # (q,) λ's bound
+    state = [x]
+
+    def neg_dual(lam):                                         # -θ(λ), -∇θ(λ)
+        y = _box_qp(G, h + C.T @ lam, state[0].copy(), lo, hi, 5000, 1e-12)
+        state[0] = y
+        r = d - C @ y                                          # > 0: violated
+        return -(0.5 * y @ G @ y - h @ y + lam @ r), -r
+
+    res = minimize(neg_dual, np.zeros(len(d)), jac=True, method="L-BFGS-B",
+                   bounds=[(0.0, c) for c in cap],
+                   options={"maxiter": int(iterations), "gtol": float(tol), "ftol": 0.0})
+    return _box_qp(G, h + C.T @ res.x, state[0].copy(), lo, hi, 5000, 1e-12)   # a(λ*)
 
 
 @njit(cache=True)
-def _contact_qp(G, h, x, lo, hi, C, d, iterations, tol):  # pragma: no cover (compiled)
-    """contact_qp's iteration (``x`` the start, updated in place)."""
-    q, k = C.shape
+def _newton(G, h, x, lo, hi, C, d, iterations, tol):  # pragma: no cover (compiled)
+    """contact_qp's semi-smooth Newton steps from ``x`` (updated in place): ``(x, True)`` at
+    the KKT point (gaps within ``tol``), ``(x, False)`` where they stop short of it."""
+    q = C.shape[0]
     lam = np.zeros(q)
-    for _ in range(iterations):
+    for it in range(iterations + 1):
         r = d - C @ x                                         # > 0: violated
         act = np.zeros(q, np.bool_)
         done = True
@@ -149,10 +182,10 @@ def _contact_qp(G, h, x, lo, hi, C, d, iterations, tol):  # pragma: no cover (co
             if r[i] > tol or (lam[i] > 0.0 and abs(r[i]) > tol):
                 done = False
         if done:
-            break
+            return x, True
         A = np.flatnonzero(act)
         F = np.flatnonzero((x > lo + 1e-9) & (x < hi - 1e-9))
-        if F.size == 0:                                   # every activation at a bound
+        if F.size == 0 or it == iterations:                  # no free activation; the cap
             break
         Cf = np.empty((A.size, F.size))
         for i in range(A.size):
@@ -169,5 +202,5 @@ def _contact_qp(G, h, x, lo, hi, C, d, iterations, tol):  # pragma: no cover (co
         step = np.linalg.solve(S, r[A])
         for i in range(A.size):
             lam[A[i]] = max(lam[A[i]] + step[i], 0.0)
-        x = _box_qp(G, h + C.T @ lam, x, lo, hi, 400, 1e-8)
-    return x
+        x = _box_qp(G, h + C.T @ lam, x, lo, hi, 400, 1e-9)
+    return x, False
