@@ -184,3 +184,17 @@ def test_contact_qp_degenerate_cases():
                    constraints=[{"type": "ineq", "fun": lambda a: a[0] - a[1] - 0.4}],
                    options={"ftol": 1e-15, "maxiter": 500}).x
     np.testing.assert_allclose(x, ref, atol=1e-5)
+
+
+def test_a_model_that_is_not_arkit_named_fits_without_the_contact(quick_model):
+    """The paper's per-mode models (a bilinear ICT model here) have no activations to bound:
+    their Shape says so (``lips`` None, as with the option off) and solves as before."""
+    ident = quick_model.training_weights("identity", quick_model.labels[0][0])
+    shape = Shape(quick_model, ident, sampler(quick_model), CaptureOptions())
+    assert not shape.arkit and shape.lips is None
+    V = shape.points(shape.x0)[:68]
+    pose = Pose(np.eye(3), 9.0, np.array([256.0, 240.0]))
+    p = pose.project(V)
+    x = shape.solve(pose, Targets.stack([(p, np.ones(68))]), float(np.linalg.norm(p[36] - p[45])),
+                    shape.x0, None)
+    assert np.all(np.isfinite(x)) and x.shape == shape.x0.shape

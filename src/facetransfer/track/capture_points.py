@@ -111,8 +111,7 @@ class Shape:
             self._blocks: dict = {}                                            # nominal -> C
             self._zeros, self._ones = np.zeros(self.size), np.ones(self.size)  # the box
             # the lips' contact: the inner-lip gaps, linear in the activations (lip_contact)
-            self.lips = (lip_contact(rig.neutral, self.D)
-                         if getattr(opt, "lip_contact", False) else None)
+            self.lips = lip_contact(rig.neutral, self.D) if opt.lip_contact else None
         else:
             self.priors = {m: Prior.from_model(model, m) for m in self.per_frame}
             self.precision = {m: p.Q @ p.inv_cov @ p.Q.T for m, p in self.priors.items()}
@@ -121,6 +120,7 @@ class Shape:
             self.sizes = [model.ranks[model.mode_index(m)] for m in self.per_frame]
             self.size = int(sum(self.sizes))
             self.x0 = np.concatenate([self.priors[m].mean for m in self.per_frame])
+            self.lips = None                   # the lips' contact: ARKit activations only
 
     def offset_at(self, sin_yaw: float) -> np.ndarray:
         """The offset of the tracked points at a head yaw: ``offset + sin_yaw view``, (P, 3).
