@@ -5,7 +5,9 @@ archive``); a benchmark then runs its worker in a fresh process with that folder
 ``PYTHONPATH`` (``bench_rewrite_frame.py``, ``bench_jaw_seam.py``), or the command itself
 (:func:`run_command`: ``bench_plate_header.py``, ``bench_primaries.py``). A worker calls the
 library through :func:`rewrite_plan` and :func:`hard_paste`, which call it as the tree on the
-path, older or newer, takes it.
+path, older or newer, takes it. :func:`add_base_options` and :func:`base_src` give a benchmark
+the ``--base SRC`` / ``--base-rev REV`` options (``bench_rewrite_frame.py``,
+``bench_track_pair.py``); :func:`now_and_before` its ``--before REV`` command line.
 """
 
 from __future__ import annotations

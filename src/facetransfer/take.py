@@ -174,12 +174,10 @@ def take_on_timeline(seconds: np.ndarray, values: np.ndarray, n_frames: int, fps
     :func:`facetransfer.transfer.time_map`: ``"trim"`` stops at the end of its last row's own
     span, ``"hold"`` holds its last row, ``"loop"`` restarts it after that span. A row's span
     is the rows' median step (:func:`_row_step`): a take of 90 rows at 30 a second lasts 3 s,
-    as a 90-frame video of 30 fps does, on a target of any rate. Before, it was the target's
-    frame (half of one for ``"trim"``): at another rate than the take's each repeat came late,
-    the take's last row shown in place of its first, and a 30 fps take trimmed on a 60 fps
-    target lost the frame its video keeps (179 frames for 180). A frame within ``_SLACK`` of
-    a target frame short of the span is past it: trimmed, or a repeat's first row (the span
-    from time-of-day timecodes lands an ulp off a target frame).
+    as a 90-frame video of 30 fps does, on a target of any rate (trimmed on a 60 fps target
+    it keeps 180 frames; looped, each repeat starts on its first row). A frame within
+    ``_SLACK`` of a target frame short of the span is past it: trimmed, or a repeat's first
+    row (the span from time-of-day timecodes lands an ulp off a target frame).
     None: ``"trim"`` when the take is at least as long as the ``n_frames``, else ``"hold"``.
 
     Returns
@@ -406,9 +404,9 @@ def _first_timecode(timecodes) -> str | None:
 
 def take_row_rate(timecodes, name: str = "the take") -> float:
     """The rate of a take's rows, frames a second (:func:`_rows_rate`): what a preview of it
-    plays them at (``puppet take.csv``), and what ``probe`` says beside its timecode rate (a
-    25 fps clip's export counts 30 a second with thousandths, the app's way: its rows are 25
-    a second, which ``probe`` did not say)."""
+    plays them at (``puppet take.csv``), and what ``probe`` says beside its timecode rate
+    where they differ (a 25 fps clip's export counts 30 a second with thousandths, the app's
+    way: its rows are 25 a second)."""
     return _rows_rate(take_seconds(timecodes, warn=False, name=name), _fields(timecodes, name))
 
 

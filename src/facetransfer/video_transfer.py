@@ -34,10 +34,10 @@ from .errors import RewriteError
 from .io.ahead import ordered_ahead
 from .io.plate_output import plate_output
 from .io.video_like import like_video
-from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
 from .rewrite import paste_image
 from .rewrite_clip import MouthSource, RenderRun, rewrite_frames
 from .rewrite_options import RewriteOptions
+from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
 from .transfer_plan import TransferPlan, TransferSources, plan_sources, plan_transfer  # noqa: F401
 
 log = logging.getLogger(__name__)

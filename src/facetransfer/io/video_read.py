@@ -116,14 +116,11 @@ _NAMED_KINDS = ("a glTF", "a USD", "a Live Link", "an HTML", "a JSON")
 def why_not_video(p: Path) -> str:
     """Why OpenCV cannot open the file ``p`` as a video, as far as its bytes and ffmpeg say:
     an MP4/MOV cut short (no ``moov`` index: a recording or copy that did not finish), a file
-    with sound and no pictures, or no stream at all, a text file; else that it is not a video
-    OpenCV can decode.
-    The tool's own files by their first bytes (a Live Link Face take, a glb, a USD file, a
-    page, a JSON file: :func:`facetransfer.io.npz.content_kind`), named as ``probe`` names
-    them: an export or a take passed on where a video belongs (``track take.csv``,
-    ``transfer --identity-from face.glb``; before, "a text file", or "not a video OpenCV can
-    decode" for a glb or a binary USD file).
-    (Before, all of these were "not a video OpenCV can decode".)"""
+    with sound and no pictures, or no stream at all; one of the tool's own files by its first
+    bytes (a Live Link Face take, a glb, a USD file, a page, a JSON file:
+    :func:`facetransfer.io.npz.content_kind`), named as ``probe`` names it: an export or a take
+    passed on where a video belongs (``track take.csv``, ``transfer --identity-from
+    face.glb``); another text file; else that it is not a video OpenCV can decode."""
     from .npz import content_kind
     from .video_display import described_input
 

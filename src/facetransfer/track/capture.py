@@ -191,7 +191,8 @@ class CaptureOptions:
     lip_contact : bool
         For an ARKit model: the model's upper inner lip is kept from passing below the lower
         one (:mod:`facetransfer.track.lip_contact`: the inner-lip gaps, linear in the
-        activations, held >= 0 in each expression step where the box solution crosses them).
+        activations, held >= 0, or at the neutral face's own gap where that is below 0, in
+        each expression step where the box solution crosses them).
     """
 
     identity_frames: int = 24

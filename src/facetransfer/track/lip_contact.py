@@ -12,10 +12,10 @@ the lip shapes (mouthClose, the rolls, shrugs and presses against jawOpen) hold 
 outline while moving the upper inner lip below the lower one: the model's lips pass through
 each other (``benchmarks/bench_shut_mouth.py``), which no bound on a single activation can
 forbid. The frame's expression step (Eq. (9), a box-constrained quadratic program) therefore
-gets the inequalities ``g0 + C a >= min(margin, g0)`` (an identity whose lips cross at rest,
-as one of the synthetic benchmark's FaceKit faces does, keeps its own contact: the expression
-is not made to part them): where the box solution satisfies them it is kept
-as it is; otherwise :func:`contact_qp` solves the program with them (their Lagrange multipliers
+gets the inequalities ``g0 + C a >= min(0, g0)`` (the lips may touch; an identity whose lips
+cross at rest, as one of the synthetic benchmark's FaceKit faces does, keeps its own contact:
+the expression is not made to part them): where the box solution satisfies them it is kept as
+it is; otherwise :func:`contact_qp` solves the program with them (their Lagrange multipliers
 maximise the dual: semi-smooth Newton steps where they reach its KKT point, L-BFGS-B where they
 do not; each evaluation a warm-started box solve).
 
@@ -49,8 +49,8 @@ class LipContact:
     C : (q, K) float64
         Each activation's change of them.
     floor : (q,) float64
-        The least gaps allowed: a margin (0: the lips may touch), or the neutral face's own
-        gap where that is less (an identity whose lips cross at rest: the expression is not
+        The least gaps allowed: 0 (the lips may touch), or the neutral face's own gap where
+        that is less (an identity whose lips cross at rest: the expression is not
         made to part them); :func:`lip_contact`.
     """
 
@@ -68,14 +68,14 @@ class LipContact:
 
     def solve(self, G: np.ndarray, h: np.ndarray, a: np.ndarray, lo: np.ndarray,
               hi: np.ndarray) -> np.ndarray:
-        """:func:`contact_qp` with these gaps held at their :attr:`floor`; ``a`` (K,) the box
-        solution, returned as it is where no gap is below it."""
+        """:func:`contact_qp` with these gaps held at or above their :attr:`floor`; ``a`` (K,)
+        the box solution, returned as it is where no gap is below it."""
         if not self.crossed(a):
             return a
         return contact_qp(G, h, a, lo, hi, self.C, self.floor - self.g0)
 
 
-def lip_contact(neutral: np.ndarray, deltas: np.ndarray, margin: float = 0.0) -> LipContact:
+def lip_contact(neutral: np.ndarray, deltas: np.ndarray) -> LipContact:
     """The :class:`LipContact` of a rig at the tracked points (rows 0-67: the iBUG landmark
     vertices of the mesh).
 
@@ -85,16 +85,13 @@ def lip_contact(neutral: np.ndarray, deltas: np.ndarray, margin: float = 0.0) ->
         The rig's neutral face (without the clip's offset), model units.
     deltas : (K, P, 3) float64
         Its activations' displacements.
-    margin : float
-        The least gap (model units).
     """
     up = neutral[27] - neutral[8]
     up = up / np.linalg.norm(up)
-    hi, lo = (np.array(i) for i in zip(*LIP_PAIRS))
-    g0 = (neutral[hi] - neutral[lo]) @ up                                   # (q,)
-    C = ((deltas[:, hi] - deltas[:, lo]) @ up).T                            # (q, K)
-    return LipContact(np.ascontiguousarray(g0), np.ascontiguousarray(C),
-                      np.minimum(float(margin), g0))
+    upper, lower = (np.array(i) for i in zip(*LIP_PAIRS))
+    g0 = (neutral[upper] - neutral[lower]) @ up                             # (q,)
+    C = ((deltas[:, upper] - deltas[:, lower]) @ up).T                      # (q, K)
+    return LipContact(np.ascontiguousarray(g0), np.ascontiguousarray(C), np.minimum(0.0, g0))
 
 
 def contact_qp(G: np.ndarray, h: np.ndarray, a: np.ndarray, lo: np.ndarray, hi: np.ndarray,

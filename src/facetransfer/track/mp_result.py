@@ -3,8 +3,9 @@
 MediaPipe's Tasks API (``FaceLandmarker.detect_for_video``) turns each C result into Python
 objects before returning it: 478 ``NormalizedLandmark`` dataclasses and 52 ``Category`` ones,
 which the detector (:class:`facetransfer.track.detect.VideoLandmarker`) then reads back into
-arrays. On issue 13's source clip that conversion took 0.09 of the detector's 0.18 CPU-s in
-this process for 218 frames (BENCHMARKS.md, "Forty-eighth session").
+arrays. On ``driving_d6`` (218 frames shown) that conversion took 0.093 of the 0.18 CPU-s
+the main thread spent in the landmarker's calls (BENCHMARKS.md, "Forty-eighth session (helper
+track48)").
 
 :class:`ArrayReader` makes the call that ``detect_for_video`` makes (the same C function,
 through the landmarker's own wrapped library, so its errors are raised as the API raises them)
