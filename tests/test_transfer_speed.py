@@ -566,7 +566,7 @@ def test_defaults_agree():
 
 @pytest.mark.parametrize("workers,processes", [(1, False), (2, False), (2, True)])
 def test_parts_paste_to_the_whole_frames(quick_model, topo, synthetic, workers, processes):
-    """``rewrite_frames(..., parts=True)`` (what ``transfer`` writes from) gives each frame's
+    """``rewrite_frame_parts`` (what ``transfer`` writes from) gives each frame's
     face box, whose composite pasted by ``rewrite.paste_image`` is the whole frame's image
     to the bit, with whether a face was rendered; on one thread, two, or forked processes."""
     fa, ta, fb, tb, truth = synthetic
@@ -576,10 +576,9 @@ def test_parts_paste_to_the_whole_frames(quick_model, topo, synthetic, workers, 
     new = dataclasses.replace(new, lost=lost)
 
     def frames(parts):
-        return list(rc.rewrite_frames(fb, tb, new, quick_model,
-                                      mouth_source=rc.MouthSource(fa, ta), topo=topo,
-                                      run=rc.RenderRun(workers=workers, processes=processes),
-                                      parts=parts))
+        rewrite = rc.rewrite_frame_parts if parts else rc.rewrite_frames
+        return list(rewrite(fb, tb, new, quick_model, mouth_source=rc.MouthSource(fa, ta),
+                            topo=topo, run=rc.RenderRun(workers=workers, processes=processes)))
 
     whole, parts = frames(False), frames(True)
     assert len(parts) == len(whole) == new.n_frames and parts[1] is None

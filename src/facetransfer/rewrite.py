@@ -238,7 +238,7 @@ def paste_image(T: np.ndarray, part) -> tuple[np.ndarray, bool]:
     """The composite of the whole frame from ``(box, crop result)`` (None: the frame
     unchanged), as :func:`_paste`'s ``image``, and whether a face was rendered (its
     ``face_mask`` has a pixel): a writer's share of a frame, without the whole frame's rendered
-    face and masks (:func:`facetransfer.rewrite_clip.rewrite_frames`' ``parts``)."""
+    face and masks (:func:`facetransfer.rewrite_clip.rewrite_frame_parts`)."""
     image = T.copy()
     if part is None:
         return image, False

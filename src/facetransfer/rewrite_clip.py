@@ -50,7 +50,7 @@ from .topology import MeshTopology, close_mouth, mesh_topology
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MouthSource", "RenderRun", "rewrite_frames"]
+__all__ = ["MouthSource", "RenderRun", "rewrite_frame_parts", "rewrite_frames"]
 
 
 @dataclass(frozen=True)
@@ -106,8 +106,8 @@ class RenderRun:
 def rewrite_frames(target_frames, target_track, new_track, model, *,
                    mouth_source: MouthSource | None = None, options: RewriteOptions | None = None,
                    topo: MeshTopology | None = None, run: RenderRun | None = None,
-                   regions: RegionTextures | None = None, matte: bool = False,
-                   parts: bool = False) -> Iterator:
+                   regions: RegionTextures | None = None, matte: bool = False
+                   ) -> Iterator[RewriteFrame]:
     """Rewrite every target frame with the new performance (§6, Fig. 7); each shot of an
     edited target (``target_track.shot_starts``) as a clip of its own.
 
@@ -144,17 +144,29 @@ def rewrite_frames(target_frames, target_track, new_track, model, *,
     matte : bool
         Give each frame's :attr:`~facetransfer.rewrite.RewriteFrame.matte` too (computed only
         when asked; all 0 where the face is lost).
-    parts : bool
-        Yield each frame's rewrite on the face's box only, ``(box, RewriteFrame)`` or None
-        (the frame unchanged; :meth:`_ClipRenderer.part`), not the whole frame: what a caller
-        that needs the composite alone pastes itself (:func:`facetransfer.rewrite.paste_image`),
-        without the whole frame's rendered face and masks.
 
     Yields
     ------
-    RewriteFrame, or (box, RewriteFrame) or None with ``parts``
+    RewriteFrame
         Frames ``run.start`` to ``new_track.n_frames - 1``.
     """
+    return _rewrite(target_frames, target_track, new_track, model, mouth_source=mouth_source,
+                    options=options, topo=topo, run=run, regions=regions, matte=matte)
+
+
+def rewrite_frame_parts(target_frames, target_track, new_track, model, **keywords
+                        ) -> Iterator[tuple | None]:
+    """:func:`rewrite_frames`' frames (its arguments, but ``matte``) on the face's box only:
+    ``(box, RewriteFrame)`` of each, or None (the frame unchanged; :meth:`_ClipRenderer.part`).
+    What a caller that needs the composite alone pastes itself
+    (:func:`facetransfer.rewrite.paste_image`), without the whole frame's rendered face and
+    masks."""
+    return _rewrite(target_frames, target_track, new_track, model, parts=True, **keywords)
+
+
+def _rewrite(target_frames, target_track, new_track, model, *, mouth_source=None, options=None,
+             topo=None, run=None, regions=None, matte: bool = False, parts: bool = False):
+    """:func:`rewrite_frames` (``parts``: :func:`rewrite_frame_parts`), shot by shot."""
     opts = options or RewriteOptions()
     mouth_source = MouthSource() if mouth_source is None else mouth_source
     run = RenderRun() if run is None else run

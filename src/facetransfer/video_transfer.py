@@ -35,7 +35,7 @@ from .io.ahead import ordered_ahead
 from .io.plate_output import plate_output
 from .io.video_like import like_video
 from .rewrite import paste_image
-from .rewrite_clip import MouthSource, RenderRun, rewrite_frames
+from .rewrite_clip import MouthSource, RenderRun, rewrite_frame_parts, rewrite_frames
 from .rewrite_options import RewriteOptions
 from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
 from .transfer_plan import TransferPlan, TransferSources, plan_sources, plan_transfer  # noqa: F401
@@ -287,10 +287,12 @@ class _Frames:
         mouth = MouthSource(p.mouth_frames, p.mouth_track, p.mouth_index, self.mouth_fn)
         run = RenderRun(progress=self.bar.update if self.bar is not None else None,
                         start=self.start)
-        it = rewrite_frames(p.target_frames, p.target_track, p.new_track, self.model,
-                            mouth_source=mouth, options=self.options, run=run,
-                            regions=p.regions, matte=self.matte is not None,
-                            parts=self._parts)
+        keywords = {"mouth_source": mouth, "options": self.options, "run": run,
+                    "regions": p.regions}
+        it = rewrite_frame_parts(p.target_frames, p.target_track, p.new_track, self.model,
+                                 **keywords) if self._parts else \
+            rewrite_frames(p.target_frames, p.target_track, p.new_track, self.model,
+                           matte=self.matte is not None, **keywords)
         if self.grading is None:
             frames = ((frame, face) for _, frame, face in self._composed(it))
         else:                          # graded on threads, a few frames ahead of the writer
@@ -310,8 +312,9 @@ class _Frames:
 
     @property
     def _parts(self) -> bool:
-        """Whether the frames are rendered as their face's boxes (``rewrite_frames``'
-        ``parts``) and only the composite is pasted into each: neither a ``compose`` nor the
+        """Whether the frames are rendered as their face's boxes
+        (:func:`~facetransfer.rewrite_clip.rewrite_frame_parts`) and only the composite is
+        pasted into each: neither a ``compose`` nor the
         matte looks at the rest of a whole :class:`~facetransfer.rewrite.RewriteFrame`."""
         return self.compose is None and self.matte is None
 
