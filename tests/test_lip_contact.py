@@ -198,3 +198,17 @@ def test_a_model_that_is_not_arkit_named_fits_without_the_contact(quick_model):
     x = shape.solve(pose, Targets.stack([(p, np.ones(68))]), float(np.linalg.norm(p[36] - p[45])),
                     shape.x0, None)
     assert np.all(np.isfinite(x)) and x.shape == shape.x0.shape
+
+
+def test_loading_the_kernels_leaves_scipys_optimiser_unimported():
+    """The tracker's start (``load_kernels``, before the transfer's fork) warms the contact's
+    Newton steps without importing SciPy's optimiser (0.17 s), which only a failed Newton
+    solve calls."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from facetransfer.track.capture import load_kernels; load_kernels(); "
+            "print('scipy.optimize' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"

@@ -747,8 +747,9 @@ def restore_pitch(R: np.ndarray, s: np.ndarray, t: np.ndarray, X: np.ndarray, w:
 
 def load_kernels() -> None:
     """Load the fit's compiled kernels (:mod:`.fit2d`, :func:`.gaze.frame_gaze_activations`)
-    from numba's cache by running each once on a tiny problem, and SciPy's optimiser that
-    :func:`.lip_contact.contact_qp` calls.
+    from numba's cache by running each once on a tiny problem (:func:`.lip_contact.contact_qp`'s
+    Newton steps too; SciPy's optimiser, which it calls only where they fail, is not imported:
+    0.17 s).
 
     numba starts up on the first compiled call of a process (about 0.25 s here). A command
     that tracks a second clip in a forked child
@@ -768,8 +769,9 @@ def load_kernels() -> None:
               hi=np.ones(2))
     frame_gaze_activations(np.zeros((68, 3)) + np.arange(68)[:, None], np.zeros((2, 2)),
                            np.zeros(2, bool), R, 10.0, t)
-    contact_qp(np.eye(2), np.ones(2), np.zeros(2), np.zeros(2), np.ones(2), np.ones((1, 2)),
-               np.array([0.5]))
+    # the Newton steps' kernel, on a problem they solve (SciPy's optimiser is not imported)
+    contact_qp(np.eye(2), np.full(2, 0.5), np.full(2, 0.5), np.zeros(2), np.ones(2),
+               np.ones((1, 2)), np.array([1.5]))
 
 
 def capture_video(video, model, *, options: CaptureOptions | None = None, detector=None,
