@@ -156,7 +156,7 @@ def take_facts(path: str | os.PathLike) -> dict:
     return {
         "kind": "take", "path": str(path), "rows": len(tc),
         "timecode_rate": take_rate(tc, warn=False) if tc else None,  # said once, above
-        "row_rate": take_row_rate(tc, f"take {path}") if len(tc) > 1 else None,
+        "row_rate": take_row_rate(seconds, tc, f"take {path}") if len(tc) > 1 else None,
         "seconds": float(seconds[-1] - seconds[0]) if len(seconds) else 0.0,
         "first_timecode": tc[0] if tc else None, "last_timecode": tc[-1] if tc else None,
         "shapes": len(shapes), "missing_shapes": [n for n in LIVELINK_NAMES if n not in shapes],

@@ -402,12 +402,12 @@ def _first_timecode(timecodes) -> str | None:
     return f"{h:02d}:{m:02d}:{sec:02d}:{ff:02d}"
 
 
-def take_row_rate(timecodes, name: str = "the take") -> float:
-    """The rate of a take's rows, frames a second (:func:`_rows_rate`): what a preview of it
-    plays them at (``puppet take.csv``), and what ``probe`` says beside its timecode rate
-    where they differ (a 25 fps clip's export counts 30 a second with thousandths, the app's
-    way: its rows are 25 a second)."""
-    return _rows_rate(take_seconds(timecodes, warn=False, name=name), _fields(timecodes, name))
+def take_row_rate(seconds: np.ndarray, timecodes, name: str = "the take") -> float:
+    """The rate of a take's rows, frames a second (:func:`_rows_rate`; ``seconds``: the rows'
+    :func:`take_seconds`): what a preview of it plays them at (``puppet take.csv``), and what
+    ``probe`` says beside its timecode rate where they differ (a 25 fps clip's export counts
+    30 a second with thousandths, the app's way: its rows are 25 a second)."""
+    return _rows_rate(np.asarray(seconds, float), _fields(timecodes, name))
 
 
 def _rows_rate(t: np.ndarray, f: np.ndarray) -> float:
@@ -464,7 +464,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
 
     take = _read(path, model)
     t = take_seconds(take.timecodes, name=f"take {path}")
-    fps = take_row_rate(take.timecodes, f"take {path}")
+    fps = take_row_rate(t, take.timecodes, f"take {path}")
     start = _first_timecode(take.timecodes)
     n = int(np.floor(t[-1] * fps + 1e-6)) + 1
     n = n if max_frames is None else min(n, int(max_frames))
