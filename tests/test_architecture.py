@@ -1,4 +1,5 @@
-"""The code's shape (issue 15): no import cycles, the library never imports the CLI, small units.
+"""The code's shape (issue 15): no import cycles, the library never imports the CLI, imports
+never climb the layers (:data:`LAYERS`, :data:`LAYER_OF`), small units.
 
 Read from the source with :mod:`ast`, imports inside functions included, so a cycle hidden in a
 function body fails here as well.
@@ -120,6 +121,151 @@ def test_the_library_never_imports_the_cli():
     bad = {m: sorted(d for d in deps if _in_cli(d)) for m, deps in GRAPH.items()
            if not _in_cli(m)}
     assert {m: d for m, d in bad.items() if d} == {}
+
+
+#: The layers, lowest first: the way a frame travels (io -> render -> track -> transfer ->
+#: texture -> rewrite -> video -> cli, the project guide's layout), with the paper's algebra and
+#: models below it and the applications beyond the paper (exports, batch runs, the demo) just
+#: under the CLI; README's "Architecture" lists them. A module may import its own layer and the
+#: layers below it.
+LAYERS = ("base", "io", "render", "track", "transfer", "texture", "rewrite", "video", "apps",
+          "cli")
+
+#: A module's layer: the entry of its longest dotted prefix here (``facetransfer`` itself is
+#: matched only exactly, so a new top-level module fails test_every_module_has_a_layer until
+#: it is placed). Unusual entries say why.
+LAYER_OF = {
+    "facetransfer": "base",              # the package: its docstring and __version__ only
+    # base: the paper's algebra and models, and what every stage shares
+    "facetransfer.errors": "base",
+    "facetransfer.tensor": "base",
+    "facetransfer.model": "base",
+    "facetransfer.geometry": "base",
+    "facetransfer.topology": "base",
+    "facetransfer.arkit": "base",
+    "facetransfer.assets": "base",
+    "facetransfer.default_model": "base",
+    "facetransfer.datasets": "base",
+    "facetransfer.impute": "base",
+    "facetransfer.correspond": "base",
+    "facetransfer.threads": "base",      # BLAS threads and one job ahead: no stage's data
+    "facetransfer.signals": "base",      # signals held over a fork: no stage's data
+    # file primitives the models and data sets write and read with (not frames: io proper)
+    "facetransfer.io.atomic": "base",    # atomic writes: model, assets, data sets
+    "facetransfer.io.npz": "base",       # an .npz read with one clear error: the model file
+    "facetransfer.io.verified": "base",  # checksums remembered: the model file, in assets' cache
+    "facetransfer.io.mesh": "base",      # mesh files: the data sets' and the scans' input
+    "facetransfer.io.output_names": "base",  # an output's extension checked: io.mesh uses it
+    "facetransfer.io.memory": "base",    # the memory budget: the ICT data-set builder uses it
+    # io: frames in and out (videos, plates, image sequences), their headers and colour
+    "facetransfer.io": "io",
+    # render
+    "facetransfer.render": "render",
+    "facetransfer.background": "render",  # the renderer's background parser, beside it
+    # track
+    "facetransfer.track": "track",
+    "facetransfer.correspond.detect": "track",  # the tracker's detector on renderings of a scan
+    "facetransfer.synth": "track",        # footage with the truth a tracker is measured against
+    "facetransfer.synth_keys": "track",   # synth's spec keys, for the help without the renderer
+    "facetransfer.truth_check": "track",  # synth's truth checked as a Track
+    # transfer: tracks in, a new track out
+    "facetransfer.transfer": "transfer",
+    "facetransfer.take": "transfer",      # a Live Link Face take as the new performance
+    "facetransfer.dials": "transfer",     # identity edits of a track (dial_track)
+    # texture
+    "facetransfer.texture": "texture",
+    "facetransfer.rewrite_options": "texture",  # options as data: texture.face checks the mouth
+    # rewrite: one frame of new geometry and textures blended into the footage
+    "facetransfer.rewrite": "rewrite",
+    "facetransfer.rewrite_clip": "rewrite",
+    "facetransfer.frame_meshes": "rewrite",
+    "facetransfer.composite": "rewrite",  # blending the render into footage: the rewrite's step
+    "facetransfer.jacobi": "rewrite",     # the membrane's Jacobi sweeps, composite's kernel
+    "facetransfer.eyes": "rewrite",
+    "facetransfer.eye_lids": "rewrite",
+    "facetransfer.eyeballs": "rewrite",
+    "facetransfer.jaw": "rewrite",
+    "facetransfer.jaw_look": "rewrite",
+    "facetransfer.lips": "rewrite",
+    "facetransfer.lip_colour": "rewrite",
+    "facetransfer.mouth": "rewrite",
+    "facetransfer.monochrome": "rewrite",
+    "facetransfer.patch": "rewrite",
+    "facetransfer.region_views": "rewrite",
+    "facetransfer.region_weights": "rewrite",
+    "facetransfer.label_masks": "rewrite",
+    "facetransfer.layer_flags": "rewrite",
+    "facetransfer.rim": "rewrite",
+    "facetransfer.unmoved": "rewrite",
+    # video: the job over a clip
+    "facetransfer.video_transfer": "video",
+    "facetransfer.transfer_plan": "video",
+    "facetransfer.puppet_video": "video",
+    "facetransfer.render_cache": "video",
+    # apps: beyond the paper, what the commands run
+    "facetransfer.export": "apps",
+    "facetransfer.batch": "apps",
+    "facetransfer.demo": "apps",
+    "facetransfer.fidelity": "apps",      # the demo's independent judge of a transfer
+    "facetransfer.file_facts": "apps",    # what probe says of a track or a take
+    "facetransfer.face_file": "apps",     # the dial editor's (export.viewer's) saved face
+    "facetransfer.cli": "cli",
+}
+
+#: Imports from a lower layer to a higher one that stay, each with its reason. A new one fails
+#: test_imports_never_climb_the_layers; a mended one must leave this list.
+ALLOWED_UPWARD = {
+    # render.vertex_normals shares the rasteriser's mesh check (its RenderError messages), its
+    # numba face cross product and decorator: moving it below render takes those along
+    ("facetransfer.correspond.fitting", "facetransfer.render"): "vertex normals",
+    ("facetransfer.correspond.synthetic", "facetransfer.render"): "vertex normals",
+    # the Live Link Face CSV is read beside its writer (export.livelink: one format, column for
+    # column); the mend, its reader and timecodes moved below transfer, is a move in export/
+    ("facetransfer.take", "facetransfer.export.livelink"): "the take's CSV reader",
+    ("facetransfer.take", "facetransfer.export.common"): "ExportError, the reader's error",
+}
+
+
+def _layer_in(layer_of: dict[str, str], module: str) -> str | None:
+    """The layer of ``module`` in ``layer_of``: its longest listed dotted prefix's (the root
+    package only exactly)."""
+    name = module
+    while name:
+        if name in layer_of and (name != "facetransfer" or module == name):
+            return layer_of[name]
+        name = name.rpartition(".")[0]
+    return None
+
+
+def _upward(graph: dict[str, set[str]], layer_of: dict[str, str]) -> set[tuple[str, str]]:
+    """Every import ``(importer, imported)`` from a lower layer of :data:`LAYERS` to a higher."""
+    rank = {name: i for i, name in enumerate(LAYERS)}
+    return {(m, d) for m, deps in graph.items() for d in deps
+            if rank[_layer_in(layer_of, d)] > rank[_layer_in(layer_of, m)]}
+
+
+def test_every_module_has_a_layer():
+    assert set(LAYER_OF.values()) <= set(LAYERS)
+    assert [m for m in MODULES if _layer_in(LAYER_OF, m) is None] == []
+    assert [p for p in LAYER_OF if p not in MODULES] == []   # no entry for a module gone
+
+
+def test_the_layer_check_finds_a_planted_upward_import():
+    layers = {"a": "base", "b": "render", "c": "cli"}
+    assert _upward({"a": {"b"}, "b": {"a"}, "c": {"a", "b"}}, layers) == {("a", "b")}
+    # and on the package itself: the algebra reaching up into the rewrite
+    planted = {**GRAPH, "facetransfer.tensor": GRAPH["facetransfer.tensor"] | {
+        "facetransfer.rewrite"}}
+    assert ("facetransfer.tensor", "facetransfer.rewrite") in _upward(planted, LAYER_OF)
+    assert ("facetransfer.track.pair", "facetransfer.render") not in _upward(planted, LAYER_OF)
+
+
+def test_imports_never_climb_the_layers():
+    """A frame travels down the layers without climbing back (issue 15's one-way data
+    flow): no module imports a layer above its own, but for :data:`ALLOWED_UPWARD`."""
+    found = _upward(GRAPH, LAYER_OF)
+    assert sorted(found - set(ALLOWED_UPWARD)) == []
+    assert sorted(set(ALLOWED_UPWARD) - found) == []   # mended: leave the allow-list
 
 
 @pytest.mark.parametrize("module", sorted(MODULES))
