@@ -660,13 +660,13 @@ def test_a_takes_preview_runs_at_its_rows_ntsc_rate_from_its_start_timecode(
     take.write_text(cols + "\n" + "\n".join(rows) + "\n")
     got = take_track(take, arkit_model, arkit_model.factors[0][0])
     assert got.fps == pytest.approx(30000 / 1001) and got.n_frames == 120
-    from facetransfer.take import _fields, _rows_rate
+    from facetransfer.take import _rows_rate, _timecode_fields
 
     for n in (600, 18000):     # a long take too (the span's count alone missed it past ~500)
         t = 59 + 20 / 30 + np.arange(n) * 1001 / 30000
         tc = [f"00:{int(x // 60):02d}:{int(x % 60):02d}:{int((x % 1) * 30):02d}."
               f"{min(int(round(((x % 1) * 30 % 1) * 1000)), 999):03d}" for x in t]
-        assert _rows_rate(take_seconds(tc, warn=False), _fields(tc)) == \
+        assert _rows_rate(take_seconds(tc, warn=False), _timecode_fields(tc)) == \
             pytest.approx(30000 / 1001), n
     assert got.info["start_timecode"] == "00:00:59:20"
     whole = tmp_path / "whole.csv"

@@ -3,7 +3,7 @@ synthetic-footage generator share.
 
 It sits beside :mod:`facetransfer.render` rather than in it so that any stage that composes frames
 over a background (rendering, synthetic clips) can check one the same way without importing the
-rasteriser; it imports nothing else from the package.
+rasteriser; it imports nothing else from the package but its errors.
 """
 
 from __future__ import annotations

@@ -85,7 +85,7 @@ def is_take(path) -> bool:
     return path is not None and Path(os.fspath(path)).suffix.lower() == ".csv"
 
 
-def _fields(timecodes, name: str = "the take") -> np.ndarray:
+def _timecode_fields(timecodes, name: str = "the take") -> np.ndarray:
     """:func:`facetransfer.export.livelink.timecode_fields` (hours, minutes, seconds, frame,
     thousandths), a timecode that is not one, or of hours or minutes past a day's, a
     TransferError (before, ``99:02:03:00`` was read as 4 days on; ``name``: the take, as said).
@@ -112,7 +112,7 @@ def take_rate(timecodes, *, warn: bool = True) -> int:
     wrap after the last one of its rate); a take within one second whose labels have
     thousandths of a frame (the app's) is read at 30 or 60 as Unreal's importer reads it, any
     other is said in the log to be a guess. TransferError beyond every rate."""
-    return _rate(_fields(timecodes), warn)
+    return _rate(_timecode_fields(timecodes), warn)
 
 
 def _rate(f: np.ndarray, warn: bool, name: str = "the take") -> int:
@@ -149,7 +149,7 @@ def take_seconds(timecodes, *, warn: bool = True, name: str = "the take") -> np.
 def _clock(timecodes, warn: bool, name: str = "the take") -> np.ndarray:
     """``(F,)`` seconds since midnight of each row's timecode, counted at :func:`take_rate`;
     TransferError where they go back in time."""
-    f = _fields(timecodes, name)
+    f = _timecode_fields(timecodes, name)
     t = _seconds(f, _rate(f, False, name), timecodes, name)
     _rate(f, warn, name)    # its guess said once the take is known to be readable
     return t
@@ -288,7 +288,7 @@ def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str
     app's), or beside a drop-frame start, counts clock time (:func:`_seconds`)."""
     from .io.plate_header import timecode_count
 
-    f = _fields(timecodes, name)
+    f = _timecode_fields(timecodes, name)
     nominal, whole = round(float(fps)), not f[:, 4].any()
     secs = f[:, 0] * 3600 + f[:, 1] * 60 + f[:, 2]
     short = not (secs.size and secs.max() > secs.min())       # within one second: no rate shown
@@ -398,7 +398,7 @@ def _first_timecode(timecodes) -> str | None:
     so that it lines up with the plate in an editor; None for a take without rows."""
     if not len(timecodes):
         return None
-    h, m, sec, ff = (int(v) for v in _fields(timecodes[:1])[0, :4])
+    h, m, sec, ff = (int(v) for v in _timecode_fields(timecodes[:1])[0, :4])
     return f"{h:02d}:{m:02d}:{sec:02d}:{ff:02d}"
 
 
@@ -407,7 +407,7 @@ def take_row_rate(seconds: np.ndarray, timecodes, name: str = "the take") -> flo
     :func:`take_seconds`): what a preview of it plays them at (``puppet take.csv``), and what
     ``probe`` says beside its timecode rate where they differ (a 25 fps clip's export counts
     30 a second with thousandths, the app's way: its rows are 25 a second)."""
-    return _rows_rate(np.asarray(seconds, float), _fields(timecodes, name))
+    return _rows_rate(np.asarray(seconds, float), _timecode_fields(timecodes, name))
 
 
 def _rows_rate(t: np.ndarray, f: np.ndarray) -> float:
