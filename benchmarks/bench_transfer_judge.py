@@ -20,17 +20,31 @@ before: which share of the brows' change is the texture's).
 The result frames are judged as rendered (before encoding). Tracks are cached in
 ``OUT/judge_pairs/``.
 
+The floor of the leak measures (session 49): a fourth render, ``pure`` (:data:`PURE`: the
+new face only, one face texture for the clip and a hard paste, so no pixel of the target's
+frames inside the face), is judged like the others. What it still shares with the target is
+the target's head pose and the footage around the face, and Face Landmarker's scores follow
+the pose beyond the linear pitch and yaw partialled out (the demo's eyeBlinkLeft goes with the
+target's pitch, as the target lowers its lids while it looks down). Its partials are the
+floor, what a render without the target's pixels scores: each measure of ``before``, ``after``
+and ``eyes_only`` gets ``target_partial_floor`` and ``target_partial_pose_floor`` (the pure
+render's partials) and ``target_leak`` / ``target_leak_pose``, its partial minus the floor
+(what the per-frame texture and the blend, the target's pixels, add; :func:`add_floor`). A
+difference of two renders, not a bound: it can be negative. ``--no-floor`` skips the render
+(one more render and judging a pair, 20-45 s on two shared cores).
+
 ``--video V`` instead judges the three panels of a ``source | target | result`` video (what
 ``facetransfer demo`` writes).
 
 Usage::
 
     python benchmarks/bench_transfer_judge.py --out out/benchmarks [--pairs demo,fps,open]
+    python benchmarks/bench_transfer_judge.py --out out/benchmarks --no-floor  # no pure render
     python benchmarks/bench_transfer_judge.py --out out/benchmarks --video out/demo.mp4
 
 Writes ``OUT/transfer_judge.json``, ``OUT/transfer_judge.png`` and one contact picture per pair
-(``OUT/transfer_judge_PAIR.png``: source | target | before | after at the frames where the
-source's eyes are most closed and most open).
+(``OUT/transfer_judge_PAIR.png``: source | target | before | after | pure at the frames where
+the source's eyes are most closed and most open).
 """
 
 from __future__ import annotations
@@ -59,6 +73,16 @@ PAIRS = {"demo": ("driving_d6", "WDA_KatieHill_000"),
          "fps": ("driving_d9", "face_2"),
          "open": ("WDA_KatieHill_000", "driving_d6")}
 FRAMES = 120
+#: The renders of a pair: name -> (the rewrite's options as keywords, the brows from the
+#: open-eyed frame). ``pure`` (:data:`PURE`) is the floor's render.
+RENDERS = {"before": ({"eyes": "target"}, False), "after": ({"eyes": "model"}, True),
+           "eyes_only": ({"eyes": "model"}, False)}
+#: The floor's render: the new face only, no pixel of the target's frames inside the face (one
+#: face texture for the clip, a hard paste without a blend; leak49's ``pure``).
+PURE = ({"eyes": "model", "texture": "constant", "blend": "none"}, True)
+#: The partials that get a floor: key -> (the floor's key, the leak's key).
+FLOOR_KEYS = {"target_partial": ("target_partial_floor", "target_leak"),
+              "target_partial_pose": ("target_partial_pose_floor", "target_leak_pose")}
 
 
 #: Distances between MediaPipe's points over the outer eye corners (33-263), the capture
@@ -140,6 +164,29 @@ def _partial(r: np.ndarray, t: np.ndarray, controls: list) -> float:
     return float(ea @ eb / den) if den > 1e-12 else float("nan")
 
 
+def add_floor(judged: dict, pure: dict) -> dict:
+    """``judged`` (a render's measures, :func:`compare`) with the floor of each partial of
+    :data:`FLOOR_KEYS` from ``pure`` (the pure render's measures): ``target_partial_floor``,
+    ``target_partial_pose_floor``, and ``target_leak`` / ``target_leak_pose`` = the partial
+    minus its floor (NaN where either is NaN). A new dict; the keys already there unchanged."""
+    out = {}
+    for name, m in judged.items():
+        m = dict(m)
+        for key, (floor_key, leak_key) in FLOOR_KEYS.items():
+            if key in m and key in pure.get(name, {}):
+                m[floor_key] = float(pure[name][key])
+                m[leak_key] = float(m[key]) - m[floor_key]
+        out[name] = m
+    return out
+
+
+def largest_leaks(judged: dict, key: str = "target_leak", top: int = 4) -> list:
+    """The ``top`` measures of ``judged`` (:func:`add_floor`'s) with the largest ``key``, as
+    ``(name, value)`` largest first; NaN left out."""
+    rows = [(n, float(m[key])) for n, m in judged.items() if np.isfinite(m.get(key, np.nan))]
+    return sorted(rows, key=lambda r: -r[1])[:top]
+
+
 def judge_video(video: Path) -> dict:
     """The judge on the three panels of a ``source | target | result`` video."""
     from facetransfer.io.video import iter_frames, video_info
@@ -182,19 +229,34 @@ def _brows(brows: bool):
         ev.eye_texture = original
 
 
-def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
-               every: int | None = None) -> dict:
-    """Render one pair before and after and judge both; the clips tracked as the transfer
-    tracks them (the detector shown one frame of ``every``, default the default speed
-    preset's, :data:`facetransfer.track.presets.DETECT_EVERY`; the source's also where the
-    eyes move)."""
+def _render(plan, model, options: dict, brows: bool) -> tuple[list, float]:
+    """The frames of ``plan`` rendered with the rewrite's ``options`` (keywords of
+    :class:`facetransfer.rewrite_options.RewriteOptions`; ``brows``: :func:`_brows`) as
+    rendered (before encoding), and the seconds it took."""
     import tempfile
 
-    from facetransfer import transfer_plan as tp
     from facetransfer import video_transfer as vt
+    from facetransfer.rewrite_options import RewriteOptions
+
+    frames: list[np.ndarray] = []
+    t = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp, _brows(brows):
+        vt.render_plan(plan, model, vt.RenderTarget(Path(tmp) / "r.mp4", overwrite=True),
+                       options=RewriteOptions(**options),
+                       compose=lambda i, r: frames.append(r.image) or r.image)
+    return frames, time.perf_counter() - t
+
+
+def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
+               every: int | None = None, floor: bool = True) -> dict:
+    """Render one pair as :data:`RENDERS` (and, with ``floor``, :data:`PURE`) and judge each;
+    the clips tracked as the transfer tracks them (the detector shown one frame of ``every``,
+    default the default speed preset's, :data:`facetransfer.track.presets.DETECT_EVERY`; the
+    source's also where the eyes move). With ``floor`` the pure render's block ``pure`` and
+    each other block's floor and leak (:func:`add_floor`)."""
+    from facetransfer import transfer_plan as tp
     from facetransfer.export.common import head_euler
     from facetransfer.io.video import video_info
-    from facetransfer.rewrite_options import RewriteOptions
     from facetransfer.track.presets import DEFAULT_SPEED, DETECT_EVERY
 
     every = DETECT_EVERY[DEFAULT_SPEED] if every is None else int(every)
@@ -211,21 +273,15 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
     source = [plan.mouth_frames[plan.mouth_index[i]] for i in range(n)]
     target = [plan.target_frames[i] for i in range(n)]
     res, seconds = {}, {"plan": time.perf_counter() - t0}
-    for kind, eyes, brows in (("before", "target", False), ("after", "model", True),
-                              ("eyes_only", "model", False)):
-        frames: list[np.ndarray] = []
-        t = time.perf_counter()
-        with tempfile.TemporaryDirectory() as tmp, _brows(brows):
-            vt.render_plan(plan, model, vt.RenderTarget(Path(tmp) / "r.mp4", overwrite=True),
-                           options=RewriteOptions(eyes=eyes),
-                           compose=lambda i, r: frames.append(r.image) or r.image)
-        seconds[kind] = time.perf_counter() - t
-        res[kind] = frames
+    for kind, (options, brows) in {**RENDERS, **({"pure": PURE} if floor else {})}.items():
+        res[kind], seconds[kind] = _render(plan, model, options, brows)
     t = time.perf_counter()
     sar = {c: video_info(data / f"{c}.mp4").sar for c in (src, tgt)}
     S, T = scores(source, plan.fps, sar[src]), scores(target, plan.fps, sar[tgt])
     pose = np.degrees(head_euler(plan.target_track.rotation[:n])[:, [1, 0]])  # pitch, yaw
     judged = {k: compare(S, T, scores(v, plan.fps, sar[tgt]), pose) for k, v in res.items()}
+    if floor:
+        judged.update({k: add_floor(v, judged["pure"]) for k, v in judged.items() if k in RENDERS})
     seconds["judge"] = time.perf_counter() - t
     _picture(name, source, target, res, S[0], out / f"transfer_judge_{name}.png")
     return {"source": src, "target": tgt, "frames": n, "fps": plan.fps, "seconds": seconds,
@@ -233,7 +289,8 @@ def judge_pair(name: str, model, out: Path, data: Path, frames: int = FRAMES,
 
 
 def _picture(name, source, target, res, S, path: Path) -> None:
-    """source | target | before | after at the source's most closed and most open eyes."""
+    """source | target | before | after (| pure, if rendered) at the source's most closed and
+    most open eyes."""
     import cv2
 
     from facetransfer.arkit import MEDIAPIPE_NAMES
@@ -242,15 +299,16 @@ def _picture(name, source, target, res, S, path: Path) -> None:
     blink = np.nanmean(S[:, [MEDIAPIPE_NAMES.index("eyeBlinkLeft"),
                              MEDIAPIPE_NAMES.index("eyeBlinkRight")]], axis=1)
     blink = np.where(np.isfinite(blink), blink, 0.5)
+    kinds = [k for k in ("before", "after", "pure") if k in res]
     rows = []
     for i in (int(np.argmax(blink)), int(np.argmin(blink))):
         h = 320
         tiles = [cv2.resize(np.asarray(f), (int(round(f.shape[1] * h / f.shape[0])), h),
                             interpolation=cv2.INTER_AREA)
-                 for f in (source[i], target[i], res["before"][i], res["after"][i])]
+                 for f in (source[i], target[i], *(res[k][i] for k in kinds))]
         row = np.concatenate(tiles, axis=1)
-        cv2.putText(row, f"{name} frame {i}: source | target | before | after", (8, 24),
-                    cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 0), 2)
+        cv2.putText(row, f"{name} frame {i}: " + " | ".join(["source", "target", *kinds]),
+                    (8, 24), cv2.FONT_HERSHEY_SIMPLEX, 0.6, (255, 255, 0), 2)
         rows.append(row)
     W = max(r.shape[1] for r in rows)
     img = np.concatenate([np.pad(r, ((0, 0), (0, W - r.shape[1]), (0, 0))) for r in rows])
@@ -291,14 +349,25 @@ def plot(res: dict, path: Path) -> None:
                                             ("after", "result_target", "#a50f15"))):
             ax.bar(x - 0.3 + 0.2 * j, [res[p][kind][n][key] for n in names], 0.2, color=c,
                    label=f"{kind}: result ~ {key.split('_')[1]}")
+        _plot_floor(ax, x + 0.3, res[p]["after"], names)
         decorate(ax, names, f"{p}: {res[p]['source']} -> {res[p]['target']} "
                  f"({res[p]['frames']} frames)")
-    axes[0, 0].legend(fontsize=7, ncol=4, loc="lower left")
+    axes[0, 0].legend(fontsize=7, ncol=3, loc="lower left")
     fig.suptitle("transfer fidelity judged by MediaPipe (targets: >= 0.8 / 0.6 with the source, "
                  "<= 0.3 with the target for jawOpen)")
     fig.tight_layout()
     save_figure(fig, path)
     plt.close(fig)
+
+
+def _plot_floor(ax, x, after: dict, names) -> None:
+    """On the bars of after's result ~ target at ``x``: after's partial given the source (a
+    cross) and, where judged, its floor (a dash: the pure render's, :func:`add_floor`)."""
+    ax.plot(x, [after[n]["target_partial"] for n in names], "kx", ms=5,
+            label="after: partial ~ target | source")
+    if all("target_partial_floor" in after[n] for n in names):
+        ax.plot(x, [after[n]["target_partial_floor"] for n in names], "_", color="0.45",
+                ms=12, mew=2, label="its floor (pure render)")
 
 
 def add_pair_options(ap: argparse.ArgumentParser) -> None:
@@ -307,10 +376,25 @@ def add_pair_options(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--frames", type=int, default=FRAMES, help="target frames judged")
 
 
+def leak_line(name: str, after: dict, top: int = 4) -> str:
+    """A pair's largest leaks over the floor (:func:`largest_leaks`), plain and with the pose:
+    ``measure partial/floor=leak``."""
+    parts = []
+    for key, part, floor in (("target_leak", "target_partial", "target_partial_floor"),
+                             ("target_leak_pose", "target_partial_pose",
+                              "target_partial_pose_floor")):
+        cells = "  ".join(f"{n} {after[n][part]:+.2f}/{after[n][floor]:+.2f}={v:+.2f}"
+                          for n, v in largest_leaks(after, key, top))
+        parts.append(f"{key}: {cells}")
+    return f"{name} after, largest leaks over the floor (partial/floor=leak): " + "; ".join(parts)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", default="out/benchmarks")
     ap.add_argument("--video", help="judge the panels of a source | target | result video")
+    ap.add_argument("--no-floor", dest="floor", action="store_false",
+                    help="skip the pure render (the floor of the target partials)")
     ap.add_argument("--every", type=int, default=None,
                     help="the clips' detector shown one frame of N (default: as the "
                     "default transfer, DETECT_EVERY of the default speed)")
@@ -335,11 +419,13 @@ def main() -> int:
     model = load_default_model()
     res = {}
     for name in args.pairs.split(","):
-        res[name] = judge_pair(name, model, out, data, args.frames, args.every)
+        res[name] = judge_pair(name, model, out, data, args.frames, args.every, args.floor)
         for kind in ("before", "after", "eyes_only"):
             line = "  ".join(f"{n} {r['result_source']:+.2f}/{r['result_target']:+.2f}"
                              for n, r in res[name][kind].items())
             print(f"{name} {kind}: {line}", flush=True)
+        if args.floor:
+            print(leak_line(name, res[name]["after"]), flush=True)
     with atomic_path(out / "transfer_judge.json", overwrite=True) as tmp:
         Path(tmp).write_text(json.dumps({"pairs": res}, indent=2))
     plot(res, out / "transfer_judge.png")
