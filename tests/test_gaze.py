@@ -235,6 +235,21 @@ def test_running_median_is_scipys_median_filter_to_the_bit():
         running_median(np.ones(5), 0)
 
 
+def test_the_capture_and_its_iris_leave_scipy_ndimage_unimported():
+    """A tracking process (the capture, its kernels, usable_iris on a clip) does not import
+    scipy.ndimage (0.06 CPU-s) for the lid gap's running median."""
+    import subprocess
+    import sys
+
+    code = ("import sys; import numpy as np; from facetransfer.track.capture import load_kernels; "
+            "from facetransfer.track.gaze import usable_iris; load_kernels(); "
+            "usable_iris(np.random.default_rng(0).uniform(0, 99, (40, 478, 2))); "
+            "print('scipy.ndimage' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"
+
+
 def test_a_closing_eye_leaves_its_lids_to_the_blink(arkit_model):
     """The fit holds a closed eye's vertical gaze at 0 and writes its bridged value after."""
     from facetransfer.track.camera import Pose
