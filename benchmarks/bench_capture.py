@@ -764,42 +764,64 @@ def _console_script() -> list[str]:
     return [str(exe)] if exe.is_file() else [sys.executable, "-m", "facetransfer.cli.main"]
 
 
-def _timed(cmd: list[str]) -> tuple[float, str]:
-    t0 = time.perf_counter()
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of every finished child process and its own children."""
+    import resource
+
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
+def _timed(cmd: list[str]) -> tuple[float, str, float]:
+    """Run ``cmd``: ``(wall seconds, its stderr, CPU seconds of it and its children)``."""
+    t0, c0 = time.perf_counter(), _children_cpu()
     p = subprocess.run(cmd, capture_output=True, text=True)
-    sec = time.perf_counter() - t0
+    sec, cpu = time.perf_counter() - t0, _children_cpu() - c0
     if p.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd[:3])} ... exited {p.returncode}: "
                            f"{(p.stderr or p.stdout).strip()[-300:]}")
-    return sec, p.stderr
+    return sec, p.stderr, cpu
 
 
 #: rounds of the speed test (the three commands in turn each round; medians reported)
 SPEED_ROUNDS = 3
 
 
+def _round(cmds: dict) -> tuple[dict, dict]:
+    """One round: each command in turn; ``({name: wall s}, {name: CPU s})``."""
+    wall, cpu = {}, {}
+    for name, cmd in cmds.items():
+        wall[name], _, cpu[name] = _timed(cmd)
+    return wall, cpu
+
+
 def run_speed(args, model, cache: Path) -> dict:
     """Whole-process wall time of ``facetransfer track`` (the default: two detection processes),
     of ``track --workers 1`` and of a MediaPipe VIDEO-mode process, in turn, on the same clip,
-    :data:`SPEED_ROUNDS` rounds; the medians and every round."""
+    :data:`SPEED_ROUNDS` rounds; the medians and every round. Also each one's CPU seconds (user
+    + system, its children's too): on a machine other work shares, the wall ratio of two
+    processes against one moves with the cores left free, the CPU ratio much less."""
     from facetransfer.default_model import default_model_path
 
     clip = speed_clip(cache)
     mpath = args.model or str(default_model_path())
     here = Path(__file__).resolve().parent
-    rounds = []
+    rounds, cpus = [], []
     with tempfile.TemporaryDirectory(dir=cache) as tmp:
         ours_cmd = _console_script() + ["track", str(clip), "--model", mpath,
                                         "--out", str(Path(tmp) / "t.npz"), "--overwrite"]
         mp_cmd = [sys.executable, str(here / "_mp_video.py"), str(clip), str(Path(tmp) / "m.npz")]
         try:
             for _ in range(1 if args.quick else SPEED_ROUNDS):
-                rounds.append({"mediapipe": _timed(mp_cmd)[0], "ours": _timed(ours_cmd)[0],
-                               "ours_one_process": _timed(ours_cmd + ["--workers", "1"])[0]})
+                wall, cpu = _round({"mediapipe": mp_cmd, "ours": ours_cmd,
+                                    "ours_one_process": ours_cmd + ["--workers", "1"]})
+                rounds.append(wall)
+                cpus.append(cpu)
         except RuntimeError as exc:
             log.error("speed run failed: %s", exc)
             return {"error": str(exc)}
     med = {k: float(np.median([r[k] for r in rounds])) for k in rounds[0]}
+    cpu = {k: float(np.median([r[k] for r in cpus])) for k in cpus[0]}
     return {"clip": str(clip), "frames": SPEED_FRAMES, "size": "512x512",
             "ours_command": " ".join(ours_cmd[1:3] + ["--model", "M", "--out", "T.npz"]),
             "ours_seconds": round(med["ours"], 2), "mediapipe_seconds": round(med["mediapipe"], 2),
@@ -811,6 +833,10 @@ def run_speed(args, model, cache: Path) -> dict:
             "ratio_one_process": round(med["ours_one_process"] / med["mediapipe"], 3),
             "round_ratios": [round(r["ours"] / r["mediapipe"], 3) for r in rounds],
             "rounds": [{k: round(v, 2) for k, v in r.items()} for r in rounds],
+            "cpu_seconds": {k: round(v, 2) for k, v in cpu.items()},
+            "cpu_ratio": round(cpu["ours"] / cpu["mediapipe"], 3),
+            "cpu_ratio_one_process": round(cpu["ours_one_process"] / cpu["mediapipe"], 3),
+            "cpu_rounds": [{k: round(v, 2) for k, v in r.items()} for r in cpus],
             "target_ratio": 2.0, "goal_ratio": 1.0}
 
 
@@ -973,6 +999,11 @@ def print_table(res: dict) -> None:
               f"{len(sp['rounds'])} rounds in turn, each {sp['round_ratios']}); "
               f"--workers 1: {sp['ours_one_process_seconds']:.1f} s, ratio "
               f"{sp['ratio_one_process']:.2f}")
+        if "cpu_seconds" in sp:
+            c = sp["cpu_seconds"]
+            print(f"CPU (user + system, medians): ours {c['ours']:.2f} s, --workers 1 "
+                  f"{c['ours_one_process']:.2f} s, mediapipe {c['mediapipe']:.2f} s: ratio "
+                  f"{sp['cpu_ratio']:.2f} (--workers 1: {sp['cpu_ratio_one_process']:.2f})")
 
 
 def synthetic_verdict(syn: dict) -> str:

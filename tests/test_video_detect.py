@@ -183,6 +183,27 @@ def test_an_interrupt_while_this_process_loads_its_landmarker_stops_the_child(
     assert len(children) == 1 and children[0].cancelled
 
 
+def test_the_child_reads_its_warm_up_and_part_as_a_whole_read(data_dir):
+    """The child's frames past a keyframe (``driving_d6``: every 250 frames), reached by the
+    container's seek: the frames of a read from the start, placeholders before the warm-up."""
+    from facetransfer.io.video import read_video
+    from facetransfer.io.video_display import exact_seek
+    from facetransfer.track.detect import VideoLandmarker
+
+    video = data_dir / "video" / "driving_d6.mp4"
+    start, stop = 300, 306
+    whole = read_video(video, max_frames=stop)[0]
+    got = list(video_detect._child_frames(video, start, stop))
+    warm = start - VideoLandmarker.warmup_frames
+    assert exact_seek(video) and len(got) == stop and got[warm - 1] is None
+    assert all(f is None for f in got[:warm])
+    for a, b in zip(got[warm:], whole[warm:]):
+        np.testing.assert_array_equal(a, b)
+    arr = np.asarray(whole[:12])                   # an array's frames: all of them, as they are
+    got = list(video_detect._child_frames(arr, 4, 10))
+    assert len(got) == 10 and all(np.array_equal(a, b) for a, b in zip(got, arr))
+
+
 def test_cli_rejects_workers_below_one(tmp_path, capsys, data_dir):
     code = main(["track", str(data_dir / "video" / "driving_d9.mp4"), "--out",
                  str(tmp_path / "t.npz"), "--workers", "0"])

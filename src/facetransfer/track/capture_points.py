@@ -10,7 +10,6 @@ parameters to a frame's 2-D targets at a fixed pose (Eq. (7)).
 
 from __future__ import annotations
 
-import copy
 import numpy as np
 
 from ..arkit import ARKIT_NAMES, activation_basis, activation_prior_scale, expression_rig, \
@@ -135,7 +134,7 @@ class Shape:
         there, ``R[0, 2]``): itself without a view-dependent offset."""
         if self.view is None:
             return self
-        other = copy.copy(self)
+        other = self._copy()
         d = float(sin_yaw) * self.view
         if self.arkit:
             other.N = self.N + d
@@ -147,8 +146,15 @@ class Shape:
 
     def with_options(self, opt) -> "Shape":
         """The same shape solved with other settings (e.g. the identity phase's priors)."""
-        other = copy.copy(self)
+        other = self._copy()
         other.opt = opt
+        return other
+
+    def _copy(self) -> "Shape":
+        """A shallow copy (``copy.copy``'s, without its protocol lookups: :meth:`at_view`
+        makes one at every pose step of the fit)."""
+        other = type(self).__new__(type(self))
+        other.__dict__.update(self.__dict__)
         return other
 
     def basis(self, mode: str, weights: dict) -> np.ndarray:

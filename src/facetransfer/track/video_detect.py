@@ -10,9 +10,12 @@ track`` does (:mod:`facetransfer.track.capture`). With ``workers=2`` the clip's 
 ``m``; the two parts are joined in order.
 
 The child starts its own landmarker at frame ``m`` exactly as a resumed run does
-(:func:`facetransfer.track.detect.detect_clip` with ``start=m``): it decodes every frame before
-``m`` (no container seek: OpenCV's is not exact) and shows the last
-:attr:`~facetransfer.track.detect.VideoLandmarker.warmup_frames` of them to the detector, so the
+(:func:`facetransfer.track.detect.detect_clip` with ``start=m``): it reads the frames before
+``m`` and shows the last :attr:`~facetransfer.track.detect.VideoLandmarker.warmup_frames` of them
+to the detector (the first of those reached by the container's seek where OpenCV's lands
+exactly, :func:`facetransfer.io.video.iter_frames`: MP4, Matroska, AVI; the same frames as
+decoded in turn, only those from the keyframe before them decoded, not the whole first half
+again), so the
 points of frame ``m`` and after differ from one process's by about as little as a resumed run's
 (the class notes measure 0.05 px on average; up to ~1 px on a long clip). Frame ``m`` has no
 flow term: its flow would move the parent's points of frame ``m - 1``, which the child does not
@@ -128,13 +131,7 @@ _JOB: tuple | None = None
 def _child_job() -> ClipDetections:
     """In the child: detect frames ``start .. stop`` (or the clip's end) of the video."""
     video, start, stop, fps, counter, view, subject, every, eyes = _JOB
-    if isinstance(video, np.ndarray):
-        frames = iter(video[:stop])
-    else:
-        from ..io.video import iter_frames
-
-        warm = max(0, start - VideoLandmarker.warmup_frames)
-        frames = _offset(iter_frames(video, start=warm, stop=stop, seek=False), warm)
+    frames = _child_frames(video, start, stop)
     detector = _child_landmarker(fps, subject)
 
     def progress(done, total):
@@ -148,6 +145,19 @@ def _child_job() -> ClipDetections:
         return None
     finally:
         detector.close()
+
+
+def _child_frames(video, start: int, stop: int | None):
+    """The frames the child reads of ``video`` (a path or an (F, H, W, 3) array) for its part
+    ``start .. stop``: frames ``0 .. stop - 1`` in order, None for those before the
+    detector's warm-up (:data:`~.detect.VideoLandmarker.warmup_frames` frames before
+    ``start``), which are not decoded where the container's seek is exact (module notes)."""
+    if isinstance(video, np.ndarray):
+        return iter(video[:stop])
+    from ..io.video import iter_frames
+
+    warm = max(0, start - VideoLandmarker.warmup_frames)
+    return _offset(iter_frames(video, start=warm, stop=stop, seek=True), warm)
 
 
 def _child_landmarker(fps: float, subject=None) -> FollowingLandmarker:
