@@ -482,3 +482,16 @@ def test_a_commands_sequence_rate_ends_with_it(monkeypatch, capsys):
     assert main(["probe", "/nonexistent/plate.%04d.png", "--sequence-fps", "25"]) == 2
     assert os.environ[SEQUENCE_FPS_VARIABLE] == "30.0"
     capsys.readouterr()
+
+
+def test_a_ctrl_c_while_the_commands_load_is_one_line_and_130(monkeypatch, capsys):
+    """A Ctrl-C in the first half second (the subcommands' modules importing, before the
+    command's own handling began) printed the import's traceback and died of the signal."""
+    from facetransfer.cli import main as cli_main
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli_main, "build_parser", interrupted)
+    assert main(["track", "x.mp4", "--out", "t.npz"]) == 130
+    assert _err(capsys) == ["facetransfer: interrupted"]

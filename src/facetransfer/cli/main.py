@@ -309,8 +309,21 @@ def main(argv: list[str] | None = None) -> int:
 
     Called with no ``argv`` (the console script), native libraries' log lines are filtered out
     of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
-    parallel work keep OpenBLAS and OpenCV to one thread each (:func:`serial_blas`).
+    parallel work keep OpenBLAS and OpenCV to one thread each (:func:`serial_blas`). A Ctrl-C
+    before the command began (while the subcommands' modules load: half a second) is one line
+    and 130 as well (it printed the import's traceback).
     """
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
+        what, status = ("terminated", 143) if isinstance(exc, Terminated) else \
+            ("interrupted", 130)
+        print(f"facetransfer: {what}", file=sys.stderr)
+        return status
+
+
+def _main(argv: list[str] | None) -> int:
+    """:func:`main`'s work: parse ``argv``, set up logging and stderr, run the command."""
     if argv is None:
         serial_blas(sys.argv[1:])
     parser = build_parser()
