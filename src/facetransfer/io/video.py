@@ -567,7 +567,8 @@ class VideoWriter:
         self.stored_size = _stored_size(self.size, self.options.codec)
         if not self._detached:   # a part of a longer video: the parts' writer warns, once
             warn_if_grown(self.path, self.size, self.options.codec)
-        self._atomic = atomic_path(self.path, overwrite=True)  # checked in __init__
+        # checked in __init__, and again as it is renamed: another run's since is kept
+        self._atomic = atomic_path(self.path, overwrite=self._overwrite)
         self.tmp = self._atomic.__enter__()
         cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",
                "-pix_fmt", self._pipe_format, "-s", "{}x{}".format(*self.stored_size),
