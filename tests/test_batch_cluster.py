@@ -4,6 +4,7 @@ certificates, each one line within the timeout; a TLS scheduler reached by its h
 
 from __future__ import annotations
 
+import os
 import sys
 
 import pytest
@@ -136,3 +137,36 @@ def test_a_tls_address_of_a_plain_scheduler_is_said_as_a_refusal_not_a_wait(tls_
                            "there "), said
     assert "within" not in said, said
     assert "not in Dask's protocol" in said or "closed them" in said, said
+
+
+def test_a_sigterm_while_the_cluster_starts_is_raised_once_it_is_whole_and_closes_it(
+        monkeypatch):
+    """A SIGTERM (``kill``, ``timeout``) in the seconds the embedded cluster takes to start was
+    raised inside its start: the half-started cluster's close at the exit and its workers'
+    start printed tracebacks. It is now raised once the cluster is whole, which is closed."""
+    import signal
+
+    import dask.distributed
+
+    from facetransfer.batch import cluster as cluster_mod
+    from facetransfer.cli.main import Terminated, _terminated
+
+    events = []
+
+    class Starting:
+        def __init__(self, **kw):
+            os.kill(os.getpid(), signal.SIGTERM)    # while the workers start
+            events.append("started")
+
+        def close(self):
+            events.append("closed")
+
+    monkeypatch.setattr(dask.distributed, "LocalCluster", Starting)
+    before = signal.signal(signal.SIGTERM, _terminated)
+    try:
+        with pytest.raises(Terminated):
+            cluster_mod._local_cluster(2, True, False)
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert events == ["started", "closed"]
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler

@@ -482,3 +482,44 @@ def test_a_commands_sequence_rate_ends_with_it(monkeypatch, capsys):
     assert main(["probe", "/nonexistent/plate.%04d.png", "--sequence-fps", "25"]) == 2
     assert os.environ[SEQUENCE_FPS_VARIABLE] == "30.0"
     capsys.readouterr()
+
+
+def test_a_ctrl_c_while_the_commands_load_is_one_line_and_130(monkeypatch, capsys):
+    """A Ctrl-C in the first half second (the subcommands' modules importing, before the
+    command's own handling began) printed the import's traceback and died of the signal."""
+    from facetransfer.cli import main as cli_main
+
+    def interrupted():
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli_main, "build_parser", interrupted)
+    assert main(["track", "x.mp4", "--out", "t.npz"]) == 130
+    assert _err(capsys) == ["facetransfer: interrupted"]
+
+
+def test_an_interrupted_run_names_an_earlier_output_it_replaced(tmp_path, capsys):
+    """``track --out T.npz --overlay O.mp4 --overwrite`` interrupted while drawing the overlay
+    had already replaced the earlier T.npz, but its line said only "interrupted": an output is
+    named as written when it is another file than before (it named only new ones)."""
+    import argparse
+
+    from facetransfer.cli import main as cli_main
+
+    out = tmp_path / "t.npz"
+    out.write_bytes(b"an earlier run's track")
+
+    def replace_then_stop(args):
+        tmp = tmp_path / ".t.part.npz"
+        tmp.write_bytes(b"this run's track")
+        os.replace(tmp, out)
+        raise KeyboardInterrupt                   # in the overlay
+
+    args = argparse.Namespace(command="track", out=str(out), verbose=False,
+                              func=replace_then_stop)
+    assert cli_main._run(args) == 130
+    assert _err(capsys) == [f"facetransfer track: interrupted; it had written {out}: run it "
+                            "again with --overwrite to replace them"]
+    untouched = argparse.Namespace(command="track", out=str(out), verbose=False,
+                                   func=lambda args: (_ for _ in ()).throw(KeyboardInterrupt))
+    assert cli_main._run(untouched) == 130
+    assert _err(capsys) == ["facetransfer track: interrupted"]

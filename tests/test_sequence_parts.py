@@ -129,3 +129,35 @@ def test_each_file_type_of_a_sequence_is_written(tmp_path, suffix):
     back = np.asarray(Image.open(tmp_path / "f.tmp").convert("RGB")).astype(int)
     err = np.abs(back - img).max()
     assert err == 0 if suffix not in (".jpg", ".jpeg") else 0 < err <= 6
+
+
+def test_two_runs_writing_one_new_sequence_at_once_the_later_is_refused(tmp_path):
+    """Two runs of one new sequence, without --overwrite, both passed the check at their start
+    (no frames yet): the one that finished later replaced the other's frames without being
+    asked to (and, shorter, left none of them; longer, a mix till its moves ended). Now it is
+    refused where it places its frames, the first run's kept, its own kept in the cache."""
+    from facetransfer.io.video import VideoWriter
+
+    out, long_, short = tmp_path / "out" / "f%03d.png", _frames(6, seed=1), _frames(3, seed=2)
+    late = sp.SequenceWriter(tmp_path / "c1", out, (32, 24), n_frames=3, overwrite=False)
+    _write(tmp_path / "c2", out, long_, overwrite=False)         # the other run ends first
+    for f in short:
+        late.write(f)
+    with pytest.raises(VideoError, match="meanwhile by another run .6 files.*--overwrite"):
+        late.close()
+    assert len(list(out.parent.iterdir())) == 6
+    for got, want in zip(_read(out, 6), long_):
+        np.testing.assert_array_equal(got, want)
+    assert sp.kept_frames(tmp_path / "c1", "f%03d.png", 3) == [False] * 3   # continued later
+    direct = tmp_path / "direct" / "g%03d.png"
+    late = VideoWriter(direct, 25.0, (32, 24), overwrite=False)
+    with VideoWriter(direct, 25.0, (32, 24), overwrite=False) as first:
+        for f in long_:
+            first.write(f)
+    for f in short:
+        late.write(f)
+    with pytest.raises(VideoError, match="meanwhile by another run"):
+        late.close()
+    assert sorted(p.name for p in direct.parent.iterdir()) == [f"g{i:03d}.png" for i in range(6)]
+    for got, want in zip(_read(direct, 6), long_):
+        np.testing.assert_array_equal(got, want)

@@ -262,3 +262,22 @@ def test_a_join_that_fails_says_how_ffmpeg_ended(small_parts, tmp_path, monkeypa
                        r"by signal 9\)$"):
         _write(folder, out, frames)
     assert not out.exists()
+
+
+def test_two_runs_writing_one_new_video_at_once_the_later_is_refused(small_parts, tmp_path):
+    """Both runs checked the output at their start (not there yet); the later one replaced the
+    other's video at its end without --overwrite (two puppets to p.mp4: both 'wrote', exit 0).
+    Now it is refused, in parts or written at once, and the first run's video stays."""
+    out, frames = tmp_path / "p.mp4", _frames(12)
+    late = vp.PartsWriter(tmp_path / "c1", out, 25.0, (64, 48), n_frames=12, options=LOSSLESS)
+    direct = VideoWriter(out, 25.0, (64, 48), options=LOSSLESS, overwrite=False)
+    out.write_bytes(b"the other run's video")                  # finished first
+    for f in frames:
+        late.write(f)
+        direct.write(f)
+    with pytest.raises(ValueError, match="p.mp4 exists; pass --overwrite"):
+        late.close()
+    with pytest.raises(ValueError, match="p.mp4 exists; pass --overwrite"):
+        direct.close()
+    assert out.read_bytes() == b"the other run's video"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["c1", "p.mp4"]  # no temporary file

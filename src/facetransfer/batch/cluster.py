@@ -331,10 +331,30 @@ def _local_cluster(n: int, processes: bool, verbose: bool):
     # workers that may start processes of their own (the renderer forks for long clips);
     # started with Ctrl-C ignored, which they inherit: a terminal's Ctrl-C reaches every
     # process of the group, and only this one (the client) is to act on it (cancel, summary,
-    # one line), not each worker with a traceback
-    with config.set({"distributed.worker.daemon": False}), _ctrl_c_ignored(processes):
-        return LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
-                            dashboard_address=None, silence_logs=level, **kw)
+    # one line), not each worker with a traceback. A SIGTERM meanwhile is raised once the
+    # cluster is whole, and the cluster closed: raised in its start, the half-started cluster's
+    # close at the exit and its workers' start printed tracebacks.
+    cluster = None
+    try:
+        with config.set({"distributed.worker.daemon": False}), _ctrl_c_ignored(processes), \
+                _sigterm_deferred(processes):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
+                                   dashboard_address=None, silence_logs=level, **kw)
+    except BaseException:
+        if cluster is not None:
+            cluster.close()
+        raise
+    return cluster
+
+
+def _sigterm_deferred(active: bool):
+    """SIGTERM noted while the block runs and handed to its handler on leaving
+    (:func:`facetransfer.signals.deferred_signals`); nothing when not ``active``."""
+    import signal
+
+    from ..signals import deferred_signals
+
+    return deferred_signals((signal.SIGTERM,)) if active else contextlib.nullcontext()
 
 
 @contextlib.contextmanager

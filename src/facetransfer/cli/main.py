@@ -309,8 +309,21 @@ def main(argv: list[str] | None = None) -> int:
 
     Called with no ``argv`` (the console script), native libraries' log lines are filtered out
     of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
-    parallel work keep OpenBLAS and OpenCV to one thread each (:func:`serial_blas`).
+    parallel work keep OpenBLAS and OpenCV to one thread each (:func:`serial_blas`). A Ctrl-C
+    before the command began (while the subcommands' modules load: half a second) is one line
+    and 130 as well (it printed the import's traceback).
     """
+    try:
+        return _main(argv)
+    except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
+        what, status = ("terminated", 143) if isinstance(exc, Terminated) else \
+            ("interrupted", 130)
+        print(f"facetransfer: {what}", file=sys.stderr)
+        return status
+
+
+def _main(argv: list[str] | None) -> int:
+    """:func:`main`'s work: parse ``argv``, set up logging and stderr, run the command."""
     if argv is None:
         serial_blas(sys.argv[1:])
     parser = build_parser()
@@ -425,7 +438,7 @@ def _run(args) -> int:
     import signal
 
     previous = _catching_sigterm()
-    before = {p for p in _outputs(args) if _is_file(p)}
+    before = {p: _file_id(p) for p in _outputs(args)}
     try:
         status = int(args.func(args) or 0)
         sys.stdout.flush()      # what the command said, while a closed pipe can be caught here
@@ -444,7 +457,8 @@ def _run(args) -> int:
             raise
         what, status = ("terminated", 143) if isinstance(stop, Terminated) else \
             ("interrupted", 130)
-        written = [str(p) for p in _outputs(args) if _is_file(p) and p not in before]
+        written = [str(p) for p in _outputs(args)
+                   if _file_id(p) is not None and _file_id(p) != before.get(p)]
         print(f"facetransfer {command_name(args)}: {what}{_kept(args.command, written)}",
               file=sys.stderr)
         return status
@@ -500,13 +514,19 @@ def _outputs(args) -> list:
             if isinstance(v, (str, os.PathLike)) and "%" not in str(v)]
 
 
-def _is_file(p) -> bool:
-    """Whether ``p`` is a file now (a folder, a name too long or a path that cannot be looked
-    at: not one, so never a traceback of its own)."""
+def _file_id(p) -> tuple | None:
+    """Which file ``p`` is now (device, inode, size, modification time), None where it is none
+    (a folder, a name too long or a path that cannot be looked at, never a traceback of its
+    own): an output the command replaced (``--overwrite``) is another file, as a new one is."""
+    import stat
+
     try:
-        return p.is_file()
+        st = p.stat()
     except (OSError, ValueError):
-        return False
+        return None
+    if not stat.S_ISREG(st.st_mode):
+        return None
+    return st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns
 
 
 def _kept(command: str, written: list | None = None) -> str:

@@ -110,6 +110,7 @@ class SequenceWriter:
                  first_number: int = 0, fps: float | None = None,
                  timecode: str | None = None, sar: tuple[int, int] | None = None) -> None:
         self.output = check_video_output(out, None, overwrite=overwrite)
+        self.overwrite = bool(overwrite)
         self.first_number = int(first_number)
         self.fps, self.timecode, self.sar = fps, timecode, sar
         if self.output.kind != "images":
@@ -170,7 +171,7 @@ class SequenceWriter:
                     raise VideoError(f"{self.output.path}: {self.done} frames were written, "
                                      f"not {self.n_frames}")
                 place_sequence(self.folder, self.output.path, self.n_frames,
-                               first=self.first_number)
+                               first=self.first_number, overwrite=self.overwrite)
                 shutil.rmtree(self.folder, ignore_errors=True)
                 self.result = WrittenVideo(self.output.path, self.n_frames, self.size, False,
                                            "images")

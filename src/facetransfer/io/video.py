@@ -230,21 +230,50 @@ def _pattern_files(pattern: Path) -> list[Path]:
 
 
 def place_sequence(folder: str | os.PathLike, pattern: str | os.PathLike, n_frames: int, *,
-                   first: int = 0) -> None:
+                   first: int = 0, overwrite: bool = True) -> None:
     """Move the finished frames ``0 .. n_frames - 1`` of the image sequence ``pattern`` from
     ``folder`` beside the pattern (renamed; moved across file systems), numbered from ``first``
     there, and remove the files of an older, longer sequence of the same pattern, which would
-    be mistaken for its frames."""
+    be mistaken for its frames.
+
+    One process at a time places frames in the pattern's folder (a lock on the folder), so two
+    runs writing the same sequence at once leave one run's frames, never a mix; without
+    ``overwrite``, frames placed since the caller checked the output (another run's, finished
+    first) are a :class:`VideoError` and stay as they are (``folder`` is left as it was).
+    """
     pattern = Path(pattern)
     pattern.parent.mkdir(parents=True, exist_ok=True)
-    old = _pattern_files(pattern)
-    names = [pattern.name % (first + i) for i in range(n_frames)]
-    for i, name in enumerate(names):
-        shutil.move(Path(folder) / (pattern.name % i), pattern.parent / name)
-    keep = set(names)
-    for q in old:
-        if q.name not in keep:
-            q.unlink()
+    with _folder_locked(pattern.parent):
+        old = _pattern_files(pattern)
+        if old and not overwrite:
+            raise VideoError(f"output frames {pattern} were written meanwhile by another run "
+                             f"({len(old)} files); pass --overwrite to replace them")
+        names = [pattern.name % (first + i) for i in range(n_frames)]
+        for i, name in enumerate(names):
+            shutil.move(Path(folder) / (pattern.name % i), pattern.parent / name)
+        keep = set(names)
+        for q in old:
+            if q.name not in keep:
+                q.unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def _folder_locked(folder: Path):
+    """An exclusive ``flock`` on the folder itself while the block runs (waited for); where
+    the file system takes no lock on a folder, the block runs without it."""
+    import fcntl
+
+    try:
+        fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        yield
+        return
+    try:
+        with contextlib.suppress(OSError):
+            fcntl.flock(fd, fcntl.LOCK_EX)
+        yield
+    finally:
+        os.close(fd)     # the lock goes with it
 
 
 def check_video_output(path: str | os.PathLike, options: VideoOptions | None = None, *,
@@ -502,6 +531,7 @@ class VideoWriter:
             raise VideoError(f"video size must be (width, height) >= 1, got {size}")
         self.output = check_video_output(path, options, overwrite=overwrite)
         self.path, self.options = self.output.path, self.output.options
+        self._overwrite = bool(overwrite)
         if audio_from is not None and Path(audio_from).exists() and self.path.exists() \
                 and os.path.samefile(audio_from, self.path):
             raise VideoError(f"output {self.path} is also the audio input; choose another --out")
@@ -537,7 +567,8 @@ class VideoWriter:
         self.stored_size = _stored_size(self.size, self.options.codec)
         if not self._detached:   # a part of a longer video: the parts' writer warns, once
             warn_if_grown(self.path, self.size, self.options.codec)
-        self._atomic = atomic_path(self.path, overwrite=True)  # checked in __init__
+        # checked in __init__, and again as it is renamed: another run's since is kept
+        self._atomic = atomic_path(self.path, overwrite=self._overwrite)
         self.tmp = self._atomic.__enter__()
         cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-f", "rawvideo",
                "-pix_fmt", self._pipe_format, "-s", "{}x{}".format(*self.stored_size),
@@ -733,7 +764,7 @@ class VideoWriter:
 
     def _commit_images(self) -> WrittenVideo:
         place_sequence(self._tmpdir, self.path, self.n_frames,
-                       first=self.output.options.first_number or 0)
+                       first=self.output.options.first_number or 0, overwrite=self._overwrite)
         self._tmpdir.rmdir()
         self._tmpdir = None
         return WrittenVideo(self.path, self.n_frames, self.size, False, "images")

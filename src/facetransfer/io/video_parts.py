@@ -163,6 +163,7 @@ class PartsWriter:
                  options: VideoOptions | None = None,
                  audio_from: str | os.PathLike | None = None, overwrite: bool = False) -> None:
         self.output = check_video_output(out, options, overwrite=overwrite)
+        self.overwrite = bool(overwrite)
         if self.output.kind != "video":
             raise VideoError(f"{out}: an image sequence is not written in parts")
         self.folder, self.fps, self.size = Path(folder), float(fps), tuple(size)
@@ -278,7 +279,7 @@ class PartsWriter:
                                  f"{self.n_frames}")
             self.result = join_parts(self.folder, self.parts, self.output.path, self.fps,
                                      self.size, audio_from=self.audio_from,
-                                     options=self.output.options)
+                                     options=self.output.options, overwrite=self.overwrite)
             shutil.rmtree(self.folder, ignore_errors=True)
             return self.result
         finally:
@@ -310,16 +311,19 @@ class PartsWriter:
 def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathLike,
                fps: float, size: tuple[int, int], *,
                audio_from: str | os.PathLike | None = None,
-               options: VideoOptions | None = None) -> WrittenVideo:
+               options: VideoOptions | None = None, overwrite: bool = True) -> WrittenVideo:
     """Join ``parts`` (in ``folder``) of frames of ``size`` (width, height) into the video
     ``out`` by stream copy, with the audio of ``audio_from`` (copied where the container
     holds its codec, else AAC) cut to the frames' length; written atomically and checked to
-    hold every frame.
+    hold every frame. Without ``overwrite``, an ``out`` that another run wrote meanwhile is
+    kept and this one refused.
 
     Raises
     ------
     VideoError
         ffmpeg failed, or the joined file does not hold the parts' frames.
+    OutputError
+        ``out`` exists and not ``overwrite``.
     """
     folder, out = Path(folder), Path(out)
     opt = options or VideoOptions()
@@ -332,7 +336,7 @@ def join_parts(folder: str | os.PathLike, parts: list[Part], out: str | os.PathL
     extra = _container_args(opt, out.suffix.lower())
     if fmt == "avi":  # a constant rate (else the parts' 1/15360 s ticks: "600 fps"), its tag
         extra += ["-r", _fps_arg(fps)] + (["-tag:v", "H264"] if opt.codec == "h264" else [])
-    with atomic_path(out, overwrite=True) as tmp:
+    with atomic_path(out, overwrite=overwrite) as tmp:
         res = subprocess.run([_require_ffmpeg(), "-hide_banner", "-nostdin", "-loglevel", "error",
                               "-y", "-f", "concat", "-safe", "0", "-i", str(listing), *audio,
                               "-c:v", "copy", *extra, "-f", fmt, str(tmp)],
