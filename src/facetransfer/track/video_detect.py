@@ -149,9 +149,10 @@ def _child_job() -> ClipDetections:
 
 def _child_frames(video, start: int, stop: int | None):
     """The frames the child reads of ``video`` (a path or an (F, H, W, 3) array) for its part
-    ``start .. stop``: frames ``0 .. stop - 1`` in order, None for those before the
+    ``start .. stop``: frames ``0 .. stop - 1`` in order; of a path, None for those before the
     detector's warm-up (:data:`~.detect.VideoLandmarker.warmup_frames` frames before
-    ``start``), which are not decoded where the container's seek is exact (module notes)."""
+    ``start``), which are not decoded where the container's seek is exact (module notes); of an
+    array, every one as it is (in memory already)."""
     if isinstance(video, np.ndarray):
         return iter(video[:stop])
     from ..io.video import iter_frames
