@@ -147,3 +147,43 @@ def test_a_matroska_files_frames_are_its_packets(tmp_path, data_dir):
     assert info.n_frames == 20
     assert len(read_video(out)[0]) == 20
     assert vt.packet_count(out) == 20
+
+
+#: Files whose container EXACT_SEEK names, made as cameras and editors make them: H.264 with
+#: B-frames and open GOPs (keyframes every 12), an MP4 cut by stream copy (an edit list hiding
+#: the frames before the cut), one whose first frame is at 7.3 s, Matroska and AVI.
+_SEEK_FILES = {
+    "bframes_open_gop.mp4": (["-bf", "3", "-g", "12", "-x264-params", "open-gop=1"], None),
+    "edit_list.mp4": (["-bf", "3", "-g", "12"], ["-ss", "0.9"]),
+    "late_start.mp4": (["-bf", "3", "-g", "12", "-output_ts_offset", "7.3"], None),
+    "open_gop.mkv": (["-bf", "3", "-g", "12", "-x264-params", "open-gop=1"], None),
+    "bframes.avi": (["-bf", "3", "-g", "12"], None),
+}
+
+
+@pytest.mark.parametrize("name", sorted(_SEEK_FILES))
+def test_a_seek_where_it_is_exact_gives_the_frames_decoded_in_turn(tmp_path, name):
+    """``iter_frames(start=s)`` by the container's seek (what the second detection process
+    reads its warm-up with, track.video_detect) against the same frames decoded from the
+    start, at starts on, after and just before keyframes."""
+    from facetransfer.io.video_display import exact_seek
+
+    made, cut = _SEEK_FILES[name]
+    src, path = tmp_path / "src.mp4", tmp_path / name
+    lavfi = ["-f", "lavfi", "-i", "testsrc2=size=96x64:rate=25:duration=2.4"]
+    x264 = ["-c:v", "libx264", "-pix_fmt", "yuv420p"]
+    if cut:     # the cut by stream copy of a file coded as the others
+        subprocess.run([ffmpeg_exe(), "-v", "error", *lavfi, *x264, *made, str(src)], check=True)
+        subprocess.run([ffmpeg_exe(), "-v", "error", *cut, "-i", str(src), "-c", "copy",
+                        str(path)], check=True)
+    else:
+        subprocess.run([ffmpeg_exe(), "-v", "error", *lavfi, *x264, *made, str(path)],
+                       check=True)
+    whole = list(iter_frames(path, seek=False))
+    assert exact_seek(path) and len(whole) >= 36
+    assert not any(np.array_equal(whole[i], whole[i + 1]) for i in range(len(whole) - 1))
+    for s in (1, 5, 11, 12, 13, 23, 24, 30, len(whole) - 2):
+        got = list(iter_frames(path, start=s, stop=s + 2, seek=True))
+        assert len(got) == 2, (name, s)
+        for a, b in zip(got, whole[s:s + 2]):
+            np.testing.assert_array_equal(a, b, err_msg=f"{name} from frame {s}")
