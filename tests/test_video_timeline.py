@@ -167,6 +167,7 @@ def test_a_seek_where_it_is_exact_gives_the_frames_decoded_in_turn(tmp_path, nam
     reads its warm-up with, track.video_detect) against the same frames decoded from the
     start, at starts on, after and just before keyframes."""
     from facetransfer.io.video_display import exact_seek
+    from facetransfer.io.video_read import seeks_exactly
 
     made, cut = _SEEK_FILES[name]
     src, path = tmp_path / "src.mp4", tmp_path / name
@@ -181,9 +182,40 @@ def test_a_seek_where_it_is_exact_gives_the_frames_decoded_in_turn(tmp_path, nam
                        check=True)
     whole = list(iter_frames(path, seek=False))
     assert exact_seek(path) and len(whole) >= 36
+    # each keeps to its rate: the seek is used (an AVI of B-frames by its decoding times)
+    assert seeks_exactly(path, video_info(path).fps)
     assert not any(np.array_equal(whole[i], whole[i + 1]) for i in range(len(whole) - 1))
     for s in (1, 5, 11, 12, 13, 23, 24, 30, len(whole) - 2):
         got = list(iter_frames(path, start=s, stop=s + 2, seek=True))
         assert len(got) == 2, (name, s)
         for a, b in zip(got, whole[s:s + 2]):
             np.testing.assert_array_equal(a, b, err_msg=f"{name} from frame {s}")
+
+
+def test_a_seek_in_a_video_whose_rate_drifts_gives_the_frames_decoded_in_turn(tmp_path):
+    """A 30 fps clip slowed to 25 fps for two seconds (a phone in the dark): every interval
+    within UNEVEN, so it is read as stored, frame by frame; OpenCV's seek numbers the frame it
+    lands on by its time, and landed 2 frames late after the slow part (4 before it, at its
+    average rate). Such a video is now read from a later frame by decoding those before it,
+    and ``probe`` says its seeks are not exact."""
+    from facetransfer.io.video_facts import video_facts
+    from facetransfer.io.video_read import seeks_exactly
+    from facetransfer.io.video_timeline import on_rate_grid
+
+    path = tmp_path / "drift.mp4"
+    times = "if(lt(N,60),N/30,if(lt(N,120),2+(N-60)*0.04,4.4+(N-120)/30))"
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "testsrc2=size=96x64:rate=30:duration=6", "-vf",
+                    f"settb=1/90000,setpts='{times}/TB'", "-fps_mode", "passthrough",
+                    "-enc_time_base:v", "1/90000", "-c:v", "libx264", "-pix_fmt", "yuv420p",
+                    "-g", "30", "-video_track_timescale", "90000", str(path)], check=True)
+    info = video_info(path)
+    assert info.steps is None and info.n_frames == 180          # read as stored
+    whole = list(iter_frames(path, seek=False))
+    for s in (20, 50, 80, 119, 130, 170):
+        got = next(iter_frames(path, start=s, stop=s + 1, seek=True))
+        np.testing.assert_array_equal(got, whole[s], err_msg=f"from frame {s}")
+    assert not seeks_exactly(path, info.fps) and not video_facts(path).exact_seek
+    even = tmp_path / "even.mp4"
+    encode_video(even, whole[:40], 30.0, options=VideoOptions(crf=0))
+    assert on_rate_grid(even, video_info(even).fps) and seeks_exactly(even, 30.0)
