@@ -258,6 +258,14 @@ def test_the_layer_check_finds_a_planted_upward_import():
         "facetransfer.rewrite"}}
     assert ("facetransfer.tensor", "facetransfer.rewrite") in _upward(planted, LAYER_OF)
     assert ("facetransfer.track.pair", "facetransfer.render") not in _upward(planted, LAYER_OF)
+    # a climb of one layer, each step of the frame's way (a check counting only longer
+    # climbs passed every other test here)
+    for low, high in zip(LAYERS, LAYERS[1:]):
+        assert _upward({"x": {"y"}, "y": set()}, {"x": low, "y": high}) == {("x", "y")}
+    renders = {**GRAPH, "facetransfer.render.raster": GRAPH["facetransfer.render.raster"] | {
+        "facetransfer.track.camera"}}
+    assert ("facetransfer.render.raster", "facetransfer.track.camera") in _upward(renders,
+                                                                                 LAYER_OF)
 
 
 def test_imports_never_climb_the_layers():

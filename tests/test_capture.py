@@ -484,3 +484,38 @@ def test_detector_scores_carry_the_jaw_that_noisy_points_blur(arkit_model):
     assert r1 < 0.99 and r2 > 0.995 and e2 < 0.7 * e1, (r1, r2, e1, e2)  # 0.986 0.999 .048 .025
     ratio = two.blendshapes[:, jaw].std() / one.blendshapes[:, jaw].std()
     assert 0.8 < ratio < 1.2, ratio                   # the geometry's amplitude, not 0.4x
+
+
+def test_sin_yaw_clips_keeps_nan_and_at_view_copies_as_copy_copy(arkit_model):
+    """capture49's two shortcuts at every pose step keep what they replaced: ``sin_yaw`` in
+    Python's floats clips as NumPy's clip did, NaN and -0.0 kept (``max(-1, min(1, x))``
+    would make a NaN 1.0), and ``Shape._copy`` holds what ``copy.copy`` held."""
+    import copy
+    import math
+    from types import SimpleNamespace
+
+    from facetransfer.track.capture_frame import sin_yaw
+    from facetransfer.track.capture_points import Shape, sampler
+
+    def at(v):
+        R = np.eye(3)
+        R[0, 2] = v
+        return sin_yaw(SimpleNamespace(rotation=R))
+
+    for v in (0.25, -0.75, 1.0 + 1e-12, -1.0 - 1e-12, 3.0, -np.inf, 0.0):
+        assert at(v) == float(np.clip(v, -1.0, 1.0)) and type(at(v)) is float
+    assert math.isnan(at(np.nan)) and math.copysign(1.0, at(-0.0)) == -1.0
+    ident = arkit_model.training_weights("identity", "id02")
+    smp = sampler(arkit_model)
+    view = np.full((smp.model.n_vertices, 3), 0.1)
+    shape = Shape(arkit_model, ident, smp, CaptureOptions(), view=view)
+    turned, want = shape.at_view(0.3), copy.copy(shape)
+    assert type(turned) is Shape and set(vars(turned)) == set(vars(want))
+    assert turned.view is None and shape.view is view          # the original untouched
+    np.testing.assert_array_equal(turned.N, shape.N + 0.3 * view)
+    np.testing.assert_array_equal(turned._flat[1], turned.N.ravel())
+    assert all(getattr(turned, k) is v for k, v in vars(want).items()
+               if k not in ("N", "_flat", "view"))
+    other = shape.with_options(CaptureOptions(lip_contact=False))
+    assert other.opt.lip_contact is False and shape.opt.lip_contact is True
+    assert all(getattr(other, k) is v for k, v in vars(want).items() if k != "opt")

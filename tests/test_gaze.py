@@ -235,6 +235,22 @@ def test_running_median_is_scipys_median_filter_to_the_bit():
         running_median(np.ones(5), 0)
 
 
+def test_running_median_of_nothing_and_beside_a_nan():
+    """An empty series is an empty result, as SciPy's median filter gives (it was NumPy's
+    "can't extend empty axis 0" from the padding); a NaN ranks above every number, as the
+    docstring says (SciPy's result there depends on the NaN's place: no reference)."""
+    from scipy.ndimage import median_filter
+
+    for x in (np.zeros(0), np.zeros(0, np.int64)):
+        got = running_median(x, 31)
+        want = median_filter(x, size=31, mode="nearest")
+        assert got.shape == want.shape == (0,) and got.dtype == want.dtype
+    np.testing.assert_array_equal(running_median(np.array([np.nan, 1.0, 2.0]), 3),
+                                  [np.nan, 2.0, 2.0])
+    np.testing.assert_array_equal(running_median(np.array([np.nan, 1.0, 2.0, 3.0]), 2),
+                                  [np.nan, np.nan, 2.0, 3.0])
+
+
 def test_the_capture_and_its_iris_leave_scipy_ndimage_unimported():
     """A tracking process (the capture, its kernels, usable_iris on a clip) does not import
     scipy.ndimage (0.06 CPU-s) for the lid gap's running median."""

@@ -161,3 +161,35 @@ def test_two_runs_writing_one_new_sequence_at_once_the_later_is_refused(tmp_path
     assert sorted(p.name for p in direct.parent.iterdir()) == [f"g{i:03d}.png" for i in range(6)]
     for got, want in zip(_read(direct, 6), long_):
         np.testing.assert_array_equal(got, want)
+
+
+def test_frames_are_placed_under_a_lock_on_their_folder(tmp_path, monkeypatch):
+    """Each frame moved beside the pattern with the folder locked (``flock``), so a second run
+    placing the same pattern waits and a reader of the sequence sees one run's frames: with the
+    lock taken out, every test above still passed."""
+    import fcntl
+    import os
+    import shutil
+
+    from facetransfer.io import video as io_video
+
+    out, seen, move = tmp_path / "out" / "f%03d.png", [], shutil.move
+    out.parent.mkdir()
+
+    def move_checked(src, dst):
+        fd = os.open(out.parent, os.O_RDONLY | os.O_DIRECTORY)   # another run's attempt
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            seen.append("free")
+        except BlockingIOError:
+            seen.append("locked")
+        finally:
+            os.close(fd)
+        return move(src, dst)
+
+    monkeypatch.setattr(io_video.shutil, "move", move_checked)
+    frames = _frames(4)
+    _write(tmp_path / "c", out, frames)
+    assert seen == ["locked"] * 4
+    for got, want in zip(_read(out, 4), frames):
+        np.testing.assert_array_equal(got, want)

@@ -204,6 +204,33 @@ def test_the_child_reads_its_warm_up_and_part_as_a_whole_read(data_dir):
     assert len(got) == 10 and all(np.array_equal(a, b) for a, b in zip(got, arr))
 
 
+def test_the_child_seeks_to_its_warm_up_instead_of_decoding_the_first_half(data_dir,
+                                                                          monkeypatch):
+    """The frames before the warm-up are not taken from the decoder one by one (the seek
+    where it is exact; the test above passed with them decoded in turn, as before)."""
+    from facetransfer.io import video_read
+    from facetransfer.track.detect import VideoLandmarker
+
+    calls = {"grab": 0, "read": 0}
+    opened = video_read._open
+
+    class Counted:
+        def __init__(self, cap):
+            self._cap = cap
+
+        def __getattr__(self, name):
+            if name in calls:
+                calls[name] += 1
+            return getattr(self._cap, name)
+
+    monkeypatch.setattr(video_read, "_open", lambda path: Counted(opened(path)))
+    start, stop = 300, 306
+    got = list(video_detect._child_frames(data_dir / "video" / "driving_d6.mp4", start, stop))
+    warm = start - VideoLandmarker.warmup_frames
+    assert len(got) == stop and sum(f is not None for f in got) == stop - warm
+    assert calls == {"grab": 0, "read": stop - warm}
+
+
 def test_cli_rejects_workers_below_one(tmp_path, capsys, data_dir):
     code = main(["track", str(data_dir / "video" / "driving_d9.mp4"), "--out",
                  str(tmp_path / "t.npz"), "--workers", "0"])

@@ -147,3 +147,75 @@ def test_a_matroska_files_frames_are_its_packets(tmp_path, data_dir):
     assert info.n_frames == 20
     assert len(read_video(out)[0]) == 20
     assert vt.packet_count(out) == 20
+
+
+#: Files whose container EXACT_SEEK names, made as cameras and editors make them: H.264 with
+#: B-frames and open GOPs (keyframes every 12), an MP4 cut by stream copy (an edit list hiding
+#: the frames before the cut), one whose first frame is at 7.3 s, Matroska and AVI.
+_SEEK_FILES = {
+    "bframes_open_gop.mp4": (["-bf", "3", "-g", "12", "-x264-params", "open-gop=1"], None),
+    "edit_list.mp4": (["-bf", "3", "-g", "12"], ["-ss", "0.9"]),
+    "late_start.mp4": (["-bf", "3", "-g", "12", "-output_ts_offset", "7.3"], None),
+    "open_gop.mkv": (["-bf", "3", "-g", "12", "-x264-params", "open-gop=1"], None),
+    "bframes.avi": (["-bf", "3", "-g", "12"], None),
+}
+
+
+@pytest.mark.parametrize("name", sorted(_SEEK_FILES))
+def test_a_seek_where_it_is_exact_gives_the_frames_decoded_in_turn(tmp_path, name):
+    """``iter_frames(start=s)`` by the container's seek (what the second detection process
+    reads its warm-up with, track.video_detect) against the same frames decoded from the
+    start, at starts on, after and just before keyframes."""
+    from facetransfer.io.video_display import exact_seek
+    from facetransfer.io.video_read import seeks_exactly
+
+    made, cut = _SEEK_FILES[name]
+    src, path = tmp_path / "src.mp4", tmp_path / name
+    lavfi = ["-f", "lavfi", "-i", "testsrc2=size=96x64:rate=25:duration=2.4"]
+    x264 = ["-c:v", "libx264", "-pix_fmt", "yuv420p"]
+    if cut:     # the cut by stream copy of a file coded as the others
+        subprocess.run([ffmpeg_exe(), "-v", "error", *lavfi, *x264, *made, str(src)], check=True)
+        subprocess.run([ffmpeg_exe(), "-v", "error", *cut, "-i", str(src), "-c", "copy",
+                        str(path)], check=True)
+    else:
+        subprocess.run([ffmpeg_exe(), "-v", "error", *lavfi, *x264, *made, str(path)],
+                       check=True)
+    whole = list(iter_frames(path, seek=False))
+    assert exact_seek(path) and len(whole) >= 36
+    # each keeps to its rate: the seek is used (an AVI of B-frames by its decoding times)
+    assert seeks_exactly(path, video_info(path).fps)
+    assert not any(np.array_equal(whole[i], whole[i + 1]) for i in range(len(whole) - 1))
+    for s in (1, 5, 11, 12, 13, 23, 24, 30, len(whole) - 2):
+        got = list(iter_frames(path, start=s, stop=s + 2, seek=True))
+        assert len(got) == 2, (name, s)
+        for a, b in zip(got, whole[s:s + 2]):
+            np.testing.assert_array_equal(a, b, err_msg=f"{name} from frame {s}")
+
+
+def test_a_seek_in_a_video_whose_rate_drifts_gives_the_frames_decoded_in_turn(tmp_path):
+    """A 30 fps clip slowed to 25 fps for two seconds (a phone in the dark): every interval
+    within UNEVEN, so it is read as stored, frame by frame; OpenCV's seek numbers the frame it
+    lands on by its time, and landed 2 frames late after the slow part (4 before it, at its
+    average rate). Such a video is now read from a later frame by decoding those before it,
+    and ``probe`` says its seeks are not exact."""
+    from facetransfer.io.video_facts import video_facts
+    from facetransfer.io.video_read import seeks_exactly
+    from facetransfer.io.video_timeline import on_rate_grid
+
+    path = tmp_path / "drift.mp4"
+    times = "if(lt(N,60),N/30,if(lt(N,120),2+(N-60)*0.04,4.4+(N-120)/30))"
+    subprocess.run([ffmpeg_exe(), "-v", "error", "-f", "lavfi", "-i",
+                    "testsrc2=size=96x64:rate=30:duration=6", "-vf",
+                    f"settb=1/90000,setpts='{times}/TB'", "-fps_mode", "passthrough",
+                    "-enc_time_base:v", "1/90000", "-c:v", "libx264", "-pix_fmt", "yuv420p",
+                    "-g", "30", "-video_track_timescale", "90000", str(path)], check=True)
+    info = video_info(path)
+    assert info.steps is None and info.n_frames == 180          # read as stored
+    whole = list(iter_frames(path, seek=False))
+    for s in (20, 50, 80, 119, 130, 170):
+        got = next(iter_frames(path, start=s, stop=s + 1, seek=True))
+        np.testing.assert_array_equal(got, whole[s], err_msg=f"from frame {s}")
+    assert not seeks_exactly(path, info.fps) and not video_facts(path).exact_seek
+    even = tmp_path / "even.mp4"
+    encode_video(even, whole[:40], 30.0, options=VideoOptions(crf=0))
+    assert on_rate_grid(even, video_info(even).fps) and seeks_exactly(even, 30.0)

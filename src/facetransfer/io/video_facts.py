@@ -16,12 +16,12 @@ import os
 from dataclasses import asdict, dataclass
 
 from .video_audio import audio_codecs
-from .video_display import (ColourTags, container, exact_seek, first_field, shown_width,
+from .video_display import (ColourTags, container, first_field, shown_width,
                             timecode_of, video_colour)
 from .plate_alpha import cmyk_still, sequence_has_alpha, video_has_alpha
 from .video_depth import video_bits
 from .video_planes import stored_pixel_format
-from .video_read import TRUNCATED_FRAMES, video_info
+from .video_read import TRUNCATED_FRAMES, seeks_exactly, video_info
 from .video_timeline import packet_count
 from .frame_file import bit_depth
 from .video_sequence import IMAGE_SUFFIXES, is_sequence, open_sequence
@@ -134,7 +134,7 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       info.sar, float(info.fps),
                       int(info.n_frames), info.steps is not None,
                       float(info.n_frames / info.fps) if info.fps else 0.0, first_field(path),
-                      "ffmpeg" if info.piped else "OpenCV", exact_seek(path),
+                      "ffmpeg" if info.piped else "OpenCV", seeks_exactly(path, info.fps),
                       video_colour(path), ", ".join(audio_codecs(path)) or None, turn=info.turn,
                       timecode=timecode_of(path), alpha=video_has_alpha(path),
                       bits=video_bits(path), stored_frames=packet_count(path),

@@ -23,7 +23,7 @@ from .video_display import exact_seek, first_field, pixel_aspect  # noqa: F401 (
 from .video_pipe import piped_frames
 from .video_sequence import (IMAGE_SUFFIXES, is_sequence, open_sequence, pattern_of_file,
                              sequence_files, sequence_frames, sequence_stamp, suggested_pattern)
-from .video_timeline import timeline
+from .video_timeline import on_rate_grid, timeline
 
 log = logging.getLogger(__name__)
 
@@ -355,16 +355,23 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
 TRUNCATED_FRAMES = 3
 
 
+def seeks_exactly(path: str | os.PathLike, fps: float) -> bool:
+    """Whether OpenCV's seek lands on the frame asked in the video ``path`` (``fps``: OpenCV's
+    rate of it): exact in its container (:func:`facetransfer.io.video_display.exact_seek`; in
+    an MPEG transport stream of H.264 it lands nowhere) and its frames' times on that rate's
+    steps (:func:`facetransfer.io.video_timeline.on_rate_grid`; else it lands frames away)."""
+    return exact_seek(path) and on_rate_grid(path, fps)
+
+
 def _at(cap, path, start: int, seek: bool) -> bool:
     """Put an opened capture at stored frame ``start``: by the container's seek where ``seek``
-    and OpenCV's is exact in it (:func:`facetransfer.io.video_display.exact_seek`; in an MPEG
-    transport stream of H.264 it lands nowhere), else by decoding every frame before it
+    and OpenCV's lands exactly (:func:`seeks_exactly`), else by decoding every frame before it
     (``grab``: no colour conversion). False where the clip ends before ``start``."""
     import cv2
 
     if not start:
         return True
-    if seek and exact_seek(path):
+    if seek and seeks_exactly(path, cap.get(cv2.CAP_PROP_FPS)):
         cap.set(cv2.CAP_PROP_POS_FRAMES, start)
         return True
     return all(cap.grab() for _ in range(start))

@@ -30,29 +30,41 @@ from .video_sequence import is_sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["UNEVEN", "packet_times", "timeline"]
+__all__ = ["UNEVEN", "SEEK_SLACK", "on_rate_grid", "packet_times", "timeline"]
 
 #: A video's frames are uneven when an interval between two of them is outside this range of
 #: their median interval (a millisecond time base's 33/34 ms steps are even).
 UNEVEN = (0.5, 1.5)
+
+#: How far (in frames) a stored frame's time may sit from its step of the constant rate for
+#: OpenCV's seek to land on it (:func:`on_rate_grid`; it numbers a frame by its time, rounded).
+SEEK_SLACK = 0.4
 
 
 def packet_times(path: str | os.PathLike) -> np.ndarray | None:
     """The presentation times (seconds, ascending) of the first video stream's packets, as the
     container stores them (ffmpeg's ``framecrc`` of a stream copy: nothing decoded); None
     without ffmpeg, or where a packet has no time."""
+    text = _listing(path)
+    return None if text is None else _framecrc_times(text)
+
+
+def _listing(path: str | os.PathLike) -> str | None:
+    """ffmpeg's ``framecrc`` listing of the first video stream's packets (a stream copy), None
+    without ffmpeg or where it fails."""
     exe = ffmpeg_exe()
     if exe is None:
         return None
     res = subprocess.run([exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-i",
                           str(path), "-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"],
                          capture_output=True, text=True)
-    return _framecrc_times(res.stdout) if res.returncode == 0 else None
+    return res.stdout if res.returncode == 0 else None
 
 
-def _framecrc_times(text: str) -> np.ndarray | None:
+def _framecrc_times(text: str, column: int = 2) -> np.ndarray | None:
     """The sorted times in seconds of a ``framecrc`` listing of one stream (lines
-    ``stream, dts, pts, duration, size, checksum``, time base ``#tb 0: num/den``)."""
+    ``stream, dts, pts, duration, size, checksum``, time base ``#tb 0: num/den``): its
+    presentation times (``column`` 2), or its decoding times (1)."""
     tb = re.search(r"^#tb 0: (\d+)/(\d+)", text, re.M)
     if not tb or int(tb[2]) == 0:
         return None
@@ -64,7 +76,7 @@ def _framecrc_times(text: str) -> np.ndarray | None:
         if len(parts) < 4 or parts[0] != "0":
             continue
         try:
-            pts.append(int(parts[2]))
+            pts.append(int(parts[column]))
         except ValueError:
             return None
     if not pts or min(pts) <= -(1 << 62):      # AV_NOPTS_VALUE: a packet without a time
@@ -79,8 +91,16 @@ def _framecrc_times(text: str) -> np.ndarray | None:
 
 
 @functools.lru_cache(maxsize=32)
+def _cached_packets(path: str, stamp: str) -> tuple:
+    """``(presentation times, decoding times)`` of the packets (:func:`_framecrc_times`)."""
+    text = _listing(path)
+    if text is None:
+        return None, None
+    return _framecrc_times(text), _framecrc_times(text, 1)
+
+
 def _cached_times(path: str, stamp: str) -> np.ndarray | None:
-    return packet_times(path)
+    return _cached_packets(path, stamp)[0]
 
 
 @functools.lru_cache(maxsize=32)
@@ -134,3 +154,30 @@ def _timeline(times: np.ndarray | None, n_frames: int, path: str):
                 "in step with its audio", path, worst, worst + 1, gaps[worst], step, 1 / step,
                 len(steps), len(times))
     return round(1.0 / step, 6), tuple(int(i) for i in steps)
+
+
+def on_rate_grid(path: str | os.PathLike, fps: float) -> bool:
+    """Whether each stored frame ``k`` of the video ``path`` is shown within
+    :data:`SEEK_SLACK` of ``k / fps`` seconds after its first: where OpenCV's seek, which
+    numbers the frame it lands on by its time at ``fps`` (its rate), lands on the frame asked.
+
+    A video whose rate drifts with every interval within :data:`UNEVEN` (a phone's 30 fps clip
+    slowed to 25 for two seconds in the dark) is read as stored, but its frames' times leave the
+    grid: there the seek landed frames away (2 after those two seconds). An AVI of B-frames
+    stores no presentation times: its decoding times are asked (one a frame, in turn). False
+    where neither can be read (kept per file, with the timeline's)."""
+    try:
+        stamp = file_stamp(path)
+    except OSError:
+        return False
+    return _cached_on_grid(str(path), stamp, float(fps))
+
+
+@functools.lru_cache(maxsize=32)
+def _cached_on_grid(path: str, stamp: str, fps: float) -> bool:
+    shown, decoded = _cached_packets(path, stamp)
+    times = decoded if shown is None else shown
+    if times is None or not fps > 0:
+        return False
+    off = (times - times[0]) * fps - np.arange(len(times))      # (F,) frames off the grid
+    return bool(np.all(np.abs(off) < SEEK_SLACK))

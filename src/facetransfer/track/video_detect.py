@@ -13,13 +13,12 @@ The child starts its own landmarker at frame ``m`` exactly as a resumed run does
 (:func:`facetransfer.track.detect.detect_clip` with ``start=m``): it reads the frames before
 ``m`` and shows the last :attr:`~facetransfer.track.detect.VideoLandmarker.warmup_frames` of them
 to the detector (the first of those reached by the container's seek where OpenCV's lands
-exactly, :func:`facetransfer.io.video.iter_frames`: MP4, Matroska, AVI; the same frames as
-decoded in turn, only those from the keyframe before them decoded, not the whole first half
-again), so the
-points of frame ``m`` and after differ from one process's by about as little as a resumed run's
-(the class notes measure 0.05 px on average; up to ~1 px on a long clip). Frame ``m`` has no
-flow term: its flow would move the parent's points of frame ``m - 1``, which the child does not
-have.
+exactly, :func:`facetransfer.io.video_read.seeks_exactly`: MP4, Matroska, AVI whose frames keep
+to their rate; the same frames as decoded in turn, only those from the keyframe before them
+decoded, not the whole first half again), so the points of frame ``m`` and after differ from
+one process's by about as little as a resumed run's (the class notes measure 0.05 px on average;
+up to ~1 px on a long clip). Frame ``m`` has no flow term: its flow would move the parent's
+points of frame ``m - 1``, which the child does not have.
 
 When the child cannot run or fails, the parent detects the rest itself (resuming from its own
 part), so the result never depends on the fork. An interrupted run keeps only the parent's
@@ -149,9 +148,10 @@ def _child_job() -> ClipDetections:
 
 def _child_frames(video, start: int, stop: int | None):
     """The frames the child reads of ``video`` (a path or an (F, H, W, 3) array) for its part
-    ``start .. stop``: frames ``0 .. stop - 1`` in order, None for those before the
+    ``start .. stop``: frames ``0 .. stop - 1`` in order; of a path, None for those before the
     detector's warm-up (:data:`~.detect.VideoLandmarker.warmup_frames` frames before
-    ``start``), which are not decoded where the container's seek is exact (module notes)."""
+    ``start``), which are not decoded where the container's seek is exact (module notes); of an
+    array, every one as it is (in memory already)."""
     if isinstance(video, np.ndarray):
         return iter(video[:stop])
     from ..io.video import iter_frames
