@@ -384,12 +384,12 @@ def test_batch_track_clip_of_max_frames_as_track_does(clip, quick_model_path, qu
     a, b = Track.load(out), Track.load(ref)
     assert a.n_frames == b.n_frames == n
     np.testing.assert_allclose(a.landmarks2d, b.landmarks2d, atol=1e-9)
-    fakes.stop_at = 15
+    fakes.stop_at = 15            # (redone over its track: the batch's --overwrite)
     with pytest.raises(KeyboardInterrupt):
-        jobs.track_clip(job, str(out), quick_model, settings)
+        jobs.track_clip(job, str(out), quick_model, settings, True)
     fakes.stop_at = None          # the same clip, another limit: from its first frame
     row = jobs.track_clip(dataclasses.replace(job, max_frames=20), str(out), quick_model,
-                          settings)
+                          settings, True)
     assert row.frames == 20 and fakes.made[-1].calls == 20
 
 

@@ -244,7 +244,7 @@ def test_batch_tracks_the_face_it_is_told(two_faces, arkit_model, tmp_path, chun
             tr = J.track_chunk(job, Chunk(1, 8, 24), str(out), arkit_model,
                                TrackerSettings()).track
         else:
-            J.track_clip(job, str(out), arkit_model, TrackerSettings())
+            J.track_clip(job, str(out), arkit_model, TrackerSettings(), overwrite=True)
             tr = Track.load(out)
         x = tr.translation[:, 0]
         assert not tr.lost.any() and ((x < 480) if side == "left" else (x > 480)).all()

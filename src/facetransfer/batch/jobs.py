@@ -10,9 +10,11 @@ A task raises on bad input; the client turns the exception into the clip's faile
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import functools
 import logging
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +28,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
-           "MATTE_FORMATS", "matte_pattern"]
+           "MATTE_FORMATS", "matte_pattern", "OutputTaken", "output_identity"]
 
 #: The frame file of each ``batch transfer --matte`` format (image sequences only, one file a
 #: frame: :mod:`facetransfer.io.matte`).
@@ -60,6 +62,69 @@ def _detector_for(init: str, options):
     from ..track.init import LazyDetector
 
     return None if (init == "auto" or options.anchor) else LazyDetector()
+
+
+class OutputTaken(BatchError):
+    """A job's output was written by another run while this one went on (two runs into one
+    folder at once): that run's file is kept, and the job's row fails (before, the job
+    replaced it: both runs said "done", the later one's outputs left)."""
+
+
+def output_identity(out) -> str:
+    """Which file ``out`` is now (:func:`facetransfer.io.verified.file_identity`), "" where
+    there is none: what a run records of an output it plans to do again
+    (:func:`transfer_pair`'s ``planned``)."""
+    from ..io.verified import file_identity
+
+    try:
+        return file_identity(out) if os.path.isfile(out) else ""
+    except OSError:
+        return ""
+
+
+def _taken(out, why: str = "while this run went on") -> OutputTaken:
+    o = Path(out)
+    return OutputTaken(f"{o} was written by another run {why} (two runs into {o.parent} at "
+                       "once?): that file is kept, this run's result not written; "
+                       "--overwrite replaces it")
+
+
+def _frames_there(pattern) -> bool:
+    """Whether the image sequence ``pattern`` (a matte) has frames (None: no pattern)."""
+    if pattern is None:
+        return False
+    from ..io.video_sequence import sequence_files
+
+    try:
+        return bool(sequence_files(Path(pattern)))
+    except (OSError, ValueError):
+        return False
+
+
+@contextlib.contextmanager
+def _own_output(out, overwrite: bool, matte=None):
+    """Write ``out`` (and the frames of ``matte``) in the block, replacing only with
+    ``overwrite``: without it, the run found no ``out`` when it planned the job, so an ``out``
+    there now, or frames of ``matte`` that appeared during the block, are another run's (the
+    write commits without replacing, :func:`facetransfer.io.atomic.atomic_path`):
+    :class:`OutputTaken`, before the work or when the write is refused."""
+    if overwrite:
+        yield
+        return
+    if os.path.isfile(out):
+        raise _taken(out, "since this run began")
+    from ..errors import VideoError
+
+    had_frames = _frames_there(matte)
+    try:
+        yield
+    except (ValueError, OSError) as exc:
+        # frames placed meanwhile refuse the matte's placement (VideoError), which comes
+        # before the result's: frames of its own then, and a failed result, are not another's
+        if os.path.isfile(out) or (isinstance(exc, VideoError) and not had_frames
+                                   and _frames_there(matte)):
+            raise _taken(out) from None
+        raise
 
 
 def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=None,
@@ -109,7 +174,7 @@ def _subject(face: str | None, video, source: str):
     return subject_point(face, video_info(source).size, what=f"{source}: face")
 
 
-def track_clip(job, out: str, model, options) -> Row:
+def track_clip(job, out: str, model, options, overwrite: bool = False) -> Row:
     """Track a whole clip exactly as ``facetransfer track VIDEO --out OUT`` does and write it.
 
     Parameters
@@ -119,6 +184,9 @@ def track_clip(job, out: str, model, options) -> Row:
         ``DIR/NAME.npz``.
     model : MultilinearModel
     options : TrackerSettings
+    overwrite : bool
+        Replace an existing ``out`` (the batch's ``--overwrite``); without it, an ``out`` that
+        another run wrote since this one was planned is kept (:class:`OutputTaken`).
 
     Returns
     -------
@@ -128,10 +196,16 @@ def track_clip(job, out: str, model, options) -> Row:
 
     t0 = time.perf_counter()
     video_info(job.video)  # missing / not a video: one line naming the path
-    track = _track(str(job.video), model, job.init, options, source=str(job.video),
-                   checkpoint=partial_path(out), face=job.face, max_frames=job.max_frames)
-    track = track.with_source_facts(job.video)   # the clip's numbering, before it can move
-    track.save(out, overwrite=True)
+    try:
+        with _own_output(out, overwrite):
+            track = _track(str(job.video), model, job.init, options, source=str(job.video),
+                           checkpoint=partial_path(out), face=job.face,
+                           max_frames=job.max_frames)
+            track = track.with_source_facts(job.video)   # the clip's numbering, before it moves
+            track.save(out, overwrite=overwrite)
+    except OutputTaken:   # the other run's track is whole: no progress to keep for it
+        partial_path(out).unlink(missing_ok=True)
+        raise
     partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
     return track_row(job.name, track, out, time.perf_counter() - t0)
 
@@ -211,14 +285,16 @@ def _chunk_capture(frames, model, options, job, chunk, identity):
                               source=src, fixed=held)
 
 
-def join_clip(job, out: str, model, chunks, results) -> Row:
+def join_clip(job, out: str, model, chunks, results, overwrite: bool = False) -> Row:
     """Join a clip's chunk tracks (:func:`~facetransfer.batch.chunks.join_tracks`) and write
-    ``out``."""
+    ``out`` (``overwrite``: as :func:`track_clip`'s)."""
     from .chunks import join_tracks
 
     t0 = time.perf_counter()
-    track = join_tracks([r.track for r in results], chunks, model).with_source_facts(job.video)
-    track.save(out, overwrite=True)
+    with _own_output(out, overwrite):
+        track = join_tracks([r.track for r in results], chunks, model)
+        track = track.with_source_facts(job.video)
+        track.save(out, overwrite=overwrite)
     return track_row(job.name, track, out,
                      sum(r.seconds for r in results) + time.perf_counter() - t0)
 
@@ -244,7 +320,8 @@ def matte_pattern(out_dir, name: str, suffix: str) -> Path:
     return Path(out_dir) / f"{name}.matte" / f"{name}.%05d{suffix}"
 
 
-def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None) -> Row:
+def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None, *,
+                  overwrite: bool = False, planned: str = "") -> Row:
     """Rewrite one target as ``facetransfer transfer`` does
     (:func:`facetransfer.video_transfer.transfer_video`) and write ``out`` (and ``matte``).
 
@@ -265,6 +342,13 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         after an interrupt with ``out``. Once written, that folder's frames of an earlier
         render in another format (all of them, without ``matte``) are removed
         (:func:`_remove_other_mattes`).
+    overwrite : bool
+        Replace an existing ``out`` and ``matte`` (the batch's ``--overwrite``).
+    planned : str
+        Without ``overwrite``: the :func:`output_identity` of the ``out`` the run found and
+        chose to render again (its own result, redone for the matte asked; a file that does
+        not decode), replaced, with its matte, while it is still that file; "" (none found):
+        an ``out`` or matte frames another run wrote meanwhile are kept (:class:`OutputTaken`).
 
     Returns
     -------
@@ -290,15 +374,29 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         pose_from=s.get("pose_from"), pose_track=s.get("pose_track"),
         performance=s.get("performance"), target_face=s.get("target_face"),
         source_face=s.get("source_face"))
-    res = transfer_video(sources, out, model, overwrite=True, options=options,
-                         progress_factory=None, align=settings["align"],
-                         max_frames=settings["max_frames"], parallel=False,
-                         video_options=settings.get("video"), matte=matte)
+    overwrite = overwrite or _still_planned(out, planned)
+    with _own_output(out, overwrite, matte):
+        res = transfer_video(sources, out, model, overwrite=overwrite, options=options,
+                             progress_factory=None, align=settings["align"],
+                             max_frames=settings["max_frames"], parallel=False,
+                             video_options=settings.get("video"), matte=matte)
     _remove_other_mattes(Path(out).parent, job.name, matte)
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
                output=str(out), matte="" if res.matte is None else str(res.matte))
+
+
+def _still_planned(out, planned: str) -> bool:
+    """Whether ``out`` is still the file ``planned`` (:func:`output_identity`) the run chose to
+    render again (may be replaced); False where none was planned or none is there now;
+    :class:`OutputTaken` where another file is there now (another run's)."""
+    if not planned:
+        return False
+    now = output_identity(out)
+    if now and now != planned:
+        raise _taken(out, "since this run began")
+    return bool(now)
 
 
 def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:
@@ -350,10 +448,12 @@ def _default_model():
 
 
 def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
-               labels=None) -> Row:
+               labels=None, overwrite: bool = False, planned: str = "") -> Row:
     """Export one track file with :func:`facetransfer.export.export_track` to ``out``
     (``neutral``: its neutral frame, :mod:`facetransfer.export.neutral`; ``labels``: a
-    livelink take's timecode labels, None the default).
+    livelink take's timecode labels, None the default; ``overwrite``: as
+    :func:`track_clip`'s; ``planned``: as :func:`transfer_pair`'s, the take of an earlier
+    version the run writes again).
 
     Without ``model``, a track made with the default model gets the worker's cached copy of
     it; any other track is left to ``export_track``'s own check (``model=None``).
@@ -369,8 +469,10 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
         if default_model_path().is_file():
             default, h = _default_model()
             model = default if track.model_hash == h else None
-    path = export_track(track, fmt, out, model=model, overwrite=True, texture=texture,
-                        neutral=neutral, labels=labels)
+    overwrite = overwrite or _still_planned(out, planned)
+    with _own_output(out, overwrite):
+        path = export_track(track, fmt, out, model=model, overwrite=overwrite,
+                            texture=texture, neutral=neutral, labels=labels)
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
                seconds=time.perf_counter() - t0,
                mean_confidence=float(np.mean(track.confidence)), output=str(path))

@@ -135,8 +135,9 @@ class _Collector:
         # the earlier rows of clips this run does not have: kept in the summary, so that their
         # outputs' digests are not forgotten by a run of some of the clips (before, a later run
         # of them all took a stale output for its own)
-        mine = set(self.names)
-        self.others = [r for r in _earlier_rows(out_dir) if r.clip not in mine]
+        mine, earlier = set(self.names), _earlier_rows(out_dir)
+        self.others = [r for r in earlier if r.clip not in mine]
+        self.before = {r.clip: r for r in earlier}   # what the summary said as the run began
         # {clip: (digest of a cancelled row, of a failed row)}: what made its output (_unfinished)
         self.unfinished = dict(unfinished or {})
         self.progress = progress
@@ -159,15 +160,37 @@ class _Collector:
 
     def fail(self, job, exc: BaseException, out) -> None:
         log.info("%s failed: %s", job.name, exc)
+        # an output another run wrote meanwhile is not this job's (before, the row had this
+        # run's digest where the output was absent at the start: a rerun took it for its own)
+        made = OTHER_RUN if isinstance(exc, J.OutputTaken) else \
+            self.unfinished.get(job.name, ("", ""))[1]
         self.finish(job, Row(job.name, "failed", error=_error_line(exc), output=str(out),
-                             job=self.unfinished.get(job.name, ("", ""))[1]))
+                             job=made))
 
     def write(self) -> Path:
         rows = [self.rows.get(n) or Row(n, "cancelled",
                                         job=self.unfinished.get(n, ("", ""))[0])
                 for n in self.names] + self.others
         self.last_write = time.monotonic()
-        return write_summary(self.summary, rows)
+        return write_summary(self.summary, self._adopted(rows))
+
+    def _adopted(self, rows: list) -> list:
+        """``rows`` with the failed rows of outputs another run wrote meanwhile
+        (:data:`OTHER_RUN`) given that run's digest and matte where the summary now holds its
+        row of that output, written since this run began (kept in ``self.rows`` for the
+        writes after); else the row keeps :data:`OTHER_RUN`, and a rerun of the same command
+        skips the other run's output only if that run's summary was the one written last."""
+        lost = {n for n, r in self.rows.items() if r.job == OTHER_RUN}
+        if not lost:
+            return rows
+        for r in _earlier_rows(self.summary.parent):
+            if r.clip in lost and r.ok and r.job not in ("", OTHER_RUN, UNKNOWN_JOB) and \
+                    r != self.before.get(r.clip) and \
+                    Path(r.output).name == Path(self.rows[r.clip].output).name:
+                self.rows[r.clip] = dataclasses.replace(self.rows[r.clip], job=r.job,
+                                                        matte=r.matte)
+        mine = set(self.names)
+        return [self.rows.get(r.clip, r) if r.clip in mine else r for r in rows]
 
     def run(self, on_done: Callable) -> BatchResult:
         """Iterate the futures as they finish, calling ``on_done(kind, job, future)``."""
@@ -302,7 +325,7 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
         out, by_name[name], mhash), lambda job: legacy_job_key(job, what))
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
-    run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys)
+    run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, overwrite)
     for job in todo:
         run.submit(job)
     return col.run(run.on_done)
@@ -313,9 +336,10 @@ class _TrackSubmit:
     first, then its chunks tracked in parallel (the first one first) and joined."""
 
     def __init__(self, client, col: _Collector, outs: dict, mf, options, chunk: int,
-                 overlap: int, keys: dict) -> None:
+                 overlap: int, keys: dict, overwrite: bool = False) -> None:
         self.client, self.col, self.outs, self.mf = client, col, outs, mf
         self.options, self.chunk, self.overlap, self.keys = options, chunk, overlap, keys
+        self.overwrite = overwrite   # without it, an output another run wrote is kept
 
     def submit(self, job) -> None:
         if self.chunk:   # a clip of more than max_frames: the chunks of its first max_frames
@@ -326,7 +350,7 @@ class _TrackSubmit:
 
     def _whole(self, job) -> None:
         self.col.add(self.client.submit(J.track_clip, job, str(self.outs[job.name]), self.mf,
-                                        self.options, pure=False), "clip", job)
+                                        self.options, self.overwrite, pure=False), "clip", job)
 
     def _chunks(self, job, n_frames: int) -> None:
         out, mf, opt = str(self.outs[job.name]), self.mf, self.options
@@ -339,8 +363,8 @@ class _TrackSubmit:
         rest = [submit(J.track_chunk, job, c, out, mf, opt, first, pure=False)
                 for c in chunks[1:]]
         self.col.alive += [first] + rest
-        self.col.add(submit(J.join_clip, job, out, mf, chunks, [first] + rest, pure=False),
-                     "clip", job)
+        self.col.add(submit(J.join_clip, job, out, mf, chunks, [first] + rest, self.overwrite,
+                            pure=False), "clip", job)
 
     def on_done(self, kind: str, job, fut) -> None:
         try:
@@ -368,6 +392,10 @@ def _earlier_rows(out_dir: Path) -> list[Row]:
 #: A digest standing for "made by a run whose options nobody recorded": an output that
 #: finished after a Ctrl-C had cancelled its task (its row says cancelled, with no digest).
 UNKNOWN_JOB = "unknown"
+#: The digest of a failed row whose output another run wrote while this one went on (two
+#: runs into one folder at once, :class:`~facetransfer.batch.jobs.OutputTaken`): made with
+#: options this run does not know, so not taken by a rerun as its own.
+OTHER_RUN = "another-run"
 
 
 def _earlier(out_dir: Path) -> dict[str, str]:
@@ -425,6 +453,9 @@ def _refused(name: str, out: Path, made: str) -> Row:
     """The failed row of an output that job ``made`` made, not this run's job ``name``."""
     if made == UNKNOWN_JOB:
         why = "was finished after an interrupt, with options not recorded"
+    elif made == OTHER_RUN:
+        why = ("was written by another run into the folder at the same time, with options "
+               "not recorded")
     else:
         why = f"was made from other inputs or options than {name}'s now"
         if is_legacy(made):   # (before this format, a moved folder was "other inputs" too)
@@ -543,12 +574,24 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     # a result kept without the matte asked for: the pair done again (its render gives both)
     done = {n: r for n, r in done.items() if not (r.ok and n in mattes and not r.matte)}
 
+    planned = _planned(outs, overwrite)
+
     def submit(job, mf):
         m = mattes.get(job.name)
         return client.submit(J.transfer_pair, job, str(outs[job.name]), mf, dict(settings),
-                             None if m is None else str(m), pure=False)
+                             None if m is None else str(m), overwrite=overwrite,
+                             planned=planned[job.name], pure=False)
 
     return _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys)
+
+
+def _planned(outs: dict, overwrite: bool) -> dict[str, str]:
+    """``{name: which file its output is now}`` (:func:`.jobs.output_identity`, "" none):
+    an output there that the run does again without ``overwrite`` (a result rendered again
+    for its matte or that does not decode, a take of an earlier version) is replaced only
+    while it is still that file; one absent is written only if still absent (before, the jobs
+    replaced whatever was there as they finished: another run's output, unasked)."""
+    return {n: "" if overwrite else J.output_identity(o) for n, o in outs.items()}
 
 
 def transfer_what(settings: dict, model) -> str:
@@ -622,9 +665,11 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         done = _without_unnamed_labels(done, jobs, out_dir, (
             _export_what_before(fmt, value_text(texture), neutral, model),
             _export_what_before(fmt, repr(texture), neutral, model)))
+    planned = _planned(outs, overwrite)   # a take written again (_without_unnamed_labels)
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
-                                                 texture, neutral, labels, pure=False),
+                                                 texture, neutral, labels, overwrite,
+                                                 planned[job.name], pure=False),
                    model, keys)
 
 

@@ -1,0 +1,235 @@
+"""Two ``batch`` runs into one folder at once: a job replaces its output only with the batch's
+``--overwrite`` (or, for a pair rendered again, while it is still the file the run found); an
+output another run wrote meanwhile is kept and the job's row fails, saying so. "Meanwhile" is
+made deterministic: the other run's file is written from inside the job (a stand-in for the
+tracker or the render), or is there before the job starts."""
+
+from __future__ import annotations
+
+import os
+import shutil
+import sys
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer.batch import jobs as J  # noqa: E402
+from facetransfer.batch.manifest import ClipJob, ExportJob, PairJob  # noqa: E402
+from facetransfer.errors import VideoError  # noqa: E402
+from facetransfer.io.atomic import write_bytes_atomic  # noqa: E402
+from facetransfer.track import Track  # noqa: E402
+from facetransfer.track.settings import TrackerSettings  # noqa: E402
+
+import test_batch  # noqa: E402
+from conftest import still_track  # noqa: E402
+
+clips, inproc = test_batch.clips, test_batch.inproc
+_cli, _summary = test_batch._cli, test_batch._summary
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+
+def _which(p: Path) -> tuple:
+    st = p.stat()
+    return st.st_ino, st.st_mtime_ns, st.st_size
+
+
+def _theirs(model, video, n: int = 5) -> Track:
+    """Another run's track of ``video`` (``n`` frames: told apart from this run's)."""
+    return still_track(model, n, source=str(video))
+
+
+def test_a_track_job_keeps_the_track_another_run_wrote_meanwhile(clips, quick_model, tmp_path,
+                                                                  monkeypatch):
+    video = clips["a"][0]
+    job, out = ClipJob("a", str(video)), tmp_path / "a.npz"
+    calls = []
+
+    def tracked(*a, **k):           # the other run finishes while this one tracks
+        calls.append(1)
+        if not out.exists():
+            _theirs(quick_model, video).save(out, overwrite=False)
+        return still_track(quick_model, 8, source=str(video))
+
+    monkeypatch.setattr(J, "_track", tracked)
+    with pytest.raises(J.OutputTaken, match="written by another run") as e:
+        J.track_clip(job, str(out), quick_model, TrackerSettings())
+    assert str(out) in str(e.value) and isinstance(e.value, ValueError)
+    kept = _which(out)
+    assert Track.load(out).n_frames == 5
+    # there before the job starts: refused before any tracking
+    with pytest.raises(J.OutputTaken, match="since this run began"):
+        J.track_clip(job, str(out), quick_model, TrackerSettings())
+    assert len(calls) == 1 and _which(out) == kept
+    # the batch's --overwrite: replaced
+    row = J.track_clip(job, str(out), quick_model, TrackerSettings(), True)
+    assert row.status == "done" and Track.load(out).n_frames == 8
+
+
+def test_a_joined_clip_and_an_export_keep_an_output_another_run_wrote(
+        clips, quick_model, arkit_model, make_arkit_track, tmp_path, monkeypatch):
+    from facetransfer.batch import chunks
+
+    video = clips["a"][0]
+    out = tmp_path / "a.npz"
+    _theirs(quick_model, video).save(out)
+    kept = _which(out)
+    monkeypatch.setattr(chunks, "join_tracks",
+                        lambda *a: still_track(quick_model, 8, source=str(video)))
+    with pytest.raises(J.OutputTaken):
+        J.join_clip(ClipJob("a", str(video)), str(out), quick_model, [], [])
+    assert _which(out) == kept
+    row = J.join_clip(ClipJob("a", str(video)), str(out), quick_model, [], [], True)
+    assert row.status == "done" and Track.load(out).n_frames == 8
+
+    track, js = tmp_path / "k.npz", tmp_path / "k.json"
+    make_arkit_track(arkit_model, 4)[0].save(track)
+    js.write_text("theirs")
+    with pytest.raises(J.OutputTaken):
+        J.export_one(ExportJob("k", track), "json", str(js))
+    assert js.read_text() == "theirs"
+    # a take the run found and writes again (an earlier version's): while it is still that file
+    planned = J.output_identity(js)
+    J.export_one(ExportJob("k", track), "json", str(js), planned=planned)
+    assert js.read_text() != "theirs"
+    planned = J.output_identity(js)
+    os.unlink(js)
+    js.write_text("theirs")
+    with pytest.raises(J.OutputTaken, match="since this run began"):
+        J.export_one(ExportJob("k", track), "json", str(js), planned=planned)
+    assert js.read_text() == "theirs"
+    J.export_one(ExportJob("k", track), "json", str(js), overwrite=True)
+    assert js.read_text() != "theirs"
+
+
+class _Render:
+    """A stand-in for :func:`facetransfer.video_transfer.transfer_video`: ``before`` (the other
+    run, meanwhile), then this run's result written as the real one commits it."""
+
+    def __init__(self, before=None):
+        self.before, self.seen = before, []
+
+    def __call__(self, sources, out, model, *, overwrite, matte=None, **kw):
+        self.seen.append(overwrite)
+        if self.before is not None:
+            self.before(Path(out), matte)
+        write_bytes_atomic(out, b"mine", overwrite=overwrite)
+        plan = types.SimpleNamespace(target_track=types.SimpleNamespace(confidence=np.ones(3)),
+                                     fps=25.0)
+        return types.SimpleNamespace(plan=plan, n_frames=3, matte=None)
+
+
+SETTINGS = {"texture": "frame", "blend": "poisson", "mouth": None, "align": "trim",
+            "max_frames": None, "track_method": "auto", "speed": "fast"}
+
+
+def test_a_pair_keeps_a_result_another_run_wrote_and_replaces_only_what_it_found(
+        clips, tmp_path, monkeypatch):
+    from facetransfer import video_transfer
+
+    job = PairJob("p", clips["a"][0], {"expression_from": str(clips["b"][0])})
+    out = tmp_path / "p.mp4"
+
+    def pair(render, **kw):
+        monkeypatch.setattr(video_transfer, "transfer_video", render)
+        return J.transfer_pair(job, str(out), None, dict(SETTINGS), **kw)
+
+    # none there when planned: one written meanwhile is the other run's, kept
+    theirs = _Render(lambda o, m: o.write_bytes(b"theirs"))
+    with pytest.raises(J.OutputTaken, match="written by another run while this run"):
+        pair(theirs)
+    assert theirs.seen == [False] and out.read_bytes() == b"theirs"
+    # its own result, found when planned and rendered again (for its matte): replaced
+    planned, render = J.output_identity(out), _Render()
+    assert planned and pair(render, planned=planned).status == "done"
+    assert render.seen == [True] and out.read_bytes() == b"mine"
+    # the file found was replaced before the job began (by another run): kept
+    planned = J.output_identity(out)
+    os.unlink(out)
+    out.write_bytes(b"theirs again")
+    render = _Render()
+    with pytest.raises(J.OutputTaken, match="since this run began"):
+        pair(render, planned=planned)
+    assert render.seen == [] and out.read_bytes() == b"theirs again"
+    # --overwrite: replaced
+    assert pair(_Render(), overwrite=True).status == "done" and out.read_bytes() == b"mine"
+
+
+def test_a_pair_whose_matte_another_run_placed_meanwhile_says_so(clips, tmp_path,
+                                                                 monkeypatch):
+    from facetransfer import video_transfer
+
+    job = PairJob("p", clips["a"][0], {"expression_from": str(clips["b"][0])})
+    out, matte = tmp_path / "p.mp4", J.matte_pattern(tmp_path, "p", ".png")
+
+    def placed(o, m):    # the other run's matte placed, its result not yet: refused here
+        Path(m).parent.mkdir()
+        (Path(m).parent / "p.00000.png").write_bytes(b"theirs")
+        raise VideoError(f"output frames {m} were written meanwhile by another run (1 files); "
+                         "pass --overwrite to replace them")
+
+    monkeypatch.setattr(video_transfer, "transfer_video", _Render(placed))
+    with pytest.raises(J.OutputTaken):
+        J.transfer_pair(job, str(out), None, dict(SETTINGS), str(matte))
+    assert (Path(matte).parent / "p.00000.png").read_bytes() == b"theirs"
+
+
+def _race(model_path, out, clips, capsys, *more):
+    (va, pa, _), (vb, pb, _) = clips["a"], clips["b"]
+    man = out.parent / "clips.csv"
+    man.write_text(f"video,init\n{va},{pa}\n{vb},{pb}\n")
+    return _cli(capsys, "batch", "track", "--manifest", man, "--model", model_path, "--out",
+                out, "--passes", "1", "--workers", "1", "--no-progress", *more)
+
+
+def test_two_batch_runs_into_one_folder_keep_the_first_run_s_track(clips, quick_model_path,
+                                                                   inproc, tmp_path, capsys,
+                                                                   monkeypatch):
+    """Clip ``a``'s track is written by another run of the same command while this one
+    tracks it: kept, its row failed (exit 1), ``b`` done. With the other run's summary row
+    there, the row takes that run's digest and the same command again skips ``a``; without
+    it, a rerun refuses ``a`` (options not recorded) and ``--overwrite`` replaces it."""
+    first = tmp_path / "first" / "out"
+    first.parent.mkdir()
+    assert _race(quick_model_path, first, clips, capsys)[0] == 0    # the other run, alone
+    real = J._track
+
+    def meanwhile(out_dir, summary: bool):
+        def track(video, *a, **k):
+            res = real(video, *a, **k)
+            if Path(str(video)).stem == "a" and not (out_dir / "a.npz").exists():
+                shutil.copy2(first / "a.npz", out_dir / "a.npz")
+                if summary:     # that run's summary, as it writes it as it finishes
+                    text = (first / "summary.csv").read_text()
+                    (out_dir / "summary.csv").write_text(text.replace(str(first),
+                                                                      str(out_dir)))
+            return res
+        return track
+
+    for summary in (True, False):
+        out = tmp_path / f"with{summary}" / "out"
+        out.parent.mkdir()
+        monkeypatch.setattr(J, "_track", meanwhile(out, summary))
+        code, said, _ = _race(quick_model_path, out, clips, capsys)
+        kept = _which(out / "a.npz")
+        rows = _summary(out / "summary.csv")
+        assert code == 1 and "1 done, 1 failed" in said, said
+        assert rows["a"]["status"] == "failed" and "written by another run" in rows["a"]["error"]
+        assert rows["b"]["status"] == "done"
+        mine = _summary(first / "summary.csv")["a"]["job"]
+        assert rows["a"]["job"] == (mine if summary else "another-run")
+        monkeypatch.setattr(J, "_track", real)
+        code, said, _ = _race(quick_model_path, out, clips, capsys)
+        assert _which(out / "a.npz") == kept
+        rows = _summary(out / "summary.csv")
+        if summary:
+            assert code == 0 and rows["a"]["status"] == "skipped", said
+        else:
+            assert code == 1 and rows["a"]["status"] == "failed", said
+            assert "written by another run into the folder" in rows["a"]["error"]
+            code, said, _ = _race(quick_model_path, out, clips, capsys, "--overwrite")
+            assert code == 0 and _which(out / "a.npz") != kept, said
