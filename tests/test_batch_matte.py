@@ -318,3 +318,31 @@ def test_a_summary_written_before_the_options_left_their_defaults_out_keeps_its_
     code, said, err = batch("--blend", "none")
     assert code == 1 and "(2 failed)" in said, (said, err)
     assert {n: (out / f"{n}.mp4").stat().st_mtime_ns for n in made} == made
+
+
+def test_a_matte_beside_no_result_is_rendered_again_without_overwrite(
+        pairs, quick_model_path, inproc, tmp_path, capsys):
+    """A pair's matte whose result is not there (a render stopped between the two commits, the
+    matte's first; or the result removed to redo the pair alone, as a failed row says) is the
+    run's own: the rerun renders the pair, result and matte, without ``--overwrite`` (before,
+    the render refused the frames, "pass --overwrite", and the pair failed at every rerun)."""
+    man = tmp_path / "one.csv"
+    man.write_text("".join(pairs[0].read_text().splitlines(keepends=True)[:2]))   # ab
+    out = tmp_path / "out"
+
+    def batch():
+        return _cli(capsys, "batch", "transfer", "--manifest", man, "--model", quick_model_path,
+                    "--out", out, "--workers", "1", "--no-progress", "--matte", "png")
+
+    code, said, err = batch()
+    assert code == 0 and "(1 done)" in said, (said, err)
+    first = _pngs(out / "ab.matte")
+    (out / "ab.mp4").unlink()
+    code, said, err = batch()
+    row = _summary(out / "summary.csv")["ab"]
+    assert code == 0 and "(1 done)" in said, (said, err, row["error"])
+    assert len(read_video(out / "ab.mp4")[0]) == 8
+    again = _pngs(out / "ab.matte")
+    assert sorted(again) == sorted(first) == [f"ab.{i:05d}.png" for i in range(8)]
+    assert all(np.array_equal(first[k], again[k]) for k in first)
+    assert row["matte"] == str(out / "ab.matte" / "ab.%05d.png")

@@ -233,3 +233,34 @@ def test_two_batch_runs_into_one_folder_keep_the_first_run_s_track(clips, quick_
             assert "written by another run into the folder" in rows["a"]["error"]
             code, said, _ = _race(quick_model_path, out, clips, capsys, "--overwrite")
             assert code == 0 and _which(out / "a.npz") != kept, said
+
+
+def test_a_pair_removes_only_the_leftover_matte_its_run_found(clips, tmp_path, monkeypatch):
+    """Frames of a pair's matte beside no result: those the run found when it planned
+    (:func:`J.matte_identity`) are removed before the render, which then writes without
+    replacing; others there at the job's start are another run's, kept (OutputTaken)."""
+    from facetransfer import video_transfer
+
+    job = PairJob("p", clips["a"][0], {"expression_from": str(clips["b"][0])})
+    out, matte = tmp_path / "p.mp4", J.matte_pattern(tmp_path, "p", ".png")
+    frame = Path(matte).parent / "p.00000.png"
+    frame.parent.mkdir()
+    frame.write_bytes(b"left over")
+    planned = J.matte_identity(matte)
+    assert planned and J.matte_identity(J.matte_pattern(tmp_path, "q", ".png")) == ""
+
+    def seen(o, m):                       # the real render refuses frames without overwrite
+        assert not Path(m).parent.exists() or not any(Path(m).parent.iterdir())
+
+    render = _Render(seen)
+    monkeypatch.setattr(video_transfer, "transfer_video", render)
+    row = J.transfer_pair(job, str(out), None, dict(SETTINGS), str(matte), planned_matte=planned)
+    assert row.status == "done" and render.seen == [False] and not frame.exists()
+    # frames written since the run planned (none then, or others): another run's, kept
+    os.unlink(out)
+    frame.write_bytes(b"theirs")
+    for before in ("", planned):
+        with pytest.raises(J.OutputTaken, match="frames .* written by another run"):
+            J.transfer_pair(job, str(out), None, dict(SETTINGS), str(matte),
+                            planned_matte=before)
+        assert frame.read_bytes() == b"theirs" and not out.exists()

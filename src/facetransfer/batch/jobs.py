@@ -13,6 +13,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import functools
+import hashlib
 import logging
 import os
 import time
@@ -28,7 +29,8 @@ log = logging.getLogger(__name__)
 
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
-           "MATTE_FORMATS", "matte_pattern", "OutputTaken", "output_identity"]
+           "MATTE_FORMATS", "matte_pattern", "OutputTaken", "output_identity",
+           "matte_identity"]
 
 #: The frame file of each ``batch transfer --matte`` format (image sequences only, one file a
 #: frame: :mod:`facetransfer.io.matte`).
@@ -80,6 +82,24 @@ def output_identity(out) -> str:
         return file_identity(out) if os.path.isfile(out) else ""
     except OSError:
         return ""
+
+
+def matte_identity(pattern) -> str:
+    """Which frames the matte sequence ``pattern`` holds now (their names and
+    :func:`facetransfer.io.verified.file_identity`, hashed), "" where none (or no pattern):
+    what a run records of a matte it finds beside no result (:func:`transfer_pair`'s
+    ``planned_matte``)."""
+    if pattern is None:
+        return ""
+    from ..io.verified import file_identity
+    from ..io.video_sequence import sequence_files
+
+    try:
+        files = sorted(sequence_files(Path(pattern)).values())
+        said = "\n".join(f"{f.name}|{file_identity(f)}" for f in files)
+    except (OSError, ValueError):
+        return ""
+    return hashlib.sha256(said.encode()).hexdigest()[:16] if files else ""
 
 
 def _taken(out, why: str = "while this run went on") -> OutputTaken:
@@ -321,7 +341,7 @@ def matte_pattern(out_dir, name: str, suffix: str) -> Path:
 
 
 def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None, *,
-                  overwrite: bool = False, planned: str = "") -> Row:
+                  overwrite: bool = False, planned: str = "", planned_matte: str = "") -> Row:
     """Rewrite one target as ``facetransfer transfer`` does
     (:func:`facetransfer.video_transfer.transfer_video`) and write ``out`` (and ``matte``).
 
@@ -349,6 +369,10 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         chose to render again (its own result, redone for the matte asked; a file that does
         not decode), replaced, with its matte, while it is still that file; "" (none found):
         an ``out`` or matte frames another run wrote meanwhile are kept (:class:`OutputTaken`).
+    planned_matte : str
+        Without ``overwrite``: the :func:`matte_identity` of the frames of ``matte`` the run
+        found; beside no ``out`` (:func:`_clear_leftover_matte`) removed while they are still
+        those, before the render.
 
     Returns
     -------
@@ -375,6 +399,8 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         performance=s.get("performance"), target_face=s.get("target_face"),
         source_face=s.get("source_face"))
     overwrite = overwrite or _still_planned(out, planned)
+    if not overwrite:
+        _clear_leftover_matte(out, matte, planned_matte)
     with _own_output(out, overwrite, matte):
         res = transfer_video(sources, out, model, overwrite=overwrite, options=options,
                              progress_factory=None, align=settings["align"],
@@ -397,6 +423,27 @@ def _still_planned(out, planned: str) -> bool:
     if now and now != planned:
         raise _taken(out, "since this run began")
     return bool(now)
+
+
+def _clear_leftover_matte(out, matte, planned: str) -> None:
+    """Before a pair's render without ``--overwrite``: the frames of ``matte`` there beside no
+    result ``out`` (a render stopped between the two commits, the matte's first; the result
+    removed to redo the pair, as a failed row says) are removed if they are still the frames
+    ``planned`` (:func:`matte_identity`) the run found: ``NAME.matte/`` holds the matte of
+    ``NAME.mp4`` or none. Before, the render refused them ("pass --overwrite", which redoes
+    every pair) and the pair failed at every rerun. Other frames there now are another run's
+    (:class:`OutputTaken`); an ``out`` there is :func:`_own_output`'s to say."""
+    now = matte_identity(matte)
+    if not now or os.path.isfile(out):
+        return
+    if now != planned:
+        raise OutputTaken(f"the frames {matte} were written by another run since this run "
+                          f"began (two runs into {Path(out).parent} at once?): they are kept, "
+                          "this run's result not written; --overwrite replaces them")
+    from ..io.video_sequence import sequence_files
+
+    for f in sequence_files(Path(matte)).values():
+        f.unlink(missing_ok=True)
 
 
 def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:

@@ -575,12 +575,16 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     done = {n: r for n, r in done.items() if not (r.ok and n in mattes and not r.matte)}
 
     planned = _planned(outs, overwrite)
+    # a matte beside no result (a render stopped between their commits; the result removed to
+    # redo the pair): frames the job removes while still these (before: the pair failed)
+    planned_mattes = {n: "" if overwrite else J.matte_identity(m) for n, m in mattes.items()}
 
     def submit(job, mf):
         m = mattes.get(job.name)
         return client.submit(J.transfer_pair, job, str(outs[job.name]), mf, dict(settings),
                              None if m is None else str(m), overwrite=overwrite,
-                             planned=planned[job.name], pure=False)
+                             planned=planned[job.name],
+                             planned_matte=planned_mattes.get(job.name, ""), pure=False)
 
     return _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys)
 
