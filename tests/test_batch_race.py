@@ -264,3 +264,51 @@ def test_a_pair_removes_only_the_leftover_matte_its_run_found(clips, tmp_path, m
             J.transfer_pair(job, str(out), None, dict(SETTINGS), str(matte),
                             planned_matte=before)
         assert frame.read_bytes() == b"theirs" and not out.exists()
+
+
+def _seen_elsewhere(monkeypatch):
+    """``os.stat`` as a client on another machine than the worker sees a shared folder (NFS):
+    the same inode, size and times, its own device number for the mount."""
+    real = os.stat
+
+    def stat(path, *a, **k):
+        st = real(path, *a, **k)
+        return types.SimpleNamespace(**{f: getattr(st, f) for f in dir(st)
+                                        if f.startswith("st_") and f != "st_dev"},
+                                     st_dev=st.st_dev + 1)
+
+    monkeypatch.setattr(os, "stat", stat)
+
+
+def test_a_worker_on_another_machine_replaces_what_its_client_planned(
+        clips, arkit_model, make_arkit_track, tmp_path, monkeypatch):
+    """On a cluster of several machines sharing DIR, the client records the outputs it does
+    again and the worker that renders them checks them: a file's device number is each
+    machine's own, so the identity compared leaves it out (before, every output planned was
+    "written by another run": a take of an earlier version, a result rendered again for its
+    matte, a matte beside no result)."""
+    from facetransfer import video_transfer
+
+    track, js = tmp_path / "k.npz", tmp_path / "k.json"
+    make_arkit_track(arkit_model, 4)[0].save(track)
+    js.write_text("an earlier version's")
+    out, matte = tmp_path / "p.mp4", J.matte_pattern(tmp_path, "p", ".png")
+    out.write_bytes(b"its own result")
+    frame = Path(matte).parent / "p.00000.png"
+    frame.parent.mkdir()
+    frame.write_bytes(b"left over")
+    with monkeypatch.context() as client:
+        _seen_elsewhere(client)
+        planned = {p: J.output_identity(p) for p in (js, out)}
+        planned_matte = J.matte_identity(matte)
+    assert all(planned.values()) and planned_matte
+    row = J.export_one(ExportJob("k", track), "json", str(js), planned=planned[js])
+    assert row.status == "done" and js.read_text() != "an earlier version's"
+    monkeypatch.setattr(video_transfer, "transfer_video", _Render())
+    job = PairJob("p", clips["a"][0], {"expression_from": str(clips["b"][0])})
+    row = J.transfer_pair(job, str(out), None, dict(SETTINGS), planned=planned[out])
+    assert row.status == "done" and out.read_bytes() == b"mine"
+    out.unlink()
+    row = J.transfer_pair(job, str(out), None, dict(SETTINGS), str(matte),
+                          planned_matte=planned_matte)
+    assert row.status == "done" and not frame.exists()

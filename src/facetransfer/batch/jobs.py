@@ -73,30 +73,35 @@ class OutputTaken(BatchError):
 
 
 def output_identity(out) -> str:
-    """Which file ``out`` is now (:func:`facetransfer.io.verified.file_identity`), "" where
-    there is none: what a run records of an output it plans to do again
-    (:func:`transfer_pair`'s ``planned``)."""
-    from ..io.verified import file_identity
-
+    """Which file ``out`` is now (:func:`_shared_identity`), "" where there is none: what a
+    run records of an output it plans to do again (:func:`transfer_pair`'s ``planned``)."""
     try:
-        return file_identity(out) if os.path.isfile(out) else ""
+        return _shared_identity(out) if os.path.isfile(out) else ""
     except OSError:
         return ""
 
 
+def _shared_identity(path) -> str:
+    """A file's inode, size and mtime in ns: which file it is, as every machine sharing its
+    folder sees it. Not its device number (:func:`facetransfer.io.verified.file_identity`'s),
+    each machine's own for a shared disk (NFS): before, a worker on another machine than the
+    client's found every output its run planned to do again "written by another run"."""
+    st = os.stat(path)
+    return f"{st.st_ino}|{st.st_size}|{st.st_mtime_ns}"
+
+
 def matte_identity(pattern) -> str:
     """Which frames the matte sequence ``pattern`` holds now (their names and
-    :func:`facetransfer.io.verified.file_identity`, hashed), "" where none (or no pattern):
+    :func:`_shared_identity`, hashed), "" where none (or no pattern):
     what a run records of a matte it finds beside no result (:func:`transfer_pair`'s
     ``planned_matte``)."""
     if pattern is None:
         return ""
-    from ..io.verified import file_identity
     from ..io.video_sequence import sequence_files
 
     try:
         files = sorted(sequence_files(Path(pattern)).values())
-        said = "\n".join(f"{f.name}|{file_identity(f)}" for f in files)
+        said = "\n".join(f"{f.name}|{_shared_identity(f)}" for f in files)
     except (OSError, ValueError):
         return ""
     return hashlib.sha256(said.encode()).hexdigest()[:16] if files else ""
