@@ -312,3 +312,39 @@ def test_a_worker_on_another_machine_replaces_what_its_client_planned(
     row = J.transfer_pair(job, str(out), None, dict(SETTINGS), str(matte),
                           planned_matte=planned_matte)
     assert row.status == "done" and not frame.exists()
+
+
+def test_a_track_finished_by_the_stopped_run_s_worker_is_that_job_s(clips, quick_model_path,
+                                                                    inproc, tmp_path, capsys,
+                                                                    monkeypatch):
+    """A run stopped while clip ``a`` was tracked (its row cancelled, with its digest): on a
+    scheduler of its own the task goes on, and writes ``a.npz`` while the same command run
+    again tracks it. That track is of the same job: the row keeps the job's digest, and the
+    command once more skips it (before: 'another-run', and the next run failed the clip,
+    naming --overwrite, where README says a clip finished after a stop is skipped)."""
+    out = tmp_path / "out"
+    assert _race(quick_model_path, out, clips, capsys)[0] == 0
+    kept = tmp_path / "a.npz"
+    shutil.move(out / "a.npz", kept)
+    summary = (out / "summary.csv").read_text().splitlines(keepends=True)
+    rows = _summary(out / "summary.csv")
+    key = rows["a"]["job"]
+    (out / "summary.csv").write_text("".join(
+        summary[:1] + [f"a,,,0,,cancelled,,{out / 'a.npz'},{key},\n"]
+        + [ln for ln in summary[1:] if not ln.startswith("a,")]))
+    real = J._track
+
+    def track(video, *a, **k):         # the stopped run's task finishes meanwhile
+        res = real(video, *a, **k)
+        if Path(str(video)).stem == "a" and not (out / "a.npz").exists():
+            shutil.copy2(kept, out / "a.npz")
+        return res
+
+    monkeypatch.setattr(J, "_track", track)
+    code, said, _ = _race(quick_model_path, out, clips, capsys)
+    row = _summary(out / "summary.csv")["a"]
+    assert code == 1 and row["status"] == "failed" and "another run" in row["error"], said
+    assert row["job"] == key
+    monkeypatch.setattr(J, "_track", real)
+    code, said, _ = _race(quick_model_path, out, clips, capsys)
+    assert code == 0 and _summary(out / "summary.csv")["a"]["status"] == "skipped", said

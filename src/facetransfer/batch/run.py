@@ -178,11 +178,19 @@ class _Collector:
         """``rows`` with the failed rows of outputs another run wrote meanwhile
         (:data:`OTHER_RUN`) given that run's digest and matte where the summary now holds its
         row of that output, written since this run began (kept in ``self.rows`` for the
-        writes after); else the row keeps :data:`OTHER_RUN`, and a rerun of the same command
-        skips the other run's output only if that run's summary was the one written last."""
+        writes after); else, where the summary said as the run began that a run stopped with
+        the same job's task unfinished (a cancelled row of this job's digest: on a scheduler of
+        its own the task went on), that job's; else the row keeps :data:`OTHER_RUN`, and a
+        rerun of the same command skips the other run's output only if that run's summary was
+        the one written last."""
         lost = {n for n, r in self.rows.items() if r.job == OTHER_RUN}
         if not lost:
             return rows
+        for n in lost:   # (before, OTHER_RUN: the next run failed the clip, naming --overwrite)
+            b = self.before.get(n)
+            if b is not None and b.status == "cancelled" and b.job and \
+                    b.job == self.unfinished.get(n, ("", ""))[0]:
+                self.rows[n] = dataclasses.replace(self.rows[n], job=b.job)
         for r in _earlier_rows(self.summary.parent):
             if r.clip in lost and r.ok and r.job not in ("", OTHER_RUN, UNKNOWN_JOB) and \
                     r != self.before.get(r.clip) and \
