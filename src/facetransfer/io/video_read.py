@@ -238,8 +238,10 @@ def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = N
     of a video of variable frame rate, the steps of its constant-rate timeline
     (:attr:`VideoInfo.steps`; each a frame of its own).
 
-    ``seek=False`` reaches ``start`` by decoding every frame before it (``grab``, no colour
-    conversion) instead of the container's seek, which OpenCV does not promise to be exact.
+    ``seek=True`` reaches ``start`` by the container's seek only where OpenCV's lands on the
+    frame asked (:func:`seeks_exactly`: its container, and its frames on their rate's steps),
+    else, as ``seek=False`` always does, by decoding every frame before it (``grab``, no colour
+    conversion). A video of variable frame rate (``steps``) is always decoded from its start.
     """
     steps = video_info(path).steps
     if steps is None:
