@@ -4,10 +4,10 @@ shown size, its rate and timeline, its fields, colour and audio, and how it is d
 Footage from phones, camcorders and archives differs from the data folder's clips in ways that
 change what the commands do: pixels that are not square (tracked resampled to square ones),
 interlaced fields (decoded by ffmpeg, tracked on the field shown first, written back
-interlaced), a variable frame rate (read on a constant-rate timeline), a container whose seeks
-are not exact (decoded from its start), HDR colour (decoded to SDR). :func:`video_facts`
-gathers them from :mod:`facetransfer.io.video_read` and :mod:`facetransfer.io.video_display`;
-:func:`fact_lines` says them.
+interlaced), a variable frame rate (read on a constant-rate timeline), seeks that are not exact
+(a container's, or those of frames off their rate's steps: decoded from its start), HDR colour
+(decoded to SDR). :func:`video_facts` gathers them from :mod:`facetransfer.io.video_read` and
+:mod:`facetransfer.io.video_display`; :func:`fact_lines` says them.
 """
 
 from __future__ import annotations

@@ -10,7 +10,9 @@ stored frames are uneven they read the video on a constant-rate timeline instead
 a step at or before it. Frames repeat across a gap and, where they come faster than the rate,
 some are passed over. :func:`timeline` works it out from the packets' times in the container
 (ffmpeg's ``framecrc`` muxer: no decoding); :func:`facetransfer.io.video_read.video_info` and
-the readers use it.
+the readers use it. From the same times, :func:`on_rate_grid` says whether each stored frame
+sits on its step of the rate, where OpenCV's seek (which numbers a frame by its time) lands on
+the frame asked: a video can be even enough to read as stored and still drift off those steps.
 """
 
 from __future__ import annotations
