@@ -98,6 +98,9 @@ class SequenceWriter:
     n_frames : int
         Frames of the whole sequence.
     overwrite : bool
+        As :class:`~facetransfer.io.video.VideoWriter`'s: when False, frames of ``out`` there
+        now are refused, and those another run places meanwhile are kept (the commit refused,
+        :func:`~facetransfer.io.video.place_sequence`; the frames here kept for a rerun).
     first_number : int
         Number of its first frame beside the pattern (in the folder they count from 0).
     fps, timecode, sar : float, str and (int, int), optional

@@ -508,7 +508,9 @@ class VideoWriter:
     audio_start : float
         Seconds into ``audio_from`` where the audio starts.
     overwrite : bool
-        Refuse to replace an existing output when False.
+        Replace an existing output. When False, one there now is refused, and one another
+        run writes meanwhile is kept: this write is refused as it commits (:class:`OutputError`
+        for a video, :class:`VideoError` for an image sequence, :func:`place_sequence`).
     n_frames : int, optional
         The frames that will be written. With audio, the audio is then cut to their length and
         encoded while the frames are (one pass); if another number is written, or without it,

@@ -156,6 +156,9 @@ class PartsWriter:
     options : VideoOptions, optional
     audio_from : path-like, optional
     overwrite : bool
+        As :class:`~facetransfer.io.video.VideoWriter`'s: when False, an ``out`` there now is
+        refused, and one another run writes meanwhile is kept (the join refused,
+        :func:`join_parts`).
     """
 
     def __init__(self, folder: str | os.PathLike, out: str | os.PathLike, fps: float,
