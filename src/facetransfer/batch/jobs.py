@@ -6,6 +6,11 @@ its inputs from paths the workers can see, writes its output atomically, and ret
 :class:`~facetransfer.batch.summary.Row` (or, for a chunk, its track) to the client. The model
 arrives as the value of a future scattered once to every worker, never pickled with the task.
 A task raises on bad input; the client turns the exception into the clip's failed row.
+
+Without ``--overwrite`` a task replaces no file but those its run found and chose to redo
+(``planned``: :func:`output_identity`, :func:`matte_identity`): an output or matte frames
+another run into the same folder wrote meanwhile are kept, and the task raises
+:class:`OutputTaken` (:func:`_own_output`).
 """
 
 from __future__ import annotations
