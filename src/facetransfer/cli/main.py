@@ -458,7 +458,7 @@ def _run(args) -> int:
         what, status = ("terminated", 143) if isinstance(stop, Terminated) else \
             ("interrupted", 130)
         written = [str(p) for p in _outputs(args)
-                   if _file_id(p) is not None and _file_id(p) != before.get(p)]
+                   if (now := _file_id(p)) is not None and now != before.get(p)]
         print(f"facetransfer {command_name(args)}: {what}{_kept(args.command, written)}",
               file=sys.stderr)
         return status
