@@ -316,10 +316,15 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return _main(argv)
     except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
-        what, status = ("terminated", 143) if isinstance(exc, Terminated) else \
-            ("interrupted", 130)
+        what, status = _stop_status(exc)
         print(f"facetransfer: {what}", file=sys.stderr)
         return status
+
+
+def _stop_status(stop: KeyboardInterrupt) -> tuple[str, int]:
+    """What a run stopped by ``stop`` says and its exit status: ``("terminated", 143)`` for a
+    SIGTERM (:class:`Terminated`), ``("interrupted", 130)`` for a Ctrl-C."""
+    return ("terminated", 143) if isinstance(stop, Terminated) else ("interrupted", 130)
 
 
 def _main(argv: list[str] | None) -> int:
@@ -455,8 +460,7 @@ def _run(args) -> int:
         stop = interrupt_of(exc)     # a compiled kernel's SystemError caused by the interrupt
         if stop is None:
             raise
-        what, status = ("terminated", 143) if isinstance(stop, Terminated) else \
-            ("interrupted", 130)
+        what, status = _stop_status(stop)
         written = [str(p) for p in _outputs(args)
                    if (now := _file_id(p)) is not None and now != before.get(p)]
         print(f"facetransfer {command_name(args)}: {what}{_kept(args.command, written)}",
