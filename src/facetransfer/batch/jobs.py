@@ -133,11 +133,13 @@ def _frames_there(pattern) -> bool:
 
 @contextlib.contextmanager
 def _own_output(out, overwrite: bool, matte=None):
-    """Write ``out`` (and the frames of ``matte``) in the block, replacing only with
-    ``overwrite``: without it, the run found no ``out`` when it planned the job, so an ``out``
-    there now, or frames of ``matte`` that appeared during the block, are another run's (the
-    write commits without replacing, :func:`facetransfer.io.atomic.atomic_path`):
-    :class:`OutputTaken`, before the work or when the write is refused."""
+    """Guard the block that writes ``out`` (and the frames of ``matte``); it writes nothing
+    itself. With ``overwrite`` the block may replace them. Without it, the run found no
+    ``out`` when it planned the job (or, :func:`_still_planned`, no longer finds the one it
+    planned to redo), so an ``out`` there now, or frames of ``matte`` that appeared during the
+    block, are another run's (the block's write commits without replacing,
+    :func:`facetransfer.io.atomic.atomic_path`): :class:`OutputTaken`, before the block runs
+    or when its write is refused."""
     if overwrite:
         yield
         return
