@@ -112,11 +112,15 @@ def matte_identity(pattern) -> str:
     return hashlib.sha256(said.encode()).hexdigest()[:16] if files else ""
 
 
-def _taken(out, why: str = "while this run went on") -> OutputTaken:
+def _taken(out, why: str = "while this run went on", *, frames=None) -> OutputTaken:
+    """The error of a job whose output ``out`` (or, given, the matte ``frames`` beside it)
+    another run wrote ``why``."""
     o = Path(out)
-    return OutputTaken(f"{o} was written by another run {why} (two runs into {o.parent} at "
-                       "once?): that file is kept, this run's result not written; "
-                       "--overwrite replaces it")
+    what, kept, it = (f"the frames {frames}", "they are", "them") if frames else \
+        (str(o), "that file is", "it")
+    return OutputTaken(f"{what} {'were' if frames else 'was'} written by another run {why} "
+                       f"(two runs into {o.parent} at once?): {kept} kept, this run's result "
+                       f"not written; --overwrite replaces {it}")
 
 
 def _frames_there(pattern) -> bool:
@@ -449,9 +453,7 @@ def _clear_leftover_matte(out, matte, planned: str) -> None:
     if not now or os.path.isfile(out):
         return
     if now != planned:
-        raise OutputTaken(f"the frames {matte} were written by another run since this run "
-                          f"began (two runs into {Path(out).parent} at once?): they are kept, "
-                          "this run's result not written; --overwrite replaces them")
+        raise _taken(out, "since this run began", frames=matte)
     from ..io.video_sequence import sequence_files
 
     for f in sequence_files(Path(matte)).values():
