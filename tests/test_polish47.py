@@ -80,25 +80,43 @@ def test_texture_blend_of_an_8_bit_alpha_beside_a_16_bit_result_scales_it(tmp_pa
     assert got.dtype == np.uint8 and np.array_equal(got[..., 3], a8)   # (a x 257 + 3) / 257
 
 
-def test_texture_blend_of_an_rgba_tiff_target_says_its_alpha_is_not_kept(tmp_path, caplog):
-    """An 8-bit RGBA TIFF's colour is read premultiplied by OpenCV: its straight alpha beside
-    it would darken the edges twice, so the PNG is written without it, said in one warning
-    naming the target."""
+def test_texture_blend_of_an_rgba_tiff_target_keeps_its_stored_colour_and_alpha(tmp_path,
+                                                                              caplog):
+    """An 8-bit RGBA TIFF of straight alpha (what Pillow writes) is blended in its stored
+    colour, and its alpha kept beside it (before: OpenCV's reader premultiplied the colour,
+    the blend darkened where the alpha is low, and the PNG was written without alpha). One
+    whose alpha is associated (colour stored premultiplied) is written without it, said in one
+    warning naming the target."""
     from PIL import Image
 
+    from test_plate_alpha import _tag_offsets
+
     m = _blend_case(tmp_path)
-    rgba = np.dstack([np.full((40, 50, 3), 200, np.uint8), np.full((40, 50), 255, np.uint8)])
+    alpha = np.tile((np.arange(50) * 5).astype(np.uint8), (40, 1))
+    rgba = np.dstack([np.full((40, 50, 3), 200, np.uint8), alpha])
     Image.fromarray(rgba, "RGBA").save(tmp_path / "t.tif")
+    args = ["texture", "blend", "--source", str(tmp_path / "s.png"), "--mask",
+            str(tmp_path / "m.png"), "--target", str(tmp_path / "t.tif")]
     caplog.clear()
     with caplog.at_level(logging.WARNING):
-        assert main(["texture", "blend", "--source", str(tmp_path / "s.png"), "--mask",
-                     str(tmp_path / "m.png"), "--target", str(tmp_path / "t.tif"),
-                     "--out", str(tmp_path / "o.png")]) == 0
+        assert main(args + ["--out", str(tmp_path / "o.png")]) == 0
+    assert [r for r in caplog.records if r.levelname == "WARNING"] == []
     o = cv2.imread(str(tmp_path / "o.png"), cv2.IMREAD_UNCHANGED)
-    assert o.shape == (40, 50, 3) and (o[m == 0] == 200).all()
+    assert o.shape == (40, 50, 4) and np.array_equal(o[..., 3], alpha)
+    assert (o[..., :3][m == 0] == 200).all()          # before: 200 x alpha / 255
+    # the same file with its alpha marked associated (ExtraSamples 1)
+    f = tmp_path / "t.tif"
+    off = next(o for o in _tag_offsets(f) if o[0] == 338)[1]
+    data = bytearray(f.read_bytes())
+    data[off:off + 2] = b"\x01\x00" if data[off] == 2 else b"\x00\x01"
+    f.write_bytes(bytes(data))
+    caplog.clear()
+    with caplog.at_level(logging.WARNING):
+        assert main(args + ["--out", str(tmp_path / "p.png")]) == 0
+    assert cv2.imread(str(tmp_path / "p.png"), cv2.IMREAD_UNCHANGED).shape == (40, 50, 3)
     assert [r.getMessage() for r in caplog.records if r.levelname == "WARNING"] == [
-        f"target {tmp_path / 't.tif'} has alpha; its colour is read premultiplied (a TIFF's): "
-        "written without it"]
+        f"target {f} has alpha; its colour is stored premultiplied (a TIFF's associated "
+        "alpha): written without it"]
 
 
 def test_synth_video_refuses_a_texture_that_is_not_square(arkit_model_path, tmp_path, capsys):

@@ -35,13 +35,17 @@ def _image_out(path: str, args=None, inputs=()) -> Path:
 
 def _read_image(path: str, what: str, *, gray: bool = False, deep: bool = False) -> np.ndarray:
     """An RGB image ``(H, W, 3) uint8`` (or grey ``(H, W)``); one clear error if unreadable.
-    ``deep``: a 16-bit file's RGB stays ``uint16``."""
+    ``deep``: a 16-bit file's RGB stays ``uint16``. An 8-bit RGBA TIFF of straight alpha: its
+    colour as stored (OpenCV's reader premultiplies it: a blend worked on darkened colour)."""
     import cv2
 
-    from ..io.frame_file import read_image
+    from ..io.frame_file import read_image, straight_tiff_rgb
     from ..io.npz import check_input_file
 
     p = check_input_file(path, what)
+    stored = None if gray else straight_tiff_rgb(Path(p))
+    if stored is not None:
+        return stored
     img = read_image(Path(p), cv2.IMREAD_COLOR | cv2.IMREAD_ANYDEPTH) if deep else None
     if img is None or img.dtype not in (np.uint8, np.uint16):   # e.g. a float TIFF: 8 bits
         img = read_image(Path(p), cv2.IMREAD_GRAYSCALE if gray else cv2.IMREAD_COLOR)
@@ -225,8 +229,8 @@ def _with_alpha(res: np.ndarray, target: str, out: Path) -> np.ndarray:
     """The blend ``res`` with the target's alpha beside it (in ``res``'s bits: 8-bit alpha
     ``x 257``, 16-bit rounded, :func:`~facetransfer.io.frame_file.eight_bits`), where the
     target has one and ``out`` is a PNG; ``res`` as it is otherwise (a JPEG ``out``, an 8-bit
-    RGBA TIFF target, whose colour OpenCV reads premultiplied, or a float alpha: said in a
-    warning naming the file)."""
+    RGBA TIFF target whose colour is stored premultiplied (associated alpha), or a float
+    alpha: said in a warning naming the file)."""
     import logging
 
     from ..io.frame_file import eight_bits, sixteen_bits, tiff_alpha_kind
@@ -237,8 +241,8 @@ def _with_alpha(res: np.ndarray, target: str, out: Path) -> np.ndarray:
         return res
     why = (f"{out} holds none: written without it (give a .png to keep it)"
            if out.suffix.lower() != ".png" else
-           "its colour is read premultiplied (a TIFF's): written without it"
-           if tiff_alpha_kind(Path(target)) else
+           "its colour is stored premultiplied (a TIFF's associated alpha): written without it"
+           if tiff_alpha_kind(Path(target)) == "premultiplied" else
            f"its samples are {a.dtype}, not 8 or 16 bits: written without it"
            if a.dtype not in (np.uint8, np.uint16) else None)
     if why:

@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import VideoError
 
 __all__ = ["read_frame_file", "read_image", "read_unchanged", "bit_depth", "eight_bits",
-           "sixteen_bits", "shown_16", "tiff_alpha_kind"]
+           "sixteen_bits", "shown_16", "tiff_alpha_kind", "straight_tiff_rgb"]
 
 
 def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
@@ -150,6 +150,15 @@ def _alpha_kind(tiff) -> str | None:
     if tiff is None or tiff[1] != (8, 8, 8, 8) or tiff[3] not in ("RGBA", "RGBa"):
         return None
     return {(2,): "straight", (1,): "premultiplied"}.get(tiff[2])
+
+
+def straight_tiff_rgb(file: Path) -> np.ndarray | None:
+    """The stored RGB ``(H, W, 3) uint8`` of an 8-bit RGBA TIFF with straight alpha
+    (:func:`tiff_alpha_kind`; OpenCV's reader gives its colour premultiplied); None for any
+    other file, or where Pillow cannot decode it (OpenCV's reader then reads it or names what
+    is wrong)."""
+    file = Path(file)
+    return _straight_tiff(file) if tiff_alpha_kind(file) == "straight" else None
 
 
 def _straight_tiff(file: Path) -> np.ndarray | None:
