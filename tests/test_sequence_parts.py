@@ -193,3 +193,16 @@ def test_frames_are_placed_under_a_lock_on_their_folder(tmp_path, monkeypatch):
     assert seen == ["locked"] * 4
     for got, want in zip(_read(out, 4), frames):
         np.testing.assert_array_equal(got, want)
+
+
+def test_frames_are_placed_without_a_lock_where_the_platform_has_none(tmp_path, monkeypatch):
+    """Where ``fcntl`` cannot be imported (not POSIX), the frames are placed all the same,
+    without the folder's lock (before, the import's error stopped every sequence's end)."""
+    import sys
+
+    monkeypatch.setitem(sys.modules, "fcntl", None)      # import fcntl: ImportError
+    out = tmp_path / "out" / "f%03d.png"
+    frames = _frames(3)
+    _write(tmp_path / "c", out, frames)
+    for got, want in zip(_read(out, 3), frames):
+        np.testing.assert_array_equal(got, want)

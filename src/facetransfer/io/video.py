@@ -260,9 +260,13 @@ def place_sequence(folder: str | os.PathLike, pattern: str | os.PathLike, n_fram
 @contextlib.contextmanager
 def _folder_locked(folder: Path):
     """An exclusive ``flock`` on the folder itself while the block runs (waited for); where
-    the file system takes no lock on a folder, the block runs without it."""
-    import fcntl
-
+    the file system or the platform (not POSIX) takes no lock on a folder, the block runs
+    without it."""
+    try:
+        import fcntl
+    except ImportError:     # not POSIX
+        yield
+        return
     try:
         fd = os.open(folder, os.O_RDONLY | os.O_DIRECTORY)
     except OSError:
