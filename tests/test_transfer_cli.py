@@ -548,20 +548,66 @@ def test_an_interrupted_puppet_renders_only_the_frames_it_had_not(clips, quick_m
     assert a.shape == b.shape == (6, *a.shape[1:]) and np.array_equal(a, b)
 
 
-def test_puppet_start_repeats_the_last_good_frame_before_it(clips, quick_model):
-    """``puppet_frames(start=k)`` gives the frames a whole run gives from k on, also where
-    frame k is lost (it repeats the good frame before it, rendered for the purpose)."""
+def _held_as_captured(track, lost):
+    """``track`` with the frames ``lost`` marked lost and holding the values the capture
+    tracker keeps there (its own rule, ``capture._fill_lost``: the nearest tracked frame's,
+    the earlier on ties), the values the CSV, glb and USD exports write."""
+    import dataclasses
+
+    from facetransfer.track.capture import _fill_lost
+
+    lost = np.asarray(lost, bool)
+    src, _ = _fill_lost([None if lost[i] else i for i in range(track.n_frames)])
+    src = np.asarray(src)
+    return dataclasses.replace(
+        track, rotation=track.rotation[src], scale=track.scale[src],
+        translation=track.translation[src],
+        weights={m: w[src] for m, w in track.weights.items()},
+        landmarks2d=track.landmarks2d[src], confidence=np.where(lost, 0.0, track.confidence),
+        lost=lost, blendshapes=None if track.blendshapes is None else track.blendshapes[src],
+        detections2d=None if track.detections2d is None else track.detections2d[src]), src
+
+
+def test_puppet_shows_lost_frames_as_the_exports_hold_them(clips, quick_model):
+    """Lost frames at the start, in the middle and at the end of a track are rendered from the
+    values the track holds there, as the exports write them: each equals the frame rendered
+    for the same values unmarked (before: the background before the face first appeared, the
+    last tracked frame after a loss)."""
     import dataclasses
 
     from facetransfer.transfer import identity_from_label, puppet_frames
 
     track = Track.load(clips["source_track"])
     lost = np.zeros(track.n_frames, bool)
+    lost[[0, 3, track.n_frames - 1]] = True
+    held, src = _held_as_captured(track, lost)
+    assert list(src) == [1, 1, 2, 2, 4, 4]      # start, a tie (the earlier), end
+    wid = identity_from_label(quick_model, "id04")
+    size = (40, 30)
+    shown = list(puppet_frames(held, quick_model, wid, size=size))
+    filled = list(puppet_frames(dataclasses.replace(held, lost=np.zeros_like(lost)),
+                                quick_model, wid, size=size))
+    plain = list(puppet_frames(track, quick_model, wid, size=size))
+    assert len(shown) == len(filled) == track.n_frames
+    for i in range(track.n_frames):
+        assert np.array_equal(shown[i], filled[i]), i
+        assert np.array_equal(shown[i], plain[src[i]]), i
+    assert not np.array_equal(shown[0], shown[0][0, 0])     # a face, not the background
+
+
+def test_puppet_start_gives_the_frames_of_a_whole_run(clips, quick_model):
+    """``puppet_frames(start=k)`` gives the frames a whole run gives from k on, also where
+    frame k is lost (rendered from the values the track holds there)."""
+    from facetransfer.transfer import identity_from_label, puppet_frames
+
+    track = Track.load(clips["source_track"])
+    lost = np.zeros(track.n_frames, bool)
     lost[[3, 4]] = True
-    track = dataclasses.replace(track, lost=lost)
+    track, _ = _held_as_captured(track, lost)
     wid = identity_from_label(quick_model, "id04")
     whole = list(puppet_frames(track, quick_model, wid))
-    assert np.array_equal(whole[3], whole[2]) and not np.array_equal(whole[5], whole[2])
+    assert np.array_equal(whole[3], whole[2]) and np.array_equal(whole[4], whole[5])
+    assert not np.array_equal(whole[5], whole[2])
     for k in (0, 3, 4, 5):
         part = list(puppet_frames(track, quick_model, wid, start=k))
         assert len(part) == 6 - k

@@ -683,7 +683,9 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
 
     Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
     track's camera, Lambert-shaded on a plain background, with the mouth gap and eye holes
-    closed; lost frames repeat the last good one (or the background before the first).
+    closed. A frame where the face was lost is rendered from the values the track holds
+    there, as the exports write them (the capture tracker's nearest tracked frame, before the
+    face first appears too; README, ``facetransfer export``), not the last tracked frame.
     ``start``: yield frames ``start`` to the end only (those of a whole run: a render
     continued after an interrupt).
 
@@ -733,15 +735,8 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
                             cam.translation * np.array([sx, sy]), cam.pixel_aspect)
         return render(V, faces, cam, size, colors=colors, background=bg).image
 
-    lost = np.asarray(track.lost, bool)
-    last = None
     for i in range(max(0, int(start)), track.n_frames):
-        if not lost[i]:
-            last = draw(i)
-        elif last is None:  # a lost frame repeats the last good one before it
-            before = np.flatnonzero(~lost[:i])
-            last = draw(int(before[-1])) if len(before) else bg
-        yield last
+        yield draw(i)   # a lost frame too: the values the track (and so every export) holds
 
 
 def identity_from_label(model, label: str, mode: str = "identity") -> np.ndarray:
