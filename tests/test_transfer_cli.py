@@ -839,3 +839,52 @@ def test_puppet_of_a_plates_track_numbers_its_frames_as_the_plate(clips, quick_m
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == \
         [f"f.{n}.png" for n in range(1001, 1007)]
     assert "another clip" not in caplog.text, caplog.text
+
+
+def test_puppet_and_export_show_a_klt_tracks_lost_frames_as_their_nearest_tracked(
+        clips, quick_model, tmp_path):
+    """A track whose lost frames hold another state than a tracked frame's (the paper's KLT
+    tracker keeps the flow's drifting state there, a landmarks track the previous fit): the
+    puppet and the CSV show each lost frame as its nearest tracked frame, the earlier on ties,
+    as for a capture track (before: a head drifted off and shrunk in the puppet, the CSV's
+    drifted activations)."""
+    import csv
+    import dataclasses
+
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.export import export_track
+    from facetransfer.track.project import nearest_tracked
+    from facetransfer.transfer import identity_from_label, puppet_frames
+
+    track = Track.load(clips["source_track"])
+    lost = np.zeros(track.n_frames, bool)
+    lost[[0, 3, track.n_frames - 1]] = True
+    src = nearest_tracked(lost)
+    assert list(src) == [1, 1, 2, 2, 4, 4]
+    drift = {m: np.where(lost[:, None], w + 0.5 * np.std(w, axis=0) + 0.1, w)
+             for m, w in track.weights.items()}
+    klt = dataclasses.replace(      # a drifted, shrunken head where the face was lost
+        track, lost=lost, scale=np.where(lost, track.scale * 0.3, track.scale),
+        translation=np.where(lost[:, None], track.translation + 7.0, track.translation),
+        weights={m: (w if m == quick_model.identity_mode else drift[m])
+                 for m, w in track.weights.items()}, blendshapes=None)
+    bs = np.random.default_rng(0).uniform(0.0, 0.5, (track.n_frames, 52)).astype(np.float32)
+    wid = identity_from_label(quick_model, "id04")
+    size = (40, 30)
+    shown = list(puppet_frames(klt, quick_model, wid, size=size))
+    plain = list(puppet_frames(track, quick_model, wid, size=size))
+    for i in range(track.n_frames):
+        assert np.array_equal(shown[i], plain[src[i]]), i
+    held = dataclasses.replace(klt, lost=np.zeros_like(lost))   # the same frames, unmarked
+    held = dataclasses.replace(
+        held, rotation=track.rotation[src], scale=track.scale[src],
+        translation=track.translation[src], weights={m: w[src] for m, w in track.weights.items()},
+        blendshapes=bs[src], blendshape_names=ARKIT_NAMES)
+    klt = dataclasses.replace(klt, blendshapes=np.where(lost[:, None], 1 - bs, bs),
+                              blendshape_names=ARKIT_NAMES)     # drifted
+    rows = []
+    for t, name in ((klt, "klt.csv"), (held, "held.csv")):
+        path = export_track(t, "livelink", tmp_path / name, timecode=None)
+        with open(path, newline="") as f:
+            rows.append([r[2:] for r in csv.reader(f)])
+    assert rows[0] == rows[1]

@@ -683,9 +683,9 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
 
     Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
     track's camera, Lambert-shaded on a plain background, with the mouth gap and eye holes
-    closed. A frame where the face was lost is rendered from the values the track holds
-    there, as the exports write them (the capture tracker's nearest tracked frame, before the
-    face first appears too; README, ``facetransfer export``), not the last tracked frame.
+    closed. A frame where the face was lost shows its nearest tracked frame (the earlier on
+    ties; :func:`facetransfer.track.project.held_lost`), as ``facetransfer export`` writes it
+    and the capture tracker stores it: not a KLT track's drifting state there.
     ``start``: yield frames ``start`` to the end only (those of a whole run: a render
     continued after an interrupt).
 
@@ -703,7 +703,9 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     (H, W, 3) uint8
     """
     from .render import render
+    from .track.project import held_lost
 
+    track = held_lost(track)    # a lost frame as the exports write it, whichever tracker
     size = tuple(track.frame_size) if size is None else (int(size[0]), int(size[1]))
     r = model.ranks[model.mode_index(identity_mode)]
     wid = np.asarray(identity, dtype=np.float64).ravel()
@@ -736,7 +738,7 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
         return render(V, faces, cam, size, colors=colors, background=bg).image
 
     for i in range(max(0, int(start)), track.n_frames):
-        yield draw(i)   # a lost frame too: the values the track (and so every export) holds
+        yield draw(i)   # a lost frame too: its nearest tracked frame's values (held_lost)
 
 
 def identity_from_label(model, label: str, mode: str = "identity") -> np.ndarray:

@@ -23,6 +23,7 @@ import os
 from pathlib import Path
 
 from ..io.atomic import check_output_path
+from ..track.project import held_lost
 from .common import (ExportError, activations_from_weights, require_activations, resolve_model,
                      with_clip_facts)
 from .neutral import with_neutral
@@ -84,7 +85,7 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
     track : facetransfer.track.Track
         With ARKit activations (``blendshapes``), or with expression weights of a model whose
         expressions are ARKit blendshapes (``model``, else the default model if the track is
-        of it): the activations are made from them.
+        of it): the activations are made from them. A lost frame: its nearest tracked one's.
     fmt : {"livelink", "glb", "usd", "json"} or None
         None: the format ``out``'s extension names (:func:`format_of`).
     out : path-like
@@ -130,7 +131,7 @@ def export_track(track, fmt: str | None, out: str | os.PathLike, *, model=None,
     if track.blendshapes is None:
         track = _activations_from_weights(track, model)
     require_activations(track)
-    track, start = _start(with_neutral(track, neutral), timecode)
+    track, start = _start(with_neutral(held_lost(track), neutral), timecode)  # as puppet
     if fmt in ("livelink", "json"):
         if model is not None:
             track.check_model(model)

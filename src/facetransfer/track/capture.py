@@ -68,6 +68,7 @@ from .init import require_landmarks
 from .landmarks import IBUG_WEIGHTS, eye_distance
 from .lip_contact import contact_qp
 from .options import Progress
+from .project import nearest_tracked
 from .result import Track
 from .scores import ScoreLine, fit_score_lines, score_targets
 from .shots import joined_shots, shot_detections, shot_spans, shot_starts
@@ -660,12 +661,7 @@ def _track_both(run: _FitRun, det: ClipDetections, weights, opt: CaptureOptions,
 def _fill_lost(states: list) -> tuple[list, np.ndarray]:
     """Lost frames take the nearest tracked state (earlier one on ties)."""
     ok = np.array([s is not None for s in states])
-    idx = np.flatnonzero(ok)
-    out = list(states)
-    for i in np.flatnonzero(~ok):
-        j = idx[np.argmin(np.abs(idx - i))]
-        out[i] = states[j]
-    return out, ~ok
+    return [states[j] for j in nearest_tracked(~ok)], ~ok   # held_lost's rule, one place
 
 
 def _assemble(model, shape: Shape, states: list, fps, size, src, opt) -> Track:

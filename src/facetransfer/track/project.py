@@ -14,7 +14,7 @@ import numpy as np
 from ..arkit import attach_activations
 from ..errors import TrackError
 
-__all__ = ["take_frames", "project_landmarks"]
+__all__ = ["held_lost", "nearest_tracked", "take_frames", "project_landmarks"]
 
 
 def take_frames(track, idx: np.ndarray):
@@ -32,6 +32,47 @@ def take_frames(track, idx: np.ndarray):
         lost=track.lost[idx], info={"file": track.info["file"]} if track.info.get("file") else {},
         blendshapes=None if track.blendshapes is None else track.blendshapes[idx],
         detections2d=None if track.detections2d is None else track.detections2d[idx])
+
+
+def nearest_tracked(lost) -> np.ndarray:
+    """Per frame, the frame whose values it shows: itself where the face is tracked, else the
+    nearest frame not ``lost`` (the earlier on ties); itself everywhere when every one is lost.
+
+    Parameters
+    ----------
+    lost : (F,) bool
+
+    Returns
+    -------
+    (F,) int64
+    """
+    lost = np.asarray(lost, bool)
+    idx = np.arange(lost.size)
+    good = np.flatnonzero(~lost)
+    if good.size == 0:
+        return idx
+    k = np.clip(np.searchsorted(good, idx), 1, max(good.size - 1, 1))
+    before, after = good[k - 1], good[np.minimum(k, good.size - 1)]
+    near = np.where(np.abs(after - idx) < np.abs(idx - before), after, before)
+    return np.where(lost, near, idx)
+
+
+def held_lost(track):
+    """``track`` with each lost frame holding its nearest tracked frame's pose, weights,
+    landmarks and activations (:func:`nearest_tracked`), as the capture tracker stores them
+    (``capture._fill_lost``); ``lost`` and ``confidence`` kept. The paper's KLT tracker keeps
+    the flow's drifting state there, a landmarks track and ``batch --chunk``'s joins other
+    frames': ``puppet`` and ``export`` show lost frames through this one rule. The track
+    itself where no lost frame would change."""
+    idx = nearest_tracked(track.lost)
+    if np.array_equal(idx, np.arange(track.n_frames)):
+        return track
+    return dataclasses.replace(
+        track, rotation=track.rotation[idx], scale=track.scale[idx],
+        translation=track.translation[idx],
+        weights={n: w[idx] for n, w in track.weights.items()},
+        landmarks2d=track.landmarks2d[idx],
+        blendshapes=None if track.blendshapes is None else track.blendshapes[idx])
 
 
 def project_landmarks(track, model):
