@@ -200,3 +200,29 @@ def test_the_help_reads_the_keys_without_the_renderer():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.split()
     assert out == ["True", "False"], out
+
+
+def test_texture_blend_keeps_a_grey_alpha_tiff_s_alpha_and_adds_none_to_a_cmyk_one(tmp_path,
+                                                                                capsys):
+    """An 8-bit grey + alpha TIFF target keeps its alpha beside the blend (before: OpenCV's
+    reader dropped it, the PNG was written without it and nothing said so); a CMYK TIFF target,
+    which holds no alpha, gets none (before: OpenCV gave it as BGRA, and the PNG gained an
+    opaque alpha said to be "the target's alpha kept")."""
+    from PIL import Image
+
+    m = _blend_case(tmp_path)
+    alpha = np.tile((np.arange(50) * 5).astype(np.uint8), (40, 1))
+    Image.fromarray(np.dstack([np.full((40, 50), 200, np.uint8), alpha]), "LA").save(
+        tmp_path / "la.tif")
+    Image.fromarray(np.full((40, 50, 4), 60, np.uint8), "CMYK").save(tmp_path / "k.tif")
+    for name, out in (("la.tif", "la.png"), ("k.tif", "k.png")):
+        assert main(["texture", "blend", "--source", str(tmp_path / "s.png"), "--mask",
+                     str(tmp_path / "m.png"), "--target", str(tmp_path / name),
+                     "--out", str(tmp_path / out)]) == 0
+    said = capsys.readouterr().out.splitlines()
+    la = cv2.imread(str(tmp_path / "la.png"), cv2.IMREAD_UNCHANGED)
+    assert la.shape == (40, 50, 4) and np.array_equal(la[..., 3], alpha)
+    assert (la[..., :3][m == 0] == 200).all()        # stored, not premultiplied
+    k = cv2.imread(str(tmp_path / "k.png"), cv2.IMREAD_UNCHANGED)
+    assert k.shape == (40, 50, 3)
+    assert "alpha kept" in said[0] and "alpha" not in said[1]

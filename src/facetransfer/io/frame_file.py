@@ -17,7 +17,8 @@ import numpy as np
 from ..errors import VideoError
 
 __all__ = ["read_frame_file", "read_image", "read_unchanged", "bit_depth", "eight_bits",
-           "sixteen_bits", "shown_16", "tiff_alpha_kind", "straight_tiff_rgb"]
+           "sixteen_bits", "shown_16", "tiff_alpha_kind", "straight_tiff_rgb", "tiff_mode",
+           "tiff_alpha"]
 
 
 def read_frame_file(file: Path, pattern: Path) -> np.ndarray:
@@ -143,6 +144,25 @@ def tiff_alpha_kind(file: Path) -> str | None:
     None for any other file (no alpha, another bit depth, unreadable)."""
     return _alpha_kind(_tiff_header(file) if file.suffix.lower() in (".tif", ".tiff")
                        else None)
+
+
+def tiff_mode(file: Path) -> str | None:
+    """Pillow's mode of a TIFF (``"RGBA"``, ``"LA"``, ``"CMYK"``, ...) from its header; None
+    for another file or an unreadable header."""
+    tiff = _tiff_header(file) if Path(file).suffix.lower() in (".tif", ".tiff") else None
+    return None if tiff is None else tiff[3]
+
+
+def tiff_alpha(file: Path) -> np.ndarray | None:
+    """The stored alpha ``(H, W) uint8`` of an 8-bit grey + alpha TIFF (OpenCV's reader drops
+    it), read by Pillow; None where Pillow cannot decode it."""
+    from PIL import Image
+
+    try:
+        with Image.open(file) as im:
+            return np.asarray(im.getchannel("A"))
+    except Exception:  # noqa: BLE001 - damaged or huge: OpenCV's reader names what is wrong
+        return None
 
 
 def _alpha_kind(tiff) -> str | None:

@@ -24,7 +24,7 @@ import numpy as np
 
 from ..errors import VideoError
 from .dpx import dpx_header, read_dpx_image
-from .frame_file import eight_bits, read_unchanged, tiff_alpha_kind
+from .frame_file import eight_bits, read_unchanged, tiff_alpha, tiff_alpha_kind, tiff_mode
 from .video_planes import DecodedPlanes, stored_pixel_format
 from .video_sequence import is_sequence, open_sequence
 
@@ -44,7 +44,19 @@ def _has_alpha(img: np.ndarray | None) -> bool:
 def image_alpha(file) -> np.ndarray | None:
     """The alpha channel of an image file as stored, ``(H, W)`` uint8 or uint16 (of grey +
     alpha or RGBA, as OpenCV reads it), or None: the file has none, or OpenCV cannot read it."""
-    img = read_unchanged(file)
+    return _stored_alpha(file, read_unchanged(file))
+
+
+def _stored_alpha(file, img: np.ndarray | None) -> np.ndarray | None:
+    """The alpha of ``file`` read by OpenCV as ``img`` (IMREAD_UNCHANGED), or None, where the
+    file holds one: not a CMYK TIFF's, which OpenCV gives as BGRA with an opaque alpha the file
+    does not hold (a blend's PNG gained it), and an 8-bit grey + alpha TIFF's, which OpenCV
+    drops, read as stored (before: lost without a word)."""
+    mode = tiff_mode(Path(file))
+    if mode == "CMYK":
+        return None
+    if mode == "LA" and img is not None and not _has_alpha(img):
+        return tiff_alpha(Path(file))
     return img[..., -1] if _has_alpha(img) else None
 
 
@@ -55,7 +67,7 @@ def sequence_has_alpha(seq) -> bool:
     f = seq.file(0)
     if f.suffix.lower() == ".dpx":
         return dpx_header(f)[2] == 4
-    return f.suffix.lower() != ".exr" and _has_alpha(read_unchanged(f))
+    return f.suffix.lower() != ".exr" and _stored_alpha(f, read_unchanged(f)) is not None
 
 
 #: ffmpeg's pixel formats that carry an alpha plane (ProRes 4444, PNG, QuickTime RLE, VP9).
@@ -113,9 +125,9 @@ class PlateAlpha:
         img = read_unchanged(f)
         if img is None:
             raise VideoError(f"cannot read frame {f} of the plate {self.sequence.pattern}")
-        if not _has_alpha(img):
+        a = _stored_alpha(f, img)
+        if a is None:
             return np.full(img.shape[:2], 255, np.uint8)
-        a = img[..., -1]
         return eight_bits(a) if a.dtype == np.uint16 else a
 
     def __call__(self, i: int, shown: np.ndarray, rewritten: np.ndarray) -> np.ndarray:
