@@ -703,9 +703,8 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     (H, W, 3) uint8
     """
     from .render import render
-    from .track.project import held_lost
+    from .track.project import nearest_tracked
 
-    track = held_lost(track)    # a lost frame as the exports write it, whichever tracker
     size = tuple(track.frame_size) if size is None else (int(size[0]), int(size[1]))
     r = model.ranks[model.mode_index(identity_mode)]
     wid = np.asarray(identity, dtype=np.float64).ravel()
@@ -737,8 +736,13 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
                             cam.translation * np.array([sx, sy]), cam.pixel_aspect)
         return render(V, faces, cam, size, colors=colors, background=bg).image
 
+    # a lost frame shows its nearest tracked one (held_lost's rule, as the exports write it,
+    # whichever tracker), each drawn once for a run of lost frames around it
+    near, shown = nearest_tracked(track.lost), (-1, bg)
     for i in range(max(0, int(start)), track.n_frames):
-        yield draw(i)   # a lost frame too: its nearest tracked frame's values (held_lost)
+        if int(near[i]) != shown[0]:
+            shown = (int(near[i]), draw(int(near[i])))
+        yield shown[1]
 
 
 def identity_from_label(model, label: str, mode: str = "identity") -> np.ndarray:
