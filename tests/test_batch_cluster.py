@@ -170,3 +170,110 @@ def test_a_sigterm_while_the_cluster_starts_is_raised_once_it_is_whole_and_close
         signal.signal(signal.SIGTERM, before)
     assert events == ["started", "closed"]
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+#: The CLI (as the console script runs it) in a child process that sends a terminal's Ctrl-C
+#: (SIGINT to every process of its group) at one moment of the embedded cluster's start, the
+#: first argument: as the scheduler starts, as a worker process has just been started
+#: (importing), or once the cluster is whole (before :func:`batch_cluster.open_client`
+#: returns).
+_CHILD_CTRL_C = """
+import os, signal, sys
+moment = sys.argv.pop(1)
+
+
+def ctrl_c():
+    os.killpg(0, signal.SIGINT)
+
+
+if moment == "scheduler":
+    from distributed.deploy import spec
+    real_start = spec.SpecCluster._start
+
+    async def start(self):
+        ctrl_c()
+        return await real_start(self)
+    spec.SpecCluster._start = start
+elif moment == "worker":
+    import multiprocessing.process
+    real_process = multiprocessing.process.BaseProcess.start
+
+    def process_start(self):
+        real_process(self)
+        ctrl_c()
+    multiprocessing.process.BaseProcess.start = process_start
+else:
+    import distributed
+    real_init = distributed.LocalCluster.__init__
+
+    def init(self, *args, **kwargs):
+        real_init(self, *args, **kwargs)
+        ctrl_c()
+    distributed.LocalCluster.__init__ = init
+from facetransfer.cli.main import main
+sys.exit(main())
+"""
+
+
+def _group_left(pgid: int) -> list[str]:
+    """The processes of group ``pgid`` still running (not zombies, which init reaps)."""
+    left = []
+    for stat in os.listdir("/proc"):
+        try:
+            with open(f"/proc/{stat}/stat") as f:
+                fields = f.read().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[2]) == pgid and fields[0] != "Z":
+            left.append(stat)
+    return left
+
+
+@pytest.fixture(scope="module")
+def clip_a(quick_model, tmp_path_factory):
+    """An 8-frame synthetic clip and its first frame's points."""
+    from conftest import clip_with_points
+
+    d = tmp_path_factory.mktemp("ctrlc")
+    return clip_with_points(quick_model, 8, 3, d, video="a.mp4", points="a.json")
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+@pytest.mark.parametrize("moment", ["scheduler", "worker", "whole"])
+def test_a_ctrl_c_while_the_cluster_starts_stops_the_run(moment, clip_a, quick_model_path,
+                                                         tmp_path):
+    """A Ctrl-C in the seconds the embedded cluster takes to start (its workers started with
+    Ctrl-C ignored, and so was the client while they started) was lost: the run went on to
+    "1 done", exit 0. It is now held until the cluster is whole, which is closed: one line,
+    exit 130, no worker left, nothing of Dask's left in the temporary folder but the two
+    lock files every run leaves, no output folder."""
+    import subprocess
+    import time
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    env = {k: v for k, v in os.environ.items() if not k.startswith("DASK_")}
+    env.update(TMPDIR=str(tmp), DASK_CONFIG=str(tmp_path / "no-dask-config"))
+    out = tmp_path / "out"
+    child = subprocess.Popen(
+        [sys.executable, "-c", _CHILD_CTRL_C, moment, "batch", "track", str(clip_a[0]),
+         "--init", str(clip_a[1]), "--model", str(quick_model_path), "--out", str(out),
+         "--workers", "2", "--no-progress"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+        start_new_session=True)
+    try:
+        stdout, stderr = child.communicate(timeout=180)
+        deadline = time.monotonic() + 30     # a bound, not a measure: the workers are closed
+        while _group_left(child.pid) and time.monotonic() < deadline:
+            time.sleep(0.2)
+        assert _group_left(child.pid) == []
+    finally:
+        for pid in _group_left(child.pid):
+            os.kill(int(pid), 9)
+        child.kill()
+    assert (child.returncode, stderr.splitlines(), stdout) == (
+        130, ["facetransfer batch track: interrupted"], "")
+    assert not out.exists()
+    left = sorted(str(p.relative_to(tmp)) for p in tmp.rglob("*"))
+    assert set(left) <= {"dask-scratch-space", "dask-scratch-space/global.lock",
+                         "dask-scratch-space/purge.lock"}, left

@@ -329,15 +329,16 @@ def _local_cluster(n: int, processes: bool, verbose: bool):
         kw["env"] = {k: os.environ.get(k, v)
                      for k, v in (("OPENCV_FOR_THREADS_NUM", "1"), *quiet)}
     # workers that may start processes of their own (the renderer forks for long clips);
-    # started with Ctrl-C ignored, which they inherit: a terminal's Ctrl-C reaches every
-    # process of the group, and only this one (the client) is to act on it (cancel, summary,
-    # one line), not each worker with a traceback. A SIGTERM meanwhile is raised once the
-    # cluster is whole, and the cluster closed: raised in its start, the half-started cluster's
-    # close at the exit and its workers' start printed tracebacks.
+    # started with Ctrl-C held back (_start_signals_held), which they keep: a terminal's Ctrl-C
+    # reaches every process of the group, and only this one (the client) is to act on it
+    # (cancel, summary, one line), not each worker with a traceback. A Ctrl-C or SIGTERM to
+    # this process meanwhile is raised once the cluster is whole, and the cluster closed:
+    # raised in its start, the half-started cluster's close at the exit and its workers' start
+    # printed tracebacks.
     cluster = None
     try:
-        with config.set({"distributed.worker.daemon": False}), _ctrl_c_ignored(processes), \
-                _sigterm_deferred(processes):
+        with config.set({"distributed.worker.daemon": False}), \
+                _start_signals_held(processes):
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
                                    dashboard_address=None, silence_logs=level, **kw)
     except BaseException:
@@ -347,31 +348,45 @@ def _local_cluster(n: int, processes: bool, verbose: bool):
     return cluster
 
 
-def _sigterm_deferred(active: bool):
-    """SIGTERM noted while the block runs and handed to its handler on leaving
-    (:func:`facetransfer.signals.deferred_signals`); nothing when not ``active``."""
-    import signal
-
-    from ..signals import deferred_signals
-
-    return deferred_signals((signal.SIGTERM,)) if active else contextlib.nullcontext()
-
-
 @contextlib.contextmanager
-def _ctrl_c_ignored(active: bool):
-    """SIGINT ignored while the block runs (in the main thread, where signals can be set),
-    then the handler before it again."""
+def _start_signals_held(active: bool):
+    """Ctrl-C and SIGTERM noted while the block (the embedded cluster's start) runs and handed
+    to their handlers on leaving (:func:`facetransfer.signals.deferred_signals`), and Ctrl-C
+    blocked meanwhile in this thread (``pthread_sigmask``): the threads and processes started
+    in the block (the cluster's event loop and its threads, the workers and every process they
+    start) inherit the block and never take a terminal's Ctrl-C, while one sent to this
+    process waits, pending, until the block ends. Before, Ctrl-C was ignored (``SIG_IGN``) for
+    the workers to inherit, and so was lost when it came as the cluster started: the run went
+    on. Nothing when not ``active`` (worker threads) or outside the main thread; where signals
+    cannot be blocked (not POSIX), Ctrl-C is ignored in the block, as before."""
     import signal
     import threading
+
+    from ..signals import deferred_signals
 
     if not active or threading.current_thread() is not threading.main_thread():
         yield
         return
-    before = signal.signal(signal.SIGINT, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        signal.signal(signal.SIGINT, before)
+    if not hasattr(signal, "pthread_sigmask"):   # pragma: no cover (Windows)
+        with deferred_signals((signal.SIGTERM,)):
+            before = signal.signal(signal.SIGINT, signal.SIG_IGN)
+            try:
+                yield
+            finally:
+                signal.signal(signal.SIGINT, before)
+        return
+    # multiprocessing's resource tracker, started by the first worker's spawn, unblocks
+    # Ctrl-C in the thread that starts it (the cluster's event loop), which then started the
+    # workers with it: started here first (each spawn starts it, once, if not running)
+    from multiprocessing import resource_tracker
+
+    resource_tracker.ensure_running()
+    with deferred_signals((signal.SIGINT, signal.SIGTERM)):
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            yield
+        finally:     # a Ctrl-C pending is delivered here, noted, and raised on leaving
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
 
 
 def scatter_model(client, model):
