@@ -348,3 +348,141 @@ def test_a_track_finished_by_the_stopped_run_s_worker_is_that_job_s(clips, quick
     monkeypatch.setattr(J, "_track", real)
     code, said, _ = _race(quick_model_path, out, clips, capsys)
     assert code == 0 and _summary(out / "summary.csv")["a"]["status"] == "skipped", said
+
+
+def test_a_job_claims_its_output_another_run_s_job_of_it_fails_at_its_start(
+        clips, quick_model, tmp_path, monkeypatch):
+    """Two runs' jobs of one output that both may replace it (here ``overwrite``; in a batch,
+    both found the same earlier result and do it again): the first holds it
+    while it runs (its claim file), so the other's fails at its start naming the holder, and
+    writes nothing, not even its progress file. Before, both passed the check that the output
+    was the file they found (the first had not written yet) and both replaced it, the later
+    without a word."""
+    video = clips["a"][0]
+    job, out = ClipJob("a", str(video)), tmp_path / "a.npz"
+    _theirs(quick_model, video, 3).save(out)          # the result both runs found
+    errors, calls = [], []
+
+    def tracked(*a, **k):          # the other run's job of it starts while this one tracks
+        calls.append(1)
+        n = 8 if len(calls) == 1 else 5       # this run's, the other's
+        if n == 8:
+            try:
+                J.track_clip(job, str(out), quick_model, TrackerSettings(), True)
+            except J.OutputTaken as exc:
+                errors.append(str(exc))
+        return still_track(quick_model, n, source=str(video))
+
+    monkeypatch.setattr(J, "_track", tracked)
+    partial = J.partial_path(out)
+    partial.write_bytes(b"this run's progress")
+    row = J.track_clip(job, str(out), quick_model, TrackerSettings(), True)
+    assert row.status == "done" and Track.load(out).n_frames == 8
+    assert len(calls) == 1 and len(errors) == 1 and errors[0].startswith(f"{out} is being written by another run "
+                                                     f"(pid {os.getpid()} on host ")
+    assert "run the same command again once that run has ended" in errors[0]
+    assert not J.claim_path(out).exists() and not partial.exists()
+
+
+def test_a_claim_held_by_another_process_refuses_and_one_left_by_a_killed_run_is_taken(
+        clips, quick_model, arkit_model, make_arkit_track, tmp_path, monkeypatch):
+    """A claim is held by its process: another process's (another machine's, on a shared
+    folder) refuses every job of that output, naming its process and host, and leaves the
+    progress file that run resumes from; once that process is killed (SIGKILL: no cleanup),
+    its claim file, left behind, is taken over and the output written."""
+    import subprocess
+
+    video = clips["a"][0]
+    job, out = ClipJob("a", str(video)), tmp_path / "a.npz"
+    claim = J.claim_path(out)
+    holder = subprocess.Popen(
+        [sys.executable, "-c", "import fcntl, os, sys; fd = os.open(sys.argv[1], os.O_RDWR | "
+         "os.O_CREAT); fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, b'pid 4242 on host "
+         "render-7, since 20:00'); print('held', flush=True); sys.stdin.read()", str(claim)],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline() == "held\n"
+        partial = J.partial_path(out)
+        partial.write_bytes(b"that run's progress")
+        monkeypatch.setattr(J, "_track", lambda *a, **k: still_track(quick_model, 8,
+                                                                     source=str(video)))
+        for overwrite in (False, True):
+            with pytest.raises(J.OutputTaken, match=r"is being written by another run \(pid "
+                                                    r"4242 on host render-7, since 20:00; two"):
+                J.track_clip(job, str(out), quick_model, TrackerSettings(), overwrite)
+        track, js = tmp_path / "k.npz", tmp_path / "a.json"   # the same claim, another job
+        make_arkit_track(arkit_model, 4)[0].save(track)
+        assert not out.exists() and partial.read_bytes() == b"that run's progress"
+    finally:
+        holder.kill()
+        holder.wait()
+    assert claim.exists()         # left by the killed run
+    row = J.track_clip(job, str(out), quick_model, TrackerSettings())
+    assert row.status == "done" and Track.load(out).n_frames == 8 and not claim.exists()
+    row = J.export_one(ExportJob("k", track), "json", str(js))
+    assert row.status == "done" and not J.claim_path(js).exists()
+
+
+@pytest.mark.filterwarnings("ignore:Port 8787 is already in use")
+@pytest.mark.parametrize("how", ["--overwrite", "a failed result"])
+def test_two_runs_started_together_that_redo_one_result_write_it_once(
+        how, clips, quick_model_path, inproc, tmp_path, capsys, monkeypatch):
+    """Two ``batch`` runs of one folder started together, both redoing results there (both
+    with ``--overwrite``, or both finding pairs' results that do not decode): each output is
+    written by exactly one of them, and the other's row says why (its job of it started
+    while the first held it, or after the first had replaced the file it found). Before, both
+    said "done", exit 0, and the later one's outputs were left. This run (on a thread) holds
+    ``a`` while the other runs from its start to its end."""
+    import threading
+
+    from facetransfer import video_transfer
+    from facetransfer.cli.main import main
+
+    out = tmp_path / "out"
+    if how == "--overwrite":
+        assert _race(quick_model_path, out, clips, capsys)[0] == 0      # the earlier results
+        man = out.parent / "clips.csv"
+        argv = ["batch", "track", "--manifest", man, "--passes", "1", "--overwrite"]
+    else:
+        man = tmp_path / "pairs.csv"
+        man.write_text(f"name,target,expression_from\na,{clips['a'][0]},{clips['b'][0]}\n"
+                       f"b,{clips['b'][0]},{clips['a'][0]}\n")
+        out.mkdir()
+        for n in "ab":
+            (out / f"{n}.mp4").write_bytes(b"a render that failed")
+        argv = ["batch", "transfer", "--manifest", man, "--texture", "frame"]
+        monkeypatch.setattr(video_transfer, "transfer_video", _Render())
+    argv = [str(a) for a in argv + ["--model", quick_model_path, "--out", out, "--workers",
+                                    "1", "--no-progress"]]
+    found = {n: _which(p) for n in "ab" for p in out.glob(f"{n}.*") if p.suffix != ".csv"}
+    holding, other_done, codes = threading.Event(), threading.Event(), {}
+    where, name = ((J, "_track") if how == "--overwrite"
+                   else (video_transfer, "transfer_video"))
+    real = getattr(where, name)
+
+    def meanwhile(first, *a, **k):     # this run's job of a: the other run goes meanwhile
+        if Path(str(getattr(first, "target", first))).stem == "a" and not holding.is_set():
+            holding.set()
+            other_done.wait(300)
+        return real(first, *a, **k)
+
+    monkeypatch.setattr(where, name, meanwhile)
+    this = threading.Thread(target=lambda: codes.update(this=main(argv)))
+    this.start()
+    try:
+        assert holding.wait(300)
+        codes["other"] = main(argv)
+        theirs = _summary(out / "summary.csv")
+    finally:
+        other_done.set()
+        this.join(300)
+    rows = _summary(out / "summary.csv")
+    # a: this run's (the other's job started while this one held it); b: the other's (done
+    # before this run's job of it began, which found another file than the one it planned)
+    assert codes == {"this": 1, "other": 1}, (rows, theirs)
+    assert rows["a"]["status"] == "done" and theirs["a"]["status"] == "failed"
+    assert "is being written by another run (pid " in theirs["a"]["error"]
+    assert theirs["b"]["status"] == "done" and rows["b"]["status"] == "failed"
+    assert "written by another run since this run began" in rows["b"]["error"]
+    assert all(_which(Path(rows[n]["output"])) != found[n] for n in "ab")
+    assert not list(out.glob(".*.claim"))

@@ -7,10 +7,11 @@ its inputs from paths the workers can see, writes its output atomically, and ret
 arrives as the value of a future scattered once to every worker, never pickled with the task.
 A task raises on bad input; the client turns the exception into the clip's failed row.
 
-Without ``--overwrite`` a task replaces no file but those its run found and chose to redo
-(``planned``: :func:`output_identity`, :func:`matte_identity`): an output or matte frames
-another run into the same folder wrote meanwhile are kept, and the task raises
-:class:`OutputTaken` (:func:`_own_output`).
+A task replaces no file but those its run found and chose to redo (``planned``:
+:func:`output_identity`, :func:`matte_identity`; every output there as the run began with
+``--overwrite``): an output or matte frames another run into the same folder wrote meanwhile
+are kept, and the task raises :class:`OutputTaken` (:func:`_own_output`). A task holds its
+output while it runs (:func:`claimed`): another run's task of it fails at its start.
 """
 
 from __future__ import annotations
@@ -35,7 +36,7 @@ log = logging.getLogger(__name__)
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
            "MATTE_FORMATS", "matte_pattern", "OutputTaken", "output_identity",
-           "matte_identity"]
+           "matte_identity", "claimed", "claim_path"]
 
 #: The frame file of each ``batch transfer --matte`` format (image sequences only, one file a
 #: frame: :mod:`facetransfer.io.matte`).
@@ -121,6 +122,98 @@ def _taken(out, why: str = "while this run went on", *, frames=None) -> OutputTa
     return OutputTaken(f"{what} {'were' if frames else 'was'} written by another run {why} "
                        f"(two runs into {o.parent} at once?): {kept} kept, this run's result "
                        f"not written; --overwrite replaces {it}")
+
+
+def claim_path(out) -> Path:
+    """The claim file of the output ``out`` (:func:`claimed`): ``DIR/.NAME.EXT.claim``."""
+    p = Path(out)
+    return p.with_name(f".{p.name}.claim")
+
+
+@contextlib.contextmanager
+def claimed(out):
+    """Hold the output ``out`` for the block: an exclusive ``flock`` on its claim file
+    (:func:`claim_path`), which names this process, its host and the time; the file is removed
+    on leaving. A job of another run that holds it (two runs into one folder at once, with
+    ``--overwrite`` or redoing the same result) is said at once: :class:`OutputTaken` naming
+    its process and host, before any work. Before, both jobs went on, and where both replaced
+    the output (with ``--overwrite``, or both redoing one failed result) the later replaced the
+    earlier's without a word. The lock goes with its process (SIGKILL, a crash; on a folder
+    shared over NFS, with the lock's lease when its machine is gone), so the claim a dead run
+    left is taken over, its file rewritten. Where the file system takes no lock (a ``nolock``
+    mount, not POSIX), the block runs without a claim."""
+    try:
+        import fcntl
+    except ImportError:     # pragma: no cover (not POSIX)
+        yield
+        return
+    fd = _claim(claim_path(out), out, fcntl)
+    if fd is None:
+        yield
+        return
+    try:
+        yield
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(claim_path(out))    # still held: no other job has it open and locked
+        os.close(fd)
+
+
+def _claim(path: Path, out, fcntl) -> int | None:
+    """The descriptor of ``path`` opened and locked by this process (None where it cannot be
+    locked); :class:`OutputTaken` where another process holds it. A file removed or replaced
+    between its opening and its lock (its holder finished) is opened again."""
+    import socket
+
+    for _ in range(100):
+        fd = _open_claim(path)
+        if fd is None:
+            return None    # a folder that cannot be written: the write says so
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            holder = os.read(fd, 512).decode("utf-8", "replace").strip()
+            os.close(fd)
+            raise _busy(out, holder) from None
+        except OSError:     # ENOLCK, EOPNOTSUPP: no locks here
+            os.close(fd)
+            return None
+        try:
+            same = os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
+        except OSError:
+            same = False
+        if same:
+            said = (f"pid {os.getpid()} on host {socket.gethostname()}, since "
+                    f"{time.strftime('%Y-%m-%d %H:%M:%S %Z')}")
+            with contextlib.suppress(OSError):   # (another user's claim left: read-only)
+                os.ftruncate(fd, 0)
+                os.write(fd, said.encode())
+            return fd
+        os.close(fd)
+    return None     # pragma: no cover (a claim made and removed 100 times meanwhile)
+
+
+def _open_claim(path: Path) -> int | None:
+    """``path`` opened (made if absent) for its lock: to write, else, where another user's
+    run left it, to read (a lock needs no more); None where it cannot be opened."""
+    for flags in (os.O_RDWR | os.O_CREAT, os.O_RDONLY):
+        try:
+            return os.open(path, flags | os.O_NOFOLLOW, 0o666)
+        except PermissionError:
+            continue
+        except OSError:
+            return None
+    return None
+
+
+def _busy(out, holder: str) -> OutputTaken:
+    """The error of a job whose output ``out`` another run's job holds (``holder``: its claim
+    file's words, its process, host and start; "" not yet written)."""
+    o = Path(out)
+    return OutputTaken(f"{o} is being written by another run ("
+                       + (f"{holder}; " if holder else "")
+                       + f"two runs into {o.parent} at once?): left to it, this run's result "
+                       "not written; run the same command again once that run has ended")
 
 
 def _frames_there(pattern) -> bool:
@@ -210,7 +303,8 @@ def _subject(face: str | None, video, source: str):
     return subject_point(face, video_info(source).size, what=f"{source}: face")
 
 
-def track_clip(job, out: str, model, options, overwrite: bool = False) -> Row:
+def track_clip(job, out: str, model, options, overwrite: bool = False,
+               planned: str = "") -> Row:
     """Track a whole clip exactly as ``facetransfer track VIDEO --out OUT`` does and write it.
 
     Parameters
@@ -221,8 +315,15 @@ def track_clip(job, out: str, model, options, overwrite: bool = False) -> Row:
     model : MultilinearModel
     options : TrackerSettings
     overwrite : bool
-        Replace an existing ``out`` (the batch's ``--overwrite``); without it, an ``out`` that
-        another run wrote since this one was planned is kept (:class:`OutputTaken`).
+        Replace whatever ``out`` is there; without it, an ``out`` that another run wrote since
+        this one was planned is kept (:class:`OutputTaken`).
+    planned : str
+        Without ``overwrite``: the :func:`output_identity` of the ``out`` the run found and
+        does again (the batch's ``--overwrite``), replaced while it is still that file
+        (:func:`_still_planned`).
+
+    The job holds its output while it runs (:func:`claimed`): another run's job of it then
+    fails at its start (:class:`OutputTaken`), its progress file left to that run.
 
     Returns
     -------
@@ -232,17 +333,19 @@ def track_clip(job, out: str, model, options, overwrite: bool = False) -> Row:
 
     t0 = time.perf_counter()
     video_info(job.video)  # missing / not a video: one line naming the path
-    try:
-        with _own_output(out, overwrite):
-            track = _track(str(job.video), model, job.init, options, source=str(job.video),
-                           checkpoint=partial_path(out), face=job.face,
-                           max_frames=job.max_frames)
-            track = track.with_source_facts(job.video)   # the clip's numbering, before it moves
-            track.save(out, overwrite=overwrite)
-    except OutputTaken:   # the other run's track is whole: no progress to keep for it
-        partial_path(out).unlink(missing_ok=True)
-        raise
-    partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
+    with claimed(out):
+        overwrite = overwrite or _still_planned(out, planned)
+        try:
+            with _own_output(out, overwrite):
+                track = _track(str(job.video), model, job.init, options,
+                               source=str(job.video), checkpoint=partial_path(out),
+                               face=job.face, max_frames=job.max_frames)
+                track = track.with_source_facts(job.video)   # its numbering, before it moves
+                track.save(out, overwrite=overwrite)
+        except OutputTaken:   # the other run's track is whole: no progress to keep for it
+            partial_path(out).unlink(missing_ok=True)
+            raise
+        partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
     return track_row(job.name, track, out, time.perf_counter() - t0)
 
 
@@ -321,16 +424,19 @@ def _chunk_capture(frames, model, options, job, chunk, identity):
                               source=src, fixed=held)
 
 
-def join_clip(job, out: str, model, chunks, results, overwrite: bool = False) -> Row:
+def join_clip(job, out: str, model, chunks, results, overwrite: bool = False,
+              planned: str = "") -> Row:
     """Join a clip's chunk tracks (:func:`~facetransfer.batch.chunks.join_tracks`) and write
-    ``out`` (``overwrite``: as :func:`track_clip`'s)."""
+    ``out`` (``overwrite``, ``planned`` and its claim: as :func:`track_clip`'s)."""
     from .chunks import join_tracks
 
     t0 = time.perf_counter()
-    with _own_output(out, overwrite):
-        track = join_tracks([r.track for r in results], chunks, model)
-        track = track.with_source_facts(job.video)
-        track.save(out, overwrite=overwrite)
+    with claimed(out):
+        overwrite = overwrite or _still_planned(out, planned)
+        with _own_output(out, overwrite):
+            track = join_tracks([r.track for r in results], chunks, model)
+            track = track.with_source_facts(job.video)
+            track.save(out, overwrite=overwrite)
     return track_row(job.name, track, out,
                      sum(r.seconds for r in results) + time.perf_counter() - t0)
 
@@ -383,7 +489,8 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
     planned : str
         Without ``overwrite``: the :func:`output_identity` of the ``out`` the run found and
         chose to render again (its own result, redone for the matte asked; a file that does
-        not decode), replaced, with its matte, while it is still that file; "" (none found):
+        not decode; any, with the batch's ``--overwrite``), replaced, with its matte, while it
+        is still that file, under the job's claim (:func:`claimed`); "" (none found):
         an ``out`` or matte frames another run wrote meanwhile are kept (:class:`OutputTaken`).
     planned_matte : str
         Without ``overwrite``: the :func:`matte_identity` of the frames of ``matte`` the run
@@ -414,15 +521,16 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         pose_from=s.get("pose_from"), pose_track=s.get("pose_track"),
         performance=s.get("performance"), target_face=s.get("target_face"),
         source_face=s.get("source_face"))
-    overwrite = overwrite or _still_planned(out, planned)
-    if not overwrite:
-        _clear_leftover_matte(out, matte, planned_matte)
-    with _own_output(out, overwrite, matte):
-        res = transfer_video(sources, out, model, overwrite=overwrite, options=options,
-                             progress_factory=None, align=settings["align"],
-                             max_frames=settings["max_frames"], parallel=False,
-                             video_options=settings.get("video"), matte=matte)
-    _remove_other_mattes(Path(out).parent, job.name, matte)
+    with claimed(out):
+        overwrite = overwrite or _still_planned(out, planned)
+        if not overwrite:
+            _clear_leftover_matte(out, matte, planned_matte)
+        with _own_output(out, overwrite, matte):
+            res = transfer_video(sources, out, model, overwrite=overwrite, options=options,
+                                 progress_factory=None, align=settings["align"],
+                                 max_frames=settings["max_frames"], parallel=False,
+                                 video_options=settings.get("video"), matte=matte)
+        _remove_other_mattes(Path(out).parent, job.name, matte)
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
@@ -514,7 +622,8 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
     (``neutral``: its neutral frame, :mod:`facetransfer.export.neutral`; ``labels``: a
     livelink take's timecode labels, None the default; ``overwrite``: as
     :func:`track_clip`'s; ``planned``: as :func:`transfer_pair`'s, the take of an earlier
-    version the run writes again).
+    version the run writes again, or any with the batch's ``--overwrite``; claimed as
+    :func:`track_clip`'s output).
 
     Without ``model``, a track made with the default model gets the worker's cached copy of
     it; any other track is left to ``export_track``'s own check (``model=None``).
@@ -530,10 +639,11 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
         if default_model_path().is_file():
             default, h = _default_model()
             model = default if track.model_hash == h else None
-    overwrite = overwrite or _still_planned(out, planned)
-    with _own_output(out, overwrite):
-        path = export_track(track, fmt, out, model=model, overwrite=overwrite,
-                            texture=texture, neutral=neutral, labels=labels)
+    with claimed(out):
+        overwrite = overwrite or _still_planned(out, planned)
+        with _own_output(out, overwrite):
+            path = export_track(track, fmt, out, model=model, overwrite=overwrite,
+                                texture=texture, neutral=neutral, labels=labels)
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
                seconds=time.perf_counter() - t0,
                mean_confidence=float(np.mean(track.confidence)), output=str(path))

@@ -6,7 +6,7 @@ model to the workers once, submit, collect the rows as the clips finish (reporti
 ``progress``), and write ``DIR/summary.csv`` atomically (also every few seconds, and when the run
 is interrupted: pending tasks are cancelled, finished outputs stay). A failed clip is a
 ``failed`` row while the others go on; so is a clip whose output another run into the same
-folder wrote meanwhile (kept, its row's digest that run's where its summary says it,
+folder holds (its job's claim, :func:`.jobs.claimed`) or wrote meanwhile (kept, its row's digest that run's where its summary says it,
 :data:`OTHER_RUN` otherwise, :meth:`_Collector._adopted`).
 """
 
@@ -304,7 +304,8 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     overlap : int
         Frames shared by neighbouring chunks.
     overwrite : bool
-        Track every clip again (default: skip clips whose output is complete and valid).
+        Track every clip again, replacing each output there as the run began, not one another
+        run writes meanwhile (default: skip clips whose output is complete and valid).
     progress : callable(Row), optional
         Called as each clip finishes (or is skipped).
 
@@ -335,7 +336,7 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
         out, by_name[name], mhash), lambda job: legacy_job_key(job, what))
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
-    run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, overwrite)
+    run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, _planned(outs))
     for job in todo:
         run.submit(job)
     return col.run(run.on_done)
@@ -346,10 +347,10 @@ class _TrackSubmit:
     first, then its chunks tracked in parallel (the first one first) and joined."""
 
     def __init__(self, client, col: _Collector, outs: dict, mf, options, chunk: int,
-                 overlap: int, keys: dict, overwrite: bool = False) -> None:
+                 overlap: int, keys: dict, planned: dict) -> None:
         self.client, self.col, self.outs, self.mf = client, col, outs, mf
         self.options, self.chunk, self.overlap, self.keys = options, chunk, overlap, keys
-        self.overwrite = overwrite   # without it, an output another run wrote is kept
+        self.planned = planned   # what a job may replace (_planned): not another run's
 
     def submit(self, job) -> None:
         if self.chunk:   # a clip of more than max_frames: the chunks of its first max_frames
@@ -360,7 +361,8 @@ class _TrackSubmit:
 
     def _whole(self, job) -> None:
         self.col.add(self.client.submit(J.track_clip, job, str(self.outs[job.name]), self.mf,
-                                        self.options, self.overwrite, pure=False), "clip", job)
+                                        self.options, False, self.planned[job.name],
+                                        pure=False), "clip", job)
 
     def _chunks(self, job, n_frames: int) -> None:
         out, mf, opt = str(self.outs[job.name]), self.mf, self.options
@@ -373,8 +375,8 @@ class _TrackSubmit:
         rest = [submit(J.track_chunk, job, c, out, mf, opt, first, pure=False)
                 for c in chunks[1:]]
         self.col.alive += [first] + rest
-        self.col.add(submit(J.join_clip, job, out, mf, chunks, [first] + rest, self.overwrite,
-                            pure=False), "clip", job)
+        self.col.add(submit(J.join_clip, job, out, mf, chunks, [first] + rest, False,
+                            self.planned[job.name], pure=False), "clip", job)
 
     def on_done(self, kind: str, job, fut) -> None:
         try:
@@ -558,7 +560,8 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     settings : dict
         See :func:`facetransfer.batch.jobs.transfer_pair`.
     overwrite : bool
-        Redo every pair (default: skip pairs whose video exists and decodes, and whose
+        Redo every pair, replacing each result there as the run began, not one another run
+        writes meanwhile (default: skip pairs whose video exists and decodes, and whose
         matte, if asked, is whole and named by the earlier row of the same job digest).
     progress : callable(Row), optional
     matte : {"png", "tiff", "exr"}, optional
@@ -584,28 +587,30 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     # a result kept without the matte asked for: the pair done again (its render gives both)
     done = {n: r for n, r in done.items() if not (r.ok and n in mattes and not r.matte)}
 
-    planned = _planned(outs, overwrite)
+    planned = _planned(outs)
     # a matte beside no result (a render stopped between their commits; the result removed to
     # redo the pair): frames the job removes while still these (before: the pair failed)
-    planned_mattes = {n: "" if overwrite else J.matte_identity(m) for n, m in mattes.items()}
+    planned_mattes = {n: J.matte_identity(m) for n, m in mattes.items()}
 
     def submit(job, mf):
         m = mattes.get(job.name)
         return client.submit(J.transfer_pair, job, str(outs[job.name]), mf, dict(settings),
-                             None if m is None else str(m), overwrite=overwrite,
+                             None if m is None else str(m), overwrite=False,
                              planned=planned[job.name],
                              planned_matte=planned_mattes.get(job.name, ""), pure=False)
 
     return _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys)
 
 
-def _planned(outs: dict, overwrite: bool) -> dict[str, str]:
+def _planned(outs: dict) -> dict[str, str]:
     """``{name: which file its output is now}`` (:func:`.jobs.output_identity`, "" none):
-    an output there that the run does again without ``overwrite`` (a result rendered again
-    for its matte or that does not decode, a take of an earlier version) is replaced only
-    while it is still that file; one absent is written only if still absent (before, the jobs
-    replaced whatever was there as they finished: another run's output, unasked)."""
-    return {n: "" if overwrite else J.output_identity(o) for n, o in outs.items()}
+    an output there that the run does again (every one with ``--overwrite``; without it, a
+    result rendered again for its matte or that does not decode, a take of an earlier
+    version) is replaced only while it is still that file; one absent is written only if
+    still absent (before, the jobs replaced whatever was there as they finished: another
+    run's output, unasked; with ``--overwrite``, until the fiftieth session, even one another
+    run wrote after this one began). Its job claims it meanwhile (:func:`.jobs.claimed`)."""
+    return {n: J.output_identity(o) for n, o in outs.items()}
 
 
 def transfer_what(settings: dict, model) -> str:
@@ -653,7 +658,8 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
     texture : optional
         Passed to ``export_track``.
     overwrite : bool
-        Redo every export (default: skip existing outputs).
+        Redo every export, replacing each output there as the run began, not one another
+        run writes meanwhile (default: skip existing outputs).
     neutral : int or "auto", optional
         Each track's activations measured from this frame's (``export_track``).
     labels : {"app", "clip"}, optional
@@ -679,10 +685,10 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         done = _without_unnamed_labels(done, jobs, out_dir, (
             _export_what_before(fmt, value_text(texture), neutral, model),
             _export_what_before(fmt, repr(texture), neutral, model)))
-    planned = _planned(outs, overwrite)   # a take written again (_without_unnamed_labels)
+    planned = _planned(outs)   # a take written again (_without_unnamed_labels), --overwrite
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
-                                                 texture, neutral, labels, overwrite,
+                                                 texture, neutral, labels, False,
                                                  planned[job.name], pure=False),
                    model, keys)
 

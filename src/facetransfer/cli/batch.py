@@ -35,8 +35,9 @@ def _cluster_options(p) -> None:
     g.add_argument("--timeout", type=float, default=10.0,
                    help="seconds the scheduler has to answer (its host's lookup included)")
     g.add_argument("--overwrite", action="store_true",
-                   help="redo every clip, replacing its output (default: skip clips whose "
-                   "output is complete, and keep one another run writes meanwhile)")
+                   help="redo every clip, replacing the output there as the run began "
+                   "(default: skip clips whose output is complete); one another run writes "
+                   "meanwhile is kept either way")
     g.add_argument("--no-progress", action="store_true", help="no progress bar")
 
 
