@@ -389,7 +389,7 @@ def test_a_claim_held_by_another_process_refuses_and_one_left_by_a_killed_run_is
     """A claim is held by its process: another process's (another machine's, on a shared
     folder) refuses every job of that output, naming its process and host, and leaves the
     progress file that run resumes from; once that process is killed (SIGKILL: no cleanup),
-    its claim file, left behind, is taken over and the output written."""
+    its claim file, left behind, is taken over and the output written, or removed."""
     import subprocess
 
     video = clips["a"][0]
@@ -410,9 +410,10 @@ def test_a_claim_held_by_another_process_refuses_and_one_left_by_a_killed_run_is
             with pytest.raises(J.OutputTaken, match=r"is being written by another run \(pid "
                                                     r"4242 on host render-7, since 20:00; two"):
                 J.track_clip(job, str(out), quick_model, TrackerSettings(), overwrite)
-        track, js = tmp_path / "k.npz", tmp_path / "a.json"   # the same claim, another job
+        track, js = tmp_path / "k.npz", tmp_path / "a.json"
         make_arkit_track(arkit_model, 4)[0].save(track)
         assert not out.exists() and partial.read_bytes() == b"that run's progress"
+        assert J.remove_stale_claims(tmp_path) == [] and claim.exists()     # held: kept
     finally:
         holder.kill()
         holder.wait()
@@ -421,6 +422,10 @@ def test_a_claim_held_by_another_process_refuses_and_one_left_by_a_killed_run_is
     assert row.status == "done" and Track.load(out).n_frames == 8 and not claim.exists()
     row = J.export_one(ExportJob("k", track), "json", str(js))
     assert row.status == "done" and not J.claim_path(js).exists()
+    # one left by a run stopped or killed (its workers end without removing it), not held:
+    # removed by the next run as it plans, and by the stopped run once its cluster is closed
+    claim.write_text("pid 4242 on host render-7, since 20:00")
+    assert J.remove_stale_claims(tmp_path) == [claim] and not claim.exists()
 
 
 @pytest.mark.filterwarnings("ignore:Port 8787 is already in use")

@@ -36,7 +36,7 @@ log = logging.getLogger(__name__)
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
            "MATTE_FORMATS", "matte_pattern", "OutputTaken", "output_identity",
-           "matte_identity", "claimed", "claim_path"]
+           "matte_identity", "claimed", "claim_path", "remove_stale_claims"]
 
 #: The frame file of each ``batch transfer --matte`` format (image sequences only, one file a
 #: frame: :mod:`facetransfer.io.matte`).
@@ -193,10 +193,41 @@ def _claim(path: Path, out, fcntl) -> int | None:
     return None     # pragma: no cover (a claim made and removed 100 times meanwhile)
 
 
-def _open_claim(path: Path) -> int | None:
+def remove_stale_claims(out_dir) -> list[Path]:
+    """Remove the claim files (:func:`claimed`) in ``out_dir`` that no process holds: left by
+    a run killed or stopped while its jobs ran (their workers ended without removing them).
+    One held is kept; one made meanwhile by a job not yet holding it is removed, and that job
+    makes another (:func:`_claim`). Returns those removed."""
+    try:
+        import fcntl
+    except ImportError:     # pragma: no cover (not POSIX)
+        return []
+    removed = []
+    try:
+        names = [n for n in os.listdir(out_dir) if n.startswith(".") and n.endswith(".claim")]
+    except OSError:
+        return removed
+    for name in names:
+        path = Path(out_dir) / name
+        fd = _open_claim(path, create=False)
+        if fd is None:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
+                os.unlink(path)
+                removed.append(path)
+        except OSError:      # held (a job running), gone, or no locks here
+            pass
+        finally:
+            os.close(fd)
+    return removed
+
+
+def _open_claim(path: Path, create: bool = True) -> int | None:
     """``path`` opened (made if absent) for its lock: to write, else, where another user's
     run left it, to read (a lock needs no more); None where it cannot be opened."""
-    for flags in (os.O_RDWR | os.O_CREAT, os.O_RDONLY):
+    for flags in (os.O_RDWR | (os.O_CREAT if create else 0), os.O_RDONLY):
         try:
             return os.open(path, flags | os.O_NOFOLLOW, 0o666)
         except PermissionError:

@@ -94,6 +94,9 @@ def prepare_out_dir(out_dir) -> Path:
 
 
 def _outputs(jobs, out_dir: Path, ext: str) -> dict[str, Path]:
+    """``{name: DIR/NAME.ext}`` of the jobs (BatchError where one is the summary or an input);
+    the claim files a killed run left in DIR removed (:func:`.jobs.remove_stale_claims`)."""
+    J.remove_stale_claims(out_dir)
     outs = {}
     for job in jobs:
         out = out_dir / f"{job.name}{ext}"

@@ -189,6 +189,11 @@ def _run(args, what: str, n_jobs: int, call) -> int:
             bar.close()
         if not started:   # while the cluster started or the scheduler was asked: nothing ran
             raise         # (before: "finished outputs are kept in DIR", of no DIR)
+        from ..batch.jobs import remove_stale_claims
+
+        # the embedded cluster is closed: the claims its workers held, left (a scheduler's
+        # tasks still running keep theirs)
+        remove_stale_claims(args.out)
         summary = Path(args.out) / "summary.csv"
         print(f"stopped: finished outputs are kept in {args.out}"
               + (f" (see {summary})" if summary.is_file() else "")
