@@ -573,3 +573,20 @@ def test_the_tracked_points_are_made_before_a_fork(arkit_model, tmp_path, monkey
     obtain._prepare_child(tmp_path / "v.mp4", m, 10, "capture", (None, None, 2, True))
     assert made == [m]
 
+
+def test_a_clips_targets_are_each_frames_made_at_once(arkit_model):
+    """clip_targets holds every frame's detection_targets (detections, then the dense points
+    of MediaPipe's; weight 0 where unknown), the same arrays to the bit, read-only."""
+    from facetransfer.track.capture_frame import PointWeights, clip_targets, detection_targets
+
+    det, _, _ = _synthetic(arkit_model, F=12, late=3)              # no face in 3 frames
+    mp_index = mediapipe_correspondence(arkit_model).mp_index
+    w = np.linspace(0.1, 1.0, 68 + len(mp_index))
+    for pw in (PointWeights(w, mp_index), PointWeights(w[:68])):
+        held = clip_targets(det, pw)
+        assert pw.targets is None and held.targets is not None
+        for i in range(det.n_frames):
+            (p, wt), (q, vt) = detection_targets(det, i, pw), detection_targets(det, i, held)
+            assert np.array_equal(p, q, equal_nan=True) and np.array_equal(wt, vt)
+            assert q.dtype == p.dtype and not q.flags.writeable and not vt.flags.writeable
+        assert held.targets[0] is not det.points
