@@ -521,35 +521,10 @@ def test_sin_yaw_clips_keeps_nan_and_at_view_copies_as_copy_copy(arkit_model):
     assert all(getattr(other, k) is v for k, v in vars(want).items() if k != "opt")
 
 
-def test_the_identity_bases_read_a_core_laid_out_once(arkit_model):
-    """Shape.identity_bases contracts the expression of every sampled frame in one product
-    with the points model's core laid out once by its sampler (``Sampler.leading``): the
-    bases are np.tensordot's to the bit, and the layout is made once, not at every call."""
-    from facetransfer.track.capture_points import Shape, expression_axis, sampler
-
-    m = arkit_model
-    smp = sampler(m)
-    shape = Shape(m, m.training_weights("identity", "id02"), smp, CaptureOptions())
-    X = np.random.default_rng(3).uniform(0.0, 1.0, (5, shape.size))
-    axis = expression_axis(m)
-    core = smp.model.core
-    want = np.tensordot(shape.weights(X)["expression"], core, axes=([1], [axis]))
-    want = np.moveaxis(want.reshape(5, -1, 3, want.shape[-1]), 3, 1)
-    B = shape.identity_bases(X, None)
-    assert B.shape == want.shape and np.array_equal(B, want)
-    layout = smp.leading(axis)
-    assert smp.leading(axis) is layout
-    assert np.array_equal(layout, np.moveaxis(core, axis, 0).reshape(core.shape[axis], -1))
-    again = shape.identity_bases(X, None)
-    assert again is not B and np.array_equal(again, B)
-    assert expression_axis(type("M", (), {"mode_names": ("identity", "expression", "viseme")})) \
-        is None
-
-
 def test_the_tracked_points_are_made_before_a_fork(arkit_model, tmp_path, monkeypatch):
-    """capture.prepare_points makes the sampler a fit of MediaPipe's detections uses (dense
-    points and the identity bases' layout), so a forked child inherits it; start_background
-    _track makes it unless the cache holds the child's track."""
+    """capture.prepare_points makes the sampler a fit of MediaPipe's detections uses (with
+    the dense points), so a forked child inherits it; start_background_track makes it unless
+    the cache holds the child's track."""
     from facetransfer.track import capture_points, obtain
     from facetransfer.track.capture import prepare_points
 
@@ -558,7 +533,6 @@ def test_the_tracked_points_are_made_before_a_fork(arkit_model, tmp_path, monkey
     prepare_points(m)
     (smp,) = capture_points._SAMPLERS.values()
     assert smp is capture_points.sampler(m, mediapipe_correspondence(m))
-    assert set(smp._leading) == {capture_points.expression_axis(m)}
     prepare_points(type("NoLandmarks", (), {"landmarks": None})())   # nothing to make
     assert len(capture_points._SAMPLERS) == 1
 

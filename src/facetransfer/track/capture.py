@@ -557,8 +557,8 @@ def _dense_points(model, opt: CaptureOptions):
 
 def prepare_points(model, options: CaptureOptions | None = None) -> None:
     """The capture's tracked points of ``model`` (its core read at them,
-    :func:`.capture_points.sampler`, which keeps them, and the identity bases' layout of that
-    core) made now, as a fit with ``options`` of MediaPipe's detections makes them.
+    :func:`.capture_points.sampler`, which keeps them) made now, as a fit with ``options`` of
+    MediaPipe's detections makes them.
 
     Making them reads the model's core at the points (0.1-0.15 CPU-s, most of it the pages
     of a core mapped from its file). A command that tracks a second clip in a forked child
@@ -567,10 +567,7 @@ def prepare_points(model, options: CaptureOptions | None = None) -> None:
     landmark vertices (whose tracking fails on them)."""
     if getattr(model, "landmarks", None) is None:
         return
-    sampler = capture_points.sampler(model, _dense_points(model, options or CaptureOptions()))
-    axis = capture_points.expression_axis(model) if is_arkit_model(model) else None
-    if axis is not None:
-        sampler.leading(axis)
+    capture_points.sampler(model, _dense_points(model, options or CaptureOptions()))
 
 
 def _track_passes(run: "_FitRun", det: ClipDetections, weights: PointWeights,

@@ -21,7 +21,7 @@ from .gaze import GAZE_NAMES
 from .lip_contact import lip_contact
 from .solver import BasisCache, Prior
 
-__all__ = ["Sampler", "sampler", "Shape", "EYELID", "expression_axis"]
+__all__ = ["Sampler", "sampler", "Shape", "EYELID"]
 
 #: ARKit shapes of the eyelids: fast (a blink closes and opens in 4-6 frames).
 EYELID = ("eyeBlink", "eyeSquint", "eyeWide")
@@ -53,19 +53,6 @@ class Sampler:
                                       mode_names=model.mode_names, labels=model.labels,
                                       faces=np.zeros((0, 3), np.int64))
         self.mp_index = None if dense is None else dense.mp_index
-        self._leading: dict = {}
-
-    def leading(self, axis: int) -> np.ndarray:
-        """The points model's core with its ``axis`` first, as an ``(r, rest)`` matrix: the
-        operand :func:`numpy.tensordot` makes of the core to contract that axis (the same
-        transpose and reshape: a copy where the core's memory is not in that order, as the
-        capture's is), for :meth:`Shape.identity_bases`; made once
-        (:func:`facetransfer.track.capture.prepare_points` makes it before a fork) instead of
-        at every call (a 26 MB copy for the default model's dense points)."""
-        if axis not in self._leading:
-            core = self.model.core
-            self._leading[axis] = np.moveaxis(core, axis, 0).reshape(core.shape[axis], -1)
-        return self._leading[axis]
 
 
 #: The last samplers made (:func:`sampler`), by model and dense points.
@@ -84,14 +71,6 @@ def sampler(model, dense=None) -> Sampler:
     return _SAMPLERS[key]
 
 
-def expression_axis(model) -> int | None:
-    """The core axis of the expression mode where :meth:`Shape.identity_bases` contracts it
-    in one product (a model of identity and expression; for an ARKit model), else None."""
-    if set(model.mode_names) != {"identity", "expression"}:
-        return None
-    return model.mode_index("expression") + 1
-
-
 class Shape:
     """The face at the 68 landmark vertices as a linear function of per-frame parameters.
 
@@ -103,7 +82,6 @@ class Shape:
                  opt, offset: np.ndarray | None = None,
                  view: np.ndarray | None = None):  # opt: capture.CaptureOptions
         self.model, self.opt = sampler.model, opt                           # points model
-        self.sampler = sampler
         P = sampler.model.n_vertices
         self.offset = np.zeros((P, 3)) if offset is None else offset        # (P, 3) static
         self.view = view                    # (P, 3): the offset's part times sin(yaw), or None
@@ -190,12 +168,9 @@ class Shape:
         entry of the weights being ``identity``: ``(F, r, P, 3)`` (an ARKit model of identity
         and expression: the expression mode of every frame contracted in one product)."""
         m = self.model
-        axis = expression_axis(m) if self.arkit else None
-        if axis is not None:
+        if self.arkit and set(m.mode_names) == {"identity", "expression"}:
             E = self.weights(X)["expression"]                                  # (F, r_e)
-            # np.tensordot's product, its copy of the core made once
-            B = np.dot(E, self.sampler.leading(axis)).reshape(
-                (len(E),) + tuple(n for k, n in enumerate(m.core.shape) if k != axis))
+            B = np.tensordot(E, m.core, axes=([1], [m.mode_index("expression") + 1]))
             return np.moveaxis(B.reshape(len(E), -1, 3, B.shape[-1]), 3, 1)   # (F, 3P, r)
         out = []
         for x in X:
