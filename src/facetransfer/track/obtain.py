@@ -523,11 +523,11 @@ def start_background_track(video, model, max_frames: int, *, method: str, option
         return None
     from ..signals import deferred_signals
 
-    _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames, face,
-                       int(detect_every), bool(detect_eyes))
     _prepare_child(video, model, len(frames[0]) if frames is not None else int(max_frames),
                    method, (options, face, int(detect_every),
                             bool(detect_eyes) and int(detect_every) > 1))
+    _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames, face,
+                       int(detect_every), bool(detect_eyes))
     fut = None
     try:
         pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))
