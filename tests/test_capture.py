@@ -519,3 +519,48 @@ def test_sin_yaw_clips_keeps_nan_and_at_view_copies_as_copy_copy(arkit_model):
     other = shape.with_options(CaptureOptions(lip_contact=False))
     assert other.opt.lip_contact is False and shape.opt.lip_contact is True
     assert all(getattr(other, k) is v for k, v in vars(want).items() if k != "opt")
+
+
+def test_the_tracked_points_are_made_before_a_fork(arkit_model, tmp_path, monkeypatch):
+    """capture.prepare_points makes the sampler a fit of MediaPipe's detections uses (with
+    the dense points), so a forked child inherits it; start_background_track makes it unless
+    the cache holds the child's track."""
+    from facetransfer.track import capture_points, obtain
+    from facetransfer.track.capture import prepare_points
+
+    m = arkit_model
+    monkeypatch.setattr(capture_points, "_SAMPLERS", {})
+    prepare_points(m)
+    (smp,) = capture_points._SAMPLERS.values()
+    assert smp is capture_points.sampler(m, mediapipe_correspondence(m))
+    prepare_points(type("NoLandmarks", (), {"landmarks": None})())   # nothing to make
+    assert len(capture_points._SAMPLERS) == 1
+
+    made = []
+    monkeypatch.setattr(capture_points, "sampler",
+                        lambda model, dense=None: made.append(model) or smp)
+    monkeypatch.setattr(obtain, "holds", lambda key: False)
+    obtain._prepare_child(tmp_path / "v.mp4", m, 10, "auto", (None, None, 2, True))
+    obtain._prepare_child(tmp_path / "v.mp4", m, 10, "flow", (None, None, 1, False))
+    assert made == [m]
+    monkeypatch.setattr(obtain, "holds", lambda key: True)             # the child's track kept
+    obtain._prepare_child(tmp_path / "v.mp4", m, 10, "capture", (None, None, 2, True))
+    assert made == [m]
+
+
+def test_a_clips_targets_are_each_frames_made_at_once(arkit_model):
+    """clip_targets holds every frame's detection_targets (detections, then the dense points
+    of MediaPipe's; weight 0 where unknown), the same arrays to the bit, read-only."""
+    from facetransfer.track.capture_frame import PointWeights, clip_targets, detection_targets
+
+    det, _, _ = _synthetic(arkit_model, F=12, late=3)              # no face in 3 frames
+    mp_index = mediapipe_correspondence(arkit_model).mp_index
+    w = np.linspace(0.1, 1.0, 68 + len(mp_index))
+    for pw in (PointWeights(w, mp_index), PointWeights(w[:68])):
+        held = clip_targets(det, pw)
+        assert pw.targets is None and held.targets is not None
+        for i in range(det.n_frames):
+            (p, wt), (q, vt) = detection_targets(det, i, pw), detection_targets(det, i, held)
+            assert np.array_equal(p, q, equal_nan=True) and np.array_equal(wt, vt)
+            assert q.dtype == p.dtype and not q.flags.writeable and not vt.flags.writeable
+        assert held.targets[0] is not det.points

@@ -111,6 +111,17 @@ def partial_path(key: str) -> Path:
     return track_dir() / f"{key}.partial.npz"
 
 
+def holds(key: str | None) -> bool:
+    """Whether the cache has a file under ``key`` (not read: :func:`cached_track` may still
+    find it unreadable)."""
+    if key is None:
+        return False
+    try:
+        return _path(key).is_file()
+    except OSError:                       # no cache folder can be made: nothing cached
+        return False
+
+
 def cached_track(key: str | None, model):
     """The cached track of ``key`` (its use recorded), or None: no key, none cached, or an
     unreadable or foreign file (removed, with a warning)."""

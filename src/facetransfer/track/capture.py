@@ -56,8 +56,8 @@ from ..errors import TrackError, VideoError, plain_interrupts
 from .aspect import stored_pixels
 from .camera import Pose
 from . import capture_points
-from .capture_frame import (FrameState, PointWeights, detection_targets, fit_frame,
-                            iris_of, sin_yaw)
+from .capture_frame import (FrameState, PointWeights, clip_targets, detection_targets,
+                            fit_frame, iris_of, sin_yaw)
 from .capture_points import Sampler, Shape
 from .detect import ClipDetections
 from .fit_checkpoint import SavedFit, fit_key
@@ -79,7 +79,7 @@ from .video_detect import _open, detect_video
 log = logging.getLogger(__name__)
 
 __all__ = ["CaptureOptions", "capture_video", "capture_detections", "detect_video",
-           "load_kernels"]
+           "load_kernels", "prepare_points"]
 
 #: iBUG points of well-defined corners (outer and inner eye corners, nose tip, mouth corners):
 #: any detector places them most consistently, so they weigh :data:`CORNER_WEIGHT` times more.
@@ -534,18 +534,40 @@ def _point_weights(det: ClipDetections, model, opt: CaptureOptions
     reliabilities and the iris centres the gaze follows."""
     weights = np.asarray(opt.point_weights if opt.point_weights is not None
                          else capture_point_weights(), float)
-    dense = None
-    if opt.dense > 0 and det.points478 is not None:
-        from .dense import mediapipe_correspondence
-
-        dense = mediapipe_correspondence(model)
+    dense = _dense_points(model, opt) if det.points478 is not None else None
+    if dense is not None:
         weights = np.concatenate([weights, np.full(len(dense.mp_index), float(opt.dense))])
     sampler = capture_points.sampler(model, dense)
     iris = closed = None
     if opt.gaze and is_arkit_model(model) and det.points478 is not None \
             and det.points478.shape[1] > max(IRIS_INDEX):
         iris, closed = usable_iris(det.points478)
-    return PointWeights(weights, sampler.mp_index, iris, closed), sampler
+    return clip_targets(det, PointWeights(weights, sampler.mp_index, iris, closed)), sampler
+
+
+def _dense_points(model, opt: CaptureOptions):
+    """MediaPipe's dense points on ``model`` the fit follows with ``opt.dense`` (detections
+    with MediaPipe's 478 points), or None."""
+    if not opt.dense > 0:
+        return None
+    from .dense import mediapipe_correspondence
+
+    return mediapipe_correspondence(model)
+
+
+def prepare_points(model, options: CaptureOptions | None = None) -> None:
+    """The capture's tracked points of ``model`` (its core read at them,
+    :func:`.capture_points.sampler`, which keeps them) made now, as a fit with ``options`` of
+    MediaPipe's detections makes them.
+
+    Making them reads the model's core at the points (0.1-0.15 CPU-s, most of it the pages
+    of a core mapped from its file). A command that tracks a second clip in a forked child
+    (:func:`facetransfer.track.obtain.start_background_track`) calls this before the fork:
+    the child inherits them instead of making them again. Nothing for a model without
+    landmark vertices (whose tracking fails on them)."""
+    if getattr(model, "landmarks", None) is None:
+        return
+    capture_points.sampler(model, _dense_points(model, options or CaptureOptions()))
 
 
 def _track_passes(run: "_FitRun", det: ClipDetections, weights: PointWeights,

@@ -115,6 +115,8 @@ def mediapipe_to_ibug(points: np.ndarray) -> np.ndarray:
     if P.ndim < 2 or P.shape[-2] < 468:
         raise ShapeError(f"MediaPipe landmarks must be (..., 478, d), got {P.shape}")
     A = mapping_matrix(P.shape[-2])                                        # (68, n)
+    if np.isfinite(P).all():          # a face in every frame: nan_to_num's copy, unchanged
+        return np.einsum("im,...md->...id", A, np.array(P, copy=True))
     out = np.einsum("im,...md->...id", A, np.nan_to_num(P))
     unknown = np.einsum("im,...m->...i", A != 0, np.isnan(P).any(axis=-1)) > 0
     out[unknown] = np.nan  # an iBUG point is unknown when any of its MediaPipe points is

@@ -15,7 +15,7 @@ import numpy as np
 from ..errors import ShapeError, TrackError, VideoError
 from ..errors import RewriteError
 from .aspect import warn_stored_fit
-from .cache import cached_track, partial_path, store_track, track_key
+from .cache import cached_track, holds, partial_path, store_track, track_key
 from .presets import check_track_method
 from .project import project_landmarks, take_frames
 from .result import Track
@@ -340,13 +340,19 @@ def _kept(video, n: int, method: str, depends: tuple, model):
     by ``method`` with :func:`_depends`'s ``(options, face, every, eyes)``, and the track kept
     under it or, for a detector shown fewer frames (``every`` > 1), the better track made
     showing it every frame where one was; None where none is kept."""
+    key, every_frame = _keys(video, n, method, depends, model)
+    tr = cached_track(every_frame, model)
+    return key, (tr if tr is not None else cached_track(key, model))
+
+
+def _keys(video, n: int, method: str, depends: tuple, model) -> tuple:
+    """:func:`_kept`'s two keys: the track's, and for a detector shown fewer frames
+    (``every`` > 1) that of the track made showing it every frame (else None)."""
     options, face, every, eyes = depends
     key = track_key(video, n, method, _depends(method, video, options, face, every, eyes), model)
-    tr = None
-    if every > 1:
-        tr = cached_track(track_key(video, n, method, _depends(method, video, options, face),
-                                    model), model)
-    return key, (tr if tr is not None else cached_track(key, model))
+    every_frame = None if every <= 1 else \
+        track_key(video, n, method, _depends(method, video, options, face), model)
+    return key, every_frame
 
 
 def _check_counts(max_frames, detect_every) -> None:
@@ -483,6 +489,20 @@ def _background_track_job():
                         detect_eyes=eyes)
 
 
+def _prepare_child(video, model, n: int, method: str, depends: tuple) -> None:
+    """What the child tracking ``video``'s first ``n`` frames with ``method`` (as
+    :func:`obtain_track` with :func:`_kept`'s ``depends``) would make of the model, made here
+    before the fork, where it is no track the cache holds: the capture's tracked points
+    (:func:`facetransfer.track.capture.prepare_points`; this process, tracking the other clip
+    the same way, then uses them too)."""
+    if method not in ("auto", "capture") or any(holds(k) for k in _keys(video, n, method,
+                                                                           depends, model)):
+        return
+    from .capture import prepare_points
+
+    prepare_points(model)
+
+
 def start_background_track(video, model, max_frames: int, *, method: str, options,
                             parallel: bool | None, frames=None,
                             face: str | None = None, detect_every: int = 1,
@@ -503,6 +523,9 @@ def start_background_track(video, model, max_frames: int, *, method: str, option
         return None
     from ..signals import deferred_signals
 
+    _prepare_child(video, model, len(frames[0]) if frames is not None else int(max_frames),
+                   method, (options, face, int(detect_every),
+                            bool(detect_eyes) and int(detect_every) > 1))
     _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames, face,
                        int(detect_every), bool(detect_eyes))
     fut = None
