@@ -44,19 +44,21 @@ def jacobi_sweeps(h: np.ndarray, inner: np.ndarray, origin: tuple[int, int],
                          f"holding the region's box, got {h.shape} {h.dtype} and a box of "
                          f"{m.shape} at {(y0, x0)}")
     if iterations > 0 and m.size:
-        _sweeps_kernel(h, m, y0, x0, int(iterations), np.empty(m.shape + (3,), np.float32))
+        _sweeps_kernel(h, m, y0, x0, int(iterations), np.empty((2, 3 * m.shape[1]), np.float32))
 
 
 def _sweeps_kernel_py(h, inner, y0, x0, iterations, new):  # pragma: no cover (numba)
-    """:func:`jacobi_sweeps` with the scratch ``new`` (h, w, 3) float32: each sweep's sums
-    for every pixel of the box, a row at a time on its channels' flat run (a loop without
-    branches between the row's ends, on unsigned indices: one the compiler vectorises), then
-    written back at the region's pixels once the sweep has read the one before."""
+    """:func:`jacobi_sweeps` with the scratch ``new`` (2, 3 w) float32: each sweep's sums a
+    row at a time on its channels' flat run (a loop without branches between the row's ends,
+    on unsigned indices: one the compiler vectorises), into one of two scratch rows; a row
+    is written back at the region's pixels once the next row's sums have read it (the rows
+    before it are no longer read by the sweep), so the sweep reads only the values of the
+    one before, without a scratch image as large as the box (in the cache, not memory)."""
     H, W = inner.shape
-    hf, nf = h.reshape(h.size), new.reshape(new.size)
+    hf = h.reshape(h.size)
     for _ in range(iterations):
         for y in range(H):
-            o = np.uint64(3 * W * y)
+            nr = new[y % 2]
             up = np.uint64(3 * ((y0 + max(y - 1, 0)) * h.shape[1] + x0))
             row = np.uint64(3 * ((y0 + y) * h.shape[1] + x0))
             dn = np.uint64(3 * ((y0 + min(y + 1, H - 1)) * h.shape[1] + x0))
@@ -65,16 +67,25 @@ def _sweeps_kernel_py(h, inner, y0, x0, iterations, new):  # pragma: no cover (n
                     j = np.uint64(3 * x + c)
                     jl = np.uint64(3 * max(x - 1, 0) + c)
                     jr = np.uint64(3 * min(x + 1, W - 1) + c)
-                    nf[o + j] = _mean4(hf[up + j], hf[row + jl], hf[row + jr], hf[dn + j])
+                    nr[j] = _mean4(hf[up + j], hf[row + jl], hf[row + jr], hf[dn + j])
             for i in range(3, 3 * W - 3):
                 j = np.uint64(i)
-                nf[o + j] = _mean4(hf[up + j], hf[row + j - np.uint64(3)],
-                                   hf[row + j + np.uint64(3)], hf[dn + j])
-        for y in range(H):
-            for x in range(W):
-                if inner[y, x]:
-                    for c in range(3):
-                        h[y0 + y, x0 + x, c] = new[y, x, c]
+                nr[j] = _mean4(hf[up + j], hf[row + j - np.uint64(3)],
+                               hf[row + j + np.uint64(3)], hf[dn + j])
+            if y > 0:
+                _write_row(h, inner, y0, x0, y - 1, new[(y - 1) % 2])
+        _write_row(h, inner, y0, x0, H - 1, new[(H - 1) % 2])
+
+
+def _write_row_py(h, inner, y0, x0, y, nr):  # pragma: no cover (numba, inlined)
+    """Row ``y`` of the box set to the scratch row ``nr`` (3 w,) at the region's pixels."""
+    for x in range(inner.shape[1]):
+        if inner[y, x]:
+            for c in range(3):
+                h[y0 + y, x0 + x, c] = nr[3 * x + c]
+
+
+_write_row = _maybe_njit(_write_row_py, inline=True)
 
 
 def _mean4_py(a, b, c, d):  # pragma: no cover (numba, inlined)
