@@ -677,9 +677,9 @@ def _feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.n
     Equal to ``cv2.distanceTransform(..., DIST_L2, DIST_MASK_PRECISE)`` scaled and clipped, but
     computed only where it is below 1: pixels whose ``(2r + 1)²`` window (``r = ceil(feather)``)
     lies inside ``m`` are farther than ``feather`` from outside (a square erosion finds them,
-    1 there, 0 elsewhere, in one conversion); the rest of ``m`` (its band along the outline,
-    from ``cv2.findNonZero``) search their window. ``edge_outside``: pixels beyond the crop
-    count as outside (else, as OpenCV, they do not).
+    1 there, 0 elsewhere); the rest of ``m`` (its band along the outline) search their
+    window, nearest offsets first, up to the first whose alpha is 1 (:func:`_alpha_kernel`).
+    ``edge_outside``: pixels beyond the crop count as outside (else, as OpenCV, they do not).
     """
     r = max(int(np.ceil(feather)), 1)
     m8 = m.view(np.uint8)
