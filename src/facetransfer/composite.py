@@ -699,10 +699,9 @@ def _square(k: int) -> np.ndarray:
 
 def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover (numba)
     """:func:`_feather_alpha` into ``a`` (h, w) float32 from ``m`` (h, w) uint8 and its square
-    erosion ``deep``: 1 in ``deep``, 0 outside ``m`` (a row at a time, without a branch: the
-    compiler vectorises it), then the window search at the row's band pixels (in ``m``, not
-    in ``deep``). The search stops at the first offset whose alpha is 1 (those after it are
-    no nearer: 1 too, as when no pixel of the window is outside)."""
+    erosion ``deep``: 1 in ``deep``, 0 outside ``m`` (a row without a branch: vectorised),
+    then the window search at the row's band pixels (in ``m``, not ``deep``), up to the first
+    offset whose alpha is 1 (those after it are no nearer: 1, as when none is outside)."""
     h, w = m.shape
     k = 2 * r + 1
     d2 = np.empty(k * k, np.int64)
@@ -712,8 +711,7 @@ def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover 
     oy, ox, od = order // k - r, order % k - r, d2[order]
     n = od.shape[0]  # the offsets searched: those of an alpha below 1
     for i in range(od.shape[0]):
-        if min(np.sqrt(np.float32(od[i])) / np.float32(feather), np.float32(1.0)) \
-                >= np.float32(1.0):
+        if min(np.sqrt(np.float32(od[i])) / np.float32(feather), np.float32(1.0)) >= 1:
             n = i
             break
     for y in range(h):
