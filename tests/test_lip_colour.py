@@ -213,6 +213,49 @@ def test_recolour_leaves_the_colours_it_does_not_move_to_the_level():
     assert (out[~grey] != img[~grey]).all(axis=-1).mean() > 0.9
 
 
+def _recolour_numpy(image, w, target_lab, keep):
+    """:func:`facetransfer.lip_colour.recolour_lips` as numpy expressions (before its
+    kernels): the reference they must equal bit for bit."""
+    import cv2
+
+    moved = w > 0.0
+    if not moved.any():
+        return
+    lab = cv2.cvtColor(image.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
+    x = lab[moved]
+    c0, c1 = lc.CHROMA_RAMP
+    ww = w[moved] * np.clip((np.hypot(x[:, 1], x[:, 2]) - c0) / (c1 - c0), 0.0, 1.0)
+    go = ww > 0.0
+    x += ww[:, None] * (1.0 - np.asarray(keep, np.float32)) * (
+        np.asarray(target_lab, np.float32) - x)
+    lab[moved] = x
+    rgb = cv2.cvtColor(lab, cv2.COLOR_LAB2RGB)
+    moved[moved] = go
+    image[moved] = np.clip(rgb[moved] * 255.0 + 0.5, 0, 255).astype(np.uint8)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_recolour_kernels_equal_the_numpy_expressions(seed):
+    """The recolouring's kernels (the move in CIELAB, the moved pixels written back) against
+    the numpy expressions they replaced, bit for bit: random colours (grey and coloured),
+    weights of 0, of 1, between and negative, several targets and keeps, a crop's view."""
+    rng = np.random.default_rng(seed)
+    img = rng.integers(0, 256, (90, 130, 3), dtype=np.uint8)
+    img[:20] = img[:20, :, :1]  # grey rows: chroma under the ramp
+    w = rng.random((90, 130)).astype(np.float32)
+    w[rng.random(w.shape) < 0.3] = 0.0
+    w[rng.random(w.shape) < 0.1] = 1.0
+    w[rng.random(w.shape) < 0.05] = -0.5
+    target = np.array([40.0, 30.0, 15.0]) + rng.normal(0, 10, 3)
+    keep = np.clip(rng.random(3), lc.KEEP_MIN, 1.0)
+    for box in ((slice(None), slice(None)), (slice(7, 80), slice(3, 121))):
+        want, got = img.copy(), img.copy()
+        _recolour_numpy(want[box], w[box], target, keep)
+        lc.recolour_lips(got[box], w[box], target, keep)
+        np.testing.assert_array_equal(got, want)
+        assert (got != img).any()
+
+
 def test_tint_mouth_scales_the_masked_pixels_by_their_weight():
     V = np.array([[0, 0, 0], [30, 0, 0], [0, 30, 0], [30, 30, 0]], float)
     F = np.array([[0, 1, 2], [1, 3, 2]])

@@ -206,10 +206,10 @@ def test_gain_samples_equal_numpy():
     scale = float(max(np.ptp(ys), np.ptp(xs), 1))
     step = -(-ys.size // 500)
     ys, xs = ys[::step], xs[::step]
-    pts = cv2.findNonZero(where.view(np.uint8)).reshape(-1, 2)
     k = ys.size
     u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
-    patch._gain_samples(pts, 0, 0, 0, 0, face, part, 500, patch._LOG1P_U8, u, v, r, centre)
+    patch._gain_samples(where.view(np.uint8), int(where.sum()), 0, 0, 0, 0, face, part, 500,
+                        patch._LOG1P_U8, u, v, r, centre)
     np.testing.assert_array_equal(centre, [cx, cy, scale])
     np.testing.assert_array_equal(u, (xs - cx) / scale)
     np.testing.assert_array_equal(v, (ys - cy) / scale)
@@ -409,12 +409,11 @@ def _gain_factors_numpy(face, part, where, box, max_samples=4096):
     """:func:`facetransfer.patch._gain_factors` with its tail as the numpy expressions it was
     before the forty-fifth session (the columns' and rows' coordinates, held within the
     samples' middle by ``np.partition``, times the plane's coefficients, then ``np.exp``)."""
-    pts = cv2.findNonZero(where.view(np.uint8))
-    n = pts.shape[0]
+    n = int(np.count_nonzero(where))
     k = -(-n // max(1, -(-n // int(max_samples))))
     u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
-    patch._gain_samples(pts.reshape(n, 2), 0, 0, 0, 0, face, part, int(max_samples),
-                        patch._LOG1P_U8, u, v, r, centre)
+    patch._gain_samples(np.ascontiguousarray(where).view(np.uint8), n, 0, 0, 0, 0, face, part,
+                        int(max_samples), patch._LOG1P_U8, u, v, r, centre)
     cx, cy, scale = centre
     coef = np.empty((3, 3))
     patch._plane_l1_kernel(u, v, r, patch.GAIN_ITERATIONS, coef)

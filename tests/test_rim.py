@@ -324,3 +324,18 @@ def test_a_face_mostly_past_the_frames_edge_renders(narrower):
                         blending=BlendOptions("none"))
     assert out.face_mask.any() and not out.face_mask[:, :SIZE // 2].any()
     np.testing.assert_array_equal(out.image[~out.face_mask], frame[~out.face_mask])
+
+
+def test_median5_is_opencvs_median_of_a_binary_image():
+    """:func:`facetransfer.rim._median5` (the 5 x 5 windows' sums of a 0/1 image, 13 or
+    more) is ``cv2.medianBlur(kept, 5) != 0`` pixel for pixel: sparse, half and dense random
+    images from one pixel to wider than OpenCV's vector width, the border replicated."""
+    import cv2
+
+    rng = np.random.default_rng(3)
+    for h, w in [(1, 1), (1, 7), (6, 1), (2, 3), (4, 4), (5, 5), (13, 40), (44, 25), (70, 131)]:
+        for p in (0.1, 0.5, 0.9):
+            kept = (rng.random((h, w)) < p).astype(np.uint8)
+            got = rim._median5(kept)
+            assert got.dtype == np.uint8 and got.shape == (h, w)
+            np.testing.assert_array_equal(got, (cv2.medianBlur(kept, 5) != 0).view(np.uint8))

@@ -677,9 +677,9 @@ def _feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.n
     Equal to ``cv2.distanceTransform(..., DIST_L2, DIST_MASK_PRECISE)`` scaled and clipped, but
     computed only where it is below 1: pixels whose ``(2r + 1)²`` window (``r = ceil(feather)``)
     lies inside ``m`` are farther than ``feather`` from outside (a square erosion finds them,
-    1 there, 0 elsewhere, in one conversion); the rest of ``m`` (its band along the outline,
-    from ``cv2.findNonZero``) search their window. ``edge_outside``: pixels beyond the crop
-    count as outside (else, as OpenCV, they do not).
+    1 there, 0 elsewhere); the rest of ``m`` (its band along the outline) search their
+    window, nearest offsets first, up to the first whose alpha is 1 (:func:`_alpha_kernel`).
+    ``edge_outside``: pixels beyond the crop count as outside (else, as OpenCV, they do not).
     """
     r = max(int(np.ceil(feather)), 1)
     m8 = m.view(np.uint8)
@@ -699,7 +699,9 @@ def _square(k: int) -> np.ndarray:
 
 def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover (numba)
     """:func:`_feather_alpha` into ``a`` (h, w) float32 from ``m`` (h, w) uint8 and its square
-    erosion ``deep``: 1 in ``deep``, 0 outside ``m``, the window search between (the band)."""
+    erosion ``deep``: 1 in ``deep``, 0 outside ``m`` (a row without a branch: vectorised),
+    then the window search at the row's band pixels (in ``m``, not ``deep``), up to the first
+    offset whose alpha is 1 (those after it are no nearer: 1, as when none is outside)."""
     h, w = m.shape
     k = 2 * r + 1
     d2 = np.empty(k * k, np.int64)
@@ -707,29 +709,32 @@ def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover 
         d2[i] = (i // k - r) ** 2 + (i % k - r) ** 2
     order = np.argsort(d2, kind="mergesort")
     oy, ox, od = order // k - r, order % k - r, d2[order]
+    n = od.shape[0]  # the offsets searched: those of an alpha below 1
+    for i in range(od.shape[0]):
+        if min(np.sqrt(np.float32(od[i])) / np.float32(feather), np.float32(1.0)) >= 1:
+            n = i
+            break
     for y in range(h):
         for x in range(w):
-            if deep[y, x] or not m[y, x]:
-                a[y, x] = np.float32(1.0) if deep[y, x] else np.float32(0.0)
-            else:
-                a[y, x] = _window_alpha(m, x, y, oy, ox, od, r, feather, edge_outside)
+            a[y, x] = np.float32(1.0) if deep[y, x] else np.float32(0.0)
+        for x in range(w):
+            if m[y, x] and not deep[y, x]:
+                a[y, x] = _window_alpha(m, x, y, oy, ox, od, n, feather, edge_outside)
 
 
-def _window_alpha_py(m, x, y, oy, ox, od, r, feather, edge_outside):  # pragma: no cover
-    """:func:`_alpha_kernel`'s search at ``(x, y)``: the first offset ``(ox, oy)`` outside,
-    its squared distance ``od`` as ``min(sqrt / feather, 1)`` in float32 (numba, inlined)."""
+def _window_alpha_py(m, x, y, oy, ox, od, n, feather, edge_outside):  # pragma: no cover
+    """:func:`_alpha_kernel`'s search at ``(x, y)``: the first of the ``n`` nearest offsets
+    ``(ox, oy)`` outside, its squared distance ``od`` as ``min(sqrt / feather, 1)`` in
+    float32; 1 if none is (numba, inlined)."""
     h, w = m.shape
-    best = 2 * (r + 1) * (r + 1)
-    for i in range(od.shape[0]):
+    for i in range(n):
         yy, xx = y + oy[i], x + ox[i]
         if yy < 0 or yy >= h or xx < 0 or xx >= w:
             if edge_outside:
-                best = od[i]
-                break
+                return min(np.sqrt(np.float32(od[i])) / np.float32(feather), np.float32(1.0))
         elif m[yy, xx] == 0:
-            best = od[i]
-            break
-    return min(np.sqrt(np.float32(best)) / np.float32(feather), np.float32(1.0))
+            return min(np.sqrt(np.float32(od[i])) / np.float32(feather), np.float32(1.0))
+    return np.float32(1.0)
 
 
 _window_alpha = _maybe_njit(_window_alpha_py, inline=True)

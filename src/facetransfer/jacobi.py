@@ -44,37 +44,64 @@ def jacobi_sweeps(h: np.ndarray, inner: np.ndarray, origin: tuple[int, int],
                          f"holding the region's box, got {h.shape} {h.dtype} and a box of "
                          f"{m.shape} at {(y0, x0)}")
     if iterations > 0 and m.size:
-        _sweeps_kernel(h, m, y0, x0, int(iterations), np.empty(m.shape + (3,), np.float32))
+        _sweeps_kernel(h, m, y0, x0, int(iterations),
+                       np.empty((int(iterations), 3, 3 * m.shape[1]), np.float32))
 
 
-def _sweeps_kernel_py(h, inner, y0, x0, iterations, new):  # pragma: no cover (numba)
-    """:func:`jacobi_sweeps` with the scratch ``new`` (h, w, 3) float32: each sweep's sums
-    for every pixel of the box, a row at a time on its channels' flat run (a loop without
-    branches between the row's ends, on unsigned indices: one the compiler vectorises), then
-    written back at the region's pixels once the sweep has read the one before."""
+def _sweeps_kernel_py(h, inner, y0, x0, iterations, rings):  # pragma: no cover (numba)
+    """:func:`jacobi_sweeps` with the scratch ``rings`` (iterations, 3, 3 w) float32: the
+    sweeps pipelined down the box, sweep ``k`` a row behind sweep ``k - 1`` (it needs that
+    sweep's rows above, at and below its own), each sweep's last three rows kept in its ring
+    (row ``y`` in slot ``y % 3``: the region's pixels the sums, the rest as they were), the
+    first sweep reading ``h`` itself and the last sweep's rows written back two rows behind
+    the first's reads. The box is read from memory once, not once a sweep; every value is
+    the same sum of the same values as sweep after sweep over the whole box."""
     H, W = inner.shape
-    hf, nf = h.reshape(h.size), new.reshape(new.size)
-    for _ in range(iterations):
-        for y in range(H):
-            o = np.uint64(3 * W * y)
-            up = np.uint64(3 * ((y0 + max(y - 1, 0)) * h.shape[1] + x0))
+    n = iterations
+    hf = h.reshape(h.size)
+    lag = max(n, 2)  # the last sweep's row y written back once the first has read it
+    for t in range(H + lag):
+        for k in range(n):
+            y = t - k
+            if y < 0 or y >= H:
+                continue
+            out = rings[k, y % 3]
             row = np.uint64(3 * ((y0 + y) * h.shape[1] + x0))
-            dn = np.uint64(3 * ((y0 + min(y + 1, H - 1)) * h.shape[1] + x0))
-            for x in (0, W - 1):  # the row's ends: their left or right neighbour replicated
-                for c in range(3):
-                    j = np.uint64(3 * x + c)
-                    jl = np.uint64(3 * max(x - 1, 0) + c)
-                    jr = np.uint64(3 * min(x + 1, W - 1) + c)
-                    nf[o + j] = _mean4(hf[up + j], hf[row + jl], hf[row + jr], hf[dn + j])
-            for i in range(3, 3 * W - 3):
-                j = np.uint64(i)
-                nf[o + j] = _mean4(hf[up + j], hf[row + j - np.uint64(3)],
-                                   hf[row + j + np.uint64(3)], hf[dn + j])
-        for y in range(H):
-            for x in range(W):
-                if inner[y, x]:
+            if k == 0:
+                up = np.uint64(3 * ((y0 + max(y - 1, 0)) * h.shape[1] + x0))
+                dn = np.uint64(3 * ((y0 + min(y + 1, H - 1)) * h.shape[1] + x0))
+                _sums(hf[up:up + np.uint64(3 * W)], hf[row:row + np.uint64(3 * W)],
+                      hf[dn:dn + np.uint64(3 * W)], out)
+            else:
+                src = rings[k - 1]
+                _sums(src[max(y - 1, 0) % 3], src[y % 3], src[min(y + 1, H - 1) % 3], out)
+            for x in range(W):  # outside the region: the values as they were
+                if not inner[y, x]:
                     for c in range(3):
-                        h[y0 + y, x0 + x, c] = new[y, x, c]
+                        out[3 * x + c] = hf[row + np.uint64(3 * x + c)]
+        y = t - lag
+        if 0 <= y < H:
+            row = np.uint64(3 * ((y0 + y) * h.shape[1] + x0))
+            last = rings[n - 1, y % 3]  # outside the region it holds the values as they were
+            for i in range(3 * W):
+                hf[row + np.uint64(i)] = last[i]
+
+
+def _sums_py(up, row, dn, out):  # pragma: no cover (numba, inlined)
+    """``out`` (3 w,) = the 4 neighbours' mean (:func:`_mean4`) of each channel value of the
+    row ``row`` (3 w,) between the rows ``up`` and ``dn``: the left and right neighbours
+    replicated at the row's ends; between them a loop without branches, on unsigned indices
+    (one the compiler vectorises)."""
+    L = row.shape[0]
+    W = L // 3
+    for x in (0, W - 1):
+        for c in range(3):
+            j = 3 * x + c
+            out[j] = _mean4(up[j], row[3 * max(x - 1, 0) + c], row[3 * min(x + 1, W - 1) + c],
+                            dn[j])
+    for i in range(3, L - 3):
+        j = np.uint64(i)
+        out[j] = _mean4(up[j], row[j - np.uint64(3)], row[j + np.uint64(3)], dn[j])
 
 
 def _mean4_py(a, b, c, d):  # pragma: no cover (numba, inlined)
@@ -85,4 +112,5 @@ def _mean4_py(a, b, c, d):  # pragma: no cover (numba, inlined)
 
 
 _mean4 = _maybe_njit(_mean4_py, inline=True)
+_sums = _maybe_njit(_sums_py, inline=True)
 _sweeps_kernel = _maybe_njit(_sweeps_kernel_py)

@@ -40,6 +40,7 @@ import numpy as np
 from .composite import mask_box
 from .errors import ShapeError
 from .render import interpolate_vertex_values, sample_texture
+from .render.raster import _maybe_njit
 from .topology import MeshTopology, _face_size, inside_polygon
 
 __all__ = ["LIP_LEVELS", "TINT_RANGE", "KEEP_MIN", "KEEP_SAME", "FLAT", "CHROMA_RAMP", "LipColour",
@@ -358,16 +359,48 @@ def recolour_lips(image: np.ndarray, w: np.ndarray, target_lab: np.ndarray,
     if not moved.any():
         return
     lab = cv2.cvtColor(image.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
-    x = lab[moved]
     c0, c1 = CHROMA_RAMP
-    ww = w[moved] * np.clip((np.hypot(x[:, 1], x[:, 2]) - c0) / (c1 - c0), 0.0, 1.0)
-    go = ww > 0.0     # the others as they are: the round trip alone moves 2 % of colours a level
-    x += ww[:, None] * (1.0 - np.asarray(keep, np.float32)) * (
-        np.asarray(target_lab, np.float32) - x)
-    lab[moved] = x
+    go = np.zeros(w.shape, np.uint8)  # the moved pixels' steps in one kernel, and then theirs
+    _move_lab(lab, np.ascontiguousarray(w, np.float32), np.float32(c0), np.float32(c1 - c0),
+              1.0 - np.asarray(keep, np.float32), np.asarray(target_lab, np.float32), go)
     rgb = cv2.cvtColor(lab, cv2.COLOR_LAB2RGB)
-    moved[moved] = go
-    image[moved] = np.clip(rgb[moved] * 255.0 + 0.5, 0, 255).astype(np.uint8)
+    out = np.array(image, copy=True, order="C")  # (the image a crop's view or not: one layout)
+    _put_moved(rgb, go, out)
+    image[...] = out
+
+
+def _move_lab_py(lab, w, c0, span, k, t, go):  # pragma: no cover (numba)
+    """:func:`recolour_lips`' move of ``lab`` (h, w, 3) float32 in place where ``w`` (h, w)
+    float32 is above 0: ``ww = w clip((hypot(a, b) - c0) / span, 0, 1)`` and ``x += ww k (t -
+    x)`` per channel (``k = 1 - keep``, ``t`` the target's colour, (3,) float32), ``go = ww >
+    0`` (h, w) uint8: the numpy expressions' float32 operations, in their order, without the
+    moved pixels gathered and scattered."""
+    zero, one = np.float32(0.0), np.float32(1.0)
+    for y in range(w.shape[0]):
+        for x in range(w.shape[1]):
+            if not w[y, x] > zero:
+                continue
+            r = (np.hypot(lab[y, x, 1], lab[y, x, 2]) - c0) / span
+            ww = w[y, x] * min(max(r, zero), one)
+            for c in range(3):
+                v = lab[y, x, c]
+                lab[y, x, c] = v + ww * k[c] * (t[c] - v)
+            go[y, x] = ww > zero
+
+
+def _put_moved_py(rgb, go, image):  # pragma: no cover (numba)
+    """``image`` (h, w, 3) uint8 set to ``clip(rgb 255 + 0.5, 0, 255)`` truncated (``rgb``
+    (h, w, 3) float32) where ``go`` (h, w) uint8, in place."""
+    for y in range(go.shape[0]):
+        for x in range(go.shape[1]):
+            if go[y, x]:
+                for c in range(3):
+                    v = rgb[y, x, c] * np.float32(255.0) + np.float32(0.5)
+                    image[y, x, c] = np.uint8(min(max(v, np.float32(0.0)), np.float32(255.0)))
+
+
+_move_lab = _maybe_njit(_move_lab_py)
+_put_moved = _maybe_njit(_put_moved_py)
 
 
 def _hue_axis(tint: LipTint) -> tuple[np.ndarray, float, float]:

@@ -519,10 +519,10 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
 
     ``where`` may be a crop of the mask whose top-left pixel is ``origin`` in ``face`` and
     ``part``; the fit's coordinates are those of ``face`` plus ``shift`` (as ``box``'s)."""
-    pts = cv2.findNonZero(np.ascontiguousarray(where).view(np.uint8))  # (n, 1, 2): (x, y)
-    if pts is None:
+    m = np.ascontiguousarray(where).view(np.uint8)
+    n = cv2.countNonZero(m)
+    if n == 0:
         raise RewriteError("the gain fit needs at least one pixel, got an empty mask")
-    n = pts.shape[0]
     k = -(-n // max(1, -(-n // int(max_samples))))  # the samples: every step-th pixel
     x0, y0, x1, y1 = box
     # exp(a + b x + c y) = exp(a) exp(b x) exp(c y): separable over the box's rows and columns,
@@ -531,8 +531,8 @@ def _gain_factors(face, part, where, iterations: int, box, max_samples: int, *,
     step = max(1, k // 1024)     # at most ~1024 of the samples give the middle's ends
     lo = int(round(GAIN_SUPPORT * (len(range(0, k, step)) - 1)))
     u, v, r, centre = np.empty(k), np.empty(k), np.empty((k, 3)), np.empty(3)
-    _gain_samples(pts.reshape(n, 2), int(origin[0]), int(origin[1]), int(shift[0]),
-                  int(shift[1]), face, part, int(max_samples), _LOG1P_U8, u, v, r, centre)
+    _gain_samples(m, n, int(origin[0]), int(origin[1]), int(shift[0]), int(shift[1]), face,
+                  part, int(max_samples), _LOG1P_U8, u, v, r, centre)
     gx, gy = np.empty((x1 - x0, 3)), np.empty((y1 - y0, 3))
     _gain_fit(u, v, r, centre, int(iterations), step, lo, GAIN_SUPPORT > 0, int(x0), int(y0),
               gx, gy)
@@ -578,39 +578,47 @@ def _exponents_py(u, v, step, lo, held, x0, y0, cx, cy, scale, coef, ex,
             ey[i, c] = coef[0, c] + y * coef[2, c]
 
 
-def _gain_samples_py(pts, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v, r,
+def _gain_samples_py(m, n, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v, r,
                      centre):  # pragma: no cover (numba)
-    """The samples of :func:`gain_field`'s fit from the pixels ``pts + (ox, oy)`` (n, 2) int32
-    ``(x, y)`` of ``face`` and ``part`` in row-major order (``cv2.findNonZero`` of a crop
-    whose top-left pixel is ``(ox, oy)``; numba), at coordinates shifted by ``(sx0, sy0)``:
+    """The samples of :func:`gain_field`'s fit from the ``n`` pixels set in ``m`` (h, w)
+    uint8, in row-major order (as ``cv2.findNonZero`` lists them), ``m``'s top-left pixel
+    ``(ox, oy)`` of ``face`` and ``part``, at coordinates shifted by ``(sx0, sy0)``:
     ``centre = (cx, cy, scale)``, the pixels' mean position and the larger extent of their
     rows and columns (at least 1); for every ``step``-th pixel (``step = ceil(n /
     max_samples)``) the centred, scaled coordinates ``u = (x - cx) / scale``, ``v = (y - cy) /
     scale`` and the log ratios ``r = lut[face] - lut[part]`` (3 channels). The means are the
     integer sums over ``n`` (as numpy's mean of the coordinates, whose float sums are
-    exact)."""
-    n = pts.shape[0]
+    exact). Two passes over ``m``, no list of its pixels."""
     dx, dy = np.int64(ox) + np.int64(sx0), np.int64(oy) + np.int64(sy0)
-    sx = sy = 0
-    x_lo = x_hi = pts[0, 0]
-    y_lo = y_hi = pts[0, 1]
-    for i in range(n):
-        x, y = pts[i, 0] + dx, pts[i, 1] + dy
-        sx += x
-        sy += y
-        x_lo, x_hi = min(x_lo, pts[i, 0]), max(x_hi, pts[i, 0])
-        y_lo, y_hi = min(y_lo, pts[i, 1]), max(y_hi, pts[i, 1])
+    sx = sy = np.int64(0)
+    x_lo, x_hi, y_lo, y_hi = m.shape[1], -1, m.shape[0], -1
+    for y in range(m.shape[0]):
+        c = np.int64(0)
+        for x in range(m.shape[1]):
+            if m[y, x]:
+                c += 1
+                sx += x
+                x_lo, x_hi = min(x_lo, x), max(x_hi, x)
+        if c:
+            sx += c * dx
+            sy += c * (y + dy)
+            y_lo, y_hi = min(y_lo, y), max(y_hi, y)
     cx, cy = float(sx) / float(n), float(sy) / float(n)
     scale = float(max(y_hi - y_lo, x_hi - x_lo, 1))
     step = max(1, -(-n // max_samples))
-    j = 0
-    for i in range(0, n, step):
-        x, y = np.int64(pts[i, 0]) + ox, np.int64(pts[i, 1]) + oy
-        u[j] = (x + sx0 - cx) / scale
-        v[j] = (y + sy0 - cy) / scale
-        for c in range(3):
-            r[j, c] = lut[face[y, x, c]] - lut[part[y, x, c]]
-        j += 1
+    i = j = 0
+    for yy in range(m.shape[0]):
+        for xx in range(m.shape[1]):
+            if not m[yy, xx]:
+                continue
+            if i % step == 0:
+                x, y = np.int64(xx) + ox, np.int64(yy) + oy
+                u[j] = (x + sx0 - cx) / scale
+                v[j] = (y + sy0 - cy) / scale
+                for c in range(3):
+                    r[j, c] = lut[face[y, x, c]] - lut[part[y, x, c]]
+                j += 1
+            i += 1
     centre[0], centre[1], centre[2] = cx, cy, scale
 
 

@@ -154,8 +154,18 @@ def drawn_inside(face_mask: np.ndarray, raster, faces: np.ndarray, lifted: np.nd
     kept = np.empty(tb.shape, np.uint8)
     _lookup_kernel(per_tri, tb, kept)
     # the triangles' sawtooth outline smoothed (5 x 5 median), on the face only
-    _on_face_kernel(cv2.medianBlur(kept, 5), tb, out, x0, y0)
+    _on_face_kernel(_median5(kept), tb, out, x0, y0)
     return out
+
+
+def _median5(kept: np.ndarray) -> np.ndarray:
+    """``cv2.medianBlur(kept, 5) != 0`` of a 0/1 image ``kept`` (h, w) uint8, as uint8 0/1:
+    a 5 x 5 window's median is 1 where 13 or more of its 25 pixels are (the image's border
+    replicated, as the median's), so the windows' sums (``cv2.boxFilter``) say it. The same
+    pixels; on the small boxes here 0.014 against 0.19 ms a call (OpenCV's median pays a
+    set-up on a few hundred pixels)."""
+    s = cv2.boxFilter(kept, -1, (5, 5), normalize=False, borderType=cv2.BORDER_REPLICATE)
+    return (s >= 13).view(np.uint8)
 
 
 def _band_kernel_py(at, F, k, P, half, step, cand, grid):  # pragma: no cover (numba)

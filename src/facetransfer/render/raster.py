@@ -486,14 +486,19 @@ def _coverage_kernel_py(xy, F, W, H, front, skip, mask):  # pragma: no cover (nu
     barycentrics, a pixel already covered is not tested again (the silhouettes of meshes whose
     triangles span a pixel or two, a loop over each triangle's box is cheaper than tiles).
     A triangle whose three corners fall on pixels set in ``skip`` (H, W) uint8 is not drawn
-    (``mask`` holds its pixels already)."""
+    (``mask`` holds its pixels already; whether a point falls on ``skip`` is found once a
+    point, not once a corner)."""
+    on = np.empty(xy.shape[0], np.bool_)
+    for i in range(xy.shape[0]):  # (a point not finite: only on triangles not drawn)
+        x, y = xy[i, 0], xy[i, 1]
+        on[i] = np.isfinite(x) and np.isfinite(y) and _covered(skip, x, y)
     for f in range(F.shape[0]):
         i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
         x0, y0, x1, y1, x2, y2 = xy[i0, 0], xy[i0, 1], xy[i1, 0], xy[i1, 1], xy[i2, 0], xy[i2, 1]
         area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
         if area == 0 or not np.isfinite(area) or (front and area > 0):
             continue
-        if _covered(skip, x0, y0) and _covered(skip, x1, y1) and _covered(skip, x2, y2):
+        if on[i0] and on[i1] and on[i2]:
             continue
         xmin, xmax, ymin, ymax = _pixel_box(x0, y0, x1, y1, x2, y2, W, H)
         if xmin > xmax or ymin > ymax:
