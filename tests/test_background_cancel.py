@@ -1,5 +1,6 @@
-"""A forked background track stopped by its parent (track.obtain._BackgroundTrack.cancel) is
-gone even where it could not take a SIGTERM: one that reaches the child in the fork's first
+"""A forked background track stopped by its parent (track.obtain._BackgroundTrack.cancel), and
+the second detection process (track.video_detect.SplitDetection.cancel), are gone even where
+they could not take a SIGTERM: one that reaches the child in the fork's first
 instants, before its default handler is back (cli.main._default_sigterm_in_child), is lost,
 and the child then tracked the whole clip and waited for ever to hand its track to a parent
 that had left."""
@@ -12,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from facetransfer.track import obtain
+from facetransfer.track import obtain, video_detect
 
 pytestmark = pytest.mark.skipif(
     "fork" not in multiprocessing.get_all_start_methods() or not Path("/proc/self").exists(),
@@ -57,6 +58,23 @@ def test_a_cancelled_child_that_missed_its_sigterm_is_stopped(tmp_path, monkeypa
         assert _wait(ready.exists, 30), "the forked job did not start"
         pid = int(ready.read_text())
         bg.cancel()
+        assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
+    finally:
+        if ready.exists() and _alive(int(ready.read_text())):
+            os.kill(int(ready.read_text()), signal.SIGKILL)
+
+
+def test_a_cancelled_second_detection_that_missed_its_sigterm_is_stopped(tmp_path,
+                                                                         monkeypatch):
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(video_detect, "_child_job", _deaf_job)
+    split = video_detect.SplitDetection.start("v.mp4", 5, 10, 25.0)
+    assert split is not None
+    try:
+        assert _wait(ready.exists, 30), "the forked job did not start"
+        pid = int(ready.read_text())
+        split.cancel()
         assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
     finally:
         if ready.exists() and _alive(int(ready.read_text())):
