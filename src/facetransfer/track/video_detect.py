@@ -248,11 +248,13 @@ class SplitDetection:
             self._pool.shutdown(wait=False, cancel_futures=True)
 
     def cancel(self) -> None:
-        """Stop the child without waiting for it."""
+        """Stop the child without waiting for it: by SIGKILL, as
+        :meth:`facetransfer.track.obtain._BackgroundTrack.cancel` (a SIGTERM in the fork's
+        first instants was lost, and the child left running)."""
         self._future.cancel()
         for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
             try:
-                proc.terminate()
+                proc.kill()
             except Exception:  # noqa: BLE001 - already gone
                 pass
         self._pool.shutdown(wait=False, cancel_futures=True)

@@ -1,0 +1,81 @@
+"""A forked background track stopped by its parent (track.obtain._BackgroundTrack.cancel), and
+the second detection process (track.video_detect.SplitDetection.cancel), are gone even where
+they could not take a SIGTERM: one that reaches the child in the fork's first
+instants, before its default handler is back (cli.main._default_sigterm_in_child), is lost,
+and the child then tracked the whole clip and waited for ever to hand its track to a parent
+that had left."""
+
+import multiprocessing
+import os
+import signal
+import time
+from pathlib import Path
+
+import pytest
+
+from facetransfer.track import obtain, video_detect
+
+pytestmark = pytest.mark.skipif(
+    "fork" not in multiprocessing.get_all_start_methods() or not Path("/proc/self").exists(),
+    reason="needs fork and /proc")
+
+_READY = "FACETRANSFER_TEST_CHILD_READY"
+
+
+def _deaf_job():
+    """A background job that cannot take a SIGTERM (as in the fork's first instants)."""
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    Path(os.environ[_READY]).write_text(str(os.getpid()))
+    time.sleep(60)
+
+
+def _alive(pid: int) -> bool:
+    """Whether ``pid`` runs (a zombie, dead and not yet reaped, does not)."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _wait(what, seconds: float) -> bool:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if what():
+            return True
+        time.sleep(0.05)
+    return what()
+
+
+def test_a_cancelled_child_that_missed_its_sigterm_is_stopped(tmp_path, monkeypatch):
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _deaf_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    try:
+        assert _wait(ready.exists, 30), "the forked job did not start"
+        pid = int(ready.read_text())
+        bg.cancel()
+        assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
+    finally:
+        if ready.exists() and _alive(int(ready.read_text())):
+            os.kill(int(ready.read_text()), signal.SIGKILL)
+
+
+def test_a_cancelled_second_detection_that_missed_its_sigterm_is_stopped(tmp_path,
+                                                                         monkeypatch):
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(video_detect, "_child_job", _deaf_job)
+    split = video_detect.SplitDetection.start("v.mp4", 5, 10, 25.0)
+    assert split is not None
+    try:
+        assert _wait(ready.exists, 30), "the forked job did not start"
+        pid = int(ready.read_text())
+        split.cancel()
+        assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
+    finally:
+        if ready.exists() and _alive(int(ready.read_text())):
+            os.kill(int(ready.read_text()), signal.SIGKILL)
