@@ -229,6 +229,27 @@ def test_preset_reaches_x264(tmp_path):
     assert b"subme=4 " in default.read_bytes()
 
 
+def test_default_preset_is_written_without_b8x8_partitions(tmp_path):
+    """The default preset is x264's "faster" with B-frames' 8x8 partitions not searched
+    (:data:`DEFAULT_X264_PARAMS`: 20 % less of the encoder's CPU for the same quality, measured
+    in BENCHMARKS.md), as the stream's own settings say (``analyse``: the I and the P/B
+    partitions, 0x100 the B-frames' 8x8); a preset asked for is x264's own, b8x8 kept, and
+    H.265 gets no x264 settings."""
+    assert iov.DEFAULT_X264_PARAMS == "partitions=i4x4,i8x8,p8x8"
+    args = iov._encode_args(VideoOptions(), ".mp4")
+    assert args[args.index("-x264-params") + 1] == iov.DEFAULT_X264_PARAMS
+    assert args[args.index("-preset") + 1] == "faster"
+    default = encode_video(tmp_path / "d.mp4", smooth_frames(n=3), 25).path.read_bytes()
+    assert b"analyse=0x3:0x13 " in default and b"subme=4 " in default
+    for preset in ("medium", "veryfast"):
+        opt = VideoOptions(preset=preset)
+        assert "-x264-params" not in iov._encode_args(opt, ".mp4")
+        data = encode_video(tmp_path / f"{preset}.mp4", smooth_frames(n=3), 25,
+                            options=opt).path.read_bytes()
+        assert b"analyse=0x3:0x113 " in data
+    assert "-x264-params" not in iov._encode_args(VideoOptions(codec="h265"), ".mp4")
+
+
 @pytest.mark.parametrize("kw,match", [({"crf": 52}, "0 to 51"), ({"crf": -1}, "0 to 51"),
                                       ({"preset": "warp"}, "preset must be one of"),
                                       ({"crf": 2.5}, "integer"), ({"codec": "vp9"}, "h264"),

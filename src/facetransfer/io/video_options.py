@@ -10,7 +10,8 @@ from ..errors import VideoError
 from .video_display import checked_aspect, checked_colour_name, checked_timecode
 
 __all__ = ["CODECS", "GREY_CODECS", "ENCODERS", "DEEP_CODECS", "DEFAULT_CODEC", "DEFAULT_CRF",
-           "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "VIDEO_SUFFIXES", "VideoOptions"]
+           "CRF_RANGE", "PRESETS", "DEFAULT_PRESET", "DEFAULT_X264_PARAMS", "VIDEO_SUFFIXES",
+           "VideoOptions"]
 
 #: Video containers by extension (the ffmpeg muxer of each).
 VIDEO_SUFFIXES = {".mp4": "mp4", ".m4v": "mp4", ".mov": "mov", ".mkv": "matroska",
@@ -34,6 +35,17 @@ DEEP_CODECS = ("prores", "h265")
 #: The default preset: x264's "faster" costs 64 % of the CPU of its own default, "medium",
 #: for 0.07 dB less over the face of a transfer at CRF 18 (BENCHMARKS.md, "End to end").
 DEFAULT_PRESET = "faster"
+#: x264 settings the default preset is written with, on top of x264's own "faster" (H.264
+#: only; any other ``--preset`` is x264's as it stands): B-frames' 8x8 partitions not searched
+#: (x264's ``partitions`` with ``b8x8`` left out). On the 300 frames issue 13's transfer writes
+#: (512x480, CRF 18) the encoder took 2.0-2.1 CPU-s instead of 2.5 (two runs of 3 rounds,
+#: medians; 2.1 instead of 2.7 beside two busy processes), the file 0.5 % larger, 0.05 dB less
+#: outside the face against the target file and 0.03 dB more against the target encoded alike
+#: (the 45 dB bar); on three other clips 11-17 % less CPU, within 0.06 dB and 0.7 % in size.
+#: Fewer threads, a shorter lookahead, ``ref=1``, ``subme=3`` or ``me=dia`` saved less or
+#: cost more quality (BENCHMARKS.md, "Fiftieth session (helper x26450)";
+#: ``benchmarks/bench_x264_params.py``).
+DEFAULT_X264_PARAMS = "partitions=i4x4,i8x8,p8x8"
 
 
 @dataclass(frozen=True)
@@ -53,7 +65,9 @@ class VideoOptions:
         bigger. Default :data:`DEFAULT_CRF`. ProRes has none.
     preset : str
         x264 / x265 speed preset (:data:`PRESETS`): faster ones cost less CPU for a little less
-        quality or bigger files at the same CRF (figures in BENCHMARKS.md).
+        quality or bigger files at the same CRF (figures in BENCHMARKS.md). The default,
+        :data:`DEFAULT_PRESET`, is written by x264 with :data:`DEFAULT_X264_PARAMS` too (about
+        20 % less CPU for the same quality); every other preset is x264's own.
     sar : (int, int), optional
         The pixel aspect ratio written into the video's header (its sample aspect ratio), so
         that players show it at the shape of the video it rewrites (e.g. (15, 16): a 512x480
