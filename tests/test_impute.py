@@ -310,6 +310,24 @@ def test_nan_in_a_known_cell_is_rejected(small_ds):
         im.impute_dataset(bad)
 
 
+
+@pytest.mark.parametrize("bad, said", [
+    (np.ones((6, 4, 3)) + 1j, "real numbers, got complex"),
+    (np.full((6, 4, 3), "x"), "real numbers, got text"),
+    (np.zeros((0, 4, 3)), r"\(0, 4, 3\) has no vertex coordinates"),
+])
+def test_complex_text_or_empty_tensor_is_refused(bad, said):
+    """A complex tensor was imputed from its real part (a ComplexWarning only), text failed
+    with numpy's own message, a tensor of no coordinates with "cannot reshape"; the shared
+    check (check_tensor) serves every method."""
+    from facetransfer.errors import ShapeError
+
+    mask = np.ones((4, 3), bool)
+    mask[1, 2] = False
+    for method in (im.impute_tensor, im.average_impute, im.naive_impute):
+        with pytest.raises(ShapeError, match=said):
+            method(bad, mask)
+
 def test_too_many_cells_is_a_clear_error():
     mask = np.ones((61, 50), bool)
     mask[0, 0] = False

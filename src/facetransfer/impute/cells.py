@@ -7,6 +7,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..arrays import real_array
 from ..errors import DatasetError, ShapeError
 
 __all__ = ["Progress", "validate_mask", "check_tensor"]
@@ -61,16 +62,19 @@ def check_tensor(tensor: np.ndarray, mask: np.ndarray) -> np.ndarray:
     Raises
     ------
     ShapeError
-        The tensor does not have one more mode than the mask.
+        The tensor does not have one more mode than the mask, has no coordinates, or holds
+        other than real numbers (complex, text).
     DatasetError
         Its cells differ from the mask's, or a known cell holds NaN or infinite coordinates.
     """
-    T = np.asarray(tensor, dtype=np.float64)
+    T = real_array(tensor, "tensor")    # complex was cast to its real part, text numpy's error
     if T.ndim != mask.ndim + 1:
         raise ShapeError(f"tensor must be (3n, d_1..d_K) with cells {mask.shape}, got {T.shape}")
     if T.shape[1:] != mask.shape:
         raise DatasetError(f"mask shape {mask.shape} does not match the tensor's cells "
                            f"{T.shape[1:]}")
+    if T.shape[0] == 0:
+        raise ShapeError(f"tensor {T.shape} has no vertex coordinates (mode 0 is empty)")
     known = T.reshape(T.shape[0], -1)[:, mask.ravel()]
     if not np.isfinite(known).all():
         raise DatasetError("known cells contain NaN or infinite coordinates")
