@@ -132,6 +132,18 @@ def test_spec_from_json_file(tiny_model, tmp_path):
     ({"pose": {"keys": [[0, {"yaw_deg": None}]]}}, "yaw_deg"),
     ({"pose": {"keys": [[0, {"nod": 1}]]}}, "expected an object"),
     ({"pose": {"fill": 0}}, "fill"),
+    # a blend's amount NaN or infinite: the spec passed and the clip failed later with
+    # "vertices contain NaN" or "camera scale must be ... got nan", naming neither file nor key
+    ({"tracks": {"expression": [[0, {"smile": float("nan")}]]}},
+     r"tracks.expression frame 0: amount of 'smile' must be a finite number, got nan"),
+    ({"tracks": {"expression": [[0, {"smile": float("inf")}]]}}, "finite number, got inf"),
+    ({"identity": {"id1": float("nan")}}, r"identity: amount of 'id1' must be a finite"),
+    ({"tracks": {"expression": [[0, {"smile": "lots"}]]}}, "amount of 'smile'"),
+    # a keyframe at frame 1.5 was read as frame 1 without a word (NaN was refused)
+    ({"tracks": {"expression": [[1.5, "smile"]]}}, r"frame must be an integer, got 1.5"),
+    ({"pose": {"keys": [[2.5, {"yaw_deg": 1}]]}}, r"frame must be an integer, got 2.5"),
+    # a keyframe at frame Infinity (JSON's) printed an OverflowError traceback
+    ({"tracks": {"expression": [[float("inf"), "smile"]]}}, "frame must be an integer, got inf"),
 ])
 def test_bad_specs_rejected(tiny_model, spec, match):
     with pytest.raises(SpecError, match=match):
