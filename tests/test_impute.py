@@ -434,3 +434,12 @@ def test_an_init_of_another_shape_is_named():
         im.impute_tensor(hide(T, mask), mask, init=T.reshape(30, 30))
     done = im.impute_tensor(hide(T, mask), mask, init=T, tol=1e-12, max_iter=300)
     np.testing.assert_allclose(done.tensor, T, atol=1e-6)
+
+
+def test_evaluation_refuses_a_method_or_fraction_given_twice(small_ds):
+    """evaluate_imputation(ds, [0.1, 0.1]) or methods ("average", "average") ran each twice
+    and reported every row twice."""
+    with pytest.raises(ValueError, match="missing fractions gives 0.1 twice"):
+        im.evaluate_imputation(small_ds, [0.1, 0.1], trials=1, methods=("average",))
+    with pytest.raises(ValueError, match="methods gives 'average' twice"):
+        im.evaluate_imputation(small_ds, [0.1], trials=1, methods=("average", "average"))
