@@ -443,3 +443,27 @@ def test_evaluation_refuses_a_method_or_fraction_given_twice(small_ds):
         im.evaluate_imputation(small_ds, [0.1, 0.1], trials=1, methods=("average",))
     with pytest.raises(ValueError, match="methods gives 'average' twice"):
         im.evaluate_imputation(small_ds, [0.1], trials=1, methods=("average", "average"))
+
+
+def test_iteration_options_and_ranks_are_checked(small_ds):
+    """max_iter=-1 or tol=NaN ran (no iteration; never stopping early) without a word;
+    tensorly_impute's ranks [0, 0] failed with numpy's "cannot reshape array of size 0";
+    all-zero row weights were said as a wrong shape (the shape given was right)."""
+    T = small_ds.vertices.reshape(small_ds.vertices.shape[:2] + (-1,))
+    T = np.moveaxis(T, -1, 0)
+    mask = np.ones(T.shape[1:], bool)
+    mask[1, 1] = False
+    with pytest.raises(ValueError, match=r"impute_tensor: max_iter must be an integer >= 0, "
+                                         r"got -1"):
+        im.impute_tensor(T, mask, max_iter=-1)
+    with pytest.raises(ValueError, match=r"impute_tensor: tol must be a number \(not NaN\)"):
+        im.impute_tensor(T, mask, tol=float("nan"))
+    with pytest.raises(ValueError, match=r"hooi: max_iter must be an integer >= 0, got 2.5"):
+        tl.hooi(T, max_iter=2.5)
+    with pytest.raises(ValueError, match=r"tensorly_impute: ranks must be 2 integers, each from "
+                                         r"1 to its mode's size"):
+        pytest.importorskip("tensorly")
+        im.tensorly_impute(T, mask, ranks=[0, 0])
+    with pytest.raises(ValueError, match=r"row_weights must be finite, non-negative and not all "
+                                         r"zero, got 0 negative, 0 NaN or infinite, sum 0"):
+        im.impute_tensor(T, mask, row_weights=np.zeros(T.shape[0]))

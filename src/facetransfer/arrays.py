@@ -13,7 +13,7 @@ import numpy as np
 
 from .errors import ShapeError
 
-__all__ = ["real_array"]
+__all__ = ["real_array", "check_iterations"]
 
 
 def real_array(values, what: str, *, finite: bool = False, nonempty: bool = False
@@ -59,3 +59,21 @@ def real_array(values, what: str, *, finite: bool = False, nonempty: bool = Fals
         bad = int(np.size(a) - np.count_nonzero(np.isfinite(a)))
         raise ShapeError(f"{what} holds {bad} NaN or infinite value(s) (shape {a.shape})")
     return a
+
+
+def check_iterations(max_iter, tol, where: str) -> None:
+    """The options every iterative solver shares, checked: ``max_iter`` an integer >= 0 and
+    ``tol`` a real number, not NaN (a negative ``max_iter`` ran no iteration and a NaN ``tol``
+    never stopped early, each without a word; a negative ``tol``, never stopping early, is a
+    choice).
+
+    Raises
+    ------
+    ValueError
+        Naming ``where`` (the function) and the value given.
+    """
+    if isinstance(max_iter, bool) or not isinstance(max_iter, (int, np.integer)) or max_iter < 0:
+        raise ValueError(f"{where}: max_iter must be an integer >= 0, got {max_iter!r}")
+    if isinstance(tol, bool) or not isinstance(tol, (int, float, np.integer, np.floating)) \
+            or np.isnan(tol):
+        raise ValueError(f"{where}: tol must be a number (not NaN), got {tol!r}")

@@ -25,7 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .arrays import real_array
+from .arrays import check_iterations, real_array
 from .errors import FaceTransferError, ShapeError
 
 log = logging.getLogger(__name__)
@@ -495,6 +495,7 @@ def hooi(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
     Tucker
         ``errors`` holds the error of the initial guess and of every sweep.
     """
+    check_iterations(max_iter, tol, "hooi")
     T, norm2 = _finite_data(tensor)
     N = T.ndim
     skip = _skipped(T, skip)
