@@ -118,6 +118,21 @@ def test_smoothing_bad_input():
         bilateral_smooth(bad, f)
 
 
+
+def test_a_sigma_whose_pairs_do_not_fit_is_refused_before_the_work(monkeypatch):
+    """``scan smooth --sigma-c 1e9`` on an ICT face (every vertex seeing every face: ~26 GiB of
+    pairs) ran for minutes towards running out of memory; the pairs are now counted from a
+    sample first. Here a cube of 12 x 12 quads a side against a budget of 100 MiB."""
+    import facetransfer.io.memory as memory
+
+    v, f = _cube(12)
+    small = bilateral_smooth(v, f)                   # the default sigma: a few faces a vertex
+    monkeypatch.setattr(memory, "available_memory", lambda: 100 * 2**20)
+    np.testing.assert_array_equal(bilateral_smooth(v, f), small)
+    with pytest.raises(FaceTransferError, match=rf"sigma_c 100 makes each vertex see about "
+                                                rf"{len(f)} of the {len(f)} faces"):
+        bilateral_smooth(v, f, sigma_c=100.0)
+
 # ---------------------------------------------------------------- feature files
 def _pts(k=10, seed=0):
     rng = np.random.default_rng(seed)
