@@ -150,6 +150,22 @@ def test_bad_specs_rejected(tiny_model, spec, match):
         performance_from_spec(tiny_model, spec)
 
 
+
+def test_the_spec_and_frames_share_one_limit(tiny_model):
+    """The spec's n_frames was limited to 100000 and --frames to 1000000: a spec of 200000
+    frames was refused that the command line wrote; a keyframe at frame 150000 (n_frames
+    left to it) was refused with "n_frames must be between 1 and 100000"."""
+    from facetransfer.synth import _spec_n_frames
+    from facetransfer.synth_keys import MAX_FRAMES
+
+    from facetransfer.cli.render import MAX_SYNTH_FRAMES
+
+    assert MAX_SYNTH_FRAMES == MAX_FRAMES
+    assert _spec_n_frames({"n_frames": 200_000}, -1) == 200_000
+    assert _spec_n_frames({}, 149_999) == 150_000
+    with pytest.raises(SpecError, match=f"between 1 and {MAX_FRAMES}"):
+        _spec_n_frames({"n_frames": MAX_FRAMES + 1}, -1)
+
 def test_random_performance_is_seeded_and_gentle(tiny_model):
     a = random_performance(tiny_model, 60, seed=3, size=(96, 80))
     b = random_performance(tiny_model, 60, seed=3, size=(96, 80))

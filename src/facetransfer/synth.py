@@ -69,7 +69,7 @@ from .errors import AssetError, FaceTransferError, TrackError, VideoError
 from .io.atomic import atomic_path, check_output_path
 from .io.npz import read_npz
 from .render import WeakPerspective, render, rotation_from_euler
-from .synth_keys import SPEC_KEYS  # the keys of a spec, read by the parser below
+from .synth_keys import MAX_FRAMES, SPEC_KEYS  # the keys of a spec, read by the parser below
 
 log = logging.getLogger(__name__)
 
@@ -363,8 +363,8 @@ def _spec_n_frames(spec: Mapping, last: int) -> int:
     if n_frames != int(n_frames):
         raise SpecError(f"n_frames must be an integer, got {n_frames}")
     n_frames = int(n_frames)
-    if not 1 <= n_frames <= 100_000:
-        raise SpecError(f"n_frames must be between 1 and 100000, got {n_frames}")
+    if not 1 <= n_frames <= MAX_FRAMES:      # one limit with --frames (it was 100000 here)
+        raise SpecError(f"n_frames must be between 1 and {MAX_FRAMES}, got {n_frames}")
     return n_frames
 
 
