@@ -467,3 +467,13 @@ def test_iteration_options_and_ranks_are_checked(small_ds):
     with pytest.raises(ValueError, match=r"row_weights must be finite, non-negative and not all "
                                          r"zero, got 0 negative, 0 NaN or infinite, sum 0"):
         im.impute_tensor(T, mask, row_weights=np.zeros(T.shape[0]))
+
+
+def test_an_empty_slice_of_an_unnamed_mask_is_said_plainly():
+    """Without mode names or labels the slice was said "mode 0 '0' (mode 0 'mode 0', index 0)
+    has no known cell"."""
+    mask = np.ones((4, 3), bool)
+    mask[:, 2] = False
+    with pytest.raises(DatasetError, match=r"^mode 1 index 2 has no known cell \(mask \(4, 3\)\): "
+                                           r"a slice with no data at all cannot be imputed$"):
+        im.validate_mask(mask, (4, 3))

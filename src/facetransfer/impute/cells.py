@@ -50,9 +50,11 @@ def validate_mask(mask: np.ndarray, shape: Sequence[int], *,
         has = m.any(axis=axes) if axes else m
         if not has.all():
             i = int(np.nonzero(~has)[0][0])
-            lab = labels[k][i] if labels is not None else str(i)
-            raise DatasetError(f"{names[k]} {lab!r} (mode {k} {names[k]!r}, index {i}) has no "
-                               f"known cell: a slice with no data at all cannot be imputed")
+            which = (f"{names[k]} {labels[k][i]!r} (mode {k} {names[k]!r}, index {i})"
+                     if labels is not None and mode_names is not None else
+                     f"{names[k]} index {i}")   # was "mode 0 '0' (mode 0 'mode 0', index 0)"
+            raise DatasetError(f"{which} has no known cell (mask {shape}): a slice with no "
+                               "data at all cannot be imputed")
     return m
 
 
