@@ -138,6 +138,7 @@ LAYER_OF = {
     "facetransfer": "base",              # the package: its docstring and __version__ only
     # base: the paper's algebra and models, and what every stage shares
     "facetransfer.errors": "base",
+    "facetransfer.arrays": "base",       # numbers converted and checked at the boundary
     "facetransfer.tensor": "base",
     "facetransfer.model": "base",
     "facetransfer.geometry": "base",

@@ -53,6 +53,16 @@ def test_parsers():
         parse_like("identity")
 
 
+
+def test_a_mode_given_twice_is_refused():
+    """``--weights 'identity=1,0,0;identity=0,1,0'`` wrote the second identity's face without
+    a word (also --like and --ranks: the last of a mode was taken)."""
+    for parse, flag, text in [(parse_weights, "--weights", "identity=1,0;identity=0,1"),
+                              (parse_like, "--like", "identity=id01,identity=id02"),
+                              (parse_ranks, "--ranks", "identity=2,identity=3")]:
+        with pytest.raises(FaceTransferError, match=f"{flag} gives mode 'identity' twice"):
+            parse(text)
+
 def test_build_info_synth_like_reproduces_training_mesh(model_path, tmp_path, capsys):
     m = load_model(model_path)
     assert m.mode_names == ("identity", "expression") and m.ranks == (3, 3)

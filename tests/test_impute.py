@@ -310,6 +310,24 @@ def test_nan_in_a_known_cell_is_rejected(small_ds):
         im.impute_dataset(bad)
 
 
+
+@pytest.mark.parametrize("bad, said", [
+    (np.ones((6, 4, 3)) + 1j, "real numbers, got complex"),
+    (np.full((6, 4, 3), "x"), "real numbers, got text"),
+    (np.zeros((0, 4, 3)), r"\(0, 4, 3\) has no vertex coordinates"),
+])
+def test_complex_text_or_empty_tensor_is_refused(bad, said):
+    """A complex tensor was imputed from its real part (a ComplexWarning only), text failed
+    with numpy's own message, a tensor of no coordinates with "cannot reshape"; the shared
+    check (check_tensor) serves every method."""
+    from facetransfer.errors import ShapeError
+
+    mask = np.ones((4, 3), bool)
+    mask[1, 2] = False
+    for method in (im.impute_tensor, im.average_impute, im.naive_impute):
+        with pytest.raises(ShapeError, match=said):
+            method(bad, mask)
+
 def test_too_many_cells_is_a_clear_error():
     mask = np.ones((61, 50), bool)
     mask[0, 0] = False
@@ -416,3 +434,46 @@ def test_an_init_of_another_shape_is_named():
         im.impute_tensor(hide(T, mask), mask, init=T.reshape(30, 30))
     done = im.impute_tensor(hide(T, mask), mask, init=T, tol=1e-12, max_iter=300)
     np.testing.assert_allclose(done.tensor, T, atol=1e-6)
+
+
+def test_evaluation_refuses_a_method_or_fraction_given_twice(small_ds):
+    """evaluate_imputation(ds, [0.1, 0.1]) or methods ("average", "average") ran each twice
+    and reported every row twice."""
+    with pytest.raises(ValueError, match="missing fractions gives 0.1 twice"):
+        im.evaluate_imputation(small_ds, [0.1, 0.1], trials=1, methods=("average",))
+    with pytest.raises(ValueError, match="methods gives 'average' twice"):
+        im.evaluate_imputation(small_ds, [0.1], trials=1, methods=("average", "average"))
+
+
+def test_iteration_options_and_ranks_are_checked(small_ds):
+    """max_iter=-1 or tol=NaN ran (no iteration; never stopping early) without a word;
+    tensorly_impute's ranks [0, 0] failed with numpy's "cannot reshape array of size 0";
+    all-zero row weights were said as a wrong shape (the shape given was right)."""
+    T = small_ds.vertices.reshape(small_ds.vertices.shape[:2] + (-1,))
+    T = np.moveaxis(T, -1, 0)
+    mask = np.ones(T.shape[1:], bool)
+    mask[1, 1] = False
+    with pytest.raises(ValueError, match=r"impute_tensor: max_iter must be an integer >= 0, "
+                                         r"got -1"):
+        im.impute_tensor(T, mask, max_iter=-1)
+    with pytest.raises(ValueError, match=r"impute_tensor: tol must be a number \(not NaN\)"):
+        im.impute_tensor(T, mask, tol=float("nan"))
+    with pytest.raises(ValueError, match=r"hooi: max_iter must be an integer >= 0, got 2.5"):
+        tl.hooi(T, max_iter=2.5)
+    with pytest.raises(ValueError, match=r"tensorly_impute: ranks must be 2 integers, each from "
+                                         r"1 to its mode's size"):
+        pytest.importorskip("tensorly")
+        im.tensorly_impute(T, mask, ranks=[0, 0])
+    with pytest.raises(ValueError, match=r"row_weights must be finite, non-negative and not all "
+                                         r"zero, got 0 negative, 0 NaN or infinite, sum 0"):
+        im.impute_tensor(T, mask, row_weights=np.zeros(T.shape[0]))
+
+
+def test_an_empty_slice_of_an_unnamed_mask_is_said_plainly():
+    """Without mode names or labels the slice was said "mode 0 '0' (mode 0 'mode 0', index 0)
+    has no known cell"."""
+    mask = np.ones((4, 3), bool)
+    mask[:, 2] = False
+    with pytest.raises(DatasetError, match=r"^mode 1 index 2 has no known cell \(mask \(4, 3\)\): "
+                                           r"a slice with no data at all cannot be imputed$"):
+        im.validate_mask(mask, (4, 3))

@@ -109,6 +109,9 @@ def test_eval_on_a_manifest_with_missing_cells(tmp_path):
     (["--missing", "a,b"], "--missing must be comma-separated numbers"),
     (["--methods", "ppca,magic"], "unknown method 'magic'"),
     (["--trials", "0"], "--trials must be at least 1"),
+    # given twice: run twice, every row printed and written twice (before)
+    (["--missing", "0.1,0.2,0.1"], "--missing gives 0.1 twice: give each once"),
+    (["--methods", "average,ppca,average"], "--methods gives 'average' twice"),
 ])
 def test_eval_bad_options_exit_2(tmp_path, capsys, args, message):
     csv = write_manifest(tmp_path)

@@ -361,6 +361,34 @@ def test_weight_validation():
         m.synthesize({"identity": np.zeros(5)})
 
 
+
+@pytest.mark.parametrize("bad, said", [
+    (np.array([np.nan, 0, 0, 0]), "holds 1 NaN or infinite"),
+    (np.array([np.inf, 0, 0, 0]), "holds 1 NaN or infinite"),
+    (np.array([1j, 0, 0, 0]), "real numbers, got complex"),
+    (np.array(["a", "b", "c", "d"]), "real numbers, got text"),
+    ([[1, 2, 3, 4], [1]], "ragged"),
+])
+def test_weights_real_and_finite_naming_the_mode(bad, said):
+    """NaN or infinite weights gave a NaN face with a RuntimeWarning only; complex ones their
+    real part (a ComplexWarning); text or ragged ones numpy's message naming no mode."""
+    m = build_model(random_dataset(seed=10))
+    w = m.default_weights()
+    w["expression"] = bad
+    with pytest.raises(ShapeError, match=f"weights of mode 'expression'.*{said}|{said}"):
+        m.synthesize(w)
+    with pytest.raises(ShapeError, match="mode 'expression'"):
+        m.synthesize(w)
+
+
+def test_an_empty_batch_gives_no_faces():
+    """Weights of no rows (a clip of no frames) raised numpy's broadcast error; numpy's rule
+    for an empty batch is an empty result."""
+    m = build_model(random_dataset(seed=10))
+    w = {n: np.zeros((0, r)) for n, r in zip(m.mode_names, m.ranks)}
+    assert m.synthesize(w).shape == (0, m.n_vertices, 3)
+    assert m.synthesize(w, vertices=np.array([1, 2])).shape == (0, 2, 3)
+
 def test_vertices_must_be_integer_indices():
     """A float selection was truncated (1.7 read as vertex 1) and a boolean mask read as the
     indices 0 and 1: synthesize returned the wrong vertices without a word."""

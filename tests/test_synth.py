@@ -132,11 +132,39 @@ def test_spec_from_json_file(tiny_model, tmp_path):
     ({"pose": {"keys": [[0, {"yaw_deg": None}]]}}, "yaw_deg"),
     ({"pose": {"keys": [[0, {"nod": 1}]]}}, "expected an object"),
     ({"pose": {"fill": 0}}, "fill"),
+    # a blend's amount NaN or infinite: the spec passed and the clip failed later with
+    # "vertices contain NaN" or "camera scale must be ... got nan", naming neither file nor key
+    ({"tracks": {"expression": [[0, {"smile": float("nan")}]]}},
+     r"tracks.expression frame 0: amount of 'smile' must be a finite number, got nan"),
+    ({"tracks": {"expression": [[0, {"smile": float("inf")}]]}}, "finite number, got inf"),
+    ({"identity": {"id1": float("nan")}}, r"identity: amount of 'id1' must be a finite"),
+    ({"tracks": {"expression": [[0, {"smile": "lots"}]]}}, "amount of 'smile'"),
+    # a keyframe at frame 1.5 was read as frame 1 without a word (NaN was refused)
+    ({"tracks": {"expression": [[1.5, "smile"]]}}, r"frame must be an integer, got 1.5"),
+    ({"pose": {"keys": [[2.5, {"yaw_deg": 1}]]}}, r"frame must be an integer, got 2.5"),
+    # a keyframe at frame Infinity (JSON's) printed an OverflowError traceback
+    ({"tracks": {"expression": [[float("inf"), "smile"]]}}, "frame must be an integer, got inf"),
 ])
 def test_bad_specs_rejected(tiny_model, spec, match):
     with pytest.raises(SpecError, match=match):
         performance_from_spec(tiny_model, spec)
 
+
+
+def test_the_spec_and_frames_share_one_limit(tiny_model):
+    """The spec's n_frames was limited to 100000 and --frames to 1000000: a spec of 200000
+    frames was refused that the command line wrote; a keyframe at frame 150000 (n_frames
+    left to it) was refused with "n_frames must be between 1 and 100000"."""
+    from facetransfer.synth import _spec_n_frames
+    from facetransfer.synth_keys import MAX_FRAMES
+
+    from facetransfer.cli.render import MAX_SYNTH_FRAMES
+
+    assert MAX_SYNTH_FRAMES == MAX_FRAMES
+    assert _spec_n_frames({"n_frames": 200_000}, -1) == 200_000
+    assert _spec_n_frames({}, 149_999) == 150_000
+    with pytest.raises(SpecError, match=f"between 1 and {MAX_FRAMES}"):
+        _spec_n_frames({"n_frames": MAX_FRAMES + 1}, -1)
 
 def test_random_performance_is_seeded_and_gentle(tiny_model):
     a = random_performance(tiny_model, 60, seed=3, size=(96, 80))

@@ -222,3 +222,19 @@ def test_non_finite_tensor_is_named(bad):
         tl.nmode_svd(T)
     with pytest.raises(FaceTransferError, match="NaN or infinite"):
         tl.hooi(T, [2, 2, 2], skip=(0,))
+
+
+@pytest.mark.parametrize("bad, said", [
+    (np.ones((3, 3, 3)) + 1j, r"real numbers, got complex values of shape \(3, 3, 3\)"),
+    (np.full((3, 3, 3), "x"), "real numbers, got text"),
+    (np.zeros((0, 3, 3)), r"empty \(shape \(0, 3, 3\)\)"),
+])
+def test_complex_text_or_empty_tensor_is_named(bad, said):
+    """A complex tensor was decomposed as its real part (a ComplexWarning only), text failed
+    with numpy's "could not convert string to float", an empty one with "cannot reshape"."""
+    from facetransfer.errors import ShapeError
+
+    with pytest.raises(ShapeError, match=said):
+        tl.nmode_svd(bad)
+    with pytest.raises(ShapeError, match=said):
+        tl.hooi(bad, skip=(0,))

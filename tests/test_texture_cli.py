@@ -76,6 +76,36 @@ def test_default_and_lift(run, tmp_path, model_path):
     assert (tmp_path / "tf.npz").is_file()
 
 
+
+def test_lift_from_an_odd_sized_clip_and_its_truth(run, tmp_path, model_path, capsys):
+    """synth-video at an odd size (63x47) stores its frames grown to 64x48 (4:2:0, the edge
+    repeated) beside a truth of 63x47: lifting the clip through its own truth was refused
+    ("track ... is for 63x47 frames, the video is 64x48"). The frames are now taken without
+    the repeated edge, and the texture is the one lifted from the same clip at an even size
+    cut to it."""
+    from facetransfer.model import load_model
+
+    model = load_model(model_path)
+    yy, xx = np.mgrid[:64, :64]
+    ramp = np.stack([40 + 3 * xx, 40 + 3 * yy, 120 + 0 * xx], -1).astype(np.uint8)
+    perf = random_performance(model, 3, seed=0, size=(95, 79))
+    write_clip(make_clip(model, perf, texture=ramp), tmp_path / "odd.mp4")
+    capsys.readouterr()
+    assert run("texture", "lift", tmp_path / "odd.mp4", "--track", tmp_path / "odd.truth.npz",
+               "--model", model_path, "--size", 32, "--out", tmp_path / "l.png") == 0, \
+        capsys.readouterr().err
+    lifted = _read(tmp_path / "l.png").astype(float)
+    c = np.corrcoef(lifted[4:28, 4:28, 0].ravel(), np.tile(np.arange(24), 24))[0, 1]
+    assert c > 0.9                                    # the ramp along u, where it belongs
+    assert run("texture", "lift", tmp_path / "odd.mp4", "--track", tmp_path / "odd.truth.npz",
+               "--model", model_path, "--size", 32, "--out", tmp_path / "l.png") == 2
+    other = random_performance(model, 3, seed=0, size=(93, 79))   # not the clip's: refused
+    write_clip(make_clip(model, other), tmp_path / "other.mp4")
+    capsys.readouterr()
+    assert run("texture", "lift", tmp_path / "odd.mp4", "--track", tmp_path / "other.truth.npz",
+               "--model", model_path, "--size", 32, "--out", tmp_path / "l2.png") == 2
+    assert "is for 93x79 frames, the video is 96x80" in capsys.readouterr().err
+
 def test_errors_are_one_line(run, tmp_path, model_path, capsys):
     img = np.zeros((20, 20, 3), np.uint8)
     _write(tmp_path / "a.png", img)

@@ -32,6 +32,7 @@ import numpy as np
 
 from . import tensor as tl
 from .datasets.base import FaceDataset
+from .arrays import real_array
 from .errors import DatasetError, ModelFileError, ShapeError
 from .io.atomic import atomic_path
 from .io.verified import remember_verified, was_verified
@@ -204,11 +205,15 @@ class MultilinearModel:
             missing = [n for n in self.mode_names if n not in weights]
             if missing:
                 raise ValueError(f"weights missing for mode(s) {missing}")
-            ws = [np.asarray(weights[n], dtype=np.float64) for n in self.mode_names]
+            ws = [weights[n] for n in self.mode_names]
         else:
-            ws = [np.asarray(w, dtype=np.float64) for w in weights]
+            ws = list(weights)
             if len(ws) != self.n_modes:
                 raise ValueError(f"{len(ws)} weight vectors for {self.n_modes} modes")
+        # real and finite: NaN or inf gave a NaN face (a RuntimeWarning only), complex weights
+        # their real part, text numpy's message naming no mode
+        ws = [real_array(w, f"weights of mode {n!r}", finite=True)
+              for n, w in zip(self.mode_names, ws)]
         for name, w, r in zip(self.mode_names, ws, self.ranks):
             if w.ndim == 0 or w.shape[-1] != r:
                 raise ShapeError(f"weights of mode {name!r} must end in {r}, got shape {w.shape}")
@@ -230,7 +235,9 @@ class MultilinearModel:
         Parameters
         ----------
         weights : mapping mode name -> (..., r_k) array, or a sequence in mode order
-            Leading (batch) dimensions broadcast against each other.
+            Leading (batch) dimensions broadcast against each other; a batch of no rows gives
+            no faces. Real and finite (NaN, infinite or complex weights raise ShapeError
+            naming the mode).
         vertices : (m,) int array, optional
             Only synthesize these vertices.
 
@@ -242,6 +249,9 @@ class MultilinearModel:
         batch = self._batch_shape(ws)
         if vertices is not None and np.size(vertices) == 0:   # an empty selection
             return np.zeros(batch + (0, 3))
+        if math.prod(batch) == 0:     # no faces asked for (e.g. a clip of no frames)
+            n = self.n_vertices if vertices is None else len(self._rows(vertices)) // 3
+            return np.zeros(batch + (n, 3))
         if vertices is not None and len(ws) > 1 and self._first_mode_worth(ws[0], vertices):
             # one identity over the batch, already contracted or wanted for many vertices:
             # its rows of the contracted core (the core's rows alone copy r_1 times more)

@@ -55,6 +55,7 @@ Vlasic, Brand, Pfister, Popović. Face Transfer with Multilinear Models. SIGGRAP
 from __future__ import annotations
 
 import json
+import math
 import logging
 import os
 from dataclasses import dataclass, field
@@ -68,7 +69,7 @@ from .errors import AssetError, FaceTransferError, TrackError, VideoError
 from .io.atomic import atomic_path, check_output_path
 from .io.npz import read_npz
 from .render import WeakPerspective, render, rotation_from_euler
-from .synth_keys import SPEC_KEYS  # the keys of a spec, read by the parser below
+from .synth_keys import MAX_FRAMES, SPEC_KEYS  # the keys of a spec, read by the parser below
 
 log = logging.getLogger(__name__)
 
@@ -162,7 +163,7 @@ def _value_weights(model, mode: str, value, where: str) -> np.ndarray:
         if isinstance(value, Mapping):
             w = base.copy()
             for label, amount in value.items():
-                w += float(amount) * (model.training_weights(k, label) - base)
+                w += _amount(amount, label, where) * (model.training_weights(k, label) - base)
             return w
         w = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -171,6 +172,18 @@ def _value_weights(model, mode: str, value, where: str) -> np.ndarray:
         raise SpecError(f"{where}: expected a label, a {{label: amount}} blend or {r} finite "
                         f"weights for mode {mode!r}, got {value!r}")
     return w
+
+
+def _amount(amount, label, where: str) -> float:
+    """A blend's ``{label: amount}`` amount as a finite float (NaN or infinity made a NaN face
+    that failed later, naming neither the spec nor the key)."""
+    try:
+        a = float(amount)
+    except (TypeError, ValueError):
+        a = math.nan
+    if not math.isfinite(a) or isinstance(amount, bool):
+        raise SpecError(f"{where}: amount of {label!r} must be a finite number, got {amount!r}")
+    return a
 
 
 def _ease(x: np.ndarray) -> np.ndarray:
@@ -203,7 +216,9 @@ def _parse_keys(raw, what: str) -> list[tuple[int, Any]]:
             raise SpecError(f"{what}[{i}] must be [frame, value], got {item!r}")
         try:
             f = int(item[0])
-        except (TypeError, ValueError):
+            if isinstance(item[0], float) and item[0] != f:   # 1.5 was read as frame 1
+                raise ValueError
+        except (TypeError, ValueError, OverflowError):
             raise SpecError(f"{what}[{i}]: frame must be an integer, got {item[0]!r}") from None
         if f < 0:
             raise SpecError(f"{what}[{i}]: frame must be >= 0, got {f}")
@@ -348,8 +363,8 @@ def _spec_n_frames(spec: Mapping, last: int) -> int:
     if n_frames != int(n_frames):
         raise SpecError(f"n_frames must be an integer, got {n_frames}")
     n_frames = int(n_frames)
-    if not 1 <= n_frames <= 100_000:
-        raise SpecError(f"n_frames must be between 1 and 100000, got {n_frames}")
+    if not 1 <= n_frames <= MAX_FRAMES:      # one limit with --frames (it was 100000 here)
+        raise SpecError(f"n_frames must be between 1 and {MAX_FRAMES}, got {n_frames}")
     return n_frames
 
 

@@ -5,10 +5,14 @@ the command line names them in its help without importing the renderer at start-
 
 from __future__ import annotations
 
-__all__ = ["SPEC_KEYS"]
+__all__ = ["SPEC_KEYS", "MAX_FRAMES"]
 
 #: The keys of a performance spec: its own, an oscillating pose's and a pose keyframe's.
 SPEC_KEYS = {"spec": ("n_frames", "fps", "size", "identity", "tracks", "pose"),
              "pose": ("yaw_deg", "pitch_deg", "roll_deg", "translate_px", "scale", "period_s",
                       "fill", "keys"),
              "pose.keys": ("yaw_deg", "pitch_deg", "roll_deg", "tx", "ty", "scale")}
+
+#: The most frames a synthetic clip has, from ``--frames`` or the spec's ``n_frames`` alike (11
+#: hours at 25 fps; 10**30 was numpy's OverflowError traceback).
+MAX_FRAMES = 1_000_000

@@ -25,6 +25,7 @@ from typing import Sequence
 
 import numpy as np
 
+from .arrays import check_iterations, real_array
 from .errors import FaceTransferError, ShapeError
 
 log = logging.getLogger(__name__)
@@ -348,7 +349,7 @@ def _finite_data(tensor: np.ndarray) -> tuple[np.ndarray, float]:
     """The tensor as float64 and its squared norm, refused (FaceTransferError naming its shape)
     when it holds NaN or infinities: the eigensolver would fail on them with LinAlgError
     ("Eigenvalues did not converge"), which names neither the tensor nor the cause."""
-    T = np.asarray(tensor, dtype=np.float64)
+    T = real_array(tensor, "tensor", nonempty=True)   # complex was cast to its real part
     norm2 = float(np.vdot(T, T))    # NaN or inf iff an entry is (or it overflows)
     if not np.isfinite(norm2):
         raise FaceTransferError(f"tensor of shape {T.shape} holds NaN or infinite values (or "
@@ -494,6 +495,7 @@ def hooi(tensor: np.ndarray, ranks: Sequence[int | None] | None = None, *,
     Tucker
         ``errors`` holds the error of the initial guess and of every sweep.
     """
+    check_iterations(max_iter, tol, "hooi")
     T, norm2 = _finite_data(tensor)
     N = T.ndim
     skip = _skipped(T, skip)

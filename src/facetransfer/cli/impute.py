@@ -75,6 +75,7 @@ def _eval_inputs(args) -> tuple[list[float], list[str], Path]:
     """``impute eval``'s fractions, methods and output folder, checked before any work: an
     earlier run's results in the folder are replaced only with ``--overwrite``."""
     from ..impute import EVAL_VARIANTS, METHODS
+    from ..impute.evaluate import check_no_repeats
     from ..io.atomic import check_output_path
 
     fractions = _floats(args.missing, "--missing")
@@ -88,6 +89,8 @@ def _eval_inputs(args) -> tuple[list[float], list[str], Path]:
                              f"{', '.join(METHODS + tuple(EVAL_VARIANTS))}")
     if not methods:
         raise ValueError("--methods is empty")
+    check_no_repeats(fractions, "--missing")
+    check_no_repeats(methods, "--methods")
     if args.trials < 1:
         raise ValueError(f"--trials must be at least 1, got {args.trials}")
     _check_trials_fit(args.trials, len(fractions) * len(methods))

@@ -46,6 +46,7 @@ def parse_ranks(text: str | None) -> dict[str, int]:
             r = 0
         if not sep or not name or r < 1:
             raise FaceTransferError(f"--ranks: expected MODE=POSITIVE_INT[,...], got {part!r}")
+        _once(out, name, "--ranks", text)
         out[name] = r
     return out
 
@@ -63,6 +64,7 @@ def parse_weights(text: str) -> dict[str, np.ndarray]:
             w = np.array([np.nan])
         if not sep or not name.strip() or w.size == 0 or not np.all(np.isfinite(w)):
             raise FaceTransferError(f"--weights: expected MODE=NUM,NUM,...[;MODE=...], got {part!r}")
+        _once(out, name.strip(), "--weights", text)
         out[name.strip()] = w
     if not out:
         raise FaceTransferError("--weights is empty")
@@ -76,8 +78,16 @@ def parse_like(text: str) -> dict[str, str]:
         name, sep, lab = part.partition("=")
         if not sep or not name.strip() or not lab.strip():
             raise FaceTransferError(f"--like: expected MODE=LABEL[,...], got {part!r}")
+        _once(out, name.strip(), "--like", text)
         out[name.strip()] = lab.strip()
     return out
+
+
+def _once(parsed: dict, mode: str, flag: str, text: str) -> None:
+    """Refuse a mode ``flag`` gives twice (the last one was taken without a word)."""
+    if mode in parsed:
+        raise FaceTransferError(f"{flag} gives mode {mode!r} twice, in {text!r}: give each "
+                                "mode once")
 
 
 # --------------------------------------------------------------------------------- build

@@ -18,13 +18,13 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
+from ..synth_keys import MAX_FRAMES
 from .common import (MODEL_ARG_HELP, add_video_options, frame_count, integer_from,
                      progress_disabled, resolve_model, video_options, video_out)
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
-#: The most frames ``synth-video --frames`` writes (11 hours at 25 fps; 10**30 was numpy's
-#: OverflowError traceback).
-MAX_SYNTH_FRAMES = 1_000_000
+#: The most frames ``synth-video --frames`` writes: the spec's limit too (:mod:`synth_keys`).
+MAX_SYNTH_FRAMES = MAX_FRAMES
 #: The largest ``--pose`` angle, in degrees (a turn either way; 1e300 was taken) and scale.
 MAX_POSE_ANGLE, MAX_POSE_SCALE = 360.0, 1000.0
 

@@ -95,6 +95,7 @@ def _smooth(args) -> int:
     from ..correspond import bilateral_smooth, load_scan
     from ..io.atomic import check_output_path
     from ..io.mesh import check_mesh_output, write_mesh
+    from .common import tqdm_progress
 
     check_mesh_output(args.out)
     check_output_path(args.out, overwrite=args.overwrite, inputs=[args.scan])
@@ -104,7 +105,13 @@ def _smooth(args) -> int:
             raise ValueError(f"--{name.replace('_', '-')} must be a positive finite number "
                              f"(scan units), got {val}")
     scan = load_scan(args.scan)
-    v = bilateral_smooth(scan.vertices, scan.faces, sigma_c=args.sigma_c, sigma_s=args.sigma_s)
+    on_progress, close = tqdm_progress("scan smooth", unit="chunk",
+                                       enabled=not getattr(args, "no_progress", False))
+    try:
+        v = bilateral_smooth(scan.vertices, scan.faces, sigma_c=args.sigma_c,
+                             sigma_s=args.sigma_s, progress=on_progress)
+    finally:
+        close()
     write_mesh(args.out, v, scan.faces, overwrite=args.overwrite)
     print(f"wrote {args.out} ({len(v)} vertices)")
     return 0

@@ -120,7 +120,7 @@ def cmd_lift(args: argparse.Namespace) -> int:
 
     from tqdm import tqdm
 
-    from ..io.video import iter_frames, video_info
+    from ..io.video import grown_size_of, iter_frames, video_info
     from ..texture import (TextureFunction, lift_merged, lift_track, merge_textures,
                            texture_to_uint8)
 
@@ -145,7 +145,9 @@ def cmd_lift(args: argparse.Namespace) -> int:
     track = _load_track(args.track)
     model = _lift_model(track, args.model)
     track.check_model(model)
-    if tuple(track.frame_size) != tuple(info.size):
+    w, h = (int(v) for v in track.frame_size)
+    grown = grown_size_of(info.size, (w, h))   # an odd-sized synth-video clip, 4:2:0
+    if tuple(track.frame_size) != tuple(info.size) and not grown:
         raise FaceTransferError(f"track {args.track} is for {track.frame_size[0]}x"
                                 f"{track.frame_size[1]} frames, the video is "
                                 f"{info.size[0]}x{info.size[1]}")
@@ -160,6 +162,8 @@ def cmd_lift(args: argparse.Namespace) -> int:
               disable=progress_disabled()) as bar:
         # a track of the clip's first n frames (``track --max-frames``) lifts those
         frames = itertools.islice(iter_frames(args.video), n)
+        if grown:                     # the frames as they were, without the repeated edge
+            frames = (f[:h, :w] for f in frames)
         if fn_out is None:            # merged as they come: one texture's memory
             merged, used = lift_merged(model, frames, track, tex_size=args.size,
                                        step=args.step, progress=bar.update)

@@ -22,6 +22,7 @@ from typing import Sequence
 import numpy as np
 
 from .. import tensor as tl
+from ..arrays import check_iterations
 from .cells import Progress, check_tensor, validate_mask
 
 __all__ = ["reference_indices", "average_impute", "naive_impute", "tensorly_impute"]
@@ -293,6 +294,11 @@ def tensorly_impute(tensor: np.ndarray, mask: np.ndarray, *, ranks: Sequence[int
     shape = mask.shape
     K = len(shape)
     rk = list(ranks) if ranks is not None else [max(1, -(-d // 2)) for d in shape]
+    if len(rk) != K or not all(isinstance(r, (int, np.integer)) and 1 <= r <= d
+                               for r, d in zip(rk, shape)):
+        raise ValueError(f"tensorly_impute: ranks must be {K} integers, each from 1 to its "
+                         f"mode's size {tuple(shape)}, got {tuple(rk)}")
+    check_iterations(max_iter, tol, "tensorly_impute")
     Q, Z, Y = _compress(T, mask)
     # centre on the known cells' mean face (the usual preprocessing; Tucker has no mean term)
     mean = Z.reshape(Z.shape[0], -1)[:, mask.ravel()].mean(axis=1)

@@ -7,6 +7,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
+from ..arrays import real_array
 from ..errors import DatasetError, ShapeError
 
 __all__ = ["Progress", "validate_mask", "check_tensor"]
@@ -49,9 +50,11 @@ def validate_mask(mask: np.ndarray, shape: Sequence[int], *,
         has = m.any(axis=axes) if axes else m
         if not has.all():
             i = int(np.nonzero(~has)[0][0])
-            lab = labels[k][i] if labels is not None else str(i)
-            raise DatasetError(f"{names[k]} {lab!r} (mode {k} {names[k]!r}, index {i}) has no "
-                               f"known cell: a slice with no data at all cannot be imputed")
+            which = (f"{names[k]} {labels[k][i]!r} (mode {k} {names[k]!r}, index {i})"
+                     if labels is not None and mode_names is not None else
+                     f"{names[k]} index {i}")   # was "mode 0 '0' (mode 0 'mode 0', index 0)"
+            raise DatasetError(f"{which} has no known cell (mask {shape}): a slice with no "
+                               "data at all cannot be imputed")
     return m
 
 
@@ -61,16 +64,19 @@ def check_tensor(tensor: np.ndarray, mask: np.ndarray) -> np.ndarray:
     Raises
     ------
     ShapeError
-        The tensor does not have one more mode than the mask.
+        The tensor does not have one more mode than the mask, has no coordinates, or holds
+        other than real numbers (complex, text).
     DatasetError
         Its cells differ from the mask's, or a known cell holds NaN or infinite coordinates.
     """
-    T = np.asarray(tensor, dtype=np.float64)
+    T = real_array(tensor, "tensor")    # complex was cast to its real part, text numpy's error
     if T.ndim != mask.ndim + 1:
         raise ShapeError(f"tensor must be (3n, d_1..d_K) with cells {mask.shape}, got {T.shape}")
     if T.shape[1:] != mask.shape:
         raise DatasetError(f"mask shape {mask.shape} does not match the tensor's cells "
                            f"{T.shape[1:]}")
+    if T.shape[0] == 0:
+        raise ShapeError(f"tensor {T.shape} has no vertex coordinates (mode 0 is empty)")
     known = T.reshape(T.shape[0], -1)[:, mask.ravel()]
     if not np.isfinite(known).all():
         raise DatasetError("known cells contain NaN or infinite coordinates")

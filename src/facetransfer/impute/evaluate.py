@@ -180,11 +180,22 @@ def evaluate_imputation(dataset: FaceDataset, fractions: Sequence[float], *, tri
     return ImputeEvaluation(_records(acc, methods, fractions), examples)
 
 
+def check_no_repeats(values: Sequence, what: str) -> None:
+    """ValueError naming the first value given twice in ``values`` (a method or fraction given
+    twice was run twice, its rows reported and written twice, the report's counts doubled)."""
+    seen = set()
+    for v in values:
+        if v in seen:
+            raise ValueError(f"{what} gives {v!r} twice: give each once")
+        seen.add(v)
+
+
 def _check_methods(methods: Sequence[str]) -> None:
     for m in methods:
         if m not in METHODS and m not in EVAL_VARIANTS:
             raise ValueError(f"unknown imputation method {m!r}; choose from "
                              f"{', '.join(METHODS + tuple(EVAL_VARIANTS))}")
+    check_no_repeats(list(methods), "methods")
 
 
 def _check_fractions(fractions: Sequence[float], trials: int) -> list[float]:
@@ -194,6 +205,7 @@ def _check_fractions(fractions: Sequence[float], trials: int) -> list[float]:
     for f in fractions:
         if not 0 < f < 1:
             raise ValueError(f"missing fractions must be in (0, 1), got {f}")
+    check_no_repeats(fractions, "missing fractions")
     return fractions
 
 

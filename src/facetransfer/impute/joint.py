@@ -62,6 +62,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import scipy.linalg
 
+from ..arrays import check_iterations
 from ..errors import DatasetError, ShapeError
 from .cells import Progress, check_tensor, validate_mask
 from .ppca import FLOOR, ppca_eigen
@@ -272,6 +273,7 @@ def impute_tensor(tensor: np.ndarray, mask: np.ndarray, *, ranks=None,
     ranks_l = _resolve_ranks(ranks, mask.shape, mode_names)
     if em not in ("soft", "hard"):
         raise ValueError(f"em must be 'soft' or 'hard', got {em!r}")
+    check_iterations(max_iter, tol, "impute_tensor")
     P = T.shape[0]
     missing = ~mask.ravel()
     Y = T.reshape(P, -1)
@@ -339,8 +341,13 @@ def _check_row_weights(row_weights: np.ndarray | None, P: int) -> np.ndarray | N
     if row_weights is None:
         return None
     w = np.asarray(row_weights, dtype=np.float64)
-    if w.shape != (P,) or (w < 0).any() or not np.isfinite(w).all() or w.sum() <= 0:
+    if w.shape != (P,):
         raise ShapeError(f"row_weights must be ({P},) non-negative, got shape {w.shape}")
+    if (w < 0).any() or not np.isfinite(w).all() or w.sum() <= 0:   # the shape was said
+        raise ValueError(f"row_weights must be finite, non-negative and not all zero, got "
+                         f"{int((w < 0).sum())} negative, "
+                         f"{int(w.size - np.count_nonzero(np.isfinite(w)))} NaN or infinite, "
+                         f"sum {float(np.nansum(w)):g}")
     return w
 
 

@@ -395,6 +395,16 @@ def _stored_size(size: tuple[int, int], codec: str) -> tuple[int, int]:
     return w + w % 2, h + (h % 2 if codec != "prores" else 0)
 
 
+def grown_size_of(stored: tuple[int, int], size: tuple[int, int]) -> bool:
+    """Whether a video stored at ``stored`` (``(W, H)``) holds frames of the odd ``size`` grown
+    to even sizes (:func:`_stored_size` of 4:2:0 or 4:2:2: the edge repeated): the frames are
+    then the stored ones' top-left ``size`` (e.g. ``synth-video --size 63x47``'s clip, 64x48,
+    beside its truth's 63x47)."""
+    size = (int(size[0]), int(size[1]))
+    return tuple(int(v) for v in stored) != size and tuple(int(v) for v in stored) in (
+        _stored_size(size, "h264"), _stored_size(size, "prores"))
+
+
 def warn_if_grown(path, size: tuple[int, int], codec: str) -> None:
     """Warn (once per output) that a video of ``size`` is stored larger than its frames: the
     frame of a plate of odd size grows by a column or row repeating its edge
