@@ -548,6 +548,29 @@ def test_the_tracked_points_are_made_before_a_fork(arkit_model, tmp_path, monkey
     assert made == [m]
 
 
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, MemoryError])
+def test_a_stop_making_the_tracked_points_leaves_no_child_and_no_job(tmp_path, monkeypatch,
+                                                                     stop):
+    """A Ctrl-C (or an error) while start_background_track makes the child's tracked points
+    before the fork: raised, no child forked, no job left holding the model and the frames."""
+    import multiprocessing
+
+    from facetransfer.track import capture, obtain
+
+    def stopped(model, options=None):
+        raise stop()
+
+    monkeypatch.setattr(capture, "prepare_points", stopped)
+    model = type("Model", (), {"landmarks": np.arange(68), "content_hash": "m"})()
+    frames = (np.zeros((3, 8, 8, 3), np.uint8), 30.0)
+    before = multiprocessing.active_children()
+    with pytest.raises(stop):
+        obtain.start_background_track(tmp_path / "v.mp4", model, 3, method="auto", options=None,
+                                      parallel=True, frames=frames)
+    assert obtain._BACKGROUND_JOB is None
+    assert multiprocessing.active_children() == before
+
+
 def test_a_frames_targets_are_read_from_the_detections_given(arkit_model):
     """detection_targets reads frame ``i`` of the detections it is handed, whatever the
     weights were made from: the fit's weights hold no copy of a clip's targets (a copy made
