@@ -287,17 +287,20 @@ def test_median5_equals_opencvs_median(box):
 
 
 @_SETTINGS
-@given(_boxes(24), st.integers(0, 2 ** 32 - 1), st.booleans(), st.booleans())
-def test_recolour_lips_equals_the_numpy_expressions(box, seed, crop, fortran):
+@given(_boxes(24), st.integers(0, 2 ** 32 - 1), st.booleans(), st.booleans(),
+       st.sampled_from(["float32", "float64", "float16", "uint8", "int32"]))
+def test_recolour_lips_equals_the_numpy_expressions(box, seed, crop, fortran, dtype):
     """The two recolouring kernels against the numpy expressions: a crop's view or a
-    Fortran-ordered weight map, weights of 0, 1, negative, NaN, between; one-pixel boxes."""
+    Fortran-ordered weight map, weights of 0, 1, negative, NaN, between; one-pixel boxes;
+    weights of another dtype moved in numpy's precision (float64 with float64 or int32)."""
     h, w, _, moved = box
     rng = np.random.default_rng(seed)
     img = rng.integers(0, 256, (h + 2, w + 3, 3), dtype=np.uint8)
     wt = np.where(moved, rng.choice([1.0, 0.5, 1e-7, rng.random()], (h, w)), 0.0)
     wt[rng.random((h, w)) < 0.05] = np.nan
     wt[rng.random((h, w)) < 0.05] = -0.5
-    wt = wt.astype(np.float32)
+    wt = wt.astype(np.float32) if dtype.startswith("float") else np.nan_to_num(wt) > 0.3
+    wt = wt.astype(dtype)
     if fortran:
         wt = np.asfortranarray(wt)
     target = np.array([45.0, 30.0, 15.0]) + rng.normal(0, 12, 3)
@@ -328,3 +331,17 @@ def test_mediapipe_to_ibug_equals_the_old_mapping(frames, n, d, dtype, fortran, 
         got, want = mediapipe_to_ibug(P), _old_mediapipe_to_ibug(P)
     assert got.dtype == want.dtype and got.shape == want.shape
     np.testing.assert_array_equal(_bits(got), _bits(want))
+
+
+def test_recolour_lips_moves_float64_weights_as_numpy_did():
+    """Weights in float64 (any weights numpy's expressions would have moved in float64): the
+    move in float64, as theirs, not in float32 after a cast (a million pixels: some are a
+    level apart that way)."""
+    rng = np.random.default_rng(7)
+    img = rng.integers(0, 256, (1000, 1000, 3), dtype=np.uint8)
+    wt = rng.random((1000, 1000))
+    target, keep = np.array([45.0, 30.0, 15.0]), np.array([0.4, 0.6, 0.8])
+    got, want = img.copy(), img.copy()
+    lip_colour.recolour_lips(got, wt, target, keep)
+    _old_recolour(want, wt, target, keep)
+    np.testing.assert_array_equal(got, want)
