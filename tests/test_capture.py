@@ -548,19 +548,46 @@ def test_the_tracked_points_are_made_before_a_fork(arkit_model, tmp_path, monkey
     assert made == [m]
 
 
-def test_a_clips_targets_are_each_frames_made_at_once(arkit_model):
-    """clip_targets holds every frame's detection_targets (detections, then the dense points
-    of MediaPipe's; weight 0 where unknown), the same arrays to the bit, read-only."""
-    from facetransfer.track.capture_frame import PointWeights, clip_targets, detection_targets
+@pytest.mark.parametrize("stop", [KeyboardInterrupt, MemoryError])
+def test_a_stop_making_the_tracked_points_leaves_no_child_and_no_job(tmp_path, monkeypatch,
+                                                                     stop):
+    """A Ctrl-C (or an error) while start_background_track makes the child's tracked points
+    before the fork: raised, no child forked, no job left holding the model and the frames."""
+    import multiprocessing
 
-    det, _, _ = _synthetic(arkit_model, F=12, late=3)              # no face in 3 frames
-    mp_index = mediapipe_correspondence(arkit_model).mp_index
-    w = np.linspace(0.1, 1.0, 68 + len(mp_index))
-    for pw in (PointWeights(w, mp_index), PointWeights(w[:68])):
-        held = clip_targets(det, pw)
-        assert pw.targets is None and held.targets is not None
-        for i in range(det.n_frames):
-            (p, wt), (q, vt) = detection_targets(det, i, pw), detection_targets(det, i, held)
-            assert np.array_equal(p, q, equal_nan=True) and np.array_equal(wt, vt)
-            assert q.dtype == p.dtype and not q.flags.writeable and not vt.flags.writeable
-        assert held.targets[0] is not det.points
+    from facetransfer.track import capture, obtain
+
+    def stopped(model, options=None):
+        raise stop()
+
+    monkeypatch.setattr(capture, "prepare_points", stopped)
+    model = type("Model", (), {"landmarks": np.arange(68), "content_hash": "m"})()
+    frames = (np.zeros((3, 8, 8, 3), np.uint8), 30.0)
+    before = multiprocessing.active_children()
+    with pytest.raises(stop):
+        obtain.start_background_track(tmp_path / "v.mp4", model, 3, method="auto", options=None,
+                                      parallel=True, frames=frames)
+    assert obtain._BACKGROUND_JOB is None
+    assert multiprocessing.active_children() == before
+
+
+def test_a_frames_targets_are_read_from_the_detections_given(arkit_model):
+    """detection_targets reads frame ``i`` of the detections it is handed, whatever the
+    weights were made from: the fit's weights hold no copy of a clip's targets (a copy made
+    them ~12 kB a frame, three times MediaPipe's points, held through the fit, for ~0.014
+    CPU-s a clip; and a call with other detections had their first clip's)."""
+    import dataclasses
+
+    from facetransfer.track.capture import _point_weights
+    from facetransfer.track.capture_frame import detection_targets
+
+    det, _, _ = _synthetic(arkit_model, F=6)
+    weights, _ = _point_weights(det, arkit_model, CaptureOptions())
+    other = dataclasses.replace(det, points=det.points + 1.0, points478=det.points478 + 1.0)
+    for i in range(det.n_frames):
+        p, w = detection_targets(other, i, weights)
+        np.testing.assert_array_equal(p[:68], other.points[i])
+        np.testing.assert_array_equal(p[68:], other.points478[i, weights.mp_index])
+    held = [a for v in vars(weights).values()
+            for a in (v if isinstance(v, tuple) else (v,)) if isinstance(a, np.ndarray)]
+    assert sum(a.nbytes for a in held) < det.points478.nbytes

@@ -53,9 +53,10 @@ def _sweeps_kernel_py(h, inner, y0, x0, iterations, rings):  # pragma: no cover 
     sweeps pipelined down the box, sweep ``k`` a row behind sweep ``k - 1`` (it needs that
     sweep's rows above, at and below its own), each sweep's last three rows kept in its ring
     (row ``y`` in slot ``y % 3``: the region's pixels the sums, the rest as they were), the
-    first sweep reading ``h`` itself and the last sweep's rows written back two rows behind
-    the first's reads. The box is read from memory once, not once a sweep; every value is
-    the same sum of the same values as sweep after sweep over the whole box."""
+    first sweep reading ``h`` itself and the last sweep's row ``y`` written back once the first
+    has made row ``y + max(iterations, 2)`` (no sweep reads ``h``'s row ``y`` after that). The
+    box is read from memory once, not once a sweep; every value is the same sum of the same
+    values as sweep after sweep over the whole box."""
     H, W = inner.shape
     n = iterations
     hf = h.reshape(h.size)

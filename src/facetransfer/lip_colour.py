@@ -347,7 +347,8 @@ def recolour_lips(image: np.ndarray, w: np.ndarray, target_lab: np.ndarray,
     image : (h, w, 3) uint8
         The tinted mouth (RGB).
     w : (h, w) float32
-        The share of the tint each pixel took (the lips' weight times :func:`tint_reach`).
+        The share of the tint each pixel took (the lips' weight times :func:`tint_reach`);
+        in float64 (or int32), the move is in float64, as numpy's.
     target_lab : (3,) float
         :attr:`LipTint.target_lab`.
     keep : (3,) float
@@ -361,8 +362,9 @@ def recolour_lips(image: np.ndarray, w: np.ndarray, target_lab: np.ndarray,
     lab = cv2.cvtColor(image.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
     c0, c1 = CHROMA_RAMP
     go = np.zeros(w.shape, np.uint8)  # the moved pixels' steps in one kernel, and then theirs
-    _move_lab(lab, np.ascontiguousarray(w, np.float32), np.float32(c0), np.float32(c1 - c0),
-              1.0 - np.asarray(keep, np.float32), np.asarray(target_lab, np.float32), go)
+    w = np.ascontiguousarray(w, np.result_type(w, np.float32))  # numpy's precision of the move
+    _move_lab(lab, w, np.float32(c0), np.float32(c1 - c0), 1.0 - np.asarray(keep, np.float32),
+              np.asarray(target_lab, np.float32), go)
     rgb = cv2.cvtColor(lab, cv2.COLOR_LAB2RGB)
     out = np.array(image, copy=True, order="C")  # (the image a crop's view or not: one layout)
     _put_moved(rgb, go, out)
@@ -371,10 +373,10 @@ def recolour_lips(image: np.ndarray, w: np.ndarray, target_lab: np.ndarray,
 
 def _move_lab_py(lab, w, c0, span, k, t, go):  # pragma: no cover (numba)
     """:func:`recolour_lips`' move of ``lab`` (h, w, 3) float32 in place where ``w`` (h, w)
-    float32 is above 0: ``ww = w clip((hypot(a, b) - c0) / span, 0, 1)`` and ``x += ww k (t -
-    x)`` per channel (``k = 1 - keep``, ``t`` the target's colour, (3,) float32), ``go = ww >
-    0`` (h, w) uint8: the numpy expressions' float32 operations, in their order, without the
-    moved pixels gathered and scattered."""
+    float32 (or float64: the move in float64) is above 0: ``ww = w clip((hypot(a, b) - c0) /
+    span, 0, 1)`` and ``x += ww k (t - x)`` per channel (``k = 1 - keep``, ``t`` the target's
+    colour, (3,) float32), ``go = ww > 0`` (h, w) uint8: the numpy expressions' operations,
+    in their order and precision, without the moved pixels gathered and scattered."""
     zero, one = np.float32(0.0), np.float32(1.0)
     for y in range(w.shape[0]):
         for x in range(w.shape[1]):

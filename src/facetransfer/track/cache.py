@@ -32,7 +32,7 @@ from ..errors import OutputError
 log = logging.getLogger(__name__)
 
 __all__ = ["KEEP", "LAYOUT", "cache_enabled", "code_digest", "code_fingerprint", "track_dir",
-           "track_key", "cached_track", "store_track", "partial_path"]
+           "track_key", "holds", "cached_track", "store_track", "partial_path"]
 
 #: The cache's layout: a change of what a key means (or of the trackers' results) changes it.
 LAYOUT = "tracks-1"

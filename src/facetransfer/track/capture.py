@@ -56,8 +56,8 @@ from ..errors import TrackError, VideoError, plain_interrupts
 from .aspect import stored_pixels
 from .camera import Pose
 from . import capture_points
-from .capture_frame import (FrameState, PointWeights, clip_targets, detection_targets,
-                            fit_frame, iris_of, sin_yaw)
+from .capture_frame import (FrameState, PointWeights, detection_targets, fit_frame,
+                            iris_of, sin_yaw)
 from .capture_points import Sampler, Shape
 from .detect import ClipDetections
 from .fit_checkpoint import SavedFit, fit_key
@@ -542,7 +542,7 @@ def _point_weights(det: ClipDetections, model, opt: CaptureOptions
     if opt.gaze and is_arkit_model(model) and det.points478 is not None \
             and det.points478.shape[1] > max(IRIS_INDEX):
         iris, closed = usable_iris(det.points478)
-    return clip_targets(det, PointWeights(weights, sampler.mp_index, iris, closed)), sampler
+    return PointWeights(weights, sampler.mp_index, iris, closed), sampler
 
 
 def _dense_points(model, opt: CaptureOptions):

@@ -10,7 +10,7 @@ Ry(b) Rz(c)`` (:func:`sin_yaw`; :mod:`facetransfer.render.cameras` names the con
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -21,7 +21,7 @@ from .fit2d import Targets, pose_gauss_newton
 from .gaze import frame_gaze_activations
 
 __all__ = ["FrameState", "PointWeights", "sin_yaw", "residual_rms", "gaze_fixed",
-           "fit_frame", "detection_targets", "clip_targets", "iris_of"]
+           "fit_frame", "detection_targets", "iris_of"]
 
 
 @dataclass(frozen=True)
@@ -102,9 +102,6 @@ class PointWeights:
     iris: np.ndarray | None = None     # (F, 2, 2) iris centres the gaze follows (NaN: free)
     closed: np.ndarray | None = None   # (F, 2) eyes with closed lids (vertical gaze free)
     anchors: np.ndarray | None = None  # (F, K) mapped detector scores (NaN: none)
-    # every frame's detection_targets (p (F, P, 2), w (F, P)) of the clip's detections, made
-    # once (clip_targets; the fit asks for a frame's again at every pass), or None
-    targets: tuple | None = None
 
     def flow_nominal(self, flow: float) -> np.ndarray:
         """Summed weights (P,) of the detection and flow terms with every point known (the
@@ -119,26 +116,11 @@ class PointWeights:
 
 
 def detection_targets(det: ClipDetections, i: int, pw: PointWeights) -> tuple[np.ndarray, np.ndarray]:
-    """Frame ``i``'s targets for the tracked points and their weights (0 where unknown); of
-    ``pw.targets`` where it holds them (``det``'s: :func:`clip_targets`), read-only views."""
-    if pw.targets is not None:
-        return pw.targets[0][i], pw.targets[1][i]
+    """Frame ``i``'s targets for the tracked points and their weights (0 where unknown)."""
     p = det.points[i]
     if pw.mp_index is not None and len(pw.mp_index):
         p = np.concatenate([p, np.asarray(det.points478[i, pw.mp_index], np.float64)])
     return p, np.where(np.isfinite(p).all(1), pw.w, 0.0)
-
-
-def clip_targets(det: ClipDetections, pw: PointWeights) -> PointWeights:
-    """``pw`` holding every frame's :func:`detection_targets` of ``det`` (the same values,
-    made in two array operations instead of one frame at a time), read-only."""
-    p = det.points
-    if pw.mp_index is not None and len(pw.mp_index):
-        p = np.concatenate([p, np.asarray(det.points478[:, pw.mp_index], np.float64)], axis=1)
-    w = np.where(np.isfinite(p).all(2), pw.w, 0.0)
-    p = p.copy() if p is det.points else p
-    p.flags.writeable = w.flags.writeable = False
-    return replace(pw, targets=(p, w))
 
 
 def iris_of(weights: PointWeights, i: int) -> tuple | None:
