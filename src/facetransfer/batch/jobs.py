@@ -124,6 +124,12 @@ def _taken(out, why: str = "while this run went on", *, frames=None) -> OutputTa
                        f"not written; --overwrite replaces {it}")
 
 
+#: Seconds a job tries to take its output's claim that another process holds before it says
+#: the output is being written by another run: longer than another run's check of it
+#: (:func:`remove_stale_claims`), shorter than any job.
+CLAIM_WAIT = 0.5
+
+
 def claim_path(out) -> Path:
     """The claim file of the output ``out`` (:func:`claimed`): ``DIR/.NAME.EXT.claim``."""
     p = Path(out)
@@ -161,11 +167,15 @@ def claimed(out):
 
 def _claim(path: Path, out, fcntl) -> int | None:
     """The descriptor of ``path`` opened and locked by this process (None where it cannot be
-    locked); :class:`OutputTaken` where another process holds it. A file removed or replaced
-    between its opening and its lock (its holder finished) is opened again."""
+    locked); :class:`OutputTaken` where another process holds it for longer than
+    :data:`CLAIM_WAIT` (another run's planning locks it for a moment to see whether it is
+    held, :func:`remove_stale_claims`: before, a job making its claim then failed). A file
+    removed or replaced between its opening and its lock (its holder finished) is opened
+    again."""
     import socket
 
-    for _ in range(100):
+    deadline = time.monotonic() + CLAIM_WAIT
+    for _ in range(200):
         fd = _open_claim(path)
         if fd is None:
             return None    # a folder that cannot be written: the write says so
@@ -174,6 +184,9 @@ def _claim(path: Path, out, fcntl) -> int | None:
         except BlockingIOError:
             holder = os.read(fd, 512).decode("utf-8", "replace").strip()
             os.close(fd)
+            if time.monotonic() < deadline:
+                time.sleep(0.02)
+                continue
             raise _busy(out, holder) from None
         except OSError:     # ENOLCK, EOPNOTSUPP: no locks here
             os.close(fd)
@@ -190,7 +203,7 @@ def _claim(path: Path, out, fcntl) -> int | None:
                 os.write(fd, said.encode())
             return fd
         os.close(fd)
-    return None     # pragma: no cover (a claim made and removed 100 times meanwhile)
+    return None     # pragma: no cover (a claim made and removed 200 times meanwhile)
 
 
 def remove_stale_claims(out_dir) -> list[Path]:

@@ -1,0 +1,53 @@
+"""A batch job's claim of its output (:func:`facetransfer.batch.jobs.claimed`) against the
+moments other runs look at it: another run's planning checking the claim files there
+(:func:`~facetransfer.batch.jobs.remove_stale_claims`), locks that are the process's (as
+``flock`` is over NFS), a claim file replaced under its holder."""
+
+from __future__ import annotations
+
+import fcntl
+import os
+
+import pytest
+
+from facetransfer.batch import jobs as J
+
+
+def test_a_claim_another_run_s_planning_is_checking_is_taken_once_it_has_looked(
+        tmp_path, monkeypatch):
+    """Another run's planning locks each claim file there for a moment to see whether a
+    process holds it (:func:`remove_stale_claims`); a job making its claim in that moment
+    found it held and failed, "being written by another run", though no run was writing it.
+    The job now tries again for a moment before saying so."""
+    out = tmp_path / "a.npz"
+    real, looked = J._open_claim, []
+
+    def opened(path, create=True):
+        if looked:              # the job tries again: the other run has looked by then
+            os.close(looked.pop())
+            looked.append(None)
+        fd = real(path, create)
+        if create and not looked:     # the other run's check locks it as the job opens it
+            other = os.open(path, os.O_RDWR)
+            fcntl.flock(other, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            looked.append(other)
+        return fd
+
+    monkeypatch.setattr(J, "_open_claim", opened)
+    with J.claimed(out):
+        assert "pid " in J.claim_path(out).read_text()
+    assert looked == [None] and not J.claim_path(out).exists()
+
+
+def test_a_claim_another_run_holds_is_still_refused(tmp_path):
+    """The moment's wait does not let a job take a claim another process holds."""
+    out = tmp_path / "a.npz"
+    fd = os.open(J.claim_path(out), os.O_RDWR | os.O_CREAT)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX)
+        os.write(fd, b"pid 4242 on host render-7, since 20:00")
+        with pytest.raises(J.OutputTaken, match=r"another run \(pid 4242 on host render-7"):
+            with J.claimed(out):
+                pass
+    finally:
+        os.close(fd)
