@@ -51,3 +51,22 @@ def test_a_claim_another_run_holds_is_still_refused(tmp_path):
                 pass
     finally:
         os.close(fd)
+
+
+def test_a_claim_is_this_process_s_own_where_locks_are_the_process_s(tmp_path, monkeypatch):
+    """Over NFS, Linux makes ``flock`` a whole-file POSIX lock, which is the process's, not
+    the open file's (here: ``lockf``, the same locks on a local disk): a second job of one
+    output in one process (a worker's threads running two runs' jobs; the threads of a
+    cluster in the client) took the claim the first held, and its end (or the stopped run's
+    :func:`remove_stale_claims` in that process) removed the file and let go of the lock.
+    A claim held in this process is now refused, and kept, as one held in another."""
+    monkeypatch.setattr(fcntl, "flock", fcntl.lockf)
+    out = tmp_path / "a.npz"
+    with J.claimed(out):
+        said = J.claim_path(out).read_text()
+        with pytest.raises(J.OutputTaken, match=r"is being written by another run \(pid "):
+            with J.claimed(out):
+                pass
+        assert J.remove_stale_claims(tmp_path) == []
+        assert J.claim_path(out).read_text() == said
+    assert not J.claim_path(out).exists()

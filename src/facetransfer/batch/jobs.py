@@ -22,6 +22,7 @@ import functools
 import hashlib
 import logging
 import os
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -153,16 +154,50 @@ def claimed(out):
     except ImportError:     # pragma: no cover (not POSIX)
         yield
         return
-    fd = _claim(claim_path(out), out, fcntl)
-    if fd is None:
-        yield
-        return
+    path = claim_path(out)
+    with _held_here(path, out):
+        fd = _claim(path, out, fcntl)
+        try:
+            yield
+        finally:
+            if fd is not None:
+                with contextlib.suppress(OSError):
+                    os.unlink(path)    # still held: no other job has it open and locked
+                os.close(fd)
+
+
+#: The claim files (real paths) this process holds (:func:`_held_here`), and their lock.
+_HELD: set[str] = set()
+_HELD_LOCK = threading.Lock()
+
+
+@contextlib.contextmanager
+def _held_here(path: Path, out):
+    """Note the claim file ``path`` as held by this process for the block;
+    :class:`OutputTaken` where a thread of it holds it already. Where a lock is the process's,
+    not its open file's (``flock`` over NFS, which Linux makes a POSIX lock), another thread's
+    lock of it would succeed, and its close let go of the first's: before, two jobs of one
+    output in one process (a worker's threads) both held it. :func:`remove_stale_claims`
+    keeps those noted."""
+    key = os.path.realpath(path)
+    with _HELD_LOCK:
+        if key in _HELD:
+            raise _busy(out, _words(path))
+        _HELD.add(key)
     try:
         yield
     finally:
-        with contextlib.suppress(OSError):
-            os.unlink(claim_path(out))    # still held: no other job has it open and locked
-        os.close(fd)
+        with _HELD_LOCK:
+            _HELD.discard(key)
+
+
+def _words(path: Path) -> str:
+    """The words of the claim file ``path`` (its holder), "" where none can be read."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(512).decode("utf-8", "replace").strip()
+    except OSError:
+        return ""
 
 
 def _claim(path: Path, out, fcntl) -> int | None:
@@ -209,7 +244,8 @@ def _claim(path: Path, out, fcntl) -> int | None:
 def remove_stale_claims(out_dir) -> list[Path]:
     """Remove the claim files (:func:`claimed`) in ``out_dir`` that no process holds: left by
     a run killed or stopped while its jobs ran (their workers ended without removing them).
-    One held is kept; one made meanwhile by a job not yet holding it is removed, and that job
+    One held is kept (by another process, or by a job of this one, :func:`_held_here`); one
+    made meanwhile by a job of another process not yet holding it is removed, and that job
     makes another (:func:`_claim`). Returns those removed."""
     try:
         import fcntl
@@ -222,19 +258,28 @@ def remove_stale_claims(out_dir) -> list[Path]:
         return removed
     for name in names:
         path = Path(out_dir) / name
-        fd = _open_claim(path, create=False)
-        if fd is None:
-            continue
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
-                os.unlink(path)
+        with _HELD_LOCK:    # (a job of this process claims it after the check, or before)
+            if os.path.realpath(path) not in _HELD and _remove_unheld(path, fcntl):
                 removed.append(path)
-        except OSError:      # held (a job running), gone, or no locks here
-            pass
-        finally:
-            os.close(fd)
     return removed
+
+
+def _remove_unheld(path: Path, fcntl) -> bool:
+    """Remove the claim file ``path`` if no process holds it (and it is still the file
+    locked); whether it was removed."""
+    fd = _open_claim(path, create=False)
+    if fd is None:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
+            os.unlink(path)
+            return True
+    except OSError:      # held (a job running), gone, or no locks here
+        pass
+    finally:
+        os.close(fd)
+    return False
 
 
 def _open_claim(path: Path, create: bool = True) -> int | None:
