@@ -70,3 +70,16 @@ def test_a_claim_is_this_process_s_own_where_locks_are_the_process_s(tmp_path, m
         assert J.remove_stale_claims(tmp_path) == []
         assert J.claim_path(out).read_text() == said
     assert not J.claim_path(out).exists()
+
+
+def test_a_job_s_end_removes_its_own_claim_file_not_one_put_in_its_place(tmp_path):
+    """Where locks are each machine's own (an NFS mount with ``local_lock`` or ``nolock``),
+    a run on another machine sees a claim held here as unheld, removes it and makes its own;
+    the end of the job here then removed that run's claim, held, so a third run took the
+    output too. A job's end now removes its claim file only while it is the one it made."""
+    out = tmp_path / "a.npz"
+    theirs = tmp_path / "theirs"
+    with J.claimed(out):
+        theirs.write_text("pid 4242 on host render-7, since 20:00")
+        os.replace(theirs, J.claim_path(out))
+    assert J.claim_path(out).read_text() == "pid 4242 on host render-7, since 20:00"

@@ -161,9 +161,18 @@ def claimed(out):
             yield
         finally:
             if fd is not None:
-                with contextlib.suppress(OSError):
-                    os.unlink(path)    # still held: no other job has it open and locked
-                os.close(fd)
+                _release(path, fd)
+
+
+def _release(path: Path, fd: int) -> None:
+    """Remove the claim file ``path`` this process holds (``fd``), while it is still the file
+    locked (where locks are each machine's own, an NFS mount with ``local_lock`` or
+    ``nolock``, a run on another one may have put its own there: before, removed held), and
+    let go of it."""
+    with contextlib.suppress(OSError):
+        if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
+            os.unlink(path)     # held: no other job has it open and locked
+    os.close(fd)
 
 
 #: The claim files (real paths) this process holds (:func:`_held_here`), and their lock.
