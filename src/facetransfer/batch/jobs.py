@@ -147,8 +147,10 @@ def claimed(out):
     the output (with ``--overwrite``, or both redoing one failed result) the later replaced the
     earlier's without a word. The lock goes with its process (SIGKILL, a crash; on a folder
     shared over NFS, with the lock's lease when its machine is gone), so the claim a dead run
-    left is taken over, its file rewritten. Where the file system takes no lock (a ``nolock``
-    mount, not POSIX), the block runs without a claim."""
+    left is taken over, its file rewritten. Where each machine's locks are its own (an NFS
+    mount with ``nolock`` or ``local_lock``: before, said to take no lock) a claim guards only
+    against jobs of the same machine; where the file system refuses locks (``ENOLCK``), or
+    not POSIX, the block runs without a claim."""
     try:
         import fcntl
     except ImportError:     # pragma: no cover (not POSIX)
