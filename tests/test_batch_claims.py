@@ -83,3 +83,19 @@ def test_a_job_s_end_removes_its_own_claim_file_not_one_put_in_its_place(tmp_pat
         theirs.write_text("pid 4242 on host render-7, since 20:00")
         os.replace(theirs, J.claim_path(out))
     assert J.claim_path(out).read_text() == "pid 4242 on host render-7, since 20:00"
+
+
+def test_where_the_file_system_refuses_locks_a_job_leaves_no_claim_file(tmp_path, monkeypatch):
+    """A file system that refuses locks (``ENOLCK``): the job runs unclaimed, as said, but
+    left behind the empty claim file it had made to lock, one a job, which no run removes
+    (:func:`remove_stale_claims` cannot lock it either). It now removes it."""
+    import errno
+
+    def refused(fd, how):
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", refused)
+    out = tmp_path / "a.npz"
+    with J.claimed(out):
+        out.write_bytes(b"the job's output")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.npz"]

@@ -235,7 +235,7 @@ def _claim(path: Path, out, fcntl) -> int | None:
                 continue
             raise _busy(out, holder) from None
         except OSError:     # ENOLCK, EOPNOTSUPP: no locks here
-            os.close(fd)
+            _drop_unlockable(path, fd)
             return None
         try:
             same = os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
@@ -250,6 +250,18 @@ def _claim(path: Path, out, fcntl) -> int | None:
             return fd
         os.close(fd)
     return None     # pragma: no cover (a claim made and removed 200 times meanwhile)
+
+
+def _drop_unlockable(path: Path, fd: int) -> None:
+    """Close ``fd``, the claim file ``path`` that cannot be locked, and remove the file while
+    it is that one, empty (made to be locked, by this job or another as unable to lock it;
+    one with words is a holder's, where its machine can lock): before, every job there left
+    its own, which no run could remove (:func:`remove_stale_claims` cannot lock it either)."""
+    with contextlib.suppress(OSError):
+        st = os.fstat(fd)
+        if st.st_size == 0 and os.path.samestat(st, os.stat(path, follow_symlinks=False)):
+            os.unlink(path)
+    os.close(fd)
 
 
 def remove_stale_claims(out_dir) -> list[Path]:
