@@ -99,3 +99,19 @@ def test_where_the_file_system_refuses_locks_a_job_leaves_no_claim_file(tmp_path
     with J.claimed(out):
         out.write_bytes(b"the job's output")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.npz"]
+
+
+def test_a_file_another_run_wrote_is_said_to_be_replaced_by_a_run_again_with_overwrite(
+        tmp_path):
+    """Since the fiftieth session a run with ``--overwrite`` keeps an output another run
+    wrote after it began, and its row said "--overwrite replaces it", to one who had given
+    it: the row now says a run again with ``--overwrite`` replaces it."""
+    out = tmp_path / "a.npz"
+    out.write_bytes(b"the output the run found")
+    planned = J.output_identity(out)
+    (tmp_path / "theirs").write_bytes(b"another run's output, written since")
+    os.replace(tmp_path / "theirs", out)
+    with pytest.raises(J.OutputTaken) as e:
+        J._still_planned(out, planned)
+    assert str(e.value).endswith("this run's result not written; run again with --overwrite "
+                                 "to replace it"), str(e.value)

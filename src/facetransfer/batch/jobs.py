@@ -122,7 +122,7 @@ def _taken(out, why: str = "while this run went on", *, frames=None) -> OutputTa
         (str(o), "that file is", "it")
     return OutputTaken(f"{what} {'were' if frames else 'was'} written by another run {why} "
                        f"(two runs into {o.parent} at once?): {kept} kept, this run's result "
-                       f"not written; --overwrite replaces {it}")
+                       f"not written; run again with --overwrite to replace {it}")
 
 
 #: Seconds a job tries to take its output's claim that another process holds before it says
