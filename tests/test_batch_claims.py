@@ -115,3 +115,39 @@ def test_a_file_another_run_wrote_is_said_to_be_replaced_by_a_run_again_with_ove
         J._still_planned(out, planned)
     assert str(e.value).endswith("this run's result not written; run again with --overwrite "
                                  "to replace it"), str(e.value)
+
+
+_FORKS_AND_WAITS = """
+import os, sys, time
+from facetransfer.batch import jobs as J
+with J.claimed(sys.argv[1]):
+    if os.fork() == 0:          # the tracker's detector, forked while the job holds its claim
+        time.sleep(60)
+        os._exit(0)
+    print("forked", flush=True)
+    time.sleep(60)
+"""
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="forks")
+def test_a_claim_ends_with_its_job_s_process_not_with_a_child_it_forked(tmp_path):
+    """A job's process forks while it holds its claim (the tracker's detector of a clip's
+    second part; a render's processes): the child had the claim's descriptor, so where the
+    job's process was killed (SIGKILL, the OOM killer) the claim stayed held while the child
+    went on, and the next run's job said the output was being written by a run that was
+    gone. The child now lets go of it at its start."""
+    import signal
+    import subprocess
+    import sys
+
+    out = tmp_path / "a.npz"
+    job = subprocess.Popen([sys.executable, "-c", _FORKS_AND_WAITS, str(out)],
+                           stdout=subprocess.PIPE, text=True, start_new_session=True)
+    try:
+        assert job.stdout.readline() == "forked\n"
+        job.kill()
+        job.wait()
+        with J.claimed(out):      # the child still runs
+            assert "pid " in J.claim_path(out).read_text()
+    finally:
+        os.killpg(job.pid, signal.SIGKILL)

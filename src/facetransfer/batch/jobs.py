@@ -157,11 +157,13 @@ def claimed(out):
         yield
         return
     path = claim_path(out)
-    with _held_here(path, out):
+    with _held_here(path, out) as key:
         fd = _claim(path, out, fcntl)
+        _HELD[key] = -1 if fd is None else fd      # (a fork meanwhile: _forget_claims)
         try:
             yield
         finally:
+            _HELD[key] = -1
             if fd is not None:
                 _release(path, fd)
 
@@ -177,29 +179,49 @@ def _release(path: Path, fd: int) -> None:
     os.close(fd)
 
 
-#: The claim files (real paths) this process holds (:func:`_held_here`), and their lock.
-_HELD: set[str] = set()
+#: The claim files (real paths) this process holds (:func:`_held_here`), each with its
+#: locked descriptor (-1: none yet, or none), and their lock.
+_HELD: dict[str, int] = {}
 _HELD_LOCK = threading.Lock()
+
+
+def _forget_claims() -> None:
+    """In a child forked while this process held claims (the tracker's detector of a clip's
+    second part, a render's processes): close its copies of their descriptors, so that a claim
+    ends with its job's process (a ``flock`` is held while any copy is open). Before, a worker
+    killed (SIGKILL, the OOM killer) left its claim held by such a child while it went on,
+    and the next run's job was told a run that was gone was writing the output."""
+    global _HELD_LOCK
+    for fd in _HELD.values():
+        if fd >= 0:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+    _HELD.clear()
+    _HELD_LOCK = threading.Lock()     # (another thread may have held it as this one forked)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_claims)
 
 
 @contextlib.contextmanager
 def _held_here(path: Path, out):
-    """Note the claim file ``path`` as held by this process for the block;
-    :class:`OutputTaken` where a thread of it holds it already. Where a lock is the process's,
-    not its open file's (``flock`` over NFS, which Linux makes a POSIX lock), another thread's
-    lock of it would succeed, and its close let go of the first's: before, two jobs of one
-    output in one process (a worker's threads) both held it. :func:`remove_stale_claims`
-    keeps those noted."""
+    """Note the claim file ``path`` as held by this process for the block (which is given its
+    key in :data:`_HELD`); :class:`OutputTaken` where a thread of it holds it already. Where
+    a lock is the process's, not its open file's (``flock`` over NFS, which Linux makes a
+    POSIX lock), another thread's lock of it would succeed, and its close let go of the
+    first's: before, two jobs of one output in one process (a worker's threads) both held it.
+    :func:`remove_stale_claims` keeps those noted."""
     key = os.path.realpath(path)
     with _HELD_LOCK:
         if key in _HELD:
             raise _busy(out, _words(path))
-        _HELD.add(key)
+        _HELD[key] = -1
     try:
-        yield
+        yield key
     finally:
         with _HELD_LOCK:
-            _HELD.discard(key)
+            _HELD.pop(key, None)
 
 
 def _words(path: Path) -> str:
