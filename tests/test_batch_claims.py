@@ -150,4 +150,8 @@ def test_a_claim_ends_with_its_job_s_process_not_with_a_child_it_forked(tmp_path
         with J.claimed(out):      # the child still runs
             assert "pid " in J.claim_path(out).read_text()
     finally:
-        os.killpg(job.pid, signal.SIGKILL)
+        try:
+            os.killpg(job.pid, signal.SIGKILL)     # the child
+        except ProcessLookupError:
+            pass
+        job.wait()
