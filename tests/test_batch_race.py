@@ -378,8 +378,9 @@ def test_a_job_claims_its_output_another_run_s_job_of_it_fails_at_its_start(
     partial.write_bytes(b"this run's progress")
     row = J.track_clip(job, str(out), quick_model, TrackerSettings(), True)
     assert row.status == "done" and Track.load(out).n_frames == 8
-    assert len(calls) == 1 and len(errors) == 1 and errors[0].startswith(f"{out} is being written by another run "
-                                                     f"(pid {os.getpid()} on host ")
+    assert len(calls) == 1 and len(errors) == 1
+    assert errors[0].startswith(f"{out} is being written by another run "
+                                f"(pid {os.getpid()} on host ")
     assert "run the same command again once that run has ended" in errors[0]
     assert not J.claim_path(out).exists() and not partial.exists()
 

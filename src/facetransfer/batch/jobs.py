@@ -22,6 +22,7 @@ import functools
 import hashlib
 import logging
 import os
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -121,7 +122,13 @@ def _taken(out, why: str = "while this run went on", *, frames=None) -> OutputTa
         (str(o), "that file is", "it")
     return OutputTaken(f"{what} {'were' if frames else 'was'} written by another run {why} "
                        f"(two runs into {o.parent} at once?): {kept} kept, this run's result "
-                       f"not written; --overwrite replaces {it}")
+                       f"not written; run again with --overwrite to replace {it}")
+
+
+#: Seconds a job tries to take its output's claim that another process holds before it says
+#: the output is being written by another run: longer than another run's check of it
+#: (:func:`remove_stale_claims`), shorter than any job.
+CLAIM_WAIT = 0.5
 
 
 def claim_path(out) -> Path:
@@ -140,32 +147,103 @@ def claimed(out):
     the output (with ``--overwrite``, or both redoing one failed result) the later replaced the
     earlier's without a word. The lock goes with its process (SIGKILL, a crash; on a folder
     shared over NFS, with the lock's lease when its machine is gone), so the claim a dead run
-    left is taken over, its file rewritten. Where the file system takes no lock (a ``nolock``
-    mount, not POSIX), the block runs without a claim."""
+    left is taken over, its file rewritten. Where each machine's locks are its own (an NFS
+    mount with ``nolock`` or ``local_lock``: before, said to take no lock) a claim guards only
+    against jobs of the same machine; where the file system refuses locks (``ENOLCK``), or
+    not POSIX, the block runs without a claim."""
     try:
         import fcntl
     except ImportError:     # pragma: no cover (not POSIX)
         yield
         return
-    fd = _claim(claim_path(out), out, fcntl)
-    if fd is None:
-        yield
-        return
+    path = claim_path(out)
+    with _held_here(path, out) as key:
+        fd = _claim(path, out, fcntl)
+        _HELD[key] = -1 if fd is None else fd      # (a fork meanwhile: _forget_claims)
+        try:
+            yield
+        finally:
+            _HELD[key] = -1
+            if fd is not None:
+                _release(path, fd)
+
+
+def _release(path: Path, fd: int) -> None:
+    """Remove the claim file ``path`` this process holds (``fd``), while it is still the file
+    locked (where locks are each machine's own, an NFS mount with ``local_lock`` or
+    ``nolock``, a run on another one may have put its own there: before, removed held), and
+    let go of it."""
+    with contextlib.suppress(OSError):
+        if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
+            os.unlink(path)     # held: no other job has it open and locked
+    os.close(fd)
+
+
+#: The claim files (real paths) this process holds (:func:`_held_here`), each with its
+#: locked descriptor (-1: none yet, or none), and their lock.
+_HELD: dict[str, int] = {}
+_HELD_LOCK = threading.Lock()
+
+
+def _forget_claims() -> None:
+    """In a child forked while this process held claims (the tracker's detector of a clip's
+    second part, a render's processes): close its copies of their descriptors, so that a claim
+    ends with its job's process (a ``flock`` is held while any copy is open). Before, a worker
+    killed (SIGKILL, the OOM killer) left its claim held by such a child while it went on,
+    and the next run's job was told a run that was gone was writing the output."""
+    global _HELD_LOCK
+    for fd in _HELD.values():
+        if fd >= 0:
+            with contextlib.suppress(OSError):
+                os.close(fd)
+    _HELD.clear()
+    _HELD_LOCK = threading.Lock()     # (another thread may have held it as this one forked)
+
+
+if hasattr(os, "register_at_fork"):
+    os.register_at_fork(after_in_child=_forget_claims)
+
+
+@contextlib.contextmanager
+def _held_here(path: Path, out):
+    """Note the claim file ``path`` as held by this process for the block (which is given its
+    key in :data:`_HELD`); :class:`OutputTaken` where a thread of it holds it already. Where
+    a lock is the process's, not its open file's (``flock`` over NFS, which Linux makes a
+    POSIX lock), another thread's lock of it would succeed, and its close let go of the
+    first's: before, two jobs of one output in one process (a worker's threads) both held it.
+    :func:`remove_stale_claims` keeps those noted."""
+    key = os.path.realpath(path)
+    with _HELD_LOCK:
+        if key in _HELD:
+            raise _busy(out, _words(path))
+        _HELD[key] = -1
     try:
-        yield
+        yield key
     finally:
-        with contextlib.suppress(OSError):
-            os.unlink(claim_path(out))    # still held: no other job has it open and locked
-        os.close(fd)
+        with _HELD_LOCK:
+            _HELD.pop(key, None)
+
+
+def _words(path: Path) -> str:
+    """The words of the claim file ``path`` (its holder), "" where none can be read."""
+    try:
+        with open(path, "rb") as f:
+            return f.read(512).decode("utf-8", "replace").strip()
+    except OSError:
+        return ""
 
 
 def _claim(path: Path, out, fcntl) -> int | None:
     """The descriptor of ``path`` opened and locked by this process (None where it cannot be
-    locked); :class:`OutputTaken` where another process holds it. A file removed or replaced
-    between its opening and its lock (its holder finished) is opened again."""
+    locked); :class:`OutputTaken` where another process holds it for longer than
+    :data:`CLAIM_WAIT` (another run's planning locks it for a moment to see whether it is
+    held, :func:`remove_stale_claims`: before, a job making its claim then failed). A file
+    removed or replaced between its opening and its lock (its holder finished) is opened
+    again."""
     import socket
 
-    for _ in range(100):
+    deadline = time.monotonic() + CLAIM_WAIT
+    for _ in range(200):
         fd = _open_claim(path)
         if fd is None:
             return None    # a folder that cannot be written: the write says so
@@ -174,9 +252,12 @@ def _claim(path: Path, out, fcntl) -> int | None:
         except BlockingIOError:
             holder = os.read(fd, 512).decode("utf-8", "replace").strip()
             os.close(fd)
+            if time.monotonic() < deadline:
+                time.sleep(0.02)
+                continue
             raise _busy(out, holder) from None
         except OSError:     # ENOLCK, EOPNOTSUPP: no locks here
-            os.close(fd)
+            _drop_unlockable(path, fd)
             return None
         try:
             same = os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
@@ -190,13 +271,26 @@ def _claim(path: Path, out, fcntl) -> int | None:
                 os.write(fd, said.encode())
             return fd
         os.close(fd)
-    return None     # pragma: no cover (a claim made and removed 100 times meanwhile)
+    return None     # pragma: no cover (a claim made and removed 200 times meanwhile)
+
+
+def _drop_unlockable(path: Path, fd: int) -> None:
+    """Close ``fd``, the claim file ``path`` that cannot be locked, and remove the file while
+    it is that one, empty (made to be locked, by this job or another as unable to lock it;
+    one with words is a holder's, where its machine can lock): before, every job there left
+    its own, which no run could remove (:func:`remove_stale_claims` cannot lock it either)."""
+    with contextlib.suppress(OSError):
+        st = os.fstat(fd)
+        if st.st_size == 0 and os.path.samestat(st, os.stat(path, follow_symlinks=False)):
+            os.unlink(path)
+    os.close(fd)
 
 
 def remove_stale_claims(out_dir) -> list[Path]:
     """Remove the claim files (:func:`claimed`) in ``out_dir`` that no process holds: left by
     a run killed or stopped while its jobs ran (their workers ended without removing them).
-    One held is kept; one made meanwhile by a job not yet holding it is removed, and that job
+    One held is kept (by another process, or by a job of this one, :func:`_held_here`); one
+    made meanwhile by a job of another process not yet holding it is removed, and that job
     makes another (:func:`_claim`). Returns those removed."""
     try:
         import fcntl
@@ -209,19 +303,28 @@ def remove_stale_claims(out_dir) -> list[Path]:
         return removed
     for name in names:
         path = Path(out_dir) / name
-        fd = _open_claim(path, create=False)
-        if fd is None:
-            continue
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-            if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
-                os.unlink(path)
+        with _HELD_LOCK:    # (a job of this process claims it after the check, or before)
+            if os.path.realpath(path) not in _HELD and _remove_unheld(path, fcntl):
                 removed.append(path)
-        except OSError:      # held (a job running), gone, or no locks here
-            pass
-        finally:
-            os.close(fd)
     return removed
+
+
+def _remove_unheld(path: Path, fcntl) -> bool:
+    """Remove the claim file ``path`` if no process holds it (and it is still the file
+    locked); whether it was removed."""
+    fd = _open_claim(path, create=False)
+    if fd is None:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
+            os.unlink(path)
+            return True
+    except OSError:      # held (a job running), gone, or no locks here
+        pass
+    finally:
+        os.close(fd)
+    return False
 
 
 def _open_claim(path: Path, create: bool = True) -> int | None:

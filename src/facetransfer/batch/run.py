@@ -6,8 +6,9 @@ model to the workers once, submit, collect the rows as the clips finish (reporti
 ``progress``), and write ``DIR/summary.csv`` atomically (also every few seconds, and when the run
 is interrupted: pending tasks are cancelled, finished outputs stay). A failed clip is a
 ``failed`` row while the others go on; so is a clip whose output another run into the same
-folder holds (its job's claim, :func:`.jobs.claimed`) or wrote meanwhile (kept, its row's digest that run's where its summary says it,
-:data:`OTHER_RUN` otherwise, :meth:`_Collector._adopted`).
+folder holds (its job's claim, :func:`.jobs.claimed`) or wrote meanwhile (kept, its row's
+digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
+:meth:`_Collector._adopted`).
 """
 
 from __future__ import annotations
