@@ -10,7 +10,7 @@ import os
 
 import pytest
 
-from facetransfer.batch import jobs as J
+from facetransfer.batch import ownership as O
 
 
 def test_a_claim_another_run_s_planning_is_checking_is_taken_once_it_has_looked(
@@ -20,7 +20,7 @@ def test_a_claim_another_run_s_planning_is_checking_is_taken_once_it_has_looked(
     found it held and failed, "being written by another run", though no run was writing it.
     The job now tries again for a moment before saying so."""
     out = tmp_path / "a.npz"
-    real, looked = J._open_claim, []
+    real, looked = O._open_claim, []
 
     def opened(path, create=True):
         if looked:              # the job tries again: the other run has looked by then
@@ -33,21 +33,21 @@ def test_a_claim_another_run_s_planning_is_checking_is_taken_once_it_has_looked(
             looked.append(other)
         return fd
 
-    monkeypatch.setattr(J, "_open_claim", opened)
-    with J.claimed(out):
-        assert "pid " in J.claim_path(out).read_text()
-    assert looked == [None] and not J.claim_path(out).exists()
+    monkeypatch.setattr(O, "_open_claim", opened)
+    with O.claimed(out):
+        assert "pid " in O.claim_path(out).read_text()
+    assert looked == [None] and not O.claim_path(out).exists()
 
 
 def test_a_claim_another_run_holds_is_still_refused(tmp_path):
     """The moment's wait does not let a job take a claim another process holds."""
     out = tmp_path / "a.npz"
-    fd = os.open(J.claim_path(out), os.O_RDWR | os.O_CREAT)
+    fd = os.open(O.claim_path(out), os.O_RDWR | os.O_CREAT)
     try:
         fcntl.flock(fd, fcntl.LOCK_EX)
         os.write(fd, b"pid 4242 on host render-7, since 20:00")
-        with pytest.raises(J.OutputTaken, match=r"another run \(pid 4242 on host render-7"):
-            with J.claimed(out):
+        with pytest.raises(O.OutputTaken, match=r"another run \(pid 4242 on host render-7"):
+            with O.claimed(out):
                 pass
     finally:
         os.close(fd)
@@ -62,14 +62,14 @@ def test_a_claim_is_this_process_s_own_where_locks_are_the_process_s(tmp_path, m
     A claim held in this process is now refused, and kept, as one held in another."""
     monkeypatch.setattr(fcntl, "flock", fcntl.lockf)
     out = tmp_path / "a.npz"
-    with J.claimed(out):
-        said = J.claim_path(out).read_text()
-        with pytest.raises(J.OutputTaken, match=r"is being written by another run \(pid "):
-            with J.claimed(out):
+    with O.claimed(out):
+        said = O.claim_path(out).read_text()
+        with pytest.raises(O.OutputTaken, match=r"is being written by another run \(pid "):
+            with O.claimed(out):
                 pass
-        assert J.remove_stale_claims(tmp_path) == []
-        assert J.claim_path(out).read_text() == said
-    assert not J.claim_path(out).exists()
+        assert O.remove_stale_claims(tmp_path) == []
+        assert O.claim_path(out).read_text() == said
+    assert not O.claim_path(out).exists()
 
 
 def test_a_job_s_end_removes_its_own_claim_file_not_one_put_in_its_place(tmp_path):
@@ -79,10 +79,10 @@ def test_a_job_s_end_removes_its_own_claim_file_not_one_put_in_its_place(tmp_pat
     output too. A job's end now removes its claim file only while it is the one it made."""
     out = tmp_path / "a.npz"
     theirs = tmp_path / "theirs"
-    with J.claimed(out):
+    with O.claimed(out):
         theirs.write_text("pid 4242 on host render-7, since 20:00")
-        os.replace(theirs, J.claim_path(out))
-    assert J.claim_path(out).read_text() == "pid 4242 on host render-7, since 20:00"
+        os.replace(theirs, O.claim_path(out))
+    assert O.claim_path(out).read_text() == "pid 4242 on host render-7, since 20:00"
 
 
 def test_where_the_file_system_refuses_locks_a_job_leaves_no_claim_file(tmp_path, monkeypatch):
@@ -96,7 +96,7 @@ def test_where_the_file_system_refuses_locks_a_job_leaves_no_claim_file(tmp_path
 
     monkeypatch.setattr(fcntl, "flock", refused)
     out = tmp_path / "a.npz"
-    with J.claimed(out):
+    with O.claimed(out):
         out.write_bytes(b"the job's output")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.npz"]
 
@@ -108,19 +108,19 @@ def test_a_file_another_run_wrote_is_said_to_be_replaced_by_a_run_again_with_ove
     it: the row now says a run again with ``--overwrite`` replaces it."""
     out = tmp_path / "a.npz"
     out.write_bytes(b"the output the run found")
-    planned = J.output_identity(out)
+    planned = O.output_identity(out)
     (tmp_path / "theirs").write_bytes(b"another run's output, written since")
     os.replace(tmp_path / "theirs", out)
-    with pytest.raises(J.OutputTaken) as e:
-        J._still_planned(out, planned)
+    with pytest.raises(O.OutputTaken) as e:
+        O._still_planned(out, planned)
     assert str(e.value).endswith("this run's result not written; run again with --overwrite "
                                  "to replace it"), str(e.value)
 
 
 _FORKS_AND_WAITS = """
 import os, sys, time
-from facetransfer.batch import jobs as J
-with J.claimed(sys.argv[1]):
+from facetransfer.batch import ownership as O
+with O.claimed(sys.argv[1]):
     if os.fork() == 0:          # the tracker's detector, forked while the job holds its claim
         time.sleep(60)
         os._exit(0)
@@ -147,8 +147,8 @@ def test_a_claim_ends_with_its_job_s_process_not_with_a_child_it_forked(tmp_path
         assert job.stdout.readline() == "forked\n"
         job.kill()
         job.wait()
-        with J.claimed(out):      # the child still runs
-            assert "pid " in J.claim_path(out).read_text()
+        with O.claimed(out):      # the child still runs
+            assert "pid " in O.claim_path(out).read_text()
     finally:
         try:
             os.killpg(job.pid, signal.SIGKILL)     # the child

@@ -18,6 +18,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).parent))
 
 from facetransfer.batch import jobs as J  # noqa: E402
+from facetransfer.batch import ownership as O  # noqa: E402
 from facetransfer.batch.manifest import ClipJob, ExportJob, PairJob  # noqa: E402
 from facetransfer.errors import VideoError  # noqa: E402
 from facetransfer.io.atomic import write_bytes_atomic  # noqa: E402
@@ -56,13 +57,13 @@ def test_a_track_job_keeps_the_track_another_run_wrote_meanwhile(clips, quick_mo
         return still_track(quick_model, 8, source=str(video))
 
     monkeypatch.setattr(J, "_track", tracked)
-    with pytest.raises(J.OutputTaken, match="written by another run") as e:
+    with pytest.raises(O.OutputTaken, match="written by another run") as e:
         J.track_clip(job, str(out), quick_model, TrackerSettings())
     assert str(out) in str(e.value) and isinstance(e.value, ValueError)
     kept = _which(out)
     assert Track.load(out).n_frames == 5
     # there before the job starts: refused before any tracking
-    with pytest.raises(J.OutputTaken, match="since this run began"):
+    with pytest.raises(O.OutputTaken, match="since this run began"):
         J.track_clip(job, str(out), quick_model, TrackerSettings())
     assert len(calls) == 1 and _which(out) == kept
     # the batch's --overwrite: replaced
@@ -80,7 +81,7 @@ def test_a_joined_clip_and_an_export_keep_an_output_another_run_wrote(
     kept = _which(out)
     monkeypatch.setattr(chunks, "join_tracks",
                         lambda *a: still_track(quick_model, 8, source=str(video)))
-    with pytest.raises(J.OutputTaken):
+    with pytest.raises(O.OutputTaken):
         J.join_clip(ClipJob("a", str(video)), str(out), quick_model, [], [])
     assert _which(out) == kept
     row = J.join_clip(ClipJob("a", str(video)), str(out), quick_model, [], [], True)
@@ -89,17 +90,17 @@ def test_a_joined_clip_and_an_export_keep_an_output_another_run_wrote(
     track, js = tmp_path / "k.npz", tmp_path / "k.json"
     make_arkit_track(arkit_model, 4)[0].save(track)
     js.write_text("theirs")
-    with pytest.raises(J.OutputTaken):
+    with pytest.raises(O.OutputTaken):
         J.export_one(ExportJob("k", track), "json", str(js))
     assert js.read_text() == "theirs"
     # a take the run found and writes again (an earlier version's): while it is still that file
-    planned = J.output_identity(js)
+    planned = O.output_identity(js)
     J.export_one(ExportJob("k", track), "json", str(js), planned=planned)
     assert js.read_text() != "theirs"
-    planned = J.output_identity(js)
+    planned = O.output_identity(js)
     os.unlink(js)
     js.write_text("theirs")
-    with pytest.raises(J.OutputTaken, match="since this run began"):
+    with pytest.raises(O.OutputTaken, match="since this run began"):
         J.export_one(ExportJob("k", track), "json", str(js), planned=planned)
     assert js.read_text() == "theirs"
     J.export_one(ExportJob("k", track), "json", str(js), overwrite=True)
@@ -140,19 +141,19 @@ def test_a_pair_keeps_a_result_another_run_wrote_and_replaces_only_what_it_found
 
     # none there when planned: one written meanwhile is the other run's, kept
     theirs = _Render(lambda o, m: o.write_bytes(b"theirs"))
-    with pytest.raises(J.OutputTaken, match="written by another run while this run"):
+    with pytest.raises(O.OutputTaken, match="written by another run while this run"):
         pair(theirs)
     assert theirs.seen == [False] and out.read_bytes() == b"theirs"
     # its own result, found when planned and rendered again (for its matte): replaced
-    planned, render = J.output_identity(out), _Render()
+    planned, render = O.output_identity(out), _Render()
     assert planned and pair(render, planned=planned).status == "done"
     assert render.seen == [True] and out.read_bytes() == b"mine"
     # the file found was replaced before the job began (by another run): kept
-    planned = J.output_identity(out)
+    planned = O.output_identity(out)
     os.unlink(out)
     out.write_bytes(b"theirs again")
     render = _Render()
-    with pytest.raises(J.OutputTaken, match="since this run began"):
+    with pytest.raises(O.OutputTaken, match="since this run began"):
         pair(render, planned=planned)
     assert render.seen == [] and out.read_bytes() == b"theirs again"
     # --overwrite: replaced
@@ -173,7 +174,7 @@ def test_a_pair_whose_matte_another_run_placed_meanwhile_says_so(clips, tmp_path
                          "pass --overwrite to replace them")
 
     monkeypatch.setattr(video_transfer, "transfer_video", _Render(placed))
-    with pytest.raises(J.OutputTaken):
+    with pytest.raises(O.OutputTaken):
         J.transfer_pair(job, str(out), None, dict(SETTINGS), str(matte))
     assert (Path(matte).parent / "p.00000.png").read_bytes() == b"theirs"
 
@@ -237,7 +238,7 @@ def test_two_batch_runs_into_one_folder_keep_the_first_run_s_track(clips, quick_
 
 def test_a_pair_removes_only_the_leftover_matte_its_run_found(clips, tmp_path, monkeypatch):
     """Frames of a pair's matte beside no result: those the run found when it planned
-    (:func:`J.matte_identity`) are removed before the render, which then writes without
+    (:func:`O.matte_identity`) are removed before the render, which then writes without
     replacing; others there at the job's start are another run's, kept (OutputTaken)."""
     from facetransfer import video_transfer
 
@@ -246,8 +247,8 @@ def test_a_pair_removes_only_the_leftover_matte_its_run_found(clips, tmp_path, m
     frame = Path(matte).parent / "p.00000.png"
     frame.parent.mkdir()
     frame.write_bytes(b"left over")
-    planned = J.matte_identity(matte)
-    assert planned and J.matte_identity(J.matte_pattern(tmp_path, "q", ".png")) == ""
+    planned = O.matte_identity(matte)
+    assert planned and O.matte_identity(J.matte_pattern(tmp_path, "q", ".png")) == ""
 
     def seen(o, m):                       # the real render refuses frames without overwrite
         assert not Path(m).parent.exists() or not any(Path(m).parent.iterdir())
@@ -260,7 +261,7 @@ def test_a_pair_removes_only_the_leftover_matte_its_run_found(clips, tmp_path, m
     os.unlink(out)
     frame.write_bytes(b"theirs")
     for before in ("", planned):
-        with pytest.raises(J.OutputTaken, match="frames .* written by another run"):
+        with pytest.raises(O.OutputTaken, match="frames .* written by another run"):
             J.transfer_pair(job, str(out), None, dict(SETTINGS), str(matte),
                             planned_matte=before)
         assert frame.read_bytes() == b"theirs" and not out.exists()
@@ -299,8 +300,8 @@ def test_a_worker_on_another_machine_replaces_what_its_client_planned(
     frame.write_bytes(b"left over")
     with monkeypatch.context() as client:
         _seen_elsewhere(client)
-        planned = {p: J.output_identity(p) for p in (js, out)}
-        planned_matte = J.matte_identity(matte)
+        planned = {p: O.output_identity(p) for p in (js, out)}
+        planned_matte = O.matte_identity(matte)
     assert all(planned.values()) and planned_matte
     row = J.export_one(ExportJob("k", track), "json", str(js), planned=planned[js])
     assert row.status == "done" and js.read_text() != "an earlier version's"
@@ -369,7 +370,7 @@ def test_a_job_claims_its_output_another_run_s_job_of_it_fails_at_its_start(
         if n == 8:
             try:
                 J.track_clip(job, str(out), quick_model, TrackerSettings(), True)
-            except J.OutputTaken as exc:
+            except O.OutputTaken as exc:
                 errors.append(str(exc))
         return still_track(quick_model, n, source=str(video))
 
@@ -382,7 +383,7 @@ def test_a_job_claims_its_output_another_run_s_job_of_it_fails_at_its_start(
     assert errors[0].startswith(f"{out} is being written by another run "
                                 f"(pid {os.getpid()} on host ")
     assert "run the same command again once that run has ended" in errors[0]
-    assert not J.claim_path(out).exists() and not partial.exists()
+    assert not O.claim_path(out).exists() and not partial.exists()
 
 
 def test_a_claim_held_by_another_process_refuses_and_one_left_by_a_killed_run_is_taken(
@@ -395,7 +396,7 @@ def test_a_claim_held_by_another_process_refuses_and_one_left_by_a_killed_run_is
 
     video = clips["a"][0]
     job, out = ClipJob("a", str(video)), tmp_path / "a.npz"
-    claim = J.claim_path(out)
+    claim = O.claim_path(out)
     holder = subprocess.Popen(
         [sys.executable, "-c", "import fcntl, os, sys; fd = os.open(sys.argv[1], os.O_RDWR | "
          "os.O_CREAT); fcntl.flock(fd, fcntl.LOCK_EX); os.write(fd, b'pid 4242 on host "
@@ -408,13 +409,13 @@ def test_a_claim_held_by_another_process_refuses_and_one_left_by_a_killed_run_is
         monkeypatch.setattr(J, "_track", lambda *a, **k: still_track(quick_model, 8,
                                                                      source=str(video)))
         for overwrite in (False, True):
-            with pytest.raises(J.OutputTaken, match=r"is being written by another run \(pid "
+            with pytest.raises(O.OutputTaken, match=r"is being written by another run \(pid "
                                                     r"4242 on host render-7, since 20:00; two"):
                 J.track_clip(job, str(out), quick_model, TrackerSettings(), overwrite)
         track, js = tmp_path / "k.npz", tmp_path / "a.json"
         make_arkit_track(arkit_model, 4)[0].save(track)
         assert not out.exists() and partial.read_bytes() == b"that run's progress"
-        assert J.remove_stale_claims(tmp_path) == [] and claim.exists()     # held: kept
+        assert O.remove_stale_claims(tmp_path) == [] and claim.exists()     # held: kept
     finally:
         holder.kill()
         holder.wait()
@@ -422,11 +423,11 @@ def test_a_claim_held_by_another_process_refuses_and_one_left_by_a_killed_run_is
     row = J.track_clip(job, str(out), quick_model, TrackerSettings())
     assert row.status == "done" and Track.load(out).n_frames == 8 and not claim.exists()
     row = J.export_one(ExportJob("k", track), "json", str(js))
-    assert row.status == "done" and not J.claim_path(js).exists()
+    assert row.status == "done" and not O.claim_path(js).exists()
     # one left by a run stopped or killed (its workers end without removing it), not held:
     # removed by the next run as it plans, and by the stopped run once its cluster is closed
     claim.write_text("pid 4242 on host render-7, since 20:00")
-    assert J.remove_stale_claims(tmp_path) == [claim] and not claim.exists()
+    assert O.remove_stale_claims(tmp_path) == [claim] and not claim.exists()
 
 
 @pytest.mark.filterwarnings("ignore:Port 8787 is already in use")

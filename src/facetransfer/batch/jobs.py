@@ -7,22 +7,15 @@ its inputs from paths the workers can see, writes its output atomically, and ret
 arrives as the value of a future scattered once to every worker, never pickled with the task.
 A task raises on bad input; the client turns the exception into the clip's failed row.
 
-A task replaces no file but those its run found and chose to redo (``planned``:
-:func:`output_identity`, :func:`matte_identity`; every output there as the run began with
-``--overwrite``): an output or matte frames another run into the same folder wrote meanwhile
-are kept, and the task raises :class:`OutputTaken` (:func:`_own_output`). A task holds its
-output while it runs (:func:`claimed`): another run's task of it fails at its start.
+A task replaces no file but those its run found and chose to redo, and holds its output while
+it runs: :mod:`facetransfer.batch.ownership`.
 """
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import functools
-import hashlib
 import logging
-import os
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,14 +23,14 @@ from pathlib import Path
 import numpy as np
 
 from .manifest import BatchError
+from .ownership import OutputTaken, _clear_leftover_matte, _own_output, _still_planned, claimed
 from .summary import Row
 
 log = logging.getLogger(__name__)
 
 __all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
-           "MATTE_FORMATS", "matte_pattern", "OutputTaken", "output_identity",
-           "matte_identity", "claimed", "claim_path", "remove_stale_claims"]
+           "MATTE_FORMATS", "matte_pattern"]
 
 #: The frame file of each ``batch transfer --matte`` format (image sequences only, one file a
 #: frame: :mod:`facetransfer.io.matte`).
@@ -71,323 +64,6 @@ def _detector_for(init: str, options):
     from ..track.init import LazyDetector
 
     return None if (init == "auto" or options.anchor) else LazyDetector()
-
-
-class OutputTaken(BatchError):
-    """A job's output was written by another run while this one went on (two runs into one
-    folder at once): that run's file is kept, and the job's row fails (before, the job
-    replaced it: both runs said "done", the later one's outputs left)."""
-
-
-def output_identity(out) -> str:
-    """Which file ``out`` is now (:func:`_shared_identity`), "" where there is none: what a
-    run records of an output it plans to do again (:func:`transfer_pair`'s ``planned``)."""
-    try:
-        return _shared_identity(out) if os.path.isfile(out) else ""
-    except OSError:
-        return ""
-
-
-def _shared_identity(path) -> str:
-    """A file's inode, size and mtime in ns: which file it is, as every machine sharing its
-    folder sees it. Not its device number (:func:`facetransfer.io.verified.file_identity`'s),
-    each machine's own for a shared disk (NFS): before, a worker on another machine than the
-    client's found every output its run planned to do again "written by another run"."""
-    st = os.stat(path)
-    return f"{st.st_ino}|{st.st_size}|{st.st_mtime_ns}"
-
-
-def matte_identity(pattern) -> str:
-    """Which frames the matte sequence ``pattern`` holds now (their names and
-    :func:`_shared_identity`, hashed), "" where none (or no pattern):
-    what a run records of a matte it finds beside no result (:func:`transfer_pair`'s
-    ``planned_matte``)."""
-    if pattern is None:
-        return ""
-    from ..io.video_sequence import sequence_files
-
-    try:
-        files = sorted(sequence_files(Path(pattern)).values())
-        said = "\n".join(f"{f.name}|{_shared_identity(f)}" for f in files)
-    except (OSError, ValueError):
-        return ""
-    return hashlib.sha256(said.encode()).hexdigest()[:16] if files else ""
-
-
-def _taken(out, why: str = "while this run went on", *, frames=None) -> OutputTaken:
-    """The error of a job whose output ``out`` (or, given, the matte ``frames`` beside it)
-    another run wrote ``why``."""
-    o = Path(out)
-    what, kept, it = (f"the frames {frames}", "they are", "them") if frames else \
-        (str(o), "that file is", "it")
-    return OutputTaken(f"{what} {'were' if frames else 'was'} written by another run {why} "
-                       f"(two runs into {o.parent} at once?): {kept} kept, this run's result "
-                       f"not written; run again with --overwrite to replace {it}")
-
-
-#: Seconds a job tries to take its output's claim that another process holds before it says
-#: the output is being written by another run: longer than another run's check of it
-#: (:func:`remove_stale_claims`), shorter than any job.
-CLAIM_WAIT = 0.5
-
-
-def claim_path(out) -> Path:
-    """The claim file of the output ``out`` (:func:`claimed`): ``DIR/.NAME.EXT.claim``."""
-    p = Path(out)
-    return p.with_name(f".{p.name}.claim")
-
-
-@contextlib.contextmanager
-def claimed(out):
-    """Hold the output ``out`` for the block: an exclusive ``flock`` on its claim file
-    (:func:`claim_path`), which names this process, its host and the time; the file is removed
-    on leaving. A job of another run that holds it (two runs into one folder at once, with
-    ``--overwrite`` or redoing the same result) is said at once: :class:`OutputTaken` naming
-    its process and host, before any work. Before, both jobs went on, and where both replaced
-    the output (with ``--overwrite``, or both redoing one failed result) the later replaced the
-    earlier's without a word. The lock goes with its process (SIGKILL, a crash; on a folder
-    shared over NFS, with the lock's lease when its machine is gone), so the claim a dead run
-    left is taken over, its file rewritten. Where each machine's locks are its own (an NFS
-    mount with ``nolock`` or ``local_lock``: before, said to take no lock) a claim guards only
-    against jobs of the same machine; where the file system refuses locks (``ENOLCK``), or
-    not POSIX, the block runs without a claim."""
-    try:
-        import fcntl
-    except ImportError:     # pragma: no cover (not POSIX)
-        yield
-        return
-    path = claim_path(out)
-    with _held_here(path, out) as key:
-        fd = _claim(path, out, fcntl)
-        _HELD[key] = -1 if fd is None else fd      # (a fork meanwhile: _forget_claims)
-        try:
-            yield
-        finally:
-            _HELD[key] = -1
-            if fd is not None:
-                _release(path, fd)
-
-
-def _release(path: Path, fd: int) -> None:
-    """Remove the claim file ``path`` this process holds (``fd``), while it is still the file
-    locked (where locks are each machine's own, an NFS mount with ``local_lock`` or
-    ``nolock``, a run on another one may have put its own there: before, removed held), and
-    let go of it."""
-    with contextlib.suppress(OSError):
-        if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
-            os.unlink(path)     # held: no other job has it open and locked
-    os.close(fd)
-
-
-#: The claim files (real paths) this process holds (:func:`_held_here`), each with its
-#: locked descriptor (-1: none yet, or none), and their lock.
-_HELD: dict[str, int] = {}
-_HELD_LOCK = threading.Lock()
-
-
-def _forget_claims() -> None:
-    """In a child forked while this process held claims (the tracker's detector of a clip's
-    second part, a render's processes): close its copies of their descriptors, so that a claim
-    ends with its job's process (a ``flock`` is held while any copy is open). Before, a worker
-    killed (SIGKILL, the OOM killer) left its claim held by such a child while it went on,
-    and the next run's job was told a run that was gone was writing the output."""
-    global _HELD_LOCK
-    for fd in _HELD.values():
-        if fd >= 0:
-            with contextlib.suppress(OSError):
-                os.close(fd)
-    _HELD.clear()
-    _HELD_LOCK = threading.Lock()     # (another thread may have held it as this one forked)
-
-
-if hasattr(os, "register_at_fork"):
-    os.register_at_fork(after_in_child=_forget_claims)
-
-
-@contextlib.contextmanager
-def _held_here(path: Path, out):
-    """Note the claim file ``path`` as held by this process for the block (which is given its
-    key in :data:`_HELD`); :class:`OutputTaken` where a thread of it holds it already. Where
-    a lock is the process's, not its open file's (``flock`` over NFS, which Linux makes a
-    POSIX lock), another thread's lock of it would succeed, and its close let go of the
-    first's: before, two jobs of one output in one process (a worker's threads) both held it.
-    :func:`remove_stale_claims` keeps those noted."""
-    key = os.path.realpath(path)
-    with _HELD_LOCK:
-        if key in _HELD:
-            raise _busy(out, _words(path))
-        _HELD[key] = -1
-    try:
-        yield key
-    finally:
-        with _HELD_LOCK:
-            _HELD.pop(key, None)
-
-
-def _words(path: Path) -> str:
-    """The words of the claim file ``path`` (its holder), "" where none can be read."""
-    try:
-        with open(path, "rb") as f:
-            return f.read(512).decode("utf-8", "replace").strip()
-    except OSError:
-        return ""
-
-
-def _claim(path: Path, out, fcntl) -> int | None:
-    """The descriptor of ``path`` opened and locked by this process (None where it cannot be
-    locked); :class:`OutputTaken` where another process holds it for longer than
-    :data:`CLAIM_WAIT` (another run's planning locks it for a moment to see whether it is
-    held, :func:`remove_stale_claims`: before, a job making its claim then failed). A file
-    removed or replaced between its opening and its lock (its holder finished) is opened
-    again."""
-    import socket
-
-    deadline = time.monotonic() + CLAIM_WAIT
-    for _ in range(200):
-        fd = _open_claim(path)
-        if fd is None:
-            return None    # a folder that cannot be written: the write says so
-        try:
-            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            holder = os.read(fd, 512).decode("utf-8", "replace").strip()
-            os.close(fd)
-            if time.monotonic() < deadline:
-                time.sleep(0.02)
-                continue
-            raise _busy(out, holder) from None
-        except OSError:     # ENOLCK, EOPNOTSUPP: no locks here
-            _drop_unlockable(path, fd)
-            return None
-        try:
-            same = os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
-        except OSError:
-            same = False
-        if same:
-            said = (f"pid {os.getpid()} on host {socket.gethostname()}, since "
-                    f"{time.strftime('%Y-%m-%d %H:%M:%S %Z')}")
-            with contextlib.suppress(OSError):   # (another user's claim left: read-only)
-                os.ftruncate(fd, 0)
-                os.write(fd, said.encode())
-            return fd
-        os.close(fd)
-    return None     # pragma: no cover (a claim made and removed 200 times meanwhile)
-
-
-def _drop_unlockable(path: Path, fd: int) -> None:
-    """Close ``fd``, the claim file ``path`` that cannot be locked, and remove the file while
-    it is that one, empty (made to be locked, by this job or another as unable to lock it;
-    one with words is a holder's, where its machine can lock): before, every job there left
-    its own, which no run could remove (:func:`remove_stale_claims` cannot lock it either)."""
-    with contextlib.suppress(OSError):
-        st = os.fstat(fd)
-        if st.st_size == 0 and os.path.samestat(st, os.stat(path, follow_symlinks=False)):
-            os.unlink(path)
-    os.close(fd)
-
-
-def remove_stale_claims(out_dir) -> list[Path]:
-    """Remove the claim files (:func:`claimed`) in ``out_dir`` that no process holds: left by
-    a run killed or stopped while its jobs ran (their workers ended without removing them).
-    One held is kept (by another process, or by a job of this one, :func:`_held_here`); one
-    made meanwhile by a job of another process not yet holding it is removed, and that job
-    makes another (:func:`_claim`). Returns those removed."""
-    try:
-        import fcntl
-    except ImportError:     # pragma: no cover (not POSIX)
-        return []
-    removed = []
-    try:
-        names = [n for n in os.listdir(out_dir) if n.startswith(".") and n.endswith(".claim")]
-    except OSError:
-        return removed
-    for name in names:
-        path = Path(out_dir) / name
-        with _HELD_LOCK:    # (a job of this process claims it after the check, or before)
-            if os.path.realpath(path) not in _HELD and _remove_unheld(path, fcntl):
-                removed.append(path)
-    return removed
-
-
-def _remove_unheld(path: Path, fcntl) -> bool:
-    """Remove the claim file ``path`` if no process holds it (and it is still the file
-    locked); whether it was removed."""
-    fd = _open_claim(path, create=False)
-    if fd is None:
-        return False
-    try:
-        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
-            os.unlink(path)
-            return True
-    except OSError:      # held (a job running), gone, or no locks here
-        pass
-    finally:
-        os.close(fd)
-    return False
-
-
-def _open_claim(path: Path, create: bool = True) -> int | None:
-    """``path`` opened (made if absent) for its lock: to write, else, where another user's
-    run left it, to read (a lock needs no more); None where it cannot be opened."""
-    for flags in (os.O_RDWR | (os.O_CREAT if create else 0), os.O_RDONLY):
-        try:
-            return os.open(path, flags | os.O_NOFOLLOW, 0o666)
-        except PermissionError:
-            continue
-        except OSError:
-            return None
-    return None
-
-
-def _busy(out, holder: str) -> OutputTaken:
-    """The error of a job whose output ``out`` another run's job holds (``holder``: its claim
-    file's words, its process, host and start; "" not yet written)."""
-    o = Path(out)
-    return OutputTaken(f"{o} is being written by another run ("
-                       + (f"{holder}; " if holder else "")
-                       + f"two runs into {o.parent} at once?): left to it, this run's result "
-                       "not written; run the same command again once that run has ended")
-
-
-def _frames_there(pattern) -> bool:
-    """Whether the image sequence ``pattern`` (a matte) has frames (None: no pattern)."""
-    if pattern is None:
-        return False
-    from ..io.video_sequence import sequence_files
-
-    try:
-        return bool(sequence_files(Path(pattern)))
-    except (OSError, ValueError):
-        return False
-
-
-@contextlib.contextmanager
-def _own_output(out, overwrite: bool, matte=None):
-    """Guard the block that writes ``out`` (and the frames of ``matte``); it writes nothing
-    itself. With ``overwrite`` the block may replace them. Without it, the run found no
-    ``out`` when it planned the job (or, :func:`_still_planned`, no longer finds the one it
-    planned to redo), so an ``out`` there now, or frames of ``matte`` that appeared during the
-    block, are another run's (the block's write commits without replacing,
-    :func:`facetransfer.io.atomic.atomic_path`): :class:`OutputTaken`, before the block runs
-    or when its write is refused."""
-    if overwrite:
-        yield
-        return
-    if os.path.isfile(out):
-        raise _taken(out, "since this run began")
-    from ..errors import VideoError
-
-    had_frames = _frames_there(matte)
-    try:
-        yield
-    except (ValueError, OSError) as exc:
-        # frames placed meanwhile refuse the matte's placement (VideoError), which comes
-        # before the result's: frames of its own then, and a failed result, are not another's
-        if os.path.isfile(out) or (isinstance(exc, VideoError) and not had_frames
-                                   and _frames_there(matte)):
-            raise _taken(out) from None
-        raise
 
 
 def _track(video, model, init: str, settings, *, source: str, checkpoint, fixed=None,
@@ -669,37 +345,6 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
                output=str(out), matte="" if res.matte is None else str(res.matte))
-
-
-def _still_planned(out, planned: str) -> bool:
-    """Whether ``out`` is still the file ``planned`` (:func:`output_identity`) the run chose to
-    render again (may be replaced); False where none was planned or none is there now;
-    :class:`OutputTaken` where another file is there now (another run's)."""
-    if not planned:
-        return False
-    now = output_identity(out)
-    if now and now != planned:
-        raise _taken(out, "since this run began")
-    return bool(now)
-
-
-def _clear_leftover_matte(out, matte, planned: str) -> None:
-    """Before a pair's render without ``--overwrite``: the frames of ``matte`` there beside no
-    result ``out`` (a render stopped between the two commits, the matte's first; the result
-    removed to redo the pair, as a failed row says) are removed if they are still the frames
-    ``planned`` (:func:`matte_identity`) the run found: ``NAME.matte/`` holds the matte of
-    ``NAME.mp4`` or none. Before, the render refused them ("pass --overwrite", which redoes
-    every pair) and the pair failed at every rerun. Other frames there now are another run's
-    (:class:`OutputTaken`); an ``out`` there is :func:`_own_output`'s to say."""
-    now = matte_identity(matte)
-    if not now or os.path.isfile(out):
-        return
-    if now != planned:
-        raise _taken(out, "since this run began", frames=matte)
-    from ..io.video_sequence import sequence_files
-
-    for f in sequence_files(Path(matte)).values():
-        f.unlink(missing_ok=True)
 
 
 def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:

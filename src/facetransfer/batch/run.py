@@ -6,7 +6,7 @@ model to the workers once, submit, collect the rows as the clips finish (reporti
 ``progress``), and write ``DIR/summary.csv`` atomically (also every few seconds, and when the run
 is interrupted: pending tasks are cancelled, finished outputs stay). A failed clip is a
 ``failed`` row while the others go on; so is a clip whose output another run into the same
-folder holds (its job's claim, :func:`.jobs.claimed`) or wrote meanwhile (kept, its row's
+folder holds (its job's claim, :func:`.ownership.claimed`) or wrote meanwhile (kept, its row's
 digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
 :meth:`_Collector._adopted`).
 """
@@ -22,6 +22,7 @@ from typing import Callable
 
 from ..io.atomic import same_file
 from . import jobs as J
+from . import ownership as O
 from .chunks import MIN_CHUNK, plan_chunks
 from .jobs import MATTE_FORMATS, matte_pattern
 from .digest import (is_legacy, job_key, job_keys, legacy_job_key, options_text, same_job,
@@ -96,8 +97,8 @@ def prepare_out_dir(out_dir) -> Path:
 
 def _outputs(jobs, out_dir: Path, ext: str) -> dict[str, Path]:
     """``{name: DIR/NAME.ext}`` of the jobs (BatchError where one is the summary or an input);
-    the claim files a killed run left in DIR removed (:func:`.jobs.remove_stale_claims`)."""
-    J.remove_stale_claims(out_dir)
+    the claim files a killed run left in DIR removed (:func:`.ownership.remove_stale_claims`)."""
+    O.remove_stale_claims(out_dir)
     outs = {}
     for job in jobs:
         out = out_dir / f"{job.name}{ext}"
@@ -168,7 +169,7 @@ class _Collector:
         log.info("%s failed: %s", job.name, exc)
         # an output another run wrote meanwhile is not this job's (before, the row had this
         # run's digest where the output was absent at the start: a rerun took it for its own)
-        made = OTHER_RUN if isinstance(exc, J.OutputTaken) else \
+        made = OTHER_RUN if isinstance(exc, O.OutputTaken) else \
             self.unfinished.get(job.name, ("", ""))[1]
         self.finish(job, Row(job.name, "failed", error=_error_line(exc), output=str(out),
                              job=made))
@@ -409,7 +410,7 @@ def _earlier_rows(out_dir: Path) -> list[Row]:
 #: finished after a Ctrl-C had cancelled its task (its row says cancelled, with no digest).
 UNKNOWN_JOB = "unknown"
 #: The digest of a failed row whose output another run wrote while this one went on (two
-#: runs into one folder at once, :class:`~facetransfer.batch.jobs.OutputTaken`): made with
+#: runs into one folder at once, :class:`~facetransfer.batch.ownership.OutputTaken`): made with
 #: options this run does not know, so not taken by a rerun as its own.
 OTHER_RUN = "another-run"
 
@@ -594,7 +595,7 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     planned = _planned(outs)
     # a matte beside no result (a render stopped between their commits; the result removed to
     # redo the pair): frames the job removes while still these (before: the pair failed)
-    planned_mattes = {n: J.matte_identity(m) for n, m in mattes.items()}
+    planned_mattes = {n: O.matte_identity(m) for n, m in mattes.items()}
 
     def submit(job, mf):
         m = mattes.get(job.name)
@@ -607,14 +608,14 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
 
 
 def _planned(outs: dict) -> dict[str, str]:
-    """``{name: which file its output is now}`` (:func:`.jobs.output_identity`, "" none):
+    """``{name: which file its output is now}`` (:func:`.ownership.output_identity`, "" none):
     an output there that the run does again (every one with ``--overwrite``; without it, a
     result rendered again for its matte or that does not decode, a take of an earlier
     version) is replaced only while it is still that file; one absent is written only if
     still absent (before, the jobs replaced whatever was there as they finished: another
     run's output, unasked; with ``--overwrite``, until the fiftieth session, even one another
-    run wrote after this one began). Its job claims it meanwhile (:func:`.jobs.claimed`)."""
-    return {n: J.output_identity(o) for n, o in outs.items()}
+    run wrote after this one began). Its job claims it meanwhile (:func:`.ownership.claimed`)."""
+    return {n: O.output_identity(o) for n, o in outs.items()}
 
 
 def transfer_what(settings: dict, model) -> str:

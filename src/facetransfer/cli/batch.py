@@ -189,7 +189,7 @@ def _run(args, what: str, n_jobs: int, call) -> int:
             bar.close()
         if not started:   # while the cluster started or the scheduler was asked: nothing ran
             raise         # (before: "finished outputs are kept in DIR", of no DIR)
-        from ..batch.jobs import remove_stale_claims
+        from ..batch.ownership import remove_stale_claims
 
         # the embedded cluster is closed: the claims its workers held, left (a scheduler's
         # tasks still running keep theirs)
