@@ -7,7 +7,9 @@ end (a new user's walk, ``track`` of a 200-frame clip interrupted 0.7 s in). Ins
 :func:`deferred_signals` the handlers only note the signal; on leaving, the first noted is
 handed to its own handler there, in ordinary code, so the interrupt is raised where the
 caller can stop what it started. A forked child starts with the parent's Ctrl-C handler and
-SIGTERM's default (a forked worker dies of it).
+SIGTERM's default (a forked worker dies of it). A parent that gives up on its forked workers
+stops them by SIGKILL (:func:`kill_forked`): a signal that reaches a child in the fork's
+first instants, while it still holds the noting handlers, is noted in the child and lost.
 """
 
 from __future__ import annotations
@@ -17,7 +19,7 @@ import os
 import signal
 import threading
 
-__all__ = ["deferred_signals"]
+__all__ = ["deferred_signals", "kill_forked"]
 
 #: The handlers replaced while a fork is under way (None: none), for the child to restore.
 _SAVED: dict | None = None
@@ -26,8 +28,9 @@ _HOOKED = False
 
 def _restore_in_child() -> None:
     """A forked child's handlers back to the parent's own (not the noting ones), but SIGTERM
-    to its default: a forked worker dies of it, as its parent stops it so
-    (``Process.terminate``; :mod:`facetransfer.cli.main` does the same for every fork)."""
+    to its default: a forked worker dies of it (a ``kill`` of the process group, the
+    executor's own ``terminate`` of a broken pool; :mod:`facetransfer.cli.main` does the same
+    for every fork)."""
     global _SAVED
     saved, _SAVED = _SAVED, None
     if saved is not None and threading.current_thread() is threading.main_thread():
@@ -62,3 +65,22 @@ def deferred_signals(signums=(signal.SIGINT, signal.SIGTERM)):
             signal.signal(s, handler)
         if noted:
             saved[noted[0]](noted[0], None)
+
+
+def kill_forked(pool, future) -> None:
+    """Stop the forked workers of the ``concurrent.futures.ProcessPoolExecutor`` ``pool`` (and
+    ``future``, the job they run) without waiting for them: by SIGKILL, not SIGTERM. A SIGTERM
+    reaching a child in the fork's first instants, before its handlers are restored
+    (:func:`deferred_signals`), was lost, and the child ran its whole job and then waited for
+    ever to hand its result to a parent that had left (3 of 30 children cancelled right after
+    the fork). A child owns nothing that it must clean up: its temporary files are written
+    under names that the next write removes once their process is gone
+    (:mod:`facetransfer.io.atomic`), and the fork context's semaphores and shared values
+    are unlinked when made."""
+    future.cancel()
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        try:
+            proc.kill()
+        except Exception:  # noqa: BLE001 - already gone
+            pass
+    pool.shutdown(wait=False, cancel_futures=True)

@@ -412,8 +412,9 @@ def _terminated(signum, frame):
 
 def _default_sigterm_in_child() -> None:
     """A forked child (a background tracker, a render worker) dies of SIGTERM (the default
-    handler, not its parent's, which raises :class:`Terminated`): its parent stops it so
-    (``Process.terminate``)."""
+    handler, not its parent's, which raises :class:`Terminated`): a SIGTERM to the process
+    group, or the executor's ``terminate`` of a broken pool, ends it (its parent cancels it by
+    SIGKILL, :func:`facetransfer.signals.kill_forked`)."""
     import signal
 
     if signal.getsignal(signal.SIGTERM) is _terminated:

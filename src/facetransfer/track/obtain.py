@@ -463,21 +463,11 @@ class _BackgroundTrack:
             self._pool.shutdown(wait=True)
 
     def cancel(self) -> None:
-        """Stop the child (it may be half-way through the video) without waiting for it.
+        """Stop the child (it may be half-way through the video) without waiting for it (by
+        SIGKILL, :func:`facetransfer.signals.kill_forked`)."""
+        from ..signals import kill_forked
 
-        By SIGKILL: the child keeps nothing of its own either way (a SIGTERM ends it by the
-        default handler, :func:`facetransfer.cli.main._default_sigterm_in_child`), but a
-        SIGTERM that reached it in the fork's first instants, before that handler was back
-        (a Ctrl-C as the parent forks), was lost: the child then tracked the whole clip and
-        waited for ever to hand its track to a parent that had left."""
-        self._future.cancel()
-        procs = getattr(self._pool, "_processes", None) or {}
-        for proc in list(procs.values()):
-            try:
-                proc.kill()
-            except Exception:  # noqa: BLE001 - already gone
-                pass
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        kill_forked(self._pool, self._future)
 
 
 #: (model, video, max_frames, method, options, frames, face) handed to the forked child (not
