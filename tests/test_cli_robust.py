@@ -497,6 +497,27 @@ def test_a_ctrl_c_while_the_commands_load_is_one_line_and_130(monkeypatch, capsy
     assert _err(capsys) == ["facetransfer: interrupted"]
 
 
+def test_a_sigterm_while_the_commands_load_is_one_line_and_143():
+    """A SIGTERM in the first half second (the subcommands' modules importing: before the
+    command's own handler was set, 0.05-0.35 s into a transfer on a loaded machine) killed the
+    process by the signal, with no line; now as a Ctrl-C then: one line and 143. In a process
+    of its own: before, the signal ended it."""
+    code = textwrap.dedent("""
+        import os, signal, sys
+        from facetransfer.cli import main as cli_main
+
+        def loading():
+            os.kill(os.getpid(), signal.SIGTERM)
+            raise SystemExit("the SIGTERM was not taken")
+
+        cli_main.build_parser = loading
+        sys.exit(cli_main.main(["track", "x.mp4", "--out", "t.npz"]))
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": SRC})
+    assert (r.returncode, r.stderr.splitlines()) == (143, ["facetransfer: terminated"])
+
+
 def test_an_interrupted_run_names_an_earlier_output_it_replaced(tmp_path, capsys):
     """``track --out T.npz --overlay O.mp4 --overwrite`` interrupted while drawing the overlay
     had already replaced the earlier T.npz, but its line said only "interrupted": an output is

@@ -311,14 +311,21 @@ def main(argv: list[str] | None = None) -> int:
     of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
     parallel work keep OpenBLAS and OpenCV to one thread each (:func:`serial_blas`). A Ctrl-C
     before the command began (while the subcommands' modules load: half a second) is one line
-    and 130 as well (it printed the import's traceback).
+    and 130 as well (it printed the import's traceback); a SIGTERM then, one line and 143 (it
+    killed the process by the signal, with nothing said).
     """
+    import signal
+
+    previous = _catching_sigterm()
     try:
         return _main(argv)
     except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
         what, status = _stop_status(exc)
         print(f"facetransfer: {what}", file=sys.stderr)
         return status
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 def _stop_status(stop: KeyboardInterrupt) -> tuple[str, int]:
