@@ -518,6 +518,36 @@ def test_a_sigterm_while_the_commands_load_is_one_line_and_143():
     assert (r.returncode, r.stderr.splitlines()) == (143, ["facetransfer: terminated"])
 
 
+@pytest.mark.parametrize("signum,said", [("SIGTERM", (143, "terminated")),
+                                          ("SIGINT", (130, "interrupted"))])
+def test_an_interrupt_inside_a_callback_python_ignores_is_taken(signum, said):
+    """A SIGTERM or Ctrl-C whose handler ran inside a callback where Python ignores exceptions
+    (a weak reference's, as importlib's module locks have: 1 of 21 SIGTERMs 0.8 s into a
+    transfer) printed "Exception ignored ... Terminated" and was lost: the transfer ran to its
+    end, exit 0. It is now given again a moment later, and taken in the code running then."""
+    code = textwrap.dedent(f"""
+        import os, signal, sys, time, weakref
+        from facetransfer.cli import main as cli_main
+
+        class Thing:
+            pass
+
+        def loading():
+            thing = Thing()
+            ref = weakref.ref(thing, lambda r: (os.kill(os.getpid(), signal.{signum}),
+                                                sum(range(1000))))
+            del thing                                   # the handler runs in the callback
+            time.sleep(30)                              # the command goes on
+            raise SystemExit("the signal was lost")
+
+        cli_main.build_parser = loading
+        sys.exit(cli_main.main(["track", "x.mp4", "--out", "t.npz"]))
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": SRC})
+    assert (r.returncode, r.stderr.splitlines()) == (said[0], [f"facetransfer: {said[1]}"])
+
+
 def test_an_interrupted_run_names_an_earlier_output_it_replaced(tmp_path, capsys):
     """``track --out T.npz --overlay O.mp4 --overwrite`` interrupted while drawing the overlay
     had already replaced the earlier T.npz, but its line said only "interrupted": an output is

@@ -10,6 +10,8 @@ caller can stop what it started. A forked child starts with the parent's Ctrl-C 
 SIGTERM's default (a forked worker dies of it). A parent that gives up on its forked workers
 stops them by SIGKILL (:func:`kill_forked`): a signal that reaches a child in the fork's
 first instants, while it still holds the noting handlers, is noted in the child and lost.
+An interrupt raised elsewhere where Python ignores exceptions (a weak reference's callback, a
+``__del__``) is sent again (:func:`interrupts_not_ignored`).
 """
 
 from __future__ import annotations
@@ -17,9 +19,10 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import threading
 
-__all__ = ["deferred_signals", "kill_forked"]
+__all__ = ["deferred_signals", "interrupts_not_ignored", "kill_forked"]
 
 #: The handlers replaced while a fork is under way (None: none), for the child to restore.
 _SAVED: dict | None = None
@@ -84,3 +87,45 @@ def kill_forked(pool, future) -> None:
         except Exception:  # noqa: BLE001 - already gone
             pass
     pool.shutdown(wait=False, cancel_futures=True)
+
+
+@contextlib.contextmanager
+def interrupts_not_ignored(signals):
+    """Inside the block, an interrupt that Python ignored is sent again: ``signals``, pairs
+    ``(exception class, signal number)`` (the most specific first), says which signal's
+    handler raised an exception of which class.
+
+    A signal's handler runs between two bytecodes of the main thread, wherever it is; where
+    that is a callback whose exceptions Python only prints ("Exception ignored in", through
+    :func:`sys.unraisablehook`: a weak reference's callback, as importlib's module locks have,
+    a ``__del__``), the interrupt it raised was lost and the command ran on (1 of 21 SIGTERMs
+    0.8 s into a transfer). Such an exception is not printed; its signal is sent again to the
+    main thread a moment later (:func:`_send_again`, from a thread of its own), and its
+    handler runs in the code running then. Any other goes to the hook there was."""
+    before = sys.unraisablehook
+
+    def hook(unraisable) -> None:
+        kind = unraisable.exc_type
+        signum = next((n for cls, n in signals if isinstance(kind, type)
+                       and issubclass(kind, cls)), None)
+        if signum is None or threading.current_thread() is not threading.main_thread():
+            before(unraisable)
+            return
+        # from another thread, a moment later: made here, the signal's handler would run at
+        # once, in this hook, where its exception is ignored again
+        later = threading.Timer(0.01, _send_again, (signum,))
+        later.daemon = True
+        later.start()
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = before
+
+
+def _send_again(signum: int) -> None:
+    """Send ``signum`` to the main thread (a real signal: it wakes a wait there), while Python
+    still handles it."""
+    if callable(signal.getsignal(signum)):
+        signal.pthread_kill(threading.main_thread().ident, signum)

@@ -312,13 +312,18 @@ def main(argv: list[str] | None = None) -> int:
     parallel work keep OpenBLAS and OpenCV to one thread each (:func:`serial_blas`). A Ctrl-C
     before the command began (while the subcommands' modules load: half a second) is one line
     and 130 as well (it printed the import's traceback); a SIGTERM then, one line and 143 (it
-    killed the process by the signal, with nothing said).
+    killed the process by the signal, with nothing said). An interrupt raised where Python
+    ignores exceptions is sent again (:func:`facetransfer.signals.interrupts_not_ignored`).
     """
     import signal
 
+    from ..signals import interrupts_not_ignored
+
     previous = _catching_sigterm()
     try:
-        return _main(argv)
+        with interrupts_not_ignored(((Terminated, signal.SIGTERM),
+                                     (KeyboardInterrupt, signal.SIGINT))):
+            return _main(argv)
     except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
         what, status = _stop_status(exc)
         print(f"facetransfer: {what}", file=sys.stderr)
