@@ -548,6 +548,35 @@ def test_an_interrupt_inside_a_callback_python_ignores_is_taken(signum, said):
     assert (r.returncode, r.stderr.splitlines()) == (said[0], [f"facetransfer: {said[1]}"])
 
 
+@pytest.mark.parametrize("handler,signum", [("_terminated", "SIGTERM"),
+                                            ("_interrupted", "SIGINT")])
+def test_an_interrupt_inside_importlibs_lock_callback_is_raised_after_it(handler, signum):
+    """importlib's module-lock callback takes the global import lock before its ``try``: an
+    interrupt raised there right after it took the lock left the lock held for ever, and the
+    transfer's other threads hung at their next import (a Ctrl-C 2 s in, killed 120 s later).
+    The CLI's handlers raise nothing there; the signal is sent again and raised after it."""
+    code = textwrap.dedent(f"""
+        import signal, sys, time
+        from facetransfer.cli import main as cli_main
+
+        ns = {{"__name__": "importlib._bootstrap", "sys": sys}}
+        exec("def cb():\\n    return sys._getframe()\\n", ns)     # the callback's frame
+        signal.signal(signal.{signum}, cli_main.{handler})
+        try:
+            cli_main.{handler}(signal.{signum}, ns["cb"]())
+        except KeyboardInterrupt:
+            sys.exit("raised inside importlib's callback")
+        try:
+            time.sleep(30)
+        except KeyboardInterrupt:
+            sys.exit(0)
+        sys.exit("not sent again")
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": SRC})
+    assert (r.returncode, r.stderr) == (0, "")
+
+
 def test_an_interrupted_run_names_an_earlier_output_it_replaced(tmp_path, capsys):
     """``track --out T.npz --overlay O.mp4 --overwrite`` interrupted while drawing the overlay
     had already replaced the earlier T.npz, but its line said only "interrupted": an output is

@@ -22,7 +22,8 @@ import signal
 import sys
 import threading
 
-__all__ = ["deferred_signals", "interrupts_not_ignored", "kill_forked"]
+__all__ = ["deferred_signals", "interrupts_not_ignored", "kill_forked",
+           "in_import_lock_callback", "send_later"]
 
 #: The handlers replaced while a fork is under way (None: none), for the child to restore.
 _SAVED: dict | None = None
@@ -99,9 +100,9 @@ def interrupts_not_ignored(signals):
     that is a callback whose exceptions Python only prints ("Exception ignored in", through
     :func:`sys.unraisablehook`: a weak reference's callback, as importlib's module locks have,
     a ``__del__``), the interrupt it raised was lost and the command ran on (1 of 21 SIGTERMs
-    0.8 s into a transfer). Such an exception is not printed; its signal is sent again to the
-    main thread a moment later (:func:`_send_again`, from a thread of its own), and its
-    handler runs in the code running then. Any other goes to the hook there was."""
+    0.8 s into a transfer). Such an exception is not printed; its signal is sent again
+    (:func:`send_later`), and its handler runs in the code running then. Any other goes to the
+    hook there was."""
     before = sys.unraisablehook
 
     def hook(unraisable) -> None:
@@ -111,17 +112,32 @@ def interrupts_not_ignored(signals):
         if signum is None or threading.current_thread() is not threading.main_thread():
             before(unraisable)
             return
-        # from another thread, a moment later: made here, the signal's handler would run at
-        # once, in this hook, where its exception is ignored again
-        later = threading.Timer(0.01, _send_again, (signum,))
-        later.daemon = True
-        later.start()
+        send_later(signum)
 
     sys.unraisablehook = hook
     try:
         yield
     finally:
         sys.unraisablehook = before
+
+
+def send_later(signum: int) -> None:
+    """Send ``signum`` to the main thread again a moment later, from a thread of its own (sent
+    by the main thread, its handler would run at once, where it was not to be raised)."""
+    later = threading.Timer(0.01, _send_again, (signum,))
+    later.daemon = True
+    later.start()
+
+
+def in_import_lock_callback(frame) -> bool:
+    """Whether ``frame`` is importlib's module-lock callback (``_get_module_lock``'s ``cb``,
+    run when a module's lock is collected): it takes the global import lock before its
+    ``try``, so an interrupt raised there, right after the lock was taken, left the lock held
+    by the main thread for ever, and every other thread's next import waited for it (a Ctrl-C
+    2 s into a transfer hung it). A handler sends its signal again instead
+    (:func:`send_later`)."""
+    return frame is not None and frame.f_code.co_name == "cb" and \
+        frame.f_globals.get("__name__") == "importlib._bootstrap"
 
 
 def _send_again(signum: int) -> None:
