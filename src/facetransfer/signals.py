@@ -77,10 +77,11 @@ def kill_forked(pool, future) -> None:
     reaching a child in the fork's first instants, before its handlers are restored
     (:func:`deferred_signals`), was lost, and the child ran its whole job and then waited for
     ever to hand its result to a parent that had left (3 of 30 children cancelled right after
-    the fork). A child owns nothing that it must clean up: its temporary files are written
-    under names that the next write removes once their process is gone
-    (:mod:`facetransfer.io.atomic`), and the fork context's semaphores and shared values
-    are unlinked when made."""
+    the fork). SIGTERM's default ended a child as abruptly: a child killed while it writes
+    (the background tracker saving its progress on the Ctrl-C it got too) leaves its
+    temporary file (``.NAME.PID-XXXX.part.npz``), which the next write of that file removes
+    once its process is gone (:mod:`facetransfer.io.atomic`); the fork context's semaphores
+    and shared values are unlinked when made, so nothing else is left."""
     future.cancel()
     for proc in list((getattr(pool, "_processes", None) or {}).values()):
         try:
