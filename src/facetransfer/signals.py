@@ -71,24 +71,33 @@ def deferred_signals(signums=(signal.SIGINT, signal.SIGTERM)):
             saved[noted[0]](noted[0], None)
 
 
-def kill_forked(pool, future) -> None:
+def kill_forked(pool, future, *, grace: float = 0.0) -> None:
     """Stop the forked workers of the ``concurrent.futures.ProcessPoolExecutor`` ``pool`` (and
-    ``future``, the job they run) without waiting for them: by SIGKILL, not SIGTERM. A SIGTERM
+    ``future``, the job they run) without waiting for them (but ``grace`` seconds for a job
+    running: one that got the same Ctrl-C ends by itself, saving its progress): by SIGKILL,
+    not SIGTERM. A SIGTERM
     reaching a child in the fork's first instants, before its handlers are restored
     (:func:`deferred_signals`), was lost, and the child ran its whole job and then waited for
     ever to hand its result to a parent that had left (3 of 30 children cancelled right after
-    the fork). SIGTERM's default ended a child as abruptly: a child killed while it writes
-    (the background tracker saving its progress on the Ctrl-C it got too) leaves its
-    temporary file (``.NAME.PID-XXXX.part.npz``), which the next write of that file removes
-    once its process is gone (:mod:`facetransfer.io.atomic`); the fork context's semaphores
-    and shared values are unlinked when made, so nothing else is left."""
+    the fork). A child killed while it writes leaves its temporary file
+    (``.NAME.PID-XXXX.part.npz``), which the next write of that file removes once its process
+    is gone (:mod:`facetransfer.io.atomic`): the background tracker saving its progress on the
+    Ctrl-C it got too was killed so (1 of 7 Ctrl-Cs while tracking, its progress lost; so did
+    SIGTERM's default), hence ``grace``. The fork context's semaphores and shared values are
+    unlinked when made: nothing else is left."""
+    from concurrent.futures import wait
+
     future.cancel()
-    for proc in list((getattr(pool, "_processes", None) or {}).values()):
-        try:
-            proc.kill()
-        except Exception:  # noqa: BLE001 - already gone
-            pass
-    pool.shutdown(wait=False, cancel_futures=True)
+    try:
+        if grace > 0 and future.running():
+            wait([future], timeout=grace)
+    finally:                        # killed all the same, also on a second Ctrl-C meanwhile
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            try:
+                proc.kill()
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        pool.shutdown(wait=False, cancel_futures=True)
 
 
 @contextlib.contextmanager

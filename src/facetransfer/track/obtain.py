@@ -456,18 +456,31 @@ class _BackgroundTrack:
         except BrokenProcessPool as exc:
             log.warning("background tracking failed (%s); tracking in this process", exc)
             return None
-        except BaseException:  # e.g. Ctrl-C: do not wait for the child
-            self.cancel()
+        except BaseException as exc:  # e.g. Ctrl-C: do not wait for the child, or barely
+            self.cancel(grace=grace_for(exc))
             raise
         finally:
             self._pool.shutdown(wait=True)
 
-    def cancel(self) -> None:
-        """Stop the child (it may be half-way through the video) without waiting for it (by
-        SIGKILL, :func:`facetransfer.signals.kill_forked`)."""
+    def cancel(self, *, grace: float = 0.0) -> None:
+        """Stop the child (it may be half-way through the video) by SIGKILL
+        (:func:`facetransfer.signals.kill_forked`), after up to ``grace`` seconds for it to
+        end by itself (:func:`grace_for`)."""
         from ..signals import kill_forked
 
-        kill_forked(self._pool, self._future)
+        kill_forked(self._pool, self._future, grace=grace)
+
+
+#: Seconds a background tracker cancelled for a Ctrl-C is given to end by itself before it is
+#: killed: the Ctrl-C reached it too, and it saves its progress (about 0.1 s) into the cache.
+CTRL_C_GRACE = 3.0
+
+
+def grace_for(exc: BaseException) -> float:
+    """The ``grace`` of :meth:`_BackgroundTrack.cancel` for a parent stopped by ``exc``:
+    :data:`CTRL_C_GRACE` for a Ctrl-C (which the terminal sent to the child as well), else 0
+    (a SIGTERM to the parent, an error: the child has nothing to end by itself)."""
+    return CTRL_C_GRACE if type(exc) is KeyboardInterrupt else 0.0
 
 
 #: (model, video, max_frames, method, options, frames, face) handed to the forked child (not
