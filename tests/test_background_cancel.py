@@ -79,3 +79,41 @@ def test_a_cancelled_second_detection_that_missed_its_sigterm_is_stopped(tmp_pat
     finally:
         if ready.exists() and _alive(int(ready.read_text())):
             os.kill(int(ready.read_text()), signal.SIGKILL)
+
+
+def _saving_job():
+    """A background job that, on a Ctrl-C, saves its progress (a moment's work) as the
+    tracker's checkpoint does."""
+    Path(os.environ[_READY]).write_text(str(os.getpid()))
+    try:
+        time.sleep(60)
+    except KeyboardInterrupt:
+        time.sleep(0.3)
+        Path(os.environ[_READY] + ".saved").write_text("saved")
+        raise
+
+
+def test_a_child_that_got_the_ctrl_c_too_saves_its_progress_before_it_is_killed(
+        tmp_path, monkeypatch):
+    """A Ctrl-C reaches the background tracker too, which saves its progress; its parent,
+    interrupted as well, killed it at once, mid-save: its progress was lost and its temporary
+    file left in the user cache (1 of 7 Ctrl-Cs while tracking). Cancelled for a Ctrl-C
+    (:func:`facetransfer.track.obtain.grace_for`), a running child is given a moment to end."""
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _saving_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    try:
+        assert _wait(ready.exists, 30), "the forked job did not start"
+        pid = int(ready.read_text())
+        os.kill(pid, signal.SIGINT)                  # the terminal's Ctrl-C, in the child
+        bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))
+        assert Path(str(ready) + ".saved").exists()
+        assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
+        assert obtain.grace_for(KeyboardInterrupt()) > 0
+        assert obtain.grace_for(ValueError()) == 0     # not interrupted: nothing to save
+    finally:
+        if ready.exists() and _alive(int(ready.read_text())):
+            os.kill(int(ready.read_text()), signal.SIGKILL)

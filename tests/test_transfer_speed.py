@@ -308,7 +308,7 @@ class _Failed:
     def result(self):
         return None
 
-    def cancel(self):
+    def cancel(self, *, grace: float = 0.0):
         pass
 
 

@@ -231,9 +231,9 @@ def test_preset_reaches_x264(tmp_path):
 
 def test_default_preset_is_written_without_b8x8_partitions(tmp_path):
     """The default preset is x264's "faster" with B-frames' 8x8 partitions not searched
-    (:data:`DEFAULT_X264_PARAMS`: 20 % less of the encoder's CPU for the same quality, measured
-    in BENCHMARKS.md), as the stream's own settings say (``analyse``: the I and the P/B
-    partitions, 0x100 the B-frames' 8x8); a preset asked for is x264's own, b8x8 kept, and
+    (:data:`DEFAULT_X264_PARAMS`: 11-18 % less of the encoder's CPU for the same quality,
+    measured in BENCHMARKS.md), as the stream's own settings say (``analyse``: the I and the
+    P/B partitions, 0x100 the B-frames' 8x8); any other preset is x264's own, b8x8 kept, and
     H.265 gets no x264 settings."""
     assert iov.DEFAULT_X264_PARAMS == "partitions=i4x4,i8x8,p8x8"
     args = iov._encode_args(VideoOptions(), ".mp4")

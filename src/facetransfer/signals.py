@@ -7,7 +7,11 @@ end (a new user's walk, ``track`` of a 200-frame clip interrupted 0.7 s in). Ins
 :func:`deferred_signals` the handlers only note the signal; on leaving, the first noted is
 handed to its own handler there, in ordinary code, so the interrupt is raised where the
 caller can stop what it started. A forked child starts with the parent's Ctrl-C handler and
-SIGTERM's default (a forked worker dies of it).
+SIGTERM's default (a forked worker dies of it). A parent that gives up on its forked workers
+stops them by SIGKILL (:func:`kill_forked`): a signal that reaches a child in the fork's
+first instants, while it still holds the noting handlers, is noted in the child and lost.
+An interrupt raised elsewhere where Python ignores exceptions (a weak reference's callback, a
+``__del__``) is sent again (:func:`interrupts_not_ignored`).
 """
 
 from __future__ import annotations
@@ -15,9 +19,11 @@ from __future__ import annotations
 import contextlib
 import os
 import signal
+import sys
 import threading
 
-__all__ = ["deferred_signals"]
+__all__ = ["deferred_signals", "interrupts_not_ignored", "kill_forked",
+           "in_import_lock_callback", "send_later"]
 
 #: The handlers replaced while a fork is under way (None: none), for the child to restore.
 _SAVED: dict | None = None
@@ -26,8 +32,9 @@ _HOOKED = False
 
 def _restore_in_child() -> None:
     """A forked child's handlers back to the parent's own (not the noting ones), but SIGTERM
-    to its default: a forked worker dies of it, as its parent stops it so
-    (``Process.terminate``; :mod:`facetransfer.cli.main` does the same for every fork)."""
+    to its default: a forked worker dies of it (a ``kill`` of the process group, the
+    executor's own ``terminate`` of a broken pool; :mod:`facetransfer.cli.main` does the same
+    for every fork)."""
     global _SAVED
     saved, _SAVED = _SAVED, None
     if saved is not None and threading.current_thread() is threading.main_thread():
@@ -62,3 +69,89 @@ def deferred_signals(signums=(signal.SIGINT, signal.SIGTERM)):
             signal.signal(s, handler)
         if noted:
             saved[noted[0]](noted[0], None)
+
+
+def kill_forked(pool, future, *, grace: float = 0.0) -> None:
+    """Stop the forked workers of the ``concurrent.futures.ProcessPoolExecutor`` ``pool`` (and
+    ``future``, the job they run) without waiting for them (but ``grace`` seconds for a job
+    running: one that got the same Ctrl-C ends by itself, saving its progress): by SIGKILL,
+    not SIGTERM. A SIGTERM
+    reaching a child in the fork's first instants, before its handlers are restored
+    (:func:`deferred_signals`), was lost, and the child ran its whole job and then waited for
+    ever to hand its result to a parent that had left (3 of 30 children cancelled right after
+    the fork). A child killed while it writes leaves its temporary file
+    (``.NAME.PID-XXXX.part.npz``), which the next write of that file removes once its process
+    is gone (:mod:`facetransfer.io.atomic`): the background tracker saving its progress on the
+    Ctrl-C it got too was killed so (1 of 7 Ctrl-Cs while tracking, its progress lost; so did
+    SIGTERM's default), hence ``grace``. The fork context's semaphores and shared values are
+    unlinked when made: nothing else is left."""
+    from concurrent.futures import wait
+
+    future.cancel()
+    try:
+        if grace > 0 and future.running():
+            wait([future], timeout=grace)
+    finally:                        # killed all the same, also on a second Ctrl-C meanwhile
+        for proc in list((getattr(pool, "_processes", None) or {}).values()):
+            try:
+                proc.kill()
+            except Exception:  # noqa: BLE001 - already gone
+                pass
+        pool.shutdown(wait=False, cancel_futures=True)
+
+
+@contextlib.contextmanager
+def interrupts_not_ignored(signals):
+    """Inside the block, an interrupt that Python ignored is sent again: ``signals``, pairs
+    ``(exception class, signal number)`` (the most specific first), says which signal's
+    handler raised an exception of which class.
+
+    A signal's handler runs between two bytecodes of the main thread, wherever it is; where
+    that is a callback whose exceptions Python only prints ("Exception ignored in", through
+    :func:`sys.unraisablehook`: a weak reference's callback, as importlib's module locks have,
+    a ``__del__``), the interrupt it raised was lost and the command ran on (1 of 21 SIGTERMs
+    0.8 s into a transfer). Such an exception is not printed; its signal is sent again
+    (:func:`send_later`), and its handler runs in the code running then. Any other goes to the
+    hook there was."""
+    before = sys.unraisablehook
+
+    def hook(unraisable) -> None:
+        kind = unraisable.exc_type
+        signum = next((n for cls, n in signals if isinstance(kind, type)
+                       and issubclass(kind, cls)), None)
+        if signum is None or threading.current_thread() is not threading.main_thread():
+            before(unraisable)
+            return
+        send_later(signum)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        sys.unraisablehook = before
+
+
+def send_later(signum: int) -> None:
+    """Send ``signum`` to the main thread again a moment later, from a thread of its own (sent
+    by the main thread, its handler would run at once, where it was not to be raised)."""
+    later = threading.Timer(0.01, _send_again, (signum,))
+    later.daemon = True
+    later.start()
+
+
+def in_import_lock_callback(frame) -> bool:
+    """Whether ``frame`` is importlib's module-lock callback (``_get_module_lock``'s ``cb``,
+    run when a module's lock is collected): it takes the global import lock before its
+    ``try``, so an interrupt raised there, right after the lock was taken, left the lock held
+    by the main thread for ever, and every other thread's next import waited for it (a Ctrl-C
+    2 s into a transfer hung it). A handler sends its signal again instead
+    (:func:`send_later`)."""
+    return frame is not None and frame.f_code.co_name == "cb" and \
+        frame.f_globals.get("__name__") == "importlib._bootstrap"
+
+
+def _send_again(signum: int) -> None:
+    """Send ``signum`` to the main thread (a real signal: it wakes a wait there), while Python
+    still handles it."""
+    if callable(signal.getsignal(signum)):
+        signal.pthread_kill(threading.main_thread().ident, signum)

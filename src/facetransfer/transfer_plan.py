@@ -291,9 +291,9 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
         tt = planner.target_track(sources.target, frames, fps, alone=early is None)
         regions = _regions_ahead(frames, tt, model, options, planner.timings) \
             if early is not None else None
-    except BaseException:
+    except BaseException as exc:
         if early is not None:
-            early.cancel()
+            early.cancel(grace=obtain.grace_for(exc))
         raise
     inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings)
     if regions is None:

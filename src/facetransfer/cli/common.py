@@ -111,9 +111,9 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
     p.add_argument("--preset", choices=PRESETS, default=DEFAULT_PRESET, metavar="PRESET",
                    help=f"x264/x265 speed preset, ultrafast ... veryslow (default "
                    f"{DEFAULT_PRESET}): slower ones cost more CPU for slightly better quality "
-                   "at the same CRF (medium: 1.6x the CPU, +0.07 dB); h264's default is "
-                   "x264's faster without B-frames' 8x8 partitions (20 %% less CPU, same "
-                   "quality), any other preset x264's own")
+                   "at the same CRF (medium: 1.6x the CPU, +0.07 dB); h264 at faster, given "
+                   "or not, is x264's faster without B-frames' 8x8 partitions (11-18 %% less "
+                   "of the encoder's CPU, the same quality), any other preset x264's own")
     if sequences:
         p.add_argument("--start-number", type=_start_number, default=None, metavar="N",
                        help=f"number of an image sequence's first frame ({flag} "

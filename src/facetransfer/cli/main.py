@@ -311,14 +311,29 @@ def main(argv: list[str] | None = None) -> int:
     of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
     parallel work keep OpenBLAS and OpenCV to one thread each (:func:`serial_blas`). A Ctrl-C
     before the command began (while the subcommands' modules load: half a second) is one line
-    and 130 as well (it printed the import's traceback).
+    and 130 as well (it printed the import's traceback); a SIGTERM then, one line and 143 (it
+    killed the process by the signal, with nothing said). An interrupt raised where Python
+    ignores exceptions is sent again (:func:`facetransfer.signals.interrupts_not_ignored`), and
+    one that would be raised inside importlib's module-lock callback is sent again instead
+    (:func:`_interrupted`, :func:`_terminated`).
     """
+    import signal
+
+    from ..signals import interrupts_not_ignored
+
+    previous = {signal.SIGTERM: _catching_sigterm(), signal.SIGINT: _catching_sigint()}
     try:
-        return _main(argv)
+        with interrupts_not_ignored(((Terminated, signal.SIGTERM),
+                                     (KeyboardInterrupt, signal.SIGINT))):
+            return _main(argv)
     except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
         what, status = _stop_status(exc)
         print(f"facetransfer: {what}", file=sys.stderr)
         return status
+    finally:
+        for signum, handler in previous.items():
+            if handler is not None:
+                signal.signal(signum, handler)
 
 
 def _stop_status(stop: KeyboardInterrupt) -> tuple[str, int]:
@@ -407,13 +422,43 @@ class Terminated(KeyboardInterrupt):
 
 
 def _terminated(signum, frame):
+    from ..signals import in_import_lock_callback, send_later
+
+    if in_import_lock_callback(frame):   # not there: raised again a moment later
+        send_later(signum)
+        return
     raise Terminated
+
+
+def _interrupted(signum, frame):
+    """The CLI's Ctrl-C: Python's own (KeyboardInterrupt), but not raised inside importlib's
+    module-lock callback (:func:`facetransfer.signals.in_import_lock_callback`)."""
+    from ..signals import in_import_lock_callback, send_later
+
+    if in_import_lock_callback(frame):
+        send_later(signum)
+        return
+    raise KeyboardInterrupt
+
+
+def _catching_sigint():
+    """:func:`_interrupted` for Ctrl-C where Python's own handler is (main thread only; a job
+    started in the background ignores it, a caller's own handler is kept); returns the old
+    handler to restore, or None."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGINT) is not signal.default_int_handler:
+        return None
+    return signal.signal(signal.SIGINT, _interrupted)
 
 
 def _default_sigterm_in_child() -> None:
     """A forked child (a background tracker, a render worker) dies of SIGTERM (the default
-    handler, not its parent's, which raises :class:`Terminated`): its parent stops it so
-    (``Process.terminate``)."""
+    handler, not its parent's, which raises :class:`Terminated`): a SIGTERM to the process
+    group, or the executor's ``terminate`` of a broken pool, ends it (its parent cancels it by
+    SIGKILL, :func:`facetransfer.signals.kill_forked`)."""
     import signal
 
     if signal.getsignal(signal.SIGTERM) is _terminated:

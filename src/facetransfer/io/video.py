@@ -353,7 +353,7 @@ def check_video_output(path: str | os.PathLike, options: VideoOptions | None = N
 def _encode_args(opt: VideoOptions, suffix: str) -> list[str]:
     """ffmpeg output arguments of a codec (libx264/libx265 4:2:0, ProRes 422 HQ or 4444 with
     alpha); H.264 at the default preset with :data:`DEFAULT_X264_PARAMS` too (the default's
-    tuning: 20 % less of the encoder's CPU for the same quality)."""
+    tuning: 11-18 % less of the encoder's CPU for the same quality)."""
     enc = ENCODERS[opt.codec]
     if opt.grey:   # one channel of 16 bits, lossless; data, so no colour tags
         fmt = ["-pix_fmt", "gray16be"] if opt.codec == "png" else \

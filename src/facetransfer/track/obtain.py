@@ -456,28 +456,31 @@ class _BackgroundTrack:
         except BrokenProcessPool as exc:
             log.warning("background tracking failed (%s); tracking in this process", exc)
             return None
-        except BaseException:  # e.g. Ctrl-C: do not wait for the child
-            self.cancel()
+        except BaseException as exc:  # e.g. Ctrl-C: do not wait for the child, or barely
+            self.cancel(grace=grace_for(exc))
             raise
         finally:
             self._pool.shutdown(wait=True)
 
-    def cancel(self) -> None:
-        """Stop the child (it may be half-way through the video) without waiting for it.
+    def cancel(self, *, grace: float = 0.0) -> None:
+        """Stop the child (it may be half-way through the video) by SIGKILL
+        (:func:`facetransfer.signals.kill_forked`), after up to ``grace`` seconds for it to
+        end by itself (:func:`grace_for`)."""
+        from ..signals import kill_forked
 
-        By SIGKILL: the child keeps nothing of its own either way (a SIGTERM ends it by the
-        default handler, :func:`facetransfer.cli.main._default_sigterm_in_child`), but a
-        SIGTERM that reached it in the fork's first instants, before that handler was back
-        (a Ctrl-C as the parent forks), was lost: the child then tracked the whole clip and
-        waited for ever to hand its track to a parent that had left."""
-        self._future.cancel()
-        procs = getattr(self._pool, "_processes", None) or {}
-        for proc in list(procs.values()):
-            try:
-                proc.kill()
-            except Exception:  # noqa: BLE001 - already gone
-                pass
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        kill_forked(self._pool, self._future, grace=grace)
+
+
+#: Seconds a background tracker cancelled for a Ctrl-C is given to end by itself before it is
+#: killed: the Ctrl-C reached it too, and it saves its progress (about 0.1 s) into the cache.
+CTRL_C_GRACE = 3.0
+
+
+def grace_for(exc: BaseException) -> float:
+    """The ``grace`` of :meth:`_BackgroundTrack.cancel` for a parent stopped by ``exc``:
+    :data:`CTRL_C_GRACE` for a Ctrl-C (which the terminal sent to the child as well), else 0
+    (a SIGTERM to the parent, an error: the child has nothing to end by itself)."""
+    return CTRL_C_GRACE if type(exc) is KeyboardInterrupt else 0.0
 
 
 #: (model, video, max_frames, method, options, frames, face) handed to the forked child (not

@@ -248,16 +248,11 @@ class SplitDetection:
             self._pool.shutdown(wait=False, cancel_futures=True)
 
     def cancel(self) -> None:
-        """Stop the child without waiting for it: by SIGKILL, as
-        :meth:`facetransfer.track.obtain._BackgroundTrack.cancel` (a SIGTERM in the fork's
-        first instants was lost, and the child left running)."""
-        self._future.cancel()
-        for proc in list((getattr(self._pool, "_processes", None) or {}).values()):
-            try:
-                proc.kill()
-            except Exception:  # noqa: BLE001 - already gone
-                pass
-        self._pool.shutdown(wait=False, cancel_futures=True)
+        """Stop the child without waiting for it (by SIGKILL,
+        :func:`facetransfer.signals.kill_forked`)."""
+        from ..signals import kill_forked
+
+        kill_forked(self._pool, self._future)
 
 
 def finish_split(first: ClipDetections, child: SplitDetection, start: int,
