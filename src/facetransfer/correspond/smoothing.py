@@ -80,30 +80,44 @@ def bilateral_smooth(vertices: np.ndarray, faces: np.ndarray, *, sigma_c: float 
     _, area = face_normals(v, f)
     tree_c = cKDTree(cent)
     chunks = _vertex_chunks(v, tree_c, sc)
-    # Jones §3.1: mollified normals, from vertices smoothed by a spatial filter of width σ_f/2.
+    # a scan in one chunk (the default sigma_c's usual case): its pairs found once, both passes
+    once = _pairs(v, tree_c, 2.0 * sc) if len(chunks) == 1 else None
+
+    def pairs(sl: slice):
+        return once if once is not None else _pairs(v[sl], tree_c, 2.0 * sc)
+
     vm = v.copy()
-    for sl in chunks:
-        i, q, d = _pairs(v[sl], tree_c, 2.0 * sc)
-        wm = area[q] * np.exp(-0.5 * (d / (0.5 * sc)) ** 2)
-        vm[sl] = _weighted_mean(i, wm, cent[q], v[sl])
-        _tick(progress, chunks, sl, 0)
+    for n, sl in enumerate(chunks):
+        vm[sl] = _mollified(v[sl], pairs(sl), cent, area, sc)
+        if progress is not None:
+            progress(n + 1, 2 * len(chunks))
     nq, _ = face_normals(vm, f)
     out = v.copy()
-    for sl in chunks:
-        i, q, d = _pairs(v[sl], tree_c, 2.0 * sc)
-        # Eq. (2): predictions Π_q(p) = p + ((c_q − p)·n_q) n_q, weighted by area, f and g.
-        h = np.einsum("ij,ij->i", cent[q] - v[sl][i], nq[q])
-        pred = v[sl][i] + h[:, None] * nq[q]
-        w = area[q] * np.exp(-0.5 * (d / sc) ** 2) * np.exp(-0.5 * (h / ss) ** 2)
-        out[sl] = _weighted_mean(i, w, pred, v[sl])
-        _tick(progress, chunks, sl, len(chunks))
+    for n, sl in enumerate(chunks):
+        out[sl] = _predicted(v[sl], pairs(sl), cent, area, nq, sc, ss)
+        if progress is not None:
+            progress(len(chunks) + n + 1, 2 * len(chunks))
     return out
 
 
-def _tick(progress, chunks: list, sl: slice, before: int) -> None:
-    """``progress(done, total)`` after the chunk ``sl`` of a pass that follows ``before``."""
-    if progress is not None:
-        progress(before + chunks.index(sl) + 1, 2 * len(chunks))
+def _mollified(p: np.ndarray, pairs, cent: np.ndarray, area: np.ndarray, sc: float
+               ) -> np.ndarray:
+    """Jones §3.1: the vertices ``p`` smoothed by a spatial filter of width σ_f/2, whose
+    faces' normals are the mollified ones (``pairs``: :func:`_pairs` of ``p``)."""
+    i, q, d = pairs
+    wm = area[q] * np.exp(-0.5 * (d / (0.5 * sc)) ** 2)
+    return _weighted_mean(i, wm, cent[q], p)
+
+
+def _predicted(p: np.ndarray, pairs, cent: np.ndarray, area: np.ndarray, nq: np.ndarray,
+               sc: float, ss: float) -> np.ndarray:
+    """Jones Eq. (2) for the vertices ``p``: their predictions Π_q(p) = p + ((c_q − p)·n_q) n_q
+    onto the faces ``q`` near them (``pairs``), weighted by area, f and g."""
+    i, q, d = pairs
+    h = np.einsum("ij,ij->i", cent[q] - p[i], nq[q])
+    pred = p[i] + h[:, None] * nq[q]
+    w = area[q] * np.exp(-0.5 * (d / sc) ** 2) * np.exp(-0.5 * (h / ss) ** 2)
+    return _weighted_mean(i, w, pred, p)
 
 
 def _pairs(v: np.ndarray, tree_c: cKDTree, radius: float):
