@@ -334,14 +334,18 @@ class MultilinearModel:
             return key in _FIRST_MODE.get(self, {})
 
     def _rows(self, vertices: np.ndarray) -> np.ndarray:
-        """The core's rows ``(3m,)`` of ``vertices`` (x, y, z of each), checked: integer
-        indices (floats were truncated, a boolean mask read as indices 0 and 1)."""
+        """The core's rows ``(3m,)`` of ``vertices`` (x, y, z of each), checked: one list of
+        integer indices (floats were truncated, a boolean mask read as indices 0 and 1, a 2-D
+        selection flattened)."""
         a = np.asarray(vertices)
+        if a.ndim != 1:
+            raise ShapeError(f"vertices must be a 1-D array of vertex indices, got shape "
+                             f"{a.shape}")
         if a.size and a.dtype.kind not in "iu":
             raise ShapeError(f"vertices must be integer vertex indices, got dtype {a.dtype}"
                              + (" (for a boolean mask give np.flatnonzero(mask))"
                                 if a.dtype.kind == "b" else ""))
-        v = a.astype(np.int64, copy=False).ravel()
+        v = a.astype(np.int64, copy=False)
         if v.size and (v.min() < 0 or v.max() >= self.n_vertices):
             raise ShapeError(f"vertex indices outside 0..{self.n_vertices - 1}")
         return (3 * v[:, None] + np.arange(3)).ravel()
