@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -146,8 +147,10 @@ def test_spec_from_json_file(tiny_model, tmp_path):
     ({"tracks": {"expression": [[float("inf"), "smile"]]}}, "frame must be an integer, got inf"),
 ])
 def test_bad_specs_rejected(tiny_model, spec, match):
-    with pytest.raises(SpecError, match=match):
+    with pytest.raises(SpecError, match=match) as err:
         performance_from_spec(tiny_model, spec)
+    # where in the spec, said once (a blend's amount said "identity: identity: amount ...")
+    assert not re.match(r"(.+?): \1:", str(err.value)), err.value
 
 
 
@@ -165,6 +168,7 @@ def test_the_spec_and_frames_share_one_limit(tiny_model):
     assert _spec_n_frames({}, 149_999) == 150_000
     with pytest.raises(SpecError, match=f"between 1 and {MAX_FRAMES}"):
         _spec_n_frames({"n_frames": MAX_FRAMES + 1}, -1)
+
 
 def test_random_performance_is_seeded_and_gentle(tiny_model):
     a = random_performance(tiny_model, 60, seed=3, size=(96, 80))

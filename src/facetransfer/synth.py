@@ -163,7 +163,7 @@ def _value_weights(model, mode: str, value, where: str) -> np.ndarray:
         if isinstance(value, Mapping):
             w = base.copy()
             for label, amount in value.items():
-                w += _amount(amount, label, where) * (model.training_weights(k, label) - base)
+                w += _amount(amount, label) * (model.training_weights(k, label) - base)
             return w
         w = np.asarray(value, dtype=np.float64)
     except (TypeError, ValueError) as exc:
@@ -174,15 +174,15 @@ def _value_weights(model, mode: str, value, where: str) -> np.ndarray:
     return w
 
 
-def _amount(amount, label, where: str) -> float:
-    """A blend's ``{label: amount}`` amount as a finite float (NaN or infinity made a NaN face
-    that failed later, naming neither the spec nor the key)."""
+def _amount(amount, label) -> float:
+    """A blend's ``{label: amount}`` amount as a finite float, else ValueError (NaN or infinity
+    made a NaN face that failed later); its caller says where in the spec."""
     try:
         a = float(amount)
     except (TypeError, ValueError):
         a = math.nan
     if not math.isfinite(a) or isinstance(amount, bool):
-        raise SpecError(f"{where}: amount of {label!r} must be a finite number, got {amount!r}")
+        raise ValueError(f"amount of {label!r} must be a finite number, got {amount!r}")
     return a
 
 
