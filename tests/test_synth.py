@@ -140,6 +140,12 @@ def test_spec_from_json_file(tiny_model, tmp_path):
     ({"tracks": {"expression": [[0, {"smile": float("inf")}]]}}, "finite number, got inf"),
     ({"identity": {"id1": float("nan")}}, r"identity: amount of 'id1' must be a finite"),
     ({"tracks": {"expression": [[0, {"smile": "lots"}]]}}, "amount of 'smile'"),
+    # an identity of 1e300 (finite) failed late: "all 18461 triangles are degenerate (zero
+    # area)", naming neither spec nor key; 1e308 overflowed the face
+    ({"identity": {"id1": 1e300}}, r"identity: weights of mode 'identity' reach 6.74e\+299"),
+    ({"identity": [1e300, 0.0, 0.0]}, r"identity: weights of mode 'identity'.*1000 times"),
+    ({"tracks": {"expression": [[0, {"smile": 1e308}]]}},
+     r"tracks.expression frame 0: weights of mode 'expression' reach"),
     # a keyframe at frame 1.5 was read as frame 1 without a word (NaN was refused)
     ({"tracks": {"expression": [[1.5, "smile"]]}}, r"frame must be an integer, got 1.5"),
     ({"pose": {"keys": [[2.5, {"yaw_deg": 1}]]}}, r"frame must be an integer, got 2.5"),

@@ -153,7 +153,8 @@ def _base(model, mode: str) -> np.ndarray:
 
 
 def _value_weights(model, mode: str, value, where: str) -> np.ndarray:
-    """Weights (r,) of a keyframe value: label, {label: amount} blend or weight list."""
+    """Weights (r,) of a keyframe value: label, {label: amount} blend or weight list, within
+    the model's reach (:meth:`~facetransfer.model.MultilinearModel.check_reach`)."""
     k = model.mode_index(mode)
     r = model.ranks[k]
     base = _base(model, mode)
@@ -164,14 +165,14 @@ def _value_weights(model, mode: str, value, where: str) -> np.ndarray:
             w = base.copy()
             for label, amount in value.items():
                 w += _amount(amount, label) * (model.training_weights(k, label) - base)
-            return w
-        w = np.asarray(value, dtype=np.float64)
+        else:
+            w = np.asarray(value, dtype=np.float64)
+            if w.shape != (r,) or not np.all(np.isfinite(w)):
+                raise ValueError(f"expected a label, a {{label: amount}} blend or {r} finite "
+                                 f"weights for mode {mode!r}, got {value!r}")
+        return model.check_reach(k, w)
     except (TypeError, ValueError) as exc:
         raise SpecError(f"{where}: {exc}") from None
-    if w.shape != (r,) or not np.all(np.isfinite(w)):
-        raise SpecError(f"{where}: expected a label, a {{label: amount}} blend or {r} finite "
-                        f"weights for mode {mode!r}, got {value!r}")
-    return w
 
 
 def _amount(amount, label) -> float:
