@@ -48,8 +48,8 @@ def real_array(values, what: str, *, finite: bool = False, nonempty: bool = Fals
         raise ShapeError(f"{what} must be an array of real numbers, got a ragged sequence "
                          "(rows of different lengths)") from None
     if raw.dtype.kind not in "biuf":
-        kind = {"c": "complex", "U": "text", "S": "text", "O": "objects"}.get(raw.dtype.kind,
-                                                                           str(raw.dtype))
+        kind = {"c": "complex", "U": "text", "S": "text",
+                "O": "Python object"}.get(raw.dtype.kind, str(raw.dtype))
         raise ShapeError(f"{what} must be real numbers, got {kind} values of shape "
                          f"{raw.shape}")
     a = raw.astype(np.float64, copy=False)

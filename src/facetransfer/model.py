@@ -390,7 +390,8 @@ class MultilinearModel:
         ----------
         mode : str or int
         weights : mapping or sequence of (r_k,) vectors
-            The entry of ``mode`` itself is ignored (may be anything of the right length).
+            The entry of ``mode`` itself is not used, but checked as the others are (real,
+            finite, of the right length: :meth:`synthesize`'s check).
         vertices : (m,) int array, optional
 
         Returns
