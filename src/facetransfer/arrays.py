@@ -3,8 +3,9 @@ clear :class:`~facetransfer.errors.ShapeError` naming what it is and its shape.
 
 ``np.asarray(x, dtype=np.float64)`` alone casts complex values to their real part (with only a
 ``ComplexWarning``), and fails on strings or ragged lists with numpy's own message, which names
-neither the argument nor what was expected. Every validator that takes numbers from a caller
-(the model's weights, the tensor algebra's tensors, the imputation's data) converts them here.
+neither the argument nor what was expected. The model's weights, the tensor algebra's tensors
+and the imputation's tensor, init and row and vertex weights are converted here (other
+modules' validators keep their own checks and errors: meshes, scans, tracks).
 """
 
 from __future__ import annotations
