@@ -63,6 +63,7 @@ def test_a_mode_given_twice_is_refused():
         with pytest.raises(FaceTransferError, match=f"{flag} gives mode 'identity' twice"):
             parse(text)
 
+
 def test_build_info_synth_like_reproduces_training_mesh(model_path, tmp_path, capsys):
     m = load_model(model_path)
     assert m.mode_names == ("identity", "expression") and m.ranks == (3, 3)
@@ -103,6 +104,22 @@ def test_synth_bad_input(model_path, tmp_path, capsys):
     code, _, err = run(capsys, "model", "synth", model_path, "--out", tmp_path / "x.csv")
     assert code == 2 and ".obj, .ply, .stl, .off or .glb, not .csv; name it x.obj" in err
     assert not (tmp_path / "x.csv").exists()
+
+
+def test_weights_beyond_the_model_are_refused_naming_them(model_path, tmp_path, capsys):
+    """``--weights identity=1e308,...`` overflowed the face; the mesh writer then said "mesh
+    x.obj has ... vertices with NaN or infinite coordinates", naming the output as if it were
+    a bad input. Weights a thousand times beyond the training ones are now refused."""
+    out = tmp_path / "x.obj"
+    for big in ("1e308", "1e300", "1e9"):
+        code, _, err = run(capsys, "model", "synth", model_path, "--weights",
+                           f"identity={big},0,0", "--out", out)
+        assert code == 2 and err.count("\n") == 1, err
+        assert "--weights of mode 'identity'" in err and "1000 times" in err, err
+        assert not out.exists()
+    code, _, err = run(capsys, "model", "synth", model_path, "--weights", "identity=3,-2,1",
+                       "--out", out)     # beyond the training faces, a researcher's choice
+    assert code == 0, err
 
 
 def test_build_bad_input_leaves_no_file(manifest, tmp_path, capsys):

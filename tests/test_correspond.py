@@ -137,6 +137,43 @@ def test_smoothing_in_chunks_of_vertices_gives_the_same_result(monkeypatch):
     np.testing.assert_allclose(bilateral_smooth(v, f, sigma_c=0.3), whole, rtol=0, atol=1e-12)
 
 
+def _sheet(n, side, z, first):
+    """A flat grid mesh of n x n quads over [0, side]² at height z, its vertices numbered
+    from ``first``."""
+    g = np.linspace(0.0, side, n + 1)
+    u, w = np.meshgrid(g, g, indexing="ij")
+    p = np.stack([u.ravel(), w.ravel(), np.full(u.size, z)], 1)
+    idx = np.arange((n + 1) ** 2).reshape(n + 1, n + 1) + first
+    q = np.stack([idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]], -1).reshape(-1, 4)
+    return p, np.concatenate([q[:, [0, 1, 2]], q[:, [0, 2, 3]]])
+
+
+def test_smoothing_chunks_fit_their_budget_where_the_scan_is_denser(monkeypatch):
+    """The chunks were sized by the mean number of faces near a sample of the vertices: a scan
+    denser in one part (its last vertices, a patch of small faces) put chunks of those
+    vertices times over the budget (the memory bound was an average). Every chunk's pairs now
+    fit it."""
+    import facetransfer.correspond.smoothing as smoothing
+
+    p1, f1 = _sheet(60, 60.0, 0.0, 0)
+    p2, f2 = _sheet(30, 0.5, 0.01, len(p1))             # 1800 faces within 1 of each other
+    v, f = np.concatenate([p1, p2]), np.concatenate([f1, f2])
+    budget = 20_000 * smoothing.PAIR_BYTES
+    monkeypatch.setattr(smoothing, "CHUNK_BYTES", budget)
+    held, pairs = [], smoothing._pairs
+
+    def counted(*args):
+        out = pairs(*args)
+        held.append(len(out[0]))
+        return out
+
+    monkeypatch.setattr(smoothing, "_pairs", counted)
+    whole = smoothing.bilateral_smooth(v, f, sigma_c=0.5)
+    assert max(held) * smoothing.PAIR_BYTES <= budget      # before: 95561 pairs, 4.8 times over
+    monkeypatch.setattr(smoothing, "CHUNK_BYTES", 1 << 30)
+    np.testing.assert_array_equal(smoothing.bilateral_smooth(v, f, sigma_c=0.5), whole)
+
+
 def test_smoothing_says_its_progress_by_chunk(monkeypatch):
     """A 1.2-million-face scan smoothed for 265 s with nothing shown; the chunks of both
     passes are now counted to a progress callback (the CLI's bar)."""

@@ -460,13 +460,33 @@ def test_iteration_options_and_ranks_are_checked(small_ds):
         im.impute_tensor(T, mask, tol=float("nan"))
     with pytest.raises(ValueError, match=r"hooi: max_iter must be an integer >= 0, got 2.5"):
         tl.hooi(T, max_iter=2.5)
-    with pytest.raises(ValueError, match=r"tensorly_impute: ranks must be 2 integers, each from "
-                                         r"1 to its mode's size"):
-        pytest.importorskip("tensorly")
-        im.tensorly_impute(T, mask, ranks=[0, 0])
     with pytest.raises(ValueError, match=r"row_weights must be finite, non-negative and not all "
                                          r"zero, got 0 negative, 0 NaN or infinite, sum 0"):
         im.impute_tensor(T, mask, row_weights=np.zeros(T.shape[0]))
+    pytest.importorskip("tensorly")   # last: inside pytest.raises its skip skipped the rest
+    with pytest.raises(ValueError, match=r"tensorly_impute: ranks must be 2 integers, each from "
+                                         r"1 to its mode's size"):
+        im.tensorly_impute(T, mask, ranks=[0, 0])
+
+
+def test_complex_row_weights_and_init_are_refused_naming_them(small_ds):
+    """impute_tensor took complex row_weights and init as their real parts (a ComplexWarning
+    only), as the tensor itself did before ``arrays.real_array``; impute_missing's
+    vertex_weights the same."""
+    from facetransfer.errors import ShapeError
+
+    T = low_rank_tensor(shape=(6, 5), ranks=(2, 2), P=30)
+    mask = np.ones((6, 5), bool)
+    mask[0, 1] = False
+    with pytest.raises(ShapeError, match=r"row_weights must be real numbers, got complex"):
+        im.impute_tensor(hide(T, mask), mask, row_weights=np.ones(30) + 1j)
+    with pytest.raises(ShapeError, match=r"init must be real numbers, got complex"):
+        im.impute_tensor(hide(T, mask), mask, init=T + 1j)
+    held = np.ones((4, 3), bool)
+    held[1, 2] = False
+    with pytest.raises(ShapeError, match=r"vertex_weights must be real numbers, got complex"):
+        im.impute_dataset(_with_mask(small_ds, held),
+                          vertex_weights=np.ones(small_ds.n_vertices) + 1j)
 
 
 def test_an_empty_slice_of_an_unnamed_mask_is_said_plainly():

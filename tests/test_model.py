@@ -389,6 +389,7 @@ def test_an_empty_batch_gives_no_faces():
     assert m.synthesize(w).shape == (0, m.n_vertices, 3)
     assert m.synthesize(w, vertices=np.array([1, 2])).shape == (0, 2, 3)
 
+
 def test_vertices_must_be_integer_indices():
     """A float selection was truncated (1.7 read as vertex 1) and a boolean mask read as the
     indices 0 and 1: synthesize returned the wrong vertices without a word."""
@@ -405,6 +406,19 @@ def test_vertices_must_be_integer_indices():
     sel = m.synthesize(w, vertices=np.flatnonzero(mask))
     np.testing.assert_allclose(sel, m.synthesize(w)[[3, 7]], atol=1e-12)
     assert m.synthesize(w, vertices=np.array([], np.int64)).shape == (0, 3)
+
+
+def test_vertices_must_be_one_list_of_indices():
+    """A (1, 2) selection was read flattened (the faces' shape not the selection's) and one
+    index as a list of one, without a word; either is now refused, naming its shape."""
+    m = build_model(random_dataset(seed=11))
+    w = m.default_weights()
+    for bad, shape in ((np.array([[1, 2]]), r"\(1, 2\)"), (np.int64(3), r"\(\)")):
+        with pytest.raises(ShapeError, match=f"1-D array of vertex indices, got shape {shape}"):
+            m.synthesize(w, vertices=bad)
+        with pytest.raises(ShapeError, match="1-D array of vertex indices"):
+            m.mode_basis("expression", w, vertices=bad)
+    assert m.synthesize(w, vertices=[1, 2]).shape == (2, 3)
 
 
 def test_batch_shapes_that_do_not_broadcast_name_the_modes():

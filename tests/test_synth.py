@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -139,6 +140,12 @@ def test_spec_from_json_file(tiny_model, tmp_path):
     ({"tracks": {"expression": [[0, {"smile": float("inf")}]]}}, "finite number, got inf"),
     ({"identity": {"id1": float("nan")}}, r"identity: amount of 'id1' must be a finite"),
     ({"tracks": {"expression": [[0, {"smile": "lots"}]]}}, "amount of 'smile'"),
+    # an identity of 1e300 (finite) failed late: "all 18461 triangles are degenerate (zero
+    # area)", naming neither spec nor key; 1e308 overflowed the face
+    ({"identity": {"id1": 1e300}}, r"identity: weights of mode 'identity' reach 6.74e\+299"),
+    ({"identity": [1e300, 0.0, 0.0]}, r"identity: weights of mode 'identity'.*1000 times"),
+    ({"tracks": {"expression": [[0, {"smile": 1e308}]]}},
+     r"tracks.expression frame 0: weights of mode 'expression' reach"),
     # a keyframe at frame 1.5 was read as frame 1 without a word (NaN was refused)
     ({"tracks": {"expression": [[1.5, "smile"]]}}, r"frame must be an integer, got 1.5"),
     ({"pose": {"keys": [[2.5, {"yaw_deg": 1}]]}}, r"frame must be an integer, got 2.5"),
@@ -146,8 +153,10 @@ def test_spec_from_json_file(tiny_model, tmp_path):
     ({"tracks": {"expression": [[float("inf"), "smile"]]}}, "frame must be an integer, got inf"),
 ])
 def test_bad_specs_rejected(tiny_model, spec, match):
-    with pytest.raises(SpecError, match=match):
+    with pytest.raises(SpecError, match=match) as err:
         performance_from_spec(tiny_model, spec)
+    # where in the spec, said once (a blend's amount said "identity: identity: amount ...")
+    assert not re.match(r"(.+?): \1:", str(err.value)), err.value
 
 
 
@@ -165,6 +174,7 @@ def test_the_spec_and_frames_share_one_limit(tiny_model):
     assert _spec_n_frames({}, 149_999) == 150_000
     with pytest.raises(SpecError, match=f"between 1 and {MAX_FRAMES}"):
         _spec_n_frames({"n_frames": MAX_FRAMES + 1}, -1)
+
 
 def test_random_performance_is_seeded_and_gentle(tiny_model):
     a = random_performance(tiny_model, 60, seed=3, size=(96, 80))

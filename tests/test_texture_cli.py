@@ -81,8 +81,8 @@ def test_lift_from_an_odd_sized_clip_and_its_truth(run, tmp_path, model_path, ca
     """synth-video at an odd size (63x47) stores its frames grown to 64x48 (4:2:0, the edge
     repeated) beside a truth of 63x47: lifting the clip through its own truth was refused
     ("track ... is for 63x47 frames, the video is 64x48"). The frames are now taken without
-    the repeated edge, and the texture is the one lifted from the same clip at an even size
-    cut to it."""
+    the repeated edge (here 95x79 in 96x80), the texture's ramp where it belongs; a truth of
+    another size is still refused."""
     from facetransfer.model import load_model
 
     model = load_model(model_path)
@@ -105,6 +105,7 @@ def test_lift_from_an_odd_sized_clip_and_its_truth(run, tmp_path, model_path, ca
     assert run("texture", "lift", tmp_path / "odd.mp4", "--track", tmp_path / "other.truth.npz",
                "--model", model_path, "--size", 32, "--out", tmp_path / "l2.png") == 2
     assert "is for 93x79 frames, the video is 96x80" in capsys.readouterr().err
+
 
 def test_errors_are_one_line(run, tmp_path, model_path, capsys):
     img = np.zeros((20, 20, 3), np.uint8)

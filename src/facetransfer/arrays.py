@@ -3,8 +3,9 @@ clear :class:`~facetransfer.errors.ShapeError` naming what it is and its shape.
 
 ``np.asarray(x, dtype=np.float64)`` alone casts complex values to their real part (with only a
 ``ComplexWarning``), and fails on strings or ragged lists with numpy's own message, which names
-neither the argument nor what was expected. Every validator that takes numbers from a caller
-(the model's weights, the tensor algebra's tensors, the imputation's data) converts them here.
+neither the argument nor what was expected. The model's weights, the tensor algebra's tensors
+and the imputation's tensor, init and row and vertex weights are converted here (other
+modules' validators keep their own checks and errors: meshes, scans, tracks).
 """
 
 from __future__ import annotations
@@ -48,8 +49,8 @@ def real_array(values, what: str, *, finite: bool = False, nonempty: bool = Fals
         raise ShapeError(f"{what} must be an array of real numbers, got a ragged sequence "
                          "(rows of different lengths)") from None
     if raw.dtype.kind not in "biuf":
-        kind = {"c": "complex", "U": "text", "S": "text", "O": "objects"}.get(raw.dtype.kind,
-                                                                           str(raw.dtype))
+        kind = {"c": "complex", "U": "text", "S": "text",
+                "O": "Python object"}.get(raw.dtype.kind, str(raw.dtype))
         raise ShapeError(f"{what} must be real numbers, got {kind} values of shape "
                          f"{raw.shape}")
     a = raw.astype(np.float64, copy=False)

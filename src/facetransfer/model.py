@@ -50,6 +50,12 @@ _FIRST_MODE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _FIRST_MODE_KEPT = 3
 _FIRST_MODE_LOCK = threading.Lock()   # the render calls synthesize from several threads
 
+#: How far given weights may reach (:meth:`MultilinearModel.check_reach`): their norm at most
+#: this many times the longest training weights' of their mode. An identity of 1e300 made a
+#: face no triangle of which had an area, 1e308 one of NaN, each failing later, naming neither
+#: the weights nor where they were given; 3 times a training face is a researcher's choice.
+WEIGHT_REACH = 1000.0
+
 #: Version of the model file format written by :meth:`MultilinearModel.save`.
 FORMAT_VERSION = 1
 _MAGIC = "facetransfer-model"
@@ -167,6 +173,26 @@ class MultilinearModel:
     def weight_mean(self, mode: str | int) -> np.ndarray:
         """Mean of the training attribute vectors of a mode, shape (r,)."""
         return self.factors[self.mode_index(mode)].mean(axis=0)
+
+    def check_reach(self, mode: str | int, weights, what: str = "weights") -> np.ndarray:
+        """``weights`` of ``mode`` (..., r) as float64, refused where a row's norm is more than
+        :data:`WEIGHT_REACH` times the longest training row's (or NaN): for weights a user
+        gives (``--weights``, a performance spec), not in :meth:`synthesize`'s inner loops.
+
+        Raises
+        ------
+        ValueError
+            Saying ``what`` (e.g. ``"--weights"``), the mode, the norm and the bound.
+        """
+        k = self.mode_index(mode)
+        w = np.asarray(weights, dtype=np.float64)
+        longest = float(np.linalg.norm(self.factors[k], axis=1).max())
+        norm = float(np.max(np.hypot.reduce(w, axis=-1), initial=0.0))   # 1e300: no overflow
+        if not norm <= WEIGHT_REACH * longest:
+            raise ValueError(f"{what} of mode {self.mode_names[k]!r} reach {norm:.3g} (their "
+                             f"norm), more than {WEIGHT_REACH:g} times the longest training "
+                             f"weights' ({longest:.3g}): a face that far collapses or overflows")
+        return w
 
     def weight_cov(self, mode: str | int) -> np.ndarray:
         """Covariance of the training attribute vectors of a mode, shape (r, r).
@@ -334,14 +360,18 @@ class MultilinearModel:
             return key in _FIRST_MODE.get(self, {})
 
     def _rows(self, vertices: np.ndarray) -> np.ndarray:
-        """The core's rows ``(3m,)`` of ``vertices`` (x, y, z of each), checked: integer
-        indices (floats were truncated, a boolean mask read as indices 0 and 1)."""
+        """The core's rows ``(3m,)`` of ``vertices`` (x, y, z of each), checked: one list of
+        integer indices (floats were truncated, a boolean mask read as indices 0 and 1, a 2-D
+        selection flattened)."""
         a = np.asarray(vertices)
+        if a.ndim != 1:
+            raise ShapeError(f"vertices must be a 1-D array of vertex indices, got shape "
+                             f"{a.shape}")
         if a.size and a.dtype.kind not in "iu":
             raise ShapeError(f"vertices must be integer vertex indices, got dtype {a.dtype}"
                              + (" (for a boolean mask give np.flatnonzero(mask))"
                                 if a.dtype.kind == "b" else ""))
-        v = a.astype(np.int64, copy=False).ravel()
+        v = a.astype(np.int64, copy=False)
         if v.size and (v.min() < 0 or v.max() >= self.n_vertices):
             raise ShapeError(f"vertex indices outside 0..{self.n_vertices - 1}")
         return (3 * v[:, None] + np.arange(3)).ravel()
@@ -360,7 +390,8 @@ class MultilinearModel:
         ----------
         mode : str or int
         weights : mapping or sequence of (r_k,) vectors
-            The entry of ``mode`` itself is ignored (may be anything of the right length).
+            The entry of ``mode`` itself is not used, but checked as the others are (real,
+            finite, of the right length: :meth:`synthesize`'s check).
         vertices : (m,) int array, optional
 
         Returns

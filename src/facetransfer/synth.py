@@ -153,7 +153,8 @@ def _base(model, mode: str) -> np.ndarray:
 
 
 def _value_weights(model, mode: str, value, where: str) -> np.ndarray:
-    """Weights (r,) of a keyframe value: label, {label: amount} blend or weight list."""
+    """Weights (r,) of a keyframe value: label, {label: amount} blend or weight list, within
+    the model's reach (:meth:`~facetransfer.model.MultilinearModel.check_reach`)."""
     k = model.mode_index(mode)
     r = model.ranks[k]
     base = _base(model, mode)
@@ -163,26 +164,26 @@ def _value_weights(model, mode: str, value, where: str) -> np.ndarray:
         if isinstance(value, Mapping):
             w = base.copy()
             for label, amount in value.items():
-                w += _amount(amount, label, where) * (model.training_weights(k, label) - base)
-            return w
-        w = np.asarray(value, dtype=np.float64)
+                w += _amount(amount, label) * (model.training_weights(k, label) - base)
+        else:
+            w = np.asarray(value, dtype=np.float64)
+            if w.shape != (r,) or not np.all(np.isfinite(w)):
+                raise ValueError(f"expected a label, a {{label: amount}} blend or {r} finite "
+                                 f"weights for mode {mode!r}, got {value!r}")
+        return model.check_reach(k, w)
     except (TypeError, ValueError) as exc:
         raise SpecError(f"{where}: {exc}") from None
-    if w.shape != (r,) or not np.all(np.isfinite(w)):
-        raise SpecError(f"{where}: expected a label, a {{label: amount}} blend or {r} finite "
-                        f"weights for mode {mode!r}, got {value!r}")
-    return w
 
 
-def _amount(amount, label, where: str) -> float:
-    """A blend's ``{label: amount}`` amount as a finite float (NaN or infinity made a NaN face
-    that failed later, naming neither the spec nor the key)."""
+def _amount(amount, label) -> float:
+    """A blend's ``{label: amount}`` amount as a finite float, else ValueError (NaN or infinity
+    made a NaN face that failed later); its caller says where in the spec."""
     try:
         a = float(amount)
     except (TypeError, ValueError):
         a = math.nan
     if not math.isfinite(a) or isinstance(amount, bool):
-        raise SpecError(f"{where}: amount of {label!r} must be a finite number, got {amount!r}")
+        raise ValueError(f"amount of {label!r} must be a finite number, got {amount!r}")
     return a
 
 

@@ -261,7 +261,7 @@ def synth_weights(model, weights: dict[str, np.ndarray] | None = None,
         if vec.shape != (model.ranks[k],):
             raise ShapeError(f"--weights {name} has {vec.size} values; the model's {name} rank is "
                              f"{model.ranks[k]}")
-        w[model.mode_names[k]] = vec
+        w[model.mode_names[k]] = model.check_reach(k, vec, "--weights")
     return w
 
 

@@ -105,8 +105,7 @@ def _smooth(args) -> int:
             raise ValueError(f"--{name.replace('_', '-')} must be a positive finite number "
                              f"(scan units), got {val}")
     scan = load_scan(args.scan)
-    on_progress, close = tqdm_progress("scan smooth", unit="chunk",
-                                       enabled=not getattr(args, "no_progress", False))
+    on_progress, close = tqdm_progress("scan smooth", unit="chunk")   # off: --no-progress
     try:
         v = bilateral_smooth(scan.vertices, scan.faces, sigma_c=args.sigma_c,
                              sigma_s=args.sigma_s, progress=on_progress)

@@ -62,7 +62,7 @@ from typing import Mapping, Sequence
 import numpy as np
 import scipy.linalg
 
-from ..arrays import check_iterations
+from ..arrays import check_iterations, real_array
 from ..errors import DatasetError, ShapeError
 from .cells import Progress, check_tensor, validate_mask
 from .ppca import FLOOR, ppca_eigen
@@ -340,7 +340,7 @@ def _check_row_weights(row_weights: np.ndarray | None, P: int) -> np.ndarray | N
     """``row_weights`` as a (P,) float64 array of non-negative weights (``None`` stays ``None``)."""
     if row_weights is None:
         return None
-    w = np.asarray(row_weights, dtype=np.float64)
+    w = real_array(row_weights, "row_weights")   # complex was cast to its real part
     if w.shape != (P,):
         raise ShapeError(f"row_weights must be ({P},) non-negative, got shape {w.shape}")
     if (w < 0).any() or not np.isfinite(w).all() or w.sum() <= 0:   # the shape was said
@@ -455,7 +455,7 @@ def _guess_precisions(prob: _Problem, Y: np.ndarray, offset: np.ndarray, w: np.n
                       init: np.ndarray) -> list[np.ndarray]:
     """PPCA precisions ``(d_j, d_j)`` of every mode of a complete first guess ``init``."""
     P = Y.shape[0]
-    Z = np.asarray(init, dtype=np.float64)
+    Z = real_array(init, "init")
     if Z.shape != (P,) + prob.shape:   # a wrong size failed in the reshape, naming no shape
         raise ShapeError(f"init must be a finite tensor of shape {(P,) + prob.shape}, got "
                          f"{Z.shape}")

@@ -9,6 +9,7 @@ from typing import Mapping
 
 import numpy as np
 
+from ..arrays import real_array
 from ..datasets.base import FaceDataset
 from ..errors import ShapeError
 from .baselines import average_impute, naive_impute, tensorly_impute
@@ -148,7 +149,7 @@ def _row_weights(dataset: FaceDataset, vertex_weights: np.ndarray | None) -> np.
     """Per-vertex weights ``(n,)`` as per-coordinate weights ``(3 n,)`` (vertex-major)."""
     if vertex_weights is None:
         return None
-    vw = np.asarray(vertex_weights, dtype=np.float64)
+    vw = real_array(vertex_weights, "vertex_weights")   # complex: its real part was taken
     if vw.shape != (dataset.n_vertices,):
         raise ShapeError(f"vertex_weights must be ({dataset.n_vertices},), got {vw.shape}")
     return np.repeat(vw, 3)
