@@ -112,7 +112,7 @@ def test_a_file_another_run_wrote_is_said_to_be_replaced_by_a_run_again_with_ove
     (tmp_path / "theirs").write_bytes(b"another run's output, written since")
     os.replace(tmp_path / "theirs", out)
     with pytest.raises(O.OutputTaken) as e:
-        O._still_planned(out, planned)
+        O.still_planned(out, planned)
     assert str(e.value).endswith("this run's result not written; run again with --overwrite "
                                  "to replace it"), str(e.value)
 

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from .manifest import BatchError
-from .ownership import OutputTaken, _clear_leftover_matte, _own_output, _still_planned, claimed
+from .ownership import OutputTaken, claimed, clear_leftover_matte, own_output, still_planned
 from .summary import Row
 
 log = logging.getLogger(__name__)
@@ -130,7 +130,7 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
     planned : str
         Without ``overwrite``: the :func:`output_identity` of the ``out`` the run found and
         does again (the batch's ``--overwrite``), replaced while it is still that file
-        (:func:`_still_planned`).
+        (:func:`still_planned`).
 
     The job holds its output while it runs (:func:`claimed`): another run's job of it then
     fails at its start (:class:`OutputTaken`), its progress file left to that run.
@@ -144,9 +144,9 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
     t0 = time.perf_counter()
     video_info(job.video)  # missing / not a video: one line naming the path
     with claimed(out):
-        overwrite = overwrite or _still_planned(out, planned)
+        overwrite = overwrite or still_planned(out, planned)
         try:
-            with _own_output(out, overwrite):
+            with own_output(out, overwrite):
                 track = _track(str(job.video), model, job.init, options,
                                source=str(job.video), checkpoint=partial_path(out),
                                face=job.face, max_frames=job.max_frames)
@@ -242,8 +242,8 @@ def join_clip(job, out: str, model, chunks, results, overwrite: bool = False,
 
     t0 = time.perf_counter()
     with claimed(out):
-        overwrite = overwrite or _still_planned(out, planned)
-        with _own_output(out, overwrite):
+        overwrite = overwrite or still_planned(out, planned)
+        with own_output(out, overwrite):
             track = join_tracks([r.track for r in results], chunks, model)
             track = track.with_source_facts(job.video)
             track.save(out, overwrite=overwrite)
@@ -304,7 +304,7 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         an ``out`` or matte frames another run wrote meanwhile are kept (:class:`OutputTaken`).
     planned_matte : str
         Without ``overwrite``: the :func:`matte_identity` of the frames of ``matte`` the run
-        found; beside no ``out`` (:func:`_clear_leftover_matte`) removed while they are still
+        found; beside no ``out`` (:func:`clear_leftover_matte`) removed while they are still
         those, before the render.
 
     Returns
@@ -332,10 +332,10 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         performance=s.get("performance"), target_face=s.get("target_face"),
         source_face=s.get("source_face"))
     with claimed(out):
-        overwrite = overwrite or _still_planned(out, planned)
+        overwrite = overwrite or still_planned(out, planned)
         if not overwrite:
-            _clear_leftover_matte(out, matte, planned_matte)
-        with _own_output(out, overwrite, matte):
+            clear_leftover_matte(out, matte, planned_matte)
+        with own_output(out, overwrite, matte):
             res = transfer_video(sources, out, model, overwrite=overwrite, options=options,
                                  progress_factory=None, align=settings["align"],
                                  max_frames=settings["max_frames"], parallel=False,
@@ -419,8 +419,8 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
             default, h = _default_model()
             model = default if track.model_hash == h else None
     with claimed(out):
-        overwrite = overwrite or _still_planned(out, planned)
-        with _own_output(out, overwrite):
+        overwrite = overwrite or still_planned(out, planned)
+        with own_output(out, overwrite):
             path = export_track(track, fmt, out, model=model, overwrite=overwrite,
                                 texture=texture, neutral=neutral, labels=labels)
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,

@@ -5,7 +5,7 @@ Two runs into one folder at once (the forty-ninth and fiftieth sessions, BENCHMA
 replaces no file but those its run found and chose to redo (``planned``: :func:`output_identity`,
 :func:`matte_identity`; every output there as the run began with ``--overwrite``); an output or
 matte frames another run wrote meanwhile are kept, and the task raises :class:`OutputTaken`
-(:func:`_own_output`). A task holds its output while it runs (:func:`claimed`): another run's
+(:func:`own_output`). A task holds its output while it runs (:func:`claimed`): another run's
 task of it fails at its start. Used by the tasks of :mod:`facetransfer.batch.jobs`.
 """
 
@@ -21,7 +21,7 @@ from pathlib import Path
 from .manifest import BatchError
 
 __all__ = ["OutputTaken", "output_identity", "matte_identity", "claimed", "claim_path",
-           "remove_stale_claims"]
+           "remove_stale_claims", "own_output", "still_planned", "clear_leftover_matte"]
 
 
 class OutputTaken(BatchError):
@@ -314,10 +314,10 @@ def _frames_there(pattern) -> bool:
 
 
 @contextlib.contextmanager
-def _own_output(out, overwrite: bool, matte=None):
+def own_output(out, overwrite: bool, matte=None):
     """Guard the block that writes ``out`` (and the frames of ``matte``); it writes nothing
     itself. With ``overwrite`` the block may replace them. Without it, the run found no
-    ``out`` when it planned the job (or, :func:`_still_planned`, no longer finds the one it
+    ``out`` when it planned the job (or, :func:`still_planned`, no longer finds the one it
     planned to redo), so an ``out`` there now, or frames of ``matte`` that appeared during the
     block, are another run's (the block's write commits without replacing,
     :func:`facetransfer.io.atomic.atomic_path`): :class:`OutputTaken`, before the block runs
@@ -341,7 +341,7 @@ def _own_output(out, overwrite: bool, matte=None):
         raise
 
 
-def _still_planned(out, planned: str) -> bool:
+def still_planned(out, planned: str) -> bool:
     """Whether ``out`` is still the file ``planned`` (:func:`output_identity`) the run chose to
     render again (may be replaced); False where none was planned or none is there now;
     :class:`OutputTaken` where another file is there now (another run's)."""
@@ -353,14 +353,14 @@ def _still_planned(out, planned: str) -> bool:
     return bool(now)
 
 
-def _clear_leftover_matte(out, matte, planned: str) -> None:
+def clear_leftover_matte(out, matte, planned: str) -> None:
     """Before a pair's render without ``--overwrite``: the frames of ``matte`` there beside no
     result ``out`` (a render stopped between the two commits, the matte's first; the result
     removed to redo the pair, as a failed row says) are removed if they are still the frames
     ``planned`` (:func:`matte_identity`) the run found: ``NAME.matte/`` holds the matte of
     ``NAME.mp4`` or none. Before, the render refused them ("pass --overwrite", which redoes
     every pair) and the pair failed at every rerun. Other frames there now are another run's
-    (:class:`OutputTaken`); an ``out`` there is :func:`_own_output`'s to say."""
+    (:class:`OutputTaken`); an ``out`` there is :func:`own_output`'s to say."""
     now = matte_identity(matte)
     if not now or os.path.isfile(out):
         return
