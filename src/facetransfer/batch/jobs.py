@@ -117,6 +117,9 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
                planned: str = "") -> Row:
     """Track a whole clip exactly as ``facetransfer track VIDEO --out OUT`` does and write it.
 
+    The job holds its output while it runs (:func:`.ownership.claimed`): another run's job of
+    it then fails at its start (:class:`OutputTaken`), its progress file left to that run.
+
     Parameters
     ----------
     job : ClipJob
@@ -125,15 +128,14 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
     model : MultilinearModel
     options : TrackerSettings
     overwrite : bool
-        Replace whatever ``out`` is there; without it, an ``out`` that another run wrote since
-        this one was planned is kept (:class:`OutputTaken`).
+        Replace whatever ``out`` is there, even one another run wrote since this one was
+        planned (the batch passes False: its ``--overwrite`` comes as ``planned``); without it,
+        such an ``out`` is kept (:class:`OutputTaken`).
     planned : str
-        Without ``overwrite``: the :func:`output_identity` of the ``out`` the run found and
-        does again (the batch's ``--overwrite``), replaced while it is still that file
-        (:func:`still_planned`).
-
-    The job holds its output while it runs (:func:`claimed`): another run's job of it then
-    fails at its start (:class:`OutputTaken`), its progress file left to that run.
+        Without ``overwrite``: the :func:`.ownership.output_identity` of the ``out`` the run
+        found and does again (every one with the batch's ``--overwrite``), replaced while it is
+        still that file (:func:`.ownership.still_planned`); "" (none found): an ``out``
+        another run wrote meanwhile is kept.
 
     Returns
     -------
@@ -295,17 +297,19 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         render in another format (all of them, without ``matte``) are removed
         (:func:`_remove_other_mattes`).
     overwrite : bool
-        Replace an existing ``out`` and ``matte`` (the batch's ``--overwrite``).
+        Replace whatever ``out`` and ``matte`` are there (as :func:`track_clip`'s: the batch
+        passes False, its ``--overwrite`` comes as ``planned``).
     planned : str
-        Without ``overwrite``: the :func:`output_identity` of the ``out`` the run found and
-        chose to render again (its own result, redone for the matte asked; a file that does
-        not decode; any, with the batch's ``--overwrite``), replaced, with its matte, while it
-        is still that file, under the job's claim (:func:`claimed`); "" (none found):
-        an ``out`` or matte frames another run wrote meanwhile are kept (:class:`OutputTaken`).
+        Without ``overwrite``: the :func:`.ownership.output_identity` of the ``out`` the run
+        found and chose to render again (its own result, redone for the matte asked; a file
+        that does not decode; any, with the batch's ``--overwrite``), replaced, with its matte,
+        while it is still that file, under the job's claim (:func:`.ownership.claimed`); ""
+        (none found): an ``out`` or matte frames another run wrote meanwhile are kept
+        (:class:`OutputTaken`).
     planned_matte : str
-        Without ``overwrite``: the :func:`matte_identity` of the frames of ``matte`` the run
-        found; beside no ``out`` (:func:`clear_leftover_matte`) removed while they are still
-        those, before the render.
+        Without ``overwrite``: the :func:`.ownership.matte_identity` of the frames of ``matte``
+        the run found; beside no ``out`` (:func:`.ownership.clear_leftover_matte`) removed
+        while they are still those, before the render.
 
     Returns
     -------
