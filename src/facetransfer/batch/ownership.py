@@ -25,9 +25,10 @@ __all__ = ["OutputTaken", "output_identity", "matte_identity", "claimed", "claim
 
 
 class OutputTaken(BatchError):
-    """A job's output was written by another run while this one went on (two runs into one
-    folder at once): that run's file is kept, and the job's row fails (before, the job
-    replaced it: both runs said "done", the later one's outputs left)."""
+    """A job's output is another run's (two runs into one folder at once): written by it
+    while this one went on (:func:`own_output`, :func:`still_planned`), or being written by
+    it, its claim held (:func:`claimed`). That run's file is kept, and the job's row fails
+    (before, the job replaced it: both runs said "done", the later one's outputs left)."""
 
 
 def output_identity(out) -> str:
