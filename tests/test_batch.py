@@ -100,8 +100,8 @@ def test_batch_track_writes_what_track_writes_and_fails_bad_rows(clips, quick_mo
     log = tmp_path / "calls.txt"  # tasks are pickled (by value, for this stand-in): a file
     log.write_text("")
     real = batch_jobs.track_clip
-    monkeypatch.setattr(batch_jobs, "track_clip", lambda job, *a: (
-        open(log, "a").write(job.name + "\n"), real(job, *a))[1])
+    monkeypatch.setattr(batch_jobs, "track_clip", lambda job, *a, **kw: (
+        open(log, "a").write(job.name + "\n"), real(job, *a, **kw))[1])
     code, stdout, _ = _cli(capsys, "batch", "track", "--manifest", man, "--model",
                            quick_model_path, "--out", out, "--passes", "1", "--no-progress")
     assert code == 1 and sorted(log.read_text().split()) == ["missing", "notvideo"]

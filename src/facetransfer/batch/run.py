@@ -366,7 +366,7 @@ class _TrackSubmit:
 
     def _whole(self, job) -> None:
         self.col.add(self.client.submit(J.track_clip, job, str(self.outs[job.name]), self.mf,
-                                        self.options, False, self.planned[job.name],
+                                        self.options, planned=self.planned[job.name],
                                         pure=False), "clip", job)
 
     def _chunks(self, job, n_frames: int) -> None:
@@ -380,8 +380,8 @@ class _TrackSubmit:
         rest = [submit(J.track_chunk, job, c, out, mf, opt, first, pure=False)
                 for c in chunks[1:]]
         self.col.alive += [first] + rest
-        self.col.add(submit(J.join_clip, job, out, mf, chunks, [first] + rest, False,
-                            self.planned[job.name], pure=False), "clip", job)
+        self.col.add(submit(J.join_clip, job, out, mf, chunks, [first] + rest,
+                            planned=self.planned[job.name], pure=False), "clip", job)
 
     def on_done(self, kind: str, job, fut) -> None:
         try:
@@ -600,8 +600,7 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     def submit(job, mf):
         m = mattes.get(job.name)
         return client.submit(J.transfer_pair, job, str(outs[job.name]), mf, dict(settings),
-                             None if m is None else str(m), overwrite=False,
-                             planned=planned[job.name],
+                             None if m is None else str(m), planned=planned[job.name],
                              planned_matte=planned_mattes.get(job.name, ""), pure=False)
 
     return _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys)
@@ -693,8 +692,8 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
     planned = _planned(outs)   # a take written again (_without_unnamed_labels), --overwrite
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
-                                                 texture, neutral, labels, False,
-                                                 planned[job.name], pure=False),
+                                                 texture, neutral, labels,
+                                                 planned=planned[job.name], pure=False),
                    model, keys)
 
 
