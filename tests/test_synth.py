@@ -167,9 +167,9 @@ def test_the_spec_and_frames_share_one_limit(tiny_model):
     from facetransfer.synth import _spec_n_frames
     from facetransfer.synth_keys import MAX_FRAMES
 
-    from facetransfer.cli.render import MAX_SYNTH_FRAMES
+    from facetransfer.cli import render
 
-    assert MAX_SYNTH_FRAMES == MAX_FRAMES
+    assert render.MAX_FRAMES is MAX_FRAMES     # synth-video --frames' limit
     assert _spec_n_frames({"n_frames": 200_000}, -1) == 200_000
     assert _spec_n_frames({}, 149_999) == 150_000
     with pytest.raises(SpecError, match=f"between 1 and {MAX_FRAMES}"):

@@ -364,7 +364,8 @@ def _spec_n_frames(spec: Mapping, last: int) -> int:
     if n_frames != int(n_frames):
         raise SpecError(f"n_frames must be an integer, got {n_frames}")
     n_frames = int(n_frames)
-    if not 1 <= n_frames <= MAX_FRAMES:      # one limit with --frames (it was 100000 here)
+    # one limit with --frames (before, 100000 here: a spec refused clips --frames wrote)
+    if not 1 <= n_frames <= MAX_FRAMES:
         raise SpecError(f"n_frames must be between 1 and {MAX_FRAMES}, got {n_frames}")
     return n_frames
 

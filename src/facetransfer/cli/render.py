@@ -18,13 +18,11 @@ import numpy as np
 
 from ..errors import FaceTransferError
 from ..io.atomic import check_output_path, write_image
-from ..synth_keys import MAX_FRAMES
+from ..synth_keys import MAX_FRAMES  # of --frames and the spec's n_frames alike
 from .common import (MODEL_ARG_HELP, add_video_options, frame_count, integer_from,
                      progress_disabled, resolve_model, video_options, video_out)
 
 POSE_KEYS = ("yaw", "pitch", "roll", "scale")
-#: The most frames ``synth-video --frames`` writes: the spec's limit too (:mod:`synth_keys`).
-MAX_SYNTH_FRAMES = MAX_FRAMES
 #: The largest ``--pose`` angle, in degrees (a turn either way; 1e300 was taken) and scale.
 MAX_POSE_ANGLE, MAX_POSE_SCALE = 360.0, 1000.0
 
@@ -212,8 +210,8 @@ def cmd_synth_video(args: argparse.Namespace) -> int:
                                 args.random else "give --performance SPEC.json or --random")
     if args.fps is not None and not 0 < args.fps <= 1000:
         raise FaceTransferError(f"--fps must be in (0, 1000], got {args.fps}")
-    if args.frames is not None and not 1 <= args.frames <= MAX_SYNTH_FRAMES:
-        raise FaceTransferError(f"--frames must be from 1 to {MAX_SYNTH_FRAMES}, got "
+    if args.frames is not None and not 1 <= args.frames <= MAX_FRAMES:
+        raise FaceTransferError(f"--frames must be from 1 to {MAX_FRAMES}, got "
                                 f"{args.frames}")
     if args.performance and not Path(args.performance).is_file():   # before the model's build
         raise FaceTransferError(f"performance spec {args.performance} does not exist")
