@@ -236,8 +236,8 @@ class MultilinearModel:
             ws = list(weights)
             if len(ws) != self.n_modes:
                 raise ValueError(f"{len(ws)} weight vectors for {self.n_modes} modes")
-        # real and finite: NaN or inf gave a NaN face (a RuntimeWarning only), complex weights
-        # their real part, text numpy's message naming no mode
+        # real and finite: before, NaN or inf gave a NaN face (a RuntimeWarning only), complex
+        # weights their real part, text numpy's message naming no mode
         ws = [real_array(w, f"weights of mode {n!r}", finite=True)
               for n, w in zip(self.mode_names, ws)]
         for name, w, r in zip(self.mode_names, ws, self.ranks):

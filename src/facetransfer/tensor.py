@@ -349,7 +349,7 @@ def _finite_data(tensor: np.ndarray) -> tuple[np.ndarray, float]:
     """The tensor as float64 and its squared norm, refused (FaceTransferError naming its shape)
     when it holds NaN or infinities: the eigensolver would fail on them with LinAlgError
     ("Eigenvalues did not converge"), which names neither the tensor nor the cause."""
-    T = real_array(tensor, "tensor", nonempty=True)   # complex was cast to its real part
+    T = real_array(tensor, "tensor", nonempty=True)   # (before, complex: its real part taken)
     norm2 = float(np.vdot(T, T))    # NaN or inf iff an entry is (or it overflows)
     if not np.isfinite(norm2):
         raise FaceTransferError(f"tensor of shape {T.shape} holds NaN or infinite values (or "

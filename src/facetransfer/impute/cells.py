@@ -52,7 +52,7 @@ def validate_mask(mask: np.ndarray, shape: Sequence[int], *,
             i = int(np.nonzero(~has)[0][0])
             which = (f"{names[k]} {labels[k][i]!r} (mode {k} {names[k]!r}, index {i})"
                      if labels is not None and mode_names is not None else
-                     f"{names[k]} index {i}")   # was "mode 0 '0' (mode 0 'mode 0', index 0)"
+                     f"{names[k]} index {i}")   # before: "mode 0 '0' (mode 0 'mode 0', index 0)"
             raise DatasetError(f"{which} has no known cell (mask {shape}): a slice with no "
                                "data at all cannot be imputed")
     return m
@@ -69,7 +69,7 @@ def check_tensor(tensor: np.ndarray, mask: np.ndarray) -> np.ndarray:
     DatasetError
         Its cells differ from the mask's, or a known cell holds NaN or infinite coordinates.
     """
-    T = real_array(tensor, "tensor")    # complex was cast to its real part, text numpy's error
+    T = real_array(tensor, "tensor")    # (before, complex: its real part; text: numpy's error)
     if T.ndim != mask.ndim + 1:
         raise ShapeError(f"tensor must be (3n, d_1..d_K) with cells {mask.shape}, got {T.shape}")
     if T.shape[1:] != mask.shape:

@@ -340,7 +340,7 @@ def _check_row_weights(row_weights: np.ndarray | None, P: int) -> np.ndarray | N
     """``row_weights`` as a (P,) float64 array of non-negative weights (``None`` stays ``None``)."""
     if row_weights is None:
         return None
-    w = real_array(row_weights, "row_weights")   # complex was cast to its real part
+    w = real_array(row_weights, "row_weights")   # (before, complex: its real part taken)
     if w.shape != (P,):
         raise ShapeError(f"row_weights must be ({P},) non-negative, got shape {w.shape}")
     if (w < 0).any() or not np.isfinite(w).all() or w.sum() <= 0:   # the shape was said

@@ -149,7 +149,7 @@ def _row_weights(dataset: FaceDataset, vertex_weights: np.ndarray | None) -> np.
     """Per-vertex weights ``(n,)`` as per-coordinate weights ``(3 n,)`` (vertex-major)."""
     if vertex_weights is None:
         return None
-    vw = real_array(vertex_weights, "vertex_weights")   # complex: its real part was taken
+    vw = real_array(vertex_weights, "vertex_weights")   # (before, complex: its real part taken)
     if vw.shape != (dataset.n_vertices,):
         raise ShapeError(f"vertex_weights must be ({dataset.n_vertices},), got {vw.shape}")
     return np.repeat(vw, 3)
