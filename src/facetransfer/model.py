@@ -53,7 +53,8 @@ _FIRST_MODE_LOCK = threading.Lock()   # the render calls synthesize from several
 #: How far given weights may reach (:meth:`MultilinearModel.check_reach`): their norm at most
 #: this many times the longest training weights' of their mode. An identity of 1e300 made a
 #: face no triangle of which had an area, 1e308 one of NaN, each failing later, naming neither
-#: the weights nor where they were given; 3 times a training face is a researcher's choice.
+#: the weights nor where they were given. A face 3 times as far as a training one (a
+#: caricature) is a researcher's choice: the bound leaves it room.
 WEIGHT_REACH = 1000.0
 
 #: Version of the model file format written by :meth:`MultilinearModel.save`.

@@ -75,11 +75,10 @@ def kill_forked(pool, future, *, grace: float = 0.0) -> None:
     """Stop the forked workers of the ``concurrent.futures.ProcessPoolExecutor`` ``pool`` (and
     ``future``, the job they run) without waiting for them (but ``grace`` seconds for a job
     running: one that got the same Ctrl-C ends by itself, saving its progress): by SIGKILL,
-    not SIGTERM. A SIGTERM
-    reaching a child in the fork's first instants, before its handlers are restored
-    (:func:`deferred_signals`), was lost, and the child ran its whole job and then waited for
-    ever to hand its result to a parent that had left (3 of 30 children cancelled right after
-    the fork). A child killed while it writes leaves its temporary file
+    not SIGTERM. A SIGTERM reaching a child in the fork's first instants, before its handlers
+    are restored (:func:`deferred_signals`), was lost, and the child ran its whole job and then
+    waited for ever to hand its result to a parent that had left (3 of 30 children cancelled
+    right after the fork). A child killed while it writes leaves its temporary file
     (``.NAME.PID-XXXX.part.npz``), which the next write of that file removes once its process
     is gone (:mod:`facetransfer.io.atomic`): the background tracker saving its progress on the
     Ctrl-C it got too was killed so (1 of 7 Ctrl-Cs while tracking, its progress lost; so did

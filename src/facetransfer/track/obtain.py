@@ -501,9 +501,9 @@ def _background_track_job():
 def _prepare_child(video, model, n: int, method: str, depends: tuple) -> None:
     """What the child tracking ``video``'s first ``n`` frames with ``method`` (as
     :func:`obtain_track` with :func:`_kept`'s ``depends``) would make of the model, made here
-    before the fork, where it is no track the cache holds: the capture's tracked points
-    (:func:`facetransfer.track.capture.prepare_points`; this process, tracking the other clip
-    the same way, then uses them too)."""
+    before the fork, unless the cache holds that track (the child then makes nothing): the
+    capture's tracked points (:func:`facetransfer.track.capture.prepare_points`; this process,
+    tracking the other clip the same way, then uses them too)."""
     if method not in ("auto", "capture") or any(holds(k) for k in _keys(video, n, method,
                                                                            depends, model)):
         return
