@@ -364,8 +364,7 @@ def _spec_n_frames(spec: Mapping, last: int) -> int:
     if n_frames != int(n_frames):
         raise SpecError(f"n_frames must be an integer, got {n_frames}")
     n_frames = int(n_frames)
-    # one limit with --frames (before, 100000 here: a spec refused clips --frames wrote)
-    if not 1 <= n_frames <= MAX_FRAMES:
+    if not 1 <= n_frames <= MAX_FRAMES:   # --frames' limit (before, 100000 here: less)
         raise SpecError(f"n_frames must be between 1 and {MAX_FRAMES}, got {n_frames}")
     return n_frames
 
