@@ -603,3 +603,36 @@ def test_an_interrupted_run_names_an_earlier_output_it_replaced(tmp_path, capsys
                                    func=lambda args: (_ for _ in ()).throw(KeyboardInterrupt))
     assert cli_main._run(untouched) == 130
     assert _err(capsys) == ["facetransfer track: interrupted"]
+
+
+def test_commands_run_in_threads_leave_the_process_unraisable_hook_as_it_was(monkeypatch):
+    """A program running commands in threads (:func:`main` with ``argv``): each command set the
+    process's :func:`sys.unraisablehook` (:func:`facetransfer.signals.interrupts_not_ignored`)
+    and put back the one it found; two commands at once put them back out of order, and the
+    first one's hook stayed for ever (re-sending the program's own ignored interrupts). Only
+    the main thread, the one whose signal handlers the CLI sets, sets it."""
+    import threading
+
+    from facetransfer.cli import main as cli_main
+
+    a_in, b_in = threading.Event(), threading.Event()
+
+    def command(argv):
+        if argv == ["a"]:
+            a_in.set()
+            assert b_in.wait(10)          # b sets its hook while a's is set
+        else:
+            b_in.set()
+            a.join(10)                    # a has put back the hook it found
+        return 0
+
+    monkeypatch.setattr(cli_main, "_main", command)
+    before = sys.unraisablehook
+    a = threading.Thread(target=main, args=(["a"],))
+    b = threading.Thread(target=main, args=(["b"],))
+    a.start()
+    assert a_in.wait(10)
+    b.start()
+    b.join(10)
+    a.join(10)
+    assert sys.unraisablehook is before
