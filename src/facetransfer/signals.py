@@ -157,6 +157,13 @@ def in_import_lock_callback(frame) -> bool:
 
 def _send_again(signum: int) -> None:
     """Send ``signum`` to the main thread (a real signal: it wakes a wait there), while Python
-    still handles it."""
-    if callable(signal.getsignal(signum)):
+    still handles it; where there is no ``pthread_kill`` (not POSIX), its handler is called
+    there at its next bytecode (``_thread.interrupt_main``)."""
+    if not callable(signal.getsignal(signum)):
+        return
+    if hasattr(signal, "pthread_kill"):
         signal.pthread_kill(threading.main_thread().ident, signum)
+    else:
+        import _thread
+
+        _thread.interrupt_main(signum)
