@@ -636,3 +636,29 @@ def test_commands_run_in_threads_leave_the_process_unraisable_hook_as_it_was(mon
     b.join(10)
     a.join(10)
     assert sys.unraisablehook is before
+
+
+def test_a_callers_own_sigterm_handler_is_kept_while_a_command_runs(monkeypatch):
+    """A program with its own SIGTERM handler (a server's orderly shutdown) that runs a command
+    in process (:func:`main` with ``argv``): the command replaced it with its own for its
+    length, so a SIGTERM then stopped the command (143) and the program never heard of it. A
+    caller's handler is kept, as a caller's Ctrl-C handler already was."""
+    import signal
+    import time
+
+    from facetransfer.cli import main as cli_main
+
+    heard = []
+
+    def command(argv):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.5)                        # the handler runs here
+        return 0
+
+    monkeypatch.setattr(cli_main, "_main", command)
+    before = signal.signal(signal.SIGTERM, lambda signum, frame: heard.append(signum))
+    try:
+        assert main(["probe", "x.mp4"]) == 0
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert heard == [signal.SIGTERM]

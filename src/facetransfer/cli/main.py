@@ -475,12 +475,14 @@ def _reset_sigterm_in_children() -> None:
 
 
 def _catching_sigterm():
-    """Route SIGTERM to :class:`Terminated` (main thread only; forked children keep the
-    default); returns the old handler to restore, or None."""
+    """Route SIGTERM to :class:`Terminated` where its default is (main thread only; forked
+    children keep the default; a caller's own handler or its ignoring is kept, as Ctrl-C's,
+    :func:`_catching_sigint`); returns the old handler to restore, or None."""
     import signal
     import threading
 
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
         return None
     _reset_sigterm_in_children()
     return signal.signal(signal.SIGTERM, _terminated)
