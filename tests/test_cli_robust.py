@@ -603,3 +603,62 @@ def test_an_interrupted_run_names_an_earlier_output_it_replaced(tmp_path, capsys
                                    func=lambda args: (_ for _ in ()).throw(KeyboardInterrupt))
     assert cli_main._run(untouched) == 130
     assert _err(capsys) == ["facetransfer track: interrupted"]
+
+
+def test_commands_run_in_threads_leave_the_process_unraisable_hook_as_it_was(monkeypatch):
+    """A program running commands in threads (:func:`main` with ``argv``): each command set the
+    process's :func:`sys.unraisablehook` (:func:`facetransfer.signals.interrupts_not_ignored`)
+    and put back the one it found; two commands at once put them back out of order, and the
+    first one's hook stayed for ever (re-sending the program's own ignored interrupts). Only
+    the main thread, the one whose signal handlers the CLI sets, sets it."""
+    import threading
+
+    from facetransfer.cli import main as cli_main
+
+    a_in, b_in = threading.Event(), threading.Event()
+
+    def command(argv):
+        if argv == ["a"]:
+            a_in.set()
+            assert b_in.wait(10)          # b sets its hook while a's is set
+        else:
+            b_in.set()
+            a.join(10)                    # a has put back the hook it found
+        return 0
+
+    monkeypatch.setattr(cli_main, "_main", command)
+    before = sys.unraisablehook
+    a = threading.Thread(target=main, args=(["a"],))
+    b = threading.Thread(target=main, args=(["b"],))
+    a.start()
+    assert a_in.wait(10)
+    b.start()
+    b.join(10)
+    a.join(10)
+    assert sys.unraisablehook is before
+
+
+def test_a_callers_own_sigterm_handler_is_kept_while_a_command_runs(monkeypatch):
+    """A program with its own SIGTERM handler (a server's orderly shutdown) that runs a command
+    in process (:func:`main` with ``argv``): the command replaced it with its own for its
+    length, so a SIGTERM then stopped the command (143) and the program never heard of it. A
+    caller's handler is kept, as a caller's Ctrl-C handler already was."""
+    import signal
+    import time
+
+    from facetransfer.cli import main as cli_main
+
+    heard = []
+
+    def command(argv):
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(0.5)                        # the handler runs here
+        return 0
+
+    monkeypatch.setattr(cli_main, "_main", command)
+    before = signal.signal(signal.SIGTERM, lambda signum, frame: heard.append(signum))
+    try:
+        assert main(["probe", "x.mp4"]) == 0
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert heard == [signal.SIGTERM]

@@ -60,3 +60,24 @@ def test_a_child_forked_in_the_block_dies_of_sigterm_and_defers_again():
         assert signal.getsignal(signal.SIGTERM) is terminated
     finally:
         signal.signal(signal.SIGTERM, old)
+
+
+def test_an_interrupt_sent_again_reaches_the_main_thread_without_pthread_kill(monkeypatch):
+    """Where there is no ``signal.pthread_kill`` (not POSIX: Windows), the interrupt sent again
+    (:func:`facetransfer.signals.send_later`) failed in its timer thread (an AttributeError
+    printed there) and was lost; it is then handed to the main thread as a signal would be
+    (``_thread.interrupt_main``)."""
+    import threading
+    import time
+
+    from facetransfer import signals
+
+    monkeypatch.delattr(signal, "pthread_kill")
+    failed = []
+    monkeypatch.setattr(threading, "excepthook", failed.append)
+    with pytest.raises(KeyboardInterrupt):
+        signals.send_later(signal.SIGINT)
+        end = time.monotonic() + 10
+        while time.monotonic() < end and not failed:   # a handler runs between bytecodes
+            pass
+    assert not failed

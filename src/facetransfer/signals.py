@@ -111,7 +111,12 @@ def interrupts_not_ignored(signals):
     a ``__del__``), the interrupt it raised was lost and the command ran on (1 of 21 SIGTERMs
     0.8 s into a transfer). Such an exception is not printed; its signal is sent again
     (:func:`send_later`), and its handler runs in the code running then. Any other goes to the
-    hook there was."""
+    hook there was. Outside the main thread (a command run in a thread of a program, which
+    sets no handler) the block runs as it is: the hook is the process's, and two blocks at
+    once in threads put it back out of order, the first one's left for ever."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
     before = sys.unraisablehook
 
     def hook(unraisable) -> None:
@@ -151,6 +156,13 @@ def in_import_lock_callback(frame) -> bool:
 
 def _send_again(signum: int) -> None:
     """Send ``signum`` to the main thread (a real signal: it wakes a wait there), while Python
-    still handles it."""
-    if callable(signal.getsignal(signum)):
+    still handles it; where there is no ``pthread_kill`` (not POSIX), its handler is called
+    there at its next bytecode (``_thread.interrupt_main``)."""
+    if not callable(signal.getsignal(signum)):
+        return
+    if hasattr(signal, "pthread_kill"):
         signal.pthread_kill(threading.main_thread().ident, signum)
+    else:
+        import _thread
+
+        _thread.interrupt_main(signum)

@@ -422,23 +422,25 @@ class Terminated(KeyboardInterrupt):
 
 
 def _terminated(signum, frame):
-    from ..signals import in_import_lock_callback, send_later
-
-    if in_import_lock_callback(frame):   # not there: raised again a moment later
-        send_later(signum)
-        return
-    raise Terminated
+    """The CLI's SIGTERM: :class:`Terminated`, raised as :func:`_raise_at` says."""
+    _raise_at(frame, signum, Terminated)
 
 
 def _interrupted(signum, frame):
-    """The CLI's Ctrl-C: Python's own (KeyboardInterrupt), but not raised inside importlib's
-    module-lock callback (:func:`facetransfer.signals.in_import_lock_callback`)."""
+    """The CLI's Ctrl-C: Python's own (KeyboardInterrupt), raised as :func:`_raise_at` says."""
+    _raise_at(frame, signum, KeyboardInterrupt)
+
+
+def _raise_at(frame, signum: int, stop: type[KeyboardInterrupt]) -> None:
+    """Raise ``stop`` in ``frame`` (the code the main thread was running), but not inside
+    importlib's module-lock callback (:func:`facetransfer.signals.in_import_lock_callback`):
+    ``signum`` is sent again a moment later instead."""
     from ..signals import in_import_lock_callback, send_later
 
     if in_import_lock_callback(frame):
         send_later(signum)
         return
-    raise KeyboardInterrupt
+    raise stop
 
 
 def _catching_sigint():
@@ -473,21 +475,22 @@ def _reset_sigterm_in_children() -> None:
 
 
 def _catching_sigterm():
-    """Route SIGTERM to :class:`Terminated` (main thread only; forked children keep the
-    default); returns the old handler to restore, or None."""
+    """Route SIGTERM to :class:`Terminated` where its default is (main thread only; forked
+    children keep the default; a caller's own handler or its ignoring is kept, as Ctrl-C's,
+    :func:`_catching_sigint`); returns the old handler to restore, or None."""
     import signal
     import threading
 
-    if threading.current_thread() is not threading.main_thread():
+    if threading.current_thread() is not threading.main_thread() or \
+            signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL:
         return None
     _reset_sigterm_in_children()
     return signal.signal(signal.SIGTERM, _terminated)
 
 
 def _run(args) -> int:
-    import signal
-
-    previous = _catching_sigterm()
+    """Run the parsed command: its status, or that of the one line said of what stopped it
+    (an error, a Ctrl-C, a SIGTERM: whose handler :func:`main` sets)."""
     before = {p: _file_id(p) for p in _outputs(args)}
     try:
         status = int(args.func(args) or 0)
@@ -511,9 +514,6 @@ def _run(args) -> int:
         print(f"facetransfer {command_name(args)}: {what}{_kept(args.command, written)}",
               file=sys.stderr)
         return status
-    finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
 
 
 def _stdout_gone() -> bool:
