@@ -24,6 +24,7 @@ from facetransfer.render import (WeakPerspective, interpolate_vertex_values,  # 
                                  rasterize)
 from facetransfer.rewrite_options import RewriteError, RewriteOptions  # noqa: E402
 
+from test_speed50_references import _old_recolour  # noqa: E402 (the numpy it replaced)
 from test_transfer_mouth import Scene  # noqa: E402
 
 PAINT = np.array([1.25, 0.55, 0.7])  # the target's lipstick, per channel (RGB)
@@ -213,27 +214,6 @@ def test_recolour_leaves_the_colours_it_does_not_move_to_the_level():
     assert (out[~grey] != img[~grey]).all(axis=-1).mean() > 0.9
 
 
-def _recolour_numpy(image, w, target_lab, keep):
-    """:func:`facetransfer.lip_colour.recolour_lips` as numpy expressions (before its
-    kernels): the reference they must equal bit for bit."""
-    import cv2
-
-    moved = w > 0.0
-    if not moved.any():
-        return
-    lab = cv2.cvtColor(image.astype(np.float32) / 255.0, cv2.COLOR_RGB2LAB)
-    x = lab[moved]
-    c0, c1 = lc.CHROMA_RAMP
-    ww = w[moved] * np.clip((np.hypot(x[:, 1], x[:, 2]) - c0) / (c1 - c0), 0.0, 1.0)
-    go = ww > 0.0
-    x += ww[:, None] * (1.0 - np.asarray(keep, np.float32)) * (
-        np.asarray(target_lab, np.float32) - x)
-    lab[moved] = x
-    rgb = cv2.cvtColor(lab, cv2.COLOR_LAB2RGB)
-    moved[moved] = go
-    image[moved] = np.clip(rgb[moved] * 255.0 + 0.5, 0, 255).astype(np.uint8)
-
-
 @pytest.mark.parametrize("seed", range(4))
 def test_recolour_kernels_equal_the_numpy_expressions(seed):
     """The recolouring's kernels (the move in CIELAB, the moved pixels written back) against
@@ -250,7 +230,7 @@ def test_recolour_kernels_equal_the_numpy_expressions(seed):
     keep = np.clip(rng.random(3), lc.KEEP_MIN, 1.0)
     for box in ((slice(None), slice(None)), (slice(7, 80), slice(3, 121))):
         want, got = img.copy(), img.copy()
-        _recolour_numpy(want[box], w[box], target, keep)
+        _old_recolour(want[box], w[box], target, keep)
         lc.recolour_lips(got[box], w[box], target, keep)
         np.testing.assert_array_equal(got, want)
         assert (got != img).any()
