@@ -5,6 +5,7 @@ instants, before its default handler is back (cli.main._default_sigterm_in_child
 and the child then tracked the whole clip and waited for ever to hand its track to a parent
 that had left."""
 
+import contextlib
 import multiprocessing
 import os
 import signal
@@ -47,6 +48,18 @@ def _wait(what, seconds: float) -> bool:
     return what()
 
 
+@contextlib.contextmanager
+def _forked(ready: Path):
+    """The pid of the forked job once it has written it to ``ready``; on leaving, the job
+    killed if it still runs (a failed test leaves no child)."""
+    try:
+        assert _wait(ready.exists, 30), "the forked job did not start"
+        yield int(ready.read_text())
+    finally:
+        if ready.exists() and _alive(int(ready.read_text())):
+            os.kill(int(ready.read_text()), signal.SIGKILL)
+
+
 def test_a_cancelled_child_that_missed_its_sigterm_is_stopped(tmp_path, monkeypatch):
     ready = tmp_path / "ready"
     monkeypatch.setenv(_READY, str(ready))
@@ -54,14 +67,9 @@ def test_a_cancelled_child_that_missed_its_sigterm_is_stopped(tmp_path, monkeypa
     bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
                                        parallel=True)
     assert bg is not None
-    try:
-        assert _wait(ready.exists, 30), "the forked job did not start"
-        pid = int(ready.read_text())
+    with _forked(ready) as pid:
         bg.cancel()
         assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
-    finally:
-        if ready.exists() and _alive(int(ready.read_text())):
-            os.kill(int(ready.read_text()), signal.SIGKILL)
 
 
 def test_a_cancelled_second_detection_that_missed_its_sigterm_is_stopped(tmp_path,
@@ -71,14 +79,9 @@ def test_a_cancelled_second_detection_that_missed_its_sigterm_is_stopped(tmp_pat
     monkeypatch.setattr(video_detect, "_child_job", _deaf_job)
     split = video_detect.SplitDetection.start("v.mp4", 5, 10, 25.0)
     assert split is not None
-    try:
-        assert _wait(ready.exists, 30), "the forked job did not start"
-        pid = int(ready.read_text())
+    with _forked(ready) as pid:
         split.cancel()
         assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
-    finally:
-        if ready.exists() and _alive(int(ready.read_text())):
-            os.kill(int(ready.read_text()), signal.SIGKILL)
 
 
 def _saving_job():
@@ -105,15 +108,10 @@ def test_a_child_that_got_the_ctrl_c_too_saves_its_progress_before_it_is_killed(
     bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
                                        parallel=True)
     assert bg is not None
-    try:
-        assert _wait(ready.exists, 30), "the forked job did not start"
-        pid = int(ready.read_text())
+    with _forked(ready) as pid:
         os.kill(pid, signal.SIGINT)                  # the terminal's Ctrl-C, in the child
         bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))
         assert Path(str(ready) + ".saved").exists()
         assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
         assert obtain.grace_for(KeyboardInterrupt()) > 0
         assert obtain.grace_for(ValueError()) == 0     # not interrupted: nothing to save
-    finally:
-        if ready.exists() and _alive(int(ready.read_text())):
-            os.kill(int(ready.read_text()), signal.SIGKILL)
