@@ -158,6 +158,28 @@ def test_cache_roundtrip(bilinear, ict_cache, monkeypatch):
     np.testing.assert_allclose(rebuilt.vertices, bilinear.vertices, atol=1e-12)
 
 
+def test_a_cache_of_an_older_build_gives_the_same_model(bilinear, ict_cache):
+    """A cached data set written with its build's seconds in the provenance (before the
+    fifty-first session) is read without them: its model's content hash is a fresh build's."""
+    from facetransfer.model import build_model
+
+    path = ict_cache_path("ict-bilinear", n_identities=3, seed=5)
+    with np.load(path) as z:
+        arrays = {k: z[k] for k in z.files}
+    meta = json.loads(str(arrays["meta"]))
+    meta["provenance"]["build_seconds"] = 12.345
+    arrays["meta"] = np.array(json.dumps(meta))
+    older = path.with_name("older.npz")
+    np.savez(older, **arrays)
+    older.replace(path)
+    cached = build_ict_dataset("ict-bilinear", n_identities=3, seed=5)
+    assert "build_seconds" not in cached.provenance
+    fresh = build_ict_dataset("ict-bilinear", n_identities=3, seed=5, use_cache=False)
+    ranks = {"identity": 2, "expression": 4}
+    assert (build_model(cached, ranks, refine=False).content_hash
+            == build_model(fresh, ranks, refine=False).content_hash)
+
+
 def test_bad_input(ict_cache):
     with pytest.raises(DatasetError, match="unknown ICT data set 'ict-quadrilinear'"):
         build_ict_dataset("ict-quadrilinear")

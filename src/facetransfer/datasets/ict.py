@@ -348,6 +348,13 @@ def _save_cache(path: Path, ds: FaceDataset) -> None:
                                            "provenance": ds.provenance})))
 
 
+def _reproducible(provenance: Mapping) -> dict:
+    """``provenance`` without the build's duration, which caches written before the fifty-first
+    session hold: in a model's metadata it changed the content hash of every build of the same
+    data set (the default model's tracks and face files were refused after a rebuild)."""
+    return {k: v for k, v in provenance.items() if k != "build_seconds"}
+
+
 def _load_cache(path: Path) -> FaceDataset | None:
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -357,7 +364,7 @@ def _load_cache(path: Path) -> FaceDataset | None:
                 z["vertices"], z["mask"], tuple(meta["mode_names"]),
                 tuple(tuple(l) for l in meta["labels"]), z["faces"],
                 uvs if len(uvs) else None, z["landmarks"], z["vertex_subset"],
-                dict(meta["provenance"]))
+                _reproducible(meta["provenance"]))
     except Exception as exc:  # a damaged cache file is rebuilt, never trusted
         log.warning("ignoring unreadable cached data set %s (%s)", path, exc)
         return None
@@ -419,7 +426,8 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
     FaceDataset
         ``vertices (n_identities, n_expressions[, n_visemes], n, 3)``, full mask, labels,
         triangles, UVs, 68 landmarks, ``vertex_subset = arange(n)``, and provenance (recipes,
-        seed, identity weights, asset commit, build seconds).
+        seed, identity weights, asset commit; no timing, so that building it again gives a model
+        of the same content hash: its arrays are the same bits; the seconds go to the log).
 
     References
     ----------
@@ -472,7 +480,6 @@ def _build(name: str, spec: dict, rec: Mapping, *, seed: int, n_id: int, region:
         "recipes": used, "identity_scale": scale, "identity_weights": w.round(12).tolist(),
         "anchors": anchors.tolist(),
         "asset": assets.describe(_ASSET) | {"commit": assets.ICT_COMMIT},
-        "build_seconds": round(seconds, 3),
         "default_ranks": spec.get("default_ranks", {}),
     }
     ds = FaceDataset(out, np.ones(out.shape[:-2], dtype=bool), modes, labels, faces,
