@@ -439,3 +439,22 @@ def test_a_track_or_a_video_given_as_a_mesh_is_named(tmp_path):
     write_video(tmp_path / "v.mp4", np.zeros((2, 16, 16, 3), np.uint8), 25)
     with pytest.raises(MeshError, match="is a video, not a mesh"):
         read_mesh(tmp_path / "v.mp4")
+
+
+def test_every_option_and_argument_has_help():
+    """Each option and argument of each command says what it is in its ``--help`` (before,
+    ``view --out``, ``edit --out`` and ``TRACK.npz``, ``batch transfer --manifest``, ``batch
+    export --format``, ``puppet``'s, ``export``'s and ``probe``'s inputs showed a bare name)."""
+    import argparse
+
+    from facetransfer.cli.main import build_parser
+
+    def bare(parser, words):
+        for a in parser._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for name, sub in a.choices.items():
+                    yield from bare(sub, words + [name])
+            elif not a.help and not isinstance(a, argparse._HelpAction):
+                yield " ".join(words), a.option_strings or a.dest
+
+    assert list(bare(build_parser(), [])) == []

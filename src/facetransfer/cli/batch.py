@@ -105,7 +105,10 @@ def _register_transfer(bs, fmt) -> None:
                       "performance, and track files target_track, source_track, viseme_track, "
                       "identity_track, pose_track; with several people, target_face and "
                       "source_face as --target-face / --source-face; name).")
-    r.add_argument("--manifest", required=True, metavar="pairs.csv")
+    r.add_argument("--manifest", required=True, metavar="pairs.csv",
+                   help="CSV with a target column and transfer's sources (expression_from: a "
+                   "video or a Live Link Face take; the others as the description above says); "
+                   "paths relative to it")
     r.add_argument("--model", metavar="M.npz", help="model (default: the default model)")
     r.add_argument("--align", choices=("trim", "loop", "hold"), default=None, help=ALIGN_HELP)
     r.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
@@ -127,8 +130,10 @@ def _register_export(bs, fmt) -> None:
     """``batch export``'s parser."""
     e = bs.add_parser("export", formatter_class=fmt, help="export many tracks: DIR/NAME.<ext>",
                       description="Run `facetransfer export` for every track file.")
-    e.add_argument("tracks", nargs="+", metavar="TRACK.npz")
-    e.add_argument("--format", required=True, choices=("livelink", "glb", "usd", "json"))
+    e.add_argument("tracks", nargs="+", metavar="TRACK.npz", help="track files to export")
+    e.add_argument("--format", required=True, choices=("livelink", "glb", "usd", "json"),
+                   help="livelink (DIR/NAME.csv), glb, usd or json, as `facetransfer export "
+                   "--format`")
     e.add_argument("--model", metavar="M.npz",
                    help="the model of the tracks (default: the default model)")
     e.add_argument("--neutral", metavar="FRAME|auto",

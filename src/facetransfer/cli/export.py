@@ -26,7 +26,7 @@ def register(sub) -> None:
         description="Export a track's ARKit activations and head pose: livelink (Live Link Face "
         "CSV), glb (glTF 2.0 with 52 morph targets and the animation), usd (UsdSkel), json "
         "(MediaPipe's blendshape layout).")
-    p.add_argument("track", metavar="TRACK.npz")
+    p.add_argument("track", metavar="TRACK.npz", help="the track to export (facetransfer track)")
     p.add_argument("--format", metavar="FMT",
                    help=f"one of {', '.join(FORMATS)} (default: the one --out's extension "
                    "names: " + ", ".join(f"{'/'.join(s)} {f}" for f, s in FORMAT_SUFFIXES.items())

@@ -18,7 +18,8 @@ def register(sub) -> None:
         "track (TRACK.npz): its frames, rate, video, model, activations and lost frames; for "
         "a take (take.csv): its rows, timecode rate and span, shapes and rotations "
         "(facetransfer.file_facts).")
-    p.add_argument("videos", nargs="+", metavar="FILE")
+    p.add_argument("videos", nargs="+", metavar="FILE",
+                   help="videos, image sequences (plate/%%04d.png), tracks (.npz) or takes (.csv)")
     p.add_argument("--json", action="store_true", help="one JSON object per file, a list")
     p.set_defaults(func=run)
 

@@ -227,7 +227,7 @@ def _register_edit(sub) -> None:
         sub, "edit", "edit a tracked performance (Fig. 7E)",
         "Add a training expression over a frame range (with smooth ramps) or scale an "
         "expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E).")
-    e.add_argument("track", metavar="TRACK.npz")
+    e.add_argument("track", metavar="TRACK.npz", help="the track to edit")
     e.add_argument("--model", metavar="M.npz",
                    help="the model the track was made with (default: the default model, if the "
                    "track was made with it)")
@@ -241,7 +241,8 @@ def _register_edit(sub) -> None:
                    "(0: none; the range itself is at full strength; default 8)")
     e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
                    help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1")
-    _add_output(e, run_edit, metavar="TRACK2.npz")
+    _add_output(e, run_edit, metavar="TRACK2.npz",
+                help="the edited track to write (.npz), for transfer --performance")
 
 
 def _register_puppet(sub) -> None:
@@ -253,7 +254,8 @@ def _register_puppet(sub) -> None:
         "head's rotation (a preview of the take). A track file (TRACK.npz) instead: its "
         "performance, at its clip's size and rate, with that clip's audio if it is still there "
         "(and is that clip: of the track's size, at least its frames).")
-    q.add_argument("video", metavar="VIDEO")
+    q.add_argument("video", metavar="VIDEO", help="the video to track, or a Live Link Face take "
+                   "(TAKE.csv) or a track file (TRACK.npz)")
     q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
     q.add_argument("--identity", metavar="LABEL", help="training identity label (default: the "
                    "model's mean face)")

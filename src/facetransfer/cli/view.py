@@ -20,7 +20,8 @@ def register(sub) -> None:
     p.add_argument("source", metavar="MODEL.npz|TRACK.npz|TAKE.csv", nargs="?",
                    help="a model, a track, or a Live Link Face take (its curves and head "
                    "rotation on the model's mean person); default: the default model")
-    p.add_argument("--out", required=True, metavar="PAGE.html")
+    p.add_argument("--out", required=True, metavar="PAGE.html",
+                   help="the page to write (.html), opened by any browser without network")
     p.add_argument("--model", metavar="M.npz", help="for a track: its model (default: the "
                    "default model, if the track was made with it)")
     p.add_argument("--neutral", metavar="FRAME|auto",
