@@ -333,7 +333,8 @@ class Track:
                                  f"the model's {r}{other}")
         if self.model_hash and self.model_hash != model.content_hash:
             raise TrackError(f"track {self.label} was made with a different model (model hash "
-                             f"differs){other}")
+                             f"{self.model_hash[:12]}, this one's {model.content_hash[:12]})"
+                             f"{other}")
 
     def with_source_facts(self, clip=None) -> "Track":
         """This track with the first frame number and start timecode of ``clip`` (default:
