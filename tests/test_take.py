@@ -727,3 +727,35 @@ def test_a_short_take_of_the_apps_labels_is_read_at_unreals_rate(caplog):
     np.testing.assert_allclose(take_seconds(fifty), np.arange(40) / 50.0, atol=1e-9)
     early = [format_timecode(k, 50.0, labels="app") for k in range(20)]   # frames below 30
     assert take_rate(early) == 30      # as Unreal reads it: no frame number passes 29
+
+
+def test_a_take_exports_as_glb_or_json(arkit_model, make_arkit_track, tmp_path, capsys):
+    """``export take.csv --out face.glb`` (or ``.usd``, ``.json``): the take on the model's mean
+    person, as ``puppet take.csv`` shows it, its activations exactly the take's (to the CSV's
+    decimals); before, a take was refused ("not a track") and reached a
+    glTF only through a transfer onto a video and a track of the result. A take asked for as a
+    take, or with ``--texture-from`` (it has no video), is one line and exit status 2."""
+    import pygltflib
+
+    from facetransfer.cli.main import main
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.export.mpjson import read_mediapipe_json
+
+    track, a, _ = make_arkit_track(arkit_model, 12, fps=25.0)
+    take = write_livelink(track, tmp_path / "take.csv")
+    model = tmp_path / "arkit.npz"
+    arkit_model.save(model)
+    for out in ("face.json", "face.glb"):
+        code = main([str(x) for x in ["export", take, "--model", model,
+                                      "--out", tmp_path / out]])
+        assert code == 0, capsys.readouterr().err
+        assert f"wrote {tmp_path / out}: 12 frames" in capsys.readouterr().out
+    np.testing.assert_allclose(read_mediapipe_json(tmp_path / "face.json"), a, atol=1e-6)
+    g = pygltflib.GLTF2().load(str(tmp_path / "face.glb"))
+    assert len(g.meshes[0].extras["targetNames"]) == 52
+    assert g.accessors[g.animations[0].samplers[0].input].count == 12
+    for extra, said in ((["--out", tmp_path / "again.csv"], "is a Live Link Face take already"),
+                        (["--out", tmp_path / "t.glb", "--texture-from", take],
+                         "is a take, of no video")):
+        code = main([str(x) for x in ["export", take, "--model", model, *extra]])
+        assert code == 2 and said in capsys.readouterr().err

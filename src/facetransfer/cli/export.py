@@ -15,7 +15,8 @@ import argparse
 from pathlib import Path
 
 from ..export import FORMAT_SUFFIXES, FORMATS
-from .common import default_model_for, frame_count, option_with, progress_disabled
+from .common import (default_model_for, frame_count, option_with, progress_disabled,
+                     resolve_model)
 
 
 def register(sub) -> None:
@@ -26,7 +27,10 @@ def register(sub) -> None:
         description="Export a track's ARKit activations and head pose: livelink (Live Link Face "
         "CSV), glb (glTF 2.0 with 52 morph targets and the animation), usd (UsdSkel), json "
         "(MediaPipe's blendshape layout).")
-    p.add_argument("track", metavar="TRACK.npz", help="the track to export (facetransfer track)")
+    p.add_argument("track", metavar="TRACK.npz",
+                   help="the track to export (facetransfer track), or a Live Link Face take "
+                   "(take.csv) as glb, usd or json: the model's mean person performing its "
+                   "curves with its head's rotation, as `puppet take.csv` shows it")
     p.add_argument("--format", metavar="FMT",
                    help=f"one of {', '.join(FORMATS)} (default: the one --out's extension "
                    "names: " + ", ".join(f"{'/'.join(s)} {f}" for f, s in FORMAT_SUFFIXES.items())
@@ -148,12 +152,10 @@ def run(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--texture-step must be >= 1, got {args.texture_step}")
     from ..take import is_take
 
-    if is_take(args.track):  # a Live Link file already: what it holds is said by probe
-        raise FaceTransferError(f"{args.track} is a Live Link Face take, not a track: export "
-                                f"writes a track file's activations (`facetransfer track "
-                                f"VIDEO --out T.npz`); `facetransfer probe {args.track}` "
-                                "describes the take")
-    track, model = _track_and_model(Track.load(args.track), args)
+    if is_take(args.track):
+        track, model = _take_and_model(args)
+    else:
+        track, model = _track_and_model(Track.load(args.track), args)
     if args.timecode == "source" or track.lost.any():   # what the lines below say
         track = _clip_facts(track)
     if args.neutral is not None:
@@ -175,6 +177,29 @@ def run(args: argparse.Namespace) -> int:
                         texture=texture, timecode=timecode, labels=args.take_rate)
     _say_written(args, track, path, timecode, said)
     return 0
+
+
+def _take_and_model(args):
+    """``(track, model)`` of a Live Link Face take: the model's (``--model``'s, else the
+    default one's) mean person performing it with its head's rotation
+    (:func:`facetransfer.take.take_track`, what ``puppet take.csv`` renders); a take asked
+    for as a take, or a texture lifted from a video it does not have, is one line."""
+    from ..errors import FaceTransferError
+    from ..take import take_track
+
+    if args.format == "livelink":   # a Live Link file already: what it holds is said by probe
+        raise FaceTransferError(f"{args.track} is a Live Link Face take already: export writes "
+                                f"it as glb, usd or json; `facetransfer probe {args.track}` "
+                                "describes the take")
+    if args.texture_from:
+        raise FaceTransferError(f"--texture-from lifts a tracked video's texture; {args.track} "
+                                "is a take, of no video: give --texture TEX.png")
+    from ..export.livelink import read_livelink
+
+    if not len(read_livelink(args.track, lenient=True).timecodes):  # before a model is built
+        raise FaceTransferError(f"the take {args.track} has no rows")
+    model = resolve_model(args.model, progress=not args.no_progress)
+    return take_track(args.track, model, model.weight_mean(model.mode_index("identity"))), model
 
 
 def _track_and_model(track, args):
