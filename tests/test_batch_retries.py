@@ -6,6 +6,7 @@ of a clip being tracked fail at once, none tracked twice."""
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import threading
@@ -25,7 +26,7 @@ from facetransfer.track import Track  # noqa: E402
 from facetransfer.track.settings import TrackerSettings  # noqa: E402
 
 import test_batch  # noqa: E402
-from conftest import still_track  # noqa: E402
+from conftest import clip_with_points, still_track  # noqa: E402
 
 clips, inproc = test_batch.clips, test_batch.inproc
 _cli, _summary = test_batch._cli, test_batch._summary
@@ -212,6 +213,51 @@ def test_a_retry_waits_for_an_attempt_in_another_process_bounded(
         p.kill()
         p.wait()
     assert O.output_identity(out) == kept and len(calls) == 1
+
+
+def test_a_clip_s_chunks_another_run_is_tracking_are_not_tracked_again(
+        quick_model, quick_model_path, inproc, tmp_path, capsys, monkeypatch):
+    """Two runs of one ``batch track --chunk`` at once: the clip's chunks are claimed by the
+    first run's client until its join ends, so the other run's row of that clip fails at
+    once, naming the holder, and tracks none of its chunks; the first run's track is written
+    and no claim is left. Before, both tracked every chunk and one join failed."""
+    from facetransfer.cli.main import main
+
+    video, pts, _ = clip_with_points(quick_model, 20, 5, tmp_path, video="long.mp4",
+                                     points="p.json")
+    out = tmp_path / "out"
+    argv = [str(a) for a in ("batch", "track", video, "--out", out, "--chunk", 10,
+                             "--overlap", 2, "--model", quick_model_path, "--init", pts,
+                             "--passes", "1", "--workers", 1, "--no-progress")]
+    holding, other_done, codes, calls = threading.Event(), threading.Event(), {}, []
+    real = J._track
+
+    def tracked(*a, **k):
+        calls.append(threading.current_thread().name)
+        if not holding.is_set():         # the first run's first chunk: the other runs
+            holding.set()
+            assert other_done.wait(300)
+        return real(*a, **k)
+
+    monkeypatch.setattr(J, "_track", tracked)
+    this = threading.Thread(target=lambda: codes.update(this=main(argv)))
+    this.start()
+    try:
+        assert holding.wait(300)
+        n = len(calls)
+        codes["other"] = main(argv)
+        theirs, other_calls = _summary(out / "summary.csv"), len(calls) - n
+    finally:
+        other_done.set()
+        this.join(300)
+    assert codes == {"this": 0, "other": 1}
+    assert other_calls == 0
+    assert theirs["long"]["status"] == "failed" and theirs["long"]["job"] == "another-run"
+    assert theirs["long"]["error"].startswith(
+        f"{out / 'long.npz'}: its chunks are being tracked by another run (pid {os.getpid()}")
+    rows = _summary(out / "summary.csv")
+    assert rows["long"]["status"] == "done" and Track.load(out / "long.npz").n_frames == 20
+    assert not list(out.glob(".*.claim"))
 
 
 @pytest.mark.filterwarnings("ignore:Port 8787 is already in use")

@@ -13,6 +13,7 @@ digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import time
@@ -346,9 +347,12 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
     run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, _planned(outs))
-    for job in todo:
-        run.submit(job)
-    return col.run(run.on_done)
+    try:
+        for job in todo:
+            run.submit(job)
+        return col.run(run.on_done)
+    finally:
+        run.held.close()
 
 
 def _owners(keys: dict) -> dict[str, str]:
@@ -362,7 +366,13 @@ def _owners(keys: dict) -> dict[str, str]:
 
 class _TrackSubmit:
     """The tasks of :func:`batch_track`: a clip in one task, or (``chunk``) its frames counted
-    first, then its chunks tracked in parallel (the first one first) and joined."""
+    first, then its chunks tracked in parallel (the first one first) and joined. The chunks
+    of a clip are claimed by this process, the client (:func:`.ownership.claimed`,
+    ``DIR/.NAME.npz.chunks.claim``), from before its count to its join's end: another run's
+    chunks of it fail at once, "its chunks are being tracked by another run" (before, two runs
+    of one batch at once both tracked every chunk, and one join's write failed). A chunk's
+    track goes to the join as a Dask result, no file: there is no chunk of another run to
+    take, nor one to be replaced under a join."""
 
     def __init__(self, client, col: _Collector, outs: dict, mf, options, chunk: int,
                  overlap: int, keys: dict, planned: dict) -> None:
@@ -370,9 +380,19 @@ class _TrackSubmit:
         self.options, self.chunk, self.overlap, self.keys = options, chunk, overlap, keys
         self.planned = planned   # what a job may replace (_planned): not another run's
         self.owners = _owners(keys)
+        self.held = contextlib.ExitStack()     # the chunk claims, released at the run's end
+        self.claims: dict[str, contextlib.ExitStack] = {}
 
     def submit(self, job) -> None:
         if self.chunk:   # a clip of more than max_frames: the chunks of its first max_frames
+            claim = contextlib.ExitStack()
+            try:
+                claim.enter_context(O.claimed(self.outs[job.name], self.owners[job.name],
+                                              part="chunks"))
+            except O.OutputTaken as exc:
+                self.col.fail(job, exc, self.outs[job.name])
+                return
+            self.claims[job.name] = self.held.enter_context(claim)
             self.col.add(self.client.submit(J.count_frames, str(job.video), job.max_frames,
                                             pure=False), "count", job)
         else:
@@ -402,12 +422,20 @@ class _TrackSubmit:
         try:
             res = fut.result()
         except Exception as exc:  # noqa: BLE001 (any failure is this clip's row)
+            self._release(job)
             self.col.fail(job, exc, self.outs[job.name])
             return
         if kind == "count":
             self._chunks(job, int(res))
         else:
+            self._release(job)
             self.col.finish(job, dataclasses.replace(res, job=self.keys[job.name]))
+
+    def _release(self, job) -> None:
+        """Let go of the claim of the chunks of ``job``'s clip (its row is final)."""
+        claim = self.claims.pop(job.name, None)
+        if claim is not None:
+            claim.close()
 
 
 def _earlier_rows(out_dir: Path) -> list[Row]:
