@@ -152,7 +152,8 @@ def claim_path(out, part: str = "") -> Path:
 def claimed(out, owner: str = "", part: str = ""):
     """Hold the output ``out`` for the block: an exclusive ``flock`` on its claim file
     (:func:`claim_path`), which names this process, its host and the time; the file is removed
-    on leaving. A job of another run that holds it (two runs into one folder at once, with
+    on leaving (with an ``owner``, after the block ran, kept for a retry: :func:`_release`).
+    A job of another run that holds it (two runs into one folder at once, with
     ``--overwrite`` or redoing the same result) is said at once: :class:`OutputTaken` naming
     its process and host, before any work. Before, both jobs went on, and where both replaced
     the output (with ``--overwrite``, or both redoing one failed result) the later replaced the
