@@ -335,9 +335,14 @@ def _local_cluster(n: int, processes: bool, verbose: bool):
     # this process meanwhile is raised once the cluster is whole, and the cluster closed:
     # raised in its start, the half-started cluster's close at the exit and its workers' start
     # printed tracebacks.
+    # The model is scattered to every worker (scatter_model); Dask's active memory manager
+    # drops the copies no task waits for, every 2 s, leaving one: a worker lost (its heartbeat
+    # missed, or killed) then lost the model, and every clip not finished was cancelled ("its
+    # worker died, more than once"), none run again. Off: each worker keeps its copy.
     cluster = None
     try:
-        with config.set({"distributed.worker.daemon": False}), \
+        with config.set({"distributed.worker.daemon": False,
+                         "distributed.scheduler.active-memory-manager.start": False}), \
                 _start_signals_held(processes):
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=processes,
                                    dashboard_address=None, silence_logs=level, **kw)

@@ -23,7 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from .manifest import BatchError
-from .ownership import OutputTaken, claimed, clear_leftover_matte, own_output, still_planned
+from .ownership import (OutputTaken, claimed, clear_leftover_matte, earlier_output, own_output,
+                        still_planned)
 from .summary import Row
 
 log = logging.getLogger(__name__)
@@ -114,7 +115,7 @@ def _subject(face: str | None, video, source: str):
 
 
 def track_clip(job, out: str, model, options, overwrite: bool = False,
-               planned: str = "") -> Row:
+               planned: str = "", owner: str = "") -> Row:
     """Track a whole clip exactly as ``facetransfer track VIDEO --out OUT`` does and write it.
 
     The job holds its output while it runs (:func:`.ownership.claimed`): another run's job of
@@ -136,6 +137,11 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
         found and does again (every one with the batch's ``--overwrite``), replaced while it is
         still that file (:func:`.ownership.still_planned`); "" (none found): an ``out``
         another run wrote meanwhile is kept.
+    owner : str
+        The run and the job's digest (:func:`.ownership.claimed`): a claim of the same
+        ``owner`` is this run's earlier attempt of the job (Dask ran the task again, taking its
+        worker for lost), waited for; the track it wrote is taken (the row's ``error`` says
+        so), else the clip is tracked again.
 
     Returns
     -------
@@ -145,7 +151,9 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
 
     t0 = time.perf_counter()
     video_info(job.video)  # missing / not a video: one line naming the path
-    with claimed(out):
+    with claimed(out, owner) as claim:
+        if earlier_output(out, planned, claim):
+            return _taken_track(job, out, claim, t0)
         overwrite = overwrite or still_planned(out, planned)
         try:
             with own_output(out, overwrite):
@@ -158,7 +166,20 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
             partial_path(out).unlink(missing_ok=True)
             raise
         partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
-    return track_row(job.name, track, out, time.perf_counter() - t0)
+    return dataclasses.replace(track_row(job.name, track, out, time.perf_counter() - t0),
+                               error=claim.note(False))
+
+
+def _taken_track(job, out: str, claim, t0: float, seconds: float = 0.0) -> Row:
+    """The row of the track ``out`` this run's earlier attempt of the job wrote
+    (:func:`.ownership.earlier_output`), taken as this attempt's; its progress file removed."""
+    from ..track.result import Track
+
+    track = Track.load(out)
+    partial_path(out).unlink(missing_ok=True)
+    return dataclasses.replace(
+        track_row(job.name, track, out, seconds + time.perf_counter() - t0),
+        error=claim.note(True))
 
 
 @dataclass(frozen=True, eq=False)
@@ -237,20 +258,23 @@ def _chunk_capture(frames, model, options, job, chunk, identity):
 
 
 def join_clip(job, out: str, model, chunks, results, overwrite: bool = False,
-              planned: str = "") -> Row:
+              planned: str = "", owner: str = "") -> Row:
     """Join a clip's chunk tracks (:func:`~facetransfer.batch.chunks.join_tracks`) and write
-    ``out`` (``overwrite``, ``planned`` and its claim: as :func:`track_clip`'s)."""
+    ``out`` (``overwrite``, ``planned``, ``owner`` and its claim: as :func:`track_clip`'s)."""
     from .chunks import join_tracks
 
     t0 = time.perf_counter()
-    with claimed(out):
+    spent = sum(r.seconds for r in results)
+    with claimed(out, owner) as claim:
+        if earlier_output(out, planned, claim):
+            return _taken_track(job, out, claim, t0, spent)
         overwrite = overwrite or still_planned(out, planned)
         with own_output(out, overwrite):
             track = join_tracks([r.track for r in results], chunks, model)
             track = track.with_source_facts(job.video)
             track.save(out, overwrite=overwrite)
-    return track_row(job.name, track, out,
-                     sum(r.seconds for r in results) + time.perf_counter() - t0)
+    return dataclasses.replace(track_row(job.name, track, out, spent + time.perf_counter() - t0),
+                               error=claim.note(False))
 
 
 def _identity(job, model):
@@ -275,7 +299,8 @@ def matte_pattern(out_dir, name: str, suffix: str) -> Path:
 
 
 def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None, *,
-                  overwrite: bool = False, planned: str = "", planned_matte: str = "") -> Row:
+                  overwrite: bool = False, planned: str = "", planned_matte: str = "",
+                  owner: str = "") -> Row:
     """Rewrite one target as ``facetransfer transfer`` does
     (:func:`facetransfer.video_transfer.transfer_video`) and write ``out`` (and ``matte``).
 
@@ -310,32 +335,22 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         Without ``overwrite``: the :func:`.ownership.matte_identity` of the frames of ``matte``
         the run found; beside no ``out`` (:func:`.ownership.clear_leftover_matte`) removed
         while they are still those, before the render.
+    owner : str
+        As :func:`track_clip`'s: the result (and matte) this run's earlier attempt of the
+        pair rendered is taken.
 
     Returns
     -------
     Row
     """
-    from ..io.video import video_info
-    from ..take import is_take
-    from ..video_transfer import TransferSources, transfer_video
+    from ..video_transfer import transfer_video
 
     t0 = time.perf_counter()
-    s = job.sources
-    for v in (job.target, s.get("expression_from"), s.get("viseme_from"),
-              s.get("identity_from"), s.get("pose_from")):
-        if v and not is_take(v):   # a take (Live Link Face CSV) is read by the plan
-            video_info(v)  # a missing or unreadable input fails the row, naming the path
+    sources = _pair_sources(job, model)
     options = rewrite_options(settings)
-    sources = TransferSources.of(
-        str(job.target), target_track=s.get("target_track"),
-        expression_from=s.get("expression_from"),
-        expression_track=s.get("source_track"), viseme_from=s.get("viseme_from"),
-        viseme_track=s.get("viseme_track"), identity=_identity(job, model),
-        identity_from=s.get("identity_from"), identity_track=s.get("identity_track"),
-        pose_from=s.get("pose_from"), pose_track=s.get("pose_track"),
-        performance=s.get("performance"), target_face=s.get("target_face"),
-        source_face=s.get("source_face"))
-    with claimed(out):
+    with claimed(out, owner) as claim:
+        if earlier_output(out, planned, claim):
+            return _taken_video(job.name, out, matte, claim, t0)
         overwrite = overwrite or still_planned(out, planned)
         if not overwrite:
             clear_leftover_matte(out, matte, planned_matte)
@@ -348,7 +363,42 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
     conf = res.plan.target_track.confidence[:res.n_frames]
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
-               output=str(out), matte="" if res.matte is None else str(res.matte))
+               output=str(out), matte="" if res.matte is None else str(res.matte),
+               error=claim.note(False))
+
+
+def _pair_sources(job, model):
+    """The :class:`~facetransfer.video_transfer.TransferSources` of the pair ``job``, its
+    inputs checked (a missing or unreadable one fails the row, naming the path)."""
+    from ..io.video import video_info
+    from ..take import is_take
+    from ..video_transfer import TransferSources
+
+    s = job.sources
+    for v in (job.target, s.get("expression_from"), s.get("viseme_from"),
+              s.get("identity_from"), s.get("pose_from")):
+        if v and not is_take(v):   # a take (Live Link Face CSV) is read by the plan
+            video_info(v)  # a missing or unreadable input fails the row, naming the path
+    return TransferSources.of(
+        str(job.target), target_track=s.get("target_track"),
+        expression_from=s.get("expression_from"),
+        expression_track=s.get("source_track"), viseme_from=s.get("viseme_from"),
+        viseme_track=s.get("viseme_track"), identity=_identity(job, model),
+        identity_from=s.get("identity_from"), identity_track=s.get("identity_track"),
+        pose_from=s.get("pose_from"), pose_track=s.get("pose_track"),
+        performance=s.get("performance"), target_face=s.get("target_face"),
+        source_face=s.get("source_face"))
+
+
+def _taken_video(name: str, out: str, matte: str | None, claim, t0: float) -> Row:
+    """The row of the result ``out`` (and ``matte``, committed before it) this run's earlier
+    attempt of the pair rendered (:func:`.ownership.earlier_output`), taken as this one's."""
+    from ..io.video import video_info
+
+    info = video_info(out)
+    return Row(clip=name, status="done", frames=info.n_frames, fps=info.fps,
+               seconds=time.perf_counter() - t0, output=str(out),
+               matte="" if matte is None else str(matte), error=claim.note(True))
 
 
 def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:
@@ -400,13 +450,14 @@ def _default_model():
 
 
 def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
-               labels=None, overwrite: bool = False, planned: str = "") -> Row:
+               labels=None, overwrite: bool = False, planned: str = "", owner: str = "") -> Row:
     """Export one track file with :func:`facetransfer.export.export_track` to ``out``
     (``neutral``: its neutral frame, :mod:`facetransfer.export.neutral`; ``labels``: a
     livelink take's timecode labels, None the default; ``overwrite``: as
     :func:`track_clip`'s; ``planned``: as :func:`transfer_pair`'s, the take of an earlier
     version the run writes again, or any with the batch's ``--overwrite``; claimed as
-    :func:`track_clip`'s output).
+    :func:`track_clip`'s output; ``owner``: as :func:`track_clip`'s, an export this run's
+    earlier attempt of the job wrote is taken).
 
     Without ``model``, a track made with the default model gets the worker's cached copy of
     it; any other track is left to ``export_track``'s own check (``model=None``).
@@ -422,14 +473,17 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
         if default_model_path().is_file():
             default, h = _default_model()
             model = default if track.model_hash == h else None
-    with claimed(out):
-        overwrite = overwrite or still_planned(out, planned)
-        with own_output(out, overwrite):
-            path = export_track(track, fmt, out, model=model, overwrite=overwrite,
-                                texture=texture, neutral=neutral, labels=labels)
+    with claimed(out, owner) as claim:
+        taken = earlier_output(out, planned, claim)
+        if not taken:
+            overwrite = overwrite or still_planned(out, planned)
+            with own_output(out, overwrite):
+                out = export_track(track, fmt, out, model=model, overwrite=overwrite,
+                                   texture=texture, neutral=neutral, labels=labels)
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
                seconds=time.perf_counter() - t0,
-               mean_confidence=float(np.mean(track.confidence)), output=str(path))
+               mean_confidence=float(np.mean(track.confidence)), output=str(out),
+               error=claim.note(taken))
 
 
 

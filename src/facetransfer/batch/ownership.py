@@ -6,7 +6,11 @@ replaces no file but those its run found and chose to redo (``planned``: :func:`
 :func:`matte_identity`; every output there as the run began with ``--overwrite``); an output or
 matte frames another run wrote meanwhile are kept, and the task raises :class:`OutputTaken`
 (:func:`own_output`). A task holds its output while it runs (:func:`claimed`): another run's
-task of it fails at its start. Used by the tasks of :mod:`facetransfer.batch.jobs`.
+task of it fails at its start; a task of the same run's same job (Dask's scheduler ran it
+again, taking the first attempt's worker for lost) waits for the first attempt and takes its
+output (:class:`Claim`, :func:`earlier_output`). Used by the tasks of
+:mod:`facetransfer.batch.jobs`, and by :func:`facetransfer.batch.run.batch_track` for the
+chunks of a clip (``part="chunks"``).
 """
 
 from __future__ import annotations
@@ -16,12 +20,14 @@ import hashlib
 import os
 import threading
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 from .manifest import BatchError
 
 __all__ = ["OutputTaken", "output_identity", "matte_identity", "claimed", "claim_path",
-           "remove_stale_claims", "own_output", "still_planned", "clear_leftover_matte"]
+           "remove_stale_claims", "own_output", "still_planned", "clear_leftover_matte",
+           "Claim", "earlier_output", "RETRY_WAIT"]
 
 
 class OutputTaken(BatchError):
@@ -82,18 +88,72 @@ def _taken(out, why: str = "while this run went on", *, frames=None) -> OutputTa
 #: (:func:`remove_stale_claims`), shorter than any job.
 CLAIM_WAIT = 0.5
 
+#: Seconds a job waits for this run's other attempt of the same job to let go of its output
+#: (:func:`claimed`'s ``owner``): Dask's scheduler runs a task again on another worker when it
+#: takes the first one's for lost (its heartbeat missed: a long call holding the GIL, a
+#: paused or overloaded machine) while that attempt may still run. An embedded cluster's
+#: nanny ends such a worker within seconds (4 s, Dask 2026.8); a worker without one may
+#: finish the job.
+RETRY_WAIT = 300.0
 
-def claim_path(out) -> Path:
-    """The claim file of the output ``out`` (:func:`claimed`): ``DIR/.NAME.EXT.claim``."""
+
+@dataclass(frozen=True)
+class Claim:
+    """What a job found as it took its output's claim (:func:`claimed`).
+
+    Attributes
+    ----------
+    waited : float
+        Seconds it waited for this run's other attempt of the job to let go of it.
+    earlier : str
+        The words (process, host, start) of this run's other attempt of the same job that
+        held the claim (waited for) or left it (its worker killed); "" none: another run's,
+        or no claim there.
+    """
+
+    waited: float = 0.0
+    earlier: str = ""
+
+    def note(self, taken: bool) -> str:
+        """The words of a done row after such an attempt ("" none): its output taken
+        (``taken``) or made again."""
+        if not self.earlier:
+            return ""
+        who = self.earlier.splitlines()[0]
+        said = (f"this run's earlier attempt of the job ({who}; Dask ran it again, taking "
+                "its worker for lost)")
+        waited = f" after waiting {self.waited:.1f} s for it" if self.waited else ""
+        return (f"note: {said} wrote the output: taken{waited}" if taken else
+                f"note: {said} ended without the output: done again{waited}")
+
+
+def earlier_output(out, planned: str, claim: Claim) -> bool:
+    """Whether ``out`` is the output this run's earlier attempt of the job wrote
+    (``claim.earlier``, :func:`claimed`): the file that attempt said it left as it ended
+    ("done" and its :func:`output_identity`); where it said nothing (killed), there and
+    another file than the one the run found (``planned``): between that attempt's claim and
+    this one's no job of another run held it (it would have rewritten the claim's words),
+    and a job writes its output only under its claim."""
+    if not claim.earlier:
+        return False
+    now = output_identity(out)
+    said = [ln[5:] for ln in claim.earlier.splitlines() if ln.startswith("done ")]
+    return bool(now) and (now == said[-1] if said else now != planned)
+
+
+def claim_path(out, part: str = "") -> Path:
+    """The claim file of the output ``out`` (:func:`claimed`): ``DIR/.NAME.EXT.claim``
+    (``part``: of that part of its work, ``DIR/.NAME.EXT.PART.claim``)."""
     p = Path(out)
-    return p.with_name(f".{p.name}.claim")
+    return p.with_name(f".{p.name}{'.' + part if part else ''}.claim")
 
 
 @contextlib.contextmanager
-def claimed(out):
+def claimed(out, owner: str = "", part: str = ""):
     """Hold the output ``out`` for the block: an exclusive ``flock`` on its claim file
     (:func:`claim_path`), which names this process, its host and the time; the file is removed
-    on leaving. A job of another run that holds it (two runs into one folder at once, with
+    on leaving (with an ``owner``, after the block ran, kept for a retry: :func:`_release`).
+    A job of another run that holds it (two runs into one folder at once, with
     ``--overwrite`` or redoing the same result) is said at once: :class:`OutputTaken` naming
     its process and host, before any work. Before, both jobs went on, and where both replaced
     the output (with ``--overwrite``, or both redoing one failed result) the later replaced the
@@ -102,29 +162,47 @@ def claimed(out):
     left is taken over, its file rewritten. Where each machine's locks are its own (an NFS
     mount with ``nolock`` or ``local_lock``: before, said to take no lock) a claim guards only
     against jobs of the same machine; where the file system refuses locks (``ENOLCK``), or
-    not POSIX, the block runs without a claim."""
+    not POSIX, the block runs without a claim.
+
+    ``owner`` names the run and the job (its digest), written in the claim: a claim held by
+    the same ``owner`` is this run's other attempt of the job (Dask ran the task again,
+    taking its worker for lost), waited for up to :data:`RETRY_WAIT` seconds (a
+    :class:`~.manifest.BatchError` after), not refused: before, the retry failed "is being
+    written by another run" and the row said failed while the first attempt finished the
+    output. The block is given a :class:`Claim` saying what was found (:func:`earlier_output`).
+    ``part``: a claim of that part of the output's work (:func:`claim_path`), said so."""
     try:
         import fcntl
     except ImportError:     # pragma: no cover (not POSIX)
-        yield
+        yield Claim()
         return
-    path = claim_path(out)
-    with _held_here(path, out) as key:
-        fd = _claim(path, out, fcntl)
+    path = claim_path(out, part)
+    with _held_here(path, out, owner, part) as (key, here):
+        fd, found = _claim(path, out, fcntl, owner, part)
         _HELD[key] = -1 if fd is None else fd      # (a fork meanwhile: _forget_claims)
+        done = ""
         try:
-            yield
+            yield Claim(here.waited + found.waited, found.earlier or here.earlier)
+            done = f"done {output_identity(out)}" if owner and not part else ""
         finally:
             _HELD[key] = -1
             if fd is not None:
-                _release(path, fd)
+                _release(path, fd, done)
 
 
-def _release(path: Path, fd: int) -> None:
+def _release(path: Path, fd: int, done: str = "") -> None:
     """Remove the claim file ``path`` this process holds (``fd``), while it is still the file
     locked (where locks are each machine's own, an NFS mount with ``local_lock`` or
     ``nolock``, a run on another one may have put its own there: before, removed held), and
-    let go of it."""
+    let go of it. ``done`` (a batch job's, :func:`claimed`'s ``owner``: "done" and the
+    output's :func:`output_identity`): added to its words and the file kept, for a retry of
+    the job that starts after this attempt ended (:func:`earlier_output`); the run removes
+    it at its end (:func:`remove_stale_claims`), as does any run's planning."""
+    if done:
+        with contextlib.suppress(OSError):
+            os.pwrite(fd, f"\n{done}".encode(), os.fstat(fd).st_size)
+            os.close(fd)
+            return
     with contextlib.suppress(OSError):
         if os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False)):
             os.unlink(path)     # held: no other job has it open and locked
@@ -132,8 +210,10 @@ def _release(path: Path, fd: int) -> None:
 
 
 #: The claim files (real paths) this process holds (:func:`_held_here`), each with its
-#: locked descriptor (-1: none yet, or none), and their lock.
+#: locked descriptor (-1: none yet, or none), their owners (:func:`claimed`) and words, and
+#: their lock.
 _HELD: dict[str, int] = {}
+_OWNERS: dict[str, tuple[str, str]] = {}
 _HELD_LOCK = threading.Lock()
 
 
@@ -149,6 +229,7 @@ def _forget_claims() -> None:
             with contextlib.suppress(OSError):
                 os.close(fd)
     _HELD.clear()
+    _OWNERS.clear()
     _HELD_LOCK = threading.Lock()     # (another thread may have held it as this one forked)
 
 
@@ -157,23 +238,48 @@ if hasattr(os, "register_at_fork"):
 
 
 @contextlib.contextmanager
-def _held_here(path: Path, out):
+def _held_here(path: Path, out, owner: str = "", part: str = ""):
     """Note the claim file ``path`` as held by this process for the block (which is given its
-    key in :data:`_HELD`); :class:`OutputTaken` where a thread of it holds it already. Where
-    a lock is the process's, not its open file's (``flock`` over NFS, which Linux makes a
-    POSIX lock), another thread's lock of it would succeed, and its close let go of the
-    first's: before, two jobs of one output in one process (a worker's threads) both held it.
-    :func:`remove_stale_claims` keeps those noted."""
-    key = os.path.realpath(path)
-    with _HELD_LOCK:
-        if key in _HELD:
-            raise _busy(out, _words(path))
-        _HELD[key] = -1
+    key in :data:`_HELD` and a :class:`Claim`); :class:`OutputTaken` where a thread of it
+    holds it already, but for the same ``owner`` (this run's other attempt of the job), waited
+    for. Where a lock is the process's, not its open file's (``flock`` over NFS, which Linux
+    makes a POSIX lock), another thread's lock of it would succeed, and its close let go of
+    the first's: before, two jobs of one output in one process (a worker's threads) both held
+    it. :func:`remove_stale_claims` keeps those noted."""
+    key, t0, earlier = os.path.realpath(path), time.monotonic(), ""
+    while True:
+        with _HELD_LOCK:
+            if key not in _HELD:
+                _HELD[key] = -1
+                _OWNERS[key] = (owner, _said())
+                break
+            theirs, words = _OWNERS.get(key, ("", ""))
+        if not owner or theirs != owner:
+            raise _busy(out, _words(path), part)
+        earlier = words
+        if time.monotonic() - t0 > RETRY_WAIT:
+            raise _still_ours(out, words, time.monotonic() - t0)
+        time.sleep(0.05)
     try:
-        yield key
+        yield key, Claim(time.monotonic() - t0 if earlier else 0.0, earlier)
     finally:
         with _HELD_LOCK:
             _HELD.pop(key, None)
+            _OWNERS.pop(key, None)
+
+
+def _said() -> str:
+    """The words of a claim made now: this process, its host and the time."""
+    import socket
+
+    return (f"pid {os.getpid()} on host {socket.gethostname()}, since "
+            f"{time.strftime('%Y-%m-%d %H:%M:%S %Z')}")
+
+
+def _owner_of(words: str) -> str:
+    """The owner (:func:`claimed`) a claim file's ``words`` name ("" none: an older
+    version's, or none given)."""
+    return next((ln[4:] for ln in words.splitlines() if ln.startswith("job ")), "")
 
 
 def _words(path: Path) -> str:
@@ -185,45 +291,52 @@ def _words(path: Path) -> str:
         return ""
 
 
-def _claim(path: Path, out, fcntl) -> int | None:
+def _claim(path: Path, out, fcntl, owner: str = "",
+           part: str = "") -> tuple[int | None, Claim]:
     """The descriptor of ``path`` opened and locked by this process (None where it cannot be
-    locked); :class:`OutputTaken` where another process holds it for longer than
-    :data:`CLAIM_WAIT` (another run's planning locks it for a moment to see whether it is
-    held, :func:`remove_stale_claims`: before, a job making its claim then failed). A file
-    removed or replaced between its opening and its lock (its holder finished) is opened
-    again."""
-    import socket
-
-    deadline = time.monotonic() + CLAIM_WAIT
-    for _ in range(200):
+    locked), and what was found (:class:`Claim`); :class:`OutputTaken` where another process
+    holds it for longer than :data:`CLAIM_WAIT` (another run's planning locks it for a moment
+    to see whether it is held, :func:`remove_stale_claims`: before, a job making its claim
+    then failed), or, holding it for this run's same job (``owner``), for longer than
+    :data:`RETRY_WAIT` (a :class:`~.manifest.BatchError`). A file removed or replaced
+    between its opening and its lock (its holder finished) is opened again."""
+    t0, earlier, waited, reopened = time.monotonic(), "", 0.0, 0
+    while reopened < 200:
         fd = _open_claim(path)
         if fd is None:
-            return None    # a folder that cannot be written: the write says so
+            return None, Claim()   # a folder that cannot be written: the write says so
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
-            holder = os.read(fd, 512).decode("utf-8", "replace").strip()
+            holder = os.pread(fd, 512, 0).decode("utf-8", "replace").strip()
             os.close(fd)
-            if time.monotonic() < deadline:
-                time.sleep(0.02)
+            ours = bool(owner) and _owner_of(holder) == owner
+            if ours:
+                earlier, waited = holder, time.monotonic() - t0
+            if time.monotonic() - t0 < (RETRY_WAIT if ours else CLAIM_WAIT):
+                time.sleep(0.05 if ours else 0.02)
                 continue
-            raise _busy(out, holder) from None
+            raise (_still_ours(out, holder, waited) if ours else _busy(out, holder, part)) \
+                from None
         except OSError:     # ENOLCK, EOPNOTSUPP: no locks here
             _drop_unlockable(path, fd)
-            return None
+            return None, Claim()
         try:
             same = os.path.samestat(os.fstat(fd), os.stat(path, follow_symlinks=False))
         except OSError:
             same = False
         if same:
-            said = (f"pid {os.getpid()} on host {socket.gethostname()}, since "
-                    f"{time.strftime('%Y-%m-%d %H:%M:%S %Z')}")
+            left = os.pread(fd, 512, 0).decode("utf-8", "replace").strip()
+            if owner and _owner_of(left) == owner:
+                earlier = left         # left by this run's attempt of the job, killed
+            said = _said() + (f"\njob {owner}" if owner else "")
             with contextlib.suppress(OSError):   # (another user's claim left: read-only)
                 os.ftruncate(fd, 0)
-                os.write(fd, said.encode())
-            return fd
+                os.pwrite(fd, said.encode(), 0)
+            return fd, Claim(time.monotonic() - t0 if waited else 0.0, earlier)
         os.close(fd)
-    return None     # pragma: no cover (a claim made and removed 200 times meanwhile)
+        reopened += 1
+    return None, Claim()     # pragma: no cover (a claim made and removed 200 times meanwhile)
 
 
 def _drop_unlockable(path: Path, fd: int) -> None:
@@ -292,14 +405,27 @@ def _open_claim(path: Path, create: bool = True) -> int | None:
     return None
 
 
-def _busy(out, holder: str) -> OutputTaken:
-    """The error of a job whose output ``out`` another run's job holds (``holder``: its claim
-    file's words, its process, host and start; "" not yet written)."""
+def _busy(out, holder: str, part: str = "") -> OutputTaken:
+    """The error of a job whose output ``out`` (or that ``part`` of its work, ``chunks``)
+    another run's job holds (``holder``: its claim file's words, its process, host and start
+    on their first line; "" not yet written)."""
     o = Path(out)
-    return OutputTaken(f"{o} is being written by another run ("
+    holder = holder.splitlines()[0] if holder else ""
+    what = f"{o}: its {part} are being tracked" if part else f"{o} is being written"
+    return OutputTaken(f"{what} by another run ("
                        + (f"{holder}; " if holder else "")
                        + f"two runs into {o.parent} at once?): left to it, this run's result "
                        "not written; run the same command again once that run has ended")
+
+
+def _still_ours(out, holder: str, waited: float) -> BatchError:
+    """The error of a job whose output ``out`` this run's earlier attempt of the same job
+    (``holder``: its claim's words) still held after ``waited`` seconds."""
+    holder = holder.splitlines()[0] if holder else "its process"
+    return BatchError(f"{out} is still being written by this run's earlier attempt of the job "
+                      f"({holder}; Dask ran it again, taking its worker for lost) after "
+                      f"{waited:.0f} s: left to it; run the same command again once it has "
+                      "ended (a finished output is then kept)")
 
 
 def _frames_there(pattern) -> bool:

@@ -13,9 +13,11 @@ digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import time
+import uuid
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Callable
@@ -217,6 +219,9 @@ class _Collector:
             self.client.cancel([f for f in self.alive if not f.done()], force=True)
             self.write()
             raise
+        # the claims its jobs left for a retry of theirs (.ownership.claimed's owner): none
+        # runs now
+        O.remove_stale_claims(self.summary.parent)
         path = self.write()
         return BatchResult(tuple(self.rows[n] for n in self.names), path)
 
@@ -342,23 +347,52 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
     run = _TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, _planned(outs))
-    for job in todo:
-        run.submit(job)
-    return col.run(run.on_done)
+    try:
+        for job in todo:
+            run.submit(job)
+        return col.run(run.on_done)
+    finally:
+        run.held.close()
+
+
+def _owners(keys: dict) -> dict[str, str]:
+    """``{name: owner}`` of a run's jobs (:func:`.ownership.claimed`): the run, by a name of
+    its own, and the job's digest. A claim of the same owner is this run's other attempt of
+    the job: Dask's scheduler runs a task again when it takes its worker for lost, while the
+    first attempt may go on (before, the second failed "is being written by another run")."""
+    run = uuid.uuid4().hex[:12]
+    return {n: f"{run} {k}" for n, k in keys.items()}
 
 
 class _TrackSubmit:
     """The tasks of :func:`batch_track`: a clip in one task, or (``chunk``) its frames counted
-    first, then its chunks tracked in parallel (the first one first) and joined."""
+    first, then its chunks tracked in parallel (the first one first) and joined. The chunks
+    of a clip are claimed by this process, the client (:func:`.ownership.claimed`,
+    ``DIR/.NAME.npz.chunks.claim``), from before its count to its join's end: another run's
+    chunks of it fail at once, "its chunks are being tracked by another run" (before, two runs
+    of one batch at once both tracked every chunk, and one join's write failed). A chunk's
+    track goes to the join as a Dask result, no file: there is no chunk of another run to
+    take, nor one to be replaced under a join."""
 
     def __init__(self, client, col: _Collector, outs: dict, mf, options, chunk: int,
                  overlap: int, keys: dict, planned: dict) -> None:
         self.client, self.col, self.outs, self.mf = client, col, outs, mf
         self.options, self.chunk, self.overlap, self.keys = options, chunk, overlap, keys
         self.planned = planned   # what a job may replace (_planned): not another run's
+        self.owners = _owners(keys)
+        self.held = contextlib.ExitStack()     # the chunk claims, released at the run's end
+        self.claims: dict[str, contextlib.ExitStack] = {}
 
     def submit(self, job) -> None:
         if self.chunk:   # a clip of more than max_frames: the chunks of its first max_frames
+            claim = contextlib.ExitStack()
+            try:
+                claim.enter_context(O.claimed(self.outs[job.name], self.owners[job.name],
+                                              part="chunks"))
+            except O.OutputTaken as exc:
+                self.col.fail(job, exc, self.outs[job.name])
+                return
+            self.claims[job.name] = self.held.enter_context(claim)
             self.col.add(self.client.submit(J.count_frames, str(job.video), job.max_frames,
                                             pure=False), "count", job)
         else:
@@ -367,7 +401,7 @@ class _TrackSubmit:
     def _whole(self, job) -> None:
         self.col.add(self.client.submit(J.track_clip, job, str(self.outs[job.name]), self.mf,
                                         self.options, planned=self.planned[job.name],
-                                        pure=False), "clip", job)
+                                        owner=self.owners[job.name], pure=False), "clip", job)
 
     def _chunks(self, job, n_frames: int) -> None:
         out, mf, opt = str(self.outs[job.name]), self.mf, self.options
@@ -381,18 +415,27 @@ class _TrackSubmit:
                 for c in chunks[1:]]
         self.col.alive += [first] + rest
         self.col.add(submit(J.join_clip, job, out, mf, chunks, [first] + rest,
-                            planned=self.planned[job.name], pure=False), "clip", job)
+                            planned=self.planned[job.name], owner=self.owners[job.name],
+                            pure=False), "clip", job)
 
     def on_done(self, kind: str, job, fut) -> None:
         try:
             res = fut.result()
         except Exception as exc:  # noqa: BLE001 (any failure is this clip's row)
+            self._release(job)
             self.col.fail(job, exc, self.outs[job.name])
             return
         if kind == "count":
             self._chunks(job, int(res))
         else:
+            self._release(job)
             self.col.finish(job, dataclasses.replace(res, job=self.keys[job.name]))
+
+    def _release(self, job) -> None:
+        """Let go of the claim of the chunks of ``job``'s clip (its row is final)."""
+        claim = self.claims.pop(job.name, None)
+        if claim is not None:
+            claim.close()
 
 
 def _earlier_rows(out_dir: Path) -> list[Row]:
@@ -592,7 +635,7 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
     # a result kept without the matte asked for: the pair done again (its render gives both)
     done = {n: r for n, r in done.items() if not (r.ok and n in mattes and not r.matte)}
 
-    planned = _planned(outs)
+    planned, owners = _planned(outs), _owners(keys)
     # a matte beside no result (a render stopped between their commits; the result removed to
     # redo the pair): frames the job removes while still these (before: the pair failed)
     planned_mattes = {n: O.matte_identity(m) for n, m in mattes.items()}
@@ -601,7 +644,8 @@ def batch_transfer(jobs, out_dir, model, *, client, settings: dict, overwrite: b
         m = mattes.get(job.name)
         return client.submit(J.transfer_pair, job, str(outs[job.name]), mf, dict(settings),
                              None if m is None else str(m), planned=planned[job.name],
-                             planned_matte=planned_mattes.get(job.name, ""), pure=False)
+                             planned_matte=planned_mattes.get(job.name, ""),
+                             owner=owners[job.name], pure=False)
 
     return _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys)
 
@@ -690,10 +734,12 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
             _export_what_before(fmt, value_text(texture), neutral, model),
             _export_what_before(fmt, repr(texture), neutral, model)))
     planned = _planned(outs)   # a take written again (_without_unnamed_labels), --overwrite
+    owners = _owners(keys)
     return _simple(client, jobs, out_dir, outs, done, progress,
                    lambda job, mf: client.submit(J.export_one, job, fmt, str(outs[job.name]), mf,
                                                  texture, neutral, labels,
-                                                 planned=planned[job.name], pure=False),
+                                                 planned=planned[job.name],
+                                                 owner=owners[job.name], pure=False),
                    model, keys)
 
 

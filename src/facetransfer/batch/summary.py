@@ -10,7 +10,9 @@ column              meaning
 ``mean_confidence`` mean tracking confidence over the frames (empty if not known)
 ``status``          ``done``, ``skipped`` (already done by an earlier run), ``failed`` or
                     ``cancelled`` (the run was stopped before it finished)
-``error``           one line: why it failed
+``error``           one line: why it failed; of a done row, a note of what happened on the
+                    way (its output taken from the run's earlier attempt of the job, which
+                    Dask ran again), empty mostly
 ``output``          the output's path
 ``job``             a digest of what made the output (the job's input files by their
                     content, its labels and options, the model: ``v2:`` and 16 hex

@@ -1,0 +1,275 @@
+"""A batch job run twice by one run (Dask's scheduler takes the first attempt's worker for lost,
+its heartbeat missed, and runs the task again while that attempt may go on), and a clip's
+chunks under two runs at once: the retry waits for the first attempt's claim and takes the
+output it wrote (:func:`facetransfer.batch.ownership.earlier_output`); another run's chunks
+of a clip being tracked fail at once, none tracked twice."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import threading
+import types
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer.batch import jobs as J  # noqa: E402
+from facetransfer.batch import ownership as O  # noqa: E402
+from facetransfer.batch.manifest import BatchError, ClipJob, ExportJob, PairJob  # noqa: E402
+from facetransfer.io.atomic import write_bytes_atomic  # noqa: E402
+from facetransfer.track import Track  # noqa: E402
+from facetransfer.track.settings import TrackerSettings  # noqa: E402
+
+import test_batch  # noqa: E402
+from conftest import clip_with_points, still_track  # noqa: E402
+
+clips, inproc = test_batch.clips, test_batch.inproc
+_cli, _summary = test_batch._cli, test_batch._summary
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+OWNER = "run0001 v2:00112233aabbccdd"
+
+
+def _attempt(job, out, model, rows, **kw):
+    """A job's attempt on a thread of its own (a worker's), its row or error in ``rows``."""
+    def go():
+        try:
+            rows.append(J.track_clip(job, str(out), model, TrackerSettings(), **kw))
+        except Exception as exc:  # noqa: BLE001
+            rows.append(exc)
+    t = threading.Thread(target=go)
+    t.start()
+    return t
+
+
+def test_a_retry_of_the_run_s_own_job_waits_for_the_first_attempt_and_takes_its_track(
+        clips, quick_model, tmp_path, monkeypatch):
+    """Two attempts of one job of one run at once (a worker's threads): the second waits for
+    the first's claim, then takes the track it wrote, tracking nothing, its row saying so.
+    Before, it failed at once, "is being written by another run", though the first attempt
+    finished the output. A job of another run (another owner) is still refused at once."""
+    video = clips["a"][0]
+    job, out = ClipJob("a", str(video)), tmp_path / "a.npz"
+    go_on, calls, retry = threading.Event(), [], []
+
+    def tracked(*a, **k):            # the first attempt: the retry starts meanwhile
+        calls.append(1)
+        assert go_on.wait(60)
+        return still_track(quick_model, 7, source=str(video))
+
+    monkeypatch.setattr(J, "_track", tracked)
+    first_rows = []
+    first = _attempt(job, out, quick_model, first_rows, owner=OWNER)
+    while not calls and first.is_alive():
+        first.join(0.01)
+    assert calls, first_rows
+    other = []
+    _attempt(job, out, quick_model, other, owner="run0002 v2:00112233aabbccdd").join(30)
+    assert isinstance(other[0], O.OutputTaken) and "being written by another run" in \
+        str(other[0])
+    second = _attempt(job, out, quick_model, retry, owner=OWNER)
+    second.join(1.0)
+    assert second.is_alive() and not retry      # waiting, not failed
+    go_on.set()
+    first.join(30)
+    second.join(30)
+    row = retry[0]
+    assert not isinstance(row, Exception), row
+    assert row.status == "done" and row.frames == 7 and len(calls) == 1
+    assert row.error.startswith("note: this run's earlier attempt of the job (pid ")
+    assert "wrote the output: taken after waiting" in row.error
+    assert first_rows[0].status == "done" and first_rows[0].error == ""
+    assert Track.load(out).n_frames == 7
+
+
+def test_a_retry_started_after_the_first_attempt_ended_takes_its_output(
+        clips, quick_model, tmp_path, monkeypatch):
+    """The first attempt ended before its retry began (a worker without a nanny, not ended
+    when taken for lost): the claim it leaves says which file it wrote, and the retry takes
+    it. Before, the retry found an output there that the run had not found, "written by
+    another run since this run began". A job of another run still says so; the run's end
+    removes the claim left."""
+    video = clips["a"][0]
+    job, out = ClipJob("a", str(video)), tmp_path / "a.npz"
+    calls = []
+    monkeypatch.setattr(J, "_track", lambda *a, **k: calls.append(1) or still_track(
+        quick_model, 6, source=str(video)))
+    assert J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER).error == ""
+    row = J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER)
+    assert row.status == "done" and row.frames == 6 and len(calls) == 1
+    assert "wrote the output: taken" in row.error and "waiting" not in row.error
+    assert O.claim_path(out).exists()
+    with pytest.raises(O.OutputTaken, match="written by another run since this run began"):
+        J.track_clip(job, str(out), quick_model, TrackerSettings(), owner="run0002 x")
+    J.track_clip(job, str(out), quick_model, TrackerSettings(), True, owner=OWNER)
+    assert O.remove_stale_claims(tmp_path) == [O.claim_path(out)] and len(calls) == 2
+
+
+def test_a_retry_of_a_join_a_pair_or_an_export_takes_the_output_its_first_attempt_wrote(
+        clips, quick_model, arkit_model, make_arkit_track, tmp_path, monkeypatch):
+    """As a clip's track: a join, a pair's render and an export run again by their run (the
+    first attempt ended) take the output the first wrote, done once."""
+    from facetransfer import video_transfer
+    from facetransfer.batch import chunks
+
+    video, done = clips["a"][0], []
+    monkeypatch.setattr(chunks, "join_tracks", lambda *a: done.append("join") or still_track(
+        quick_model, 8, source=str(video)))
+
+    def render(sources, out, model, *, overwrite, matte=None, **kw):
+        done.append("pair")
+        write_bytes_atomic(out, Path(video).read_bytes(), overwrite=overwrite)
+        plan = types.SimpleNamespace(target_track=types.SimpleNamespace(confidence=np.ones(8)),
+                                     fps=25.0)
+        return types.SimpleNamespace(plan=plan, n_frames=8, matte=None)
+
+    monkeypatch.setattr(video_transfer, "transfer_video", render)
+    track = tmp_path / "k.npz"
+    make_arkit_track(arkit_model, 4)[0].save(track)
+    settings = {"texture": "frame", "blend": "poisson", "mouth": None, "align": "trim",
+                "max_frames": None, "track_method": "auto", "speed": "fast"}
+    runs = {"join": lambda: J.join_clip(ClipJob("a", str(video)), str(tmp_path / "a.npz"),
+                                        quick_model, [], [], owner=OWNER),
+            "pair": lambda: J.transfer_pair(
+                PairJob("p", video, {"expression_from": str(clips["b"][0])}),
+                str(tmp_path / "p.mp4"), None, dict(settings), owner=OWNER),
+            "export": lambda: J.export_one(ExportJob("k", track), "json",
+                                           str(tmp_path / "k.json"), owner=OWNER)}
+    for what, run in runs.items():
+        first = run()
+        out = Path(first.output)
+        made = O.output_identity(out)
+        row = run()
+        assert first.error == "" and row.status == "done" and row.frames == first.frames
+        assert "wrote the output: taken" in row.error and O.output_identity(out) == made
+    assert done == ["join", "pair"]
+
+
+def _holder(claim: Path, words: str):
+    """Another process holding ``claim`` with ``words`` until told (a line on its stdin:
+    words to add, then it ends) or killed."""
+    code = ("import fcntl, os, sys; fd = os.open(sys.argv[1], os.O_RDWR | os.O_CREAT); "
+            "fcntl.flock(fd, fcntl.LOCK_EX); os.ftruncate(fd, 0); "
+            "os.write(fd, sys.argv[2].encode()); "
+            "print('held', flush=True); more = sys.stdin.readline().strip(); "
+            "os.write(fd, ('\\n' + more).encode()) if more else None")
+    p = subprocess.Popen([sys.executable, "-c", code, str(claim), words],
+                         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+    assert p.stdout.readline() == "held\n"
+    return p
+
+
+def test_a_retry_waits_for_an_attempt_in_another_process_bounded(
+        clips, quick_model, tmp_path, monkeypatch):
+    """The first attempt in another worker process (its claim names the run and the job):
+    waited for; once it ends having written the output, taken; once killed without having
+    written it, the job is done again, the row saying so; held past the wait
+    (:data:`RETRY_WAIT`), the row fails saying that attempt still holds it."""
+    video = clips["a"][0]
+    job, out = ClipJob("a", str(video)), tmp_path / "a.npz"
+    claim, calls = O.claim_path(out), []
+    monkeypatch.setattr(J, "_track", lambda *a, **k: calls.append(1) or still_track(
+        quick_model, 8, source=str(video)))
+    words = f"pid 4242 on host render-7, since 20:00\njob {OWNER}"
+    # 1. it writes the output, says so and ends
+    p, rows = _holder(claim, words), []
+    try:
+        t = _attempt(job, out, quick_model, rows, owner=OWNER)
+        t.join(0.5)
+        assert t.is_alive() and not rows
+        still_track(quick_model, 5, source=str(video)).save(out)
+        p.stdin.write(f"done {O.output_identity(out)}\n")
+        p.stdin.flush()
+        t.join(30)
+    finally:
+        p.kill()
+        p.wait()
+    assert rows[0].status == "done" and rows[0].frames == 5 and not calls
+    assert "(pid 4242 on host render-7, since 20:00; Dask ran it again" in rows[0].error
+    # 2. killed before writing (a worker's nanny ends it): done again, planned the file there
+    planned = O.output_identity(out)
+    p, rows = _holder(claim, words), []
+    t = _attempt(job, out, quick_model, rows, owner=OWNER, planned=planned)
+    t.join(0.5)
+    p.kill()
+    p.wait()
+    t.join(30)
+    assert rows[0].status == "done" and rows[0].frames == 8 and len(calls) == 1
+    assert "ended without the output: done again after waiting" in rows[0].error
+    # 3. held past the wait: said, nothing written
+    monkeypatch.setattr(O, "RETRY_WAIT", 0.3)
+    kept, p = O.output_identity(out), _holder(claim, words)
+    try:
+        with pytest.raises(BatchError, match=r"still being written by this run's earlier "
+                                             r"attempt of the job \(pid 4242 on host render-7"):
+            J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER)
+    finally:
+        p.kill()
+        p.wait()
+    assert O.output_identity(out) == kept and len(calls) == 1
+
+
+def test_a_clip_s_chunks_another_run_is_tracking_are_not_tracked_again(
+        quick_model, quick_model_path, inproc, tmp_path, capsys, monkeypatch):
+    """Two runs of one ``batch track --chunk`` at once: the clip's chunks are claimed by the
+    first run's client until its join ends, so the other run's row of that clip fails at
+    once, naming the holder, and tracks none of its chunks; the first run's track is written
+    and no claim is left. Before, both tracked every chunk and one join failed."""
+    from facetransfer.cli.main import main
+
+    video, pts, _ = clip_with_points(quick_model, 20, 5, tmp_path, video="long.mp4",
+                                     points="p.json")
+    out = tmp_path / "out"
+    argv = [str(a) for a in ("batch", "track", video, "--out", out, "--chunk", 10,
+                             "--overlap", 2, "--model", quick_model_path, "--init", pts,
+                             "--passes", "1", "--workers", 1, "--no-progress")]
+    holding, other_done, codes, calls = threading.Event(), threading.Event(), {}, []
+    real = J._track
+
+    def tracked(*a, **k):
+        calls.append(threading.current_thread().name)
+        if not holding.is_set():         # the first run's first chunk: the other runs
+            holding.set()
+            assert other_done.wait(300)
+        return real(*a, **k)
+
+    monkeypatch.setattr(J, "_track", tracked)
+    this = threading.Thread(target=lambda: codes.update(this=main(argv)))
+    this.start()
+    try:
+        assert holding.wait(300)
+        n = len(calls)
+        codes["other"] = main(argv)
+        theirs, other_calls = _summary(out / "summary.csv"), len(calls) - n
+    finally:
+        other_done.set()
+        this.join(300)
+    assert codes == {"this": 0, "other": 1}
+    assert other_calls == 0
+    assert theirs["long"]["status"] == "failed" and theirs["long"]["job"] == "another-run"
+    assert theirs["long"]["error"].startswith(
+        f"{out / 'long.npz'}: its chunks are being tracked by another run (pid {os.getpid()}")
+    rows = _summary(out / "summary.csv")
+    assert rows["long"]["status"] == "done" and Track.load(out / "long.npz").n_frames == 20
+    assert not list(out.glob(".*.claim"))
+
+
+@pytest.mark.filterwarnings("ignore:Port 8787 is already in use")
+def test_the_embedded_cluster_keeps_the_model_on_every_worker():
+    """The model is scattered to every worker; Dask's active memory manager dropped the
+    copies no task waited for (every 2 s), leaving one: that worker lost (its heartbeat
+    missed), every clip left was cancelled, "its worker died, more than once", none run
+    again. The embedded cluster runs without it."""
+    from facetransfer.batch.cluster import open_client, scatter_model
+
+    with open_client(workers=2, processes=False) as client:
+        amm = client.run_on_scheduler(lambda dask_scheduler: dask_scheduler.extensions[
+            "amm"].running)
+        fut = scatter_model(client, bytes(1000))
+        assert not amm and len(client.who_has([fut])[fut.key]) == 2
