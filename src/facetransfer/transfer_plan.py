@@ -287,10 +287,11 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
             sources.expression.video, model, len(pre_read[0]), frames=pre_read,
             method=options.track_method, options=planner.track_options, parallel=parallel,
             face=sources.expression.face, detect_every=planner.every, detect_eyes=True)
+    setup = _setup_ahead(model, options) if early is not None else None
     try:
         tt = planner.target_track(sources.target, frames, fps, alone=early is None)
-        regions = _regions_ahead(frames, tt, model, options, planner.timings) \
-            if early is not None else None
+        regions = _regions_ahead(frames, tt, model, options, planner.timings,
+                                 _made_ahead(setup)) if early is not None else None
     except BaseException as exc:
         if early is not None:
             early.cancel(grace=obtain.grace_for(exc))
@@ -324,7 +325,66 @@ def _planned(planner: "_Planner", inputs: "_Inputs", sources: TransferSources, m
     return _recombined_plan(inputs, sources, model, align)
 
 
-def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings: dict):
+#: The renderer's modules, which the forked tracker of the expression source does not need:
+#: imported by :func:`plan_sources` on a thread of their own once it has forked (SciPy's
+#: ndimage among them, 0.13-0.15 CPU-s), while this process tracks the target, rather than
+#: before the fork, which they delayed (:mod:`facetransfer.video_transfer` imports them where
+#: the frames are rendered).
+RENDER_MODULES = ("facetransfer.rewrite_clip", "facetransfer.rewrite")
+
+
+def _setup_ahead(model, options: RewriteOptions):
+    """On a daemon thread from now on (:class:`facetransfer.threads.Ahead`), once the
+    expression source's tracker is forked and while the target is tracked here: the
+    :data:`RENDER_MODULES` imported, and what the target's region textures take of the model
+    alone (:func:`_model_parts`), which they then find made (:func:`_regions_ahead`)."""
+    from .threads import Ahead
+
+    return Ahead(_render_setup, model, options, name="setup-ahead")
+
+
+def _render_setup(model, options: RewriteOptions):
+    import importlib
+
+    for name in RENDER_MODULES:
+        importlib.import_module(name)
+    return _model_parts(model, options)
+
+
+def _model_parts(model, options: RewriteOptions) -> tuple:
+    """``(topo, rig)`` of :func:`facetransfer.region_views.region_textures` with ``options``:
+    the model's :func:`facetransfer.topology.mesh_topology` (0.1 CPU-s for the default model:
+    its mean face) and, for the eye or jaw region of an ARKit model, its mean person's
+    expression rig (:func:`facetransfer.arkit.expression_rig`, 0.04-0.07 CPU-s); None where
+    the regions make none."""
+    from .arkit import expression_rig, is_arkit_model
+    from .region_views import region_modes
+    from .threads import one_blas_thread
+    from .topology import mesh_topology
+
+    eyes, jaw, _ = region_modes(options, options.texture != "constant")
+    with one_blas_thread():               # as the regions' own (the other core is the child's)
+        topo = mesh_topology(model)
+        rig = expression_rig(model, model.default_weights()) \
+            if (eyes or jaw) and is_arkit_model(model) else None
+    return topo, rig
+
+
+def _made_ahead(setup) -> tuple:
+    """:func:`_setup_ahead`'s ``(topo, rig)`` once made (waited for: no thread of it is left
+    at a later fork), ``(None, None)`` without it or where it failed (the regions then make
+    them, and say their error)."""
+    if setup is None:
+        return None, None
+    setup.wait()
+    try:
+        return setup.result()
+    except Exception:  # noqa: BLE001 - made again by the regions, which raise it there
+        return None, None
+
+
+def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings: dict,
+                   made: tuple = (None, None)):
     """The target's eye and jaw region textures for the render with ``options``
     (:func:`facetransfer.region_views.region_textures`), made on a thread of their own
     (:class:`facetransfer.threads.Ahead`) while this one waits for the expression source's
@@ -334,12 +394,14 @@ def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings
 
     if len(target_track.shot_starts):
         return None
-    return Ahead(_region_textures, frames, target_track, model, options, timings,
+    return Ahead(_region_textures, frames, target_track, model, options, timings, made,
                  name="regions-ahead")
 
 
-def _region_textures(frames, target_track, model, options: RewriteOptions, timings: dict):
-    """:func:`_regions_ahead`'s work, timed into ``timings["regions"]``."""
+def _region_textures(frames, target_track, model, options: RewriteOptions, timings: dict,
+                     made: tuple = (None, None)):
+    """:func:`_regions_ahead`'s work, timed into ``timings["regions"]``; ``made``: the
+    ``(topo, rig)`` of :func:`_model_parts`, or None for either not made."""
     from .region_views import region_textures
     from .threads import one_blas_thread
 
@@ -349,7 +411,8 @@ def _region_textures(frames, target_track, model, options: RewriteOptions, timin
     # BENCHMARKS.md, "Fortieth session")
     with one_blas_thread():
         regions = region_textures(frames, target_track, model, options, len(frames),
-                                  per_frame=options.texture != "constant")
+                                  per_frame=options.texture != "constant", topo=made[0],
+                                  rig=made[1])
     timings["regions"] = time.perf_counter() - t
     return regions
 
