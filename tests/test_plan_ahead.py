@@ -1,8 +1,9 @@
 """What a transfer makes of its render's set-up on a thread while the target is tracked
-(:func:`facetransfer.transfer_plan._setup_ahead`): the regions' model parts, as the regions
-would make them."""
+(:func:`facetransfer.transfer_plan._setup_ahead`): the regions' model parts and OpenCV's
+CIELAB tables, as the regions and the render would make them."""
 
 import numpy as np
+import pytest
 
 from facetransfer import transfer_plan as tp
 from facetransfer.rewrite_options import RewriteOptions
@@ -26,3 +27,21 @@ def test_the_model_parts_made_ahead_are_the_regions_own(arkit_model):
     assert tp._model_parts(arkit_model, RewriteOptions(eyes="target", jaw="frame"))[1] is None
     assert tp._made_ahead(None) == (None, None)
 
+
+@pytest.mark.parametrize("options, made", [
+    (RewriteOptions(), 1),
+    (RewriteOptions(lip_colour="source"), 0),
+    (RewriteOptions(mouth="function"), 0),
+])
+def test_the_lab_tables_are_made_ahead_where_the_render_converts(arkit_model, monkeypatch,
+                                                                 options, made):
+    """The lip colour's first CIELAB conversion (OpenCV's tables) is made ahead where the
+    render reads the target's lip colour against another clip's mouth frame, else not."""
+    import facetransfer.lip_colour as lc
+
+    if arkit_model.landmarks is None:
+        pytest.skip("a model without landmarks reads no lip colour")
+    calls = []
+    monkeypatch.setattr(lc, "rgb_to_lab", lambda rgb: calls.append(np.shape(rgb)))
+    tp._lab_tables(arkit_model, options)
+    assert calls == [(1, 3)] * made

@@ -348,7 +348,24 @@ def _render_setup(model, options: RewriteOptions):
 
     for name in RENDER_MODULES:
         importlib.import_module(name)
-    return _model_parts(model, options)
+    made = _model_parts(model, options)
+    _lab_tables(model, options)
+    return made
+
+
+def _lab_tables(model, options: RewriteOptions) -> None:
+    """OpenCV's tables of the CIELAB conversion that the lip colour reads with
+    (:func:`facetransfer.lip_colour.rgb_to_lab`; made on a process's first conversion,
+    0.05-0.09 s), made now where the render will convert: a mouth from another clip's frame
+    (an expression source is tracked) with the target's lip colour. No value changes."""
+    try:
+        mouth = resolve_mouth_mode(options.mouth, model, performance=False)
+    except RewriteError:                    # the render's to say
+        return
+    if mouth == "frame" and options.lip_colour == "target" and model.landmarks is not None:
+        from .lip_colour import rgb_to_lab
+
+        rgb_to_lab(np.zeros((1, 3)))
 
 
 def _model_parts(model, options: RewriteOptions) -> tuple:
@@ -422,9 +439,8 @@ def _render_ahead(plan: "TransferPlan", model, options: RewriteOptions) -> None:
     region textures are made on their thread (:func:`_regions_ahead`), where it leaves the
     interpreter's lock to them: the model's core contracted with the mouth source's identity
     for the render's meshes of it (:class:`facetransfer.frame_meshes.FrameMeshes`; kept by the
-    model, 0.1 s for the default model), and OpenCV's tables of the CIELAB conversion that the
-    lip colour reads with (:func:`facetransfer.lip_colour.rgb_to_lab`; made on a process's
-    first conversion, 0.05-0.09 s). Neither changes a value the render computes."""
+    model, 0.1 s for the default model). It changes no value the render computes. (OpenCV's
+    CIELAB tables, made here before, are made during the target's track: :func:`_lab_tables`.)"""
     from .frame_meshes import FrameMeshes
 
     try:
@@ -434,10 +450,6 @@ def _render_ahead(plan: "TransferPlan", model, options: RewriteOptions) -> None:
     if mouth != "frame" or plan.mouth_frames is plan.target_frames:
         return
     FrameMeshes(model, {"source": plan.mouth_track}, plan.n_frames).basis("source")
-    if options.lip_colour == "target" and model.landmarks is not None:
-        from .lip_colour import rgb_to_lab
-
-        rgb_to_lab(np.zeros((1, 3)))
 
 
 def _take_as_performance(sources: TransferSources, align, model) -> TransferSources:
