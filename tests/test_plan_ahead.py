@@ -45,3 +45,41 @@ def test_the_lab_tables_are_made_ahead_where_the_render_converts(arkit_model, mo
     monkeypatch.setattr(lc, "rgb_to_lab", lambda rgb: calls.append(np.shape(rgb)))
     tp._lab_tables(arkit_model, options)
     assert calls == [(1, 3)] * made
+
+
+def test_an_error_in_the_targets_track_leaves_no_set_up_thread_behind(monkeypatch):
+    """The target's track fails while the set-up thread still works: the child is cancelled
+    and the error raised once that thread has ended (nothing goes on behind the caller)."""
+    import time
+
+    from facetransfer.errors import VideoError
+    from facetransfer.track import obtain
+
+    frames = np.zeros((3, 8, 8, 3), np.uint8)
+    cancelled, made = [], []
+
+    class Early:
+        def cancel(self, grace):
+            cancelled.append(grace)
+
+    def slow_setup(model, options):
+        time.sleep(0.3)
+        return None, None
+
+    def setup_ahead(model, options):
+        from facetransfer.threads import Ahead
+
+        made.append(Ahead(slow_setup, model, options))
+        return made[-1]
+
+    def no_face(self, *a, **k):
+        raise VideoError("no face found in the target t.mp4")
+
+    monkeypatch.setattr(tp._Planner, "read_target",
+                        lambda self, sources, n: (frames, 25.0, (frames, 25.0)))
+    monkeypatch.setattr(obtain, "start_background_track", lambda *a, **k: Early())
+    monkeypatch.setattr(tp, "_setup_ahead", setup_ahead)
+    monkeypatch.setattr(tp._Planner, "target_track", no_face)
+    with pytest.raises(VideoError, match="no face"):
+        tp.plan_sources(tp.TransferSources.of("t.mp4", expression_from="s.mp4"), object())
+    assert len(cancelled) == 1 and made and made[0].done()

@@ -295,6 +295,8 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     except BaseException as exc:
         if early is not None:
             early.cancel(grace=obtain.grace_for(exc))
+        if setup is not None:    # ended (0.3 s at most) before the error leaves, as the regions'
+            setup.wait()
         raise
     inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings)
     if regions is None:
