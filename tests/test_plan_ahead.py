@@ -76,10 +76,49 @@ def test_an_error_in_the_targets_track_leaves_no_set_up_thread_behind(monkeypatc
         raise VideoError("no face found in the target t.mp4")
 
     monkeypatch.setattr(tp._Planner, "read_target",
-                        lambda self, sources, n: (frames, 25.0, (frames, 25.0)))
+                        lambda self, sources, n, meanwhile=None: (frames, 25.0, (frames, 25.0)))
     monkeypatch.setattr(obtain, "start_background_track", lambda *a, **k: Early())
     monkeypatch.setattr(tp, "_setup_ahead", setup_ahead)
     monkeypatch.setattr(tp._Planner, "target_track", no_face)
     with pytest.raises(VideoError, match="no face"):
         tp.plan_sources(tp.TransferSources.of("t.mp4", expression_from="s.mp4"), object())
     assert len(cancelled) == 1 and made and made[0].done()
+
+
+def test_the_forks_points_are_made_while_the_clips_decode(data_dir):
+    """``read_target``'s ``meanwhile`` runs while both clips decode (the reader here waits for
+    it: called after the decoding, the read would time out)."""
+    import threading
+
+    from facetransfer.errors import VideoError
+
+    clips = data_dir / "video"
+    called = threading.Event()
+
+    def reader(path, max_frames=None):
+        if not called.wait(10):
+            raise VideoError(f"{path}: read before meanwhile was called")
+        return np.zeros((4, 8, 8, 3), np.uint8), 25.0
+
+    planner = tp._Planner(object(), "auto", None, None, {"read": 0.0, "track": 0.0}, reader)
+    sources = tp.TransferSources.of(clips / "driving_d9.mp4",
+                                    expression_from=clips / "driving_d6.mp4")
+    frames, fps, pre_read = planner.read_target(sources, 4, called.set)
+    assert called.is_set() and len(frames) == 4 and pre_read is not None
+
+
+def test_the_forks_points_are_made_where_a_source_is_to_be_tracked(monkeypatch):
+    import facetransfer.track.capture as capture
+
+    made = []
+    monkeypatch.setattr(capture, "prepare_points", lambda model: made.append(model))
+    of = tp.TransferSources.of
+    assert tp._before_fork(of("t.mp4"), "m", RewriteOptions(), None) is None
+    assert tp._before_fork(of("t.mp4", expression_from="s.mp4", expression_track="s.npz"), "m",
+                           RewriteOptions(), None) is None
+    assert tp._before_fork(of("t.mp4", expression_from="s.mp4"), "m", RewriteOptions(),
+                           False) is None
+    tp._before_fork(of("t.mp4", expression_from="s.mp4"), "m", RewriteOptions(), None)()
+    tp._before_fork(of("t.mp4", expression_from="s.mp4"), "m",
+                    RewriteOptions(track_method="flow"), None)()
+    assert made == ["m"]

@@ -8,9 +8,11 @@ everything the render needs, before any frame is rendered.
   :class:`TransferPlan`: reading (:func:`facetransfer.io.video.read_video`; the target and the
   expression source decoded at the same time), tracking
   (:func:`facetransfer.track.obtain.obtain_track`; the expression source in a forked process
-  while the target is tracked here, and the target's eye and jaw regions made for the render
-  meanwhile), then recombining (:func:`facetransfer.transfer.recombine`, Fig. 1) or taking a
-  ready performance (a track, or a Live Link Face take: :mod:`facetransfer.take`);
+  while the target is tracked here, the renderer's modules imported and the model's parts of
+  the regions made on a thread meanwhile, and the target's eye and jaw regions made for the
+  render while the source's track is awaited), then recombining
+  (:func:`facetransfer.transfer.recombine`, Fig. 1) or taking a ready performance (a track,
+  or a Live Link Face take: :mod:`facetransfer.take`);
 * where the mouth's texture comes from: the source of the mouth's motion (visemes, else
   expressions) resampled to the new timeline, the target itself without one, and for a ready
   performance the target's frame whose expression is nearest
@@ -278,7 +280,8 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     planner = _Planner(model, options.track_method, track_options(options.speed),
                        progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video,
                        DETECT_EVERY[options.speed])
-    frames, fps, pre_read = planner.read_target(sources, max_frames)
+    frames, fps, pre_read = planner.read_target(sources, max_frames, _before_fork(
+        sources, model, options, parallel))
     # the expression source is tracked in a second (forked) process while this one tracks the
     # target; the child inherits the decoded frames (no second decoding, nothing pickled)
     early = None
@@ -325,6 +328,19 @@ def _planned(planner: "_Planner", inputs: "_Inputs", sources: TransferSources, m
     if sources.performance is not None:
         return _performance_plan(inputs, sources, model)
     return _recombined_plan(inputs, sources, model, align)
+
+
+def _before_fork(sources: TransferSources, model, options: RewriteOptions, parallel):
+    """What :func:`plan_sources` makes while the clips decode (its main thread waits for them
+    otherwise): what the fork of the expression source's tracker needs made of the model
+    (:func:`facetransfer.track.obtain.prepare_fork`, 0.1 CPU-s for the default model, which
+    came after the decoding), where that source is to be tracked; None otherwise. (Made for
+    nothing where the track cache holds both clips' tracks: the key needs the decoded count.)"""
+    import functools
+
+    if sources.expression is None or sources.expression.track is not None or parallel is False:
+        return None
+    return functools.partial(obtain.prepare_fork, model, options.track_method)
 
 
 #: The renderer's modules, which the forked tracker of the expression source does not need:
@@ -519,10 +535,12 @@ class _Planner:
     reader: Callable
     every: int = 1
 
-    def read_target(self, sources: TransferSources, max_frames):
+    def read_target(self, sources: TransferSources, max_frames,
+                    meanwhile: Callable[[], None] | None = None):
         """``(frames, fps, pre_read)``: the target's frames and, with an expression source,
         that source's ``(frames, fps)`` decoded at the same time on a second thread and cut to
-        the frames the target's timeline needs (else None)."""
+        the frames the target's timeline needs (else None); ``meanwhile``: called while they
+        decode, with an expression source."""
         from .io.prefetch import frames_covering, frames_to_cover
         from .io.video import video_info
 
@@ -540,6 +558,8 @@ class _Planner:
             ft = pool.submit(read_video, target, max_frames=max_frames)
             fs = pool.submit(read_video, expression_from,
                              max_frames=frames_to_cover(target, expression_from, max_frames))
+            if meanwhile is not None:
+                meanwhile()
             frames, fps = ft.result()
             sfr, sfps = fs.result()
         si = video_info(expression_from)
