@@ -362,6 +362,8 @@ def _setup_ahead(model, options: RewriteOptions):
 
 
 def _render_setup(model, options: RewriteOptions):
+    """:func:`_setup_ahead`'s work: the imports, the regions' model parts (returned: ``(topo,
+    rig)``, :func:`_model_parts`) and the CIELAB tables (:func:`_lab_tables`)."""
     import importlib
 
     for name in RENDER_MODULES:
