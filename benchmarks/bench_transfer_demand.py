@@ -10,7 +10,13 @@ in time by the load: compare the fractions, not the seconds). A thread waiting t
 it was preempted counts as demand (``sched_switch``'s ``prev_state`` R), one woken counts
 from its wakeup.
 
-    python benchmarks/bench_transfer_demand.py --out out/demand --window 0.25
+    python benchmarks/bench_transfer_demand.py --out out/demand --window 0.25 --rows
+    python benchmarks/bench_transfer_demand.py --out out/demand-ab --base-rev main --rounds 4
+
+With ``--base SRC`` or ``--base-rev REV`` the base tree and this one run in turn (the base
+first in odd rounds); each run's line gives the core-seconds short in the start, the render's
+set-up and the end (:func:`phases`), and the medians close the report. ``--rows``: every
+window's row as well.
 
 Writes ``OUT/transfer_demand.json`` (per run: wall, CPU seconds, core-seconds short of two,
 and per window the demand and each process's running threads) and
@@ -32,6 +38,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from _revision import add_base_options, base_src  # noqa: E402
 
 _SWITCH = re.compile(r"prev_pid=(\d+) prev_prio=\S+ prev_state=(\S+) ==> next_comm=.*? "
                      r"next_pid=(\d+)")
@@ -128,6 +136,28 @@ def summary(demand: np.ndarray, running: np.ndarray, per: dict, window: float,
             "windows": rows}
 
 
+def phases(demand: np.ndarray, per: dict, root: int, cores: int = 2) -> dict:
+    """Core-seconds short of ``cores`` in the three windows where the transfer runs one
+    thread: ``start``, up to the forked tracker's first run (the busiest process after
+    ``root``); ``setup``, from its last run to the first run of the first encoder (the
+    processes of 0.2 CPU-s or more besides those two: the parts' ffmpeg); ``end``, after the
+    last encoder's last run (the frame counts and the join). Zero where a process is missing."""
+    capped = np.minimum(demand, cores)
+    short = lambda a, b: round(float((cores - capped[a:b]).sum() * STEP), 3)  # noqa: E731
+    cpu = {p: c.sum() * STEP for p, c in per.items() if p != root}
+    busy = sorted(cpu, key=lambda p: -cpu[p])
+    if not busy:
+        return {"start": 0.0, "setup": 0.0, "end": 0.0}
+    ran = lambda p: np.flatnonzero(per[p] > 0)  # noqa: E731
+    tracker = ran(busy[0])
+    enc = [ran(p) for p in busy[1:] if cpu[p] >= 0.2]
+    out = {"start": short(0, tracker[0]), "setup": 0.0, "end": 0.0}
+    if enc:
+        out["setup"] = short(tracker[-1], min(e[0] for e in enc))
+        out["end"] = short(max(e[-1] for e in enc), len(capped))
+    return out
+
+
 def run_once(src: Path, folder: Path) -> dict:
     """Issue 13's command (``bench_transfer_e2e_ab.py``'s) with ``src`` first on the path,
     under ``perf sched record``; its :func:`summary` at a 1 ms step (windows added later)."""
@@ -149,8 +179,9 @@ def run_once(src: Path, folder: Path) -> dict:
     events, children, group = parse(script.stdout)
     script.wait()
     data.unlink(missing_ok=True)
-    ours = tree(children, int(pidfile.read_text()))
-    return curves(intervals(events, ours), group)
+    root = int(pidfile.read_text())
+    ours = tree(children, root)
+    return (*curves(intervals(events, ours), group), root)
 
 
 def plot(runs: list, path: Path) -> None:
@@ -176,24 +207,45 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="out/benchmarks")
     ap.add_argument("--rounds", type=int, default=1)
     ap.add_argument("--window", type=float, default=0.25, help="seconds a row")
+    ap.add_argument("--rows", action="store_true", help="print every window's row")
+    add_base_options(ap)
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    src = Path(__file__).resolve().parents[1] / "src"
-    runs = []
+    trees = {"new": Path(__file__).resolve().parents[1] / "src"}
+    base = base_src(args, "bench_demand_")
+    if base is not None:      # in turn, the base first in odd rounds
+        trees = {"base": base, **trees}
+    runs = {name: [] for name in trees}
     for r in range(args.rounds):
-        with tempfile.TemporaryDirectory(dir=out) as tmp:
-            _, demand, running, per = run_once(src, Path(tmp))
-        runs.append(summary(demand, running, per, args.window))
-        s = runs[-1]
-        print(f"run {r + 1}: {s['wall']:.2f} s, {s['cpu']:.2f} CPU-s, {s['short']:.2f} "
-              f"core-s short of 2 ({100 * s['short_fraction']:.1f} %)", flush=True)
-        for w in s["windows"]:
-            print(f"  {w['t']:7.2f}  demand {w['demand']:4.2f}  running {w['running']:4.2f}  "
-                  + "  ".join(f"{p}:{v:4.2f}" for p, v in w["processes"].items()))
-    (out / "transfer_demand.json").write_text(json.dumps({"runs": runs}, indent=1))
-    plot(runs, out / "transfer_demand.png")
+        order = list(trees) if r % 2 == 0 else list(trees)[::-1]
+        for name in order:
+            with tempfile.TemporaryDirectory(dir=out) as tmp:
+                _, demand, running, per, root = run_once(trees[name], Path(tmp))
+            s = summary(demand, running, per, args.window)
+            s["phases"] = phases(demand, per, root)
+            runs[name].append(s)
+            _print_run(f"{name} {r + 1}", s, args.rows)
+    for name, rs in runs.items():
+        med = {k: float(np.median([r[k] for r in rs])) for k in ("wall", "cpu", "short")}
+        ph = {k: float(np.median([r["phases"][k] for r in rs])) for k in ("start", "setup", "end")}
+        print(f"{name}: medians {med['wall']:.2f} s, {med['cpu']:.2f} CPU-s, "
+              f"{med['short']:.2f} core-s short (start {ph['start']:.2f}, set-up "
+              f"{ph['setup']:.2f}, end {ph['end']:.2f})")
+    (out / "transfer_demand.json").write_text(json.dumps(
+        {"trees": {k: str(v) for k, v in trees.items()}, "runs": runs}, indent=1))
+    plot([r for rs in runs.values() for r in rs], out / "transfer_demand.png")
     return 0
+
+
+def _print_run(label: str, s: dict, rows: bool) -> None:
+    ph = s["phases"]
+    print(f"{label}: {s['wall']:.2f} s, {s['cpu']:.2f} CPU-s, {s['short']:.2f} core-s short "
+          f"of 2 ({100 * s['short_fraction']:.1f} %; start {ph['start']:.2f}, set-up "
+          f"{ph['setup']:.2f}, end {ph['end']:.2f})", flush=True)
+    for w in s["windows"] if rows else ():
+        print(f"  {w['t']:7.2f}  demand {w['demand']:4.2f}  running {w['running']:4.2f}  "
+              + "  ".join(f"{p}:{v:4.2f}" for p, v in w["processes"].items()))
 
 
 if __name__ == "__main__":

@@ -68,3 +68,17 @@ def test_demand_counts_running_and_preempted_threads():
     assert [w["t"] for w in s["windows"]] == [0.0, 0.5, 1.0]
     assert s["windows"][0]["demand"] == pytest.approx(np.mean(np.minimum(
         demand[:500], 2)), abs=1e-3)
+
+
+def test_the_phases_are_the_windows_before_the_fork_between_the_tracks_and_the_render_and_after():
+    n = 1000
+    per = {1: np.ones(n), 2: np.zeros(n), 3: np.zeros(n), 4: np.zeros(n)}
+    per[2][100:600] = 1        # the forked tracker, 0.5 CPU-s
+    per[3][650:950] = 1        # an encoder, 0.3 CPU-s
+    per[4][10:20] = 1          # a probe, 0.01 CPU-s: not an encoder
+    demand = per[1] + per[2] + per[3] + per[4]
+    ph = bd.phases(demand, per, root=1)
+    assert ph["start"] == pytest.approx(0.1 - 0.01)   # 0-0.1 s at 1, the probe's 0.01 s at 2
+    assert ph["setup"] == pytest.approx(0.05)         # 0.6-0.65 s
+    assert ph["end"] == pytest.approx(0.05)           # 0.95-1.0 s
+    assert bd.phases(per[1], {1: per[1]}, root=1) == {"start": 0.0, "setup": 0.0, "end": 0.0}

@@ -44,3 +44,35 @@ def test_the_datasets_builders_load_on_first_use():
         assert "no_such_name" in str(exc)
     else:
         raise AssertionError("an unknown name must raise AttributeError")
+
+
+def test_the_transfer_reaches_its_fork_without_the_renderers_modules():
+    """What ``facetransfer transfer`` imports before it forks the expression source's tracker
+    leaves the renderer's modules (and SciPy's ndimage, 0.13-0.15 CPU-s, which the tracker
+    does not need) to the parent after the fork: they delayed the fork."""
+    seen = _imported(["facetransfer.cli.transfer", "facetransfer.video_transfer",
+                      "facetransfer.transfer_plan", "facetransfer.track.capture",
+                      "facetransfer.track.detect", "facetransfer.track.obtain",
+                      "facetransfer.io.prefetch"],
+                     ["scipy.ndimage", "facetransfer.composite", "facetransfer.rewrite",
+                      "facetransfer.rewrite_clip"])
+    assert not any(seen.values()), seen
+
+
+def test_the_plan_imports_the_renderers_modules_on_a_thread(arkit_model_path):
+    """:func:`facetransfer.transfer_plan._setup_ahead` (started once the tracker is forked)
+    imports every module of ``RENDER_MODULES`` on a thread of its own, and makes the model's
+    parts of the regions there."""
+    code = ("import sys, threading; from facetransfer import transfer_plan as tp\n"
+            "from facetransfer.rewrite_options import RewriteOptions\n"
+            "from facetransfer.model import load_model\n"
+            f"m = load_model({str(arkit_model_path)!r})\n"
+            "a = tp._setup_ahead(m, RewriteOptions())\n"
+            "print(a._thread.name != threading.current_thread().name)\n"
+            "topo, rig = tp._made_ahead(a); print(all(m in sys.modules for m in "
+            "tp.RENDER_MODULES), 'scipy.ndimage' in sys.modules, topo is not None, "
+            "rig is not None)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.split()
+    assert out == ["True"] * 5
+

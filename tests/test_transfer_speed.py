@@ -170,9 +170,9 @@ def test_the_regions_made_on_their_thread_beside_the_source_basis_and_their_erro
         clips, quick_model, monkeypatch):
     """While the forked source is awaited the target's regions are made on a thread of their
     own and here the source's clip basis, for the render's meshes of it (the same identity
-    rows the render's :class:`~facetransfer.frame_meshes.FrameMeshes` contracts), and a first
-    CIELAB conversion (OpenCV's tables, for the lip colour); an error of the regions' thread
-    reaches the caller."""
+    rows the render's :class:`~facetransfer.frame_meshes.FrameMeshes` contracts); a first
+    CIELAB conversion (OpenCV's tables, for the lip colour) is made on the set-up thread while
+    the target is tracked; an error of the regions' thread reaches the caller."""
     fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
     monkeypatch.setattr(obtain, "obtain_track", fake)
     seen, threads = [], []
@@ -204,7 +204,7 @@ def test_the_regions_made_on_their_thread_beside_the_source_basis_and_their_erro
     plan = tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
                             parallel=True)
     assert quick_model.landmarks is not None         # the lip colour's tables made here too
-    assert sorted(threads, key=str) == [("lab", "MainThread"), "regions-ahead"]
+    assert sorted(threads, key=str) == [("lab", "setup-ahead"), "regions-ahead"]
     assert plan.regions.target_track is plan.target_track
     mouth = plan.mouth_track.weights["identity"][:plan.n_frames]
     assert plan.mouth_frames is not plan.target_frames and len(seen) == 1

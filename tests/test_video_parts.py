@@ -281,3 +281,52 @@ def test_two_runs_writing_one_new_video_at_once_the_later_is_refused(small_parts
         direct.close()
     assert out.read_bytes() == b"the other run's video"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["c1", "p.mp4"]  # no temporary file
+
+
+def _counting(monkeypatch) -> list:
+    """The names of the files :func:`stored_frame_count` reads (a part's count, the joined
+    file's), in order."""
+    import facetransfer.io.video as video
+
+    real, names = video.stored_frame_count, []
+
+    def counted(path):
+        names.append(os.path.basename(path))
+        return real(path)
+
+    monkeypatch.setattr(video, "stored_frame_count", counted)
+    monkeypatch.setattr(vp, "stored_frame_count", counted)
+    return names
+
+
+def test_the_last_part_is_counted_in_the_joined_file_not_on_its_own(small_parts, tmp_path,
+                                                                    monkeypatch):
+    """Each full part is read back as it is finished, the joined file at the join; the last
+    part no longer on its own in between (one ffmpeg run in series at the transfer's end):
+    the joined file holds the frames listed only if it holds its own."""
+    names = _counting(monkeypatch)
+    w, _ = _write(tmp_path / "p", tmp_path / "out.mp4", _frames(12))
+    assert w.result.n_frames == 12
+    parts = [n for n in names if n.endswith(".mov")]
+    assert len(parts) == 2 and not any(n.startswith(".00000010.") for n in parts), names
+    assert len(names) == 3 and "out" in names[-1]
+
+
+def test_a_last_part_short_of_its_frames_is_refused_at_the_join(small_parts, tmp_path,
+                                                                monkeypatch):
+    """A last part that holds fewer frames than were written to it: the joined file is
+    refused (not the output), and the next run takes up the parts before it only."""
+    real = VideoWriter.write
+
+    def dropping(self, frame):
+        if self.n_frames == 1 and self.path.name == "00000010.mov":
+            self.n_frames += 1        # said written, never sent to ffmpeg
+            return
+        real(self, frame)
+
+    folder, out = tmp_path / "p", tmp_path / "out.mp4"
+    monkeypatch.setattr(VideoWriter, "write", dropping)
+    with pytest.raises(VideoError, match=r"its parts hold 12 frames, the joined file 11"):
+        _write(folder, out, _frames(12))
+    assert not out.exists()
+    assert [(p.start, p.frames) for p in vp.kept_parts(folder)] == [(0, 5), (5, 5)]

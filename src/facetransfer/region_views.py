@@ -282,12 +282,14 @@ def region_modes(opts, per_frame: bool = True) -> tuple:
 
 
 def region_textures(target_frames, target_track, model, opts, n: int, *, topo=None,
-                    per_frame: bool = True) -> RegionTextures:
+                    per_frame: bool = True, rig=None) -> RegionTextures:
     """The eye and jaw regions of a clip (:class:`RegionTextures`): the eye holes closed and the
     eye region lifted (``opts.eyes == "model"``, :func:`eye_texture_by_view`), the jaw region
     lifted for the final topology (``opts.jaw == "closed"`` with the per-frame face texture,
     :func:`jaw_texture_by_view`); one expression rig for both. ``topo``: the model's
-    :func:`facetransfer.topology.mesh_topology`, if at hand; ``n``: the frames rendered."""
+    :func:`facetransfer.topology.mesh_topology`, if at hand; ``rig``: that rig, the model's
+    mean person's (:func:`facetransfer.arkit.expression_rig` of its default weights), if at
+    hand (an ARKit model's); ``n``: the frames rendered."""
     from .arkit import expression_rig, is_arkit_model
     from .topology import mesh_topology
 
@@ -297,7 +299,8 @@ def region_textures(target_frames, target_track, model, opts, n: int, *, topo=No
     eyes, jaw, _ = modes
     if target_track.lost[:n].all() or not (eyes or jaw):
         return out
-    rig = expression_rig(model, model.default_weights()) if is_arkit_model(model) else None
+    if rig is None and is_arkit_model(model):
+        rig = expression_rig(model, model.default_weights())
     closed, eye_tex = open_topo, None
     if eyes:
         closed, eye_tex = eye_texture_by_view(target_frames, target_track, model, open_topo,

@@ -8,9 +8,11 @@ everything the render needs, before any frame is rendered.
   :class:`TransferPlan`: reading (:func:`facetransfer.io.video.read_video`; the target and the
   expression source decoded at the same time), tracking
   (:func:`facetransfer.track.obtain.obtain_track`; the expression source in a forked process
-  while the target is tracked here, and the target's eye and jaw regions made for the render
-  meanwhile), then recombining (:func:`facetransfer.transfer.recombine`, Fig. 1) or taking a
-  ready performance (a track, or a Live Link Face take: :mod:`facetransfer.take`);
+  while the target is tracked here, the renderer's modules imported and the model's parts of
+  the regions made on a thread meanwhile, and the target's eye and jaw regions made for the
+  render while the source's track is awaited), then recombining
+  (:func:`facetransfer.transfer.recombine`, Fig. 1) or taking a ready performance (a track,
+  or a Live Link Face take: :mod:`facetransfer.take`);
 * where the mouth's texture comes from: the source of the mouth's motion (visemes, else
   expressions) resampled to the new timeline, the target itself without one, and for a ready
   performance the target's frame whose expression is nearest
@@ -278,7 +280,8 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
     planner = _Planner(model, options.track_method, track_options(options.speed),
                        progress_factory, {"read": 0.0, "track": 0.0}, reader or read_video,
                        DETECT_EVERY[options.speed])
-    frames, fps, pre_read = planner.read_target(sources, max_frames)
+    frames, fps, pre_read = planner.read_target(sources, max_frames, _before_fork(
+        sources, model, options, parallel))
     # the expression source is tracked in a second (forked) process while this one tracks the
     # target; the child inherits the decoded frames (no second decoding, nothing pickled)
     early = None
@@ -287,13 +290,16 @@ def plan_sources(sources: TransferSources, model, *, options: RewriteOptions | N
             sources.expression.video, model, len(pre_read[0]), frames=pre_read,
             method=options.track_method, options=planner.track_options, parallel=parallel,
             face=sources.expression.face, detect_every=planner.every, detect_eyes=True)
+    setup = _setup_ahead(model, options) if early is not None else None
     try:
         tt = planner.target_track(sources.target, frames, fps, alone=early is None)
-        regions = _regions_ahead(frames, tt, model, options, planner.timings) \
-            if early is not None else None
+        regions = _regions_ahead(frames, tt, model, options, planner.timings,
+                                 _made_ahead(setup)) if early is not None else None
     except BaseException as exc:
         if early is not None:
             early.cancel(grace=obtain.grace_for(exc))
+        if setup is not None:    # ended (0.3 s at most) before the error leaves, as the regions'
+            setup.wait()
         raise
     inputs = _Inputs(frames, float(fps), {"target": tt}, {}, planner.timings)
     if regions is None:
@@ -324,7 +330,98 @@ def _planned(planner: "_Planner", inputs: "_Inputs", sources: TransferSources, m
     return _recombined_plan(inputs, sources, model, align)
 
 
-def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings: dict):
+def _before_fork(sources: TransferSources, model, options: RewriteOptions, parallel):
+    """What :func:`plan_sources` makes while the clips decode (its main thread waits for them
+    otherwise): what the fork of the expression source's tracker needs made of the model
+    (:func:`facetransfer.track.obtain.prepare_fork`, 0.1 CPU-s for the default model, which
+    came after the decoding), where that source is to be tracked; None otherwise. (Made for
+    nothing where the track cache holds both clips' tracks: the key needs the decoded count.)"""
+    import functools
+
+    if sources.expression is None or sources.expression.track is not None or parallel is False:
+        return None
+    return functools.partial(obtain.prepare_fork, model, options.track_method)
+
+
+#: The renderer's modules, which the forked tracker of the expression source does not need:
+#: imported by :func:`plan_sources` on a thread of their own once it has forked (SciPy's
+#: ndimage among them, 0.13-0.15 CPU-s), while this process tracks the target, rather than
+#: before the fork, which they delayed (:mod:`facetransfer.video_transfer` imports them where
+#: the frames are rendered).
+RENDER_MODULES = ("facetransfer.rewrite_clip", "facetransfer.rewrite")
+
+
+def _setup_ahead(model, options: RewriteOptions):
+    """On a daemon thread from now on (:class:`facetransfer.threads.Ahead`), once the
+    expression source's tracker is forked and while the target is tracked here: the
+    :data:`RENDER_MODULES` imported, and what the target's region textures take of the model
+    alone (:func:`_model_parts`), which they then find made (:func:`_regions_ahead`)."""
+    from .threads import Ahead
+
+    return Ahead(_render_setup, model, options, name="setup-ahead")
+
+
+def _render_setup(model, options: RewriteOptions):
+    """:func:`_setup_ahead`'s work: the imports, the regions' model parts (returned: ``(topo,
+    rig)``, :func:`_model_parts`) and the CIELAB tables (:func:`_lab_tables`)."""
+    import importlib
+
+    for name in RENDER_MODULES:
+        importlib.import_module(name)
+    made = _model_parts(model, options)
+    _lab_tables(model, options)
+    return made
+
+
+def _lab_tables(model, options: RewriteOptions) -> None:
+    """OpenCV's tables of the CIELAB conversion that the lip colour reads with
+    (:func:`facetransfer.lip_colour.rgb_to_lab`; made on a process's first conversion,
+    0.05-0.09 s), made now where the render will convert: a mouth from another clip's frame
+    (an expression source is tracked) with the target's lip colour. No value changes."""
+    try:
+        mouth = resolve_mouth_mode(options.mouth, model, performance=False)
+    except RewriteError:                    # the render's to say
+        return
+    if mouth == "frame" and options.lip_colour == "target" and model.landmarks is not None:
+        from .lip_colour import rgb_to_lab
+
+        rgb_to_lab(np.zeros((1, 3)))
+
+
+def _model_parts(model, options: RewriteOptions) -> tuple:
+    """``(topo, rig)`` of :func:`facetransfer.region_views.region_textures` with ``options``:
+    the model's :func:`facetransfer.topology.mesh_topology` (0.1 CPU-s for the default model:
+    its mean face) and, for the eye or jaw region of an ARKit model, its mean person's
+    expression rig (:func:`facetransfer.arkit.expression_rig`, 0.04-0.07 CPU-s); None where
+    the regions make none."""
+    from .arkit import expression_rig, is_arkit_model
+    from .region_views import region_modes
+    from .threads import one_blas_thread
+    from .topology import mesh_topology
+
+    eyes, jaw, _ = region_modes(options, options.texture != "constant")
+    with one_blas_thread():               # as the regions' own (the other core is the child's)
+        topo = mesh_topology(model)
+        rig = expression_rig(model, model.default_weights()) \
+            if (eyes or jaw) and is_arkit_model(model) else None
+    return topo, rig
+
+
+def _made_ahead(setup) -> tuple:
+    """:func:`_setup_ahead`'s ``(topo, rig)`` once made (waited for: no thread of it is left
+    at a later fork), ``(None, None)`` without it or where it failed (the regions then make
+    them, and say their error)."""
+    if setup is None:
+        return None, None
+    setup.wait()
+    try:
+        return setup.result()
+    except Exception:  # noqa: BLE001 - made again by the regions, which raise it there
+        return None, None
+
+
+def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings: dict,
+                   made: tuple = (None, None)):
     """The target's eye and jaw region textures for the render with ``options``
     (:func:`facetransfer.region_views.region_textures`), made on a thread of their own
     (:class:`facetransfer.threads.Ahead`) while this one waits for the expression source's
@@ -334,12 +431,14 @@ def _regions_ahead(frames, target_track, model, options: RewriteOptions, timings
 
     if len(target_track.shot_starts):
         return None
-    return Ahead(_region_textures, frames, target_track, model, options, timings,
+    return Ahead(_region_textures, frames, target_track, model, options, timings, made,
                  name="regions-ahead")
 
 
-def _region_textures(frames, target_track, model, options: RewriteOptions, timings: dict):
-    """:func:`_regions_ahead`'s work, timed into ``timings["regions"]``."""
+def _region_textures(frames, target_track, model, options: RewriteOptions, timings: dict,
+                     made: tuple = (None, None)):
+    """:func:`_regions_ahead`'s work, timed into ``timings["regions"]``; ``made``: the
+    ``(topo, rig)`` of :func:`_model_parts`, or None for either not made."""
     from .region_views import region_textures
     from .threads import one_blas_thread
 
@@ -349,7 +448,8 @@ def _region_textures(frames, target_track, model, options: RewriteOptions, timin
     # BENCHMARKS.md, "Fortieth session")
     with one_blas_thread():
         regions = region_textures(frames, target_track, model, options, len(frames),
-                                  per_frame=options.texture != "constant")
+                                  per_frame=options.texture != "constant", topo=made[0],
+                                  rig=made[1])
     timings["regions"] = time.perf_counter() - t
     return regions
 
@@ -359,9 +459,8 @@ def _render_ahead(plan: "TransferPlan", model, options: RewriteOptions) -> None:
     region textures are made on their thread (:func:`_regions_ahead`), where it leaves the
     interpreter's lock to them: the model's core contracted with the mouth source's identity
     for the render's meshes of it (:class:`facetransfer.frame_meshes.FrameMeshes`; kept by the
-    model, 0.1 s for the default model), and OpenCV's tables of the CIELAB conversion that the
-    lip colour reads with (:func:`facetransfer.lip_colour.rgb_to_lab`; made on a process's
-    first conversion, 0.05-0.09 s). Neither changes a value the render computes."""
+    model, 0.1 s for the default model). It changes no value the render computes. (OpenCV's
+    CIELAB tables, made here before, are made during the target's track: :func:`_lab_tables`.)"""
     from .frame_meshes import FrameMeshes
 
     try:
@@ -371,10 +470,6 @@ def _render_ahead(plan: "TransferPlan", model, options: RewriteOptions) -> None:
     if mouth != "frame" or plan.mouth_frames is plan.target_frames:
         return
     FrameMeshes(model, {"source": plan.mouth_track}, plan.n_frames).basis("source")
-    if options.lip_colour == "target" and model.landmarks is not None:
-        from .lip_colour import rgb_to_lab
-
-        rgb_to_lab(np.zeros((1, 3)))
 
 
 def _take_as_performance(sources: TransferSources, align, model) -> TransferSources:
@@ -442,10 +537,12 @@ class _Planner:
     reader: Callable
     every: int = 1
 
-    def read_target(self, sources: TransferSources, max_frames):
+    def read_target(self, sources: TransferSources, max_frames,
+                    meanwhile: Callable[[], None] | None = None):
         """``(frames, fps, pre_read)``: the target's frames and, with an expression source,
         that source's ``(frames, fps)`` decoded at the same time on a second thread and cut to
-        the frames the target's timeline needs (else None)."""
+        the frames the target's timeline needs (else None); ``meanwhile``: called while they
+        decode, with an expression source."""
         from .io.prefetch import frames_covering, frames_to_cover
         from .io.video import video_info
 
@@ -463,6 +560,8 @@ class _Planner:
             ft = pool.submit(read_video, target, max_frames=max_frames)
             fs = pool.submit(read_video, expression_from,
                              max_frames=frames_to_cover(target, expression_from, max_frames))
+            if meanwhile is not None:
+                meanwhile()
             frames, fps = ft.result()
             sfr, sfps = fs.result()
         si = video_info(expression_from)

@@ -16,6 +16,11 @@ and :class:`~facetransfer.transfer_plan.TransferSources` are importable from her
 
 The writer goes through the render cache (:mod:`facetransfer.render_cache`): an interrupted
 render continues where it stopped (as the puppet's of :mod:`facetransfer.puppet_video`).
+
+The renderer's modules (:data:`facetransfer.transfer_plan.RENDER_MODULES`: SciPy's ndimage
+among them) are imported where the frames are rendered, not with this module: a transfer
+imports this one before it forks the expression source's tracker, which needs none of them
+(:func:`facetransfer.transfer_plan.plan_sources` imports them on a thread after the fork).
 """
 
 from __future__ import annotations
@@ -34,8 +39,6 @@ from .errors import RewriteError
 from .io.ahead import ordered_ahead
 from .io.plate_output import plate_output
 from .io.video_like import like_video
-from .rewrite import paste_image
-from .rewrite_clip import MouthSource, RenderRun, rewrite_frame_parts, rewrite_frames
 from .rewrite_options import RewriteOptions
 from .texture.face import MOUTH_MAX_FRAMES, MouthFunction, resolve_mouth_mode
 from .transfer_plan import TransferPlan, TransferSources, plan_sources, plan_transfer  # noqa: F401
@@ -281,6 +284,8 @@ class _Frames:
 
     def with_faces(self):
         """Yield ``(frame, whether a face was rendered)``."""
+        from .rewrite_clip import MouthSource, RenderRun, rewrite_frame_parts, rewrite_frames
+
         p = self.plan
         if self.start >= p.n_frames:
             return
@@ -320,6 +325,8 @@ class _Frames:
 
     def _composed(self, it):
         """``(i, frame, face)`` of each output frame, the rendering timed."""
+        from .rewrite import paste_image
+
         parts = self._parts
         for i in range(self.start, self.plan.n_frames):
             t = time.perf_counter()

@@ -687,12 +687,16 @@ class VideoWriter:
         what = f"cannot write video {self.path} (ffmpeg {exit_cause(rc)})"
         return ffmpeg_error(err, what) if err.strip() else VideoError(what)
 
-    def close(self, *, commit: bool = True, prefix: bool = False) -> WrittenVideo | None:
+    def close(self, *, commit: bool = True, prefix: bool = False,
+              counted: bool = True) -> WrittenVideo | None:
         """Finish the output (``commit``) or discard it; returns what was written.
 
         ``prefix``: a video whose last write may have been cut short (an interrupt in the
         middle of a frame) keeps the whole frames ffmpeg received, one fewer than written at
         most (``n_frames`` is then what the file holds; none: nothing written, None returned).
+        ``counted=False``: a video without audio is not read back to count its frames (one
+        ffmpeg run, 20-30 ms), for a caller that counts what it is copied into
+        (:meth:`facetransfer.io.video_parts.PartsWriter.close`'s last part).
 
         Raises
         ------
@@ -712,13 +716,13 @@ class VideoWriter:
                     return None
                 raise VideoError(f"no frames to write to {self.path}")
             self.result = self._commit_images() if self._tmpdir is not None else \
-                self._commit_video(prefix)
+                self._commit_video(prefix, counted)
             return self.result
         except BaseException:
             self._abort()
             raise
 
-    def _commit_video(self, prefix: bool = False) -> WrittenVideo | None:
+    def _commit_video(self, prefix: bool = False, counted: bool = True) -> WrittenVideo | None:
         proc = self._proc
         with contextlib.suppress(OSError):
             proc.stdin.close()
@@ -738,7 +742,7 @@ class VideoWriter:
             audio = True
         else:
             audio = self.audio_from is not None and self._mux()
-            if not audio:
+            if not audio and counted:
                 self._check_count()
         atomic, self._atomic = self._atomic, None
         atomic.__exit__(None, None, None)  # rename into place

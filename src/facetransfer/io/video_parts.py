@@ -238,9 +238,10 @@ class PartsWriter:
                                           name="finish-part", daemon=True)
         self._finisher.start()
 
-    def _finish(self, w: VideoWriter, start: int, marks: list, prefix: bool) -> None:
+    def _finish(self, w: VideoWriter, start: int, marks: list, prefix: bool,
+                counted: bool = True) -> None:
         try:
-            done = w.close(prefix=prefix)
+            done = w.close(prefix=prefix, counted=counted)
             if done is not None:
                 self.parts.append(Part(start, done.n_frames, sum(marks[:done.n_frames]),
                                        done.path.name))
@@ -257,11 +258,11 @@ class PartsWriter:
         if err is not None:
             raise err
 
-    def _finish_current(self, *, prefix: bool) -> None:
+    def _finish_current(self, *, prefix: bool, counted: bool = True) -> None:
         self._wait()
         w, self._writer = self._writer, None
         if w is not None:
-            self._finish(w, self._part_start, self._marks, prefix)
+            self._finish(w, self._part_start, self._marks, prefix, counted)
             self._marks = []
             self._wait()
 
@@ -275,8 +276,11 @@ class PartsWriter:
             if not commit:
                 self._keep()
                 return None
+            # the last part is not read back on its own: the joined file is, and holds the
+            # frames listed only if it does (every part before it was counted when finished,
+            # or by kept_parts when taken up); a run kept for later counts it there (verify)
             with self._in_the_cache():
-                self._finish_current(prefix=False)
+                self._finish_current(prefix=False, counted=False)
             if self.done != self.n_frames:
                 raise VideoError(f"{self.output.path}: {self.done} frames were written, not "
                                  f"{self.n_frames}")

@@ -512,6 +512,19 @@ def _prepare_child(video, model, n: int, method: str, depends: tuple) -> None:
     prepare_points(model)
 
 
+def prepare_fork(model, method: str) -> None:
+    """What :func:`start_background_track` makes of ``model`` before it forks a child tracking
+    with ``method`` (the capture's tracked points, :func:`_prepare_child`), made now: by a
+    caller whose main thread would otherwise wait, for the clips' decoding
+    (:func:`facetransfer.transfer_plan.plan_sources`). The points are kept
+    (:func:`facetransfer.track.capture_points.sampler`): the fork finds them made, and this
+    process's own capture too. Nothing for the optical flow or the landmarks."""
+    if method in ("auto", "capture"):
+        from .capture import prepare_points
+
+        prepare_points(model)
+
+
 def start_background_track(video, model, max_frames: int, *, method: str, options,
                             parallel: bool | None, frames=None,
                             face: str | None = None, detect_every: int = 1,
