@@ -82,6 +82,16 @@ class MeshTopology:
     mouth_faces: np.ndarray
     eye_loops: tuple
 
+    def __post_init__(self) -> None:
+        # the faces read-only and the topology's own: the render checks them against a frame's
+        # arrays several times a frame, and remembers their index range (render.raster.
+        # index_range) for an array nobody may change
+        F = self.faces
+        if isinstance(F, np.ndarray) and (F.flags.writeable or F.base is not None):
+            F = np.array(F, copy=True)
+            F.flags.writeable = False
+            object.__setattr__(self, "faces", F)
+
     @property
     def n_closed(self) -> int:
         """Vertices of the closed mesh."""
