@@ -9,7 +9,7 @@ import numpy as np
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from facetransfer import patch
+from facetransfer import lips, patch
 
 _SETTINGS = settings(max_examples=150, deadline=None, derandomize=True,
                      suppress_health_check=[HealthCheck.too_slow])
@@ -29,6 +29,16 @@ def _old_coarse(part, face, valid):
                  .astype(np.float32), 1.0)
     p1 = cv2.add(cv2.resize(part[:hk, :wk], size, interpolation=cv2.INTER_AREA), 1.0)
     return f1, p1, m
+
+
+def _old_displace_lips(vertices, warp, residual, rotation, scale, ratio=1.0):
+    V = np.array(vertices, dtype=np.float64, copy=True)
+    r = np.asarray(residual, np.float64)
+    dX = np.stack([r[:, 0], -r[:, 1]], axis=1) @ np.asarray(rotation, np.float64)[:2] \
+        / float(scale)
+    own = warp.vertices < warp.n_vertices
+    V[warp.vertices[own]] += ratio * (warp.influence[own] @ dX)
+    return V
 
 
 # ---- the tests ---------------------------------------------------------------------------
@@ -61,3 +71,20 @@ def test_coarse_equals_opencv_at_a_face_regions_size():
     valid = rng.random((285, 255)) < 0.6
     for a, b in zip(patch._coarse(part, face, valid), _old_coarse(part, face, valid)):
         assert np.array_equal(a, b)
+
+
+@_SETTINGS
+@given(st.integers(2, 30), st.integers(0, 2 ** 32 - 1), st.booleans())
+def test_displace_lips_equals_the_old_selection_per_frame(n, seed, centre):
+    rng = np.random.default_rng(seed)
+    k = int(rng.integers(1, n + 1))
+    verts = rng.choice(n, size=k, replace=False).astype(np.int64)
+    if centre:  # the closing fan's centre, index n, among the mouth's vertices
+        verts = np.append(verts, n)
+    warp = lips.LipWarp(verts, rng.normal(size=(len(verts), 20)), np.arange(20) % n, n)
+    V = rng.normal(size=(n, 3))
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    for _ in range(2):  # the second frame through the warp's remembered rows
+        res, ratio, s = rng.normal(size=(20, 2)), float(rng.uniform(0.5, 2)), rng.uniform(1, 9)
+        assert np.array_equal(lips.displace_lips(V, warp, res, q, s, ratio),
+                              _old_displace_lips(V, warp, res, q, s, ratio))
