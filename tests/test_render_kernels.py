@@ -578,3 +578,43 @@ def test_push_pull_points_read_no_texel_of_the_buffers_before_writing_it():
                        rx.astype(np.int64), vals, out)
     assert np.isfinite(out).all()
     np.testing.assert_array_equal(out, merge.push_pull_points(shape, ry, rx, vals))
+
+
+def test_index_range_remembers_only_frozen_arrays_of_their_own():
+    from facetransfer.render import raster
+    from facetransfer.render.shading import interpolate_vertex_values
+
+    F = np.array([[0, 1, 2], [2, 1, 3]], np.int64)
+    assert raster.index_range(F) == (0, 3)
+    F[1, 2] = 7  # a writeable array is scanned every call
+    assert raster.index_range(F) == (0, 7)
+    frozen = F.copy()
+    frozen.flags.writeable = False
+    assert raster.index_range(frozen) == (0, 7)
+    assert raster._RANGES[id(frozen)][1] == (0, 7)
+    view = frozen[:1]  # a view of it (its base could change): scanned
+    assert raster.index_range(view) == (0, 2) and id(view) not in raster._RANGES
+    # the checks still refuse faces past the values, through the remembered range
+    r = raster.rasterize(np.array([[0, 0, 0], [9, 0, 0], [0, 9, 0], [9, 9, 0.0]]),
+                         frozen[:1].copy(), _flat_camera(), (12, 12))
+    with pytest.raises(ValueError, match="values"):
+        interpolate_vertex_values(r, frozen, np.zeros(4))
+
+
+def _flat_camera():
+    from facetransfer.render import WeakPerspective
+
+    return WeakPerspective(1.0, np.eye(3), np.zeros(2))
+
+
+def test_mesh_topology_faces_are_read_only_and_its_own():
+    from facetransfer.topology import MeshTopology
+
+    F = np.array([[0, 1, 2]], np.int64)
+    empty = np.zeros(0, np.int64)
+    topo = MeshTopology(3, F, empty, empty, ())
+    assert not topo.faces.flags.writeable and topo.faces.base is None
+    F[0, 0] = 2  # the caller's array is not the topology's
+    assert topo.faces[0, 0] == 0
+    with pytest.raises(ValueError):
+        topo.faces[0, 0] = 1

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -82,6 +83,14 @@ class LipWarp:
     influence: np.ndarray
     landmarks: np.ndarray
     n_vertices: int
+
+    @cached_property
+    def own(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(vertices, influence)`` of the model's own vertices (not the closing fan's
+        centre): the rows :func:`displace_lips` moves, selected once per warp, not once a frame
+        (two fancy-index copies, ~0.1 ms a frame)."""
+        keep = self.vertices < self.n_vertices
+        return self.vertices[keep], self.influence[keep]
 
 
 @dataclass(frozen=True)
@@ -306,8 +315,8 @@ def displace_lips(vertices: np.ndarray, warp: LipWarp, residual: np.ndarray,
     r = np.asarray(residual, np.float64)
     dX = np.stack([r[:, 0], -r[:, 1]], axis=1) @ np.asarray(rotation, np.float64)[:2] \
         / float(scale)                                           # (20, 3) head frame
-    own = warp.vertices < warp.n_vertices                        # not the mouth's centre
-    V[warp.vertices[own]] += ratio * (warp.influence[own] @ dX)
+    rows, influence = warp.own                                   # not the mouth's centre
+    V[rows] += ratio * (influence @ dX)
     return V
 
 

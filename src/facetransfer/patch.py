@@ -161,7 +161,7 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
 #: clip of the field's gain.
 SHADING_SIGMA = 6.0
 SHADING_LIMIT = 0.25
-SHADING_STEP = 3
+SHADING_STEP = 3  # (:func:`_block_means` is written for 3 x 3 blocks)
 SHADING_RANGE = (0.8, 1.25)
 
 
@@ -182,20 +182,50 @@ def _coarse(part: np.ndarray, face: np.ndarray, valid: np.ndarray):
     """The two images and the compared pixels on a grid :data:`SHADING_STEP` times coarser:
     ``(f1, p1, m)``, the block means of ``face`` (h, w, 3) uint8 and ``part`` (h, w, 3)
     float32 plus 1 and the share of ``valid`` (h, w) bool pixels per block, all float32; None
-    for a box smaller than a block. Over whole blocks (OpenCV's fast path; the last
-    ``h % k`` rows and ``w % k`` columns do not count, and a field interpolated back over all
-    of them is stretched by less than a block)."""
+    for a box smaller than a block. Over whole blocks (the last ``h % k`` rows and ``w % k``
+    columns do not count, and a field interpolated back over all of them is stretched by less
+    than a block). The means are OpenCV's ``INTER_AREA`` resize's to the bit (the face's
+    rounded to uint8), in one kernel (:func:`_block_means`)."""
     k = SHADING_STEP
     h, w = valid.shape
     if h < k or w < k:
         return None
-    size, hk, wk = (w // k, h // k), h - h % k, w - w % k
-    m = cv2.resize(valid[:hk, :wk].view(np.uint8).astype(np.float32), size,
-                   interpolation=cv2.INTER_AREA)
-    f1 = cv2.add(cv2.resize(face[:hk, :wk], size, interpolation=cv2.INTER_AREA)
-                 .astype(np.float32), 1.0)
-    p1 = cv2.add(cv2.resize(part[:hk, :wk], size, interpolation=cv2.INTER_AREA), 1.0)
+    f1 = np.empty((h // k, w // k, 3), np.float32)
+    p1, m = np.empty_like(f1), np.empty((h // k, w // k), np.float32)
+    _block_means(part, face, valid.view(np.uint8), f1, p1, m)
     return f1, p1, m
+
+
+def _block_means_py(part, face, valid, f1, p1, m):  # pragma: no cover (numba)
+    """:func:`_coarse`'s means of the 3 x 3 blocks into ``f1``, ``p1`` (h', w', 3) and ``m``
+    (h', w') float32, as ``cv2.resize(..., INTER_AREA)`` computes them for a whole factor
+    (its ``resizeAreaFast``: a block's values summed in row-major order, four at a time
+    (``sum += ((a + b) + c) + d``; in int for uint8, in float32 for float32), times the
+    float32 ``1 / 9``; the uint8 mean rounded to even) and ``cv2.add(., 1.0)``: ``f1`` the
+    rounded mean of ``face`` (uint8) plus 1, ``p1`` the mean of ``part`` (float32) plus 1,
+    ``m`` the share of ``valid`` (uint8 0/1; its sums exact in any order)."""
+    scale, one = np.float32(1.0) / np.float32(9.0), np.float32(1.0)
+    for by in range(m.shape[0]):
+        y = 3 * by
+        for bx in range(m.shape[1]):
+            x = 3 * bx
+            c = (np.int64(valid[y, x]) + valid[y, x + 1] + valid[y, x + 2] + valid[y + 1, x]
+                 + valid[y + 1, x + 1] + valid[y + 1, x + 2] + valid[y + 2, x]
+                 + valid[y + 2, x + 1] + valid[y + 2, x + 2])
+            m[by, bx] = np.float32(c) * scale
+            for ch in range(3):
+                si = (np.int64(face[y, x, ch]) + face[y, x + 1, ch] + face[y, x + 2, ch]
+                      + face[y + 1, x, ch] + face[y + 1, x + 1, ch] + face[y + 1, x + 2, ch]
+                      + face[y + 2, x, ch] + face[y + 2, x + 1, ch] + face[y + 2, x + 2, ch])
+                f1[by, bx, ch] = np.float32(np.rint(np.float32(si) * scale)) + one
+                s = ((part[y, x, ch] + part[y, x + 1, ch]) + part[y, x + 2, ch]) \
+                    + part[y + 1, x, ch]
+                s = s + (((part[y + 1, x + 1, ch] + part[y + 1, x + 2, ch])
+                          + part[y + 2, x, ch]) + part[y + 2, x + 1, ch])
+                p1[by, bx, ch] = (s + part[y + 2, x + 2, ch]) * scale + one
+
+
+_block_means = _maybe_njit(_block_means_py)
 
 
 def _weighted_sums(f1: np.ndarray, p1: np.ndarray, m: np.ndarray, sigma: float):

@@ -67,7 +67,8 @@ class MeshTopology:
         Vertices of the model; the closed mesh appends one centre vertex of the mouth (index
         ``n_vertices``) when there is a mouth gap.
     faces : (F', 3) int64
-        Model faces followed by the mouth-closing fan.
+        Model faces followed by the mouth-closing fan; read-only, the topology's own array
+        (a writeable or borrowed one given is copied once).
     mouth_loop : (k,) int64
         The inner-lip boundary loop (empty when the mesh has no mouth gap).
     mouth_faces : (m,) int64
@@ -81,6 +82,16 @@ class MeshTopology:
     mouth_loop: np.ndarray
     mouth_faces: np.ndarray
     eye_loops: tuple
+
+    def __post_init__(self) -> None:
+        # the faces read-only and the topology's own: the render checks them against a frame's
+        # arrays several times a frame, and remembers their index range (render.raster.
+        # index_range) for an array nobody may change
+        F = self.faces
+        if isinstance(F, np.ndarray) and (F.flags.writeable or F.base is not None):
+            F = np.array(F, copy=True)
+            F.flags.writeable = False
+            object.__setattr__(self, "faces", F)
 
     @property
     def n_closed(self) -> int:
