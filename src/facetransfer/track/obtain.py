@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +23,8 @@ from .result import Track
 
 log = logging.getLogger(__name__)
 
-__all__ = ["capture_resuming", "landmarks_file", "landmark_track", "obtain_track",
-           "start_background_track"]
+__all__ = ["capture_resuming", "done_tracking", "landmarks_file", "landmark_track",
+           "obtain_track", "start_background_track"]
 
 
 def landmarks_file(video: str | os.PathLike) -> Path | None:
@@ -433,6 +434,18 @@ def _check_landmarks_fit(path: Path, P: np.ndarray, n: int, size) -> None:
     if len(P) < n:
         log.warning("MediaPipe landmarks file %s has %d frames of the %d read: the rest are "
                     "taken as frames without a face", path, len(P), n)
+
+
+def done_tracking() -> None:
+    """Release what this process keeps for tracking more clips, once a command's tracks are in
+    (a transfer's render, a puppet's, needs none of it): the capture's point samplers
+    (:func:`facetransfer.track.capture_points.release`, 24.5 MB for the default model, made
+    before the fork by :func:`_prepare_child`). A later track makes them again (0.1-0.15
+    CPU-s), as the first did: a second transfer in one process costs what the first did.
+    Nothing is imported for it (a command whose tracks were all read from files)."""
+    points = sys.modules.get(f"{__package__}.capture_points")
+    if points is not None:
+        points.release()
 
 
 # ---------------------------------------------------------------------------------------------
