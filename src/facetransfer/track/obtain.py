@@ -495,8 +495,9 @@ CTRL_C_GRACE = 3.0
 
 def grace_for(exc: BaseException) -> float:
     """The ``grace`` of :meth:`_BackgroundTrack.cancel` for a parent stopped by ``exc``:
-    :data:`CTRL_C_GRACE` for a Ctrl-C (which the terminal sent to the child as well), else 0
-    (a SIGTERM to the parent, an error: the child has nothing to end by itself)."""
+    :data:`CTRL_C_GRACE` for a Ctrl-C (which the terminal sent to the child as well, else
+    :meth:`_BackgroundTrack.cancel` sends it), else 0 (a SIGTERM to the parent, an error: the
+    child is not told to save, and is killed at once)."""
     return CTRL_C_GRACE if type(exc) is KeyboardInterrupt else 0.0
 
 
