@@ -75,7 +75,8 @@ def release() -> None:
     """Drop the samplers :func:`sampler` keeps (the default model's with MediaPipe's dense
     points is 24.5 MB, its core read at the points): a command whose tracks are in
     (:func:`facetransfer.track.obtain.done_tracking`) held it through its whole render. The
-    next fit makes it again (0.1-0.15 CPU-s), as the first did."""
+    next fit makes it again: 0.015-0.02 CPU-s in the same process (the first, 0.1-0.15 CPU-s,
+    also maps the core's pages from its file)."""
     _SAMPLERS.clear()
 
 

@@ -440,9 +440,10 @@ def done_tracking() -> None:
     """Release what this process keeps for tracking more clips, once a command's tracks are in
     (a transfer's render, a puppet's, needs none of it): the capture's point samplers
     (:func:`facetransfer.track.capture_points.release`, 24.5 MB for the default model, made
-    before the fork by :func:`_prepare_child`). A later track makes them again (0.1-0.15
-    CPU-s), as the first did: a second transfer in one process costs what the first did.
-    Nothing is imported for it (a command whose tracks were all read from files)."""
+    before the fork by :func:`_prepare_child`). A later track in this process makes them
+    again in 0.015-0.02 CPU-s (the first time, 0.1-0.15: the core's pages read from its file):
+    a second transfer pays no more than the first. Nothing is imported for it (a command whose
+    tracks were all read from files)."""
     points = sys.modules.get(f"{__package__}.capture_points")
     if points is not None:
         points.release()
