@@ -143,6 +143,7 @@ def kill_forked(pool, future, *, grace: float = 0.0, interrupt: bool = False) ->
     from concurrent.futures import wait
 
     future.cancel()
+    manager = getattr(pool, "_executor_manager_thread", None)     # shutdown() forgets it
     try:
         if grace > 0 and future.running():
             if interrupt:
@@ -151,6 +152,11 @@ def kill_forked(pool, future, *, grace: float = 0.0, interrupt: bool = False) ->
     finally:                        # killed all the same, also on a second Ctrl-C meanwhile
         _each_worker(pool, lambda proc: proc.kill())
         pool.shutdown(wait=False, cancel_futures=True)
+        if manager is not None and manager is not threading.current_thread():
+            # its pipes closed before this process exits: Python 3.11 wakes every pool's
+            # manager thread at the exit through a pipe such a thread may then be closing
+            # ("Exception ignored ... Bad file descriptor", 1 of 10 Ctrl-Cs to the parent)
+            manager.join(timeout=1.0)
 
 
 def _each_worker(pool, do) -> None:
