@@ -218,3 +218,20 @@ def test_a_childs_ctrl_c_that_python_ignored_is_taken_again(monkeypatch):
                 assert handler.state == "stopping"
                 send_later(signal.SIGINT)
                 time.sleep(2)
+
+
+def test_a_cancelled_childs_pool_has_closed_its_pipes_when_cancel_returns(tmp_path, monkeypatch):
+    """At the interpreter's exit Python 3.11 wakes every pool's manager thread through a pipe
+    that thread closes as it ends: a manager still ending then ("Exception ignored ... Bad
+    file descriptor") put a traceback after an interrupted command's one line. Cancelled, the
+    pool's manager thread has ended."""
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _saving_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    with _forked(ready):
+        manager = bg._pool._executor_manager_thread
+        bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))
+        assert not manager.is_alive()
