@@ -115,3 +115,123 @@ def test_a_child_that_got_the_ctrl_c_too_saves_its_progress_before_it_is_killed(
         assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
         assert obtain.grace_for(KeyboardInterrupt()) > 0
         assert obtain.grace_for(ValueError()) == 0     # not interrupted: nothing to save
+
+
+def test_a_ctrl_c_to_the_parent_alone_reaches_the_child_which_saves_its_progress(
+        tmp_path, monkeypatch):
+    """A SIGINT sent to the parent alone (``kill -INT PID``, a job runner's stop) reached no
+    child: the parent waited out the grace while the child tracked on, then killed it, its
+    progress lost. The parent now hands its child the interrupt, which saves and ends."""
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _saving_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    with _forked(ready) as pid:
+        bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))     # the child got nothing
+        assert Path(str(ready) + ".saved").exists(), "the child's progress was not saved"
+        assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
+
+
+def _slow_saving_job():
+    """:func:`_saving_job` whose save says when it begins, and takes a while."""
+    Path(os.environ[_READY]).write_text(str(os.getpid()))
+    try:
+        time.sleep(60)
+    except KeyboardInterrupt:
+        Path(os.environ[_READY] + ".saving").write_text("saving")
+        time.sleep(1.0)
+        Path(os.environ[_READY] + ".saved").write_text("saved")
+        raise
+
+
+def test_a_child_saving_on_the_terminals_ctrl_c_is_not_cut_short_by_its_parents(
+        tmp_path, monkeypatch):
+    """The terminal's Ctrl-C reaches the child too; the one its parent then sends it (as for a
+    Ctrl-C to the parent alone) must not raise inside its save (the child takes one)."""
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _slow_saving_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    with _forked(ready) as pid:
+        os.kill(pid, signal.SIGINT)                  # the terminal's Ctrl-C, in the child
+        assert _wait(Path(str(ready) + ".saving").exists, 10)
+        bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))     # sends it another
+        assert Path(str(ready) + ".saved").exists(), "the child's save was cut short"
+        assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
+
+
+@contextlib.contextmanager
+def _once_handler():
+    """A child's one-Ctrl-C handler (signals._InterruptOnce) set in this process for the
+    block."""
+    from facetransfer import signals
+
+    handler = signals._InterruptOnce(signal.getsignal(signal.SIGINT))
+    before = signal.signal(signal.SIGINT, handler)
+    try:
+        yield handler
+    finally:
+        signal.signal(signal.SIGINT, before)
+
+
+def test_a_childs_ctrl_c_before_its_job_is_raised_as_the_job_begins_and_taken_once():
+    from facetransfer.signals import interrupted_once
+
+    with _once_handler():
+        os.kill(os.getpid(), signal.SIGINT)          # before the job: noted, nothing raised
+        time.sleep(0.01)
+        with pytest.raises(KeyboardInterrupt):
+            with interrupted_once():
+                raise AssertionError("the job ran after its Ctrl-C")
+    saved = []
+    with _once_handler():
+        with pytest.raises(KeyboardInterrupt):
+            with interrupted_once():
+                try:
+                    os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(1)
+                except KeyboardInterrupt:
+                    os.kill(os.getpid(), signal.SIGINT)  # a second one: ignored in the save
+                    time.sleep(0.05)
+                    saved.append(True)
+                    raise
+        os.kill(os.getpid(), signal.SIGINT)          # after the job: ignored
+        time.sleep(0.01)
+    assert saved == [True]
+
+
+def test_a_childs_ctrl_c_that_python_ignored_is_taken_again(monkeypatch):
+    """An interrupt raised where Python drops it (a weak reference's callback) is sent again
+    (signals.send_later): the child's one Ctrl-C must be taken then, not ignored."""
+    from facetransfer.signals import interrupted_once, send_later
+
+    with _once_handler() as handler:
+        with pytest.raises(KeyboardInterrupt):
+            with interrupted_once():
+                with contextlib.suppress(KeyboardInterrupt):     # dropped, as in a callback
+                    os.kill(os.getpid(), signal.SIGINT)
+                    time.sleep(1)
+                assert handler.state == "stopping"
+                send_later(signal.SIGINT)
+                time.sleep(2)
+
+
+def test_a_cancelled_childs_pool_has_closed_its_pipes_when_cancel_returns(tmp_path, monkeypatch):
+    """At the interpreter's exit Python 3.11 wakes every pool's manager thread through a pipe
+    that thread closes as it ends: a manager still ending then ("Exception ignored ... Bad
+    file descriptor") put a traceback after an interrupted command's one line. Cancelled, the
+    pool's manager thread has ended."""
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _saving_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    with _forked(ready):
+        manager = bg._pool._executor_manager_thread
+        bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))
+        assert not manager.is_alive()

@@ -102,6 +102,28 @@ def _fake_obtain_track(tracks):
     return fake
 
 
+def test_the_capture_points_kept_for_tracking_are_released_once_the_tracks_are_in(
+        clips, quick_model, monkeypatch):
+    """The capture's point sampler (24.5 MB for the default model, made for the target's fit
+    and kept by track.capture_points for the next fit) was held by the transfer's parent
+    through its whole render; a plan's tracks in, it is released (obtain.done_tracking)."""
+    from facetransfer.track import capture_points
+
+    fake = _fake_obtain_track({"target": clips["target_track"], "source": clips["source_track"]})
+
+    def fitted(video, model, **kw):
+        capture_points.sampler(model)                   # kept, as the capture's fit does
+        return fake(video, model, **kw)
+
+    monkeypatch.setattr(obtain, "obtain_track", fitted)
+    monkeypatch.setattr(capture_points, "_SAMPLERS", {})
+    tp.plan_transfer(clips["target"], quick_model, expression_from=clips["source"],
+                     parallel=False)
+    assert capture_points._SAMPLERS == {}
+    capture_points.sampler(quick_model)                 # a later fit makes it again
+    assert len(capture_points._SAMPLERS) == 1
+
+
 @pytest.mark.skipif("fork" not in __import__("multiprocessing").get_all_start_methods(),
                     reason="needs fork")
 def test_background_tracking_equals_sequential(clips, quick_model, monkeypatch, tmp_path):

@@ -12,6 +12,12 @@ stops them by SIGKILL (:func:`kill_forked`): a signal that reaches a child in th
 first instants, while it still holds the noting handlers, is noted in the child and lost.
 An interrupt raised elsewhere where Python ignores exceptions (a weak reference's callback, a
 ``__del__``) is sent again (:func:`interrupts_not_ignored`).
+
+A forked child that saves its progress on a Ctrl-C (the background tracker) takes one
+interrupt only (:func:`deferred_signals`' ``interrupt_once``, :func:`interrupted_once`): its
+parent, interrupted alone (``kill -INT PID``, a job runner's stop), hands it the interrupt
+(:func:`kill_forked`'s ``interrupt``), and where the terminal's Ctrl-C reached the child
+already, that second one does not cut its save short.
 """
 
 from __future__ import annotations
@@ -22,12 +28,54 @@ import signal
 import sys
 import threading
 
-__all__ = ["deferred_signals", "interrupts_not_ignored", "kill_forked",
+__all__ = ["deferred_signals", "interrupted_once", "interrupts_not_ignored", "kill_forked",
            "in_import_lock_callback", "send_later"]
 
 #: The handlers replaced while a fork is under way (None: none), for the child to restore.
 _SAVED: dict | None = None
 _HOOKED = False
+#: Whether the child of the fork under way takes one Ctrl-C only (:class:`_InterruptOnce`).
+_ONCE = False
+
+
+class _InterruptOnce:
+    """A forked child's Ctrl-C handler (``deferred_signals(interrupt_once=True)``): before its
+    job begins (:func:`interrupted_once`) an interrupt is noted, and raised as the job begins;
+    while it runs, the first one is handed to the parent's ``handler`` (which raises), any
+    later one ignored (the job is saving its progress: a second ``KeyboardInterrupt`` there
+    lost it); after it, ignored (the child only hands back its result)."""
+
+    def __init__(self, handler) -> None:
+        self.handler, self.state, self.noted = handler, "before", False
+
+    def __call__(self, signum, frame) -> None:
+        if self.state == "before":
+            self.noted = True
+        elif self.state == "running":
+            try:
+                self.handler(signum, frame)         # raises, or sends the signal again later
+            except BaseException:
+                self.state = "stopping"
+                raise
+
+
+@contextlib.contextmanager
+def interrupted_once():
+    """Run a forked child's job (forked inside ``deferred_signals(interrupt_once=True)``) with
+    its Ctrl-C taken once (:class:`_InterruptOnce`): one noted before the job is raised here;
+    elsewhere (no such handler) the block runs as it is."""
+    handler = signal.getsignal(signal.SIGINT)
+    if not isinstance(handler, _InterruptOnce):
+        yield
+        return
+    handler.state = "running"
+    try:
+        if handler.noted:
+            handler.state = "stopping"
+            raise KeyboardInterrupt
+        yield
+    finally:
+        handler.state = "done"
 
 
 def _restore_in_child() -> None:
@@ -35,46 +83,54 @@ def _restore_in_child() -> None:
     to its default: a forked worker dies of it (a ``kill`` of the process group, the
     executor's own ``terminate`` of a broken pool; :mod:`facetransfer.cli.main` does the same
     for every fork)."""
-    global _SAVED
-    saved, _SAVED = _SAVED, None
+    global _SAVED, _ONCE
+    saved, _SAVED, once, _ONCE = _SAVED, None, _ONCE, False
     if saved is not None and threading.current_thread() is threading.main_thread():
         for signum, handler in saved.items():
+            if signum == signal.SIGINT and once:
+                handler = _InterruptOnce(handler)
             signal.signal(signum, signal.SIG_DFL if signum == signal.SIGTERM else handler)
 
 
 @contextlib.contextmanager
-def deferred_signals(signums=(signal.SIGINT, signal.SIGTERM)):
+def deferred_signals(signums=(signal.SIGINT, signal.SIGTERM), *, interrupt_once: bool = False):
     """Note SIGINT and SIGTERM instead of handling them inside the block (a fork), then hand
     the first one noted to its handler (which raises, e.g. ``KeyboardInterrupt``) on leaving.
 
     Only Python-level handlers are deferred, and only in the main thread (the only one whose
-    handlers Python runs); elsewhere the block runs as it is."""
-    global _SAVED, _HOOKED
+    handlers Python runs); elsewhere the block runs as it is. Yields whether a child forked in
+    the block takes one Ctrl-C only (``interrupt_once`` asked, and a Python-level Ctrl-C
+    handler to wrap: :class:`_InterruptOnce`), to be interrupted by its parent
+    (:func:`kill_forked`'s ``interrupt``) with no harm to its save."""
+    global _SAVED, _HOOKED, _ONCE
     if threading.current_thread() is not threading.main_thread() or _SAVED is not None:
-        yield
+        yield False
         return
     if not _HOOKED and hasattr(os, "register_at_fork"):
         os.register_at_fork(after_in_child=_restore_in_child)
         _HOOKED = True
     noted: list[int] = []
     saved = {s: signal.getsignal(s) for s in signums if callable(signal.getsignal(s))}
-    _SAVED = saved
+    _SAVED, _ONCE = saved, interrupt_once and signal.SIGINT in saved
     try:
         for s in saved:      # inside the try: a signal between two of these is restored too
             signal.signal(s, lambda signum, frame: noted.append(signum))
-        yield
+        yield _ONCE
     finally:
-        _SAVED = None
+        _SAVED, _ONCE = None, False
         for s, handler in saved.items():
             signal.signal(s, handler)
         if noted:
             saved[noted[0]](noted[0], None)
 
 
-def kill_forked(pool, future, *, grace: float = 0.0) -> None:
+def kill_forked(pool, future, *, grace: float = 0.0, interrupt: bool = False) -> None:
     """Stop the forked workers of the ``concurrent.futures.ProcessPoolExecutor`` ``pool`` (and
     ``future``, the job they run) without waiting for them (but ``grace`` seconds for a job
-    running: one that got the same Ctrl-C ends by itself, saving its progress): by SIGKILL,
+    running: one that got the same Ctrl-C ends by itself, saving its progress; ``interrupt``:
+    sent SIGINT first, for a Ctrl-C that reached the parent alone, which the workers take once
+    only, :func:`interrupted_once`; before, the parent waited out the grace while its child
+    tracked on, then killed it, its progress lost): by SIGKILL,
     not SIGTERM. A SIGTERM reaching a child in the fork's first instants, before its handlers
     are restored (:func:`deferred_signals`), was lost, and the child ran its whole job and then
     waited for ever to hand its result to a parent that had left (3 of 30 children cancelled
@@ -87,16 +143,29 @@ def kill_forked(pool, future, *, grace: float = 0.0) -> None:
     from concurrent.futures import wait
 
     future.cancel()
+    manager = getattr(pool, "_executor_manager_thread", None)     # shutdown() forgets it
     try:
         if grace > 0 and future.running():
+            if interrupt:
+                _each_worker(pool, lambda proc: os.kill(proc.pid, signal.SIGINT))
             wait([future], timeout=grace)
     finally:                        # killed all the same, also on a second Ctrl-C meanwhile
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
-            try:
-                proc.kill()
-            except Exception:  # noqa: BLE001 - already gone
-                pass
+        _each_worker(pool, lambda proc: proc.kill())
         pool.shutdown(wait=False, cancel_futures=True)
+        if manager is not None and manager is not threading.current_thread():
+            # its pipes closed before this process exits: Python 3.11 wakes every pool's
+            # manager thread at the exit through a pipe such a thread may then be closing
+            # ("Exception ignored ... Bad file descriptor", 1 of 10 Ctrl-Cs to the parent)
+            manager.join(timeout=1.0)
+
+
+def _each_worker(pool, do) -> None:
+    """``do(process)`` for each worker process of ``pool`` (one already gone is skipped)."""
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        try:
+            do(proc)
+        except Exception:  # noqa: BLE001 - already gone
+            pass
 
 
 @contextlib.contextmanager
@@ -137,7 +206,11 @@ def interrupts_not_ignored(signals):
 
 def send_later(signum: int) -> None:
     """Send ``signum`` to the main thread again a moment later, from a thread of its own (sent
-    by the main thread, its handler would run at once, where it was not to be raised)."""
+    by the main thread, its handler would run at once, where it was not to be raised). A forked
+    child's one Ctrl-C (:class:`_InterruptOnce`) lost so is taken again."""
+    handler = signal.getsignal(signum)
+    if isinstance(handler, _InterruptOnce) and handler.state == "stopping":
+        handler.state = "running"
     later = threading.Timer(0.01, _send_again, (signum,))
     later.daemon = True
     later.start()

@@ -325,6 +325,7 @@ def _planned(planner: "_Planner", inputs: "_Inputs", sources: TransferSources, m
         if src is not None:
             planner.read_source(inputs, kind, src, pre_read if kind == "expression" else None,
                                 early if kind == "expression" else None, quiet)
+    obtain.done_tracking()              # every track is in: nothing of it kept for the render
     if sources.performance is not None:
         return _performance_plan(inputs, sources, model)
     return _recombined_plan(inputs, sources, model, align)

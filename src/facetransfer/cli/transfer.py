@@ -671,7 +671,7 @@ def _puppet_identity(model, label: str | None):
 def run_puppet(args) -> int:
     from ..io.video import check_video_output, read_video, video_info
     from ..io.video_like import like_video
-    from ..track.obtain import obtain_track
+    from ..track.obtain import done_tracking, obtain_track
     from ..track.video_detect import default_workers
     from ..puppet_video import puppet_video
 
@@ -707,6 +707,7 @@ def run_puppet(args) -> int:
     if track.lost.all():
         raise FaceTransferError(f"no face found in {args.video}")
     frames = None
+    done_tracking()                     # the capture's points: not needed in the render
     audio, resumed = puppet_video(track, model, wid, args.out,
                                   video_options=like_video(vopt, args.video),
                                   audio_from=args.video, overwrite=args.overwrite,

@@ -21,7 +21,7 @@ from .gaze import GAZE_NAMES
 from .lip_contact import lip_contact
 from .solver import BasisCache, Prior
 
-__all__ = ["Sampler", "sampler", "Shape", "EYELID"]
+__all__ = ["Sampler", "sampler", "release", "Shape", "EYELID"]
 
 #: ARKit shapes of the eyelids: fast (a blink closes and opens in 4-6 frames).
 EYELID = ("eyeBlink", "eyeSquint", "eyeWide")
@@ -69,6 +69,15 @@ def sampler(model, dense=None) -> Sampler:
             _SAMPLERS.pop(next(iter(_SAMPLERS)))
         _SAMPLERS[key] = Sampler(model, dense)
     return _SAMPLERS[key]
+
+
+def release() -> None:
+    """Drop the samplers :func:`sampler` keeps (the default model's with MediaPipe's dense
+    points is 24.5 MB, its core read at the points): a command whose tracks are in
+    (:func:`facetransfer.track.obtain.done_tracking`) held it through its whole render. The
+    next fit makes it again: 0.015-0.02 CPU-s in the same process (the first, 0.1-0.15 CPU-s,
+    also maps the core's pages from its file)."""
+    _SAMPLERS.clear()
 
 
 class Shape:

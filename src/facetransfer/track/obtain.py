@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 import logging
 import os
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,8 +23,8 @@ from .result import Track
 
 log = logging.getLogger(__name__)
 
-__all__ = ["capture_resuming", "landmarks_file", "landmark_track", "obtain_track",
-           "start_background_track"]
+__all__ = ["capture_resuming", "done_tracking", "landmarks_file", "landmark_track",
+           "obtain_track", "start_background_track"]
 
 
 def landmarks_file(video: str | os.PathLike) -> Path | None:
@@ -435,6 +436,19 @@ def _check_landmarks_fit(path: Path, P: np.ndarray, n: int, size) -> None:
                     "taken as frames without a face", path, len(P), n)
 
 
+def done_tracking() -> None:
+    """Release what this process keeps for tracking more clips, once a command's tracks are in
+    (a transfer's render, a puppet's, needs none of it): the capture's point samplers
+    (:func:`facetransfer.track.capture_points.release`, 24.5 MB for the default model, made
+    before the fork by :func:`_prepare_child`). A later track in this process makes them
+    again in 0.015-0.02 CPU-s (the first time, 0.1-0.15: the core's pages read from its file):
+    a second transfer pays no more than the first. Nothing is imported for it (a command whose
+    tracks were all read from files)."""
+    points = sys.modules.get(f"{__package__}.capture_points")
+    if points is not None:
+        points.release()
+
+
 # ---------------------------------------------------------------------------------------------
 # a track computed in a forked child process while the parent tracks another video
 # ---------------------------------------------------------------------------------------------
@@ -442,8 +456,8 @@ def _check_landmarks_fit(path: Path, P: np.ndarray, n: int, size) -> None:
 class _BackgroundTrack:
     """A track computed in a forked child process (:func:`start_background_track`)."""
 
-    def __init__(self, pool, future) -> None:
-        self._pool, self._future = pool, future
+    def __init__(self, pool, future, interruptible: bool = False) -> None:
+        self._pool, self._future, self._interruptible = pool, future, interruptible
 
     def result(self):
         """The Track, or None when the child could not run (then the caller tracks itself).
@@ -465,27 +479,41 @@ class _BackgroundTrack:
     def cancel(self, *, grace: float = 0.0) -> None:
         """Stop the child (it may be half-way through the video) by SIGKILL
         (:func:`facetransfer.signals.kill_forked`), after up to ``grace`` seconds for it to
-        end by itself (:func:`grace_for`)."""
+        end by itself (:func:`grace_for`). With a grace, the child is sent the Ctrl-C first:
+        one sent to this process alone (``kill -INT``, a job runner's stop) reached no child,
+        which tracked on until killed, its progress lost; one that reached it already (the
+        terminal's) is not taken twice (:func:`facetransfer.signals.interrupted_once`)."""
         from ..signals import kill_forked
 
-        kill_forked(self._pool, self._future, grace=grace)
+        kill_forked(self._pool, self._future, grace=grace, interrupt=self._interruptible)
 
 
 #: Seconds a background tracker cancelled for a Ctrl-C is given to end by itself before it is
-#: killed: the Ctrl-C reached it too, and it saves its progress (about 0.1 s) into the cache.
+#: killed: the Ctrl-C reached it too (or its parent sends it), and it saves its progress
+#: (about 0.1 s) into the cache.
 CTRL_C_GRACE = 3.0
 
 
 def grace_for(exc: BaseException) -> float:
     """The ``grace`` of :meth:`_BackgroundTrack.cancel` for a parent stopped by ``exc``:
-    :data:`CTRL_C_GRACE` for a Ctrl-C (which the terminal sent to the child as well), else 0
-    (a SIGTERM to the parent, an error: the child has nothing to end by itself)."""
+    :data:`CTRL_C_GRACE` for a Ctrl-C (which the terminal sent to the child as well, else
+    :meth:`_BackgroundTrack.cancel` sends it), else 0 (a SIGTERM to the parent, an error: the
+    child is not told to save, and is killed at once)."""
     return CTRL_C_GRACE if type(exc) is KeyboardInterrupt else 0.0
 
 
 #: (model, video, max_frames, method, options, frames, face) handed to the forked child (not
 #: pickled)
 _BACKGROUND_JOB: tuple | None = None
+
+
+def _run_background_job():
+    """In the child: :func:`_background_track_job`, its Ctrl-C taken once (saved, not cut
+    short by a second one: :func:`facetransfer.signals.interrupted_once`)."""
+    from ..signals import interrupted_once
+
+    with interrupted_once():
+        return _background_track_job()
 
 
 def _background_track_job():
@@ -550,11 +578,12 @@ def start_background_track(video, model, max_frames: int, *, method: str, option
                             bool(detect_eyes) and int(detect_every) > 1))
     _BACKGROUND_JOB = (model, video, int(max_frames), method, options, frames, face,
                        int(detect_every), bool(detect_eyes))
-    fut = None
+    fut, once = None, False
     try:
         pool = ProcessPoolExecutor(max_workers=1, mp_context=mp.get_context("fork"))
-        with deferred_signals():    # a Ctrl-C in the fork: raised below, not lost in it
-            fut = pool.submit(_background_track_job)  # forks now: the child sees the job
+        # a Ctrl-C in the fork: raised below, not lost in it; the child takes one only
+        with deferred_signals(interrupt_once=True) as once:
+            fut = pool.submit(_run_background_job)  # forks now: the child sees the job
     except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. in a daemon process)
         log.info("no background tracking (%s)", exc)
         return None
@@ -564,4 +593,4 @@ def start_background_track(video, model, max_frames: int, *, method: str, option
         raise
     finally:
         _BACKGROUND_JOB = None
-    return _BackgroundTrack(pool, fut)
+    return _BackgroundTrack(pool, fut, once)
