@@ -755,8 +755,10 @@ def test_a_take_exports_as_glb_or_json(arkit_model, make_arkit_track, tmp_path, 
     glTF only through a transfer onto a video and a track of the result. A take asked for as a
     take, or with ``--texture-from`` (it has no video), is one line and exit status 2."""
     import pygltflib
+    from test_export import _read_accessor
 
     from facetransfer.cli.main import main
+    from facetransfer.export.common import head_quaternions
     from facetransfer.export.livelink import write_livelink
     from facetransfer.export.mpjson import read_mediapipe_json
 
@@ -773,6 +775,15 @@ def test_a_take_exports_as_glb_or_json(arkit_model, make_arkit_track, tmp_path, 
     g = pygltflib.GLTF2().load(str(tmp_path / "face.glb"))
     assert len(g.meshes[0].extras["targetNames"]) == 52
     assert g.accessors[g.animations[0].samplers[0].input].count == 12
+    # the take's head rotation, the head turning in place: a take holds no translation (before
+    # the review, the preview's framing moved it with its rotation: 2.6 cm here, 0.8 on face_2's)
+    channels = {c.target.path: g.animations[0].samplers[c.sampler].output
+                for c in g.animations[0].channels}
+    q = _read_accessor(g, channels["rotation"])
+    np.testing.assert_allclose(np.abs(np.sum(q * head_quaternions(track.rotation), axis=1)), 1,
+                               atol=1e-5)
+    moved = _read_accessor(g, channels["translation"])
+    np.testing.assert_array_equal(moved, np.repeat(moved[:1], 12, axis=0))
     for extra, said in ((["--out", tmp_path / "again.csv"], "is a Live Link Face take already"),
                         (["--out", tmp_path / "t.glb", "--texture-from", take],
                          "is a take, of no video")):

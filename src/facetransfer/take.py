@@ -445,11 +445,13 @@ def _phase(d: np.ndarray, rate: float) -> float:
 
 
 def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PREVIEW_SIZE,
-               max_frames: int | None = None):
+               max_frames: int | None = None, in_place: bool = False):
     """A take as a track of its own: ``identity`` (the model's identity weights) performing it
     with the take's head rotation, framed in ``size`` (the model's mean face filling 0.6 of
     it, its box as turned on each frame at the centre: :func:`_centred`), at the timecode rate
-    nearest the take's rows (``max_frames``: the first ones).
+    nearest the take's rows (``max_frames``: the first ones). ``in_place``: every frame's
+    translation the unturned face's instead, the head turning about the model's origin (a
+    take holds no head translation: what an export of it carries, not a preview's framing).
 
     The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``:
     head angles in radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (yaw > 0 turns the face toward
@@ -487,7 +489,8 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     cam = look_at_weak_perspective(mean, size, fill=0.6)
     R = Rotation.from_euler("YXZ", ypr).as_matrix()
     track = Track(fps=fps, frame_size=tuple(size), rotation=R, scale=np.full(n, cam.scale),
-                  translation=_centred(mean, R, cam.scale, size),
+                  translation=_centred(mean, np.eye(3)[None].repeat(n, 0) if in_place else R,
+                                       cam.scale, size),
                   weights={model.mode_names[k]: np.tile(wid, (n, 1)),
                            "expression": activations_to_weights(model, a)},
                   landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),
