@@ -61,7 +61,8 @@ def register(sub) -> None:
                    "(00:00:00:00). usd: source (the default) starts the time codes at the "
                    "first frame number of the image sequence tracked (a plate numbered from "
                    "1001: 1001), none at 0. usd, glb and json: source also records the tracked "
-                   "video's start timecode in the file (customLayerData, extras, timecode). "
+                   "video's start timecode in the file (customLayerData, extras, timecode; "
+                   "a take's: its first row's). "
                    "source: as the track recorded them when it was tracked (a track made "
                    "before tracks recorded them: read from its clip, if still there)")
     p.add_argument("--take-rate", choices=("app", "clip"), default=None,
