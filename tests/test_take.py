@@ -706,6 +706,25 @@ def test_a_takes_track_records_the_takes_start_and_exports_from_it(arkit_model,
     assert read_livelink(tmp_path / "again.csv").timecodes[0].startswith("01:02:03:04")
 
 
+def test_a_takes_start_timecode_counts_the_frames_it_plays_at(arkit_model, make_arkit_track,
+                                                              tmp_path):
+    """A 25 fps clip's take in the app's labels (frames of 30 a second, with thousandths) is
+    played at 25 (``take_track``, ``puppet``, ``export take.csv``): its start timecode counts
+    frames of 25, the clip's own (before: the label's frame number, of 30: from the clip's frame
+    13 it said 15, 0.08 s late, and from frame 24 it said 28, a frame 25 fps has not)."""
+    from facetransfer.export.livelink import read_livelink, write_livelink
+    from facetransfer.take import take_track
+
+    track, _, _ = make_arkit_track(arkit_model, 8, fps=25.0)
+    for start, label in (("01:00:00:13", "01:00:00:15.600"), ("01:00:00:24", "01:00:00:28.800"),
+                         ("23:59:59:00", "23:59:59:00.000")):
+        take = write_livelink(track, tmp_path / "take.csv", start=start, overwrite=True)
+        assert read_livelink(take).timecodes[0] == label
+        got = take_track(take, arkit_model, arkit_model.factors[0][0])
+        assert got.fps == 25.0 and got.source_facts.timecode == start, (start, got.source_facts)
+        assert got.info["start_timecode"] == start
+
+
 def test_a_short_take_of_the_apps_labels_is_read_at_unreals_rate(caplog):
     """A take within one second whose labels carry thousandths of a frame (the app's, and
     ``export --take-rate app``) counts frames of 30 a second (60 where a frame number passes
@@ -736,8 +755,10 @@ def test_a_take_exports_as_glb_or_json(arkit_model, make_arkit_track, tmp_path, 
     glTF only through a transfer onto a video and a track of the result. A take asked for as a
     take, or with ``--texture-from`` (it has no video), is one line and exit status 2."""
     import pygltflib
+    from test_export import _read_accessor
 
     from facetransfer.cli.main import main
+    from facetransfer.export.common import head_quaternions
     from facetransfer.export.livelink import write_livelink
     from facetransfer.export.mpjson import read_mediapipe_json
 
@@ -754,6 +775,15 @@ def test_a_take_exports_as_glb_or_json(arkit_model, make_arkit_track, tmp_path, 
     g = pygltflib.GLTF2().load(str(tmp_path / "face.glb"))
     assert len(g.meshes[0].extras["targetNames"]) == 52
     assert g.accessors[g.animations[0].samplers[0].input].count == 12
+    # the take's head rotation, the head turning in place: a take holds no translation (before
+    # the review, the preview's framing moved it with its rotation: 2.6 cm here, 0.8 on face_2's)
+    channels = {c.target.path: g.animations[0].samplers[c.sampler].output
+                for c in g.animations[0].channels}
+    q = _read_accessor(g, channels["rotation"])
+    np.testing.assert_allclose(np.abs(np.sum(q * head_quaternions(track.rotation), axis=1)), 1,
+                               atol=1e-5)
+    moved = _read_accessor(g, channels["translation"])
+    np.testing.assert_array_equal(moved, np.repeat(moved[:1], 12, axis=0))
     for extra, said in ((["--out", tmp_path / "again.csv"], "is a Live Link Face take already"),
                         (["--out", tmp_path / "t.glb", "--texture-from", take],
                          "is a take, of no video")):

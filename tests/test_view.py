@@ -286,14 +286,20 @@ def test_a_track_of_a_model_without_arkit_activations_is_refused_naming_it(quick
 def test_a_track_of_another_model_is_named_when_its_model_is_missing(quick_model, data_dir,
                                                                      tmp_path, capsys):
     """`view T.npz` (and `export`) without --model, of a track made with another model than the
-    default one: the line names the track (before: "the track was not made with ...")."""
+    default one: the line names the track (before: "the track was not made with ...") and both
+    content hashes, the track's and the default model's here (a track of another build of the
+    default model is told from one of another model)."""
     from conftest import still_track
+
+    from facetransfer.default_model import load_default_model
 
     tp = tmp_path / "other.npz"
     still_track(quick_model, 3).save(tp)
     assert main(["view", str(tp), "--out", str(tmp_path / "p.html")]) == 2
     err = capsys.readouterr().err.strip().splitlines()   # (on a fresh machine, the default
     # model's one-line note of its first build comes first)
+    here = load_default_model().content_hash[:12]
     assert err[-1] == (f"facetransfer view: error: track {tp} was not made with the default "
-                       "model (ict-arkit); pass the model it was tracked with (--model M.npz)")
+                       f"model (ict-arkit) here (model hash {quick_model.content_hash[:12]}, "
+                       f"this one's {here}); pass the model it was tracked with (--model M.npz)")
     assert not [line for line in err[:-1] if "error" in line or "Traceback" in line]

@@ -447,14 +447,13 @@ def test_every_option_and_argument_has_help():
     export --format``, ``puppet``'s, ``export``'s and ``probe``'s inputs showed a bare name)."""
     import argparse
 
+    from test_readme import _subcommands
+
     from facetransfer.cli.main import build_parser
 
-    def bare(parser, words):
-        for a in parser._actions:
-            if isinstance(a, argparse._SubParsersAction):
-                for name, sub in a.choices.items():
-                    yield from bare(sub, words + [name])
-            elif not a.help and not isinstance(a, argparse._HelpAction):
-                yield " ".join(words), a.option_strings or a.dest
-
-    assert list(bare(build_parser(), [])) == []
+    parsers = {"facetransfer": build_parser(), **_subcommands(build_parser())}
+    assert len(parsers) > 30
+    bare = [(words, a.option_strings or a.dest) for words, p in parsers.items()
+            for a in p._actions
+            if not a.help and not isinstance(a, (argparse._HelpAction, argparse._SubParsersAction))]
+    assert bare == []

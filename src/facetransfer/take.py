@@ -392,13 +392,22 @@ def _read(path, model):
     return take
 
 
-def _first_timecode(timecodes) -> str | None:
-    """The first of a take's rows' timecodes as a video's start timecode (``HH:MM:SS:FF``, its
-    thousandths of a frame dropped): what a preview of the take (``puppet take.csv``) carries,
-    so that it lines up with the plate in an editor; None for a take without rows."""
+def _first_timecode(timecodes, fps: float) -> str | None:
+    """The first of a take's rows' timecodes as the start timecode (``HH:MM:SS:FF``) of a
+    video of ``fps`` frames a second, the rate the take is played at (:func:`take_row_rate`):
+    its frame counted at that rate's nominal one, the part of a frame dropped. What a preview
+    (``puppet take.csv``) or an export of the take carries, so that it lines up with the plate
+    in an editor; None for a take without rows. Before: the label's own frame number, counted
+    at the take's timecode rate (:func:`take_rate`): a 25 fps clip's take in the app's labels
+    (30 a second) from frame 13 said 15 (``01:00:00:15.600``), and from frame 24 said 28, a
+    frame 25 fps has not."""
     if not len(timecodes):
         return None
-    h, m, sec, ff = (int(v) for v in _timecode_fields(timecodes[:1])[0, :4])
+    f = _timecode_fields(timecodes)
+    h, m, sec = (int(v) for v in f[0, :3])
+    nominal = max(1, int(round(fps)))     # 30 for 29.97: a timecode counts nominal frames
+    frame = (f[0, 3] + f[0, 4] / 1000.0) * nominal / _rate(f, False)
+    ff = min(int(np.floor(frame + 1e-6)), nominal - 1)
     return f"{h:02d}:{m:02d}:{sec:02d}:{ff:02d}"
 
 
@@ -436,11 +445,13 @@ def _phase(d: np.ndarray, rate: float) -> float:
 
 
 def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PREVIEW_SIZE,
-               max_frames: int | None = None):
+               max_frames: int | None = None, in_place: bool = False):
     """A take as a track of its own: ``identity`` (the model's identity weights) performing it
     with the take's head rotation, framed in ``size`` (the model's mean face filling 0.6 of
     it, its box as turned on each frame at the centre: :func:`_centred`), at the timecode rate
-    nearest the take's rows (``max_frames``: the first ones).
+    nearest the take's rows (``max_frames``: the first ones). ``in_place``: every frame's
+    translation the unturned face's instead, the head turning about the model's origin (a
+    take holds no head translation: what an export of it carries, not a preview's framing).
 
     The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``:
     head angles in radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (yaw > 0 turns the face toward
@@ -452,7 +463,8 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     -------
     Track
         Its ``source`` the take, its ``source_facts`` first frame 0 and the take's first row's
-        timecode (what an export of it starts from), ``info["start_timecode"]`` the same.
+        timecode in frames of its ``fps`` (:func:`_first_timecode`; what an export of it starts
+        from), ``info["start_timecode"]`` the same.
     """
     from scipy.spatial.transform import Rotation
 
@@ -465,7 +477,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     take = _read(path, model)
     t = take_seconds(take.timecodes, name=f"take {path}")
     fps = take_row_rate(t, take.timecodes, f"take {path}")
-    start = _first_timecode(take.timecodes)
+    start = _first_timecode(take.timecodes, fps)
     n = int(np.floor(t[-1] * fps + 1e-6)) + 1
     n = n if max_frames is None else min(n, int(max_frames))
     rows = take_on_timeline(t, np.hstack([take.activations, take.pose[:, :3]]), n, fps,
@@ -477,7 +489,8 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     cam = look_at_weak_perspective(mean, size, fill=0.6)
     R = Rotation.from_euler("YXZ", ypr).as_matrix()
     track = Track(fps=fps, frame_size=tuple(size), rotation=R, scale=np.full(n, cam.scale),
-                  translation=_centred(mean, R, cam.scale, size),
+                  translation=_centred(mean, np.eye(3)[None].repeat(n, 0) if in_place else R,
+                                       cam.scale, size),
                   weights={model.mode_names[k]: np.tile(wid, (n, 1)),
                            "expression": activations_to_weights(model, a)},
                   landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),

@@ -61,7 +61,8 @@ def register(sub) -> None:
                    "(00:00:00:00). usd: source (the default) starts the time codes at the "
                    "first frame number of the image sequence tracked (a plate numbered from "
                    "1001: 1001), none at 0. usd, glb and json: source also records the tracked "
-                   "video's start timecode in the file (customLayerData, extras, timecode). "
+                   "video's start timecode in the file (customLayerData, extras, timecode; "
+                   "a take's: its first row's). "
                    "source: as the track recorded them when it was tracked (a track made "
                    "before tracks recorded them: read from its clip, if still there)")
     p.add_argument("--take-rate", choices=("app", "clip"), default=None,
@@ -182,8 +183,9 @@ def run(args: argparse.Namespace) -> int:
 def _take_and_model(args):
     """``(track, model)`` of a Live Link Face take: the model's (``--model``'s, else the
     default one's) mean person performing it with its head's rotation
-    (:func:`facetransfer.take.take_track`, what ``puppet take.csv`` renders); a take asked
-    for as a take, or a texture lifted from a video it does not have, is one line."""
+    (:func:`facetransfer.take.take_track`, what ``puppet take.csv`` renders, the head turning
+    in place: not moved to keep the face at the preview's centre); a take asked for as a take,
+    or a texture lifted from a video it does not have, is one line."""
     from ..errors import FaceTransferError
     from ..take import take_track
 
@@ -199,7 +201,8 @@ def _take_and_model(args):
     if not len(read_livelink(args.track, lenient=True).timecodes):  # before a model is built
         raise FaceTransferError(f"the take {args.track} has no rows")
     model = resolve_model(args.model, progress=not args.no_progress)
-    return take_track(args.track, model, model.weight_mean(model.mode_index("identity"))), model
+    mean = model.weight_mean(model.mode_index("identity"))
+    return take_track(args.track, model, mean, in_place=True), model
 
 
 def _track_and_model(track, args):
