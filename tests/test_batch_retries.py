@@ -82,9 +82,9 @@ def test_a_retry_of_the_run_s_own_job_waits_for_the_first_attempt_and_takes_its_
     row = retry[0]
     assert not isinstance(row, Exception), row
     assert row.status == "done" and row.frames == 7 and len(calls) == 1
-    assert row.error.startswith("note: this run's earlier attempt of the job (pid ")
-    assert "wrote the output: taken after waiting" in row.error
-    assert first_rows[0].status == "done" and first_rows[0].error == ""
+    assert row.note.startswith("this run's earlier attempt of the job (pid ") and not row.error
+    assert "wrote the output: taken after waiting" in row.note
+    assert first_rows[0].status == "done" and first_rows[0].note == ""
     assert Track.load(out).n_frames == 7
 
 
@@ -100,10 +100,10 @@ def test_a_retry_started_after_the_first_attempt_ended_takes_its_output(
     calls = []
     monkeypatch.setattr(J, "_track", lambda *a, **k: calls.append(1) or still_track(
         quick_model, 6, source=str(video)))
-    assert J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER).error == ""
+    assert J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER).note == ""
     row = J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER)
     assert row.status == "done" and row.frames == 6 and len(calls) == 1
-    assert "wrote the output: taken" in row.error and "waiting" not in row.error
+    assert "wrote the output: taken" in row.note and "waiting" not in row.note
     assert O.claim_path(out).exists()
     with pytest.raises(O.OutputTaken, match="written by another run since this run began"):
         J.track_clip(job, str(out), quick_model, TrackerSettings(), owner="run0002 x")
@@ -146,8 +146,8 @@ def test_a_retry_of_a_join_a_pair_or_an_export_takes_the_output_its_first_attemp
         out = Path(first.output)
         made = O.output_identity(out)
         row = run()
-        assert first.error == "" and row.status == "done" and row.frames == first.frames
-        assert "wrote the output: taken" in row.error and O.output_identity(out) == made
+        assert first.note == "" and row.status == "done" and row.frames == first.frames
+        assert "wrote the output: taken" in row.note and O.output_identity(out) == made
     assert done == ["join", "pair"]
 
 
@@ -191,7 +191,7 @@ def test_a_retry_waits_for_an_attempt_in_another_process_bounded(
         p.kill()
         p.wait()
     assert rows[0].status == "done" and rows[0].frames == 5 and not calls
-    assert "(pid 4242 on host render-7, since 20:00; Dask ran it again" in rows[0].error
+    assert "(pid 4242 on host render-7, since 20:00; Dask ran it again" in rows[0].note
     # 2. killed before writing (a worker's nanny ends it): done again, planned the file there
     planned = O.output_identity(out)
     p, rows = _holder(claim, words), []
@@ -201,7 +201,7 @@ def test_a_retry_waits_for_an_attempt_in_another_process_bounded(
     p.wait()
     t.join(30)
     assert rows[0].status == "done" and rows[0].frames == 8 and len(calls) == 1
-    assert "ended without the output: done again after waiting" in rows[0].error
+    assert "ended without the output: done again after waiting" in rows[0].note
     # 3. held past the wait: said, nothing written
     monkeypatch.setattr(O, "RETRY_WAIT", 0.3)
     kept, p = O.output_identity(out), _holder(claim, words)

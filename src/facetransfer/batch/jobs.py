@@ -140,7 +140,7 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
     owner : str
         The run and the job's digest (:func:`.ownership.claimed`): a claim of the same
         ``owner`` is this run's earlier attempt of the job (Dask ran the task again, taking its
-        worker for lost), waited for; the track it wrote is taken (the row's ``error`` says
+        worker for lost), waited for; the track it wrote is taken (the row's ``note`` says
         so), else the clip is tracked again.
 
     Returns
@@ -167,7 +167,7 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
             raise
         partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
     return dataclasses.replace(track_row(job.name, track, out, time.perf_counter() - t0),
-                               error=claim.note(False))
+                               note=claim.note(False))
 
 
 def _taken_track(job, out: str, claim, t0: float, seconds: float = 0.0) -> Row:
@@ -179,7 +179,7 @@ def _taken_track(job, out: str, claim, t0: float, seconds: float = 0.0) -> Row:
     partial_path(out).unlink(missing_ok=True)
     return dataclasses.replace(
         track_row(job.name, track, out, seconds + time.perf_counter() - t0),
-        error=claim.note(True))
+        note=claim.note(True))
 
 
 @dataclass(frozen=True, eq=False)
@@ -274,7 +274,7 @@ def join_clip(job, out: str, model, chunks, results, overwrite: bool = False,
             track = track.with_source_facts(job.video)
             track.save(out, overwrite=overwrite)
     return dataclasses.replace(track_row(job.name, track, out, spent + time.perf_counter() - t0),
-                               error=claim.note(False))
+                               note=claim.note(False))
 
 
 def _identity(job, model):
@@ -364,7 +364,7 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
                output=str(out), matte="" if res.matte is None else str(res.matte),
-               error=claim.note(False))
+               note=claim.note(False))
 
 
 def _pair_sources(job, model):
@@ -398,7 +398,7 @@ def _taken_video(name: str, out: str, matte: str | None, claim, t0: float) -> Ro
     info = video_info(out)
     return Row(clip=name, status="done", frames=info.n_frames, fps=info.fps,
                seconds=time.perf_counter() - t0, output=str(out),
-               matte="" if matte is None else str(matte), error=claim.note(True))
+               matte="" if matte is None else str(matte), note=claim.note(True))
 
 
 def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:
@@ -483,7 +483,7 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
                seconds=time.perf_counter() - t0,
                mean_confidence=float(np.mean(track.confidence)), output=str(out),
-               error=claim.note(taken))
+               note=claim.note(taken))
 
 
 

@@ -115,16 +115,16 @@ class Claim:
     earlier: str = ""
 
     def note(self, taken: bool) -> str:
-        """The words of a done row after such an attempt ("" none): its output taken
-        (``taken``) or made again."""
+        """The note of a done row after such an attempt (its summary's ``note`` column, ""
+        none): its output taken (``taken``) or made again."""
         if not self.earlier:
             return ""
         who = self.earlier.splitlines()[0]
         said = (f"this run's earlier attempt of the job ({who}; Dask ran it again, taking "
                 "its worker for lost)")
         waited = f" after waiting {self.waited:.1f} s for it" if self.waited else ""
-        return (f"note: {said} wrote the output: taken{waited}" if taken else
-                f"note: {said} ended without the output: done again{waited}")
+        return (f"{said} wrote the output: taken{waited}" if taken else
+                f"{said} ended without the output: done again{waited}")
 
 
 def earlier_output(out, planned: str, claim: Claim) -> bool:
