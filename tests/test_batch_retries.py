@@ -273,3 +273,34 @@ def test_the_embedded_cluster_keeps_the_model_on_every_worker():
             "amm"].running)
         fut = scatter_model(client, bytes(1000))
         assert not amm and len(client.who_has([fut])[fut.key]) == 2
+
+
+def test_a_pair_s_retry_after_its_first_attempt_died_between_the_matte_and_the_result(
+        clips, tmp_path, monkeypatch):
+    """The first attempt of a pair with a matte was killed between the matte's commit and the
+    result's (the matte is committed first): its claim names this run's job, its frames are
+    there beside no result. The retry renders the pair again, those frames removed as its
+    own. Before, it failed, "the frames ... were written by another run", its own attempt's.
+    Another run's claim left there (another owner) still keeps such frames."""
+    from facetransfer import video_transfer
+
+    import test_batch_race
+
+    job = PairJob("p", clips["a"][0], {"expression_from": str(clips["b"][0])})
+    out, matte = tmp_path / "p.mp4", J.matte_pattern(tmp_path, "p", ".png")
+    frame = Path(matte).parent / "p.00000.png"
+    render = test_batch_race._Render()
+    monkeypatch.setattr(video_transfer, "transfer_video", render)
+    settings = dict(test_batch_race.SETTINGS)
+    for owner, ours in ((f"run0002 {OWNER.split()[1]}", False), (OWNER, True)):
+        frame.parent.mkdir(exist_ok=True)
+        frame.write_bytes(b"the first attempt's")     # planned: none there (planned_matte "")
+        O.claim_path(out).write_text(f"pid 4242 on host render-7, since 20:00\njob {owner}")
+        if not ours:
+            with pytest.raises(O.OutputTaken, match="frames .* written by another run"):
+                J.transfer_pair(job, str(out), None, dict(settings), str(matte), owner=OWNER)
+            assert frame.exists() and not out.exists()
+            continue
+        row = J.transfer_pair(job, str(out), None, dict(settings), str(matte), owner=OWNER)
+        assert row.status == "done" and out.read_bytes() == b"mine" and not frame.exists()
+        assert "ended without the output: done again" in row.note and render.seen == [False]

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from .manifest import BatchError
-from .ownership import (OutputTaken, claimed, clear_leftover_matte, earlier_output, own_output,
-                        still_planned)
+from .ownership import (OutputTaken, claimed, clear_leftover_matte, earlier_output,
+                        matte_identity, own_output, still_planned)
 from .summary import Row
 
 log = logging.getLogger(__name__)
@@ -337,7 +337,9 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         while they are still those, before the render.
     owner : str
         As :func:`track_clip`'s: the result (and matte) this run's earlier attempt of the
-        pair rendered is taken.
+        pair rendered is taken; frames of a matte beside no result after it (killed between
+        the two commits) are its own, removed as the run's (no other run's job held the claim
+        since: :func:`.ownership.earlier_output`).
 
     Returns
     -------
@@ -353,7 +355,10 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
             return _taken_video(job.name, out, matte, claim, t0)
         overwrite = overwrite or still_planned(out, planned)
         if not overwrite:
-            clear_leftover_matte(out, matte, planned_matte)
+            # frames beside no result under this run's earlier attempt's claim (killed between
+            # the matte's commit and the result's): that attempt's, removed as the run's own
+            clear_leftover_matte(out, matte,
+                                 matte_identity(matte) if claim.earlier else planned_matte)
         with own_output(out, overwrite, matte):
             res = transfer_video(sources, out, model, overwrite=overwrite, options=options,
                                  progress_factory=None, align=settings["align"],
