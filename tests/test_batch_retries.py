@@ -36,6 +36,23 @@ pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
 OWNER = "run0001 v2:00112233aabbccdd"
 
 
+def _waiting(monkeypatch) -> threading.Event:
+    """An event set as a job of :mod:`~facetransfer.batch.ownership` first sleeps waiting for
+    a claim (the retry waiting, seen, not guessed from a join's timeout: on a loaded machine
+    the retry may not yet have reached the claim)."""
+    import time
+
+    seen = threading.Event()
+
+    def sleep(seconds):
+        seen.set()
+        time.sleep(seconds)
+
+    monkeypatch.setattr(O, "time", types.SimpleNamespace(
+        monotonic=time.monotonic, strftime=time.strftime, sleep=sleep))
+    return seen
+
+
 def _attempt(job, out, model, rows, **kw):
     """A job's attempt on a thread of its own (a worker's), its row or error in ``rows``."""
     def go():
@@ -73,8 +90,10 @@ def test_a_retry_of_the_run_s_own_job_waits_for_the_first_attempt_and_takes_its_
     _attempt(job, out, quick_model, other, owner="run0002 v2:00112233aabbccdd").join(30)
     assert isinstance(other[0], O.OutputTaken) and "being written by another run" in \
         str(other[0])
+    waiting = _waiting(monkeypatch)
     second = _attempt(job, out, quick_model, retry, owner=OWNER)
-    second.join(1.0)
+    while not waiting.is_set() and second.is_alive():
+        second.join(0.01)
     assert second.is_alive() and not retry      # waiting, not failed
     go_on.set()
     first.join(30)
@@ -86,6 +105,70 @@ def test_a_retry_of_the_run_s_own_job_waits_for_the_first_attempt_and_takes_its_
     assert "wrote the output: taken after waiting" in row.note
     assert first_rows[0].status == "done" and first_rows[0].note == ""
     assert Track.load(out).n_frames == 7
+
+
+def _outcome(call, a, k):
+    """``call(*a, **k)``'s result, or the exception it raised."""
+    try:
+        return call(*a, **k)
+    except Exception as exc:  # noqa: BLE001
+        return exc
+
+
+#: What :func:`_run_twice` runs (set by the test; module-level: Dask pickles the task's
+#: function, by reference where it is a module's).
+_TWICE: dict = {}
+
+
+def _run_twice(*a, **k):
+    """A clip's task as Dask may run it: the first attempt, and, from inside its tracking
+    (its worker taken for lost), a second of the same arguments, whose result the run gets."""
+    real, waiting, second = _TWICE["real"], _TWICE["waiting"], []
+
+    def first_tracks(*ta, **tk):
+        t = threading.Thread(target=lambda: second.append(_outcome(real, a, k)))
+        t.start()
+        while not waiting.is_set() and t.is_alive():
+            t.join(0.01)
+        second.insert(0, t)
+        J._track = _TWICE["tracked"]
+        return _TWICE["tracked"]()
+
+    J._track = first_tracks
+    _TWICE["first"] = real(*a, **k)
+    second[0].join(60)
+    if isinstance(second[-1], Exception):
+        raise second[-1]
+    return second[-1]
+
+
+def test_a_clip_s_task_run_again_by_dask_while_its_first_attempt_tracks_is_done_once(
+        clips, quick_model, quick_model_path, inproc, tmp_path, capsys, monkeypatch):
+    """``batch track`` as a user runs it; Dask runs the clip's task again while the first
+    attempt still tracks (its worker taken for lost): here the task the run submitted is run
+    a second time, with the arguments the run gave it, from inside the first's tracking, and
+    the run gets the second's result, as from Dask. The retry waits for the first attempt and
+    takes its track: tracked once, the row done with a note, exit 0. Before, the retry failed
+    at once, "is being written by another run", that run its own: the row failed, exit 1,
+    while the first attempt wrote the track."""
+    video, pts, _ = clips["a"]
+    calls = []
+    monkeypatch.setitem(_TWICE, "real", J.track_clip)
+    monkeypatch.setitem(_TWICE, "waiting", _waiting(monkeypatch))
+    monkeypatch.setitem(_TWICE, "tracked", lambda *a, **k: calls.append(1) or still_track(
+        quick_model, 8, source=str(video)))
+    monkeypatch.setattr(J, "_track", J._track)      # (restored after _run_twice's)
+    monkeypatch.setattr(J, "track_clip", _run_twice)
+    out = tmp_path / "out"
+    code, said, err = _cli(capsys, "batch", "track", video, "--out", out, "--init", pts,
+                           "--model", quick_model_path, "--workers", 1, "--no-progress")
+    row = _summary(out / "summary.csv")["a"]
+    assert (code, row["status"], row["error"]) == (0, "done", ""), (said, err, row)
+    assert row["note"].startswith("this run's earlier attempt of the job (pid ")
+    assert "wrote the output: taken after waiting" in row["note"] and len(calls) == 1
+    first = _TWICE.pop("first")
+    assert first.status == "done" and not first.note
+    assert Track.load(out / "a.npz").n_frames == 8 and not list(out.glob(".*.claim"))
 
 
 def test_a_retry_started_after_the_first_attempt_ended_takes_its_output(
@@ -178,10 +261,11 @@ def test_a_retry_waits_for_an_attempt_in_another_process_bounded(
         quick_model, 8, source=str(video)))
     words = f"pid 4242 on host render-7, since 20:00\njob {OWNER}"
     # 1. it writes the output, says so and ends
-    p, rows = _holder(claim, words), []
+    p, rows, waiting = _holder(claim, words), [], _waiting(monkeypatch)
     try:
         t = _attempt(job, out, quick_model, rows, owner=OWNER)
-        t.join(0.5)
+        while not waiting.is_set() and t.is_alive():
+            t.join(0.01)
         assert t.is_alive() and not rows
         still_track(quick_model, 5, source=str(video)).save(out)
         p.stdin.write(f"done {O.output_identity(out)}\n")
@@ -195,8 +279,10 @@ def test_a_retry_waits_for_an_attempt_in_another_process_bounded(
     # 2. killed before writing (a worker's nanny ends it): done again, planned the file there
     planned = O.output_identity(out)
     p, rows = _holder(claim, words), []
+    waiting.clear()
     t = _attempt(job, out, quick_model, rows, owner=OWNER, planned=planned)
-    t.join(0.5)
+    while not waiting.is_set() and t.is_alive():
+        t.join(0.01)
     p.kill()
     p.wait()
     t.join(30)
