@@ -346,6 +346,40 @@ def test_a_clip_s_chunks_another_run_is_tracking_are_not_tracked_again(
     assert not list(out.glob(".*.claim"))
 
 
+#: The chunk claims the client held as each count of a clip's frames ran (:func:`_count`).
+_CHUNK_CLAIMS_SEEN: list = []
+
+
+def _count(video, max_frames=None) -> int:
+    """A clip's frames counted (8, one chunk), noting how many chunk claims are held."""
+    _CHUNK_CLAIMS_SEEN.append(sum(k.endswith(".chunks.claim") for k in O._HELD))
+    return 8
+
+
+def test_a_chunked_run_holds_a_bounded_number_of_chunk_claims(
+        clips, quick_model, tmp_path, monkeypatch):
+    """The client claims the chunks of at most ``MAX_CLAIMS`` clips at once (each claim an
+    open file), the rest queued and claimed as rows become final; every clip done, no claim
+    left. Before, every clip was claimed as the run began: a run of more clips than the
+    process may open files ran the rest unclaimed (300 clips under a limit of 200: 136)."""
+    from facetransfer.batch import run as R
+    from facetransfer.batch.cluster import open_client
+
+    video = clips["a"][0]
+    monkeypatch.setattr(R._TrackSubmit, "MAX_CLAIMS", 2, raising=False)
+    monkeypatch.setattr(J, "count_frames", _count)
+    monkeypatch.setattr(J, "_track", lambda *a, **k: still_track(quick_model, 8,
+                                                                  source=str(video)))
+    monkeypatch.setattr(sys.modules[__name__], "_CHUNK_CLAIMS_SEEN", [])
+    jobs = [ClipJob(f"c{i}", str(video)) for i in range(5)]
+    with open_client(workers=1, processes=False) as client:
+        res = R.batch_track(jobs, tmp_path / "out", quick_model, client=client, chunk=10,
+                            overlap=2)
+    assert [r.status for r in res.rows] == ["done"] * 5, res.rows
+    assert len(_CHUNK_CLAIMS_SEEN) == 5 and max(_CHUNK_CLAIMS_SEEN) <= 2, _CHUNK_CLAIMS_SEEN
+    assert not list((tmp_path / "out").glob(".*.claim"))
+
+
 @pytest.mark.filterwarnings("ignore:Port 8787 is already in use")
 def test_the_embedded_cluster_keeps_the_model_on_every_worker():
     """The model is scattered to every worker; Dask's active memory manager dropped the
