@@ -301,6 +301,41 @@ def test_a_retry_waits_for_an_attempt_in_another_process_bounded(
     assert O.output_identity(out) == kept and len(calls) == 1
 
 
+def test_a_retry_takes_no_file_its_killed_first_attempt_did_not_write(
+        clips, quick_model, tmp_path, monkeypatch):
+    """The first attempt was killed after taking its claim but before its checks (its claim
+    names this run's job, and no more); a file is there that the run did not find (another
+    run's, finished between this run's planning and that claim; or a user's): not that
+    attempt's, so not taken: the retry says another run wrote it, and keeps it. Before, any
+    file other than the one planned was taken as the attempt's, the row done with this run's
+    digest. One that attempt wrote (past its checks, its claim says so) is still taken."""
+    video = clips["a"][0]
+    job, out = ClipJob("a", str(video)), tmp_path / "a.npz"
+    monkeypatch.setattr(J, "_track", lambda *a, **k: still_track(quick_model, 8,
+                                                                  source=str(video)))
+    words = f"pid 4242 on host render-7, since 20:00\njob {OWNER}"
+    still_track(quick_model, 5, source=str(video)).save(out)         # not planned: none then
+    theirs = O.output_identity(out)
+    O.claim_path(out).write_text(words)
+    with pytest.raises(O.OutputTaken, match="written by another run since this run began"):
+        J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER)
+    assert O.output_identity(out) == theirs
+    # an attempt past its checks: what it writes is its own. Its claim's words while it
+    # tracks are what a kill then leaves (the output written, the claim not yet "done")
+    during = []
+
+    def tracking(*a, **k):
+        during.append(O.claim_path(out).read_text())
+        return still_track(quick_model, 6, source=str(video))
+
+    out.unlink()
+    monkeypatch.setattr(J, "_track", tracking)
+    J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER)
+    O.claim_path(out).write_text(during[0])
+    row = J.track_clip(job, str(out), quick_model, TrackerSettings(), owner=OWNER)
+    assert row.frames == 6 and "wrote the output: taken" in row.note and len(during) == 1
+
+
 def test_a_clip_s_chunks_another_run_is_tracking_are_not_tracked_again(
         quick_model, quick_model_path, inproc, tmp_path, capsys, monkeypatch):
     """Two runs of one ``batch track --chunk`` at once: the clip's chunks are claimed by the
@@ -401,7 +436,8 @@ def test_a_pair_s_retry_after_its_first_attempt_died_between_the_matte_and_the_r
     result's (the matte is committed first): its claim names this run's job, its frames are
     there beside no result. The retry renders the pair again, those frames removed as its
     own. Before, it failed, "the frames ... were written by another run", its own attempt's.
-    Another run's claim left there (another owner) still keeps such frames."""
+    Another run's claim left there (another owner), or this run's attempt's killed before its
+    checks, still keeps such frames."""
     from facetransfer import video_transfer
 
     import test_batch_race
@@ -412,10 +448,13 @@ def test_a_pair_s_retry_after_its_first_attempt_died_between_the_matte_and_the_r
     render = test_batch_race._Render()
     monkeypatch.setattr(video_transfer, "transfer_video", render)
     settings = dict(test_batch_race.SETTINGS)
-    for owner, ours in ((f"run0002 {OWNER.split()[1]}", False), (OWNER, True)):
+    for owner, ours in ((f"run0002 {OWNER.split()[1]}", False), (OWNER, False),
+                        (OWNER, True)):
         frame.parent.mkdir(exist_ok=True)
         frame.write_bytes(b"the first attempt's")     # planned: none there (planned_matte "")
-        O.claim_path(out).write_text(f"pid 4242 on host render-7, since 20:00\njob {owner}")
+        # this run's attempt wrote them only past its checks (killed before: not its)
+        O.claim_path(out).write_text(f"pid 4242 on host render-7, since 20:00\njob {owner}"
+                                     + ("\nchecked" if ours else ""))
         if not ours:
             with pytest.raises(O.OutputTaken, match="frames .* written by another run"):
                 J.transfer_pair(job, str(out), None, dict(settings), str(matte), owner=OWNER)

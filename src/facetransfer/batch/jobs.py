@@ -338,8 +338,8 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
     owner : str
         As :func:`track_clip`'s: the result (and matte) this run's earlier attempt of the
         pair rendered is taken; frames of a matte beside no result after it (killed between
-        the two commits) are its own, removed as the run's (no other run's job held the claim
-        since: :func:`.ownership.earlier_output`).
+        the two commits, past its checks) are its own, removed as the run's (no other run's
+        job held the claim since: :func:`.ownership.earlier_output`).
 
     Returns
     -------
@@ -355,10 +355,10 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
             return _taken_video(job.name, out, matte, claim, t0)
         overwrite = overwrite or still_planned(out, planned)
         if not overwrite:
-            # frames beside no result under this run's earlier attempt's claim (killed between
-            # the matte's commit and the result's): that attempt's, removed as the run's own
+            # frames beside no result under this run's earlier attempt's claim, past its checks
+            # (killed between the matte's commit and the result's): its, removed as the run's
             clear_leftover_matte(out, matte,
-                                 matte_identity(matte) if claim.earlier else planned_matte)
+                                 matte_identity(matte) if claim.past_checks else planned_matte)
         with own_output(out, overwrite, matte):
             res = transfer_video(sources, out, model, overwrite=overwrite, options=options,
                                  progress_factory=None, align=settings["align"],
