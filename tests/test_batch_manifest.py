@@ -112,15 +112,15 @@ def test_bad_pairs(tmp_path, rows, message):
 
 def test_summary_round_trip_and_one_line_errors(tmp_path):
     rows = [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz", job="1f2e3d",
-                matte="/o/a.matte/a.%05d.png"),
+                matte="/o/a.matte/a.%05d.png", note="taken\n from an earlier attempt"),
             Row("b", "failed", error="video /x/b.mp4 does not exist\n  (details)"),
             Row("c", "cancelled")]
     p = write_summary(tmp_path / "summary.csv", rows)
     assert p.read_text().splitlines()[0] == \
-        "clip,frames,fps,seconds,mean_confidence,status,error,output,job,matte"
+        "clip,frames,fps,seconds,mean_confidence,status,error,output,job,matte,note"
     back = read_summary(p)
     assert back == [Row("a", "done", 120, 25.0, 3.5, 0.93, output="/o/a.npz", job="1f2e3d",
-                        matte="/o/a.matte/a.%05d.png"),
+                        matte="/o/a.matte/a.%05d.png", note="taken from an earlier attempt"),
                     Row("b", "failed", error="video /x/b.mp4 does not exist (details)"),
                     Row("c", "cancelled")]
     # a summary written before the matte column: read with none

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 
 from .manifest import BatchError
-from .ownership import (OutputTaken, claimed, clear_leftover_matte, earlier_output, own_output,
-                        still_planned)
+from .ownership import (OutputTaken, claimed, clear_leftover_matte, earlier_output,
+                        matte_identity, own_output, still_planned)
 from .summary import Row
 
 log = logging.getLogger(__name__)
@@ -140,7 +140,7 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
     owner : str
         The run and the job's digest (:func:`.ownership.claimed`): a claim of the same
         ``owner`` is this run's earlier attempt of the job (Dask ran the task again, taking its
-        worker for lost), waited for; the track it wrote is taken (the row's ``error`` says
+        worker for lost), waited for; the track it wrote is taken (the row's ``note`` says
         so), else the clip is tracked again.
 
     Returns
@@ -167,7 +167,7 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
             raise
         partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
     return dataclasses.replace(track_row(job.name, track, out, time.perf_counter() - t0),
-                               error=claim.note(False))
+                               note=claim.note(False))
 
 
 def _taken_track(job, out: str, claim, t0: float, seconds: float = 0.0) -> Row:
@@ -179,7 +179,7 @@ def _taken_track(job, out: str, claim, t0: float, seconds: float = 0.0) -> Row:
     partial_path(out).unlink(missing_ok=True)
     return dataclasses.replace(
         track_row(job.name, track, out, seconds + time.perf_counter() - t0),
-        error=claim.note(True))
+        note=claim.note(True))
 
 
 @dataclass(frozen=True, eq=False)
@@ -274,7 +274,7 @@ def join_clip(job, out: str, model, chunks, results, overwrite: bool = False,
             track = track.with_source_facts(job.video)
             track.save(out, overwrite=overwrite)
     return dataclasses.replace(track_row(job.name, track, out, spent + time.perf_counter() - t0),
-                               error=claim.note(False))
+                               note=claim.note(False))
 
 
 def _identity(job, model):
@@ -337,7 +337,9 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
         while they are still those, before the render.
     owner : str
         As :func:`track_clip`'s: the result (and matte) this run's earlier attempt of the
-        pair rendered is taken.
+        pair rendered is taken; frames of a matte beside no result after it (killed between
+        the two commits, past its checks) are its own, removed as the run's (no other run's
+        job held the claim since: :func:`.ownership.earlier_output`).
 
     Returns
     -------
@@ -353,7 +355,10 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
             return _taken_video(job.name, out, matte, claim, t0)
         overwrite = overwrite or still_planned(out, planned)
         if not overwrite:
-            clear_leftover_matte(out, matte, planned_matte)
+            # frames beside no result under this run's earlier attempt's claim, past its checks
+            # (killed between the matte's commit and the result's): its, removed as the run's
+            clear_leftover_matte(out, matte,
+                                 matte_identity(matte) if claim.past_checks else planned_matte)
         with own_output(out, overwrite, matte):
             res = transfer_video(sources, out, model, overwrite=overwrite, options=options,
                                  progress_factory=None, align=settings["align"],
@@ -364,7 +369,7 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
     return Row(clip=job.name, status="done", frames=res.n_frames, fps=res.plan.fps,
                seconds=time.perf_counter() - t0, mean_confidence=float(np.mean(conf)),
                output=str(out), matte="" if res.matte is None else str(res.matte),
-               error=claim.note(False))
+               note=claim.note(False))
 
 
 def _pair_sources(job, model):
@@ -398,7 +403,7 @@ def _taken_video(name: str, out: str, matte: str | None, claim, t0: float) -> Ro
     info = video_info(out)
     return Row(clip=name, status="done", frames=info.n_frames, fps=info.fps,
                seconds=time.perf_counter() - t0, output=str(out),
-               matte="" if matte is None else str(matte), error=claim.note(True))
+               matte="" if matte is None else str(matte), note=claim.note(True))
 
 
 def _remove_other_mattes(out_dir: Path, name: str, matte: str | None) -> None:
@@ -483,7 +488,7 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
     return Row(clip=job.name, status="done", frames=track.n_frames, fps=track.fps,
                seconds=time.perf_counter() - t0,
                mean_confidence=float(np.mean(track.confidence)), output=str(out),
-               error=claim.note(taken))
+               note=claim.note(taken))
 
 
 

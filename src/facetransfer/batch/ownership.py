@@ -114,31 +114,54 @@ class Claim:
     waited: float = 0.0
     earlier: str = ""
 
+    @property
+    def past_checks(self) -> bool:
+        """Whether that attempt had passed its checks (:data:`CHECKED`): what is there now
+        that the run did not find may be its writing, none of another run's."""
+        return CHECKED in self.earlier.splitlines()
+
     def note(self, taken: bool) -> str:
-        """The words of a done row after such an attempt ("" none): its output taken
-        (``taken``) or made again."""
+        """The note of a done row after such an attempt (its summary's ``note`` column, ""
+        none): its output taken (``taken``) or made again."""
         if not self.earlier:
             return ""
         who = self.earlier.splitlines()[0]
         said = (f"this run's earlier attempt of the job ({who}; Dask ran it again, taking "
                 "its worker for lost)")
         waited = f" after waiting {self.waited:.1f} s for it" if self.waited else ""
-        return (f"note: {said} wrote the output: taken{waited}" if taken else
-                f"note: {said} ended without the output: done again{waited}")
+        return (f"{said} wrote the output: taken{waited}" if taken else
+                f"{said} ended without the output: done again{waited}")
 
 
 def earlier_output(out, planned: str, claim: Claim) -> bool:
     """Whether ``out`` is the output this run's earlier attempt of the job wrote
     (``claim.earlier``, :func:`claimed`): the file that attempt said it left as it ended
-    ("done" and its :func:`output_identity`); where it said nothing (killed), there and
-    another file than the one the run found (``planned``): between that attempt's claim and
-    this one's no job of another run held it (it would have rewritten the claim's words),
-    and a job writes its output only under its claim."""
+    ("done" and its :func:`output_identity`); where it did not end (killed) but had passed its
+    checks ("checked", :func:`own_output`), there and another file than the one the run found
+    (``planned``): between that attempt's claim and this one's no job of another run held it
+    (it would have rewritten the claim's words), and a job writes its output only under its
+    claim, past its checks. Killed before them, a file there that the run did not plan is
+    not that attempt's (another run's, finished before it; a user's): not taken (before,
+    taken, with this run's digest)."""
     if not claim.earlier:
         return False
     now = output_identity(out)
     said = [ln[5:] for ln in claim.earlier.splitlines() if ln.startswith("done ")]
-    return bool(now) and (now == said[-1] if said else now != planned)
+    return bool(now) and (now == said[-1] if said else claim.past_checks and now != planned)
+
+
+#: The line a job adds to its claim's words once it has passed its checks
+#: (:func:`own_output`): what it writes from then on is its own (:func:`earlier_output`).
+CHECKED = "checked"
+
+
+def _say_checked(out) -> None:
+    """Add :data:`CHECKED` to the words of the claim of ``out`` this process holds (none
+    held: nothing)."""
+    fd = _HELD.get(os.path.realpath(claim_path(out)), -1)
+    if fd >= 0:
+        with contextlib.suppress(OSError):
+            os.pwrite(fd, f"\n{CHECKED}".encode(), os.fstat(fd).st_size)
 
 
 def claim_path(out, part: str = "") -> Path:
@@ -448,12 +471,15 @@ def own_output(out, overwrite: bool, matte=None):
     planned to redo), so an ``out`` there now, or frames of ``matte`` that appeared during the
     block, are another run's (the block's write commits without replacing,
     :func:`facetransfer.io.atomic.atomic_path`): :class:`OutputTaken`, before the block runs
-    or when its write is refused."""
+    or when its write is refused. Its checks passed, it says so in the output's claim
+    (:data:`CHECKED`, held by this process: a batch job's)."""
     if overwrite:
+        _say_checked(out)
         yield
         return
     if os.path.isfile(out):
         raise _taken(out, "since this run began")
+    _say_checked(out)
     from ..errors import VideoError
 
     had_frames = _frames_there(matte)

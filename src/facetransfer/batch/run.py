@@ -13,6 +13,7 @@ digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
 
 from __future__ import annotations
 
+import collections
 import contextlib
 import dataclasses
 import logging
@@ -372,7 +373,16 @@ class _TrackSubmit:
     chunks of it fail at once, "its chunks are being tracked by another run" (before, two runs
     of one batch at once both tracked every chunk, and one join's write failed). A chunk's
     track goes to the join as a Dask result, no file: there is no chunk of another run to
-    take, nor one to be replaced under a join."""
+    take, nor one to be replaced under a join. At most :attr:`MAX_CLAIMS` clips are claimed
+    (and under way) at once, the others queued."""
+
+    #: Clips whose chunks the client claims at once, each claim an open file; no more than a
+    #: quarter of the files the process may open (:func:`_claims_at_once`). Before, every
+    #: clip's was taken as the run began: a run of more clips than the process may open files
+    #: (1024 by default on Linux) ran the rest unclaimed, without a word, its descriptors
+    #: spent (300 clips under a limit of 200: 136 unclaimed). Enough clips under way to keep
+    #: a cluster of a few hundred workers busy: each has a count and two chunks or more.
+    MAX_CLAIMS = 256
 
     def __init__(self, client, col: _Collector, outs: dict, mf, options, chunk: int,
                  overlap: int, keys: dict, planned: dict) -> None:
@@ -382,21 +392,32 @@ class _TrackSubmit:
         self.owners = _owners(keys)
         self.held = contextlib.ExitStack()     # the chunk claims, released at the run's end
         self.claims: dict[str, contextlib.ExitStack] = {}
+        self.queued: collections.deque = collections.deque()   # clips waiting for a claim
 
     def submit(self, job) -> None:
         if self.chunk:   # a clip of more than max_frames: the chunks of its first max_frames
+            self.queued.append(job)
+            self._next()
+        else:
+            self._whole(job)
+
+    def _next(self) -> None:
+        """Claim the chunks of the clips queued while fewer than :attr:`MAX_CLAIMS` are held,
+        and count their frames. While a clip is queued, as many are under way (each claimed
+        clip has a task until its row is final, which releases its claim and calls this): the
+        run's collector never runs out of tasks with clips left."""
+        while self.queued and len(self.claims) < _claims_at_once(self.MAX_CLAIMS):
+            job = self.queued.popleft()
             claim = contextlib.ExitStack()
             try:
                 claim.enter_context(O.claimed(self.outs[job.name], self.owners[job.name],
                                               part="chunks"))
             except O.OutputTaken as exc:
                 self.col.fail(job, exc, self.outs[job.name])
-                return
+                continue
             self.claims[job.name] = self.held.enter_context(claim)
             self.col.add(self.client.submit(J.count_frames, str(job.video), job.max_frames,
                                             pure=False), "count", job)
-        else:
-            self._whole(job)
 
     def _whole(self, job) -> None:
         self.col.add(self.client.submit(J.track_clip, job, str(self.outs[job.name]), self.mf,
@@ -432,10 +453,24 @@ class _TrackSubmit:
             self.col.finish(job, dataclasses.replace(res, job=self.keys[job.name]))
 
     def _release(self, job) -> None:
-        """Let go of the claim of the chunks of ``job``'s clip (its row is final)."""
+        """Let go of the claim of the chunks of ``job``'s clip (its row is final), and claim
+        the next clip queued."""
         claim = self.claims.pop(job.name, None)
         if claim is not None:
             claim.close()
+            self._next()
+
+
+def _claims_at_once(most: int) -> int:
+    """``most``, or a quarter of the files this process may open where that is fewer (the
+    rest for Dask's connections, the summary, the videos of a threads cluster)."""
+    try:
+        import resource
+
+        soft = resource.getrlimit(resource.RLIMIT_NOFILE)[0]
+    except (ImportError, OSError, ValueError):   # not POSIX
+        return most
+    return most if soft == resource.RLIM_INFINITY else max(1, min(most, soft // 4))
 
 
 def _earlier_rows(out_dir: Path) -> list[Row]:

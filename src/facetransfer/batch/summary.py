@@ -10,9 +10,7 @@ column              meaning
 ``mean_confidence`` mean tracking confidence over the frames (empty if not known)
 ``status``          ``done``, ``skipped`` (already done by an earlier run), ``failed`` or
                     ``cancelled`` (the run was stopped before it finished)
-``error``           one line: why it failed; of a done row, a note of what happened on the
-                    way (its output taken from the run's earlier attempt of the job, which
-                    Dask ran again), empty mostly
+``error``           one line: why it failed (empty unless failed)
 ``output``          the output's path
 ``job``             a digest of what made the output (the job's input files by their
                     content, its labels and options, the model: ``v2:`` and 16 hex
@@ -23,6 +21,9 @@ column              meaning
                     ``DIR/NAME.matte/NAME.%05d.png``), empty where it made none; a rerun
                     asking for a matte takes the one there as the job's only where the
                     row names it
+``note``            one line: what happened on the way to a done row, empty mostly (its
+                    output taken from the run's earlier attempt of the job, which Dask ran
+                    again, or made again after it)
 ==================  ======================================================================
 """
 
@@ -40,7 +41,7 @@ from .manifest import BatchError
 __all__ = ["Row", "SUMMARY_COLUMNS", "STATUSES", "write_summary", "read_summary"]
 
 SUMMARY_COLUMNS = ("clip", "frames", "fps", "seconds", "mean_confidence", "status", "error",
-                   "output", "job", "matte")
+                   "output", "job", "matte", "note")
 STATUSES = ("done", "skipped", "failed", "cancelled")
 
 
@@ -58,12 +59,14 @@ class Row:
     output: str = ""
     job: str = ""
     matte: str = ""
+    note: str = ""
 
     def __post_init__(self) -> None:
         if self.status not in STATUSES:
             raise ValueError(f"summary status must be one of {STATUSES}, got {self.status!r}")
         # one line, whatever the exception said
         object.__setattr__(self, "error", " ".join(str(self.error).split()))
+        object.__setattr__(self, "note", " ".join(str(self.note).split()))
 
     @property
     def ok(self) -> bool:
@@ -100,7 +103,7 @@ def read_summary(path: str | os.PathLike) -> list[Row]:
                         fps=num(r["fps"], float), seconds=float(r["seconds"] or 0),
                         mean_confidence=num(r["mean_confidence"], float), error=r["error"],
                         output=r.get("output") or "", job=r.get("job") or "",
-                        matte=r.get("matte") or "")
+                        matte=r.get("matte") or "", note=r.get("note") or "")
                     for r in csv.DictReader(fh)]
     except OSError as exc:
         raise BatchError(f"cannot read the batch summary {path} ({exc.strerror})") from None

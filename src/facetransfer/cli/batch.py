@@ -215,8 +215,8 @@ def _run(args, what: str, n_jobs: int, call) -> int:
     for row in res.rows:
         if row.status == "failed":
             print(f"{row.clip}: failed: {row.error}", file=sys.stderr)
-        elif row.error:     # a done row's note (its output taken from an earlier attempt)
-            print(f"{row.clip}: {row.error}", file=sys.stderr)
+        elif row.note:     # a done row's note (its output taken from an earlier attempt)
+            print(f"{row.clip}: note: {row.note}", file=sys.stderr)
     counts = ", ".join(f"{res.count(s)} {s}" for s in ("done", "skipped", "failed")
                        if res.count(s))
     n = len(res.rows)
