@@ -235,3 +235,38 @@ def test_a_cancelled_childs_pool_has_closed_its_pipes_when_cancel_returns(tmp_pa
         manager = bg._pool._executor_manager_thread
         bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))
         assert not manager.is_alive()
+
+
+def test_a_child_whose_parent_was_killed_outright_ends(tmp_path):
+    """A parent killed outright (``kill -9``, the out-of-memory killer) left its background
+    tracker running to the end, then waiting for ever to hand its result to no one (its own
+    copy of the result pipe kept the pipe open): it ends with its parent."""
+    import subprocess
+    import sys
+    import textwrap
+
+    ready = tmp_path / "ready"
+    code = textwrap.dedent("""
+        import os, signal, time
+        from pathlib import Path
+        from facetransfer.track import obtain
+
+        def job():
+            Path(os.environ["READY"]).write_text(str(os.getpid()))
+            time.sleep(60)
+
+        obtain._background_track_job = job
+        bg = obtain.start_background_track("v.mp4", object(), 10, method="auto",
+                                           options=None, parallel=True)
+        while not Path(os.environ["READY"]).exists():
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGKILL)
+    """)
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    # no pipes: an orphaned child holding them would keep run() waiting
+    r = subprocess.run([sys.executable, "-c", code], timeout=120, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.DEVNULL,
+                       env={**os.environ, "PYTHONPATH": src, "READY": str(ready)})
+    assert r.returncode == -signal.SIGKILL
+    with _forked(ready) as pid:
+        assert _wait(lambda: not _alive(pid), 10), "the orphaned child still runs"

@@ -28,8 +28,8 @@ import signal
 import sys
 import threading
 
-__all__ = ["deferred_signals", "interrupted_once", "interrupts_not_ignored", "kill_forked",
-           "send_later", "unsafe_to_raise_at"]
+__all__ = ["deferred_signals", "ended_with_parent", "interrupted_once", "interrupts_not_ignored",
+           "kill_forked", "send_later", "unsafe_to_raise_at"]
 
 #: The handlers replaced while a fork is under way (None: none), for the child to restore.
 _SAVED: dict | None = None
@@ -157,6 +157,28 @@ def kill_forked(pool, future, *, grace: float = 0.0, interrupt: bool = False) ->
             # manager thread at the exit through a pipe such a thread may then be closing
             # ("Exception ignored ... Bad file descriptor", 1 of 10 Ctrl-Cs to the parent)
             manager.join(timeout=1.0)
+
+
+def ended_with_parent(every: float = 0.5) -> None:
+    """In a forked worker of a ``ProcessPoolExecutor`` (a background tracker, a detector):
+    end this process at once (``os._exit``) when its parent has gone, checked every ``every``
+    seconds on a daemon thread. A parent killed outright (``kill -9``, the kernel's
+    out-of-memory killer) left its child tracking to the end, then waiting for ever to hand
+    its result to no one (its own copy of the result pipe's reader kept it open), holding the
+    clip's decoded frames. Nothing outside such a worker (no parent recorded)."""
+    import multiprocessing
+    import time
+
+    parent = multiprocessing.parent_process()
+    if parent is None or parent.pid is None:
+        return
+
+    def watch() -> None:
+        while os.getppid() == parent.pid:
+            time.sleep(every)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
 
 
 def _each_worker(pool, do) -> None:

@@ -509,9 +509,11 @@ _BACKGROUND_JOB: tuple | None = None
 
 def _run_background_job():
     """In the child: :func:`_background_track_job`, its Ctrl-C taken once (saved, not cut
-    short by a second one: :func:`facetransfer.signals.interrupted_once`)."""
-    from ..signals import interrupted_once
+    short by a second one: :func:`facetransfer.signals.interrupted_once`); ended if the parent
+    goes (:func:`facetransfer.signals.ended_with_parent`)."""
+    from ..signals import ended_with_parent, interrupted_once
 
+    ended_with_parent()
     with interrupted_once():
         return _background_track_job()
 
