@@ -270,3 +270,36 @@ def test_a_child_whose_parent_was_killed_outright_ends(tmp_path):
     assert r.returncode == -signal.SIGKILL
     with _forked(ready) as pid:
         assert _wait(lambda: not _alive(pid), 10), "the orphaned child still runs"
+
+
+def _deaf_to_ctrl_c_job():
+    """A background job that does not stop on a Ctrl-C (one stuck in a compiled kernel)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    Path(os.environ[_READY]).write_text(str(os.getpid()))
+    time.sleep(60)
+
+
+def test_a_second_ctrl_c_in_the_parent_kills_the_child_at_once(tmp_path, monkeypatch):
+    """The child takes one Ctrl-C only; a user who presses it again because the first seemed
+    slow must still get out: the parent's second interrupt, while it gives the child its
+    grace, ends the wait and kills the child (not the grace's end)."""
+    import concurrent.futures
+
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _deaf_to_ctrl_c_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    waited = []
+
+    def second_ctrl_c(futures, timeout=None):
+        waited.append(timeout)
+        raise KeyboardInterrupt                   # pressed again during the grace
+
+    with _forked(ready) as pid:
+        monkeypatch.setattr(concurrent.futures, "wait", second_ctrl_c)
+        with pytest.raises(KeyboardInterrupt):
+            bg.cancel(grace=600.0)                 # the first Ctrl-C's; the child is deaf
+        assert waited == [600.0]
+        assert _wait(lambda: not _alive(pid), 10), "the child outlived the second Ctrl-C"
