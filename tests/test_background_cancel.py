@@ -303,3 +303,30 @@ def test_a_second_ctrl_c_in_the_parent_kills_the_child_at_once(tmp_path, monkeyp
             bg.cancel(grace=600.0)                 # the first Ctrl-C's; the child is deaf
         assert waited == [600.0]
         assert _wait(lambda: not _alive(pid), 10), "the child outlived the second Ctrl-C"
+
+
+def test_a_second_ctrl_c_before_the_kill_began_still_kills_the_child(tmp_path, monkeypatch):
+    """A second interrupt raised as the cancel began (before ``kill_forked``'s own ``try``)
+    left the child running: ``result()``'s pool shutdown, and the exit, then waited for its
+    whole track. The cancel kills it all the same."""
+    from facetransfer import signals
+
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _deaf_to_ctrl_c_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    real, calls = signals.kill_forked, []
+
+    def interrupted_at_its_start(pool, future, **kw):
+        calls.append(kw)
+        if len(calls) == 1:
+            raise KeyboardInterrupt                # landed before anything was done
+        return real(pool, future, **kw)
+
+    with _forked(ready) as pid:
+        monkeypatch.setattr(signals, "kill_forked", interrupted_at_its_start)
+        with pytest.raises(KeyboardInterrupt):
+            bg.cancel(grace=600.0)
+        assert _wait(lambda: not _alive(pid), 10), "the child outlived the second Ctrl-C"
