@@ -47,6 +47,8 @@ def _nbytes(obj, seen=None) -> int:
     seen.add(id(obj))
     if isinstance(obj, np.ndarray):
         return obj.nbytes if obj.base is None else _nbytes(obj.base, seen)
+    if isinstance(obj, (bytes, bytearray)):    # the memory of a frozen array (a topology's faces)
+        return len(obj)
     if isinstance(obj, dict):
         return sum(_nbytes(v, seen) for v in obj.values())
     if isinstance(obj, (list, tuple)):

@@ -235,3 +235,98 @@ def test_a_cancelled_childs_pool_has_closed_its_pipes_when_cancel_returns(tmp_pa
         manager = bg._pool._executor_manager_thread
         bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))
         assert not manager.is_alive()
+
+
+def test_a_child_whose_parent_was_killed_outright_ends(tmp_path):
+    """A parent killed outright (``kill -9``, the out-of-memory killer) left its background
+    tracker running to the end, then waiting for ever to hand its result to no one (its own
+    copy of the result pipe kept the pipe open): it ends with its parent."""
+    import subprocess
+    import sys
+    import textwrap
+
+    ready = tmp_path / "ready"
+    code = textwrap.dedent("""
+        import os, signal, time
+        from pathlib import Path
+        from facetransfer.track import obtain
+
+        def job():
+            Path(os.environ["READY"]).write_text(str(os.getpid()))
+            time.sleep(60)
+
+        obtain._background_track_job = job
+        bg = obtain.start_background_track("v.mp4", object(), 10, method="auto",
+                                           options=None, parallel=True)
+        while not Path(os.environ["READY"]).exists():
+            time.sleep(0.05)
+        os.kill(os.getpid(), signal.SIGKILL)
+    """)
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    # no pipes: an orphaned child holding them would keep run() waiting
+    r = subprocess.run([sys.executable, "-c", code], timeout=120, stdout=subprocess.DEVNULL,
+                       stderr=subprocess.DEVNULL,
+                       env={**os.environ, "PYTHONPATH": src, "READY": str(ready)})
+    assert r.returncode == -signal.SIGKILL
+    with _forked(ready) as pid:
+        assert _wait(lambda: not _alive(pid), 10), "the orphaned child still runs"
+
+
+def _deaf_to_ctrl_c_job():
+    """A background job that does not stop on a Ctrl-C (one stuck in a compiled kernel)."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    Path(os.environ[_READY]).write_text(str(os.getpid()))
+    time.sleep(60)
+
+
+def test_a_second_ctrl_c_in_the_parent_kills_the_child_at_once(tmp_path, monkeypatch):
+    """The child takes one Ctrl-C only; a user who presses it again because the first seemed
+    slow must still get out: the parent's second interrupt, while it gives the child its
+    grace, ends the wait and kills the child (not the grace's end)."""
+    import concurrent.futures
+
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _deaf_to_ctrl_c_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    waited = []
+
+    def second_ctrl_c(futures, timeout=None):
+        waited.append(timeout)
+        raise KeyboardInterrupt                   # pressed again during the grace
+
+    with _forked(ready) as pid:
+        monkeypatch.setattr(concurrent.futures, "wait", second_ctrl_c)
+        with pytest.raises(KeyboardInterrupt):
+            bg.cancel(grace=600.0)                 # the first Ctrl-C's; the child is deaf
+        assert waited == [600.0]
+        assert _wait(lambda: not _alive(pid), 10), "the child outlived the second Ctrl-C"
+
+
+def test_a_second_ctrl_c_before_the_kill_began_still_kills_the_child(tmp_path, monkeypatch):
+    """A second interrupt raised as the cancel began (before ``kill_forked``'s own ``try``)
+    left the child running: ``result()``'s pool shutdown, and the exit, then waited for its
+    whole track. The cancel kills it all the same."""
+    from facetransfer import signals
+
+    ready = tmp_path / "ready"
+    monkeypatch.setenv(_READY, str(ready))
+    monkeypatch.setattr(obtain, "_background_track_job", _deaf_to_ctrl_c_job)
+    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
+                                       parallel=True)
+    assert bg is not None
+    real, calls = signals.kill_forked, []
+
+    def interrupted_at_its_start(pool, future, **kw):
+        calls.append(kw)
+        if len(calls) == 1:
+            raise KeyboardInterrupt                # landed before anything was done
+        return real(pool, future, **kw)
+
+    with _forked(ready) as pid:
+        monkeypatch.setattr(signals, "kill_forked", interrupted_at_its_start)
+        with pytest.raises(KeyboardInterrupt):
+            bg.cancel(grace=600.0)
+        assert _wait(lambda: not _alive(pid), 10), "the child outlived the second Ctrl-C"

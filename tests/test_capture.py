@@ -548,6 +548,27 @@ def test_the_tracked_points_are_made_before_a_fork(arkit_model, tmp_path, monkey
     assert made == [m]
 
 
+def test_a_sampler_made_while_another_thread_releases_them_is_returned(arkit_model, monkeypatch):
+    """obtain.done_tracking (a job whose tracks are in) empties the samplers' cache; in a
+    ``batch`` worker another job's thread may be making one then: it read the sampler back
+    from the emptied cache (a KeyError in that job's fit). The one made is returned."""
+    from facetransfer.track import capture_points
+
+    class ReleasedMeanwhile(dict):
+        def __setitem__(self, key, value):
+            super().__setitem__(key, value)
+            capture_points.release()          # another thread's, right after the store
+
+    monkeypatch.setattr(capture_points, "_SAMPLERS", ReleasedMeanwhile())
+    smp = capture_points.sampler(arkit_model)
+    assert isinstance(smp, capture_points.Sampler)
+    monkeypatch.setattr(capture_points, "_SAMPLERS", {})
+    made = [capture_points.sampler(arkit_model, mediapipe_correspondence(arkit_model)),
+            capture_points.sampler(arkit_model)]
+    assert list(capture_points._SAMPLERS.values()) == made      # the last two kept
+    assert capture_points.sampler(arkit_model) is made[1]
+
+
 @pytest.mark.parametrize("stop", [KeyboardInterrupt, MemoryError])
 def test_a_stop_making_the_tracked_points_leaves_no_child_and_no_job(tmp_path, monkeypatch,
                                                                      stop):

@@ -576,6 +576,51 @@ def test_an_interrupt_inside_importlibs_lock_callback_is_raised_after_it(handler
     assert (r.returncode, r.stderr) == (0, "")
 
 
+@pytest.mark.parametrize("handler,signum,where", [
+    ("_interrupted", "SIGINT", "_get_module_lock"), ("_interrupted", "SIGINT", "acquire"),
+    ("_terminated", "SIGTERM", "_get_module_lock"), ("_interrupted", "SIGINT", "handle")])
+def test_an_interrupt_inside_importlibs_or_loggings_lock_taking_is_raised_after_it(
+        handler, signum, where):
+    """importlib's ``_get_module_lock`` takes the global import lock before its ``try``,
+    ``_ModuleLock.acquire`` a module's lock before it returns, logging's ``Handler.handle``
+    its lock before its ``try``: a Ctrl-C raised there left the lock held for ever, and the
+    transfer's main thread, interrupted as it imported, waited for ever for its MediaPipe and
+    kernel loading threads, stuck at their next import (a lone SIGINT 1.3-2.7 s in: 3 of 45
+    runs hung, nothing said). The handlers raise nothing in such a frame (real ones, caught
+    by a trace function); the signal is sent again and raised after it."""
+    code = textwrap.dedent(f"""
+        import logging, signal, sys, time
+        from facetransfer.cli import main as cli_main
+
+        seen = []
+
+        def tracer(frame, event, arg):
+            if frame.f_code.co_name == {where!r} and not seen:
+                seen.append(frame)
+
+        sys.modules.pop("json", None)
+        sys.settrace(tracer)
+        import json                                  # a module's lock taken
+        logging.getLogger("t").addHandler(logging.NullHandler())
+        logging.getLogger("t").error("x")            # a handler's lock taken
+        sys.settrace(None)
+        assert seen[0].f_globals["__name__"] in ("importlib._bootstrap", "logging"), seen
+        signal.signal(signal.{signum}, cli_main.{handler})
+        try:
+            cli_main.{handler}(signal.{signum}, seen[0])
+        except KeyboardInterrupt:
+            sys.exit("raised inside " + {where!r})
+        try:
+            time.sleep(30)
+        except KeyboardInterrupt:
+            sys.exit(0)
+        sys.exit("not sent again")
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": SRC})
+    assert (r.returncode, r.stderr) == (0, "")
+
+
 def test_an_interrupted_run_names_an_earlier_output_it_replaced(tmp_path, capsys):
     """``track --out T.npz --overlay O.mp4 --overwrite`` interrupted while drawing the overlay
     had already replaced the earlier T.npz, but its line said only "interrupted": an output is

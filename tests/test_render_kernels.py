@@ -588,11 +588,17 @@ def test_index_range_remembers_only_frozen_arrays_of_their_own():
     assert raster.index_range(F) == (0, 3)
     F[1, 2] = 7  # a writeable array is scanned every call
     assert raster.index_range(F) == (0, 7)
-    frozen = F.copy()
-    frozen.flags.writeable = False
+    flagged = F.copy()
+    flagged.flags.writeable = False
+    assert raster.index_range(flagged) == (0, 7)
+    flagged.flags.writeable = True   # read-only by a flag only: changed and flagged back
+    flagged[1, 2] = 9
+    flagged.flags.writeable = False
+    assert raster.index_range(flagged) == (0, 9)
+    frozen = np.frombuffer(F.tobytes(), F.dtype).reshape(F.shape)   # nothing can change it
     assert raster.index_range(frozen) == (0, 7)
     assert raster._RANGES[id(frozen)][1] == (0, 7)
-    view = frozen[:1]  # a view of it (its base could change): scanned
+    view = flagged[:1]  # a view of an array that could change: scanned
     assert raster.index_range(view) == (0, 2) and id(view) not in raster._RANGES
     # the checks still refuse faces past the values, through the remembered range
     r = raster.rasterize(np.array([[0, 0, 0], [9, 0, 0], [0, 9, 0], [9, 9, 0.0]]),
@@ -613,7 +619,9 @@ def test_mesh_topology_faces_are_read_only_and_its_own():
     F = np.array([[0, 1, 2]], np.int64)
     empty = np.zeros(0, np.int64)
     topo = MeshTopology(3, F, empty, empty, ())
-    assert not topo.faces.flags.writeable and topo.faces.base is None
+    assert not topo.faces.flags.writeable
+    with pytest.raises(ValueError):
+        topo.faces.flags.writeable = True     # read-only for good, not by a flag only
     F[0, 0] = 2  # the caller's array is not the topology's
     assert topo.faces[0, 0] == 0
     with pytest.raises(ValueError):

@@ -28,8 +28,8 @@ import signal
 import sys
 import threading
 
-__all__ = ["deferred_signals", "interrupted_once", "interrupts_not_ignored", "kill_forked",
-           "in_import_lock_callback", "send_later"]
+__all__ = ["deferred_signals", "ended_with_parent", "interrupted_once", "interrupts_not_ignored",
+           "kill_forked", "send_later", "unsafe_to_raise_at"]
 
 #: The handlers replaced while a fork is under way (None: none), for the child to restore.
 _SAVED: dict | None = None
@@ -159,6 +159,28 @@ def kill_forked(pool, future, *, grace: float = 0.0, interrupt: bool = False) ->
             manager.join(timeout=1.0)
 
 
+def ended_with_parent(every: float = 0.5) -> None:
+    """In a forked worker of a ``ProcessPoolExecutor`` (a background tracker, a detector):
+    end this process at once (``os._exit``) when its parent has gone, checked every ``every``
+    seconds on a daemon thread. A parent killed outright (``kill -9``, the kernel's
+    out-of-memory killer) left its child tracking to the end, then waiting for ever to hand
+    its result to no one (its own copy of the result pipe's reader kept it open), holding the
+    clip's decoded frames. Nothing outside such a worker (no parent recorded)."""
+    import multiprocessing
+    import time
+
+    parent = multiprocessing.parent_process()
+    if parent is None or parent.pid is None:
+        return
+
+    def watch() -> None:
+        while os.getppid() == parent.pid:
+            time.sleep(every)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="parent-watch", daemon=True).start()
+
+
 def _each_worker(pool, do) -> None:
     """``do(process)`` for each worker process of ``pool`` (one already gone is skipped)."""
     for proc in list((getattr(pool, "_processes", None) or {}).values()):
@@ -216,15 +238,24 @@ def send_later(signum: int) -> None:
     later.start()
 
 
-def in_import_lock_callback(frame) -> bool:
-    """Whether ``frame`` is importlib's module-lock callback (``_get_module_lock``'s ``cb``,
-    run when a module's lock is collected): it takes the global import lock before its
-    ``try``, so an interrupt raised there, right after the lock was taken, left the lock held
-    by the main thread for ever, and every other thread's next import waited for it (a Ctrl-C
-    2 s into a transfer hung it). A handler sends its signal again instead
-    (:func:`send_later`)."""
-    return frame is not None and frame.f_code.co_name == "cb" and \
-        frame.f_globals.get("__name__") == "importlib._bootstrap"
+#: Modules whose own code takes a lock before the ``try`` that releases it (importlib's
+#: ``_get_module_lock`` and its callback ``cb`` the global import lock, ``_ModuleLock.acquire``
+#: a module's; logging's ``Handler.handle`` and ``_acquireLock`` theirs), and that never wait
+#: long themselves (a module's own code runs in a frame of its own).
+UNGUARDED_LOCKS = ("importlib._bootstrap", "logging")
+
+
+def unsafe_to_raise_at(frame) -> bool:
+    """Whether a signal handler must not raise in ``frame`` (the code the main thread was
+    running): a frame of :data:`UNGUARDED_LOCKS`' modules, where an interrupt raised right
+    after a lock was taken left it held by the main thread for ever, and every other thread
+    waited for it at its next import or log line. The transfer's main thread, interrupted as
+    it imported while the threads loading MediaPipe and the capture's kernels imported too,
+    then waited for ever for them (a lone Ctrl-C 1.3-2.7 s into issue 13's transfer: 3 of 45
+    runs hung, no line said; importlib's module-lock callback alone was guarded before). A
+    handler sends its signal again instead (:func:`send_later`), taken in the code running
+    a moment later."""
+    return frame is not None and frame.f_globals.get("__name__") in UNGUARDED_LOCKS
 
 
 def _send_again(signum: int) -> None:

@@ -314,7 +314,7 @@ def main(argv: list[str] | None = None) -> int:
     and 130 as well (it printed the import's traceback); a SIGTERM then, one line and 143 (it
     killed the process by the signal, with nothing said). An interrupt raised where Python
     ignores exceptions is sent again (:func:`facetransfer.signals.interrupts_not_ignored`), and
-    one that would be raised inside importlib's module-lock callback is sent again instead
+    one that would be raised inside importlib's or logging's lock taking is sent again instead
     (:func:`_interrupted`, :func:`_terminated`).
     """
     import signal
@@ -432,12 +432,13 @@ def _interrupted(signum, frame):
 
 
 def _raise_at(frame, signum: int, stop: type[KeyboardInterrupt]) -> None:
-    """Raise ``stop`` in ``frame`` (the code the main thread was running), but not inside
-    importlib's module-lock callback (:func:`facetransfer.signals.in_import_lock_callback`):
-    ``signum`` is sent again a moment later instead."""
-    from ..signals import in_import_lock_callback, send_later
+    """Raise ``stop`` in ``frame`` (the code the main thread was running), but not where a lock
+    taken before its ``try`` would be left held (importlib's, logging's:
+    :func:`facetransfer.signals.unsafe_to_raise_at`): ``signum`` is sent again a moment later
+    instead."""
+    from ..signals import send_later, unsafe_to_raise_at
 
-    if in_import_lock_callback(frame):
+    if unsafe_to_raise_at(frame):
         send_later(signum)
         return
     raise stop

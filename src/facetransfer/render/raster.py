@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import MeshError, ShapeError
+from ..topology import never_written
 from .cameras import Pinhole, WeakPerspective, _as_size
 from .jit import _HAVE_NUMBA, _maybe_njit  # noqa: F401 (the kernels import it from here)
 
@@ -69,10 +70,13 @@ _RANGES: dict = {}
 
 def index_range(F: np.ndarray) -> tuple[int, int]:
     """``(F.min(), F.max())`` of a non-empty integer array, as ints. Remembered for an array
-    that is read-only and owns its data (a :class:`facetransfer.topology.MeshTopology`'s
-    faces, which the render of a frame checked against its vertices, uvs and values seven
-    times: 0.05 ms each, the interpreter held); any other array is scanned every call."""
-    if F.flags.writeable or F.base is not None:
+    nothing can change (:func:`facetransfer.topology.never_written`: a
+    :class:`~facetransfer.topology.MeshTopology`'s faces, which the render of a frame checked
+    against its vertices, uvs and values seven times: 0.05 ms each, the interpreter held);
+    any other array is scanned every call (one merely flagged read-only could be made
+    writeable, changed, and flagged back: its remembered range was then stale, and the checks
+    let a kernel index past the vertices)."""
+    if not never_written(F):
         return int(F.min()), int(F.max())
     held = _RANGES.get(id(F))
     if held is not None and held[0]() is F:

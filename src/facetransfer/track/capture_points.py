@@ -61,14 +61,18 @@ _SAMPLERS: dict = {}
 
 def sampler(model, dense=None) -> Sampler:
     """``Sampler(model, dense)``, reused while the model (its content hash) and the dense
-    points are those of one of the last two calls (a sampler is never changed)."""
+    points are those of one of the last two calls (a sampler is never changed). The one made
+    is returned, not read back: another thread's :func:`release` (a job of a ``batch`` worker
+    whose tracks are in, beside one tracking) may empty the cache meanwhile."""
     key = (model.content_hash, None if dense is None else
            (dense.mp_index.tobytes(), dense.triangles.tobytes(), dense.bary.tobytes()))
-    if key not in _SAMPLERS:
-        while len(_SAMPLERS) >= 2:
-            _SAMPLERS.pop(next(iter(_SAMPLERS)))
-        _SAMPLERS[key] = Sampler(model, dense)
-    return _SAMPLERS[key]
+    made = _SAMPLERS.get(key)
+    if made is None:
+        made = Sampler(model, dense)
+        for old in list(_SAMPLERS)[:-1]:       # the last one made before this one is kept
+            _SAMPLERS.pop(old, None)
+        _SAMPLERS[key] = made
+    return made
 
 
 def release() -> None:

@@ -482,10 +482,16 @@ class _BackgroundTrack:
         end by itself (:func:`grace_for`). With a grace, the child is sent the Ctrl-C first:
         one sent to this process alone (``kill -INT``, a job runner's stop) reached no child,
         which tracked on until killed, its progress lost; one that reached it already (the
-        terminal's) is not taken twice (:func:`facetransfer.signals.interrupted_once`)."""
+        terminal's) is not taken twice (:func:`facetransfer.signals.interrupted_once`). A second
+        interrupt before the kill was under way kills it at once (else this process's exit, and
+        :meth:`result`'s, waited for the child's whole track)."""
         from ..signals import kill_forked
 
-        kill_forked(self._pool, self._future, grace=grace, interrupt=self._interruptible)
+        try:
+            kill_forked(self._pool, self._future, grace=grace, interrupt=self._interruptible)
+        except BaseException:
+            kill_forked(self._pool, self._future)
+            raise
 
 
 #: Seconds a background tracker cancelled for a Ctrl-C is given to end by itself before it is
@@ -509,9 +515,11 @@ _BACKGROUND_JOB: tuple | None = None
 
 def _run_background_job():
     """In the child: :func:`_background_track_job`, its Ctrl-C taken once (saved, not cut
-    short by a second one: :func:`facetransfer.signals.interrupted_once`)."""
-    from ..signals import interrupted_once
+    short by a second one: :func:`facetransfer.signals.interrupted_once`); ended if the parent
+    goes (:func:`facetransfer.signals.ended_with_parent`)."""
+    from ..signals import ended_with_parent, interrupted_once
 
+    ended_with_parent()
     with interrupted_once():
         return _background_track_job()
 

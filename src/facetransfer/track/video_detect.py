@@ -128,7 +128,11 @@ _JOB: tuple | None = None
 
 
 def _child_job() -> ClipDetections:
-    """In the child: detect frames ``start .. stop`` (or the clip's end) of the video."""
+    """In the child: detect frames ``start .. stop`` (or the clip's end) of the video; ended if
+    the parent goes (:func:`facetransfer.signals.ended_with_parent`)."""
+    from ..signals import ended_with_parent
+
+    ended_with_parent()
     video, start, stop, fps, counter, view, subject, every, eyes = _JOB
     frames = _child_frames(video, start, stop)
     detector = _child_landmarker(fps, subject)
