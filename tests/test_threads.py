@@ -24,3 +24,62 @@ def test_ahead_raises_the_error_of_its_work_where_the_result_is_asked():
     with pytest.raises(IndexError):
         ahead.result()
     assert ahead.done()
+
+
+def _interrupted_meanwhile(release: threading.Event) -> None:
+    """A Ctrl-C to the main thread 0.05 s from now, ``release`` set 0.2 s after it."""
+    import signal
+    import time
+
+    def later():
+        time.sleep(0.05)
+        signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
+        time.sleep(0.2)          # the interrupt is in; the work ends only now
+        release.set()
+
+    threading.Thread(target=later, daemon=True).start()
+
+
+@pytest.fixture
+def ctrl_c():
+    """Python's own Ctrl-C handler in the main thread while the test runs."""
+    import signal
+
+    if not hasattr(signal, "pthread_kill") or threading.current_thread() is not \
+            threading.main_thread():
+        pytest.skip("needs a signal sent to the main thread")
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_a_wait_cut_short_by_a_ctrl_c_leaves_the_work_seen_running(ctrl_c):
+    """An interrupted :meth:`Ahead.wait` leaves :meth:`Ahead.done` false and the next wait
+    waiting while the work runs (Python 3.11's interrupted ``Thread.join`` took the thread
+    for ended: a caller's wait for the work in its error path returned at once)."""
+    release, ended = threading.Event(), []
+    ahead = Ahead(lambda: ended.append(release.wait(10)))
+    _interrupted_meanwhile(release)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            ahead.wait()
+        assert not ahead.done() and not ended
+        ahead.wait()
+        assert ahead.done() and ended == [True]
+    finally:
+        release.set()
+
+
+def test_wait_out_waits_for_the_work_through_an_interrupt_then_raises_it(ctrl_c):
+    """A Ctrl-C while :meth:`Ahead.wait_out` waits is raised once the work has ended (a plain
+    wait left it running while the interpreter exited: a thread in native code then aborted
+    the process)."""
+    release, ended = threading.Event(), []
+    ahead = Ahead(lambda: ended.append(release.wait(10)))
+    _interrupted_meanwhile(release)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            ahead.wait_out()
+        assert ended == [True] and ahead.done()
+    finally:
+        release.set()
