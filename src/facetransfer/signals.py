@@ -23,7 +23,7 @@ import sys
 import threading
 
 __all__ = ["deferred_signals", "interrupts_not_ignored", "kill_forked",
-           "in_import_lock_callback", "send_later"]
+           "in_importlib", "send_later"]
 
 #: The handlers replaced while a fork is under way (None: none), for the child to restore.
 _SAVED: dict | None = None
@@ -143,15 +143,19 @@ def send_later(signum: int) -> None:
     later.start()
 
 
-def in_import_lock_callback(frame) -> bool:
-    """Whether ``frame`` is importlib's module-lock callback (``_get_module_lock``'s ``cb``,
-    run when a module's lock is collected): it takes the global import lock before its
-    ``try``, so an interrupt raised there, right after the lock was taken, left the lock held
-    by the main thread for ever, and every other thread's next import waited for it (a Ctrl-C
-    2 s into a transfer hung it). A handler sends its signal again instead
-    (:func:`send_later`)."""
-    return frame is not None and frame.f_code.co_name == "cb" and \
-        frame.f_globals.get("__name__") == "importlib._bootstrap"
+def in_importlib(frame) -> bool:
+    """Whether ``frame`` is importlib's own code (``importlib._bootstrap``), where the import
+    locks are taken and given back. Its module-lock callback (``_get_module_lock``'s ``cb``,
+    run when a module's lock is collected) and ``_get_module_lock`` itself take the global
+    import lock before their ``try``, and ``_ModuleLock.acquire`` counts a module's lock as
+    held before it returns to the ``with`` that gives it back: an interrupt raised there, right
+    after the lock was taken, left it held by the main thread for ever, and every other
+    thread's next import waited for it (a Ctrl-C 2 s into a transfer hung it, in ``cb``; a
+    SIGTERM 0.6 s in, in ``_get_module_lock``, with the CLI's threads loading MediaPipe and the
+    capture's kernels waiting for the lock and the main thread for them). A handler sends its
+    signal again instead (:func:`send_later`): the code a module runs is its own frames, not
+    importlib's, so the interrupt lands there or after the import."""
+    return frame is not None and frame.f_globals.get("__name__") == "importlib._bootstrap"
 
 
 def _send_again(signum: int) -> None:

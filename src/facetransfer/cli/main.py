@@ -314,8 +314,8 @@ def main(argv: list[str] | None = None) -> int:
     and 130 as well (it printed the import's traceback); a SIGTERM then, one line and 143 (it
     killed the process by the signal, with nothing said). An interrupt raised where Python
     ignores exceptions is sent again (:func:`facetransfer.signals.interrupts_not_ignored`), and
-    one that would be raised inside importlib's module-lock callback is sent again instead
-    (:func:`_interrupted`, :func:`_terminated`).
+    one that would be raised inside importlib's own code (where it holds the import locks) is
+    sent again instead (:func:`_interrupted`, :func:`_terminated`).
     """
     import signal
 
@@ -433,11 +433,12 @@ def _interrupted(signum, frame):
 
 def _raise_at(frame, signum: int, stop: type[KeyboardInterrupt]) -> None:
     """Raise ``stop`` in ``frame`` (the code the main thread was running), but not inside
-    importlib's module-lock callback (:func:`facetransfer.signals.in_import_lock_callback`):
-    ``signum`` is sent again a moment later instead."""
-    from ..signals import in_import_lock_callback, send_later
+    importlib's own code, where it takes the import locks
+    (:func:`facetransfer.signals.in_importlib`): ``signum`` is sent again a moment later
+    instead."""
+    from ..signals import in_importlib, send_later
 
-    if in_import_lock_callback(frame):
+    if in_importlib(frame):
         send_later(signum)
         return
     raise stop
