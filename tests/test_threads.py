@@ -26,18 +26,31 @@ def test_ahead_raises_the_error_of_its_work_where_the_result_is_asked():
     assert ahead.done()
 
 
-def _interrupted_meanwhile(release: threading.Event) -> None:
-    """A Ctrl-C to the main thread 0.05 s from now, ``release`` set 0.2 s after it."""
+def _interrupted_meanwhile(release: threading.Event | None = None) -> threading.Thread:
+    """A Ctrl-C to the main thread 0.05 s from now, and ``release`` (if any) set 0.2 s after
+    it; the thread sending them (joined by :func:`_sent`)."""
     import signal
     import time
 
     def later():
         time.sleep(0.05)
         signal.pthread_kill(threading.main_thread().ident, signal.SIGINT)
-        time.sleep(0.2)          # the interrupt is in; the work ends only now
-        release.set()
+        if release is not None:
+            time.sleep(0.2)          # the interrupt is in; the work ends only now
+            release.set()
 
-    threading.Thread(target=later, daemon=True).start()
+    sender = threading.Thread(target=later, daemon=True)
+    sender.start()
+    return sender
+
+
+def _sent(sender: threading.Thread) -> None:
+    """``sender`` joined: its Ctrl-C delivered while the test's handler is there (one that
+    comes here, the test having failed otherwise, would stop the whole session)."""
+    try:
+        sender.join()
+    except KeyboardInterrupt:
+        pass
 
 
 @pytest.fixture
@@ -59,15 +72,17 @@ def test_a_wait_cut_short_by_a_ctrl_c_leaves_the_work_seen_running(ctrl_c):
     for ended: a caller's wait for the work in its error path returned at once)."""
     release, ended = threading.Event(), []
     ahead = Ahead(lambda: ended.append(release.wait(10)))
-    _interrupted_meanwhile(release)
+    sender = _interrupted_meanwhile()
     try:
         with pytest.raises(KeyboardInterrupt):
             ahead.wait()
         assert not ahead.done() and not ended
+        threading.Timer(0.1, release.set).start()     # the work ends while the next wait waits
         ahead.wait()
         assert ahead.done() and ended == [True]
     finally:
         release.set()
+        _sent(sender)
 
 
 def test_wait_out_waits_for_the_work_through_an_interrupt_then_raises_it(ctrl_c):
@@ -76,10 +91,11 @@ def test_wait_out_waits_for_the_work_through_an_interrupt_then_raises_it(ctrl_c)
     the process)."""
     release, ended = threading.Event(), []
     ahead = Ahead(lambda: ended.append(release.wait(10)))
-    _interrupted_meanwhile(release)
+    sender = _interrupted_meanwhile(release)
     try:
         with pytest.raises(KeyboardInterrupt):
             ahead.wait_out()
         assert ended == [True] and ahead.done()
     finally:
         release.set()
+        _sent(sender)
