@@ -547,22 +547,27 @@ def test_an_interrupt_inside_a_callback_python_ignores_is_taken(signum, said):
     assert (r.returncode, r.stderr.splitlines()) == (said[0], [f"facetransfer: {said[1]}"])
 
 
-@pytest.mark.parametrize("handler,signum", [("_terminated", "SIGTERM"),
-                                            ("_interrupted", "SIGINT")])
-def test_an_interrupt_inside_importlibs_lock_callback_is_raised_after_it(handler, signum):
-    """importlib's module-lock callback takes the global import lock before its ``try``: an
-    interrupt raised there right after it took the lock left the lock held for ever, and the
-    transfer's other threads hung at their next import (a Ctrl-C 2 s in, killed 120 s later).
-    The CLI's handlers raise nothing there; the signal is sent again and raised after it."""
+@pytest.mark.parametrize("handler,signum,where", [
+    ("_terminated", "SIGTERM", "cb"), ("_interrupted", "SIGINT", "cb"),
+    ("_terminated", "SIGTERM", "_get_module_lock"), ("_interrupted", "SIGINT", "acquire")])
+def test_an_interrupt_inside_importlibs_lock_callback_is_raised_after_it(handler, signum,
+                                                                         where):
+    """importlib's module-lock callback (``cb``) and ``_get_module_lock`` take the global
+    import lock before their ``try``, ``_ModuleLock.acquire`` a module's before the ``with``
+    that gives it back: an interrupt raised there right after it took the lock left the lock
+    held for ever, and the transfer's other threads hung at their next import (a Ctrl-C 2 s in,
+    killed 120 s later; a SIGTERM 0.6 s in, in ``_get_module_lock``, the loading threads
+    waiting). The CLI's handlers raise nothing in importlib's code; the signal is sent again
+    and raised after it."""
     code = textwrap.dedent(f"""
         import signal, sys, time
         from facetransfer.cli import main as cli_main
 
         ns = {{"__name__": "importlib._bootstrap", "sys": sys}}
-        exec("def cb():\\n    return sys._getframe()\\n", ns)     # the callback's frame
+        exec("def {where}():\\n    return sys._getframe()\\n", ns)     # importlib's frame
         signal.signal(signal.{signum}, cli_main.{handler})
         try:
-            cli_main.{handler}(signal.{signum}, ns["cb"]())
+            cli_main.{handler}(signal.{signum}, ns["{where}"]())
         except KeyboardInterrupt:
             sys.exit("raised inside importlib's callback")
         try:
