@@ -17,20 +17,7 @@ from .errors import ShapeError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["MeshTopology", "mesh_topology", "boundary_loops", "close_mouth", "inside_polygon",
-           "never_written"]
-
-
-def never_written(a: np.ndarray) -> bool:
-    """Whether nothing can change ``a``'s values: read-only, over the memory of a ``bytes``
-    object (immutable), so that its writeable flag cannot be set again. An array merely
-    flagged read-only that owns its memory can be made writeable again, changed and flagged
-    back."""
-    while isinstance(a, np.ndarray):
-        if a.flags.writeable:
-            return False
-        a = a.base
-    return isinstance(a, bytes)
+__all__ = ["MeshTopology", "mesh_topology", "boundary_loops", "close_mouth", "inside_polygon"]
 
 
 def boundary_loops(faces: np.ndarray) -> list[np.ndarray]:
@@ -95,16 +82,6 @@ class MeshTopology:
     mouth_loop: np.ndarray
     mouth_faces: np.ndarray
     eye_loops: tuple
-
-    def __post_init__(self) -> None:
-        # the faces read-only for good and the topology's own: the render checks them against
-        # a frame's arrays several times a frame, and remembers their index range
-        # (render.raster.index_range) for an array nobody can change
-        F = self.faces
-        if isinstance(F, np.ndarray) and not never_written(F):
-            F = np.ascontiguousarray(F)
-            object.__setattr__(self, "faces",
-                               np.frombuffer(F.tobytes(), F.dtype).reshape(F.shape))
 
     @property
     def n_closed(self) -> int:

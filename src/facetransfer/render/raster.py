@@ -15,13 +15,11 @@ Pineda. A parallel algorithm for polygon rasterization. SIGGRAPH 1988 (edge func
 from __future__ import annotations
 
 import threading
-import weakref
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..errors import MeshError, ShapeError
-from ..topology import never_written
 from .cameras import Pinhole, WeakPerspective, _as_size
 from .jit import _HAVE_NUMBA, _maybe_njit  # noqa: F401 (the kernels import it from here)
 
@@ -64,30 +62,6 @@ class Raster:
 # Validation
 # --------------------------------------------------------------------------------------------
 
-#: :func:`index_range`'s ranges of frozen arrays: ``id -> (weak reference, (lo, hi))``.
-_RANGES: dict = {}
-
-
-def index_range(F: np.ndarray) -> tuple[int, int]:
-    """``(F.min(), F.max())`` of a non-empty integer array, as ints. Remembered for an array
-    nothing can change (:func:`facetransfer.topology.never_written`: a
-    :class:`~facetransfer.topology.MeshTopology`'s faces, which the render of a frame checked
-    against its vertices, uvs and values seven times: 0.05 ms each, the interpreter held);
-    any other array is scanned every call (one merely flagged read-only could be made
-    writeable, changed, and flagged back: its remembered range was then stale, and the checks
-    let a kernel index past the vertices)."""
-    if not never_written(F):
-        return int(F.min()), int(F.max())
-    held = _RANGES.get(id(F))
-    if held is not None and held[0]() is F:
-        return held[1]
-    lo_hi = int(F.min()), int(F.max())
-    if len(_RANGES) >= 32:  # (ids of arrays gone; a few topologies live at a time)
-        _RANGES.clear()
-    _RANGES[id(F)] = (weakref.ref(F), lo_hi)
-    return lo_hi
-
-
 def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     """Vertices (n, 3) float64 finite and faces (F, 3) int64 in range; rejects empty meshes."""
     V = np.ascontiguousarray(vertices, dtype=np.float64)
@@ -105,7 +79,7 @@ def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
     if not np.issubdtype(F.dtype, np.integer):
         raise ShapeError(f"faces must be integer indices, got dtype {F.dtype}")
     F = np.ascontiguousarray(F, dtype=np.int64)
-    lo, hi = index_range(F)
+    lo, hi = int(F.min()), int(F.max())
     if lo < 0 or hi >= V.shape[0]:
         raise RenderError(f"faces index vertices {lo}..{hi} but the mesh has {V.shape[0]} vertices")
     return V, F
@@ -546,12 +520,6 @@ def _coverage_kernel_py(xy, F, W, H, front, skip, mask):  # pragma: no cover (nu
 _coverage_kernel = _maybe_njit(_coverage_kernel_py)
 
 
-def _within(F: np.ndarray, n: int) -> bool:
-    """Whether the indices ``F`` (not empty) all lie in ``0 .. n - 1``."""
-    lo, hi = index_range(F)
-    return lo >= 0 and hi < n
-
-
 def coverage(points: np.ndarray, faces: np.ndarray, size: tuple[int, int], *,
              front: bool = False, known: np.ndarray | None = None) -> np.ndarray:
     """The pixels a 2D triangle mesh covers: ``(H, W) bool``, what :func:`rasterize`'s ``mask``
@@ -567,7 +535,7 @@ def coverage(points: np.ndarray, faces: np.ndarray, size: tuple[int, int], *,
     F = np.ascontiguousarray(faces, np.int64)
     if xy.ndim != 2 or xy.shape[1] != 2:
         raise ShapeError(f"points must be (n, 2), got {xy.shape}")
-    if F.ndim != 2 or F.shape[1] != 3 or (F.size and not _within(F, len(xy))):
+    if F.ndim != 2 or F.shape[1] != 3 or (F.size and (F.min() < 0 or F.max() >= len(xy))):
         raise ShapeError(f"faces must be (F, 3) indices of the {len(xy)} points")
     W, H = _as_size(size)
     if known is None:

@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import AssetError, ShapeError
-from .raster import Raster, RenderError, _check_mesh, _face_cross, _maybe_njit, index_range
+from .raster import Raster, RenderError, _check_mesh, _face_cross, _maybe_njit
 
 __all__ = ["vertex_normals", "sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS",
            "interpolate_vertex_values"]
@@ -275,7 +275,7 @@ def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray,
         raise ShapeError("flags select a layer that is not given")
     tid, bary = _whole(raster)
     y0, x0, H, W = _box_of(box, tid.shape)
-    n_vertices = index_range(Fa)[1] + 1 if Fa.size else 0
+    n_vertices = int(Fa.max()) + 1 if Fa.size else 0
     args, images = [], []
     for layer in layers:
         if layer is None:  # no flag selects it: never read or written
@@ -339,7 +339,7 @@ def interpolate_vertex_values(raster: Raster, faces: np.ndarray, values: np.ndar
     """
     Fa = np.ascontiguousarray(faces, dtype=np.int64)
     v = np.ascontiguousarray(values, dtype=np.float32)
-    if v.ndim != 1 or (Fa.size and v.shape[0] <= index_range(Fa)[1]):
+    if v.ndim != 1 or (Fa.size and v.shape[0] <= int(Fa.max())):
         raise ShapeError(f"values must be (n,) covering the faces' vertices, got {v.shape}")
     tid, bary = _whole(raster)
     y0, x0, h, w = _box_of(box, tid.shape)
