@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .eyes import (BROW_SHAPES, EyeTexture, eye_openness, eye_texture, reference_candidates,
+from .eyes import (BROW_SHAPES, eye_openness, eye_texture, reference_candidates,
                    shape_activity)
 from .jaw import jaw_texture, mouth_closure
 
