@@ -60,13 +60,20 @@ def _forked(ready: Path):
             os.kill(int(ready.read_text()), signal.SIGKILL)
 
 
-def test_a_cancelled_child_that_missed_its_sigterm_is_stopped(tmp_path, monkeypatch):
+def _background(tmp_path, monkeypatch, job):
+    """``(ready, bg)``: a background track started with ``job`` in the tracker's place, which
+    writes its pid to ``ready`` (:func:`_forked`)."""
     ready = tmp_path / "ready"
     monkeypatch.setenv(_READY, str(ready))
-    monkeypatch.setattr(obtain, "_background_track_job", _deaf_job)
+    monkeypatch.setattr(obtain, "_background_track_job", job)
     bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
                                        parallel=True)
     assert bg is not None
+    return ready, bg
+
+
+def test_a_cancelled_child_that_missed_its_sigterm_is_stopped(tmp_path, monkeypatch):
+    ready, bg = _background(tmp_path, monkeypatch, _deaf_job)
     with _forked(ready) as pid:
         bg.cancel()
         assert _wait(lambda: not _alive(pid), 10), "the cancelled child still runs"
@@ -102,12 +109,7 @@ def test_a_child_that_got_the_ctrl_c_too_saves_its_progress_before_it_is_killed(
     interrupted as well, killed it at once, mid-save: its progress was lost and its temporary
     file left in the user cache (1 of 7 Ctrl-Cs while tracking). Cancelled for a Ctrl-C
     (:func:`facetransfer.track.obtain.grace_for`), a running child is given a moment to end."""
-    ready = tmp_path / "ready"
-    monkeypatch.setenv(_READY, str(ready))
-    monkeypatch.setattr(obtain, "_background_track_job", _saving_job)
-    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
-                                       parallel=True)
-    assert bg is not None
+    ready, bg = _background(tmp_path, monkeypatch, _saving_job)
     with _forked(ready) as pid:
         os.kill(pid, signal.SIGINT)                  # the terminal's Ctrl-C, in the child
         bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))
@@ -122,12 +124,7 @@ def test_a_ctrl_c_to_the_parent_alone_reaches_the_child_which_saves_its_progress
     """A SIGINT sent to the parent alone (``kill -INT PID``, a job runner's stop) reached no
     child: the parent waited out the grace while the child tracked on, then killed it, its
     progress lost. The parent now hands its child the interrupt, which saves and ends."""
-    ready = tmp_path / "ready"
-    monkeypatch.setenv(_READY, str(ready))
-    monkeypatch.setattr(obtain, "_background_track_job", _saving_job)
-    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
-                                       parallel=True)
-    assert bg is not None
+    ready, bg = _background(tmp_path, monkeypatch, _saving_job)
     with _forked(ready) as pid:
         bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))     # the child got nothing
         assert Path(str(ready) + ".saved").exists(), "the child's progress was not saved"
@@ -150,12 +147,7 @@ def test_a_child_saving_on_the_terminals_ctrl_c_is_not_cut_short_by_its_parents(
         tmp_path, monkeypatch):
     """The terminal's Ctrl-C reaches the child too; the one its parent then sends it (as for a
     Ctrl-C to the parent alone) must not raise inside its save (the child takes one)."""
-    ready = tmp_path / "ready"
-    monkeypatch.setenv(_READY, str(ready))
-    monkeypatch.setattr(obtain, "_background_track_job", _slow_saving_job)
-    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
-                                       parallel=True)
-    assert bg is not None
+    ready, bg = _background(tmp_path, monkeypatch, _slow_saving_job)
     with _forked(ready) as pid:
         os.kill(pid, signal.SIGINT)                  # the terminal's Ctrl-C, in the child
         assert _wait(Path(str(ready) + ".saving").exists, 10)
@@ -225,12 +217,7 @@ def test_a_cancelled_childs_pool_has_closed_its_pipes_when_cancel_returns(tmp_pa
     that thread closes as it ends: a manager still ending then ("Exception ignored ... Bad
     file descriptor") put a traceback after an interrupted command's one line. Cancelled, the
     pool's manager thread has ended."""
-    ready = tmp_path / "ready"
-    monkeypatch.setenv(_READY, str(ready))
-    monkeypatch.setattr(obtain, "_background_track_job", _saving_job)
-    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
-                                       parallel=True)
-    assert bg is not None
+    ready, bg = _background(tmp_path, monkeypatch, _saving_job)
     with _forked(ready):
         manager = bg._pool._executor_manager_thread
         bg.cancel(grace=obtain.grace_for(KeyboardInterrupt()))
@@ -285,12 +272,7 @@ def test_a_second_ctrl_c_in_the_parent_kills_the_child_at_once(tmp_path, monkeyp
     grace, ends the wait and kills the child (not the grace's end)."""
     import concurrent.futures
 
-    ready = tmp_path / "ready"
-    monkeypatch.setenv(_READY, str(ready))
-    monkeypatch.setattr(obtain, "_background_track_job", _deaf_to_ctrl_c_job)
-    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
-                                       parallel=True)
-    assert bg is not None
+    ready, bg = _background(tmp_path, monkeypatch, _deaf_to_ctrl_c_job)
     waited = []
 
     def second_ctrl_c(futures, timeout=None):
@@ -311,12 +293,7 @@ def test_a_second_ctrl_c_before_the_kill_began_still_kills_the_child(tmp_path, m
     whole track. The cancel kills it all the same."""
     from facetransfer import signals
 
-    ready = tmp_path / "ready"
-    monkeypatch.setenv(_READY, str(ready))
-    monkeypatch.setattr(obtain, "_background_track_job", _deaf_to_ctrl_c_job)
-    bg = obtain.start_background_track("v.mp4", object(), 10, method="auto", options=None,
-                                       parallel=True)
-    assert bg is not None
+    ready, bg = _background(tmp_path, monkeypatch, _deaf_to_ctrl_c_job)
     real, calls = signals.kill_forked, []
 
     def interrupted_at_its_start(pool, future, **kw):

@@ -547,6 +547,27 @@ def test_an_interrupt_inside_a_callback_python_ignores_is_taken(signum, said):
     assert (r.returncode, r.stderr.splitlines()) == (said[0], [f"facetransfer: {said[1]}"])
 
 
+def _raised_after_it(setup: str, handler: str, signum: str, frame: str) -> None:
+    """Run ``setup`` (Python code making ``frame``, an expression of a frame where the CLI's
+    ``handler`` must not raise), call the handler there as ``signum`` would, and check that
+    it raised nothing there and that the signal, sent again, was raised after it."""
+    code = setup + textwrap.dedent(f"""
+        signal.signal(signal.{signum}, cli_main.{handler})
+        try:
+            cli_main.{handler}(signal.{signum}, {frame})
+        except KeyboardInterrupt:
+            sys.exit("raised inside the frame")
+        try:
+            time.sleep(30)
+        except KeyboardInterrupt:
+            sys.exit(0)
+        sys.exit("not sent again")
+    """)
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
+                       env={**os.environ, "PYTHONPATH": SRC})
+    assert (r.returncode, r.stderr) == (0, "")
+
+
 @pytest.mark.parametrize("handler,signum,where", [
     ("_terminated", "SIGTERM", "cb"), ("_interrupted", "SIGINT", "cb")])
 def test_an_interrupt_inside_importlibs_lock_callback_is_raised_after_it(handler, signum,
@@ -564,20 +585,8 @@ def test_an_interrupt_inside_importlibs_lock_callback_is_raised_after_it(handler
 
         ns = {{"__name__": "importlib._bootstrap", "sys": sys}}
         exec("def {where}():\\n    return sys._getframe()\\n", ns)     # importlib's frame
-        signal.signal(signal.{signum}, cli_main.{handler})
-        try:
-            cli_main.{handler}(signal.{signum}, ns["{where}"]())
-        except KeyboardInterrupt:
-            sys.exit("raised inside importlib's callback")
-        try:
-            time.sleep(30)
-        except KeyboardInterrupt:
-            sys.exit(0)
-        sys.exit("not sent again")
     """)
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
-                       env={**os.environ, "PYTHONPATH": SRC})
-    assert (r.returncode, r.stderr) == (0, "")
+    _raised_after_it(code, handler, signum, f'ns["{where}"]()')
 
 
 @pytest.mark.parametrize("handler,signum,where", [
@@ -609,20 +618,8 @@ def test_an_interrupt_inside_importlibs_or_loggings_lock_taking_is_raised_after_
         logging.getLogger("t").error("x")            # a handler's lock taken
         sys.settrace(None)
         assert seen[0].f_globals["__name__"] in ("importlib._bootstrap", "logging"), seen
-        signal.signal(signal.{signum}, cli_main.{handler})
-        try:
-            cli_main.{handler}(signal.{signum}, seen[0])
-        except KeyboardInterrupt:
-            sys.exit("raised inside " + {where!r})
-        try:
-            time.sleep(30)
-        except KeyboardInterrupt:
-            sys.exit(0)
-        sys.exit("not sent again")
     """)
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60,
-                       env={**os.environ, "PYTHONPATH": SRC})
-    assert (r.returncode, r.stderr) == (0, "")
+    _raised_after_it(code, handler, signum, "seen[0]")
 
 
 def test_an_interrupted_run_names_an_earlier_output_it_replaced(tmp_path, capsys):
