@@ -67,8 +67,7 @@ class MeshTopology:
         Vertices of the model; the closed mesh appends one centre vertex of the mouth (index
         ``n_vertices``) when there is a mouth gap.
     faces : (F', 3) int64
-        Model faces followed by the mouth-closing fan; read-only, the topology's own array
-        (a writeable or borrowed one given is copied once).
+        Model faces followed by the mouth-closing fan.
     mouth_loop : (k,) int64
         The inner-lip boundary loop (empty when the mesh has no mouth gap).
     mouth_faces : (m,) int64
