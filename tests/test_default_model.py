@@ -64,3 +64,38 @@ def test_memory_is_estimated_before_building(monkeypatch):
     with pytest.raises(DatasetError, match=r"needs about [0-9.]+ GiB"):
         ict.build_ict_dataset("ict-arkit", n_identities=1000, use_cache=False)
     assert ict.build_memory_bytes(50, 52, 9409) < 3 * 2**30
+
+
+class _Stop(Exception):
+    """Raised where a test has seen what it needs."""
+
+
+def _blas_threads() -> int:
+    from threadpoolctl import threadpool_info
+
+    return max((p["num_threads"] for p in threadpool_info() if p["user_api"] == "blas"),
+               default=1)
+
+
+def test_the_default_model_is_built_on_one_blas_thread_whatever_the_command(monkeypatch,
+                                                                             tmp_path):
+    """OpenBLAS orders its sums by its thread count: the default model built by a command
+    whose BLAS had two threads (``probe``, ``export``) hashed 49fc4338eee2, by one that gives
+    it one (``track``, ``demo``) 4bd74ef47e95, and a track made with one was refused by the
+    other after a rebuild. The build holds BLAS at one thread, whatever the caller's."""
+    import facetransfer.datasets as datasets
+    from threadpoolctl import threadpool_limits
+
+    seen = []
+
+    def load(name, progress=None, **kw):
+        seen.append(_blas_threads())
+        raise _Stop                                # the build's start is all this needs
+
+    monkeypatch.setattr(datasets, "load_dataset", load)
+    with threadpool_limits(limits=2, user_api="blas"):
+        if _blas_threads() < 2:
+            pytest.skip("this machine's BLAS cannot have two threads")
+        with pytest.raises(_Stop):
+            dm._build(tmp_path / "default.npz", None, None)
+    assert seen == [1]

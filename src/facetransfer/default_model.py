@@ -76,11 +76,17 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
 def _build(path: Path, progress, announce):
     from .datasets import load_dataset
     from .model import build_model
+    from .threads import one_blas_thread
 
     if announce is not None:
         announce(f"building the default model ({DEFAULT_DATASET}) once into {path}")
-    ds = load_dataset(DEFAULT_DATASET, progress=progress)
-    model = build_model(ds, dataset_ranks(ds), refine=False)
+    # on one BLAS thread whatever the command: OpenBLAS orders its sums by its thread count,
+    # so a build on two threads (``probe``, ``export``) and one on one (``track``, ``demo``:
+    # cli.main.SERIAL_POOLS) differed in their last bits, hence in their content hash
+    # (49fc4338eee2 against 4bd74ef47e95 here): a track made with one was refused by the other
+    with one_blas_thread():
+        ds = load_dataset(DEFAULT_DATASET, progress=progress)
+        model = build_model(ds, dataset_ranks(ds), refine=False)
     del ds
     model.provenance["default_model"] = True  # read by is_default_model
     path.parent.mkdir(parents=True, exist_ok=True)
