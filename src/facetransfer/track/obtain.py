@@ -540,12 +540,9 @@ def _prepare_child(video, model, n: int, method: str, depends: tuple) -> None:
     before the fork, unless the cache holds that track (the child then makes nothing): the
     capture's tracked points (:func:`facetransfer.track.capture.prepare_points`; this process,
     tracking the other clip the same way, then uses them too)."""
-    if method not in ("auto", "capture") or any(holds(k) for k in _keys(video, n, method,
+    if method in ("auto", "capture") and not any(holds(k) for k in _keys(video, n, method,
                                                                            depends, model)):
-        return
-    from .capture import prepare_points
-
-    prepare_points(model)
+        prepare_fork(model, method)
 
 
 def prepare_fork(model, method: str) -> None:
