@@ -243,7 +243,7 @@ def test_page_of_a_model_without_arkit_shapes(quick_model):
 
 def test_view_of_a_live_link_face_take(arkit_model, pages, tmp_path, capsys):
     """``view take.csv``: the page's timeline holds the take's activations (decoded from the
-    page) and as many frames; a take is no track for ``--neutral``."""
+    page) and as many frames."""
     import base64
 
     from facetransfer.export.livelink import write_livelink
@@ -260,9 +260,37 @@ def test_view_of_a_live_link_face_take(arkit_model, pages, tmp_path, capsys):
              for b in re.findall(r'"activations": "([A-Za-z0-9+/=]+)"', page)]
     assert len(blobs) == 1 and f'"n_frames": {len(a)}' in page
     np.testing.assert_allclose(blobs[0].reshape(a.shape), a, atol=1e-6)
-    assert main(["view", str(take), "--model", str(mp), "--out", str(tmp_path / "n.html"),
-                 "--neutral", "auto"]) == 2
-    assert "--neutral is for a track" in capsys.readouterr().err
+
+
+def test_view_of_a_take_measured_from_a_neutral_row_shows_what_export_writes(
+        arkit_model, pages, tmp_path, capsys):
+    """``view take.csv --neutral 0`` (or ``auto``): the page's activations are those ``export
+    take.csv --neutral`` writes (its json read back), not the take's as recorded. Before, view
+    refused it ("--neutral is for a track") while export took it. A row outside the take is
+    one line."""
+    import base64
+
+    from facetransfer.export.livelink import write_livelink
+    from facetransfer.export.mpjson import read_mediapipe_json
+
+    _, _, track, a = pages
+    mp = tmp_path / "m.npz"
+    arkit_model.save(mp)
+    take = write_livelink(track, tmp_path / "take.csv")
+    for neutral in ("0", "auto"):
+        page, js = tmp_path / f"n{neutral}.html", tmp_path / f"n{neutral}.json"
+        assert main(["view", str(take), "--model", str(mp), "--out", str(page),
+                     "--neutral", neutral]) == 0, capsys.readouterr().err
+        assert main(["export", str(take), "--model", str(mp), "--out", str(js),
+                     "--neutral", neutral]) == 0, capsys.readouterr().err
+        capsys.readouterr()
+        blobs = re.findall(r'"activations": "([A-Za-z0-9+/=]+)"', page.read_text())
+        shown = np.frombuffer(base64.b64decode(blobs[0]), np.float32).reshape(a.shape)
+        np.testing.assert_allclose(shown, read_mediapipe_json(js), atol=1e-6)
+        assert np.abs(shown - a).max() > 0.01      # measured from the row, not as recorded
+    assert main(["view", str(take), "--model", str(mp), "--out", str(tmp_path / "x.html"),
+                 "--neutral", str(len(a))]) == 2
+    assert f"the track has frames 0 to {len(a) - 1}" in capsys.readouterr().err
 
 
 def test_a_track_of_a_model_without_arkit_activations_is_refused_naming_it(quick_model,

@@ -2,7 +2,7 @@
 
     facetransfer view [MODEL.npz] --out page.html                 # default: the default model
     facetransfer view TRACK.npz --out page.html [--model M.npz] [--neutral auto]
-    facetransfer view TAKE.csv --out page.html [--model M.npz]     # a Live Link Face take
+    facetransfer view TAKE.csv --out page.html [--model M.npz] [--neutral 0]   # a take
 """
 
 from __future__ import annotations
@@ -25,8 +25,9 @@ def register(sub) -> None:
     p.add_argument("--model", metavar="M.npz", help="for a track: its model (default: the "
                    "default model, if the track was made with it)")
     p.add_argument("--neutral", metavar="FRAME|auto",
-                   help="for a track: its activations measured from this frame's, as "
-                   "`facetransfer export --neutral` (default: as tracked)")
+                   help="for a track or a take: its activations measured from this frame's "
+                   "(a take's row's), as `facetransfer export --neutral` (default: as tracked "
+                   "or recorded)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing page")
     p.set_defaults(func=run)
 
@@ -49,21 +50,26 @@ def _is_track(path) -> bool:
 
 def _take_page(args: argparse.Namespace):
     """The page of a Live Link Face take: the model's mean person performing it with its
-    head's rotation (:func:`facetransfer.take.take_track`), on the track's timeline."""
+    head's rotation (:func:`facetransfer.take.take_track`), on the track's timeline; with
+    ``--neutral``, its activations measured from that row's as ``export take.csv --neutral``
+    measures them (:func:`facetransfer.export.neutral.with_neutral`; before, refused as "for
+    a track")."""
     from pathlib import Path
 
     from ..errors import FaceTransferError
+    from ..export.neutral import neutral_arg, with_neutral
     from ..export.viewer import viewer_page
     from ..io.atomic import write_text_atomic
     from ..take import take_track
     from .common import resolve_model
 
     if args.neutral is not None:
-        raise FaceTransferError(f"--neutral is for a track; {args.source} is a take")
+        neutral_arg(args.neutral)        # its form, before a model is built
     if not Path(args.source).is_file():
         raise FaceTransferError(f"take {args.source} does not exist")
     model = resolve_model(args.model)
     track = take_track(args.source, model, model.weight_mean(model.mode_index("identity")))
+    track = with_neutral(track, args.neutral)
     page = viewer_page(model, track=track, title=Path(args.source).name)
     return write_text_atomic(args.out, page, overwrite=args.overwrite)
 
