@@ -206,6 +206,7 @@ LAYER_OF = {
     # apps: beyond the paper, what the commands run
     "facetransfer.export": "apps",
     "facetransfer.batch": "apps",
+    "facetransfer.batch.track_submit": "apps",  # batch_track's tasks, out of batch.run
     "facetransfer.demo": "apps",
     "facetransfer.fidelity": "apps",      # the demo's independent judge of a transfer
     "facetransfer.file_facts": "apps",    # what probe says of a track or a take

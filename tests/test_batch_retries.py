@@ -399,9 +399,10 @@ def test_a_chunked_run_holds_a_bounded_number_of_chunk_claims(
     process may open files ran the rest unclaimed (300 clips under a limit of 200: 136)."""
     from facetransfer.batch import run as R
     from facetransfer.batch.cluster import open_client
+    from facetransfer.batch.track_submit import TrackSubmit
 
     video = clips["a"][0]
-    monkeypatch.setattr(R._TrackSubmit, "MAX_CLAIMS", 2, raising=False)
+    monkeypatch.setattr(TrackSubmit, "MAX_CLAIMS", 2)
     monkeypatch.setattr(J, "count_frames", _count)
     monkeypatch.setattr(J, "_track", lambda *a, **k: still_track(quick_model, 8,
                                                                   source=str(video)))

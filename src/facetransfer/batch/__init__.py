@@ -4,7 +4,8 @@ Modules, in the order data flows: :mod:`.manifest` (the jobs: clips, pairs, trac
 :mod:`.chunks` (long clips in overlapping chunks, joined at the seams), :mod:`.jobs` (the tasks
 the workers run), :mod:`.cluster` (the embedded LocalCluster or a scheduler's client),
 :mod:`.digest` (what makes each output, recorded to know it again), :mod:`.run` (submit,
-collect, skip what is done, stop cleanly), :mod:`.summary` (``DIR/summary.csv``).
+collect, skip what is done, stop cleanly; :mod:`.track_submit`, a track run's tasks: counts,
+chunks and their claims), :mod:`.summary` (``DIR/summary.csv``).
 
 Typical use::
 
