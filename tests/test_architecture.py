@@ -212,6 +212,7 @@ LAYER_OF = {
     "facetransfer.file_facts": "apps",    # what probe says of a track or a take
     "facetransfer.face_file": "apps",     # the dial editor's (export.viewer's) saved face
     "facetransfer.cli": "cli",
+    "facetransfer.cli.edit_take": "cli",   # edit of a Live Link Face take, out of cli.transfer
 }
 
 #: Imports from a lower layer to a higher one that stay, each with its reason. A new one fails

@@ -23,7 +23,8 @@ beside the camera with synced clocks is placed by the target's start timecode
 
 :func:`take_track` makes a take a track of its own (the model's person performing it with the
 take's head rotation): what ``facetransfer puppet take.csv`` renders and ``facetransfer view
-take.csv`` shows.
+take.csv`` shows. :func:`edit_take` edits a take's curves as a track's are edited and writes a
+take again, the rest of the file as it was (``facetransfer edit take.csv``).
 """
 
 from __future__ import annotations
@@ -32,6 +33,7 @@ import dataclasses
 import logging
 import os
 from dataclasses import dataclass
+from io import StringIO
 from pathlib import Path
 
 import numpy as np
@@ -43,7 +45,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["TIMECODE_RATES", "TAKE_SYNCS", "PREVIEW_SIZE", "Take", "is_take", "timecode_seconds",
            "take_rate", "take_seconds", "take_row_rate", "take_on_timeline", "take_performance",
-           "take_track"]
+           "take_track", "EditedTake", "edit_take"]
 
 #: The frame size of a take shown on a model (:func:`take_track`, ``facetransfer puppet``).
 PREVIEW_SIZE = (512, 512)
@@ -370,19 +372,12 @@ def _read(path, model):
     model of ARKit expressions; TransferError otherwise, or without rows. Columns of shapes it
     lacks are said once."""
     from .arkit import is_arkit_model
-    from .export.common import ExportError
-    from .export.livelink import POSE_COLUMNS, read_livelink
+    from .export.livelink import POSE_COLUMNS
 
     if not is_arkit_model(model):
         raise TransferError(f"a Live Link Face take ({path}) drives a model whose expressions "
                             "are ARKit blendshapes (the default model, 'ict-arkit')")
-    try:
-        take = read_livelink(path, lenient=True)
-    except (ExportError, OSError, UnicodeDecodeError) as exc:
-        said = str(exc)    # the reader's messages name the file already: not twice
-        raise TransferError(said if str(path) in said else f"{path}: {said}") from None
-    if not len(take.timecodes):
-        raise TransferError(f"the take {path} has no rows")
+    take = _load(path)
     shapes = [n for n in take.missing if n not in POSE_COLUMNS]
     head = [n for n in POSE_COLUMNS if n.startswith("Head")]
     if any(n not in take.missing for n in head):   # a head's rotation, in part: said too
@@ -390,6 +385,131 @@ def _read(path, model):
     if shapes:
         log.warning("the take %s has no column %s: taken as 0", path, ", ".join(shapes))
     return take
+
+
+def _load(path):
+    """The take at ``path`` read leniently (:func:`facetransfer.export.livelink.read_livelink`);
+    TransferError where it is none, or has no rows."""
+    from .export.common import ExportError
+    from .export.livelink import read_livelink
+
+    try:
+        take = read_livelink(path, lenient=True)
+    except (ExportError, OSError, UnicodeDecodeError) as exc:
+        said = str(exc)    # the reader's messages name the file already: not twice
+        raise TransferError(said if str(path) in said else f"{path}: {said}") from None
+    if not len(take.timecodes):
+        raise TransferError(f"the take {path} has no rows")
+    return take
+
+
+@dataclass(frozen=True)
+class EditedTake:
+    """A take written by :func:`edit_take`: its path, its rows, and the columns that changed
+    (the take's own names for them, in its order)."""
+
+    path: Path
+    n_rows: int
+    changed: tuple[str, ...]
+
+
+def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
+              overwrite: bool = False) -> EditedTake:
+    """Write the Live Link Face take at ``path`` to ``out`` with its ARKit curves edited (what
+    ``facetransfer edit take.csv`` does; beyond the paper, its Fig. 7E edit on a recorded take).
+
+    The curves are edited as a track of an ARKit model is
+    (:func:`facetransfer.transfer.edit_activations`: ``scale`` multiplies a curve, ``add`` adds
+    an activation over rows ``START..END`` with :func:`facetransfer.transfer.ramp_envelope`'s
+    ramps, each edited curve clipped to Live Link Face's [0, 1]); a frame is a row of the take,
+    0-based. Everything else is kept byte for byte: the header and its column order, the
+    timecodes, ``BlendShapeCount``, the head and eye rotation columns, the line endings, a
+    byte-order mark; so is every field of an edited curve whose value the edit leaves as it was.
+    An edited field is written with 8 decimals (as ``export`` writes a take). The eye rotation
+    columns are not worked out again from edited ``eyeLook*`` curves (said in the log).
+
+    Parameters
+    ----------
+    path, out : path-like
+        The take, and the edited take to write (atomically; ``overwrite``: replace one there).
+    add, scale : EditAdd / EditScale, their text, or sequences of them
+        As :func:`facetransfer.transfer.edit_track` takes them (``"jawOpen*0.5@10-40"``,
+        ``"jawOpen=2"``); a name is one of the 52 ARKit names or a word for both sides.
+    ramp : int
+        Rows over which an addition eases in before its range and out after it.
+
+    Returns
+    -------
+    EditedTake
+
+    Raises
+    ------
+    TransferError
+        The take is none (or has no rows), an unknown name (the closest one named), a curve the
+        take has no column for, a range outside its rows, a negative factor.
+    """
+    from .arkit import ARKIT_NAMES
+    from .io.atomic import write_text_atomic
+    from .transfer import edit_activations
+
+    if int(ramp) < 0:
+        raise TransferError(f"ramp must be >= 0 frames, got {ramp}")
+    take = _load(path)
+    has = np.array([_column_name(n) not in take.missing for n in ARKIT_NAMES])
+    after = edit_activations(take.activations, scale, add, int(ramp), has=has,
+                             owner=f"the take {path}")
+    text = Path(path).read_bytes().decode("utf-8")
+    new, changed = _edited_text(text, take.activations, after)
+    if any(n.startswith("eyeLook") for n in changed):
+        log.warning("the eye rotation columns (LeftEyeYaw, ...) of %s are kept as recorded; "
+                    "they no longer follow its edited eyeLook curves", out)
+    written = write_text_atomic(out, new, overwrite=overwrite)
+    return EditedTake(written, len(take.timecodes), tuple(_column_name(n) for n in changed))
+
+
+def _column_name(arkit_name: str) -> str:
+    """A take's column of an ARKit shape: its name in PascalCase (``jawOpen``: ``JawOpen``)."""
+    return arkit_name[0].upper() + arkit_name[1:]
+
+
+def _edited_text(text: str, before: np.ndarray, after: np.ndarray) -> tuple[str, list[str]]:
+    """A take's CSV ``text`` with the fields of each curve whose value ``after`` (F, 52) differs
+    from ``before`` (what was read) written anew; every other byte kept (module notes of
+    :func:`edit_take`). Rows are the header's followers that are not empty, as the reader counts
+    them. Returns the text and the ARKit names of the curves that changed."""
+    import csv
+
+    from .arkit import ARKIT_NAMES
+
+    lines = list(StringIO(text, newline=""))      # each with its own line ending
+    header = [h.strip().lower() for h in next(csv.reader([lines[0].rstrip("\r\n")]))]
+    differs = after != before                          # (F, 52)
+    edited = [j for j in range(len(ARKIT_NAMES)) if differs[:, j].any()]
+    cols = {j: header.index(_column_name(ARKIT_NAMES[j]).lower()) for j in edited}
+    row = 0
+    for k in range(1, len(lines)):
+        body = lines[k].rstrip("\r\n")
+        if not body:
+            continue
+        if differs[row].any():
+            fields = next(csv.reader([body])) if '"' in body else body.split(",")
+            for j in np.flatnonzero(differs[row]):
+                fields[cols[j]] = f"{after[row, j]:.8f}"
+            lines[k] = _joined(fields, '"' in body) + lines[k][len(body):]
+        row += 1
+    return "".join(lines), [ARKIT_NAMES[j] for j in edited]
+
+
+def _joined(fields: list[str], quoted: bool) -> str:
+    """A CSV line of ``fields``: joined by commas, or (a line that quoted some) as the csv
+    module quotes them."""
+    if not quoted:
+        return ",".join(fields)
+    import csv
+
+    buf = StringIO()
+    csv.writer(buf, lineterminator="").writerow(fields)
+    return buf.getvalue()
 
 
 def _first_timecode(timecodes, fps: float) -> str | None:

@@ -53,6 +53,7 @@ __all__ = [
     "project_landmarks",
     "EditAdd",
     "EditScale",
+    "edit_activations",
     "parse_add",
     "parse_scale",
     "ramp_envelope",
@@ -615,40 +616,76 @@ def _edited_labels(labels, label: str) -> list[str]:
 
 def _edit_activations(w: np.ndarray, model, scale, add, ramp: int) -> np.ndarray:
     """:func:`edit_track` of an ARKit model's expression weights ``(F, r)``, on the
-    activations they convert to exactly (Eq. (A)): ``EditScale`` multiplies the shape's
-    activation, ``EditAdd`` adds ``amount`` times the envelope to it; each activation then
-    clipped to ARKit's [0, 1]. (A projection on the weights would also count the other
-    shapes' part along the shape's direction: ``jawOpen=2`` made jawOpen 6 times as large.)"""
+    activations they convert to exactly (Eq. (A)): :func:`edit_activations`. (A projection on
+    the weights would also count the other shapes' part along the shape's direction:
+    ``jawOpen=2`` made jawOpen 6 times as large.)"""
     from .arkit import activations_to_weights, arkit_rows, weights_to_activations
 
-    act = weights_to_activations(model, w, clip=False)
-    has = arkit_rows(model) >= 0
-    for s in scale:
+    act = edit_activations(weights_to_activations(model, w, clip=False), scale, add, ramp,
+                           has=arkit_rows(model) >= 0)
+    return activations_to_weights(model, np.clip(act, 0.0, 1.0))   # every curve in ARKit's
+
+
+def edit_activations(activations: np.ndarray, scale=(), add=(), ramp: int = 8, *, has=None,
+                     owner: str = "the model") -> np.ndarray:
+    """ARKit activation curves ``(F, 52)`` (:data:`facetransfer.arkit.ARKIT_NAMES` order)
+    edited as :func:`edit_track` edits an ARKit model's: each ``EditScale`` (or its text)
+    multiplies its shape's curve by its factor (>= 0), then each ``EditAdd`` adds ``amount``
+    times the :func:`ramp_envelope` of its range; each edited curve then clipped to ARKit's
+    [0, 1], the others returned as given. A label names one of the 52 shapes or both sides of
+    one (:data:`SIDE_WORDS`). ``has``: (52,) bool, the shapes ``owner`` holds (default: every
+    one); an edit of another is refused, as an unknown name is (:func:`_arkit_index`), a range
+    outside the ``F`` frames and a factor or amount that is not finite. What ``edit take.csv``
+    does to a take's curves.
+
+    Returns
+    -------
+    (F, 52) float64
+    """
+    from .arkit import ARKIT_NAMES
+
+    act = np.array(activations, dtype=np.float64)
+    add, scale = _edits(add, EditAdd, parse_add), _edits(scale, EditScale, parse_scale)
+    _check_edits(add, scale, len(act))
+    has = np.ones(len(ARKIT_NAMES), bool) if has is None else np.asarray(has, bool)
+    touched = np.zeros(len(ARKIT_NAMES), bool)
+    for s in (dataclasses.replace(s, label=x) for s in scale
+              for x in _edited_labels(ARKIT_NAMES, s.label)):
         if s.factor < 0:  # clipped to [0, 1], the shape would be gone: not what was asked
             raise TransferError(f"--scale {s.label}={s.factor:g}: an ARKit activation lies in "
                                 "0..1, so a negative factor would only remove the shape; give "
                                 f"{s.label}=0 to remove it")
-        act[:, _arkit_index(s.label, has)] *= s.factor
-    for a in add:
-        e = ramp_envelope(len(act), a.start, a.stop, ramp)
-        act[:, _arkit_index(a.label, has)] += a.amount * e
-    return activations_to_weights(model, np.clip(act, 0.0, 1.0))
+        j = _arkit_index(s.label, has, owner)
+        act[:, j], touched[j] = act[:, j] * s.factor, True
+    for a in (dataclasses.replace(a, label=x) for a in add
+              for x in _edited_labels(ARKIT_NAMES, a.label)):
+        j = _arkit_index(a.label, has, owner)
+        act[:, j], touched[j] = act[:, j] + a.amount * ramp_envelope(len(act), a.start,
+                                                                      a.stop, ramp), True
+    act[:, touched] = np.clip(act[:, touched], 0.0, 1.0)
+    return act
 
 
-def _arkit_index(label: str, has: np.ndarray) -> int:
-    """The ARKit index of ``label``, a shape the model has (``has`` (52,) bool); else a
-    :class:`TransferError` naming those it has (an edit of a shape it lacks changes nothing)."""
+def _arkit_index(label: str, has: np.ndarray, owner: str = "the model") -> int:
+    """The ARKit index of ``label``, a shape ``owner`` has (``has`` (52,) bool); else a
+    :class:`TransferError` naming the closest name (and, but for a take's 52, the shapes it
+    has): an edit of a shape it lacks changes nothing."""
+    import difflib
+
     from .arkit import ARKIT_NAMES
 
     known = [n for n, h in zip(ARKIT_NAMES, has) if h]
     if label in ARKIT_NAMES and label not in known:
-        raise TransferError(f"the model has no {label} shape (its data set has none): an edit "
-                            "of it would change nothing")
+        why = " (its data set has none)" if owner == "the model" else \
+            f" (no column {label[0].upper()}{label[1:]})"
+        raise TransferError(f"{owner} has no {label} shape{why}: an edit of it would change "
+                            "nothing")
     if label not in known:
-        close = [n for n in known if n.lower() == label.lower()]
-        hint = f" (did you mean {close[0]}?)" if close else ""
-        raise TransferError(f"unknown expression {label!r}{hint}; the model knows: "
-                            f"{', '.join(known)}, and {', '.join(SIDE_WORDS)} (both sides)")
+        lower = {n.lower(): n for n in known + list(SIDE_WORDS)}
+        close = difflib.get_close_matches(label.lower(), list(lower), n=1, cutoff=0.0)
+        names = "the 52 ARKit names" if len(known) == 52 else ", ".join(known)
+        raise TransferError(f"unknown expression {label!r} (did you mean {lower[close[0]]}?); "
+                            f"{owner} knows: {names}, and {', '.join(SIDE_WORDS)} (both sides)")
     return ARKIT_NAMES.index(label)
 
 

@@ -8,6 +8,7 @@
         [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png
         [--matte matte/%05d.png|matte/%05d.exr|M.mov|M.mkv...] [--overwrite]
     facetransfer edit TRACK.npz [--model M.npz] --add frown@120-180 --scale smile=1.5 --out T2.npz
+    facetransfer edit TAKE.csv --scale jawOpen=2 --out TAKE2.csv     (:mod:`.edit_take`)
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
     facetransfer puppet VIDEO [--model M.npz] --identity LABEL --out OUT.mp4
     facetransfer demo [--out out] [--frames N]
@@ -225,25 +226,33 @@ def _add_sources(p) -> None:
 
 def _register_edit(sub) -> None:
     e = _parser(
-        sub, "edit", "edit a tracked performance (Fig. 7E)",
+        sub, "edit", "edit a tracked performance (Fig. 7E) or a Live Link Face take",
         "Add a training expression over a frame range (with smooth ramps) or scale an "
-        "expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E).")
-    e.add_argument("track", metavar="TRACK.npz", help="the track to edit")
+        "expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E). A Live Link "
+        "Face take (TAKE.csv) is edited on its ARKit curves and written as a take, the rest of "
+        "the file (timecodes, head and eye rotations, columns) kept as it was.")
+    e.add_argument("track", metavar="TRACK.npz|TAKE.csv", help="the track or take to edit")
     e.add_argument("--model", metavar="M.npz",
                    help="the model the track was made with (default: the default model, if the "
-                   "track was made with it)")
+                   "track was made with it); a take needs none")
     e.add_argument("--add", action="append", default=[], metavar="EXPR@START-END",
-                   help="add EXPR (training weights minus neutral) on frames START..END "
-                   "(inclusive, 0-based); EXPR*0.5@... for half; repeatable")
+                   help="add EXPR (training weights minus neutral; an ARKit model's or a "
+                   "take's: activation 1) on frames START..END (inclusive, 0-based; a take's "
+                   "rows); EXPR*0.5@... for half; repeatable")
     e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
-                   help="scale the component of the expression along EXPR - neutral; repeatable")
+                   help="scale the component of the expression along EXPR - neutral (an ARKit "
+                   "model's or a take's: the EXPR curve times FACTOR, clipped to [0, 1], Live "
+                   "Link Face's range; EXPR one of the 52 ARKit names, e.g. jawOpen); "
+                   "repeatable")
     e.add_argument("--ramp", type=int, default=None,
                    help="frames over which an --add eases in before START and out after END "
                    "(0: none; the range itself is at full strength; default 8)")
     e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
-                   help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1")
-    _add_output(e, run_edit, metavar="TRACK2.npz",
-                help="the edited track to write (.npz), for transfer --performance")
+                   help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1 "
+                   "(a track's; a take has no identity)")
+    _add_output(e, run_edit, metavar="TRACK2.npz|TAKE2.csv",
+                help="the edited track to write (.npz), for transfer --performance; of a "
+                "take, the edited take (.csv)")
 
 
 def _register_puppet(sub) -> None:
@@ -626,6 +635,10 @@ def run_edit(args) -> int:
     if not args.add and not args.scale and not args.identity_dials:
         raise FaceTransferError("nothing to do: give --add EXPR@START-END, --scale "
                                 "EXPR=FACTOR and/or --identity-dials NAME=UNITS")
+    from ..take import is_take
+    from .edit_take import check_edit_kind, run_take_edit
+
+    check_edit_kind(args)      # a take's options, a track's output named as a take
     dial_values = None
     if args.identity_dials:
         from ..dials import parse_dial_values
@@ -645,6 +658,8 @@ def run_edit(args) -> int:
     args.ramp = option_with(args.ramp, 8, "--ramp", args.add, "--add")
     if args.ramp < 0:
         raise FaceTransferError(f"--ramp must be >= 0 frames, got {args.ramp}")
+    if is_take(args.track):
+        return run_take_edit(args, adds, scales)
     check_track_name(args.out)
     check_output_path(args.out, overwrite=args.overwrite, inputs=[args.track, args.model])
     track = Track.load(args.track)

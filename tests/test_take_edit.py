@@ -1,0 +1,126 @@
+"""``facetransfer edit take.csv``: a Live Link Face take's ARKit curves edited, the rest of the
+file kept (facetransfer.take.edit_take, facetransfer.cli.edit_take)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from facetransfer.arkit import ARKIT_NAMES
+from facetransfer.cli.main import main
+from facetransfer.export.livelink import read_livelink, write_livelink
+from facetransfer.take import edit_take
+from facetransfer.transfer import edit_activations, edit_track
+
+EDITED = ("JawOpen", "MouthSmileLeft", "MouthSmileRight")
+
+
+def _fields(path) -> list[list[str]]:
+    return [line.split(",") for line in path.read_text().splitlines()]
+
+
+def test_an_edited_take_changes_its_edited_curves_only(arkit_model, make_arkit_track, tmp_path,
+                                                       capsys, caplog):
+    """``edit take.csv --scale jawOpen=2 --add "smile*0.5@3-6" --out take2.csv``: the take's
+    jawOpen doubled and both smiles raised over rows 3-6 with the ramps a track's edit has,
+    clipped to [0, 1], as ``edit`` of the track the take was exported from edits them; every
+    other field (timecodes, count, the other curves, head and eye rotations) and the header as
+    they were. Before, the take was refused: "is not a track file"."""
+    track, a, _ = make_arkit_track(arkit_model, 12, fps=25.0)
+    take = write_livelink(track, tmp_path / "take.csv")
+    out = tmp_path / "take2.csv"
+    edits = ["--scale", "jawOpen=2", "--add", "smile*0.5@3-6", "--ramp", "2"]
+    assert main(["edit", str(take), *edits, "--out", str(out)]) == 0, capsys.readouterr().err
+    said = capsys.readouterr().out
+    assert said.startswith(f"wrote {out}: 12 rows") and "JawOpen, MouthSmileLeft" in said
+    before, after = _fields(take), _fields(out)
+    assert after[0] == before[0] and len(after) == len(before)
+    edited = [before[0].index(n) for n in EDITED]
+    for row_before, row_after in zip(before[1:], after[1:]):
+        kept = [k for k in range(len(row_before)) if k not in edited]
+        assert [row_after[k] for k in kept] == [row_before[k] for k in kept]
+    got = read_livelink(out).activations
+    want = edit_activations(read_livelink(take).activations, scale=["jawOpen=2"],
+                            add=["smile*0.5@3-6"], ramp=2)
+    np.testing.assert_allclose(got, want, atol=1e-8)
+    np.testing.assert_allclose(got, edit_track(track, arkit_model, scale="jawOpen=2",
+                                               add="smile*0.5@3-6", ramp=2).blendshapes,
+                               atol=1e-5)            # the track's edit, to the take's decimals
+    j = ARKIT_NAMES.index("mouthSmileLeft")
+    assert got[0, j] == read_livelink(take).activations[0, j]       # beyond the ramp: as it was
+    assert got[2, j] > a[2, j] + 0.1 or got[2, j] == 1.0             # in the ramp, raised
+    with caplog.at_level("WARNING", logger="facetransfer.take"):
+        res = edit_take(take, tmp_path / "eyes.csv", scale="eyeLookInLeft=0.5")
+    assert res.changed == ("EyeLookInLeft",)
+    assert "eye rotation columns" in caplog.text
+
+
+def test_a_take_of_another_tool_keeps_its_bytes(tmp_path, capsys):
+    """A take as another tool or a spreadsheet saves it (a byte-order mark, CRLF lines,
+    camelCase names, six decimals, no rotation or tongueOut column, a column of its own): the
+    edited take is the same bytes but for the fields the edit changes (rows 2-4 of jawOpen,
+    ``--ramp 0``). A curve the take has no column for is one line naming it."""
+    names = [n for n in ARKIT_NAMES if n != "tongueOut"]
+    rng = np.random.default_rng(3)
+    a = rng.uniform(0, 0.9, (8, len(names)))
+    head = "Timecode,BlendShapeCount," + ",".join(names) + ",Note"
+    rows = [f"01:00:00:{k:02d},{len(names)}," + ",".join(f"{v:.6f}" for v in a[k]) + ",take 3"
+            for k in range(8)]
+    take = tmp_path / "other.csv"
+    take.write_bytes(("\ufeff" + "\r\n".join([head, *rows]) + "\r\n").encode("utf-8"))
+    out = tmp_path / "other2.csv"
+    assert main(["edit", str(take), "--add", "jawOpen*0.25@2-4", "--ramp", "0",
+                 "--out", str(out)]) == 0, capsys.readouterr().err
+    j = 2 + names.index("jawOpen")
+    want = []
+    for k, line in enumerate(rows):
+        fields = line.split(",")
+        if 2 <= k <= 4:
+            fields[j] = f"{min(float(fields[j]) + 0.25, 1.0):.8f}"
+        want.append(",".join(fields))
+    assert out.read_bytes() == ("\ufeff" + "\r\n".join([head, *want]) + "\r\n").encode("utf-8")
+    capsys.readouterr()
+    assert main(["edit", str(take), "--add", "tongueOut@1-2", "--out",
+                 str(tmp_path / "t.csv")]) == 2
+    assert "has no tongueOut shape (no column TongueOut)" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("extra, out, said", [
+    (["--scale", "jawOpn=2"], "e.csv", "unknown expression 'jawOpn' (did you mean jawOpen?)"),
+    (["--scale", "JawOpen=2"], "e.csv", "(did you mean jawOpen?)"),
+    (["--scale", "jawOpen=2", "--identity-dials", "width=1"], "e.csv",
+     "is a Live Link Face take, which has no identity to dial"),
+    (["--scale", "jawOpen=2"], "e.npz", "an edited take is written as .csv, not .npz"),
+    (["--scale", "jawOpen=2"], "take.csv", "is also an input"),
+    (["--scale", "jawOpen=2"], "there.csv", "exists; pass --overwrite"),
+    (["--add", "jawOpen@3-40"], "e.csv", "outside the clip (0-11)"),
+])
+def test_a_wrong_edit_of_a_take_is_one_line(arkit_model, make_arkit_track, tmp_path, capsys,
+                                            extra, out, said):
+    """Each mistake in an edit of a take is one line and exit status 2, nothing written: an
+    unknown name (the closest one named), an identity to dial, a track's name for the output,
+    the take itself, an output there already, rows beyond the take's."""
+    track, _, _ = make_arkit_track(arkit_model, 12)
+    take = write_livelink(track, tmp_path / "take.csv")
+    (tmp_path / "there.csv").write_text("kept")
+    assert main(["edit", str(take), *extra, "--out", str(tmp_path / out)]) == 2
+    err = capsys.readouterr().err
+    assert said in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "e.csv").exists() and not (tmp_path / "e.npz").exists()
+    assert (tmp_path / "there.csv").read_text() == "kept"
+    assert main(["edit", str(take), "--scale", "jawOpen=2", "--out", str(tmp_path / "there.csv"),
+                 "--overwrite"]) == 0
+    assert (tmp_path / "there.csv").read_text().startswith("Timecode,BlendShapeCount,")
+
+
+def test_a_tracks_edit_named_as_a_take_points_to_export(arkit_model, make_arkit_track, tmp_path,
+                                                        capsys):
+    """``edit TRACK.npz ... --out e.csv``: one line saying the edit is a track and how
+    ``export`` makes a take of it (before: "a track is written as .npz")."""
+    track, _, _ = make_arkit_track(arkit_model, 12)
+    tp = tmp_path / "t.npz"
+    track.save(tp)
+    assert main(["edit", str(tp), "--scale", "jawOpen=2", "--out", str(tmp_path / "e.csv")]) == 2
+    err = capsys.readouterr().err
+    assert "`facetransfer export" in err and "turns it into a Live Link Face take" in err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "e.csv").exists()
