@@ -456,7 +456,7 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
         raise TransferError(f"ramp must be >= 0 frames, got {ramp}")
     take = _load(path)
     has = np.array([_column_name(n) not in take.missing for n in ARKIT_NAMES])
-    after = edit_activations(take.activations, scale, add, int(ramp), has=has,
+    after = edit_activations(take.activations, scale=scale, add=add, ramp=int(ramp), has=has,
                              owner=f"the take {path}")
     text = Path(path).read_bytes().decode("utf-8")
     new, changed = _edited_text(text, take.activations, after)

@@ -621,12 +621,12 @@ def _edit_activations(w: np.ndarray, model, scale, add, ramp: int) -> np.ndarray
     ``jawOpen=2`` made jawOpen 6 times as large.)"""
     from .arkit import activations_to_weights, arkit_rows, weights_to_activations
 
-    act = edit_activations(weights_to_activations(model, w, clip=False), scale, add, ramp,
-                           has=arkit_rows(model) >= 0)
+    act = edit_activations(weights_to_activations(model, w, clip=False), scale=scale, add=add,
+                           ramp=ramp, has=arkit_rows(model) >= 0)
     return activations_to_weights(model, np.clip(act, 0.0, 1.0))   # every curve in ARKit's
 
 
-def edit_activations(activations: np.ndarray, scale=(), add=(), ramp: int = 8, *, has=None,
+def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8, has=None,
                      owner: str = "the model") -> np.ndarray:
     """ARKit activation curves ``(F, 52)`` (:data:`facetransfer.arkit.ARKIT_NAMES` order)
     edited as :func:`edit_track` edits an ARKit model's: each ``EditScale`` (or its text)
