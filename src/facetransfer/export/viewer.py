@@ -9,7 +9,11 @@ update it), the face's mesh and morph targets embedded (int16, one scale per tar
 * a slider per semantic identity dial (:mod:`facetransfer.dials`),
 * head yaw, pitch and roll (head angles in degrees: ``R = Ry(yaw) Rx(pitch) Rz(roll)``,
   three.js's ``"YXZ"`` order, the signs of :func:`facetransfer.export.common.head_euler`),
-* for a track: a timeline with play and pause that drives the shapes and head pose per frame.
+* for a track: a timeline with play and pause that drives the shapes and head pose per frame,
+* an eyeball behind each eye hole (:func:`eye_data`: the tracker's gaze model, turned by the
+  eyeLook* sliders as :func:`facetransfer.track.gaze.activation_gaze` reads them), and a dark
+  cone behind the mouth gap and each eye hole (:func:`cavity_loops`) with the skin's back faces
+  dark, so that the parted lips and the eye corners show the head's inside, not the page.
 
 Identity dials act on the neutral face (their offsets are exact there); the expression offsets
 stay those of the shown identity (the bilinear cross term is left out in the page).
