@@ -419,7 +419,8 @@ def _eye_box(eye: dict) -> tuple[slice, slice]:
     x = VIEW[0] / 2 + eye["iris_at"][0] * VIEW[1] - CANVAS[1].start
     y = VIEW[1] / 2 + eye["iris_at"][1] * VIEW[1] - CANVAS[0].start
     r = eye["radius_at"] * VIEW[1]
-    return slice(int(y - 0.6 * r), int(y + 0.6 * r) + 1), slice(int(x - 1.3 * r), int(x + 1.3 * r) + 1)
+    return (slice(int(y - 0.6 * r), int(y + 0.6 * r) + 1),
+            slice(int(x - 1.3 * r), int(x + 1.3 * r) + 1))
 
 
 def _eye_pixels(shot: np.ndarray, eye: dict) -> np.ndarray:
@@ -443,9 +444,10 @@ def _iris(px: np.ndarray) -> np.ndarray:
 @pytest.mark.slow
 def test_the_eyes_show_an_eyeball_that_the_lids_hide_and_the_gaze_turns(pages, tmp_path):
     """The eye holes show an eyeball (before: the page's background): no background, and sclera
-    and iris or pupil pixels in each eye with the eyes open; none of either with eyeBlinkLeft = eyeBlinkRight = 1;
-    with eyeLookOutLeft = 1 the subject's left iris (image right for a frontal face) sits right
-    of where it is with eyeLookInLeft = 1, the right eye's unmoved."""
+    and iris or pupil pixels in each eye with the eyes open; none of either with eyeBlinkLeft =
+    eyeBlinkRight = 1; with eyeLookOutLeft = 1 the subject's left iris (image right for a
+    frontal face) sits right of where it is at rest, with eyeLookInLeft = 1 left of it, the
+    right eye's unmoved."""
     model_page = pages[0]
     eyes = _drawn_eyes(model_page, "")
     open_ = _shot(model_page, "", tmp_path)

@@ -153,10 +153,11 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
     Returns
     -------
     dict or None
-        None also where an eye's corners coincide. ``corners`` (2, 2) vertex ids, ``offset`` (2, 3), ``ratio`` (2,), ``gaze`` (G, 4),
+        ``corners`` (2, 2) vertex ids, ``offset`` (2, 3), ``ratio`` (2,), ``gaze`` (G, 4),
         ``lids`` (2, 2, 2) vertex ids (:data:`LID_PAIRS`) and ``lid_shade``
         (:data:`LID_SHADE`), ``colours``, ``iris_angle`` and ``pupil_angle`` (degrees); eyes in
-        :data:`facetransfer.track.gaze.EYES` order (the subject's right, then left).
+        :data:`facetransfer.track.gaze.EYES` order (the subject's right, then left). None also
+        where an eye's corners coincide (a degenerate face).
     """
     from ..arkit import ARKIT_NAMES
     from ..track.gaze import CORNER_INDEX, activation_gaze, eye_model
@@ -186,7 +187,7 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
 
 #: How far behind its hole each cavity's apex lies, in widths (x extent) of the hole: the mouth
 #: bag (3.2 cm behind the inner lips of the ICT face) and the eye sockets (2.9 cm behind the lid
-#: margins; the eyeballs sit 0.7 cm behind them).
+#: margins; the eyeballs' centres sit 0.7 cm behind them).
 CAVITY_DEPTH = {"mouth": 0.7, "eye": 1.2}
 
 
