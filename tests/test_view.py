@@ -331,3 +331,194 @@ def test_a_track_of_another_model_is_named_when_its_model_is_missing(quick_model
                        f"model (ict-arkit) here (model hash {quick_model.content_hash[:12]}, "
                        f"this one's {here}); pass the model it was tracked with (--model M.npz)")
     assert not [line for line in err[:-1] if "error" in line or "Traceback" in line]
+
+
+def _page_data(page: str) -> dict:
+    import json
+
+    return json.loads(re.search(r'<script id="ft-data" type="application/json">(.*?)</script>',
+                                page, re.S).group(1))
+
+
+def _eye_numbers_check(arkit_model, data: dict, activations: np.ndarray) -> None:
+    """The page's eye numbers (export.viewer.eye_data) give activation_gaze's angles for
+    ``activations`` (F, 52) and eye_model's eyeballs for the page's neutral."""
+    from facetransfer.track.gaze import activation_gaze, eye_model
+
+    E = data["eyes"]
+    got = np.zeros((len(activations), 2, 2))
+    for j, e, yaw, pitch in E["gaze"]:
+        got[:, e] += activations[:, [j]] * [yaw, pitch]
+    np.testing.assert_allclose(got, activation_gaze(activations), atol=1e-12)
+    n = arkit_model.n_vertices
+    V = np.frombuffer(__import__("base64").b64decode(data["positions"]), np.float32)
+    V = V.reshape(-1, 3).astype(np.float64)
+    want = eye_model(V[:n][np.asarray(arkit_model.landmarks)])
+    for e, (o, i) in enumerate(E["corners"]):
+        w = np.linalg.norm(V[o] - V[i])
+        np.testing.assert_allclose((V[o] + V[i]) / 2 + w * np.array(E["offset"][e]),
+                                   want.centre[e], atol=1e-5)
+        np.testing.assert_allclose(w * E["ratio"][e], want.radius[e], atol=1e-6)
+
+
+def test_the_pages_eye_numbers_are_eye_model_and_activation_gaze(arkit_model, pages):
+    """The numbers the page turns and places its eyeballs by: per eye, the sum of each
+    eyeLook* slider times its handed yaw and pitch is activation_gaze's angles (random
+    activation sets, and each eyeLook* alone), and the eyeball from the corners is eye_model's;
+    a model without landmarks has no eyeballs."""
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.track.gaze import GAZE_NAMES
+
+    data = _page_data(pages[0].read_text())
+    a = np.random.default_rng(3).uniform(0, 1, (6, 52))
+    unit = np.zeros((8, 52))
+    unit[range(8), [ARKIT_NAMES.index(nm) for nm in GAZE_NAMES]] = 1.0
+    _eye_numbers_check(arkit_model, data, np.concatenate([a, unit]))
+    assert sorted(ARKIT_NAMES[j] for j, *_ in data["eyes"]["gaze"]) == sorted(GAZE_NAMES)
+    no_lm = dataclasses.replace(arkit_model, landmarks=None)
+    assert _page_data(viewer_page(no_lm))["eyes"] is None
+
+
+def _dom(page: Path, fragment: str) -> str:
+    """The page's DOM after it applied ``fragment``, in a 900x700 window (as :func:`_shot`)."""
+    exe = _chromium()
+    with tempfile.TemporaryDirectory() as profile:
+        res = subprocess.run(
+            [exe, "--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+             "--disable-background-networking", "--disable-component-update",
+             f"--user-data-dir={profile}", "--window-size=900,700", "--dump-dom",
+             f"{page.resolve().as_uri()}#{fragment}"], capture_output=True, text=True, timeout=180)
+    assert 'data-eyes="' in res.stdout, res.stderr[-2000:]
+    return res.stdout
+
+
+def _drawn_eyes(page: Path, fragment: str) -> list:
+    """What the page drew of its eyeballs (its ``#gaze`` element's ``data-eyes``)."""
+    import html
+    import json
+
+    return json.loads(html.unescape(re.search(r'data-eyes="([^"]*)"', _dom(page, fragment))
+                                    .group(1)))
+
+
+@pytest.mark.slow
+def test_the_drawn_eyeballs_are_eye_model_turned_by_activation_gaze(arkit_model, pages):
+    """In the page (headless Chromium) the eyeballs point where gaze_direction of
+    activation_gaze's angles points, for sliders set in the address, and sit where eye_model
+    puts them for the identity the dials show (the eye_spacing and width dials move the eye
+    corners: the eyeballs follow); on the track's page they follow its eyeLook* curves."""
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.dials import learn_dials
+    from facetransfer.export.viewer import view_rig
+    from facetransfer.track.gaze import activation_gaze, eye_model, gaze_direction
+
+    model_page, track_page, track, acts = pages
+    dials = learn_dials(arkit_model)
+    neutral, _, _, _, dial_off = view_rig(arkit_model, arkit_model.weight_mean("identity"), dials)
+    lm = np.asarray(arkit_model.landmarks)
+    for sliders, dial in (({"eyeLookOutLeft": 0.8, "eyeLookUpLeft": 0.3, "eyeLookInRight": 0.5,
+                            "eyeLookDownRight": 0.6}, {}),
+                          ({"eyeLookInLeft": 1.0, "eyeLookOutRight": 0.25, "eyeLookUpRight": 1.0},
+                           {"eye_spacing": 2.5, "width": -1.5})):
+        a = np.zeros((1, 52))
+        for k, v in sliders.items():
+            a[0, ARKIT_NAMES.index(k)] = v
+        frag = "&".join(f"{k}={v}" for k, v in {**sliders, **dial}.items())
+        drawn = _drawn_eyes(model_page, frag)
+        V = neutral + sum(v * dial_off[dials.names.index(k)] for k, v in dial.items())
+        want = eye_model(V[lm])
+        dirs = gaze_direction(activation_gaze(a))[0]
+        for e in range(2):
+            np.testing.assert_allclose(drawn[e]["direction"], dirs[e], atol=2e-6)
+            np.testing.assert_allclose(drawn[e]["centre"], want.centre[e], atol=2e-3)
+            np.testing.assert_allclose(drawn[e]["radius"], want.radius[e], atol=2e-3)
+    drawn = _drawn_eyes(track_page, "frame=5")
+    dirs = gaze_direction(activation_gaze(acts[5:6].astype(np.float64)))[0]
+    np.testing.assert_allclose([d["direction"] for d in drawn], dirs, atol=2e-6)
+
+
+#: The 3-D view's size in :func:`_shot`'s 900x700 window (the panel takes 351 pixels).
+VIEW = (549, 700)
+
+
+def _eye_box(eye: dict) -> tuple[slice, slice]:
+    """Rows and columns of a :func:`_shot` about where the page drew an eye's iris at rest
+    (``iris_at``, ``radius_at`` of :func:`_drawn_eyes`: view heights from the view's centre)."""
+    x = VIEW[0] / 2 + eye["iris_at"][0] * VIEW[1] - CANVAS[1].start
+    y = VIEW[1] / 2 + eye["iris_at"][1] * VIEW[1] - CANVAS[0].start
+    r = eye["radius_at"] * VIEW[1]
+    return (slice(int(y - 0.6 * r), int(y + 0.6 * r) + 1),
+            slice(int(x - 1.3 * r), int(x + 1.3 * r) + 1))
+
+
+def _eye_pixels(shot: np.ndarray, eye: dict) -> np.ndarray:
+    """The pixels (k, 3) of :func:`_eye_box`."""
+    return shot[_eye_box(eye)].reshape(-1, 3)
+
+
+def _sclera(px: np.ndarray) -> np.ndarray:
+    """Light, nearly grey pixels that are not the page's background."""
+    return (px.min(1) > 150) & (np.ptp(px, 1) < 40) & (np.abs(px - BACKGROUND).sum(1) > 12)
+
+
+def _iris(px: np.ndarray) -> np.ndarray:
+    """The lit iris's sienna (green well below red, unlike the skin; brighter than the dark red
+    inside of the head and its blend with the lids: sums <= 144 at a blink) or the pupil's
+    black (darker than the inside's sum of 78)."""
+    s = px.sum(1)
+    return ((px[:, 1] < 0.62 * px[:, 0]) & (s >= 170)) | (s < 40)
+
+
+@pytest.mark.slow
+def test_the_eyes_show_an_eyeball_that_the_lids_hide_and_the_gaze_turns(pages, tmp_path):
+    """The eye holes show an eyeball (before: the page's background): no background, and sclera
+    and iris or pupil pixels in each eye with the eyes open; none of either with eyeBlinkLeft =
+    eyeBlinkRight = 1; with eyeLookOutLeft = 1 the subject's left iris (image right for a
+    frontal face) sits right of where it is at rest, with eyeLookInLeft = 1 left of it, the
+    right eye's unmoved."""
+    model_page = pages[0]
+    eyes = _drawn_eyes(model_page, "")
+    open_ = _shot(model_page, "", tmp_path)
+    for eye in eyes:
+        px = _eye_pixels(open_, eye)
+        assert not (np.abs(px - BACKGROUND).sum(1) <= 12).any()  # before: hundreds
+        assert _sclera(px).sum() > 20 and _iris(px).sum() > 20, (_sclera(px).sum(),
+                                                                   _iris(px).sum())
+    shut = _shot(model_page, "eyeBlinkLeft=1&eyeBlinkRight=1", tmp_path)
+    for eye in eyes:
+        px = _eye_pixels(shut, eye)
+        assert not _sclera(px).any() and not _iris(px).any()
+
+    def iris_x(frag):
+        shot = _shot(model_page, frag, tmp_path)
+        out = []
+        for eye in eyes:
+            rows, cols = _eye_box(eye)
+            box = shot[rows, cols]
+            xs = np.nonzero(_iris(box.reshape(-1, 3)).reshape(box.shape[:2]))[1]
+            out.append(xs.mean() + cols.start)
+        return np.array(out)
+
+    rest, out, inward = iris_x(""), iris_x("eyeLookOutLeft=1"), iris_x("eyeLookInLeft=1")
+    r = eyes[1]["radius_at"] * VIEW[1]
+    assert out[1] > rest[1] + 0.2 * r and inward[1] < rest[1] - 0.2 * r, (rest, out, inward)
+    assert abs(out[0] - rest[0]) < 1 and abs(inward[0] - rest[0]) < 1
+
+
+@pytest.mark.slow
+def test_the_open_mouth_shows_a_dark_inside_not_the_page(pages, tmp_path):
+    """With jawOpen = 1 the mouth's gap is dark (before: the page's background showed through
+    it, a hole in the face): no patch of background lies inside the face, and the shot has
+    many more dark pixels than with the jaw shut."""
+    from scipy import ndimage
+
+    model_page = pages[0]
+    shut, gaping = _shot(model_page, "", tmp_path), _shot(model_page, "jawOpen=1", tmp_path)
+    for shot in (shut, gaping):
+        labels, n = ndimage.label(np.abs(shot - BACKGROUND).sum(axis=2) < 12)
+        edge = set(np.unique(np.concatenate([labels[0], labels[-1], labels[:, 0],
+                                             labels[:, -1]])))
+        holes = [k for k in range(1, n + 1) if k not in edge and (labels == k).sum() > 4]
+        assert not holes, [(labels == k).sum() for k in holes]
+    dark = lambda im: int((im.sum(axis=2) < 120).sum())  # noqa: E731
+    assert dark(gaping) - dark(shut) > 1000, (dark(gaping), dark(shut))

@@ -9,7 +9,11 @@ update it), the face's mesh and morph targets embedded (int16, one scale per tar
 * a slider per semantic identity dial (:mod:`facetransfer.dials`),
 * head yaw, pitch and roll (head angles in degrees: ``R = Ry(yaw) Rx(pitch) Rz(roll)``,
   three.js's ``"YXZ"`` order, the signs of :func:`facetransfer.export.common.head_euler`),
-* for a track: a timeline with play and pause that drives the shapes and head pose per frame.
+* for a track: a timeline with play and pause that drives the shapes and head pose per frame,
+* an eyeball behind each eye hole (:func:`eye_data`: the tracker's gaze model, turned by the
+  eyeLook* sliders as :func:`facetransfer.track.gaze.activation_gaze` reads them), and a dark
+  cone behind the mouth gap and each eye hole (:func:`cavity_loops`) with the skin's back faces
+  dark, so that the parted lips and the eye corners show the head's inside, not the page.
 
 Identity dials act on the neutral face (their offsets are exact there); the expression offsets
 stay those of the shown identity (the bilinear cross term is left out in the page).
@@ -35,7 +39,8 @@ from .common import ExportError, head_quaternions, require_activations, source_n
 
 log = logging.getLogger(__name__)
 
-__all__ = ["THREE_VERSION", "THREE_SHA256", "viewer_page", "write_viewer", "view_rig"]
+__all__ = ["THREE_VERSION", "THREE_SHA256", "viewer_page", "write_viewer", "view_rig", "eye_data",
+           "EYE_COLOURS"]
 
 #: The vendored three.js release and the sha256 of its ``build/three.min.js``.
 THREE_VERSION = "0.159.0"
@@ -103,6 +108,117 @@ def view_rig(model, identity: np.ndarray, dials=None):
     return neutral, shapes, names, title, dial_off
 
 
+#: The eyeballs' colours (CSS colours), painted on a canvas in the page: the white, the iris (a
+#: named colour), its dark rim and the pupil.
+EYE_COLOURS = {"sclera": "#f1ede4", "iris": "sienna", "limbus": "#2e1c10", "pupil": "black"}
+#: Half-angles (degrees, about the eyeball's centre from its gaze axis) of the iris and the pupil:
+#: an 11.7 mm iris and a 4 mm pupil on an eyeball of :data:`facetransfer.track.gaze.EYE_RADIUS`.
+IRIS_ANGLE, PUPIL_ANGLE = 34.0, 11.0
+#: iBUG-68 upper and lower lid points facing each other, per eye (the subject's right, left).
+LID_PAIRS = (((37, 41), (38, 40)), ((43, 47), (44, 46)))
+#: Lid gap (mean of :data:`LID_PAIRS`' distances over the corner distance) at and below which the
+#: eyeball is hidden, and from which it is fully lit; between, its colour is scaled by a
+#: smoothstep. FaceKit's lids part 0.34 eye widths at rest, 0.19 looking down, and stop 0.066
+#: apart at ``eyeBlink`` 1 (a 1.8 mm slit in the mesh), where the eyeball must not show.
+LID_SHADE = (0.08, 0.18)
+
+
+def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
+    """What the page needs to draw and turn the eyeballs; None for a model without landmarks.
+
+    Each eyeball is :func:`facetransfer.track.gaze.eye_model`'s: a sphere about the eye's centre
+    of rotation through the iris centre (the iris on its pole). That model scales with the eye's
+    width, so it goes to the page as ``centre = (o + i) / 2 + |o - i| offset`` and ``radius =
+    |o - i| ratio`` of the eye's outer and inner corner vertices ``o``, ``i`` (``offset`` and
+    ``ratio`` read from ``eye_model`` of ``neutral``): the page places the eyeballs for the
+    identity its dials show. Expressions leave them where they are (a blink moves the lids, not
+    the eyeball). The mesh's lids do not quite meet at ``eyeBlink`` 1, so the page shades each
+    eyeball by its lid gap (:data:`LID_SHADE`): a closing lid darkens the eye, a closed one hides
+    it.
+
+    The turn is :func:`facetransfer.track.gaze.activation_gaze`, which is linear in the
+    activations: ``gaze`` lists, per expression slider that turns an eye, ``[slider, eye, yaw,
+    pitch]``, the angles (radians) of ``activation_gaze`` of that slider at 1 alone; the page sums
+    them per eye and turns the eyeball's pole (+z) to
+    :func:`facetransfer.track.gaze.gaze_direction` of the sums (``Euler(-pitch, yaw, 0, "YXZ")``).
+
+    Parameters
+    ----------
+    model : MultilinearModel
+    neutral : (n_vertices, 3) float
+        The page's neutral face.
+    names : list of str
+        The page's expression sliders: only ARKit's 52 turn the eyes.
+
+    Returns
+    -------
+    dict or None
+        ``corners`` (2, 2) vertex ids, ``offset`` (2, 3), ``ratio`` (2,), ``gaze`` (G, 4),
+        ``lids`` (2, 2, 2) vertex ids (:data:`LID_PAIRS`) and ``lid_shade``
+        (:data:`LID_SHADE`), ``colours``, ``iris_angle`` and ``pupil_angle`` (degrees); eyes in
+        :data:`facetransfer.track.gaze.EYES` order (the subject's right, then left). None also
+        where an eye's corners coincide (a degenerate face).
+    """
+    from ..arkit import ARKIT_NAMES
+    from ..track.gaze import CORNER_INDEX, activation_gaze, eye_model
+
+    if model.landmarks is None:
+        return None
+    lm = np.asarray(model.landmarks, np.int64)
+    V = np.asarray(neutral, np.float64)
+    eyes = eye_model(V[lm])
+    corners = [(int(lm[o]), int(lm[i])) for o, i in CORNER_INDEX]
+    width = np.array([np.linalg.norm(V[o] - V[i]) for o, i in corners])
+    if not np.all(width > 0):          # a degenerate face (e.g. all-zero weights): no eyeballs
+        log.info("no eyeballs: the eye corners coincide (widths %s)", width)
+        return None
+    mid = np.array([(V[o] + V[i]) / 2 for o, i in corners])
+    gaze = []
+    if list(names) == list(ARKIT_NAMES):
+        unit = activation_gaze(np.eye(len(names)))                 # (52, eye, (yaw, pitch))
+        for j, e in zip(*np.nonzero(np.abs(unit).sum(axis=2))):
+            gaze.append([int(j), int(e), float(unit[j, e, 0]), float(unit[j, e, 1])])
+    lids = [[[int(lm[u]), int(lm[lo])] for u, lo in pairs] for pairs in LID_PAIRS]
+    return {"corners": [list(c) for c in corners], "lids": lids, "lid_shade": list(LID_SHADE),
+            "offset": ((eyes.centre - mid) / width[:, None]).tolist(),
+            "ratio": (eyes.radius / width).tolist(), "gaze": gaze,
+            "colours": dict(EYE_COLOURS), "iris_angle": IRIS_ANGLE, "pupil_angle": PUPIL_ANGLE}
+
+
+#: How far behind its hole each cavity's apex lies, in widths (x extent) of the hole: the mouth
+#: bag (3.2 cm behind the inner lips of the ICT face) and the eye sockets (2.9 cm behind the lid
+#: margins; the eyeballs' centres sit 0.7 cm behind them).
+CAVITY_DEPTH = {"mouth": 0.7, "eye": 1.2}
+
+
+def cavity_loops(model) -> list[tuple[np.ndarray, float]]:
+    """The mouth gap and eye holes of the mesh (:func:`facetransfer.topology.mesh_topology`),
+    each with its :data:`CAVITY_DEPTH`: the page closes each with a dark cone to a point behind it
+    (:func:`_closed`), the mouth's inside and the eye sockets. Without them the page showed its
+    background there: the ICT head is open behind the ears, so nothing stood behind the holes."""
+    from ..topology import mesh_topology
+
+    topo = mesh_topology(model)
+    return ([(topo.mouth_loop, CAVITY_DEPTH["mouth"])] if topo.mouth_loop.size else []) + \
+        [(lp, CAVITY_DEPTH["eye"]) for lp in topo.eye_loops]
+
+
+def _closed(loops: list, faces: np.ndarray, neutral: np.ndarray, *offsets: np.ndarray):
+    """``faces``, ``neutral`` (n, 3) and each of ``offsets`` (``(S, n, 3)``: shape offsets) with
+    a vertex per ``(loop, depth)`` of ``loops`` appended and a fan from the loop to it (oriented
+    as :func:`facetransfer.topology.mesh_topology` closes the mouth). The vertex lies behind the
+    mean of the loop's (the face looks along +z) by ``depth`` times the loop's width; its
+    offsets are the mean of the loop's (it follows the lips, or the lids)."""
+    n = neutral.shape[0]
+    fans = [np.stack([np.roll(lp, -1), lp, np.full_like(lp, n + j)], axis=1)
+            for j, (lp, _) in enumerate(loops)]
+    apex = [neutral[lp].mean(axis=0) - [0.0, 0.0, d * np.ptp(neutral[lp, 0])] for lp, d in loops]
+    out = [np.concatenate([a] + [a[..., lp, :].mean(axis=-2)[..., None, :] for lp, _ in loops],
+                          axis=-2) for a in offsets]
+    return (np.concatenate([np.asarray(faces, np.int64), *fans]),
+            np.concatenate([neutral, np.reshape(apex, (-1, 3))]), *out)
+
+
 def _shape_kind(model) -> str:
     """What the page's expression sliders are: ``"arkit"``, or the mode of the training
     expressions :func:`view_rig` gives a slider each."""
@@ -151,16 +267,19 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
     identity = (track.weights_at(0)[model.mode_names[k]] if track is not None
                 else model.weight_mean(k))
     neutral, shapes, names, shape_title, dial_off = view_rig(model, identity, dials)
+    eyes = eye_data(model, neutral, names)
+    faces, neutral, shapes, dial_off = _closed(cavity_loops(model), model.faces, neutral, shapes,
+                                               dial_off)
     dial_names = list(dials.names) if dials is not None else []
     q, scales = _quantize(np.concatenate([shapes, dial_off]) if len(shapes) + len(dial_off)
                           else np.zeros((0,) + neutral.shape))
     data = {"positions": _b64(neutral.astype(np.float32)),
-            "faces": _b64(np.asarray(model.faces, np.uint32)),
+            "faces": _b64(faces.astype(np.uint32)), "n_skin_faces": len(model.faces),
             "targets": _b64(q), "target_scales": scales, "target_names": names + dial_names,
             "n_shapes": len(names), "shape_title": shape_title,
             "dial_info": [f"{d.effect:+.2f} {dials.unit}/unit, R2 {d.r2_loo:.2f}"
                           for d in dials.dials] if dials is not None else [],
-            "n_frames": 0, "fps": 25.0,
+            "n_frames": 0, "fps": 25.0, "eyes": eyes,
             **_save_data(model, track, model.mode_names[k], identity, title),
             "about": _about(model, track)}
     if track is not None:
