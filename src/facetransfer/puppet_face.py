@@ -97,6 +97,9 @@ class PuppetFace:
     mouth : tuple
         ``(first row of the mouth fan in faces, (k,) bool)``: the fan triangles whose lip edge
         is the middle of the upper lip (where the teeth show).
+    rim : (m,) int64
+        The fills' vertices but their centres (the eye and mouth loops): their projections'
+        box holds every pixel of the fills.
     """
 
     faces: np.ndarray
@@ -105,6 +108,7 @@ class PuppetFace:
     landmarks: np.ndarray | None
     gaze: np.ndarray | None
     mouth: tuple
+    rim: np.ndarray
 
     def vertices(self, V: np.ndarray) -> np.ndarray:
         """``V`` (n_closed, 3), a frame's closed mesh, with each eye loop's centre appended."""
@@ -142,8 +146,9 @@ def puppet_face(model, topo, track) -> PuppetFace:
     gaze = None if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES) \
         else activation_gaze(np.asarray(b, np.float64))
     V0 = model.synthesize(model.default_weights())
+    rim = np.concatenate([np.zeros(0, np.int64), topo.mouth_loop, *topo.eye_loops])
     return PuppetFace(faces, kind, tuple(topo.eye_loops), lm, gaze,
-                      (fan.start, _upper_lip(V0, topo.mouth_loop)))
+                      (fan.start, _upper_lip(V0, topo.mouth_loop)), rim.astype(np.int64))
 
 
 def _upper_lip(V0: np.ndarray, loop: np.ndarray) -> np.ndarray:
@@ -176,12 +181,21 @@ def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFac
     i : int
         The track's frame (its gaze).
     """
-    tid = raster.tri_id
+    if not face.rim.size:
+        return
+    # the fills' pixels lie in the box of their vertices' projections (a tenth of a frame)
+    P = camera.project(V[face.rim])
+    H, W = raster.tri_id.shape
+    x0, y0 = np.maximum(np.floor(P.min(axis=0)).astype(np.int64) - 1, 0)
+    x1, y1 = np.minimum(np.ceil(P.max(axis=0)).astype(np.int64) + 2, (W, H))
+    tid = raster.tri_id[y0:max(y0, y1), x0:max(x0, x1)]
     kind = face.kind[tid + 1]
     ys, xs = np.nonzero(kind >= 0)
     if not ys.size:
         return
     k = kind[ys, xs]
+    tid = tid[ys, xs]
+    ys, xs = ys + y0, xs + x0
     shut = _shut(np.bincount(k, minlength=3), V, camera, face)[k]
     if shut.any():   # the lids or the lips meeting: a line darker than the skin
         image[ys[shut], xs[shut]] = (image[ys[shut], xs[shut]] * SHUT_LINE).astype(np.uint8)
@@ -190,7 +204,7 @@ def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFac
         _paint_eyes(image, ys[eye], xs[eye], k[eye], V, camera, face, i)
     m = (k == _MOUTH) & ~shut
     if m.any():
-        _paint_mouth(image, ys[m], xs[m], tid[ys[m], xs[m]], raster.bary[ys[m], xs[m]], V, face)
+        _paint_mouth(image, ys[m], xs[m], tid[m], raster.bary[ys[m], xs[m]], V, face)
 
 
 def _shut(count: np.ndarray, V: np.ndarray, camera, face: PuppetFace) -> np.ndarray:
