@@ -684,10 +684,11 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
     track's camera, Lambert-shaded on a plain background, with the mouth gap and eye holes
     closed: the eye holes show eyeballs turned by the frame's eyeLook* activations (straight
-    ahead for a track without ARKit activations), the open mouth a dark cavity with the upper
-    teeth (:mod:`facetransfer.puppet_face`), occluded by the lids and lips. A frame where the face was lost shows its nearest tracked frame (the earlier on
-    ties; :func:`facetransfer.track.project.held_lost`), as ``facetransfer export`` writes it
-    and the capture tracker stores it: not a KLT track's drifting state there.
+    ahead for a track without ARKit activations), an open mouth a dark cavity with the upper
+    teeth, a shut eye or mouth a line (:mod:`facetransfer.puppet_face`), all occluded by the
+    lids and lips. A frame where the face was lost shows its nearest tracked frame (the
+    earlier on ties; :func:`facetransfer.track.project.held_lost`), as ``facetransfer export``
+    writes it and the capture tracker stores it: not a KLT track's drifting state there.
     ``start``: yield frames ``start`` to the end only (those of a whole run: a render
     continued after an interrupt).
 
