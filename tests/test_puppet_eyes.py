@@ -142,3 +142,31 @@ def test_an_open_mouth_shows_a_dark_cavity_a_shut_one_none(arkit_model):
     assert _cavity(open_px).sum() > 100
     assert _sclera(open_px).sum() > 5           # the teeth
     assert _cavity(shut_px).sum() == 0 and _sclera(shut_px).sum() == 0
+
+
+def test_the_render_preview_shows_the_eyes_and_the_mouth(arkit_model_path, tmp_path, capsys):
+    """``facetransfer render`` draws the puppet's eyes and mouth (before: the eye holes and an
+    open mouth showed the background through the mesh): irises looking where the expression's
+    eyeLook* activations say (eyeLookOutLeft: the left eye, image right, looks image right;
+    the right eye stays), an open mouth's cavity, none in a neutral mouth."""
+    from facetransfer.cli.main import main
+
+    def preview(expression: str) -> np.ndarray:
+        from PIL import Image
+
+        out = tmp_path / f"{expression}.png"
+        assert main(["render", str(arkit_model_path), "--like", f"expression={expression}",
+                     "--size", "256x256", "--background", "40,40,48", "--out", str(out)]) == 0
+        capsys.readouterr()
+        return np.asarray(Image.open(out).convert("RGB"))
+
+    ahead, look, wide = (preview(e) for e in ("neutral", "eyeLookOutLeft", "jawOpen"))
+    for img in (ahead, look):
+        for half in (img[:, :128], img[:, 128:]):
+            assert _iris(half).sum() > 20
+    box = (slice(0, 256), slice(128, 256))   # the subject's left eye, image right
+    d = _iris_centre(look, box) - _iris_centre(ahead, box)
+    assert d[0] > 2, d
+    right = (slice(0, 256), slice(0, 128))
+    np.testing.assert_allclose(_iris_centre(look, right), _iris_centre(ahead, right), atol=0.5)
+    assert _cavity(wide).sum() > 50 and _cavity(ahead).sum() == 0

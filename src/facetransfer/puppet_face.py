@@ -19,7 +19,15 @@ lips occlude them as they occlude any surface):
   straight ahead (the head's +z);
 - a mouth fill's pixel is the cavity (:data:`CAVITY`, darker toward the fan's centre, the back
   of the mouth), with the upper teeth (:data:`TEETH`) in a band of :data:`TEETH_SHOW` eye widths
-  under the middle of the upper lip. A shut mouth's fan has no area, so it shows neither.
+  under the middle of the upper lip;
+- an eye or the mouth whose fill shows only a sliver (on average lower than :data:`SHUT` of its
+  width: the model's lids in a blink and its lips at rest do not quite meet) is shut, its
+  pixels the skin darkened by :data:`SHUT_LINE` (the lids' or the lips' line): a blink hides
+  the eyeball, a mouth at rest shows no cavity.
+
+:func:`preview_face` is the same head in :func:`facetransfer.render.render_model`'s framing,
+``facetransfer render``'s picture. The eyes and the mouth cost ~0.7 ms of CPU a frame (a
+480x480 frame of ~8 ms on one thread; ``benchmarks/bench_puppet_face.py``).
 
 Beyond the paper (its §8 names puppetry; the paper renders no eyes).
 
@@ -39,7 +47,8 @@ import numpy as np
 from .track.gaze import EYE_RADIUS, activation_gaze, eye_model, gaze_direction
 
 __all__ = ["SCLERA", "IRIS", "PUPIL", "CAVITY", "TEETH", "IRIS_RADIUS", "PUPIL_RADIUS",
-           "TEETH_SHOW", "SHUT", "SHUT_LINE", "PuppetFace", "puppet_face", "paint_face"]
+           "TEETH_SHOW", "SHUT", "SHUT_LINE", "PuppetFace", "puppet_face", "arkit_activations",
+           "paint_face", "preview_face"]
 
 #: The white of the eye: an off-white (RGB).
 SCLERA = (232, 228, 218)
@@ -95,8 +104,9 @@ class PuppetFace:
         The track's gaze, ``[frame, eye (right, left), (yaw, pitch)]`` (radians); None: straight
         ahead.
     mouth : tuple
-        ``(first row of the mouth fan in faces, (k,) bool)``: the fan triangles whose lip edge
-        is the middle of the upper lip (where the teeth show).
+        ``(first row of the mouth fan in faces, its triangles)``: triangle ``j`` has the lip
+        edge ``loop[j + 1], loop[j]`` and the centre (:func:`facetransfer.topology.
+        mesh_topology`).
     rim : (m,) int64
         The fills' vertices but their centres (the eye and mouth loops): their projections'
         box holds every pixel of the fills.
@@ -118,16 +128,15 @@ class PuppetFace:
                                      for loop in self.eye_loops])
 
 
-def puppet_face(model, topo, track) -> PuppetFace:
+def puppet_face(model, topo, activations: np.ndarray | None = None) -> PuppetFace:
     """The solid head of ``model``'s topology ``topo`` (:func:`facetransfer.topology.
-    mesh_topology`) and what its fills show in ``track``'s frames (module docstring).
+    mesh_topology`) and what its fills show (module docstring).
 
     Eyeballs need both eye holes and the model's landmarks; without them the eye holes stay
-    closed in the skin's colour. ``track``'s eyeLook* activations turn the eyes when its
-    blendshapes are ARKit's 52; otherwise the eyes look straight ahead.
+    closed in the skin's colour. ``activations`` (F, 52), ARKit's in
+    :data:`facetransfer.arkit.ARKIT_NAMES` order (:func:`arkit_activations` of a track), turn
+    the eyes by their eyeLook* curves, frame by frame; None: the eyes look straight ahead.
     """
-    from .arkit import ARKIT_NAMES
-
     n_c = topo.n_closed
     faces = [topo.faces]
     for k, loop in enumerate(topo.eye_loops):
@@ -142,26 +151,20 @@ def puppet_face(model, topo, track) -> PuppetFace:
             row += len(loop)
     fan = topo.mouth_fan
     kind[fan.start + 1:fan.stop + 1] = _MOUTH
-    b, names = track.blendshapes, track.blendshape_names
-    gaze = None if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES) \
-        else activation_gaze(np.asarray(b, np.float64))
-    V0 = model.synthesize(model.default_weights())
+    gaze = None if activations is None else activation_gaze(np.asarray(activations, np.float64))
     rim = np.concatenate([np.zeros(0, np.int64), topo.mouth_loop, *topo.eye_loops])
     return PuppetFace(faces, kind, tuple(topo.eye_loops), lm, gaze,
-                      (fan.start, _upper_lip(V0, topo.mouth_loop)), rim.astype(np.int64))
+                      (fan.start, int(topo.mouth_loop.size)), rim.astype(np.int64))
 
 
-def _upper_lip(V0: np.ndarray, loop: np.ndarray) -> np.ndarray:
-    """``(k,) bool``: the mouth fan's triangles (:func:`facetransfer.topology.mesh_topology`:
-    triangle ``j`` has the lip edge ``loop[j + 1], loop[j]``) whose edge lies above the loop's
-    centre in the mean face ``V0``, within the middle 60 % of the mouth's width."""
-    if not loop.size:
-        return np.zeros(0, bool)
-    P = V0[loop]
-    mid = (P + np.roll(P, -1, axis=0)) / 2
-    c = P.mean(axis=0)
-    half = (P[:, 0].max() - P[:, 0].min()) / 2
-    return (mid[:, 1] > c[1]) & (np.abs(mid[:, 0] - c[0]) < 0.6 * half)
+def arkit_activations(track) -> np.ndarray | None:
+    """``(F, 52)``: ``track``'s blendshape activations if they are ARKit's 52, else None."""
+    from .arkit import ARKIT_NAMES
+
+    b, names = track.blendshapes, track.blendshape_names
+    if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES):
+        return None
+    return np.asarray(b, np.float64)
 
 
 def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFace,
@@ -248,18 +251,67 @@ def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int) -> None:
 
 def _paint_mouth(image, ys, xs, tid, bary, V, face: PuppetFace) -> None:
     """Paint the mouth fan's pixels ``(ys, xs)`` (triangle ``tid``, barycentrics ``bary``
-    (n, 3), the fan's centre last) with the cavity, the upper teeth under the upper lip."""
-    start, upper = face.mouth
-    j = tid - start
-    F = face.faces[start:start + upper.size]
-    lip = (V[F[:, 0]] + V[F[:, 1]]) / 2
-    depth = np.linalg.norm(V[F[:, 2]] - lip, axis=1)                  # lip to centre, per fan
+    (n, 3), the fan's centre last) with the cavity, darker toward the centre, and the upper
+    teeth: the band, in the head's frame, from the upper lip's middle down :data:`TEETH_SHOW`
+    eye widths, over the middle 55 % of the mouth's width."""
     w = bary[:, 2].astype(np.float64)
     colour = np.array(CAVITY, np.float64) * (1.0 - 0.5 * w)[:, None]
     if face.landmarks is not None:
-        P = V[face.landmarks[[36, 39, 42, 45]]]
-        width = (np.linalg.norm(P[0] - P[1]) + np.linalg.norm(P[2] - P[3])) / 2
-        teeth = upper[j] & (w * depth[j] < TEETH_SHOW * width)
-        colour[teeth] = TEETH
+        start, k = face.mouth
+        loop = V[face.faces[start:start + k, 1]]
+        c = V[face.faces[start, 2]]                                       # the fan's centre
+        half = (loop[:, 0].max() - loop[:, 0].min()) / 2
+        mid = loop[(np.abs(loop[:, 0] - c[0]) < 0.25 * half) & (loop[:, 1] > c[1]), 1]
+        E = V[face.landmarks[[36, 39, 42, 45]]]
+        show = TEETH_SHOW * (np.linalg.norm(E[0] - E[1]) + np.linalg.norm(E[2] - E[3])) / 2
+        X = np.einsum("nk,nkd->nd", bary.astype(np.float64), V[face.faces[tid]])
+        if mid.size:
+            teeth = (X[:, 1] > mid.min() - show) & (np.abs(X[:, 0] - c[0]) < 0.55 * half)
+            colour[teeth] = TEETH
     image[ys, xs] = np.clip(colour + 0.5, 0, 255).astype(np.uint8)
 
+
+def preview_face(model, weights, *, size: tuple[int, int] = (640, 480), yaw_deg: float = 0.0,
+                 pitch_deg: float = 0.0, roll_deg: float = 0.0, scale: float = 1.0,
+                 fill: float = 0.8, background=(255, 255, 255)):
+    """:func:`facetransfer.render.render_model`'s preview (the same framing and grey Lambert
+    shading) of the model's face with its eye holes and mouth gap closed and painted as the
+    puppet's (:func:`paint_face`): ``facetransfer render``'s picture. The eyes look where the
+    expression weights' eyeLook* activations say for an ARKit model
+    (:func:`facetransfer.arkit.weights_to_activations`), straight ahead otherwise; a model
+    without landmarks (no holes found) is rendered as ``render_model`` renders it.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+    weights : mapping mode -> (r_k,)
+    size, yaw_deg, pitch_deg, roll_deg, scale, fill, background
+        As :func:`facetransfer.render.render_model`'s.
+
+    Returns
+    -------
+    RenderResult
+        Its ``visible`` holds the model's vertices only (not the fills' centres).
+    """
+    import dataclasses
+
+    from .arkit import is_arkit_model, weights_to_activations
+    from .errors import ShapeError
+    from .render import look_at_weak_perspective, render, rotation_from_euler
+    from .topology import close_mouth, mesh_topology
+
+    if not (np.isfinite(scale) and scale > 0):
+        raise ShapeError(f"preview scale must be > 0, got {scale}")
+    V = np.asarray(model.synthesize(weights), dtype=np.float64)
+    cam = look_at_weak_perspective(V, size, rotation=rotation_from_euler(yaw_deg, pitch_deg,
+                                                                         roll_deg),
+                                   fill=fill * scale)
+    acts = None
+    if is_arkit_model(model):
+        acts = weights_to_activations(model, np.asarray(weights["expression"])[None])
+    topo = mesh_topology(model, lips=False)
+    face = puppet_face(model, topo, acts)
+    Vc = face.vertices(close_mouth(V, topo))
+    res = render(Vc, face.faces, cam, size, background=background)
+    paint_face(res.image, res.raster, Vc, cam, face, 0)
+    return dataclasses.replace(res, visible=res.visible[:V.shape[0]])
