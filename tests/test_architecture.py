@@ -173,6 +173,7 @@ LAYER_OF = {
     "facetransfer.transfer": "transfer",
     "facetransfer.take": "transfer",      # a Live Link Face take as the new performance
     "facetransfer.dials": "transfer",     # identity edits of a track (dial_track)
+    "facetransfer.puppet_face": "transfer",  # the puppet's eyeballs and mouth, puppet_frames' paint
     # texture
     "facetransfer.texture": "texture",
     "facetransfer.rewrite_options": "texture",  # options as data: texture.face checks the mouth

@@ -720,9 +720,12 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
 
     Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
     track's camera, Lambert-shaded on a plain background, with the mouth gap and eye holes
-    closed. A frame where the face was lost shows its nearest tracked frame (the earlier on
-    ties; :func:`facetransfer.track.project.held_lost`), as ``facetransfer export`` writes it
-    and the capture tracker stores it: not a KLT track's drifting state there.
+    closed: the eye holes show eyeballs turned by the frame's eyeLook* activations (straight
+    ahead for a track without ARKit activations), an open mouth a dark cavity with the upper
+    teeth, a shut eye or mouth a line (:mod:`facetransfer.puppet_face`), all occluded by the
+    lids and lips. A frame where the face was lost shows its nearest tracked frame (the
+    earlier on ties; :func:`facetransfer.track.project.held_lost`), as ``facetransfer export``
+    writes it and the capture tracker stores it: not a KLT track's drifting state there.
     ``start``: yield frames ``start`` to the end only (those of a whole run: a render
     continued after an interrupt).
 
@@ -739,6 +742,7 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     ------
     (H, W, 3) uint8
     """
+    from .puppet_face import arkit_activations, paint_face, puppet_face
     from .render import render
     from .track.project import nearest_tracked
 
@@ -750,28 +754,25 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     bg = np.broadcast_to(np.asarray(background, np.uint8), (size[1], size[0], 3)).copy()
     sx = size[0] / track.frame_size[0]
     sy = size[1] / track.frame_size[1]
-    # a solid head: the mouth gap and the eye holes closed by fans around their centres
+    # a solid head: the mouth gap and the eye holes closed, their fills painted as a mouth
+    # cavity and eyeballs (facetransfer.puppet_face)
     topo = mesh_topology(model, lips=False)
-    faces = [topo.faces]
-    for k, loop in enumerate(topo.eye_loops):
-        c = topo.n_closed + k
-        faces.append(np.stack([np.roll(loop, -1), loop, np.full_like(loop, c)], axis=1))
-    faces = np.concatenate(faces)
+    face = puppet_face(model, topo, arkit_activations(track))
     n_all = topo.n_closed + len(topo.eye_loops)
     colors = np.broadcast_to(np.asarray(color, np.float64), (n_all, 3))
 
     def draw(i: int) -> np.ndarray:
         w = track.weights_at(i)
         w[identity_mode] = wid
-        V = close_mouth(model.synthesize(w), topo)  # the identity contracted once (model.py)
-        if topo.eye_loops:
-            V = np.concatenate([V] + [V[loop].mean(axis=0, keepdims=True)
-                                      for loop in topo.eye_loops])
+        # the identity contracted once (model.py); the eye loops' centres appended
+        V = face.vertices(close_mouth(model.synthesize(w), topo))
         cam = track.camera(i)
         if (sx, sy) != (1.0, 1.0):
             cam = type(cam)(cam.scale * np.sqrt(sx * sy), cam.rotation,
                             cam.translation * np.array([sx, sy]), cam.pixel_aspect)
-        return render(V, faces, cam, size, colors=colors, background=bg).image
+        out = render(V, face.faces, cam, size, colors=colors, background=bg)
+        paint_face(out.image, out.raster, V, cam, face, i)
+        return out.image
 
     # a lost frame shows its nearest tracked one (held_lost's rule, as the exports write it,
     # whichever tracker), each drawn once for a run of lost frames around it

@@ -113,7 +113,7 @@ def _face_pose(face, pose: dict[str, float]) -> dict[str, float]:
 
 
 def cmd_render(args: argparse.Namespace) -> int:
-    from ..render import render_model
+    from ..puppet_face import preview_face
     from .model import face_arg, face_or_weights
 
     out = check_output_path(args.out, overwrite=args.overwrite, inputs=[args.model, args.face])
@@ -125,7 +125,7 @@ def cmd_render(args: argparse.Namespace) -> int:
     background = parse_colour(args.background)   # before the model, which may be built first
     model = resolve_model(args.model)
     weights = face_or_weights(model, args, face)
-    res = render_model(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
+    res = preview_face(model, weights, size=size, yaw_deg=pose.get("yaw", 0.0),
                        pitch_deg=pose.get("pitch", 0.0), roll_deg=pose.get("roll", 0.0),
                        scale=pose.get("scale", 1.0), background=background)
     write_image(out, res.image, overwrite=args.overwrite)
@@ -251,7 +251,9 @@ def register(sub) -> None:
     from .model import add_face_options
 
     r = sub.add_parser("render", help="render a Lambert-shaded preview of a model face",
-                       description="Render a model face (Eq. (5)) with a weak-perspective camera.")
+                       description="Render a model face (Eq. (5)) with a weak-perspective camera, "
+                       "its eyes and mouth as the puppet's (eyeballs turned by an ARKit "
+                       "model's eyeLook* weights, an open mouth's cavity).")
     r.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     add_face_options(r, face_takes=": its weights and head pose")
     r.add_argument("--pose", help="head pose, e.g. yaw=20,pitch=-5,roll=0,scale=1.2 (degrees)")

@@ -1,0 +1,317 @@
+"""The puppet's eyes and mouth: eyeballs that look where the track looks, a dark mouth cavity.
+
+:func:`facetransfer.transfer.puppet_frames` renders the model's face as a solid head: its eye
+holes closed by fans around their centres, its mouth gap by the topology's fan
+(:func:`facetransfer.topology.close_mouth`). Shaded in the skin's colour those fills read as skin:
+a blink closed skin over skin, the gaze did not show and an open mouth was a skin-coloured disc.
+Here the pixels where a fill wins the z-buffer are painted after the render (so the lids and
+lips occlude them as they occlude any surface):
+
+- an eye fill's pixel shows the eyeball behind the eye's corners
+  (:func:`facetransfer.track.gaze.eye_model`) at that pixel: the pixel is taken back through
+  the weak-perspective camera (Eq. (7)) onto the ball's front, and the angle between that
+  point's direction from the ball's centre and the gaze (:func:`facetransfer.track.gaze.
+  activation_gaze` of the frame's eyeLook* activations, the inverse of what the tracker reads
+  from Face Landmarker's iris points) makes it pupil (:data:`PUPIL`), iris (:data:`IRIS`) or
+  sclera (:data:`SCLERA`). The iris is a disc on the ball, so it foreshortens as the eye or
+  the head turns; a half-closed eye shows the part of it its lids leave. A track without ARKit
+  activations (a model whose expressions are not ARKit-named, e.g. ``ict-bilinear``) looks
+  straight ahead (the head's +z);
+- a mouth fill's pixel is the cavity (:data:`CAVITY`, darker toward the fan's centre, the back
+  of the mouth), with the upper teeth (:data:`TEETH`) in a band of :data:`TEETH_SHOW` eye widths
+  under the middle of the upper lip;
+- an eye or the mouth whose fill shows only a sliver (on average lower than :data:`SHUT` of its
+  width: the model's lids in a blink and its lips at rest do not quite meet) is shut, its
+  pixels the skin darkened by :data:`SHUT_LINE` (the lids' or the lips' line): a blink hides
+  the eyeball, a mouth at rest shows no cavity.
+
+:func:`preview_face` is the same head in :func:`facetransfer.render.render_model`'s framing,
+``facetransfer render``'s picture. The eyes and the mouth cost ~0.7 ms of CPU a frame (a
+480x480 frame of ~8 ms on one thread; ``benchmarks/bench_puppet_face.py``).
+
+Beyond the paper (its §8 names puppetry; the paper renders no eyes).
+
+References
+----------
+Vlasic, Brand, Pfister, Popović. Face Transfer with Multilinear Models. SIGGRAPH 2005, Eq. (7).
+The visible iris diameter (~11.8 mm) and a daylight pupil (~4 mm): textbook averages
+(e.g. Atchison & Smith, Optics of the Human Eye, 2000).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .track.gaze import EYE_RADIUS, activation_gaze, eye_model, gaze_direction
+
+__all__ = ["SCLERA", "IRIS", "PUPIL", "CAVITY", "TEETH", "IRIS_RADIUS", "PUPIL_RADIUS",
+           "TEETH_SHOW", "SHUT", "SHUT_LINE", "PuppetFace", "puppet_face", "arkit_activations",
+           "paint_face", "preview_face"]
+
+#: The white of the eye: an off-white (RGB).
+SCLERA = (232, 228, 218)
+#: The iris: a neutral brown (RGB).
+IRIS = (110, 76, 50)
+#: The pupil (RGB).
+PUPIL = (12, 10, 10)
+#: The inside of an open mouth: a dark red-brown (RGB), at the lips; darker toward the middle.
+CAVITY = (96, 34, 32)
+#: The upper teeth (RGB).
+TEETH = (222, 216, 198)
+#: The visible iris's radius, cm at FaceKit's eye width (:data:`facetransfer.track.gaze.
+#: FACEKIT_EYE_WIDTH`): half of an 11.8 mm visible iris.
+IRIS_RADIUS = 0.59
+#: The pupil's radius, cm at FaceKit's eye width: half of a 4 mm daylight pupil.
+PUPIL_RADIUS = 0.2
+#: How far the upper teeth show below the upper lip of an open mouth, in eye widths (corner to
+#: corner): 0.3 of FaceKit's 2.69 cm, about the 8 mm of an upper incisor not under the lip.
+TEETH_SHOW = 0.3
+#: An eye or the mouth whose fill shows on average less high than this fraction of its width
+#: (right eye, left, mouth; the corners' distance) is shut: the model's lids in a blink and its
+#: lips at rest leave a sliver of their holes (the mean person in ``ict-arkit``: eyeBlink* = 1
+#: shows 3 % of the eye's width, 0.8 shows 8 %, open eyes 26 %; the mouth at rest 0.8 % of its
+#: width, jawOpen = 0.1 shows 4.7 %).
+SHUT = (0.05, 0.05, 0.025)
+#: A shut eye's or mouth's sliver: the skin there darkened by this factor (the lids' or lips'
+#: line).
+SHUT_LINE = 0.5
+#: What the lids' fills are painted with, by :attr:`PuppetFace.kind`.
+_RIGHT, _LEFT, _MOUTH = 0, 1, 2
+#: The ball's Lambert term: ``_EYE_AMBIENT + (1 - _EYE_AMBIENT) n_z`` (its normal toward the
+#: camera); the corners, beyond the ball's silhouette, at the ambient alone.
+_EYE_AMBIENT = 0.55
+
+
+@dataclass(frozen=True)
+class PuppetFace:
+    """The puppet's solid head and what its fills show, for one clip.
+
+    Attributes
+    ----------
+    faces : (F', 3) int64
+        The closed mesh's faces (model faces and the mouth fan) followed by each eye hole's
+        fan around a centre vertex (``n_closed + k`` for the ``k``-th eye loop).
+    kind : (F' + 1,) int8
+        Indexed by a raster's ``tri_id + 1``: 0 the right eye's fan, 1 the left eye's, 2 the
+        mouth fan; -1 the others and the background.
+    eye_loops : tuple of (k,) int64
+        The topology's eye holes (right, left).
+    landmarks : (68,) int64 or None
+        The model's iBUG-68 vertices (the eye corners place the eyeballs).
+    gaze : (F, 2, 2) float64 or None
+        The track's gaze, ``[frame, eye (right, left), (yaw, pitch)]`` (radians); None: straight
+        ahead.
+    mouth : tuple
+        ``(first row of the mouth fan in faces, its triangles)``: triangle ``j`` has the lip
+        edge ``loop[j + 1], loop[j]`` and the centre (:func:`facetransfer.topology.
+        mesh_topology`).
+    rim : (m,) int64
+        The fills' vertices but their centres (the eye and mouth loops): their projections'
+        box holds every pixel of the fills.
+    """
+
+    faces: np.ndarray
+    kind: np.ndarray
+    eye_loops: tuple
+    landmarks: np.ndarray | None
+    gaze: np.ndarray | None
+    mouth: tuple
+    rim: np.ndarray
+
+    def vertices(self, V: np.ndarray) -> np.ndarray:
+        """``V`` (n_closed, 3), a frame's closed mesh, with each eye loop's centre appended."""
+        if not self.eye_loops:
+            return V
+        return np.concatenate([V] + [V[loop].mean(axis=0, keepdims=True)
+                                     for loop in self.eye_loops])
+
+
+def puppet_face(model, topo, activations: np.ndarray | None = None) -> PuppetFace:
+    """The solid head of ``model``'s topology ``topo`` (:func:`facetransfer.topology.
+    mesh_topology`) and what its fills show (module docstring).
+
+    Eyeballs need both eye holes and the model's landmarks; without them the eye holes stay
+    closed in the skin's colour. ``activations`` (F, 52), ARKit's in
+    :data:`facetransfer.arkit.ARKIT_NAMES` order (:func:`arkit_activations` of a track), turn
+    the eyes by their eyeLook* curves, frame by frame; None: the eyes look straight ahead.
+    """
+    n_c = topo.n_closed
+    faces = [topo.faces]
+    for k, loop in enumerate(topo.eye_loops):
+        faces.append(np.stack([np.roll(loop, -1), loop, np.full_like(loop, n_c + k)], axis=1))
+    faces = np.concatenate(faces)
+    kind = np.full(faces.shape[0] + 1, -1, np.int8)
+    lm = None if model.landmarks is None else np.asarray(model.landmarks, np.int64)
+    if len(topo.eye_loops) == 2 and lm is not None:
+        row = topo.faces.shape[0] + 1
+        for k, loop in enumerate(topo.eye_loops):
+            kind[row:row + len(loop)] = (_RIGHT, _LEFT)[k]
+            row += len(loop)
+    fan = topo.mouth_fan
+    kind[fan.start + 1:fan.stop + 1] = _MOUTH
+    gaze = None if activations is None else activation_gaze(np.asarray(activations, np.float64))
+    rim = np.concatenate([np.zeros(0, np.int64), topo.mouth_loop, *topo.eye_loops])
+    return PuppetFace(faces, kind, tuple(topo.eye_loops), lm, gaze,
+                      (fan.start, int(topo.mouth_loop.size)), rim.astype(np.int64))
+
+
+def arkit_activations(track) -> np.ndarray | None:
+    """``(F, 52)``: ``track``'s blendshape activations if they are ARKit's 52, else None."""
+    from .arkit import ARKIT_NAMES
+
+    b, names = track.blendshapes, track.blendshape_names
+    if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES):
+        return None
+    return np.asarray(b, np.float64)
+
+
+def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFace,
+               i: int) -> None:
+    """Paint, in place, the eye and mouth fills of a rendered puppet frame.
+
+    Parameters
+    ----------
+    image : (H, W, 3) uint8
+        The render of ``V`` with ``face.faces`` under ``camera``.
+    raster : Raster
+        Its raster (``tri_id``, ``bary``).
+    V : (n_closed + n_eyes, 3) float64
+        The frame's mesh (:meth:`PuppetFace.vertices`).
+    camera : WeakPerspective
+    face : PuppetFace
+    i : int
+        The track's frame (its gaze).
+    """
+    if not face.rim.size:
+        return
+    # the fills' pixels lie in the box of their vertices' projections (a tenth of a frame)
+    P = camera.project(V[face.rim])
+    H, W = raster.tri_id.shape
+    x0, y0 = np.maximum(np.floor(P.min(axis=0)).astype(np.int64) - 1, 0)
+    x1, y1 = np.minimum(np.ceil(P.max(axis=0)).astype(np.int64) + 2, (W, H))
+    tid = raster.tri_id[y0:max(y0, y1), x0:max(x0, x1)]
+    kind = face.kind[tid + 1]
+    ys, xs = np.nonzero(kind >= 0)
+    if not ys.size:
+        return
+    k = kind[ys, xs]
+    tid = tid[ys, xs]
+    ys, xs = ys + y0, xs + x0
+    shut = _shut(np.bincount(k, minlength=3), V, camera, face)[k]
+    if shut.any():   # the lids or the lips meeting: a line darker than the skin
+        image[ys[shut], xs[shut]] = (image[ys[shut], xs[shut]] * SHUT_LINE).astype(np.uint8)
+    eye = (k != _MOUTH) & ~shut
+    if eye.any():
+        _paint_eyes(image, ys[eye], xs[eye], k[eye], V, camera, face, i)
+    m = (k == _MOUTH) & ~shut
+    if m.any():
+        _paint_mouth(image, ys[m], xs[m], tid[m], raster.bary[ys[m], xs[m]], V, face)
+
+
+def _shut(count: np.ndarray, V: np.ndarray, camera, face: PuppetFace) -> np.ndarray:
+    """``(3,) bool``, the right eye, the left and the mouth: whether the fill's visible part
+    (``count`` pixels each) is narrower on average than :data:`SHUT` of its width (the eye's
+    corners, the mouth's, projected): the model's lids and lips do not quite meet in a blink
+    or at rest, a sliver of their holes shows. Without landmarks none is."""
+    if face.landmarks is None:
+        return np.zeros(3, bool)
+    P = camera.project(V[face.landmarks[[36, 39, 45, 42, 48, 54]]])
+    width = np.linalg.norm(P[0::2] - P[1::2], axis=1)
+    return count < np.asarray(SHUT) * width ** 2
+
+
+def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int) -> None:
+    """Paint the eye fills' pixels ``(ys, xs)`` (eye ``k`` each: 0 right, 1 left) with the
+    eyeball's sclera, iris or pupil seen there (module docstring)."""
+    eyes = eye_model(V[face.landmarks])
+    angles = np.zeros((2, 2)) if face.gaze is None else face.gaze[i]
+    g = gaze_direction(angles)                                        # (2, 3), the head's frame
+    R = np.asarray(camera.rotation, np.float64)
+    s, a = float(camera.scale), float(camera.pixel_aspect)
+    t = np.asarray(camera.translation, np.float64)
+    # Eq. (7) taken back: the pixel's (R X)[:2] (x columns s / a per unit, y down)
+    q = np.stack([(xs - t[0]) * (a / s), (t[1] - ys) / s], axis=1)
+    q = (q - (eyes.centre @ R[:2].T)[k]) / eyes.radius[k, None]
+    n2 = np.sum(q * q, axis=1)
+    q = q / np.sqrt(np.maximum(n2, 1.0))[:, None]                      # beyond it: the rim
+    ez = np.sqrt(np.clip(1.0 - np.sum(q * q, axis=1), 0.0, None))
+    d = np.column_stack([q, ez]) @ R                                  # R^T e, the head's frame
+    cos = np.sum(d * g[k], axis=1)
+    # the iris and the pupil as discs on the ball (its radius EYE_RADIUS at FaceKit's width)
+    c_iris = np.cos(np.arcsin(min(IRIS_RADIUS / EYE_RADIUS, 1.0)))
+    c_pupil = np.cos(np.arcsin(min(PUPIL_RADIUS / EYE_RADIUS, 1.0)))
+    colour = np.where((cos > c_pupil)[:, None], np.array(PUPIL, np.float64),
+                      np.where((cos > c_iris)[:, None], np.array(IRIS, np.float64),
+                               np.array(SCLERA, np.float64)))
+    light = _EYE_AMBIENT + (1.0 - _EYE_AMBIENT) * ez
+    image[ys, xs] = np.clip(colour * light[:, None] + 0.5, 0, 255).astype(np.uint8)
+
+
+def _paint_mouth(image, ys, xs, tid, bary, V, face: PuppetFace) -> None:
+    """Paint the mouth fan's pixels ``(ys, xs)`` (triangle ``tid``, barycentrics ``bary``
+    (n, 3), the fan's centre last) with the cavity, darker toward the centre, and the upper
+    teeth: the band, in the head's frame, from the upper lip's middle down :data:`TEETH_SHOW`
+    eye widths, over the middle 55 % of the mouth's width."""
+    w = bary[:, 2].astype(np.float64)
+    colour = np.array(CAVITY, np.float64) * (1.0 - 0.5 * w)[:, None]
+    if face.landmarks is not None:
+        start, k = face.mouth
+        loop = V[face.faces[start:start + k, 1]]
+        c = V[face.faces[start, 2]]                                       # the fan's centre
+        half = (loop[:, 0].max() - loop[:, 0].min()) / 2
+        mid = loop[(np.abs(loop[:, 0] - c[0]) < 0.25 * half) & (loop[:, 1] > c[1]), 1]
+        E = V[face.landmarks[[36, 39, 42, 45]]]
+        show = TEETH_SHOW * (np.linalg.norm(E[0] - E[1]) + np.linalg.norm(E[2] - E[3])) / 2
+        X = np.einsum("nk,nkd->nd", bary.astype(np.float64), V[face.faces[tid]])
+        if mid.size:
+            teeth = (X[:, 1] > mid.min() - show) & (np.abs(X[:, 0] - c[0]) < 0.55 * half)
+            colour[teeth] = TEETH
+    image[ys, xs] = np.clip(colour + 0.5, 0, 255).astype(np.uint8)
+
+
+def preview_face(model, weights, *, size: tuple[int, int] = (640, 480), yaw_deg: float = 0.0,
+                 pitch_deg: float = 0.0, roll_deg: float = 0.0, scale: float = 1.0,
+                 fill: float = 0.8, background=(255, 255, 255)):
+    """:func:`facetransfer.render.render_model`'s preview (the same framing and grey Lambert
+    shading) of the model's face with its eye holes and mouth gap closed and painted as the
+    puppet's (:func:`paint_face`): ``facetransfer render``'s picture. The eyes look where the
+    expression weights' eyeLook* activations say for an ARKit model
+    (:func:`facetransfer.arkit.weights_to_activations`), straight ahead otherwise; a model
+    without landmarks (no holes found) is rendered as ``render_model`` renders it.
+
+    Parameters
+    ----------
+    model : MultilinearModel
+    weights : mapping mode -> (r_k,)
+    size, yaw_deg, pitch_deg, roll_deg, scale, fill, background
+        As :func:`facetransfer.render.render_model`'s.
+
+    Returns
+    -------
+    RenderResult
+        Its ``visible`` holds the model's vertices only (not the fills' centres).
+    """
+    import dataclasses
+
+    from .arkit import is_arkit_model, weights_to_activations
+    from .errors import ShapeError
+    from .render import look_at_weak_perspective, render, rotation_from_euler
+    from .topology import close_mouth, mesh_topology
+
+    if not (np.isfinite(scale) and scale > 0):
+        raise ShapeError(f"preview scale must be > 0, got {scale}")
+    V = np.asarray(model.synthesize(weights), dtype=np.float64)
+    cam = look_at_weak_perspective(V, size, rotation=rotation_from_euler(yaw_deg, pitch_deg,
+                                                                         roll_deg),
+                                   fill=fill * scale)
+    acts = None
+    if is_arkit_model(model):
+        acts = weights_to_activations(model, np.asarray(weights["expression"])[None])
+    topo = mesh_topology(model, lips=False)
+    face = puppet_face(model, topo, acts)
+    Vc = face.vertices(close_mouth(V, topo))
+    res = render(Vc, face.faces, cam, size, background=background)
+    paint_face(res.image, res.raster, Vc, cam, face, 0)
+    return dataclasses.replace(res, visible=res.visible[:V.shape[0]])

@@ -1,0 +1,172 @@
+"""The puppet's eyes and mouth (facetransfer.puppet_face through transfer.puppet_frames):
+eyeballs that look where the track's eyeLook* activations look, hidden by a blink, and a dark
+cavity in an open mouth. Before, the eye holes and the mouth gap were closed in the skin's
+colour."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+
+from facetransfer.arkit import ARKIT_NAMES
+from facetransfer.transfer import puppet_frames
+
+from conftest import mean_person_track
+
+SIZE = 256
+
+
+def _track(activations: np.ndarray, model):
+    """A frontal track of ``model``'s mean person, the face whole in the frame (12 px per cm:
+    an eye 32 px wide)."""
+    return mean_person_track(model, activations, size=SIZE, scale=12.0)
+
+
+def _acts(**values: float) -> np.ndarray:
+    """One frame's 52 ARKit activations: ``values`` by name, the others 0."""
+    a = np.zeros((1, 52), np.float32)
+    for name, v in values.items():
+        a[0, ARKIT_NAMES.index(name)] = v
+    return a
+
+
+def _render(model, track) -> np.ndarray:
+    """The puppet (the model's mean person) of ``track``'s first frame."""
+    return next(puppet_frames(track, model, model.weight_mean("identity")))
+
+
+def _box(model, track, points, pad: int = 4) -> tuple[slice, slice]:
+    """The image box (rows, columns) around the frame's landmarks ``points`` (iBUG-68)."""
+    V = model.synthesize(track.weights_at(0))
+    P = track.camera(0).project(V[np.asarray(model.landmarks)[list(points)]])
+    (x0, y0), (x1, y1) = np.floor(P.min(0)) - pad, np.ceil(P.max(0)) + pad
+    return slice(int(y0), int(y1) + 1), slice(int(x0), int(x1) + 1)
+
+
+def _ratios(px: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """R, G / R and B / R of pixels (n, 3): the skin's shading keeps its G / R (0.83) and
+    B / R (0.73); an eye's white, an iris or a mouth's cavity have other ratios."""
+    p = px.reshape(-1, 3).astype(np.float64)
+    r = np.maximum(p[:, 0], 1.0)
+    return p[:, 0], p[:, 1] / r, p[:, 2] / r
+
+
+def _sclera(px):
+    """An off-white: bright, near grey."""
+    r, g, b = _ratios(px)
+    return (r > 120) & (g > 0.9) & (b > 0.88)
+
+
+def _iris(px):
+    """Brown to black: an iris (a brown's G / R under the skin's, B / R well under) or its
+    pupil."""
+    r, g, b = _ratios(px)
+    return ((g < 0.78) & (g > 0.55) & (b < 0.6)) | (r < 30)
+
+
+def _cavity(px):
+    """A dark red-brown: red well above green and blue."""
+    r, g, b = _ratios(px)
+    return (r < 130) & (r > 20) & (g < 0.5) & (b < 0.5)
+
+
+LEFT_EYE, RIGHT_EYE, MOUTH = range(42, 48), range(36, 42), range(48, 68)
+
+
+def test_open_eyes_show_a_sclera_and_an_iris_a_blink_shows_neither(arkit_model):
+    """Open eyes: each eye's box holds off-white and brown pixels (before: skin only); a full
+    blink (eyeBlinkLeft = eyeBlinkRight = 1): the lids cover the eyeballs, none; a half blink
+    shows less iris than open eyes, but some."""
+    counts = {}
+    for blink in (0.0, 0.5, 1.0):
+        track = _track(_acts(eyeBlinkLeft=blink, eyeBlinkRight=blink), arkit_model)
+        img = _render(arkit_model, track)
+        counts[blink] = []
+        for eye in (RIGHT_EYE, LEFT_EYE):
+            px = img[_box(arkit_model, track, eye)]
+            counts[blink].append((int(_sclera(px).sum()), int(_iris(px).sum())))
+    for sclera, iris in counts[0.0]:
+        assert sclera > 40 and iris > 40, counts
+    assert counts[1.0] == [(0, 0), (0, 0)], counts
+    for (_, half), (_, open_) in zip(counts[0.5], counts[0.0]):
+        assert 0 < half < open_, counts
+
+
+def _iris_centre(img, box) -> np.ndarray:
+    """(x, y) centroid of the iris-coloured pixels in ``box``."""
+    m = _iris(img[box]).reshape(img[box].shape[:2])
+    ys, xs = np.nonzero(m)
+    assert ys.size > 20
+    return np.array([xs.mean() + box[1].start, ys.mean() + box[0].start])
+
+
+@pytest.mark.parametrize("look, sign", [("eyeLookOutLeft", 1.0), ("eyeLookInLeft", -1.0)])
+def test_eye_look_turns_the_left_eye_its_way(arkit_model, look, sign):
+    """eyeLookOutLeft = 1 turns the subject's LEFT eye toward its left ear: for a frontal face
+    image right (the model's +x, :mod:`facetransfer.track.gaze`), by several pixels
+    (35 degrees of a ball 13 px in radius: ~7 px); eyeLookInLeft = 1 toward the nose (image
+    left). The right eye stays (before: no iris at all)."""
+    still = _track(_acts(), arkit_model)
+    moved = _track(_acts(**{look: 1.0}), arkit_model)
+    a, b = _render(arkit_model, still), _render(arkit_model, moved)
+    left, right = _box(arkit_model, still, LEFT_EYE), _box(arkit_model, still, RIGHT_EYE)
+    d = _iris_centre(b, left) - _iris_centre(a, left)
+    assert sign * d[0] > 4 and abs(d[1]) < 2, d
+    np.testing.assert_allclose(_iris_centre(b, right), _iris_centre(a, right), atol=0.5)
+
+
+def test_a_track_without_arkit_activations_looks_straight_ahead(arkit_model):
+    """A track without eyeLook* activations (a model whose expressions are not ARKit-named):
+    the eyeballs look straight ahead, the picture of eyeLook* all 0, eyes shown."""
+    track = _track(_acts(eyeLookUpLeft=0.8, eyeLookOutRight=0.6), arkit_model)
+    bare = dataclasses.replace(track, blendshapes=None, blendshape_names=None)
+    ahead = _track(_acts(), arkit_model)
+    img = _render(arkit_model, bare)
+    ref = _render(arkit_model, dataclasses.replace(ahead, weights=track.weights))
+    for eye in (LEFT_EYE, RIGHT_EYE):
+        box = _box(arkit_model, track, eye)
+        assert _iris(img[box]).sum() > 40
+        np.testing.assert_array_equal(img[box], ref[box])
+    assert not np.array_equal(img, _render(arkit_model, track))   # the gaze did turn those
+
+
+def test_an_open_mouth_shows_a_dark_cavity_a_shut_one_none(arkit_model):
+    """jawOpen = 1: dark red-brown pixels between the lips (before: the gap's fan in the skin's
+    colour), with the upper teeth's off-white above them; jawOpen = 0 (the mouth shut): none."""
+    shut = _track(_acts(), arkit_model)
+    wide = _track(_acts(jawOpen=1.0), arkit_model)
+    box = _box(arkit_model, wide, MOUTH)
+    open_px, shut_px = _render(arkit_model, wide)[box], _render(arkit_model, shut)[box]
+    assert _cavity(open_px).sum() > 100
+    assert _sclera(open_px).sum() > 5           # the teeth
+    assert _cavity(shut_px).sum() == 0 and _sclera(shut_px).sum() == 0
+
+
+def test_the_render_preview_shows_the_eyes_and_the_mouth(arkit_model_path, tmp_path, capsys):
+    """``facetransfer render`` draws the puppet's eyes and mouth (before: the eye holes and an
+    open mouth showed the background through the mesh): irises looking where the expression's
+    eyeLook* activations say (eyeLookOutLeft: the left eye, image right, looks image right;
+    the right eye stays), an open mouth's cavity, none in a neutral mouth."""
+    from facetransfer.cli.main import main
+
+    def preview(expression: str) -> np.ndarray:
+        from PIL import Image
+
+        out = tmp_path / f"{expression}.png"
+        assert main(["render", str(arkit_model_path), "--like", f"expression={expression}",
+                     "--size", "256x256", "--background", "40,40,48", "--out", str(out)]) == 0
+        capsys.readouterr()
+        return np.asarray(Image.open(out).convert("RGB"))
+
+    ahead, look, wide = (preview(e) for e in ("neutral", "eyeLookOutLeft", "jawOpen"))
+    for img in (ahead, look):
+        for half in (img[:, :128], img[:, 128:]):
+            assert _iris(half).sum() > 20
+    box = (slice(0, 256), slice(128, 256))   # the subject's left eye, image right
+    d = _iris_centre(look, box) - _iris_centre(ahead, box)
+    assert d[0] > 2, d
+    right = (slice(0, 256), slice(0, 128))
+    np.testing.assert_allclose(_iris_centre(look, right), _iris_centre(ahead, right), atol=0.5)
+    assert _cavity(wide).sum() > 50 and _cavity(ahead).sum() == 0
