@@ -421,8 +421,9 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     The curves are edited as a track of an ARKit model is
     (:func:`facetransfer.transfer.edit_activations`: ``scale`` multiplies a curve, ``add`` adds
     an activation over rows ``START..END`` with :func:`facetransfer.transfer.ramp_envelope`'s
-    ramps, each edited curve clipped to Live Link Face's [0, 1]); a frame is a row of the take,
-    0-based. Everything else is kept byte for byte: the header and its column order, the
+    ramps, each edited curve clipped to Live Link Face's [0, 1]); frames are the take's on its
+    timeline, 0-based, as ``view`` and ``puppet`` of it number them (its rows, where none is
+    dropped: :func:`_row_frames`). Everything else is kept byte for byte: the header and its column order, the
     timecodes, ``BlendShapeCount``, the head and eye rotation columns, the line endings, a
     byte-order mark; so is every field of an edited curve whose value the edit leaves as it was.
     An edited field is written with 8 decimals (as ``export`` writes a take). The eye rotation
@@ -445,8 +446,9 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     Raises
     ------
     TransferError
-        The take is none (or has no rows), an unknown name (the closest one named), a curve the
-        take has no column for, a range outside its rows, a negative factor.
+        The take is none (or has no rows, or timecodes that repeat or go back), an unknown
+        name (the closest one named), a curve the take has no column for, a range outside its
+        frames, a negative factor.
     """
     from .arkit import ARKIT_NAMES
     from .io.atomic import write_text_atomic
@@ -457,7 +459,7 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     take = _load(path)
     has = np.array([_column_name(n) not in take.missing for n in ARKIT_NAMES])
     after = edit_activations(take.activations, scale=scale, add=add, ramp=int(ramp), has=has,
-                             owner=f"the take {path}")
+                             owner=f"the take {path}", frames=_row_frames(take, path))
     text = Path(path).read_bytes().decode("utf-8")
     new, changed = _edited_text(text, take.activations, after)
     if any(n.startswith("eyeLook") for n in changed):
@@ -465,6 +467,17 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
                     "they no longer follow its edited eyeLook curves", out)
     written = write_text_atomic(out, new, overwrite=overwrite)
     return EditedTake(written, len(take.timecodes), tuple(_column_name(n) for n in changed))
+
+
+def _row_frames(take, path) -> np.ndarray:
+    """``(F,)`` the frame of each of a take's rows on its timeline, as :func:`take_track`
+    lays them out (what ``view``, ``puppet`` and ``--neutral FRAME`` count): the nearest one
+    (an app's rows jitter by a few thousandths), its last frame at most; row ``k`` where no row
+    is dropped (before, always row ``k``: a take whose rows skip frames was edited later than
+    asked). TransferError where its timecodes repeat or go back."""
+    t = take_seconds(take.timecodes, warn=False, name=f"take {path}")
+    at = t * take_row_rate(t, take.timecodes, f"take {path}")
+    return np.minimum(np.round(at), np.floor(at[-1] + 1e-6))
 
 
 def _column_name(arkit_name: str) -> str:

@@ -486,8 +486,9 @@ def _expression_direction(model, label: str, mode: str, neutral: str) -> np.ndar
     return model.training_weights(k, label) - model.training_weights(k, neutral)
 
 
-def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int) -> np.ndarray:
-    """(n_frames,) weights: 1 on ``start..stop`` (both included), smoothstep ramps outside.
+def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int, *, at=None) -> np.ndarray:
+    """(n_frames,) weights: 1 on ``start..stop`` (both included), smoothstep ramps outside
+    (``at``: at these frame positions instead, e.g. a take's rows on its timeline).
 
     The edit holds at full strength on every frame of its range, as ``--add EXPR@START-END``
     says; it eases in over the ``ramp`` frames before ``start`` and out over the ``ramp``
@@ -496,7 +497,7 @@ def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int) -> np.ndarray
     it is a box 1 on ``start..stop``. (Ramps inside the range would give its end frames
     nothing, and a range shorter than two ramps would never reach full strength.)
     """
-    t = np.arange(n_frames, dtype=np.float64)
+    t = np.arange(n_frames, dtype=np.float64) if at is None else np.asarray(at, np.float64)
     d = np.maximum(np.maximum(start - t, t - stop), 0.0)     # frames outside the range
     x = np.clip(1.0 - d / (max(int(ramp), 0) + 1.0), 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
@@ -627,7 +628,7 @@ def _edit_activations(w: np.ndarray, model, scale, add, ramp: int) -> np.ndarray
 
 
 def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8, has=None,
-                     owner: str = "the model") -> np.ndarray:
+                     owner: str = "the model", frames=None) -> np.ndarray:
     """ARKit activation curves ``(F, 52)`` (:data:`facetransfer.arkit.ARKIT_NAMES` order)
     edited as :func:`edit_track` edits an ARKit model's: each ``EditScale`` (or its text)
     multiplies its shape's curve by its factor (>= 0), then each ``EditAdd`` adds ``amount``
@@ -635,8 +636,9 @@ def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8
     [0, 1], the others returned as given. A label names one of the 52 shapes or both sides of
     one (:data:`SIDE_WORDS`). ``has``: (52,) bool, the shapes ``owner`` holds (default: every
     one); an edit of another is refused, as an unknown name is (:func:`_arkit_index`), a range
-    outside the ``F`` frames and a factor or amount that is not finite. What ``edit take.csv``
-    does to a take's curves.
+    outside the ``F`` frames and a factor or amount that is not finite. ``frames``: (F,) the
+    rows' frame positions (a take's rows on its timeline, where rows may skip frames;
+    default 0..F-1): ranges count those frames. What ``edit take.csv`` does to a take's curves.
 
     Returns
     -------
@@ -646,7 +648,8 @@ def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8
 
     act = np.array(activations, dtype=np.float64)
     add, scale = _edits(add, EditAdd, parse_add), _edits(scale, EditScale, parse_scale)
-    _check_edits(add, scale, len(act))
+    at = np.arange(len(act), dtype=np.float64) if frames is None else np.asarray(frames, float)
+    _check_edits(add, scale, int(np.floor(at[-1] + 1e-6)) + 1 if len(at) else 0)
     has = np.ones(len(ARKIT_NAMES), bool) if has is None else np.asarray(has, bool)
     touched = np.zeros(len(ARKIT_NAMES), bool)
     for s in (dataclasses.replace(s, label=x) for s in scale
@@ -660,8 +663,8 @@ def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8
     for a in (dataclasses.replace(a, label=x) for a in add
               for x in _edited_labels(ARKIT_NAMES, a.label)):
         j = _arkit_index(a.label, has, owner)
-        act[:, j], touched[j] = act[:, j] + a.amount * ramp_envelope(len(act), a.start,
-                                                                      a.stop, ramp), True
+        act[:, j], touched[j] = act[:, j] + a.amount * ramp_envelope(
+            len(act), a.start, a.stop, ramp, at=at), True
     act[:, touched] = np.clip(act[:, touched], 0.0, 1.0)
     return act
 

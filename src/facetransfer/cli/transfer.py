@@ -238,7 +238,7 @@ def _register_edit(sub) -> None:
     e.add_argument("--add", action="append", default=[], metavar="EXPR@START-END",
                    help="add EXPR (training weights minus neutral; an ARKit model's or a "
                    "take's: activation 1) on frames START..END (inclusive, 0-based; a take's "
-                   "rows); EXPR*0.5@... for half; repeatable")
+                   "as view and puppet number them); EXPR*0.5@... for half; repeatable")
     e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
                    help="scale the component of the expression along EXPR - neutral (an ARKit "
                    "model's or a take's: the EXPR curve times FACTOR, clipped to [0, 1], Live "
