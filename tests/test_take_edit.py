@@ -199,3 +199,27 @@ def test_a_name_as_the_takes_header_spells_it_is_taken(arkit_model, make_arkit_t
     with pytest.raises(TransferError, match="unknown expression 'xyz';") as err:
         edit_activations(read_livelink(take).activations, scale="xyz=2")
     assert "did you mean" not in str(err.value)
+
+
+def test_a_takes_quoted_fields_keep_their_quotes(arkit_model, make_arkit_track, tmp_path,
+                                                  capsys):
+    """A take whose own column quotes its notes (``"take 3, good"``, a spreadsheet's ``""``,
+    one note over two lines): the edited take is its bytes with the edited fields replaced.
+    Before, an edited row's quotes were dropped (``take 3, good`` unquoted: a field more to a
+    plain reader) and the two-line note ended the edit in an IndexError traceback."""
+    track, _, _ = make_arkit_track(arkit_model, 8)
+    lines = write_livelink(track, tmp_path / "plain.csv").read_text().splitlines()
+    notes = ['"take 3, good"', '"a ""quoted"" word"', '"two\nlines"'] + ['""'] * 5
+    take = tmp_path / "notes.csv"
+    take.write_text("\n".join([lines[0] + ",Note"] + [f"{line},{note}" for line, note
+                                                       in zip(lines[1:], notes)]) + "\n")
+    out = tmp_path / "notes2.csv"
+    assert main(["edit", str(take), "--scale", "jawOpen=0", "--out", str(out)]) == 0, \
+        capsys.readouterr().err
+    j = lines[0].split(",").index("JawOpen")
+    want = []
+    for line, note in zip(lines[1:], notes):
+        fields = line.split(",")
+        fields[j] = "0.00000000" if float(fields[j]) != 0 else fields[j]
+        want.append(",".join(fields) + "," + note)
+    assert out.read_text() == "\n".join([lines[0] + ",Note"] + want) + "\n"

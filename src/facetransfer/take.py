@@ -488,41 +488,59 @@ def _column_name(arkit_name: str) -> str:
 def _edited_text(text: str, before: np.ndarray, after: np.ndarray) -> tuple[str, list[str]]:
     """A take's CSV ``text`` with the fields of each curve whose value ``after`` (F, 52) differs
     from ``before`` (what was read) written anew; every other byte kept (module notes of
-    :func:`edit_take`). Rows are the header's followers that are not empty, as the reader counts
-    them. Returns the text and the ARKit names of the curves that changed."""
+    :func:`edit_take`), a quoted field's quotes too. Rows are the header's followers that are
+    not empty, records as the reader reads them (a quoted field may hold a line break: before,
+    an IndexError, and a row's quotes were dropped). Returns the text and the ARKit names of
+    the curves that changed."""
     import csv
 
     from .arkit import ARKIT_NAMES
 
     lines = list(StringIO(text, newline=""))      # each with its own line ending
-    header = [h.strip().lower() for h in next(csv.reader([lines[0].rstrip("\r\n")]))]
+    taken: list[int] = []                         # the lines the csv reader has read
+
+    def fed():
+        for k, line in enumerate(lines):
+            taken.append(k)
+            yield line
+
+    records, start = [], 0
+    for fields in csv.reader(fed()):              # each record with its own lines' text
+        records.append(("".join(lines[start:len(taken)]), fields))
+        start = len(taken)
+    header = [h.strip().lower() for h in records[0][1]]
     differs = after != before                          # (F, 52)
     edited = [j for j in range(len(ARKIT_NAMES)) if differs[:, j].any()]
     cols = {j: header.index(_column_name(ARKIT_NAMES[j]).lower()) for j in edited}
-    row = 0
-    for k in range(1, len(lines)):
-        body = lines[k].rstrip("\r\n")
-        if not body:
-            continue
-        if differs[row].any():
-            fields = next(csv.reader([body])) if '"' in body else body.split(",")
-            for j in np.flatnonzero(differs[row]):
-                fields[cols[j]] = f"{after[row, j]:.8f}"
-            lines[k] = _joined(fields, '"' in body) + lines[k][len(body):]
-        row += 1
-    return "".join(lines), [ARKIT_NAMES[j] for j in edited]
+    out, row = [records[0][0]], 0
+    for raw, fields in records[1:]:
+        if fields and differs[row].any():
+            raw = _replaced(raw, {cols[j]: f"{after[row, j]:.8f}"
+                                  for j in np.flatnonzero(differs[row])})
+        row += bool(fields)
+        out.append(raw)
+    return "".join(out), [ARKIT_NAMES[j] for j in edited]
 
 
-def _joined(fields: list[str], quoted: bool) -> str:
-    """A CSV line of ``fields``: joined by commas, or (a line that quoted some) as the csv
-    module quotes them."""
-    if not quoted:
-        return ",".join(fields)
-    import csv
-
-    buf = StringIO()
-    csv.writer(buf, lineterminator="").writerow(fields)
-    return buf.getvalue()
+def _replaced(raw: str, new: dict[int, str]) -> str:
+    """The text ``raw`` of a CSV record (its line ending too) with its fields ``new`` (``{index:
+    text}``) replaced, every other byte as it was (a quoted field's quotes, ``""`` in it)."""
+    body = raw.rstrip("\r\n")
+    if '"' not in body:               # the usual record: its fields split at every comma
+        fields = body.split(",")
+        for c, value in new.items():
+            fields[c] = value
+        return ",".join(fields) + raw[len(body):]
+    starts, quoted = [0], False
+    for k, ch in enumerate(raw):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == "," and not quoted:
+            starts.append(k + 1)
+    ends = [s - 1 for s in starts[1:]] + [len(body)]
+    for c in sorted(new, reverse=True):
+        raw = raw[:starts[c]] + new[c] + raw[ends[c]:]
+    return raw
 
 
 def _first_timecode(timecodes, fps: float) -> str | None:
