@@ -445,7 +445,7 @@ def test_edits_of_an_arkit_track_act_on_its_activations(arkit_model, make_arkit_
     with pytest.raises(TransferError, match="the model has no tongueOut shape"):
         edit_track(track, arkit_model, add=[EditAdd("tongueOut", 1, 3)])
     with pytest.raises(TransferError, match="did you mean jawOpen") as err:
-        edit_track(track, arkit_model, scale=[EditScale("JawOpen", 2.0)])
+        edit_track(track, arkit_model, scale=[EditScale("jawOpn", 2.0)])
     assert "tongueOut" not in str(err.value)                 # the list: the model's shapes
 
 

@@ -266,8 +266,8 @@ def test_view_of_a_take_measured_from_a_neutral_row_shows_what_export_writes(
         arkit_model, pages, tmp_path, capsys):
     """``view take.csv --neutral 0`` (or ``auto``): the page's activations are those ``export
     take.csv --neutral`` writes (its json read back), not the take's as recorded. Before, view
-    refused it ("--neutral is for a track") while export took it. A row outside the take is
-    one line."""
+    refused it ("--neutral is for a track") while export took it. A frame outside the take is
+    one line naming the take (before, "the track has frames 0 to ...")."""
     import base64
 
     from facetransfer.export.livelink import write_livelink
@@ -290,7 +290,7 @@ def test_view_of_a_take_measured_from_a_neutral_row_shows_what_export_writes(
         assert np.abs(shown - a).max() > 0.01      # measured from the row, not as recorded
     assert main(["view", str(take), "--model", str(mp), "--out", str(tmp_path / "x.html"),
                  "--neutral", str(len(a))]) == 2
-    assert f"the track has frames 0 to {len(a) - 1}" in capsys.readouterr().err
+    assert f"the take {take} has frames 0 to {len(a) - 1}" in capsys.readouterr().err
 
 
 def test_a_track_of_a_model_without_arkit_activations_is_refused_naming_it(quick_model,

@@ -421,8 +421,9 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     The curves are edited as a track of an ARKit model is
     (:func:`facetransfer.transfer.edit_activations`: ``scale`` multiplies a curve, ``add`` adds
     an activation over rows ``START..END`` with :func:`facetransfer.transfer.ramp_envelope`'s
-    ramps, each edited curve clipped to Live Link Face's [0, 1]); a frame is a row of the take,
-    0-based. Everything else is kept byte for byte: the header and its column order, the
+    ramps, each edited curve clipped to Live Link Face's [0, 1]); frames are the take's on its
+    timeline, 0-based, as ``view`` and ``puppet`` of it number them (its rows, where none is
+    dropped: :func:`_row_frames`). Everything else is kept byte for byte: the header and its column order, the
     timecodes, ``BlendShapeCount``, the head and eye rotation columns, the line endings, a
     byte-order mark; so is every field of an edited curve whose value the edit leaves as it was.
     An edited field is written with 8 decimals (as ``export`` writes a take). The eye rotation
@@ -445,8 +446,9 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     Raises
     ------
     TransferError
-        The take is none (or has no rows), an unknown name (the closest one named), a curve the
-        take has no column for, a range outside its rows, a negative factor.
+        The take is none (or has no rows, or timecodes that repeat or go back), an unknown
+        name (the closest one named), a curve the take has no column for, a range outside its
+        frames, a negative factor.
     """
     from .arkit import ARKIT_NAMES
     from .io.atomic import write_text_atomic
@@ -457,7 +459,7 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     take = _load(path)
     has = np.array([_column_name(n) not in take.missing for n in ARKIT_NAMES])
     after = edit_activations(take.activations, scale=scale, add=add, ramp=int(ramp), has=has,
-                             owner=f"the take {path}")
+                             owner=f"the take {path}", frames=_row_frames(take, path))
     text = Path(path).read_bytes().decode("utf-8")
     new, changed = _edited_text(text, take.activations, after)
     if any(n.startswith("eyeLook") for n in changed):
@@ -465,6 +467,17 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
                     "they no longer follow its edited eyeLook curves", out)
     written = write_text_atomic(out, new, overwrite=overwrite)
     return EditedTake(written, len(take.timecodes), tuple(_column_name(n) for n in changed))
+
+
+def _row_frames(take, path) -> np.ndarray:
+    """``(F,)`` the frame of each of a take's rows on its timeline, as :func:`take_track`
+    lays them out (what ``view``, ``puppet`` and ``--neutral FRAME`` count): the nearest one
+    (an app's rows jitter by a few thousandths), its last frame at most; row ``k`` where no row
+    is dropped (before, always row ``k``: a take whose rows skip frames was edited later than
+    asked). TransferError where its timecodes repeat or go back."""
+    t = take_seconds(take.timecodes, warn=False, name=f"take {path}")
+    at = t * take_row_rate(t, take.timecodes, f"take {path}")
+    return np.minimum(np.round(at), np.floor(at[-1] + 1e-6))
 
 
 def _column_name(arkit_name: str) -> str:
@@ -475,41 +488,59 @@ def _column_name(arkit_name: str) -> str:
 def _edited_text(text: str, before: np.ndarray, after: np.ndarray) -> tuple[str, list[str]]:
     """A take's CSV ``text`` with the fields of each curve whose value ``after`` (F, 52) differs
     from ``before`` (what was read) written anew; every other byte kept (module notes of
-    :func:`edit_take`). Rows are the header's followers that are not empty, as the reader counts
-    them. Returns the text and the ARKit names of the curves that changed."""
+    :func:`edit_take`), a quoted field's quotes too. Rows are the header's followers that are
+    not empty, records as the reader reads them (a quoted field may hold a line break: before,
+    an IndexError, and a row's quotes were dropped). Returns the text and the ARKit names of
+    the curves that changed."""
     import csv
 
     from .arkit import ARKIT_NAMES
 
     lines = list(StringIO(text, newline=""))      # each with its own line ending
-    header = [h.strip().lower() for h in next(csv.reader([lines[0].rstrip("\r\n")]))]
+    taken: list[int] = []                         # the lines the csv reader has read
+
+    def fed():
+        for k, line in enumerate(lines):
+            taken.append(k)
+            yield line
+
+    records, start = [], 0
+    for fields in csv.reader(fed()):              # each record with its own lines' text
+        records.append(("".join(lines[start:len(taken)]), fields))
+        start = len(taken)
+    header = [h.strip().lower() for h in records[0][1]]
     differs = after != before                          # (F, 52)
     edited = [j for j in range(len(ARKIT_NAMES)) if differs[:, j].any()]
     cols = {j: header.index(_column_name(ARKIT_NAMES[j]).lower()) for j in edited}
-    row = 0
-    for k in range(1, len(lines)):
-        body = lines[k].rstrip("\r\n")
-        if not body:
-            continue
-        if differs[row].any():
-            fields = next(csv.reader([body])) if '"' in body else body.split(",")
-            for j in np.flatnonzero(differs[row]):
-                fields[cols[j]] = f"{after[row, j]:.8f}"
-            lines[k] = _joined(fields, '"' in body) + lines[k][len(body):]
-        row += 1
-    return "".join(lines), [ARKIT_NAMES[j] for j in edited]
+    out, row = [records[0][0]], 0
+    for raw, fields in records[1:]:
+        if fields and differs[row].any():
+            raw = _replaced(raw, {cols[j]: f"{after[row, j]:.8f}"
+                                  for j in np.flatnonzero(differs[row])})
+        row += bool(fields)
+        out.append(raw)
+    return "".join(out), [ARKIT_NAMES[j] for j in edited]
 
 
-def _joined(fields: list[str], quoted: bool) -> str:
-    """A CSV line of ``fields``: joined by commas, or (a line that quoted some) as the csv
-    module quotes them."""
-    if not quoted:
-        return ",".join(fields)
-    import csv
-
-    buf = StringIO()
-    csv.writer(buf, lineterminator="").writerow(fields)
-    return buf.getvalue()
+def _replaced(raw: str, new: dict[int, str]) -> str:
+    """The text ``raw`` of a CSV record (its line ending too) with its fields ``new`` (``{index:
+    text}``) replaced, every other byte as it was (a quoted field's quotes, ``""`` in it)."""
+    body = raw.rstrip("\r\n")
+    if '"' not in body:               # the usual record: its fields split at every comma
+        fields = body.split(",")
+        for c, value in new.items():
+            fields[c] = value
+        return ",".join(fields) + raw[len(body):]
+    starts, quoted = [0], False
+    for k, ch in enumerate(raw):
+        if ch == '"':
+            quoted = not quoted
+        elif ch == "," and not quoted:
+            starts.append(k + 1)
+    ends = [s - 1 for s in starts[1:]] + [len(body)]
+    for c in sorted(new, reverse=True):
+        raw = raw[:starts[c]] + new[c] + raw[ends[c]:]
+    return raw
 
 
 def _first_timecode(timecodes, fps: float) -> str | None:

@@ -486,8 +486,8 @@ def _expression_direction(model, label: str, mode: str, neutral: str) -> np.ndar
     return model.training_weights(k, label) - model.training_weights(k, neutral)
 
 
-def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int) -> np.ndarray:
-    """(n_frames,) weights: 1 on ``start..stop`` (both included), smoothstep ramps outside.
+def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int, *, at=None) -> np.ndarray:
+    """(n_frames,) weights (``at``: at those frames): 1 on ``start..stop``, ramps outside.
 
     The edit holds at full strength on every frame of its range, as ``--add EXPR@START-END``
     says; it eases in over the ``ramp`` frames before ``start`` and out over the ``ramp``
@@ -496,7 +496,7 @@ def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int) -> np.ndarray
     it is a box 1 on ``start..stop``. (Ramps inside the range would give its end frames
     nothing, and a range shorter than two ramps would never reach full strength.)
     """
-    t = np.arange(n_frames, dtype=np.float64)
+    t = np.arange(n_frames, dtype=np.float64) if at is None else np.asarray(at, np.float64)
     d = np.maximum(np.maximum(start - t, t - stop), 0.0)     # frames outside the range
     x = np.clip(1.0 - d / (max(int(ramp), 0) + 1.0), 0.0, 1.0)
     return x * x * (3.0 - 2.0 * x)
@@ -518,7 +518,7 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
     edits act on the activations the weights convert to exactly, clipped to [0, 1]
     (:func:`_edit_activations`): ``jawOpen=2`` doubles the jawOpen curve and leaves the others.
     A label the model lacks whose two sides it has names both (``mouthSmile``, or ``smile``:
-    :data:`SIDE_WORDS`).
+    :data:`SIDE_WORDS`); an ARKit model's in any case (``JawOpen``, a take's column).
 
     Parameters
     ----------
@@ -543,8 +543,7 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
         Unknown expression, a frame range outside the clip or ending before it starts, an
         amount or factor that is not finite, a track of another model.
     """
-    add = _edits(add, EditAdd, parse_add)
-    scale = _edits(scale, EditScale, parse_scale)
+    add, scale = _edits(add, EditAdd, parse_add), _edits(scale, EditScale, parse_scale)
     if mode not in track.weights:
         raise TransferError(f"the track has no {mode!r} mode (modes: {', '.join(track.mode_names)})")
     if tuple(model.mode_names) != tuple(track.mode_names) or \
@@ -615,10 +614,9 @@ def _edited_labels(labels, label: str) -> list[str]:
 
 
 def _edit_activations(w: np.ndarray, model, scale, add, ramp: int) -> np.ndarray:
-    """:func:`edit_track` of an ARKit model's expression weights ``(F, r)``, on the
-    activations they convert to exactly (Eq. (A)): :func:`edit_activations`. (A projection on
-    the weights would also count the other shapes' part along the shape's direction:
-    ``jawOpen=2`` made jawOpen 6 times as large.)"""
+    """:func:`edit_track` of an ARKit model's expression weights ``(F, r)``: their activations
+    (Eq. (A)) edited, :func:`edit_activations`. (A projection on the weights would also count
+    the other shapes' part along the shape's direction: ``jawOpen=2`` made jawOpen 6 times.)"""
     from .arkit import activations_to_weights, arkit_rows, weights_to_activations
 
     act = edit_activations(weights_to_activations(model, w, clip=False), scale=scale, add=add,
@@ -627,16 +625,16 @@ def _edit_activations(w: np.ndarray, model, scale, add, ramp: int) -> np.ndarray
 
 
 def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8, has=None,
-                     owner: str = "the model") -> np.ndarray:
+                     owner: str = "the model", frames=None) -> np.ndarray:
     """ARKit activation curves ``(F, 52)`` (:data:`facetransfer.arkit.ARKIT_NAMES` order)
-    edited as :func:`edit_track` edits an ARKit model's: each ``EditScale`` (or its text)
-    multiplies its shape's curve by its factor (>= 0), then each ``EditAdd`` adds ``amount``
-    times the :func:`ramp_envelope` of its range; each edited curve then clipped to ARKit's
-    [0, 1], the others returned as given. A label names one of the 52 shapes or both sides of
-    one (:data:`SIDE_WORDS`). ``has``: (52,) bool, the shapes ``owner`` holds (default: every
-    one); an edit of another is refused, as an unknown name is (:func:`_arkit_index`), a range
-    outside the ``F`` frames and a factor or amount that is not finite. What ``edit take.csv``
-    does to a take's curves.
+    edited as :func:`edit_track` edits an ARKit model's (and ``edit take.csv`` a take's): each
+    ``EditScale`` (or its text) multiplies its shape's curve by its factor (>= 0), then each
+    ``EditAdd`` adds ``amount`` times the :func:`ramp_envelope` of its range; each edited curve
+    clipped to [0, 1], the others as given. A label: one of the 52 shapes or both sides of one
+    (:data:`SIDE_WORDS`), in any case (:func:`_spelled`). ``has``: (52,) bool, the shapes
+    ``owner`` holds (default: all); an edit of another, an unknown name (:func:`_arkit_index`),
+    a range outside the frames, a factor or amount not finite are refused. ``frames``: (F,)
+    the rows' frame positions, which ranges count (default 0..F-1; a take's on its timeline).
 
     Returns
     -------
@@ -646,11 +644,12 @@ def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8
 
     act = np.array(activations, dtype=np.float64)
     add, scale = _edits(add, EditAdd, parse_add), _edits(scale, EditScale, parse_scale)
-    _check_edits(add, scale, len(act))
+    at = np.arange(len(act), dtype=np.float64) if frames is None else np.asarray(frames, float)
+    _check_edits(add, scale, int(np.floor(at[-1] + 1e-6)) + 1 if len(at) else 0)
     has = np.ones(len(ARKIT_NAMES), bool) if has is None else np.asarray(has, bool)
     touched = np.zeros(len(ARKIT_NAMES), bool)
     for s in (dataclasses.replace(s, label=x) for s in scale
-              for x in _edited_labels(ARKIT_NAMES, s.label)):
+              for x in _edited_labels(ARKIT_NAMES, _spelled(s.label))):
         if s.factor < 0:  # clipped to [0, 1], the shape would be gone: not what was asked
             raise TransferError(f"--scale {s.label}={s.factor:g}: an ARKit activation lies in "
                                 "0..1, so a negative factor would only remove the shape; give "
@@ -658,12 +657,22 @@ def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8
         j = _arkit_index(s.label, has, owner)
         act[:, j], touched[j] = act[:, j] * s.factor, True
     for a in (dataclasses.replace(a, label=x) for a in add
-              for x in _edited_labels(ARKIT_NAMES, a.label)):
+              for x in _edited_labels(ARKIT_NAMES, _spelled(a.label))):
         j = _arkit_index(a.label, has, owner)
-        act[:, j], touched[j] = act[:, j] + a.amount * ramp_envelope(len(act), a.start,
-                                                                      a.stop, ramp), True
+        act[:, j], touched[j] = act[:, j] + a.amount * ramp_envelope(
+            len(act), a.start, a.stop, ramp, at=at), True
     act[:, touched] = np.clip(act[:, touched], 0.0, 1.0)
     return act
+
+
+def _spelled(label: str) -> str:
+    """``label`` as ARKit spells the shape (or the two sides' stem, or word) it names in any
+    case: ``JawOpen`` (a take's column, a Live Link curve) is ``jawOpen``; else as given."""
+    from .arkit import ARKIT_NAMES
+
+    names = {n.lower(): n for n in ARKIT_NAMES} | {w: w for w in SIDE_WORDS}
+    names |= {k[:-4]: n[:-4] for k, n in names.items() if k.endswith("left")}
+    return names.get(label.lower(), label)
 
 
 def _arkit_index(label: str, has: np.ndarray, owner: str = "the model") -> int:
@@ -682,10 +691,11 @@ def _arkit_index(label: str, has: np.ndarray, owner: str = "the model") -> int:
                             "nothing")
     if label not in known:
         lower = {n.lower(): n for n in known + list(SIDE_WORDS)}
-        close = difflib.get_close_matches(label.lower(), list(lower), n=1, cutoff=0.0)
+        close = difflib.get_close_matches(label.lower(), list(lower), n=1)   # else no guess
+        hint = f" (did you mean {lower[close[0]]}?)" if close else ""
         names = "the 52 ARKit names" if len(known) == 52 else ", ".join(known)
-        raise TransferError(f"unknown expression {label!r} (did you mean {lower[close[0]]}?); "
-                            f"{owner} knows: {names}, and {', '.join(SIDE_WORDS)} (both sides)")
+        raise TransferError(f"unknown expression {label!r}{hint}; {owner} knows: {names}, and "
+                            f"{', '.join(SIDE_WORDS)} (both sides)")
     return ARKIT_NAMES.index(label)
 
 

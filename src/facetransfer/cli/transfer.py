@@ -238,12 +238,12 @@ def _register_edit(sub) -> None:
     e.add_argument("--add", action="append", default=[], metavar="EXPR@START-END",
                    help="add EXPR (training weights minus neutral; an ARKit model's or a "
                    "take's: activation 1) on frames START..END (inclusive, 0-based; a take's "
-                   "rows); EXPR*0.5@... for half; repeatable")
+                   "as view and puppet number them); EXPR*0.5@... for half; repeatable")
     e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
                    help="scale the component of the expression along EXPR - neutral (an ARKit "
                    "model's or a take's: the EXPR curve times FACTOR, clipped to [0, 1], Live "
-                   "Link Face's range; EXPR one of the 52 ARKit names, e.g. jawOpen); "
-                   "repeatable")
+                   "Link Face's range; EXPR one of the 52 ARKit names, e.g. jawOpen or, as a "
+                   "take's header spells it, JawOpen); repeatable")
     e.add_argument("--ramp", type=int, default=None,
                    help="frames over which an --add eases in before START and out after END "
                    "(0: none; the range itself is at full strength; default 8)")

@@ -26,8 +26,8 @@ def register(sub) -> None:
                    "default model, if the track was made with it)")
     p.add_argument("--neutral", metavar="FRAME|auto",
                    help="for a track or a take: its activations measured from this frame's "
-                   "(a take's row's), as `facetransfer export --neutral` (default: as tracked "
-                   "or recorded)")
+                   "(a take's, numbered as its page does), as `facetransfer export --neutral` "
+                   "(default: as tracked or recorded)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing page")
     p.set_defaults(func=run)
 
@@ -51,7 +51,7 @@ def _is_track(path) -> bool:
 def _take_page(args: argparse.Namespace):
     """The page of a Live Link Face take: the model's mean person performing it with its
     head's rotation (:func:`facetransfer.take.take_track`), on the track's timeline; with
-    ``--neutral``, its activations measured from that row's as ``export take.csv --neutral``
+    ``--neutral``, its activations measured from that frame's as ``export take.csv --neutral``
     measures them (:func:`facetransfer.export.neutral.with_neutral`; before, refused as "for
     a track")."""
     from pathlib import Path
@@ -63,12 +63,14 @@ def _take_page(args: argparse.Namespace):
     from ..take import take_track
     from .common import resolve_model
 
-    if args.neutral is not None:
-        neutral_arg(args.neutral)        # its form, before a model is built
+    i = None if args.neutral is None else neutral_arg(args.neutral)   # before a model is built
     if not Path(args.source).is_file():
         raise FaceTransferError(f"take {args.source} does not exist")
     model = resolve_model(args.model)
     track = take_track(args.source, model, model.weight_mean(model.mode_index("identity")))
+    if isinstance(i, int) and i >= track.n_frames:     # the take's frames, not "the track's"
+        raise FaceTransferError(f"--neutral {i}: the take {args.source} has frames 0 to "
+                                f"{track.n_frames - 1} (on its {track.fps:g} fps timeline)")
     track = with_neutral(track, args.neutral)
     page = viewer_page(model, track=track, title=Path(args.source).name)
     return write_text_atomic(args.out, page, overwrite=args.overwrite)
