@@ -170,3 +170,76 @@ def test_the_render_preview_shows_the_eyes_and_the_mouth(arkit_model_path, tmp_p
     right = (slice(0, 256), slice(0, 128))
     np.testing.assert_allclose(_iris_centre(look, right), _iris_centre(ahead, right), atol=0.5)
     assert _cavity(wide).sum() > 50 and _cavity(ahead).sum() == 0
+
+
+#: A take's recorded eye angles (radians; the take's signs: yaw + toward the subject's left,
+#: pitch + looking down) for :func:`_take_with_eye_columns`: both eyes 0.35 rad (20°) to the
+#: subject's left and 0.1 rad down, its eyeLook* curves all 0.
+RECORDED = {"LeftEyeYaw": 0.35, "LeftEyePitch": 0.1, "RightEyeYaw": 0.35, "RightEyePitch": 0.1}
+
+
+def _take_with_eye_columns(model, path, n: int = 3, **columns: float):
+    """A Live Link Face take of ``n`` rows of the mean person, its eyeLook* all 0 and its eye
+    rotation columns set to ``columns`` (as the iPhone records them, apart from its curves)."""
+    import csv
+
+    from facetransfer.export.livelink import write_livelink
+
+    write_livelink(mean_person_track(model, np.zeros((n, 52), np.float32)), path)
+    rows = list(csv.reader(path.read_text().splitlines()))
+    for name, v in columns.items():
+        for row in rows[1:]:
+            row[rows[0].index(name)] = f"{v:.8f}"
+    path.write_text("\n".join(",".join(r) for r in rows) + "\n")
+    return path
+
+
+def test_a_takes_gaze_is_its_recorded_eye_angles(arkit_model, tmp_path):
+    """track_gaze (what the puppet and the view page turn the eyes by) of a take that carries
+    its own eye rotation columns is those angles on the take's timeline (pitch + up, as
+    track.gaze has it), not activation_gaze of its eyeLook* (0 here: before, the eyes looked
+    ahead); a take whose eye columns are 0 (a tool that records none) or a track of a clip is
+    activation_gaze of its activations."""
+    from facetransfer.puppet_face import track_gaze
+    from facetransfer.take import take_track
+    from facetransfer.track.gaze import activation_gaze
+
+    mean = arkit_model.weight_mean("identity")
+    take = take_track(_take_with_eye_columns(arkit_model, tmp_path / "t.csv", **RECORDED),
+                      arkit_model, mean)
+    want = np.tile([[0.35, -0.1], [0.35, -0.1]], (take.n_frames, 1, 1))
+    np.testing.assert_allclose(track_gaze(take), want, atol=1e-7)
+    plain = take_track(_take_with_eye_columns(arkit_model, tmp_path / "z.csv"), arkit_model, mean)
+    np.testing.assert_array_equal(track_gaze(plain), np.zeros((plain.n_frames, 2, 2)))
+    clip = _track(_acts(eyeLookOutLeft=0.5), arkit_model)
+    np.testing.assert_allclose(track_gaze(clip), activation_gaze(clip.blendshapes))
+
+
+def test_the_puppet_of_a_take_looks_where_the_take_recorded(arkit_model, tmp_path):
+    """The puppet turned by track_gaze of a take with recorded eye angles (20° to the subject's
+    left, eyeLook* 0): both irises sit right of where they sit looking ahead (image right, the
+    subject's left, for the take's frontal head), as puppet_frames draws them (its face's
+    gaze the only change)."""
+    from facetransfer.puppet_face import paint_face, puppet_face, track_gaze
+    from facetransfer.render import render
+    from facetransfer.take import take_track
+    from facetransfer.topology import close_mouth, mesh_topology
+
+    take = take_track(_take_with_eye_columns(arkit_model, tmp_path / "t.csv", **RECORDED),
+                      arkit_model, arkit_model.weight_mean("identity"))
+    topo = mesh_topology(arkit_model, lips=False)
+    V0 = close_mouth(arkit_model.synthesize(take.weights_at(0)), topo)
+
+    def draw(gaze) -> np.ndarray:
+        face = puppet_face(arkit_model, topo, gaze=gaze)
+        V = face.vertices(V0)
+        out = render(V, face.faces, take.camera(0), take.frame_size,
+                     colors=np.broadcast_to(np.array([205.0, 170.0, 150.0]), V.shape))
+        paint_face(out.image, out.raster, V, take.camera(0), face, 0)
+        return out.image
+
+    ahead, looked = draw(None), draw(track_gaze(take))
+    for eye in (LEFT_EYE, RIGHT_EYE):
+        box = _box(arkit_model, take, eye)
+        d = _iris_centre(looked, box) - _iris_centre(ahead, box)
+        assert d[0] > 2, d

@@ -522,3 +522,37 @@ def test_the_open_mouth_shows_a_dark_inside_not_the_page(pages, tmp_path):
         assert not holes, [(labels == k).sum() for k in holes]
     dark = lambda im: int((im.sum(axis=2) < 120).sum())  # noqa: E731
     assert dark(gaping) - dark(shut) > 1000, (dark(gaping), dark(shut))
+
+
+@pytest.mark.slow
+def test_a_takes_page_turns_the_eyes_by_its_recorded_angles(arkit_model, tmp_path, capsys):
+    """``view take.csv`` of a take with its own eye rotation columns (20° to the subject's left,
+    0.1 rad down; eyeLook* 0): the page hands track_gaze's angles (what the puppet turns its
+    eyes by) and draws the eyeballs that way at a frame (before: ahead, by the eyeLook* 0);
+    an eyeLook* slider moved from the frame's value adds its activation_gaze angles."""
+    import base64
+
+    from test_puppet_eyes import RECORDED, _take_with_eye_columns
+
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.puppet_face import track_gaze
+    from facetransfer.take import take_track
+    from facetransfer.track.gaze import activation_gaze, gaze_direction
+
+    take = _take_with_eye_columns(arkit_model, tmp_path / "take.csv", **RECORDED)
+    mp, out = tmp_path / "m.npz", tmp_path / "take.html"
+    arkit_model.save(mp)
+    assert main(["view", str(take), "--model", str(mp), "--out", str(out)]) == 0
+    capsys.readouterr()
+    want = track_gaze(take_track(take, arkit_model, arkit_model.weight_mean("identity")))
+    handed = np.frombuffer(base64.b64decode(_page_data(out.read_text())["frame_gaze"]),
+                           np.float32).reshape(want.shape)
+    np.testing.assert_allclose(handed, want, atol=1e-7)
+    drawn = _drawn_eyes(out, "frame=1")
+    np.testing.assert_allclose([d["direction"] for d in drawn], gaze_direction(want[1]),
+                               atol=2e-6)
+    a = np.zeros((1, 52))
+    a[0, ARKIT_NAMES.index("eyeLookUpRight")] = 0.5
+    drawn = _drawn_eyes(out, "frame=1&eyeLookUpRight=0.5")
+    np.testing.assert_allclose([d["direction"] for d in drawn],
+                               gaze_direction(want[1] + activation_gaze(a)[0]), atol=2e-6)

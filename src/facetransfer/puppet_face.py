@@ -48,7 +48,7 @@ from .track.gaze import EYE_RADIUS, activation_gaze, eye_model, gaze_direction
 
 __all__ = ["SCLERA", "IRIS", "PUPIL", "CAVITY", "TEETH", "IRIS_RADIUS", "PUPIL_RADIUS",
            "TEETH_SHOW", "SHUT", "SHUT_LINE", "PuppetFace", "puppet_face", "arkit_activations",
-           "paint_face", "preview_face"]
+           "track_gaze", "paint_face", "preview_face"]
 
 #: The white of the eye: an off-white (RGB).
 SCLERA = (232, 228, 218)
@@ -128,14 +128,18 @@ class PuppetFace:
                                      for loop in self.eye_loops])
 
 
-def puppet_face(model, topo, activations: np.ndarray | None = None) -> PuppetFace:
+def puppet_face(model, topo, activations: np.ndarray | None = None, *,
+                gaze: np.ndarray | None = None) -> PuppetFace:
     """The solid head of ``model``'s topology ``topo`` (:func:`facetransfer.topology.
     mesh_topology`) and what its fills show (module docstring).
 
     Eyeballs need both eye holes and the model's landmarks; without them the eye holes stay
-    closed in the skin's colour. ``activations`` (F, 52), ARKit's in
-    :data:`facetransfer.arkit.ARKIT_NAMES` order (:func:`arkit_activations` of a track), turn
-    the eyes by their eyeLook* curves, frame by frame; None: the eyes look straight ahead.
+    closed in the skin's colour. ``gaze`` (F, 2, 2), ``[frame, eye (right, left), (yaw,
+    pitch)]`` in radians (:func:`track_gaze` of a track: a take's recorded eye angles), turns
+    the eyes frame by frame; else ``activations`` (F, 52), ARKit's in
+    :data:`facetransfer.arkit.ARKIT_NAMES` order (:func:`arkit_activations` of a track), by
+    their eyeLook* curves (:func:`facetransfer.track.gaze.activation_gaze`); neither: the eyes
+    look straight ahead.
     """
     n_c = topo.n_closed
     faces = [topo.faces]
@@ -151,7 +155,9 @@ def puppet_face(model, topo, activations: np.ndarray | None = None) -> PuppetFac
             row += len(loop)
     fan = topo.mouth_fan
     kind[fan.start + 1:fan.stop + 1] = _MOUTH
-    gaze = None if activations is None else activation_gaze(np.asarray(activations, np.float64))
+    if gaze is None and activations is not None:
+        gaze = activation_gaze(np.asarray(activations, np.float64))
+    gaze = None if gaze is None else np.asarray(gaze, np.float64)
     rim = np.concatenate([np.zeros(0, np.int64), topo.mouth_loop, *topo.eye_loops])
     return PuppetFace(faces, kind, tuple(topo.eye_loops), lm, gaze,
                       (fan.start, int(topo.mouth_loop.size)), rim.astype(np.int64))
@@ -165,6 +171,25 @@ def arkit_activations(track) -> np.ndarray | None:
     if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES):
         return None
     return np.asarray(b, np.float64)
+
+
+def track_gaze(track) -> np.ndarray | None:
+    """``(F, 2, 2)``, ``[frame, eye (right, left), (yaw, pitch)]`` in radians: where the eyes
+    of ``track`` look, as the puppet (:func:`puppet_face`) and the ``view`` page show them.
+
+    A Live Link Face take's own eye angles where it recorded them (``LeftEyeYaw``, ...: the
+    iPhone's measure of each eye's rotation, what a rig reading the take's eye rotation curves
+    is driven with; :func:`facetransfer.take.take_track` keeps them in the track's
+    ``info["eye_gaze"]``, one row a frame); else :func:`facetransfer.track.gaze.
+    activation_gaze` of its ARKit activations (the tracker's scale, 35° a unit of
+    eyeLookIn/Out, 28° of Up/Down: what ``export`` writes as a take's eye angles); None for a
+    track without ARKit activations (the eyes look ahead).
+    """
+    recorded = track.info.get("eye_gaze")
+    if recorded is not None and np.shape(recorded) == (track.n_frames, 2, 2):
+        return np.asarray(recorded, np.float64)
+    a = arkit_activations(track)
+    return None if a is None else activation_gaze(a)
 
 
 def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFace,

@@ -631,9 +631,8 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     start = _first_timecode(take.timecodes, fps)
     n = int(np.floor(t[-1] * fps + 1e-6)) + 1
     n = n if max_frames is None else min(n, int(max_frames))
-    rows = take_on_timeline(t, np.hstack([take.activations, take.pose[:, :3]]), n, fps,
-                            align="hold")
-    a, ypr = np.clip(rows[:, :52], 0.0, 1.0), rows[:, 52:]
+    rows = take_on_timeline(t, np.hstack([take.activations, take.pose]), n, fps, align="hold")
+    a, ypr = np.clip(rows[:, :52], 0.0, 1.0), rows[:, 52:55]
     k = model.mode_index("identity")
     wid = np.asarray(identity, np.float64).ravel()
     mean = model.synthesize(model.default_weights())
@@ -649,8 +648,28 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
                   mode_names=model.mode_names, source=str(path),
                   blendshapes=a.astype(np.float32), blendshape_names=ARKIT_NAMES,
                   source_facts=SourceFacts(0, start))   # its clip's start: the take's
-    # the take's start timecode, for its preview (read here: the take is not read again)
-    return dataclasses.replace(project_landmarks(track, model), info={"start_timecode": start})
+    # the take's start timecode, for its preview, and its recorded eye angles, which the
+    # puppet and the view page turn the eyes by (read here: the take is not read again)
+    return dataclasses.replace(project_landmarks(track, model), info={
+        "start_timecode": start, "eye_gaze": _eye_gaze(take, rows[:, 52:])})
+
+
+def _eye_gaze(take, pose: np.ndarray) -> np.ndarray | None:
+    """``(n, 2, 2)``, the take's recorded eye angles (``RightEyeYaw``, ``RightEyePitch``,
+    ``LeftEyeYaw``, ``LeftEyePitch`` of ``pose``, its :data:`facetransfer.export.livelink.
+    POSE_COLUMNS` on the track's timeline) as :mod:`facetransfer.track.gaze` has gaze
+    (``[frame, eye (right, left), (yaw, pitch)]``, pitch positive up: the take's looks down);
+    None where the take lacks one of them or they are all 0 (a tool that records none):
+    :func:`facetransfer.puppet_face.track_gaze`."""
+    from .export.livelink import POSE_COLUMNS
+
+    names = ("RightEyeYaw", "RightEyePitch", "LeftEyeYaw", "LeftEyePitch")
+    if any(n in take.missing for n in names):
+        return None
+    gaze = pose[:, [POSE_COLUMNS.index(n) for n in names]].reshape(-1, 2, 2)
+    if not np.any(gaze):
+        return None
+    return gaze * np.array([1.0, -1.0])
 
 
 def _centred(vertices: np.ndarray, rotation: np.ndarray, scale: float, size) -> np.ndarray:

@@ -219,6 +219,21 @@ def _closed(loops: list, faces: np.ndarray, neutral: np.ndarray, *offsets: np.nd
             np.concatenate([neutral, np.reshape(apex, (-1, 3))]), *out)
 
 
+def _frame_gaze(track, activations: np.ndarray) -> str | None:
+    """The track's gaze (:func:`facetransfer.puppet_face.track_gaze`, as the puppet turns its
+    eyes), ``(F, 2, 2)`` float32 base64, where it is not what the page's eyeLook* sliders give
+    (:func:`facetransfer.track.gaze.activation_gaze` of ``activations``, the page's timeline):
+    a Live Link Face take's recorded eye angles. The page shows them at a frame and adds what
+    the eyeLook* sliders are moved by from it. None: the sliders' angles are the track's."""
+    from ..puppet_face import track_gaze
+    from ..track.gaze import activation_gaze
+
+    g = track_gaze(track)
+    if g is None or np.allclose(g, activation_gaze(activations), rtol=0.0, atol=1e-6):
+        return None
+    return _b64(g.astype(np.float32))
+
+
 def _shape_kind(model) -> str:
     """What the page's expression sliders are: ``"arkit"``, or the mode of the training
     expressions :func:`view_rig` gives a slider each."""
@@ -289,8 +304,9 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
             raise ExportError(f"track {track.label}: its timeline plays ARKit activations, and "
                               f"{arkit_shortfall(model) or 'the model has none'} (`view` of the "
                               "model itself has a slider per training expression)")
+        acts = require_activations(track)
         data.update(n_frames=track.n_frames, fps=track.fps,
-                    activations=_b64(require_activations(track).astype(np.float32)),
+                    activations=_b64(acts.astype(np.float32)), frame_gaze=_frame_gaze(track, acts),
                     quaternions=_b64(head_quaternions(track.rotation).astype(np.float32)))
     three = resources.files("facetransfer.data").joinpath("vendor/three/three.min.js").read_text()
     template = resources.files("facetransfer.data").joinpath("viewer.html").read_text()
