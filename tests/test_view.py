@@ -556,3 +556,15 @@ def test_a_takes_page_turns_the_eyes_by_its_recorded_angles(arkit_model, tmp_pat
     drawn = _drawn_eyes(out, "frame=1&eyeLookUpRight=0.5")
     np.testing.assert_allclose([d["direction"] for d in drawn],
                                gaze_direction(want[1] + activation_gaze(a)[0]), atol=2e-6)
+
+
+def test_the_pages_iris_and_pupil_are_the_puppets(pages):
+    """The page's iris and pupil (half-angles about the eyeball's centre) are the puppet's
+    discs (puppet_face.IRIS_RADIUS, PUPIL_RADIUS on gaze.EYE_RADIUS's ball): one size written
+    once (before: 34 and 11 degrees typed again beside the puppet's 0.59 and 0.2 cm)."""
+    from facetransfer.puppet_face import IRIS_RADIUS, PUPIL_RADIUS
+    from facetransfer.track.gaze import EYE_RADIUS
+
+    E = _page_data(pages[0].read_text())["eyes"]
+    for got, r in ((E["iris_angle"], IRIS_RADIUS), (E["pupil_angle"], PUPIL_RADIUS)):
+        assert got == pytest.approx(np.degrees(np.arcsin(r / EYE_RADIUS)), abs=1e-9)

@@ -35,6 +35,8 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
+from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, PUPIL_RADIUS as _PUPIL_RADIUS
+from ..track.gaze import EYE_RADIUS as _EYE_RADIUS
 from .common import ExportError, head_quaternions, require_activations, source_name
 
 log = logging.getLogger(__name__)
@@ -112,8 +114,10 @@ def view_rig(model, identity: np.ndarray, dials=None):
 #: named colour), its dark rim and the pupil.
 EYE_COLOURS = {"sclera": "#f1ede4", "iris": "sienna", "limbus": "#2e1c10", "pupil": "black"}
 #: Half-angles (degrees, about the eyeball's centre from its gaze axis) of the iris and the pupil:
-#: an 11.7 mm iris and a 4 mm pupil on an eyeball of :data:`facetransfer.track.gaze.EYE_RADIUS`.
-IRIS_ANGLE, PUPIL_ANGLE = 34.0, 11.0
+#: the puppet's (:data:`facetransfer.puppet_face.IRIS_RADIUS`, ``PUPIL_RADIUS``: an 11.8 mm
+#: iris and a 4 mm pupil) on an eyeball of :data:`facetransfer.track.gaze.EYE_RADIUS`.
+IRIS_ANGLE, PUPIL_ANGLE = (float(np.degrees(np.arcsin(r / _EYE_RADIUS)))
+                           for r in (_IRIS_RADIUS, _PUPIL_RADIUS))
 #: iBUG-68 upper and lower lid points facing each other, per eye (the subject's right, left).
 LID_PAIRS = (((37, 41), (38, 40)), ((43, 47), (44, 46)))
 #: Lid gap (mean of :data:`LID_PAIRS`' distances over the corner distance) at and below which the
