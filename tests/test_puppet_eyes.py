@@ -243,3 +243,28 @@ def test_the_puppet_of_a_take_looks_where_the_take_recorded(arkit_model, tmp_pat
         box = _box(arkit_model, take, eye)
         d = _iris_centre(looked, box) - _iris_centre(ahead, box)
         assert d[0] > 2, d
+
+
+@pytest.mark.parametrize("size", [64, 128])
+def test_a_small_puppets_mouth_at_rest_shows_no_teeth_at_any_subpixel_position(arkit_model,
+                                                                               size):
+    """The mouth at rest (every activation 0) of a small puppet, its head a quarter of a pixel
+    apart from frame to frame: shut in every frame, no cavity or teeth (before: the lips'
+    sliver, under a pixel high, lit a row of pixels at one position, 5 of a 12 pixel wide
+    mouth at 64x64: drawn open, teeth flickering in and out as the head moved); the eyes stay
+    open; jawOpen = 0.4 still shows the cavity."""
+    scale = size / 25.6
+
+    def frame(dx: float, **values: float) -> np.ndarray:
+        t = mean_person_track(arkit_model, _acts(**values), size=size, scale=scale)
+        t = dataclasses.replace(t, translation=np.array([[size / 2 + dx, 0.625 * size + dx]]))
+        return t, _render(arkit_model, t)
+
+    for dx in (0.0, 0.25, 0.5, 0.75):
+        t, img = frame(dx)
+        px = img[_box(arkit_model, t, MOUTH, pad=1)]
+        assert _cavity(px).sum() == 0 and _sclera(px).sum() == 0, dx
+        for eye in (LEFT_EYE, RIGHT_EYE):
+            assert _sclera(img[_box(arkit_model, t, eye, pad=1)]).sum() > 0, dx
+    t, img = frame(0.0, jawOpen=0.4)
+    assert _cavity(img[_box(arkit_model, t, MOUTH, pad=1)]).sum() > 3

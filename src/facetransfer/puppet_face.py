@@ -74,6 +74,9 @@ TEETH_SHOW = 0.3
 #: shows 3 % of the eye's width, 0.8 shows 8 %, open eyes 26 %; the mouth at rest 0.8 % of its
 #: width, jawOpen = 0.1 shows 4.7 %).
 SHUT = (0.05, 0.05, 0.025)
+#: How much of a row of pixels along its width a shut fill's sliver may light beyond
+#: :data:`SHUT` (:func:`_shut`: a sliver under a pixel high, aliased).
+_SLIVER_ROW = 0.5
 #: A shut eye's or mouth's sliver: the skin there darkened by this factor (the lids' or lips'
 #: line).
 SHUT_LINE = 0.5
@@ -239,12 +242,17 @@ def _shut(count: np.ndarray, V: np.ndarray, camera, face: PuppetFace) -> np.ndar
     """``(3,) bool``, the right eye, the left and the mouth: whether the fill's visible part
     (``count`` pixels each) is narrower on average than :data:`SHUT` of its width (the eye's
     corners, the mouth's, projected): the model's lids and lips do not quite meet in a blink
-    or at rest, a sliver of their holes shows. Without landmarks none is."""
+    or at rest, a sliver of their holes shows. A sliver thinner than a pixel lights a whole
+    row of pixels where it crosses their centres and none a subpixel away, so up to
+    :data:`_SLIVER_ROW` of a row along the width is allowed for beyond it: before, the mouth
+    at rest of a 64x64 puppet showed the cavity and teeth at one subpixel position and not
+    at another (5 pixels for a 12 pixel wide mouth), a flicker of teeth as a head moves. Without
+    landmarks none is."""
     if face.landmarks is None:
         return np.zeros(3, bool)
     P = camera.project(V[face.landmarks[[36, 39, 45, 42, 48, 54]]])
     width = np.linalg.norm(P[0::2] - P[1::2], axis=1)
-    return count < np.asarray(SHUT) * width ** 2
+    return count < np.asarray(SHUT) * width ** 2 + _SLIVER_ROW * width
 
 
 def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int) -> None:
