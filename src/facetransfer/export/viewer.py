@@ -11,7 +11,8 @@ update it), the face's mesh and morph targets embedded (int16, one scale per tar
   three.js's ``"YXZ"`` order, the signs of :func:`facetransfer.export.common.head_euler`),
 * for a track: a timeline with play and pause that drives the shapes and head pose per frame,
 * an eyeball behind each eye hole (:func:`eye_data`: the tracker's gaze model, turned by the
-  eyeLook* sliders as :func:`facetransfer.track.gaze.activation_gaze` reads them), and a dark
+  eyeLook* sliders as :func:`facetransfer.track.gaze.activation_gaze` reads them; a Live Link
+  Face take's by its recorded eye angles, :func:`_frame_gaze`), and a dark
   cone behind the mouth gap and each eye hole (:func:`cavity_loops`) with the skin's back faces
   dark, so that the parted lips and the eye corners show the head's inside, not the page.
 
