@@ -21,7 +21,8 @@ lips occlude them as they occlude any surface):
   of the mouth), with the upper teeth (:data:`TEETH`) in a band of :data:`TEETH_SHOW` eye widths
   under the middle of the upper lip;
 - an eye or the mouth whose fill shows only a sliver (on average lower than :data:`SHUT` of its
-  width: the model's lids in a blink and its lips at rest do not quite meet) is shut, its
+  width, and half a row of pixels more for a sliver under a pixel high: the model's lids in a
+  blink and its lips at rest do not quite meet) is shut, its
   pixels the skin darkened by :data:`SHUT_LINE` (the lids' or the lips' line): a blink hides
   the eyeball, a mouth at rest shows no cavity.
 
