@@ -268,3 +268,22 @@ def test_a_small_puppets_mouth_at_rest_shows_no_teeth_at_any_subpixel_position(a
             assert _sclera(img[_box(arkit_model, t, eye, pad=1)]).sum() > 0, dx
     t, img = frame(0.0, jawOpen=0.4)
     assert _cavity(img[_box(arkit_model, t, MOUTH, pad=1)]).sum() > 3
+
+
+def test_closing_lids_darken_the_puppets_eyeball_as_the_pages(arkit_model):
+    """eyeBlink* = 0.8 (the lids 0.105 eye widths apart): the eyeball shows through the gap
+    darkened by lid_light, the view page's shade of it (0.19 here), so no bright sclera is
+    left (before: the sliver's sclera lit as an open eye's, where the page's was dark); open
+    eyes stay lit whole (lid_light 1)."""
+    from facetransfer.puppet_face import lid_light
+
+    track = _track(_acts(eyeBlinkLeft=0.8, eyeBlinkRight=0.8), arkit_model)
+    V = arkit_model.synthesize(track.weights_at(0))
+    lit = lid_light(V[np.asarray(arkit_model.landmarks)])
+    assert np.all((lit > 0.05) & (lit < 0.4)), lit
+    img = _render(arkit_model, track)
+    for eye in (RIGHT_EYE, LEFT_EYE):
+        px = img[_box(arkit_model, track, eye)]
+        assert _sclera(px).sum() == 0
+    rest = arkit_model.synthesize(_track(_acts(), arkit_model).weights_at(0))
+    np.testing.assert_array_equal(lid_light(rest[np.asarray(arkit_model.landmarks)]), [1, 1])

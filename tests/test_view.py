@@ -568,3 +568,22 @@ def test_the_pages_iris_and_pupil_are_the_puppets(pages):
     E = _page_data(pages[0].read_text())["eyes"]
     for got, r in ((E["iris_angle"], IRIS_RADIUS), (E["pupil_angle"], PUPIL_RADIUS)):
         assert got == pytest.approx(np.degrees(np.arcsin(r / EYE_RADIUS)), abs=1e-9)
+
+
+@pytest.mark.slow
+def test_the_pages_lid_shade_is_the_puppets(arkit_model, pages):
+    """The page's shade of each eyeball as its lids close is the puppet's
+    (puppet_face.lid_light of the face the page shows), at a half blink, eyeBlink 0.8 and a
+    blink: one rule for both (LID_PAIRS, LID_SHADE in puppet_face)."""
+    from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+    from facetransfer.puppet_face import lid_light
+
+    for blink in (0.5, 0.8, 1.0):
+        drawn = _drawn_eyes(pages[0], f"eyeBlinkLeft={blink}&eyeBlinkRight={blink}")
+        a = np.zeros((1, 52), np.float32)
+        a[0, [ARKIT_NAMES.index("eyeBlinkLeft"), ARKIT_NAMES.index("eyeBlinkRight")]] = blink
+        w = {**arkit_model.default_weights(), "expression": activations_to_weights(arkit_model,
+                                                                                   a)[0]}
+        V = arkit_model.synthesize(w)
+        want = lid_light(V[np.asarray(arkit_model.landmarks)])
+        np.testing.assert_allclose([d["lit"] for d in drawn], want, atol=2e-3)

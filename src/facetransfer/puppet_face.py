@@ -24,7 +24,9 @@ lips occlude them as they occlude any surface):
   width, and half a row of pixels more for a sliver under a pixel high: the model's lids in a
   blink and its lips at rest do not quite meet) is shut, its
   pixels the skin darkened by :data:`SHUT_LINE` (the lids' or the lips' line): a blink hides
-  the eyeball, a mouth at rest shows no cavity.
+  the eyeball, a mouth at rest shows no cavity. As on the ``view`` page, the lids closing
+  darken the eyeball by their gap (:func:`lid_light`, :data:`LID_SHADE`); at a gap of
+  ``LID_SHADE[0]`` the eye is shut.
 
 :func:`preview_face` is the same head in :func:`facetransfer.render.render_model`'s framing,
 ``facetransfer render``'s picture. The eyes and the mouth cost ~0.7 ms of CPU a frame (a
@@ -45,11 +47,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .track.gaze import EYE_RADIUS, activation_gaze, eye_model, gaze_direction
+from .track.gaze import CORNER_INDEX, EYE_RADIUS, activation_gaze, eye_model, gaze_direction
 
 __all__ = ["SCLERA", "IRIS", "PUPIL", "CAVITY", "TEETH", "IRIS_RADIUS", "PUPIL_RADIUS",
-           "TEETH_SHOW", "SHUT", "SHUT_LINE", "PuppetFace", "puppet_face", "arkit_activations",
-           "track_gaze", "paint_face", "preview_face"]
+           "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "PuppetFace", "puppet_face", "arkit_activations",
+           "track_gaze", "lid_light", "paint_face", "preview_face"]
 
 #: The white of the eye: an off-white (RGB).
 SCLERA = (232, 228, 218)
@@ -81,6 +83,15 @@ _SLIVER_ROW = 0.5
 #: A shut eye's or mouth's sliver: the skin there darkened by this factor (the lids' or lips'
 #: line).
 SHUT_LINE = 0.5
+#: iBUG-68 upper and lower lid points facing each other, per eye (the subject's right, left).
+LID_PAIRS = (((37, 41), (38, 40)), ((43, 47), (44, 46)))
+#: Lid gap (mean of :data:`LID_PAIRS`' distances over the corner distance, in the head's frame)
+#: at and below which the eyeball is hidden, and from which it is fully lit; between, its colour
+#: is scaled by a smoothstep (:func:`lid_light`): the puppet's and the ``view`` page's
+#: (:mod:`facetransfer.export.viewer`) alike. FaceKit's lids part 0.34 eye widths at rest, 0.19
+#: looking down, and stop 0.066 apart at ``eyeBlink`` 1 (a 1.8 mm slit in the mesh), where the
+#: eyeball must not show.
+LID_SHADE = (0.08, 0.18)
 #: What the lids' fills are painted with, by :attr:`PuppetFace.kind`.
 _RIGHT, _LEFT, _MOUTH = 0, 1, 2
 #: The ball's Lambert term: ``_EYE_AMBIENT + (1 - _EYE_AMBIENT) n_z`` (its normal toward the
@@ -228,15 +239,31 @@ def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFac
     k = kind[ys, xs]
     tid = tid[ys, xs]
     ys, xs = ys + y0, xs + x0
-    shut = _shut(np.bincount(k, minlength=3), V, camera, face)[k]
+    lit = np.ones(2) if face.landmarks is None else lid_light(V[face.landmarks])
+    shut = _shut(np.bincount(k, minlength=3), V, camera, face)
+    shut = (shut | np.append(lit <= 0.0, False))[k]
     if shut.any():   # the lids or the lips meeting: a line darker than the skin
         image[ys[shut], xs[shut]] = (image[ys[shut], xs[shut]] * SHUT_LINE).astype(np.uint8)
     eye = (k != _MOUTH) & ~shut
     if eye.any():
-        _paint_eyes(image, ys[eye], xs[eye], k[eye], V, camera, face, i)
+        _paint_eyes(image, ys[eye], xs[eye], k[eye], V, camera, face, i, lit)
     m = (k == _MOUTH) & ~shut
     if m.any():
         _paint_mouth(image, ys[m], xs[m], tid[m], raster.bary[ys[m], xs[m]], V, face)
+
+
+def lid_light(points68: np.ndarray) -> np.ndarray:
+    """``(2,)``, the right eye's and the left's: how much its eyeball is lit as its lids close,
+    ``smoothstep(LID_SHADE, gap)`` of the lid gap (:data:`LID_SHADE`) of a face's iBUG-68
+    landmark vertices ``points68`` (68, 3): 1 open, 0 shut (the ``view`` page's shade)."""
+    P = np.asarray(points68, np.float64)
+    out = np.zeros(2)
+    for e, ((o, i), pairs) in enumerate(zip(CORNER_INDEX, LID_PAIRS)):
+        gap = np.mean([np.linalg.norm(P[u] - P[lo]) for u, lo in pairs])
+        u = np.clip((gap / max(np.linalg.norm(P[o] - P[i]), 1e-12) - LID_SHADE[0])
+                    / (LID_SHADE[1] - LID_SHADE[0]), 0.0, 1.0)
+        out[e] = u * u * (3.0 - 2.0 * u)
+    return out
 
 
 def _shut(count: np.ndarray, V: np.ndarray, camera, face: PuppetFace) -> np.ndarray:
@@ -256,9 +283,10 @@ def _shut(count: np.ndarray, V: np.ndarray, camera, face: PuppetFace) -> np.ndar
     return count < np.asarray(SHUT) * width ** 2 + _SLIVER_ROW * width
 
 
-def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int) -> None:
+def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int, lit) -> None:
     """Paint the eye fills' pixels ``(ys, xs)`` (eye ``k`` each: 0 right, 1 left) with the
-    eyeball's sclera, iris or pupil seen there (module docstring)."""
+    eyeball's sclera, iris or pupil seen there (module docstring), shaded by ``lit`` (2,)
+    (:func:`lid_light`: its lids closing darken it, as on the ``view`` page)."""
     eyes = eye_model(V[face.landmarks])
     angles = np.zeros((2, 2)) if face.gaze is None else face.gaze[i]
     g = gaze_direction(angles)                                        # (2, 3), the head's frame
@@ -279,7 +307,7 @@ def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int) -> None:
     colour = np.where((cos > c_pupil)[:, None], np.array(PUPIL, np.float64),
                       np.where((cos > c_iris)[:, None], np.array(IRIS, np.float64),
                                np.array(SCLERA, np.float64)))
-    light = _EYE_AMBIENT + (1.0 - _EYE_AMBIENT) * ez
+    light = (_EYE_AMBIENT + (1.0 - _EYE_AMBIENT) * ez) * np.asarray(lit)[k]
     image[ys, xs] = np.clip(colour * light[:, None] + 0.5, 0, 255).astype(np.uint8)
 
 

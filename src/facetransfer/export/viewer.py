@@ -36,7 +36,8 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
-from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, PUPIL_RADIUS as _PUPIL_RADIUS
+from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, LID_PAIRS, LID_SHADE
+from ..puppet_face import PUPIL_RADIUS as _PUPIL_RADIUS
 from ..track.gaze import EYE_RADIUS as _EYE_RADIUS
 from .common import ExportError, head_quaternions, require_activations, source_name
 
@@ -119,13 +120,6 @@ EYE_COLOURS = {"sclera": "#f1ede4", "iris": "sienna", "limbus": "#2e1c10", "pupi
 #: iris and a 4 mm pupil) on an eyeball of :data:`facetransfer.track.gaze.EYE_RADIUS`.
 IRIS_ANGLE, PUPIL_ANGLE = (float(np.degrees(np.arcsin(r / _EYE_RADIUS)))
                            for r in (_IRIS_RADIUS, _PUPIL_RADIUS))
-#: iBUG-68 upper and lower lid points facing each other, per eye (the subject's right, left).
-LID_PAIRS = (((37, 41), (38, 40)), ((43, 47), (44, 46)))
-#: Lid gap (mean of :data:`LID_PAIRS`' distances over the corner distance) at and below which the
-#: eyeball is hidden, and from which it is fully lit; between, its colour is scaled by a
-#: smoothstep. FaceKit's lids part 0.34 eye widths at rest, 0.19 looking down, and stop 0.066
-#: apart at ``eyeBlink`` 1 (a 1.8 mm slit in the mesh), where the eyeball must not show.
-LID_SHADE = (0.08, 0.18)
 
 
 def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
@@ -138,8 +132,8 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
     ``ratio`` read from ``eye_model`` of ``neutral``): the page places the eyeballs for the
     identity its dials show. Expressions leave them where they are (a blink moves the lids, not
     the eyeball). The mesh's lids do not quite meet at ``eyeBlink`` 1, so the page shades each
-    eyeball by its lid gap (:data:`LID_SHADE`): a closing lid darkens the eye, a closed one hides
-    it.
+    eyeball by its lid gap (:data:`facetransfer.puppet_face.LID_SHADE`, as the puppet does): a
+    closing lid darkens the eye, a closed one hides it.
 
     The turn is :func:`facetransfer.track.gaze.activation_gaze`, which is linear in the
     activations: ``gaze`` lists, per expression slider that turns an eye, ``[slider, eye, yaw,
@@ -159,8 +153,8 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
     -------
     dict or None
         ``corners`` (2, 2) vertex ids, ``offset`` (2, 3), ``ratio`` (2,), ``gaze`` (G, 4),
-        ``lids`` (2, 2, 2) vertex ids (:data:`LID_PAIRS`) and ``lid_shade``
-        (:data:`LID_SHADE`), ``colours``, ``iris_angle`` and ``pupil_angle`` (degrees); eyes in
+        ``lids`` (2, 2, 2) vertex ids (:data:`facetransfer.puppet_face.LID_PAIRS`) and
+        ``lid_shade`` (:data:`facetransfer.puppet_face.LID_SHADE`), ``colours``, ``iris_angle`` and ``pupil_angle`` (degrees); eyes in
         :data:`facetransfer.track.gaze.EYES` order (the subject's right, then left). None also
         where an eye's corners coincide (a degenerate face).
     """
