@@ -32,7 +32,7 @@ from .video_sequence import is_sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["UNEVEN", "SEEK_SLACK", "on_rate_grid", "packet_times", "timeline"]
+__all__ = ["UNEVEN", "SEEK_SLACK", "first_frame_time", "on_rate_grid", "packet_times", "timeline"]
 
 #: A video's frames are uneven when an interval between two of them is outside this range of
 #: their median interval (a millisecond time base's 33/34 ms steps are even).
@@ -119,6 +119,24 @@ def packet_count(path: str | os.PathLike) -> int | None:
         return None
     times = _cached_times(str(path), stamp)
     return None if times is None else int(len(times))
+
+
+def first_frame_time(path: str | os.PathLike) -> float:
+    """Seconds from a media file's start to its first video frame: where its picture starts on
+    the timeline its audio is read on (ffmpeg counts both from the file's start, the earliest
+    of its streams). 0.0 for most files; a phone's clip whose sound starts before its picture
+    (an edit list, audio recorded first) gives the time the sound leads by. 0.0 where the
+    packets cannot be read or the file has no video (kept per file, with the timeline's)."""
+    if is_sequence(path):
+        return 0.0
+    try:
+        stamp = file_stamp(path)
+    except OSError:
+        return 0.0
+    times = _cached_times(str(path), stamp)
+    if times is None or not len(times) or not np.isfinite(times[0]):
+        return 0.0
+    return max(0.0, float(times[0]))
 
 
 def timeline(path: str | os.PathLike, n_frames: int) -> tuple[float, tuple[int, ...]] | None:

@@ -1,0 +1,55 @@
+"""Phone footage (helper walk52): files as phones write them, and what the commands make of
+them (BENCHMARKS.md, "Fifty-second session (helper walk52)")."""
+
+from __future__ import annotations
+
+import subprocess
+
+import numpy as np
+import pytest
+
+imageio_ffmpeg = pytest.importorskip("imageio_ffmpeg")
+
+from facetransfer.io.video import encode_video  # noqa: E402
+
+FF = imageio_ffmpeg.get_ffmpeg_exe()
+
+
+def _run(*args):
+    subprocess.run([FF, "-hide_banner", "-loglevel", "error", "-y", *args], check=True)
+
+
+def _clip_sound_first(tmp_path, lead=0.5):
+    """A 3-second 30 fps clip whose picture starts ``lead`` seconds after its sound (as
+    ``-itsoffset`` writes it: an edit list), a beep in the sound at 1.0 s of the file."""
+    pic, snd, out = tmp_path / "pic.mp4", tmp_path / "snd.m4a", tmp_path / "phone.mp4"
+    _run("-f", "lavfi", "-i", "testsrc=size=64x64:rate=30:duration=3", "-c:v", "libx264",
+         "-pix_fmt", "yuv420p", str(pic))
+    _run("-f", "lavfi", "-i", "aevalsrc=sin(2*PI*440*t)*between(t\\,1\\,1.2):s=48000:d=3.5",
+         "-c:a", "aac", str(snd))
+    _run("-itsoffset", str(lead), "-i", str(pic), "-i", str(snd), "-map", "0:v", "-map", "1:a",
+         "-c", "copy", str(out))
+    return out
+
+
+def _beep_at(path) -> float:
+    """Seconds into ``path``'s decoded sound where the beep starts."""
+    pcm = subprocess.run([FF, "-hide_banner", "-loglevel", "error", "-i", str(path), "-map",
+                          "0:a:0", "-ac", "1", "-ar", "8000", "-f", "f32le", "-"],
+                         capture_output=True, check=True).stdout
+    sound = np.frombuffer(pcm, np.float32)
+    return float(np.argmax(np.abs(sound) > 0.3)) / 8000
+
+
+@pytest.mark.parametrize("known", [True, False])
+def test_the_sound_of_a_clip_whose_picture_starts_late_stays_in_step(tmp_path, known):
+    """The beep is 0.5 s after the picture's first frame in the clip, and so in the output
+    (in one pass with the frames, or muxed after them); before, the sound was taken from the
+    file's start: the beep at 1.0 s, half a second late."""
+    clip = _clip_sound_first(tmp_path)
+    assert abs(_beep_at(clip) - 1.0) < 0.03       # the file's own timeline
+    frames = np.full((60, 64, 64, 3), 128, np.uint8)
+    res = encode_video(tmp_path / "out.mp4", frames if known else iter(frames), 30,
+                       audio_from=clip)
+    assert res.audio and res.n_frames == 60
+    assert abs(_beep_at(res.path) - 0.5) < 0.03
