@@ -53,3 +53,17 @@ def test_the_sound_of_a_clip_whose_picture_starts_late_stays_in_step(tmp_path, k
                        audio_from=clip)
     assert res.audio and res.n_frames == 60
     assert abs(_beep_at(res.path) - 0.5) < 0.03
+
+
+def test_probe_says_the_sound_starts_before_the_picture(tmp_path):
+    """``probe`` names the lead (before, it said ``audio aac`` alone); a clip whose sound and
+    picture start together says nothing more."""
+    from facetransfer.io.video_facts import fact_lines, video_facts
+    facts = video_facts(_clip_sound_first(tmp_path))
+    assert abs(facts.picture_start - 0.5) < 0.01
+    assert "audio aac (starting 0.50 s before the picture" in "\n".join(fact_lines(facts))
+    both = tmp_path / "both.mp4"
+    _run("-i", str(tmp_path / "pic.mp4"), "-i", str(tmp_path / "snd.m4a"), "-map", "0:v",
+         "-map", "1:a", "-c", "copy", str(both))
+    facts = video_facts(both)
+    assert facts.picture_start == 0.0 and "before the picture" not in "\n".join(fact_lines(facts))
