@@ -67,3 +67,26 @@ def test_probe_says_the_sound_starts_before_the_picture(tmp_path):
          "-map", "1:a", "-c", "copy", str(both))
     facts = video_facts(both)
     assert facts.picture_start == 0.0 and "before the picture" not in "\n".join(fact_lines(facts))
+
+
+def test_a_clip_trimmed_without_reencoding_reads_as_the_frames_it_shows(tmp_path, caplog):
+    """A phone's Photos app (an editor's stream copy) trims a clip by its edit list: the frames
+    before the cut stay stored from their keyframe on, and players and decoders drop them.
+    The clip reads as what it shows: 60 frames, the original's 30-89, no warning; before, 90
+    frames (6.0 s of a 5.0 s clip in ``probe``), 'truncated?' after frame 59."""
+    from facetransfer.io.video_facts import video_facts
+    from facetransfer.io.video_read import read_video, video_info
+    whole, cut = tmp_path / "whole.mp4", tmp_path / "trimmed.mp4"
+    _run("-f", "lavfi", "-i", "testsrc=size=64x64:rate=30:duration=3", "-c:v", "libx264",
+         "-g", "90", "-pix_fmt", "yuv420p", str(whole))
+    _run("-ss", "1", "-i", str(whole), "-c", "copy", str(cut))
+    info = video_info(cut)
+    assert info.n_frames == 60 and info.steps is None and info.fps == 30
+    assert video_facts(cut).seconds == 2.0
+    caplog.clear()
+    frames, _ = read_video(cut)
+    original, _ = read_video(whole)
+    assert len(frames) == 60 and not [r for r in caplog.records if r.levelname == "WARNING"]
+    assert np.abs(frames.astype(int) - original[30:].astype(int)).mean() < 2
+    later, _ = read_video(cut, start=40, max_frames=1)
+    assert np.abs(later[0].astype(int) - original[70].astype(int)).mean() < 2

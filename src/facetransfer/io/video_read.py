@@ -206,11 +206,18 @@ UNCOUNTED = ("matroska,webm",)
 
 def _counted(path, n: int) -> int:
     """The frames of a video whose container stores no count (:data:`UNCOUNTED`): its video
-    packets (:func:`facetransfer.io.video_timeline.packet_count`); else ``n``, OpenCV's."""
+    packets (:func:`facetransfer.io.video_timeline.packet_count`); of one whose edit list hides
+    frames (a phone's clip trimmed without re-encoding: :func:`facetransfer.io.video_timeline.
+    hidden_count`), the ones shown, where OpenCV counted them all; else ``n``, OpenCV's."""
     from .video_display import container
-    from .video_timeline import packet_count
+    from .video_timeline import hidden_count, packet_count
 
     if container(path) not in UNCOUNTED:
+        hidden = hidden_count(path)
+        if hidden and n > hidden:
+            log.info("%s: %d frames shown (%d more stored before its edit list's start)", path,
+                     n - hidden, hidden)
+            return n - hidden
         return n
     m = packet_count(path)
     if m and m != n:
