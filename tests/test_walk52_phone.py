@@ -90,3 +90,22 @@ def test_a_clip_trimmed_without_reencoding_reads_as_the_frames_it_shows(tmp_path
     assert np.abs(frames.astype(int) - original[30:].astype(int)).mean() < 2
     later, _ = read_video(cut, start=40, max_frames=1)
     assert np.abs(later[0].astype(int) - original[70].astype(int)).mean() < 2
+
+
+def test_a_trimmed_clip_of_variable_rate_keeps_its_frames_on_their_times(tmp_path):
+    """The same trim of a phone's clip with a gap (frames 60-69 dropped): its timeline is of
+    the frames shown, from the cut on, so frame ``k`` is the original's ``30 + k`` (the one
+    before the gap, across it); before, the 30 hidden frames were counted into it: 90 steps
+    for a 2-second clip, the gap placed 1 s early."""
+    from facetransfer.io.video_read import read_video, video_info
+    whole, cut = tmp_path / "whole.mp4", tmp_path / "trimmed.mp4"
+    _run("-f", "lavfi", "-i", "testsrc=size=64x64:rate=30:duration=3", "-vf",
+         "select='not(between(n\\,60\\,69))'", "-fps_mode", "passthrough", "-c:v", "libx264",
+         "-g", "90", "-pix_fmt", "yuv420p", str(whole))
+    _run("-ss", "1", "-i", str(whole), "-c", "copy", str(cut))
+    info = video_info(cut)
+    assert info.n_frames == 60 and info.steps is not None
+    frames, _ = read_video(cut)
+    original, _ = read_video(whole)          # its own timeline: step k is frame k, held
+    assert len(frames) == 60 and len(original) == 90
+    assert np.abs(frames.astype(int) - original[30:].astype(int)).mean() < 2
