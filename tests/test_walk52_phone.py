@@ -109,3 +109,26 @@ def test_a_trimmed_clip_of_variable_rate_keeps_its_frames_on_their_times(tmp_pat
     original, _ = read_video(whole)          # its own timeline: step k is frame k, held
     assert len(frames) == 60 and len(original) == 90
     assert np.abs(frames.astype(int) - original[30:].astype(int)).mean() < 2
+
+
+def test_an_overlay_of_the_first_frames_from_a_longer_track(quick_model, quick_model_path,
+                                                            tmp_path, capsys):
+    """``track CLIP --from-track T.npz --overlay OV.mp4 --max-frames 3`` draws the clip's
+    first 3 frames with the track's first 3, as ``puppet`` and ``transfer`` take the first N
+    of a longer track; before, it was refused: 'track T.npz has 8 frames, but video CLIP has
+    3' (the clip has 8: --max-frames cut it)."""
+    from conftest import clip_with_points
+    from facetransfer.cli.main import main
+    from facetransfer.io.video import read_video
+    from facetransfer.track import Track
+    video, _, _ = clip_with_points(quick_model, 8, 5, tmp_path)
+    F, whole = 8, tmp_path / "whole.npz"
+    Track(25.0, (320, 240), np.tile(np.eye(3), (F, 1, 1)), np.full(F, 1e-3),
+          np.full((F, 2), 160.0), {"identity": np.zeros((F, 5)), "expression": np.zeros((F, 5))},
+          np.zeros((F, 68, 2)), np.ones(F), np.zeros(F, bool), quick_model.content_hash,
+          ("identity", "expression")).save(whole)
+    ov = tmp_path / "ov.mp4"
+    code = main(["track", str(video), "--model", str(quick_model_path), "--from-track",
+                 str(whole), "--overlay", str(ov), "--max-frames", "3"])
+    assert code == 0, capsys.readouterr().err
+    assert read_video(ov)[0].shape[0] == 3
