@@ -111,6 +111,7 @@ class VideoFacts:
     stored_frames: int | None = None
     pixel_format: str | None = None
     picture_start: float = 0.0
+    mirrored: bool = False
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -140,16 +141,19 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       timecode=timecode_of(path), alpha=video_has_alpha(path),
                       bits=video_bits(path), stored_frames=packet_count(path),
                       pixel_format=stored_pixel_format(path),
-                      picture_start=first_frame_time(path) if audio_codecs(path) else 0.0)
+                      picture_start=first_frame_time(path) if audio_codecs(path) else 0.0,
+                      mirrored=info.mirrored)
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
     """The facts as a few lines for a person, with what each means for the commands."""
     size = "{}x{}".format(*f.size)
-    if f.turn:
-        stored = f.size if f.turn == 180 else f.size[::-1]
-        size += (" upright (stored {}x{}, turned {} degrees clockwise by its display matrix "
-                 "as players show it; results written upright)").format(*stored, f.turn)
+    if f.turn or f.mirrored:
+        stored = f.size if f.turn in (0, 180) else f.size[::-1]
+        how = f"turned {f.turn} degrees clockwise" if f.turn else ""
+        how += (" and " if f.turn else "") + "mirrored" if f.mirrored else ""
+        size += (" upright (stored {}x{}, {} by its display matrix as players show it; "
+                 "results written upright)").format(*stored, how)
     if f.shown_size != f.size:
         size += ("{}, shown {}x{} (pixels {}:{}: tracked resampled to square pixels, "
                  "results written with the same ratio)").format(
