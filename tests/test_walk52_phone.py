@@ -162,3 +162,18 @@ def test_a_video_mirrored_by_its_display_matrix_is_read_as_players_show_it(tmp_p
     unturned = tmp_path / "plain.mp4"
     _run("-display_rotation", str(turn), "-i", str(flat), "-c", "copy", str(unturned))
     assert not video_facts(unturned).mirrored
+
+
+def test_the_track_cache_is_keyed_by_the_frame_readers_too():
+    """A track cached before the readers came to read a trimmed or mirrored clip right is not
+    taken after: the code fingerprint of the track cache digests the readers that decide a
+    clip's frames (before, only ``track/`` and the model: a mirrored clip's cached track,
+    left and right swapped, was taken again)."""
+    from pathlib import Path
+
+    from facetransfer.track import cache
+    root = Path(cache.__file__).resolve().parent.parent
+    files = cache.fingerprinted_files(root)
+    for name in ("io/video_read.py", "io/video_timeline.py", "io/video_display.py"):
+        assert root / name in files
+    assert all(f.is_file() for f in files)
