@@ -61,9 +61,10 @@ def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str 
     The video stream is copied as is; the audio too when the container holds its codec
     (:data:`COPIED_AUDIO`), else it is encoded to AAC; it starts at ``start`` seconds after the
     first frame of ``audio_from``'s picture (:func:`audio_seek`: in step with it where the
-    sound starts earlier) and is cut to ``duration`` (default: the shorter stream). ``timecode``: the start timecode
-    written (:attr:`VideoOptions.timecode`; the video's own is not copied). Returns False (and
-    logs why) when there is no ffmpeg or no audio, in which case ``out`` is not written.
+    sound starts earlier) and is cut to ``duration`` (default: the shorter stream).
+    ``timecode``: the start timecode written (:attr:`VideoOptions.timecode`; the video's own
+    is not copied). Returns False (and logs why) when there is no ffmpeg or no audio, in which
+    case ``out`` is not written.
 
     Raises
     ------

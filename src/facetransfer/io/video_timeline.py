@@ -32,7 +32,8 @@ from .video_sequence import is_sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["UNEVEN", "SEEK_SLACK", "first_frame_time", "on_rate_grid", "hidden_count", "packet_times", "timeline"]
+__all__ = ["UNEVEN", "SEEK_SLACK", "first_frame_time", "hidden_count", "on_rate_grid",
+           "packet_times", "timeline"]
 
 #: A video's frames are uneven when an interval between two of them is outside this range of
 #: their median interval (a millisecond time base's 33/34 ms steps are even).

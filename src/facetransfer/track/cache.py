@@ -31,7 +31,8 @@ from ..errors import OutputError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FRAME_READERS", "KEEP", "LAYOUT", "fingerprinted_files", "cache_enabled", "code_digest", "code_fingerprint", "track_dir",
+__all__ = ["FRAME_READERS", "KEEP", "LAYOUT", "fingerprinted_files", "cache_enabled", "code_digest",
+           "code_fingerprint", "track_dir",
            "track_key", "holds", "cached_track", "store_track", "partial_path"]
 
 #: The cache's layout: a change of what a key means (or of the trackers' results) changes it.
