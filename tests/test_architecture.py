@@ -171,6 +171,7 @@ LAYER_OF = {
     "facetransfer.truth_check": "track",  # synth's truth checked as a Track
     # transfer: tracks in, a new track out
     "facetransfer.transfer": "transfer",
+    "facetransfer.performance_edit": "transfer",  # Fig. 7E edits of a track (or ARKit curves)
     "facetransfer.take": "transfer",      # a Live Link Face take as the new performance
     "facetransfer.dials": "transfer",     # identity edits of a track (dial_track)
     "facetransfer.puppet_face": "transfer",  # the puppet's eyeballs and mouth, puppet_frames' paint
@@ -213,7 +214,7 @@ LAYER_OF = {
     "facetransfer.file_facts": "apps",    # what probe says of a track or a take
     "facetransfer.face_file": "apps",     # the dial editor's (export.viewer's) saved face
     "facetransfer.cli": "cli",
-    "facetransfer.cli.edit_take": "cli",   # edit of a Live Link Face take, out of cli.transfer
+    "facetransfer.cli.edit": "cli",   # the edit command (a track's, a take's), out of cli.transfer
 }
 
 #: Imports from a lower layer to a higher one that stay, each with its reason. A new one fails

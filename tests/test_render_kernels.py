@@ -405,6 +405,31 @@ def test_interpolate_vertex_values_is_the_barycentric_mix():
         interpolate_vertex_values(r, F, vals[:3])
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_interpolate_vertex_pair_is_two_interpolations(seed):
+    """render.shading.interpolate_vertex_pair (the jaw's two alphas in one pass) gives the
+    bits of two interpolate_vertex_values calls, on the whole raster and on a box (negative,
+    zero and float64 values among them); it refuses values short of the faces' vertices."""
+    from facetransfer.render import WeakPerspective, interpolate_vertex_values, rasterize
+    from facetransfer.render.shading import interpolate_vertex_pair
+
+    rng = np.random.default_rng(seed)
+    V = rng.normal(0, 1, (40, 3))
+    F = rng.integers(0, 40, (60, 3))
+    r = rasterize(V, F, WeakPerspective(12.0, np.eye(3), np.array([32.0, 30.0])), (64, 60))
+    assert (r.tri_id >= 0).sum() > 300
+    a = rng.normal(0, 1, 40)
+    b = np.where(rng.random(40) < 0.5, 0.0, rng.uniform(0, 1, 40)).astype(np.float32)
+    for box in (None, (slice(7, 41), slice(3, 50))):
+        got = interpolate_vertex_pair(r, F, a, b, box=box)
+        for g, v in zip(got, (a, b)):
+            want = interpolate_vertex_values(r, F, v, box=box)
+            assert g.dtype == np.float32 and g.shape == want.shape
+            np.testing.assert_array_equal(g.view(np.uint32), want.view(np.uint32))
+    with pytest.raises(ValueError, match="values"):
+        interpolate_vertex_pair(r, F, a, b[:3])
+
+
 def _gain_factors_numpy(face, part, where, box, max_samples=4096):
     """:func:`facetransfer.patch._gain_factors` with its tail as the numpy expressions it was
     before the forty-fifth session (the columns' and rows' coordinates, held within the

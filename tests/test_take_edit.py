@@ -1,5 +1,5 @@
 """``facetransfer edit take.csv``: a Live Link Face take's ARKit curves edited, the rest of the
-file kept (facetransfer.take.edit_take, facetransfer.cli.edit_take)."""
+file kept (facetransfer.take.edit_take, facetransfer.cli.edit)."""
 
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.cli.main import main
 from facetransfer.export.livelink import read_livelink, write_livelink
 from facetransfer.take import edit_take
-from facetransfer.transfer import edit_activations, edit_track
+from facetransfer.performance_edit import edit_activations, edit_track
 
 EDITED = ("JawOpen", "MouthSmileLeft", "MouthSmileRight")
 

@@ -7,11 +7,11 @@ import dataclasses
 import numpy as np
 import pytest
 
+from facetransfer.performance_edit import (EditAdd, EditScale, edit_track, parse_add,
+                                           parse_scale, ramp_envelope)
 from facetransfer.track import Track
-from facetransfer.transfer import (EditAdd, EditScale, TransferError, constant_weights,
-                                   edit_track, parse_add, parse_scale, parse_weights,
-                                   project_landmarks, ramp_envelope, recombine, resample_track,
-                                   time_map)
+from facetransfer.transfer import (TransferError, constant_weights, parse_weights,
+                                   project_landmarks, recombine, resample_track, time_map)
 
 
 def make_track(n=10, *, r=(3, 4), fps=25.0, size=(64, 48), seed=0, model_hash="h",
@@ -419,7 +419,7 @@ def test_edits_of_an_arkit_track_act_on_its_activations(arkit_model, make_arkit_
     grew about six times); ``smile`` and ``frown`` name both sides; an unknown name lists the
     words too."""
     from facetransfer.arkit import ARKIT_NAMES as N
-    from facetransfer.transfer import EditAdd, EditScale, edit_track
+    from facetransfer.performance_edit import EditAdd, EditScale, edit_track
 
     track, a, _ = make_arkit_track(arkit_model, 40, seed=4)
     new = edit_track(track, arkit_model, scale=[EditScale("jawOpen", 2.0),

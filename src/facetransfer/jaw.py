@@ -60,6 +60,7 @@ from .region_weights import facing_weights, model_vertices, moved_strengths, ver
 from .jaw_look import LOOK_RAMP, look_strengths, mouth_reach
 from .patch import REJECT, _match_outline_into
 from .render import interpolate_vertex_values, shade_layers
+from .render.shading import interpolate_vertex_pair
 from .texture.face import frame_uvs
 from .topology import close_mouth
 
@@ -370,10 +371,14 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
         compare &= fm
         if np.count_nonzero(compare) < 8:
             compare = None
-    opacity = 1.0 if texture.alpha is None else \
-        interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
-    far = None
-    if texture.look_alpha is not None:
+    opacity, far = 1.0, None
+    if texture.alpha is not None and texture.look_alpha is not None:  # one pass for both
+        opacity, look = interpolate_vertex_pair(raster, faces, texture.alpha,
+                                                texture.look_alpha, box=sl)
+        far = _look_far(look)
+    elif texture.alpha is not None:
+        opacity = interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
+    elif texture.look_alpha is not None:
         far = _look_far(interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl))
     _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
                         compare=compare, reject=REJECT, reject_where=far,

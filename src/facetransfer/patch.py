@@ -618,17 +618,24 @@ def _gain_samples_py(m, n, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v,
     max_samples)``) the centred, scaled coordinates ``u = (x - cx) / scale``, ``v = (y - cy) /
     scale`` and the log ratios ``r = lut[face] - lut[part]`` (3 channels). The means are the
     integer sums over ``n`` (as numpy's mean of the coordinates, whose float sums are
-    exact). Two passes over ``m``, no list of its pixels."""
+    exact). Two passes over ``m``, no list of its pixels: the first without a branch per
+    pixel (a row's count, column sum and extremes by selects: vectorised), the second
+    counting down to the next sample, not ``i % step`` per pixel (an integer division)."""
     dx, dy = np.int64(ox) + np.int64(sx0), np.int64(oy) + np.int64(sy0)
     sx = sy = np.int64(0)
-    x_lo, x_hi, y_lo, y_hi = m.shape[1], -1, m.shape[0], -1
+    W = m.shape[1]
+    x_lo, x_hi, y_lo, y_hi = W, -1, m.shape[0], -1
     for y in range(m.shape[0]):
-        c = np.int64(0)
-        for x in range(m.shape[1]):
-            if m[y, x]:
-                c += 1
-                sx += x
-                x_lo, x_hi = min(x_lo, x), max(x_hi, x)
+        c = row_x = np.int64(0)
+        lo, hi = W, -1
+        for x in range(W):
+            b = np.int64(m[y, x] != 0)
+            c += b
+            row_x += x * b
+            lo = min(lo, x if b else W)
+            hi = max(hi, x if b else -1)
+        sx += row_x
+        x_lo, x_hi = min(x_lo, lo), max(x_hi, hi)
         if c:
             sx += c * dx
             sy += c * (y + dy)
@@ -636,19 +643,20 @@ def _gain_samples_py(m, n, ox, oy, sx0, sy0, face, part, max_samples, lut, u, v,
     cx, cy = float(sx) / float(n), float(sy) / float(n)
     scale = float(max(y_hi - y_lo, x_hi - x_lo, 1))
     step = max(1, -(-n // max_samples))
-    i = j = 0
+    j = left = 0  # left: the set pixels to pass before the next sample (every step-th)
     for yy in range(m.shape[0]):
         for xx in range(m.shape[1]):
             if not m[yy, xx]:
                 continue
-            if i % step == 0:
+            if left == 0:
                 x, y = np.int64(xx) + ox, np.int64(yy) + oy
                 u[j] = (x + sx0 - cx) / scale
                 v[j] = (y + sy0 - cy) / scale
                 for c in range(3):
                     r[j, c] = lut[face[y, x, c]] - lut[part[y, x, c]]
                 j += 1
-            i += 1
+                left = step
+            left -= 1
     centre[0], centre[1], centre[2] = cx, cy, scale
 
 

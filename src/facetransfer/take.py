@@ -419,9 +419,10 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     ``facetransfer edit take.csv`` does; beyond the paper, its Fig. 7E edit on a recorded take).
 
     The curves are edited as a track of an ARKit model is
-    (:func:`facetransfer.transfer.edit_activations`: ``scale`` multiplies a curve, ``add`` adds
-    an activation over rows ``START..END`` with :func:`facetransfer.transfer.ramp_envelope`'s
-    ramps, each edited curve clipped to Live Link Face's [0, 1]); frames are the take's on its
+    (:func:`facetransfer.performance_edit.edit_activations`: ``scale`` multiplies a curve,
+    ``add`` adds an activation over rows ``START..END`` with
+    :func:`facetransfer.performance_edit.ramp_envelope`'s ramps, each edited curve clipped to
+    Live Link Face's [0, 1]); frames are the take's on its
     timeline, 0-based, as ``view`` and ``puppet`` of it number them (its rows, where none is
     dropped: :func:`_row_frames`). Everything else is kept byte for byte: the header and its column order, the
     timecodes, ``BlendShapeCount``, the head and eye rotation columns, the line endings, a
@@ -434,8 +435,8 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     path, out : path-like
         The take, and the edited take to write (atomically; ``overwrite``: replace one there).
     add, scale : EditAdd / EditScale, their text, or sequences of them
-        As :func:`facetransfer.transfer.edit_track` takes them (``"jawOpen*0.5@10-40"``,
-        ``"jawOpen=2"``); a name is one of the 52 ARKit names or a word for both sides.
+        As :func:`facetransfer.performance_edit.edit_track` takes them
+        (``"jawOpen*0.5@10-40"``, ``"jawOpen=2"``); a name is one of the 52 ARKit names or a word for both sides.
     ramp : int
         Rows over which an addition eases in before its range and out after it.
 
@@ -452,7 +453,7 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     """
     from .arkit import ARKIT_NAMES
     from .io.atomic import write_text_atomic
-    from .transfer import edit_activations
+    from .performance_edit import edit_activations
 
     if int(ramp) < 0:
         raise TransferError(f"ramp must be >= 0 frames, got {ramp}")

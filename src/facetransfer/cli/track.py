@@ -111,7 +111,8 @@ def register(sub) -> None:
                    help="ignore the progress of an interrupted run (OUT with suffix "
                    ".partial.npz; by default tracking continues from it)")
     p.add_argument("--from-track", dest="from_track",
-                   help="draw --overlay from an existing track file instead of tracking")
+                   help="draw --overlay from an existing track file instead of tracking "
+                   "(with --max-frames N: the clip's and the track's first N frames)")
     p.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=False,
                    help="replace existing outputs (an output is never one of the inputs)")
     p.set_defaults(func=run)
@@ -143,6 +144,12 @@ def run(args) -> int:
     if args.from_track is not None:
         track = Track.load(args.from_track)
         frames = frame_source(args.video, args.max_frames)
+        if args.max_frames is not None and frames.n < track.n_frames:
+            import numpy as np
+
+            from ..track.project import take_frames     # the first N, as puppet and transfer
+
+            track = take_frames(track, np.arange(frames.n))
         check_track_of(track, args.from_track, args.video, frames.n, frames.size,
                        "to draw the frames it covers")
         track.check_model(model)

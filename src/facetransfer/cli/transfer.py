@@ -8,7 +8,7 @@
         [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png
         [--matte matte/%05d.png|matte/%05d.exr|M.mov|M.mkv...] [--overwrite]
     facetransfer edit TRACK.npz [--model M.npz] --add frown@120-180 --scale smile=1.5 --out T2.npz
-    facetransfer edit TAKE.csv --scale jawOpen=2 --out TAKE2.csv     (:mod:`.edit_take`)
+    facetransfer edit TAKE.csv --scale jawOpen=2 --out TAKE2.csv     (``edit``: :mod:`.edit`)
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
     facetransfer puppet VIDEO [--model M.npz] --identity LABEL --out OUT.mp4
     facetransfer demo [--out out] [--frames N]
@@ -30,7 +30,8 @@ from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES
                                TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
 from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
                      check_track_name, check_track_of, default_model_for, frame_count,
-                     option_with, progress_disabled, resolve_model, video_options, video_out)
+                     progress_disabled, resolve_model, video_options, video_out)
+from .edit import register_edit
 from .track import CAPTURE_HELP
 
 log = logging.getLogger(__name__)
@@ -147,7 +148,7 @@ def _add_output(p, func, *, metavar: str, help: str | None = None, video: bool =
 def register(sub) -> None:
     """Add ``transfer``, ``edit``, ``puppet`` and ``demo`` to the facetransfer parser."""
     _register_transfer(sub)
-    _register_edit(sub)
+    register_edit(sub)          # the edit command: .edit
     _register_puppet(sub)
     _register_demo(sub)
 
@@ -224,37 +225,6 @@ def _add_sources(p) -> None:
         p.add_argument(flag, metavar="WHERE", help=f"with several people {role}: {FACE_WHERE}")
 
 
-def _register_edit(sub) -> None:
-    e = _parser(
-        sub, "edit", "edit a tracked performance (Fig. 7E) or a Live Link Face take",
-        "Add a training expression over a frame range (with smooth ramps) or scale an "
-        "expression's component, frame by frame (Vlasic et al. 2005, Fig. 7E). A Live Link "
-        "Face take (TAKE.csv) is edited on its ARKit curves and written as a take, the rest of "
-        "the file (timecodes, head and eye rotations, columns) kept as it was.")
-    e.add_argument("track", metavar="TRACK.npz|TAKE.csv", help="the track or take to edit")
-    e.add_argument("--model", metavar="M.npz",
-                   help="the model the track was made with (default: the default model, if the "
-                   "track was made with it); a take needs none")
-    e.add_argument("--add", action="append", default=[], metavar="EXPR@START-END",
-                   help="add EXPR (training weights minus neutral; an ARKit model's or a "
-                   "take's: activation 1) on frames START..END (inclusive, 0-based; a take's "
-                   "as view and puppet number them); EXPR*0.5@... for half; repeatable")
-    e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
-                   help="scale the component of the expression along EXPR - neutral (an ARKit "
-                   "model's or a take's: the EXPR curve times FACTOR, clipped to [0, 1], Live "
-                   "Link Face's range; EXPR one of the 52 ARKit names, e.g. jawOpen or, as a "
-                   "take's header spells it, JawOpen); repeatable")
-    e.add_argument("--ramp", type=int, default=None,
-                   help="frames over which an --add eases in before START and out after END "
-                   "(0: none; the range itself is at full strength; default 8)")
-    e.add_argument("--identity-dials", metavar="NAME=UNITS,...",
-                   help="move the identity along semantic dials, e.g. width=+1.5,lip_fullness=1 "
-                   "(a track's; a take has no identity)")
-    _add_output(e, run_edit, metavar="TRACK2.npz|TAKE2.csv",
-                help="the edited track to write (.npz), for transfer --performance; of a "
-                "take, the edited take (.csv)")
-
-
 def _register_puppet(sub) -> None:
     q = _parser(
         sub, "puppet", "drive a model identity from a video (puppetry)",
@@ -305,11 +275,6 @@ def _tracker_name(value: str) -> str:
     """``--tracker``: ``klt`` (what ``track`` calls the paper's optical-flow tracker) is
     ``flow`` here."""
     return {"klt": "flow"}.get(value, value)
-
-
-#: largest |factor| of ``edit --scale`` and |amount| of ``edit --add``: beyond it a face leaves
-#: the space the model was trained on (weights of 1e307 were written before issue 16)
-MAX_EDIT_FACTOR = 10.0
 
 
 def _positive(value, name):
@@ -613,66 +578,6 @@ def _dialled_identity(model, identity, args):
         tt.check_model(model)
         identity = constant_weights(tt, dials.mode)
     return dials.apply(identity, values)
-
-
-def _model_for_track(track, model_path):
-    """``--model`` checked against the track, or without it the default model, built on first
-    use as every other command builds it (before, edit asked to run `facetransfer demo`)."""
-    from ..model import load_model
-
-    if model_path is None:
-        return default_model_for(track)
-    model = load_model(model_path)
-    track.check_model(model)
-    return model
-
-
-def run_edit(args) -> int:
-    from ..io.atomic import check_output_path
-    from ..track import Track
-    from ..transfer import edit_track, parse_add, parse_scale
-
-    if not args.add and not args.scale and not args.identity_dials:
-        raise FaceTransferError("nothing to do: give --add EXPR@START-END, --scale "
-                                "EXPR=FACTOR and/or --identity-dials NAME=UNITS")
-    from ..take import is_take
-    from .edit_take import check_edit_kind, run_take_edit
-
-    check_edit_kind(args)      # a take's options, a track's output named as a take
-    dial_values = None
-    if args.identity_dials:
-        from ..dials import parse_dial_values
-
-        dial_values = parse_dial_values(args.identity_dials)
-    adds = [parse_add(a) for a in args.add]
-    scales = [parse_scale(s) for s in args.scale]
-    for s, text in zip(scales, args.scale):
-        if not abs(s.factor) <= MAX_EDIT_FACTOR:
-            raise FaceTransferError(f"--scale {text}: the factor must lie in "
-                                    f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}] (for an "
-                                    f"ARKit model's activations [0, {MAX_EDIT_FACTOR:g}])")
-    for a, text in zip(adds, args.add):
-        if not abs(a.amount) <= MAX_EDIT_FACTOR:
-            raise FaceTransferError(f"--add {text}: the amount must lie in "
-                                    f"[-{MAX_EDIT_FACTOR:g}, {MAX_EDIT_FACTOR:g}]")
-    args.ramp = option_with(args.ramp, 8, "--ramp", args.add, "--add")
-    if args.ramp < 0:
-        raise FaceTransferError(f"--ramp must be >= 0 frames, got {args.ramp}")
-    if is_take(args.track):
-        return run_take_edit(args, adds, scales)
-    check_track_name(args.out)
-    check_output_path(args.out, overwrite=args.overwrite, inputs=[args.track, args.model])
-    track = Track.load(args.track)
-    model = _model_for_track(track, args.model)
-    new = edit_track(track, model, add=adds, scale=scales, ramp=args.ramp)
-    if dial_values:
-        from ..dials import dial_track
-
-        new = dial_track(new, model, dial_values)
-    new.save(args.out, overwrite=args.overwrite)
-    print(f"wrote {args.out}: {frame_count(new.n_frames)}, {len(adds)} addition(s), "
-          f"{len(scales)} scaling(s)" + (f", dials {args.identity_dials}" if dial_values else ""))
-    return 0
 
 
 def _puppet_identity(model, label: str | None):

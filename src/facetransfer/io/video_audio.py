@@ -15,11 +15,12 @@ from pathlib import Path
 from .ffmpeg import ffmpeg_error, ffmpeg_exe
 from .video_display import checked_timecode, described_input, timecode_args
 from .video_options import VIDEO_SUFFIXES
+from .video_timeline import first_frame_time
 
 log = logging.getLogger(__name__)
 
 __all__ = ["COPIED_AUDIO", "audio_codec", "audio_codec_args", "audio_codecs", "audio_input_args",
-           "has_audio", "mux_audio"]
+           "audio_seek", "has_audio", "mux_audio"]
 
 
 def has_audio(path: str | os.PathLike) -> bool:
@@ -58,10 +59,12 @@ def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str 
     """Copy ``video``'s frames and ``audio_from``'s audio into ``out``.
 
     The video stream is copied as is; the audio too when the container holds its codec
-    (:data:`COPIED_AUDIO`), else it is encoded to AAC; it starts at ``start`` seconds and is
-    cut to ``duration`` (default: the shorter stream). ``timecode``: the start timecode
-    written (:attr:`VideoOptions.timecode`; the video's own is not copied). Returns False (and
-    logs why) when there is no ffmpeg or no audio, in which case ``out`` is not written.
+    (:data:`COPIED_AUDIO`), else it is encoded to AAC; it starts at ``start`` seconds after the
+    first frame of ``audio_from``'s picture (:func:`audio_seek`: in step with it where the
+    sound starts earlier) and is cut to ``duration`` (default: the shorter stream).
+    ``timecode``: the start timecode written (:attr:`VideoOptions.timecode`; the video's own
+    is not copied). Returns False (and logs why) when there is no ffmpeg or no audio, in which
+    case ``out`` is not written.
 
     Raises
     ------
@@ -78,8 +81,9 @@ def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str 
         return False
     fmt = VIDEO_SUFFIXES.get(Path(out).suffix.lower(), "mp4")
     cmd = [exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-y", "-i", str(video)]
-    if start:
-        cmd += ["-ss", f"{start:.3f}"]
+    seek = audio_seek(audio_from, start)
+    if seek:
+        cmd += ["-ss", f"{seek:.3f}"]
     cmd += ["-i", str(audio_from), "-map", "0:v:0", "-map", "1:a", "-c:v", "copy",
             *audio_codec_args(codecs, fmt)]
     # cut to the video's length; a shorter audio track just ends early
@@ -94,11 +98,23 @@ def mux_audio(video: str | os.PathLike, audio_from: str | os.PathLike, out: str 
     return True
 
 
+def audio_seek(audio_from, start: float = 0.0) -> float:
+    """Where in ``audio_from`` (seconds from the file's start, as ffmpeg's input ``-ss``
+    counts) the sound of a video written from its frames ``start`` seconds after its first one
+    begins: ``start`` plus the time the file's picture starts after its sound
+    (:func:`facetransfer.io.video_timeline.first_frame_time`). A phone's clip whose audio leads
+    its picture by 0.5 s (an edit list) had its output's sound 0.5 s late before: it was
+    taken from the file's start, not from the picture's."""
+    return float(start) + first_frame_time(audio_from)
+
+
 def audio_input_args(audio_from, codecs: tuple[str, ...], fmt: str, *, start: float = 0.0,
                      duration: float) -> list[str]:
     """ffmpeg arguments adding every audio stream of ``audio_from`` (in ``codecs``) as the
-    second input of a video written into the container ``fmt``: from ``start`` seconds, cut
-    to ``duration``, copied or encoded as :func:`audio_codec_args` says."""
-    return [*(["-ss", f"{start:.3f}"] if start else []), "-t", f"{duration:.3f}",
+    second input of a video written into the container ``fmt``: from ``start`` seconds after
+    its picture's first frame (:func:`audio_seek`), cut to ``duration``, copied or encoded as
+    :func:`audio_codec_args` says."""
+    seek = audio_seek(audio_from, start)
+    return [*(["-ss", f"{seek:.3f}"] if seek else []), "-t", f"{duration:.3f}",
             "-i", str(audio_from), "-map", "0:v:0", "-map", "1:a",
             *audio_codec_args(codecs, fmt)]

@@ -15,6 +15,7 @@ from __future__ import annotations
 import functools
 import os
 import re
+import struct
 import subprocess
 from dataclasses import dataclass
 
@@ -28,7 +29,8 @@ __all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixe
            "frame_args", "colour_named", "checked_colour_name", "described", "described_input",
            "video_colour",
            "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK",
-           "checked_timecode", "timecode_args", "timecode_of", "timecode_seconds"]
+           "checked_timecode", "timecode_args", "timecode_of", "timecode_seconds",
+           "display_mirrored"]
 
 #: ffmpeg arguments naming the colour of a video written
 #: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
@@ -311,3 +313,88 @@ def colour_matrix(path: str | os.PathLike) -> str | None:
     """The colour matrix a video's header names, as ffmpeg names it (``"bt709"``,
     ``"smpte170m"``, ...); None when it names none or without ffmpeg."""
     return video_colour(path).matrix
+
+
+def display_mirrored(path: str | os.PathLike) -> bool:
+    """Whether a QuickTime or MP4 file's display matrix mirrors its first video track (the
+    determinant of its track header's matrix is negative: a front camera's clip written
+    mirrored by its header, ``ffmpeg -display_hflip``). Players (and ffmpeg) show it
+    mirrored back; OpenCV turns it by the matrix's rotation alone, so the readers mirror it
+    (:func:`facetransfer.io.video_read.iter_frames`). False for any other file, or one that
+    cannot be read."""
+    if is_sequence(path):
+        return False
+    try:
+        stamp = file_stamp(path)
+    except OSError:
+        return False
+    return _kept_mirrored(str(path), stamp)
+
+
+@functools.lru_cache(maxsize=32)
+def _kept_mirrored(path: str, stamp: str) -> bool:
+    try:
+        with open(path, "rb") as f:
+            moov = _box(f, b"moov", os.fstat(f.fileno()).st_size)
+            return moov is not None and _video_matrix_mirrored(moov)
+    except (OSError, struct.error, ValueError):
+        return False
+
+
+def _boxes(data: bytes):
+    """``(type, payload)`` of the ISO-BMFF boxes laid one after another in ``data``."""
+    at = 0
+    while at + 8 <= len(data):
+        size, kind = struct.unpack(">I4s", data[at:at + 8])
+        head = 8
+        if size == 1:
+            size, head = struct.unpack(">Q", data[at + 8:at + 16])[0], 16
+        elif size == 0:
+            size = len(data) - at
+        if size < head:
+            return
+        yield kind, data[at + head:at + size]
+        at += size
+
+
+def _box(f, kind: bytes, end: int) -> bytes | None:
+    """The payload of the top-level box ``kind`` of an open file (the boxes before it skipped
+    by their sizes, not read: a phone writes ``moov`` after gigabytes of ``mdat``)."""
+    at = 0
+    while at + 8 <= end:
+        f.seek(at)
+        head = f.read(16)
+        if len(head) < 8:
+            return None
+        size, box = struct.unpack(">I4s", head[:8])
+        start = 8
+        if size == 1:
+            size, start = struct.unpack(">Q", head[8:16])[0], 16
+        elif size == 0:
+            size = end - at
+        if size < start:
+            return None
+        if box == kind:
+            if size > 64 << 20:      # a header this large is no header
+                return None
+            f.seek(at + start)
+            return f.read(size - start)
+        at += size
+    return None
+
+
+def _video_matrix_mirrored(moov: bytes) -> bool:
+    """Whether the first video track (handler ``vide``) of a ``moov`` payload has a track
+    header matrix of negative determinant (``a d - b c < 0``, in 16.16 fixed point)."""
+    for kind, trak in _boxes(moov):
+        if kind != b"trak":
+            continue
+        parts = dict(_boxes(trak))
+        mdia = dict(_boxes(parts.get(b"mdia", b"")))
+        if mdia.get(b"hdlr", b"")[8:12] != b"vide" or b"tkhd" not in parts:
+            continue
+        tkhd = parts[b"tkhd"]
+        at = 4 + (32 if tkhd[:1] == b"\x01" else 20) + 16   # version, times, layer ...
+        a, b, _, c, d = struct.unpack(">5i", tkhd[at:at + 20])
+        return a * d - b * c < 0
+    return False

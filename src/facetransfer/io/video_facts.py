@@ -22,7 +22,7 @@ from .plate_alpha import cmyk_still, sequence_has_alpha, video_has_alpha
 from .video_depth import video_bits
 from .video_planes import stored_pixel_format
 from .video_read import TRUNCATED_FRAMES, seeks_exactly, video_info
-from .video_timeline import packet_count
+from .video_timeline import first_frame_time, packet_count
 from .frame_file import bit_depth
 from .video_sequence import IMAGE_SUFFIXES, is_sequence, open_sequence
 
@@ -110,6 +110,8 @@ class VideoFacts:
     rate_from: str | None = None
     stored_frames: int | None = None
     pixel_format: str | None = None
+    picture_start: float = 0.0
+    mirrored: bool = False
 
     def as_dict(self) -> dict:
         """The facts as JSON-ready values (the colour tags a dict of their own)."""
@@ -138,16 +140,20 @@ def video_facts(path: str | os.PathLike) -> VideoFacts:
                       video_colour(path), ", ".join(audio_codecs(path)) or None, turn=info.turn,
                       timecode=timecode_of(path), alpha=video_has_alpha(path),
                       bits=video_bits(path), stored_frames=packet_count(path),
-                      pixel_format=stored_pixel_format(path))
+                      pixel_format=stored_pixel_format(path),
+                      picture_start=first_frame_time(path) if audio_codecs(path) else 0.0,
+                      mirrored=info.mirrored)
 
 
 def fact_lines(f: VideoFacts) -> list[str]:
     """The facts as a few lines for a person, with what each means for the commands."""
     size = "{}x{}".format(*f.size)
-    if f.turn:
-        stored = f.size if f.turn == 180 else f.size[::-1]
-        size += (" upright (stored {}x{}, turned {} degrees clockwise by its display matrix "
-                 "as players show it; results written upright)").format(*stored, f.turn)
+    if f.turn or f.mirrored:
+        stored = f.size if f.turn in (0, 180) else f.size[::-1]
+        how = f"turned {f.turn} degrees clockwise" if f.turn else ""
+        how += (" and " if f.turn else "") + "mirrored" if f.mirrored else ""
+        size += (" upright (stored {}x{}, {} by its display matrix as players show it; "
+                 "results written upright)").format(*stored, how)
     if f.shown_size != f.size:
         size += ("{}, shown {}x{} (pixels {}:{}: tracked resampled to square pixels, "
                  "results written with the same ratio)").format(
@@ -190,7 +196,7 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 "one frame", f"  {_still_colour(f)}; "
                 f"{_depth_words(f) if f.bits > 8 else 'no audio'}"]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
-            f"  {colour}; audio {f.audio or 'none'}" + (
+            f"  {colour}; audio {f.audio or 'none'}" + _lead_words(f) + (
                 "" if f.timecode is None else
                 f"; timecode {f.timecode} (the results start at it)"),
             f"  container {f.container or '?'}; {reading}"] + (
@@ -200,6 +206,14 @@ def fact_lines(f: VideoFacts) -> list[str]:
                     "PNG, TIFF or DPX sequence")] if f.bits > 8 else []) + (
                 ["  alpha plane: kept by transfer in ProRes 4444 (--codec prores) or a PNG, "
                  "TIFF or DPX sequence"] if f.alpha else [])
+
+
+def _lead_words(f: VideoFacts) -> str:
+    """What :attr:`VideoFacts.picture_start` means, said where it is 10 ms or more."""
+    if f.picture_start < 0.01 or not f.audio:
+        return ""
+    return (f" (starting {f.picture_start:.2f} s before the picture: results take it from the "
+            "picture's first frame)")
 
 
 #: A still's colour tags as ffmpeg names them, in words (:func:`_still_colour`).

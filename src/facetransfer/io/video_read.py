@@ -19,7 +19,8 @@ import numpy as np
 
 from ..errors import VideoError
 from .verified import file_stamp
-from .video_display import exact_seek, first_field, pixel_aspect  # noqa: F401 (pixel_aspect: API)
+from .video_display import (display_mirrored, exact_seek, first_field,  # noqa: F401
+                            pixel_aspect)  # (pixel_aspect: API)
 from .video_pipe import piped_frames
 from .video_sequence import (IMAGE_SUFFIXES, is_sequence, open_sequence, pattern_of_file,
                              sequence_files, sequence_frames, sequence_stamp, suggested_pattern)
@@ -60,6 +61,11 @@ class VideoInfo:
         upright or upside down): the frames are read turned, as a player shows them (OpenCV
         and ffmpeg both turn them), so ``size`` and ``sar`` are the turned frames' (a quarter
         turn swaps the stored width and height, and the pixel aspect ratio's terms).
+    mirrored : bool
+        The display matrix also mirrors the pictures
+        (:func:`facetransfer.io.video_display.display_mirrored`): OpenCV turns them only, so
+        its frames are mirrored back (rows for a turn of 0 or 180, columns for a quarter
+        turn), as ffmpeg and players show them.
     """
 
     path: Path
@@ -70,6 +76,7 @@ class VideoInfo:
     steps: tuple[int, ...] | None = field(default=None, repr=False)
     piped: bool = False
     turn: int = 0
+    mirrored: bool = False
 
 
 def _warn_frame_of_sequence(p: Path) -> None:
@@ -194,9 +201,12 @@ def _video_info(path) -> VideoInfo:
                  "garbage)", path)
     n = _counted(path, n)
     even = timeline(path, n)
+    mirrored = display_mirrored(path)
     if even is None:
-        return VideoInfo(Path(path), fps, n, size, sar, piped=piped, turn=turn)
-    return VideoInfo(Path(path), even[0], len(even[1]), size, sar, even[1], piped, turn)
+        return VideoInfo(Path(path), fps, n, size, sar, piped=piped, turn=turn,
+                         mirrored=mirrored)
+    return VideoInfo(Path(path), even[0], len(even[1]), size, sar, even[1], piped, turn,
+                     mirrored)
 
 
 #: Containers that store no frame count: OpenCV's is its duration times its rate (a
@@ -206,11 +216,18 @@ UNCOUNTED = ("matroska,webm",)
 
 def _counted(path, n: int) -> int:
     """The frames of a video whose container stores no count (:data:`UNCOUNTED`): its video
-    packets (:func:`facetransfer.io.video_timeline.packet_count`); else ``n``, OpenCV's."""
+    packets (:func:`facetransfer.io.video_timeline.packet_count`); of one whose edit list hides
+    frames (a phone's clip trimmed without re-encoding: :func:`facetransfer.io.video_timeline.
+    hidden_count`), the ones shown, where OpenCV counted them all; else ``n``, OpenCV's."""
     from .video_display import container
-    from .video_timeline import packet_count
+    from .video_timeline import hidden_count, packet_count
 
     if container(path) not in UNCOUNTED:
+        hidden = hidden_count(path)
+        if hidden and n > hidden:
+            log.info("%s: %d frames shown (%d more stored before its edit list's start)", path,
+                     n - hidden, hidden)
+            return n - hidden
         return n
     m = packet_count(path)
     if m and m != n:
@@ -387,17 +404,23 @@ def _bgr_to_rgb(dst: np.ndarray, bgr: np.ndarray) -> None:
 
 def _decoded(path, start: int, stop: int | None, seek: bool = True) -> Iterator[np.ndarray]:
     """The stored frames ``start`` to ``stop`` as BGR, in one decoding buffer reused for each
-    (reached by the container's seek to ``start`` where ``seek`` and it is exact, :func:`_at`)."""
+    (reached by the container's seek to ``start`` where ``seek`` and it is exact, :func:`_at`);
+    a mirrored video's mirrored back (:attr:`VideoInfo.mirrored`) into a second one."""
+    import cv2
+
+    info = video_info(path)
+    mirror = None if not info.mirrored else 0 if info.turn in (0, 180) else 1  # cv2.flip code
     cap = _open(path)
     try:
         if not _at(cap, path, start, seek):
             return
-        n, bgr = 0, None
+        n, bgr, shown = 0, None, None
         while stop is None or start + n < stop:
             ok, bgr = cap.read(bgr)
             if not ok:
                 break
-            yield bgr
+            shown = bgr if mirror is None else cv2.flip(bgr, mirror, dst=shown)
+            yield shown
             n += 1
     finally:
         cap.release()

@@ -32,7 +32,8 @@ from .video_sequence import is_sequence
 
 log = logging.getLogger(__name__)
 
-__all__ = ["UNEVEN", "SEEK_SLACK", "on_rate_grid", "packet_times", "timeline"]
+__all__ = ["UNEVEN", "SEEK_SLACK", "first_frame_time", "hidden_count", "on_rate_grid",
+           "packet_times", "timeline"]
 
 #: A video's frames are uneven when an interval between two of them is outside this range of
 #: their median interval (a millisecond time base's 33/34 ms steps are even).
@@ -65,8 +66,9 @@ def _listing(path: str | os.PathLike) -> str | None:
 
 def _framecrc_times(text: str, column: int = 2) -> np.ndarray | None:
     """The sorted times in seconds of a ``framecrc`` listing of one stream (lines
-    ``stream, dts, pts, duration, size, checksum``, time base ``#tb 0: num/den``): its
-    presentation times (``column`` 2), or its decoding times (1)."""
+    ``stream, dts, pts, duration, size, checksum[, F=0xFLAGS]``, time base ``#tb 0:
+    num/den``): its presentation times (``column`` 2), or its decoding times (1), of the
+    packets shown (:func:`_hidden`)."""
     tb = re.search(r"^#tb 0: (\d+)/(\d+)", text, re.M)
     if not tb or int(tb[2]) == 0:
         return None
@@ -75,7 +77,7 @@ def _framecrc_times(text: str, column: int = 2) -> np.ndarray | None:
         if line.startswith("#"):
             continue
         parts = [p.strip() for p in line.split(",")]
-        if len(parts) < 4 or parts[0] != "0":
+        if len(parts) < 4 or parts[0] != "0" or _hidden(parts):
             continue
         try:
             pts.append(int(parts[column]))
@@ -92,13 +94,39 @@ def _framecrc_times(text: str, column: int = 2) -> np.ndarray | None:
     return times if np.isfinite(times).all() else None
 
 
+#: ffmpeg's flag of a packet its demuxer reads but no decoder shows (``AV_PKT_FLAG_DISCARD``).
+DISCARD = 0x4
+
+
+def _hidden(parts: list[str]) -> bool:
+    """Whether a ``framecrc`` line (its fields) is of a packet outside the file's edit list:
+    a clip trimmed without re-encoding (a phone's Photos app, an editor's stream copy) keeps
+    the frames before its cut from the keyframe they need, flagged :data:`DISCARD`, and
+    decoders drop them. Counted, they made a clip trimmed by 1 s read as 30 frames longer,
+    uneven and cut short."""
+    flags = parts[-1]
+    if not flags.startswith("F=0x"):
+        return False
+    try:
+        return bool(int(flags[4:], 16) & DISCARD)
+    except ValueError:
+        return False
+
+
+def _count_hidden(text: str) -> int:
+    """How many packets of a ``framecrc`` listing of one stream are :func:`_hidden`."""
+    return sum(1 for line in text.splitlines() if line.startswith("0,")
+               and _hidden([p.strip() for p in line.split(",")]))
+
+
 @functools.lru_cache(maxsize=32)
 def _cached_packets(path: str, stamp: str) -> tuple:
-    """``(presentation times, decoding times)`` of the packets (:func:`_framecrc_times`)."""
+    """``(presentation times, decoding times)`` of the packets shown (:func:`_framecrc_times`),
+    and how many are hidden by the edit list (:func:`_hidden`)."""
     text = _listing(path)
     if text is None:
-        return None, None
-    return _framecrc_times(text), _framecrc_times(text, 1)
+        return None, None, 0
+    return _framecrc_times(text), _framecrc_times(text, 1), _count_hidden(text)
 
 
 def _cached_times(path: str, stamp: str) -> np.ndarray | None:
@@ -110,15 +138,45 @@ def _cached_timeline(path: str, stamp: str, n_frames: int):
     return _timeline(_cached_times(path, stamp), n_frames, path)
 
 
+def hidden_count(path: str | os.PathLike) -> int:
+    """How many packets of the first video stream its edit list hides (:func:`_hidden`: a
+    trimmed clip's frames before the cut), which :func:`packet_count` and the times leave
+    out and OpenCV's frame count includes; 0 where they cannot be read."""
+    try:
+        stamp = file_stamp(path)
+    except OSError:
+        return 0
+    return int(_cached_packets(str(path), stamp)[2])
+
+
 def packet_count(path: str | os.PathLike) -> int | None:
-    """How many packets the first video stream stores (:func:`packet_times`, kept per file
-    with the timeline's); None where they cannot be read."""
+    """How many packets of the first video stream are shown (:func:`packet_times`, less
+    those its edit list hides: :func:`hidden_count`; kept per file with the timeline's); None
+    where they cannot be read."""
     try:
         stamp = file_stamp(path)
     except OSError:
         return None
     times = _cached_times(str(path), stamp)
     return None if times is None else int(len(times))
+
+
+def first_frame_time(path: str | os.PathLike) -> float:
+    """Seconds from a media file's start to its first video frame: where its picture starts on
+    the timeline its audio is read on (ffmpeg counts both from the file's start, the earliest
+    of its streams). 0.0 for most files; a phone's clip whose sound starts before its picture
+    (an edit list, audio recorded first) gives the time the sound leads by. 0.0 where the
+    packets cannot be read or the file has no video (kept per file, with the timeline's)."""
+    if is_sequence(path):
+        return 0.0
+    try:
+        stamp = file_stamp(path)
+    except OSError:
+        return 0.0
+    times = _cached_times(str(path), stamp)
+    if times is None or not len(times) or not np.isfinite(times[0]):
+        return 0.0
+    return max(0.0, float(times[0]))
 
 
 def timeline(path: str | os.PathLike, n_frames: int) -> tuple[float, tuple[int, ...]] | None:
@@ -177,7 +235,7 @@ def on_rate_grid(path: str | os.PathLike, fps: float) -> bool:
 
 @functools.lru_cache(maxsize=32)
 def _cached_on_grid(path: str, stamp: str, fps: float) -> bool:
-    shown, decoded = _cached_packets(path, stamp)
+    shown, decoded, _ = _cached_packets(path, stamp)
     times = decoded if shown is None else shown
     if times is None or not fps > 0:
         return False

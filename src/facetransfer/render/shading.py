@@ -10,7 +10,7 @@ from ..errors import AssetError, ShapeError
 from .raster import Raster, RenderError, _check_mesh, _face_cross, _maybe_njit
 
 __all__ = ["vertex_normals", "sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS",
-           "interpolate_vertex_values"]
+           "interpolate_vertex_values", "interpolate_vertex_pair"]
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -349,6 +349,67 @@ def interpolate_vertex_values(raster: Raster, faces: np.ndarray, values: np.ndar
     return out
 
 
+def interpolate_vertex_pair(raster: Raster, faces: np.ndarray, values: np.ndarray,
+                            more: np.ndarray, box: tuple[slice, slice] | None = None
+                            ) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`interpolate_vertex_values` of two per-vertex scalars over the same raster and
+    box in one pass: the same bits as two calls, the raster's triangles and barycentrics read
+    once (the jaw region's two alphas, :func:`facetransfer.jaw._paint_jaw`: 0.65 -> 0.45 ms
+    a frame of issue 13's pair).
+
+    Parameters
+    ----------
+    raster : Raster
+        Of a mesh with faces ``faces``.
+    faces : (F, 3) int
+    values, more : (n,) float
+        One value per vertex the faces index, each.
+    box : (slice, slice), optional
+        ``(rows, columns)`` of the raster (default: all of it), with unit steps.
+
+    Returns
+    -------
+    (h, w) float32, (h, w) float32
+        ``values`` and ``more`` interpolated; 0 where nothing is.
+    """
+    Fa = np.ascontiguousarray(faces, dtype=np.int64)
+    top = int(Fa.max()) if Fa.size else -1
+    vs = []
+    for v in (values, more):
+        v = np.ascontiguousarray(v, dtype=np.float32)
+        if v.ndim != 1 or v.shape[0] <= top:
+            raise ShapeError(f"values must be (n,) covering the faces' vertices, got {v.shape}")
+        vs.append(v)
+    tid, bary = _whole(raster)
+    y0, x0, h, w = _box_of(box, tid.shape)
+    out, out2 = np.zeros((h, w), np.float32), np.zeros((h, w), np.float32)
+    if not _interpolate_pair_kernel(tid, bary, y0, x0, Fa, vs[0], vs[1], out, out2):
+        raise ShapeError(f"the raster's triangles exceed the {len(Fa)} faces given")
+    return out, out2
+
+
+def _interpolate_pair_kernel_py(tid, bary, y0, x0, F, values, more, out,
+                                out2):  # pragma: no cover (numba)
+    """:func:`_interpolate_kernel` of ``values`` into ``out`` and of ``more`` into ``out2``
+    (both (h, w) float32) in one pass, each sum in its order."""
+    H, W = out.shape
+    n = F.shape[0]
+    for iy in range(H):
+        y = np.uint64(y0 + iy)  # unsigned: no negative-index wrapping per read
+        for ix in range(W):
+            x = np.uint64(x0 + ix)
+            f = tid[y, x]
+            if f < 0:
+                continue
+            if f >= n:
+                return False
+            b0, b1, b2 = bary[y, x, 0], bary[y, x, 1], bary[y, x, 2]
+            i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
+            out[iy, ix] = b0 * values[i0] + b1 * values[i1] + b2 * values[i2]
+            out2[iy, ix] = b0 * more[i0] + b1 * more[i1] + b2 * more[i2]
+    return True
+
+
 def _interpolate_kernel_py(tid, bary, y0, x0, F, values, out):  # pragma: no cover (numba)
     """:func:`interpolate_vertex_values` into ``out`` (h, w) float32, the box of that shape
     at ``(x0, y0)`` of the whole raster ``tid``, ``bary``; False (and stops) at a triangle
@@ -370,6 +431,7 @@ def _interpolate_kernel_py(tid, bary, y0, x0, F, values, out):  # pragma: no cov
 
 
 _interpolate_kernel = _maybe_njit(_interpolate_kernel_py)
+_interpolate_pair_kernel = _maybe_njit(_interpolate_pair_kernel_py)
 
 
 def _check_uvs(uvs, n_vertices: int) -> np.ndarray:

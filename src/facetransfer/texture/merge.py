@@ -279,6 +279,8 @@ def push_pull_points(shape: tuple[int, int], ry: np.ndarray, rx: np.ndarray,
     Returns
     -------
     (H, W, 3) float32
+        C-contiguous; for an even ``W`` the first ``H`` rows of the finest push's upsampling
+        (its rows are ``W`` wide: the points are written into it, no copy of the crop).
     """
     H, W = shape
     vals = np.ascontiguousarray(values, np.float32)
@@ -292,8 +294,13 @@ def push_pull_points(shape: tuple[int, int], ry: np.ndarray, rx: np.ndarray,
     ry, rx = np.ascontiguousarray(ry, np.int64), np.ascontiguousarray(rx, np.int64)
     col, wgt, offsets, shapes = _pyramid(H, W)
     _pull_from_points(ry, rx, vals, col, wgt, *_as_arrays(offsets, shapes))
+    up = _push_levels(col, wgt, offsets, shapes)  # (2 ceil(H / 2), 2 ceil(W / 2), 3)
+    if up.shape[1] == W:  # its first H rows are the crop's, C-contiguous: in place
+        out = up[:H]
+        _points(ry, rx, vals, out)
+        return out
     out = np.empty((H, W, 3), np.float32)
-    _points_over(_push_levels(col, wgt, offsets, shapes), ry, rx, vals, out)
+    _points_over(up, ry, rx, vals, out)
     return out
 
 
@@ -433,6 +440,13 @@ def _points_over_py(up, ry, rx, vals, out):  # pragma: no cover (numba)
         for i in range(3 * W):
             j = np.uint64(i)
             of[o + j] = uf[u + j]
+    _points(ry, rx, vals, out)
+
+
+def _points_py(ry, rx, vals, out):  # pragma: no cover (numba)
+    """``out[ry, rx] = vals``: ``vals`` (k, 3) at the points ``(ry, rx)`` of ``out`` (H, W,
+    3), the last step of :func:`_points_over` (alone where the upsampling's rows are the
+    crop's: :func:`push_pull_points`)."""
     for i in range(ry.shape[0]):
         out[ry[i], rx[i], 0] = vals[i, 0]
         out[ry[i], rx[i], 1] = vals[i, 1]
@@ -443,6 +457,7 @@ _pull_image = _maybe_njit(_pull_image_py)
 _pull_from_points = _maybe_njit(_pull_from_points_py)
 _known_over = _maybe_njit(_known_over_py)
 _known_or_up = _maybe_njit(_known_or_up_py)
+_points = _maybe_njit(_points_py)
 _points_over = _maybe_njit(_points_over_py)
 
 

@@ -31,7 +31,8 @@ from ..errors import OutputError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["KEEP", "LAYOUT", "cache_enabled", "code_digest", "code_fingerprint", "track_dir",
+__all__ = ["FRAME_READERS", "KEEP", "LAYOUT", "fingerprinted_files", "cache_enabled", "code_digest",
+           "code_fingerprint", "track_dir",
            "track_key", "holds", "cached_track", "store_track", "partial_path"]
 
 #: The cache's layout: a change of what a key means (or of the trackers' results) changes it.
@@ -73,20 +74,33 @@ def track_key(video, n_frames: int, method: str, options, model) -> str | None:
     return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:32]
 
 
+#: The video readers whose changes change a track (a clip's frames, their times, their turn):
+#: a reader that came to read a phone's trimmed or mirrored clip right made the tracks cached
+#: of it before wrong, and they were still taken.
+FRAME_READERS = ("io/video_read.py", "io/video_timeline.py", "io/video_display.py",
+                 "io/video_pipe.py")
+
+
+def fingerprinted_files(root: Path) -> list[Path]:
+    """The package's files (under its folder ``root``) that :func:`code_fingerprint` digests."""
+    files = sorted((root / "track").glob("*.py")) + sorted((root / "data").glob("*.json"))
+    return files + [root / n for n in ("arkit.py", "model.py", "tensor.py", *FRAME_READERS)]
+
+
 @functools.lru_cache(maxsize=1)
 def code_fingerprint() -> str:
     """A digest of what makes a track besides its inputs: the sources of
-    :mod:`facetransfer.track`, of the model and ARKit modules, the package's data files (the
-    landmark mappings), and the versions of MediaPipe (the detector) and OpenCV (the decoder
-    and the point flow)."""
+    :mod:`facetransfer.track`, of the model and ARKit modules, of the readers that decide which
+    frames a video gives and how they are turned (:data:`FRAME_READERS`), the package's data
+    files (the landmark mappings), and the versions of MediaPipe (the detector) and OpenCV (the
+    decoder and the point flow)."""
     from importlib import metadata
 
     import cv2
 
     root = Path(__file__).resolve().parent.parent
-    files = sorted((root / "track").glob("*.py")) + sorted((root / "data").glob("*.json"))
-    files += [root / n for n in ("arkit.py", "model.py", "tensor.py")]
-    return code_digest(root, files, f"mediapipe={metadata.version('mediapipe')} "
+    return code_digest(root, fingerprinted_files(root),
+                       f"mediapipe={metadata.version('mediapipe')} "
                                     f"cv2={cv2.__version__}")
 
 
