@@ -245,6 +245,29 @@ def test_the_puppet_of_a_take_looks_where_the_take_recorded(arkit_model, tmp_pat
         assert d[0] > 2, d
 
 
+def test_puppet_frames_of_a_take_turn_the_eyes_by_its_recorded_angles(arkit_model, tmp_path,
+                                                                      monkeypatch):
+    """puppet_frames itself (the command's path) turns a take's eyes by its recorded angles:
+    both irises right of the same take's with its eye columns 0; and the render cache's key of
+    the two takes differs (the angles are in the track's info, which the track's arrays do not
+    carry: before, an edit of a take's eye columns alone reused the old puppet)."""
+    from facetransfer import render_cache
+    from facetransfer.take import take_track
+
+    mean = arkit_model.weight_mean("identity")
+    looked = take_track(_take_with_eye_columns(arkit_model, tmp_path / "t.csv", **RECORDED),
+                        arkit_model, mean)
+    ahead = take_track(_take_with_eye_columns(arkit_model, tmp_path / "z.csv"), arkit_model,
+                       mean)
+    a, b = (next(puppet_frames(t, arkit_model, mean)) for t in (ahead, looked))
+    for eye in (LEFT_EYE, RIGHT_EYE):
+        box = _box(arkit_model, looked, eye)
+        assert (_iris_centre(b, box) - _iris_centre(a, box))[0] > 2
+    monkeypatch.setattr(render_cache, "cache_enabled", lambda: True)
+    keys = {render_cache.puppet_key(t, arkit_model, mean, None) for t in (ahead, looked)}
+    assert len(keys) == 2
+
+
 @pytest.mark.parametrize("size", [64, 128])
 def test_a_small_puppets_mouth_at_rest_shows_no_teeth_at_any_subpixel_position(arkit_model,
                                                                                size):

@@ -136,6 +136,9 @@ def puppet_key(track, model, identity, video_options, *, images: bool = False) -
     h = _keyed(model, video_options, track.fps, images, kind="puppet")
     _update_track(h, track)
     _update_value(h, np.asarray(identity, np.float64))
+    recorded = track.info.get("eye_gaze")  # a take's own eye angles (puppet_face.track_gaze)
+    if recorded is not None:
+        _update_value(h, np.asarray(recorded, np.float64))
     return h.hexdigest()[:32]
 
 

@@ -443,7 +443,7 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     ------
     (H, W, 3) uint8
     """
-    from .puppet_face import arkit_activations, paint_face, puppet_face
+    from .puppet_face import paint_face, puppet_face, track_gaze
     from .render import render
     from .track.project import nearest_tracked
 
@@ -458,7 +458,7 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     # a solid head: the mouth gap and the eye holes closed, their fills painted as a mouth
     # cavity and eyeballs (facetransfer.puppet_face)
     topo = mesh_topology(model, lips=False)
-    face = puppet_face(model, topo, arkit_activations(track))
+    face = puppet_face(model, topo, gaze=track_gaze(track))
     n_all = topo.n_closed + len(topo.eye_loops)
     colors = np.broadcast_to(np.asarray(color, np.float64), (n_all, 3))
 
