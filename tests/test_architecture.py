@@ -333,3 +333,17 @@ def test_the_readme_paper_table_names_modules_that_exist():
     for m in pkgutil.iter_modules(correspond.__path__):
         if m.name not in ("prior", "report", "synthetic"):   # the project's own additions
             assert f"`{m.name}`" in row, m.name
+
+
+def test_the_readme_architecture_names_every_module_of_the_package_top():
+    """README's "Architecture" is the module map a newcomer walks the layers by: it named
+    neither ``arrays`` nor ``performance_edit`` (the Fig. 7E edits, moved out of ``transfer``)
+    nor ``puppet_face``, which ``LAYER_OF`` places. Every top-level module and subpackage of
+    the package must be named there (in backticks)."""
+    import re
+
+    text = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    section = text.split("\n## Architecture", 1)[1].split("\n## ", 1)[0]
+    named = set(re.findall(r"`(\w+)`", section))
+    top = {m.split(".")[1] for m in MODULES if m.count(".") >= 1}
+    assert sorted(top - named) == []
