@@ -347,3 +347,33 @@ def test_the_readme_architecture_names_every_module_of_the_package_top():
     named = set(re.findall(r"`(\w+)`", section))
     top = {m.split(".")[1] for m in MODULES if m.count(".") >= 1}
     assert sorted(top - named) == []
+
+
+#: Modules their subpackage's docstring does not name yet, each with its reason; a mended one
+#: must leave this list.
+UNNAMED_IN_PACKAGE_MAP = {
+    # render/ was being edited by another helper in the fifty-second session: its docstring
+    # should say that the kernels' numba decorator lives in .jit (imported through .raster)
+    ("render", "jit"): "the house's numba decorator",
+}
+
+
+def test_each_subpackage_maps_its_modules():
+    """A subpackage's docstring is its module map (``track``'s named neither ``dense`` nor
+    ``capture_frame``, ``texture``'s not ``face``, the rewrite's textures): every module of it
+    must be named there, but ``cli``'s (one per command group, ``cli.main`` says how) and
+    ``io``'s, whose map is README's "Architecture" (every one of them named there)."""
+    import re
+
+    text = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    readme = set(re.findall(r"`(\w+)`", text.split("\n## Architecture", 1)[1].split("\n## ", 1)[0]))
+    unnamed = {}
+    for init in sorted(PACKAGE.glob("*/__init__.py")):
+        pkg = init.parent.name
+        doc = ast.get_docstring(ast.parse(init.read_text(encoding="utf-8"))) or ""
+        names = readme if pkg == "io" else set(re.findall(r"\w+", doc))
+        for p in sorted(init.parent.glob("*.py")):
+            if p.stem != "__init__" and p.stem not in names and pkg != "cli":
+                unnamed[(pkg, p.stem)] = p
+    assert sorted(set(unnamed) - set(UNNAMED_IN_PACKAGE_MAP)) == []
+    assert sorted(set(UNNAMED_IN_PACKAGE_MAP) - set(unnamed)) == []   # named: leave the list
