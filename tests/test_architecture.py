@@ -377,3 +377,18 @@ def test_each_subpackage_maps_its_modules():
                 unnamed[(pkg, p.stem)] = p
     assert sorted(set(unnamed) - set(UNNAMED_IN_PACKAGE_MAP)) == []
     assert sorted(set(UNNAMED_IN_PACKAGE_MAP) - set(unnamed)) == []   # named: leave the list
+
+
+def test_every_command_is_found_where_cli_main_says():
+    """A newcomer looks for ``facetransfer edit`` in ``cli/edit.py`` or in
+    :data:`facetransfer.cli.main.SUBCOMMAND_MODULES` (which does not list it): every top-level
+    command is either the module of its name there or one ``cli.main``'s docstring names."""
+    import argparse
+
+    from facetransfer.cli import main as cli_main
+
+    parser = cli_main.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    doc = cli_main.__doc__
+    elsewhere = [c for c in sub.choices if c not in cli_main.SUBCOMMAND_MODULES]
+    assert elsewhere and [c for c in elsewhere if f"``{c}``" not in doc] == []
