@@ -392,3 +392,30 @@ def test_every_command_is_found_where_cli_main_says():
     doc = cli_main.__doc__
     elsewhere = [c for c in sub.choices if c not in cli_main.SUBCOMMAND_MODULES]
     assert elsewhere and [c for c in elsewhere if f"``{c}``" not in doc] == []
+
+
+def test_the_readme_walk_names_functions_that_exist():
+    """README's "Where to start" walks one transfer from the command to the written video and
+    into the eye region's paste; this session moved code under it (the edits out of
+    ``transfer``, ``edit``'s command out of ``cli.transfer``). Every ``module.name`` it gives
+    must resolve, and ``tests/...`` files exist."""
+    import importlib
+    import re
+
+    text = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    walk = text.split("\n### Where to start\n", 1)[1].split("\n## ", 1)[0]
+    names = re.findall(r"`([a-z_]+(?:\.[A-Za-z_]+)+)`", walk)
+    dotted = [n for n in names if not n.startswith("tests/")]
+    assert len(dotted) > 20
+    for name in dotted:
+        parts, obj = name.split("."), None
+        for i in range(len(parts), 0, -1):   # the longest module prefix, then attributes
+            if "facetransfer." + ".".join(parts[:i]) in MODULES:
+                obj = importlib.import_module("facetransfer." + ".".join(parts[:i]))
+                break
+        assert obj is not None, name
+        for attr in parts[i:]:
+            assert hasattr(obj, attr), name
+            obj = getattr(obj, attr)
+    for path in re.findall(r"`(tests/\w+\.py)`", walk):
+        assert (PACKAGE.parents[1] / path).is_file(), path
