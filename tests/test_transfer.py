@@ -10,8 +10,9 @@ import pytest
 from facetransfer.performance_edit import (EditAdd, EditScale, edit_track, parse_add,
                                            parse_scale, ramp_envelope)
 from facetransfer.track import Track
-from facetransfer.transfer import (TransferError, constant_weights, parse_weights,
-                                   project_landmarks, recombine, resample_track, time_map)
+from facetransfer.track.project import project_landmarks
+from facetransfer.transfer import (TransferError, constant_weights, parse_weights, recombine,
+                                   resample_track, time_map)
 
 
 def make_track(n=10, *, r=(3, 4), fps=25.0, size=(64, 48), seed=0, model_hash="h",

@@ -35,7 +35,7 @@ import numpy as np
 
 from .errors import FaceTransferError, RewriteError, ShapeError
 from .topology import close_mouth, mesh_topology
-from .track.project import project_landmarks, take_frames
+from .track.project import take_frames
 
 log = logging.getLogger(__name__)
 
@@ -48,9 +48,7 @@ __all__ = [
     "resample_track",
     "constant_weights",
     "recombine",
-    "project_landmarks",
     "puppet_frames",
-    "take_frames",
     "identity_from_label",
     "parse_weights",
 ]
@@ -335,8 +333,9 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         Target's fps, frame size and source path; ``lost`` where the target or any source used
         for the frame is lost (those frames keep the original footage when rendered);
         ``landmarks2d`` copied from the pose track and ``blendshapes`` None (new weights:
-        :func:`project_landmarks` with the model recomputes both, and the exports of
-        :mod:`facetransfer.export` need the blendshapes); ``detections2d`` None.
+        :func:`facetransfer.track.project.project_landmarks` with the model recomputes both,
+        and the exports of :mod:`facetransfer.export` need the blendshapes); ``detections2d``
+        None.
     """
     sources = {}
     for what, tr in (("expression", expression), ("viseme", viseme), ("pose", pose)):
