@@ -15,8 +15,10 @@ expression from the new video"):
 * :func:`puppet_frames`: drive an identity of the model from a video, rendered alone.
 
 Rendering the new performance back into footage is :mod:`facetransfer.rewrite` (one frame) and
-:mod:`facetransfer.video_transfer` (the job). Every function here is pure: tracks in, a new
-track out.
+:mod:`facetransfer.video_transfer` (the job). Every function here is pure, tracks in and a new
+track out (:func:`nearest_frames`: the §6 texture's nearest frames, rows in and indices out),
+but :func:`puppet_frames`, which renders frames (a move to :mod:`facetransfer.puppet_video` is
+proposed in BENCHMARKS.md, newcomer52).
 
 References
 ----------
