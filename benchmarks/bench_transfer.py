@@ -150,8 +150,8 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
     from facetransfer.texture import face as ftex
     from facetransfer import topology
     from facetransfer.synth import make_clip, random_performance
-    from facetransfer.transfer import (constant_weights, nearest_frames, project_landmarks,
-                                       recombine)
+    from facetransfer.track.project import project_landmarks
+    from facetransfer.transfer import constant_weights, nearest_frames, recombine
 
     idm = model.mode_names[0]
     labels = model.labels[0]
@@ -194,7 +194,7 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
         """``mouth_from="target"``: the mouth from B's own footage, as for a ready performance
         (``--performance``): its nearest frame (``mouth="frame"``) or the texture function
         lifted from its frames."""
-        from facetransfer.transfer import take_frames
+        from facetransfer.track.project import take_frames
 
         new = project_landmarks(recombine(tb, expression=ta), model)
         src = rc.MouthSource(clip_a.frames, ta)

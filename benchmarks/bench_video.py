@@ -3,7 +3,7 @@ encoding, at least 45 dB at the default CRF.
 
 For real pairs of the data folder, the source's expressions are put on the target (landmark
 tracks from the ``NAME.mediapipe478.npz`` beside each clip, so no tracker runs) and every frame is
-rewritten (``facetransfer.rewrite.rewrite_frames``, the frames ``facetransfer transfer`` writes).
+rewritten (``facetransfer.rewrite_clip.rewrite_frames``, the frames ``facetransfer transfer`` writes).
 The rewritten frames are then encoded by the one writer (``facetransfer.io.video``) at each CRF
 offered for H.264 and H.265, and as ProRes, decoded again with the project's reader (OpenCV) and
 compared with the decoded target frames outside the face mask (the rewritten face's mask,

@@ -83,6 +83,25 @@ def quick_model(quick_ict_dataset, tmp_path_factory):
     return build_model(quick_ict_dataset, {"identity": 5, "expression": 5})
 
 
+@pytest.fixture(scope="module")
+def quick_track(quick_model):
+    """30 frames of :func:`quick_model`'s id02, expressions near neutral, a still camera: the
+    track the transfer's and the edits' exact tests act on (test_transfer.py,
+    test_performance_edit.py)."""
+    from facetransfer.track import Track
+
+    n = 30
+    rng = np.random.default_rng(5)
+    w = {"identity": np.tile(quick_model.training_weights("identity", "id02"), (n, 1)),
+         "expression": quick_model.training_weights("expression", "neutral")
+         + 0.1 * rng.normal(size=(n, quick_model.ranks[1]))}
+    return Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
+                 scale=np.full(n, 2.0), translation=np.tile([32.0, 32.0], (n, 1)), weights=w,
+                 landmarks2d=np.zeros((n, 68, 2)), confidence=np.ones(n),
+                 lost=np.zeros(n, bool), model_hash=quick_model.content_hash,
+                 mode_names=quick_model.mode_names)
+
+
 @pytest.fixture(scope="session")
 def quick_model_path(quick_model, tmp_path_factory) -> Path:
     p = tmp_path_factory.mktemp("models") / "quick.npz"

@@ -333,3 +333,89 @@ def test_the_readme_paper_table_names_modules_that_exist():
     for m in pkgutil.iter_modules(correspond.__path__):
         if m.name not in ("prior", "report", "synthetic"):   # the project's own additions
             assert f"`{m.name}`" in row, m.name
+
+
+def test_the_readme_architecture_names_every_module_of_the_package_top():
+    """README's "Architecture" is the module map a newcomer walks the layers by: it named
+    neither ``arrays`` nor ``performance_edit`` (the Fig. 7E edits, moved out of ``transfer``)
+    nor ``puppet_face``, which ``LAYER_OF`` places. Every top-level module and subpackage of
+    the package must be named there (in backticks)."""
+    import re
+
+    text = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    section = text.split("\n## Architecture", 1)[1].split("\n## ", 1)[0]
+    named = set(re.findall(r"`(\w+)`", section))
+    top = {m.split(".")[1] for m in MODULES if m.count(".") >= 1}
+    assert sorted(top - named) == []
+
+
+#: Modules their subpackage's docstring does not name yet, each with its reason; a mended one
+#: must leave this list.
+UNNAMED_IN_PACKAGE_MAP = {
+    # render/ was being edited by another helper in the fifty-second session: its docstring
+    # should say that the kernels' numba decorator lives in .jit (imported through .raster)
+    ("render", "jit"): "the house's numba decorator",
+}
+
+
+def test_each_subpackage_maps_its_modules():
+    """A subpackage's docstring is its module map (``track``'s named neither ``dense`` nor
+    ``capture_frame``, ``texture``'s not ``face``, the rewrite's textures): every module of it
+    must be named there, but ``cli``'s (one per command group, ``cli.main`` says how) and
+    ``io``'s, whose map is README's "Architecture" (every one of them named there)."""
+    import re
+
+    text = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    readme = set(re.findall(r"`(\w+)`", text.split("\n## Architecture", 1)[1].split("\n## ", 1)[0]))
+    unnamed = {}
+    for init in sorted(PACKAGE.glob("*/__init__.py")):
+        pkg = init.parent.name
+        doc = ast.get_docstring(ast.parse(init.read_text(encoding="utf-8"))) or ""
+        names = readme if pkg == "io" else set(re.findall(r"\w+", doc))
+        for p in sorted(init.parent.glob("*.py")):
+            if p.stem != "__init__" and p.stem not in names and pkg != "cli":
+                unnamed[(pkg, p.stem)] = p
+    assert sorted(set(unnamed) - set(UNNAMED_IN_PACKAGE_MAP)) == []
+    assert sorted(set(UNNAMED_IN_PACKAGE_MAP) - set(unnamed)) == []   # named: leave the list
+
+
+def test_every_command_is_found_where_cli_main_says():
+    """A newcomer looks for ``facetransfer edit`` in ``cli/edit.py`` or in
+    :data:`facetransfer.cli.main.SUBCOMMAND_MODULES` (which does not list it): every top-level
+    command is either the module of its name there or one ``cli.main``'s docstring names."""
+    import argparse
+
+    from facetransfer.cli import main as cli_main
+
+    parser = cli_main.build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    doc = cli_main.__doc__
+    elsewhere = [c for c in sub.choices if c not in cli_main.SUBCOMMAND_MODULES]
+    assert elsewhere and [c for c in elsewhere if f"``{c}``" not in doc] == []
+
+
+def test_the_readme_walk_names_functions_that_exist():
+    """README's "Where to start" walks one transfer from the command to the written video and
+    into the eye region's paste; this session moved code under it (the edits out of
+    ``transfer``, ``edit``'s command out of ``cli.transfer``). Every ``module.name`` it gives
+    must resolve, and ``tests/...`` files exist."""
+    import importlib
+    import re
+
+    text = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    walk = text.split("\n### Where to start\n", 1)[1].split("\n## ", 1)[0]
+    names = re.findall(r"`([a-z_]+(?:\.[A-Za-z_]+)+)`", walk)
+    dotted = [n for n in names if not n.startswith("tests/")]
+    assert len(dotted) > 20
+    for name in dotted:
+        parts, obj = name.split("."), None
+        for i in range(len(parts), 0, -1):   # the longest module prefix, then attributes
+            if "facetransfer." + ".".join(parts[:i]) in MODULES:
+                obj = importlib.import_module("facetransfer." + ".".join(parts[:i]))
+                break
+        assert obj is not None, name
+        for attr in parts[i:]:
+            assert hasattr(obj, attr), name
+            obj = getattr(obj, attr)
+    for path in re.findall(r"`(tests/\w+\.py)`", walk):
+        assert (PACKAGE.parents[1] / path).is_file(), path

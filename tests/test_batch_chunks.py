@@ -69,7 +69,7 @@ def test_crossfade_is_linear_and_open():
 def _truth_track(model, F: int, seed: int = 0):
     """A smooth synthetic performance (pose and weights known on every frame)."""
     from facetransfer.track import Track
-    from facetransfer.transfer import project_landmarks
+    from facetransfer.track.project import project_landmarks
 
     rng = np.random.default_rng(seed)
     t = np.linspace(0, 1, F)

@@ -1,6 +1,6 @@
-"""A batch job's claim of its output (:func:`facetransfer.batch.jobs.claimed`) against the
+"""A batch job's claim of its output (:func:`facetransfer.batch.ownership.claimed`) against the
 moments other runs look at it: another run's planning checking the claim files there
-(:func:`~facetransfer.batch.jobs.remove_stale_claims`), locks that are the process's (as
+(:func:`~facetransfer.batch.ownership.remove_stale_claims`), locks that are the process's (as
 ``flock`` is over NFS), a claim file replaced under its holder."""
 
 from __future__ import annotations

@@ -725,3 +725,20 @@ def test_a_texture_too_large_to_read_is_refused_in_one_line(case, tmp_path, caps
         f"facetransfer export: error: texture image {tex} has more than 2,000 pixels, more "
         "than the image reader takes: give a smaller texture"]
     assert not out.exists()
+
+
+def test_export_of_a_take_with_a_neutral_past_its_frames_names_the_take(
+        arkit_model_path, arkit_model, make_arkit_track, tmp_path, capsys):
+    """``export take.csv --neutral 99`` past the take's frames: one line naming the take and
+    its frames on its timeline, as ``view take.csv --neutral`` says it (before, "the track has
+    frames 0 to 5", where no track was given)."""
+    from facetransfer.export.livelink import write_livelink
+
+    track, _, _ = make_arkit_track(arkit_model, 6)
+    take = write_livelink(track, tmp_path / "take.csv")
+    assert main(["export", str(take), "--model", str(arkit_model_path), "--out",
+                 str(tmp_path / "n.json"), "--neutral", "99"]) == 2
+    err = capsys.readouterr().err
+    assert f"--neutral 99: the take {take} has frames 0 to 5 (on its 25 fps timeline)" in err
+    assert "the track" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "n.json").exists()

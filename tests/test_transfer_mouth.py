@@ -25,7 +25,7 @@ from facetransfer.transfer import nearest_frames  # noqa: E402
 from facetransfer.render import (WeakPerspective, look_at_weak_perspective, render,  # noqa: E402
                                  rotation_from_euler)
 from facetransfer.track import Track  # noqa: E402
-from facetransfer.transfer import project_landmarks, take_frames  # noqa: E402
+from facetransfer.track.project import project_landmarks, take_frames  # noqa: E402
 
 SIZE = (128, 128)
 LABELS = ["neutral", "open", "smile", "pucker", "neutral", "open"]

@@ -19,7 +19,8 @@ from facetransfer import topology
 from facetransfer import transfer_plan as tp
 from facetransfer.render import WeakPerspective, look_at_weak_perspective, render, rotation_from_euler
 from facetransfer.track import Track
-from facetransfer.transfer import nearest_frames, project_landmarks, recombine
+from facetransfer.track.project import project_landmarks
+from facetransfer.transfer import nearest_frames, recombine
 
 SIZE = (128, 128)
 

@@ -94,7 +94,7 @@ def _fake_obtain_track(tracks):
         tr = Track.load(tracks[name])
         n = kw.get("max_frames")
         if n is not None and tr.n_frames > n:
-            from facetransfer.transfer import take_frames
+            from facetransfer.track.project import take_frames
 
             tr = take_frames(tr, np.arange(n))
         return dataclasses.replace(tr, source=str(os.getpid()))

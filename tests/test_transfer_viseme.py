@@ -20,7 +20,8 @@ from facetransfer import topology  # noqa: E402
 from facetransfer.render import (WeakPerspective, look_at_weak_perspective, render,  # noqa: E402
                                  rotation_from_euler)
 from facetransfer.track import Track  # noqa: E402
-from facetransfer.transfer import project_landmarks, recombine  # noqa: E402
+from facetransfer.track.project import project_landmarks  # noqa: E402
+from facetransfer.transfer import recombine  # noqa: E402
 
 SIZE = (128, 128)
 EXPRESSIONS = {

@@ -16,7 +16,8 @@ Where to start from Python (each name is importable from the module before it)::
     facetransfer.track.Track                        its fields and file (save, load)
     facetransfer.transfer.recombine                 Fig. 1 / Fig. 7 (also time_map)
     facetransfer.performance_edit.edit_track        Fig. 7E: add or scale an expression
-    facetransfer.video_transfer.plan_transfer       read, track, recombine (render_plan: write)
+    facetransfer.transfer_plan.plan_transfer        read, track, recombine (TransferSources)
+    facetransfer.video_transfer.render_plan         a plan rendered and written
     facetransfer.video_transfer.transfer_video      the whole job (TransferSources.of)
     facetransfer.export.export_track                Live Link Face CSV, glTF, USD, JSON
 

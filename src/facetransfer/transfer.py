@@ -15,8 +15,10 @@ expression from the new video"):
 * :func:`puppet_frames`: drive an identity of the model from a video, rendered alone.
 
 Rendering the new performance back into footage is :mod:`facetransfer.rewrite` (one frame) and
-:mod:`facetransfer.video_transfer` (the job). Every function here is pure: tracks in, a new
-track out.
+:mod:`facetransfer.video_transfer` (the job). Every function here is pure, tracks in and a new
+track out (:func:`nearest_frames`: the §6 texture's nearest frames, rows in and indices out),
+but :func:`puppet_frames`, which renders frames (a move to :mod:`facetransfer.puppet_video` is
+proposed in BENCHMARKS.md, newcomer52).
 
 References
 ----------
@@ -35,7 +37,7 @@ import numpy as np
 
 from .errors import FaceTransferError, RewriteError, ShapeError
 from .topology import close_mouth, mesh_topology
-from .track.project import project_landmarks, take_frames
+from .track.project import take_frames
 
 log = logging.getLogger(__name__)
 
@@ -48,9 +50,7 @@ __all__ = [
     "resample_track",
     "constant_weights",
     "recombine",
-    "project_landmarks",
     "puppet_frames",
-    "take_frames",
     "identity_from_label",
     "parse_weights",
 ]
@@ -335,8 +335,9 @@ def recombine(target, *, expression=None, viseme=None, identity=None, pose=None,
         Target's fps, frame size and source path; ``lost`` where the target or any source used
         for the frame is lost (those frames keep the original footage when rendered);
         ``landmarks2d`` copied from the pose track and ``blendshapes`` None (new weights:
-        :func:`project_landmarks` with the model recomputes both, and the exports of
-        :mod:`facetransfer.export` need the blendshapes); ``detections2d`` None.
+        :func:`facetransfer.track.project.project_landmarks` with the model recomputes both,
+        and the exports of :mod:`facetransfer.export` need the blendshapes); ``detections2d``
+        None.
     """
     sources = {}
     for what, tr in (("expression", expression), ("viseme", viseme), ("pose", pose)):

@@ -264,8 +264,9 @@ def _write_frames(stack: contextlib.ExitStack, render: "_Frames", writer, skip: 
 
 @dataclass
 class _Frames:
-    """The rewritten frames of a plan from ``start`` on (:func:`rewrite_frames`), timed and
-    counted: ``seconds`` spent rendering, ``rewritten`` frames that show a face; with what
+    """The rewritten frames of a plan from ``start`` on
+    (:func:`~facetransfer.rewrite_clip.rewrite_frames`), timed and counted: ``seconds`` spent
+    rendering, ``rewritten`` frames that show a face; with what
     each output frame keeps of its target beyond the colour (``grading``:
     :func:`facetransfer.io.plate_output.plate_output`); each frame's matte written by
     ``matte`` (:class:`facetransfer.io.matte.MatteWriter`), if given."""

@@ -373,7 +373,7 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
 
 
 def _pair_sources(job, model):
-    """The :class:`~facetransfer.video_transfer.TransferSources` of the pair ``job``, its
+    """The :class:`~facetransfer.transfer_plan.TransferSources` of the pair ``job``, its
     inputs checked (a missing or unreadable one fails the row, naming the path)."""
     from ..io.video import video_info
     from ..take import is_take

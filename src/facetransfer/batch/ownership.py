@@ -39,7 +39,7 @@ class OutputTaken(BatchError):
 
 def output_identity(out) -> str:
     """Which file ``out`` is now (:func:`_shared_identity`), "" where there is none: what a
-    run records of an output it plans to do again (:func:`transfer_pair`'s ``planned``)."""
+    run records of an output it plans to do again (:func:`~.jobs.transfer_pair`'s ``planned``)."""
     try:
         return _shared_identity(out) if os.path.isfile(out) else ""
     except OSError:
@@ -58,7 +58,7 @@ def _shared_identity(path) -> str:
 def matte_identity(pattern) -> str:
     """Which frames the matte sequence ``pattern`` holds now (their names and
     :func:`_shared_identity`, hashed), "" where none (or no pattern):
-    what a run records of a matte it finds beside no result (:func:`transfer_pair`'s
+    what a run records of a matte it finds beside no result (:func:`~.jobs.transfer_pair`'s
     ``planned_matte``)."""
     if pattern is None:
         return ""

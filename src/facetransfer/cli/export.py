@@ -51,7 +51,8 @@ def register(sub) -> None:
                    help="measure every activation from this frame's, as Live Link Face's "
                    "calibration does (the neutral frame exports 0, a full shape still 1; the gaze "
                    "as tracked); auto: the frame whose activations sum least (default: as "
-                   "tracked)")
+                   "tracked). A take's FRAME is numbered on its timeline, as view and puppet "
+                   "number it")
     p.add_argument("--timecode", default="source", metavar="HH:MM:SS:FF|source|none",
                    help="livelink: the first row's timecode: the tracked video's start timecode "
                    "where it has one (source, the default: a take then lines up with the plate "
@@ -153,7 +154,12 @@ def run(args: argparse.Namespace) -> int:
         raise FaceTransferError(f"--texture-step must be >= 1, got {args.texture_step}")
     from ..take import is_take
 
-    if is_take(args.track):
+    take = args.track if is_take(args.track) else None
+    if args.neutral is not None:
+        from ..export.neutral import neutral_arg
+
+        neutral_arg(args.neutral)            # its word checked before a model is built
+    if take is not None:
         track, model = _take_and_model(args)
     else:
         track, model = _track_and_model(Track.load(args.track), args)
@@ -162,7 +168,8 @@ def run(args: argparse.Namespace) -> int:
     if args.neutral is not None:
         from ..export.neutral import with_neutral
 
-        track = with_neutral(track, args.neutral)     # checked before a texture is lifted
+        # checked before a texture is lifted; a frame past a take's end named as the take's
+        track = with_neutral(track, args.neutral, take=take)
     texture = args.texture
     if args.texture_from:
         from ..export.gltf import check_texture_video

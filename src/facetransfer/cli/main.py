@@ -1,8 +1,12 @@
 """``facetransfer`` console script.
 
-Each subcommand lives in its own module with a ``register(subparsers)`` function that adds its
-parser(s) and sets ``func`` to a handler ``handler(args) -> int``. Bad input raises a
-:class:`ValueError` subclass in the library; here it becomes one line on stderr and exit status 2.
+Each module of :data:`SUBCOMMAND_MODULES` has a ``register(subparsers)`` function that adds its
+parser(s) and sets ``func`` to a handler ``handler(args) -> int``. A module is named after its
+command or command group (``model build|info|...`` in :mod:`.model`), but for two that register
+more than one command: :mod:`.transfer` registers ``transfer``, ``edit`` (its parser and
+handlers in :mod:`.edit`), ``puppet`` and ``demo``; :mod:`.render` registers ``render`` and
+``synth-video``. Bad input raises a :class:`ValueError` subclass in the library; here it
+becomes one line on stderr and exit status 2.
 """
 
 from __future__ import annotations

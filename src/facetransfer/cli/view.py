@@ -63,15 +63,13 @@ def _take_page(args: argparse.Namespace):
     from ..take import take_track
     from .common import resolve_model
 
-    i = None if args.neutral is None else neutral_arg(args.neutral)   # before a model is built
+    if args.neutral is not None:
+        neutral_arg(args.neutral)            # its word checked before a model is built
     if not Path(args.source).is_file():
         raise FaceTransferError(f"take {args.source} does not exist")
     model = resolve_model(args.model)
     track = take_track(args.source, model, model.weight_mean(model.mode_index("identity")))
-    if isinstance(i, int) and i >= track.n_frames:     # the take's frames, not "the track's"
-        raise FaceTransferError(f"--neutral {i}: the take {args.source} has frames 0 to "
-                                f"{track.n_frames - 1} (on its {track.fps:g} fps timeline)")
-    track = with_neutral(track, args.neutral)
+    track = with_neutral(track, args.neutral, take=args.source)   # a frame past it: the take's
     page = viewer_page(model, track=track, title=Path(args.source).name)
     return write_text_atomic(args.out, page, overwrite=args.overwrite)
 

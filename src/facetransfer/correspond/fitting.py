@@ -329,7 +329,8 @@ class _WorkFrame:
     def pairs(self, x: np.ndarray, max_distance: float, idx: np.ndarray | None = None):
         """Closest points of ``x`` (n, 3) (or of ``x[idx]``) and which pairs are accepted.
 
-        Returns ``(cp, ok, cos)``: :class:`ClosestPoints`, ``(m,) bool`` and the normals' cosines.
+        Returns ``(cp, ok, cos)``: :class:`~.meshops.ClosestPoints`, ``(m,) bool`` and the
+        normals' cosines.
         """
         vn = vertex_normals(x, self.faces)
         if idx is not None:

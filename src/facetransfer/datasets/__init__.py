@@ -2,6 +2,9 @@
 
 Sources: the ICT-FaceKit builder (default, :mod:`.ict`), a manifest CSV (:mod:`.manifest`) and the
 FaceWarehouse folder layout (:mod:`.facewarehouse`); :func:`load_dataset` picks one from a spec.
+The product itself, one array with a mask, is :mod:`.base`; the ICT builder makes its generic
+expressions identity-specific by deformation transfer (Sumner & Popović 2004,
+:mod:`.deformation`).
 """
 
 from __future__ import annotations

@@ -12,8 +12,10 @@ usd         usd           UsdSkel blend shapes + SkelAnimation (needs ``usd-core
 json        mpjson        per-frame scores in MediaPipe Face Landmarker's layout
 ==========  ============  ===========================================================
 
-The browser dial editor is :mod:`facetransfer.export.viewer`; a neutral pose for the curves
-(Live Link Face's calibration) is :mod:`facetransfer.export.neutral`.
+What every format shares (the model check, the activations, the head pose) is
+:mod:`facetransfer.export.common`. The browser dial editor is
+:mod:`facetransfer.export.viewer`; a neutral pose for the curves (Live Link Face's calibration)
+is :mod:`facetransfer.export.neutral`.
 """
 
 from __future__ import annotations

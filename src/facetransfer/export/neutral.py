@@ -84,10 +84,12 @@ def neutral_arg(value) -> int | str:
     return i
 
 
-def with_neutral(track, neutral):
+def with_neutral(track, neutral, *, take=None):
     """``track`` with its activations measured from a neutral frame: ``neutral`` a frame
     index, ``"auto"`` (:func:`neutral_frame`) or None (the track unchanged). The frame used is
-    recorded in ``info["neutral_frame"]``.
+    recorded in ``info["neutral_frame"]``. ``take``: the path of the Live Link Face take
+    ``track`` was made from (:func:`facetransfer.take.take_track`), named by the error of a
+    frame past its end, with its timeline's rate (a take's frames are numbered on it).
 
     Raises
     ------
@@ -101,7 +103,9 @@ def with_neutral(track, neutral):
     if i == "auto":
         i = neutral_frame(a, track.lost)
     elif i >= track.n_frames:
-        raise ExportError(f"--neutral {i}: the track has frames 0 to {track.n_frames - 1}")
+        of = "the track" if take is None else f"the take {take}"
+        raise ExportError(f"--neutral {i}: {of} has frames 0 to {track.n_frames - 1}"
+                          + ("" if take is None else f" (on its {track.fps:g} fps timeline)"))
     elif bool(np.asarray(track.lost)[i]):
         raise ExportError(f"--neutral {i}: the face is lost in that frame")
     return dataclasses.replace(track, blendshapes=calibrated(a, i),

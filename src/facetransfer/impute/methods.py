@@ -99,7 +99,7 @@ def impute_dataset(dataset: FaceDataset, *, method: str = "ppca", rng=None, tol:
         ``ppca`` only: per-vertex weights of the covariance estimates (region emphasis).
     regions : "mouth" or int, optional
         ``ppca`` only: separate mode covariances per soft face region, fills blended
-        (:func:`region_memberships`; ``"mouth"`` is §4.4's suggested mouth emphasis).
+        (:func:`~.regions.region_memberships`; ``"mouth"`` is §4.4's suggested mouth emphasis).
 
     Returns
     -------

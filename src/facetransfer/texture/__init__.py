@@ -30,6 +30,10 @@ fitted to the Lee Perry-Smith scan); :mod:`.lee_perry_smith` then carries the sc
 onto the template's UVs by closest points (:mod:`.bake`, :func:`bake_texture`); credit
 :data:`LEE_PERRY_SMITH_CREDIT` wherever it is shown.
 
+The rewrite's face textures (the target's, per frame or constant, and the performance-driven
+mouth: :class:`~facetransfer.texture.face.MouthFunction`) are :mod:`.face`; the error, input
+checks and colour convention every module here shares are :mod:`.base`.
+
 Colours are float32 on the 0..255 scale of the uint8 frames. Texture images follow
 :func:`facetransfer.render.sample_texture`: texel ``(col, row) = (u (T - 1), (1 - v) (T - 1))``
 with v up, so a lifted texture renders back with :func:`facetransfer.render.render` directly.

@@ -43,7 +43,8 @@ def bake_texture(vertices, faces, uvs, source_vertices, source_faces, source_uvs
     The source surface is sampled densely (the texel points of a ``source_samples``² UV atlas
     of the source, coloured from ``source_image``); every covered texel of the target's UV atlas
     takes the colour of the nearest source sample. Used to put the Lee Perry-Smith scan
-    (credit :data:`LEE_PERRY_SMITH_CREDIT`) on the template's UVs once the template is fitted.
+    (credit :data:`~.lee_perry_smith.LEE_PERRY_SMITH_CREDIT`) on the template's UVs once the
+    template is fitted.
 
     Parameters
     ----------

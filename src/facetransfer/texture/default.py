@@ -3,7 +3,8 @@
 :func:`default_face_texture` paints a deterministic procedural skin texture (skin tone, smooth
 variation, fine noise so that a KLT tracker finds gradients everywhere, darker lips, brows and
 eyelids where the iBUG-68 landmarks fall in UV space), or returns the Lee Perry-Smith scan's colour
-map on the ICT-FaceKit UVs (:mod:`.lee_perry_smith`; credit :data:`LEE_PERRY_SMITH_CREDIT`).
+map on the ICT-FaceKit UVs (:mod:`.lee_perry_smith`; credit
+:data:`~.lee_perry_smith.LEE_PERRY_SMITH_CREDIT`).
 Texture images follow :func:`facetransfer.render.sample_texture` (v up).
 """
 
@@ -42,7 +43,7 @@ def default_face_texture(model_or_uvs, size: int = 512, seed: int = 0, *,
     ``source="lee-perry-smith"``: the Lee Perry-Smith scan carried onto the ICT-FaceKit template
     UVs by template fitting (:func:`lee_perry_smith_template_texture`; first call about 15 s,
     then cached). Needs a mesh whose UVs are ICT-FaceKit's (e.g. a model built from the ICT
-    data sets). Show it with the credit :data:`LEE_PERRY_SMITH_CREDIT`.
+    data sets). Show it with the credit :data:`~.lee_perry_smith.LEE_PERRY_SMITH_CREDIT`.
     ``source="auto"``: Lee Perry-Smith where it applies and its assets are available, else
     procedural.
 

@@ -305,7 +305,8 @@ class LiftedTrack(NamedTuple):
     lifted : list of LiftedUVTexture
         One per used frame.
     attributes : (F, r) float64
-        The frames' attribute vectors (:func:`attribute_vector`), for :class:`TextureFunction`.
+        The frames' attribute vectors (:func:`attribute_vector`), for
+        :class:`~.function.TextureFunction`.
     frames : (F,) int64
         Indices of the used frames in the clip.
     """

@@ -138,8 +138,8 @@ def merge_textures(lifted: Iterable, *, fill: str = "auto", min_weight: float = 
     Parameters
     ----------
     lifted : iterable of (texture (..., 3), weight (...)) pairs
-        E.g. :class:`LiftedUVTexture` or :class:`LiftedTexture` results of several frames
-        (summed one at a time: :class:`TextureSum`).
+        E.g. :class:`~.lifting.LiftedUVTexture` or :class:`~.lifting.LiftedTexture` results of
+        several frames (summed one at a time: :class:`TextureSum`).
     fill : {"auto", "pushpull", "inpaint", "none"}, keyword-only
         How to fill texels whose total weight is below ``min_weight``: ``"auto"`` is push-pull
         for (T, T, 3) images and nothing for per-vertex colours (use :func:`fill_vertex_colors`).

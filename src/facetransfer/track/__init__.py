@@ -7,8 +7,10 @@ Two trackers write the same :class:`Track` (:mod:`.result`, its file):
   processes, :mod:`.face_crop` for small faces, :mod:`.shots` for an edited clip's cuts), the
   identity fitted over frames spread through it, then every frame's pose and ARKit
   activations fitted to the points and the flow (:mod:`.capture_points`, :mod:`.fit2d`,
-  :mod:`.gaze`, :mod:`.scores`); its progress kept (:mod:`.detect_checkpoint`,
-  :mod:`.fit_checkpoint`);
+  :mod:`.gaze`, :mod:`.scores`; one frame's fit :mod:`.capture_frame`, the lips' contact
+  :mod:`.lip_contact`, MediaPipe's points on the model's surface :mod:`.dense`, the frames the
+  detector may skip :mod:`.skip_rule`, Face Landmarker's results as arrays :mod:`.mp_result`);
+  its progress kept (:mod:`.detect_checkpoint`, :mod:`.fit_checkpoint`);
 * the paper's KLT tracker (``--tracker klt``; ``flow`` in ``transfer``, ``puppet`` and
   ``demo``): :mod:`.camera` (weak-perspective pose, Eq. (7)), :mod:`.klt` (symmetric KLT
   terms, Eq. (6)), :mod:`.solver` (Eq. (8), (9)), :mod:`.pair` (one frame pair, Eq.
@@ -17,7 +19,8 @@ Two trackers write the same :class:`Track` (:mod:`.result`, its file):
 
 Around them: :mod:`.obtain` (a track for a video: a file given, the cache, or tracked; in a
 forked process beside another), :mod:`.cache` (the track cache), :mod:`.presets` and
-:mod:`.settings` (the commands' tracker options), :mod:`.landmarks` (MediaPipe-478 to iBUG-68),
+:mod:`.settings` (the commands' tracker options), :mod:`.landmarks` (MediaPipe-478 to iBUG-68;
+:mod:`.calibration`, that correspondence calibrated against points of known truth),
 :mod:`.aspect` (the frames as the tracker sees them), :mod:`.project` (a track's landmarks
 and frames), :mod:`.smooth`, :mod:`.overlay` (drawing the fit on frames).
 

@@ -21,7 +21,7 @@ Progress = Callable[[str, int, int], None]
 
 @dataclass(frozen=True)
 class TrackOptions:
-    """Settings of :func:`track_video` (defaults defined once here; the CLI uses them).
+    """Settings of :func:`~.tracker.track_video` (defaults defined once here; the CLI uses them).
 
     Attributes
     ----------
@@ -42,7 +42,7 @@ class TrackOptions:
     identity_prior : float
         Weight of the prior in the per-pass identity solve.
     init_prior : float
-        Prior weight of the landmark fit at initialisation (see :func:`fit_landmarks`).
+        Prior weight of the landmark fit at initialisation (see :func:`~.init.fit_landmarks`).
     init_weight : float
         Weight of the initial landmarks in the identity solve, in frame pairs.
     snap_frames : int
