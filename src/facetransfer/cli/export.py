@@ -281,15 +281,24 @@ def _say_written(args, track, path, timecode, said: str) -> None:
     if people > 1:
         print(f"note: the track's shots hold {people} people (a clip cut between them); the "
               "mesh is the first one's, the curves every shot's")
-    if track.lost.any():
-        from ..export.usd import source_first_frame
-        from ..file_facts import lost_runs
+    note = lost_note(track, "their frames are left empty" if args.format == "json" else
+                     "they hold the nearest tracked frame's values")
+    if note:
+        print(f"note: {note}")
 
-        first = source_first_frame(track)   # a plate's own numbers: 1001-1010, not 0-9
-        plate = f" (the plate's {lost_runs(track.lost, first)})" if first else ""
-        print(f"note: the face is lost in frames {lost_runs(track.lost)}{plate}: "
-              + ("their frames are left empty" if args.format == "json" else
-                 "they hold the nearest tracked frame's values"))
+
+def lost_note(track, held: str) -> str:
+    """``"the face is lost in frames 68-104: <held>"``: the note of a track's lost frames (their
+    runs, and a plate's own numbers beside them), ``held`` saying what a result shows there;
+    "" where no frame is lost. Said by ``export`` and ``puppet``."""
+    if not track.lost.any():
+        return ""
+    from ..export.usd import source_first_frame
+    from ..file_facts import lost_runs
+
+    first = source_first_frame(track)   # a plate's own numbers: 1001-1010, not 0-9
+    plate = f" (the plate's {lost_runs(track.lost, first)})" if first else ""
+    return f"the face is lost in frames {lost_runs(track.lost)}{plate}: {held}"
 
 
 def _rows_said(args, track) -> str:

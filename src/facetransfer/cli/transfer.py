@@ -637,7 +637,18 @@ def run_puppet(args) -> int:
     print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
           f"{args.identity or 'the mean face'}"
           + (", with the video's audio" if audio else ""))
+    _say_lost(track)
     return 0
+
+
+def _say_lost(track) -> None:
+    """The note ``export`` prints of the frames where ``track`` lost the face, which the puppet
+    shows as its nearest tracked frame (:func:`facetransfer.transfer.puppet_frames`)."""
+    from .export import lost_note
+
+    note = lost_note(track, "the puppet holds the nearest tracked frame's head there")
+    if note:
+        print(f"note: {note}")
 
 
 def _puppet_track(args, vopt) -> int:
@@ -681,6 +692,7 @@ def _puppet_track(args, vopt) -> int:
     print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
           f"{args.identity or 'the mean face'} performing the track {args.video}"
           + (f", with the audio of {audio_from.name}" if audio else ""))
+    _say_lost(track)
     return 0
 
 
