@@ -1,5 +1,6 @@
 """Faults found by walk52 (phone footage) in what ``transfer`` and ``puppet`` draw, mended by
-helper fix52: the puppet's note of the frames where the face was lost."""
+helper fix52: the mouth's colours on a dark target, the puppet's note of the frames where the
+face was lost."""
 
 from __future__ import annotations
 
@@ -41,3 +42,35 @@ def test_puppet_says_which_frames_it_holds_where_the_face_was_lost(clips, quick_
                           "--out", tmp_path / "q.mp4"], capsys)
     assert code == 0, err
     assert "the face is lost" not in out, out
+
+
+def _mouth_scene(face_level: int, source_level: int):
+    """A face of one level (the target's skin), the source's mouth: its skin ``source_level``
+    and its lips 0.6 of it, a disk pasted inside a ring of skin compared."""
+    H, W = 80, 100
+    yy, xx = np.mgrid[0:H, 0:W]
+    r = np.hypot(yy - 40, xx - 50)
+    face_img = np.full((H, W, 3), face_level, np.uint8)
+    mouth_img = np.full((H, W, 3), source_level, np.uint8)
+    mask, ring = r < 15, (r >= 15) & (r < 25)
+    mouth_img[mask] = np.array([0.6, 0.4, 0.4]) * source_level
+    return face_img, np.ones((H, W), bool), mouth_img, mask, ring
+
+
+def test_the_mouth_takes_a_dark_targets_exposure():
+    """Onto a dark target (walk52's ``dark.mp4``: every level times 0.12) the source's mouth
+    needs a gain of ~0.12 to the face's skin; clipped at the range's 0.4 it was pasted at over
+    three times the face's level, a bright mouth on a dark face. Now the range is widened by
+    the frames' exposure: the lips come out at the target's level (0.12 of the source's), and
+    onto a face of the source's level nothing changes (the gains as they were)."""
+    from facetransfer import mouth
+
+    face_img, face_mask, mouth_img, mask, ring = _mouth_scene(24, 200)
+    out = mouth.blend_mouth(face_img.copy(), face_img.copy(), face_mask, mouth_img, mask, ring,
+                            0.0)
+    lips = out[mask].astype(float).mean(0)
+    want = np.array([0.6, 0.4, 0.4]) * 24
+    assert np.abs(lips - want).max() < 2.0, lips
+    assert mouth.mouth_gain_range(face_img, mouth_img, ring)[0] < 0.12 * 0.5
+    face_img, face_mask, mouth_img, mask, ring = _mouth_scene(200, 200)
+    assert mouth.mouth_gain_range(face_img, mouth_img, ring) == mouth.MOUTH_GAIN_RANGE

@@ -25,7 +25,8 @@ from .eyes import faces_around
 from .patch import _match_outline_into
 from .topology import MeshTopology
 
-__all__ = ["MOUTH_RING", "MOUTH_GAIN_RANGE", "mouth_ring_faces", "inside_mouth", "blend_mouth"]
+__all__ = ["MOUTH_RING", "MOUTH_GAIN_RANGE", "mouth_ring_faces", "inside_mouth", "blend_mouth",
+           "mouth_gain_range"]
 
 #: Rings of triangles around the mouth over which its gain is fitted (:func:`mouth_ring_faces`).
 MOUTH_RING = 3
@@ -68,9 +69,31 @@ def blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
         return _membrane_mouth(T, face_img, face_mask, mouth_img, mask, feather)
     _match_outline_into(face_img[sl], mouth_img[sl], m, fm, face_img[sl], feather=feather,
                         compare=compare, reject=None, reject_where=None,
-                        origin=(sl[1].start, sl[0].start), gain_range=MOUTH_GAIN_RANGE,
+                        origin=(sl[1].start, sl[0].start),
+                        gain_range=mouth_gain_range(face_img[sl], mouth_img[sl], compare),
                         grey_where=None if inside is None else inside[sl])
     return face_img
+
+
+def mouth_gain_range(face: np.ndarray, part: np.ndarray, compare: np.ndarray
+                     ) -> tuple[float, float]:
+    """The clip of the mouth's gains: :data:`MOUTH_GAIN_RANGE` widened by the two frames'
+    exposure where it lies outside 1, the median over the ``compare`` (H, W) bool pixels of
+    the face's level (the channels' sum, ``face`` (H, W, 3)) over the source's (``part``).
+
+    The range is for two people's skin under two lights; a clip's exposure is not a person's.
+    Onto a dark target (walk52's ``dark.mp4``, every level times 0.12) the gain the mouth
+    needs is ~0.15, and clipped at 0.4 the source's mouth was pasted at 2-3 times the face's
+    level, a bright mouth on a dark face. Now the low end is ``0.4 e`` for an exposure ``e``
+    below 1, the high ``2.5 e`` above it: the range about the exposure, as it was about 1.
+    """
+    lo, hi = MOUTH_GAIN_RANGE
+    f = face[compare].sum(axis=-1, dtype=np.float32) + np.float32(3.0)
+    p = part[compare].sum(axis=-1, dtype=np.float32) + np.float32(3.0)
+    if not f.size:
+        return lo, hi
+    e = float(np.median(f / p))
+    return lo * min(e, 1.0), hi * max(e, 1.0)
 
 
 def _membrane_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
