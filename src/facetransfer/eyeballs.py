@@ -21,8 +21,8 @@ import numpy as np
 from .render.raster import _maybe_njit
 from .track.gaze import activation_gaze, eye_model, project_iris
 
-__all__ = ["GROW", "LIMIT", "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs",
-           "track_gaze"]
+__all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "Eyeballs", "extend_eyeballs",
+           "eyeballs_of", "shift_eyeballs", "track_gaze"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
@@ -103,7 +103,14 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     """``image`` (H, W, 3) uint8 with each pixel within ``grow`` pixels of ``opening`` (H, W)
     bool (the eyes' openings), and of the opening's own outer ``rim`` pixels, taking the colour
     of the nearest pixel of the rest of the opening: the eyeball continued under the lids (the
-    sclera beyond the corners, the iris above and below)."""
+    sclera beyond the corners, the iris above and below).
+
+    A pixel beyond the iris's extent along its eye's long axis whose nearest pixel is the iris
+    (:func:`_iris_pixels`: an eye turned into its corner) takes its eye's sclera colour
+    instead: the eyeball beyond the iris is sclera. Before, the iris was continued there, and
+    an eye turned back from that corner showed it as a dark grey blob over that half of the
+    eye (walk52: ``transfer --target orig.mp4 --expression-from face_2.mp4 --max-frames 30``,
+    whose reference frame's left eye looks fully in)."""
     import cv2
 
     core = cv2.erode(opening.view(np.uint8), np.ones((3, 3), np.uint8), iterations=rim) \
@@ -111,15 +118,86 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     out = np.array(image, copy=True)
     if not core.any():
         return out
-    # the nearest core pixel of every pixel: distanceTransform's labels of the zero pixels
-    # (the core, one label each, numbered in row-major order)
+    ys, xs, src = _nearest(core, grow + rim)
+    iris, eye, axes, span, sclera = _iris_pixels(image, core)
+    k = eye[src[:, 0], src[:, 1]]                       # each source's eye
+    p = xs * axes[k, 0] + ys * axes[k, 1]                # the pixel's place along its long axis
+    side = iris[src[:, 0], src[:, 1]] & ((p < span[k, 0]) | (p > span[k, 1]))
+    out[ys, xs] = image[src[:, 0], src[:, 1]]
+    out[ys[side], xs[side]] = sclera[k[side]]
+    return out
+
+
+#: :func:`_iris_pixels`: an eye's opening holds an iris where its luma's 10th percentile is
+#: below this share of its 90th (an iris against the sclera: 0.3 in walk52's ``orig.mp4``; a
+#: closed or featureless opening is near 1: nothing changes).
+IRIS_CONTRAST = 0.7
+#: ... its iris is darker than this share of the way from that 10th percentile to the 90th
+#: (the iris 0-0.2 in walk52's ``orig.mp4`` and ``make demo``'s target, the sclera in the
+#: shade of a corner 0.4-0.7: a share of 0.5 took that shade for the iris).
+IRIS_LEVEL = 0.3
+#: :func:`_iris_pixels`: the sclera is read on the eye's middle band, within this share of
+#: its half-height (twice its pixels' standard deviation across its long axis) of its middle.
+BAND = 0.5
+
+
+def _nearest(core: np.ndarray, reach: float):
+    """``(ys, xs, src)``: the pixels within ``reach`` of ``core`` (H, W) uint8 (not in it) and
+    each one's nearest core pixel ``(m, 2)`` (row, column): distanceTransform's labels of the
+    zero pixels (the core, one label each, numbered in row-major order)."""
+    import cv2
+
     dist, label = cv2.distanceTransformWithLabels((core == 0).view(np.uint8), cv2.DIST_L2, 5,
                                                   labelType=cv2.DIST_LABEL_PIXEL)
-    ring = (dist > 0) & (dist <= grow + rim)
+    ring = (dist > 0) & (dist <= reach)
     ys, xs = np.nonzero(ring)
-    src = np.argwhere(core != 0)[label[ys, xs] - 1]
-    out[ys, xs] = image[src[:, 0], src[:, 1]]
-    return out
+    return ys, xs, np.argwhere(core != 0)[label[ys, xs] - 1]
+
+
+def _iris_pixels(image: np.ndarray, core: np.ndarray):
+    """``(iris, eye, axes, span, sclera)``: per connected part of ``core`` (H, W) uint8 (an
+    eye's opening), its iris: the largest connected part of its dark pixels (luma under
+    :data:`IRIS_LEVEL` of the way from its 10th percentile to its 90th, where the 10th is
+    under :data:`IRIS_CONTRAST` of the 90th), (H, W) bool; the part of each pixel (H, W) int32
+    (0 outside); each part's long axis ``(k + 1, 2)`` (x, y) unit vectors (its pixels'
+    principal direction; row 0 unused); its iris's extent along that axis ``(k + 1, 2)`` (an
+    empty one without an iris or sclera); and its sclera's colour ``(k + 1, 3)`` uint8, the
+    median of its pixels above the midpoint on its middle band (:data:`BAND`: not the lids'
+    grey margins) beside the iris (not the catchlights in it)."""
+    import cv2
+
+    n, eye = cv2.connectedComponents(core, connectivity=8)
+    luma = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
+    iris, sclera = np.zeros(core.shape, bool), np.zeros((n, 3), np.uint8)
+    axes = np.tile(np.array([1.0, 0.0]), (n, 1))
+    span = np.tile(np.array([np.inf, -np.inf]), (n, 1))
+    for k in range(1, n):
+        yy, xx = np.nonzero(eye == k)
+        across = np.zeros(len(xx))
+        if len(xx) > 2:
+            w, vec = np.linalg.eigh(np.cov(np.stack([xx, yy]).astype(np.float64)))
+            axes[k] = vec[:, int(np.argmax(w))]
+            across = ((yy - yy.mean()) * axes[k, 0] - (xx - xx.mean()) * axes[k, 1]) \
+                / max(2.0 * np.sqrt(max(w.min(), 0.0)), 1e-9)
+        v = luma[yy, xx].astype(np.float64)
+        lo, hi = np.percentile(v, [10, 90])
+        if not lo < IRIS_CONTRAST * hi:
+            continue
+        low = v < lo + IRIS_LEVEL * (hi - lo)
+        dark = np.zeros(core.shape, np.uint8)
+        dark[yy[low], xx[low]] = 1
+        _, parts, stats, _ = cv2.connectedComponentsWithStats(dark, connectivity=8)
+        big = parts == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))
+        iy, ix = np.nonzero(big)
+        along = ix * axes[k, 0] + iy * axes[k, 1]
+        p = xx * axes[k, 0] + yy * axes[k, 1]    # the sclera: beside the iris (no catchlight)
+        mid = (v >= 0.5 * (lo + hi)) & (np.abs(across) <= BAND) \
+            & ((p < along.min()) | (p > along.max()))
+        if mid.any():
+            iris |= big
+            span[k] = along.min(), along.max()
+            sclera[k] = np.median(image[yy[mid], xx[mid]], axis=0)
+    return iris, eye, axes, span, sclera
 
 
 def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: np.ndarray,
