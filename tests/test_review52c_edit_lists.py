@@ -102,3 +102,31 @@ def test_a_clip_edited_by_reference_reads_as_the_frames_ffmpeg_shows(tmp_path, e
     assert _numbers(np.stack(list(iter_frames(cut, start=40, stop=45)))) == numbers[40:45]
     assert _numbers(read_video(cut, start=33, max_frames=4)[0]) == numbers[33:37]
     assert "truncated" not in caplog.text and "variable frame rate" not in caplog.text
+
+
+def test_an_edit_list_past_the_media_is_refused_saying_so(tmp_path):
+    """An edit list showing media past the last frame shows no picture: refused in words
+    that say so (before: 'no frame from frame 0 on decodes, though its header counts 90
+    (damaged, or cut short)', after the count and probe had said 90 frames)."""
+    from facetransfer.errors import VideoError
+    from facetransfer.io.video_read import video_info
+    whole, cut = tmp_path / "whole.mp4", tmp_path / "past.mp4"
+    _numbered_clip(whole)
+    _with_edits(whole, cut, [(1.0, 200)])
+    assert len(_shown(cut)) == 0
+    with pytest.raises(VideoError, match="shows none of the frames it stores: its edit list"):
+        video_info(cut)
+
+
+def test_a_trimmed_clip_cut_short_is_said_to_be(tmp_path):
+    """A trimmed clip (its index first) cut short: its trim's count, and the packets there
+    fewer (probe's 'cut short?'), not a clip of variable rate of the packets left."""
+    from facetransfer.io.video_facts import video_facts
+    whole, trim, cut = tmp_path / "whole.mp4", tmp_path / "trim.mp4", tmp_path / "cut.mp4"
+    _numbered_clip(whole)
+    subprocess.run([FF, "-v", "error", "-y", "-ss", "1.03", "-i", str(whole), "-c", "copy",
+                    "-movflags", "+faststart", str(trim)], check=True)
+    data = trim.read_bytes()
+    cut.write_bytes(data[:len(data) * 2 // 3])
+    facts = video_facts(cut)
+    assert facts.n_frames == 59 and facts.stored_frames < 50 and not facts.variable_rate

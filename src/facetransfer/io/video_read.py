@@ -228,7 +228,12 @@ def _counted(path, n: int) -> int:
     if container(path) not in UNCOUNTED:
         hidden = hidden_count(path)
         shown = shown_count(path) if hidden else None
-        if shown and shown != n:
+        if shown is None and hidden and n > hidden:     # cut short: its trim's frames
+            shown = n - hidden
+        if shown == 0:
+            raise VideoError(f"video {path} shows none of the frames it stores: its edit list "
+                             "points past their end (players show no picture)")
+        if shown is not None and shown != n:
             log.info("%s: %d frames shown (its edit list hides %d stored packets)", path, shown,
                      hidden)
             return shown

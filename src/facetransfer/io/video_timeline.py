@@ -54,14 +54,21 @@ def packet_times(path: str | os.PathLike) -> np.ndarray | None:
 
 def _listing(path: str | os.PathLike) -> str | None:
     """ffmpeg's ``framecrc`` listing of the first video stream's packets (a stream copy), None
-    without ffmpeg or where it fails."""
+    without ffmpeg or where it fails; of a file cut short (its index names packets past its
+    end: ffmpeg's "partial file"), with a last line ``#partial`` (:data:`CUT_SHORT`)."""
     exe = ffmpeg_exe()
     if exe is None:
         return None
     res = subprocess.run([exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-i",
                           str(path), "-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"],
                          capture_output=True, text=True)
-    return res.stdout if res.returncode == 0 else None
+    if res.returncode != 0:
+        return None
+    return res.stdout + (f"{CUT_SHORT}\n" if "partial file" in res.stderr else "")
+
+
+#: The line :func:`_listing` adds to the listing of a file cut short.
+CUT_SHORT = "#partial"
 
 
 def _framecrc_times(text: str, column: int = 2) -> np.ndarray | None:
@@ -142,12 +149,16 @@ def _spliced(text: str) -> bool:
 def _cached_packets(path: str, stamp: str) -> tuple:
     """``(presentation times, decoding times)`` of the packets shown (:func:`_framecrc_times`;
     None where they are made up, :func:`_spliced`), how many are hidden by the edit list
-    (:func:`_hidden`), and how many are shown."""
+    (:func:`_hidden`), and how many are shown (None where the file is cut short: its index's
+    count is the one :mod:`facetransfer.io.video_facts` compares with the packets there).
+    """
     text = _listing(path)
     if text is None:
         return None, None, 0, None
     hidden = _count_hidden(text)
     shown = sum(1 for p in _packet_fields(text) if len(p) >= 4 and not _hidden(p))
+    if CUT_SHORT in text.splitlines():      # the frames it shows are not all there to count
+        shown = None
     if hidden and _spliced(text):
         return None, None, hidden, shown
     return _framecrc_times(text), _framecrc_times(text, 1), hidden, shown
@@ -176,7 +187,7 @@ def hidden_count(path: str | os.PathLike) -> int:
 def shown_count(path: str | os.PathLike) -> int | None:
     """How many packets of the first video stream are shown: not hidden by its edit list
     (:func:`hidden_count`), counted even where their times are made up (:func:`_spliced`);
-    None where they cannot be listed."""
+    None where they cannot be listed, or the file is cut short (ffmpeg's "partial file")."""
     try:
         stamp = file_stamp(path)
     except OSError:
