@@ -104,17 +104,18 @@ def test_a_clip_edited_by_reference_reads_as_the_frames_ffmpeg_shows(tmp_path, e
     assert "truncated" not in caplog.text and "variable frame rate" not in caplog.text
 
 
-def test_an_edit_list_past_the_media_is_refused_saying_so(tmp_path):
-    """An edit list showing media past the last frame shows no picture: refused in words
-    that say so (before: 'no frame from frame 0 on decodes, though its header counts 90
-    (damaged, or cut short)', after the count and probe had said 90 frames)."""
+@pytest.mark.parametrize("edits", [[(1.0, 200)], [(0.0, 10)]])
+def test_an_edit_list_past_the_media_is_refused_saying_so(tmp_path, edits):
+    """An edit list showing media past the last frame (or for no time) shows no picture:
+    refused in words that say so (before: 'no frame from frame 0 on decodes, though its header
+    counts 90 (damaged, or cut short)', after the count and probe had said 90 frames)."""
     from facetransfer.errors import VideoError
     from facetransfer.io.video_read import video_info
     whole, cut = tmp_path / "whole.mp4", tmp_path / "past.mp4"
     _numbered_clip(whole)
-    _with_edits(whole, cut, [(1.0, 200)])
+    _with_edits(whole, cut, edits)
     assert len(_shown(cut)) == 0
-    with pytest.raises(VideoError, match="shows none of the frames it stores: its edit list"):
+    with pytest.raises(VideoError, match="shows none of the frames it stores: its edit list shows no time"):
         video_info(cut)
 
 

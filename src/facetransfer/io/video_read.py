@@ -232,7 +232,8 @@ def _counted(path, n: int) -> int:
             shown = n - hidden
         if shown == 0:
             raise VideoError(f"video {path} shows none of the frames it stores: its edit list "
-                             "points past their end (players show no picture)")
+                             "shows no time of them (an edit past their end, or of no length; "
+                             "players show no picture)")
         if shown is not None and shown != n:
             log.info("%s: %d frames shown (its edit list hides %d stored packets)", path, shown,
                      hidden)
