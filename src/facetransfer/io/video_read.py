@@ -218,16 +218,26 @@ def _counted(path, n: int) -> int:
     """The frames of a video whose container stores no count (:data:`UNCOUNTED`): its video
     packets (:func:`facetransfer.io.video_timeline.packet_count`); of one whose edit list hides
     frames (a phone's clip trimmed without re-encoding: :func:`facetransfer.io.video_timeline.
-    hidden_count`), the ones shown, where OpenCV counted them all; else ``n``, OpenCV's."""
+    hidden_count`), the packets shown (:func:`facetransfer.io.video_timeline.shown_count`),
+    where OpenCV counts the track's samples (not its stored packets less the hidden ones: an
+    edit list's index repeats and drops packets: a clip shown from frame 10 for 60 frames
+    was counted 30); else ``n``, OpenCV's."""
     from .video_display import container
-    from .video_timeline import hidden_count, packet_count
+    from .video_timeline import hidden_count, packet_count, shown_count
 
     if container(path) not in UNCOUNTED:
         hidden = hidden_count(path)
-        if hidden and n > hidden:
-            log.info("%s: %d frames shown (%d more stored before its edit list's start)", path,
-                     n - hidden, hidden)
-            return n - hidden
+        shown = shown_count(path) if hidden else None
+        if shown is None and hidden and n > hidden:     # cut short: its trim's frames
+            shown = n - hidden
+        if shown == 0:
+            raise VideoError(f"video {path} shows none of the frames it stores: its edit list "
+                             "shows no time of them (an edit past their end, or of no length; "
+                             "players show no picture)")
+        if shown is not None and shown != n:
+            log.info("%s: %d frames shown (its edit list hides %d stored packets)", path, shown,
+                     hidden)
+            return shown
         return n
     m = packet_count(path)
     if m and m != n:

@@ -33,7 +33,7 @@ from .video_sequence import is_sequence
 log = logging.getLogger(__name__)
 
 __all__ = ["UNEVEN", "SEEK_SLACK", "first_frame_time", "hidden_count", "on_rate_grid",
-           "packet_times", "timeline"]
+           "packet_times", "shown_count", "timeline"]
 
 #: A video's frames are uneven when an interval between two of them is outside this range of
 #: their median interval (a millisecond time base's 33/34 ms steps are even).
@@ -54,14 +54,21 @@ def packet_times(path: str | os.PathLike) -> np.ndarray | None:
 
 def _listing(path: str | os.PathLike) -> str | None:
     """ffmpeg's ``framecrc`` listing of the first video stream's packets (a stream copy), None
-    without ffmpeg or where it fails."""
+    without ffmpeg or where it fails; of a file cut short (its index names packets past its
+    end: ffmpeg's "partial file"), with a last line ``#partial`` (:data:`CUT_SHORT`)."""
     exe = ffmpeg_exe()
     if exe is None:
         return None
     res = subprocess.run([exe, "-hide_banner", "-nostdin", "-loglevel", "error", "-i",
                           str(path), "-map", "0:v:0", "-c", "copy", "-f", "framecrc", "-"],
                          capture_output=True, text=True)
-    return res.stdout if res.returncode == 0 else None
+    if res.returncode != 0:
+        return None
+    return res.stdout + (f"{CUT_SHORT}\n" if "partial file" in res.stderr else "")
+
+
+#: The line :func:`_listing` adds to the listing of a file cut short.
+CUT_SHORT = "#partial"
 
 
 def _framecrc_times(text: str, column: int = 2) -> np.ndarray | None:
@@ -113,20 +120,48 @@ def _hidden(parts: list[str]) -> bool:
         return False
 
 
+def _packet_fields(text: str) -> list[list[str]]:
+    """The fields of each packet line of the first stream of a ``framecrc`` listing."""
+    return [[p.strip() for p in line.split(",")] for line in text.splitlines()
+            if line.startswith("0,")]
+
+
 def _count_hidden(text: str) -> int:
     """How many packets of a ``framecrc`` listing of one stream are :func:`_hidden`."""
-    return sum(1 for line in text.splitlines() if line.startswith("0,")
-               and _hidden([p.strip() for p in line.split(",")]))
+    return sum(1 for parts in _packet_fields(text) if _hidden(parts))
+
+
+def _spliced(text: str) -> bool:
+    """Whether the shown packets of a ``framecrc`` listing whose edit list hides some do not
+    decode in a strictly rising order: an edit list of two edits or more (a clip's pieces
+    joined by reference, as an editor's stream copy keeps them), whose second piece ffmpeg's
+    stream copy lists at times it made up (one decoding time repeated over dozens of packets,
+    presentation times before the first piece's end). Their times are no timeline: read as
+    one, a clip of two 1-second pieces took a 0.57 s gap at the join and held a frame there."""
+    try:
+        dts = [int(p[1]) for p in _packet_fields(text) if len(p) >= 4 and not _hidden(p)]
+    except ValueError:
+        return True
+    return any(b <= a for a, b in zip(dts, dts[1:]))
 
 
 @functools.lru_cache(maxsize=32)
 def _cached_packets(path: str, stamp: str) -> tuple:
-    """``(presentation times, decoding times)`` of the packets shown (:func:`_framecrc_times`),
-    and how many are hidden by the edit list (:func:`_hidden`)."""
+    """``(presentation times, decoding times)`` of the packets shown (:func:`_framecrc_times`;
+    None where they are made up, :func:`_spliced`), how many are hidden by the edit list
+    (:func:`_hidden`), and how many are shown (None where the file is cut short: its index's
+    count is the one :mod:`facetransfer.io.video_facts` compares with the packets there).
+    """
     text = _listing(path)
     if text is None:
-        return None, None, 0
-    return _framecrc_times(text), _framecrc_times(text, 1), _count_hidden(text)
+        return None, None, 0, None
+    hidden = _count_hidden(text)
+    shown = sum(1 for p in _packet_fields(text) if len(p) >= 4 and not _hidden(p))
+    if CUT_SHORT in text.splitlines():      # the frames it shows are not all there to count
+        shown = None
+    if hidden and _spliced(text):
+        return None, None, hidden, shown
+    return _framecrc_times(text), _framecrc_times(text, 1), hidden, shown
 
 
 def _cached_times(path: str, stamp: str) -> np.ndarray | None:
@@ -147,6 +182,17 @@ def hidden_count(path: str | os.PathLike) -> int:
     except OSError:
         return 0
     return int(_cached_packets(str(path), stamp)[2])
+
+
+def shown_count(path: str | os.PathLike) -> int | None:
+    """How many packets of the first video stream are shown: not hidden by its edit list
+    (:func:`hidden_count`), counted even where their times are made up (:func:`_spliced`);
+    None where they cannot be listed, or the file is cut short (ffmpeg's "partial file")."""
+    try:
+        stamp = file_stamp(path)
+    except OSError:
+        return None
+    return _cached_packets(str(path), stamp)[3]
 
 
 def packet_count(path: str | os.PathLike) -> int | None:
@@ -235,7 +281,7 @@ def on_rate_grid(path: str | os.PathLike, fps: float) -> bool:
 
 @functools.lru_cache(maxsize=32)
 def _cached_on_grid(path: str, stamp: str, fps: float) -> bool:
-    shown, decoded, _ = _cached_packets(path, stamp)
+    shown, decoded = _cached_packets(path, stamp)[:2]
     times = decoded if shown is None else shown
     if times is None or not fps > 0:
         return False

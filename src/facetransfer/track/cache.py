@@ -9,8 +9,10 @@ does not track both clips again and an interrupted one keeps its tracking,
 ``$XDG_CACHE_HOME/facetransfer/tracks`` (default ``~/.cache/facetransfer/tracks``) by a key of
 everything the track depends on
 (:func:`track_key`): the video file (resolved path, size, modification time), the frames
-tracked, the tracker and its options, the model's content, and the code, data and libraries
-that make a track (:func:`code_fingerprint`: a changed tracker never reads an old track). The capture
+tracked, the tracker and its options, the model's content, what the readers make of the video
+(:func:`reading_facts`: its count, timeline, turn, mirror), and the code, data and libraries
+that make a track (:func:`code_fingerprint`: a changed tracker never reads an old track; its
+docstrings and comments are not its code). The capture
 tracker's progress (detections, then the fit) is saved beside it while it runs
 (:mod:`facetransfer.track.detect_checkpoint`) and continued by the next run.
 
@@ -31,9 +33,9 @@ from ..errors import OutputError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FRAME_READERS", "KEEP", "LAYOUT", "fingerprinted_files", "cache_enabled", "code_digest",
-           "code_fingerprint", "track_dir",
-           "track_key", "holds", "cached_track", "store_track", "partial_path"]
+__all__ = ["FRAME_READERS", "KEEP", "LAYOUT", "fingerprinted_files", "cache_enabled",
+           "code_digest", "code_fingerprint", "reading_facts", "track_dir", "track_key", "holds",
+           "cached_track", "store_track", "partial_path"]
 
 #: The cache's layout: a change of what a key means (or of the trackers' results) changes it.
 LAYOUT = "tracks-1"
@@ -68,10 +70,31 @@ def track_key(video, n_frames: int, method: str, options, model) -> str | None:
     from .checkpoint import video_identity
 
     what = {"layout": LAYOUT, "version": __version__, "code": code_fingerprint(),
-            "video": video_identity(os.fspath(video)),
+            "video": video_identity(os.fspath(video)), "reading": reading_facts(video),
             "frames": int(n_frames), "method": str(method), "options": repr(options),
             "model": str(model.content_hash)}
     return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:32]
+
+
+def reading_facts(video) -> str | None:
+    """What the readers make of ``video`` (:func:`facetransfer.io.video_read.video_info`): its
+    frames' count, rate, size and pixel aspect, the steps of its timeline, its turn and mirror,
+    and whether ffmpeg decodes it. In the key, a change of how a clip is read re-tracks that
+    clip whatever made it: the readers' code (:data:`FRAME_READERS`, also digested), but also
+    the ffmpeg binary, whose listing of a clip's packets decides a trimmed clip's frames and a
+    variable-rate clip's timeline and is digested nowhere. None where it cannot be read."""
+    from ..errors import VideoError
+    from ..io.video_read import video_info
+
+    try:
+        info = video_info(video)
+    except (VideoError, OSError):
+        return None
+    steps = None if info.steps is None else hashlib.sha256(
+        json.dumps(list(info.steps)).encode()).hexdigest()[:16]
+    return json.dumps([round(float(info.fps), 6), int(info.n_frames), list(info.size),
+                       list(info.sar), steps, int(info.turn), bool(info.mirrored),
+                       bool(info.piped)])
 
 
 #: The video readers whose changes change a track (a clip's frames, their times, their turn):
@@ -89,31 +112,53 @@ def fingerprinted_files(root: Path) -> list[Path]:
 
 @functools.lru_cache(maxsize=1)
 def code_fingerprint() -> str:
-    """A digest of what makes a track besides its inputs: the sources of
-    :mod:`facetransfer.track`, of the model and ARKit modules, of the readers that decide which
-    frames a video gives and how they are turned (:data:`FRAME_READERS`), the package's data
-    files (the landmark mappings), and the versions of MediaPipe (the detector) and OpenCV (the
-    decoder and the point flow)."""
+    """A digest of what makes a track besides its inputs: the code (not the docstrings and
+    comments: :func:`_code_of`) of :mod:`facetransfer.track`, of the model and ARKit modules, of
+    the readers that decide which frames a video gives and how they are turned
+    (:data:`FRAME_READERS`), the package's data files (the landmark mappings), and the versions
+    of MediaPipe (the detector) and OpenCV (the decoder and the point flow)."""
     from importlib import metadata
 
     import cv2
 
     root = Path(__file__).resolve().parent.parent
     return code_digest(root, fingerprinted_files(root),
-                       f"mediapipe={metadata.version('mediapipe')} "
-                                    f"cv2={cv2.__version__}")
+                       f"mediapipe={metadata.version('mediapipe')} cv2={cv2.__version__}",
+                       code_only=True)
 
 
-def code_digest(root: Path, files, versions: str) -> str:
+def code_digest(root: Path, files, versions: str, *, code_only: bool = False) -> str:
     """A digest of ``files`` (their paths under ``root`` and contents; a missing one counts
     as empty) and of ``versions`` (the libraries' versions, as the caller names them): what a
-    cache's key holds of the code that made an entry (also :mod:`facetransfer.render_cache`)."""
+    cache's key holds of the code that made an entry (also :mod:`facetransfer.render_cache`).
+    ``code_only``: a Python file's code alone (:func:`_code_of`: its docstrings, comments and
+    layout left out), so that a reworded docstring keeps every cached entry."""
     h = hashlib.sha256()
     for f in files:
         h.update(str(Path(f).relative_to(root)).encode())
-        h.update(f.read_bytes() if f.is_file() else b"")
+        data = f.read_bytes() if f.is_file() else b""
+        h.update(_code_of(data) if code_only and f.suffix == ".py" else data)
     h.update(versions.encode())
     return h.hexdigest()[:16]
+
+
+def _code_of(source: bytes) -> bytes:
+    """A Python file's syntax tree without its docstrings (``ast.dump``: no comments, no line
+    numbers), or the file itself where it does not parse."""
+    import ast
+
+    try:
+        tree = ast.parse(source)
+    except (SyntaxError, ValueError):
+        return source
+    for node in ast.walk(tree):
+        body = getattr(node, "body", None)
+        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
+                and body and isinstance(body[0], ast.Expr)
+                and isinstance(body[0].value, ast.Constant)
+                and isinstance(body[0].value.value, str)):
+            node.body = body[1:] or [ast.Pass()]
+    return ast.dump(tree).encode()
 
 
 def _path(key: str) -> Path:
