@@ -106,11 +106,15 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     sclera beyond the corners, the iris above and below).
 
     A pixel beyond the iris's extent along its eye's long axis whose nearest pixel is the iris
-    (:func:`_iris_pixels`: an eye turned into its corner) takes its eye's sclera colour
-    instead: the eyeball beyond the iris is sclera. Before, the iris was continued there, and
-    an eye turned back from that corner showed it as a dark grey blob over that half of the
-    eye (walk52: ``transfer --target orig.mp4 --expression-from face_2.mp4 --max-frames 30``,
-    whose reference frame's left eye looks fully in)."""
+    (:func:`_iris_pixels`: an eye turned into its corner) takes the colour of its nearest pixel
+    of the eye's sclera instead: the eyeball beyond the iris is sclera. Before, the iris was
+    continued there, and an eye turned back from that corner showed it as a dark grey blob over
+    that half of the eye (walk52: ``transfer --target orig.mp4 --expression-from face_2.mp4
+    --max-frames 30``, whose reference frame's left eye looks fully in). The nearest sclera,
+    not one colour for the eye (review52d): an eye with its sclera lit on one side of the iris
+    and in shade on the other had the shaded side's hidden part filled with the lit side's
+    colour, a light stripe with a hard edge beside the shaded sclera (``make demo``'s pair,
+    frames 29 and 40)."""
     import cv2
 
     core = cv2.erode(opening.view(np.uint8), np.ones((3, 3), np.uint8), iterations=rim) \
@@ -124,8 +128,20 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     p = xs * axes[k, 0] + ys * axes[k, 1]                # the pixel's place along its long axis
     side = iris[src[:, 0], src[:, 1]] & ((p < span[k, 0]) | (p > span[k, 1]))
     out[ys, xs] = image[src[:, 0], src[:, 1]]
-    out[ys[side], xs[side]] = sclera[k[side]]
+    if side.any():
+        at = _nearest_to(sclera, ys[side], xs[side])
+        out[ys[side], xs[side]] = image[at[:, 0], at[:, 1]]
     return out
+
+
+def _nearest_to(mask: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
+    """``(m, 2)`` (row, column): the nearest ``mask`` (H, W) bool pixel to each of the pixels
+    ``(ys, xs)``, as :func:`_nearest` finds them."""
+    import cv2
+
+    _, label = cv2.distanceTransformWithLabels((~mask).view(np.uint8), cv2.DIST_L2, 5,
+                                               labelType=cv2.DIST_LABEL_PIXEL)
+    return np.argwhere(mask)[label[ys, xs] - 1]
 
 
 #: :func:`_iris_pixels`: an eye's opening holds an iris where its luma's 10th percentile is
@@ -161,14 +177,14 @@ def _iris_pixels(image: np.ndarray, core: np.ndarray):
     under :data:`IRIS_CONTRAST` of the 90th), (H, W) bool; the part of each pixel (H, W) int32
     (0 outside); each part's long axis ``(k + 1, 2)`` (x, y) unit vectors (its pixels'
     principal direction; row 0 unused); its iris's extent along that axis ``(k + 1, 2)`` (an
-    empty one without an iris or sclera); and its sclera's colour ``(k + 1, 3)`` uint8, the
-    median of its pixels above the midpoint on its middle band (:data:`BAND`: not the lids'
-    grey margins) beside the iris (not the catchlights in it)."""
+    empty one without an iris or sclera); and its sclera (H, W) bool, its pixels above the
+    midpoint on its middle band (:data:`BAND`: not the lids' grey margins) beside the iris
+    (not the catchlights in it), of the eyes with an iris."""
     import cv2
 
     n, eye = cv2.connectedComponents(core, connectivity=8)
     luma = cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2GRAY)
-    iris, sclera = np.zeros(core.shape, bool), np.zeros((n, 3), np.uint8)
+    iris, sclera = np.zeros(core.shape, bool), np.zeros(core.shape, bool)
     axes = np.tile(np.array([1.0, 0.0]), (n, 1))
     span = np.tile(np.array([np.inf, -np.inf]), (n, 1))
     for k in range(1, n):
@@ -196,7 +212,7 @@ def _iris_pixels(image: np.ndarray, core: np.ndarray):
         if mid.any():
             iris |= big
             span[k] = along.min(), along.max()
-            sclera[k] = np.median(image[yy[mid], xx[mid]], axis=0)
+            sclera[yy[mid], xx[mid]] = True
     return iris, eye, axes, span, sclera
 
 
