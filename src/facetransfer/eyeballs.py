@@ -21,8 +21,8 @@ import numpy as np
 from .render.raster import _maybe_njit
 from .track.gaze import activation_gaze, eye_model, project_iris
 
-__all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "Eyeballs", "extend_eyeballs",
-           "eyeballs_of", "shift_eyeballs", "track_gaze"]
+__all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "Eyeballs",
+           "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
@@ -155,6 +155,13 @@ IRIS_LEVEL = 0.3
 #: :func:`_iris_pixels`: the sclera is read on the eye's middle band, within this share of
 #: its half-height (twice its pixels' standard deviation across its long axis) of its middle.
 BAND = 0.5
+#: :func:`_iris_pixels`: a part of an opening has a long axis where its pixels' variance along
+#: it is at least this many times that across it (its length 1.7 times its height; an eye
+#: open wide, its corners to its lids, is 2-3 times. Review52d: a part about as tall as wide, an
+#: eye nearly closed or a piece of one, had its axis put upright by chance, and the eyeball
+#: above its iris, under the lid, was made sclera: a white cap over the iris). Without one
+#: the part is filled from its nearest pixels, as an eye without an iris is.
+ELONGATION = 3.0
 
 
 def _nearest(core: np.ndarray, reach: float):
@@ -192,6 +199,8 @@ def _iris_pixels(image: np.ndarray, core: np.ndarray):
         across = np.zeros(len(xx))
         if len(xx) > 2:
             w, vec = np.linalg.eigh(np.cov(np.stack([xx, yy]).astype(np.float64)))
+            if w.max() < ELONGATION * w.min():
+                continue
             axes[k] = vec[:, int(np.argmax(w))]
             across = ((yy - yy.mean()) * axes[k, 0] - (xx - xx.mean()) * axes[k, 1]) \
                 / max(2.0 * np.sqrt(max(w.min(), 0.0)), 1e-9)
