@@ -21,7 +21,7 @@ def _shaded_eye():
 def test_the_eyeball_beyond_an_iris_is_the_sclera_on_its_own_side():
     """The hidden eyeball beyond the iris took one colour for the whole eye (the median of its
     lit sclera): where the sclera on that side of the iris is in shade, the fill was a light
-    patch with a hard edge beside it (``make demo``'s pair, frames 29 and 40). Now it is the
+    patch with a hard edge beside it (``make demo``'s pair, frame 29). Now it is the
     nearest sclera's: the shade on the shaded side, the lit on the lit side."""
     from facetransfer import eyeballs
 

@@ -114,7 +114,7 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     not one colour for the eye (review52d): an eye with its sclera lit on one side of the iris
     and in shade on the other had the shaded side's hidden part filled with the lit side's
     colour, a light stripe with a hard edge beside the shaded sclera (``make demo``'s pair,
-    frames 29 and 40)."""
+    frame 29)."""
     import cv2
 
     core = cv2.erode(opening.view(np.uint8), np.ones((3, 3), np.uint8), iterations=rim) \
@@ -183,10 +183,11 @@ def _iris_pixels(image: np.ndarray, core: np.ndarray):
     :data:`IRIS_LEVEL` of the way from its 10th percentile to its 90th, where the 10th is
     under :data:`IRIS_CONTRAST` of the 90th), (H, W) bool; the part of each pixel (H, W) int32
     (0 outside); each part's long axis ``(k + 1, 2)`` (x, y) unit vectors (its pixels'
-    principal direction; row 0 unused); its iris's extent along that axis ``(k + 1, 2)`` (an
-    empty one without an iris or sclera); and its sclera (H, W) bool, its pixels above the
-    midpoint on its middle band (:data:`BAND`: not the lids' grey margins) beside the iris
-    (not the catchlights in it), of the eyes with an iris."""
+    principal direction; row 0 unused; a part not :data:`ELONGATION` long has none, nor an
+    iris); its iris's extent along that axis ``(k + 1, 2)`` (an empty one without an iris or
+    sclera); and its sclera (H, W) bool, its pixels above the midpoint on its middle band
+    (:data:`BAND`: not the lids' grey margins) beside the iris (not the catchlights in it), of
+    the eyes with an iris."""
     import cv2
 
     n, eye = cv2.connectedComponents(core, connectivity=8)
