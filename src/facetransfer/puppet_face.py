@@ -50,8 +50,9 @@ import numpy as np
 from .track.gaze import CORNER_INDEX, EYE_RADIUS, activation_gaze, eye_model, gaze_direction
 
 __all__ = ["SCLERA", "IRIS", "PUPIL", "CAVITY", "TEETH", "IRIS_RADIUS", "PUPIL_RADIUS",
-           "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "PuppetFace", "puppet_face", "arkit_activations",
-           "track_gaze", "lid_light", "paint_face", "preview_face"]
+           "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "PuppetFace",
+           "puppet_face", "arkit_activations", "track_gaze", "lid_light", "paint_face",
+           "preview_face"]
 
 #: The white of the eye: an off-white (RGB).
 SCLERA = (232, 228, 218)
