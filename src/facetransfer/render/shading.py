@@ -391,7 +391,10 @@ def interpolate_vertex_pair(raster: Raster, faces: np.ndarray, values: np.ndarra
 def _interpolate_pair_kernel_py(tid, bary, y0, x0, F, values, more, out,
                                 out2):  # pragma: no cover (numba)
     """:func:`_interpolate_kernel` of ``values`` into ``out`` and of ``more`` into ``out2``
-    (both (h, w) float32) in one pass, each sum in its order."""
+    (both (h, w) float32) in one pass, each sum in its order. A second kernel on purpose: one
+    kernel over ``k`` stacked scalars (a loop of a run-time length per pixel) took the single
+    interpolation from 0.23 to 0.41 ms on the default model's face box, and the pair to 0.60
+    against this one's 0.35 (fifty-second session)."""
     H, W = out.shape
     n = F.shape[0]
     for iy in range(H):
