@@ -217,13 +217,23 @@ def interrupts_not_ignored(signals):
         if signum is None or threading.current_thread() is not threading.main_thread():
             before(unraisable)
             return
-        send_later(signum)
+        _IN_HOOK[0] = True
+        try:
+            send_later(signum)
+        finally:
+            _IN_HOOK[0] = False
 
     sys.unraisablehook = hook
     try:
         yield
     finally:
         sys.unraisablehook = before
+
+
+#: Whether :func:`interrupts_not_ignored`'s hook runs (in the main thread): a signal handled
+#: there is ignored as the one it sends again was (its timer's signal can come before the
+#: timer's ``start()`` returns, on a loaded machine), so :func:`unsafe_to_raise_at` says so.
+_IN_HOOK = [False]
 
 
 def send_later(signum: int) -> None:
@@ -254,8 +264,10 @@ def unsafe_to_raise_at(frame) -> bool:
     then waited for ever for them (a lone Ctrl-C 1.3-2.7 s into issue 13's transfer: 3 of 45
     runs hung, no line said; importlib's module-lock callback alone was guarded before). A
     handler sends its signal again instead (:func:`send_later`), taken in the code running
-    a moment later."""
-    return frame is not None and frame.f_globals.get("__name__") in UNGUARDED_LOCKS
+    a moment later. Nor while :func:`interrupts_not_ignored`'s hook runs (:data:`_IN_HOOK`):
+    what it raises there is ignored."""
+    return _IN_HOOK[0] or (frame is not None
+                           and frame.f_globals.get("__name__") in UNGUARDED_LOCKS)
 
 
 def _send_again(signum: int) -> None:
