@@ -134,12 +134,54 @@ def code_digest(root: Path, files, versions: str, *, code_only: bool = False) ->
     ``code_only``: a Python file's code alone (:func:`_code_of`: its docstrings, comments and
     layout left out), so that a reworded docstring keeps every cached entry."""
     h = hashlib.sha256()
+    memo = _load_memo() if code_only else {}
+    known = len(memo)
     for f in files:
         h.update(str(Path(f).relative_to(root)).encode())
         data = f.read_bytes() if f.is_file() else b""
-        h.update(_code_of(data) if code_only and f.suffix == ".py" else data)
+        h.update(_code_hash(data, memo).encode() if code_only and f.suffix == ".py" else data)
     h.update(versions.encode())
+    if len(memo) != known:
+        _save_memo(memo)
     return h.hexdigest()[:16]
+
+
+#: :func:`_code_hash`'s memo in the user cache: a Python file's bytes' sha256 -> its code's
+#: (:func:`_code_of`), so that a version of a file is parsed once, not at every command (the
+#: track's fingerprint 0.46 CPU-s with the parses, 0.11 without); at most :data:`MEMO_LIMIT`.
+CODE_MEMO, MEMO_LIMIT = "code-digests.json", 2048
+
+
+def _code_hash(data: bytes, memo: dict) -> str:
+    """The sha256 of :func:`_code_of` ``(data)``, looked up in (or added to) ``memo`` by the
+    sha256 of ``data`` itself."""
+    raw = hashlib.sha256(data).hexdigest()
+    if raw not in memo:
+        memo[raw] = hashlib.sha256(_code_of(data)).hexdigest()
+    return memo[raw]
+
+
+def _load_memo() -> dict:
+    """:data:`CODE_MEMO`'s entries; none where it is missing or unreadable."""
+    from ..assets import cache_dir
+
+    try:
+        memo = json.loads((cache_dir() / CODE_MEMO).read_text())
+    except (OSError, ValueError):
+        return {}
+    return memo if isinstance(memo, dict) and len(memo) <= MEMO_LIMIT else {}
+
+
+def _save_memo(memo: dict) -> None:
+    """Write :data:`CODE_MEMO` atomically (two commands at once: the later's is kept, either
+    right); a cache that cannot be written is left as it is."""
+    from ..assets import cache_dir
+    from ..io.atomic import write_text_atomic
+
+    try:
+        write_text_atomic(cache_dir() / CODE_MEMO, json.dumps(memo))
+    except OSError:
+        pass
 
 
 def _code_of(source: bytes) -> bytes:
