@@ -11,10 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from facetransfer.geometry import check_mesh
 from facetransfer.render import (Pinhole, WeakPerspective, look_at_weak_perspective, rasterize,
                                  rotation_from_euler)
 from facetransfer.render.cameras import _pixels
-from facetransfer.render.raster import _check_mesh, _raster_kernel, _screen
+from facetransfer.render.raster import _raster_kernel, _screen
 
 
 def _before(cam: WeakPerspective, X) -> np.ndarray:
@@ -66,7 +67,7 @@ def test_pixels_kernel_equals_its_python_twin():
 def _raster_before(V, F, camera, W, H, cull):
     """``rasterize`` as it was at ``c1ab903``: numpy's buffers, then the kernel, then the
     mask."""
-    V, F = _check_mesh(V, F)
+    V, F = check_mesh(V, F)
     xy, z, q = _screen(V, camera)
     zbuf = np.full((H, W), -np.inf, np.float32)
     tid = np.full((H, W), -1, np.int32)

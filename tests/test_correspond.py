@@ -15,7 +15,7 @@ from facetransfer.correspond.features import FeatureError, features_from_dict
 from facetransfer.correspond.meshops import SurfaceQuery, closest_point_on_triangles
 from facetransfer.correspond.synthetic import random_rotation
 from facetransfer.errors import FaceTransferError, MeshError, ShapeError
-from facetransfer.render import vertex_normals
+from facetransfer.geometry import vertex_normals
 
 
 # ---------------------------------------------------------------- Procrustes (Umeyama 1991)

@@ -20,7 +20,6 @@ from facetransfer.render import (
     render,
     rotation_from_euler,
     sample_texture,
-    vertex_normals,
     vertex_visibility,
 )
 
@@ -342,16 +341,6 @@ def test_visibility_uses_given_raster_and_checks_its_size():
 
 
 # ------------------------------------------------------------------------------- render
-
-def test_vertex_normals_of_plane_and_cap():
-    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
-    F = np.array([[0, 1, 2], [1, 3, 2]])
-    np.testing.assert_allclose(vertex_normals(V, F), np.tile([0, 0, 1.0], (4, 1)))
-    Vc, Fc = cap_mesh(40, 40)
-    N = vertex_normals(Vc, Fc)
-    # normals of a sphere cap point outwards, up to discretisation near the border
-    assert np.min(np.einsum("ij,ij->i", N, Vc / np.linalg.norm(Vc, axis=1)[:, None])) > 0.95
-
 
 def test_render_per_vertex_colours_exact():
     V, F, cam = one_triangle()

@@ -16,6 +16,11 @@ class MeshError(FaceTransferError):
     """A mesh file is unreadable, empty, non-finite or has an unexpected topology."""
 
 
+class RenderError(MeshError):
+    """A mesh, camera or texture that cannot be rendered (:mod:`facetransfer.render`, whose
+    public name it stays; here because :func:`facetransfer.geometry.check_mesh` raises it)."""
+
+
 class DatasetError(FaceTransferError):
     """A manifest or data-set folder is inconsistent (duplicate or missing cells, mixed topology)."""
 

@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .render import project_frames, vertex_normals
+from .geometry import vertex_normals
+from .render import project_frames
 
 __all__ = ["FACING", "USUAL", "USUAL_SAMPLES", "facing_weights", "model_vertices",
            "moved_strengths", "usual_weights", "usual_weights_of", "vertex_alpha", "smoothstep"]
@@ -46,7 +47,7 @@ def facing_weights(V: np.ndarray, faces: np.ndarray, rotation: np.ndarray, verts
                    ramp: tuple[float, float] = FACING) -> np.ndarray:
     """How squarely the reference frame sees each vertex, ``(m,)`` float32 in [0, 1]: the
     smoothstep from ``ramp[0]`` to ``ramp[1]`` of the component toward the camera of the
-    unit normal (:func:`facetransfer.render.vertex_normals`) of ``V`` (n, 3), the mesh in
+    unit normal (:func:`facetransfer.geometry.vertex_normals`) of ``V`` (n, 3), the mesh in
     the frame (no pose), turned by the frame's ``rotation`` (3, 3), at the vertices
     ``verts`` (m,)."""
     N = vertex_normals(V, faces)[verts] @ np.asarray(rotation, np.float64).T

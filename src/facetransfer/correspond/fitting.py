@@ -51,7 +51,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
 from ..errors import FaceTransferError, MeshError
-from ..render import vertex_normals
+from ..geometry import vertex_normals
 from .features import FeatureError, FeaturePoints, validate_features_on_surface
 from .meshops import ScanMesh, SurfaceQuery, face_normals, mesh_laplacian
 from .prior import ShapePrior, fit_shape_prior, ict_prior

@@ -1,7 +1,7 @@
 """Scan validation and repair, face normals, Laplacians and closest points on a triangle surface.
 
 Everything here is plain array geometry: vertices ``(n, 3) float64``, triangles ``(F, 3) int64``.
-Vertex normals are :func:`facetransfer.render.vertex_normals` (area-weighted, unit, zero on
+Vertex normals are :func:`facetransfer.geometry.vertex_normals` (area-weighted, unit, zero on
 vertices of no non-degenerate face).
 """
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..render import vertex_normals
+from ..geometry import vertex_normals
 from .features import FeaturePoints
 from .meshops import ScanMesh, SurfaceQuery, clean_scan
 from .procrustes import Similarity

@@ -247,7 +247,7 @@ def lift_clip_texture(track, model, video, *, tex_size: int = 512, step: int = 1
 def _normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Unit vertex normals ``(n, 3) float32``: the renderer's (area-weighted), so a glb shades
     like our own renders; (0, 0, 1) where a vertex has none."""
-    from ..render import vertex_normals
+    from ..geometry import vertex_normals
 
     n = vertex_normals(np.asarray(vertices, np.float64), np.asarray(faces, np.int64))
     n = n.astype(np.float32)

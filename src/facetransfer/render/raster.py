@@ -19,15 +19,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import MeshError, ShapeError
+from ..errors import RenderError, ShapeError
+from ..geometry import check_mesh as _check_mesh
+from ..geometry import face_cross as _face_cross
+from ..jit import _HAVE_NUMBA, _maybe_njit  # noqa: F401 (the kernels import it from here)
 from .cameras import Pinhole, WeakPerspective, _as_size
-from .jit import _HAVE_NUMBA, _maybe_njit  # noqa: F401 (the kernels import it from here)
 
 __all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference", "coverage"]
-
-
-class RenderError(MeshError):
-    """A mesh, camera or texture that cannot be rendered."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,45 +60,11 @@ class Raster:
 # Validation
 # --------------------------------------------------------------------------------------------
 
-def _check_mesh(vertices, faces) -> tuple[np.ndarray, np.ndarray]:
-    """Vertices (n, 3) float64 finite and faces (F, 3) int64 in range; rejects empty meshes."""
-    V = np.ascontiguousarray(vertices, dtype=np.float64)
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise ShapeError(f"vertices must be (n, 3), got {V.shape}")
-    if V.shape[0] == 0:
-        raise RenderError("cannot render an empty mesh (0 vertices)")
-    if not np.all(np.isfinite(V)):
-        raise RenderError("vertices contain NaN or infinite coordinates")
-    F = np.asarray(faces)
-    if F.ndim != 2 or F.shape[1] != 3:
-        raise ShapeError(f"faces must be (F, 3), got {F.shape}")
-    if F.shape[0] == 0:
-        raise RenderError("cannot render a mesh with no faces (0 triangles)")
-    if not np.issubdtype(F.dtype, np.integer):
-        raise ShapeError(f"faces must be integer indices, got dtype {F.dtype}")
-    F = np.ascontiguousarray(F, dtype=np.int64)
-    lo, hi = int(F.min()), int(F.max())
-    if lo < 0 or hi >= V.shape[0]:
-        raise RenderError(f"faces index vertices {lo}..{hi} but the mesh has {V.shape[0]} vertices")
-    return V, F
-
-
 def _check_not_all_degenerate(V: np.ndarray, F: np.ndarray) -> None:
     """Reject a mesh whose triangles all have zero area in 3D."""
     scale = float(_bbox_diagonal(V))
     if scale == 0.0 or not _any_nondegenerate(V, F, (1e-12 * scale * scale) ** 2):
         raise RenderError(f"all {F.shape[0]} triangles are degenerate (zero area)")
-
-
-def _face_cross_py(V, i0, i1, i2):  # pragma: no cover (numba)
-    """Cross product ``(V[i1] - V[i0]) x (V[i2] - V[i0])`` of a triangle (2 x area x unit
-    normal) as three floats."""
-    ax, ay, az = V[i1, 0] - V[i0, 0], V[i1, 1] - V[i0, 1], V[i1, 2] - V[i0, 2]
-    bx, by, bz = V[i2, 0] - V[i0, 0], V[i2, 1] - V[i0, 1], V[i2, 2] - V[i0, 2]
-    return ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-
-
-_face_cross = _maybe_njit(_face_cross_py)
 
 
 def _any_nondegenerate_py(V, F, eps2):  # pragma: no cover

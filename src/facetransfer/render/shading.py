@@ -1,55 +1,17 @@
-"""Colour for rasterised pixels (paper §6): vertex normals, texture sampling, and the numba
-kernels that shade a :class:`~facetransfer.render.raster.Raster` from per-vertex colours or a UV
-texture, optionally Lambert-lit."""
+"""Colour for rasterised pixels (paper §6): texture sampling, and the numba kernels that shade a
+:class:`~facetransfer.render.raster.Raster` from per-vertex colours or a UV texture, optionally
+Lambert-lit (by :func:`facetransfer.geometry.vertex_normals`)."""
 
 from __future__ import annotations
 
 import numpy as np
 
 from ..errors import AssetError, ShapeError
-from .raster import Raster, RenderError, _check_mesh, _face_cross, _maybe_njit
+from ..geometry import vertex_normals
+from .raster import Raster, RenderError, _maybe_njit
 
-__all__ = ["vertex_normals", "sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS",
+__all__ = ["sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS",
            "interpolate_vertex_values", "interpolate_vertex_pair"]
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (right-hand rule on the face vertex order).
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-    faces : (F, 3) int64
-
-    Returns
-    -------
-    (n, 3) float64
-        Unit normals; vertices on no non-degenerate face get (0, 0, 0).
-    """
-    V, F = _check_mesh(vertices, faces)
-    N = np.zeros_like(V)
-    _normals_kernel(V, F, N)
-    return N
-
-
-def _normals_kernel_py(V, F, N):  # pragma: no cover
-    """Sum of face cross products (2 x area x unit normal) per vertex, then normalised."""
-    for f in range(F.shape[0]):
-        i0, i1, i2 = F[f, 0], F[f, 1], F[f, 2]
-        nx, ny, nz = _face_cross(V, i0, i1, i2)
-        for i in (i0, i1, i2):
-            N[i, 0] += nx
-            N[i, 1] += ny
-            N[i, 2] += nz
-    for i in range(N.shape[0]):
-        norm = np.sqrt(N[i, 0] ** 2 + N[i, 1] ** 2 + N[i, 2] ** 2)
-        if norm > 0:
-            N[i, 0] /= norm
-            N[i, 1] /= norm
-            N[i, 2] /= norm
-
-
-_normals_kernel = _maybe_njit(_normals_kernel_py)
 
 
 def _check_texture(texture) -> np.ndarray:

@@ -6,9 +6,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ShapeError
+from ..geometry import check_mesh as _check_mesh
 from .cameras import _as_size
-from .raster import (Raster, _bbox_diagonal, _check_mesh, _maybe_njit, _scratch_rasterizer,
-                     _screen)
+from .raster import Raster, _bbox_diagonal, _maybe_njit, _scratch_rasterizer, _screen
 
 __all__ = ["vertex_visibility"]
 

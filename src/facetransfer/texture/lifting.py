@@ -21,8 +21,8 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ..geometry import barycentric_2d
-from ..render import rasterize, vertex_normals, vertex_visibility
+from ..geometry import barycentric_2d, vertex_normals
+from ..render import rasterize, vertex_visibility
 from .atlas import UVAtlas, uv_atlas
 from .base import TextureError, check_frame, check_raster, check_uvs, check_vertices, default_tol
 from .function import attribute_vector

@@ -107,7 +107,8 @@ class FaceTracker:
         points : (k, 2) float64
             Their pixels in this frame.
         """
-        from ..render import WeakPerspective, vertex_normals, vertex_visibility
+        from ..geometry import vertex_normals
+        from ..render import WeakPerspective, vertex_visibility
 
         V = self.cache(state.weights).shape(state.weights)            # (n, 3)
         pose = state.pose

@@ -1,6 +1,7 @@
-"""The house's numba decorator (:func:`_maybe_njit`), in a module of its own so that the
-camera (:mod:`facetransfer.render.cameras`, which :mod:`facetransfer.render.raster` imports) has
-a kernel too; every kernel imports it from :mod:`facetransfer.render.raster` as before."""
+"""The house's numba decorator (:func:`_maybe_njit`), in the base layer so that every layer's
+kernels share it: the mesh's vertex normals (:mod:`facetransfer.geometry`, which the scans'
+template fitting uses below the renderer), the camera (:mod:`facetransfer.render.cameras`), the
+rasteriser and the rewrite's kernels."""
 
 from __future__ import annotations
 
