@@ -2,7 +2,10 @@
 never climb the layers (:data:`LAYERS`, :data:`LAYER_OF`), small units.
 
 Read from the source with :mod:`ast`, imports inside functions included, so a cycle hidden in a
-function body fails here as well.
+function body fails here as well. What a module loads when it is imported (:data:`LOADS`: its
+module-level imports and its parent packages, whose ``__init__`` Python runs first,
+transitively) is checked against the layers too: a direct edge that goes down can still load a
+layer above through a package's ``__init__``.
 """
 
 from __future__ import annotations
@@ -37,11 +40,31 @@ def _owner(name: str) -> str | None:
     return name or None
 
 
-def _imported(module: str, path: Path) -> set[str]:
-    """Modules of this package that ``module`` imports anywhere in its body."""
+def _run_at_import(tree: ast.Module) -> list[ast.stmt]:
+    """The statements of ``tree`` that run when the module is imported: the module's body and
+    the blocks in it (``if``, ``try``, ``with``, class bodies), not function bodies nor an
+    ``if TYPE_CHECKING:``."""
+    out, todo = [], list(tree.body)
+    while todo:
+        node = todo.pop()
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            continue
+        out.append(node)
+        if isinstance(node, ast.If) and "TYPE_CHECKING" in ast.unparse(node.test):
+            todo.extend(node.orelse)
+            continue
+        for field in ("body", "orelse", "finalbody", "handlers", "cases"):
+            todo.extend(getattr(node, field, None) or [])
+    return out
+
+
+def _imported(module: str, path: Path, *, at_import: bool = False) -> set[str]:
+    """Modules of this package that ``module`` imports anywhere in its body (``at_import``:
+    only in the statements that run when it is imported)."""
     base = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
     found = set()
-    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    for node in _run_at_import(tree) if at_import else ast.walk(tree):
         if isinstance(node, ast.Import):
             names = [a.name for a in node.names]
         elif isinstance(node, ast.ImportFrom):
@@ -57,6 +80,17 @@ def _imported(module: str, path: Path) -> set[str]:
 
 
 GRAPH = {m: _imported(m, p) for m, p in MODULES.items()}
+
+
+def _parents(module: str) -> set[str]:
+    """The packages above ``module`` (``facetransfer``, ``facetransfer.io`` for
+    ``facetransfer.io.atomic``): Python runs their ``__init__`` before the module."""
+    parts = module.split(".")
+    return {".".join(parts[:i]) for i in range(1, len(parts))} & set(MODULES)
+
+
+#: What importing a module runs first: its module-level imports and its parent packages
+LOADS = {m: _imported(m, p, at_import=True) | _parents(m) for m, p in MODULES.items()}
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -133,7 +167,8 @@ LAYERS = ("base", "io", "render", "track", "transfer", "texture", "rewrite", "vi
 
 #: A module's layer: the entry of its longest dotted prefix here (``facetransfer`` itself is
 #: matched only exactly, so a new top-level module fails test_every_module_has_a_layer until
-#: it is placed). Unusual entries say why.
+#: it is placed; ``P.__init__`` is package P's own file, below its modules). Unusual entries
+#: say why.
 LAYER_OF = {
     "facetransfer": "base",              # the package: its docstring and __version__ only
     # base: the paper's algebra and models, and what every stage shares
@@ -159,6 +194,8 @@ LAYER_OF = {
     "facetransfer.io.mesh": "base",      # mesh files: the data sets' and the scans' input
     "facetransfer.io.output_names": "base",  # an output's extension checked: io.mesh uses it
     "facetransfer.io.memory": "base",    # the memory budget: the ICT data-set builder uses it
+    # the io package's own file, which the base primitives above load first: a docstring only
+    "facetransfer.io.__init__": "base",
     # io: frames in and out (videos, plates, image sequences), their headers and colour
     "facetransfer.io": "io",
     # render
@@ -230,7 +267,9 @@ ALLOWED_UPWARD = {
 
 def _layer_in(layer_of: dict[str, str], module: str) -> str | None:
     """The layer of ``module`` in ``layer_of``: its longest listed dotted prefix's (the root
-    package only exactly)."""
+    package only exactly; a package's ``__init__`` entry before it)."""
+    if f"{module}.__init__" in layer_of:
+        return layer_of[f"{module}.__init__"]
     name = module
     while name:
         if name in layer_of and (name != "facetransfer" or module == name):
@@ -249,7 +288,8 @@ def _upward(graph: dict[str, set[str]], layer_of: dict[str, str]) -> set[tuple[s
 def test_every_module_has_a_layer():
     assert set(LAYER_OF.values()) <= set(LAYERS)
     assert [m for m in MODULES if _layer_in(LAYER_OF, m) is None] == []
-    assert [p for p in LAYER_OF if p not in MODULES] == []   # no entry for a module gone
+    # no entry for a module gone
+    assert [p for p in LAYER_OF if p.removesuffix(".__init__") not in MODULES] == []
 
 
 def test_the_layer_check_finds_a_planted_upward_import():
@@ -276,6 +316,58 @@ def test_imports_never_climb_the_layers():
     found = _upward(GRAPH, LAYER_OF)
     assert sorted(found - set(ALLOWED_UPWARD)) == []
     assert sorted(set(ALLOWED_UPWARD) - found) == []   # mended: leave the allow-list
+
+
+def _closure(graph: dict[str, set[str]], module: str) -> set[str]:
+    """Every module ``module`` reaches in ``graph``, transitively."""
+    seen, todo = set(), [module]
+    while todo:
+        for w in graph[todo.pop()] - seen:
+            seen.add(w)
+            todo.append(w)
+    return seen
+
+
+def _loads_upward(graph: dict[str, set[str]], layer_of: dict[str, str]) -> dict[str, list[str]]:
+    """For each module, the modules of a higher layer than its own that it loads (its closure in
+    ``graph``, :data:`LOADS` on the package)."""
+    rank = {name: i for i, name in enumerate(LAYERS)}
+    out = {}
+    for m in graph:
+        up = sorted(d for d in _closure(graph, m)
+                    if rank[_layer_in(layer_of, d)] > rank[_layer_in(layer_of, m)])
+        if up:
+            out[m] = up
+    return out
+
+
+def test_the_load_check_finds_a_planted_climb():
+    """Through a parent package's ``__init__``, and through an allowed climb: the tree before
+    the fifty-third session, where ``correspond/__init__`` imported ``fitting`` and ``fitting``
+    the renderer (then in ``ALLOWED_UPWARD``), so that ``correspond.procrustes`` loaded the
+    rasteriser while every direct edge of it went down."""
+    layers = {"p": "base", "p.a": "base", "q": "render", "q.b": "render"}
+    assert _loads_upward({"p": {"q.b"}, "p.a": {"p"}, "q": set(), "q.b": {"q"}}, layers) == {
+        "p": ["q", "q.b"], "p.a": ["q", "q.b"]}
+    assert _parents("facetransfer.io.atomic") == {"facetransfer", "facetransfer.io"}
+    assert "facetransfer.correspond" in LOADS["facetransfer.correspond.procrustes"]
+    assert "facetransfer.jit" in LOADS["facetransfer.render.raster"]   # read, not empty
+    assert "facetransfer.geometry" not in LOADS["facetransfer.export.gltf"]  # in a function
+    fit = "facetransfer.correspond.fitting"
+    planted = {**LOADS, "facetransfer.correspond": LOADS["facetransfer.correspond"] | {fit},
+               fit: LOADS[fit] | {"facetransfer.render"}}
+    found = _loads_upward(planted, LAYER_OF)
+    assert "facetransfer.render.raster" in found["facetransfer.correspond.procrustes"]
+    assert ("facetransfer.correspond.procrustes", "facetransfer.render") not in _upward(
+        planted, LAYER_OF)   # no direct edge climbs: only the load check sees it
+
+
+def test_importing_a_module_never_loads_a_layer_above_its_own():
+    """What Python runs to import a module (:data:`LOADS`, transitively) stays in its layer and
+    below: the climbs of :data:`ALLOWED_UPWARD` are imports inside functions, none at import
+    time, and a package's ``__init__`` loads nothing above its submodules' layers (``io``'s,
+    which the base primitives load, nothing at all)."""
+    assert _loads_upward(LOADS, LAYER_OF) == {}
 
 
 @pytest.mark.parametrize("module", sorted(MODULES))

@@ -13,14 +13,44 @@ Pipeline stages, one module each:
 * :mod:`.synthetic` — synthetic scans with exact ground truth (tests, benchmarks).
 """
 
-from .features import (IBUG_NAMES, PROTOCOL_CLOSED_MOUTH_21, PROTOCOL_NEUTRAL_42, PROTOCOL_VISEME_18,
-                       FeaturePoints, read_features, validate_features_on_surface, write_features)
-from .fitting import (FitDivergedError, FitResult, FitStage, DEFAULT_SCHEDULE, PRIOR_SCHEDULE,
-                      Template, fit_template, load_template)
-from .meshops import ScanMesh, clean_scan, load_scan
-from .prior import ShapePrior, ict_prior, model_identity_prior
-from .procrustes import Similarity, similarity_procrustes
-from .smoothing import bilateral_smooth, laplacian_smooth
+from __future__ import annotations
+
+import importlib
+
+#: The public names and the submodule of each, imported on first use (PEP 562), as in
+#: :mod:`facetransfer.datasets`: a submodule imported alone (:mod:`.procrustes`, a 3x3 SVD) ran
+#: this file first, which imported the fitting and with it SciPy's sparse solvers.
+_LAZY = {
+    **dict.fromkeys(("IBUG_NAMES", "PROTOCOL_CLOSED_MOUTH_21", "PROTOCOL_NEUTRAL_42",
+                     "PROTOCOL_VISEME_18", "FeaturePoints", "read_features",
+                     "validate_features_on_surface", "write_features"), "features"),
+    **dict.fromkeys(("FitDivergedError", "FitResult", "FitStage", "DEFAULT_SCHEDULE",
+                     "PRIOR_SCHEDULE", "Template", "fit_template", "load_template"), "fitting"),
+    **dict.fromkeys(("ScanMesh", "clean_scan", "load_scan"), "meshops"),
+    **dict.fromkeys(("ShapePrior", "ict_prior", "model_identity_prior"), "prior"),
+    **dict.fromkeys(("Similarity", "similarity_procrustes"), "procrustes"),
+    **dict.fromkeys(("bilateral_smooth", "laplacian_smooth"), "smoothing"),
+}
+
+#: The submodules the eager imports left bound as attributes of the package
+#: (``facetransfer.correspond.fitting`` after ``import facetransfer.correspond``), still so
+_SUBMODULES = ("features", "fitting", "meshops", "prior", "procrustes", "smoothing")
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:
+        return importlib.import_module(f".{name}", __name__)
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))
+
 
 __all__ = [
     "IBUG_NAMES", "PROTOCOL_CLOSED_MOUTH_21", "PROTOCOL_NEUTRAL_42", "PROTOCOL_VISEME_18",
