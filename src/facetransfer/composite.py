@@ -36,7 +36,7 @@ import scipy.ndimage as ndi
 
 from .errors import ShapeError, FaceTransferError
 from .jacobi import jacobi_sweeps
-from .render.raster import _maybe_njit
+from .jit import maybe_njit as _maybe_njit
 
 log = logging.getLogger(__name__)
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .render.raster import _maybe_njit
+from .jit import maybe_njit as _maybe_njit
 from .track.gaze import activation_gaze, eye_model, project_iris
 
 __all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "Eyeballs",

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import RenderError, ShapeError
-from .jit import _maybe_njit
+from .jit import maybe_njit
 
 __all__ = ["barycentric_2d", "check_mesh", "face_cross", "vertex_normals"]
 
@@ -93,7 +93,7 @@ def _face_cross_py(V, i0, i1, i2):  # pragma: no cover (numba)
 
 #: :func:`_face_cross_py` compiled: called from numba kernels (the normals here, the
 #: rasteriser's degenerate-mesh check)
-face_cross = _maybe_njit(_face_cross_py)
+face_cross = maybe_njit(_face_cross_py)
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -137,4 +137,4 @@ def _normals_kernel_py(V, F, N):  # pragma: no cover
             N[i, 2] /= norm
 
 
-_normals_kernel = _maybe_njit(_normals_kernel_py)
+_normals_kernel = maybe_njit(_normals_kernel_py)

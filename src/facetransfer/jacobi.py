@@ -15,7 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from .errors import ShapeError
-from .render.raster import _maybe_njit
+from .jit import maybe_njit as _maybe_njit
 
 __all__ = ["jacobi_sweeps"]
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .render.raster import _maybe_njit
+from .jit import maybe_njit as _maybe_njit
 
 __all__ = ["bits_box", "frame_masks"]
 

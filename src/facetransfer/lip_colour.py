@@ -40,7 +40,7 @@ import numpy as np
 from .composite import mask_box
 from .errors import ShapeError
 from .render import interpolate_vertex_values, sample_texture
-from .render.raster import _maybe_njit
+from .jit import maybe_njit as _maybe_njit
 from .topology import MeshTopology, _face_size, inside_polygon
 
 __all__ = ["LIP_LEVELS", "TINT_RANGE", "KEEP_MIN", "KEEP_SAME", "FLAT", "CHROMA_RAMP", "LipColour",

@@ -16,7 +16,7 @@ import numpy as np
 
 from .composite import _blend_paste, _feather_alpha, _rows
 from .errors import RewriteError
-from .render.raster import _maybe_njit
+from .jit import maybe_njit as _maybe_njit
 
 __all__ = ["GAIN_RANGE", "REJECT", "REJECT_GROW", "match_outline", "gain_field"]
 

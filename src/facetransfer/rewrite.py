@@ -66,7 +66,7 @@ from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.face import FaceTexture
 from .render import shade_layers
-from .render.raster import _maybe_njit
+from .jit import maybe_njit as _maybe_njit
 from .rewrite_options import BlendOptions
 from .topology import MeshTopology, close_mouth
 

@@ -25,7 +25,8 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .render.raster import _maybe_njit, coverage
+from .jit import maybe_njit as _maybe_njit
+from .render.raster import coverage
 
 __all__ = ["RIM", "MOVED", "REACH", "texture_positions", "lifted_positions", "lifted_depth",
            "drawn_inside"]

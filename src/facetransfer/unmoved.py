@@ -40,7 +40,7 @@ import numpy as np
 
 from .errors import ShapeError
 from .render import interpolate_vertex_values
-from .render.raster import _maybe_njit
+from .jit import maybe_njit as _maybe_njit
 
 __all__ = ["D0", "D1", "vertex_weights", "unmoved_uvs", "unmoved_weight"]
 

@@ -42,7 +42,7 @@ from typing import Protocol
 import numpy as np
 
 from ..errors import ShapeError
-from ..jit import _maybe_njit
+from ..jit import maybe_njit as _maybe_njit
 
 __all__ = ["Camera", "WeakPerspective", "Pinhole", "rotation_from_euler", "euler_from_rotation",
            "look_at_weak_perspective", "project_frames"]

@@ -22,7 +22,8 @@ import numpy as np
 from ..errors import RenderError, ShapeError
 from ..geometry import check_mesh as _check_mesh
 from ..geometry import face_cross as _face_cross
-from ..jit import _HAVE_NUMBA, _maybe_njit  # noqa: F401 (the kernels import it from here)
+from ..jit import HAVE_NUMBA as _HAVE_NUMBA
+from ..jit import maybe_njit as _maybe_njit
 from .cameras import Pinhole, WeakPerspective, _as_size
 
 __all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference", "coverage"]

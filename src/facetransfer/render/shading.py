@@ -8,7 +8,8 @@ import numpy as np
 
 from ..errors import AssetError, ShapeError
 from ..geometry import vertex_normals
-from .raster import Raster, RenderError, _maybe_njit
+from ..jit import maybe_njit as _maybe_njit
+from .raster import Raster, RenderError
 
 __all__ = ["sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS",
            "interpolate_vertex_values", "interpolate_vertex_pair"]

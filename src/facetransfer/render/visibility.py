@@ -8,7 +8,8 @@ import numpy as np
 from ..errors import ShapeError
 from ..geometry import check_mesh as _check_mesh
 from .cameras import _as_size
-from .raster import Raster, _bbox_diagonal, _maybe_njit, _scratch_rasterizer, _screen
+from ..jit import maybe_njit as _maybe_njit
+from .raster import Raster, _bbox_diagonal, _scratch_rasterizer, _screen
 
 __all__ = ["vertex_visibility"]
 

@@ -21,7 +21,7 @@ import cv2
 import numpy as np
 
 from ..errors import ShapeError
-from ..render.raster import _maybe_njit
+from ..jit import maybe_njit as _maybe_njit
 from .base import TextureError, texture_to_uint8
 
 log = logging.getLogger(__name__)
