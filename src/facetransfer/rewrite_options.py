@@ -5,6 +5,12 @@ tracker) are defined here, and :class:`RewriteOptions` checks them when it is ma
 :func:`facetransfer.rewrite_clip.rewrite_frames`, :func:`facetransfer.video_transfer.render_plan`,
 :func:`facetransfer.video_transfer.transfer_video`, the demo and ``facetransfer transfer`` share
 one definition of what is allowed (and one error message for each).
+
+The tracking presets' names (:data:`~facetransfer.track.presets.SPEED_PRESETS`,
+:data:`~facetransfer.track.presets.DEFAULT_SPEED`, :data:`~facetransfer.track.presets.TRACK_METHODS`,
+:func:`~facetransfer.track.presets.check_track_method`) are :mod:`facetransfer.track.presets`',
+and :class:`~facetransfer.errors.RewriteError` is :mod:`facetransfer.errors`'; both are importable
+from here too (every mode of a rewrite in one import).
 """
 
 from __future__ import annotations

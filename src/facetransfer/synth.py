@@ -7,8 +7,8 @@ background and returns the frames with the truth per frame: pose, weights per mo
 landmarks and every vertex in pixels, and per-vertex visibility. :func:`write_clip` writes the
 video and ``<name>.truth.npz`` beside it.
 
-Performance spec (JSON)
------------------------
+Performance spec (JSON; its keys :data:`SPEC_KEYS`, :mod:`facetransfer.synth_keys`')
+------------------------------------------------------------------------------------
 ::
 
     {

@@ -25,6 +25,9 @@ beside the camera with synced clocks is placed by the target's start timecode
 take's head rotation): what ``facetransfer puppet take.csv`` renders and ``facetransfer view
 take.csv`` shows. :func:`edit_take` edits a take's curves as a track's are edited and writes a
 take again, the rest of the file as it was (``facetransfer edit take.csv``).
+
+:func:`~facetransfer.io.video_display.timecode_seconds` is :mod:`facetransfer.io.video_display`'s,
+importable from here too.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ everything the render needs, before any frame is rendered.
 * :class:`Source`, :class:`TransferSources`: the video (and optionally its track file, and the
   face to track of several) that gives each attribute of the new performance;
 * :func:`plan_transfer` (keywords) and :func:`plan_sources` (:class:`TransferSources`) ->
-  :class:`TransferPlan`: reading (:func:`facetransfer.io.video.read_video`; the target and the
+  :class:`TransferPlan`: reading (:func:`facetransfer.io.video_read.read_video`; the target and the
   expression source decoded at the same time), tracking
   (:func:`facetransfer.track.obtain.obtain_track`; the expression source in a forked process
   while the target is tracked here, the renderer's modules imported and the model's parts of
@@ -35,10 +35,10 @@ import numpy as np
 from .errors import RewriteError, VideoError
 from .texture.face import (MouthFunction, mouth_texture_function, resolve_mouth_mode,
                             timeline_mouth_function)
-from .rewrite_options import DEFAULT_SPEED, RewriteOptions
+from .rewrite_options import RewriteOptions
 from .topology import MeshTopology
 from .track import obtain
-from .track.presets import DETECT_EVERY, track_options
+from .track.presets import DEFAULT_SPEED, DETECT_EVERY, track_options
 from .track.video_detect import default_workers
 from .track.project import project_landmarks, take_frames
 from .transfer import constant_weights, nearest_frames, recombine, resample_track, time_map
@@ -234,7 +234,7 @@ def plan_transfer(target, model, *, target_track=None, expression_from=None,
         here. Default: when the machine has two or more CPUs and the platform can fork. The
         tracks do not depend on it.
     reader : callable(path, max_frames=...) -> (frames, fps), optional
-        How videos are decoded: :func:`facetransfer.io.video.read_video` (default) or the
+        How videos are decoded: :func:`facetransfer.io.video_read.read_video` (default) or the
         :meth:`~facetransfer.io.prefetch.Prefetch.read_video` of reads started earlier.
 
     Returns

@@ -9,6 +9,10 @@ is interrupted: pending tasks are cancelled, finished outputs stay). A failed cl
 folder holds (its job's claim, :func:`.ownership.claimed`) or wrote meanwhile (kept, its row's
 digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
 :meth:`_Collector._adopted`).
+
+:func:`~.digest.job_key` and :func:`~.digest.options_text` are :mod:`.digest`'s,
+:data:`~.jobs.MATTE_FORMATS` and :func:`~.jobs.matte_pattern` :mod:`.jobs`'; they are importable
+from here too.
 """
 
 from __future__ import annotations

@@ -151,7 +151,7 @@ def _matte_format(text: str) -> str:
     """``batch transfer --matte``'s value: a sequence's format (argparse names the option)."""
     import argparse
 
-    from ..batch.run import MATTE_FORMATS
+    from ..batch.jobs import MATTE_FORMATS
 
     if text not in MATTE_FORMATS:
         raise argparse.ArgumentTypeError(

@@ -128,7 +128,7 @@ def _bar(desc: str, total: int):
 def run(args) -> int:
     from ..io.video import video_info
     from ..track.result import Track
-    from ..track.tracker import frame_source
+    from ..track.frames import frame_source
 
     vopt = _check_outputs(args)
     settings = track_settings(args)                                   # validates the options
@@ -365,7 +365,7 @@ def _say_progress(partial) -> None:
 def _capture_detect(args, saved, ck, progress):
     """The clip's detections, continued from ``saved``: (detections, fps, size, source)."""
     from ..io.video import video_info
-    from ..track.capture import detect_video
+    from ..track.video_detect import detect_video
     from ..track.video_detect import default_workers
 
     if saved is not None and saved.complete:

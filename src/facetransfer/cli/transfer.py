@@ -25,9 +25,9 @@ from pathlib import Path
 
 from ..errors import FaceTransferError
 from ..transfer import ALIGN_MODES
-from ..rewrite_options import (BLEND_MODES, DEFAULT_SPEED, EYE_MODES, GAZE_MODES, JAW_MODES,
-                               LIP_COLOUR_MODES, LIP_MODES, MOUTH_MODES, SPEED_PRESETS,
-                               TEXTURE_MODES, TRACK_METHODS, RewriteOptions)
+from ..rewrite_options import (BLEND_MODES, EYE_MODES, GAZE_MODES, JAW_MODES, LIP_COLOUR_MODES,
+                               LIP_MODES, MOUTH_MODES, TEXTURE_MODES, RewriteOptions)
+from ..track.presets import DEFAULT_SPEED, SPEED_PRESETS, TRACK_METHODS
 from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
                      check_track_name, check_track_of, default_model_for, frame_count,
                      progress_disabled, resolve_model, video_options, video_out)

@@ -9,6 +9,15 @@ for every command that writes video (:class:`VideoWriter`,
 renamed on success, checks ffmpeg's exit status and that the file holds the frames written,
 and raises :class:`~facetransfer.errors.VideoError` otherwise, so a failed write (a full disk)
 never leaves a broken video under the final name nor replaces a good one.
+
+Names of :data:`__all__` that live elsewhere, importable from here too (one import for the
+video API): :class:`VideoInfo`, :func:`video_info`, :func:`pixel_aspect`, :func:`iter_frames`,
+:func:`read_video` (:mod:`.video_read`); :class:`VideoOptions`, ``CODECS``, ``DEFAULT_CODEC``,
+``DEFAULT_CRF``, ``CRF_RANGE``, ``PRESETS``, ``DEFAULT_PRESET``, ``VIDEO_SUFFIXES``
+(:mod:`.video_options`); ``IMAGE_SUFFIXES`` (:mod:`.video_sequence`); :func:`colour_matrix`,
+:func:`video_colour` (:mod:`.video_display`); :func:`ffmpeg_exe` (:mod:`.ffmpeg`);
+:func:`has_audio`, :func:`audio_codec`, :func:`audio_codecs`, :func:`mux_audio`
+(:mod:`.video_audio`).
 """
 
 from __future__ import annotations

@@ -4,7 +4,9 @@ of :mod:`facetransfer.io.memory`, into an unnamed file); a video of variable fra
 constant-rate timeline (:mod:`facetransfer.io.video_timeline`); interlaced pictures OpenCV
 returns black through the ffmpeg binary (:mod:`facetransfer.io.video_pipe`); an image sequence
 (``plate/%04d.png``) frame by frame (:mod:`facetransfer.io.video_sequence`). Its names are
-also those of :mod:`facetransfer.io.video`, the module of video input and output."""
+also those of :mod:`facetransfer.io.video`, the module of video input and output.
+:func:`~facetransfer.io.video_display.pixel_aspect` is :mod:`facetransfer.io.video_display`'s,
+importable from here too."""
 
 from __future__ import annotations
 

@@ -44,13 +44,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..background import background_image
-from ..errors import ShapeError
+from ..errors import RenderError, ShapeError
 from ..geometry import check_mesh as _check_mesh
 from .cameras import Camera  # noqa: F401 (the camera protocol, importable here as before)
 from .cameras import (Pinhole, WeakPerspective, _as_size, euler_from_rotation,
                       look_at_weak_perspective, project_frames, rotation_from_euler)
-from .raster import (Raster, Rasterizer, RenderError, _check_not_all_degenerate, _rasterize_checked,
-                     rasterize, rasterize_reference)
+from .raster import (Raster, Rasterizer, _check_not_all_degenerate, _rasterize_checked, rasterize,
+                     rasterize_reference)
 from .shading import (_check_colors, check_shading, check_textured, interpolate_vertex_values,
                       sample_texture, shade_image, shade_layers, shade_texture)
 from .visibility import _tolerance, _visibility, vertex_visibility

@@ -26,7 +26,7 @@ from ..jit import HAVE_NUMBA as _HAVE_NUMBA
 from ..jit import maybe_njit as _maybe_njit
 from .cameras import Pinhole, WeakPerspective, _as_size
 
-__all__ = ["RenderError", "Raster", "rasterize", "Rasterizer", "rasterize_reference", "coverage"]
+__all__ = ["Raster", "rasterize", "Rasterizer", "rasterize_reference", "coverage"]
 
 
 @dataclass(frozen=True, eq=False)

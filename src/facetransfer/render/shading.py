@@ -6,10 +6,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..errors import AssetError, ShapeError
+from ..errors import AssetError, RenderError, ShapeError
 from ..geometry import vertex_normals
 from ..jit import maybe_njit as _maybe_njit
-from .raster import Raster, RenderError
+from .raster import Raster
 
 __all__ = ["sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS",
            "interpolate_vertex_values", "interpolate_vertex_pair"]

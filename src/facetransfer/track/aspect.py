@@ -28,6 +28,9 @@ alone (:func:`field_frame`: its rows kept, the other field's interpolated betwee
 row moves), and the track is that field's instant. On an interlaced copy of ``driving_d6``
 (30 fps woven into 15 fps fields) against the progressive frames of its first fields: jawOpen r
 0.978 woven, 0.995 one field; eyeBlinkRight 0.953 and 0.994, its largest error 0.67 and 0.17.
+
+:func:`~facetransfer.io.video_display.shown_width` is :mod:`facetransfer.io.video_display`'s,
+importable from here too.
 """
 
 from __future__ import annotations

@@ -41,6 +41,9 @@ References
 ----------
 Vlasic et al. 2005, §5.1 (Eq. (7)-(9), identity over the clip); MediaPipe Face Landmarker;
 Lucas & Kanade 1981 (OpenCV's pyramidal implementation).
+
+:func:`~facetransfer.track.video_detect.detect_video` (the detections of step 1) is
+:mod:`.video_detect`'s, importable from here too.
 """
 
 from __future__ import annotations

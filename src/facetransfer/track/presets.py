@@ -66,7 +66,7 @@ def track_options(speed: str = DEFAULT_SPEED):
     RewriteError
         An unknown preset.
     """
-    from .tracker import TrackOptions
+    from .options import TrackOptions
 
     if speed not in SPEED_PRESETS:
         raise RewriteError(f"speed must be one of {', '.join(SPEED_PRESETS)}, got {speed!r}")

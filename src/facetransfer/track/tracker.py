@@ -20,7 +20,8 @@ robust=0)`` is the paper's frame-to-frame tracker.
 This module runs the passes (:func:`track_video`); one frame pair is solved by
 :class:`~facetransfer.track.pair.FaceTracker` (:mod:`.pair`), the options are
 :class:`~facetransfer.track.options.TrackOptions`, the frames come from :mod:`.frames` and the
-smoothing from :mod:`.smooth`.
+smoothing from :mod:`.smooth`; ``TrackOptions``, ``FaceTracker``, ``frame_source`` and
+``smooth_track``, which live there, are importable from here too.
 """
 
 from __future__ import annotations
