@@ -155,7 +155,7 @@ def _numeric(action) -> bool:
     if not action.option_strings or action.nargs == 0 or action.choices:
         return False
     kind = getattr(action.type, "__name__", None) if action.type else None
-    return kind not in (None, "str", "Path", "video_out", "_tracker_name", "_matte_format") or \
+    return kind not in (None, "str", "Path", "video_out", "tracker_name", "_matte_format") or \
         action.option_strings[-1] in TEMPLATE
 
 

@@ -114,7 +114,7 @@ def test_demo_seconds_count_the_model_it_loaded_or_built(tmp_path, monkeypatch, 
     import types
 
     import facetransfer.demo as demo_mod
-    from facetransfer.cli import transfer as cli_transfer
+    from facetransfer.cli import demo as cli_demo
     from facetransfer.cli.main import main
     from facetransfer.demo import DemoResult
 
@@ -129,9 +129,9 @@ def test_demo_seconds_count_the_model_it_loaded_or_built(tmp_path, monkeypatch, 
                           tmp_path / "demo_track.npz", 120, "auto",
                           {"model": 0.1, "render": 50.0, "total": 85.7})
 
-    monkeypatch.setattr(cli_transfer, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]),
+    monkeypatch.setattr(cli_demo, "time", types.SimpleNamespace(perf_counter=lambda: clock[0]),
                         raising=False)
-    monkeypatch.setattr(cli_transfer, "_load_model_and_mediapipe", build)
+    monkeypatch.setattr(cli_demo, "load_model_and_mediapipe", build)
     monkeypatch.setattr(demo_mod, "run_demo", fake_demo)
     assert main(["demo", "--out", str(tmp_path / "out")]) == 0
     seconds = next(ln for ln in capsys.readouterr().out.splitlines()

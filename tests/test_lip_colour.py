@@ -525,7 +525,7 @@ def test_the_demo_command_passes_every_rewrite_option(monkeypatch):
     """``facetransfer demo`` accepts the rewrite options of ``transfer``; each reaches
     :func:`facetransfer.demo.run_demo` (``--lips`` and ``--lip-colour`` were accepted and
     dropped before)."""
-    import facetransfer.cli.transfer as ct
+    import facetransfer.cli.demo as cli_demo
     import facetransfer.demo as demo
     from facetransfer.cli.main import build_parser
 
@@ -539,18 +539,18 @@ def test_the_demo_command_passes_every_rewrite_option(monkeypatch):
         raise Stop
 
     monkeypatch.setattr(demo, "run_demo", fake)
-    monkeypatch.setattr(ct, "_load_model_and_mediapipe", lambda *a: None)
+    monkeypatch.setattr(cli_demo, "load_model_and_mediapipe", lambda *a: None)
     args = build_parser().parse_args(["demo", "--out", "o", "--lips", "model", "--lip-colour",
                                       "source", "--jaw", "frame", "--eyes", "target"])
     with pytest.raises(Stop):
-        ct.run_demo(args)
+        cli_demo.run_demo(args)
     opts = seen["options"]
     assert (opts.lips, opts.lip_colour, opts.jaw, opts.eyes) == ("model", "source", "frame",
                                                                  "target")
     # a bad one is refused before any work (the model is not loaded)
-    monkeypatch.setattr(ct, "_load_model_and_mediapipe", lambda *a: pytest.fail("loaded"))
+    monkeypatch.setattr(cli_demo, "load_model_and_mediapipe", lambda *a: pytest.fail("loaded"))
     for what, bad in (("lip_colour", "lipstick"), ("lips", "painted")):
         args = build_parser().parse_args(["demo", "--out", "o"])
         setattr(args, what, bad)   # past argparse's choices, as a library caller could
         with pytest.raises(RewriteError, match=f"{what} must be one of"):
-            ct.run_demo(args)
+            cli_demo.run_demo(args)

@@ -350,15 +350,15 @@ def test_identity_and_pose_from_videos_and_align(clips, quick_model_path, tmp_pa
 def test_landmarks_file_is_checked_only_for_the_tracker_that_reads_it(tmp_path):
     """A damaged ``NAME.mediapipe478.npz`` stops ``--tracker landmarks`` before any work, and
     is not read at all by the trackers that never use it (capture, flow)."""
-    from facetransfer.cli.transfer import _check_landmarks_file
+    from facetransfer.cli.common import check_landmarks_file
     from facetransfer.errors import FaceTransferError
 
     video = tmp_path / "clip.mp4"
     (tmp_path / "clip.mediapipe478.npz").write_bytes(b"PK\x03\x04 not a zip")
     with pytest.raises(FaceTransferError, match="clip.mediapipe478.npz"):
-        _check_landmarks_file(video, "landmarks")
+        check_landmarks_file(video, "landmarks")
     for tracker in ("auto", "capture", "flow"):
-        assert _check_landmarks_file(video, tracker) is None
+        assert check_landmarks_file(video, tracker) is None
 
 
 def test_an_interrupted_transfer_renders_only_the_frames_it_had_not(clips, quick_model_path,

@@ -5,7 +5,9 @@ Not a subcommand. ``transfer``, ``puppet``, ``track``, ``demo``, ``synth-video``
 transfer`` take the video options ``--codec``/``--crf``/``--preset``...
 (:class:`facetransfer.io.video.VideoOptions`); every command given no model uses the default
 model (:func:`resolve_model`, :mod:`facetransfer.default_model`), building it once with a
-progress bar and a one-line message.
+progress bar and a one-line message. ``transfer``, ``puppet`` and ``demo`` share a parser's
+making (:func:`subcommand_parser`, :func:`add_output`), the tracker's loading while the model
+loads (:func:`load_model_and_mediapipe`) and the library's progress bars (:func:`bar_factory`).
 """
 
 from __future__ import annotations
@@ -320,3 +322,101 @@ def default_model_for(track):
         return of_track(track, progress=progress, announce=announce)
     finally:
         close()
+
+
+# --------------------------------------------------------------------------------------------
+# what the commands that track and render share (transfer, puppet, demo)
+# --------------------------------------------------------------------------------------------
+
+def bar_factory():
+    """``factory(desc, total) -> tqdm`` for library progress (stderr), or None after
+    ``--no-progress``."""
+    if progress_disabled():
+        return None
+    from tqdm import tqdm
+
+    def make(desc, total):
+        return tqdm(total=total, desc=desc, unit="frame", leave=False, dynamic_ncols=True,
+                    file=sys.stderr, disable=progress_disabled())
+
+    return make
+
+
+def subcommand_parser(sub, name: str, help: str, description: str):
+    """A subcommand's parser with the defaults shown in its help."""
+    return sub.add_parser(name, formatter_class=DefaultsFormatter, help=help,
+                          description=description)
+
+
+def add_output(p, func, *, metavar: str, help: str | None = None, video: bool = False,
+               overwrite_help: str = "replace an existing output",
+               carries_target: bool = True) -> None:
+    """``--out`` (with the video options when ``video``, ``carries_target`` as
+    :func:`add_video_options`), ``--overwrite`` and the function that runs the
+    subcommand."""
+    p.add_argument("--out", required=True, metavar=metavar, help=help,
+                   type=video_out if video else str)
+    if video:
+        add_video_options(p, carries_target=carries_target)
+    p.add_argument("--overwrite", action="store_true", help=overwrite_help)
+    p.set_defaults(func=func)
+
+
+def tracker_name(value: str) -> str:
+    """``--tracker``: ``klt`` (what ``track`` calls the paper's optical-flow tracker) is
+    ``flow`` here."""
+    return {"klt": "flow"}.get(value, value)
+
+
+def check_positive(value, name):
+    """A count option (``--max-frames``, ``--frames``) None or at least 1, else one line."""
+    from ..errors import FaceTransferError
+
+    if value is not None and int(value) < 1:
+        raise FaceTransferError(f"{name} must be >= 1, got {value}")
+
+
+def check_landmarks_file(video, tracker: str) -> None:
+    """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work
+    (only for ``--tracker landmarks``, the one tracker that reads it)."""
+    if tracker != "landmarks":
+        return
+    from ..io.landmarks import read_mediapipe_landmarks
+    from ..track.obtain import landmarks_file
+
+    lmf = landmarks_file(video)
+    if lmf is not None:
+        read_mediapipe_landmarks(lmf)
+
+
+def start_tracker_loads(will_track: bool):
+    """When videos will be tracked, MediaPipe imported and the capture's compiled kernels
+    loaded on threads from now on (:func:`facetransfer.track.detect.preload_mediapipe`,
+    :func:`facetransfer.track.capture.load_kernels`); returns ``wait()``, to be called before
+    the tracking forks its background process, which then inherits them."""
+    if not will_track:
+        return lambda: None
+    import threading
+
+    from ..track.capture import load_kernels
+    from ..track.detect import preload_mediapipe
+
+    wait = preload_mediapipe()
+    kernels = threading.Thread(target=load_kernels, name="load-kernels", daemon=True)
+    kernels.start()
+
+    def done():
+        wait()
+        kernels.join()
+
+    return done
+
+
+def load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
+    """The model (``--model`` ``path`` or the default), with :func:`start_tracker_loads`'
+    threads running meanwhile and done when this returns."""
+    wait = start_tracker_loads(will_track)
+    try:
+        return resolve_model(path, progress=progress)
+    finally:
+        wait()

@@ -8,7 +8,7 @@ A track's expression weights are edited by :func:`facetransfer.performance_edit.
 animator's take from the iPhone app, exaggerated or given a curve and sent back to Unreal:
 :func:`facetransfer.take.edit_take` (the curves edited as an ARKit track's are, everything else
 of the file kept byte for byte). The command's parser, its checks common to a track and a take,
-and each one's own are here; :mod:`.transfer` registers it between ``transfer`` and ``puppet``.
+and each one's own are here.
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from .common import (DefaultsFormatter, check_track_name, default_model_for, fra
                      option_with)
 
 
-def register_edit(sub) -> None:
+def register(sub) -> None:
     """Add ``edit`` to the facetransfer parser."""
     e = sub.add_parser(
         "edit", formatter_class=DefaultsFormatter,

@@ -2,11 +2,10 @@
 
 Each module of :data:`SUBCOMMAND_MODULES` has a ``register(subparsers)`` function that adds its
 parser(s) and sets ``func`` to a handler ``handler(args) -> int``. A module is named after its
-command or command group (``model build|info|...`` in :mod:`.model`), but for two that register
-more than one command: :mod:`.transfer` registers ``transfer``, ``edit`` (its parser and
-handlers in :mod:`.edit`), ``puppet`` and ``demo``; :mod:`.render` registers ``render`` and
-``synth-video``. Bad input raises a :class:`ValueError` subclass in the library; here it
-becomes one line on stderr and exit status 2.
+command or command group (``model build|info|...`` in :mod:`.model`), but for one that registers
+two commands: :mod:`.render` registers ``render`` and ``synth-video``. Bad input raises a
+:class:`ValueError` subclass in the library; here it becomes one line on stderr and exit
+status 2.
 """
 
 from __future__ import annotations
@@ -27,7 +26,7 @@ from ..errors import interrupt_of
 
 #: Subcommand modules, in help order. Each defines ``register(subparsers)``.
 SUBCOMMAND_MODULES = ("model", "impute", "scan", "render", "texture", "track", "transfer",
-                      "export", "view", "batch", "probe")
+                      "edit", "puppet", "demo", "export", "view", "batch", "probe")
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -1,4 +1,4 @@
-"""``facetransfer transfer | edit | puppet | demo``: the applications of Vlasic et al. 2005, §6.
+"""``facetransfer transfer``: the video rewrite of Vlasic et al. 2005, §6.
 
     facetransfer transfer --target T.mp4 [--target-track T.npz]
         (--expression-from S.mp4 [--source-track S.npz] [--viseme-from S2.mp4]
@@ -7,11 +7,11 @@
         [--mouth frame|function] [--codec h264|h265|prores] [--crf 18]
         [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png
         [--matte matte/%05d.png|matte/%05d.exr|M.mov|M.mkv...] [--overwrite]
-    facetransfer edit TRACK.npz [--model M.npz] --add frown@120-180 --scale smile=1.5 --out T2.npz
-    facetransfer edit TAKE.csv --scale jawOpen=2 --out TAKE2.csv     (``edit``: :mod:`.edit`)
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
-    facetransfer puppet VIDEO [--model M.npz] --identity LABEL --out OUT.mp4
-    facetransfer demo [--out out] [--frames N]
+
+A performance edited first (``facetransfer edit``) is :mod:`.edit`'s; an identity performing a
+video alone (``facetransfer puppet``) :mod:`.puppet`'s; the job on the default clips
+(``facetransfer demo``, which takes this command's rewrite options) :mod:`.demo`'s.
 """
 
 from __future__ import annotations
@@ -19,8 +19,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
-import sys
-import time
 from pathlib import Path
 
 from ..errors import FaceTransferError
@@ -28,10 +26,10 @@ from ..transfer import ALIGN_MODES
 from ..rewrite_options import (BLEND_MODES, EYE_MODES, GAZE_MODES, JAW_MODES, LIP_COLOUR_MODES,
                                LIP_MODES, MOUTH_MODES, TEXTURE_MODES, RewriteOptions)
 from ..track.presets import DEFAULT_SPEED, SPEED_PRESETS, TRACK_METHODS
-from .common import (FACE_WHERE, MODEL_HELP, DefaultsFormatter, add_video_options, check_face,
-                     check_track_name, check_track_of, default_model_for, frame_count,
-                     progress_disabled, resolve_model, video_options, video_out)
-from .edit import register_edit
+from .common import (FACE_WHERE, MODEL_HELP, add_output, bar_factory, check_face,
+                     check_landmarks_file, check_positive, check_track_name, frame_count,
+                     resolve_model, start_tracker_loads, subcommand_parser, tracker_name,
+                     video_options, video_out)
 from .track import CAPTURE_HELP
 
 log = logging.getLogger(__name__)
@@ -40,20 +38,6 @@ ALIGN_HELP = ("how to fit a source of another length: trim (stop where the short
               "(repeat the source), hold (hold the source's last frame); default: trim when the "
               "source is at least as long as the target, hold when it is shorter (the output "
               "always has the target's frame rate)")
-
-
-def _bar_factory():
-    """``factory(desc, total) -> tqdm`` for library progress (stderr), or None after
-    ``--no-progress``."""
-    if progress_disabled():
-        return None
-    from tqdm import tqdm
-
-    def make(desc, total):
-        return tqdm(total=total, desc=desc, unit="frame", leave=False, dynamic_ncols=True,
-                    file=sys.stderr, disable=progress_disabled())
-
-    return make
 
 
 def add_rewrite_options(p: argparse.ArgumentParser) -> None:
@@ -89,7 +73,7 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    help="performance: the eyes look where the new performance looks (its "
                    "eyeLook* activations); target: where the target looks in each of its own "
                    "frames (with --eyes model)")
-    p.add_argument("--tracker", choices=TRACK_METHODS, default="auto", type=_tracker_name,
+    p.add_argument("--tracker", choices=TRACK_METHODS, default="auto", type=tracker_name,
                    help="tracking when no track file is given: auto or capture ("
                    + CAPTURE_HELP + "), flow (or klt, as track calls it: the optical-flow "
                    "tracker of §5, with --speed) or "
@@ -125,36 +109,9 @@ def rewrite_options(args) -> RewriteOptions:
                           gaze=args.gaze)
 
 
-def _parser(sub, name: str, help: str, description: str):
-    """A subcommand's parser with the defaults shown in its help."""
-    return sub.add_parser(name, formatter_class=DefaultsFormatter, help=help,
-                          description=description)
-
-
-def _add_output(p, func, *, metavar: str, help: str | None = None, video: bool = False,
-                overwrite_help: str = "replace an existing output",
-                carries_target: bool = True) -> None:
-    """``--out`` (with the video options when ``video``, ``carries_target`` as
-    :func:`~.common.add_video_options`), ``--overwrite`` and the function that runs the
-    subcommand."""
-    p.add_argument("--out", required=True, metavar=metavar, help=help,
-                   type=video_out if video else str)
-    if video:
-        add_video_options(p, carries_target=carries_target)
-    p.add_argument("--overwrite", action="store_true", help=overwrite_help)
-    p.set_defaults(func=func)
-
-
 def register(sub) -> None:
-    """Add ``transfer``, ``edit``, ``puppet`` and ``demo`` to the facetransfer parser."""
-    _register_transfer(sub)
-    register_edit(sub)          # the edit command: .edit
-    _register_puppet(sub)
-    _register_demo(sub)
-
-
-def _register_transfer(sub) -> None:
-    p = _parser(
+    """Add ``transfer`` to the facetransfer parser."""
+    p = subcommand_parser(
         sub, "transfer",
         "put expressions, visemes, identity or pose of other videos into target footage",
         "Video rewrite (Vlasic et al. 2005, §6, Fig. 1, Fig. 7): track the videos (or reuse "
@@ -176,7 +133,7 @@ def _register_transfer(sub) -> None:
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
-    _add_output(p, run_transfer, metavar="OUT.mp4", video=True,
+    add_output(p, run_transfer, metavar="OUT.mp4", video=True,
                 help="video to write (.mp4, .mov, .mkv...) or image sequence (frames/%%05d.png)",
                 overwrite_help="replace existing outputs")
     p.add_argument("--matte", metavar="MATTE", type=video_out,
@@ -225,109 +182,6 @@ def _add_sources(p) -> None:
         p.add_argument(flag, metavar="WHERE", help=f"with several people {role}: {FACE_WHERE}")
 
 
-def _register_puppet(sub) -> None:
-    q = _parser(
-        sub, "puppet", "drive a model identity from a video (puppetry)",
-        "Track a video (or reuse its track) and render an identity of the model performing "
-        "it, alone on a plain background (Vlasic et al. 2005, §5). A Live Link Face take "
-        "(TAKE.csv) instead of a video: the identity performs its ARKit curves with its "
-        "head's rotation (a preview of the take). A track file (TRACK.npz) instead: its "
-        "performance, at its clip's size and rate, with that clip's audio if it is still there "
-        "(and is that clip: of the track's size, at least its frames).")
-    q.add_argument("video", metavar="VIDEO", help="the video to track, or a Live Link Face take "
-                   "(TAKE.csv) or a track file (TRACK.npz)")
-    q.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
-    q.add_argument("--identity", metavar="LABEL", help="training identity label (default: the "
-                   "model's mean face)")
-    q.add_argument("--track", metavar="TRACK.npz", help="track file of VIDEO (reused); a track "
-                   "file alone as VIDEO is rendered at its frame size and rate")
-    q.add_argument("--max-frames", type=int, default=None, help="use the first N frames")
-    q.add_argument("--tracker", choices=TRACK_METHODS, default="auto", type=_tracker_name,
-                   help="tracking when no track file is given (flow or klt: the optical-flow "
-                   "tracker)")
-    q.add_argument("--face", metavar="WHERE",
-                   help=f"with several people, the one whose performance drives the puppet: "
-                   f"{FACE_WHERE}")
-    _add_output(q, run_puppet, metavar="OUT.mp4", video=True, carries_target=False,
-                help="video (.mp4...) or image sequence (frames/%%05d.png)")
-
-
-def _register_demo(sub) -> None:
-    d = _parser(
-        sub, "demo", "the main job end to end on the default clips",
-        "Build the default model if needed, track two clips of the data folder "
-        "($FACETRANSFER_DATA_DIR/video), transfer the expressions of driving_d6.mp4 onto "
-        "WDA_KatieHill_000.mp4 and write OUT/demo.mp4 (source | target | result), OUT/demo.png "
-        "(contact sheet) and OUT/demo_track.npz.")
-    d.add_argument("--out", default="out", metavar="DIR", help="output folder")
-    d.add_argument("--frames", type=int, default=120, help="target frames to use")
-    d.add_argument("--source", metavar="S.mp4", help="expression source (default driving_d6)")
-    d.add_argument("--target", metavar="T.mp4", help="target footage (default WDA_KatieHill_000)")
-    d.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
-    d.add_argument("--overwrite", action="store_true",
-                   help="replace the outputs of an earlier run in the folder")
-    add_rewrite_options(d)
-    add_video_options(d, what="OUT/demo.mp4 (demo.mov for prores)", sequences=False)
-    d.set_defaults(func=run_demo)
-
-
-def _tracker_name(value: str) -> str:
-    """``--tracker``: ``klt`` (what ``track`` calls the paper's optical-flow tracker) is
-    ``flow`` here."""
-    return {"klt": "flow"}.get(value, value)
-
-
-def _positive(value, name):
-    if value is not None and int(value) < 1:
-        raise FaceTransferError(f"{name} must be >= 1, got {value}")
-
-
-def _check_landmarks_file(video, tracker: str) -> None:
-    """A damaged ``NAME.mediapipe478.npz`` beside a video: one line naming it, before any work
-    (only for ``--tracker landmarks``, the one tracker that reads it)."""
-    if tracker != "landmarks":
-        return
-    from ..io.landmarks import read_mediapipe_landmarks
-    from ..track.obtain import landmarks_file
-
-    lmf = landmarks_file(video)
-    if lmf is not None:
-        read_mediapipe_landmarks(lmf)
-
-
-def _start_tracker_loads(will_track: bool):
-    """When videos will be tracked, MediaPipe imported and the capture's compiled kernels
-    loaded on threads from now on (:func:`facetransfer.track.detect.preload_mediapipe`,
-    :func:`facetransfer.track.capture.load_kernels`); returns ``wait()``, to be called before
-    the tracking forks its background process, which then inherits them."""
-    if not will_track:
-        return lambda: None
-    import threading
-
-    from ..track.capture import load_kernels
-    from ..track.detect import preload_mediapipe
-
-    wait = preload_mediapipe()
-    kernels = threading.Thread(target=load_kernels, name="load-kernels", daemon=True)
-    kernels.start()
-
-    def done():
-        wait()
-        kernels.join()
-
-    return done
-
-
-def _load_model_and_mediapipe(path, will_track: bool, *, progress: bool = True):
-    """The model (``--model`` ``path`` or the default), with :func:`_start_tracker_loads`'
-    threads running meanwhile and done when this returns."""
-    wait = _start_tracker_loads(will_track)
-    try:
-        return resolve_model(path, progress=progress)
-    finally:
-        wait()
-
-
 def _prefetch_inputs(args):
     """The target and the expression source decoded on threads from now on, as the transfer
     will read them (:class:`facetransfer.io.prefetch.Prefetch`)."""
@@ -346,7 +200,7 @@ def run_transfer(args) -> int:
     vopt, to_track = _check_transfer_args(args)
     # decoded from now on, while the modules import and the model and MediaPipe load
     prefetch = _prefetch_inputs(args)
-    loads = _start_tracker_loads(to_track > 0 and args.tracker != "landmarks")
+    loads = start_tracker_loads(to_track > 0 and args.tracker != "landmarks")
     try:
         from ..transfer_plan import TransferSources
         from ..video_transfer import transfer_video
@@ -365,7 +219,7 @@ def run_transfer(args) -> int:
     res = transfer_video(
         sources, args.out, model, options=rewrite_options(args),
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
-        progress_factory=_bar_factory(), video_options=vopt,
+        progress_factory=bar_factory(), video_options=vopt,
         align=args.align, max_frames=args.max_frames, reader=prefetch.read_video,
         matte=args.matte)
     kept = res.n_frames - res.n_rewritten
@@ -433,7 +287,7 @@ def _check_transfer_args(args):
     work; ``(video options, how many videos are to be tracked)``."""
     from ..io.video import video_info
 
-    _positive(args.max_frames, "--max-frames")
+    check_positive(args.max_frames, "--max-frames")
     if not (args.expression_from or args.viseme_from or args.identity_from
             or args.identity_weights or args.identity_label or args.pose_from
             or args.performance or args.identity_dials):
@@ -482,7 +336,7 @@ def _check_transfer_args(args):
         if v:
             video_info(v)  # unreadable input: one line, before any work
             if not tr and not (v == args.target and args.performance):
-                _check_landmarks_file(v, args.tracker)
+                check_landmarks_file(v, args.tracker)
                 check_face(*((args.target_face, v, "--target-face") if k == 0 else
                              (args.source_face, v, "--source-face")), args.tracker)
                 to_track += 1
@@ -579,221 +433,3 @@ def _dialled_identity(model, identity, args):
         identity = constant_weights(tt, dials.mode)
     return dials.apply(identity, values)
 
-
-def _puppet_identity(model, label: str | None):
-    """The puppet's identity weights ``(r,)``: the training identity ``label``, or the model's
-    mean face where none is named."""
-    from ..transfer import identity_from_label
-
-    return model.weight_mean("identity") if label is None else identity_from_label(model, label)
-
-
-def run_puppet(args) -> int:
-    from ..io.video import check_video_output, read_video, video_info
-    from ..io.video_like import like_video
-    from ..track.obtain import done_tracking, obtain_track
-    from ..track.video_detect import default_workers
-    from ..puppet_video import puppet_video
-
-    from ..take import is_take
-
-    _positive(args.max_frames, "--max-frames")
-    vopt = video_options(args, args.out)
-    check_video_output(args.out, vopt, overwrite=args.overwrite,
-                       inputs=[args.video, args.model, args.track])
-    if is_take(args.video):
-        return _puppet_take(args, vopt)
-    if Path(args.video).suffix.lower() == ".npz":
-        return _puppet_track(args, vopt)
-    video_info(args.video)
-    if args.track and args.tracker != "auto":   # it was ignored
-        raise FaceTransferError(f"--tracker {args.tracker} chooses how VIDEO is tracked, but "
-                                f"--track {args.track} is tracked already: give one of them")
-    if not args.track:
-        _check_landmarks_file(args.video, args.tracker)
-        check_face(args.face, args.video, tracker=args.tracker)
-    model = _load_model_and_mediapipe(args.model,
-                                      not args.track and args.tracker != "landmarks")
-    wid = _puppet_identity(model, args.identity)
-    frames, fps = read_video(args.video, max_frames=args.max_frames)
-    track = obtain_track(args.video, model, frames=frames, fps=fps, track_file=args.track,
-                         max_frames=len(frames), method=args.tracker,
-                         progress_factory=_bar_factory(), workers=default_workers(),
-                         face=args.face)
-    if args.track:   # a track of another video would drive the face with the wrong motion
-        check_track_of(track, args.track, args.video, len(frames),
-                       (frames.shape[2], frames.shape[1]), "to drive the puppet for those")
-        track.warn_other_video(args.video, "the puppet does not move with this video's audio")
-    if track.lost.all():
-        raise FaceTransferError(f"no face found in {args.video}")
-    frames = None
-    done_tracking()                     # the capture's points: not needed in the render
-    audio, resumed = puppet_video(track, model, wid, args.out,
-                                  video_options=like_video(vopt, args.video),
-                                  audio_from=args.video, overwrite=args.overwrite,
-                                  progress_factory=_bar_factory())
-    if resumed:
-        print(f"continued an interrupted render from frame {resumed}")
-    print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
-          f"{args.identity or 'the mean face'}"
-          + (", with the video's audio" if audio else ""))
-    _say_lost(track)
-    return 0
-
-
-def _say_lost(track) -> None:
-    """The note ``export`` prints of the frames where ``track`` lost the face, which the puppet
-    shows as its nearest tracked frame (:func:`facetransfer.transfer.puppet_frames`)."""
-    from .export import lost_note
-
-    note = lost_note(track, "the puppet holds the nearest tracked frame's head there")
-    if note:
-        print(f"note: {note}")
-
-
-def _puppet_track(args, vopt) -> int:
-    """``puppet TRACK.npz``: the identity performing a track file with no video beside it, at
-    the track's frame size and rate (its pixels' aspect and its clip's start timecode kept);
-    where the clip it was tracked from is still there (:func:`_track_clip`), as ``puppet
-    VIDEO --track`` writes it: that clip's audio, pixels' aspect, colour and numbering."""
-    import numpy as np
-
-    from ..io.video import check_video_output
-    from ..io.video_like import like_video
-    from ..puppet_video import puppet_video
-    from ..track.project import take_frames
-    from ..track.result import Track
-
-    for flag, given in (("--track", args.track), ("--face", args.face),
-                        ("--tracker", args.tracker != "auto")):
-        if given:
-            raise FaceTransferError(f"{args.video} is a track file: {flag} is for a video")
-    if not Path(args.video).is_file():
-        raise FaceTransferError(f"track {args.video} does not exist")
-    track = Track.load(args.video)
-    model = (resolve_model(args.model, progress=not args.no_progress) if args.model
-             else default_model_for(track))
-    track.check_model(model)
-    if args.max_frames is not None and args.max_frames < track.n_frames:
-        track = take_frames(track, np.arange(args.max_frames))
-    if track.lost.all():
-        raise FaceTransferError(f"track {args.video} has no frame with a face")
-    clip = _track_clip(track)
-    if clip is not None:   # its audio is read: not replaced by the puppet (as puppet VIDEO)
-        check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=[clip])
-    vopt = _track_video_options(vopt if clip is None else like_video(vopt, clip), track)
-    audio_from = Path(clip) if clip is not None and Path(clip).is_file() else None  # no sequence
-    wid = _puppet_identity(model, args.identity)
-    audio, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
-                                  audio_from=audio_from, overwrite=args.overwrite,
-                                  progress_factory=_bar_factory())
-    if resumed:
-        print(f"continued an interrupted render from frame {resumed}")
-    print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
-          f"{args.identity or 'the mean face'} performing the track {args.video}"
-          + (f", with the audio of {audio_from.name}" if audio else ""))
-    _say_lost(track)
-    return 0
-
-
-def _track_clip(track) -> str | None:
-    """The clip ``track`` was made from (its ``source``: a video file or an image sequence's
-    pattern) where it is still there and is that clip: frames of the track's size, at least as
-    many as the track's (a track of its first frames, ``track --max-frames``), a video file's
-    at its rate (a sequence's is a setting, ``--sequence-fps``); else None, said in the log
-    where a clip of another size, rate or length has taken its place (its audio is not the
-    performance's)."""
-    from ..io.video import VideoError, video_info
-    from ..io.video_sequence import is_sequence
-
-    source = track.source
-    if not source or not (Path(source).is_file() or is_sequence(source)):
-        return None
-    try:
-        info = video_info(source)
-    except (VideoError, OSError, ValueError):
-        return None
-    rate = is_sequence(source) or abs(info.fps - track.fps) < 1e-3
-    if tuple(info.size) == tuple(track.frame_size) and rate and info.n_frames >= track.n_frames:
-        return str(source)
-    log.warning("track %s was made from %s, which is now %d frames of %dx%d at %g fps, the "
-                "track %d of %dx%d at %g fps: another clip; its audio, timecode and pixels' "
-                "aspect are not used", track.label, source, info.n_frames, *info.size, info.fps,
-                track.n_frames, *track.frame_size, track.fps)
-    return None
-
-
-def _track_video_options(vopt, track):
-    """``vopt`` for a puppet of ``track`` alone: its pixels' aspect and its clip's start
-    timecode and first frame number (:attr:`Track.source_facts`) where ``vopt`` gives none."""
-    import dataclasses
-
-    from ..io.plate_header import usable_aspect
-
-    changes = {}
-    sar = usable_aspect(track.pixel_aspect)     # None where square
-    if vopt.sar is None and sar is not None:
-        changes["sar"] = sar
-    facts = track.source_facts
-    if facts is not None and vopt.timecode is None and facts.timecode:
-        changes["timecode"] = facts.timecode
-    if facts is not None and vopt.first_number is None and facts.first_frame:
-        changes["first_number"] = facts.first_frame
-    return dataclasses.replace(vopt, **changes) if changes else vopt
-
-
-def _puppet_take(args, vopt) -> int:
-    """``puppet take.csv``: the identity performing a Live Link Face take, with its head's
-    rotation (:func:`facetransfer.take.take_track`), on a plain background."""
-    from ..puppet_video import puppet_video
-    from ..take import PREVIEW_SIZE, take_track
-
-    for flag, given in (("--track", args.track), ("--face", args.face),
-                        ("--tracker", args.tracker != "auto")):
-        if given:
-            raise FaceTransferError(f"{args.video} is a Live Link Face take: {flag} is for a "
-                                    "video")
-    if not Path(args.video).is_file():
-        raise FaceTransferError(f"take {args.video} does not exist")
-    model = resolve_model(args.model, progress=not args.no_progress)
-    wid = _puppet_identity(model, args.identity)
-    track = take_track(args.video, model, wid, max_frames=args.max_frames)
-    if vopt.timecode is None:   # the take's own start, as a video's result keeps its
-        import dataclasses
-
-        vopt = dataclasses.replace(vopt, timecode=track.info.get("start_timecode"))
-    _, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
-                              overwrite=args.overwrite, progress_factory=_bar_factory())
-    if resumed:
-        print(f"continued an interrupted render from frame {resumed}")
-    print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
-          f"{args.identity or 'the mean face'} performing the "
-          f"take {args.video} ({track.fps:g} fps, {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]})")
-    return 0
-
-
-def run_demo(args) -> int:
-
-    from ..demo import run_demo as demo
-
-    _positive(args.frames, "--frames")
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise FaceTransferError(f"--out {out} is a file; demo writes into a folder (give a "
-                                "folder name)")
-    vopt, opts = video_options(args), rewrite_options(args)  # checked before any work
-    t0 = time.perf_counter()
-    model = _load_model_and_mediapipe(args.model, args.tracker != "landmarks")
-    loaded = time.perf_counter() - t0  # the default model's first build too
-    res = demo(args.out, frames=args.frames, source=args.source, target=args.target,
-               model=model, options=opts, overwrite=args.overwrite,
-               progress_factory=_bar_factory(), video_options=vopt)
-    t = dict(res.timings)
-    t["model"], t["total"] = t.get("model", 0.0) + loaded, t.get("total", 0.0) + loaded
-    print(f"wrote {res.video} ({frame_count(res.n_frames)}: source | target | result), "
-          f"{res.sheet}, {res.track}")
-    print("seconds: " + ", ".join(f"{k} {v:.1f}" for k, v in t.items())
-          + ("" if res.method == "auto" else f" (tracking: {res.method})"))
-    if res.fidelity is not None:
-        print(res.fidelity.line())
-    return 0
