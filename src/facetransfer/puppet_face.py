@@ -1,6 +1,6 @@
 """The puppet's eyes and mouth: eyeballs that look where the track looks, a dark mouth cavity.
 
-:func:`facetransfer.transfer.puppet_frames` renders the model's face as a solid head: its eye
+:func:`facetransfer.puppet_video.puppet_frames` renders the model's face as a solid head: its eye
 holes closed by fans around their centres, its mouth gap by the topology's fan
 (:func:`facetransfer.topology.close_mouth`). Shaded in the skin's colour those fills read as skin:
 a blink closed skin over skin, the gaze did not show and an open mouth was a skin-coloured disc.
