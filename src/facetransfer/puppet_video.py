@@ -17,7 +17,7 @@ __all__ = ["puppet_frames", "puppet_video"]
 
 def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] | None = None,
                   background=(40, 40, 48), identity_mode: str = "identity",
-                  color=(205, 170, 150), start: int = 0) -> Iterator[np.ndarray]:
+                  color=None, start: int = 0) -> Iterator[np.ndarray]:
     """Drive a synthetic actor (an identity of the model) with a tracked performance.
 
     Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
@@ -39,12 +39,14 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     size : (W, H), optional
         Default: the track's frame size.
     background : (3,) colour
+    color : (3,) colour, optional
+        The skin's; default :data:`facetransfer.puppet_face.SKIN` (the previews' palette).
 
     Yields
     ------
     (H, W, 3) uint8
     """
-    from .puppet_face import paint_face, puppet_face, track_gaze
+    from .puppet_face import SKIN, paint_face, puppet_face, track_gaze
     from .render import render
     from .topology import close_mouth, mesh_topology
     from .track.project import nearest_tracked
@@ -63,7 +65,8 @@ def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] |
     topo = mesh_topology(model, lips=False)
     face = puppet_face(model, topo, gaze=track_gaze(track))
     n_all = topo.n_closed + len(topo.eye_loops)
-    colors = np.broadcast_to(np.asarray(color, np.float64), (n_all, 3))
+    colors = np.broadcast_to(np.asarray(SKIN if color is None else color, np.float64),
+                             (n_all, 3))
 
     def draw(i: int) -> np.ndarray:
         w = track.weights_at(i)
