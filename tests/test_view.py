@@ -611,13 +611,12 @@ def test_the_page_paints_with_the_puppets_palette(pages):
     """One palette for the two previews (puppet_face.PALETTE): the page's skin, its eyeballs'
     canvas (pupil, iris, the iris's rim, sclera: each a row's mean, the iris's fibres lighter
     and darker about its colour), the mouth's inside at the lips and at the back (and the
-    head's inside) are the puppet's. Before, the page had colours of its own: a #d9b59f skin,
-    a sienna iris, a #f1ede4 sclera, a #2a1212 inside."""
+    head's inside) and the upper teeth are the puppet's. Before, the page had colours of its
+    own: a #d9b59f skin, a sienna iris, a #f1ede4 sclera, a #2a1212 inside, no teeth."""
     from facetransfer.puppet_face import CAVITY_BACK, PALETTE
 
     drawn = _painted(pages[0])
     want = {**PALETTE, "cavity_back": np.asarray(PALETTE["cavity"]) * CAVITY_BACK}
-    want.pop("teeth")   # the page draws no teeth (BENCHMARKS, look53)
     for name, rgb in want.items():
         got = [int(drawn[name][i:i + 2], 16) for i in (1, 3, 5)]
         # the limbus: the canvas's last iris row, a row short of the gradient's end
@@ -628,7 +627,9 @@ def _colours(img: np.ndarray, eye_boxes, *, page: bool) -> dict:
     """The lit sclera (the mean of the brightest quarter of its pixels), the iris's, the
     mouth's inside's and the skin's median colours of a frontal face ``img``, the eyes' in
     ``eye_boxes``: pixels told by the hues of the palette's colours, the same rule for both
-    previews."""
+    previews; the upper teeth: pixels within 12 of the palette's (unlit, both)."""
+    from facetransfer.puppet_face import PALETTE
+
     px = img.reshape(-1, 3).astype(np.float64)
     r = np.maximum(px[:, 0], 1.0)
     g, b = px[:, 1] / r, px[:, 2] / r
@@ -642,20 +643,23 @@ def _colours(img: np.ndarray, eye_boxes, *, page: bool) -> dict:
     iris = in_eyes & (g > 0.5) & (g < 0.76) & (b < 0.55) & (px[:, 0] > 50)
     cavity = (px[:, 0] > 1.8 * px[:, 1]) & (px[:, 0] > 1.8 * px[:, 2]) & (px[:, 0] > 15)
     skin = (np.abs(g - 0.83) < 0.04) & (np.abs(b - 0.73) < 0.04) & (px[:, 0] > 40)
+    teeth = ~in_eyes & (np.abs(px - PALETTE["teeth"]).max(1) <= 12)
     return {"sclera": px[bright].mean(0), "iris": np.median(px[iris], 0),
+            "teeth": px[teeth].mean(0) if teeth.sum() > 20 else np.zeros(3),
             "cavity": np.median(px[cavity], 0) if cavity.sum() > 50 else np.zeros(3),
-            "skin": np.median(px[skin], 0), "n": (int(iris.sum()), int(cavity.sum()))}
+            "skin": np.median(px[skin], 0),
+            "n": (int(iris.sum()), int(cavity.sum()), int(teeth.sum()))}
 
 
 @pytest.mark.slow
 def test_the_page_and_the_puppet_show_the_same_colours(arkit_model, pages, tmp_path):
     """The two previews side by side, the tests' ARKit model's mean person facing the camera
     with its mouth open (jawOpen = 0.7): the puppet's frame and the page's shot show the same
-    lit sclera, iris, mouth inside and skin (each within 18 of 255 a channel; each preview
-    lit its own way: the puppet from the camera, the page by its key and sky lights, matched
-    on the skin). Before, the page's iris was a sienna (G / R 0.51 against the puppet's
+    lit sclera, iris, mouth inside, skin and upper teeth (each within 18 of 255 a channel; each
+    preview lit its own way: the puppet from the camera, the page by its key and sky lights,
+    matched on the skin). Before, the page's iris was a sienna (G / R 0.51 against the puppet's
     0.69) and its mouth's inside a near black (42, 18, 18) against the puppet's red (96, 34,
-    32) darkening to half."""
+    32) darkening to half, and it drew no teeth."""
     from facetransfer.arkit import ARKIT_NAMES
     from facetransfer.puppet_video import puppet_frames
 
@@ -677,5 +681,5 @@ def test_the_page_and_the_puppet_show_the_same_colours(arkit_model, pages, tmp_p
     page = _colours(shot, [_eye_box(e) for e in _drawn_eyes(pages[0], "jawOpen=0.7")],
                     page=True)
     print({k: (np.round(puppet[k]).tolist(), np.round(page[k]).tolist()) for k in puppet})
-    for k in ("sclera", "iris", "cavity", "skin"):
+    for k in ("sclera", "iris", "cavity", "skin", "teeth"):
         np.testing.assert_allclose(page[k], puppet[k], atol=18, err_msg=k)

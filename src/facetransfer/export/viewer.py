@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
-from ..puppet_face import CAVITY_BACK, IRIS_RIM, LID_PAIRS, LID_SHADE, PALETTE
+from ..puppet_face import CAVITY_BACK, IRIS_RIM, LID_PAIRS, LID_SHADE, PALETTE, TEETH_SHOW
 from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, PUPIL_RADIUS as _PUPIL_RADIUS
 from ..track.gaze import EYE_RADIUS as _EYE_RADIUS
 from .common import ExportError, head_quaternions, require_activations, source_name
@@ -117,8 +117,9 @@ def page_palette() -> dict:
     for both previews) as CSS ``#rrggbb``, with ``cavity_back`` and ``iris_rim``
     (:data:`facetransfer.puppet_face.CAVITY_BACK`, ``IRIS_RIM``). The page paints its skin,
     its eyeballs' canvas (sclera, iris to ``iris_rim`` then toward ``limbus``, pupil), the
-    mouth's and the eye sockets' insides (``cavity`` at the holes, ``cavity_back`` of it at the
-    cones' apexes and on the skin's back faces) with them."""
+    mouth's and the eye sockets' insides (``cavity`` at the mouth, ``cavity_back`` of it at the
+    cones' apexes, in the sockets and on the skin's back faces) and the upper teeth (``teeth``,
+    in :data:`facetransfer.puppet_face.TEETH_SHOW`'s band, as the puppet's) with them."""
     out = {k: "#%02x%02x%02x" % tuple(v) for k, v in PALETTE.items()}
     return {**out, "cavity_back": CAVITY_BACK, "iris_rim": IRIS_RIM}
 
@@ -312,6 +313,8 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
                           for d in dials.dials] if dials is not None else [],
             "n_frames": 0, "fps": 25.0, "eyes": eyes, "palette": page_palette(),
             "n_cavities": len(loops), "n_mouth_faces": _mouth_faces(loops),
+            "mouth_loop": loops[0][0].tolist() if _mouth_faces(loops) else [],
+            "teeth_show": TEETH_SHOW,
             **_save_data(model, track, model.mode_names[k], identity, title),
             "about": _about(model, track)}
     if track is not None:
