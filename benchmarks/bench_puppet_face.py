@@ -42,20 +42,23 @@ def _worker(track_path: str, sheet_path: str) -> None:
     :data:`SHEET` frames to ``sheet_path`` (.npy)."""
     import time
 
-    from facetransfer import transfer
+    try:
+        from facetransfer.puppet_video import puppet_frames
+    except ImportError:   # a tree before the fifty-third session (--before): in transfer
+        from facetransfer.transfer import puppet_frames
     from facetransfer.default_model import load_default_model
     from facetransfer.track.project import take_frames
     from facetransfer.track.result import Track
 
     track, model = Track.load(track_path), load_default_model()
     wid = model.weight_mean("identity")
-    for _ in transfer.puppet_frames(take_frames(track, np.arange(5)), model, wid):
+    for _ in puppet_frames(take_frames(track, np.arange(5)), model, wid):
         pass                                          # numba's kernels compiled or loaded
     sub = take_frames(track, np.arange(*TIMED))
     c0 = time.process_time()
-    n = sum(1 for _ in transfer.puppet_frames(sub, model, wid))
+    n = sum(1 for _ in puppet_frames(sub, model, wid))
     cpu = time.process_time() - c0
-    frames = [next(transfer.puppet_frames(take_frames(track, np.array([i])), model, wid))
+    frames = [next(puppet_frames(take_frames(track, np.array([i])), model, wid))
               for i in SHEET]
     np.save(sheet_path, np.stack(frames))
     print(json.dumps({"frames": n, "cpu_ms_per_frame": 1000 * cpu / n}))

@@ -151,7 +151,8 @@ def synthetic_quality(model, *, n_frames: int, size: int, seed: int = 0, log=pri
     from facetransfer import topology
     from facetransfer.synth import make_clip, random_performance
     from facetransfer.track.project import project_landmarks
-    from facetransfer.transfer import constant_weights, nearest_frames, recombine
+    from facetransfer.texture.function import nearest_frames
+    from facetransfer.transfer import constant_weights, recombine
 
     idm = model.mode_names[0]
     labels = model.labels[0]

@@ -213,7 +213,6 @@ LAYER_OF = {
     "facetransfer.performance_edit": "transfer",  # Fig. 7E edits of a track (or ARKit curves)
     "facetransfer.take": "transfer",      # a Live Link Face take as the new performance
     "facetransfer.dials": "transfer",     # identity edits of a track (dial_track)
-    "facetransfer.puppet_face": "transfer",  # the puppet's eyeballs and mouth, puppet_frames' paint
     # texture
     "facetransfer.texture": "texture",
     "facetransfer.rewrite_options": "texture",  # options as data: texture.face checks the mouth
@@ -242,7 +241,8 @@ LAYER_OF = {
     # video: the job over a clip
     "facetransfer.video_transfer": "video",
     "facetransfer.transfer_plan": "video",
-    "facetransfer.puppet_video": "video",
+    "facetransfer.puppet_video": "video",  # the puppet: its frames (puppet_frames), its video
+    "facetransfer.puppet_face": "video",  # the puppet's eyeballs and mouth, puppet_frames' paint
     "facetransfer.render_cache": "video",
     # apps: beyond the paper, what the commands run
     "facetransfer.export": "apps",

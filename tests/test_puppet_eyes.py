@@ -1,4 +1,4 @@
-"""The puppet's eyes and mouth (facetransfer.puppet_face through transfer.puppet_frames):
+"""The puppet's eyes and mouth (facetransfer.puppet_face through puppet_video.puppet_frames):
 eyeballs that look where the track's eyeLook* activations look, hidden by a blink, and a dark
 cavity in an open mouth. Before, the eye holes and the mouth gap were closed in the skin's
 colour."""
@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from facetransfer.arkit import ARKIT_NAMES
-from facetransfer.transfer import puppet_frames
+from facetransfer.puppet_video import puppet_frames
 
 from conftest import mean_person_track
 

@@ -235,7 +235,7 @@ def test_constant_weights_all_lost_raises():
 def test_nearest_frames_refuses_rows_of_another_length():
     """Query and bank rows of different lengths raised numpy's broadcast error."""
     from facetransfer.errors import ShapeError
-    from facetransfer.transfer import nearest_frames
+    from facetransfer.texture.function import nearest_frames
 
     with pytest.raises(ShapeError, match=r"got \(3, 4\) and \(5, 6\)"):
         nearest_frames(np.zeros((3, 4)), np.zeros((5, 6)))
@@ -276,7 +276,7 @@ def test_puppet_meshes_are_eq5_per_frame(quick_model, quick_track, monkeypatch):
     identity contracted once for the clip, gives each frame's own mesh."""
     from facetransfer import render as render_module
     from facetransfer import tensor as tl
-    from facetransfer import transfer
+    from facetransfer.puppet_video import puppet_frames
     from facetransfer.topology import close_mouth, mesh_topology
 
     seen = []
@@ -288,7 +288,7 @@ def test_puppet_meshes_are_eq5_per_frame(quick_model, quick_track, monkeypatch):
 
     monkeypatch.setattr(render_module, "render", spy)
     wid = quick_model.training_weights(0, quick_model.labels[0][1])
-    frames = list(transfer.puppet_frames(quick_track, quick_model, wid))
+    frames = list(puppet_frames(quick_track, quick_model, wid))
     assert len(frames) == len(seen) == quick_track.n_frames
     topo = mesh_topology(quick_model, lips=False)
     for i in [0, 2, 3, 4, quick_track.n_frames - 1, 1]:

@@ -575,7 +575,8 @@ def test_puppet_shows_lost_frames_as_the_exports_hold_them(clips, quick_model):
     last tracked frame after a loss)."""
     import dataclasses
 
-    from facetransfer.transfer import identity_from_label, puppet_frames
+    from facetransfer.puppet_video import puppet_frames
+    from facetransfer.transfer import identity_from_label
 
     track = Track.load(clips["source_track"])
     lost = np.zeros(track.n_frames, bool)
@@ -598,7 +599,8 @@ def test_puppet_shows_lost_frames_as_the_exports_hold_them(clips, quick_model):
 def test_puppet_start_gives_the_frames_of_a_whole_run(clips, quick_model):
     """``puppet_frames(start=k)`` gives the frames a whole run gives from k on, also where
     frame k is lost (rendered from the values the track holds there)."""
-    from facetransfer.transfer import identity_from_label, puppet_frames
+    from facetransfer.puppet_video import puppet_frames
+    from facetransfer.transfer import identity_from_label
 
     track = Track.load(clips["source_track"])
     lost = np.zeros(track.n_frames, bool)
@@ -854,7 +856,8 @@ def test_puppet_and_export_show_a_klt_tracks_lost_frames_as_their_nearest_tracke
     from facetransfer.arkit import ARKIT_NAMES
     from facetransfer.export import export_track
     from facetransfer.track.project import nearest_tracked
-    from facetransfer.transfer import identity_from_label, puppet_frames
+    from facetransfer.puppet_video import puppet_frames
+    from facetransfer.transfer import identity_from_label
 
     track = Track.load(clips["source_track"])
     lost = np.zeros(track.n_frames, bool)

@@ -21,7 +21,7 @@ from facetransfer import rewrite_clip as rc  # noqa: E402
 from facetransfer.texture import face as ftex  # noqa: E402
 from facetransfer import rewrite_options as rwo  # noqa: E402
 from facetransfer import topology  # noqa: E402
-from facetransfer.transfer import nearest_frames  # noqa: E402
+from facetransfer.texture.function import nearest_frames  # noqa: E402
 from facetransfer.render import (WeakPerspective, look_at_weak_perspective, render,  # noqa: E402
                                  rotation_from_euler)
 from facetransfer.track import Track  # noqa: E402

@@ -20,7 +20,8 @@ from facetransfer import transfer_plan as tp
 from facetransfer.render import WeakPerspective, look_at_weak_perspective, render, rotation_from_euler
 from facetransfer.track import Track
 from facetransfer.track.project import project_landmarks
-from facetransfer.transfer import nearest_frames, recombine
+from facetransfer.texture.function import nearest_frames
+from facetransfer.transfer import recombine
 
 SIZE = (128, 128)
 

@@ -462,11 +462,15 @@ def _sclera(px: np.ndarray) -> np.ndarray:
 
 
 def _iris(px: np.ndarray) -> np.ndarray:
-    """The lit iris's sienna (green well below red, unlike the skin; brighter than the dark red
-    inside of the head and its blend with the lids: sums <= 144 at a blink) or the pupil's
-    black (darker than the inside's sum of 78)."""
+    """The lit iris's brown (puppet_face.PALETTE's, G / R 0.65, B / R 0.39, its rim's 0.62,
+    0.38: green well below red, unlike the skin's 0.83 and 0.73; greener than the dark red
+    inside's G / R 0.35, and its blends with the lids' skin at a blink, whose B / R is over
+    0.45 where G / R is over 0.58: (56, 31, 26) is one) or the pupil's black (darker than the
+    inside's sum of 81)."""
     s = px.sum(1)
-    return ((px[:, 1] < 0.62 * px[:, 0]) & (s >= 170)) | (s < 40)
+    r = np.maximum(px[:, 0], 1)
+    g, b = px[:, 1] / r, px[:, 2] / r
+    return ((g > 0.58) & (g < 0.76) & (b < 0.45) & (px[:, 0] > 50)) | (s < 40)
 
 
 @pytest.mark.slow
@@ -509,7 +513,7 @@ def test_the_eyes_show_an_eyeball_that_the_lids_hide_and_the_gaze_turns(pages, t
 def test_the_open_mouth_shows_a_dark_inside_not_the_page(pages, tmp_path):
     """With jawOpen = 1 the mouth's gap is dark (before: the page's background showed through
     it, a hole in the face): no patch of background lies inside the face, and the shot has
-    many more dark pixels than with the jaw shut."""
+    many more of the inside's dark red pixels than with the jaw shut."""
     from scipy import ndimage
 
     model_page = pages[0]
@@ -520,7 +524,11 @@ def test_the_open_mouth_shows_a_dark_inside_not_the_page(pages, tmp_path):
                                              labels[:, -1]])))
         holes = [k for k in range(1, n + 1) if k not in edge and (labels == k).sum() > 4]
         assert not holes, [(labels == k).sum() for k in holes]
-    dark = lambda im: int((im.sum(axis=2) < 120).sum())  # noqa: E731
+
+    def dark(im):   # the inside's dark reds (puppet_face.PALETTE's cavity, darker to the back)
+        r = im[..., 0]
+        return int(((r > 1.8 * im[..., 1]) & (r > 1.8 * im[..., 2]) & (r > 15)).sum())
+
     assert dark(gaping) - dark(shut) > 1000, (dark(gaping), dark(shut))
 
 
@@ -587,3 +595,91 @@ def test_the_pages_lid_shade_is_the_puppets(arkit_model, pages):
         V = arkit_model.synthesize(w)
         want = lid_light(V[np.asarray(arkit_model.landmarks)])
         np.testing.assert_allclose([d["lit"] for d in drawn], want, atol=2e-3)
+
+
+def _painted(page: Path) -> dict:
+    """The colours the page painted with (its body's ``data-palette``: sRGB ``#rrggbb``)."""
+    import html
+    import json
+
+    return json.loads(html.unescape(re.search(r'data-palette="([^"]*)"', _dom(page, ""))
+                                    .group(1)))
+
+
+@pytest.mark.slow
+def test_the_page_paints_with_the_puppets_palette(pages):
+    """One palette for the two previews (puppet_face.PALETTE): the page's skin, its eyeballs'
+    canvas (pupil, iris, the iris's rim, sclera: each a row's mean, the iris's fibres lighter
+    and darker about its colour), the mouth's inside at the lips and at the back (and the
+    head's inside) and the upper teeth are the puppet's. Before, the page had colours of its
+    own: a #d9b59f skin, a sienna iris, a #f1ede4 sclera, a #2a1212 inside, no teeth."""
+    from facetransfer.puppet_face import CAVITY_BACK, PALETTE
+
+    drawn = _painted(pages[0])
+    want = {**PALETTE, "cavity_back": np.asarray(PALETTE["cavity"]) * CAVITY_BACK}
+    for name, rgb in want.items():
+        got = [int(drawn[name][i:i + 2], 16) for i in (1, 3, 5)]
+        # the limbus: the canvas's last iris row, a row short of the gradient's end
+        np.testing.assert_allclose(got, rgb, atol=8 if name == "limbus" else 1.5, err_msg=name)
+
+
+def _colours(img: np.ndarray, eye_boxes, *, page: bool) -> dict:
+    """The lit sclera (the mean of the brightest quarter of its pixels), the iris's, the
+    mouth's inside's and the skin's median colours of a frontal face ``img``, the eyes' in
+    ``eye_boxes``: pixels told by the hues of the palette's colours, the same rule for both
+    previews; the upper teeth: pixels within 12 of the palette's (unlit, both)."""
+    from facetransfer.puppet_face import PALETTE
+
+    px = img.reshape(-1, 3).astype(np.float64)
+    r = np.maximum(px[:, 0], 1.0)
+    g, b = px[:, 1] / r, px[:, 2] / r
+    in_eyes = np.zeros(img.shape[:2], bool)
+    for rows, cols in eye_boxes:
+        in_eyes[rows, cols] = True
+    in_eyes = in_eyes.ravel()
+    bg = (np.abs(px - BACKGROUND).sum(1) <= 12) if page else np.zeros(len(px), bool)
+    sclera = in_eyes & ~bg & (px.min(1) > 100) & (np.ptp(px, 1) < 40)
+    bright = sclera & (px.sum(1) >= np.percentile(px[sclera].sum(1), 75))
+    iris = in_eyes & (g > 0.5) & (g < 0.76) & (b < 0.55) & (px[:, 0] > 50)
+    cavity = (px[:, 0] > 1.8 * px[:, 1]) & (px[:, 0] > 1.8 * px[:, 2]) & (px[:, 0] > 15)
+    skin = (np.abs(g - 0.83) < 0.04) & (np.abs(b - 0.73) < 0.04) & (px[:, 0] > 40)
+    teeth = ~in_eyes & (np.abs(px - PALETTE["teeth"]).max(1) <= 12)
+    return {"sclera": px[bright].mean(0), "iris": np.median(px[iris], 0),
+            "teeth": px[teeth].mean(0) if teeth.sum() > 20 else np.zeros(3),
+            "cavity": np.median(px[cavity], 0) if cavity.sum() > 50 else np.zeros(3),
+            "skin": np.median(px[skin], 0),
+            "n": (int(iris.sum()), int(cavity.sum()), int(teeth.sum()))}
+
+
+@pytest.mark.slow
+def test_the_page_and_the_puppet_show_the_same_colours(arkit_model, pages, tmp_path):
+    """The two previews side by side, the tests' ARKit model's mean person facing the camera
+    with its mouth open (jawOpen = 0.7): the puppet's frame and the page's shot show the same
+    lit sclera, iris, mouth inside, skin and upper teeth (each within 18 of 255 a channel; each
+    preview lit its own way: the puppet from the camera, the page by its key and sky lights,
+    matched on the skin). Before, the page's iris was a sienna (G / R 0.51 against the puppet's
+    0.69) and its mouth's inside a near black (42, 18, 18) against the puppet's red (96, 34,
+    32) darkening to half, and it drew no teeth."""
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.puppet_video import puppet_frames
+
+    from conftest import mean_person_track
+
+    a = np.zeros((1, 52), np.float32)
+    a[0, ARKIT_NAMES.index("jawOpen")] = 0.7
+    track = mean_person_track(arkit_model, a, size=320, scale=14.0)
+    img = next(puppet_frames(track, arkit_model, arkit_model.weight_mean("identity")))
+    V = arkit_model.synthesize(track.weights_at(0))
+    lm = np.asarray(arkit_model.landmarks)
+    boxes = []
+    for eye in (range(36, 42), range(42, 48)):
+        P = track.camera(0).project(V[lm[list(eye)]])
+        (x0, y0), (x1, y1) = np.floor(P.min(0)) - 2, np.ceil(P.max(0)) + 2
+        boxes.append((slice(int(y0), int(y1) + 1), slice(int(x0), int(x1) + 1)))
+    puppet = _colours(img, boxes, page=False)
+    shot = _shot(pages[0], "jawOpen=0.7", tmp_path)
+    page = _colours(shot, [_eye_box(e) for e in _drawn_eyes(pages[0], "jawOpen=0.7")],
+                    page=True)
+    print({k: (np.round(puppet[k]).tolist(), np.round(page[k]).tolist()) for k in puppet})
+    for k in ("sclera", "iris", "cavity", "skin", "teeth"):
+        np.testing.assert_allclose(page[k], puppet[k], atol=18, err_msg=k)

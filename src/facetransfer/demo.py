@@ -336,13 +336,13 @@ def _plan_with_fallback(target, source, model, opts: RewriteOptions, frames: int
 def _take_panels(source, plan, model):
     """For a Live Link Face take as the source (it has no pictures; the plan's mouth frames
     are the target's own): the take's performance on the model's mean face, in the target's
-    pose and frame (:func:`facetransfer.transfer.puppet_frames` of the new track), the
+    pose and frame (:func:`facetransfer.puppet_video.puppet_frames` of the new track), the
     source panel that the judge compares the result with; None for a video source."""
     from .take import is_take
 
     if not is_take(source):
         return None
-    from .transfer import puppet_frames
+    from .puppet_video import puppet_frames
 
     return puppet_frames(plan.new_track, model, model.weight_mean("identity"),
                          size=tuple(plan.target_frames.shape[2:0:-1]))

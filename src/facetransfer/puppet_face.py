@@ -1,6 +1,6 @@
 """The puppet's eyes and mouth: eyeballs that look where the track looks, a dark mouth cavity.
 
-:func:`facetransfer.transfer.puppet_frames` renders the model's face as a solid head: its eye
+:func:`facetransfer.puppet_video.puppet_frames` renders the model's face as a solid head: its eye
 holes closed by fans around their centres, its mouth gap by the topology's fan
 (:func:`facetransfer.topology.close_mouth`). Shaded in the skin's colour those fills read as skin:
 a blink closed skin over skin, the gaze did not show and an open mouth was a skin-coloured disc.
@@ -12,14 +12,14 @@ lips occlude them as they occlude any surface):
   the weak-perspective camera (Eq. (7)) onto the ball's front, and the angle between that
   point's direction from the ball's centre and the gaze (:func:`facetransfer.track.gaze.
   activation_gaze` of the frame's eyeLook* activations, the inverse of what the tracker reads
-  from Face Landmarker's iris points) makes it pupil (:data:`PUPIL`), iris (:data:`IRIS`) or
-  sclera (:data:`SCLERA`). The iris is a disc on the ball, so it foreshortens as the eye or
-  the head turns; a half-closed eye shows the part of it its lids leave. A track without ARKit
-  activations (a model whose expressions are not ARKit-named, e.g. ``ict-bilinear``) looks
-  straight ahead (the head's +z);
+  from Face Landmarker's iris points) makes it pupil (:data:`PUPIL`), iris (:data:`IRIS`, its
+  rim :data:`LIMBUS`) or sclera (:data:`SCLERA`). The iris is a disc on the ball, so it
+  foreshortens as the eye or the head turns; a half-closed eye shows the part of it its lids
+  leave. A track without ARKit activations (a model whose expressions are not ARKit-named,
+  e.g. ``ict-bilinear``) looks straight ahead (the head's +z);
 - a mouth fill's pixel is the cavity (:data:`CAVITY`, darker toward the fan's centre, the back
-  of the mouth), with the upper teeth (:data:`TEETH`) in a band of :data:`TEETH_SHOW` eye widths
-  under the middle of the upper lip;
+  of the mouth: :data:`CAVITY_BACK`), with the upper teeth (:data:`TEETH`) in a band of
+  :data:`TEETH_SHOW` eye widths under the middle of the upper lip;
 - an eye or the mouth whose fill shows only a sliver (on average lower than :data:`SHUT` of its
   width, and half a row of pixels more for a sliver under a pixel high: the model's lids in a
   blink and its lips at rest do not quite meet) is shut, its
@@ -27,6 +27,8 @@ lips occlude them as they occlude any surface):
   the eyeball, a mouth at rest shows no cavity. As on the ``view`` page, the lids closing
   darken the eyeball by their gap (:func:`lid_light`, :data:`LID_SHADE`); at a gap of
   ``LID_SHADE[0]`` the eye is shut.
+
+The colours are :data:`PALETTE`'s, the ``view`` page's too (one palette for both previews).
 
 :func:`preview_face` is the same head in :func:`facetransfer.render.render_model`'s framing,
 ``facetransfer render``'s picture. The eyes and the mouth cost ~0.7 ms of CPU a frame (a
@@ -44,26 +46,56 @@ The visible iris diameter (~11.8 mm) and a daylight pupil (~4 mm): textbook aver
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import MappingProxyType
 
 import numpy as np
 
 from .track.gaze import CORNER_INDEX, EYE_RADIUS, activation_gaze, eye_model, gaze_direction
 
-__all__ = ["SCLERA", "IRIS", "PUPIL", "CAVITY", "TEETH", "IRIS_RADIUS", "PUPIL_RADIUS",
+__all__ = ["PALETTE", "SKIN", "SCLERA", "IRIS", "LIMBUS", "PUPIL", "CAVITY", "TEETH",
+           "CAVITY_BACK", "IRIS_RIM", "IRIS_RADIUS", "PUPIL_RADIUS",
            "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "PuppetFace",
            "puppet_face", "arkit_activations", "track_gaze", "lid_light", "paint_face",
            "preview_face"]
 
-#: The white of the eye: an off-white (RGB).
-SCLERA = (232, 228, 218)
-#: The iris: a neutral brown (RGB).
-IRIS = (110, 76, 50)
+#: The two previews' colours (RGB, 0-255): the puppet's (``facetransfer puppet``, ``render``)
+#: and the ``view`` page's (:mod:`facetransfer.export.viewer` hands this dict to the page,
+#: which draws its skin, eyeballs and mouth with it), written once so that they cannot drift
+#: apart again (the fifty-second session's had two, the page's iris a ``sienna``, its mouth a
+#: near black). Each is what a surface facing a frontal light shows: ``skin`` and the eyeball
+#: are shaded by their lights, the mouth's inside is not lit. ``iris`` to :data:`IRIS_RIM` of
+#: the way from the pupil's edge, then toward ``limbus`` (the iris's dark rim) at its edge;
+#: ``cavity`` the mouth's inside at the lips, :data:`CAVITY_BACK` of it at the back; ``teeth``
+#: the upper teeth.
+PALETTE = MappingProxyType({
+    "skin": (205, 170, 150),
+    "sclera": (232, 228, 218),
+    "iris": (124, 80, 48),
+    "limbus": (52, 32, 20),
+    "pupil": (12, 10, 10),
+    "cavity": (96, 34, 32),
+    "teeth": (222, 216, 198),
+})
+#: The skin (RGB): :data:`PALETTE`'s.
+SKIN = PALETTE["skin"]
+#: The white of the eye (RGB): an off-white.
+SCLERA = PALETTE["sclera"]
+#: The iris (RGB): a brown.
+IRIS = PALETTE["iris"]
+#: The iris's dark rim (RGB).
+LIMBUS = PALETTE["limbus"]
 #: The pupil (RGB).
-PUPIL = (12, 10, 10)
-#: The inside of an open mouth: a dark red-brown (RGB), at the lips; darker toward the middle.
-CAVITY = (96, 34, 32)
+PUPIL = PALETTE["pupil"]
+#: The inside of an open mouth: a dark red-brown (RGB), at the lips; darker toward the back.
+CAVITY = PALETTE["cavity"]
 #: The upper teeth (RGB).
-TEETH = (222, 216, 198)
+TEETH = PALETTE["teeth"]
+#: The mouth's inside at its back (the fan's centre; the page's cone's apex and the head's
+#: inside): :data:`CAVITY` times this.
+CAVITY_BACK = 0.5
+#: The iris is :data:`IRIS` from the pupil's edge to this fraction of the way to its edge, then
+#: blends into :data:`LIMBUS` at the edge.
+IRIS_RIM = 0.75
 #: The visible iris's radius, cm at FaceKit's eye width (:data:`facetransfer.track.gaze.
 #: FACEKIT_EYE_WIDTH`): half of an 11.8 mm visible iris.
 IRIS_RADIUS = 0.59
@@ -286,7 +318,8 @@ def _shut(count: np.ndarray, V: np.ndarray, camera, face: PuppetFace) -> np.ndar
 
 def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int, lit) -> None:
     """Paint the eye fills' pixels ``(ys, xs)`` (eye ``k`` each: 0 right, 1 left) with the
-    eyeball's sclera, iris or pupil seen there (module docstring), shaded by ``lit`` (2,)
+    eyeball's sclera, iris (its rim darker: :data:`IRIS_RIM`) or pupil seen there (module
+    docstring), shaded by ``lit`` (2,)
     (:func:`lid_light`: its lids closing darken it, as on the ``view`` page)."""
     eyes = eye_model(V[face.landmarks])
     angles = np.zeros((2, 2)) if face.gaze is None else face.gaze[i]
@@ -303,10 +336,13 @@ def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int, lit) -> N
     d = np.column_stack([q, ez]) @ R                                  # R^T e, the head's frame
     cos = np.sum(d * g[k], axis=1)
     # the iris and the pupil as discs on the ball (its radius EYE_RADIUS at FaceKit's width)
-    c_iris = np.cos(np.arcsin(min(IRIS_RADIUS / EYE_RADIUS, 1.0)))
-    c_pupil = np.cos(np.arcsin(min(PUPIL_RADIUS / EYE_RADIUS, 1.0)))
-    colour = np.where((cos > c_pupil)[:, None], np.array(PUPIL, np.float64),
-                      np.where((cos > c_iris)[:, None], np.array(IRIS, np.float64),
+    a_iris, a_pupil = (np.arcsin(min(r / EYE_RADIUS, 1.0)) for r in (IRIS_RADIUS, PUPIL_RADIUS))
+    # from the pupil's edge to the iris's: IRIS, then toward LIMBUS past IRIS_RIM of the way
+    t = (np.arccos(np.clip(cos, -1.0, 1.0)) - a_pupil) / max(a_iris - a_pupil, 1e-12)
+    rim = np.clip((t - IRIS_RIM) / (1.0 - IRIS_RIM), 0.0, 1.0)[:, None]
+    iris = np.array(IRIS, np.float64) * (1.0 - rim) + np.array(LIMBUS, np.float64) * rim
+    colour = np.where((cos > np.cos(a_pupil))[:, None], np.array(PUPIL, np.float64),
+                      np.where((cos > np.cos(a_iris))[:, None], iris,
                                np.array(SCLERA, np.float64)))
     light = (_EYE_AMBIENT + (1.0 - _EYE_AMBIENT) * ez) * np.asarray(lit)[k]
     image[ys, xs] = np.clip(colour * light[:, None] + 0.5, 0, 255).astype(np.uint8)
@@ -318,7 +354,7 @@ def _paint_mouth(image, ys, xs, tid, bary, V, face: PuppetFace) -> None:
     teeth: the band, in the head's frame, from the upper lip's middle down :data:`TEETH_SHOW`
     eye widths, over the middle 55 % of the mouth's width."""
     w = bary[:, 2].astype(np.float64)
-    colour = np.array(CAVITY, np.float64) * (1.0 - 0.5 * w)[:, None]
+    colour = np.array(CAVITY, np.float64) * (1.0 - (1.0 - CAVITY_BACK) * w)[:, None]
     if face.landmarks is not None:
         start, k = face.mouth
         loop = V[face.faces[start:start + k, 1]]

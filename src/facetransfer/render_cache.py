@@ -128,7 +128,7 @@ def matte_key(key: str | None, video_options, *, images: bool = False) -> str | 
 
 
 def puppet_key(track, model, identity, video_options, *, images: bool = False) -> str | None:
-    """The key of a puppet video (:func:`facetransfer.transfer.puppet_frames`): ``track``
+    """The key of a puppet video (:func:`facetransfer.puppet_video.puppet_frames`): ``track``
     driving the identity weights ``identity`` of ``model``, written with ``video_options``
     into a video or (``images``) an image sequence; None when the cache is off."""
     if not cache_enabled():

@@ -11,14 +11,13 @@ expression from the new video"):
 * :func:`recombine`: identity, expression, viseme and pose from up to three tracks (Fig. 1,
   Fig. 7B–7D);
 * editing a track (Fig. 7E: add a training expression over a frame range, scale an
-  expression's component) is :mod:`facetransfer.performance_edit`;
-* :func:`puppet_frames`: drive an identity of the model from a video, rendered alone.
+  expression's component) is :mod:`facetransfer.performance_edit`.
 
 Rendering the new performance back into footage is :mod:`facetransfer.rewrite` (one frame) and
-:mod:`facetransfer.video_transfer` (the job). Every function here is pure, tracks in and a new
-track out (:func:`nearest_frames`: the §6 texture's nearest frames, rows in and indices out),
-but :func:`puppet_frames`, which renders frames (a move to :mod:`facetransfer.puppet_video` is
-proposed in BENCHMARKS.md, newcomer52).
+:mod:`facetransfer.video_transfer` (the job); rendering it alone, the puppet, is
+:func:`facetransfer.puppet_video.puppet_frames`; the §6 texture's nearest frames (a transfer's
+mouth frames) are :func:`facetransfer.texture.function.nearest_frames`. Every function here is
+pure, tracks in and a new track out.
 
 References
 ----------
@@ -31,26 +30,22 @@ from __future__ import annotations
 import dataclasses
 import logging
 from dataclasses import dataclass
-from typing import Iterator
 
 import numpy as np
 
-from .errors import FaceTransferError, RewriteError, ShapeError
-from .topology import close_mouth, mesh_topology
+from .errors import FaceTransferError
 from .track.project import take_frames
 
 log = logging.getLogger(__name__)
 
 __all__ = [
     "ALIGN_MODES",
-    "nearest_frames",
     "TransferError",
     "TimeMap",
     "time_map",
     "resample_track",
     "constant_weights",
     "recombine",
-    "puppet_frames",
     "identity_from_label",
     "parse_weights",
 ]
@@ -411,80 +406,6 @@ def _identity_weights(target, identity, identity_mode: str, r: int) -> np.ndarra
     return wid
 
 
-# ---------------------------------------------------------------------------------------------
-# puppetry
-# ---------------------------------------------------------------------------------------------
-
-def puppet_frames(track, model, identity: np.ndarray, *, size: tuple[int, int] | None = None,
-                  background=(40, 40, 48), identity_mode: str = "identity",
-                  color=(205, 170, 150), start: int = 0) -> Iterator[np.ndarray]:
-    """Drive a synthetic actor (an identity of the model) with a tracked performance.
-
-    Each frame renders Eq. (5) with ``identity`` and the track's other weights, seen by the
-    track's camera, Lambert-shaded on a plain background, with the mouth gap and eye holes
-    closed: the eye holes show eyeballs turned by the frame's eyeLook* activations (straight
-    ahead for a track without ARKit activations), an open mouth a dark cavity with the upper
-    teeth, a shut eye or mouth a line (:mod:`facetransfer.puppet_face`), all occluded by the
-    lids and lips. A frame where the face was lost shows its nearest tracked frame (the
-    earlier on ties; :func:`facetransfer.track.project.held_lost`), as ``facetransfer export``
-    writes it and the capture tracker stores it: not a KLT track's drifting state there.
-    ``start``: yield frames ``start`` to the end only (those of a whole run: a render
-    continued after an interrupt).
-
-    Parameters
-    ----------
-    track : Track
-    model : MultilinearModel
-    identity : (r,) float64
-    size : (W, H), optional
-        Default: the track's frame size.
-    background : (3,) colour
-
-    Yields
-    ------
-    (H, W, 3) uint8
-    """
-    from .puppet_face import paint_face, puppet_face, track_gaze
-    from .render import render
-    from .track.project import nearest_tracked
-
-    size = tuple(track.frame_size) if size is None else (int(size[0]), int(size[1]))
-    r = model.ranks[model.mode_index(identity_mode)]
-    wid = np.asarray(identity, dtype=np.float64).ravel()
-    if wid.shape != (r,):
-        raise TransferError(f"identity weights must have {r} values, got {wid.shape}")
-    bg = np.broadcast_to(np.asarray(background, np.uint8), (size[1], size[0], 3)).copy()
-    sx = size[0] / track.frame_size[0]
-    sy = size[1] / track.frame_size[1]
-    # a solid head: the mouth gap and the eye holes closed, their fills painted as a mouth
-    # cavity and eyeballs (facetransfer.puppet_face)
-    topo = mesh_topology(model, lips=False)
-    face = puppet_face(model, topo, gaze=track_gaze(track))
-    n_all = topo.n_closed + len(topo.eye_loops)
-    colors = np.broadcast_to(np.asarray(color, np.float64), (n_all, 3))
-
-    def draw(i: int) -> np.ndarray:
-        w = track.weights_at(i)
-        w[identity_mode] = wid
-        # the identity contracted once (model.py); the eye loops' centres appended
-        V = face.vertices(close_mouth(model.synthesize(w), topo))
-        cam = track.camera(i)
-        if (sx, sy) != (1.0, 1.0):
-            cam = type(cam)(cam.scale * np.sqrt(sx * sy), cam.rotation,
-                            cam.translation * np.array([sx, sy]), cam.pixel_aspect)
-        out = render(V, face.faces, cam, size, colors=colors, background=bg)
-        paint_face(out.image, out.raster, V, cam, face, i)
-        return out.image
-
-    # a lost frame shows its nearest tracked one (held_lost's rule, as the exports write it,
-    # whichever tracker), each drawn once for a run of lost frames around it
-    near, shown = nearest_tracked(track.lost), (-1, bg)
-    for i in range(max(0, int(start)), track.n_frames):
-        if int(near[i]) != shown[0]:
-            shown = (int(near[i]), draw(int(near[i])))
-        yield shown[1]
-
-
 def identity_from_label(model, label: str, mode: str = "identity") -> np.ndarray:
     """Training weights of an identity given by label (TransferError listing known labels)."""
     k = model.mode_index(mode)
@@ -556,36 +477,3 @@ def check_identity_weights(model, w: np.ndarray, *, what: str = "--identity-weig
         raise TransferError(f"{what}: component {j} ({w[j]:.4g}) lies {z[j]:.0f} standard "
                             f"deviations from the training identities' (at most "
                             f"{IDENTITY_LIMIT:g}): {hint}")
-
-
-def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None
-                   ) -> np.ndarray:
-    """For each query row the index of the nearest bank row (Euclidean), among ``valid`` ones.
-
-    The performance-driven texture of §6 ("the weighted sum of nearest neighbors") with one
-    neighbour: the frame of the texture video whose attributes are closest.
-
-    Parameters
-    ----------
-    query : (n, r)
-    bank : (m, r)
-    valid : (m,) bool, optional
-
-    Returns
-    -------
-    (n,) int64
-    """
-    Q = np.asarray(query, np.float64)
-    B = np.asarray(bank, np.float64)
-    if Q.ndim != 2 or B.ndim != 2 or Q.shape[1] != B.shape[1]:
-        raise ShapeError(f"query and bank must be (n, r) and (m, r), got {Q.shape} and "
-                         f"{B.shape}")
-    ok = np.ones(B.shape[0], bool) if valid is None else np.asarray(valid, bool)
-    if ok.shape != B.shape[:1]:
-        raise ShapeError(f"valid must be ({B.shape[0]},) for a bank of {B.shape}, got "
-                         f"{ok.shape}")
-    if not ok.any():
-        raise RewriteError("no frame to take a texture from (all lost)")
-    idx = np.flatnonzero(ok)
-    d = ((Q[:, None, :] - B[None, idx, :]) ** 2).sum(axis=-1)
-    return idx[np.argmin(d, axis=1)]

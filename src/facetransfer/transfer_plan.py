@@ -16,7 +16,7 @@ everything the render needs, before any frame is rendered.
 * where the mouth's texture comes from: the source of the mouth's motion (visemes, else
   expressions) resampled to the new timeline, the target itself without one, and for a ready
   performance the target's frame whose expression is nearest
-  (:func:`facetransfer.transfer.nearest_frames`).
+  (:func:`facetransfer.texture.function.nearest_frames`).
 
 Rendering a plan and writing the video is :mod:`facetransfer.video_transfer`.
 """
@@ -41,7 +41,8 @@ from .track import obtain
 from .track.presets import DEFAULT_SPEED, DETECT_EVERY, track_options
 from .track.video_detect import default_workers
 from .track.project import project_landmarks, take_frames
-from .transfer import constant_weights, nearest_frames, recombine, resample_track, time_map
+from .texture.function import nearest_frames
+from .transfer import constant_weights, recombine, resample_track, time_map
 
 log = logging.getLogger(__name__)
 

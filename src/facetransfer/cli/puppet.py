@@ -115,7 +115,7 @@ def run_puppet(args) -> int:
 
 def _say_lost(track) -> None:
     """The note ``export`` prints of the frames where ``track`` lost the face, which the puppet
-    shows as its nearest tracked frame (:func:`facetransfer.transfer.puppet_frames`)."""
+    shows as its nearest tracked frame (:func:`facetransfer.puppet_video.puppet_frames`)."""
     from .export import lost_note
 
     note = lost_note(track, "the puppet holds the nearest tracked frame's head there")

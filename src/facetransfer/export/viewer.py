@@ -36,15 +36,15 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
-from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, LID_PAIRS, LID_SHADE
-from ..puppet_face import PUPIL_RADIUS as _PUPIL_RADIUS
+from ..puppet_face import CAVITY_BACK, IRIS_RIM, LID_PAIRS, LID_SHADE, PALETTE, TEETH_SHOW
+from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, PUPIL_RADIUS as _PUPIL_RADIUS
 from ..track.gaze import EYE_RADIUS as _EYE_RADIUS
 from .common import ExportError, head_quaternions, require_activations, source_name
 
 log = logging.getLogger(__name__)
 
 __all__ = ["THREE_VERSION", "THREE_SHA256", "viewer_page", "write_viewer", "view_rig", "eye_data",
-           "EYE_COLOURS"]
+           "page_palette"]
 
 #: The vendored three.js release and the sha256 of its ``build/three.min.js``.
 THREE_VERSION = "0.159.0"
@@ -112,9 +112,18 @@ def view_rig(model, identity: np.ndarray, dials=None):
     return neutral, shapes, names, title, dial_off
 
 
-#: The eyeballs' colours (CSS colours), painted on a canvas in the page: the white, the iris (a
-#: named colour), its dark rim and the pupil.
-EYE_COLOURS = {"sclera": "#f1ede4", "iris": "sienna", "limbus": "#2e1c10", "pupil": "black"}
+def page_palette() -> dict:
+    """The page's colours: :data:`facetransfer.puppet_face.PALETTE` (the puppet's: one palette
+    for both previews) as CSS ``#rrggbb``, with ``cavity_back`` and ``iris_rim``
+    (:data:`facetransfer.puppet_face.CAVITY_BACK`, ``IRIS_RIM``). The page paints its skin,
+    its eyeballs' canvas (sclera, iris to ``iris_rim`` then toward ``limbus``, pupil), the
+    mouth's and the eye sockets' insides (``cavity`` at the mouth, ``cavity_back`` of it at the
+    cones' apexes, in the sockets and on the skin's back faces) and the upper teeth (``teeth``,
+    in :data:`facetransfer.puppet_face.TEETH_SHOW`'s band, as the puppet's) with them."""
+    out = {k: "#%02x%02x%02x" % tuple(v) for k, v in PALETTE.items()}
+    return {**out, "cavity_back": CAVITY_BACK, "iris_rim": IRIS_RIM}
+
+
 #: Half-angles (degrees, about the eyeball's centre from its gaze axis) of the iris and the pupil:
 #: the puppet's (:data:`facetransfer.puppet_face.IRIS_RADIUS`, ``PUPIL_RADIUS``: an 11.8 mm
 #: iris and a 4 mm pupil) on an eyeball of :data:`facetransfer.track.gaze.EYE_RADIUS`.
@@ -154,7 +163,8 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
     dict or None
         ``corners`` (2, 2) vertex ids, ``offset`` (2, 3), ``ratio`` (2,), ``gaze`` (G, 4),
         ``lids`` (2, 2, 2) vertex ids (:data:`facetransfer.puppet_face.LID_PAIRS`) and
-        ``lid_shade`` (:data:`facetransfer.puppet_face.LID_SHADE`), ``colours``, ``iris_angle`` and ``pupil_angle`` (degrees); eyes in
+        ``lid_shade`` (:data:`facetransfer.puppet_face.LID_SHADE`), ``iris_angle`` and
+        ``pupil_angle`` (degrees; the colours are :func:`page_palette`'s); eyes in
         :data:`facetransfer.track.gaze.EYES` order (the subject's right, then left). None also
         where an eye's corners coincide (a degenerate face).
     """
@@ -181,7 +191,7 @@ def eye_data(model, neutral: np.ndarray, names: list) -> dict | None:
     return {"corners": [list(c) for c in corners], "lids": lids, "lid_shade": list(LID_SHADE),
             "offset": ((eyes.centre - mid) / width[:, None]).tolist(),
             "ratio": (eyes.radius / width).tolist(), "gaze": gaze,
-            "colours": dict(EYE_COLOURS), "iris_angle": IRIS_ANGLE, "pupil_angle": PUPIL_ANGLE}
+            "iris_angle": IRIS_ANGLE, "pupil_angle": PUPIL_ANGLE}
 
 
 #: How far behind its hole each cavity's apex lies, in widths (x extent) of the hole: the mouth
@@ -200,6 +210,14 @@ def cavity_loops(model) -> list[tuple[np.ndarray, float]]:
     topo = mesh_topology(model)
     return ([(topo.mouth_loop, CAVITY_DEPTH["mouth"])] if topo.mouth_loop.size else []) + \
         [(lp, CAVITY_DEPTH["eye"]) for lp in topo.eye_loops]
+
+
+def _mouth_faces(loops: list) -> int:
+    """How many of the cavities' faces (:func:`_closed`, after the skin's) are the mouth's (its
+    loop comes first in :func:`cavity_loops`, one face a loop vertex): the page paints the
+    mouth's lips-side :data:`facetransfer.puppet_face.CAVITY`, darker to its apex as the
+    puppet's mouth darkens to its back, and the eye sockets the darker inside."""
+    return int(loops[0][0].size) if loops and loops[0][1] == CAVITY_DEPTH["mouth"] else 0
 
 
 def _closed(loops: list, faces: np.ndarray, neutral: np.ndarray, *offsets: np.ndarray):
@@ -282,8 +300,8 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
                 else model.weight_mean(k))
     neutral, shapes, names, shape_title, dial_off = view_rig(model, identity, dials)
     eyes = eye_data(model, neutral, names)
-    faces, neutral, shapes, dial_off = _closed(cavity_loops(model), model.faces, neutral, shapes,
-                                               dial_off)
+    loops = cavity_loops(model)
+    faces, neutral, shapes, dial_off = _closed(loops, model.faces, neutral, shapes, dial_off)
     dial_names = list(dials.names) if dials is not None else []
     q, scales = _quantize(np.concatenate([shapes, dial_off]) if len(shapes) + len(dial_off)
                           else np.zeros((0,) + neutral.shape))
@@ -293,7 +311,10 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
             "n_shapes": len(names), "shape_title": shape_title,
             "dial_info": [f"{d.effect:+.2f} {dials.unit}/unit, R2 {d.r2_loo:.2f}"
                           for d in dials.dials] if dials is not None else [],
-            "n_frames": 0, "fps": 25.0, "eyes": eyes,
+            "n_frames": 0, "fps": 25.0, "eyes": eyes, "palette": page_palette(),
+            "n_cavities": len(loops), "n_mouth_faces": _mouth_faces(loops),
+            "mouth_loop": loops[0][0].tolist() if _mouth_faces(loops) else [],
+            "teeth_show": TEETH_SHOW,
             **_save_data(model, track, model.mode_names[k], identity, title),
             "about": _about(model, track)}
     if track is not None:

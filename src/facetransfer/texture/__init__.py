@@ -23,7 +23,8 @@ Pipeline, per tracked frame (pose and mesh known), one module per stage:
 3. :mod:`.function` — :class:`TextureFunction`: the texture for an attribute vector (e.g.
    expression and viseme weights concatenated, :func:`attribute_vector`) is the weighted sum of
    the lifted textures of the ``k`` training frames nearest in attribute space, each texel weighted
-   by kernel weight times its weight (1).
+   by kernel weight times its weight (1); :func:`nearest_frames`, one neighbour (the frame),
+   the rows' indices alone: a transfer's mouth frames.
 
 Default textures: :mod:`.default` (:func:`default_face_texture`, procedural until the template is
 fitted to the Lee Perry-Smith scan); :mod:`.lee_perry_smith` then carries the scan's colour map
@@ -50,7 +51,7 @@ from .atlas import UVAtlas, uv_atlas
 from .bake import BakedTexture, bake_texture
 from .base import TextureError, texture_to_uint8
 from .default import default_face_texture
-from .function import TextureFunction, attribute_vector
+from .function import TextureFunction, attribute_vector, nearest_frames
 from .lee_perry_smith import (LEE_PERRY_SMITH_CREDIT, lee_perry_smith_template_texture,
                               lee_perry_smith_texture, load_lee_perry_smith)
 from .lifting import (LiftedTexture, LiftedTrack, LiftedUVTexture, lift_merged, lift_track,
@@ -76,6 +77,7 @@ __all__ = [
     "lift_track",
     "lift_merged",
     "attribute_vector",
+    "nearest_frames",
     "default_face_texture",
     "bake_texture",
     "BakedTexture",

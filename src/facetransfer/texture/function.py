@@ -11,12 +11,12 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..errors import FaceTransferError, ShapeError
+from ..errors import FaceTransferError, RewriteError, ShapeError
 from ..io.atomic import atomic_path
 from .base import TextureError
 from .merge import MergedTexture, fill_vertex_colors, merge_textures, stack_lifted
 
-__all__ = ["TextureFunction", "attribute_vector"]
+__all__ = ["TextureFunction", "attribute_vector", "nearest_frames"]
 
 
 class TextureFunction:
@@ -197,3 +197,38 @@ def attribute_vector(model, weights: dict) -> np.ndarray:
     if missing:
         raise TextureError(f"weights lack the modes {missing}")
     return np.concatenate([np.asarray(weights[m], dtype=np.float64) for m in modes], axis=-1)
+
+
+def nearest_frames(query: np.ndarray, bank: np.ndarray, valid: np.ndarray | None = None
+                   ) -> np.ndarray:
+    """For each query row the index of the nearest bank row (Euclidean), among ``valid`` ones.
+
+    The performance-driven texture of §6 ("the weighted sum of nearest neighbors") with one
+    neighbour: the frame of the texture video whose attributes are closest
+    (:class:`TextureFunction` weighs ``k`` of them): a transfer's mouth frames
+    (:mod:`facetransfer.transfer_plan`).
+
+    Parameters
+    ----------
+    query : (n, r)
+    bank : (m, r)
+    valid : (m,) bool, optional
+
+    Returns
+    -------
+    (n,) int64
+    """
+    Q = np.asarray(query, np.float64)
+    B = np.asarray(bank, np.float64)
+    if Q.ndim != 2 or B.ndim != 2 or Q.shape[1] != B.shape[1]:
+        raise ShapeError(f"query and bank must be (n, r) and (m, r), got {Q.shape} and "
+                         f"{B.shape}")
+    ok = np.ones(B.shape[0], bool) if valid is None else np.asarray(valid, bool)
+    if ok.shape != B.shape[:1]:
+        raise ShapeError(f"valid must be ({B.shape[0]},) for a bank of {B.shape}, got "
+                         f"{ok.shape}")
+    if not ok.any():
+        raise RewriteError("no frame to take a texture from (all lost)")
+    idx = np.flatnonzero(ok)
+    d = ((Q[:, None, :] - B[None, idx, :]) ** 2).sum(axis=-1)
+    return idx[np.argmin(d, axis=1)]
