@@ -104,6 +104,36 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "tracker's three passes, for hard footage)")
 
 
+#: What each source of a transfer is called where its lost face keeps target frames.
+_ROLES = {"expression": "the expression source", "viseme": "the viseme source",
+          "pose": "the pose source", "performance": "the performance"}
+
+
+def _whose_lost(plan) -> str:
+    """``"the target's face is lost in frames 0-59"``, ``"the expression source's face is lost
+    in frames 45-74"`` (both, joined by ``;``): why the frames a transfer keeps as they were
+    (the new performance's lost ones, :func:`facetransfer.transfer.recombine`) are kept, and
+    which; before, one clip's face lost for a second said ``face lost``, whose and where not."""
+    import numpy as np
+
+    from ..file_facts import lost_runs
+
+    new = np.asarray(plan.new_track.lost, bool)
+    own = np.zeros_like(new)
+    target = np.asarray(plan.target_track.lost, bool)[:len(new)]
+    own[:len(target)] = target
+    said = [f"the target's face is lost in frames {lost_runs(own)}"] if own.any() else []
+    others = new & ~own
+    if others.any():
+        roles = [r for r, tr in plan.source_tracks.items() if r in _ROLES and tr is not None
+                 and np.asarray(tr.lost).any()]
+        if plan.performance:
+            roles = ["performance"]
+        whose = _ROLES[roles[0]] if len(roles) == 1 else "a source"
+        said.append(f"{whose}'s face is lost in frames {lost_runs(others)}")
+    return "; ".join(said) or "face lost"
+
+
 def _numbered(out, target, n: int, first: int | None = None) -> str:
     """How an output sequence is numbered: from ``first`` (``--start-number``), else a plate's
     rewrite as the plate; else ""."""
@@ -377,7 +407,7 @@ def run_transfer(args) -> int:
         print(f"continued an interrupted render from frame {res.resumed}")
     print(f"wrote {res.path}: {frame_count(res.n_frames)}" + _numbered(args.out, args.target,
                                                               res.n_frames, args.start_number)
-          + (f" ({kept} kept original: face lost)" if kept else "")
+          + (f" ({kept} kept original: {_whose_lost(res.plan)})" if kept else "")
           + (f", {res.kept}" if res.kept else "")
           + (", with the target's audio" if res.audio else ", no audio"))
     if args.matte:
