@@ -1,17 +1,21 @@
 """Faults found by walk53 (hard faces in ordinary footage: occluded, blurred, dark, small, cut by
 the frame's edge, rolled, late, leaving for a second): what ``track`` and ``transfer`` say of
-the frames where a face was lost."""
+the frames where a face was lost, and the face ``--face`` points at where a larger one is
+beside it."""
 
 from __future__ import annotations
 
 import dataclasses
 import sys
 
+import cv2
 import numpy as np
+import pytest
 
 sys.path.insert(0, str(__import__("pathlib").Path(__file__).parent))
 
 from conftest import still_track  # noqa: E402
+from facetransfer.io.video import read_video, write_video  # noqa: E402
 from facetransfer.track import Track  # noqa: E402
 from test_track_cli import small_clip  # noqa: E402,F401  (a fixture)
 from test_transfer_cli import clips, run  # noqa: E402,F401  (a fixture)
@@ -77,3 +81,33 @@ def test_transfer_says_whose_face_was_lost_and_where(clips, quick_model_path, tm
                               "--no-progress", "--out", tmp_path / f"o{i}.mp4"], capsys)
         assert code == 0, err
         assert said in out, out
+
+
+@pytest.mark.parametrize("encoded", [False, True])
+def test_a_small_face_said_by_face_is_followed_beside_a_larger_one(data_dir, tmp_path,
+                                                                   encoded):
+    """walk53's ``small_busy.mp4``: ``driving_d6`` shrunk to a face ~60 pixels tall, pasted into
+    ``stills/breakingbad.jpg`` made 1920x1080 (two people, their faces ~300 pixels), and
+    ``track --face 1362,762`` on the small face. The whole-frame search finds only the large
+    faces, and the point said was nearer neither of them than their size: the larger face of
+    the photo was followed (yaw -44 deg, jawOpen 0.02 throughout); where the whole-frame
+    search found no face (these frames as they are, not through H.264), the tiles' search took
+    the first tile's face, the other person's. Now the tiles about the point are searched
+    first, and the small face is followed in every frame."""
+    from facetransfer.track.detect import detect_clip
+    from facetransfer.track.face_crop import FollowingLandmarker, subject_point
+
+    still = cv2.imread(str(data_dir / "stills" / "breakingbad.jpg"))[..., ::-1]
+    back = cv2.resize(still, (1920, 1080), interpolation=cv2.INTER_AREA)
+    clip = read_video(data_dir / "video" / "driving_d6.mp4", max_frames=3)[0]
+    frames = np.stack([back] * len(clip))
+    for k, f in enumerate(clip):
+        frames[k, 700:824, 1300:1424] = cv2.resize(f, (124, 124), interpolation=cv2.INTER_AREA)
+    if encoded:                      # as the clip was made: the whole frame finds the others
+        write_video(tmp_path / "small.mp4", frames, 30.0)
+        frames = read_video(tmp_path / "small.mp4")[0]
+    with FollowingLandmarker(fps=30.0, subject=subject_point("1362,762", (1920, 1080))) as fl:
+        det = detect_clip(frames, fl, flow=False)
+    assert det.found.all()
+    centre = np.nanmean(det.points, axis=1)
+    assert (np.abs(centre - (1362, 762)) < 40).all(), centre
