@@ -111,3 +111,52 @@ def test_a_small_face_said_by_face_is_followed_beside_a_larger_one(data_dir, tmp
     assert det.found.all()
     centre = np.nanmean(det.points, axis=1)
     assert (np.abs(centre - (1362, 762)) < 40).all(), centre
+
+
+def _face_track(n: int, cut: dict):
+    """A track of ``n`` frames of one face inside a 64x64 frame (every measure of eyes and
+    mouth alike), frame 0 the most confident (the reference every rule picks), and the points
+    ``cut`` ({iBUG number: (x, y)}) of frame 0 moved where they are."""
+    from facetransfer.track import Track
+
+    face = np.random.default_rng(3).uniform(12, 52, (68, 2))
+    L = np.repeat(face[None], n, axis=0)
+    for k, xy in cut.items():
+        L[0, k] = xy
+    conf = np.full(n, 0.6)
+    conf[0] = 1.0
+    return Track(fps=25.0, frame_size=(64, 64), rotation=np.tile(np.eye(3), (n, 1, 1)),
+                 scale=np.ones(n), translation=np.zeros((n, 2)),
+                 weights={"identity": np.zeros((n, 2)), "expression": np.zeros((n, 3))},
+                 landmarks2d=L, confidence=conf, lost=np.zeros(n, bool), model_hash="x",
+                 mode_names=("identity", "expression"))
+
+
+def test_a_region_is_not_textured_from_a_frame_that_cuts_it():
+    """walk53's ``edge.mp4`` (the face pushed half out of the picture and back) transferred:
+    the eye region's second view was textured from frame 74, whose left eye the frame's edge
+    cut, and its closed-eye texture from frame 50, that eye out of the picture: the re-entering
+    eye's lids were streaked with the edge's pixels (frames 74-78). Now a region's reference
+    frames (open eyes, closed eyes, closed mouth, each view's) are those that show its points
+    inside the picture, where any does (then 15 alone, no closed-eye frame: the streaks gone);
+    a clip that cuts them in every frame keeps its frames."""
+    from facetransfer.eyes import closed_eye_frame, open_eye_frame, reference_candidates
+    from facetransfer.jaw import closed_jaw_frame
+
+    whole = _face_track(3, {})
+    assert open_eye_frame(whole) == 0 and closed_jaw_frame(whole) == 0
+    brow = _face_track(3, {20: (30.0, -4.0)})           # a brow above the frame's top
+    assert open_eye_frame(brow) == 1 and closed_jaw_frame(brow) == 0
+    chin = _face_track(3, {8: (30.0, 70.0)})            # the chin below its bottom
+    assert open_eye_frame(chin) == 0 and closed_jaw_frame(chin) == 1
+    every = _face_track(1, {20: (30.0, -4.0), 8: (30.0, 70.0)})
+    assert open_eye_frame(every) == 0 and closed_jaw_frame(every) == 0
+    shut = _face_track(3, {45: (70.0, 30.0)})           # frame 0's eye, cut, reads as closed
+    shut.landmarks2d[0, [37, 38, 43, 44]] = shut.landmarks2d[0, [41, 40, 47, 46]]
+    assert closed_eye_frame(shut) is None
+
+    from facetransfer.region_weights import EYE_POINTS, in_picture   # each view's candidates
+
+    assert in_picture(brow, EYE_POINTS).tolist() == [False, True, True]
+    assert reference_candidates(brow, np.ones(3), None, 0.5, low=False,
+                                points=EYE_POINTS).tolist() == [1, 2]
