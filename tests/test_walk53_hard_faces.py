@@ -64,8 +64,8 @@ def test_transfer_says_whose_face_was_lost_and_where(clips, quick_model_path, tm
     """A transfer whose expression source leaves the picture for a second (walk53: ``gap.mp4``
     onto ``driving_d6``) keeps the target's own frames there and said ``(30 kept original: face
     lost)``, although the target's face was never lost: whose face, and which frames, were
-    not said. Now the line names the clip and the frames, the target's own lost frames apart
-    from a source's."""
+    not said. Now the line names the clip and the frames (an image sequence's by its own
+    numbers), the target's own lost frames apart from a source's."""
     src = _with_lost(clips["source_track"], [2, 3], tmp_path / "src.npz")
     tgt = _with_lost(clips["target_track"], [0], tmp_path / "tgt.npz")
     cases = ((clips["target_track"], src, "(2 kept original: the expression source's face is "
@@ -81,6 +81,15 @@ def test_transfer_says_whose_face_was_lost_and_where(clips, quick_model_path, tm
                               "--no-progress", "--out", tmp_path / f"o{i}.mp4"], capsys)
         assert code == 0, err
         assert said in out, out
+    # an image sequence numbered from 1001 (a plate's rewrite): its own numbers
+    code, out, err = run(["transfer", "--target", clips["target"], "--target-track",
+                          clips["target_track"], "--expression-from", clips["source"],
+                          "--source-track", src, "--model", quick_model_path, "--no-progress",
+                          "--out", tmp_path / "seq" / "o.%04d.png", "--start-number", "1001"],
+                         capsys)
+    assert code == 0, err
+    assert ("numbered 1001-1006 (2 kept original: the expression source's face is lost in "
+            "frames 1003-1004)") in out, out
 
 
 @pytest.mark.parametrize("encoded", [False, True])
