@@ -55,7 +55,8 @@ from .eye_lids import lid_shares, mix_lids
 from .label_masks import bits_box
 from .eyeballs import Eyeballs, eyeballs_of, shift_eyeballs
 from .patch import REJECT, SHADING_SIGMA, _match_outline_into
-from .region_weights import model_vertices, moved_strengths, usual_weights_of, vertex_alpha
+from .region_weights import (EYE_POINTS, model_vertices, moved_strengths, seen_frames,
+                             usual_weights_of, vertex_alpha)
 from .render import interpolate_vertex_values, shade_layers, shade_texture
 from .texture.face import frame_uvs
 from .topology import close_mouth
@@ -476,7 +477,7 @@ def closed_eye_frame(track, n_frames: int | None = None, *, min_drop: float = 0.
     "Closed": :func:`eye_openness` falls below its median by at least ``min_drop`` of its median
     (for ARKit activations: a blink of about 0.4 or more).
     """
-    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
+    good = seen_frames(track, np.flatnonzero(~np.asarray(track.lost)[:n_frames]), EYE_POINTS)
     if good.size == 0:
         return None
     op = eye_openness(track)[good]
@@ -499,7 +500,7 @@ def open_eye_frame(track, n_frames: int | None = None, *, quantile: float = 0.75
         The face is lost in every frame.
     """
     return reference_frame(track, eye_openness(track), n_frames, quantile, low=False,
-                           penalty=shape_activity(track, BROW_SHAPES))
+                           penalty=shape_activity(track, BROW_SHAPES), points=EYE_POINTS)
 
 
 def shape_activity(track, names) -> np.ndarray | None:
@@ -513,10 +514,12 @@ def shape_activity(track, names) -> np.ndarray | None:
 
 
 def reference_candidates(track, values: np.ndarray, n_frames: int | None, quantile: float, *,
-                         low: bool) -> np.ndarray:
+                         low: bool, points=None) -> np.ndarray:
     """The frames (of the first ``n_frames``) where the face is not lost and ``values`` (F,)
-    is at most (``low``) or at least its ``quantile`` over them; empty when every one is lost."""
-    good = np.flatnonzero(~np.asarray(track.lost)[:n_frames])
+    is at most (``low``) or at least its ``quantile`` over them; empty when every one is lost.
+    With ``points`` (iBUG-68 numbers), only the frames that show them inside the picture, where
+    any does (:func:`facetransfer.region_weights.in_picture`)."""
+    good = seen_frames(track, np.flatnonzero(~np.asarray(track.lost)[:n_frames]), points)
     if good.size == 0:
         return good
     v = np.asarray(values, np.float64)[good]
@@ -525,7 +528,7 @@ def reference_candidates(track, values: np.ndarray, n_frames: int | None, quanti
 
 
 def reference_frame(track, values: np.ndarray, n_frames: int | None, quantile: float, *,
-                    low: bool, penalty: np.ndarray | None = None) -> int:
+                    low: bool, penalty: np.ndarray | None = None, points=None) -> int:
     """A clip's reference frame for a texture: among the frames (of the first ``n_frames``)
     where the face is not lost and ``values`` is at most (``low``) or at least its
     ``quantile``, the one facing the camera most squarely plus half its tracking confidence,
@@ -538,13 +541,16 @@ def reference_frame(track, values: np.ndarray, n_frames: int | None, quantile: f
     n_frames : int or None
     quantile : float
     low : bool
+    points : sequence of int, optional
+        The region's iBUG-68 points: frames that show one outside the picture are passed over
+        where another frame shows them all (:func:`reference_candidates`).
 
     Raises
     ------
     RewriteError
         The face is lost in every frame.
     """
-    cand = reference_candidates(track, values, n_frames, quantile, low=low)
+    cand = reference_candidates(track, values, n_frames, quantile, low=low, points=points)
     if cand.size == 0:
         raise RewriteError(f"the face is lost in every frame of "
                            f"{track.source or 'the target'}")

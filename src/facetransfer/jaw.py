@@ -56,7 +56,8 @@ import numpy as np
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .label_masks import bits_box
 from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
-from .region_weights import facing_weights, model_vertices, moved_strengths, vertex_alpha
+from .region_weights import (JAW_POINTS, facing_weights, model_vertices, moved_strengths,
+                             vertex_alpha)
 from .jaw_look import LOOK_RAMP, look_strengths, mouth_reach
 from .patch import REJECT, _match_outline_into
 from .render import interpolate_vertex_values, shade_layers
@@ -214,7 +215,8 @@ def closed_jaw_frame(track, n_frames: int | None = None, *, quantile: float = 0.
     RewriteError
         The face is lost in every frame.
     """
-    return reference_frame(track, mouth_closure(track), n_frames, quantile, low=True)
+    return reference_frame(track, mouth_closure(track), n_frames, quantile, low=True,
+                           points=JAW_POINTS)
 
 
 def jaw_texture(frames, track, model, topo, *, frame: int | None = None,

@@ -31,6 +31,7 @@ import numpy as np
 from .eyes import (BROW_SHAPES, eye_openness, eye_texture, reference_candidates,
                    shape_activity)
 from .jaw import jaw_texture, mouth_closure
+from .region_weights import EYE_POINTS, JAW_POINTS
 
 log = logging.getLogger(__name__)
 
@@ -142,7 +143,8 @@ def _candidates(track, n: int, region: str) -> tuple[np.ndarray, np.ndarray]:
     their expression in degrees (:data:`EXPRESSION_COST`, :data:`COST_SHAPES`)."""
     eyes = region == "eyes"
     cand = reference_candidates(track, eye_openness(track) if eyes else mouth_closure(track), n,
-                                CANDIDATE_QUANTILE, low=not eyes)
+                                CANDIDATE_QUANTILE, low=not eyes,
+                                points=EYE_POINTS if eyes else JAW_POINTS)
     activity = shape_activity(track, COST_SHAPES[region])
     return cand, (np.zeros(cand.size) if activity is None
                   else EXPRESSION_COST * activity[cand])

@@ -22,7 +22,8 @@ from .geometry import vertex_normals
 from .render import project_frames
 
 __all__ = ["FACING", "USUAL", "USUAL_SAMPLES", "facing_weights", "model_vertices",
-           "moved_strengths", "usual_weights", "usual_weights_of", "vertex_alpha", "smoothstep"]
+           "moved_strengths", "usual_weights", "usual_weights_of", "vertex_alpha", "smoothstep",
+           "EYE_POINTS", "JAW_POINTS", "in_picture", "seen_frames"]
 
 #: :func:`facing_weights`' ramp: a vertex that a region's reference frame sees edge-on (its
 #: normal's component toward the camera below the first value) keeps the current frame's
@@ -224,3 +225,33 @@ def smoothstep(x: np.ndarray, ramp: tuple[float, float]) -> np.ndarray:
     """``3 t² - 2 t³`` of ``t = (x - ramp[0]) / (ramp[1] - ramp[0])`` clipped to [0, 1]."""
     t = np.clip((x - ramp[0]) / max(ramp[1] - ramp[0], 1e-12), 0.0, 1.0)
     return t * t * (3.0 - 2.0 * t)
+
+
+#: The iBUG-68 points of the eye region (brows, eyes) and of the jaw region (jaw line, lips):
+#: a reference frame shows them inside the picture (:func:`in_picture`).
+EYE_POINTS = tuple(range(17, 27)) + tuple(range(36, 48))
+JAW_POINTS = tuple(range(0, 17)) + tuple(range(48, 68))
+
+
+def in_picture(track, points) -> np.ndarray:
+    """``(F,) bool``: the frames whose tracked ``points`` (iBUG-68 numbers) all lie inside the
+    frame (``landmarks2d`` within ``frame_size``); every frame where the track has no such
+    points or no frame size. A region textured from a frame that shows it cut by the frame's edge takes the
+    edge's pixels, stretched (walk53's ``edge.mp4``: an eye half out of the picture became the
+    eye region's reference for the frames turned that way, its lids streaked)."""
+    L = np.asarray(track.landmarks2d, np.float64)
+    size = getattr(track, "frame_size", None)
+    if L.ndim != 3 or L.shape[1] != 68 or size is None:
+        return np.ones(int(track.n_frames), bool)
+    W, H = (float(v) for v in size)
+    P = L[:, list(points)]
+    return ((P >= 0).all(2) & (P[..., 0] <= W - 1) & (P[..., 1] <= H - 1)).all(1)
+
+
+def seen_frames(track, good: np.ndarray, points) -> np.ndarray:
+    """``good`` (frame numbers) without those whose ``points`` leave the picture, unless that
+    leaves none (a close-up that cuts the chin in every frame keeps its frames)."""
+    if points is None or good.size == 0:
+        return good
+    kept = good[in_picture(track, points)[good]]
+    return kept if kept.size else good

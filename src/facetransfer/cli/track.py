@@ -276,12 +276,24 @@ def _track_and_save(args, model, settings, tracker: str):
     print(f"wrote {args.out}: {frame_count(track.n_frames)}, {track.frame_size[0]}x"
           f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
           + (f", {n_lost} lost" if n_lost else ""))
+    _say_lost(track)
     if track.blendshapes is None:
         from ..arkit import arkit_shortfall
 
         print(f"note: the track has no ARKit blendshape activations: "
               f"{arkit_shortfall(model) or 'the model gives none'}")
     return track, model
+
+
+def _say_lost(track) -> None:
+    """The note of the frames where the face was lost (their runs, as ``export`` and ``puppet``
+    name them), and what each command makes of them; nothing where no frame is lost."""
+    from .export import lost_note
+
+    note = lost_note(track, "marked lost (a transfer keeps those frames as they are, export "
+                            "and puppet hold the nearest tracked frame)")
+    if note:
+        print(f"note: {note}")
 
 
 def _overlay(args, track, model, vopt) -> None:

@@ -88,16 +88,54 @@ def add_rewrite_options(p: argparse.ArgumentParser) -> None:
                    "tracker's three passes, for hard footage)")
 
 
-def _numbered(out, target, n: int, first: int | None = None) -> str:
-    """How an output sequence is numbered: from ``first`` (``--start-number``), else a plate's
-    rewrite as the plate; else ""."""
+#: What each source of a transfer is called where its lost face keeps target frames.
+_ROLES = {"expression": "the expression source", "viseme": "the viseme source",
+          "pose": "the pose source", "performance": "the performance"}
+
+
+def _whose_lost(plan, first: int | None = None) -> str:
+    """``"the target's face is lost in frames 0-59"``, ``"the expression source's face is lost
+    in frames 45-74"`` (both, joined by ``;``): why the frames a transfer keeps as they were
+    (the new performance's lost ones, :func:`facetransfer.transfer.recombine`) are kept, and
+    which, numbered as the output is (from ``first``: a sequence's first frame number); before,
+    one clip's face lost for a second said ``face lost``, whose and where not."""
+    import numpy as np
+
+    from ..file_facts import lost_runs
+
+    new = np.asarray(plan.new_track.lost, bool)
+    own = np.zeros_like(new)
+    target = np.asarray(plan.target_track.lost, bool)[:len(new)]
+    own[:len(target)] = target
+    first = first or 0
+    said = [f"the target's face is lost in frames {lost_runs(own, first)}"] if own.any() else []
+    others = new & ~own
+    if others.any():
+        roles = [r for r, tr in plan.source_tracks.items() if r in _ROLES and tr is not None
+                 and np.asarray(tr.lost).any()]
+        if plan.performance:
+            roles = ["performance"]
+        whose = _ROLES[roles[0]] if len(roles) == 1 else "a source"
+        said.append(f"{whose}'s face is lost in frames {lost_runs(others, first)}")
+    return "; ".join(said) or "face lost"
+
+
+def _first_number(out, target, first: int | None = None) -> int | None:
+    """The number of an output sequence's first frame: ``first`` (``--start-number``), else a
+    plate's rewrite's, the plate's; None for a video."""
     from ..io.video import is_image_pattern
     from ..io.video_sequence import is_sequence, open_sequence
 
     if not is_image_pattern(out) or first is None and not is_sequence(target):
-        return ""
-    first = open_sequence(target).first if first is None else first
-    return f" numbered {first}-{first + n - 1}"
+        return None
+    return open_sequence(target).first if first is None else first
+
+
+def _numbered(out, target, n: int, first: int | None = None) -> str:
+    """How an output sequence is numbered: from ``first`` (``--start-number``), else a plate's
+    rewrite as the plate; else ""."""
+    first = _first_number(out, target, first)
+    return "" if first is None else f" numbered {first}-{first + n - 1}"
 
 
 def rewrite_options(args) -> RewriteOptions:
@@ -231,7 +269,9 @@ def run_transfer(args) -> int:
         print(f"continued an interrupted render from frame {res.resumed}")
     print(f"wrote {res.path}: {frame_count(res.n_frames)}" + _numbered(args.out, args.target,
                                                               res.n_frames, args.start_number)
-          + (f" ({kept} kept original: face lost)" if kept else "")
+          + (f" ({kept} kept original: "
+             f"{_whose_lost(res.plan, _first_number(args.out, args.target, args.start_number))})"
+             if kept else "")
           + (f", {res.kept}" if res.kept else "")
           + (", with the target's audio" if res.audio else ", no audio"))
     if args.matte:

@@ -244,6 +244,9 @@ class FollowingLandmarker:
         if len(boxes) == 1 and self._other_person(frame):
             self._hidden = True
             return None, None
+        said = self._at_point(frame, boxes) if self.last[2] == 0 else None
+        if said is not None:
+            return said
         if len(boxes) < 2:
             return found
         self.several = True
@@ -253,6 +256,36 @@ class FollowingLandmarker:
         H, W = frame.shape[:2]
         self.crop = crop_about(box, (W, H))
         return self._in_crop(frame)
+
+    def _at_point(self, frame: np.ndarray, boxes: list):
+        """The face at the point ``--face`` said, before any face is followed, where none of
+        the whole frame's ``boxes`` lies there: searched in the tiles about the point (finest
+        first), and kept where it is nearer the point than every one of them; else None.
+
+        A face too small for the whole-frame search beside a larger one (walk53: a face 60
+        pixels tall pasted into a 1080p photo of two people, ``--face`` on it) was passed over
+        for the large one: the point lay in no face the whole frame showed, and where that
+        showed none, the tiles' search took the first tile's face, wherever it was."""
+        x, y, _ = self.last
+        if any(not moved_away((x, y, 0.0), b) for b in boxes):
+            return None                                   # a face found lies at the point
+        H, W = frame.shape[:2]
+        for x0, y0, side in sorted(search_tiles((W, H)), key=lambda t: t[2]):
+            if not (x0 <= x < x0 + side and y0 <= y < y0 + side):
+                continue
+            q, _ = self._search_landmarker().detect_scored(
+                np.ascontiguousarray(frame[y0:y0 + side, x0:x0 + side]))
+            if q is None:
+                continue
+            box = face_box(q + (x0, y0))
+            if choose_subject([*boxes, box], self.last) != len(boxes):
+                continue                                  # a face the whole frame shows is nearer
+            self.several = True
+            self.crop = crop_about(box, (W, H))
+            found = self._in_crop(frame)
+            if found[0] is not None:
+                return found
+        return None
 
     def _other_person(self, frame: np.ndarray) -> bool:
         """Whether the one face in ``frame``, far from the subject's last place, is another
@@ -305,6 +338,10 @@ class FollowingLandmarker:
         every = SEARCH_EVERY * (1 if self._missed < SEARCH_SLOWER else 5)
         if not tiles or self._missed % every:
             return None, None
+        said = self._at_point(frame, []) if self.last is not None and self.last[2] == 0 \
+            else None
+        if said is not None:
+            return said
         for x0, y0, side in tiles:
             q, _ = self._search_landmarker().detect_scored(
                 np.ascontiguousarray(frame[y0:y0 + side, x0:x0 + side]))
