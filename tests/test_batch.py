@@ -161,11 +161,14 @@ def test_ctrl_c_before_the_cluster_is_there_says_no_outputs_kept(clips, quick_mo
     assert not out.exists()
 
 
-def test_the_model_is_scattered_once_not_sent_with_each_task(quick_model, tmp_path,
-                                                             monkeypatch):
-    """Real worker processes: the model is pickled once (the scatter), for four tasks."""
+def test_the_model_is_never_pickled_with_a_task(quick_model, tmp_path, monkeypatch):
+    """Real worker processes, four tasks: a model of a file is not pickled at all (each worker
+    loads it from its path, :mod:`facetransfer.batch.model_ref`); one built in memory is
+    pickled once (scattered to the workers)."""
+    import dataclasses
+
     from facetransfer.batch import batch_track, clip_jobs, open_client
-    from facetransfer.model import MultilinearModel
+    from facetransfer.model import MultilinearModel, load_model
 
     pickled = []
     monkeypatch.setattr(MultilinearModel, "__reduce_ex__",
@@ -173,12 +176,17 @@ def test_the_model_is_scattered_once_not_sent_with_each_task(quick_model, tmp_pa
                                                                                       proto),
                         raising=False)
     jobs = clip_jobs([tmp_path / f"missing{i}.mp4" for i in range(4)])
+    of_file = load_model(quick_model.save(tmp_path / "m.npz"))
+    in_memory = dataclasses.replace(quick_model)
     with open_client(workers=1) as client:
-        res = batch_track(jobs, tmp_path / "out", quick_model, client=client)
-    assert len(pickled) == 1
+        res = batch_track(jobs, tmp_path / "out", of_file, client=client)
+        assert len(pickled) == 0
+        res2 = batch_track(jobs, tmp_path / "out2", in_memory, client=client)
+        assert len(pickled) == 1
     # each row failed on its worker with its own path
-    assert [r.status for r in res.rows] == ["failed"] * 4
-    assert all(f"missing{i}.mp4" in r.error for i, r in enumerate(res.rows))
+    for r in (res, res2):
+        assert [r.status for r in r.rows] == ["failed"] * 4
+        assert all(f"missing{i}.mp4" in r.error for i, r in enumerate(r.rows))
 
 
 @pytest.mark.slow

@@ -1,8 +1,8 @@
 """Batch runs on a Dask client: many clips tracked, transferred or exported, one task per clip.
 
 Every run follows the same steps: check the output folder, refuse an output that is also an
-input, skip the jobs an earlier run finished (their output is complete and valid), scatter the
-model to the workers once, submit, collect the rows as the clips finish (reporting each to
+input, skip the jobs an earlier run finished (their output is complete and valid), give the model
+to the workers (its file, each worker loading it once: :mod:`.model_ref`), submit, collect the rows as the clips finish (reporting each to
 ``progress``), and write ``DIR/summary.csv`` atomically (also every few seconds, and when the run
 is interrupted: pending tasks are cancelled, finished outputs stay). A failed clip is a
 ``failed`` row while the others go on; so is a clip whose output another run into the same
@@ -227,9 +227,14 @@ class _Collector:
 
 
 def _model_future(client, model):
+    """What the tasks receive for ``model``: its file's :class:`.model_ref.ModelRef` (each worker
+    loads it once; nothing on the cluster that a lost worker takes with it), else (a model with
+    no file as it was, or None) the model scattered to every worker."""
     from .cluster import scatter_model
+    from .model_ref import model_ref
 
-    return scatter_model(client, model)
+    ref = None if model is None else model_ref(model)
+    return ref if ref is not None else scatter_model(client, model)
 
 
 def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, model,
