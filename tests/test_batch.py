@@ -143,6 +143,34 @@ def test_ctrl_c_cancels_the_pending_clips_and_keeps_the_finished(clips, quick_mo
     assert rows["b"]["status"] in ("done", "skipped") and Track.load(out / "b.npz").n_frames == 8
 
 
+def test_ctrl_c_while_the_tasks_are_submitted_writes_the_summary(clips, quick_model_path,
+                                                                  inproc, tmp_path, capsys,
+                                                                  monkeypatch):
+    """A Ctrl-C as the run submits its tasks (a batch of many clips submits for seconds while
+    the first ones run) ended it with no summary: the clips' rows and digests were lost. Now
+    the run's: what was submitted cancelled, the summary written, exit 130."""
+    from facetransfer.batch.track_submit import TrackSubmit
+
+    (va, pa, _), (vb, _, _) = clips["a"], clips["b"]
+    real_submit, submitted = TrackSubmit.submit, []
+
+    def submit_then_ctrl_c(self, job):
+        if submitted:
+            raise KeyboardInterrupt
+        submitted.append(job.name)
+        real_submit(self, job)
+
+    monkeypatch.setattr(TrackSubmit, "submit", submit_then_ctrl_c)
+    out = tmp_path / "out"
+    code = main([str(a) for a in ("batch", "track", va, vb, "--init", pa, "--model",
+                                  quick_model_path, "--out", out, "--passes", "1")])
+    capsys.readouterr()
+    assert code == 130 and submitted == ["a"]
+    rows = _summary(out / "summary.csv")          # before: no summary.csv
+    assert rows["b"]["status"] == "cancelled" and rows["b"]["job"].startswith("v2:")
+    assert rows["a"]["status"] in ("cancelled", "done")
+
+
 def test_ctrl_c_before_the_cluster_is_there_says_no_outputs_kept(clips, quick_model_path,
                                                                 tmp_path, capsys, monkeypatch):
     """Ctrl-C while the cluster starts or the scheduler is asked (a hung one: the only way

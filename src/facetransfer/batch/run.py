@@ -13,13 +13,14 @@ digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 from ..io.atomic import same_file
 from . import jobs as J
@@ -209,6 +210,25 @@ class _Collector:
         mine = set(self.names)
         return [self.rows.get(r.clip, r) if r.clip in mine else r for r in rows]
 
+    @contextlib.contextmanager
+    def submitting(self) -> Iterator[None]:
+        """The block that gives the workers the model and submits the run's tasks: a Ctrl-C
+        there is the run's as in :meth:`run` (what was submitted cancelled, the summary
+        written: the rows skipped or finished so far, the others cancelled with the digest of
+        what made their output). Before, it ended the run with no summary (a batch of many
+        clips submits for seconds, while the first ones run): an output written meanwhile had
+        no row to say its job, and the next run refused it as made "with options not
+        recorded", or the earlier summary's rows were kept as they were."""
+        try:
+            yield
+        except KeyboardInterrupt:
+            self._interrupted()
+            raise
+
+    def _interrupted(self) -> None:
+        self.client.cancel([f for f in self.alive if not f.done()], force=True)
+        self.write()
+
     def run(self, on_done: Callable) -> BatchResult:
         """Iterate the futures as they finish, calling ``on_done(kind, job, future)``."""
         try:
@@ -216,8 +236,7 @@ class _Collector:
                 kind, job = self.what.pop(fut)
                 on_done(kind, job, fut)
         except KeyboardInterrupt:
-            self.client.cancel([f for f in self.alive if not f.done()], force=True)
-            self.write()
+            self._interrupted()
             raise
         # the claims its jobs left for a retry of theirs (.ownership.claimed's owner): none
         # runs now
@@ -247,7 +266,9 @@ def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, m
         for r in done.values():
             progress(r)
     todo = [j for j in jobs if j.name not in done]
-    return col, todo, (_model_future(client, model) if todo else None)
+    with col.submitting():
+        mf = _model_future(client, model) if todo else None
+    return col, todo, mf
 
 
 def _done_track(out: Path, job, model_hash: str) -> Row | None:
@@ -354,8 +375,9 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     run = TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, _planned(outs),
                       _owners(keys))
     try:
-        for job in todo:
-            run.submit(job)
+        with col.submitting():
+            for job in todo:
+                run.submit(job)
         return col.run(run.on_done)
     finally:
         run.held.close()
@@ -718,8 +740,9 @@ def _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys) ->
     """A run of one independent task per job; each row records its job digest."""
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
-    for job in todo:
-        col.add(submit(job, mf), "clip", job)
+    with col.submitting():
+        for job in todo:
+            col.add(submit(job, mf), "clip", job)
 
     def on_done(kind, job, fut) -> None:
         try:
