@@ -69,6 +69,27 @@ def test_a_model_file_replaced_since_or_not_there_is_said_naming_it(quick_model,
         MR.worker_model(ref)
 
 
+def test_a_model_file_the_workers_do_not_see_is_sent_to_them_saying_so(
+        clips, quick_model_path, tmp_path, monkeypatch, caplog):
+    """Workers on machines without the client's file (its user cache not shared, no
+    ``--model`` on the shared file system): the model is scattered to them, as before, with a
+    warning naming the hosts and the file, not every clip failed "cannot be loaded"."""
+    from facetransfer.batch import batch_track, open_client, run
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.model import load_model
+
+    model = load_model(quick_model_path)
+    elsewhere = MR.ModelRef(str(tmp_path / "not-here" / "m.npz"), model.content_hash)
+    monkeypatch.setattr(MR, "model_ref", lambda m: elsewhere)
+    (va, pa, _) = clips["a"]
+    with open_client(workers=1, processes=False) as client:
+        res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
+                          client=client)
+    assert [(r.status, r.error) for r in res.rows] == [("done", "")]
+    said = [r.getMessage() for r in caplog.records if r.name == run.__name__]
+    assert said and f"do not see the model file {elsewhere.path}: it is sent" in said[0]
+
+
 def _block_clip(name: str, folder: str) -> None:
     """Run on each worker: the tracking of the clip ``name`` waits, once it has begun (a file
     ``started-PID`` in ``folder``), for ``folder/go``; a worker started again runs as usual."""

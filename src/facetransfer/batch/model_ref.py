@@ -13,7 +13,9 @@ MB, :func:`facetransfer.model.load_model`): the workers of one machine share its
 each held a copy of its own of the scattered model.
 
 A model without a file that is still as it was loaded or saved (built in memory by a library
-caller) is scattered as before (:func:`facetransfer.batch.cluster.scatter_model`).
+caller), or whose file some of the workers do not see (:func:`hosts_without`: machines without
+the shared file system, nor the default model in their own cache), is scattered as before
+(:func:`facetransfer.batch.cluster.scatter_model`).
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from pathlib import Path
 
 from .manifest import BatchError
 
-__all__ = ["ModelRef", "model_ref", "worker_model"]
+__all__ = ["ModelRef", "model_ref", "worker_model", "hosts_without"]
 
 #: Models a worker process keeps loaded (the last ones used): a worker serving two runs of
 #: different models at once loads each once.
@@ -59,6 +61,22 @@ def model_ref(model) -> ModelRef | None:
         return None
     default = path == default_model_path().absolute()
     return ModelRef(str(path), model.content_hash, default)
+
+
+def hosts_without(client, ref: ModelRef) -> list[str]:
+    """The hosts of the client's workers (those there now) on which the file of ``ref`` is not
+    there (nor, for the default model, a default model file of their own): a ``stat`` on each
+    (``client.run``); a worker that fails to answer (ending) is left out."""
+    seen = client.run(_sees, ref, on_error="ignore")
+    return sorted({host for ok, host in seen.values() if not ok})
+
+
+def _sees(ref: ModelRef) -> tuple[bool, str]:
+    """Run on a worker: whether the model file of ``ref`` is there, and the host's name."""
+    from ..default_model import default_model_path
+
+    ok = Path(ref.path).is_file() or (ref.default and default_model_path().is_file())
+    return ok, socket.gethostname()
 
 
 def worker_model(model):

@@ -248,12 +248,21 @@ class _Collector:
 def _model_future(client, model):
     """What the tasks receive for ``model``: its file's :class:`.model_ref.ModelRef` (each worker
     loads it once; nothing on the cluster that a lost worker takes with it), else (a model with
-    no file as it was, or None) the model scattered to every worker."""
+    no file as it was, a file some workers do not see, or None) the model scattered to every
+    worker, as before: a worker lost may then lose every clip left (a warning says so)."""
     from .cluster import scatter_model
-    from .model_ref import model_ref
+    from .model_ref import hosts_without, model_ref
 
     ref = None if model is None else model_ref(model)
-    return ref if ref is not None else scatter_model(client, model)
+    if ref is not None:
+        blind = hosts_without(client, ref)
+        if not blind:
+            return ref
+        log.warning("the workers on %s do not see the model file %s: it is sent to them "
+                    "instead (a worker lost may then lose every clip left, where the "
+                    "scheduler's active memory manager is on: give --model on a file system "
+                    "every worker sees)", ", ".join(blind), ref.path)
+    return scatter_model(client, model)
 
 
 def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, model,
