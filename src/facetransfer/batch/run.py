@@ -1,11 +1,12 @@
 """Batch runs on a Dask client: many clips tracked, transferred or exported, one task per clip.
 
 Every run follows the same steps: check the output folder, refuse an output that is also an
-input, skip the jobs an earlier run finished (their output is complete and valid), give the model
-to the workers (its file, each worker loading it once: :mod:`.model_ref`), submit, collect the rows as the clips finish (reporting each to
-``progress``), and write ``DIR/summary.csv`` atomically (also every few seconds, and when the run
-is interrupted: pending tasks are cancelled, finished outputs stay). A failed clip is a
-``failed`` row while the others go on; so is a clip whose output another run into the same
+input, skip the jobs an earlier run finished (their output is complete and valid), give the
+model to the workers (its file, each worker loading it once: :mod:`.model_ref`), submit,
+collect the rows as the clips finish (reporting each to ``progress``), and write
+``DIR/summary.csv`` atomically (also every few seconds, and when the run is interrupted:
+pending tasks are cancelled, finished outputs stay). A failed clip is a ``failed`` row while
+the others go on; so is a clip whose output another run into the same
 folder holds (its job's claim, :func:`.ownership.claimed`) or wrote meanwhile (kept, its row's
 digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
 :meth:`_Collector._adopted`).
@@ -217,8 +218,8 @@ class _Collector:
         written: the rows skipped or finished so far, the others cancelled with the digest of
         what made their output). Before, it ended the run with no summary (a batch of many
         clips submits for seconds, while the first ones run): an output written meanwhile had
-        no row to say its job, and the next run refused it as made "with options not
-        recorded", or the earlier summary's rows were kept as they were."""
+        no row of this run to say its job (where the earlier summary's row named the job of
+        other options, the next run refused it, "made from other inputs or options")."""
         try:
             yield
         except KeyboardInterrupt:
