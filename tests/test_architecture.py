@@ -248,6 +248,7 @@ LAYER_OF = {
     "facetransfer.export": "apps",
     "facetransfer.batch": "apps",
     "facetransfer.batch.track_submit": "apps",  # batch_track's tasks, out of batch.run
+    "facetransfer.batch.model_ref": "apps",     # the model file each worker loads once
     "facetransfer.demo": "apps",
     "facetransfer.fidelity": "apps",      # the demo's independent judge of a transfer
     "facetransfer.file_facts": "apps",    # what probe says of a track or a take

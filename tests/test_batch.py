@@ -143,6 +143,34 @@ def test_ctrl_c_cancels_the_pending_clips_and_keeps_the_finished(clips, quick_mo
     assert rows["b"]["status"] in ("done", "skipped") and Track.load(out / "b.npz").n_frames == 8
 
 
+def test_ctrl_c_while_the_tasks_are_submitted_writes_the_summary(clips, quick_model_path,
+                                                                  inproc, tmp_path, capsys,
+                                                                  monkeypatch):
+    """A Ctrl-C as the run submits its tasks (a batch of many clips submits for seconds while
+    the first ones run) ended it with no summary: the clips' rows and digests were lost. Now
+    the run's: what was submitted cancelled, the summary written, exit 130."""
+    from facetransfer.batch.track_submit import TrackSubmit
+
+    (va, pa, _), (vb, _, _) = clips["a"], clips["b"]
+    real_submit, submitted = TrackSubmit.submit, []
+
+    def submit_then_ctrl_c(self, job):
+        if submitted:
+            raise KeyboardInterrupt
+        submitted.append(job.name)
+        real_submit(self, job)
+
+    monkeypatch.setattr(TrackSubmit, "submit", submit_then_ctrl_c)
+    out = tmp_path / "out"
+    code = main([str(a) for a in ("batch", "track", va, vb, "--init", pa, "--model",
+                                  quick_model_path, "--out", out, "--passes", "1")])
+    capsys.readouterr()
+    assert code == 130 and submitted == ["a"]
+    rows = _summary(out / "summary.csv")          # before: no summary.csv
+    assert rows["b"]["status"] == "cancelled" and rows["b"]["job"].startswith("v2:")
+    assert rows["a"]["status"] in ("cancelled", "done")
+
+
 def test_ctrl_c_before_the_cluster_is_there_says_no_outputs_kept(clips, quick_model_path,
                                                                 tmp_path, capsys, monkeypatch):
     """Ctrl-C while the cluster starts or the scheduler is asked (a hung one: the only way
@@ -161,11 +189,14 @@ def test_ctrl_c_before_the_cluster_is_there_says_no_outputs_kept(clips, quick_mo
     assert not out.exists()
 
 
-def test_the_model_is_scattered_once_not_sent_with_each_task(quick_model, tmp_path,
-                                                             monkeypatch):
-    """Real worker processes: the model is pickled once (the scatter), for four tasks."""
+def test_the_model_is_never_pickled_with_a_task(quick_model, tmp_path, monkeypatch):
+    """Real worker processes, four tasks: a model of a file is not pickled at all (each worker
+    loads it from its path, :mod:`facetransfer.batch.model_ref`); one built in memory is
+    pickled once (scattered to the workers)."""
+    import dataclasses
+
     from facetransfer.batch import batch_track, clip_jobs, open_client
-    from facetransfer.model import MultilinearModel
+    from facetransfer.model import MultilinearModel, load_model
 
     pickled = []
     monkeypatch.setattr(MultilinearModel, "__reduce_ex__",
@@ -173,12 +204,17 @@ def test_the_model_is_scattered_once_not_sent_with_each_task(quick_model, tmp_pa
                                                                                       proto),
                         raising=False)
     jobs = clip_jobs([tmp_path / f"missing{i}.mp4" for i in range(4)])
+    of_file = load_model(quick_model.save(tmp_path / "m.npz"))
+    in_memory = dataclasses.replace(quick_model)
     with open_client(workers=1) as client:
-        res = batch_track(jobs, tmp_path / "out", quick_model, client=client)
-    assert len(pickled) == 1
+        res = batch_track(jobs, tmp_path / "out", of_file, client=client)
+        assert len(pickled) == 0
+        res2 = batch_track(jobs, tmp_path / "out2", in_memory, client=client)
+        assert len(pickled) == 1
     # each row failed on its worker with its own path
-    assert [r.status for r in res.rows] == ["failed"] * 4
-    assert all(f"missing{i}.mp4" in r.error for i, r in enumerate(res.rows))
+    for r in (res, res2):
+        assert [r.status for r in r.rows] == ["failed"] * 4
+        assert all(f"missing{i}.mp4" in r.error for i, r in enumerate(r.rows))
 
 
 @pytest.mark.slow

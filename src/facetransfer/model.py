@@ -48,6 +48,10 @@ _HASHES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 #: :meth:`MultilinearModel.synthesize` of one frame then reads a core r_1 times smaller.
 _FIRST_MODE: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _FIRST_MODE_KEPT = 3
+
+#: the model file each model object was loaded from or saved to, with that file's identity then
+#: (:func:`model_file`).
+_FILES: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 _FIRST_MODE_LOCK = threading.Lock()   # the render calls synthesize from several threads
 
 #: How far given weights may reach (:meth:`MultilinearModel.check_reach`): their norm at most
@@ -452,6 +456,7 @@ class MultilinearModel:
         with atomic_path(path, overwrite=overwrite) as tmp:
             with open(tmp, "wb") as fh:
                 np.savez(fh, metadata=np.array(json.dumps(meta, default=json_default)), **arrays)
+        _remember_file(self, Path(path))
         return Path(path)
 
 
@@ -538,7 +543,35 @@ def load_model(path: str | Path) -> MultilinearModel:
     if not known:
         remember_verified(p, expected)
     _HASHES[model] = expected  # verified above: the same sha256 that content_hash gives
+    _remember_file(model, p)
     return model
+
+
+def _file_identity(path: Path) -> tuple | None:
+    """``(device, inode, size, mtime ns)`` of the file at ``path``, None where there is none."""
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+
+
+def _remember_file(model: MultilinearModel, path: Path) -> None:
+    ident = _file_identity(path)
+    if ident is not None:
+        _FILES[model] = (path.absolute(), ident)
+
+
+def model_file(model: MultilinearModel) -> Path | None:
+    """The file (absolute) ``model`` was loaded from (:func:`load_model`) or last saved to
+    (:meth:`MultilinearModel.save`), where that file is still the one it was then (the same
+    device, inode, size and modification time); None otherwise (a model built in memory, a
+    file replaced or removed since). Another process can load the same model from it: a batch
+    run's workers do (:mod:`facetransfer.batch.model_ref`)."""
+    path, ident = _FILES.get(model, (None, None))
+    if path is None or _file_identity(path) != ident:
+        return None
+    return path
 
 
 #: dtype kinds of the arrays of a model file (float: also integers; int: integers only)

@@ -2,7 +2,8 @@
 
 Modules, in the order data flows: :mod:`.manifest` (the jobs: clips, pairs, tracks, their names),
 :mod:`.chunks` (long clips in overlapping chunks, joined at the seams), :mod:`.jobs` (the tasks
-the workers run), :mod:`.cluster` (the embedded LocalCluster or a scheduler's client),
+the workers run; :mod:`.model_ref`, the model file each worker loads once), :mod:`.cluster`
+(the embedded LocalCluster or a scheduler's client),
 :mod:`.digest` (what makes each output, recorded to know it again), :mod:`.ownership` (which
 run owns an output: its claim while a job writes it), :mod:`.run` (submit,
 collect, skip what is done, stop cleanly; :mod:`.track_submit`, a track run's tasks: counts,

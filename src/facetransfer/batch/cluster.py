@@ -2,7 +2,8 @@
 single-threaded worker process per core) or the scheduler of a real cluster.
 
 The workers must see the inputs and the output folder at the same paths as the client (a shared
-file system); the model is scattered to them once (:func:`scatter_model`). A scheduler's address
+file system); each loads the model from its file once (:mod:`.model_ref`; a model built in
+memory is scattered to them once, :func:`scatter_model`). A scheduler's address
 (``tcp://`` or ``tls://``) is asked, within the timeout, whether a Dask scheduler answers there
 before a client connects (:func:`_probe`: its host looked up on a thread, Dask's client waits
 for the handshake of whatever listens, and for a name server, without a deadline); ``tls://``
@@ -335,7 +336,8 @@ def _local_cluster(n: int, processes: bool, verbose: bool):
     # this process meanwhile is raised once the cluster is whole, and the cluster closed:
     # raised in its start, the half-started cluster's close at the exit and its workers' start
     # printed tracebacks.
-    # The model is scattered to every worker (scatter_model); Dask's active memory manager
+    # A model built in memory is scattered to every worker (scatter_model; a model of a file,
+    # the CLI's, is loaded by each worker from it: .model_ref); Dask's active memory manager
     # drops the copies no task waits for, every 2 s, leaving one: a worker lost (its heartbeat
     # missed, or killed) then lost the model, and every clip not finished was cancelled ("its
     # worker died, more than once"), none run again. Off: each worker keeps its copy.
@@ -395,7 +397,9 @@ def _start_signals_held(active: bool):
 
 
 def scatter_model(client, model):
-    """Send the model to every worker once; pass the returned future to the tasks.
+    """Send the model to every worker once; pass the returned future to the tasks. For a model
+    built in memory only: on a scheduler whose active memory manager is on (a user's own, by
+    default) the copies are reduced to one, lost with its worker (:mod:`.model_ref`).
 
     Returns
     -------

@@ -4,7 +4,9 @@ join a clip's chunks, transfer a pair, export a track.
 Each task is a module-level function (workers import it from the installed package) that reads
 its inputs from paths the workers can see, writes its output atomically, and returns a small
 :class:`~facetransfer.batch.summary.Row` (or, for a chunk, its track) to the client. The model
-arrives as the value of a future scattered once to every worker, never pickled with the task.
+arrives as its file's :class:`~facetransfer.batch.model_ref.ModelRef`, loaded once by each
+worker (:func:`~facetransfer.batch.model_ref.worker_model`; a model without a file: a future
+scattered once to every worker), never pickled with the task.
 A task raises on bad input; the client turns the exception into the clip's failed row.
 
 A task replaces no file but those its run found and chose to redo, and holds its output while
@@ -23,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from .manifest import BatchError
+from .model_ref import worker_model
 from .ownership import (OutputTaken, claimed, clear_leftover_matte, earlier_output,
                         matte_identity, own_output, still_planned)
 from .summary import Row
@@ -151,6 +154,7 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
 
     t0 = time.perf_counter()
     video_info(job.video)  # missing / not a video: one line naming the path
+    model = worker_model(model)
     with claimed(out, owner) as claim:
         if earlier_output(out, planned, claim):
             return _taken_track(job, out, claim, t0)
@@ -218,6 +222,7 @@ def track_chunk(job, chunk, out: str, model, options, first=None) -> ChunkResult
     from ..track.aspect import View
 
     t0 = time.perf_counter()
+    model = worker_model(model)
     frames, fps = read_video(job.video, start=chunk.start, stop=chunk.stop)
     fixed = None
     init = job.init
@@ -265,6 +270,7 @@ def join_clip(job, out: str, model, chunks, results, overwrite: bool = False,
 
     t0 = time.perf_counter()
     spent = sum(r.seconds for r in results)
+    model = worker_model(model)
     with claimed(out, owner) as claim:
         if earlier_output(out, planned, claim):
             return _taken_track(job, out, claim, t0, spent)
@@ -348,6 +354,7 @@ def transfer_pair(job, out: str, model, settings: dict, matte: str | None = None
     from ..video_transfer import transfer_video
 
     t0 = time.perf_counter()
+    model = worker_model(model)
     sources = _pair_sources(job, model)
     options = rewrite_options(settings)
     with claimed(out, owner) as claim:
@@ -472,6 +479,7 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
 
     t0 = time.perf_counter()
     track = Track.load(job.track)
+    model = worker_model(model)
     if model is None and fmt in ("glb", "usd"):  # livelink and json need no geometry
         from ..default_model import default_model_path
 

@@ -1,11 +1,12 @@
 """Batch runs on a Dask client: many clips tracked, transferred or exported, one task per clip.
 
 Every run follows the same steps: check the output folder, refuse an output that is also an
-input, skip the jobs an earlier run finished (their output is complete and valid), scatter the
-model to the workers once, submit, collect the rows as the clips finish (reporting each to
-``progress``), and write ``DIR/summary.csv`` atomically (also every few seconds, and when the run
-is interrupted: pending tasks are cancelled, finished outputs stay). A failed clip is a
-``failed`` row while the others go on; so is a clip whose output another run into the same
+input, skip the jobs an earlier run finished (their output is complete and valid), give the
+model to the workers (its file, each worker loading it once: :mod:`.model_ref`), submit,
+collect the rows as the clips finish (reporting each to ``progress``), and write
+``DIR/summary.csv`` atomically (also every few seconds, and when the run is interrupted:
+pending tasks are cancelled, finished outputs stay). A failed clip is a ``failed`` row while
+the others go on; so is a clip whose output another run into the same
 folder holds (its job's claim, :func:`.ownership.claimed`) or wrote meanwhile (kept, its row's
 digest that run's where its summary says it, :data:`OTHER_RUN` otherwise,
 :meth:`_Collector._adopted`).
@@ -17,13 +18,14 @@ from here too.
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import logging
 import time
 import uuid
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import Callable, Iterator
 
 from ..io.atomic import same_file
 from . import jobs as J
@@ -213,6 +215,25 @@ class _Collector:
         mine = set(self.names)
         return [self.rows.get(r.clip, r) if r.clip in mine else r for r in rows]
 
+    @contextlib.contextmanager
+    def submitting(self) -> Iterator[None]:
+        """The block that gives the workers the model and submits the run's tasks: a Ctrl-C
+        there is the run's as in :meth:`run` (what was submitted cancelled, the summary
+        written: the rows skipped or finished so far, the others cancelled with the digest of
+        what made their output). Before, it ended the run with no summary (a batch of many
+        clips submits for seconds, while the first ones run): an output written meanwhile had
+        no row of this run to say its job (where the earlier summary's row named the job of
+        other options, the next run refused it, "made from other inputs or options")."""
+        try:
+            yield
+        except KeyboardInterrupt:
+            self._interrupted()
+            raise
+
+    def _interrupted(self) -> None:
+        self.client.cancel([f for f in self.alive if not f.done()], force=True)
+        self.write()
+
     def run(self, on_done: Callable) -> BatchResult:
         """Iterate the futures as they finish, calling ``on_done(kind, job, future)``."""
         try:
@@ -220,8 +241,7 @@ class _Collector:
                 kind, job = self.what.pop(fut)
                 on_done(kind, job, fut)
         except KeyboardInterrupt:
-            self.client.cancel([f for f in self.alive if not f.done()], force=True)
-            self.write()
+            self._interrupted()
             raise
         # the claims its jobs left for a retry of theirs (.ownership.claimed's owner): none
         # runs now
@@ -231,8 +251,22 @@ class _Collector:
 
 
 def _model_future(client, model):
+    """What the tasks receive for ``model``: its file's :class:`.model_ref.ModelRef` (each worker
+    loads it once; nothing on the cluster that a lost worker takes with it), else (a model with
+    no file as it was, a file some workers do not see, or None) the model scattered to every
+    worker, as before: a worker lost may then lose every clip left (a warning says so)."""
     from .cluster import scatter_model
+    from .model_ref import hosts_without, model_ref
 
+    ref = None if model is None else model_ref(model)
+    if ref is not None:
+        blind = hosts_without(client, ref)
+        if not blind:
+            return ref
+        log.warning("the workers on %s do not see the model file %s: it is sent to them "
+                    "instead (a worker lost may then lose every clip left, where the "
+                    "scheduler's active memory manager is on: give --model on a file system "
+                    "every worker sees)", ", ".join(blind), ref.path)
     return scatter_model(client, model)
 
 
@@ -246,7 +280,9 @@ def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, m
         for r in done.values():
             progress(r)
     todo = [j for j in jobs if j.name not in done]
-    return col, todo, (_model_future(client, model) if todo else None)
+    with col.submitting():
+        mf = _model_future(client, model) if todo else None
+    return col, todo, mf
 
 
 def _done_track(out: Path, job, model_hash: str) -> Row | None:
@@ -353,8 +389,9 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
     run = TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, _planned(outs),
                       _owners(keys))
     try:
-        for job in todo:
-            run.submit(job)
+        with col.submitting():
+            for job in todo:
+                run.submit(job)
         return col.run(run.on_done)
     finally:
         run.held.close()
@@ -717,8 +754,9 @@ def _simple(client, jobs, out_dir, outs, done, progress, submit, model, keys) ->
     """A run of one independent task per job; each row records its job digest."""
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
-    for job in todo:
-        col.add(submit(job, mf), "clip", job)
+    with col.submitting():
+        for job in todo:
+            col.add(submit(job, mf), "clip", job)
 
     def on_done(kind, job, fut) -> None:
         try:

@@ -1,0 +1,139 @@
+"""The model of a batch run as its tasks receive it: the model file's path and content hash
+(:class:`ModelRef`), each worker process loading it once (:func:`worker_model`).
+
+Before the fifty-third session the model was scattered to every worker (``client.scatter(model,
+broadcast=True)``). On a user's own scheduler Dask's active memory manager (on by default: its
+ReduceReplicas policy) dropped the copies no task waited for, leaving one; when that worker was
+lost (killed, out of memory, taken for lost) the scheduler said "the cluster lost scattered
+data" and cancelled every clip left, none run again (the embedded cluster ran with the manager
+off for that reason). A :class:`ModelRef` is a few bytes in each task: there is no data on the
+cluster to lose, and a worker started again (a nanny's restart, a worker joining) loads the
+model from the file as the others did. A model file is mapped, not read (its core, hundreds of
+MB, :func:`facetransfer.model.load_model`): the workers of one machine share its pages, where
+each held a copy of its own of the scattered model.
+
+A model without a file that is still as it was loaded or saved (built in memory by a library
+caller), or whose file some of the workers do not see (:func:`hosts_without`: machines without
+the shared file system, nor the default model in their own cache), is scattered as before
+(:func:`facetransfer.batch.cluster.scatter_model`).
+"""
+
+from __future__ import annotations
+
+import collections
+import socket
+import threading
+from dataclasses import dataclass
+from pathlib import Path
+
+from .manifest import BatchError
+
+__all__ = ["ModelRef", "model_ref", "worker_model", "hosts_without"]
+
+#: Models a worker process keeps loaded (the last ones used): a worker serving two runs of
+#: different models at once loads each once.
+KEPT = 2
+
+_LOADED: "collections.OrderedDict[str, object]" = collections.OrderedDict()
+_LOCK = threading.Lock()
+
+
+@dataclass(frozen=True)
+class ModelRef:
+    """A model file as the client found it: its absolute ``path`` and the model's
+    ``content_hash`` (sha256 hex), which the file a worker loads must have; ``default``: it is
+    the default model, which a worker that does not see ``path`` (the client's user cache) may
+    take from its own cache where that holds the same model."""
+
+    path: str
+    content_hash: str
+    default: bool = False
+
+
+def model_ref(model) -> ModelRef | None:
+    """The :class:`ModelRef` of ``model``, None where it has no file still as it was loaded
+    or saved (:func:`facetransfer.model.model_file`)."""
+    from ..default_model import default_model_path
+    from ..model import model_file
+
+    path = model_file(model)
+    if path is None:
+        return None
+    default = path == default_model_path().absolute()
+    return ModelRef(str(path), model.content_hash, default)
+
+
+def hosts_without(client, ref: ModelRef) -> list[str]:
+    """The hosts of the client's workers (those there now) on which the file of ``ref`` is not
+    there (nor, for the default model, a default model file of their own): a ``stat`` on each
+    (``client.run``); a worker that fails to answer (ending) is left out."""
+    seen = client.run(_sees, ref, on_error="ignore")
+    return sorted({host for ok, host in seen.values() if not ok})
+
+
+def _sees(ref: ModelRef) -> tuple[bool, str]:
+    """Run on a worker: whether the model file of ``ref`` is there, and the host's name."""
+    from ..default_model import default_model_path
+
+    ok = Path(ref.path).is_file() or (ref.default and default_model_path().is_file())
+    return ok, socket.gethostname()
+
+
+def worker_model(model):
+    """``model`` where it is a model (or None); the model of a :class:`ModelRef`, loaded once
+    by this process (the last :data:`KEPT` kept, by content hash).
+
+    Raises
+    ------
+    BatchError
+        The file cannot be loaded here or holds another model (replaced since the run began):
+        naming the path and this host.
+    """
+    if not isinstance(model, ModelRef):
+        return model
+    with _LOCK:
+        found = _LOADED.get(model.content_hash)
+        if found is None:
+            found = _load(model)
+            _LOADED[model.content_hash] = found
+            while len(_LOADED) > KEPT:
+                _LOADED.popitem(last=False)
+        _LOADED.move_to_end(model.content_hash)
+        return found
+
+
+def _load(ref: ModelRef):
+    """The model of ``ref`` read from its path (or, for the default model where this machine
+    does not see that path, from this machine's default model file); BatchError if not."""
+    from ..default_model import default_model_path
+
+    paths = [Path(ref.path)]
+    if ref.default and not paths[0].is_file():
+        paths.append(default_model_path())
+    why = ""
+    for p in paths:
+        model, why = _try_load(p, ref.content_hash)
+        if model is not None:
+            return model
+    raise BatchError(f"the run's model {ref.path} cannot be loaded on the worker on "
+                     f"{socket.gethostname()}: {why} (every worker must see the model file "
+                     "at the client's path, e.g. on a shared file system: give --model "
+                     "/shared/M.npz)")
+
+
+def _try_load(path: Path, content_hash: str):
+    """``(model, "")`` of the model file ``path`` where it holds the model of ``content_hash``,
+    else ``(None, why)``."""
+    from ..errors import ModelFileError
+    from ..model import load_model
+
+    if not path.is_file():
+        return None, f"{path} is not there"
+    try:
+        model = load_model(path)
+    except (ModelFileError, OSError) as exc:
+        return None, str(exc)
+    if model.content_hash != content_hash:
+        return None, (f"{path} holds another model now (sha256 {model.content_hash[:12]}, the "
+                      f"run's {content_hash[:12]}): replaced since the run began?")
+    return model, ""

@@ -1,0 +1,182 @@
+"""The model of a batch run on the workers (:mod:`facetransfer.batch.model_ref`): its file's
+path and hash in each task, each worker loading it once; a worker lost on a scheduler whose
+active memory manager is on (Dask's default, a user's own scheduler) loses nothing the other
+clips need."""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+from facetransfer.batch import model_ref as MR  # noqa: E402
+from facetransfer.batch.manifest import BatchError  # noqa: E402
+
+import test_batch  # noqa: E402
+
+clips = test_batch.clips
+
+pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
+
+
+def test_a_model_of_a_file_is_sent_as_its_path_and_loaded_once_per_worker(
+        quick_model, tmp_path, monkeypatch):
+    from facetransfer.model import load_model, model_file
+
+    p = quick_model.save(tmp_path / "m.npz")
+    model = load_model(p)
+    ref = MR.model_ref(model)
+    assert ref == MR.ModelRef(str(p.absolute()), model.content_hash, False)
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    loads = []
+    real = MR._load
+    monkeypatch.setattr(MR, "_load", lambda r: loads.append(r) or real(r))
+    first = MR.worker_model(ref)
+    assert MR.worker_model(ref) is first and len(loads) == 1
+    assert first.content_hash == model.content_hash
+    assert MR.worker_model(model) is model and MR.worker_model(None) is None
+    # built in memory: no file to load it from (the run scatters it)
+    from facetransfer.model import MultilinearModel
+
+    fresh = MultilinearModel(core=model.core, factors=model.factors,
+                             mode_names=model.mode_names, labels=model.labels, faces=model.faces)
+    assert model_file(fresh) is None and MR.model_ref(fresh) is None
+
+
+def test_a_model_file_replaced_since_or_not_there_is_said_naming_it(quick_model, tmp_path,
+                                                                     monkeypatch):
+    from facetransfer.model import load_model, model_file
+
+    p = quick_model.save(tmp_path / "m.npz")
+    ref = MR.model_ref(load_model(p))
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    other = load_model(p)
+    dataclasses.replace(other, provenance={"note": "another"}).save(p)  # another model there
+    assert model_file(other) is None      # not the file it was loaded from any more
+    with pytest.raises(BatchError, match=r"m\.npz holds another model now \(sha256 "):
+        MR.worker_model(ref)
+    p.unlink()
+    with pytest.raises(BatchError, match=rf"the run's model {p} cannot be loaded on the worker "
+                                         r"on .*m\.npz is not there \(every worker must see"):
+        MR.worker_model(ref)
+
+
+def test_a_model_file_the_workers_do_not_see_is_sent_to_them_saying_so(
+        clips, quick_model_path, tmp_path, monkeypatch, caplog):
+    """Workers on machines without the client's file (its user cache not shared, no
+    ``--model`` on the shared file system): the model is scattered to them, as before, with a
+    warning naming the hosts and the file, not every clip failed "cannot be loaded"."""
+    from facetransfer.batch import batch_track, open_client, run
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.model import load_model
+
+    model = load_model(quick_model_path)
+    elsewhere = MR.ModelRef(str(tmp_path / "not-here" / "m.npz"), model.content_hash)
+    monkeypatch.setattr(MR, "model_ref", lambda m: elsewhere)
+    (va, pa, _) = clips["a"]
+    with open_client(workers=1, processes=False) as client:
+        res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
+                          client=client)
+    assert [(r.status, r.error) for r in res.rows] == [("done", "")]
+    said = [r.getMessage() for r in caplog.records if r.name == run.__name__]
+    assert said and f"do not see the model file {elsewhere.path}: it is sent" in said[0]
+
+
+def _block_clip(name: str, folder: str) -> None:
+    """Run on each worker: the tracking of the clip ``name`` waits, once it has begun (a file
+    ``started-PID`` in ``folder``), for ``folder/go``; a worker started again runs as usual."""
+    from facetransfer.batch import jobs
+
+    real = jobs._track
+
+    def _track(video, *args, **kw):
+        if os.path.basename(str(video)).startswith(name + "."):
+            open(os.path.join(folder, f"started-{os.getpid()}"), "w").close()
+            while not os.path.exists(os.path.join(folder, "go")):
+                time.sleep(0.05)
+        return real(video, *args, **kw)
+
+    jobs._track = _track
+
+
+def _wait(what, seconds: float = 120.0):
+    """``what()`` once true (polled), else the test fails naming it."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        got = what()
+        if got:
+            return got
+        time.sleep(0.05)
+    raise AssertionError(f"not seen within {seconds:g} s: {what.__doc__}")
+
+
+def test_a_worker_lost_under_the_active_memory_manager_loses_no_clip(clips, quick_model_path,
+                                                                     tmp_path):
+    """A real cluster (worker processes with nannies) whose scheduler runs Dask's active memory
+    manager (ReduceReplicas), as a user's own ``dask scheduler`` does by default; a worker is
+    killed (SIGKILL) while it tracks the last clip left. Before, the model was scattered, the
+    manager had left its one copy on that worker, and the clip was cancelled with it ("its
+    worker died, more than once"); now it is tracked again on the other worker."""
+    import dask
+    from dask.distributed import Client, LocalCluster
+
+    from facetransfer.batch import batch_track
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.model import load_model
+
+    (va, pa, _), (vb, pb, _) = clips["a"], clips["b"]
+    gate = tmp_path / "gate"
+    gate.mkdir()
+    out = tmp_path / "out"
+    model = load_model(quick_model_path)       # as the CLI loads it
+    amm = {"distributed.scheduler.active-memory-manager.start": True,
+           "distributed.scheduler.active-memory-manager.interval": "100ms",
+           "distributed.scheduler.active-memory-manager.policies": [
+               {"class": "distributed.active_memory_manager.ReduceReplicas"}]}
+    with dask.config.set(amm), \
+            LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                         dashboard_address=None) as cluster, \
+            Client(cluster, set_as_default=False) as client:
+        assert client.run_on_scheduler(
+            lambda dask_scheduler: dask_scheduler.extensions["amm"].running)
+        client.run(_block_clip, "a", str(gate))
+        done, killed = [], []
+
+        def kill_a_s_worker():
+            def b_done_a_begun():
+                """clip b done, clip a's tracking begun"""
+                return done and list(gate.glob("started-*"))
+            try:
+                started = _wait(b_done_a_begun)
+
+                def model_on_one_worker():
+                    """the scattered model (if any) on one worker, the manager's doing"""
+                    held = [len(w) for k, w in client.who_has().items()
+                            if str(k).startswith("MultilinearModel")]
+                    return held == [] or held == [1]
+                _wait(model_on_one_worker)
+                os.kill(int(started[0].name.split("-")[1]), signal.SIGKILL)
+                killed.append(started[0].name)
+            finally:
+                (gate / "go").touch()
+
+        th = threading.Thread(target=kill_a_s_worker)
+        th.start()
+        jobs = [ClipJob("b", str(vb), init=str(pb)), ClipJob("a", str(va), init=str(pa))]
+        res = batch_track(jobs, out, model, client=client,
+                          progress=lambda row: done.append(row.clip))
+        th.join()
+    assert killed
+    rows = {r.clip: r for r in res.rows}
+    assert {n: (r.status, r.error) for n, r in rows.items()} == {"a": ("done", ""),
+                                                                  "b": ("done", "")}
+    assert (out / "a.npz").is_file() and (out / "b.npz").is_file()
+    assert not list(out.glob(".*.claim"))
