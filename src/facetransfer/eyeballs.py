@@ -19,10 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .render.raster import _maybe_njit
-from .track.gaze import activation_gaze, eye_model, project_iris
+from .track.gaze import GazeOptions, activation_gaze, eye_model, project_iris
 
 __all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "Eyeballs",
-           "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze"]
+           "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze", "gaze_offset"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
@@ -96,6 +96,21 @@ def track_gaze(track) -> np.ndarray | None:
     if b is None or names is None or tuple(names) != tuple(ARKIT_NAMES):
         return None
     return activation_gaze(np.asarray(b, np.float64))
+
+
+def gaze_offset(track) -> np.ndarray | None:
+    """``(F,)``: how far each frame's eyes look from straight ahead (the head's +z), the mean
+    over the two eyes of ``hypot(yaw / horizontal, pitch / vertical)`` of :func:`track_gaze`
+    (:class:`facetransfer.track.gaze.GazeOptions`: an eyeLook* activation of 1 is 1), 0 where
+    unknown; None without ARKit blendshapes. An eye looking ahead has its iris amid its
+    opening: shifted to any other gaze, it uncovers the least of the eyeball its frame hides
+    (:func:`extend_eyeballs`)."""
+    g = track_gaze(track)
+    if g is None:
+        return None
+    opt = GazeOptions()
+    off = np.hypot(g[..., 0] / opt.horizontal, g[..., 1] / opt.vertical).mean(axis=1)
+    return np.nan_to_num(off, nan=0.0)
 
 
 def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
