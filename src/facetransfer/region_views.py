@@ -55,9 +55,9 @@ FADE_SECONDS = 0.3
 #: Degrees of view a candidate's own expression counts as, per unit of its
 #: ``0.5 * sum(activations)`` of :data:`COST_SHAPES` (:func:`facetransfer.eyes.open_eye_frame`'s
 #: penalty): a turned frame with raised brows or a smile would bring them back. The eye
-#: region's candidates pay :func:`facetransfer.eyes.eye_penalty`, their gaze off ahead too.
+#: region's candidates pay :func:`facetransfer.eyes.eye_penalty` (their gaze too, if weighed).
 EXPRESSION_COST = 20.0
-#: The activations a region's candidate reference frames pay for (the eyes' also their gaze).
+#: The activations a region's candidate reference frames pay for.
 COST_SHAPES = {"eyes": BROW_SHAPES, "jaw": ("mouthSmileLeft", "mouthSmileRight")}
 #: A reference is added only if it removes at least this share of the frames' total angle
 #: beyond :data:`VIEW_SPLIT` (a frame turned where no open-eyed frame looks from keeps the
