@@ -216,3 +216,21 @@ def test_shift_eyeballs_kernels_equal_their_numpy_expressions(seed):
     none = dataclasses.replace(balls, lookup=np.full(F + 1, -1, np.int8))
     eyeballs.shift_eyeballs(got, tid[sl], bary[sl], faces, uvs, none, shift)
     np.testing.assert_array_equal(got, want)
+
+
+def test_the_sclera_beyond_an_iris_passes_into_what_is_continued_beside_it():
+    """An eye turned into its left corner (fix52's scene: an ellipse 61 x 21 pixels, its iris
+    of radius 9 at column 27): under the upper lid, the sclera filled beyond the iris met the
+    iris continued above it in one step of 205 levels (eyeref53: ``make demo``'s frame 40,
+    a straight cut). Now the iris side passes to the sclera over about a third of the iris's
+    length; beyond the iris it is the sclera still, over the iris's middle the iris."""
+    yy, xx = np.mgrid[0:60, 0:100]
+    img = np.zeros((60, 100, 3), np.uint8)
+    img[:] = SKIN
+    opening = ((xx - 50) / 30.5) ** 2 + ((yy - 30) / 10.5) ** 2 <= 1.0
+    img[opening] = SCLERA
+    img[opening & (np.hypot(xx - 27, yy - 30) <= 9)] = IRIS
+    row = eyeballs.extend_eyeballs(img, opening, grow=8)[20, 18:30, 0].astype(int)
+    assert np.abs(row[:3] - SCLERA[0]).max() <= 3 and np.all(row[-3:] == IRIS[0]), row
+    assert np.abs(np.diff(row)).max() <= 60, row          # no step: a ramp
+    assert ((row > IRIS[0] + 10) & (row < SCLERA[0] - 10)).sum() >= 3, row

@@ -102,6 +102,36 @@ def test_open_and_closed_reference_frames():
     assert eyes.closed_eye_frame(T) is None  # never closes
 
 
+def test_the_open_eyed_frame_looks_ahead_where_the_squarest_looks_aside(monkeypatch):
+    """Frame 1 faces the camera most squarely but its eyes look 0.6 to the subject's left
+    (eyeLookOutLeft, eyeLookInRight); frame 3 is turned 6 degrees and looks ahead: the eyeballs
+    are turned from the reference's gaze, and one looking aside has the eyeball beyond its
+    iris hidden (eyeref53: ``make demo``'s frame 40). The rule picked frame 1; with the gaze
+    weighed (:data:`facetransfer.eyes.GAZE_WEIGHT`, off by default) it picks 3, and a track
+    without eyeLook* activations keeps the squarest."""
+    monkeypatch.setattr(eyes, "GAZE_WEIGHT", 1.0)
+    c, s = np.cos(np.radians([8.0, 0.0, 9.0, 6.0])), np.sin(np.radians([8.0, 0.0, 9.0, 6.0]))
+    R = np.zeros((4, 3, 3))
+    R[:, 0, 0], R[:, 0, 2], R[:, 1, 1], R[:, 2, 0], R[:, 2, 2] = c, s, 1.0, -s, c
+
+    class T:  # the fields the frame choice reads
+        n_frames = 4
+        lost = np.zeros(4, bool)
+        rotation = R
+        confidence = np.ones(4)
+        blendshape_names = ARKIT_NAMES
+        landmarks2d = np.zeros((4, 68, 2))
+        source = "t.mp4"
+    b = _acts(4)
+    b[1, ARKIT_NAMES.index("eyeLookOutLeft")] = b[1, ARKIT_NAMES.index("eyeLookInRight")] = 0.6
+    b[[0, 2], ARKIT_NAMES.index("eyeLookDownLeft")] = 0.5
+    T.blendshapes = b
+    assert eyes.open_eye_frame(T) == 3
+    np.testing.assert_allclose(eyes.eye_penalty(T), [0.25, 0.6, 0.25, 0.0])
+    T.blendshape_names = None
+    assert eyes.open_eye_frame(T) == 1
+
+
 def test_open_lids_show_the_reference_eye_and_a_blink_covers_it(setup):
     model, topo, closed, fill = setup
     ref = _track(model, _acts(1, 0.0))

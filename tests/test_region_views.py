@@ -55,6 +55,21 @@ def test_a_turned_half_takes_a_quiet_browed_frame_from_its_side(arkit_model):
     assert view_references(_track(arkit_model, few), 40, 0) == [0]
 
 
+def test_a_turned_half_takes_a_frame_looking_ahead(arkit_model, monkeypatch):
+    """Frames 20-39 turned 25 degrees, the eyes of 20-29 looking aside (eyeLookInRight and
+    eyeLookOutLeft 0.7): the second reference is one looking ahead, as the first is
+    (:func:`facetransfer.eyes.eye_penalty`; eyeref53: ``make demo``'s second reference looked
+    hard aside), with the gaze weighed (:data:`facetransfer.eyes.GAZE_WEIGHT`); it was 20,
+    the first of the turned frames."""
+    from facetransfer import eyes
+
+    monkeypatch.setattr(eyes, "GAZE_WEIGHT", 1.0)
+    acts = np.zeros((40, 52), np.float32)
+    acts[20:30, [ARKIT_NAMES.index(n) for n in ("eyeLookInRight", "eyeLookOutLeft")]] = 0.7
+    tr = _track(arkit_model, np.r_[np.zeros(20), np.full(20, 25.0)], acts)
+    assert view_references(tr, 40, 0) == [0, 30]
+
+
 def test_a_head_hovering_between_two_views_does_not_switch_back_and_forth():
     """Two references 20 degrees apart: frames alternating 1 degree either side of half way
     keep the reference they have (the first frame's nearest to begin with); a frame

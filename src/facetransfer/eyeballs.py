@@ -19,10 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .jit import maybe_njit as _maybe_njit
-from .track.gaze import activation_gaze, eye_model, project_iris
+from .track.gaze import GazeOptions, activation_gaze, eye_model, project_iris
 
-__all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "Eyeballs",
-           "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze"]
+__all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "SOFT",
+           "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze",
+           "gaze_offset"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
@@ -98,6 +99,21 @@ def track_gaze(track) -> np.ndarray | None:
     return activation_gaze(np.asarray(b, np.float64))
 
 
+def gaze_offset(track) -> np.ndarray | None:
+    """``(F,)``: how far each frame's eyes look from straight ahead (the head's +z), the mean
+    over the two eyes of ``hypot(yaw / horizontal, pitch / vertical)`` of :func:`track_gaze`
+    (:class:`facetransfer.track.gaze.GazeOptions`: an eyeLook* activation of 1 is 1), 0 where
+    unknown; None without ARKit blendshapes. An eye looking ahead has its iris amid its
+    opening: shifted to any other gaze, it uncovers the least of the eyeball its frame hides
+    (:func:`extend_eyeballs`)."""
+    g = track_gaze(track)
+    if g is None:
+        return None
+    opt = GazeOptions()
+    off = np.hypot(g[..., 0] / opt.horizontal, g[..., 1] / opt.vertical).mean(axis=1)
+    return np.nan_to_num(off, nan=0.0)
+
+
 def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
                     rim: int = RIM) -> np.ndarray:
     """``image`` (H, W, 3) uint8 with each pixel within ``grow`` pixels of ``opening`` (H, W)
@@ -114,7 +130,9 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     not one colour for the eye (review52d): an eye with its sclera lit on one side of the iris
     and in shade on the other had the shaded side's hidden part filled with the lit side's
     colour, a light stripe with a hard edge beside the shaded sclera (``make demo``'s pair,
-    frame 29)."""
+    frame 29). What is continued beside that sclera (the iris above and below the iris, the
+    lid margins) passes into it over :data:`SOFT` of the iris's length (eyeref53: a step
+    there read as a straight cut, ``make demo``'s frame 40)."""
     import cv2
 
     core = cv2.erode(opening.view(np.uint8), np.ones((3, 3), np.uint8), iterations=rim) \
@@ -128,10 +146,31 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     p = xs * axes[k, 0] + ys * axes[k, 1]                # the pixel's place along its long axis
     side = iris[src[:, 0], src[:, 1]] & ((p < span[k, 0]) | (p > span[k, 1]))
     out[ys, xs] = image[src[:, 0], src[:, 1]]
-    if side.any():
-        at = _nearest_to(sclera, ys[side], xs[side])
-        out[ys[side], xs[side]] = image[at[:, 0], at[:, 1]]
+    w = _toward_sclera(side, ys, xs, SOFT * (span[k, 1] - span[k, 0]), image.shape[:2])
+    mix = w > 0
+    if mix.any():
+        at = _nearest_to(sclera, ys[mix], xs[mix])
+        a = w[mix, None]
+        out[ys[mix], xs[mix]] = np.rint((1.0 - a) * out[ys[mix], xs[mix]]
+                                        + a * image[at[:, 0], at[:, 1]]).astype(np.uint8)
     return out
+
+
+def _toward_sclera(side: np.ndarray, ys: np.ndarray, xs: np.ndarray, width: np.ndarray,
+                   shape: tuple) -> np.ndarray:
+    """``(m,)`` in [0, 1]: how much of the sclera each hidden pixel ``(ys, xs)`` takes: 1 on
+    ``side`` (m,) bool (beyond the iris), falling to 0 at ``width`` (m,) pixels (its eye's)
+    from the nearest of them (eyeref53: the step between the sclera beyond the iris and the
+    iris or lid margin continued beside it showed as a straight cut, ``make demo``'s frame
+    40); 0 everywhere without ``side`` (nothing changes)."""
+    import cv2
+
+    if not side.any():
+        return side.astype(np.float64)
+    free = np.ones(shape, np.uint8)
+    free[ys[side], xs[side]] = 0
+    d = cv2.distanceTransform(free, cv2.DIST_L2, 5)[ys, xs]
+    return np.clip(1.0 - d / np.maximum(np.nan_to_num(width, neginf=0.0), 1e-9), 0.0, 1.0)
 
 
 def _nearest_to(mask: np.ndarray, ys: np.ndarray, xs: np.ndarray) -> np.ndarray:
@@ -162,6 +201,10 @@ BAND = 0.5
 #: above its iris, under the lid, was made sclera: a white cap over the iris). Without one
 #: the part is filled from its nearest pixels, as an eye without an iris is.
 ELONGATION = 3.0
+#: :func:`_toward_sclera`: the fill passes from the sclera beyond an iris to what is continued
+#: beside it (the iris above and below it, the lid margins) over this share of the iris's
+#: length along its eye.
+SOFT = 0.3
 
 
 def _nearest(core: np.ndarray, reach: float):

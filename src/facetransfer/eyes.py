@@ -53,7 +53,7 @@ from .composite import mask_box
 from .errors import RewriteError
 from .eye_lids import lid_shares, mix_lids
 from .label_masks import bits_box
-from .eyeballs import Eyeballs, eyeballs_of, shift_eyeballs
+from .eyeballs import Eyeballs, eyeballs_of, gaze_offset, shift_eyeballs
 from .patch import REJECT, SHADING_SIGMA, _match_outline_into
 from .region_weights import (EYE_POINTS, model_vertices, moved_strengths, seen_frames,
                              usual_weights_of, vertex_alpha)
@@ -67,7 +67,7 @@ __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
            "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE", "LID_BLINK",
-           "shape_activity", "reference_candidates"]
+           "shape_activity", "reference_candidates", "GAZE_WEIGHT", "eye_penalty"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -128,6 +128,13 @@ FRAME_RULE = True
 #: +0.13 -> +0.53 with the rule everywhere, +0.28 beyond 0.6 cm, +0.08 beyond 1 cm, +0.05 with
 #: the rule moved-gated within 1 cm; BENCHMARKS.md, "Twentieth session").
 BROW_KEEP = 1.0
+#: :func:`eye_penalty`: per unit of the eyes' gaze off ahead (:func:`facetransfer.eyeballs.
+#: gaze_offset`, 1 = an eyeLook* of 1, 35 degrees sideways). Off (0) by measurement: from
+#: 0.035 on ``driving_d6``'s reference 30 (its left eye fully in) becomes 68 and the judge's
+#: ``open`` pair lost eyeBlinkLeft 0.87 -> 0.80 and browInnerUp 0.90 -> 0.81 at 1 (68's brows
+#: and lids, not its eyeballs), where ``make demo``'s reference moves only from 0.2 on (4 ->
+#: 110: browInnerUp 0.67 -> 0.74; BENCHMARKS.md, "Fifty-third session (helper eyeref53)").
+GAZE_WEIGHT = 0.0
 
 
 @dataclass(frozen=True)
@@ -492,7 +499,8 @@ def open_eye_frame(track, n_frames: int | None = None, *, quantile: float = 0.75
     Among the frames (of the first ``n_frames``) where the face is not lost and the eyes are at
     least as open as the ``quantile`` of :func:`eye_openness` (no blink, no squint), the one
     facing the camera most squarely (plus half its tracking confidence), with the least brow
-    activity when the track has ARKit activations.
+    activity when the track has ARKit activations (:func:`eye_penalty`; its eyes looking most
+    nearly ahead too where :data:`GAZE_WEIGHT` is set).
 
     Raises
     ------
@@ -500,7 +508,20 @@ def open_eye_frame(track, n_frames: int | None = None, *, quantile: float = 0.75
         The face is lost in every frame.
     """
     return reference_frame(track, eye_openness(track), n_frames, quantile, low=False,
-                           penalty=shape_activity(track, BROW_SHAPES), points=EYE_POINTS)
+                           penalty=eye_penalty(track), points=EYE_POINTS)
+
+
+def eye_penalty(track) -> np.ndarray | None:
+    """``(F,)``: an eye region's reference frames' penalty: its brows' activity
+    (:func:`shape_activity` of :data:`BROW_SHAPES`) plus :data:`GAZE_WEIGHT` (0: none) times its
+    eyes' gaze off ahead (:func:`facetransfer.eyeballs.gaze_offset`: the eyeballs are turned from
+    that gaze, and a frame looking aside has its iris in a corner, the eyeball beyond it
+    hidden and filled), or None without ARKit activations."""
+    brow = shape_activity(track, BROW_SHAPES)
+    gaze = gaze_offset(track) if GAZE_WEIGHT else None
+    if gaze is None:
+        return brow
+    return GAZE_WEIGHT * gaze + (0.0 if brow is None else brow)
 
 
 def shape_activity(track, names) -> np.ndarray | None:

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .eyes import (BROW_SHAPES, eye_openness, eye_texture, reference_candidates,
+from .eyes import (BROW_SHAPES, eye_openness, eye_penalty, eye_texture, reference_candidates,
                    shape_activity)
 from .jaw import jaw_texture, mouth_closure
 from .region_weights import EYE_POINTS, JAW_POINTS
@@ -55,7 +55,8 @@ HYSTERESIS = 3.0
 FADE_SECONDS = 0.3
 #: Degrees of view a candidate's own expression counts as, per unit of its
 #: ``0.5 * sum(activations)`` of :data:`COST_SHAPES` (:func:`facetransfer.eyes.open_eye_frame`'s
-#: penalty): a turned frame with raised brows or a smile would bring them back.
+#: penalty): a turned frame with raised brows or a smile would bring them back. The eye
+#: region's candidates pay :func:`facetransfer.eyes.eye_penalty` (their gaze too, if weighed).
 EXPRESSION_COST = 20.0
 #: The activations a region's candidate reference frames pay for.
 COST_SHAPES = {"eyes": BROW_SHAPES, "jaw": ("mouthSmileLeft", "mouthSmileRight")}
@@ -145,7 +146,7 @@ def _candidates(track, n: int, region: str) -> tuple[np.ndarray, np.ndarray]:
     cand = reference_candidates(track, eye_openness(track) if eyes else mouth_closure(track), n,
                                 CANDIDATE_QUANTILE, low=not eyes,
                                 points=EYE_POINTS if eyes else JAW_POINTS)
-    activity = shape_activity(track, COST_SHAPES[region])
+    activity = eye_penalty(track) if eyes else shape_activity(track, COST_SHAPES[region])
     return cand, (np.zeros(cand.size) if activity is None
                   else EXPRESSION_COST * activity[cand])
 
