@@ -48,14 +48,62 @@ def test_the_flow_on_the_faces_box_of_a_1080p_frame_is_the_whole_frames(shift, m
     np.testing.assert_allclose(np.median(crop[ok], axis=0), shift, atol=0.05)
 
 
-def test_the_flows_box_sits_on_the_top_levels_grid_and_only_when_small():
+@pytest.mark.parametrize("shift", [(1.5, -0.75), (-4.0, 2.5)])
+def test_the_flow_of_a_face_filling_a_512_frame_is_on_its_box_as_the_whole_frames(
+        shift, monkeypatch):
+    """Issue 13's frames (512x480, a face half of it and more): the flow on the face's box
+    (its pyramids and derivatives a third smaller), within Lucas-Kanade's tolerance of the
+    whole frame's."""
+    shape = (480, 512)
+    tex = _texture(shape, seed=5)
+    a, b = _shifted(tex, shape, 0.0, 0.0), _shifted(tex, shape, *shift)
+    rng = np.random.default_rng(2)
+    pts = np.array([150.0, 110.0]) + rng.uniform(0, 230, (68, 2))   # a face 230 px across
+    rows, cols = detect._flow_box(pts, shape, 21, 2)
+    assert (rows.stop - rows.start) * (cols.stop - cols.start) < 0.75 * shape[0] * shape[1]
+    crop = point_flow(a, b, pts)
+    monkeypatch.setattr(detect, "FLOW_CROP_SHARE", 0.0)               # never cropped
+    whole = point_flow(a, b, pts)
+    ok = np.isfinite(whole).all(1)
+    assert ok.sum() >= 60 and np.array_equal(ok, np.isfinite(crop).all(1))
+    np.testing.assert_allclose(crop[ok], whole[ok], atol=0.03)
+    np.testing.assert_allclose(np.median(crop[ok], axis=0), shift, atol=0.05)
+
+
+def test_the_flows_error_is_the_cheap_one_and_its_points_are_the_defaults(monkeypatch):
+    """Lucas-Kanade is asked for the minimum eigenvalue as its (unread) error, which skips a
+    pass over every window; the points and status are those of the default error."""
+    shape = (480, 512)
+    tex = _texture(shape, seed=7)
+    a, b = _shifted(tex, shape, 0.0, 0.0), _shifted(tex, shape, 2.25, 1.0)
+    pts = np.array([140.0, 120.0]) + np.random.default_rng(3).uniform(0, 240, (68, 2))
+    real, flags = cv2.calcOpticalFlowPyrLK, []
+
+    def spy(*args, **kwargs):
+        flags.append(kwargs.get("flags", 0))
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(cv2, "calcOpticalFlowPyrLK", spy)
+    got = point_flow(a, b, pts)
+    assert flags == [cv2.OPTFLOW_LK_GET_MIN_EIGENVALS] * 2
+    monkeypatch.setattr(detect, "_LK_FLAGS", 0)
+    np.testing.assert_array_equal(got, point_flow(a, b, pts))
+    assert np.isfinite(got).all(1).sum() >= 60
+
+
+def test_the_flows_box_sits_on_the_top_levels_grid_and_only_when_small(monkeypatch):
     pts = np.array([[1001.3, 533.7], [1200.9, 790.2]])
     rows, cols = detect._flow_box(pts, (1080, 1920), 21, 2)
     m = (21 // 2 + detect.FLOW_SLACK) * 4
     assert cols.start % 4 == 0 and rows.start % 4 == 0
     assert cols.start <= 1001.3 - m and cols.stop >= 1200.9 + m
     assert rows.start <= 533.7 - m and rows.stop >= 790.2 + m
-    # the same face in a 512x480 frame covers most of it: the whole frame
+    # the same face in a 512x480 frame covers most of it: still its box (FLOW_CROP_SHARE 1),
+    # or the whole frame where a box may be at most a quarter of the frame
+    rows, cols = detect._flow_box(pts - (900, 450), (480, 512), 21, 2)
+    assert (rows.stop - rows.start) * (cols.stop - cols.start) > 0.25 * 480 * 512
+    assert rows.start >= 0 and cols.start >= 0 and rows.stop <= 480 and cols.stop <= 512
+    monkeypatch.setattr(detect, "FLOW_CROP_SHARE", 0.25)
     assert detect._flow_box(pts - (900, 450), (480, 512), 21, 2) is None
     # a box reaching past the frame is clipped to it
     rows, cols = detect._flow_box(np.array([[5.0, 3.0], [300.0, 200.0]]), (1080, 1920), 21, 2)

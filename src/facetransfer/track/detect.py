@@ -196,11 +196,18 @@ def preload_mediapipe() -> Callable[[], None]:
 #: :func:`point_flow` works on the points' box grown by the window's half plus
 #: ``FLOW_SLACK`` pixels of the top pyramid level (the motion between frames and the pyramid's
 #: own border: 64 pixels of the frame at the default window and 2 levels) when that box is at
-#: most ``FLOW_CROP_SHARE`` of the frame. A 1080p frame's pyramids are most of the flow's cost:
-#: with a face 400 pixels tall 4.7 -> 1.4 ms a frame, the displacements within 0.02 px of the
-#: whole frame's (Lucas-Kanade's own stopping tolerance here is 0.03; BENCHMARKS.md,
-#: "Thirty-fourth session").
-FLOW_SLACK, FLOW_CROP_SHARE = 6, 0.25
+#: most ``FLOW_CROP_SHARE`` of the frame (1: always). Each call builds the pyramids and the
+#: first frame's derivatives of all it is given: with a face 400 pixels tall in a 1080p frame
+#: 4.7 -> 1.4 ms a frame (BENCHMARKS.md, "Thirty-fourth session"), with issue 13's 512x480
+#: faces, whose box is half the frame or more, 1.6 -> 1.36 ("Fifty-third session (helper
+#: cpu53b)"); the displacements within 0.022 px of the whole frame's (Lucas-Kanade's own
+#: stopping tolerance here is 0.03), 0.0001 px on average.
+FLOW_SLACK, FLOW_CROP_SHARE = 6, 1.0
+
+#: Lucas-Kanade's calls of :func:`point_flow` take the points' minimum eigenvalue as their
+#: error (unread): the same points and status, without OpenCV's last pass over each window at
+#: the finest level that the default error (the window's mean difference) takes.
+_LK_FLAGS = cv2.OPTFLOW_LK_GET_MIN_EIGENVALS
 
 
 def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
@@ -209,7 +216,8 @@ def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
 
     A point fails when OpenCV loses it or when tracking it back lands more than ``max_fb``
     pixels from where it started (forward-backward check). The flow is computed on the
-    points' box when that is small (:data:`FLOW_SLACK`, :data:`FLOW_CROP_SHARE`).
+    points' box (:data:`FLOW_SLACK`, :data:`FLOW_CROP_SHARE`), its error left as OpenCV's
+    cheaper one (:data:`_LK_FLAGS`).
     """
     ok = np.all(np.isfinite(pts), axis=1)
     out = np.full(pts.shape, np.nan)
@@ -222,9 +230,9 @@ def point_flow(prev_gray: np.ndarray, gray: np.ndarray, pts: np.ndarray, *,
     p0 = (pts[ok] - (x0, y0)).astype(np.float32).reshape(-1, 1, 2)
     crit = (cv2.TERM_CRITERIA_EPS | cv2.TERM_CRITERIA_COUNT, 20, 0.03)
     p1, st1, _ = cv2.calcOpticalFlowPyrLK(prev_gray, gray, p0, None, winSize=(window, window),
-                                          maxLevel=levels, criteria=crit)
+                                          maxLevel=levels, criteria=crit, flags=_LK_FLAGS)
     pb, st2, _ = cv2.calcOpticalFlowPyrLK(gray, prev_gray, p1, None, winSize=(window, window),
-                                          maxLevel=levels, criteria=crit)
+                                          maxLevel=levels, criteria=crit, flags=_LK_FLAGS)
     fb = np.linalg.norm((pb - p0).reshape(-1, 2), axis=1)
     good = (st1.ravel() == 1) & (st2.ravel() == 1) & (fb < max_fb)
     d = (p1 - p0).reshape(-1, 2).astype(np.float64)
