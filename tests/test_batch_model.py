@@ -180,3 +180,36 @@ def test_a_worker_lost_under_the_active_memory_manager_loses_no_clip(clips, quic
                                                                   "b": ("done", "")}
     assert (out / "a.npz").is_file() and (out / "b.npz").is_file()
     assert not list(out.glob(".*.claim"))
+
+
+def test_a_model_file_written_over_in_place_after_a_worker_loaded_it_is_checked_again(
+        quick_model, tmp_path, monkeypatch):
+    """A worker keeps the models it loaded (their cores mapped, not read): a file written over
+    in place since (a ``cp`` of another build onto it, the same inode) made its later tasks,
+    this run's and a later run's with that hash, read the new bytes as the run's model,
+    silently (review53b: the default model's core read other values); now the file is loaded
+    and checked again, and refused naming it. A file replaced by a rename (as ``save``
+    writes) leaves the mapped one as it was: the loaded model is kept."""
+    from facetransfer.model import load_model
+
+    p = quick_model.save(tmp_path / "m.npz")
+    other = dataclasses.replace(load_model(p), provenance={"note": "another"}).save(
+        tmp_path / "other.npz")
+    ref = MR.model_ref(load_model(p))
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    first = MR.worker_model(ref)
+    inode, mtime = p.stat().st_ino, p.stat().st_mtime_ns
+    with open(p, "r+b") as fh:                       # cp other.npz m.npz: in place
+        fh.write(other.read_bytes())
+        fh.truncate()
+    os.utime(p, ns=(mtime + 10 ** 9, mtime + 10 ** 9))
+    assert p.stat().st_ino == inode
+    with pytest.raises(BatchError, match=r"m\.npz holds another model now \(sha256 .*"
+                                         r"replaced since the run began\?$"):
+        MR.worker_model(ref)
+
+    q = quick_model.save(tmp_path / "n.npz")
+    ref = MR.model_ref(load_model(q))
+    first = MR.worker_model(ref)
+    dataclasses.replace(load_model(q), provenance={"note": "another"}).save(q)  # a rename
+    assert MR.worker_model(ref) is first

@@ -81,7 +81,10 @@ def _sees(ref: ModelRef) -> tuple[bool, str]:
 
 def worker_model(model):
     """``model`` where it is a model (or None); the model of a :class:`ModelRef`, loaded once
-    by this process (the last :data:`KEPT` kept, by content hash).
+    by this process (the last :data:`KEPT` kept, by content hash), and again where its file
+    was written over in place since (:func:`facetransfer.model.file_written_over`: a ``cp``
+    onto it; its core is mapped, and a worker's later tasks, this run's or a later one's,
+    read the new bytes under the old hash, silently another model).
 
     Raises
     ------
@@ -91,8 +94,12 @@ def worker_model(model):
     """
     if not isinstance(model, ModelRef):
         return model
+    from ..model import file_written_over
+
     with _LOCK:
         found = _LOADED.get(model.content_hash)
+        if found is not None and file_written_over(found):
+            found = None              # its mapped core reads the new bytes: loaded and checked
         if found is None:
             found = _load(model)
             _LOADED[model.content_hash] = found
@@ -115,10 +122,12 @@ def _load(ref: ModelRef):
         model, why = _try_load(p, ref.content_hash)
         if model is not None:
             return model
+    unseen = not any(p.is_file() for p in paths)
     raise BatchError(f"the run's model {ref.path} cannot be loaded on the worker on "
-                     f"{socket.gethostname()}: {why} (every worker must see the model file "
-                     "at the client's path, e.g. on a shared file system: give --model "
-                     "/shared/M.npz)")
+                     f"{socket.gethostname()}: {why}" + (
+                         " (every worker must see the model file at the client's path, e.g. "
+                         "on a shared file system: give --model /shared/M.npz)" if unseen
+                         else ""))
 
 
 def _try_load(path: Path, content_hash: str):
