@@ -213,3 +213,28 @@ def test_a_model_file_written_over_in_place_after_a_worker_loaded_it_is_checked_
     first = MR.worker_model(ref)
     dataclasses.replace(load_model(q), provenance={"note": "another"}).save(q)  # a rename
     assert MR.worker_model(ref) is first
+
+
+def test_the_workers_drop_the_model_as_the_run_ends(clips, quick_model_path, tmp_path,
+                                                      monkeypatch):
+    """A user's long-lived cluster keeps nothing of a run that is over: each worker kept the
+    run's model (its mapped core's pages counted in its memory, 126 MB of an idle worker
+    after a 30-frame track of the default model) until two other models were used
+    (review53b); now the run's end asks them to drop it. Threads in this process: the
+    workers' kept models are this module's."""
+    from facetransfer.batch import batch_track, open_client
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.model import load_model
+
+    model = load_model(quick_model_path)
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    loads = []
+    real = MR._load
+    monkeypatch.setattr(MR, "_load", lambda r: loads.append(r) or real(r))
+    (va, pa, _) = clips["a"]
+    with open_client(workers=1, processes=False) as client:
+        res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
+                          client=client)
+    assert [(r.status, r.error) for r in res.rows] == [("done", "")]
+    assert [r.content_hash for r in loads] == [model.content_hash]   # it was loaded
+    assert model.content_hash not in MR._LOADED                     # and is no longer kept
