@@ -238,3 +238,37 @@ def test_the_workers_drop_the_model_as_the_run_ends(clips, quick_model_path, tmp
     assert [(r.status, r.error) for r in res.rows] == [("done", "")]
     assert [r.content_hash for r in loads] == [model.content_hash]   # it was loaded
     assert model.content_hash not in MR._LOADED                     # and is no longer kept
+
+
+def test_a_worker_whose_own_default_model_is_another_build_is_sent_the_model(
+        clips, quick_model_path, tmp_path, monkeypatch, caplog):
+    """The default model where a worker does not see the client's user cache: the worker's own
+    default model is another build (another version's, or the recipe's bits on another
+    machine). It was taken as seen: the model was not sent, and the worker's every clip failed,
+    "holds another model now ... replaced since the run began?" (review53b); now the model is
+    sent to it, with the warning, as to a worker with no file."""
+    from facetransfer import default_model
+    from facetransfer.batch import batch_track, open_client, run
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.model import load_model
+
+    model = load_model(quick_model_path)
+    (tmp_path / "cache").mkdir()
+    own = dataclasses.replace(model, provenance={"note": "another build"}).save(
+        tmp_path / "cache" / "default.npz")
+    monkeypatch.setattr(default_model, "default_model_path", lambda: own)
+    elsewhere = MR.ModelRef(str(tmp_path / "client-cache" / "default.npz"), model.content_hash,
+                            default=True)
+    monkeypatch.setattr(MR, "model_ref", lambda m: elsewhere)
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    (va, pa, _) = clips["a"]
+    with open_client(workers=1, processes=False) as client:
+        res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
+                          client=client)
+    assert [(r.status, r.error) for r in res.rows] == [("done", "")]
+    said = [r.getMessage() for r in caplog.records if r.name == run.__name__]
+    assert said and f"do not see the model file {elsewhere.path}: it is sent" in said[0]
+    # a worker that joins later, its own default another build, says whose model it is
+    with pytest.raises(BatchError, match=r"default\.npz holds another model now .*: this "
+                                         r"machine's own default model, another build"):
+        MR.worker_model(elsewhere)

@@ -67,9 +67,10 @@ def model_ref(model) -> ModelRef | None:
 
 
 def hosts_without(client, ref: ModelRef) -> list[str]:
-    """The hosts of the client's workers (those there now) on which the file of ``ref`` is not
-    there (nor, for the default model, a default model file of their own): a ``stat`` on each
-    (``client.run``); a worker that fails to answer (ending) is left out."""
+    """The hosts of the client's workers (those there now) that have no file of the model of
+    ``ref``: neither at its path nor, for the default model, in their own cache, with the
+    run's hash in its metadata (:func:`_stated_hash`); asked of each (``client.run``); a worker
+    that fails to answer (ending) is left out."""
     seen = client.run(_sees, ref, on_error="ignore")
     return sorted({host for ok, host in seen.values() if not ok})
 
@@ -95,11 +96,42 @@ def _release(content_hash: str) -> None:
 
 
 def _sees(ref: ModelRef) -> tuple[bool, str]:
-    """Run on a worker: whether the model file of ``ref`` is there, and the host's name."""
+    """Run on a worker: whether a file it would load (:func:`_paths`) says it holds the run's
+    model (its metadata's hash; the load checks the content), and the host's name. A machine's
+    own default model of another build than the client's (another version's, or the same
+    recipe's bits on another machine) was taken as seen: the model was not sent, and each of
+    that worker's clips failed, "holds another model now ... replaced since the run began?"
+    (review53b)."""
+    return any(_stated_hash(p) == ref.content_hash for p in _paths(ref)), \
+        socket.gethostname()
+
+
+def _paths(ref: ModelRef) -> list[Path]:
+    """The files a worker loads the model of ``ref`` from: its path, or for the default model
+    where this machine does not see that path, this machine's default model file."""
     from ..default_model import default_model_path
 
-    ok = Path(ref.path).is_file() or (ref.default and default_model_path().is_file())
-    return ok, socket.gethostname()
+    paths = [Path(ref.path)]
+    if ref.default and not paths[0].is_file():
+        paths.append(default_model_path())
+    return paths
+
+
+def _stated_hash(path: Path) -> str | None:
+    """The sha256 the metadata of the model file ``path`` states (read, not checked: the file's
+    content is checked as it is loaded), None where it is no readable model file."""
+    import json
+
+    import numpy as np
+
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["metadata"]))
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+    return meta.get("sha256") if isinstance(meta, dict) else None
 
 
 def worker_model(model):
@@ -135,14 +167,10 @@ def worker_model(model):
 def _load(ref: ModelRef):
     """The model of ``ref`` read from its path (or, for the default model where this machine
     does not see that path, from this machine's default model file); BatchError if not."""
-    from ..default_model import default_model_path
-
-    paths = [Path(ref.path)]
-    if ref.default and not paths[0].is_file():
-        paths.append(default_model_path())
+    paths = _paths(ref)
     why = ""
     for p in paths:
-        model, why = _try_load(p, ref.content_hash)
+        model, why = _try_load(p, ref.content_hash, own=p != Path(ref.path))
         if model is not None:
             return model
     unseen = not any(p.is_file() for p in paths)
@@ -153,9 +181,9 @@ def _load(ref: ModelRef):
                          else ""))
 
 
-def _try_load(path: Path, content_hash: str):
+def _try_load(path: Path, content_hash: str, *, own: bool = False):
     """``(model, "")`` of the model file ``path`` where it holds the model of ``content_hash``,
-    else ``(None, why)``."""
+    else ``(None, why)`` (``own``: ``path`` is this machine's own default model)."""
     from ..errors import ModelFileError
     from ..model import load_model
 
@@ -167,5 +195,7 @@ def _try_load(path: Path, content_hash: str):
         return None, str(exc)
     if model.content_hash != content_hash:
         return None, (f"{path} holds another model now (sha256 {model.content_hash[:12]}, the "
-                      f"run's {content_hash[:12]}): replaced since the run began?")
+                      f"run's {content_hash[:12]}): " + (
+                          "this machine's own default model, another build than the client's"
+                          if own else "replaced since the run began?"))
     return model, ""
