@@ -180,3 +180,95 @@ def test_a_worker_lost_under_the_active_memory_manager_loses_no_clip(clips, quic
                                                                   "b": ("done", "")}
     assert (out / "a.npz").is_file() and (out / "b.npz").is_file()
     assert not list(out.glob(".*.claim"))
+
+
+def test_a_model_file_written_over_in_place_after_a_worker_loaded_it_is_checked_again(
+        quick_model, tmp_path, monkeypatch):
+    """A worker keeps the models it loaded (their cores mapped, not read): a file written over
+    in place since (a ``cp`` of another build onto it, the same inode) made its later tasks,
+    this run's and a later run's with that hash, read the new bytes as the run's model,
+    silently (review53b: the default model's core read other values); now the file is loaded
+    and checked again, and refused naming it. A file replaced by a rename (as ``save``
+    writes) leaves the mapped one as it was: the loaded model is kept."""
+    from facetransfer.model import load_model
+
+    p = quick_model.save(tmp_path / "m.npz")
+    other = dataclasses.replace(load_model(p), provenance={"note": "another"}).save(
+        tmp_path / "other.npz")
+    ref = MR.model_ref(load_model(p))
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    first = MR.worker_model(ref)
+    inode, mtime = p.stat().st_ino, p.stat().st_mtime_ns
+    with open(p, "r+b") as fh:                       # cp other.npz m.npz: in place
+        fh.write(other.read_bytes())
+        fh.truncate()
+    os.utime(p, ns=(mtime + 10 ** 9, mtime + 10 ** 9))
+    assert p.stat().st_ino == inode
+    with pytest.raises(BatchError, match=r"m\.npz holds another model now \(sha256 .*"
+                                         r"replaced since the run began\?$"):
+        MR.worker_model(ref)
+
+    q = quick_model.save(tmp_path / "n.npz")
+    ref = MR.model_ref(load_model(q))
+    first = MR.worker_model(ref)
+    dataclasses.replace(load_model(q), provenance={"note": "another"}).save(q)  # a rename
+    assert MR.worker_model(ref) is first
+
+
+def test_the_workers_drop_the_model_as_the_run_ends(clips, quick_model_path, tmp_path,
+                                                      monkeypatch):
+    """A user's long-lived cluster keeps nothing of a run that is over: each worker kept the
+    run's model (its mapped core's pages counted in its memory, 126 MB of an idle worker
+    after a 30-frame track of the default model) until two other models were used
+    (review53b); now the run's end asks them to drop it. Threads in this process: the
+    workers' kept models are this module's."""
+    from facetransfer.batch import batch_track, open_client
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.model import load_model
+
+    model = load_model(quick_model_path)
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    loads = []
+    real = MR._load
+    monkeypatch.setattr(MR, "_load", lambda r: loads.append(r) or real(r))
+    (va, pa, _) = clips["a"]
+    with open_client(workers=1, processes=False) as client:
+        res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
+                          client=client)
+    assert [(r.status, r.error) for r in res.rows] == [("done", "")]
+    assert [r.content_hash for r in loads] == [model.content_hash]   # it was loaded
+    assert model.content_hash not in MR._LOADED                     # and is no longer kept
+
+
+def test_a_worker_whose_own_default_model_is_another_build_is_sent_the_model(
+        clips, quick_model_path, tmp_path, monkeypatch, caplog):
+    """The default model where a worker does not see the client's user cache: the worker's own
+    default model is another build (another version's, or the recipe's bits on another
+    machine). It was taken as seen: the model was not sent, and the worker's every clip failed,
+    "holds another model now ... replaced since the run began?" (review53b); now the model is
+    sent to it, with the warning, as to a worker with no file."""
+    from facetransfer import default_model
+    from facetransfer.batch import batch_track, open_client, run
+    from facetransfer.batch.manifest import ClipJob
+    from facetransfer.model import load_model
+
+    model = load_model(quick_model_path)
+    (tmp_path / "cache").mkdir()
+    own = dataclasses.replace(model, provenance={"note": "another build"}).save(
+        tmp_path / "cache" / "default.npz")
+    monkeypatch.setattr(default_model, "default_model_path", lambda: own)
+    elsewhere = MR.ModelRef(str(tmp_path / "client-cache" / "default.npz"), model.content_hash,
+                            default=True)
+    monkeypatch.setattr(MR, "model_ref", lambda m: elsewhere)
+    monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
+    (va, pa, _) = clips["a"]
+    with open_client(workers=1, processes=False) as client:
+        res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
+                          client=client)
+    assert [(r.status, r.error) for r in res.rows] == [("done", "")]
+    said = [r.getMessage() for r in caplog.records if r.name == run.__name__]
+    assert said and f"do not see the model file {elsewhere.path}: it is sent" in said[0]
+    # a worker that joins later, its own default another build, says whose model it is
+    with pytest.raises(BatchError, match=r"default\.npz holds another model now .*: this "
+                                         r"machine's own default model, another build"):
+        MR.worker_model(elsewhere)

@@ -574,6 +574,20 @@ def model_file(model: MultilinearModel) -> Path | None:
     return path
 
 
+def file_written_over(model: MultilinearModel) -> bool:
+    """Whether the file ``model`` was loaded from or saved to (:func:`model_file`) is at its
+    path still the same file (device, inode) with another size or modification time: written
+    over in place (a ``cp`` onto it), so that a core mapped from it (:func:`load_model`) reads
+    its new bytes. False for a file replaced by another (a rename onto it, as
+    :meth:`MultilinearModel.save` writes: the mapped one is kept as it was), removed, or
+    unchanged, and for a model with no file."""
+    path, ident = _FILES.get(model, (None, None))
+    if path is None:
+        return False
+    now = _file_identity(path)
+    return now is not None and now[:2] == ident[:2] and now != ident
+
+
 #: dtype kinds of the arrays of a model file (float: also integers; int: integers only)
 _ARRAY_KINDS = {"core": "fiu", "faces": "iu", "uvs": "fiu", "landmarks": "iu",
                 "vertex_subset": "iu", "imputed": "b"}

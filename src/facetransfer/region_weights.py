@@ -236,9 +236,10 @@ JAW_POINTS = tuple(range(0, 17)) + tuple(range(48, 68))
 def in_picture(track, points) -> np.ndarray:
     """``(F,) bool``: the frames whose tracked ``points`` (iBUG-68 numbers) all lie inside the
     frame (``landmarks2d`` within ``frame_size``); every frame where the track has no such
-    points or no frame size. A region textured from a frame that shows it cut by the frame's edge takes the
-    edge's pixels, stretched (walk53's ``edge.mp4``: an eye half out of the picture became the
-    eye region's reference for the frames turned that way, its lids streaked)."""
+    points or no frame size. A region textured from a frame that shows it cut by the frame's
+    edge takes the edge's pixels, stretched (walk53's ``edge.mp4``: an eye half out of the
+    picture became the eye region's reference for the frames turned that way, its lids
+    streaked)."""
     L = np.asarray(track.landmarks2d, np.float64)
     size = getattr(track, "frame_size", None)
     if L.ndim != 3 or L.shape[1] != 68 or size is None:

@@ -21,6 +21,7 @@ the shared file system, nor the default model in their own cache), is scattered 
 from __future__ import annotations
 
 import collections
+import logging
 import socket
 import threading
 from dataclasses import dataclass
@@ -28,10 +29,12 @@ from pathlib import Path
 
 from .manifest import BatchError
 
-__all__ = ["ModelRef", "model_ref", "worker_model", "hosts_without"]
+log = logging.getLogger(__name__)
+
+__all__ = ["ModelRef", "model_ref", "worker_model", "hosts_without", "release"]
 
 #: Models a worker process keeps loaded (the last ones used): a worker serving two runs of
-#: different models at once loads each once.
+#: different models at once loads each once. Each is dropped as its run ends (:func:`release`).
 KEPT = 2
 
 _LOADED: "collections.OrderedDict[str, object]" = collections.OrderedDict()
@@ -64,24 +67,79 @@ def model_ref(model) -> ModelRef | None:
 
 
 def hosts_without(client, ref: ModelRef) -> list[str]:
-    """The hosts of the client's workers (those there now) on which the file of ``ref`` is not
-    there (nor, for the default model, a default model file of their own): a ``stat`` on each
-    (``client.run``); a worker that fails to answer (ending) is left out."""
+    """The hosts of the client's workers (those there now) that have no file of the model of
+    ``ref``: neither at its path nor, for the default model, in their own cache, with the
+    run's hash in its metadata (:func:`_stated_hash`); asked of each (``client.run``); a worker
+    that fails to answer (ending) is left out."""
     seen = client.run(_sees, ref, on_error="ignore")
     return sorted({host for ok, host in seen.values() if not ok})
 
 
+def release(client, ref: ModelRef) -> None:
+    """At a run's end, the client's workers drop the model of ``ref`` from those they keep
+    (:func:`worker_model`): a user's long-lived cluster holds nothing of a run that is over
+    (before, each worker kept it until two other models were used: the core's pages it had
+    read stayed mapped, counted in its memory as Dask measures it, 126 MB of a worker idle
+    after a 30-frame track, review53b). A run of the same model still going on them loads it
+    again once (mapped, its sha256 not read again: 0.07 s). A worker that fails to answer is
+    left out; a client that cannot ask is logged."""
+    try:
+        client.run(_release, ref.content_hash, on_error="ignore")
+    except Exception as exc:  # noqa: BLE001 - the run is over; its summary is still written
+        log.debug("the workers were not asked to drop the model %s: %s", ref.path, exc)
+
+
+def _release(content_hash: str) -> None:
+    """Run on a worker: the model of ``content_hash`` no longer kept."""
+    with _LOCK:
+        _LOADED.pop(content_hash, None)
+
+
 def _sees(ref: ModelRef) -> tuple[bool, str]:
-    """Run on a worker: whether the model file of ``ref`` is there, and the host's name."""
+    """Run on a worker: whether a file it would load (:func:`_paths`) says it holds the run's
+    model (its metadata's hash; the load checks the content), and the host's name. A machine's
+    own default model of another build than the client's (another version's, or the same
+    recipe's bits on another machine) was taken as seen: the model was not sent, and each of
+    that worker's clips failed, "holds another model now ... replaced since the run began?"
+    (review53b)."""
+    return any(_stated_hash(p) == ref.content_hash for p in _paths(ref)), \
+        socket.gethostname()
+
+
+def _paths(ref: ModelRef) -> list[Path]:
+    """The files a worker loads the model of ``ref`` from: its path, or for the default model
+    where this machine does not see that path, this machine's default model file."""
     from ..default_model import default_model_path
 
-    ok = Path(ref.path).is_file() or (ref.default and default_model_path().is_file())
-    return ok, socket.gethostname()
+    paths = [Path(ref.path)]
+    if ref.default and not paths[0].is_file():
+        paths.append(default_model_path())
+    return paths
+
+
+def _stated_hash(path: Path) -> str | None:
+    """The sha256 the metadata of the model file ``path`` states (read, not checked: the file's
+    content is checked as it is loaded), None where it is no readable model file."""
+    import json
+
+    import numpy as np
+
+    if not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["metadata"]))
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+    return meta.get("sha256") if isinstance(meta, dict) else None
 
 
 def worker_model(model):
     """``model`` where it is a model (or None); the model of a :class:`ModelRef`, loaded once
-    by this process (the last :data:`KEPT` kept, by content hash).
+    by this process (the last :data:`KEPT` kept, by content hash), and again where its file
+    was written over in place since (:func:`facetransfer.model.file_written_over`: a ``cp``
+    onto it; its core is mapped, and a worker's later tasks, this run's or a later one's,
+    read the new bytes under the old hash, silently another model).
 
     Raises
     ------
@@ -91,8 +149,12 @@ def worker_model(model):
     """
     if not isinstance(model, ModelRef):
         return model
+    from ..model import file_written_over
+
     with _LOCK:
         found = _LOADED.get(model.content_hash)
+        if found is not None and file_written_over(found):
+            found = None              # its mapped core reads the new bytes: loaded and checked
         if found is None:
             found = _load(model)
             _LOADED[model.content_hash] = found
@@ -105,25 +167,23 @@ def worker_model(model):
 def _load(ref: ModelRef):
     """The model of ``ref`` read from its path (or, for the default model where this machine
     does not see that path, from this machine's default model file); BatchError if not."""
-    from ..default_model import default_model_path
-
-    paths = [Path(ref.path)]
-    if ref.default and not paths[0].is_file():
-        paths.append(default_model_path())
+    paths = _paths(ref)
     why = ""
     for p in paths:
-        model, why = _try_load(p, ref.content_hash)
+        model, why = _try_load(p, ref.content_hash, own=p != Path(ref.path))
         if model is not None:
             return model
+    unseen = not any(p.is_file() for p in paths)
     raise BatchError(f"the run's model {ref.path} cannot be loaded on the worker on "
-                     f"{socket.gethostname()}: {why} (every worker must see the model file "
-                     "at the client's path, e.g. on a shared file system: give --model "
-                     "/shared/M.npz)")
+                     f"{socket.gethostname()}: {why}" + (
+                         " (every worker must see the model file at the client's path, e.g. "
+                         "on a shared file system: give --model /shared/M.npz)" if unseen
+                         else ""))
 
 
-def _try_load(path: Path, content_hash: str):
+def _try_load(path: Path, content_hash: str, *, own: bool = False):
     """``(model, "")`` of the model file ``path`` where it holds the model of ``content_hash``,
-    else ``(None, why)``."""
+    else ``(None, why)`` (``own``: ``path`` is this machine's own default model)."""
     from ..errors import ModelFileError
     from ..model import load_model
 
@@ -135,5 +195,7 @@ def _try_load(path: Path, content_hash: str):
         return None, str(exc)
     if model.content_hash != content_hash:
         return None, (f"{path} holds another model now (sha256 {model.content_hash[:12]}, the "
-                      f"run's {content_hash[:12]}): replaced since the run began?")
+                      f"run's {content_hash[:12]}): " + (
+                          "this machine's own default model, another build than the client's"
+                          if own else "replaced since the run began?"))
     return model, ""

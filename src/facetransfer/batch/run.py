@@ -160,6 +160,7 @@ class _Collector:
         self.what: dict = {}       # future -> (kind, job)
         self.alive: list = []      # every future submitted (cancelled on interrupt)
         self.last_write = time.monotonic()
+        self.model_ref = None      # the ModelRef the tasks receive (released at the run's end)
 
     def add(self, future, kind: str, job) -> None:
         self.what[future] = (kind, job)
@@ -243,6 +244,10 @@ class _Collector:
         except KeyboardInterrupt:
             self._interrupted()
             raise
+        if self.model_ref is not None:
+            from .model_ref import release
+
+            release(self.client, self.model_ref)
         # the claims its jobs left for a retry of theirs (.ownership.claimed's owner): none
         # runs now
         O.remove_stale_claims(self.summary.parent)
@@ -282,6 +287,9 @@ def _start(client, jobs, out_dir: Path, done: dict, progress: Progress | None, m
     todo = [j for j in jobs if j.name not in done]
     with col.submitting():
         mf = _model_future(client, model) if todo else None
+    from .model_ref import ModelRef
+
+    col.model_ref = mf if isinstance(mf, ModelRef) else None
     return col, todo, mf
 
 
