@@ -4,10 +4,16 @@ The machine's speed drifts by 20-35 % within an hour (Face Landmarker alone on t
 frames took 2.2 to 3.1 s in one session), so a change to the transfer's speed is measured
 against the revision before it in the same run: each round runs the peer (Face Landmarker in
 VIDEO mode with blendshapes on the target's 300 frames, a fresh process), then the base's
-``facetransfer transfer``, then this tree's, on issue 13's 10-second pair (``driving_d9`` with
+``facetransfer transfer`` and this tree's, the base first in odd rounds and second in even
+ones (a run after another may find the machine otherwise: always second, the new tree took
+that alone), on issue 13's 10-second pair (``driving_d9`` with
 the expressions of ``driving_d6``, default model, H.264 CRF 18). Wall seconds, and the CPU
 seconds of each command with its forked tracker and its ffmpeg. Both trees' bytecode is
 compiled first and each command runs once before the rounds (numba's caches, the page cache).
+Each round's ``cpu_diff`` is this tree's CPU seconds less the base's: the medians of those
+pairs spread less than the difference of the two medians. ``--render-cache off`` times both
+without the render cache (``FACETRANSFER_RENDER_CACHE=off``: one encoder, no parts); by
+default it is on, as a user's command runs.
 With ``--hd`` the pair is first made 1080p (:data:`HD_FILTER`: footage as a camera would give
 it, the face ~330 pixels tall) and the peer runs on that target.
 
@@ -130,28 +136,35 @@ def main(argv=None) -> int:
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--out", default="out/benchmarks")
     ap.add_argument("--hd", action="store_true", help="the pair made 1080p (HD_FILTER)")
+    ap.add_argument("--render-cache", choices=("on", "off"), default="on",
+                    help="FACETRANSFER_RENDER_CACHE for both commands (default on)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     global _VIDEOS
+    os.environ["FACETRANSFER_RENDER_CACHE"] = args.render_cache
     if args.hd:
         _VIDEOS = hd_pair(out / "hd")
-    trees = {"base": extract_src(args.base_rev, "bench_e2e_ab_"), "new": Path(__file__).resolve().parents[1] / "src"}
+    trees = {"base": extract_src(args.base_rev, "bench_e2e_ab_"),
+             "new": Path(__file__).resolve().parents[1] / "src"}
     for src in trees.values():
         subprocess.run([sys.executable, "-m", "compileall", "-q", str(src)], check=True)
         command(src, out / "ab.mp4")                       # warm: caches, page cache
     rows = []
     for r in range(args.rounds):
         row = {"peer": round(peer(), 2)}
-        for name, src in trees.items():
-            wall, cpu = command(src, out / "ab.mp4")
-            row[name], row[f"{name}_cpu"] = round(wall, 2), round(cpu, 1)
+        names = ("base", "new") if r % 2 == 0 else ("new", "base")
+        for name in names:
+            wall, cpu = command(trees[name], out / "ab.mp4")
+            row[name], row[f"{name}_cpu"] = round(wall, 2), round(cpu, 2)
+        row["first"], row["cpu_diff"] = names[0], round(row["new_cpu"] - row["base_cpu"], 2)
         print(row, flush=True)
         rows.append(row)
-    med = {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
+    med = {k: float(np.median([r[k] for r in rows])) for k in rows[0] if k != "first"}
     print("medians: " + ", ".join(f"{k} {v:.2f}" for k, v in med.items()))
     (out / "transfer_e2e_ab.json").write_text(json.dumps(
-        {"base_rev": args.base_rev, "target": str(_videos()[0]), "source": str(_videos()[1]),
+        {"base_rev": args.base_rev, "render_cache": args.render_cache,
+         "target": str(_videos()[0]), "source": str(_videos()[1]),
          "rounds": rows, "medians": med}, indent=1))
     plot(rows, out / "transfer_e2e_ab.png")
     (out / "ab.mp4").unlink(missing_ok=True)
