@@ -113,6 +113,10 @@ def register(sub) -> None:
     p.add_argument("--from-track", dest="from_track",
                    help="draw --overlay from an existing track file instead of tracking "
                    "(with --max-frames N: the clip's and the track's first N frames)")
+    p.add_argument("--occluders", action=argparse.BooleanOptionalAction, default=False,
+                   help="test each frame for a hand, a microphone or glasses over the mouth or "
+                   "the eyes, and bridge that region's activations over the frames it is "
+                   "covered (facetransfer.track.occlusion; the clip is read once more)")
     p.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=False,
                    help="replace existing outputs (an output is never one of the inputs)")
     p.set_defaults(func=run)
@@ -269,6 +273,8 @@ def _track_and_save(args, model, settings, tracker: str):
         track, model = _capture(args, model, settings.capture, progress, bars)
     else:
         track = _track_klt(args, model, settings.klt, progress, bars)
+    if getattr(args, "occluders", False):
+        track = _held_occluded(args, track, model)
     track = track.with_source_facts(args.video)   # the clip's numbering, before it can move
     track.save(args.out, overwrite=args.overwrite)
     partial_path(args.out).unlink(missing_ok=True)   # the progress of the run, if any
@@ -283,6 +289,20 @@ def _track_and_save(args, model, settings, tracker: str):
         print(f"note: the track has no ARKit blendshape activations: "
               f"{arkit_shortfall(model) or 'the model gives none'}")
     return track, model
+
+
+def _held_occluded(args, track, model):
+    """``--occluders``: the track with its covered regions' activations bridged, and a note of
+    the frames each region was found covered in."""
+    from ..file_facts import lost_runs
+    from ..track.occlusion import REGIONS, hold_occluded_video
+
+    track = hold_occluded_video(args.video, track, model)
+    said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
+            for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]
+    print("note: " + ("covered: " + "; ".join(said) + " (its activations bridged there)"
+                      if said else "no mouth or eye found covered"))
+    return track
 
 
 def _say_lost(track) -> None:
