@@ -273,8 +273,9 @@ def _track_and_save(args, model, settings, tracker: str):
         track, model = _capture(args, model, settings.capture, progress, bars)
     else:
         track = _track_klt(args, model, settings.klt, progress, bars)
+    covered = None
     if getattr(args, "occluders", False):
-        track = _held_occluded(args, track, model)
+        track, covered = _held_occluded(args, track, model)
     track = track.with_source_facts(args.video)   # the clip's numbering, before it can move
     track.save(args.out, overwrite=args.overwrite)
     partial_path(args.out).unlink(missing_ok=True)   # the progress of the run, if any
@@ -283,6 +284,8 @@ def _track_and_save(args, model, settings, tracker: str):
           f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
           + (f", {n_lost} lost" if n_lost else ""))
     _say_lost(track)
+    if covered is not None:
+        print(f"note: {covered}")
     if track.blendshapes is None:
         from ..arkit import arkit_shortfall
 
@@ -292,17 +295,16 @@ def _track_and_save(args, model, settings, tracker: str):
 
 
 def _held_occluded(args, track, model):
-    """``--occluders``: the track with its covered regions' activations bridged, and a note of
-    the frames each region was found covered in."""
+    """``--occluders``: the track with its covered regions' activations bridged, and the note
+    of the frames each region was found covered in."""
     from ..file_facts import lost_runs
     from ..track.occlusion import REGIONS, hold_occluded_video
 
     track = hold_occluded_video(args.video, track, model)
     said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
             for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]
-    print("note: " + ("covered: " + "; ".join(said) + " (its activations bridged there)"
-                      if said else "no mouth or eye found covered"))
-    return track
+    return track, ("covered: " + "; ".join(said) + " (the activations of each bridged there)"
+                   if said else "no mouth or eye found covered")
 
 
 def _say_lost(track) -> None:
