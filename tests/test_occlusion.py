@@ -162,3 +162,18 @@ def test_a_clips_covered_mouth_is_found_from_its_file_and_the_tracks_points(
     assert not held.occluded[:, 1:].any()
     jaw = ARKIT_NAMES.index("jawOpen")
     assert not np.allclose(held.blendshapes[12:20, jaw], a[12:20, jaw])
+
+
+def test_a_tracks_covered_frames_follow_it_when_cut_or_retimed(arkit_model, make_arkit_track):
+    from dataclasses import replace
+
+    from facetransfer.track.project import take_frames
+    from facetransfer.transfer import TimeMap, resample_track
+
+    track, _, _ = make_arkit_track(arkit_model, n_frames=10)
+    cov = np.zeros((10, 3), bool)
+    cov[4, 0] = True
+    track = replace(track, occluded=cov)
+    assert np.array_equal(take_frames(track, np.arange(3, 6)).occluded[:, 0], [0, 1, 0])
+    half = resample_track(track, TimeMap(np.array([3.0, 3.5, 4.0, 5.0, 6.0]), "trim"))
+    assert half.occluded[:, 0].tolist() == [False, True, True, False, False]
