@@ -2,12 +2,20 @@
 covers its mouth or bars its eyes, not where it talks or blinks; the covered region's
 activations bridged over those frames, the others kept; the track file records them."""
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 
-from facetransfer.arkit import ARKIT_NAMES
-from facetransfer.track import occlusion as oc
-from facetransfer.track.result import Track
+sys.path.insert(0, str(Path(__file__).parent))
+
+import test_track_cli  # noqa: E402
+from facetransfer.arkit import ARKIT_NAMES  # noqa: E402
+from facetransfer.track import occlusion as oc  # noqa: E402
+from facetransfer.track.result import Track  # noqa: E402
+
+small_clip = test_track_cli.small_clip     # a fixture: a short clip and its first points
 
 SKIN, LIPS, BROW = (205, 160, 135), (175, 70, 80), (70, 50, 40)
 #: A hand's colour: the skin's, in its own shade (a box of exactly the skin's colour scores
@@ -177,3 +185,41 @@ def test_a_tracks_covered_frames_follow_it_when_cut_or_retimed(arkit_model, make
     assert np.array_equal(take_frames(track, np.arange(3, 6)).occluded[:, 0], [0, 1, 0])
     half = resample_track(track, TimeMap(np.array([3.0, 3.5, 4.0, 5.0, 6.0]), "trim"))
     assert half.occluded[:, 0].tolist() == [False, True, True, False, False]
+
+
+def test_track_occluders_names_the_covered_frames_and_saves_them(small_clip, quick_model,
+                                                                 quick_model_path, monkeypatch,
+                                                                 tmp_path, capsys):
+    """``track --occluders`` runs the test on the clip it tracked, writes the held track and
+    names the covered regions' frames after the track's line; without it, nothing is tested."""
+    import dataclasses
+
+    import facetransfer.cli.track as cli_track
+    import facetransfer.track.occlusion as occlusion
+    from conftest import still_track
+    from test_transfer_cli import run
+
+    video, pts, _ = small_clip
+    found = still_track(quick_model, 8)
+    monkeypatch.setattr(cli_track, "_track_klt", lambda *a, **k: found)
+    seen = []
+
+    def held(v, track, model):
+        seen.append(str(v))
+        cov = np.zeros((track.n_frames, 3), bool)
+        cov[2:5, 0] = cov[6:, 2] = True
+        return dataclasses.replace(track, occluded=cov)
+
+    monkeypatch.setattr(occlusion, "hold_occluded_video", held)
+    code, out, err = run(["track", video, "--model", quick_model_path, "--init", pts,
+                          "--out", tmp_path / "t.npz", "--no-progress", "--occluders"], capsys)
+    assert code == 0, err
+    assert seen == [str(video)]
+    assert out.strip().splitlines()[1] == (
+        "note: covered: mouth in frames 2-4; left eye in frames 6-7 (the activations of each "
+        "bridged there)"), out
+    assert Track.load(tmp_path / "t.npz").occluded[:, 0].tolist() == [0, 0, 1, 1, 1, 0, 0, 0]
+    code, out, err = run(["track", video, "--model", quick_model_path, "--init", pts,
+                          "--out", tmp_path / "u.npz", "--no-progress"], capsys)
+    assert code == 0 and "covered" not in out and len(seen) == 1, out
+    assert Track.load(tmp_path / "u.npz").occluded is None
