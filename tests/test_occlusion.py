@@ -223,3 +223,30 @@ def test_track_occluders_names_the_covered_frames_and_saves_them(small_clip, qui
                           "--out", tmp_path / "u.npz", "--no-progress"], capsys)
     assert code == 0 and "covered" not in out and len(seen) == 1, out
     assert Track.load(tmp_path / "u.npz").occluded is None
+
+
+def test_a_transfer_keeps_the_targets_pixels_over_its_covered_regions(arkit_model,
+                                                                     make_arkit_track):
+    from dataclasses import replace
+
+    from facetransfer.rewrite import RewriteFrame
+    from facetransfer.rewrite_clip import _keep_covered
+
+    p = _points(0.5, 1.0)
+    assert oc.covered_alpha(p, np.zeros(3, bool), (0, 0, 200, 200)) is None
+    track, _, _ = make_arkit_track(arkit_model, n_frames=2)
+    cov = np.zeros((2, 3), bool)
+    cov[1, 0] = True                                              # frame 1's mouth
+    track = replace(track, frame_size=(200, 200), detections2d=np.stack([p, p]), occluded=cov)
+    frame = np.full((200, 200, 3), 77, np.uint8)
+    box = (20, 30, 180, 190)                                      # x0, y0, x1, y1
+    res = RewriteFrame(np.zeros((160, 160, 3), np.uint8), np.zeros((160, 160, 3), np.uint8),
+                       np.ones((160, 160), bool), np.zeros((160, 160), bool),
+                       np.ones((160, 160), np.float32))
+    assert _keep_covered(res, frame, box, track, 0) is res       # nothing covered there
+    kept = _keep_covered(res, frame, box, track, 1)
+    mouth, eye = (100 - 20, 150 - 30), (65 - 20, 82 - 30)          # (x, y) in the box
+    assert kept.image[mouth[1], mouth[0]].tolist() == [77, 77, 77]
+    assert kept.matte[mouth[1], mouth[0]] == 0.0
+    assert kept.image[eye[1], eye[0]].tolist() == [0, 0, 0] and kept.matte[eye[1], eye[0]] == 1
+    assert _keep_covered(res, frame, box, replace(track, occluded=None), 1) is res

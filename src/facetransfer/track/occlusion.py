@@ -379,3 +379,43 @@ def hold_occluded_video(video, track, model):
 
     occ = clip_occlusion(iter_frames(video, stop=track.n_frames), track_points(track))
     return hold_occluded(track, occ, model)
+
+
+def covered_alpha(points: np.ndarray, covered: np.ndarray, box: tuple[int, int, int, int]
+                  ) -> np.ndarray | None:
+    """Where a frame's covered regions lie, as an alpha on a box of the frame: a transfer keeps
+    the target's own pixels there (the occluder stays in front of the new face).
+
+    Parameters
+    ----------
+    points : (68, 2) float64
+        The frame's iBUG-68 points in pixels (:func:`track_points`).
+    covered : (3,) bool
+        The frame's row of ``Track.occluded``.
+    box : (x0, y0, x1, y1) int
+        The box of the frame the alpha is of.
+
+    Returns
+    -------
+    (y1 - y0, x1 - x0) float32 in [0, 1] or None
+        1 over each covered region's sample points' hull grown by a fifth of the eyes'
+        distance, feathered by a twentieth; None where no region is covered or the points are
+        unknown.
+    """
+    import cv2
+
+    points = np.asarray(points, dtype=np.float64)
+    if not np.any(covered) or not np.isfinite(points).all():
+        return None
+    x0, y0, x1, y1 = (int(v) for v in box)
+    eyes = float(np.linalg.norm(points[42:48].mean(0) - points[36:42].mean(0)))
+    mask = np.zeros((y1 - y0, x1 - x0), np.uint8)
+    for r, pts in enumerate(region_points(points)):
+        if covered[r]:
+            hull = cv2.convexHull(np.round(pts - (x0, y0)).astype(np.int32))
+            cv2.fillConvexPoly(mask, hull, 1)
+    grow = max(1, int(round(eyes * 0.2)))
+    mask = cv2.dilate(mask, cv2.getStructuringElement(cv2.MORPH_ELLIPSE,
+                                                      (2 * grow + 1, 2 * grow + 1)))
+    alpha = cv2.GaussianBlur(mask.astype(np.float32), (0, 0), max(1.0, eyes / 20.0))
+    return alpha if alpha.any() else None
