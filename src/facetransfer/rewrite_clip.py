@@ -489,9 +489,11 @@ def _keep_covered(res: RewriteFrame, frame: np.ndarray, box, target_track, i: in
     :func:`facetransfer.track.occlusion.covered_alpha`); as it is for a track not tested."""
     if target_track.occluded is None or not target_track.occluded[i].any():
         return res
-    from .track.occlusion import covered_alpha, track_points
+    from .track.occlusion import covered_alpha
 
-    alpha = covered_alpha(track_points(target_track)[i], target_track.occluded[i], box)
+    points = target_track.detections2d if target_track.detections2d is not None \
+        else target_track.landmarks2d                             # as track_points, one frame
+    alpha = covered_alpha(points[i], target_track.occluded[i], box)
     if alpha is None:
         return res
     x0, y0, x1, y1 = box
