@@ -1,4 +1,4 @@
-"""Occluded face regions: a hand over the mouth, a microphone at the chin, dark glasses.
+"""Occluded face regions: a hand over the mouth, dark glasses or bars over the eyes.
 
 Beyond the paper. Face Landmarker places a hidden mouth or hidden eyes by the face's shape and
 scores them as if it saw them (a box over the mouth reads as a pucker, black bars over the eyes
@@ -19,8 +19,16 @@ more than a smile). A region's score is the fraction of its points that differ; 
 occluded where the score is at least :data:`OCCLUDED_SCORE` for at least :data:`MIN_RUN`
 frames in a row.
 
-The clip's median is its own reference: a clip covered in more than half its frames has the
+The clip's median is its own reference: a clip covered in half its frames or more has the
 covered look as its median and is not flagged (said in README).
+
+**What follows.** :func:`hold_occluded` (``track --occluders``) bridges a covered region's
+ARKit activations over its frames, as the gaze is bridged over a blink
+(:mod:`facetransfer.track.gaze`), lowers the confidence there and records the frames
+(``Track.occluded``); a transfer onto a target whose track records them keeps the target's
+own pixels over the covered regions (:func:`covered_alpha`,
+:func:`facetransfer.rewrite_clip._keep_covered`). Figures: BENCHMARKS.md, "Fifty-third
+session (helper occl53)".
 
 References
 ----------
@@ -30,10 +38,12 @@ Vlasic et al. 2005 §5 (the tracker this guards); the iBUG-68 landmark layout (S
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import cv2
 import numpy as np
+
+from ..arkit import activation_basis
 
 #: The regions tested, in the columns' order.
 REGIONS = ("mouth", "right_eye", "left_eye")
@@ -319,9 +329,6 @@ def hold_occluded(track, occlusion: Occlusion, model):
         ``blendshapes``, the expression weights and ``landmarks2d`` changed in the covered
         frames, ``confidence`` times :data:`COVERED_CONFIDENCE` there, ``occluded`` recorded.
     """
-    from dataclasses import replace
-    from ..arkit import activation_basis
-
     cov = np.asarray(occlusion.occluded, dtype=bool)
     if cov.shape != (track.n_frames, len(REGIONS)):
         raise ValueError(f"occlusion is {cov.shape}, the track has {track.n_frames} frames")
@@ -402,8 +409,6 @@ def covered_alpha(points: np.ndarray, covered: np.ndarray, box: tuple[int, int, 
         distance, feathered by a twentieth; None where no region is covered or the points are
         unknown.
     """
-    import cv2
-
     points = np.asarray(points, dtype=np.float64)
     if not np.any(covered) or not np.isfinite(points).all():
         return None
