@@ -208,7 +208,8 @@ def test_track_occluders_names_the_covered_frames_and_saves_them(small_clip, qui
         seen.append(str(v))
         cov = np.zeros((track.n_frames, 3), bool)
         cov[2:5, 0] = cov[6:, 2] = True
-        return dataclasses.replace(track, occluded=cov)
+        return dataclasses.replace(track, occluded=cov, blendshape_names=ARKIT_NAMES,
+                                   blendshapes=np.zeros((track.n_frames, 52), np.float32))
 
     monkeypatch.setattr(occlusion, "hold_occluded_video", held)
     code, out, err = run(["track", video, "--model", quick_model_path, "--init", pts,

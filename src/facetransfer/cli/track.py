@@ -303,8 +303,10 @@ def _held_occluded(args, track, model):
     track = hold_occluded_video(args.video, track, model)
     said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
             for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]
-    return track, ("covered: " + "; ".join(said) + " (the activations of each bridged there)"
-                   if said else "no mouth or eye found covered")
+    held = ("the activations of each bridged there" if track.blendshapes is not None else
+            "recorded: the model has no ARKit activations to bridge")
+    return track, (f"covered: {'; '.join(said)} ({held})" if said
+                   else "no mouth or eye found covered")
 
 
 def _say_lost(track) -> None:
