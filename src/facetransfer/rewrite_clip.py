@@ -479,7 +479,28 @@ class _ClipRenderer:
             x0, y0, x1, y1 = box
             res = dataclasses.replace(res, image=monochrome_changes(res.image,
                                                                     frame[y0:y1, x0:x1]))
-        return box, res
+        return box, _keep_covered(res, frame, box, self.target_track, i)
+
+
+def _keep_covered(res: RewriteFrame, frame: np.ndarray, box, target_track, i: int
+                  ) -> RewriteFrame:
+    """``res`` (a rewrite on ``box``) with the target's own pixels kept over the regions its
+    track found covered in frame ``i`` (a hand, a microphone, glasses: ``track --occluders``,
+    :func:`facetransfer.track.occlusion.covered_alpha`); as it is for a track not tested."""
+    if target_track.occluded is None or not target_track.occluded[i].any():
+        return res
+    from .track.occlusion import covered_alpha
+
+    points = target_track.detections2d if target_track.detections2d is not None \
+        else target_track.landmarks2d                             # as track_points, one frame
+    alpha = covered_alpha(points[i], target_track.occluded[i], box)
+    if alpha is None:
+        return res
+    x0, y0, x1, y1 = box
+    a = alpha[..., None]
+    image = res.image * (1.0 - a) + frame[y0:y1, x0:x1] * a
+    matte = None if res.matte is None else (res.matte * (1.0 - alpha)).astype(np.float32)
+    return dataclasses.replace(res, image=np.rint(image).astype(np.uint8), matte=matte)
 
 
 def _render_in_threads(one, todo: range, workers: int, progress):

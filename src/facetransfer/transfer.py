@@ -213,6 +213,8 @@ def resample_track(track, tmap: TimeMap):
         # resampled mouth is textured from, video_transfer's ``mouth_index``)
         detections2d=(None if track.detections2d is None else
                       track.detections2d[np.minimum(tmap.nearest, track.n_frames - 1)]),
+        occluded=(None if track.occluded is None else       # covered where either side is
+                  track.occluded[i0] | ((frac > 1e-9)[:, None] & track.occluded[i1])),
         info={},
     )
 

@@ -113,6 +113,10 @@ def register(sub) -> None:
     p.add_argument("--from-track", dest="from_track",
                    help="draw --overlay from an existing track file instead of tracking "
                    "(with --max-frames N: the clip's and the track's first N frames)")
+    p.add_argument("--occluders", action=argparse.BooleanOptionalAction, default=False,
+                   help="test each frame for a hand, a microphone or glasses over the mouth or "
+                   "the eyes, and bridge that region's activations over the frames it is "
+                   "covered (facetransfer.track.occlusion; the clip is read once more)")
     p.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=False,
                    help="replace existing outputs (an output is never one of the inputs)")
     p.set_defaults(func=run)
@@ -269,6 +273,9 @@ def _track_and_save(args, model, settings, tracker: str):
         track, model = _capture(args, model, settings.capture, progress, bars)
     else:
         track = _track_klt(args, model, settings.klt, progress, bars)
+    covered = None
+    if getattr(args, "occluders", False):
+        track, covered = _held_occluded(args, track, model)
     track = track.with_source_facts(args.video)   # the clip's numbering, before it can move
     track.save(args.out, overwrite=args.overwrite)
     partial_path(args.out).unlink(missing_ok=True)   # the progress of the run, if any
@@ -277,12 +284,29 @@ def _track_and_save(args, model, settings, tracker: str):
           f"{track.frame_size[1]}, mean confidence {track.confidence.mean():.2f}"
           + (f", {n_lost} lost" if n_lost else ""))
     _say_lost(track)
+    if covered is not None:
+        print(f"note: {covered}")
     if track.blendshapes is None:
         from ..arkit import arkit_shortfall
 
         print(f"note: the track has no ARKit blendshape activations: "
               f"{arkit_shortfall(model) or 'the model gives none'}")
     return track, model
+
+
+def _held_occluded(args, track, model):
+    """``--occluders``: the track with its covered regions' activations bridged, and the note
+    of the frames each region was found covered in."""
+    from ..file_facts import lost_runs
+    from ..track.occlusion import REGIONS, hold_occluded_video
+
+    track = hold_occluded_video(args.video, track, model)
+    said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
+            for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]
+    held = ("the activations of each bridged there" if track.blendshapes is not None else
+            "recorded: the model has no ARKit activations to bridge")
+    return track, (f"covered: {'; '.join(said)} ({held})" if said
+                   else "no mouth or eye found covered")
 
 
 def _say_lost(track) -> None:

@@ -22,7 +22,8 @@ forked process beside another), :mod:`.cache` (the track cache), :mod:`.presets`
 :mod:`.settings` (the commands' tracker options), :mod:`.landmarks` (MediaPipe-478 to iBUG-68;
 :mod:`.calibration`, that correspondence calibrated against points of known truth),
 :mod:`.aspect` (the frames as the tracker sees them), :mod:`.project` (a track's landmarks
-and frames), :mod:`.smooth`, :mod:`.overlay` (drawing the fit on frames).
+and frames), :mod:`.smooth`, :mod:`.overlay` (drawing the fit on frames), :mod:`.occlusion`
+(a hand, a microphone or glasses over the mouth or the eyes: ``track --occluders``).
 
 Typical use::
 

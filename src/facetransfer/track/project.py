@@ -31,7 +31,8 @@ def take_frames(track, idx: np.ndarray):
         landmarks2d=track.landmarks2d[idx], confidence=track.confidence[idx],
         lost=track.lost[idx], info={"file": track.info["file"]} if track.info.get("file") else {},
         blendshapes=None if track.blendshapes is None else track.blendshapes[idx],
-        detections2d=None if track.detections2d is None else track.detections2d[idx])
+        detections2d=None if track.detections2d is None else track.detections2d[idx],
+        occluded=None if track.occluded is None else track.occluded[idx])
 
 
 def nearest_tracked(lost) -> np.ndarray:

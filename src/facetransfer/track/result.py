@@ -29,6 +29,7 @@ key                     shape / dtype        meaning
 ``shot_starts``         (S,) int64           first frames of the later shots (absent: one shot)
 ``source_first_frame``  () int64             the clip's first frame number (absent: not recorded)
 ``source_timecode``     () str               the clip's start timecode ("" none; with the above)
+``occluded``            (F, 3) bool          mouth, right eye, left eye covered (absent: not tested)
 ``format_version``      () int64             version of this layout
 ======================  ===================  =======================================================
 """
@@ -136,6 +137,10 @@ class Track:
         (:func:`facetransfer.io.source_facts.read_source_facts`), what the exports number
         and time the frames by; None: not recorded (a track made before they were, or not
         from a clip: an export then reads them from ``source`` if it is still there).
+    occluded : (F, 3) bool or None
+        Per frame, whether the mouth, the right eye and the left eye were found covered
+        (:mod:`facetransfer.track.occlusion`: their activations bridged there); None: not
+        tested.
     """
 
     fps: float
@@ -157,6 +162,7 @@ class Track:
     pixel_aspect: float = 1.0
     shot_starts: tuple[int, ...] = ()
     source_facts: SourceFacts | None = None
+    occluded: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         R = np.asarray(self.rotation, dtype=np.float64)
@@ -176,6 +182,11 @@ class Track:
             if np.isinf(D).any():
                 raise TrackError("track detections2d must be finite or NaN (no face)")
             object.__setattr__(self, "detections2d", D)
+        if self.occluded is not None:
+            C = np.asarray(self.occluded, dtype=bool)
+            if C.shape != (F, 3):
+                raise TrackError(f"track occluded must have shape {(F, 3)}, got {C.shape}")
+            object.__setattr__(self, "occluded", C)
 
     def _check_pose(self, R: np.ndarray, F: int) -> None:
         """The per-frame pose, points, confidence and lost flags, checked and stored as arrays
@@ -369,6 +380,8 @@ class Track:
             arrays["blendshape_names"] = np.array(self.blendshape_names)
         if self.detections2d is not None:
             arrays["detections2d"] = self.detections2d
+        if self.occluded is not None:
+            arrays["occluded"] = self.occluded
         if self.shot_starts:
             arrays["shot_starts"] = np.asarray(self.shot_starts, np.int64)
         if self.source_facts is not None:
@@ -429,7 +442,8 @@ class Track:
                        pixel_aspect=(scalar(data, "pixel_aspect", float, p, "track file",
                                             TrackError) if "pixel_aspect" in data else 1.0),
                        shot_starts=tuple(np.asarray(data.get("shot_starts", ())).ravel()),
-                       source_facts=_source_facts(data, p), info={"file": str(p)})
+                       source_facts=_source_facts(data, p), info={"file": str(p)},
+                       occluded=data.get("occluded"))
         except (TrackError, ValueError, TypeError, OverflowError) as exc:
             if str(p) in str(exc):   # said of the file already: not twice
                 raise TrackError(str(exc)) from None
