@@ -683,3 +683,44 @@ def test_the_page_and_the_puppet_show_the_same_colours(arkit_model, pages, tmp_p
     print({k: (np.round(puppet[k]).tolist(), np.round(page[k]).tolist()) for k in puppet})
     for k in ("sclera", "iris", "cavity", "skin", "teeth"):
         np.testing.assert_allclose(page[k], puppet[k], atol=18, err_msg=k)
+
+
+def _teeth_pixels(img: np.ndarray, eye_boxes) -> int:
+    """How many pixels of ``img`` outside ``eye_boxes`` and 3 pixels or more from the page's
+    background (the head's outline blends the skin into it) are the palette's teeth (within
+    12)."""
+    from scipy import ndimage
+
+    from facetransfer.puppet_face import PALETTE
+
+    near = np.abs(img.astype(np.int16) - PALETTE["teeth"]).max(axis=2) <= 12
+    near &= ~ndimage.binary_dilation(np.abs(img - BACKGROUND).sum(axis=2) <= 12, iterations=3)
+    for rows, cols in eye_boxes:
+        near[rows, cols] = False
+    return int(near.sum())
+
+
+@pytest.mark.slow
+def test_a_shut_mouth_shows_no_teeth_on_the_page_as_on_the_puppet(arkit_model, pages, tmp_path):
+    """The lips at rest (and barely parted, jawOpen = 0.03) are shut for the puppet
+    (puppet_face.SHUT: the lips' line, no cavity, no teeth) and for the page: no pixel of the
+    palette's teeth between them. Before, the page painted the teeth band on the mouth's
+    inside whatever the lips' gap, so every face at rest showed a cream line between its lips
+    (before the palette's teeth, the cavity's red-brown line); with the jaw open (0.3) both
+    show the teeth."""
+    from facetransfer.puppet_video import puppet_frames
+
+    from conftest import jaw_open_track
+
+    track = jaw_open_track(arkit_model, [0.0, 0.03, 0.3], size=320, scale=14.0)
+    puppet = list(puppet_frames(track, arkit_model, arkit_model.weight_mean("identity")))
+    lm = np.asarray(arkit_model.landmarks)
+    counts = []
+    for i, frag in enumerate(("", "jawOpen=0.03", "jawOpen=0.3")):
+        P = track.camera(i).project(arkit_model.synthesize(track.weights_at(i))[lm[36:48]])
+        top = int(np.ceil(P[:, 1].max())) + 3   # the puppet's eyes: every row above this
+        shot = _shot(pages[0], frag, tmp_path)
+        boxes = [_eye_box(e) for e in _drawn_eyes(pages[0], frag)]
+        counts.append((_teeth_pixels(shot, boxes),
+                       _teeth_pixels(puppet[i], [(slice(0, top), slice(None))])))
+    assert counts[0] == counts[1] == (0, 0) and min(counts[2]) > 20, counts

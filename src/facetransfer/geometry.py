@@ -92,7 +92,9 @@ def _face_cross_py(V, i0, i1, i2):  # pragma: no cover (numba)
 
 
 #: :func:`_face_cross_py` compiled: called from numba kernels (the normals here, the
-#: rasteriser's degenerate-mesh check)
+#: rasteriser's degenerate-mesh check). numba caches a kernel by its own file and does not see
+#: a change in another file's function it calls: after editing this one, touch
+#: ``render/raster.py`` too (or clear numba's cache), or its cached check keeps the old code.
 face_cross = maybe_njit(_face_cross_py)
 
 

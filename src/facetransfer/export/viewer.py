@@ -119,7 +119,8 @@ def page_palette() -> dict:
     its eyeballs' canvas (sclera, iris to ``iris_rim`` then toward ``limbus``, pupil), the
     mouth's and the eye sockets' insides (``cavity`` at the mouth, ``cavity_back`` of it at the
     cones' apexes, in the sockets and on the skin's back faces) and the upper teeth (``teeth``,
-    in :data:`facetransfer.puppet_face.TEETH_SHOW`'s band, as the puppet's) with them."""
+    in :data:`facetransfer.puppet_face.TEETH_SHOW`'s band, as the puppet's; none while the lips
+    are shut, :data:`TEETH_GAP`) with them."""
     out = {k: "#%02x%02x%02x" % tuple(v) for k, v in PALETTE.items()}
     return {**out, "cavity_back": CAVITY_BACK, "iris_rim": IRIS_RIM}
 
@@ -210,6 +211,28 @@ def cavity_loops(model) -> list[tuple[np.ndarray, float]]:
     topo = mesh_topology(model)
     return ([(topo.mouth_loop, CAVITY_DEPTH["mouth"])] if topo.mouth_loop.size else []) + \
         [(lp, CAVITY_DEPTH["eye"]) for lp in topo.eye_loops]
+
+
+#: The inner lips' gap (the mean of iBUG-68's 61-67, 62-66 and 63-65, over the mouth corners'
+#: 48-54 distance, in the head's frame) below which the page's mouth is shut and shows no teeth:
+#: the page's stand-in for the puppet's :data:`facetransfer.puppet_face.SHUT` (a count of the
+#: pixels the lips leave of the mouth's fill, which the page does not have). On ict-arkit faces
+#: (the default model's mean person, its id01, id05 and id10, the tests' 6-identity mean; jawOpen
+#: in steps of 0.005) the puppet's lips part at gaps of 0.059 to 0.083; at rest the gap is about
+#: 0.02 (review53a).
+TEETH_GAP = 0.07
+_INNER_LIPS = ((61, 67), (62, 66), (63, 65))
+
+
+def _mouth_shut(model) -> dict | None:
+    """What the page needs to tell a shut mouth (:data:`TEETH_GAP`): the inner lips' vertex
+    pairs and the mouth corners' vertices; None for a model without landmarks (the puppet's
+    mouth is then never shut)."""
+    if model.landmarks is None:
+        return None
+    lm = np.asarray(model.landmarks, np.int64)
+    return {"lips": [[int(lm[u]), int(lm[lo])] for u, lo in _INNER_LIPS],
+            "corners": [int(lm[48]), int(lm[54])], "gap": TEETH_GAP}
 
 
 def _mouth_faces(loops: list) -> int:
@@ -314,7 +337,7 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
             "n_frames": 0, "fps": 25.0, "eyes": eyes, "palette": page_palette(),
             "n_cavities": len(loops), "n_mouth_faces": _mouth_faces(loops),
             "mouth_loop": loops[0][0].tolist() if _mouth_faces(loops) else [],
-            "teeth_show": TEETH_SHOW,
+            "teeth_show": TEETH_SHOW, "mouth_shut": _mouth_shut(model),
             **_save_data(model, track, model.mode_names[k], identity, title),
             "about": _about(model, track)}
     if track is not None:
