@@ -66,7 +66,7 @@ def _track(model, jaw_open: float):
 def _scene():
     """``(model, topo, frame, texture, Vc, camera, skin)`` of the synthetic target."""
     from facetransfer.cli.common import resolve_model
-    from facetransfer.composite import _erode
+    from facetransfer.composite import erode_mask
     from facetransfer.render import rasterize
     from facetransfer.texture.face import FaceTexture, frame_uvs
     from facetransfer.topology import close_mouth, mesh_topology
@@ -80,8 +80,8 @@ def _scene():
     frame = np.empty((SIZE, SIZE, 3), np.uint8)
     frame[:] = BACK
     frame[mask] = EDGE
-    frame[_erode(mask, 4)] = SKIN
-    skin = _erode((frame == SKIN).all(axis=-1), 2)  # 2 px of the rule's tolerance
+    frame[erode_mask(mask, 4)] = SKIN
+    skin = erode_mask((frame == SKIN).all(axis=-1), 2)  # 2 px of the rule's tolerance
     skin[:16] = skin[-16:] = False                  # the head cut by the frame: no outline
     tex = FaceTexture(frame, frame_uvs(Vc, cam, (SIZE, SIZE)), 0)
     return model, topo, frame, tex, Vc, cam, skin

@@ -1,8 +1,9 @@
 """The shading labels' masks and boxes in one kernel each (forty-sixth session,
 :mod:`facetransfer.label_masks`) against the numpy expressions ``rewrite._shade_frame``,
-``eyes._paint_eyes`` and ``jaw._paint_jaw`` made them with (commit ``c1ab903``), on random
-labels and at the edges: no pixel with the bits, one pixel, a bit on the image's border,
-images of one row or column, margins past the image, labels that are a view."""
+``eyes.paint_shaded_eyes`` and ``jaw.paint_shaded_jaw`` made them with (commit ``c1ab903``,
+where they were ``_paint_eyes`` and ``_paint_jaw``), on random labels and at the edges: no
+pixel with the bits, one pixel, a bit on the image's border, images of one row or column,
+margins past the image, labels that are a view."""
 
 from __future__ import annotations
 

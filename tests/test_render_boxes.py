@@ -3,9 +3,9 @@
 raster (one array layout, one compiled kernel), and the closing lids' mix
 (:mod:`facetransfer.eye_lids`) writes into the box of the whole eye layer. Each against what
 it replaced: the shading of a cropped raster by the module as it was at commit ``c1ab903``
-(read from git), and the numpy expressions of ``eyes._paint_eyes`` at that commit, on random
-inputs and at the edges (empty boxes, one row or column, boxes past the raster's edge, views
-of larger arrays)."""
+(read from git), and the numpy expressions of ``eyes.paint_shaded_eyes`` (``_paint_eyes``) at
+that commit, on random inputs and at the edges (empty boxes, one row or column, boxes past the
+raster's edge, views of larger arrays)."""
 
 from __future__ import annotations
 
@@ -137,13 +137,13 @@ def test_a_box_with_a_step_is_refused(scene):
 
 
 def _old_shares(tid, side, a):
-    """``eyes._paint_eyes``' shares at :data:`BEFORE` (on the cropped ``tid``)."""
+    """``eyes.paint_shaded_eyes``' shares at :data:`BEFORE` (on the cropped ``tid``)."""
     t = np.where(tid >= 0, side[np.maximum(tid, 0)], -1)
     return np.where(t >= 0, a[np.maximum(t, 0)], 0.0).astype(np.float32)
 
 
 def _old_mix(w, eye_img, closed_img):
-    """``eyes._paint_eyes``' mix at :data:`BEFORE`."""
+    """``eyes.paint_shaded_eyes``' mix at :data:`BEFORE`."""
     return np.rint((1 - w[..., None]) * eye_img + w[..., None] * closed_img).astype(np.uint8)
 
 

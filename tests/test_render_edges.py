@@ -31,6 +31,14 @@ from test_rewrite_kernels import _blobs as _discs
 #: The commit before the render's kernels.
 BEFORE = "aec34b2"
 _ROOT = Path(__file__).resolve().parent.parent
+#: Names the modules at :data:`BEFORE` import from the current package under their names of
+#: then (made public by the fifty-third session): ``module -> {name then: name now}``, lent
+#: to the current modules while an old one loads.
+_NAMES_THEN = {"composite": {"_blend_paste": "blend_paste", "_feather_alpha": "feather_alpha",
+                             "_rows": "channel_rows", "_erode": "erode_mask",
+                             "_extend": "extend_nearest"},
+               "eyes": {"_paint_eyes": "paint_shaded_eyes"},
+               "jaw": {"_paint_jaw": "paint_shaded_jaw"}}
 _REMAP = cv2.remap
 
 
@@ -64,11 +72,27 @@ def before(tmp_path_factory):
             mod = importlib.util.module_from_spec(spec)
             mod.__package__ = "facetransfer"
             sys.modules[spec.name] = mod
-            spec.loader.exec_module(mod)
+            _with_names_then(lambda: spec.loader.exec_module(mod))
             loaded[name] = mod
         return loaded[name]
 
     return load
+
+
+def _with_names_then(run) -> None:
+    """``run()`` with the current modules answering to their names of :data:`BEFORE` too
+    (:data:`_NAMES_THEN`); those names gone again after it."""
+    mods = {m: importlib.import_module(f"facetransfer.{m}") for m in _NAMES_THEN}
+    try:
+        for m, names in _NAMES_THEN.items():
+            for then, now in names.items():
+                setattr(mods[m], then, getattr(mods[m], now))
+        run()
+    finally:
+        for m, names in _NAMES_THEN.items():
+            for then in names:
+                if hasattr(mods[m], then):
+                    delattr(mods[m], then)
 
 
 @pytest.fixture
@@ -270,7 +294,7 @@ def test_keep_own_at_the_edges_equals_before(before):
 
 
 def test_blend_paste_at_the_edges_equals_before(before):
-    """:func:`facetransfer.composite._blend_paste` with and without ``s``, into a view of a
+    """:func:`facetransfer.composite.blend_paste` with and without ``s``, into a view of a
     larger image, on one pixel, on masks of none, an alpha of NaN or inf, float64 alphas and
     membranes, strided masks and alphas: the same bytes as before; with no rows or columns
     (before: OpenCV's merge raised) nothing is written."""
@@ -285,7 +309,7 @@ def test_blend_paste_at_the_edges_equals_before(before):
         src = rng.integers(0, 256, (h, w, 3), np.uint8) if s else None
         big = rng.integers(0, 256, (h + 4, w + 5, 3), np.uint8)
         outs = []
-        for fn in (old._blend_paste, composite._blend_paste):
+        for fn in (old._blend_paste, composite.blend_paste):
             b = big.copy()
             out = b[2:2 + h, 1:1 + w] if view else b[:h, :w].copy()
             fn(m, base, mem, a, out, s=src)
@@ -303,13 +327,13 @@ def test_blend_paste_at_the_edges_equals_before(before):
     assert changed > 1000
     for h, w in ((0, 5), (5, 0)):
         out = np.zeros((h, w, 3), np.uint8)
-        composite._blend_paste(np.ones((h, w), bool), out.copy(), np.ones((h, w, 3), np.float32),
-                               np.ones((h, w), np.float32), out)
+        composite.blend_paste(np.ones((h, w), bool), out.copy(), np.ones((h, w, 3), np.float32),
+                              np.ones((h, w), np.float32), out)
         assert out.shape == (h, w, 3)
 
 
 def test_feather_alpha_at_the_edges_equals_before(before):
-    """:func:`facetransfer.composite._feather_alpha` of masks of one pixel, one row, one
+    """:func:`facetransfer.composite.feather_alpha` of masks of one pixel, one row, one
     column, no rows, a full square, random and strided ones, both kinds of edge, feathers from
     0 to 40 and NaN and inf: the same alpha (or exception) as before."""
     old = before("composite")
@@ -323,8 +347,8 @@ def test_feather_alpha_at_the_edges_equals_before(before):
             for feather in (0.0, 1e-9, 0.5, 1.0, 2.5, 40.0, np.nan, np.inf):
                 want = _outcome(lambda: old._feather_alpha(m, feather,
                                                            edge_outside=edge_outside))
-                got = _outcome(lambda: composite._feather_alpha(m, feather,
-                                                                edge_outside=edge_outside))
+                got = _outcome(lambda: composite.feather_alpha(m, feather,
+                                                               edge_outside=edge_outside))
                 _same(want, got, f"{m.shape} {edge_outside} {feather}")
                 if isinstance(want, np.ndarray):
                     some += float(np.nansum((want > 0) & (want < 1)))
@@ -375,7 +399,7 @@ def test_match_outline_at_the_edges_equals_before(before):
             _same(*(_outcome(lambda: fn(face, part, mask, face_mask, out, feather=2.0,
                                         reject_where=None, grey_where=grey, opacity=opacity,
                                         shading=shading, hue=hue, **opts))
-                    for fn, out in zip((old._match_outline_into, patch._match_outline_into),
+                    for fn, out in zip((old._match_outline_into, patch.match_outline_into),
                                        outs)), f"into {trial}")
             np.testing.assert_array_equal(outs[1], outs[0], err_msg=f"into {trial}")
     assert changed > 10000
@@ -470,8 +494,8 @@ def _as_before(monkeypatch, before) -> None:
     monkeypatch.setattr(rewrite, "_keep_own", rew0._keep_own)
     monkeypatch.setattr(eyes, "shift_eyeballs", eye0.shift_eyeballs)
     for mod in (composite, patch):
-        monkeypatch.setattr(mod, "_feather_alpha", comp0._feather_alpha)
-        monkeypatch.setattr(mod, "_blend_paste", comp0._blend_paste)
+        monkeypatch.setattr(mod, "feather_alpha", comp0._feather_alpha)
+        monkeypatch.setattr(mod, "blend_paste", comp0._blend_paste)
     for name in ("_grey", "_gain_factors", "_shading_field", "_hue_field"):
         monkeypatch.setattr(patch, name, getattr(patch0, name))
 
@@ -510,7 +534,7 @@ def _edge_frame(model, topo, size, scale, offset, grey: bool = False):
     frame = np.random.default_rng(0).integers(0, 8, (H, W, 3), np.uint8)
     frame += np.uint8(120)
     frame[mask] = (30, 25, 20)
-    frame[composite._erode(mask, 4)] = (200, 150, 120)
+    frame[composite.erode_mask(mask, 4)] = (200, 150, 120)
     if grey:  # a monochrome clip's frame (facetransfer.monochrome): three equal channels
         frame[:] = frame[..., 1:2]
     tex = FaceTexture(frame, frame_uvs(Vc, cam, (W, H)), 0)

@@ -14,8 +14,8 @@ import cv2
 import numpy as np
 import pytest
 
-from facetransfer import composite, eyes, patch
-from facetransfer.composite import _feather_alpha, _nonzero, membrane_blend
+from facetransfer import composite, patch
+from facetransfer.composite import _nonzero, feather_alpha, membrane_blend
 from facetransfer.texture import fill_holes
 
 
@@ -37,7 +37,7 @@ def test_feather_alpha_equals_the_distance_transform(feather, edge_outside):
     else:
         d = cv2.distanceTransform(m8, cv2.DIST_L2, cv2.DIST_MASK_PRECISE)
     ref = np.clip(d / feather, 0.0, 1.0)
-    a = _feather_alpha(m, feather, edge_outside=edge_outside)
+    a = feather_alpha(m, feather, edge_outside=edge_outside)
     assert a.dtype == np.float32 and a.shape == m.shape
     np.testing.assert_allclose(a, ref, rtol=0, atol=1e-6)
     assert (a[~m] == 0).all() and (a[m] > 0).all()
@@ -165,7 +165,7 @@ def test_plane_l1_kernel_equals_its_python_twin():
     np.testing.assert_allclose(a[1], 0.3, atol=0.03)
 
 
-def test_rejected_equals_the_log_ratio():
+def test_rejection_equals_the_log_ratio():
     rng = np.random.default_rng(11)
     fb = rng.integers(0, 256, (40, 50, 3)).astype(np.uint8)
     f = (fb * np.exp(rng.normal(0, 0.6, fb.shape))).astype(np.float32)
@@ -179,18 +179,10 @@ def test_rejected_equals_the_log_ratio():
     grown = np.max([pad[g + dy: g + dy + r.shape[0], g + dx: g + dx + r.shape[1]]
                     for dy in range(-g, g + 1) for dx in range(-g, g + 1)], axis=0)
     ref = np.clip(cv2.GaussianBlur(grown.astype(np.float32), (0, 0), 2.0) * 2.0, 0.0, 1.0)
-    np.testing.assert_allclose(patch._rejected(f, fb, (lo, hi)), ref, rtol=0, atol=1e-5)
-
-
-def test_region_box_is_the_shown_pixels_box_grown():
-    rng = np.random.default_rng(5)
-    shown = np.zeros((30, 40), np.uint8)
-    shown[rng.integers(8, 20, 6), rng.integers(10, 30, 6)] = 2  # any nonzero label bit
-    ys, xs = np.nonzero(shown)
-    assert eyes._region_box(shown, margin=3) == (xs.min() - 3, ys.min() - 3, xs.max() + 4,
-                                                 ys.max() + 4)
-    assert eyes._region_box(shown, margin=12) == (0, 0, 40, 30)  # clipped to the image
-    assert eyes._region_box(np.zeros((30, 40), np.uint8), margin=3) is None
+    # the paste's fade of an alpha of 1 everywhere: 1 - r
+    a = np.ones(fb.shape[:2], np.float32)
+    patch._reject_fade(patch._rejection_blur(f, fb, (lo, hi)), np.ones(a.shape, bool), a)
+    np.testing.assert_allclose(1.0 - a, ref, rtol=0, atol=1e-5)
 
 
 def test_gain_samples_equal_numpy():
@@ -234,13 +226,13 @@ def test_match_outline_on_a_crop_with_its_origin_equals_the_whole_image():
     assert mask.sum() > 200 and compare.sum() > 200
     kw = dict(feather=4.0, compare=compare, reject=patch.REJECT, reject_where=None)
     whole = face.copy()
-    patch._match_outline_into(face, part, mask, face_mask, whole, **kw)
+    patch.match_outline_into(face, part, mask, face_mask, whole, **kw)
     ys, xs = np.nonzero(mask | compare)
     sl = (slice(max(ys.min() - 2, 0), ys.max() + 3), slice(max(xs.min() - 2, 0), xs.max() + 3))
     crop = face.copy()
     kw["compare"] = compare[sl]
-    patch._match_outline_into(crop[sl], part[sl], mask[sl], face_mask[sl], crop[sl], **kw,
-                              origin=(sl[1].start, sl[0].start))
+    patch.match_outline_into(crop[sl], part[sl], mask[sl], face_mask[sl], crop[sl], **kw,
+                             origin=(sl[1].start, sl[0].start))
     assert (whole != face).any()
     np.testing.assert_array_equal(crop, whole)
 
@@ -361,7 +353,7 @@ def test_blend_paste_rejected_equals_the_numpy_fade():
     before = big.copy()
     faded = a.copy()
     patch._reject_fade(blur, where, faded)
-    composite._blend_paste(m, base, f, faded, big[2:2 + h, 5:5 + w])
+    composite.blend_paste(m, base, f, faded, big[2:2 + h, 5:5 + w])
     r = np.clip(blur * np.float32(2.0), np.float32(0.0), np.float32(1.0))
     r *= where
     fade = (a * (np.float32(1.0) - r))[..., None]
@@ -376,7 +368,7 @@ def test_blend_paste_rejected_equals_the_numpy_fade():
     # the membrane's paste: f + s in float32
     s = rng.integers(0, 256, (h, w, 3), dtype=np.uint8)
     out = base.copy()
-    composite._blend_paste(m, base, f, a, out, s=s)
+    composite.blend_paste(m, base, f, a, out, s=s)
     fs = f + s.astype(np.float32)
     want = np.clip(np.rint(b + a[..., None] * (fs - b)), 0, 255).astype(np.uint8)
     np.testing.assert_array_equal(out, np.where(m[..., None], want, base))
@@ -479,7 +471,7 @@ def test_gain_factors_exponents_equal_the_numpy_expressions(seed, support, monke
 
 
 def _feather_alpha_before(m, feather, edge_outside):
-    """:func:`facetransfer.composite._feather_alpha` as it was before the forty-fifth session
+    """:func:`facetransfer.composite.feather_alpha` as it was before the forty-fifth session
     (the band by ``cv2.subtract`` and ``cv2.findNonZero``, searched pixel by pixel; here in
     Python): the reference its one-pass kernel must equal bit for bit."""
     r = max(int(np.ceil(feather)), 1)
@@ -523,7 +515,7 @@ def test_feather_alpha_kernel_equals_the_band_search_before(feather, edge_outsid
     line = np.zeros((9, 30), bool)
     line[4, 2:28] = True
     for mask in (m, np.ones((12, 9), bool), np.zeros((6, 8), bool), line):
-        np.testing.assert_array_equal(_feather_alpha(mask, feather, edge_outside=edge_outside),
+        np.testing.assert_array_equal(feather_alpha(mask, feather, edge_outside=edge_outside),
                                       _feather_alpha_before(mask, feather, edge_outside))
 
 

@@ -83,12 +83,12 @@ def narrower(arkit_model):
     new = {k: mean_person_track(model, zeros, size=SIZE, scale=k) for k in (24.0, 19.0)}
     Vc = close_mouth(model.synthesize(target.weights_at(0)), topo)
     mask = rasterize(Vc, topo.faces, target.camera(0), (SIZE, SIZE)).mask
-    from facetransfer.composite import _erode
+    from facetransfer.composite import erode_mask
 
     frame = np.empty((SIZE, SIZE, 3), np.uint8)
     frame[:] = BACK
     frame[mask] = EDGE
-    frame[_erode(mask, 4)] = SKIN
+    frame[erode_mask(mask, 4)] = SKIN
     tex = FaceTexture(frame, frame_uvs(Vc, target.camera(0), (SIZE, SIZE)), 0)
     return model, topo, new, frame, tex, Vc
 
@@ -133,9 +133,9 @@ def test_an_outline_sliding_along_itself_keeps_the_targets_pixels(narrower, monk
     a = np.deg2rad(5.0)
     roll = np.array([[np.cos(a), -np.sin(a), 0.0], [np.sin(a), np.cos(a), 0.0], [0, 0, 1.0]])
     turned = WeakPerspective(cam.scale, roll @ cam.rotation, cam.translation)
-    from facetransfer.composite import _erode
+    from facetransfer.composite import erode_mask
 
-    skin = _erode((frame == SKIN).all(axis=-1), 2)  # 2 px of the rule's tolerance (MOVED)
+    skin = erode_mask((frame == SKIN).all(axis=-1), 2)  # 2 px of the rule's tolerance (MOVED)
     skin[:16] = skin[-16:] = False  # the head and the neck cut by the frame: no outline there
 
     def dark_on_skin():
@@ -164,12 +164,12 @@ def test_the_same_outline_keeps_its_band(narrower):
     c = lifted.mean(axis=0)
     inward = lifted - 4.0 * (lifted - c) / np.linalg.norm(lifted - c, axis=1, keepdims=True)
     kept = rim.drawn_inside(r.mask, r, topo.faces, lifted, inward)
-    from facetransfer.composite import _erode
+    from facetransfer.composite import erode_mask
 
     k = max(2, int(round(rim.RIM * np.sqrt(r.mask.sum()))))
-    band = r.mask & ~_erode(r.mask, k)
+    band = r.mask & ~erode_mask(r.mask, k)
     assert kept.sum() > 0.5 * band.sum()
-    assert not (kept & _erode(r.mask, 3 * k)).any()       # only near the outline
+    assert not (kept & erode_mask(r.mask, 3 * k)).any()   # only near the outline
     # drawn beyond the frame's edge (the raster as before): nothing to keep, no error
     assert not rim.drawn_inside(r.mask, r, topo.faces, lifted, inward + [SIZE, 0]).any()
 

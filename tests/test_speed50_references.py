@@ -218,7 +218,7 @@ def test_feather_alpha_equals_the_old_search(box, feather, edge_outside):
     search of every offset, bit for bit: masks empty, full, at the border, features of 1-2
     pixels, feathers below one pixel and wider than the box."""
     _, _, _, m = box
-    got = composite._feather_alpha(m, feather, edge_outside=edge_outside)
+    got = composite.feather_alpha(m, feather, edge_outside=edge_outside)
     r = max(int(np.ceil(feather)), 1)
     m8 = np.ascontiguousarray(m).view(np.uint8)
     deep = cv2.erode(m8, np.ones((2 * r + 1,) * 2, np.uint8), borderType=cv2.BORDER_CONSTANT,

@@ -351,7 +351,8 @@ def test_erode_equals_scipy_binary_erosion():
         m = ndi.binary_opening(rng.random((60, 80)) < 0.7)
         m[0, :] = True  # the image border counts as outside
         m[:, -1] = True
-        np.testing.assert_array_equal(composite._erode(m, k), ndi.binary_erosion(m, iterations=k))
+        np.testing.assert_array_equal(composite.erode_mask(m, k),
+                                      ndi.binary_erosion(m, iterations=k))
 
 
 def test_a_target_track_of_another_clip_is_said(quick_model, caplog):

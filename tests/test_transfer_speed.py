@@ -435,13 +435,13 @@ def test_crop_of_and_paste_round_trip(synthetic):
     frame = rw.RewriteFrame(img, rend, face, np.zeros_like(face))
     part = rc._crop_of(T, frame)
     assert part[0] == (50, 30, 70, 40)
-    back = rw._paste(T, part)
+    back = rw.paste_part(T, part)
     for x, y in zip(dataclasses.astuple(frame), dataclasses.astuple(back)):
         np.testing.assert_array_equal(x, y)
     unchanged = rw.RewriteFrame(T.copy(), np.zeros_like(T), np.zeros_like(face),
                                 np.zeros_like(face))
     assert rc._crop_of(T, unchanged) is None
-    np.testing.assert_array_equal(rw._paste(T, None).image, T)
+    np.testing.assert_array_equal(rw.paste_part(T, None).image, T)
 
 
 def test_frame_meshes_are_the_frame_meshes_a_chunk_at_a_time(quick_model):

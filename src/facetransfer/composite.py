@@ -41,20 +41,11 @@ from .jit import maybe_njit as _maybe_njit
 log = logging.getLogger(__name__)
 
 __all__ = [
-    "CompositeError",
-    "poisson_blend",
-    "opencv_serves",
-    "poisson_blend_multi",
-    "feather_mask",
-    "match_color",
-    "composite_face",
-    "composite_alpha",
-    "membrane_blend",
-    "membrane_alpha",
-    "membrane_crop",
-    "mask_box",
-    "over",
-    "MEMBRANE_MARGIN",
+    "CompositeError", "poisson_blend", "opencv_serves", "poisson_blend_multi", "feather_mask",
+    "match_color", "composite_face", "composite_alpha", "membrane_blend", "membrane_alpha",
+    "membrane_crop", "mask_box", "over", "MEMBRANE_MARGIN",
+    # the rewrite's and the region pastes' (facetransfer.patch) pieces
+    "extend_nearest", "erode_mask", "feather_alpha", "blend_paste", "channel_rows",
 ]
 
 _METHODS = ("auto", "opencv", "solver")
@@ -533,7 +524,7 @@ def composite_alpha(face_mask, *, mouth_mask=None, feather: float = 3.0) -> np.n
 # the fast blend: a membrane correction (an approximation of Poisson blending)
 # ---------------------------------------------------------------------------------------------
 
-def _extend(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
+def extend_nearest(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """``img`` inside ``mask``, its nearest inside pixel outside (no step across the outline)."""
     if mask.all() or not mask.any():
         return img.copy()
@@ -545,7 +536,7 @@ def _extend(img: np.ndarray, mask: np.ndarray) -> np.ndarray:
 _CROSS = np.array([[0, 1, 0], [1, 1, 1], [0, 1, 0]], np.uint8)
 
 
-def _erode(mask: np.ndarray, iterations: int) -> np.ndarray:
+def erode_mask(mask: np.ndarray, iterations: int) -> np.ndarray:
     """Binary erosion by the 4-connected cross, pixels beyond the image counting as outside
     (equal to ``scipy.ndimage.binary_erosion(mask, iterations=iterations)``)."""
     m8 = np.ascontiguousarray(mask, dtype=bool).view(np.uint8)  # 0/1 bytes, no copy
@@ -633,7 +624,7 @@ def membrane_blend(target: np.ndarray, source: np.ndarray, mask: np.ndarray, *,
     h = _membrane(m, t, s, outlier, int(smooth_iterations))
     a = _seam_alpha(m, feather)
     crop = out[box]
-    _blend_paste(m, t, h, a, crop, s=s)  # in place: the region's pixels of ``out``
+    blend_paste(m, t, h, a, crop, s=s)  # in place: the region's pixels of ``out``
     return out
 
 
@@ -641,7 +632,7 @@ def _seam_alpha(m: np.ndarray, feather: float) -> np.ndarray:
     """The seam's fade of :func:`membrane_blend` over its crop's region ``m`` (h, w) bool:
     the distance to the nearest pixel outside the region over ``feather`` (the crop's margin
     is outside; pixels beyond the image are not), (h, w) float32, 0 outside ``m``."""
-    return _feather_alpha(m, feather, edge_outside=False) if feather > 0 else \
+    return feather_alpha(m, feather, edge_outside=False) if feather > 0 else \
         m.astype(np.float32)
 
 
@@ -670,7 +661,7 @@ def membrane_alpha(mask: np.ndarray, *, feather: float = 2.0,
     return out
 
 
-def _feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.ndarray:
+def feather_alpha(m: np.ndarray, feather: float, *, edge_outside: bool) -> np.ndarray:
     """``clip(d / feather, 0, 1)`` with ``d`` the Euclidean distance of each pixel of ``m``
     (h, w) bool to the nearest pixel outside it (0 outside): (h, w) float32.
 
@@ -698,7 +689,7 @@ def _square(k: int) -> np.ndarray:
 
 
 def _alpha_kernel_py(m, deep, r, feather, edge_outside, a):  # pragma: no cover (numba)
-    """:func:`_feather_alpha` into ``a`` (h, w) float32 from ``m`` (h, w) uint8 and its square
+    """:func:`feather_alpha` into ``a`` (h, w) float32 from ``m`` (h, w) uint8 and its square
     erosion ``deep``: 1 in ``deep``, 0 outside ``m`` (a row without a branch: vectorised),
     then the window search at the row's band pixels (in ``m``, not ``deep``), up to the first
     offset whose alpha is 1 (those after it are no nearer: 1, as when none is outside)."""
@@ -750,8 +741,8 @@ def _blend_value_py(b, ay, f):  # pragma: no cover (numba, inlined)
 _blend_value = _maybe_njit(_blend_value_py, inline=True)
 
 
-def _blend_paste(m: np.ndarray, base: np.ndarray, f: np.ndarray, a: np.ndarray,
-                 out: np.ndarray, *, s: np.ndarray | None = None) -> None:
+def blend_paste(m: np.ndarray, base: np.ndarray, f: np.ndarray, a: np.ndarray,
+                out: np.ndarray, *, s: np.ndarray | None = None) -> None:
     """``out = rint(base + a (f - base))`` clipped to 0..255 at the pixels of ``m`` (h, w) bool
     (``base``, ``out`` (h, w, 3) uint8, ``f`` (h, w, 3) and ``a`` (h, w) float32), in float32;
     ``out`` (a view of a larger image, in place) is left alone elsewhere. With ``s`` (h, w, 3)
@@ -766,12 +757,12 @@ def _blend_paste(m: np.ndarray, base: np.ndarray, f: np.ndarray, a: np.ndarray,
     args = (m.view(np.uint8), np.ascontiguousarray(a, np.float32), np.empty(3 * w, np.uint8),
             np.empty(3 * w, np.float32))
     if s is None:
-        _blend_rows(_rows(base), _rows(f), _rows(out), *args)
+        _blend_rows(channel_rows(base), channel_rows(f), channel_rows(out), *args)
     else:
-        _blend_rows_sum(_rows(base), _rows(f), _rows(s), _rows(out), *args)
+        _blend_rows_sum(*map(channel_rows, (base, f, s, out)), *args)
 
 
-def _rows(x: np.ndarray) -> np.ndarray:
+def channel_rows(x: np.ndarray) -> np.ndarray:
     """``x`` (h, w, 3), rows of contiguous pixels (a crop of an image), seen as ``(h, 3 w)``
     without a copy (numpy refuses, AttributeError, where that needs one: a write to a copy
     would be lost)."""
@@ -793,7 +784,7 @@ _spread = _maybe_njit(_spread_py, inline=True)
 
 
 def _blend_rows_py(base, f, out, m, a, m3, a3):  # pragma: no cover (numba)
-    """:func:`_blend_paste` on rows ``(h, 3 w)`` of channel values: ``out = _blend_value(base,
+    """:func:`blend_paste` on rows ``(h, 3 w)`` of channel values: ``out = _blend_value(base,
     a, f)`` where ``m``, else ``out`` as it is (``m3``, ``a3``: a row's scratch)."""
     H, L = out.shape
     for y in range(H):

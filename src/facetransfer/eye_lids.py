@@ -1,4 +1,4 @@
-"""The closing lids' mix of the eye region (:func:`facetransfer.eyes._paint_eyes`) in two
+"""The closing lids' mix of the eye region (:func:`facetransfer.eyes.paint_shaded_eyes`) in two
 numba kernels: each pixel's share of the closed frame, and the mix itself written into the
 region's box of the eye layer.
 

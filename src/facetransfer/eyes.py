@@ -14,7 +14,7 @@ the sequence)", applied to the eyes):
    nothing of the region carries the target's own blinks or brow movements;
 3. the new mesh is rasterised with the fill (the z-buffer puts a closing lid in front of the
    eyeball), and the eye region is pasted into the per-frame face shifted to its colours (the
-   frames' exposure may differ: :func:`paint_eyes`, :func:`match_outline`);
+   frames' exposure may differ: :func:`paint_eyes`, :func:`facetransfer.patch.match_outline`);
 4. when the target closes its eyes somewhere in the clip (:func:`closed_eye_frame`), that
    frame's lids fade in as the new lids close (:meth:`EyeTexture.closing`), so a blink shows the
    target's own closed lid rather than its open-eyed lid skin stretched;
@@ -49,12 +49,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
-from .composite import mask_box
 from .errors import RewriteError
 from .eye_lids import lid_shares, mix_lids
 from .label_masks import bits_box
 from .eyeballs import Eyeballs, eyeballs_of, gaze_offset, shift_eyeballs
-from .patch import REJECT, SHADING_SIGMA, _match_outline_into
+from .patch import REJECT, SHADING_SIGMA, match_outline_into
 from .region_weights import (EYE_POINTS, model_vertices, moved_strengths, seen_frames,
                              usual_weights_of, vertex_alpha)
 from .render import interpolate_vertex_values, shade_layers, shade_texture
@@ -67,7 +66,8 @@ __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "region_vertices", "region_faces", "eye_openness", "open_eye_frame", "eye_texture",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
            "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE", "LID_BLINK",
-           "shape_activity", "reference_candidates", "GAZE_WEIGHT", "eye_penalty"]
+           "shape_activity", "reference_candidates", "GAZE_WEIGHT", "eye_penalty",
+           "paint_shaded_eyes"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -776,7 +776,7 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
 
     The eye region's pixels (of the triangles ``texture.select`` that the z-buffer shows) are
     shaded from ``texture`` and pasted into ``face_image`` shifted to its colours
-    (:func:`match_outline`). With a closed frame, each eye's lid pixels are
+    (:func:`facetransfer.patch.match_outline`). With a closed frame, each eye's lid pixels are
     the mix of the open and the closed frame's texture by how closed the new mesh's lids are
     (:meth:`EyeTexture.closing`): a blink shows the target's own closed lid. With a
     per-vertex :attr:`EyeTexture.alpha` (:meth:`EyeTexture.at`), the paste's opacity is that,
@@ -803,8 +803,8 @@ def paint_eyes(raster, faces: np.ndarray, vertices: np.ndarray, face_image: np.n
     """
     flags = eye_flags(texture, shown=1, rim=16)
     (eye_img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
-    return _paint_eyes(raster, faces, vertices, np.array(face_image, copy=True), face_mask,
-                       texture, eye_img, labels, (1, 16), feather=feather)
+    return paint_shaded_eyes(raster, faces, vertices, np.array(face_image, copy=True),
+                             face_mask, texture, eye_img, labels, (1, 16), feather=feather)
 
 
 def eye_flags(texture: EyeTexture, *, shown: int, rim: int) -> np.ndarray:
@@ -817,16 +817,19 @@ def eye_flags(texture: EyeTexture, *, shown: int, rim: int) -> np.ndarray:
     return flags
 
 
-def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeTexture,
-                eye_img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
-                feather: float = 3.0) -> np.ndarray:
+def paint_shaded_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeTexture,
+                      eye_img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
+                      feather: float = 3.0) -> np.ndarray:
     """:func:`paint_eyes` with the region shaded already (``eye_img`` (H, W, 3) the eye
     texture on the region's triangles, ``labels`` (H, W) uint8 of
     :func:`facetransfer.render.shade_layers` with the bits ``(shown, rim)`` of
     :func:`eye_flags`), painting ``face_image`` in place and returning it."""
     import cv2
 
-    # the box of _region_box (of np.bitwise_and(labels, bits[0])) in one kernel
+    # the box of the shown pixels (mask_box of np.bitwise_and(labels, bits[0])) in one kernel,
+    # its margin wider than every filter below (the lids' blur reaches 4 LID_SOFTNESS; the
+    # outline's erosion 2 px; the feather's distance transform sees a zero pixel at the box's
+    # edge): the same pixels as on the whole raster
     sl = bits_box(labels, bits[0], int(np.ceil(4 * LID_SOFTNESS)) + 2)
     if sl is None:
         return face_image
@@ -857,22 +860,10 @@ def _paint_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeText
         rim = eye_mask & ((lab & bits[1]) != 0)  # eye_mask: shown pixels
     # the region's own shading brought to the frame's (patch._shading_field): textured from
     # one frame under another head pose, its cheeks and temples showed patches with seams
-    _match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],
-                        feather=feather, compare=None, reject=None if rim is None else REJECT,
-                        reject_where=rim, shading=SHADING_SIGMA, opacity=opacity)
+    match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],
+                       feather=feather, compare=None, reject=None if rim is None else REJECT,
+                       reject_where=rim, shading=SHADING_SIGMA, opacity=opacity)
     return face_image
-
-
-def _region_box(shown: np.ndarray, *, margin: int) -> tuple[int, int, int, int] | None:
-    """``(x0, y0, x1, y1)`` of the nonzero pixels of ``shown`` (H, W) uint8 (those showing
-    the region), grown by ``margin`` and clipped to the image; None when none shows.
-
-    The margin covers every filter :func:`paint_eyes` applies (the lids' blur reaches
-    ``4·LID_SOFTNESS``; the outline's erosion 2 px; the feather's distance transform sees a
-    zero pixel at the box's edge), so working on the box gives the same pixels as the whole
-    raster."""
-    sl = mask_box(shown, margin)
-    return None if sl is None else (sl[1].start, sl[0].start, sl[1].stop, sl[0].stop)
 
 
 def eye_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig=None,

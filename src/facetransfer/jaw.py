@@ -59,7 +59,7 @@ from .eyes import close_region, faces_around, reference_frame, region_faces, reg
 from .region_weights import (JAW_POINTS, facing_weights, model_vertices, moved_strengths,
                              vertex_alpha)
 from .jaw_look import LOOK_RAMP, look_strengths, mouth_reach
-from .patch import REJECT, _match_outline_into
+from .patch import REJECT, match_outline_into
 from .render import interpolate_vertex_values, shade_layers
 from .render.shading import interpolate_vertex_pair
 from .texture.face import frame_uvs
@@ -68,7 +68,7 @@ from .topology import close_mouth
 log = logging.getLogger(__name__)
 
 __all__ = ["JAW_SHAPES", "JAW_THRESHOLD", "JawTexture", "jaw_region", "mouth_closure",
-           "closed_jaw_frame", "jaw_texture", "jaw_strengths", "paint_jaw"]
+           "closed_jaw_frame", "jaw_texture", "jaw_strengths", "paint_jaw", "paint_shaded_jaw"]
 
 #: ARKit blendshapes whose vertices take the closed-mouth frame's texture.
 JAW_SHAPES = ("jawOpen", "jawForward", "jawLeft", "jawRight")
@@ -333,8 +333,8 @@ def paint_jaw(raster, faces: np.ndarray, face_image: np.ndarray, face_mask: np.n
     # not give, which shade_layers refuses
     flags = jaw_flags(texture, shaded=1, region=16, ring=32)
     (img,), labels = shade_layers(raster, faces, [(texture.uvs, texture.image)], flags)
-    return _paint_jaw(np.array(face_image, copy=True), face_mask, texture, img, labels,
-                      (16, 32), raster, faces, feather=feather)
+    return paint_shaded_jaw(np.array(face_image, copy=True), face_mask, texture, img, labels,
+                            (16, 32), raster, faces, feather=feather)
 
 
 def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np.ndarray:
@@ -349,9 +349,9 @@ def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np
     return flags
 
 
-def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTexture,
-               img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], raster, faces, *,
-               feather: float = 4.0) -> np.ndarray:
+def paint_shaded_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTexture,
+                     img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], raster, faces,
+                     *, feather: float = 4.0) -> np.ndarray:
     """:func:`paint_jaw` with the region shaded already (``img`` (H, W, 3) the closed-mouth
     frame on the region and its ring, ``labels`` (H, W) uint8 of
     :func:`facetransfer.render.shade_layers` with the bits ``(region, ring)`` of
@@ -382,10 +382,10 @@ def _paint_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTextur
         opacity = interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
     elif texture.look_alpha is not None:
         far = _look_far(interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl))
-    _match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
-                        compare=compare, reject=REJECT, reject_where=far,
-                        origin=(sl[1].start, sl[0].start), opacity=opacity, grey_where=True,
-                        hue=JAW_HUE_SIGMA, hue_where=far if JAW_HUE_SIGMA > 0 else None)
+    match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
+                       compare=compare, reject=REJECT, reject_where=far,
+                       origin=(sl[1].start, sl[0].start), opacity=opacity, grey_where=True,
+                       hue=JAW_HUE_SIGMA, hue_where=far if JAW_HUE_SIGMA > 0 else None)
     return face_image
 
 

@@ -1,7 +1,7 @@
 """Masks and boxes of a frame's shading labels (the ``labels`` of
 :func:`facetransfer.render.shade_layers`: per pixel, its triangle's flags) in one numba pass
 each: the frame's masks for :func:`facetransfer.rewrite._shade_frame`, the regions' boxes for
-:func:`facetransfer.eyes._paint_eyes` and :func:`facetransfer.jaw._paint_jaw`.
+:func:`facetransfer.eyes.paint_shaded_eyes` and :func:`facetransfer.jaw.paint_shaded_jaw`.
 
 Each gives the bytes of the numpy expressions it replaces (``labels != 0``, ``np.bitwise_and(
 labels, bit) != 0``, ``&= ~ring``: five passes over the face's crop; and

@@ -22,7 +22,7 @@ import numpy as np
 
 from .composite import mask_box, membrane_blend, membrane_crop, over
 from .eyes import faces_around
-from .patch import _match_outline_into
+from .patch import match_outline_into
 from .topology import MeshTopology
 
 __all__ = ["MOUTH_RING", "MOUTH_GAIN_RANGE", "mouth_ring_faces", "inside_mouth", "blend_mouth",
@@ -67,11 +67,11 @@ def blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
     compare = None if ring is None else ring[sl] & fm
     if compare is None or np.count_nonzero(compare) < 8:
         return _membrane_mouth(T, face_img, face_mask, mouth_img, mask, feather)
-    _match_outline_into(face_img[sl], mouth_img[sl], m, fm, face_img[sl], feather=feather,
-                        compare=compare, reject=None, reject_where=None,
-                        origin=(sl[1].start, sl[0].start),
-                        gain_range=mouth_gain_range(face_img[sl], mouth_img[sl], compare),
-                        grey_where=None if inside is None else inside[sl])
+    match_outline_into(face_img[sl], mouth_img[sl], m, fm, face_img[sl], feather=feather,
+                       compare=compare, reject=None, reject_where=None,
+                       origin=(sl[1].start, sl[0].start),
+                       gain_range=mouth_gain_range(face_img[sl], mouth_img[sl], compare),
+                       grey_where=None if inside is None else inside[sl])
     return face_img
 
 

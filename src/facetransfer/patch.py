@@ -14,11 +14,12 @@ from __future__ import annotations
 import cv2
 import numpy as np
 
-from .composite import _blend_paste, _feather_alpha, _rows
+from .composite import blend_paste, channel_rows, feather_alpha
 from .errors import RewriteError
 from .jit import maybe_njit as _maybe_njit
 
-__all__ = ["GAIN_RANGE", "REJECT", "REJECT_GROW", "match_outline", "gain_field"]
+__all__ = ["GAIN_RANGE", "REJECT", "REJECT_GROW", "match_outline", "match_outline_into",
+           "gain_field"]
 
 #: Per-channel gains allowed between the eye region's frame and the current one
 #: (:func:`match_outline`).
@@ -83,17 +84,17 @@ def match_outline(face: np.ndarray, part: np.ndarray, mask: np.ndarray, face_mas
     (H, W, 3) uint8
     """
     out = face.copy()
-    _match_outline_into(face, part, mask, face_mask, out, feather=feather, compare=compare,
-                        reject=reject, reject_where=reject_where)
+    match_outline_into(face, part, mask, face_mask, out, feather=feather, compare=compare,
+                       reject=reject, reject_where=reject_where)
     return out
 
 
-def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
-                        reject_where, origin: tuple[int, int] = (0, 0),
-                        gain_range: tuple[float, float] = GAIN_RANGE,
-                        grey_where: np.ndarray | bool | None = None,
-                        opacity: float | np.ndarray = 1.0, shading: float = 0.0,
-                        hue: float = 0.0, hue_where: np.ndarray | None = None) -> None:
+def match_outline_into(face, part, mask, face_mask, out, *, feather, compare, reject,
+                       reject_where, origin: tuple[int, int] = (0, 0),
+                       gain_range: tuple[float, float] = GAIN_RANGE,
+                       grey_where: np.ndarray | bool | None = None,
+                       opacity: float | np.ndarray = 1.0, shading: float = 0.0,
+                       hue: float = 0.0, hue_where: np.ndarray | None = None) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
     the region's pixels are written; ``gain_range``: the gains' clip (default
@@ -144,16 +145,16 @@ def _match_outline_into(face, part, mask, face_mask, out, *, feather, compare, r
     # the distance to the nearest pixel outside the region (the box's edge counts as outside:
     # one pixel beyond it is outside the region, or the image ends there)
     mb = np.ascontiguousarray(mask[box])
-    a = _feather_alpha(mb, feather, edge_outside=True)
+    a = feather_alpha(mb, feather, edge_outside=True)
     if isinstance(opacity, np.ndarray):
         a *= opacity[box]
     elif opacity < 1.0:
         a *= np.float32(opacity)
     fb = np.ascontiguousarray(face[box])
-    if reject is not None:  # the fade a (1 - r), r = _rejected where reject_where
+    if reject is not None:  # the fade a (1 - r), r the rejection where reject_where
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
         _reject_fade(_rejection_blur(f, fb, reject), where, a)
-    _blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
+    blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
 
 
 #: :func:`_shading_field`: the Gaussian's standard deviation in pixels, how far a compared
@@ -419,18 +420,13 @@ def _ring(compare: np.ndarray, face_mask: np.ndarray):
 _SQUARE5 = np.ones((5, 5), np.uint8)
 
 
-def _rejected(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
-    """``(h, w)`` float32 in [0, 1]: how far each pixel's largest per-channel absolute log
-    ratio of ``f`` (h, w, 3) float32 and ``fb`` (h, w, 3) uint8 (``|log(1 + f) - log(1 + fb)|``)
-    lies between ``reject = (lo, hi)``, grown by :data:`REJECT_GROW` pixels (the soft edge of
-    hair in the reference frame is less unlike the skin than the hair, and would be left as a
-    thin grey outline) and smoothed over ~2 pixels."""
-    return np.clip(_rejection_blur(f, fb, reject) * 2.0, 0.0, 1.0)
-
-
 def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
-    """:func:`_rejected` before its last step (``clip(2 b, 0, 1)``): the grown ramp blurred,
-    ``(h, w)`` float32."""
+    """``b`` (h, w) float32, whose ``r = clip(2 b, 0, 1)`` (that last step in
+    :func:`_reject_fade`) is the rejection: how far each pixel's largest per-channel absolute
+    log ratio of ``f`` (h, w, 3) float32 and ``fb`` (h, w, 3) uint8 (``|log(1 + f) - log(1 +
+    fb)|``) lies between ``reject = (lo, hi)``, grown by :data:`REJECT_GROW` pixels (the soft
+    edge of hair in the reference frame is less unlike the skin than the hair, and would be
+    left as a thin grey outline) and blurred over ~2 pixels."""
     lo, hi = (float(v) for v in reject)
     r = np.empty(f.shape[:2], np.float32)
     _reject_kernel(f, fb, lo, max(hi - lo, 1e-6), r)
@@ -441,7 +437,7 @@ def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) 
 
 def _reject_fade_py(blur, where, a):  # pragma: no cover (numba)
     """``a *= 1 - r`` with ``r = clip(2 blur, 0, 1)`` where ``where`` (h, w) bool and 0
-    elsewhere: match_outline's rejection (:func:`_rejected`) in float32 as numpy's ``r *=
+    elsewhere: match_outline's rejection (:func:`_rejection_blur`) in float32 as numpy's ``r *=
     where; a *= 1.0 - r`` were, in one pass (``a``, ``blur`` (h, w) float32)."""
     H, W = a.shape
     one, zero = np.float32(1.0), np.float32(0.0)
@@ -456,8 +452,8 @@ def _reject_kernel(f: np.ndarray, fb: np.ndarray, lo: float, span: float,
     """``r = clip((max_c |log(1 + f) - log(1 + fb)| - lo) / span, 0, 1)`` per pixel: ``f``
     (h, w, 3) float32, ``fb`` (h, w, 3) uint8, ``r`` (h, w) float32 (:func:`_reject_rows`)."""
     cls = np.empty(3 * r.shape[1], np.uint8)
-    _reject_rows(_rows(np.ascontiguousarray(f)), _rows(np.ascontiguousarray(fb)), float(lo),
-                 float(span), r, cls)
+    _reject_rows(channel_rows(np.ascontiguousarray(f)), channel_rows(np.ascontiguousarray(fb)),
+                 float(lo), float(span), r, cls)
 
 
 def _reject_rows_py(f, fb, lo, span, r, cls):  # pragma: no cover (numba)
@@ -732,8 +728,8 @@ def _apply_gain(part: np.ndarray, gy: np.ndarray, gx: np.ndarray, lo: float, hi:
     and channel: ``part`` (h, w, 3) uint8, ``gy`` (h, 3), ``gx`` (w, 3) float64, ``f``
     (h, w, 3) float32, all C-contiguous; by rows of channel values (vectorised)."""
     h, w = part.shape[:2]
-    _gain_rows(_rows(part), np.ascontiguousarray(gy), np.ascontiguousarray(gx).reshape(3 * w),
-               lo, hi, _rows(f), np.empty(3 * w))
+    _gain_rows(channel_rows(part), np.ascontiguousarray(gy),
+               np.ascontiguousarray(gx).reshape(3 * w), lo, hi, channel_rows(f), np.empty(3 * w))
 
 
 def _gain_rows_py(part, gy, gx, lo, hi, f, row):  # pragma: no cover (numba)

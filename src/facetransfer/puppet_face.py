@@ -279,7 +279,7 @@ def paint_face(image: np.ndarray, raster, V: np.ndarray, camera, face: PuppetFac
         image[ys[shut], xs[shut]] = (image[ys[shut], xs[shut]] * SHUT_LINE).astype(np.uint8)
     eye = (k != _MOUTH) & ~shut
     if eye.any():
-        _paint_eyes(image, ys[eye], xs[eye], k[eye], V, camera, face, i, lit)
+        _paint_eyeballs(image, ys[eye], xs[eye], k[eye], V, camera, face, i, lit)
     m = (k == _MOUTH) & ~shut
     if m.any():
         _paint_mouth(image, ys[m], xs[m], tid[m], raster.bary[ys[m], xs[m]], V, face)
@@ -316,7 +316,7 @@ def _shut(count: np.ndarray, V: np.ndarray, camera, face: PuppetFace) -> np.ndar
     return count < np.asarray(SHUT) * width ** 2 + _SLIVER_ROW * width
 
 
-def _paint_eyes(image, ys, xs, k, V, camera, face: PuppetFace, i: int, lit) -> None:
+def _paint_eyeballs(image, ys, xs, k, V, camera, face: PuppetFace, i: int, lit) -> None:
     """Paint the eye fills' pixels ``(ys, xs)`` (eye ``k`` each: 0 right, 1 left) with the
     eyeball's sclera, iris (its rim darker: :data:`IRIS_RIM`) or pupil seen there (module
     docstring), shaded by ``lit`` (2,)

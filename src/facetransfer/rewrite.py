@@ -53,13 +53,13 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from .composite import (_erode, _extend, composite_alpha, composite_face, membrane_alpha,
-                        membrane_blend, over)
+from .composite import (composite_alpha, composite_face, erode_mask, extend_nearest,
+                        membrane_alpha, membrane_blend, over)
 from .errors import ShapeError
 from .rim import drawn_inside, lifted_positions
 from .unmoved import unmoved_uvs
-from .eyes import EyeTexture, _paint_eyes
-from .jaw import JawTexture, _paint_jaw
+from .eyes import EyeTexture, paint_shaded_eyes
+from .jaw import JawTexture, paint_shaded_jaw
 from .label_masks import frame_masks
 from .layer_flags import layer_flags
 from .lip_colour import LipTint, tint_mouth
@@ -77,6 +77,7 @@ __all__ = [
     "RewriteFrame",
     "rewrite_frame",
     "rewrite_frame_part",
+    "paste_part",
     "paste_image",
 ]
 
@@ -172,7 +173,7 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
     -------
     RewriteFrame
     """
-    return _paste(np.asarray(target_frame), rewrite_frame_part(
+    return paste_part(np.asarray(target_frame), rewrite_frame_part(
         target_frame, vertices, camera, topo, textures, blending=blending, matte=matte),
         matte=matte)
 
@@ -182,7 +183,7 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
                        blending: BlendOptions | None = None, matte: bool = False):
     """:func:`rewrite_frame`'s work, on the face's box only: ``(box, RewriteFrame of the
     box)`` with ``box = (x0, y0, x1, y1)`` (end exclusive) in the frame, or None where the face
-    is not in the frame; :func:`_paste` makes the whole frame of it (a render in processes
+    is not in the frame; :func:`paste_part` makes the whole frame of it (a render in processes
     sends back this much, not a frame)."""
     T = np.asarray(target_frame)
     if T.ndim != 3 or T.shape[2] != 3 or T.dtype != np.uint8:
@@ -211,7 +212,7 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
     return box, res
 
 
-def _paste(T: np.ndarray, part, *, matte: bool = False) -> RewriteFrame:
+def paste_part(T: np.ndarray, part, *, matte: bool = False) -> RewriteFrame:
     """The full frame from ``(box, crop result)``; ``None``: the frame unchanged, no face
     (``matte``: with an all-zero matte)."""
     H, W = T.shape[:2]
@@ -236,7 +237,7 @@ def _paste(T: np.ndarray, part, *, matte: bool = False) -> RewriteFrame:
 
 def paste_image(T: np.ndarray, part) -> tuple[np.ndarray, bool]:
     """The composite of the whole frame from ``(box, crop result)`` (None: the frame
-    unchanged), as :func:`_paste`'s ``image``, and whether a face was rendered (its
+    unchanged), as :func:`paste_part`'s ``image``, and whether a face was rendered (its
     ``face_mask`` has a pixel): a writer's share of a frame, without the whole frame's rendered
     face and masks (:func:`facetransfer.rewrite_clip.rewrite_frame_parts`)."""
     image = T.copy()
@@ -337,7 +338,7 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
     # The blend region stays ``erode`` pixels inside the rendered silhouette, so its outline
     # (the Dirichlet boundary of the Poisson problem) lies on the target's own face, which
     # covers the same silhouette up to the change of expression, not on the background.
-    region = _erode(face_mask, int(erode)) if erode > 0 else face_mask
+    region = erode_mask(face_mask, int(erode)) if erode > 0 else face_mask
     if not region.any():
         region = face_mask
     if blending.mode == "none":
@@ -352,9 +353,9 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
     else:
         # The guidance field on the region's outline is the source's difference across it, so
         # each source is extended beyond its mask by its nearest inside pixel (no step there).
-        face_src = _extend(face_img, face_mask)
+        face_src = extend_nearest(face_img, face_mask)
         if mouth_img is not None and (mouth_mask & region).any():
-            mouth_src = _extend(mouth_img, mouth_mask)
+            mouth_src = extend_nearest(mouth_img, mouth_mask)
             out = composite_face(T, face_src, region, mouth_source=mouth_src,
                                  mouth_mask=mouth_mask & region,
                                  color_match=blending.color_match, feather=feather)
@@ -445,11 +446,11 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
     if own is not None:
         _keep_own(face_img, face_mask, *own)
     if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
-        face_img = _paint_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture, eye_img,
-                               labels, (_EYES, _RIM))
+        face_img = paint_shaded_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture,
+                                     eye_img, labels, (_EYES, _RIM))
     if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
-        face_img = _paint_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
-                              (_JAW_REGION, _JAW_RING), raster, topo.faces)
+        face_img = paint_shaded_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
+                                    (_JAW_REGION, _JAW_RING), raster, topo.faces)
     if not with_mouth or mouth_ring is None:
         ring = None
     return face_img, face_mask, mouth_img, mouth_mask, ring

@@ -44,7 +44,7 @@ from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
                            merged_face_texture, mouth_texture_function, resolve_mouth_mode,
                            timeline_mouth_function)
-from .rewrite import FrameTextures, RewriteFrame, _paste, rewrite_frame_part
+from .rewrite import FrameTextures, RewriteFrame, paste_part, rewrite_frame_part
 from .rewrite_options import RewriteOptions
 from .topology import MeshTopology, close_mouth, mesh_topology
 
@@ -451,7 +451,7 @@ class _ClipRenderer:
 
     def __call__(self, i: int) -> RewriteFrame:
         """Frame ``i`` rewritten (:meth:`part` pasted into it)."""
-        return _paste(np.asarray(self.target_frames[i]), self.part(i), matte=self.matte)
+        return paste_part(np.asarray(self.target_frames[i]), self.part(i), matte=self.matte)
 
     def part(self, i: int):
         """Frame ``i``'s rewrite on the face's box: ``(box, RewriteFrame)`` or None
@@ -532,7 +532,7 @@ def _render_in_threads(one, todo: range, workers: int, progress):
 
 def _crop_of(T: np.ndarray, frame: RewriteFrame):
     """``(box, crop result)`` of a rewritten frame: the inverse of
-    :func:`facetransfer.rewrite._paste`, cropped to the pixels that differ from ``T`` or belong
+    :func:`facetransfer.rewrite.paste_part`, cropped to the pixels that differ from ``T`` or belong
     to the face (small to send between processes); None when nothing changed."""
     changed = frame.face_mask | frame.mouth_mask | (frame.image != T).any(axis=-1)
     changed |= frame.rendered.any(axis=-1)
@@ -608,8 +608,8 @@ def _render_in_processes(one, target_frames, todo: range, workers: int, progress
                         pending.append(pool.submit(_render_job, nxt))
                         nxt += 1
                     part = pending.popleft().result()
-                    res = part if parts else _paste(np.asarray(target_frames[done]), part,
-                                                    matte=one.matte)
+                    res = part if parts else paste_part(np.asarray(target_frames[done]), part,
+                                                        matte=one.matte)
                 except BrokenProcessPool as exc:
                     log.warning("render workers failed (%s); rendering here", exc)
                     broken = True

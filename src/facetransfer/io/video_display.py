@@ -24,21 +24,13 @@ from .ffmpeg import ffmpeg_exe
 from .verified import file_stamp
 from .video_sequence import is_sequence
 
-__all__ = ["COLOUR_TAGS", "HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
+__all__ = ["HDR_TRANSFERS", "ColourTags", "checked_aspect", "pixel_aspect",
            "shown_width",
            "frame_args", "colour_named", "checked_colour_name", "described", "described_input",
            "video_colour",
            "colour_matrix", "field_named", "first_field", "container", "exact_seek", "EXACT_SEEK",
            "checked_timecode", "timecode_args", "timecode_of", "timecode_seconds",
            "display_mirrored"]
-
-#: ffmpeg arguments naming the colour of a video written
-#: (:attr:`~facetransfer.io.video.VideoOptions.colour_tags`) in its header: the BT.601 matrix in
-#: limited range, the conversion its frames had (``facetransfer.io.video._yuv420p``; ffmpeg's
-#: own for ProRes). OpenCV decodes a video by the matrix its header names (e.g. BT.709): left
-#: unspecified, the rewritten video would be guessed at by players, most taking BT.709 for HD
-#: (reds and skin drawn a little off the target's).
-COLOUR_TAGS = ["-colorspace", "smpte170m", "-color_range", "tv"]
 
 
 def pixel_aspect(num, den) -> tuple[int, int]:

@@ -9,7 +9,7 @@ with ``s`` pixels per model unit, ``R`` a rotation and ``t`` an image translatio
 (x right, y down; the centre of the top-left pixel is (0, 0)). The depth of a point is
 ``(R @ X)[2]``: larger is nearer the camera. A pinhole camera is provided for previews.
 
-The package turns a mesh and a camera (:mod:`.cameras`) into
+The package turns a mesh and a camera (:mod:`.cameras`: any :class:`Camera`) into
 
 * a :class:`Raster` (:mod:`.raster`): per pixel the depth, the id of the nearest triangle and its
   barycentric coordinates (perspective-correct for the pinhole camera);
@@ -46,8 +46,7 @@ import numpy as np
 from ..background import background_image
 from ..errors import RenderError, ShapeError
 from ..geometry import check_mesh as _check_mesh
-from .cameras import Camera  # noqa: F401 (the camera protocol, importable here as before)
-from .cameras import (Pinhole, WeakPerspective, _as_size, euler_from_rotation,
+from .cameras import (Camera, Pinhole, WeakPerspective, _as_size, euler_from_rotation,
                       look_at_weak_perspective, project_frames, rotation_from_euler)
 from .raster import (Raster, Rasterizer, _check_not_all_degenerate, _rasterize_checked, rasterize,
                      rasterize_reference)
@@ -58,6 +57,7 @@ from .visibility import _tolerance, _visibility, vertex_visibility
 log = logging.getLogger(__name__)
 
 __all__ = [
+    "Camera",
     "WeakPerspective",
     "Pinhole",
     "Raster",

@@ -317,7 +317,7 @@ def interpolate_vertex_pair(raster: Raster, faces: np.ndarray, values: np.ndarra
                             ) -> tuple[np.ndarray, np.ndarray]:
     """:func:`interpolate_vertex_values` of two per-vertex scalars over the same raster and
     box in one pass: the same bits as two calls, the raster's triangles and barycentrics read
-    once (the jaw region's two alphas, :func:`facetransfer.jaw._paint_jaw`: 0.65 -> 0.45 ms
+    once (the jaw region's two alphas, :func:`facetransfer.jaw.paint_shaded_jaw`: 0.65 -> 0.45 ms
     a frame of issue 13's pair).
 
     Parameters
