@@ -243,7 +243,7 @@ def in_picture(track, points) -> np.ndarray:
     L = np.asarray(track.landmarks2d, np.float64)
     size = getattr(track, "frame_size", None)
     if L.ndim != 3 or L.shape[1] != 68 or size is None:
-        return np.ones(int(track.n_frames), bool)
+        return np.ones(len(np.asarray(track.lost)), bool)
     W, H = (float(v) for v in size)
     P = L[:, list(points)]
     return ((P >= 0).all(2) & (P[..., 0] <= W - 1) & (P[..., 1] <= H - 1)).all(1)
