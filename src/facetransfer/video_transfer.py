@@ -130,6 +130,9 @@ class RenderTarget:
         sequence (``matte/%05d.png``, ``.tif``, ``.exr``) or a video (``.mp4``, ``.mov``,
         ``.mkv``), numbered and timed as ``path`` (:mod:`facetransfer.io.matte`); the frames
         are rendered with it only when asked.
+    sound_from : path-like, optional
+        The video whose audio is kept instead of ``audio_from``'s: a photo's rewrite (a target
+        without sound, performing its expression source's frames) keeps that source's.
     """
 
     path: object
@@ -137,6 +140,12 @@ class RenderTarget:
     video_options: object = None
     overwrite: bool = False
     matte: object = None
+    sound_from: object = None
+
+    @property
+    def sound(self):
+        """The video whose audio is kept: ``sound_from``, else ``audio_from``."""
+        return self.audio_from if self.sound_from is None else self.sound_from
 
 
 @dataclass(frozen=True)
@@ -209,7 +218,7 @@ def render_plan(plan: TransferPlan, model, output: RenderTarget, *,
     n = plan.n_frames
     key = _render_key(plan, model, out, options, video_options) \
         if resume and compose is None else None
-    writer = _parts_writer(key, plan, out, video_options, audio_from, overwrite)
+    writer = _parts_writer(key, plan, out, video_options, output.sound, overwrite)
     start = skip = 0 if writer is None else writer.done
     with contextlib.ExitStack() as stack:
         if writer is not None:  # parts kept on an error or interrupt, joined on success
@@ -252,7 +261,7 @@ def _write_frames(stack: contextlib.ExitStack, render: "_Frames", writer, skip: 
 
         frames = stack.enter_context(contextlib.closing(render()))
         return write_video_with_audio(output.path, frames, render.plan.fps,
-                                      audio_from=output.audio_from, overwrite=output.overwrite,
+                                      audio_from=output.sound, overwrite=output.overwrite,
                                       options=video_options, n_frames=render.plan.n_frames)
     # closed here on an error (its render threads joined), not by the collector
     frames = stack.enter_context(contextlib.closing(render.with_faces()))
@@ -448,6 +457,19 @@ def _source_files(sources: TransferSources) -> list:
     return files
 
 
+def _sound_of(sources: TransferSources, plan: TransferPlan):
+    """The video whose audio a transfer keeps where it is not the target's: a photo's (a
+    target without sound held over its expression source's frames), that source's; None: the
+    target's."""
+    from .io.video_sequence import is_still
+    from .take import is_take
+
+    if is_still(sources.target.video) and sources.expression is not None \
+            and not is_take(sources.expression.video) and plan.n_frames > 1:
+        return sources.expression.video
+    return None
+
+
 def transfer_video(sources: TransferSources, out, model, *,
                    options: RewriteOptions | None = None, overwrite: bool = False,
                    meshes_dir=None, save_track=None, progress_factory=None, video_options=None,
@@ -485,7 +507,8 @@ def transfer_video(sources: TransferSources, out, model, *,
     resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
     plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
                         parallel=parallel, progress_factory=progress_factory, reader=reader)
-    output = RenderTarget(out, sources.target.video, video_options, overwrite, matte)
+    output = RenderTarget(out, sources.target.video, video_options, overwrite, matte,
+                          sound_from=_sound_of(sources, plan))
     rendered = render_plan(plan, model, output, options=opts,
                            progress_factory=progress_factory, resume=True)
     if save_track is not None:

@@ -227,9 +227,11 @@ def _prefetch_inputs(args):
 
     from ..take import is_take
 
+    from ..io.video_sequence import is_still
+
     reads = [(args.target, args.max_frames)]
     if args.expression_from and not is_take(args.expression_from):
-        reads.append((args.expression_from,
+        reads.append((args.expression_from, args.max_frames if is_still(args.target) else
                       frames_to_cover(args.target, args.expression_from, args.max_frames)))
     return Prefetch(reads)
 
@@ -273,7 +275,8 @@ def run_transfer(args) -> int:
              f"{_whose_lost(res.plan, _first_number(args.out, args.target, args.start_number))})"
              if kept else "")
           + (f", {res.kept}" if res.kept else "")
-          + (", with the target's audio" if res.audio else ", no audio"))
+          + ((", with the expression source's audio" if _held(args) else
+              ", with the target's audio") if res.audio else ", no audio"))
     if args.matte:
         print(f"wrote the matte {args.matte}"
               + _numbered(args.matte, args.target, res.n_frames, args.start_number))
@@ -282,6 +285,17 @@ def run_transfer(args) -> int:
     if args.meshes:
         print(f"wrote {res.n_frames} meshes to {args.meshes}")
     return 0
+
+
+def _held(args) -> bool:
+    """Whether the target is a photo held over the expression source's frames (a video of
+    the photo performing the source, with the source's audio:
+    :func:`facetransfer.transfer_plan.held_frames`)."""
+    from ..io.video_sequence import is_still
+    from ..take import is_take
+
+    return bool(is_still(args.target) and args.expression_from
+                and not is_take(args.expression_from))
 
 
 def _check_option_pairs(args) -> None:
