@@ -31,6 +31,7 @@ from .common import (FACE_WHERE, MODEL_HELP, add_output, bar_factory, check_face
                      resolve_model, start_tracker_loads, subcommand_parser, tracker_name,
                      video_options, video_out)
 from .track import CAPTURE_HELP
+from ..io.output_names import is_one_image
 
 log = logging.getLogger(__name__)
 
@@ -168,11 +169,17 @@ def register(sub) -> None:
                    "else from its first row (timecode, the default); or always from its first "
                    "row (start)")
     p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
+    p.add_argument("--frame", type=int, default=None, metavar="N",
+                   help="with one image as --out (result.png, .jpg, .tif): write frame N of "
+                   "the transfer (counted from 0; of a photo's, its expression source's frame "
+                   "N); default: its only frame")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
     add_output(p, run_transfer, metavar="OUT.mp4", video=True,
-                help="video to write (.mp4, .mov, .mkv...) or image sequence (frames/%%05d.png)",
+                help="video to write (.mp4, .mov, .mkv...), image sequence (frames/%%05d.png) "
+                "or one image (result.png, .jpg, .tif: a photo's or a one-frame clip's "
+                "rewrite, or the frame --frame N)",
                 overwrite_help="replace existing outputs")
     p.add_argument("--matte", metavar="MATTE", type=video_out,
                    help="also write the matte of the pixels the transfer changed, one grey "
@@ -261,7 +268,12 @@ def run_transfer(args) -> int:
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
         progress_factory=bar_factory(), video_options=vopt,
         align=args.align, max_frames=args.max_frames, reader=prefetch.read_video,
-        matte=args.matte)
+        matte=args.matte, frame=args.frame)
+    if args.frame is not None or is_one_image(args.out):
+        print(f"wrote {res.path}: one image, frame {args.frame or 0} of the transfer"
+              + (" (kept original: the face is lost there)" if not res.n_rewritten else ""))
+        _said_also(args, 1)
+        return 0
     kept = res.n_frames - res.n_rewritten
     for tr in res.plan.source_tracks.values():
         if tr is not None and tr.info.get("resumed"):
@@ -280,11 +292,16 @@ def run_transfer(args) -> int:
     if args.matte:
         print(f"wrote the matte {args.matte}"
               + _numbered(args.matte, args.target, res.n_frames, args.start_number))
+    _said_also(args, res.n_frames)
+    return 0
+
+
+def _said_also(args, n_frames: int) -> None:
+    """The lines of the track and meshes a transfer also wrote."""
     if args.save_track:
         print(f"wrote {args.save_track}")
     if args.meshes:
-        print(f"wrote {res.n_frames} meshes to {args.meshes}")
-    return 0
+        print(f"wrote {n_frames} meshes to {args.meshes}")
 
 
 def _held(args) -> bool:
@@ -320,7 +337,10 @@ def _check_transfer_outputs(args, inputs: list):
 
     vopt = video_options(args, next((o for o in (args.out, args.matte)
                                      if o and is_image_pattern(o)), args.out))
-    check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
+    if is_one_image(args.out) or args.frame is not None:
+        _check_one_image(args, inputs)
+    else:
+        check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.matte:
         from ..io.matte import check_matte_output
 
@@ -334,6 +354,39 @@ def _check_transfer_outputs(args, inputs: list):
         check_track_name(args.save_track, "--save-track")
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
     return vopt
+
+
+def _check_one_image(args, inputs: list) -> None:
+    """``--out result.png`` (one image) and ``--frame N``, checked before any work: the
+    transfer has that frame (without ``--frame``, one frame: a photo with no expression
+    source, a clip of one frame); one line otherwise."""
+    from ..io.output_names import check_one_image
+    from ..io.video import video_info
+
+    out, frame = args.out, args.frame
+    if not is_one_image(out):
+        raise FaceTransferError(f"--frame {frame} chooses the frame of one image as --out "
+                                f"(result.png), not of {out}: for the first N frames give "
+                                "--max-frames N")
+    if args.matte:
+        raise FaceTransferError(f"--matte {args.matte} is written beside a video or an image "
+                                f"sequence, not beside the one image --out {out}")
+    check_one_image(out, overwrite=args.overwrite, inputs=inputs)
+    clip = args.expression_from if _held(args) else args.target
+    n = video_info(clip).n_frames
+    n = n if args.max_frames is None else min(n, args.max_frames)
+    p = Path(out)
+    seq = p.with_name(f"{p.stem}_%05d{p.suffix}")
+    whose = f"the expression source {clip}'s" if clip != args.target else f"the target {clip}'s"
+    if frame is None and _held(args):
+        frame = args.frame = 0         # a photo's rewrite: its first frame (the source's)
+    if frame is None and n > 1:
+        raise FaceTransferError(f"--out {out} is one image, but the transfer has {n} frames "
+                                f"({whose}): choose one with --frame N (0-{n - 1}), or write "
+                                f"them all as {seq} or a video (.mp4)")
+    if frame is not None and not 0 <= frame < n:
+        raise FaceTransferError(f"--frame {frame}: the transfer has {n} frames ({whose}), "
+                                f"0-{n - 1}")
 
 
 def _check_transfer_args(args):
