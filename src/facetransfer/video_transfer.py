@@ -467,10 +467,12 @@ def _source_files(sources: TransferSources) -> list:
     return files
 
 
-def _frames_for(out, frame: int | None, max_frames: int | None) -> int | None:
-    """The target frames a transfer into ``out`` plans: for one image of ``frame``, up to it
-    (``max_frames`` at most); ``frame`` refused for another output."""
-    if frame is None:
+def _frames_for(out, frame: int | None, max_frames: int | None, still: bool) -> int | None:
+    """The target frames a transfer into ``out`` plans: for one image of ``frame`` of a
+    photo's (``still``), the source's up to it (not tracked further for one image); of a
+    clip's, ``max_frames`` (its regions' frames chosen among them all, as the whole rewrite
+    chooses them); ``frame`` refused for another output."""
+    if frame is None or not still and is_one_image(out):
         return max_frames
     if not is_one_image(out):
         raise RewriteError(f"frame {frame} chooses the frame of one image (result.png), not "
@@ -501,8 +503,8 @@ def render_frame(plan: TransferPlan, model, i: int, *, options: RewriteOptions |
 
 def _one_image(plan: TransferPlan, model, out, frame: int | None, *, options, overwrite,
                save_track, meshes_dir, progress_factory) -> TransferResult:
-    """The transfer written as the one image ``out``: its only frame, or ``frame`` (the
-    last the plan holds, :func:`_frames_for`); the track and meshes of that frame."""
+    """The transfer written as the one image ``out``: its only frame, or ``frame`` (counted
+    from 0; the plan's frames :func:`_frames_for`'s); the track and meshes of that frame."""
     from .io.atomic import write_image
     from .track.project import take_frames
 
@@ -512,7 +514,7 @@ def _one_image(plan: TransferPlan, model, out, frame: int | None, *, options, ov
                            f"choose one (frame=0..{n - 1}), or write an image sequence "
                            f"({p.with_name(p.stem + '_%05d' + p.suffix)}) or a video")
     i = 0 if frame is None else int(frame)
-    if i >= n:
+    if i >= n or frame is not None and frame < 0:
         raise RewriteError(f"frame {i} is beyond the transfer's {n} frames (0-{n - 1})")
     t = time.perf_counter()
     image, face = render_frame(plan, model, i, options=options,
@@ -579,9 +581,10 @@ def transfer_video(sources: TransferSources, out, model, *,
                    inputs=_source_files(sources))  # before any work
     opts = RewriteOptions() if options is None else options
     resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
-    if frame is None and is_one_image(out) and is_still(sources.target.video):
+    still = is_still(sources.target.video)
+    if frame is None and is_one_image(out) and still:
         frame = 0                      # a photo's rewrite: its first frame (the source's)
-    max_frames = _frames_for(out, frame, max_frames)
+    max_frames = _frames_for(out, frame, max_frames, still)
     plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
                         parallel=parallel, progress_factory=progress_factory, reader=reader)
     if is_one_image(out):
