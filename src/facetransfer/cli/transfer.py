@@ -5,9 +5,14 @@
          | --identity-from V.mp4 | --identity-weights W | --identity-label L)
         [--pose-from P.mp4] [--model M.npz] [--align trim|loop|hold] [--max-frames N]
         [--mouth frame|function] [--codec h264|h265|prores] [--crf 18]
-        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png
+        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png|OUT.png [--frame N]
         [--matte matte/%05d.png|matte/%05d.exr|M.mov|M.mkv...] [--overwrite]
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
+    facetransfer transfer --target portrait.jpg --expression-from S.mp4 --out OUT.mp4|OUT.png
+
+A photo as the target performs its expression source: the video has the source's length, rate
+and audio, the photo's head held (:func:`facetransfer.transfer_plan.held_frames`); one image as
+``--out`` is a one-frame result's frame, or ``--frame N``'s.
 
 A performance edited first (``facetransfer edit``) is :mod:`.edit`'s; an identity performing a
 video alone (``facetransfer puppet``) :mod:`.puppet`'s; the job on the default clips
@@ -156,7 +161,8 @@ def register(sub) -> None:
         "Video rewrite (Vlasic et al. 2005, §6, Fig. 1, Fig. 7): track the videos (or reuse "
         "track files), take each attribute from its chosen video, render the new face into "
         "the target footage with the target's texture and the source's mouth, blend, and keep "
-        "the target's audio. Interrupted (Ctrl-C, SIGTERM), it keeps its tracking and the "
+        "the target's audio. A photo as the target performs the whole expression source (its "
+        "length, rate and audio), the photo's head held. Interrupted (Ctrl-C, SIGTERM), it keeps its tracking and the "
         "frames it rendered in the user cache: the same command continues from them "
         "(FACETRANSFER_TRACK_CACHE=off, FACETRANSFER_RENDER_CACHE=off: nothing kept).")
     _add_sources(p)
