@@ -16,7 +16,9 @@ from facetransfer.cli.main import main  # noqa: E402
 from facetransfer.io.video import read_video, write_video  # noqa: E402
 from facetransfer.track import Track  # noqa: E402
 from facetransfer.track.project import take_frames  # noqa: E402
-from test_transfer_cli import clips  # noqa: E402,F401
+import test_transfer_cli  # noqa: E402
+
+clips = test_transfer_cli.clips       # the synthetic clips' fixture, shared
 
 
 def run(argv, capsys):
@@ -26,7 +28,7 @@ def run(argv, capsys):
 
 
 @pytest.fixture(scope="module")
-def photo(clips, tmp_path_factory):  # noqa: F811
+def photo(clips, tmp_path_factory):
     """The target clip's first frame as ``photo.png`` with its track of one frame, and the
     source clip at 30 fps (the photo's own rate, 25, is not the output's)."""
     d = tmp_path_factory.mktemp("photo")
@@ -94,7 +96,7 @@ def test_a_photo_rewrite_written_as_one_image(photo, quick_model_path, tmp_path,
     ("x.mp4", ["--frame", "2"], "--max-frames"),  # --frame picks one image's frame
     ("x.png", ["--frame", "6"], "0-5"),           # beyond the transfer
 ])
-def test_a_clip_to_one_image_is_refused_in_one_line(clips, quick_model_path, tmp_path,  # noqa: F811
+def test_a_clip_to_one_image_is_refused_in_one_line(clips, quick_model_path, tmp_path,
                                                     capsys, out, extra, said):
     code, _, err = run(["transfer", "--target", clips["target"], "--target-track",
                         clips["target_track"], "--expression-from", clips["source"],
@@ -104,7 +106,7 @@ def test_a_clip_to_one_image_is_refused_in_one_line(clips, quick_model_path, tmp
     assert "Traceback" not in err and not list(tmp_path.iterdir())
 
 
-def test_one_frame_of_a_clip_as_one_image(clips, quick_model_path, tmp_path, capsys):  # noqa: F811
+def test_one_frame_of_a_clip_as_one_image(clips, quick_model_path, tmp_path, capsys):
     """``--frame 1`` of a video target: that frame of its rewrite as a sequence has it."""
     base = ["transfer", "--target", clips["target"], "--target-track", clips["target_track"],
             "--expression-from", clips["source"], "--source-track", clips["source_track"],

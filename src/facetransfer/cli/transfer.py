@@ -162,8 +162,9 @@ def register(sub) -> None:
         "track files), take each attribute from its chosen video, render the new face into "
         "the target footage with the target's texture and the source's mouth, blend, and keep "
         "the target's audio. A photo as the target performs the whole expression source (its "
-        "length, rate and audio), the photo's head held. Interrupted (Ctrl-C, SIGTERM), it keeps its tracking and the "
-        "frames it rendered in the user cache: the same command continues from them "
+        "length, rate and audio), the photo's head held. Interrupted (Ctrl-C, SIGTERM), it "
+        "keeps its tracking and the frames it rendered in the user cache: the same command "
+        "continues from them "
         "(FACETRANSFER_TRACK_CACHE=off, FACETRANSFER_RENDER_CACHE=off: nothing kept).")
     _add_sources(p)
     p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
@@ -178,7 +179,7 @@ def register(sub) -> None:
     p.add_argument("--frame", type=int, default=None, metavar="N",
                    help="with one image as --out (result.png, .jpg, .tif): write frame N of "
                    "the transfer (counted from 0; of a photo's, its expression source's frame "
-                   "N); default: its only frame")
+                   "N); default: a photo's first frame, a one-frame clip's only one")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
