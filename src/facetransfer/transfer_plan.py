@@ -33,6 +33,7 @@ from typing import Callable
 import numpy as np
 
 from .errors import RewriteError, VideoError
+from .io.video_sequence import is_still
 from .texture.face import (MouthFunction, mouth_texture_function, resolve_mouth_mode,
                             timeline_mouth_function)
 from .rewrite_options import RewriteOptions
@@ -560,14 +561,18 @@ class _Planner:
         from concurrent.futures import ThreadPoolExecutor
 
         expression_from = sources.expression.video
+        still = is_still(target)   # a photo: performs the whole source (its first max_frames)
         with ThreadPoolExecutor(max_workers=2) as pool:
             ft = pool.submit(read_video, target, max_frames=max_frames)
-            fs = pool.submit(read_video, expression_from,
-                             max_frames=frames_to_cover(target, expression_from, max_frames))
+            fs = pool.submit(read_video, expression_from, max_frames=max_frames if still else
+                             frames_to_cover(target, expression_from, max_frames))
             if meanwhile is not None:
                 meanwhile()
             frames, fps = ft.result()
             sfr, sfps = fs.result()
+        if still and len(frames) == 1:
+            self.timings["read"] += time.perf_counter() - t0
+            return held_frames(frames[0], len(sfr)), sfps, (sfr, sfps)
         si = video_info(expression_from)
         need = frames_covering(len(frames), fps, sfps)
         if len(sfr) < need and len(sfr) < si.n_frames:  # the containers' counts were short
@@ -596,6 +601,9 @@ class _Planner:
     def target_track(self, target: Source, frames, fps, *, alone: bool = False):
         """The target's track, checked against its frames (a face somewhere)."""
         n, H, W = frames.shape[:3]
+        n_held = n if n > 1 and is_still(target.video) else 0  # the photo tracked once, held
+        if n_held:
+            frames, n = frames[:1], 1
         tt = self.track(target.video, target.track, frames, fps, n, alone=alone,
                         face=target.face, every=self.every)
         if target.track is not None:
@@ -608,7 +616,7 @@ class _Planner:
                                    "rewrite the frames it covers")
         if tt.lost.all():
             raise VideoError(f"no face found in the target {target.video}")
-        return tt
+        return held_track(tt, n_held, fps) if n_held else tt
 
     def read_source(self, inputs: _Inputs, kind: str, src: Source, pre_read, early,
                     quiet: Callable[[], None] | None = None) -> None:
@@ -639,6 +647,22 @@ class _Planner:
         if src.track is not None:
             _warn_other_source(tr, src.video, kind)
         inputs.tracks[kind], inputs.source_frames[kind] = checked
+
+
+def held_frames(frame: np.ndarray, n: int) -> np.ndarray:
+    """A photo's frame ``(H, W, 3) uint8`` as the target's ``n`` frames ``(n, H, W, 3)``: one
+    read-only view of it (no copy; 1008 frames of a 1080p photo would be 6.3 GB), so that a
+    photo as the target performs the whole expression source, its own pixels in every frame
+    (and its texture, lifted from each, the same)."""
+    frame = np.asarray(frame)
+    return np.broadcast_to(frame[None], (max(int(n), 1), *frame.shape))
+
+
+def held_track(track, n: int, fps: float):
+    """A photo's track of one frame held over ``n`` frames at ``fps`` (the expression
+    source's rate): its pose, identity and expression in every frame of :func:`held_frames`
+    (the expression is then the source's, :func:`facetransfer.transfer.recombine`)."""
+    return dataclasses.replace(take_frames(track, np.zeros(int(n), np.int64)), fps=float(fps))
 
 
 def _warn_other_source(track, video, role: str) -> None:

@@ -37,6 +37,8 @@ import numpy as np
 
 from .errors import RewriteError
 from .io.ahead import ordered_ahead
+from .io.output_names import is_one_image
+from .io.video_sequence import is_still
 from .io.plate_output import plate_output
 from .io.video_like import like_video
 from .rewrite_options import RewriteOptions
@@ -53,6 +55,7 @@ __all__ = [
     "RenderResult",
     "RenderTarget",
     "render_plan",
+    "render_frame",
     "transfer_video",
     "write_mesh_sequence",
 ]
@@ -130,6 +133,9 @@ class RenderTarget:
         sequence (``matte/%05d.png``, ``.tif``, ``.exr``) or a video (``.mp4``, ``.mov``,
         ``.mkv``), numbered and timed as ``path`` (:mod:`facetransfer.io.matte`); the frames
         are rendered with it only when asked.
+    sound_from : path-like, optional
+        The video whose audio is kept instead of ``audio_from``'s: a photo's rewrite (a target
+        without sound, performing its expression source's frames) keeps that source's.
     """
 
     path: object
@@ -137,6 +143,12 @@ class RenderTarget:
     video_options: object = None
     overwrite: bool = False
     matte: object = None
+    sound_from: object = None
+
+    @property
+    def sound(self):
+        """The video whose audio is kept: ``sound_from``, else ``audio_from``."""
+        return self.audio_from if self.sound_from is None else self.sound_from
 
 
 @dataclass(frozen=True)
@@ -209,7 +221,7 @@ def render_plan(plan: TransferPlan, model, output: RenderTarget, *,
     n = plan.n_frames
     key = _render_key(plan, model, out, options, video_options) \
         if resume and compose is None else None
-    writer = _parts_writer(key, plan, out, video_options, audio_from, overwrite)
+    writer = _parts_writer(key, plan, out, video_options, output.sound, overwrite)
     start = skip = 0 if writer is None else writer.done
     with contextlib.ExitStack() as stack:
         if writer is not None:  # parts kept on an error or interrupt, joined on success
@@ -252,7 +264,7 @@ def _write_frames(stack: contextlib.ExitStack, render: "_Frames", writer, skip: 
 
         frames = stack.enter_context(contextlib.closing(render()))
         return write_video_with_audio(output.path, frames, render.plan.fps,
-                                      audio_from=output.audio_from, overwrite=output.overwrite,
+                                      audio_from=output.sound, overwrite=output.overwrite,
                                       options=video_options, n_frames=render.plan.n_frames)
     # closed here on an error (its render threads joined), not by the collector
     frames = stack.enter_context(contextlib.closing(render.with_faces()))
@@ -415,6 +427,7 @@ def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: boo
                    matte=None, inputs=()) -> None:
     """The outputs of :func:`transfer_video` can be written (before any work)."""
     from .io.atomic import check_output_path
+    from .io.output_names import check_one_image
     from .io.video import check_video_output
 
     named = [(n, Path(p).resolve()) for n, p in (("--out", out), ("--save-track", save_track),
@@ -424,7 +437,13 @@ def _check_outputs(out, *, video_options, save_track, meshes_dir, overwrite: boo
         for b, pb in named[i + 1:]:
             if pa == pb:
                 raise RewriteError(f"{b} {pb} is also {a}: give each output its own name")
-    check_video_output(out, video_options, overwrite=overwrite)
+    if is_one_image(out):
+        if matte is not None:
+            raise RewriteError(f"the matte {matte} is written beside a video or an image "
+                               f"sequence, not beside the one image {out}")
+        check_one_image(out, overwrite=overwrite, inputs=inputs)
+    else:
+        check_video_output(out, video_options, overwrite=overwrite)
     if save_track is not None:
         check_output_path(save_track, overwrite=overwrite)
     if meshes_dir is not None:
@@ -448,11 +467,86 @@ def _source_files(sources: TransferSources) -> list:
     return files
 
 
+def _frames_for(out, frame: int | None, max_frames: int | None, still: bool) -> int | None:
+    """The target frames a transfer into ``out`` plans: for one image of ``frame`` of a
+    photo's (``still``), the source's up to it (not tracked further for one image); of a
+    clip's, ``max_frames`` (its regions' frames chosen among them all, as the whole rewrite
+    chooses them); ``frame`` refused for another output."""
+    if frame is None or not still and is_one_image(out):
+        return max_frames
+    if not is_one_image(out):
+        raise RewriteError(f"frame {frame} chooses the frame of one image (result.png), not "
+                           f"of {out}: give max_frames for the first N frames")
+    if int(frame) < 0 or max_frames is not None and int(frame) >= int(max_frames):
+        raise RewriteError(f"frame {frame} is not among the first {max_frames} frames"
+                           if max_frames is not None else f"frame must be >= 0, got {frame}")
+    return int(frame) + 1
+
+
+def render_frame(plan: TransferPlan, model, i: int, *, options: RewriteOptions | None = None,
+                 progress_factory=None) -> tuple[np.ndarray, bool]:
+    """Frame ``i`` of a planned transfer alone, rewritten as :func:`render_plan` rewrites it
+    (the regions chosen among all the plan's frames): ``((H, W, 3) uint8, whether a face was
+    rendered)``."""
+    options = RewriteOptions() if options is None else options
+    options = options.with_(mouth=resolve_mouth_mode(options.mouth, model,
+                                                     performance=plan.performance))
+    if not 0 <= int(i) < plan.n_frames:
+        raise RewriteError(f"frame {i} is not one of the transfer's {plan.n_frames} frames")
+    mouth_fn = _lift_mouth(plan, model, progress_factory) \
+        if options.mouth == "function" else None
+    render = _Frames(plan, model, options, mouth_fn, None, None, int(i))
+    with contextlib.closing(render.with_faces()) as frames:
+        frame, face = next(frames)
+    return np.asarray(frame), bool(face)
+
+
+def _one_image(plan: TransferPlan, model, out, frame: int | None, *, options, overwrite,
+               save_track, meshes_dir, progress_factory) -> TransferResult:
+    """The transfer written as the one image ``out``: its only frame, or ``frame`` (counted
+    from 0; the plan's frames :func:`_frames_for`'s); the track and meshes of that frame."""
+    from .io.atomic import write_image
+    from .track.project import take_frames
+
+    n, p = plan.n_frames, Path(out)
+    if frame is None and n > 1:
+        raise RewriteError(f"output {out} is one image, but the transfer has {n} frames: "
+                           f"choose one (frame=0..{n - 1}), or write an image sequence "
+                           f"({p.with_name(p.stem + '_%05d' + p.suffix)}) or a video")
+    i = 0 if frame is None else int(frame)
+    if i >= n or frame is not None and frame < 0:
+        raise RewriteError(f"frame {i} is beyond the transfer's {n} frames (0-{n - 1})")
+    t = time.perf_counter()
+    image, face = render_frame(plan, model, i, options=options,
+                               progress_factory=progress_factory)
+    timings = dict(plan.timings, render=time.perf_counter() - t)
+    write_image(out, image, overwrite=overwrite)
+    one = take_frames(plan.new_track, np.array([i]))
+    if save_track is not None:
+        one.save(save_track, overwrite=overwrite)
+    if meshes_dir is not None:
+        write_mesh_sequence(meshes_dir, one, model)
+    return TransferResult(p, 1, int(face), False, plan, timings)
+
+
+def _sound_of(sources: TransferSources, plan: TransferPlan):
+    """The video whose audio a transfer keeps where it is not the target's: a photo's (a
+    target without sound held over its expression source's frames), that source's; None: the
+    target's."""
+    from .take import is_take
+
+    if is_still(sources.target.video) and sources.expression is not None \
+            and not is_take(sources.expression.video) and plan.n_frames > 1:
+        return sources.expression.video
+    return None
+
+
 def transfer_video(sources: TransferSources, out, model, *,
                    options: RewriteOptions | None = None, overwrite: bool = False,
                    meshes_dir=None, save_track=None, progress_factory=None, video_options=None,
                    align: str | None = None, max_frames: int | None = None,
-                   parallel: bool | None = None, reader=None, matte=None) -> TransferResult:
+                   parallel: bool | None = None, reader=None, matte=None,
+                   frame: int | None = None) -> TransferResult:
     """The whole video rewrite (§6): plan (read, track, recombine), render, write with audio.
 
     The inputs are ``sources`` (:class:`TransferSources`, e.g.
@@ -464,7 +558,12 @@ def transfer_video(sources: TransferSources, out, model, *,
     replaced only with ``overwrite=True``. With the mouth mode ``"function"`` the function is
     lifted from :attr:`TransferPlan.texture_frames`. ``video_options``: codec and CRF of
     ``out`` (:class:`facetransfer.io.video.VideoOptions`); ``out`` may be an image sequence
-    (``frames/%05d.png``). A video file is rendered in parts kept in the render cache
+    (``frames/%05d.png``), or one image (``result.png``, ``.jpg``, ``.tif``: a one-frame
+    transfer's frame, or with ``frame`` that frame of the transfer, :func:`render_frame`). A
+    photo as the target (``portrait.jpg``) with an expression source performs all the
+    source's frames at its rate, with its audio
+    (:func:`facetransfer.transfer_plan.held_frames`); a photo's one image is its frame 0 by
+    default. A video file is rendered in parts kept in the render cache
     (:mod:`facetransfer.render_cache`): an interrupted transfer run again renders only the
     frames it had not. ``matte``: also write the matte of the pixels the rewrite changed
     (:attr:`RenderTarget.matte`), numbered, timed and continued as ``out``.
@@ -483,9 +582,18 @@ def transfer_video(sources: TransferSources, out, model, *,
                    inputs=_source_files(sources))  # before any work
     opts = RewriteOptions() if options is None else options
     resolve_mouth_mode(opts.mouth, model, performance=sources.performance is not None)
+    still = is_still(sources.target.video)
+    if frame is None and is_one_image(out) and still:
+        frame = 0                      # a photo's rewrite: its first frame (the source's)
+    max_frames = _frames_for(out, frame, max_frames, still)
     plan = plan_sources(sources, model, options=opts, align=align, max_frames=max_frames,
                         parallel=parallel, progress_factory=progress_factory, reader=reader)
-    output = RenderTarget(out, sources.target.video, video_options, overwrite, matte)
+    if is_one_image(out):
+        return _one_image(plan, model, out, frame, options=opts, overwrite=overwrite,
+                          save_track=save_track, meshes_dir=meshes_dir,
+                          progress_factory=progress_factory)
+    output = RenderTarget(out, sources.target.video, video_options, overwrite, matte,
+                          sound_from=_sound_of(sources, plan))
     rendered = render_plan(plan, model, output, options=opts,
                            progress_factory=progress_factory, resume=True)
     if save_track is not None:

@@ -5,9 +5,14 @@
          | --identity-from V.mp4 | --identity-weights W | --identity-label L)
         [--pose-from P.mp4] [--model M.npz] [--align trim|loop|hold] [--max-frames N]
         [--mouth frame|function] [--codec h264|h265|prores] [--crf 18]
-        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png
+        [--meshes DIR] [--save-track OUT.npz] --out OUT.mp4|frames/%05d.png|OUT.png [--frame N]
         [--matte matte/%05d.png|matte/%05d.exr|M.mov|M.mkv...] [--overwrite]
     facetransfer transfer --target T.mp4 --target-track TRACK.npz --performance T2.npz ...
+    facetransfer transfer --target portrait.jpg --expression-from S.mp4 --out OUT.mp4|OUT.png
+
+A photo as the target performs its expression source: the video has the source's length, rate
+and audio, the photo's head held (:func:`facetransfer.transfer_plan.held_frames`); one image as
+``--out`` is a one-frame result's frame, or ``--frame N``'s.
 
 A performance edited first (``facetransfer edit``) is :mod:`.edit`'s; an identity performing a
 video alone (``facetransfer puppet``) :mod:`.puppet`'s; the job on the default clips
@@ -31,6 +36,7 @@ from .common import (FACE_WHERE, MODEL_HELP, add_output, bar_factory, check_face
                      resolve_model, start_tracker_loads, subcommand_parser, tracker_name,
                      video_options, video_out)
 from .track import CAPTURE_HELP
+from ..io.output_names import is_one_image
 
 log = logging.getLogger(__name__)
 
@@ -155,8 +161,10 @@ def register(sub) -> None:
         "Video rewrite (Vlasic et al. 2005, §6, Fig. 1, Fig. 7): track the videos (or reuse "
         "track files), take each attribute from its chosen video, render the new face into "
         "the target footage with the target's texture and the source's mouth, blend, and keep "
-        "the target's audio. Interrupted (Ctrl-C, SIGTERM), it keeps its tracking and the "
-        "frames it rendered in the user cache: the same command continues from them "
+        "the target's audio. A photo as the target performs the whole expression source (its "
+        "length, rate and audio), the photo's head held. Interrupted (Ctrl-C, SIGTERM), it "
+        "keeps its tracking and the frames it rendered in the user cache: the same command "
+        "continues from them "
         "(FACETRANSFER_TRACK_CACHE=off, FACETRANSFER_RENDER_CACHE=off: nothing kept).")
     _add_sources(p)
     p.add_argument("--model", metavar="M.npz", help=MODEL_HELP)
@@ -168,11 +176,17 @@ def register(sub) -> None:
                    "else from its first row (timecode, the default); or always from its first "
                    "row (start)")
     p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
+    p.add_argument("--frame", type=int, default=None, metavar="N",
+                   help="with one image as --out (result.png, .jpg, .tif): write frame N of "
+                   "the transfer (counted from 0; of a photo's, its expression source's frame "
+                   "N); default: a photo's first frame, a one-frame clip's only one")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
     add_output(p, run_transfer, metavar="OUT.mp4", video=True,
-                help="video to write (.mp4, .mov, .mkv...) or image sequence (frames/%%05d.png)",
+                help="video to write (.mp4, .mov, .mkv...), image sequence (frames/%%05d.png) "
+                "or one image (result.png, .jpg, .tif: a photo's or a one-frame clip's "
+                "rewrite, or the frame --frame N)",
                 overwrite_help="replace existing outputs")
     p.add_argument("--matte", metavar="MATTE", type=video_out,
                    help="also write the matte of the pixels the transfer changed, one grey "
@@ -227,9 +241,11 @@ def _prefetch_inputs(args):
 
     from ..take import is_take
 
+    from ..io.video_sequence import is_still
+
     reads = [(args.target, args.max_frames)]
     if args.expression_from and not is_take(args.expression_from):
-        reads.append((args.expression_from,
+        reads.append((args.expression_from, args.max_frames if is_still(args.target) else
                       frames_to_cover(args.target, args.expression_from, args.max_frames)))
     return Prefetch(reads)
 
@@ -259,7 +275,12 @@ def run_transfer(args) -> int:
         overwrite=args.overwrite, meshes_dir=args.meshes, save_track=args.save_track,
         progress_factory=bar_factory(), video_options=vopt,
         align=args.align, max_frames=args.max_frames, reader=prefetch.read_video,
-        matte=args.matte)
+        matte=args.matte, frame=args.frame)
+    if args.frame is not None or is_one_image(args.out):
+        print(f"wrote {res.path}: one image, frame {args.frame or 0} of the transfer"
+              + (" (kept original: the face is lost there)" if not res.n_rewritten else ""))
+        _said_also(args, 1)
+        return 0
     kept = res.n_frames - res.n_rewritten
     for tr in res.plan.source_tracks.values():
         if tr is not None and tr.info.get("resumed"):
@@ -273,15 +294,32 @@ def run_transfer(args) -> int:
              f"{_whose_lost(res.plan, _first_number(args.out, args.target, args.start_number))})"
              if kept else "")
           + (f", {res.kept}" if res.kept else "")
-          + (", with the target's audio" if res.audio else ", no audio"))
+          + ((", with the expression source's audio" if _held(args) else
+              ", with the target's audio") if res.audio else ", no audio"))
     if args.matte:
         print(f"wrote the matte {args.matte}"
               + _numbered(args.matte, args.target, res.n_frames, args.start_number))
+    _said_also(args, res.n_frames)
+    return 0
+
+
+def _said_also(args, n_frames: int) -> None:
+    """The lines of the track and meshes a transfer also wrote."""
     if args.save_track:
         print(f"wrote {args.save_track}")
     if args.meshes:
-        print(f"wrote {res.n_frames} meshes to {args.meshes}")
-    return 0
+        print(f"wrote {n_frames} meshes to {args.meshes}")
+
+
+def _held(args) -> bool:
+    """Whether the target is a photo held over the expression source's frames (a video of
+    the photo performing the source, with the source's audio:
+    :func:`facetransfer.transfer_plan.held_frames`)."""
+    from ..io.video_sequence import is_still
+    from ..take import is_take
+
+    return bool(is_still(args.target) and args.expression_from
+                and not is_take(args.expression_from))
 
 
 def _check_option_pairs(args) -> None:
@@ -306,7 +344,10 @@ def _check_transfer_outputs(args, inputs: list):
 
     vopt = video_options(args, next((o for o in (args.out, args.matte)
                                      if o and is_image_pattern(o)), args.out))
-    check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
+    if is_one_image(args.out) or args.frame is not None:
+        _check_one_image(args, inputs)
+    else:
+        check_video_output(args.out, vopt, overwrite=args.overwrite, inputs=inputs)
     if args.matte:
         from ..io.matte import check_matte_output
 
@@ -320,6 +361,39 @@ def _check_transfer_outputs(args, inputs: list):
         check_track_name(args.save_track, "--save-track")
         check_output_path(args.save_track, overwrite=args.overwrite, inputs=inputs + [args.out])
     return vopt
+
+
+def _check_one_image(args, inputs: list) -> None:
+    """``--out result.png`` (one image) and ``--frame N``, checked before any work: the
+    transfer has that frame (without ``--frame``, one frame: a photo with no expression
+    source, a clip of one frame); one line otherwise."""
+    from ..io.output_names import check_one_image
+    from ..io.video import video_info
+
+    out, frame = args.out, args.frame
+    if not is_one_image(out):
+        raise FaceTransferError(f"--frame {frame} chooses the frame of one image as --out "
+                                f"(result.png), not of {out}: for the first N frames give "
+                                "--max-frames N")
+    if args.matte:
+        raise FaceTransferError(f"--matte {args.matte} is written beside a video or an image "
+                                f"sequence, not beside the one image --out {out}")
+    check_one_image(out, overwrite=args.overwrite, inputs=inputs)
+    clip = args.expression_from if _held(args) else args.target
+    n = video_info(clip).n_frames
+    n = n if args.max_frames is None else min(n, args.max_frames)
+    p = Path(out)
+    seq = p.with_name(f"{p.stem}_%05d{p.suffix}")
+    whose = f"the expression source {clip}'s" if clip != args.target else f"the target {clip}'s"
+    if frame is None and _held(args):
+        frame = args.frame = 0         # a photo's rewrite: its first frame (the source's)
+    if frame is None and n > 1:
+        raise FaceTransferError(f"--out {out} is one image, but the transfer has {n} frames "
+                                f"({whose}): choose one with --frame N (0-{n - 1}), or write "
+                                f"them all as {seq} or a video (.mp4)")
+    if frame is not None and not 0 <= frame < n:
+        raise FaceTransferError(f"--frame {frame}: the transfer has {n} frames ({whose}), "
+                                f"0-{n - 1}")
 
 
 def _check_transfer_args(args):

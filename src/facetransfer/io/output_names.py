@@ -16,7 +16,11 @@ from pathlib import Path
 
 from ..errors import OutputError
 
-__all__ = ["check_meshes_folder", "check_output_suffix", "suffix_list"]
+__all__ = ["check_meshes_folder", "check_output_suffix", "suffix_list", "ONE_IMAGE_SUFFIXES",
+           "is_one_image", "check_one_image"]
+
+#: The extensions of one image a transfer writes as its one frame (``--out result.png``).
+ONE_IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".tif", ".tiff", ".bmp")
 
 
 def suffix_list(suffixes) -> str:
@@ -86,3 +90,30 @@ def check_meshes_folder(path: str | os.PathLike, *, overwrite: bool) -> Path:
     except OutputError as exc:
         raise OutputError(f"--meshes {md}: {exc}") from None
     return md
+
+
+def is_one_image(path: str | os.PathLike | None) -> bool:
+    """Whether ``path`` names one image to write (``result.png``): an image's extension
+    (:data:`ONE_IMAGE_SUFFIXES`) and no frame-number field (``%05d``, ``####``: a sequence)."""
+    if path is None:
+        return False
+    p = Path(path)
+    return p.suffix.lower() in ONE_IMAGE_SUFFIXES and "%" not in p.name and "#" not in p.name
+
+
+def check_one_image(path: str | os.PathLike, *, overwrite: bool, inputs=()) -> Path:
+    """Validate one image to write (:func:`is_one_image`) before any work: its folder
+    exists and can be written, it is none of ``inputs``, and an existing one is replaced
+    only with ``overwrite`` (:func:`facetransfer.io.atomic.check_output_path`).
+
+    Raises
+    ------
+    OutputError
+        Not an image's name, or as :func:`~facetransfer.io.atomic.check_output_path`.
+    """
+    from .atomic import check_output_path
+
+    if not is_one_image(path):
+        raise OutputError(f"output {path}: one image is written as "
+                          f"{suffix_list(ONE_IMAGE_SUFFIXES)}")
+    return check_output_path(path, overwrite=overwrite, inputs=inputs)

@@ -34,7 +34,7 @@ log = logging.getLogger(__name__)
 __all__ = ["IMAGE_SUFFIXES", "FRAME_FIELD", "DEFAULT_SEQUENCE_FPS", "SEQUENCE_FPS_VARIABLE",
            "Sequence", "is_sequence", "percent_pattern", "sequence_fps", "sequence_stamp",
            "sequence_files", "open_sequence", "sequence_frames", "suggested_pattern",
-           "pattern_of_file",
+           "pattern_of_file", "STILL_SUFFIXES", "is_still",
            "same_sequence_files"]
 
 #: Image formats of a frame sequence, read and written (``frames/%05d.png``).
@@ -99,6 +99,19 @@ def is_sequence(path) -> bool:
     p = Path(path)
     return bool(FRAME_FIELD.search(p.name)) and \
         p.suffix.lower() in IMAGE_SUFFIXES + _SCENE_SUFFIXES
+
+
+#: The extensions of a still image read as a clip of one frame (beside :data:`IMAGE_SUFFIXES`).
+STILL_SUFFIXES = IMAGE_SUFFIXES + (".ppm", ".pgm", ".webp")
+
+
+def is_still(path) -> bool:
+    """Whether ``path`` names one still image (a photo: ``portrait.jpg``), not a sequence's
+    pattern nor a video; read as a clip of one frame, and as a transfer's target animated by
+    its expression source's frames (:mod:`facetransfer.transfer_plan`)."""
+    if path is None or not isinstance(path, (str, os.PathLike)) or is_sequence(path):
+        return False
+    return Path(path).suffix.lower() in STILL_SUFFIXES
 
 
 def percent_pattern(path) -> Path:
