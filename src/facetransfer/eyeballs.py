@@ -201,7 +201,7 @@ def _lift_eyes(ext: np.ndarray, eye: np.ndarray, image: np.ndarray, V: np.ndarra
     cams = track.camera(i), track.camera(j)
     other, width = _eye_map(V, *mesh[:2], cams[1], image.shape[:2], mesh[2])
     other[~np.isin(other, np.flatnonzero(which))] = -1
-    src = extend_eyeballs(image, other >= 0,
+    src = extend_eyeballs(image, other >= 0, iris=True,
                           grow=max(int(round((GROW + LIFT_GROW) * width.max())), 2))
     for e in np.flatnonzero(which).tolist():
         near = cv2.distanceTransform((eye != e).view(np.uint8), cv2.DIST_L2, 5) <= reach
@@ -235,7 +235,7 @@ def _eye_affine(models: tuple, cams: tuple, e: int) -> np.ndarray:
 
 
 def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
-                    rim: int = RIM) -> np.ndarray:
+                    rim: int = RIM, iris: bool = False) -> np.ndarray:
     """``image`` (H, W, 3) uint8 with each pixel within ``grow`` pixels of ``opening`` (H, W)
     bool (the eyes' openings), and of the opening's own outer ``rim`` pixels, taking the colour
     of the nearest pixel of the rest of the opening: the eyeball continued under the lids (the
@@ -252,7 +252,16 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     colour, a light stripe with a hard edge beside the shaded sclera (``make demo``'s pair,
     frame 29). What is continued beside that sclera (the iris above and below the iris, the
     lid margins) passes into it over :data:`SOFT` of the iris's length (eyeref53: a step
-    there read as a straight cut, ``make demo``'s frame 40)."""
+    there read as a straight cut, ``make demo``'s frame 40).
+
+    With ``iris`` (eyeball53: another frame's eyeball, :func:`_lift_eyes`; off for the
+    reference frame's own, as before), the eyeball of an eye with an iris is continued as an
+    eyeball: a hidden pixel over or under the iris (within its extent along the eye) whose
+    nearest pixel is the iris or a catchlight in it takes its nearest pixel of the iris's dark
+    part (a catchlight on the opening's rim, where the track puts it, was drawn out into a
+    bar across the lid), and every hidden pixel beyond the iris its nearest sclera's, as
+    beyond an iris in its corner (the lid margins and the corners' shade were continued into
+    a flat grey wedge where an iris turned far away from them uncovers it)."""
     import cv2
 
     core = cv2.erode(opening.view(np.uint8), np.ones((3, 3), np.uint8), iterations=rim) \
@@ -261,11 +270,17 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     if not core.any():
         return out
     ys, xs, src = _nearest(core, grow + rim)
-    iris, eye, axes, span, sclera = _iris_pixels(image, core)
+    iris_px, eye, axes, span, sclera = _iris_pixels(image, core)
     k = eye[src[:, 0], src[:, 1]]                       # each source's eye
     p = xs * axes[k, 0] + ys * axes[k, 1]                # the pixel's place along its long axis
-    side = iris[src[:, 0], src[:, 1]] & ((p < span[k, 0]) | (p > span[k, 1]))
+    beyond = (p < span[k, 0]) | (p > span[k, 1])
+    side = (iris_px[src[:, 0], src[:, 1]] | (iris & np.isfinite(span[k, 0]))) & beyond
     out[ys, xs] = image[src[:, 0], src[:, 1]]
+    if iris and iris_px.any():
+        near = cv2.dilate(iris_px.view(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        over = near[src[:, 0], src[:, 1]] & (p >= span[k, 0]) & (p <= span[k, 1])
+        at = _nearest_to(iris_px, ys[over], xs[over])
+        out[ys[over], xs[over]] = image[at[:, 0], at[:, 1]]
     w = _toward_sclera(side, ys, xs, SOFT * (span[k, 1] - span[k, 0]), image.shape[:2])
     mix = w > 0
     if mix.any():
