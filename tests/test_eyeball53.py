@@ -118,3 +118,28 @@ def test_the_eyeball_frame_rules(arkit_model):
     bare = track.__class__(**{**track.__dict__, "blendshapes": None,
                               "blendshape_names": None})
     np.testing.assert_array_equal(eyeballs.eyeball_frames(bare, 0), [0, 0])
+
+
+def test_a_lifted_eyeball_is_continued_as_an_eyeball_under_its_lids():
+    """``extend_eyeballs(iris=True)`` (another frame's eyeball): a catchlight on the opening's
+    rim is not drawn out into a bar over the iris, and the corner's shade beyond the sclera
+    is not continued: the eyeball there is its sclera; without it, as before."""
+    img = np.zeros((60, 80, 3), np.uint8)
+    img[:] = SKIN
+    opening = np.zeros((60, 80), bool)
+    opening[25:35, 20:60] = True
+    img[opening] = SCLERA
+    img[25:35, 55:60] = (120, 110, 110)          # the outer corner in shade
+    img[25:35, 34:46] = IRIS                     # an iris from lid to lid
+    img[25:28, 38:40] = (255, 255, 255)          # a catchlight on its upper rim
+    plain = eyeballs.extend_eyeballs(img, opening, grow=8)
+    lifted = eyeballs.extend_eyeballs(img, opening, grow=8, iris=True)
+    above = (slice(19, 24), slice(38, 40))       # over the catchlight, under the upper lid
+    assert plain[above].min() >= 250                                  # a bar of it
+    assert np.abs(lifted[above].astype(int) - IRIS).max() == 0        # the iris
+    beyond = (slice(28, 32), slice(61, 66))      # beyond the shaded outer corner
+    assert np.abs(plain[beyond].astype(int) - (120, 110, 110)).max() == 0
+    assert np.abs(lifted[beyond].astype(int) - SCLERA).max() == 0
+    core = np.zeros_like(opening)
+    core[26:34, 21:59] = True
+    np.testing.assert_array_equal(lifted[core], img[core])           # the opening kept
