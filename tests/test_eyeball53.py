@@ -51,8 +51,9 @@ def clip(arkit_model):
     return model, closed, fill_eye, track, frames
 
 
-def test_an_eye_looking_aside_takes_the_eyeball_of_a_frame_looking_ahead(clip):
+def test_an_eye_looking_aside_takes_the_eyeball_of_a_frame_looking_ahead(clip, monkeypatch):
     model, closed, fill_eye, track, frames = clip
+    monkeypatch.setattr(eyeballs, "LIFT", True)
     (img0, V0, iris0), (img1, _, iris1) = frames
     assert iris0[1, 0] > iris1[1, 0] + 3.0            # the left iris out (the image's right)
     np.testing.assert_array_equal(eyeballs.eyeball_frames(track, 0), [0, 1])
@@ -78,10 +79,11 @@ def test_an_eye_looking_aside_takes_the_eyeball_of_a_frame_looking_ahead(clip):
     assert changed[disk].all() and (xx[changed] > SIZE / 2).all()   # the image's right: left
 
 
-def test_a_lifted_eyeball_is_shown_at_the_frames_own_gaze_too(clip):
+def test_a_lifted_eyeball_is_shown_at_the_frames_own_gaze_too(clip, monkeypatch):
     """:meth:`EyeTexture.at`: a gaze equal to the lifted frame's (no shift) still shows the
     lifted eyeball (before, no shift meant the reference frame's own eye as it is)."""
     model, closed, fill_eye, track, frames = clip
+    monkeypatch.setattr(eyeballs, "LIFT", True)
     (img0, V0, _), (img1, _, _) = frames
     lift = eyeballs.eyeballs_of(img0, track, 0, model, closed.faces, V0, fill_eye,
                                 frames=[img0, img1], n_frames=2, topo=closed)
@@ -143,3 +145,17 @@ def test_a_lifted_eyeball_is_continued_as_an_eyeball_under_its_lids():
     core = np.zeros_like(opening)
     core[26:34, 21:59] = True
     np.testing.assert_array_equal(lifted[core], img[core])           # the opening kept
+
+
+def test_the_lift_is_off_by_default_and_then_nothing_changes(clip):
+    """:data:`facetransfer.eyeballs.LIFT` off (the judge's vertical gaze): the clip's frames
+    given or not, the eyeballs are the reference frame's, to the bit."""
+    model, closed, fill_eye, track, frames = clip
+    (img0, V0, _), (img1, _, _) = frames
+    assert eyeballs.LIFT is False
+    base = eyeballs.eyeballs_of(img0, track, 0, model, closed.faces, V0, fill_eye)
+    given = eyeballs.eyeballs_of(img0, track, 0, model, closed.faces, V0, fill_eye,
+                                 frames=[img0, img1], n_frames=2, topo=closed)
+    assert given.source is None
+    np.testing.assert_array_equal(given.image, base.image)
+    np.testing.assert_array_equal(given.angles, base.angles)
