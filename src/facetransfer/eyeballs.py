@@ -10,6 +10,12 @@ tracker reads from Face Landmarker's iris points) and projected with that frame'
 (:func:`facetransfer.track.gaze.project_iris`). What the shift uncovers beyond the reference
 frame's eye opening (the sclera under its lids) is filled once per clip from the opening's
 nearest pixel (:func:`extend_eyeballs`).
+
+With :data:`LIFT` (off by the judge: BENCHMARKS.md, "Fifty-third session (helper eyeball53)"),
+an eye of the reference frame looking aside shows instead the eyeball of a frame of the clip
+looking nearer ahead (:func:`eyeball_frames`), lifted into the reference frame through the two
+frames' eyeballs (:func:`_eye_affine`), the lids and brows still the reference frame's: turned
+to the new gaze, it uncovers less of what its frame hides.
 """
 
 from __future__ import annotations
@@ -416,12 +422,12 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     """The eyeballs of the target's frame ``i`` (``image``), or None where the track has no
     eyeLook* activations.
 
-    With the clip's ``frames`` and :data:`LIFT`, an eye of frame ``i`` looking aside shows the eyeball of a
-    frame of the clip looking nearer ahead (:func:`eyeball_frames`), lifted into frame ``i``
-    (:func:`_lift_eyes`): the lids and brows stay frame ``i``'s, and turned to another gaze
-    the eyeball uncovers little that its frame hides (before, the iris of an eye looking hard
-    into its corner was turned back across a sclera filled beyond it: ``make demo``'s wedge
-    in frames 33-85).
+    With the clip's ``frames`` and :data:`LIFT`, an eye of frame ``i`` looking aside shows
+    the eyeball of a frame of the clip looking nearer ahead (:func:`eyeball_frames`), lifted
+    into frame ``i`` (:func:`_lift_eyes`): the lids and brows stay frame ``i``'s, and turned
+    to another gaze the eyeball uncovers little that its frame hides (before, the iris of an
+    eye looking hard into its corner was turned back across a sclera filled beyond it:
+    ``make demo``'s wedge in frames 33-85).
 
     Parameters
     ----------
