@@ -10,20 +10,31 @@ tracker reads from Face Landmarker's iris points) and projected with that frame'
 (:func:`facetransfer.track.gaze.project_iris`). What the shift uncovers beyond the reference
 frame's eye opening (the sclera under its lids) is filled once per clip from the opening's
 nearest pixel (:func:`extend_eyeballs`).
+
+With :data:`LIFT` (off by the judge: BENCHMARKS.md, "Fifty-third session (helper eyeball53)"),
+an eye of the reference frame looking aside shows instead the eyeball of a frame of the clip
+looking nearer ahead (:func:`eyeball_frames`), lifted into the reference frame through the two
+frames' eyeballs (:func:`_eye_affine`), the lids and brows still the reference frame's: turned
+to the new gaze, it uncovers less of what its frame hides.
 """
 
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
 
 from .jit import maybe_njit as _maybe_njit
+from .topology import close_mouth
 from .track.gaze import GazeOptions, activation_gaze, eye_model, project_iris
+
+log = logging.getLogger(__name__)
 
 __all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "SOFT",
            "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze",
-           "gaze_offset"]
+           "gaze_offset", "eye_offsets", "eyeball_frames", "EYEBALL_GAIN", "EYEBALL_VIEW",
+           "EYEBALL_ANGLE", "LIFT_GROW", "LIFT"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
@@ -57,6 +68,10 @@ class Eyeballs:
         triangle of the eye-closed topology closes; -1 for the others and for the background.
     iris : (2, 2) float64
         Where :attr:`angles` put each iris in the reference frame (pixels).
+    source : (2,) int64 or None
+        Per eye, the frame whose eyeball :attr:`image` shows there, lifted into the reference
+        frame (:func:`eyeball_frames`; :attr:`angles` is that frame's gaze); None: the
+        reference frame's own eyeballs.
     """
 
     image: np.ndarray
@@ -66,6 +81,13 @@ class Eyeballs:
     limit: np.ndarray
     lookup: np.ndarray
     iris: np.ndarray
+    source: np.ndarray | None = None
+
+    @property
+    def lifted(self) -> bool:
+        """Whether an eye's eyeball is another frame's (:attr:`source`): :attr:`image` then
+        differs from the reference frame's eye even where no gaze moves it."""
+        return self.source is not None
 
     def shift(self, angles: np.ndarray) -> np.ndarray:
         """``(2, 2)`` pixels, ``[eye, (x, y)]``: where gaze ``angles`` (2, 2) puts each iris in
@@ -101,21 +123,131 @@ def track_gaze(track) -> np.ndarray | None:
 
 def gaze_offset(track) -> np.ndarray | None:
     """``(F,)``: how far each frame's eyes look from straight ahead (the head's +z), the mean
-    over the two eyes of ``hypot(yaw / horizontal, pitch / vertical)`` of :func:`track_gaze`
-    (:class:`facetransfer.track.gaze.GazeOptions`: an eyeLook* activation of 1 is 1), 0 where
-    unknown; None without ARKit blendshapes. An eye looking ahead has its iris amid its
-    opening: shifted to any other gaze, it uncovers the least of the eyeball its frame hides
-    (:func:`extend_eyeballs`)."""
+    over the two eyes of :func:`eye_offsets`, 0 where unknown; None without ARKit
+    blendshapes. An eye looking ahead has its iris amid its opening: shifted to any other
+    gaze, it uncovers the least of the eyeball its frame hides (:func:`extend_eyeballs`)."""
+    off = eye_offsets(track)
+    return None if off is None else np.nan_to_num(off.mean(axis=1), nan=0.0)
+
+
+def eye_offsets(track) -> np.ndarray | None:
+    """``(F, 2)``: each eye's (right, left) gaze off straight ahead in each frame,
+    ``hypot(yaw / horizontal, pitch / vertical)`` of :func:`track_gaze`
+    (:class:`facetransfer.track.gaze.GazeOptions`: an eyeLook* activation of 1 is 1), NaN
+    where unknown; None without ARKit blendshapes."""
     g = track_gaze(track)
     if g is None:
         return None
     opt = GazeOptions()
-    off = np.hypot(g[..., 0] / opt.horizontal, g[..., 1] / opt.vertical).mean(axis=1)
-    return np.nan_to_num(off, nan=0.0)
+    return np.hypot(g[..., 0] / opt.horizontal, g[..., 1] / opt.vertical)
+
+
+#: :func:`eyeball_frames`: an eye takes another frame's eyeball where that frame's eye looks
+#: nearer ahead than the reference frame's by at least this (:func:`eye_offsets`; 1 = an
+#: eyeLook* of 1), its view's degrees counted in (:data:`EYEBALL_ANGLE`) ...
+EYEBALL_GAIN = 0.1
+#: ... its head turned at most this many degrees from the reference frame's (the eyeball is
+#: lifted through the two frames' poses: a sphere seen from another side shows another part)
+EYEBALL_VIEW = 8.0
+#: ... each degree of that turn counting as this much gaze off ahead.
+EYEBALL_ANGLE = 0.01
+#: :func:`eyeballs_of` takes an eye's eyeball from another frame (:func:`eyeball_frames`) where
+#: it is given the clip's frames. Off by measurement: on the judge (BENCHMARKS.md, "Fifty-third
+#: session (helper eyeball53)") it gained the demo's blinks (0.84/0.73 -> 0.86/0.77), brows
+#: (0.67 -> 0.70) and horizontal gaze (demo 0.82 -> 0.83, fps 0.26 -> 0.32) but lost the demo's
+#: vertical gaze 0.41 -> 0.38; the brief's floor is 0.02. The tests set it.
+LIFT = False
+#: :func:`_lift_eyes`: another frame's eyeball is continued under its lids this much farther
+#: (a fraction of its eye's width) than :data:`GROW`, so that it covers the reference frame's
+#: grown opening where the two openings differ.
+LIFT_GROW = 0.3
+
+
+def eyeball_frames(track, reference: int, n_frames: int | None = None) -> np.ndarray:
+    """``(2,) int64``: per eye (right, left), the frame whose eyeball the eye region textured
+    from frame ``reference`` shows: ``reference``, or the frame (of the first ``n_frames``,
+    the face not lost, the eye region inside the picture:
+    :func:`facetransfer.region_weights.seen_frames`) whose eye is as open as the clip's
+    median or more (its eyeBlink), its head within :data:`EYEBALL_VIEW` of the reference's,
+    and looks most nearly ahead (:func:`eye_offsets`, plus :data:`EYEBALL_ANGLE` per degree of
+    view), where that is :data:`EYEBALL_GAIN` nearer than the reference frame's eye. Both
+    ``reference`` where the track has no eyeLook* activations."""
+    from .arkit import ARKIT_NAMES
+    from .region_weights import EYE_POINTS, seen_frames
+
+    out = np.full(2, int(reference), np.int64)
+    off = eye_offsets(track)
+    good = seen_frames(track, np.flatnonzero(~np.asarray(track.lost, bool)[:n_frames]),
+                       EYE_POINTS)
+    if off is None or good.size == 0:
+        return out
+    R = np.asarray(track.rotation, np.float64)
+    c = (np.einsum("fab,ab->f", R[good], R[int(reference)]) - 1.0) / 2.0
+    cost = off[good] + EYEBALL_ANGLE * np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))[:, None]
+    blink = np.asarray(track.blendshapes, np.float64)[good][
+        :, [ARKIT_NAMES.index("eyeBlinkRight"), ARKIT_NAMES.index("eyeBlinkLeft")]]
+    ok = (np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))[:, None] <= EYEBALL_VIEW) \
+        & (blink <= np.nanmedian(blink, axis=0)) & np.isfinite(cost)
+    for e in (0, 1):
+        if ok[:, e].any() and np.isfinite(off[int(reference), e]):
+            k = int(np.argmin(np.where(ok[:, e], cost[:, e], np.inf)))
+            if cost[k, e] <= off[int(reference), e] - EYEBALL_GAIN:
+                out[e] = good[k]
+    return out
+
+
+def _lift_eyes(ext: np.ndarray, eye: np.ndarray, image: np.ndarray, V: np.ndarray, track,
+               frames: tuple, which: np.ndarray, mesh: tuple, reach: int, models: tuple) -> None:
+    """Put, in place, into ``ext`` (H, W, 3) uint8 (the reference frame's extended eyeballs,
+    :func:`extend_eyeballs`) within ``reach`` pixels of each eye ``which`` (2,) bool's opening
+    (``eye`` (H, W) int8 of :func:`_eye_map`) the eyeball of another frame (``image``
+    (H', W', 3) uint8, its mesh ``V``), extended under its own lids (:data:`LIFT_GROW`) and
+    mapped from that frame's pixels to the reference frame's (:func:`_eye_affine`).
+
+    ``frames``: ``(reference, other)`` frame numbers of ``track``; ``mesh``: ``(faces,
+    fill_eye, lm)`` as :func:`eyeballs_of` has them; ``models``: the two frames' eyeballs
+    (:func:`facetransfer.track.gaze.eye_model`, model units)."""
+    import cv2
+
+    i, j = frames
+    cams = track.camera(i), track.camera(j)
+    other, width = _eye_map(V, *mesh[:2], cams[1], image.shape[:2], mesh[2])
+    other[~np.isin(other, np.flatnonzero(which))] = -1
+    src = extend_eyeballs(image, other >= 0, iris=True,
+                          grow=max(int(round((GROW + LIFT_GROW) * width.max())), 2))
+    for e in np.flatnonzero(which).tolist():
+        near = cv2.distanceTransform((eye != e).view(np.uint8), cv2.DIST_L2, 5) <= reach
+        if not near.any() or not (other == e).any():
+            continue
+        ys, xs = np.nonzero(near)
+        y0, x0 = ys.min(), xs.min()
+        M = _eye_affine(models, cams, e)          # the other frame's pixels -> the reference's
+        M[:, 2] -= (x0, y0)
+        box = cv2.warpAffine(src, M, (int(xs.max()) + 1 - x0, int(ys.max()) + 1 - y0),
+                             flags=cv2.INTER_LINEAR, borderMode=cv2.BORDER_REPLICATE)
+        ext[ys, xs] = box[ys - y0, xs - x0]
+
+
+def _eye_affine(models: tuple, cams: tuple, e: int) -> np.ndarray:
+    """``(2, 3)`` float64: the affine map of eye ``e``'s eyeball from the pixels of one frame
+    (``models[1]``, ``cams[1]``) to another's (``models[0]``, ``cams[0]``): each frame's
+    eyeball (:class:`facetransfer.track.gaze.EyeModel`, centred where that frame's mesh puts
+    it) seen by its camera, on the plane through its iris at rest (its radius before its
+    centre, the head's +z) spanned by the head's x and y (the weak-perspective image of a
+    plane is affine; the eye's corners lie half a radius behind it)."""
+    import cv2
+
+    pts = []
+    for eyes, cam in zip(models, cams):
+        c, r = eyes.centre[e], float(eyes.radius[e])
+        front = c + np.array([0.0, 0.0, r])
+        pts.append(cam.project(np.stack([front, front + (r, 0.0, 0.0), front + (0.0, r, 0.0)]))
+                   .astype(np.float32))
+    return cv2.getAffineTransform(pts[1], pts[0]).astype(np.float64)
 
 
 def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
-                    rim: int = RIM) -> np.ndarray:
+                    rim: int = RIM, iris: bool = False) -> np.ndarray:
     """``image`` (H, W, 3) uint8 with each pixel within ``grow`` pixels of ``opening`` (H, W)
     bool (the eyes' openings), and of the opening's own outer ``rim`` pixels, taking the colour
     of the nearest pixel of the rest of the opening: the eyeball continued under the lids (the
@@ -132,7 +264,16 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     colour, a light stripe with a hard edge beside the shaded sclera (``make demo``'s pair,
     frame 29). What is continued beside that sclera (the iris above and below the iris, the
     lid margins) passes into it over :data:`SOFT` of the iris's length (eyeref53: a step
-    there read as a straight cut, ``make demo``'s frame 40)."""
+    there read as a straight cut, ``make demo``'s frame 40).
+
+    With ``iris`` (eyeball53: another frame's eyeball, :func:`_lift_eyes`; off for the
+    reference frame's own, as before), the eyeball of an eye with an iris is continued as an
+    eyeball: a hidden pixel over or under the iris (within its extent along the eye) whose
+    nearest pixel is the iris or a catchlight in it takes its nearest pixel of the iris's dark
+    part (a catchlight on the opening's rim, where the track puts it, was drawn out into a
+    bar across the lid), and every hidden pixel beyond the iris its nearest sclera's, as
+    beyond an iris in its corner (the lid margins and the corners' shade were continued into
+    a flat grey wedge where an iris turned far away from them uncovers it)."""
     import cv2
 
     core = cv2.erode(opening.view(np.uint8), np.ones((3, 3), np.uint8), iterations=rim) \
@@ -141,11 +282,17 @@ def extend_eyeballs(image: np.ndarray, opening: np.ndarray, *, grow: int,
     if not core.any():
         return out
     ys, xs, src = _nearest(core, grow + rim)
-    iris, eye, axes, span, sclera = _iris_pixels(image, core)
+    iris_px, eye, axes, span, sclera = _iris_pixels(image, core)
     k = eye[src[:, 0], src[:, 1]]                       # each source's eye
     p = xs * axes[k, 0] + ys * axes[k, 1]                # the pixel's place along its long axis
-    side = iris[src[:, 0], src[:, 1]] & ((p < span[k, 0]) | (p > span[k, 1]))
+    beyond = (p < span[k, 0]) | (p > span[k, 1])
+    side = (iris_px[src[:, 0], src[:, 1]] | (iris & np.isfinite(span[k, 0]))) & beyond
     out[ys, xs] = image[src[:, 0], src[:, 1]]
+    if iris and iris_px.any():
+        near = cv2.dilate(iris_px.view(np.uint8), np.ones((5, 5), np.uint8)) > 0
+        over = near[src[:, 0], src[:, 1]] & (p >= span[k, 0]) & (p <= span[k, 1])
+        at = _nearest_to(iris_px, ys[over], xs[over])
+        out[ys[over], xs[over]] = image[at[:, 0], at[:, 1]]
     w = _toward_sclera(side, ys, xs, SOFT * (span[k, 1] - span[k, 0]), image.shape[:2])
     mix = w > 0
     if mix.any():
@@ -270,9 +417,17 @@ def _iris_pixels(image: np.ndarray, core: np.ndarray):
 
 
 def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: np.ndarray,
-                fill_eye: np.ndarray) -> Eyeballs | None:
+                fill_eye: np.ndarray, *, frames=None, n_frames: int | None = None,
+                topo=None) -> Eyeballs | None:
     """The eyeballs of the target's frame ``i`` (``image``), or None where the track has no
     eyeLook* activations.
+
+    With the clip's ``frames`` and :data:`LIFT`, an eye of frame ``i`` looking aside shows
+    the eyeball of a frame of the clip looking nearer ahead (:func:`eyeball_frames`), lifted
+    into frame ``i`` (:func:`_lift_eyes`): the lids and brows stay frame ``i``'s, and turned
+    to another gaze the eyeball uncovers little that its frame hides (before, the iris of an
+    eye looking hard into its corner was turned back across a sclera filled beyond it:
+    ``make demo``'s wedge in frames 33-85).
 
     Parameters
     ----------
@@ -288,26 +443,50 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     fill_eye : (F',) int8
         Per triangle of the eye-closed topology, the eye (0 right, 1 left) whose opening a
         fill triangle closes; -1 for the others.
+    frames : sequence of (H, W, 3) uint8, optional
+        The target's frames (of the first ``n_frames``) to take the eyeballs from.
+    topo : MeshTopology, optional
+        The eye-closed topology, for the other frames' meshes (with ``frames``).
     """
-    from .render import rasterize
-
     gaze = track_gaze(track)
     if gaze is None or model.landmarks is None or not (fill_eye >= 0).any():
         return None
-    cam = track.camera(i)
-    H, W = image.shape[:2]
     lm = np.asarray(model.landmarks, np.int64)
     eyes = eye_model(V[lm])
-    px = cam.project(V[lm[[36, 39, 42, 45]]])
-    width = np.array([np.linalg.norm(px[0] - px[1]), np.linalg.norm(px[2] - px[3])])
-    tid = rasterize(V, faces, cam, (W, H)).tri_id
-    opening = (tid >= 0) & (fill_eye[np.maximum(tid, 0)] >= 0)
-    ext = extend_eyeballs(image, opening, grow=max(int(round(GROW * width.max())), 2))
+    eye, width = _eye_map(V, faces, fill_eye, track.camera(i), image.shape[:2], lm)
+    grow = max(int(round(GROW * width.max())), 2)
+    ext = extend_eyeballs(image, eye >= 0, grow=grow)
     pose = (np.asarray(track.rotation[i], np.float64), float(track.scale[i]),
             np.asarray(track.translation[i], np.float64), float(track.pixel_aspect))
-    return Eyeballs(ext, eyes, gaze[i], pose, LIMIT * width,
+    angles, source = gaze[i], None
+    src = eyeball_frames(track, i, n_frames) if frames is not None and LIFT \
+        else np.full(2, i)
+    for j in np.unique(src[src != i]).tolist():
+        angles, source = np.array(angles, copy=True), src
+        Vj = close_mouth(model.synthesize(track.weights_at(j)), topo)
+        _lift_eyes(ext, eye, np.asarray(frames[j]), Vj, track, (i, j), src == j,
+                   (faces, fill_eye, lm), grow + RIM + 2, (eyes, eye_model(Vj[lm])))
+        angles[src == j] = gaze[j][src == j]
+    if source is not None:
+        log.info("eyes: the eyeballs of target frame %d from frames %d (right), %d (left)",
+                 i, *source.tolist())
+    return Eyeballs(ext, eyes, angles, pose, LIMIT * width,
                     np.concatenate([np.array([-1], np.int8), np.asarray(fill_eye, np.int8)]),
-                    _project(eyes, gaze[i], pose))
+                    _project(eyes, angles, pose), source)
+
+
+def _eye_map(V: np.ndarray, faces: np.ndarray, fill_eye: np.ndarray, cam, shape: tuple,
+             lm: np.ndarray):
+    """``(eye, width)``: per pixel of a frame of ``shape`` (H, W) the eye (0 right, 1 left)
+    whose opening (a fill triangle of ``fill_eye``) the mesh ``V`` seen by ``cam`` shows
+    there, -1 elsewhere, (H, W) int8; each eye's width (corner to corner, iBUG 36-39, 42-45
+    of the landmark vertices ``lm``) in pixels, (2,)."""
+    from .render import rasterize
+
+    px = cam.project(V[lm[[36, 39, 42, 45]]])
+    width = np.array([np.linalg.norm(px[0] - px[1]), np.linalg.norm(px[2] - px[3])])
+    tid = rasterize(V, faces, cam, (shape[1], shape[0])).tri_id
+    return np.where(tid >= 0, fill_eye[np.maximum(tid, 0)], -1).astype(np.int8), width
 
 
 def shift_eyeballs(eye_img: np.ndarray, tri_id: np.ndarray, bary: np.ndarray, faces: np.ndarray,

@@ -215,9 +215,10 @@ class EyeTexture:
         if self.strengths is not None:
             out = dataclasses.replace(out, alpha=vertex_alpha(len(self.uvs), self.verts,
                                                               self.strengths[i], rest=1.0))
-        if gaze is not None and self.eyeballs is not None and np.isfinite(gaze).all():
-            shift = self.eyeballs.shift(gaze)
-            if shift.any():  # the reference frame's own gaze: its eyeballs as they are
+        ok = gaze is not None and np.isfinite(gaze).all()
+        if self.eyeballs is not None and (ok or self.eyeballs.lifted):
+            shift = self.eyeballs.shift(gaze) if ok else np.zeros((2, 2))
+            if shift.any() or self.eyeballs.lifted:  # else the reference's own eyeballs
                 out = dataclasses.replace(out, gaze_shift=shift)
         return out
 
@@ -646,8 +647,8 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         tex = dataclasses.replace(tex, verts=verts, strengths=strengths)
     fill_eye = np.full(len(closed.faces), -1, np.int8)
     fill_eye[fill] = side[fill]
-    tex = dataclasses.replace(tex, eyeballs=eyeballs_of(img, track, i, model, closed.faces,
-                                                         Vi, fill_eye))
+    tex = dataclasses.replace(tex, eyeballs=eyeballs_of(
+        img, track, i, model, closed.faces, Vi, fill_eye, frames=frames, n_frames=m, topo=closed))
     c = closed_eye_frame(track, m)
     if c is not None:
         cimg, cuvs, cgap, _ = lift(c)
