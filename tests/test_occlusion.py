@@ -104,6 +104,23 @@ def test_lost_frames_are_not_scored_and_points_are_checked():
         oc.clip_occlusion(frames, pts[:, :60])
 
 
+def test_a_face_partly_outside_every_frame_is_scored_without_warnings():
+    """A close-up whose chin is cut off in every frame: the mouth's points below the frame
+    have no median (before: numpy's 'All-NaN slice encountered' RuntimeWarning, shown by
+    ``facetransfer -v track --occluders``); the box over the mouth is still found."""
+    import warnings
+
+    frames, pts = _clip(n=30, mouth_box=range(10, 18))
+    frames = [np.ascontiguousarray(f[:168]) for f in frames]         # the frame cut at y 168
+    below = np.all([oc.region_points(p)[0][:, 1] >= 168 for p in pts], axis=0)
+    assert below.any()                                 # the chin's points, in every frame
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        occ = oc.clip_occlusion(frames, pts)
+    assert set(range(10, 18)) <= set(occ.frames("mouth"))
+    assert np.isfinite(occ.score).all()
+
+
 def test_runs_need_min_run_frames_and_close_short_gaps():
     s = np.zeros((30, 1))
     s[2:4] = 0.9                                  # too short: a glint

@@ -182,7 +182,9 @@ def occlusion_scores(samples: list) -> np.ndarray:
         return score
     for r in range(len(REGIONS)):
         lab = np.stack([samples[i][r] for i in seen]).astype(np.float64)  # (f, n, 3)
-        ref = np.nanmedian(lab, axis=0)                                     # (n, 3)
+        ref = np.full(lab.shape[1:], np.nan)                                # (n, 3)
+        known = np.isfinite(lab).any(axis=(0, 2))   # a point outside every frame: no median
+        ref[known] = np.nanmedian(lab[:, known], axis=0)
         d = lab - ref
         chroma = np.hypot(d[..., 1], d[..., 2])
         differs = (chroma > CHROMA_STEP) | (np.abs(d[..., 0]) > LIGHT_STEP)
