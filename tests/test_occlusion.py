@@ -241,6 +241,16 @@ def test_track_occluders_names_the_covered_frames_and_saves_them(small_clip, qui
                           "--out", tmp_path / "u.npz", "--no-progress"], capsys)
     assert code == 0 and "covered" not in out and len(seen) == 1, out
     assert Track.load(tmp_path / "u.npz").occluded is None
+    # --from-track tracks nothing: --occluders refused there (before: ignored in silence,
+    # the overlay drawn from a track never tested)
+    drawn = tmp_path / "v.npz"                  # a track of the clip's frames, to draw
+    dataclasses.replace(Track.load(tmp_path / "u.npz"), frame_size=(320, 240)).save(drawn)
+    code, out, err = run(["track", video, "--model", quick_model_path, "--from-track", drawn,
+                          "--overlay", tmp_path / "o.mp4", "--occluders"], capsys)
+    assert code == 2 and len(seen) == 1 and not (tmp_path / "o.mp4").exists()
+    assert err.strip().splitlines() == [
+        "facetransfer track: error: --occluders tests the clip as it is tracked, and "
+        "--from-track tracks nothing: track again with --occluders --out T.npz"], err
 
 
 def test_a_transfer_keeps_the_targets_pixels_over_its_covered_regions(arkit_model,

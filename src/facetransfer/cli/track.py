@@ -173,6 +173,9 @@ def _check_outputs(args):
         raise FaceTransferError("--out is required (the track file to write)")
     if args.from_track is not None and not args.overlay:
         raise FaceTransferError("--from-track needs --overlay (the video to draw)")
+    if args.from_track is not None and args.occluders:     # before: ignored in silence
+        raise FaceTransferError("--occluders tests the clip as it is tracked, and --from-track "
+                                "tracks nothing: track again with --occluders --out T.npz")
     if args.max_frames is not None and args.max_frames < 1:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
     if args.workers is not None and args.workers < 1:
