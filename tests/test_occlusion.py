@@ -241,6 +241,17 @@ def test_track_occluders_names_the_covered_frames_and_saves_them(small_clip, qui
                           "--out", tmp_path / "u.npz", "--no-progress"], capsys)
     assert code == 0 and "covered" not in out and len(seen) == 1, out
     assert Track.load(tmp_path / "u.npz").occluded is None
+    # a still or a clip shorter than a run: not tested, and said so (before: 'no mouth or eye
+    # found covered', the track saved as tested)
+    monkeypatch.setattr(cli_track, "_track_klt", lambda *a, **k: still_track(quick_model, 3))
+    code, out, err = run(["track", video, "--model", quick_model_path, "--init", pts,
+                          "--max-frames", "3", "--out", tmp_path / "s.npz", "--no-progress",
+                          "--occluders"], capsys)
+    assert code == 0 and len(seen) == 1, err
+    assert out.strip().splitlines()[1] == (
+        "note: not tested for a covered mouth or eye: 3 frames, and the test compares 4 frames "
+        "or more with the clip's own"), out
+    assert Track.load(tmp_path / "s.npz").occluded is None
     # --from-track tracks nothing: --occluders refused there (before: ignored in silence,
     # the overlay drawn from a track never tested)
     drawn = tmp_path / "v.npz"                  # a track of the clip's frames, to draw
