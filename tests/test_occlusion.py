@@ -141,6 +141,34 @@ def test_bridged_draws_a_line_over_a_run_and_holds_at_the_ends():
     assert oc.bridged(v, cov)[7:, 0].tolist() == [36.0] * 3
 
 
+def test_a_covered_run_beside_lost_frames_is_bridged_from_seen_frames(arkit_model,
+                                                                      make_arkit_track):
+    """A hand over the face: the mouth covered in 3-5, the face then lost in 6-8 (its frames
+    holding the nearest tracked one's values, the covered frame 5's misreading). The bridge
+    runs from frame 2 to frame 9, the first seen frame after (before: to the lost frame 6's
+    held misreading); a lost run beside no covered frame is left as it is."""
+    from dataclasses import replace
+
+    v = np.arange(12, dtype=float)[:, None] ** 2
+    v[6:9] = v[5]                                              # lost: held from frame 5
+    v[10] = v[9]                                               # lost, nothing covered by it
+    cov, lost = np.zeros(12, bool), np.zeros(12, bool)
+    cov[3:6], lost[6:9], lost[10] = True, True, True
+    got = oc.bridged(v, cov, lost)[:, 0]
+    assert np.allclose(got[3:9], 4.0 + np.arange(1, 7) / 7 * (81.0 - 4.0))
+    assert got[[2, 9, 10, 11]].tolist() == [4.0, 81.0, 81.0, 121.0]
+    track, a, _ = make_arkit_track(arkit_model, n_frames=12)
+    a = a.copy()
+    a[6:9] = a[5]
+    track = replace(track, lost=lost, blendshapes=a.astype(np.float32))
+    c3 = np.zeros((12, 3), bool)
+    c3[:, 0] = cov
+    held = oc.hold_occluded(track, oc.Occlusion(np.zeros((12, 3)), c3), arkit_model)
+    jaw = ARKIT_NAMES.index("jawOpen")
+    line = a[2, jaw] + (np.arange(1, 4) / 7) * (a[9, jaw] - a[2, jaw])
+    assert np.allclose(held.blendshapes[3:6, jaw], line, atol=1e-6)
+
+
 def test_hold_occluded_bridges_the_covered_regions_shapes_and_records_them(
         arkit_model, make_arkit_track, tmp_path):
     track, a, _ = make_arkit_track(arkit_model, n_frames=10)
