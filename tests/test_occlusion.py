@@ -104,6 +104,23 @@ def test_lost_frames_are_not_scored_and_points_are_checked():
         oc.clip_occlusion(frames, pts[:, :60])
 
 
+def test_a_face_partly_outside_every_frame_is_scored_without_warnings():
+    """A close-up whose chin is cut off in every frame: the mouth's points below the frame
+    have no median (before: numpy's 'All-NaN slice encountered' RuntimeWarning, shown by
+    ``facetransfer -v track --occluders``); the box over the mouth is still found."""
+    import warnings
+
+    frames, pts = _clip(n=30, mouth_box=range(10, 18))
+    frames = [np.ascontiguousarray(f[:168]) for f in frames]         # the frame cut at y 168
+    below = np.all([oc.region_points(p)[0][:, 1] >= 168 for p in pts], axis=0)
+    assert below.any()                                 # the chin's points, in every frame
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        occ = oc.clip_occlusion(frames, pts)
+    assert set(range(10, 18)) <= set(occ.frames("mouth"))
+    assert np.isfinite(occ.score).all()
+
+
 def test_runs_need_min_run_frames_and_close_short_gaps():
     s = np.zeros((30, 1))
     s[2:4] = 0.9                                  # too short: a glint
@@ -122,6 +139,34 @@ def test_bridged_draws_a_line_over_a_run_and_holds_at_the_ends():
     cov[:] = False
     cov[7:] = True
     assert oc.bridged(v, cov)[7:, 0].tolist() == [36.0] * 3
+
+
+def test_a_covered_run_beside_lost_frames_is_bridged_from_seen_frames(arkit_model,
+                                                                      make_arkit_track):
+    """A hand over the face: the mouth covered in 3-5, the face then lost in 6-8 (its frames
+    holding the nearest tracked one's values, the covered frame 5's misreading). The bridge
+    runs from frame 2 to frame 9, the first seen frame after (before: to the lost frame 6's
+    held misreading); a lost run beside no covered frame is left as it is."""
+    from dataclasses import replace
+
+    v = np.arange(12, dtype=float)[:, None] ** 2
+    v[6:9] = v[5]                                              # lost: held from frame 5
+    v[10] = v[9]                                               # lost, nothing covered by it
+    cov, lost = np.zeros(12, bool), np.zeros(12, bool)
+    cov[3:6], lost[6:9], lost[10] = True, True, True
+    got = oc.bridged(v, cov, lost)[:, 0]
+    assert np.allclose(got[3:9], 4.0 + np.arange(1, 7) / 7 * (81.0 - 4.0))
+    assert got[[2, 9, 10, 11]].tolist() == [4.0, 81.0, 81.0, 121.0]
+    track, a, _ = make_arkit_track(arkit_model, n_frames=12)
+    a = a.copy()
+    a[6:9] = a[5]
+    track = replace(track, lost=lost, blendshapes=a.astype(np.float32))
+    c3 = np.zeros((12, 3), bool)
+    c3[:, 0] = cov
+    held = oc.hold_occluded(track, oc.Occlusion(np.zeros((12, 3)), c3), arkit_model)
+    jaw = ARKIT_NAMES.index("jawOpen")
+    line = a[2, jaw] + (np.arange(1, 4) / 7) * (a[9, jaw] - a[2, jaw])
+    assert np.allclose(held.blendshapes[3:6, jaw], line, atol=1e-6)
 
 
 def test_hold_occluded_bridges_the_covered_regions_shapes_and_records_them(
@@ -224,6 +269,27 @@ def test_track_occluders_names_the_covered_frames_and_saves_them(small_clip, qui
                           "--out", tmp_path / "u.npz", "--no-progress"], capsys)
     assert code == 0 and "covered" not in out and len(seen) == 1, out
     assert Track.load(tmp_path / "u.npz").occluded is None
+    # a still or a clip shorter than a run: not tested, and said so (before: 'no mouth or eye
+    # found covered', the track saved as tested)
+    monkeypatch.setattr(cli_track, "_track_klt", lambda *a, **k: still_track(quick_model, 3))
+    code, out, err = run(["track", video, "--model", quick_model_path, "--init", pts,
+                          "--max-frames", "3", "--out", tmp_path / "s.npz", "--no-progress",
+                          "--occluders"], capsys)
+    assert code == 0 and len(seen) == 1, err
+    assert out.strip().splitlines()[1] == (
+        "note: not tested for a covered mouth or eye: 3 frames, and the test compares 4 frames "
+        "or more with the clip's own"), out
+    assert Track.load(tmp_path / "s.npz").occluded is None
+    # --from-track tracks nothing: --occluders refused there (before: ignored in silence,
+    # the overlay drawn from a track never tested)
+    drawn = tmp_path / "v.npz"                  # a track of the clip's frames, to draw
+    dataclasses.replace(Track.load(tmp_path / "u.npz"), frame_size=(320, 240)).save(drawn)
+    code, out, err = run(["track", video, "--model", quick_model_path, "--from-track", drawn,
+                          "--overlay", tmp_path / "o.mp4", "--occluders"], capsys)
+    assert code == 2 and len(seen) == 1 and not (tmp_path / "o.mp4").exists()
+    assert err.strip().splitlines() == [
+        "facetransfer track: error: --occluders tests the clip as it is tracked, and "
+        "--from-track tracks nothing: track again with --occluders --out T.npz"], err
 
 
 def test_a_transfer_keeps_the_targets_pixels_over_its_covered_regions(arkit_model,

@@ -173,6 +173,9 @@ def _check_outputs(args):
         raise FaceTransferError("--out is required (the track file to write)")
     if args.from_track is not None and not args.overlay:
         raise FaceTransferError("--from-track needs --overlay (the video to draw)")
+    if args.from_track is not None and args.occluders:     # before: ignored in silence
+        raise FaceTransferError("--occluders tests the clip as it is tracked, and --from-track "
+                                "tracks nothing: track again with --occluders --out T.npz")
     if args.max_frames is not None and args.max_frames < 1:
         raise FaceTransferError(f"--max-frames must be >= 1, got {args.max_frames}")
     if args.workers is not None and args.workers < 1:
@@ -296,10 +299,14 @@ def _track_and_save(args, model, settings, tracker: str):
 
 def _held_occluded(args, track, model):
     """``--occluders``: the track with its covered regions' activations bridged, and the note
-    of the frames each region was found covered in."""
+    of the frames each region was found covered in; a clip of fewer than ``MIN_RUN`` frames
+    is not tested (``occluded`` None, as the track key says: not tested)."""
     from ..file_facts import lost_runs
-    from ..track.occlusion import REGIONS, hold_occluded_video
+    from ..track.occlusion import MIN_RUN, REGIONS, hold_occluded_video
 
+    if track.n_frames < MIN_RUN:     # a still: its own colours are its reference, no run fits
+        return track, (f"not tested for a covered mouth or eye: {frame_count(track.n_frames)}"
+                       f", and the test compares {MIN_RUN} frames or more with the clip's own")
     track = hold_occluded_video(args.video, track, model)
     said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
             for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]

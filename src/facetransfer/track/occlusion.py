@@ -182,7 +182,9 @@ def occlusion_scores(samples: list) -> np.ndarray:
         return score
     for r in range(len(REGIONS)):
         lab = np.stack([samples[i][r] for i in seen]).astype(np.float64)  # (f, n, 3)
-        ref = np.nanmedian(lab, axis=0)                                     # (n, 3)
+        ref = np.full(lab.shape[1:], np.nan)                                # (n, 3)
+        known = np.isfinite(lab).any(axis=(0, 2))   # a point outside every frame: no median
+        ref[known] = np.nanmedian(lab[:, known], axis=0)
         d = lab - ref
         chroma = np.hypot(d[..., 1], d[..., 2])
         differs = (chroma > CHROMA_STEP) | (np.abs(d[..., 0]) > LIGHT_STEP)
@@ -285,13 +287,18 @@ def region_columns(names) -> list[np.ndarray]:
     return [np.array(c, dtype=int) for c in (mouth, *eyes)]
 
 
-def bridged(values: np.ndarray, covered: np.ndarray) -> np.ndarray:
+def bridged(values: np.ndarray, covered: np.ndarray, unseen: np.ndarray | None = None
+            ) -> np.ndarray:
     """``values`` over each run of covered frames drawn straight between the frames around it.
 
     Parameters
     ----------
     values : (F, k) float
     covered : (F,) bool
+    unseen : (F,) bool, optional
+        Frames whose values were not seen (a track's lost frames, which hold the nearest
+        tracked frame's: perhaps a covered one's misreading): a covered run is bridged over
+        the unseen frames beside it too, from the seen frames around them all.
 
     Returns
     -------
@@ -301,8 +308,10 @@ def bridged(values: np.ndarray, covered: np.ndarray) -> np.ndarray:
     """
     out = np.array(values, dtype=np.float64)
     F = len(out)
-    for a, b in _runs(np.asarray(covered, dtype=bool)):
-        if a == 0 and b == F:
+    cov = np.asarray(covered, dtype=bool)
+    span = cov if unseen is None else cov | np.asarray(unseen, dtype=bool)
+    for a, b in _runs(span):
+        if (a == 0 and b == F) or not cov[a:b].any():
             continue
         left = out[a - 1] if a > 0 else out[b]
         right = out[b] if b < F else out[a - 1]
@@ -337,7 +346,7 @@ def hold_occluded(track, occlusion: Occlusion, model):
     old = track.blendshapes.astype(np.float64)
     new = old.copy()
     for r, cols in enumerate(region_columns(track.blendshape_names)):
-        new[:, cols] = bridged(old[:, cols], cov[:, r])
+        new[:, cols] = bridged(old[:, cols], cov[:, r], track.lost)
     new = np.clip(new, 0.0, 1.0)
     _, D = activation_basis(model)
     weights = dict(track.weights)
