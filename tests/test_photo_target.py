@@ -118,3 +118,36 @@ def test_one_frame_of_a_clip_as_one_image(clips, quick_model_path, tmp_path, cap
     a = cv2.imread(str(tmp_path / "one.png")).astype(int)
     b = cv2.imread(str(tmp_path / "f_00001.png")).astype(int)
     assert np.abs(a - b).max() <= 4
+
+
+@pytest.mark.parametrize("kind", ["alpha", "16-bit"])
+def test_a_photo_with_alpha_or_16_bits_held_in_a_png_sequence(photo, quick_model_path,
+                                                              tmp_path, capsys, kind):
+    """An RGBA or a 16-bit PNG photo as the target of a PNG sequence: every frame keeps the
+    photo's alpha or 16 bits. Before, the photo's alpha and 16-bit colour were decoded as a
+    video's, one frame each: the transfer failed at frame 1 after all its tracking (``the
+    alpha of still.png ends at frame 1``, exit 2), nothing written."""
+    rgb = photo["frame"]
+    h, w = rgb.shape[:2]
+    if kind == "alpha":
+        alpha = np.full((h, w), 255, np.uint8)
+        alpha[:, : w // 4] = 90
+        stored = np.dstack([cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), alpha])
+    else:
+        stored = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR).astype(np.uint16) * 257 + 3
+    still = tmp_path / "still.png"
+    cv2.imwrite(str(still), stored)
+    track = tmp_path / "still.npz"
+    dataclasses.replace(Track.load(photo["photo_track"]), source=str(still)).save(track)
+    args = _args(photo, quick_model_path, tmp_path / "a_%05d.png")
+    args[2], args[4] = still, track
+    code, said, err = run(args, capsys)
+    assert code == 0, err
+    assert ("with the target's alpha" if kind == "alpha" else "16 bits") in said
+    written = [cv2.imread(str(tmp_path / f"a_{i:05d}.png"), cv2.IMREAD_UNCHANGED)
+               for i in range(photo["n_source"])]
+    for out in written:
+        if kind == "alpha":
+            assert out.shape == (h, w, 4) and np.array_equal(out[..., 3], alpha)
+        else:   # the photo's 16-bit values where the face is not
+            assert out.dtype == np.uint16 and np.array_equal(out[:10, :10], stored[:10, :10])
