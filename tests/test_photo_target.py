@@ -151,3 +151,25 @@ def test_a_photo_with_alpha_or_16_bits_held_in_a_png_sequence(photo, quick_model
             assert out.shape == (h, w, 4) and np.array_equal(out[..., 3], alpha)
         else:   # the photo's 16-bit values where the face is not
             assert out.dtype == np.uint16 and np.array_equal(out[:10, :10], stored[:10, :10])
+
+
+def test_a_photo_target_performs_a_ready_performance(photo, quick_model_path, tmp_path,
+                                                     capsys):
+    """``--performance NEW.npz`` (a photo's transfer saved with ``--save-track``, edited)
+    onto the photo: a video of the performance's frames at its rate, as an expression source
+    gives. Before, one frame (the performance's first, the rest dropped without a word), and
+    ``--frame 2 --out one.png`` was refused (``the transfer has 1 frames``)."""
+    base = ["transfer", "--target", photo["photo"], "--target-track", photo["photo_track"],
+            "--performance", photo["source_track"], "--model", quick_model_path,
+            "--no-progress", "--out"]
+    code, said, err = run(base + [tmp_path / "performed.mp4"], capsys)
+    assert code == 0, err
+    frames, fps = read_video(tmp_path / "performed.mp4")
+    assert len(frames) == photo["n_source"] and fps == 30.0
+    assert f"{photo['n_source']} frames" in said
+    assert np.abs(frames[1].astype(int) - frames[0].astype(int)).max() > 40  # it moves
+    code, said, err = run(base + [tmp_path / "one.png", "--frame", "2"], capsys)
+    assert code == 0, err
+    assert "frame 2" in said
+    code, _, err = run(base + [tmp_path / "two.png", "--frame", str(photo["n_source"])], capsys)
+    assert code == 2 and f"0-{photo['n_source'] - 1}" in err, err
