@@ -173,3 +173,25 @@ def test_a_photo_target_performs_a_ready_performance(photo, quick_model_path, tm
     assert "frame 2" in said
     code, _, err = run(base + [tmp_path / "two.png", "--frame", str(photo["n_source"])], capsys)
     assert code == 2 and f"0-{photo['n_source'] - 1}" in err, err
+
+
+def test_an_exif_turned_jpeg_photo_is_read_upright(tmp_path):
+    """A phone's portrait photo is stored sideways with EXIF orientation 6; read as a clip of
+    one frame (a transfer's target, ``track``, ``puppet``) it is upright, as every viewer shows
+    it. Before, OpenCV's capture gave it sideways (60x40 for a 40x60 portrait): the face
+    tracked lying down, the output a sideways video."""
+    from PIL import Image
+
+    from facetransfer.io.video import video_info
+
+    upright = np.zeros((60, 40, 3), np.uint8)
+    upright[:20] = (250, 40, 40)                 # the top third red: which way is up
+    exif = Image.Exif()
+    exif[0x0112] = 6                             # shown turned a quarter clockwise
+    stored = Image.fromarray(upright).transpose(Image.Transpose.ROTATE_90)
+    stored.save(tmp_path / "portrait.jpg", exif=exif, quality=95)
+    assert stored.size == (60, 40)
+    frames, _ = read_video(tmp_path / "portrait.jpg")
+    assert frames.shape == (1, 60, 40, 3)
+    assert video_info(tmp_path / "portrait.jpg").size == (40, 60)
+    assert np.abs(frames[0].astype(int) - upright.astype(int)).mean() < 6
