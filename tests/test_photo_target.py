@@ -195,3 +195,6 @@ def test_an_exif_turned_jpeg_photo_is_read_upright(tmp_path):
     assert frames.shape == (1, 60, 40, 3)
     assert video_info(tmp_path / "portrait.jpg").size == (40, 60)
     assert np.abs(frames[0].astype(int) - upright.astype(int)).mean() < 6
+    from facetransfer.io.video import iter_frames   # the frame readers of track and texture
+
+    assert np.array_equal(next(iter_frames(tmp_path / "portrait.jpg")), frames[0])

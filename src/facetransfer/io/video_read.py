@@ -274,6 +274,9 @@ def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = N
     else, as ``seek=False`` always does, by decoding every frame before it (``grab``, no colour
     conversion). A video of variable frame rate (``steps``) is always decoded from its start.
     """
+    if exif_orientation(path) != 1:     # a photo stored turned, read upright
+        yield from _upright_still(path, start, stop)
+        return
     steps = video_info(path).steps
     if steps is None:
         yield from _stored_frames(path, start=start, stop=stop, seek=seek)
@@ -361,7 +364,7 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     if is_sequence(path):       # RGB, file by file
         source, put = sequence_frames(path, start=start, stop=stop), np.copyto
     elif exif_orientation(path) != 1:   # a photo stored turned: OpenCV's capture keeps it so
-        source, put = _upright_still(path, start, stop), np.copyto
+        source, put = iter_frames(path, start=start, stop=stop), np.copyto
     elif info.piped:            # RGB from ffmpeg (interlaced: OpenCV's are black)
         source, put = piped_frames(path, info.size, start=start, stop=stop), np.copyto
     elif info.steps is None:    # BGR buffers converted into place
