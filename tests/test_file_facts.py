@@ -161,17 +161,19 @@ def test_a_missing_track_or_take_given_to_probe_is_named_as_one(tmp_path, capsys
         assert err == ["facetransfer probe: error: " + said.format(tmp_path / name)], err
 
 
-def test_a_still_image_is_described_as_one(tmp_path, capsys):
-    """A photo given to probe is said to be a still image (tracked as a clip of one frame), not
-    a 25 fps video of one frame whose seeks are not exact."""
+@pytest.mark.parametrize("name", ["face.jpg", "face.pgm"])
+def test_a_still_image_is_described_as_one(tmp_path, capsys, name):
+    """A photo given to probe is said to be a still image (tracked as a clip of one frame, a
+    transfer's target held over its source's frames), not a 25 fps video of one frame whose
+    seeks are not exact (a grey ``.pgm``, which transfer reads as a still, was, before)."""
     import cv2
 
-    photo = tmp_path / "face.jpg"
-    cv2.imwrite(str(photo), np.full((48, 64, 3), 128, np.uint8))
+    photo = tmp_path / name
+    cv2.imwrite(str(photo), np.full((48, 64), 128, np.uint8))
     assert main(["probe", str(photo)]) == 0
     out = capsys.readouterr().out.splitlines()
-    assert out[:2] == [f"{photo}: 64x48", "  a still image: tracked and transferred as a clip "
-                       "of one frame"], out
+    assert out[:2] == [f"{photo}: 64x48", "  a still image: tracked as a clip of one frame; "
+                       "as a transfer's target, held over its expression source's frames"], out
     assert "fps" not in " ".join(out) and "seeks" not in " ".join(out)
 
 

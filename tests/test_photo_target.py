@@ -118,3 +118,83 @@ def test_one_frame_of_a_clip_as_one_image(clips, quick_model_path, tmp_path, cap
     a = cv2.imread(str(tmp_path / "one.png")).astype(int)
     b = cv2.imread(str(tmp_path / "f_00001.png")).astype(int)
     assert np.abs(a - b).max() <= 4
+
+
+@pytest.mark.parametrize("kind", ["alpha", "16-bit"])
+def test_a_photo_with_alpha_or_16_bits_held_in_a_png_sequence(photo, quick_model_path,
+                                                              tmp_path, capsys, kind):
+    """An RGBA or a 16-bit PNG photo as the target of a PNG sequence: every frame keeps the
+    photo's alpha or 16 bits. Before, the photo's alpha and 16-bit colour were decoded as a
+    video's, one frame each: the transfer failed at frame 1 after all its tracking (``the
+    alpha of still.png ends at frame 1``, exit 2), nothing written."""
+    rgb = photo["frame"]
+    h, w = rgb.shape[:2]
+    if kind == "alpha":
+        alpha = np.full((h, w), 255, np.uint8)
+        alpha[:, : w // 4] = 90
+        stored = np.dstack([cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR), alpha])
+    else:
+        stored = cv2.cvtColor(rgb, cv2.COLOR_RGB2BGR).astype(np.uint16) * 257 + 3
+    still = tmp_path / "still.png"
+    cv2.imwrite(str(still), stored)
+    track = tmp_path / "still.npz"
+    dataclasses.replace(Track.load(photo["photo_track"]), source=str(still)).save(track)
+    args = _args(photo, quick_model_path, tmp_path / "a_%05d.png")
+    args[2], args[4] = still, track
+    code, said, err = run(args, capsys)
+    assert code == 0, err
+    assert ("with the target's alpha" if kind == "alpha" else "16 bits") in said
+    written = [cv2.imread(str(tmp_path / f"a_{i:05d}.png"), cv2.IMREAD_UNCHANGED)
+               for i in range(photo["n_source"])]
+    for out in written:
+        if kind == "alpha":
+            assert out.shape == (h, w, 4) and np.array_equal(out[..., 3], alpha)
+        else:   # the photo's 16-bit values where the face is not
+            assert out.dtype == np.uint16 and np.array_equal(out[:10, :10], stored[:10, :10])
+
+
+def test_a_photo_target_performs_a_ready_performance(photo, quick_model_path, tmp_path,
+                                                     capsys):
+    """``--performance NEW.npz`` (a photo's transfer saved with ``--save-track``, edited)
+    onto the photo: a video of the performance's frames at its rate, as an expression source
+    gives. Before, one frame (the performance's first, the rest dropped without a word), and
+    ``--frame 2 --out one.png`` was refused (``the transfer has 1 frames``)."""
+    base = ["transfer", "--target", photo["photo"], "--target-track", photo["photo_track"],
+            "--performance", photo["source_track"], "--model", quick_model_path,
+            "--no-progress", "--out"]
+    code, said, err = run(base + [tmp_path / "performed.mp4"], capsys)
+    assert code == 0, err
+    frames, fps = read_video(tmp_path / "performed.mp4")
+    assert len(frames) == photo["n_source"] and fps == 30.0
+    assert f"{photo['n_source']} frames" in said
+    assert np.abs(frames[1].astype(int) - frames[0].astype(int)).max() > 40  # it moves
+    code, said, err = run(base + [tmp_path / "one.png", "--frame", "2"], capsys)
+    assert code == 0, err
+    assert "frame 2" in said
+    code, _, err = run(base + [tmp_path / "two.png", "--frame", str(photo["n_source"])], capsys)
+    assert code == 2 and f"0-{photo['n_source'] - 1}" in err, err
+
+
+def test_an_exif_turned_jpeg_photo_is_read_upright(tmp_path):
+    """A phone's portrait photo is stored sideways with EXIF orientation 6; read as a clip of
+    one frame (a transfer's target, ``track``, ``puppet``) it is upright, as every viewer shows
+    it. Before, OpenCV's capture gave it sideways (60x40 for a 40x60 portrait): the face
+    tracked lying down, the output a sideways video."""
+    from PIL import Image
+
+    from facetransfer.io.video import video_info
+
+    upright = np.zeros((60, 40, 3), np.uint8)
+    upright[:20] = (250, 40, 40)                 # the top third red: which way is up
+    exif = Image.Exif()
+    exif[0x0112] = 6                             # shown turned a quarter clockwise
+    stored = Image.fromarray(upright).transpose(Image.Transpose.ROTATE_90)
+    stored.save(tmp_path / "portrait.jpg", exif=exif, quality=95)
+    assert stored.size == (60, 40)
+    frames, _ = read_video(tmp_path / "portrait.jpg")
+    assert frames.shape == (1, 60, 40, 3)
+    assert video_info(tmp_path / "portrait.jpg").size == (40, 60)
+    assert np.abs(frames[0].astype(int) - upright.astype(int)).mean() < 6
+    from facetransfer.io.video import iter_frames   # the frame readers of track and texture
+
+    assert np.array_equal(next(iter_frames(tmp_path / "portrait.jpg")), frames[0])

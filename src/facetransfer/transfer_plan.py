@@ -557,6 +557,10 @@ class _Planner:
         if sources.expression is None:
             frames, fps = read_video(target, max_frames=max_frames)
             self.timings["read"] += time.perf_counter() - t0
+            held = performance_length(sources.performance, max_frames) \
+                if is_still(target) and len(frames) == 1 else None
+            if held is not None:   # a photo performs a ready track's frames at its rate
+                return held_frames(frames[0], held[0]), held[1], None
             return frames, fps, None
         from concurrent.futures import ThreadPoolExecutor
 
@@ -656,6 +660,21 @@ def held_frames(frame: np.ndarray, n: int) -> np.ndarray:
     (and its texture, lifted from each, the same)."""
     frame = np.asarray(frame)
     return np.broadcast_to(frame[None], (max(int(n), 1), *frame.shape))
+
+
+def performance_length(performance, max_frames: int | None = None):
+    """``(n_frames, fps)`` of a ready performance (a track file or
+    :class:`~facetransfer.track.Track`: ``transfer --save-track`` of a photo's, edited) that a
+    photo as the target performs, as it performs an expression source (:func:`held_frames`),
+    its first ``max_frames``; None: none, or a Live Link take (one frame of the photo)."""
+    from .take import Take
+    from .track import Track
+
+    if performance is None or isinstance(performance, Take):
+        return None
+    perf = performance if isinstance(performance, Track) else Track.load(performance)
+    n = perf.n_frames if max_frames is None else min(perf.n_frames, int(max_frames))
+    return n, float(perf.fps)
 
 
 def held_track(track, n: int, fps: float):

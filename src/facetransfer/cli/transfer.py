@@ -368,7 +368,7 @@ def _check_one_image(args, inputs: list) -> None:
     transfer has that frame (without ``--frame``, one frame: a photo with no expression
     source, a clip of one frame); one line otherwise."""
     from ..io.output_names import check_one_image
-    from ..io.video import video_info
+    from ..io.video_sequence import is_still
 
     out, frame = args.out, args.frame
     if not is_one_image(out):
@@ -380,12 +380,10 @@ def _check_one_image(args, inputs: list) -> None:
                                 f"sequence, not beside the one image --out {out}")
     check_one_image(out, overwrite=args.overwrite, inputs=inputs)
     clip = args.expression_from if _held(args) else args.target
-    n = video_info(clip).n_frames
-    n = n if args.max_frames is None else min(n, args.max_frames)
+    n, whose = _one_image_count(args, clip)
     p = Path(out)
     seq = p.with_name(f"{p.stem}_%05d{p.suffix}")
-    whose = f"the expression source {clip}'s" if clip != args.target else f"the target {clip}'s"
-    if frame is None and _held(args):
+    if frame is None and (_held(args) or n > 1 and is_still(args.target)):
         frame = args.frame = 0         # a photo's rewrite: its first frame (the source's)
     if frame is None and n > 1:
         raise FaceTransferError(f"--out {out} is one image, but the transfer has {n} frames "
@@ -394,6 +392,23 @@ def _check_one_image(args, inputs: list) -> None:
     if frame is not None and not 0 <= frame < n:
         raise FaceTransferError(f"--frame {frame}: the transfer has {n} frames ({whose}), "
                                 f"0-{n - 1}")
+
+
+def _one_image_count(args, clip) -> tuple[int, str]:
+    """How many frames the transfer has (of a photo target, its expression source's, or its
+    ready performance's: :func:`facetransfer.transfer_plan.performance_length`), and whose."""
+    from ..io.video import video_info
+    from ..io.video_sequence import is_still
+    from ..transfer_plan import performance_length
+
+    held = performance_length(args.performance, args.max_frames) \
+        if args.performance and is_still(args.target) else None
+    if held is not None:
+        return held[0], f"the performance {args.performance}'s"
+    n = video_info(clip).n_frames
+    n = n if args.max_frames is None else min(n, args.max_frames)
+    return n, (f"the expression source {clip}'s" if clip != args.target
+               else f"the target {clip}'s")
 
 
 def _check_transfer_args(args):

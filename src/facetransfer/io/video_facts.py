@@ -24,7 +24,7 @@ from .video_planes import stored_pixel_format
 from .video_read import TRUNCATED_FRAMES, seeks_exactly, video_info
 from .video_timeline import first_frame_time, packet_count
 from .frame_file import bit_depth
-from .video_sequence import IMAGE_SUFFIXES, is_sequence, open_sequence
+from .video_sequence import STILL_SUFFIXES, is_sequence, open_sequence
 
 __all__ = ["VideoFacts", "video_facts", "fact_lines"]
 
@@ -190,10 +190,10 @@ def fact_lines(f: VideoFacts) -> list[str]:
                 (f"  {_exr_kind(f)}" if str(f.path).lower().endswith(".exr") else
                  f"  {_dpx_kind(f)}" if str(f.path).lower().endswith(".dpx") else
                  f"  {_image_kind(f)}; no audio")]
-    if f.n_frames <= 1 and os.path.splitext(str(f.path))[1].lower() in IMAGE_SUFFIXES + (
-            ".ppm", ".webp"):
-        return [f"{f.path}: {size}", "  a still image: tracked and transferred as a clip of "
-                "one frame", f"  {_still_colour(f)}; "
+    if f.n_frames <= 1 and os.path.splitext(str(f.path))[1].lower() in STILL_SUFFIXES:
+        return [f"{f.path}: {size}", "  a still image: tracked as a clip of one frame; as a "
+                "transfer's target, held over its expression source's frames",
+                f"  {_still_colour(f)}; "
                 f"{_depth_words(f) if f.bits > 8 else 'no audio'}"]
     return [f"{f.path}: {size}", f"  {timing}; {fields}",
             f"  {colour}; audio {f.audio or 'none'}" + _lead_words(f) + (

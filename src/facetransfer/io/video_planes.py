@@ -5,7 +5,9 @@ the tools read (:mod:`facetransfer.io.video_read`) do not hold: its alpha plane
 One ffmpeg process decodes the first video stream in order, every stored frame as it is
 (``-fps_mode passthrough``), as raw 16-bit samples; frames are asked for by number, in any
 order a few frames ahead (the rewrite's threads): the frames decoded and not yet asked for are
-kept until they are. The numbers are the reader's: a video of variable frame rate is read on
+kept until they are. A still image (a photo held as a transfer's target over its expression
+source's frames, :func:`facetransfer.transfer_plan.held_frames`) is decoded once, its one frame
+given for every number. The numbers are the reader's: a video of variable frame rate is read on
 its constant-rate timeline (:mod:`facetransfer.io.video_timeline`), so frame ``i`` is the
 stored frame its step ``i`` shows (kept while a later step shows it again; stored frames no
 step shows are passed over).
@@ -23,6 +25,7 @@ import numpy as np
 from ..errors import VideoError
 from .ffmpeg import ffmpeg_exe
 from .video_display import described_input
+from .video_sequence import is_still
 
 __all__ = ["DecodedPlanes", "stored_pixel_format"]
 
@@ -61,7 +64,8 @@ class DecodedPlanes:
         self._next, self._kept, self._size = 0, {}, None
         self._lock = threading.Lock()
         self._proc = None
-        self._start = int(start)
+        self._still = is_still(video)           # its one frame held, for every number
+        self._start = 0 if self._still else int(start)
         self._steps, self._shown = None, None   # a variable rate's timeline (module notes)
 
     def _open(self) -> None:
@@ -94,10 +98,14 @@ class DecodedPlanes:
 
     def frame(self, i: int) -> np.ndarray:
         """``(H, W, C) uint16``: the video's frame ``i`` (``i`` at least ``start``, each asked
-        for once)."""
+        for once; a still's one frame, read-only, for any ``i``)."""
         with self._lock:
             if self._proc is None:
                 self._open()
+            if self._still:
+                if 0 not in self._kept:
+                    self._kept[0], self._next = self._read_next(), 1
+                return self._kept[0]
             s = self._stored(i)
             while self._next <= s:
                 a = self._read_next()

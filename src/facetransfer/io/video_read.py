@@ -198,6 +198,8 @@ def _video_info(path) -> VideoInfo:
         raise VideoError(f"video {path} has no frames")
     if turn in (90, 270):      # the stream's ratio is of its stored pixels, turned with them
         sar = (sar[1], sar[0])
+    if exif_orientation(path) in (5, 6, 7, 8):     # a phone's portrait photo, stored sideways
+        size = (size[1], size[0])
     if piped:
         log.info("%s: interlaced; decoded by ffmpeg (OpenCV's frames would be black or "
                  "garbage)", path)
@@ -272,6 +274,9 @@ def iter_frames(path: str | os.PathLike, *, start: int = 0, stop: int | None = N
     else, as ``seek=False`` always does, by decoding every frame before it (``grab``, no colour
     conversion). A video of variable frame rate (``steps``) is always decoded from its start.
     """
+    if exif_orientation(path) != 1:     # a photo stored turned, read upright
+        yield from _upright_still(path, start, stop)
+        return
     steps = video_info(path).steps
     if steps is None:
         yield from _stored_frames(path, start=start, stop=stop, seek=seek)
@@ -358,6 +363,8 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     budget = frame_budget()
     if is_sequence(path):       # RGB, file by file
         source, put = sequence_frames(path, start=start, stop=stop), np.copyto
+    elif exif_orientation(path) != 1:   # a photo stored turned: OpenCV's capture keeps it so
+        source, put = iter_frames(path, start=start, stop=stop), np.copyto
     elif info.piped:            # RGB from ffmpeg (interlaced: OpenCV's are black)
         source, put = piped_frames(path, info.size, start=start, stop=stop), np.copyto
     elif info.steps is None:    # BGR buffers converted into place
@@ -379,6 +386,36 @@ def read_video(path: str | os.PathLike, *, start: int = 0, stop: int | None = No
     if expect - n >= max(TRUNCATED_FRAMES, 0.02 * expect):
         _say_truncated(str(path), start + n - 1, int(info.n_frames))
     return out[:n], info.fps
+
+
+def exif_orientation(path) -> int:
+    """A JPEG photo's EXIF orientation (1: stored upright; 6: turned a quarter, as a phone
+    stores a portrait; 2-8 as EXIF numbers them); 1 for anything else. OpenCV's capture, which
+    reads a still as a clip of one frame, does not apply it (its ``imread`` does)."""
+    if Path(path).suffix.lower() not in (".jpg", ".jpeg") or is_sequence(path):
+        return 1
+    from PIL import Image
+
+    try:
+        with Image.open(path) as im:
+            value = im.getexif().get(0x0112, 1)
+    except (OSError, ValueError, SyntaxError):
+        return 1
+    return int(value) if value in range(1, 9) else 1
+
+
+def _upright_still(path, start: int, stop: int | None) -> Iterator[np.ndarray]:
+    """A photo's one frame ``(H, W, 3) uint8`` RGB, its EXIF orientation applied (OpenCV's
+    ``imread``), where ``start``-``stop`` holds frame 0."""
+    import cv2
+
+    if start > 0 or stop is not None and stop <= 0:
+        return
+    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    if bgr is None:
+        raise VideoError(f"cannot read the image {path} (damaged, or not an image OpenCV "
+                         "decodes)")
+    yield cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
 
 
 #: :func:`read_video` says a video ends early when it decodes at least this many frames (and
