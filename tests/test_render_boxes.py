@@ -119,11 +119,15 @@ def test_shading_a_view_of_a_larger_raster_equals_before(old_shading, scene):
 def test_a_box_compiles_no_second_kernel(scene):
     # the whole raster and a box of it: the kernels keep one compiled signature each (a
     # cropped raster's views were a second layout, loaded from numba's cache mid-clip)
+    # (nor a read-only texture: a photo target's frames are one shared read-only view, and
+    # its textures compiled a second signature mid-run)
     rng, P, F, r = scene
-    layers = [(rng.random((len(P), 2)), rng.integers(0, 256, (8, 8, 3), dtype=np.uint8))]
+    tex = rng.integers(0, 256, (8, 8, 3), dtype=np.uint8)
+    held = np.broadcast_to(tex[None], (2, 8, 8, 3))[1]  # read-only, as a photo's frames
     flags = np.ones(len(F), np.uint8)
     for box in (None, (slice(7, 31), slice(9, 44))):
-        shading.shade_layers(r, F, layers, flags, box)
+        for texture in (tex, held):
+            shading.shade_layers(r, F, [(rng.random((len(P), 2)), texture)], flags, box)
         shading.interpolate_vertex_values(r, F, rng.normal(size=len(P)), box=box)
     assert len(shading._shade_layers_kernel.signatures) == 1
     assert len(shading._interpolate_kernel.signatures) == 1
@@ -186,3 +190,25 @@ def test_lid_kernels_equal_their_python_twins(scene):
     for kernel, img in zip((_mix_lids, _mix_lids.py_func), imgs):
         kernel(w, closed, img, 5, 11)
     np.testing.assert_array_equal(*imgs)
+
+
+def test_keeping_a_read_only_frames_pixels_compiles_no_second_kernel():
+    # a photo target's frames are one shared read-only view: rewrite's keep-own mix of them
+    # must reuse the kernel a video's writable frames compile (the same pixels either way)
+    from facetransfer import rewrite
+
+    rng = np.random.default_rng(3)
+    frame = rng.integers(0, 256, (40, 50, 3), dtype=np.uint8)
+    held = np.broadcast_to(frame[None], (2, 40, 50, 3))[1]
+    mask = np.zeros((40, 50), bool)
+    mask[5:35, 8:42] = True
+    where = np.zeros((40, 50), bool)
+    where[12:20, 15:30] = True
+    outs = []
+    for f in (frame, held):
+        img = rng.integers(0, 256, (40, 50, 3), dtype=np.uint8)
+        out = img.copy()
+        rewrite._keep_own(out, mask, f, where)
+        outs.append((img, out))
+    assert len(rewrite._keep_own_kernel.signatures) == 1
+    assert (outs[0][1][where] == frame[where]).all() and (outs[1][1][where] == frame[where]).all()

@@ -11,7 +11,7 @@ keep numba's ``njit(cache=True)``: Python's error model, where a division by zer
 
 from __future__ import annotations
 
-__all__ = ["HAVE_NUMBA", "maybe_njit"]
+__all__ = ["HAVE_NUMBA", "maybe_njit", "read_only"]
 
 try:  # numba is a hard dependency; the fallback keeps the module importable without it
     import numba
@@ -31,3 +31,15 @@ def maybe_njit(fn, *, inline: bool = False):
         return fn
     return numba.njit(cache=True, nogil=True, error_model="numpy",
                       inline="always" if inline else "never")(fn)
+
+
+def read_only(a):
+    """A read-only view of the array ``a`` (no copy), for a kernel argument it only reads.
+
+    numba compiles one signature per argument type, and a read-only array is another type: a
+    photo target's frames are one shared read-only view, so a kernel given them compiled (and
+    cached) a second version mid-run. Passing the view always keeps one compiled signature
+    whatever the caller's array."""
+    view = a.view()
+    view.flags.writeable = False
+    return view

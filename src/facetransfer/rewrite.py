@@ -66,7 +66,7 @@ from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
 from .texture.face import FaceTexture
 from .render import shade_layers
-from .jit import maybe_njit as _maybe_njit
+from .jit import maybe_njit as _maybe_njit, read_only
 from .rewrite_options import BlendOptions
 from .topology import MeshTopology, close_mouth
 
@@ -468,7 +468,8 @@ def _keep_own(face_img: np.ndarray, face_mask: np.ndarray, frame: np.ndarray,
     box = (slice(y, y + h + 8), slice(x, x + w + 8))
     wb = np.ascontiguousarray(where[box])
     blur = cv2.GaussianBlur(wb.view(np.uint8).astype(np.float32), (0, 0), 1.5)
-    _keep_own_kernel(blur, wb, face_mask, frame, face_img, x, y, np.float32(0.5 / 255))
+    _keep_own_kernel(blur, wb, face_mask, read_only(frame), face_img, x, y,
+                     np.float32(0.5 / 255))
 
 
 def _keep_own_kernel_py(blur, where, face_mask, frame, face_img, x0, y0,

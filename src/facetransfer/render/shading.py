@@ -8,7 +8,7 @@ import numpy as np
 
 from ..errors import AssetError, RenderError, ShapeError
 from ..geometry import vertex_normals
-from ..jit import maybe_njit as _maybe_njit
+from ..jit import maybe_njit as _maybe_njit, read_only
 from .raster import Raster
 
 __all__ = ["sample_texture", "shade_texture", "shade_layers", "MAX_LAYERS",
@@ -242,12 +242,12 @@ def shade_layers(raster: Raster, faces: np.ndarray, layers, flags: np.ndarray,
     args, images = [], []
     for layer in layers:
         if layer is None:  # no flag selects it: never read or written
-            args += [_DUMMY_UV, _DUMMY_TEX, _DUMMY_TEX]
+            args += [_DUMMY_UV, read_only(_DUMMY_TEX), _DUMMY_TEX]  # a texture, an image
             images.append(None)
             continue
         images.append(np.zeros((H, W, 3), np.uint8))
         args += [_check_uvs(layer[0], n_vertices),
-                 np.ascontiguousarray(_check_texture(layer[1])), images[-1]]
+                 read_only(np.ascontiguousarray(_check_texture(layer[1]))), images[-1]]
     labels = np.zeros((H, W), np.uint8)
     scratch = (np.empty((W, MAX_LAYERS, 4), np.int64), np.empty((W, MAX_LAYERS, 2)),
                np.empty(W, np.uint8))  # a row's texel footprints
