@@ -555,6 +555,7 @@ def test_shade_texture_equals_numpy_lookup_on_selected_triangles():
 
 def test_shade_layers_kernel_equals_its_python_twin():
     # four layers over a small raster: the compiled kernel and its pure-Python source
+    from facetransfer.jit import read_only
     from facetransfer.render.shading import _shade_layers_kernel, _shade_layers_kernel_py
 
     P, F = cap_mesh(8, 8)
@@ -569,7 +570,7 @@ def test_shade_layers_kernel_equals_its_python_twin():
         for kernel in (_shade_layers_kernel, _shade_layers_kernel_py):
             args = []
             for uv, tex in layers:
-                args += [uv, tex, np.zeros((h, w, 3), np.uint8)]
+                args += [uv, read_only(tex), np.zeros((h, w, 3), np.uint8)]  # as shade_layers
             labels = np.zeros((h, w), np.uint8)
             ok = kernel(r.tri_id, r.bary, y0, x0, F.astype(np.int64), flags, *args, labels,
                         np.empty((w, 4, 4), np.int64), np.empty((w, 4, 2)),
