@@ -179,6 +179,7 @@ LAYER_OF = {
     "facetransfer.model": "base",
     "facetransfer.geometry": "base",     # and the vertex normals the renderer and fitting share
     "facetransfer.jit": "base",          # the numba decorator of every layer's kernels
+    "facetransfer.lazy": "base",         # the lazy packages' __getattr__ and __dir__
     "facetransfer.topology": "base",
     "facetransfer.arkit": "base",
     "facetransfer.assets": "base",

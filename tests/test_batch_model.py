@@ -74,13 +74,20 @@ def test_a_model_file_the_workers_do_not_see_is_sent_to_them_saying_so(
     """Workers on machines without the client's file (its user cache not shared, no
     ``--model`` on the shared file system): the model is scattered to them, as before, with a
     warning naming the hosts and the file, not every clip failed "cannot be loaded"."""
-    from facetransfer.batch import batch_track, open_client, run
-    from facetransfer.batch.manifest import ClipJob
     from facetransfer.model import load_model
 
     model = load_model(quick_model_path)
     elsewhere = MR.ModelRef(str(tmp_path / "not-here" / "m.npz"), model.content_hash)
     monkeypatch.setattr(MR, "model_ref", lambda m: elsewhere)
+    _sent_to_a_worker_without_the_file(clips, model, elsewhere, tmp_path, caplog)
+
+
+def _sent_to_a_worker_without_the_file(clips, model, elsewhere, tmp_path, caplog) -> None:
+    """Clip "a" tracked by one in-process worker that does not see ``elsewhere``'s file: done,
+    the model sent to it with the warning naming that file."""
+    from facetransfer.batch import batch_track, open_client, run
+    from facetransfer.batch.manifest import ClipJob
+
     (va, pa, _) = clips["a"]
     with open_client(workers=1, processes=False) as client:
         res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
@@ -248,8 +255,6 @@ def test_a_worker_whose_own_default_model_is_another_build_is_sent_the_model(
     "holds another model now ... replaced since the run began?" (review53b); now the model is
     sent to it, with the warning, as to a worker with no file."""
     from facetransfer import default_model
-    from facetransfer.batch import batch_track, open_client, run
-    from facetransfer.batch.manifest import ClipJob
     from facetransfer.model import load_model
 
     model = load_model(quick_model_path)
@@ -261,13 +266,7 @@ def test_a_worker_whose_own_default_model_is_another_build_is_sent_the_model(
                             default=True)
     monkeypatch.setattr(MR, "model_ref", lambda m: elsewhere)
     monkeypatch.setattr(MR, "_LOADED", type(MR._LOADED)())
-    (va, pa, _) = clips["a"]
-    with open_client(workers=1, processes=False) as client:
-        res = batch_track([ClipJob("a", str(va), init=str(pa))], tmp_path / "out", model,
-                          client=client)
-    assert [(r.status, r.error) for r in res.rows] == [("done", "")]
-    said = [r.getMessage() for r in caplog.records if r.name == run.__name__]
-    assert said and f"do not see the model file {elsewhere.path}: it is sent" in said[0]
+    _sent_to_a_worker_without_the_file(clips, model, elsewhere, tmp_path, caplog)
     # a worker that joins later, its own default another build, says whose model it is
     with pytest.raises(BatchError, match=r"default\.npz holds another model now .*: this "
                                          r"machine's own default model, another build"):

@@ -8,28 +8,15 @@ import pytest
 
 from facetransfer import eyeballs, eyes
 from facetransfer.arkit import ARKIT_NAMES
-from facetransfer.render import rasterize
 from facetransfer.topology import close_mouth, mesh_topology
-from facetransfer.track.gaze import activation_gaze, eye_model, project_iris
+from test_eyeballs import IRIS, SCLERA, SKIN, painted_frame
 from test_eyes import SIZE, _acts, _track
-
-SCLERA, IRIS, SKIN = (235, 235, 230), (30, 40, 60), (200, 150, 120)
 
 
 def _painted(model, closed, fill, track, i):
-    """Frame ``i`` of ``track``: skin, its eye openings sclera, a dark iris where its gaze
-    puts each; and the irises' centres (2, 2)."""
-    V = close_mouth(model.synthesize(track.weights_at(i)), closed)
-    hole = np.isin(rasterize(V, closed.faces, track.camera(i), (SIZE, SIZE)).tri_id, fill)
-    g = activation_gaze(np.asarray(track.blendshapes, np.float64)[i:i + 1])
-    iris = project_iris(eye_model(V[np.asarray(model.landmarks)]), g, track.rotation[i:i + 1],
-                        track.scale[i:i + 1], track.translation[i:i + 1])[0]
-    img = np.empty((SIZE, SIZE, 3), np.uint8)
-    img[:] = SKIN
-    img[hole] = SCLERA
-    yy, xx = np.mgrid[:SIZE, :SIZE]
-    for p in iris:
-        img[hole & ((xx - p[0]) ** 2 + (yy - p[1]) ** 2 <= 4.5 ** 2)] = IRIS
+    """Frame ``i`` of ``track`` painted (:func:`test_eyeballs.painted_frame`): the picture,
+    the mesh and the irises' centres."""
+    img, V, _, iris = painted_frame(model, closed, fill, track, i)
     return img, V, iris
 
 

@@ -27,19 +27,27 @@ def scene(arkit_model):
     topo = mesh_topology(model)
     closed, fill = eyes.close_eyes(topo, model.synthesize(model.default_weights()))
     track = _track(model, _acts(1, 0.0))
-    V = close_mouth(model.synthesize(track.weights_at(0)), closed)
-    tid = rasterize(V, closed.faces, track.camera(0), (SIZE, SIZE)).tri_id
+    img, V, tid, iris = painted_frame(model, closed, fill, track, 0)
+    return model, topo, closed, fill, track, V, tid, iris, img
+
+
+def painted_frame(model, closed, fill, track, i):
+    """Frame ``i`` of ``track``: skin, its eye openings sclera, a dark iris where its gaze
+    (its eyeLook* activations) puts each; with the mesh ``V``, the raster's ``tri_id`` and the
+    irises' centres (2, 2)."""
+    V = close_mouth(model.synthesize(track.weights_at(i)), closed)
+    tid = rasterize(V, closed.faces, track.camera(i), (SIZE, SIZE)).tri_id
     hole = np.isin(tid, fill)
-    lm = np.asarray(model.landmarks)
-    iris = project_iris(eye_model(V[lm]), np.zeros((1, 2, 2)), track.rotation[:1],
-                        track.scale[:1], track.translation[:1])[0]
+    g = activation_gaze(np.asarray(track.blendshapes, np.float64)[i:i + 1])
+    iris = project_iris(eye_model(V[np.asarray(model.landmarks)]), g, track.rotation[i:i + 1],
+                        track.scale[i:i + 1], track.translation[i:i + 1])[0]
     img = np.empty((SIZE, SIZE, 3), np.uint8)
     img[:] = SKIN
     img[hole] = SCLERA
     yy, xx = np.mgrid[:SIZE, :SIZE]
     for p in iris:
         img[hole & ((xx - p[0]) ** 2 + (yy - p[1]) ** 2 <= 4.5 ** 2)] = IRIS
-    return model, topo, closed, fill, track, V, tid, iris, img
+    return img, V, tid, iris
 
 
 def _look(eye: str, direction: str, value: float, F: int = 1) -> np.ndarray:

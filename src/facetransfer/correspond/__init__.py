@@ -15,7 +15,7 @@ Pipeline stages, one module each:
 
 from __future__ import annotations
 
-import importlib
+from ..lazy import lazy_names
 
 #: The public names and the submodule of each, imported on first use (PEP 562), as in
 #: :mod:`facetransfer.datasets`: a submodule imported alone (:mod:`.procrustes`, a 3x3 SVD) ran
@@ -37,20 +37,7 @@ _LAZY = {
 _SUBMODULES = ("features", "fitting", "meshops", "prior", "procrustes", "smoothing")
 
 
-def __getattr__(name: str):
-    if name in _SUBMODULES:
-        return importlib.import_module(f".{name}", __name__)
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY) | set(_SUBMODULES))
-
+__getattr__, __dir__ = lazy_names(__name__, _LAZY, _SUBMODULES)
 
 __all__ = [
     "IBUG_NAMES", "PROTOCOL_CLOSED_MOUTH_21", "PROTOCOL_NEUTRAL_42", "PROTOCOL_VISEME_18",

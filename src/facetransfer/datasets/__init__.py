@@ -9,12 +9,12 @@ expressions identity-specific by deformation transfer (Sumner & Popović 2004,
 
 from __future__ import annotations
 
-import importlib
 import os
 from pathlib import Path
 from typing import Callable
 
 from ..errors import DatasetError
+from ..lazy import lazy_names
 from .base import FaceDataset
 
 #: The other public names and the submodule of each, imported on first use (PEP 562): a model
@@ -27,17 +27,7 @@ _LAZY = {"DeformationTransfer": "deformation", "deformation_gradients": "deforma
          "ict_template": "ict", "load_recipes": "ict", "read_manifest": "manifest"}
 
 
-def __getattr__(name: str):
-    module = _LAZY.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{module}", __name__), name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__getattr__, __dir__ = lazy_names(__name__, _LAZY)
 
 __all__ = [
     "FaceDataset",
