@@ -60,12 +60,12 @@ def test_livelink_header_and_rows(case, tmp_path):
     # the eye angles are the eyeLook* activations read back (35 deg per unit In/Out, 28 Up/Down)
     col = {n: a[:, ARKIT_NAMES.index(n)] for n in ARKIT_NAMES}
     h, v = np.deg2rad(35.0), np.deg2rad(28.0)
-    np.testing.assert_allclose(take.pose[:, 3], (col["eyeLookOutLeft"] - col["eyeLookInLeft"]) * h,
-                               atol=1e-7)   # LeftEyeYaw: + toward the subject's left
+    np.testing.assert_allclose(take.pose[:, 3], (col["eyeLookInLeft"] - col["eyeLookOutLeft"]) * h,
+                               atol=1e-7)   # LeftEyeYaw: + toward the subject's right (the app's)
     np.testing.assert_allclose(take.pose[:, 4], (col["eyeLookDownLeft"] - col["eyeLookUpLeft"]) * v,
                                atol=1e-7)   # LeftEyePitch: + looking down
-    np.testing.assert_allclose(take.pose[:, 6], (col["eyeLookInRight"] - col["eyeLookOutRight"]) * h,
-                               atol=1e-7)   # RightEyeYaw: looking in = toward the left
+    np.testing.assert_allclose(take.pose[:, 6], (col["eyeLookOutRight"] - col["eyeLookInRight"]) * h,
+                               atol=1e-7)   # RightEyeYaw: looking out = toward the right
     np.testing.assert_allclose(take.pose[:, 7],
                                (col["eyeLookDownRight"] - col["eyeLookUpRight"]) * v, atol=1e-7)
     assert np.all(take.pose[:, [5, 8]] == 0)

@@ -7,11 +7,22 @@ Reference facts:
   ``FF.mmm`` passes 30 and 30 otherwise (the app records at one of the two), and places a row
   at ``HH*3600 + MM*60 + SS + FF.mmm / rate`` seconds (:func:`_unreal_seconds` does the same
   sums).
-* A take written by the Live Link Face app (a public one, ``MySlate_1_iPhone.csv``, its first
-  row, rounded): eyeLookDown 0.113 both eyes, eyeLookIn 0.054 left and 0.063 right, with
-  ``LeftEyeYaw`` -0.038, ``LeftEyePitch`` +0.069, ``RightEyeYaw`` +0.033, ``RightEyePitch``
-  +0.069 (radians): yaw positive toward the subject's left, pitch positive looking down.
+* Three takes written by the Live Link Face app (public: ``MySlate_1_iPhone.csv`` of
+  dwskillman/BlendFiles, ``anim/alex_rom_3.csv`` and ``anim/alex_rom_4.csv`` of
+  alexdjulin/LiveLinkFace-CSV-Retarget-For-Motionbuilder; 679, 4030 and 3809 rows), each eye
+  column fitted by least squares against its eye's curves (correlation 0.994-1.000):
+  ``LeftEyeYaw`` = +0.591 / +0.607 / +0.594 radians per unit of ``EyeLookInLeft -
+  EyeLookOutLeft``, ``RightEyeYaw`` = -0.612 / -0.603 / -0.592 per unit of ``EyeLookInRight -
+  EyeLookOutRight``, each eye's pitch = +0.611 / +0.556 / +0.544 per unit of ``EyeLookDown -
+  EyeLookUp`` (both eyes alike), plus a constant of about -0.065 (left yaw), +0.065 (right
+  yaw), 0-0.02 (pitch). Rows where ``EyeLookInLeft`` passes 0.3 average ``LeftEyeYaw``
+  +0.43 / +0.37 (alex_rom_3 / 4), where ``EyeLookOutLeft`` does -0.57 / -0.58. So in the app's
+  columns an eye's yaw is positive toward the subject's right (the gaze ``EyeLookInLeft`` and
+  ``EyeLookOutRight`` name) and its pitch positive looking down, in radians (±0.6: 34°). One
+  row alone misleads: MySlate's first (eyeLookIn 0.054 left, ``LeftEyeYaw`` -0.038) is the
+  constant, not the slope (the sign before the fifty-fourth session was read from it).
 """
+
 
 from __future__ import annotations
 
@@ -30,6 +41,12 @@ from facetransfer.export.livelink import app_rate, eye_angles, format_timecode, 
 from test_export import _validate
 
 RATES = (24000 / 1001, 24.0, 25.0, 30000 / 1001, 30.0, 48.0, 50.0, 60000 / 1001, 60.0)
+
+#: The app's eye columns per unit of their curves (module notes: the three takes' slopes,
+#: rounded): yaw per unit of In - Out (left eye) and of Out - In (right eye), pitch per unit of
+#: Down - Up; signs as the app's.
+APP_EYE_SLOPE = {"LeftEyeYaw": 0.60, "RightEyeYaw": 0.60, "LeftEyePitch": 0.57,
+                 "RightEyePitch": 0.57}
 
 
 def _unreal_seconds(codes) -> np.ndarray:
@@ -137,17 +154,26 @@ def test_export_take_rate_on_the_command_line(arkit_model, make_arkit_track, tmp
     assert not (tmp_path / "a.glb").exists()
 
 
-def test_eye_angles_agree_with_the_apps_in_sign_and_size():
-    """The eye angles read back from the eyeLook* activations of the app's own row (module
-    notes) have the app's signs, and sizes within a factor 1.5 of its."""
+@pytest.mark.parametrize("curve, column, sign", [
+    ("eyeLookInLeft", "LeftEyeYaw", 1), ("eyeLookOutLeft", "LeftEyeYaw", -1),
+    ("eyeLookOutRight", "RightEyeYaw", 1), ("eyeLookInRight", "RightEyeYaw", -1),
+    ("eyeLookDownLeft", "LeftEyePitch", 1), ("eyeLookUpLeft", "LeftEyePitch", -1),
+    ("eyeLookDownRight", "RightEyePitch", 1), ("eyeLookUpRight", "RightEyePitch", -1)])
+def test_eye_angles_turn_with_the_curves_as_the_apps_takes_do(curve, column, sign):
+    """Each eyeLook* curve alone at 0.5 moves its eye's column as the app's takes move it
+    (module notes): the app's sign (before, the yaw's was the other: an importer driving the
+    eye bones from the columns turned them against the curves), the app's size within a
+    factor 1.3 (ours: the tracker's 35 degrees a unit of In/Out, 28 of Up/Down), the other
+    columns 0."""
+    from facetransfer.export.livelink import POSE_COLUMNS
+
     a = np.zeros((1, 52))
-    for name, v in (("eyeLookDownLeft", 0.113), ("eyeLookDownRight", 0.113),
-                    ("eyeLookInLeft", 0.054), ("eyeLookInRight", 0.063)):
-        a[0, ARKIT_NAMES.index(name)] = v
-    ours = eye_angles(a)[0][[0, 1, 3, 4]]        # left yaw, pitch; right yaw, pitch
-    app = np.array([-0.038, 0.069, 0.033, 0.069])
-    assert np.all(np.sign(ours) == np.sign(app))
-    assert np.all((np.abs(ours) > np.abs(app) / 1.5) & (np.abs(ours) < np.abs(app) * 1.5))
+    a[0, ARKIT_NAMES.index(curve)] = 0.5
+    ours = dict(zip(POSE_COLUMNS[3:], eye_angles(a)[0]))
+    want = sign * APP_EYE_SLOPE[column] * 0.5
+    assert np.sign(ours[column]) == np.sign(want)
+    assert abs(want) / 1.3 < abs(ours[column]) < abs(want) * 1.3
+    assert all(v == 0 for name, v in ours.items() if name != column)
 
 
 def _glb(path) -> tuple[dict, bytes, int]:
@@ -203,8 +229,9 @@ def test_a_head_turned_and_eyes_looking_to_the_subjects_left_in_every_export(ark
                                                                            tmp_path):
     """One truth (the head turned 20 degrees toward the subject's left, the image's right; both
     eyes looking to the subject's left) read the same in the take, the glb, the USD and the dial
-    page: HeadYaw +20 degrees, both eyes' yaw positive; the nose toward +X (the subject's left)
-    in the glb, the USD and the page."""
+    page: HeadYaw +20 degrees, both eyes' yaw negative (the app's: positive toward the
+    subject's right, module notes); the nose toward +X (the subject's left) in the glb, the USD
+    and the page."""
     from conftest import mean_person_track
     from scipy.spatial.transform import Rotation
 
@@ -218,7 +245,7 @@ def test_a_head_turned_and_eyes_looking_to_the_subjects_left_in_every_export(ark
     track = mean_person_track(arkit_model, a, rotation=R)
     take = read_livelink(export_track(track, "livelink", tmp_path / "t.csv", model=arkit_model))
     np.testing.assert_allclose(take.pose[:, :3], [[np.deg2rad(20.0), 0.0, 0.0]] * 3, atol=1e-7)
-    assert np.all(take.pose[:, [3, 6]] > 0.2)        # LeftEyeYaw, RightEyeYaw
+    assert np.all(take.pose[:, [3, 6]] < -0.2)       # LeftEyeYaw, RightEyeYaw
     nose = np.array([0.0, 0.0, 1.0])
     want = [np.sin(np.deg2rad(20.0)), 0.0, np.cos(np.deg2rad(20.0))]
     glb = _glb_rotations(export_track(track, "glb", tmp_path / "t.glb", model=arkit_model))

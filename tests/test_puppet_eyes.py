@@ -172,10 +172,11 @@ def test_the_render_preview_shows_the_eyes_and_the_mouth(arkit_model_path, tmp_p
     assert _cavity(wide).sum() > 50 and _cavity(ahead).sum() == 0
 
 
-#: A take's recorded eye angles (radians; the take's signs: yaw + toward the subject's left,
-#: pitch + looking down) for :func:`_take_with_eye_columns`: both eyes 0.35 rad (20°) to the
-#: subject's left and 0.1 rad down, its eyeLook* curves all 0.
-RECORDED = {"LeftEyeYaw": 0.35, "LeftEyePitch": 0.1, "RightEyeYaw": 0.35, "RightEyePitch": 0.1}
+#: A take's recorded eye angles (radians; the app's signs, facetransfer.export.livelink's
+#: References: yaw + toward the subject's right, pitch + looking down) for
+#: :func:`_take_with_eye_columns`: both eyes 0.35 rad (20°) to the subject's left and 0.1 rad
+#: down, its eyeLook* curves all 0 (before, a yaw of +0.35 was read as to the subject's left).
+RECORDED = {"LeftEyeYaw": -0.35, "LeftEyePitch": 0.1, "RightEyeYaw": -0.35, "RightEyePitch": 0.1}
 
 
 def _take_with_eye_columns(model, path, n: int = 3, **columns: float):

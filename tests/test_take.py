@@ -552,6 +552,35 @@ def test_a_damaged_take_is_named_by_line_and_column(arkit_model, make_arkit_trac
     assert len(read_livelink(tmp_path / "take.csv").timecodes) == 6
 
 
+def test_a_take_whose_curves_pass_one_as_the_apps_do_is_read(arkit_model, tmp_path):
+    """ARKit's coefficients pass 1 a little at the extremes and the app writes them so (its
+    public take alex_rom_4.csv: eyeLookIn up to 1.053 in 91 of 3809 rows): such a take is read,
+    its value kept as written, and what it drives clipped to 1 (its preview's curves); before,
+    every command refused it as "outside 0..1". A value past any activation is still refused."""
+    from conftest import mean_person_track
+
+    from facetransfer.arkit import ARKIT_NAMES
+    from facetransfer.export.common import ExportError
+    from facetransfer.export.livelink import read_livelink, write_livelink
+    from facetransfer.take import take_track
+
+    def take(value: str, name: str):
+        p = write_livelink(mean_person_track(arkit_model, np.zeros((4, 52), np.float32)),
+                           tmp_path / name)
+        rows = [r.split(",") for r in p.read_text().splitlines()]
+        rows[2][rows[0].index("EyeLookInLeft")] = value
+        p.write_text("\n".join(",".join(r) for r in rows) + "\n")
+        return p
+
+    j = ARKIT_NAMES.index("eyeLookInLeft")
+    app = take("1.0533207655", "app.csv")
+    assert read_livelink(app, lenient=True).activations[1, j] == 1.0533207655
+    track = take_track(app, arkit_model, arkit_model.weight_mean("identity"))
+    np.testing.assert_allclose(track.blendshapes[:, j], [0.0, 1.0, 0.0, 0.0], atol=1e-6)
+    with pytest.raises(ExportError, match="line 3, column EyeLookInLeft: 1.3 is outside 0..1"):
+        read_livelink(take("1.3", "bad.csv"), lenient=True)
+
+
 def test_a_short_takes_rate_guess_names_the_take(caplog):
     """A take within one second of timecode: its rate is a guess, said once naming the take
     (a batch worker's line named nothing)."""

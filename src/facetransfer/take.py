@@ -662,10 +662,12 @@ def _eye_gaze(take, pose: np.ndarray) -> np.ndarray | None:
     """``(n, 2, 2)``, the take's recorded eye angles (``RightEyeYaw``, ``RightEyePitch``,
     ``LeftEyeYaw``, ``LeftEyePitch`` of ``pose``, its :data:`facetransfer.export.livelink.
     POSE_COLUMNS` on the track's timeline) as :mod:`facetransfer.track.gaze` has gaze
-    (``[frame, eye (right, left), (yaw, pitch)]``, pitch positive up: the take's looks down);
-    None where the take lacks one of them or they are all 0 (a tool that records none):
-    :func:`facetransfer.puppet_face.track_gaze`."""
-    from .export.livelink import POSE_COLUMNS
+    (``[frame, eye (right, left), (yaw, pitch)]``, yaw positive toward the subject's left,
+    pitch up: the take's yaw is positive toward the subject's right, its pitch looking down,
+    :data:`facetransfer.export.livelink.EYE_SIGNS`; before, its yaw was taken as it is and a
+    real take's eyes turned the other way); None where the take lacks one of them or they are
+    all 0 (a tool that records none): :func:`facetransfer.puppet_face.track_gaze`."""
+    from .export.livelink import EYE_SIGNS, POSE_COLUMNS
 
     names = ("RightEyeYaw", "RightEyePitch", "LeftEyeYaw", "LeftEyePitch")
     if any(n in take.missing for n in names):
@@ -673,7 +675,7 @@ def _eye_gaze(take, pose: np.ndarray) -> np.ndarray | None:
     gaze = pose[:, [POSE_COLUMNS.index(n) for n in names]].reshape(-1, 2, 2)
     if not np.any(gaze):
         return None
-    return gaze * np.array([1.0, -1.0])
+    return gaze * EYE_SIGNS
 
 
 def _centred(vertices: np.ndarray, rotation: np.ndarray, scale: float, size) -> np.ndarray:

@@ -17,8 +17,10 @@ its columns by position, so the layout is the app's exactly:
   ``61`` (52 + 9 values), the activations in [0, 1], then head yaw, pitch and roll in **radians**
   (:func:`facetransfer.export.common.head_euler`) and the six eye angles in radians, read back
   from the eyeLook* activations (:func:`facetransfer.track.gaze.activation_gaze`: 35° per unit
-  of In/Out, 28° of Up/Down, the tracker's own scale) in the head's convention: yaw positive
-  toward the subject's left, pitch positive looking down, roll 0.
+  of In/Out, 28° of Up/Down, the tracker's own scale) as the app relates them to its curves
+  (:data:`EYE_SIGNS`): yaw positive toward the subject's right (``LeftEyeYaw`` rising with
+  ``EyeLookInLeft``, ``RightEyeYaw`` with ``EyeLookOutRight``), pitch positive looking down,
+  roll 0.
 
 References
 ----------
@@ -28,8 +30,15 @@ first two names, the rate inferred as 60 where a frame number passes 30 (else 30
 byte for byte by open importers: nmfisher/blender_livelinkface (``bpylivelinkface.py``,
 ``LIVE_LINK_FACE_HEADER``), alexdjulin/LiveLinkFace-CSV-Retarget-For-Motionbuilder; radians
 for the head angles as in JimWest/MeFaMo (Euler angles of the pose matrix sent as
-``HeadYaw``/``HeadPitch``/``HeadRoll``); the eye angles' units and signs as in a take the
-app wrote (its eyeLook* and ``LeftEyeYaw``... of one row: ``tests/test_export_conventions.py``).
+``HeadYaw``/``HeadPitch``/``HeadRoll``); the eye angles' units and signs as in three takes the
+app wrote (MySlate_1_iPhone.csv of dwskillman/BlendFiles, anim/alex_rom_3.csv and
+alex_rom_4.csv of alexdjulin/LiveLinkFace-CSV-Retarget-For-Motionbuilder; 679, 4030 and 3809
+rows): ``LeftEyeYaw`` against ``EyeLookInLeft - EyeLookOutLeft`` has slope +0.59 to +0.61
+radians a unit, ``RightEyeYaw`` against ``EyeLookInRight - EyeLookOutRight`` -0.59 to -0.61,
+each eye's pitch against ``EyeLookDown - EyeLookUp`` +0.54 to +0.61 (radians: ±0.6 is 34°;
+the eyes' ±0.6 could not be the ±108° of degrees / 180); ``tests/test_export_conventions.py``.
+The app's sign of ``HeadYaw`` and ``HeadRoll`` could not be checked (those takes record the
+head as 0).
 """
 
 from __future__ import annotations
@@ -47,8 +56,8 @@ from ..arkit import ARKIT_NAMES
 from ..io.atomic import write_text_atomic
 from .common import ExportError, head_euler, require_activations
 
-__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "HEADER", "LABELS", "DEFAULT_LABELS", "app_rate",
-           "format_timecode", "parse_timecode",
+__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "EYE_SIGNS", "HEADER", "LABELS", "DEFAULT_LABELS",
+           "app_rate", "format_timecode", "parse_timecode",
            "timecode_fields", "source_timecode",
            "livelink_rows", "eye_angles", "write_livelink", "read_livelink", "LiveLinkTake"]
 
@@ -66,6 +75,10 @@ LIVELINK_NAMES: tuple[str, ...] = (
     "BrowOuterUpRight", "CheekPuff", "CheekSquintLeft", "CheekSquintRight", "NoseSneerLeft",
     "NoseSneerRight", "TongueOut",
 )
+#: ``(yaw, pitch)`` of an eye column = these signs times :mod:`facetransfer.track.gaze`'s
+#: angles: in the app's takes (module notes, References) an eye's yaw is positive toward the
+#: subject's right and its pitch looking down; gaze's yaw is toward the subject's left, up.
+EYE_SIGNS = np.array([-1.0, -1.0])
 #: The 9 rotation columns after the blendshapes (radians).
 POSE_COLUMNS: tuple[str, ...] = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw",
                                  "LeftEyePitch", "LeftEyeRoll", "RightEyeYaw", "RightEyePitch",
@@ -187,14 +200,15 @@ def livelink_rows(track, start: str | None = None, *, labels: str = "app") -> li
 
 def eye_angles(activations: np.ndarray) -> np.ndarray:
     """``LeftEyeYaw, LeftEyePitch, LeftEyeRoll, RightEyeYaw, RightEyePitch, RightEyeRoll`` in
-    radians, ``(F, 6)``, from the (F, 52) activations' eyeLook* (module notes)."""
+    radians, ``(F, 6)``, from the (F, 52) activations' eyeLook* (module notes): yaw positive
+    toward the subject's right, pitch positive looking down (:data:`EYE_SIGNS`), as the app's
+    takes have them (before, the yaw was turned: positive toward the subject's left)."""
     from ..track.gaze import activation_gaze
 
-    g = activation_gaze(activations)           # (F, eye (right, left), (yaw, pitch up))
+    g = activation_gaze(activations) * EYE_SIGNS   # (F, eye (right, left), (yaw, pitch))
     out = np.zeros((len(g), 6))
     for col, k in ((0, 1), (3, 0)):            # the subject's left eye first, as the app
-        out[:, col] = g[:, k, 0]
-        out[:, col + 1] = -g[:, k, 1]           # the head's pitch: positive looks down
+        out[:, col:col + 2] = g[:, k]
     return out
 
 
@@ -218,7 +232,8 @@ class LiveLinkTake:
     ----------
     timecodes : tuple of str
     activations : (F, 52) float64
-        In :data:`facetransfer.arkit.ARKIT_NAMES` order.
+        In :data:`facetransfer.arkit.ARKIT_NAMES` order, as the take holds them (the app's
+        pass 1 a little at the extremes: up to :data:`ACTIVATION_MAX`).
     pose : (F, 9) float64
         :data:`POSE_COLUMNS`, radians.
     missing : tuple of str
@@ -305,15 +320,25 @@ def _take_values(p: Path, header: list, body: list, cols: list) -> np.ndarray:
     raise AssertionError("unreachable: a field failed, then none did")  # pragma: no cover
 
 
+#: The largest blendshape value a take may hold: ARKit's coefficients pass 1 a little at the
+#: extremes, and the app writes them as they come (its takes, module notes: eyeLookIn up to
+#: 1.053 in 91 of alex_rom_4's 3809 rows; a take refused for it before the fifty-fourth
+#: session). Above it a column is no activation (a percentage, an angle): refused.
+ACTIVATION_MAX = 1.25
+
+
 def _check_unit(p: Path, header: list, body: list, a: np.ndarray, cols: list) -> None:
-    """ExportError naming the first blendshape value of ``a`` (rows, 52) outside 0..1 (a
-    thousandth of slack): Live Link Face's are activations."""
-    bad = np.argwhere((a < -1e-3) | (a > 1.0 + 1e-3))
+    """ExportError naming the first blendshape value of ``a`` (rows, 52) outside
+    0..:data:`ACTIVATION_MAX` (a thousandth of slack below 0): Live Link Face's are
+    activations. Values over 1 are kept as the take holds them; what a take drives clips
+    them to 0..1."""
+    bad = np.argwhere((a < -1e-3) | (a > ACTIVATION_MAX))
     if bad.size:
         i, j = bad[0]
         line, r = body[i]
         raise ExportError(f"{p} line {line}, column {header[cols[j]].strip()}: "
-                          f"{r[cols[j]]} is outside 0..1 (a blendshape's activation)")
+                          f"{r[cols[j]]} is outside 0..1 (a blendshape's activation; the "
+                          f"app's pass 1 by a few hundredths at most)")
 
 
 def source_timecode(track) -> str | None:
