@@ -27,6 +27,7 @@ Reference facts:
 from __future__ import annotations
 
 import base64
+import dataclasses
 import json
 import re
 import struct
@@ -198,6 +199,29 @@ def _glb_rotations(path) -> np.ndarray:
     anim = g["animations"][0]
     ch = next(c for c in anim["channels"] if c["target"]["path"] == "rotation")
     return _accessor(g, b, start, anim["samplers"][ch["sampler"]]["output"])
+
+
+def test_the_head_translation_is_from_the_frames_centre_as_the_renderer_has_it(arkit_model,
+                                                                            tmp_path):
+    """The model's origin where the renderer centres a frame (pixel k centred at k:
+    ``((W - 1) / 2, (H - 1) / 2)``, :func:`facetransfer.render.look_at_weak_perspective`)
+    exports no head translation, and 10 px right and 20 px up of it at 20 px a unit exports
+    (0.5, 1.0, 0) units (glb: metres, x 0.01); before, half a pixel off (``W / 2``)."""
+    from conftest import mean_person_track
+
+    from facetransfer.export.common import head_translation
+
+    track = mean_person_track(arkit_model, np.zeros((2, 52), np.float32), size=256,
+                              scale=20.0)
+    c = (256 - 1) / 2.0
+    track = dataclasses.replace(track, translation=np.array([[c, c], [c + 10.0, c - 20.0]]))
+    want = np.array([[0.0, 0.0, 0.0], [0.5, 1.0, 0.0]])
+    np.testing.assert_allclose(head_translation(track), want, atol=1e-12)
+    g, b, start = _glb(export_track(track, "glb", tmp_path / "t.glb", model=arkit_model))
+    anim = g["animations"][0]
+    ch = next(k for k in anim["channels"] if k["target"]["path"] == "translation")
+    np.testing.assert_allclose(_accessor(g, b, start, anim["samplers"][ch["sampler"]]["output"]),
+                               want * 0.01, atol=1e-7)
 
 
 def test_glb_morph_targets_carry_the_shapes_normals(arkit_model, make_arkit_track, tmp_path):

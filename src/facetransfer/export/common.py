@@ -14,8 +14,10 @@ y up, z towards the viewer):
   counter-clockwise in the image. These are the "head angles" of
   :mod:`facetransfer.render.cameras` (ARKit's order); the previews' and the synthetic
   footage's "render angles" have the same axes and signs in another order, in degrees.
-* Head translation in model units: ``((t_x - W/2) / s, -(t_y - H/2) / s, 0)``, the model origin's
-  offset from the image centre at the face's depth (weak perspective has no depth).
+* Head translation in model units: ``((t_x - (W-1)/2) / s, -(t_y - (H-1)/2) / s, 0)``, the model
+  origin's offset from the image centre at the face's depth (weak perspective has no depth);
+  the centre as the renderer has it, pixel ``k`` centred at ``k`` (before the fifty-fourth
+  session ``W/2``: half a pixel off, 0.29 mm on driving_d6 at 17 px a cm).
 """
 
 from __future__ import annotations
@@ -123,8 +125,9 @@ def head_quaternions(rotation: np.ndarray) -> np.ndarray:
 
 def head_translation(track) -> np.ndarray:
     """Per-frame translation of the model origin in model units, ``(F, 3) float64``, from the
-    frame's centre (as the video is shown: a track of non-square pixels,
-    :mod:`facetransfer.track.aspect`, in square ones)."""
+    frame's centre ``((W - 1) / 2, (H - 1) / 2)``, where the renderer and
+    :func:`facetransfer.render.look_at_weak_perspective` put it (as the video is shown: a track
+    of non-square pixels, :mod:`facetransfer.track.aspect`, in square ones)."""
     from ..track.aspect import to_shown_x
 
     W, H = track.frame_size
@@ -133,8 +136,8 @@ def head_translation(track) -> np.ndarray:
     t = np.asarray(track.translation, np.float64)
     out = np.zeros((track.n_frames, 3))
     tx = t[:, 0] if a == 1.0 else to_shown_x(t[:, 0], a)
-    out[:, 0] = (tx - W * a / 2.0) / s
-    out[:, 1] = -(t[:, 1] - H / 2.0) / s
+    out[:, 0] = (tx - (W * a - 1.0) / 2.0) / s
+    out[:, 1] = -(t[:, 1] - (H - 1.0) / 2.0) / s
     return out
 
 
