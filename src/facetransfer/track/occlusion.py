@@ -397,6 +397,28 @@ def hold_occluded_video(video, track, model):
     return hold_occluded(track, occ, model)
 
 
+def with_occluders(video, track, model):
+    """``track --occluders``' step (``batch track --occluders`` too, on the whole clip after
+    its chunks are joined): :func:`hold_occluded_video`, or the track as it is where it has
+    fewer than :data:`MIN_RUN` frames (a still, or a clip no run fits in: its own frames are
+    its reference, nothing could be found; ``occluded`` left None, the key's "not tested").
+
+    Parameters
+    ----------
+    video : path-like
+        The tracked clip.
+    track : Track
+    model : MultilinearModel
+
+    Returns
+    -------
+    Track
+    """
+    if track.n_frames < MIN_RUN:
+        return track
+    return hold_occluded_video(video, track, model)
+
+
 def covered_alpha(points: np.ndarray, covered: np.ndarray, box: tuple[int, int, int, int]
                   ) -> np.ndarray | None:
     """Where a frame's covered regions lie, as an alpha on a box of the frame: a transfer keeps
