@@ -200,6 +200,8 @@ LAYER_OF = {
     "facetransfer.io.__init__": "base",
     # io: frames in and out (videos, plates, image sequences), their headers and colour
     "facetransfer.io": "io",
+    "facetransfer.monochrome": "io",      # grey footage told from its frames: track's occlusion
+                                          # test and the rewrite's grey face both ask
     # render
     "facetransfer.render": "render",
     "facetransfer.background": "render",  # the renderer's background parser, beside it
@@ -231,7 +233,6 @@ LAYER_OF = {
     "facetransfer.lips": "rewrite",
     "facetransfer.lip_colour": "rewrite",
     "facetransfer.mouth": "rewrite",
-    "facetransfer.monochrome": "rewrite",
     "facetransfer.patch": "rewrite",
     "facetransfer.region_views": "rewrite",
     "facetransfer.region_weights": "rewrite",

@@ -95,6 +95,31 @@ def test_a_covered_mouth_and_barred_eyes_are_found_and_talking_and_blinks_are_no
     assert not clean.occluded.any()              # the mouth opens and shuts, the eyes blink
 
 
+def _grey(frames):
+    """Frames in BT.601 luma, three equal channels (a black-and-white clip)."""
+    import cv2
+
+    return [np.repeat(cv2.cvtColor(f, cv2.COLOR_RGB2GRAY)[..., None], 3, axis=2) for f in frames]
+
+
+def test_a_box_over_a_black_and_white_clips_mouth_is_found():
+    """A black-and-white clip: a box of a hand's grey over the mouth is found by its flat
+    texture (before: not found, scoring 0.38: its grey within the lightness step); talking
+    and blinks are not; a clip with a colour frame among those
+    :func:`facetransfer.monochrome.is_monochrome` looks at is tested in colour, as before."""
+    frames, pts = _clip(mouth_box=range(10, 18))
+    occ = oc.clip_occlusion(_grey(frames), pts)
+    assert set(range(10, 18)) <= set(occ.frames("mouth")) <= set(range(8, 20))
+    assert not occ.occluded[:, 1:].any()
+    assert occ.score[10:18, 0].min() > 0.8 and np.nanmax(np.delete(occ.score[:, 0],
+                                                                   range(8, 20))) < 0.3
+    clean = oc.clip_occlusion(_grey(_clip()[0]), pts)
+    assert not clean.occluded.any()               # the mouth opens and shuts, the eyes blink
+    mixed = _grey(frames)
+    mixed[39] = frames[39]                         # the last frame in colour: not a grey clip
+    assert not oc.clip_occlusion(mixed, pts).occluded[:, 0].any()
+
+
 def test_lost_frames_are_not_scored_and_points_are_checked():
     frames, pts = _clip(n=12)
     pts[3] = np.nan

@@ -15,7 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["file_kind", "track_facts", "take_facts", "file_fact_lines", "lost_runs"]
+__all__ = ["file_kind", "track_facts", "take_facts", "file_fact_lines", "lost_runs",
+           "covered_note"]
 
 #: What ``probe`` describes, said when it is handed something else (a model is not described:
 #: ``probe M.npz`` points to ``model info``; this said "tracks, models and ...").
@@ -79,6 +80,24 @@ def lost_runs(lost: np.ndarray, first: int = 0) -> str:
     """``"3-7, 12"``: a track's lost frames as runs (the first four), counted from ``first``
     (a plate's first frame number)."""
     return _ranges(np.asarray(lost, bool), first=first)
+
+
+def covered_note(track) -> str:
+    """What ``track --occluders`` (and ``batch track --occluders``, in a clip's ``note``) says
+    of a track it tested (:func:`facetransfer.track.occlusion.with_occluders`): the frames
+    each region was found covered in, none, or why it was not tested (``occluded`` None: fewer
+    frames than a run)."""
+    from .track.occlusion import MIN_RUN, REGIONS
+
+    if track.occluded is None:
+        n = track.n_frames
+        return (f"not tested for a covered mouth or eye: {n} frame{'' if n == 1 else 's'}, "
+                f"and the test compares {MIN_RUN} frames or more with the clip's own")
+    said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
+            for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]
+    held = ("the activations of each bridged there" if track.blendshapes is not None else
+            "recorded: the model has no ARKit activations to bridge")
+    return f"covered: {'; '.join(said)} ({held})" if said else "no mouth or eye found covered"
 
 
 def _ranges(mask: np.ndarray, limit: int = 4, first: int = 0) -> str:

@@ -1,17 +1,22 @@
-"""A monochrome target stays monochrome: its rewritten face in grey (beyond the paper, §6).
+"""Black-and-white footage told from its frames; a monochrome target stays monochrome: its
+rewritten face in grey (beyond the paper, §6).
 
 Black-and-white footage (archive film, a grey security or infrared camera, a graded plate)
-stores three equal channels. The rewrite pastes textures of other frames and of the source
-(the mouth's interior and lips from a colour source) into it; in such a clip the pixels it
-changes are brought to grey (ITU-R BT.601 luma, OpenCV's ``RGB2GRAY``) and every other pixel is
-left as it is, to the bit.
+stores three equal channels (:func:`is_monochrome`, of a few frames spread over the clip:
+:func:`monochrome_picks`, :func:`frame_is_monochrome`). The rewrite pastes textures of other
+frames and of the source (the mouth's interior and lips from a colour source) into it; in such
+a clip the pixels it changes are brought to grey (ITU-R BT.601 luma, OpenCV's ``RGB2GRAY``) and
+every other pixel is left as it is, to the bit. The occlusion test of ``track --occluders``
+(:mod:`facetransfer.track.occlusion`) compares lightness and texture where a clip has no
+colour to compare.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["MONO_LEVELS", "MONO_SAMPLES", "is_monochrome", "monochrome_changes"]
+__all__ = ["MONO_LEVELS", "MONO_SAMPLES", "is_monochrome", "frame_is_monochrome",
+           "monochrome_picks", "monochrome_changes"]
 
 #: A frame is monochrome when the 99.9th percentile of its channels' differences from green
 #: is at most this many levels (decoding and chroma subsampling leave 1-2 on grey footage).
@@ -20,7 +25,7 @@ MONO_LEVELS = 3
 MONO_SAMPLES = 8
 
 
-def _frame_is_monochrome(frame: np.ndarray) -> bool:
+def frame_is_monochrome(frame: np.ndarray) -> bool:
     """Whether ``frame`` (H, W, 3) uint8 holds (almost) equal channels, on every other pixel
     of every other row."""
     f = np.asarray(frame)[::2, ::2].astype(np.int16)
@@ -34,8 +39,15 @@ def is_monochrome(frames, n_frames: int | None = None) -> bool:
     n = len(frames) if n_frames is None else min(int(n_frames), len(frames))
     if n <= 0:
         return False
-    pick = np.unique(np.linspace(0, n - 1, min(MONO_SAMPLES, n)).round().astype(np.int64))
-    return all(_frame_is_monochrome(frames[int(i)]) for i in pick)
+    return all(frame_is_monochrome(frames[int(i)]) for i in monochrome_picks(n))
+
+
+def monochrome_picks(n: int) -> np.ndarray:
+    """The frames of an ``n``-frame clip :func:`is_monochrome` looks at: up to
+    :data:`MONO_SAMPLES` spread over it, the first among them; (k,) int64, ascending."""
+    if n <= 0:
+        return np.zeros(0, np.int64)
+    return np.unique(np.linspace(0, n - 1, min(MONO_SAMPLES, n)).round().astype(np.int64))
 
 
 def monochrome_changes(image: np.ndarray, frame: np.ndarray) -> np.ndarray:

@@ -32,7 +32,8 @@ from .summary import Row
 
 log = logging.getLogger(__name__)
 
-__all__ = ["partial_path", "track_row", "track_clip", "ChunkResult", "track_chunk",
+__all__ = ["partial_path", "track_row", "occluders_tested", "track_note", "track_clip",
+           "ChunkResult", "track_chunk",
            "join_clip", "transfer_pair", "export_one", "count_frames", "EXPORT_EXTENSIONS",
            "MATTE_FORMATS", "matte_pattern"]
 
@@ -56,10 +57,34 @@ def partial_path(out, suffix: str = "") -> Path:
     return p.with_name(p.stem + suffix + ".partial.npz")
 
 
-def track_row(name: str, track, out, seconds: float, status: str = "done") -> Row:
+def track_row(name: str, track, out, seconds: float, status: str = "done",
+              note: str = "") -> Row:
     """The summary row of a finished track."""
     return Row(clip=name, status=status, frames=track.n_frames, fps=track.fps, seconds=seconds,
-               mean_confidence=float(np.mean(track.confidence)), output=str(out))
+               mean_confidence=float(np.mean(track.confidence)), output=str(out), note=note)
+
+
+def occluders_tested(job, track, model):
+    """The track of ``job`` tested for a covered mouth or eye where the job asks
+    (``batch track --occluders``, a manifest's ``occluders`` cell) as ``track --occluders``
+    tests it (:func:`facetransfer.track.occlusion.with_occluders`: on the whole clip, after
+    its chunks are joined); as it is otherwise."""
+    if not job.occluders:
+        return track
+    from ..track.occlusion import with_occluders
+
+    return with_occluders(job.video, track, model)
+
+
+def track_note(job, track, *more: str) -> str:
+    """A track row's note: what ``track --occluders`` says of it where the job asks
+    (:func:`facetransfer.file_facts.covered_note`), then ``more`` (the claim's), "; "-joined."""
+    said = ()
+    if job.occluders:
+        from ..file_facts import covered_note
+
+        said = (covered_note(track),)
+    return "; ".join(n for n in said + more if n)
 
 
 def _detector_for(init: str, options):
@@ -164,14 +189,15 @@ def track_clip(job, out: str, model, options, overwrite: bool = False,
                 track = _track(str(job.video), model, job.init, options,
                                source=str(job.video), checkpoint=partial_path(out),
                                face=job.face, max_frames=job.max_frames)
+                track = occluders_tested(job, track, model)
                 track = track.with_source_facts(job.video)   # its numbering, before it moves
                 track.save(out, overwrite=overwrite)
         except OutputTaken:   # the other run's track is whole: no progress to keep for it
             partial_path(out).unlink(missing_ok=True)
             raise
         partial_path(out).unlink(missing_ok=True)   # the capture tracker's progress, if any
-    return dataclasses.replace(track_row(job.name, track, out, time.perf_counter() - t0),
-                               note=claim.note(False))
+    return track_row(job.name, track, out, time.perf_counter() - t0,
+                     note=track_note(job, track, claim.note(False)))
 
 
 def _taken_track(job, out: str, claim, t0: float, seconds: float = 0.0) -> Row:
@@ -181,9 +207,8 @@ def _taken_track(job, out: str, claim, t0: float, seconds: float = 0.0) -> Row:
 
     track = Track.load(out)
     partial_path(out).unlink(missing_ok=True)
-    return dataclasses.replace(
-        track_row(job.name, track, out, seconds + time.perf_counter() - t0),
-        note=claim.note(True))
+    return track_row(job.name, track, out, seconds + time.perf_counter() - t0,
+                     note=track_note(job, track, claim.note(True)))
 
 
 @dataclass(frozen=True, eq=False)
@@ -277,10 +302,11 @@ def join_clip(job, out: str, model, chunks, results, overwrite: bool = False,
         overwrite = overwrite or still_planned(out, planned)
         with own_output(out, overwrite):
             track = join_tracks([r.track for r in results], chunks, model)
+            track = occluders_tested(job, track, model)   # the whole clip: its own reference
             track = track.with_source_facts(job.video)
             track.save(out, overwrite=overwrite)
-    return dataclasses.replace(track_row(job.name, track, out, spent + time.perf_counter() - t0),
-                               note=claim.note(False))
+    return track_row(job.name, track, out, spent + time.perf_counter() - t0,
+                     note=track_note(job, track, claim.note(False)))
 
 
 def _identity(job, model):

@@ -13,7 +13,8 @@ manifest            columns
 clips (``track``)   ``video`` (required), ``name``, ``init`` (POINTS.json; default ``auto``),
                     ``face`` (of several people, the one to track, as ``track --face``),
                     ``max_frames`` (track only the clip's first N frames, as
-                    ``track --max-frames``)
+                    ``track --max-frames``), ``occluders`` (``yes``/``no``: test it for a
+                    covered mouth or eye, as ``track --occluders``)
 pairs (``transfer``) ``target`` (required), ``name``, the sources of ``facetransfer transfer``:
                     ``expression_from``, ``viseme_from``, ``identity_from``, ``pose_from``,
                     ``performance``, their track files ``target_track``, ``source_track``,
@@ -42,7 +43,7 @@ class BatchError(FaceTransferError):
 
 
 #: Columns of a clips manifest (``video`` required).
-CLIP_COLUMNS = ("video", "name", "init", "face", "max_frames")
+CLIP_COLUMNS = ("video", "name", "init", "face", "max_frames", "occluders")
 #: Columns of a pairs manifest holding paths (``target`` required).
 PAIR_PATH_COLUMNS = ("target", "expression_from", "viseme_from", "identity_from", "pose_from",
                      "performance", "target_track", "source_track", "viseme_track",
@@ -81,6 +82,11 @@ class ClipJob(_Job):
         :func:`facetransfer.track.face_crop.subject_point`); None: the face found first.
     max_frames : int or None
         Track only the clip's first ``max_frames`` frames (``track --max-frames``); None: all.
+    occluders : bool
+        Test the tracked clip for a covered mouth or eye and bridge the covered region's
+        activations (``track --occluders``, :func:`facetransfer.track.occlusion.
+        with_occluders`). Not in the ``repr``, which the digest of the format before hashed
+        (:func:`.digest.legacy_job_key`: its summaries' outputs stay this version's jobs').
     """
 
     name: str
@@ -88,6 +94,7 @@ class ClipJob(_Job):
     init: str = "auto"
     face: str | None = None
     max_frames: int | None = None
+    occluders: bool = field(default=False, repr=False)
 
     @property
     def roles(self) -> tuple[tuple[str, Path], ...]:
@@ -97,8 +104,10 @@ class ClipJob(_Job):
 
     @property
     def labels(self) -> tuple[tuple[str, object], ...]:
-        """What else makes the job's output: its name, face and frame limit."""
-        return (("name", self.name), ("face", self.face), ("max_frames", self.max_frames))
+        """What else makes the job's output: its name, face and frame limit, and
+        ``occluders`` where asked (a job without it keeps the digest it had before)."""
+        return (("name", self.name), ("face", self.face), ("max_frames", self.max_frames)) + (
+            (("occluders", True),) if self.occluders else ())
 
 
 @dataclass(frozen=True)
@@ -258,6 +267,20 @@ def _max_frames(value, what: str) -> int | None:
     return n
 
 
+#: The words of an ``occluders`` cell (case aside): yes and no.
+_YES, _NO = ("yes", "true", "1", "on"), ("no", "false", "0", "off")
+
+
+def _occluders(text: str | None, default: bool, what: str) -> bool:
+    """An ``occluders`` cell: yes or no (:data:`_YES`, :data:`_NO`); empty: ``default``."""
+    if text is None:
+        return default
+    word = text.strip().lower()
+    if word in _YES or word in _NO:
+        return word in _YES
+    raise BatchError(f"{what} must be yes or no (true/false, 1/0), got {text!r}")
+
+
 def _name(explicit: str | None, path: str | os.PathLike, where: str) -> str:
     name = explicit or _stem(path)
     if not name or name in (".", "..") or "/" in name or "\\" in name or name.startswith("."):
@@ -279,22 +302,25 @@ def _stem(path: str | os.PathLike) -> str:
 
 def clip_jobs(videos=(), manifest: str | os.PathLike | None = None, *,
               init: str = "auto", face: str | None = None,
-              max_frames: int | None = None) -> list[ClipJob]:
+              max_frames: int | None = None, occluders: bool = False) -> list[ClipJob]:
     """The clips of ``batch track``: videos given directly (with the initial points ``init``,
-    the person ``face`` and the frame limit ``max_frames``) and/or the rows of a manifest (with
-    their ``init``, ``face`` and ``max_frames`` columns; an empty ``face`` or ``max_frames``
-    cell takes ``face`` or ``max_frames``).
+    the person ``face``, the frame limit ``max_frames`` and ``occluders``) and/or the rows of a
+    manifest (with their ``init``, ``face``, ``max_frames`` and ``occluders`` columns; an empty
+    ``face``, ``max_frames`` or ``occluders`` cell takes ``face``, ``max_frames`` or
+    ``occluders``).
 
     Raises
     ------
     BatchError
         No clip at all, a bad manifest, a face that names no place, a frame limit that is not
-        a whole number >= 1, or two clips with the same name.
+        a whole number >= 1, an ``occluders`` cell neither yes nor no, or two clips with the
+        same name.
     """
     _check_face(face, "--face")
     max_frames = _max_frames(max_frames, "--max-frames")
     jobs = [ClipJob(_name(None, v, f"video {v}"), absolute(v),
-                    str(init) if init == "auto" else absolute(init), face, max_frames)
+                    str(init) if init == "auto" else absolute(init), face, max_frames,
+                    bool(occluders))
             for v in videos]
     if manifest is not None:
         for row in read_manifest(manifest, required=("video",), allowed=CLIP_COLUMNS,
@@ -304,7 +330,9 @@ def clip_jobs(videos=(), manifest: str | os.PathLike | None = None, *,
             limit = _max_frames(row.get("max_frames"), f"{where}: max_frames")
             jobs.append(ClipJob(_name(row.get("name"), row["video"], where), row["video"],
                                 row.get("init", "auto"), row.get("face", face),
-                                max_frames if limit is None else limit))
+                                max_frames if limit is None else limit,
+                                _occluders(row.get("occluders"), bool(occluders),
+                                           f"{where}: occluders")))
     if not jobs:
         raise BatchError("no clips: give VIDEO files or --manifest clips.csv")
     check_unique_names(jobs)

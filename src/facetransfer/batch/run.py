@@ -318,11 +318,23 @@ def _done_track(out: Path, job, model_hash: str) -> Row | None:
         elif job.max_frames is not None and t.n_frames > job.max_frames:
             why = f"holds a track of {t.n_frames} frames, more than max_frames {job.max_frames}"
         else:
-            why = _other_frames(t, job.video)
+            why = _other_occluders(t, job) or _other_frames(t, job.video)
     if why is not None:
         return Row(job.name, "failed", error=f"{out} {why}; --overwrite replaces it",
                    output=str(out))
-    return J.track_row(job.name, t, out, 0.0, status="skipped")
+    return J.track_row(job.name, t, out, 0.0, status="skipped", note=J.track_note(job, t))
+
+
+def _other_occluders(track, job) -> str | None:
+    """Why ``track`` is not what ``job`` asks of its occluders (tested, or not), or None: a
+    summary's digest says so too, but a folder without its summary has only the file."""
+    from ..track.occlusion import MIN_RUN
+
+    if job.occluders and track.occluded is None and track.n_frames >= MIN_RUN:
+        return "holds a track not tested for occluders (tracked without --occluders)"
+    if not job.occluders and track.occluded is not None:
+        return "holds a track tested for occluders (--occluders), and this clip is asked without"
+    return None
 
 
 def _other_frames(track, video) -> str | None:
@@ -390,8 +402,10 @@ def batch_track(jobs, out_dir, model, *, client, options=None, chunk: int = 0,
             + (f" overlap={overlap}" if chunk else "") + f" {mhash}")
     keys = job_keys(jobs, what)
     by_name = {j.name: j for j in jobs}
+    # (a summary of the format before never holds an --occluders job's track: no legacy key)
     done = {} if overwrite else _kept(jobs, outs, out_dir, keys, lambda out, name: _done_track(
-        out, by_name[name], mhash), lambda job: legacy_job_key(job, what))
+        out, by_name[name], mhash), lambda job: "" if job.occluders else
+        legacy_job_key(job, what))
     col, todo, mf = _start(client, jobs, out_dir, done, progress, model,
                            _unfinished(jobs, outs, out_dir, keys))
     run = TrackSubmit(client, col, outs, mf, options, chunk, overlap, keys, _planned(outs),

@@ -2,8 +2,8 @@
 
     facetransfer batch track VIDEO... | --manifest clips.csv --out DIR [--workers N]
                              [--scheduler tcp://HOST:8786] [--chunk N [--overlap N]]
-                             [--model M.npz] [--face WHERE] [--max-frames N] [track options]
-                             [--overwrite]
+                             [--model M.npz] [--face WHERE] [--max-frames N] [--occluders]
+                             [track options] [--overwrite]
     facetransfer batch transfer --manifest pairs.csv --out DIR [--model M.npz]
                                 [--matte png|tiff|exr] [transfer options]
     facetransfer batch export TRACK... --format livelink|glb|usd|json --out DIR [--model M.npz]
@@ -46,7 +46,10 @@ def _track_options(p) -> None:
     from .track import add_track_options
 
     add_track_options(p.add_argument_group("tracking (as `facetransfer track`; a manifest's "
-                                           "init column gives per-clip --init points)"))
+                                           "init column gives per-clip --init points, its "
+                                           "occluders column (yes/no) per-clip --occluders: "
+                                           "each clip tested whole, after its chunks are "
+                                           "joined)"))
 
 
 def register(sub) -> None:
@@ -73,8 +76,8 @@ def _register_track(bs, fmt) -> None:
                       "the seams (one identity per clip).")
     t.add_argument("videos", nargs="*", metavar="VIDEO", help="videos to track")
     t.add_argument("--manifest", metavar="clips.csv",
-                   help="CSV with a video column (and name, init, face, max_frames); paths "
-                   "relative to it")
+                   help="CSV with a video column (and name, init, face, max_frames, "
+                   "occluders); paths relative to it")
     t.add_argument("--model", metavar="M.npz", help="model (default: the default model)")
     t.add_argument("--chunk", type=int, default=0,
                    help="split clips longer than this many frames into overlapping chunks "
@@ -246,7 +249,7 @@ def run_track(args) -> int:
         raise FaceTransferError("give VIDEO files or --manifest clips.csv")
     # duplicate names are refused before anything runs
     jobs = clip_jobs(args.videos, args.manifest, init=args.init, face=args.face,
-                     max_frames=args.max_frames)
+                     max_frames=args.max_frames, occluders=args.occluders)
     opt = track_settings(args)  # validates the options
     for job in jobs:
         if job.face is not None and opt.choose(job.init) != "capture":

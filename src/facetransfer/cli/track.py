@@ -68,6 +68,10 @@ def add_track_options(p) -> None:
                    "scores of the jaw, lips and blinks (facetransfer.track.scores); "
                    "--no-scores: the landmarks and their flow only (a track that does not "
                    "depend on its blendshape model)")
+    p.add_argument("--occluders", action=argparse.BooleanOptionalAction, default=False,
+                   help="test each frame for a hand, a microphone or glasses over the mouth or "
+                   "the eyes, and bridge that region's activations over the frames it is "
+                   "covered (facetransfer.track.occlusion; the clip is read once more)")
 
 
 def track_settings(args):
@@ -113,10 +117,6 @@ def register(sub) -> None:
     p.add_argument("--from-track", dest="from_track",
                    help="draw --overlay from an existing track file instead of tracking "
                    "(with --max-frames N: the clip's and the track's first N frames)")
-    p.add_argument("--occluders", action=argparse.BooleanOptionalAction, default=False,
-                   help="test each frame for a hand, a microphone or glasses over the mouth or "
-                   "the eyes, and bridge that region's activations over the frames it is "
-                   "covered (facetransfer.track.occlusion; the clip is read once more)")
     p.add_argument("--overwrite", action=argparse.BooleanOptionalAction, default=False,
                    help="replace existing outputs (an output is never one of the inputs)")
     p.set_defaults(func=run)
@@ -299,21 +299,13 @@ def _track_and_save(args, model, settings, tracker: str):
 
 def _held_occluded(args, track, model):
     """``--occluders``: the track with its covered regions' activations bridged, and the note
-    of the frames each region was found covered in; a clip of fewer than ``MIN_RUN`` frames
-    is not tested (``occluded`` None, as the track key says: not tested)."""
-    from ..file_facts import lost_runs
-    from ..track.occlusion import MIN_RUN, REGIONS, hold_occluded_video
+    of the frames each region was found covered in (a clip of fewer than ``MIN_RUN`` frames
+    is not tested: ``occluded`` None, as the track key says: not tested)."""
+    from ..file_facts import covered_note
+    from ..track.occlusion import with_occluders
 
-    if track.n_frames < MIN_RUN:     # a still: its own colours are its reference, no run fits
-        return track, (f"not tested for a covered mouth or eye: {frame_count(track.n_frames)}"
-                       f", and the test compares {MIN_RUN} frames or more with the clip's own")
-    track = hold_occluded_video(args.video, track, model)
-    said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
-            for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]
-    held = ("the activations of each bridged there" if track.blendshapes is not None else
-            "recorded: the model has no ARKit activations to bridge")
-    return track, (f"covered: {'; '.join(said)} ({held})" if said
-                   else "no mouth or eye found covered")
+    track = with_occluders(args.video, track, model)
+    return track, covered_note(track)
 
 
 def _say_lost(track) -> None:

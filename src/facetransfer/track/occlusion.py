@@ -19,6 +19,13 @@ more than a smile). A region's score is the fraction of its points that differ; 
 occluded where the score is at least :data:`OCCLUDED_SCORE` for at least :data:`MIN_RUN`
 frames in a row.
 
+**Black-and-white clips.** Where the clip has no colour (:func:`facetransfer.monochrome.
+is_monochrome` of its frames: three equal channels), chroma tells nothing and a hand's grey is
+within the lightness step of the skin's; there a point also differs where its texture (the
+lightness' gradient, averaged over a quarter of the eyes' distance: the lips' edges, the lids'
+folds, a box's flat inside) is outside :data:`TEXTURE_LOW` to :data:`TEXTURE_HIGH` times its
+median over the clip. A colour clip's test is as it was, to the bit.
+
 The clip's median is its own reference: a clip covered in half its frames or more has the
 covered look as its median and is not flagged (said in README).
 
@@ -52,6 +59,13 @@ REGIONS = ("mouth", "right_eye", "left_eye")
 CHROMA_STEP = 9.0
 #: A sample point's lightness step (8-bit L*) that differs.
 LIGHT_STEP = 45.0
+#: In a black-and-white clip: a point's texture, as a fraction of its median over the clip,
+#: below this or above :data:`TEXTURE_HIGH` differs (module notes).
+TEXTURE_LOW = 0.35
+#: (and above this)
+TEXTURE_HIGH = 2.5
+#: Texture below this (L* units per pixel) is taken as this: a flat point's ratio is not noise's.
+TEXTURE_FLOOR = 0.05
 #: The fraction of a region's points that differ for the frame's region to be occluded.
 OCCLUDED_SCORE = 0.5
 #: Frames in a row a region must be found covered for (a shorter run is a glint or a glitch).
@@ -124,8 +138,9 @@ def _eye_ring(eye: np.ndarray, brow: np.ndarray) -> np.ndarray:
     return np.array(upper + outer + under)
 
 
-def frame_samples(frame: np.ndarray, points: np.ndarray) -> list[np.ndarray]:
-    """The L*a*b* colours of each region's sample points in one frame.
+def frame_samples(frame: np.ndarray, points: np.ndarray, texture: bool = False
+                  ) -> list[np.ndarray]:
+    """The L*a*b* colours of each region's sample points in one frame (and their texture).
 
     Parameters
     ----------
@@ -133,21 +148,25 @@ def frame_samples(frame: np.ndarray, points: np.ndarray) -> list[np.ndarray]:
         RGB.
     points : (68, 2) float64
         The frame's iBUG-68 points in pixels.
+    texture : bool
+        Also each point's texture (:func:`_texture`), a fourth column.
 
     Returns
     -------
-    list of (n, 3) float32
-        Per region (:data:`REGIONS`), L*, a*, b* on OpenCV's 8-bit scale; NaN outside the frame.
+    list of (n, 3) or (n, 4) float32
+        Per region (:data:`REGIONS`), L*, a*, b* on OpenCV's 8-bit scale (and the texture);
+        NaN outside the frame.
     """
     pts = region_points(points)
     allp = np.concatenate(pts)
     h, w = frame.shape[:2]
     eyes = np.linalg.norm(points[42:48].mean(0) - points[36:42].mean(0))
-    pad = int(max(4.0, eyes * 0.2))
+    pad = int(max(4.0, eyes * 0.2))              # (the texture's window: within it)
     x0, y0 = np.floor(allp.min(axis=0)).astype(int) - pad
     x1, y1 = np.ceil(allp.max(axis=0)).astype(int) + pad
     x0, y0, x1, y1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
-    out = [np.full((len(q), 3), np.nan, np.float32) for q in pts]
+    k = 4 if texture else 3
+    out = [np.full((len(q), k), np.nan, np.float32) for q in pts]
     if x1 - x0 < 2 or y1 - y0 < 2:
         return out
     crop = cv2.cvtColor(np.ascontiguousarray(frame[y0:y1, x0:x1]), cv2.COLOR_RGB2LAB)
@@ -156,19 +175,37 @@ def frame_samples(frame: np.ndarray, points: np.ndarray) -> list[np.ndarray]:
     xy = (allp - (x0, y0)).astype(np.float32)
     got = cv2.remap(lab, xy[None, :, 0], xy[None, :, 1], cv2.INTER_LINEAR,
                     borderMode=cv2.BORDER_CONSTANT, borderValue=(np.nan,) * 3)[0]
+    if texture:
+        tex = cv2.remap(_texture(lab[..., 0], eyes), xy[None, :, 0], xy[None, :, 1],
+                        cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=np.nan)
+        got = np.concatenate([got, tex.reshape(-1, 1)], axis=1)
     inside = (allp[:, 0] >= 0) & (allp[:, 0] < w) & (allp[:, 1] >= 0) & (allp[:, 1] < h)
     got[~inside] = np.nan
     n = np.cumsum([0] + [len(q) for q in pts])
     return [got[n[k]:n[k + 1]] for k in range(len(pts))]
 
 
-def occlusion_scores(samples: list) -> np.ndarray:
+def _texture(light: np.ndarray, eyes: float) -> np.ndarray:
+    """(h, w) float32: the lightness' gradient magnitude (L* units per pixel), averaged over
+    a square of a quarter of the eyes' distance (a box filter: a Gaussian that wide cost 1 ms
+    a frame): high on the lips' edges and the lids' folds, low on smooth skin, none on a flat
+    occluder."""
+    gx = cv2.Sobel(light, cv2.CV_32F, 1, 0, ksize=3, scale=0.125)
+    gy = cv2.Sobel(light, cv2.CV_32F, 0, 1, ksize=3, scale=0.125)
+    side = max(3, int(round(eyes / 4.0)) | 1)
+    return cv2.blur(cv2.magnitude(gx, gy), (side, side))
+
+
+def occlusion_scores(samples: list, grey: bool = False) -> np.ndarray:
     """Per frame and region, the fraction of sample points whose colour is not the clip's.
 
     Parameters
     ----------
-    samples : list of (list of (n, 3) float32) or None
+    samples : list of (list of (n, 3) or (n, 4) float32) or None
         Per frame, :func:`frame_samples`' result; None where the face is lost.
+    grey : bool
+        The clip is black and white: a point's texture (the samples' fourth column) differs
+        too (module notes).
 
     Returns
     -------
@@ -181,13 +218,17 @@ def occlusion_scores(samples: list) -> np.ndarray:
     if not seen:
         return score
     for r in range(len(REGIONS)):
-        lab = np.stack([samples[i][r] for i in seen]).astype(np.float64)  # (f, n, 3)
-        ref = np.full(lab.shape[1:], np.nan)                                # (n, 3)
+        lab = np.stack([samples[i][r] for i in seen]).astype(np.float64)  # (f, n, 3 or 4)
+        ref = np.full(lab.shape[1:], np.nan)                                # (n, 3 or 4)
         known = np.isfinite(lab).any(axis=(0, 2))   # a point outside every frame: no median
         ref[known] = np.nanmedian(lab[:, known], axis=0)
-        d = lab - ref
+        d = lab[..., :3] - ref[:, :3]
         chroma = np.hypot(d[..., 1], d[..., 2])
         differs = (chroma > CHROMA_STEP) | (np.abs(d[..., 0]) > LIGHT_STEP)
+        if grey:
+            floor = np.maximum(ref[:, 3], TEXTURE_FLOOR)
+            ratio = np.maximum(lab[..., 3], TEXTURE_FLOOR) / floor
+            differs |= (ratio < TEXTURE_LOW) | (ratio > TEXTURE_HIGH)
         valid = np.isfinite(d).all(axis=2)
         counted = np.maximum(valid.sum(axis=1), 1)
         score[seen, r] = (differs & valid).sum(axis=1) / counted
@@ -255,17 +296,26 @@ def clip_occlusion(frames, points: np.ndarray) -> Occlusion:
     -------
     Occlusion
     """
+    from ..monochrome import frame_is_monochrome, monochrome_picks
+
     points = np.asarray(points, dtype=np.float64)
     if points.ndim != 3 or points.shape[1:] != (68, 2):
         raise ValueError(f"points must be (F, 68, 2), got {points.shape}")
+    picks = set(monochrome_picks(len(points)).tolist())    # the first frame among them
+    grey = len(picks) > 0
     samples = []
     for i, frame in enumerate(frames):
         if i >= len(points):
             break
+        if i in picks:       # a colour frame: the clip is not grey, no texture needed
+            grey = grey and frame_is_monochrome(frame)
         p = points[i]
-        samples.append(frame_samples(frame, p) if np.isfinite(p).all() else None)
+        samples.append(frame_samples(frame, p, texture=grey) if np.isfinite(p).all()
+                       else None)
     samples += [None] * (len(points) - len(samples))
-    score = occlusion_scores(samples)
+    if not grey:                                  # (a clip grey at first, in colour later)
+        samples = [None if s is None else [q[:, :3] for q in s] for s in samples]
+    score = occlusion_scores(samples, grey=grey)
     return Occlusion(score=score, occluded=occluded_runs(score))
 
 
@@ -395,6 +445,28 @@ def hold_occluded_video(video, track, model):
 
     occ = clip_occlusion(iter_frames(video, stop=track.n_frames), track_points(track))
     return hold_occluded(track, occ, model)
+
+
+def with_occluders(video, track, model):
+    """``track --occluders``' step (``batch track --occluders`` too, on the whole clip after
+    its chunks are joined): :func:`hold_occluded_video`, or the track as it is where it has
+    fewer than :data:`MIN_RUN` frames (a still, or a clip no run fits in: its own frames are
+    its reference, nothing could be found; ``occluded`` left None, the key's "not tested").
+
+    Parameters
+    ----------
+    video : path-like
+        The tracked clip.
+    track : Track
+    model : MultilinearModel
+
+    Returns
+    -------
+    Track
+    """
+    if track.n_frames < MIN_RUN:
+        return track
+    return hold_occluded_video(video, track, model)
 
 
 def covered_alpha(points: np.ndarray, covered: np.ndarray, box: tuple[int, int, int, int]
