@@ -302,13 +302,15 @@ def _held_occluded(args, track, model):
     of the frames each region was found covered in; a clip of fewer than ``MIN_RUN`` frames
     is not tested (``occluded`` None, as the track key says: not tested)."""
     from ..file_facts import lost_runs
+    from ..io.frame_numbers import first_number
     from ..track.occlusion import MIN_RUN, REGIONS, hold_occluded_video
 
     if track.n_frames < MIN_RUN:     # a still: its own colours are its reference, no run fits
         return track, (f"not tested for a covered mouth or eye: {frame_count(track.n_frames)}"
                        f", and the test compares {MIN_RUN} frames or more with the clip's own")
     track = hold_occluded_video(args.video, track, model)
-    said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
+    first = first_number(args.video)      # a plate's frames by their numbers
+    said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r], first)}"
             for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]
     held = ("the activations of each bridged there" if track.blendshapes is not None else
             "recorded: the model has no ARKit activations to bridge")
@@ -373,7 +375,10 @@ def _capture(args, model, options, progress, bars):
                                        face_detector_id(getattr(args, "face", None)))
     saved = ck.load()
     if saved is not None:
-        print(f"continued an interrupted run from frame {saved.detections.n_frames}")
+        from ..io.frame_numbers import first_number
+
+        print(f"continued an interrupted run from frame "
+              f"{first_number(args.video) + saved.detections.n_frames}")   # a plate's number
     try:
         det, fps, size, src = _capture_detect(args, saved, ck, progress)
         if isinstance(model, Future):
@@ -450,7 +455,9 @@ def _track_klt(args, model, opt, progress, bars):
         if detector is not None:
             detector.close()
     if track.info and track.info.get("resumed"):
-        r = track.info["resumed"]
+        from ..io.frame_numbers import first_number
+
+        r, first = track.info["resumed"], first_number(args.video)   # a plate's number
         print("continued an interrupted run from " + (f"pass {r['pass']}, " if "pass" in r
-                                                      else "") + f"frame {r['frame']}")
+                                                      else "") + f"frame {first + r['frame']}")
     return track
