@@ -9,15 +9,17 @@ import numpy as np
 import pytest
 
 from facetransfer.cli.main import main
-from facetransfer.file_facts import _ranges, file_kind, take_facts, track_facts
+from facetransfer.file_facts import file_kind, take_facts, track_facts
+from facetransfer.io.frame_numbers import frame_runs
 
 
 def test_runs_of_lost_frames():
     m = np.zeros(20, bool)
-    assert _ranges(m) == ""
+    assert frame_runs(m) == ""
     m[[3, 4, 5, 9, 12, 13, 15, 18]] = True
-    assert _ranges(m) == "3-5, 9, 12-13, 15, ... (5 runs)"
-    assert _ranges(m, limit=5) == "3-5, 9, 12-13, 15, 18"
+    assert frame_runs(m) == "3-5, 9, 12-13, 15, ... (5 runs)"
+    assert frame_runs(m, limit=5) == "3-5, 9, 12-13, 15, 18"
+    assert frame_runs(m, 1001, limit=5) == "1004-1006, 1010, 1013-1014, 1016, 1019"
 
 
 def test_a_track_is_described(arkit_model, make_arkit_track, tmp_path, monkeypatch, capsys):

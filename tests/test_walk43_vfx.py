@@ -204,8 +204,9 @@ def test_an_exr_plate_s_alpha_dropped_by_another_output_is_said(tmp_path, caplog
 def test_an_export_names_lost_frames_by_the_plate_s_numbers(arkit_model, make_arkit_track,
                                                              tmp_path, capsys):
     """The track of a plate numbered from 1001 whose first frames have no face: the USD's
-    time codes start at 1001, and the note said "lost in frames 0-1" only; now it adds the
-    plate's numbers, 1001-1002."""
+    time codes start at 1001, and the note said "lost in frames 0-1" only; then it added the
+    plate's numbers, 1001-1002, in parentheses; now it names them by those alone, as every
+    message names a plate's frames."""
     import cv2
     import numpy as np
 
@@ -225,5 +226,5 @@ def test_an_export_names_lost_frames_by_the_plate_s_numbers(arkit_model, make_ar
     assert main([str(x) for x in ["export", tmp_path / "t.npz", "--model", tmp_path / "m.npz",
                                   "--out", tmp_path / "t.csv"]]) == 0
     out = capsys.readouterr().out.strip().splitlines()
-    assert out[-1] == ("note: the face is lost in frames 0-1 (the plate's 1001-1002): they "
-                       "hold the nearest tracked frame's values"), out
+    assert out[-1] == ("note: the face is lost in frames 1001-1002: they hold the nearest "
+                       "tracked frame's values"), out

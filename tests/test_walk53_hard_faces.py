@@ -65,7 +65,8 @@ def test_transfer_says_whose_face_was_lost_and_where(clips, quick_model_path, tm
     onto ``driving_d6``) keeps the target's own frames there and said ``(30 kept original: face
     lost)``, although the target's face was never lost: whose face, and which frames, were
     not said. Now the line names the clip and the frames (an image sequence's by its own
-    numbers), the target's own lost frames apart from a source's."""
+    numbers, and the source's own where they differ), the target's own lost frames apart from
+    a source's."""
     src = _with_lost(clips["source_track"], [2, 3], tmp_path / "src.npz")
     tgt = _with_lost(clips["target_track"], [0], tmp_path / "tgt.npz")
     cases = ((clips["target_track"], src, "(2 kept original: the expression source's face is "
@@ -89,7 +90,7 @@ def test_transfer_says_whose_face_was_lost_and_where(clips, quick_model_path, tm
                          capsys)
     assert code == 0, err
     assert ("numbered 1001-1006 (2 kept original: the expression source's face is lost in "
-            "frames 1003-1004)") in out, out
+            "its frames 2-3, the result's 1003-1004)") in out, out
 
 
 @pytest.mark.parametrize("encoded", [False, True])

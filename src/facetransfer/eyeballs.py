@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .io.frame_numbers import track_first_number
 from .jit import maybe_njit as _maybe_njit
 from .topology import close_mouth
 from .track.gaze import GazeOptions, activation_gaze, eye_model, project_iris
@@ -468,8 +469,9 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
                    (faces, fill_eye, lm), grow + RIM + 2, (eyes, eye_model(Vj[lm])))
         angles[src == j] = gaze[j][src == j]
     if source is not None:
+        n0 = track_first_number(track)  # a plate's frames by their numbers
         log.info("eyes: the eyeballs of target frame %d from frames %d (right), %d (left)",
-                 i, *source.tolist())
+                 n0 + i, *(n0 + k for k in source.tolist()))
     return Eyeballs(ext, eyes, angles, pose, LIMIT * width,
                     np.concatenate([np.array([-1], np.int8), np.asarray(fill_eye, np.int8)]),
                     _project(eyes, angles, pose), source)

@@ -50,6 +50,7 @@ import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
 from .errors import RewriteError
+from .io.frame_numbers import track_first_number
 from .eye_lids import lid_shares, mix_lids
 from .label_masks import bits_box
 from .eyeballs import Eyeballs, eyeballs_of, gaze_offset, shift_eyeballs
@@ -655,8 +656,10 @@ def eye_texture(frames, track, model, topo, *, brows: bool = True, frame: int | 
         if np.all(cgap < 0.7 * gap):  # the track closes the lids there too
             tex = dataclasses.replace(tex, closed_image=cimg, closed_uvs=cuvs, gap_closed=cgap,
                                       closed_frame=c)
-    log.info("eyes: textured from target frames %d (open) and %d (closed; -1: none), "
-             "%d triangles", i, tex.closed_frame, int(select.sum()))
+    n0 = track_first_number(track)      # a plate's frames by their numbers
+    log.info("eyes: textured from target frames %d (open) and %s (closed), %d triangles",
+             n0 + i, "none" if tex.closed_frame < 0 else n0 + tex.closed_frame,
+             int(select.sum()))
     return closed, tex
 
 

@@ -78,38 +78,28 @@ def _other_npz(p: Path, names: set) -> str:
 
 def lost_runs(lost: np.ndarray, first: int = 0) -> str:
     """``"3-7, 12"``: a track's lost frames as runs (the first four), counted from ``first``
-    (a plate's first frame number)."""
-    return _ranges(np.asarray(lost, bool), first=first)
+    (a plate's first frame number: :func:`facetransfer.io.frame_numbers.frame_runs`)."""
+    from .io.frame_numbers import frame_runs
+
+    return frame_runs(lost, first)
 
 
-def covered_note(track) -> str:
+def covered_note(track, first: int = 0) -> str:
     """What ``track --occluders`` (and ``batch track --occluders``, in a clip's ``note``) says
     of a track it tested (:func:`facetransfer.track.occlusion.with_occluders`): the frames
     each region was found covered in, none, or why it was not tested (``occluded`` None: fewer
-    frames than a run)."""
+    frames than a run); a plate's frames by their numbers, from ``first``."""
     from .track.occlusion import MIN_RUN, REGIONS
 
     if track.occluded is None:
         n = track.n_frames
         return (f"not tested for a covered mouth or eye: {n} frame{'' if n == 1 else 's'}, "
                 f"and the test compares {MIN_RUN} frames or more with the clip's own")
-    said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r])}"
+    said = [f"{name.replace('_', ' ')} in frames {lost_runs(track.occluded[:, r], first)}"
             for r, name in enumerate(REGIONS) if track.occluded[:, r].any()]
     held = ("the activations of each bridged there" if track.blendshapes is not None else
             "recorded: the model has no ARKit activations to bridge")
     return f"covered: {'; '.join(said)} ({held})" if said else "no mouth or eye found covered"
-
-
-def _ranges(mask: np.ndarray, limit: int = 4, first: int = 0) -> str:
-    """``"3-7, 12, 40-41"``: the runs of True in ``mask`` (the first ``limit``), numbered from
-    ``first``."""
-    idx = np.flatnonzero(mask) + int(first)
-    if not idx.size:
-        return ""
-    starts = np.r_[idx[0], idx[1:][np.diff(idx) > 1]]
-    ends = np.r_[idx[:-1][np.diff(idx) > 1], idx[-1]]
-    runs = [f"{a}" if a == b else f"{a}-{b}" for a, b in zip(starts, ends)]
-    return ", ".join(runs[:limit]) + (f", ... ({len(runs)} runs)" if len(runs) > limit else "")
 
 
 def _no_activations(f: dict) -> str:
@@ -143,8 +133,10 @@ def track_facts(path: str | os.PathLike) -> dict:
     from .export.livelink import source_timecode
     from .track.result import Track
 
+    from .io.frame_numbers import track_first_number
+
     t = Track.load(path)
-    n = t.n_frames
+    n, first = t.n_frames, track_first_number(t)    # a plate's frames by its numbers
     default = _default_model_hash()
     return {
         "kind": "track", "path": str(path), "frames": n, "fps": float(t.fps),
@@ -154,10 +146,12 @@ def track_facts(path: str | os.PathLike) -> dict:
         "default_model": None if default is None else t.model_hash == default,
         "modes": list(t.mode_names),
         "activations": None if t.blendshapes is None else len(t.blendshape_names or ()),
-        "lost_frames": int(np.count_nonzero(t.lost)), "lost": _ranges(np.asarray(t.lost)),
+        "first_frame": first,
+        "lost_frames": int(np.count_nonzero(t.lost)), "lost": lost_runs(t.lost, first),
         "mean_confidence": float(np.mean(t.confidence)) if n else 0.0,
-        "shots": [0, *t.shot_starts] if t.shot_starts else [0],
-        "neutral_frame": t.info.get("neutral_frame")}
+        "shots": [first + s for s in (0, *t.shot_starts)],
+        "neutral_frame": None if t.info.get("neutral_frame") is None else
+        first + int(t.info["neutral_frame"])}
 
 
 def take_facts(path: str | os.PathLike) -> dict:
@@ -204,10 +198,15 @@ def _count(n: int, word: str) -> str:
 
 
 def _track_lines(f: dict) -> list[str]:
+    from .io.frame_numbers import frame_span
+
     w, h = f["frame_size"]
     model = {True: "the default model (ict-arkit)", False: "another model than the default",
              None: "a model"}[f["default_model"]]
-    lines = [f"{f['path']}: a track of {_count(f['frames'], 'frame')} at {f['fps']:g} fps "
+    first = f.get("first_frame") or 0      # a plate's: its frames named by their numbers
+    lines = [f"{f['path']}: a track of {_count(f['frames'], 'frame')}"
+             + (f" (numbered {frame_span(first, f['frames'])}, as the plate's files)" if first
+                else "") + f" at {f['fps']:g} fps "
              f"({f['seconds']:.2f} s), {w}x{h}"
              + (f" (pixel aspect {f['pixel_aspect']:g})" if f["pixel_aspect"] != 1 else ""),
              f"  made from: {f['source'] or 'an unnamed video'}"

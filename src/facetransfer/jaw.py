@@ -54,6 +54,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .arkit import ARKIT_NAMES, expression_rig, is_arkit_model
+from .io.frame_numbers import track_first_number
 from .label_masks import bits_box
 from .eyes import close_region, faces_around, reference_frame, region_faces, region_vertices
 from .region_weights import (JAW_POINTS, facing_weights, model_vertices, moved_strengths,
@@ -264,8 +265,9 @@ def jaw_texture(frames, track, model, topo, *, frame: int | None = None,
         np.maximum(strengths, look, out=strengths)
     strengths *= facing_weights(Vi, topo.faces, track.rotation[i], verts)
     shown = strengths.max(axis=1) > 0 if verts.size else np.zeros(len(strengths), bool)
-    log.info("jaw: textured from target frame %d, %d triangles, in %d of %d frames", i,
-             int(select.sum()), int(np.count_nonzero(shown)), len(strengths))
+    log.info("jaw: textured from target frame %d, %d triangles, in %d of %d frames",
+             track_first_number(track) + i, int(select.sum()), int(np.count_nonzero(shown)),
+             len(strengths))     # a plate's frame by its number
     return JawTexture(img, uvs, select, i, ring, verts, strengths, look=look)
 
 

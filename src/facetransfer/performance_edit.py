@@ -123,7 +123,8 @@ def ramp_envelope(n_frames: int, start: int, stop: int, ramp: int, *, at=None) -
 
 
 def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[EditScale] = (),
-               ramp: int = 8, mode: str = "expression", neutral: str = "neutral"):
+               ramp: int = 8, mode: str = "expression", neutral: str = "neutral",
+               first: int = 0):
     """Edit a tracked performance (Vlasic et al. 2005, §6, Fig. 7E: "we manually add a frown").
 
     Scaling is applied first, then additions:
@@ -152,6 +153,10 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
         Ramp length in frames at each end of an added range.
     mode, neutral : str
         The edited mode and its neutral training label.
+    first : int
+        The number of the track's first frame, which an added range counts from (0: its
+        rows; ``edit`` gives a plate's track's first number, 1001, as
+        :mod:`facetransfer.io.frame_numbers` numbers it).
 
     Returns
     -------
@@ -171,7 +176,9 @@ def edit_track(track, model, *, add: Sequence[EditAdd] = (), scale: Sequence[Edi
         raise TransferError("the track was made with another model (modes or ranks differ)")
     if int(ramp) < 0:
         raise TransferError(f"ramp must be >= 0 frames, got {ramp}")
-    _check_edits(add, scale, track.n_frames)
+    _check_edits(add, scale, track.n_frames, int(first))
+    add = [dataclasses.replace(a, start=a.start - int(first), stop=a.stop - int(first))
+           for a in add]                              # the track's rows
     k = model.mode_index(mode)
     scale = [dataclasses.replace(s, label=x) for s in scale
              for x in _edited_labels(model.labels[k], s.label)]
@@ -198,14 +205,17 @@ def _edits(edits, kind: type, parse) -> list:
     return out
 
 
-def _check_edits(add: list, scale: list, n: int) -> None:
-    """The edits' frame ranges lie in the clip of ``n`` frames and run forwards, and their
-    amounts and factors are finite (a NaN reached the track as non-finite weights; a range
-    ending before its start weighed every frame less than 1 and edited nothing fully)."""
+def _check_edits(add: list, scale: list, n: int, first: int = 0) -> None:
+    """The edits' frame ranges lie in the clip of ``n`` frames numbered from ``first`` and run
+    forwards, and their amounts and factors are finite (a NaN reached the track as non-finite
+    weights; a range ending before its start weighed every frame less than 1 and edited
+    nothing fully)."""
     for a in add:
         where = f"--add {a.label}@{a.start}-{a.stop}"
-        if a.start < 0 or a.stop > n - 1:
-            raise TransferError(f"{where}: frames outside the clip (0-{n - 1})")
+        if a.start < first or a.stop > first + n - 1:
+            raise TransferError(f"{where}: frames outside the clip ({first}-{first + n - 1}"
+                                + (", a plate's track: numbered as the plate's files)"
+                                   if first else ")"))
         if a.stop < a.start:
             raise TransferError(f"{where}: the range ends ({a.stop}) before it starts "
                                 f"({a.start})")

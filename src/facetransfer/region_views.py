@@ -30,6 +30,7 @@ import numpy as np
 
 from .eyes import (BROW_SHAPES, eye_openness, eye_penalty, eye_texture, reference_candidates,
                    shape_activity)
+from .io.frame_numbers import track_first_number
 from .jaw import jaw_texture, mouth_closure
 from .region_weights import EYE_POINTS, JAW_POINTS
 
@@ -222,8 +223,9 @@ def _by_view(tex, region: str, frames, track, n_frames, build):
         return tex
     pick = pick_views(track.rotation, refs, track.lost, n)
     counts = np.bincount(pick, minlength=len(refs))
+    n0 = track_first_number(track)      # a plate's frames by their numbers
     log.info("%s: a texture per view, from target frames %s, for %s frames", region,
-             ", ".join(map(str, refs)), " / ".join(map(str, counts)))
+             ", ".join(str(n0 + r) for r in refs), " / ".join(map(str, counts)))
     fade = max(1, int(round(FADE_SECONDS * float(track.fps))))
     return RegionViews((tex, *[build(r) for r in refs[1:]]),
                        fade_weights(pick, len(refs), fade))

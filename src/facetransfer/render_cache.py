@@ -221,7 +221,8 @@ def parts_writer(key: str | None, out, fps: float, size: tuple[int, int], n_fram
         log.warning("the render cache cannot be used (%s): writing %s without it", exc, out)
         return None
     if writer.done:
-        log.info("%s: continuing an interrupted render from frame %d", out, writer.done)
+        log.info("%s: continuing an interrupted render from frame %d", out,  # a plate's number
+                 (getattr(video_options, "first_number", None) or 0) + writer.done)
     return writer
 
 

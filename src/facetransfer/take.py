@@ -238,6 +238,7 @@ def take_performance(path, target_track, model, *, align: str | None = None,
         The model's expressions are not ARKit's, or the take is not one.
     """
     from .arkit import activations_to_weights, attach_activations
+    from .io.frame_numbers import track_first_number
     from .track.project import project_landmarks, take_frames
 
     take = _read(path, model)
@@ -248,7 +249,7 @@ def take_performance(path, target_track, model, *, align: str | None = None,
     a = take_on_timeline(t, take.activations, target_track.n_frames, target_track.fps,
                          align=align, start=start)
     _say_held(path, float(t[-1]) - start + _row_step(t, target_track.fps), len(a),
-              target_track.fps, align)
+              target_track.fps, align, track_first_number(target_track))
     new = take_frames(target_track, np.arange(len(a)))
     weights = dict(new.weights)
     weights["expression"] = activations_to_weights(model, np.clip(a, 0.0, 1.0))
@@ -269,18 +270,19 @@ def _row_step(t: np.ndarray, fps: float) -> float:
     return float(np.median(np.diff(t))) if np.size(t) > 1 else 1.0 / float(fps)
 
 
-def _say_held(path, left: float, n: int, fps: float, align: str | None) -> None:
+def _say_held(path, left: float, n: int, fps: float, align: str | None,
+              first: int = 0) -> None:
     """Warn where a take that ends ``left`` seconds after the target's first frame (its last
     row's span included) leaves the last of its ``n`` frames (at ``fps``) holding its last
     row (``align`` None or "hold"): the performance stands still there, which the user would
-    not see coming."""
+    not see coming. The target's frames numbered from ``first`` (a plate's first number)."""
     if align not in (None, "hold") or n < 1:
         return
     k = max(int(np.ceil(left * fps - _SLACK)), 1)     # the frames the take's rows reach
     if k < n:
         log.warning("the take %s ends at the target's frame %d: its last row is held on "
                     "frames %d-%d (--align trim stops the result there, loop repeats the "
-                    "take)", path, max(k - 1, 0), max(k, 0), n - 1)
+                    "take)", path, first + max(k - 1, 0), first + max(k, 0), first + n - 1)
 
 
 def _take_clock(timecodes, fps: float, start_timecode: str | None, name: str

@@ -44,6 +44,7 @@ __all__ = [
     "TimeMap",
     "time_map",
     "resample_track",
+    "source_frames_read",
     "constant_weights",
     "recombine",
     "identity_from_label",
@@ -217,6 +218,20 @@ def resample_track(track, tmap: TimeMap):
                   track.occluded[i0] | ((frac > 1e-9)[:, None] & track.occluded[i1])),
         info={},
     )
+
+
+def source_frames_read(track, tmap: TimeMap) -> tuple[np.ndarray, np.ndarray]:
+    """The frames of ``track`` (a source) each output frame of ``tmap`` reads, as
+    :func:`resample_track` reads them: ``(i0, i1)``, each ``(tmap.n_frames,) int64``, the
+    frame at or before its source time and the next where the time lies between the two (not
+    across a cut), else ``i0`` again. An output frame is lost where ``track.lost[i0] |
+    track.lost[i1]``."""
+    t = np.asarray(tmap.source_time, np.float64)
+    n = track.n_frames
+    i0 = np.clip(np.floor(t).astype(np.int64), 0, n - 1)
+    i1 = np.minimum(i0 + 1, n - 1)
+    between = (t - i0 > 1e-9) & ~np.isin(i1, track.shot_starts)
+    return i0, np.where(between, i1, i0)
 
 
 def _resampled_starts(starts, t: np.ndarray) -> tuple[int, ...]:

@@ -82,8 +82,9 @@ def track_note(job, track, *more: str) -> str:
     said = ()
     if job.occluders:
         from ..file_facts import covered_note
+        from ..io.frame_numbers import first_number
 
-        said = (covered_note(track),)
+        said = (covered_note(track, first_number(job.video)),)
     return "; ".join(n for n in said + more if n)
 
 
@@ -280,9 +281,12 @@ def _chunk_capture(frames, model, options, job, chunk, identity):
                                        subject=_subject(job.face, frames, source))
     held = held_identity(det, model, options.capture, identity)
     if held is None and det.found.any():
+        from ..io.frame_numbers import first_number
+
+        first = first_number(source)          # a plate's frames by their numbers
         log.warning("%s: frames %d-%d begin on another face than the clip's first (a cut "
-                    "before them): captured with their own identity", source, chunk.start,
-                    chunk.stop - 1)
+                    "before them): captured with their own identity", source,
+                    first + chunk.start, first + chunk.stop - 1)
     return capture_detections(det, model, options=options.capture, fps=fps, frame_size=size,
                               source=src, fixed=held)
 

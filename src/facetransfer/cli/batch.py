@@ -141,7 +141,8 @@ def _register_export(bs, fmt) -> None:
                    help="the model of the tracks (default: the default model)")
     e.add_argument("--neutral", metavar="FRAME|auto",
                    help="measure each track's activations from this frame's, as `facetransfer "
-                   "export --neutral` (default: as tracked)")
+                   "export --neutral` (a plate's track's numbered as the plate's files; "
+                   "default: as tracked)")
     e.add_argument("--take-rate", choices=("app", "clip"), default=None,
                    help="livelink: the rows' timecodes as the Live Link Face app counts them "
                    "(app, the default: what Unreal reads right) or as the clip's timecode "

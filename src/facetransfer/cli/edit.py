@@ -33,8 +33,9 @@ def register(sub) -> None:
                    "track was made with it); a take needs none")
     e.add_argument("--add", action="append", default=[], metavar="EXPR@START-END",
                    help="add EXPR (training weights minus neutral; an ARKit model's or a "
-                   "take's: activation 1) on frames START..END (inclusive, 0-based; a take's "
-                   "as view and puppet number them); EXPR*0.5@... for half; repeatable")
+                   "take's: activation 1) on frames START..END (inclusive, 0-based; a plate's "
+                   "track's numbered as the plate's files, 1001 on; a take's as view and "
+                   "puppet number them); EXPR*0.5@... for half; repeatable")
     e.add_argument("--scale", action="append", default=[], metavar="EXPR=FACTOR",
                    help="scale the component of the expression along EXPR - neutral (an ARKit "
                    "model's or a take's: the EXPR curve times FACTOR, clipped to [0, 1], Live "
@@ -73,6 +74,7 @@ def _model_for_track(track, model_path):
 def run_edit(args) -> int:
     """Edit the track (or the take: :func:`run_take_edit`) ``args.track`` and write it."""
     from ..io.atomic import check_output_path
+    from ..io.frame_numbers import frame_span, track_first_number
     from ..performance_edit import edit_track, parse_add, parse_scale
     from ..track import Track
 
@@ -107,13 +109,16 @@ def run_edit(args) -> int:
     check_output_path(args.out, overwrite=args.overwrite, inputs=[args.track, args.model])
     track = Track.load(args.track)
     model = _model_for_track(track, args.model)
-    new = edit_track(track, model, add=adds, scale=scales, ramp=args.ramp)
+    first = track_first_number(track)     # a plate's track: ranges in the plate's numbers
+    new = edit_track(track, model, add=adds, scale=scales, ramp=args.ramp, first=first)
     if dial_values:
         from ..dials import dial_track
 
         new = dial_track(new, model, dial_values)
     new.save(args.out, overwrite=args.overwrite)
-    print(f"wrote {args.out}: {frame_count(new.n_frames)}, {len(adds)} addition(s), "
+    print(f"wrote {args.out}: {frame_count(new.n_frames)}"
+          + (f" (numbered {frame_span(first, new.n_frames)} as the plate's files)" if first
+             else "") + f", {len(adds)} addition(s), "
           f"{len(scales)} scaling(s)" + (f", dials {args.identity_dials}" if dial_values else ""))
     return 0
 

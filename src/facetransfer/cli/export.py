@@ -51,7 +51,8 @@ def register(sub) -> None:
                    help="measure every activation from this frame's, as Live Link Face's "
                    "calibration does (the neutral frame exports 0, a full shape still 1; the gaze "
                    "as tracked); auto: the frame whose activations sum least (default: as "
-                   "tracked). A take's FRAME is numbered on its timeline, as view and puppet "
+                   "tracked). FRAME counts from 0, a plate's track's as the plate's files "
+                   "(1001 on); a take's is numbered on its timeline, as view and puppet "
                    "number it")
     p.add_argument("--timecode", default="source", metavar="HH:MM:SS:FF|source|none",
                    help="livelink: the first row's timecode: the tracked video's start timecode "
@@ -268,6 +269,10 @@ def _clip_facts(track):
 def _say_written(args, track, path, timecode, said: str) -> None:
     """The line of a written export (and a note of its lost frames)."""
     neutral = track.info.get("neutral_frame") if args.neutral is not None else None
+    if neutral is not None:           # named as --neutral took it: a plate's by its number
+        from ..io.frame_numbers import track_first_number
+
+        neutral += track_first_number(track)
     if timecode and timecode != "source" and args.format == "livelink" \
             and _drop_frame(timecode, track.fps):
         said += f"; drop-frame: the rows count clock time, from {_first_row(path)}"
@@ -289,16 +294,14 @@ def _say_written(args, track, path, timecode, said: str) -> None:
 
 def lost_note(track, held: str) -> str:
     """``"the face is lost in frames 68-104: <held>"``: the note of a track's lost frames (their
-    runs, and a plate's own numbers beside them), ``held`` saying what a result shows there;
-    "" where no frame is lost. Said by ``export`` and ``puppet``."""
+    runs, a plate's by its own numbers: 1001-1010, not 0-9), ``held`` saying what a result
+    shows there; "" where no frame is lost. Said by ``track``, ``export`` and ``puppet``."""
     if not track.lost.any():
         return ""
     from ..export.usd import source_first_frame
     from ..file_facts import lost_runs
 
-    first = source_first_frame(track)   # a plate's own numbers: 1001-1010, not 0-9
-    plate = f" (the plate's {lost_runs(track.lost, first)})" if first else ""
-    return f"the face is lost in frames {lost_runs(track.lost)}{plate}: {held}"
+    return f"the face is lost in frames {lost_runs(track.lost, source_first_frame(track))}: {held}"
 
 
 def _rows_said(args, track) -> str:

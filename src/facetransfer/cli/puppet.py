@@ -100,17 +100,24 @@ def run_puppet(args) -> int:
         raise FaceTransferError(f"no face found in {args.video}")
     frames = None
     done_tracking()                     # the capture's points: not needed in the render
-    audio, resumed = puppet_video(track, model, wid, args.out,
-                                  video_options=like_video(vopt, args.video),
+    vopt = like_video(vopt, args.video)       # a plate's: its first number, as the result's
+    audio, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
                                   audio_from=args.video, overwrite=args.overwrite,
                                   progress_factory=bar_factory())
-    if resumed:
-        print(f"continued an interrupted render from frame {resumed}")
+    _say_resumed(resumed, vopt)
     print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
           f"{args.identity or 'the mean face'}"
           + (", with the video's audio" if audio else ""))
     _say_lost(track)
     return 0
+
+
+def _say_resumed(resumed: int, vopt) -> None:
+    """The line of a render continued from frame ``resumed`` (0-based), numbered as the
+    result's frames are (``vopt.first_number``: a plate's, or ``--start-number``)."""
+    if resumed:
+        print(f"continued an interrupted render from frame "
+              f"{(vopt.first_number or 0) + resumed}")
 
 
 def _say_lost(track) -> None:
@@ -159,8 +166,7 @@ def _puppet_track(args, vopt) -> int:
     audio, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
                                   audio_from=audio_from, overwrite=args.overwrite,
                                   progress_factory=bar_factory())
-    if resumed:
-        print(f"continued an interrupted render from frame {resumed}")
+    _say_resumed(resumed, vopt)
     print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
           f"{args.identity or 'the mean face'} performing the track {args.video}"
           + (f", with the audio of {audio_from.name}" if audio else ""))
@@ -236,8 +242,7 @@ def _puppet_take(args, vopt) -> int:
         vopt = dataclasses.replace(vopt, timecode=track.info.get("start_timecode"))
     _, resumed = puppet_video(track, model, wid, args.out, video_options=vopt,
                               overwrite=args.overwrite, progress_factory=bar_factory())
-    if resumed:
-        print(f"continued an interrupted render from frame {resumed}")
+    _say_resumed(resumed, vopt)
     print(f"wrote {args.out}: {frame_count(track.n_frames)} of "
           f"{args.identity or 'the mean face'} performing the "
           f"take {args.video} ({track.fps:g} fps, {PREVIEW_SIZE[0]}x{PREVIEW_SIZE[1]})")

@@ -302,10 +302,11 @@ def _held_occluded(args, track, model):
     of the frames each region was found covered in (a clip of fewer than ``MIN_RUN`` frames
     is not tested: ``occluded`` None, as the track key says: not tested)."""
     from ..file_facts import covered_note
+    from ..io.frame_numbers import first_number
     from ..track.occlusion import with_occluders
 
     track = with_occluders(args.video, track, model)
-    return track, covered_note(track)
+    return track, covered_note(track, first_number(args.video))
 
 
 def _say_lost(track) -> None:
@@ -365,7 +366,10 @@ def _capture(args, model, options, progress, bars):
                                        face_detector_id(getattr(args, "face", None)))
     saved = ck.load()
     if saved is not None:
-        print(f"continued an interrupted run from frame {saved.detections.n_frames}")
+        from ..io.frame_numbers import first_number
+
+        print(f"continued an interrupted run from frame "
+              f"{first_number(args.video) + saved.detections.n_frames}")   # a plate's number
     try:
         det, fps, size, src = _capture_detect(args, saved, ck, progress)
         if isinstance(model, Future):
@@ -442,7 +446,9 @@ def _track_klt(args, model, opt, progress, bars):
         if detector is not None:
             detector.close()
     if track.info and track.info.get("resumed"):
-        r = track.info["resumed"]
+        from ..io.frame_numbers import first_number
+
+        r, first = track.info["resumed"], first_number(args.video)   # a plate's number
         print("continued an interrupted run from " + (f"pass {r['pass']}, " if "pass" in r
-                                                      else "") + f"frame {r['frame']}")
+                                                      else "") + f"frame {first + r['frame']}")
     return track

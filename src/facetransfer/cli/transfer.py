@@ -99,31 +99,72 @@ _ROLES = {"expression": "the expression source", "viseme": "the viseme source",
           "pose": "the pose source", "performance": "the performance"}
 
 
-def _whose_lost(plan, first: int | None = None) -> str:
+def _whose_lost(plan, first: int = 0, align: str | None = None) -> str:
     """``"the target's face is lost in frames 0-59"``, ``"the expression source's face is lost
     in frames 45-74"`` (both, joined by ``;``): why the frames a transfer keeps as they were
     (the new performance's lost ones, :func:`facetransfer.transfer.recombine`) are kept, and
-    which, numbered as the output is (from ``first``: a sequence's first frame number); before,
-    one clip's face lost for a second said ``face lost``, whose and where not."""
+    which, numbered as the result's frames are (from ``first``, :func:`_result_first`: a
+    plate's rewrite by the plate's numbers, as a video too); a source's by its own numbers
+    where they differ (:func:`_sources_lost`). Before, one clip's face lost for a second said
+    ``face lost``, whose and where not; a plate's rewrite into a video, and a plate as the
+    source, named its frames counted from 0."""
     import numpy as np
 
-    from ..file_facts import lost_runs
+    from ..io.frame_numbers import frame_runs
 
     new = np.asarray(plan.new_track.lost, bool)
     own = np.zeros_like(new)
     target = np.asarray(plan.target_track.lost, bool)[:len(new)]
     own[:len(target)] = target
-    first = first or 0
-    said = [f"the target's face is lost in frames {lost_runs(own, first)}"] if own.any() else []
+    said = [f"the target's face is lost in frames {frame_runs(own, first)}"] if own.any() else []
     others = new & ~own
     if others.any():
-        roles = [r for r, tr in plan.source_tracks.items() if r in _ROLES and tr is not None
-                 and np.asarray(tr.lost).any()]
-        if plan.performance:
-            roles = ["performance"]
-        whose = _ROLES[roles[0]] if len(roles) == 1 else "a source"
-        said.append(f"{whose}'s face is lost in frames {lost_runs(others, first)}")
+        said += _sources_lost(plan, others, first, align)
     return "; ".join(said) or "face lost"
+
+
+def _sources_lost(plan, kept, first: int, align: str | None) -> list[str]:
+    """Whose face (the performance's, or each source's) is lost in the result's frames where
+    ``kept`` (n,) is True, and where: the result's frames numbered from ``first``; a source's
+    also by its own numbers (a plate's as its files) where those name them otherwise
+    (``"in its frames 1006-1008, the result's 4-6"``: a plate at another rate, or a result
+    numbered otherwise)."""
+    import numpy as np
+
+    from ..io.frame_numbers import frame_runs, track_first_number
+    from ..transfer import source_frames_read, time_map
+
+    if plan.performance:       # on the target's timeline, numbered as the result
+        return [f"the performance's face is lost in frames {frame_runs(kept, first)}"]
+    said = []
+    for role, tr in plan.source_tracks.items():
+        if role not in _ROLES or tr is None or not np.asarray(tr.lost).any():
+            continue
+        tm = time_map(tr.n_frames, tr.fps, plan.target_track.n_frames, plan.fps, align=align)
+        i0, i1 = (i[:len(kept)] for i in source_frames_read(tr, tm))
+        mine = np.zeros_like(kept)
+        mine[:len(i0)] = kept[:len(i0)] & (tr.lost[i0] | tr.lost[i1])
+        if not mine.any():
+            continue
+        read = np.zeros(tr.n_frames, bool)
+        read[np.r_[i0[mine[:len(i0)]], i1[mine[:len(i0)]]]] = True
+        here, own = frame_runs(mine, first), frame_runs(read & tr.lost, track_first_number(tr))
+        said.append(f"{_ROLES[role]}'s face is lost in frames {here}" if own == here else
+                    f"{_ROLES[role]}'s face is lost in its frames {own}, the result's {here}")
+    return said or [f"a source's face is lost in frames {frame_runs(kept, first)}"]
+
+
+def _result_first(out, target, first: int | None = None) -> int:
+    """The number of the result's first frame, which its frames are named by: an output
+    sequence's first (``--start-number``, else a plate target's own first number, else 0); a
+    video's of a plate target, the plate's (its frames are the plate's, as the batch's mattes
+    number them); else 0."""
+    from ..io.frame_numbers import first_number
+    from ..io.video import is_image_pattern
+
+    if first is not None and is_image_pattern(out):
+        return int(first)
+    return first_number(target)
 
 
 def _first_number(out, target, first: int | None = None) -> int | None:
@@ -178,8 +219,9 @@ def register(sub) -> None:
     p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
     p.add_argument("--frame", type=int, default=None, metavar="N",
                    help="with one image as --out (result.png, .jpg, .tif): write frame N of "
-                   "the transfer (counted from 0; of a photo's, its expression source's frame "
-                   "N); default: a photo's first frame, a one-frame clip's only one")
+                   "the transfer (of a photo's, its expression source's frame N), numbered as "
+                   "the clip's frames: a video's from 0, a plate's as its files (1001 on); "
+                   "default: a photo's first frame, a one-frame clip's only one")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
@@ -276,22 +318,32 @@ def run_transfer(args) -> int:
         progress_factory=bar_factory(), video_options=vopt,
         align=args.align, max_frames=args.max_frames, reader=prefetch.read_video,
         matte=args.matte, frame=args.frame)
+    _say_transfer(args, res)
+    return 0
+
+
+def _say_transfer(args, res) -> None:
+    """The lines of a written transfer: its frames numbered as the result's are (a plate's
+    rewrite by the plate's numbers, :func:`_result_first`), a source's as its own."""
+    from ..io.frame_numbers import track_first_number
+
+    first = _result_first(args.out, args.target, args.start_number)
     if args.frame is not None or is_one_image(args.out):
-        print(f"wrote {res.path}: one image, frame {args.frame or 0} of the transfer"
+        print(f"wrote {res.path}: one image, frame {getattr(args, 'frame_said', 0)} of the "
+              "transfer"
               + (" (kept original: the face is lost there)" if not res.n_rewritten else ""))
         _said_also(args, 1)
-        return 0
+        return
     kept = res.n_frames - res.n_rewritten
     for tr in res.plan.source_tracks.values():
         if tr is not None and tr.info.get("resumed"):
             print(f"continued an interrupted tracking of {tr.source} from frame "
-                  f"{tr.info['resumed']['frame']}")
+                  f"{track_first_number(tr) + tr.info['resumed']['frame']}")
     if res.resumed:
-        print(f"continued an interrupted render from frame {res.resumed}")
+        print(f"continued an interrupted render from frame {first + res.resumed}")
     print(f"wrote {res.path}: {frame_count(res.n_frames)}" + _numbered(args.out, args.target,
                                                               res.n_frames, args.start_number)
-          + (f" ({kept} kept original: "
-             f"{_whose_lost(res.plan, _first_number(args.out, args.target, args.start_number))})"
+          + (f" ({kept} kept original: {_whose_lost(res.plan, first, args.align)})"
              if kept else "")
           + (f", {res.kept}" if res.kept else "")
           + ((", with the expression source's audio" if _held(args) else
@@ -300,7 +352,6 @@ def run_transfer(args) -> int:
         print(f"wrote the matte {args.matte}"
               + _numbered(args.matte, args.target, res.n_frames, args.start_number))
     _said_also(args, res.n_frames)
-    return 0
 
 
 def _said_also(args, n_frames: int) -> None:
@@ -367,6 +418,7 @@ def _check_one_image(args, inputs: list) -> None:
     """``--out result.png`` (one image) and ``--frame N``, checked before any work: the
     transfer has that frame (without ``--frame``, one frame: a photo with no expression
     source, a clip of one frame); one line otherwise."""
+    from ..io.frame_numbers import first_number, frame_span
     from ..io.output_names import check_one_image
     from ..io.video_sequence import is_still
 
@@ -381,17 +433,23 @@ def _check_one_image(args, inputs: list) -> None:
     check_one_image(out, overwrite=args.overwrite, inputs=inputs)
     clip = args.expression_from if _held(args) else args.target
     n, whose = _one_image_count(args, clip)
+    first = first_number(clip)     # a plate's frames by their numbers (1001 on), else from 0
+    span = f"numbered {frame_span(first, n)} as the plate's files" if first else \
+        frame_span(first, n)
     p = Path(out)
     seq = p.with_name(f"{p.stem}_%05d{p.suffix}")
     if frame is None and (_held(args) or n > 1 and is_still(args.target)):
-        frame = args.frame = 0         # a photo's rewrite: its first frame (the source's)
+        frame = args.frame = first     # a photo's rewrite: its first frame (the source's)
     if frame is None and n > 1:
         raise FaceTransferError(f"--out {out} is one image, but the transfer has {n} frames "
-                                f"({whose}): choose one with --frame N (0-{n - 1}), or write "
+                                f"({whose}): choose one with --frame N ({span}), or write "
                                 f"them all as {seq} or a video (.mp4)")
-    if frame is not None and not 0 <= frame < n:
+    if frame is not None and not 0 <= frame - first < n:
         raise FaceTransferError(f"--frame {frame}: the transfer has {n} frames ({whose}), "
-                                f"0-{n - 1}")
+                                f"{span}")
+    args.frame_said = first if frame is None else frame     # the number, as the user knows it
+    if frame is not None:
+        args.frame = frame - first                          # the row the library renders
 
 
 def _one_image_count(args, clip) -> tuple[int, str]:

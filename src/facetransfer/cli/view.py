@@ -26,7 +26,8 @@ def register(sub) -> None:
                    "default model, if the track was made with it)")
     p.add_argument("--neutral", metavar="FRAME|auto",
                    help="for a track or a take: its activations measured from this frame's "
-                   "(a take's, numbered as its page does), as `facetransfer export --neutral` "
+                   "(numbered as its page does: a plate's track's as the plate's files), as "
+                   "`facetransfer export --neutral` "
                    "(default: as tracked or recorded)")
     p.add_argument("--overwrite", action="store_true", help="replace an existing page")
     p.set_defaults(func=run)

@@ -86,28 +86,35 @@ def neutral_arg(value) -> int | str:
 
 def with_neutral(track, neutral, *, take=None):
     """``track`` with its activations measured from a neutral frame: ``neutral`` a frame
-    index, ``"auto"`` (:func:`neutral_frame`) or None (the track unchanged). The frame used is
-    recorded in ``info["neutral_frame"]``. ``take``: the path of the Live Link Face take
-    ``track`` was made from (:func:`facetransfer.take.take_track`), named by the error of a
-    frame past its end, with its timeline's rate (a take's frames are numbered on it).
+    number (counted from 0; of a plate's track, the plate's own number, as
+    :mod:`facetransfer.io.frame_numbers` numbers it), ``"auto"`` (:func:`neutral_frame`) or
+    None (the track unchanged). The frame used is recorded in ``info["neutral_frame"]`` (its
+    row, counted from 0). ``take``: the path of the Live Link Face take ``track`` was made
+    from (:func:`facetransfer.take.take_track`), named by the error of a frame past its end,
+    with its timeline's rate (a take's frames are numbered on it).
 
     Raises
     ------
     ExportError
-        A frame index outside the track, a lost frame, or another word than ``auto``.
+        A frame number outside the track, a lost frame, or another word than ``auto``.
     """
+    from ..io.frame_numbers import track_first_number
+
     if neutral is None:
         return track
     a = require_activations(track)
-    i = neutral_arg(neutral)
-    if i == "auto":
+    said = neutral_arg(neutral)
+    first = track_first_number(track)   # a plate's track: its frames by the plate's numbers
+    if said == "auto":
         i = neutral_frame(a, track.lost)
-    elif i >= track.n_frames:
+    elif not 0 <= (i := said - first) < track.n_frames:
         of = "the track" if take is None else f"the take {take}"
-        raise ExportError(f"--neutral {i}: {of} has frames 0 to {track.n_frames - 1}"
-                          + ("" if take is None else f" (on its {track.fps:g} fps timeline)"))
+        raise ExportError(f"--neutral {said}: {of} has frames {first} to "
+                          f"{first + track.n_frames - 1}"
+                          + ("" if take is None else f" (on its {track.fps:g} fps timeline)")
+                          + (" (a plate's, numbered as its files)" if first else ""))
     elif bool(np.asarray(track.lost)[i]):
-        raise ExportError(f"--neutral {i}: the face is lost in that frame")
+        raise ExportError(f"--neutral {said}: the face is lost in that frame")
     return dataclasses.replace(track, blendshapes=calibrated(a, i),
                                blendshape_names=ARKIT_NAMES,
                                info={**track.info, "neutral_frame": i})

@@ -311,6 +311,7 @@ def _about(model, track) -> str:
 def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
     """The HTML page (a str) for ``model``, or for ``track`` of that model."""
     from ..dials import DialError, learn_dials
+    from ..io.frame_numbers import track_first_number
 
     try:
         dials = learn_dials(model)
@@ -349,6 +350,7 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
                               "model itself has a slider per training expression)")
         acts = require_activations(track)
         data.update(n_frames=track.n_frames, fps=track.fps,
+                    first_frame=track_first_number(track),    # a plate's: its numbers shown
                     activations=_b64(acts.astype(np.float32)), frame_gaze=_frame_gaze(track, acts),
                     quaternions=_b64(head_quaternions(track.rotation).astype(np.float32)))
     three = resources.files("facetransfer.data").joinpath("vendor/three/three.min.js").read_text()

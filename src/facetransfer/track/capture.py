@@ -56,6 +56,7 @@ import numpy as np
 
 from ..arkit import ARKIT_NAMES, is_arkit_model
 from ..errors import TrackError, VideoError, plain_interrupts
+from ..io.frame_numbers import first_number, frame_span
 from .aspect import stored_pixels
 from .camera import Pose
 from . import capture_points
@@ -435,9 +436,10 @@ def _capture_shots(det, spans, model, options, fps, frame_size, fixed, progress,
     subs = [shot_detections(det, a, b) for a, b in spans]
     faced = [a for (a, _), sub in zip(spans, subs) if sub.found.any()]
     if len(faced) > 1:  # a shot without a face (a clip that opens on black) is only lost
+        n0 = first_number(source)             # a plate's frames by their numbers
         log.warning("%s cuts to another shot at frame%s %s: each shot is captured on its own "
                     "(the first one's person's shots with its identity)", source or "the video",
-                    "s" if len(faced) > 2 else "", ", ".join(str(a) for a in faced[1:]))
+                    "s" if len(faced) > 2 else "", ", ".join(str(n0 + a) for a in faced[1:]))
     if not faced:
         raise _no_face(source, det.n_frames)
     tracks, first = [], None     # first: the identity of the first shot with a face
@@ -477,8 +479,8 @@ def held_identity(det, model, options, first: np.ndarray | None) -> dict | None:
 
 
 def _no_face(source, n_frames: int) -> VideoError:
-    return VideoError(f"no face found in {source or 'the video'} "
-                      f"(searched frames 0-{n_frames - 1})")
+    return VideoError(f"no face found in {source or 'the video'} (searched frames "
+                      f"{frame_span(first_number(source), n_frames)})")
 
 
 def _capture_detections(det, model, options, fps, frame_size, fixed, progress, source,

@@ -237,8 +237,10 @@ def capture_resuming(video, model, partial, *, frames=None, options=None, source
     view = View.of(video)
     saved = ck.load()
     if saved is not None:
+        from ..io.frame_numbers import first_number
+
         log.info("%s: continued an interrupted run from frame %d", source,
-                 saved.detections.n_frames)
+                 first_number(video) + saved.detections.n_frames)   # a plate's: its number
     if saved is not None and saved.complete:
         det = saved.detections
     else:

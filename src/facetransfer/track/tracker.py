@@ -34,6 +34,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from ..errors import TrackError, VideoError, plain_interrupts
+from ..io.frame_numbers import first_number, frame_span
 from .camera import Pose, fit_affine_pose, orthonormalize, project
 from .frames import FrameSource, frame_source
 from .init import check_init_points, fit_landmarks, points_to_array, require_landmarks
@@ -280,7 +281,7 @@ def _initialise(frames: FrameSource, model, tr: FaceTracker, init, detect: _Dete
     else:
         L0 = _init_array(init, frames.size)
     if start > 0:
-        log.info("first face found at frame %d", start)
+        log.info("first face found at frame %d", first_number(src) + start)
     start_state = None
     if fixed:
         w = {m: tr.priors[m].mean.copy() for m in model.mode_names}
@@ -301,7 +302,8 @@ def _first_face(frames: FrameSource, detect: _Detections, src) -> tuple[int, np.
         L0 = detect(i, fr)
         if L0 is not None:
             return i, L0
-    raise VideoError(f"no face found in {src or 'the video'} (searched frames 0-{frames.n - 1})")
+    raise VideoError(f"no face found in {src or 'the video'} (searched frames "
+                     f"{frame_span(first_number(src), frames.n)})")   # a plate's: its numbers
 
 
 def _snap(run: _Run) -> None:
