@@ -145,3 +145,22 @@ def test_a_photo_performs_a_take_of_a_real_clip(data_dir, arkit_model_path, tmp_
     assert np.ptp(curve) > 0.4                  # the take opens the jaw
     jaw = landmarker_scores(result, fps)[0][:, MEDIAPIPE_NAMES.index("jawOpen")]
     assert np.isfinite(jaw).all() and np.corrcoef(jaw, curve)[0, 1] > 0.8
+
+
+def test_a_photos_mouth_texture_is_lifted_once(photo, arkit_model, make_arkit_track, tmp_path):
+    """The mouth's texture function of a photo performing a take is lifted from the photo
+    once, and gives the texture the 30 copies of it gave (each the photo): before, every held
+    copy was lifted (up to 120; 27 of a 240-row take's 44 s on ``einstein.jpg``)."""
+    from facetransfer.texture.face import mouth_texture_function
+    from facetransfer.texture.function import attribute_vector
+
+    take = _take(arkit_model, make_arkit_track, tmp_path, "take.csv", 30, 30.0)
+    still, still_track, _ = photo
+    plan = plan_transfer(still, arkit_model, target_track=still_track, expression_from=take)
+    once = plan.mouth_function(arkit_model, tex_size=64)
+    every = mouth_texture_function(arkit_model, plan.target_frames, plan.target_track,
+                                   tex_size=64)
+    assert once.frames.tolist() == [0] and len(every.frames) == 30
+    for i in (0, 17):
+        a = attribute_vector(arkit_model, {m: w[i] for m, w in plan.new_track.weights.items()})
+        assert np.array_equal(once.texture(a), every.texture(a))

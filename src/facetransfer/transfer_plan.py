@@ -754,9 +754,21 @@ def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> Trans
     b = np.concatenate([tt.weights[m] for m in varying], axis=1)
     j = nearest_frames(q, b, ~tt.lost)
     mt = take_frames(tt, j)
+    tex_frames, tex_track = _lifted_once(frames, tt, sources.target.video)
     # the chosen frames' geometry, seen by their own cameras (texture lookup)
     return TransferPlan(frames, inputs.fps, tt, new, frames, mt, j, inputs.tracks,
-                        inputs.timings, texture_frames=frames, texture_track=tt, performance=True)
+                        inputs.timings, texture_frames=tex_frames, texture_track=tex_track,
+                        performance=True)
+
+
+def _lifted_once(frames, target_track, target) -> tuple:
+    """``(frames, track)`` the mouth's texture function of a ready performance is lifted from:
+    the target's; of a photo held over ``n`` frames (:func:`held_frames`), its one frame
+    (before, up to 120 copies of it were lifted, 27 of a 240-frame take's 44 s on a photo, for
+    the texture of one picture)."""
+    if len(frames) > 1 and is_still(target):
+        return frames[:1], take_frames(target_track, np.zeros(1, np.int64))
+    return frames, target_track
 
 
 def _recombined_plan(inputs: _Inputs, sources: TransferSources, model, align) -> TransferPlan:
