@@ -23,7 +23,9 @@ beside the camera with synced clocks is placed by the target's start timecode
 
 :func:`take_track` makes a take a track of its own (the model's person performing it with the
 take's head rotation): what ``facetransfer puppet take.csv`` renders and ``facetransfer view
-take.csv`` shows. :func:`edit_take` edits a take's curves as a track's are edited and writes a
+take.csv`` shows; a photo as the target of ``transfer`` performs the take over the same
+frames (:func:`take_length`: the take's rows at their rate, the photo's head held).
+:func:`edit_take` edits a take's curves as a track's are edited and writes a
 take again, the rest of the file as it was (``facetransfer edit take.csv``).
 
 :func:`~facetransfer.io.video_display.timecode_seconds` is :mod:`facetransfer.io.video_display`'s,
@@ -48,7 +50,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["TIMECODE_RATES", "TAKE_SYNCS", "PREVIEW_SIZE", "Take", "is_take", "timecode_seconds",
            "take_rate", "take_seconds", "take_row_rate", "take_on_timeline", "take_performance",
-           "take_track", "EditedTake", "edit_take"]
+           "take_length", "take_track", "EditedTake", "edit_take"]
 
 #: The frame size of a take shown on a model (:func:`take_track`, ``facetransfer puppet``).
 PREVIEW_SIZE = (512, 512)
@@ -601,6 +603,29 @@ def _phase(d: np.ndarray, rate: float) -> float:
     return float(np.mean(np.abs(x - np.round(x))))
 
 
+def take_length(path, max_frames: int | None = None, *, warn: bool = True
+                ) -> tuple[int, float]:
+    """``(n_frames, fps)`` of the timeline a take is laid out on (:func:`take_track`'s: what
+    ``view`` and ``puppet`` of it number, and what a photo as a transfer's target performs it
+    over): a frame every ``1 / fps`` seconds from its first row to its last, at the rate of
+    its rows (:func:`take_row_rate`), so frame ``k`` is row ``k`` where no row is dropped (a
+    dropped row's frame lies between its neighbours); its first ``max_frames``. ``warn``: a
+    short take's rate guess said (:func:`take_rate`). TransferError where it is no take, has
+    no rows, or its timecodes repeat or go back."""
+    take = _load(path)
+    _, fps, n = _timeline(take.timecodes, f"take {path}", warn)
+    return (n if max_frames is None else max(1, min(n, int(max_frames)))), fps
+
+
+def _timeline(timecodes, name: str, warn: bool = True) -> tuple[np.ndarray, float, int]:
+    """``(seconds, fps, n)``: a take's rows' :func:`take_seconds`, their
+    :func:`take_row_rate` and the frames of that rate from the first row to the last
+    (:func:`take_length`)."""
+    t = take_seconds(timecodes, warn=warn, name=name)
+    fps = take_row_rate(t, timecodes, name)
+    return t, fps, int(np.floor(t[-1] * fps + 1e-6)) + 1
+
+
 def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PREVIEW_SIZE,
                max_frames: int | None = None, in_place: bool = False):
     """A take as a track of its own: ``identity`` (the model's identity weights) performing it
@@ -632,10 +657,8 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     from .track.result import Track
 
     take = _read(path, model)
-    t = take_seconds(take.timecodes, name=f"take {path}")
-    fps = take_row_rate(t, take.timecodes, f"take {path}")
+    t, fps, n = _timeline(take.timecodes, f"take {path}")
     start = _first_timecode(take.timecodes, fps)
-    n = int(np.floor(t[-1] * fps + 1e-6)) + 1
     n = n if max_frames is None else min(n, int(max_frames))
     rows = take_on_timeline(t, np.hstack([take.activations, take.pose]), n, fps, align="hold")
     a, ypr = np.clip(rows[:, :52], 0.0, 1.0), rows[:, 52:55]

@@ -502,9 +502,9 @@ def _take_as_performance(sources: TransferSources, align, model) -> TransferSour
     from .io.video_display import timecode_of
     from .io.video_sequence import is_sequence
 
-    start = None
-    if sources.take_sync == "timecode" and (Path(sources.target.video).is_file()
-                                            or is_sequence(sources.target.video)):
+    start = None       # a photo has no timecode: it performs the take from its first row
+    if sources.take_sync == "timecode" and not is_still(sources.target.video) and (
+            Path(sources.target.video).is_file() or is_sequence(sources.target.video)):
         start = timecode_of(sources.target.video)
     return dataclasses.replace(sources, expression=None,
                                performance=Take(Path(path), align, start))
@@ -559,7 +559,7 @@ class _Planner:
             self.timings["read"] += time.perf_counter() - t0
             held = performance_length(sources.performance, max_frames) \
                 if is_still(target) and len(frames) == 1 else None
-            if held is not None:   # a photo performs a ready track's frames at its rate
+            if held is not None:   # a photo performs a ready track (a take) at its rate
                 return held_frames(frames[0], held[0]), held[1], None
             return frames, fps, None
         from concurrent.futures import ThreadPoolExecutor
@@ -664,14 +664,18 @@ def held_frames(frame: np.ndarray, n: int) -> np.ndarray:
 
 def performance_length(performance, max_frames: int | None = None):
     """``(n_frames, fps)`` of a ready performance (a track file or
-    :class:`~facetransfer.track.Track`: ``transfer --save-track`` of a photo's, edited) that a
-    photo as the target performs, as it performs an expression source (:func:`held_frames`),
-    its first ``max_frames``; None: none, or a Live Link take (one frame of the photo)."""
-    from .take import Take
+    :class:`~facetransfer.track.Track`: ``transfer --save-track`` of a photo's, edited; or a
+    Live Link Face take, :class:`~facetransfer.take.Take`: its rows at their rate, as ``view``
+    and ``puppet`` number them, :func:`facetransfer.take.take_length`) that a photo as the
+    target performs, as it performs an expression source (:func:`held_frames`), its first
+    ``max_frames``; None: none. (Before, a take onto a photo was one frame, its first row.)"""
+    from .take import Take, take_length
     from .track import Track
 
-    if performance is None or isinstance(performance, Take):
+    if performance is None:
         return None
+    if isinstance(performance, Take):
+        return take_length(performance.path, max_frames)
     perf = performance if isinstance(performance, Track) else Track.load(performance)
     n = perf.n_frames if max_frames is None else min(perf.n_frames, int(max_frames))
     return n, float(perf.fps)
@@ -750,9 +754,21 @@ def _performance_plan(inputs: _Inputs, sources: TransferSources, model) -> Trans
     b = np.concatenate([tt.weights[m] for m in varying], axis=1)
     j = nearest_frames(q, b, ~tt.lost)
     mt = take_frames(tt, j)
+    tex_frames, tex_track = _lifted_once(frames, tt, sources.target.video)
     # the chosen frames' geometry, seen by their own cameras (texture lookup)
     return TransferPlan(frames, inputs.fps, tt, new, frames, mt, j, inputs.tracks,
-                        inputs.timings, texture_frames=frames, texture_track=tt, performance=True)
+                        inputs.timings, texture_frames=tex_frames, texture_track=tex_track,
+                        performance=True)
+
+
+def _lifted_once(frames, target_track, target) -> tuple:
+    """``(frames, track)`` the mouth's texture function of a ready performance is lifted from:
+    the target's; of a photo held over ``n`` frames (:func:`held_frames`), its one frame
+    (before, up to 120 copies of it were lifted, 27 of a 240-frame take's 44 s on a photo, for
+    the texture of one picture)."""
+    if len(frames) > 1 and is_still(target):
+        return frames[:1], take_frames(target_track, np.zeros(1, np.int64))
+    return frames, target_track
 
 
 def _recombined_plan(inputs: _Inputs, sources: TransferSources, model, align) -> TransferPlan:

@@ -562,7 +562,8 @@ def transfer_video(sources: TransferSources, out, model, *,
     transfer's frame, or with ``frame`` that frame of the transfer, :func:`render_frame`). A
     photo as the target (``portrait.jpg``) with an expression source performs all the
     source's frames at its rate, with its audio
-    (:func:`facetransfer.transfer_plan.held_frames`); a photo's one image is its frame 0 by
+    (:func:`facetransfer.transfer_plan.held_frames`; a Live Link Face take's rows at their
+    rate, without audio); a photo's one image is its frame 0 by
     default. A video file is rendered in parts kept in the render cache
     (:mod:`facetransfer.render_cache`): an interrupted transfer run again renders only the
     frames it had not. ``matte``: also write the matte of the pixels the rewrite changed

@@ -11,8 +11,9 @@
     facetransfer transfer --target portrait.jpg --expression-from S.mp4 --out OUT.mp4|OUT.png
 
 A photo as the target performs its expression source: the video has the source's length, rate
-and audio, the photo's head held (:func:`facetransfer.transfer_plan.held_frames`); one image as
-``--out`` is a one-frame result's frame, or ``--frame N``'s.
+and audio, the photo's head held (:func:`facetransfer.transfer_plan.held_frames`); a Live Link
+Face take's rows at their rate (as ``view`` and ``puppet`` number them), no audio; one image
+as ``--out`` is a one-frame result's frame, or ``--frame N``'s.
 
 A performance edited first (``facetransfer edit``) is :mod:`.edit`'s; an identity performing a
 video alone (``facetransfer puppet``) :mod:`.puppet`'s; the job on the default clips
@@ -203,7 +204,8 @@ def register(sub) -> None:
         "track files), take each attribute from its chosen video, render the new face into "
         "the target footage with the target's texture and the source's mouth, blend, and keep "
         "the target's audio. A photo as the target performs the whole expression source (its "
-        "length, rate and audio), the photo's head held. Interrupted (Ctrl-C, SIGTERM), it "
+        "length, rate and audio; a Live Link Face take's rows at their rate), the photo's "
+        "head held. Interrupted (Ctrl-C, SIGTERM), it "
         "keeps its tracking and the frames it rendered in the user cache: the same command "
         "continues from them "
         "(FACETRANSFER_TRACK_CACHE=off, FACETRANSFER_RENDER_CACHE=off: nothing kept).")
@@ -219,9 +221,10 @@ def register(sub) -> None:
     p.add_argument("--max-frames", type=int, default=None, help="use the first N target frames")
     p.add_argument("--frame", type=int, default=None, metavar="N",
                    help="with one image as --out (result.png, .jpg, .tif): write frame N of "
-                   "the transfer (of a photo's, its expression source's frame N), numbered as "
-                   "the clip's frames: a video's from 0, a plate's as its files (1001 on); "
-                   "default: a photo's first frame, a one-frame clip's only one")
+                   "the transfer (of a photo's, its expression source's frame N, or a take's "
+                   "row N as `view take.csv` numbers it), numbered as the clip's frames: a "
+                   "video's from 0, a plate's as its files (1001 on); default: a photo's first "
+                   "frame, a one-frame clip's only one")
     add_rewrite_options(p)
     p.add_argument("--meshes", metavar="DIR", help="also write the new meshes as OBJ files")
     p.add_argument("--save-track", metavar="OUT.npz", help="also write the new performance")
@@ -347,7 +350,8 @@ def _say_transfer(args, res) -> None:
              if kept else "")
           + (f", {res.kept}" if res.kept else "")
           + ((", with the expression source's audio" if _held(args) else
-              ", with the target's audio") if res.audio else ", no audio"))
+              ", with the target's audio") if res.audio else
+             ", no audio (a take has none)" if _take_on_photo(args) else ", no audio"))
     if args.matte:
         print(f"wrote the matte {args.matte}"
               + _numbered(args.matte, args.target, res.n_frames, args.start_number))
@@ -371,6 +375,15 @@ def _held(args) -> bool:
 
     return bool(is_still(args.target) and args.expression_from
                 and not is_take(args.expression_from))
+
+
+def _take_on_photo(args) -> bool:
+    """Whether a photo target performs a Live Link Face take (its rows at their rate, the
+    photo's head held, no audio: :func:`facetransfer.transfer_plan.performance_length`)."""
+    from ..io.video_sequence import is_still
+    from ..take import is_take
+
+    return bool(is_still(args.target) and is_take(args.expression_from))
 
 
 def _check_option_pairs(args) -> None:
@@ -463,6 +476,12 @@ def _one_image_count(args, clip) -> tuple[int, str]:
         if args.performance and is_still(args.target) else None
     if held is not None:
         return held[0], f"the performance {args.performance}'s"
+    if _take_on_photo(args):
+        from ..take import take_length
+
+        _check_take(args)                 # its own lines first (a missing take, a bad one)
+        n = take_length(args.expression_from, args.max_frames, warn=False)[0]
+        return n, f"the take {args.expression_from}'s rows"
     n = video_info(clip).n_frames
     n = n if args.max_frames is None else min(n, args.max_frames)
     return n, (f"the expression source {clip}'s" if clip != args.target
