@@ -426,8 +426,8 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     The curves are edited as a track of an ARKit model is
     (:func:`facetransfer.performance_edit.edit_activations`: ``scale`` multiplies a curve,
     ``add`` adds an activation over rows ``START..END`` with
-    :func:`facetransfer.performance_edit.ramp_envelope`'s ramps, each edited curve clipped to
-    Live Link Face's [0, 1]); frames are the take's on its
+    :func:`facetransfer.performance_edit.ramp_envelope`'s ramps, each value the edit changes
+    clipped to [0, 1]: a value the app wrote past 1 the edit does not move is kept); frames are the take's on its
     timeline, 0-based, as ``view`` and ``puppet`` of it number them (its rows, where none is
     dropped: :func:`_row_frames`). Everything else is kept byte for byte: the header and its column order, the
     timecodes, ``BlendShapeCount``, the head and eye rotation columns, the line endings, a
