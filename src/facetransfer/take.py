@@ -610,10 +610,12 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     translation the unturned face's instead, the head turning about the model's origin (a
     take holds no head translation: what an export of it carries, not a preview's framing).
 
-    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``:
-    head angles in radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (yaw > 0 turns the face toward
-    the image's right, pitch > 0 looks down, roll > 0 counter-clockwise; the inverse of
-    :func:`facetransfer.export.common.head_euler`). What ``facetransfer puppet take.csv``
+    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll`` in
+    radians with the app's signs (:data:`facetransfer.export.livelink.HEAD_SIGNS`: yaw > 0
+    toward the subject's right, pitch > 0 looking down, roll > 0 clockwise in the image), taken
+    to ``R = Ry(yaw) Rx(pitch) Rz(roll)`` of :func:`facetransfer.export.common.head_euler`'s
+    angles (before the review of the fifty-fourth session the take's yaw and roll were taken
+    as they are: a real take's head turned the other way). What ``facetransfer puppet take.csv``
     renders: the take seen on a face before it goes into a scene.
 
     Returns
@@ -626,6 +628,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     from scipy.spatial.transform import Rotation
 
     from .arkit import ARKIT_NAMES, activations_to_weights
+    from .export.livelink import HEAD_SIGNS
     from .io.source_facts import SourceFacts
     from .render import look_at_weak_perspective
     from .track.project import project_landmarks
@@ -643,7 +646,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     wid = np.asarray(identity, np.float64).ravel()
     mean = model.synthesize(model.default_weights())
     cam = look_at_weak_perspective(mean, size, fill=0.6)
-    R = Rotation.from_euler("YXZ", ypr).as_matrix()
+    R = Rotation.from_euler("YXZ", ypr * HEAD_SIGNS).as_matrix()   # the app's signs to ours
     track = Track(fps=fps, frame_size=tuple(size), rotation=R, scale=np.full(n, cam.scale),
                   translation=_centred(mean, np.eye(3)[None].repeat(n, 0) if in_place else R,
                                        cam.scale, size),
