@@ -854,6 +854,40 @@ def test_a_summary_of_the_format_before_still_keeps_its_outputs(arkit_model, mak
             "lay); remove it to redo this clip alone, or --overwrite redoes every clip")
 
 
+def test_a_take_written_with_the_angles_signs_before_is_exported_again(
+        arkit_model, make_arkit_track, inproc, tmp_path, capsys, monkeypatch):
+    """A livelink take a version before the fifty-fourth session's review wrote (its digest
+    names its labels, not its angles' signs; its HeadYaw, HeadRoll and eye yaw turned against
+    the app's): a rerun of the same ``batch export`` writes it again with the app's signs
+    (before: skipped as this version's, the head turning the wrong way in Unreal kept); the
+    next rerun skips it."""
+    from facetransfer.export import livelink
+    from facetransfer.export.common import head_euler
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    t, m, out = tmp_path / "t.npz", tmp_path / "m.npz", tmp_path / "exp"
+    track = make_arkit_track(arkit_model, 6, seed=1)[0]
+    track.save(t)
+    arkit_model.save(m)
+    take = ("batch", "export", t, "--format", "livelink", "--out", out, "--model", m,
+            "--no-progress")
+    yaw = head_euler(track.rotation)[:, 0]
+    assert np.all(np.abs(yaw) > 1e-3)
+    new_words, signs = batch_run._export_what, livelink.HEAD_SIGNS
+    monkeypatch.setattr(batch_run, "_export_what", batch_run._export_what_labelled)
+    monkeypatch.setattr(livelink, "HEAD_SIGNS", np.ones(3))          # the writer before
+    assert _cli(capsys, *take)[0] == 0
+    np.testing.assert_allclose(livelink.read_livelink(out / "t.csv").pose[:, 0], yaw, atol=1e-7)
+    monkeypatch.setattr(batch_run, "_export_what", new_words)
+    monkeypatch.setattr(livelink, "HEAD_SIGNS", signs)
+    assert _cli(capsys, *take)[0] == 0
+    row = _summary(out / "summary.csv")["t"]
+    assert row["status"] == "done", row
+    np.testing.assert_allclose(livelink.read_livelink(out / "t.csv").pose[:, 0], -yaw, atol=1e-7)
+    assert _cli(capsys, *take)[0] == 0
+    assert _summary(out / "summary.csv")["t"]["status"] == "skipped"
+
+
 def _old_export_words(fmt, texture, neutral, model, labels=None):
     """``batch export``'s options in its digests as a version before ``--take-rate`` wrote
     them (its takes labelled in the clip's frames)."""

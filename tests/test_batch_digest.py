@@ -229,12 +229,12 @@ def test_a_takes_labels_are_always_named_in_its_digest(monkeypatch):
     from facetransfer.export import livelink
 
     assert _export_what("livelink", "None", None, None) == \
-        "export livelink None None default labels app"
+        "export livelink None None default labels app angles app"
     assert _export_what("livelink", "None", 3, None, "clip") == \
-        "export livelink None 3 default labels clip"
+        "export livelink None 3 default labels clip angles app"
     assert _export_what("json", "None", None, None) == "export json None None default"
     monkeypatch.setattr(livelink, "DEFAULT_LABELS", "clip")
-    assert _export_what("livelink", "None", None, None).endswith(" labels clip")
+    assert _export_what("livelink", "None", None, None).endswith(" labels clip angles app")
 
 
 def test_an_option_that_is_a_file_is_its_content(tmp_path, cache):

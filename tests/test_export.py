@@ -56,7 +56,8 @@ def test_livelink_header_and_rows(case, tmp_path):
     assert float(row[2 + 17]) == pytest.approx(a[3, ARKIT_NAMES.index("jawOpen")], abs=1e-8)
     take = read_livelink(out)
     np.testing.assert_allclose(take.activations, a, atol=1e-6)  # round trip to 1e-6
-    np.testing.assert_allclose(take.pose[:, :3], ang, atol=1e-7)  # yaw, pitch, roll (radians)
+    # yaw, pitch, roll (radians) with the app's signs: yaw and roll turned (HEAD_SIGNS)
+    np.testing.assert_allclose(take.pose[:, :3], ang * [-1.0, 1.0, -1.0], atol=1e-7)
     # the eye angles are the eyeLook* activations read back (35 deg per unit In/Out, 28 Up/Down)
     col = {n: a[:, ARKIT_NAMES.index(n)] for n in ARKIT_NAMES}
     h, v = np.deg2rad(35.0), np.deg2rad(28.0)

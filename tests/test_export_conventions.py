@@ -253,9 +253,10 @@ def test_a_head_turned_and_eyes_looking_to_the_subjects_left_in_every_export(ark
                                                                            tmp_path):
     """One truth (the head turned 20 degrees toward the subject's left, the image's right; both
     eyes looking to the subject's left) read the same in the take, the glb, the USD and the dial
-    page: HeadYaw +20 degrees, both eyes' yaw negative (the app's: positive toward the
-    subject's right, module notes); the nose toward +X (the subject's left) in the glb, the USD
-    and the page."""
+    page: HeadYaw -20 degrees and both eyes' yaw negative, one sign for one way as the app has
+    them (positive toward the subject's right: Unreal's ARKit code turns the head's and the
+    eyes' rotations into angles by one rule; before the review, HeadYaw +20 beside the eyes'
+    negative yaw); the nose toward +X (the subject's left) in the glb, the USD and the page."""
     from conftest import mean_person_track
     from scipy.spatial.transform import Rotation
 
@@ -268,7 +269,7 @@ def test_a_head_turned_and_eyes_looking_to_the_subjects_left_in_every_export(ark
     R = rotation_from_euler(20.0, 0.0, 0.0)          # yaw > 0: toward the image's right
     track = mean_person_track(arkit_model, a, rotation=R)
     take = read_livelink(export_track(track, "livelink", tmp_path / "t.csv", model=arkit_model))
-    np.testing.assert_allclose(take.pose[:, :3], [[np.deg2rad(20.0), 0.0, 0.0]] * 3, atol=1e-7)
+    np.testing.assert_allclose(take.pose[:, :3], [[-np.deg2rad(20.0), 0.0, 0.0]] * 3, atol=1e-7)
     assert np.all(take.pose[:, [3, 6]] < -0.2)       # LeftEyeYaw, RightEyeYaw
     nose = np.array([0.0, 0.0, 1.0])
     want = [np.sin(np.deg2rad(20.0)), 0.0, np.cos(np.deg2rad(20.0))]
@@ -328,3 +329,35 @@ def test_a_clips_start_timecode_that_names_no_frame_is_said(arkit_model, make_ar
         export_track(dataclasses.replace(track, source_facts=SourceFacts(0, "01:00:00:24")),
                      "livelink", tmp_path / "u.csv")
     assert caplog.records == []
+
+
+def test_a_takes_head_turns_the_apps_way_as_its_eyes_do(arkit_model, tmp_path):
+    """A take as the app records it: ``HeadYaw`` +0.35 with the eyes looking in the same
+    direction (``LeftEyeYaw``/``RightEyeYaw`` +0.3: toward the subject's right, as measured on
+    the app's takes) and ``HeadRoll`` +0.2. ``take_track`` (what ``puppet``, ``view`` and
+    ``export take.csv --out face.glb`` show) turns the nose toward the subject's right (the
+    image's left, -x), with the eyes, and the face clockwise in the image (its +x axis, the
+    subject's left, tipped down); pitch +0.1 looks down. Before the review, the head turned
+    the other way from its eyes (nose toward +x) and counter-clockwise."""
+    from facetransfer.export.livelink import HEADER
+    from facetransfer.take import take_track
+
+    values = dict.fromkeys(HEADER[2:], "0.0")
+    values.update(HeadYaw="0.35", HeadPitch="0.1", HeadRoll="0.2", LeftEyeYaw="0.3",
+                  RightEyeYaw="0.3")
+    rows = [",".join(HEADER)] + [f"00:00:00:{k:02d}.000,61," + ",".join(values[n] for n in
+                                                                      HEADER[2:])
+                                 for k in range(3)]
+    (tmp_path / "app.csv").write_text("\n".join(rows) + "\n")
+    track = take_track(tmp_path / "app.csv", arkit_model, arkit_model.weight_mean("identity"))
+    R = track.rotation[0]
+    nose, left, up = R @ [0.0, 0.0, 1.0], R @ [1.0, 0.0, 0.0], R @ [0.0, 1.0, 0.0]
+    assert nose[0] < -0.3                      # toward the subject's right: the image's left
+    assert left[1] < -0.15                     # clockwise in the image: the +x side down
+    assert up[2] > 0.05                        # the top of the head toward the camera: down
+    gaze = track.info["eye_gaze"][0]           # (eye, (yaw + toward the subject's left, pitch))
+    assert np.all(gaze[:, 0] < -0.25)          # the eyes toward the subject's right, the head too
+    from scipy.spatial.transform import Rotation
+
+    np.testing.assert_allclose(Rotation.from_matrix(R).as_euler("YXZ"), [-0.35, 0.1, -0.2],
+                               atol=1e-9)

@@ -223,3 +223,32 @@ def test_a_takes_quoted_fields_keep_their_quotes(arkit_model, make_arkit_track, 
         fields[j] = "0.00000000" if float(fields[j]) != 0 else fields[j]
         want.append(",".join(fields) + "," + note)
     assert out.read_text() == "\n".join([lines[0] + ",Note"] + want) + "\n"
+
+
+def test_an_apps_value_past_one_outside_the_edit_keeps_its_bytes(tmp_path):
+    """The app writes ARKit's overshoot as it comes (its take alex_rom_4: eyeLookIn up to
+    1.053): ``edit take.csv --add jawOpen*0.2@2-5 --ramp 0`` of a take whose JawOpen is
+    1.0533207655 in row 20 changes rows 2-5 only; row 20 keeps its field byte for byte, as
+    every field the edit leaves as it was (before: the whole edited curve was clipped to 1, and
+    row 20 was rewritten as 1.00000000). A value the edit moves is still clipped to 1."""
+    from facetransfer.export.livelink import HEADER
+
+    j = HEADER.index("JawOpen")
+    rows = []
+    for k in range(30):
+        fields = [f"00:00:00:{k:02d}.000", "61"] + ["0.10000000"] * 61
+        if k == 20:
+            fields[j] = "1.0533207655"
+        if k == 3:
+            fields[j] = "0.95000000"
+        rows.append(fields)
+    take = tmp_path / "app.csv"
+    take.write_text("\n".join(",".join(r) for r in [list(HEADER), *rows]) + "\n")
+    res = edit_take(take, tmp_path / "e.csv", add="jawOpen*0.2@2-5", ramp=0)
+    assert res.changed == ("JawOpen",)
+    after = _fields(tmp_path / "e.csv")[1:]
+    changed = [k for k in range(30) if after[k] != rows[k]]
+    assert changed == [2, 3, 4, 5]
+    assert [after[k][j] for k in changed] == ["0.30000000", "1.00000000", "0.30000000",
+                                              "0.30000000"]
+    assert after[20][j] == "1.0533207655"

@@ -259,8 +259,10 @@ def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8
     """ARKit activation curves ``(F, 52)`` (:data:`facetransfer.arkit.ARKIT_NAMES` order)
     edited as :func:`edit_track` edits an ARKit model's (and ``edit take.csv`` a take's): each
     ``EditScale`` (or its text) multiplies its shape's curve by its factor (>= 0), then each
-    ``EditAdd`` adds ``amount`` times the :func:`ramp_envelope` of its range; each edited curve
-    clipped to [0, 1], the others as given. A label: one of the 52 shapes or both sides of one
+    ``EditAdd`` adds ``amount`` times the :func:`ramp_envelope` of its range; each value the
+    edit changes clipped to [0, 1], every other as given (a take's value past 1 outside an
+    added range, or of a curve not edited, is kept: before, an edited curve was clipped
+    whole, and ``edit take.csv`` rewrote such fields it had not touched as 1). A label: one of the 52 shapes or both sides of one
     (:data:`SIDE_WORDS`), in any case (:func:`_spelled`). ``has``: (52,) bool, the shapes
     ``owner`` holds (default: all); an edit of another, an unknown name (:func:`_arkit_index`),
     a range outside the frames, a factor or amount not finite are refused. ``frames``: (F,)
@@ -272,7 +274,8 @@ def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8
     """
     from .arkit import ARKIT_NAMES
 
-    act = np.array(activations, dtype=np.float64)
+    given = np.asarray(activations, dtype=np.float64)
+    act = given.copy()
     add, scale = _edits(add, EditAdd, parse_add), _edits(scale, EditScale, parse_scale)
     at = np.arange(len(act), dtype=np.float64) if frames is None else np.asarray(frames, float)
     _check_edits(add, scale, int(np.floor(at[-1] + 1e-6)) + 1 if len(at) else 0)
@@ -291,7 +294,8 @@ def edit_activations(activations: np.ndarray, *, scale=(), add=(), ramp: int = 8
         j = _arkit_index(a.label, has, owner)
         act[:, j], touched[j] = act[:, j] + a.amount * ramp_envelope(
             len(act), a.start, a.stop, ramp, at=at), True
-    act[:, touched] = np.clip(act[:, touched], 0.0, 1.0)
+    moved = touched & (act != given)                # the values the edit changed, only
+    act[moved] = np.clip(act[moved], 0.0, 1.0)
     return act
 
 

@@ -428,8 +428,8 @@ def edit_take(path, out, *, add=(), scale=(), ramp: int = 8,
     The curves are edited as a track of an ARKit model is
     (:func:`facetransfer.performance_edit.edit_activations`: ``scale`` multiplies a curve,
     ``add`` adds an activation over rows ``START..END`` with
-    :func:`facetransfer.performance_edit.ramp_envelope`'s ramps, each edited curve clipped to
-    Live Link Face's [0, 1]); frames are the take's on its
+    :func:`facetransfer.performance_edit.ramp_envelope`'s ramps, each value the edit changes
+    clipped to [0, 1]: a value the app wrote past 1 the edit does not move is kept); frames are the take's on its
     timeline, 0-based, as ``view`` and ``puppet`` of it number them (its rows, where none is
     dropped: :func:`_row_frames`). Everything else is kept byte for byte: the header and its column order, the
     timecodes, ``BlendShapeCount``, the head and eye rotation columns, the line endings, a
@@ -635,10 +635,12 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     translation the unturned face's instead, the head turning about the model's origin (a
     take holds no head translation: what an export of it carries, not a preview's framing).
 
-    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll``:
-    head angles in radians, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (yaw > 0 turns the face toward
-    the image's right, pitch > 0 looks down, roll > 0 counter-clockwise; the inverse of
-    :func:`facetransfer.export.common.head_euler`). What ``facetransfer puppet take.csv``
+    The head's yaw, pitch and roll are the take's ``HeadYaw``, ``HeadPitch``, ``HeadRoll`` in
+    radians with the app's signs (:data:`facetransfer.export.livelink.HEAD_SIGNS`: yaw > 0
+    toward the subject's right, pitch > 0 looking down, roll > 0 clockwise in the image), taken
+    to ``R = Ry(yaw) Rx(pitch) Rz(roll)`` of :func:`facetransfer.export.common.head_euler`'s
+    angles (before the review of the fifty-fourth session the take's yaw and roll were taken
+    as they are: a real take's head turned the other way). What ``facetransfer puppet take.csv``
     renders: the take seen on a face before it goes into a scene.
 
     Returns
@@ -651,6 +653,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     from scipy.spatial.transform import Rotation
 
     from .arkit import ARKIT_NAMES, activations_to_weights
+    from .export.livelink import HEAD_SIGNS
     from .io.source_facts import SourceFacts
     from .render import look_at_weak_perspective
     from .track.project import project_landmarks
@@ -666,7 +669,7 @@ def take_track(path, model, identity: np.ndarray, *, size: tuple[int, int] = PRE
     wid = np.asarray(identity, np.float64).ravel()
     mean = model.synthesize(model.default_weights())
     cam = look_at_weak_perspective(mean, size, fill=0.6)
-    R = Rotation.from_euler("YXZ", ypr).as_matrix()
+    R = Rotation.from_euler("YXZ", ypr * HEAD_SIGNS).as_matrix()   # the app's signs to ours
     track = Track(fps=fps, frame_size=tuple(size), rotation=R, scale=np.full(n, cam.scale),
                   translation=_centred(mean, np.eye(3)[None].repeat(n, 0) if in_place else R,
                                        cam.scale, size),

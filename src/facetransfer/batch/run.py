@@ -719,10 +719,13 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
         lambda out, name: Row(name, "skipped", output=str(out)) if out.is_file() else None,
         lambda job: legacy_job_key(job, _export_what(fmt, repr(texture), neutral, model,
                                                      labels)))
-    if fmt == "livelink":      # a take whose labels its digest does not name: written again
+    if fmt == "livelink":      # a take an earlier writer made (its digest's words): again
         done = _without_unnamed_labels(done, jobs, out_dir, (
             _export_what_before(fmt, value_text(texture), neutral, model),
             _export_what_before(fmt, repr(texture), neutral, model)))
+        done = _without_unnamed_labels(done, jobs, out_dir, (
+            _export_what_labelled(fmt, value_text(texture), neutral, model, labels),
+            _export_what_labelled(fmt, repr(texture), neutral, model, labels)))
     planned = _planned(outs)   # a take written again (_without_unnamed_labels), --overwrite
     owners = _owners(keys)
     return _simple(client, jobs, out_dir, outs, done, progress,
@@ -733,14 +736,31 @@ def batch_export(jobs, out_dir, fmt: str, *, client, model=None, texture=None,
                    model, keys)
 
 
+#: The signs of a take's head and eye angles in its digest: the app's (the fifty-fourth
+#: session: the eyes' yaw, then the head's yaw and roll, turned to them). A take whose digest
+#: lacks them was written with the signs before, and is written again.
+_TAKE_ANGLES = "app"
+
+
 def _export_what(fmt: str, texture: str, neutral, model, labels: str | None = None) -> str:
     """The options and model of a ``batch export`` in its digests (``texture``: as text, of the
     file's content, :func:`.digest.value_text`; in the format before, its ``repr``); a take's
     labels always, the default's named (:data:`~facetransfer.export.livelink.DEFAULT_LABELS`):
     a later change of the default is a change of the digest, not a take kept labelled as it
-    was. The other formats' digests keep the words they had (:func:`_export_what_before`)."""
+    was; and its angles' signs (:data:`_TAKE_ANGLES`: a take written with the signs before is
+    not kept as this version's). The other formats' digests keep the words they had
+    (:func:`_export_what_before`)."""
     if fmt != "livelink":
         return _export_what_before(fmt, texture, neutral, model)
+    return (f"{_export_what_labelled(fmt, texture, neutral, model, labels)} "
+            f"angles {_TAKE_ANGLES}")
+
+
+def _export_what_labelled(fmt: str, texture: str, neutral, model,
+                          labels: str | None = None) -> str:
+    """:func:`_export_what` of a take as facetransfer wrote it from when a take's labels were
+    named in it until its angles' signs were (before the fifty-fourth session's review: the
+    eye yaw, head yaw and head roll turned against the app's). Kept as it was."""
     from ..export.livelink import DEFAULT_LABELS
 
     return (f"{_export_what_before(fmt, texture, neutral, model)} "
@@ -757,11 +777,13 @@ def _export_what_before(fmt: str, texture: str, neutral, model) -> str:
 
 def _without_unnamed_labels(done: dict, jobs, out_dir: Path, words: tuple[str, str]) -> dict:
     """``done`` without the refused rows of takes this job wrote in a version whose digest did
-    not name their labels (``words``: this job's options so worded, in the format of
-    :data:`.digest.KEY_FORMAT` and in the one before it): such a take is exported again, with
-    the labels asked for. Before, the old default's take (the clip's frames, which Unreal's
-    importer misplaces) was skipped as the new default's; whether such a take is of the
-    clip's labels or the app's cannot be told from its digest, so it is not kept."""
+    not name their labels, or (called again) their angles' signs (``words``: this job's
+    options so worded, in the format of :data:`.digest.KEY_FORMAT` and in the one before it):
+    such a take is exported again, with the labels asked for and the app's signs. Before, the
+    old default's take (the clip's frames, which Unreal's importer misplaces) was skipped as
+    the new default's, and a take of the signs before (its head turning against the app's) as
+    this version's; whether such a take is of the clip's labels or the app's cannot be told
+    from its digest, so it is not kept."""
     earlier, stale = _earlier(out_dir), set()
     for j in jobs:
         r, made = done.get(j.name), earlier.get(j.name, "")

@@ -13,7 +13,9 @@ y up, z towards the viewer):
   tips the top of the head towards the camera (looking down), positive roll turns the face
   counter-clockwise in the image. These are the "head angles" of
   :mod:`facetransfer.render.cameras` (ARKit's order); the previews' and the synthetic
-  footage's "render angles" have the same axes and signs in another order, in degrees.
+  footage's "render angles" have the same axes and signs in another order, in degrees. A Live
+  Link Face take writes the yaw and the roll with the app's other sign
+  (:data:`facetransfer.export.livelink.HEAD_SIGNS`).
 * Head translation in model units: ``((t_x - (W-1)/2) / s, -(t_y - (H-1)/2) / s, 0)``, the model
   origin's offset from the image centre at the face's depth (weak perspective has no depth);
   the centre as the renderer has it, pixel ``k`` centred at ``k`` (before the fifty-fourth

@@ -15,7 +15,9 @@ its columns by position, so the layout is the app's exactly:
   which the CSV cannot say, clock time, ``.mmm`` the thousandths of a frame:
   :func:`format_timecode`), the count
   ``61`` (52 + 9 values), the activations in [0, 1], then head yaw, pitch and roll in **radians**
-  (:func:`facetransfer.export.common.head_euler`) and the six eye angles in radians, read back
+  (:func:`facetransfer.export.common.head_euler` with the app's signs, :data:`HEAD_SIGNS`: yaw
+  positive toward the subject's right, pitch positive looking down, roll positive clockwise
+  in the image, the eyes' convention) and the six eye angles in radians, read back
   from the eyeLook* activations (:func:`facetransfer.track.gaze.activation_gaze`: 35° per unit
   of In/Out, 28° of Up/Down, the tracker's own scale) as the app relates them to its curves
   (:data:`EYE_SIGNS`): yaw positive toward the subject's right (``LeftEyeYaw`` rising with
@@ -37,8 +39,16 @@ rows): ``LeftEyeYaw`` against ``EyeLookInLeft - EyeLookOutLeft`` has slope +0.59
 radians a unit, ``RightEyeYaw`` against ``EyeLookInRight - EyeLookOutRight`` -0.59 to -0.61,
 each eye's pitch against ``EyeLookDown - EyeLookUp`` +0.54 to +0.61 (radians: ±0.6 is 34°;
 the eyes' ±0.6 could not be the ±108° of degrees / 180); ``tests/test_export_conventions.py``.
-The app's sign of ``HeadYaw`` and ``HeadRoll`` could not be checked (those takes record the
-head as 0).
+Those takes record the head as 0; the head's signs follow from the eyes' (:data:`HEAD_SIGNS`):
+Unreal's ARKit face support (``AppleARKitFaceMeshConversion.h``, ``ToBlendShapeMap``) turns the
+face anchor's rotation and each eye's into ``HeadYaw/Pitch/Roll`` and ``LeftEyeYaw/...`` by one
+rule (yaw and roll negated together, pitch kept), and ARKit's face anchor, in its mirrored
+face-tracking world, has the eyes' axes (Apple's ``ARFaceAnchor``: x to the face's own left,
+y up, z out of the face; identity facing the camera), so a head and eyes turned the same way
+have the same signs; JimWest/MeFaMo, written to stand in for the app, sends ``HeadYaw`` and
+``HeadRoll`` negated from its pose matrix's (MediaPipe's canonical face, the same axes) and
+``HeadPitch`` as it is. Before the review of the fifty-fourth session the head's yaw and roll
+were written with our signs (``head_euler``'s): turned against the app's.
 """
 
 from __future__ import annotations
@@ -56,7 +66,7 @@ from ..arkit import ARKIT_NAMES
 from ..io.atomic import write_text_atomic
 from .common import ExportError, head_euler, require_activations
 
-__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "EYE_SIGNS", "HEADER", "LABELS", "DEFAULT_LABELS",
+__all__ = ["LIVELINK_NAMES", "POSE_COLUMNS", "EYE_SIGNS", "HEAD_SIGNS", "HEADER", "LABELS", "DEFAULT_LABELS",
            "app_rate", "format_timecode", "parse_timecode",
            "timecode_fields", "source_timecode",
            "livelink_rows", "eye_angles", "write_livelink", "read_livelink", "LiveLinkTake"]
@@ -79,6 +89,11 @@ LIVELINK_NAMES: tuple[str, ...] = (
 #: angles: in the app's takes (module notes, References) an eye's yaw is positive toward the
 #: subject's right and its pitch looking down; gaze's yaw is toward the subject's left, up.
 EYE_SIGNS = np.array([-1.0, -1.0])
+#: ``(HeadYaw, HeadPitch, HeadRoll)`` = these signs times
+#: :func:`facetransfer.export.common.head_euler`'s (yaw toward the image's right, pitch down,
+#: roll counter-clockwise): the app's yaw is positive toward the subject's right (the image's
+#: left), as its eyes' yaw, and its roll clockwise in the image (module notes, References).
+HEAD_SIGNS = np.array([-1.0, 1.0, -1.0])
 #: The 9 rotation columns after the blendshapes (radians).
 POSE_COLUMNS: tuple[str, ...] = ("HeadYaw", "HeadPitch", "HeadRoll", "LeftEyeYaw",
                                  "LeftEyePitch", "LeftEyeRoll", "RightEyeYaw", "RightEyePitch",
@@ -186,7 +201,7 @@ def livelink_rows(track, start: str | None = None, *, labels: str = "app") -> li
     ``labels``: how the rows' timecodes count (:func:`format_timecode`)."""
     acts = require_activations(track)             # (F, 52) in ARKIT_NAMES order
     a = acts[:, _TO_ARKIT]                        # in the app's order
-    ypr = head_euler(track.rotation)  # (F, 3) radians
+    ypr = head_euler(track.rotation) * HEAD_SIGNS  # (F, 3) radians, the app's signs
     pose = np.zeros((track.n_frames, len(POSE_COLUMNS)))
     pose[:, :3] = ypr
     pose[:, 3:] = eye_angles(acts)

@@ -21,8 +21,10 @@ They differ in the order the three rotations are composed in and in the unit:
   and its inverse :func:`euler_from_rotation`; the previews (``facetransfer render --pose``),
   the synthetic footage of :mod:`facetransfer.synth`.
 * **head angles**, ``R = Ry(yaw) Rx(pitch) Rz(roll)`` (intrinsic Y-X'-Z''), **radians**: ARKit's
-  and Live Link Face's; :func:`facetransfer.export.common.head_euler` and its inverse in
-  :func:`facetransfer.take.take_track`; the viewer's sliders (in degrees there).
+  and Live Link Face's order (a take's ``HeadYaw`` and ``HeadRoll`` with the other sign:
+  :data:`facetransfer.export.livelink.HEAD_SIGNS`); :func:`facetransfer.export.common.
+  head_euler` and its inverse in :func:`facetransfer.take.take_track`; the viewer's sliders
+  (in degrees there).
 * **capture angles**, ``R = Rx(pitch) Ry(yaw) Rz(roll)``, **radians**: the capture tracker's
   (:mod:`facetransfer.track.capture`), which reads the sine of the yaw as ``R[0, 2]`` (the
   tracked points' view-dependent offset, :meth:`facetransfer.track.capture_points.Shape.at_view`)
