@@ -1,12 +1,9 @@
 """The track's eye openings on the eyes (fifty-fourth session, helper eyes54): a photo read
-twice by Face Landmarker (its second look in the region of its own points), and the eyes'
-contours weighed more in the capture's identity, so that the mesh's eye contour (which a
-transfer shows the eyes through) lies nearer the detected eyes."""
+twice by Face Landmarker (its second look in the region of its own points)."""
 
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from facetransfer.io.video import read_video
 from facetransfer.track.landmarks import MP_EYE_CONTOURS
@@ -56,42 +53,3 @@ def test_only_a_picture_is_looked_at_twice(data_dir):
     two = detect_video(frames)[0].points478[0]
     assert np.array_equal(one, again.astype(one.dtype))
     assert np.array_equal(two, first.astype(two.dtype))
-
-
-@pytest.fixture(scope="module")
-def face_2(data_dir):
-    """``face_2``'s first 40 frames, detected."""
-    from facetransfer.track.capture import detect_video
-
-    return detect_video(read_video(data_dir / "video" / "face_2.mp4", max_frames=40)[0])
-
-
-def _mesh_eyes_off(track, model, det) -> float:
-    """Mean distance (px) of the mesh's own eye contours (the points of its surface the fit
-    takes MediaPipe's eye rings for, without the clip's offsets) from the detected ones."""
-    from facetransfer.track.dense import mediapipe_correspondence
-
-    dc = mediapipe_correspondence(model)
-    ring = np.concatenate(MP_EYE_CONTOURS)
-    rows = np.searchsorted(dc.mp_index, ring)
-    err = [np.linalg.norm(track.camera(i).project(dc.sample(model.synthesize(
-        track.weights_at(i)))[rows]) - det.points478[i, ring], axis=1).mean()
-        for i in range(track.n_frames)]
-    return float(np.mean(err))
-
-
-def test_the_mesh_eyes_lie_nearer_the_detected_eyes(face_2):
-    """The capture's mesh (what a transfer renders and shows the eyes through) has no share of
-    the clip's offset, which took up where this face's lids lie: on ``face_2`` its eye
-    contours lay 3.3 px from the detected ones (the detections' eye width ~55 px). With the
-    eyes' contours weighing 3 times more in the identity solve, 2.7 px."""
-    from facetransfer.default_model import load_default_model
-    from facetransfer.track.capture import CaptureOptions, capture_detections
-
-    det, fps, size, src = face_2
-    model = load_default_model()
-    off = {k: _mesh_eyes_off(capture_detections(det, model, fps=fps, frame_size=size,
-                                                options=CaptureOptions(identity_eyes=k)),
-                             model, det) for k in (1.0, 3.0)}
-    assert CaptureOptions().identity_eyes == 3.0
-    assert off[3.0] < 3.0 and off[3.0] < 0.85 * off[1.0], off

@@ -197,11 +197,6 @@ class CaptureOptions:
         one (:mod:`facetransfer.track.lip_contact`: the inner-lip gaps, linear in the
         activations, held >= 0, or at the neutral face's own gap where that is below 0, in
         each expression step where the box solution crosses them).
-    identity_eyes : float
-        The eyes' contours (iBUG 36-47, MediaPipe's eye rings) weigh this many times their
-        detection weight in the identity solve: the clip's offset, which the track's mesh does
-        not carry, then takes less of where the lids lie, and the mesh's eye openings (that a
-        transfer shows the eyes through) lie nearer the eyes (``bench_eye_openings.py``).
     """
 
     identity_frames: int = 24
@@ -223,7 +218,6 @@ class CaptureOptions:
     view_offset_prior: float = 1e-4
     pitch_gain: float = DETECTOR_PITCH_GAIN
     lip_contact: bool = True
-    identity_eyes: float = 3.0
 
     def __post_init__(self) -> None:
         for name in ("identity_frames", "identity_rounds", "iterations"):
@@ -231,7 +225,7 @@ class CaptureOptions:
                 raise TrackError(f"{name} must be >= 1, got {getattr(self, name)}")
         for name in ("identity_prior", "expression_prior", "sparsity", "temporal", "slow_temporal", "flow",
                      "smooth", "dense", "offset_prior", "identity_expression_prior", "scores",
-                     "view_offset_prior", "identity_eyes"):
+                     "view_offset_prior"):
             if not float(getattr(self, name)) >= 0:
                 raise TrackError(f"{name} must be >= 0, got {getattr(self, name)}")
         if not 0.5 <= float(self.pitch_gain) <= 2.0:
@@ -242,10 +236,8 @@ class CaptureOptions:
 
 def _solve_identity(model, shape: Shape, frames: list, states: list, det: ClipDetections,
                     weights: np.ndarray, opt: CaptureOptions) -> np.ndarray:
-    """One identity for the sampled frames (Eq. (9), identity mode free, training prior; the
-    eyes' contours weighed ``opt.identity_eyes`` times)."""
+    """One identity for the sampled frames (Eq. (9), identity mode free, training prior)."""
     prior = Prior.from_model(model, "identity")
-    weights = weights.eyes_weighed(opt.identity_eyes)
     r = prior.mean.size
     G = np.zeros((r, r))
     h = np.zeros(r)

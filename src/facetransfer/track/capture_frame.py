@@ -10,7 +10,7 @@ Ry(b) Rz(c)`` (:func:`sin_yaw`; :mod:`facetransfer.render.cameras` names the con
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,7 +19,6 @@ from .capture_points import Shape
 from .detect import ClipDetections
 from .fit2d import Targets, pose_gauss_newton
 from .gaze import frame_gaze_activations
-from .landmarks import MP_EYE_CONTOURS
 
 __all__ = ["FrameState", "PointWeights", "sin_yaw", "residual_rms", "gaze_fixed",
            "fit_frame", "detection_targets", "iris_of"]
@@ -110,21 +109,6 @@ class PointWeights:
         wf = flow * self.w
         wf[68:] = 0.0
         return self.w + wf
-
-    def eye_rows(self) -> np.ndarray:
-        """The rows of the eyes' contours among the tracked points: iBUG 36-47, then the dense
-        points of MediaPipe's eye contours (:data:`~.landmarks.MP_EYE_CONTOURS`), (k,) int."""
-        dense = np.zeros(0, np.int64) if self.mp_index is None else 68 + np.flatnonzero(
-            np.isin(self.mp_index, np.concatenate(MP_EYE_CONTOURS)))
-        return np.concatenate([np.arange(36, 48), dense])
-
-    def eyes_weighed(self, factor: float) -> "PointWeights":
-        """These weights with the eyes' contours (:meth:`eye_rows`) ``factor`` times theirs."""
-        if float(factor) == 1.0:
-            return self
-        w = np.array(self.w, float)
-        w[self.eye_rows()] *= float(factor)
-        return replace(self, w=w)
 
     def anchor(self, i: int) -> np.ndarray | None:
         """Frame ``i``'s mapped scores (K,) for the fit, or None."""
