@@ -16,6 +16,14 @@ shifted back to the frame. When the face grows past :data:`WHOLE_FRAME_SHARE` of
 the crop loses it, the whole frame is tried again. Footage whose face the whole-frame detector
 finds is detected exactly as by that detector alone.
 
+A picture (a clip of one frame: a photo, ``track PHOTO``, ``transfer --target PHOTO``) is
+looked at :data:`STILL_LOOKS` times, the last look kept (``still=True``): Face Landmarker reads
+a frame's points in a region its face detector gives on the first frame it sees, and from the
+next frame on in the region its own points gave (its video mode), which lies better on a face
+turned or in glasses. Measured (``benchmarks/bench_eye_openings.py``): on ``stills/breakingbad``
+(the head turned ~50°, glasses) the first look's contour of the near eye lay on the lower lid,
+9.3 px (16 % of the eye's width) from the human points, the second's on the eye, 2.0 px.
+
 Several faces (an interview, a two-shot): Face Landmarker follows one face, whichever it found
 first, and may take another after a loss, as may the second detection process that starts in
 the clip's middle (:mod:`facetransfer.track.video_detect`), so a track could change person. The
@@ -41,7 +49,7 @@ from .detect import VideoLandmarker
 from .init import MediaPipeDetector
 
 __all__ = ["WHOLE_FRAME_SHARE", "CROP_FACES", "SEARCH_EVERY", "SEARCH_SLOWER", "MOST_FACES",
-           "CUT_CHANGE",
+           "CUT_CHANGE", "STILL_LOOKS",
            "search_tiles", "face_box", "choose_subject", "moved_away",
            "crop_about", "FACE_PLACES", "face_place", "subject_point", "FollowingLandmarker"]
 
@@ -62,6 +70,9 @@ MOST_FACES = 4
 #: frame is another shot's for the subject's rule: within the data folder's clips at most 12.2,
 #: at edited cuts 36-72 (:mod:`facetransfer.track.shots`).
 CUT_CHANGE = 25.0
+#: How often a picture is shown to the landmarker (:class:`FollowingLandmarker`'s ``still``):
+#: the second look reads it in the region of the first look's own points (module notes).
+STILL_LOOKS = 2
 #: The smallest tile side searched, pixels (the detector's input is 128; a face in a smaller
 #: tile is too small for the landmark model too).
 _MIN_TILE = 192
@@ -193,12 +204,17 @@ class FollowingLandmarker:
     subject : (cx, cy, size), optional
         Where the face to follow was last (:func:`face_box`), or a point (size 0,
         :func:`subject_point`): of several faces, the nearest to it is followed.
+    still : bool
+        The clip is one picture: a frame whose face is found is looked at again
+        (:data:`STILL_LOOKS` in all), the last look's points kept (module notes).
     """
 
     warmup_frames = VideoLandmarker.warmup_frames
 
     def __init__(self, *, fps: float = 30.0, blendshapes: bool = True,
-                 model_path: str | os.PathLike | None = None, subject=None) -> None:
+                 model_path: str | os.PathLike | None = None, subject=None,
+                 still: bool = False) -> None:
+        self.still = bool(still)
         self._whole = VideoLandmarker(model_path, fps=fps, blendshapes=blendshapes)
         self._args = (model_path, float(fps), bool(blendshapes))
         self._crop_lm = None            # created when first needed: most clips never do
@@ -212,7 +228,16 @@ class FollowingLandmarker:
         self._hidden = False            # this frame: only another person's face is seen
 
     def detect_scored(self, frame: np.ndarray):
-        """``(points (478, 2) in the frame's pixels, scores (52,))`` or ``(None, None)``."""
+        """``(points (478, 2) in the frame's pixels, scores (52,))`` or ``(None, None)``; of
+        a ``still``, the last of its looks that found the face."""
+        found = self._look(frame)
+        for _ in range(STILL_LOOKS - 1 if self.still and found[0] is not None else 0):
+            again = self._look(frame)           # the landmarker's region: its own points
+            found = again if again[0] is not None else found
+        return found
+
+    def _look(self, frame: np.ndarray):
+        """One look at ``frame`` (the landmarkers' clock moves on a frame)."""
         found = self._in_crop(frame) if self.crop is not None else (None, None)
         self._hidden = False
         if found[0] is None:

@@ -32,7 +32,7 @@ log = logging.getLogger(__name__)
 
 __all__ = ["MP_TO_IBUG", "IBUG_WEIGHTS", "REQUIRED_IBUG", "mediapipe_to_ibug", "ibug_names",
            "eye_distance", "table_matrix", "calibrated_matrix", "mapping_matrix",
-           "read_correspondence", "CALIBRATION_FILE"]
+           "read_correspondence", "CALIBRATION_FILE", "MP_EYE_CONTOURS"]
 
 #: The calibrated correspondence, in the package's data folder.
 CALIBRATION_FILE = "mediapipe_ibug.json"
@@ -58,6 +58,13 @@ MP_TO_IBUG: tuple[tuple[int, ...], ...] = (
     (61,), (39,), (37,), (0,), (267,), (269,), (291,), (321,), (314,), (17,), (84,), (91,),
     # inner lips 60-67
     (78,), (82,), (13,), (312,), (308,), (317,), (14,), (87,),
+)
+
+#: MediaPipe's eye contours, per eye (the subject's right, then left): the outer corner, the
+#: lower lid outward-in, the inner corner, the upper lid inward-out (16 points an eye).
+MP_EYE_CONTOURS: tuple[tuple[int, ...], ...] = (
+    (33, 7, 163, 144, 145, 153, 154, 155, 133, 173, 157, 158, 159, 160, 161, 246),
+    (263, 249, 390, 373, 374, 380, 381, 382, 362, 398, 384, 385, 386, 387, 388, 466),
 )
 
 #: Reliability of each iBUG point from the detector, used as a weight in fitting (jaw low).

@@ -359,7 +359,8 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
 
     try:    # the child cancelled on any interrupt from here, its landmarker's loading too
         if detector is None:
-            detector = own = FollowingLandmarker(fps=fps, blendshapes=True, subject=subject)
+            detector = own = FollowingLandmarker(fps=fps, blendshapes=True, subject=subject,
+                                                 still=total == 1)
         det = detect_clip(view.frames(frames), detector,
                           n_frames=n if child is None else m, keep478=True, progress=report,
                           resume=resume, checkpoint=checkpoint, pixel_aspect=view.aspect,
