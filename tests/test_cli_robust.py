@@ -745,3 +745,27 @@ def test_a_callers_own_sigterm_handler_is_kept_while_a_command_runs(monkeypatch)
     finally:
         signal.signal(signal.SIGTERM, before)
     assert heard == [signal.SIGTERM]
+
+
+# ---------------------------------------------------------------------- python -m facetransfer
+def test_python_dash_m_facetransfer_runs_the_command_line(tmp_path):
+    """``python -m facetransfer …`` is the console script (it said "No module named
+    facetransfer.__main__", status 1): its version, a usage error in one line naming the
+    command with status 2, and a command's work."""
+    import facetransfer
+
+    env = {**os.environ, "PYTHONPATH": SRC}
+
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "facetransfer", *args], capture_output=True,
+                              text=True, timeout=120, env=env, cwd=tmp_path)
+
+    r = run("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"facetransfer {facetransfer.__version__}"
+    r = run("render", "--nope")
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip().splitlines() == [
+        "facetransfer render: error: unrecognized arguments: --nope "
+        "(options: facetransfer render --help)"]
+    r = run("probe", "missing.mp4")
+    assert r.returncode == 2 and "missing.mp4" in r.stderr and "Traceback" not in r.stderr
