@@ -769,3 +769,25 @@ def test_python_dash_m_facetransfer_runs_the_command_line(tmp_path):
         "(options: facetransfer render --help)"]
     r = run("probe", "missing.mp4")
     assert r.returncode == 2 and "missing.mp4" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_no_help_states_an_empty_or_missing_default():
+    """Every command's ``--help``: no option says "(default: [])" (``edit --add`` and
+    ``--scale``, repeatable options given none, did), "(default: None)" or "(default: ())"."""
+    import argparse
+    import re
+
+    from facetransfer.cli.main import build_parser
+
+    def parsers(parser, path):
+        yield path, parser
+        for a in parser._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for name, sub in a.choices.items():
+                    yield from parsers(sub, f"{path} {name}")
+
+    found = [(path, m) for path, parser in parsers(build_parser(), "facetransfer")
+             for m in re.findall(r"\(default: (\[\]|None|\(\)|'')\)", parser.format_help())]
+    assert found == []
+    helps = dict(parsers(build_parser(), "facetransfer"))
+    assert "--add EXPR@START-END" in helps["facetransfer edit"].format_help()

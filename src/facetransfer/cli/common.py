@@ -49,10 +49,11 @@ def progress_shown() -> bool:
 
 class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """``(default: X)`` after an option's help only where it has a default its help does not
-    state already (no "(default: None)", no "default 18 (default: None)")."""
+    state already (no "(default: None)", no "default 18 (default: None)", no "(default: [])"
+    after a repeatable option given none)."""
 
     def _get_help_string(self, action):
-        if action.default is None or action.default is False or \
+        if action.default is None or action.default is False or action.default == [] or \
                 "default" in (action.help or "").lower():
             return action.help
         return super()._get_help_string(action)
