@@ -203,7 +203,8 @@ def _check_edits(add: list, scale: list, n: int) -> None:
     amounts and factors are finite (a NaN reached the track as non-finite weights; a range
     ending before its start weighed every frame less than 1 and edited nothing fully)."""
     for a in add:
-        where = f"--add {a.label}@{a.start}-{a.stop}"
+        amount = f"*{a.amount:g}" if a.amount != 1 and np.isfinite(a.amount) else ""  # as typed
+        where = f"--add {a.label}{amount}@{a.start}-{a.stop}"
         if a.start < 0 or a.stop > n - 1:
             raise TransferError(f"{where}: frames outside the clip (0-{n - 1})")
         if a.stop < a.start:
