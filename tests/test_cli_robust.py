@@ -791,3 +791,13 @@ def test_no_help_states_an_empty_or_missing_default():
     assert found == []
     helps = dict(parsers(build_parser(), "facetransfer"))
     assert "--add EXPR@START-END" in helps["facetransfer edit"].format_help()
+    # an option with a default says it ("default" the word: --speed's help named "the flow
+    # tracker's defaults" and never its own, fast)
+    silent = [(path, a.option_strings[-1]) for path, parser in helps.items()
+              for a in parser._actions if a.option_strings and a.help
+              and a.default not in (None, False, [], argparse.SUPPRESS)
+              and not re.search(r"\bdefault\b", parser._get_formatter()._get_help_string(a),
+                                re.I)]
+    assert silent == []
+    speed = helps["facetransfer transfer"].format_help().split("--speed")[-1]
+    assert "(default: fast)" in " ".join(speed.split())

@@ -574,7 +574,8 @@ def register(sub) -> None:
     h = msub.add_parser("sheet", help="picture sheets: identities x expressions, and dials")
     h.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     h.add_argument("--out", required=True, help="SHEET.png (also writes SHEET_dials.png)")
-    h.add_argument("--max-identities", type=int, default=8, help="rows of the first sheet")
+    h.add_argument("--max-identities", type=int, default=8,
+                   help="rows of the first sheet, one per training identity (default 8)")
     _overwrite_option(h)
     h.set_defaults(func=cmd_sheet)
 
