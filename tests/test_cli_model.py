@@ -283,3 +283,35 @@ def test_model_info_is_read_by_a_person_and_whole_as_json(quick_model, quick_mod
     d = json.loads(out)
     assert d["ranks"] == list(quick_model.ranks) and d["mode_names"] == ["identity", "expression"]
     assert d["provenance"]["dataset"] == quick_model.provenance["dataset"]
+
+
+def _paper_through_the_face(tile: np.ndarray) -> int:
+    """White pixels (the sheet's paper) enclosed by a tile's face: its eye holes and mouth gap
+    left open."""
+    from scipy.ndimage import binary_fill_holes
+
+    face = tile.min(axis=2) < 245
+    return int((binary_fill_holes(face) & ~face).sum())
+
+
+def test_sheets_draw_the_eyes_and_mouth_as_the_puppet(arkit_model_path, tmp_path, capsys):
+    """``model sheet`` and ``model dials --out``: the tiles' eye holes and mouth gap showed the
+    white paper (a face with blank eyes; an eyeLook* column looked like neutral); they are
+    drawn as ``render`` and ``puppet`` draw them, the eyes turned by the column's gaze."""
+    out = tmp_path / "sheet.png"
+    code, _, err = run(capsys, "model", "sheet", arkit_model_path, "--out", out,
+                       "--max-identities", "1")
+    assert code == 0, err
+    a = np.asarray(Image.open(out).convert("RGB"))
+    names = load_model(arkit_model_path).labels[1]
+    tiles = {n: a[36:36 + 180, 90 + j * 150: 90 + (j + 1) * 150] for j, n in enumerate(names)}
+    assert max(_paper_through_the_face(t) for t in tiles.values()) < 5
+    assert min((t.min(axis=2) < 245).mean() for t in tiles.values()) > 0.1   # faces drawn
+    eyes = (slice(55, 95), slice(40, 110))       # the eyes' band of a tile
+    gaze = np.abs(tiles["eyeLookInLeft"][eyes].astype(int) - tiles["neutral"][eyes]).max(axis=2)
+    assert (gaze > 40).sum() > 5                 # an iris moved
+    assert main(["model", "dials", str(arkit_model_path), "--out",
+                 str(tmp_path / "dials.png")]) == 0
+    d = np.asarray(Image.open(tmp_path / "dials.png").convert("RGB"))
+    first = d[24:24 + 170, 130:130 + 3 * 140]    # the first dial's row of tiles
+    assert sum(_paper_through_the_face(first[:, k * 140:(k + 1) * 140]) for k in range(3)) < 5

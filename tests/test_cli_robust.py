@@ -745,3 +745,59 @@ def test_a_callers_own_sigterm_handler_is_kept_while_a_command_runs(monkeypatch)
     finally:
         signal.signal(signal.SIGTERM, before)
     assert heard == [signal.SIGTERM]
+
+
+# ---------------------------------------------------------------------- python -m facetransfer
+def test_python_dash_m_facetransfer_runs_the_command_line(tmp_path):
+    """``python -m facetransfer …`` is the console script (it said "No module named
+    facetransfer.__main__", status 1): its version, a usage error in one line naming the
+    command with status 2, and a command's work."""
+    import facetransfer
+
+    env = {**os.environ, "PYTHONPATH": SRC}
+
+    def run(*args):
+        return subprocess.run([sys.executable, "-m", "facetransfer", *args], capture_output=True,
+                              text=True, timeout=120, env=env, cwd=tmp_path)
+
+    r = run("--version")
+    assert r.returncode == 0 and r.stdout.strip() == f"facetransfer {facetransfer.__version__}"
+    r = run("render", "--nope")
+    assert r.returncode == 2 and r.stdout == ""
+    assert r.stderr.strip().splitlines() == [
+        "facetransfer render: error: unrecognized arguments: --nope "
+        "(options: facetransfer render --help)"]
+    r = run("probe", "missing.mp4")
+    assert r.returncode == 2 and "missing.mp4" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_no_help_states_an_empty_or_missing_default():
+    """Every command's ``--help``: no option says "(default: [])" (``edit --add`` and
+    ``--scale``, repeatable options given none, did), "(default: None)" or "(default: ())"."""
+    import argparse
+    import re
+
+    from facetransfer.cli.main import build_parser
+
+    def parsers(parser, path):
+        yield path, parser
+        for a in parser._actions:
+            if isinstance(a, argparse._SubParsersAction):
+                for name, sub in a.choices.items():
+                    yield from parsers(sub, f"{path} {name}")
+
+    found = [(path, m) for path, parser in parsers(build_parser(), "facetransfer")
+             for m in re.findall(r"\(default: (\[\]|None|\(\)|'')\)", parser.format_help())]
+    assert found == []
+    helps = dict(parsers(build_parser(), "facetransfer"))
+    assert "--add EXPR@START-END" in helps["facetransfer edit"].format_help()
+    # an option with a default says it ("default" the word: --speed's help named "the flow
+    # tracker's defaults" and never its own, fast)
+    silent = [(path, a.option_strings[-1]) for path, parser in helps.items()
+              for a in parser._actions if a.option_strings and a.help
+              and a.default not in (None, False, [], argparse.SUPPRESS)
+              and not re.search(r"\bdefault\b", parser._get_formatter()._get_help_string(a),
+                                re.I)]
+    assert silent == []
+    speed = helps["facetransfer transfer"].format_help().split("--speed")[-1]
+    assert "(default: fast)" in " ".join(speed.split())

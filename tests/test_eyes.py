@@ -682,3 +682,68 @@ def test_paint_eyes_alone_is_what_the_rewrite_paints(setup):
     alone = eyes.paint_eyes(r, closed.faces, V, face_img, labels != 0, tex)
     together = _shade_frame(r, V, closed, FrameTextures(face_tex, eyes=tex))[0]
     assert np.array_equal(alone, together) and not np.array_equal(alone, face_img)
+
+
+def _highlight_core_error(setup, scale: float) -> np.ndarray:
+    """A clip of 7 frames of the mean person at ``scale`` pixels per cm (in a frame that
+    holds its face, 23 cm square): at rest, then with its brows up (frames 4-6), so the eye
+    region's rim takes the reference frame (frame 0) there. That frame's forehead carries a
+    highlight, a soft halo 1.2 times the skin and a core 1.4 times (beyond what the shading
+    field compares: ``patch.SHADING_LIMIT``), the other frames none. Returns, at the core's
+    pixels of the rim, the rewritten frame 5's largest channel error against its skin."""
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
+
+    model, topo, closed, fill = setup
+    size = int(23 * scale)
+    acts = np.zeros((7, 52), np.float32)
+    acts[4:, ARKIT_NAMES.index("browInnerUp")] = 1.0
+    target = mean_person_track(model, acts, size=size, scale=scale)
+    new = mean_person_track(model, np.zeros((7, 52), np.float32), size=size, scale=scale)
+    V = close_mouth(model.synthesize(target.weights_at(0)), closed)
+    tid = rasterize(V, closed.faces, target.camera(0), (size, size)).tri_id
+    hole = np.isin(tid, fill)
+    _, tex = eyes.eye_texture([np.zeros((size, size, 3), np.uint8)], target, model, topo,
+                              frame=0)
+    rim = (tid >= 0) & tex.rim[np.maximum(tid, 0)]
+    top = np.flatnonzero(rim.any(axis=1))[0]
+    y, x = np.mgrid[:size, :size]
+    d2 = (y - top - scale) ** 2 + (x - np.flatnonzero(rim[top]).mean()) ** 2
+    core = d2 < (0.5 * scale) ** 2
+    ref = np.zeros((size, size, 3), np.uint8)
+    ref[:] = SKIN
+    ref[d2 < scale ** 2] = np.minimum(np.multiply(SKIN, 1.2), 255).astype(np.uint8)
+    ref[core] = np.minimum(np.multiply(SKIN, 1.4), 255).astype(np.uint8)
+    ref[hole] = REF_EYE
+    cur = np.zeros((size, size, 3), np.uint8)
+    cur[:] = SKIN
+    cur[hole] = TARGET_EYE
+    out = list(rewrite_frames([ref] + [cur] * 6, target, new, model,
+                              options=RewriteOptions(blend="none"), run=RenderRun(workers=1)))
+    where = core & rim
+    assert where.sum() > 200
+    return np.abs(out[5].image[where].astype(int) - SKIN).max(axis=1)
+
+
+def test_a_larger_face_matches_the_reference_highlight_as_a_smaller_one(setup):
+    """The eye region's shading is matched at a scale that grows with the face
+    (``patch.shading_sigma`` of ``eyes.eye_span``): the same face at 2.5 times the pixels is
+    rewritten as at 1 time, its reference frame's forehead highlight brought as near to the
+    frame's skin. (With the scale fixed at 6 px, the highlight's core lay beyond the field's
+    reach on the larger face and was pasted as it was, 60 levels over the skin where the
+    smaller face's was within 25: the white blobs on a 1280x1280 clip's forehead.)"""
+    small, large = _highlight_core_error(setup, 20.0), _highlight_core_error(setup, 50.0)
+    assert np.percentile(small, 95) < 30                       # what 6 px gives at 130 px
+    assert np.percentile(large, 95) < np.percentile(small, 95) + 5
+    assert np.mean(large) < np.mean(small) + 5
+
+
+def test_the_shading_scale_grows_with_the_face_beyond_the_clips_it_was_chosen_on():
+    """Up to :data:`facetransfer.patch.SHADING_SPAN` (every data-folder clip: renders there
+    are as before, bit for bit) the scale is :data:`~facetransfer.patch.SHADING_SIGMA`;
+    beyond, proportional."""
+    assert patch.shading_sigma(60.0) == patch.shading_sigma(patch.SHADING_SPAN) \
+        == patch.SHADING_SIGMA
+    assert patch.shading_sigma(2.5 * patch.SHADING_SPAN) == pytest.approx(
+        2.5 * patch.SHADING_SIGMA)
+    assert patch.shading_sigma(float("nan")) == patch.SHADING_SIGMA

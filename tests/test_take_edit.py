@@ -93,6 +93,8 @@ def test_a_take_of_another_tool_keeps_its_bytes(tmp_path, capsys):
     (["--scale", "jawOpen=2"], "take.csv", "is also an input"),
     (["--scale", "jawOpen=2"], "there.csv", "exists; pass --overwrite"),
     (["--add", "jawOpen@3-40"], "e.csv", "outside the clip (0-11)"),
+    (["--add", "mouthSmile*0.5@3-40"], "e.csv",   # the edit as typed (it lost its "*0.5")
+     "--add mouthSmile*0.5@3-40: frames outside the clip (0-11)"),
 ])
 def test_a_wrong_edit_of_a_take_is_one_line(arkit_model, make_arkit_track, tmp_path, capsys,
                                             extra, out, said):

@@ -289,9 +289,11 @@ def dial_track(track, model, values: Mapping[str, float], *, dials: DialSet | No
     return project_landmarks(dataclasses.replace(track, weights=weights, info={}), model)
 
 
-def dial_sheet(model, dials: DialSet, *, steps=(-2.0, 0.0, 2.0), tile=(140, 170)):
+def dial_sheet(model, dials: DialSet, *, steps=(-2.0, 0.0, 2.0), tile=(140, 170), paint=None):
     """A PIL picture: one row per dial, the mean identity at ``steps`` units, labelled with the
-    dial's R² and its measured effect per unit.
+    dial's R² and its measured effect per unit. ``paint(V, weights, camera, tile)`` -> (H, W,
+    3) uint8 draws a face (default: the mesh shaded, its eye holes and mouth gap open; ``model
+    dials`` draws them as the puppet's).
 
     Returns
     -------
@@ -308,7 +310,7 @@ def dial_sheet(model, dials: DialSet, *, steps=(-2.0, 0.0, 2.0), tile=(140, 170)
     V0 = model.synthesize({**rest, mode: mean_w})
     cam = look_at_weak_perspective(V0, tile, rotation=rotation_from_euler(15.0, 0.0), fill=0.8)
     colors = np.tile(np.array([[0.85, 0.75, 0.70]]), (model.n_vertices, 1))
-    lw, hh = 250, 24
+    lw, hh = 130, 24   # the labels: "+1 unit = +0.626 cm" is ~120 px
     W, H = tile
     img = Image.new("RGB", (lw + W * len(steps), hh + H * len(dials.dials)), "white")
     draw = ImageDraw.Draw(img)
@@ -321,7 +323,9 @@ def dial_sheet(model, dials: DialSet, *, steps=(-2.0, 0.0, 2.0), tile=(140, 170)
         draw.text((4, y + H // 2 + 8), f"+1 unit = {d.effect:+.3f} {dials.unit}",
                   fill=(60, 60, 60))
         for j, t in enumerate(steps):
-            V = model.synthesize({**rest, mode: mean_w + t * d.direction})
-            rgb = render(V, faces, cam, tile, colors=colors, background=(255, 255, 255)).image
+            w = {**rest, mode: mean_w + t * d.direction}
+            V = model.synthesize(w)
+            rgb = render(V, faces, cam, tile, colors=colors, background=(255, 255, 255)).image \
+                if paint is None else paint(V, w, cam, tile)
             img.paste(Image.fromarray(rgb), (lw + j * W, y))
     return img

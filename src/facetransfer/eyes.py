@@ -54,7 +54,7 @@ from .io.frame_numbers import track_first_number
 from .eye_lids import lid_shares, mix_lids
 from .label_masks import bits_box
 from .eyeballs import Eyeballs, eyeballs_of, gaze_offset, shift_eyeballs
-from .patch import REJECT, SHADING_SIGMA, match_outline_into
+from .patch import REJECT, match_outline_into, shading_sigma
 from .region_weights import (EYE_POINTS, model_vertices, moved_strengths, seen_frames,
                              usual_weights_of, vertex_alpha)
 from .render import interpolate_vertex_values, shade_layers, shade_texture
@@ -68,7 +68,7 @@ __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
            "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE", "LID_BLINK",
            "shape_activity", "reference_candidates", "GAZE_WEIGHT", "eye_penalty",
-           "paint_shaded_eyes"]
+           "paint_shaded_eyes", "eye_span"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -866,8 +866,16 @@ def paint_shaded_eyes(raster, faces, vertices, face_image, face_mask, texture: E
     # one frame under another head pose, its cheeks and temples showed patches with seams
     match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],
                        feather=feather, compare=None, reject=None if rim is None else REJECT,
-                       reject_where=rim, shading=SHADING_SIGMA, opacity=opacity)
+                       reject_where=rim, shading=shading_sigma(eye_span(texture)),
+                       opacity=opacity)
     return face_image
+
+
+def eye_span(texture: EyeTexture) -> float:
+    """Pixels between the centres of the two eyes' lids in ``texture``'s reference frame."""
+    H, W = texture.image.shape[:2]
+    c = texture.uvs[np.asarray(texture.lids).reshape(2, -1)].mean(axis=1) * (W - 1, H - 1)
+    return float(np.hypot(*(c[0] - c[1])))
 
 
 def eye_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig=None,

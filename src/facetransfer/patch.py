@@ -19,7 +19,7 @@ from .errors import RewriteError
 from .jit import maybe_njit as _maybe_njit
 
 __all__ = ["GAIN_RANGE", "REJECT", "REJECT_GROW", "match_outline", "match_outline_into",
-           "gain_field"]
+           "gain_field", "shading_sigma"]
 
 #: Per-channel gains allowed between the eye region's frame and the current one
 #: (:func:`match_outline`).
@@ -164,6 +164,21 @@ SHADING_SIGMA = 6.0
 SHADING_LIMIT = 0.25
 SHADING_STEP = 3  # (:func:`_block_means` is written for 3 x 3 blocks)
 SHADING_RANGE = (0.8, 1.25)
+#: :func:`shading_sigma`: the face size, in pixels between the eyes' centres, up to which the
+#: shading is matched at :data:`SHADING_SIGMA` (the data folder's clips, where it was chosen:
+#: 109-135 px); beyond it the scale grows with the face.
+SHADING_SPAN = 135.0
+
+
+def shading_sigma(span: float) -> float:
+    """The shading field's scale in pixels (:func:`_shading_field`) for a face whose eyes'
+    centres lie ``span`` pixels apart: :data:`SHADING_SIGMA` up to :data:`SHADING_SPAN`,
+    proportional beyond. The field is fitted on a ring around the region and reaches
+    ~2 sigma into it: fixed in pixels, it left the middle of a face 2.5 times larger
+    unmatched, and a reference frame's forehead highlight showed there as white blobs
+    (an upscaled 1280x1280 clip: BENCHMARKS.md, "Fifty-fourth session (helper walk54)")."""
+    span = float(span)
+    return SHADING_SIGMA * max(1.0, span / SHADING_SPAN) if np.isfinite(span) else SHADING_SIGMA
 
 
 def _shade_to(f: np.ndarray, face: np.ndarray, ring: np.ndarray, rbox: tuple[int, int],

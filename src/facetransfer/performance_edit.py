@@ -211,7 +211,8 @@ def _check_edits(add: list, scale: list, n: int, first: int = 0) -> None:
     weights; a range ending before its start weighed every frame less than 1 and edited
     nothing fully)."""
     for a in add:
-        where = f"--add {a.label}@{a.start}-{a.stop}"
+        amount = f"*{a.amount:g}" if a.amount != 1 and np.isfinite(a.amount) else ""  # as typed
+        where = f"--add {a.label}{amount}@{a.start}-{a.stop}"
         if a.start < first or a.stop > first + n - 1:
             raise TransferError(f"{where}: frames outside the clip ({first}-{first + n - 1}"
                                 + (", a plate's track: numbered as the plate's files)"

@@ -31,7 +31,8 @@ lips occlude them as they occlude any surface):
 The colours are :data:`PALETTE`'s, the ``view`` page's too (one palette for both previews).
 
 :func:`preview_face` is the same head in :func:`facetransfer.render.render_model`'s framing,
-``facetransfer render``'s picture. The eyes and the mouth cost ~0.7 ms of CPU a frame (a
+``facetransfer render``'s picture; :func:`draw_face` under a camera of the caller's (``model
+sheet``'s and ``model dials``' tiles). The eyes and the mouth cost ~0.7 ms of CPU a frame (a
 480x480 frame of ~8 ms on one thread; ``benchmarks/bench_puppet_face.py``).
 
 Beyond the paper (its §8 names puppetry; the paper renders no eyes).
@@ -56,7 +57,7 @@ __all__ = ["PALETTE", "SKIN", "SCLERA", "IRIS", "LIMBUS", "PUPIL", "CAVITY", "TE
            "CAVITY_BACK", "IRIS_RIM", "IRIS_RADIUS", "PUPIL_RADIUS",
            "TEETH_SHOW", "SHUT", "SHUT_LINE", "LID_PAIRS", "LID_SHADE", "PuppetFace",
            "puppet_face", "arkit_activations", "track_gaze", "lid_light", "paint_face",
-           "preview_face"]
+           "preview_face", "draw_face"]
 
 #: The two previews' colours (RGB, 0-255): the puppet's (``facetransfer puppet``, ``render``)
 #: and the ``view`` page's (:mod:`facetransfer.export.viewer` hands this dict to the page,
@@ -392,12 +393,10 @@ def preview_face(model, weights, *, size: tuple[int, int] = (640, 480), yaw_deg:
     RenderResult
         Its ``visible`` holds the model's vertices only (not the fills' centres).
     """
-    import dataclasses
-
     from .arkit import is_arkit_model, weights_to_activations
     from .errors import ShapeError
-    from .render import look_at_weak_perspective, render, rotation_from_euler
-    from .topology import close_mouth, mesh_topology
+    from .render import look_at_weak_perspective, rotation_from_euler
+    from .topology import mesh_topology
 
     if not (np.isfinite(scale) and scale > 0):
         raise ShapeError(f"preview scale must be > 0, got {scale}")
@@ -407,10 +406,37 @@ def preview_face(model, weights, *, size: tuple[int, int] = (640, 480), yaw_deg:
                                    fill=fill * scale)
     acts = None
     if is_arkit_model(model):
-        acts = weights_to_activations(model, np.asarray(weights["expression"])[None])
-    topo = mesh_topology(model, lips=False)
+        acts = weights_to_activations(model, np.asarray(weights["expression"])[None])[0]
+    return draw_face(model, mesh_topology(model, lips=False), V, cam, size, activations=acts,
+                     background=background)
+
+
+def draw_face(model, topo, V: np.ndarray, camera, size: tuple[int, int], *,
+              activations: np.ndarray | None = None, colour=None,
+              background=(255, 255, 255)):
+    """The face ``V`` (n, 3) of ``model`` rendered under ``camera`` into an image of ``size``
+    ``(W, H)``, its eye holes and mouth gap closed and painted as the puppet's
+    (:func:`paint_face`): :func:`preview_face`'s picture with a camera of the caller's (a
+    sheet's tiles share one). ``topo``: :func:`facetransfer.topology.mesh_topology` of the
+    model with ``lips=False``; ``activations`` (52,): the face's ARKit activations, which turn
+    its eyes (none: they look ahead); ``colour``: the skin's RGB in [0, 1] (default the
+    renderer's grey).
+
+    Returns
+    -------
+    RenderResult
+        Its ``visible`` holds ``V``'s vertices only (not the fills' centres).
+    """
+    import dataclasses
+
+    from .render import render
+    from .topology import close_mouth
+
+    acts = None if activations is None else np.asarray(activations, np.float64).reshape(1, -1)
     face = puppet_face(model, topo, acts)
+    V = np.asarray(V, dtype=np.float64)
     Vc = face.vertices(close_mouth(V, topo))
-    res = render(Vc, face.faces, cam, size, background=background)
-    paint_face(res.image, res.raster, Vc, cam, face, 0)
+    colors = None if colour is None else np.tile(np.asarray(colour, np.float64), (len(Vc), 1))
+    res = render(Vc, face.faces, camera, size, colors=colors, background=background)
+    paint_face(res.image, res.raster, Vc, camera, face, 0)
     return dataclasses.replace(res, visible=res.visible[:V.shape[0]])

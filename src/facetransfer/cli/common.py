@@ -13,6 +13,7 @@ loads (:func:`load_model_and_mediapipe`) and the library's progress bars (:func:
 from __future__ import annotations
 
 import argparse
+import re
 import sys
 from pathlib import Path
 
@@ -49,11 +50,13 @@ def progress_shown() -> bool:
 
 class DefaultsFormatter(argparse.ArgumentDefaultsHelpFormatter):
     """``(default: X)`` after an option's help only where it has a default its help does not
-    state already (no "(default: None)", no "default 18 (default: None)")."""
+    state already (no "(default: None)", no "default 18 (default: None)", no "(default: [])"
+    after a repeatable option given none). "Default" as a word says it; "the flow tracker's
+    defaults" (``--speed``'s help) does not, and hid its own default."""
 
     def _get_help_string(self, action):
-        if action.default is None or action.default is False or \
-                "default" in (action.help or "").lower():
+        if action.default is None or action.default is False or action.default == [] or \
+                re.search(r"\bdefault\b", action.help or "", re.IGNORECASE):
             return action.help
         return super()._get_help_string(action)
 
@@ -106,7 +109,7 @@ def add_video_options(p: argparse.ArgumentParser, *, what: str = "the video",
                    + ("; 4444 keeping a target's alpha); h265 and prores keep a 10-bit or HDR "
                       "target's depth and colour" if carries_target else ")")
                    + (f"; ignored for an image sequence ({flag} frames/%%05d.png)"
-                      if sequences else ""))
+                      if sequences else "") + f"; default {DEFAULT_CODEC}")
     p.add_argument("--crf", type=int, default=None,
                    help=f"constant rate factor of h264/h265, {CRF_RANGE[0]} (best) to "
                    f"{CRF_RANGE[1]}; default {DEFAULT_CRF}")

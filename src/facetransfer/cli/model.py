@@ -357,13 +357,36 @@ def _fallback_render(vertices: np.ndarray, faces: np.ndarray, camera, size) -> n
     return img
 
 
+#: The skin of a sheet's tiles (RGB in [0, 1]).
+TILE_SKIN = (0.85, 0.75, 0.70)
+
+
 def _render_tile(vertices: np.ndarray, faces: np.ndarray, camera, size) -> np.ndarray:
     try:
         from ..render import render
     except ImportError:
         return _fallback_render(vertices, faces, camera, size)
-    colors = np.tile(np.array([[0.85, 0.75, 0.70]]), (len(vertices), 1))
+    colors = np.tile(np.array([TILE_SKIN]), (len(vertices), 1))
     return render(vertices, faces, camera, size, colors=colors, background=(255, 255, 255)).image
+
+
+def tile_painter(model):
+    """``paint(V, weights, camera, size=TILE) -> (H, W, 3) uint8``: a sheet's tile of
+    ``model``'s face ``V`` (n, 3) made of ``weights`` (mode -> (r_k,)), its eyes and mouth as
+    the puppet's (:func:`facetransfer.puppet_face.draw_face`; an ARKit model's eyes turned by
+    the weights' eyeLook*): the eye holes and the mouth gap showed the sheet's white paper."""
+    from ..arkit import is_arkit_model, weights_to_activations
+    from ..puppet_face import draw_face
+    from ..topology import mesh_topology
+
+    topo, arkit = mesh_topology(model, lips=False), is_arkit_model(model)
+
+    def paint(V: np.ndarray, weights, camera, size=TILE) -> np.ndarray:
+        acts = weights_to_activations(model, np.asarray(weights["expression"])[None])[0] \
+            if arkit else None
+        return draw_face(model, topo, V, camera, size, activations=acts,
+                         colour=TILE_SKIN).image
+    return paint
 
 
 def _camera(vertices: np.ndarray, size, yaw_deg: float = 15.0):
@@ -424,7 +447,8 @@ def model_sheets(model, *, max_identities: int = 8, dial_components: int = 3,
     flat = [w for row in weights for w in row]
     batch = {n: np.stack([w[n] for w in flat]) for n in model.mode_names}
     V = model.synthesize(batch)
-    tiles = [[_render_tile(V[i * len(cols) + j], model.faces, cam, TILE) for j in range(len(cols))]
+    paint = tile_painter(model)
+    tiles = [[paint(V[i * len(cols) + j], weights[i][j], cam) for j in range(len(cols))]
              for i in range(len(ids))]
     col_labels = [lab if len(model.mode_names) == 2 else f"{m[:3]}:{lab}" for m, lab in cols]
     sheet = _grid(tiles, ids, col_labels, f"{', '.join(model.mode_names)} "
@@ -444,7 +468,7 @@ def model_sheets(model, *, max_identities: int = 8, dial_components: int = 3,
                 ws.append(w)
             b = {n: np.stack([w[n] for w in ws]) for n in model.mode_names}
             Vd = model.synthesize(b)
-            rows.append([_render_tile(v, model.faces, cam, TILE) for v in Vd])
+            rows.append([paint(v, w, cam) for v, w in zip(Vd, ws)])
             rlabels.append(f"{name} pc{pc}")
     dials = _grid(rows, rlabels, [f"{t:+g} sd" for t in dial_steps], "one dial at a time")
     return sheet, dials
@@ -493,7 +517,7 @@ def cmd_dials(args: argparse.Namespace) -> int:
               f"identity left out: {m.shape[0]} identities are too few for "
               + ("them" if len(bad) > 1 else "it") + " to mean what the name says")
     if args.out:
-        img = dial_sheet(m, dials)
+        img = dial_sheet(m, dials, paint=tile_painter(m))
         with atomic_path(args.out, overwrite=args.overwrite) as tmp:
             img.save(tmp, format="PNG")
         print(f"wrote {args.out}")
@@ -550,7 +574,8 @@ def register(sub) -> None:
     h = msub.add_parser("sheet", help="picture sheets: identities x expressions, and dials")
     h.add_argument("model", nargs="?", help=MODEL_ARG_HELP)
     h.add_argument("--out", required=True, help="SHEET.png (also writes SHEET_dials.png)")
-    h.add_argument("--max-identities", type=int, default=8, help="rows of the first sheet")
+    h.add_argument("--max-identities", type=int, default=8,
+                   help="rows of the first sheet, one per training identity (default 8)")
     _overwrite_option(h)
     h.set_defaults(func=cmd_sheet)
 

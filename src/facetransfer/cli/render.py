@@ -259,7 +259,7 @@ def register(sub) -> None:
     r.add_argument("--pose", help="head pose, e.g. yaw=20,pitch=-5,roll=0,scale=1.2 (degrees)")
     r.add_argument("--size", default="640x480", help="image WIDTHxHEIGHT (default 640x480)")
     r.add_argument("--background", default="255,255,255", help="R,G,B (default white)")
-    r.add_argument("--out", required=True, help="IMG.png")
+    r.add_argument("--out", required=True, help="the image to write, IMG.png or .jpg")
     r.add_argument("--overwrite", action="store_true", help="replace an existing output")
     r.set_defaults(func=cmd_render)
 

@@ -49,7 +49,8 @@ def register(sub) -> None:
     fe.add_argument("--out", required=True, help='feature file to write (JSON {"points": ...})')
     _add_texture_options(fe)
     fe.add_argument("--view", choices=("auto", "front"), default="auto",
-                    help="auto: search the scan's orientation; front: it faces +z with y up")
+                    help="auto (default): search the scan's orientation; front: it faces +z "
+                         "with y up")
     fe.add_argument("--with-jaw", action="store_true",
                     help="also the jaw contour (iBUG 0-16; a silhouette, less reliable on a 3D "
                     "surface)")
@@ -74,7 +75,7 @@ def register(sub) -> None:
                     help="previous fit of the same subject (template topology) to deform instead: "
                          "closed-mouth scan -> neutral fit, viseme -> closed-mouth fit")
     ft.add_argument("--prior", choices=("auto", "identity+expression", "none"), default="auto",
-                    help="face space fitted before the smooth deformation: 'auto' = for the "
+                    help="face space fitted before the smooth deformation: 'auto' (default) = for the "
                          "ICT template, both ICT-FaceKit's 100 identity components and "
                          "identity+expression are fitted and the one closer to the scan is kept "
                          "(the report names it), none for other "
