@@ -516,28 +516,112 @@ def test_every_command_is_found_where_cli_main_says():
     assert elsewhere and [c for c in elsewhere if f"``{c}``" not in doc] == []
 
 
+#: README's names that are files, not modules (``TRACK.npz``, ``OUT.mp4``): not resolved.
+_FILE_SUFFIXES = {"py", "mp4", "npz", "csv", "json", "glb", "usd", "png", "html", "txt"}
+
+
+def _resolve(name: str, base: str | None = None) -> bool:
+    """Whether ``name`` exists: ``track.obtain.obtain_track`` (``facetransfer.`` before it or
+    not), a module of the package and then names in it; or, with ``base``, names in the module
+    ``base`` (``_Planner.read_target``). A dataclass's field counts as its attribute
+    (``TransferPlan.mouth_frames``)."""
+    import dataclasses
+    import importlib
+
+    parts = name.removeprefix("facetransfer.").split(".")
+    obj, rest = None, parts
+    for i in range(len(parts), 0, -1):   # the longest module prefix, then attributes
+        if "facetransfer." + ".".join(parts[:i]) in MODULES:
+            obj, rest = importlib.import_module("facetransfer." + ".".join(parts[:i])), parts[i:]
+            break
+    if obj is None and base is not None:
+        obj = importlib.import_module(base)
+    if obj is None:
+        return False
+    for attr in rest:
+        if not hasattr(obj, attr):
+            fields = {f.name for f in dataclasses.fields(obj)} \
+                if isinstance(obj, type) and dataclasses.is_dataclass(obj) else set()
+            return attr in fields and attr == rest[-1]
+        obj = getattr(obj, attr)
+    return True
+
+
+def _file_module(path: str) -> str | None:
+    """The module of ``path`` (``cli/transfer.py``, under ``src/facetransfer/``), or None."""
+    parts = path.removesuffix(".py").split("/")
+    name = "facetransfer." + ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+    return name if name in MODULES else None
+
+
+def _unresolved(text: str) -> list[str]:
+    """The names of README text that do not exist: ``file.py:name`` (the file under
+    ``src/facetransfer/``), dotted ``module.name`` spans, and on a numbered step's line (which
+    starts with its ``file.py:name``) also the bare names it gives, as the file's."""
+    bad = []
+    for line in text.splitlines():
+        files = re.findall(r"`([\w/]+\.py):([\w.]+)`", line)
+        for path, name in files:
+            module = _file_module(path)
+            if module is None or not _resolve(name, module):
+                bad.append(f"{path}:{name}")
+        base = _file_module(files[0][0]) if files and re.match(r"^\d+\. `", line) else None
+        for span in re.findall(r"`([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)`", line):
+            dotted = "." in span
+            if dotted and span.rsplit(".", 1)[1] in _FILE_SUFFIXES:
+                continue
+            if (dotted or (base and "_" in span)) and not _resolve(span, base):
+                bad.append(span)
+    return bad
+
+
+def test_the_readme_name_check_finds_a_planted_name():
+    """:func:`_unresolved` is not vacuous: a missing function, method or file is found."""
+    assert _unresolved("1. `cli/transfer.py:run_transfer`: `_say_transfer`, "
+                       "`transfer.recombine`, `TransferPlan` in `transfer_plan.TransferPlan`") \
+        == []
+    assert _unresolved("1. `cli/transfer.py:run_transfer`: `_no_such_helper`, "
+                       "`rewrite.no_such_function`") == ["_no_such_helper",
+                                                         "rewrite.no_such_function"]
+    assert _unresolved("`transfer_plan.py:_Planner.no_such` and `cli/nothing.py:main`") == [
+        "transfer_plan.py:_Planner.no_such", "cli/nothing.py:main"]
+    assert _unresolved("`transfer_plan.TransferPlan.mouth_frames`, `OUT.mp4`, "
+                       "`facetransfer.eyes.GAZE_WEIGHT`") == []
+    assert _unresolved("`facetransfer.eyes.NO_SUCH`") == ["facetransfer.eyes.NO_SUCH"]
+
+
 def test_the_readme_walk_names_functions_that_exist():
     """README's "Where to start" walks one transfer from the command to the written video and
     into the eye region's paste; this session moved code under it (the edits out of
     ``transfer``, ``edit``'s command out of ``cli.transfer``). Every ``module.name`` it gives
-    must resolve, and ``tests/...`` files exist."""
-    import importlib
-    import re
-
+    must resolve, and ``tests/...`` files exist. The fifty-fourth session's walk (helper
+    doc54) gave ``track`` and ``export`` walks too, each step ``file.py:function``, and the
+    mouth's paragraph: each of the three walks starts at its command's module, and every name
+    of it resolves."""
     text = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
     walk = text.split("\n### Where to start\n", 1)[1].split("\n## ", 1)[0]
-    names = re.findall(r"`([a-z_]+(?:\.[A-Za-z_]+)+)`", walk)
-    dotted = [n for n in names if not n.startswith("tests/")]
-    assert len(dotted) > 20
-    for name in dotted:
-        parts, obj = name.split("."), None
-        for i in range(len(parts), 0, -1):   # the longest module prefix, then attributes
-            if "facetransfer." + ".".join(parts[:i]) in MODULES:
-                obj = importlib.import_module("facetransfer." + ".".join(parts[:i]))
-                break
-        assert obj is not None, name
-        for attr in parts[i:]:
-            assert hasattr(obj, attr), name
-            obj = getattr(obj, attr)
+    assert len(re.findall(r"`[a-z_]+(?:\.[A-Za-z_]+)+`", walk)) > 20
+    assert _unresolved(walk) == []
+    for command in ("transfer", "track", "export"):
+        block = walk.split(f"**`facetransfer {command} ", 1)[1].split("\n**`", 1)[0]
+        steps = re.findall(r"^\d+\. `([\w/]+\.py):", block, re.M)
+        assert len(steps) >= 4 and steps[0] == f"cli/{command}.py", (command, steps)
     for path in re.findall(r"`(tests/\w+\.py)`", walk):
         assert (PACKAGE.parents[1] / path).is_file(), path
+
+
+def test_every_name_readme_gives_of_the_package_exists():
+    """README named ``facetransfer.x.y`` in 60-odd places, its "Architecture" and the transfer's
+    chart the rest, and only the paper table and the walk were checked: a name gone (moved,
+    renamed) misled a newcomer who looked for it. Every ``facetransfer.…`` of README, every
+    dotted name of "Architecture" and every dotted name in its chart's boxes resolves."""
+    text = (PACKAGE.parents[1] / "README.md").read_text(encoding="utf-8")
+    named = set(re.findall(r"\bfacetransfer((?:\.[A-Za-z_]\w*)+)", text))
+    assert len(named) > 40
+    assert sorted(n for n in named if not _resolve("facetransfer" + n)) == []
+    section = text.split("\n## Architecture", 1)[1].split("\n## ", 1)[0]
+    assert _unresolved(section) == []
+    chart = re.search(r"```mermaid\n(.*?)```", section, re.S).group(1)
+    boxes = re.findall(r"[a-z_]+(?:\.[a-z_]\w*)+", " ".join(re.findall(r"\[(.*?)\]", chart)))
+    assert len(boxes) >= 8
+    assert sorted(b for b in boxes if not _resolve(b)) == []

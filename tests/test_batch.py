@@ -410,7 +410,7 @@ def _stub_export(monkeypatch, calls):
     importlib.import_module("facetransfer.export.livelink")   # the job digest's take labels
 
     mod = types.ModuleType("facetransfer.export")
-    mod.FORMATS = real.FORMATS
+    mod.FORMATS, mod.GEOMETRY_FORMATS = real.FORMATS, real.GEOMETRY_FORMATS
 
     def export_track(track, fmt, out, *, model=None, overwrite=False, texture=None,
                      neutral=None, labels=None):

@@ -743,3 +743,29 @@ def test_export_of_a_take_with_a_neutral_past_its_frames_names_the_take(
     assert f"--neutral 99: the take {take} has frames 0 to 5 (on its 25 fps timeline)" in err
     assert "the track" not in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "n.json").exists()
+
+
+def test_every_list_of_export_formats_is_export_formats():
+    """A new format named in :data:`facetransfer.export.FORMATS` alone was refused by ``batch
+    export`` (its ``--format`` choices were a list of their own) and named no file there
+    (:data:`facetransfer.batch.jobs.EXPORT_EXTENSIONS`): the other lists are this one, and the
+    formats that need the geometry are among them (README's "Where to start" lists what a new
+    format touches)."""
+    import argparse
+
+    from facetransfer.batch.jobs import EXPORT_EXTENSIONS
+    from facetransfer.cli.main import build_parser
+    from facetransfer.export import FORMAT_SUFFIXES, FORMATS, GEOMETRY_FORMATS
+
+    assert EXPORT_EXTENSIONS == FORMATS
+    assert list(FORMAT_SUFFIXES) == list(FORMATS)
+    assert all(FORMAT_SUFFIXES[f][0] == s for f, s in FORMATS.items())
+    assert set(GEOMETRY_FORMATS) < set(FORMATS)
+
+    def sub(parser, name):
+        action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+        return action.choices[name]
+
+    batch_export = sub(sub(build_parser(), "batch"), "export")
+    fmt = next(a for a in batch_export._actions if "--format" in a.option_strings)
+    assert tuple(fmt.choices) == tuple(FORMATS)

@@ -1,4 +1,5 @@
-"""Compositing a rendered face back into footage: Poisson image editing and colour matching (§6).
+"""Compositing a rendered face back into footage (§6, Fig. 7D): the membrane blend (the default),
+Poisson image editing and colour matching.
 
 Vlasic et al. (2005), §6 and Fig. 7D: "For best visual results, we blend [Pérez et al. 2003] the
 face texture from the target video; the mouth texture from the source video; and the background
@@ -16,7 +17,11 @@ of the target (for feathered masks), or the larger of the source and target diff
 gradients, Pérez et al. Eq. (12)–(13)).
 
 OpenCV's ``seamlessClone`` is used where it serves (one hard-edged region, one source, away from
-the image border); the sparse solver here does everything else.
+the image border); the sparse solver here does everything else. The rewrite's ``blend="poisson"``
+is :func:`composite_face`; its default, ``blend="fast"``, is :func:`membrane_blend`: the same
+equation with the source's own gradients as guidance, whose correction (harmonic, equal to
+``target - source`` on the region's outline) is interpolated from the outline
+(:mod:`facetransfer.jacobi`'s sweeps) instead of solved for.
 
 References
 ----------
@@ -422,7 +427,8 @@ def match_color(source, target, source_mask, target_mask=None) -> np.ndarray:
 
 def composite_face(target_frame, rendered_face, face_mask, *, mouth_source=None, mouth_mask=None,
                    color_match: bool = True, feather: float = 3.0, mixed: bool = False) -> np.ndarray:
-    """Blend a rendered face into a frame (Vlasic et al. 2005, §6, Fig. 7D).
+    """Blend a rendered face into a frame by solving the Poisson equation (Vlasic et al. 2005,
+    §6, Fig. 7D; the rewrite's ``blend="poisson"``, where :func:`membrane_blend` is its default).
 
     The face region's guidance field comes from ``rendered_face`` (optionally colour-matched to
     the target's face region first), the mouth region's from ``mouth_source`` (e.g. the source

@@ -14,7 +14,8 @@ the sequence)", applied to the eyes):
    nothing of the region carries the target's own blinks or brow movements;
 3. the new mesh is rasterised with the fill (the z-buffer puts a closing lid in front of the
    eyeball), and the eye region is pasted into the per-frame face shifted to its colours (the
-   frames' exposure may differ: :func:`paint_eyes`, :func:`facetransfer.patch.match_outline`);
+   frames' exposure may differ: :func:`paint_eyes`, in the rewrite :func:`paint_shaded_eyes`;
+   :func:`facetransfer.patch.match_outline_into`);
 4. when the target closes its eyes somewhere in the clip (:func:`closed_eye_frame`), that
    frame's lids fade in as the new lids close (:meth:`EyeTexture.closing`), so a blink shows the
    target's own closed lid rather than its open-eyed lid skin stretched;

@@ -402,8 +402,8 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
                  own: tuple[np.ndarray, np.ndarray] | None = None):
     """The new face textured at one frame (§6): every texture it takes sampled in one pass
     over the raster (:func:`facetransfer.render.shade_layers`), then the eye and jaw regions
-    pasted into the face (:func:`facetransfer.eyes.paint_eyes`,
-    :func:`facetransfer.jaw.paint_jaw`). ``own = (frame, where)``: the face texture replaced
+    pasted into the face (:func:`facetransfer.eyes.paint_shaded_eyes`,
+    :func:`facetransfer.jaw.paint_shaded_jaw`). ``own = (frame, where)``: the face texture replaced
     by the (cropped) target frame's own pixels ``where`` (:func:`facetransfer.rim.
     drawn_inside`), under the regions.
 

@@ -1,8 +1,9 @@
 """Mesh topology of the model for texturing (Vlasic et al. 2005, §6, Fig. 7A).
 
 The boundary loops of the model's mesh, the mouth gap closed by a fan for texturing ("the mouth
-shapes closed-off for texturing", Fig. 7A–C) and the eye holes, which stay open so that the
-target's own eyes show through (§6).
+shapes closed-off for texturing", Fig. 7A–C) and the eye holes, which stay open here so that the
+target's own eyes show through (§6; the rewrite's ``eyes="target"``). The default
+``eyes="model"`` closes them for its eye region (:func:`facetransfer.eyes.close_eyes`).
 """
 
 from __future__ import annotations

@@ -1,4 +1,5 @@
-"""Face transfer applications on tracked performances (Vlasic et al. 2005, §5, §6, Fig. 1, Fig. 7).
+"""Tracks recombined into a new performance (Vlasic et al. 2005, §6, Fig. 1, Fig. 7B–D): time maps
+and recombination, pure functions on tracks.
 
 A tracked video is a :class:`~facetransfer.track.Track`: per frame a weak-perspective pose
 (Eq. (7)) and one weight vector per model mode (Eq. (5)). Because the multilinear model separates

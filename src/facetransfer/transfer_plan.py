@@ -324,12 +324,13 @@ def _planned(planner: "_Planner", inputs: "_Inputs", sources: TransferSources, m
              pre_read, early, quiet: Callable[[], None] | None = None) -> TransferPlan:
     """:func:`plan_sources`' sources read and tracked into ``inputs`` (``pre_read``, ``early``:
     the expression source's frames and forked track) and recombined; ``quiet``: called before
-    a source is tracked here (:meth:`_Planner.read_source`)."""
+    a source is tracked here (:meth:`_Planner.read_and_track_source`)."""
     for kind in ("expression", "viseme", "pose", "identity"):
         src = getattr(sources, kind)
         if src is not None:
-            planner.read_source(inputs, kind, src, pre_read if kind == "expression" else None,
-                                early if kind == "expression" else None, quiet)
+            planner.read_and_track_source(
+                inputs, kind, src, pre_read if kind == "expression" else None,
+                early if kind == "expression" else None, quiet)
     obtain.done_tracking()              # every track is in: nothing of it kept for the render
     if sources.performance is not None:
         return _performance_plan(inputs, sources, model)
@@ -622,8 +623,8 @@ class _Planner:
             raise VideoError(f"no face found in the target {target.video}")
         return held_track(tt, n_held, fps) if n_held else tt
 
-    def read_source(self, inputs: _Inputs, kind: str, src: Source, pre_read, early,
-                    quiet: Callable[[], None] | None = None) -> None:
+    def read_and_track_source(self, inputs: _Inputs, kind: str, src: Source, pre_read,
+                              early, quiet: Callable[[], None] | None = None) -> None:
         """Read and track a source (``pre_read``: its decoded frames; ``early``: its track
         from the background process) into ``inputs``; ``quiet``: called before the source is
         tracked here, with nothing beside it (its detection forks a second process): the

@@ -47,7 +47,9 @@ MATTE_FORMATS = {"png": ".png", "tiff": ".tif", "exr": ".exr"}
 #: :class:`facetransfer.track.detect_checkpoint.DetectionCheckpoint`).
 SAVE_EVERY = 4.0
 
-#: File extension of each ``batch export`` format.
+#: Format name -> the suffix of ``batch export``'s files: :data:`facetransfer.export.FORMATS`
+#: (not imported here: a worker loads the exporters only when it exports; a test holds the
+#: two equal).
 EXPORT_EXTENSIONS = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "json": ".json"}
 
 
@@ -504,13 +506,13 @@ def export_one(job, fmt: str, out: str, model=None, texture=None, neutral=None,
     Without ``model``, a track made with the default model gets the worker's cached copy of
     it; any other track is left to ``export_track``'s own check (``model=None``).
     """
-    from ..export import export_track
+    from ..export import GEOMETRY_FORMATS, export_track
     from ..track.result import Track
 
     t0 = time.perf_counter()
     track = Track.load(job.track)
     model = worker_model(model)
-    if model is None and fmt in ("glb", "usd"):  # livelink and json need no geometry
+    if model is None and fmt in GEOMETRY_FORMATS:  # the others need no geometry
         from ..default_model import default_model_path
 
         if default_model_path().is_file():

@@ -130,11 +130,13 @@ def _register_transfer(bs, fmt) -> None:
 
 
 def _register_export(bs, fmt) -> None:
-    """``batch export``'s parser."""
+    """``batch export``'s parser (its formats :data:`facetransfer.export.FORMATS`)."""
+    from ..export import FORMATS
+
     e = bs.add_parser("export", formatter_class=fmt, help="export many tracks: DIR/NAME.<ext>",
                       description="Run `facetransfer export` for every track file.")
     e.add_argument("tracks", nargs="+", metavar="TRACK.npz", help="track files to export")
-    e.add_argument("--format", required=True, choices=("livelink", "glb", "usd", "json"),
+    e.add_argument("--format", required=True, choices=tuple(FORMATS),
                    help="livelink (DIR/NAME.csv), glb, usd or json, as `facetransfer export "
                    "--format`")
     e.add_argument("--model", metavar="M.npz",

@@ -14,7 +14,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from ..export import FORMAT_SUFFIXES, FORMATS
+from ..export import FORMAT_SUFFIXES, FORMATS, GEOMETRY_FORMATS
 from .common import (default_model_for, frame_count, option_with, progress_disabled,
                      resolve_model)
 
@@ -227,7 +227,7 @@ def _track_and_model(track, args):
     if track.blendshapes is None:
         track, model = _activations(track, model, args)
     require_activations(track)
-    if model is None and args.format in ("glb", "usd"):
+    if model is None and args.format in GEOMETRY_FORMATS:
         model = default_model_for(track)
     return track, model
 
@@ -282,7 +282,7 @@ def _say_written(args, track, path, timecode, said: str) -> None:
           + (f", from timecode {timecode} ({said})" if timecode and timecode != "source"
              else (f", {said}" if said else ""))
           + (f"; {rows}" if rows else ""))
-    people = _identities(track) if args.format in ("glb", "usd") else 1
+    people = _identities(track) if args.format in GEOMETRY_FORMATS else 1
     if people > 1:
         print(f"note: the track's shots hold {people} people (a clip cut between them); the "
               "mesh is the first one's, the curves every shot's")

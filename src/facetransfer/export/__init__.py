@@ -31,7 +31,8 @@ from .common import (ExportError, activations_from_weights, require_activations,
 from .neutral import with_neutral
 from .usd import USD_SUFFIXES
 
-__all__ = ["FORMATS", "FORMAT_SUFFIXES", "ExportError", "export_track", "format_of"]
+__all__ = ["FORMATS", "FORMAT_SUFFIXES", "GEOMETRY_FORMATS", "ExportError", "export_track",
+           "format_of"]
 
 log = logging.getLogger(__name__)
 
@@ -41,6 +42,9 @@ FORMATS: dict[str, str] = {"livelink": ".csv", "glb": ".glb", "usd": ".usd", "js
 #: glb is binary glTF, never ``.gltf`` (JSON with its buffers beside it).
 FORMAT_SUFFIXES: dict[str, tuple[str, ...]] = {
     "livelink": (".csv",), "glb": (".glb",), "usd": USD_SUFFIXES, "json": (".json",)}
+#: The formats that write the mesh (the track's person and its blend shapes), so need the
+#: track's model (``export --model``, else the default model); the others write curves alone.
+GEOMETRY_FORMATS: tuple[str, ...] = ("glb", "usd")
 
 
 def format_of(out: str | os.PathLike, fmt: str | None = None) -> str:

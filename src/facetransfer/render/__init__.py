@@ -1,4 +1,5 @@
-"""Z-buffer rasterisation of triangle meshes under the tracker's cameras (paper §5.1, §6).
+"""Z-buffer rasterisation and shading of triangle meshes under the tracker's cameras (paper §5.1,
+§6).
 
 The tracker of Vlasic et al. (2005) images the face with a weak-perspective camera (§5.1,
 Eq. (7)): a vertex ``X`` (model coordinates, y up, camera looking along -z) lands at the pixel
