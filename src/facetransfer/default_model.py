@@ -5,7 +5,11 @@ Every command that needs a model and is given none uses it (``track``, ``transfe
 ``lift``, ``render``, ``model info``, ``synth``, ``sheet`` and ``dials``). Its expressions
 are the ARKit blendshapes (:mod:`facetransfer.arkit`), its identities are drawn from the
 ICT-FaceKit's 100-component identity space (§4.1). The file lives at
-:func:`default_model_path`; a damaged file is rebuilt.
+:func:`default_model_path`; a damaged file is rebuilt, and so is one built by another recipe
+or code than this version's (:func:`build_recipe`, recorded beside the file in
+:func:`recipe_path`): an upgrade that changes how the model is built never leaves the old
+build in use. The record is not in the model's metadata, so a build of the same bits keeps
+the model's content hash, and the tracks and face files made with it stay its own.
 
 Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datasets` and
 :func:`facetransfer.model.build_model`), below every consumer.
@@ -13,6 +17,8 @@ Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datas
 
 from __future__ import annotations
 
+import hashlib
+import json
 import logging
 from pathlib import Path
 from typing import Callable
@@ -21,8 +27,8 @@ from .errors import ModelFileError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_DATASET", "default_model_path", "dataset_ranks", "load_default_model",
-           "is_default_model"]
+__all__ = ["DEFAULT_DATASET", "default_model_path", "recipe_path", "build_recipe",
+           "dataset_ranks", "load_default_model", "is_default_model"]
 
 #: The data set of the default model.
 DEFAULT_DATASET = "ict-arkit"
@@ -37,6 +43,30 @@ def default_model_path() -> Path:
     from .assets import cache_dir
 
     return cache_dir() / "models" / f"{DEFAULT_DATASET}-default-v{DEFAULT_MODEL_VERSION}.npz"
+
+
+def recipe_path() -> Path:
+    """The record beside :func:`default_model_path` of what built that file: its
+    :func:`build_recipe` and its content hash (JSON)."""
+    path = default_model_path()
+    return path.with_name(f"{path.stem}.recipe.json")
+
+
+def build_recipe(*, root: Path | None = None) -> str:
+    """A digest of what builds the default model: :data:`DEFAULT_MODEL_VERSION`, the data set's
+    cache key (its recipes, seed, identities, the ICT-FaceKit's commit, its builder's version
+    and code: :func:`facetransfer.datasets.ict.ict_cache_path`) and the code and data files of
+    every module the build can run (:func:`facetransfer.code_digest.closure_digest` of this
+    module, in the package at ``root``: by default this one). Not the libraries' versions: a
+    model built with another NumPy is as good, and rebuilding it would orphan its tracks for its
+    last bits."""
+    from . import code_digest
+    from .datasets.ict import ict_cache_path
+
+    code = code_digest.closure_digest([__name__], "", root=root or code_digest.PACKAGE_ROOT)
+    what = {"version": DEFAULT_MODEL_VERSION, "dataset": ict_cache_path(DEFAULT_DATASET).name,
+            "code": code}
+    return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:20]
 
 
 def dataset_ranks(dataset) -> dict[str, int]:
@@ -64,13 +94,48 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
     """
     from .model import load_model
 
-    path = default_model_path()
+    path, recipe, stale = default_model_path(), build_recipe(), False
     if path.is_file():
         try:
-            return load_model(path)
+            model = load_model(path)
         except ModelFileError as exc:
             log.warning("cached default model is unusable (%s); rebuilding", exc)
-    return _build(path, progress, announce)
+        else:
+            if _recorded(model) == recipe:
+                return model
+            stale = True
+    if announce is not None:
+        announce(f"rebuilding the default model ({DEFAULT_DATASET}) into {path}: the cached "
+                 "one was built by another version of its recipe or code" if stale else
+                 f"building the default model ({DEFAULT_DATASET}) once into {path}")
+    model = _build(path, progress, None)
+    _record(model, recipe)
+    return model
+
+
+def _recorded(model) -> str | None:
+    """The :func:`build_recipe` that :func:`recipe_path` records for ``model`` (the file as
+    loaded: the record names its content hash); None where there is no record (a model built
+    before the record existed), it is unreadable, or it is another file's."""
+    try:
+        record = json.loads(recipe_path().read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(record, dict) or record.get("sha256") != model.content_hash:
+        return None
+    return record.get("recipe")
+
+
+def _record(model, recipe: str) -> None:
+    """Write :func:`recipe_path` for ``model`` just saved: built by ``recipe``. A record that
+    cannot be written leaves the model to be rebuilt next time (warned)."""
+    from .io.atomic import write_text_atomic
+
+    try:
+        write_text_atomic(recipe_path(), json.dumps({"recipe": recipe,
+                                                     "sha256": model.content_hash}))
+    except (OSError, ValueError) as exc:   # OutputError: a full disk, a read-only cache
+        log.warning("could not record how the default model was built (%s)", exc)
 
 
 def _build(path: Path, progress, announce):
