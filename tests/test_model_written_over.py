@@ -120,3 +120,27 @@ def test_outside_a_command_a_library_caller_is_not_checked(quick_model_path, tmp
     assert (tmp_path / "before.txt").is_file() and not (tmp_path / "after.txt").exists()
     assert not list(tmp_path.glob(".after*"))           # its temporary file removed
     del m
+
+
+def test_an_image_sequences_frames_are_not_placed_after_it(quick_model_path, tmp_path,
+                                                           monkeypatch):
+    """An image sequence's frames are put in place by the writer itself (not through
+    ``atomic_path``): they too wait for the checks, so none of a plate rendered with a model
+    written over reaches its pattern."""
+    from facetransfer.errors import ModelFileError
+    from facetransfer.io.video import place_sequence
+
+    monkeypatch.setattr(model_module, "MAP_MIN_BYTES", 1024)
+    mine, done = tmp_path / "M.npz", tmp_path / "done"
+    shutil.copyfile(quick_model_path, mine)
+    done.mkdir()
+    for i in range(2):
+        (done / f"f{i:04d}.png").write_bytes(b"frame")
+    with atomic.commit_checks():
+        m = model_module.load_model(mine)
+        _write_over(mine)
+        with pytest.raises(ModelFileError, match="was written over"):
+            place_sequence(done, tmp_path / "out" / "f%04d.png", 2)
+    assert sorted(p.name for p in done.iterdir()) == ["f0000.png", "f0001.png"]
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").iterdir())
+    del m
