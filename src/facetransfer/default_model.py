@@ -79,14 +79,18 @@ def dataset_ranks(dataset) -> dict[str, int]:
 
 def load_default_model(*, progress: Progress | None = None, announce: Callable[[str], None]
                        | None = None):
-    """Load the default model, building and caching it first if needed.
+    """Load the default model, building and caching it first if needed: none is cached, the
+    cached one is damaged, or another recipe or code built it (:func:`build_recipe` against
+    :func:`recipe_path`'s record: a model cached without a record, by a version before it, is
+    rebuilt too).
 
     Parameters
     ----------
     progress : callable(done, total), optional
-        Called per identity while the data set is built (first use only).
+        Called per identity while the data set is built (a build only).
     announce : callable(str), optional
-        Called once with a one-line message before a build starts (the CLI prints it).
+        Called once with a one-line message before a build starts (the CLI prints it): the
+        first build's, or a stale model's rebuild's.
 
     Returns
     -------
@@ -104,6 +108,7 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
             if _recorded(model) == recipe:
                 return model
             stale = True
+            del model         # its core's mapped pages (0.45 GB) not held over the build
     if announce is not None:
         announce(f"rebuilding the default model ({DEFAULT_DATASET}) into {path}: the cached "
                  "one was built by another version of its recipe or code" if stale else
