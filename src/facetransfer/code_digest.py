@@ -258,15 +258,35 @@ class _Memo:
             _save_memo(self.memo)
 
 
+#: :data:`CODE_MEMO` as this process last read or wrote it: (its path, size and modification
+#: time) and its entries, so that the keys one command computes (the track cache's, the
+#: default model's) read it once.
+_READ: dict = {}
+
+
+def _memo_identity(path: Path) -> tuple | None:
+    try:
+        st = path.stat()
+    except OSError:
+        return None
+    return (str(path), st.st_size, st.st_mtime_ns)
+
+
 def _load_memo() -> dict:
-    """:data:`CODE_MEMO`'s entries; none where it is missing or unreadable."""
+    """:data:`CODE_MEMO`'s entries (a copy); none where it is missing or unreadable."""
     from .assets import cache_dir
 
+    path = cache_dir() / CODE_MEMO
+    ident = _memo_identity(path)
+    if ident is not None and _READ.get("identity") == ident:
+        return dict(_READ["memo"])
     try:
-        memo = json.loads((cache_dir() / CODE_MEMO).read_text())
+        memo = json.loads(path.read_text())
     except (OSError, ValueError):
         return {}
-    return memo if isinstance(memo, dict) and len(memo) <= MEMO_LIMIT else {}
+    memo = memo if isinstance(memo, dict) and len(memo) <= MEMO_LIMIT else {}
+    _READ.update(identity=ident, memo=dict(memo))
+    return memo
 
 
 def _save_memo(memo: dict) -> None:
@@ -276,10 +296,12 @@ def _save_memo(memo: dict) -> None:
     from .assets import cache_dir
     from .io.atomic import write_text_atomic
 
+    path = cache_dir() / CODE_MEMO
     try:
-        write_text_atomic(cache_dir() / CODE_MEMO, json.dumps(memo))
+        write_text_atomic(path, json.dumps(memo))
     except (OSError, ValueError):
-        pass
+        return
+    _READ.update(identity=_memo_identity(path), memo=dict(memo))
 
 
 def _code_of(source: bytes) -> bytes:

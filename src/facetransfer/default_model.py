@@ -17,7 +17,6 @@ Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datas
 
 from __future__ import annotations
 
-import hashlib
 import json
 import logging
 from pathlib import Path
@@ -53,20 +52,17 @@ def recipe_path() -> Path:
 
 
 def build_recipe(*, root: Path | None = None) -> str:
-    """A digest of what builds the default model: :data:`DEFAULT_MODEL_VERSION`, the data set's
-    cache key (its recipes, seed, identities, the ICT-FaceKit's commit, its builder's version
-    and code: :func:`facetransfer.datasets.ict.ict_cache_path`) and the code and data files of
-    every module the build can run (:func:`facetransfer.code_digest.closure_digest` of this
-    module, in the package at ``root``: by default this one). Not the libraries' versions: a
-    model built with another NumPy is as good, and rebuilding it would orphan its tracks for its
-    last bits."""
+    """A digest of what builds the default model: the code and data files of every module the
+    build can run (:func:`facetransfer.code_digest.closure_digest` of this module, in the
+    package at ``root``: by default this one). They hold all of it: :data:`DEFAULT_MODEL_VERSION`,
+    the recipe file (``ict_recipes.json``: the data set's expressions, identities and ranks),
+    the ICT-FaceKit's commit and its files' sha256 table (:mod:`facetransfer.assets`), the
+    builder's version and code. Not the libraries' versions: a model built with another NumPy
+    is as good, and rebuilding it would orphan its tracks for its last bits."""
     from . import code_digest
-    from .datasets.ict import ict_cache_path
 
-    code = code_digest.closure_digest([__name__], "", root=root or code_digest.PACKAGE_ROOT)
-    what = {"version": DEFAULT_MODEL_VERSION, "dataset": ict_cache_path(DEFAULT_DATASET).name,
-            "code": code}
-    return hashlib.sha256(json.dumps(what, sort_keys=True).encode()).hexdigest()[:20]
+    return code_digest.closure_digest([__name__], f"default-v{DEFAULT_MODEL_VERSION}",
+                                      root=root or code_digest.PACKAGE_ROOT)
 
 
 def dataset_ranks(dataset) -> dict[str, int]:
