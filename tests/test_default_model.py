@@ -41,7 +41,9 @@ def fast_default(monkeypatch, tmp_path, quick_ict_dataset):
         return quick_ict_dataset
 
     monkeypatch.setattr(datasets, "load_dataset", small)
-    return calls
+    dm._recipe.cache_clear()                # the recipe of the package a test may change
+    yield calls
+    dm._recipe.cache_clear()
 
 
 def test_built_once_then_read(small_default):
@@ -181,13 +183,16 @@ def test_a_change_of_the_builders_code_or_recipes_rebuilds_the_default_model(
     deformation = root / "datasets" / "deformation.py"
     _edit(deformation, '"""', '"""Reworded. ')
     _edit(root / "cli" / "main.py", "\ndef ", "\ndef _new():\n    return 2\n\n\ndef ")
+    dm._recipe.cache_clear()                   # a new process, of the changed package
     dm.load_default_model()
     assert fast_default == ["ict-arkit"]
     _edit(deformation, "\ndef ", "\ndef _new():\n    return 1\n\n\ndef ")
     said = []
+    dm._recipe.cache_clear()
     dm.load_default_model(announce=said.append)
     assert fast_default == ["ict-arkit"] * 2 and said[0].startswith("rebuilding")
     _edit(root / "data" / "ict_recipes.json", "{", '{"note": "a new recipe", ', )
+    dm._recipe.cache_clear()
     dm.load_default_model()
     assert fast_default == ["ict-arkit"] * 3
 
@@ -223,3 +228,42 @@ def test_the_ict_data_sets_cache_keys_hold_their_builders_code(tmp_path, monkeyp
     ict._prune_others(first.parent / f"{stem}d.npz", stem)
     assert sorted(p.name for p in first.parent.iterdir()) == [
         f"{stem}b.npz", f"{stem}c.npz", f"{stem}d.npz", "ict-bilinear-face-n15-s0-e.npz"]
+
+
+def test_another_versions_default_model_is_kept_beside_not_used(tmp_path, monkeypatch,
+                                                                  quick_model,
+                                                                  quick_ict_dataset):
+    """The file is named by its recipe: another version's (here one named before the recipe
+    was, as every default model cached so far) is not used, the rebuild names it, and it is
+    kept beside this version's (two checkouts sharing a user cache do not rebuild it in turn);
+    beyond :data:`~facetransfer.default_model.KEEP_OTHERS` of them, the oldest go."""
+    import os
+
+    import facetransfer.datasets as datasets
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))   # the real path's folder
+    built = []
+    monkeypatch.setattr(datasets, "load_dataset", lambda name, progress=None, **kw:
+                        built.append(name) or quick_ict_dataset)
+    dm._recipe.cache_clear()
+    path = dm.default_model_path()
+    assert path.name == f"ict-arkit-default-v1-{dm.build_recipe()}.npz"
+    older = path.with_name("ict-arkit-default-v1.npz")
+    older.parent.mkdir(parents=True)
+    quick_model.save(older)
+    said = []
+    m = dm.load_default_model(announce=said.append)
+    assert built == ["ict-arkit"] and m.content_hash != quick_model.content_hash
+    assert said == [f"rebuilding the default model (ict-arkit) into {path}: the cached one "
+                    "(ict-arkit-default-v1.npz) was built by another version of its recipe "
+                    "or code"]
+    assert older.is_file() and path.is_file() and dm.recipe_path().is_file()
+    for i in range(3):
+        other = path.with_name(f"ict-arkit-default-v1-other{i}.npz")
+        other.write_bytes(b"x")
+        os.utime(other, (i + 1, i + 1))
+    os.utime(older, (0, 0))
+    dm._prune_others(path)
+    assert sorted(p.name for p in path.parent.glob("*.npz")) == sorted(
+        [path.name, "ict-arkit-default-v1-other1.npz", "ict-arkit-default-v1-other2.npz"])
+    dm._recipe.cache_clear()

@@ -5,11 +5,12 @@ Every command that needs a model and is given none uses it (``track``, ``transfe
 ``lift``, ``render``, ``model info``, ``synth``, ``sheet`` and ``dials``). Its expressions
 are the ARKit blendshapes (:mod:`facetransfer.arkit`), its identities are drawn from the
 ICT-FaceKit's 100-component identity space (§4.1). The file lives at
-:func:`default_model_path`; a damaged file is rebuilt, and so is one built by another recipe
-or code than this version's (:func:`build_recipe`, recorded beside the file in
-:func:`recipe_path`): an upgrade that changes how the model is built never leaves the old
-build in use. The record is not in the model's metadata, so a build of the same bits keeps
-the model's content hash, and the tracks and face files made with it stay its own.
+:func:`default_model_path`, named by what builds it (:func:`build_recipe`: the code and data
+of every module its build runs), so that an upgrade that changes how the model is built never
+leaves the old build in use; a damaged file is rebuilt, and so is one its record
+(:func:`recipe_path`) does not say this recipe built. The recipe is not in the model's
+metadata, so a build of the same bits keeps the model's content hash, and the tracks and face
+files made with it stay its own.
 
 Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datasets` and
 :func:`facetransfer.model.build_model`), below every consumer.
@@ -17,6 +18,7 @@ Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datas
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
 from pathlib import Path
@@ -31,17 +33,31 @@ __all__ = ["DEFAULT_DATASET", "default_model_path", "recipe_path", "build_recipe
 
 #: The data set of the default model.
 DEFAULT_DATASET = "ict-arkit"
-#: Bump when the default model's recipe changes (a new file name; the old one is left alone).
+#: Bump when the default model's recipe changes in a way its code does not show (it is in
+#: :func:`build_recipe`, hence in the file's name).
 DEFAULT_MODEL_VERSION = 1
+#: Default models of other recipes kept beside this version's (the newest; 0.47 GB each): a
+#: switch back to another version (two checkouts sharing a user cache) finds its own.
+KEEP_OTHERS = 2
+#: The default model files' names begin so (then ``-RECIPE.npz``; before the recipe, ``.npz``).
+_STEM = f"{DEFAULT_DATASET}-default-v{DEFAULT_MODEL_VERSION}"
 
 Progress = Callable[[int, int], None]
 
 
 def default_model_path() -> Path:
-    """Where the default model is cached (the file may not exist yet)."""
+    """Where this version's default model is cached (the file may not exist yet): named by
+    its :func:`build_recipe` (``ict-arkit-default-v1-RECIPE.npz``), so that two versions sharing
+    a user cache keep one each, not rebuilding it in turn."""
     from .assets import cache_dir
 
-    return cache_dir() / "models" / f"{DEFAULT_DATASET}-default-v{DEFAULT_MODEL_VERSION}.npz"
+    return cache_dir() / "models" / f"{_STEM}-{_recipe()}.npz"
+
+
+@functools.lru_cache(maxsize=1)
+def _recipe() -> str:
+    """:func:`build_recipe` of this process's package (its code does not change under it)."""
+    return build_recipe()
 
 
 def recipe_path() -> Path:
@@ -94,7 +110,8 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
     """
     from .model import load_model
 
-    path, recipe, stale = default_model_path(), build_recipe(), False
+    path, recipe = default_model_path(), _recipe()
+    stale = _older(path)
     if path.is_file():
         try:
             model = load_model(path)
@@ -103,15 +120,40 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
         else:
             if _recorded(model) == recipe:
                 return model
-            stale = True
+            stale = path
             del model         # its core's mapped pages (0.45 GB) not held over the build
     if announce is not None:
         announce(f"rebuilding the default model ({DEFAULT_DATASET}) into {path}: the cached "
-                 "one was built by another version of its recipe or code" if stale else
-                 f"building the default model ({DEFAULT_DATASET}) once into {path}")
+                 f"one ({stale.name}) was built by another version of its recipe or code"
+                 if stale else f"building the default model ({DEFAULT_DATASET}) once into "
+                 f"{path}")
     model = _build(path, progress, None)
     _record(model, recipe)
+    _prune_others(path)
     return model
+
+
+def _older(path: Path) -> Path | None:
+    """The newest default model file beside ``path`` of another recipe (another version's, or
+    one named before the recipe was), or None."""
+    try:
+        others = [p for p in path.parent.glob(f"{_STEM}*.npz") if p != path and p.is_file()]
+        return max(others, key=lambda p: p.stat().st_mtime, default=None)
+    except OSError:
+        return None
+
+
+def _prune_others(path: Path) -> None:
+    """Remove the default model files of other recipes beside ``path`` (and their records)
+    but the :data:`KEEP_OTHERS` newest; a cache that cannot be pruned is left (logged)."""
+    try:
+        others = [p for p in path.parent.glob(f"{_STEM}*.npz") if p != path and p.is_file()]
+        for p in sorted(others, key=lambda p: p.stat().st_mtime, reverse=True)[KEEP_OTHERS:]:
+            p.unlink(missing_ok=True)
+            p.with_name(f"{p.stem}.recipe.json").unlink(missing_ok=True)
+            log.info("removed %s (another version's default model)", p)
+    except OSError as exc:
+        log.warning("could not prune the default models beside %s (%s)", path, exc)
 
 
 def _recorded(model) -> str | None:
