@@ -267,3 +267,36 @@ def test_another_versions_default_model_is_kept_beside_not_used(tmp_path, monkey
     assert sorted(p.name for p in path.parent.glob("*.npz")) == sorted(
         [path.name, "ict-arkit-default-v1-other1.npz", "ict-arkit-default-v1-other2.npz"])
     dm._recipe.cache_clear()
+
+
+def test_the_blas_loaded_by_the_build_itself_is_held_at_one_thread_too(tmp_path):
+    """SciPy's own OpenBLAS is loaded by the deformation transfer, inside the build's
+    one-thread block, where threadpoolctl's limit did not reach it: it ran on every core, so a
+    build in a process that had not imported SciPy before (the CLI's: 5ef31ecd1964 here) and
+    one that had (pytest's: ac4061d4553f) differed in their last bits. In a fresh process (the
+    test's own has SciPy loaded), every BLAS library is at one thread while the data set is
+    built."""
+    import os
+    import subprocess
+    import sys
+
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("one core: BLAS has one thread anyway")
+    code = (
+        "import sys\n"
+        "from pathlib import Path\n"
+        "import facetransfer.datasets as datasets\n"
+        "from facetransfer import default_model as dm\n"
+        "def load(name, progress=None, **kw):\n"
+        "    import facetransfer.datasets.deformation  # what the build loads: SciPy's solvers\n"
+        "    from threadpoolctl import threadpool_info\n"
+        "    print(sorted({p['num_threads'] for p in threadpool_info()\n"
+        "                  if p['user_api'] == 'blas'}))\n"
+        "    sys.exit(0)\n"
+        "datasets.load_dataset = load\n"
+        "dm._build(Path(sys.argv[1]), None, None)\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("OMP_NUM_THREADS",
+                                                            "OPENBLAS_NUM_THREADS")}
+    run = subprocess.run([sys.executable, "-c", code, str(tmp_path / "m.npz")], env=env,
+                         capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "[1]"
