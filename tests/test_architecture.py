@@ -182,6 +182,7 @@ LAYER_OF = {
     "facetransfer.geometry": "base",     # and the vertex normals the renderer and fitting share
     "facetransfer.jit": "base",          # the numba decorator of every layer's kernels
     "facetransfer.lazy": "base",         # the lazy packages' __getattr__ and __dir__
+    "facetransfer.code_digest": "base",  # the package's code as a cache's key holds it
     "facetransfer.topology": "base",
     "facetransfer.arkit": "base",
     "facetransfer.assets": "base",

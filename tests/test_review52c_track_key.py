@@ -10,6 +10,7 @@ import numpy as np
 
 from facetransfer.io import video_read
 from facetransfer.io.video import encode_video
+from facetransfer import code_digest
 from facetransfer.track import cache
 
 
@@ -43,13 +44,13 @@ def test_a_docstring_or_a_comment_is_not_code(tmp_path):
 
     def digest(text):
         src.write_text(text)
-        return cache.code_digest(tmp_path, [src], "v", code_only=True)
+        return code_digest.code_digest(tmp_path, [src], "v", code_only=True)
 
     code = '"""A reader."""\n\ndef f(x):\n    """One."""\n    return x + 1  # add\n'
     same = '"""The reader, reworded."""\n\n\ndef f(x):\n    """Two."""\n    return x + 1\n'
     other = '"""A reader."""\n\ndef f(x):\n    """One."""\n    return x + 2  # add\n'
     assert digest(code) == digest(same) != digest(other)
-    assert cache.code_digest(tmp_path, [src], "v") != digest(same)   # the render cache's: bytes
+    assert code_digest.code_digest(tmp_path, [src], "v") != digest(same)   # the render cache's: bytes
 
 
 
@@ -62,14 +63,14 @@ def test_a_files_code_is_parsed_once_a_version(tmp_path, monkeypatch):
     src = tmp_path / "io" / "video_read.py"
     src.parent.mkdir()
     src.write_text('"""A reader."""\n\ndef f(x):\n    return x + 1\n')
-    first = cache.code_digest(tmp_path, [src], "v", code_only=True)
-    parse = cache._code_of
-    monkeypatch.setattr(cache, "_code_of", lambda data: (_ for _ in ()).throw(
+    first = code_digest.code_digest(tmp_path, [src], "v", code_only=True)
+    parse = code_digest._code_of
+    monkeypatch.setattr(code_digest, "_code_of", lambda data: (_ for _ in ()).throw(
         AssertionError("parsed again")))
-    assert cache.code_digest(tmp_path, [src], "v", code_only=True) == first
-    monkeypatch.setattr(cache, "_code_of", parse)
+    assert code_digest.code_digest(tmp_path, [src], "v", code_only=True) == first
+    monkeypatch.setattr(code_digest, "_code_of", parse)
     src.write_text('"""A reader."""\n\ndef f(x):\n    return x + 2\n')
-    assert cache.code_digest(tmp_path, [src], "v", code_only=True) != first
-    (tmp_path / "cache" / "facetransfer" / cache.CODE_MEMO).write_text("{not json")
+    assert code_digest.code_digest(tmp_path, [src], "v", code_only=True) != first
+    (tmp_path / "cache" / "facetransfer" / code_digest.CODE_MEMO).write_text("{not json")
     src.write_text('"""A reader."""\n\ndef f(x):\n    return x + 1\n')
-    assert cache.code_digest(tmp_path, [src], "v", code_only=True) == first
+    assert code_digest.code_digest(tmp_path, [src], "v", code_only=True) == first

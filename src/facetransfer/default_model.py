@@ -5,7 +5,12 @@ Every command that needs a model and is given none uses it (``track``, ``transfe
 ``lift``, ``render``, ``model info``, ``synth``, ``sheet`` and ``dials``). Its expressions
 are the ARKit blendshapes (:mod:`facetransfer.arkit`), its identities are drawn from the
 ICT-FaceKit's 100-component identity space (§4.1). The file lives at
-:func:`default_model_path`; a damaged file is rebuilt.
+:func:`default_model_path`, named by what builds it (:func:`build_recipe`: the code and data
+of every module its build runs), so that an upgrade that changes how the model is built never
+leaves the old build in use; a damaged file is rebuilt, and so is one its record
+(:func:`recipe_path`) does not say this recipe built. The recipe is not in the model's
+metadata, so a build of the same bits keeps the model's content hash, and the tracks and face
+files made with it stay its own.
 
 Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datasets` and
 :func:`facetransfer.model.build_model`), below every consumer.
@@ -13,6 +18,8 @@ Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datas
 
 from __future__ import annotations
 
+import functools
+import json
 import logging
 from pathlib import Path
 from typing import Callable
@@ -21,22 +28,57 @@ from .errors import ModelFileError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_DATASET", "default_model_path", "dataset_ranks", "load_default_model",
-           "is_default_model"]
+__all__ = ["DEFAULT_DATASET", "default_model_path", "recipe_path", "build_recipe",
+           "dataset_ranks", "load_default_model", "is_default_model"]
 
 #: The data set of the default model.
 DEFAULT_DATASET = "ict-arkit"
-#: Bump when the default model's recipe changes (a new file name; the old one is left alone).
+#: Bump when the default model's recipe changes in a way its code does not show (it is in
+#: :func:`build_recipe`, hence in the file's name).
 DEFAULT_MODEL_VERSION = 1
+#: Default models of other recipes kept beside this version's (the newest; 0.47 GB each): a
+#: switch back to another version (two checkouts sharing a user cache) finds its own.
+KEEP_OTHERS = 2
+#: The default model files' names begin so (then ``-RECIPE.npz``; before the recipe, ``.npz``).
+_STEM = f"{DEFAULT_DATASET}-default-v{DEFAULT_MODEL_VERSION}"
 
 Progress = Callable[[int, int], None]
 
 
 def default_model_path() -> Path:
-    """Where the default model is cached (the file may not exist yet)."""
+    """Where this version's default model is cached (the file may not exist yet): named by
+    its :func:`build_recipe` (``ict-arkit-default-v1-RECIPE.npz``), so that two versions sharing
+    a user cache keep one each, not rebuilding it in turn."""
     from .assets import cache_dir
 
-    return cache_dir() / "models" / f"{DEFAULT_DATASET}-default-v{DEFAULT_MODEL_VERSION}.npz"
+    return cache_dir() / "models" / f"{_STEM}-{_recipe()}.npz"
+
+
+@functools.lru_cache(maxsize=1)
+def _recipe() -> str:
+    """:func:`build_recipe` of this process's package (its code does not change under it)."""
+    return build_recipe()
+
+
+def recipe_path() -> Path:
+    """The record beside :func:`default_model_path` of what built that file: its
+    :func:`build_recipe` and its content hash (JSON)."""
+    path = default_model_path()
+    return path.with_name(f"{path.stem}.recipe.json")
+
+
+def build_recipe(*, root: Path | None = None) -> str:
+    """A digest of what builds the default model: the code and data files of every module the
+    build can run (:func:`facetransfer.code_digest.closure_digest` of this module, in the
+    package at ``root``: by default this one). They hold all of it: :data:`DEFAULT_MODEL_VERSION`,
+    the recipe file (``ict_recipes.json``: the data set's expressions, identities and ranks),
+    the ICT-FaceKit's commit and its files' sha256 table (:mod:`facetransfer.assets`), the
+    builder's version and code. Not the libraries' versions: a model built with another NumPy
+    is as good, and rebuilding it would orphan its tracks for its last bits."""
+    from . import code_digest
+
+    return code_digest.closure_digest([__name__], f"default-v{DEFAULT_MODEL_VERSION}",
+                                      root=root or code_digest.PACKAGE_ROOT)
 
 
 def dataset_ranks(dataset) -> dict[str, int]:
@@ -49,14 +91,18 @@ def dataset_ranks(dataset) -> dict[str, int]:
 
 def load_default_model(*, progress: Progress | None = None, announce: Callable[[str], None]
                        | None = None):
-    """Load the default model, building and caching it first if needed.
+    """Load the default model, building and caching it first if needed: none is cached, the
+    cached one is damaged, or another recipe or code built it (:func:`build_recipe` against
+    :func:`recipe_path`'s record: a model cached without a record, by a version before it, is
+    rebuilt too).
 
     Parameters
     ----------
     progress : callable(done, total), optional
-        Called per identity while the data set is built (first use only).
+        Called per identity while the data set is built (a build only).
     announce : callable(str), optional
-        Called once with a one-line message before a build starts (the CLI prints it).
+        Called once with a one-line message before a build starts (the CLI prints it): the
+        first build's, or a stale model's rebuild's.
 
     Returns
     -------
@@ -64,26 +110,93 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
     """
     from .model import load_model
 
-    path = default_model_path()
+    path, recipe = default_model_path(), _recipe()
+    stale = _older(path)
     if path.is_file():
         try:
-            return load_model(path)
+            model = load_model(path)
         except ModelFileError as exc:
             log.warning("cached default model is unusable (%s); rebuilding", exc)
-    return _build(path, progress, announce)
+        else:
+            if _recorded(model) == recipe:
+                return model
+            stale = path
+            del model         # its core's mapped pages (0.45 GB) not held over the build
+    if announce is not None:
+        announce(f"rebuilding the default model ({DEFAULT_DATASET}) into {path}: the cached "
+                 f"one ({stale.name}) was built by another version of its recipe or code"
+                 if stale else f"building the default model ({DEFAULT_DATASET}) once into "
+                 f"{path}")
+    model = _build(path, progress, None)
+    _record(model, recipe)
+    _prune_others(path)
+    return model
+
+
+def _older(path: Path) -> Path | None:
+    """The newest default model file beside ``path`` of another recipe (another version's, or
+    one named before the recipe was), or None."""
+    try:
+        others = [p for p in path.parent.glob(f"{_STEM}*.npz") if p != path and p.is_file()]
+        return max(others, key=lambda p: p.stat().st_mtime, default=None)
+    except OSError:
+        return None
+
+
+def _prune_others(path: Path) -> None:
+    """Remove the default model files of other recipes beside ``path`` (and their records)
+    but the :data:`KEEP_OTHERS` newest; a cache that cannot be pruned is left (logged)."""
+    try:
+        others = [p for p in path.parent.glob(f"{_STEM}*.npz") if p != path and p.is_file()]
+        for p in sorted(others, key=lambda p: p.stat().st_mtime, reverse=True)[KEEP_OTHERS:]:
+            p.unlink(missing_ok=True)
+            p.with_name(f"{p.stem}.recipe.json").unlink(missing_ok=True)
+            log.info("removed %s (another version's default model)", p)
+    except OSError as exc:
+        log.warning("could not prune the default models beside %s (%s)", path, exc)
+
+
+def _recorded(model) -> str | None:
+    """The :func:`build_recipe` that :func:`recipe_path` records for ``model`` (the file as
+    loaded: the record names its content hash); None where there is no record (a model built
+    before the record existed), it is unreadable, or it is another file's."""
+    try:
+        record = json.loads(recipe_path().read_text())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(record, dict) or record.get("sha256") != model.content_hash:
+        return None
+    return record.get("recipe")
+
+
+def _record(model, recipe: str) -> None:
+    """Write :func:`recipe_path` for ``model`` just saved: built by ``recipe``. A record that
+    cannot be written leaves the model to be rebuilt next time (warned)."""
+    from .io.atomic import write_text_atomic
+
+    try:
+        write_text_atomic(recipe_path(), json.dumps({"recipe": recipe,
+                                                     "sha256": model.content_hash}))
+    except (OSError, ValueError) as exc:   # OutputError: a full disk, a read-only cache
+        log.warning("could not record how the default model was built (%s)", exc)
 
 
 def _build(path: Path, progress, announce):
-    from .datasets import load_dataset
+    from .datasets import deformation, load_dataset
     from .model import build_model
     from .threads import one_blas_thread
+
+    del deformation       # imported for SciPy's BLAS, loaded before it is held (below)
 
     if announce is not None:
         announce(f"building the default model ({DEFAULT_DATASET}) once into {path}")
     # on one BLAS thread whatever the command: OpenBLAS orders its sums by its thread count,
     # so a build on two threads (``probe``, ``export``) and one on one (``track``, ``demo``:
     # cli.main.SERIAL_POOLS) differed in their last bits, hence in their content hash
-    # (49fc4338eee2 against 4bd74ef47e95 here): a track made with one was refused by the other
+    # (49fc4338eee2 against 4bd74ef47e95 here): a track made with one was refused by the other.
+    # A library loaded inside the block is not held: SciPy's own OpenBLAS, loaded by the
+    # deformation transfer, ran on every core where the process had not loaded it before (the
+    # CLI's builds 5ef31ecd1964, pytest's ac4061d4553f); it is loaded above.
     with one_blas_thread():
         ds = load_dataset(DEFAULT_DATASET, progress=progress)
         model = build_model(ds, dataset_ranks(ds), refine=False)

@@ -17,6 +17,7 @@ vertex ``v``.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -34,7 +35,7 @@ from . import tensor as tl
 from .datasets.base import FaceDataset
 from .arrays import real_array
 from .errors import DatasetError, ModelFileError, ShapeError
-from .io.atomic import atomic_path
+from .io.atomic import atomic_path, check_before_commit
 from .io.verified import remember_verified, was_verified
 
 log = logging.getLogger(__name__)
@@ -505,7 +506,7 @@ def load_model(path: str | Path) -> MultilinearModel:
 
     p = Path(path)
     # the core is mapped, not read (hundreds of MB; its sha256 is verified below)
-    data = read_npz(p, "model file", ModelFileError, mmap_min_bytes=1 << 24)
+    data = read_npz(p, "model file", ModelFileError, mmap_min_bytes=MAP_MIN_BYTES)
     if "metadata" not in data:
         what = "it is a track file (as `facetransfer track` writes)" \
             if {"rotation", "mode_names"} <= set(data) else "it has no metadata"
@@ -544,7 +545,39 @@ def load_model(path: str | Path) -> MultilinearModel:
         remember_verified(p, expected)
     _HASHES[model] = expected  # verified above: the same sha256 that content_hash gives
     _remember_file(model, p)
+    if any(_mapped(a) for a in data.values()):
+        check_before_commit(functools.partial(check_not_written_over, weakref.ref(model)))
     return model
+
+
+#: A model file's arrays of at least this many bytes are mapped from the file, not read
+#: (:func:`load_model`): the default model's core is 0.45 GB.
+MAP_MIN_BYTES = 1 << 24
+
+
+def _mapped(a: np.ndarray) -> bool:
+    """Whether ``a`` views a file mapped into memory (:func:`facetransfer.io.npz.read_npz`)."""
+    while a is not None:
+        if isinstance(a, np.memmap):
+            return True
+        a = a.base if isinstance(a.base, np.ndarray) else None
+    return False
+
+
+def check_not_written_over(model) -> None:
+    """Raise :class:`ModelFileError` if the file ``model`` (or a weak reference to it) was
+    loaded from has been written over in place since (:func:`file_written_over`): its mapped
+    core reads the new bytes, so what was computed with it may mix two models. A command's
+    outputs check it before each is put in place (:func:`load_model` adds it to the command's
+    :func:`facetransfer.io.atomic.commit_checks`): before, ``track``, ``transfer`` and
+    ``puppet`` wrote such results as the old model's."""
+    if isinstance(model, weakref.ref):
+        model = model()
+    if model is not None and file_written_over(model):
+        raise ModelFileError(f"model file {_FILES[model][0]} was written over while this "
+                             "command ran: the model, read from it as it is used, may have "
+                             "mixed two models, so nothing more was written; run the command "
+                             "again")
 
 
 def _file_identity(path: Path) -> tuple | None:

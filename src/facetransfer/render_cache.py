@@ -179,7 +179,7 @@ def code_fingerprint() -> str:
     import cv2
     import numba
 
-    from .track.cache import code_digest
+    from .code_digest import code_digest
 
     root = Path(__file__).resolve().parent
     files = sorted(root.rglob("*.py")) + sorted((root / "data").glob("*.json"))

@@ -495,9 +495,15 @@ def _catching_sigterm():
 def _run(args) -> int:
     """Run the parsed command: its status, or that of the one line said of what stopped it
     (an error, a Ctrl-C, a SIGTERM: whose handler :func:`main` sets)."""
+    from ..io.atomic import commit_checks
+
     before = {p: _file_id(p) for p in _outputs(args)}
+    # a model file written over as the command runs: no output after (io.atomic); batch's
+    # workers check it clip by clip (batch.model_ref) and the run's summary says which failed
+    checks = contextlib.nullcontext() if args.command == "batch" else commit_checks()
     try:
-        status = int(args.func(args) or 0)
+        with checks:
+            status = int(args.func(args) or 0)
         sys.stdout.flush()      # what the command said, while a closed pipe can be caught here
         return status
     except (ValueError, OSError, MemoryError, EOFError, zipfile.BadZipFile) as exc:

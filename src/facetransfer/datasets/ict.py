@@ -27,6 +27,7 @@ triangle meshes"; T. Li et al. 2020, "Learning formation of physically-based fac
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import logging
@@ -44,7 +45,6 @@ from ..io.atomic import atomic_path
 from ..io.memory import available_memory
 from ..io.mesh import Mesh, read_obj, read_obj_vertices
 from .base import FaceDataset
-from .deformation import DeformationTransfer, component_anchors, deformation_gradients
 
 log = logging.getLogger(__name__)
 
@@ -56,6 +56,7 @@ __all__ = [
     "ict_template",
     "build_ict_dataset",
     "ict_cache_path",
+    "builder_code",
 ]
 
 #: Bump when the builder's output changes for the same inputs (invalidates cached data sets).
@@ -201,11 +202,23 @@ def _used_recipes(spec: Mapping, recipes: Mapping) -> dict:
             "visemes": {v: recipes["visemes"][v] for v in spec.get("visemes", [])}}
 
 
+@functools.lru_cache(maxsize=1)
+def builder_code() -> str:
+    """A digest of the code (and data files) this builder can run
+    (:func:`facetransfer.code_digest.closure_digest` of this module): in every cached file's
+    key, so that a changed builder never reads a data set or components an older one made
+    (before, only :data:`BUILDER_VERSION`, bumped by hand, and the asset's commit were)."""
+    from .. import code_digest
+
+    return code_digest.closure_digest([__name__], "", root=code_digest.PACKAGE_ROOT)
+
+
 def _cache_key(name: str, seed: int, n_identities: int, region: str, used: Mapping,
                identity: Mapping) -> str:
     blob = json.dumps({"name": name, "seed": seed, "n_identities": n_identities,
                        "region": region, "recipes": used, "identity": identity,
-                       "builder": BUILDER_VERSION, "commit": assets.ICT_COMMIT},
+                       "builder": BUILDER_VERSION, "commit": assets.ICT_COMMIT,
+                       "code": builder_code()},
                       sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()[:20]
 
@@ -240,11 +253,12 @@ def _read_prefix_vertices(path: Path, n: int) -> np.ndarray:
     return v[:n]
 
 
-def _cached_offsets(name: str, shape: tuple[int, ...], build: Callable[[], np.ndarray],
-                    use_cache: bool) -> np.ndarray:
-    """Shape offsets ``shape`` read from the ``.npy`` cache file ``name`` if it is there and
-    sound, else ``build()`` (then saved atomically when ``use_cache``)."""
-    cache = assets.cache_dir() / "datasets" / name
+def _cached_offsets(stem: str, key: str, shape: tuple[int, ...],
+                    build: Callable[[], np.ndarray], use_cache: bool) -> np.ndarray:
+    """Shape offsets ``shape`` read from the ``.npy`` cache file ``stem + key + ".npy"`` if it
+    is there and sound, else ``build()`` (then saved atomically when ``use_cache``, and the
+    files of ``stem`` under other keys pruned: :func:`_prune_others`)."""
+    cache = assets.cache_dir() / "datasets" / f"{stem}{key}.npy"
     if use_cache and cache.is_file():
         try:
             comps = np.load(cache, allow_pickle=False)
@@ -257,7 +271,27 @@ def _cached_offsets(name: str, shape: tuple[int, ...], build: Callable[[], np.nd
         cache.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(cache) as tmp:
             np.save(tmp, comps)
+        _prune_others(cache, stem)
     return comps
+
+
+#: Cached files of one data set (or components) under other keys kept beside the current one:
+#: made by another builder's code or recipe, read again only by a switch back to it.
+KEEP_OTHERS = 2
+
+
+def _prune_others(path: Path, stem: str) -> None:
+    """Remove the files of ``path``'s folder whose names begin with ``stem`` (the same data set
+    or components under other keys) but ``path`` and the :data:`KEEP_OTHERS` most recent: a
+    change of the builder's code or recipes makes new keys (:func:`builder_code`), and each
+    stale ``ict-arkit`` data set is 0.6 GB."""
+    try:
+        others = [p for p in path.parent.glob(f"{stem}*") if p != path and p.is_file()]
+        for p in sorted(others, key=lambda p: p.stat().st_mtime, reverse=True)[KEEP_OTHERS:]:
+            p.unlink(missing_ok=True)
+            log.info("removed %s (another key of a cached data set)", p)
+    except OSError as exc:                 # another process's pruning, a read-only cache
+        log.warning("could not prune the cached data sets beside %s (%s)", path, exc)
 
 
 def _identity_components(neutral: np.ndarray, region: str, use_cache: bool) -> np.ndarray:
@@ -273,7 +307,8 @@ def _identity_components(neutral: np.ndarray, region: str, use_cache: bool) -> n
                          for c in range(_N_IDENTITY_COMPONENTS)]) - neutral
 
     return _cached_offsets(
-        f"ict-identity-components-{region}-{assets.ICT_COMMIT[:12]}-v{BUILDER_VERSION}.npy",
+        f"ict-identity-components-{region}-",
+        f"{assets.ICT_COMMIT[:12]}-v{BUILDER_VERSION}-{builder_code()[:8]}",
         (_N_IDENTITY_COMPONENTS, n, 3), build, use_cache)
 
 
@@ -306,7 +341,8 @@ def ict_expression_components(region: str = "face", use_cache: bool = True, *,
         return np.stack([off[k] for k in names])
 
     comps = _cached_offsets(
-        f"ict-expression-components-{region}-{assets.ICT_COMMIT[:12]}-{tag}-v{BUILDER_VERSION}.npy",
+        f"ict-expression-components-{region}-",
+        f"{assets.ICT_COMMIT[:12]}-{tag}-v{BUILDER_VERSION}-{builder_code()[:8]}",
         (len(names), len(neutral), 3), build, use_cache)
     return names, comps
 
@@ -452,6 +488,7 @@ def build_ict_dataset(name: str, *, seed: int = 0, n_identities: int | None = No
                 use_cache=use_cache)
     if use_cache:
         _save_cache(cache, ds)
+        _prune_others(cache, cache.name[:-len(cache.name.rsplit("-", 1)[1])])
     return ds
 
 
@@ -529,6 +566,8 @@ def _anchor_vertices(tmpl, off: dict, n: int) -> np.ndarray:
     over all used shapes."""
     motion = sum(np.linalg.norm(o, axis=1) for o in off.values()) if off else np.zeros(n)
     preferred = tmpl.rigid[np.argsort(motion[tmpl.rigid], kind="stable")]
+    from .deformation import component_anchors
+
     return component_anchors(n, tmpl.mesh.faces, preferred)
 
 
@@ -537,6 +576,8 @@ def _transfer_cells(neutral: np.ndarray, cell_off: np.ndarray, faces: np.ndarray
                     progress: Progress | None) -> np.ndarray:
     """Step 3: deformation transfer of every generic cell onto every identity (Sumner & Popović
     2004), shape (n_id, *cells, n, 3)."""
+    from .deformation import DeformationTransfer, deformation_gradients  # SciPy's solvers
+
     n_id, n = id_neutral.shape[0], neutral.shape[0]
     Q = deformation_gradients(neutral, neutral + cell_off, faces)  # (*cells, F, 3, 3)
     out = np.empty((n_id,) + cell_off.shape[:-2] + (n, 3))

@@ -11,7 +11,11 @@ Guarantees, for every output written through :func:`atomic_path`:
 * a temporary file left behind by a killed process (``.STEM.PID-RANDOM.partSUFFIX``) is removed
   by the next write of the same output, once its process is gone and its lock is free;
 * a failed write raises :class:`~facetransfer.errors.OutputError` (a ``ValueError``) naming the
-  output and the reason (no space left, read-only folder, permission denied).
+  output and the reason (no space left, read-only folder, permission denied);
+* while a command runs (:func:`commit_checks`), no output is committed once an input it reads
+  as it goes has changed under it (:func:`check_before_commit`: a model file written over in
+  place, whose core is mapped, :func:`facetransfer.model.load_model`): the check's error,
+  one line, and the old output kept.
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ import os
 import re
 import tempfile
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Callable, Iterable, Iterator
 
 from ..errors import FaceTransferError, OutputError
 
@@ -38,6 +42,39 @@ _WRITE_ERRNOS = {errno.ENOSPC: "no space left on the device",
                  errno.EPERM: "operation not permitted (is the folder read-only?)",
                  errno.EFBIG: "the file is too large for the file system",
                  errno.EIO: "input/output error"}
+
+
+#: The checks of the :func:`commit_checks` scope running (None: none runs).
+_CHECKS: list[Callable[[], None]] | None = None
+
+
+@contextlib.contextmanager
+def commit_checks() -> Iterator[None]:
+    """A scope (a command's run: :func:`facetransfer.cli.main.main`) in which every output is
+    committed only once the checks added to it (:func:`check_before_commit`) pass; the scope
+    before it is restored at its end."""
+    global _CHECKS
+    outer, _CHECKS = _CHECKS, []
+    try:
+        yield
+    finally:
+        _CHECKS = outer
+
+
+def check_before_commit(check: Callable[[], None]) -> None:
+    """Run ``check()`` before each output of the running :func:`commit_checks` scope is put in
+    place (a process it forks runs them too); to refuse the output it raises, and the output's
+    temporary file is removed. Outside a scope (a library's caller), nothing is added."""
+    if _CHECKS is not None:
+        _CHECKS.append(check)
+
+
+def run_commit_checks() -> None:
+    """Run the running scope's checks (:func:`commit_checks`): before an output is put in place
+    here, and by a writer that puts its files in place itself (an image sequence's frames,
+    :func:`facetransfer.io.video.place_sequence`)."""
+    for check in tuple(_CHECKS or ()):
+        check()
 
 
 def same_file(a: Path, b: Path) -> bool:
@@ -231,7 +268,9 @@ def _make_temp(p: Path) -> tuple[int, Path]:
 
 
 def _commit(tmp: Path, p: Path, *, overwrite: bool) -> None:
-    """Make ``tmp`` the output: durable on disk, usual permissions, then renamed in one step."""
+    """Make ``tmp`` the output: durable on disk, usual permissions, then renamed in one step
+    (once the running scope's checks pass: :func:`commit_checks`)."""
+    run_commit_checks()
     st = os.lstat(tmp)   # FileNotFoundError / a link put in its place: the write is not ours
     if not os.path.isfile(tmp) or os.path.islink(tmp):
         raise OutputError(f"cannot write {p}: its temporary file {tmp} was replaced")

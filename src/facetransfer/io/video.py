@@ -39,7 +39,8 @@ from typing import Callable, Iterable
 import numpy as np
 
 from ..errors import VideoError
-from .atomic import atomic_path, check_not_folder_name, check_output_path, probe_folder
+from .atomic import (atomic_path, check_not_folder_name, check_output_path, probe_folder,
+                     run_commit_checks)
 from .ffmpeg import exit_cause, ffmpeg_error, ffmpeg_exe
 from .frame_file import sixteen_bits
 from .video_audio import audio_codec, audio_codecs, audio_input_args, has_audio, mux_audio
@@ -252,6 +253,7 @@ def place_sequence(folder: str | os.PathLike, pattern: str | os.PathLike, n_fram
     """
     pattern = Path(pattern)
     pattern.parent.mkdir(parents=True, exist_ok=True)
+    run_commit_checks()    # as any output put in place (a model file written over meanwhile)
     with _folder_locked(pattern.parent):
         old = _pattern_files(pattern)
         if old and not overwrite:

@@ -11,8 +11,9 @@ everything the track depends on
 (:func:`track_key`): the video file (resolved path, size, modification time), the frames
 tracked, the tracker and its options, the model's content, what the readers make of the video
 (:func:`reading_facts`: its count, timeline, turn, mirror), and the code, data and libraries
-that make a track (:func:`code_fingerprint`: a changed tracker never reads an old track; its
-docstrings and comments are not its code). The capture
+that make a track (:func:`code_fingerprint`: every module of the package the trackers can run,
+found from their imports, so that a changed tracker never reads an old track; its docstrings
+and comments are not its code). The capture
 tracker's progress (detections, then the fit) is saved beside it while it runs
 (:mod:`facetransfer.track.detect_checkpoint`) and continued by the next run.
 
@@ -33,9 +34,9 @@ from ..errors import OutputError
 
 log = logging.getLogger(__name__)
 
-__all__ = ["FRAME_READERS", "KEEP", "LAYOUT", "fingerprinted_files", "cache_enabled",
-           "code_digest", "code_fingerprint", "reading_facts", "track_dir", "track_key", "holds",
-           "cached_track", "store_track", "partial_path"]
+__all__ = ["FRAME_READERS", "KEEP", "LAYOUT", "TRACK_LIBRARIES", "fingerprinted_files",
+           "cache_enabled", "code_fingerprint", "reading_facts", "track_dir", "track_key",
+           "tracker_modules", "holds", "cached_track", "store_track", "partial_path"]
 
 #: The cache's layout: a change of what a key means (or of the trackers' results) changes it.
 LAYOUT = "tracks-1"
@@ -99,108 +100,51 @@ def reading_facts(video) -> str | None:
 
 #: The video readers whose changes change a track (a clip's frames, their times, their turn):
 #: a reader that came to read a phone's trimmed or mirrored clip right made the tracks cached
-#: of it before wrong, and they were still taken.
+#: of it before wrong, and they were still taken. The trackers import them; they are named here
+#: too, so that their reason to be digested does not hang on an import.
 FRAME_READERS = ("io/video_read.py", "io/video_timeline.py", "io/video_display.py",
                  "io/video_pipe.py")
+#: The libraries whose versions shape a track (their distributions' names): the arrays, the
+#: solvers, the compiled kernels, the detector, ffmpeg (the decoder of what OpenCV cannot read).
+TRACK_LIBRARIES = ("numpy", "scipy", "numba", "mediapipe", "imageio-ffmpeg")
+
+
+def tracker_modules(root: Path) -> list[str]:
+    """The modules a track's code starts from: every module of :mod:`facetransfer.track` (of
+    the package in ``root``) and the :data:`FRAME_READERS`."""
+    from ..code_digest import PACKAGE
+
+    files = [*sorted((root / "track").glob("*.py")), *(root / n for n in FRAME_READERS)]
+    names = [".".join((PACKAGE, *f.relative_to(root).with_suffix("").parts)) for f in files]
+    return [n.removesuffix(".__init__") for n in names]
 
 
 def fingerprinted_files(root: Path) -> list[Path]:
-    """The package's files (under its folder ``root``) that :func:`code_fingerprint` digests."""
-    files = sorted((root / "track").glob("*.py")) + sorted((root / "data").glob("*.json"))
-    return files + [root / n for n in ("arkit.py", "model.py", "tensor.py", *FRAME_READERS)]
+    """The package's files (under its folder ``root``) that :func:`code_fingerprint` digests:
+    every file the tracker's code can run (:func:`facetransfer.code_digest.closure_files` of
+    :func:`tracker_modules`: before, the files of ``track/`` and four more by name, while the
+    trackers ran 40 more, ``geometry.py`` among them) and the data files it names."""
+    from ..code_digest import closure_files
+
+    return closure_files(tracker_modules(root), root=root)
 
 
 @functools.lru_cache(maxsize=1)
 def code_fingerprint() -> str:
     """A digest of what makes a track besides its inputs: the code (not the docstrings and
-    comments: :func:`_code_of`) of :mod:`facetransfer.track`, of the model and ARKit modules, of
-    the readers that decide which frames a video gives and how they are turned
-    (:data:`FRAME_READERS`), the package's data files (the landmark mappings), and the versions
-    of MediaPipe (the detector) and OpenCV (the decoder and the point flow)."""
-    from importlib import metadata
-
+    comments) of every module of the package the trackers can run and the data files they name
+    (:func:`fingerprinted_files`), the versions of the libraries that shape a track
+    (:data:`TRACK_LIBRARIES`, OpenCV's), and the detector's model file (Face Landmarker's
+    ``.task``, by its registered sha256: the file is checked against it before it is used)."""
     import cv2
 
-    root = Path(__file__).resolve().parent.parent
-    return code_digest(root, fingerprinted_files(root),
-                       f"mediapipe={metadata.version('mediapipe')} cv2={cv2.__version__}",
-                       code_only=True)
+    from ..assets import REGISTRY
+    from ..code_digest import PACKAGE_ROOT, closure_digest, library_versions
 
-
-def code_digest(root: Path, files, versions: str, *, code_only: bool = False) -> str:
-    """A digest of ``files`` (their paths under ``root`` and contents; a missing one counts
-    as empty) and of ``versions`` (the libraries' versions, as the caller names them): what a
-    cache's key holds of the code that made an entry (also :mod:`facetransfer.render_cache`).
-    ``code_only``: a Python file's code alone (:func:`_code_of`: its docstrings, comments and
-    layout left out), so that a reworded docstring keeps every cached entry."""
-    h = hashlib.sha256()
-    memo = _load_memo() if code_only else {}
-    known = len(memo)
-    for f in files:
-        h.update(str(Path(f).relative_to(root)).encode())
-        data = f.read_bytes() if f.is_file() else b""
-        h.update(_code_hash(data, memo).encode() if code_only and f.suffix == ".py" else data)
-    h.update(versions.encode())
-    if len(memo) != known:
-        _save_memo(memo)
-    return h.hexdigest()[:16]
-
-
-#: :func:`_code_hash`'s memo in the user cache: a Python file's bytes' sha256 -> its code's
-#: (:func:`_code_of`), so that a version of a file is parsed once, not at every command (the
-#: track's fingerprint 0.46 CPU-s with the parses, 0.11 without); at most :data:`MEMO_LIMIT`.
-CODE_MEMO, MEMO_LIMIT = "code-digests.json", 2048
-
-
-def _code_hash(data: bytes, memo: dict) -> str:
-    """The sha256 of :func:`_code_of` ``(data)``, looked up in (or added to) ``memo`` by the
-    sha256 of ``data`` itself."""
-    raw = hashlib.sha256(data).hexdigest()
-    if raw not in memo:
-        memo[raw] = hashlib.sha256(_code_of(data)).hexdigest()
-    return memo[raw]
-
-
-def _load_memo() -> dict:
-    """:data:`CODE_MEMO`'s entries; none where it is missing or unreadable."""
-    from ..assets import cache_dir
-
-    try:
-        memo = json.loads((cache_dir() / CODE_MEMO).read_text())
-    except (OSError, ValueError):
-        return {}
-    return memo if isinstance(memo, dict) and len(memo) <= MEMO_LIMIT else {}
-
-
-def _save_memo(memo: dict) -> None:
-    """Write :data:`CODE_MEMO` atomically (two commands at once: the later's is kept, either
-    right); a cache that cannot be written is left as it is."""
-    from ..assets import cache_dir
-    from ..io.atomic import write_text_atomic
-
-    try:
-        write_text_atomic(cache_dir() / CODE_MEMO, json.dumps(memo))
-    except OSError:
-        pass
-
-
-def _code_of(source: bytes) -> bytes:
-    """A Python file's syntax tree without its docstrings (``ast.dump``: no comments, no line
-    numbers), or the file itself where it does not parse."""
-    import ast
-
-    try:
-        tree = ast.parse(source)
-    except (SyntaxError, ValueError):
-        return source
-    for node in ast.walk(tree):
-        body = getattr(node, "body", None)
-        if (isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef))
-                and body and isinstance(body[0], ast.Expr)
-                and isinstance(body[0].value, ast.Constant)
-                and isinstance(body[0].value.value, str)):
-            node.body = body[1:] or [ast.Pass()]
-    return ast.dump(tree).encode()
+    landmarker = REGISTRY["face_landmarker"].files[0].sha256
+    versions = (f"{library_versions(*TRACK_LIBRARIES)} cv2={cv2.__version__} "
+                f"face_landmarker={landmarker}")
+    return closure_digest(tracker_modules(PACKAGE_ROOT), versions, root=PACKAGE_ROOT)
 
 
 def _path(key: str) -> Path:
