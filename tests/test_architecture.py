@@ -182,6 +182,7 @@ LAYER_OF = {
     "facetransfer.lazy": "base",         # the lazy packages' __getattr__ and __dir__
     "facetransfer.topology": "base",
     "facetransfer.arkit": "base",
+    "facetransfer.palette": "base",      # the colours of the eyeballs and the mouth's inside
     "facetransfer.assets": "base",
     "facetransfer.default_model": "base",
     "facetransfer.datasets": "base",
