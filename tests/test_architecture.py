@@ -234,6 +234,7 @@ LAYER_OF = {
     "facetransfer.lips": "rewrite",
     "facetransfer.lip_colour": "rewrite",
     "facetransfer.mouth": "rewrite",
+    "facetransfer.mouth_inside": "rewrite",
     "facetransfer.patch": "rewrite",
     "facetransfer.region_views": "rewrite",
     "facetransfer.region_weights": "rewrite",
