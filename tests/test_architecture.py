@@ -185,6 +185,7 @@ LAYER_OF = {
     "facetransfer.code_digest": "base",  # the package's code as a cache's key holds it
     "facetransfer.topology": "base",
     "facetransfer.arkit": "base",
+    "facetransfer.palette": "base",      # the colours of the eyeballs and the mouth's inside
     "facetransfer.assets": "base",
     "facetransfer.default_model": "base",
     "facetransfer.datasets": "base",
@@ -236,6 +237,7 @@ LAYER_OF = {
     "facetransfer.lips": "rewrite",
     "facetransfer.lip_colour": "rewrite",
     "facetransfer.mouth": "rewrite",
+    "facetransfer.mouth_inside": "rewrite",
     "facetransfer.patch": "rewrite",
     "facetransfer.region_views": "rewrite",
     "facetransfer.region_weights": "rewrite",

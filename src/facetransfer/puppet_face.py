@@ -47,10 +47,10 @@ The visible iris diameter (~11.8 mm) and a daylight pupil (~4 mm): textbook aver
 from __future__ import annotations
 
 from dataclasses import dataclass
-from types import MappingProxyType
 
 import numpy as np
 
+from .palette import CAVITY_BACK, PALETTE, TEETH_SHOW
 from .track.gaze import CORNER_INDEX, EYE_RADIUS, activation_gaze, eye_model, gaze_direction
 
 __all__ = ["PALETTE", "SKIN", "SCLERA", "IRIS", "LIMBUS", "PUPIL", "CAVITY", "TEETH",
@@ -59,24 +59,9 @@ __all__ = ["PALETTE", "SKIN", "SCLERA", "IRIS", "LIMBUS", "PUPIL", "CAVITY", "TE
            "puppet_face", "arkit_activations", "track_gaze", "lid_light", "paint_face",
            "preview_face", "draw_face"]
 
-#: The two previews' colours (RGB, 0-255): the puppet's (``facetransfer puppet``, ``render``)
-#: and the ``view`` page's (:mod:`facetransfer.export.viewer` hands this dict to the page,
-#: which draws its skin, eyeballs and mouth with it), written once so that they cannot drift
-#: apart again (the fifty-second session's had two, the page's iris a ``sienna``, its mouth a
-#: near black). Each is what a surface facing a frontal light shows: ``skin`` and the eyeball
-#: are shaded by their lights, the mouth's inside is not lit. ``iris`` to :data:`IRIS_RIM` of
-#: the way from the pupil's edge, then toward ``limbus`` (the iris's dark rim) at its edge;
-#: ``cavity`` the mouth's inside at the lips, :data:`CAVITY_BACK` of it at the back; ``teeth``
-#: the upper teeth.
-PALETTE = MappingProxyType({
-    "skin": (205, 170, 150),
-    "sclera": (232, 228, 218),
-    "iris": (124, 80, 48),
-    "limbus": (52, 32, 20),
-    "pupil": (12, 10, 10),
-    "cavity": (96, 34, 32),
-    "teeth": (222, 216, 198),
-})
+# PALETTE (the two previews' colours, the view page's too, and the mouth's inside a rewrite
+# draws where its target never shows one), CAVITY_BACK and TEETH_SHOW: facetransfer.palette's.
+
 #: The skin (RGB): :data:`PALETTE`'s.
 SKIN = PALETTE["skin"]
 #: The white of the eye (RGB): an off-white.
@@ -91,9 +76,6 @@ PUPIL = PALETTE["pupil"]
 CAVITY = PALETTE["cavity"]
 #: The upper teeth (RGB).
 TEETH = PALETTE["teeth"]
-#: The mouth's inside at its back (the fan's centre; the page's cone's apex and the head's
-#: inside): :data:`CAVITY` times this.
-CAVITY_BACK = 0.5
 #: The iris is :data:`IRIS` from the pupil's edge to this fraction of the way to its edge, then
 #: blends into :data:`LIMBUS` at the edge.
 IRIS_RIM = 0.75
@@ -102,9 +84,6 @@ IRIS_RIM = 0.75
 IRIS_RADIUS = 0.59
 #: The pupil's radius, cm at FaceKit's eye width: half of a 4 mm daylight pupil.
 PUPIL_RADIUS = 0.2
-#: How far the upper teeth show below the upper lip of an open mouth, in eye widths (corner to
-#: corner): 0.3 of FaceKit's 2.69 cm, about the 8 mm of an upper incisor not under the lip.
-TEETH_SHOW = 0.3
 #: An eye or the mouth whose fill shows on average less high than this fraction of its width
 #: (right eye, left, mouth; the corners' distance) is shut: the model's lids in a blink and its
 #: lips at rest leave a sliver of their holes (the mean person in ``ict-arkit``: eyeBlink* = 1

@@ -64,6 +64,7 @@ from .label_masks import frame_masks
 from .layer_flags import layer_flags
 from .lip_colour import LipTint, tint_mouth
 from .mouth import blend_mouth, inside_mouth, mouth_ring_faces
+from .mouth_inside import DrawnInside, paint_inside
 from .texture.face import FaceTexture
 from .render import shade_layers
 from .jit import maybe_njit as _maybe_njit, read_only
@@ -137,6 +138,9 @@ class FrameTextures:
     lip_tint : LipTint, optional
         The target's lip colour for the source's lips (:mod:`facetransfer.lip_colour`);
         without it the lips keep the source's colour against the skin.
+    inside : DrawnInside, optional
+        The mouth's inside painted over ``mouth``'s in the mouth's opening where it opens wider
+        than the frames ``mouth`` comes from show (:mod:`facetransfer.mouth_inside`).
     """
 
     face: FaceTexture
@@ -145,6 +149,7 @@ class FrameTextures:
     jaw: JawTexture | None = None
     mouth_ring: np.ndarray | None = None
     lip_tint: LipTint | None = None
+    inside: DrawnInside | None = None
 
 
 def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: MeshTopology,
@@ -328,6 +333,8 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
                                                                     own)
     lip_tint, erode, feather = textures.lip_tint, blending.erode, blending.feather
     fan = inside_mouth(raster.tri_id, topo) if mouth_img is not None else None
+    if textures.inside is not None and fan is not None:  # an inside its frames never show
+        paint_inside(mouth_img, raster, V, camera, topo, textures.inside, fan)
     if lip_tint is not None and mouth_img is not None:  # the target's lip colour, not inside
         tint_mouth(mouth_img, raster, topo.faces, lip_tint,
                    mouth_mask if fan is None else mouth_mask & ~fan)

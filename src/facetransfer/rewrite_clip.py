@@ -39,6 +39,7 @@ from .jaw import JawTexture
 from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights
 from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
 from .mouth import mouth_ring_faces
+from .mouth_inside import DrawnInside, drawn_inside
 from .monochrome import is_monochrome, monochrome_changes
 from .texture.function import attribute_vector
 from .texture.face import (FaceTexture, MouthFunction, constant_face_texture, frame_uvs,
@@ -70,12 +71,19 @@ class MouthSource:
     function : MouthFunction, optional
         With ``mouth="function"``: the texture function to query (default: lifted from
         ``frames``, else from the target's).
+    own : bool
+        The mouth's texture comes from the target's own frames, which show another performance
+        than the new one (a ready performance, a Live Link Face take: ``frames`` are the
+        target's, ``function`` lifted from them): where the new mouth opens wider than they
+        ever show, its inside is drawn (:mod:`facetransfer.mouth_inside`). False: the frames
+        are the source's, whose mouth opens as the new one does.
     """
 
     frames: object = None
     track: object = None
     index: np.ndarray | None = None
     function: MouthFunction | None = None
+    own: bool = False
 
 
 @dataclass(frozen=True)
@@ -290,6 +298,9 @@ class _ClipRenderer:
     mono : bool
         The target is monochrome: the pixels the rewrite changes are brought to grey
         (:mod:`facetransfer.monochrome`).
+    inside : DrawnInside or None
+        The mouth's inside drawn where the new mouth opens wider than the target's frames show
+        (:attr:`MouthSource.own`, :mod:`facetransfer.mouth_inside`).
     matte : bool
         Each frame with its matte (:attr:`facetransfer.rewrite.RewriteFrame.matte`).
     """
@@ -315,6 +326,7 @@ class _ClipRenderer:
     lip_tint: LipTint | None = None
     gaze: np.ndarray | None = None
     mono: bool = False
+    inside: DrawnInside | None = None
     matte: bool = False
 
     @classmethod
@@ -369,6 +381,10 @@ class _ClipRenderer:
         if eye_tex is not None and eye_tex.eyeballs is not None:
             renderer = dataclasses.replace(renderer, gaze=track_gaze(
                 new_track if opts.gaze == "performance" else target_track))
+        if mouth_source.own and (fn is not None or with_mouth):
+            rows = fn.frames if fn is not None else sidx
+            renderer = dataclasses.replace(renderer, inside=drawn_inside(
+                target_frames, target_track, model, topo, rows))
         return renderer
 
     def clip_lip_tint(self) -> LipTint | None:
@@ -464,7 +480,8 @@ class _ClipRenderer:
             return None
         V, blending = self.new_mesh(i), self.options.blending
         textures = FrameTextures(self.face_texture(frame, i), self.mouth_texture(i),
-                                 mouth_ring=self.ring, lip_tint=self.lip_tint)
+                                 mouth_ring=self.ring, lip_tint=self.lip_tint,
+                                 inside=self.inside)
         parts = [(rewrite_frame_part(
             frame, V, self.new_track.camera(i), self.topo,
             dataclasses.replace(textures, eyes=eye, jaw=jaw), blending=blending,

@@ -302,7 +302,8 @@ class _Frames:
         p = self.plan
         if self.start >= p.n_frames:
             return
-        mouth = MouthSource(p.mouth_frames, p.mouth_track, p.mouth_index, self.mouth_fn)
+        mouth = MouthSource(p.mouth_frames, p.mouth_track, p.mouth_index, self.mouth_fn,
+                            own=p.performance)
         run = RenderRun(progress=self.bar.update if self.bar is not None else None,
                         start=self.start)
         keywords = {"mouth_source": mouth, "options": self.options, "run": run,
