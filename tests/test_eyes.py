@@ -9,7 +9,7 @@ import pytest
 
 from facetransfer import eyes, patch, region_weights
 from facetransfer.region_weights import vertex_alpha
-from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.render import rasterize
 from facetransfer.rewrite import FrameTextures, rewrite_frame
 from facetransfer.rewrite_options import BlendOptions
