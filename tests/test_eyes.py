@@ -9,7 +9,7 @@ import pytest
 
 from facetransfer import eyes, patch, region_weights
 from facetransfer.region_weights import vertex_alpha
-from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.render import rasterize
 from facetransfer.rewrite import FrameTextures, rewrite_frame
 from facetransfer.rewrite_options import BlendOptions
@@ -747,3 +747,17 @@ def test_the_shading_scale_grows_with_the_face_beyond_the_clips_it_was_chosen_on
     assert patch.shading_sigma(2.5 * patch.SHADING_SPAN) == pytest.approx(
         2.5 * patch.SHADING_SIGMA)
     assert patch.shading_sigma(float("nan")) == patch.SHADING_SIGMA
+
+
+def test_the_data_folders_largest_face_keeps_the_scale_it_was_chosen_at():
+    """``face_2`` (844x844) as a target: its eyes' lid centres lie 134.0-139.8 px apart over
+    its frames (the track's mesh, measured in the fifty-fourth session's review54b), its
+    reference frame 136.6 px. With the threshold at 135 px its eye region was matched at
+    6.07 px, and its renders were not as before (frame 20 onto ``driving_d9``: 1273 pixels
+    one level off), against what the threshold was for; now every data-folder face is
+    matched at :data:`~facetransfer.patch.SHADING_SIGMA`, and the scale rises from it
+    without a step."""
+    for span in (103.0, 136.6, 139.8):
+        assert patch.shading_sigma(span) == patch.SHADING_SIGMA
+    edge = patch.SHADING_SPAN
+    assert patch.shading_sigma(edge + 0.01) - patch.shading_sigma(edge) < 1e-3

@@ -3,7 +3,9 @@ twice by Face Landmarker (its second look in the region of its own points)."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
+import pytest
 
 from facetransfer.io.video import read_video
 from facetransfer.track.landmarks import MP_EYE_CONTOURS
@@ -53,3 +55,47 @@ def test_only_a_picture_is_looked_at_twice(data_dir):
     two = detect_video(frames)[0].points478[0]
     assert np.array_equal(one, again.astype(one.dtype))
     assert np.array_equal(two, first.astype(two.dtype))
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tif", ".bmp", ".webp"])
+def test_a_photo_of_any_format_is_a_clip_of_one_frame(data_dir, tmp_path, suffix):
+    """A still image is read as a clip of one frame whatever its format. OpenCV counts a
+    JPEG's frames 1 but a PNG's, TIFF's, BMP's or WebP's 0, and ``video_info`` said 0: such a
+    photo was looked at once by Face Landmarker (the second look is keyed to a clip of one
+    frame) and ``transfer --target photo.png --out r.png --frame 0`` was refused."""
+    from facetransfer.io.video import video_info
+
+    photo = tmp_path / f"takeo{suffix}"
+    assert cv2.imwrite(str(photo), cv2.imread(str(data_dir / "stills" / "takeo.ppm")))
+    assert video_info(photo).n_frames == 1
+
+
+def test_a_png_photo_is_looked_at_twice_as_a_jpeg_is(data_dir, tmp_path):
+    """``track photo.png`` (the file) detects as a transfer onto it does (its one decoded
+    frame): Face Landmarker's second look. Before, the file's count of 0 frames gave the PNG
+    one look, so ``track``, ``batch track`` and a transfer's target track of one PNG differed
+    (breakingbad's near eye back on the lower lid, 15 px from the second look)."""
+    from facetransfer.track.capture import detect_video
+
+    photo = tmp_path / "breakingbad.png"
+    assert cv2.imwrite(str(photo), cv2.imread(str(data_dir / "stills" / "breakingbad.jpg")))
+    frames = read_video(photo)[0]
+    assert len(frames) == 1
+    from_file = detect_video(photo)[0].points478[0]
+    from_frames = detect_video(frames)[0].points478[0]
+    np.testing.assert_array_equal(from_file, from_frames)
+
+
+def test_a_png_photo_has_its_one_frame_to_write(data_dir, tmp_path, capsys):
+    """``--frame N`` of a PNG photo's rewrite is checked against its one frame (0): before,
+    ``--frame 0`` was refused as ``the transfer has 0 frames``."""
+    from facetransfer.cli.main import main
+
+    photo = tmp_path / "takeo.png"
+    assert cv2.imwrite(str(photo), cv2.imread(str(data_dir / "stills" / "takeo.ppm")))
+    code = main(["transfer", "--target", str(photo), "--identity-label", "any",
+                 "--out", str(tmp_path / "r.png"), "--frame", "1"])
+    err = capsys.readouterr().err
+    assert code == 2
+    assert f"--frame 1: the transfer has 1 frame (the target {photo}'s), 0" in err, err
+    assert not (tmp_path / "r.png").exists()

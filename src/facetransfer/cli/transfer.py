@@ -458,8 +458,8 @@ def _check_one_image(args, inputs: list) -> None:
                                 f"({whose}): choose one with --frame N ({span}), or write "
                                 f"them all as {seq} or a video (.mp4)")
     if frame is not None and not 0 <= frame - first < n:
-        raise FaceTransferError(f"--frame {frame}: the transfer has {n} frames ({whose}), "
-                                f"{span}")
+        raise FaceTransferError(f"--frame {frame}: the transfer has {n} frame"
+                                f"{'s' if n != 1 else ''} ({whose}), {span}")
     args.frame_said = first if frame is None else frame     # the number, as the user knows it
     if frame is not None:
         args.frame = frame - first                          # the row the library renders

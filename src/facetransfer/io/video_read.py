@@ -24,8 +24,9 @@ from .verified import file_stamp
 from .video_display import (display_mirrored, exact_seek, first_field,  # noqa: F401
                             pixel_aspect)  # (pixel_aspect: API)
 from .video_pipe import piped_frames
-from .video_sequence import (IMAGE_SUFFIXES, is_sequence, open_sequence, pattern_of_file,
-                             sequence_files, sequence_frames, sequence_stamp, suggested_pattern)
+from .video_sequence import (IMAGE_SUFFIXES, is_sequence, is_still, open_sequence,
+                             pattern_of_file, sequence_files, sequence_frames, sequence_stamp,
+                             suggested_pattern)
 from .video_timeline import on_rate_grid, timeline
 
 log = logging.getLogger(__name__)
@@ -45,7 +46,8 @@ class VideoInfo:
         An image sequence's: :func:`facetransfer.io.video_sequence.sequence_fps`.
     n_frames : int
         As reported by the container (may be approximate for some codecs); for a video of
-        variable frame rate, the steps of its constant-rate timeline.
+        variable frame rate, the steps of its constant-rate timeline; a still image's 1 (it
+        is read as a clip of one frame).
     size : (int, int)
         ``(width, height)`` in pixels.
     sar : (int, int)
@@ -203,6 +205,8 @@ def _video_info(path) -> VideoInfo:
     if piped:
         log.info("%s: interlaced; decoded by ffmpeg (OpenCV's frames would be black or "
                  "garbage)", path)
+    if is_still(path):   # a clip of one frame: OpenCV counts a JPEG's 1, but a PNG's, TIFF's,
+        n = 1            # BMP's or WebP's 0 (so a PNG photo was looked at once, --frame 0 refused)
     n = _counted(path, n)
     even = timeline(path, n)
     mirrored = display_mirrored(path)
