@@ -300,3 +300,37 @@ def test_the_blas_loaded_by_the_build_itself_is_held_at_one_thread_too(tmp_path)
     run = subprocess.run([sys.executable, "-c", code, str(tmp_path / "m.npz")], env=env,
                          capture_output=True, text=True, check=True)
     assert run.stdout.strip() == "[1]"
+
+
+def test_a_file_made_with_a_kept_older_default_model_is_refused_naming_that_file(
+        tmp_path, monkeypatch, quick_model, quick_ict_dataset, quick_track):
+    """After a rebuild gives the default model another hash, a track made with the one before
+    is refused, rightly; the refusal said "give the model it was tracked with as --model", and
+    that model is the kept older default model file, whose name the user did not know. Now the
+    refusal names it (the track given a model, the export's default model); a batch worker
+    that does not see the client's default model finds its own kept file of the run's model."""
+    import facetransfer.datasets as datasets
+    from facetransfer.batch.model_ref import ModelRef, _paths
+    from facetransfer.errors import TrackError
+    from facetransfer.export.common import ExportError, resolve_model
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(datasets, "load_dataset", lambda name, progress=None, **kw:
+                        quick_ict_dataset)
+    dm._recipe.cache_clear()
+    older = dm.default_model_path().with_name("ict-arkit-default-v1.npz")
+    older.parent.mkdir(parents=True)
+    quick_model.save(older)               # the default model as a version before cached it
+    now = dm.load_default_model()         # rebuilt: another hash
+    assert now.content_hash != quick_model.content_hash
+    hint = f"kept at {older}: give --model {older})"
+    with pytest.raises(TrackError, match="another model") as err:   # its ranks, here
+        quick_track.check_model(now)
+    assert str(err.value).endswith(hint)
+    with pytest.raises(ExportError, match="not made with the default model") as err:
+        resolve_model(quick_track)
+    assert str(err.value).endswith(hint)
+    assert dm.kept_model("f" * 64) is None and dm.kept_model_hint("f" * 64) == ""
+    ref = ModelRef(str(tmp_path / "elsewhere" / "m.npz"), quick_model.content_hash, True)
+    assert _paths(ref)[-1] == older
+    dm._recipe.cache_clear()

@@ -29,7 +29,8 @@ from .errors import ModelFileError
 log = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_DATASET", "default_model_path", "recipe_path", "build_recipe",
-           "dataset_ranks", "load_default_model", "is_default_model"]
+           "dataset_ranks", "load_default_model", "is_default_model", "kept_model",
+           "kept_model_hint", "stated_hash"]
 
 #: The data set of the default model.
 DEFAULT_DATASET = "ict-arkit"
@@ -141,6 +142,45 @@ def _older(path: Path) -> Path | None:
         return max(others, key=lambda p: p.stat().st_mtime, default=None)
     except OSError:
         return None
+
+
+def kept_model(content_hash: str) -> Path | None:
+    """The default model file of another version kept beside this one's
+    (:data:`KEEP_OTHERS`; one named before the recipe was, ``ict-arkit-default-v1.npz``) that
+    holds the model of ``content_hash`` (its metadata's hash, or a prefix of it), newest first;
+    None where none does. A track made with the default model before a rebuild gave it another
+    hash names this file, which then holds the model it was made with."""
+    if not content_hash:
+        return None
+    path = default_model_path()
+    try:
+        others = sorted((p for p in path.parent.glob(f"{_STEM}*.npz") if p != path),
+                        key=lambda p: p.stat().st_mtime, reverse=True)
+    except OSError:
+        return None
+    return next((p for p in others if (stated_hash(p) or "").startswith(content_hash)), None)
+
+
+def kept_model_hint(content_hash: str) -> str:
+    """What a refusal of a file made with the model of ``content_hash`` adds where that model
+    is a default model kept of another version (:func:`kept_model`): " (made with the default
+    model of another version, kept at P: give --model P)"; else ``""``."""
+    kept = kept_model(content_hash)
+    return "" if kept is None else (f" (made with the default model of another version, kept "
+                                    f"at {kept}: give --model {kept})")
+
+
+def stated_hash(path: Path) -> str | None:
+    """The sha256 the metadata of the model file ``path`` states (read, not checked: the
+    file's content is checked as it is loaded), None where it is no readable model file."""
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["metadata"]))
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+    return meta.get("sha256") if isinstance(meta, dict) else None
 
 
 def _prune_others(path: Path) -> None:
