@@ -334,3 +334,29 @@ def test_a_file_made_with_a_kept_older_default_model_is_refused_naming_that_file
     ref = ModelRef(str(tmp_path / "elsewhere" / "m.npz"), quick_model.content_hash, True)
     assert _paths(ref)[-1] == older
     dm._recipe.cache_clear()
+
+
+def test_a_command_started_while_another_builds_the_default_model_waits_and_takes_it(
+        fast_default, monkeypatch):
+    """Two commands started at once after an upgrade (which rebuilds the default model) built
+    it side by side, 1.9 GB and 70 CPU-s each. Now a build holds a lock beside the file: the
+    later command says it waits and, the lock free, takes the model the first one built. Here
+    the lock is held by "another command" that builds while this one waits."""
+    import fcntl
+
+    real, path = fcntl.flock, dm.default_model_path()
+
+    def flock(fd, op):
+        if op == fcntl.LOCK_EX | fcntl.LOCK_NB:
+            raise BlockingIOError("held by another command")
+        if op == fcntl.LOCK_EX:              # the other command builds, then lets go
+            dm._record(dm._build(path, None, None), dm._recipe())
+        return real(fd, op)
+
+    monkeypatch.setattr(fcntl, "flock", flock)
+    said = []
+    model = dm.load_default_model(announce=said.append)
+    assert fast_default == ["ict-arkit"]      # the other command's build only
+    assert said == [f"waiting for another command building the default model into "
+                    f"{path.parent}"]
+    assert model.provenance["default_model"] and dm._recorded(model) == dm._recipe()

@@ -18,6 +18,7 @@ Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datas
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import logging
@@ -109,9 +110,31 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
     -------
     MultilinearModel
     """
+    path, recipe = default_model_path(), _recipe()
+    model, stale = _cached(path, recipe)
+    if model is not None:
+        return model
+    with _build_lock(path, announce):
+        model, stale = _cached(path, recipe)    # built meanwhile by the process waited for
+        if model is not None:
+            return model
+        if announce is not None:
+            announce(f"rebuilding the default model ({DEFAULT_DATASET}) into {path}: the "
+                     f"cached one ({stale.name}) was built by another version of its recipe "
+                     "or code" if stale else f"building the default model ({DEFAULT_DATASET}) "
+                     f"once into {path}")
+        model = _build(path, progress, None)
+        _record(model, recipe)
+    _prune_others(path)
+    return model
+
+
+def _cached(path: Path, recipe: str) -> tuple:
+    """``(model, None)`` where ``path`` holds the model ``recipe`` built (its record says so),
+    else ``(None, the stale file to name)``: ``path`` itself where it holds another build, or
+    the newest default model of another recipe beside it (:func:`_older`), or None."""
     from .model import load_model
 
-    path, recipe = default_model_path(), _recipe()
     stale = _older(path)
     if path.is_file():
         try:
@@ -120,18 +143,42 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
             log.warning("cached default model is unusable (%s); rebuilding", exc)
         else:
             if _recorded(model) == recipe:
-                return model
+                return model, None
             stale = path
             del model         # its core's mapped pages (0.45 GB) not held over the build
-    if announce is not None:
-        announce(f"rebuilding the default model ({DEFAULT_DATASET}) into {path}: the cached "
-                 f"one ({stale.name}) was built by another version of its recipe or code"
-                 if stale else f"building the default model ({DEFAULT_DATASET}) once into "
-                 f"{path}")
-    model = _build(path, progress, None)
-    _record(model, recipe)
-    _prune_others(path)
-    return model
+    return None, stale
+
+
+@contextlib.contextmanager
+def _build_lock(path: Path, announce: Callable[[str], None] | None):
+    """Hold an exclusive lock (``flock``) on a file beside ``path`` for a build: two commands
+    started at once (after an upgrade, every command rebuilds) built it side by side, twice the
+    1.9 GB and the CPU, each renaming its file over the other's; the later one waits for the
+    first (said through ``announce``) and takes its model. A cache where no lock can be taken
+    (read-only, a network file system without locks) builds unlocked, as before."""
+    import fcntl
+    import os
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path.with_name(f".{_STEM}.build.lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            if announce is not None:
+                announce(f"waiting for another command building the default model into "
+                         f"{path.parent}")
+            with contextlib.suppress(OSError):
+                fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:
+            pass
+        yield
+    finally:
+        os.close(fd)
 
 
 def _older(path: Path) -> Path | None:
