@@ -300,3 +300,63 @@ def test_the_blas_loaded_by_the_build_itself_is_held_at_one_thread_too(tmp_path)
     run = subprocess.run([sys.executable, "-c", code, str(tmp_path / "m.npz")], env=env,
                          capture_output=True, text=True, check=True)
     assert run.stdout.strip() == "[1]"
+
+
+def test_a_file_made_with_a_kept_older_default_model_is_refused_naming_that_file(
+        tmp_path, monkeypatch, quick_model, quick_ict_dataset, quick_track):
+    """After a rebuild gives the default model another hash, a track made with the one before
+    is refused, rightly; the refusal said "give the model it was tracked with as --model", and
+    that model is the kept older default model file, whose name the user did not know. Now the
+    refusal names it (the track given a model, the export's default model); a batch worker
+    that does not see the client's default model finds its own kept file of the run's model."""
+    import facetransfer.datasets as datasets
+    from facetransfer.batch.model_ref import ModelRef, _paths
+    from facetransfer.errors import TrackError
+    from facetransfer.export.common import ExportError, resolve_model
+
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(datasets, "load_dataset", lambda name, progress=None, **kw:
+                        quick_ict_dataset)
+    dm._recipe.cache_clear()
+    older = dm.default_model_path().with_name("ict-arkit-default-v1.npz")
+    older.parent.mkdir(parents=True)
+    quick_model.save(older)               # the default model as a version before cached it
+    now = dm.load_default_model()         # rebuilt: another hash
+    assert now.content_hash != quick_model.content_hash
+    hint = f"kept at {older}: give --model {older})"
+    with pytest.raises(TrackError, match="another model") as err:   # its ranks, here
+        quick_track.check_model(now)
+    assert str(err.value).endswith(hint)
+    with pytest.raises(ExportError, match="not made with the default model") as err:
+        resolve_model(quick_track)
+    assert str(err.value).endswith(hint)
+    assert dm.kept_model("f" * 64) is None and dm.kept_model_hint("f" * 64) == ""
+    ref = ModelRef(str(tmp_path / "elsewhere" / "m.npz"), quick_model.content_hash, True)
+    assert _paths(ref)[-1] == older
+    dm._recipe.cache_clear()
+
+
+def test_a_command_started_while_another_builds_the_default_model_waits_and_takes_it(
+        fast_default, monkeypatch):
+    """Two commands started at once after an upgrade (which rebuilds the default model) built
+    it side by side, 1.9 GB and 70 CPU-s each. Now a build holds a lock beside the file: the
+    later command says it waits and, the lock free, takes the model the first one built. Here
+    the lock is held by "another command" that builds while this one waits."""
+    import fcntl
+
+    real, path = fcntl.flock, dm.default_model_path()
+
+    def flock(fd, op):
+        if op == fcntl.LOCK_EX | fcntl.LOCK_NB:
+            raise BlockingIOError("held by another command")
+        if op == fcntl.LOCK_EX:              # the other command builds, then lets go
+            dm._record(dm._build(path, None, None), dm._recipe())
+        return real(fd, op)
+
+    monkeypatch.setattr(fcntl, "flock", flock)
+    said = []
+    model = dm.load_default_model(announce=said.append)
+    assert fast_default == ["ict-arkit"]      # the other command's build only
+    assert said == [f"waiting for another command building the default model into "
+                    f"{path.parent}"]
+    assert model.provenance["default_model"] and dm._recorded(model) == dm._recipe()

@@ -18,6 +18,7 @@ Sits beside :mod:`facetransfer.model` (it only composes :mod:`facetransfer.datas
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import logging
@@ -29,7 +30,8 @@ from .errors import ModelFileError
 log = logging.getLogger(__name__)
 
 __all__ = ["DEFAULT_DATASET", "default_model_path", "recipe_path", "build_recipe",
-           "dataset_ranks", "load_default_model", "is_default_model"]
+           "dataset_ranks", "load_default_model", "is_default_model", "kept_model",
+           "kept_model_hint", "stated_hash"]
 
 #: The data set of the default model.
 DEFAULT_DATASET = "ict-arkit"
@@ -108,9 +110,31 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
     -------
     MultilinearModel
     """
+    path, recipe = default_model_path(), _recipe()
+    model, stale = _cached(path, recipe)
+    if model is not None:
+        return model
+    with _build_lock(path, announce):
+        model, stale = _cached(path, recipe)    # built meanwhile by the process waited for
+        if model is not None:
+            return model
+        if announce is not None:
+            announce(f"rebuilding the default model ({DEFAULT_DATASET}) into {path}: the "
+                     f"cached one ({stale.name}) was built by another version of its recipe "
+                     "or code" if stale else f"building the default model ({DEFAULT_DATASET}) "
+                     f"once into {path}")
+        model = _build(path, progress, None)
+        _record(model, recipe)
+    _prune_others(path)
+    return model
+
+
+def _cached(path: Path, recipe: str) -> tuple:
+    """``(model, None)`` where ``path`` holds the model ``recipe`` built (its record says so),
+    else ``(None, the stale file to name)``: ``path`` itself where it holds another build, or
+    the newest default model of another recipe beside it (:func:`_older`), or None."""
     from .model import load_model
 
-    path, recipe = default_model_path(), _recipe()
     stale = _older(path)
     if path.is_file():
         try:
@@ -119,18 +143,42 @@ def load_default_model(*, progress: Progress | None = None, announce: Callable[[
             log.warning("cached default model is unusable (%s); rebuilding", exc)
         else:
             if _recorded(model) == recipe:
-                return model
+                return model, None
             stale = path
             del model         # its core's mapped pages (0.45 GB) not held over the build
-    if announce is not None:
-        announce(f"rebuilding the default model ({DEFAULT_DATASET}) into {path}: the cached "
-                 f"one ({stale.name}) was built by another version of its recipe or code"
-                 if stale else f"building the default model ({DEFAULT_DATASET}) once into "
-                 f"{path}")
-    model = _build(path, progress, None)
-    _record(model, recipe)
-    _prune_others(path)
-    return model
+    return None, stale
+
+
+@contextlib.contextmanager
+def _build_lock(path: Path, announce: Callable[[str], None] | None):
+    """Hold an exclusive lock (``flock``) on a file beside ``path`` for a build: two commands
+    started at once (after an upgrade, every command rebuilds) built it side by side, twice the
+    1.9 GB and the CPU, each renaming its file over the other's; the later one waits for the
+    first (said through ``announce``) and takes its model. A cache where no lock can be taken
+    (read-only, a network file system without locks) builds unlocked, as before."""
+    import fcntl
+    import os
+
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd = os.open(path.with_name(f".{_STEM}.build.lock"), os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            if announce is not None:
+                announce(f"waiting for another command building the default model into "
+                         f"{path.parent}")
+            with contextlib.suppress(OSError):
+                fcntl.flock(fd, fcntl.LOCK_EX)
+        except OSError:
+            pass
+        yield
+    finally:
+        os.close(fd)
 
 
 def _older(path: Path) -> Path | None:
@@ -141,6 +189,45 @@ def _older(path: Path) -> Path | None:
         return max(others, key=lambda p: p.stat().st_mtime, default=None)
     except OSError:
         return None
+
+
+def kept_model(content_hash: str) -> Path | None:
+    """The default model file of another version kept beside this one's
+    (:data:`KEEP_OTHERS`; one named before the recipe was, ``ict-arkit-default-v1.npz``) that
+    holds the model of ``content_hash`` (its metadata's hash, or a prefix of it), newest first;
+    None where none does. A track made with the default model before a rebuild gave it another
+    hash names this file, which then holds the model it was made with."""
+    if not content_hash:
+        return None
+    path = default_model_path()
+    try:
+        others = sorted((p for p in path.parent.glob(f"{_STEM}*.npz") if p != path),
+                        key=lambda p: p.stat().st_mtime, reverse=True)
+    except OSError:
+        return None
+    return next((p for p in others if (stated_hash(p) or "").startswith(content_hash)), None)
+
+
+def kept_model_hint(content_hash: str) -> str:
+    """What a refusal of a file made with the model of ``content_hash`` adds where that model
+    is a default model kept of another version (:func:`kept_model`): " (made with the default
+    model of another version, kept at P: give --model P)"; else ``""``."""
+    kept = kept_model(content_hash)
+    return "" if kept is None else (f" (made with the default model of another version, kept "
+                                    f"at {kept}: give --model {kept})")
+
+
+def stated_hash(path: Path) -> str | None:
+    """The sha256 the metadata of the model file ``path`` states (read, not checked: the
+    file's content is checked as it is loaded), None where it is no readable model file."""
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["metadata"]))
+    except (OSError, ValueError, KeyError, EOFError):
+        return None
+    return meta.get("sha256") if isinstance(meta, dict) else None
 
 
 def _prune_others(path: Path) -> None:

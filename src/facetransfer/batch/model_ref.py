@@ -69,7 +69,7 @@ def model_ref(model) -> ModelRef | None:
 def hosts_without(client, ref: ModelRef) -> list[str]:
     """The hosts of the client's workers (those there now) that have no file of the model of
     ``ref``: neither at its path nor, for the default model, in their own cache, with the
-    run's hash in its metadata (:func:`_stated_hash`); asked of each (``client.run``); a worker
+    run's hash in its metadata (:func:`facetransfer.default_model.stated_hash`); asked of each (``client.run``); a worker
     that fails to answer (ending) is left out."""
     seen = client.run(_sees, ref, on_error="ignore")
     return sorted({host for ok, host in seen.values() if not ok})
@@ -102,36 +102,25 @@ def _sees(ref: ModelRef) -> tuple[bool, str]:
     recipe's bits on another machine) was taken as seen: the model was not sent, and each of
     that worker's clips failed, "holds another model now ... replaced since the run began?"
     (review53b)."""
-    return any(_stated_hash(p) == ref.content_hash for p in _paths(ref)), \
+    from ..default_model import stated_hash
+
+    return any(stated_hash(p) == ref.content_hash for p in _paths(ref)), \
         socket.gethostname()
 
 
 def _paths(ref: ModelRef) -> list[Path]:
     """The files a worker loads the model of ``ref`` from: its path, or for the default model
-    where this machine does not see that path, this machine's default model file."""
-    from ..default_model import default_model_path
+    where this machine does not see that path, this machine's default model file, and a file
+    of the run's model it keeps of another version's code (the rename of the default model by
+    its recipe, cache54, left a machine's earlier build of the same bits under another name)."""
+    from ..default_model import default_model_path, kept_model
 
     paths = [Path(ref.path)]
     if ref.default and not paths[0].is_file():
         paths.append(default_model_path())
+        kept = kept_model(ref.content_hash)   # this machine's build of another version's code
+        paths += [kept] if kept is not None else []
     return paths
-
-
-def _stated_hash(path: Path) -> str | None:
-    """The sha256 the metadata of the model file ``path`` states (read, not checked: the file's
-    content is checked as it is loaded), None where it is no readable model file."""
-    import json
-
-    import numpy as np
-
-    if not path.is_file():
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            meta = json.loads(str(z["metadata"]))
-    except (OSError, ValueError, KeyError, EOFError):
-        return None
-    return meta.get("sha256") if isinstance(meta, dict) else None
 
 
 def worker_model(model):

@@ -83,15 +83,16 @@ def resolve_model(track, model=None, *, progress=None, announce=None):
         match the track (modes, ranks or content hash).
     """
     if model is None:
-        from ..default_model import load_default_model
+        from ..default_model import kept_model_hint, load_default_model
 
         model = load_default_model(progress=progress, announce=announce)
         if track.model_hash and track.model_hash != model.content_hash:
             name = f"track {track.label}" if track.label else "the track"
             raise ExportError(f"{name} was not made with the default model (ict-arkit) here "
                               f"(model hash {track.model_hash[:12]}, this one's "
-                              f"{model.content_hash[:12]}); pass the model it was tracked with "
-                              "(--model M.npz)")
+                              f"{model.content_hash[:12]})" + (
+                                  kept_model_hint(track.model_hash) or "; pass the model it "
+                                  "was tracked with (--model M.npz)"))
     track.check_model(model)
     return model
 

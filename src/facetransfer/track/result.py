@@ -332,20 +332,25 @@ class Track:
                              f"has {n_frames}")
 
     def check_model(self, model) -> None:
-        """Raise :class:`TrackError` unless ``model`` is the model this track was made with."""
-        other = " (give the model it was tracked with as --model)"
+        """Raise :class:`TrackError` unless ``model`` is the model this track was made with
+        (where that is a default model kept of another version, the refusal names its file:
+        :func:`facetransfer.default_model.kept_model_hint`)."""
+        from ..default_model import kept_model_hint
+
+        why = None
         if tuple(model.mode_names) != self.mode_names:
-            raise TrackError(f"track {self.label} has modes {self.mode_names}, the model "
-                             f"{model.mode_names}{other}")
+            why = f"has modes {self.mode_names}, the model {model.mode_names}"
         for n, r in zip(model.mode_names, model.ranks):
-            if self.weights[n].shape[1] != r:
-                raise TrackError(f"track {self.label} was made with another model: its weights "
-                                 f"of mode {n!r} have {self.weights[n].shape[1]} components, "
-                                 f"the model's {r}{other}")
-        if self.model_hash and self.model_hash != model.content_hash:
-            raise TrackError(f"track {self.label} was made with a different model (model hash "
-                             f"{self.model_hash[:12]}, this one's {model.content_hash[:12]})"
-                             f"{other}")
+            if why is None and self.weights[n].shape[1] != r:
+                why = (f"was made with another model: its weights of mode {n!r} have "
+                       f"{self.weights[n].shape[1]} components, the model's {r}")
+        if why is None and self.model_hash and self.model_hash != model.content_hash:
+            why = (f"was made with a different model (model hash {self.model_hash[:12]}, this "
+                   f"one's {model.content_hash[:12]})")
+        if why is not None:
+            raise TrackError(f"track {self.label} {why}" + (
+                kept_model_hint(self.model_hash)
+                or " (give the model it was tracked with as --model)"))
 
     def with_source_facts(self, clip=None) -> "Track":
         """This track with the first frame number and start timecode of ``clip`` (default:
