@@ -178,3 +178,34 @@ def test_the_inside_is_drawn_only_where_the_frames_never_show_one(arkit_model):
     img = shut.copy()
     assert paint_inside(img, raster0, V0, cam0, topo0, drawn(0.0), fan0) == 0.0
     assert np.array_equal(img, shut)
+
+
+def test_a_target_with_cuts_measures_its_inside_over_the_whole_clip(quick_model, quick_track,
+                                                                    monkeypatch):
+    """A ready performance onto a target with a cut: each shot is rendered as a clip of its
+    own, but the mouth's texture comes from the whole clip's frames (the mouth source's index
+    counts them from the clip's first), so the inside those frames show is measured there.
+    Before, each shot handed :func:`drawn_inside` its own frames and track with the whole
+    clip's numbers: the second shot's rows past its length were dropped, the others read the
+    wrong frames."""
+    import dataclasses
+
+    import facetransfer.rewrite_clip as rc
+    from facetransfer.rewrite_clip import MouthSource, rewrite_frame_parts
+    from facetransfer.track.project import take_frames
+
+    n, cut = quick_track.n_frames, 20
+    target = dataclasses.replace(quick_track, shot_starts=(cut,))
+    frames = np.random.default_rng(0).integers(0, 255, (n, 64, 64, 3), dtype=np.uint8)
+    index = np.arange(n)[::-1].copy()           # the nearest frames: any of the clip's
+    seen = []
+
+    def spy(frames_, track_, model_, topo_, rows):
+        seen.append((len(frames_), track_.n_frames, np.unique(rows).tolist()))
+
+    monkeypatch.setattr(rc, "drawn_inside", spy)
+    mouth = MouthSource(frames, take_frames(target, index), index, own=True)
+    list(rewrite_frame_parts(frames, target, target, quick_model, mouth_source=mouth,
+                             options=rc.RewriteOptions(mouth="frame")))
+    assert len(seen) == 2                                   # one renderer a shot
+    assert all(s == (n, n, list(range(n))) for s in seen), seen

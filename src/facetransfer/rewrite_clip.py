@@ -183,12 +183,14 @@ def _rewrite(target_frames, target_track, new_track, model, *, mouth_source=None
         raise RewriteError(f"start frame {start} is outside the {n} frames")
     from .track.shots import shots_from
 
+    whole = (target_frames, target_track,
+             np.arange(n) if mouth_source.index is None else mouth_source.index)
     for a, b, (frames, tt, new, st, si) in shots_from(start, n, target_frames, target_track,
                                                       new_track, mouth_source.track,
                                                       mouth_source.index):
         shot_mouth = dataclasses.replace(mouth_source, track=st, index=si)
         one = _ClipRenderer.build(frames, tt, new, model, opts, mouth_source=shot_mouth,
-                                  regions=regions, topo=topo)
+                                  regions=regions, topo=topo, whole=whole)
         if matte:
             one = dataclasses.replace(one, matte=True)
         yield from _render(one, frames, range(max(start, a) - a, b - a), run, parts)
@@ -331,10 +333,12 @@ class _ClipRenderer:
 
     @classmethod
     def build(cls, target_frames, target_track, new_track, model, opts: RewriteOptions, *,
-              mouth_source: MouthSource, topo, regions: RegionTextures | None = None
-              ) -> "_ClipRenderer":
+              mouth_source: MouthSource, topo, regions: RegionTextures | None = None,
+              whole=None) -> "_ClipRenderer":
         """Check the clip, lift the textures (the region textures ``regions`` made ahead, if
-        they are this clip's) and synthesise the meshes once."""
+        they are this clip's) and synthesise the meshes once. ``whole``: ``(frames, track,
+        index)`` of the whole clip this shot is part of (the mouth source's ``index`` over it),
+        where the drawn inside is measured (:meth:`_inside`)."""
         source_frames, source_track, source_index, mouth_function = (
             mouth_source.frames, mouth_source.track, mouth_source.index, mouth_source.function)
         mouth = resolve_mouth_mode(opts.mouth or "frame", model)
@@ -382,10 +386,21 @@ class _ClipRenderer:
             renderer = dataclasses.replace(renderer, gaze=track_gaze(
                 new_track if opts.gaze == "performance" else target_track))
         if mouth_source.own and (fn is not None or with_mouth):
-            rows = fn.frames if fn is not None else sidx
-            renderer = dataclasses.replace(renderer, inside=drawn_inside(
-                target_frames, target_track, model, topo, rows))
+            renderer = dataclasses.replace(renderer, inside=renderer._inside(
+                fn, mouth_function is not None, whole))
         return renderer
+
+    def _inside(self, fn, given: bool, whole) -> DrawnInside | None:
+        """The drawn inside (:func:`facetransfer.mouth_inside.drawn_inside`) of the frames
+        the mouth's texture comes from: the texture function's (``fn``; ``given``: lifted by
+        the caller, over the whole clip) or the mouth source's index. Measured over the whole
+        clip ``whole`` (:meth:`build`), whose frames those index, not this shot's: a shot's
+        frames and track start at its own first frame (before, a target with cuts measured
+        its later shots' frames at the whole clip's numbers, or none of them)."""
+        frames, track, index = (self.target_frames, self.target_track, self.sidx) \
+            if whole is None or (fn is not None and not given) else whole
+        rows = fn.frames if fn is not None else index
+        return drawn_inside(frames, track, self.model, self.topo, rows)
 
     def clip_lip_tint(self) -> LipTint | None:
         """The target's lip colour over the source's (:mod:`facetransfer.lip_colour`), read
