@@ -545,7 +545,7 @@ def load_model(path: str | Path) -> MultilinearModel:
         remember_verified(p, expected)
     _HASHES[model] = expected  # verified above: the same sha256 that content_hash gives
     _remember_file(model, p)
-    if any(_mapped(a) for a in data.values()):
+    if any(_map_offset(a) is not None for a in data.values()):
         check_before_commit(functools.partial(check_not_written_over, weakref.ref(model)))
     return model
 
@@ -553,15 +553,6 @@ def load_model(path: str | Path) -> MultilinearModel:
 #: A model file's arrays of at least this many bytes are mapped from the file, not read
 #: (:func:`load_model`): the default model's core is 0.45 GB.
 MAP_MIN_BYTES = 1 << 24
-
-
-def _mapped(a: np.ndarray) -> bool:
-    """Whether ``a`` views a file mapped into memory (:func:`facetransfer.io.npz.read_npz`)."""
-    while a is not None:
-        if isinstance(a, np.memmap):
-            return True
-        a = a.base if isinstance(a.base, np.ndarray) else None
-    return False
 
 
 def check_not_written_over(model) -> None:
@@ -609,16 +600,59 @@ def model_file(model: MultilinearModel) -> Path | None:
 
 def file_written_over(model: MultilinearModel) -> bool:
     """Whether the file ``model`` was loaded from or saved to (:func:`model_file`) is at its
-    path still the same file (device, inode) with another size or modification time: written
-    over in place (a ``cp`` onto it), so that a core mapped from it (:func:`load_model`) reads
-    its new bytes. False for a file replaced by another (a rename onto it, as
-    :meth:`MultilinearModel.save` writes: the mapped one is kept as it was), removed, or
-    unchanged, and for a model with no file."""
+    path still the same file (device, inode) with other content: written over in place (a
+    ``cp`` onto it), so that a core mapped from it (:func:`load_model`) reads its new bytes.
+    False for a file replaced by another (a rename onto it, as :meth:`MultilinearModel.save`
+    writes: the mapped one is kept as it was), removed, or unchanged, and for a model with no
+    file.
+
+    Another modification time is a change only where the content confirms it (read once,
+    :func:`_same_content`): a file touched, or written over with an identical copy, was
+    refused (fix54). Another size is a change without reading."""
     path, ident = _FILES.get(model, (None, None))
     if path is None:
         return False
     now = _file_identity(path)
-    return now is not None and now[:2] == ident[:2] and now != ident
+    if now is None or now[:2] != ident[:2] or now == ident:
+        return False
+    with _SAME_LOCK:
+        if _FILES.get(model, (None, None))[1] == now:
+            return False                  # confirmed by another thread meanwhile
+        if now[2] != ident[2] or not _same_content(model, path):
+            return True
+        _FILES[model] = (path, now)       # the same model: not read again
+        return False
+
+
+_SAME_LOCK = threading.Lock()   # one content check at a time (outputs check from threads)
+
+
+def _same_content(model: MultilinearModel, path: Path) -> bool:
+    """Whether the model file at ``path`` holds ``model``: its stated sha256 and its content's
+    are ``model``'s :attr:`~MultilinearModel.content_hash`, and each array of ``model`` mapped
+    from it lies where the file holds it now. False for a file that cannot be read so."""
+    from .io.npz import read_npz
+
+    try:
+        data = read_npz(path, "model file", ModelFileError, mmap_min_bytes=MAP_MIN_BYTES)
+        meta = json.loads(str(data.pop("metadata")))
+        stated = meta.pop("sha256", None)
+        if stated != model.content_hash or _content_hash(data, meta) != stated:
+            return False
+    except (ModelFileError, OSError, ValueError, KeyError, TypeError, AttributeError):
+        return False
+    return all(name in data and _map_offset(data[name]) == _map_offset(a)
+               for name, a in model._arrays().items() if _map_offset(a) is not None)
+
+
+def _map_offset(a: np.ndarray) -> int | None:
+    """The offset in its file of the mapping ``a`` views (a file mapped into memory,
+    :func:`facetransfer.io.npz.read_npz`), None where it views none."""
+    while a is not None:
+        if isinstance(a, np.memmap):
+            return int(a.offset)
+        a = a.base if isinstance(a.base, np.ndarray) else None
+    return None
 
 
 #: dtype kinds of the arrays of a model file (float: also integers; int: integers only)

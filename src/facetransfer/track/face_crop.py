@@ -45,13 +45,15 @@ import os
 
 import numpy as np
 
+from ..errors import TrackError
 from .detect import VideoLandmarker
 from .init import MediaPipeDetector
 
 __all__ = ["WHOLE_FRAME_SHARE", "CROP_FACES", "SEARCH_EVERY", "SEARCH_SLOWER", "MOST_FACES",
            "CUT_CHANGE", "STILL_LOOKS",
            "search_tiles", "face_box", "choose_subject", "moved_away",
-           "crop_about", "FACE_PLACES", "face_place", "subject_point", "FollowingLandmarker"]
+           "crop_about", "FACE_PLACES", "face_place", "subject_point", "FacePoint",
+           "FaceNotAtPoint", "near_point", "FollowingLandmarker"]
 
 #: A face found in a crop whose size (its points' larger extent) passes this share of the
 #: frame's shorter side goes back to the whole-frame detector, which finds faces this large.
@@ -148,8 +150,6 @@ def face_place(text: str, what: str = "--face") -> tuple[str, tuple[float, float
         Anything else (a batch manifest's cell is checked so before any clip runs); the
         message names the option or cell ``what``.
     """
-    from ..errors import TrackError
-
     said = str(text).strip().lower()
     if said in FACE_PLACES:
         return "share", FACE_PLACES[said]
@@ -162,30 +162,73 @@ def face_place(text: str, what: str = "--face") -> tuple[str, tuple[float, float
     return "pixels", (x, y)
 
 
-def subject_point(text: str, size: tuple[int, int], what: str = "--face"
-                  ) -> tuple[float, float, float]:
+class FacePoint(tuple):
+    """A point ``(x, y, 0.0)`` (a box of no size, :func:`face_box`) where ``--face`` said the
+    subject is; ``said``: the pixels ``"X,Y"`` as given, "" for a place (``left``, ...). A
+    face must be found at or near pixels said (:meth:`FollowingLandmarker._refuse_far`)."""
+
+    said: str
+
+    def __new__(cls, x: float, y: float, said: str = "") -> "FacePoint":
+        point = super().__new__(cls, (float(x), float(y), 0.0))
+        point.said = str(said)
+        return point
+
+    def __getnewargs__(self):
+        return self[0], self[1], self.said
+
+
+class FaceNotAtPoint(TrackError):
+    """No face found at or near the pixels ``--face`` said (:func:`near_point`), only others:
+    ``said`` the point as given, ``centres`` the faces' centres (the pixels the detector was
+    shown). :func:`facetransfer.track.video_detect.detect_video` names the file."""
+
+    def __init__(self, said: str, centres: list[tuple[float, float]]) -> None:
+        self.said, self.centres = said, centres
+        super().__init__(self.line("the frame"))
+
+    def line(self, where: str, aspect: float = 1.0) -> str:
+        """The refusal, ``where`` the file (the faces' columns in its stored pixels, of
+        ``aspect``, :func:`facetransfer.track.aspect.to_stored_x`)."""
+        from .aspect import to_stored_x
+
+        faces = ", ".join(f"({float(to_stored_x(x, aspect)):.0f}, {y:.0f})"
+                          for x, y in self.centres)
+        many = "a face" if len(self.centres) == 1 else f"{len(self.centres)} faces"
+        return (f"no face found at or near the point {self.said} in {where}: {many} found, "
+                f"centred at {faces} (pixels X,Y); give a point on the face to follow")
+
+
+def near_point(point, box: tuple[float, float, float]) -> bool:
+    """Whether a face's box (:func:`face_box`) lies at or near the ``point`` (x, y): the point
+    within the face's size (its points' larger extent) of its centre, inside the face's box
+    grown by half its size on each side or about as near."""
+    return bool(np.hypot(box[0] - point[0], box[1] - point[1]) <= box[2])
+
+
+def subject_point(text: str, size: tuple[int, int], what: str = "--face") -> FacePoint:
     """The subject of ``track --face`` in a frame of ``size`` (W, H): ``"left"``, ``"right"``,
     ``"centre"`` or pixels ``"X,Y"`` (:func:`face_place`), as a box of no size
-    (:func:`face_box`): of several faces, the nearest is followed from the first frame on.
+    (:func:`face_box`, a :class:`FacePoint`): of several faces, the nearest is followed from
+    the first frame on; pixels said must lie at or near a face found (:func:`near_point`:
+    else :class:`FaceNotAtPoint` where the face is chosen).
 
     Raises
     ------
     TrackError
         Anything else, or a point outside the frame (the message names ``what``).
     """
-    from ..errors import TrackError
-
     W, H = (float(v) for v in size)
     try:
         kind, (x, y) = face_place(text)
     except TrackError:
         kind, x, y = "pixels", -1.0, -1.0
     if kind == "share":
-        return x * (W - 1), y * (H - 1), 0.0
+        return FacePoint(x * (W - 1), y * (H - 1))
     if not (0 <= x < W and 0 <= y < H):
         raise TrackError(f"{what} must be left, right, centre or pixels X,Y inside the "
                          f"{int(W)}x{int(H)} frame, got {text!r}")
-    return x, y, 0.0
+    return FacePoint(x, y, said=f"{x:g},{y:g}")
 
 
 class FollowingLandmarker:
@@ -203,7 +246,9 @@ class FollowingLandmarker:
     model_path : path-like, optional
     subject : (cx, cy, size), optional
         Where the face to follow was last (:func:`face_box`), or a point (size 0,
-        :func:`subject_point`): of several faces, the nearest to it is followed.
+        :func:`subject_point`): of several faces, the nearest to it is followed; pixels said
+        (a :class:`FacePoint`'s ``said``) with no face at or near them where the face is chosen
+        (the first frame where one is found): :class:`FaceNotAtPoint`.
     still : bool
         The clip is one picture: a frame whose face is found is looked at again
         (:data:`STILL_LOOKS` in all), the last look's points kept (module notes).
@@ -221,6 +266,7 @@ class FollowingLandmarker:
         self._search_lm = None          # IMAGE mode, up to MOST_FACES: tiles and counting
         self.crop: tuple[int, int, int] | None = None
         self.last = None if subject is None else tuple(float(v) for v in subject)
+        self._said = getattr(subject, "said", "")   # pixels said: a face must lie there
         self.several = False            # several faces seen: the subject kept in a crop
         self._missed = 0                # frames since the last face (the search's rhythm)
         self._frame = 0                 # frames seen: the landmarkers' clock
@@ -272,6 +318,8 @@ class FollowingLandmarker:
         said = self._at_point(frame, boxes) if self.last[2] == 0 else None
         if said is not None:
             return said
+        if self.last[2] == 0:
+            self._refuse_far([*boxes, face_box(found[0])])
         if len(boxes) < 2:
             return found
         self.several = True
@@ -303,8 +351,9 @@ class FollowingLandmarker:
             if q is None:
                 continue
             box = face_box(q + (x0, y0))
-            if choose_subject([*boxes, box], self.last) != len(boxes):
-                continue                                  # a face the whole frame shows is nearer
+            if choose_subject([*boxes, box], self.last) != len(boxes) or \
+                    (self._said and not near_point(self.last, box)):
+                continue              # a face the whole frame shows is nearer, or none is here
             self.several = True
             self.crop = crop_about(box, (W, H))
             found = self._in_crop(frame)
@@ -378,8 +427,25 @@ class FollowingLandmarker:
                 self.crop = crop_about(box, (W, H))
                 found = self._in_crop(frame)
                 if found[0] is not None:
+                    if self.last is not None and self.last[2] == 0:
+                        self._refuse_far([face_box(found[0])])
                     return found
         return None, None
+
+    def _refuse_far(self, boxes: list) -> None:
+        """:class:`FaceNotAtPoint` where ``--face`` said pixels (:class:`FacePoint`) and no
+        face of ``boxes`` (those found where the subject is chosen, the tiles about the point
+        searched too, :meth:`_at_point`) lies at or near them (:func:`near_point`).
+
+        Before, such a point (one on the background of ``stills/breakingbad.jpg``, beside two
+        people) silently followed the face nearest it, or the only face, wherever it was."""
+        if not self._said or any(near_point(self.last, b) for b in boxes):
+            return
+        kept: list = []                 # a face counted and found by the whole frame: once
+        for b in boxes:
+            if all(np.hypot(b[0] - k[0], b[1] - k[1]) > min(b[2], k[2]) / 2 for k in kept):
+                kept.append(b)
+        raise FaceNotAtPoint(self._said, [(b[0], b[1]) for b in kept])
 
     def _crop_landmarker(self) -> VideoLandmarker:
         if self._crop_lm is None:

@@ -34,10 +34,10 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import ShapeError, VideoError
+from ..errors import ShapeError, TrackError, VideoError
 from .aspect import View, to_shown_x
 from .detect import ClipDetections, VideoLandmarker, between_detections, detect_clip
-from .face_crop import FollowingLandmarker, face_box, moved_away
+from .face_crop import FaceNotAtPoint, FacePoint, FollowingLandmarker, face_box, moved_away
 from .options import Progress
 
 log = logging.getLogger(__name__)
@@ -328,19 +328,19 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
     their pixels' aspect (:attr:`~facetransfer.track.detect.ClipDetections.pixel_aspect`). The
     size returned is the stored frames'. ``subject``: of several faces, follow the one nearest
     this point ``(x, y, 0)`` in the stored pixels
-    (:func:`facetransfer.track.face_crop.subject_point`). ``every``: the detector is shown
-    one frame of ``every``, and with ``eyes`` every frame where the eyes move
-    (:func:`facetransfer.track.detect.detect_clip`).
+    (:func:`facetransfer.track.face_crop.subject_point`; pixels said with no face at or
+    near them where the face is chosen: a TrackError naming them, the file and the faces
+    found). ``every``: the detector is shown one frame of ``every``, and with ``eyes`` every
+    frame where the eyes move (:func:`facetransfer.track.detect.detect_clip`).
     """
     prog = progress or (lambda stage, done, total: None)
     fps, size, src, frames, n, total = _open(video, max_frames, source)
     view = View.of(video) if view is None else view
-    if subject is not None:                # in the pixels the detector is shown
-        subject = (float(to_shown_x(subject[0], view.aspect)), subject[1], 0.0)
+    subject = _shown_subject(subject, view, resume)
     done = 0 if resume is None else resume.n_frames
     m = split_frame(done, total, workers) if detector is None else None
-    child = None if m is None else SplitDetection.start(video, m, n, fps, view, subject,
-                                                        every, eyes)
+    child = None if m is None else SplitDetection.start(
+        video, m, n, fps, view, None if subject is None else tuple(subject), every, eyes)
     own = None
 
     def report(d, t):                      # this process's frames, and the child's so far
@@ -367,14 +367,28 @@ def detect_video(video, *, detector=None, max_frames: int | None = None,
                           every=every, eyes=eyes)
         if child is not None:
             det = finish_split(det, child, m, redetect, report_child, checkpoint)
-    except BaseException:
+    except BaseException as exc:
         if child is not None:
             child.cancel()
+        if isinstance(exc, FaceNotAtPoint):
+            raise TrackError(exc.line(src or "the frames", view.aspect)) from None
         raise
     finally:
         if own is not None:
             own.close()
     return det, fps, size, src
+
+
+def _shown_subject(subject, view: View, resume: ClipDetections | None):
+    """``subject`` (:func:`facetransfer.track.face_crop.subject_point`) in the pixels the
+    detector is shown; pixels said kept as said (:class:`~.face_crop.FacePoint`: a face
+    must lie there) only where no face is followed yet (the child's part, of a clip's middle,
+    gets a plain point: :meth:`SplitDetection.start`; a run resumed after a face was found)."""
+    if subject is None:
+        return None
+    x = float(to_shown_x(subject[0], view.aspect))
+    followed = resume is not None and bool(np.isfinite(resume.points).any())
+    return FacePoint(x, subject[1], "" if followed else getattr(subject, "said", ""))
 
 
 def _open(video, max_frames, source):
