@@ -149,7 +149,9 @@ def test_no_import_cycles():
 
 
 def _in_cli(module: str) -> bool:
-    return module == "facetransfer.cli" or module.startswith("facetransfer.cli.")
+    # facetransfer.__main__: the console script's entry (``python -m facetransfer``)
+    return module in ("facetransfer.cli", "facetransfer.__main__") or \
+        module.startswith("facetransfer.cli.")
 
 
 def test_the_library_never_imports_the_cli():
@@ -255,6 +257,7 @@ LAYER_OF = {
     "facetransfer.file_facts": "apps",    # what probe says of a track or a take
     "facetransfer.face_file": "apps",     # the dial editor's (export.viewer's) saved face
     "facetransfer.cli": "cli",
+    "facetransfer.__main__": "cli",   # the console script: the CLI loaded, a Ctrl-C meanwhile said
     "facetransfer.cli.edit": "cli",   # the edit command (a track's, a take's), out of cli.transfer
 }
 

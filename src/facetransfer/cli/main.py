@@ -330,13 +330,15 @@ def main(argv: list[str] | None = None) -> int:
                                      (KeyboardInterrupt, signal.SIGINT))):
             return _main(argv)
     except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
+        _no_more_stops()
         what, status = _stop_status(exc)
         print(f"facetransfer: {what}", file=sys.stderr)
         return status
     finally:
         for signum, handler in previous.items():
-            if handler is not None:
-                signal.signal(signum, handler)
+            if handler is not None:     # the console script's exit takes no more Ctrl-C
+                exiting = argv is None and signum == signal.SIGINT
+                signal.signal(signum, signal.SIG_IGN if exiting else handler)
 
 
 def _stop_status(stop: KeyboardInterrupt) -> tuple[str, int]:
@@ -447,6 +449,25 @@ def _raise_at(frame, signum: int, stop: type[KeyboardInterrupt]) -> None:
     raise stop
 
 
+def _no_more_stops() -> None:
+    """Ignore Ctrl-C and SIGTERM from here until :func:`main` restores the handlers there were
+    (the console script's exit keeps ignoring Ctrl-C): the command has ended, or its stop is
+    being said. A second Ctrl-C then (a user's, 10-200 ms after the first, while the command
+    said its line and the process exited) printed a second line, or a traceback of the line's
+    own ``print``, or of the interpreter's exit (joining threads), or killed the process by
+    the signal (status -2, not 130: Python's exit puts a Python-level handler back to the
+    default, not an ignored signal) (BENCHMARKS.md, "Fifty-fourth session"). Only where the
+    handlers are the CLI's own (:func:`main` set them, in the main thread)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for signum, ours in ((signal.SIGINT, _interrupted), (signal.SIGTERM, _terminated)):
+        if signal.getsignal(signum) is ours:
+            signal.signal(signum, signal.SIG_IGN)
+
+
 def _catching_sigint():
     """:func:`_interrupted` for Ctrl-C where Python's own handler is (main thread only; a job
     started in the background ignores it, a caller's own handler is kept); returns the old
@@ -498,9 +519,11 @@ def _run(args) -> int:
     before = {p: _file_id(p) for p in _outputs(args)}
     try:
         status = int(args.func(args) or 0)
+        _no_more_stops()        # done: a Ctrl-C now has nothing left to stop
         sys.stdout.flush()      # what the command said, while a closed pipe can be caught here
         return status
     except (ValueError, OSError, MemoryError, EOFError, zipfile.BadZipFile) as exc:
+        _no_more_stops()
         # bad input, a failed write or read (permissions, full disk), a job too large
         if isinstance(exc, BrokenPipeError) and _stdout_gone():
             return 141        # read by ``| head``, which stopped reading: nothing to say
@@ -512,6 +535,7 @@ def _run(args) -> int:
         stop = interrupt_of(exc)     # a compiled kernel's SystemError caused by the interrupt
         if stop is None:
             raise
+        _no_more_stops()
         what, status = _stop_status(stop)
         written = [str(p) for p in _outputs(args)
                    if (now := _file_id(p)) is not None and now != before.get(p)]

@@ -1,0 +1,103 @@
+"""Ctrl-C at any moment of the console script's life is one line (``benchmarks/bench_interrupt.py``
+sends it at every moment of real runs): while the CLI loads, while a command says its stop,
+while the process exits. Each in a process of its own, as the console script runs, the signal
+sent at a chosen point (an import, the line's making, an ``atexit`` callback)."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def _console(*code: str, args=("probe", "x.mp4")) -> subprocess.CompletedProcess:
+    """Run ``code`` (pieces of Python, at their end the console script's entry run on
+    ``args``) in a process of its own: its status and output."""
+    code = "".join(textwrap.dedent(c) for c in code) + textwrap.dedent(f"""
+        sys.argv = ["facetransfer", *{list(args)!r}]
+        from facetransfer.__main__ import main
+        sys.exit(main())
+    """)
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60, env={**os.environ, "PYTHONPATH": SRC})
+
+
+@pytest.mark.parametrize("signum,said", [("SIGINT", (130, "interrupted")),
+                                          ("SIGTERM", (143, "terminated"))])
+def test_a_stop_while_the_cli_loads_is_one_line(signum, said):
+    """The console script imported the CLI (argparse, logging, zipfile, its own module: 0.15-
+    0.2 s) before any of the project's code ran: a Ctrl-C then printed the import's traceback
+    (1 of 42 Ctrl-Cs into a 40-frame transfer, 0.05 s in) and a SIGTERM killed the process
+    with no line. The signal here comes as the CLI imports argparse."""
+    r = _console(f"""
+        import importlib.abc, os, signal, sys
+
+        class Stop(importlib.abc.MetaPathFinder):
+            def find_spec(self, name, path, target=None):
+                if name == "argparse":
+                    os.kill(os.getpid(), signal.{signum})
+                    sum(range(10000))                  # the handler runs here
+                return None
+
+        assert "argparse" not in sys.modules
+        sys.meta_path.insert(0, Stop())
+    """)
+    assert (r.returncode, r.stderr.splitlines()) == (said[0], [f"facetransfer: {said[1]}"])
+
+
+def test_python_m_facetransfer_is_the_cli():
+    r = subprocess.run([sys.executable, "-m", "facetransfer", "--version"], capture_output=True,
+                       text=True, timeout=60, env={**os.environ, "PYTHONPATH": SRC})
+    assert (r.returncode, r.stdout.split()[0], r.stderr) == (0, "facetransfer", "")
+
+
+#: A probe command that stops as a Ctrl-C does (``raise``) or ends (0).
+COMMAND = """
+    import atexit, os, signal, sys, time
+    from facetransfer.cli import main as cli_main, probe
+
+    def stopped(args):
+        raise KeyboardInterrupt
+
+    probe.run = stopped if STOP else (lambda args: 0)
+"""
+
+
+def test_a_second_ctrl_c_while_the_stop_is_said_is_ignored():
+    """A second Ctrl-C while the command made its line (here: as it asks what the caches keep)
+    was raised there: the command's line was lost and the CLI's "before the command began" one
+    said instead (a traceback where it came during that line's ``print``)."""
+    r = _console("STOP = True\n", COMMAND, """
+    real = cli_main._kept
+
+    def kept(*args):
+        os.kill(os.getpid(), signal.SIGINT)
+        sum(range(10000))                              # the handler runs here
+        return real(*args)
+
+    cli_main._kept = kept
+    """)
+    assert (r.returncode, r.stderr.splitlines()) == (130, ["facetransfer probe: interrupted"])
+
+
+@pytest.mark.parametrize("stop,said", [(True, (130, ["facetransfer probe: interrupted"])),
+                                       (False, (0, []))])
+def test_a_ctrl_c_while_the_process_exits_is_ignored(stop, said):
+    """A Ctrl-C after the command ended, while the interpreter exits (its ``atexit`` callbacks,
+    its threads joined: a user's second Ctrl-C 10-200 ms after the first) printed
+    "Exception ignored in atexit callback" and a traceback, or killed the process by the signal
+    (status -2, not the command's). Ignored now: the command's status and line only."""
+    r = _console(f"STOP = {stop}\n", COMMAND, """
+    def exiting():
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)                                # the handler runs here, if any
+
+    atexit.register(exiting)
+    """)
+    assert (r.returncode, r.stderr.splitlines()) == said
