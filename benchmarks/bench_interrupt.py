@@ -1,19 +1,21 @@
 """Ctrl-C at any moment: what `transfer`, `track` and `puppet` do when interrupted, and whether
 the next run continues to the same output.
 
-Each command runs on a short real clip of the data folder (``--frames``, default 40), each run
+Each command runs on a short real clip of the data folder (``--frames``, default 30), each run
 a fresh process in its own session and process group, with a private user cache (its own track
 and render caches; the default model linked in), as a terminal runs it. First one run left
-alone (the reference, its time ``T``); then, for every moment from 0.05 s to ``T`` in steps of
-``--step``, a run sent SIGINT to its process group at that moment (a terminal's Ctrl-C: the
-command and every process it started get it), and at every ``--double-every`` seconds a run
-sent two SIGINTs ``--gaps`` apart (a user pressing Ctrl-C again while the program exits). Each
-interrupted run is checked, a fault for each failing check:
+alone (the reference, its time ``T``, the least of two runs); then, at ``--singles`` moments
+evenly from 0.05 s to ``T``, a run sent SIGINT to its process group at that moment (a
+terminal's Ctrl-C: the command and every process it started get it), and at ``--pairs``
+moments a run sent two SIGINTs each of ``--gaps`` apart (a user pressing Ctrl-C again while the
+program exits). Each interrupted run is checked, a fault for each failing check:
 
+- ``start``: (not the program's) the signal came in Python's own start, before the program's
+  first line ran: Python's traceback or its death by the signal, as for any Python program;
 - ``status``: exit status 130 (the CLI's for an interrupt, ``facetransfer.cli.main``);
 - ``lines``: exactly one line on stderr, the CLI's own (no traceback, no library's log line);
 - ``hang``: it ends within ``--timeout`` seconds of the signal (else killed);
-- ``orphan``: no process of its group is left a second after it ended;
+- ``orphan``: no process of its group is left running a second after it ended;
 - ``partial``: no output at the output path unless the line says it had written it (then it is
   the whole output);
 - ``temp``: no temporary file (``.NAME.PID-RANDOM.part*``) beside the output after the next run;
@@ -71,6 +73,9 @@ def commands(frames: int) -> dict:
                    str(frames), "--out", "{out}"], "out.npz"),
         "puppet": (["puppet", str(DATA / "WDA_KatieHill_000.mp4"), *crf, "--out", "{out}"],
                    "out.mp4"),
+        # long enough for the detection's second process (video_detect.SPLIT_MIN_FRAMES)
+        "track-long": (["track", str(DATA / "driving_d6.mp4"), "--no-progress", "--max-frames",
+                        str(max(frames, 240)), "--out", "{out}"], "out.npz"),
     }
 
 
@@ -93,14 +98,12 @@ def launch(argv: list[str], home: Path) -> subprocess.Popen:
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
 
 
-def group_alive(pgid: int) -> bool:
-    """Whether any process of the group ``pgid`` is left (zombies of the command's children
-    included until they are reaped by init)."""
-    try:
-        os.killpg(pgid, 0)
-    except ProcessLookupError:
-        return False
-    return True
+def group_left(pgid: int) -> list[str]:
+    """The processes of the group ``pgid`` still running (``ps`` lines; a zombie is not one:
+    a child the command did not wait for, gone once init reaps it)."""
+    ps = subprocess.run(["ps", "-o", "pid=,stat=,args=", "-g", str(pgid)], capture_output=True,
+                        text=True).stdout.splitlines()
+    return [line.strip() for line in ps if not line.split()[1].startswith("Z")]
 
 
 def run(argv: list[str], home: Path, at=(), timeout: float = 60.0) -> dict:
@@ -124,12 +127,9 @@ def run(argv: list[str], home: Path, at=(), timeout: float = 60.0) -> dict:
         out, err = p.communicate()
     seconds = time.perf_counter() - t0
     deadline = time.monotonic() + 1.0
-    while group_alive(p.pid) and time.monotonic() < deadline:
+    while (orphan := group_left(p.pid)) and time.monotonic() < deadline:
         time.sleep(0.05)
-    orphan = group_alive(p.pid)
     if orphan:
-        orphan = subprocess.run(["ps", "-o", "pid,ppid,stat,args", "-g", str(p.pid)],
-                                capture_output=True, text=True).stdout.splitlines()[1:]
         os.killpg(p.pid, signal.SIGKILL)
     return {"status": p.returncode, "sent": sent, "hung": hung, "orphan": orphan,
             "seconds": round(seconds, 2), "stderr": err.splitlines(), "stdout": out.splitlines()}
@@ -166,6 +166,9 @@ def compare(path: Path, ref: Path, min_psnr: float) -> tuple[str, float]:
 def faults_of(first: dict, again: dict | None, leftovers: list, kept: str) -> list[str]:
     """The checks an interrupted run (``first``) and its next run (``again``) failed."""
     faults = []
+    if first["status"] in (1, -signal.SIGINT) and not any(
+            "<string>" in line or "facetransfer" in line for line in first["stderr"]):
+        return ["start"]     # in Python's own start, before the program's first line ran
     if first["hung"]:
         faults.append("hang")
     if first["status"] != 130 and not first["hung"]:
@@ -206,18 +209,19 @@ def trial(spec, kind: str, root: Path, at: tuple, ref: Path, opts) -> dict:
     leftovers = [p.name for p in out.parent.iterdir() if TEMP.match(p.name)]
     row.update(again=again, kept=kept, leftovers=leftovers,
                faults=faults_of(first, again, leftovers, kept))
-    row["result"] = "fault" if row["faults"] else "ok"
+    row["result"] = "start" if row["faults"] == ["start"] else \
+        "fault" if row["faults"] else "ok"
     shutil.rmtree(home, ignore_errors=True)
     return row
 
 
-def reference(spec, kind: str, root: Path, opts) -> tuple[Path, float]:
+def reference(name: str, spec, kind: str, root: Path, opts) -> tuple[Path, float]:
     """The command left alone (twice: its output must not change between runs): the output
     kept for comparison and the first run's seconds."""
     outs, seconds = [], []
     for _ in range(2):
         home = fresh_home(root)
-        out = root / f"reference-{len(outs)}-{kind}"
+        out = root / f"reference-{len(outs)}-{name}-{kind}"
         got = run([a.replace("{out}", str(out)) for a in spec], home, (), 600.0)
         if got["status"] != 0:
             raise SystemExit(f"the reference run failed: {got['stderr'][-3:]}")
@@ -231,21 +235,22 @@ def reference(spec, kind: str, root: Path, opts) -> tuple[Path, float]:
 
 
 def moments(seconds: float, opts) -> list[tuple]:
-    """The moments to interrupt at: single ones every ``--step`` from 0.05 s to past the
-    reference's time, and pairs every ``--double-every`` seconds ``--gaps`` apart."""
+    """The moments to interrupt at: ``--singles`` single ones evenly from 0.05 s to the
+    reference's time, and ``--pairs`` moments evenly from 0.1 s, each with a second SIGINT
+    each of ``--gaps`` later."""
     if opts.at:
         return [tuple(float(t) for t in a.split("+")) for a in opts.at.split(",")]
-    singles = [(round(t, 3),) for t in np.arange(0.05, seconds + opts.step, opts.step)]
+    singles = [(round(float(t), 3),) for t in np.linspace(0.05, seconds, opts.singles)]
     gaps = [float(g) for g in opts.gaps.split(",")]
-    doubles = [(round(t, 3), round(t + g, 3))
-               for t in np.arange(0.1, seconds, opts.double_every) for g in gaps]
+    doubles = [(round(float(t), 3), round(float(t) + g, 3))
+               for t in np.linspace(0.1, seconds, opts.pairs) for g in gaps]
     return singles + doubles
 
 
 def measure(name: str, opts, root: Path) -> dict:
     """Every moment's trial of the command ``name``."""
     spec, kind = commands(opts.frames)[name]
-    ref, seconds = reference(spec, kind, root, opts)
+    ref, seconds = reference(name, spec, kind, root, opts)
     print(f"{name}: reference {seconds:.1f} s", flush=True)
     rows = []
     for at in moments(seconds, opts):
@@ -261,7 +266,7 @@ def measure(name: str, opts, root: Path) -> dict:
 
 def table(report: dict) -> str:
     """Per command: the moments tried, those finished first, and the faults of each check."""
-    checks = ("status", "lines", "hang", "orphan", "partial", "temp", "resume")
+    checks = ("start", "status", "lines", "hang", "orphan", "partial", "temp", "resume")
     head = "| command | moments | finished first | faulty | " + " | ".join(checks) + " |"
     lines = [head, "|" + "---|" * (4 + len(checks))]
     for name, r in report["commands"].items():
@@ -275,18 +280,19 @@ def table(report: dict) -> str:
 
 def main() -> None:
     ap = arguments(__doc__)
-    ap.add_argument("--commands", default="transfer,track,puppet")
-    ap.add_argument("--frames", type=int, default=40)
-    ap.add_argument("--step", type=float, default=0.1)
-    ap.add_argument("--double-every", type=float, default=0.5)
-    ap.add_argument("--gaps", default="0.01,0.05,0.1,0.2")
+    ap.add_argument("--commands", default="transfer,track,puppet,track-long")
+    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--singles", type=int, default=30)
+    ap.add_argument("--pairs", type=int, default=6)
+    ap.add_argument("--gaps", default="0.01,0.05,0.2")
     ap.add_argument("--timeout", type=float, default=60.0)
     ap.add_argument("--min-psnr", type=float, default=40.0)
     ap.add_argument("--at", default="", help="these moments only: 1.2,0.5+0.55 (a pair)")
     opts = ap.parse_args()
     out = Path(opts.out)
     out.mkdir(parents=True, exist_ok=True)
-    report = {"frames": opts.frames, "step": opts.step, "gaps": opts.gaps, "commands": {}}
+    report = {"frames": opts.frames, "singles": opts.singles, "pairs": opts.pairs,
+              "gaps": opts.gaps, "commands": {}}
     with tempfile.TemporaryDirectory(prefix="interrupt-") as tmp:
         for name in opts.commands.split(","):
             report["commands"][name] = measure(name, opts, Path(tmp))

@@ -16,16 +16,18 @@ import pytest
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 
 
-def _console(*code: str, args=("probe", "x.mp4")) -> subprocess.CompletedProcess:
+def _console(*code: str, args=("probe", "x.mp4"), timeout: float = 60
+             ) -> subprocess.CompletedProcess:
     """Run ``code`` (pieces of Python, at their end the console script's entry run on
-    ``args``) in a process of its own: its status and output."""
+    ``args``) in a process of its own: its status and output (``timeout``: seconds before it
+    is said to hang)."""
     code = "".join(textwrap.dedent(c) for c in code) + textwrap.dedent(f"""
         sys.argv = ["facetransfer", *{list(args)!r}]
         from facetransfer.__main__ import main
         sys.exit(main())
     """)
     return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          timeout=60, env={**os.environ, "PYTHONPATH": SRC})
+                          timeout=timeout, env={**os.environ, "PYTHONPATH": SRC})
 
 
 @pytest.mark.parametrize("signum,said", [("SIGINT", (130, "interrupted")),
@@ -101,3 +103,35 @@ def test_a_ctrl_c_while_the_process_exits_is_ignored(stop, said):
     atexit.register(exiting)
     """)
     assert (r.returncode, r.stderr.splitlines()) == said
+
+
+def test_a_ctrl_c_while_a_thread_starts_is_taken_after_it():
+    """A Ctrl-C raised while a ``ThreadPoolExecutor`` started its worker (``Thread.start``
+    waiting for the thread to begin) left the worker running but unrecorded: the interpreter's
+    exit never woke it, and the process hung for ever after its line (1 of 130 pairs of
+    Ctrl-Cs 0.5-3.5 s into a transfer). Here the signal comes as the worker begins; it is
+    raised a moment later, after ``start``, and the process ends."""
+    r = _console("STOP = False\n", COMMAND, """
+    import threading
+    from concurrent.futures import ThreadPoolExecutor
+
+    real = threading.Thread._bootstrap_inner
+
+    def bootstrap(self):
+        if self.name.startswith("ThreadPoolExecutor"):
+            os.kill(os.getpid(), signal.SIGINT)        # the starting thread still waits
+            time.sleep(0.2)
+        real(self)
+
+    threading.Thread._bootstrap_inner = bootstrap
+
+    POOL = ThreadPoolExecutor(1)                       # kept, as a module's pool is
+
+    def command(args):
+        POOL.submit(time.sleep, 0)
+        time.sleep(5)                                  # the Ctrl-C is raised here
+        return 0
+
+    probe.run = command
+    """, timeout=20)
+    assert (r.returncode, r.stderr.splitlines()) == (130, ["facetransfer probe: interrupted"])
