@@ -14,7 +14,6 @@ landmarks in pixels, a confidence and a lost flag (see :mod:`facetransfer.track.
 from __future__ import annotations
 
 import argparse
-import sys
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
