@@ -135,3 +135,43 @@ def test_a_ctrl_c_while_a_thread_starts_is_taken_after_it():
     probe.run = command
     """, timeout=20)
     assert (r.returncode, r.stderr.splitlines()) == (130, ["facetransfer probe: interrupted"])
+
+
+def test_native_lines_after_a_stop_stay_filtered_until_the_process_exits():
+    """A command stopped while MediaPipe's landmarker was being made (its graph's threads log
+    as they start) or while a thread still loaded it: their lines came after the CLI's one (3
+    of 192 Ctrl-Cs), the filter of native lines (:mod:`facetransfer.cli.stderr`) ended with
+    the command while the process's exit still waited for them. Here a thread logs 0.3 s
+    after the command stopped."""
+    r = _console("STOP = True\n", COMMAND, """
+    import threading
+
+    def loading():
+        time.sleep(0.3)
+        os.write(2, b"W0000 00:00:1796628595.414419   30557 feedback.cc:121] Feedback\\n")
+        os.write(2, b"INFO: Created TensorFlow Lite XNNPACK delegate for CPU.\\n")
+
+    real = probe.run
+
+    def command(args):
+        threading.Thread(target=loading).start()
+        real(args)
+
+    probe.run = command
+    """)
+    assert (r.returncode, r.stderr.splitlines()) == (130, ["facetransfer probe: interrupted"])
+
+
+def test_a_newline_left_of_two_processes_native_lines_is_dropped():
+    """TensorFlow Lite writes its severity, message and newline in three writes: two
+    processes' lines interleaved left a line of both and a newline alone, which passed as a
+    blank line before the CLI's (3 of 48 Ctrl-Cs into a 240-frame track). Another blank line
+    passes."""
+    from facetransfer.cli.stderr import filter_native
+
+    both = (b"INFO: INFO: Created TensorFlow Lite XNNPACK delegate for CPU.Created TensorFlow "
+            b"Lite XNNPACK delegate for CPU.\n")
+    assert filter_native(both + b"\n") == (b"", b"", False)
+    assert filter_native(both) == (b"", b"", True)
+    assert filter_native(b"\n", after_native=True) == (b"", b"", False)   # in the next read
+    assert filter_native(b"own line\n\n") == (b"own line\n\n", b"", False)

@@ -8,15 +8,40 @@ any code of the project's ran: a Ctrl-C in that time printed the import's traceb
 Ctrl-Cs 0.05-4.2 s into a 40-frame transfer, and 4 of the 32 pairs of Ctrl-Cs; a new user's
 "wrong clip, stop" just after pressing Enter) and a SIGTERM killed the process with nothing
 said. Here the CLI is loaded inside a ``try`` that says either in one line (exit status 130 or
-143, as the CLI's own); this module imports nothing but the package (its docstring and version)
-and Python's ``signal``. Only the interpreter's own start (~20 ms, before any code of a
+143, as the CLI's own); this module imports nothing but the package (its docstring and
+version) before that ``try`` (Python's ``signal`` inside it: with ``enum`` and ``functools``,
+10-15 ms). Only the interpreter's own start (~20 ms, before any code of a
 program runs) is left: a Ctrl-C there is Python's traceback, as for any Python program.
 """
 
 from __future__ import annotations
 
-import signal
 import sys
+
+
+def main() -> int:
+    """Load the CLI and run it on ``sys.argv``; its exit status (130 or 143 for an interrupt
+    before it began, said in one line)."""
+    signal = None
+    try:
+        import signal      # inside the try: enum and functools come with it (10-15 ms)
+
+        term = signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
+        if term:           # its default killed the process with nothing said
+            signal.signal(signal.SIGTERM, _terminated)
+        try:
+            from .cli.main import main as cli
+        finally:
+            if term:       # the CLI sets its own
+                signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        return cli(process_ends=True)
+    except KeyboardInterrupt as exc:
+        if signal is not None and signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+            signal.signal(signal.SIGINT, signal.SIG_IGN)     # nothing more to stop
+        what, status = ("terminated", 143) if isinstance(exc, _Terminated) else \
+            ("interrupted", 130)
+        print(f"facetransfer: {what}", file=sys.stderr)
+        return status
 
 
 class _Terminated(KeyboardInterrupt):
@@ -26,28 +51,6 @@ class _Terminated(KeyboardInterrupt):
 
 def _terminated(signum, frame):
     raise _Terminated
-
-
-def main() -> int:
-    """Load the CLI and run it on ``sys.argv``; its exit status (130 or 143 for an interrupt
-    before it began, said in one line)."""
-    term = signal.getsignal(signal.SIGTERM) == signal.SIG_DFL
-    try:
-        if term:
-            signal.signal(signal.SIGTERM, _terminated)
-        try:
-            from .cli.main import main as cli
-        finally:
-            if term:
-                signal.signal(signal.SIGTERM, signal.SIG_DFL)
-        return cli()
-    except KeyboardInterrupt as exc:
-        if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
-            signal.signal(signal.SIGINT, signal.SIG_IGN)     # nothing more to stop
-        what, status = ("terminated", 143) if isinstance(exc, _Terminated) else \
-            ("interrupted", 130)
-        print(f"facetransfer: {what}", file=sys.stderr)
-        return status
 
 
 if __name__ == "__main__":  # pragma: no cover

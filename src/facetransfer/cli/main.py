@@ -306,9 +306,13 @@ def error_line(command: str, exc: BaseException) -> str:
     return f"facetransfer {command}: error: {msg}"
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, *, process_ends: bool = False) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input or usage, 130 interrupted by
     Ctrl-C, 143 terminated by SIGTERM, after keeping what an interrupt keeps).
+
+    ``process_ends``: the process exits once this returns (the console script,
+    :mod:`facetransfer.__main__`): native log lines stay filtered and Ctrl-C ignored until it
+    has (:func:`_no_more_stops`).
 
     Called with no ``argv`` (the console script), native libraries' log lines are filtered out
     of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
@@ -328,7 +332,7 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with interrupts_not_ignored(((Terminated, signal.SIGTERM),
                                      (KeyboardInterrupt, signal.SIGINT))):
-            return _main(argv)
+            return _main(argv, process_ends)
     except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
         _no_more_stops()
         what, status = _stop_status(exc)
@@ -337,7 +341,7 @@ def main(argv: list[str] | None = None) -> int:
     finally:
         for signum, handler in previous.items():
             if handler is not None:     # the console script's exit takes no more Ctrl-C
-                exiting = argv is None and signum == signal.SIGINT
+                exiting = process_ends and signum == signal.SIGINT
                 signal.signal(signum, signal.SIG_IGN if exiting else handler)
 
 
@@ -347,7 +351,7 @@ def _stop_status(stop: KeyboardInterrupt) -> tuple[str, int]:
     return ("terminated", 143) if isinstance(stop, Terminated) else ("interrupted", 130)
 
 
-def _main(argv: list[str] | None) -> int:
+def _main(argv: list[str] | None, process_ends: bool = False) -> int:
     """:func:`main`'s work: parse ``argv``, set up logging and stderr, run the command."""
     if argv is None:
         serial_blas(sys.argv[1:])
@@ -377,7 +381,7 @@ def _main(argv: list[str] | None) -> int:
             return _exiting(_run(args))
         from .stderr import filtered_stderr
 
-        with filtered_stderr():
+        with filtered_stderr(until_exit=process_ends):
             return _exiting(_run(args))
     with _sequence_rate_kept():  # a caller's process goes on: the next command's rate is its own
         use_sequence_rate(args)
