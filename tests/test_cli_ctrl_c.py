@@ -35,7 +35,7 @@ def _console(*code: str, args=("probe", "x.mp4"), timeout: float = 60
 def test_a_stop_while_the_cli_loads_is_one_line(signum, said):
     """The console script imported the CLI (argparse, logging, zipfile, its own module: 0.15-
     0.2 s) before any of the project's code ran: a Ctrl-C then printed the import's traceback
-    (1 of 42 Ctrl-Cs into a 40-frame transfer, 0.05 s in) and a SIGTERM killed the process
+    (4 of 192 Ctrl-Cs into four commands, 0.05-0.1 s in) and a SIGTERM killed the process
     with no line. The signal here comes as the CLI imports argparse."""
     r = _console(f"""
         import importlib.abc, os, signal, sys
@@ -108,8 +108,8 @@ def test_a_ctrl_c_while_the_process_exits_is_ignored(stop, said):
 def test_a_ctrl_c_while_a_thread_starts_is_taken_after_it():
     """A Ctrl-C raised while a ``ThreadPoolExecutor`` started its worker (``Thread.start``
     waiting for the thread to begin) left the worker running but unrecorded: the interpreter's
-    exit never woke it, and the process hung for ever after its line (1 of 130 pairs of
-    Ctrl-Cs 0.5-3.5 s into a transfer). Here the signal comes as the worker begins; it is
+    exit never woke it, and the process hung for ever after its line (2 of about 200 runs
+    given Ctrl-C 0.5-3.5 s into a transfer). Here the signal comes as the worker begins; it is
     raised a moment later, after ``start``, and the process ends."""
     r = _console("STOP = False\n", COMMAND, """
     import threading
@@ -175,3 +175,29 @@ def test_a_newline_left_of_two_processes_native_lines_is_dropped():
     assert filter_native(both) == (b"", b"", True)
     assert filter_native(b"\n", after_native=True) == (b"", b"", False)   # in the next read
     assert filter_native(b"own line\n\n") == (b"own line\n\n", b"", False)
+
+
+def test_a_ctrl_c_in_an_import_is_taken_after_it(tmp_path):
+    """C code that imports turns an interrupt raised inside into an error of its own: NumPy's
+    multiarray, whose import of ``datetime`` took a Ctrl-C, raised "ImportError:
+    PyCapsule_Import could not import module 'datetime'" (60 lines, exit 1; 1 of 48 Ctrl-Cs
+    into ``puppet`` while the CLI's modules loaded). Here a module swallows it the same way;
+    the interrupt is raised once the import is done."""
+    (tmp_path / "victim.py").write_text("import os, signal\n"
+                                        "os.kill(os.getpid(), signal.SIGINT)\n"
+                                        "sum(range(100000))      # the handler runs here\n")
+    (tmp_path / "swallow.py").write_text("try:\n    import victim\n"
+                                         "except BaseException:    # as NumPy's C code does\n"
+                                         "    raise ImportError('could not import victim')"
+                                         " from None\n")
+    r = _console("STOP = False\n", COMMAND, f"""
+    sys.path.insert(0, {str(tmp_path)!r})
+
+    def command(args):
+        import swallow                                 # noqa: F401
+        time.sleep(5)                                  # the Ctrl-C is raised here
+        return 0
+
+    probe.run = command
+    """)
+    assert (r.returncode, r.stderr.splitlines()) == (130, ["facetransfer probe: interrupted"])

@@ -4,9 +4,9 @@ in one line.
 
 Loading the CLI (argparse, logging, zipfile and the CLI's own module) takes 0.15-0.2 s before
 :func:`facetransfer.cli.main.main` sets its handlers, and the console script imported it before
-any code of the project's ran: a Ctrl-C in that time printed the import's traceback (1 of 42
-Ctrl-Cs 0.05-4.2 s into a 40-frame transfer, and 4 of the 32 pairs of Ctrl-Cs; a new user's
-"wrong clip, stop" just after pressing Enter) and a SIGTERM killed the process with nothing
+any code of the project's ran: a Ctrl-C in that time printed the import's traceback (the one
+0.05 s into a 30-frame transfer and into a puppet, and puppet's pairs 0.1 s in: 4 of 192
+Ctrl-Cs into four commands; a new user's "wrong clip, stop" just after pressing Enter) and a SIGTERM killed the process with nothing
 said. Here the CLI is loaded inside a ``try`` that says either in one line (exit status 130 or
 143, as the CLI's own); this module imports nothing but the package (its docstring and
 version) before that ``try`` (Python's ``signal`` inside it: with ``enum`` and ``functools``,
