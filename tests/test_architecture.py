@@ -149,7 +149,8 @@ def test_no_import_cycles():
 
 
 def _in_cli(module: str) -> bool:
-    """The CLI: ``cli`` and ``python -m facetransfer``'s ``__main__``, which only runs it."""
+    """The CLI: ``cli`` and ``python -m facetransfer``'s ``__main__`` (the console script's
+    entry too), which only runs it."""
     return module in ("facetransfer.cli", "facetransfer.__main__") \
         or module.startswith("facetransfer.cli.")
 
@@ -261,8 +262,8 @@ LAYER_OF = {
     "facetransfer.file_facts": "apps",    # what probe says of a track or a take
     "facetransfer.face_file": "apps",     # the dial editor's (export.viewer's) saved face
     "facetransfer.cli": "cli",
+    "facetransfer.__main__": "cli",   # the console script: the CLI loaded, a Ctrl-C meanwhile said
     "facetransfer.cli.edit": "cli",   # the edit command (a track's, a take's), out of cli.transfer
-    "facetransfer.__main__": "cli",   # python -m facetransfer: the console script's main
 }
 
 #: Imports from a lower layer to a higher one that stay, each with its reason. A new one fails

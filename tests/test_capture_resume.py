@@ -243,11 +243,15 @@ def test_cli_capture_continues_an_interrupted_run(clip, quick_model_path, tmp_pa
     capsys.readouterr()
     fakes.stop_at = 0                 # before the first frame: nothing saved, none promised
     assert main(args) == 130 and not partial.exists()
-    assert "interrupted before any progress was saved" in capsys.readouterr().err
+    # one line (the progress was said on a line of its own before the CLI's)
+    assert capsys.readouterr().err.splitlines() == [
+        "facetransfer track: interrupted; no progress was saved yet: the same command starts "
+        "again"]
     fakes.stop_at = 20                                       # interrupted in frame 20
     assert main(args) == 130
-    err = capsys.readouterr().err
-    assert f"interrupted; the progress is in {partial}: run the same command again" in err
+    assert capsys.readouterr().err.splitlines() == [
+        f"facetransfer track: interrupted; the progress is in {partial}: run the same command "
+        "again to continue"]
     assert partial.is_file() and not out.exists()
     fakes.stop_at = None
     assert main(args) == 0

@@ -700,7 +700,7 @@ def test_commands_run_in_threads_leave_the_process_unraisable_hook_as_it_was(mon
 
     a_in, b_in = threading.Event(), threading.Event()
 
-    def command(argv):
+    def command(argv, process_ends=False):
         if argv == ["a"]:
             a_in.set()
             assert b_in.wait(10)          # b sets its hook while a's is set
@@ -733,7 +733,7 @@ def test_a_callers_own_sigterm_handler_is_kept_while_a_command_runs(monkeypatch)
 
     heard = []
 
-    def command(argv):
+    def command(argv, process_ends=False):
         os.kill(os.getpid(), signal.SIGTERM)
         time.sleep(0.5)                        # the handler runs here
         return 0

@@ -183,6 +183,29 @@ def test_an_interrupt_while_this_process_loads_its_landmarker_stops_the_child(
     assert len(children) == 1 and children[0].cancelled
 
 
+def test_the_child_takes_a_ctrl_c_inside_its_job_only(monkeypatch, capfd):
+    """A Ctrl-C reaching the detection's child while it waited for its job, or (here) for the
+    pool's end once its part was done, was raised in the pool's own loop: the child printed
+    "Process ForkProcess-1: Traceback ... KeyboardInterrupt" under the CLI's line (1 of 48
+    Ctrl-Cs into a 240-frame track). It is taken inside the job only."""
+    import os
+    import signal
+    import time
+
+    from facetransfer.track import detect
+
+    monkeypatch.setattr(detect, "_import_mediapipe", lambda: None)
+    monkeypatch.setattr(video_detect, "_detect_part", os.getpid)    # the child's part: its pid
+    child = video_detect.SplitDetection.start("clip.mp4", 0, 1, 30.0)
+    try:
+        pid = child._future.result(timeout=30)
+        os.kill(pid, signal.SIGINT)                 # as a terminal's Ctrl-C reaches it
+        time.sleep(0.5)
+    finally:
+        child.cancel()
+    assert pid != os.getpid() and "KeyboardInterrupt" not in capfd.readouterr().err
+
+
 def test_the_child_reads_its_warm_up_and_part_as_a_whole_read(data_dir):
     """The child's frames past a keyframe (``driving_d6``: every 250 frames), reached by the
     container's seek: the frames of a read from the start, placeholders before the warm-up."""

@@ -265,9 +265,44 @@ def unsafe_to_raise_at(frame) -> bool:
     runs hung, no line said; importlib's module-lock callback alone was guarded before). A
     handler sends its signal again instead (:func:`send_later`), taken in the code running
     a moment later. Nor while :func:`interrupts_not_ignored`'s hook runs (:data:`_IN_HOOK`):
-    what it raises there is ignored."""
+    what it raises there is ignored. Nor while a thread is being started
+    (:func:`_starting_thread`), nor while the main thread imports (:func:`_importing`)."""
     return _IN_HOOK[0] or (frame is not None
-                           and frame.f_globals.get("__name__") in UNGUARDED_LOCKS)
+                           and (frame.f_globals.get("__name__") in UNGUARDED_LOCKS
+                                or _starting_thread(frame) or _importing(frame)))
+
+
+def _importing(frame) -> bool:
+    """Whether ``frame`` runs inside an import (importlib's frames below it: a module's own
+    code, or a C extension's init importing others). C code that imports turns an interrupt
+    raised inside into an error of its own: NumPy's ``_multiarray_umath``, whose import of
+    ``datetime`` took a Ctrl-C, raised "ImportError: PyCapsule_Import could not import module
+    'datetime'" (60 lines and exit 1, 1 of 48 Ctrl-Cs into ``puppet``, 0.2 s in, while the
+    CLI's modules loaded). The interrupt is raised once the outermost import is done instead
+    (the CLI's modules load one by one: a moment later)."""
+    while frame is not None:
+        if frame.f_globals.get("__name__") == "importlib._bootstrap":
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _starting_thread(frame, depth: int = 4) -> bool:
+    """Whether ``frame`` or one of the ``depth - 1`` frames it was called from is
+    :meth:`threading.Thread.start` (which waits in ``Event.wait``, ``Condition.wait`` for the
+    new thread to begin): an interrupt raised there left the thread running but unknown to
+    whatever started it. A ``ThreadPoolExecutor``'s worker, started by ``submit`` but never
+    recorded for the interpreter's exit to wake, waited for work for ever, and the process
+    with it, after its one line (2 of about 200 runs given Ctrl-C 0.5-3.5 s into a transfer,
+    killed after 30 and 60 s; BENCHMARKS.md, "Fifty-fourth session")."""
+    start = threading.Thread.start.__code__
+    for _ in range(depth):
+        if frame is None:
+            return False
+        if frame.f_code is start:
+            return True
+        frame = frame.f_back
+    return False
 
 
 def _send_again(signum: int) -> None:

@@ -195,7 +195,7 @@ def _run(args, what: str, n_jobs: int, call) -> int:
                                                      dynamic_ncols=True, file=sys.stderr,
                                                      disable=progress_disabled())
             res = call(client, progress)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         if bar is not None:
             bar.close()
         if not started:   # while the cluster started or the scheduler was asked: nothing ran
@@ -206,14 +206,13 @@ def _run(args, what: str, n_jobs: int, call) -> int:
         # tasks still running keep theirs)
         remove_stale_claims(args.out)
         summary = Path(args.out) / "summary.csv"
-        print(f"stopped: finished outputs are kept in {args.out}"
-              + (f" (see {summary})" if summary.is_file() else "")
-              + "; run the same command again to continue"
-              # only a clip tracked whole keeps a progress file (not a transfer, an export or
-              # a chunk)
-              + (" (a clip being tracked continues from its progress file)"
-                 if what == "track" and not getattr(args, "chunk", 0) else ""),
-              file=sys.stderr)
+        # said in the CLI's one line (facetransfer.cli.main._run); only a clip tracked whole
+        # keeps a progress file (not a transfer, an export or a chunk)
+        stop.add_note(f"finished outputs are kept in {args.out}"
+                      + (f" (see {summary})" if summary.is_file() else "")
+                      + "; run the same command again to continue"
+                      + (" (a clip being tracked continues from its progress file)"
+                         if what == "track" and not getattr(args, "chunk", 0) else ""))
         raise
     finally:
         if bar is not None:

@@ -306,9 +306,13 @@ def error_line(command: str, exc: BaseException) -> str:
     return f"facetransfer {command}: error: {msg}"
 
 
-def main(argv: list[str] | None = None) -> int:
+def main(argv: list[str] | None = None, *, process_ends: bool = False) -> int:
     """Run the CLI; returns the exit status (0 ok, 2 bad input or usage, 130 interrupted by
     Ctrl-C, 143 terminated by SIGTERM, after keeping what an interrupt keeps).
+
+    ``process_ends``: the process exits once this returns (the console script,
+    :mod:`facetransfer.__main__`): native log lines stay filtered and Ctrl-C ignored until it
+    has (:func:`_no_more_stops`).
 
     Called with no ``argv`` (the console script), native libraries' log lines are filtered out
     of stderr unless ``-v`` is given (:mod:`.stderr`), and the commands that run their own
@@ -328,15 +332,17 @@ def main(argv: list[str] | None = None) -> int:
     try:
         with interrupts_not_ignored(((Terminated, signal.SIGTERM),
                                      (KeyboardInterrupt, signal.SIGINT))):
-            return _main(argv)
+            return _main(argv, process_ends)
     except KeyboardInterrupt as exc:     # the command's own are said by _run: not yet begun
+        _no_more_stops()
         what, status = _stop_status(exc)
         print(f"facetransfer: {what}", file=sys.stderr)
         return status
     finally:
         for signum, handler in previous.items():
-            if handler is not None:
-                signal.signal(signum, handler)
+            if handler is not None:     # the console script's exit takes no more Ctrl-C
+                exiting = process_ends and signum == signal.SIGINT
+                signal.signal(signum, signal.SIG_IGN if exiting else handler)
 
 
 def _stop_status(stop: KeyboardInterrupt) -> tuple[str, int]:
@@ -345,7 +351,7 @@ def _stop_status(stop: KeyboardInterrupt) -> tuple[str, int]:
     return ("terminated", 143) if isinstance(stop, Terminated) else ("interrupted", 130)
 
 
-def _main(argv: list[str] | None) -> int:
+def _main(argv: list[str] | None, process_ends: bool = False) -> int:
     """:func:`main`'s work: parse ``argv``, set up logging and stderr, run the command."""
     if argv is None:
         serial_blas(sys.argv[1:])
@@ -375,7 +381,7 @@ def _main(argv: list[str] | None) -> int:
             return _exiting(_run(args))
         from .stderr import filtered_stderr
 
-        with filtered_stderr():
+        with filtered_stderr(until_exit=process_ends):
             return _exiting(_run(args))
     with _sequence_rate_kept():  # a caller's process goes on: the next command's rate is its own
         use_sequence_rate(args)
@@ -447,6 +453,25 @@ def _raise_at(frame, signum: int, stop: type[KeyboardInterrupt]) -> None:
     raise stop
 
 
+def _no_more_stops() -> None:
+    """Ignore Ctrl-C and SIGTERM from here until :func:`main` restores the handlers there were
+    (the console script's exit keeps ignoring Ctrl-C): the command has ended, or its stop is
+    being said. A second Ctrl-C then (a user's, 10-200 ms after the first, while the command
+    said its line and the process exited) printed a second line, or a traceback of the line's
+    own ``print``, or of the interpreter's exit (joining threads), or killed the process by
+    the signal (status -2, not 130: Python's exit puts a Python-level handler back to the
+    default, not an ignored signal) (BENCHMARKS.md, "Fifty-fourth session"). Only where the
+    handlers are the CLI's own (:func:`main` set them, in the main thread)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for signum, ours in ((signal.SIGINT, _interrupted), (signal.SIGTERM, _terminated)):
+        if signal.getsignal(signum) is ours:
+            signal.signal(signum, signal.SIG_IGN)
+
+
 def _catching_sigint():
     """:func:`_interrupted` for Ctrl-C where Python's own handler is (main thread only; a job
     started in the background ignores it, a caller's own handler is kept); returns the old
@@ -504,9 +529,11 @@ def _run(args) -> int:
     try:
         with checks:
             status = int(args.func(args) or 0)
+        _no_more_stops()        # done: a Ctrl-C now has nothing left to stop
         sys.stdout.flush()      # what the command said, while a closed pipe can be caught here
         return status
     except (ValueError, OSError, MemoryError, EOFError, zipfile.BadZipFile) as exc:
+        _no_more_stops()
         # bad input, a failed write or read (permissions, full disk), a job too large
         if isinstance(exc, BrokenPipeError) and _stdout_gone():
             return 141        # read by ``| head``, which stopped reading: nothing to say
@@ -518,12 +545,27 @@ def _run(args) -> int:
         stop = interrupt_of(exc)     # a compiled kernel's SystemError caused by the interrupt
         if stop is None:
             raise
+        _no_more_stops()
         what, status = _stop_status(stop)
         written = [str(p) for p in _outputs(args)
                    if (now := _file_id(p)) is not None and now != before.get(p)]
-        print(f"facetransfer {command_name(args)}: {what}{_kept(args.command, written)}",
-              file=sys.stderr)
+        print(f"facetransfer {command_name(args)}: {what}{_noted(stop)}"
+              f"{_kept(args.command, written)}", file=sys.stderr)
         return status
+
+
+def _noted(stop: BaseException) -> str:
+    """What the command noted on its interrupt (``stop.add_note``: where its progress is, what
+    a batch kept), each after "; ", for its one line: ``track`` and ``batch`` printed a line of
+    their own before the CLI's (two lines for one Ctrl-C: 18 and 24 of 48 Ctrl-Cs into a 30- and
+    a 240-frame ``track``).
+    The notes of an interrupt it stopped in the handling of (a second Ctrl-C meanwhile) too."""
+    notes, seen = [], set()
+    while stop is not None and id(stop) not in seen:
+        seen.add(id(stop))
+        notes[:0] = [n for n in getattr(stop, "__notes__", ()) if n not in notes]
+        stop = stop.__context__
+    return "".join(f"; {n}" for n in notes)
 
 
 def _stdout_gone() -> bool:

@@ -41,14 +41,23 @@ def _maybe_native(partial: bytes) -> bool:
     return any(partial.startswith(k) or k.startswith(partial) for k in _KEYWORDS)
 
 
-def filter_native(data: bytes) -> tuple[bytes, bytes]:
+def filter_native(data: bytes, after_native: bool = False) -> tuple[bytes, bytes, bool]:
     """Split ``data`` into what to forward now and an unfinished native log line to keep.
+
+    A blank line right after a native log line (``after_native``: the last line of the chunk
+    before was one) is dropped too: TensorFlow Lite writes its severity, its message and the
+    newline in three writes, so two processes' lines interleaved leave one line of both
+    messages and a newline alone (a blank line before the CLI's own, 3 of 48 interrupted
+    240-frame ``track`` runs, whose detection's second process speaks too). Any other blank
+    line passes.
 
     Returns
     -------
     forward : bytes
     rest : bytes
         A trailing partial line that starts like a native log line (kept for the next chunk).
+    after_native : bool
+        Whether the last whole line was a native log line (for the next chunk).
     """
     out = []
     lines = data.splitlines(keepends=True)
@@ -56,9 +65,11 @@ def filter_native(data: bytes) -> tuple[bytes, bytes]:
     if lines and not lines[-1].endswith(b"\n") and _maybe_native(lines[-1]):
         rest = lines.pop()
     for ln in lines:
-        if not NATIVE_LOG.match(ln):
+        blank = not ln.strip(b"\r\n")
+        if not (NATIVE_LOG.match(ln) or (blank and after_native)):
             out.append(ln)
-    return b"".join(out), rest
+        after_native = not blank and bool(NATIVE_LOG.match(ln))
+    return b"".join(out), rest, after_native
 
 
 class CurrentStderrHandler(logging.StreamHandler):
@@ -83,8 +94,14 @@ class CurrentStderrHandler(logging.StreamHandler):
 
 
 @contextlib.contextmanager
-def filtered_stderr() -> Iterator[None]:
-    """Filter native log lines out of descriptor 2 for the duration of the block."""
+def filtered_stderr(*, until_exit: bool = False) -> Iterator[None]:
+    """Filter native log lines out of descriptor 2 for the duration of the block; with
+    ``until_exit`` (a process that ends with the block: the console script), until the
+    interpreter's exit, once its threads have ended (:mod:`atexit`). A command stopped while
+    MediaPipe's landmarker was being made (its graph's threads log as they start) or a thread
+    still loading it let their lines through after the CLI's one (3 of 192 Ctrl-Cs into
+    ``track``, ``puppet`` and a 240-frame ``track``): the process's exit waited for them with
+    descriptor 2 the terminal again."""
     try:
         saved = os.dup(2)
         r, w = os.pipe()
@@ -93,7 +110,7 @@ def filtered_stderr() -> Iterator[None]:
         return
 
     def pump() -> None:
-        rest = b""
+        rest, after_native = b"", False
         while True:
             try:
                 chunk = os.read(r, 65536)
@@ -101,7 +118,7 @@ def filtered_stderr() -> Iterator[None]:
                 break
             if not chunk:
                 break
-            fwd, rest = filter_native(rest + chunk)
+            fwd, rest, after_native = filter_native(rest + chunk, after_native)
             if fwd:
                 with contextlib.suppress(OSError):
                     os.write(saved, fwd)
@@ -123,15 +140,23 @@ def filtered_stderr() -> Iterator[None]:
     py_fd = os.dup(saved)
     sys.stderr = io.TextIOWrapper(io.FileIO(py_fd, "w"), encoding=getattr(old, "encoding", None)
                                   or "utf-8", errors="backslashreplace", line_buffering=True)
-    try:
-        yield
-    finally:
+    def end() -> None:
         with contextlib.suppress(Exception):
             sys.stderr.flush()
             sys.stderr.close()
         sys.stderr = old
         os.dup2(saved, 2)   # closes the pipe's last write end: the pump drains and stops
         _drained(t, saved)
+
+    try:
+        yield
+    finally:
+        if until_exit:
+            import atexit
+
+            atexit.register(end)    # after the interpreter has joined its threads
+        else:
+            end()
 
 
 #: Seconds :func:`filtered_stderr` waits at its end for the pump to forward what is left. A

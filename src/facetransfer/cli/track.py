@@ -14,7 +14,6 @@ landmarks in pixels, a confidence and a lost flag (see :mod:`facetransfer.track.
 from __future__ import annotations
 
 import argparse
-import sys
 from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
@@ -380,25 +379,22 @@ def _capture(args, model, options, progress, bars):
         except KeyboardInterrupt:
             ck.save(det, complete=True)                   # with the fit so far, if it began
             raise
-    except KeyboardInterrupt:
-        for b in bars.values():
-            b.close()                                     # the message on a line of its own
-        _say_progress(partial)
+    except KeyboardInterrupt as stop:
+        _say_progress(stop, partial)
         raise
     finally:
         for b in bars.values():
             b.close()
 
 
-def _say_progress(partial) -> None:
-    """The line of an interrupted ``track``: where its progress is, where any was saved
-    (no file is named when the interrupt came before the first save wrote one)."""
+def _say_progress(stop: KeyboardInterrupt, partial) -> None:
+    """Note on ``stop`` (said in the CLI's one line, :func:`facetransfer.cli.main._run`) where
+    the interrupted ``track``'s progress is, where any was saved (no file is named when the
+    interrupt came before the first save wrote one)."""
     if partial.exists():
-        print(f"interrupted; the progress is in {partial}: run the same command again to "
-              "continue", file=sys.stderr)
+        stop.add_note(f"the progress is in {partial}: run the same command again to continue")
     else:
-        print("interrupted before any progress was saved: the same command starts again",
-              file=sys.stderr)
+        stop.add_note("no progress was saved yet: the same command starts again")
 
 
 def _capture_detect(args, saved, ck, progress):
@@ -437,8 +433,8 @@ def _track_klt(args, model, opt, progress, bars):
         track = track_video(args.video, model, init=args.init, options=opt,
                             max_frames=args.max_frames, progress=progress,
                             source=str(args.video), detector=detector, checkpoint=partial)
-    except KeyboardInterrupt:
-        _say_progress(partial)
+    except KeyboardInterrupt as stop:
+        _say_progress(stop, partial)
         raise
     finally:
         for b in bars.values():

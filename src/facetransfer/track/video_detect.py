@@ -129,10 +129,17 @@ _JOB: tuple | None = None
 
 def _child_job() -> ClipDetections:
     """In the child: detect frames ``start .. stop`` (or the clip's end) of the video; ended if
-    the parent goes (:func:`facetransfer.signals.ended_with_parent`)."""
-    from ..signals import ended_with_parent
+    the parent goes (:func:`facetransfer.signals.ended_with_parent`); its Ctrl-C taken inside
+    the job only (:func:`facetransfer.signals.interrupted_once`)."""
+    from ..signals import ended_with_parent, interrupted_once
 
     ended_with_parent()
+    with interrupted_once():
+        return _detect_part()
+
+
+def _detect_part() -> ClipDetections:
+    """:func:`_child_job`'s detection."""
     video, start, stop, fps, counter, view, subject, every, eyes = _JOB
     frames = _child_frames(video, start, stop)
     detector = _child_landmarker(fps, subject)
@@ -210,7 +217,11 @@ class SplitDetection:
         pool = fut = None
         try:
             pool = ProcessPoolExecutor(max_workers=1, mp_context=ctx)
-            with deferred_signals():    # a Ctrl-C in the fork: raised below, not lost in it
+            # a Ctrl-C in the fork: raised below, not lost in it; the child takes it inside its
+            # job only: one that reached it while it waited for the job, or for the pool's end
+            # after it, was raised in the pool's loop and printed its traceback ("Process
+            # ForkProcess-1: ... KeyboardInterrupt", 1 of 48 Ctrl-Cs into a 240-frame track)
+            with deferred_signals(interrupt_once=True):
                 fut = pool.submit(_child_job)       # forks now: the child sees _JOB
         except Exception as exc:  # noqa: BLE001 - cannot fork here (e.g. a daemon process)
             log.info("detecting in one process (%s)", exc)
