@@ -23,6 +23,7 @@ from facetransfer.cli.main import main
 from facetransfer.io.video import read_video
 from facetransfer.track import Track
 
+from _tracks import assert_same_track_file
 from conftest import clip_with_points
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
@@ -56,13 +57,6 @@ def _summary(path):
         return {r["clip"]: r for r in csv.DictReader(fh)}
 
 
-def _assert_same_track_file(p, q):
-    with np.load(p) as a, np.load(q) as b:
-        assert sorted(a.files) == sorted(b.files)
-        for k in a.files:
-            assert np.array_equal(a[k], b[k]), k
-
-
 def test_batch_track_writes_what_track_writes_and_fails_bad_rows(clips, quick_model_path, inproc,
                                                                  tmp_path, capsys, monkeypatch):
     (va, pa, _), (vb, pb, _) = clips["a"], clips["b"]
@@ -81,7 +75,7 @@ def test_batch_track_writes_what_track_writes_and_fails_bad_rows(clips, quick_mo
     code, stdout, _ = _cli(capsys, "batch", "track", "--manifest", man, "--model",
                            quick_model_path, "--out", out, "--passes", "1", "--workers", "2")
     assert code == 1  # two rows failed, the others went on
-    _assert_same_track_file(out / "a.npz", ref)
+    assert_same_track_file(out / "a.npz", ref)
     rows = _summary(out / "summary.csv")
     assert list(rows) == ["a", "bee", "missing", "notvideo"]
     tb = Track.load(out / "bee.npz")
@@ -261,7 +255,7 @@ def test_max_frames_tracks_the_first_frames_and_a_rerun_knows_its_limit(
     out = tmp_path / "out"
     argv = ("batch", "track", va, "--init", pa, "--out", out, *common)
     assert _cli(capsys, *argv, "--max-frames", 5)[0] == 0
-    _assert_same_track_file(out / "a.npz", ref)
+    assert_same_track_file(out / "a.npz", ref)
     assert Track.load(out / "a.npz").n_frames == 5
     row = _summary(out / "summary.csv")["a"]
     assert row["status"] == "done" and int(row["frames"]) == 5
@@ -335,7 +329,7 @@ def test_max_frames_of_a_chunked_clip(quick_model, quick_model_path, inproc, tmp
                 "--overlap", 2, "--max-frames", 9, *common)[0] == 0
     assert _cli(capsys, "track", video, "--out", tmp_path / "ref.npz", "--max-frames", 9,
                 *common)[0] == 0
-    _assert_same_track_file(tmp_path / "w" / "long.npz", tmp_path / "ref.npz")
+    assert_same_track_file(tmp_path / "w" / "long.npz", tmp_path / "ref.npz")
 
 
 def test_batch_transfer_calls_what_transfer_calls(clips, quick_model_path, inproc, tmp_path,

@@ -14,6 +14,7 @@ from facetransfer.batch import cluster as batch_cluster
 from facetransfer.cli.main import main
 from facetransfer.track import Track
 
+from _tracks import assert_same_track_file
 from conftest import clip_with_points
 
 pytestmark = pytest.mark.filterwarnings("ignore::DeprecationWarning")
@@ -67,13 +68,6 @@ def _notes(path):
         return {r["clip"]: (r["status"], r["note"]) for r in csv.DictReader(fh)}
 
 
-def _same_file(p, q):
-    with np.load(p) as a, np.load(q) as b:
-        assert sorted(a.files) == sorted(b.files)
-        for k in a.files:
-            assert np.array_equal(a[k], b[k]), k
-
-
 def test_batch_track_occluders_is_track_occluders_per_clip(two_clips, quick_model_path, inproc,
                                                            tmp_path, capsys):
     """Two clips, one with a box over its mouth: ``batch track --occluders`` writes the track
@@ -102,7 +96,7 @@ def test_batch_track_occluders_is_track_occluders_per_clip(two_clips, quick_mode
     code, _, err = _cli(capsys, *argv, "--occluders")
     assert code == 0, err
     for name in two_clips:
-        _same_file(out / f"{name}.npz", tmp_path / f"ref_{name}.npz")
+        assert_same_track_file(out / f"{name}.npz", tmp_path / f"ref_{name}.npz")
     assert _notes(out / "summary.csv") == {n: ("done", said[n]) for n in said}
     assert f"b: note: {said['b']}" in err.splitlines()
     code, _, err = _cli(capsys, *argv, "--occluders")       # a rerun: skipped, still said
@@ -130,7 +124,7 @@ def test_a_manifests_occluders_column_asks_per_clip(two_clips, quick_model_path,
     assert Track.load(out / "b.npz").occluded[4:9, 0].all()       # empty: the flag's yes
     assert _cli(capsys, "track", va, "--init", pa, "--out", tmp_path / "ref_a.npz",
                 *common)[0] == 0
-    _same_file(out / "a.npz", tmp_path / "ref_a.npz")
+    assert_same_track_file(out / "a.npz", tmp_path / "ref_a.npz")
     (out / "summary.csv").unlink()                   # the files alone say which kind they are
     man.write_text(f"video,init,occluders\n{va},{pa},YES\n{vb},{pb},0\n")
     code, _, err = _cli(capsys, "batch", "track", "--manifest", man, "--out", out, *common)
