@@ -214,6 +214,29 @@ def cache_dir() -> Path:
     return d
 
 
+def others_beside(path: Path, pattern: str) -> list[Path]:
+    """The files in ``path``'s folder whose names match ``pattern`` (a glob), ``path`` itself
+    left out, newest first: a cached file's versions under other keys (the default model's
+    other recipes, a data set's other builders). OSError where the folder cannot be read."""
+    others = [p for p in path.parent.glob(pattern) if p != path and p.is_file()]
+    return sorted(others, key=lambda p: p.stat().st_mtime, reverse=True)
+
+
+def prune_beside(path: Path, pattern: str, keep: int, what: str, *,
+                 also: Callable[[Path], Path] | None = None) -> None:
+    """Remove :func:`others_beside` ``path`` but the ``keep`` newest (and ``also`` of each: a
+    record kept beside it), each logged as ``what``; a folder that cannot be pruned (another
+    process's pruning, a read-only cache) is left, with a warning."""
+    try:
+        for p in others_beside(path, pattern)[keep:]:
+            p.unlink(missing_ok=True)
+            if also is not None:
+                also(p).unlink(missing_ok=True)
+            log.info("removed %s (%s)", p, what)
+    except OSError as exc:
+        log.warning("could not prune the files beside %s (%s)", path, exc)
+
+
 def _get(name: str) -> Asset:
     try:
         return REGISTRY[name]

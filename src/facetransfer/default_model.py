@@ -184,9 +184,10 @@ def _build_lock(path: Path, announce: Callable[[str], None] | None):
 def _older(path: Path) -> Path | None:
     """The newest default model file beside ``path`` of another recipe (another version's, or
     one named before the recipe was), or None."""
+    from .assets import others_beside
+
     try:
-        others = [p for p in path.parent.glob(f"{_STEM}*.npz") if p != path and p.is_file()]
-        return max(others, key=lambda p: p.stat().st_mtime, default=None)
+        return next(iter(others_beside(path, f"{_STEM}*.npz")), None)
     except OSError:
         return None
 
@@ -199,10 +200,10 @@ def kept_model(content_hash: str) -> Path | None:
     hash names this file, which then holds the model it was made with."""
     if not content_hash:
         return None
-    path = default_model_path()
+    from .assets import others_beside
+
     try:
-        others = sorted((p for p in path.parent.glob(f"{_STEM}*.npz") if p != path),
-                        key=lambda p: p.stat().st_mtime, reverse=True)
+        others = others_beside(default_model_path(), f"{_STEM}*.npz")
     except OSError:
         return None
     return next((p for p in others if (stated_hash(p) or "").startswith(content_hash)), None)
@@ -233,14 +234,10 @@ def stated_hash(path: Path) -> str | None:
 def _prune_others(path: Path) -> None:
     """Remove the default model files of other recipes beside ``path`` (and their records)
     but the :data:`KEEP_OTHERS` newest; a cache that cannot be pruned is left (logged)."""
-    try:
-        others = [p for p in path.parent.glob(f"{_STEM}*.npz") if p != path and p.is_file()]
-        for p in sorted(others, key=lambda p: p.stat().st_mtime, reverse=True)[KEEP_OTHERS:]:
-            p.unlink(missing_ok=True)
-            p.with_name(f"{p.stem}.recipe.json").unlink(missing_ok=True)
-            log.info("removed %s (another version's default model)", p)
-    except OSError as exc:
-        log.warning("could not prune the default models beside %s (%s)", path, exc)
+    from .assets import prune_beside
+
+    prune_beside(path, f"{_STEM}*.npz", KEEP_OTHERS, "another version's default model",
+                 also=lambda p: p.with_name(f"{p.stem}.recipe.json"))
 
 
 def _recorded(model) -> str | None:

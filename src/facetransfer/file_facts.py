@@ -113,18 +113,9 @@ def _no_activations(f: dict) -> str:
 def _default_model_hash() -> str | None:
     """The content hash of the default model if it is built (read from its file's metadata,
     not by loading it), else None."""
-    import json
+    from .default_model import default_model_path, stated_hash
 
-    from .default_model import default_model_path
-
-    p = default_model_path()
-    if not p.is_file():
-        return None
-    try:
-        with np.load(p, allow_pickle=False) as z:
-            return json.loads(str(z["metadata"])).get("sha256")
-    except (OSError, ValueError, KeyError, EOFError):
-        return None
+    return stated_hash(default_model_path())
 
 
 def track_facts(path: str | os.PathLike) -> dict:

@@ -629,18 +629,20 @@ _SAME_LOCK = threading.Lock()   # one content check at a time (outputs check fro
 
 def _same_content(model: MultilinearModel, path: Path) -> bool:
     """Whether the model file at ``path`` holds ``model``: its stated sha256 and its content's
-    are ``model``'s :attr:`~MultilinearModel.content_hash`, and each array of ``model`` mapped
-    from it lies where the file holds it now. False for a file that cannot be read so."""
+    (not hashed again where recorded so as it is now, :mod:`facetransfer.io.verified`) are its
+    ``content_hash``, its mapped arrays where the file holds them. False where unreadable."""
     from .io.npz import read_npz
 
     try:
         data = read_npz(path, "model file", ModelFileError, mmap_min_bytes=MAP_MIN_BYTES)
         meta = json.loads(str(data.pop("metadata")))
         stated = meta.pop("sha256", None)
-        if stated != model.content_hash or _content_hash(data, meta) != stated:
+        known = stated == model.content_hash and was_verified(path, stated)
+        if stated != model.content_hash or not known and _content_hash(data, meta) != stated:
             return False
     except (ModelFileError, OSError, ValueError, KeyError, TypeError, AttributeError):
         return False
+    remember_verified(path, stated)     # the loaded model's content: not hashed on next load
     return all(name in data and _map_offset(data[name]) == _map_offset(a)
                for name, a in model._arrays().items() if _map_offset(a) is not None)
 

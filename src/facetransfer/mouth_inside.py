@@ -53,7 +53,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .mouth import mouth_ring_faces
-from .palette import CAVITY_BACK, PALETTE, TEETH_SHOW
+from .palette import CAVITY_BACK, PALETTE, TEETH_SHOW, TEETH_SPAN
 from .region_weights import smoothstep
 from .topology import MeshTopology, close_mouth
 
@@ -93,8 +93,6 @@ LOWER_SHOW = 0.1
 TEETH_LEVEL = 1.25
 #: The lower teeth, in the lower lip's shadow, at this fraction of the upper teeth's light.
 LOWER_SHADE = 0.7
-#: The teeth span this fraction of the mouth's half-width about its middle (the puppet's).
-TEETH_SPAN = 0.55
 #: Where the teeth part, eye widths from the middle: the central incisors (8.5 mm) and the
 #: lateral ones (6.5 mm); the line's half-width (eye widths) and how much it darkens.
 TEETH_PARTS = (0.0, 0.32, 0.56)

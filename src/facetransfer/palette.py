@@ -14,7 +14,7 @@ from __future__ import annotations
 
 from types import MappingProxyType
 
-__all__ = ["PALETTE", "CAVITY_BACK", "TEETH_SHOW"]
+__all__ = ["PALETTE", "CAVITY_BACK", "TEETH_SHOW", "TEETH_SPAN"]
 
 #: The colours (RGB, 0-255). Each is what a surface facing a frontal light shows: ``skin`` and
 #: the eyeball are shaded by their lights, the mouth's inside is not lit. ``iris`` to
@@ -36,3 +36,6 @@ CAVITY_BACK = 0.5
 #: How far the upper teeth show below the upper lip of an open mouth, in eye widths (corner to
 #: corner): 0.3 of FaceKit's 2.69 cm, about the 8 mm of an upper incisor not under the lip.
 TEETH_SHOW = 0.3
+#: The upper teeth span this fraction of the mouth's half-width about its middle (each side of
+#: it: the middle 55 % of the mouth).
+TEETH_SPAN = 0.55

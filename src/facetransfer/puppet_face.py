@@ -50,7 +50,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .palette import CAVITY_BACK, PALETTE, TEETH_SHOW
+from .palette import CAVITY_BACK, PALETTE, TEETH_SHOW, TEETH_SPAN
 from .track.gaze import CORNER_INDEX, EYE_RADIUS, activation_gaze, eye_model, gaze_direction
 
 __all__ = ["PALETTE", "SKIN", "SCLERA", "IRIS", "LIMBUS", "PUPIL", "CAVITY", "TEETH",
@@ -345,7 +345,7 @@ def _paint_mouth(image, ys, xs, tid, bary, V, face: PuppetFace) -> None:
         show = TEETH_SHOW * (np.linalg.norm(E[0] - E[1]) + np.linalg.norm(E[2] - E[3])) / 2
         X = np.einsum("nk,nkd->nd", bary.astype(np.float64), V[face.faces[tid]])
         if mid.size:
-            teeth = (X[:, 1] > mid.min() - show) & (np.abs(X[:, 0] - c[0]) < 0.55 * half)
+            teeth = (X[:, 1] > mid.min() - show) & (np.abs(X[:, 0] - c[0]) < TEETH_SPAN * half)
             colour[teeth] = TEETH
     image[ys, xs] = np.clip(colour + 0.5, 0, 255).astype(np.uint8)
 

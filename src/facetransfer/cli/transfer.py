@@ -172,11 +172,11 @@ def _first_number(out, target, first: int | None = None) -> int | None:
     """The number of an output sequence's first frame: ``first`` (``--start-number``), else a
     plate's rewrite's, the plate's; None for a video."""
     from ..io.video import is_image_pattern
-    from ..io.video_sequence import is_sequence, open_sequence
+    from ..io.video_sequence import is_sequence
 
     if not is_image_pattern(out) or first is None and not is_sequence(target):
         return None
-    return open_sequence(target).first if first is None else first
+    return _result_first(out, target, first)
 
 
 def _numbered(out, target, n: int, first: int | None = None) -> str:

@@ -285,13 +285,9 @@ def _prune_others(path: Path, stem: str) -> None:
     or components under other keys) but ``path`` and the :data:`KEEP_OTHERS` most recent: a
     change of the builder's code or recipes makes new keys (:func:`builder_code`), and each
     stale ``ict-arkit`` data set is 0.6 GB."""
-    try:
-        others = [p for p in path.parent.glob(f"{stem}*") if p != path and p.is_file()]
-        for p in sorted(others, key=lambda p: p.stat().st_mtime, reverse=True)[KEEP_OTHERS:]:
-            p.unlink(missing_ok=True)
-            log.info("removed %s (another key of a cached data set)", p)
-    except OSError as exc:                 # another process's pruning, a read-only cache
-        log.warning("could not prune the cached data sets beside %s (%s)", path, exc)
+    from ..assets import prune_beside
+
+    prune_beside(path, f"{stem}*", KEEP_OTHERS, "another key of a cached data set")
 
 
 def _identity_components(neutral: np.ndarray, region: str, use_cache: bool) -> np.ndarray:

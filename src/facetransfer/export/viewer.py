@@ -36,9 +36,11 @@ from pathlib import Path
 import numpy as np
 
 from ..io.atomic import write_text_atomic
+from ..palette import TEETH_SPAN
 from ..puppet_face import CAVITY_BACK, IRIS_RIM, LID_PAIRS, LID_SHADE, PALETTE, TEETH_SHOW
 from ..puppet_face import IRIS_RADIUS as _IRIS_RADIUS, PUPIL_RADIUS as _PUPIL_RADIUS
 from ..track.gaze import EYE_RADIUS as _EYE_RADIUS
+from ..track.lip_contact import LIP_PAIRS
 from .common import ExportError, head_quaternions, require_activations, source_name
 
 log = logging.getLogger(__name__)
@@ -221,7 +223,6 @@ def cavity_loops(model) -> list[tuple[np.ndarray, float]]:
 #: in steps of 0.005) the puppet's lips part at gaps of 0.059 to 0.083; at rest the gap is about
 #: 0.02 (review53a).
 TEETH_GAP = 0.07
-_INNER_LIPS = ((61, 67), (62, 66), (63, 65))
 
 
 def _mouth_shut(model) -> dict | None:
@@ -231,7 +232,7 @@ def _mouth_shut(model) -> dict | None:
     if model.landmarks is None:
         return None
     lm = np.asarray(model.landmarks, np.int64)
-    return {"lips": [[int(lm[u]), int(lm[lo])] for u, lo in _INNER_LIPS],
+    return {"lips": [[int(lm[u]), int(lm[lo])] for u, lo in LIP_PAIRS],
             "corners": [int(lm[48]), int(lm[54])], "gap": TEETH_GAP}
 
 
@@ -338,7 +339,8 @@ def viewer_page(model, *, track=None, title: str = "facetransfer") -> str:
             "n_frames": 0, "fps": 25.0, "eyes": eyes, "palette": page_palette(),
             "n_cavities": len(loops), "n_mouth_faces": _mouth_faces(loops),
             "mouth_loop": loops[0][0].tolist() if _mouth_faces(loops) else [],
-            "teeth_show": TEETH_SHOW, "mouth_shut": _mouth_shut(model),
+            "teeth_show": TEETH_SHOW, "teeth_span": TEETH_SPAN,
+            "mouth_shut": _mouth_shut(model),
             **_save_data(model, track, model.mode_names[k], identity, title),
             "about": _about(model, track)}
     if track is not None:

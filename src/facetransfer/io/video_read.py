@@ -415,7 +415,9 @@ def _upright_still(path, start: int, stop: int | None) -> Iterator[np.ndarray]:
 
     if start > 0 or stop is not None and stop <= 0:
         return
-    bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    from .frame_file import read_image
+
+    bgr = read_image(Path(path), cv2.IMREAD_COLOR)
     if bgr is None:
         raise VideoError(f"cannot read the image {path} (damaged, or not an image OpenCV "
                          "decodes)")

@@ -202,8 +202,9 @@ class FaceNotAtPoint(TrackError):
 def near_point(point, box: tuple[float, float, float]) -> bool:
     """Whether a face's box (:func:`face_box`) lies at or near the ``point`` (x, y): the point
     within the face's size (its points' larger extent) of its centre, inside the face's box
-    grown by half its size on each side or about as near."""
-    return bool(np.hypot(box[0] - point[0], box[1] - point[1]) <= box[2])
+    grown by half its size on each side or about as near: the box not :func:`moved_away` from
+    a box of no size at the point, as :meth:`FollowingLandmarker._at_point` asks it."""
+    return not moved_away((point[0], point[1], 0.0), box)
 
 
 def subject_point(text: str, size: tuple[int, int], what: str = "--face") -> FacePoint:
