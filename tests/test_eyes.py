@@ -9,7 +9,7 @@ import pytest
 
 from facetransfer import eyes, patch, region_weights
 from facetransfer.region_weights import vertex_alpha
-from facetransfer.arkit import ARKIT_NAMES, activations_to_weights
+from facetransfer.arkit import ARKIT_NAMES
 from facetransfer.render import rasterize
 from facetransfer.rewrite import FrameTextures, rewrite_frame
 from facetransfer.rewrite_options import BlendOptions
@@ -727,7 +727,8 @@ def _highlight_core_error(setup, scale: float) -> np.ndarray:
 
 def test_a_larger_face_matches_the_reference_highlight_as_a_smaller_one(setup):
     """The eye region's shading is matched at a scale that grows with the face
-    (``patch.shading_sigma`` of ``eyes.eye_span``): the same face at 2.5 times the pixels is
+    (``patch.SHADING_SIGMA`` times ``face_scale.face_scale``, the factor of the face's size
+    the rewrite applies to its pixel settings): the same face at 2.5 times the pixels is
     rewritten as at 1 time, its reference frame's forehead highlight brought as near to the
     frame's skin. (With the scale fixed at 6 px, the highlight's core lay beyond the field's
     reach on the larger face and was pasted as it was, 60 levels over the skin where the
@@ -737,13 +738,3 @@ def test_a_larger_face_matches_the_reference_highlight_as_a_smaller_one(setup):
     assert np.percentile(large, 95) < np.percentile(small, 95) + 5
     assert np.mean(large) < np.mean(small) + 5
 
-
-def test_the_shading_scale_grows_with_the_face_beyond_the_clips_it_was_chosen_on():
-    """Up to :data:`facetransfer.patch.SHADING_SPAN` (every data-folder clip: renders there
-    are as before, bit for bit) the scale is :data:`~facetransfer.patch.SHADING_SIGMA`;
-    beyond, proportional."""
-    assert patch.shading_sigma(60.0) == patch.shading_sigma(patch.SHADING_SPAN) \
-        == patch.SHADING_SIGMA
-    assert patch.shading_sigma(2.5 * patch.SHADING_SPAN) == pytest.approx(
-        2.5 * patch.SHADING_SIGMA)
-    assert patch.shading_sigma(float("nan")) == patch.SHADING_SIGMA
