@@ -32,7 +32,8 @@ from .track.gaze import GazeOptions, activation_gaze, eye_model, project_iris
 
 log = logging.getLogger(__name__)
 
-__all__ = ["GROW", "RIM_WIDTH", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "SOFT",
+__all__ = ["GROW", "RIM_WIDTH", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION",
+           "SOFT",
            "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze",
            "gaze_offset", "eye_offsets", "eyeball_frames", "EYEBALL_GAIN", "EYEBALL_VIEW",
            "EYEBALL_ANGLE", "LIFT_GROW", "LIFT"]
