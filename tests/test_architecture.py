@@ -246,6 +246,7 @@ LAYER_OF = {
     "facetransfer.layer_flags": "rewrite",
     "facetransfer.rim": "rewrite",
     "facetransfer.unmoved": "rewrite",
+    "facetransfer.face_scale": "rewrite",  # the face's size: the pixel settings grown with it
     # video: the job over a clip
     "facetransfer.video_transfer": "video",
     "facetransfer.transfer_plan": "video",

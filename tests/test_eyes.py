@@ -727,7 +727,8 @@ def _highlight_core_error(setup, scale: float) -> np.ndarray:
 
 def test_a_larger_face_matches_the_reference_highlight_as_a_smaller_one(setup):
     """The eye region's shading is matched at a scale that grows with the face
-    (``patch.shading_sigma`` of ``eyes.eye_span``): the same face at 2.5 times the pixels is
+    (``patch.SHADING_SIGMA`` times ``face_scale.face_scale``, the factor of the face's size
+    the rewrite applies to its pixel settings): the same face at 2.5 times the pixels is
     rewritten as at 1 time, its reference frame's forehead highlight brought as near to the
     frame's skin. (With the scale fixed at 6 px, the highlight's core lay beyond the field's
     reach on the larger face and was pasted as it was, 60 levels over the skin where the
@@ -736,28 +737,3 @@ def test_a_larger_face_matches_the_reference_highlight_as_a_smaller_one(setup):
     assert np.percentile(small, 95) < 30                       # what 6 px gives at 130 px
     assert np.percentile(large, 95) < np.percentile(small, 95) + 5
     assert np.mean(large) < np.mean(small) + 5
-
-
-def test_the_shading_scale_grows_with_the_face_beyond_the_clips_it_was_chosen_on():
-    """Up to :data:`facetransfer.patch.SHADING_SPAN` (every data-folder clip: renders there
-    are as before, bit for bit) the scale is :data:`~facetransfer.patch.SHADING_SIGMA`;
-    beyond, proportional."""
-    assert patch.shading_sigma(60.0) == patch.shading_sigma(patch.SHADING_SPAN) \
-        == patch.SHADING_SIGMA
-    assert patch.shading_sigma(2.5 * patch.SHADING_SPAN) == pytest.approx(
-        2.5 * patch.SHADING_SIGMA)
-    assert patch.shading_sigma(float("nan")) == patch.SHADING_SIGMA
-
-
-def test_the_data_folders_largest_face_keeps_the_scale_it_was_chosen_at():
-    """``face_2`` (844x844) as a target: its eyes' lid centres lie 134.0-139.8 px apart over
-    its frames (the track's mesh, measured in the fifty-fourth session's review54b), its
-    reference frame 136.6 px. With the threshold at 135 px its eye region was matched at
-    6.07 px, and its renders were not as before (frame 20 onto ``driving_d9``: 1273 pixels
-    one level off), against what the threshold was for; now every data-folder face is
-    matched at :data:`~facetransfer.patch.SHADING_SIGMA`, and the scale rises from it
-    without a step."""
-    for span in (103.0, 136.6, 139.8):
-        assert patch.shading_sigma(span) == patch.SHADING_SIGMA
-    edge = patch.SHADING_SPAN
-    assert patch.shading_sigma(edge + 0.01) - patch.shading_sigma(edge) < 1e-3

@@ -490,14 +490,23 @@ def _as_before(monkeypatch, before) -> None:
 
     rim0, rew0, eye0, comp0, patch0 = (before(n) for n in ("rim", "rewrite", "eyeballs",
                                                             "composite", "patch"))
-    monkeypatch.setattr(rewrite, "drawn_inside", rim0.drawn_inside)
-    monkeypatch.setattr(rewrite, "_keep_own", rew0._keep_own)
+    monkeypatch.setattr(rewrite, "drawn_inside", _unit_scale(rim0.drawn_inside))
+    monkeypatch.setattr(rewrite, "_keep_own", _unit_scale(rew0._keep_own))
     monkeypatch.setattr(eyes, "shift_eyeballs", eye0.shift_eyeballs)
     for mod in (composite, patch):
         monkeypatch.setattr(mod, "feather_alpha", comp0._feather_alpha)
         monkeypatch.setattr(mod, "blend_paste", comp0._blend_paste)
     for name in ("_grey", "_gain_factors", "_shading_field", "_hue_field"):
         monkeypatch.setattr(patch, name, getattr(patch0, name))
+
+
+def _unit_scale(f):
+    """``f`` (the code before :mod:`facetransfer.face_scale`) called as the rewrite calls it
+    now, with the face's ``scale``: these faces are smaller than ``FACE_SPAN`` (1)."""
+    def at(*args, scale: float = 1.0):
+        assert scale == 1.0
+        return f(*args)
+    return at
 
 
 #: ``rewrite_frame``'s cases: ``(frame (W, H), face scale, its offset (dx, dy) in pixels)``.

@@ -32,15 +32,22 @@ from .track.gaze import GazeOptions, activation_gaze, eye_model, project_iris
 
 log = logging.getLogger(__name__)
 
-__all__ = ["GROW", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION", "SOFT",
+__all__ = ["GROW", "RIM_WIDTH", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", "ELONGATION",
+           "SOFT",
            "Eyeballs", "extend_eyeballs", "eyeballs_of", "shift_eyeballs", "track_gaze",
            "gaze_offset", "eye_offsets", "eyeball_frames", "EYEBALL_GAIN", "EYEBALL_VIEW",
            "EYEBALL_ANGLE", "LIFT_GROW", "LIFT"]
 
 #: :func:`extend_eyeballs`: the opening grows by this fraction of the eye's width (pixels of the
 #: reference frame) under the lids; its own rim of this many pixels (lashes and the lid margin
-#: where the track's margin is a little off) is redone too.
+#: where the track's margin is a little off) is redone too ...
 GROW, RIM = 0.35, 1
+#: ... in :func:`eyeballs_of`, one pixel per this many of the eye's width, rounded (at least
+#: :data:`RIM`): the data folder's eyes, 46-57 px wide, 1 px, where it was chosen; a face 2.5
+#: times larger (a 1280x1280 clip: eyes 120 px wide) 3 px. With 1 px there, the lashes were
+#: continued under the lids as the eyeball: the sclera that a turned iris uncovers showed as a
+#: flat grey-brown wedge (BENCHMARKS.md, "Fifty-fourth session (helper large54)").
+RIM_WIDTH = 42.0
 #: The largest shift of an iris, a fraction of its eye's width in the reference frame (beyond it
 #: the inpainted sclera would show more than the eye).
 LIMIT = 0.3
@@ -456,7 +463,8 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
     eyes = eye_model(V[lm])
     eye, width = _eye_map(V, faces, fill_eye, track.camera(i), image.shape[:2], lm)
     grow = max(int(round(GROW * width.max())), 2)
-    ext = extend_eyeballs(image, eye >= 0, grow=grow)
+    rim = max(RIM, int(round(width.max() / RIM_WIDTH)))  # the rim grows with the eye
+    ext = extend_eyeballs(image, eye >= 0, grow=grow, rim=rim)
     pose = (np.asarray(track.rotation[i], np.float64), float(track.scale[i]),
             np.asarray(track.translation[i], np.float64), float(track.pixel_aspect))
     angles, source = gaze[i], None
@@ -466,7 +474,7 @@ def eyeballs_of(image: np.ndarray, track, i: int, model, faces: np.ndarray, V: n
         angles, source = np.array(angles, copy=True), src
         Vj = close_mouth(model.synthesize(track.weights_at(j)), topo)
         _lift_eyes(ext, eye, np.asarray(frames[j]), Vj, track, (i, j), src == j,
-                   (faces, fill_eye, lm), grow + RIM + 2, (eyes, eye_model(Vj[lm])))
+                   (faces, fill_eye, lm), grow + rim + 2, (eyes, eye_model(Vj[lm])))
         angles[src == j] = gaze[j][src == j]
     if source is not None:
         n0 = track_first_number(track)  # a plate's frames by their numbers

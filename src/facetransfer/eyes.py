@@ -55,7 +55,7 @@ from .io.frame_numbers import track_first_number
 from .eye_lids import lid_shares, mix_lids
 from .label_masks import bits_box
 from .eyeballs import Eyeballs, eyeballs_of, gaze_offset, shift_eyeballs
-from .patch import REJECT, match_outline_into, shading_sigma
+from .patch import REJECT, SHADING_SIGMA, match_outline_into, ring_inset
 from .region_weights import (EYE_POINTS, model_vertices, moved_strengths, seen_frames,
                              usual_weights_of, vertex_alpha)
 from .render import interpolate_vertex_values, shade_layers, shade_texture
@@ -69,7 +69,7 @@ __all__ = ["EYE_SHAPES", "BROW_SHAPES", "EyeTexture", "fill_loop", "close_eyes",
            "paint_eyes", "lid_gap", "closed_eye_frame", "close_region", "reference_frame",
            "faces_around", "EYE_BLEND", "eye_strengths", "LID_DISTANCE", "LID_BLINK",
            "shape_activity", "reference_candidates", "GAZE_WEIGHT", "eye_penalty",
-           "paint_shaded_eyes", "eye_span"]
+           "paint_shaded_eyes"]
 
 #: ARKit blendshapes whose vertices take the open-eyed reference frame's texture (the lids).
 EYE_SHAPES = ("eyeBlinkLeft", "eyeBlinkRight", "eyeWideLeft", "eyeWideRight",
@@ -824,18 +824,23 @@ def eye_flags(texture: EyeTexture, *, shown: int, rim: int) -> np.ndarray:
 
 def paint_shaded_eyes(raster, faces, vertices, face_image, face_mask, texture: EyeTexture,
                       eye_img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], *,
-                      feather: float = 3.0) -> np.ndarray:
+                      feather: float = 3.0, scale: float = 1.0) -> np.ndarray:
     """:func:`paint_eyes` with the region shaded already (``eye_img`` (H, W, 3) the eye
     texture on the region's triangles, ``labels`` (H, W) uint8 of
     :func:`facetransfer.render.shade_layers` with the bits ``(shown, rim)`` of
-    :func:`eye_flags`), painting ``face_image`` in place and returning it."""
+    :func:`eye_flags`), painting ``face_image`` in place and returning it; ``feather``,
+    :data:`LID_SOFTNESS` and the shading's scale (:data:`facetransfer.patch.SHADING_SIGMA`)
+    times ``scale`` (:func:`facetransfer.face_scale.face_scale`: fixed in pixels, the shading
+    field left the middle of a face 2.5 times larger unmatched, a reference frame's forehead
+    highlight pasted as white blobs: BENCHMARKS.md, "Fifty-fourth session (helper walk54)")."""
     import cv2
 
+    soft = LID_SOFTNESS * scale
     # the box of the shown pixels (mask_box of np.bitwise_and(labels, bits[0])) in one kernel,
-    # its margin wider than every filter below (the lids' blur reaches 4 LID_SOFTNESS; the
-    # outline's erosion 2 px; the feather's distance transform sees a zero pixel at the box's
+    # its margin wider than every filter below (the lids' blur reaches 4 soft; the outline's
+    # erosion ring_inset; the feather's distance transform sees a zero pixel at the box's
     # edge): the same pixels as on the whole raster
-    sl = bits_box(labels, bits[0], int(np.ceil(4 * LID_SOFTNESS)) + 2)
+    sl = bits_box(labels, bits[0], int(np.ceil(4 * soft)) + ring_inset(scale))
     if sl is None:
         return face_image
     box = (sl[1].start, sl[0].start, sl[1].stop, sl[0].stop)
@@ -856,7 +861,7 @@ def paint_shaded_eyes(raster, faces, vertices, face_image, face_mask, texture: E
                                       texture.select, box=sl)
         w = lid_shares(raster.tri_id, (box[1], box[0], *lab.shape), texture.side, a)
         # soft where the lids meet the rest of the region (no step along triangle edges)
-        w = cv2.GaussianBlur(w, (0, 0), LID_SOFTNESS)
+        w = cv2.GaussianBlur(w, (0, 0), soft)
         mix_lids(w, closed_img, whole, (box[1], box[0]))  # into eye_img, a view of whole
         if texture.alpha is not None:  # closing lids show the closed frame's, at least
             opacity = np.maximum(opacity, w)
@@ -866,17 +871,10 @@ def paint_shaded_eyes(raster, faces, vertices, face_image, face_mask, texture: E
     # the region's own shading brought to the frame's (patch._shading_field): textured from
     # one frame under another head pose, its cheeks and temples showed patches with seams
     match_outline_into(face_image[sl], eye_img, eye_mask, face_mask[sl], face_image[sl],
-                       feather=feather, compare=None, reject=None if rim is None else REJECT,
-                       reject_where=rim, shading=shading_sigma(eye_span(texture)),
-                       opacity=opacity)
+                       feather=feather * scale, compare=None,
+                       reject=None if rim is None else REJECT, reject_where=rim,
+                       shading=SHADING_SIGMA * scale, opacity=opacity, scale=scale)
     return face_image
-
-
-def eye_span(texture: EyeTexture) -> float:
-    """Pixels between the centres of the two eyes' lids in ``texture``'s reference frame."""
-    H, W = texture.image.shape[:2]
-    c = texture.uvs[np.asarray(texture.lids).reshape(2, -1)].mean(axis=1) * (W - 1, H - 1)
-    return float(np.hypot(*(c[0] - c[1])))
 
 
 def eye_strengths(model, track, topo, select: np.ndarray, reference: int, *, rig=None,

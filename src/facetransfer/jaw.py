@@ -60,7 +60,7 @@ from .eyes import close_region, faces_around, reference_frame, region_faces, reg
 from .region_weights import (JAW_POINTS, facing_weights, model_vertices, moved_strengths,
                              vertex_alpha)
 from .jaw_look import LOOK_RAMP, look_strengths, mouth_reach
-from .patch import REJECT, match_outline_into
+from .patch import REJECT, match_outline_into, ring_inset
 from .render import interpolate_vertex_values, shade_layers
 from .render.shading import interpolate_vertex_pair
 from .texture.face import frame_uvs
@@ -353,15 +353,19 @@ def jaw_flags(texture: JawTexture, *, shaded: int, region: int, ring: int) -> np
 
 def paint_shaded_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: JawTexture,
                      img: np.ndarray, labels: np.ndarray, bits: tuple[int, int], raster, faces,
-                     *, feather: float = 4.0) -> np.ndarray:
+                     *, feather: float = 4.0, scale: float = 1.0) -> np.ndarray:
     """:func:`paint_jaw` with the region shaded already (``img`` (H, W, 3) the closed-mouth
     frame on the region and its ring, ``labels`` (H, W) uint8 of
     :func:`facetransfer.render.shade_layers` with the bits ``(region, ring)`` of
     :func:`jaw_flags`; ``raster`` and ``faces`` interpolate :attr:`JawTexture.alpha`),
-    painting ``face_image`` in place and returning it."""
-    # the work on the box of the region and its ring, grown by the 2 px the ring's erosion
+    painting ``face_image`` in place and returning it. ``feather``, :data:`JAW_HUE_SIGMA` and
+    :data:`LOOK_GROW` times ``scale`` (:func:`facetransfer.face_scale.face_scale`: a 4-px
+    feather on a face 2.5 times the data folder's showed the region's top edge as a step
+    across the cheek at the mouth's height: BENCHMARKS.md, "Fifty-fourth session (helper
+    large54)")."""
+    # the work on the box of the region and its ring, grown by the pixels the ring's erosion
     # reaches (patch._ring); the gain fit keeps the frame's coordinates (origin)
-    sl = bits_box(labels, bits[0] | bits[1], 2)  # mask_box of the bits, in one kernel
+    sl = bits_box(labels, bits[0] | bits[1], ring_inset(scale))  # mask_box of the bits
     if sl is None:
         return face_image
     lab, fm = labels[sl], face_mask[sl]
@@ -379,23 +383,27 @@ def paint_shaded_jaw(face_image: np.ndarray, face_mask: np.ndarray, texture: Jaw
     if texture.alpha is not None and texture.look_alpha is not None:  # one pass for both
         opacity, look = interpolate_vertex_pair(raster, faces, texture.alpha,
                                                 texture.look_alpha, box=sl)
-        far = _look_far(look)
+        far = _look_far(look, scale)
     elif texture.alpha is not None:
         opacity = interpolate_vertex_values(raster, faces, texture.alpha, box=sl)
     elif texture.look_alpha is not None:
-        far = _look_far(interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl))
-    match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl], feather=feather,
-                       compare=compare, reject=REJECT, reject_where=far,
-                       origin=(sl[1].start, sl[0].start), opacity=opacity, grey_where=True,
-                       hue=JAW_HUE_SIGMA, hue_where=far if JAW_HUE_SIGMA > 0 else None)
+        far = _look_far(interpolate_vertex_values(raster, faces, texture.look_alpha, box=sl),
+                        scale)
+    match_outline_into(face_image[sl], img[sl], mask, fm, face_image[sl],
+                       feather=feather * scale, compare=compare, reject=REJECT,
+                       reject_where=far, origin=(sl[1].start, sl[0].start), opacity=opacity,
+                       grey_where=True, hue=JAW_HUE_SIGMA * scale,
+                       hue_where=far if JAW_HUE_SIGMA > 0 else None, scale=scale)
     return face_image
 
 
-def _look_far(look: np.ndarray) -> np.ndarray:
+def _look_far(look: np.ndarray, scale: float = 1.0) -> np.ndarray:
     """``(h, w) bool``: the pixels away from where the appearance rule took the reference
     frame, those whose appearance strength ``look`` (h, w) float32 is at most
-    :data:`LOOK_HUE`, away from the others by more than :data:`LOOK_GROW` pixels (two of the
-    hue field's blocks: a block partly of the tongue still carries its red). Only these
+    :data:`LOOK_HUE`, away from the others by more than :data:`LOOK_GROW` pixels times
+    ``scale`` (two of the hue field's blocks at a face up to
+    :data:`facetransfer.face_scale.FACE_SPAN`: a block partly of the tongue still carries its
+    red; the hue field's scale grows with the face). Only these
 
     - set the paste's hue match: a tongue's or the lips' red where the reference frame shows
       skin does not tint the pasted skin (the match itself comes after the paste's gain, at
@@ -409,4 +417,6 @@ def _look_far(look: np.ndarray) -> np.ndarray:
       ``benchmarks/bench_jaw_appearance.py``)."""
     import cv2
 
-    return cv2.dilate((look > LOOK_HUE).view(np.uint8), _GROW) == 0
+    r = int(round(LOOK_GROW * scale))
+    grow = _GROW if r == LOOK_GROW else np.ones((2 * r + 1,) * 2, np.uint8)
+    return cv2.dilate((look > LOOK_HUE).view(np.uint8), grow) == 0

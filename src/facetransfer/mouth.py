@@ -22,7 +22,7 @@ import numpy as np
 
 from .composite import mask_box, membrane_blend, membrane_crop, over
 from .eyes import faces_around
-from .patch import match_outline_into
+from .patch import match_outline_into, ring_inset
 from .topology import MeshTopology
 
 __all__ = ["MOUTH_RING", "MOUTH_GAIN_RANGE", "mouth_ring_faces", "inside_mouth", "blend_mouth",
@@ -48,7 +48,8 @@ def inside_mouth(tri_id: np.ndarray, topo: MeshTopology) -> np.ndarray | None:
 
 def blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
                 mouth_img: np.ndarray, mask: np.ndarray, ring: np.ndarray | None,
-                feather: float, inside: np.ndarray | None = None) -> np.ndarray:
+                feather: float, inside: np.ndarray | None = None, *,
+                scale: float = 1.0) -> np.ndarray:
     """``face_img`` with the source's mouth pasted where ``mask`` (H, W) bool, scaled per
     channel by the smooth gain of the face's colours over the source's on ``ring`` (H, W) bool,
     the skin around the mouth (:func:`facetransfer.patch.match_outline`, no rejection: the
@@ -59,8 +60,10 @@ def blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
     light, and per channel it tinted the teeth (green-white on ``make demo``'s pair, whose
     target's skin is yellower than the source's), where the lips and the skin they bring along
     take the target's hue. Without a ring (the §6 texture function's mouth, which has no skin
-    around it) or with fewer than 8 of its pixels in sight: :func:`_membrane_mouth`."""
-    sl = mask_box(mask if ring is None else mask | ring, 2)
+    around it) or with fewer than 8 of its pixels in sight: :func:`_membrane_mouth`.
+    ``scale``: the factor of the gain fit's pixel settings for the face's size
+    (:func:`facetransfer.patch.ring_inset`; ``feather`` is given scaled)."""
+    sl = mask_box(mask if ring is None else mask | ring, ring_inset(scale))
     if sl is None:
         return face_img
     m, fm = mask[sl], face_mask[sl]
@@ -71,7 +74,7 @@ def blend_mouth(T: np.ndarray, face_img: np.ndarray, face_mask: np.ndarray,
                        compare=compare, reject=None, reject_where=None,
                        origin=(sl[1].start, sl[0].start),
                        gain_range=mouth_gain_range(face_img[sl], mouth_img[sl], compare),
-                       grey_where=None if inside is None else inside[sl])
+                       grey_where=None if inside is None else inside[sl], scale=scale)
     return face_img
 
 

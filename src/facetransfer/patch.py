@@ -18,8 +18,8 @@ from .composite import blend_paste, channel_rows, feather_alpha
 from .errors import RewriteError
 from .jit import maybe_njit as _maybe_njit
 
-__all__ = ["GAIN_RANGE", "REJECT", "REJECT_GROW", "match_outline", "match_outline_into",
-           "gain_field", "shading_sigma"]
+__all__ = ["GAIN_RANGE", "REJECT", "REJECT_GROW", "RING_INSET", "match_outline",
+           "match_outline_into", "gain_field", "ring_inset"]
 
 #: Per-channel gains allowed between the eye region's frame and the current one
 #: (:func:`match_outline`).
@@ -34,8 +34,13 @@ GAIN_ITERATIONS, GAIN_SAMPLES = 5, 4096
 #: by a quarter: BENCHMARKS.md, "Nineteenth session".)
 GAIN_SUPPORT = 0.1
 #: Pixels by which a rejection (:func:`match_outline`'s ``reject``) grows beyond the pixels
-#: that are unlike enough: the transition from skin to hair in the reference frame.
+#: that are unlike enough: the transition from skin to hair in the reference frame; and the
+#: rejection's blur (a Gaussian's standard deviation). Both, like :data:`RING_INSET`, at a face
+#: up to :data:`facetransfer.face_scale.FACE_SPAN`, grown with a larger one (``scale``).
 REJECT_GROW = 2
+REJECT_BLUR = 2.0
+#: Pixels inside the face that the compared pixels keep from its outline (:func:`_ring`).
+RING_INSET = 2
 #: Log ratios between a reference frame's texture (matched) and the current frame's from
 #: which a pixel fades back to the current frame, fully at the second (a factor of 1.65-2.5;
 #: :func:`match_outline`'s ``reject``): the reference frame shows another thing there, not the
@@ -94,7 +99,8 @@ def match_outline_into(face, part, mask, face_mask, out, *, feather, compare, re
                        gain_range: tuple[float, float] = GAIN_RANGE,
                        grey_where: np.ndarray | bool | None = None,
                        opacity: float | np.ndarray = 1.0, shading: float = 0.0,
-                       hue: float = 0.0, hue_where: np.ndarray | None = None) -> None:
+                       hue: float = 0.0, hue_where: np.ndarray | None = None,
+                       scale: float = 1.0) -> None:
     """:func:`match_outline` written into ``out`` (H, W, 3) uint8, which holds ``face``'s
     pixels on entry (``face`` itself: every read of ``face`` comes before the paste); only
     the region's pixels are written; ``gain_range``: the gains' clip (default
@@ -109,11 +115,15 @@ def match_outline_into(face, part, mask, face_mask, out, *, feather, compare, re
     pixels), compared where the gain is. ``hue`` > 0: then to the face's smooth hue at that
     scale, its brightness kept (:func:`_hue_field`), compared over the region and where the
     gain is, of those only at the pixels ``hue_where`` (H, W) bool where given (e.g. not
-    where the jaw region shows a tongue, :mod:`facetransfer.jaw_look`)."""
+    where the jaw region shows a tongue, :mod:`facetransfer.jaw_look`). ``scale``: the factor
+    of the compared pixels' inset and the rejection's growth and blur (:func:`ring_inset`,
+    :data:`REJECT_GROW`; :func:`facetransfer.face_scale.face_scale`; the caller scales
+    ``feather``, ``shading`` and ``hue``), the crop's border then ``ring_inset(scale)``
+    pixels beyond ``mask`` and ``compare``."""
     x, y, w, h = cv2.boundingRect(mask.view(np.uint8))
     if w == 0 or h == 0:
         return
-    ring, rbox = _ring(mask if compare is None else compare, face_mask)
+    ring, rbox = _ring(mask if compare is None else compare, face_mask, ring_inset(scale))
     box = (slice(y, y + h), slice(x, x + w))      # the work is done on the region's box only
     pb = np.ascontiguousarray(part[box])
     if ring is not None and np.count_nonzero(ring) >= 8:  # part scaled by gain_field's gains
@@ -153,7 +163,7 @@ def match_outline_into(face, part, mask, face_mask, out, *, feather, compare, re
     fb = np.ascontiguousarray(face[box])
     if reject is not None:  # the fade a (1 - r), r the rejection where reject_where
         where = mb if reject_where is None else np.ascontiguousarray(reject_where[box])
-        _reject_fade(_rejection_blur(f, fb, reject), where, a)
+        _reject_fade(_rejection_blur(f, fb, reject, scale), where, a)
     blend_paste(mb, fb, f, a, out[box])  # in place: the region's pixels of ``out``
 
 
@@ -164,23 +174,13 @@ SHADING_SIGMA = 6.0
 SHADING_LIMIT = 0.25
 SHADING_STEP = 3  # (:func:`_block_means` is written for 3 x 3 blocks)
 SHADING_RANGE = (0.8, 1.25)
-#: :func:`shading_sigma`: the face size, in pixels between the eyes' centres, up to which the
-#: shading is matched at :data:`SHADING_SIGMA` (the data folder's clips, where it was chosen:
-#: 103-140 px over their frames, ``face_2``'s 134-139.8, and a margin for the tracker's changes;
-#: at 135, as first set, ``face_2``'s reference frame, 136.6 px, was matched at 6.07 px, not as
-#: before); beyond it the scale grows with the face.
-SHADING_SPAN = 145.0
 
 
-def shading_sigma(span: float) -> float:
-    """The shading field's scale in pixels (:func:`_shading_field`) for a face whose eyes'
-    centres lie ``span`` pixels apart: :data:`SHADING_SIGMA` up to :data:`SHADING_SPAN`,
-    proportional beyond. The field is fitted on a ring around the region and reaches
-    ~2 sigma into it: fixed in pixels, it left the middle of a face 2.5 times larger
-    unmatched, and a reference frame's forehead highlight showed there as white blobs
-    (an upscaled 1280x1280 clip: BENCHMARKS.md, "Fifty-fourth session (helper walk54)")."""
-    span = float(span)
-    return SHADING_SIGMA * max(1.0, span / SHADING_SPAN) if np.isfinite(span) else SHADING_SIGMA
+def ring_inset(scale: float = 1.0) -> int:
+    """:data:`RING_INSET` for a face ``scale`` times the size it is given for
+    (:func:`facetransfer.face_scale.face_scale`), rounded: the pixels by which the compared
+    pixels keep inside the face, and a caller's crop reaches beyond the region."""
+    return int(round(RING_INSET * scale))
 
 
 def _shade_to(f: np.ndarray, face: np.ndarray, ring: np.ndarray, rbox: tuple[int, int],
@@ -417,19 +417,22 @@ _row_means = _maybe_njit(_row_means_py)
 _repeat3 = _maybe_njit(_repeat3_py)
 
 
-def _ring(compare: np.ndarray, face_mask: np.ndarray):
-    """The pixels of ``compare`` (H, W) bool at least 2 pixels inside ``face_mask`` (H, W) bool
-    (its 5 x 5 erosion, pixels beyond the image outside) on the box of ``compare`` only:
-    ``(ring (h, w) bool or None, (x0, y0))`` (None: ``compare`` is empty)."""
+def _ring(compare: np.ndarray, face_mask: np.ndarray, inset: int = RING_INSET):
+    """The pixels of ``compare`` (H, W) bool at least ``inset`` pixels inside ``face_mask``
+    (H, W) bool (its square erosion of side ``2 inset + 1``, pixels beyond the image outside)
+    on the box of ``compare`` only: ``(ring (h, w) bool or None, (x0, y0))`` (None:
+    ``compare`` is empty)."""
     x, y, w, h = cv2.boundingRect(compare.view(np.uint8))
     if w == 0 or h == 0:
         return None, (0, 0)
     H, W = face_mask.shape
-    # the erosion on the box grown by its reach (2 px, clipped to the image): the box's pixels
-    # see their true neighbours, the image's border stays outside
-    gx0, gy0, gx1, gy1 = max(x - 2, 0), max(y - 2, 0), min(x + w + 2, W), min(y + h + 2, H)
+    r = int(inset)
+    # the erosion on the box grown by its reach (clipped to the image): the box's pixels see
+    # their true neighbours, the image's border stays outside
+    gx0, gy0, gx1, gy1 = max(x - r, 0), max(y - r, 0), min(x + w + r, W), min(y + h + r, H)
     grown = np.ascontiguousarray(face_mask[gy0:gy1, gx0:gx1]).view(np.uint8)
-    deep = cv2.erode(grown, _SQUARE5, borderType=cv2.BORDER_CONSTANT, borderValue=0)
+    square = _SQUARE5 if r == 2 else np.ones((2 * r + 1,) * 2, np.uint8)
+    deep = cv2.erode(grown, square, borderType=cv2.BORDER_CONSTANT, borderValue=0)
     ring = compare[y:y + h, x:x + w] & deep[y - gy0:y - gy0 + h, x - gx0:x - gx0 + w].view(bool)
     return ring, (x, y)
 
@@ -437,19 +440,21 @@ def _ring(compare: np.ndarray, face_mask: np.ndarray):
 _SQUARE5 = np.ones((5, 5), np.uint8)
 
 
-def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float]) -> np.ndarray:
+def _rejection_blur(f: np.ndarray, fb: np.ndarray, reject: tuple[float, float],
+                    scale: float = 1.0) -> np.ndarray:
     """``b`` (h, w) float32, whose ``r = clip(2 b, 0, 1)`` (that last step in
     :func:`_reject_fade`) is the rejection: how far each pixel's largest per-channel absolute
     log ratio of ``f`` (h, w, 3) float32 and ``fb`` (h, w, 3) uint8 (``|log(1 + f) - log(1 +
     fb)|``) lies between ``reject = (lo, hi)``, grown by :data:`REJECT_GROW` pixels (the soft
     edge of hair in the reference frame is less unlike the skin than the hair, and would be
-    left as a thin grey outline) and blurred over ~2 pixels."""
+    left as a thin grey outline) and blurred by :data:`REJECT_BLUR`, both times ``scale``."""
     lo, hi = (float(v) for v in reject)
     r = np.empty(f.shape[:2], np.float32)
     _reject_kernel(f, fb, lo, max(hi - lo, 1e-6), r)
-    if REJECT_GROW > 0 and r.any():
-        r = cv2.dilate(r, np.ones((2 * REJECT_GROW + 1,) * 2, np.uint8))
-    return cv2.GaussianBlur(r, (0, 0), 2.0)
+    grow = int(round(REJECT_GROW * scale))
+    if grow > 0 and r.any():
+        r = cv2.dilate(r, np.ones((2 * grow + 1,) * 2, np.uint8))
+    return cv2.GaussianBlur(r, (0, 0), REJECT_BLUR * scale)
 
 
 def _reject_fade_py(blur, where, a):  # pragma: no cover (numba)

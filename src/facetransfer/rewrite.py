@@ -56,6 +56,7 @@ import numpy as np
 from .composite import (composite_alpha, composite_face, erode_mask, extend_nearest,
                         membrane_alpha, membrane_blend, over)
 from .errors import ShapeError
+from .face_scale import face_scale, face_span
 from .rim import drawn_inside, lifted_positions
 from .unmoved import unmoved_uvs
 from .eyes import EyeTexture, paint_shaded_eyes
@@ -201,6 +202,9 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
     if V.shape != (topo.n_closed, 3):
         raise ShapeError(f"vertices must be ({topo.n_vertices} or {topo.n_closed}, 3), "
                          f"got {V.shape}")
+    # the pixel settings of a face larger than the ones they were chosen for, grown with it
+    scale = face_scale(face_span(V, camera, topo.eye_loops))
+    blending = blending.scaled(scale)
     # all per-frame work happens in the face's bounding box (plus a margin wider than any
     # filter below: erosion, outline ring, membrane margin, feathering); the rest is T
     box = _face_box(V, camera, (W, H),
@@ -213,7 +217,7 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
         textures = dataclasses.replace(textures, mouth_ring=mouth_ring_faces(topo))
     lifted = lifted_positions(textures.face, target_frame)  # None: not the frame's own
     res = _rewrite_crop(T[y0:y1, x0:x1], V, cam, topo, textures, blending,
-                        None if lifted is None else lifted - (x0, y0), matte=matte)
+                        None if lifted is None else lifted - (x0, y0), matte=matte, scale=scale)
     return box, res
 
 
@@ -305,11 +309,12 @@ def _shift_camera(camera, x0: int, y0: int):
 
 
 def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOptions,
-                  lifted=None, *, matte: bool = False) -> RewriteFrame:
+                  lifted=None, *, matte: bool = False, scale: float = 1.0) -> RewriteFrame:
     """:func:`rewrite_frame` on a crop ``T`` of the frame, ``camera`` shifted to the crop;
     ``lifted``: where the per-frame face texture lifted the vertices, in the crop's pixels
     (:func:`facetransfer.rim.lifted_positions`), or None; ``matte``: with its matte
-    (:func:`_blend_matte`)."""
+    (:func:`_blend_matte`); ``scale``: the pixel settings' factor for the face's size
+    (:func:`facetransfer.face_scale.face_scale`; ``blending`` is scaled already)."""
     from .render import WeakPerspective
     from .render.raster import rasterize_drawn
 
@@ -323,14 +328,14 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
                 V.dtype == np.float64 and V.flags.c_contiguous):
             drawn = camera.project(V)
         # not the target's own outline drawn inside its face: the target's pixels there instead
-        own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn))
+        own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn, scale=scale))
         # nor its pixels resampled where the new face did not move: looked up where drawn
         face = textures.face
         uvs = unmoved_uvs(face.uvs, (face.image.shape[1], face.image.shape[0]), lifted, drawn)
         if uvs is not None:
             textures = dataclasses.replace(textures, face=dataclasses.replace(face, uvs=uvs))
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(raster, V, topo, textures,
-                                                                    own)
+                                                                    own, scale)
     lip_tint, erode, feather = textures.lip_tint, blending.erode, blending.feather
     fan = inside_mouth(raster.tri_id, topo) if mouth_img is not None else None
     if textures.inside is not None and fan is not None:  # an inside its frames never show
@@ -355,7 +360,7 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
         if mouth_img is not None and mouth_mask.any():
             # the source's mouth first takes the colours of the face around it (a gain)
             face = blend_mouth(T, face_img, face_mask, mouth_img, mouth_mask & region, ring,
-                               blending.mouth_feather, fan)
+                               blending.mouth_feather, fan, scale=scale)
         out = membrane_blend(T, face, region, feather=feather)
     else:
         # The guidance field on the region's outline is the source's difference across it, so
@@ -406,13 +411,14 @@ _RIM, _JAW_REGION, _JAW_RING, _MOUTH_RING = 16, 32, 64, 128
 
 
 def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextures,
-                 own: tuple[np.ndarray, np.ndarray] | None = None):
+                 own: tuple[np.ndarray, np.ndarray] | None = None, scale: float = 1.0):
     """The new face textured at one frame (§6): every texture it takes sampled in one pass
     over the raster (:func:`facetransfer.render.shade_layers`), then the eye and jaw regions
     pasted into the face (:func:`facetransfer.eyes.paint_shaded_eyes`,
     :func:`facetransfer.jaw.paint_shaded_jaw`). ``own = (frame, where)``: the face texture replaced
     by the (cropped) target frame's own pixels ``where`` (:func:`facetransfer.rim.
-    drawn_inside`), under the regions.
+    drawn_inside`), under the regions; ``scale``: the factor of the pastes' pixel settings
+    (:func:`facetransfer.face_scale.face_scale`).
 
     Returns
     -------
@@ -451,30 +457,32 @@ def _shade_frame(raster, V: np.ndarray, topo: MeshTopology, textures: FrameTextu
         labels, _MOUTH if with_mouth else 0,
         _MOUTH_RING if with_mouth and mouth_ring is not None else 0)
     if own is not None:
-        _keep_own(face_img, face_mask, *own)
+        _keep_own(face_img, face_mask, *own, scale=scale)
     if eye_texture is not None:  # lids, eyes and brows from the open-eyed frame (issue 13)
         face_img = paint_shaded_eyes(raster, topo.faces, V, face_img, face_mask, eye_texture,
-                                     eye_img, labels, (_EYES, _RIM))
+                                     eye_img, labels, (_EYES, _RIM), scale=scale)
     if jaw_texture is not None:  # chin and jaw from the closed-mouth frame (issue 13)
         face_img = paint_shaded_jaw(face_img, face_mask, jaw_texture, jaw_img, labels,
-                                    (_JAW_REGION, _JAW_RING), raster, topo.faces)
+                                    (_JAW_REGION, _JAW_RING), raster, topo.faces, scale=scale)
     if not with_mouth or mouth_ring is None:
         ring = None
     return face_img, face_mask, mouth_img, mouth_mask, ring
 
 
 def _keep_own(face_img: np.ndarray, face_mask: np.ndarray, frame: np.ndarray,
-              where: np.ndarray) -> None:
+              where: np.ndarray, *, scale: float = 1.0) -> None:
     """``face_img`` (H, W, 3) uint8 made ``frame``'s own pixels ``where`` (H, W) bool, in place,
-    with a soft edge (a Gaussian of 1.5 px) on ``face_mask``: the face texture's shading meets
-    the frame's without a step (:func:`_keep_own_kernel`)."""
+    with a soft edge (a Gaussian of 1.5 px, times ``scale``: :mod:`facetransfer.face_scale`) on
+    ``face_mask``: the face texture's shading meets the frame's without a step
+    (:func:`_keep_own_kernel`)."""
     x, y, w, h = cv2.boundingRect(where.view(np.uint8))
     if not w:
         return
-    x, y = max(x - 4, 0), max(y - 4, 0)
-    box = (slice(y, y + h + 8), slice(x, x + w + 8))
+    r = int(round(4 * scale))  # the box's margin, where the blur's edge lies
+    x, y = max(x - r, 0), max(y - r, 0)
+    box = (slice(y, y + h + 2 * r), slice(x, x + w + 2 * r))
     wb = np.ascontiguousarray(where[box])
-    blur = cv2.GaussianBlur(wb.view(np.uint8).astype(np.float32), (0, 0), 1.5)
+    blur = cv2.GaussianBlur(wb.view(np.uint8).astype(np.float32), (0, 0), 1.5 * scale)
     _keep_own_kernel(blur, wb, face_mask, read_only(frame), face_img, x, y,
                      np.float32(0.5 / 255))
 

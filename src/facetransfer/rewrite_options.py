@@ -86,7 +86,10 @@ class BlendOptions:
         :func:`facetransfer.composite.membrane_blend` (fast), Poisson blending
         (:func:`facetransfer.composite.composite_face`, exact sparse solve) or a hard paste.
     feather : float
-        Soft-edge radius of the blend in pixels.
+        Soft-edge radius of the blend in pixels (these pixels, ``erode``'s and
+        ``mouth_feather``'s are a face's whose eyes lie up to
+        :data:`facetransfer.face_scale.FACE_SPAN` apart; the rewrite grows them with a larger
+        face: :meth:`scaled`).
     erode : int
         The blend region is the rendered face mask eroded by this many pixels.
     mouth_feather : float
@@ -111,6 +114,17 @@ class BlendOptions:
 
     def __post_init__(self) -> None:
         check_mode("blend", self.mode, BLEND_MODES)
+
+    def scaled(self, scale: float) -> "BlendOptions":
+        """These options for a face ``scale`` times the size their pixels are given for
+        (:func:`facetransfer.face_scale.face_scale`, which the rewrite applies to every frame):
+        ``feather``, ``erode`` (rounded) and ``mouth_feather`` times ``scale``; these options
+        themselves at 1."""
+        if scale == 1.0:
+            return self
+        return dataclasses.replace(self, feather=self.feather * scale,
+                                   erode=int(round(self.erode * scale)),
+                                   mouth_feather=self.mouth_feather * scale)
 
 
 @dataclass(frozen=True)

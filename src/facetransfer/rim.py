@@ -114,11 +114,12 @@ def _remap_points(depth: np.ndarray, mx: np.ndarray, my: np.ndarray) -> np.ndarr
 
 
 def drawn_inside(face_mask: np.ndarray, raster, faces: np.ndarray, lifted: np.ndarray,
-                 drawn: np.ndarray) -> np.ndarray:
+                 drawn: np.ndarray, *, scale: float = 1.0) -> np.ndarray:
     """``(H, W) bool``: the pixels of the rendered face whose texture was lifted from the
     target's outer band (the band :data:`RIM` of the face's size) while they lie more than
-    :data:`MOVED` pixels, and at most :data:`REACH` band widths, deeper inside the target's
-    silhouette than it did.
+    :data:`MOVED` pixels (times ``scale``, :func:`facetransfer.face_scale.face_scale`: the
+    tracked outline's error grows with the face), and at most :data:`REACH` band widths,
+    deeper inside the target's silhouette than it did.
 
     Judged per triangle, by the means over its corners of each vertex's depths in
     :func:`lifted_depth`'s map of the target's silhouette, at ``lifted`` and at ``drawn``
@@ -144,7 +145,7 @@ def drawn_inside(face_mask: np.ndarray, raster, faces: np.ndarray, lifted: np.nd
     per_tri = np.zeros(len(F) + 1, bool)
     xy = np.empty((3 * c, 2), np.float64)
     m = _flag_kernel(at_texture, F, cand[:c], tp, np.float32(k),
-                     np.float32(MOVED), np.float32(REACH * k), P, per_tri, xy)
+                     np.float32(MOVED * scale), np.float32(REACH * k), P, per_tri, xy)
     if m == 0:
         return out
     # the triangles' pixels, looked up on the box their corners span only

@@ -1,0 +1,155 @@
+"""The rewrite's pixel settings grown with the face (``facetransfer.face_scale``): a face 2.5
+times larger is rewritten as the smaller one, its seams as wide for the face; the data folder's
+faces (eyes up to FACE_SPAN apart) as before."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import cv2
+import numpy as np
+import pytest
+
+from facetransfer import face_scale, jaw, patch
+from facetransfer.render import WeakPerspective, rasterize
+from facetransfer.rewrite import FrameTextures, rewrite_frame
+from facetransfer.rewrite_options import BlendOptions
+from facetransfer.texture.face import FaceTexture, frame_uvs
+from facetransfer.topology import close_mouth, mesh_topology
+
+from conftest import jaw_open_track
+
+SKIN = (120, 90, 72)
+LIT = tuple(int(1.6 * c) for c in SKIN)  # the closed frame's skin: beyond the gain's clip
+
+
+@pytest.fixture(scope="module")
+def setup(arkit_model):
+    return arkit_model, mesh_topology(arkit_model)
+
+
+def _jaw_paste(model, topo, px_per_cm: float):
+    """The mean person's closed jaw rewritten into frame 1 of a clip whose frame 0 (mouth
+    closed: the jaw region's reference frame) shows its skin 1.6 times brighter, beyond
+    :data:`facetransfer.patch.GAIN_RANGE`: pasted, the region keeps a step of 1.12 at its
+    outline, faded over the jaw's feather. At ``px_per_cm`` pixels per cm in a frame of 23 cm
+    (the face's place in it the same at every size). Returns ``(image, region, face)``: the
+    result, the region's pixels and the face's (H, W) bool."""
+    size = int(round(23 * px_per_cm))
+    target = jaw_open_track(model, [0.0, 1.0], size=size, scale=px_per_cm)
+    # the face's place in the frame as a share of the frame (conftest's 40 px: at 20 px per cm)
+    c = (size - 1) / 2.0
+    target = dataclasses.replace(target, translation=np.tile([c, c - 2.0 * px_per_cm], (2, 1)))
+    frames = [np.full((size, size, 3), LIT, np.uint8), np.full((size, size, 3), SKIN, np.uint8)]
+    tex = jaw.jaw_texture(frames, target, model, topo)
+    cam = target.camera(1)
+    face_tex = FaceTexture(frames[1], frame_uvs(close_mouth(model.synthesize(
+        target.weights_at(1)), topo), cam, (size, size)), 1)
+    V = close_mouth(model.synthesize(target.weights_at(0)), topo)   # the new jaw: closed
+    out = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex, jaw=tex),
+                        blending=BlendOptions("none", erode=0))
+    r = rasterize(V, topo.faces, cam, (size, size))
+    region = np.isin(r.tri_id, np.flatnonzero(tex.select))
+    return out.image, region, r.tri_id >= 0
+
+
+def test_a_larger_face_shows_the_jaw_regions_edge_as_the_smaller_one(setup):
+    """The jaw region's paste is faded over a feather that grows with the face
+    (``face_scale``): the same face at 2.5 times the pixels (eyes ~320 px apart), brought
+    back to the smaller one's pixels, shows the region's outline as the smaller face does.
+    Before, a 4-px feather at every size made the step across the outline 2.5 times as
+    steep for the face (the step across the cheek on a 1280x1280 clip: BENCHMARKS.md,
+    "Fifty-fourth session (helper large54)")."""
+    model, topo = setup
+    small, region, face = _jaw_paste(model, topo, 20.0)
+    large, _, _ = _jaw_paste(model, topo, 50.0)
+    back = cv2.resize(large, small.shape[1::-1], interpolation=cv2.INTER_AREA)
+    grey = (lambda img: img.astype(np.float64).mean(axis=-1))
+    # the region's outline inside the face, away from the face's own edge: 6 px either side
+    inside = cv2.distanceTransform(region.view(np.uint8), cv2.DIST_L2, 5)
+    outside = cv2.distanceTransform((~region).view(np.uint8), cv2.DIST_L2, 5)
+    deep = cv2.erode(face.view(np.uint8), np.ones((17, 17), np.uint8)).view(bool)
+    band = deep & (((inside > 0) & (inside <= 6)) | ((outside > 0) & (outside <= 6)))
+    assert band.sum() > 300
+    # the step is there at both sizes: the region 1.12 times the skin deep inside it
+    core = deep & (inside > 8)
+    assert np.median(grey(small)[core]) == pytest.approx(1.12 * np.mean(SKIN), abs=3)
+    assert np.median(grey(back)[core]) == pytest.approx(1.12 * np.mean(SKIN), abs=3)
+    err = np.abs(grey(back) - grey(small))[band]
+    assert np.percentile(err, 95) < 3.0        # before: 6 levels (the step ~13 levels)
+    # and the steepest rise across it, in levels per pixel of the smaller face
+    gy, gx = np.gradient(grey(back))
+    sy, sx = np.gradient(grey(small))
+    assert np.percentile(np.hypot(gx, gy)[band], 99) < 1.25 * np.percentile(
+        np.hypot(sx, sy)[band], 99)
+
+
+def test_the_settings_grow_with_the_face_beyond_the_clips_they_were_chosen_on():
+    """Up to :data:`facetransfer.face_scale.FACE_SPAN` (every data-folder clip's frames:
+    their renders as before, bit for bit) the factor is 1; beyond, proportional; 1 where the
+    span is unknown."""
+    assert face_scale.face_scale(60.0) == face_scale.face_scale(face_scale.FACE_SPAN) == 1.0
+    assert face_scale.face_scale(2.5 * face_scale.FACE_SPAN) == pytest.approx(2.5)
+    assert face_scale.face_scale(float("nan")) == 1.0
+    opts = BlendOptions(feather=2.0, erode=2, mouth_feather=3.0)
+    assert opts.scaled(1.0) is opts
+    big = opts.scaled(2.5)
+    assert (big.feather, big.erode, big.mouth_feather) == (5.0, 5, 7.5)
+    assert patch.ring_inset(1.0) == patch.RING_INSET and patch.ring_inset(2.5) == 5
+
+
+def test_the_face_span_is_the_eye_holes_distance_at_the_cameras_scale(setup):
+    """Pixels between the centres of the two eye holes: the camera's scale times their
+    distance in the model (a turned head's face is as large), or, for another camera, their
+    projections' distance; NaN without two eye holes."""
+    model, topo = setup
+    V = model.synthesize(model.default_weights())
+    c = [V[np.asarray(loop)].mean(axis=0) for loop in topo.eye_loops]
+    d = float(np.linalg.norm(c[0] - c[1]))
+    assert 5.5 < d < 7.0                                  # cm: a person's eyes
+    R = np.eye(3)
+    assert face_scale.face_span(V, WeakPerspective(20.0, R, np.zeros(2)), topo.eye_loops) \
+        == pytest.approx(20.0 * d)
+    turn = np.array([[np.cos(0.5), 0, np.sin(0.5)], [0, 1, 0], [-np.sin(0.5), 0, np.cos(0.5)]])
+    assert face_scale.face_span(V, WeakPerspective(20.0, turn, np.zeros(2)), topo.eye_loops) \
+        == pytest.approx(20.0 * d)
+
+    class Flat:            # another camera: the projection, here an orthographic one
+        def project(self, X):
+            return 10.0 * np.asarray(X)[:, :2]
+
+    assert face_scale.face_span(V, Flat(), topo.eye_loops) == pytest.approx(
+        10.0 * np.hypot(*(c[0][:2] - c[1][:2])))
+    assert np.isnan(face_scale.face_span(V, Flat(), ()))
+
+
+def test_a_larger_faces_eyeballs_are_continued_without_its_lashes(arkit_model):
+    """The eye openings' rim redone before the eyeball is continued under the lids
+    (``eyeballs.RIM``: lashes and the lid margin where the track's margin is a little off)
+    grows with the eye (``eyeballs.RIM_WIDTH``): on a face 2.5 times the data folder's,
+    lashes 2.5 px deep on the opening's rim (1 px at the smaller face) are not continued
+    under the lids as the eyeball. Before, a 1-px rim left them, and the sclera uncovered by
+    a turned iris was a flat grey-brown wedge (a 1280x1280 clip's frame 39: BENCHMARKS.md,
+    "Fifty-fourth session (helper large54)")."""
+    from facetransfer import eyeballs, eyes
+    from conftest import mean_person_track
+
+    model = arkit_model
+    topo = mesh_topology(model)
+    closed, fill = eyes.close_eyes(topo, model.synthesize(model.default_weights()))
+    fill_eye = np.full(len(closed.faces), -1, np.int8)
+    fill_eye[fill] = 0
+    size = 23 * 50
+    track = mean_person_track(model, np.zeros((1, 52), np.float32), size=size, scale=50.0)
+    V = close_mouth(model.synthesize(track.weights_at(0)), closed)
+    hole = np.isin(rasterize(V, closed.faces, track.camera(0), (size, size)).tri_id, fill)
+    depth = cv2.distanceTransform(hole.view(np.uint8), cv2.DIST_L2, 5)
+    img = np.empty((size, size, 3), np.uint8)
+    img[:] = (200, 150, 120)
+    img[hole] = (235, 235, 230)                  # sclera (no iris: the lashes alone matter)
+    img[hole & (depth <= 2.5)] = (40, 30, 25)    # lashes on the opening's rim
+    balls = eyeballs.eyeballs_of(img, track, 0, model, closed.faces, V, fill_eye)
+    under = (cv2.distanceTransform((~hole).view(np.uint8), cv2.DIST_L2, 5) <= 4) & ~hole
+    shown = balls.image[under].astype(float).mean(axis=-1)
+    assert np.median(shown) > 200                # before: 31.7 (the lashes continued)
+
