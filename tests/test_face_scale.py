@@ -28,13 +28,14 @@ def setup(arkit_model):
     return arkit_model, mesh_topology(arkit_model)
 
 
-def _jaw_paste(model, topo, px_per_cm: float):
+def _jaw_paste(model, topo, px_per_cm: float, blending: BlendOptions | None = None):
     """The mean person's closed jaw rewritten into frame 1 of a clip whose frame 0 (mouth
     closed: the jaw region's reference frame) shows its skin 1.6 times brighter, beyond
     :data:`facetransfer.patch.GAIN_RANGE`: pasted, the region keeps a step of 1.12 at its
     outline, faded over the jaw's feather. At ``px_per_cm`` pixels per cm in a frame of 23 cm
     (the face's place in it the same at every size). Returns ``(image, region, face)``: the
-    result, the region's pixels and the face's (H, W) bool."""
+    result, the region's pixels and the face's (H, W) bool. ``blending``: the rewrite's blend
+    (default: a hard paste, no erosion)."""
     size = int(round(23 * px_per_cm))
     target = jaw_open_track(model, [0.0, 1.0], size=size, scale=px_per_cm)
     # the face's place in the frame as a share of the frame (conftest's 40 px: at 20 px per cm)
@@ -47,7 +48,8 @@ def _jaw_paste(model, topo, px_per_cm: float):
         target.weights_at(1)), topo), cam, (size, size)), 1)
     V = close_mouth(model.synthesize(target.weights_at(0)), topo)   # the new jaw: closed
     out = rewrite_frame(frames[1], V, cam, topo, FrameTextures(face_tex, jaw=tex),
-                        blending=BlendOptions("none", erode=0))
+                        blending=BlendOptions("none", erode=0) if blending is None
+                        else blending)
     r = rasterize(V, topo.faces, cam, (size, size))
     region = np.isin(r.tri_id, np.flatnonzero(tex.select))
     return out.image, region, r.tri_id >= 0
@@ -98,6 +100,49 @@ def test_the_settings_grow_with_the_face_beyond_the_clips_they_were_chosen_on():
     assert patch.ring_inset(1.0) == patch.RING_INSET and patch.ring_inset(2.5) == 5
 
 
+def test_the_data_folders_faces_keep_their_settings_and_the_factor_rises_without_a_step():
+    """Every frame of the data folder's clips as a target, their own tracks and their new ones
+    with another clip's expressions (:func:`facetransfer.face_scale.face_span`, measured in the
+    fifty-fifth session): ``driving_d6`` 102.1-122.2 px, ``driving_d9`` 106.1-113.4,
+    ``WDA_KatieHill_000`` 107.9-114.9, ``face_2`` 129.6-137.0; all rewritten with the settings
+    they were chosen with. Beyond :data:`~facetransfer.face_scale.FACE_SPAN` the factor rises
+    from 1 without a step (the guarantee of the removed ``patch.shading_sigma`` tests, whose
+    threshold was first set below ``face_2``'s frames); a span that is no size (infinite,
+    zero, negative) keeps the settings."""
+    for span in (102.1, 122.2, 129.6, 137.0):
+        assert face_scale.face_scale(span) == 1.0
+    edge = face_scale.FACE_SPAN
+    assert face_scale.face_scale(edge) == 1.0
+    assert 1.0 < face_scale.face_scale(edge + 0.01) < 1.0 + 1e-4
+    for span in (float("inf"), float("-inf"), 0.0, -300.0):
+        assert face_scale.face_scale(span) == 1.0
+
+
+def test_a_face_at_the_threshold_is_rewritten_without_a_step(setup, monkeypatch):
+    """A face at :data:`~facetransfer.face_scale.FACE_SPAN` is rewritten with the factor 1;
+    just beyond, with 1 + 1e-6: every setting scaled (``BlendOptions.scaled`` no longer the
+    options themselves, the feathers' windows one pixel wider, the whole pixels rounded as at
+    1). The same frame rewritten both ways (the jaw region pasted, the membrane blend) differs
+    by at most a level at a few pixels (here at none): no step where the settings start to
+    grow. (An erosion rounded up instead, ``ceil(2 (1 + 1e-6))``, changes 96,000 pixels by up
+    to 5 levels. The mesh itself moved by 1e-6 of its size can flip a pixel's triangle, 4
+    levels at 37 pixels here, with the factor held at 1 too: the raster's, not the
+    threshold's, so the test holds the mesh.)"""
+    from facetransfer import rewrite
+
+    model, topo = setup
+    probe = jaw_open_track(model, [0.0], scale=1.0)
+    V = close_mouth(model.synthesize(probe.weights_at(0)), topo)
+    ppc = face_scale.FACE_SPAN / face_scale.face_span(V, probe.camera(0), topo.eye_loops)
+    out = {}
+    for factor in (1.0, 1.0 + 1e-6):
+        monkeypatch.setattr(rewrite, "face_scale", lambda span, f=factor: f)
+        out[factor] = _jaw_paste(model, topo, ppc, BlendOptions())[0].astype(int)
+    step = np.abs(out[1.0 + 1e-6] - out[1.0])
+    assert step.max() <= 1
+    assert np.count_nonzero(step) <= 20
+
+
 def test_the_face_span_is_the_eye_holes_distance_at_the_cameras_scale(setup):
     """Pixels between the centres of the two eye holes: the camera's scale times their
     distance in the model (a turned head's face is as large), or, for another camera, their
@@ -121,6 +166,12 @@ def test_the_face_span_is_the_eye_holes_distance_at_the_cameras_scale(setup):
     assert face_scale.face_span(V, Flat(), topo.eye_loops) == pytest.approx(
         10.0 * np.hypot(*(c[0][:2] - c[1][:2])))
     assert np.isnan(face_scale.face_span(V, Flat(), ()))
+    # a mesh that is no face (a NaN vertex: WeakPerspective itself refuses a scale that is
+    # not > 0) gives no size, and the settings as they are
+    bad = np.array(V, copy=True)
+    bad[np.asarray(topo.eye_loops[0])[0]] = np.nan
+    nan = face_scale.face_span(bad, WeakPerspective(20.0, R, np.zeros(2)), topo.eye_loops)
+    assert np.isnan(nan) and face_scale.face_scale(nan) == 1.0
 
 
 def test_a_larger_faces_eyeballs_are_continued_without_its_lashes(arkit_model):
@@ -152,4 +203,3 @@ def test_a_larger_faces_eyeballs_are_continued_without_its_lashes(arkit_model):
     under = (cv2.distanceTransform((~hole).view(np.uint8), cv2.DIST_L2, 5) <= 4) & ~hole
     shown = balls.image[under].astype(float).mean(axis=-1)
     assert np.median(shown) > 200                # before: 31.7 (the lashes continued)
-

@@ -43,8 +43,10 @@ __all__ = ["GROW", "RIM_WIDTH", "LIMIT", "IRIS_CONTRAST", "IRIS_LEVEL", "BAND", 
 #: where the track's margin is a little off) is redone too ...
 GROW, RIM = 0.35, 1
 #: ... in :func:`eyeballs_of`, one pixel per this many of the eye's width, rounded (at least
-#: :data:`RIM`): the data folder's eyes, 46-57 px wide, 1 px, where it was chosen; a face 2.5
-#: times larger (a 1280x1280 clip: eyes 120 px wide) 3 px. With 1 px there, the lashes were
+#: :data:`RIM`): the data folder's clips' eyes, 43-59 px wide over all their frames, 1 px,
+#: where it was chosen (2 px from 63 px: a face of eyes ~140-150 px apart, about where
+#: :data:`facetransfer.face_scale.FACE_SPAN` grows the rewrite's other pixel settings); a face
+#: 2.5 times larger (a 1280x1280 clip: eyes 120 px wide) 3 px. With 1 px there, the lashes were
 #: continued under the lids as the eyeball: the sclera that a turned iris uncovers showed as a
 #: flat grey-brown wedge (BENCHMARKS.md, "Fifty-fourth session (helper large54)").
 RIM_WIDTH = 42.0

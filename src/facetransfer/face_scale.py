@@ -2,17 +2,22 @@
 
 The rewrite's settings in pixels were chosen on the data folder's clips, faces whose eyes'
 centres lie 102-137 px apart (:func:`face_span` over every frame of ``driving_d6``,
-``driving_d9``, ``WDA_KatieHill_000`` and ``face_2``): the blend's feather and erosion
+``driving_d9``, ``WDA_KatieHill_000`` and ``face_2``, their own tracks and their new ones with
+another clip's expressions): the blend's feather and erosion
 (:class:`facetransfer.rewrite_options.BlendOptions`), the mouth's, the eye region's and the
-jaw region's feathers, the eye region's lid fade and shading scale, the jaw region's hue scale,
-the pastes' compare ring and rejection (:mod:`facetransfer.patch`), the rim's depth tolerance
+jaw region's feathers, the eye region's lid fade and shading scale, the jaw region's hue scale
+and its margin around a tongue (:data:`facetransfer.jaw.LOOK_GROW`), the pastes' compare ring
+and rejection (:mod:`facetransfer.patch`), the rim's depth tolerance
 (:mod:`facetransfer.rim`) and the soft edge of the target's own pixels
 (:mod:`facetransfer.rewrite`). On a face two or three times larger (HD footage, a phone's
 portrait video) the same pixels are a seam two or three times narrower for the face: the jaw
 region's edge showed as a step across the cheek at the mouth's height, where the same clip at
 512 px showed a soft one (BENCHMARKS.md, "Fifty-fourth session (helper large54)"). So each is
 multiplied by :func:`face_scale`: 1 up to :data:`FACE_SPAN` (those clips render as before, to
-the bit), proportional to the face beyond.
+the bit), proportional to the face beyond, without a step at it (the settings in whole pixels
+are rounded, and step where their rounding does: the blend's 2-px erosion at a factor of 1.25).
+The data folder's ``breakingbad.jpg`` (1920x1080, eyes 158-161 px apart) is a larger face: as a
+target its settings are 1.09-1.11 times these.
 
 The settings that are about the pixel grid itself stay in pixels: the half-pixel rule of
 :mod:`facetransfer.unmoved` (a resampling's error) and the grids' steps. The eyeballs' rim

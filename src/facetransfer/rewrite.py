@@ -315,25 +315,13 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
     (:func:`facetransfer.rim.lifted_positions`), or None; ``matte``: with its matte
     (:func:`_blend_matte`); ``scale``: the pixel settings' factor for the face's size
     (:func:`facetransfer.face_scale.face_scale`; ``blending`` is scaled already)."""
-    from .render import WeakPerspective
     from .render.raster import rasterize_drawn
 
     # the raster and where it drew the vertices (camera.project(V), one projection for both)
     raster, drawn = rasterize_drawn(V, topo.faces, camera, (T.shape[1], T.shape[0]))
     own = None
     if lifted is not None:
-        # (a pinhole draws by its own formula; the raster's projection is of V made
-        # C-contiguous float64, which a product of another layout might round otherwise)
-        if not isinstance(camera, WeakPerspective) or not (
-                V.dtype == np.float64 and V.flags.c_contiguous):
-            drawn = camera.project(V)
-        # not the target's own outline drawn inside its face: the target's pixels there instead
-        own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn, scale=scale))
-        # nor its pixels resampled where the new face did not move: looked up where drawn
-        face = textures.face
-        uvs = unmoved_uvs(face.uvs, (face.image.shape[1], face.image.shape[0]), lifted, drawn)
-        if uvs is not None:
-            textures = dataclasses.replace(textures, face=dataclasses.replace(face, uvs=uvs))
+        own, textures = _target_own(T, V, camera, topo, textures, raster, drawn, lifted, scale)
     face_img, face_mask, mouth_img, mouth_mask, ring = _shade_frame(raster, V, topo, textures,
                                                                     own, scale)
     lip_tint, erode, feather = textures.lip_tint, blending.erode, blending.feather
@@ -377,6 +365,30 @@ def _rewrite_crop(T, V, camera, topo, textures: FrameTextures, blending: BlendOp
     return RewriteFrame(np.ascontiguousarray(out, dtype=np.uint8), rendered, face_mask,
                         mouth_mask, _blend_matte(region, mouth_mask if mouth_img is not None
                                                  else None, blending) if matte else None)
+
+
+def _target_own(T, V, camera, topo, textures: FrameTextures, raster, drawn, lifted, scale):
+    """Where :func:`_rewrite_crop` keeps the crop ``T``'s own pixels, given ``lifted`` (where
+    the per-frame face texture lifted the vertices) and ``drawn`` (where the raster drew
+    them): ``(own, textures)``, ``own = (T, where)`` of :func:`_shade_frame` (the target's
+    outline drawn inside its face, :func:`facetransfer.rim.drawn_inside`), ``textures`` with
+    the face texture looked up where drawn where the new face did not move
+    (:func:`facetransfer.unmoved.unmoved_uvs`)."""
+    from .render import WeakPerspective
+
+    # (a pinhole draws by its own formula; the raster's projection is of V made
+    # C-contiguous float64, which a product of another layout might round otherwise)
+    if not isinstance(camera, WeakPerspective) or not (
+            V.dtype == np.float64 and V.flags.c_contiguous):
+        drawn = camera.project(V)
+    # not the target's own outline drawn inside its face: the target's pixels there instead
+    own = (T, drawn_inside(raster.mask, raster, topo.faces, lifted, drawn, scale=scale))
+    # nor its pixels resampled where the new face did not move: looked up where drawn
+    face = textures.face
+    uvs = unmoved_uvs(face.uvs, (face.image.shape[1], face.image.shape[0]), lifted, drawn)
+    if uvs is not None:
+        textures = dataclasses.replace(textures, face=dataclasses.replace(face, uvs=uvs))
+    return own, textures
 
 
 def _blend_matte(region: np.ndarray, mouth_mask: np.ndarray | None,
