@@ -203,3 +203,42 @@ def test_a_larger_faces_eyeballs_are_continued_without_its_lashes(arkit_model):
     under = (cv2.distanceTransform((~hole).view(np.uint8), cv2.DIST_L2, 5) <= 4) & ~hole
     shown = balls.image[under].astype(float).mean(axis=-1)
     assert np.median(shown) > 200                # before: 31.7 (the lashes continued)
+
+
+def test_a_clips_frames_take_one_factor_for_their_shot(arkit_model, monkeypatch):
+    """A clip's frames are rewritten with one factor, their shot's
+    (:func:`facetransfer.face_scale.shot_scale`: of the median of their faces' spans), not
+    each its own: a face whose measure moves about a whole-pixel setting's step from frame
+    to frame (the blend's erosion: 2 px at a factor of 1.249, 3 at 1.251) had its outline
+    flicker (a 1280x1280 clip's frame 19: 1,097 pixels by more than 8 levels, up to 111)."""
+    from facetransfer import rewrite_clip
+    from facetransfer.rewrite_clip import RenderRun, rewrite_frames
+    from facetransfer.rewrite_options import RewriteOptions
+    from conftest import mean_person_track
+
+    model = arkit_model
+    topo = mesh_topology(model)
+    V = model.synthesize(model.default_weights())
+    c = [V[np.asarray(loop)].mean(axis=0) for loop in topo.eye_loops]
+    d = float(np.linalg.norm(c[0] - c[1]))
+    monkeypatch.setattr(face_scale, "FACE_SPAN", 50.0)      # the threshold at a small face
+    factors = np.array([1.249, 1.251, 1.249, 1.251, 1.252])  # each frame's own measure
+    track = mean_person_track(model, np.zeros((5, 52), np.float32), size=256, scale=10.0)
+    track = dataclasses.replace(track, scale=factors * 50.0 / d)
+    spans = [face_scale.face_span(V, track.camera(i), topo.eye_loops) for i in range(5)]
+    assert [face_scale.face_scale(s) for s in spans] == pytest.approx(factors)
+    assert face_scale.shot_scale(V, track, topo.eye_loops, range(5)) == pytest.approx(1.251)
+    assert face_scale.shot_scale(V, track, topo.eye_loops, []) == 1.0
+    seen = []
+    part = rewrite_clip.rewrite_frame_part
+
+    def recorded(*args, **kw):
+        seen.append(kw["scale"])
+        return part(*args, **kw)
+
+    monkeypatch.setattr(rewrite_clip, "rewrite_frame_part", recorded)
+    frames = [np.full((256, 256, 3), SKIN, np.uint8)] * 5
+    out = list(rewrite_frames(frames, track, track, model, options=RewriteOptions(blend="none"),
+                              run=RenderRun(workers=1)))
+    assert len(out) == 5 and len(seen) >= 5
+    assert seen == pytest.approx([1.251] * len(seen), abs=1e-3)

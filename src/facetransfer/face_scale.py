@@ -16,6 +16,7 @@ region's edge showed as a step across the cheek at the mouth's height, where the
 multiplied by :func:`face_scale`: 1 up to :data:`FACE_SPAN` (those clips render as before, to
 the bit), proportional to the face beyond, without a step at it (the settings in whole pixels
 are rounded, and step where their rounding does: the blend's 2-px erosion at a factor of 1.25).
+A clip's frames take their shot's factor (:func:`shot_scale`), a frame rewritten alone its own.
 The data folder's ``breakingbad.jpg`` (1920x1080, eyes 158-161 px apart) is a larger face: as a
 target its settings are 1.09-1.11 times these.
 
@@ -29,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["FACE_SPAN", "face_span", "face_scale"]
+__all__ = ["FACE_SPAN", "face_span", "face_scale", "shot_scale"]
 
 #: Pixels between the centres of the eyes up to which the rewrite's pixel settings are used as
 #: they are: the data folder's clips, where they were chosen (102-137 px), and a margin.
@@ -73,3 +74,17 @@ def face_scale(span: float) -> float:
     1 where ``span`` is not finite."""
     span = float(span)
     return max(1.0, span / FACE_SPAN) if np.isfinite(span) else 1.0
+
+
+def shot_scale(vertices: np.ndarray, track, eye_loops, frames) -> float:
+    """:func:`face_scale` of a shot: of the median of :func:`face_span` over its ``frames``
+    (indices into ``track``, each frame's camera with the one face ``vertices``: the eyes'
+    distance does not change with the expression); 1 without a frame.
+
+    One factor for the shot's frames, not each its own: the settings in whole pixels step
+    where their rounding does, and a face whose measure moved about such a step from frame to
+    frame had its outline flicker (the blend's erosion, 2 px at 1.249 and 3 at 1.251: on a
+    1280x1280 clip's frame 19, 1,097 pixels of the outline changed by more than 8 levels, up
+    to 111: BENCHMARKS.md, "Fifty-fifth session (helper large55)")."""
+    spans = [face_span(vertices, track.camera(int(i)), eye_loops) for i in frames]
+    return face_scale(np.nanmedian(spans)) if spans and not np.isnan(spans).all() else 1.0

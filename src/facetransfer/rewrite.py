@@ -155,7 +155,7 @@ class FrameTextures:
 
 def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: MeshTopology,
                   textures: FrameTextures, *, blending: BlendOptions | None = None,
-                  matte: bool = False) -> RewriteFrame:
+                  matte: bool = False, scale: float | None = None) -> RewriteFrame:
     """Render the new face into one target frame (§6): :func:`rewrite_frame_part` pasted
     into the frame.
 
@@ -174,23 +174,28 @@ def rewrite_frame(target_frame: np.ndarray, vertices: np.ndarray, camera, topo: 
         membrane blend, ``"fast"``).
     matte : bool
         Also give :attr:`RewriteFrame.matte` (computed only when asked).
+    scale : float, optional
+        The factor of the rewrite's pixel settings for the face's size
+        (:func:`facetransfer.face_scale.face_scale`); default: of this frame's face.
 
     Returns
     -------
     RewriteFrame
     """
     return paste_part(np.asarray(target_frame), rewrite_frame_part(
-        target_frame, vertices, camera, topo, textures, blending=blending, matte=matte),
-        matte=matte)
+        target_frame, vertices, camera, topo, textures, blending=blending, matte=matte,
+        scale=scale), matte=matte)
 
 
 def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
                        topo: MeshTopology, textures: FrameTextures, *,
-                       blending: BlendOptions | None = None, matte: bool = False):
+                       blending: BlendOptions | None = None, matte: bool = False,
+                       scale: float | None = None):
     """:func:`rewrite_frame`'s work, on the face's box only: ``(box, RewriteFrame of the
     box)`` with ``box = (x0, y0, x1, y1)`` (end exclusive) in the frame, or None where the face
     is not in the frame; :func:`paste_part` makes the whole frame of it (a render in processes
-    sends back this much, not a frame)."""
+    sends back this much, not a frame). ``scale``: as :func:`rewrite_frame`'s (a clip's
+    frames take their shot's: :func:`facetransfer.face_scale.shot_scale`)."""
     T = np.asarray(target_frame)
     if T.ndim != 3 or T.shape[2] != 3 or T.dtype != np.uint8:
         raise ShapeError(f"target frame must be (H, W, 3) uint8, got {T.shape} {T.dtype}")
@@ -203,7 +208,8 @@ def rewrite_frame_part(target_frame: np.ndarray, vertices: np.ndarray, camera,
         raise ShapeError(f"vertices must be ({topo.n_vertices} or {topo.n_closed}, 3), "
                          f"got {V.shape}")
     # the pixel settings of a face larger than the ones they were chosen for, grown with it
-    scale = face_scale(face_span(V, camera, topo.eye_loops))
+    if scale is None:
+        scale = face_scale(face_span(V, camera, topo.eye_loops))
     blending = blending.scaled(scale)
     # all per-frame work happens in the face's bounding box (plus a margin wider than any
     # filter below: erosion, outline ring, membrane margin, feathering); the rest is T

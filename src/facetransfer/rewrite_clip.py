@@ -35,6 +35,7 @@ from .eyeballs import track_gaze
 from .region_views import RegionTextures, blend_renders, region_modes, region_textures, views_at
 from .frame_meshes import FrameMeshes
 from .eyes import EyeTexture
+from .face_scale import shot_scale
 from .jaw import JawTexture
 from .lip_colour import SAMPLES as LIP_SAMPLES, LipTint, lip_ratio, lip_vertex_weights
 from .lips import LipResidual, clip_lip_residual, displace_lips, mouth_width_ratio, warp_uvs
@@ -297,6 +298,9 @@ class _ClipRenderer:
     gaze : (F, 2, 2) float64 or None
         The new performance's gaze per frame (its eyeLook* activations), where the eye region
         turns the reference frame's eyeballs to it (:mod:`facetransfer.eyeballs`).
+    scale : float
+        The factor of the rewrite's pixel settings for the shot's face, one for its frames
+        (:func:`facetransfer.face_scale.shot_scale`).
     mono : bool
         The target is monochrome: the pixels the rewrite changes are brought to grey
         (:mod:`facetransfer.monochrome`).
@@ -327,6 +331,7 @@ class _ClipRenderer:
     ring: np.ndarray | None = None
     lip_tint: LipTint | None = None
     gaze: np.ndarray | None = None
+    scale: float = 1.0
     mono: bool = False
     inside: DrawnInside | None = None
     matte: bool = False
@@ -378,6 +383,7 @@ class _ClipRenderer:
                        source_frames, source_track, sidx, const_tex, fn, with_mouth,
                        FrameMeshes(model, kinds, n), eye_tex, jaw_tex, lips,
                        mouth_ring_faces(topo) if with_mouth else None, mono=mono)
+        renderer = dataclasses.replace(renderer, scale=renderer.shot_scale())
         if opts.lip_colour == "target" and with_mouth and model.landmarks is not None:
             tint = renderer.clip_lip_tint()
             renderer = dataclasses.replace(renderer, lip_tint=tint.grey() if mono and tint
@@ -425,6 +431,17 @@ class _ClipRenderer:
         log.info("lip colour: the target's lips over the source's %s (RGB)",
                  np.array2string(tint.tint, precision=2))
         return tint
+
+    def shot_scale(self) -> float:
+        """:func:`facetransfer.face_scale.shot_scale` over the frames :meth:`part` renders
+        (neither track lost there), of the new face at the first of them."""
+        n = self.new_track.n_frames
+        shown = np.flatnonzero(~(np.asarray(self.new_track.lost[:n], bool)
+                                 | np.asarray(self.target_track.lost[:n], bool)))
+        if not shown.size:
+            return 1.0
+        return shot_scale(self.mesh("new", self.new_track, int(shown[0])), self.new_track,
+                          self.topo.eye_loops, shown)
 
     def mesh(self, kind: str, track, i: int) -> np.ndarray:
         """The mesh (n_vertices, 3) of frame ``i`` of ``track`` (its ``kind`` in :attr:`meshes`)."""
@@ -500,7 +517,7 @@ class _ClipRenderer:
         parts = [(rewrite_frame_part(
             frame, V, self.new_track.camera(i), self.topo,
             dataclasses.replace(textures, eyes=eye, jaw=jaw), blending=blending,
-            matte=self.matte), we * wj)
+            matte=self.matte, scale=self.scale), we * wj)
             for eye, we in views_at(self.eye_tex, i, None if self.gaze is None else self.gaze[i])
             for jaw, wj in views_at(self.jaw_tex, i)]
         if parts[0][0] is None:       # the face outside the frame (the same box every view)
