@@ -254,12 +254,30 @@ def _teeth_halves(model, yaw: float) -> tuple[int, int]:
 def test_a_turned_heads_teeth_follow_the_dental_arch(arkit_model, yaw):
     """On a head turned 30°, the teeth are drawn on the dental arch behind the lips seen along
     the camera's view: the far side's teeth, on the arch's side turned away, are foreshortened.
-    Their pixels beyond the upper lip's middle are 0.59 and 0.62 of the near side's (the arch
+    Their pixels beyond the upper lip's middle are 0.58 and 0.62 of the near side's (the arch
     ``z = -0.81 x²`` at the teeth's half-width, 0.46 eye widths, projects to 0.65); the
     flat band painted on the opening's surface (a cone whose far half recedes out of view) drew
-    0.15-0.18 there. Facing the camera, the two sides are the same (508 and 504 pixels)."""
+    0.15-0.18 there. Facing the camera, the two sides are alike (515 and 496 pixels)."""
     near, far = _teeth_halves(arkit_model, yaw)
     assert near > 400
     assert 0.4 < far / near < 0.85
     n0, f0 = _teeth_halves(arkit_model, 0.0)
     assert n0 > 400 and abs(n0 - f0) < 0.03 * (n0 + f0)
+
+
+def test_the_drawn_teeth_are_as_bright_over_the_skin_as_real_teeth():
+    """The drawn teeth's luminance over the skin's is the median of what real teeth show
+    (:data:`facetransfer.mouth_inside.TEETH_LEVEL`: 1.55, 1.48, 1.35, 0.85, 0.67 measured):
+    on a face darkened to takeo's 0.35 (skin 33) the teeth are 1.35 times its luminance, at
+    least the 1.35 of the dimmest real source whose upper teeth show lit (``driving_d6``;
+    before, 1.25: under all three); one gain, the palette's hue kept, and a bright skin's
+    teeth clipped at white."""
+    from facetransfer.mouth_inside import _colours
+    from facetransfer.palette import PALETTE
+
+    skin, lips = np.array([36.0, 32.0, 29.0]), np.array([40.0, 25.0, 25.0])
+    teeth = _colours(skin, lips, lips * 0.5)[2]
+    assert 1.34 < (teeth @ LUMA) / (skin @ LUMA) < 1.36
+    palette = np.asarray(PALETTE["teeth"], np.float64)
+    assert np.allclose(teeth / (teeth @ LUMA), palette / (palette @ LUMA))
+    assert np.all(_colours(skin * 6.5, lips, lips)[2] <= 255.0)

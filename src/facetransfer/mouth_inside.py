@@ -88,21 +88,24 @@ UPPER_SHARE = 0.45
 LOWER_SHARE = 0.25
 #: How far the lower teeth show over the lower lip, in eye widths (about 2.7 mm).
 LOWER_SHOW = 0.1
-#: The teeth's luminance over the target's skin's (the median around its mouth): the palette's
-#: teeth over its skin (1.21), a little more. At the palette's ratio times the skin's lit side
-#: (0.8 of its 75th percentile) the teeth of ``driving_d9``'s closed stretch were a dull grey,
-#: 115 beside a skin of 119, which its orange light showed as blue. Measured on the real
-#: clips' frames where the teeth show (MediaPipe's inner lips, brightest twentieth over the
-#: skin's median about the mouth): 1.48 (``WDA_KatieHill_000``), 1.35 (``driving_d6``), 0.85
-#: (``face_2``, a darkly lit face), 0.67 (``driving_d9``, lower teeth in the lip's shadow);
-#: over the eye whites' (their brightest tenth) no steadier: 1.46, 0.93, 1.22, 0.70. The
-#: teeth follow the light the skin shows; a dark face's teeth are not the brighter for it.
-TEETH_LEVEL = 1.25
+#: The teeth's luminance over the target's skin's (the median around its mouth), measured
+#: where real teeth show: the brightest twentieth of the opening (MediaPipe's inner lips in
+#: the clips' frames opened over a quarter of their width, where that twentieth is over 1.6
+#: times the opening's median; the human points' in the photo) over the median of the skin
+#: about the mouth: ``takeo.ppm`` 1.55 (and 1.56 darkened to 0.35), ``WDA_KatieHill_000``
+#: 1.48, ``driving_d6`` 1.35, ``face_2`` 0.85 (a darkly lit face), ``driving_d9`` 0.67 (lower
+#: teeth in the lip's shadow): their median. Over the eye whites' (their brightest tenth)
+#: the clips' ratios are no steadier (1.46, 0.93, 1.22, 0.70): the teeth follow the light
+#: the skin shows. (mouth54's 1.25, the palette's teeth over its skin, 1.21, a little more,
+#: drew them under every source whose upper teeth show lit.)
+TEETH_LEVEL = 1.35
 #: The lower teeth, in the lower lip's shadow, at this fraction of the upper teeth's light.
 LOWER_SHADE = 0.7
-#: Where the teeth part, eye widths from the middle: the central incisors (8.5 mm) and the
-#: lateral ones (6.5 mm); the line's half-width (eye widths) and how much it darkens.
-TEETH_PARTS = (0.0, 0.32, 0.56)
+#: Where the teeth part, eye widths from the middle: the central incisors (8.5 mm), the
+#: lateral ones (6.5 mm), the canines (7.5 mm) and the first premolars (7 mm), these two seen on
+#: a turned head's near side (:func:`_seen_as`); the line's half-width (eye widths) and how
+#: much it darkens.
+TEETH_PARTS = (0.0, 0.32, 0.56, 0.84, 1.1)
 PART_WIDTH = 0.012
 PART_SHADE = 0.15
 #: The tongue: a dome over the lower lip rising to this share of the opening's height in the
@@ -471,19 +474,36 @@ def _inside_colours(X: np.ndarray, back: np.ndarray, V: np.ndarray, topo: MeshTo
         xa, ya, seen = _arch_hits(X, ray, middle, front - ARCH_BEHIND * eye, eye)
         at_up, at_low = edges(xa + middle)                 # the lips over the arch's point
         gap = np.maximum(at_up - at_low, 0.0)
+        reach = _seen_as(xa, ray, eye)
         teeth = _teeth(inside.teeth, xa, span, eye)
         if lower:
             edge = at_low + np.minimum(LOWER_SHOW * eye, LOWER_SHARE * gap)
             a = np.clip((edge - ya) / px + 0.5, 0.0, 1.0)
-            over(teeth * LOWER_SHADE, a * np.clip((0.8 * span - np.abs(xa)) / px + 0.5, 0, 1)
+            over(teeth * LOWER_SHADE, a * np.clip((0.8 * span - reach) / px + 0.5, 0, 1)
                  * seen)
         else:
             edge = at_up - np.minimum(TEETH_SHOW * eye, UPPER_SHARE * gap)
             under = 0.6 + 0.4 * np.clip((up - y) / (0.1 * eye), 0.0, 1.0)  # the lip's shadow
             a = np.clip((ya - edge) / px + 0.5, 0.0, 1.0)
-            over(teeth * under[:, None], a * np.clip((span - np.abs(xa)) / px + 0.5, 0, 1)
+            over(teeth * under[:, None], a * np.clip((span - reach) / px + 0.5, 0, 1)
                  * seen)
     return colour
+
+
+def _seen_as(x: np.ndarray, ray: np.ndarray, eye: float) -> np.ndarray:
+    """``(n,)`` >= 0: how far from the middle the teeth at the dental arch's points ``x`` (n,)
+    from the middle (model units; ``eye`` the eye width) reach as a frontal view's do: ``|x|``,
+    or nearer the middle where ``ray`` (3,) sees the arch more squarely than a frontal view
+    sees it there (the arch's normal against the view, both across the head: a nod does not
+    turn the teeth). A turned head's near side, its canine seen squarely, shows teeth past the
+    frontal span; the far side is foreshortened and hidden by the arch's own geometry
+    (:func:`_arch_hits`). Frontal: ``|x|``."""
+    u = x / eye
+    v = np.array([-ray[0], -ray[2]]) / max(float(np.hypot(ray[0], ray[2])), 1e-12)
+    facing = (2.0 * ARCH_CURVE * u * v[0] + v[1]) / np.sqrt(1.0 + (2.0 * ARCH_CURVE * u) ** 2)
+    with np.errstate(divide="ignore"):
+        slope = np.sqrt(np.maximum(1.0 / np.maximum(facing, 0.0) ** 2 - 1.0, 0.0))
+    return np.minimum(np.abs(x), eye * slope / (2.0 * ARCH_CURVE))
 
 
 def _teeth(colour: np.ndarray, x: np.ndarray, span: float, eye: float) -> np.ndarray:
@@ -492,6 +512,7 @@ def _teeth(colour: np.ndarray, x: np.ndarray, span: float, eye: float) -> np.nda
     the incisors (:data:`TEETH_PARTS`, eye widths ``eye``)."""
     side = np.clip(1.0 - np.abs(x) / span, 0.0, 1.0)
     light = 0.45 + 0.55 * (1.0 - (1.0 - side) ** 2)                      # the corners' dark
-    parted = 1.0 - PART_SHADE * np.exp(-((np.abs(x)[:, None] - np.asarray(TEETH_PARTS)) ** 2)
-                                       .min(axis=1) / (PART_WIDTH * eye) ** 2)
+    parts = eye * np.asarray(TEETH_PARTS)       # eye widths (before: taken as model units)
+    parted = 1.0 - PART_SHADE * np.exp(-((np.abs(x)[:, None] - parts) ** 2).min(axis=1)
+                                       / (PART_WIDTH * eye) ** 2)
     return colour[None, :] * (light * parted)[:, None]
