@@ -254,7 +254,7 @@ def _teeth_halves(model, yaw: float) -> tuple[int, int]:
 def test_a_turned_heads_teeth_follow_the_dental_arch(arkit_model, yaw):
     """On a head turned 30°, the teeth are drawn on the dental arch behind the lips seen along
     the camera's view: the far side's teeth, on the arch's side turned away, are foreshortened.
-    Their pixels beyond the upper lip's middle are 0.58 and 0.62 of the near side's (the arch
+    Their pixels beyond the upper lip's middle are 0.55 and 0.61 of the near side's (the arch
     ``z = -0.81 x²`` at the teeth's half-width, 0.46 eye widths, projects to 0.65); the
     flat band painted on the opening's surface (a cone whose far half recedes out of view) drew
     0.15-0.18 there. Facing the camera, the two sides are alike (515 and 496 pixels)."""

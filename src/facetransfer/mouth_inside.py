@@ -391,10 +391,10 @@ def _edge_alpha(fan: np.ndarray, ys: np.ndarray, xs: np.ndarray, feather: float)
 
 
 def _visible_edges(X: np.ndarray, px: float):
-    """The opening's visible upper and lower edges over the fan's points ``X`` (n, 3) (the
-    head's frame): a function of x in the head's frame giving ``(up, low)`` there, the highest
-    and the lowest point seen in its column (x in bins of 1.5 pixels, ``px`` model units a
-    pixel), interpolated between columns. The lips occlude the fan's rim (the inner-lip loop
+    """The opening's visible upper and lower edges over the points ``X`` (n, >= 2) it shows
+    (the fan's, or the dental arch's: x and y in the head's frame): a function of x giving
+    ``(up, low)`` there, the highest and the lowest point seen in its column (x in bins of 1.5
+    pixels, ``px`` model units a pixel), interpolated between columns. The lips occlude the fan's rim (the inner-lip loop
     lies behind their edge), so the teeth hang from where the lips are seen to end."""
     x, y = X[:, 0], X[:, 1]
     lo, hi = float(x.min()), float(x.max())
@@ -472,7 +472,10 @@ def _inside_colours(X: np.ndarray, back: np.ndarray, V: np.ndarray, topo: MeshTo
     fronts = _arch_fronts(V, topo, middle, half)
     for lower, front in ((True, fronts[1]), (False, fronts[0])):
         xa, ya, seen = _arch_hits(X, ray, middle, front - ARCH_BEHIND * eye, eye)
-        at_up, at_low = edges(xa + middle)                 # the lips over the arch's point
+        if not seen.any():
+            continue
+        # the lips' edges where they cover the arch (a nod moves them over it, not the teeth)
+        at_up, at_low = _visible_edges(np.column_stack([xa, ya])[seen], px)(xa)
         gap = np.maximum(at_up - at_low, 0.0)
         reach = _seen_as(xa, ray, eye)
         teeth = _teeth(inside.teeth, xa, span, eye)
