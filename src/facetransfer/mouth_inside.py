@@ -392,10 +392,11 @@ def _edge_alpha(fan: np.ndarray, ys: np.ndarray, xs: np.ndarray, feather: float)
 
 def _visible_edges(X: np.ndarray, px: float):
     """The opening's visible upper and lower edges over the points ``X`` (n, >= 2) it shows
-    (the fan's, or the dental arch's: x and y in the head's frame): a function of x giving
-    ``(up, low)`` there, the highest and the lowest point seen in its column (x in bins of 1.5
-    pixels, ``px`` model units a pixel), interpolated between columns. The lips occlude the fan's rim (the inner-lip loop
-    lies behind their edge), so the teeth hang from where the lips are seen to end."""
+    (the fan's, or the dental arch's: x and y in the head's frame): a function of x (m,)
+    giving ``(up, low)`` (m,) there, the highest and the lowest point seen in its column (x in
+    bins of 1.5 pixels, ``px`` model units a pixel), interpolated between columns. The lips
+    occlude the fan's rim (the inner-lip loop lies behind their edge), so the teeth hang from
+    where the lips are seen to end."""
     x, y = X[:, 0], X[:, 1]
     lo, hi = float(x.min()), float(x.max())
     nb = max(int((hi - lo) / (1.5 * px)), 1)
@@ -433,9 +434,11 @@ def _arch_hits(X: np.ndarray, ray: np.ndarray, middle: float, front: float, eye:
 
 def _arch_fronts(V: np.ndarray, topo: MeshTopology, middle: float, half: float
                  ) -> tuple[float, float]:
-    """``(upper, lower)``: the z of the upper and the lower arch's fronts, :data:`ARCH_BEHIND`
-    eye widths (given as ``half``'s unit by the caller) behind the upper and the lower lips'
-    inner edges over the middle third of the mouth (their foremost points there)."""
+    """``(upper, lower)``: the z of the upper and the lower lips' inner edges (the closed mesh
+    ``V``'s inner-lip loop above and below its mean height) at their foremost over the middle
+    third of the mouth (``middle`` its x, ``half`` its half-width): the dental arches' fronts
+    lie :data:`ARCH_BEHIND` eye widths behind them. Either is the loop's foremost point where
+    the middle holds none of its points."""
     loop = V[topo.mouth_loop]
     mid = np.abs(loop[:, 0] - middle) < max(half / 3.0, 1e-12)
     centre = float(loop[:, 1].mean())
